@@ -1,0 +1,58 @@
+"""Exceptions, named after the condition they report."""
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "EventRejected"]
+
+
+class SLRError(Exception):
+    """Base class of every error slr_sql raises on purpose."""
+
+
+class SLRSyntaxError(SLRError):
+    """Program or goal text that does not parse.
+
+    ``str()`` is ``file:line:col: message`` followed by the source line and a caret.
+
+    >>> e = SLRSyntaxError("operator expected", line=1, column=6, source_line="a(1) b.")
+    >>> print(e)
+    <string>:1:6: operator expected
+        a(1) b.
+             ^
+    """
+
+    def __init__(self, message: str, line: int = 0, column: int = 0,
+                 source_line: str = "", filename: str = "<string>"):
+        self.message = message
+        self.line = line
+        self.column = column
+        self.source_line = source_line
+        self.filename = filename
+        super().__init__(self._render())
+
+    def _render(self) -> str:
+        head = f"{self.filename}:{self.line}:{self.column}: {self.message}"
+        if not self.source_line:
+            return head
+        caret = " " * (max(self.column, 1) - 1) + "^"
+        return f"{head}\n    {self.source_line}\n    {caret}"
+
+    def __str__(self) -> str:
+        return self._render()
+
+
+class SLREvaluationError(SLRError):
+    """An ISO error raised while running a goal; ``term`` is the error term (``error(F, C)``)."""
+
+    def __init__(self, term: Any, message: str | None = None):
+        self.term = term
+        super().__init__(message or f"{term}")
+
+
+class SLRTimeout(SLRError):
+    """A query ran out of its ``timeout=`` (seconds) or step limit."""
+
+
+class EventRejected(SLRError):
+    """An event that cannot be stored (non-ground, NaN, start > end, wrong arity, ...)."""
