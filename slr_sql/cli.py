@@ -1,0 +1,500 @@
+"""``slr``: the command line, a thin layer over the library API (SPEC §5).
+
+Every command opens the store with :func:`slr_sql.open`, does one thing through the public
+API and closes it.  Errors: a :class:`slr_sql.SLRSyntaxError` prints its own text
+(``file:line:col: message``, the source line and a caret) on stderr; any other
+:class:`slr_sql.SLRError` prints ``error: message``; both exit with status 1.
+"""
+from __future__ import annotations
+
+import json
+import os
+import sqlite3
+import sys
+from dataclasses import dataclass
+from typing import Any, Iterable, Iterator
+
+import click
+
+import slr_sql
+
+from .demo import answer_text, value_text
+
+__all__ = ["main", "parse_event_line", "ingest_file", "IngestReport", "strip_full_stop"]
+
+INGEST_BATCH = 500          # events per kb.add_many transaction
+PROGRESS_MIN_BYTES = 256_000  # files smaller than this ingest without a progress bar
+
+
+def _err(message: str) -> None:
+    click.echo(message, err=True)
+
+
+class SLRGroup(click.Group):
+    """Turns library errors into the CLI's error contract instead of tracebacks."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except slr_sql.SLRSyntaxError as exc:
+            _err(str(exc))
+            ctx.exit(1)
+        except slr_sql.SLRError as exc:
+            _err(f"error: {exc}")
+            ctx.exit(1)
+
+
+def strip_full_stop(text: str) -> str:
+    """``"color(cup1,C)^5."`` -> ``"color(cup1,C)^5"``: goals are accepted with or without the
+    Prolog full stop, but a trailing ``..`` (as in ``=..``) is not a full stop."""
+    text = text.strip()
+    if text.endswith(".") and not text.endswith(".."):
+        text = text[:-1].rstrip()
+    return text
+
+
+def _open(db: str) -> Any:
+    return slr_sql.open(db)
+
+
+@click.group(cls=SLRGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="slr_sql", prog_name="slr")
+def main() -> None:
+    """SLR: a Prolog-like language over robot event streams, in one SQLite file.
+
+    DB is the store's file; it is created on first use.
+    """
+
+
+# ---------------------------------------------------------------------------------------------
+# demo
+# ---------------------------------------------------------------------------------------------
+
+@main.command()
+@click.option("--db", "db_path", type=click.Path(dir_okay=False), default=None,
+              help="Keep the scenario in this new file (default: a temporary in-memory store).")
+def demo(db_path: str | None) -> None:
+    """Play the robot scenario of the SLR paper and print the answers."""
+    from rich.console import Console
+
+    from .demo import run_demo
+
+    if db_path is not None and os.path.exists(db_path) and os.path.getsize(db_path) > 0:
+        raise click.UsageError(f"{db_path} exists; the demo wants a fresh store (remove it first)")
+    run_demo(Console(highlight=False), db_path=db_path)
+
+
+# ---------------------------------------------------------------------------------------------
+# load / add / ingest
+# ---------------------------------------------------------------------------------------------
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.argument("file", type=click.Path(exists=True, dir_okay=False))
+def load(db: str, file: str) -> None:
+    """Append the clauses and declarations of FILE to the program in DB."""
+    with _open(db) as kb:
+        kb.load_file(file)
+    click.echo(f"loaded {file}")
+
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.argument("events", nargs=-1, required=True)
+def add(db: str, events: tuple[str, ...]) -> None:
+    """Add EVENTS, each in SLR syntax: 'obj(cup1, cup, red)^2.0' or 'seen(x)^[1,2]'."""
+    with _open(db) as kb:
+        for event in events:
+            kb.add(strip_full_stop(event))
+    click.echo(f"added {len(events)} event{'s' if len(events) != 1 else ''}")
+
+
+class BadLine(ValueError):
+    """A line of an ingest file that is not an event."""
+
+
+def _json_args(args: list) -> list:
+    """JSON event arguments as terms, in the store's own JSON encoding (docs/schema.md):
+    a JSON string is an atom, ``{"$string":"text"}`` a string, ``{"f":[..]}`` the compound
+    ``f(..)``, an array a list.  So what ``slr sql`` shows can be ingested back."""
+    from .encoding import decode
+    from .terms import list_items
+
+    try:
+        items, _ = list_items(decode(json.dumps(args)))
+    except (ValueError, TypeError) as exc:
+        raise BadLine(f"bad argument: {exc}") from None
+    return items
+
+
+def _json_time(obj: dict, key: str) -> float:
+    value = obj.get(key)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise BadLine(f'"{key}" must be a number')
+    return float(value)
+
+
+def parse_event_line(line: str) -> str | tuple | None:
+    """One ingest line as something ``kb.add_many`` takes, or None for blank/comment lines.
+
+    A line starting with ``{`` is a JSON object ``{"name", "args", "start", "end"}`` (or
+    ``"time"`` for a point event; arguments in the store's JSON encoding); anything else is SLR event text such as
+    ``seg(cup1,[0.4,0.1,0.9])^12.31`` (a final full stop is allowed).
+    Raises :class:`BadLine` for JSON that is not an event; SLR text is checked by the store.
+    """
+    text = line.strip()
+    if not text or text.startswith("%") or text.startswith("#"):
+        return None
+    if not text.startswith("{"):
+        return strip_full_stop(text)
+    try:
+        obj = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise BadLine(f"invalid JSON: {exc.msg} at column {exc.colno}") from None
+    if not isinstance(obj, dict):
+        raise BadLine("a JSON line must be an object")
+    name = obj.get("name")
+    if not isinstance(name, str) or not name:
+        raise BadLine('"name" must be a non-empty string')
+    args = obj.get("args", [])
+    if not isinstance(args, list):
+        raise BadLine('"args" must be a list')
+    if "time" in obj and "start" not in obj and "end" not in obj:
+        start = end = _json_time(obj, "time")
+    else:
+        start = _json_time(obj, "start")
+        end = _json_time(obj, "end") if "end" in obj else start
+    return (name, _json_args(args), start, end)
+
+
+@dataclass
+class IngestReport:
+    added: int
+    bad: list[tuple[int, str]]  # (line number, reason)
+
+
+def _add_batch(kb: Any, batch: list[tuple[int, Any]], bad: list[tuple[int, str]]) -> int:
+    """Add a batch in one transaction; if the store rejects it, find the bad lines one by one.
+
+    Each event goes in by itself on the slow path, so a bad line costs only itself.
+    """
+    if not batch:
+        return 0
+    try:
+        kb.add_many([event for _, event in batch])
+        return len(batch)
+    except slr_sql.SLRSyntaxError:
+        pass
+    except slr_sql.SLRError:
+        pass
+    added = 0
+    for lineno, event in batch:
+        try:
+            if isinstance(event, str):
+                kb.add(event)
+            else:
+                name, args, start, end = event
+                kb.add_event(name, args, start=start, end=end)
+            added += 1
+        except slr_sql.SLRSyntaxError as exc:
+            bad.append((lineno, f"{exc.message} (column {exc.column})" if exc.column else exc.message))
+        except slr_sql.SLRError as exc:
+            bad.append((lineno, str(exc)))
+    return added
+
+
+def _numbered_lines(handle: Iterable[str]) -> Iterator[tuple[int, str]]:
+    for lineno, line in enumerate(handle, start=1):
+        yield lineno, line
+
+
+def ingest_file(kb: Any, path: str, progress: Any = None, task: Any = None) -> IngestReport:
+    """Ingest every event line of ``path`` into ``kb`` in batches; bad lines are collected,
+    the rest still goes in."""
+    bad: list[tuple[int, str]] = []
+    added = 0
+    batch: list[tuple[int, Any]] = []
+    with open(path, encoding="utf-8") as handle:
+        for lineno, line in _numbered_lines(handle):
+            if progress is not None:
+                progress.update(task, advance=len(line.encode("utf-8")))
+            try:
+                event = parse_event_line(line)
+            except BadLine as exc:
+                bad.append((lineno, str(exc)))
+                continue
+            if event is None:
+                continue
+            batch.append((lineno, event))
+            if len(batch) >= INGEST_BATCH:
+                added += _add_batch(kb, batch, bad)
+                batch = []
+    added += _add_batch(kb, batch, bad)
+    bad.sort()
+    return IngestReport(added, bad)
+
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.argument("file", type=click.Path(exists=True, dir_okay=False))
+def ingest(db: str, file: str) -> None:
+    """Add the events of FILE: one per line, SLR text or a JSON object.
+
+    \b
+      seg(cup1,[0.4,0.1,0.9])^12.31
+      {"name":"seg","args":["cup1",[0.4,0.1,0.9]],"start":12.31,"end":12.31}
+
+    Bad lines are reported as FILE:LINE: reason and skipped; the exit status is 1 if any.
+    """
+    from rich.console import Console
+    from rich.progress import BarColumn, DownloadColumn, Progress, TimeRemainingColumn
+
+    size = os.path.getsize(file)
+    with _open(db) as kb:
+        if size >= PROGRESS_MIN_BYTES:
+            columns = ("[progress.description]{task.description}", BarColumn(),
+                       DownloadColumn(), TimeRemainingColumn())
+            with Progress(*columns, console=Console(stderr=True), transient=True) as progress:
+                task = progress.add_task(f"ingesting {os.path.basename(file)}", total=size)
+                report = ingest_file(kb, file, progress, task)
+        else:
+            report = ingest_file(kb, file)
+    for lineno, reason in report.bad:
+        _err(f"{file}:{lineno}: {reason}")
+    click.echo(f"ingested {report.added} event{'s' if report.added != 1 else ''}"
+               + (f", {len(report.bad)} bad line{'s' if len(report.bad) != 1 else ''}" if report.bad else ""))
+    if report.bad:
+        sys.exit(1)
+
+
+# ---------------------------------------------------------------------------------------------
+# query / explain
+# ---------------------------------------------------------------------------------------------
+
+def answer_lines(answers: list[dict[str, Any]]) -> list[str]:
+    """One line per answer, ``X = a, Y = [1,2]``; ``true.`` for an answer without
+    variables and ``false.`` when there is no answer, as the Prolog top level says."""
+    if not answers:
+        return ["false."]
+    return [answer_text(a) if a else "true." for a in answers]
+
+
+def _print_answers(answers: list[dict[str, Any]]) -> None:
+    for line in answer_lines(answers):
+        click.echo(line)
+
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.argument("goal")
+@click.option("--at", "at", type=float, default=None,
+              help="The stream view: only events with end time <= Z (outside prev/next).")
+@click.option("--wait", is_flag=True,
+              help="Synchronized: answer once the events the goal depends on are complete up to --at.")
+@click.option("--timeout", type=float, default=None, help="Give up after S seconds.")
+def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | None) -> None:
+    """Ask GOAL and print one answer per line (`false.` when there is none)."""
+    goal = strip_full_stop(goal)
+    with _open(db) as kb:
+        if wait:
+            if not hasattr(kb, "submit"):
+                _err("error: synchronized queries are not available in this build")
+                sys.exit(2)
+            if at is None:
+                raise click.UsageError("--wait needs --at Z (the time the answer must be complete up to)")
+            import concurrent.futures
+
+            pending = kb.submit(goal, at=at)
+            try:
+                answers = pending.result(timeout=timeout)
+            except concurrent.futures.TimeoutError:
+                _err(f"error: the query was not answerable within {timeout:g} s")
+                sys.exit(1)
+        else:
+            answers = kb.query(goal, at=at, timeout=timeout)
+    _print_answers(answers)
+
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.argument("goal")
+def explain(db: str, goal: str) -> None:
+    """Show how GOAL would run: compiled to SQL or interpreted, and why."""
+    with _open(db) as kb:
+        click.echo(kb.explain(strip_full_stop(goal)))
+
+
+# ---------------------------------------------------------------------------------------------
+# sql
+# ---------------------------------------------------------------------------------------------
+
+def run_sql(db: str, statement: str) -> tuple[list[str], list[tuple]]:
+    """Run one SQL statement against the store; returns (column names, rows).
+
+    Uses ``kb.sql`` when the library offers it; otherwise opens the file read-only, so a
+    mistyped UPDATE cannot damage the store.
+    """
+    if not os.path.exists(db):
+        raise slr_sql.SLRError(f"no such store: {db}")
+    with _open(db) as kb:
+        if hasattr(kb, "sql"):
+            columns, rows = kb.sql(statement)
+            return list(columns), [tuple(r) for r in rows]
+    uri = "file:" + os.path.abspath(db).replace("?", "%3f").replace("#", "%23") + "?mode=ro"
+    con = sqlite3.connect(uri, uri=True)
+    try:
+        cur = con.execute(statement)
+        columns = [d[0] for d in cur.description or ()]
+        return columns, [tuple(r) for r in cur.fetchall()]
+    except sqlite3.Error as exc:
+        raise slr_sql.SLRError(f"sql: {exc}") from None
+    finally:
+        con.close()
+
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.argument("statement")
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON list of row objects.")
+def sql(db: str, statement: str, as_json: bool) -> None:
+    """Run a SQL STATEMENT on the store, e.g. "SELECT * FROM seg"."""
+    columns, rows = run_sql(db, statement)
+    if as_json:
+        click.echo(json.dumps([dict(zip(columns, row)) for row in rows], indent=None))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(*columns, show_lines=False)
+    for row in rows:
+        table.add_row(*("NULL" if v is None else str(v) for v in row))
+    # Piped output is not cut to 80 columns: the table is for reading, and --json for programs.
+    Console(highlight=False, width=None if sys.stdout.isatty() else 500).print(table)
+
+
+# ---------------------------------------------------------------------------------------------
+# shell
+# ---------------------------------------------------------------------------------------------
+
+SHELL_HELP = """\
+  GOAL.              ask a goal (may span lines; ends with a full stop)
+  :- DIRECTIVE.      load program text; so does any clause written with :-
+  load FILE          load a program file
+  add EVENT          add one event, e.g. add obj(cup1, cup, red)^2.0
+  at Z | at none     set / clear the stream view for the following goals
+  explain GOAL.      show the plan of a goal
+  help               this text;  Ctrl-D or `halt.` leaves"""
+
+
+class Shell:
+    """The interactive loop, independent of where lines come from (prompt or plain stdin)."""
+
+    def __init__(self, kb: Any, echo: Any = click.echo, echo_err: Any = _err):
+        self.kb = kb
+        self.echo = echo
+        self.echo_err = echo_err
+        self.at: float | None = None
+        self.pending: list[str] = []
+
+    @property
+    def continuing(self) -> bool:
+        return bool(self.pending)
+
+    def feed(self, line: str) -> bool:
+        """Handle one input line; returns False when the user asked to leave."""
+        stripped = line.strip()
+        if not self.pending:
+            if not stripped or stripped.startswith("%"):
+                return True
+            word, _, rest = stripped.partition(" ")
+            if stripped in ("halt.", "halt", "quit", "exit"):
+                return False
+            if word == "help":
+                self.echo(SHELL_HELP)
+                return True
+            if word == "load" and rest:
+                return self._guarded(lambda: self._load_file(strip_full_stop(rest).strip("'\"")))
+            if word == "add" and rest:
+                return self._guarded(lambda: self._add(rest))
+            if word == "at" and rest:
+                return self._guarded(lambda: self._set_at(strip_full_stop(rest)))
+        self.pending.append(line.rstrip("\n"))
+        text = "\n".join(self.pending).strip()
+        if not text.endswith(".") or text.endswith(".."):
+            return True  # a clause or goal spanning several lines
+        self.pending = []
+        return self._guarded(lambda: self._run(text))
+
+    def _guarded(self, action: Any) -> bool:
+        try:
+            action()
+        except slr_sql.SLRSyntaxError as exc:
+            self.echo_err(str(exc))
+        except slr_sql.SLRError as exc:
+            self.echo_err(f"error: {exc}")
+        except (ValueError, OSError) as exc:
+            self.echo_err(f"error: {exc}")
+        return True
+
+    def _load_file(self, path: str) -> None:
+        self.kb.load_file(path)
+        self.echo(f"loaded {path}")
+
+    def _add(self, event: str) -> None:
+        self.kb.add(strip_full_stop(event))
+        self.echo("added.")
+
+    def _set_at(self, value: str) -> None:
+        self.at = None if value in ("none", "off") else float(value)
+        self.echo(f"stream view: {'every stored event' if self.at is None else f'at {self.at:g}'}")
+
+    def _run(self, text: str) -> None:
+        if text.startswith("explain "):
+            self.echo(self.kb.explain(strip_full_stop(text[len("explain "):])))
+            return
+        if text.startswith(":-") or ":-" in text:
+            self.kb.load(text)
+            self.echo("ok.")
+            return
+        answers = self.kb.query(strip_full_stop(text), at=self.at)
+        for line in answer_lines(answers):
+            self.echo(line)
+
+
+def _history_path() -> str:
+    return os.environ.get("SLR_HISTORY") or os.path.join(os.path.expanduser("~"), ".slr_history")
+
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+def shell(db: str) -> None:
+    """Interactive goals and program text on DB (history in ~/.slr_history or $SLR_HISTORY)."""
+    with _open(db) as kb:
+        session = Shell(kb)
+        if not sys.stdin.isatty():
+            # Piped input (scripts, tests): plain lines, no prompt, no history file.
+            for line in sys.stdin:
+                if not session.feed(line):
+                    break
+            if session.pending:
+                _err("error: input ended inside an unfinished clause (missing full stop)")
+            return
+        from prompt_toolkit import PromptSession
+        from prompt_toolkit.history import FileHistory
+
+        prompt = PromptSession(history=FileHistory(_history_path()))
+        click.echo(f"slr shell on {db} — `help` for commands, Ctrl-D to leave")
+        while True:
+            try:
+                line = prompt.prompt("   | " if session.continuing else "?- ")
+            except KeyboardInterrupt:
+                session.pending = []
+                continue
+            except EOFError:
+                break
+            if not session.feed(line):
+                break
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

@@ -1,0 +1,386 @@
+"""The robot scenario of the SLR paper, played on an embedded store (``slr demo``).
+
+Robot X looks at table1 while its components publish, with delays, into SLR:
+
+* the *state publisher*: ``tf(cam, base, pose(..))^T`` (the head pans from left to right)
+  and ``tf(base, world, pose(..))^T`` (the base drives along the world x axis);
+* *segmentation*: ``seg(O, [X,Y,Z])^T``, object segments relative to the camera;
+* *objRec*: ``obj(O, Type, Color)^T``, the type and color of each new segment.
+
+The *control* component then asks the paper's questions: which cups are on table1 and where
+they are in the world, the color of an object, whether a location is fresh, outdated or never
+observed, and which objects can be used for tea.  Everything runs through the public API
+(``slr_sql.open``, ``kb.load``, ``kb.add_many``, ``kb.query``, ``kb.explain``) so the demo
+doubles as a worked example of it.
+
+This module also holds the answer formatting the CLI shares (:func:`value_text`,
+:func:`answer_text`), because the demo prints answers exactly like ``slr query`` does.
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Any, Iterable
+
+import slr_sql
+
+__all__ = [
+    "ROBOT_PROGRAM", "TABLE_SWEEP", "DemoQuery", "DemoResult", "scenario_events",
+    "open_robot_kb", "demo_queries", "run_demo", "value_text", "answer_text",
+]
+
+# --------------------------------------------------------------------------------------------
+# Answer formatting (shared with the CLI)
+# --------------------------------------------------------------------------------------------
+
+_SOLO_ATOMS = {"[]", "{}", "!", ";", ","}
+_PLAIN_ATOM = re.compile(r"[a-z][A-Za-z0-9_]*\Z")
+_SYMBOL_ATOM = re.compile(r"[+\-*/\\^<>=~:.?@#&$]+\Z")
+
+
+def _atom_text(name: str) -> str:
+    if _PLAIN_ATOM.match(name) or _SYMBOL_ATOM.match(name) or name in _SOLO_ATOMS:
+        return name
+    escaped = name.replace("\\", "\\\\").replace("'", "\\'").replace("\n", "\\n")
+    return f"'{escaped}'"
+
+
+def _string_text(text: str) -> str:
+    escaped = text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
+    return f'"{escaped}"'
+
+
+def _number_text(x: float | int) -> str:
+    if isinstance(x, float):
+        if math.isinf(x):
+            return "inf" if x > 0 else "-inf"
+        if math.isnan(x):
+            return "nan"
+    return repr(x)
+
+
+def _as_engine_term(value: Any) -> Any:
+    """Turn a returned answer value back into an engine term, so the printer can quote it.
+
+    Returned strings are plain ``str`` (atoms are :class:`slr_sql.Atom`), so a plain ``str``
+    goes back to a Prolog string, not to an atom as ``from_python`` would make it.
+    """
+    from .terms import Atom, String, Struct, Var, make_list
+
+    if isinstance(value, Atom) or isinstance(value, Var):
+        return value
+    if isinstance(value, str):
+        return String(value)
+    if isinstance(value, (list, tuple)):
+        return make_list([_as_engine_term(v) for v in value])
+    if isinstance(value, Struct):
+        return Struct(value.name, tuple(_as_engine_term(a) for a in value.args))
+    return value
+
+
+def value_text(value: Any) -> str:
+    """Prolog text of one answer value: atoms quoted when needed, strings in double quotes.
+
+    >>> value_text(slr_sql.Atom("cup1")), value_text("never-observed"), value_text([1, 2.5])
+    ('cup1', '"never-observed"', '[1,2.5]')
+    """
+    from .terms import Atom, Struct, Var
+
+    if isinstance(value, bool):  # bool is an int subclass; never produced, but be exact
+        return "true" if value else "false"
+    if isinstance(value, Atom):
+        return _atom_text(str(value))
+    if isinstance(value, str):
+        return _string_text(value)
+    if isinstance(value, (int, float)):
+        return _number_text(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ",".join(value_text(v) for v in value) + "]"
+    if isinstance(value, Var):
+        return str(value)
+    if isinstance(value, Struct):
+        # Lists and strings nested in a compound must print as Prolog, so rebuild the engine
+        # term and let the project's printer (operators, quoting) render it.
+        try:
+            return str(_as_engine_term(value))
+        except Exception:  # printer not available: plain functional notation is still valid
+            return f"{_atom_text(str(value.name))}(" + ",".join(value_text(a) for a in value.args) + ")"
+    return str(value)
+
+
+def answer_text(answer: dict[str, Any]) -> str:
+    """One answer as the Prolog top level prints it, on one line: ``X = a, Y = [1,2]``.
+
+    An answer without variables (a goal that just succeeds) is ``true``.
+    """
+    if not answer:
+        return "true"
+    return ", ".join(f"{name} = {value_text(value)}" for name, value in answer.items())
+
+
+# --------------------------------------------------------------------------------------------
+# The scenario
+# --------------------------------------------------------------------------------------------
+
+#: The program of the paper (sections "Persistence and Maintaining State" and "Aggregation"),
+#: written in slr_sql syntax: ``next(.., [T, inf])`` for the paper's ``prev(.., [T, ∞])``.
+ROBOT_PROGRAM = r"""
+% ---- declarations --------------------------------------------------------------------
+:- event seg/2.
+:- event obj/3.
+:- event tf/3.
+% The state publisher is a single producer that sends in time order, so `next` over tf can
+% answer as soon as the first tf event at or after T has arrived.
+:- in_order(tf/3).
+:- max_delay(tf/3, 50ms).
+% Segmentation and object recognition take a variable time; rather than trusting a delay
+% bound, their components say when they are done: fullyUpdated(seg/2)^T, fullyUpdated(obj/3)^T.
+:- max_delay(seg/2, 10s).
+:- max_delay(obj/3, 10s).
+tBuffer(tf(_S, _D, _TF), 300s).
+
+% ---- persistent knowledge: the color is the last observed one ------------------------
+color(O, C)^T :- prev(obj(O, _, C)^_Z, T).
+
+% ---- persistence with temporal validity ----------------------------------------------
+location(O, L)^T :- prev(seg(O, L)^Z, T), T - Z =< 5, !.
+location(O, "outdated")^T :- prev(seg(O, _)^Z, T), T - Z > 5, !.
+location(_, "never-observed")^_.
+
+% ---- continuous knowledge: camera->base by interpolation -----------------------------
+tf(cam, base, TF)^T :-
+    prev(tf(cam, base, TF1)^T1, T),
+    next(tf(cam, base, TF2)^T2, [T, inf]),
+    interpolate([TF, T], [TF1, T1], [TF2, T2]).
+
+% ---- base->world: interpolate if the next observation is within 1 s, else hold -------
+tf(base, world, TF)^T :-
+    prev(tf(base, world, TF1)^T1, T),
+    (   next(tf(base, world, TF2)^T2, [T, T+1])
+    ->  interpolate([TF, T], [TF1, T1], [TF2, T2])
+    ;   extrapolate([TF, T], [TF1, T1])
+    ).
+
+% ---- an object's position in the world frame -----------------------------------------
+position(seg(O, RelPos)^T, WorldPos) :-
+    tf(cam, base, TF1)^T,
+    tf(base, world, TF2)^T,
+    pos_multiply([RelPos, TF1, TF2], WorldPos).
+
+% ---- static knowledge -----------------------------------------------------------------
+usedFor(cup, tea).
+usedFor(cup, coffee).
+usedFor(mug, coffee).
+usedFor(glass, water).
+
+% table1's top, as a box in the world frame: [XMin, XMax], [YMin, YMax], [ZMin, ZMax].
+surface(table1, [1.5, 2.5], [-0.5, 0.5], [0.6, 1.0]).
+on(Surface, [X, Y, Z]) :-
+    surface(Surface, [X0, X1], [Y0, Y1], [Z0, Z1]),
+    X0 =< X, X =< X1, Y0 =< Y, Y =< Y1, Z0 =< Z, Z =< Z1.
+"""
+
+#: The control component's look at table1: the head sweeps it from t1 to t2.
+TABLE_SWEEP = (10.0, 14.0)
+
+
+def _yaw_pose(xyz: list[float], yaw_degrees: float) -> Any:
+    """``pose([X,Y,Z],[QX,QY,QZ,QW])`` for a rotation of ``yaw_degrees`` about z."""
+    half = math.radians(yaw_degrees) / 2.0
+    return slr_sql.Struct("pose", (list(xyz), [0.0, 0.0, math.sin(half), math.cos(half)]))
+
+
+@dataclass(frozen=True)
+class Publication:
+    """One event as a component publishes it: ``arrival`` is when it reaches the store."""
+
+    component: str
+    name: str
+    args: tuple
+    time: float
+    arrival: float
+
+    def as_tuple(self) -> tuple:
+        return (self.name, list(self.args), self.time, self.time)
+
+
+def scenario_events() -> list[Publication]:
+    """Every event of the scenario, in arrival order.
+
+    The head pans from +20° (t=10) to -20° (t=14) in steps of 10°/s; the camera sits 0.1 m
+    ahead of and 1.2 m above the base.  The base drives along world x at 0.2 m/s from x=1.0
+    (t=10) to x=1.4 (t=12), stops publishing for a while, and is seen again at x=1.7 (t=15).
+    Segmentation reports each segment 0.3 s after its image; objRec 0.8 s after.
+    """
+    pubs: list[Publication] = []
+    for i, t in enumerate([10.0, 11.0, 12.0, 13.0, 14.0, 15.0]):
+        pubs.append(Publication("statePublisher", "tf",
+                                ("cam", "base", _yaw_pose([0.1, 0.0, 1.2], 20.0 - 10.0 * i)),
+                                t, t + 0.01))
+    for t, x in [(10.0, 1.0), (11.0, 1.2), (12.0, 1.4), (15.0, 1.7)]:
+        pubs.append(Publication("statePublisher", "tf",
+                                ("base", "world", _yaw_pose([x, 0.0, 0.0], 0.0)), t, t + 0.01))
+    sightings = [  # (time, object, position relative to the camera, type, color)
+        (10.5, "cup1", [0.8, 0.1, -0.4], "cup", "red"),
+        (11.5, "cup2", [0.9, -0.2, -0.4], "cup", "blue"),
+        (12.5, "book1", [0.7, 0.0, -0.35], "book", "green"),
+        (13.5, "cup3", [2.0, -0.3, -0.4], "cup", "white"),   # a cup on the next table
+        (13.6, "mug1", [0.75, -0.1, -0.38], "mug", "yellow"),
+    ]
+    for t, o, rel, typ, color in sightings:
+        pubs.append(Publication("segmentation", "seg", (o, rel), t, t + 0.3))
+        pubs.append(Publication("objRec", "obj", (o, typ, color), t, t + 0.8))
+    pubs.sort(key=lambda p: (p.arrival, p.time))
+    return pubs
+
+
+def open_robot_kb(db_path: str | None = None, clock: Any = None):
+    """Open a store with the robot program loaded; returns ``(kb, clock)``."""
+    clock = clock if clock is not None else slr_sql.ManualClock(0.0)
+    kb = slr_sql.open(db_path, clock=clock)
+    kb.load(ROBOT_PROGRAM)
+    return kb, clock
+
+
+def publish(kb: Any, clock: Any, pubs: Iterable[Publication]) -> None:
+    """Deliver publications in arrival order, moving the manual clock to each arrival."""
+    for pub in pubs:
+        if pub.arrival > clock.now():
+            clock.set(pub.arrival)
+        kb.add_event(pub.name, list(pub.args), start=pub.time, end=pub.time)
+
+
+@dataclass(frozen=True)
+class DemoQuery:
+    """A question of the control component: ``goal`` asked over the stream view ``at``."""
+
+    title: str
+    goal: str
+    at: float | None
+    why: str
+
+
+@dataclass
+class DemoResult:
+    query: DemoQuery
+    answers: list[dict[str, Any]]
+    plan: str = ""
+    notes: list[str] = field(default_factory=list)
+
+
+CUPS_ON_TABLE1 = DemoQuery(
+    "Which cups did you see on table1, and where are they in the world?",
+    "findall(O-WorldPos, (obj(O, cup, _)^_, next(seg(O, RelPos)^T, [%g, %g]), "
+    "position(seg(O, RelPos)^T, WorldPos), on(table1, WorldPos)), Cups)" % TABLE_SWEEP,
+    TABLE_SWEEP[1],
+    "cups recognised by objRec, segmented during the sweep, placed in the world via "
+    "tf cam->base (interpolated) and base->world (interpolated or held), kept if on table1",
+)
+
+
+def demo_queries() -> list[DemoQuery]:
+    t2 = TABLE_SWEEP[1]
+    return [
+        CUPS_ON_TABLE1,
+        DemoQuery("What color is cup2?", "color(cup2, C)^20", None,
+                  "persistence: the color of the last obj(cup2, _, C) at or before 20"),
+        DemoQuery("Where is cup1 (camera frame) at t=13?", "location(cup1, L)^13", None,
+                  "temporal validity: the last segment of cup1 is 2.5 s old, so it is fresh"),
+        DemoQuery("Where is cup1 at t=20?", "location(cup1, L)^20", None,
+                  "the last segment of cup1 is 9.5 s old (> 5 s): the second rule says outdated"),
+        DemoQuery("Where is plate9 at t=13?", "location(plate9, L)^13", None,
+                  "no segment of plate9 at all: the first two rules fail, the third one answers"),
+        DemoQuery("Where is the base in the world at t=13.5?", "tf(base, world, TF)^13.5", None,
+                  "no base->world observation within [13.5, 14.5]: the last one is held (extrapolate)"),
+        DemoQuery("Which objects can be used for tea, and where are they?",
+                  "findall(object(O, WPos), (obj(O, Type, _)^_, usedFor(Type, tea), "
+                  "prev(seg(O, RPos)^T2, %g), position(seg(O, RPos)^T2, WPos)), List)" % t2,
+                  t2,
+                  "the paper's aggregation query: every cup seen up to t=14, at its last segment"),
+    ]
+
+
+def _plan_line(kb: Any, goal: str) -> str:
+    try:
+        plan = kb.explain(goal)
+    except Exception as exc:  # the plan is commentary: never let it stop the demo
+        return f"(no plan: {exc})"
+    first = next((line.strip() for line in str(plan).splitlines() if line.strip()), "")
+    return first
+
+
+def _print_result(console: Any, result: DemoResult) -> None:
+    q = result.query
+    at = "" if q.at is None else f"   [dim](at={q.at:g})[/dim]"
+    console.print(f"\n[bold cyan]control>[/bold cyan] [bold]{q.title}[/bold]")
+    console.print(f"  [green]?-[/green] {q.goal}.{at}", markup=True, highlight=False)
+    if not result.answers:
+        console.print("  [red]false.[/red]")
+    for answer in result.answers:
+        console.print("  " + answer_text(answer), markup=False, highlight=False)
+    console.print(f"  [dim]why: {q.why}[/dim]", highlight=False)
+    if result.plan:
+        console.print(f"  [dim]plan: {result.plan}[/dim]", highlight=False)
+    for note in result.notes:
+        console.print(f"  [yellow]{note}[/yellow]", highlight=False)
+
+
+def _synchronized_cups_query(kb: Any, clock: Any, console: Any) -> DemoResult:
+    """The cups question asked *before* segmentation and objRec have finished the sweep.
+
+    The control component submits ⟨cups, t2⟩ as soon as the head stops at t2; the query
+    waits until seg/2 and obj/3 are complete up to t2 (their components send
+    ``fullyUpdated(..)^t2``) and tf/3 is complete (its max_delay has passed).
+    """
+    pubs = scenario_events()
+    t2 = TABLE_SWEEP[1]
+    before = [p for p in pubs if p.arrival <= t2]
+    after = [p for p in pubs if p.arrival > t2]
+    publish(kb, clock, before)
+    notes = []
+    pending = kb.submit(CUPS_ON_TABLE1.goal, at=t2, id="cups-on-table1")
+    notes.append(f"t={clock.now():g}: submitted at={t2:g}; answered yet: {pending.done()}")
+    publish(kb, clock, after)
+    notes.append(f"t={clock.now():g}: all segments and recognitions arrived; answered yet: {pending.done()}")
+    for component, type_ in (("segmentation", "seg/2"), ("objRec", "obj/3")):
+        kb.add(f"fullyUpdated({type_})^{t2:g}")
+        notes.append(f"t={clock.now():g}: {component} sent fullyUpdated({type_})^{t2:g}; "
+                     f"answered yet: {pending.done()}")
+    answers = pending.result(timeout=5.0)
+    q = DemoQuery("(synchronized) " + CUPS_ON_TABLE1.title, CUPS_ON_TABLE1.goal, t2,
+                  "a synchronized query waits until every event type it depends on is "
+                  "complete up to its time: here until both perception components said so")
+    return DemoResult(q, answers, notes=notes)
+
+
+def run_demo(console: Any = None, db_path: str | None = None) -> list[DemoResult]:
+    """Play the scenario and print every question with its answers; returns the results."""
+    if console is None:
+        from rich.console import Console
+
+        console = Console()
+    kb, clock = open_robot_kb(db_path)
+    results: list[DemoResult] = []
+    try:
+        console.rule("[bold]SLR demo: robot X looks at table1[/bold]")
+        console.print("[dim]program: color persistence, location validity with cut, tf interpolation "
+                      "and extrapolation, position in the world frame, usedFor/2[/dim]")
+        if hasattr(kb, "submit"):
+            results.append(_synchronized_cups_query(kb, clock, console))
+            _print_result(console, results[-1])
+        else:
+            publish(kb, clock, scenario_events())
+        counts = {}
+        for pub in scenario_events():
+            counts[pub.component] = counts.get(pub.component, 0) + 1
+        console.print("[dim]published: " + ", ".join(f"{c} {n} events" for c, n in counts.items())
+                      + f"; clock now {clock.now():g}[/dim]")
+        for query in demo_queries():
+            answers = kb.query(query.goal, at=query.at)
+            result = DemoResult(query, answers, plan=_plan_line(kb, query.goal))
+            results.append(result)
+            _print_result(console, result)
+    finally:
+        kb.close()
+    return results
