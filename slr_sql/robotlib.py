@@ -1,0 +1,306 @@
+"""Robot library: continuous knowledge over numbers, vectors and poses (SPEC §1 "Robot library").
+
+Everything here works on *Python values*, not terms: the engine converts arguments with
+:func:`slr_sql.terms.to_python` and results back with :func:`slr_sql.terms.from_python`.
+
+Value kinds
+-----------
+* **number** -- ``int`` or ``float`` (``bool`` is not a number here).
+* **vector** -- a ``list`` (or ``tuple``) of numbers.  A *point* is a vector of length 3.
+* **pose**   -- ``Struct("pose", ([x, y, z], [qx, qy, qz, qw]))``: a translation and a rotation
+  quaternion in (x, y, z, w) order.  A pose also serves as a rigid transform.
+
+Quaternions use the Hamilton product; a vector ``v`` is rotated by ``q`` as ``q·v·q*``.
+Rotation quaternions are normalized before use, so non-unit input is accepted (a zero
+quaternion is an error).  Results are always returned as new ``list`` / ``Struct`` objects
+with ``float`` components.
+
+Anything that does not fit (mismatched kinds, wrong lengths, non-numbers, a zero quaternion)
+raises :class:`RobotValueError`, a ``ValueError`` subclass.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Sequence
+
+from .terms import Struct
+
+__all__ = [
+    "RobotValueError", "value_kind", "interpolate", "extrapolate", "pos_multiply", "distance",
+    "quat_multiply", "quat_conjugate", "quat_normalize", "quat_rotate", "slerp", "make_pose",
+]
+
+#: Above this |dot| between two unit quaternions, slerp falls back to normalized lerp.
+_NLERP_THRESHOLD = 0.9995
+
+
+class RobotValueError(ValueError):
+    """A value that the robot library cannot handle (wrong kind, length, or a zero quaternion).
+
+    >>> issubclass(RobotValueError, ValueError)
+    True
+    """
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def _is_number(x: Any) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def _is_vector(x: Any) -> bool:
+    return isinstance(x, (list, tuple)) and all(_is_number(c) for c in x)
+
+
+def _is_pose(x: Any) -> bool:
+    return (isinstance(x, Struct) and x.name == "pose" and len(x.args) == 2
+            and _is_vector(x.args[0]) and len(x.args[0]) == 3
+            and _is_vector(x.args[1]) and len(x.args[1]) == 4)
+
+
+def value_kind(v: Any) -> str:
+    """Classify a value as ``"number"``, ``"vector"`` or ``"pose"``; raise otherwise.
+
+    >>> value_kind(1.5), value_kind([1, 2]), value_kind(make_pose([0, 0, 0], [0, 0, 0, 1]))
+    ('number', 'vector', 'pose')
+    """
+    if _is_number(v):
+        return "number"
+    if _is_vector(v):
+        return "vector"
+    if _is_pose(v):
+        return "pose"
+    if isinstance(v, Struct) and v.name == "pose":
+        raise RobotValueError(
+            f"malformed pose {v!r}: expected pose([X,Y,Z],[QX,QY,QZ,QW]) with numbers")
+    raise RobotValueError(f"expected a number, a vector or a pose, got {v!r}")
+
+
+def _number(x: Any, what: str) -> float:
+    if not _is_number(x):
+        raise RobotValueError(f"{what} must be a number, got {x!r}")
+    return x
+
+
+def _point(p: Any, what: str = "point") -> list[float]:
+    if not _is_vector(p) or len(p) != 3:
+        raise RobotValueError(f"{what} must be a list of 3 numbers [X,Y,Z], got {p!r}")
+    return [float(c) for c in p]
+
+
+def _pose_parts(p: Any, what: str = "pose") -> tuple[list[float], tuple[float, ...]]:
+    if not _is_pose(p):
+        raise RobotValueError(f"{what} must be pose([X,Y,Z],[QX,QY,QZ,QW]), got {p!r}")
+    return [float(c) for c in p.args[0]], quat_normalize(p.args[1])
+
+
+def make_pose(translation: Sequence[float], rotation: Sequence[float]) -> Struct:
+    """Build ``pose([x,y,z],[qx,qy,qz,qw])`` with float lists (no normalization).
+
+    >>> make_pose([1, 2, 3], [0, 0, 0, 1]).args
+    ([1.0, 2.0, 3.0], [0.0, 0.0, 0.0, 1.0])
+    """
+    return Struct("pose", ([float(c) for c in translation], [float(c) for c in rotation]))
+
+
+# --------------------------------------------------------------------------- quaternions
+
+
+def _quat(q: Any, what: str = "quaternion") -> tuple[float, float, float, float]:
+    if not _is_vector(q) or len(q) != 4:
+        raise RobotValueError(f"{what} must be a list of 4 numbers [QX,QY,QZ,QW], got {q!r}")
+    return (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+
+
+def quat_normalize(q: Sequence[float]) -> tuple[float, float, float, float]:
+    """Unit quaternion in the direction of ``q`` (x, y, z, w); a zero quaternion is an error.
+
+    >>> quat_normalize([0, 0, 0, 2])
+    (0.0, 0.0, 0.0, 1.0)
+    """
+    x, y, z, w = _quat(q)
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if not n > 0.0 or math.isinf(n):
+        raise RobotValueError(f"cannot normalize quaternion {list(q)!r}")
+    return (x / n, y / n, z / n, w / n)
+
+
+def quat_conjugate(q: Sequence[float]) -> tuple[float, float, float, float]:
+    """Conjugate ``q*`` of a quaternion (x, y, z, w).
+
+    >>> quat_conjugate([1, 2, 3, 4])
+    (-1.0, -2.0, -3.0, 4.0)
+    """
+    x, y, z, w = _quat(q)
+    return (-x, -y, -z, w)
+
+
+def quat_multiply(q1: Sequence[float], q2: Sequence[float]) -> tuple[float, float, float, float]:
+    """Hamilton product ``q1·q2`` of quaternions in (x, y, z, w) order (applies q2 first, then q1).
+
+    >>> quat_multiply([0, 0, 0, 1], [1, 0, 0, 0])
+    (1.0, 0.0, 0.0, 0.0)
+    """
+    x1, y1, z1, w1 = _quat(q1)
+    x2, y2, z2, w2 = _quat(q2)
+    return (
+        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+    )
+
+
+def quat_rotate(q: Sequence[float], v: Sequence[float]) -> list[float]:
+    """Rotate the 3-vector ``v`` by the quaternion ``q`` (normalized first): ``q·v·q*``.
+
+    >>> s = math.sqrt(0.5)  # 90 degrees about z
+    >>> [round(c, 9) for c in quat_rotate([0, 0, s, s], [1, 0, 0])]
+    [0.0, 1.0, 0.0]
+    """
+    qn = quat_normalize(q)
+    px, py, pz = _point(v, "vector to rotate")
+    x, y, z, _ = quat_multiply(quat_multiply(qn, (px, py, pz, 0.0)), quat_conjugate(qn))
+    return [x, y, z]
+
+
+def slerp(q1: Sequence[float], q2: Sequence[float], s: float) -> tuple[float, float, float, float]:
+    """Spherical linear interpolation from ``q1`` (s=0) to ``q2`` (s=1), shortest path.
+
+    Both inputs are normalized; if their dot product is negative ``q2`` is negated so the
+    shorter arc is taken.  When they are nearly parallel (|dot| > 0.9995) normalized linear
+    interpolation is used instead.  ``s`` outside [0, 1] extrapolates along the same great
+    circle (keeps rotating at the same angular rate).  The result is a unit quaternion; at
+    s=0 it equals ``q1`` and at s=1 it equals ``q2`` up to sign (both normalized).
+
+    >>> s = math.sqrt(0.5)
+    >>> [round(c, 6) for c in slerp([0, 0, 0, 1], [0, 0, s, s], 0.5)]  # 45 degrees about z
+    [0.0, 0.0, 0.382683, 0.92388]
+    """
+    s = _number(s, "slerp parameter")
+    a = quat_normalize(q1)
+    b = quat_normalize(q2)
+    dot = sum(x * y for x, y in zip(a, b))
+    if dot < 0.0:
+        b = tuple(-c for c in b)
+        dot = -dot
+    if dot > _NLERP_THRESHOLD:
+        out = [x + (y - x) * s for x, y in zip(a, b)]
+        try:
+            return quat_normalize(out)
+        except RobotValueError:  # only reachable with absurd extrapolation
+            raise RobotValueError(f"slerp degenerated at s={s!r}") from None
+    theta = math.acos(min(1.0, dot))
+    sin_theta = math.sin(theta)
+    wa = math.sin((1.0 - s) * theta) / sin_theta
+    wb = math.sin(s * theta) / sin_theta
+    return quat_normalize([wa * x + wb * y for x, y in zip(a, b)])
+
+
+# --------------------------------------------------------------------------- public API
+
+
+def interpolate(t: float, v1: Any, t1: float, v2: Any, t2: float) -> Any:
+    """Value at time ``t`` given observations ``v1`` at ``t1`` and ``v2`` at ``t2``.
+
+    Numbers and vectors are interpolated linearly (vectors elementwise, equal lengths
+    required); poses linearly on translation and by :func:`slerp` on rotation (shortest
+    path, result normalized).  With ``s = (t - t1) / (t2 - t1)``, ``t`` outside
+    ``[t1, t2]`` *extrapolates*: linearly for numbers, vectors and translations, and by
+    continuing the rotation at the same angular rate for quaternions.  If ``t1 == t2`` the
+    result is ``v1`` (returned unchanged).  ``v1`` and ``v2`` must be of the same kind, else
+    :class:`RobotValueError`.  Numeric results are floats.
+
+    >>> interpolate(1.5, 10, 1, 20, 2), interpolate(0.5, [0, 0], 0, [2, 4], 1)
+    (15.0, [1.0, 2.0])
+    """
+    t = _number(t, "time T")
+    t1 = _number(t1, "time T1")
+    t2 = _number(t2, "time T2")
+    k1 = value_kind(v1)
+    k2 = value_kind(v2)
+    if k1 != k2:
+        raise RobotValueError(f"cannot interpolate between a {k1} ({v1!r}) and a {k2} ({v2!r})")
+    if k1 == "vector" and len(v1) != len(v2):
+        raise RobotValueError(
+            f"cannot interpolate between vectors of lengths {len(v1)} and {len(v2)}")
+    if t1 == t2:
+        return v1
+    s = (t - t1) / (t2 - t1)
+    if k1 == "number":
+        return float(v1 + (v2 - v1) * s)
+    if k1 == "vector":
+        return [float(a + (b - a) * s) for a, b in zip(v1, v2)]
+    p1, q1 = _pose_parts(v1)
+    p2, q2 = _pose_parts(v2)
+    return make_pose([a + (b - a) * s for a, b in zip(p1, p2)], slerp(q1, q2, s))
+
+
+def extrapolate(v1: Any) -> Any:
+    """The "hold last value" rule of the paper: the value now is the last observed ``v1``.
+
+    Kept as a function for symmetry with :func:`interpolate`; ``v1`` is returned unchanged.
+
+    >>> extrapolate([1, 2, 3])
+    [1, 2, 3]
+    """
+    return v1
+
+
+def _compose(ta: list[float], qa: tuple, tp: list[float], qp: tuple) -> tuple[list[float], tuple]:
+    """Transform A=(ta, qa) applied to pose P=(tp, qp): (ta + qa·tp·qa*, qa·qp)."""
+    r = quat_rotate(qa, tp)
+    return [a + b for a, b in zip(ta, r)], quat_normalize(quat_multiply(qa, qp))
+
+
+def pos_multiply(p: Any, transforms: Sequence[Any]) -> Any:
+    """Transform the point or pose ``p`` by ``transforms[0]``, then ``transforms[1]``, ...
+
+    Each transform is a pose ``A = pose(T, Q)`` mapping a point ``x`` to ``Q·x·Q* + T``.  For
+    ``pos_multiply(P, [A, B])`` the result is ``B·(A·P)`` -- e.g. ``[RelPos, CamToBase,
+    BaseToWorld]`` gives the world position.  A point ``[x,y,z]`` gives a point; a pose gives
+    a pose whose rotation is composed (``QB·QA·QP``, normalized).  Quaternions are normalized
+    before use.  An empty ``transforms`` returns ``p`` as floats.
+
+    >>> s = math.sqrt(0.5)
+    >>> [round(c, 9) for c in pos_multiply([1, 0, 0], [make_pose([0, 0, 5], [0, 0, s, s])])]
+    [0.0, 1.0, 5.0]
+    """
+    if not isinstance(transforms, (list, tuple)):
+        raise RobotValueError(f"pos_multiply expects a list of pose transforms, got {transforms!r}")
+    parts = [_pose_parts(a, f"transform #{i + 1}") for i, a in enumerate(transforms)]
+    if _is_pose(p):
+        t, q = _pose_parts(p)
+        for ta, qa in parts:
+            t, q = _compose(ta, qa, t, q)
+        return make_pose(t, q)
+    if _is_vector(p) and len(p) == 3:
+        x = _point(p)
+        for ta, qa in parts:
+            r = quat_rotate(qa, x)
+            x = [a + b for a, b in zip(ta, r)]
+        return x
+    raise RobotValueError(
+        f"pos_multiply: first element must be a point [X,Y,Z] or a pose, got {p!r}")
+
+
+def distance(p1: Any, p2: Any) -> float:
+    """Euclidean distance between two points/vectors (equal lengths), two poses (their
+    translations) or two numbers (absolute difference).  Mixed kinds raise RobotValueError.
+
+    >>> distance([0, 0, 0], [3, 4, 0]), distance(2, 5)
+    (5.0, 3.0)
+    """
+    k1 = value_kind(p1)
+    k2 = value_kind(p2)
+    if k1 != k2:
+        raise RobotValueError(f"cannot measure distance between a {k1} ({p1!r}) and a {k2} ({p2!r})")
+    if k1 == "number":
+        return float(abs(p1 - p2))
+    if k1 == "pose":
+        p1, p2 = p1.args[0], p2.args[0]
+    elif len(p1) != len(p2):
+        raise RobotValueError(
+            f"cannot measure distance between vectors of lengths {len(p1)} and {len(p2)}")
+    return math.sqrt(sum((float(a) - float(b)) ** 2 for a, b in zip(p1, p2)))
