@@ -835,6 +835,39 @@ class EventStore:
         """
         return self._query(name, arity, bound, "at_start", (), [float(start), float(b)])
 
+    def lookup_sql(self, kind: str, name: str, arity: int,
+                   bound: dict[int, Any] | None = None, *, start_ge: bool = False,
+                   end_le: bool = False) -> str | None:
+        """The SQL a lookup runs (for explain output and plan tests). ``kind`` is ``scan``,
+        ``prev``, ``at_end``, ``next`` or ``at_start``; ``start_ge``/``end_le`` say whether
+        those optional bounds are given. None if the type has no table.
+
+        >>> s = EventStore(None); s.declare_type("p", 1)
+        'p'
+        >>> s.lookup_sql("prev", "p", 1)
+        'SELECT arg1, t_start, t_end, seq FROM "p" INDEXED BY "slr_ix__p__end" WHERE t_end <= ? ORDER BY t_end DESC, t_start DESC, seq DESC'
+        """
+        flags = {"scan": (end_le,), "prev": (start_ge,), "at_end": (start_ge, end_le),
+                 "next": (), "at_start": ()}[kind]
+        with self.lock:
+            self._check_open()
+            event_type = self._lookup_type(name, arity)
+            if event_type is None:
+                return None
+            positions, _ = self._pushdown(event_type, bound)
+            return self._select_sql(event_type, kind, positions, flags)
+
+    def query_plan(self, sql: str) -> list[str]:
+        """SQLite's ``EXPLAIN QUERY PLAN`` lines for a statement (parameters bound to NULL).
+
+        >>> EventStore(None).query_plan("SELECT * FROM slr_meta WHERE key = ?")
+        ['SEARCH slr_meta USING INDEX sqlite_autoindex_slr_meta_1 (key=?)']
+        """
+        with self.lock:
+            self._check_open()
+            cursor = self._conn.execute("EXPLAIN QUERY PLAN " + sql, [None] * sql.count("?"))
+            return [row[3] for row in cursor.fetchall()]
+
     def count(self, name: str, arity: int) -> int:
         """Number of stored events of name/arity.
 
