@@ -173,20 +173,32 @@ class IngestReport:
     bad: list[tuple[int, str]]  # (line number, reason)
 
 
-def _add_batch(kb: Any, batch: list[tuple[int, Any]], bad: list[tuple[int, str]]) -> int:
-    """Add a batch in one transaction; if the store rejects it, find the bad lines one by one.
+def _reason(exc: Exception) -> str:
+    if isinstance(exc, slr_sql.SLRSyntaxError):
+        return f"{exc.message} (column {exc.column})" if exc.column else exc.message
+    return str(exc)
 
-    Each event goes in by itself on the slow path, so a bad line costs only itself.
+
+def _add_batch(kb: Any, batch: list[tuple[int, Any]], bad: list[tuple[int, str]]) -> int:
+    """Add a batch in one ``kb.add_many`` transaction; returns how many events were stored.
+
+    ``add_many`` stores the good events of a batch and returns the rejected ones (each with
+    ``.index`` into the batch), which are reported against their lines.  If it raises
+    instead (nothing stored), the batch goes in event by event so a bad line costs only itself.
     """
     if not batch:
         return 0
     try:
-        kb.add_many([event for _, event in batch])
-        return len(batch)
-    except slr_sql.SLRSyntaxError:
-        pass
+        rejected = kb.add_many([event for _, event in batch])
     except slr_sql.SLRError:
-        pass
+        rejected = None
+    if rejected is not None:
+        rejections = [r for r in (rejected if isinstance(rejected, list) else []) if isinstance(r, Exception)]
+        for rejection in rejections:
+            index = getattr(rejection, "index", None)
+            lineno = batch[index][0] if isinstance(index, int) and 0 <= index < len(batch) else 0
+            bad.append((lineno, _reason(rejection)))
+        return len(batch) - len(rejections)
     added = 0
     for lineno, event in batch:
         try:
@@ -196,10 +208,8 @@ def _add_batch(kb: Any, batch: list[tuple[int, Any]], bad: list[tuple[int, str]]
                 name, args, start, end = event
                 kb.add_event(name, args, start=start, end=end)
             added += 1
-        except slr_sql.SLRSyntaxError as exc:
-            bad.append((lineno, f"{exc.message} (column {exc.column})" if exc.column else exc.message))
         except slr_sql.SLRError as exc:
-            bad.append((lineno, str(exc)))
+            bad.append((lineno, _reason(exc)))
     return added
 
 
