@@ -348,7 +348,10 @@ def run_sql(db: str, statement: str) -> tuple[list[str], list[tuple]]:
         raise slr_sql.SLRError(f"no such store: {db}")
     with _open(db) as kb:
         if hasattr(kb, "sql"):
-            columns, rows = kb.sql(statement)
+            try:
+                columns, rows = kb.sql(statement)
+            except sqlite3.Error as exc:
+                raise slr_sql.SLRError(f"sql: {exc}") from None
             return list(columns), [tuple(r) for r in rows]
     uri = "file:" + os.path.abspath(db).replace("?", "%3f").replace("#", "%23") + "?mode=ro"
     con = sqlite3.connect(uri, uri=True)

@@ -306,8 +306,10 @@ def _plan_line(kb: Any, goal: str) -> str:
         plan = kb.explain(goal)
     except Exception as exc:  # the plan is commentary: never let it stop the demo
         return f"(no plan: {exc})"
-    first = next((line.strip() for line in str(plan).splitlines() if line.strip()), "")
-    return first
+    # The first line repeats the goal; the next one says which engine runs it.
+    lines = [line.strip() for line in str(plan).splitlines() if line.strip()]
+    informative = [line for line in lines if not line.startswith("goal:")]
+    return (informative or lines or [""])[0]
 
 
 def _print_result(console: Any, result: DemoResult) -> None:
