@@ -1,0 +1,527 @@
+"""SLR text -> terms.  The only module that imports lark.
+
+Two stages, both run inside one LALR parse:
+
+1. ``grammar/slr.lark`` recognises tokens and bracket structure and hands each bracketed
+   region to this module as a flat *sequence* of operands and names.
+2. :class:`_Resolver` turns a sequence into a term with Prolog's operator-precedence rules
+   and the operator table of :mod:`slr_sql.printer` (SWI-Prolog 9 defaults).  It decides
+   whether a name is a prefix operator, an infix operator or an atom, and whether ``-``
+   before a number makes a negative literal (only when written directly against it:
+   ``-1`` is an integer, ``- 1`` the compound ``-(1)``, as SWI-Prolog 9 reads them).
+
+The lark parser is built once per process (``_parser()``) with the transformer inlined,
+so terms are built while parsing and no parse tree is materialised.  Per-parse state (the
+variable table of the current clause, the source text) is thread-local, so several threads
+may parse at once.
+"""
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+from typing import Any
+
+from lark import Lark, Token, Transformer
+from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
+
+from .errors import SLRSyntaxError
+from .printer import INFIX_OPS, PREFIX_OPS
+from .terms import NIL, TRUE, Atom, Clause, Span, String, Struct, Var
+
+__all__ = ["parse_program", "parse_term"]
+
+_GRAMMAR_PATH = Path(__file__).with_name("grammar") / "slr.lark"
+
+# Item kinds of an operand/operator sequence.
+_TERM, _NAME, _NUM, _FUNC = 0, 1, 2, 3
+# Duration units (SLR): value in seconds.
+_UNITS = {"ms": 0.001, "s": 1, "min": 60, "h": 3600}
+_ESC = {"n": "\n", "t": "\t", "r": "\r", "a": "\a", "b": "\b", "f": "\f", "v": "\v",
+        "e": "\x1b", "s": " ", "0": "\0", "\\": "\\", "'": "'", '"': '"', "`": "`"}
+_GOAL_OPS = frozenset((":-", "?-", ",", ";", "|", "->", "*->", "\\+"))
+
+_state = threading.local()
+
+
+class _Fail(Exception):
+    """A syntax error found while building terms; converted to SLRSyntaxError at the top."""
+
+    def __init__(self, message: str, pos: int):
+        super().__init__(message)
+        self.message = message
+        self.pos = pos
+
+
+# ---------------------------------------------------------------------------- tokens
+def _unescape(body: str, pos: int) -> str:
+    """Decode the inside of a quoted atom or string (quotes already stripped)."""
+    if "\\" not in body:
+        return body
+    out = []
+    i, n = 0, len(body)
+    while i < n:
+        ch = body[i]
+        if ch != "\\":
+            out.append(ch)
+            i += 1
+            continue
+        i += 1
+        c = body[i]
+        if c == "\n":  # `\` newline: line continuation
+            i += 1
+        elif c == "x":
+            j = i + 1
+            while j < n and body[j] in "0123456789abcdefABCDEF":
+                j += 1
+            out.append(chr(int(body[i + 1:j], 16)))
+            i = j + 1 if j < n and body[j] == "\\" else j
+        elif c in "01234567":
+            j = i
+            while j < n and body[j] in "01234567":
+                j += 1
+            out.append(chr(int(body[i:j], 8)))
+            i = j + 1 if j < n and body[j] == "\\" else j
+        elif c in _ESC:
+            out.append(_ESC[c])
+            i += 1
+        else:
+            raise _Fail(f"undefined escape sequence '\\{c}'", pos)
+    return "".join(out)
+
+
+def _quoted_text(tok: str, pos: int) -> str:
+    q = tok[0]
+    return _unescape(tok[1:-1].replace(q + q, q), pos)
+
+
+def _int_value(text: str, pos: int) -> int:
+    if text.startswith("0'"):
+        c = text[2:]
+        if c == "''":
+            return 39
+        return ord(_unescape(c, pos) if c[0] == "\\" else c)
+    if text[:2] in ("0x", "0o", "0b"):
+        return int(text[2:], {"x": 16, "o": 8, "b": 2}[text[1]])
+    return int(text)
+
+
+def _float_value(text: str) -> float:
+    if text.endswith("Inf"):
+        return float("inf")
+    if text.endswith("NaN"):
+        return float("nan")
+    return float(text)
+
+
+def _duration_value(text: str) -> int | float:
+    i = len(text)
+    while not text[i - 1].isdigit():
+        i -= 1
+    num, unit = text[:i], text[i:]
+    scale = _UNITS[unit]
+    if "." not in num and type(scale) is int:
+        return int(num) * scale
+    value = float(num) * scale
+    return value
+
+
+def _functor_name(tok: str, pos: int) -> str:
+    name = tok[:-1]
+    if name[0] == "'":
+        return _quoted_text(name, pos)
+    return name
+
+
+# -------------------------------------------------------------------------- resolver
+class _Resolver:
+    """Operator-precedence parsing of one sequence (ISO 6.3.4, with SWI's leniencies).
+
+    Items are tuples ``(kind, value, token[, arg_priorities])``.  SWI-Prolog accepts terms
+    up to priority 1200 as arguments (``f(a:-b)``), so every sequence is parsed at 1200.
+    """
+
+    __slots__ = ("items", "i", "n")
+
+    def __init__(self, items: list):
+        self.items = items
+        self.i = 0
+        self.n = len(items)
+
+    def run(self) -> tuple[Any, int]:
+        term, prec = self.parse(1200)
+        if self.i < self.n:
+            kind, value, tok = self.items[self.i][:3]
+            if kind == _NAME and value in INFIX_OPS:
+                raise _Fail(f"operator priority clash at '{value}'", tok.start_pos)
+            prev = self.items[self.i - 1][2]
+            if prev.end_line != tok.line and prev.end_line is not None:
+                raise _Fail("operator expected (missing '.' at the end of the previous clause?)",
+                            tok.start_pos)
+            raise _Fail("operator expected", tok.start_pos)
+        return term, prec
+
+    def parse(self, maxp: int) -> tuple[Any, int]:
+        left, lp = self.primary(maxp)
+        return self.infix(left, lp, maxp)
+
+    def primary(self, maxp: int) -> tuple[Any, int]:
+        items = self.items
+        i = self.i
+        if i >= self.n:
+            tok = items[i - 1][2]
+            op = items[i - 1][1]
+            what = "a goal" if op in _GOAL_OPS else "a term"
+            raise _Fail(f"{{unexpected}} (expected {what} after '{op}')", -tok.end_pos - 1)
+        item = items[i]
+        self.i = i + 1
+        kind = item[0]
+        if kind != _NAME:
+            return item[1], 0
+        name, tok = item[1], item[2]
+        if i + 1 < self.n:
+            nxt = items[i + 1]
+            nk = nxt[0]
+            # `-1`: a minus written directly against a number is a negative literal.
+            if name == "-" and nk == _NUM and nxt[2].start_pos == tok.end_pos:
+                self.i = i + 2
+                return -nxt[1], 0
+            pre = PREFIX_OPS.get(name)
+            # A prefix operator followed by an infix operator is an atom: `- = a`.
+            if pre is not None and not (nk == _NAME and nxt[1] in INFIX_OPS
+                                        and nxt[1] not in PREFIX_OPS):
+                p, ap = pre
+                if p > maxp:
+                    raise _Fail(f"operator priority clash at '{name}'", tok.start_pos)
+                arg, _ = self.parse(ap)
+                return Struct(name, (arg,)), p
+        if name == "," or name == "|":
+            raise _Fail(f"unexpected '{name}' (expected a term)", tok.start_pos)
+        # An operator as an atom (`f(-)`, `X = (+)`, `- (-)`): lenient like SWI.
+        return Atom(name), 0
+
+    def infix(self, left: Any, lp: int, maxp: int) -> tuple[Any, int]:
+        items = self.items
+        while self.i < self.n:
+            item = items[self.i]
+            kind = item[0]
+            if kind == _FUNC:
+                # `a-(b,c)` lexes as the functor `-(` but, in infix position, it is the
+                # operator `-` followed by a parenthesised term.
+                op = item[1].name
+                if op not in INFIX_OPS:
+                    raise _Fail("operator expected", item[2].start_pos)
+                p, lmax, rmax = INFIX_OPS[op]
+                if p > maxp or lp > lmax:
+                    break
+                self.i += 1
+                args, prios = item[1].args, item[3]
+                if len(args) > 1 and max(prios) > 999:
+                    raise _Fail(f"ambiguous '{op}(': write '{op} (' for an operator",
+                                item[2].start_pos)
+                right = args[-1]
+                for a in reversed(args[:-1]):
+                    right = Struct(",", (a, right))
+                left = Struct(op, (left, right))
+                lp = p
+                continue
+            if kind != _NAME:
+                raise _Fail("operator expected", item[2].start_pos)
+            name = item[1]
+            spec = INFIX_OPS.get(name)
+            if spec is None:
+                raise _Fail("operator expected", item[2].start_pos)
+            p, lmax, rmax = spec
+            if p > maxp or lp > lmax:
+                break
+            self.i += 1
+            right, _ = self.parse(rmax)
+            left = Struct(name, (left, right))
+            lp = p
+        return left, lp
+
+
+# ----------------------------------------------------------------------- transformer
+class _Builder(Transformer):
+    """Inline LALR callbacks: build terms while parsing (no parse tree)."""
+
+    def _items(self, children: list) -> list:
+        st = _state
+        items = []
+        append = items.append
+        for c in children:
+            if type(c) is not Token:
+                append(c)
+                continue
+            t = c.type
+            if t == "NAME" or t == "SYM" or t == "COMMA" or t == "BAR":
+                append((_NAME, c.value, c))
+            elif t == "VAR":
+                name = c.value
+                if name == "_":
+                    append((_TERM, Var("_"), c))
+                else:
+                    # Inner brackets reduce before the tokens around them, so variables
+                    # are met out of textual order: remember each one's first position.
+                    entry = st.varmap.get(name)
+                    if entry is None:
+                        entry = st.varmap[name] = [Var(name), c.start_pos]
+                    elif c.start_pos < entry[1]:
+                        entry[1] = c.start_pos
+                    append((_TERM, entry[0], c))
+            elif t == "FLOAT":
+                append((_NUM, _float_value(c.value), c))
+            elif t == "INT":
+                append((_NUM, _int_value(c.value, c.start_pos), c))
+            elif t == "QNAME":
+                text = _quoted_text(c.value, c.start_pos)
+                # A quoted comma or bar is an ordinary atom, never the operator.
+                append((_TERM if text in (",", "|") else _NAME, Atom(text), c))
+            elif t == "STRING":
+                append((_TERM, String(_quoted_text(c.value, c.start_pos)), c))
+            elif t == "DURATION":
+                append((_NUM, _duration_value(c.value), c))
+            else:  # pragma: no cover - grammar and this table must agree
+                raise _Fail(f"unexpected token {c.value!r}", c.start_pos)
+        return items
+
+    def _resolve(self, children: list) -> tuple[Any, int, Token]:
+        items = self._items(children)
+        first = items[0]
+        if len(items) == 1 and first[0] != _NAME:
+            return first[1], 0, first[2]  # fast path: a single operand
+        term, prec = _Resolver(items).run()
+        return term, prec, first[2]
+
+    seq = aseq = lseq = _resolve
+
+    def compound(self, c: list) -> tuple:
+        tok = c[0]
+        name = _functor_name(tok.value, tok.start_pos)
+        args = c[1:]
+        return (_FUNC, Struct(name, tuple(a[0] for a in args)), tok, [a[1] for a in args])
+
+    def paren(self, c: list) -> tuple:
+        return (_TERM, c[1][0], c[0])
+
+    def list(self, c: list) -> tuple:
+        tail = NIL
+        end = len(c)
+        if type(c[-2]) is Token:  # `| Tail`
+            tail = c[-1][0]
+            end -= 2
+        # Built back to front in a loop: a million-element list must not recurse.
+        for k in range(end - 1, 0, -1):
+            tail = Struct(".", (c[k][0], tail))
+        return (_TERM, tail, c[0])
+
+    def nil(self, c: list) -> tuple:
+        return (_TERM, NIL, c[0])
+
+    def curly(self, c: list) -> tuple:
+        return (_TERM, Struct("{}", (c[1][0],)), c[0])
+
+    def curly_empty(self, c: list) -> tuple:
+        return (_TERM, Atom("{}"), c[0])
+
+    def clause(self, c: list) -> Clause:
+        st = _state
+        term, _, first = c[0]
+        end = c[1]
+        varnames = _ordered_vars(st.varmap)
+        st.varmap = {}
+        span = Span(st.filename, first.line, first.column, end.end_line, end.end_column)
+        text = st.text[first.start_pos:end.end_pos]
+        if type(term) is Struct and term.name in (":-", "?-") and len(term.args) == 1:
+            return Clause(None, _bar_to_semicolon(term.args[0]), span, varnames, text)
+        if type(term) is Struct and term.name == ":-" and len(term.args) == 2:
+            head, body = term.args
+            body = _bar_to_semicolon(body)
+        else:
+            head, body = term, TRUE
+        if type(head) is Var:
+            raise _Fail("variable as clause head", first.start_pos)
+        if type(head) is not Atom and type(head) is not Struct:
+            raise _Fail(f"clause head must be an atom or compound term, not {head!r}",
+                        first.start_pos)
+        return Clause(head, body, span, varnames, text)
+
+    def program(self, c: list) -> list:
+        return c
+
+    def query(self, c: list) -> tuple[Any, dict[str, Var]]:
+        return _bar_to_semicolon(c[0][0]), dict(_ordered_vars(_state.varmap))
+
+
+def _ordered_vars(varmap: dict) -> tuple:
+    if len(varmap) < 2:
+        return tuple((k, e[0]) for k, e in varmap.items())
+    return tuple((k, e[0]) for k, e in sorted(varmap.items(), key=lambda kv: kv[1][1]))
+
+
+def _bar_to_semicolon(goal: Any) -> Any:
+    """SWI reads `(a | b)` as '|'(a, b) but runs it as `;` in a body: do that here."""
+    if type(goal) is not Struct or goal.name not in _GOAL_OPS:
+        return goal
+    stack_changed = goal.name == "|" and len(goal.args) == 2
+    args = tuple(_bar_to_semicolon(a) for a in goal.args)
+    name = ";" if stack_changed else goal.name
+    if not stack_changed and all(a is b for a, b in zip(args, goal.args)):
+        return goal
+    return Struct(name, args)
+
+
+# ------------------------------------------------------------------------ entry points
+_LARK: Lark | None = None
+_LOCK = threading.Lock()
+
+
+def _parser() -> Lark:
+    global _LARK
+    if _LARK is None:
+        with _LOCK:
+            if _LARK is None:
+                _LARK = Lark(_GRAMMAR_PATH.read_text(encoding="utf-8"), parser="lalr",
+                             lexer="contextual", start=["program", "query"],
+                             transformer=_Builder(), maybe_placeholders=False,
+                             cache=False)
+    return _LARK
+
+
+# Typical mistakes, matched by lark's parser state (UnexpectedInput.match_examples).
+_EXAMPLES: dict[str, list[str]] = {
+    "missing '.' at the end of the clause": ["a", "a(1)", "a :- b", "a :- b, c"],
+    "unbalanced parenthesis: missing ')'": ["a(b", "a(b, c", "a :- (b", "a :- (b, c",
+                                            "a(b.", "a((b).", "a :- (b."],
+    "unbalanced bracket: missing ']'": ["a([b", "a([b, c", "a([b|c", "a([b.", "a([b|c."],
+    "unbalanced brace: missing '}'": ["a({b", "a({b."],
+    "unexpected ')' (no matching '(')": ["a)", "a(b))", "a :- b)"],
+    "unexpected ']' (no matching '[')": ["a]", "a(b])"],
+    "unexpected '}' (no matching '{')": ["a}"],
+    "expected an argument": ["a(", "a(b,", "a(,", "a(b,)", "a()", "a(b, )"],
+    "expected a list element": ["a([b,", "a([,", "a([b,]", "a([b|", "a([b|]", "a([b|c|d]"],
+    "expected a term": ["(", "a :- (", "a :- (,", "a :- ()", "{", "a :- {,", ",", ", a."],
+}
+
+
+def _line_col(text: str, pos: int) -> tuple[int, int, str]:
+    line_start = text.rfind("\n", 0, pos) + 1
+    line_end = text.find("\n", pos)
+    if line_end < 0:
+        line_end = len(text)
+    return text.count("\n", 0, pos) + 1, pos - line_start + 1, text[line_start:line_end]
+
+
+def _describe(text: str, pos: int) -> str:
+    if pos >= len(text):
+        return "unexpected end of text"
+    ch = text[pos]
+    if ch == ".":
+        return "unexpected '.'"
+    return f"unexpected {text[pos:pos + 12].split()[0]!r}"
+
+
+def _next_token_pos(text: str, pos: int) -> int:
+    """First non-layout character at or after pos (skipping comments)."""
+    n = len(text)
+    while pos < n:
+        ch = text[pos]
+        if ch.isspace():
+            pos += 1
+        elif ch == "%":
+            nl = text.find("\n", pos)
+            pos = n if nl < 0 else nl + 1
+        elif text.startswith("/*", pos):
+            end = text.find("*/", pos + 2)
+            pos = n if end < 0 else end + 2
+        else:
+            break
+    return pos
+
+
+def _syntax_error(text: str, filename: str, message: str, pos: int) -> SLRSyntaxError:
+    if pos < 0:  # "after token": report at the next token, naming it
+        pos = _next_token_pos(text, -pos - 1)
+        message = message.replace("{unexpected}", _describe(text, pos))
+    line, col, src = _line_col(text, min(pos, len(text)))
+    return SLRSyntaxError(message, line, col, src, filename)
+
+
+def _lark_error(e: UnexpectedInput, text: str, filename: str, start: str) -> SLRSyntaxError:
+    if isinstance(e, UnexpectedCharacters):
+        pos = e.pos_in_stream
+        ch = text[pos]
+        if ch == "'":
+            msg = "unterminated quoted atom"
+        elif ch == '"':
+            msg = "unterminated string"
+        elif ch == "`":
+            msg = "back-quoted text is not supported"
+        else:
+            msg = f"unexpected character {ch!r}"
+        return _syntax_error(text, filename, msg, pos)
+    if isinstance(e, UnexpectedToken) and e.token.type != "$END":
+        pos = e.token.start_pos
+    else:
+        pos = len(text.rstrip())
+    label = None
+    try:
+        label = e.match_examples(lambda s: _run(s, "<example>", "program"), _EXAMPLES,
+                                 use_accepts=True)
+    except Exception:  # pragma: no cover - a broken example must not hide the real error
+        label = None
+    what = _describe(text, pos)
+    if isinstance(e, UnexpectedToken) and e.token.type == "END" and label is None:
+        label = "unexpected end of clause"
+    if label is None:
+        expected = sorted(e.expected) if isinstance(e, (UnexpectedToken, UnexpectedEOF)) else []
+        return _syntax_error(text, filename, f"{what} (expected one of {', '.join(expected)})"
+                             if expected else what, pos)
+    if label.startswith("unexpected") or pos >= len(text.rstrip()):
+        msg = label if pos < len(text.rstrip()) else f"{label} (at end of text)"
+    else:
+        msg = f"{what} ({label})"
+    return _syntax_error(text, filename, msg, pos)
+
+
+def _run(text: str, filename: str, start: str) -> Any:
+    st = _state
+    st.varmap = {}
+    st.text = text
+    st.filename = filename
+    return _parser().parse(text, start=start)
+
+
+def _parse(text: str, filename: str, start: str) -> Any:
+    st = _state
+    saved = getattr(st, "varmap", None), getattr(st, "text", None), getattr(st, "filename", None)
+    try:
+        return _run(text, filename, start)
+    except _Fail as f:
+        raise _syntax_error(text, filename, f.message, f.pos) from None
+    except UnexpectedInput as e:
+        err = _lark_error(e, text, filename, start)
+        raise err from None
+    finally:
+        st.varmap, st.text, st.filename = saved
+
+
+def parse_program(text: str, filename: str = "<string>") -> list[Clause]:
+    """Parse program text into clauses, in source order; any syntax error raises.
+
+    >>> [str(c.head) for c in parse_program("p(a).  q(X) :- p(X).")]
+    ['p(a)', 'q(X)']
+    >>> c = parse_program(":- event seg/2.")[0]; c.head is None, str(c.body)
+    (True, 'event seg/2')
+    """
+    return _parse(text, filename, "program")
+
+
+def parse_term(text: str, filename: str = "<query>") -> tuple[Any, dict[str, Var]]:
+    """Parse one term (a goal or an event); the final '.' is optional.
+
+    Returns the term and its named variables in order of first appearance (``_`` excluded).
+
+    >>> t, vs = parse_term("color(O, C)^12.5"); str(t), list(vs)
+    ('color(O,C)^12.5', ['O', 'C'])
+    """
+    return _parse(text, filename, "query")
