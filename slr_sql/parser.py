@@ -39,6 +39,8 @@ _UNITS = {"ms": 0.001, "s": 1, "min": 60, "h": 3600}
 _ESC = {"n": "\n", "t": "\t", "r": "\r", "a": "\a", "b": "\b", "f": "\f", "v": "\v",
         "e": "\x1b", "s": " ", "0": "\0", "\\": "\\", "'": "'", '"': '"', "`": "`"}
 _GOAL_OPS = frozenset((":-", "?-", ",", ";", "|", "->", "*->", "\\+"))
+# Control constructs whose arguments are goals (where `|` means `;`).
+_CONTROL = frozenset((",", ";", "|", "->", "*->", "\\+"))
 
 _state = threading.local()
 
@@ -306,7 +308,7 @@ class _Builder(Transformer):
     def list(self, c: list) -> tuple:
         tail = NIL
         end = len(c)
-        if type(c[-2]) is Token:  # `| Tail`
+        if len(c) > 3 and type(c[-2]) is Token:  # `| Tail` (c[0] is the `[` token)
             tail = c[-1][0]
             end -= 2
         # Built back to front in a loop: a million-element list must not recurse.
@@ -360,7 +362,7 @@ def _ordered_vars(varmap: dict) -> tuple:
 
 def _bar_to_semicolon(goal: Any) -> Any:
     """SWI reads `(a | b)` as '|'(a, b) but runs it as `;` in a body: do that here."""
-    if type(goal) is not Struct or goal.name not in _GOAL_OPS:
+    if type(goal) is not Struct or goal.name not in _CONTROL:
         return goal
     stack_changed = goal.name == "|" and len(goal.args) == 2
     args = tuple(_bar_to_semicolon(a) for a in goal.args)

@@ -234,10 +234,9 @@ class _Writer:
             self.term(arg, ap)
             first = self.out[mark][0] if mark < len(self.out) else ""
             # `- (a,b)` is -((a,b)) but `-(a,b)` is -(a,b); `- 1` is -(1) but `-1` is -1.
-            if first == "(" or (name in ("-", "+") and first.isdigit()) or (
-                    name[0].isalpha() and first != " "):
-                if first != " ":
-                    self.out.insert(mark, " ")
+            if first != " " and (
+                    first == "(" or (name == "-" and first.isdigit()) or name[0].isalpha()):
+                self.out.insert(mark, " ")
             if open_:
                 self.put(")")
             return
