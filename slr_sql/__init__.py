@@ -1,0 +1,19 @@
+"""slr_sql: SLR, a Prolog-like language over robot event streams, on a persistent SQLite store.
+
+>>> import slr_sql
+>>> with slr_sql.open() as kb:
+...     kb.add("obj(cup1, cup, red)^2.0")
+...     kb.query("obj(O, cup, C)^T")
+[{'O': Atom('cup1'), 'C': Atom('red'), 'T': 2.0}]
+"""
+from .clocks import Clock, ManualClock, StreamClock, WallClock
+from .errors import EventRejected, SLRError, SLREvaluationError, SLRSyntaxError, SLRTimeout
+from .kb import KnowledgeBase, open
+from .terms import Atom, String, Struct, Var
+
+__all__ = [
+    "open", "KnowledgeBase", "Clock", "WallClock", "ManualClock", "StreamClock",
+    "SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "EventRejected",
+    "Atom", "String", "Struct", "Var",
+]
+__version__ = "0.1.0"

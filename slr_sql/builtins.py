@@ -1,0 +1,1309 @@
+"""Builtin predicates: deterministic ones return a bool, nondeterministic ones are generators
+that bind through the machine and ``yield`` once per solution (the machine undoes the
+bindings before asking for the next one).
+
+List predicates whose order of solutions users rely on (member/2, append/3, ...) are written
+in Prolog (:data:`LIBRARY_SOURCE`) exactly as SWI-Prolog's library defines them, so that the
+interpreter enumerates solutions in the same order as SWI-Prolog.
+"""
+from __future__ import annotations
+
+import functools
+import io
+import math
+import sys
+from typing import Any, Callable, Iterator
+
+from .arith import evaluate, instantiation_error, iso_error, type_error
+from .engine import Machine, copy_term, resolve, unify, undo
+from .errors import SLREvaluationError
+from .program import Program, split_event_atom, event_key
+from .terms import (Atom, NIL, String, Struct, Var, deref, from_python, is_callable,
+                    is_ground, list_items, make_list, term_vars, to_python)
+
+DET: dict[tuple[str, int], Callable[[Machine, tuple], bool]] = {}
+NONDET: dict[tuple[str, int], Callable[[Machine, tuple], Iterator[None]]] = {}
+
+
+def det(name: str, arity: int):
+    def deco(f):
+        DET[(name, arity)] = f
+        return f
+    return deco
+
+
+def nondet(name: str, arity: int):
+    def deco(f):
+        NONDET[(name, arity)] = f
+        return f
+    return deco
+
+
+def _err_domain(domain: str, culprit: Any) -> SLREvaluationError:
+    return iso_error(Struct("domain_error", (Atom(domain), culprit)))
+
+
+# -- unification and comparison -------------------------------------------------------------
+
+@det("=", 2)
+def _eq(m, a):
+    return m.unify(a[0], a[1])
+
+
+@det("\\=", 2)
+def _neq(m, a):
+    mark = len(m.trail)
+    ok = m.unify(a[0], a[1])
+    m.undo_to(mark)
+    return not ok
+
+
+@det("==", 2)
+def _ident(m, a):
+    return compare_terms(a[0], a[1]) == 0
+
+
+@det("\\==", 2)
+def _nident(m, a):
+    return compare_terms(a[0], a[1]) != 0
+
+
+def _type_rank(t: Any) -> int:
+    tt = type(t)
+    if tt is Var:
+        return 0
+    if tt is int or tt is float:
+        return 1
+    if tt is Atom:
+        return 3
+    if tt is String:
+        return 4
+    return 5
+
+
+def compare_terms(a: Any, b: Any) -> int:
+    """Standard order of terms: Var < Number < Atom < String < Compound.
+
+    >>> compare_terms(1, Atom("a")), compare_terms(1.0, 1), compare_terms(Atom("b"), Atom("a"))
+    (-1, -1, 1)
+    """
+    while True:
+        a = deref(a)
+        b = deref(b)
+        if a is b:
+            return 0
+        ra, rb = _type_rank(a), _type_rank(b)
+        if ra != rb:
+            return -1 if ra < rb else 1
+        if ra == 1:
+            if a == b:
+                if type(a) is type(b):
+                    return 0
+                return -1 if type(a) is float else 1
+            return -1 if a < b else 1
+        if ra == 3 or ra == 4:
+            return 0 if a == b else (-1 if str(a) < str(b) else 1)
+        if ra == 0:
+            return 0 if a is b else (-1 if id(a) < id(b) else 1)
+        # compound: arity, name, then arguments left to right
+        na, nb = len(a.args), len(b.args)
+        if na != nb:
+            return -1 if na < nb else 1
+        if a.name != b.name:
+            return -1 if str(a.name) < str(b.name) else 1
+        for x, y in zip(a.args[:-1], b.args[:-1]):
+            c = compare_terms(x, y)
+            if c:
+                return c
+        a, b = a.args[-1], b.args[-1]
+
+
+_cmp_key = functools.cmp_to_key(compare_terms)
+
+for _op, _test in (("@<", lambda c: c < 0), ("@>", lambda c: c > 0),
+                   ("@=<", lambda c: c <= 0), ("@>=", lambda c: c >= 0)):
+    DET[(_op, 2)] = (lambda test: lambda m, a: test(compare_terms(a[0], a[1])))(_test)
+
+
+@det("compare", 3)
+def _compare(m, a):
+    c = compare_terms(a[1], a[2])
+    return m.unify(a[0], Atom("<" if c < 0 else ">" if c > 0 else "="))
+
+
+# -- arithmetic -------------------------------------------------------------------------------
+
+@det("is", 2)
+def _is(m, a):
+    return m.unify(a[0], evaluate(a[1]))
+
+
+for _op, _test in (("=:=", lambda x, y: x == y), ("=\\=", lambda x, y: x != y),
+                   ("<", lambda x, y: x < y), (">", lambda x, y: x > y),
+                   ("=<", lambda x, y: x <= y), (">=", lambda x, y: x >= y)):
+    DET[(_op, 2)] = (lambda test: lambda m, a: test(evaluate(a[0]), evaluate(a[1])))(_test)
+
+
+@det("succ", 2)
+def _succ(m, a):
+    x = deref(a[0])
+    if type(x) is int:
+        if x < 0:
+            raise type_error("not_less_than_zero", x)
+        return m.unify(a[1], x + 1)
+    y = deref(a[1])
+    if type(y) is int:
+        if y <= 0:
+            if y < 0:
+                raise type_error("not_less_than_zero", y)
+            return False
+        return m.unify(a[0], y - 1)
+    if type(x) is Var and type(y) is Var:
+        raise instantiation_error()
+    raise type_error("integer", x if type(x) is not Var else y)
+
+
+@det("plus", 3)
+def _plus(m, a):
+    x, y, z = (deref(v) for v in a)
+    if type(z) is Var:
+        return m.unify(z, evaluate(x) + evaluate(y))
+    if type(y) is Var:
+        return m.unify(y, evaluate(z) - evaluate(x))
+    return m.unify(x, evaluate(z) - evaluate(y))
+
+
+@nondet("between", 3)
+def _between(m, a):
+    lo = deref(a[0])
+    hi = deref(a[1])
+    x = deref(a[2])
+    if type(lo) is Var or type(hi) is Var:
+        raise instantiation_error()
+    if type(lo) is not int:
+        raise type_error("integer", lo)
+    if hi in ("inf", "infinite") and type(hi) is Atom:
+        hi = math.inf
+    elif type(hi) is not int:
+        raise type_error("integer", hi)
+    if type(x) is int:
+        if lo <= x <= hi:
+            yield None
+        return
+    if type(x) is not Var:
+        raise type_error("integer", x)
+    i = lo
+    trail = m.trail
+    while i <= hi:
+        x.ref = i
+        trail.append(x)
+        yield None
+        i += 1
+
+
+# -- type checks -------------------------------------------------------------------------------
+
+def _typecheck(name, test):
+    DET[(name, 1)] = lambda m, a: test(deref(a[0]))
+
+
+_typecheck("var", lambda t: type(t) is Var)
+_typecheck("nonvar", lambda t: type(t) is not Var)
+_typecheck("atom", lambda t: type(t) is Atom)
+_typecheck("number", lambda t: type(t) in (int, float))
+_typecheck("integer", lambda t: type(t) is int)
+_typecheck("float", lambda t: type(t) is float)
+_typecheck("atomic", lambda t: type(t) in (Atom, int, float, String))
+_typecheck("compound", lambda t: type(t) is Struct)
+_typecheck("callable", lambda t: type(t) in (Atom, Struct))
+_typecheck("is_list", lambda t: list_items(t)[1] == "[]" and type(list_items(t)[1]) is Atom)
+_typecheck("string", lambda t: type(t) is String)
+_typecheck("ground", is_ground)
+
+
+# -- term construction ----------------------------------------------------------------------------
+
+@det("functor", 3)
+def _functor(m, a):
+    t = deref(a[0])
+    if type(t) is Struct:
+        return m.unify(a[1], t.name) and m.unify(a[2], len(t.args))
+    if type(t) is not Var:
+        return m.unify(a[1], t) and m.unify(a[2], 0)
+    name = deref(a[1])
+    n = deref(a[2])
+    if type(name) is Var or type(n) is Var:
+        raise instantiation_error()
+    if type(n) is not int:
+        raise type_error("integer", n)
+    if n == 0:
+        return m.unify(t, name)
+    if type(name) is not Atom:
+        raise type_error("atomic" if type(name) is Struct else "atom", name)
+    return m.unify(t, Struct(name, tuple(Var() for _ in range(n))))
+
+
+@nondet("arg", 3)
+def _arg(m, a):
+    n = deref(a[0])
+    t = deref(a[1])
+    if type(t) is Var:
+        raise instantiation_error()
+    if type(t) is not Struct:
+        raise type_error("compound", t)
+    if type(n) is int:
+        if 1 <= n <= len(t.args) and m.unify(a[2], t.args[n - 1]):
+            yield None
+        return
+    if type(n) is not Var:
+        raise type_error("integer", n)
+    for i, x in enumerate(t.args, 1):
+        mark = len(m.trail)
+        if m.unify(n, i) and m.unify(a[2], x):
+            yield None
+        m.undo_to(mark)
+
+
+@det("=..", 2)
+def _univ(m, a):
+    t = deref(a[0])
+    if type(t) is Struct:
+        return m.unify(a[1], make_list((t.name,) + t.args))
+    if type(t) is not Var:
+        return m.unify(a[1], make_list([t]))
+    items, tail = list_items(a[1])
+    if type(tail) is Var:
+        raise instantiation_error()
+    if not items:
+        raise _err_domain("non_empty_list", NIL)
+    head = deref(items[0])
+    if len(items) == 1:
+        return m.unify(t, head)
+    if type(head) is Var:
+        raise instantiation_error()
+    if type(head) is not Atom:
+        raise type_error("atom", head)
+    return m.unify(t, Struct(head, tuple(items[1:])))
+
+
+@det("copy_term", 2)
+def _copy_term(m, a):
+    return m.unify(a[1], copy_term(a[0]))
+
+
+# -- atoms and strings -------------------------------------------------------------------------------
+
+def text_of(t: Any, what: str = "atomic") -> str:
+    t = deref(t)
+    tt = type(t)
+    if tt is Var:
+        raise instantiation_error()
+    if tt is Atom or tt is String:
+        return str(t)
+    if tt is int:
+        return str(t)
+    if tt is float:
+        from .printer import format_term
+
+        return format_term(t)
+    if tt is Struct:
+        items, tail = list_items(t)
+        if tail == "[]" and type(tail) is Atom:
+            try:
+                return "".join(chr(deref(x)) if type(deref(x)) is int else str(deref(x))
+                               for x in items)
+            except (TypeError, ValueError):
+                pass
+    raise type_error(what, t)
+
+
+def _parse_number(s: str) -> Any:
+    from .parser import parse_term
+
+    try:
+        t, _ = parse_term(s.strip())
+    except Exception:
+        return None
+    t = deref(t)
+    if type(t) in (int, float):
+        return t
+    if type(t) is Struct and t.name == "-" and len(t.args) == 1 and type(deref(t.args[0])) in (int, float):
+        return -deref(t.args[0])
+    return None
+
+
+@nondet("atom_concat", 3)
+def _atom_concat(m, a):
+    x, y = deref(a[0]), deref(a[1])
+    if type(x) is not Var and type(y) is not Var:
+        if m.unify(a[2], Atom(text_of(x) + text_of(y))):
+            yield None
+        return
+    z = deref(a[2])
+    if type(z) is Var:
+        raise instantiation_error()
+    s = text_of(z)
+    for i in range(len(s) + 1):
+        mark = len(m.trail)
+        if m.unify(x, Atom(s[:i])) and m.unify(y, Atom(s[i:])):
+            yield None
+        m.undo_to(mark)
+
+
+@nondet("string_concat", 3)
+def _string_concat(m, a):
+    x, y = deref(a[0]), deref(a[1])
+    if type(x) is not Var and type(y) is not Var:
+        if m.unify(a[2], String(text_of(x) + text_of(y))):
+            yield None
+        return
+    s = text_of(a[2])
+    for i in range(len(s) + 1):
+        mark = len(m.trail)
+        if m.unify(x, String(s[:i])) and m.unify(y, String(s[i:])):
+            yield None
+        m.undo_to(mark)
+
+
+@det("atom_length", 2)
+def _atom_length(m, a):
+    return m.unify(a[1], len(text_of(a[0])))
+
+
+DET[("string_length", 2)] = _atom_length
+
+
+def _text_conv(name: str, make: Callable[[str], Any], parse: Callable[[Any], str]):
+    def f(m, a):
+        x = deref(a[0])
+        if type(x) is not Var:
+            return m.unify(a[1], make(text_of(x)))
+        return m.unify(x, parse(a[1]))
+    DET[(name, 2)] = f
+
+
+_text_conv("atom_chars", lambda s: make_list([Atom(c) for c in s]), lambda t: Atom(text_of(t)))
+_text_conv("atom_codes", lambda s: make_list([ord(c) for c in s]), lambda t: Atom(text_of(t)))
+_text_conv("char_code", lambda s: ord(s), lambda t: Atom(chr(deref(t))))
+_text_conv("atom_string", lambda s: String(s), lambda t: Atom(text_of(t)))
+_text_conv("string_chars", lambda s: make_list([Atom(c) for c in s]), lambda t: String(text_of(t)))
+_text_conv("string_codes", lambda s: make_list([ord(c) for c in s]), lambda t: String(text_of(t)))
+_text_conv("string_to_atom", lambda s: Atom(s), lambda t: String(text_of(t)))
+_text_conv("term_string", lambda s: String(s), lambda t: _parse_any(t))
+
+
+def _parse_any(t):
+    from .parser import parse_term
+
+    return parse_term(text_of(t))[0]
+
+
+@det("string_code", 3)
+def _string_code(m, a):
+    i = deref(a[0])
+    s = text_of(a[1])
+    return type(i) is int and 1 <= i <= len(s) and m.unify(a[2], ord(s[i - 1]))
+
+
+@det("number_codes", 2)
+def _number_codes(m, a):
+    x = deref(a[0])
+    if type(x) is not Var:
+        return m.unify(a[1], make_list([ord(c) for c in text_of(x)]))
+    n = _parse_number(text_of(a[1]))
+    if n is None:
+        raise iso_error(Struct("syntax_error", (Atom("illegal_number"),)))
+    return m.unify(x, n)
+
+
+@det("atom_number", 2)
+def _atom_number(m, a):
+    x = deref(a[0])
+    if type(x) is Var:
+        n = deref(a[1])
+        if type(n) is Var:
+            raise instantiation_error()
+        return m.unify(x, Atom(text_of(n)))
+    n = _parse_number(text_of(x))
+    return n is not None and m.unify(a[1], n)
+
+
+@det("number_string", 2)
+def _number_string(m, a):
+    s = deref(a[1])
+    if type(s) is not Var:
+        n = _parse_number(text_of(s))
+        if n is None:
+            raise iso_error(Struct("syntax_error", (Atom("illegal_number"),)))
+        return m.unify(a[0], n)
+    return m.unify(s, String(text_of(a[0])))
+
+
+@det("term_to_atom", 2)
+def _term_to_atom(m, a):
+    from .printer import format_term
+
+    t = deref(a[0])
+    if type(t) is Var and type(deref(a[1])) is not Var:
+        return m.unify(t, _parse_any(a[1]))
+    return m.unify(a[1], Atom(format_term(t)))
+
+
+@det("upcase_atom", 2)
+def _upcase(m, a):
+    return m.unify(a[1], Atom(text_of(a[0]).upper()))
+
+
+@det("downcase_atom", 2)
+def _downcase(m, a):
+    return m.unify(a[1], Atom(text_of(a[0]).lower()))
+
+
+@det("atomic_list_concat", 2)
+def _alc2(m, a):
+    items, _ = list_items(a[0])
+    return m.unify(a[1], Atom("".join(text_of(x) for x in items)))
+
+
+@det("atomic_list_concat", 3)
+def _alc3(m, a):
+    sep = text_of(a[1])
+    items, tail = list_items(a[0])
+    if type(tail) is Atom and all(type(deref(x)) is not Var for x in items):
+        return m.unify(a[2], Atom(sep.join(text_of(x) for x in items)))
+    if not sep:
+        raise instantiation_error()
+    parts = text_of(a[2]).split(sep)
+    return m.unify(a[0], make_list([Atom(p) for p in parts]))
+
+
+@det("split_string", 4)
+def _split_string(m, a):
+    s, seps, pad = text_of(a[0]), text_of(a[1]), text_of(a[2])
+    parts = [s] if not seps else _split_any(s, seps)
+    return m.unify(a[3], make_list([String(p.strip(pad)) for p in parts]))
+
+
+def _split_any(s: str, seps: str) -> list[str]:
+    out, cur = [], []
+    for ch in s:
+        if ch in seps:
+            out.append("".join(cur))
+            cur = []
+        else:
+            cur.append(ch)
+    out.append("".join(cur))
+    return out
+
+
+@nondet("sub_atom", 5)
+def _sub_atom(m, a):
+    s = text_of(a[0])
+    sub = deref(a[4])
+    n = len(s)
+    if type(sub) is not Var:
+        t = text_of(sub)
+        start = s.find(t)
+        while start >= 0:
+            mark = len(m.trail)
+            if m.unify(a[1], start) and m.unify(a[2], len(t)) and m.unify(a[3], n - start - len(t)):
+                yield None
+            m.undo_to(mark)
+            start = s.find(t, start + 1)
+        return
+    for b in range(n + 1):
+        for length in range(n - b + 1):
+            mark = len(m.trail)
+            if m.unify(a[1], b) and m.unify(a[2], length) and m.unify(a[3], n - b - length) \
+                    and m.unify(sub, Atom(s[b:b + length])):
+                yield None
+            m.undo_to(mark)
+
+
+# -- lists -----------------------------------------------------------------------------------------
+
+def proper_list(t: Any) -> list:
+    items, tail = list_items(t)
+    if type(tail) is Var:
+        raise instantiation_error()
+    if not (type(tail) is Atom and tail == "[]"):
+        raise type_error("list", t)
+    return items
+
+
+@nondet("length", 2)
+def _length(m, a):
+    items, tail = list_items(a[0])
+    n = deref(a[1])
+    if type(tail) is Atom and tail == "[]":
+        if m.unify(n, len(items)):
+            yield None
+        return
+    if type(tail) is not Var:
+        return
+    if type(n) is int:
+        if n < len(items):
+            return
+        if m.unify(tail, make_list([Var() for _ in range(n - len(items))])):
+            yield None
+        return
+    if type(n) is not Var:
+        raise type_error("integer", n)
+    k = 0
+    while True:
+        mark = len(m.trail)
+        if m.unify(tail, make_list([Var() for _ in range(k)])) and m.unify(n, len(items) + k):
+            yield None
+        m.undo_to(mark)
+        k += 1
+
+
+@det("msort", 2)
+def _msort(m, a):
+    return m.unify(a[1], make_list(sorted(proper_list(a[0]), key=_cmp_key)))
+
+
+def _dedup(items: list) -> list:
+    out = []
+    for x in items:
+        if not out or compare_terms(out[-1], x) != 0:
+            out.append(x)
+    return out
+
+
+@det("sort", 2)
+def _sort(m, a):
+    return m.unify(a[1], make_list(_dedup(sorted(proper_list(a[0]), key=_cmp_key))))
+
+
+@det("sort", 4)
+def _sort4(m, a):
+    key = deref(a[0])
+    order = deref(a[1])
+    items = proper_list(a[2])
+    if type(key) is not int:
+        raise type_error("integer", key)
+
+    def k(t):
+        if key == 0:
+            return t
+        t = deref(t)
+        if type(t) is not Struct or len(t.args) < key:
+            raise type_error("compound", t)
+        return t.args[key - 1]
+
+    if str(order) not in ("@<", "@>", "@=<", "@>="):
+        raise _err_domain("order", order)
+    desc = order in ("@>", "@>=")
+    res = sorted(items, key=lambda t: _cmp_key(k(t)), reverse=desc)
+    if order in ("@<", "@>"):
+        out = []
+        for x in res:
+            if not out or compare_terms(k(out[-1]), k(x)) != 0:
+                out.append(x)
+        res = out
+    return m.unify(a[3], make_list(res))
+
+
+@det("keysort", 2)
+def _keysort(m, a):
+    items = proper_list(a[0])
+    for x in items:
+        x = deref(x)
+        if type(x) is Var:
+            raise instantiation_error()
+        if type(x) is not Struct or x.name != "-" or len(x.args) != 2:
+            raise type_error("pair", x)
+    return m.unify(a[1], make_list(sorted(items, key=lambda t: _cmp_key(deref(t).args[0]))))
+
+
+def _numbers(t: Any) -> list:
+    return [evaluate(x) for x in proper_list(t)]
+
+
+@det("sum_list", 2)
+def _sum_list(m, a):
+    total: Any = 0
+    for x in _numbers(a[0]):
+        total = total + x
+    return m.unify(a[1], total)
+
+
+DET[("sumlist", 2)] = _sum_list
+
+
+@det("max_list", 2)
+def _max_list(m, a):
+    xs = _numbers(a[0])
+    if not xs:
+        return False
+    best = xs[0]
+    for x in xs[1:]:
+        if x > best:
+            best = x
+    return m.unify(a[1], best)
+
+
+@det("min_list", 2)
+def _min_list(m, a):
+    xs = _numbers(a[0])
+    if not xs:
+        return False
+    best = xs[0]
+    for x in xs[1:]:
+        if x < best:
+            best = x
+    return m.unify(a[1], best)
+
+
+@det("max_member", 2)
+def _max_member(m, a):
+    xs = proper_list(a[1])
+    if not xs:
+        return False
+    best = xs[0]
+    for x in xs[1:]:
+        if compare_terms(x, best) > 0:
+            best = x
+    return m.unify(a[0], best)
+
+
+@det("min_member", 2)
+def _min_member(m, a):
+    xs = proper_list(a[1])
+    if not xs:
+        return False
+    best = xs[0]
+    for x in xs[1:]:
+        if compare_terms(x, best) < 0:
+            best = x
+    return m.unify(a[0], best)
+
+
+@det("numlist", 3)
+def _numlist(m, a):
+    lo, hi = deref(a[0]), deref(a[1])
+    if type(lo) is Var or type(hi) is Var:
+        raise instantiation_error()
+    if type(lo) is not int:
+        raise type_error("integer", lo)
+    if type(hi) is not int:
+        raise type_error("integer", hi)
+    if lo > hi:
+        return False
+    return m.unify(a[2], make_list(range(lo, hi + 1)))
+
+
+@det("reverse", 2)
+def _reverse(m, a):
+    return m.unify(a[1], make_list(list(reversed(proper_list(a[0])))))
+
+
+@det("memberchk", 2)
+def _memberchk(m, a):
+    items, tail = list_items(a[1])
+    trail = m.trail
+    for x in items:
+        mark = len(trail)
+        if unify(a[0], x, trail):
+            return True
+        undo(trail, mark)
+    if type(tail) is Var:
+        return m.unify(tail, Struct(".", (a[0], Var())))
+    return False
+
+
+@det("list_to_set", 2)
+def _list_to_set(m, a):
+    out = []
+    for x in proper_list(a[0]):
+        if not any(compare_terms(x, y) == 0 for y in out):
+            out.append(x)
+    return m.unify(a[1], make_list(out))
+
+
+# -- output ------------------------------------------------------------------------------------------
+
+def _out(m: Machine):
+    return m.engine.out or sys.stdout
+
+
+def _write_text(t: Any, quoted: bool = False) -> str:
+    from .printer import format_term
+
+    t = deref(t)
+    if not quoted and type(t) in (Atom, String):
+        return str(t)
+    return format_term(t, quoted=quoted)
+
+
+@det("write", 1)
+def _write(m, a):
+    _out(m).write(_write_text(a[0]))
+    return True
+
+
+DET[("print", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], True)), True)[1]
+DET[("writeq", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], True)), True)[1]
+DET[("write_canonical", 1)] = DET[("writeq", 1)]
+DET[("writeln", 1)] = lambda m, a: (_out(m).write(_write_text(a[0]) + "\n"), True)[1]
+DET[("nl", 0)] = lambda m, a: (_out(m).write("\n"), True)[1]
+DET[("tab", 1)] = lambda m, a: (_out(m).write(" " * evaluate(a[0])), True)[1]
+
+
+def format_text(fmt: str, args: list) -> str:
+    """SWI-style ``format/2`` directives: ~w ~p ~q ~a ~d ~D ~s ~e ~f ~g ~n ~c ~r ~8| ~t ~~ ~i ~*c.
+
+    >>> format_text("~w has ~d items~n", [Atom("cup"), 3])
+    'cup has 3 items\\n'
+    """
+    out: list[str] = []
+    args = list(args)
+    i = 0
+    n = len(fmt)
+
+    def take():
+        if not args:
+            raise iso_error(Struct("format", (String("not enough arguments"),)))
+        return args.pop(0)
+
+    while i < n:
+        ch = fmt[i]
+        if ch != "~":
+            out.append(ch)
+            i += 1
+            continue
+        i += 1
+        num = ""
+        while i < n and (fmt[i].isdigit() or fmt[i] == "*"):
+            if fmt[i] == "*":
+                num = str(evaluate(take()))
+            else:
+                num += fmt[i]
+            i += 1
+        if i >= n:
+            break
+        d = fmt[i]
+        i += 1
+        if d == "w":
+            out.append(_write_text(take()))
+        elif d in "pq":
+            out.append(_write_text(take(), True))
+        elif d == "a":
+            out.append(text_of(take()))
+        elif d in "dD":
+            v = evaluate(take())
+            if type(v) is not int:
+                raise type_error("integer", v)
+            if num and int(num) > 0:
+                k = int(num)
+                s = str(abs(v)).rjust(k + 1, "0")
+                s = ("-" if v < 0 else "") + s[:-k] + "." + s[-k:]
+            else:
+                s = f"{v:,}" if d == "D" else str(v)
+            out.append(s)
+        elif d == "f" or d == "e" or d == "g":
+            v = float(evaluate(take()))
+            prec = int(num) if num else 6
+            out.append(f"{v:.{prec}{d}}")
+        elif d == "s":
+            out.append(text_of(take()))
+        elif d == "n":
+            out.append("\n" * (int(num) if num else 1))
+        elif d == "c":
+            out.append(chr(evaluate(take())) * (int(num) if num else 1))
+        elif d == "r":
+            v = evaluate(take())
+            base = int(num) if num else 8
+            digits = "0123456789abcdefghijklmnopqrstuvwxyz"
+            s, x = "", abs(v)
+            while True:
+                s = digits[x % base] + s
+                x //= base
+                if not x:
+                    break
+            out.append(("-" if v < 0 else "") + s)
+        elif d == "~":
+            out.append("~")
+        elif d == "i":
+            take()
+        elif d in "t|+":
+            pass  # column alignment is not supported; text is emitted unpadded
+        else:
+            raise iso_error(Struct("format", (String(f"unknown directive ~{d}"),)))
+    return "".join(out)
+
+
+def _format_args(t: Any) -> list:
+    t = deref(t)
+    items, tail = list_items(t)
+    if type(tail) is Atom and tail == "[]" and (items or t == "[]"):
+        return items
+    return [t]
+
+
+@det("format", 1)
+def _format1(m, a):
+    _out(m).write(format_text(text_of(a[0]), []))
+    return True
+
+
+@det("format", 2)
+def _format2(m, a):
+    _out(m).write(format_text(text_of(a[0]), _format_args(a[1])))
+    return True
+
+
+@det("format", 3)
+def _format3(m, a):
+    sink = deref(a[0])
+    text = format_text(text_of(a[1]), _format_args(a[2]))
+    if type(sink) is Struct and len(sink.args) == 1:
+        kind = sink.name
+        if kind == "atom":
+            return m.unify(sink.args[0], Atom(text))
+        if kind == "string":
+            return m.unify(sink.args[0], String(text))
+        if kind == "codes":
+            return m.unify(sink.args[0], make_list([ord(c) for c in text]))
+        if kind == "chars":
+            return m.unify(sink.args[0], make_list([Atom(c) for c in text]))
+    raise _err_domain("output_sink", sink)
+
+
+DET[("halt", 0)] = lambda m, a: (_ for _ in ()).throw(
+    iso_error(Struct("permission_error", (Atom("halt"), Atom("system"), Atom("halt")))))
+
+
+# -- collecting: findall, aggregate_all, bagof, setof, forall --------------------------------------
+
+def _strip_carets(goal: Any) -> tuple[Any, list]:
+    """``V^W^G`` -> (G, [V, W]). ``p(..)^T`` (an event atom: a time or ``[S,E]`` on the right)
+    is a goal, not a quantification."""
+    quantified = []
+    goal = deref(goal)
+    while type(goal) is Struct and goal.name == "^" and len(goal.args) == 2:
+        left, right = deref(goal.args[0]), deref(goal.args[1])
+        right_is_goal = (type(right) is Atom) or (type(right) is Struct and right.name != ".")
+        if type(left) is not Var and not right_is_goal:
+            break
+        quantified.append(left)
+        goal = right
+    return goal, quantified
+
+
+def collector(m: Machine, key, args, nxt):
+    name, arity = key
+    if name in ("findall", "findAll") and arity == 3:
+        def finish(m, results, nxt, out=args[2]):
+            return nxt if m.unify(out, make_list(results)) else False
+        return m.push_collect(args[0], args[1], finish, nxt)
+    if name == "findall" and arity == 4:
+        def finish(m, results, nxt, out=args[2], tail=args[3]):
+            return nxt if m.unify(out, make_list(results, tail)) else False
+        return m.push_collect(args[0], args[1], finish, nxt)
+    if name == "forall":
+        goal = Struct("\\+", (Struct(",", (Struct("call", (args[0],)),
+                                           Struct("\\+", (Struct("call", (args[1],)),)))),))
+        return (goal, len(m.cps), nxt)
+    if name == "aggregate_all":
+        return _aggregate_all(m, args, nxt)
+    if name in ("bagof", "setof"):
+        return _bagof(m, args, nxt, name == "setof")
+    raise AssertionError(key)
+
+
+def _aggregate_all(m: Machine, args, nxt):
+    spec = deref(args[0])
+    goal = args[1]
+    out = args[2]
+    if type(spec) is Atom and spec == "count":
+        return m.push_collect(NIL, goal, lambda m, r, nxt: nxt if m.unify(out, len(r)) else False, nxt)
+    if type(spec) is not Struct or len(spec.args) != 1:
+        if type(spec) is Var:
+            raise instantiation_error()
+        raise _err_domain("aggregate_spec", spec)
+    kind = spec.name
+    template = spec.args[0]
+
+    def finish(m, results, nxt):
+        if kind == "count":
+            value = len(results)
+        elif kind == "sum":
+            value = 0
+            for x in results:
+                value = value + evaluate(x)
+        elif kind == "bag":
+            value = make_list(results)
+        elif kind == "set":
+            value = make_list(_dedup(sorted(results, key=_cmp_key)))
+        elif kind in ("max", "min"):
+            if not results:
+                return False
+            t0 = deref(template)
+            if type(t0) is Struct and t0.name == "-" and len(t0.args) == 2:
+                # max(X-W): the witness of the best value
+                best = results[0]
+                for x in results[1:]:
+                    a, b = evaluate(deref(x).args[0]), evaluate(deref(best).args[0])
+                    if (a > b) if kind == "max" else (a < b):
+                        best = x
+                value = Struct(kind, (deref(best).args[0], deref(best).args[1]))
+            else:
+                nums = [evaluate(x) for x in results]
+                value = nums[0]
+                for x in nums[1:]:
+                    if (x > value) if kind == "max" else (x < value):
+                        value = x
+        else:
+            raise _err_domain("aggregate_spec", spec)
+        return nxt if m.unify(out, value) else False
+
+    return m.push_collect(template, goal, finish, nxt)
+
+
+def _bagof(m: Machine, args, nxt, is_set: bool):
+    template, goal, out = args
+    inner, quantified = _strip_carets(goal)
+    excluded = {id(v) for v in term_vars(Struct("t", (template, *quantified)))}
+    witness_vars = [v for v in term_vars(inner) if id(v) not in excluded]
+    witness = make_list(witness_vars)
+    pair = Struct("-", (witness, template))
+
+    def finish(m, results, nxt):
+        if not results:
+            return False
+        groups: list[tuple[Any, list]] = []
+        if not witness_vars:
+            groups = [(witness, [deref(r).args[1] for r in results])]
+        else:
+            ordered = sorted(results, key=lambda r: _cmp_key(deref(r).args[0]))
+            for r in ordered:
+                w, t = deref(r).args
+                for g in groups:
+                    if _variant(g[0], w):
+                        g[1].append(t)
+                        break
+                else:
+                    groups.append((w, [t]))
+        if is_set:
+            groups = [(w, _dedup(sorted(items, key=_cmp_key))) for w, items in groups]
+        return m._push_gen(_bag_solutions(m, witness, out, groups), nxt)
+
+    return m.push_collect(pair, inner, finish, nxt)
+
+
+def _bag_solutions(m: Machine, witness, out, groups) -> Iterator[None]:
+    for w, items in groups:
+        mark = len(m.trail)
+        if m.unify(witness, w) and m.unify(out, make_list(items)):
+            yield None
+        m.undo_to(mark)
+
+
+def _variant(a: Any, b: Any) -> bool:
+    mapping: dict = {}
+    back: dict = {}
+    stack = [(a, b)]
+    while stack:
+        x, y = stack.pop()
+        x, y = deref(x), deref(y)
+        if type(x) is Var and type(y) is Var:
+            if mapping.setdefault(id(x), id(y)) != id(y) or back.setdefault(id(y), id(x)) != id(x):
+                return False
+        elif type(x) is Struct and type(y) is Struct:
+            if x.name != y.name or len(x.args) != len(y.args):
+                return False
+            stack.extend(zip(x.args, y.args))
+        elif type(x) is not type(y) or x != y:
+            return False
+    return True
+
+
+# -- prev / next -----------------------------------------------------------------------------------
+
+def _time_value(t: Any) -> float:
+    t = deref(t)
+    if type(t) is Var:
+        raise instantiation_error()
+    v = evaluate(t)
+    return float(v)
+
+
+def _interval(t: Any) -> tuple[float, float] | None:
+    t = deref(t)
+    if type(t) is Struct and t.name == "." and len(t.args) == 2:
+        items, tail = list_items(t)
+        if len(items) == 2 and tail == "[]":
+            return _time_value(items[0]), _time_value(items[1])
+        raise type_error("interval", t)
+    return None
+
+
+def _event_pattern(t: Any, op: str):
+    ev = split_event_atom(t)
+    if ev is None:
+        t = deref(t)
+        if type(t) is Var:
+            raise instantiation_error()
+        raise type_error("event_atom", t)
+    atom, s, e = ev
+    name, n = event_key(atom)
+    args = tuple(atom.args) if type(atom) is Struct else ()
+    return name, n, args, s, e
+
+
+def _matching(m: Machine, pattern: tuple, rows) -> Iterator[tuple]:
+    """Rows of ``rows`` that unify with ``pattern`` (tested, bindings undone)."""
+    trail = m.trail
+    from .engine import unify_tuple
+
+    for row in rows:
+        mark = len(trail)
+        ok = unify_tuple(pattern, tuple(row[0]) + (row[1], row[2]), trail)
+        undo(trail, mark)
+        if ok:
+            yield row
+
+
+def _yield_rows(m: Machine, pattern: tuple, rows) -> Iterator[None]:
+    from .engine import unify_tuple
+
+    trail = m.trail
+    for row in rows:
+        mark = len(trail)
+        if unify_tuple(pattern, tuple(row[0]) + (row[1], row[2]), trail):
+            yield None
+        undo(trail, mark)
+
+
+@nondet("prev", 2)
+def _prev(m, a):
+    """prev(E^Z, T): the matching event(s) with the greatest end <= T (ties: all, store order);
+    prev(E^Z, [A,B]): the latest matching event with A =< start and end =< B."""
+    name, n, args, s, e = _event_pattern(a[0], "prev")
+    iv = _interval(a[1])
+    if iv is None:
+        start_ge, t = None, _time_value(a[1])
+    else:
+        start_ge, t = iv
+    if m.on_prev is not None:
+        m.on_prev(name, n, t)
+    store = m.engine.events
+    if store is None:
+        return
+    from .engine import _bound_args
+
+    bound = _bound_args(args)
+    pattern = args + (s, e)
+    first = next(_matching(m, pattern, store.prev_candidates(name, n, bound, t, start_ge)), None)
+    if first is None:
+        return
+    yield from _yield_rows(m, pattern, store.rows_at_end(name, n, bound, first[2], start_ge=start_ge))
+
+
+def _next(m, event, lo_t, hi_t):
+    name, n, args, s, e = _event_pattern(event, "next")
+    lo, hi = _time_value(lo_t), _time_value(hi_t)
+    if m.on_next is not None:
+        m.on_next(name, n, lo, hi, args)
+    store = m.engine.events
+    if store is None:
+        return
+    from .engine import _bound_args
+
+    bound = _bound_args(args)
+    pattern = args + (s, e)
+    first = next(_matching(m, pattern, store.next_candidates(name, n, bound, lo, hi)), None)
+    if first is None:
+        return
+    yield from _yield_rows(m, pattern, store.rows_at_start(name, n, bound, first[1], hi))
+
+
+@nondet("next", 2)
+def _next2(m, a):
+    iv = _interval(a[1])
+    if iv is None:
+        t = deref(a[1])
+        if type(t) is Var:
+            raise instantiation_error()
+        raise type_error("interval", t)
+    yield from _next(m, a[0], iv[0], iv[1])
+
+
+@nondet("next", 3)
+def _next3(m, a):
+    yield from _next(m, a[0], a[1], a[2])
+
+
+# -- robot library -----------------------------------------------------------------------------------
+
+def _pair(t: Any) -> tuple[Any, Any]:
+    items = proper_list(t)
+    if len(items) != 2:
+        raise type_error("value_time_pair", t)
+    return items[0], items[1]
+
+
+def _robot_call(f, *args):
+    from .robotlib import RobotValueError
+
+    try:
+        return f(*args)
+    except RobotValueError as exc:
+        raise iso_error(Struct("domain_error", (Atom("robot_value"), String(str(exc)))))
+
+
+@det("interpolate", 3)
+def _interpolate(m, a):
+    from . import robotlib
+
+    v, t = _pair(a[0])
+    v1, t1 = _pair(a[1])
+    v2, t2 = _pair(a[2])
+    value = _robot_call(robotlib.interpolate, float(evaluate(t)), to_python(v1),
+                        float(evaluate(t1)), to_python(v2), float(evaluate(t2)))
+    return m.unify(v, from_python(value))
+
+
+@det("extrapolate", 2)
+def _extrapolate(m, a):
+    from . import robotlib
+
+    v, _t = _pair(a[0])
+    v1, _t1 = _pair(a[1])
+    return m.unify(v, from_python(_robot_call(robotlib.extrapolate, to_python(v1))))
+
+
+@det("pos_multiply", 2)
+def _pos_multiply(m, a):
+    from . import robotlib
+
+    items = proper_list(a[0])
+    if not items:
+        raise _err_domain("non_empty_list", NIL)
+    p = to_python(items[0])
+    transforms = [to_python(x) for x in items[1:]]
+    return m.unify(a[1], from_python(_robot_call(robotlib.pos_multiply, p, transforms)))
+
+
+@det("distance", 3)
+def _distance(m, a):
+    from . import robotlib
+
+    return m.unify(a[2], from_python(_robot_call(robotlib.distance, to_python(a[0]), to_python(a[1]))))
+
+
+# -- Python-defined predicates ---------------------------------------------------------------------
+
+def call_python_pred(m: Machine, fn: Callable, args: tuple) -> bool:
+    """Call a predicate registered with ``kb.define``.
+
+    ``fn`` gets the arguments as Python values (unbound ones as :class:`Var`) and returns
+    ``True``/``False``/``None`` (succeed/fail/fail), a tuple/list with one value per argument
+    (unified with the arguments), or a dict ``{position: value}`` (0-based positions).
+    """
+    values = [to_python(x) for x in args]
+    result = fn(*values)
+    if result is None or result is False:
+        return False
+    if result is True:
+        return True
+    if isinstance(result, dict):
+        return all(m.unify(args[i], from_python(v)) for i, v in result.items())
+    if isinstance(result, (tuple, list)):
+        if len(result) != len(args):
+            raise iso_error(Struct("python_error", (String(
+                f"defined predicate returned {len(result)} values for {len(args)} arguments"),)))
+        return all(m.unify(x, from_python(v)) for x, v in zip(args, result))
+    raise iso_error(Struct("python_error", (String(f"defined predicate returned {result!r}"),)))
+
+
+# -- the Prolog-defined library ---------------------------------------------------------------------
+
+LIBRARY_SOURCE = r"""
+member(X, [Y|Ys]) :- member_(Ys, X, Y).
+member_(_, X, X).
+member_([Y|Ys], X, _) :- member_(Ys, X, Y).
+append([], L, L).
+append([H|T], L, [H|R]) :- append(T, L, R).
+append(ListOfLists, List) :- '$append_all'(ListOfLists, List).
+'$append_all'([], []).
+'$append_all'([L|Ls], As) :- append(L, Ws, As), '$append_all'(Ls, Ws).
+nth0(I, L, E) :- integer(I), !, I >= 0, '$nth_det'(I, L, E).
+nth0(I, L, E) :- var(I), !, '$nth_gen'(L, E, 0, I).
+nth1(I, L, E) :- integer(I), !, I >= 1, I0 is I-1, '$nth_det'(I0, L, E).
+nth1(I, L, E) :- var(I), !, '$nth_gen'(L, E, 1, I).
+'$nth_det'(0, [E|_], E) :- !.
+'$nth_det'(I, [_|T], E) :- I1 is I-1, '$nth_det'(I1, T, E).
+'$nth_gen'([E|_], E, B, B).
+'$nth_gen'([_|T], E, B0, B) :- B1 is B0+1, '$nth_gen'(T, E, B1, B).
+last([X|Xs], Last) :- '$last'(Xs, X, Last).
+'$last'([], Last, Last).
+'$last'([X|Xs], _, Last) :- '$last'(Xs, X, Last).
+select(X, [Head|Tail], Rest) :- '$select3'(Tail, Head, X, Rest).
+'$select3'(Tail, Head, Head, Tail).
+'$select3'([Head2|Tail], Head, X, [Head|Rest]) :- '$select3'(Tail, Head2, X, Rest).
+selectchk(Elem, List, Rest) :- select(Elem, List, Rest0), !, Rest = Rest0.
+exclude(_, [], []).
+exclude(P, [H|T], R) :- ( call(P, H) -> R = R1 ; R = [H|R1] ), exclude(P, T, R1).
+include(_, [], []).
+include(P, [H|T], R) :- ( call(P, H) -> R = [H|R1] ; R = R1 ), include(P, T, R1).
+partition(_, [], [], []).
+partition(P, [H|T], I, E) :- ( call(P, H) -> I = [H|I1], E = E1 ; I = I1, E = [H|E1] ), partition(P, T, I1, E1).
+maplist(_, []).
+maplist(G, [A|As]) :- call(G, A), maplist(G, As).
+maplist(_, [], []).
+maplist(G, [A|As], [B|Bs]) :- call(G, A, B), maplist(G, As, Bs).
+maplist(_, [], [], []).
+maplist(G, [A|As], [B|Bs], [C|Cs]) :- call(G, A, B, C), maplist(G, As, Bs, Cs).
+maplist(_, [], [], [], []).
+maplist(G, [A|As], [B|Bs], [C|Cs], [D|Ds]) :- call(G, A, B, C, D), maplist(G, As, Bs, Cs, Ds).
+foldl(G, L, V0, V) :- '$foldl'(L, G, V0, V).
+'$foldl'([], _, V, V).
+'$foldl'([X|Xs], G, V0, V) :- call(G, X, V0, V1), '$foldl'(Xs, G, V1, V).
+foldl(G, L1, L2, V0, V) :- '$foldl'(L1, L2, G, V0, V).
+'$foldl'([], [], _, V, V).
+'$foldl'([X|Xs], [Y|Ys], G, V0, V) :- call(G, X, Y, V0, V1), '$foldl'(Xs, Ys, G, V1, V).
+delete([], _, []).
+delete([H|T], X, R) :- ( H \= X -> R = [H|R1] ; R = R1 ), delete(T, X, R1).
+subtract([], _, []).
+subtract([E|T], D, R) :- ( memberchk(E, D) -> R = R1 ; R = [E|R1] ), subtract(T, D, R1).
+intersection([], _, []).
+intersection([X|T], L, I) :- ( memberchk(X, L) -> I = [X|R] ; I = R ), intersection(T, L, R).
+union([], L, L).
+union([H|T], L, R) :- ( memberchk(H, L) -> R = R1 ; R = [H|R1] ), union(T, L, R1).
+permutation([], []).
+permutation(L, [H|T]) :- select(H, L, R), permutation(R, T).
+once(G) :- call(G), !.
+ignore(G) :- ( call(G) -> true ; true ).
+pairs_keys_values([], [], []).
+pairs_keys_values([K-V|T], [K|Ks], [V|Vs]) :- pairs_keys_values(T, Ks, Vs).
+pairs_keys([], []).
+pairs_keys([K-_|T], [K|Ks]) :- pairs_keys(T, Ks).
+pairs_values([], []).
+pairs_values([_-V|T], [V|Vs]) :- pairs_values(T, Vs).
+flatten(List, Flat) :- '$flatten'(List, [], Flat0), !, Flat = Flat0.
+'$flatten'(Var, Tl, [Var|Tl]) :- var(Var), !.
+'$flatten'([], Tl, Tl) :- !.
+'$flatten'([Hd|Tl], Tail, List) :- !, '$flatten'(Hd, FlatHeadTail, List), '$flatten'(Tl, Tail, FlatHeadTail).
+'$flatten'(NonList, Tl, [NonList|Tl]).
+"""
+
+_LIBRARY: Program | None = None
+
+
+def library_program() -> Program:
+    """The Prolog-defined part of the builtins, parsed once per process."""
+    global _LIBRARY
+    if _LIBRARY is None:
+        from .parser import parse_program
+
+        prog = Program()
+        for clause in parse_program(LIBRARY_SOURCE, "<library>"):
+            prog.add_clause(clause)
+        _LIBRARY = prog
+    return _LIBRARY
+
+
+BUILTIN_NAMES = set(DET) | set(NONDET)

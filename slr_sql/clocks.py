@@ -1,0 +1,102 @@
+"""Clocks: where "now" comes from (arrival times, tBuffer pruning, max_delay completeness).
+
+* :class:`WallClock` — a live robot (``time.time()``), the default.
+* :class:`ManualClock` — tests and simulation: time moves only by ``set``/``advance``.
+* :class:`StreamClock` — replaying recorded data: now = the greatest end time received.
+
+A clock notifies its listeners when it moves, so that anything waiting on time (synchronized
+queries, time-driven pruning) is woken by the move itself rather than by polling.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Callable
+
+__all__ = ["Clock", "WallClock", "ManualClock", "StreamClock"]
+
+
+class Clock:
+    """Base class: ``now()`` plus listeners called with the new time when the clock moves."""
+
+    def __init__(self) -> None:
+        self._listeners: list[Callable[[float], None]] = []
+        self._lock = threading.Lock()
+
+    def now(self) -> float:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def subscribe(self, fn: Callable[[float], None]) -> None:
+        with self._lock:
+            self._listeners.append(fn)
+
+    def unsubscribe(self, fn: Callable[[float], None]) -> None:
+        with self._lock:
+            if fn in self._listeners:
+                self._listeners.remove(fn)
+
+    def _moved(self, t: float) -> None:
+        with self._lock:
+            listeners = list(self._listeners)
+        for fn in listeners:
+            fn(t)
+
+    def observe_event(self, end: float) -> None:
+        """Called by the store for each event stored (only StreamClock cares)."""
+
+
+class WallClock(Clock):
+    """Real time in seconds since the epoch.
+
+    >>> WallClock().now() > 1e9
+    True
+    """
+
+    def now(self) -> float:
+        return time.time()
+
+
+class ManualClock(Clock):
+    """A clock that only moves when told to.
+
+    >>> c = ManualClock(0.0); c.advance(1.5); c.now()
+    1.5
+    """
+
+    def __init__(self, t: float = 0.0) -> None:
+        super().__init__()
+        self._t = float(t)
+
+    def now(self) -> float:
+        return self._t
+
+    def set(self, t: float) -> None:
+        if t < self._t:
+            raise ValueError(f"ManualClock cannot go back in time ({t} < {self._t})")
+        self._t = float(t)
+        self._moved(self._t)
+
+    def advance(self, dt: float) -> None:
+        if dt < 0:
+            raise ValueError("ManualClock.advance needs dt >= 0")
+        self.set(self._t + dt)
+
+
+class StreamClock(Clock):
+    """Replay clock: now is the greatest end time of any event received so far.
+
+    >>> c = StreamClock(); c.observe_event(3.0); c.observe_event(2.0); c.now()
+    3.0
+    """
+
+    def __init__(self, t: float = float("-inf")) -> None:
+        super().__init__()
+        self._t = t
+
+    def now(self) -> float:
+        return self._t
+
+    def observe_event(self, end: float) -> None:
+        if end > self._t:
+            self._t = end
+            self._moved(end)

@@ -1,0 +1,603 @@
+"""The top-down interpreter: SLDNF resolution with Prolog's order of solutions.
+
+The machine is iterative (no Python recursion per resolution step), so a 100,000-deep
+recursion costs heap, not Python stack. State:
+
+* the *continuation*: a linked list of ``(goal, cut_barrier, next)`` tuples still to prove;
+* the *choicepoint stack* ``cps``: lists ``[kind, trail_mark, cont, a, b, c]``;
+* the *trail*: variables bound since each choicepoint, unbound again on backtracking.
+
+A cut barrier is the height of ``cps`` when the clause (or ``call/N``, or the condition of an
+if-then-else) was entered; ``!`` truncates ``cps`` to it. Collecting builtins (findall & co.)
+push a COLLECT choicepoint below the goal and gather copies of the template on each solution,
+so they need no nested interpreter either.
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import Any, Callable, Iterator
+
+from .arith import evaluate, instantiation_error, iso_error, type_error
+from .errors import SLREvaluationError, SLRTimeout
+from .program import Predicate, Program, Slot, Template, build, split_event_atom, event_key
+from .terms import Atom, NIL, String, Struct, Var, deref, list_items, make_list
+
+__all__ = ["Engine", "Machine", "unify", "copy_term", "PrologThrow"]
+
+# choicepoint kinds
+K_CLAUSES, K_GEN, K_ALT, K_DEAD, K_COLLECT, K_CATCH = range(6)
+
+
+class PrologThrow(Exception):
+    """A ball thrown by throw/1 (or an ISO error) travelling to the nearest matching catch/3."""
+
+    def __init__(self, ball: Any):
+        self.ball = ball
+
+
+class Special:
+    """An internal goal the machine pushes on the continuation (never written by users)."""
+
+    __slots__ = ("op", "data")
+
+    def __init__(self, op: int, data: Any):
+        self.op = op
+        self.data = data
+
+
+S_CUT_TO, S_SOFTCUT, S_NAFAIL, S_COLLECT, S_POPCATCH, S_RULES = range(6)
+
+
+def unify(a: Any, b: Any, trail: list) -> bool:
+    """Unify two terms, recording bindings on ``trail``. No occurs check (as in Prolog).
+
+    >>> X = Var("X"); tr = []; unify(Struct("f", (X,)), Struct("f", (1,)), tr), X.ref
+    (True, 1)
+    """
+    stack = None
+    while True:
+        while type(a) is Var:
+            r = a.ref
+            if r is None:
+                break
+            a = r
+        while type(b) is Var:
+            r = b.ref
+            if r is None:
+                break
+            b = r
+        if a is not b:
+            ta = type(a)
+            tb = type(b)
+            if ta is Var:
+                a.ref = b
+                trail.append(a)
+            elif tb is Var:
+                b.ref = a
+                trail.append(b)
+            elif ta is Struct:
+                if tb is not Struct or a.name != b.name:
+                    return False
+                aa = a.args
+                ba = b.args
+                n = len(aa)
+                if n != len(ba):
+                    return False
+                if stack is None:
+                    stack = []
+                if n == 2:
+                    stack.append((aa[0], ba[0]))
+                    a = aa[1]
+                    b = ba[1]
+                    continue
+                stack.extend(zip(aa, ba))
+            elif ta is not tb or a != b:
+                if ta is float and tb is float and a != a and b != b:
+                    pass
+                else:
+                    return False
+        if not stack:
+            return True
+        a, b = stack.pop()
+
+
+def undo(trail: list, mark: int) -> None:
+    while len(trail) > mark:
+        trail.pop().ref = None
+
+
+def copy_term(t: Any, mapping: dict | None = None) -> Any:
+    """Copy a term with fresh variables (bindings resolved). Iterative over list spines."""
+    if mapping is None:
+        mapping = {}
+    t = deref(t)
+    tt = type(t)
+    if tt is Var:
+        v = mapping.get(id(t))
+        if v is None:
+            v = mapping[id(t)] = Var()
+        return v
+    if tt is Struct:
+        if t.name == "." and len(t.args) == 2:
+            heads = []
+            cur = t
+            while type(cur) is Struct and cur.name == "." and len(cur.args) == 2:
+                heads.append(copy_term(cur.args[0], mapping))
+                cur = deref(cur.args[1])
+            out = copy_term(cur, mapping)
+            for h in reversed(heads):
+                out = Struct(".", (h, out))
+            return out
+        return Struct(t.name, tuple([copy_term(a, mapping) for a in t.args]))
+    return t
+
+
+def resolve(t: Any) -> Any:
+    """The term with all bound variables replaced by their values (unbound ones kept)."""
+    t = deref(t)
+    if type(t) is Struct:
+        if t.name == "." and len(t.args) == 2:
+            items, tail = list_items(t)
+            return make_list([resolve(x) for x in items], resolve(tail))
+        return Struct(t.name, tuple([resolve(a) for a in t.args]))
+    return t
+
+
+class Engine:
+    """Runs goals against a :class:`Program` and an event source (the store).
+
+    ``events`` must offer ``scan``, ``prev_candidates``, ``rows_at_end``, ``next_candidates``
+    and ``rows_at_start`` (see :mod:`slr_sql.store`).
+    """
+
+    def __init__(self, program: Program, events: Any = None, library: Program | None = None):
+        from . import builtins as _b
+
+        self.program = program
+        self.library = library or _b.library_program()
+        self.events = events
+        self.python_preds: dict[tuple[str, int], Callable] = {}
+        self.det = _b.DET
+        self.nondet = _b.NONDET
+        self.out = None  # where write/1 & co. print; None = sys.stdout
+
+    def machine(self, at: float | None = None, timeout: float | None = None,
+                max_steps: int | None = None) -> "Machine":
+        return Machine(self, at=at, timeout=timeout, max_steps=max_steps)
+
+
+CONTROL = {
+    (",", 2), ("true", 0), ("!", 0), (";", 2), ("->", 2), ("*->", 2), ("\\+", 1),
+    ("call", 1), ("call", 2), ("call", 3), ("call", 4), ("call", 5), ("call", 6), ("call", 7),
+    ("call", 8), ("findall", 3), ("findall", 4), ("findAll", 3), ("forall", 2),
+    ("aggregate_all", 3), ("bagof", 3), ("setof", 3), ("catch", 3), ("throw", 1),
+    ("fail", 0), ("false", 0), ("^", 2), ("not", 1),
+}
+
+
+class Machine:
+    """One query's execution state. ``solve(goal)`` yields once per solution."""
+
+    def __init__(self, engine: Engine, at: float | None = None, timeout: float | None = None,
+                 max_steps: int | None = None):
+        self.engine = engine
+        self.at = at
+        self.trail: list = []
+        self.cps: list = []
+        self.steps = 0
+        self.deadline = time.monotonic() + timeout if timeout is not None else None
+        self.max_steps = max_steps
+        self.timeout = timeout
+        # hooks for synchronized queries: called before prev/next read the store
+        self.on_prev: Callable | None = None
+        self.on_next: Callable | None = None
+
+    # -- helpers used by builtins -------------------------------------------------------
+    def unify(self, a: Any, b: Any) -> bool:
+        return unify(a, b, self.trail)
+
+    def undo_to(self, mark: int) -> None:
+        undo(self.trail, mark)
+
+    # -- the main loop ------------------------------------------------------------------
+    def solve(self, goal: Any) -> Iterator[None]:
+        """Prove ``goal``; yields after each solution (bindings readable until resumed)."""
+        cont = (goal, 0, None)
+        engine = self.engine
+        preds = engine.program.preds
+        library = engine.library.preds
+        det = engine.det
+        nondet = engine.nondet
+        check_every = 2048
+        steps_left = check_every
+        while True:
+            try:
+                if cont is False:
+                    cont = self._backtrack()
+                    if cont is False:
+                        return
+                    continue
+                if cont is None:
+                    yield None
+                    cont = False
+                    continue
+                steps_left -= 1
+                if steps_left <= 0:
+                    steps_left = check_every
+                    self._check_limits(check_every)
+                goal, cb, nxt = cont
+                while type(goal) is Var:
+                    r = goal.ref
+                    if r is None:
+                        raise instantiation_error()
+                    goal = r
+                tg = type(goal)
+                if tg is Struct:
+                    args = goal.args
+                    key = (goal.name, len(args))
+                elif tg is Atom:
+                    args = ()
+                    key = (goal, 0)
+                elif tg is Special:
+                    cont = self._special(goal, nxt)
+                    continue
+                else:
+                    raise type_error("callable", goal)
+
+                if key in CONTROL:
+                    cont = self._control(key, args, cb, nxt)
+                    continue
+                pred = preds.get(key)
+                if pred is None:
+                    pred = library.get(key)
+                if pred is not None:
+                    cont = self._call_pred(pred, args, nxt)
+                    continue
+                f = det.get(key)
+                if f is not None:
+                    cont = nxt if f(self, args) else False
+                    continue
+                g = nondet.get(key)
+                if g is not None:
+                    cont = self._push_gen(g(self, args), nxt)
+                    continue
+                cont = self._other(key, args, nxt)
+            except PrologThrow as exc:
+                cont = self._handle_throw(exc.ball)
+            except SLREvaluationError as exc:
+                cont = self._handle_throw(exc.term, exc)
+
+    def _check_limits(self, n: int) -> None:
+        self.steps += n
+        if self.max_steps is not None and self.steps > self.max_steps:
+            raise SLRTimeout(f"step limit of {self.max_steps} inference steps exceeded")
+        if self.deadline is not None and time.monotonic() > self.deadline:
+            raise SLRTimeout(f"query timed out after {self.timeout} s "
+                             f"({self.steps} inference steps)")
+
+    def _backtrack(self):
+        """Resume the newest choicepoint; returns the continuation, or False when none is left."""
+        cps = self.cps
+        trail = self.trail
+        while cps:
+            cp = cps[-1]
+            mark = cp[1]
+            while len(trail) > mark:
+                trail.pop().ref = None
+            kind = cp[0]
+            if kind == K_CLAUSES:
+                cont = self._try_clauses(cp, len(cps) - 1)
+                if cont is not False:
+                    return cont
+            elif kind == K_GEN:
+                try:
+                    next(cp[3])
+                except StopIteration:
+                    cps.pop()
+                    continue
+                return cp[2]
+            elif kind == K_ALT:
+                cps.pop()
+                return cp[2]
+            elif kind == K_COLLECT:
+                cps.pop()
+                finish = cp[4]
+                cont = finish(self, cp[3], cp[2])
+                if cont is not False:
+                    return cont
+            else:  # K_DEAD, K_CATCH: nothing to resume
+                cps.pop()
+        return False
+
+    # -- user predicates ----------------------------------------------------------------
+    def _call_pred(self, pred: Predicate, args: tuple, nxt):
+        clauses = pred.candidates(deref(args[0]) if args else None)
+        if not clauses:
+            return False
+        cp = [K_CLAUSES, len(self.trail), nxt, args, clauses, 0]
+        self.cps.append(cp)
+        return self._try_clauses(cp, len(self.cps) - 1)
+
+    def _try_clauses(self, cp: list, height: int):
+        """Try clauses from cp[5] on; pops cp when the last candidate is taken."""
+        args = cp[3]
+        clauses = cp[4]
+        i = cp[5]
+        n = len(clauses)
+        trail = self.trail
+        mark = cp[1]
+        cps = self.cps
+        while i < n:
+            clause = clauses[i]
+            i += 1
+            frame = [None] * clause.nslots
+            if _unify_head(clause.head, args, frame, trail):
+                if i >= n:
+                    cps.pop()
+                else:
+                    cp[5] = i
+                cont = cp[2]
+                body = clause.body
+                for g in reversed(body):
+                    cont = (build(g, frame), height, cont)
+                return cont
+            while len(trail) > mark:
+                trail.pop().ref = None
+        cps.pop()
+        return False
+
+    def _push_gen(self, gen: Iterator, nxt):
+        cp = [K_GEN, len(self.trail), nxt, gen, None, None]
+        self.cps.append(cp)
+        try:
+            next(gen)
+        except StopIteration:
+            self.cps.pop()
+            return False
+        return nxt
+
+    def _other(self, key, args, nxt):
+        fn = self.engine.python_preds.get(key)
+        if fn is not None:
+            from .builtins import call_python_pred
+
+            return nxt if call_python_pred(self, fn, args) else False
+        if key in self.engine.program.dynamic or key in self.engine.program.temporal:
+            return False
+        name, arity = key
+        raise iso_error(Struct("existence_error", (
+            Atom("procedure"), Struct("/", (Atom(name), arity)))))
+
+    # -- control constructs -------------------------------------------------------------
+    def _control(self, key, args, cb, nxt):
+        name = key[0]
+        cps = self.cps
+        if name == ",":
+            return (args[0], cb, (args[1], cb, nxt))
+        if name == "true":
+            return nxt
+        if name == "!":
+            del cps[cb:]
+            return nxt
+        if name == "fail" or name == "false":
+            return False
+        if name == ";":
+            left = deref(args[0])
+            if type(left) is Struct and len(left.args) == 2 and left.name in ("->", "*->"):
+                height = len(cps)
+                cp = [K_ALT, len(self.trail), (args[1], cb, nxt), None, None, None]
+                cps.append(cp)
+                cond, then = left.args
+                if left.name == "->":
+                    marker = Special(S_CUT_TO, height)
+                else:
+                    marker = Special(S_SOFTCUT, cp)
+                return (cond, height + 1, (marker, cb, (then, cb, nxt)))
+            cps.append([K_ALT, len(self.trail), (args[1], cb, nxt), None, None, None])
+            return (args[0], cb, nxt)
+        if name == "->":
+            height = len(cps)
+            return (args[0], height, (Special(S_CUT_TO, height), cb, (args[1], cb, nxt)))
+        if name == "*->":
+            return (args[0], len(cps), (args[1], cb, nxt))
+        if name == "\\+" or name == "not":
+            height = len(cps)
+            cps.append([K_ALT, len(self.trail), nxt, None, None, None])
+            return (args[0], height + 1, (Special(S_NAFAIL, height), cb, None))
+        if name == "call":
+            goal = deref(args[0])
+            if len(args) > 1:
+                goal = _add_args(goal, args[1:])
+            elif type(goal) is Var:
+                raise instantiation_error()
+            if type(goal) not in (Struct, Atom):
+                raise type_error("callable", goal)
+            return (goal, len(cps), nxt)
+        if name == "^":
+            ev = split_event_atom(Struct("^", args))
+            if ev is None:
+                # V^Goal outside bagof/setof: prove Goal (as SWI does)
+                return (args[1], cb, nxt)
+            return self._event_goal(ev, nxt)
+        if name == "throw":
+            ball = deref(args[0])
+            if type(ball) is Var:
+                raise instantiation_error()
+            raise PrologThrow(copy_term(ball))
+        if name == "catch":
+            height = len(cps)
+            cp = [K_CATCH, len(self.trail), nxt, args[1], args[2], cb]
+            cps.append(cp)
+            return (args[0], height + 1, (Special(S_POPCATCH, cp), cb, nxt))
+        # collection predicates
+        from .builtins import collector
+
+        return collector(self, key, args, nxt)
+
+    def _special(self, goal: Special, nxt):
+        op = goal.op
+        if op == S_CUT_TO:
+            del self.cps[goal.data:]
+            return nxt
+        if op == S_SOFTCUT:
+            goal.data[0] = K_DEAD
+            return nxt
+        if op == S_NAFAIL:
+            del self.cps[goal.data:]
+            return False
+        if op == S_COLLECT:
+            template, results = goal.data
+            results.append(copy_term(template))
+            return False
+        if op == S_RULES:
+            pred, args = goal.data
+            return self._call_pred(pred, args, nxt)
+        if op == S_POPCATCH:
+            cp = goal.data
+            # the catch is only active while its goal runs; leaving it deactivates it
+            if self.cps and self.cps[-1] is cp:
+                self.cps.pop()
+            else:
+                cp[0] = K_DEAD
+            return nxt
+        raise AssertionError(op)
+
+    def push_collect(self, template: Any, goal: Any, finish: Callable, nxt):
+        """Run ``goal`` to exhaustion collecting copies of ``template``, then ``finish``."""
+        results: list = []
+        height = len(self.cps)
+        self.cps.append([K_COLLECT, len(self.trail), nxt, results, finish, None])
+        return (goal, height + 1, (Special(S_COLLECT, (template, results)), 0, None))
+
+    def _handle_throw(self, ball: Any, original: SLREvaluationError | None = None):
+        ball = copy_term(ball)
+        cps = self.cps
+        while cps:
+            cp = cps.pop()
+            undo(self.trail, cp[1])
+            if cp[0] == K_CATCH:
+                mark = len(self.trail)
+                if unify(cp[3], ball, self.trail):
+                    return (cp[4], cp[5], cp[2])
+                undo(self.trail, mark)
+        if original is not None:
+            raise original
+        from .printer import format_term
+
+        raise SLREvaluationError(ball, f"unhandled exception: {format_term(ball)}")
+
+    # -- events -------------------------------------------------------------------------
+    def _event_goal(self, ev, nxt):
+        """``p(..)^T``: stored events in store order (stream view), then the temporal rules."""
+        atom, s, e = ev
+        name, n = event_key(atom)
+        args = tuple(atom.args) if type(atom) is Struct else ()
+        rules = self.engine.program.temporal.get((name, n))
+        events = self.engine.events
+        if rules is not None and rules.clauses:
+            rule_goal = Special(S_RULES, (rules, args + (s, e)))
+            cps = self.cps
+            cps.append([K_ALT, len(self.trail), (rule_goal, 0, nxt), None, None, None])
+        if events is None:
+            return False
+        bound = _bound_args(args)
+        rows = events.scan(name, n, bound, end_le=self.at)
+        return self._push_gen(_match_rows(self, args, s, e, rows), nxt)
+
+    def event_source(self):
+        return self.engine.events
+
+
+def _bound_args(args: tuple) -> dict:
+    """Argument positions whose value is atomic or ground, to push into SQL."""
+    bound = {}
+    for i, a in enumerate(args):
+        a = deref(a)
+        ta = type(a)
+        if ta is Atom or ta is int or ta is String or (ta is float and a == a):
+            bound[i] = a
+        elif ta is Struct:
+            from .terms import is_ground
+
+            if is_ground(a):
+                bound[i] = resolve(a)
+    return bound
+
+
+def _match_rows(m: Machine, args: tuple, s: Any, e: Any, rows) -> Iterator[None]:
+    trail = m.trail
+    pattern = args + (s, e)
+    for row in rows:
+        vals, start, end = row[0], row[1], row[2]
+        mark = len(trail)
+        if unify_tuple(pattern, tuple(vals) + (start, end), trail):
+            yield None
+        undo(trail, mark)
+
+
+def unify_tuple(xs: tuple, ys: tuple, trail: list) -> bool:
+    for x, y in zip(xs, ys):
+        if not unify(x, y, trail):
+            return False
+    return True
+
+
+def _unify_head(head: tuple, args: tuple, frame: list, trail: list) -> bool:
+    for p, a in zip(head, args):
+        if not _unify_pattern(p, a, frame, trail):
+            return False
+    return True
+
+
+def _unify_pattern(p: Any, t: Any, frame: list, trail: list) -> bool:
+    tp = type(p)
+    if tp is Slot:
+        cur = frame[p.index]
+        if cur is None:
+            frame[p.index] = t
+            return True
+        return unify(cur, t, trail)
+    if tp is Template:
+        while type(t) is Var:
+            r = t.ref
+            if r is None:
+                t.ref = build(p, frame)
+                trail.append(t)
+                return True
+            t = r
+        if type(t) is not Struct or t.name != p.name or len(t.args) != len(p.args):
+            return False
+        # iterate along list spines instead of recursing on the tail
+        while True:
+            pa = p.args
+            ta = t.args
+            last = len(pa) - 1
+            for i in range(last):
+                if not _unify_pattern(pa[i], ta[i], frame, trail):
+                    return False
+            p = pa[last]
+            t = ta[last]
+            if type(p) is not Template:
+                return _unify_pattern(p, t, frame, trail)
+            while type(t) is Var:
+                r = t.ref
+                if r is None:
+                    t.ref = build(p, frame)
+                    trail.append(t)
+                    return True
+                t = r
+            if type(t) is not Struct or t.name != p.name or len(t.args) != len(p.args):
+                return False
+    return unify(p, t, trail)
+
+
+def _add_args(goal: Any, extra: tuple) -> Any:
+    goal = deref(goal)
+    if type(goal) is Atom:
+        return Struct(goal, tuple(extra))
+    if type(goal) is Struct:
+        return Struct(goal.name, goal.args + tuple(extra))
+    if type(goal) is Var:
+        raise instantiation_error()
+    raise type_error("callable", goal)

@@ -1,0 +1,460 @@
+"""The public knowledge-base API (SPEC §4): open, load, add, query, explain.
+
+>>> import slr_sql
+>>> kb = slr_sql.open()
+>>> kb.load("color(O,C)^T :- prev(obj(O,_,C)^Z, T).")
+>>> kb.add("obj(cup1, cup, red)^2.0")
+>>> kb.query("color(cup1, C)^5")
+[{'C': Atom('red')}]
+>>> kb.close()
+"""
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable
+
+from .clocks import Clock, WallClock
+from .engine import Engine, Machine
+from .errors import EventRejected, SLRError, SLRSyntaxError
+from .parser import parse_program, parse_term
+from .program import Program, build, compile_clause, split_event_atom, event_key
+from .store import EventStore
+from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
+    list_items, to_python
+from .printer import format_term
+
+__all__ = ["KnowledgeBase", "open", "Declarations", "parse_duration"]
+
+
+@dataclass
+class BufferDecl:
+    kind: str              # "tBuffer" | "cBuffer"
+    pattern: Any           # the event pattern term
+    amount: float | int    # seconds (tBuffer) or count (cBuffer)
+    clause: Clause | None  # where it was declared (None for runtime buffers)
+
+
+@dataclass
+class Declarations:
+    """What the program declares beyond clauses (SPEC §1 "Declarations")."""
+
+    event_types: set = field(default_factory=set)         # {(name, arity)}
+    max_delay: dict = field(default_factory=dict)         # (name, arity) -> seconds | "learn"
+    in_order: set = field(default_factory=set)            # {(name, arity)}
+    buffers: list = field(default_factory=list)           # [BufferDecl]
+
+    def copy(self) -> "Declarations":
+        return Declarations(set(self.event_types), dict(self.max_delay), set(self.in_order),
+                            list(self.buffers))
+
+
+def parse_duration(t: Any) -> float:
+    """A duration term in seconds: numbers (the parser already turned ``500ms`` into 0.5).
+
+    >>> parse_duration(60), parse_duration(Atom("inf"))
+    (60, inf)
+    """
+    t = deref(t)
+    if type(t) in (int, float) and not (type(t) is float and math.isnan(t)) and t >= 0:
+        return t
+    if type(t) is Atom and t in ("inf", "infinite"):
+        return math.inf
+    raise SLRError(f"a duration must be a non-negative number of seconds, not {format_term(t)}")
+
+
+def _indicator(t: Any) -> tuple[str, int]:
+    t = deref(t)
+    if type(t) is Struct and t.name == "/" and len(t.args) == 2:
+        name, arity = deref(t.args[0]), deref(t.args[1])
+        if type(name) is Atom and type(arity) is int and arity >= 0:
+            return str(name), arity
+    raise SLRError(f"expected a predicate indicator name/arity, not {format_term(t)}")
+
+
+def _indicators(t: Any) -> list[tuple[str, int]]:
+    t = deref(t)
+    if type(t) is Struct and t.name == "," and len(t.args) == 2:
+        return _indicators(t.args[0]) + _indicators(t.args[1])
+    if type(t) is Struct and t.name == "." and len(t.args) == 2:
+        items, _ = list_items(t)
+        return [ind for x in items for ind in _indicators(x)]
+    return [_indicator(t)]
+
+
+def _where(clause: Clause | None) -> str:
+    if clause is None or clause.span is None:
+        return ""
+    return f"{clause.span.filename}:{clause.span.line}: "
+
+
+@dataclass
+class _Plan:
+    """A parsed, compiled goal cached per (text, names bound from Python)."""
+
+    compiled: Any                 # CompiledClause of the goal
+    names: list[tuple[str, int]]  # answer variables: (name, slot index)
+    bind_slots: dict[str, int]    # args name -> slot index
+    text: str
+
+
+class KnowledgeBase:
+    """One SLR knowledge base: program + events + state in one SQLite file.
+
+    Use :func:`slr_sql.open` to get one.
+    """
+
+    def __init__(self, path: str | Path | None = None, clock: Clock | None = None, *,
+                 synchronous: str = "FULL"):
+        self.clock = clock if clock is not None else WallClock()
+        self.store = EventStore(path, self.clock, synchronous=synchronous)
+        self.path = self.store.path
+        self.program = Program()
+        self.declarations = Declarations()
+        self.engine = Engine(self.program, self.store)
+        self._plans: dict[tuple, _Plan] = {}
+        self._load_lock = threading.RLock()
+        # extension points for the SQL compiler, buffers and synchronization
+        self.load_listeners: list[Callable[["KnowledgeBase"], None]] = []
+        self.add_listeners: list[Callable[[list], None]] = []
+        self._restore_program()
+
+    # -- lifecycle ----------------------------------------------------------------------
+    def close(self) -> None:
+        """Close the store (a checkpoint of the WAL included)."""
+        self.store.close()
+
+    def __enter__(self) -> "KnowledgeBase":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    # -- program ------------------------------------------------------------------------
+    def _restore_program(self) -> None:
+        for source, filename in self.store.program_sources():
+            program, decls = self._compile_program(source, filename or "<stored>",
+                                                   self.program, self.declarations)
+            self.program, self.declarations = program, decls
+        self.engine.program = self.program
+
+    def _compile_program(self, text: str, filename: str, base: Program,
+                         base_decls: Declarations) -> tuple[Program, Declarations]:
+        clauses = parse_program(text, filename)
+        program = base.copy()
+        decls = base_decls.copy()
+        for clause in clauses:
+            if clause.head is None:
+                self._directive(clause, program, decls)
+                continue
+            head = deref(clause.head)
+            self._check_head(head, clause)
+            if type(head) is Struct and head.name in ("tBuffer", "cBuffer") and len(head.args) == 2:
+                decls.buffers.append(self._buffer_decl(head, clause))
+            program.add_clause(clause)
+        return program, decls
+
+    def _buffer_decl(self, head: Struct, clause: Clause) -> BufferDecl:
+        pattern, amount = deref(head.args[0]), deref(head.args[1])
+        if type(pattern) not in (Struct, Atom):
+            raise SLRError(f"{_where(clause)}{head.name}: the pattern must be an event "
+                           f"term, not {format_term(pattern)}")
+        if head.name == "tBuffer":
+            value = parse_duration(amount)
+        else:
+            if type(amount) is not int or amount < 0:
+                raise SLRError(f"{_where(clause)}cBuffer: the count must be a non-negative "
+                               f"integer, not {format_term(amount)}")
+            value = amount
+        return BufferDecl(str(head.name), pattern, value, clause)
+
+    def _check_head(self, head: Any, clause: Clause) -> None:
+        from .builtins import BUILTIN_NAMES
+        from .engine import CONTROL
+
+        if type(head) is Var:
+            raise SLRError(f"{_where(clause)}a clause head cannot be a variable")
+        if type(head) not in (Struct, Atom):
+            raise SLRError(f"{_where(clause)}a clause head must be callable, not "
+                           f"{format_term(head)}")
+        if split_event_atom(head) is not None:
+            return
+        key = (str(head.name), len(head.args)) if type(head) is Struct else (str(head), 0)
+        if key in CONTROL or key in BUILTIN_NAMES or key in (("prev", 2), ("next", 2), ("next", 3)):
+            raise SLRError(f"{_where(clause)}cannot redefine the builtin {key[0]}/{key[1]}")
+
+    def _directive(self, clause: Clause, program: Program, decls: Declarations) -> None:
+        goal = deref(clause.body)
+        name = str(goal.name) if type(goal) is Struct else str(goal)
+        args = goal.args if type(goal) is Struct else ()
+        try:
+            if name == "event" and len(args) == 1:
+                decls.event_types.update(_indicators(args[0]))
+            elif name == "max_delay" and len(args) == 2:
+                ind = _indicator(args[0])
+                value = deref(args[1])
+                decls.max_delay[ind] = "learn" if value == "learn" and type(value) is Atom \
+                    else parse_duration(value)
+            elif name == "in_order" and len(args) == 1:
+                decls.in_order.update(_indicators(args[0]))
+            elif name == "dynamic" and len(args) == 1:
+                program.dynamic.update(_indicators(args[0]))
+            elif name in ("discontiguous", "use_module", "ensure_loaded", "set_prolog_flag",
+                          "module"):
+                pass  # accepted for compatibility with Prolog sources; nothing to do here
+            elif name in ("tBuffer", "cBuffer") and len(args) == 2:
+                decls.buffers.append(self._buffer_decl(goal, clause))
+            else:
+                raise SLRError(f"unknown directive :- {format_term(goal)}")
+        except SLRError as exc:
+            msg = str(exc)
+            if not msg.startswith(_where(clause)) or not _where(clause):
+                msg = _where(clause) + msg
+            raise SLRError(msg) from None
+
+    def load(self, text: str, filename: str = "<string>") -> None:
+        """Add the clauses and declarations of ``text`` to the program (persisted).
+
+        All or nothing: a program with any error is rejected whole and the loaded program
+        stays as it was.
+
+        >>> kb = open(); kb.load("p(1). p(2)."); [a["X"] for a in kb.query("p(X)")]
+        [1, 2]
+        """
+        with self._load_lock:
+            program, decls = self._compile_program(text, filename, self.program,
+                                                   self.declarations)
+            old = (self.program, self.declarations)
+            with self.store.transaction():
+                self.store.append_program(text, filename)
+                for name, arity in sorted(decls.event_types - self.declarations.event_types):
+                    self.store.declare_type(name, arity)
+                self.program, self.declarations = program, decls
+                try:
+                    for listener in self.load_listeners:
+                        listener(self)
+                except BaseException:
+                    self.program, self.declarations = old
+                    raise
+            self.engine.program = program
+            self._plans.clear()
+
+    def load_file(self, path: str | Path) -> None:
+        """Load a program file (see :meth:`load`)."""
+        path = Path(path)
+        self.load(path.read_text(encoding="utf-8"), str(path))
+
+    def define(self, name: str, arity: int, fn: Callable) -> None:
+        """Register a Python predicate ``name/arity``.
+
+        ``fn`` receives the arguments as Python values (unbound ones as :class:`Var`) and
+        returns True/False/None, a tuple with one value per argument, or ``{position: value}``.
+
+        >>> kb = open(); kb.define("double", 2, lambda x, y: (x, 2 * x))
+        >>> kb.query("double(21, Y)")
+        [{'Y': 42}]
+        """
+        self.engine.python_preds[(name, arity)] = fn
+        self._plans.clear()
+
+    # -- events -------------------------------------------------------------------------
+    def _event_from_text(self, text: str) -> tuple:
+        term, _ = parse_term(text, "<event>")
+        ev = split_event_atom(term)
+        if ev is None:
+            raise EventRejected(f"{text.strip()}: an event must be written p(...)^T or "
+                                f"p(...)^[Start,End]")
+        atom, s, e = ev
+        name, _n = event_key(atom)
+        args = tuple(atom.args) if type(atom) is Struct else ()
+        return (name, args, self._time(s, text), self._time(e, text))
+
+    @staticmethod
+    def _time(t: Any, text: str) -> Any:
+        from .arith import evaluate
+
+        t = deref(t)
+        if type(t) is Var:
+            raise EventRejected(f"{text.strip()}: the event time must be bound")
+        if type(t) in (int, float):
+            return float(t)
+        try:
+            return float(evaluate(t))
+        except SLRError:
+            raise EventRejected(f"{text.strip()}: the event time must be a number, "
+                                f"not {format_term(t)}") from None
+
+    def add(self, text: str) -> None:
+        """Add one event written in SLR syntax (``p(..)^T`` or ``p(..)^[S,E]``).
+
+        >>> kb = open(); kb.add("seg(cup1, [0.4,0.1,0.9])^12.31"); len(kb.query("seg(O,L)^T"))
+        1
+        """
+        self._add([self._event_from_text(text)], atomic=True)
+
+    def add_event(self, name: str, args: Iterable[Any], start: float, end: float | None = None) -> None:
+        """Add one event from Python values (``str`` is an atom, ``String`` a string).
+
+        >>> kb = open(); kb.add_event("seg", ["cup1", [0.4, 0.1, 0.9]], start=2.0, end=2.0)
+        """
+        if end is None:
+            end = start
+        self._add([(name, tuple(from_python(a) for a in args), start, end)], atomic=True)
+
+    def add_many(self, events: Iterable[Any], atomic: bool = False) -> list[EventRejected]:
+        """Add many events in one transaction: strings in SLR syntax or
+        ``(name, args, start, end)`` tuples. Returns the rejected events (each with its reason);
+        the others are stored. With ``atomic=True`` one bad event rejects the whole batch.
+
+        >>> kb = open(); kb.add_many(["p(1)^1", ("p", [2], 2.0, 2.0)])
+        []
+        """
+        prepared: list = []
+        errors: list[EventRejected] = []
+        for i, ev in enumerate(events):
+            try:
+                if isinstance(ev, str):
+                    prepared.append(self._event_from_text(ev))
+                else:
+                    name, args, start, end = ev
+                    prepared.append((name, tuple(from_python(a) for a in args), start, end))
+            except (SLRError, TypeError, ValueError) as exc:
+                if atomic:
+                    raise exc if isinstance(exc, SLRError) else EventRejected(str(exc))
+                err = exc if isinstance(exc, EventRejected) else EventRejected(f"{ev!r}: {exc}")
+                err.index = i
+                errors.append(err)
+        return errors + self._add(prepared, atomic=atomic)
+
+    def _add(self, events: list, atomic: bool) -> list[EventRejected]:
+        errors = self.store.add_events(events, atomic=atomic)
+        if atomic and errors:
+            raise errors[0]
+        if self.add_listeners:
+            rejected = {id(e.event) for e in errors if hasattr(e, "event")}
+            stored = [ev for ev in events if id(ev) not in rejected]
+            for listener in self.add_listeners:
+                listener(stored)
+        return errors
+
+    # -- queries ------------------------------------------------------------------------
+    def _plan(self, goal: str, arg_names: tuple) -> _Plan:
+        key = (goal, arg_names)
+        plan = self._plans.get(key)
+        if plan is not None:
+            return plan
+        term, varnames = parse_term(goal, "<query>")
+        compiled = compile_clause((), term)
+        slots: dict[str, int] = {}
+        # map names to slots through the compiled body: find Slot objects by name
+        from .program import Slot, Template
+
+        def walk(t):
+            stack = [t]
+            while stack:
+                x = stack.pop()
+                if type(x) is Slot:
+                    slots.setdefault(x.name, x.index)
+                elif type(x) is Template:
+                    stack.extend(x.args)
+        for g in compiled.body:
+            walk(g)
+        for name in arg_names:
+            if name not in varnames:
+                raise SLRError(f"args names {name!r}, which is not a variable of the goal {goal!r}")
+        names = [(n, slots[n]) for n in varnames if not n.startswith("_") and n in slots]
+        plan = _Plan(compiled, names, {n: slots[n] for n in arg_names if n in slots}, goal)
+        if len(self._plans) > 1024:
+            self._plans.clear()
+        self._plans[key] = plan
+        return plan
+
+    def _instantiate(self, plan: _Plan, args: dict | None) -> tuple[Any, list]:
+        frame: list = [None] * plan.compiled.nslots
+        if args:
+            for name, value in args.items():
+                slot = plan.bind_slots.get(name)
+                if slot is not None:
+                    frame[slot] = from_python(value)
+        goals = [build(g, frame) for g in plan.compiled.body]
+        if not goals:
+            goal: Any = Atom("true")
+        else:
+            goal = goals[-1]
+            for g in reversed(goals[:-1]):
+                goal = Struct(",", (g, goal))
+        for name, slot in plan.names:
+            if frame[slot] is None:
+                frame[slot] = Var(name)
+        return goal, frame
+
+    def machine(self, at: float | None = None, timeout: float | None = None,
+                max_steps: int | None = None) -> Machine:
+        return self.engine.machine(at=at, timeout=timeout, max_steps=max_steps)
+
+    def query(self, goal: str, at: float | None = None, args: dict | None = None,
+              timeout: float | None = None, max_steps: int | None = None,
+              limit: int | None = None) -> list[dict[str, Any]]:
+        """Answer ``goal`` now, on the events that have arrived (unsynchronized).
+
+        ``at`` restricts event goals to the stream view (events with end <= at); ``args``
+        binds goal variables from Python values (no text splicing; the parsed plan is reused);
+        ``timeout`` (seconds) or ``max_steps`` stop an endless computation with SLRTimeout.
+
+        >>> kb = open(); kb.add_many(["pos(a, 1)^1", "pos(a, 4)^5"])
+        []
+        >>> kb.query("prev(pos(a, X)^T, 4)")
+        [{'X': 1, 'T': 1.0}]
+        """
+        plan = self._plan(goal, tuple(args) if args else ())
+        term, frame = self._instantiate(plan, args)
+        m = self.engine.machine(at=at, timeout=timeout, max_steps=max_steps)
+        answers = []
+        names = plan.names
+        for _ in m.solve(term):
+            answers.append(_answer(names, frame))
+            if limit is not None and len(answers) >= limit:
+                break
+        return answers
+
+    def explain(self, goal: str) -> str:
+        """How ``goal`` would be run: which engine, and why.
+
+        >>> open().explain("p(X)").splitlines()[0]
+        'goal: p(X)'
+        """
+        plan = self._plan(goal, ())
+        lines = [f"goal: {goal}", "engine: interpreter (top-down SLDNF over the event store)"]
+        return "\n".join(lines)
+
+    # -- SQL access -----------------------------------------------------------------------
+    def sql(self, query: str, params: Iterable[Any] = ()) -> tuple[list[str], list[tuple]]:
+        """Run SQL on the store's database; returns (column names, rows).
+
+        >>> kb = open(); kb.add("p(a)^1"); kb.sql("SELECT arg1, t_end FROM p")
+        (['arg1', 't_end'], [('a', 1.0)])
+        """
+        return self.store.sql(query, params)
+
+
+def _answer(names: list, frame: list) -> dict[str, Any]:
+    """Bindings of the named variables, as SWI-Prolog's toplevel shows them: a variable left
+    unbound is omitted unless it is shared with another named variable (``X = Y``)."""
+    values = [(name, deref(frame[slot])) for name, slot in names]
+    free = [id(v) for _, v in values if type(v) is Var]
+    answer = {}
+    for name, v in values:
+        if type(v) is Var and free.count(id(v)) < 2:
+            continue
+        answer[name] = to_python(v)
+    return answer
+
+
+def open(path: str | Path | None = None, clock: Clock | None = None, **options: Any) -> KnowledgeBase:
+    """Open (or create) a knowledge base; ``path=None`` gives an in-memory one.
+
+    >>> kb = open(); kb.close()
+    """
+    return KnowledgeBase(path, clock, **options)

@@ -1,0 +1,252 @@
+"""Loaded programs: clauses compiled into templates that are cheap to rename apart.
+
+A clause is compiled once: its variables become numbered :class:`Slot` s and every compound
+that contains a variable becomes a :class:`Template`; ground subterms are shared as they are.
+Resolving against a clause then needs no copy of the head at all (slots are filled straight
+from the goal's arguments) and one copy of the body goals.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from .terms import Atom, Clause, Span, Struct, Var, deref, TRUE
+
+__all__ = ["Slot", "Template", "CompiledClause", "Predicate", "Program", "compile_clause",
+           "split_event_atom", "event_key"]
+
+
+class Slot:
+    """The i-th variable of a compiled clause."""
+
+    __slots__ = ("index", "name")
+
+    def __init__(self, index: int, name: str):
+        self.index = index
+        self.name = name
+
+    def __repr__(self) -> str:
+        return f"Slot({self.index}, {self.name!r})"
+
+
+class Template:
+    """A compound term of a compiled clause that contains at least one Slot."""
+
+    __slots__ = ("name", "args")
+
+    def __init__(self, name: str, args: tuple):
+        self.name = name
+        self.args = args
+
+    def __repr__(self) -> str:
+        return f"Template({self.name!r}, {self.args!r})"
+
+
+def build(t: Any, frame: list) -> Any:
+    """Instantiate a compiled term with the variables of ``frame`` (fresh Vars on demand)."""
+    tt = type(t)
+    if tt is Slot:
+        v = frame[t.index]
+        if v is None:
+            v = frame[t.index] = Var(t.name)
+        return v
+    if tt is Template:
+        # long list templates: walk the spine iteratively
+        if t.name == "." and len(t.args) == 2 and type(t.args[1]) is Template:
+            heads = []
+            while type(t) is Template and t.name == "." and len(t.args) == 2:
+                heads.append(build(t.args[0], frame))
+                t = t.args[1]
+            out = build(t, frame)
+            for h in reversed(heads):
+                out = Struct(".", (h, out))
+            return out
+        return Struct(t.name, tuple([build(a, frame) for a in t.args]))
+    return t
+
+
+@dataclass(slots=True)
+class CompiledClause:
+    head: tuple  # compiled head arguments (for temporal rules: data args + (start, end))
+    body: tuple  # compiled body goals, top-level conjunction flattened
+    nslots: int
+    source: Clause | None = None
+    index_key: Any = None  # first-argument key, None when the first argument is a variable
+
+
+def _compile(t: Any, slots: dict) -> Any:
+    t = deref(t)
+    tt = type(t)
+    if tt is Var:
+        s = slots.get(id(t))
+        if s is None:
+            s = slots[id(t)] = Slot(len(slots), t.name)
+        return s
+    if tt is Struct:
+        # iterative over list spines so that million-element list facts compile
+        if t.name == "." and len(t.args) == 2:
+            heads = []
+            cur = t
+            while type(cur) is Struct and cur.name == "." and len(cur.args) == 2:
+                heads.append(_compile(cur.args[0], slots))
+                cur = deref(cur.args[1])
+            out = _compile(cur, slots)
+            for h in reversed(heads):
+                if type(h) in (Slot, Template) or type(out) in (Slot, Template):
+                    out = Template(".", (h, out))
+                else:
+                    out = Struct(".", (h, out))
+            return out
+        args = tuple(_compile(a, slots) for a in t.args)
+        if any(type(a) is Slot or type(a) is Template for a in args):
+            return Template(t.name, args)
+        if all(a is b for a, b in zip(args, t.args)):
+            return t
+        return Struct(t.name, args)
+    return t
+
+
+def first_arg_key(t: Any) -> Any:
+    """Key for first-argument indexing, or None for a variable."""
+    tt = type(t)
+    if tt is Slot or tt is Var:
+        return None
+    if tt is Struct or tt is Template:
+        return (Struct, t.name, len(t.args))
+    return (tt, t)
+
+
+def flatten_conjunction(body: Any) -> list:
+    goals = []
+    stack = [body]
+    while stack:
+        g = deref(stack.pop())
+        if type(g) is Struct and g.name == "," and len(g.args) == 2:
+            stack.append(g.args[1])
+            stack.append(g.args[0])
+        else:
+            goals.append(g)
+    return goals
+
+
+def compile_clause(head_args: tuple, body: Any, source: Clause | None = None) -> CompiledClause:
+    """Compile a clause given its head arguments and body.
+
+    >>> from slr_sql.terms import Var, Atom
+    >>> X = Var("X"); c = compile_clause((X,), Struct("q", (X,)))
+    >>> c.nslots, c.head
+    (1, (Slot(0, 'X'),))
+    """
+    slots: dict = {}
+    head = tuple(_compile(a, slots) for a in head_args)
+    goals = [_compile(g, slots) for g in flatten_conjunction(body)]
+    goals = tuple(g for g in goals if not (type(g) is Atom and g == "true"))
+    key = first_arg_key(head[0]) if head else None
+    return CompiledClause(head, goals, len(slots), source, key)
+
+
+def split_event_atom(t: Any) -> tuple[Any, Any, Any] | None:
+    """``p(..)^T`` -> (p(..), T, T); ``p(..)^[S,E]`` -> (p(..), S, E); else None."""
+    t = deref(t)
+    if type(t) is not Struct or t.name != "^" or len(t.args) != 2:
+        return None
+    atom = deref(t.args[0])
+    if type(atom) is not Struct and type(atom) is not Atom:
+        return None
+    stamp = deref(t.args[1])
+    if type(stamp) is Struct and stamp.name == "." and len(stamp.args) == 2:
+        tail = deref(stamp.args[1])
+        if type(tail) is Struct and tail.name == "." and len(tail.args) == 2 \
+                and deref(tail.args[1]) == "[]" and type(deref(tail.args[1])) is Atom:
+            return atom, stamp.args[0], tail.args[0]
+    return atom, stamp, stamp
+
+
+def event_key(atom: Any) -> tuple[str, int]:
+    if type(atom) is Struct:
+        return str(atom.name), len(atom.args)
+    return str(atom), 0
+
+
+@dataclass
+class Predicate:
+    name: str
+    arity: int
+    clauses: list = field(default_factory=list)
+    _index: dict | None = None
+    _var_only: list | None = None
+
+    def add(self, clause: CompiledClause) -> None:
+        self.clauses.append(clause)
+        self._index = None
+
+    def candidates(self, first_arg: Any) -> list:
+        """Clauses whose first head argument may unify with ``first_arg`` (dereferenced)."""
+        if first_arg is None:
+            return self.clauses
+        tt = type(first_arg)
+        if tt is Var:
+            return self.clauses
+        if self._index is None:
+            self._build_index()
+        key = (Struct, first_arg.name, len(first_arg.args)) if tt is Struct else (tt, first_arg)
+        try:
+            return self._index.get(key, self._var_only)
+        except TypeError:
+            return self.clauses
+
+    def _build_index(self) -> None:
+        keys = []
+        for c in self.clauses:
+            if c.index_key is not None and c.index_key not in keys:
+                keys.append(c.index_key)
+        index = {}
+        for k in keys:
+            index[k] = [c for c in self.clauses if c.index_key is None or c.index_key == k]
+        self._var_only = [c for c in self.clauses if c.index_key is None]
+        self._index = index
+
+
+class Program:
+    """The clauses of a knowledge base, keyed by name/arity; temporal rules keyed separately.
+
+    ``preds[(name, arity)]`` holds ordinary predicates; ``temporal[(name, n)]`` the rules whose
+    head is an event atom ``p(A1..An)^T`` (compiled with head args A1..An, Start, End).
+    """
+
+    def __init__(self) -> None:
+        self.preds: dict[tuple[str, int], Predicate] = {}
+        self.temporal: dict[tuple[str, int], Predicate] = {}
+        self.dynamic: set[tuple[str, int]] = set()
+        self.clauses: list[Clause] = []
+
+    def copy(self) -> "Program":
+        p = Program()
+        p.preds = {k: Predicate(v.name, v.arity, list(v.clauses)) for k, v in self.preds.items()}
+        p.temporal = {k: Predicate(v.name, v.arity, list(v.clauses)) for k, v in self.temporal.items()}
+        p.dynamic = set(self.dynamic)
+        p.clauses = list(self.clauses)
+        return p
+
+    def add_clause(self, clause: Clause) -> None:
+        head = deref(clause.head)
+        ev = split_event_atom(head)
+        if ev is not None:
+            atom, s, e = ev
+            name, n = event_key(atom)
+            args = tuple(atom.args) if type(atom) is Struct else ()
+            pred = self.temporal.get((name, n))
+            if pred is None:
+                pred = self.temporal[(name, n)] = Predicate(name, n)
+            pred.add(compile_clause(args + (s, e), clause.body, clause))
+        else:
+            if type(head) is Struct:
+                name, args = str(head.name), head.args
+            else:
+                name, args = str(head), ()
+            key = (name, len(args))
+            pred = self.preds.get(key)
+            if pred is None:
+                pred = self.preds[key] = Predicate(name, len(args))
+            pred.add(compile_clause(tuple(args), clause.body, clause))
+        self.clauses.append(clause)
