@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import sqlite3
 import sys
 from dataclasses import dataclass
@@ -58,7 +59,7 @@ def _open(db: str) -> Any:
 
 
 @click.group(cls=SLRGroup, context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(package_name="slr_sql", prog_name="slr")
+@click.version_option(version=slr_sql.__version__, prog_name="slr")
 def main() -> None:
     """SLR: a Prolog-like language over robot event streams, in one SQLite file.
 
@@ -173,10 +174,20 @@ class IngestReport:
     bad: list[tuple[int, str]]  # (line number, reason)
 
 
+_EMBEDDED_POSITION = re.compile(r"<[a-z]+>:\d+:(\d+): (.*)")
+
+
 def _reason(exc: Exception) -> str:
+    """A one-line reason for an ``ingest`` report (the line number is printed separately)."""
     if isinstance(exc, slr_sql.SLRSyntaxError):
         return f"{exc.message} (column {exc.column})" if exc.column else exc.message
-    return str(exc)
+    first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    # A rejection that wraps a syntax error repeats the event text and says where in it
+    # the error is; the event text is already the reported line, so keep message + column.
+    embedded = _EMBEDDED_POSITION.search(first)
+    if embedded:
+        return f"{embedded.group(2)} (column {embedded.group(1)})"
+    return first
 
 
 def _add_batch(kb: Any, batch: list[tuple[int, Any]], bad: list[tuple[int, str]]) -> int:
