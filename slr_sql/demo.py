@@ -51,12 +51,14 @@ def _string_text(text: str) -> str:
     return f'"{escaped}"'
 
 
-def _number_text(x: float | int) -> str:
+def _number_text(x: float | int, digits: int | None = None) -> str:
     if isinstance(x, float):
         if math.isinf(x):
             return "inf" if x > 0 else "-inf"
         if math.isnan(x):
             return "nan"
+        if digits is not None:
+            return repr(round(x, digits) + 0.0)  # + 0.0 turns -0.0 into 0.0
     return repr(x)
 
 
@@ -79,8 +81,9 @@ def _as_engine_term(value: Any) -> Any:
     return value
 
 
-def value_text(value: Any) -> str:
+def value_text(value: Any, digits: int | None = None) -> str:
     """Prolog text of one answer value: atoms quoted when needed, strings in double quotes.
+    ``digits`` rounds floats for display (the demo); by default they print exactly.
 
     >>> value_text(slr_sql.Atom("cup1")), value_text("never-observed"), value_text([1, 2.5])
     ('cup1', '"never-observed"', '[1,2.5]')
@@ -94,11 +97,16 @@ def value_text(value: Any) -> str:
     if isinstance(value, str):
         return _string_text(value)
     if isinstance(value, (int, float)):
-        return _number_text(value)
+        return _number_text(value, digits)
     if isinstance(value, (list, tuple)):
-        return "[" + ",".join(value_text(v) for v in value) + "]"
+        return "[" + ",".join(value_text(v, digits) for v in value) + "]"
     if isinstance(value, Var):
         return str(value)
+    if isinstance(value, Struct) and digits is not None:
+        args = ",".join(value_text(a, digits) for a in value.args)
+        if str(value.name) == "-" and len(value.args) == 2:
+            return value_text(value.args[0], digits) + "-" + value_text(value.args[1], digits)
+        return f"{_atom_text(str(value.name))}({args})"
     if isinstance(value, Struct):
         # Lists and strings nested in a compound must print as Prolog, so rebuild the engine
         # term and let the project's printer (operators, quoting) render it.
@@ -320,12 +328,33 @@ def _print_result(console: Any, result: DemoResult) -> None:
     if not result.answers:
         console.print("  [red]false.[/red]")
     for answer in result.answers:
-        console.print("  " + answer_text(answer), markup=False, highlight=False)
+        for line in _display_answer(answer):
+            console.print("  " + line, markup=False, highlight=False)
     console.print(f"  [dim]why: {q.why}[/dim]", highlight=False)
     if result.plan:
         console.print(f"  [dim]plan: {result.plan}[/dim]", highlight=False)
     for note in result.notes:
         console.print(f"  [yellow]{note}[/yellow]", highlight=False)
+
+
+def _display_answer(answer: dict[str, Any]) -> list[str]:
+    """An answer for people: floats to 3 decimals, and a list of several items one per line."""
+    if not answer:
+        return ["true."]
+    lines = []
+    for name, value in answer.items():
+        from .terms import Var
+
+        if isinstance(value, Var):
+            continue  # a findall's template variables: unbound, and noise here
+        if isinstance(value, list) and len(value) > 1:
+            lines.append(f"{name} = [")
+            lines.extend(f"    {value_text(item, 3)}," for item in value[:-1])
+            lines.append(f"    {value_text(value[-1], 3)}")
+            lines.append("  ]")
+        else:
+            lines.append(f"{name} = {value_text(value, 3)}")
+    return lines
 
 
 def _synchronized_cups_query(kb: Any, clock: Any, console: Any) -> DemoResult:

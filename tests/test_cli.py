@@ -238,8 +238,9 @@ def test_demo_answers_the_cups_question():
     r = slr("demo", timeout=300)
     assert r.returncode == 0, r.stderr
     assert "Which cups did you see on table1" in r.stdout
-    assert "Cups = [cup1-[" in r.stdout and "cup2-[" in r.stdout
-    assert "cup3" not in r.stdout.split("Cups = ", 1)[1].splitlines()[0]  # cup3 is on the next table
+    cups_block = r.stdout.split("Cups = [", 1)[1].split("\n  ]", 1)[0]
+    assert "cup1-[1.947,0.304,0.8]" in cups_block and "cup2-[2.314,-0.121,0.8]" in cups_block
+    assert "cup3" not in cups_block  # cup3 was seen, but on the next table
     assert 'L = "outdated"' in r.stdout and 'L = "never-observed"' in r.stdout
     assert "C = blue" in r.stdout
 
