@@ -2,7 +2,7 @@
 
 Events are ``seg(oN, [x, y, z])^t`` (an atom and a list of three floats). The raw baseline
 inserts rows that were encoded *before* the clock starts, into a table with the same columns,
-indexes and pragmas (WAL, synchronous=FULL), in one transaction; the store does the same work
+indexes and pragmas (WAL, synchronous=FULL, the store's cache_size), in one transaction; the store does the same work
 plus validation and encoding of every event. Building the Python terms is not timed for
 either. Target: store / raw >= 0.70.
 
@@ -24,7 +24,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from slr_sql.encoding import encode  # noqa: E402
-from slr_sql.store import EventStore  # noqa: E402
+from slr_sql.store import CACHE_SIZE_KIB, EventStore  # noqa: E402
 from slr_sql.terms import Atom, make_list  # noqa: E402
 
 
@@ -67,6 +67,7 @@ def run_raw(path: Path, events: list[tuple], synchronous: str) -> float:
     conn.execute("PRAGMA journal_mode=WAL")
     conn.execute(f"PRAGMA synchronous={synchronous}")
     conn.execute("PRAGMA foreign_keys=ON")
+    conn.execute(f"PRAGMA cache_size=-{CACHE_SIZE_KIB}")
     began = time.perf_counter()
     conn.execute("BEGIN IMMEDIATE")
     conn.executemany(f'INSERT INTO "{table}" (arg1, arg2, t_start, t_end, arrival) '

@@ -139,6 +139,10 @@ def _deref_or_raise(var: Var) -> Any:
     return t
 
 
+_INF = math.inf
+_NEG_INF = -math.inf
+_float_repr = float.__repr__
+_int_str = int.__repr__
 _MAX_DEPTH = 400  # nesting of compounds/lists; deeper terms are rejected, not crashed on
 
 
@@ -170,10 +174,21 @@ def _json(t: Any, depth: int) -> str:
         if t.name == "." and len(args) == 2:
             # Walk the cons cells iteratively: long lists must not recurse.
             items = []
+            add = items.append
             cell = t
             while True:
-                items.append(_json(cell.args[0], depth + 1))
-                tail = cell.args[1]
+                head, tail = cell.args
+                # Inline the common element kinds (numbers, atoms): vectors of floats are
+                # the bulk of robot data, and a call per element costs more than the element.
+                th = type(head)
+                if th is float and _NEG_INF < head < _INF:
+                    add(_float_repr(head))
+                elif th is Atom and head != "[]":
+                    add(_quote(head))
+                elif th is int and INT64_MIN <= head <= INT64_MAX:
+                    add(_int_str(head))
+                else:
+                    add(_json(head, depth + 1))
                 while type(tail) is Var:
                     if tail.ref is None:
                         raise Unencodable(f"{tail.name} is unbound (partial list)")

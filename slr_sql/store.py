@@ -52,16 +52,16 @@ from .encoding import Unencodable, decode, encode
 from .errors import EventRejected, SLRError
 from .terms import Atom, String, Struct, Var
 
-__all__ = ["EventStore", "Event", "Row", "SCHEMA_VERSION_KEY"]
+__all__ = ["EventStore", "Event", "Row", "CACHE_SIZE_KIB", "quote_identifier", "format_event",
+           "migration_scripts", "split_sql_script"]
 
 Event = tuple  # (name: str, args: tuple[term, ...], start: float, end: float)
 Row = tuple    # (args: tuple[term, ...], start: float, end: float, seq: int)
 
-SCHEMA_VERSION_KEY = "user_version"
-
 _INF = math.inf
 _NEG_INF = -math.inf
-_INSERT_CHUNK = 20_000  # rows per executemany: bounds memory on huge batches
+_INSERT_CHUNK = 20_000
+CACHE_SIZE_KIB = 65536  # PRAGMA cache_size of the store's connection (64 MiB)  # rows per executemany: bounds memory on huge batches
 
 _SAFE_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 _RESERVED_PREFIXES = ("slr_", "sqlite_")
@@ -285,6 +285,9 @@ class EventStore:
         self._types: dict[tuple[str, int], _EventType] = {}
         self._declared_arities: dict[str, set[int]] = {}
         self._sql_cache: dict[tuple, str] = {}
+        # buffers (issue 4): called as hook(name, arity, table) inside the transaction that
+        # creates a new event type's table (slr_sql.buffers installs its triggers there)
+        self.table_created_hooks: list = []
         self._conn = sqlite3.connect(self.path or ":memory:", check_same_thread=False,
                                      isolation_level=None, timeout=30.0,
                                      cached_statements=512)
@@ -297,6 +300,9 @@ class EventStore:
             conn.execute("PRAGMA journal_mode=WAL")
         conn.execute(f"PRAGMA synchronous={synchronous.upper()}")
         conn.execute("PRAGMA foreign_keys=ON")
+        # Every event type has four indexes; SQLite's default 2 MiB page cache makes large
+        # ingests spill and re-read index pages constantly. The cache grows only as used.
+        conn.execute(f"PRAGMA cache_size=-{CACHE_SIZE_KIB}")
         self._migrate()
         self._reload_types()
 
@@ -500,6 +506,8 @@ class EventStore:
         self._types[(name, arity)] = event_type
         if declared:
             self._declared_arities.setdefault(name, set()).add(arity)
+        for hook in self.table_created_hooks:  # buffers (issue 4)
+            hook(name, arity, table)
         return event_type
 
     def declare_type(self, name: str, arity: int) -> str:
@@ -570,6 +578,7 @@ class EventStore:
         enc = encode
         with self.transaction():
             arrival = float(self.clock.now())
+            self.record_now(arrival)  # buffers (issue 4): "now" for the buffer triggers
             executemany = self._conn.executemany
             types = self._types
             rows: list = []
@@ -868,6 +877,45 @@ class EventStore:
             cursor = self._conn.execute("EXPLAIN QUERY PLAN " + sql, [None] * sql.count("?"))
             return [row[3] for row in cursor.fetchall()]
 
+    def latest_at_or_before(self, name: str, arity: int, bound: dict[int, Any], t: float,
+                            point: bool) -> list[Row] | None:
+        """The whole answer of ``prev`` for a pattern whose bound arguments are all atomic and
+        whose other arguments are distinct variables, in one statement: the events with the
+        greatest end <= t (only point events, start = end, when ``point``), in store order.
+
+        Returns None when a bound value cannot be pushed into SQL exactly (the caller then
+        takes the general path). SQL's ``1 = 1.0`` is re-checked by the caller.
+
+        >>> s = EventStore(None); s.add_events([("p", ("a",), 1, 1), ("p", ("a",), 2, 2)])
+        []
+        >>> [row[2] for row in s.latest_at_or_before("p", 1, {0: "a"}, 1.5, True)]
+        [1.0]
+        """
+        with self.lock:
+            self._check_open()
+            event_type = self._lookup_type(name, arity)
+            if event_type is None:
+                return []
+            positions, values = self._pushdown(event_type, bound)
+            if len(positions) != len(bound):
+                return None
+            key = (event_type.table, "latest", positions, point)
+            sql = self._sql_cache.get(key)
+            if sql is None:
+                where = " AND ".join([f"arg{p + 1} = ?" for p in positions]
+                                     + (["t_start = t_end"] if point else []))
+                where = (where + " AND ") if where else ""
+                columns = ", ".join([f"arg{i + 1}" for i in range(arity)]
+                                    + ["t_start", "t_end", "seq"])
+                sql = (f"SELECT {columns} FROM {event_type.quoted} WHERE {where}t_end = "
+                       f"(SELECT max(t_end) FROM {event_type.quoted} WHERE {where}t_end <= ?) "
+                       f"ORDER BY t_start, seq")
+                self._sql_cache[key] = sql
+            rows = self._conn.execute(sql, values + values + [float(t)]).fetchall()
+        dec = decode
+        return [(tuple([dec(v) for v in row[:arity]]), row[arity], row[arity + 1], row[arity + 2])
+                for row in rows]
+
     def count(self, name: str, arity: int) -> int:
         """Number of stored events of name/arity.
 
@@ -1034,3 +1082,238 @@ class EventStore:
         """Rows changed by the last statement (``changes()``)."""
         with self.lock:
             return self._conn.execute("SELECT changes()").fetchone()[0]
+
+    # ================================================================== buffers (issue 4)
+    # Event-history management (slr_sql.buffers decides *what*; these methods run the SQL).
+    # Tables: slr_buffers, slr_counters, slr_clock (migrations/0002_buffers.sql); schema
+    # objects named slr_buf_<id>_* (triggers) and slr_bix_<id> (indexes).
+
+    def record_now(self, now: float) -> None:
+        """Record the store clock's current time in ``slr_clock`` (read by the buffer
+        triggers). Moving it runs the time-driven tBuffer pruning (``slr_buf_<id>_tick``
+        triggers). Called at the start of every add batch and by clock listeners.
+
+        >>> s = EventStore(None); s.record_now(5.0); s.recorded_now()
+        5.0
+        """
+        now = float(now)
+        if now != now:
+            return
+        sql = "UPDATE slr_clock SET now = ? WHERE id = 1 AND now IS NOT ?"
+        with self.lock:
+            if self._tx_depth:  # inside add_events: part of its transaction
+                self._check_open()
+                self._conn.execute(sql, (now, now))
+                return
+        with self.transaction():
+            self._conn.execute(sql, (now, now))
+
+    def recorded_now(self) -> float:
+        """The "now" buffer triggers currently use (``-inf`` before the first record)."""
+        with self.lock:
+            self._check_open()
+            return self._conn.execute("SELECT now FROM slr_clock WHERE id = 1").fetchone()[0]
+
+    def buffer_rows(self, active_only: bool = True) -> list[dict[str, Any]]:
+        """The rows of ``slr_buffers`` (oldest first) with their counters, as dicts.
+
+        >>> EventStore(None).buffer_rows()
+        []
+        """
+        where = " WHERE b.removed_at IS NULL" if active_only else ""
+        with self.lock:
+            self._check_open()
+            cursor = self._conn.execute(
+                "SELECT b.id, b.kind, b.source, b.pattern_text, b.type_name, b.type_arity, "
+                "b.amount, b.t1, b.t2, b.origin, b.cutoff, b.created_at, b.removed_at, "
+                "coalesce(c.pruned, 0) AS pruned, coalesce(c.dropped, 0) AS dropped "
+                "FROM slr_buffers b LEFT JOIN slr_counters c ON c.buffer_id = b.id"
+                f"{where} ORDER BY b.id")
+            names = [d[0] for d in cursor.description]
+            return [dict(zip(names, row)) for row in cursor.fetchall()]
+
+    def insert_buffer(self, kind: str, source: str, pattern_text: str, type_name: str,
+                      type_arity: int, amount: float | None, t1: float | None,
+                      t2: float | None, origin: str) -> int:
+        """Add a row to ``slr_buffers`` (and its counters); returns the new buffer id."""
+        with self.transaction():
+            cursor = self._conn.execute(
+                "INSERT INTO slr_buffers (kind, source, pattern_text, type_name, type_arity, "
+                "amount, t1, t2, origin, created_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (kind, source, pattern_text, type_name, type_arity, amount, t1, t2, origin,
+                 float(self.clock.now())))
+            buffer_id = cursor.lastrowid
+            self._conn.execute("INSERT OR IGNORE INTO slr_counters (buffer_id) VALUES (?)",
+                               (buffer_id,))
+            return buffer_id
+
+    def mark_buffer_removed(self, buffer_id: int) -> None:
+        """Deactivate a buffer (its row and counters stay, for statistics)."""
+        with self.transaction():
+            self._conn.execute("UPDATE slr_buffers SET removed_at = ? WHERE id = ?",
+                               (float(self.clock.now()), int(buffer_id)))
+
+    def count_buffer(self, buffer_id: int, pruned: int = 0, dropped: int = 0) -> None:
+        """Add to a buffer's counters."""
+        with self.transaction():
+            self._conn.execute("UPDATE slr_counters SET pruned = pruned + ?, "
+                               "dropped = dropped + ? WHERE buffer_id = ?",
+                               (int(pruned), int(dropped), int(buffer_id)))
+
+    def set_buffer_cutoff(self, buffer_id: int, cutoff: float) -> None:
+        with self.transaction():
+            self._conn.execute("UPDATE slr_buffers SET cutoff = ? WHERE id = ?",
+                               (float(cutoff), int(buffer_id)))
+
+    def buffer_objects(self, buffer_id: int) -> dict[str, str]:
+        """The triggers and indexes of one buffer: ``{name: sql}``."""
+        with self.lock:
+            self._check_open()
+            rows = self._conn.execute(
+                "SELECT name, sql FROM sqlite_master WHERE type IN ('trigger', 'index') "
+                "AND (name LIKE ? ESCAPE '!' OR name = ?)",
+                (f"slr!_buf!_{int(buffer_id)}!_%", f"slr_bix_{int(buffer_id)}")).fetchall()
+        return {name: sql for name, sql in rows}
+
+    def install_buffer_objects(self, buffer_id: int, statements: dict[str, str]) -> bool:
+        """Make the triggers/indexes of ``buffer_id`` exactly ``statements`` (``{name: CREATE
+        ...}``): objects whose SQL differs are re-created, missing ones created, others
+        dropped. Returns True if anything changed."""
+        with self.transaction():
+            existing = self.buffer_objects(buffer_id)
+            changed = False
+            for name, sql in existing.items():
+                if statements.get(name) != sql:
+                    kind = "INDEX" if name.startswith("slr_bix_") else "TRIGGER"
+                    self._conn.execute(f"DROP {kind} IF EXISTS {quote_identifier(name)}")
+                    changed = True
+            for name, sql in statements.items():
+                if existing.get(name) != sql:
+                    self._conn.execute(sql)
+                    changed = True
+            return changed
+
+    def drop_buffer_objects(self, buffer_id: int) -> None:
+        """Drop every trigger and index of one buffer."""
+        self.install_buffer_objects(buffer_id, {})
+
+    def prune(self, sql: str, buffer_id: int) -> int:
+        """Run one buffer's DELETE statement (generated by slr_sql.buffers; constants in it
+        come from :func:`sql_literal`) and add the deleted rows to its ``pruned`` counter."""
+        with self.transaction():
+            deleted = self._conn.execute(sql).rowcount
+            if deleted > 0:
+                self._conn.execute("UPDATE slr_counters SET pruned = pruned + ? "
+                                   "WHERE buffer_id = ?", (deleted, int(buffer_id)))
+            return max(deleted, 0)
+
+    def table_rows(self) -> dict[tuple[str, int], int]:
+        """Rows stored now per event type (a full count: for statistics)."""
+        with self.lock:
+            self._check_open()
+            out = {}
+            for key, table in sorted(self.event_types().items()):
+                out[key] = self._conn.execute(
+                    f"SELECT count(*) FROM {quote_identifier(table)}").fetchone()[0]
+            return out
+
+    def space_stats(self) -> dict[str, Any]:
+        """Page size/count, free pages, and the sizes of the file and its WAL (bytes).
+
+        >>> sorted(EventStore(None).space_stats())
+        ['file_bytes', 'free_pages', 'page_count', 'page_size', 'wal_bytes']
+        """
+        import os
+
+        with self.lock:
+            self._check_open()
+            page_size = self._conn.execute("PRAGMA page_size").fetchone()[0]
+            page_count = self._conn.execute("PRAGMA page_count").fetchone()[0]
+            free = self._conn.execute("PRAGMA freelist_count").fetchone()[0]
+        file_bytes = wal_bytes = 0
+        if self.path is not None:
+            try:
+                file_bytes = os.path.getsize(self.path)
+            except OSError:
+                pass
+            try:
+                wal_bytes = os.path.getsize(self.path + "-wal")
+            except OSError:
+                pass
+        else:
+            file_bytes = page_size * page_count
+        return {"page_size": page_size, "page_count": page_count, "free_pages": free,
+                "file_bytes": file_bytes, "wal_bytes": wal_bytes}
+
+    def reclaim_space(self, min_free_pages: int = 2048, min_free_fraction: float = 0.25,
+                      keep_fraction: float = 0.10) -> int:
+        """Give free pages back to the file system (``PRAGMA incremental_vacuum``) when the
+        free list is large: more than ``min_free_pages`` pages and ``min_free_fraction`` of
+        the file. ``keep_fraction`` of the file is left free for the next inserts to reuse.
+        Returns the number of pages released (0 for in-memory stores)."""
+        if self.path is None:
+            return 0
+        with self.lock:
+            self._check_open()
+            conn = self._conn
+            page_count = conn.execute("PRAGMA page_count").fetchone()[0]
+            free = conn.execute("PRAGMA freelist_count").fetchone()[0]
+            if free <= min_free_pages or free < min_free_fraction * page_count:
+                return 0
+            release = free - int(keep_fraction * page_count)
+            if release <= 0:
+                return 0
+            with self.transaction():
+                conn.execute(f"PRAGMA incremental_vacuum({int(release)})").fetchall()
+            after = conn.execute("PRAGMA freelist_count").fetchone()[0]
+            if not self._tx_depth:
+                conn.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchall()
+            return max(free - after, 0)
+
+    def limit_wal(self, max_bytes: int = 64 * 1024 * 1024) -> None:
+        """Truncate the WAL file to at most ``max_bytes`` after each checkpoint
+        (``PRAGMA journal_size_limit``; the WAL is checkpointed every 1000 pages by SQLite)."""
+        if self.path is None:
+            return
+        with self.lock:
+            self._check_open()
+            self._conn.execute(f"PRAGMA journal_size_limit = {int(max_bytes)}").fetchall()
+
+
+def sql_literal(value: Any) -> str:
+    """Quote a constant as an SQL literal, strictly.
+
+    The buffer triggers (slr_sql.buffers) are the one place where slr_sql writes constants
+    into SQL text: ``CREATE TRIGGER`` bodies cannot have bound parameters, so a pattern
+    constant such as ``bob`` in ``cBuffer(face(bob, L), 1)`` must appear as a literal. Only
+    ``int`` (64-bit), finite or infinite ``float`` and ``str`` without NUL are accepted;
+    quotes are doubled; anything else is rejected.
+
+    >>> sql_literal("it's"), sql_literal(3), sql_literal(0.5), sql_literal(float("inf"))
+    ("'it''s'", '3', '0.5', '9e999')
+    >>> sql_literal(True)
+    Traceback (most recent call last):
+    ...
+    TypeError: no SQL literal for bool value True
+    """
+    tv = type(value)
+    if tv is int or (isinstance(value, int) and tv is not bool):
+        value = int(value)
+        if not -(2 ** 63) <= value < 2 ** 63:
+            raise ValueError(f"integer {value} does not fit an SQL literal")
+        return repr(value)
+    if tv is float or (isinstance(value, float) and tv is not bool):
+        value = float(value)
+        if value != value:
+            raise ValueError("NaN has no SQL literal")
+        if value == _INF:
+            return "9e999"
+        if value == _NEG_INF:
+            return "-9e999"
+        return repr(value)
+    if isinstance(value, str):
+        text = str.__str__(value)
+        if "\x00" in text:
+            raise ValueError("a NUL character cannot be written as an SQL literal")
+        return "'" + text.replace("'", "''") + "'"
+    raise TypeError(f"no SQL literal for {tv.__name__} value {value!r}")
