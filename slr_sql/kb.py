@@ -120,6 +120,8 @@ class KnowledgeBase:
         self.load_listeners: list[Callable[["KnowledgeBase"], None]] = []
         self.add_listeners: list[Callable[[list], None]] = []
         self._restore_program()
+        from . import buffers as _buffers  # event-history management (issue 4)
+        self._buffers = _buffers.attach(self)
 
     # -- lifecycle ----------------------------------------------------------------------
     def close(self) -> None:
@@ -428,6 +430,29 @@ class KnowledgeBase:
         plan = self._plan(goal, ())
         lines = [f"goal: {goal}", "engine: interpreter (top-down SLDNF over the event store)"]
         return "\n".join(lines)
+
+    # -- history buffers (issue 4; the work is in slr_sql/buffers.py) --------------------
+    def add_buffer(self, pattern: str, *, keep_last: int | None = None,
+                   keep_seconds: float | None = None,
+                   keep_between: tuple[float, float] | None = None) -> int:
+        """Keep a history of the events matching ``pattern`` (runtime policy, persisted):
+        the ``keep_last`` most recent per key, those of the last ``keep_seconds`` (by end
+        time), or those whose occurrence lies inside ``keep_between=(T1, T2)``. Returns the
+        buffer id.
+
+        >>> kb = open(); kb.add_buffer("face(P, _)", keep_last=1)
+        1
+        """
+        return self._buffers.add_runtime(pattern, keep_last=keep_last,
+                                         keep_seconds=keep_seconds, keep_between=keep_between)
+
+    def remove_buffer(self, buffer_id: int) -> None:
+        """Remove a runtime buffer (the events it kept stay)."""
+        self._buffers.remove_runtime(buffer_id)
+
+    def buffers(self) -> list:
+        """The active buffers (program and runtime) with their counters."""
+        return self._buffers.infos()
 
     # -- SQL access -----------------------------------------------------------------------
     def sql(self, query: str, params: Iterable[Any] = ()) -> tuple[list[str], list[tuple]]:
