@@ -98,6 +98,115 @@ class _Plan:
     names: list[tuple[str, int]]  # answer variables: (name, slot index)
     bind_slots: dict[str, int]    # args name -> slot index
     text: str
+    lookup: "_PrevLookup | None" = None
+
+
+_ATOMIC = (Atom, String, int, float)
+
+
+class _PrevLookup:
+    """Fast path for the robot's most frequent question, a single ``prev(p(..)^Z, T)`` whose
+    arguments are constants or distinct variables: one indexed SQL statement, no interpreter.
+
+    Whenever a run-time binding does not fit (a compound or unbound-variable argument value,
+    an int/float clash that SQL cannot see), :meth:`run` returns None and the query takes the
+    general path, so answers never differ from the interpreter's.
+    """
+
+    __slots__ = ("name", "arity", "args", "stamp", "time", "point")
+
+    def __init__(self, name, arity, args, stamp, time, point):
+        self.name, self.arity, self.args = name, arity, args
+        self.stamp, self.time, self.point = stamp, time, point
+
+    @classmethod
+    def recognise(cls, compiled) -> "_PrevLookup | None":
+        from .program import Slot, Template
+
+        body = compiled.body
+        if len(body) != 1 or type(body[0]) is not Template or body[0].name != "prev" \
+                or len(body[0].args) != 2:
+            return None
+        event, time = body[0].args
+        if type(event) is not Template or event.name != "^" or type(time) not in (Slot, int, float):
+            return None
+        atom, stamp = event.args
+        if type(stamp) is Slot:
+            stamp_slots, point = (stamp.index,), True
+        elif type(stamp) is Template and stamp.name == "." and type(stamp.args[0]) is Slot \
+                and type(stamp.args[1]) is Template and type(stamp.args[1].args[0]) is Slot \
+                and stamp.args[1].args[1] == "[]":
+            stamp_slots, point = (stamp.args[0].index, stamp.args[1].args[0].index), False
+            if stamp_slots[0] == stamp_slots[1]:
+                return None
+        else:
+            return None
+        if type(atom) is Atom:
+            name, args = str(atom), ()
+        elif type(atom) in (Template, Struct):
+            name, args = str(atom.name), atom.args
+        else:
+            return None
+        seen = set(stamp_slots)
+        if type(time) is Slot:
+            if time.index in seen:
+                return None
+            seen.add(time.index)
+        spec = []
+        for a in args:
+            if type(a) is Slot:
+                if a.index in seen:
+                    return None
+                seen.add(a.index)
+                spec.append(a.index)
+            elif type(a) in _ATOMIC:
+                spec.append(("const", a))
+            else:
+                return None
+        return cls(name, len(args), tuple(spec), stamp_slots,
+                   time.index if type(time) is Slot else ("const", time), point)
+
+    def run(self, store, frame: list, names: list) -> list | None:
+        for slot in self.stamp:
+            if frame[slot] is not None:
+                return None
+        t = self.time
+        t = t[1] if type(t) is tuple else frame[t]
+        t = deref(t)
+        if type(t) is not int and type(t) is not float:
+            return None
+        bound = {}
+        free = []
+        for i, a in enumerate(self.args):
+            if type(a) is tuple:
+                bound[i] = a[1]
+                continue
+            v = frame[a]
+            if v is None:
+                free.append((i, a))
+                continue
+            v = deref(v)
+            if type(v) not in _ATOMIC or (type(v) is float and v != v):
+                return None
+            bound[i] = v
+        rows = store.latest_at_or_before(self.name, self.arity, bound, t, self.point)
+        if rows is None:
+            return None
+        answers = []
+        for values, start, end, _seq in rows:
+            for i, v in bound.items():
+                if type(values[i]) is not type(v):
+                    return None
+            f = list(frame)
+            for i, slot in free:
+                f[slot] = values[i]
+            if self.point:
+                f[self.stamp[0]] = end
+            else:
+                f[self.stamp[0]] = start
+                f[self.stamp[1]] = end
+            answers.append(_answer(names, f))
+        return answers
 
 
 class KnowledgeBase:
@@ -367,7 +476,8 @@ class KnowledgeBase:
             if name not in varnames:
                 raise SLRError(f"args names {name!r}, which is not a variable of the goal {goal!r}")
         names = [(n, slots[n]) for n in varnames if not n.startswith("_") and n in slots]
-        plan = _Plan(compiled, names, {n: slots[n] for n in arg_names if n in slots}, goal)
+        plan = _Plan(compiled, names, {n: slots[n] for n in arg_names if n in slots}, goal,
+                     _PrevLookup.recognise(compiled))
         if len(self._plans) > 1024:
             self._plans.clear()
         self._plans[key] = plan
@@ -411,6 +521,14 @@ class KnowledgeBase:
         [{'X': 1, 'T': 1.0}]
         """
         plan = self._plan(goal, tuple(args) if args else ())
+        if plan.lookup is not None and limit is None:
+            frame = [None] * plan.compiled.nslots
+            if args:
+                for name, value in args.items():
+                    frame[plan.bind_slots[name]] = from_python(value)
+            answers = plan.lookup.run(self.store, frame, plan.names)
+            if answers is not None:
+                return answers
         term, frame = self._instantiate(plan, args)
         m = self.engine.machine(at=at, timeout=timeout, max_steps=max_steps)
         answers = []

@@ -907,9 +907,11 @@ class EventStore:
                 where = (where + " AND ") if where else ""
                 columns = ", ".join([f"arg{i + 1}" for i in range(arity)]
                                     + ["t_start", "t_end", "seq"])
+                # ORDER BY ... LIMIT 1 rather than max(): max() with the extra start = end
+                # filter is an aggregate over every row of the key, LIMIT 1 stops at the first
                 sql = (f"SELECT {columns} FROM {event_type.quoted} WHERE {where}t_end = "
-                       f"(SELECT max(t_end) FROM {event_type.quoted} WHERE {where}t_end <= ?) "
-                       f"ORDER BY t_start, seq")
+                       f"(SELECT t_end FROM {event_type.quoted} WHERE {where}t_end <= ? "
+                       f"ORDER BY t_end DESC LIMIT 1) ORDER BY t_start, seq")
                 self._sql_cache[key] = sql
             rows = self._conn.execute(sql, values + values + [float(t)]).fetchall()
         dec = decode
