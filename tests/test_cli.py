@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -238,7 +239,7 @@ def test_demo_answers_the_cups_question():
     r = slr("demo", timeout=300)
     assert r.returncode == 0, r.stderr
     assert "Which cups did you see on table1" in r.stdout
-    cups_block = r.stdout.split("Cups = [", 1)[1].split("\n  ]", 1)[0]
+    cups_block = re.split(r"\n\s*\]\s*\n", r.stdout.split("Cups = [", 1)[1], maxsplit=1)[0]
     assert "cup1-[1.947,0.304,0.8]" in cups_block and "cup2-[2.314,-0.121,0.8]" in cups_block
     assert "cup3" not in cups_block  # cup3 was seen, but on the next table
     assert 'L = "outdated"' in r.stdout and 'L = "never-observed"' in r.stdout
