@@ -122,9 +122,14 @@ def answer_text(answer: dict[str, Any]) -> str:
 
     An answer without variables (a goal that just succeeds) is ``true``.
     """
-    if not answer:
+    from .terms import Var
+
+    # X = Y answers {'X': Var('Y'), 'Y': Var('Y')}; like Prolog, do not print "Y = Y".
+    shown = [(name, value) for name, value in answer.items()
+             if not (isinstance(value, Var) and str(value) == name)]
+    if not shown:
         return "true"
-    return ", ".join(f"{name} = {value_text(value)}" for name, value in answer.items())
+    return ", ".join(f"{name} = {value_text(value)}" for name, value in shown)
 
 
 # --------------------------------------------------------------------------------------------
