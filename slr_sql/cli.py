@@ -325,7 +325,7 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
                 raise click.UsageError("--wait needs --at Z (the time the answer must be complete up to)")
             import concurrent.futures
 
-            pending = kb.submit(goal, at=at)
+            pending = kb.submit(goal, at=at, id=f"slr-query-{os.getpid()}")
             try:
                 answers = pending.result(timeout=timeout)
             except concurrent.futures.TimeoutError:
