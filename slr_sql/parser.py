@@ -17,6 +17,8 @@ may parse at once.
 """
 from __future__ import annotations
 
+import gc
+import re
 import threading
 from pathlib import Path
 from typing import Any
@@ -26,7 +28,7 @@ from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput
 
 from .errors import SLRSyntaxError
 from .printer import INFIX_OPS, PREFIX_OPS
-from .terms import NIL, TRUE, Atom, Clause, Span, String, Struct, Var
+from .terms import CONS, NIL, TRUE, Atom, Clause, Span, String, Struct, Var
 
 __all__ = ["parse_program", "parse_term"]
 
@@ -125,6 +127,32 @@ def _duration_value(text: str) -> int | float:
         return int(num) * scale
     value = float(num) * scale
     return value
+
+
+_NUMBER = re.compile(r"\s*-?[0-9]+(?:\.[0-9]+)?(?:[eE][0-9]+)?\s*\Z")
+
+
+def _numlist_value(text: str, pos: int) -> Any:
+    """The list term of a NUMLIST token such as ``[0.4, 0.1, -0.9]``."""
+    parts = text[1:-1].split(",")
+    nums = []
+    append = nums.append
+    for part in parts:
+        try:
+            if "." in part or "e" in part or "E" in part:
+                # float() also takes `1.`, `.5` and `1.e5`, which Prolog does not
+                if not _NUMBER.match(part):
+                    raise ValueError(part)
+                append(float(part))
+            else:
+                append(int(part))
+        except ValueError:
+            offset = text.find(part.strip(), 1) if part.strip() else text.find(",,")
+            raise _Fail("malformed number in list", pos + max(offset, 0)) from None
+    out = NIL
+    for num in reversed(nums):
+        out = Struct(CONS, (num, out))
+    return out
 
 
 def _functor_name(tok: str, pos: int) -> str:
@@ -244,90 +272,59 @@ class _Resolver:
 
 # ----------------------------------------------------------------------- transformer
 class _Builder(Transformer):
-    """Inline LALR callbacks: build terms while parsing (no parse tree)."""
+    """Inline LALR callbacks: build terms while parsing (no parse tree is materialised).
 
-    def _items(self, children: list) -> list:
-        st = _state
-        items = []
-        append = items.append
-        for c in children:
-            if type(c) is not Token:
-                append(c)
-                continue
-            t = c.type
-            if t == "NAME" or t == "SYM" or t == "COMMA" or t == "BAR":
-                append((_NAME, c.value, c))
-            elif t == "VAR":
-                name = c.value
-                if name == "_":
-                    append((_TERM, Var("_"), c))
-                else:
-                    # Inner brackets reduce before the tokens around them, so variables
-                    # are met out of textual order: remember each one's first position.
-                    entry = st.varmap.get(name)
-                    if entry is None:
-                        entry = st.varmap[name] = [Var(name), c.start_pos]
-                    elif c.start_pos < entry[1]:
-                        entry[1] = c.start_pos
-                    append((_TERM, entry[0], c))
-            elif t == "FLOAT":
-                append((_NUM, _float_value(c.value), c))
-            elif t == "INT":
-                append((_NUM, _int_value(c.value, c.start_pos), c))
-            elif t == "QNAME":
-                text = _quoted_text(c.value, c.start_pos)
-                # A quoted comma or bar is an ordinary atom, never the operator.
-                append((_TERM if text in (",", "|") else _NAME, Atom(text), c))
-            elif t == "STRING":
-                append((_TERM, String(_quoted_text(c.value, c.start_pos)), c))
-            elif t == "DURATION":
-                append((_NUM, _duration_value(c.value), c))
-            else:  # pragma: no cover - grammar and this table must agree
-                raise _Fail(f"unexpected token {c.value!r}", c.start_pos)
-        return items
+    ``fitems``/``aitems``/``litems`` collect one sequence item per step (tokens become
+    items here); the enclosing rule resolves the sequence with :class:`_Resolver`.
+    """
 
-    def _resolve(self, children: list) -> tuple[Any, int, Token]:
-        items = self._items(children)
-        first = items[0]
-        if len(items) == 1 and first[0] != _NAME:
-            return first[1], 0, first[2]  # fast path: a single operand
-        term, prec = _Resolver(items).run()
-        return term, prec, first[2]
+    def fitems(self, c: list) -> list:
+        if len(c) == 1:
+            return [_item(c[0])]
+        seq = c[0]
+        seq.append(_item(c[1]))
+        return seq
 
-    seq = aseq = lseq = _resolve
+    aitems = litems = fitems
+
+    def args(self, c: list) -> list:
+        if len(c) == 1:
+            return [_resolve(c[0])]
+        out = c[0]
+        out.append(_resolve(c[1]))
+        return out
+
+    elems = args
 
     def compound(self, c: list) -> tuple:
         tok = c[0]
+        args = c[1]
         name = _functor_name(tok.value, tok.start_pos)
-        args = c[1:]
-        return (_FUNC, Struct(name, tuple(a[0] for a in args)), tok, [a[1] for a in args])
+        return (_FUNC, Struct(name, tuple([a[0] for a in args])), tok, [a[1] for a in args])
 
     def paren(self, c: list) -> tuple:
-        return (_TERM, c[1][0], c[0])
+        return (_TERM, _resolve(c[1])[0], c[0])
 
     def list(self, c: list) -> tuple:
-        tail = NIL
-        end = len(c)
-        if len(c) > 3 and type(c[-2]) is Token:  # `| Tail` (c[0] is the `[` token)
-            tail = c[-1][0]
-            end -= 2
+        elems = c[1]
+        tail = _resolve(c[3])[0] if len(c) == 4 else NIL
         # Built back to front in a loop: a million-element list must not recurse.
-        for k in range(end - 1, 0, -1):
-            tail = Struct(".", (c[k][0], tail))
+        for k in range(len(elems) - 1, -1, -1):
+            tail = Struct(CONS, (elems[k][0], tail))
         return (_TERM, tail, c[0])
 
     def nil(self, c: list) -> tuple:
         return (_TERM, NIL, c[0])
 
     def curly(self, c: list) -> tuple:
-        return (_TERM, Struct("{}", (c[1][0],)), c[0])
+        return (_TERM, Struct("{}", (_resolve(c[1])[0],)), c[0])
 
     def curly_empty(self, c: list) -> tuple:
         return (_TERM, Atom("{}"), c[0])
 
     def clause(self, c: list) -> Clause:
         st = _state
-        term, _, first = c[0]
+        term, _, first = _resolve(c[0])
         end = c[1]
         varnames = _ordered_vars(st.varmap)
         st.varmap = {}
@@ -348,10 +345,60 @@ class _Builder(Transformer):
         return Clause(head, body, span, varnames, text)
 
     def program(self, c: list) -> list:
-        return c
+        if not c:
+            return []
+        out = c[0]
+        out.append(c[1])
+        return out
 
     def query(self, c: list) -> tuple[Any, dict[str, Var]]:
-        return _bar_to_semicolon(c[0][0]), dict(_ordered_vars(_state.varmap))
+        return _bar_to_semicolon(_resolve(c[0])[0]), dict(_ordered_vars(_state.varmap))
+
+
+def _item(c: Any) -> tuple:
+    """One sequence item ``(kind, value, token)`` from a token or a bracketed term."""
+    if type(c) is not Token:
+        return c
+    t = c.type
+    if t == "NAME" or t == "SYM" or t == "COMMA" or t == "BAR":
+        return (_NAME, c.value, c)
+    if t == "VAR":
+        name = c.value
+        if name == "_":
+            return (_TERM, Var("_"), c)
+        # Inner brackets reduce before the tokens around them, so variables are met out
+        # of textual order: remember each one's first position.
+        varmap = _state.varmap
+        entry = varmap.get(name)
+        if entry is None:
+            entry = varmap[name] = [Var(name), c.start_pos]
+        elif c.start_pos < entry[1]:
+            entry[1] = c.start_pos
+        return (_TERM, entry[0], c)
+    if t == "FLOAT":
+        return (_NUM, _float_value(c.value), c)
+    if t == "INT":
+        return (_NUM, _int_value(c.value, c.start_pos), c)
+    if t == "NUMLIST":
+        return (_TERM, _numlist_value(c.value, c.start_pos), c)
+    if t == "QNAME":
+        text = _quoted_text(c.value, c.start_pos)
+        # A quoted comma or bar is an ordinary atom, never the operator.
+        return ((_TERM if text in (",", "|") else _NAME), Atom(text), c)
+    if t == "STRING":
+        return (_TERM, String(_quoted_text(c.value, c.start_pos)), c)
+    if t == "DURATION":
+        return (_NUM, _duration_value(c.value), c)
+    raise _Fail(f"unexpected token {c.value!r}", c.start_pos)  # pragma: no cover
+
+
+def _resolve(items: list) -> tuple[Any, int, Token]:
+    """Term, priority and first token of a sequence."""
+    first = items[0]
+    if len(items) == 1 and first[0] != _NAME:
+        return first[1], 0, first[2]  # fast path: a single operand
+    term, prec = _Resolver(items).run()
+    return term, prec, first[2]
 
 
 def _ordered_vars(varmap: dict) -> tuple:
@@ -493,7 +540,22 @@ def _run(text: str, filename: str, start: str) -> Any:
     return _parser().parse(text, start=start)
 
 
+# Above this size the cyclic GC is paused while parsing: building a million cons cells
+# otherwise triggers repeated full collections that traverse the growing list (3x slower).
+_GC_PAUSE_CHARS = 100_000
+
+
 def _parse(text: str, filename: str, start: str) -> Any:
+    if len(text) > _GC_PAUSE_CHARS and gc.isenabled():
+        gc.disable()
+        try:
+            return _parse1(text, filename, start)
+        finally:
+            gc.enable()
+    return _parse1(text, filename, start)
+
+
+def _parse1(text: str, filename: str, start: str) -> Any:
     st = _state
     saved = getattr(st, "varmap", None), getattr(st, "text", None), getattr(st, "filename", None)
     try:
