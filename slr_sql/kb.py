@@ -231,10 +231,14 @@ class KnowledgeBase:
         self._restore_program()
         from . import buffers as _buffers  # event-history management (issue 4)
         self._buffers = _buffers.attach(self)
+        from . import sync as _sync  # synchronized queries (issue 5): slr_sql/sync.py
+        self._sync = _sync.attach(self)
 
     # -- lifecycle ----------------------------------------------------------------------
     def close(self) -> None:
         """Close the store (a checkpoint of the WAL included)."""
+        if getattr(self, "_sync", None) is not None:  # issue 5: fail waiting queries, stop threads
+            self._sync.close()
         self.store.close()
 
     def __enter__(self) -> "KnowledgeBase":
@@ -440,6 +444,13 @@ class KnowledgeBase:
         return errors + self._add(prepared, atomic=atomic)
 
     def _add(self, events: list, atomic: bool) -> list[EventRejected]:
+        # -- issue 5: fullyUpdated(p/N)^t / fullyUpdated(p)^t are completeness marks, not events
+        marks: list = []
+        if getattr(self, "_sync", None) is not None:
+            events, marks, mark_errors = self._sync.take_marks(events, atomic)
+        else:
+            mark_errors = []
+        # -- end issue 5
         errors = self.store.add_events(events, atomic=atomic)
         if atomic and errors:
             raise errors[0]
@@ -448,7 +459,9 @@ class KnowledgeBase:
             stored = [ev for ev in events if id(ev) not in rejected]
             for listener in self.add_listeners:
                 listener(stored)
-        return errors
+        if marks:  # issue 5: after the events of the same batch are stored
+            self._sync.apply_marks(marks)
+        return mark_errors + errors if mark_errors else errors
 
     # -- queries ------------------------------------------------------------------------
     def _plan(self, goal: str, arg_names: tuple) -> _Plan:
@@ -508,18 +521,21 @@ class KnowledgeBase:
 
     def query(self, goal: str, at: float | None = None, args: dict | None = None,
               timeout: float | None = None, max_steps: int | None = None,
-              limit: int | None = None) -> list[dict[str, Any]]:
+              limit: int | None = None, wait: bool = False) -> list[dict[str, Any]]:
         """Answer ``goal`` now, on the events that have arrived (unsynchronized).
 
         ``at`` restricts event goals to the stream view (events with end <= at); ``args``
         binds goal variables from Python values (no text splicing; the parsed plan is reused);
         ``timeout`` (seconds) or ``max_steps`` stop an endless computation with SLRTimeout.
+        ``wait=True`` makes it synchronized: ``submit(goal, at, timeout=timeout).result()``.
 
         >>> kb = open(); kb.add_many(["pos(a, 1)^1", "pos(a, 4)^5"])
         []
         >>> kb.query("prev(pos(a, X)^T, 4)")
         [{'X': 1, 'T': 1.0}]
         """
+        if wait:  # issue 5: synchronized (SLRTimeout names the incomplete types)
+            return self.submit(goal, at=at, args=args, timeout=timeout).result()
         plan = self._plan(goal, tuple(args) if args else ())
         if plan.lookup is not None and limit is None:
             frame = [None] * plan.compiled.nslots
@@ -548,6 +564,47 @@ class KnowledgeBase:
         plan = self._plan(goal, ())
         lines = [f"goal: {goal}", "engine: interpreter (top-down SLDNF over the event store)"]
         return "\n".join(lines)
+
+    # -- synchronized queries (issue 5; the work is in slr_sql/sync.py) -----------------
+    def submit(self, goal: str, at: float | None = None, id: str | None = None,
+               args: dict | None = None, timeout: float | None = None,
+               callback: Callable[[Any], Any] | None = None) -> Any:
+        """Synchronized query ⟨goal, at⟩: returns a PendingQuery (a concurrent.futures.Future)
+        answered with the answer list as soon as every event type the goal depends on is
+        complete up to ``at`` (default: now), and every prev/next it evaluates is complete up
+        to its own time. ``timeout`` (seconds) fails it with SLRTimeout; ``callback(pending)``
+        runs when it is done. See docs/synchronization.md.
+
+        >>> from slr_sql import ManualClock
+        >>> kb = open(clock=ManualClock(0)); p = kb.submit("findall(X, p(X)^_, L)", at=1)
+        >>> kb.mark_complete("p/1", 1); p.result(timeout=5)
+        [{'L': []}]
+        """
+        return self._sync.submit(goal, at=at, id=id, args=args, timeout=timeout,
+                                 callback=callback)
+
+    async def ask(self, goal: str, at: float | None = None, id: str | None = None,
+                  args: dict | None = None, timeout: float | None = None) -> list[dict[str, Any]]:
+        """``await kb.ask(goal, at=z)``: :meth:`submit` for asyncio code."""
+        import asyncio
+
+        return await asyncio.wrap_future(self.submit(goal, at=at, id=id, args=args,
+                                                     timeout=timeout))
+
+    def mark_complete(self, event_type: str, t: float) -> None:
+        """Declare the history of ``"p/N"`` (or ``"p"``: every arity) complete up to ``t``
+        (persisted), like a ``fullyUpdated(p/N)^t`` event."""
+        self._sync.mark_complete(event_type, t)
+
+    def complete_until(self, event_type: str) -> float:
+        """The time up to which the history of ``"p/N"`` is complete now: the greatest of
+        now − max_delay, the latest mark, and (in_order types) the latest end received."""
+        return self._sync.complete_until(event_type)
+
+    def pending(self) -> list:
+        """The waiting synchronized queries; each PendingQuery's ``waiting_for`` lists the
+        event types and times it waits for."""
+        return self._sync.pending()
 
     # -- history buffers (issue 4; the work is in slr_sql/buffers.py) --------------------
     def add_buffer(self, pattern: str, *, keep_last: int | None = None,

@@ -183,12 +183,17 @@ class _Resolver:
             kind, value, tok = self.items[self.i][:3]
             if kind == _NAME and value in INFIX_OPS:
                 raise _Fail(f"operator priority clash at '{value}'", tok.start_pos)
-            prev = self.items[self.i - 1][2]
-            if prev.end_line != tok.line and prev.end_line is not None:
-                raise _Fail("operator expected (missing '.' at the end of the previous clause?)",
-                            tok.start_pos)
-            raise _Fail("operator expected", tok.start_pos)
+            raise self.operator_expected(tok)
         return term, prec
+
+    def operator_expected(self, tok: Token) -> _Fail:
+        text = _state.text
+        line_start = text.rfind("\n", 0, tok.start_pos) + 1
+        if not text[line_start:tok.start_pos].strip() and line_start > self.items[0][2].start_pos:
+            # The operand starts a line: most likely the previous clause lacks its '.'.
+            return _Fail("operator expected (missing '.' at the end of the previous line?)",
+                         tok.start_pos)
+        return _Fail("operator expected", tok.start_pos)
 
     def parse(self, maxp: int) -> tuple[Any, int]:
         left, lp = self.primary(maxp)
@@ -239,7 +244,7 @@ class _Resolver:
                 # operator `-` followed by a parenthesised term.
                 op = item[1].name
                 if op not in INFIX_OPS:
-                    raise _Fail("operator expected", item[2].start_pos)
+                    raise self.operator_expected(item[2])
                 p, lmax, rmax = INFIX_OPS[op]
                 if p > maxp or lp > lmax:
                     break
@@ -255,11 +260,11 @@ class _Resolver:
                 lp = p
                 continue
             if kind != _NAME:
-                raise _Fail("operator expected", item[2].start_pos)
+                raise self.operator_expected(item[2])
             name = item[1]
             spec = INFIX_OPS.get(name)
             if spec is None:
-                raise _Fail("operator expected", item[2].start_pos)
+                raise self.operator_expected(item[2])
             p, lmax, rmax = spec
             if p > maxp or lp > lmax:
                 break
@@ -429,27 +434,35 @@ def _parser() -> Lark:
     if _LARK is None:
         with _LOCK:
             if _LARK is None:
+                # lexer="basic", not "contextual": the grammar is flat, so nearly every
+                # state accepts every terminal and a contextual lexer cannot disambiguate
+                # anything (measured: same speed); but it would lex a clause-ending `.`
+                # inside an unclosed bracket as the symbol atom `.` (END is not acceptable
+                # there), moving the error to the end of the file.
                 _LARK = Lark(_GRAMMAR_PATH.read_text(encoding="utf-8"), parser="lalr",
-                             lexer="contextual", start=["program", "query"],
+                             lexer="basic", start=["program", "query"],
                              transformer=_Builder(), maybe_placeholders=False,
                              cache=False)
     return _LARK
 
 
-# Typical mistakes, matched by lark's parser state (UnexpectedInput.match_examples).
+# Typical mistakes, matched against the parser state of the error by lark's
+# UnexpectedInput.match_examples.  Bracket mismatches are diagnosed separately (by
+# _bracket_problem, which can also say where the unclosed bracket was opened).
 _EXAMPLES: dict[str, list[str]] = {
-    "missing '.' at the end of the clause": ["a", "a(1)", "a :- b", "a :- b, c"],
-    "unbalanced parenthesis: missing ')'": ["a(b", "a(b, c", "a :- (b", "a :- (b, c",
-                                            "a(b.", "a((b).", "a :- (b."],
-    "unbalanced bracket: missing ']'": ["a([b", "a([b, c", "a([b|c", "a([b.", "a([b|c."],
-    "unbalanced brace: missing '}'": ["a({b", "a({b."],
-    "unexpected ')' (no matching '(')": ["a)", "a(b))", "a :- b)"],
-    "unexpected ']' (no matching '[')": ["a]", "a(b])"],
-    "unexpected '}' (no matching '{')": ["a}"],
-    "expected an argument": ["a(", "a(b,", "a(,", "a(b,)", "a()", "a(b, )"],
-    "expected a list element": ["a([b,", "a([,", "a([b,]", "a([b|", "a([b|]", "a([b|c|d]"],
-    "expected a term": ["(", "a :- (", "a :- (,", "a :- ()", "{", "a :- {,", ",", ", a."],
+    "missing '.' at the end of the clause": [
+        "a", "a(1)", "a :- b", "a :- b, c", "a :- X", "a :- 1", "a :- \"s\"", "a :- [b]",
+        "a :- 1.5", "a :- 'b'", "a :- {b}", "a :- (b)", "a :- - "],
+    "expected an argument": ["a(", "a(b,", "a(,", "a(b,)", "a()", "a(b, )", "a(b,,c)"],
+    "expected a list element": ["a([b,", "a([,", "a([b,]", "a([b|", "a([b|]", "a([b|c|d]",
+                                "a([b|c,d]", "a([,b])"],
+    "expected a term": ["(", "a :- (", "a :- (,", "a :- ()", "{", "a :- {,", ",", ", a.",
+                        "a :- (|", "a :- {}}"],
 }
+
+_OPENERS = {"LPAR": ")", "FUNCT": ")", "LSQB": "]", "LBRACE": "}"}
+_CLOSERS = {"RPAR": ")", "RSQB": "]", "RBRACE": "}"}
+_BRACKET_NAMES = {")": "parenthesis", "]": "bracket", "}": "brace"}
 
 
 def _line_col(text: str, pos: int) -> tuple[int, int, str]:
@@ -461,16 +474,27 @@ def _line_col(text: str, pos: int) -> tuple[int, int, str]:
 
 
 def _describe(text: str, pos: int) -> str:
+    """``unexpected <what is at pos>`` for a message."""
     if pos >= len(text):
         return "unexpected end of text"
-    ch = text[pos]
-    if ch == ".":
-        return "unexpected '.'"
-    return f"unexpected {text[pos:pos + 12].split()[0]!r}"
+    word = text[pos:pos + 16].split()
+    if not word:
+        return "unexpected end of text"
+    w = word[0]
+    for stop in ("(", ")", "[", "]", "{", "}", ",", "|"):
+        k = w.find(stop)
+        if k == 0:
+            w = stop
+            break
+        if k > 0:
+            w = w[:k]
+    if w.startswith("."):
+        w = "."
+    return f"unexpected {w!r}"
 
 
 def _next_token_pos(text: str, pos: int) -> int:
-    """First non-layout character at or after pos (skipping comments)."""
+    """First character at or after pos that is not layout or a comment."""
     n = len(text)
     while pos < n:
         ch = text[pos]
@@ -488,18 +512,62 @@ def _next_token_pos(text: str, pos: int) -> int:
 
 
 def _syntax_error(text: str, filename: str, message: str, pos: int) -> SLRSyntaxError:
-    if pos < 0:  # "after token": report at the next token, naming it
+    if pos < 0:  # "after the token ending at -pos-1": report at the next token, naming it
         pos = _next_token_pos(text, -pos - 1)
         message = message.replace("{unexpected}", _describe(text, pos))
     line, col, src = _line_col(text, min(pos, len(text)))
     return SLRSyntaxError(message, line, col, src, filename)
 
 
+def _bracket_problem(text: str, err_pos: int, err_type: str) -> str | None:
+    """Explain an error caused by unbalanced brackets, or None if brackets are fine."""
+    stack: list[Token] = []
+    try:
+        for tok in _parser().lex(text):
+            if tok.start_pos >= err_pos:
+                break
+            if tok.type in _OPENERS:
+                stack.append(tok)
+            elif tok.type in _CLOSERS and stack:
+                stack.pop()
+            elif tok.type == "END":
+                stack.clear()
+    except UnexpectedInput:
+        pass
+    closer = _CLOSERS.get(err_type)
+    if closer is not None:
+        if not stack:
+            return f"unexpected '{closer}' (no matching opening bracket)"
+        want = _OPENERS[stack[-1].type]
+        if want != closer:
+            o = stack[-1]
+            return (f"unexpected '{closer}' (the '{o.value[-1]}' at line {o.line}, column "
+                    f"{o.column + len(o.value) - 1} is closed by '{want}')")
+        return None
+    if stack and err_type in ("$END", "END"):
+        o = stack[-1]
+        want = _OPENERS[o.type]
+        return (f"unbalanced {_BRACKET_NAMES[want]}: missing '{want}' for the "
+                f"'{o.value[-1]}' at line {o.line}, column {o.column + len(o.value) - 1}")
+    return None
+
+
+def _expected_text(expected: set[str]) -> str:
+    if {"NAME", "VAR"} <= expected:
+        return "expected a term"
+    if "END" in expected:
+        return "expected an operator or '.'"
+    names = [_CLOSERS.get(x, x.lower()) for x in sorted(expected)]
+    return "expected " + " or ".join(f"'{n}'" if len(n) == 1 else n for n in names)
+
+
 def _lark_error(e: UnexpectedInput, text: str, filename: str, start: str) -> SLRSyntaxError:
     if isinstance(e, UnexpectedCharacters):
         pos = e.pos_in_stream
         ch = text[pos]
-        if ch == "'":
+        if ch == "'" and text[pos - 1:pos] == "0" and (pos < 2 or not text[pos - 2].isalnum()):
+            msg = "incomplete character code 0'"
+        elif ch == "'":
             msg = "unterminated quoted atom"
         elif ch == '"':
             msg = "unterminated string"
@@ -508,28 +576,36 @@ def _lark_error(e: UnexpectedInput, text: str, filename: str, start: str) -> SLR
         else:
             msg = f"unexpected character {ch!r}"
         return _syntax_error(text, filename, msg, pos)
-    if isinstance(e, UnexpectedToken) and e.token.type != "$END":
-        pos = e.token.start_pos
-    else:
-        pos = len(text.rstrip())
-    label = None
+    at_end = not isinstance(e, UnexpectedToken) or e.token.type == "$END"
+    pos = len(text.rstrip()) if at_end else e.token.start_pos
+    err_type = "$END" if at_end else e.token.type
+    what = "unexpected end of text" if at_end else _describe(text, pos)
+    problem = _bracket_problem(text, pos, err_type)
+    if problem is not None:
+        return _syntax_error(text, filename, problem if problem.startswith("unexpected")
+                             else f"{what} ({problem})", pos)
     try:
-        label = e.match_examples(lambda s: _run(s, "<example>", "program"), _EXAMPLES,
-                                 use_accepts=True)
+        label = e.match_examples(_example_parse, _EXAMPLES, use_accepts=True)
     except Exception:  # pragma: no cover - a broken example must not hide the real error
         label = None
-    what = _describe(text, pos)
-    if isinstance(e, UnexpectedToken) and e.token.type == "END" and label is None:
-        label = "unexpected end of clause"
     if label is None:
-        expected = sorted(e.expected) if isinstance(e, (UnexpectedToken, UnexpectedEOF)) else []
-        return _syntax_error(text, filename, f"{what} (expected one of {', '.join(expected)})"
-                             if expected else what, pos)
-    if label.startswith("unexpected") or pos >= len(text.rstrip()):
-        msg = label if pos < len(text.rstrip()) else f"{label} (at end of text)"
-    else:
-        msg = f"{what} ({label})"
-    return _syntax_error(text, filename, msg, pos)
+        label = _expected_text(set(getattr(e, "expected", ()) or ()))
+    if at_end and label.startswith("missing '.'"):
+        # `X is 1 +.` reads `+.` as one symbol atom: say so.
+        tail = text.rstrip()
+        k = len(tail)
+        while k > 0 and tail[k - 1] in "#$&*+-./:<=>?@^~\\":
+            k -= 1
+        if tail.endswith(".") and k < len(tail) - 1:
+            label += f" ('{tail[k:]}' reads as one symbol atom: put a space before '.')"
+    return _syntax_error(text, filename, f"{what} ({label})", pos)
+
+
+def _example_parse(text: str) -> Any:
+    try:
+        return _run(text, "<example>", "program")
+    except _Fail:
+        return None
 
 
 def _run(text: str, filename: str, start: str) -> Any:
