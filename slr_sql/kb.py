@@ -416,7 +416,7 @@ class KnowledgeBase:
         """
         if end is None:
             end = start
-        self._add([(name, tuple(from_python(a) for a in args), start, end)], atomic=True)
+        self._add([(name, tuple(args), start, end)], atomic=True)
 
     def add_many(self, events: Iterable[Any], atomic: bool = False) -> list[EventRejected]:
         """Add many events in one transaction: strings in SLR syntax or
@@ -434,7 +434,7 @@ class KnowledgeBase:
                     prepared.append(self._event_from_text(ev))
                 else:
                     name, args, start, end = ev
-                    prepared.append((name, tuple(from_python(a) for a in args), start, end))
+                    prepared.append((name, tuple(args), start, end))
             except (SLRError, TypeError, ValueError) as exc:
                 if atomic:
                     raise exc if isinstance(exc, SLRError) else EventRejected(str(exc))
@@ -576,9 +576,11 @@ class KnowledgeBase:
         runs when it is done. See docs/synchronization.md.
 
         >>> from slr_sql import ManualClock
-        >>> kb = open(clock=ManualClock(0)); p = kb.submit("findall(X, p(X)^_, L)", at=1)
+        >>> kb = open(clock=ManualClock(0)); kb.add("p(a)^0.5")
+        >>> p = kb.submit("findall(X, p(X)^_, L)", at=1); p.done()
+        False
         >>> kb.mark_complete("p/1", 1); p.result(timeout=5)
-        [{'L': []}]
+        [{'L': [Atom('a')]}]
         """
         return self._sync.submit(goal, at=at, id=id, args=args, timeout=timeout,
                                  callback=callback)
