@@ -1282,6 +1282,94 @@ class EventStore:
             self._conn.execute(f"PRAGMA journal_size_limit = {int(max_bytes)}").fetchall()
 
 
+    # ================================================================== SQL compiler (issue 3)
+    # Execution helpers for slr_sql.planner / slr_sql.sqlcompile: application-defined
+    # functions, running compiled statements (parameters always bound), fact tables
+    # (slr_facts_<name>_<arity>: ord, arg1..argN) and the inspection views of derived
+    # predicates (names kept in slr_meta under "sql_views").
+
+    def create_function(self, name: str, narg: int, fn: Any, deterministic: bool = True) -> None:
+        """Register a scalar function on the store's connection."""
+        with self.lock:
+            self._check_open()
+            self._conn.create_function(name, narg, fn, deterministic=deterministic)
+
+    def create_aggregate(self, name: str, narg: int, cls: Any) -> None:
+        """Register an aggregate function (a class with step/finalize)."""
+        with self.lock:
+            self._check_open()
+            self._conn.create_aggregate(name, narg, cls)
+
+    def run_compiled(self, sql: str, params: dict, limit: int | None = None) -> list[tuple]:
+        """Run a compiled SELECT with named parameters; all rows, or the first ``limit``."""
+        with self.lock:
+            self._check_open()
+            cursor = self._conn.execute(sql, params)
+            try:
+                return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+            finally:
+                cursor.close()
+
+    def event_table_sql(self, name: str, arity: int) -> str | None:
+        """The quoted table of an event type (for compiled SQL), or None if it has none."""
+        event_type = self._types.get((name, arity))
+        if event_type is None:
+            with self.lock:
+                self._check_open()
+                event_type = self._lookup_type(name, arity)
+        return None if event_type is None else event_type.quoted
+
+    @staticmethod
+    def fact_table_name(name: str, arity: int) -> str:
+        """``slr_facts_<name>_<arity>`` (a hex name for names that are not identifiers).
+
+        >>> EventStore.fact_table_name("usedFor", 2), EventStore.fact_table_name("a b", 1)
+        ('slr_facts_usedFor_2', 'slr_facts_x612062_1')
+        """
+        safe = name if _SAFE_IDENTIFIER.match(name) else "x" + name.encode("utf-8").hex()
+        return f"slr_facts_{safe}_{arity}"
+
+    def replace_fact_tables(self, tables: dict[tuple[str, int], list[tuple]]) -> dict:
+        """Make the ``slr_facts_*`` tables exactly ``{(name, arity): [encoded rows]}`` (rows
+        in clause order; ``ord`` is the position). Returns ``{(name, arity): quoted table}``."""
+        out = {}
+        with self.transaction():
+            conn = self._conn
+            existing = [row[0] for row in conn.execute(
+                "SELECT name FROM sqlite_master WHERE type = 'table' AND name LIKE 'slr!_facts!_%' "
+                "ESCAPE '!'")]
+            for table in existing:
+                conn.execute(f"DROP TABLE {quote_identifier(table)}")
+            for (name, arity), rows in tables.items():
+                table = quote_identifier(self.fact_table_name(name, arity))
+                cols = "".join(f", arg{i}" for i in range(1, arity + 1))
+                conn.execute(f"CREATE TABLE {table} (ord INTEGER PRIMARY KEY{cols})")
+                if arity:
+                    conn.execute(f"CREATE INDEX {quote_identifier(self.fact_table_name(name, arity) + '__a1')} "
+                                 f"ON {table} (arg1)")
+                conn.executemany(f"INSERT INTO {table} VALUES (?{', ?' * arity})",
+                                 [(i,) + tuple(row) for i, row in enumerate(rows)])
+                out[(name, arity)] = table
+        return out
+
+    def replace_views(self, views: dict[str, str]) -> list[str]:
+        """Drop the views created last time and create ``{name: select sql}`` (a name already
+        used by a table or index is skipped). Returns the names created."""
+        created = []
+        with self.transaction():
+            conn = self._conn
+            for name in self.meta_get("sql_views", []):
+                conn.execute(f"DROP VIEW IF EXISTS {quote_identifier(name)}")
+            taken = {row[0].lower() for row in conn.execute("SELECT name FROM sqlite_master")}
+            for name, select in views.items():
+                if name.lower() in taken:
+                    continue
+                conn.execute(f"CREATE VIEW {quote_identifier(name)} AS {select}")
+                created.append(name)
+                taken.add(name.lower())
+            self.meta_set("sql_views", created)
+        return created
+
 def sql_literal(value: Any) -> str:
     """Quote a constant as an SQL literal, strictly.
 
