@@ -26,7 +26,7 @@ from .terms import Atom, NIL, String, Struct, Var, deref, list_items, make_list
 __all__ = ["Engine", "Machine", "unify", "copy_term", "PrologThrow"]
 
 # choicepoint kinds
-K_CLAUSES, K_GEN, K_ALT, K_DEAD, K_COLLECT, K_CATCH = range(6)
+K_CLAUSES, K_GEN, K_ALT, K_DEAD, K_COLLECT, K_CATCH, K_REACTIVATE = range(7)
 
 
 class PrologThrow(Exception):
@@ -306,6 +306,10 @@ class Machine:
                 cont = finish(self, cp[3], cp[2])
                 if cont is not False:
                     return cont
+            elif kind == K_REACTIVATE:
+                # backtracking into a catch/3 goal that had exited: the catch is active again
+                cps.pop()
+                cp[3][0] = K_CATCH
             else:  # K_DEAD, K_CATCH: nothing to resume
                 cps.pop()
         return False
@@ -459,7 +463,10 @@ class Machine:
             if self.cps and self.cps[-1] is cp:
                 self.cps.pop()
             else:
+                # the goal left choicepoints: deactivate the catch, and reactivate it when
+                # backtracking re-enters the goal (ISO: catch/3 is transparent to backtracking)
                 cp[0] = K_DEAD
+                self.cps.append([K_REACTIVATE, len(self.trail), None, cp, None, None])
             return nxt
         raise AssertionError(op)
 
@@ -545,8 +552,28 @@ def unify_tuple(xs: tuple, ys: tuple, trail: list) -> bool:
 
 def _unify_head(head: tuple, args: tuple, frame: list, trail: list) -> bool:
     for p, a in zip(head, args):
-        if not _unify_pattern(p, a, frame, trail):
-            return False
+        tp = type(p)
+        if tp is Slot:
+            cur = frame[p.index]
+            if cur is None:
+                frame[p.index] = a
+            elif not unify(cur, a, trail):
+                return False
+        elif tp is Template:
+            if not _unify_pattern(p, a, frame, trail):
+                return False
+        else:
+            # a constant: compare without the general unifier when the goal argument is bound
+            while type(a) is Var:
+                r = a.ref
+                if r is None:
+                    a.ref = p
+                    trail.append(a)
+                    break
+                a = r
+            else:
+                if type(a) is not tp or (a != p if tp is not Struct else not unify(p, a, trail)):
+                    return False
     return True
 
 

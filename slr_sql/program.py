@@ -30,13 +30,17 @@ class Slot:
 
 
 class Template:
-    """A compound term of a compiled clause that contains at least one Slot."""
+    """A compound term of a compiled clause that contains at least one Slot.
 
-    __slots__ = ("name", "args")
+    ``spine`` marks a list cell whose tail is again a template, built iteratively.
+    """
+
+    __slots__ = ("name", "args", "spine")
 
     def __init__(self, name: str, args: tuple):
         self.name = name
         self.args = args
+        self.spine = name == "." and len(args) == 2 and type(args[1]) is Template
 
     def __repr__(self) -> str:
         return f"Template({self.name!r}, {self.args!r})"
@@ -50,19 +54,32 @@ def build(t: Any, frame: list) -> Any:
         if v is None:
             v = frame[t.index] = Var(t.name)
         return v
-    if tt is Template:
+    if tt is not Template:
+        return t
+    if t.spine:
         # long list templates: walk the spine iteratively
-        if t.name == "." and len(t.args) == 2 and type(t.args[1]) is Template:
-            heads = []
-            while type(t) is Template and t.name == "." and len(t.args) == 2:
-                heads.append(build(t.args[0], frame))
-                t = t.args[1]
-            out = build(t, frame)
-            for h in reversed(heads):
-                out = Struct(".", (h, out))
-            return out
-        return Struct(t.name, tuple([build(a, frame) for a in t.args]))
-    return t
+        heads = []
+        while type(t) is Template and t.name == "." and len(t.args) == 2:
+            heads.append(build(t.args[0], frame))
+            t = t.args[1]
+        out = build(t, frame)
+        for h in reversed(heads):
+            out = Struct(".", (h, out))
+        return out
+    # the common case inlined: arguments that are slots or constants need no call
+    out = []
+    for a in t.args:
+        ta = type(a)
+        if ta is Slot:
+            v = frame[a.index]
+            if v is None:
+                v = frame[a.index] = Var(a.name)
+            out.append(v)
+        elif ta is Template:
+            out.append(build(a, frame))
+        else:
+            out.append(a)
+    return Struct(t.name, tuple(out))
 
 
 @dataclass(slots=True)
