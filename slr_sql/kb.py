@@ -233,6 +233,9 @@ class KnowledgeBase:
         self._buffers = _buffers.attach(self)
         from . import sync as _sync  # synchronized queries (issue 5): slr_sql/sync.py
         self._sync = _sync.attach(self)
+        from . import planner as _planner  # SQL compiler (issue 3): slr_sql/planner.py
+        self.sql_enabled = True  # False: every query runs in the interpreter
+        _planner.attach(self)
 
     # -- lifecycle ----------------------------------------------------------------------
     def close(self) -> None:
@@ -545,6 +548,11 @@ class KnowledgeBase:
             answers = plan.lookup.run(self.store, frame, plan.names)
             if answers is not None:
                 return answers
+        if max_steps is None and self.sql_enabled:  # issue 3: the compiled SQL plan, if any
+            from .planner import try_sql
+            answers = try_sql(self, plan, args, at, limit)
+            if answers is not None:
+                return answers
         term, frame = self._instantiate(plan, args)
         m = self.engine.machine(at=at, timeout=timeout, max_steps=max_steps)
         answers = []
@@ -562,7 +570,8 @@ class KnowledgeBase:
         'goal: p(X)'
         """
         plan = self._plan(goal, ())
-        lines = [f"goal: {goal}", "engine: interpreter (top-down SLDNF over the event store)"]
+        from .planner import explain as _explain  # issue 3: SQL or interpreter, and why
+        lines = [f"goal: {goal}"] + _explain(self, plan)
         return "\n".join(lines)
 
     # -- synchronized queries (issue 5; the work is in slr_sql/sync.py) -----------------

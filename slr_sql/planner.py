@@ -1,0 +1,564 @@
+"""Query plans: SQL when the goal compiles exactly, the interpreter otherwise (SPEC §3).
+
+For a query goal the planner
+
+1. walks the goal and the rules it calls with :class:`slr_sql.sqlcompile.Compiler`, which
+   tracks the *binding mode* of every goal (which arguments are known when it is reached,
+   left to right, per alternative) and emits one branch per path;
+2. decides: a :class:`SqlPlan` (one prepared statement, parameters bound) or the interpreter,
+   with the reason of the fallback (cut, recursion, call/N on an unknown goal, a builtin
+   with no SQL form, a Python predicate in a non-functional mode, ...);
+3. caches the decision on the kb's parsed plan (per goal text, names bound from Python and
+   whether a stream view ``at`` is given), so it is reused across queries; loading a program
+   or defining a Python predicate drops the parsed plans and so these too.
+
+A compiled statement that meets, at run time, anything the interpreter would treat
+differently (a type error in arithmetic, a non-ground result of a builtin) raises inside
+SQLite; the query is then answered by the interpreter (which raises the proper error).
+
+The inspection side: every ground-fact predicate is materialized as ``slr_facts_<name>_<n>``
+and every non-temporal derived predicate that compiles to plain SQL (no slr_ functions) gets
+a view of its name (docs/sql.md).
+"""
+from __future__ import annotations
+
+import sqlite3
+import weakref
+from typing import Any
+
+from . import sqlcompile
+from .encoding import INT64_MAX, INT64_MIN, Unencodable, decode, encode, encode_json
+from .engine import undo, unify
+from .program import Slot, Template, build
+from .sqlcompile import SITES, Col, ColRef, Compiler, Fallback, Part, resolve
+from .terms import Atom, NIL, Struct, Var, deref, from_python, list_items, make_list, to_python
+
+__all__ = ["SqlPlan", "plan_for", "try_sql", "explain", "attach", "refresh", "Fallback",
+           "compile_goal"]
+
+
+# ---------------------------------------------------------------------- SQL functions
+
+class _UdfMachine:
+    """What a det builtin needs of a Machine when called from SQL."""
+
+    __slots__ = ("engine", "trail", "at", "on_prev", "on_next", "cps")
+
+    def __init__(self, engine):
+        self.engine = engine
+        self.trail: list = []
+        self.at = None
+        self.on_prev = None
+        self.on_next = None
+        self.cps: list = []
+
+    def unify(self, a, b):
+        return unify(a, b, self.trail)
+
+    def undo_to(self, mark):
+        undo(self.trail, mark)
+
+
+def _num(v):
+    if type(v) is int or type(v) is float:
+        return v
+    raise TypeError(f"not a number: {v!r}")
+
+
+def _checked(r):
+    if type(r) is int and not INT64_MIN <= r <= INT64_MAX:
+        raise OverflowError("integer beyond 64 bits")
+    return r
+
+
+def _ar2(op, a, b):
+    from .arith import evaluate
+
+    return _checked(evaluate(Struct(op, (_num(a), _num(b)))))
+
+
+def _ar1(op, a):
+    from .arith import evaluate
+
+    return _checked(evaluate(Struct(op, (_num(a),))))
+
+
+def _j(v):
+    return encode_json(decode(v))
+
+
+def _inst(t, values, varmap):
+    t = deref(t) if type(t) is Var else t
+    tt = type(t)
+    if tt is ColRef:
+        return values[t.i]
+    if tt is Var:
+        v = varmap.get(id(t))
+        if v is None:
+            v = varmap[id(t)] = Var(t.name)
+        return v
+    if tt is Struct:
+        return Struct(t.name, tuple(_inst(a, values, varmap) for a in t.args))
+    return t
+
+
+def _det(sid, i, *inputs):
+    site = SITES[sid]
+    key = tuple((type(x), x) for x in inputs)
+    last = site.last
+    if last is not None and last[0] == key:
+        result = last[1]
+    else:
+        values = [decode(x) for x in inputs]
+        varmap: dict = {}
+        for v in site.outs:
+            varmap[id(v)] = Var(v.name)
+        args = tuple(_inst(a, values, varmap) for a in site.args)
+        m = _UdfMachine(site.engine)
+        if site.python:
+            from .builtins import call_python_pred
+
+            ok = call_python_pred(m, site.fn, args)
+        else:
+            ok = site.fn(m, args)
+        if not ok:
+            result = None
+        else:
+            result = [encode(resolve(varmap[id(v)])) for v in site.outs]  # raises if unbound
+        site.last = (key, result)
+    if result is None:
+        return None
+    return 1 if i < 0 else result[i]
+
+
+class _Sum:
+    def __init__(self):
+        self.v = 0
+
+    def step(self, x):
+        self.v = self.v + _num(x)
+
+    def finalize(self):
+        return _checked(self.v)
+
+
+class _Max:
+    better = staticmethod(lambda x, v: x > v)
+
+    def __init__(self):
+        self.v = None
+
+    def step(self, x):
+        x = _num(x)
+        if self.v is None or self.better(x, self.v):
+            self.v = x
+
+    def finalize(self):
+        return self.v
+
+
+class _Min(_Max):
+    better = staticmethod(lambda x, v: x < v)
+
+
+class _Setof:
+    def __init__(self):
+        self.items = []
+
+    def step(self, x):
+        self.items.append(x)
+
+    def finalize(self):
+        from .builtins import _cmp_key, _dedup
+
+        items, _ = list_items(decode("[" + ",".join(self.items) + "]"))
+        return encode(make_list(_dedup(sorted(items, key=_cmp_key))))
+
+
+def _register(store) -> None:
+    store.create_function("slr_j", 1, _j)
+    store.create_function("slr_num", 1, _num)
+    store.create_function("slr_ar1", 2, _ar1)
+    store.create_function("slr_ar2", 3, _ar2)
+    store.create_function("slr_det", -1, _det)
+    store.create_aggregate("slr_sum", 1, _Sum)
+    store.create_aggregate("slr_max", 1, _Max)
+    store.create_aggregate("slr_min", 1, _Min)
+    store.create_aggregate("slr_setof", 1, _Setof)
+
+
+# ---------------------------------------------------------------------- per-kb state
+
+class _Ctx:
+    """What the compiler needs of a knowledge base."""
+
+    def __init__(self, kb, state: "_State"):
+        self.kb = kb
+        self.program = kb.program
+        self.engine = kb.engine
+        self.library = kb.engine.library
+        self.det = kb.engine.det
+        self.nondet = kb.engine.nondet
+        self.python_preds = kb.engine.python_preds
+        self.state = state
+
+    def event_table(self, name, n):
+        return self.kb.store.event_table_sql(name, n)
+
+    def fact_table(self, name, n):
+        return self.state.fact_tables(self.kb).get((name, n))
+
+
+class _State:
+    def __init__(self, kb):
+        self.kb = weakref.ref(kb)
+        self.facts_program = None
+        self.facts: dict = {}
+        self.view_missing: set = set()
+        _register(kb.store)
+
+    def fact_tables(self, kb) -> dict:
+        if self.facts_program is not kb.program:
+            self.materialize(kb)
+        return self.facts
+
+    def materialize(self, kb) -> None:
+        self.facts = kb.store.replace_fact_tables(fact_rows(kb.program))
+        self.facts_program = kb.program
+
+
+def fact_rows(program) -> dict:
+    """``{(name, arity): [encoded rows]}`` for every predicate made of ground facts only."""
+    out = {}
+    for key, pred in program.preds.items():
+        if not pred.clauses or key[1] == 0:
+            continue
+        rows = []
+        for c in pred.clauses:
+            if c.body or c.nslots or any(type(h) in (Slot, Template) for h in c.head):
+                rows = None
+                break
+            try:
+                rows.append(tuple(encode(h) for h in c.head))
+            except Unencodable:
+                rows = None
+                break
+        if rows is not None:
+            out[key] = rows
+    return out
+
+
+def state_of(kb) -> _State:
+    st = getattr(kb, "_sql_state", None)
+    if st is None:
+        st = kb._sql_state = _State(kb)
+    return st
+
+
+def attach(kb) -> None:
+    """Install the SQL side on a knowledge base: functions, fact tables and views on load."""
+    state_of(kb)
+    kb.load_listeners.append(refresh)
+    hooks = kb.store.table_created_hooks
+    ref = weakref.ref(kb)
+
+    def on_table(name, arity, table):
+        k = ref()
+        if k is not None and (name, arity) in state_of(k).view_missing:
+            try:
+                refresh_views(k)
+            except Exception:
+                pass
+    hooks.append(on_table)
+
+
+def refresh(kb) -> None:
+    """Load listener: materialize the fact tables and rebuild the views (in the load
+    transaction)."""
+    st = state_of(kb)
+    st.materialize(kb)
+    refresh_views(kb)
+
+
+# ---------------------------------------------------------------------- plans
+
+class SqlPlan:
+    """One compiled query: the statement, its constant parameters and how rows become
+    answers."""
+
+    def __init__(self, sql, params, arg_params, has_at, recipes, missing, sites, modes, goal):
+        self.sql = sql
+        self.params = params
+        self.arg_params = arg_params      # variable name -> parameter name
+        self.has_at = has_at
+        self.recipes = recipes            # per branch: [(name, how, data)]
+        self.missing = missing            # event types without a table when compiled
+        self.sites = sites                # keep the function call sites alive
+        self.modes = modes
+        self.goal = goal
+
+    def stale(self, store) -> bool:
+        return any(store.event_table_sql(n, a) is not None for n, a in self.missing)
+
+    def run(self, kb, args, at, limit):
+        params = self.params
+        if self.arg_params or self.has_at:
+            params = dict(params)
+            for name, pname in self.arg_params.items():
+                params[pname] = encode(from_python(args[name]))
+            if self.has_at:
+                params["at"] = float(at)
+        if self.sql is None:
+            return []
+        rows = kb.store.run_compiled(self.sql, params, limit)
+        recipes = self.recipes
+        out = []
+        for row in rows:
+            answer = {}
+            varmap: dict = {}
+            for name, how, data in recipes[row[0]]:
+                if how == 0:
+                    answer[name] = to_python(decode(row[data]))
+                elif how == 1:
+                    answer[name] = to_python(data)
+                elif how == 2:
+                    answer[name] = to_python(_inst_row(data, row, varmap))
+            out.append(answer)
+        return out
+
+
+def _inst_row(t, row, varmap):
+    tt = type(t)
+    if tt is ColRef:
+        return decode(row[t.i])
+    if tt is Var:
+        v = varmap.get(id(t))
+        if v is None:
+            v = varmap[id(t)] = Var(t.name)
+        return v
+    if tt is Struct:
+        return Struct(t.name, tuple(_inst_row(a, row, varmap) for a in t.args))
+    return t
+
+
+def _conj(goals: list) -> Any:
+    if not goals:
+        return Atom("true")
+    goal = goals[-1]
+    for g in reversed(goals[:-1]):
+        goal = Struct(",", (g, goal))
+    return goal
+
+
+def compile_goal(kb, plan, has_at: bool) -> SqlPlan:
+    """Compile a parsed query plan (kb._plan) to SQL; raises :class:`Fallback`."""
+    ctx = _Ctx(kb, state_of(kb))
+    comp = Compiler(ctx, has_at)
+    frame: list = [None] * plan.compiled.nslots
+    arg_params = {}
+    for name, slot in plan.bind_slots.items():
+        pname = f"a{slot}"
+        frame[slot] = Col(f":{pname}")
+        arg_params[name] = pname
+    for name, slot in plan.names:
+        if frame[slot] is None:
+            frame[slot] = Var(name)
+    goal = _conj([build(g, frame) for g in plan.compiled.body])
+    names = plan.names
+    parts: list[Part] = []
+
+    def emit(st):
+        cols: list[str] = []
+        index: dict[str, int] = {}
+
+        def recipe(t):
+            t = deref(t)
+            if type(t) is Col:
+                i = index.get(t.sql)
+                if i is None:
+                    i = index[t.sql] = len(cols)
+                    cols.append(t.sql)
+                return ColRef(i)
+            if type(t) is Struct:
+                return Struct(t.name, tuple(recipe(a) for a in t.args))
+            return t
+
+        values = [(name, resolve(frame[slot])) for name, slot in names]
+        free = [id(v) for _, v in values if type(v) is Var]
+        recipes = []
+        for name, v in values:
+            if type(v) is Var and free.count(id(v)) < 2:
+                continue
+            r = recipe(v)
+            if type(r) is ColRef:
+                recipes.append((name, 0, r.i))
+            elif sqlcompile.has_var(r) or _has_ref(r):
+                recipes.append((name, 2, r))
+            else:
+                recipes.append((name, 1, r))
+        parts.append(Part(list(st.froms), list(st.conds), list(st.keys), cols, recipes))
+
+    comp.compile(goal, emit)
+    if not parts:
+        sql = None
+    else:
+        nv = max(len(p.proj) for p in parts)
+        nk = max(len(p.keys) for p in parts)
+        selects = []
+        for b, p in enumerate(parts):
+            off = 1
+            recipes = []
+            for name, how, data in p.extra:
+                if how == 0:
+                    data = data + off
+                elif how == 2:
+                    data = _shift(data, off)
+                recipes.append((name, how, data))
+            p.extra = recipes
+            cols = [f"{b} AS b"]
+            cols += [f"{x} AS v{i}" for i, x in enumerate(p.proj)]
+            cols += [f"NULL AS v{i}" for i in range(len(p.proj), nv)]
+            cols += [f"{k} AS k{i}" for i, k in enumerate(p.keys)]
+            cols += [f"NULL AS k{i}" for i in range(len(p.keys), nk)]
+            selects.append(p.select(cols))
+        sql = "\nUNION ALL\n".join(selects)
+        if nk and (len(parts) > 1 or any(p.keys for p in parts)):
+            sql += "\nORDER BY " + ", ".join(f"k{i}" for i in range(nk))
+    return SqlPlan(sql, dict(comp.params), arg_params, has_at,
+                   [p.extra for p in parts], frozenset(comp.missing), comp.sites, comp.modes,
+                   plan.text)
+
+
+def _has_ref(t) -> bool:
+    stack = [t]
+    while stack:
+        x = stack.pop()
+        if type(x) is ColRef:
+            return True
+        if type(x) is Struct:
+            stack.extend(x.args)
+    return False
+
+
+def _shift(t, off):
+    if type(t) is ColRef:
+        return ColRef(t.i + off)
+    if type(t) is Struct:
+        return Struct(t.name, tuple(_shift(a, off) for a in t.args))
+    return t
+
+
+def plan_for(kb, plan, has_at: bool):
+    """The cached SqlPlan for a parsed query plan, or the Fallback explaining why none."""
+    cache = getattr(plan, "sql_plans", None)
+    if cache is None:
+        cache = plan.sql_plans = {}
+    entry = cache.get(has_at)
+    if entry is not None and (type(entry) is Fallback or not entry.missing
+                              or not entry.stale(kb.store)):
+        return entry
+    try:
+        entry = compile_goal(kb, plan, has_at)
+    except Fallback as exc:
+        entry = exc
+    except RecursionError:
+        entry = Fallback("the goal is nested too deeply to compile")
+    cache[has_at] = entry
+    return entry
+
+
+def try_sql(kb, plan, args, at, limit=None):
+    """Answers through SQL, or None when the interpreter must answer."""
+    if not getattr(kb, "sql_enabled", True):
+        return None
+    entry = plan_for(kb, plan, at is not None)
+    if type(entry) is Fallback:
+        return None
+    try:
+        return entry.run(kb, args or {}, at, limit)
+    except (sqlite3.Error, Unencodable, ValueError, TypeError, KeyError, OverflowError):
+        return None
+
+
+def explain(kb, plan, at=None) -> list[str]:
+    """Lines describing how a goal runs: the SQL with its parameters, or the fallback."""
+    entry = plan_for(kb, plan, at is not None)
+    if type(entry) is Fallback:
+        return ["engine: interpreter (top-down SLDNF over the event store)",
+                f"reason: {entry.reason}"]
+    lines = ["engine: sql (one prepared statement; rows decoded into answers)"]
+    if entry.modes:
+        lines.append("modes (+ bound, - free when the goal is reached):")
+        lines.extend(f"  {m}" for m in entry.modes)
+    if entry.sql is None:
+        lines.append("sql: none (no branch can succeed: the goal fails)")
+    else:
+        lines.append("sql:")
+        lines.extend("  " + line for line in entry.sql.splitlines())
+    if entry.params or entry.arg_params:
+        shown = {k: v for k, v in entry.params.items()}
+        lines.append("parameters: " + ", ".join(f":{k} = {v!r}" for k, v in shown.items())
+                     + "".join(f", :{p} = <{n} from args>" for n, p in entry.arg_params.items()))
+    return lines
+
+
+# ---------------------------------------------------------------------- views
+
+def view_sql(kb, name: str, arity: int):
+    """The SELECT of the inspection view of name/arity (arg1..argN, encoded values), or
+    (None, reason)."""
+    ctx = _Ctx(kb, state_of(kb))
+    comp = Compiler(ctx, False, literal=True)
+    xs = [Var(f"A{i + 1}") for i in range(arity)]
+    goal = Struct(name, tuple(xs)) if arity else Atom(name)
+    parts: list[Part] = []
+
+    def emit(st):
+        proj = []
+        for x in xs:
+            v = resolve(x)
+            if type(v) is Var:
+                proj.append("NULL")
+            else:
+                proj.append(comp.value_sql(v))
+        parts.append(Part(list(st.froms), list(st.conds), list(st.keys), proj))
+
+    try:
+        comp.compile(goal, emit)
+    except Fallback as exc:
+        return None, exc.reason, comp.missing
+    if comp.uses_udf:
+        return None, "uses slr_ functions", comp.missing
+    if not parts:
+        return None, "no rows", comp.missing
+    nk = max(len(p.keys) for p in parts)
+    selects = []
+    for p in parts:
+        cols = [f"{x} AS arg{i + 1}" for i, x in enumerate(p.proj)] or ["1 AS ok"]
+        cols += [f"{k} AS k{i}" for i, k in enumerate(p.keys)]
+        cols += [f"NULL AS k{i}" for i in range(len(p.keys), nk)]
+        selects.append(p.select(cols))
+    inner = " UNION ALL ".join(selects)
+    if nk:
+        inner += " ORDER BY " + ", ".join(f"k{i}" for i in range(nk))
+    outer = ", ".join(f"arg{i + 1}" for i in range(arity)) or "ok"
+    return f"SELECT {outer} FROM ({inner})", None, comp.missing
+
+
+def refresh_views(kb) -> list[str]:
+    st = state_of(kb)
+    views = {}
+    missing: set = set()
+    facts = st.fact_tables(kb)
+    for (name, arity), pred in sorted(kb.program.preds.items()):
+        if (name, arity) in facts:
+            table = facts[(name, arity)]
+            cols = ", ".join(f"arg{i + 1}" for i in range(arity))
+            views.setdefault(name, f"SELECT {cols} FROM {table} ORDER BY ord")
+            continue
+        sql, _reason, miss = view_sql(kb, name, arity)
+        missing |= set(miss)
+        if sql is not None and name not in views:
+            views[name] = sql
+    st.view_missing = missing
+    return kb.store.replace_views(views)

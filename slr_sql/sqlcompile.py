@@ -1,0 +1,1150 @@
+"""Compile non-recursive SLR goals to one SQL statement (SPEC §3 "Execution").
+
+The compiler is an *abstract interpreter*: it walks the goal depth-first exactly like the
+top-down interpreter does, but instead of values it binds variables to :class:`Col` objects,
+SQL expressions that stand for the value one row of the statement will hold. Every path
+through the goal tree (every alternative of a ``;``, every clause of a called rule) becomes
+one *branch*: a flat ``SELECT`` with its ``FROM`` aliases, ``WHERE`` conditions and ordering
+keys. The branches are glued with ``UNION ALL`` and ordered by their keys, which reproduces
+the interpreter's depth-first order of solutions:
+
+* an event goal contributes its store-order columns ``t_end, t_start, seq``;
+* prev contributes ``t_start, seq`` (its ties), next ``t_end, seq``; a fact table ``ord``;
+* a disjunction, a called rule or an if-then-else contributes the index of the alternative
+  taken (a constant) *before* the keys of the goals inside it.
+
+Two solutions of different branches share the goals (and so the key columns) up to the first
+alternative where they part, and there their alternative indexes decide; keys are padded
+with NULL to a common width.
+
+Values in SQL are always in the store's *top-level encoding* (slr_sql.encoding): atoms TEXT,
+integers INTEGER, floats REAL, everything else JSON TEXT. Unification of two values is
+``a = b AND typeof(a) = typeof(b)`` (SQLite's ``1 = 1.0`` must not unify), simplified when
+the kinds are known (time columns are REAL, counts INTEGER). Arithmetic goes through
+application-defined functions that call :func:`slr_sql.arith.evaluate` (Prolog's integer and
+float rules, errors included) except ``+``/``-``/``*`` on floats, which SQLite computes with
+the same IEEE doubles. A function that meets something the interpreter would reject (a type
+error, an integer overflow, a non-ground result) raises, and the query is re-run by the
+interpreter, which raises the proper error or answers.
+
+Whatever the compiler does not handle exactly raises :class:`Fallback` with the reason.
+Handlers are named ``<kind>_sql``.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+import weakref
+from typing import Any, Callable
+
+from .encoding import INT64_MAX, INT64_MIN, Unencodable, encode, encode_json
+from .program import build, event_key, split_event_atom
+from .terms import NIL, Atom, String, Struct, Var, deref, list_items
+
+__all__ = ["Fallback", "Col", "Compiler", "Part", "SITES", "quote_ident"]
+
+
+class Fallback(Exception):
+    """The goal cannot be compiled exactly; ``reason`` says why (shown by explain)."""
+
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
+
+
+class Col:
+    """A value known only when the statement runs: an SQL expression and what it can be.
+
+    kinds: ``float`` (REAL: times), ``int`` (INTEGER: counts), ``num`` (INTEGER or REAL:
+    arithmetic), ``text`` (encoded JSON text: findall lists), ``any`` (a stored value).
+    """
+
+    __slots__ = ("sql", "kind")
+
+    def __init__(self, sql: str, kind: str = "any"):
+        self.sql = sql
+        self.kind = kind
+
+    def __repr__(self) -> str:
+        return f"Col({self.sql!r}, {self.kind!r})"
+
+
+NUMERIC = frozenset(("float", "int", "num"))
+
+# det builtins that only test (never bind): free variables passed to them stay free
+NO_BIND = frozenset([
+    ("\\=", 2), ("==", 2), ("\\==", 2), ("@<", 2), ("@>", 2), ("@=<", 2), ("@>=", 2),
+    ("var", 1), ("nonvar", 1), ("atom", 1), ("number", 1), ("integer", 1), ("float", 1),
+    ("atomic", 1), ("compound", 1), ("callable", 1), ("is_list", 1), ("string", 1),
+    ("ground", 1),
+])
+# det builtins with effects outside the answer: never called from SQL
+EFFECTS = frozenset([
+    ("write", 1), ("print", 1), ("writeq", 1), ("write_canonical", 1), ("writeln", 1),
+    ("nl", 0), ("tab", 1), ("format", 1), ("format", 2), ("format", 3), ("halt", 0),
+])
+COMPARISONS = {"<": "<", ">": ">", "=<": "<=", ">=": ">=", "=:=": "=", "=\\=": "<>"}
+CONTROL_FALLBACK = {
+    ("!", 0): "cut (!)",
+    ("*->", 2): "soft-cut (*->)",
+    ("catch", 3): "catch/3",
+    ("throw", 1): "throw/1",
+    ("findall", 4): "findall/4 (difference list)",
+    ("bagof", 3): "bagof/3 (free-variable grouping)",
+    ("setof", 3): "setof/3 (free-variable grouping)",
+}
+
+
+def quote_ident(name: str) -> str:
+    return '"' + name.replace('"', '""') + '"'
+
+
+class Site:
+    """One call of a det builtin or a ``kb.define`` predicate from SQL (``slr_det``)."""
+
+    __slots__ = ("fn", "python", "args", "cols", "outs", "engine", "last", "__weakref__")
+
+    def __init__(self, fn, python, args, cols, outs, engine):
+        self.fn = fn
+        self.python = python
+        self.args = args      # argument terms with ColRef(i) for the SQL inputs
+        self.cols = cols      # number of SQL inputs
+        self.outs = outs      # free variables whose values are returned
+        self.engine = engine
+        self.last = None      # (inputs, result) memo: one call serves all its outputs
+
+
+SITES: "weakref.WeakValueDictionary[int, Site]" = weakref.WeakValueDictionary()
+_site_ids = itertools.count(1)
+
+
+class ColRef:
+    """Position ``i`` of a row (answer recipes) or of a function's inputs (sites)."""
+
+    __slots__ = ("i",)
+
+    def __init__(self, i: int):
+        self.i = i
+
+
+class Part:
+    """One branch: a flat SELECT."""
+
+    __slots__ = ("froms", "conds", "keys", "proj", "extra")
+
+    def __init__(self, froms, conds, keys, proj=None, extra=None):
+        self.froms = froms    # [(table sql, alias, id column)]
+        self.conds = conds    # [sql]
+        self.keys = keys      # [sql]
+        self.proj = proj      # projected sql expressions
+        self.extra = extra    # whatever the emitter attached (answer recipes)
+
+    def from_sql(self) -> str:
+        return ", ".join(f"{t} AS {a}" for t, a, _ in self.froms)
+
+    def select(self, cols: list[str]) -> str:
+        sql = "SELECT " + ", ".join(cols)
+        if self.froms:
+            sql += " FROM " + self.from_sql()
+        if self.conds:
+            sql += " WHERE " + " AND ".join(self.conds)
+        return sql
+
+
+class State:
+    __slots__ = ("froms", "conds", "keys", "trail")
+
+    def __init__(self):
+        self.froms: list = []
+        self.conds: list = []
+        self.keys: list = []
+        self.trail: list = []
+
+    def mark(self) -> tuple:
+        return (len(self.froms), len(self.conds), len(self.keys), len(self.trail))
+
+    def restore(self, m: tuple) -> None:
+        del self.froms[m[0]:]
+        del self.conds[m[1]:]
+        del self.keys[m[2]:]
+        trail = self.trail
+        while len(trail) > m[3]:
+            trail.pop().ref = None
+
+
+def _fmt(t: Any) -> str:
+    from .printer import format_term
+
+    try:
+        return format_term(t)
+    except Exception:
+        return repr(t)
+
+
+def resolve(t: Any) -> Any:
+    """The term with bound variables replaced by their values (Cols and free Vars kept)."""
+    t = deref(t)
+    if type(t) is Struct:
+        if t.name == "." and len(t.args) == 2:
+            items, tail = list_items(t)
+            out = resolve(tail)
+            for x in reversed(items):
+                out = Struct(".", (resolve(x), out))
+            return out
+        return Struct(t.name, tuple(resolve(a) for a in t.args))
+    return t
+
+
+def has_var(t: Any) -> bool:
+    stack = [t]
+    while stack:
+        x = deref(stack.pop())
+        if type(x) is Var:
+            return True
+        if type(x) is Struct:
+            stack.extend(x.args)
+    return False
+
+
+def has_col(t: Any) -> bool:
+    stack = [t]
+    while stack:
+        x = deref(stack.pop())
+        if type(x) is Col:
+            return True
+        if type(x) is Struct:
+            stack.extend(x.args)
+    return False
+
+
+def term_free_vars(t: Any) -> list:
+    out, seen, stack = [], set(), [t]
+    while stack:
+        x = deref(stack.pop())
+        if type(x) is Var:
+            if id(x) not in seen:
+                seen.add(id(x))
+                out.append(x)
+        elif type(x) is Struct:
+            stack.extend(reversed(x.args))
+    return out
+
+
+class Compiler:
+    """Compiles goals for one knowledge base (``ctx`` gives the program, store, builtins).
+
+    ``ctx`` needs: ``program``, ``library``, ``det``, ``nondet``, ``python_preds``,
+    ``event_table(name, n)`` -> quoted table or None, ``fact_table(name, n)`` -> quoted table
+    or None, ``engine``.
+    """
+
+    MAX_BRANCHES = 512
+
+    def __init__(self, ctx: Any, has_at: bool, literal: bool = False):
+        self.ctx = ctx
+        self.program = ctx.program
+        self.has_at = has_at
+        self.literal = literal        # views: constants as literals, no parameters
+        self.params: dict[str, Any] = {}
+        self._const: dict[tuple, str] = {}
+        self._alias = itertools.count()
+        self.missing: set = set()     # event types without a table when compiled
+        self.sites: list[Site] = []
+        self.uses_udf = False
+        self.modes: list[str] = []
+        self._modes_seen: set = set()
+        self.branches = 0
+
+    # ------------------------------------------------------------------ helpers
+    def alias(self, prefix: str = "t") -> str:
+        return f"{prefix}{next(self._alias)}"
+
+    def const(self, value: Any) -> str:
+        """A bound parameter (or, for views, a literal) holding an SQL value."""
+        key = (type(value), value)
+        if type(value) is float and value != value:
+            raise Fallback("NaN constant")
+        name = self._const.get(key)
+        if name is not None:
+            return name
+        if self.literal:
+            from .store import sql_literal
+
+            name = sql_literal(value)
+        else:
+            name = f":c{len(self._const)}"
+            self.params[name[1:]] = value
+        self._const[key] = name
+        return name
+
+    def udf(self, sql: str) -> str:
+        self.uses_udf = True
+        return sql
+
+    def record_mode(self, goal: Any) -> None:
+        if len(self.modes) >= 60:
+            return
+        g = deref(goal)
+        try:
+            text = _mode_text(g)
+        except Exception:
+            return
+        if text not in self._modes_seen:
+            self._modes_seen.add(text)
+            self.modes.append(text)
+
+    # ------------------------------------------------------------------ driver
+    def compile(self, goal: Any, emit: Callable[[State], None]) -> None:
+        st = State()
+        self.solve((goal, (), None), st, emit)
+
+    def solve(self, cont, st: State, emit) -> None:
+        if cont is None:
+            self.branches += 1
+            if self.branches > self.MAX_BRANCHES:
+                raise Fallback(f"more than {self.MAX_BRANCHES} alternative paths")
+            emit(st)
+            return
+        goal, ctx, nxt = cont
+        self.goal_sql(goal, ctx, nxt, st, emit)
+
+    def sub_parts(self, goal: Any, ctx: tuple, st: State,
+                  project: Callable[[State], list] | None = None) -> list[Part]:
+        """The branches of ``goal`` as a subquery of the current state (bindings undone)."""
+        parts: list[Part] = []
+        m = st.mark()
+
+        def emit(s: State) -> None:
+            proj = project(s) if project is not None else None
+            parts.append(Part(list(s.froms[m[0]:]), list(s.conds[m[1]:]),
+                              list(s.keys[m[2]:]), proj))
+
+        self.solve((goal, ctx, None), st, emit)
+        st.restore(m)
+        return parts
+
+    # ------------------------------------------------------------------ dispatch
+    def goal_sql(self, goal, ctx, nxt, st, emit) -> None:
+        g = deref(goal)
+        tg = type(g)
+        if tg is Var:
+            raise Fallback("a goal that is an unbound variable (call/N on an unknown goal)")
+        if tg is Col:
+            raise Fallback("a goal only known at run time (call/N on an unknown goal)")
+        if tg is _Marker:
+            return self.marker_sql(g, ctx, nxt, st, emit)
+        if tg is Struct:
+            name, args = str(g.name), g.args
+        elif tg is Atom:
+            name, args = str(g), ()
+        else:
+            raise Fallback(f"{_fmt(g)} is not callable (type error at run time)")
+        key = (name, len(args))
+        ctl = CONTROL_SQL.get(key)
+        if ctl is not None:
+            return ctl(self, g, args, ctx, nxt, st, emit)
+        if key in CONTROL_FALLBACK:
+            raise Fallback(CONTROL_FALLBACK[key])
+        pred = self.program.preds.get(key)
+        if pred is not None:
+            return self.call_sql(pred, ("pred", name, len(args)), args, ctx, nxt, st, emit)
+        lib = self.ctx.library.preds.get(key)
+        if lib is not None:
+            return self.library_sql(key, args, ctx, nxt, st, emit)
+        if key in self.ctx.det:
+            return self.builtin_sql(key, args, ctx, nxt, st, emit)
+        if key in (("prev", 2), ("next", 2), ("next", 3)):
+            self.record_mode(g)
+            return (self.prev_sql if name == "prev" else self.next_sql)(args, ctx, nxt, st, emit)
+        if key in self.ctx.nondet:
+            raise Fallback(f"the builtin {name}/{len(args)} has no SQL form")
+        fn = self.ctx.python_preds.get(key)
+        if fn is not None:
+            return self.det_sql(key, fn, True, args, nxt, st, emit)
+        if key in self.program.dynamic or key in self.program.temporal:
+            return  # fails
+        raise Fallback(f"unknown predicate {name}/{len(args)} (existence error at run time)")
+
+    # ------------------------------------------------------------------ unification
+    def unify(self, a: Any, b: Any, st: State) -> bool:
+        """Unify at compile time; conditions on run-time values go to ``st.conds``.
+        False: fails whatever the rows hold."""
+        stack = [(a, b)]
+        trail = st.trail
+        while stack:
+            a, b = stack.pop()
+            a = deref(a)
+            b = deref(b)
+            if a is b:
+                continue
+            ta, tb = type(a), type(b)
+            if ta is Var:
+                a.ref = b
+                trail.append(a)
+            elif tb is Var:
+                b.ref = a
+                trail.append(b)
+            elif ta is Col or tb is Col:
+                if ta is not Col:
+                    a, b = b, a
+                cond = self.eq_sql(a, b)
+                if cond is False:
+                    return False
+                if cond is not True:
+                    st.conds.append(cond)
+            elif ta is Struct:
+                if tb is not Struct or a.name != b.name or len(a.args) != len(b.args):
+                    return False
+                stack.extend(zip(a.args, b.args))
+            elif ta is not tb or a != b:
+                if ta is float and tb is float and a != a and b != b:
+                    continue
+                return False
+        return True
+
+    def eq_sql(self, col: Col, other: Any):
+        """SQL for "the value of ``col`` unifies with ``other``" (True/False when static)."""
+        k = col.kind
+        to = type(other)
+        if to is Col:
+            k2 = other.kind
+            a, b = col.sql, other.sql
+            if k == k2 and k in ("float", "int", "text"):
+                return f"{a} = {b}"
+            if {k, k2} == {"float", "int"} or ("text" in (k, k2) and (k in NUMERIC or k2 in NUMERIC)):
+                return False
+            return f"({a} = {b} AND typeof({a}) = typeof({b}))"
+        if to is Atom or to is String:
+            if k in NUMERIC:
+                return False
+            return f"{col.sql} = {self.const(encode(other))}"
+        if to is int:
+            if INT64_MIN <= other <= INT64_MAX:
+                if k == "float" or k == "text":
+                    return False
+                if k == "int":
+                    return f"{col.sql} = {self.const(other)}"
+                return f"({col.sql} = {self.const(other)} AND typeof({col.sql}) = 'integer')"
+            if k in NUMERIC:
+                return False
+            return f"{col.sql} = {self.const(encode(other))}"
+        if to is float:
+            if other != other:
+                raise Fallback("NaN in a goal")
+            if k == "int" or k == "text":
+                return False
+            if k == "float":
+                return f"{col.sql} = {self.const(other)}"
+            return f"({col.sql} = {self.const(other)} AND typeof({col.sql}) = 'real')"
+        if to is Struct:
+            if has_col(other) and not has_var(other):
+                if k in NUMERIC:
+                    return False
+                return f"{col.sql} = {self.json_sql(other, top=True)}"
+            if has_var(other):
+                raise Fallback(f"matching a stored value against the compound term "
+                               f"{_fmt(_shown(other))} with unknown parts")
+            if k in NUMERIC:
+                return False
+            try:
+                return f"{col.sql} = {self.const(encode(other))}"
+            except Unencodable as exc:
+                raise Fallback(f"constant cannot be encoded: {exc.reason}")
+        raise Fallback(f"cannot compare a stored value with {other!r}")
+
+    # ------------------------------------------------------------------ values
+    def value_sql(self, t: Any) -> str:
+        """SQL for a bound term's encoded value (a Col, or a ground constant)."""
+        t = deref(t)
+        if type(t) is Col:
+            return t.sql
+        if has_var(t):
+            raise Fallback(f"{_fmt(_shown(t))} is not ground")
+        if has_col(t):
+            return self.json_sql(t, top=True)
+        try:
+            return self.const(encode(t))
+        except Unencodable as exc:
+            raise Fallback(f"constant cannot be encoded: {exc.reason}")
+
+    def json_sql(self, t: Any, top: bool = False) -> str:
+        """SQL text expression of the encoding of a term built from Cols and constants:
+        its inner-JSON form (``top``: the top-level column form, only for compounds/lists)."""
+        t = deref(t)
+        tt = type(t)
+        if tt is Col:
+            return self.udf(f"slr_j({t.sql})")
+        if tt is Var:
+            raise Fallback(f"a template with the unbound variable {t.name} (findall of "
+                           f"non-ground terms)")
+        if not has_col(t):
+            try:
+                return self.const(encode_json(t))
+            except Unencodable as exc:
+                raise Fallback(f"constant cannot be encoded: {exc.reason}")
+        if tt is Struct:
+            if t.name == "." and len(t.args) == 2:
+                items, tail = list_items(t)
+                if not (type(tail) is Atom and tail == "[]"):
+                    raise Fallback("a partial list in a template")
+                inner = " || ',' || ".join(self.json_sql(x) for x in items)
+                return f"('[' || {inner} || ']')"
+            inner = " || ',' || ".join(self.json_sql(x) for x in t.args)
+            name = self.const(encode_json(Atom(t.name)))
+            return "('{' || " + name + " || ':[' || " + inner + " || ']}')"
+        raise Fallback(f"cannot encode {t!r}")
+
+    # ------------------------------------------------------------------ arithmetic
+    def arith_sql(self, t: Any):
+        """(sql, kind) of an arithmetic expression, or ('const', value) when constant."""
+        t = deref(t)
+        tt = type(t)
+        if tt is int or tt is float:
+            return None, t
+        if tt is Var:
+            raise Fallback(f"the unbound variable {t.name} in arithmetic (instantiation error)")
+        if tt is Col:
+            if t.kind in NUMERIC:
+                return t.sql, t.kind
+            if t.kind == "text":
+                raise Fallback("arithmetic on a list value")
+            return self.udf(f"slr_num({t.sql})"), "num"
+        if not has_col(t):
+            if has_var(t):
+                raise Fallback(f"unbound variable in the arithmetic expression {_fmt(_shown(t))}")
+            from .arith import evaluate
+
+            if tt is Atom and t in ("random", "cputime", "realtime"):
+                raise Fallback(f"the non-deterministic function {t}")
+            if tt is Struct and any(deref(a) in ("random", "cputime", "realtime")
+                                    for a in _atoms(t)):
+                raise Fallback("a non-deterministic arithmetic function")
+            try:
+                return None, evaluate(t)
+            except Exception as exc:
+                raise Fallback(f"arithmetic error: {exc}")
+        if tt is Struct and len(t.args) in (1, 2):
+            from .arith import BINARY, UNARY
+
+            op = str(t.name)
+            subs = [self.arith_sql(a) for a in t.args]
+            if len(subs) == 2 and op in BINARY:
+                (sa, va), (sb, vb) = subs
+                if op in ("+", "-", "*") and _floatish(sa, va) and _floatish(sb, vb) \
+                        and (_is_float(sa, va) or _is_float(sb, vb)):
+                    xa = sa if sa is not None else self.const(float(va))
+                    xb = sb if sb is not None else self.const(float(vb))
+                    return f"({xa} {op} {xb})", "float"
+                xa = sa if sa is not None else self.const(va)
+                xb = sb if sb is not None else self.const(vb)
+                return self.udf(f"slr_ar2({self.const(op)}, {xa}, {xb})"), "num"
+            if len(subs) == 1 and op in UNARY:
+                (sa, va), = subs
+                xa = sa if sa is not None else self.const(va)
+                return self.udf(f"slr_ar1({self.const(op)}, {xa})"), "num"
+        raise Fallback(f"arithmetic expression {_fmt(_shown(t))} has no SQL form")
+
+    def num_sql(self, t: Any) -> str:
+        sql, v = self.arith_sql(t)
+        if sql is None:
+            if type(v) is float and v != v:
+                raise Fallback("NaN in arithmetic")
+            return self.const(v)
+        return sql
+
+    def time_sql(self, t: Any) -> str:
+        """A time argument of prev/next: float(evaluate(t))."""
+        sql, v = self.arith_sql(t)
+        if sql is None:
+            try:
+                f = float(v)
+            except OverflowError:
+                raise Fallback("time out of range")
+            if f != f:
+                raise Fallback("NaN time")
+            return self.const(f)
+        return sql
+
+    # ------------------------------------------------------------------ control
+    def conj_sql(self, g, args, ctx, nxt, st, emit):
+        self.solve((args[0], ctx, (args[1], ctx, nxt)), st, emit)
+
+    def true_sql(self, g, args, ctx, nxt, st, emit):
+        self.solve(nxt, st, emit)
+
+    def fail_sql(self, g, args, ctx, nxt, st, emit):
+        return
+
+    def disj_sql(self, g, args, ctx, nxt, st, emit):
+        left = deref(args[0])
+        if type(left) is Struct and len(left.args) == 2 and left.name == "->":
+            return self.ite_sql(left.args[0], left.args[1], args[1], ctx, nxt, st, emit)
+        if type(left) is Struct and len(left.args) == 2 and left.name == "*->":
+            raise Fallback("soft-cut (*->)")
+        alts = [args[0]]
+        right = deref(args[1])
+        # flatten a right-nested chain a ; b ; c (but not an if-then-else inside it)
+        while type(right) is Struct and right.name == ";" and len(right.args) == 2:
+            inner_left = deref(right.args[0])
+            if type(inner_left) is Struct and inner_left.name in ("->", "*->") \
+                    and len(inner_left.args) == 2:
+                break
+            alts.append(right.args[0])
+            right = deref(right.args[1])
+        alts.append(right)
+        for i, alt in enumerate(alts):
+            m = st.mark()
+            st.keys.append(str(i))
+            self.solve((alt, ctx, nxt), st, emit)
+            st.restore(m)
+
+    def ifthen_sql(self, g, args, ctx, nxt, st, emit):
+        self.ite_sql(args[0], args[1], Atom("fail"), ctx, nxt, st, emit)
+
+    def ite_sql(self, cond, then, other, ctx, nxt, st, emit):
+        """``( C -> T ; E )``: T after C's first solution, else E when C has none."""
+        parts = self.sub_parts(cond, ctx, st)
+        if len(parts) > 1 and any(p.froms for p in parts):
+            raise Fallback("if-then-else whose condition has several alternatives over "
+                           "stored data (first solution of a union)")
+        count = [0]
+        m0 = st.mark()
+        info = {"m": m0, "parts": parts, "count": count, "ctx": ctx, "cond": cond}
+        if parts:
+            st.keys.append("0")
+            marker = _Marker(info)
+            self.solve((cond, ctx, (marker, ctx, (then, ctx, nxt))), st, emit)
+            st.restore(m0)
+        # else: no solution of C
+        m = st.mark()
+        st.keys.append("1")
+        ok = True
+        for p in parts:
+            if not p.froms and not p.conds:
+                ok = False  # C always succeeds
+                break
+        if ok:
+            if parts:
+                st.conds.append(self.not_exists(parts))
+            self.solve((other, ctx, nxt), st, emit)
+        st.restore(m)
+
+    def marker_sql(self, marker: "_Marker", ctx, nxt, st, emit):
+        info = marker.info
+        m0 = info["m"]
+        parts = info["parts"]
+        i = info["count"][0]
+        info["count"][0] += 1
+        # C yields one solution: its own ordering keys go (the branch key "0" stays)
+        saved_keys = st.keys[m0[2] + 1:]
+        del st.keys[m0[2] + 1:]
+        m = st.mark()
+        froms = st.froms[m0[0]:]
+        if froms:
+            # C's first solution in C's order: the ids of its rows are those of the first row
+            trail = st.trail[m0[3]:]
+            saved = [(v, v.ref) for v in trail]
+            for v in reversed(trail):
+                v.ref = None
+            try:
+                sub = self.sub_parts(info["cond"], info["ctx"], State())
+            finally:
+                for v, ref in saved:
+                    v.ref = ref
+            if len(sub) != 1 or len(sub[0].froms) != len(froms):
+                raise Fallback("if-then-else condition compiled unevenly")
+            p = sub[0]
+            ids = ", ".join(f"{a}.{idc}" for _, a, idc in froms)
+            sub_ids = ", ".join(f"{a}.{idc}" for _, a, idc in p.froms)
+            order = (" ORDER BY " + ", ".join(p.keys)) if p.keys else ""
+            sql = p.select([sub_ids]) + order + " LIMIT 1"
+            st.conds.append(f"{ids} = ({sql})" if len(froms) == 1 else f"({ids}) = ({sql})")
+        else:
+            for p in parts[:i]:
+                st.conds.append(self.not_exists([p]))
+        self.solve(nxt, st, emit)
+        st.restore(m)
+        st.keys.extend(saved_keys)
+
+    def not_exists(self, parts: list[Part]) -> str:
+        return "NOT " + self.exists(parts)
+
+    def exists(self, parts: list[Part]) -> str:
+        return "EXISTS (" + " UNION ALL ".join(p.select(["1"]) for p in parts) + ")"
+
+    def neg_sql(self, g, args, ctx, nxt, st, emit):
+        self.record_mode(g)
+        parts = self.sub_parts(args[0], ctx, st)
+        for p in parts:
+            if not p.froms and not p.conds:
+                return  # the goal always succeeds: \+ fails
+        m = st.mark()
+        if parts:
+            st.conds.append(self.not_exists(parts))
+        self.solve(nxt, st, emit)
+        st.restore(m)
+
+    def call_n_sql(self, g, args, ctx, nxt, st, emit):
+        goal = deref(args[0])
+        if type(goal) in (Var, Col):
+            raise Fallback("call/N on an unknown goal")
+        if len(args) > 1:
+            if type(goal) is Atom:
+                goal = Struct(goal, tuple(args[1:]))
+            elif type(goal) is Struct:
+                goal = Struct(goal.name, goal.args + tuple(args[1:]))
+            else:
+                raise Fallback("call/N on a non-callable term (type error)")
+        self.solve((goal, ctx, nxt), st, emit)
+
+    def caret_sql(self, g, args, ctx, nxt, st, emit):
+        ev = split_event_atom(g)
+        if ev is None:
+            return self.solve((args[1], ctx, nxt), st, emit)
+        self.record_mode(g)
+        return self.event_sql(ev, ctx, nxt, st, emit)
+
+    def forall_sql(self, g, args, ctx, nxt, st, emit):
+        rewritten = Struct("\\+", (Struct(",", (args[0], Struct("\\+", (args[1],)))),))
+        self.solve((rewritten, ctx, nxt), st, emit)
+
+    # ------------------------------------------------------------------ events
+    def row_unify(self, pattern: tuple, alias: str, n: int, st: State) -> bool:
+        cols = [Col(f"{alias}.arg{i + 1}") for i in range(n)]
+        cols += [Col(f"{alias}.t_start", "float"), Col(f"{alias}.t_end", "float")]
+        for p, c in zip(pattern, cols):
+            if not self.unify(p, c, st):
+                return False
+        return True
+
+    def event_table(self, name: str, n: int) -> str | None:
+        table = self.ctx.event_table(name, n)
+        if table is None:
+            self.missing.add((name, n))
+        return table
+
+    def event_sql(self, ev, ctx, nxt, st, emit):
+        atom, s, e = ev
+        atom = deref(atom)
+        if type(atom) not in (Struct, Atom):
+            raise Fallback("an event goal whose name is not known")
+        name, n = event_key(atom)
+        args = tuple(atom.args) if type(atom) is Struct else ()
+        rules = self.program.temporal.get((name, n))
+        has_rules = rules is not None and bool(rules.clauses)
+        table = self.event_table(name, n)
+        if table is not None:
+            m = st.mark()
+            if has_rules:
+                st.keys.append("0")
+            alias = self.alias()
+            st.froms.append((table, alias, "seq"))
+            if self.row_unify(args + (s, e), alias, n, st):
+                if self.has_at:
+                    st.conds.append(f"{alias}.t_end <= :at")
+                st.keys.extend([f"{alias}.t_end", f"{alias}.t_start", f"{alias}.seq"])
+                self.solve(nxt, st, emit)
+            st.restore(m)
+        if has_rules:
+            self.clauses_sql(rules, ("event", name, n), args + (s, e), ctx, nxt, st, emit,
+                             offset=1)
+
+    def _prev_next_pattern(self, t):
+        ev = split_event_atom(t)
+        if ev is None:
+            raise Fallback("prev/next of something that is not an event atom (error at run time)")
+        atom, s, e = ev
+        atom = deref(atom)
+        if type(atom) not in (Struct, Atom):
+            raise Fallback("prev/next of an event with an unknown name")
+        name, n = event_key(atom)
+        args = tuple(atom.args) if type(atom) is Struct else ()
+        return name, n, args + (s, e)
+
+    def _interval(self, t):
+        t = deref(t)
+        if type(t) is Struct and t.name == "." and len(t.args) == 2:
+            items, tail = list_items(t)
+            if len(items) == 2 and type(tail) is Atom and tail == "[]":
+                return self.time_sql(items[0]), self.time_sql(items[1])
+            raise Fallback("a malformed interval (type error at run time)")
+        return None
+
+    def _sandbox(self, pattern, table, n, st):
+        """Conditions of the pattern on a fresh alias, bindings undone; None: never matches."""
+        q = self.alias("q")
+        m = st.mark()
+        ok = self.row_unify(pattern, q, n, st)
+        conds = list(st.conds[m[1]:])
+        st.restore(m)
+        return (q, conds) if ok else None
+
+    def prev_sql(self, args, ctx, nxt, st, emit):
+        name, n, pattern = self._prev_next_pattern(args[0])
+        iv = self._interval(args[1])
+        if iv is None:
+            if type(deref(args[1])) is Var:
+                raise Fallback("prev/2 with an unbound time (instantiation error)")
+            lo, hi = None, self.time_sql(args[1])
+        else:
+            lo, hi = iv
+        table = self.event_table(name, n)
+        if table is None:
+            return
+        sb = self._sandbox(pattern, table, n, st)
+        if sb is None:
+            return
+        q, qconds = sb
+        qconds.append(f"{q}.t_end <= {hi}")
+        if lo is not None:
+            qconds.append(f"{q}.t_start >= {lo}")
+        sub = (f"(SELECT {q}.t_end FROM {table} AS {q} WHERE {' AND '.join(qconds)} "
+               f"ORDER BY {q}.t_end DESC LIMIT 1)")
+        m = st.mark()
+        p = self.alias("p")
+        st.froms.append((table, p, "seq"))
+        if self.row_unify(pattern, p, n, st):
+            st.conds.append(f"{p}.t_end = {sub}")
+            if lo is not None:
+                st.conds.append(f"{p}.t_start >= {lo}")
+            st.keys.extend([f"{p}.t_start", f"{p}.seq"])
+            self.solve(nxt, st, emit)
+        st.restore(m)
+
+    def next_sql(self, args, ctx, nxt, st, emit):
+        name, n, pattern = self._prev_next_pattern(args[0])
+        if len(args) == 2:
+            iv = self._interval(args[1])
+            if iv is None:
+                raise Fallback("next/2 without an interval (error at run time)")
+            lo, hi = iv
+        else:
+            lo, hi = self.time_sql(args[1]), self.time_sql(args[2])
+        table = self.event_table(name, n)
+        if table is None:
+            return
+        sb = self._sandbox(pattern, table, n, st)
+        if sb is None:
+            return
+        q, qconds = sb
+        qconds.append(f"{q}.t_start >= {lo}")
+        qconds.append(f"{q}.t_start <= {hi}")
+        qconds.append(f"{q}.t_end <= {hi}")
+        sub = (f"(SELECT {q}.t_start FROM {table} AS {q} WHERE {' AND '.join(qconds)} "
+               f"ORDER BY {q}.t_start LIMIT 1)")
+        m = st.mark()
+        p = self.alias("p")
+        st.froms.append((table, p, "seq"))
+        if self.row_unify(pattern, p, n, st):
+            st.conds.append(f"{p}.t_start = {sub}")
+            st.conds.append(f"{p}.t_end <= {hi}")
+            st.keys.extend([f"{p}.t_end", f"{p}.seq"])
+            self.solve(nxt, st, emit)
+        st.restore(m)
+
+    # ------------------------------------------------------------------ rules and facts
+    def call_sql(self, pred, node, args, ctx, nxt, st, emit):
+        self.record_mode(Struct(node[1], args) if args else Atom(node[1]))
+        table = self.ctx.fact_table(node[1], node[2]) if len(pred.clauses) > 4 else None
+        if table is not None:
+            return self.facts_sql(table, node, args, ctx, nxt, st, emit)
+        self.clauses_sql(pred, node, args, ctx, nxt, st, emit, offset=0)
+
+    def clauses_sql(self, pred, node, args, ctx, nxt, st, emit, offset: int):
+        if node in ctx:
+            raise Fallback(f"recursion: {node[1]}/{node[2]} calls itself"
+                           + (f" (through {', '.join(f'{c[1]}/{c[2]}' for c in ctx[ctx.index(node) + 1:])})"
+                              if ctx.index(node) + 1 < len(ctx) else ""))
+        inner = ctx + (node,)
+        for i, clause in enumerate(pred.clauses):
+            m = st.mark()
+            st.keys.append(str(i + offset))
+            frame = [None] * clause.nslots
+            ok = True
+            for h, a in zip(clause.head, args):
+                if not self.unify(build(h, frame), a, st):
+                    ok = False
+                    break
+            if ok:
+                cont = nxt
+                for g in reversed(clause.body):
+                    cont = (build(g, frame), inner, cont)
+                self.solve(cont, st, emit)
+            st.restore(m)
+
+    def facts_sql(self, table, node, args, ctx, nxt, st, emit):
+        m = st.mark()
+        alias = self.alias("f")
+        st.froms.append((table, alias, "ord"))
+        ok = True
+        for i, a in enumerate(args):
+            if not self.unify(a, Col(f"{alias}.arg{i + 1}"), st):
+                ok = False
+                break
+        if ok:
+            st.keys.append(f"{alias}.ord")
+            self.solve(nxt, st, emit)
+        st.restore(m)
+
+    def library_sql(self, key, args, ctx, nxt, st, emit):
+        name = key[0]
+        if key == ("member", 2):
+            items, tail = list_items(args[1])
+            if type(tail) is Atom and tail == "[]" and not any(type(deref(x)) is Col
+                                                                 for x in [args[1]]):
+                alts = [Struct("=", (args[0], x)) for x in items]
+                for i, alt in enumerate(alts):
+                    m = st.mark()
+                    st.keys.append(str(i))
+                    self.solve((alt, ctx, nxt), st, emit)
+                    st.restore(m)
+                return
+            raise Fallback("member/2 over a list only known at run time")
+        if key == ("once", 1):
+            return self.ite_sql(args[0], Atom("true"), Atom("fail"), ctx, nxt, st, emit)
+        if key == ("ignore", 1):
+            return self.ite_sql(args[0], Atom("true"), Atom("true"), ctx, nxt, st, emit)
+        raise Fallback(f"the library predicate {name}/{key[1]} (recursive or with cut) "
+                       f"has no SQL form")
+
+    # ------------------------------------------------------------------ builtins
+    def builtin_sql(self, key, args, ctx, nxt, st, emit):
+        name = key[0]
+        if key == ("=", 2):
+            m = st.mark()
+            if self.unify(args[0], args[1], st):
+                self.solve(nxt, st, emit)
+            st.restore(m)
+            return
+        if name in COMPARISONS and len(args) == 2:
+            a_sql, a_v = self.arith_sql(args[0])
+            b_sql, b_v = self.arith_sql(args[1])
+            if a_sql is None and b_sql is None:
+                from .builtins import DET
+
+                if DET[key](None, (a_v, b_v)):
+                    self.solve(nxt, st, emit)
+                return
+            xa = a_sql if a_sql is not None else self.num_sql(a_v)
+            xb = b_sql if b_sql is not None else self.num_sql(b_v)
+            m = st.mark()
+            st.conds.append(f"{xa} {COMPARISONS[name]} {xb}")
+            self.solve(nxt, st, emit)
+            st.restore(m)
+            return
+        if key == ("is", 2):
+            sql, v = self.arith_sql(args[1])
+            m = st.mark()
+            value = v if sql is None else Col(sql, v)
+            if self.unify(args[0], value, st):
+                self.solve(nxt, st, emit)
+            st.restore(m)
+            return
+        if key in EFFECTS:
+            raise Fallback(f"{name}/{key[1]} has effects (output) and runs in the interpreter")
+        self.det_sql(key, self.ctx.det[key], False, args, nxt, st, emit)
+
+    def det_sql(self, key, fn, python, args, nxt, st, emit):
+        """A deterministic builtin or ``kb.define`` predicate as the function ``slr_det``."""
+        self.record_mode(Struct(key[0], args) if args else Atom(key[0]))
+        resolved = [resolve(a) for a in args]
+        cols: list[Col] = []
+        index: dict[str, int] = {}
+
+        def subst(t):
+            t = deref(t)
+            if type(t) is Col:
+                i = index.get(t.sql)
+                if i is None:
+                    i = index[t.sql] = len(cols)
+                    cols.append(t)
+                return ColRef(i)
+            if type(t) is Struct:
+                return Struct(t.name, tuple(subst(a) for a in t.args))
+            return t
+
+        templ = tuple(subst(a) for a in resolved)
+        outs = [] if key in NO_BIND else term_free_vars(Struct("t", tuple(resolved)))
+        if python and not cols and len(outs) == len(term_free_vars(Struct("t", tuple(resolved)))) \
+                and outs and all(type(deref(a)) is Var for a in args):
+            raise Fallback(f"the Python predicate {key[0]}/{key[1]} called with every argument "
+                           f"unbound (a non-functional mode)")
+        site = Site(fn, python, templ, len(cols), outs, self.ctx.engine)
+        sid = next(_site_ids)
+        SITES[sid] = site
+        self.sites.append(site)
+        inputs = "".join(f", {c.sql}" for c in cols)
+        m = st.mark()
+        st.conds.append(self.udf(f"slr_det({sid}, -1{inputs}) IS NOT NULL"))
+        ok = True
+        for i, v in enumerate(outs):
+            if not self.unify(v, Col(self.udf(f"slr_det({sid}, {i}{inputs})")), st):
+                ok = False
+                break
+        if ok:
+            self.solve(nxt, st, emit)
+        st.restore(m)
+
+    # ------------------------------------------------------------------ collecting
+    def findall_sql(self, g, args, ctx, nxt, st, emit):
+        self.record_mode(g)
+        template, goal, out = args
+        parts = self.sub_parts(goal, ctx, st, lambda s: [self.json_sql(resolve(template))])
+        if not parts:
+            value: Any = NIL
+        else:
+            value = Col(self.list_sql(parts), "text")
+        m = st.mark()
+        if self.unify(out, value, st):
+            self.solve(nxt, st, emit)
+        st.restore(m)
+
+    def ordered_union(self, parts: list[Part], ncols: int) -> str:
+        width = max(len(p.keys) for p in parts)
+        selects = []
+        for p in parts:
+            cols = [f"{x} AS v{i}" for i, x in enumerate(p.proj)]
+            cols += [f"{k} AS k{i}" for i, k in enumerate(p.keys)]
+            cols += [f"NULL AS k{i}" for i in range(len(p.keys), width)]
+            selects.append(p.select(cols))
+        sql = " UNION ALL ".join(selects)
+        if width:
+            sql += " ORDER BY " + ", ".join(f"k{i}" for i in range(width))
+        return sql
+
+    def list_sql(self, parts: list[Part]) -> str:
+        return (f"(SELECT '[' || coalesce(group_concat(v0, ','), '') || ']' FROM "
+                f"({self.ordered_union(parts, 1)}))")
+
+    def aggregate_sql(self, g, args, ctx, nxt, st, emit):
+        self.record_mode(g)
+        spec = deref(args[0])
+        goal, out = args[1], args[2]
+        if type(spec) is Atom and spec == "count":
+            kind, templ = "count", None
+        elif type(spec) is Struct and len(spec.args) == 1 and spec.name in (
+                "count", "sum", "max", "min", "bag", "set"):
+            kind, templ = str(spec.name), spec.args[0]
+        else:
+            raise Fallback(f"aggregate_all/3 with the spec {_fmt(_shown(spec))}")
+        if kind in ("max", "min"):
+            t0 = deref(templ)
+            if type(t0) is Struct and t0.name == "-" and len(t0.args) == 2:
+                raise Fallback("aggregate_all max/min with a witness (X-W)")
+        if kind == "count":
+            parts = self.sub_parts(goal, ctx, st, lambda s: ["1"])
+            value: Any = 0 if not parts else Col(
+                "(SELECT count(*) FROM (" + " UNION ALL ".join(p.select(["1"]) for p in parts)
+                + "))", "int")
+        elif kind in ("bag", "set"):
+            parts = self.sub_parts(goal, ctx, st, lambda s: [self.json_sql(resolve(templ))])
+            if not parts:
+                value = NIL
+            elif kind == "bag":
+                value = Col(self.list_sql(parts), "text")
+            else:
+                value = Col(self.udf(f"(SELECT slr_setof(v0) FROM ({self.ordered_union(parts, 1)}))"),
+                            "text")
+        else:
+            parts = self.sub_parts(goal, ctx, st, lambda s: [self.num_sql(resolve(templ))])
+            fn = {"sum": "slr_sum", "max": "slr_max", "min": "slr_min"}[kind]
+            if not parts:
+                if kind == "sum":
+                    value = 0
+                else:
+                    return  # max/min of nothing fails
+            else:
+                value = Col(self.udf(f"(SELECT {fn}(v0) FROM ({self.ordered_union(parts, 1)}))"),
+                            "num")
+        m = st.mark()
+        if type(value) is Col and kind in ("max", "min"):
+            st.conds.append(f"{value.sql} IS NOT NULL")
+        if self.unify(out, value, st):
+            self.solve(nxt, st, emit)
+        st.restore(m)
+
+
+class _Marker:
+    """Pushed after the condition of an if-then-else (see :meth:`Compiler.marker_sql`)."""
+
+    __slots__ = ("info",)
+
+    def __init__(self, info):
+        self.info = info
+
+
+def _floatish(sql, v) -> bool:
+    """An operand SQLite's float arithmetic computes exactly as Python does."""
+    if sql is None:
+        return (type(v) is float and math.isfinite(v)) or (type(v) is int and abs(v) < 2 ** 53)
+    return v == "float"
+
+
+def _is_float(sql, v) -> bool:
+    return v == "float" if sql is not None else type(v) is float
+
+
+def _atoms(t):
+    stack = [t]
+    while stack:
+        x = deref(stack.pop())
+        if type(x) is Struct:
+            stack.extend(x.args)
+        else:
+            yield x
+
+
+def _shown(t: Any) -> Any:
+    """A term for messages: Cols shown as '$value'."""
+    t = deref(t)
+    if type(t) is Col:
+        return Atom("<stored value>")
+    if type(t) is Struct:
+        return Struct(t.name, tuple(_shown(a) for a in t.args))
+    return t
+
+
+def _mode_text(g: Any) -> str:
+    """``obj(-,+,-)^-``: + bound (known when the goal is reached), - free."""
+    def m(t):
+        t = deref(t)
+        if type(t) is Var:
+            return "-"
+        if type(t) is Col or not has_var(t):
+            return "+"
+        return "?"
+    ev = split_event_atom(g)
+    if ev is not None:
+        atom, s, e = ev
+        atom = deref(atom)
+        name, n = event_key(atom)
+        args = atom.args if type(atom) is Struct else ()
+        stamp = m(s) if deref(s) is deref(e) else f"[{m(s)},{m(e)}]"
+        return f"{name}({','.join(m(a) for a in args)})^{stamp}" if args else f"{name}^{stamp}"
+    if type(g) is Struct:
+        if g.name in ("prev", "next"):
+            inner = _mode_text(deref(g.args[0]))
+            return f"{g.name}({inner}, {','.join(m(a) for a in g.args[1:])})"
+        if g.name in ("findall", "aggregate_all", "\\+"):
+            return f"{g.name}/{len(g.args)}"
+        return f"{g.name}({','.join(m(a) for a in g.args)})"
+    return str(g)
+
+
+CONTROL_SQL = {
+    (",", 2): Compiler.conj_sql,
+    ("true", 0): Compiler.true_sql,
+    ("fail", 0): Compiler.fail_sql,
+    ("false", 0): Compiler.fail_sql,
+    (";", 2): Compiler.disj_sql,
+    ("->", 2): Compiler.ifthen_sql,
+    ("\\+", 1): Compiler.neg_sql,
+    ("not", 1): Compiler.neg_sql,
+    ("^", 2): Compiler.caret_sql,
+    ("forall", 2): Compiler.forall_sql,
+    ("findall", 3): Compiler.findall_sql,
+    ("findAll", 3): Compiler.findall_sql,
+    ("aggregate_all", 3): Compiler.aggregate_sql,
+}
+for _n in range(1, 9):
+    CONTROL_SQL[("call", _n)] = Compiler.call_n_sql
