@@ -280,3 +280,28 @@ def test_demo_synchronized_part_runs(monkeypatch):
     [answer] = synchronized.answers
     assert [str(item.args[0]) for item in answer["Cups"]] == ["cup1", "cup2"]
     assert "fullyUpdated(seg/2)^14" in out.getvalue()
+
+
+FAST_PATH_SAMPLES = [
+    "seg(cup1,[0.4,0.1,0.9])^12.31", "seg(cup1, [0.4, 0.1, 0.9])^12",
+    "tf(cam, base, pose([0.1, 0.0, 1.2], [0.0, 0.0, 0.0, 1.0]))^10.0", "tick^3", "seen(y)^[1, 2]",
+    "p([])^1", "p(-1, -2.5e3)^[-4, 5]", "p(a) ^ 1", "p(f(g(h)))^[1.5,2.5]", "p(a)^1.5e2",
+    "p('A')^1", 'p("s")^1', "p(a-b)^1", "p(0x1A)^1", "p(1e10)^1", "p([a|b])^1", "p(0'a)^1",
+]
+
+
+@pytest.mark.parametrize("text", FAST_PATH_SAMPLES)
+def test_ingest_fast_path_reads_events_like_the_parser(text):
+    """ingest reads simple event lines without the full parser; it must store the same rows."""
+    import slr_sql
+    from slr_sql.cli import parse_event_line
+
+    rows = []
+    for add in (lambda kb: kb.add(text), lambda kb: kb.add_many([parse_event_line(text)])):
+        with slr_sql.open(clock=slr_sql.ManualClock(0.0)) as kb:
+            add(kb)
+            [(table,)] = kb.sql("SELECT table_name FROM slr_event_types")[1]
+            columns, data = kb.sql(f'SELECT * FROM "{table}"')
+            rows.append([{c: v for c, v in zip(columns, row) if c not in ("seq", "arrival")} for row in data])
+    assert rows[0] == rows[1]
+    assert [type(v) for v in rows[0][0].values()] == [type(v) for v in rows[1][0].values()]
