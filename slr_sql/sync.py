@@ -1,0 +1,864 @@
+"""Synchronized queries over asynchronous events (SPEC §3; the SLR paper, "Synchronizing
+Queries over Asynchronous Events"). See docs/synchronization.md.
+
+Three parts:
+
+* :class:`Completeness` — per event type p/N: the max delay (declared with
+  ``:- max_delay(p/N, D)``, else learned: the largest ``arrival − end`` seen, persisted),
+  completeness marks (``fullyUpdated(p/N)^t`` / ``fullyUpdated(p)^t`` events and
+  ``kb.mark_complete``, persisted), and for ``:- in_order(p/N)`` types the latest end time
+  received. The history of p/N is complete up to z when ``z + max_delay < now`` (the clock has
+  *passed* z + max_delay), or a mark t ≥ z exists, or (in_order) an event with end > z arrived.
+* :class:`PendingQuery` — a :class:`concurrent.futures.Future` with an id, the goal, its time
+  ``at``, what it waits for now (``waiting_for``) and what it waited for (``waits``).
+* :class:`Synchronizer` — runs pending queries: first the static goal-set condition (every
+  event type reachable from the goal complete up to z, :func:`slr_sql.analysis.goal_set`), then
+  an evaluation with the machine hooks ``on_prev``/``on_next`` that stop it with
+  :class:`_MustWait` at the first prev/next whose history is not complete yet. A stopped query
+  is *parked* on that one condition (type, time) and re-evaluated from scratch when it holds.
+
+Wake-ups: parked queries are indexed per event type in a heap ordered by the time they need;
+an arrival (in_order types) or a mark pops exactly the entries it completes. Time-driven
+completeness (z + max_delay) goes through one heap of deadlines: with a ManualClock or
+StreamClock the clock's move listener serves it synchronously; with a WallClock one timer
+thread sleeps on a Condition until the earliest deadline (or a query timeout). Nothing polls.
+Evaluations run on a small thread pool; a query occupies a worker only while it is evaluated,
+never while it waits, so one waiting query never delays another.
+"""
+from __future__ import annotations
+
+import heapq
+import itertools
+import math
+import threading
+import time
+from concurrent.futures import Future, InvalidStateError, ThreadPoolExecutor
+from typing import Any, Callable, Iterable
+
+from .analysis import GoalSet, goal_set
+from .clocks import ManualClock, StreamClock
+from .errors import EventRejected, SLRError, SLRTimeout
+from .terms import Atom, Struct, Var, deref
+
+__all__ = ["Completeness", "PendingQuery", "Wait", "Synchronizer", "attach", "parse_type"]
+
+_INF = math.inf
+MARK_NAME = "fullyUpdated"
+
+
+def _fmt(t: float) -> str:
+    if t == _INF:
+        return "inf"
+    if t == -_INF:
+        return "-inf"
+    return f"{t:.6g}"
+
+
+def type_text(key: tuple[str, int]) -> str:
+    return f"{key[0]}/{key[1]}"
+
+
+def parse_type(spec: Any) -> tuple[str, int | None]:
+    """``"seg/2"`` -> ("seg", 2); ``"seg"`` -> ("seg", None) (every arity); also ``(name, n)``
+    tuples and the terms ``seg/2`` / ``seg``.
+
+    >>> parse_type("seg/2"), parse_type("seg"), parse_type(("tf", 3))
+    (('seg', 2), ('seg', None), ('tf', 3))
+    """
+    if isinstance(spec, tuple) and len(spec) == 2:
+        return str(spec[0]), (None if spec[1] is None else int(spec[1]))
+    t = deref(spec)
+    if type(t) is Struct and t.name == "/" and len(t.args) == 2:
+        name, n = deref(t.args[0]), deref(t.args[1])
+        if type(name) is Atom and type(n) is int and n >= 0:
+            return str(name), n
+    elif isinstance(t, str) and type(t) is not Var:
+        text = str(t)
+        name, sep, n = text.rpartition("/")
+        if sep and name and n.isdigit():
+            return name, int(n)
+        if text and "/" not in text:
+            return text, None
+    raise SLRError(f"expected an event type p/N or p, not {spec}")
+
+
+class _MustWait(Exception):
+    """Raised by the machine hooks: the history of ``key`` is not complete up to ``time``."""
+
+    def __init__(self, key: tuple[str, int], time: float, reason: str, kind: str = "complete",
+                 seen: int = 0):
+        self.key = key
+        self.time = time
+        self.reason = reason
+        self.kind = kind    # "complete", or "arrival": in_order next, any new event may do
+        self.seen = seen    # the type's arrival counter when the store was checked
+
+
+class Wait:
+    """One condition a query waited for: event type ``type`` complete up to ``time``."""
+
+    __slots__ = ("key", "time", "reason", "kind", "since", "since_wall", "released_at",
+                 "released_wall", "released_by")
+
+    def __init__(self, key: tuple[str, int], time: float, reason: str, since: float,
+                 kind: str = "complete"):
+        self.key = key
+        self.time = time
+        self.reason = reason
+        self.kind = kind
+        self.since = since                 # clock time when the wait began
+        self.since_wall = time_mono()      # time.monotonic() then
+        self.released_at: float | None = None
+        self.released_wall: float | None = None
+        self.released_by: str | None = None
+
+    @property
+    def type(self) -> str:
+        return type_text(self.key)
+
+    def same(self, other: "Wait") -> bool:
+        return (self.key, self.time, self.reason) == (other.key, other.time, other.reason)
+
+    def waited(self) -> float:
+        """Seconds of clock time waited (until now if still waiting)."""
+        return (self.released_at if self.released_at is not None else _now_of(self)) - self.since
+
+    def __str__(self) -> str:
+        what = f"{self.type} complete up to {_fmt(self.time)}"
+        if self.kind == "arrival":
+            what += " (or a matching in-order event)"
+        return f"{what} [{self.reason}]"
+
+    def __repr__(self) -> str:
+        return f"Wait({self.type}, {_fmt(self.time)}, {self.reason!r})"
+
+
+def time_mono() -> float:
+    return time.monotonic()
+
+
+def _now_of(w: Wait) -> float:  # pragma: no cover - only for a still-waiting Wait
+    return w.since + (time.monotonic() - w.since_wall)
+
+
+class PendingQuery(Future):
+    """A synchronized query ⟨goal, at⟩: a Future whose result is the answer list (as
+    ``kb.query`` gives it) once the query is answerable.
+
+    ``id``, ``goal``, ``at``; ``waiting_for`` — the conditions it waits for now (empty while it
+    runs or once done); ``waits`` — every condition it waited for, with when and why it was
+    released; ``goal_set`` — the event types of the static condition; ``evaluations`` — how
+    many times it was (re-)evaluated; ``explain()`` — all that as text.
+    """
+
+    def __init__(self, sync: "Synchronizer", id: str, goal: str, at: float,
+                 args: dict | None):
+        super().__init__()
+        self.id = id
+        self.goal = goal
+        self.at = at
+        self.args = args
+        self.goal_set: GoalSet | None = None
+        self.waiting_for: list[Wait] = []
+        self.waits: list[Wait] = []
+        self.evaluations = 0
+        self.submitted_at = sync.clock.now()
+        self.submitted_wall = time.monotonic()
+        self.answered_at: float | None = None
+        self.answered_wall: float | None = None
+        self._sync = sync
+        self._gen = 0
+        self._plan: Any = None
+        self._deadline: float | None = None   # monotonic deadline of timeout=
+
+    def __repr__(self) -> str:
+        state = "answered" if self.done() else (
+            "waiting for " + ", ".join(str(w) for w in self.waiting_for) if self.waiting_for
+            else "running")
+        return f"<PendingQuery {self.id!r} {self.goal!r} at={_fmt(self.at)}: {state}>"
+
+    def explain(self) -> str:
+        """What the query waited for, how long (clock seconds) and what released it.
+
+        One line per condition, e.g. ``waited 0.7 s for seg/2 complete up to 14 [goal set];
+        released by fullyUpdated(seg/2)^14``.
+        """
+        lines = []
+        for w in self.waits:
+            if w.released_at is None:
+                lines.append(f"waiting {self._sync._clock_span(w)} for {w}")
+            else:
+                lines.append(f"waited {_fmt(w.released_at - w.since)} s for {w}; released by "
+                             f"{w.released_by}")
+        if not lines:
+            lines.append(f"no wait: every event type it needs was complete up to "
+                         f"{_fmt(self.at)} when it was submitted")
+        if self.answered_at is not None:
+            lines.append(f"answered at clock {_fmt(self.answered_at)} "
+                         f"({_fmt(self.answered_at - self.submitted_at)} s after submission, "
+                         f"{self.evaluations} evaluation{'s' if self.evaluations != 1 else ''})")
+        return "\n".join(lines)
+
+    def timeout_message(self, timeout: float | None) -> str:
+        """The SLRTimeout text: which types were not complete, and their horizons."""
+        sync = self._sync
+        now = sync.clock.now()
+        waits = self.waiting_for or [w for w in self.waits if w.released_at is None]
+        parts = []
+        for w in waits:
+            parts.append(f"{w.type} ({w.reason}) would require its history up to "
+                         f"{_fmt(w.time)}, but it is complete only up to "
+                         f"{_fmt(sync.tracker.horizon(w.key, now))} "
+                         f"({sync.tracker.describe(w.key, now)})")
+        what = "; ".join(parts) if parts else "it was still being evaluated"
+        after = f" within {timeout:g} s" if timeout is not None else ""
+        return (f"synchronized query {self.id!r} ({self.goal} at {_fmt(self.at)}) was not "
+                f"answerable{after}: {what}")
+
+
+class Completeness:
+    """Per event type: max delay (declared or learned), marks, in-order latest end.
+
+    State persisted in ``slr_meta``: ``sync/learned/<name>/<n>`` (seconds),
+    ``sync/mark/<name>/<n>`` and ``sync/mark/<name>`` (time; the latter for
+    ``fullyUpdated(p)`` = every arity of p), each mark with its source in ``sync/marksrc/...``.
+    """
+
+    def __init__(self, store: Any, clock: Any, decls: Callable[[], Any]):
+        self.store = store
+        self.clock = clock
+        self._decls = decls
+        self.learned: dict[tuple[str, int], float] = {}
+        self.marks: dict[tuple[str, int], float] = {}
+        self.name_marks: dict[str, float] = {}
+        self.mark_src: dict[Any, str] = {}
+        self.max_end: dict[tuple[str, int], float] = {}
+        self.arrivals: dict[tuple[str, int], int] = {}
+        self.load()
+
+    def load(self) -> None:
+        """(Re)read learned delays and marks from the store."""
+        for k, v in self.store.meta_items("sync/").items():
+            parts = k.split("/")
+            try:
+                if parts[1] == "learned" and len(parts) >= 4:
+                    self.learned[("/".join(parts[2:-1]), int(parts[-1]))] = float(v)
+                elif parts[1] == "mark":
+                    key = self._key_of(parts[2:])
+                    if isinstance(key, tuple):
+                        self.marks[key] = max(self.marks.get(key, -_INF), float(v))
+                    else:
+                        self.name_marks[key] = max(self.name_marks.get(key, -_INF), float(v))
+                elif parts[1] == "marksrc":
+                    self.mark_src[self._key_of(parts[2:])] = str(v)
+            except (ValueError, IndexError):
+                continue
+
+    @staticmethod
+    def _key_of(parts: list[str]) -> Any:
+        # sync/mark/<name>/<n> (name may contain '/': the last part is the arity) or sync/mark/<name>!
+        if parts and parts[-1] == "*":
+            return "/".join(parts[:-1])
+        return ("/".join(parts[:-1]), int(parts[-1]))
+
+    # -- reading -----------------------------------------------------------------------------
+    def declared_delay(self, key: tuple[str, int]) -> float | None:
+        d = self._decls().max_delay.get(key)
+        if d is None or d == "learn":
+            return None
+        return float(d)
+
+    def delay(self, key: tuple[str, int]) -> float:
+        """The max delay used for ``key``: declared, else learned (0 before any event)."""
+        d = self._decls().max_delay.get(key)
+        if d is not None and d != "learn":
+            return float(d)
+        return self.learned.get(key, 0.0)
+
+    def mark(self, key: tuple[str, int]) -> float:
+        return max(self.marks.get(key, -_INF), self.name_marks.get(key[0], -_INF))
+
+    def in_order(self, key: tuple[str, int]) -> bool:
+        return key in self._decls().in_order
+
+    def latest_end(self, key: tuple[str, int]) -> float:
+        e = self.max_end.get(key)
+        if e is None:
+            e = self.store.max_end(*key)
+            e = self.max_end[key] = -_INF if e is None else float(e)
+        return e
+
+    def complete(self, key: tuple[str, int], z: float, now: float | None = None) -> bool:
+        """Is the history of ``key`` complete up to ``z``?"""
+        if z <= self.mark(key):
+            return True
+        if now is None:
+            now = self.clock.now()
+        if z + self.delay(key) < now:
+            return True
+        return self.in_order(key) and z < self.latest_end(key)
+
+    def horizon(self, key: tuple[str, int], now: float | None = None) -> float:
+        """The time up to which ``key`` is complete now: max(now − max_delay, latest mark,
+        and for in_order types the latest end received) — strictly below it for the first
+        and last, up to and including it for a mark."""
+        if now is None:
+            now = self.clock.now()
+        h = max(now - self.delay(key), self.mark(key))
+        if self.in_order(key):
+            h = max(h, self.latest_end(key))
+        return h
+
+    def deadline(self, key: tuple[str, int], z: float) -> float:
+        """The clock time the clock must pass for ``key`` to be complete up to ``z``."""
+        return z + self.delay(key)
+
+    def describe(self, key: tuple[str, int], now: float | None = None) -> str:
+        if now is None:
+            now = self.clock.now()
+        dd = self.declared_delay(key)
+        delay = (f"max_delay {_fmt(dd)} s declared" if dd is not None
+                 else f"max_delay {_fmt(self.learned.get(key, 0.0))} s learned")
+        m = self.mark(key)
+        mark = (f"latest mark {_fmt(m)} from {self.mark_src.get(key) or self.mark_src.get(key[0], 'a mark')}"
+                if m > -_INF else f"no {MARK_NAME}({type_text(key)}) mark yet")
+        parts = [f"now {_fmt(now)}", delay, mark]
+        if self.in_order(key):
+            e = self.latest_end(key)
+            parts.append(f"in order, latest end {_fmt(e)}" if e > -_INF else "in order, no event yet")
+        return "; ".join(parts)
+
+    def why(self, key: tuple[str, int], z: float, now: float) -> str:
+        """Why ``key`` is complete up to ``z`` (for explanations)."""
+        if z <= self.mark(key):
+            src = self.mark_src.get(key) if self.marks.get(key, -_INF) >= z else None
+            return src or self.mark_src.get(key[0]) or f"a mark >= {_fmt(z)}"
+        if z + self.delay(key) < now:
+            return (f"the clock passing {_fmt(z)} + max_delay {_fmt(self.delay(key))} "
+                    f"(now {_fmt(now)})")
+        if self.in_order(key) and z < self.latest_end(key):
+            return f"an in-order {type_text(key)} event at {_fmt(self.latest_end(key))} > {_fmt(z)}"
+        return "?"
+
+    # -- updating (the Synchronizer holds its lock) ------------------------------------------
+    def set_mark(self, key: Any, t: float, source: str) -> bool:
+        """Record a mark (``key`` a (name, n) tuple or a bare name for every arity)."""
+        if isinstance(key, tuple):
+            if t <= self.marks.get(key, -_INF):
+                return False
+            self.marks[key] = t
+            mk = f"{key[0]}/{key[1]}"
+        else:
+            if t <= self.name_marks.get(key, -_INF):
+                return False
+            self.name_marks[key] = t
+            mk = f"{key}/*"
+        self.mark_src[key] = source
+        with self.store.transaction():
+            self.store.meta_set(f"sync/mark/{mk}", t)
+            self.store.meta_set(f"sync/marksrc/{mk}", source)
+        return True
+
+    def observe(self, events: list, arrival: float) -> set:
+        """Learn delays from stored ``(name, args, start, end)`` events; returns the in_order
+        types that received events (their latest end / arrival counter moved)."""
+        learned = self.learned
+        in_order = self._decls().in_order
+        grew: dict[tuple[str, int], float] = {}
+        moved: set = set()
+        last_key = None
+        best = -_INF
+        for ev in events:
+            key = (ev[0], len(ev[1]))
+            end = ev[3]
+            if key != last_key:
+                if last_key is not None and best > learned.get(last_key, 0.0):
+                    if best > grew.get(last_key, 0.0):
+                        grew[last_key] = best
+                last_key = key
+                best = -_INF
+            d = arrival - end
+            if d > best:
+                best = d
+            if in_order and key in in_order:
+                if end > self.latest_end(key):
+                    self.max_end[key] = end
+                moved.add(key)
+        if last_key is not None and best > learned.get(last_key, 0.0) \
+                and best > grew.get(last_key, 0.0):
+            grew[last_key] = best
+        if grew:
+            learned.update(grew)
+            with self.store.transaction():
+                for key, d in grew.items():
+                    self.store.meta_set(f"sync/learned/{key[0]}/{key[1]}", d)
+        for key in moved:
+            self.arrivals[key] = self.arrivals.get(key, 0) + 1
+        return moved
+
+
+class Synchronizer:
+    """Pending synchronized queries of one knowledge base (created by :func:`attach`)."""
+
+    def __init__(self, kb: Any, workers: int = 4):
+        self.kb = kb
+        self.clock = kb.clock
+        self.store = kb.store
+        self.lock = threading.RLock()
+        self.cond = threading.Condition(self.lock)
+        self.tracker = Completeness(kb.store, kb.clock, lambda: kb.declarations)
+        self.workers = workers
+        self._heaps: dict[tuple[str, int], list] = {}       # key -> [(time, seq, q, gen)]
+        self._arrival_waits: dict[tuple[str, int], list] = {}  # key -> [(q, gen)]
+        self._timers: list = []      # [(clock deadline, seq, key)]
+        self._timeouts: list = []    # [(monotonic deadline, seq, q)]
+        self._queries: dict[str, PendingQuery] = {}
+        self._seq = itertools.count()
+        self._ids = itertools.count(1)
+        self._executor: ThreadPoolExecutor | None = None
+        self._thread: threading.Thread | None = None
+        self._worker_threads: set = set()
+        self._closed = False
+        self._inflight = 0
+        # clocks that tell when they move serve time-driven wake-ups from their listener
+        self._clock_driven = isinstance(self.clock, (ManualClock, StreamClock))
+        if hasattr(self.clock, "subscribe"):
+            self.clock.subscribe(self._on_clock)
+
+    # -- public operations (KnowledgeBase delegates here) ----------------------------------------
+    def submit(self, goal: str, at: float | None = None, id: str | None = None,
+               args: dict | None = None, timeout: float | None = None,
+               callback: Callable[[PendingQuery], Any] | None = None) -> PendingQuery:
+        if self._closed:
+            raise SLRError("the knowledge base is closed")
+        plan = self.kb._plan(goal, tuple(args) if args else ())  # syntax errors raise here
+        if at is None:
+            at = float(self.clock.now())
+        at = float(at)
+        with self.lock:
+            if id is None:
+                id = f"q{next(self._ids)}"
+                while id in self._queries:
+                    id = f"q{next(self._ids)}"
+            elif id in self._queries:
+                raise SLRError(f"a query with id {id!r} is already pending")
+            q = PendingQuery(self, str(id), goal, at, args)
+            q._plan = plan
+            self._queries[q.id] = q
+            if timeout is not None:
+                q._deadline = time.monotonic() + float(timeout)
+                q._timeout = float(timeout)
+                heapq.heappush(self._timeouts, (q._deadline, next(self._seq), q))
+                self._ensure_thread()
+                self.cond.notify_all()
+        q.add_done_callback(self._forget)
+        if callback is not None:
+            q.add_done_callback(callback)
+        self._schedule(q)
+        return q
+
+    def pending(self) -> list[PendingQuery]:
+        with self.lock:
+            return [q for q in self._queries.values() if not q.done()]
+
+    def mark_complete(self, spec: Any, t: float, source: str | None = None) -> None:
+        name, n = parse_type(spec)
+        t = float(t)
+        if math.isnan(t):
+            raise SLRError("mark_complete: the time must be a number")
+        key: Any = name if n is None else (name, n)
+        if source is None:
+            source = f"kb.mark_complete({type_text(key) if n is not None else name!r}, {_fmt(t)})"
+        self._apply_marks([(key, t, source)])
+
+    def complete_until(self, spec: Any) -> float:
+        name, n = parse_type(spec)
+        if n is None:
+            arities = sorted({a for (nm, a) in self._known_types() if nm == name})
+            if len(arities) != 1:
+                raise SLRError(f"complete_until: say which arity of {name} "
+                               f"({', '.join(f'{name}/{a}' for a in arities) or 'none known'})")
+            n = arities[0]
+        return self.tracker.horizon((name, n))
+
+    def drain(self, timeout: float | None = None) -> bool:
+        """Wait until no evaluation is queued or running (tests). True if idle."""
+        end = None if timeout is None else time.monotonic() + timeout
+        with self.cond:
+            while self._inflight:
+                left = None if end is None else end - time.monotonic()
+                if left is not None and left <= 0:
+                    return False
+                self.cond.wait(left)
+        return True
+
+    def close(self) -> None:
+        with self.cond:
+            if self._closed:
+                return
+            self._closed = True
+            queries = list(self._queries.values())
+            self.cond.notify_all()
+        if hasattr(self.clock, "unsubscribe"):
+            self.clock.unsubscribe(self._on_clock)
+        for q in queries:
+            if not q.done():
+                self._set_exception(q, SLRError(f"the knowledge base was closed while query "
+                                                f"{q.id!r} was waiting"))
+        in_worker = threading.current_thread() in self._worker_threads
+        if self._executor is not None:
+            self._executor.shutdown(wait=not in_worker)
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5.0)
+
+    # -- events and marks (called by KnowledgeBase._add) ---------------------------------------
+    def take_marks(self, events: list, atomic: bool) -> tuple[list, list, list]:
+        """Split ``fullyUpdated(p/N)^t`` / ``fullyUpdated(p)^t`` out of an add batch:
+        returns (events, marks, rejected)."""
+        if not any(ev[0] == MARK_NAME for ev in events if isinstance(ev, tuple) and ev):
+            return events, [], []
+        keep, marks, errors = [], [], []
+        for ev in events:
+            try:
+                name, args, start, end = ev
+            except (TypeError, ValueError):
+                keep.append(ev)
+                continue
+            if name != MARK_NAME or len(args) != 1:
+                keep.append(ev)
+                continue
+            try:
+                tname, n = parse_type(args[0])
+                t = float(end)
+                if math.isnan(t) or math.isinf(t):
+                    raise SLRError("the time must be finite")
+            except (SLRError, TypeError, ValueError) as exc:
+                err = EventRejected(f"{MARK_NAME}({args[0]})^{end}: {exc} (a completeness "
+                                    f"mark is written fullyUpdated(p/N)^T or fullyUpdated(p)^T)")
+                err.event = ev
+                if atomic:
+                    raise err from None
+                errors.append(err)
+                continue
+            key: Any = tname if n is None else (tname, n)
+            src = f"{MARK_NAME}({tname if n is None else type_text(key)})^{_fmt(t)}"
+            marks.append((key, t, src))
+        return keep, marks, errors
+
+    def apply_marks(self, marks: list) -> None:
+        if marks:
+            self._apply_marks(marks)
+
+    def _apply_marks(self, marks: list) -> None:
+        released: list = []
+        with self.lock:
+            for key, t, source in marks:
+                if not self.tracker.set_mark(key, t, source):
+                    continue
+                keys = [key] if isinstance(key, tuple) else \
+                    [k for k in list(self._heaps) if k[0] == key]
+                for k in keys:
+                    released += self._release(k)
+        self._schedule_all(released)
+
+    def on_add(self, stored: list) -> None:
+        """Add listener: learn delays, move in-order horizons, release waiting queries."""
+        if not stored:
+            return
+        clock = self.clock
+        if isinstance(clock, StreamClock):
+            clock.observe_event(max(ev[3] for ev in stored))
+        arrival = float(clock.now())
+        released: list = []
+        with self.lock:
+            moved = self.tracker.observe(stored, arrival)
+            for key in moved:
+                released += self._release(key, arrival=True)
+        self._schedule_all(released)
+
+    # -- internals ----------------------------------------------------------------------------
+    def _known_types(self) -> set:
+        return set(self.store.event_types()) | set(self.kb.declarations.event_types)
+
+    def _clock_span(self, w: Wait) -> str:
+        return f"{_fmt(self.clock.now() - w.since)} s"
+
+    def _forget(self, q: PendingQuery) -> None:
+        with self.lock:
+            if self._queries.get(q.id) is q:
+                del self._queries[q.id]
+            if q.answered_at is None:
+                q.answered_at = self.clock.now()
+                q.answered_wall = time.monotonic()
+
+    def _ensure_executor(self) -> ThreadPoolExecutor:
+        if self._executor is None:
+            self._executor = ThreadPoolExecutor(max_workers=self.workers,
+                                                thread_name_prefix="slr-sync",
+                                                initializer=self._register_worker)
+        return self._executor
+
+    def _register_worker(self) -> None:
+        self._worker_threads.add(threading.current_thread())
+
+    def _ensure_thread(self) -> None:
+        if self._thread is None and not self._closed:
+            self._thread = threading.Thread(target=self._timer_loop, name="slr-sync-timer",
+                                            daemon=True)
+            self._thread.start()
+
+    def _schedule(self, q: PendingQuery) -> None:
+        with self.lock:
+            if self._closed:
+                return
+            self._inflight += 1
+            executor = self._ensure_executor()
+        try:
+            executor.submit(self._run, q)
+        except RuntimeError:  # shut down meanwhile
+            with self.cond:
+                self._inflight -= 1
+                self.cond.notify_all()
+
+    def _schedule_all(self, queries: Iterable[PendingQuery]) -> None:
+        for q in queries:
+            self._schedule(q)
+
+    def _run(self, q: PendingQuery) -> None:
+        try:
+            if not q.done() and not self._closed:
+                self._attempt(q)
+        except BaseException as exc:  # an evaluation error is the query's answer
+            self._set_exception(q, exc)
+        finally:
+            with self.cond:
+                self._inflight -= 1
+                if not self._inflight:
+                    self.cond.notify_all()
+
+    def _set_exception(self, q: PendingQuery, exc: BaseException) -> None:
+        try:
+            q.set_exception(exc)
+        except InvalidStateError:
+            pass
+
+    def _release_waits(self, q: PendingQuery, now: float) -> None:
+        """Mark the current waits whose condition holds now as released (explanations)."""
+        tracker = self.tracker
+        for w in q.waiting_for:
+            if w.released_at is not None:
+                continue
+            if tracker.complete(w.key, w.time, now):
+                why = tracker.why(w.key, w.time, now)
+            elif w.kind == "arrival" and tracker.arrivals.get(w.key, 0) != getattr(w, "_seen", 0):
+                why = f"the arrival of an in-order {w.type} event inside the interval"
+            else:
+                continue
+            w.released_at = now
+            w.released_wall = time.monotonic()
+            w.released_by = why
+
+    def _attempt(self, q: PendingQuery) -> None:
+        from .kb import _answer
+
+        kb = self.kb
+        tracker = self.tracker
+        now = self.clock.now()
+        self._release_waits(q, now)
+        plan = q._plan
+        term, frame = kb._instantiate(plan, q.args)
+        gs = goal_set(kb.program, term, known_types=self._known_types())
+        q.goal_set = gs
+        z = q.at
+        missing = [k for k in sorted(gs) if not tracker.complete(k, z, now)]
+        if missing:
+            waits = [Wait(k, z, "goal set", now) for k in missing]
+            self._park(q, waits, missing[0], z, "complete", 0)
+            return
+        remaining = None
+        if q._deadline is not None:
+            remaining = max(q._deadline - time.monotonic(), 0.001)
+        m = kb.engine.machine(at=z, timeout=remaining)
+        m.synchronized = True  # for engines that bypass the hooks (SQL): do not
+        m.on_prev = self._check_prev
+        m.on_next = lambda name, n, lo, hi, args, s=None, e=None: \
+            self._check_next(m, name, n, lo, hi, args, s, e)
+        answers = []
+        q.evaluations += 1
+        try:
+            for _ in m.solve(term):
+                answers.append(_answer(plan.names, frame))
+        except _MustWait as w:
+            wait = Wait(w.key, w.time, w.reason, self.clock.now(), w.kind)
+            wait._seen = w.seen if w.kind == "arrival" else 0  # type: ignore[attr-defined]
+            self._park(q, [wait], w.key, w.time, w.kind, w.seen)
+            return
+        with self.lock:
+            q.waiting_for = []
+            q.answered_at = self.clock.now()
+            q.answered_wall = time.monotonic()
+        try:
+            q.set_result(answers)
+        except InvalidStateError:
+            pass
+
+    def _check_prev(self, name: str, n: int, t: float) -> None:
+        key = (name, n)
+        if not self.tracker.complete(key, t):
+            raise _MustWait(key, t, f"prev({name}/{n}) up to {_fmt(t)}")
+
+    def _check_next(self, m: Any, name: str, n: int, lo: float, hi: float, args: tuple,
+                    s: Any, e: Any) -> None:
+        key = (name, n)
+        tracker = self.tracker
+        if tracker.complete(key, hi):
+            return
+        reason = f"next({name}/{n}) in [{_fmt(lo)}, {_fmt(hi)}]"
+        if tracker.in_order(key):
+            seen = tracker.arrivals.get(key, 0)
+            if self._stored_match(m, name, n, lo, hi, args, s, e):
+                return
+            raise _MustWait(key, hi, reason, "arrival", seen)
+        raise _MustWait(key, hi, reason)
+
+    def _stored_match(self, m: Any, name: str, n: int, lo: float, hi: float, args: tuple,
+                      s: Any, e: Any) -> bool:
+        from .builtins import _matching
+        from .engine import _bound_args
+
+        pattern = tuple(args) + (Var() if s is None else s, Var() if e is None else e)
+        rows = self.store.next_candidates(name, n, _bound_args(args), lo, hi)
+        return next(_matching(m, pattern, rows), None) is not None
+
+    def _park(self, q: PendingQuery, waits: list[Wait], key: tuple[str, int], t: float,
+              kind: str, seen: int) -> None:
+        """Index ``q`` on (key, t) — or re-run it at once if that condition holds already."""
+        rerun = False
+        with self.cond:
+            if q.done() or self._closed:
+                return
+            # keep the Wait objects of conditions that are still the same (their start time)
+            old = [w for w in q.waiting_for if w.released_at is None]
+            merged = []
+            for w in waits:
+                same = next((o for o in old if o.same(w)), None)
+                if same is not None:
+                    merged.append(same)
+                else:
+                    merged.append(w)
+                    q.waits.append(w)
+            q.waiting_for = merged
+            now = self.clock.now()
+            tracker = self.tracker
+            if tracker.complete(key, t, now) or \
+                    (kind == "arrival" and tracker.arrivals.get(key, 0) != seen):
+                rerun = True
+            else:
+                q._gen += 1
+                gen = q._gen
+                heapq.heappush(self._heaps.setdefault(key, []), (t, next(self._seq), q, gen))
+                if kind == "arrival":
+                    self._arrival_waits.setdefault(key, []).append((q, gen))
+                self._push_timer(key, tracker.deadline(key, t))
+        if rerun:
+            self._schedule(q)
+
+    def _push_timer(self, key: tuple[str, int], deadline: float) -> None:
+        if deadline == _INF or math.isnan(deadline):
+            return
+        timers = self._timers
+        first = not timers or deadline < timers[0][0]
+        heapq.heappush(timers, (deadline, next(self._seq), key))
+        if not self._clock_driven and first:
+            self._ensure_thread()
+            self.cond.notify_all()
+
+    def _release(self, key: tuple[str, int], arrival: bool = False) -> list:
+        """Pop the queries parked on ``key`` whose condition holds now (lock held)."""
+        out = []
+        now = self.clock.now()
+        tracker = self.tracker
+        heap = self._heaps.get(key)
+        if heap:
+            while heap:
+                t, _, q, gen = heap[0]
+                if q._gen != gen or q.done():
+                    heapq.heappop(heap)
+                    continue
+                if not tracker.complete(key, t, now):
+                    break
+                heapq.heappop(heap)
+                q._gen += 1
+                out.append(q)
+            if heap:
+                self._push_timer(key, tracker.deadline(key, heap[0][0]))
+            else:
+                del self._heaps[key]
+        if arrival:
+            for q, gen in self._arrival_waits.pop(key, ()):
+                if q._gen == gen and not q.done():
+                    q._gen += 1
+                    out.append(q)
+        return out
+
+    def _fire_timers(self, now: float) -> list:
+        """Release what the clock passing ``now`` completes (lock held)."""
+        timers = self._timers
+        keys = set()
+        while timers and timers[0][0] < now:
+            keys.add(heapq.heappop(timers)[2])
+        out = []
+        for key in keys:
+            out += self._release(key)
+        return out
+
+    def _on_clock(self, t: float) -> None:
+        """Clock listener (ManualClock / StreamClock): serve time-driven completeness."""
+        if self._closed:
+            return
+        with self.lock:
+            released = self._fire_timers(float(t))
+        self._schedule_all(released)
+
+    def _expire(self, mono: float) -> list:
+        out = []
+        timeouts = self._timeouts
+        while timeouts and timeouts[0][0] <= mono:
+            _, _, q = heapq.heappop(timeouts)
+            if not q.done():
+                q._gen += 1
+                out.append(q)
+        return out
+
+    def _timer_loop(self) -> None:
+        """One thread: sleeps until the earliest clock deadline (WallClock) or query timeout."""
+        with self.cond:
+            while not self._closed:
+                released: list = []
+                if not self._clock_driven:
+                    released = self._fire_timers(float(self.clock.now()))
+                expired = self._expire(time.monotonic())
+                wait = None
+                if not self._clock_driven and self._timers:
+                    wait = max(self._timers[0][0] - self.clock.now(), 0.0) + 1e-4
+                if self._timeouts:
+                    w2 = max(self._timeouts[0][0] - time.monotonic(), 0.0) + 1e-4
+                    wait = w2 if wait is None else min(wait, w2)
+                if released or expired:
+                    self.cond.release()
+                    try:
+                        self._schedule_all(released)
+                        for q in expired:
+                            self._set_exception(q, SLRTimeout(
+                                q.timeout_message(getattr(q, "_timeout", None))))
+                    finally:
+                        self.cond.acquire()
+                    continue
+                self.cond.wait(wait)
+
+
+def attach(kb: Any) -> Synchronizer:
+    """Create the synchronizer of ``kb`` and hook it into its add path."""
+    sync = Synchronizer(kb)
+    kb.add_listeners.append(sync.on_add)
+    return sync
