@@ -240,11 +240,39 @@ class _Analyzer:
             return
         j, other = first
         if (path is None) != (other is None):
-            raise SLRError(f"buffer patterns cannot repeat the variable {v.name} both as a "
-                           "whole argument and inside a compound argument")
+            if path is None:
+                self.add((j,), self.mixed_equal(i, j, other))
+            else:
+                self.add((i,), self.mixed_equal(j, i, path))
+            return
         cols = tuple(sorted({i, j})) if path is not None else ()
         self.add(cols, f"{self.value(i, path)} = {self.value(j, other)} AND "
                        f"{self.vtype(i, path)} = {self.vtype(j, other)}")
+
+    def mixed_equal(self, i: int, j: int, path: str) -> str:
+        """Column i (a whole argument, top-level encoding) holds the same term as the JSON
+        value at ``path`` in column j (inside-JSON encoding): one case per kind of term."""
+        a = self.col(i)
+        b = self.col(j)
+        p = sql_literal(path)
+        tag = lambda key: sql_literal(path + _path_key(key))  # noqa: E731
+        first = f"substr({a}, 1, 1)"
+        quote = sql_literal('"')
+        atom = sql_literal('$."$atom"')
+        return (
+            f"(CASE typeof({a})"
+            f" WHEN 'integer' THEN json_type({b}, {p}) = 'integer' AND json_extract({b}, {p}) = {a}"
+            f" WHEN 'real' THEN json_type({b}, {p}) = 'real' AND json_extract({b}, {p}) = {a}"
+            f" WHEN 'text' THEN CASE"
+            f" WHEN {first} = {quote} AND json_valid({a}) THEN json_type({b}, {tag('$string')})"
+            f" = 'text' AND json_extract({b}, {tag('$string')}) = json_extract({a}, '$')"
+            f" WHEN {first} IN ('[', '{{') AND json_valid({a}) THEN CASE"
+            f" WHEN json_type({a}, {atom}) = 'text' THEN json_type({b}, {p}) = 'text' "
+            f"AND json_extract({b}, {p}) = json_extract({a}, {atom})"
+            f" ELSE json({a}) = ({b} -> {p}) END"
+            f" WHEN {first} IN ('[', '{{', {quote}) THEN 0"
+            f" ELSE json_type({b}, {p}) = 'text' AND json_extract({b}, {p}) = {a} END"
+            f" ELSE 0 END)")
 
     def finish(self) -> list[str]:
         """Group conditions by their JSON guards: ``CASE WHEN guards THEN conds ELSE 0 END``
@@ -620,7 +648,7 @@ class BufferManager:
             kind = "window"
         spec = BufferSpec(kind, compiled, amount, t1, t2, "runtime", "kb.add_buffer")
         with self.kb._load_lock, self.lock, self.store.transaction():
-            conflicts(self.program_specs() + self.active() + [spec])
+            conflicts(self.active() + [spec])
             return self.install(spec)
 
     def remove_runtime(self, buffer_id: int) -> None:
@@ -689,3 +717,42 @@ def stats(store: Any) -> dict[str, Any]:
     """Counters and sizes for ``slr stats``: space, rows per type, buffers (all, removed too)."""
     return {"space": store.space_stats(), "rows": store.table_rows(),
             "buffers": store.buffer_rows(active_only=False), "now": store.recorded_now()}
+
+
+def format_stats(store: Any, path: str = "") -> str:
+    """The text ``slr stats DB`` prints."""
+    data = stats(store)
+    space = data["space"]
+    total = space["file_bytes"] + space["wal_bytes"]
+    lines = [f"file {path}: {total} bytes ({total / 1048576:.2f} MiB) = "
+             f"{space['file_bytes']} bytes database + {space['wal_bytes']} bytes WAL; "
+             f"{space['page_count']} pages of {space['page_size']} bytes, "
+             f"{space['free_pages']} free"]
+    now = data["now"]
+    lines.append(f"buffer clock (now): {_num(now) if now > -math.inf else 'not recorded yet'}")
+    rows = data["rows"]
+    pruned_by_type: dict = {}
+    for b in data["buffers"]:
+        key = (b["type_name"], b["type_arity"])
+        pruned_by_type[key] = pruned_by_type.get(key, 0) + b["pruned"]
+    lines.append(f"events stored: {sum(rows.values())} now "
+                 f"(+ {sum(pruned_by_type.values())} pruned by buffers)")
+    for (name, arity), count in rows.items():
+        extra = pruned_by_type.get((name, arity), 0)
+        lines.append(f"  {name}/{arity}: {count} stored" + (f", {extra} pruned" if extra else ""))
+    buffers = data["buffers"]
+    lines.append(f"buffers: {sum(1 for b in buffers if b['removed_at'] is None)} active"
+                 f"; dropped late/outside: {sum(b['dropped'] for b in buffers)}"
+                 f"; pruned: {sum(b['pruned'] for b in buffers)}")
+    for b in buffers:
+        if b["kind"] == "window":
+            amount = f"[{_num(b['t1'])}, {_num(b['t2'])}]"
+        elif b["kind"] == "cBuffer":
+            amount = f"last {int(b['amount'])}"
+        else:
+            amount = f"{_num(b['amount'])}s"
+        state = "" if b["removed_at"] is None else " (removed)"
+        lines.append(f"  #{b['id']} {b['kind']} {b['pattern_text']} {amount} "
+                     f"[{b['source']}, {b['origin']}]{state}: "
+                     f"pruned {b['pruned']}, dropped {b['dropped']}")
+    return "\n".join(lines)

@@ -634,5 +634,20 @@ def shell(db: str) -> None:
                 break
 
 
+# ---------------------------------------------------------------------------------------------
+# stats (issue 4: event-history management)
+# ---------------------------------------------------------------------------------------------
+
+@main.command()
+@click.argument("db", type=click.Path(exists=True, dir_okay=False))
+def stats(db: str) -> None:
+    """Print the file size, events stored per type and each buffer's counters."""
+    from .buffers import format_stats
+    from .store import EventStore
+
+    with EventStore(db) as store:
+        click.echo(format_stats(store, db))
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()
