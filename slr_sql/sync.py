@@ -98,7 +98,7 @@ class Wait:
     """One condition a query waited for: event type ``type`` complete up to ``time``."""
 
     __slots__ = ("key", "time", "reason", "kind", "since", "since_wall", "released_at",
-                 "released_wall", "released_by")
+                 "released_wall", "released_by", "seen")
 
     def __init__(self, key: tuple[str, int], time: float, reason: str, since: float,
                  kind: str = "complete"):
@@ -111,6 +111,7 @@ class Wait:
         self.released_at: float | None = None
         self.released_wall: float | None = None
         self.released_by: str | None = None
+        self.seen = 0                      # kind "arrival": the type's arrival counter then
 
     @property
     def type(self) -> str:
@@ -650,7 +651,7 @@ class Synchronizer:
                 continue
             if tracker.complete(w.key, w.time, now):
                 why = tracker.why(w.key, w.time, now)
-            elif w.kind == "arrival" and tracker.arrivals.get(w.key, 0) != getattr(w, "_seen", 0):
+            elif w.kind == "arrival" and tracker.arrivals.get(w.key, 0) != w.seen:
                 why = f"the arrival of an in-order {w.type} event inside the interval"
             else:
                 continue
@@ -673,7 +674,7 @@ class Synchronizer:
         missing = [k for k in sorted(gs) if not tracker.complete(k, z, now)]
         if missing:
             waits = [Wait(k, z, "goal set", now) for k in missing]
-            self._park(q, waits, missing[0], z, "complete", 0)
+            self._park(q, waits, [(k, z, "complete", 0) for k in missing])
             return
         remaining = None
         if q._deadline is not None:
@@ -685,13 +686,15 @@ class Synchronizer:
             self._check_next(m, name, n, lo, hi, args, s, e)
         answers = []
         q.evaluations += 1
+        solving = m.solve(term)
         try:
-            for _ in m.solve(term):
+            for _ in solving:
                 answers.append(_answer(plan.names, frame))
         except _MustWait as w:
+            _close_machine(m, solving)
             wait = Wait(w.key, w.time, w.reason, self.clock.now(), w.kind)
-            wait._seen = w.seen if w.kind == "arrival" else 0  # type: ignore[attr-defined]
-            self._park(q, [wait], w.key, w.time, w.kind, w.seen)
+            wait.seen = w.seen
+            self._park(q, [wait], [(w.key, w.time, w.kind, w.seen)])
             return
         with self.lock:
             q.waiting_for = []
@@ -730,9 +733,9 @@ class Synchronizer:
         rows = self.store.next_candidates(name, n, _bound_args(args), lo, hi)
         return next(_matching(m, pattern, rows), None) is not None
 
-    def _park(self, q: PendingQuery, waits: list[Wait], key: tuple[str, int], t: float,
-              kind: str, seen: int) -> None:
-        """Index ``q`` on (key, t) — or re-run it at once if that condition holds already."""
+    def _park(self, q: PendingQuery, waits: list[Wait], conds: list[tuple]) -> None:
+        """Index ``q`` on each condition ``(key, t, kind, seen)`` — released when any of them
+        holds (it is then re-checked as a whole) — or re-run it at once if one holds already."""
         rerun = False
         with self.cond:
             if q.done() or self._closed:
@@ -750,16 +753,20 @@ class Synchronizer:
             q.waiting_for = merged
             now = self.clock.now()
             tracker = self.tracker
-            if tracker.complete(key, t, now) or \
-                    (kind == "arrival" and tracker.arrivals.get(key, 0) != seen):
-                rerun = True
-            else:
+            for key, t, kind, seen in conds:
+                if tracker.complete(key, t, now) or \
+                        (kind == "arrival" and tracker.arrivals.get(key, 0) != seen):
+                    rerun = True
+                    break
+            if not rerun:
                 q._gen += 1
                 gen = q._gen
-                heapq.heappush(self._heaps.setdefault(key, []), (t, next(self._seq), q, gen))
-                if kind == "arrival":
-                    self._arrival_waits.setdefault(key, []).append((q, gen))
-                self._push_timer(key, tracker.deadline(key, t))
+                for key, t, kind, seen in conds:
+                    heapq.heappush(self._heaps.setdefault(key, []),
+                                   (t, next(self._seq), q, gen))
+                    if kind == "arrival":
+                        self._arrival_waits.setdefault(key, []).append((q, gen))
+                    self._push_timer(key, tracker.deadline(key, t))
         if rerun:
             self._schedule(q)
 
@@ -855,6 +862,21 @@ class Synchronizer:
                         self.cond.acquire()
                     continue
                 self.cond.wait(wait)
+
+
+def _close_machine(m: Any, solving: Any) -> None:
+    """Close the generators an abandoned evaluation left on its choicepoints (they hold
+    store cursors) now, rather than whenever the garbage collector gets to them."""
+    from .engine import K_GEN
+
+    for cp in reversed(m.cps):
+        if cp[0] == K_GEN:
+            try:
+                cp[3].close()
+            except Exception:
+                pass
+    m.cps.clear()
+    solving.close()
 
 
 def attach(kb: Any) -> Synchronizer:
