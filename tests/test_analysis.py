@@ -1,0 +1,104 @@
+"""slr_sql.analysis: dependency graph, goal sets, meta-predicates, recursion."""
+from __future__ import annotations
+
+from slr_sql.analysis import Node, analyze, dependency_graph, goal_set, recursive_predicates, sccs
+from slr_sql.demo import CUPS_ON_TABLE1, ROBOT_PROGRAM
+from slr_sql.parser import parse_program
+from slr_sql.program import Program
+
+
+def program(text: str) -> Program:
+    p = Program()
+    for clause in parse_program(text):
+        if clause.head is not None:
+            p.add_clause(clause)
+    return p
+
+
+def test_goal_set_follows_rules_and_event_goals():
+    p = program("""
+        color(O, C)^T :- prev(obj(O, _, C)^_, T).
+        red(O) :- color(O, red)^3.
+        fresh(O) :- seg(O, _)^_, \\+ stale(O).
+        stale(O) :- old(O)^_.
+        unrelated :- tf(a, b, _)^_.
+    """)
+    assert goal_set(p, "red(X)") == {("color", 2), ("obj", 3)}
+    assert goal_set(p, "fresh(X)") == {("seg", 2), ("old", 1)}
+    assert goal_set(p, "findall(X, (red(X) ; fresh(X)), L)") == \
+        {("color", 2), ("obj", 3), ("seg", 2), ("old", 1)}
+    assert goal_set(p, "X = 1") == set()
+    assert not goal_set(p, "red(X)").unknown
+
+
+def test_prev_and_next_read_stored_events_only():
+    p = program("""
+        color(O, C)^T :- prev(obj(O, _, C)^_, T).
+        last_color(O, C, T) :- prev(color(O, C)^_, T).
+    """)
+    # prev over color/2 never calls the color rule, so obj/3 is not in the goal set
+    assert goal_set(p, "last_color(a, C, 3)") == {("color", 2)}
+    assert goal_set(p, "next(seg(O, P)^T, [1, 2])") == {("seg", 2)}
+
+
+def test_unknown_calls_give_every_known_type():
+    p = program("""
+        a(X) :- p(X)^_.
+        b(X) :- q(X)^_.
+        run(G) :- call(G).
+        any(E) :- prev(E, 3).
+    """)
+    g = goal_set(p, "G = a(1), call(G)", known_types=[("z", 9)])
+    assert g.unknown and {("p", 1), ("q", 1), ("z", 9)} <= set(g)
+    assert any("variable" in r for r in g.reasons)
+    # a meta-argument given at the call site is resolved
+    assert goal_set(p, "run(a(X))") == {("p", 1)}
+    assert not goal_set(p, "run(a(X))").unknown
+    assert goal_set(p, "any(p(_)^_)").unknown          # prev on a variable event
+
+
+def test_library_meta_predicates_are_resolved():
+    p = program("""
+        seen(X) :- s(X)^_.
+        ok(L) :- maplist(seen, L).
+        some(L, R) :- include(seen, L, R).
+        f(X, A0, A) :- w(X)^_, A is A0 + 1.
+        count(L, N) :- foldl(f, L, 0, N).
+    """)
+    a = analyze(p)
+    assert (0, 1) in a.meta[("maplist", 2)] and (0, 3) in a.meta[("foldl", 4)]
+    assert goal_set(p, "ok([1,2])") == {("s", 1)}
+    assert goal_set(p, "some([1], R)") == {("s", 1)}
+    assert goal_set(p, "count([1], N)") == {("w", 1)}
+    assert goal_set(p, "once(seen(1))") == {("s", 1)}
+
+
+def test_the_papers_cups_query():
+    p = program(ROBOT_PROGRAM)
+    g = goal_set(p, CUPS_ON_TABLE1.goal)
+    assert set(g) == {("obj", 3), ("seg", 2), ("tf", 3)} and not g.unknown
+
+
+def test_dependency_graph_and_recursion():
+    p = program("""
+        anc(X, Y) :- par(X, Y).
+        anc(X, Y) :- par(X, Z), anc(Z, Y).
+        par(a, b).
+        even(0).
+        even(N) :- N > 0, M is N - 1, odd(M).
+        odd(N) :- N > 0, M is N - 1, even(M).
+        walk(X)^T :- walk(X)^T0, T0 < T.
+        flat(X) :- par(X, _), member(X, [a]).
+    """)
+    edges = dependency_graph(p)
+    assert Node("pred", "par", 2) in edges[Node("pred", "anc", 2)]
+    rec = recursive_predicates(p)
+    assert rec == {Node("pred", "anc", 2), Node("pred", "even", 1), Node("pred", "odd", 1),
+                   Node("event", "walk", 1)}
+    assert Node("pred", "append", 3) in recursive_predicates(p, include_library=True)
+
+
+def test_sccs_orders_callees_first():
+    comps = sccs({"a": ["b"], "b": ["c", "a"], "c": ["c"], "d": []})
+    assert comps.index(["c"]) < next(i for i, c in enumerate(comps) if set(c) == {"a", "b"})
+    assert ["d"] in comps
