@@ -95,7 +95,7 @@ def test_encode_decode_are_inverse(term):
     assert same_term(decode(value), term)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(st.lists(terms, min_size=1, max_size=3))
 def test_terms_survive_the_database(tmp_path_factory, args):
     path = tmp_path_factory.mktemp("rt") / "rt.db"
@@ -238,20 +238,21 @@ def test_split_sql_script_keeps_trigger_bodies_whole():
 # ---------------------------------------------------------------- validation
 
 @pytest.mark.parametrize("event, message", [
-    (("seg", (Var("X"), 1), 2.0, 2.0),
-     "seg(X, 1)^2.0: event arguments must be ground (X is unbound)"),
+    (("seg", (Var("X"), 1), 2.0, 2.0), "^2.0: event arguments must be ground (X is unbound)"),
     (("seg", (Atom("a"), make_list([1.0, math.nan])), 2.0, 2.0), "must not contain NaN"),
     (("seg", (Atom("a"), 1), math.nan, 2.0), "event times must be finite"),
     (("seg", (Atom("a"), 1), 1.0, math.inf), "event times must be finite"),
-    (("seg", (Atom("a"), 1), 3.0, 2.0), "start time 3.0 is after end time 2.0"),
+    (("seg", (Atom("a"), 1), 3.0, 2.0), "^[3.0,2.0]: start time 3.0 is after end time 2.0"),
     (("seg", (Atom("a"), 1), "now", 2.0), "event times must be numbers"),
     (("seg", (Atom("a"), make_list([1], Var("T"))), 2.0, 2.0), "must be ground"),
     ((42, (1,), 1.0, 1.0), "event name must be an atom"),
 ])
 def test_invalid_events_are_rejected_with_a_message(store, event, message):
-    with pytest.raises(EventRejected, match=message.replace("(", r"\(").replace(")", r"\)")
-                       .replace("^", r"\^").replace("[", r"\[")):
+    with pytest.raises(EventRejected) as raised:
         store.add_event(*event)
+    assert message in str(raised.value)
+    if event[0] == "seg":  # the message starts with the event, as SLR text
+        assert str(raised.value).startswith("seg(")
     errors = store.add_events([event])
     assert len(errors) == 1 and message in str(errors[0])
     assert errors[0].index == 0 and errors[0].event == event
