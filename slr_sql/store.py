@@ -211,17 +211,17 @@ def _simple_format(term: Any) -> str:
                     tail = tail.ref
             inner = ",".join(items)
             return f"[{inner}]" if tail == "[]" else f"[{inner}|{_simple_format(tail)}]"
-        return f"{_simple_format(term.name)}({', '.join(_simple_format(a) for a in term.args)})"
+        return f"{_simple_format(term.name)}({','.join(_simple_format(a) for a in term.args)})"
     if isinstance(term, (list, tuple)):
         return "[" + ",".join(_simple_format(a) for a in term) + "]"
     return repr(term)
 
 
 def format_event(name: Any, args: Any, start: Any, end: Any) -> str:
-    """Event text for messages: ``seg(X, 1)^2.0`` or ``seg(a)^[1.0,2.0]``.
+    """Event text for messages: ``seg(X,1)^2.0`` or ``seg(a)^[1.0,2.0]``.
 
     >>> format_event("seg", (Atom("a"), 1), 2.0, 2.0)
-    'seg(a, 1)^2.0'
+    'seg(a,1)^2.0'
     """
     try:
         head = _simple_format(Atom(name)) if not args else _format_term(Struct(name, tuple(args)))
