@@ -18,6 +18,7 @@ This module also holds the answer formatting the CLI shares (:func:`value_text`,
 """
 from __future__ import annotations
 
+import concurrent.futures
 import math
 import re
 from dataclasses import dataclass, field
@@ -346,13 +347,15 @@ def _display_answer(answer: dict[str, Any]) -> list[str]:
     """An answer for people: floats to 3 decimals, and a list of several items one per line."""
     if not answer:
         return ["true."]
+    from .terms import Struct, Var
+
     lines = []
     for name, value in answer.items():
-        from .terms import Var
 
         if isinstance(value, Var):
             continue  # a findall's template variables: unbound, and noise here
-        if isinstance(value, list) and len(value) > 1:
+        if isinstance(value, list) and len(value) > 1 and any(
+                isinstance(item, (list, Struct)) for item in value):
             lines.append(f"{name} = [")
             lines.extend(f"    {value_text(item, 3)}," for item in value[:-1])
             lines.append(f"    {value_text(value[-1], 3)}")
@@ -375,14 +378,20 @@ def _synchronized_cups_query(kb: Any, clock: Any, console: Any) -> DemoResult:
     after = [p for p in pubs if p.arrival > t2]
     publish(kb, clock, before)
     notes = []
+
+    def answered() -> bool:
+        # Answers are produced by the store's scheduler; give it a moment to react.
+        concurrent.futures.wait([pending], timeout=0.3)
+        return pending.done()
+
     pending = kb.submit(CUPS_ON_TABLE1.goal, at=t2, id="cups-on-table1")
-    notes.append(f"t={clock.now():g}: submitted at={t2:g}; answered yet: {pending.done()}")
+    notes.append(f"t={clock.now():g}: submitted at={t2:g}; answered yet: {answered()}")
     publish(kb, clock, after)
-    notes.append(f"t={clock.now():g}: all segments and recognitions arrived; answered yet: {pending.done()}")
+    notes.append(f"t={clock.now():g}: all segments and recognitions arrived; answered yet: {answered()}")
     for component, type_ in (("segmentation", "seg/2"), ("objRec", "obj/3")):
         kb.add(f"fullyUpdated({type_})^{t2:g}")
         notes.append(f"t={clock.now():g}: {component} sent fullyUpdated({type_})^{t2:g}; "
-                     f"answered yet: {pending.done()}")
+                     f"answered yet: {answered()}")
     answers = pending.result(timeout=5.0)
     q = DemoQuery("(synchronized) " + CUPS_ON_TABLE1.title, CUPS_ON_TABLE1.goal, t2,
                   "a synchronized query waits until every event type it depends on is "

@@ -86,18 +86,23 @@ def test_query_at_limits_the_stream_view(loaded_db):
     assert r.stdout.strip() == "L = [red,green]"
 
 
-def test_query_wait_without_submit_or_with_it(loaded_db):
+def test_query_wait_answers_once_complete(db, tmp_path):
     import slr_sql
 
-    r = slr("query", loaded_db, "color(cup1, C)^12", "--at", "12", "--wait", "--timeout", "5")
-    kb = slr_sql.open()
-    has_submit = hasattr(kb, "submit")
-    kb.close()
-    if has_submit:
-        assert r.returncode in (0, 1), r.stderr
-    else:
+    program = tmp_path / "colors.slr"
+    # A fixed delay of 0: with the wall clock far past these event times, obj/3 is complete.
+    program.write_text(":- max_delay(obj/3, 0).\ncolor(O, C)^T :- prev(obj(O, _, C)^_Z, T).\n",
+                       encoding="utf-8")
+    assert slr("load", db, str(program)).returncode == 0
+    assert slr("add", db, "obj(cup1, cup, red)^2.0", "obj(cup1, cup, green)^9.0").returncode == 0
+    r = slr("query", db, "color(cup1, C)^12", "--at", "12", "--wait", "--timeout", "20")
+    if not hasattr(slr_sql.KnowledgeBase, "submit"):
         assert r.returncode == 2
         assert "synchronized queries are not available in this build" in r.stderr
+        return
+    assert (r.returncode, r.stdout.strip()) == (0, "C = green"), r.stderr
+    r = slr("query", db, "color(cup1, C)^12", "--wait")
+    assert r.returncode == 2 and "--at" in r.stderr
 
 
 def test_query_timeout_is_an_error(db, tmp_path):
@@ -256,27 +261,21 @@ def test_demo_into_a_file_keeps_a_readable_store(tmp_path):
     assert again.returncode == 2 and "fresh store" in again.stderr
 
 
-def test_demo_synchronized_part_runs(monkeypatch):
-    """The synchronized cups question of the demo, in process. Until kb.submit exists, a
-    stand-in that answers at once checks the demo's plumbing (printing, ordering)."""
-    import concurrent.futures
+def test_demo_synchronized_part_runs():
+    """The demo's synchronized cups question, in process: submitted before the perception
+    components are done, answered only after both send fullyUpdated."""
     import io
 
     from rich.console import Console
 
-    import slr_sql
     from slr_sql.demo import run_demo
 
-    if not hasattr(slr_sql.KnowledgeBase, "submit"):
-        def submit(self, goal, at=None, id=None):
-            future = concurrent.futures.Future()
-            future.set_result(self.query(goal, at=at))
-            return future
-        monkeypatch.setattr(slr_sql.KnowledgeBase, "submit", submit, raising=False)
     out = io.StringIO()
     results = run_demo(Console(file=out, width=200), db_path=None)
     synchronized = results[0]
     assert synchronized.query.title.startswith("(synchronized)")
+    # answered only after both perception components declared themselves complete
+    assert [note.endswith("True") for note in synchronized.notes] == [False, False, False, True]
     [answer] = synchronized.answers
     assert [str(item.args[0]) for item in answer["Cups"]] == ["cup1", "cup2"]
     assert "fullyUpdated(seg/2)^14" in out.getvalue()
