@@ -425,7 +425,8 @@ def _print_answers(answers: list[dict[str, Any]]) -> None:
 @click.option("--at", "at", type=float, default=None,
               help="The stream view: only events with end time <= Z (outside prev/next).")
 @click.option("--wait", is_flag=True,
-              help="Synchronized: answer once the events the goal depends on are complete up to --at.")
+              help="Synchronized: answer once the events the goal depends on are complete up to "
+                   "--at (default: now).")
 @click.option("--timeout", type=float, default=None, help="Give up after S seconds.")
 def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | None) -> None:
     """Ask GOAL and print one answer per line (`false.` when there is none)."""
@@ -435,11 +436,10 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
             if not hasattr(kb, "submit"):
                 _err("error: synchronized queries are not available in this build")
                 sys.exit(2)
-            if at is None:
-                raise click.UsageError("--wait needs --at Z (the time the answer must be complete up to)")
             import concurrent.futures
 
-            pending = kb.submit(goal, at=at, id=f"slr-query-{os.getpid()}")
+            # Without --at the library synchronizes on "now" (the store clock).
+            pending = kb.submit(goal, at=at, id=f"slr-query-{os.getpid()}", timeout=timeout)
             try:
                 answers = pending.result(timeout=timeout)
             except concurrent.futures.TimeoutError:
