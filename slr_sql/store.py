@@ -44,6 +44,7 @@ import re
 import sqlite3
 import threading
 import time
+import weakref
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterable, Iterator
@@ -285,6 +286,7 @@ class EventStore:
         self._types: dict[tuple[str, int], _EventType] = {}
         self._declared_arities: dict[str, set[int]] = {}
         self._sql_cache: dict[tuple, str] = {}
+        self._open_cursors: weakref.WeakSet = weakref.WeakSet()
         # buffers (issue 4): called as hook(name, arity, table) inside the transaction that
         # creates a new event type's table (slr_sql.buffers installs its triggers there)
         self.table_created_hooks: list = []
@@ -356,8 +358,13 @@ class EventStore:
                 if self._tx_depth:
                     self._conn.execute("ROLLBACK")
                     self._tx_depth = 0
+                for cursor in list(self._open_cursors):  # iterators still open
+                    cursor.close()
                 if self.path is not None:
-                    self._conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+                    try:
+                        self._conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+                    except sqlite3.OperationalError:
+                        pass  # best effort: the WAL is checkpointed on the next open anyway
             finally:
                 self._conn.close()
 
@@ -575,6 +582,8 @@ class EventStore:
         ['p(2)^[3.0,2.0]: start time 3.0 is after end time 2.0']
         """
         errors: list[EventRejected] = []
+        if type(events) in (list, tuple) and not events:
+            return errors
         enc = encode
         with self.transaction():
             arrival = float(self.clock.now())
@@ -608,8 +617,8 @@ class EventStore:
                             executemany(current_type.insert_sql, rows)
                             rows = []
                             append = rows.append
-                        current_type = types.get((name, arity)) or self._type_for_new_event(
-                            name, arity)
+                        current_type = (isinstance(name, str) and types.get((name, arity))
+                                        or self._type_for_new_event(name, arity))
                         current_name = name
                         current_arity = arity
                     append(row)
@@ -658,7 +667,12 @@ class EventStore:
         >>> s = EventStore(None); s.add_event("tick", (), 1, 1); s.count("tick", 0)
         1
         """
-        self.add_events([(name, tuple(args), start, end)], atomic=True)
+        try:
+            args = args if type(args) is tuple else tuple(args)
+        except TypeError:
+            raise EventRejected(f"{name}: event arguments must be a sequence, not "
+                                f"{args!r}") from None
+        self.add_events([(name, args, start, end)], atomic=True)
 
     # ------------------------------------------------------------------ reading events
 
@@ -735,6 +749,7 @@ class EventStore:
         with self.lock:
             self._check_open()
             cursor = self._conn.execute(sql, params)
+            self._open_cursors.add(cursor)
         try:
             batch = 8  # prev/next callers usually need only the first row or two
             dec = decode
@@ -760,7 +775,10 @@ class EventStore:
                     batch *= 4
         finally:
             with self.lock:
-                cursor.close()
+                try:
+                    cursor.close()
+                except sqlite3.ProgrammingError:  # the store was closed meanwhile
+                    pass
 
     def _query(self, name: str, arity: int, bound: dict[int, Any] | None, kind: str,
                flags: tuple[bool, ...], times: list) -> Iterator[Row]:

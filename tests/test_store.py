@@ -246,6 +246,7 @@ def test_split_sql_script_keeps_trigger_bodies_whole():
     (("seg", (Atom("a"), 1), "now", 2.0), "event times must be numbers"),
     (("seg", (Atom("a"), make_list([1], Var("T"))), 2.0, 2.0), "must be ground"),
     ((42, (1,), 1.0, 1.0), "event name must be an atom"),
+    ((["seg"], (1,), 1.0, 1.0), "event name must be an atom"),
 ])
 def test_invalid_events_are_rejected_with_a_message(store, event, message):
     with pytest.raises(EventRejected) as raised:
@@ -257,6 +258,15 @@ def test_invalid_events_are_rejected_with_a_message(store, event, message):
     assert len(errors) == 1 and message in str(errors[0])
     assert errors[0].index == 0 and errors[0].event == event
     assert store.count("seg", 2) == 0
+
+
+def test_malformed_events_are_rejected(store):
+    with pytest.raises(EventRejected, match="must be a sequence"):
+        store.add_event("seg", 5, 1.0, 1.0)
+    errors = store.add_events([("seg", 5, 1.0, 1.0), ("seg", (1,)), ("p", (1,), 1, 1)])
+    assert [e.index for e in errors] == [0, 1]
+    assert all("is not a (name, args, start, end) tuple" in str(e) for e in errors)
+    assert store.count("p", 1) == 1
 
 
 def test_one_bad_event_does_not_lose_the_batch(store):
@@ -501,6 +511,10 @@ def test_unfinished_iterators_do_not_block_writes(file_store):
 
 def test_closed_store_refuses_work(tmp_path):
     store = EventStore(tmp_path / "x.db")
+    store.add_events([("p", (i,), i, i) for i in range(20)])
+    pending = store.scan("p", 1)
+    next(pending)
     store.close()
+    pending.close()  # an iterator left open does not complain after close
     with pytest.raises(Exception, match="closed"):
         store.add_event("p", (1,), 1, 1)
