@@ -439,12 +439,21 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
             import concurrent.futures
 
             # Without --at the library synchronizes on "now" (the store clock).
+            # -- issue 5: other processes may add the events/marks it waits for
+            if hasattr(kb, "_sync"):
+                kb._sync.watch_external()
             pending = kb.submit(goal, at=at, id=f"slr-query-{os.getpid()}", timeout=timeout)
             try:
-                answers = pending.result(timeout=timeout)
+                answers = pending.result(timeout=None if timeout is None else timeout + 5.0)
             except concurrent.futures.TimeoutError:
-                _err(f"error: the query was not answerable within {timeout:g} s")
+                message = (pending.timeout_message(timeout) if hasattr(pending, "timeout_message")
+                           else f"the query was not answerable within {timeout:g} s")
+                _err(f"error: {message}")
                 sys.exit(1)
+            if hasattr(pending, "explain"):  # what it waited for and how long, as comments
+                for line in pending.explain().splitlines():
+                    _err(f"% {line}")
+            # -- end issue 5
         else:
             answers = kb.query(goal, at=at, timeout=timeout)
     _print_answers(answers)

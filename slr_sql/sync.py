@@ -46,12 +46,18 @@ _INF = math.inf
 MARK_NAME = "fullyUpdated"
 
 
-def _fmt(t: float) -> str:
+def _fmt(t: float, decimals: int = 6) -> str:
+    """A time for messages: ``14``, ``10.55``, ``1795281441.94`` (no exponent, no noise)."""
     if t == _INF:
         return "inf"
     if t == -_INF:
         return "-inf"
-    return f"{t:.6g}"
+    text = f"{t:.{decimals}f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
+
+
+def _dur(d: float) -> str:
+    return _fmt(d, 3)
 
 
 def type_text(key: tuple[str, int]) -> str:
@@ -189,14 +195,14 @@ class PendingQuery(Future):
             if w.released_at is None:
                 lines.append(f"waiting {self._sync._clock_span(w)} for {w}")
             else:
-                lines.append(f"waited {_fmt(w.released_at - w.since)} s for {w}; released by "
+                lines.append(f"waited {_dur(w.released_at - w.since)} s for {w}; released by "
                              f"{w.released_by}")
         if not lines:
             lines.append(f"no wait: every event type it needs was complete up to "
                          f"{_fmt(self.at)} when it was submitted")
         if self.answered_at is not None:
             lines.append(f"answered at clock {_fmt(self.answered_at)} "
-                         f"({_fmt(self.answered_at - self.submitted_at)} s after submission, "
+                         f"({_dur(self.answered_at - self.submitted_at)} s after submission, "
                          f"{self.evaluations} evaluation{'s' if self.evaluations != 1 else ''})")
         return "\n".join(lines)
 
@@ -243,7 +249,8 @@ class Completeness:
             parts = k.split("/")
             try:
                 if parts[1] == "learned" and len(parts) >= 4:
-                    self.learned[("/".join(parts[2:-1]), int(parts[-1]))] = float(v)
+                    key = ("/".join(parts[2:-1]), int(parts[-1]))
+                    self.learned[key] = max(self.learned.get(key, 0.0), float(v))
                 elif parts[1] == "mark":
                     key = self._key_of(parts[2:])
                     if isinstance(key, tuple):
@@ -421,6 +428,11 @@ class Synchronizer:
         self._worker_threads: set = set()
         self._closed = False
         self._inflight = 0
+        # other processes writing the same file (e.g. `slr add DB "fullyUpdated(seg/2)^14"`
+        # while `slr query DB G --wait` waits): SQLite cannot notify us, so while queries are
+        # pending the timer thread checks PRAGMA data_version every `external_poll` seconds.
+        self.external_poll: float | None = None
+        self._data_version: int | None = None
         # clocks that tell when they move serve time-driven wake-ups from their listener
         self._clock_driven = isinstance(self.clock, (ManualClock, StreamClock))
         if hasattr(self.clock, "subscribe"):
@@ -446,6 +458,8 @@ class Synchronizer:
             q = PendingQuery(self, str(id), goal, at, args)
             q._plan = plan
             self._queries[q.id] = q
+            if self.external_poll is not None:
+                self.cond.notify_all()
             if timeout is not None:
                 q._deadline = time.monotonic() + float(timeout)
                 q._timeout = float(timeout)
@@ -481,6 +495,38 @@ class Synchronizer:
                                f"({', '.join(f'{name}/{a}' for a in arities) or 'none known'})")
             n = arities[0]
         return self.tracker.horizon((name, n))
+
+    def watch_external(self, interval: float = 0.05) -> None:
+        """Also release queries on marks/events that *other processes* write to the file
+        (checked every ``interval`` s while queries are pending; see docs)."""
+        with self.cond:
+            self.external_poll = float(interval)
+            self._data_version = self._read_data_version()
+            self._ensure_thread()
+            self.cond.notify_all()
+
+    def _read_data_version(self) -> int | None:
+        try:
+            return self.store.execute("PRAGMA data_version")[0][0]
+        except Exception:
+            return None
+
+    def _external_changes(self) -> list:
+        """Reload marks, learned delays and in-order ends if another connection committed
+        (lock held); returns the queries that may now go on."""
+        version = self._read_data_version()
+        if version is None or version == self._data_version:
+            return []
+        self._data_version = version
+        tracker = self.tracker
+        tracker.load()
+        tracker.max_end.clear()
+        out: list = []
+        for key in list(self._heaps) + list(self._arrival_waits):
+            if tracker.in_order(key):
+                tracker.arrivals[key] = tracker.arrivals.get(key, 0) + 1
+            out += self._release(key, arrival=True)
+        return out
 
     def drain(self, timeout: float | None = None) -> bool:
         """Wait until no evaluation is queued or running (tests). True if idle."""
@@ -582,7 +628,7 @@ class Synchronizer:
         return set(self.store.event_types()) | set(self.kb.declarations.event_types)
 
     def _clock_span(self, w: Wait) -> str:
-        return f"{_fmt(self.clock.now() - w.since)} s"
+        return f"{_dur(self.clock.now() - w.since)} s"
 
     def _forget(self, q: PendingQuery) -> None:
         with self.lock:
@@ -845,12 +891,16 @@ class Synchronizer:
                 if not self._clock_driven:
                     released = self._fire_timers(float(self.clock.now()))
                 expired = self._expire(time.monotonic())
+                if self.external_poll is not None and self._queries:
+                    released += self._external_changes()
                 wait = None
                 if not self._clock_driven and self._timers:
                     wait = max(self._timers[0][0] - self.clock.now(), 0.0) + 1e-4
                 if self._timeouts:
                     w2 = max(self._timeouts[0][0] - time.monotonic(), 0.0) + 1e-4
                     wait = w2 if wait is None else min(wait, w2)
+                if self.external_poll is not None and self._queries:
+                    wait = self.external_poll if wait is None else min(wait, self.external_poll)
                 if released or expired:
                     self.cond.release()
                     try:
