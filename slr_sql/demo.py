@@ -379,20 +379,33 @@ def _synchronized_cups_query(kb: Any, clock: Any, console: Any) -> DemoResult:
     publish(kb, clock, before)
     notes = []
 
-    def answered() -> bool:
-        # Answers are produced by the store's scheduler; give it a moment to react.
-        concurrent.futures.wait([pending], timeout=0.3)
-        return pending.done()
+    def answered() -> str:
+        # Answers are produced by the store's scheduler: let it finish reacting, then say
+        # whether the query is answered or what it still waits for (issue 5).
+        sync = getattr(kb, "_sync", None)
+        if sync is not None:
+            sync.drain(timeout=5.0)
+        else:
+            concurrent.futures.wait([pending], timeout=0.3)
+        if pending.done():
+            return "answered"
+        waits = getattr(pending, "waiting_for", None) or []
+        if not waits:
+            return "not answered yet"
+        return "waiting for " + ", ".join(
+            f"{w.type} up to {w.time:g}" for w in sorted(waits, key=lambda w: w.type))
 
     pending = kb.submit(CUPS_ON_TABLE1.goal, at=t2, id="cups-on-table1")
-    notes.append(f"t={clock.now():g}: submitted at={t2:g}; answered yet: {answered()}")
+    notes.append(f"t={clock.now():g}: submitted at={t2:g}: {answered()}")
     publish(kb, clock, after)
-    notes.append(f"t={clock.now():g}: all segments and recognitions arrived; answered yet: {answered()}")
+    notes.append(f"t={clock.now():g}: all segments, recognitions and tf arrived: {answered()}")
     for component, type_ in (("segmentation", "seg/2"), ("objRec", "obj/3")):
         kb.add(f"fullyUpdated({type_})^{t2:g}")
-        notes.append(f"t={clock.now():g}: {component} sent fullyUpdated({type_})^{t2:g}; "
-                     f"answered yet: {answered()}")
+        notes.append(f"t={clock.now():g}: {component} sent fullyUpdated({type_})^{t2:g}: "
+                     f"{answered()}")
     answers = pending.result(timeout=5.0)
+    if hasattr(pending, "explain"):
+        notes.extend("  " + line for line in pending.explain().splitlines())
     q = DemoQuery("(synchronized) " + CUPS_ON_TABLE1.title, CUPS_ON_TABLE1.goal, t2,
                   "a synchronized query waits until every event type it depends on is "
                   "complete up to its time: here until both perception components said so")

@@ -134,7 +134,7 @@ class Wait:
         what = f"{self.type} complete up to {_fmt(self.time)}"
         if self.kind == "arrival":
             what += " (or a matching in-order event)"
-        return f"{what} [{self.reason}]"
+        return f"{what} ({self.reason})"
 
     def __repr__(self) -> str:
         return f"Wait({self.type}, {_fmt(self.time)}, {self.reason!r})"
@@ -177,6 +177,8 @@ class PendingQuery(Future):
         self._gen = 0
         self._plan: Any = None
         self._deadline: float | None = None   # monotonic deadline of timeout=
+        self._timeout: float | None = None
+        self._released_at: float | None = None  # clock time of the latest release
 
     def __repr__(self) -> str:
         state = "answered" if self.done() else (
@@ -187,7 +189,7 @@ class PendingQuery(Future):
     def explain(self) -> str:
         """What the query waited for, how long (clock seconds) and what released it.
 
-        One line per condition, e.g. ``waited 0.7 s for seg/2 complete up to 14 [goal set];
+        One line per condition, e.g. ``waited 0.7 s for seg/2 complete up to 14 (goal set);
         released by fullyUpdated(seg/2)^14``.
         """
         lines = []
@@ -711,6 +713,9 @@ class Synchronizer:
         kb = self.kb
         tracker = self.tracker
         now = self.clock.now()
+        released_at = q._released_at
+        if released_at is not None:   # the clock when the scheduler released it
+            self._release_waits(q, min(released_at, now))
         self._release_waits(q, now)
         plan = q._plan
         term, frame = kb._instantiate(plan, q.args)
@@ -842,6 +847,7 @@ class Synchronizer:
                     break
                 heapq.heappop(heap)
                 q._gen += 1
+                q._released_at = now
                 out.append(q)
             if heap:
                 self._push_timer(key, tracker.deadline(key, heap[0][0]))
@@ -851,6 +857,7 @@ class Synchronizer:
             for q, gen in self._arrival_waits.pop(key, ()):
                 if q._gen == gen and not q.done():
                     q._gen += 1
+                    q._released_at = now
                     out.append(q)
         return out
 
