@@ -388,12 +388,11 @@ def _synchronized_cups_query(kb: Any, clock: Any, console: Any) -> DemoResult:
         else:
             concurrent.futures.wait([pending], timeout=0.3)
         if pending.done():
-            return "answered"
+            return "answered yet: True"
         waits = getattr(pending, "waiting_for", None) or []
-        if not waits:
-            return "not answered yet"
-        return "waiting for " + ", ".join(
+        return ("waiting for " + ", ".join(
             f"{w.type} up to {w.time:g}" for w in sorted(waits, key=lambda w: w.type))
+            + "; " if waits else "") + "answered yet: False"
 
     pending = kb.submit(CUPS_ON_TABLE1.goal, at=t2, id="cups-on-table1")
     notes.append(f"t={clock.now():g}: submitted at={t2:g}: {answered()}")
@@ -404,11 +403,13 @@ def _synchronized_cups_query(kb: Any, clock: Any, console: Any) -> DemoResult:
         notes.append(f"t={clock.now():g}: {component} sent fullyUpdated({type_})^{t2:g}: "
                      f"{answered()}")
     answers = pending.result(timeout=5.0)
+    waited = ""
     if hasattr(pending, "explain"):
-        notes.extend("  " + line for line in pending.explain().splitlines())
+        waited = "".join("\n       " + line for line in pending.explain().splitlines())
     q = DemoQuery("(synchronized) " + CUPS_ON_TABLE1.title, CUPS_ON_TABLE1.goal, t2,
                   "a synchronized query waits until every event type it depends on is "
-                  "complete up to its time: here until both perception components said so")
+                  "complete up to its time: here until both perception components said so"
+                  + waited)
     return DemoResult(q, answers, notes=notes)
 
 
