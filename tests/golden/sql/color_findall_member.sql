@@ -1,0 +1,4 @@
+-- findall(O-C, (member(O, [cup1, cup2]), color(O, C)^10), L)
+-- at: None
+SELECT 0 AS b, (SELECT '[' || coalesce(group_concat(v0, ','), '') || ']' FROM (SELECT ('{' || :c3 || ':[' || :c2 || ',' || slr_j(p1.arg3) || ']}') AS v0, 0 AS k0, 1 AS k1, p1.t_start AS k2, p1.seq AS k3 FROM "obj" AS p1 WHERE p1.arg1 = :c1 AND p1.t_start = p1.t_end AND p1.t_end = (SELECT q0.t_end FROM "obj" AS q0 WHERE q0.arg1 = :c1 AND q0.t_start = q0.t_end AND q0.t_end <= :c0 ORDER BY q0.t_end DESC LIMIT 1) UNION ALL SELECT ('{' || :c3 || ':[' || :c5 || ',' || slr_j(p3.arg3) || ']}') AS v0, 1 AS k0, 1 AS k1, p3.t_start AS k2, p3.seq AS k3 FROM "obj" AS p3 WHERE p3.arg1 = :c4 AND p3.t_start = p3.t_end AND p3.t_end = (SELECT q2.t_end FROM "obj" AS q2 WHERE q2.arg1 = :c4 AND q2.t_start = q2.t_end AND q2.t_end <= :c0 ORDER BY q2.t_end DESC LIMIT 1) ORDER BY k0, k1, k2, k3)) AS v0;
+-- parameters: :c0 = 10.0, :c1 = 'cup1', :c2 = '"cup1"', :c3 = '"-"', :c4 = 'cup2', :c5 = '"cup2"'

@@ -1,0 +1,4 @@
+-- findall(O-T, (obj(O, cup, _)^_, next(seg(O, _)^T, 10, 14)), L)
+-- at: None
+SELECT 0 AS b, (SELECT '[' || coalesce(group_concat(v0, ','), '') || ']' FROM (SELECT ('{' || :c3 || ':[' || slr_j(t0.arg1) || ',' || slr_j(p2.t_start) || ']}') AS v0, t0.t_end AS k0, t0.t_start AS k1, t0.seq AS k2, p2.t_end AS k3, p2.seq AS k4 FROM "obj" AS t0, "seg" AS p2 WHERE t0.arg2 = :c0 AND t0.t_start = t0.t_end AND (t0.arg1 = p2.arg1 AND typeof(t0.arg1) = typeof(p2.arg1)) AND p2.t_start = p2.t_end AND p2.t_start = (SELECT q1.t_start FROM "seg" AS q1 WHERE (t0.arg1 = q1.arg1 AND typeof(t0.arg1) = typeof(q1.arg1)) AND q1.t_start = q1.t_end AND q1.t_start >= :c1 AND q1.t_start <= :c2 AND q1.t_end <= :c2 ORDER BY q1.t_start LIMIT 1) AND p2.t_end <= :c2 ORDER BY k0, k1, k2, k3, k4)) AS v0;
+-- parameters: :c0 = 'cup', :c1 = 10.0, :c2 = 14.0, :c3 = '"-"'

@@ -1,0 +1,259 @@
+"""The SQL compiler: golden SQL for representative rules, every fallback reason with the
+interpreter's answer, plan caching, arguments from Python, views and fact tables."""
+from __future__ import annotations
+
+import os
+import re
+import sqlite3
+from pathlib import Path
+
+import pytest
+
+import slr_sql
+from slr_sql.errors import SLREvaluationError
+from slr_sql.planner import plan_for
+
+GOLDEN = Path(__file__).resolve().parent / "golden" / "sql"
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+
+
+def example_kb(name: str) -> slr_sql.KnowledgeBase:
+    text = (EXAMPLES / name).read_text(encoding="utf-8")
+    program, _, events = text.partition("%% events")
+    kb = slr_sql.open()
+    kb.load(program)
+    lines = [ln.strip().rstrip(".") for ln in events.splitlines()
+             if ln.strip() and not ln.strip().startswith("%")]
+    assert kb.add_many(lines) == []
+    return kb
+
+
+def both(kb, goal, at=None, **kw):
+    """(SQL answers, interpreter answers)."""
+    sql = kb.query(goal, at=at, **kw)
+    kb.sql_enabled = False
+    try:
+        interp = kb.query(goal, at=at, **kw)
+    finally:
+        kb.sql_enabled = True
+    return sql, interp
+
+
+def engine(kb, goal, at=None):
+    entry = plan_for(kb, kb._plan(goal, ()), at is not None)
+    return "interpreter: " + entry.reason if hasattr(entry, "reason") else "sql"
+
+
+# ------------------------------------------------------------------ golden SQL
+
+TEA = ("findall(object(O, WPos), (obj(O, Type, _Color)^_T1, usedFor(Type, tea), "
+       "prev(seg(O, RPos)^T2, 14), position(seg(O, RPos)^T2, WPos)), List)")
+GOLDEN_CASES = [
+    ("color_prev", "color.slr", "color(cup1, C)^12.5", None),
+    ("color_findall_member", "color.slr",
+     "findall(O-C, (member(O, [cup1, cup2]), color(O, C)^10), L)", None),
+    ("tea_findall", "tea.slr", TEA, 14),
+    ("coffee_join", "tea.slr", "findall(O, (obj(O, Type, _)^_, usedFor(Type, coffee)), L)", 14),
+    ("count_cups", "tea.slr", "aggregate_all(count, (obj(_, cup, _)^_), N)", 14),
+    ("sweep_next", "cups_sweep.slr",
+     "findall(O-T, (obj(O, cup, _)^_, next(seg(O, _)^T, 10, 14)), L)", None),
+    ("tf_interpolation", "tf_interpolation.slr", "tf(cam, base, TF)^10.5", None),
+    ("tf_extrapolation_ite", "tf_extrapolation.slr", "tf(base, world, TF)^12", None),
+    ("negation", "tea.slr", "obj(O, T, _)^Z, \\+ usedFor(T, tea), Z > 10.5", None),
+    ("disjunction", "tea.slr", "(obj(O, cup, _)^Z ; seg(O, _)^Z), Z =< 11", None),
+]
+
+
+def normalize_sql(text: str) -> str:
+    return re.sub(r"slr_det\(\d+,", "slr_det(#,", text)
+
+
+@pytest.mark.parametrize("name,example,goal,at", GOLDEN_CASES, ids=[c[0] for c in GOLDEN_CASES])
+def test_golden_sql(name, example, goal, at):
+    kb = example_kb(example)
+    sql, interp = both(kb, goal, at)
+    assert sql == interp
+    entry = plan_for(kb, kb._plan(goal, ()), at is not None)
+    assert not hasattr(entry, "reason"), entry.reason
+    text = normalize_sql(f"-- {goal}\n-- at: {at}\n{entry.sql};\n-- parameters: "
+                         + ", ".join(f":{k} = {v!r}" for k, v in entry.params.items()) + "\n")
+    path = GOLDEN / f"{name}.sql"
+    if os.environ.get("SLR_UPDATE_GOLDEN") or not path.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text, encoding="utf-8")
+    assert text == path.read_text(encoding="utf-8")
+    # the golden statement runs on its own in SQLite (after the kb registered the functions)
+    params = dict(entry.params)
+    if at is not None:
+        params["at"] = float(at)
+    assert kb.store.run_compiled(entry.sql, params) is not None
+
+
+def test_paper_tea_answer_is_compiled():
+    kb = example_kb("tea.slr")
+    answers = kb.query(TEA, at=14)
+    items = answers[0]["List"]
+    assert [a.args[0] for a in items] == ["cup1", "cup2"]
+    assert [round(x, 9) for x in items[0].args[1]] == [2.4, 0.9, 0.7]
+    assert [round(x, 9) for x in items[1].args[1]] == [2.6, 1.1, 0.8]
+    assert "engine: sql" in kb.explain(TEA)
+
+
+# ------------------------------------------------------------------ fallbacks
+
+PROGRAM = """
+par(a, b). par(b, c). par(c, d).
+anc(X, Y) :- par(X, Y).
+anc(X, Y) :- par(X, Z), anc(Z, Y).
+first(X) :- item(X)^_, !.
+soft(X) :- ( item(X)^_ *-> true ; X = none ).
+safe(X) :- catch(item(X)^_, _, true).
+gen(X) :- between(1, 3, X).
+show(X) :- item(X)^_, write(X).
+two(X) :- ( item(X)^_ ; other(X)^_ ) -> true ; X = none.
+"""
+
+
+def fallback_kb():
+    kb = slr_sql.open()
+    kb.load(PROGRAM)
+    kb.add_many(["item(i1)^1", "item(i2)^2", "other(o1)^1.5", "task(p(1))^1",
+                 "seg(cup1, [0.5, 0.1, 0.9])^3", "val(abc)^1"])
+    kb.load("p(1). p(2).")
+    return kb
+
+
+FALLBACKS = [
+    ("first(X)", "cut (!)", [{"X": "i1"}]),
+    ("anc(a, Y)", "recursion: anc/2", [{"Y": "b"}, {"Y": "c"}, {"Y": "d"}]),
+    ("soft(X)", "soft-cut", [{"X": "i1"}, {"X": "i2"}]),
+    ("safe(X)", "catch/3", [{"X": "i1"}, {"X": "i2"}]),
+    ("gen(X)", "between/3 has no SQL form", [{"X": 1}, {"X": 2}, {"X": 3}]),
+    ("task(G)^_, call(G)", "call/N on an unknown goal", [{"G": slr_sql.Struct("p", (1,))}]),
+    ("append(X, Y, [1, 2])", "library predicate append/3", None),
+    ("findall(X, item(X)^_, L, [end])", "findall/4", [{"L": ["i1", "i2", "end"]}]),
+    ("bagof(X, p(X), L)", "bagof/3", [{"L": [1, 2]}]),
+    ("setof(X, (p(X) ; p(X)), L)", "setof/3", [{"L": [1, 2]}]),
+    ("two(X)", "if-then-else whose condition has several alternatives", [{"X": "i1"}]),
+    ("seg(O, [X, Y, Z])^T", "compound term",
+     [{"O": "cup1", "X": 0.5, "Y": 0.1, "Z": 0.9, "T": 3.0}]),
+    ("aggregate_all(max(T-X), item(X)^T, M)", "witness",
+     [{"M": slr_sql.Struct("max", (2.0, slr_sql.Atom("i2")))}]),
+]
+
+
+@pytest.mark.parametrize("goal,reason,expected", FALLBACKS, ids=[f[1] for f in FALLBACKS])
+def test_fallback_reason_and_answer(goal, reason, expected):
+    kb = fallback_kb()
+    how = engine(kb, goal)
+    assert how.startswith("interpreter") and reason in how, how
+    assert f"reason: " in kb.explain(goal)
+    sql, interp = both(kb, goal)
+    assert sql == interp
+    assert expected is None or sql == expected
+
+
+def test_fallback_python_predicate_non_functional_mode():
+    kb = fallback_kb()
+    kb.define("double", 2, lambda x, y: (x, 2 * x))
+    kb.define("pick", 1, lambda x: ("i2",))
+    # functional mode (input bound): compiled, the function runs inside SQLite
+    assert engine(kb, "p(X), double(X, Y)") == "sql"
+    assert both(kb, "p(X), double(X, Y)") == ([{"X": 1, "Y": 2}, {"X": 2, "Y": 4}],) * 2
+    # every argument unbound: the interpreter
+    assert "non-functional mode" in engine(kb, "pick(X)")
+    assert both(kb, "pick(X), item(X)^T") == ([{"X": "i2", "T": 2.0}],) * 2
+
+
+def test_fallback_effects_and_unknown_predicates():
+    kb = fallback_kb()
+    assert "effects" in engine(kb, "show(X)")
+    assert "unknown predicate nope/1" in engine(kb, "nope(X)")
+    with pytest.raises(SLREvaluationError, match="existence_error"):
+        kb.query("nope(X)")
+
+
+def test_fallback_at_run_time_raises_the_interpreters_error():
+    kb = fallback_kb()
+    goal = "val(X)^_, Y is X + 1"
+    assert engine(kb, goal) == "sql"  # compiles; the type error shows at run time
+    with pytest.raises(SLREvaluationError, match="type_error"):
+        kb.query(goal)
+    assert "unbound variable" in engine(kb, "Y is X + 1")
+    with pytest.raises(SLREvaluationError, match="instantiation_error"):
+        kb.query("Y is X + 1")
+
+
+def test_integer_and_float_semantics():
+    kb = slr_sql.open()
+    kb.add_many(["n(7)^1", "n(2.0)^2", "n(-7)^3", "n(4)^4"])
+    goal = "n(X)^_, Y is X / 2, Z is X * 3, W is X - 0.5"
+    assert engine(kb, goal) == "sql"
+    sql, interp = both(kb, goal)
+    assert sql == interp
+    assert [type(a["Y"]) for a in sql] == [float, float, float, int]
+    assert both(kb, "n(X)^_, integer(X), Q is X // 2, R is X mod 2")[0] == [
+        {"X": 7, "Q": 3, "R": 1}, {"X": -7, "Q": -3, "R": 1}, {"X": 4, "Q": 2, "R": 0}]
+    # 1 and 1.0 do not unify, though SQLite's = says they are equal
+    kb.add_many(["m(2)^1", "m(2.0)^1"])
+    assert both(kb, "n(X)^_, m(X)^_") == ([{"X": 2.0}],) * 2
+    assert both(kb, "n(X)^_, m(Y)^_, X =:= Y, X \\== Y") == ([{"X": 2.0, "Y": 2}],) * 2
+
+
+def test_ties_and_intervals_in_store_order():
+    kb = slr_sql.open()
+    kb.add_many(["e(a)^[1,2]", "e(b)^2", "e(c)^[0,2]", "e(d)^2", "e(e)^[1,3]"])
+    assert both(kb, "e(X)^[S,E]")[0] == both(kb, "e(X)^[S,E]")[1]
+    assert [a["X"] for a in kb.query("e(X)^[S,E]")] == ["c", "a", "b", "d", "e"]
+    assert [a["X"] for a in kb.query("prev(e(X)^[S,E], 2.5)")] == ["c", "a", "b", "d"]
+    assert [a["X"] for a in kb.query("prev(e(X)^Z, 2.5)")] == ["b", "d"]
+    assert [a["X"] for a in kb.query("next(e(X)^[S,E], [0.5, 5])")] == ["a", "e"]
+    assert engine(kb, "prev(e(X)^[S,E], 2.5)") == "sql"
+
+
+# ------------------------------------------------------------------ plans, args, views
+
+def test_plan_cache_and_args_from_python():
+    kb = example_kb("color.slr")
+    goal = "color(O, C)^T"
+    first = kb.query(goal, args={"O": "cup1", "T": 12.5})
+    plan = kb._plan(goal, ("O", "T"))
+    entry = plan.sql_plans[False]
+    assert first == [{"O": "cup1", "C": "green", "T": 12.5}]
+    assert kb.query(goal, args={"O": "cup2", "T": 5}) == [{"O": "cup2", "C": "blue", "T": 5}]
+    assert kb._plan(goal, ("O", "T")).sql_plans[False] is entry  # reused
+    assert ":a" in entry.sql and "cup1" not in entry.sql  # bound, never spliced
+    kb.sql_enabled = False
+    assert kb.query(goal, args={"O": "cup2", "T": 5}) == [{"O": "cup2", "C": "blue", "T": 5}]
+
+
+def test_new_event_types_invalidate_plans():
+    kb = slr_sql.open()
+    kb.load("seen(X) :- late(X)^_.")
+    assert kb.query("seen(X)") == []
+    kb.add("late(a)^1")
+    assert kb.query("seen(X)") == [{"X": "a"}]
+
+
+def test_views_and_fact_tables():
+    kb = example_kb("tea.slr")
+    kb.load("cupLike(O) :- obj(O, cup, _)^_.\nteaThing(O) :- obj(O, T, _)^_, usedFor(T, tea).")
+    cols, rows = kb.sql("SELECT arg1, arg2 FROM usedFor")
+    assert rows == [("cup", "tea"), ("cup", "coffee"), ("mug", "coffee"), ("glass", "water")]
+    _, rows = kb.sql("SELECT arg1 FROM teaThing")
+    assert [r[0] for r in rows] == ["cup1", "cup2", "cup3"]
+    assert [r[0] for r in kb.sql("SELECT arg1 FROM cupLike")[1]] == ["cup1", "cup2", "cup3"]
+    names = [r[0] for r in kb.sql("SELECT name FROM sqlite_master WHERE type = 'view'")[1]]
+    assert {"usedFor", "cupLike", "teaThing"} <= set(names)
+
+
+def test_views_readable_with_plain_sqlite3(tmp_path):
+    db = tmp_path / "robot.db"
+    kb = slr_sql.open(db)
+    kb.load("usedFor(cup, tea). usedFor(mug, coffee).\n"
+            "teaThing(O) :- obj(O, T, _)^_, usedFor(T, tea).")
+    kb.add_many(["obj(cup1, cup, red)^1", "obj(mug1, mug, blue)^2"])
+    kb.close()
+    con = sqlite3.connect(db)
+    assert con.execute("SELECT arg1 FROM teaThing").fetchall() == [("cup1",)]
+    con.close()
