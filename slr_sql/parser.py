@@ -249,13 +249,25 @@ class _Resolver:
                 if p > maxp or lp > lmax:
                     break
                 self.i += 1
-                args, prios = item[1].args, item[3]
-                if len(args) > 1 and max(prios) > 999:
-                    raise _Fail(f"ambiguous '{op}(': write '{op} (' for an operator",
-                                item[2].start_pos)
-                right = args[-1]
-                for a in reversed(args[:-1]):
-                    right = Struct(",", (a, right))
+                args = item[3]
+                if len(args) == 1:
+                    group = args[0][0]
+                elif max(a[1] for a in args) <= 999:
+                    group = args[-1][0]
+                    for a in reversed(args[:-1]):
+                        group = Struct(",", (a[0], group))
+                else:
+                    # An argument above 999 (`=(a, b;c)`): re-read the whole bracket as
+                    # one sequence in which the commas are operators.
+                    joined = list(args[0][2])
+                    for a in args[1:]:
+                        first = a[2][0][2]
+                        joined.append((_NAME, ",", Token.new_borrow_pos("COMMA", ",", first)))
+                        joined.extend(a[2])
+                    group = _Resolver(joined).run()[0]
+                # The bracketed group is only the first operand of the right-hand side:
+                # `p:-(a;b),c` is p :- ((a;b), c).
+                right, _ = self.infix(group, 0, rmax)
                 left = Struct(op, (left, right))
                 lp = p
                 continue
@@ -293,19 +305,28 @@ class _Builder(Transformer):
     aitems = litems = fitems
 
     def args(self, c: list) -> list:
+        # (term, priority, items): the items are kept for _Resolver.infix, which may have
+        # to re-read `a-(b, c;d)` as the operator `-` and one bracketed term.
+        if len(c) == 1:
+            items = c[0]
+            return [_resolve(items)[:2] + (items,)]
+        out = c[0]
+        items = c[1]
+        out.append(_resolve(items)[:2] + (items,))
+        return out
+
+    def elems(self, c: list) -> list:
         if len(c) == 1:
             return [_resolve(c[0])]
         out = c[0]
         out.append(_resolve(c[1]))
         return out
 
-    elems = args
-
     def compound(self, c: list) -> tuple:
         tok = c[0]
         args = c[1]
         name = _functor_name(tok.value, tok.start_pos)
-        return (_FUNC, Struct(name, tuple([a[0] for a in args])), tok, [a[1] for a in args])
+        return (_FUNC, Struct(name, tuple([a[0] for a in args])), tok, args)
 
     def paren(self, c: list) -> tuple:
         return (_TERM, _resolve(c[1])[0], c[0])
@@ -357,7 +378,9 @@ class _Builder(Transformer):
         return out
 
     def query(self, c: list) -> tuple[Any, dict[str, Var]]:
-        return _bar_to_semicolon(_resolve(c[0])[0]), dict(_ordered_vars(_state.varmap))
+        # Returned exactly as read (no `|` -> `;` rewrite): parse_term is also the reader
+        # for data, and format_term/parse_term must round-trip.
+        return _resolve(c[0])[0], dict(_ordered_vars(_state.varmap))
 
 
 def _item(c: Any) -> tuple:
@@ -584,10 +607,18 @@ def _lark_error(e: UnexpectedInput, text: str, filename: str, start: str) -> SLR
     if problem is not None:
         return _syntax_error(text, filename, problem if problem.startswith("unexpected")
                              else f"{what} ({problem})", pos)
-    try:
-        label = e.match_examples(_example_parse, _EXAMPLES, use_accepts=True)
-    except Exception:  # pragma: no cover - a broken example must not hide the real error
-        label = None
+    label = None
+    if isinstance(e, UnexpectedToken):
+        try:
+            label = e.match_examples(_example_parse, _EXAMPLES, use_accepts=True)
+        except Exception:  # pragma: no cover - a broken example must not hide the error
+            label = None
+        if label is None:
+            # match_examples also compares the parser's stack depth, so an example only
+            # matches at the same bracket nesting; retry on the LALR state alone.
+            table = _example_table()
+            pos_ = e.state.position if e.state is not None else None
+            label = table.get((pos_, e.token.type)) or table.get((pos_, None))
     if label is None:
         label = _expected_text(set(getattr(e, "expected", ()) or ()))
     if at_end and label.startswith("missing '.'"):
@@ -599,6 +630,27 @@ def _lark_error(e: UnexpectedInput, text: str, filename: str, start: str) -> SLR
         if tail.endswith(".") and k < len(tail) - 1:
             label += f" ('{tail[k:]}' reads as one symbol atom: put a space before '.')"
     return _syntax_error(text, filename, f"{what} ({label})", pos)
+
+
+_TABLE: dict | None = None
+
+
+def _example_table() -> dict:
+    """(LALR state, token type) -> label, from _EXAMPLES; (state, None) for any token."""
+    global _TABLE
+    if _TABLE is None:
+        table: dict = {}
+        for label, examples in _EXAMPLES.items():
+            for example in examples:
+                try:
+                    _run(example, "<example>", "program")
+                except UnexpectedToken as ex:
+                    table.setdefault((ex.state.position, ex.token.type), label)
+                    table.setdefault((ex.state.position, None), label)
+                except (UnexpectedInput, _Fail):
+                    pass
+        _TABLE = table
+    return _TABLE
 
 
 def _example_parse(text: str) -> Any:

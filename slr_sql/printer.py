@@ -65,9 +65,11 @@ _SYMBOL_CHARS = frozenset("#$&*+-./:<=>?@^~\\")
 _LETTER_ATOM = re.compile(r"[^\W\d_A-Z]\w*\Z")
 _SYMBOL_ATOM = re.compile(r"[#$&*+\-./:<=>?@^~\\]+\Z")
 _SOLO = frozenset(("[]", "{}", "!", ";"))
+# As SWI-Prolog's writeq: letter escapes where they exist, other control characters
+# (C0, DEL, C1) as `\xHH\`.
 _ESCAPES = {"\\": "\\\\", "\n": "\\n", "\t": "\\t", "\r": "\\r", "\a": "\\a", "\b": "\\b",
-            "\f": "\\f", "\v": "\\v", "\0": "\\0\\"}
-_NEEDS_ESCAPE = re.compile(r"[\\'\"\x00-\x1f\x7f]")
+            "\f": "\\f", "\v": "\\v"}
+_NEEDS_ESCAPE = re.compile(r"[\\'\"\x00-\x1f\x7f-\x9f]")
 _ARG_PRIORITY = 999  # arguments and list elements, as writeq prints them
 
 
@@ -97,8 +99,8 @@ def _escape(text: str, quote: str) -> str:
             out.append("\\" + quote)
         elif ch in _ESCAPES:
             out.append(_ESCAPES[ch])
-        elif ch < " " or ch == "\x7f":
-            out.append(f"\\x{ord(ch):x}\\")
+        elif ch < " " or "\x7f" <= ch <= "\x9f":
+            out.append(f"\\x{ord(ch):X}\\")
         else:
             out.append(ch)
     return "".join(out)
@@ -162,12 +164,13 @@ class _Writer:
         self.last = " "
 
     # -- terms ---------------------------------------------------------------------
-    def term(self, t: Any, prec: int) -> None:
+    def term(self, t: Any, prec: int, operand: bool = False) -> None:
+        """Write t at priority ≤ prec; ``operand``: t is the operand of an operator."""
         while type(t) is Var and t.ref is not None:
             t = t.ref
         tt = type(t)
         if tt is Atom:
-            if prec < _ARG_PRIORITY and _is_op_atom(t):
+            if operand and _is_op_atom(t):
                 # An operator atom as the operand of an operator: `(-)=a`, `- (-)`.
                 self.put("(")
                 self.put(format_atom(t, self.quoted))
@@ -208,7 +211,7 @@ class _Writer:
             open_ = p > prec
             if open_:
                 self.put("(")
-            self.term(args[0], lp)
+            self.term(args[0], lp, True)
             if name == "," or name == "|":
                 self.put(name)
             elif name[0].isalpha():
@@ -217,7 +220,7 @@ class _Writer:
                 self.space()
             else:
                 self.put(format_atom(name, self.quoted))
-            self.term(args[1], rp)
+            self.term(args[1], rp, True)
             if open_:
                 self.put(")")
             return
@@ -231,7 +234,7 @@ class _Writer:
             while type(arg) is Var and arg.ref is not None:
                 arg = arg.ref
             mark = len(self.out)
-            self.term(arg, ap)
+            self.term(arg, ap, True)
             first = self.out[mark][0] if mark < len(self.out) else ""
             # `- (a,b)` is -((a,b)) but `-(a,b)` is -(a,b); `- 1` is -(1) but `-1` is -1.
             if first != " " and (
