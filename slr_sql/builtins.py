@@ -535,6 +535,14 @@ def proper_list(t: Any) -> list:
 def _length(m, a):
     items, tail = list_items(a[0])
     n = deref(a[1])
+    # as SWI-Prolog: the length is checked before the list
+    if type(n) is not Var:
+        if type(n) is not int:
+            raise type_error("integer", n)
+        if n < 0:
+            raise _err_domain("not_less_than_zero", n)
+    if type(tail) is not Var and not (type(tail) is Atom and tail == "[]"):
+        raise type_error("list", a[0])
     if type(tail) is Atom and tail == "[]":
         if m.unify(n, len(items)):
             yield None
