@@ -179,6 +179,8 @@ class PendingQuery(Future):
         self._deadline: float | None = None   # monotonic deadline of timeout=
         self._timeout: float | None = None
         self._released_at: float | None = None  # clock time of the latest release
+        self._gs_program: Any = None             # the Program goal_set was computed for
+        self._gs_sorted: list = []
 
     def __repr__(self) -> str:
         state = "answered" if self.done() else (
@@ -243,7 +245,19 @@ class Completeness:
         self.mark_src: dict[Any, str] = {}
         self.max_end: dict[tuple[str, int], float] = {}
         self.arrivals: dict[tuple[str, int], int] = {}
+        self._persisted: dict[tuple[str, int], float] = {}   # learned delays as stored
         self.load()
+
+    def flush(self, learned: dict | None = None) -> None:
+        """Persist learned delays (all that grew since the last write by default)."""
+        if learned is None:
+            learned = {k: d for k, d in self.learned.items() if d > self._persisted.get(k, 0.0)}
+        if not learned:
+            return
+        with self.store.transaction():
+            for key, d in learned.items():
+                self.store.meta_set(f"sync/learned/{key[0]}/{key[1]}", d)
+        self._persisted.update(learned)
 
     def load(self) -> None:
         """(Re)read learned delays and marks from the store."""
@@ -253,6 +267,7 @@ class Completeness:
                 if parts[1] == "learned" and len(parts) >= 4:
                     key = ("/".join(parts[2:-1]), int(parts[-1]))
                     self.learned[key] = max(self.learned.get(key, 0.0), float(v))
+                    self._persisted[key] = max(self._persisted.get(key, 0.0), float(v))
                 elif parts[1] == "mark":
                     key = self._key_of(parts[2:])
                     if isinstance(key, tuple):
@@ -399,9 +414,13 @@ class Completeness:
             grew[last_key] = best
         if grew:
             learned.update(grew)
-            with self.store.transaction():
-                for key, d in grew.items():
-                    self.store.meta_set(f"sync/learned/{key[0]}/{key[1]}", d)
+            # persist when it grew by more than 1 ms (or 1 %): a stream whose delay creeps up
+            # by float noise must not cost a durable write per event; close() writes the rest
+            persisted = self._persisted
+            due = {k: d for k, d in grew.items()
+                   if d > persisted.get(k, 0.0) + max(1e-3, 0.01 * persisted.get(k, 0.0))}
+            if due:
+                self.flush(due)
         for key in moved:
             self.arrivals[key] = self.arrivals.get(key, 0) + 1
         return moved
@@ -471,7 +490,16 @@ class Synchronizer:
         q.add_done_callback(self._forget)
         if callback is not None:
             q.add_done_callback(callback)
-        self._schedule(q)
+        # the goal-set condition is checked here, on the caller's thread: a query that must
+        # wait is parked at once, without a trip through the worker pool
+        try:
+            term, _frame = self.kb._instantiate(plan, args)
+            ready = self._static_ready(q, term, self.clock.now())
+        except BaseException as exc:
+            self._set_exception(q, exc)
+            return q
+        if ready:
+            self._schedule(q)
         return q
 
     def pending(self) -> list[PendingQuery]:
@@ -550,6 +578,11 @@ class Synchronizer:
             self.cond.notify_all()
         if hasattr(self.clock, "unsubscribe"):
             self.clock.unsubscribe(self._on_clock)
+        try:
+            with self.lock:
+                self.tracker.flush()
+        except SLRError:
+            pass  # the store is closed already
         for q in queries:
             if not q.done():
                 self._set_exception(q, SLRError(f"the knowledge base was closed while query "
@@ -719,18 +752,12 @@ class Synchronizer:
         self._release_waits(q, now)
         plan = q._plan
         term, frame = kb._instantiate(plan, q.args)
-        gs = goal_set(kb.program, term, known_types=self._known_types())
-        q.goal_set = gs
-        z = q.at
-        missing = [k for k in sorted(gs) if not tracker.complete(k, z, now)]
-        if missing:
-            waits = [Wait(k, z, "goal set", now) for k in missing]
-            self._park(q, waits, [(k, z, "complete", 0) for k in missing])
+        if not self._static_ready(q, term, now):
             return
         remaining = None
         if q._deadline is not None:
             remaining = max(q._deadline - time.monotonic(), 0.001)
-        m = kb.engine.machine(at=z, timeout=remaining)
+        m = kb.engine.machine(at=q.at, timeout=remaining)
         m.synchronized = True  # for engines that bypass the hooks (SQL): do not
         m.on_prev = self._check_prev
         m.on_next = lambda name, n, lo, hi, args, s=None, e=None: \
@@ -755,6 +782,26 @@ class Synchronizer:
             q.set_result(answers)
         except InvalidStateError:
             pass
+
+    def _static_ready(self, q: PendingQuery, term: Any, now: float) -> bool:
+        """The goal-set condition; parks ``q`` on the missing types when it does not hold.
+        The goal set is computed once per program (a load replaces the Program object)."""
+        program = self.kb.program
+        if q._gs_program is not program:
+            gs = goal_set(program, term)
+            if gs.unknown:
+                gs = goal_set(program, term, known_types=self._known_types())
+            q.goal_set = gs
+            q._gs_program = program
+            q._gs_sorted = sorted(gs)
+        z = q.at
+        complete = self.tracker.complete
+        missing = [k for k in q._gs_sorted if not complete(k, z, now)]
+        if missing:
+            waits = [Wait(k, z, "goal set", now) for k in missing]
+            self._park(q, waits, [(k, z, "complete", 0) for k in missing])
+            return False
+        return True
 
     def _check_prev(self, name: str, n: int, t: float) -> None:
         key = (name, n)
