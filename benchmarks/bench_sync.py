@@ -165,7 +165,27 @@ def idle_cpu(n: int, seconds: float, path: str) -> tuple[float, int]:
     return c1 - c0, pending, threads
 
 
-def report(name: str, lat: Latencies) -> None:
+def service_time(n: int, path: str) -> float:
+    """Milliseconds per evaluation of a released query, on one thread, without the pool:
+    the synchronizer's own cost (what the latencies are made of when nothing else runs)."""
+    clock = slr_sql.ManualClock(0.0)
+    with open_kb(path, clock) as kb:
+        kb.load(":- max_delay(s/1, 1000).")
+        kb.add_many([f"s({k})^{k * 0.001}" for k in range(1, 5000)])
+        qs = [kb.submit(f"prev(s(X)^T, {i * 0.005})", at=i * 0.005, id=f"m{i}")
+              for i in range(n)]
+        sync = kb._sync
+        sync.drain()
+        with sync.lock:
+            sync.tracker.marks[("s", 1)] = 1e9    # complete, without releasing through the pool
+        t0 = time.perf_counter()
+        for q in qs:
+            sync._attempt(q)
+        return (time.perf_counter() - t0) / n * 1000.0
+
+
+def report(name: str, run, *a) -> None:
+    lat = run(*a)
     ms = lat.values_ms()
     print(f"{name:9s} answered {len(lat.done):5d}  errors {len(lat.errors)}  "
           f"p50 {statistics.median(ms):7.3f} ms  p99 {pct(ms, 99):7.3f} ms  "
@@ -191,9 +211,11 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as d:
         print(f"{args.queries} pending queries per scenario; latency = release -> done-callback; "
               f"synchronous={SYNC}")
-        report("marks", scenario_marks(args.queries, f"{d}/marks.db"))
-        report("in_order", scenario_in_order(args.queries, f"{d}/inorder.db"))
-        report("clock", scenario_clock(args.queries, f"{d}/clock.db"))
+        report("marks", scenario_marks, args.queries, f"{d}/marks.db")
+        report("in_order", scenario_in_order, args.queries, f"{d}/inorder.db")
+        report("clock", scenario_clock, args.queries, f"{d}/clock.db")
+        print(f"service   {service_time(args.queries, f'{d}/service.db'):.3f} ms per evaluation "
+              f"of a released prev query (one thread, no pool)")
         cpu, pending, threads = idle_cpu(args.queries, args.idle, f"{d}/idle.db")
         print(f"idle      {pending} pending (WallClock), {threads} threads: CPU "
               f"{cpu * 1000:.1f} ms over {args.idle:g} s ({100 * cpu / args.idle:.3f} %)")
