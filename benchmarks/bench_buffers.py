@@ -161,14 +161,15 @@ def plot(samples: list[dict], out_png: Path) -> None:
              label="file size (db + WAL)")
     ax1.set_xlabel("events streamed (millions)")
     ax1.set_ylabel("file size (MB)", color="tab:blue")
-    ax1.set_ylim(bottom=0)
+    ax1.set_ylim(0, max(s["file_bytes"] for s in samples) / 1e6 * 1.3)
     ax2 = ax1.twinx()
     ax2.plot(events, [s["rss_bytes"] / 1e6 for s in samples], color="tab:red", label="RSS")
     ax2.set_ylabel("process RSS (MB)", color="tab:red")
-    ax2.set_ylim(bottom=0)
+    ax2.set_ylim(0, max(s["rss_bytes"] for s in samples) / 1e6 * 1.6)
     ax1.set_title("tBuffer(tf(_,_,_), 10): 1 kHz stream, 10k-event batches")
     lines = ax1.get_lines() + ax2.get_lines()
     ax1.legend(lines, [line.get_label() for line in lines], loc="lower right")
+    ax1.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(out_png, dpi=120)
 
@@ -182,7 +183,13 @@ def main() -> None:
     parser.add_argument("--skip-ingest", action="store_true")
     parser.add_argument("--skip-plateau", action="store_true")
     parser.add_argument("--out", type=Path, default=HERE)
+    parser.add_argument("--replot", type=Path, help="only redraw the PNG from a samples CSV")
     args = parser.parse_args()
+    if args.replot:
+        with open(args.replot) as handle:
+            samples = [{k: float(v) for k, v in row.items()} for row in csv.DictReader(handle)]
+        plot(samples, args.out / "buffers_plateau.png")
+        return
     if not args.skip_ingest:
         r = bench_ingest(args.ingest, args.rounds)
         print(f"ingest, {r['events']:,} events, best of {args.rounds}: no buffer "
