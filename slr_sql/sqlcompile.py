@@ -140,7 +140,9 @@ class Part:
         self.extra = extra    # whatever the emitter attached (answer recipes)
 
     def from_sql(self) -> str:
-        return ", ".join(f"{t} AS {a}" for t, a, _ in self.froms)
+        # CROSS JOIN: SQLite keeps the goal order as the join order (the binding order the
+        # modes were computed for; each later table is reached through its indexes)
+        return " CROSS JOIN ".join(f"{t} AS {a}" for t, a, _ in self.froms)
 
     def select(self, cols: list[str]) -> str:
         sql = "SELECT " + ", ".join(cols)

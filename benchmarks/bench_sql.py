@@ -1,0 +1,208 @@
+"""SQL compiler figures (issue 3), recorded in benchmarks/README.md.
+
+1. The paper's tea/coffee findall (obj ⨝ usedFor ⨝ prev(seg) ⨝ position, position through
+   the tf interpolation/extrapolation rules) over a store of 100,000 events: the compiled
+   plan against the interpreter on the same store.
+2. prev/next lookups: the compiled plan (kb.query with args, answers decoded) against a
+   hand-written SQL statement for the same answer (run on the same connection, rows decoded
+   the same way).
+3. Compile time of a 50-rule program; the plan-cache hit path.
+
+Run:  python benchmarks/bench_sql.py [--events 100000] [--repeat 3]
+"""
+from __future__ import annotations
+
+import argparse
+import random
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import slr_sql  # noqa: E402
+from slr_sql.encoding import decode  # noqa: E402
+from slr_sql.planner import compile_goal, plan_for  # noqa: E402
+from slr_sql.terms import Struct  # noqa: E402
+
+TEA_PROGRAM = (Path(__file__).resolve().parent.parent / "examples" / "tea.slr").read_text(
+    encoding="utf-8").split("%% events")[0]
+TEA_QUERY = ("findall(object(O, WPos), (obj(O, Type, _Color)^_T1, usedFor(Type, tea), "
+             "prev(seg(O, RPos)^T2, Z), position(seg(O, RPos)^T2, WPos)), List)")
+TYPES = ["cup", "mug", "glass", "plate", "bowl"]
+
+
+def pose(rng, z):
+    return Struct("pose", ([round(rng.uniform(-1, 1), 3), round(rng.uniform(-1, 1), 3), z],
+                           [0.0, 0.0, round(rng.uniform(-0.3, 0.3), 3), 1.0]))
+
+
+def tea_store(n_events: int, seed: int = 7):
+    """A robot run: tf(cam,base) and tf(base,world) at 2 Hz (4 % of the events), objects
+    recognized (16 %) and segmented (80 %)."""
+    rng = random.Random(seed)
+    kb = slr_sql.open()
+    kb.load(TEA_PROGRAM)
+    events = []
+    n_tf = n_events // 25             # 4 %: both transforms
+    n_obj = n_events * 4 // 25        # 16 %: obj
+    n_seg = n_events - n_tf - n_obj   # 80 %: seg
+    steps = n_tf // 2
+    for i in range(steps):
+        t = i * 0.5
+        events.append(("tf", ["cam", "base", pose(rng, 1.0)], t, t))
+        events.append(("tf", ["base", "world", pose(rng, 0.0)], t + 0.25, t + 0.25))
+    horizon = steps * 0.5
+    objects = [f"o{i}" for i in range(2000)]
+    kinds = {o: TYPES[i % len(TYPES)] for i, o in enumerate(objects)}
+    for _ in range(n_obj):
+        o = rng.choice(objects)
+        t = round(rng.uniform(0.2, horizon - 0.2), 3)
+        events.append(("obj", [o, kinds[o], "red"], t, t))
+    for _ in range(n_seg):
+        o = rng.choice(objects)
+        t = round(rng.uniform(0.2, horizon - 0.2), 3)
+        events.append(("seg", [o, [round(rng.uniform(0, 1), 3) for _ in range(3)]], t, t))
+    events.sort(key=lambda e: e[3])
+    assert kb.add_many(events) == []
+    return kb, horizon
+
+
+def best(fn, repeat):
+    times = []
+    out = None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return min(times), out
+
+
+def bench_tea(n_events, repeat):
+    kb, horizon = tea_store(n_events)
+    z = round(horizon * 0.5, 1)
+    args = {"Z": z}
+    compiled, sql_answers = best(lambda: kb.query(TEA_QUERY, args=args, at=z), repeat)
+    assert "engine: sql" in kb.explain(TEA_QUERY)
+    kb.sql_enabled = False
+    interp, interp_answers = best(lambda: kb.query(TEA_QUERY, args=args, at=z), 1)
+    kb.sql_enabled = True
+    assert sql_answers == interp_answers, "answers differ"
+    n = len(sql_answers[0]["List"])
+    print(f"tea findall over {n_events} events (z={z}, {n} objects in the list):")
+    print(f"  compiled    {compiled * 1000:9.1f} ms")
+    print(f"  interpreter {interp * 1000:9.1f} ms")
+    print(f"  speed-up    {interp / compiled:9.1f} x")
+    return kb, horizon
+
+
+def bench_prev_next(kb, horizon, repeat, n=2000):
+    rng = random.Random(3)
+    store = kb.store
+    lookups = [(f"o{rng.randrange(2000)}", round(rng.uniform(1, horizon), 2)) for _ in range(n)]
+    results = {}
+    for label, goal, hand in [
+        ("prev", "prev(seg(O, L)^Z, T)",
+         "SELECT arg2, t_start FROM seg WHERE arg1 = ? AND t_start = t_end AND t_end = "
+         "(SELECT t_end FROM seg WHERE arg1 = ? AND t_start = t_end AND t_end <= ? "
+         "ORDER BY t_end DESC LIMIT 1) ORDER BY t_start, seq"),
+        ("next", "next(seg(O, L)^Z, [T, inf])",
+         "SELECT arg2, t_start FROM seg WHERE arg1 = ? AND t_start = t_end AND t_start = "
+         "(SELECT t_start FROM seg WHERE arg1 = ? AND t_start = t_end AND t_start >= ? "
+         "ORDER BY t_start LIMIT 1) ORDER BY t_end, seq"),
+    ]:
+        def compiled():
+            out = []
+            for o, t in lookups:
+                out.append(kb.query(goal, args={"O": o, "T": t}))
+            return out
+
+        conn = store._conn
+
+        def handwritten():
+            out = []
+            for o, t in lookups:
+                rows = conn.execute(hand, (o, o, t)).fetchall()
+                out.append([{"O": o, "L": [decode(x) for x in [r[0]]][0], "Z": r[1], "T": t}
+                            for r in rows])
+            return out
+
+        c, a1 = best(compiled, repeat)
+        h, a2 = best(handwritten, repeat)
+        assert [[{k: (v if k != "L" else list(v)) for k, v in d.items()} for d in a] for a in a1] \
+            == [[{k: (slr_sql.terms.to_python(v) if k == "L" else v) for k, v in d.items()}
+                 for d in a] for a in a2], label
+        results[label] = (c / n, h / n)
+        print(f"{label} lookup (kb.query, args bound) {c / n * 1e6:7.1f} us   hand-written SQL "
+              f"{h / n * 1e6:7.1f} us   ratio {c / h:4.2f}")
+    # one statement for many lookups: the compiled findall against a hand-written window query
+    goal = "findall(O-L, (obj(O, cup, _)^T, prev(seg(O, L)^_, T)), Xs)"
+    c, a1 = best(lambda: kb.query(goal), repeat)
+    hand = ("SELECT o.arg1, s.arg2 FROM obj o JOIN seg s ON s.arg1 = o.arg1 AND s.t_start = s.t_end "
+            "AND s.t_end = (SELECT t_end FROM seg WHERE arg1 = o.arg1 AND t_start = t_end AND "
+            "t_end <= o.t_end ORDER BY t_end DESC LIMIT 1) WHERE o.arg2 = 'cup' AND "
+            "o.t_start = o.t_end ORDER BY o.t_end, o.t_start, o.seq, s.t_start, s.seq")
+    h, rows = best(lambda: [(decode(a), decode(b)) for a, b in conn.execute(hand).fetchall()],
+                   repeat)
+    assert len(a1[0]["Xs"]) == len(rows)
+    print(f"prev join ({len(rows)} pairs): compiled {c * 1000:.1f} ms   hand-written "
+          f"{h * 1000:.1f} ms   ratio {c / h:4.2f}")
+
+
+def bench_compile():
+    kb = slr_sql.open()
+    rules = []
+    for i in range(50):
+        if i % 5 == 0:
+            rules.append(f"r{i}(O, V) :- prev(seg(O, V)^T, 10), T > 1.0.")
+        elif i % 5 == 1:
+            rules.append(f"r{i}(O, V) :- obj(O, T, C)^Z, usedFor(T, V), \\+ r{i - 1}(O, _).")
+        elif i % 5 == 2:
+            rules.append(f"r{i}(O, N) :- findall(X, r{i - 1}(O, X), L), length(L, N).")
+        elif i % 5 == 3:
+            rules.append(f"r{i}(O, V) :- ( r{i - 3}(O, V) ; r{i - 2}(O, V) ), V \\== none.")
+        else:
+            rules.append(f"r{i}(O, V) :- seg(O, V)^Z, Z >= 2.0, Z =< 9.0.")
+    kb.load("usedFor(cup, tea). usedFor(mug, coffee).\n" + "\n".join(rules))
+    kb.add_many(["seg(a, 1)^1", "obj(a, cup, red)^1"])
+    plans = [kb._plan(f"r{i}(O, V)", ()) for i in range(50)]
+    t0 = time.perf_counter()
+    compiled = 0
+    for plan in plans:
+        try:
+            compile_goal(kb, plan, False)
+            compiled += 1
+        except Exception:
+            pass
+    total = time.perf_counter() - t0
+    print(f"compile a 50-rule program (one plan per predicate, {compiled} compiled): "
+          f"{total * 1000:.1f} ms")
+    # the cache hit path: kb._plan lookup + cached SqlPlan
+    goal = "r4(O, V)"
+    kb.query(goal)
+    n = 20000
+    t0 = time.perf_counter()
+    for _ in range(n):
+        plan_for(kb, kb._plan(goal, ()), False)
+    hit = (time.perf_counter() - t0) / n
+    t0 = time.perf_counter()
+    for _ in range(2000):
+        kb.query(goal)
+    whole = (time.perf_counter() - t0) / 2000
+    print(f"plan cache hit: {hit * 1e6:.2f} us   (whole kb.query of a small goal: "
+          f"{whole * 1e6:.1f} us)")
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--events", type=int, default=100_000)
+    ap.add_argument("--repeat", type=int, default=3)
+    a = ap.parse_args()
+    kb, horizon = bench_tea(a.events, a.repeat)
+    bench_prev_next(kb, horizon, a.repeat)
+    bench_compile()
+
+
+if __name__ == "__main__":
+    main()
