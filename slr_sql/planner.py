@@ -27,7 +27,10 @@ import weakref
 from typing import Any
 
 from . import sqlcompile
+from json import loads as _json_loads
+
 from .encoding import INT64_MAX, INT64_MIN, Unencodable, decode, encode, encode_json
+from .encoding import _from_json
 from .engine import undo, unify
 from .program import Slot, Template, build
 from .sqlcompile import SITES, Col, ColRef, Compiler, Fallback, Part, resolve
@@ -318,13 +321,43 @@ class SqlPlan:
             varmap: dict = {}
             for name, how, data in recipes[row[0]]:
                 if how == 0:
-                    answer[name] = to_python(decode(row[data]))
+                    answer[name] = _value(row[data])
                 elif how == 1:
                     answer[name] = to_python(data)
                 elif how == 2:
                     answer[name] = to_python(_inst_row(data, row, varmap))
             out.append(answer)
         return out
+
+
+def _value(v):
+    """``to_python(decode(v))``, with a shortcut for numbers, atoms and JSON lists."""
+    tv = type(v)
+    if tv is float or tv is int:
+        return v
+    if tv is str:
+        if not v or v[0] not in '[{"':
+            return Atom(v)
+        if v[0] == "[":
+            return _py_list(_json_loads(v))
+    return to_python(decode(v))
+
+
+def _py_list(items):
+    if not items:
+        return Atom("[]")  # to_python gives the empty list as the atom []
+    out = []
+    for x in items:
+        tx = type(x)
+        if tx is str:
+            out.append(Atom(x))
+        elif tx is float or tx is int:
+            out.append(x)
+        elif tx is list:
+            out.append(_py_list(x))
+        else:
+            out.append(to_python(_from_json(x)))
+    return out
 
 
 def _inst_row(t, row, varmap):
