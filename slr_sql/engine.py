@@ -227,11 +227,14 @@ class Machine:
                     steps_left = check_every
                     self._check_limits(check_every)
                 goal, cb, nxt = cont
-                while type(goal) is Var:
-                    r = goal.ref
-                    if r is None:
-                        raise instantiation_error()
-                    goal = r
+                if type(goal) is Var:
+                    while type(goal) is Var:
+                        r = goal.ref
+                        if r is None:
+                            raise instantiation_error()
+                        goal = r
+                    # a variable goal G is call(G) (ISO 7.6.2): a cut inside it is local
+                    cb = len(self.cps)
                 tg = type(goal)
                 if tg is Struct:
                     args = goal.args
