@@ -213,6 +213,12 @@ class Machine:
         steps_left = check_every
         while True:
             try:
+                # every step counts, backtracking and solutions too: an endless stream of
+                # answers (length(L, N), between(1, inf, X)) must also meet the limits
+                steps_left -= 1
+                if steps_left <= 0:
+                    steps_left = check_every
+                    self._check_limits(check_every)
                 if cont is False:
                     cont = self._backtrack()
                     if cont is False:
@@ -222,10 +228,6 @@ class Machine:
                     yield None
                     cont = False
                     continue
-                steps_left -= 1
-                if steps_left <= 0:
-                    steps_left = check_every
-                    self._check_limits(check_every)
                 goal, cb, nxt = cont
                 if type(goal) is Var:
                     while type(goal) is Var:
