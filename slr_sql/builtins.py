@@ -74,15 +74,15 @@ def _type_rank(t: Any) -> int:
         return 0
     if tt is int or tt is float:
         return 1
+    if tt is String:  # SWI-Prolog 9 orders strings before atoms: Var < Number < String < Atom
+        return 2
     if tt is Atom:
         return 3
-    if tt is String:
-        return 4
     return 5
 
 
 def compare_terms(a: Any, b: Any) -> int:
-    """Standard order of terms: Var < Number < Atom < String < Compound.
+    """Standard order of terms as SWI-Prolog 9 has it: Var < Number < String < Atom < Compound.
 
     >>> compare_terms(1, Atom("a")), compare_terms(1.0, 1), compare_terms(Atom("b"), Atom("a"))
     (-1, -1, 1)
@@ -101,7 +101,7 @@ def compare_terms(a: Any, b: Any) -> int:
                     return 0
                 return -1 if type(a) is float else 1
             return -1 if a < b else 1
-        if ra == 3 or ra == 4:
+        if ra == 3 or ra == 2:
             return 0 if a == b else (-1 if str(a) < str(b) else 1)
         if ra == 0:
             return 0 if a is b else (-1 if id(a) < id(b) else 1)
