@@ -261,7 +261,10 @@ def evaluate(t: Any) -> int | float:
             if n == 2:
                 f = BINARY.get(name)
                 if f is not None:
-                    r = f(evaluate(args[0]), evaluate(args[1]))
+                    # right argument first, as SWI-Prolog: it decides which error is
+                    # raised when both arguments are faulty ((1/0) + Y: instantiation_error)
+                    b = evaluate(args[1])
+                    r = f(evaluate(args[0]), b)
                     return _float_check(r) if type(r) is float else r
             elif n == 1:
                 f = UNARY.get(name)
