@@ -557,6 +557,8 @@ def _length(m, a):
         return
     if type(n) is not Var:
         raise type_error("integer", n)
+    if n is tail:  # length([a|T], T): no list is its own length (fails, as in SWI-Prolog)
+        return
     k = 0
     while True:
         mark = len(m.trail)
