@@ -494,6 +494,8 @@ class Machine:
                     return (cp[4], cp[5], cp[2])
                 undo(self.trail, mark)
         if original is not None:
+            # the copy taken before the bindings were undone: the culprit keeps its values
+            original.term = ball
             raise original
         from .printer import format_term
 
