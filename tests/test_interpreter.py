@@ -417,6 +417,16 @@ def test_iso_errors(kb, goal, formal):
     assert same(error_of(kb, goal), formal)
 
 
+def test_error_culprit_keeps_its_bindings(kb):
+    # the error term is taken before backtracking undoes the bindings of the failed branch
+    kb.load("fa(a). p(Z) :- ( fa(Y) -> forall(between([Z|Y], 2, _), true) ; true ).")
+    for goal in ("p(V)", "aggregate_all(count, p(V), N)", "findall(V, p(V), L)"):
+        formal = error_of(kb, goal)
+        assert formal.name == "type_error" and formal.args[0] == "integer", formal
+        culprit = formal.args[1]
+        assert type(culprit) is Struct and culprit.name == "." and same(culprit.args[1], "a")
+
+
 def test_error_is_an_slr_error_with_the_term(kb):
     kb.load("r(X) :- undefined_thing(X).")
     with pytest.raises(SLRError) as info:
