@@ -305,15 +305,9 @@ def slr_answer(answer: dict, names: list[str]) -> dict:
 
 def canonical_error(term) -> tuple:
     """The formal part of an ISO error term (or the whole ball of a non-error throw)."""
-    varmap: dict = {}
-    t = term
-    if type(t) is Struct and t.name == "error" and len(t.args) == 2:
-        t = t.args[0]
-        if type(t) is Var:
-            pass
-        elif type(t) is Struct:
-            t = slr_sql.terms.to_python(t)
-    return from_slr(slr_sql.terms.to_python(t), varmap)
+    if type(term) is Struct and term.name == "error" and len(term.args) == 2:
+        term = term.args[0]
+    return from_slr(slr_sql.terms.to_python(term), {})
 
 
 # ---------------------------------------------------------------------------------------------
