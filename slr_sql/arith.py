@@ -280,6 +280,10 @@ def evaluate(t: Any) -> int | float:
             raise evaluation_error("float_overflow") from exc
         except (ValueError, ZeroDivisionError) as exc:
             raise evaluation_error("undefined") from exc
+        # as SWI-Prolog: the arguments are evaluated (right first) before the functor is
+        # found unknown, so f(Y) with Y unbound is an instantiation error
+        for a in reversed(args):
+            evaluate(a)
         raise type_error("evaluable", Struct("/", (name, n)))
     if tt is Atom:
         if t in CONSTANTS:
