@@ -272,10 +272,17 @@ def evaluate(t: Any) -> int | float:
                     r = f(evaluate(args[0]))
                     return _float_check(r) if type(r) is float else r
             if name == "." and n == 2:
-                # "a" evaluates to its code in SWI; [X] evaluates X
+                # [X] is the character code X, as in SWI-Prolog: a code or a one-char atom
                 tail = deref(args[1])
                 if tail == "[]" and type(tail) is Atom:
-                    return evaluate(args[0])
+                    x = deref(args[0])
+                    if type(x) is Var:
+                        raise instantiation_error()
+                    if type(x) is int and x >= 0:
+                        return x
+                    if type(x) is Atom and len(x) == 1:
+                        return ord(x)
+                    raise type_error("character", x)
         except (OverflowError,) as exc:
             raise evaluation_error("float_overflow") from exc
         except (ValueError, ZeroDivisionError) as exc:
