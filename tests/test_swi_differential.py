@@ -95,8 +95,9 @@ occurs_check_pass(G) :-
 
 print_answer(Vs) :- \+ acyclic_term(Vs), !, write('C'), nl.
 print_answer(Vs) :-   % a whole line or nothing, should a limit strike while it is built
-    term_variables(Vs, All),
-    with_output_to(string(S), (write('A ['), ser_args(Vs, All), write(']'))),
+    copy_term(Vs, Vs1),   % variables numbered by first occurrence: '$VAR'(I) (linear time)
+    numbervars(Vs1, 0, _, [singletons(false)]),
+    with_output_to(string(S), (write('A ['), ser_args(Vs1, numbered), write(']'))),
     write(S), nl.
 
 print_error(time_limit_exceeded) :- !, write('L'), nl.
@@ -109,6 +110,7 @@ strip_module_pi(existence_error(procedure, _:PI), existence_error(procedure, PI)
 strip_module_pi(F, F).
 
 ser(T, Vs) :- var(T), !, ( var_index(Vs, T, 0, I) -> true ; I = -1 ), format('{"v":~d}', [I]).
+ser('$VAR'(I), numbered) :- integer(I), !, format('{"v":~d}', [I]).
 ser(T, _) :- integer(T), !, format('{"i":"~d"}', [T]).
 ser(T, _) :- float(T), !, float_class(T, C),
     (   C == nan -> write('{"f":"nan"}')
