@@ -642,52 +642,28 @@ def _sum_list(m, a):
 DET[("sumlist", 2)] = _sum_list
 
 
-@det("max_list", 2)
-def _max_list(m, a):
-    xs = _numbers(a[0])
-    if not xs:
-        return False
-    best = xs[0]
-    for x in xs[1:]:
-        if x > best:
+def _extreme(items: list, better: Callable[[Any, Any], bool]) -> Any:
+    """The first item no other item is ``better`` than (None for an empty list)."""
+    if not items:
+        return None
+    best = items[0]
+    for x in items[1:]:
+        if better(x, best):
             best = x
-    return m.unify(a[1], best)
+    return best
 
 
-@det("min_list", 2)
-def _min_list(m, a):
-    xs = _numbers(a[0])
-    if not xs:
-        return False
-    best = xs[0]
-    for x in xs[1:]:
-        if x < best:
-            best = x
-    return m.unify(a[1], best)
+def _unify_extreme(m, out, items, better) -> bool:
+    best = _extreme(items, better)
+    return best is not None and m.unify(out, best)
 
 
-@det("max_member", 2)
-def _max_member(m, a):
-    xs = proper_list(a[1])
-    if not xs:
-        return False
-    best = xs[0]
-    for x in xs[1:]:
-        if compare_terms(x, best) > 0:
-            best = x
-    return m.unify(a[0], best)
-
-
-@det("min_member", 2)
-def _min_member(m, a):
-    xs = proper_list(a[1])
-    if not xs:
-        return False
-    best = xs[0]
-    for x in xs[1:]:
-        if compare_terms(x, best) < 0:
-            best = x
-    return m.unify(a[0], best)
+DET[("max_list", 2)] = lambda m, a: _unify_extreme(m, a[1], _numbers(a[0]), lambda x, y: x > y)
+DET[("min_list", 2)] = lambda m, a: _unify_extreme(m, a[1], _numbers(a[0]), lambda x, y: x < y)
+DET[("max_member", 2)] = lambda m, a: _unify_extreme(
+    m, a[0], proper_list(a[1]), lambda x, y: compare_terms(x, y) > 0)
+DET[("min_member", 2)] = lambda m, a: _unify_extreme(
+    m, a[0], proper_list(a[1]), lambda x, y: compare_terms(x, y) < 0)
 
 
 @det("numlist", 3)

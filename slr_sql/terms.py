@@ -268,6 +268,11 @@ def to_python(t: Any) -> Any:
             items, tail = list_items(t)
             if tail == NIL and type(tail) is Atom:
                 return [to_python(x) for x in items]
+            # a partial list: rebuild the spine in a loop, not by recursing on each tail
+            out = to_python(tail)
+            for x in reversed(items):
+                out = Struct(CONS, (to_python(x), out))
+            return out
         return Struct(t.name, tuple(to_python(a) for a in t.args))
     return t
 
