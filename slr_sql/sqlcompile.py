@@ -197,6 +197,23 @@ def resolve(t: Any) -> Any:
     return t
 
 
+# The interpreter unifies without occurs check (as Prolog does) and can build X = f(X);
+# the compiler's walks over bound terms would not terminate on one, so it leaves such goals
+# to the interpreter.
+CYCLIC = "a unification can build a cyclic term (no occurs check)"
+
+
+def _occurs(v: Var, t: Any) -> bool:
+    stack = [t]
+    while stack:
+        x = deref(stack.pop())
+        if x is v:
+            return True
+        if type(x) is Struct:
+            stack.extend(x.args)
+    return False
+
+
 def has_var(t: Any) -> bool:
     stack = [t]
     while stack:
@@ -381,9 +398,13 @@ class Compiler:
                 continue
             ta, tb = type(a), type(b)
             if ta is Var:
+                if tb is Struct and _occurs(a, b):
+                    raise Fallback(CYCLIC)
                 a.ref = b
                 trail.append(a)
             elif tb is Var:
+                if ta is Struct and _occurs(b, a):
+                    raise Fallback(CYCLIC)
                 b.ref = a
                 trail.append(b)
             elif ta is Col or tb is Col:

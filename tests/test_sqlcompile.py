@@ -257,3 +257,16 @@ def test_views_readable_with_plain_sqlite3(tmp_path):
     con = sqlite3.connect(db)
     assert con.execute("SELECT arg1 FROM teaThing").fetchall() == [("cup1",)]
     con.close()
+
+
+def test_a_rule_that_can_build_a_cyclic_term_falls_back_instead_of_looping():
+    # r1(X, X) against the head r1(Y, [Y, 2.0]) binds Y = [Y, 2.0]: Prolog (no occurs check)
+    # builds a cyclic term; the compiler's walks over bound terms would not end on one.
+    kb = slr_sql.open()
+    kb.load("fb(c, a). fb([], [b]). r1(Y, [Y, 2.0]) :- fb([], Y). r2(Z) :- r1(X, X). "
+            "r3(Y) :- r1(Y, W), W = [_, F], F > 1.")
+    assert "cyclic term" in engine(kb, "r2(Z)")
+    assert both(kb, "r2(Z)") == ([], [])
+    kb.add_many(["e(1)^1", "e(2)^2"])  # refreshes the inspection views: must not hang either
+    assert both(kb, "r3(Y)") == ([{"Y": ["b"]}],) * 2
+    assert engine(kb, "r3(Y)") == "sql"
