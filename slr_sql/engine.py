@@ -161,6 +161,10 @@ class Engine:
         self.det = _b.DET
         self.nondet = _b.NONDET
         self.out = None  # where write/1 & co. print; None = sys.stdout
+        # {(name, arity): callable(machine, args) -> rows or None}: predicates whose calls
+        # the SQL compiler answers (slr_sql.planner.CompiledCall); use_sql switches them off
+        self.sql_calls: dict = {}
+        self.use_sql = True
 
     def machine(self, at: float | None = None, timeout: float | None = None,
                 max_steps: int | None = None) -> "Machine":
@@ -211,6 +215,11 @@ class Machine:
         nondet = engine.nondet
         check_every = 2048
         steps_left = check_every
+        # compiled sub-goals: not under a step limit (SQL does not count inferences) nor in
+        # a synchronized run (its prev/next hooks must see every lookup)
+        sql_calls = engine.sql_calls if (engine.use_sql and self.max_steps is None
+                                         and self.on_prev is None
+                                         and self.on_next is None) else None
         while True:
             try:
                 # every step counts, backtracking and solutions too: an endless stream of
@@ -257,6 +266,13 @@ class Machine:
                 if pred is None:
                     pred = library.get(key)
                 if pred is not None:
+                    if sql_calls:
+                        call = sql_calls.get(key)
+                        if call is not None:
+                            rows = call(self, args)
+                            if rows is not None:
+                                cont = self._push_gen(self._sql_answers(rows, args), nxt)
+                                continue
                     cont = self._call_pred(pred, args, nxt)
                     continue
                 f = det.get(key)
@@ -355,6 +371,18 @@ class Machine:
                 trail.pop().ref = None
         cps.pop()
         return False
+
+    def _sql_answers(self, rows: list, args: tuple) -> Iterator[None]:
+        """Bind the call's free arguments to each compiled answer in turn."""
+        trail = self.trail
+        for row in rows:
+            mark = len(trail)
+            for i, value in row:
+                if not unify(args[i], value, trail):
+                    undo(trail, mark)
+                    break
+            else:
+                yield None
 
     def _push_gen(self, gen: Iterator, nxt):
         cp = [K_GEN, len(self.trail), nxt, gen, None, None]

@@ -234,8 +234,17 @@ class KnowledgeBase:
         from . import sync as _sync  # synchronized queries (issue 5): slr_sql/sync.py
         self._sync = _sync.attach(self)
         from . import planner as _planner  # SQL compiler (issue 3): slr_sql/planner.py
-        self.sql_enabled = True  # False: every query runs in the interpreter
         _planner.attach(self)
+
+    @property
+    def sql_enabled(self) -> bool:
+        """False: every query, and every goal inside one, runs in the interpreter (the
+        differential tests compare the two engines this way)."""
+        return self.engine.use_sql
+
+    @sql_enabled.setter
+    def sql_enabled(self, value: bool) -> None:
+        self.engine.use_sql = bool(value)
 
     # -- lifecycle ----------------------------------------------------------------------
     def close(self) -> None:

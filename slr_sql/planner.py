@@ -37,7 +37,7 @@ from .sqlcompile import SITES, Col, ColRef, Compiler, Fallback, Part, resolve
 from .terms import Atom, NIL, Struct, Var, deref, from_python, list_items, make_list, to_python
 
 __all__ = ["SqlPlan", "plan_for", "try_sql", "explain", "attach", "refresh", "Fallback",
-           "compile_goal"]
+           "compile_goal", "CompiledCall", "compiled_calls"]
 
 
 # ---------------------------------------------------------------------- SQL functions
@@ -276,11 +276,12 @@ def attach(kb) -> None:
 
 
 def refresh(kb) -> None:
-    """Load listener: materialize the fact tables and rebuild the views (in the load
-    transaction)."""
+    """Load listener: materialize the fact tables, rebuild the views (in the load
+    transaction) and choose the predicates an interpreter run calls through SQL."""
     st = state_of(kb)
     st.materialize(kb)
     refresh_views(kb)
+    kb.engine.sql_calls = compiled_calls(kb)
 
 
 # ---------------------------------------------------------------------- plans
@@ -327,6 +328,35 @@ class SqlPlan:
                 elif how == 2:
                     answer[name] = to_python(_inst_row(data, row, varmap))
             out.append(answer)
+        return out
+
+
+    def term_rows(self, kb, bound: dict, at) -> list:
+        """The answers as terms, for an interpreter that called the goal: per row, the
+        ``(name, term)`` pairs of the answer variables that are bound (fresh variables for
+        the unbound parts of non-ground answers, shared within the row)."""
+        params = self.params
+        if self.arg_params or self.has_at:
+            params = dict(params)
+            for name, pname in self.arg_params.items():
+                params[pname] = encode(bound[name])
+            if self.has_at:
+                params["at"] = float(at)
+        if self.sql is None:
+            return []
+        recipes = self.recipes
+        out = []
+        for row in kb.store.run_compiled(self.sql, params):
+            varmap: dict = {}
+            vals = []
+            for name, how, data in recipes[row[0]]:
+                if how == 0:
+                    vals.append((name, decode(row[data])))
+                elif how == 1:
+                    vals.append((name, data))
+                else:
+                    vals.append((name, _inst_row(data, row, varmap)))
+            out.append(vals)
         return out
 
 
@@ -517,8 +547,13 @@ def explain(kb, plan, at=None) -> list[str]:
     """Lines describing how a goal runs: the SQL with its parameters, or the fallback."""
     entry = plan_for(kb, plan, at is not None)
     if type(entry) is Fallback:
-        return ["engine: interpreter (top-down SLDNF over the event store)",
-                f"reason: {entry.reason}"]
+        lines = ["engine: interpreter (top-down SLDNF over the event store)",
+                 f"reason: {entry.reason}"]
+        subs = _compiled_subgoals(kb, plan)
+        if subs:
+            lines.append("compiled sub-goals (SQL when called with ground or fresh-variable "
+                         "arguments): " + ", ".join(subs))
+        return lines
     lines = ["engine: sql (one prepared statement; rows decoded into answers)"]
     if entry.modes:
         lines.append("modes (+ bound, - free when the goal is reached):")
@@ -533,6 +568,21 @@ def explain(kb, plan, at=None) -> list[str]:
         lines.append("parameters: " + ", ".join(f":{k} = {v!r}" for k, v in shown.items())
                      + "".join(f", :{p} = <{n} from args>" for n, p in entry.arg_params.items()))
     return lines
+
+
+def _compiled_subgoals(kb, plan) -> list[str]:
+    """The predicates with a CompiledCall that an interpreter run of ``plan`` may reach."""
+    calls = kb.engine.sql_calls
+    if not calls or not kb.sql_enabled:
+        return []
+    from .analysis import analyze, goal_refs, reachable
+
+    a = analyze(kb.program)
+    goal, _ = kb._instantiate(plan, None)
+    refs = goal_refs(goal, a.program, a.library, a.meta)
+    nodes = reachable(kb.program, refs.nodes)
+    return sorted(f"{n.name}/{n.arity}" for n in nodes
+                  if n.kind == "pred" and (n.name, n.arity) in calls)
 
 
 # ---------------------------------------------------------------------- views
@@ -595,3 +645,98 @@ def refresh_views(kb) -> list[str]:
             views[name] = sql
     st.view_missing = missing
     return kb.store.replace_views(views)
+
+
+# ---------------------------------------------------------------------- compiled sub-goals
+
+class CompiledCall:
+    """Calls of one derived predicate, made by an interpreter run, answered by SQL.
+
+    The interpreter takes over a query the compiler cannot handle (a cut, recursion, ...),
+    but the predicates that query calls may still compile: ``reach(A, B)`` may recurse over
+    ``near(A, B)``, a join of prev lookups. For such a call the engine asks this object for
+    the answers; it compiles ``name(A1..An)`` for the call's binding pattern (which arguments
+    are ground: they become parameters) once, and returns the rows as terms, in the order
+    the interpreter would find them. ``None`` means "run the clauses": an argument that is
+    neither ground nor a fresh variable (an instance the compiled goal does not stand for,
+    as var/1 or ``\\+`` may tell the difference), a mode that does not compile, or a statement
+    that meets at run time something only the interpreter handles exactly.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(); kb.load("near(A, B) :- at(A, P)^_, at(B, P)^_, A \\== B.")
+    >>> kb.add_many(["at(r1, k)^1", "at(r2, k)^2"])
+    []
+    >>> call = kb.engine.sql_calls[("near", 2)]
+    >>> m = kb.engine.machine(); x = slr_sql.terms.Var("X")
+    >>> [[(i, str(t)) for i, t in row] for row in call(m, (slr_sql.Atom("r1"), x))]
+    [[(1, 'r2')]]
+    """
+
+    __slots__ = ("kb", "name", "arity", "plans", "answered", "__weakref__")
+
+    def __init__(self, kb, name: str, arity: int):
+        self.kb = weakref.ref(kb)
+        self.name = name
+        self.arity = arity
+        self.plans: dict = {}
+        self.answered = 0   # calls answered through SQL (explain and the tests read it)
+
+    def __call__(self, m, args: tuple):
+        bound = []
+        terms = {}
+        seen = set()
+        for i, a in enumerate(args):
+            a = deref(a)
+            if type(a) is Var:
+                if id(a) in seen:
+                    return None
+                seen.add(id(a))
+            elif sqlcompile.has_var(a):
+                return None
+            else:
+                bound.append(i)
+                terms[f"A{i + 1}"] = a
+        kb = self.kb()
+        if kb is None:
+            return None
+        bound = tuple(bound)
+        text = self.plans.get(bound)
+        if text is None:
+            text = self.plans[bound] = self._goal(bound)
+        # through kb._plan (a dict hit): define() and load() drop the parsed plans
+        entry = plan_for(kb, kb._plan(*text), m.at is not None)
+        if type(entry) is Fallback:
+            return None
+        try:
+            rows = entry.term_rows(kb, terms, m.at)
+        except (sqlite3.Error, Unencodable, ValueError, TypeError, KeyError, OverflowError):
+            return None
+        self.answered += 1
+        return [[(int(name[1:]) - 1, t) for name, t in row if name not in terms]
+                for row in rows]
+
+    def _goal(self, bound: tuple) -> tuple:
+        from .printer import format_term
+
+        xs = tuple(Var(f"A{i + 1}") for i in range(self.arity))
+        goal = Struct(self.name, xs) if xs else Atom(self.name)
+        return format_term(goal), tuple(f"A{i + 1}" for i in bound)
+
+
+def compiled_calls(kb) -> dict:
+    """``{(name, arity): CompiledCall}`` for the derived predicates worth calling through SQL
+    from the interpreter: not recursive, with at least one rule, and reading events (directly
+    or through the rules they call). Plain fact predicates stay in the interpreter, whose
+    first-argument index answers them faster than a statement would."""
+    from .analysis import Node, analyze, reachable, recursive_predicates
+
+    program = kb.program
+    a = analyze(program)
+    recursive = recursive_predicates(program)
+    out = {}
+    for key, pred in program.preds.items():
+        if Node("pred", *key) in recursive or not any(c.body for c in pred.clauses):
+            continue
+        if any(a.stored.get(n) for n in reachable(program, [Node("pred", *key)])):
+            out[key] = CompiledCall(kb, *key)
+    return out

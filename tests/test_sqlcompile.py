@@ -270,3 +270,64 @@ def test_a_rule_that_can_build_a_cyclic_term_falls_back_instead_of_looping():
     kb.add_many(["e(1)^1", "e(2)^2"])  # refreshes the inspection views: must not hang either
     assert both(kb, "r3(Y)") == ([{"Y": ["b"]}],) * 2
     assert engine(kb, "r3(Y)") == "sql"
+
+
+# ------------------------------------------------------------------ one engine
+
+LINKS = """
+link(A, B) :- prev(at(A, P)^_, 100), at(B, P)^_, A \\== B.
+reach(A, B) :- link(A, B).
+reach(A, C) :- link(A, B), B @> A, reach(B, C).
+first_link(A, B) :- link(A, B), !.
+"""
+
+
+def links_kb():
+    kb = slr_sql.open()
+    kb.load(LINKS)
+    kb.add_many(["at(r1, k)^1", "at(r2, k)^2", "at(r3, k)^3", "at(r3, j)^4", "at(r4, j)^5",
+                 "at(r5, j)^6", "at(r2, j)^7"])
+    return kb
+
+
+@pytest.mark.parametrize("goal", [
+    "reach(r1, X)", "reach(r1, r5)", "reach(X, r4)", "first_link(r3, B)",
+    "first_link(A, B)", "findall(A-B, first_link(A, B), L)",
+])
+def test_interpreter_calls_compiled_sub_goals(goal):
+    kb = links_kb()
+    how = engine(kb, goal)
+    assert how.startswith("interpreter"), how
+    assert "compiled sub-goals" in kb.explain(goal) and "link/2" in kb.explain(goal)
+    call = kb.engine.sql_calls[("link", 2)]
+    sql, interp = both(kb, goal)
+    assert sql == interp
+    assert call.answered > 0  # the interpreter run asked SQL for link/2 (sql=True run only)
+    before = call.answered
+    kb.sql_enabled = False
+    kb.query(goal)
+    assert call.answered == before  # switched off: the interpreter ran the clauses
+
+
+def test_compiled_sub_goal_modes_and_instances():
+    kb = links_kb()
+    call = kb.engine.sql_calls[("link", 2)]
+    assert ("reach", 2) not in kb.engine.sql_calls     # recursive: interpreter
+    # one plan per binding pattern (which arguments are ground), reused across calls
+    kb.query("reach(r1, X)")
+    kb.query("reach(r2, X)")
+    assert set(call.plans) == {(0,)}
+    kb.query("first_link(A, r3)")
+    assert set(call.plans) == {(0,), (1,)}
+    # an argument that is neither ground nor fresh runs the clauses (var/1 could tell)
+    kb.load("odd(X) :- link(f(Y), X), var(Y).")
+    call = kb.engine.sql_calls[("link", 2)]   # a load chooses the compiled calls anew
+    assert kb.query("odd(X), !") == [] and call.answered == 0
+    assert both(kb, "reach(r1, X), !") == ([{"X": "r2"}],) * 2
+    # the stream view follows the interpreter run's at= (a plan of its own); prev is not
+    # limited by it, event goals are (the same in both engines)
+    n = call.answered
+    assert both(kb, "findall(X, reach(r2, X), L), !", at=4.5) == ([{"L": ["r3"]}],) * 2
+    assert call.answered > n
+    sql, interp = both(kb, "findall(X, reach(r2, X), L), !")
+    assert sql == interp and len(sql[0]["L"]) > 1
