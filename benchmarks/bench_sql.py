@@ -6,7 +6,9 @@
 2. prev/next lookups: the compiled plan (kb.query with args, answers decoded) against a
    hand-written SQL statement for the same answer (run on the same connection, rows decoded
    the same way).
-3. Compile time of a 50-rule program; the plan-cache hit path.
+3. prev/next SQL forms: the compiler's indexed correlated subqueries against hand-written
+   window-function forms (RANK() OVER (PARTITION BY ...)), raw SQL, identical rows asserted.
+4. Compile time of a 50-rule program; the plan-cache hit path.
 
 Run:  python benchmarks/bench_sql.py [--events 100000] [--repeat 3]
 """
@@ -79,6 +81,19 @@ def best(fn, repeat):
     return min(times), out
 
 
+def best_interleaved(fns, repeat):
+    """best() for several functions, run in turn in each round, so a burst of load on the
+    machine hits them all alike: [(min time, last result)] in the order of fns."""
+    times = [[] for _ in fns]
+    outs = [None] * len(fns)
+    for _ in range(repeat):
+        for i, fn in enumerate(fns):
+            t0 = time.perf_counter()
+            outs[i] = fn()
+            times[i].append(time.perf_counter() - t0)
+    return [(min(ts), out) for ts, out in zip(times, outs)]
+
+
 def bench_tea(n_events, repeat, interpreter=True):
     kb, horizon = tea_store(n_events)
     z = round(horizon * 0.5, 1)
@@ -131,24 +146,134 @@ def bench_prev_next(kb, horizon, repeat, n=2000):
                             for r in rows])
             return out
 
-        c, a1 = best(compiled, repeat)
-        h, a2 = best(handwritten, repeat)
+        (c, a1), (h, a2) = best_interleaved([compiled, handwritten], repeat)
         assert a1 == a2, label
         results[label] = (c / n, h / n)
         print(f"{label} lookup (kb.query, args bound) {c / n * 1e6:7.1f} us   hand-written SQL "
               f"{h / n * 1e6:7.1f} us   ratio {c / h:4.2f}")
-    # one statement for many lookups: the compiled findall against a hand-written window query
+    # one statement for many lookups: the compiled findall against a hand-written join
     goal = "findall(O-L, (obj(O, cup, _)^T, prev(seg(O, L)^_, T)), Xs)"
-    c, a1 = best(lambda: kb.query(goal), repeat)
     hand = ("SELECT o.arg1, s.arg2 FROM obj o JOIN seg s ON s.arg1 = o.arg1 AND s.t_start = s.t_end "
             "AND s.t_end = (SELECT t_end FROM seg WHERE arg1 = o.arg1 AND t_start = t_end AND "
             "t_end <= o.t_end ORDER BY t_end DESC LIMIT 1) WHERE o.arg2 = 'cup' AND "
             "o.t_start = o.t_end ORDER BY o.t_end, o.t_start, o.seq, s.t_start, s.seq")
-    h, rows = best(lambda: [Struct("-", (to_python(decode(a)), to_python(decode(b))))
-                            for a, b in conn.execute(hand).fetchall()], repeat)
+    (c, a1), (h, rows) = best_interleaved(
+        [lambda: kb.query(goal),
+         lambda: [Struct("-", (to_python(decode(a)), to_python(decode(b))))
+                  for a, b in conn.execute(hand).fetchall()]], repeat)
     assert a1[0]["Xs"] == rows
     print(f"prev join ({len(rows)} pairs): compiled {c * 1000:.1f} ms   hand-written "
           f"{h * 1000:.1f} ms   ratio {c / h:4.2f}")
+
+
+def _compiled(kb, goal, bound=()):
+    """The SQL the compiler emits for goal: (sql, names of the goal's variables, params(args),
+    project(row) -> the encoded values of those variables)."""
+    sp = plan_for(kb, kb._plan(goal, tuple(bound)), False)
+    assert not hasattr(sp, "reason"), sp
+    (recipe,) = sp.recipes
+    assert all(how == 0 for _, how, _ in recipe), recipe
+    cols = [i for _, _, i in recipe]
+
+    def params(args=None):
+        out = dict(sp.params)
+        for name, pname in sp.arg_params.items():
+            out[pname] = args[name]
+        return out
+
+    def project(rows):
+        return [tuple(r[i] for i in cols) for r in rows]
+
+    return sp.sql, [name for name, _, _ in recipe], params, project
+
+
+def bench_window(kb, horizon, repeat, n=2000):
+    """prev/next as the compiler's indexed correlated subqueries against hand-written
+    window-function forms, raw SQL only (rows fetched, not decoded), same connection. Each
+    form must return the same rows in the same order."""
+    rng = random.Random(5)
+    conn = kb.store._conn
+    lookups = [(f"o{rng.randrange(2000)}", round(rng.uniform(1, horizon), 2)) for _ in range(n)]
+    table = []
+
+    # (a), (b): one lookup, O and T bound. Window: RANK() over the arg1 partition, the time
+    # filter inside the window's subquery, the top rank kept.
+    single = [
+        ("prev(seg(O, L)^Z, T)", "prev lookup, O and T bound",
+         "SELECT :o, arg2, t_start, :t FROM (SELECT arg2, t_start, seq, RANK() OVER "
+         "(PARTITION BY arg1 ORDER BY t_end DESC) AS r FROM seg WHERE arg1 = :o AND "
+         "t_start = t_end AND t_end <= :t) WHERE r = 1 ORDER BY t_start, seq"),
+        ("next(seg(O, L)^Z, [T, inf])", "next lookup, O and T bound",
+         "SELECT :o, arg2, t_start, :t FROM (SELECT arg2, t_start, t_end, seq, RANK() OVER "
+         "(PARTITION BY arg1 ORDER BY t_start) AS r FROM seg WHERE arg1 = :o AND "
+         "t_start = t_end AND t_start >= :t AND t_end <= 1e999) WHERE r = 1 "
+         "ORDER BY t_end, seq"),
+    ]
+    for goal, label, window in single:
+        sql, names, params, project = _compiled(kb, goal, ("O", "T"))
+        assert names == ["O", "L", "Z", "T"], names
+        ps = [params({"O": o, "T": t}) for o, t in lookups]
+        pw = [{"o": o, "t": t} for o, t in lookups]
+        (s, r1), (w, r2) = best_interleaved(
+            [lambda: [conn.execute(sql, p).fetchall() for p in ps],
+             lambda: [conn.execute(window, p).fetchall() for p in pw]], repeat)
+        assert [project(r) for r in r1] == r2, label
+        assert sum(map(len, r1)) > n // 2, label  # most lookups find an event
+        table.append((f"{label} (per lookup, {n} lookups)", s / n * 1e6,
+                      [("RANK window", w / n * 1e6)], "us"))
+
+    # (c): the batch prev join over every obj(O, cup, _)^T event.
+    goal = "obj(O, cup, _)^T, prev(seg(O, L)^_, T)"
+    sql, names, params, project = _compiled(kb, goal)
+    assert names == ["O", "T", "L"], names
+    order = "ORDER BY k0, k1, k2, k3, k4"
+    forms = [
+        # the arg1-partition window with the time filter inside, correlated to each obj event
+        ("RANK window per arg1, correlated",
+         "SELECT o.arg1, o.t_start, s.arg2 FROM obj o JOIN seg s ON s.arg1 = o.arg1 AND "
+         "s.t_start = s.t_end AND s.t_end = (SELECT w.t_end FROM (SELECT t_end, RANK() OVER "
+         "(PARTITION BY arg1 ORDER BY t_end DESC) AS r FROM seg WHERE arg1 = o.arg1 AND "
+         "t_start = t_end AND t_end <= o.t_start) AS w WHERE w.r = 1 LIMIT 1) WHERE "
+         "o.arg2 = 'cup' AND o.t_start = o.t_end "
+         "ORDER BY o.t_end, o.t_start, o.seq, s.t_start, s.seq"),
+        # one statement, no correlation: rank each obj event's earlier segs (PARTITION BY the
+        # obj event), keep the top rank
+        ("RANK window per obj event, one join",
+         "SELECT a1, k1, a2 FROM (SELECT o.arg1 AS a1, s.arg2 AS a2, o.t_end AS k0, "
+         "o.t_start AS k1, o.seq AS k2, s.t_start AS k3, s.seq AS k4, RANK() OVER "
+         "(PARTITION BY o.seq ORDER BY s.t_end DESC) AS r FROM obj o JOIN seg s ON "
+         "s.arg1 = o.arg1 AND s.t_start = s.t_end AND s.t_end <= o.t_start WHERE "
+         "o.arg2 = 'cup' AND o.t_start = o.t_end) WHERE r = 1 " + order),
+        # one pass: obj and seg events merged per object in time order, a running MAX of the
+        # seg end times carried to each obj event (segs before objs at equal times)
+        ("running MAX window, one pass",
+         "WITH ev AS (SELECT arg1, t_start, t_end, seq, 1 AS kind FROM obj WHERE "
+         "arg2 = 'cup' AND t_start = t_end UNION ALL SELECT arg1, t_start, t_end, seq, 0 "
+         "FROM seg WHERE t_start = t_end), m AS (SELECT arg1, t_start, t_end, seq, kind, "
+         "MAX(CASE WHEN kind = 0 THEN t_end END) OVER (PARTITION BY arg1 ORDER BY t_end, "
+         "kind ROWS UNBOUNDED PRECEDING) AS last FROM ev) SELECT m.arg1, m.t_start, s.arg2 "
+         "FROM m JOIN seg s ON s.arg1 = m.arg1 AND s.t_start = s.t_end AND s.t_end = m.last "
+         "WHERE m.kind = 1 ORDER BY m.t_end, m.t_start, m.seq, s.t_start, s.seq"),
+    ]
+    p = params()
+    timed = best_interleaved([lambda: conn.execute(sql, p).fetchall()]
+                             + [lambda sql=sql: conn.execute(sql).fetchall() for _, sql in forms],
+                             repeat)
+    s, r1 = timed[0]
+    r1 = project(r1)
+    assert len(r1) > 1000
+    others = []
+    for (label, _), (w, r2) in zip(forms, timed[1:]):
+        assert r1 == r2, label
+        others.append((label, w * 1000))
+    table.append((f"batch prev join, {len(r1)} obj(O, cup, _)^T events", s * 1000, others, "ms"))
+
+    print("prev/next SQL forms (raw SQL, rows fetched, identical rows asserted):")
+    print(f"  {'what':<56} {'form':<36} {'time':>10} {'vs subquery':>11}")
+    for what, s, others, unit in table:
+        print(f"  {what:<56} {'correlated subquery (compiler)':<36} {s:>7.1f} {unit}")
+        for label, w in others:
+            print(f"  {'':<56} {label:<36} {w:>7.1f} {unit} {w / s:>10.2f}x")
 
 
 def bench_compile():
@@ -204,6 +329,7 @@ def main():
     a = ap.parse_args()
     kb, horizon = bench_tea(a.events, a.repeat, not a.no_interpreter)
     bench_prev_next(kb, horizon, a.repeat)
+    bench_window(kb, horizon, a.repeat)
     bench_compile()
 
 

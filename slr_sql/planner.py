@@ -30,7 +30,7 @@ from . import sqlcompile
 from json import loads as _json_loads
 
 from .encoding import INT64_MAX, INT64_MIN, Unencodable, decode, encode, encode_json
-from .encoding import _from_json
+from .encoding import _from_json, _quote
 from .engine import undo, unify
 from .program import Slot, Template, build
 from .sqlcompile import SITES, Col, ColRef, Compiler, Fallback, Part, resolve
@@ -87,6 +87,18 @@ def _ar1(op, a):
 
 
 def _j(v):
+    """slr_j: a column value's inner-JSON form, ``encode_json(decode(v))``. A stored list or
+    compound is already in that form (JSON inside and out); an atom is quoted; an integer
+    column is 64-bit. The rest (strings, floats, ``{"$atom":..}``) goes the long way."""
+    tv = type(v)
+    if tv is str:
+        c = v[:1]
+        if c == "[" or (c == "{" and not v.startswith('{"$atom":"')):
+            return v
+        if c and c != "{" and c != '"':
+            return _quote(v)
+    elif tv is int:
+        return str(v)
     return encode_json(decode(v))
 
 
@@ -386,8 +398,24 @@ def _py_list(items):
         elif tx is list:
             out.append(_py_list(x))
         else:
-            out.append(to_python(_from_json(x)))
+            out.append(_py_term(x))
     return out
+
+
+def _py_term(x):
+    """``to_python(_from_json(x))`` for one JSON element, compounds without the round trip."""
+    tx = type(x)
+    if tx is str:
+        return Atom(x)
+    if tx is float or tx is int:
+        return x
+    if tx is list:
+        return _py_list(x)
+    if tx is dict and len(x) == 1:
+        ((key, val),) = x.items()
+        if type(val) is list and key != ".":
+            return Struct(Atom(key), tuple([_py_term(a) for a in val]))
+    return to_python(_from_json(x))
 
 
 def _inst_row(t, row, varmap):
