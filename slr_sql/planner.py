@@ -302,8 +302,10 @@ class SqlPlan:
     """One compiled query: the statement, its constant parameters and how rows become
     answers."""
 
-    def __init__(self, sql, params, arg_params, has_at, recipes, missing, sites, modes, goal):
+    def __init__(self, sql, params, arg_params, has_at, recipes, missing, sites, modes, goal,
+                 time_sites=()):
         self.sql = sql
+        self.time_sites = time_sites      # ((name, n), time parameter or SQL) per prev/next
         self.params = params
         self.arg_params = arg_params      # variable name -> parameter name
         self.has_at = has_at
@@ -342,6 +344,20 @@ class SqlPlan:
             out.append(answer)
         return out
 
+
+    def history_times(self, at) -> list | None:
+        """``[((name, n), time)]``: up to when each prev/next of the statement reads its
+        history; None when a time is only known row by row (computed from the data)."""
+        out = []
+        for key, hi in self.time_sites:
+            if hi == ":at":
+                t = at
+            elif hi[:2] == ":c" and hi[1:] in self.params:
+                t = self.params[hi[1:]]
+            else:
+                return None
+            out.append((key, t))
+        return out
 
     def term_rows(self, kb, bound: dict, at) -> list:
         """The answers as terms, for an interpreter that called the goal: per row, the
@@ -517,7 +533,7 @@ def compile_goal(kb, plan, has_at: bool) -> SqlPlan:
             sql += "\nORDER BY " + ", ".join(f"k{i}" for i in range(nk))
     return SqlPlan(sql, dict(comp.params), arg_params, has_at,
                    [p.extra for p in parts], frozenset(comp.missing), comp.sites, comp.modes,
-                   plan.text)
+                   plan.text, tuple(dict.fromkeys(comp.time_sites)))
 
 
 def _has_ref(t) -> bool:

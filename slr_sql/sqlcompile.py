@@ -273,6 +273,9 @@ class Compiler:
         self.modes: list[str] = []
         self._modes_seen: set = set()
         self.branches = 0
+        # ((name, n), upper time SQL) of every prev/next: a synchronized query may run the
+        # statement once each history is complete up to its time (slr_sql.sync)
+        self.time_sites: list[tuple[tuple[str, int], str]] = []
 
     # ------------------------------------------------------------------ helpers
     def alias(self, prefix: str = "t") -> str:
@@ -811,6 +814,7 @@ class Compiler:
             lo, hi = None, self.time_sql(args[1])
         else:
             lo, hi = iv
+        self.time_sites.append(((name, n), hi))
         table = self.event_table(name, n)
         if table is None:
             return
@@ -843,6 +847,7 @@ class Compiler:
             lo, hi = iv
         else:
             lo, hi = self.time_sql(args[1]), self.time_sql(args[2])
+        self.time_sites.append(((name, n), hi))
         table = self.event_table(name, n)
         if table is None:
             return

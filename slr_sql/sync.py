@@ -155,7 +155,9 @@ class PendingQuery(Future):
     ``id``, ``goal``, ``at``; ``waiting_for`` — the conditions it waits for now (empty while it
     runs or once done); ``waits`` — every condition it waited for, with when and why it was
     released; ``goal_set`` — the event types of the static condition; ``evaluations`` — how
-    many times it was (re-)evaluated; ``explain()`` — all that as text.
+    many times it was (re-)evaluated; ``engine`` — what answered it: ``"sql"`` (the compiled
+    statement, once every prev/next in it reads a complete history) or ``"interpreter"``;
+    ``explain()`` — all that as text.
     """
 
     def __init__(self, sync: "Synchronizer", id: str, goal: str, at: float,
@@ -169,6 +171,7 @@ class PendingQuery(Future):
         self.waiting_for: list[Wait] = []
         self.waits: list[Wait] = []
         self.evaluations = 0
+        self.engine: str | None = None
         self.submitted_at = sync.clock.now()
         self.submitted_wall = time.monotonic()
         self.answered_at: float | None = None
@@ -207,7 +210,8 @@ class PendingQuery(Future):
         if self.answered_at is not None:
             lines.append(f"answered at clock {_fmt(self.answered_at)} "
                          f"({_dur(self.answered_at - self.submitted_at)} s after submission, "
-                         f"{self.evaluations} evaluation{'s' if self.evaluations != 1 else ''})")
+                         f"{self.evaluations} evaluation{'s' if self.evaluations != 1 else ''}"
+                         f"{', by ' + self.engine if self.engine else ''})")
         return "\n".join(lines)
 
     def timeout_message(self, timeout: float | None) -> str:
@@ -754,6 +758,12 @@ class Synchronizer:
         term, frame = kb._instantiate(plan, q.args)
         if not self._static_ready(q, term, now):
             return
+        answers = self._sql_answers(q, now)
+        if answers is not None:
+            q.evaluations += 1
+            q.engine = "sql"
+            self._finish(q, answers)
+            return
         remaining = None
         if q._deadline is not None:
             remaining = max(q._deadline - time.monotonic(), 0.001)
@@ -774,6 +784,10 @@ class Synchronizer:
             wait.seen = w.seen
             self._park(q, [wait], [(w.key, w.time, w.kind, w.seen)])
             return
+        q.engine = "interpreter"
+        self._finish(q, answers)
+
+    def _finish(self, q: PendingQuery, answers: list) -> None:
         with self.lock:
             q.waiting_for = []
             q.answered_at = self.clock.now()
@@ -782,6 +796,29 @@ class Synchronizer:
             q.set_result(answers)
         except InvalidStateError:
             pass
+
+    def _sql_answers(self, q: PendingQuery, now: float) -> list | None:
+        """The answers through the compiled statement, when the goal compiles and every
+        prev/next in it reads a history that is complete up to its (constant) time — the
+        dynamic condition of SPEC §3 checked before the statement runs, for all of them at
+        once. None: evaluate in the interpreter, whose hooks wait for exactly what the
+        evaluation reaches."""
+        kb = self.kb
+        if not kb.sql_enabled:
+            return None
+        from .planner import SqlPlan, plan_for
+
+        entry = plan_for(kb, q._plan, q.at is not None)
+        if type(entry) is not SqlPlan:
+            return None
+        times = entry.history_times(q.at)
+        if times is None:
+            return None
+        complete = self.tracker.complete
+        for key, t in times:
+            if t is None or not complete(key, t, now):
+                return None
+        return _try_run(kb, entry, q)
 
     def _static_ready(self, q: PendingQuery, term: Any, now: float) -> bool:
         """The goal-set condition; parks ``q`` on the missing types when it does not hold.
@@ -988,3 +1025,14 @@ def attach(kb: Any) -> Synchronizer:
     sync = Synchronizer(kb)
     kb.add_listeners.append(sync.on_add)
     return sync
+
+
+def _try_run(kb: Any, entry: Any, q: PendingQuery) -> list | None:
+    import sqlite3
+
+    from .encoding import Unencodable
+
+    try:
+        return entry.run(kb, q.args or {}, q.at, None)
+    except (sqlite3.Error, Unencodable, ValueError, TypeError, KeyError, OverflowError):
+        return None

@@ -5,6 +5,8 @@ or running, so that ``p.done()`` says exactly whether the condition released the
 """
 from __future__ import annotations
 
+import collections
+
 import asyncio
 
 import pytest
@@ -390,6 +392,7 @@ GOALS = [
     "findall(X, lastb(X, {z}), L)",
     "findall(X, firstc(X, {z} - 2), L)",
     "findall(X, (a(X)^_, \\+ b(X)^_), L)",
+    "findall(X-Y, (a(X)^T, prev(b(Y)^_, T + 0.5)), L)",   # a time from the data: interpreter
 ]
 DELAY = {"a": 2.0, "b": 1.0, "c": 0.5}
 
@@ -453,9 +456,46 @@ def test_synchronized_answers_equal_answers_on_the_complete_stream(scenario):
             check_not_early(pending, clock.now(), marked)
         clock.set(1000.0)
         for goal, z, p in pending:
-            assert plain(p.result(timeout=10)) == plain(kb.query(goal, at=z)), (goal, z)
+            got = plain(p.result(timeout=10))
+            assert got == plain(kb.query(goal, at=z)), (goal, z)
+            kb.sql_enabled = False
+            assert got == plain(kb.query(goal, at=z)), (goal, z, p.engine)
+            kb.sql_enabled = True
+            ENGINES[p.engine] += 1
     finally:
         kb.close()
+
+
+ENGINES: collections.Counter = collections.Counter()
+
+
+def test_synchronized_queries_run_as_sql_when_their_histories_are_complete():
+    """Both engines answer synchronized queries: SQL once every prev/next of the compiled
+    statement reads a complete history, the interpreter (waiting for exactly what it
+    reaches) otherwise. The scenarios above ran both; here, one of each by hand."""
+    if sum(ENGINES.values()) >= 40:
+        assert ENGINES["sql"] >= 10 and ENGINES["interpreter"] >= 5, dict(ENGINES)
+    clock = ManualClock(0.0)
+    with slr_sql.open(clock=clock) as kb:
+        kb.load(PROGRAM)
+        kb.add_many(["b(1)^1", "b(2)^2", "a(1)^1.5"])
+        p = kb.submit("findall(X, lastb(X, 2), L)", at=2.0)
+        q = kb.submit("findall(X, lastb(X, 6), L)", at=2.0)   # prev beyond z: waits for b to 6
+        kb.add("fullyUpdated(b/1)^2")
+        settle(kb)
+        assert plain(p.result(timeout=5)) == [{"L": [2]}] and p.engine == "sql"
+        assert not q.done()
+        assert "by sql" in p.explain()
+        kb.add("b(3)^5")
+        kb.add("fullyUpdated(b/1)^7")
+        settle(kb)
+        assert plain(q.result(timeout=5)) == [{"L": [3]}]
+        # a time computed from the data: only the interpreter knows which history it reads
+        r = kb.submit("a(X)^T, U is T + 1, prev(b(Y)^_, U)", at=2.0)
+        kb.add("fullyUpdated(a/1)^2")
+        settle(kb)
+        assert plain(r.result(timeout=5)) == [{"X": 1, "T": 1.5, "U": 2.5, "Y": 2}]
+        assert r.engine == "interpreter"
 
 
 def check_not_early(pending, now, marked):
