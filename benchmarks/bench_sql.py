@@ -115,6 +115,33 @@ def bench_tea(n_events, repeat, interpreter=True):
     return kb, horizon
 
 
+SUBGOAL_RULE = ("tea_object(O, WPos, Z) :- obj(O, Type, _Color)^_T1, usedFor(Type, tea), "
+                "prev(seg(O, RPos)^T2, Z), position(seg(O, RPos)^T2, WPos).")
+SUBGOAL_QUERY = "findall(O-W, tea_object(O, W, Z), L), !"
+
+
+def bench_subgoals(n_events, repeat):
+    """A query the compiler leaves to the interpreter (a cut) calling a rule that compiles:
+    the interpreter run with compiled sub-goals against the interpreter alone."""
+    kb, horizon = tea_store(n_events)
+    kb.load(SUBGOAL_RULE)
+    z = round(horizon * 0.5, 1)
+    args = {"Z": z}
+    assert hasattr(plan_for(kb, kb._plan(SUBGOAL_QUERY, ("Z",)), True), "reason")
+    call = kb.engine.sql_calls[("tea_object", 3)]
+    with_sql, a1 = best(lambda: kb.query(SUBGOAL_QUERY, args=args, at=z), repeat)
+    assert call.answered > 0
+    kb.sql_enabled = False
+    alone, a2 = best(lambda: kb.query(SUBGOAL_QUERY, args=args, at=z), 1)
+    kb.sql_enabled = True
+    assert a1 == a2, "answers differ"
+    print(f"interpreter run calling a compiled rule ({SUBGOAL_QUERY}), {n_events} events, "
+          f"{len(a1[0]['L'])} objects:")
+    print(f"  with compiled sub-goals {with_sql * 1000:9.1f} ms")
+    print(f"  interpreter alone       {alone * 1000:9.1f} ms")
+    print(f"  speed-up                {alone / with_sql:9.1f} x")
+
+
 def bench_prev_next(kb, horizon, repeat, n=2000):
     rng = random.Random(3)
     store = kb.store
@@ -326,7 +353,11 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-interpreter", action="store_true",
                     help="skip the (slow) interpreter run of the tea query")
+    ap.add_argument("--subgoal-events", type=int, default=10_000,
+                    help="store size of the compiled-sub-goal comparison (the interpreter "
+                         "alone grows with the square of the tf history)")
     a = ap.parse_args()
+    bench_subgoals(a.subgoal_events, a.repeat)
     kb, horizon = bench_tea(a.events, a.repeat, not a.no_interpreter)
     bench_prev_next(kb, horizon, a.repeat)
     bench_window(kb, horizon, a.repeat)
