@@ -21,6 +21,7 @@ import slr_sql
 
 from .demo import answer_text, value_text
 from .encoding import decode
+from .parser import parse_event_fast
 from .terms import NIL, Atom, Struct, list_items, make_list
 
 __all__ = ["main", "parse_event_line", "ingest_file", "IngestReport", "strip_full_stop"]
@@ -134,120 +135,6 @@ def _json_time(obj: dict, key: str) -> float:
     return float(value)
 
 
-# The common shape of recorded events -- plain atoms, numbers, lists and compounds such as
-# seg(cup1,[0.4,0.1,0.9])^12.31 -- is read here directly: the full parser costs ~2 ms a line,
-# which dominates ingesting a long recording. Anything else (quoted atoms, strings,
-# operators, variables, other number syntaxes) falls back to the full parser, so the fast
-# path only ever accepts text that the parser reads the same way.
-_FAST_TOKEN = re.compile(r"""\s*(?:
-      (?P<float>-?\d+\.\d+(?:[eE][+-]?\d+)?)
-    | (?P<int>-?\d+)(?![\d.'xob_eE])
-    | (?P<functor>[a-z][A-Za-z0-9_]*)\(
-    | (?P<atom>[a-z][A-Za-z0-9_]*)
-    | (?P<punct>[\[\](),^])
-    )""", re.VERBOSE)
-
-
-class _NotFast(Exception):
-    pass
-
-
-def _fast_event(text: str) -> tuple | None:
-    """``name(args)^T`` / ``name(args)^[S,E]`` in the simple subset -> (name, args, S, E)."""
-    tokens: list[tuple[str, str]] = []
-    pos = 0
-    end = len(text)
-    while pos < end:
-        m = _FAST_TOKEN.match(text, pos)
-        if m is None or m.end() == pos:
-            if text[pos:].strip() == "":
-                break
-            return None
-        pos = m.end()
-        kind = m.lastgroup
-        tokens.append((kind, m.group(kind)))
-    i = 0
-
-    def peek() -> tuple[str, str]:
-        return tokens[i] if i < len(tokens) else ("eof", "")
-
-    def take(kind: str, value: str | None = None) -> str:
-        nonlocal i
-        k, v = peek()
-        if k != kind or (value is not None and v != value):
-            raise _NotFast
-        i += 1
-        return v
-
-    def term() -> object:
-        nonlocal i
-        k, v = peek()
-        if k == "float":
-            i += 1
-            return float(v)
-        if k == "int":
-            i += 1
-            return int(v)
-        if k == "atom":
-            i += 1
-            return Atom(v)
-        if k == "functor":
-            i += 1
-            return Struct(v, args_until(")"))
-        if k == "punct" and v == "[":
-            i += 1
-            if peek() == ("punct", "]"):
-                i += 1
-                return NIL
-            items = args_until("]")
-            return make_list(items)
-        raise _NotFast
-
-    def args_until(close: str) -> list:
-        items = [term()]
-        while peek() == ("punct", ","):
-            take("punct", ",")
-            items.append(term())
-        take("punct", close)
-        return items
-
-    def number() -> float:
-        nonlocal i
-        k, v = peek()
-        if k not in ("int", "float"):
-            raise _NotFast
-        i += 1
-        return float(v)
-
-    try:
-        k, name = peek()
-        if k == "functor":
-            i += 1
-            args = args_until(")")
-        elif k == "atom":
-            i += 1
-            args = []
-        else:
-            return None
-        take("punct", "^")
-        if peek() == ("punct", "["):
-            take("punct", "[")
-            start = number()
-            take("punct", ",")
-            stop = number()
-            take("punct", "]")
-        else:
-            # "^-4" is not a negative time to Prolog: "^-" reads as one symbol atom.
-            if peek()[1].startswith("-"):
-                return None
-            start = stop = number()
-        if i != len(tokens):
-            return None
-    except _NotFast:
-        return None
-    return (name, args, start, stop)
-
-
 def parse_event_line(line: str) -> str | tuple | None:
     """One ingest line as something ``kb.add_many`` takes, or None for blank/comment lines.
 
@@ -261,7 +148,7 @@ def parse_event_line(line: str) -> str | tuple | None:
         return None
     if not text.startswith("{"):
         text = strip_full_stop(text)
-        return _fast_event(text) or text
+        return parse_event_fast(text) or text
     try:
         obj = json.loads(text)
     except json.JSONDecodeError as exc:

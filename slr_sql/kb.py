@@ -19,7 +19,7 @@ from typing import Any, Callable, Iterable
 from .clocks import Clock, WallClock
 from .engine import Engine, Machine
 from .errors import EventRejected, SLRError, SLRSyntaxError
-from .parser import parse_program, parse_term
+from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
 from .store import EventStore
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
@@ -388,6 +388,9 @@ class KnowledgeBase:
 
     # -- events -------------------------------------------------------------------------
     def _event_from_text(self, text: str) -> tuple:
+        fast = parse_event_fast(text)   # the common shape, ~10x faster than the parser
+        if fast is not None:
+            return fast
         term, _ = parse_term(text, "<event>")
         ev = split_event_atom(term)
         if ev is None:

@@ -28,9 +28,9 @@ from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput
 
 from .errors import SLRSyntaxError
 from .printer import INFIX_OPS, PREFIX_OPS
-from .terms import CONS, NIL, TRUE, Atom, Clause, Span, String, Struct, Var
+from .terms import CONS, NIL, TRUE, Atom, Clause, Span, String, Struct, Var, make_list
 
-__all__ = ["parse_program", "parse_term"]
+__all__ = ["parse_program", "parse_term", "parse_event_fast"]
 
 _GRAMMAR_PATH = Path(__file__).with_name("grammar") / "slr.lark"
 
@@ -717,3 +717,124 @@ def parse_term(text: str, filename: str = "<query>") -> tuple[Any, dict[str, Var
     ('color(O,C)^12.5', ['O', 'C'])
     """
     return _parse(text, filename, "query")
+
+
+# Events: the common shape of recorded events -- plain atoms, numbers, lists and compounds
+# such as seg(cup1,[0.4,0.1,0.9])^12.31 -- is read directly by a regular-expression scanner:
+# the full parser costs ~80 us an event, which dominates ingesting a long recording. Anything else (quoted atoms, strings,
+# operators, variables, other number syntaxes) falls back to the full parser, so the fast
+# path only ever accepts text that the parser reads the same way.
+_FAST_TOKEN = re.compile(r"""\s*(?:
+      (?P<float>-?\d+\.\d+(?:[eE][+-]?\d+)?)
+    | (?P<int>-?\d+)(?![\d.'xob_eE])
+    | (?P<functor>[a-z][A-Za-z0-9_]*)\(
+    | (?P<atom>[a-z][A-Za-z0-9_]*)
+    | (?P<punct>[\[\](),^])
+    )""", re.VERBOSE)
+
+
+class _NotFast(Exception):
+    pass
+
+
+def parse_event_fast(text: str) -> tuple | None:
+    """``name(args)^T`` / ``name(args)^[S,E]`` in the simple subset -> ``(name, args, S, E)``
+    with float times, or None when the text is outside it (then use :func:`parse_term`).
+
+    >>> parse_event_fast("seg(cup1, [0.5, 1])^12.5")
+    ('seg', (Atom('cup1'), Struct('.', (0.5, Struct('.', (1, Atom('[]')))))), 12.5, 12.5)
+    >>> parse_event_fast("p('A')^1") is None
+    True
+    """
+    tokens: list[tuple[str, str]] = []
+    pos = 0
+    end = len(text)
+    while pos < end:
+        m = _FAST_TOKEN.match(text, pos)
+        if m is None or m.end() == pos:
+            if text[pos:].strip() == "":
+                break
+            return None
+        pos = m.end()
+        kind = m.lastgroup
+        tokens.append((kind, m.group(kind)))
+    i = 0
+
+    def peek() -> tuple[str, str]:
+        return tokens[i] if i < len(tokens) else ("eof", "")
+
+    def take(kind: str, value: str | None = None) -> str:
+        nonlocal i
+        k, v = peek()
+        if k != kind or (value is not None and v != value):
+            raise _NotFast
+        i += 1
+        return v
+
+    def term() -> object:
+        nonlocal i
+        k, v = peek()
+        if k == "float":
+            i += 1
+            return float(v)
+        if k == "int":
+            i += 1
+            return int(v)
+        if k == "atom":
+            i += 1
+            return Atom(v)
+        if k == "functor":
+            i += 1
+            return Struct(v, args_until(")"))
+        if k == "punct" and v == "[":
+            i += 1
+            if peek() == ("punct", "]"):
+                i += 1
+                return NIL
+            items = args_until("]")
+            return make_list(items)
+        raise _NotFast
+
+    def args_until(close: str) -> list:
+        items = [term()]
+        while peek() == ("punct", ","):
+            take("punct", ",")
+            items.append(term())
+        take("punct", close)
+        return items
+
+    def number() -> float:
+        nonlocal i
+        k, v = peek()
+        if k not in ("int", "float"):
+            raise _NotFast
+        i += 1
+        return float(v)
+
+    try:
+        k, name = peek()
+        if k == "functor":
+            i += 1
+            args = args_until(")")
+        elif k == "atom":
+            i += 1
+            args = []
+        else:
+            return None
+        take("punct", "^")
+        if peek() == ("punct", "["):
+            take("punct", "[")
+            start = number()
+            take("punct", ",")
+            stop = number()
+            take("punct", "]")
+        else:
+            # "^-4" is not a negative time to Prolog: "^-" reads as one symbol atom.
+            if peek()[1].startswith("-"):
+                return None
+            start = stop = number()
+        if i != len(tokens):
+            return None
+    except _NotFast:
+        return None
+    return (name, tuple(args), start, stop)

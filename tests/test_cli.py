@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+import slr_sql
+
 ROOT = Path(__file__).resolve().parent.parent
 
 PROGRAM = """\
@@ -289,6 +291,17 @@ FAST_PATH_SAMPLES = [
 ]
 
 
+def parse_term_event(text):
+    """The event through the full parser (lark), as (name, args, start, end)."""
+    from slr_sql.arith import evaluate
+    from slr_sql.parser import parse_term
+    from slr_sql.program import event_key, split_event_atom
+
+    atom, s, e = split_event_atom(parse_term(text, "<event>")[0])
+    args = tuple(atom.args) if isinstance(atom, slr_sql.Struct) else ()
+    return event_key(atom)[0], args, float(evaluate(s)), float(evaluate(e))
+
+
 @pytest.mark.parametrize("text", FAST_PATH_SAMPLES)
 def test_ingest_fast_path_reads_events_like_the_parser(text):
     """ingest reads simple event lines without the full parser; it must store the same rows."""
@@ -296,7 +309,8 @@ def test_ingest_fast_path_reads_events_like_the_parser(text):
     from slr_sql.cli import parse_event_line
 
     rows = []
-    for add in (lambda kb: kb.add(text), lambda kb: kb.add_many([parse_event_line(text)])):
+    full = parse_term_event(text)
+    for add in (lambda kb: kb.add_many([full]), lambda kb: kb.add_many([parse_event_line(text)])):
         with slr_sql.open(clock=slr_sql.ManualClock(0.0)) as kb:
             add(kb)
             [(table,)] = kb.sql("SELECT table_name FROM slr_event_types")[1]

@@ -21,7 +21,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from slr_sql.errors import SLRSyntaxError
-from slr_sql.parser import parse_program, parse_term
+from slr_sql.parser import parse_event_fast, parse_program, parse_term
 from slr_sql.printer import INFIX_OPS, PREFIX_OPS, format_atom, format_term
 from slr_sql.terms import NIL, TRUE, Atom, String, Struct, Var, make_list
 
@@ -354,3 +354,47 @@ def test_deeply_nested_operators_print():
         t = Struct("-", (t, Atom("b")))  # left-nested yfx chain: no parentheses needed
     assert format_term(t) == "a" + "-b" * 300
     assert variant(parse_term(format_term(t))[0], t)
+
+
+# ------------------------------------------------------------------ the fast event reader
+
+simple_atoms = st.from_regex(r"[a-z][A-Za-z0-9_]{0,6}", fullmatch=True)
+simple_numbers = st.one_of(st.integers(-10**20, 10**20),
+                           st.floats(allow_nan=False, allow_infinity=False))
+simple_terms = st.recursive(
+    st.one_of(simple_atoms.map(Atom), simple_numbers),
+    lambda inner: st.one_of(st.lists(inner, max_size=4).map(make_list),
+                            st.tuples(simple_atoms, st.lists(inner, min_size=1, max_size=3))
+                            .map(lambda t: Struct(t[0], tuple(t[1])))),
+    max_leaves=12)
+
+
+@settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow])
+@given(simple_atoms, st.lists(simple_terms, max_size=4), simple_numbers, simple_numbers,
+       st.sampled_from(["", " "]))
+def test_fast_event_reader_agrees_with_the_parser(name, args, s, e, space):
+    """kb.add reads the common event shape without lark; whatever it accepts, the parser
+    reads the same way (same name, argument terms with their types, times)."""
+    atom = Struct(name, tuple(args)) if args else Atom(name)
+    stamp = format_term(s) if s == e else f"[{format_term(s)},{space}{format_term(e)}]"
+    text = format_term(atom).replace(",", "," + space) + "^" + space + stamp
+    fast = parse_event_fast(text)
+    if fast is None:  # outside the subset (e.g. a negative time after ^, 1.0e10 spellings)
+        return
+    term, _ = parse_term(text, "<event>")
+    full_args = tuple(term.args[0].args) if args else ()
+    full_name = term.args[0].name if args else str(term.args[0])
+    assert (fast[0], repr(fast[1])) == (full_name, repr(full_args)), text
+    times = term.args[1]
+    if s == e:
+        assert fast[2] == fast[3] == float(times), text
+    else:
+        assert (fast[2], fast[3]) == tuple(float(x) for x in (times.args[0], times.args[1].args[0]))
+
+
+def test_fast_event_reader_is_used_for_common_events():
+    assert parse_event_fast("seg(cup1, [0.4, 0.1, 0.9])^12.31") == (
+        "seg", (Atom("cup1"), make_list([0.4, 0.1, 0.9])), 12.31, 12.31)
+    assert parse_event_fast("tick^[1, 2.5]") == ("tick", (), 1.0, 2.5)
+    for outside in ["p('A')^1", 'p("s")^1', "p(a-b)^1", "p(X)^1", "p(1)^-1", "p(1)^1.", "p(0'a)^1"]:
+        assert parse_event_fast(outside) is None, outside
