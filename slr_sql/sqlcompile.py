@@ -57,13 +57,18 @@ class Col:
 
     kinds: ``float`` (REAL: times), ``int`` (INTEGER: counts), ``num`` (INTEGER or REAL:
     arithmetic), ``text`` (encoded JSON text: findall lists), ``any`` (a stored value).
+
+    ``src``: for an element taken out of a stored list or compound, ``(json, path)``: the SQL
+    of the JSON text it sits in and the SQL of its JSON path (so a later pattern on it reads
+    the element's parts from the same text instead of re-parsing its encoding).
     """
 
-    __slots__ = ("sql", "kind")
+    __slots__ = ("sql", "kind", "src")
 
-    def __init__(self, sql: str, kind: str = "any"):
+    def __init__(self, sql: str, kind: str = "any", src: tuple | None = None):
         self.sql = sql
         self.kind = kind
+        self.src = src
 
     def __repr__(self) -> str:
         return f"Col({self.sql!r}, {self.kind!r})"
@@ -219,6 +224,17 @@ def has_var(t: Any) -> bool:
     while stack:
         x = deref(stack.pop())
         if type(x) is Var:
+            return True
+        if type(x) is Struct:
+            stack.extend(x.args)
+    return False
+
+
+def _has_float(t: Any) -> bool:
+    stack = [t]
+    while stack:
+        x = deref(stack.pop())
+        if type(x) is float:
             return True
         if type(x) is Struct:
             stack.extend(x.args)
@@ -413,7 +429,7 @@ class Compiler:
             elif ta is Col or tb is Col:
                 if ta is not Col:
                     a, b = b, a
-                cond = self.eq_sql(a, b)
+                cond = self.eq_sql(a, b, st)
                 if cond is False:
                     return False
                 if cond is not True:
@@ -428,8 +444,13 @@ class Compiler:
                 return False
         return True
 
-    def eq_sql(self, col: Col, other: Any):
-        """SQL for "the value of ``col`` unifies with ``other``" (True/False when static)."""
+    def eq_sql(self, col: Col, other: Any, st: State | None = None):
+        """SQL for "the value of ``col`` unifies with ``other``" (True/False when static).
+
+        A compound term or list with unbound variables is matched part by part
+        (:meth:`match_sql`): its conditions go to ``st.conds`` and its variables are bound
+        on ``st.trail`` to the elements of the stored value (then the result is True/False).
+        """
         k = col.kind
         to = type(other)
         if to is Col:
@@ -468,8 +489,12 @@ class Compiler:
                     return False
                 return f"{col.sql} = {self.json_sql(other, top=True)}"
             if has_var(other):
-                raise Fallback(f"matching a stored value against the compound term "
-                               f"{_fmt(_shown(other))} with unknown parts")
+                if st is None:
+                    raise Fallback(f"matching a stored value against the compound term "
+                                   f"{_fmt(_shown(other))} with unknown parts")
+                if k in NUMERIC:
+                    return False
+                return self.match_sql(col, other, st)
             if k in NUMERIC:
                 return False
             try:
@@ -477,6 +502,134 @@ class Compiler:
             except Unencodable as exc:
                 raise Fallback(f"constant cannot be encoded: {exc.reason}")
         raise Fallback(f"cannot compare a stored value with {other!r}")
+
+    # ------------------------------------------------------------------ compound patterns
+    # A stored list or compound is JSON text (slr_sql.encoding); a pattern such as [X,Y|T]
+    # or f(A, b) becomes conditions on its shape plus one Col per variable, whose SQL gives
+    # the element in the top-level column encoding. Paths are ("c", text) when constant
+    # (bound as a parameter) or ("x", sql) when they depend on the row (partial lists).
+    # Every JSON function reads a *guarded* text: the column value when it starts with
+    # "[" or "{" (then it is the encoder's JSON), else NULL (bare atoms such as cup1 are not
+    # JSON, and SQLite would raise on them whatever order it evaluates the conditions in).
+
+    MAX_PATTERN_DEPTH = 402  # the encoder stores nothing nested deeper than 400
+
+    def match_sql(self, col: Col, pat: Struct, st: State) -> bool:
+        """Unify the value of ``col`` with the compound/list ``pat`` that has unbound
+        variables (Prolog unification, part by part). False: fails statically."""
+        if col.src is not None:
+            text, path = col.src
+        else:
+            if col.kind == "text":  # findall/aggregate lists: always JSON arrays
+                if not (pat.name == "." and len(pat.args) == 2):
+                    return False
+                text = col.sql
+            else:
+                text = (f"(CASE WHEN substr({col.sql}, 1, 1) IN ('[', '{{') "
+                        f"THEN {col.sql} END)")
+            path = ("c", "$")
+        return self._match_at(text, path, pat, st, 0)
+
+    def _path_sql(self, path: tuple) -> str:
+        return self.const(path[1]) if path[0] == "c" else path[1]
+
+    def _sub_path(self, path: tuple, suffix: str) -> tuple:
+        if path[0] == "c":
+            return ("c", path[1] + suffix)
+        return ("x", f"({path[1]} || {self.const(suffix)})")
+
+    def _elem_col(self, text: str, path: tuple) -> Col:
+        """The element at ``path`` of the JSON ``text``, in the top-level encoding: an atom
+        inside JSON is a JSON string (TEXT, or {"$atom":..} when it starts with [ { or "),
+        {"$string":s} is the string s (a JSON string at the top level); numbers come out as
+        INTEGER/REAL, lists and compounds ({"$int":..} too) as the same compact JSON text
+        (SQLite copies the tokens of the encoder's text)."""
+        p = self._path_sql(path)
+        ps = self._path_sql(self._sub_path(path, '."$string"'))
+        val = f"json_extract({text}, {p})"
+        sql = (f"(CASE json_type({text}, {p}) "
+               f"WHEN 'text' THEN (CASE WHEN substr({val}, 1, 1) IN ('[', '{{', '\"') "
+               f"THEN '{{\"$atom\":' || ({text} -> {p}) || '}}' ELSE {val} END) "
+               f"WHEN 'object' THEN (CASE WHEN json_type({text}, {ps}) = 'text' "
+               f"THEN {text} -> {ps} ELSE {text} -> {p} END) "
+               f"ELSE {val} END)")
+        return Col(sql, "any", (text, path))
+
+    def _match_at(self, text: str, path: tuple, pat: Struct, st: State, depth: int) -> bool:
+        if depth > self.MAX_PATTERN_DEPTH:
+            return False  # deeper than any stored value
+        p = self._path_sql(path)
+        subs: list = []
+        if pat.name == "." and len(pat.args) == 2:
+            items, tail = list_items(pat)
+            n = len(items)
+            if type(tail) is Atom and tail == "[]":
+                # a proper list pattern: a JSON array of exactly n elements
+                st.conds.append(f"json_array_length({text}, {p}) = {n}")
+                subs = [(self._sub_path(path, f"[{i}]"), x) for i, x in enumerate(items)]
+            else:
+                # [X1..Xn|T]: a stored proper list (JSON array) of n or more elements, T the
+                # rest; or a stored partial list, which is a chain of '.'/2 compounds
+                # {".":[H, T]} (the encoder's canonical form: an array is never a tail).
+                is_arr = f"json_type({text}, {p}) = 'array'"
+                cells = [path]
+                for _ in range(n):
+                    cells.append(self._sub_path(cells[-1], '."."[1]'))
+                dot = '."."'
+                chain = " AND ".join(
+                    f"json_array_length({text}, {self._path_sql(self._sub_path(c, dot))}) = 2"
+                    for c in cells[:n])
+                st.conds.append(f"(CASE WHEN {is_arr} THEN json_array_length({text}, {p}) >= {n} "
+                                f"ELSE ({chain}) END)")
+                for i, x in enumerate(items):
+                    in_arr = self._path_sql(self._sub_path(path, f"[{i}]"))
+                    in_chain = self._path_sql(self._sub_path(cells[i], '."."[0]'))
+                    subs.append((("x", f"(CASE WHEN {is_arr} THEN {in_arr} ELSE {in_chain} END)"),
+                                 x))
+                removes = ", ".join(self.const(f"$[{i}]") for i in reversed(range(n)))
+                rest = self._elem_col(text, cells[n]).sql
+                tail_col = Col(f"(CASE WHEN {is_arr} THEN json_remove(json_extract({text}, {p}), "
+                               f"{removes}) ELSE {rest} END)")
+                subs.append((None, tail))
+        else:
+            name = str(pat.name)
+            if '"' in name or "\\" in name or any(ord(ch) < 0x20 for ch in name):
+                raise Fallback(f"matching a stored value against a compound named {name!r} "
+                               f"(the name has characters a JSON path cannot hold)")
+            key = '."' + name + '"'
+            st.conds.append(f"json_array_length({text}, "
+                            f"{self._path_sql(self._sub_path(path, key))}) = {len(pat.args)}")
+            subs = [(self._sub_path(path, f"{key}[{i}]"), a) for i, a in enumerate(pat.args)]
+        for sub, arg in subs:
+            if sub is None:
+                if not self.unify(arg, tail_col, st):
+                    return False
+            elif not self._match_elem(text, sub, arg, st, depth + 1):
+                return False
+        return True
+
+    def _match_elem(self, text: str, path: tuple, arg: Any, st: State, depth: int) -> bool:
+        """Unify the element at ``path`` with the pattern argument ``arg``."""
+        a = deref(arg)
+        ta = type(a)
+        if ta is Struct and (has_var(a) or has_col(a) or _has_float(a)):
+            return self._match_at(text, path, a, st, depth)
+        if ta is Var or ta is Col:
+            return self.unify(a, self._elem_col(text, path), st)
+        p = self._path_sql(path)
+        if ta is float:
+            if a != a:
+                raise Fallback("NaN in a goal")
+            st.conds.append(f"(json_extract({text}, {p}) = {self.const(a)} "
+                            f"AND json_type({text}, {p}) = 'real')")
+            return True
+        # a ground term without floats: its inner JSON text is canonical (one text per term)
+        try:
+            enc = encode_json(a)
+        except Unencodable as exc:
+            raise Fallback(f"constant cannot be encoded: {exc.reason}")
+        st.conds.append(f"({text} -> {p}) = {self.const(enc)}")
+        return True
 
     # ------------------------------------------------------------------ values
     def value_sql(self, t: Any) -> str:
@@ -499,6 +652,8 @@ class Compiler:
         t = deref(t)
         tt = type(t)
         if tt is Col:
+            if t.src is not None:  # an element of stored JSON: its text there is canonical
+                return f"({t.src[0]} -> {self._path_sql(t.src[1])})"
             return self.udf(f"slr_j({t.sql})")
         if tt is Var:
             raise Fallback(f"a template with the unbound variable {t.name} (findall of "

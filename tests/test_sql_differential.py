@@ -1,8 +1,9 @@
 """Differential test: compiled SQL answers == interpreter answers, in the same order.
 
 Hypothesis generates non-recursive programs (facts, rules with joins, disjunction, negation,
-if-then-else, comparisons, arithmetic, prev/next, findall, aggregate_all, temporal rules) and
-event streams (ties on end and start times, intervals, mixed value types), then runs every
+if-then-else, comparisons, arithmetic, prev/next, findall, aggregate_all, temporal rules,
+list/compound patterns with unbound parts over stored lists and compounds) and event streams
+(ties on end and start times, intervals, mixed value types), then runs every
 generated query twice on the same store: with the SQL compiler (kb.query) and with
 ``kb.sql_enabled = False`` (the interpreter). The database is derandomized, so a failure
 replays the same way everywhere; the generated cases are counted and at least a third must
@@ -25,6 +26,17 @@ EVENTS: dict = {}
 ATOMS = ["x", "y", "z"]
 NUMS = ["1", "2", "3", "1.0", "2.5", "0"]
 ODD = ['"x"', "[1,2]", "f(x)", "[]", "'[q'", "-1"]
+# c/2 events hold lists and compounds; patterns with unbound parts take them apart in SQL.
+# Their variables (V for the whole value, E and F for parts) stay out of arithmetic, so the
+# elements (lists, atoms) do not meet `is` and comparisons.
+VALUES = ["[x, 1]", '[1.0, "x"]', "[x|y]", "g(x, 1)", "f(-0.0)", "[[1, 2], '[q']",
+          "[0.0, x]", "[x, [y|z]]", "[y]", "g([], 2.5)", "x", "[]", "[x, y|z]", '"s"']
+PATTERNS = ["[E]", "[E, F]", "[E|F]", "f(E)", "[x|E]", "[_, E]", "[E, E]", "g(E, _)",
+            "[[E|_]|F]", "[E, 0.0]", "[E|y]", "[E, [F|_]]", "[E, F|z]", "g(E, F)"]
+PVARS = ["V", "E", "F"]
+# for V = <pattern>: E only as an element, never in a tail or nested, so two of them
+# unified with each other never bind E to a term holding E (no cyclic terms)
+V_PATTERNS = ["[E]", "f(E)", "[_, E]", "[E, E]", "g(E, _)", "[E, 0.0]", "[E|y]", "[x, E]"]
 TIMES = [0.0, 1.0, 1.5, 2.0, 3.0]
 CUTS = ["!", "(true ; !)", "\\+ fail"]
 
@@ -35,6 +47,10 @@ TVARS = ["T", "S"]
 
 def o_arg(draw):
     return draw(st.sampled_from(OVARS + OVARS + ATOMS + ["_"]))
+
+
+def p_arg(draw):
+    return draw(st.sampled_from(PATTERNS + PVARS + ["_", "[x|y]", "g(x, 1)", "[]"]))
 
 
 def n_arg(draw):
@@ -57,7 +73,7 @@ def time_expr(draw):
 
 @st.composite
 def goal(draw, depth, rules, trules):
-    kinds = ["event", "event", "fact", "cmp", "eq", "is", "prev", "next"]
+    kinds = ["event", "event", "fact", "cmp", "eq", "is", "prev", "next", "pattern"]
     if rules:
         kinds += ["rule", "rule"]
     if trules:
@@ -70,6 +86,14 @@ def goal(draw, depth, rules, trules):
         if name == "a":
             return f"a({o_arg(draw)}, {n_arg(draw)})^{t_arg(draw)}"
         return f"b({o_arg(draw)})^{t_arg(draw)}"
+    if kind == "pattern":
+        form = draw(st.sampled_from(["event", "event", "eq", "same"]))
+        if form == "event":
+            return f"c({o_arg(draw)}, {p_arg(draw)})^{t_arg(draw)}"
+        if form == "eq":
+            return f"V = {draw(st.sampled_from(V_PATTERNS))}"
+        return f"{draw(st.sampled_from(['E', 'F']))} {draw(st.sampled_from(['=', '==']))} " \
+               f"{draw(st.sampled_from(['E', 'F', 'x', '1', '[y|z]', '0.0']))}"
     if kind == "fact":
         return f"f({o_arg(draw)}, {n_arg(draw)})"
     if kind == "cmp":
@@ -103,7 +127,7 @@ def goal(draw, depth, rules, trules):
     if kind == "conj":
         return f"({sub()}, {sub()})"
     if kind == "findall":
-        templ = draw(st.sampled_from(["O", "N", "O-N", "[O,T]", "x"]))
+        templ = draw(st.sampled_from(["O", "N", "O-N", "[O,T]", "x", "E"]))
         return f"findall({templ}, ({sub()}), L)"
     spec = draw(st.sampled_from(["count", "sum(N)", "max(N)", "min(T)", "bag(O)", "set(N)"]))
     return f"aggregate_all({spec}, ({sub()}), A)"
@@ -113,7 +137,7 @@ def goal(draw, depth, rules, trules):
 def body(draw, rules, trules, max_goals=3):
     n = draw(st.integers(0, max_goals - 1))
     first = draw(st.sampled_from(["a(O, N)^T", "a(O, N)^[S,T]", "f(O, N)", "b(O)^T, f(O, N)",
-                                  "a(O, N)^T, f(P, M)"]
+                                  "a(O, N)^T, f(P, M)", "c(O, V)^T", "c(O, [E|F])^T"]
                                  + [f"{r}(O, N)" for r, _ in rules]))
     return ", ".join([first] + [draw(goal(2, rules, trules)) for _ in range(n)])
 
@@ -135,11 +159,14 @@ def program(draw):
     if trules:
         lines.append(f"tr(O)^T :- {draw(body(rules, False, 2))}.")
     events = []
-    for _ in range(draw(st.integers(0, 9))):
+    for _ in range(draw(st.integers(0, 11))):
         s = draw(st.sampled_from(TIMES))
         e = draw(st.sampled_from([s, s, s + 0.5, s + 1.0]))
         stamp = f"{s}" if s == e else f"[{s},{e}]"
-        if draw(st.booleans()):
+        if draw(st.integers(0, 3)) == 0:
+            events.append(f"c({draw(st.sampled_from(ATOMS))}, "
+                          f"{draw(st.sampled_from(VALUES))})^{stamp}")
+        elif draw(st.booleans()):
             events.append(f"a({draw(st.sampled_from(ATOMS))}, "
                           f"{draw(st.sampled_from(NUMS + ODD))})^{stamp}")
         else:
