@@ -503,7 +503,9 @@ def compile_goal(kb, plan, has_at: bool) -> SqlPlan:
                 recipes.append((name, 2, r))
             else:
                 recipes.append((name, 1, r))
-        parts.append(Part(list(st.froms), list(st.conds), list(st.keys), cols, recipes))
+        conds = list(st.conds)
+        conds += sqlcompile.unused_checks(st.checks, conds + st.keys + cols)
+        parts.append(Part(list(st.froms), conds, list(st.keys), cols, recipes))
 
     comp.compile(goal, emit)
     if not parts:
@@ -648,7 +650,9 @@ def view_sql(kb, name: str, arity: int):
                 proj.append("NULL")
             else:
                 proj.append(comp.value_sql(v))
-        parts.append(Part(list(st.froms), list(st.conds), list(st.keys), proj))
+        conds = list(st.conds)
+        conds += sqlcompile.unused_checks(st.checks, conds + st.keys + proj)
+        parts.append(Part(list(st.froms), conds, list(st.keys), proj))
 
     try:
         comp.compile(goal, emit)

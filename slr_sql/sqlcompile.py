@@ -159,21 +159,27 @@ class Part:
 
 
 class State:
-    __slots__ = ("froms", "conds", "keys", "trail")
+    __slots__ = ("froms", "conds", "keys", "trail", "checks")
 
     def __init__(self):
         self.froms: list = []
         self.conds: list = []
         self.keys: list = []
         self.trail: list = []
+        # values that may raise (arithmetic through slr_ functions, findall/aggregate_all
+        # subqueries): SQLite computes a value only where the statement uses it, Prolog
+        # computes it when the goal runs, so an unused one still gets a condition
+        self.checks: list = []
 
     def mark(self) -> tuple:
-        return (len(self.froms), len(self.conds), len(self.keys), len(self.trail))
+        return (len(self.froms), len(self.conds), len(self.keys), len(self.trail),
+                len(self.checks))
 
     def restore(self, m: tuple) -> None:
         del self.froms[m[0]:]
         del self.conds[m[1]:]
         del self.keys[m[2]:]
+        del self.checks[m[4]:]
         trail = self.trail
         while len(trail) > m[3]:
             trail.pop().ref = None
@@ -217,6 +223,11 @@ def _occurs(v: Var, t: Any) -> bool:
         if type(x) is Struct:
             stack.extend(x.args)
     return False
+
+
+def unused_checks(checks: list, used: list) -> list[str]:
+    """Conditions forcing the evaluation of the ``checks`` no used SQL text contains."""
+    return [f"({c}) IS NOT NULL" for c in checks if not any(c in u for u in used)]
 
 
 def has_var(t: Any) -> bool:
@@ -354,8 +365,10 @@ class Compiler:
 
         def emit(s: State) -> None:
             proj = project(s) if project is not None else None
-            parts.append(Part(list(s.froms[m[0]:]), list(s.conds[m[1]:]),
-                              list(s.keys[m[2]:]), proj))
+            conds = list(s.conds[m[1]:])
+            keys = list(s.keys[m[2]:])
+            conds += unused_checks(s.checks[m[4]:], conds + keys + (proj or []))
+            parts.append(Part(list(s.froms[m[0]:]), conds, keys, proj))
 
         self.solve((goal, ctx, None), st, emit)
         st.restore(m)
@@ -1119,6 +1132,8 @@ class Compiler:
             sql, v = self.arith_sql(args[1])
             m = st.mark()
             value = v if sql is None else Col(sql, v)
+            if sql is not None and "slr_" in sql:
+                st.checks.append(sql)
             if self.unify(args[0], value, st):
                 self.solve(nxt, st, emit)
             st.restore(m)
@@ -1178,6 +1193,8 @@ class Compiler:
         else:
             value = Col(self.list_sql(parts), "text")
         m = st.mark()
+        if type(value) is Col and "slr_" in value.sql:
+            st.checks.append(value.sql)
         if self.unify(out, value, st):
             self.solve(nxt, st, emit)
         st.restore(m)
@@ -1242,6 +1259,8 @@ class Compiler:
         m = st.mark()
         if type(value) is Col and kind in ("max", "min"):
             st.conds.append(f"{value.sql} IS NOT NULL")
+        elif type(value) is Col and "slr_" in value.sql:
+            st.checks.append(value.sql)
         if self.unify(out, value, st):
             self.solve(nxt, st, emit)
         st.restore(m)

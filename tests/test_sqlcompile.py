@@ -434,3 +434,33 @@ def test_compiled_sub_goal_modes_and_instances():
     assert call.answered > n
     sql, interp = both(kb, "findall(X, reach(r2, X), L), !")
     assert sql == interp and len(sql[0]["L"]) > 1
+
+
+UNUSED = ("r(O) :- a(O, N)^_, M is N + 1. "
+          "s(O) :- a(O, _)^_, findall(Y, (a(O, N)^_, Y is N * 2), _). "
+          "t(O) :- a(O, N)^_, \\+ (M is N + 1, M > 100). "
+          "u(O) :- a(O, _)^_, aggregate_all(sum(N), a(_, N)^_, _).")
+
+
+@pytest.mark.parametrize("goal", [
+    "r(O)",                                   # M is N + 1, M unused
+    "s(O)",                                   # an unused findall whose goal raises
+    "t(O)",                                   # \+ over arithmetic that raises
+    "u(O)",                                   # an unused aggregate_all(sum)
+])
+def test_values_nothing_uses_are_still_computed(goal):
+    """SQLite computes an expression only where the statement uses it; Prolog runs `is`
+    when it is reached. A type error in a value nothing uses must still be raised."""
+    kb = slr_sql.open()
+    kb.load(UNUSED)
+    kb.add_many(["a(y, 2)^1", "a(x, foo)^2"])
+    assert engine(kb, goal) == "sql"
+    for sql in (True, False):
+        kb.sql_enabled = sql
+        with pytest.raises(SLREvaluationError, match="type_error"):
+            kb.query(goal)
+    kb.sql_enabled = True
+    numbers = slr_sql.open()   # numbers only: the same answers as the interpreter
+    numbers.load(UNUSED)
+    numbers.add_many(["a(y, 2)^1", "a(x, 3)^2"])
+    assert both(numbers, goal) == ([{"O": "y"}, {"O": "x"}],) * 2
