@@ -196,6 +196,7 @@ class Machine:
         # hooks for synchronized queries: called before prev/next read the store
         self.on_prev: Callable | None = None
         self.on_next: Callable | None = None
+        self.sql_calls: dict | None = None   # set by solve(): compiled sub-goals, if allowed
 
     # -- helpers used by builtins -------------------------------------------------------
     def unify(self, a: Any, b: Any) -> bool:
@@ -220,6 +221,7 @@ class Machine:
         sql_calls = engine.sql_calls if (engine.use_sql and self.max_steps is None
                                          and self.on_prev is None
                                          and self.on_next is None) else None
+        self.sql_calls = sql_calls
         while True:
             try:
                 # every step counts, backtracking and solutions too: an endless stream of
@@ -538,6 +540,13 @@ class Machine:
         rules = self.engine.program.temporal.get((name, n))
         events = self.engine.events
         if rules is not None and rules.clauses:
+            if self.sql_calls:
+                call = self.sql_calls.get(("^", name, n))
+                if call is not None:
+                    full = args + ((s,) if deref(s) is deref(e) else (s, e))
+                    rows = call(self, full)
+                    if rows is not None:
+                        return self._push_gen(self._sql_answers(rows, full), nxt)
             rule_goal = Special(S_RULES, (rules, args + (s, e)))
             cps = self.cps
             cps.append([K_ALT, len(self.trail), (rule_goal, 0, nxt), None, None, None])

@@ -627,8 +627,12 @@ def _compiled_subgoals(kb, plan) -> list[str]:
     goal, _ = kb._instantiate(plan, None)
     refs = goal_refs(goal, a.program, a.library, a.meta)
     nodes = reachable(kb.program, refs.nodes)
-    return sorted(f"{n.name}/{n.arity}" for n in nodes
-                  if n.kind == "pred" and (n.name, n.arity) in calls)
+    out = []
+    for n in nodes:
+        key = (n.name, n.arity) if n.kind == "pred" else ("^", n.name, n.arity)
+        if key in calls:
+            out.append(str(n))
+    return sorted(out)
 
 
 # ---------------------------------------------------------------------- views
@@ -720,12 +724,15 @@ class CompiledCall:
     [[(1, 'r2')]]
     """
 
-    __slots__ = ("kb", "name", "arity", "plans", "answered", "__weakref__")
+    __slots__ = ("kb", "name", "arity", "event", "plans", "answered", "__weakref__")
 
-    def __init__(self, kb, name: str, arity: int):
+    def __init__(self, kb, name: str, arity: int, event: bool = False):
         self.kb = weakref.ref(kb)
         self.name = name
         self.arity = arity
+        # event: the temporal predicate name/arity, called as an event goal ``p(..)^T`` or
+        # ``p(..)^[S,E]`` (stored events, then the rules); args then end with T, or S and E
+        self.event = event
         self.plans: dict = {}
         self.answered = 0   # calls answered through SQL (explain and the tests read it)
 
@@ -747,10 +754,10 @@ class CompiledCall:
         kb = self.kb()
         if kb is None:
             return None
-        bound = tuple(bound)
-        text = self.plans.get(bound)
+        key = (tuple(bound), len(args))
+        text = self.plans.get(key)
         if text is None:
-            text = self.plans[bound] = self._goal(bound)
+            text = self.plans[key] = self._goal(*key)
         # through kb._plan (a dict hit): define() and load() drop the parsed plans
         entry = plan_for(kb, kb._plan(*text), m.at is not None)
         if type(entry) is Fallback:
@@ -763,11 +770,15 @@ class CompiledCall:
         return [[(int(name[1:]) - 1, t) for name, t in row if name not in terms]
                 for row in rows]
 
-    def _goal(self, bound: tuple) -> tuple:
+    def _goal(self, bound: tuple, width: int) -> tuple:
         from .printer import format_term
 
-        xs = tuple(Var(f"A{i + 1}") for i in range(self.arity))
-        goal = Struct(self.name, xs) if xs else Atom(self.name)
+        xs = [Var(f"A{i + 1}") for i in range(width)]
+        n = self.arity
+        goal = Struct(self.name, tuple(xs[:n])) if n else Atom(self.name)
+        if self.event:
+            stamp = xs[n] if width == n + 1 else make_list(xs[n:])
+            goal = Struct("^", (goal, stamp))
         return format_term(goal), tuple(f"A{i + 1}" for i in bound)
 
 
@@ -787,4 +798,7 @@ def compiled_calls(kb) -> dict:
             continue
         if any(a.stored.get(n) for n in reachable(program, [Node("pred", *key)])):
             out[key] = CompiledCall(kb, *key)
+    for key, pred in program.temporal.items():   # p(..)^T goals: they read stored p events
+        if pred.clauses and Node("event", *key) not in recursive:
+            out[("^",) + key] = CompiledCall(kb, *key, event=True)
     return out

@@ -419,9 +419,9 @@ def test_compiled_sub_goal_modes_and_instances():
     # one plan per binding pattern (which arguments are ground), reused across calls
     kb.query("reach(r1, X)")
     kb.query("reach(r2, X)")
-    assert set(call.plans) == {(0,)}
+    assert set(call.plans) == {((0,), 2)}          # (ground positions, argument count)
     kb.query("first_link(A, r3)")
-    assert set(call.plans) == {(0,), (1,)}
+    assert set(call.plans) == {((0,), 2), ((1,), 2)}
     # an argument that is neither ground nor fresh runs the clauses (var/1 could tell)
     kb.load("odd(X) :- link(f(Y), X), var(Y).")
     call = kb.engine.sql_calls[("link", 2)]   # a load chooses the compiled calls anew
@@ -464,3 +464,26 @@ def test_values_nothing_uses_are_still_computed(goal):
     numbers.load(UNUSED)
     numbers.add_many(["a(y, 2)^1", "a(x, 3)^2"])
     assert both(numbers, goal) == ([{"O": "y"}, {"O": "x"}],) * 2
+
+
+def test_interpreter_calls_compiled_temporal_rules():
+    """An event goal p(..)^T of a temporal predicate (stored events, then its rules) is a
+    compiled sub-goal too: point ^T and interval ^[S,E] forms, times bound or free."""
+    kb = slr_sql.open()
+    src = (Path(__file__).parent.parent / "examples" / "tea.slr").read_text().split("%% events")
+    kb.load(src[0])
+    kb.add_many([ln.strip().rstrip(".") for ln in src[1].splitlines()
+                 if ln.strip() and not ln.startswith("%")])
+    call = kb.engine.sql_calls[("^", "tf", 3)]
+    assert "tf/3^" in kb.explain("tf(cam, base, X)^10.5, !")
+    goals = ["tf(cam, base, X)^10.5, !", "tf(base, world, X)^13.5, !",
+             "tf(base, world, X)^[A, B], !", "tf(F, world, X)^T, T > 11, !",
+             "obj(O, _, _)^T, position(seg(O, [0.1, 0.2, 0.3])^T, W), !"]
+    for goal in goals:
+        sql, interp = both(kb, goal)
+        assert sql == interp and sql, goal
+    # the two with a bound time; with a free time the rule's prev/2 does not compile (an
+    # instantiation error when reached), so the interpreter ran the clauses
+    assert call.answered == 2
+    assert set(call.plans) == {((0, 1, 3), 4), ((0, 1), 5), ((1,), 4)}
+    assert kb.engine.sql_calls[("position", 2)].answered == 1
