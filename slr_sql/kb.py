@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable
@@ -562,7 +563,8 @@ class KnowledgeBase:
                 return answers
         if max_steps is None and self.sql_enabled:  # issue 3: the compiled SQL plan, if any
             from .planner import try_sql
-            answers = try_sql(self, plan, args, at, limit)
+            deadline = time.monotonic() + timeout if timeout is not None else None
+            answers = try_sql(self, plan, args, at, limit, deadline)
             if answers is not None:
                 return answers
         term, frame = self._instantiate(plan, args)

@@ -318,7 +318,7 @@ class SqlPlan:
     def stale(self, store) -> bool:
         return any(store.event_table_sql(n, a) is not None for n, a in self.missing)
 
-    def run(self, kb, args, at, limit):
+    def run(self, kb, args, at, limit, deadline=None):
         params = self.params
         if self.arg_params or self.has_at:
             params = dict(params)
@@ -328,7 +328,7 @@ class SqlPlan:
                 params["at"] = float(at)
         if self.sql is None:
             return []
-        rows = kb.store.run_compiled(self.sql, params, limit)
+        rows = kb.store.run_compiled(self.sql, params, limit, deadline)
         recipes = self.recipes
         out = []
         for row in rows:
@@ -359,7 +359,7 @@ class SqlPlan:
             out.append((key, t))
         return out
 
-    def term_rows(self, kb, bound: dict, at) -> list:
+    def term_rows(self, kb, bound: dict, at, deadline=None) -> list:
         """The answers as terms, for an interpreter that called the goal: per row, the
         ``(name, term)`` pairs of the answer variables that are bound (fresh variables for
         the unbound parts of non-ground answers, shared within the row)."""
@@ -374,7 +374,7 @@ class SqlPlan:
             return []
         recipes = self.recipes
         out = []
-        for row in kb.store.run_compiled(self.sql, params):
+        for row in kb.store.run_compiled(self.sql, params, None, deadline):
             varmap: dict = {}
             vals = []
             for name, how, data in recipes[row[0]]:
@@ -576,15 +576,16 @@ def plan_for(kb, plan, has_at: bool):
     return entry
 
 
-def try_sql(kb, plan, args, at, limit=None):
-    """Answers through SQL, or None when the interpreter must answer."""
+def try_sql(kb, plan, args, at, limit=None, deadline=None):
+    """Answers through SQL, or None when the interpreter must answer. Past ``deadline``
+    (``time.monotonic()``) the statement stops with SLRTimeout."""
     if not getattr(kb, "sql_enabled", True):
         return None
     entry = plan_for(kb, plan, at is not None)
     if type(entry) is Fallback:
         return None
     try:
-        return entry.run(kb, args or {}, at, limit)
+        return entry.run(kb, args or {}, at, limit, deadline)
     except (sqlite3.Error, Unencodable, ValueError, TypeError, KeyError, OverflowError):
         return None
 
@@ -763,7 +764,7 @@ class CompiledCall:
         if type(entry) is Fallback:
             return None
         try:
-            rows = entry.term_rows(kb, terms, m.at)
+            rows = entry.term_rows(kb, terms, m.at, m.deadline)
         except (sqlite3.Error, Unencodable, ValueError, TypeError, KeyError, OverflowError):
             return None
         self.answered += 1

@@ -1318,15 +1318,33 @@ class EventStore:
             self._check_open()
             self._conn.create_aggregate(name, narg, cls)
 
-    def run_compiled(self, sql: str, params: dict, limit: int | None = None) -> list[tuple]:
-        """Run a compiled SELECT with named parameters; all rows, or the first ``limit``."""
+    def run_compiled(self, sql: str, params: dict, limit: int | None = None,
+                     deadline: float | None = None) -> list[tuple]:
+        """Run a compiled SELECT with named parameters; all rows, or the first ``limit``.
+        ``deadline`` (``time.monotonic()``): past it the statement is interrupted and
+        :class:`SLRTimeout` raised, as the interpreter does for ``timeout=``."""
         with self.lock:
             self._check_open()
-            cursor = self._conn.execute(sql, params)
+            conn = self._conn
+            if deadline is not None:
+                conn.set_progress_handler(
+                    lambda: 1 if time.monotonic() > deadline else 0, 20000)
             try:
-                return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+                cursor = conn.execute(sql, params)
+                try:
+                    return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+                finally:
+                    cursor.close()
+            except sqlite3.OperationalError as exc:
+                if deadline is not None and time.monotonic() > deadline \
+                        and "interrupt" in str(exc):
+                    from .errors import SLRTimeout
+
+                    raise SLRTimeout("query timed out (in its compiled SQL statement)") from None
+                raise
             finally:
-                cursor.close()
+                if deadline is not None:
+                    conn.set_progress_handler(None, 0)
 
     def event_table_sql(self, name: str, arity: int) -> str | None:
         """The quoted table of an event type (for compiled SQL), or None if it has none."""

@@ -1033,6 +1033,6 @@ def _try_run(kb: Any, entry: Any, q: PendingQuery) -> list | None:
     from .encoding import Unencodable
 
     try:
-        return entry.run(kb, q.args or {}, q.at, None)
+        return entry.run(kb, q.args or {}, q.at, None, q._deadline)
     except (sqlite3.Error, Unencodable, ValueError, TypeError, KeyError, OverflowError):
         return None

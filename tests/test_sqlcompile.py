@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 import slr_sql
-from slr_sql.errors import SLREvaluationError
+from slr_sql.errors import SLREvaluationError, SLRTimeout
 from slr_sql.planner import plan_for
 
 GOLDEN = Path(__file__).resolve().parent / "golden" / "sql"
@@ -487,3 +487,21 @@ def test_interpreter_calls_compiled_temporal_rules():
     assert call.answered == 2
     assert set(call.plans) == {((0, 1, 3), 4), ((0, 1), 5), ((1,), 4)}
     assert kb.engine.sql_calls[("position", 2)].answered == 1
+
+
+@pytest.mark.parametrize("goal", [
+    "aggregate_all(count, (a(X)^_, a(Y)^_, a(Z)^_), N)",    # the compiled statement
+    "heavy(N), !",                                           # a compiled sub-goal
+])
+def test_timeout_interrupts_a_compiled_statement(goal):
+    kb = slr_sql.open()
+    kb.load("heavy(N) :- aggregate_all(count, (a(X)^_, a(Y)^_, a(Z)^_), N).")
+    kb.add_many([("a", [i], float(i), float(i)) for i in range(2000)])  # 8e9 triples
+    for sql in (True, False):
+        kb.sql_enabled = sql
+        with pytest.raises(SLRTimeout):
+            kb.query(goal, timeout=0.1)
+    kb.sql_enabled = True
+    # the store is usable afterwards, with no deadline left behind
+    assert kb.query("aggregate_all(count, a(X)^_, N)") == [{"N": 2000}]
+    assert kb.query("a(X)^T, X > 1998, !") == [{"X": 1999, "T": 1999.0}]
