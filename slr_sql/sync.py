@@ -808,7 +808,11 @@ class Synchronizer:
             return None
         from .planner import SqlPlan, plan_for
 
-        entry = plan_for(kb, q._plan, q.at is not None)
+        # the kb's current parse of the goal, not q._plan: a load or define while the query
+        # waited drops the kb's plans, and the compiled statement with them (the program and
+        # so the statement may have changed)
+        plan = kb._plan(q.goal, tuple(q.args) if q.args else ())
+        entry = plan_for(kb, plan, q.at is not None)
         if type(entry) is not SqlPlan:
             return None
         times = entry.history_times(q.at)

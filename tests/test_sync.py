@@ -506,3 +506,30 @@ def check_not_early(pending, now, marked):
         for name, n in p.goal_set:
             assert (z + DELAY.get(name, 0.0) < now or marked.get(name, -1.0) >= z
                     or name == "c"), (goal, z, name, now)
+
+
+@pytest.mark.parametrize("sql", [True, False])
+def test_a_load_while_waiting_changes_the_answer_and_the_conditions(clock, sql):
+    """The compiled statement of a waiting query is not kept across a load: the new clauses
+    answer, and their prev/next conditions are waited for (SQL path and interpreter)."""
+    for clause, expected in [("q(b).", [{"X": "a"}, {"X": "b"}]),
+                             ("q(X) :- prev(f(X)^_, 20).", None)]:
+        with slr_sql.open(clock=ManualClock(0.0)) as kb:
+            kb.sql_enabled = sql
+            kb.load("q(X) :- prev(e(X)^_, 5).")
+            kb.add("e(a)^1")
+            kb.mark_complete("e/1", 1)
+            p = kb.submit("q(X)", at=1)
+            settle(kb)
+            assert not p.done()                  # prev(e/1) up to 5 is not complete
+            kb.load(clause)
+            kb.add("f(b)^0.5")
+            kb.mark_complete("f/1", 1)
+            kb.mark_complete("e/1", 5)
+            settle(kb)
+            if expected is None:                 # prev(f/1) up to 20 is not complete yet
+                assert not p.done()
+                kb.mark_complete("f/1", 20)
+                settle(kb)
+                expected = [{"X": "a"}, {"X": "b"}]
+            assert plain(p.result(timeout=5)) == expected
