@@ -398,3 +398,12 @@ def test_fast_event_reader_is_used_for_common_events():
     assert parse_event_fast("tick^[1, 2.5]") == ("tick", (), 1.0, 2.5)
     for outside in ["p('A')^1", 'p("s")^1', "p(a-b)^1", "p(X)^1", "p(1)^-1", "p(1)^1.", "p(0'a)^1"]:
         assert parse_event_fast(outside) is None, outside
+
+
+@pytest.mark.parametrize("text,printed", [
+    ("[1, e]", "[1,e]"), ("[2, E]", "[2,E]"), ("[1.5, e1, 3]", "[1.5,e1,3]"),
+    ("[0.4, 0.1, -0.9]", "[0.4,0.1,-0.9]"), ("[1, 2|T]", "[1,2|T]"), ("[1-2]", "[1-2]"),
+])
+def test_lists_starting_with_numbers(text, printed):
+    """A number list is lexed as one token; lists that only start with numbers are not."""
+    assert format_term(parse_term(text, "<t>")[0]) == printed
