@@ -303,8 +303,13 @@ class SqlPlan:
     answers."""
 
     def __init__(self, sql, params, arg_params, has_at, recipes, missing, sites, modes, goal,
-                 time_sites=()):
+                 time_sites=(), guards=()):
         self.sql = sql
+        self.guards = guards              # statements run first: goals that may raise
+        # arguments from Python the statement uses as numbers: a non-number goes to the
+        # interpreter (which raises, or not, exactly when a goal reaches it)
+        self.num_args = frozenset(sqlcompile.NUM_ARG.findall(
+            (sql or "") + "".join(guards))) & frozenset(arg_params.values())
         self.time_sites = time_sites      # ((name, n), time parameter or SQL) per prev/next
         self.params = params
         self.arg_params = arg_params      # variable name -> parameter name
@@ -326,6 +331,9 @@ class SqlPlan:
                 params[pname] = encode(from_python(args[name]))
             if self.has_at:
                 params["at"] = float(at)
+        self._check_args(params)
+        for guard in self.guards:
+            kb.store.run_compiled(guard, params, None, deadline)
         if self.sql is None:
             return []
         rows = kb.store.run_compiled(self.sql, params, limit, deadline)
@@ -344,6 +352,12 @@ class SqlPlan:
             out.append(answer)
         return out
 
+
+    def _check_args(self, params: dict) -> None:
+        for name in self.num_args:
+            t = type(params[name])
+            if t is not int and t is not float:
+                raise TypeError(f"argument :{name} is not a number")  # -> the interpreter
 
     def history_times(self, at) -> list | None:
         """``[((name, n), time)]``: up to when each prev/next of the statement reads its
@@ -370,6 +384,9 @@ class SqlPlan:
                 params[pname] = encode(bound[name])
             if self.has_at:
                 params["at"] = float(at)
+        self._check_args(params)
+        for guard in self.guards:
+            kb.store.run_compiled(guard, params, None, deadline)
         if self.sql is None:
             return []
         recipes = self.recipes
@@ -504,10 +521,12 @@ def compile_goal(kb, plan, has_at: bool) -> SqlPlan:
             else:
                 recipes.append((name, 1, r))
         conds = list(st.conds)
+        st.branches.append((list(st.froms), list(conds), 0))
         conds += sqlcompile.unused_checks(st.checks, conds + st.keys + cols)
         parts.append(Part(list(st.froms), conds, list(st.keys), cols, recipes))
 
     comp.compile(goal, emit)
+    guards = sqlcompile.guards(comp.state.raising, comp.state.branches)
     if not parts:
         sql = None
     else:
@@ -535,7 +554,7 @@ def compile_goal(kb, plan, has_at: bool) -> SqlPlan:
             sql += "\nORDER BY " + ", ".join(f"k{i}" for i in range(nk))
     return SqlPlan(sql, dict(comp.params), arg_params, has_at,
                    [p.extra for p in parts], frozenset(comp.missing), comp.sites, comp.modes,
-                   plan.text, tuple(dict.fromkeys(comp.time_sites)))
+                   plan.text, tuple(dict.fromkeys(comp.time_sites)), guards)
 
 
 def _has_ref(t) -> bool:
@@ -605,6 +624,10 @@ def explain(kb, plan, at=None) -> list[str]:
     if entry.modes:
         lines.append("modes (+ bound, - free when the goal is reached):")
         lines.extend(f"  {m}" for m in entry.modes)
+    for guard in entry.guards:
+        lines.append("guard (run first: evaluates a goal that may raise on the rows Prolog "
+                     "reaches it with):")
+        lines.append("  " + guard)
     if entry.sql is None:
         lines.append("sql: none (no branch can succeed: the goal fails)")
     else:

@@ -33,6 +33,7 @@ Handlers are named ``<kind>_sql``.
 from __future__ import annotations
 
 import itertools
+import re
 import math
 import weakref
 from typing import Any, Callable
@@ -158,18 +159,45 @@ class Part:
         return sql
 
 
+class _Conds(list):
+    """The WHERE conditions of a branch; one that calls an slr_ function (which may raise
+    an error Prolog would raise) is also recorded with its prefix (see Compiler.guards)."""
+
+    __slots__ = ("st",)
+
+    def append(self, cond: str) -> None:
+        if "slr_" in cond:
+            self.st.raised(cond, len(self), True)
+        list.append(self, cond)
+
+
 class State:
-    __slots__ = ("froms", "conds", "keys", "trail", "checks")
+    __slots__ = ("froms", "conds", "keys", "trail", "checks", "raising", "nested", "branches",
+                 "depth")
 
     def __init__(self):
         self.froms: list = []
-        self.conds: list = []
+        self.conds: _Conds = _Conds()
+        self.conds.st = self
+        # (expr, froms prefix, conds prefix, is a condition) of every top-level goal that may
+        # raise, in goal order; never undone (a branch that fails later still evaluated it)
+        self.raising: list = []
+        self.nested = 0       # > 0 while a prev/next pattern is matched on its subquery alias
+        # (froms, conds) of every branch emitted, subquery branches (findall, \+, ...)
+        # included with the tables and conditions of the goals before them
+        self.branches: list = []
+        self.depth = 0        # subquery nesting (findall, \+, ...) of the goal compiled now
         self.keys: list = []
         self.trail: list = []
         # values that may raise (arithmetic through slr_ functions, findall/aggregate_all
         # subqueries): SQLite computes a value only where the statement uses it, Prolog
         # computes it when the goal runs, so an unused one still gets a condition
         self.checks: list = []
+
+    def raised(self, expr: str, nc: int, is_cond: bool) -> None:
+        if not self.nested:
+            self.raising.append((expr, list(self.froms), list(self.conds[:nc]), is_cond,
+                                 self.depth))
 
     def mark(self) -> tuple:
         return (len(self.froms), len(self.conds), len(self.keys), len(self.trail),
@@ -223,6 +251,79 @@ def _occurs(v: Var, t: Any) -> bool:
         if type(x) is Struct:
             stack.extend(x.args)
     return False
+
+
+# slr_num(:aN): a value bound from Python (kb.query args) used as a number
+NUM_ARG = re.compile(r"slr_num\(:(a\d+)\)")
+
+
+def guards(raising: list, branches: list) -> list[str]:
+    """Statements that evaluate, over exactly the rows Prolog reaches it with, every goal
+    that may raise and that a branch's later goals could filter first.
+
+    Prolog runs the goals of a branch left to right, so ``X is A / 0`` raises on every row
+    that reached it, even when a later ``A > 100`` would have rejected the row; SQLite
+    applies conditions in its own order (an index on ``arg1`` serves ``A > 100`` first) and
+    computes a value only where it is used. A guard ``SELECT count(expr) FROM <the tables
+    before the goal> WHERE <the conditions before it>`` runs before the statement: an error
+    there hands the query to the interpreter, which raises it. A goal that is the last of
+    every branch it is in needs none (the statement evaluates it on every row that reaches
+    it); one in a branch that failed at compile time (``X is A / 0, fail``) always does.
+    ``branches``: (froms, conds) of every branch, before the forced checks; the goals of a
+    findall or ``\\+`` subquery are checked over the rows of the goals before it joined with
+    the subquery's own (for ``\\+``, which stops at its first solution, a superset: an
+    error there only costs the interpreter's run)."""
+    out = []
+    for expr, froms, conds, is_cond, depth in raising:
+        if expr.count("slr_") == len(NUM_ARG.findall(expr)):
+            # only slr_num(:aN), a number bound from Python: it raises for every row or for
+            # none, and SqlPlan.run leaves a non-number argument to the interpreter
+            continue
+        nf, nc = len(froms), len(conds)
+        after = nc + (1 if is_cond else 0)
+        needed = True
+        for pfroms, pconds, pdepth in branches:
+            if pdepth == depth and pfroms[:nf] == froms and pconds[:nc] == conds and \
+                    (not is_cond or pconds[nc:nc + 1] == [expr]):
+                if _filtered_first(is_cond, pfroms, nf, pconds[after:], _call_key(expr)):
+                    needed = True
+                    break
+                needed = False
+        if needed:
+            sql = Part(froms, conds, []).select([f"count({expr})"])
+            if sql not in out:
+                out.append(sql)
+    return out
+
+
+_DET_CHECK = re.compile(r"slr_det\((\d+), -1")
+
+
+def _call_key(expr: str) -> str:
+    """The text whose presence in a later condition means evaluating it evaluates ``expr``
+    first (SQLite computes a function's arguments before the call): a builtin's call site,
+    or the arithmetic of an ``is``."""
+    m = _DET_CHECK.match(expr)
+    if m:
+        return f"slr_det({m.group(1)}, "
+    if expr.startswith("(") and expr.endswith(") IS NOT NULL"):
+        return expr[1:-len(") IS NOT NULL")]
+    return expr
+
+
+def _filtered_first(is_cond: bool, froms: list, nf: int, later: list, key: str) -> bool:
+    """Can the goals after a raising one reject a row before SQLite evaluates it?
+
+    The tables join in goal order (CROSS JOIN), and SQLite tests a condition in the loop of
+    the last table it names: a condition at position nf is evaluated before any table after
+    it is read, so only a later condition on the same tables may run first — unless that
+    condition computes the raising goal itself (``key``) before it can reject anything. A
+    value (a findall/aggregate_all result) is computed where it is used, after every later
+    table."""
+    if not is_cond:
+        return len(froms) > nf or bool(later)
+    deeper = [a for _t, a, _k in froms[nf:]]
+    return any(key not in c and not any(f"{a}." in c for a in deeper) for c in later)
 
 
 def unused_checks(checks: list, used: list) -> list[str]:
@@ -344,7 +445,7 @@ class Compiler:
 
     # ------------------------------------------------------------------ driver
     def compile(self, goal: Any, emit: Callable[[State], None]) -> None:
-        st = State()
+        st = self.state = State()
         self.solve((goal, (), None), st, emit)
 
     def solve(self, cont, st: State, emit) -> None:
@@ -364,13 +465,18 @@ class Compiler:
         m = st.mark()
 
         def emit(s: State) -> None:
+            s.branches.append((list(s.froms), list(s.conds), s.depth))
             proj = project(s) if project is not None else None
             conds = list(s.conds[m[1]:])
             keys = list(s.keys[m[2]:])
             conds += unused_checks(s.checks[m[4]:], conds + keys + (proj or []))
             parts.append(Part(list(s.froms[m[0]:]), conds, keys, proj))
 
-        self.solve((goal, ctx, None), st, emit)
+        st.depth += 1
+        try:
+            self.solve((goal, ctx, None), st, emit)
+        finally:
+            st.depth -= 1
         st.restore(m)
         return parts
 
@@ -968,7 +1074,11 @@ class Compiler:
         """Conditions of the pattern on a fresh alias, bindings undone; None: never matches."""
         q = self.alias("q")
         m = st.mark()
-        ok = self.row_unify(pattern, q, n, st)
+        st.nested += 1   # these conditions go into a subquery on q, not into the branch
+        try:
+            ok = self.row_unify(pattern, q, n, st)
+        finally:
+            st.nested -= 1
         conds = list(st.conds[m[1]:])
         st.restore(m)
         return (q, conds) if ok else None
@@ -1133,7 +1243,9 @@ class Compiler:
             m = st.mark()
             value = v if sql is None else Col(sql, v)
             if sql is not None and "slr_" in sql:
-                st.checks.append(sql)
+                # evaluated where the goal stands (its loop level), as Prolog does, even when
+                # the value is used only later or not at all
+                st.conds.append(f"({sql}) IS NOT NULL")
             if self.unify(args[0], value, st):
                 self.solve(nxt, st, emit)
             st.restore(m)
@@ -1195,6 +1307,7 @@ class Compiler:
         m = st.mark()
         if type(value) is Col and "slr_" in value.sql:
             st.checks.append(value.sql)
+            st.raised(value.sql, len(st.conds), False)
         if self.unify(out, value, st):
             self.solve(nxt, st, emit)
         st.restore(m)
@@ -1261,6 +1374,7 @@ class Compiler:
             st.conds.append(f"{value.sql} IS NOT NULL")
         elif type(value) is Col and "slr_" in value.sql:
             st.checks.append(value.sql)
+            st.raised(value.sql, len(st.conds), False)
         if self.unify(out, value, st):
             self.solve(nxt, st, emit)
         st.restore(m)

@@ -505,3 +505,52 @@ def test_timeout_interrupts_a_compiled_statement(goal):
     # the store is usable afterwards, with no deadline left behind
     assert kb.query("aggregate_all(count, a(X)^_, N)") == [{"N": 2000}]
     assert kb.query("a(X)^T, X > 1998, !") == [{"X": 1999, "T": 1999.0}]
+
+
+ORDER = """
+p1 :- e(A)^_, X is A / 0, A > 100.
+p2 :- f(A)^_, X is A + 1, X = foo.
+p3 :- e(A)^_, X is A / 0, fail.
+p4(Y) :- e(A)^_, X is A / 0, A > 100, Y = X.
+p5(A) :- g(A)^_, A > 1, A = 7.
+p6(A, X) :- g(A)^_, X is A + 1, A = 7.
+p7(A) :- g(A)^_, X is A + 1, h(A, _)^_.
+"""
+
+
+@pytest.mark.parametrize("goal", ["p1", "p2", "p3", "p4(Y)", "p5(A)", "p6(A, X)", "p7(A)",
+                                  "!, p1", "catch(p1, E, true)", "findall(A, p5(A), L)"])
+def test_an_error_prolog_meets_before_a_later_goal_filters_the_row(goal):
+    """Prolog runs goals left to right: `X is A / 0` raises on every row that reaches it,
+    even when `A > 100` after it would reject the row; SQLite picks its own order. Guards
+    (SqlPlan.guards) make the compiled plan raise the same error (found by review)."""
+    kb = slr_sql.open()
+    kb.load(ORDER)
+    kb.add_many(["e(5)^1", "f(a)^1", "g(foo)^1", "g(7)^2", "h(9, x)^1"])
+    outcomes = []
+    for sql in (True, False):
+        kb.sql_enabled = sql
+        try:
+            outcomes.append(("answers", kb.query(goal)))
+        except SLREvaluationError as exc:
+            outcomes.append(("error", str(exc.term.args[0])))
+    kb.sql_enabled = True
+    if goal.startswith("catch"):
+        assert [o[0] for o in outcomes] == ["answers"] * 2
+        assert [str(o[1][0]["E"].args[0]) for o in outcomes] == ["evaluation_error(zero_divisor)"] * 2
+    else:
+        assert outcomes[0] == outcomes[1] and outcomes[0][0] == "error", outcomes
+
+
+def test_guards_only_where_a_later_goal_can_filter_first():
+    kb = slr_sql.open()
+    kb.load(ORDER + "q(A, X) :- g(A)^_, X is A + 1. r(A, X) :- g(A)^_, h(A, _)^_, X is A + 1.")
+    kb.add_many(["e(1)^1", "f(1)^1", "g(1)^1", "h(1, x)^1"])
+    plan = lambda goal: plan_for(kb, kb._plan(goal, ()), False)  # noqa: E731
+    assert plan("p1").guards and plan("p6(A, X)").guards
+    assert "guard" in kb.explain("p1")
+    # the raising goal is the last one, or what follows reads later tables only
+    assert not plan("q(A, X)").guards and not plan("r(A, X)").guards
+    assert not plan("p7(A)").guards
+    # a time bound from Python is checked in Python, not by a guard
+    assert not plan_for(kb, kb._plan("next(g(X)^T, [S, inf]), X > 0", ("S",)), False).guards
