@@ -1367,8 +1367,11 @@ class Compiler:
                 else:
                     return  # max/min of nothing fails
             else:
-                value = Col(self.udf(f"(SELECT {fn}(v0) FROM ({self.ordered_union(parts, 1)}))"),
-                            "num")
+                sql = f"(SELECT {fn}(v0) FROM ({self.ordered_union(parts, 1)}))"
+                if kind == "sum":
+                    # a Python aggregate over no rows gives NULL; the sum of nothing is 0
+                    sql = f"coalesce({sql}, 0)"
+                value = Col(self.udf(sql), "num")
         m = st.mark()
         if type(value) is Col and kind in ("max", "min"):
             st.conds.append(f"{value.sql} IS NOT NULL")

@@ -554,3 +554,16 @@ def test_guards_only_where_a_later_goal_can_filter_first():
     assert not plan("p7(A)").guards
     # a time bound from Python is checked in Python, not by a guard
     assert not plan_for(kb, kb._plan("next(g(X)^T, [S, inf]), X > 0", ("S",)), False).guards
+
+
+@pytest.mark.parametrize("goal", [
+    "a(O, N)^T, aggregate_all(sum(M), f(O, M), A), A =:= 0",
+    "a(O, N)^T, findall(O, aggregate_all(sum(N), f(O, N), A), L)",
+])
+def test_the_sum_of_nothing_is_zero_in_conditions_too(goal):
+    kb = slr_sql.open()
+    kb.load("f(x, 1). f(x, 1).")
+    kb.add_many(["a(x, 2)^0", "a(y, 3)^1"])
+    assert engine(kb, goal) == "sql"
+    sql, interp = both(kb, goal)
+    assert sql == interp and sql
