@@ -273,6 +273,7 @@ def state_of(kb) -> _State:
 def attach(kb) -> None:
     """Install the SQL side on a knowledge base: functions, fact tables and views on load."""
     state_of(kb)
+    kb.engine.sql_calls = compiled_calls(kb)   # the program restored from the file
     kb.load_listeners.append(refresh)
     hooks = kb.store.table_created_hooks
     ref = weakref.ref(kb)

@@ -61,9 +61,16 @@ def test_close_and_reopen_gives_identical_answers(db_path):
         kb.add_event("obj", ["cup3", "cup", "red"], start=6.0, end=6.5)
         before = answers(kb)
     assert all(before[i] for i in range(len(QUERIES))), before  # every query has answers
+    calls = None
     for _ in range(2):
         with slr_sql.open(db_path) as kb:
             assert as_text(answers(kb)) == as_text(before)
+            # the SQL side comes back too: the compiled sub-goals of the restored program
+            assert calls is None or sorted(kb.engine.sql_calls) == calls
+            calls = sorted(kb.engine.sql_calls)
+    with slr_sql.open() as fresh:
+        fresh.load(PROGRAM)
+        assert sorted(fresh.engine.sql_calls) == calls and calls
     # more events after reopening are added to what was there
     with slr_sql.open(db_path) as kb:
         kb.add("obj(cup1, cup, black)^10")
