@@ -1326,7 +1326,13 @@ class EventStore:
         with self.lock:
             self._check_open()
             conn = self._conn
-            if deadline is not None:
+            # a statement run from inside another (a kb.define predicate querying the kb
+            # from SQL) keeps the outer deadline: the handler is per connection
+            outer = getattr(self, "_deadline", None)
+            if deadline is None or (outer is not None and outer <= deadline):
+                deadline = outer
+            if deadline is not outer:
+                self._deadline = deadline
                 conn.set_progress_handler(
                     lambda: 1 if time.monotonic() > deadline else 0, 20000)
             try:
@@ -1343,8 +1349,13 @@ class EventStore:
                     raise SLRTimeout("query timed out (in its compiled SQL statement)") from None
                 raise
             finally:
-                if deadline is not None:
-                    conn.set_progress_handler(None, 0)
+                if deadline is not outer:
+                    self._deadline = outer
+                    if outer is None:
+                        conn.set_progress_handler(None, 0)
+                    else:
+                        conn.set_progress_handler(
+                            lambda: 1 if time.monotonic() > outer else 0, 20000)
 
     def event_table_sql(self, name: str, arity: int) -> str | None:
         """The quoted table of an event type (for compiled SQL), or None if it has none."""

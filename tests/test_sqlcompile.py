@@ -567,3 +567,17 @@ def test_the_sum_of_nothing_is_zero_in_conditions_too(goal):
     assert engine(kb, goal) == "sql"
     sql, interp = both(kb, goal)
     assert sql == interp and sql
+
+
+def test_a_query_inside_a_compiled_statement_keeps_the_outer_timeout():
+    """A kb.define predicate may query the kb from inside SQL; the inner statement's own
+    deadline must not remove the outer one (one progress handler per connection)."""
+    kb = slr_sql.open()
+    kb.add_many([("a", [i], float(i), float(i)) for i in range(300)])   # 2.7e7 triples
+    kb.define("inner", 2, lambda x, n: (x, kb.query("aggregate_all(count, a(_)^_, N)",
+                                                    timeout=30.0)[0]["N"]))
+    goal = "a(X)^_, X < 3, inner(X, N), aggregate_all(count, (a(P)^_, a(Q)^_, a(R)^_), M)"
+    assert engine(kb, goal) == "sql"
+    with pytest.raises(SLRTimeout):
+        kb.query(goal, timeout=0.05)
+    assert kb.query("inner(1, N)") == [{"N": 300}]
