@@ -522,7 +522,7 @@ def compile_goal(kb, plan, has_at: bool) -> SqlPlan:
             else:
                 recipes.append((name, 1, r))
         conds = list(st.conds)
-        st.branches.append((list(st.froms), list(conds), 0))
+        st.branches.append((list(st.froms), list(conds), frozenset(st.live)))
         conds += sqlcompile.unused_checks(st.checks, conds + st.keys + cols)
         parts.append(Part(list(st.froms), conds, list(st.keys), cols, recipes))
 

@@ -173,7 +173,7 @@ class _Conds(list):
 
 class State:
     __slots__ = ("froms", "conds", "keys", "trail", "checks", "raising", "nested", "branches",
-                 "depth")
+                 "depth", "live", "first")
 
     def __init__(self):
         self.froms: list = []
@@ -187,6 +187,8 @@ class State:
         # included with the tables and conditions of the goals before them
         self.branches: list = []
         self.depth = 0        # subquery nesting (findall, \+, ...) of the goal compiled now
+        self.live: list = []  # indexes into raising of the goals on the current path
+        self.first = 0        # > 0 inside a subquery SQLite stops at its first row (\+, ->)
         self.keys: list = []
         self.trail: list = []
         # values that may raise (arithmetic through slr_ functions, findall/aggregate_all
@@ -196,18 +198,20 @@ class State:
 
     def raised(self, expr: str, nc: int, is_cond: bool) -> None:
         if not self.nested:
+            self.live.append(len(self.raising))
             self.raising.append((expr, list(self.froms), list(self.conds[:nc]), is_cond,
-                                 self.depth))
+                                 self.depth, self.first > 0))
 
     def mark(self) -> tuple:
         return (len(self.froms), len(self.conds), len(self.keys), len(self.trail),
-                len(self.checks))
+                len(self.checks), len(self.live))
 
     def restore(self, m: tuple) -> None:
         del self.froms[m[0]:]
         del self.conds[m[1]:]
         del self.keys[m[2]:]
         del self.checks[m[4]:]
+        del self.live[m[5]:]
         trail = self.trail
         while len(trail) > m[3]:
             trail.pop().ref = None
@@ -274,7 +278,7 @@ def guards(raising: list, branches: list) -> list[str]:
     the subquery's own (for ``\\+``, which stops at its first solution, a superset: an
     error there only costs the interpreter's run)."""
     out = []
-    for expr, froms, conds, is_cond, depth in raising:
+    for i, (expr, froms, conds, is_cond, _depth, first) in enumerate(raising):
         if expr.count("slr_") == len(NUM_ARG.findall(expr)):
             # only slr_num(:aN), a number bound from Python: it raises for every row or for
             # none, and SqlPlan.run leaves a non-number argument to the interpreter
@@ -282,13 +286,17 @@ def guards(raising: list, branches: list) -> list[str]:
         nf, nc = len(froms), len(conds)
         after = nc + (1 if is_cond else 0)
         needed = True
-        for pfroms, pconds, pdepth in branches:
-            if pdepth == depth and pfroms[:nf] == froms and pconds[:nc] == conds and \
-                    (not is_cond or pconds[nc:nc + 1] == [expr]):
-                if _filtered_first(is_cond, pfroms, nf, pconds[after:], _call_key(expr)):
-                    needed = True
-                    break
-                needed = False
+        if first:
+            # in \+ or an if-then-else condition SQLite stops at the first row it finds, in
+            # its own order, not Prolog's: guard every row (a superset of Prolog's)
+            branches_in = []
+        else:
+            branches_in = [(f, c) for f, c, live in branches if i in live]
+        for pfroms, pconds in branches_in:
+            if _filtered_first(pfroms, nf, pconds[after:], _call_key(expr)):
+                needed = True
+                break
+            needed = False
         if needed:
             sql = Part(froms, conds, []).select([f"count({expr})"])
             if sql not in out:
@@ -311,19 +319,16 @@ def _call_key(expr: str) -> str:
     return expr
 
 
-def _filtered_first(is_cond: bool, froms: list, nf: int, later: list, key: str) -> bool:
+def _filtered_first(froms: list, nf: int, later: list, key: str) -> bool:
     """Can the goals after a raising one reject a row before SQLite evaluates it?
 
-    The tables join in goal order (CROSS JOIN), and SQLite tests a condition in the loop of
-    the last table it names: a condition at position nf is evaluated before any table after
-    it is read, so only a later condition on the same tables may run first — unless that
-    condition computes the raising goal itself (``key``) before it can reject anything. A
-    value (a findall/aggregate_all result) is computed where it is used, after every later
-    table."""
-    if not is_cond:
-        return len(froms) > nf or bool(later)
-    deeper = [a for _t, a, _k in froms[nf:]]
-    return any(key not in c and not any(f"{a}." in c for a in deeper) for c in later)
+    Yes when any table or condition follows it, unless that condition computes the raising
+    goal itself (``key``: SQLite computes a function's arguments before the call). A later
+    table's condition is not safe either: the tables join in goal order (CROSS JOIN), but
+    SQLite carries constraints over join equalities (``S = T, S > 3`` also filters ``T``
+    in the earlier table's loop), and a condition that names no table may be tested in
+    any loop."""
+    return len(froms) > nf or any(key not in c for c in later)
 
 
 def unused_checks(checks: list, used: list) -> list[str]:
@@ -459,13 +464,14 @@ class Compiler:
         self.goal_sql(goal, ctx, nxt, st, emit)
 
     def sub_parts(self, goal: Any, ctx: tuple, st: State,
-                  project: Callable[[State], list] | None = None) -> list[Part]:
+                  project: Callable[[State], list] | None = None,
+                  first: bool = False) -> list[Part]:
         """The branches of ``goal`` as a subquery of the current state (bindings undone)."""
         parts: list[Part] = []
         m = st.mark()
 
         def emit(s: State) -> None:
-            s.branches.append((list(s.froms), list(s.conds), s.depth))
+            s.branches.append((list(s.froms), list(s.conds), frozenset(s.live)))
             proj = project(s) if project is not None else None
             conds = list(s.conds[m[1]:])
             keys = list(s.keys[m[2]:])
@@ -473,10 +479,12 @@ class Compiler:
             parts.append(Part(list(s.froms[m[0]:]), conds, keys, proj))
 
         st.depth += 1
+        st.first += first
         try:
             self.solve((goal, ctx, None), st, emit)
         finally:
             st.depth -= 1
+            st.first -= first
         st.restore(m)
         return parts
 
@@ -903,7 +911,7 @@ class Compiler:
 
     def ite_sql(self, cond, then, other, ctx, nxt, st, emit):
         """``( C -> T ; E )``: T after C's first solution, else E when C has none."""
-        parts = self.sub_parts(cond, ctx, st)
+        parts = self.sub_parts(cond, ctx, st, first=True)
         if len(parts) > 1 and any(p.froms for p in parts):
             raise Fallback("if-then-else whose condition has several alternatives over "
                            "stored data (first solution of a union)")
@@ -974,7 +982,7 @@ class Compiler:
 
     def neg_sql(self, g, args, ctx, nxt, st, emit):
         self.record_mode(g)
-        parts = self.sub_parts(args[0], ctx, st)
+        parts = self.sub_parts(args[0], ctx, st, first=True)
         for p in parts:
             if not p.froms and not p.conds:
                 return  # the goal always succeeds: \+ fails
@@ -1093,6 +1101,21 @@ class Compiler:
         else:
             lo, hi = iv
         self.time_sites.append(((name, n), hi))
+        m0 = st.mark()
+        self._time_checks(st, lo, hi)
+        try:
+            self._prev_rows(name, n, pattern, lo, hi, nxt, st, emit)
+        finally:
+            st.restore(m0)
+
+    def _time_checks(self, st, *times) -> None:
+        """Prolog evaluates a prev/next time before it looks at the history (an error even
+        when no event matches): one computed through an slr_ function is tested here."""
+        for t in times:
+            if t is not None and "slr_" in t:
+                st.conds.append(f"({t}) IS NOT NULL")
+
+    def _prev_rows(self, name, n, pattern, lo, hi, nxt, st, emit):
         table = self.event_table(name, n)
         if table is None:
             return
@@ -1126,6 +1149,14 @@ class Compiler:
         else:
             lo, hi = self.time_sql(args[1]), self.time_sql(args[2])
         self.time_sites.append(((name, n), hi))
+        m0 = st.mark()
+        self._time_checks(st, lo, hi)
+        try:
+            self._next_rows(name, n, pattern, lo, hi, nxt, st, emit)
+        finally:
+            st.restore(m0)
+
+    def _next_rows(self, name, n, pattern, lo, hi, nxt, st, emit):
         table = self.event_table(name, n)
         if table is None:
             return
@@ -1356,8 +1387,8 @@ class Compiler:
             elif kind == "bag":
                 value = Col(self.list_sql(parts), "text")
             else:
-                value = Col(self.udf(f"(SELECT slr_setof(v0) FROM ({self.ordered_union(parts, 1)}))"),
-                            "text")
+                value = Col(self.udf(f"coalesce((SELECT slr_setof(v0) FROM "
+                                     f"({self.ordered_union(parts, 1)})), '[]')"), "text")
         else:
             parts = self.sub_parts(goal, ctx, st, lambda s: [self.num_sql(resolve(templ))])
             fn = {"sum": "slr_sum", "max": "slr_max", "min": "slr_min"}[kind]
