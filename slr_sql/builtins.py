@@ -384,12 +384,29 @@ def _text_conv(name: str, make: Callable[[str], Any], parse: Callable[[Any], str
 
 _text_conv("atom_chars", lambda s: make_list([Atom(c) for c in s]), lambda t: Atom(text_of(t)))
 _text_conv("atom_codes", lambda s: make_list([ord(c) for c in s]), lambda t: Atom(text_of(t)))
-_text_conv("char_code", lambda s: ord(s), lambda t: Atom(chr(deref(t))))
 _text_conv("atom_string", lambda s: String(s), lambda t: Atom(text_of(t)))
 _text_conv("string_chars", lambda s: make_list([Atom(c) for c in s]), lambda t: String(text_of(t)))
 _text_conv("string_codes", lambda s: make_list([ord(c) for c in s]), lambda t: String(text_of(t)))
 _text_conv("string_to_atom", lambda s: Atom(s), lambda t: String(text_of(t)))
 _text_conv("term_string", lambda s: String(s), lambda t: _parse_any(t))
+
+
+@det("char_code", 2)
+def _char_code(m, a):
+    """ISO 8.16.6: errors as SWI-Prolog (a one-character atom, or a code)."""
+    x = deref(a[0])
+    if type(x) is not Var:
+        if type(x) is not Atom or len(x) != 1:
+            raise type_error("character", x)
+        return m.unify(a[1], ord(x))
+    c = deref(a[1])
+    if type(c) is Var:
+        raise instantiation_error()
+    if type(c) is not int:
+        raise type_error("integer", c)
+    if not 0 <= c <= 0x10FFFF:
+        raise type_error("character_code", c)
+    return m.unify(x, Atom(chr(c)))
 
 
 def _parse_any(t):

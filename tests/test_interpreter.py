@@ -411,6 +411,12 @@ def test_atom_concat_and_format(kb):
     ("nope", S("existence_error", "procedure", S("/", "nope", 0))),
     ("prev(p(X)^T, Z)", "instantiation_error"),
     ("numlist(1, X, L)", "instantiation_error"),
+    # char_code/2 as SWI-Prolog (a Python TypeError escaped before; found by review)
+    ("char_code(X, Y)", "instantiation_error"),
+    ("char_code(ab, C)", S("type_error", "character", "ab")),
+    ("char_code(1, C)", S("type_error", "character", 1)),
+    ("char_code(X, foo)", S("type_error", "integer", "foo")),
+    ("char_code(X, -1)", S("type_error", "character_code", -1)),
 ])
 def test_iso_errors(kb, goal, formal):
     assert same(error_of(kb, goal), formal)
