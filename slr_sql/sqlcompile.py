@@ -173,20 +173,20 @@ class _Conds(list):
 
 class State:
     __slots__ = ("froms", "conds", "keys", "trail", "checks", "raising", "nested", "branches",
-                 "depth", "live", "first")
+                 "live", "first")
 
     def __init__(self):
         self.froms: list = []
         self.conds: _Conds = _Conds()
         self.conds.st = self
-        # (expr, froms prefix, conds prefix, is a condition) of every top-level goal that may
-        # raise, in goal order; never undone (a branch that fails later still evaluated it)
+        # (expr, froms prefix, conds prefix, is a condition, inside \+ or ->) of every goal
+        # that may raise, in goal order; never undone (a branch that fails later still
+        # evaluated it)
         self.raising: list = []
         self.nested = 0       # > 0 while a prev/next pattern is matched on its subquery alias
-        # (froms, conds) of every branch emitted, subquery branches (findall, \+, ...)
+        # (froms, conds, live) of every branch emitted, subquery branches (findall, \+, ...)
         # included with the tables and conditions of the goals before them
         self.branches: list = []
-        self.depth = 0        # subquery nesting (findall, \+, ...) of the goal compiled now
         self.live: list = []  # indexes into raising of the goals on the current path
         self.first = 0        # > 0 inside a subquery SQLite stops at its first row (\+, ->)
         self.keys: list = []
@@ -200,7 +200,7 @@ class State:
         if not self.nested:
             self.live.append(len(self.raising))
             self.raising.append((expr, list(self.froms), list(self.conds[:nc]), is_cond,
-                                 self.depth, self.first > 0))
+                                 self.first > 0))
 
     def mark(self) -> tuple:
         return (len(self.froms), len(self.conds), len(self.keys), len(self.trail),
@@ -278,7 +278,7 @@ def guards(raising: list, branches: list) -> list[str]:
     the subquery's own (for ``\\+``, which stops at its first solution, a superset: an
     error there only costs the interpreter's run)."""
     out = []
-    for i, (expr, froms, conds, is_cond, _depth, first) in enumerate(raising):
+    for i, (expr, froms, conds, is_cond, first) in enumerate(raising):
         if expr.count("slr_") == len(NUM_ARG.findall(expr)):
             # only slr_num(:aN), a number bound from Python: it raises for every row or for
             # none, and SqlPlan.run leaves a non-number argument to the interpreter
@@ -478,12 +478,10 @@ class Compiler:
             conds += unused_checks(s.checks[m[4]:], conds + keys + (proj or []))
             parts.append(Part(list(s.froms[m[0]:]), conds, keys, proj))
 
-        st.depth += 1
         st.first += first
         try:
             self.solve((goal, ctx, None), st, emit)
         finally:
-            st.depth -= 1
             st.first -= first
         st.restore(m)
         return parts
