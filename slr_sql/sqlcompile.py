@@ -471,7 +471,9 @@ class Compiler:
         m = st.mark()
 
         def emit(s: State) -> None:
-            s.branches.append((list(s.froms), list(s.conds), frozenset(s.live)))
+            # a subquery's branch is a path of its own goals only: the goals before it go
+            # on with the goal after the subquery (which may never be reached)
+            s.branches.append((list(s.froms), list(s.conds), frozenset(s.live[m[5]:])))
             proj = project(s) if project is not None else None
             conds = list(s.conds[m[1]:])
             keys = list(s.keys[m[2]:])

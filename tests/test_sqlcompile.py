@@ -529,6 +529,10 @@ p7(A) :- g(A)^_, X is A + 1, h(A, _)^_.
     "g(X)^T, prev(zz(N)^Z, X)",                              # ... no table at all
     "\\+ atom_length(X, _), h(zz, _)^T",                     # a condition on no table
     "e(N)^T, X is 10 / (N - 5), h(P, _)^S, S = T, S > 3",    # carried over S = T
+    # found by the third review: a subquery after the goal whose own branch ends there
+    "e(N)^T, (X is 1 / (N - 5), \\+ true ; true)",
+    "e(N)^T, X is 1 / (N - 5), aggregate_all(count, true, C), fail",
+    "findall(X, (e(N)^T, X is 1 / (N - 5), \\+ true), L)",
 ])
 def test_an_error_prolog_meets_before_a_later_goal_filters_the_row(goal):
     """Prolog runs goals left to right: `X is A / 0` raises on every row that reaches it,
