@@ -119,7 +119,8 @@ def _inst(t, values, varmap):
 
 def _det(sid, i, *inputs):
     site = SITES[sid]
-    key = tuple((type(x), x) for x in inputs)
+    # repr for floats: -0.0 == 0.0, but atom_length/term_to_atom tell them apart
+    key = tuple((float, repr(x)) if type(x) is float else (type(x), x) for x in inputs)
     last = site.last
     if last is not None and last[0] == key:
         result = last[1]
@@ -592,6 +593,8 @@ def plan_for(kb, plan, has_at: bool):
         entry = exc
     except RecursionError:
         entry = Fallback("the goal is nested too deeply to compile")
+    except (ValueError, OverflowError) as exc:  # e.g. an integer constant beyond 64 bits
+        entry = Fallback(f"a constant SQL cannot hold ({exc})")
     cache[has_at] = entry
     return entry
 
@@ -687,6 +690,8 @@ def view_sql(kb, name: str, arity: int):
         comp.compile(goal, emit)
     except Fallback as exc:
         return None, exc.reason, comp.missing
+    except (ValueError, OverflowError) as exc:  # a constant SQL cannot hold: no view
+        return None, str(exc), comp.missing
     if comp.uses_udf:
         return None, "uses slr_ functions", comp.missing
     if not parts:

@@ -606,3 +606,18 @@ def test_a_set_of_nothing_is_the_empty_list():
         assert engine(kb, goal) == "sql"
         sql, interp = both(kb, goal)
         assert sql == interp and len(sql) == 2
+
+
+def test_builtin_results_tell_zero_from_negative_zero_and_big_constants_compile_away():
+    """Found by the third review: the builtin call cache took -0.0 and 0.0 for the same
+    input; an integer constant beyond 64 bits escaped the compiler as a ValueError."""
+    kb = slr_sql.open()
+    kb.add_many(["a(-0.0)^1", "a(0.0)^2", "b(x, 1)^1"])
+    for goal in ["a(O)^T, atom_length(O, L)", "a(O)^T, term_to_atom(O, A)"]:
+        assert engine(kb, goal) == "sql"
+        sql, interp = both(kb, goal)
+        assert sql == interp and len(sql) == 2
+    goal = "b(O, N)^T, N < 9223372036854775807 * 2"
+    assert both(kb, goal) == ([{"O": "x", "N": 1, "T": 1.0}],) * 2
+    kb.load("r(O) :- b(O, N)^_, N < 2 ** 70.")     # the view is skipped, the load succeeds
+    assert kb.query("r(O)") == [{"O": "x"}]
