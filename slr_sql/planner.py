@@ -325,20 +325,29 @@ class SqlPlan:
     def stale(self, store) -> bool:
         return any(store.event_table_sql(n, a) is not None for n, a in self.missing)
 
-    def run(self, kb, args, at, limit, deadline=None):
+    def _rows(self, kb, values: dict, at, limit, deadline) -> list:
+        """Bind the parameters (``values``: answer variable name -> term), run the guards,
+        then the statement."""
         params = self.params
         if self.arg_params or self.has_at:
             params = dict(params)
             for name, pname in self.arg_params.items():
-                params[pname] = encode(from_python(args[name]))
+                params[pname] = encode(values[name])
             if self.has_at:
                 params["at"] = float(at)
-        self._check_args(params)
+        for name in self.num_args:
+            t = type(params[name])
+            if t is not int and t is not float:
+                raise TypeError(f"argument :{name} is not a number")  # -> the interpreter
         for guard in self.guards:
             kb.store.run_compiled(guard, params, None, deadline)
         if self.sql is None:
             return []
-        rows = kb.store.run_compiled(self.sql, params, limit, deadline)
+        return kb.store.run_compiled(self.sql, params, limit, deadline)
+
+    def run(self, kb, args, at, limit, deadline=None):
+        values = {name: from_python(args[name]) for name in self.arg_params}
+        rows = self._rows(kb, values, at, limit, deadline)
         recipes = self.recipes
         out = []
         for row in rows:
@@ -353,13 +362,6 @@ class SqlPlan:
                     answer[name] = to_python(_inst_row(data, row, varmap))
             out.append(answer)
         return out
-
-
-    def _check_args(self, params: dict) -> None:
-        for name in self.num_args:
-            t = type(params[name])
-            if t is not int and t is not float:
-                raise TypeError(f"argument :{name} is not a number")  # -> the interpreter
 
     def history_times(self, at) -> list | None:
         """``[((name, n), time)]``: up to when each prev/next of the statement reads its
@@ -379,21 +381,9 @@ class SqlPlan:
         """The answers as terms, for an interpreter that called the goal: per row, the
         ``(name, term)`` pairs of the answer variables that are bound (fresh variables for
         the unbound parts of non-ground answers, shared within the row)."""
-        params = self.params
-        if self.arg_params or self.has_at:
-            params = dict(params)
-            for name, pname in self.arg_params.items():
-                params[pname] = encode(bound[name])
-            if self.has_at:
-                params["at"] = float(at)
-        self._check_args(params)
-        for guard in self.guards:
-            kb.store.run_compiled(guard, params, None, deadline)
-        if self.sql is None:
-            return []
         recipes = self.recipes
         out = []
-        for row in kb.store.run_compiled(self.sql, params, None, deadline):
+        for row in self._rows(kb, bound, at, None, deadline):
             varmap: dict = {}
             vals = []
             for name, how, data in recipes[row[0]]:

@@ -336,37 +336,27 @@ def unused_checks(checks: list, used: list) -> list[str]:
     return [f"({c}) IS NOT NULL" for c in checks if not any(c in u for u in used)]
 
 
-def has_var(t: Any) -> bool:
+def _contains(t: Any, kind: type) -> bool:
     stack = [t]
     while stack:
         x = deref(stack.pop())
-        if type(x) is Var:
+        if type(x) is kind:
             return True
         if type(x) is Struct:
             stack.extend(x.args)
     return False
+
+
+def has_var(t: Any) -> bool:
+    return _contains(t, Var)
 
 
 def _has_float(t: Any) -> bool:
-    stack = [t]
-    while stack:
-        x = deref(stack.pop())
-        if type(x) is float:
-            return True
-        if type(x) is Struct:
-            stack.extend(x.args)
-    return False
+    return _contains(t, float)
 
 
 def has_col(t: Any) -> bool:
-    stack = [t]
-    while stack:
-        x = deref(stack.pop())
-        if type(x) is Col:
-            return True
-        if type(x) is Struct:
-            stack.extend(x.args)
-    return False
+    return _contains(t, Col)
 
 
 def term_free_vars(t: Any) -> list:
