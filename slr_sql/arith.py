@@ -16,7 +16,7 @@ __all__ = ["evaluate", "type_error", "instantiation_error", "evaluation_error", 
 
 def iso_error(formal: Any, context: Any = None) -> SLREvaluationError:
     term = Struct("error", (formal, context if context is not None else Var("_")))
-    from .printer import format_term
+    from .terms import format_term
 
     return SLREvaluationError(term, format_term(term))
 

@@ -36,10 +36,11 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any, Iterable
 
+from .clocks import parse_duration
 from .encoding import INT64_MAX, INT64_MIN, Unencodable, encode
-from .engine import copy_term, undo, unify
+from .unify import copy_term, undo, unify
 from .errors import SLRError
-from .printer import format_term
+from .terms import format_term
 from .program import event_key, split_event_atom
 from .store import quote_identifier, sql_literal
 from .terms import NIL, Atom, String, Struct, Var, deref, is_ground, list_items
@@ -682,7 +683,6 @@ class BufferManager:
 
 def _seconds(value: Any) -> float:
     if isinstance(value, str):
-        from .kb import parse_duration
 
         value = parse_duration(_parse_pattern(value))
     if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value \

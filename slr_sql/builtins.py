@@ -15,14 +15,14 @@ import sys
 from typing import Any, Callable, Iterator
 
 from .arith import evaluate, instantiation_error, iso_error, type_error
-from .engine import Machine, copy_term, resolve, unify, undo
+from .unify import bound_args, copy_term, resolve, unify, undo, unify_tuple
 from .errors import SLREvaluationError
 from .program import Program, split_event_atom, event_key
 from .terms import (Atom, NIL, String, Struct, Var, deref, from_python, is_callable,
                     is_ground, list_items, make_list, term_vars, to_python)
 
-DET: dict[tuple[str, int], Callable[[Machine, tuple], bool]] = {}
-NONDET: dict[tuple[str, int], Callable[[Machine, tuple], Iterator[None]]] = {}
+DET: dict[tuple[str, int], Callable[["Machine", tuple], bool]] = {}
+NONDET: dict[tuple[str, int], Callable[["Machine", tuple], Iterator[None]]] = {}
 
 
 def det(name: str, arity: int):
@@ -303,7 +303,7 @@ def text_of(t: Any, what: str = "atomic") -> str:
     if tt is int:
         return str(t)
     if tt is float:
-        from .printer import format_term
+        from .terms import format_term
 
         return format_term(t)
     if tt is Struct:
@@ -458,7 +458,7 @@ def _number_string(m, a):
 
 @det("term_to_atom", 2)
 def _term_to_atom(m, a):
-    from .printer import format_term
+    from .terms import format_term
 
     t = deref(a[0])
     if type(t) is Var and type(deref(a[1])) is not Var:
@@ -727,12 +727,12 @@ def _list_to_set(m, a):
 
 # -- output ------------------------------------------------------------------------------------------
 
-def _out(m: Machine):
+def _out(m: "Machine"):
     return m.engine.out or sys.stdout
 
 
 def _write_text(t: Any, quoted: bool = False) -> str:
-    from .printer import format_term
+    from .terms import format_term
 
     t = deref(t)
     if not quoted and type(t) in (Atom, String):
@@ -895,7 +895,7 @@ def _strip_carets(goal: Any) -> tuple[Any, list]:
     return goal, quantified
 
 
-def collector(m: Machine, key, args, nxt):
+def collector(m: "Machine", key, args, nxt):
     name, arity = key
     if name in ("findall", "findAll") and arity == 3:
         def finish(m, results, nxt, out=args[2]):
@@ -916,7 +916,7 @@ def collector(m: Machine, key, args, nxt):
     raise AssertionError(key)
 
 
-def _aggregate_all(m: Machine, args, nxt):
+def _aggregate_all(m: "Machine", args, nxt):
     spec = deref(args[0])
     goal = args[1]
     out = args[2]
@@ -965,7 +965,7 @@ def _aggregate_all(m: Machine, args, nxt):
     return m.push_collect(template, goal, finish, nxt)
 
 
-def _bagof(m: Machine, args, nxt, is_set: bool):
+def _bagof(m: "Machine", args, nxt, is_set: bool):
     template, goal, out = args
     inner, quantified = _strip_carets(goal)
     excluded = {id(v) for v in term_vars(Struct("t", (template, *quantified)))}
@@ -996,7 +996,7 @@ def _bagof(m: Machine, args, nxt, is_set: bool):
     return m.push_collect(pair, inner, finish, nxt)
 
 
-def _bag_solutions(m: Machine, witness, out, groups) -> Iterator[None]:
+def _bag_solutions(m: "Machine", witness, out, groups) -> Iterator[None]:
     for w, items in groups:
         mark = len(m.trail)
         if m.unify(witness, w) and m.unify(out, make_list(items)):
@@ -1056,10 +1056,9 @@ def _event_pattern(t: Any, op: str):
     return name, n, args, s, e
 
 
-def _matching(m: Machine, pattern: tuple, rows) -> Iterator[tuple]:
+def _matching(m: "Machine", pattern: tuple, rows) -> Iterator[tuple]:
     """Rows of ``rows`` that unify with ``pattern`` (tested, bindings undone)."""
     trail = m.trail
-    from .engine import unify_tuple
 
     for row in rows:
         mark = len(trail)
@@ -1069,8 +1068,7 @@ def _matching(m: Machine, pattern: tuple, rows) -> Iterator[tuple]:
             yield row
 
 
-def _yield_rows(m: Machine, pattern: tuple, rows) -> Iterator[None]:
-    from .engine import unify_tuple
+def _yield_rows(m: "Machine", pattern: tuple, rows) -> Iterator[None]:
 
     trail = m.trail
     for row in rows:
@@ -1095,9 +1093,8 @@ def _prev(m, a):
     store = m.engine.events
     if store is None:
         return
-    from .engine import _bound_args
 
-    bound = _bound_args(args)
+    bound = bound_args(args)
     pattern = args + (s, e)
     first = next(_matching(m, pattern, store.prev_candidates(name, n, bound, t, start_ge)), None)
     if first is None:
@@ -1113,9 +1110,8 @@ def _next(m, event, lo_t, hi_t):
     store = m.engine.events
     if store is None:
         return
-    from .engine import _bound_args
 
-    bound = _bound_args(args)
+    bound = bound_args(args)
     pattern = args + (s, e)
     first = next(_matching(m, pattern, store.next_candidates(name, n, bound, lo, hi)), None)
     if first is None:
@@ -1199,7 +1195,7 @@ def _distance(m, a):
 
 # -- Python-defined predicates ---------------------------------------------------------------------
 
-def call_python_pred(m: Machine, fn: Callable, args: tuple) -> bool:
+def call_python_pred(m: "Machine", fn: Callable, args: tuple) -> bool:
     """Call a predicate registered with ``kb.define``.
 
     ``fn`` gets the arguments as Python values (unbound ones as :class:`Var`) and returns

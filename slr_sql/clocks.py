@@ -9,11 +9,15 @@ queries, time-driven pruning) is woken by the move itself rather than by polling
 """
 from __future__ import annotations
 
+import math
 import threading
 import time
-from typing import Callable
+from typing import Any, Callable
 
-__all__ = ["Clock", "WallClock", "ManualClock", "StreamClock"]
+from .errors import SLRError
+from .terms import Atom, deref, format_term
+
+__all__ = ["Clock", "WallClock", "ManualClock", "StreamClock", "parse_duration"]
 
 
 class Clock:
@@ -100,3 +104,17 @@ class StreamClock(Clock):
         if end > self._t:
             self._t = end
             self._moved(end)
+
+
+def parse_duration(t: Any) -> float:
+    """A duration term in seconds: numbers (the parser already turned ``500ms`` into 0.5).
+
+    >>> parse_duration(60), parse_duration(Atom("inf"))
+    (60, inf)
+    """
+    t = deref(t)
+    if type(t) in (int, float) and not (type(t) is float and math.isnan(t)) and t >= 0:
+        return t
+    if type(t) is Atom and t in ("inf", "infinite"):
+        return math.inf
+    raise SLRError(f"a duration must be a non-negative number of seconds, not {format_term(t)}")

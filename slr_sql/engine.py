@@ -22,6 +22,7 @@ from .arith import evaluate, instantiation_error, iso_error, type_error
 from .errors import SLREvaluationError, SLRTimeout
 from .program import Predicate, Program, Slot, Template, build, split_event_atom, event_key
 from .terms import Atom, NIL, String, Struct, Var, deref, list_items, make_list
+from .unify import bound_args, copy_term, resolve, undo, unify, unify_tuple
 
 __all__ = ["Engine", "Machine", "unify", "copy_term", "PrologThrow"]
 
@@ -47,101 +48,6 @@ class Special:
 
 
 S_CUT_TO, S_SOFTCUT, S_NAFAIL, S_COLLECT, S_POPCATCH, S_RULES = range(6)
-
-
-def unify(a: Any, b: Any, trail: list) -> bool:
-    """Unify two terms, recording bindings on ``trail``. No occurs check (as in Prolog).
-
-    >>> X = Var("X"); tr = []; unify(Struct("f", (X,)), Struct("f", (1,)), tr), X.ref
-    (True, 1)
-    """
-    stack = None
-    while True:
-        while type(a) is Var:
-            r = a.ref
-            if r is None:
-                break
-            a = r
-        while type(b) is Var:
-            r = b.ref
-            if r is None:
-                break
-            b = r
-        if a is not b:
-            ta = type(a)
-            tb = type(b)
-            if ta is Var:
-                a.ref = b
-                trail.append(a)
-            elif tb is Var:
-                b.ref = a
-                trail.append(b)
-            elif ta is Struct:
-                if tb is not Struct or a.name != b.name:
-                    return False
-                aa = a.args
-                ba = b.args
-                n = len(aa)
-                if n != len(ba):
-                    return False
-                if stack is None:
-                    stack = []
-                if n == 2:
-                    stack.append((aa[0], ba[0]))
-                    a = aa[1]
-                    b = ba[1]
-                    continue
-                stack.extend(zip(aa, ba))
-            elif ta is not tb or a != b:
-                if ta is float and tb is float and a != a and b != b:
-                    pass
-                else:
-                    return False
-        if not stack:
-            return True
-        a, b = stack.pop()
-
-
-def undo(trail: list, mark: int) -> None:
-    while len(trail) > mark:
-        trail.pop().ref = None
-
-
-def copy_term(t: Any, mapping: dict | None = None) -> Any:
-    """Copy a term with fresh variables (bindings resolved). Iterative over list spines."""
-    if mapping is None:
-        mapping = {}
-    t = deref(t)
-    tt = type(t)
-    if tt is Var:
-        v = mapping.get(id(t))
-        if v is None:
-            v = mapping[id(t)] = Var()
-        return v
-    if tt is Struct:
-        if t.name == "." and len(t.args) == 2:
-            heads = []
-            cur = t
-            while type(cur) is Struct and cur.name == "." and len(cur.args) == 2:
-                heads.append(copy_term(cur.args[0], mapping))
-                cur = deref(cur.args[1])
-            out = copy_term(cur, mapping)
-            for h in reversed(heads):
-                out = Struct(".", (h, out))
-            return out
-        return Struct(t.name, tuple([copy_term(a, mapping) for a in t.args]))
-    return t
-
-
-def resolve(t: Any) -> Any:
-    """The term with all bound variables replaced by their values (unbound ones kept)."""
-    t = deref(t)
-    if type(t) is Struct:
-        if t.name == "." and len(t.args) == 2:
-            items, tail = list_items(t)
-            return make_list([resolve(x) for x in items], resolve(tail))
-        return Struct(t.name, tuple([resolve(a) for a in t.args]))
-    return t
 
 
 class Engine:
@@ -527,7 +433,7 @@ class Machine:
             # the copy taken before the bindings were undone: the culprit keeps its values
             original.term = ball
             raise original
-        from .printer import format_term
+        from .terms import format_term
 
         raise SLREvaluationError(ball, f"unhandled exception: {format_term(ball)}")
 
@@ -552,28 +458,12 @@ class Machine:
             cps.append([K_ALT, len(self.trail), (rule_goal, 0, nxt), None, None, None])
         if events is None:
             return False
-        bound = _bound_args(args)
+        bound = bound_args(args)
         rows = events.scan(name, n, bound, end_le=self.at)
         return self._push_gen(_match_rows(self, args, s, e, rows), nxt)
 
     def event_source(self):
         return self.engine.events
-
-
-def _bound_args(args: tuple) -> dict:
-    """Argument positions whose value is atomic or ground, to push into SQL."""
-    bound = {}
-    for i, a in enumerate(args):
-        a = deref(a)
-        ta = type(a)
-        if ta is Atom or ta is int or ta is String or (ta is float and a == a):
-            bound[i] = a
-        elif ta is Struct:
-            from .terms import is_ground
-
-            if is_ground(a):
-                bound[i] = resolve(a)
-    return bound
 
 
 def _match_rows(m: Machine, args: tuple, s: Any, e: Any, rows) -> Iterator[None]:
@@ -585,13 +475,6 @@ def _match_rows(m: Machine, args: tuple, s: Any, e: Any, rows) -> Iterator[None]
         if unify_tuple(pattern, tuple(vals) + (start, end), trail):
             yield None
         undo(trail, mark)
-
-
-def unify_tuple(xs: tuple, ys: tuple, trail: list) -> bool:
-    for x, y in zip(xs, ys):
-        if not unify(x, y, trail):
-            return False
-    return True
 
 
 def _unify_head(head: tuple, args: tuple, frame: list, trail: list) -> bool:

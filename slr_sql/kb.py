@@ -17,7 +17,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from .clocks import Clock, WallClock
+from .answers import answer_bindings
+from .clocks import Clock, WallClock, parse_duration
 from .engine import Engine, Machine
 from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
@@ -25,7 +26,7 @@ from .program import Program, build, compile_clause, split_event_atom, event_key
 from .store import EventStore
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
-from .printer import format_term
+from .terms import format_term
 
 __all__ = ["KnowledgeBase", "open", "Declarations", "parse_duration"]
 
@@ -50,20 +51,6 @@ class Declarations:
     def copy(self) -> "Declarations":
         return Declarations(set(self.event_types), dict(self.max_delay), set(self.in_order),
                             list(self.buffers))
-
-
-def parse_duration(t: Any) -> float:
-    """A duration term in seconds: numbers (the parser already turned ``500ms`` into 0.5).
-
-    >>> parse_duration(60), parse_duration(Atom("inf"))
-    (60, inf)
-    """
-    t = deref(t)
-    if type(t) in (int, float) and not (type(t) is float and math.isnan(t)) and t >= 0:
-        return t
-    if type(t) is Atom and t in ("inf", "infinite"):
-        return math.inf
-    raise SLRError(f"a duration must be a non-negative number of seconds, not {format_term(t)}")
 
 
 def _indicator(t: Any) -> tuple[str, int]:
@@ -206,7 +193,7 @@ class _PrevLookup:
             else:
                 f[self.stamp[0]] = start
                 f[self.stamp[1]] = end
-            answers.append(_answer(names, f))
+            answers.append(answer_bindings(names, f))
         return answers
 
 
@@ -572,7 +559,7 @@ class KnowledgeBase:
         answers = []
         names = plan.names
         for _ in m.solve(term):
-            answers.append(_answer(names, frame))
+            answers.append(answer_bindings(names, frame))
             if limit is not None and len(answers) >= limit:
                 break
         return answers
@@ -662,19 +649,6 @@ class KnowledgeBase:
         (['arg1', 't_end'], [('a', 1.0)])
         """
         return self.store.sql(query, params)
-
-
-def _answer(names: list, frame: list) -> dict[str, Any]:
-    """Bindings of the named variables, as SWI-Prolog's toplevel shows them: a variable left
-    unbound is omitted unless it is shared with another named variable (``X = Y``)."""
-    values = [(name, deref(frame[slot])) for name, slot in names]
-    free = [id(v) for _, v in values if type(v) is Var]
-    answer = {}
-    for name, v in values:
-        if type(v) is Var and free.count(id(v)) < 2:
-            continue
-        answer[name] = to_python(v)
-    return answer
 
 
 def open(path: str | Path | None = None, clock: Clock | None = None, **options: Any) -> KnowledgeBase:

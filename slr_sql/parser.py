@@ -27,7 +27,7 @@ from lark import Lark, Token, Transformer
 from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
 
 from .errors import SLRSyntaxError
-from .printer import INFIX_OPS, PREFIX_OPS
+from .terms import INFIX_OPS, PREFIX_OPS
 from .terms import CONS, NIL, TRUE, Atom, Clause, Span, String, Struct, Var, make_list
 
 __all__ = ["parse_program", "parse_term", "parse_event_fast"]

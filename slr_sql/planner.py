@@ -31,7 +31,7 @@ from json import loads as _json_loads
 
 from .encoding import INT64_MAX, INT64_MIN, Unencodable, decode, encode, encode_json
 from .encoding import _from_json, _quote
-from .engine import undo, unify
+from .unify import undo, unify
 from .program import Slot, Template, build
 from .sqlcompile import SITES, Col, ColRef, Compiler, Fallback, Part, resolve
 from .terms import Atom, NIL, Struct, Var, deref, from_python, list_items, make_list, to_python
@@ -791,7 +791,7 @@ class CompiledCall:
                 for row in rows]
 
     def _goal(self, bound: tuple, width: int) -> tuple:
-        from .printer import format_term
+        from .terms import format_term
 
         xs = [Var(f"A{i + 1}") for i in range(width)]
         n = self.arity

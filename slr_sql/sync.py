@@ -36,6 +36,7 @@ from concurrent.futures import Future, InvalidStateError, ThreadPoolExecutor
 from typing import Any, Callable, Iterable
 
 from .analysis import GoalSet, goal_set
+from .answers import answer_bindings
 from .clocks import ManualClock, StreamClock
 from .errors import EventRejected, SLRError, SLRTimeout
 from .terms import Atom, Struct, Var, deref
@@ -745,7 +746,6 @@ class Synchronizer:
             w.released_by = why
 
     def _attempt(self, q: PendingQuery) -> None:
-        from .kb import _answer
 
         kb = self.kb
         tracker = self.tracker
@@ -777,7 +777,7 @@ class Synchronizer:
         solving = m.solve(term)
         try:
             for _ in solving:
-                answers.append(_answer(plan.names, frame))
+                answers.append(answer_bindings(plan.names, frame))
         except _MustWait as w:
             _close_machine(m, solving)
             wait = Wait(w.key, w.time, w.reason, self.clock.now(), w.kind)
@@ -866,10 +866,10 @@ class Synchronizer:
     def _stored_match(self, m: Any, name: str, n: int, lo: float, hi: float, args: tuple,
                       s: Any, e: Any) -> bool:
         from .builtins import _matching
-        from .engine import _bound_args
+        from .unify import bound_args
 
         pattern = tuple(args) + (Var() if s is None else s, Var() if e is None else e)
-        rows = self.store.next_candidates(name, n, _bound_args(args), lo, hi)
+        rows = self.store.next_candidates(name, n, bound_args(args), lo, hi)
         return next(_matching(m, pattern, rows), None) is not None
 
     def _park(self, q: PendingQuery, waits: list[Wait], conds: list[tuple]) -> None:

@@ -16,6 +16,7 @@ mutated, and renamed apart before use.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from typing import Any, Iterable
 
@@ -23,6 +24,7 @@ __all__ = [
     "Atom", "String", "Struct", "Var", "NIL", "TRUE", "CONS",
     "deref", "make_list", "list_items", "is_ground", "is_callable", "from_python",
     "to_python", "term_vars", "Span", "Clause", "indicator",
+    "format_term", "format_atom", "INFIX_OPS", "PREFIX_OPS", "OPERATORS",
 ]
 
 
@@ -105,8 +107,6 @@ class Struct:
         return f"Struct({str(self.name)!r}, {self.args!r})"
 
     def __str__(self) -> str:
-        from .printer import format_term
-
         return format_term(self)
 
 
@@ -300,3 +300,289 @@ class Clause:
     span: Span | None = None
     varnames: tuple = ()
     text: str = ""
+
+
+# ---------------------------------------------------------------------------------------
+# Prolog text of terms.
+#
+# Term -> text, the way SWI-Prolog's ``writeq/1`` prints it (modulo a few spaces).
+#
+# The output is the contract of the parser's round trip: for every term ``t``,
+# ``parse_term(format_term(t))`` gives ``t`` back (up to variable identity).  That is why the
+# printer is careful about the three places where Prolog text is ambiguous:
+#
+# * operators: minimal parentheses from the priority table below, and an operator *atom*
+#   that is an operand of an operator is bracketed, ``(-)=a``;
+# * the minus sign: ``-1`` is the integer, ``- 1`` is the compound ``-(1)`` (as SWI 9 reads it);
+# * token gluing: two symbol-char tokens or two alphanumeric tokens that would run together
+#   are separated by a space (``1- -1``, ``a= \\+b``, ``X is Y``).
+#
+# The operator table lives here (not in parser.py) so that printing never imports lark.
+# ---------------------------------------------------------------------------------------
+
+# (priority, type, names): SWI-Prolog 9 defaults plus SLR's `event` declaration operator.
+OPERATORS: tuple[tuple[int, str, tuple[str, ...]], ...] = (
+    (1200, "xfx", (":-", "-->")),
+    (1200, "fx", (":-", "?-")),
+    (1150, "fx", ("dynamic", "discontiguous", "initialization", "module_transparent",
+                  "multifile", "public", "table", "event")),
+    (1105, "xfy", ("|",)),
+    (1100, "xfy", (";",)),
+    (1050, "xfy", ("->", "*->")),
+    (1000, "xfy", (",",)),
+    (990, "xfx", (":=",)),
+    (900, "fy", ("\\+",)),
+    (700, "xfx", ("=", "\\=", "==", "\\==", "@<", "@>", "@=<", "@>=", "=..", "is", "=:=",
+                  "=\\=", "<", ">", "=<", ">=", ">:<", ":<", "as")),
+    (600, "xfy", (":",)),
+    (500, "yfx", ("+", "-", "/\\", "\\/", "xor")),
+    (400, "yfx", ("*", "/", "//", "mod", "rem", "<<", ">>", "div", "rdiv")),
+    (200, "xfx", ("**",)),
+    (200, "xfy", ("^",)),
+    (200, "fy", ("-", "+", "\\")),
+)
+
+# name -> (priority, max left priority, max right priority)
+INFIX_OPS: dict[str, tuple[int, int, int]] = {}
+# name -> (priority, max argument priority)
+PREFIX_OPS: dict[str, tuple[int, int]] = {}
+for _p, _type, _names in OPERATORS:
+    for _n in _names:
+        if _type == "xfx":
+            INFIX_OPS[_n] = (_p, _p - 1, _p - 1)
+        elif _type == "xfy":
+            INFIX_OPS[_n] = (_p, _p - 1, _p)
+        elif _type == "yfx":
+            INFIX_OPS[_n] = (_p, _p, _p - 1)
+        elif _type == "fy":
+            PREFIX_OPS[_n] = (_p, _p)
+        else:  # fx
+            PREFIX_OPS[_n] = (_p, _p - 1)
+
+_SYMBOL_CHARS = frozenset("#$&*+-./:<=>?@^~\\")
+_LETTER_ATOM = re.compile(r"[^\W\d_A-Z]\w*\Z")
+_SYMBOL_ATOM = re.compile(r"[#$&*+\-./:<=>?@^~\\]+\Z")
+_SOLO = frozenset(("[]", "{}", "!", ";"))
+# As SWI-Prolog's writeq: letter escapes where they exist, other control characters
+# (C0, DEL, C1) as `\xHH\`.
+_ESCAPES = {"\\": "\\\\", "\n": "\\n", "\t": "\\t", "\r": "\\r", "\a": "\\a", "\b": "\\b",
+            "\f": "\\f", "\v": "\\v"}
+_NEEDS_ESCAPE = re.compile(r"[\\'\"\x00-\x1f\x7f-\x9f]")
+_ARG_PRIORITY = 999  # arguments and list elements, as writeq prints them
+
+
+def format_atom(name: str, quoted: bool = True) -> str:
+    """The text of an atom, quoted only when it would not read back as the same atom.
+
+    >>> format_atom("cup1"), format_atom("hello world"), format_atom("=.."), format_atom("A")
+    ('cup1', "'hello world'", '=..', "'A'")
+    """
+    if not quoted or name in _SOLO:
+        return name
+    if _LETTER_ATOM.match(name):
+        # A non-ASCII capital would read as a variable in SWI; quote it to be portable.
+        if name[0] < "\x80" or name[0].islower():
+            return name
+    elif _SYMBOL_ATOM.match(name) and not name.startswith("/*") and name != ".":
+        return name
+    return "'" + _escape(name, "'") + "'"
+
+
+def _escape(text: str, quote: str) -> str:
+    if not _NEEDS_ESCAPE.search(text):
+        return text
+    out = []
+    for ch in text:
+        if ch == quote:
+            out.append("\\" + quote)
+        elif ch in _ESCAPES:
+            out.append(_ESCAPES[ch])
+        elif ch < " " or "\x7f" <= ch <= "\x9f":
+            out.append(f"\\x{ord(ch):X}\\")
+        else:
+            out.append(ch)
+    return "".join(out)
+
+
+def _format_float(x: float) -> str:
+    """Shortest round-tripping digits, laid out as SWI does (``1.0e+15``, ``0.0001``)."""
+    if math.isnan(x):
+        return "1.5NaN"
+    if math.isinf(x):
+        return "1.0Inf" if x > 0 else "-1.0Inf"
+    r = repr(x)
+    sign = ""
+    if r[0] == "-":
+        sign, r = "-", r[1:]
+    mantissa, _, exp = r.partition("e")
+    whole, _, frac = mantissa.partition(".")
+    digits = (whole + frac).lstrip("0")
+    if not digits:
+        return sign + "0.0"
+    # decimal exponent of the first significant digit
+    e = (int(exp) if exp else 0) + len(whole) - 1 - (len(whole + frac) - len((whole + frac).lstrip("0")))
+    digits = digits.rstrip("0") or "0"
+    if -4 <= e < 15:
+        if e >= 0:
+            ip = digits[: e + 1].ljust(e + 1, "0")
+            fp = digits[e + 1:] or "0"
+        else:
+            ip, fp = "0", "0" * (-e - 1) + digits
+        return f"{sign}{ip}.{fp}"
+    return f"{sign}{digits[0]}.{digits[1:] or '0'}e{'+' if e >= 0 else '-'}{abs(e)}"
+
+
+def _is_op_atom(t: Any) -> bool:
+    return type(t) is Atom and (t in INFIX_OPS or t in PREFIX_OPS)
+
+
+class _Writer:
+    """Accumulates tokens, inserting a space where two tokens would otherwise glue."""
+
+    __slots__ = ("out", "last", "quoted")
+
+    def __init__(self, quoted: bool):
+        self.out: list[str] = []
+        self.last = ""  # last character written
+        self.quoted = quoted
+
+    def put(self, s: str) -> None:
+        if not s:
+            return
+        a, b = self.last, s[0]
+        if a and ((a in _SYMBOL_CHARS and b in _SYMBOL_CHARS)
+                  or ((a.isalnum() or a == "_") and (b.isalnum() or b == "_"))
+                  or (a == "," and b == "|")):
+            self.out.append(" ")
+        self.out.append(s)
+        self.last = s[-1]
+
+    def space(self) -> None:
+        self.out.append(" ")
+        self.last = " "
+
+    # -- terms ---------------------------------------------------------------------
+    def term(self, t: Any, prec: int, operand: bool = False) -> None:
+        """Write t at priority ≤ prec; ``operand``: t is the operand of an operator."""
+        while type(t) is Var and t.ref is not None:
+            t = t.ref
+        tt = type(t)
+        if tt is Atom:
+            if operand and _is_op_atom(t):
+                # An operator atom as the operand of an operator: `(-)=a`, `- (-)`.
+                self.put("(")
+                self.put(format_atom(t, self.quoted))
+                self.put(")")
+            else:
+                self.put(format_atom(t, self.quoted))
+        elif tt is Struct:
+            self.struct(t, prec)
+        elif tt is Var:
+            self.put(t.name)
+        elif tt is String or isinstance(t, str):
+            if self.quoted:
+                self.put('"' + _escape(t, '"') + '"')
+            else:
+                self.put(str(t))
+        elif tt is int:
+            self.put(str(t))
+        elif tt is float:
+            self.put(_format_float(t))
+        elif tt is bool:
+            self.put("true" if t else "false")
+        else:
+            self.put(str(t))
+
+    def struct(self, t: Struct, prec: int) -> None:
+        name, args = t.name, t.args
+        n = len(args)
+        if n == 2 and name == ".":
+            self.list(t)
+            return
+        if n == 1 and name == "{}":
+            self.put("{")
+            self.term(args[0], 1200)
+            self.put("}")
+            return
+        if n == 2 and name in INFIX_OPS:
+            p, lp, rp = INFIX_OPS[name]
+            open_ = p > prec
+            if open_:
+                self.put("(")
+            self.term(args[0], lp, True)
+            if name == "," or name == "|":
+                self.put(name)
+            elif name[0].isalpha():
+                self.space()
+                self.put(format_atom(name, self.quoted))
+                self.space()
+            else:
+                self.put(format_atom(name, self.quoted))
+            self.term(args[1], rp, True)
+            if open_:
+                self.put(")")
+            return
+        if n == 1 and name in PREFIX_OPS and name not in ("|", ","):
+            p, ap = PREFIX_OPS[name]
+            open_ = p > prec
+            if open_:
+                self.put("(")
+            self.put(format_atom(name, self.quoted))
+            arg = args[0]
+            while type(arg) is Var and arg.ref is not None:
+                arg = arg.ref
+            mark = len(self.out)
+            self.term(arg, ap, True)
+            first = self.out[mark][0] if mark < len(self.out) else ""
+            # `- (a,b)` is -((a,b)) but `-(a,b)` is -(a,b); `- 1` is -(1) but `-1` is -1.
+            if first != " " and (
+                    first == "(" or (name == "-" and first.isdigit()) or name[0].isalpha()):
+                self.out.insert(mark, " ")
+            if open_:
+                self.put(")")
+            return
+        # canonical form: name(arg, ...)
+        self.put(format_atom(name, self.quoted))
+        self.out.append("(")
+        self.last = "("
+        for i, a in enumerate(args):
+            if i:
+                self.put(",")
+            self.term(a, _ARG_PRIORITY)
+        self.put(")")
+
+    def list(self, t: Any) -> None:
+        # Iterative over the tail: a million-element list must not recurse.
+        self.put("[")
+        self.term(t.args[0], _ARG_PRIORITY)
+        t = t.args[1]
+        while True:
+            while type(t) is Var and t.ref is not None:
+                t = t.ref
+            if type(t) is Struct and t.name == "." and len(t.args) == 2:
+                self.put(",")
+                self.term(t.args[0], _ARG_PRIORITY)
+                t = t.args[1]
+            elif type(t) is Atom and t == "[]":
+                break
+            else:
+                self.put("|")
+                self.term(t, _ARG_PRIORITY)
+                break
+        self.put("]")
+
+
+def format_term(t: Any, quoted: bool = True, priority: int = 1200) -> str:
+    """Prolog text of a term, like SWI-Prolog's ``writeq`` (``quoted=False``: like ``write``).
+
+    >>> from slr_sql.terms import make_list
+    >>> format_term(Struct(":-", (Atom("a"), Struct(",", (Atom("b"), Atom("c"))))))
+    'a:-b,c'
+    >>> format_term(Struct("*", (Struct("+", (1, 2)), 3))), format_term(Struct("-", (1,)))
+    ('(1+2)*3', '- 1')
+    >>> format_term(make_list([Atom("hello world"), String("s"), 1.0], Var("T")))
+    "['hello world',\\"s\\",1.0|T]"
+    """
+    w = _Writer(quoted)
+    w.term(t, priority)
+    return "".join(w.out)

@@ -17,7 +17,7 @@ from slr_sql import ManualClock, SLRError, String, Struct
 from slr_sql.encoding import encode
 from slr_sql.engine import copy_term, unify
 from slr_sql.parser import parse_term
-from slr_sql.printer import format_term
+from slr_sql.terms import format_term
 from slr_sql.terms import deref, from_python
 
 PAPER_BUFFERS = """

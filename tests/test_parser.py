@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 
 from slr_sql.errors import SLRSyntaxError
 from slr_sql.parser import parse_event_fast, parse_program, parse_term
-from slr_sql.printer import INFIX_OPS, PREFIX_OPS, format_atom, format_term
+from slr_sql.terms import INFIX_OPS, PREFIX_OPS, format_atom, format_term
 from slr_sql.terms import NIL, TRUE, Atom, String, Struct, Var, make_list
 
 GOLDEN = Path(__file__).parent / "golden" / "parse"

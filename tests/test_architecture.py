@@ -1,0 +1,123 @@
+"""The package's layers (docs/architecture.md): every import points down, no import cycles,
+and only the store talks to SQLite.
+
+Imports inside functions count: a deferred import is still a dependency. A new module must be
+given its layer here, which is the point: placing it is a design decision.
+"""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parent.parent / "slr_sql"
+
+# Lower numbers are lower layers; a module may import only modules of a lower layer, or
+# modules of its own family (the same subpackage). Mirrors the table in docs/architecture.md.
+LAYERS = {
+    "errors": 0, "terms": 0,
+    "printer": 1, "unify": 1, "arith": 1, "encoding": 1, "program": 1, "parser": 1,
+    "robotlib": 1, "clocks": 1, "answers": 1, "grammar": 1,
+    "store": 2,
+    "builtins": 3,
+    "analysis": 4, "engine": 4, "sqlcompile": 4,
+    "planner": 5,
+    "sync": 6, "buffers": 6, "cep": 6, "plot": 6,
+    "kb": 7,
+    "__init__": 8,
+    "demo": 9, "service": 9, "ros": 9,
+    "cli": 10,
+    "__main__": 11,
+}
+
+
+def _family(path: Path) -> str:
+    """The first component under slr_sql/: ``store/events.py`` belongs to ``store``."""
+    return path.relative_to(PACKAGE).parts[0].removesuffix(".py")
+
+
+def _imports(path: Path) -> list[tuple[str, int]]:
+    """(family imported, line) for every import of another slr_sql module in ``path``."""
+    rel = path.relative_to(PACKAGE)
+    package_parts = list(rel.parts[:-1])  # the importing module's package inside slr_sql
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package_parts[: len(package_parts) - (node.level - 1)]
+                if node.level - 1 > len(package_parts):
+                    continue
+                parts = base + (node.module.split(".") if node.module else [])
+                targets = [parts] if parts else [[alias.name] for alias in node.names]
+            elif node.module and node.module.split(".")[0] == "slr_sql":
+                parts = node.module.split(".")[1:]
+                targets = [parts] if parts else [[alias.name] for alias in node.names]
+            else:
+                continue
+            found += [(t[0], node.lineno) for t in targets if t]
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                parts = alias.name.split(".")
+                if parts[0] == "slr_sql" and len(parts) > 1:
+                    found.append((parts[1], node.lineno))
+    return found
+
+
+MODULES = sorted(PACKAGE.rglob("*.py"))
+
+
+@pytest.mark.parametrize("path", MODULES, ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_imports_point_down(path):
+    family = _family(path)
+    assert family in LAYERS, f"{family} has no layer: place it in LAYERS and docs/architecture.md"
+    upward = [(target, line) for target, line in _imports(path)
+              if target != family and target in LAYERS and LAYERS[target] >= LAYERS[family]]
+    assert not upward, f"{path.relative_to(PACKAGE)} imports its own layer or above: {upward}"
+
+
+def test_no_import_cycles_between_modules():
+    graph: dict[str, set[str]] = {}
+    names = {p: ".".join(p.relative_to(PACKAGE).with_suffix("").parts) for p in MODULES}
+    known = set(names.values())
+    for path, name in names.items():
+        rel = path.relative_to(PACKAGE)
+        package_parts = list(rel.parts[:-1])
+        edges = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level:
+                base = package_parts[: len(package_parts) - (node.level - 1)]
+                module = base + (node.module.split(".") if node.module else [])
+                for candidate in [module] + [module + [a.name] for a in node.names]:
+                    dotted = ".".join(candidate)
+                    for target in (dotted, dotted + ".__init__"):
+                        if target in known and target != name:
+                            edges.add(target)
+        graph[name] = edges
+    state: dict[str, int] = {}
+
+    def visit(node: str, trail: list[str]) -> None:
+        state[node] = 1
+        for nxt in graph[node]:
+            if state.get(nxt) == 1:
+                cycle = trail[trail.index(nxt):] + [nxt] if nxt in trail else [node, nxt]
+                pytest.fail("import cycle: " + " -> ".join(cycle))
+            if nxt not in state:
+                visit(nxt, trail + [nxt])
+        state[node] = 2
+
+    for node in graph:
+        if node not in state:
+            visit(node, [node])
+
+
+def test_only_the_store_imports_sqlite3():
+    users = []
+    for path in MODULES:
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level
+                     else [])
+            if any(n.split(".")[0] == "sqlite3" for n in names):
+                users.append(str(path.relative_to(PACKAGE)))
+    assert all(_family(PACKAGE / u) == "store" for u in users), users
