@@ -49,9 +49,9 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterable, Iterator
 
-from .encoding import Unencodable, decode, encode
-from .errors import EventRejected, SLRError
-from .terms import Atom, String, Struct, Var
+from ..encoding import Unencodable, decode, encode
+from ..errors import EventRejected, SLRError
+from ..terms import Atom, String, Struct, Var
 
 __all__ = ["EventStore", "Event", "Row", "CACHE_SIZE_KIB", "quote_identifier", "format_event",
            "migration_scripts", "split_sql_script"]
@@ -138,7 +138,7 @@ def _migrations_dir() -> Any:
             return folder
     except Exception:  # not installed as a package: running from a source checkout
         pass
-    return Path(__file__).resolve().parent.parent / "migrations"
+    return Path(__file__).resolve().parents[2] / "migrations"
 
 
 def migration_scripts() -> list[tuple[int, str, str]]:
@@ -186,7 +186,7 @@ def _has_sql(text: str) -> bool:
 
 def _format_term(term: Any) -> str:
     try:
-        from .printer import format_term  # the project's printer, when available
+        from ..printer import format_term  # the project's printer, when available
         return format_term(term)
     except Exception:
         return _simple_format(term)
@@ -1344,7 +1344,7 @@ class EventStore:
             except sqlite3.OperationalError as exc:
                 if deadline is not None and time.monotonic() > deadline \
                         and "interrupt" in str(exc):
-                    from .errors import SLRTimeout
+                    from ..errors import SLRTimeout
 
                     raise SLRTimeout("query timed out (in its compiled SQL statement)") from None
                 raise
