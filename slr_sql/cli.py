@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import sqlite3
 import sys
 from dataclasses import dataclass
 from typing import Any, Iterable, Iterator
@@ -365,25 +364,18 @@ def run_sql(db: str, statement: str) -> tuple[list[str], list[tuple]]:
     Uses ``kb.sql`` when the library offers it; otherwise opens the file read-only, so a
     mistyped UPDATE cannot damage the store.
     """
+    from .store import DatabaseError, run_sql_file
+
     if not os.path.exists(db):
         raise slr_sql.SLRError(f"no such store: {db}")
     with _open(db) as kb:
         if hasattr(kb, "sql"):
             try:
                 columns, rows = kb.sql(statement)
-            except sqlite3.Error as exc:
+            except DatabaseError as exc:
                 raise slr_sql.SLRError(f"sql: {exc}") from None
             return list(columns), [tuple(r) for r in rows]
-    uri = "file:" + os.path.abspath(db).replace("?", "%3f").replace("#", "%23") + "?mode=ro"
-    con = sqlite3.connect(uri, uri=True)
-    try:
-        cur = con.execute(statement)
-        columns = [d[0] for d in cur.description or ()]
-        return columns, [tuple(r) for r in cur.fetchall()]
-    except sqlite3.Error as exc:
-        raise slr_sql.SLRError(f"sql: {exc}") from None
-    finally:
-        con.close()
+    return run_sql_file(db, statement)
 
 
 @main.command()

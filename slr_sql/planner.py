@@ -22,7 +22,6 @@ a view of its name (docs/sql.md).
 """
 from __future__ import annotations
 
-import sqlite3
 import weakref
 from typing import Any
 
@@ -34,6 +33,7 @@ from .encoding import _from_json, _quote
 from .unify import undo, unify
 from .program import Slot, Template, build
 from .sqlcompile import SITES, Col, ColRef, Compiler, Fallback, Part, resolve
+from .store import DatabaseError
 from .terms import Atom, NIL, Struct, Var, deref, from_python, list_items, make_list, to_python
 
 __all__ = ["SqlPlan", "plan_for", "try_sql", "explain", "attach", "refresh", "Fallback",
@@ -599,7 +599,7 @@ def try_sql(kb, plan, args, at, limit=None, deadline=None):
         return None
     try:
         return entry.run(kb, args or {}, at, limit, deadline)
-    except (sqlite3.Error, Unencodable, ValueError, TypeError, KeyError, OverflowError):
+    except (DatabaseError, Unencodable, ValueError, TypeError, KeyError, OverflowError):
         return None
 
 
@@ -784,7 +784,7 @@ class CompiledCall:
             return None
         try:
             rows = entry.term_rows(kb, terms, m.at, m.deadline)
-        except (sqlite3.Error, Unencodable, ValueError, TypeError, KeyError, OverflowError):
+        except (DatabaseError, Unencodable, ValueError, TypeError, KeyError, OverflowError):
             return None
         self.answered += 1
         return [[(int(name[1:]) - 1, t) for name, t in row if name not in terms]

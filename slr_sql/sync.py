@@ -1032,11 +1032,10 @@ def attach(kb: Any) -> Synchronizer:
 
 
 def _try_run(kb: Any, entry: Any, q: PendingQuery) -> list | None:
-    import sqlite3
-
     from .encoding import Unencodable
+    from .store import DatabaseError
 
     try:
         return entry.run(kb, q.args or {}, q.at, None, q._deadline)
-    except (sqlite3.Error, Unencodable, ValueError, TypeError, KeyError, OverflowError):
+    except (DatabaseError, Unencodable, ValueError, TypeError, KeyError, OverflowError):
         return None

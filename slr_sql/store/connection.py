@@ -1,0 +1,346 @@
+"""One open SQLite database: connection settings, transactions, deadlines and raw SQL.
+
+:class:`Database` is the object every part of an :class:`~slr_sql.store.EventStore` shares:
+the connection, the lock that serializes it, the transaction depth and the clock. The parts
+run their statements through ``db.conn`` while holding ``db.lock`` (or inside
+:meth:`Database.transaction`, which holds it).
+
+Durability: file databases use ``journal_mode=WAL`` with ``synchronous=FULL``: when a
+transaction commits it is in the WAL *and* fsynced, so it survives a process kill and a
+power loss. (``synchronous=NORMAL`` would survive a kill but may lose the last transactions
+on power loss.)
+"""
+from __future__ import annotations
+
+import os
+import sqlite3
+import threading
+import time
+import weakref
+from contextlib import contextmanager
+from typing import Any, Callable, Iterable, Iterator
+
+from ..errors import SLRError, SLRTimeout
+from .schema import migrate
+from .sqltext import split_sql_script
+
+__all__ = ["Database", "DatabaseError", "CACHE_SIZE_KIB", "run_sql_file"]
+
+# The base class of the errors the database raises while running a statement (a missing
+# table, a syntax error, a constraint, an interrupted statement...). Callers outside the
+# store catch this name, never sqlite3's.
+DatabaseError = sqlite3.Error
+
+CACHE_SIZE_KIB = 65536  # PRAGMA cache_size of the store's connection (64 MiB)
+
+
+class WallClock:
+    def now(self) -> float:
+        return time.time()
+
+
+class Database:
+    """The connection of one store, with its lock, transaction depth and clock.
+
+    ``path`` None or ``":memory:"`` gives an in-memory database. Opening applies the
+    migrations the file has not seen yet.
+
+    >>> db = Database(None); db.execute("SELECT ? + 1", (1,))
+    [(2,)]
+    >>> db.close()
+    """
+
+    def __init__(self, path: str | os.PathLike | None = None, clock: Any = None,
+                 synchronous: str = "FULL"):
+        self.path = None if path in (None, ":memory:") else str(path)
+        self.clock = clock if clock is not None else WallClock()
+        self.lock = threading.RLock()
+        self.tx_depth = 0
+        self.closed = False
+        # called, lock held, after a transaction rolled back (the event-type cache reloads)
+        self.rollback_listeners: list[Callable[[], None]] = []
+        self.open_cursors: weakref.WeakSet = weakref.WeakSet()  # iterators still reading
+        self.deadline: float | None = None  # of the compiled statement running now
+        self.conn = sqlite3.connect(self.path or ":memory:", check_same_thread=False,
+                                    isolation_level=None, timeout=30.0,
+                                    cached_statements=512)
+        if synchronous.upper() not in ("OFF", "NORMAL", "FULL", "EXTRA"):
+            raise ValueError(f"synchronous must be OFF, NORMAL, FULL or EXTRA, not {synchronous!r}")
+        conn = self.conn
+        # auto_vacuum must be chosen before the first table exists; it is a no-op afterwards.
+        conn.execute("PRAGMA auto_vacuum=INCREMENTAL")
+        if self.path is not None:
+            conn.execute("PRAGMA journal_mode=WAL")
+        conn.execute(f"PRAGMA synchronous={synchronous.upper()}")
+        conn.execute("PRAGMA foreign_keys=ON")
+        # Every event type has four indexes; SQLite's default 2 MiB page cache makes large
+        # ingests spill and re-read index pages constantly. The cache grows only as used.
+        conn.execute(f"PRAGMA cache_size=-{CACHE_SIZE_KIB}")
+        migrate(conn, self.path)
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def schema_version(self) -> int:
+        """The number of the last migration applied (``PRAGMA user_version``).
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).schema_version() >= 1
+        True
+        """
+        with self.lock:
+            return self.conn.execute("PRAGMA user_version").fetchone()[0]
+
+    def close(self) -> None:
+        """Checkpoint the WAL into the main file and close. Idempotent.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.close(); s.close()
+        """
+        with self.lock:
+            if self.closed:
+                return
+            self.closed = True
+            try:
+                if self.tx_depth:
+                    self.conn.execute("ROLLBACK")
+                    self.tx_depth = 0
+                for cursor in list(self.open_cursors):  # iterators still open
+                    cursor.close()
+                if self.path is not None:
+                    try:
+                        self.conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+                    except sqlite3.OperationalError:
+                        pass  # best effort: the WAL is checkpointed on the next open anyway
+            finally:
+                self.conn.close()
+
+    def check_open(self) -> None:
+        if self.closed:
+            raise SLRError("the event store is closed")
+
+    # ------------------------------------------------------------------ transactions
+
+    @contextmanager
+    def transaction(self) -> Iterator["Database"]:
+        """Run several statements as one atomic unit (BEGIN IMMEDIATE ... COMMIT).
+
+        Re-entrant: nested uses become savepoints, so an inner failure undoes only the inner
+        part. The lock is held for the whole transaction.
+
+        >>> db = Database(None)
+        >>> with db.transaction():
+        ...     db.execute("INSERT INTO slr_meta VALUES ('a', '1')")
+        []
+        >>> db.execute("SELECT value FROM slr_meta WHERE key = 'a'")
+        [('1',)]
+        """
+        with self.lock:
+            self.check_open()
+            depth = self.tx_depth
+            conn = self.conn
+            if depth == 0:
+                conn.execute("BEGIN IMMEDIATE")
+            else:
+                conn.execute(f"SAVEPOINT slr_sp{depth}")
+            self.tx_depth = depth + 1
+            try:
+                yield self
+            except BaseException:
+                self.tx_depth = depth
+                try:
+                    if depth == 0:
+                        conn.execute("ROLLBACK")
+                    else:
+                        conn.execute(f"ROLLBACK TO slr_sp{depth}")
+                        conn.execute(f"RELEASE slr_sp{depth}")
+                finally:
+                    self._rolled_back()
+                raise
+            self.tx_depth = depth
+            try:
+                conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
+            except BaseException:
+                if depth == 0 and conn.in_transaction:
+                    conn.execute("ROLLBACK")
+                self._rolled_back()
+                raise
+
+    def _rolled_back(self) -> None:
+        for listener in self.rollback_listeners:
+            listener()
+
+    # ------------------------------------------------------------------ raw SQL
+
+    def sql(self, query: str, params: Iterable[Any] = ()) -> tuple[list[str], list[tuple]]:
+        """Run one SQL statement as given (for ``slr sql``; meant for reading) and return
+        ``(column names, rows)``.
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).sql("SELECT 1 AS one")
+        (['one'], [(1,)])
+        """
+        with self.lock:
+            self.check_open()
+            cursor = self.conn.execute(query, tuple(params))
+            columns = [d[0] for d in cursor.description] if cursor.description else []
+            return columns, cursor.fetchall()
+
+    def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
+        """Execute one statement for another slr_sql module (triggers, buffer pruning, ...)
+        and return its rows. Inside :meth:`transaction` it is part of the transaction.
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).execute("SELECT ? + 1", (1,))
+        [(2,)]
+        """
+        with self.lock:
+            self.check_open()
+            return self.conn.execute(sql, tuple(params)).fetchall()
+
+    def executemany(self, sql: str, rows: Iterable[Iterable[Any]]) -> None:
+        """``executemany`` for other slr_sql modules.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.executemany("INSERT INTO slr_meta VALUES (?, ?)", [("a", "1")])
+        """
+        with self.lock:
+            self.check_open()
+            self.conn.executemany(sql, rows)
+
+    def executescript(self, script: str) -> None:
+        """Run several statements (e.g. ``CREATE TRIGGER`` ... ``END;``) in one transaction.
+        (Unlike ``sqlite3``'s ``executescript`` it does not commit an enclosing transaction.)
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.executescript("CREATE TABLE slr_x(a); CREATE TABLE slr_y(b);")
+        """
+        with self.transaction():
+            for statement in split_sql_script(script):
+                self.conn.execute(statement)
+
+    def changes(self) -> int:
+        """Rows changed by the last statement (``changes()``).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.executemany("INSERT INTO slr_meta VALUES (?, ?)", [("a", "1")])
+        >>> s.changes()
+        1
+        """
+        with self.lock:
+            return self.conn.execute("SELECT changes()").fetchone()[0]
+
+    def query_plan(self, sql: str) -> list[str]:
+        """SQLite's ``EXPLAIN QUERY PLAN`` lines for a statement (parameters bound to NULL).
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).query_plan("SELECT * FROM slr_meta WHERE key = ?")
+        ['SEARCH slr_meta USING INDEX sqlite_autoindex_slr_meta_1 (key=?)']
+        """
+        with self.lock:
+            self.check_open()
+            cursor = self.conn.execute("EXPLAIN QUERY PLAN " + sql, [None] * sql.count("?"))
+            return [row[3] for row in cursor.fetchall()]
+
+    # ------------------------------------------------------------------ compiled queries
+    # Execution helpers for slr_sql.planner / slr_sql.sqlcompile: application-defined
+    # functions and running compiled statements (parameters always bound).
+
+    def create_function(self, name: str, narg: int, fn: Any, deterministic: bool = True) -> None:
+        """Register a scalar function on the store's connection.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.create_function("twice", 1, lambda x: 2 * x)
+        >>> s.execute("SELECT twice(21)")
+        [(42,)]
+        """
+        with self.lock:
+            self.check_open()
+            self.conn.create_function(name, narg, fn, deterministic=deterministic)
+
+    def create_aggregate(self, name: str, narg: int, cls: Any) -> None:
+        """Register an aggregate function (a class with step/finalize).
+
+        >>> class Count:
+        ...     def __init__(self): self.n = 0
+        ...     def step(self, value): self.n += 1
+        ...     def finalize(self): return self.n
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.create_aggregate("how_many", 1, Count)
+        >>> s.execute("SELECT how_many(x) FROM (SELECT 1 AS x UNION ALL SELECT 2)")
+        [(2,)]
+        """
+        with self.lock:
+            self.check_open()
+            self.conn.create_aggregate(name, narg, cls)
+
+    def run_compiled(self, sql: str, params: dict, limit: int | None = None,
+                     deadline: float | None = None) -> list[tuple]:
+        """Run a compiled SELECT with named parameters; all rows, or the first ``limit``.
+        ``deadline`` (``time.monotonic()``): past it the statement is interrupted and
+        :class:`SLRTimeout` raised, as the interpreter does for ``timeout=``.
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).run_compiled("SELECT :a + 1", {"a": 1})
+        [(2,)]
+        """
+        with self.lock:
+            self.check_open()
+            conn = self.conn
+            # a statement run from inside another (a kb.define predicate querying the kb
+            # from SQL) keeps the outer deadline: the handler is per connection
+            outer = self.deadline
+            if deadline is None or (outer is not None and outer <= deadline):
+                deadline = outer
+            if deadline is not outer:
+                self.deadline = deadline
+                conn.set_progress_handler(
+                    lambda: 1 if time.monotonic() > deadline else 0, 20000)
+            try:
+                cursor = conn.execute(sql, params)
+                try:
+                    return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+                finally:
+                    cursor.close()
+            except sqlite3.OperationalError as exc:
+                if deadline is not None and time.monotonic() > deadline \
+                        and "interrupt" in str(exc):
+                    raise SLRTimeout("query timed out (in its compiled SQL statement)") from None
+                raise
+            finally:
+                if deadline is not outer:
+                    self.deadline = outer
+                    if outer is None:
+                        conn.set_progress_handler(None, 0)
+                    else:
+                        conn.set_progress_handler(
+                            lambda: 1 if time.monotonic() > outer else 0, 20000)
+
+
+def run_sql_file(path: str | os.PathLike, query: str,
+                 write: bool = False) -> tuple[list[str], list[tuple]]:
+    """Run one SQL statement on the store file ``path`` through a connection of its own,
+    read-only unless ``write``; returns ``(column names, rows)``. Every failure (no such
+    file, an SQL error, a write to a read-only connection) is an :class:`SLRError`.
+
+    >>> import os, tempfile
+    >>> path = os.path.join(tempfile.mkdtemp(), "robot.db"); Database(path).close()
+    >>> run_sql_file(path, "SELECT count(*) AS n FROM slr_program")
+    (['n'], [(0,)])
+    """
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise SLRError(f"no such store: {path}")
+    quoted = os.path.abspath(path).replace("%", "%25").replace("?", "%3f").replace("#", "%23")
+    uri = f"file:{quoted}?mode={'rw' if write else 'ro'}"
+    try:
+        conn = sqlite3.connect(uri, uri=True, isolation_level=None)
+    except sqlite3.Error as exc:
+        raise SLRError(f"sql: {exc}") from None
+    try:
+        cursor = conn.execute(query)
+        columns = [d[0] for d in cursor.description or ()]
+        return columns, [tuple(row) for row in cursor.fetchall()]
+    except sqlite3.Error as exc:
+        raise SLRError(f"sql: {exc}") from None
+    finally:
+        conn.close()

@@ -1,0 +1,180 @@
+"""Storing events: checked, encoded, batched into their tables in one transaction per add.
+
+Every add first records the store clock's "now" in ``slr_clock`` (the buffer triggers read
+it), then inserts the valid events with ``executemany`` per run of one type; invalid events
+are skipped and reported (or, with ``atomic=True``, abort the whole add).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Iterable
+
+from ..encoding import Unencodable, encode
+from ..errors import EventRejected
+from .checks import BadEvent, check_times, format_event, rejection_reason
+from .connection import Database
+from .tables import EventTables, EventType
+
+__all__ = ["Event", "EventWriter"]
+
+Event = tuple  # (name: str, args: tuple[term, ...], start: float, end: float)
+
+_INF = math.inf
+_NEG_INF = -math.inf
+_INSERT_CHUNK = 20_000  # rows per executemany: bounds memory on huge batches
+
+
+class EventWriter:
+    """Adds events to the tables of one database.
+
+    >>> from slr_sql.store import EventStore
+    >>> EventStore(None).add_events([("seg", ("cup1", 1), 2.0, 2.0)])
+    []
+    """
+
+    def __init__(self, db: Database, tables: EventTables):
+        self.db = db
+        self.tables = tables
+
+    def add_events(self, events: Iterable[Event], atomic: bool = False) -> list[EventRejected]:
+        """Store events ``(name, args, start, end)`` in one transaction.
+
+        Invalid events (non-ground or NaN arguments, non-finite times, start > end, wrong arity
+        for a declared type) are skipped and returned as :class:`EventRejected` errors (with
+        ``.index`` and ``.event``); the others are stored. With ``atomic=True`` the first
+        invalid event is raised and nothing is stored. All events of one call share one
+        arrival time, taken from the clock; their order is their arrival order.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None)
+        >>> [str(e) for e in s.add_events([("p", (1,), 1.0, 1.0), ("p", (2,), 3.0, 2.0)])]
+        ['p(2)^[3.0,2.0]: start time 3.0 is after end time 2.0']
+        """
+        errors: list[EventRejected] = []
+        if type(events) in (list, tuple) and not events:
+            return errors
+        enc = encode
+        with self.db.transaction():
+            arrival = float(self.db.clock.now())
+            self.record_now(arrival)  # buffers (issue 4): "now" for the buffer triggers
+            executemany = self.db.conn.executemany
+            types = self.tables.types
+            rows: list = []
+            append = rows.append
+            current_name: Any = None
+            current_arity = -1
+            current_type: EventType | None = None
+            for index, event in enumerate(events):
+                try:
+                    try:
+                        name, args, start, end = event
+                        arity = len(args)
+                    except (TypeError, ValueError):
+                        raise BadEvent(f"event #{index} is not a (name, args, start, end) "
+                                       f"tuple: {event!r}") from None
+                    if not (type(start) is float and type(end) is float
+                            and _NEG_INF < start <= end < _INF):
+                        start, end = check_times(start, end)
+                    if arity == 1:
+                        row = (enc(args[0]), start, end, arrival)
+                    elif arity == 2:
+                        row = (enc(args[0]), enc(args[1]), start, end, arrival)
+                    else:
+                        row = (*map(enc, args), start, end, arrival)
+                    if arity != current_arity or name != current_name:
+                        if rows:
+                            executemany(current_type.insert_sql, rows)
+                            rows = []
+                            append = rows.append
+                        current_type = (isinstance(name, str) and types.get((name, arity))
+                                        or self._type_for_new_event(name, arity))
+                        current_name = name
+                        current_arity = arity
+                    append(row)
+                    if len(rows) >= _INSERT_CHUNK:
+                        executemany(current_type.insert_sql, rows)
+                        rows = []
+                        append = rows.append
+                except (BadEvent, Unencodable) as exc:
+                    error = self._rejection(index, event, exc)
+                    if atomic:
+                        raise error from None
+                    errors.append(error)
+            if rows:
+                executemany(current_type.insert_sql, rows)
+        return errors
+
+    def _type_for_new_event(self, name: Any, arity: int) -> EventType:
+        if not isinstance(name, str):
+            raise BadEvent(f"event name must be an atom, not {name!r}")
+        name = str(name)
+        event_type = self.tables.lookup(name, arity)
+        if event_type is not None:
+            return event_type
+        declared = self.tables.declared_arities.get(name)
+        if declared and arity not in declared:
+            arities = " and ".join(f"{name}/{a}" for a in sorted(declared))
+            raise BadEvent(f"wrong number of arguments: event type {arities} is declared, "
+                           f"{name}/{arity} is not")
+        return self.tables.register(name, arity, declared=False)
+
+    def _rejection(self, index: int, event: Any, exc: Exception) -> EventRejected:
+        try:
+            name, args, start, end = event
+            text = format_event(name, args, start, end)
+            message = f"{text}: {rejection_reason(exc)}"
+        except Exception:
+            message = rejection_reason(exc)
+        error = EventRejected(message)
+        error.index = index
+        error.event = event
+        return error
+
+    def add_event(self, name: str, args: Iterable[Any], start: float, end: float) -> None:
+        """Store one event; raises :class:`EventRejected` if it is invalid.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_event("tick", (), 1, 1); s.count("tick", 0)
+        1
+        """
+        try:
+            args = args if type(args) is tuple else tuple(args)
+        except TypeError:
+            raise EventRejected(f"{name}: event arguments must be a sequence, not "
+                                f"{args!r}") from None
+        self.add_events([(name, args, start, end)], atomic=True)
+
+    # ------------------------------------------------------------------ the store clock
+    # slr_clock (migrations/0002_buffers.sql) holds the "now" the buffer triggers use.
+
+    def record_now(self, now: float) -> None:
+        """Record the store clock's current time in ``slr_clock`` (read by the buffer
+        triggers). Moving it runs the time-driven tBuffer pruning (``slr_buf_<id>_tick``
+        triggers). Called at the start of every add batch and by clock listeners.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.record_now(5.0); s.recorded_now()
+        5.0
+        """
+        now = float(now)
+        if now != now:
+            return
+        sql = "UPDATE slr_clock SET now = ? WHERE id = 1 AND now IS NOT ?"
+        with self.db.lock:
+            if self.db.tx_depth:  # inside add_events: part of its transaction
+                self.db.check_open()
+                self.db.conn.execute(sql, (now, now))
+                return
+        with self.db.transaction():
+            self.db.conn.execute(sql, (now, now))
+
+    def recorded_now(self) -> float:
+        """The "now" buffer triggers currently use (``-inf`` before the first record).
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).recorded_now()
+        -inf
+        """
+        with self.db.lock:
+            self.db.check_open()
+            return self.db.conn.execute("SELECT now FROM slr_clock WHERE id = 1").fetchone()[0]
