@@ -38,9 +38,9 @@ import math
 import weakref
 from typing import Any, Callable
 
-from .encoding import INT64_MAX, INT64_MIN, Unencodable, encode, encode_json
-from .program import build, event_key, split_event_atom
-from .terms import NIL, Atom, String, Struct, Var, deref, list_items
+from ..encoding import INT64_MAX, INT64_MIN, Unencodable, encode, encode_json
+from ..program import build, event_key, split_event_atom
+from ..terms import NIL, Atom, String, Struct, Var, deref, list_items
 
 __all__ = ["Fallback", "Col", "Compiler", "Part", "SITES", "quote_ident"]
 
@@ -218,7 +218,7 @@ class State:
 
 
 def _fmt(t: Any) -> str:
-    from .printer import format_term
+    from ..printer import format_term
 
     try:
         return format_term(t)
@@ -413,7 +413,7 @@ class Compiler:
         if name is not None:
             return name
         if self.literal:
-            from .store import sql_literal
+            from ..store import sql_literal
 
             name = sql_literal(value)
         else:
@@ -810,7 +810,7 @@ class Compiler:
         if not has_col(t):
             if has_var(t):
                 raise Fallback(f"unbound variable in the arithmetic expression {_fmt(_shown(t))}")
-            from .arith import evaluate
+            from ..arith import evaluate
 
             if tt is Atom and t in ("random", "cputime", "realtime"):
                 raise Fallback(f"the non-deterministic function {t}")
@@ -822,7 +822,7 @@ class Compiler:
             except Exception as exc:
                 raise Fallback(f"arithmetic error: {exc}")
         if tt is Struct and len(t.args) in (1, 2):
-            from .arith import BINARY, UNARY
+            from ..arith import BINARY, UNARY
 
             op = str(t.name)
             subs = [self.arith_sql(a) for a in t.args]
@@ -1247,7 +1247,7 @@ class Compiler:
             a_sql, a_v = self.arith_sql(args[0])
             b_sql, b_v = self.arith_sql(args[1])
             if a_sql is None and b_sql is None:
-                from .builtins import DET
+                from ..builtins import DET
 
                 if DET[key](None, (a_v, b_v)):
                     self.solve(nxt, st, emit)
