@@ -33,49 +33,19 @@ Handlers are named ``<kind>_sql``.
 from __future__ import annotations
 
 import itertools
-import re
 import math
-import weakref
 from typing import Any, Callable
 
 from ..encoding import INT64_MAX, INT64_MIN, Unencodable, encode, encode_json
 from ..program import build, event_key, split_event_atom
 from ..terms import NIL, Atom, String, Struct, Var, deref, list_items
+from .guards import NUM_ARG, guards, unused_checks
+from .model import (CYCLIC, NUMERIC, SITES, Col, ColRef, Fallback, Part, Site, State, _fmt,
+                    _has_float, _occurs, _shown, _site_ids, has_col, has_var, quote_ident,
+                    resolve, term_free_vars)
 
 __all__ = ["Fallback", "Col", "Compiler", "Part", "SITES", "quote_ident"]
 
-
-class Fallback(Exception):
-    """The goal cannot be compiled exactly; ``reason`` says why (shown by explain)."""
-
-    def __init__(self, reason: str):
-        super().__init__(reason)
-        self.reason = reason
-
-
-class Col:
-    """A value known only when the statement runs: an SQL expression and what it can be.
-
-    kinds: ``float`` (REAL: times), ``int`` (INTEGER: counts), ``num`` (INTEGER or REAL:
-    arithmetic), ``text`` (encoded JSON text: findall lists), ``any`` (a stored value).
-
-    ``src``: for an element taken out of a stored list or compound, ``(json, path)``: the SQL
-    of the JSON text it sits in and the SQL of its JSON path (so a later pattern on it reads
-    the element's parts from the same text instead of re-parsing its encoding).
-    """
-
-    __slots__ = ("sql", "kind", "src")
-
-    def __init__(self, sql: str, kind: str = "any", src: tuple | None = None):
-        self.sql = sql
-        self.kind = kind
-        self.src = src
-
-    def __repr__(self) -> str:
-        return f"Col({self.sql!r}, {self.kind!r})"
-
-
-NUMERIC = frozenset(("float", "int", "num"))
 
 # det builtins that only test (never bind): free variables passed to them stay free
 NO_BIND = frozenset([
@@ -84,12 +54,18 @@ NO_BIND = frozenset([
     ("atomic", 1), ("compound", 1), ("callable", 1), ("is_list", 1), ("string", 1),
     ("ground", 1),
 ])
+
+
 # det builtins with effects outside the answer: never called from SQL
 EFFECTS = frozenset([
     ("write", 1), ("print", 1), ("writeq", 1), ("write_canonical", 1), ("writeln", 1),
     ("nl", 0), ("tab", 1), ("format", 1), ("format", 2), ("format", 3), ("halt", 0),
 ])
+
+
 COMPARISONS = {"<": "<", ">": ">", "=<": "<=", ">=": ">=", "=:=": "=", "=\\=": "<>"}
+
+
 CONTROL_FALLBACK = {
     ("!", 0): "cut (!)",
     ("*->", 2): "soft-cut (*->)",
@@ -99,277 +75,6 @@ CONTROL_FALLBACK = {
     ("bagof", 3): "bagof/3 (free-variable grouping)",
     ("setof", 3): "setof/3 (free-variable grouping)",
 }
-
-
-def quote_ident(name: str) -> str:
-    return '"' + name.replace('"', '""') + '"'
-
-
-class Site:
-    """One call of a det builtin or a ``kb.define`` predicate from SQL (``slr_det``)."""
-
-    __slots__ = ("fn", "python", "args", "cols", "outs", "engine", "last", "__weakref__")
-
-    def __init__(self, fn, python, args, cols, outs, engine):
-        self.fn = fn
-        self.python = python
-        self.args = args      # argument terms with ColRef(i) for the SQL inputs
-        self.cols = cols      # number of SQL inputs
-        self.outs = outs      # free variables whose values are returned
-        self.engine = engine
-        self.last = None      # (inputs, result) memo: one call serves all its outputs
-
-
-SITES: "weakref.WeakValueDictionary[int, Site]" = weakref.WeakValueDictionary()
-_site_ids = itertools.count(1)
-
-
-class ColRef:
-    """Position ``i`` of a row (answer recipes) or of a function's inputs (sites)."""
-
-    __slots__ = ("i",)
-
-    def __init__(self, i: int):
-        self.i = i
-
-
-class Part:
-    """One branch: a flat SELECT."""
-
-    __slots__ = ("froms", "conds", "keys", "proj", "extra")
-
-    def __init__(self, froms, conds, keys, proj=None, extra=None):
-        self.froms = froms    # [(table sql, alias, id column)]
-        self.conds = conds    # [sql]
-        self.keys = keys      # [sql]
-        self.proj = proj      # projected sql expressions
-        self.extra = extra    # whatever the emitter attached (answer recipes)
-
-    def from_sql(self) -> str:
-        # CROSS JOIN: SQLite keeps the goal order as the join order (the binding order the
-        # modes were computed for; each later table is reached through its indexes)
-        return " CROSS JOIN ".join(f"{t} AS {a}" for t, a, _ in self.froms)
-
-    def select(self, cols: list[str]) -> str:
-        sql = "SELECT " + ", ".join(cols)
-        if self.froms:
-            sql += " FROM " + self.from_sql()
-        if self.conds:
-            sql += " WHERE " + " AND ".join(self.conds)
-        return sql
-
-
-class _Conds(list):
-    """The WHERE conditions of a branch; one that calls an slr_ function (which may raise
-    an error Prolog would raise) is also recorded with its prefix (see Compiler.guards)."""
-
-    __slots__ = ("st",)
-
-    def append(self, cond: str) -> None:
-        if "slr_" in cond:
-            self.st.raised(cond, len(self), True)
-        list.append(self, cond)
-
-
-class State:
-    __slots__ = ("froms", "conds", "keys", "trail", "checks", "raising", "nested", "branches",
-                 "live", "first")
-
-    def __init__(self):
-        self.froms: list = []
-        self.conds: _Conds = _Conds()
-        self.conds.st = self
-        # (expr, froms prefix, conds prefix, is a condition, inside \+ or ->) of every goal
-        # that may raise, in goal order; never undone (a branch that fails later still
-        # evaluated it)
-        self.raising: list = []
-        self.nested = 0       # > 0 while a prev/next pattern is matched on its subquery alias
-        # (froms, conds, live) of every branch emitted, subquery branches (findall, \+, ...)
-        # included with the tables and conditions of the goals before them
-        self.branches: list = []
-        self.live: list = []  # indexes into raising of the goals on the current path
-        self.first = 0        # > 0 inside a subquery SQLite stops at its first row (\+, ->)
-        self.keys: list = []
-        self.trail: list = []
-        # values that may raise (arithmetic through slr_ functions, findall/aggregate_all
-        # subqueries): SQLite computes a value only where the statement uses it, Prolog
-        # computes it when the goal runs, so an unused one still gets a condition
-        self.checks: list = []
-
-    def raised(self, expr: str, nc: int, is_cond: bool) -> None:
-        if not self.nested:
-            self.live.append(len(self.raising))
-            self.raising.append((expr, list(self.froms), list(self.conds[:nc]), is_cond,
-                                 self.first > 0))
-
-    def mark(self) -> tuple:
-        return (len(self.froms), len(self.conds), len(self.keys), len(self.trail),
-                len(self.checks), len(self.live))
-
-    def restore(self, m: tuple) -> None:
-        del self.froms[m[0]:]
-        del self.conds[m[1]:]
-        del self.keys[m[2]:]
-        del self.checks[m[4]:]
-        del self.live[m[5]:]
-        trail = self.trail
-        while len(trail) > m[3]:
-            trail.pop().ref = None
-
-
-def _fmt(t: Any) -> str:
-    from ..printer import format_term
-
-    try:
-        return format_term(t)
-    except Exception:
-        return repr(t)
-
-
-def resolve(t: Any) -> Any:
-    """The term with bound variables replaced by their values (Cols and free Vars kept)."""
-    t = deref(t)
-    if type(t) is Struct:
-        if t.name == "." and len(t.args) == 2:
-            items, tail = list_items(t)
-            out = resolve(tail)
-            for x in reversed(items):
-                out = Struct(".", (resolve(x), out))
-            return out
-        return Struct(t.name, tuple(resolve(a) for a in t.args))
-    return t
-
-
-# The interpreter unifies without occurs check (as Prolog does) and can build X = f(X);
-# the compiler's walks over bound terms would not terminate on one, so it leaves such goals
-# to the interpreter.
-CYCLIC = "a unification can build a cyclic term (no occurs check)"
-
-
-def _occurs(v: Var, t: Any) -> bool:
-    stack = [t]
-    while stack:
-        x = deref(stack.pop())
-        if x is v:
-            return True
-        if type(x) is Struct:
-            stack.extend(x.args)
-    return False
-
-
-# slr_num(:aN): a value bound from Python (kb.query args) used as a number
-NUM_ARG = re.compile(r"slr_num\(:(a\d+)\)")
-
-
-def guards(raising: list, branches: list) -> list[str]:
-    """Statements that evaluate, over exactly the rows Prolog reaches it with, every goal
-    that may raise and that a branch's later goals could filter first.
-
-    Prolog runs the goals of a branch left to right, so ``X is A / 0`` raises on every row
-    that reached it, even when a later ``A > 100`` would have rejected the row; SQLite
-    applies conditions in its own order (an index on ``arg1`` serves ``A > 100`` first) and
-    computes a value only where it is used. A guard ``SELECT count(expr) FROM <the tables
-    before the goal> WHERE <the conditions before it>`` runs before the statement: an error
-    there hands the query to the interpreter, which raises it. A goal that is the last of
-    every branch it is in needs none (the statement evaluates it on every row that reaches
-    it); one in a branch that failed at compile time (``X is A / 0, fail``) always does.
-    ``branches``: (froms, conds) of every branch, before the forced checks; the goals of a
-    findall or ``\\+`` subquery are checked over the rows of the goals before it joined with
-    the subquery's own (for ``\\+``, which stops at its first solution, a superset: an
-    error there only costs the interpreter's run)."""
-    out = []
-    for i, (expr, froms, conds, is_cond, first) in enumerate(raising):
-        if expr.count("slr_") == len(NUM_ARG.findall(expr)):
-            # only slr_num(:aN), a number bound from Python: it raises for every row or for
-            # none, and SqlPlan.run leaves a non-number argument to the interpreter
-            continue
-        nf, nc = len(froms), len(conds)
-        after = nc + (1 if is_cond else 0)
-        needed = True
-        if first:
-            # in \+ or an if-then-else condition SQLite stops at the first row it finds, in
-            # its own order, not Prolog's: guard every row (a superset of Prolog's)
-            branches_in = []
-        else:
-            branches_in = [(f, c) for f, c, live in branches if i in live]
-        for pfroms, pconds in branches_in:
-            if _filtered_first(pfroms, nf, pconds[after:], _call_key(expr)):
-                needed = True
-                break
-            needed = False
-        if needed:
-            sql = Part(froms, conds, []).select([f"count({expr})"])
-            if sql not in out:
-                out.append(sql)
-    return out
-
-
-_DET_CHECK = re.compile(r"slr_det\((\d+), -1")
-
-
-def _call_key(expr: str) -> str:
-    """The text whose presence in a later condition means evaluating it evaluates ``expr``
-    first (SQLite computes a function's arguments before the call): a builtin's call site,
-    or the arithmetic of an ``is``."""
-    m = _DET_CHECK.match(expr)
-    if m:
-        return f"slr_det({m.group(1)}, "
-    if expr.startswith("(") and expr.endswith(") IS NOT NULL"):
-        return expr[1:-len(") IS NOT NULL")]
-    return expr
-
-
-def _filtered_first(froms: list, nf: int, later: list, key: str) -> bool:
-    """Can the goals after a raising one reject a row before SQLite evaluates it?
-
-    Yes when any table or condition follows it, unless that condition computes the raising
-    goal itself (``key``: SQLite computes a function's arguments before the call). A later
-    table's condition is not safe either: the tables join in goal order (CROSS JOIN), but
-    SQLite carries constraints over join equalities (``S = T, S > 3`` also filters ``T``
-    in the earlier table's loop), and a condition that names no table may be tested in
-    any loop."""
-    return len(froms) > nf or any(key not in c for c in later)
-
-
-def unused_checks(checks: list, used: list) -> list[str]:
-    """Conditions forcing the evaluation of the ``checks`` no used SQL text contains."""
-    return [f"({c}) IS NOT NULL" for c in checks if not any(c in u for u in used)]
-
-
-def _contains(t: Any, kind: type) -> bool:
-    stack = [t]
-    while stack:
-        x = deref(stack.pop())
-        if type(x) is kind:
-            return True
-        if type(x) is Struct:
-            stack.extend(x.args)
-    return False
-
-
-def has_var(t: Any) -> bool:
-    return _contains(t, Var)
-
-
-def _has_float(t: Any) -> bool:
-    return _contains(t, float)
-
-
-def has_col(t: Any) -> bool:
-    return _contains(t, Col)
-
-
-def term_free_vars(t: Any) -> list:
-    out, seen, stack = [], set(), [t]
-    while stack:
-        x = deref(stack.pop())
-        if type(x) is Var:
-            if id(x) not in seen:
-                seen.add(id(x))
-                out.append(x)
-        elif type(x) is Struct:
-            stack.extend(reversed(x.args))
-    return out
 
 
 class Compiler:
@@ -1432,16 +1137,6 @@ def _atoms(t):
             stack.extend(x.args)
         else:
             yield x
-
-
-def _shown(t: Any) -> Any:
-    """A term for messages: Cols shown as '$value'."""
-    t = deref(t)
-    if type(t) is Col:
-        return Atom("<stored value>")
-    if type(t) is Struct:
-        return Struct(t.name, tuple(_shown(a) for a in t.args))
-    return t
 
 
 def _mode_text(g: Any) -> str:
