@@ -8,6 +8,7 @@ Mixed into :class:`slr_sql.sqlcompile.Compiler` (uses ``self.solve``, ``self.uni
 from __future__ import annotations
 
 import math
+import operator
 from typing import Any
 
 from ..terms import Atom, Struct, Var, deref
@@ -32,6 +33,10 @@ EFFECTS = frozenset([
 
 
 COMPARISONS = {"<": "<", ">": ">", "=<": "<=", ">=": ">=", "=:=": "=", "=\\=": "<>"}
+# two constant operands: decided at compile time by Python's comparison of the numbers, as
+# the interpreter's builtins do (without importing them: the engine is not below the compiler)
+CONSTANT_COMPARISONS = {"<": operator.lt, ">": operator.gt, "=<": operator.le,
+                        ">=": operator.ge, "=:=": operator.eq, "=\\=": operator.ne}
 
 
 class BuiltinGoals:
@@ -121,9 +126,7 @@ class BuiltinGoals:
             a_sql, a_v = self.arith_sql(args[0])
             b_sql, b_v = self.arith_sql(args[1])
             if a_sql is None and b_sql is None:
-                from ..builtins import DET
-
-                if DET[key](None, (a_v, b_v)):
+                if CONSTANT_COMPARISONS[name](a_v, b_v):
                     self.solve(nxt, st, emit)
                 return
             xa = a_sql if a_sql is not None else self.num_sql(a_v)
