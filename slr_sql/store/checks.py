@@ -66,7 +66,7 @@ def rejection_reason(exc: Exception) -> str:
 
 def _format_term(term: Any) -> str:
     try:
-        from ..printer import format_term  # the project's printer, when available
+        from ..terms import format_term  # the project's printer, when available
         return format_term(term)
     except Exception:
         return _simple_format(term)
