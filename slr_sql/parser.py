@@ -5,7 +5,7 @@ Two stages, both run inside one LALR parse:
 1. ``grammar/slr.lark`` recognises tokens and bracket structure and hands each bracketed
    region to this module as a flat *sequence* of operands and names.
 2. :class:`_Resolver` turns a sequence into a term with Prolog's operator-precedence rules
-   and the operator table of :mod:`slr_sql.printer` (SWI-Prolog 9 defaults).  It decides
+   and the operator table of :mod:`slr_sql.terms` (SWI-Prolog 9 defaults).  It decides
    whether a name is a prefix operator, an infix operator or an atom, and whether ``-``
    before a number makes a negative literal (only when written directly against it:
    ``-1`` is an integer, ``- 1`` the compound ``-(1)``, as SWI-Prolog 9 reads them).
