@@ -523,6 +523,49 @@ def shell(db: str) -> None:
 
 
 # ---------------------------------------------------------------------------------------------
+# plot (issue 13: timelines; the drawing is in slr_sql/plot.py)
+# ---------------------------------------------------------------------------------------------
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.argument("types", nargs=-1)
+@click.option("--from", "start", type=float, default=None, help="Start of the time window.")
+@click.option("--to", "end", type=float, default=None, help="End of the time window.")
+@click.option("--value", "values", multiple=True, metavar="TYPE:ARG",
+              help="Draw a numeric argument as a line, e.g. speed:1, seg:2[0], tf:3.pose[0][0].")
+@click.option("--complex", "complex_types", multiple=True, metavar="TYPE",
+              help="Mark TYPE as a complex event type (default: the store's own list, if any).")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="The PNG file to write.")
+@click.option("--size", default=None, metavar="WxH", help="Image size in pixels (default 1200 wide).")
+@click.option("--dpi", type=int, default=100, show_default=True, help="Scales text and lines.")
+@click.option("--title", default=None, help="Title above the rows (default: the DB's file name).")
+def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None,
+         values: tuple[str, ...], complex_types: tuple[str, ...], output: str,
+         size: str | None, dpi: int, title: str | None) -> None:
+    """Draw the event histories of DB as a timeline PNG: one row per event TYPE (default: all).
+
+    Intervals are bars, points ticks, --value arguments lines; histories too long for the
+    picture are aggregated per pixel column.
+    """
+    from .plot import parse_size, save_timeline, timeline
+
+    if not os.path.exists(db):
+        raise slr_sql.SLRError(f"no such store: {db}")
+    dimensions = parse_size(size) if size is not None else None
+    with _open(db) as kb:
+        figure = timeline(kb, list(types) or None, start=start, end=end, values=values,
+                          complex_types=complex_types or None, size=dimensions, dpi=dpi,
+                          title=os.path.basename(db) if title is None else title)
+    save_timeline(figure, output)
+    drawn = figure.slr_timeline
+    click.echo(f"wrote {output} ({drawn.width}x{drawn.height} px, {len(drawn.rows)} "
+               f"row{'s' if len(drawn.rows) != 1 else ''}"
+               + (f", {len(drawn.series)} value line{'s' if len(drawn.series) != 1 else ''}"
+                  if drawn.series else "") + ")")
+
+
+# ---------------------------------------------------------------------------------------------
 # stats (issue 4: event-history management)
 # ---------------------------------------------------------------------------------------------
 

@@ -650,6 +650,19 @@ class KnowledgeBase:
         """
         return self.store.sql(query, params)
 
+    # -- plots ----------------------------------------------------------------------------
+    def plot(self, types: Iterable[str] | str | None = None, **options: Any) -> Any:
+        """A timeline of the event histories as a matplotlib Figure: one row per event type,
+        intervals as bars, points as ticks, ``values=["speed:1"]`` as lines, complex events
+        marked. Options: see :func:`slr_sql.plot.timeline` and docs/plots.md.
+
+        >>> kb = open(); kb.add("move(r1)^[2, 8]")
+        >>> kb.plot(start=0, end=10, size=(600, 120)).get_size_inches().tolist()
+        [6.0, 1.2]
+        """
+        from .plot import timeline  # deferred: matplotlib is the optional extra slr_sql[plot]
+        return timeline(self, types, **options)
+
 
 def open(path: str | Path | None = None, clock: Clock | None = None, **options: Any) -> KnowledgeBase:
     """Open (or create) a knowledge base; ``path=None`` gives an in-memory one.
