@@ -58,6 +58,7 @@ COMPLEX_MARK = "\u25c6 "     # ◆ before the label of a complex event type
 FONT_PT = 9.0
 BAR_HALF = 0.32              # half the height of an interval bar, in row units
 TICK_HALF = 0.42             # half the height of a point tick
+MAX_LANES = 6                # overlapping intervals of a row are stacked in up to this many lanes
 
 
 # ---------------------------------------------------------------------------------------------
@@ -521,17 +522,46 @@ def _density_alpha(counts: Any) -> Any:
     return np.where(counts > 0, 0.3 + 0.7 * scale, 0.0)
 
 
+def _lanes(intervals: list[tuple[float, float]]) -> list[int]:
+    """A lane for each interval (in the order given) so that overlapping intervals of one row
+    sit one above the other: the first lane free at its start, at most MAX_LANES lanes (the
+    rest share the last lane and show through it)."""
+    order = sorted(range(len(intervals)), key=lambda i: intervals[i])
+    lane_ends: list[float] = []
+    lanes = [0] * len(intervals)
+    for i in order:
+        start, end = intervals[i]
+        lane = next((k for k, free_at in enumerate(lane_ends) if free_at <= start), None)
+        if lane is None:
+            if len(lane_ends) < MAX_LANES:
+                lane_ends.append(end)
+                lane = len(lane_ends) - 1
+            else:
+                lane = MAX_LANES - 1
+        lane_ends[lane] = max(lane_ends[lane], end)
+        lanes[i] = lane
+    return lanes
+
+
 def _draw_row(ax: Any, y: int, row: TypeRow, timeline: Timeline) -> None:
     import numpy as np
+    from matplotlib.collections import PolyCollection
     from matplotlib.colors import to_rgba
 
     bar_color = COMPLEX_COLOR if row.complex else INTERVAL_COLOR
     tick_color = COMPLEX_COLOR if row.complex else POINT_COLOR
     if row.mode == "exact":
         if row.intervals:
-            ax.broken_barh([(s, e - s) for s, e in row.intervals], (y - BAR_HALF, 2 * BAR_HALF),
-                           facecolors=bar_color, edgecolors=bar_color, linewidth=0.6,
-                           alpha=0.75, hatch="///" if row.complex else None)
+            lanes = _lanes(row.intervals)
+            n_lanes = max(lanes) + 1
+            height = 2 * BAR_HALF / n_lanes
+            bottoms = [y - BAR_HALF + lane * height for lane in lanes]
+            # one PolyCollection per row whatever the number of intervals: one artist
+            ax.add_collection(PolyCollection(
+                [[(s, b), (s, b + height), (e, b + height), (e, b)]
+                 for (s, e), b in zip(row.intervals, bottoms)],
+                facecolors=bar_color, edgecolors="white", linewidths=0.5, alpha=0.8,
+                hatch="///" if row.complex else None))
         if row.points:
             ax.vlines(row.points, y - TICK_HALF, y + TICK_HALF, colors=tick_color,
                       linewidth=1.4 if len(row.points) < 200 else 0.8)
@@ -613,16 +643,26 @@ def draw_timeline(timeline: Timeline) -> Any:
         upper.tick_params(axis="x", labelbottom=False)
     axes[-1].set_xlabel("time (s)", fontsize=FONT_PT)
 
-    handles = [Patch(facecolor=INTERVAL_COLOR, alpha=0.75, label="interval"),
-               Line2D([], [], color=POINT_COLOR, linewidth=1.4, label="point")]
-    if any(row.complex for row in timeline.rows) or any(s.complex for s in timeline.series):
-        handles.append(Patch(facecolor=COMPLEX_COLOR, alpha=0.75, hatch="///",
+    # The legend names what the picture shows, and nothing else.
+    plain = [row for row in timeline.rows if not row.complex]
+    handles = []
+    if any(row.intervals or (row.coverage is not None and row.coverage.any()) for row in plain):
+        handles.append(Patch(facecolor=INTERVAL_COLOR, alpha=0.8, label="interval"))
+    if any(row.points or (row.point_counts is not None and row.point_counts.any())
+           for row in plain):
+        handles.append(Line2D([], [], color=POINT_COLOR, linewidth=1.4, label="point"))
+    if any(row.complex and row.count for row in timeline.rows) or any(
+            s.complex and s.count for s in timeline.series):
+        handles.append(Patch(facecolor=COMPLEX_COLOR, alpha=0.8, hatch="///",
                              label=COMPLEX_MARK + "complex event"))
     if any(row.mode == "binned" for row in timeline.rows) or any(
             s.mode == "binned" for s in timeline.series):
-        handles.append(Patch(facecolor="#9ecae1", label="binned: darker = more events per pixel"))
-    ax.legend(handles=handles, loc="lower right", bbox_to_anchor=(1.0, 1.0), ncol=len(handles),
-              fontsize=FONT_PT * 0.85, frameon=False, borderaxespad=0.2, handlelength=1.4)
+        handles.append(Patch(facecolor="#bbbbbb",
+                             label="binned: darker = more events per pixel column"))
+    if handles:
+        ax.legend(handles=handles, loc="lower right", bbox_to_anchor=(1.0, 1.0),
+                  ncol=len(handles), fontsize=FONT_PT * 0.85, frameon=False, borderaxespad=0.2,
+                  handlelength=1.4)
     if timeline.title:
         fig.suptitle(timeline.title, x=timeline.left, ha="left", fontsize=FONT_PT * 1.15,
                      y=1 - 0.6 * FONT_PT * timeline.dpi / 72 / timeline.height)
