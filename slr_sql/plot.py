@@ -380,7 +380,8 @@ def _collect_series(source: Any, spec: ValueSpec, ref: EventTypeRef, is_complex:
     # A JSON path on a value that is not JSON (an atom, a number) is no value, not an error.
     if spec.path:
         expr = f"CASE WHEN json_valid({column}) THEN {expr} END"
-    inner = f"SELECT t_start, t_end, seq, {expr} AS v FROM {table} WHERE t_end >= ? AND t_end <= ?"
+    where = "WHERE t_end >= ? AND t_end <= ?"
+    inner = f"SELECT t_start, t_end, seq, {expr} AS v FROM {table} {where}"
     inner_params = [*params, lo, hi]
     count = int(_rows(source, f"SELECT count(*) FROM {table} WHERE t_end >= ? AND t_end <= ?",
                       (lo, hi))[0][0])
@@ -396,7 +397,8 @@ def _collect_series(source: Any, spec: ValueSpec, ref: EventTypeRef, is_complex:
         series = ValueSeries(spec, ref, is_complex, 0, "binned")
         for b, low, high, mean, n in _rows(
                 source, f"SELECT CAST((t_end - ?) / ? AS INTEGER) AS b, min(v), max(v), avg(v), "
-                        f"count(*) FROM ({inner}) WHERE {_NUMERIC} GROUP BY 1 ORDER BY 1",
+                        f"count(*) FROM (SELECT t_end, {expr} AS v FROM {table} {where}) "
+                        f"WHERE {_NUMERIC} GROUP BY 1 ORDER BY 1",
                 [lo, bin_width, *inner_params]):
             b = min(int(b), bins - 1)
             series.times.append(lo + (b + 0.5) * bin_width)
