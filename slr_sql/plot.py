@@ -5,7 +5,8 @@ One row per event type: intervals as bars, points (start = end) as ticks; numeri
 types an event-rule engine derives) in their own color, with a diamond before the row label.
 
 A history too long for the picture is aggregated in SQL before anything is drawn: when a type
-has more than ``exact_limit`` events in the window, its events are counted per pixel column
+has more events in the window than the plot has pixel columns (or than ``exact_limit``, when
+given), its events are counted per pixel column
 (``GROUP BY CAST((t - t0) / bin AS INTEGER)``) and the row shows how many events cover each
 column (darker = more); a value line becomes the mean per column inside a min/max envelope.
 The figure then holds a few artists per row whatever the number of events, so a million
@@ -39,13 +40,12 @@ from .store import quote_identifier
 __all__ = [
     "timeline", "collect_timeline", "draw_timeline", "save_timeline", "parse_value_spec",
     "parse_size", "Timeline", "TypeRow", "ValueSeries", "EventTypeRef", "ValueSpec",
-    "INSTALL_HINT", "DEFAULT_WIDTH", "DEFAULT_DPI", "EXACT_LIMIT",
+    "INSTALL_HINT", "DEFAULT_WIDTH", "DEFAULT_DPI",
 ]
 
 INSTALL_HINT = "plots need matplotlib: pip install 'slr_sql[plot]'"
 DEFAULT_WIDTH = 1200         # pixels
 DEFAULT_DPI = 100
-EXACT_LIMIT = 5000           # events of one row (or value series) drawn one by one; more are binned
 MAX_PIXELS = 20000           # per side: beyond this a PNG is a mistake, not a picture
 
 # Colors: intervals blue, points near-black, complex events red, values purple.
@@ -446,7 +446,7 @@ def collect_timeline(source: Any, types: Iterable[str] | str | None = None, *,
                      values: Iterable[str] | str = (),
                      complex_types: Iterable[str] | None = None,
                      size: tuple[int, int | None] | None = None, dpi: int = DEFAULT_DPI,
-                     title: str | None = None, exact_limit: int = EXACT_LIMIT) -> Timeline:
+                     title: str | None = None, exact_limit: int | None = None) -> Timeline:
     """Read what :func:`timeline` draws, without drawing (no matplotlib needed unless a row is
     binned, which uses numpy). Arguments as for :func:`timeline`.
 
@@ -467,7 +467,8 @@ def collect_timeline(source: Any, types: Iterable[str] | str | None = None, *,
         height = _check_pixels("height", height)
     if isinstance(dpi, bool) or not isinstance(dpi, int) or not 10 <= dpi <= 1000:
         raise SLRError(f"dpi must be a whole number between 10 and 1000, not {dpi!r}")
-    if isinstance(exact_limit, bool) or not isinstance(exact_limit, int) or exact_limit < 0:
+    if exact_limit is not None and (isinstance(exact_limit, bool)
+                                    or not isinstance(exact_limit, int) or exact_limit < 0):
         raise SLRError(f"exact_limit must be a whole number >= 0, not {exact_limit!r}")
     lo, hi = _check_time("from", start), _check_time("to", end)
     if lo is not None and hi is not None and not lo < hi:
@@ -484,6 +485,8 @@ def collect_timeline(source: Any, types: Iterable[str] | str | None = None, *,
     left, right = _horizontal(width, dpi, [COMPLEX_MARK + t.label for t in candidates]
                               + [s.text for s in specs])
     bins = max(1, int(round(width * (right - left))))  # one bin per pixel column of the axes
+    if exact_limit is None:  # aggregate what does not fit the pixels
+        exact_limit = bins
     rows = []
     for ref in candidates:
         row = _collect_row(source, ref, _type_matches(ref, complex_names), lo, hi, bins,
@@ -676,7 +679,7 @@ def timeline(source: Any, types: Iterable[str] | str | None = None, *,
              start: float | None = None, end: float | None = None,
              values: Iterable[str] | str = (), complex_types: Iterable[str] | None = None,
              size: tuple[int, int | None] | None = None, dpi: int = DEFAULT_DPI,
-             title: str | None = None, exact_limit: int = EXACT_LIMIT) -> Any:
+             title: str | None = None, exact_limit: int | None = None) -> Any:
     """A timeline of the event histories in ``source`` as a matplotlib Figure.
 
     ``source`` is anything with ``sql(query, params)`` (a knowledge base or an EventStore).
@@ -687,7 +690,8 @@ def timeline(source: Any, types: Iterable[str] | str | None = None, *,
     ``complex_types``: names of complex event types, marked in red with a diamond; None asks
     ``source.complex_event_types()`` when the source has it. ``size``: (width, height) in
     pixels, height None to fit the rows; ``dpi`` scales the text and lines. Types or value
-    series with more than ``exact_limit`` events in the window are aggregated per pixel column.
+    series with more events in the window than ``exact_limit`` (default: the number of pixel
+    columns of the plot area) are aggregated per pixel column.
 
     >>> import slr_sql
     >>> kb = slr_sql.open(); kb.add("speed(0.5)^1"); kb.add("speed(0.7)^2")
