@@ -300,25 +300,16 @@ def _window(source: Any, types: list[EventTypeRef], start: float | None,
     return float(lo), float(hi)
 
 
-def _count(source: Any, ref: EventTypeRef, lo: float, hi: float) -> int:
-    table = quote_identifier(ref.table)
-    return int(_rows(source, f"SELECT count(*) FROM {table} WHERE t_end >= ? AND t_start <= ?",
-                     (lo, hi))[0][0])
-
-
-def _bin_index(value: float, lo: float, bin_width: float, bins: int) -> int:
-    return min(max(int((value - lo) / bin_width), 0), bins - 1)
-
-
 def _collect_row(source: Any, ref: EventTypeRef, is_complex: bool, lo: float, hi: float,
                  bins: int, exact_limit: int) -> TypeRow:
     table = quote_identifier(ref.table)
-    count = _count(source, ref, lo, hi)
-    if count <= exact_limit:
-        row = TypeRow(ref, is_complex, count, "exact")
-        for s, e in _rows(source, f"SELECT t_start, t_end FROM {table} "
-                                  "WHERE t_end >= ? AND t_start <= ? ORDER BY t_end, t_start, seq",
-                          (lo, hi)):
+    # Read the events themselves, up to one more than fits: that answers "exact or binned?"
+    # without a count(*) over a long history.
+    events = _rows(source, f"SELECT t_start, t_end FROM {table} WHERE t_end >= ? AND t_start <= ? "
+                           "ORDER BY t_end, t_start, seq LIMIT ?", (lo, hi, exact_limit + 1))
+    if len(events) <= exact_limit:
+        row = TypeRow(ref, is_complex, len(events), "exact")
+        for s, e in events:
             if s == e:
                 row.points.append(float(s))
             else:
@@ -348,7 +339,9 @@ def _collect_row(source: Any, ref: EventTypeRef, is_complex: bool, lo: float, hi
                         f"FROM {table} WHERE t_end >= ? AND t_start <= ? AND t_start < t_end "
                         "GROUP BY 1", (hi, lo, bin_width, lo, hi)):
             ends[min(int(b), bins - 1) + 1] += n
-    coverage = np.cumsum(starts)[:bins] - np.cumsum(ends)[:bins]
+    # (two statements: an interval added in between could end without having started)
+    coverage = np.maximum(np.cumsum(starts)[:bins] - np.cumsum(ends)[:bins], 0)
+    count = int(starts.sum() + point_counts.sum())
     return TypeRow(ref, is_complex, count, "binned", coverage=coverage, point_counts=point_counts)
 
 
@@ -383,15 +376,12 @@ def _collect_series(source: Any, spec: ValueSpec, ref: EventTypeRef, is_complex:
     where = "WHERE t_end >= ? AND t_end <= ?"
     inner = f"SELECT t_start, t_end, seq, {expr} AS v FROM {table} {where}"
     inner_params = [*params, lo, hi]
-    count = int(_rows(source, f"SELECT count(*) FROM {table} WHERE t_end >= ? AND t_end <= ?",
-                      (lo, hi))[0][0])
-    if count <= exact_limit:
-        series = ValueSeries(spec, ref, is_complex, 0, "exact")
-        for t, v in _rows(source, f"SELECT t_end, v FROM ({inner}) WHERE {_NUMERIC} "
-                                  "ORDER BY t_end, t_start, seq", inner_params):
-            series.times.append(float(t))
-            series.values.append(float(v))
-        series.count = len(series.times)
+    samples = _rows(source, f"SELECT t_end, v FROM ({inner}) WHERE {_NUMERIC} "
+                            "ORDER BY t_end, t_start, seq LIMIT ?", [*inner_params, exact_limit + 1])
+    if len(samples) <= exact_limit:
+        series = ValueSeries(spec, ref, is_complex, len(samples), "exact")
+        series.times = [float(t) for t, _ in samples]
+        series.values = [float(v) for _, v in samples]
     else:
         bin_width = (hi - lo) / bins
         series = ValueSeries(spec, ref, is_complex, 0, "binned")
@@ -406,7 +396,7 @@ def _collect_series(source: Any, spec: ValueSpec, ref: EventTypeRef, is_complex:
             series.lows.append(float(low))
             series.highs.append(float(high))
             series.count += int(n)
-    if count and not series.count:
+    if not series.count and _rows(source, f"SELECT 1 FROM {table} {where} LIMIT 1", (lo, hi)):
         sample = _rows(source, f"SELECT v FROM ({inner}) WHERE v IS NOT NULL LIMIT 1",
                        inner_params)
         seen = f" (e.g. {sample[0][0]})" if sample else ""
