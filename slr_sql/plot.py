@@ -297,6 +297,8 @@ def _window(source: Any, types: list[EventTypeRef], start: float | None,
         hi = data_hi + margin if hi is None else hi
     if not lo < hi:
         raise SLRError(f"empty time window: from {lo:g} to {hi:g} (from must be before to)")
+    if not math.isfinite(hi - lo):
+        raise SLRError(f"the time window from {lo:g} to {hi:g} is too wide to draw")
     return float(lo), float(hi)
 
 

@@ -350,6 +350,7 @@ def test_binned_coverage_matches_a_direct_count(events, window):
     ({"start": 5, "end": 5}, r"empty time window"),
     ({"start": float("nan")}, r"from must be a finite number"),
     ({"end": "soon"}, r"to must be a number"),
+    ({"start": -1e308, "end": 1e308}, r"too wide to draw"),
     ({"size": (5, 100)}, r"width must be a whole number of pixels"),
     ({"dpi": 0}, r"dpi must be"),
 ])
