@@ -318,7 +318,10 @@ def _collect_row(source: Any, ref: EventTypeRef, is_complex: bool, lo: float, hi
                 row.intervals.append((float(s), float(e)))
         return row
 
-    import numpy as np  # comes with matplotlib; only the binned path needs it
+    try:
+        import numpy as np  # comes with matplotlib; only the binned path needs it
+    except ImportError:
+        raise SLRError(INSTALL_HINT) from None
 
     bin_width = (hi - lo) / bins
     starts = np.zeros(bins + 1, dtype=np.int64)
