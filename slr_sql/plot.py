@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from typing import Any, Iterable, Sequence
 
 from .errors import SLRError
-from .store import quote_identifier
+from .store import DatabaseError, quote_identifier
 
 __all__ = [
     "timeline", "collect_timeline", "draw_timeline", "save_timeline", "parse_value_spec",
@@ -220,9 +220,7 @@ def _check_time(what: str, value: Any) -> float | None:
 def _rows(source: Any, query: str, params: Sequence[Any] = ()) -> list[tuple]:
     try:
         return list(source.sql(query, tuple(params))[1])
-    except SLRError:
-        raise
-    except Exception as exc:  # sqlite3 or a remote source's error: say it in words
+    except DatabaseError as exc:  # locked, busy, unreadable file: say it in words
         raise SLRError(f"reading the store for the plot failed: {exc}") from None
 
 
