@@ -363,6 +363,13 @@ def test_bad_options_are_slr_errors(kb, options, message):
         kb.plot(types, **options)
 
 
+def test_a_damaged_store_is_an_slr_error(kb):
+    kb.add("move(r1)^[2, 8]")
+    kb.sql('DROP TABLE "move"')  # the catalog still names the table
+    with pytest.raises(slr_sql.SLRError, match="reading the store for the plot failed: no such table"):
+        kb.plot()
+
+
 def test_a_list_argument_without_a_path_gets_a_hint(kb):
     kb.add_event("seg", ["cup1", [0.4, 0.1, 0.9]], start=1.0, end=1.0)
     with pytest.raises(slr_sql.SLRError, match=r"give a path into it, e.g. seg:2\[0\]"):
