@@ -471,8 +471,9 @@ class RemoteSubscription:
         self.id = id
         self._done = False
         try:
+            # entered as a context manager (what websockets >= 17 asks); closed by close()
             self._ws = ws_connect(url, additional_headers=headers, open_timeout=client.timeout,
-                                  max_size=None)
+                                  max_size=None).__enter__()
             self._ws.send(dumps(request).decode("utf-8"))
         except (OSError, WebSocketException) as exc:
             raise ServiceError(f"cannot subscribe at {url}: {exc}", kind="Unavailable",
