@@ -158,7 +158,7 @@ def test_health_and_openapi_describe_the_routes(server):
         "schema"]["required"] == ["goal"]
 
 
-@settings(max_examples=40)
+@settings(max_examples=25)
 @given(st.recursive(
     st.text(max_size=6).map(Atom) | st.text(max_size=6).map(String)
     | st.integers(-(2 ** 70), 2 ** 70) | st.floats(allow_nan=True, allow_infinity=True),

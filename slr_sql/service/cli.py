@@ -2,9 +2,12 @@
 slr_sql/cli.py). Starlette and uvicorn are imported only when the command runs."""
 from __future__ import annotations
 
+import contextlib
 import ipaddress
+import signal
 import socket
 import sys
+import threading
 from typing import Any
 
 import click
@@ -60,6 +63,29 @@ def _listen(host: str, port: int) -> socket.socket:
                            f"{getattr(last, 'strerror', None) or last}")
 
 
+class _Stop(BaseException):
+    """SIGINT/SIGTERM after uvicorn's graceful shutdown."""
+
+
+@contextlib.contextmanager
+def _stop_on_signals() -> Any:
+    """uvicorn shuts down on SIGINT/SIGTERM, then raises the signal again for the previous
+    handler; this handler turns it into :class:`_Stop` so the store is closed and the
+    process exits with status 0."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum: int, frame: Any) -> None:
+        raise _Stop()
+    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
 def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | None = None,
                *, limits: Any = None, max_connections: int | None = 1000,
                ssl_keyfile: str | None = None, ssl_certfile: str | None = None,
@@ -102,7 +128,10 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
         shown = f"[{bound_host}]" if ":" in bound_host else bound_host
         scheme = "https" if ssl_certfile else "http"
         print(f"slr serve: {db} on {scheme}://{shown}:{bound_port}", flush=True)
-        server.run(sockets=[sock])
+        with _stop_on_signals():
+            server.run(sockets=[sock])
+    except _Stop:
+        pass   # uvicorn shut down gracefully and re-raised SIGINT/SIGTERM: a normal exit
     finally:
         sock.close()
         kb.close()
