@@ -6,7 +6,6 @@ import itertools
 import json
 import socket
 import threading
-from pathlib import Path
 
 import httpx
 import pytest

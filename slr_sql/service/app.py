@@ -45,9 +45,9 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 import slr_sql
 from slr_sql import EventRejected, SLRError
 
-from .encoding import (TermError, decode_args, decode_term, dumps, encode_answers, encode_plain,
+from .encoding import (decode_args, decode_term, dumps, encode_answers, encode_plain,
                        loads)
-from .errors import ServiceError, error_body, error_status
+from .errors import ServiceError, error_body
 
 __all__ = ["create_app", "Limits", "API_VERSION"]
 
@@ -200,11 +200,10 @@ class _Service:
         self.token = token.encode("utf-8") if token else None
         self.limits = limits
         self.submitted: dict[str, _Submitted] = {}
-        self.endpoints: list[_Endpoint] = []
+        self.endpoints = _ENDPOINTS
         params = _parameters(kb.load)
         self.load_takes_name = "name" in params and "replace" in params
         self.load_takes_filename = "filename" in params
-        self._define_routes()
 
     # -- plumbing -----------------------------------------------------------------------------
     def check_token(self, header: str | None) -> None:
@@ -270,15 +269,6 @@ class _Service:
         except (asyncio.TimeoutError, Exception):
             pass
 
-    def endpoint(self, method: str, path: str, summary: str, *, body: dict | None = None,
-                 query: dict | None = None, response: dict | None = None,
-                 auth: bool = True) -> Callable:
-        def register(handler: Callable) -> Callable:
-            self.endpoints.append(_Endpoint(method, path, handler, summary, body, query,
-                                            response, auth))
-            return handler
-        return register
-
     def starlette_routes(self) -> list:
         routes: dict[str, list[_Endpoint]] = {}
         for e in self.endpoints:
@@ -298,7 +288,7 @@ class _Service:
             try:
                 if e.auth:
                     self.check_token(request.headers.get("authorization"))
-                result = await e.handler(request)
+                result = await e.handler(self, request)
                 status = 200
                 if isinstance(result, tuple):
                     status, result = result
@@ -310,276 +300,6 @@ class _Service:
     async def call(self, fn: Callable, *args: Any, **kwargs: Any) -> Any:
         """Run a blocking knowledge-base call on the thread pool."""
         return await run_in_threadpool(fn, *args, **kwargs)
-
-    # -- routes -------------------------------------------------------------------------------
-    def _define_routes(self) -> None:  # noqa: C901 - one block per endpoint, in API order
-        kb = self.kb
-        L = self.limits
-
-        @self.endpoint("GET", "/health", "Liveness, version and limits (no token needed).",
-                       auth=False, response={"status": "string", "version": "string",
-                                             "api": "string", "limits": "object"})
-        async def health(request: Request) -> Any:
-            return {"status": "ok", "version": slr_sql.__version__, "api": API_VERSION,
-                    "limits": dataclasses.asdict(L)}
-
-        @self.endpoint("GET", "/openapi.json", "This API's OpenAPI 3.1 description.",
-                       auth=False)
-        async def openapi(request: Request) -> Any:
-            return self.openapi()
-
-        @self.endpoint("POST", "/add", "Add one event written in SLR syntax (kb.add).",
-                       body={"event": ("string", True)}, response={"added": "integer"})
-        async def add(request: Request) -> Any:
-            b = await self.body(request)
-            await self.call(kb.add, _field(b, "event", str, required=True))
-            return {"added": 1}
-
-        @self.endpoint("POST", "/add_event", "Add one event from terms (kb.add_event).",
-                       body={"name": ("string", True), "args": ("TermList", False),
-                             "start": ("Number", True), "end": ("Number", False)},
-                       response={"added": "integer"})
-        async def add_event(request: Request) -> Any:
-            b = await self.body(request)
-            name, args, start, end = _event_tuple(b, "")
-            await self.call(kb.add_event, name, args, start=start, end=end)
-            return {"added": 1}
-
-        @self.endpoint("POST", "/add_many", "Add many events in one transaction "
-                       "(kb.add_many); returns the rejected ones with their index.",
-                       body={"events": ("EventList", True), "atomic": ("boolean", False)},
-                       response={"accepted": "integer", "rejected": "RejectedList"})
-        async def add_many(request: Request) -> Any:
-            b = await self.body(request)
-            events = _field(b, "events", list, required=True)
-            atomic = _field(b, "atomic", bool, default=False)
-            prepared, positions, rejected = [], [], []
-            for i, ev in enumerate(events):
-                try:
-                    if isinstance(ev, str):
-                        prepared.append(ev)
-                    elif isinstance(ev, dict):
-                        prepared.append(_event_tuple(ev, f"events[{i}]"))
-                    else:
-                        raise ServiceError(f"events[{i}]: an event is SLR text or an object "
-                                           f'{{"name", "args", "start", "end"}}')
-                    positions.append(i)
-                except SLRError as exc:
-                    if atomic:
-                        raise
-                    rejected.append(_rejection(exc, i))
-            kb_rejected = await self.call(kb.add_many, prepared, atomic=atomic)
-            for exc in kb_rejected or ():
-                index = getattr(exc, "index", None)
-                original = positions[index] if isinstance(index, int) and \
-                    0 <= index < len(positions) else None
-                rejected.append(_rejection(exc, original))
-            rejected.sort(key=lambda r: (r["index"] is None, r["index"] or 0))
-            return {"accepted": len(events) - len(rejected), "rejected": rejected}
-
-        @self.endpoint("POST", "/load", "Load program text (kb.load); name= and replace= "
-                       "need a knowledge base with named programs.",
-                       body={"text": ("string", True), "filename": ("string", False),
-                             "name": ("string", False), "replace": ("boolean", False)},
-                       response={"loaded": "boolean"})
-        async def load(request: Request) -> Any:
-            b = await self.body(request)
-            text = _field(b, "text", str, required=True)
-            filename = _field(b, "filename", str)
-            name = _field(b, "name", str)
-            replace = _field(b, "replace", bool, default=False)
-            kwargs: dict[str, Any] = {}
-            if filename is not None and self.load_takes_filename:
-                kwargs["filename"] = filename
-            if name is not None or replace:
-                if not self.load_takes_name:
-                    raise ServiceError("this knowledge base has no named programs yet "
-                                       "(load(text, name=, replace=)); load without name and "
-                                       "replace", kind="NotImplemented")
-                if name is not None:
-                    kwargs["name"] = name
-                kwargs["replace"] = replace
-            await self.call(kb.load, text, **kwargs)
-            return {"loaded": True}
-
-        @self.endpoint("POST", "/unload", "Remove a named program (kb.unload).",
-                       body={"name": ("string", True)}, response={"unloaded": "string"})
-        async def unload(request: Request) -> Any:
-            b = await self.body(request)
-            name = _field(b, "name", str, required=True)
-            if not hasattr(kb, "unload"):
-                raise ServiceError("this knowledge base cannot unload programs yet",
-                                   kind="NotImplemented")
-            await self.call(kb.unload, name)
-            return {"unloaded": name}
-
-        @self.endpoint("GET", "/programs", "The loaded named programs (kb.programs).",
-                       response={"programs": "array"})
-        async def programs(request: Request) -> Any:
-            if not hasattr(kb, "programs"):
-                raise ServiceError("this knowledge base has no named programs yet",
-                                   kind="NotImplemented")
-            return {"programs": _plain(await self.call(kb.programs))}
-
-        @self.endpoint("POST", "/query", "Answer a goal (kb.query); wait=true makes it "
-                       "synchronized. timeout is capped by the server's max_query_time "
-                       "(max_wait when synchronized).",
-                       body={"goal": ("string", True), "args": ("Args", False),
-                             "at": ("Number", False), "timeout": ("Number", False),
-                             "limit": ("integer", False), "wait": ("boolean", False)},
-                       response={"answers": "AnswerList"})
-        async def query(request: Request) -> Any:
-            b = await self.body(request)
-            goal = _field(b, "goal", str, required=True)
-            args = decode_args(b.get("args"))
-            at = _number(b, "at")
-            timeout = _number(b, "timeout", minimum=0)
-            limit = _field(b, "limit", int)
-            if _field(b, "wait", bool, default=False):
-                pending = await self.call(kb.submit, goal, at=at, args=args,
-                                          timeout=_cap(timeout, L.max_wait))
-                answers = await asyncio.wrap_future(pending)
-            else:
-                answers = await self.call(kb.query, goal, at=at, args=args, limit=limit,
-                                          timeout=_cap(timeout, L.max_query_time))
-            return {"answers": encode_answers(answers)}
-
-        @self.endpoint("POST", "/submit", "Submit a synchronized query (kb.submit); returns "
-                       "a handle to poll. wait= (s) waits for the answer first.",
-                       body={"goal": ("string", True), "args": ("Args", False),
-                             "at": ("Number", False), "id": ("string", False),
-                             "timeout": ("Number", False), "wait": ("Number", False)},
-                       response={"handle": "string", "id": "string", "done": "boolean",
-                                 "answers": "AnswerList"})
-        async def submit(request: Request) -> Any:
-            b = await self.body(request)
-            goal = _field(b, "goal", str, required=True)
-            args = decode_args(b.get("args"))
-            at = _number(b, "at")
-            qid = _field(b, "id", str)
-            timeout = _number(b, "timeout", minimum=0)
-            wait = _number(b, "wait", minimum=0) or 0.0
-            self._expire()
-            if sum(1 for s in self.submitted.values() if not s.pending.done()) >= L.max_pending:
-                raise ServiceError(f"{L.max_pending} submitted queries are pending already",
-                                   kind="Unavailable")
-            pending = await self.call(kb.submit, goal, at=at, id=qid, args=args,
-                                      timeout=_cap(timeout, L.max_wait))
-            handle = uuid.uuid4().hex
-            entry = _Submitted(handle, pending, asyncio.wrap_future(pending))
-            pending.add_done_callback(entry.finished)
-            self.submitted[handle] = entry
-            return await self._poll(entry, wait)
-
-        @self.endpoint("GET", "/submit/{handle}", "The state of a submitted query; waits up "
-                       "to wait= s (capped by max_poll) for its answer.",
-                       query={"wait": ("Number", False)},
-                       response={"handle": "string", "id": "string", "done": "boolean",
-                                 "answers": "AnswerList", "explain": "string"})
-        async def poll(request: Request) -> Any:
-            entry = self._entry(request)
-            wait = _query_number(request, "wait")
-            return await self._poll(entry, wait)
-
-        @self.endpoint("DELETE", "/submit/{handle}", "Cancel a submitted query and forget it.",
-                       response={"handle": "string", "cancelled": "boolean"})
-        async def cancel(request: Request) -> Any:
-            entry = self._entry(request)
-            cancelled = entry.pending.cancel()
-            self.submitted.pop(entry.handle, None)
-            return {"handle": entry.handle, "cancelled": cancelled}
-
-        @self.endpoint("POST", "/explain", "How a goal would run (kb.explain).",
-                       body={"goal": ("string", True)}, response={"explain": "string"})
-        async def explain(request: Request) -> Any:
-            b = await self.body(request)
-            return {"explain": await self.call(kb.explain, _field(b, "goal", str, required=True))}
-
-        @self.endpoint("POST", "/mark_complete", "Declare a history complete up to a time "
-                       "(kb.mark_complete).",
-                       body={"type": ("string", True), "time": ("Number", True)},
-                       response={"type": "string", "time": "Number"})
-        async def mark_complete(request: Request) -> Any:
-            b = await self.body(request)
-            event_type = _field(b, "type", str, required=True)
-            t = _number(b, "time", required=True)
-            await self.call(kb.mark_complete, event_type, t)
-            return {"type": event_type, "time": encode_plain(t)}
-
-        @self.endpoint("GET", "/complete_until", "The time up to which a history is complete "
-                       "(kb.complete_until).", query={"type": ("string", True)},
-                       response={"type": "string", "time": "Number"})
-        async def complete_until(request: Request) -> Any:
-            event_type = request.query_params.get("type")
-            if not event_type:
-                raise ServiceError('the query parameter "type" (p/N) is required')
-            t = await self.call(kb.complete_until, event_type)
-            return {"type": event_type, "time": encode_plain(float(t))}
-
-        @self.endpoint("GET", "/buffers", "The active buffers with their counters "
-                       "(kb.buffers).", response={"buffers": "array"})
-        async def buffers(request: Request) -> Any:
-            return {"buffers": _plain(await self.call(kb.buffers))}
-
-        @self.endpoint("POST", "/buffers", "Keep a history (kb.add_buffer): exactly one of "
-                       "keep_last (N most recent per key), keep_seconds (the last l s), "
-                       "keep_between ([t1, t2]).",
-                       body={"pattern": ("string", True), "keep_last": ("integer", False),
-                             "keep_seconds": ("Number", False),
-                             "keep_between": ("NumberPair", False)},
-                       response={"id": "integer"})
-        async def add_buffer(request: Request) -> Any:
-            b = await self.body(request)
-            pattern = _field(b, "pattern", str, required=True)
-            kwargs: dict[str, Any] = {}
-            if b.get("keep_last") is not None:
-                kwargs["keep_last"] = _field(b, "keep_last", int)
-            if b.get("keep_seconds") is not None:
-                kwargs["keep_seconds"] = _number(b, "keep_seconds")
-            if b.get("keep_between") is not None:
-                pair = _field(b, "keep_between", list)
-                if len(pair) != 2:
-                    raise ServiceError('"keep_between" must be [t1, t2]')
-                kwargs["keep_between"] = (_number({"t1": pair[0]}, "t1", required=True),
-                                          _number({"t2": pair[1]}, "t2", required=True))
-            buffer_id = await self.call(kb.add_buffer, pattern, **kwargs)
-            return {"id": buffer_id}
-
-        @self.endpoint("DELETE", "/buffers/{buffer_id:int}", "Remove a runtime buffer "
-                       "(kb.remove_buffer); the events it kept stay.",
-                       response={"removed": "integer"})
-        async def remove_buffer(request: Request) -> Any:
-            buffer_id = request.path_params["buffer_id"]
-
-            def remove() -> None:
-                if not any(getattr(info, "id", None) == buffer_id for info in kb.buffers()):
-                    raise ServiceError(f"no active buffer #{buffer_id}", kind="NotFound")
-                kb.remove_buffer(buffer_id)
-            await self.call(remove)
-            return {"removed": buffer_id}
-
-        @self.endpoint("POST", "/sql", "Run one read-only SQL statement on the store "
-                       "(SELECT, WITH, VALUES, EXPLAIN, introspection PRAGMAs).",
-                       body={"query": ("string", True), "params": ("array", False)},
-                       response={"columns": "array", "rows": "array"})
-        async def sql(request: Request) -> Any:
-            b = await self.body(request)
-            statement = _field(b, "query", str, required=True)
-            params = _field(b, "params", list, default=[])
-            for i, p in enumerate(params):
-                if p is not None and type(p) not in (int, float, str):
-                    raise ServiceError(f"params[{i}]: a SQL parameter is a number, a string "
-                                       f"or null")
-            columns, rows = await self.call(_read_only_sql, kb, statement, params,
-                                            L.sql_timeout)
-            return {"columns": list(columns), "rows": encode_plain([list(r) for r in rows])}
-
-        @self.endpoint("GET", "/stats", "File size, events per type, buffers and their "
-                       "counters (what slr stats prints, as data and as text).",
-                       response={"path": "string", "rows": "array", "space": "object",
-                                 "buffers": "array", "now": "Number", "text": "string"})
-        async def stats(request: Request) -> Any:
-            return await self.call(_stats, kb)
 
     # -- submitted queries ----------------------------------------------------------------------
     def _entry(self, request: Request) -> "_Submitted":
@@ -740,6 +460,308 @@ class _Service:
                                "securitySchemes": {"bearer": {"type": "http",
                                                               "scheme": "bearer"}}},
                 "security": [{"bearer": []}]}
+
+
+# -- the endpoints -----------------------------------------------------------------------------
+
+_ENDPOINTS: list[_Endpoint] = []
+
+
+def _route(method: str, path: str, summary: str, *, body: dict | None = None,
+           query: dict | None = None, response: dict | None = None,
+           auth: bool = True) -> Callable:
+    """Register an endpoint: its handler, and what the OpenAPI description says of it."""
+    def register(handler: Callable) -> Callable:
+        _ENDPOINTS.append(_Endpoint(method, path, handler, summary, body, query, response,
+                                    auth))
+        return handler
+    return register
+
+
+@_route("GET", "/health", "Liveness, version and limits (no token needed).",
+        auth=False, response={"status": "string", "version": "string",
+                              "api": "string", "limits": "object"})
+async def _health(svc: "_Service", request: Request) -> Any:
+    return {"status": "ok", "version": slr_sql.__version__, "api": API_VERSION,
+            "limits": dataclasses.asdict(svc.limits)}
+
+
+@_route("GET", "/openapi.json", "This API's OpenAPI 3.1 description.",
+        auth=False)
+async def _openapi(svc: "_Service", request: Request) -> Any:
+    return svc.openapi()
+
+
+@_route("POST", "/add", "Add one event written in SLR syntax (kb.add).",
+        body={"event": ("string", True)}, response={"added": "integer"})
+async def _add(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    await svc.call(svc.kb.add, _field(b, "event", str, required=True))
+    return {"added": 1}
+
+
+@_route("POST", "/add_event", "Add one event from terms (kb.add_event).",
+        body={"name": ("string", True), "args": ("TermList", False),
+              "start": ("Number", True), "end": ("Number", False)},
+        response={"added": "integer"})
+async def _add_event(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    name, args, start, end = _event_tuple(b, "")
+    await svc.call(svc.kb.add_event, name, args, start=start, end=end)
+    return {"added": 1}
+
+
+@_route("POST", "/add_many", "Add many events in one transaction "
+        "(kb.add_many); returns the rejected ones with their index.",
+        body={"events": ("EventList", True), "atomic": ("boolean", False)},
+        response={"accepted": "integer", "rejected": "RejectedList"})
+async def _add_many(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    events = _field(b, "events", list, required=True)
+    atomic = _field(b, "atomic", bool, default=False)
+    prepared, positions, rejected = [], [], []
+    for i, ev in enumerate(events):
+        try:
+            if isinstance(ev, str):
+                prepared.append(ev)
+            elif isinstance(ev, dict):
+                prepared.append(_event_tuple(ev, f"events[{i}]"))
+            else:
+                raise ServiceError(f"events[{i}]: an event is SLR text or an object "
+                                   f'{{"name", "args", "start", "end"}}')
+            positions.append(i)
+        except SLRError as exc:
+            if atomic:
+                raise
+            rejected.append(_rejection(exc, i))
+    kb_rejected = await svc.call(svc.kb.add_many, prepared, atomic=atomic)
+    for exc in kb_rejected or ():
+        index = getattr(exc, "index", None)
+        original = positions[index] if isinstance(index, int) and \
+            0 <= index < len(positions) else None
+        rejected.append(_rejection(exc, original))
+    rejected.sort(key=lambda r: (r["index"] is None, r["index"] or 0))
+    return {"accepted": len(events) - len(rejected), "rejected": rejected}
+
+
+@_route("POST", "/load", "Load program text (kb.load); name= and replace= "
+        "need a knowledge base with named programs.",
+        body={"text": ("string", True), "filename": ("string", False),
+              "name": ("string", False), "replace": ("boolean", False)},
+        response={"loaded": "boolean"})
+async def _load(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    text = _field(b, "text", str, required=True)
+    filename = _field(b, "filename", str)
+    name = _field(b, "name", str)
+    replace = _field(b, "replace", bool, default=False)
+    kwargs: dict[str, Any] = {}
+    if filename is not None and svc.load_takes_filename:
+        kwargs["filename"] = filename
+    if name is not None or replace:
+        if not svc.load_takes_name:
+            raise ServiceError("this knowledge base has no named programs yet "
+                               "(load(text, name=, replace=)); load without name and "
+                               "replace", kind="NotImplemented")
+        if name is not None:
+            kwargs["name"] = name
+        kwargs["replace"] = replace
+    await svc.call(svc.kb.load, text, **kwargs)
+    return {"loaded": True}
+
+
+@_route("POST", "/unload", "Remove a named program (kb.unload).",
+        body={"name": ("string", True)}, response={"unloaded": "string"})
+async def _unload(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    name = _field(b, "name", str, required=True)
+    if not hasattr(svc.kb, "unload"):
+        raise ServiceError("this knowledge base cannot unload programs yet",
+                           kind="NotImplemented")
+    await svc.call(svc.kb.unload, name)
+    return {"unloaded": name}
+
+
+@_route("GET", "/programs", "The loaded named programs (kb.programs).",
+        response={"programs": "array"})
+async def _programs(svc: "_Service", request: Request) -> Any:
+    if not hasattr(svc.kb, "programs"):
+        raise ServiceError("this knowledge base has no named programs yet",
+                           kind="NotImplemented")
+    return {"programs": _plain(await svc.call(svc.kb.programs))}
+
+
+@_route("POST", "/query", "Answer a goal (kb.query); wait=true makes it "
+        "synchronized. timeout is capped by the server's max_query_time "
+        "(max_wait when synchronized).",
+        body={"goal": ("string", True), "args": ("Args", False),
+              "at": ("Number", False), "timeout": ("Number", False),
+              "limit": ("integer", False), "wait": ("boolean", False)},
+        response={"answers": "AnswerList"})
+async def _query(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    goal = _field(b, "goal", str, required=True)
+    args = decode_args(b.get("args"))
+    at = _number(b, "at")
+    timeout = _number(b, "timeout", minimum=0)
+    limit = _field(b, "limit", int)
+    if _field(b, "wait", bool, default=False):
+        pending = await svc.call(svc.kb.submit, goal, at=at, args=args,
+                                  timeout=_cap(timeout, svc.limits.max_wait))
+        answers = await asyncio.wrap_future(pending)
+    else:
+        answers = await svc.call(svc.kb.query, goal, at=at, args=args, limit=limit,
+                                  timeout=_cap(timeout, svc.limits.max_query_time))
+    return {"answers": encode_answers(answers)}
+
+
+@_route("POST", "/submit", "Submit a synchronized query (kb.submit); returns "
+        "a handle to poll. wait= (s) waits for the answer first.",
+        body={"goal": ("string", True), "args": ("Args", False),
+              "at": ("Number", False), "id": ("string", False),
+              "timeout": ("Number", False), "wait": ("Number", False)},
+        response={"handle": "string", "id": "string", "done": "boolean",
+                  "answers": "AnswerList"})
+async def _submit(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    goal = _field(b, "goal", str, required=True)
+    args = decode_args(b.get("args"))
+    at = _number(b, "at")
+    qid = _field(b, "id", str)
+    timeout = _number(b, "timeout", minimum=0)
+    wait = _number(b, "wait", minimum=0) or 0.0
+    svc._expire()
+    if sum(1 for s in svc.submitted.values() if not s.pending.done()) >= svc.limits.max_pending:
+        raise ServiceError(f"{svc.limits.max_pending} submitted queries are pending already",
+                           kind="Unavailable")
+    pending = await svc.call(svc.kb.submit, goal, at=at, id=qid, args=args,
+                              timeout=_cap(timeout, svc.limits.max_wait))
+    handle = uuid.uuid4().hex
+    entry = _Submitted(handle, pending, asyncio.wrap_future(pending))
+    pending.add_done_callback(entry.finished)
+    svc.submitted[handle] = entry
+    return await svc._poll(entry, wait)
+
+
+@_route("GET", "/submit/{handle}", "The state of a submitted query; waits up "
+        "to wait= s (capped by max_poll) for its answer.",
+        query={"wait": ("Number", False)},
+        response={"handle": "string", "id": "string", "done": "boolean",
+                  "answers": "AnswerList", "explain": "string"})
+async def _poll(svc: "_Service", request: Request) -> Any:
+    entry = svc._entry(request)
+    wait = _query_number(request, "wait")
+    return await svc._poll(entry, wait)
+
+
+@_route("DELETE", "/submit/{handle}", "Cancel a submitted query and forget it.",
+        response={"handle": "string", "cancelled": "boolean"})
+async def _cancel(svc: "_Service", request: Request) -> Any:
+    entry = svc._entry(request)
+    cancelled = entry.pending.cancel()
+    svc.submitted.pop(entry.handle, None)
+    return {"handle": entry.handle, "cancelled": cancelled}
+
+
+@_route("POST", "/explain", "How a goal would run (kb.explain).",
+        body={"goal": ("string", True)}, response={"explain": "string"})
+async def _explain(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    return {"explain": await svc.call(svc.kb.explain, _field(b, "goal", str, required=True))}
+
+
+@_route("POST", "/mark_complete", "Declare a history complete up to a time "
+        "(kb.mark_complete).",
+        body={"type": ("string", True), "time": ("Number", True)},
+        response={"type": "string", "time": "Number"})
+async def _mark_complete(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    event_type = _field(b, "type", str, required=True)
+    t = _number(b, "time", required=True)
+    await svc.call(svc.kb.mark_complete, event_type, t)
+    return {"type": event_type, "time": encode_plain(t)}
+
+
+@_route("GET", "/complete_until", "The time up to which a history is complete "
+        "(kb.complete_until).", query={"type": ("string", True)},
+        response={"type": "string", "time": "Number"})
+async def _complete_until(svc: "_Service", request: Request) -> Any:
+    event_type = request.query_params.get("type")
+    if not event_type:
+        raise ServiceError('the query parameter "type" (p/N) is required')
+    t = await svc.call(svc.kb.complete_until, event_type)
+    return {"type": event_type, "time": encode_plain(float(t))}
+
+
+@_route("GET", "/buffers", "The active buffers with their counters "
+        "(kb.buffers).", response={"buffers": "array"})
+async def _buffers(svc: "_Service", request: Request) -> Any:
+    return {"buffers": _plain(await svc.call(svc.kb.buffers))}
+
+
+@_route("POST", "/buffers", "Keep a history (kb.add_buffer): exactly one of "
+        "keep_last (N most recent per key), keep_seconds (the last l s), "
+        "keep_between ([t1, t2]).",
+        body={"pattern": ("string", True), "keep_last": ("integer", False),
+              "keep_seconds": ("Number", False),
+              "keep_between": ("NumberPair", False)},
+        response={"id": "integer"})
+async def _add_buffer(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    pattern = _field(b, "pattern", str, required=True)
+    kwargs: dict[str, Any] = {}
+    if b.get("keep_last") is not None:
+        kwargs["keep_last"] = _field(b, "keep_last", int)
+    if b.get("keep_seconds") is not None:
+        kwargs["keep_seconds"] = _number(b, "keep_seconds")
+    if b.get("keep_between") is not None:
+        pair = _field(b, "keep_between", list)
+        if len(pair) != 2:
+            raise ServiceError('"keep_between" must be [t1, t2]')
+        kwargs["keep_between"] = (_number({"t1": pair[0]}, "t1", required=True),
+                                  _number({"t2": pair[1]}, "t2", required=True))
+    buffer_id = await svc.call(svc.kb.add_buffer, pattern, **kwargs)
+    return {"id": buffer_id}
+
+
+@_route("DELETE", "/buffers/{buffer_id:int}", "Remove a runtime buffer "
+        "(kb.remove_buffer); the events it kept stay.",
+        response={"removed": "integer"})
+async def _remove_buffer(svc: "_Service", request: Request) -> Any:
+    buffer_id = request.path_params["buffer_id"]
+
+    def remove() -> None:
+        if not any(getattr(info, "id", None) == buffer_id for info in svc.kb.buffers()):
+            raise ServiceError(f"no active buffer #{buffer_id}", kind="NotFound")
+        svc.kb.remove_buffer(buffer_id)
+    await svc.call(remove)
+    return {"removed": buffer_id}
+
+
+@_route("POST", "/sql", "Run one read-only SQL statement on the store "
+        "(SELECT, WITH, VALUES, EXPLAIN, introspection PRAGMAs).",
+        body={"query": ("string", True), "params": ("array", False)},
+        response={"columns": "array", "rows": "array"})
+async def _sql(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    statement = _field(b, "query", str, required=True)
+    params = _field(b, "params", list, default=[])
+    for i, p in enumerate(params):
+        if p is not None and type(p) not in (int, float, str):
+            raise ServiceError(f"params[{i}]: a SQL parameter is a number, a string "
+                               f"or null")
+    columns, rows = await svc.call(_read_only_sql, svc.kb, statement, params,
+                                    svc.limits.sql_timeout)
+    return {"columns": list(columns), "rows": encode_plain([list(r) for r in rows])}
+
+
+@_route("GET", "/stats", "File size, events per type, buffers and their "
+        "counters (what slr stats prints, as data and as text).",
+        response={"path": "string", "rows": "array", "space": "object",
+                  "buffers": "array", "now": "Number", "text": "string"})
+async def _stats(svc: "_Service", request: Request) -> Any:
+    return await svc.call(_stats_of, svc.kb)
+
 
 
 @dataclass
@@ -935,7 +957,7 @@ def _read_only_sql(kb: Any, statement: str, params: list, timeout: float) -> tup
             kb.sql("PRAGMA query_only = OFF")
 
 
-def _stats(kb: Any) -> dict:
+def _stats_of(kb: Any) -> dict:
     if hasattr(kb, "stats"):
         return encode_plain(_plain(kb.stats()))
     from slr_sql import buffers as history   # the same figures `slr stats` prints

@@ -26,7 +26,6 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 from urllib.parse import quote
 
-import slr_sql
 from slr_sql import EventRejected, SLRError
 
 from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args, encode_term,
