@@ -45,8 +45,8 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 import slr_sql
 from slr_sql import EventRejected, SLRError
 
-from .encoding import (decode_args, decode_term, dumps, encode_answers, encode_plain,
-                       loads)
+from .encoding import (decode_args, decode_arguments, decode_term, dumps, encode_answers,
+                       encode_plain, loads)
 from .errors import ServiceError, error_body
 
 __all__ = ["create_app", "Limits", "API_VERSION"]
@@ -245,6 +245,7 @@ class _Service:
             raise ServiceError(f"the request body did not arrive within "
                                f"{self.limits.body_timeout:g} s", kind="RequestTimeout") from None
         data = b"".join(chunks)
+        request.state.body = data
         if not data.strip():
             return {}
         try:
@@ -506,7 +507,7 @@ async def _add(svc: "_Service", request: Request) -> Any:
         response={"added": "integer"})
 async def _add_event(svc: "_Service", request: Request) -> Any:
     b = await svc.body(request)
-    name, args, start, end = _event_tuple(b, "")
+    name, args, start, end = _event_tuple(b)
     await svc.call(svc.kb.add_event, name, args, start=start, end=end)
     return {"added": 1}
 
@@ -519,13 +520,14 @@ async def _add_many(svc: "_Service", request: Request) -> Any:
     b = await svc.body(request)
     events = _field(b, "events", list, required=True)
     atomic = _field(b, "atomic", bool, default=False)
+    plain = _plain_arguments(request.state.body, events)
     prepared, positions, rejected = [], [], []
     for i, ev in enumerate(events):
         try:
             if isinstance(ev, str):
                 prepared.append(ev)
             elif isinstance(ev, dict):
-                prepared.append(_event_tuple(ev, f"events[{i}]"))
+                prepared.append(_event_tuple(ev, plain))
             else:
                 raise ServiceError(f"events[{i}]: an event is SLR text or an object "
                                    f'{{"name", "args", "start", "end"}}')
@@ -777,37 +779,50 @@ class _Submitted:
 
 # -- request pieces ----------------------------------------------------------------------------
 
-def _event_tuple(obj: dict, where: str) -> tuple:
-    """``{"name", "args", "start", "end"}`` (or ``"time"``) -> ``(name, args, start, end)``."""
-    prefix = f"{where}." if where else ""
+def _plain_arguments(body: bytes, events: list) -> bool:
+    """True when no event argument in this body holds an object, ``true``, ``false`` or
+    ``null``: then every argument is already the Python value the knowledge base takes (a JSON
+    string is an atom, as a ``str`` is for ``kb.add_many``; numbers and arrays are themselves)
+    and decoding can be skipped. Checked on the bytes, at C speed: the body's only ``{`` are
+    the outer object's and one per event object (a ``{`` inside a string only makes this say
+    False, which is always safe)."""
+    objects = sum(1 for ev in events if type(ev) is dict)
+    return body.count(b"{") == 1 + objects and b"true" not in body \
+        and b"false" not in body and b"null" not in body
+
+
+def _event_tuple(obj: dict, plain: bool = False) -> tuple:
+    """``{"name", "args", "start", "end"}`` (or ``"time"``) -> ``(name, args, start, end)``.
+    ``plain``: the arguments need no decoding (:func:`_plain_arguments`). In a batch, the
+    index of the event says which one a message is about."""
     name = obj.get("name")
-    if not isinstance(name, str) or not name:
-        raise ServiceError(f'{prefix}name must be a non-empty string')
+    if type(name) is not str or not name:
+        raise ServiceError('"name" must be a non-empty string')
     args = obj.get("args", [])
     if type(args) is not list:
-        raise ServiceError(f"{prefix}args must be an array of terms")
-    variables: dict = {}
-    terms = [decode_term(a, variables=variables, _where=f"{prefix}args[{i}]")
-             for i, a in enumerate(args)]
-    if "time" in obj and "start" not in obj:
-        start = end = _event_time(obj, "time", prefix)
+        raise ServiceError('"args" must be an array of terms')
+    terms = args if plain else decode_arguments(args)
+    if "start" in obj or "time" not in obj:
+        start = _event_time(obj, "start")
+        end = _event_time(obj, "end") if obj.get("end") is not None else start
     else:
-        start = _event_time(obj, "start", prefix)
-        end = _event_time(obj, "end", prefix) if obj.get("end") is not None else start
+        start = end = _event_time(obj, "time")
     return (name, terms, start, end)
 
 
-def _event_time(obj: dict, key: str, prefix: str) -> Any:
-    if key not in obj:
-        raise ServiceError(f'{prefix}{key} is required')
-    value = obj[key]
-    value = decode_term(value, _where=f"{prefix}{key}") if isinstance(value, dict) else value
+def _event_time(obj: dict, key: str) -> Any:
+    value = obj.get(key)
+    if type(value) is float:
+        return value
+    if value is None:
+        raise ServiceError(f'"{key}" is required')
+    value = decode_term(value, _where=key) if isinstance(value, dict) else value
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise EventRejected(f"{prefix}{key}: event times must be numbers (got {value!r})")
+        raise EventRejected(f"{key}: event times must be numbers (got {value!r})")
     try:
         return float(value)
     except OverflowError:
-        raise EventRejected(f"{prefix}{key}: event time out of range") from None
+        raise EventRejected(f"{key}: event time out of range") from None
 
 
 def _rejection(exc: BaseException, index: int | None) -> dict:

@@ -28,8 +28,8 @@ from urllib.parse import quote
 
 from slr_sql import EventRejected, SLRError
 
-from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args, encode_term,
-                       loads)
+from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args,
+                       encode_arguments, encode_term, loads)
 from .errors import ServiceError, error_from_body
 
 __all__ = ["connect", "RemoteKnowledgeBase", "RemotePendingQuery", "RemoteSubscription"]
@@ -82,11 +82,12 @@ class RemoteKnowledgeBase:
     # -- transport ------------------------------------------------------------------------------
     def _request(self, method: str, path: str, body: Any = None, *,
                  params: dict | None = None, timeout: float | None = None,
-                 ok: tuple = (200,)) -> tuple[int, Any]:
+                 ok: tuple = (200,), content: bytes | None = None) -> tuple[int, Any]:
         if self.closed:
             raise SLRError("the connection to the knowledge base is closed")
         httpx = self._httpx
-        content = dumps(body) if body is not None else None
+        if body is not None:
+            content = dumps(body)
         try:
             response = self._http.request(
                 method, path, content=content, params=params,
@@ -168,46 +169,41 @@ class RemoteKnowledgeBase:
         """Add many events (SLR strings or ``(name, args, start, end)`` tuples); returns the
         rejected ones, each with ``.index``. Batches larger than the server's body limit go in
         several requests (one transaction each) unless ``atomic``."""
-        budget = max(int(self.limits().get("max_body", DEFAULT_MAX_BODY)) // 2, 4096)
+        items: list = []
         rejected: list[EventRejected] = []
-        chunk: list = []
-        size = 0
-        offset = 0
-        count = 0
         for i, ev in enumerate(events):
-            count += 1
+            if isinstance(ev, str):
+                items.append(ev)
+                continue
             try:
-                item = ev if isinstance(ev, str) else _tuple_object(ev, i)
+                items.append(_tuple_object(ev))
             except SLRError as exc:
                 if atomic:
                     raise
                 rejected.append(_rejected(exc, i))
-                item = None
-            # a placeholder keeps the server's indexes equal to ours
-            item_size = len(dumps(item)) + 1 if item is not None else 3
-            if chunk and size + item_size > budget and not atomic:
-                rejected += self._send_chunk(chunk, offset, atomic)
-                offset += len(chunk)
-                chunk, size = [], 0
-            chunk.append(item)
-            size += item_size
-        if chunk:
-            rejected += self._send_chunk(chunk, offset, atomic)
-        rejected.sort(key=lambda e: getattr(e, "index", 0) if isinstance(
-            getattr(e, "index", None), int) else count)
+                items.append(None)          # a hole keeps the indexes of the others
+        budget = int(self.limits().get("max_body", DEFAULT_MAX_BODY)) - 1024
+        rejected += self._send_events(items, 0, atomic, budget)
+        rejected.sort(key=lambda e: e.index if isinstance(e.index, int) else len(items))
         return rejected
 
-    def _send_chunk(self, chunk: list, offset: int, atomic: bool) -> list[EventRejected]:
-        present = [(i, item) for i, item in enumerate(chunk) if item is not None]
+    def _send_events(self, items: list, offset: int, atomic: bool,
+                     budget: int) -> list[EventRejected]:
+        """POST /add_many for ``items`` (None: a hole), halving what does not fit."""
+        present = [i for i, item in enumerate(items) if item is not None]
         if not present:
             return []
-        reply = self._post("/add_many", {"events": [item for _, item in present],
-                                         "atomic": atomic})
+        body = dumps({"events": [items[i] for i in present], "atomic": atomic})
+        if len(body) > budget and not atomic and len(present) > 1:
+            half = len(items) // 2
+            return (self._send_events(items[:half], offset, atomic, budget)
+                    + self._send_events(items[half:], offset + half, atomic, budget))
+        reply = self._request("POST", "/add_many", content=body)[1]
         out = []
         for r in reply.get("rejected", []):
             exc = EventRejected(str(r.get("message", "")))
             index = r.get("index")
-            exc.index = offset + present[index][0] if isinstance(index, int) and \
+            exc.index = offset + present[index] if isinstance(index, int) and \
                 0 <= index < len(present) else None
             out.append(exc)
         return out
@@ -562,25 +558,28 @@ def _goal_body(goal: str, at: Any, args: dict | None, timeout: Any) -> dict:
 
 def _event_object(name: Any, args: Iterable[Any], start: Any, end: Any, where: str) -> dict:
     try:
-        arg_list = list(args)
+        arg_list = args if type(args) is list else list(args)
     except TypeError:
         raise EventRejected(f"{where}args must be a list of values, not {args!r}") from None
     obj: dict[str, Any] = {"name": name if isinstance(name, str) else str(name),
-                           "args": [encode_term(a, _where=f"{where}args[{i}]")
-                                    for i, a in enumerate(arg_list)],
-                           "start": encode_term(start, _where=f"{where}start")}
+                           "args": encode_arguments(arg_list, f"{where}args"),
+                           "start": _time(start, f"{where}start")}
     if end is not None:
-        obj["end"] = encode_term(end, _where=f"{where}end")
+        obj["end"] = _time(end, f"{where}end")
     return obj
 
 
-def _tuple_object(ev: Any, i: int) -> dict:
+def _time(t: Any, where: str) -> Any:
+    return t if type(t) is float and t - t == 0.0 else encode_term(t, _where=where)
+
+
+def _tuple_object(ev: Any) -> dict:
     try:
         name, args, start, end = ev
     except (TypeError, ValueError):
         raise EventRejected(f"{ev!r}: an event is SLR text or (name, args, start, end)") from None
     try:
-        return _event_object(name, args, start, end, f"events[{i}].")
+        return _event_object(name, args, start, end, "")
     except TermError as exc:
         raise EventRejected(f"{ev!r}: {exc}") from None
 

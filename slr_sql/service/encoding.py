@@ -56,7 +56,8 @@ from typing import Any
 
 from slr_sql import Atom, SLRError, String, Struct, Var
 
-__all__ = ["TermError", "encode_term", "decode_term", "encode_answers", "decode_answers",
+__all__ = ["TermError", "encode_term", "decode_term", "encode_arguments", "decode_arguments",
+           "encode_answers", "decode_answers",
            "encode_args", "decode_args", "encode_plain", "decode_plain", "dumps", "loads",
            "MAX_DEPTH"]
 
@@ -79,13 +80,51 @@ class TermError(SLRError):
 
 # -- encoding ----------------------------------------------------------------------------------
 
-def encode_term(value: Any, *, plain_str: str = "atom", _where: str = "", _depth: int = 0) -> Any:
+def encode_term(value: Any, *, plain_str: str = "atom", _where: str = "") -> Any:
     """A term (Python value) as a JSON-ready value. ``plain_str`` says what a plain ``str``
     is: ``"atom"`` (what callers send, as in ``kb.add_event``) or ``"string"`` (answers).
 
     >>> encode_term(["cup1", 1, 0.5, -0.0]), encode_term("hi", plain_str="string")
     (['cup1', 1, 0.5, -0.0], {'$string': 'hi'})
     """
+    try:
+        return _encode_fast(value, plain_str == "atom", 0)
+    except _Unusual:
+        return _encode(value, plain_str, _where, 0)
+
+
+class _Unusual(Exception):
+    """The fast paths met a value they leave to the complete ones (which also say where)."""
+
+
+def _encode_fast(value: Any, str_is_atom: bool, depth: int) -> Any:
+    """The common values only, with no bookkeeping: ingest spends its time here."""
+    tv = type(value)
+    if tv is float:
+        if value - value == 0.0:     # finite: inf - inf and nan - nan are nan
+            return value
+        raise _Unusual
+    if tv is Atom:
+        return value                 # json writes a str subclass as a string
+    if tv is int:
+        if INT64_MIN <= value <= INT64_MAX:
+            return value
+        raise _Unusual
+    if tv is str:
+        return value if str_is_atom else {"$string": value}
+    if depth >= MAX_DEPTH:
+        raise _Unusual
+    if tv is list or tv is tuple:
+        return [_encode_fast(v, str_is_atom, depth + 1) for v in value]
+    if tv is Struct:
+        return {str(value.name): [_encode_fast(v, str_is_atom, depth + 1) for v in value.args]}
+    if tv is String:
+        return {"$string": str(value)}
+    raise _Unusual
+
+
+def _encode(value: Any, plain_str: str, where: str, depth: int) -> Any:
+    """Every value, keeping the path of each part (``args.O[2]``) for error messages."""
     tv = type(value)
     if tv is Atom:
         return str(value)
@@ -99,24 +138,22 @@ def encode_term(value: Any, *, plain_str: str = "atom", _where: str = "", _depth
         try:
             return {"$int": str(value)}
         except ValueError:  # beyond Python's int/str conversion limit
-            raise TermError("integer too large to send", _where) from None
+            raise TermError("integer too large to send", where) from None
     if tv is float:
         if math.isfinite(value):
             return value
         return {"$float": "nan" if value != value else ("inf" if value > 0 else "-inf")}
-    if _depth >= MAX_DEPTH:
-        raise TermError(f"term nested deeper than {MAX_DEPTH} levels", _where)
+    if depth >= MAX_DEPTH:
+        raise TermError(f"term nested deeper than {MAX_DEPTH} levels", where)
     if tv is list or tv is tuple:
-        return [encode_term(v, plain_str=plain_str, _where=f"{_where}[{i}]", _depth=_depth + 1)
-                for i, v in enumerate(value)]
+        return [_encode(v, plain_str, f"{where}[{i}]", depth + 1) for i, v in enumerate(value)]
     if tv is Struct:
         name = str(value.name)
-        return {name: [encode_term(v, plain_str=plain_str, _where=f"{_where}.{name}[{i}]",
-                                   _depth=_depth + 1)
+        return {name: [_encode(v, plain_str, f"{where}.{name}[{i}]", depth + 1)
                        for i, v in enumerate(value.args)]}
     if tv is Var:
         if value.ref is not None:   # a bound variable stands for its value
-            return encode_term(value.ref, plain_str=plain_str, _where=_where, _depth=_depth + 1)
+            return _encode(value.ref, plain_str, where, depth + 1)
         return {"$var": value.name}
     if tv is bool:
         return "true" if value else "false"
@@ -126,12 +163,24 @@ def encode_term(value: Any, *, plain_str: str = "atom", _where: str = "", _depth
     if isinstance(value, Atom):
         return str(value)
     if isinstance(value, str):
-        return encode_term(str(value), plain_str=plain_str, _where=_where, _depth=_depth)
+        return _encode(str(value), plain_str, where, depth)
     if isinstance(value, int):
-        return encode_term(int(value), plain_str=plain_str, _where=_where, _depth=_depth)
+        return _encode(int(value), plain_str, where, depth)
     if isinstance(value, float):
-        return encode_term(float(value), plain_str=plain_str, _where=_where, _depth=_depth)
-    raise TermError(f"cannot send {value!r} ({tv.__name__}) as an SLR term", _where)
+        return _encode(float(value), plain_str, where, depth)
+    raise TermError(f"cannot send {value!r} ({tv.__name__}) as an SLR term", where)
+
+
+def encode_arguments(args: list, where: str = "args") -> list:
+    """The arguments of an event (a list of terms; ``str`` is an atom) -> JSON-ready.
+
+    >>> encode_arguments(["cup1", [0.4, 0.1]])
+    ['cup1', [0.4, 0.1]]
+    """
+    try:
+        return _encode_fast(args, True, -1)
+    except _Unusual:
+        return [_encode(a, "atom", f"{where}[{i}]", 0) for i, a in enumerate(args)]
 
 
 def encode_answers(answers: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -156,7 +205,7 @@ def encode_args(args: dict[str, Any] | None) -> dict[str, Any] | None:
 # -- decoding ----------------------------------------------------------------------------------
 
 def decode_term(obj: Any, *, strings: type = String, variables: dict | None = None,
-                _where: str = "", _depth: int = 0) -> Any:
+                _where: str = "") -> Any:
     """A JSON value in the wire encoding -> the term as a Python value. ``strings`` is the
     type strings decode to (``String``, or ``str`` for answers); ``variables`` maps names to
     the :class:`Var` objects already made for this value (shared across one answer).
@@ -164,36 +213,72 @@ def decode_term(obj: Any, *, strings: type = String, variables: dict | None = No
     >>> decode_term({"g": [{"$var": "X"}, {"$var": "X"}]})
     Struct('g', (Var('X'), Var('X')))
     """
+    if variables is None:
+        variables = {}
+    try:
+        return _decode_fast(obj, strings, variables, 0)
+    except (_Unusual, TermError):
+        return _decode(obj, strings, variables, _where, 0)
+
+
+def decode_arguments(objs: list, where: str = "args") -> list:
+    """The JSON arguments of an event -> terms (their variables shared).
+
+    >>> decode_arguments(["cup1", {"$string": "s"}])
+    [Atom('cup1'), String('s')]
+    """
+    variables: dict = {}
+    try:
+        return _decode_fast(objs, String, variables, -1)
+    except (_Unusual, TermError):
+        return [_decode(o, String, variables, f"{where}[{i}]", 0) for i, o in enumerate(objs)]
+
+
+def _decode_fast(obj: Any, strings: type, variables: dict, depth: int) -> Any:
+    """Well-formed values, with no bookkeeping; anything wrong goes to :func:`_decode`."""
     to = type(obj)
     if to is str:
         return Atom(obj)
-    if to is int:
+    if to is float or to is int:
         return obj
-    if to is float:
-        return obj
-    if _depth >= MAX_DEPTH:
-        raise TermError(f"term nested deeper than {MAX_DEPTH} levels", _where)
+    if depth >= MAX_DEPTH:
+        raise _Unusual
     if to is list:
-        if variables is None:
-            variables = {}
-        return [decode_term(v, strings=strings, variables=variables, _where=f"{_where}[{i}]",
-                            _depth=_depth + 1) for i, v in enumerate(obj)]
+        return [_decode_fast(v, strings, variables, depth + 1) for v in obj]
+    if to is dict and len(obj) == 1:
+        for key, value in obj.items():
+            if type(value) is list:
+                return Struct(key, [_decode_fast(v, strings, variables, depth + 1)
+                                    for v in value])
+            return _decode_special(key, value, strings, variables, "")
+    raise _Unusual
+
+
+def _decode(obj: Any, strings: type, variables: dict, where: str, depth: int) -> Any:
+    """Every value, keeping the path of each part for error messages."""
+    to = type(obj)
+    if to is str:
+        return Atom(obj)
+    if to is int or to is float:
+        return obj
+    if depth >= MAX_DEPTH:
+        raise TermError(f"term nested deeper than {MAX_DEPTH} levels", where)
+    if to is list:
+        return [_decode(v, strings, variables, f"{where}[{i}]", depth + 1)
+                for i, v in enumerate(obj)]
     if to is dict:
         if len(obj) != 1:
             raise TermError("an object must have exactly one key: a compound {\"name\": [args]} "
-                            "or one of $string, $int, $float, $var, $atom", _where)
+                            "or one of $string, $int, $float, $var, $atom", where)
         (key, value), = obj.items()
         if type(value) is list:
-            if variables is None:
-                variables = {}
-            return Struct(key, [decode_term(v, strings=strings, variables=variables,
-                                            _where=f"{_where}.{key}[{i}]", _depth=_depth + 1)
+            return Struct(key, [_decode(v, strings, variables, f"{where}.{key}[{i}]", depth + 1)
                                 for i, v in enumerate(value)])
-        return _decode_special(key, value, strings, variables, _where)
+        return _decode_special(key, value, strings, variables, where)
     if obj is None or to is bool:
         raise TermError(f"{json.dumps(obj)} is not a term (an atom is a JSON string: "
-                        f"\"{json.dumps(obj)}\")", _where)
-    raise TermError(f"{obj!r} is not a term", _where)
+                        f"\"{json.dumps(obj)}\")", where)
+    raise TermError(f"{obj!r} is not a term", where)
 
 
 def _decode_special(key: str, value: Any, strings: type, variables: dict | None,
