@@ -177,3 +177,26 @@ def test_errors_come_back_as_the_same_class_and_text(exc, status):
 def test_any_message_text_travels(message):
     back = error_from_body(loads(dumps(error_body(SLRTimeout(message)))), 408)
     assert str(back) == message
+
+
+def as_terms(value):
+    """Plain JSON read the way the knowledge base reads Python values: str is an atom."""
+    if type(value) is str:
+        return Atom(value)
+    if type(value) is list:
+        return [as_terms(v) for v in value]
+    assert type(value) in (int, float), value
+    return value
+
+
+@given(st.lists(terms, max_size=4), st.lists(st.text(max_size=5), max_size=3))
+def test_the_server_skips_decoding_only_when_arguments_are_plain_json(args, texts):
+    """add_many's shortcut (arguments used as parsed) is taken only when it means the same
+    terms as decoding them."""
+    from slr_sql.service.app import _plain_arguments
+
+    events = [{"name": "p", "args": encode_term(args), "start": 1.0}] + texts
+    body = dumps({"events": events, "atomic": False})
+    parsed = loads(body)["events"]
+    if _plain_arguments(body, parsed):
+        assert same(as_terms(parsed[0]["args"]), decode_term(parsed[0]["args"]))
