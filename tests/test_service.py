@@ -292,6 +292,17 @@ def test_submitted_query_waits_until_another_client_completes_the_history(server
         remote.submit(f"{tag}seen(X^T", at=1)
 
 
+def test_a_synchronized_query_in_one_request(server, remote, tag):
+    remote.add(f"{tag}seen(a)^1")
+    remote.mark_complete(f"{tag}seen/1", 5)
+    response = httpx.post(server.url + "/query", json={"goal": f"{tag}seen(X)^T", "at": 5,
+                                                      "wait": True}, timeout=30)
+    assert response.json() == {"answers": [{"X": "a", "T": 1.0}]}
+    response = httpx.post(server.url + "/query", json={"goal": f"{tag}seen(X)^T", "at": 1e9,
+                                                      "wait": True, "timeout": 0.2}, timeout=30)
+    assert response.status_code == 408 and response.json()["error"]["kind"] == "SLRTimeout"
+
+
 def test_a_long_poll_cut_off_by_its_client_leaves_the_query_answerable(server, remote, tag):
     remote.add(f"{tag}late(y)^1")     # its delay (wall clock - 1 s) keeps at=20 incomplete
     pending = remote.submit(f"{tag}late(X)^T", at=20)

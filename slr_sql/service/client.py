@@ -254,11 +254,11 @@ class RemoteKnowledgeBase:
         if max_steps is not None:
             raise ServiceError("max_steps is not available over the network; use timeout=",
                                kind="NotImplemented")
+        if wait:  # synchronized: long-polls, however long the wait (as kb.query does it)
+            return self.submit(goal, at=at, args=args, timeout=timeout).result()
         body = _goal_body(goal, at, args, timeout)
         if limit is not None:
             body["limit"] = limit
-        if wait:
-            body["wait"] = True
         reply = self._post("/query", body, timeout=self._read_timeout(timeout))
         return decode_answers(reply["answers"])
 
