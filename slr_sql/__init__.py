@@ -12,7 +12,6 @@ from .kb import KnowledgeBase, open
 from .terms import Atom, String, Struct, Var
 
 
-
 def connect(url: str, token: str | None = None, **options):
     """A client for the ``slr serve`` at ``url`` with the methods of a local knowledge base
     (``token`` defaults to ``$SLR_TOKEN``; needs ``pip install 'slr_sql[service]'``).
