@@ -56,17 +56,31 @@ def strip_full_stop(text: str) -> str:
     return text
 
 
+def _is_url(db: str) -> bool:
+    return db.startswith(("http://", "https://"))
+
+
 def _open(db: str) -> Any:
+    """The store at DB: a file opened in this process, or the URL of a running `slr serve`."""
+    if _is_url(db):
+        ctx = click.get_current_context(silent=True)
+        token = (ctx.find_root().obj or {}).get("token") if ctx is not None else None
+        return slr_sql.connect(db, token=token)
     return slr_sql.open(db)
 
 
 @click.group(cls=SLRGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(version=slr_sql.__version__, prog_name="slr")
-def main() -> None:
+@click.option("--token", envvar="SLR_TOKEN", default=None,
+              help="Token for a DB given as the URL of `slr serve` (default: $SLR_TOKEN).")
+@click.pass_context
+def main(ctx: click.Context, token: str | None) -> None:
     """SLR: a Prolog-like language over robot event streams, in one SQLite file.
 
-    DB is the store's file; it is created on first use.
+    DB is the store's file; it is created on first use. DB may also be the URL of a
+    running `slr serve` (http://HOST:PORT).
     """
+    ctx.obj = {"token": token}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -366,7 +380,7 @@ def run_sql(db: str, statement: str) -> tuple[list[str], list[tuple]]:
     """
     from .store import DatabaseError, run_sql_file
 
-    if not os.path.exists(db):
+    if not _is_url(db) and not os.path.exists(db):
         raise slr_sql.SLRError(f"no such store: {db}")
     with _open(db) as kb:
         if hasattr(kb, "sql"):
@@ -570,14 +584,25 @@ def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None
 # ---------------------------------------------------------------------------------------------
 
 @main.command()
-@click.argument("db", type=click.Path(exists=True, dir_okay=False))
+@click.argument("db")
 def stats(db: str) -> None:
     """Print the file size, events stored per type and each buffer's counters."""
     from .buffers import format_stats
     from .store import EventStore
 
+    if _is_url(db):
+        with _open(db) as kb:
+            click.echo(kb.stats()["text"])
+        return
+    if not os.path.isfile(db):
+        raise slr_sql.SLRError(f"no such store: {db}")
     with EventStore(db) as store:
         click.echo(format_stats(store, db))
+
+
+from .service.cli import serve  # noqa: E402  (slr serve; its body imports uvicorn when run)
+
+main.add_command(serve)
 
 
 if __name__ == "__main__":  # pragma: no cover
