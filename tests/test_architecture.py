@@ -25,8 +25,8 @@ LAYERS = {
     "planner": 5,
     "sync": 6, "buffers": 6, "cep": 6, "plot": 6,
     "kb": 7,
-    "__init__": 8,
-    "demo": 9, "service": 9, "ros": 9,
+    "demo": 8, "service": 8, "ros": 8,
+    "__init__": 9,  # the public surface: open() from kb, connect() from service
     "cli": 10,
     "__main__": 11,
 }
