@@ -411,8 +411,6 @@ def _value(v):
 
 
 def _py_list(items):
-    if not items:
-        return Atom("[]")  # to_python gives the empty list as the atom []
     out = []
     for x in items:
         tx = type(x)

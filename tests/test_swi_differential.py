@@ -277,7 +277,7 @@ def from_slr(v, varmap: dict) -> tuple:
     if type(v) is list:
         return ("l", tuple(from_slr(x, varmap) for x in v))
     if type(v) is Atom:
-        return ("l", ()) if v == "[]" else ("a", str(v))
+        return ("a", str(v))  # the empty list comes back as [], never as an atom
     if type(v) is str:
         return ("s", v)
     if type(v) is Struct:

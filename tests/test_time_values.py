@@ -67,7 +67,8 @@ def seen_kb(kb):
     ("prev(seen(X)^T, 6)", [{"X": Atom("x"), "T": 5.0}]),
     ("prev(seen(X)^[1, 2], [0, 9])", [{"X": Atom("y")}]),
     ("next(seen(X)^[1, 2], [0, inf])", [{"X": Atom("y")}]),
-    ("next(seen(X)^5, [0, inf])", []),          # the first event from 0 on is y's [1, 2]
+    ("next(seen(X)^5, [0, inf])", [{"X": Atom("x")}]),   # the first *matching* event
+    ("next(seen(X)^5, [0, 4])", []),
     ("next(seen(X)^5, 3, 9)", [{"X": Atom("x")}]),
     ("next(seen(X)^T, [3, inf])", [{"X": Atom("x"), "T": 5.0}]),
     # data arguments keep Prolog's rule: the stored integer 5 is not 5.0
@@ -180,8 +181,10 @@ def test_the_empty_list_from_submit():
         kb.close()
 
 
-def test_str_of_the_empty_list_is_its_prolog_text(kb):
+def test_str_of_a_returned_term_is_its_prolog_text(kb):
     assert str(kb.query("X = []")[0]["X"]) == "[]"
+    value = kb.query('X = f([a, "s", [], g([1])], [])')[0]["X"]
+    assert str(value) == 'f([a,"s",[],g([1])],[])'
 
 
 # ------------------------------------------------------------------------ ^T predicates called plainly
@@ -238,7 +241,7 @@ def test_declaring_a_second_arity_of_stored_events_is_refused(kb):
         kb.load(":- event seg/2.")
     message = str(info.value)
     assert "seg/2" in message and "seg/1" in message and ":- event seg/1" in message
-    assert kb.declared_types() == set() if hasattr(kb, "declared_types") else True
+    assert kb.store.declared_types() == set()
     # nothing was loaded: seg/1 events are still accepted, seg/2 is not declared
     kb.add("seg(cup2)^2")
     assert len(kb.query("seg(O)^T")) == 2
