@@ -93,6 +93,19 @@ def test_times_given_from_python_match_by_value(seen_kb, engine, t):
 
 
 @pytest.mark.parametrize("engine", ENGINES)
+def test_integers_beyond_64_bits_match_by_value(kb, engine):
+    """2**53 + 1 equals no float; 10**20 equals the float 1e20 exactly."""
+    kb.add_many(["big(x)^1.0e20", "big(y)^9007199254740992"])
+    for goal, args, want in [
+            ("big(X)^T", {"T": 10 ** 20}, [{"X": Atom("x"), "T": 10 ** 20}]),
+            ("big(X)^100000000000000000000", None, [{"X": Atom("x")}]),
+            ("big(X)^9007199254740993", None, []),
+            ("big(X)^T", {"T": 2 ** 53 + 1}, []),
+            ("prev(big(X)^T, 1.0e21)", {"T": 10 ** 20}, [{"X": Atom("x"), "T": 10 ** 20}])]:
+        assert typed(ask(kb, goal, engine, args=args)) == typed(want), goal
+
+
+@pytest.mark.parametrize("engine", ENGINES)
 def test_stream_view_with_an_integer_time(seen_kb, engine):
     assert typed(ask(seen_kb, "seen(X)^5", engine, at=5)) == typed([{"X": Atom("x")}])
     assert ask(seen_kb, "seen(X)^5", engine, at=4) == []
