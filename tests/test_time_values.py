@@ -277,3 +277,15 @@ def test_second_arity_next_to_a_declared_one_is_accepted(kb):
     kb.load(":- event seg/2.")
     kb.add("seg(cup1, [1, 2])^2")
     assert len(kb.query("seg(O, L)^T")) == 1
+
+
+# ------------------------------------------------------------------------ buffers
+
+@pytest.mark.parametrize("stamp", ["5", "5.0", "[1, 2]"])
+def test_buffer_patterns_take_no_time_to_match(kb, stamp):
+    """A buffer selects events by their arguments: a time in its pattern is refused (so no
+    time there is ever compared), a variable stamp is ignored."""
+    with pytest.raises(SLRError, match="time stamp must be a variable"):
+        kb.load(f"tBuffer(p(_)^{stamp}, 10).")
+    kb.load("tBuffer(p(_)^T, 10).")
+    assert [b.pattern for b in kb.buffers()] == ["p(_)"]
