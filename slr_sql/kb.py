@@ -341,6 +341,7 @@ class KnowledgeBase:
         with self._load_lock:
             program, decls = self._compile_program(text, filename, self.program,
                                                    self.declarations)
+            self._check_event_arities(decls, filename)
             old = (self.program, self.declarations)
             with self.store.transaction():
                 self.store.append_program(text, filename)
@@ -355,6 +356,29 @@ class KnowledgeBase:
                     raise
             self.engine.program = program
             self._plans.clear()
+
+    def _check_event_arities(self, decls: Declarations, filename: str) -> None:
+        """Refuse ``:- event p/N`` when the store already has events of p with another
+        arity M that nobody declared: p/N would silently become a second type (its own
+        table) beside them -- most often a changed mind about p's arguments. Declaring p/M
+        too (``:- event p/M, p/N.``) says both are meant."""
+        new = decls.event_types - self.declarations.event_types
+        if not new:
+            return
+        stored = self.store.event_types()
+        declared = decls.event_types | self.store.declared_types()
+        for name, arity in sorted(new):
+            others = sorted(a for (n, a) in stored if n == name and a != arity
+                            and (n, a) not in declared)
+            if others:
+                other = others[0]
+                p = format_term(Atom(name))
+                raise SLRError(
+                    f"{filename}: :- event {p}/{arity}: the store already holds events of "
+                    f"{p}/{other} (table {stored[(name, other)]}), which no program "
+                    f"declares; an event type is name/arity, so {p}/{arity} would be a "
+                    f"second type beside it, with a table of its own. If both are meant, "
+                    f"declare both (:- event {p}/{other}, {p}/{arity}.)")
 
     def load_file(self, path: str | Path) -> None:
         """Load a program file (see :meth:`load`)."""

@@ -312,6 +312,10 @@ class SqlPlan:
         # interpreter (which raises, or not, exactly when a goal reaches it)
         self.num_args = frozenset(sqlcompile.NUM_ARG.findall(
             (sql or "") + "".join(guards))) & frozenset(arg_params.values())
+        # arguments from Python matched with stored times: one beyond 64 bits goes to the
+        # interpreter (SQL holds it as text, the interpreter compares it by value)
+        self.time_args = frozenset(sqlcompile.TIME_ARG.findall(
+            (sql or "") + "".join(guards))) & frozenset(arg_params.values())
         self.time_sites = time_sites      # ((name, n), time parameter or SQL) per prev/next
         self.params = params
         self.arg_params = arg_params      # variable name -> parameter name
@@ -333,6 +337,9 @@ class SqlPlan:
             params = dict(params)
             for name, pname in self.arg_params.items():
                 params[pname] = encode(values[name])
+                if pname in self.time_args and type(params[pname]) is str \
+                        and type(values[name]) is int:
+                    raise TypeError(f"argument :{pname} is a time beyond 64 bits")
             if self.has_at:
                 params["at"] = float(at)
         for name in self.num_args:
@@ -411,8 +418,6 @@ def _value(v):
 
 
 def _py_list(items):
-    if not items:
-        return Atom("[]")  # to_python gives the empty list as the atom []
     out = []
     for x in items:
         tx = type(x)

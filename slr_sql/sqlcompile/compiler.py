@@ -174,8 +174,11 @@ class Compiler(Unification, BuiltinGoals, ControlGoals, RuleGoals, EventGoals, A
         fn = self.ctx.python_preds.get(key)
         if fn is not None:
             return self.det_sql(key, fn, True, args, nxt, st, emit)
-        if key in self.program.dynamic or key in self.program.temporal:
+        if key in self.program.dynamic:
             return  # fails
+        if key in self.program.temporal:
+            raise Fallback(f"{name}/{len(args)} is only defined with ^T: a plain call is an "
+                           f"existence error at run time")
         raise Fallback(f"unknown predicate {name}/{len(args)} (existence error at run time)")
 
 

@@ -27,12 +27,13 @@ class EventGoals:
         return self.event_sql(ev, ctx, nxt, st, emit)
 
     def row_unify(self, pattern: tuple, alias: str, n: int, st: State) -> bool:
-        cols = [Col(f"{alias}.arg{i + 1}") for i in range(n)]
-        cols += [Col(f"{alias}.t_start", "float"), Col(f"{alias}.t_end", "float")]
-        for p, c in zip(pattern, cols):
-            if not self.unify(p, c, st):
+        """Match an event pattern (data arguments + (start, end)) with a row of ``alias``:
+        the data by unification, the stored times by value (``^5`` finds 5.0)."""
+        for i, p in enumerate(pattern[:n]):
+            if not self.unify(p, Col(f"{alias}.arg{i + 1}"), st):
                 return False
-        return True
+        return (self.match_time(pattern[n], Col(f"{alias}.t_start", "float"), st)
+                and self.match_time(pattern[n + 1], Col(f"{alias}.t_end", "float"), st))
 
     def event_table(self, name: str, n: int) -> str | None:
         table = self.ctx.event_table(name, n)

@@ -14,6 +14,9 @@ from .model import Part
 
 # slr_num(:aN): a value bound from Python (kb.query args) used as a number
 NUM_ARG = re.compile(r"slr_num\(:(a\d+)\)")
+# a value bound from Python matched with a stored time (Unification.match_time): an integer
+# beyond 64 bits is bound as JSON text, which SQL cannot compare by value
+TIME_ARG = re.compile(r"typeof\(:(a\d+)\) IN \('integer', 'real'\)")
 
 
 def guards(raising: list, branches: list) -> list[str]:

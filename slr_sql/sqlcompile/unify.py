@@ -58,6 +58,40 @@ class Unification:
                 return False
         return True
 
+    def match_time(self, t: Any, col: Col, st: State) -> bool:
+        """Match a goal's time term with a stored time column (REAL) by value, as the
+        interpreter does (:func:`slr_sql.unify.match_time`): a variable is bound to the
+        column, a number compares numerically, a run-time value must be a number equal to
+        it; anything else fails. False: fails whatever the rows hold."""
+        t = deref(t)
+        tt = type(t)
+        if tt is Var:
+            return self.unify(t, col, st)
+        if tt is int:
+            try:
+                value = float(t)
+            except OverflowError:
+                return False
+            if value != t:
+                return False  # no float equals it (beyond 2**53, not a multiple)
+            st.conds.append(f"{col.sql} = {self.const(value)}")
+            return True
+        if tt is float:
+            if t != t:
+                return False  # NaN equals no stored time
+            st.conds.append(f"{col.sql} = {self.const(t)}")
+            return True
+        if tt is Col:
+            if t.kind in NUMERIC:
+                st.conds.append(f"{t.sql} = {col.sql}")
+            elif t.kind == "any":
+                # a stored value or an argument from Python: a number of equal value
+                st.conds.append(f"({t.sql} = {col.sql} AND typeof({t.sql}) IN ('integer', 'real'))")
+            else:
+                return False
+            return True
+        return False
+
     def eq_sql(self, col: Col, other: Any, st: State | None = None):
         """SQL for "the value of ``col`` unifies with ``other``" (True/False when static).
 
