@@ -7,13 +7,14 @@
 [{'O': Atom('cup1'), 'C': Atom('red'), 'T': 2.0}]
 """
 from .clocks import Clock, ManualClock, StreamClock, WallClock
-from .errors import EventRejected, SLRError, SLREvaluationError, SLRSyntaxError, SLRTimeout
+from .errors import EventRejected, SLRBusy, SLRError, SLREvaluationError, SLRSyntaxError, \
+    SLRTimeout
 from .kb import KnowledgeBase, open
 from .terms import Atom, String, Struct, Var
 
 __all__ = [
     "open", "KnowledgeBase", "Clock", "WallClock", "ManualClock", "StreamClock",
-    "SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "EventRejected",
+    "SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRBusy", "EventRejected",
     "Atom", "String", "Struct", "Var",
 ]
 __version__ = "0.1.0"
