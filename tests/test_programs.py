@@ -59,7 +59,8 @@ def test_replace_swaps_one_program_in_place(any_kb):
     assert values(kb) == [10, 11, 20, 30]
 
 
-@pytest.mark.parametrize("bad", ["p(", "p(1) :- 1.", "atom_length(a, 1).", ":- nosuch(1)."])
+@pytest.mark.parametrize("bad", ["p(", "cBuffer(e(_), 3). tBuffer(e(_), 2).", "atom_length(a, 1).",
+                                 ":- nosuch(1)."])
 def test_a_bad_replacement_changes_nothing(any_kb, bad):
     kb = any_kb
     kb.load("p(1). p(2).", name="a")
