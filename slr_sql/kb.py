@@ -265,7 +265,8 @@ class KnowledgeBase:
 
     # -- lifecycle ----------------------------------------------------------------------
     def close(self) -> None:
-        """Close the store (a checkpoint of the WAL included)."""
+        """Close the store. It never waits for another process (the checkpoint of the WAL
+        on close is ``PASSIVE``: what a reader still needs stays in the WAL)."""
         if getattr(self, "_sync", None) is not None:  # issue 5: fail waiting queries, stop threads
             self._sync.close()
         self.store.close()
@@ -305,6 +306,7 @@ class KnowledgeBase:
         a change committed in between is seen again at the next call."""
         version = self.store.program_version()
         texts = self.store.program_texts()
+        self.store.event_types()   # re-read the event types too: declared arities may be new
         program, decls = self._build(self._parse_texts(texts))
         self.program, self.declarations = program, decls
         self.engine.program = program
@@ -315,11 +317,12 @@ class KnowledgeBase:
 
     def _ensure_current(self) -> bool:
         """Inside a write transaction: make sure the program is the stored one (re-read it
-        if another connection changed it); True if it had to be re-read."""
+        if another connection changed it); True if it had to be re-read. (Without taking
+        the load lock: a thread holding it may be waiting for the store lock we hold, and
+        no load can be between its write and its commit while we hold that.)"""
         if self.store.program_version() == self._program_version:
             return False
-        with self._load_lock:
-            self._reload_program()
+        self._reload_program()
         return True
 
     def _parse_texts(self, texts: list) -> list[list[Clause]]:

@@ -23,6 +23,7 @@ table in one thread never aborts another thread's scan).
 from __future__ import annotations
 
 import os
+import random
 import sqlite3
 import threading
 import time
@@ -197,10 +198,7 @@ class Database:
             conn = self.conn
             if depth == 0:
                 self.suspend_streams()
-                try:
-                    conn.execute("BEGIN IMMEDIATE")
-                except sqlite3.OperationalError as exc:
-                    raise busy_error(exc, self.path) or exc from None
+                self._begin()
             else:
                 conn.execute(f"SAVEPOINT slr_sp{depth}")
             self.tx_depth = depth + 1
@@ -225,6 +223,38 @@ class Database:
                     conn.execute("ROLLBACK")
                 self._rolled_back()
                 raise
+
+    def _begin(self) -> None:
+        """``BEGIN IMMEDIATE``, waiting at most ``busy_timeout`` seconds for another
+        connection's write transaction. SQLite's own busy handler sleeps longer and longer
+        between tries (up to 100 ms), so a process committing back to back keeps the lock
+        from the others for seconds; here the lock is tried again every 0.1 to 2 ms (a try
+        is a few microseconds), so writers take turns."""
+        conn = self.conn
+        if self.path is None:  # in memory: no other connection to wait for
+            conn.execute("BEGIN IMMEDIATE")
+            return
+        conn.execute("PRAGMA busy_timeout = 0")
+        try:
+            deadline = None
+            pause = 1e-4
+            while True:
+                try:
+                    conn.execute("BEGIN IMMEDIATE")
+                    return
+                except sqlite3.OperationalError as exc:
+                    busy = busy_error(exc, self.path)
+                    if busy is None:
+                        raise
+                    now = time.monotonic()
+                    if deadline is None:
+                        deadline = now + self.busy_timeout
+                    if now >= deadline:
+                        raise busy from None
+                    time.sleep(min(pause * (0.5 + random.random()), deadline - now))
+                    pause = min(pause * 2, 2e-3)
+        finally:
+            conn.execute(f"PRAGMA busy_timeout = {int(self.busy_timeout * 1000)}")
 
     def _rolled_back(self) -> None:
         for listener in self.rollback_listeners:
