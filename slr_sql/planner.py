@@ -252,6 +252,8 @@ class _State:
                         if store.program_version() == kb._program_version:
                             self.facts = store.replace_fact_tables(
                                 fact_rows(program), version=kb._program_version)
+                            self.facts_program = program
+                            refresh_views(kb)   # views of the old tables go with them
                 except SLRBusy:
                     pass   # compile without fact tables (facts unfolded) until next time
             self.facts_program = program

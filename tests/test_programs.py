@@ -217,3 +217,50 @@ def test_a_stored_program_named_with_reserved_words_reopens(db_path):
     with slr_sql.open(db_path) as kb:
         assert values(kb, "sqlite_foo(X)") == [1, 2, 3, 4, 5]
         assert values(kb, "slr_facts_q_1(X)") == ["a"]
+
+
+# ------------------------------------------------------------------ migrations
+
+def test_the_migration_runner_applies_a_lower_number_merged_later(tmp_path):
+    import sqlite3
+
+    from slr_sql.store.schema import applied_migrations, migrate, migration_scripts
+
+    scripts = migration_scripts()
+    numbers = [n for n, _, _ in scripts]
+    assert 3 not in numbers and 4 in numbers   # the gap this test is about
+    conn = sqlite3.connect(tmp_path / "s.db", isolation_level=None)
+    migrate(conn, "s.db", scripts)
+    assert applied_migrations(conn) == set(numbers)
+    later = (3, "0003_later.sql", "CREATE TABLE slr_later (x INTEGER);")
+    migrate(conn, "s.db", sorted(scripts + [later]))
+    assert applied_migrations(conn) == set(numbers) | {3}
+    assert conn.execute("PRAGMA user_version").fetchone()[0] == max(numbers)
+    assert conn.execute("SELECT count(*) FROM slr_later").fetchone() == (0,)
+    conn.close()
+
+
+def test_a_store_from_before_named_programs_opens_with_its_program_as_main(tmp_path):
+    import sqlite3
+
+    from slr_sql.store.schema import migrate, migration_scripts
+
+    path = tmp_path / "old.db"
+    conn = sqlite3.connect(path, isolation_level=None)
+    conn.execute("PRAGMA journal_mode=WAL")
+    migrate(conn, str(path), [s for s in migration_scripts() if s[0] <= 2])
+    facts = " ".join(f"usedFor(c{i}, tea)." for i in range(6))
+    conn.execute("INSERT INTO slr_program (source, filename, loaded_at) VALUES (?, NULL, 0)",
+                 (facts,))
+    conn.execute("CREATE TABLE slr_facts_usedFor_2 (ord INTEGER PRIMARY KEY, arg1, arg2)")
+    conn.execute("CREATE VIEW usedFor AS SELECT arg1, arg2 FROM slr_facts_usedFor_2")
+    conn.execute("""INSERT INTO slr_meta VALUES ('sql_views', '["usedFor"]')""")
+    conn.close()
+    with slr_sql.open(path) as kb:
+        assert list(kb.programs()) == ["main"]
+        kb.add_many(["obj(c1)^1", "obj(c5)^2"])
+        assert values(kb, "findall(O, (obj(O)^_, usedFor(O, tea)), L)", "L") == [["c1", "c5"]]
+        tables = [r[0] for r in kb.sql("SELECT name FROM sqlite_master WHERE type = 'table' "
+                                       "AND name LIKE 'slr_facts%'")[1]]
+        assert tables == ["slr_facts_2_used_for"]
+        assert len(kb.sql("SELECT * FROM usedFor")[1]) == 6   # the view follows the table

@@ -46,7 +46,8 @@ def migration_scripts() -> list[tuple[int, str, str]]:
     return scripts
 
 
-def applied_migrations(conn: sqlite3.Connection) -> set[int]:
+def applied_migrations(conn: sqlite3.Connection,
+                       scripts: list[tuple[int, str, str]] | None = None) -> set[int]:
     """The numbers of the migrations applied to ``conn``'s database: those recorded in
     ``slr_migrations``, or (a store from before that table) every number up to
     ``PRAGMA user_version``.
@@ -60,28 +61,32 @@ def applied_migrations(conn: sqlite3.Connection) -> set[int]:
                              "AND name = 'slr_migrations'").fetchone()
     if has_table:
         return {row[0] for row in conn.execute("SELECT number FROM slr_migrations")}
-    return {number for number, _, _ in migration_scripts() if number <= current}
+    return {number for number, _, _ in (migration_scripts() if scripts is None else scripts)
+            if number <= current}
 
 
-def migrate(conn: sqlite3.Connection, path: str | None) -> None:
+def migrate(conn: sqlite3.Connection, path: str | None,
+            scripts: list[tuple[int, str, str]] | None = None) -> None:
     """Apply the migrations ``conn`` has not seen yet (``path`` names the file in errors).
 
     Every script not applied yet runs, in number order, whatever the gaps in the numbering
     (a script merged later with a lower number than one applied already still runs); each
     is recorded in ``slr_migrations`` and ``PRAGMA user_version`` is the highest applied.
-    A store that is up to date is only read (no write lock needed to open it).
+    A store that is up to date is only read (no write lock needed to open it). ``scripts``
+    (default :func:`migration_scripts`) is for tests.
 
     >>> conn = sqlite3.connect(":memory:", isolation_level=None); migrate(conn, None)
     >>> conn.execute("PRAGMA user_version").fetchone()[0] == migration_scripts()[-1][0]
     True
     """
-    scripts = migration_scripts()
+    if scripts is None:
+        scripts = migration_scripts()
     latest = scripts[-1][0] if scripts else 0
     current = conn.execute("PRAGMA user_version").fetchone()[0]
     if current > latest:
         raise SLRError(f"{path}: database schema version {current} is newer than this "
                        f"slr_sql supports ({latest}); upgrade slr_sql")
-    if all(number in applied_migrations(conn) for number, _, _ in scripts):
+    if all(number in applied_migrations(conn, scripts) for number, _, _ in scripts):
         return
     for number, filename, text in scripts:
         try:
@@ -90,7 +95,7 @@ def migrate(conn: sqlite3.Connection, path: str | None) -> None:
             raise busy_error(exc, path) or exc from None
         try:
             # another process may have migrated between our check and the lock
-            applied = applied_migrations(conn)
+            applied = applied_migrations(conn, scripts)
             if number in applied:
                 conn.execute("COMMIT")
                 continue
