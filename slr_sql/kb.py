@@ -289,7 +289,6 @@ class KnowledgeBase:
         data_version = store.data_version()
         if data_version == self._seen_data_version:
             return
-        self._seen_data_version = data_version
         program_version, progress_version = store.versions()
         if program_version != self._program_version:
             with self._load_lock:
@@ -299,6 +298,7 @@ class KnowledgeBase:
             self._progress_version = progress_version
             for listener in self.progress_listeners:
                 listener()
+        self._seen_data_version = data_version   # (not before: a failed re-read is retried)
 
     def _reload_program(self) -> None:
         """Build the program from the texts stored now (the union of every named program,

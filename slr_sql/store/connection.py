@@ -105,7 +105,7 @@ class Database:
                     conn.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
                 conn.execute("PRAGMA journal_mode=WAL")
         except sqlite3.OperationalError as exc:
-            busy = busy_error(exc, self.path)
+            busy = busy_error(exc, self.path, self.busy_timeout)
             if busy is None:
                 raise
             conn.close()
@@ -243,7 +243,7 @@ class Database:
                     conn.execute("BEGIN IMMEDIATE")
                     return
                 except sqlite3.OperationalError as exc:
-                    busy = busy_error(exc, self.path)
+                    busy = busy_error(exc, self.path, self.busy_timeout)
                     if busy is None:
                         raise
                     now = time.monotonic()
@@ -277,7 +277,7 @@ class Database:
                 columns = [d[0] for d in cursor.description] if cursor.description else []
                 return columns, cursor.fetchall()
             except sqlite3.OperationalError as exc:
-                raise busy_error(exc, self.path) or exc from None
+                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
         """Execute one statement for another slr_sql module (triggers, buffer pruning, ...)
@@ -292,7 +292,7 @@ class Database:
             try:
                 return self.conn.execute(sql, tuple(params)).fetchall()
             except sqlite3.OperationalError as exc:
-                raise busy_error(exc, self.path) or exc from None
+                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
 
     def executemany(self, sql: str, rows: Iterable[Iterable[Any]]) -> None:
         """``executemany`` for other slr_sql modules.
@@ -402,7 +402,7 @@ class Database:
                 if deadline is not None and time.monotonic() > deadline \
                         and "interrupt" in str(exc):
                     raise SLRTimeout("query timed out (in its compiled SQL statement)") from None
-                raise busy_error(exc, self.path) or exc from None
+                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
             finally:
                 if deadline is not outer:
                     self.deadline = outer

@@ -36,12 +36,13 @@ rowid oid _rowid_
 """.split())
 
 
-def busy_error(exc: BaseException, path: str | None) -> SLRBusy | None:
+def busy_error(exc: BaseException, path: str | None,
+               timeout: float | None = None) -> SLRBusy | None:
     """The :class:`SLRBusy` to raise for ``exc`` if it says the database stayed locked by
     another connection past the busy timeout (``SQLITE_BUSY``), else None.
 
-    >>> str(busy_error(sqlite3.OperationalError("database is locked"), "robot.db"))
-    'robot.db: the store is locked by another connection (another process or knowledge base writing it); gave up waiting after the busy timeout'
+    >>> print(busy_error(sqlite3.OperationalError("database is locked"), "robot.db", 5))
+    robot.db: locked by another writer (a process or knowledge base) for more than 5 s
     >>> busy_error(sqlite3.OperationalError("no such table: x"), "robot.db") is None
     True
     """
@@ -50,9 +51,9 @@ def busy_error(exc: BaseException, path: str | None) -> SLRBusy | None:
         (code is None and "database is locked" in str(exc))
     if not busy:
         return None
-    return SLRBusy(f"{path or ':memory:'}: the store is locked by another connection (another "
-                   f"process or knowledge base writing it); gave up waiting after the busy "
-                   f"timeout")
+    waited = f" for more than {timeout:g} s" if timeout is not None else ""
+    return SLRBusy(f"{path or ':memory:'}: locked by another writer (a process or knowledge "
+                   f"base){waited}")
 
 
 def quote_identifier(name: str) -> str:
