@@ -823,6 +823,10 @@ class KnowledgeBase:
 def open(path: str | Path | None = None, clock: Clock | None = None, **options: Any) -> KnowledgeBase:
     """Open (or create) a knowledge base; ``path=None`` gives an in-memory one.
 
+    Options: ``synchronous`` (``"FULL"``: an event is on disk when its add returns),
+    ``busy_timeout`` (seconds a write waits for another process's write transaction before
+    :class:`~slr_sql.errors.SLRBusy`; default 5).
+
     >>> kb = open(); kb.close()
     """
     return KnowledgeBase(path, clock, **options)
