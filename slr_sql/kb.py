@@ -85,7 +85,7 @@ class ProgramInfo:
     name: str
     source: str             # its texts, in load order, joined by newlines
     texts: int              # how many texts were loaded under the name
-    filenames: list         # the file (or "<string>") of each text
+    filenames: tuple        # the file (or "<string>") of each text
     loaded_at: float | None  # store clock time of its latest text
 
 
@@ -509,11 +509,11 @@ class KnowledgeBase:
             info = out.get(text.name)
             if info is None:
                 out[text.name] = ProgramInfo(text.name, text.source, 1,
-                                             [text.filename or "<string>"], text.loaded_at)
+                                             (text.filename or "<string>",), text.loaded_at)
             else:
                 out[text.name] = ProgramInfo(
                     text.name, info.source + "\n" + text.source, info.texts + 1,
-                    info.filenames + [text.filename or "<string>"], text.loaded_at)
+                    info.filenames + (text.filename or "<string>",), text.loaded_at)
         return out
 
     def load_file(self, path: str | Path, *, name: str = "main", replace: bool = False) -> None:

@@ -41,7 +41,8 @@ def test_programs_are_named_and_loading_a_name_again_adds_to_it(any_kb):
     assert list(programs) == ["a", "b", "main"]
     assert programs["a"].source == "p(1).\np(3)."
     assert programs["a"].texts == 2 and programs["main"].texts == 1
-    assert programs["b"].filenames == ["<string>"]
+    assert programs["b"].filenames == ("<string>",)
+    assert programs["a"].filenames == ("<string>", "<string>")
 
 
 def test_replace_swaps_one_program_in_place(any_kb):

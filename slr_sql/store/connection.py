@@ -88,7 +88,6 @@ class Database:
         self.open_streams: weakref.WeakSet = weakref.WeakSet()
         self.deadline: float | None = None  # of the compiled statement running now
         self.busy_timeout = busy_timeout
-        self._data_version: int | None = None
         self.conn = sqlite3.connect(self.path or ":memory:", check_same_thread=False,
                                     isolation_level=None, timeout=busy_timeout,
                                     cached_statements=512)
