@@ -108,11 +108,15 @@ def demo(db_path: str | None) -> None:
 @main.command()
 @click.argument("db", type=click.Path(dir_okay=False))
 @click.argument("file", type=click.Path(exists=True, dir_okay=False))
-def load(db: str, file: str) -> None:
-    """Append the clauses and declarations of FILE to the program in DB."""
+@click.option("--name", default="main", show_default=True,
+              help="the program to add FILE's clauses to")
+@click.option("--replace", is_flag=True,
+              help="make the program NAME exactly FILE (rerunnable: no second copy)")
+def load(db: str, file: str, name: str, replace: bool) -> None:
+    """Add the clauses and declarations of FILE to the program NAME in DB."""
     with _open(db) as kb:
-        kb.load_file(file)
-    click.echo(f"loaded {file}")
+        kb.load_file(file, name=name, replace=replace)
+    click.echo(f"{'replaced' if replace else 'loaded'} {file} as program {name!r}")
 
 
 @main.command()

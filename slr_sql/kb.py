@@ -23,12 +23,12 @@ from .engine import Engine, Machine
 from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
-from .store import EventStore
+from .store import DEFAULT_BUSY_TIMEOUT, EventStore
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
 from .terms import format_term
 
-__all__ = ["KnowledgeBase", "open", "Declarations", "parse_duration"]
+__all__ = ["KnowledgeBase", "open", "Declarations", "ProgramInfo", "parse_duration"]
 
 
 @dataclass
@@ -76,6 +76,23 @@ def _where(clause: Clause | None) -> str:
     if clause is None or clause.span is None:
         return ""
     return f"{clause.span.filename}:{clause.span.line}: "
+
+
+@dataclass(frozen=True)
+class ProgramInfo:
+    """One named program, as :meth:`KnowledgeBase.programs` describes it."""
+
+    name: str
+    source: str             # its texts, in load order, joined by newlines
+    texts: int              # how many texts were loaded under the name
+    filenames: tuple        # the file (or "<string>") of each text
+    loaded_at: float | None  # store clock time of its latest text
+
+
+def _program_name(name: Any) -> str:
+    if not isinstance(name, str) or not name:
+        raise SLRError(f"a program name is a non-empty string, not {name!r}")
+    return name
 
 
 @dataclass
@@ -204,19 +221,31 @@ class KnowledgeBase:
     """
 
     def __init__(self, path: str | Path | None = None, clock: Clock | None = None, *,
-                 synchronous: str = "FULL"):
+                 synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT):
         self.clock = clock if clock is not None else WallClock()
-        self.store = EventStore(path, self.clock, synchronous=synchronous)
+        self.store = EventStore(path, self.clock, synchronous=synchronous,
+                                busy_timeout=busy_timeout)
         self.path = self.store.path
         self.program = Program()
         self.declarations = Declarations()
         self.engine = Engine(self.program, self.store)
         self._plans: dict[tuple, _Plan] = {}
         self._load_lock = threading.RLock()
+        # the stored program version self.program was built from, the parsed stored texts
+        # (by id), and the store's data_version when the file was last checked for changes
+        self._program_version = -1
+        self._parsed: dict[int, tuple[str, list]] = {}
+        self._seen_data_version: int | None = None
         # extension points for the SQL compiler, buffers and synchronization
         self.load_listeners: list[Callable[["KnowledgeBase"], None]] = []
         self.add_listeners: list[Callable[[list], None]] = []
-        self._restore_program()
+        # called after the program was re-read from the file (another connection changed
+        # it): like load_listeners, but nothing is written (the writer did that)
+        self.reload_listeners: list[Callable[["KnowledgeBase"], None]] = []
+        # called when another connection raised learned delays or completeness marks
+        self.progress_listeners: list[Callable[[], None]] = []
+        self._progress_version = self.store.versions()[1]
+        self._reload_program()
         from . import buffers as _buffers  # event-history management (issue 4)
         self._buffers = _buffers.attach(self)
         from . import sync as _sync  # synchronized queries (issue 5): slr_sql/sync.py
@@ -236,7 +265,8 @@ class KnowledgeBase:
 
     # -- lifecycle ----------------------------------------------------------------------
     def close(self) -> None:
-        """Close the store (a checkpoint of the WAL included)."""
+        """Close the store. It never waits for another process (the checkpoint of the WAL
+        on close is ``PASSIVE``: what a reader still needs stays in the WAL)."""
         if getattr(self, "_sync", None) is not None:  # issue 5: fail waiting queries, stop threads
             self._sync.close()
         self.store.close()
@@ -247,19 +277,75 @@ class KnowledgeBase:
     def __exit__(self, *exc: Any) -> None:
         self.close()
 
-    # -- program ------------------------------------------------------------------------
-    def _restore_program(self) -> None:
-        for source, filename in self.store.program_sources():
-            program, decls = self._compile_program(source, filename or "<stored>",
-                                                   self.program, self.declarations)
-            self.program, self.declarations = program, decls
-        self.engine.program = self.program
+    # -- the file is the truth ----------------------------------------------------------
+    def _refresh(self) -> None:
+        """See what other connections (processes, knowledge bases) wrote since the last
+        call: a cheap ``PRAGMA data_version`` first; when it moved, the program and progress
+        versions; the program is re-read when its version moved, and the synchronizer
+        re-reads delays and marks when theirs did."""
+        store = self.store
+        if store.path is None:  # in memory: no other connection can write it
+            return
+        data_version = store.data_version()
+        if data_version == self._seen_data_version:
+            return
+        program_version, progress_version = store.versions()
+        if program_version != self._program_version:
+            with self._load_lock:
+                if store.program_version() != self._program_version:
+                    self._reload_program()
+        if progress_version != self._progress_version:
+            self._progress_version = progress_version
+            for listener in self.progress_listeners:
+                listener()
+        self._seen_data_version = data_version   # (not before: a failed re-read is retried)
 
-    def _compile_program(self, text: str, filename: str, base: Program,
-                         base_decls: Declarations) -> tuple[Program, Declarations]:
-        clauses = parse_program(text, filename)
-        program = base.copy()
-        decls = base_decls.copy()
+    def _reload_program(self) -> None:
+        """Build the program from the texts stored now (the union of every named program,
+        in load order) and tell the reload listeners. The version is read before the texts:
+        a change committed in between is seen again at the next call."""
+        version = self.store.program_version()
+        texts = self.store.program_texts()
+        self.store.event_types()   # re-read the event types too: declared arities may be new
+        program, decls = self._build(self._parse_texts(texts))
+        self.program, self.declarations = program, decls
+        self.engine.program = program
+        self._program_version = version
+        self._plans.clear()
+        for listener in self.reload_listeners:
+            listener(self)
+
+    def _ensure_current(self) -> bool:
+        """Inside a write transaction: make sure the program is the stored one (re-read it
+        if another connection changed it); True if it had to be re-read. (Without taking
+        the load lock: a thread holding it may be waiting for the store lock we hold, and
+        no load can be between its write and its commit while we hold that.)"""
+        if self.store.program_version() == self._program_version:
+            return False
+        self._reload_program()
+        return True
+
+    def _parse_texts(self, texts: list) -> list[list[Clause]]:
+        """The clauses of each stored text, parsed once per text id."""
+        parsed = {}
+        out = []
+        for text in texts:
+            cached = self._parsed.get(text.id)
+            if cached is None or cached[0] is not text.source and cached[0] != text.source:
+                cached = (text.source, parse_program(text.source, text.filename or "<stored>"))
+            parsed[text.id] = cached
+            out.append(cached[1])
+        self._parsed = parsed
+        return out
+
+    def _build(self, texts: Iterable[list[Clause]]) -> tuple[Program, Declarations]:
+        program, decls = Program(), Declarations()
+        for clauses in texts:
+            self._add_clauses(clauses, program, decls)
+        return program, decls
+
+    # -- program ------------------------------------------------------------------------
+    def _add_clauses(self, clauses: list[Clause], program: Program, decls: Declarations) -> None:
         for clause in clauses:
             if clause.head is None:
                 self._directive(clause, program, decls)
@@ -269,7 +355,6 @@ class KnowledgeBase:
             if type(head) is Struct and head.name in ("tBuffer", "cBuffer") and len(head.args) == 2:
                 decls.buffers.append(self._buffer_decl(head, clause))
             program.add_clause(clause)
-        return program, decls
 
     def _buffer_decl(self, head: Struct, clause: Clause) -> BufferDecl:
         pattern, amount = deref(head.args[0]), deref(head.args[1])
@@ -329,33 +414,47 @@ class KnowledgeBase:
                 msg = _where(clause) + msg
             raise SLRError(msg) from None
 
-    def load(self, text: str, filename: str = "<string>") -> None:
-        """Add the clauses and declarations of ``text`` to the program (persisted).
+    def load(self, text: str, filename: str = "<string>", *, name: str = "main",
+             replace: bool = False) -> None:
+        """Add the clauses and declarations of ``text`` to the program ``name`` (persisted);
+        with ``replace=True`` the program ``name`` becomes ``text`` alone, in its place.
 
-        All or nothing: a program with any error is rejected whole and the loaded program
-        stays as it was.
+        All or nothing: a text with any error is rejected whole and the program stays as it
+        was. The program a knowledge base runs is every named program stored in the file,
+        in load order, whoever loaded them (another process included).
 
         >>> kb = open(); kb.load("p(1). p(2)."); [a["X"] for a in kb.query("p(X)")]
         [1, 2]
+        >>> kb.load("p(3).", name="main", replace=True); [a["X"] for a in kb.query("p(X)")]
+        [3]
         """
-        with self._load_lock:
-            program, decls = self._compile_program(text, filename, self.program,
-                                                   self.declarations)
+        name = _program_name(name)
+        clauses = parse_program(text, filename)   # syntax errors before taking the lock
+        with self._load_lock, self.store.transaction():
+            # the write lock is ours: the texts stored now are the latest
+            stale = self.store.program_version() != self._program_version
+            if replace or stale:
+                texts = [t for t in self.store.program_texts() if not (replace and t.name == name)]
+                parsed = self._parse_texts(texts)
+                if replace:
+                    first = self._first_text_of(name)
+                    at = len([t for t in texts if first is not None and t.id < first])
+                    parsed = parsed[:at] + [clauses] + parsed[at:] if first is not None \
+                        else parsed + [clauses]
+                else:
+                    parsed = parsed + [clauses]
+                program, decls = self._build(parsed)
+            else:
+                program, decls = self.program.copy(), self.declarations.copy()
+                self._add_clauses(clauses, program, decls)
             self._check_event_arities(decls, filename)
-            old = (self.program, self.declarations)
-            with self.store.transaction():
-                self.store.append_program(text, filename)
-                for name, arity in sorted(decls.event_types - self.declarations.event_types):
-                    self.store.declare_type(name, arity)
-                self.program, self.declarations = program, decls
-                try:
-                    for listener in self.load_listeners:
-                        listener(self)
-                except BaseException:
-                    self.program, self.declarations = old
-                    raise
-            self.engine.program = program
-            self._plans.clear()
+            self._install(program, decls, lambda: self.store.replace_named_program(
+                name, text, filename) if replace else self.store.append_program(
+                text, filename, name), (text, clauses))
+
+    def _first_text_of(self, name: str) -> int | None:
+        ids = [t.id for t in self.store.program_texts() if t.name == name]
+        return min(ids) if ids else None
 
     def _check_event_arities(self, decls: Declarations, filename: str) -> None:
         """Refuse ``:- event p/N`` when the store already has events of p with another
@@ -380,10 +479,71 @@ class KnowledgeBase:
                     f"second type beside it, with a table of its own. If both are meant, "
                     f"declare both (:- event {p}/{other}, {p}/{arity}.)")
 
-    def load_file(self, path: str | Path) -> None:
+    def _install(self, program: Program, decls: Declarations, write: Callable[[], Any],
+                 parsed: tuple[str, list] | None = None) -> None:
+        """Inside the load transaction: store the change (``write``, returning the new
+        text's id), declare the event types, make ``program`` the kb's and let the load
+        listeners build what is derived from it (fact tables, views, buffers); on any error
+        everything is as before."""
+        old = (self.program, self.declarations, self._program_version, dict(self._parsed))
+        try:
+            text_id = write()
+            if parsed is not None:
+                self._parsed[text_id] = parsed
+            declared = self.store.declared_types()
+            for type_name, arity in sorted(decls.event_types - declared):
+                self.store.declare_type(type_name, arity)
+            self.program, self.declarations = program, decls
+            self._program_version = self.store.program_version()
+            for listener in self.load_listeners:
+                listener(self)
+        except BaseException:
+            self.program, self.declarations, self._program_version, self._parsed = old
+            raise
+        self.engine.program = program
+        self._plans.clear()
+
+    def unload(self, name: str) -> None:
+        """Remove the program ``name`` (its clauses, declarations and buffers; the events
+        stay). An error if no program has that name.
+
+        >>> kb = open(); kb.load("p(1).", name="tea"); kb.unload("tea"); kb.programs()
+        {}
+        """
+        name = _program_name(name)
+        with self._load_lock, self.store.transaction():
+            stored = self.store.program_texts()
+            texts = [t for t in stored if t.name != name]
+            if len(texts) == len(stored):
+                names = list(dict.fromkeys(t.name for t in stored))
+                raise SLRError(f"no program named {name!r} (loaded: "
+                               f"{', '.join(repr(n) for n in names) or 'none'})")
+            program, decls = self._build(self._parse_texts(texts))
+            self._install(program, decls, lambda: self.store.delete_program(name))
+
+    def programs(self) -> dict[str, "ProgramInfo"]:
+        """The named programs stored in the file, in load order of their first text.
+
+        >>> kb = open(); kb.load("p(1).", name="tea"); kb.programs()["tea"].source
+        'p(1).'
+        """
+        self._refresh()
+        out: dict[str, ProgramInfo] = {}
+        for text in self.store.program_texts():
+            info = out.get(text.name)
+            if info is None:
+                out[text.name] = ProgramInfo(text.name, text.source, 1,
+                                             (text.filename or "<string>",), text.loaded_at)
+            else:
+                out[text.name] = ProgramInfo(
+                    text.name, info.source + "\n" + text.source, info.texts + 1,
+                    info.filenames + (text.filename or "<string>",), text.loaded_at)
+        return out
+
+    def load_file(self, path: str | Path, *, name: str = "main", replace: bool = False) -> None:
         """Load a program file (see :meth:`load`)."""
         path = Path(path)
-        self.load(path.read_text(encoding="utf-8"), str(path))
+        self.load(path.read_text(encoding="utf-8"), str(path), name=name, replace=replace)
 
     def define(self, name: str, arity: int, fn: Callable) -> None:
         """Register a Python predicate ``name/arity``.
@@ -471,6 +631,7 @@ class KnowledgeBase:
         return errors + self._add(prepared, atomic=atomic)
 
     def _add(self, events: list, atomic: bool) -> list[EventRejected]:
+        self._refresh()
         # -- issue 5: fullyUpdated(p/N)^t / fullyUpdated(p)^t are completeness marks, not events
         marks: list = []
         if getattr(self, "_sync", None) is not None:
@@ -563,6 +724,7 @@ class KnowledgeBase:
         """
         if wait:  # issue 5: synchronized (SLRTimeout names the incomplete types)
             return self.submit(goal, at=at, args=args, timeout=timeout).result()
+        self._refresh()
         plan = self._plan(goal, tuple(args) if args else ())
         if plan.lookup is not None and limit is None:
             frame = [None] * plan.compiled.nslots
@@ -594,6 +756,7 @@ class KnowledgeBase:
         >>> open().explain("p(X)").splitlines()[0]
         'goal: p(X)'
         """
+        self._refresh()
         plan = self._plan(goal, ())
         from .planner import explain as _explain  # issue 3: SQL or interpreter, and why
         lines = [f"goal: {goal}"] + _explain(self, plan)
@@ -616,6 +779,7 @@ class KnowledgeBase:
         >>> kb.mark_complete("p/1", 1); p.result(timeout=5)
         [{'L': [Atom('a')]}]
         """
+        self._refresh()
         return self._sync.submit(goal, at=at, id=id, args=args, timeout=timeout,
                                  callback=callback)
 
@@ -630,11 +794,13 @@ class KnowledgeBase:
     def mark_complete(self, event_type: str, t: float) -> None:
         """Declare the history of ``"p/N"`` (or ``"p"``: every arity) complete up to ``t``
         (persisted), like a ``fullyUpdated(p/N)^t`` event."""
+        self._refresh()
         self._sync.mark_complete(event_type, t)
 
     def complete_until(self, event_type: str) -> float:
         """The time up to which the history of ``"p/N"`` is complete now: the greatest of
         now − max_delay, the latest mark, and (in_order types) the latest end received."""
+        self._refresh()
         return self._sync.complete_until(event_type)
 
     def pending(self) -> list:
@@ -654,15 +820,18 @@ class KnowledgeBase:
         >>> kb = open(); kb.add_buffer("face(P, _)", keep_last=1)
         1
         """
+        self._refresh()
         return self._buffers.add_runtime(pattern, keep_last=keep_last,
                                          keep_seconds=keep_seconds, keep_between=keep_between)
 
     def remove_buffer(self, buffer_id: int) -> None:
         """Remove a runtime buffer (the events it kept stay)."""
+        self._refresh()
         self._buffers.remove_runtime(buffer_id)
 
     def buffers(self) -> list:
         """The active buffers (program and runtime) with their counters."""
+        self._refresh()
         return self._buffers.infos()
 
     # -- SQL access -----------------------------------------------------------------------
@@ -690,6 +859,10 @@ class KnowledgeBase:
 
 def open(path: str | Path | None = None, clock: Clock | None = None, **options: Any) -> KnowledgeBase:
     """Open (or create) a knowledge base; ``path=None`` gives an in-memory one.
+
+    Options: ``synchronous`` (``"FULL"``: an event is on disk when its add returns),
+    ``busy_timeout`` (seconds a write waits for another process's write transaction before
+    :class:`~slr_sql.errors.SLRBusy`; default 5).
 
     >>> kb = open(); kb.close()
     """

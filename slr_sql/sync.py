@@ -238,6 +238,8 @@ class Completeness:
     State persisted in ``slr_meta``: ``sync/learned/<name>/<n>`` (seconds),
     ``sync/mark/<name>/<n>`` and ``sync/mark/<name>`` (time; the latter for
     ``fullyUpdated(p)`` = every arity of p), each mark with its source in ``sync/marksrc/...``.
+    Delays and marks only grow: they are written with the store's ``meta_raise`` (the larger
+    of the stored and the new value is kept, compared inside SQLite) and read back.
     """
 
     def __init__(self, store: Any, clock: Any, decls: Callable[[], Any]):
@@ -254,15 +256,20 @@ class Completeness:
         self.load()
 
     def flush(self, learned: dict | None = None) -> None:
-        """Persist learned delays (all that grew since the last write by default)."""
+        """Persist learned delays (all that grew since the last write by default). The
+        store keeps the larger of its value and ours (another process may have learned a
+        larger one meanwhile): we take the stored value back."""
         if learned is None:
             learned = {k: d for k, d in self.learned.items() if d > self._persisted.get(k, 0.0)}
         if not learned:
             return
+        stored = {}
         with self.store.transaction():
             for key, d in learned.items():
-                self.store.meta_set(f"sync/learned/{key[0]}/{key[1]}", d)
-        self._persisted.update(learned)
+                stored[key] = self.store.meta_raise(f"sync/learned/{key[0]}/{key[1]}", d)
+        for key, d in stored.items():
+            self._persisted[key] = max(self._persisted.get(key, 0.0), d)
+            self.learned[key] = max(self.learned.get(key, 0.0), d)
 
     def load(self) -> None:
         """(Re)read learned delays and marks from the store."""
@@ -383,10 +390,18 @@ class Completeness:
                 return False
             self.name_marks[key] = t
             mk = f"{key}/*"
-        self.mark_src[key] = source
+        # the store keeps the larger mark (another process may have stored one meanwhile)
         with self.store.transaction():
-            self.store.meta_set(f"sync/mark/{mk}", t)
-            self.store.meta_set(f"sync/marksrc/{mk}", source)
+            stored = self.store.meta_raise(f"sync/mark/{mk}", t)
+            if stored == t:
+                self.store.meta_set(f"sync/marksrc/{mk}", source)
+            else:
+                source = self.store.meta_get(f"sync/marksrc/{mk}", source)
+        if isinstance(key, tuple):
+            self.marks[key] = stored
+        else:
+            self.name_marks[key] = stored
+        self.mark_src[key] = source
         return True
 
     def observe(self, events: list, arrival: float) -> set:
@@ -546,6 +561,13 @@ class Synchronizer:
         except Exception:
             return None
 
+    def on_progress(self) -> None:
+        """Progress listener of the kb: another connection raised learned delays or
+        completeness marks; re-read them and release the queries they complete."""
+        with self.lock:
+            released = self._reread()
+        self._schedule_all(released)
+
     def _external_changes(self) -> list:
         """Reload marks, learned delays and in-order ends if another connection committed
         (lock held); returns the queries that may now go on."""
@@ -553,6 +575,9 @@ class Synchronizer:
         if version is None or version == self._data_version:
             return []
         self._data_version = version
+        return self._reread()
+
+    def _reread(self) -> list:
         tracker = self.tracker
         tracker.load()
         tracker.max_end.clear()
@@ -1028,6 +1053,7 @@ def attach(kb: Any) -> Synchronizer:
     """Create the synchronizer of ``kb`` and hook it into its add path."""
     sync = Synchronizer(kb)
     kb.add_listeners.append(sync.on_add)
+    kb.progress_listeners.append(sync.on_progress)
     return sync
 
 

@@ -32,7 +32,8 @@ but may lose the last transactions on power loss; pass ``synchronous="NORMAL"`` 
 for speed.) Values are always bound parameters; identifiers are always quoted.
 
 Threads: one connection, serialized by ``EventStore.lock`` (an ``RLock``); a
-:meth:`EventStore.transaction` holds the lock until it ends.
+:meth:`EventStore.transaction` holds the lock until it ends, and suspends the event scans
+other threads left open (they resume after it, from where they were).
 
 >>> store = EventStore(None)
 >>> store.add_events([("seg", ("cup1", 1), 2.0, 2.0)])
@@ -47,9 +48,10 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
 from ..errors import EventRejected
-from .catalog import BufferTables, Catalog
+from .catalog import BufferTables, Catalog, ProgramText
 from .checks import format_event
-from .connection import CACHE_SIZE_KIB, Database, DatabaseError, run_sql_file
+from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, DatabaseError, \
+    run_sql_file
 from .events import Event, EventWriter
 from .lookups import EventReader, Row
 from .schema import migration_scripts
@@ -57,9 +59,9 @@ from .space import Space
 from .sqltext import quote_identifier, split_sql_script, sql_literal
 from .tables import EventTables
 
-__all__ = ["EventStore", "Event", "Row", "CACHE_SIZE_KIB", "DatabaseError", "quote_identifier",
-           "sql_literal", "format_event", "migration_scripts", "split_sql_script",
-           "run_sql_file"]
+__all__ = ["EventStore", "Event", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
+           "DatabaseError", "quote_identifier", "sql_literal", "format_event",
+           "migration_scripts", "split_sql_script", "run_sql_file"]
 
 
 def _doc(part_method: Callable) -> Callable:
@@ -74,7 +76,9 @@ class EventStore:
     """Events, program and state of one knowledge base, in one SQLite database.
 
     ``path`` None or ``":memory:"`` gives an in-memory store. ``clock`` is any object with
-    ``now() -> float`` (arrival times); the default is the wall clock.
+    ``now() -> float`` (arrival times); the default is the wall clock. ``busy_timeout``:
+    seconds a write waits for another connection's write transaction before
+    :class:`~slr_sql.errors.SLRBusy`.
 
     >>> store = EventStore(":memory:")
     >>> store.add_event("obj", ("cup1", "red"), 1.0, 1.0); store.count("obj", 2)
@@ -83,8 +87,8 @@ class EventStore:
     """
 
     def __init__(self, path: str | Path | None = None, clock: Any = None, *,
-                 synchronous: str = "FULL"):
-        self._db = db = Database(path, clock, synchronous)
+                 synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT):
+        self._db = db = Database(path, clock, synchronous, busy_timeout)
         self._tables = EventTables(db)
         self._writer = EventWriter(db, self._tables)
         self._reader = EventReader(db, self._tables)
@@ -258,8 +262,33 @@ class EventStore:
     # ------------------------------------------------------------------ program and meta keys
 
     @_doc(Catalog.append_program)
-    def append_program(self, source: str, filename: str | None = None) -> int:
-        return self._catalog.append_program(source, filename)
+    def append_program(self, source: str, filename: str | None = None,
+                       name: str = "main") -> int:
+        return self._catalog.append_program(source, filename, name)
+
+    @_doc(Catalog.replace_named_program)
+    def replace_named_program(self, name: str, source: str, filename: str | None = None) -> int:
+        return self._catalog.replace_named_program(name, source, filename)
+
+    @_doc(Catalog.delete_program)
+    def delete_program(self, name: str) -> int:
+        return self._catalog.delete_program(name)
+
+    @_doc(Catalog.program_texts)
+    def program_texts(self) -> list[ProgramText]:
+        return self._catalog.program_texts()
+
+    @_doc(Catalog.program_version)
+    def program_version(self) -> int:
+        return self._catalog.program_version()
+
+    @_doc(Catalog.versions)
+    def versions(self) -> tuple[int, int]:
+        return self._catalog.versions()
+
+    @_doc(Database.data_version)
+    def data_version(self) -> int:
+        return self._db.data_version()
 
     @_doc(Catalog.program_sources)
     def program_sources(self) -> list[tuple[str, str | None]]:
@@ -277,6 +306,10 @@ class EventStore:
     def meta_set(self, key: str, value: Any) -> None:
         self._catalog.meta_set(key, value)
 
+    @_doc(Catalog.meta_raise)
+    def meta_raise(self, key: str, value: float) -> float:
+        return self._catalog.meta_raise(key, value)
+
     @_doc(Catalog.meta_delete)
     def meta_delete(self, key: str) -> None:
         self._catalog.meta_delete(key)
@@ -288,10 +321,20 @@ class EventStore:
     # ------------------------------------------------------------------ fact tables and views
 
     fact_table_name = staticmethod(Catalog.fact_table_name)
+    view_name = staticmethod(Catalog.view_name)
 
     @_doc(Catalog.replace_fact_tables)
-    def replace_fact_tables(self, tables: dict[tuple[str, int], list[tuple]]) -> dict:
-        return self._catalog.replace_fact_tables(tables)
+    def replace_fact_tables(self, tables: dict[tuple[str, int], list[tuple]],
+                            version: int | None = None) -> dict:
+        return self._catalog.replace_fact_tables(tables, version)
+
+    @_doc(Catalog.fact_tables_for)
+    def fact_tables_for(self, keys: Iterable[tuple[str, int]]) -> dict:
+        return self._catalog.fact_tables_for(keys)
+
+    @_doc(Catalog.facts_version)
+    def facts_version(self) -> int:
+        return self._catalog.facts_version()
 
     @_doc(Catalog.replace_views)
     def replace_views(self, views: dict[str, str]) -> list[str]:

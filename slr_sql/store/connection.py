@@ -9,10 +9,21 @@ Durability: file databases use ``journal_mode=WAL`` with ``synchronous=FULL``: w
 transaction commits it is in the WAL *and* fsynced, so it survives a process kill and a
 power loss. (``synchronous=NORMAL`` would survive a kill but may lose the last transactions
 on power loss.)
+
+Sharing: any number of processes may open the file. Readers never wait (WAL); a writer waits
+for another's write transaction at most ``busy_timeout`` seconds (default
+:data:`DEFAULT_BUSY_TIMEOUT`), then gets :class:`~slr_sql.errors.SLRBusy` naming the file.
+Opening a store that is up to date only reads it, and closing never waits for anyone (the
+checkpoint on close is ``PASSIVE``). Threads share the one connection: every statement runs
+and is read holding :attr:`Database.lock`, a transaction holds it to the end, and the
+statements other threads left open (event scans read in batches) are *suspended* when a
+transaction begins and resumed after it from where they were (so a rollback or a dropped
+table in one thread never aborts another thread's scan).
 """
 from __future__ import annotations
 
 import os
+import random
 import sqlite3
 import threading
 import time
@@ -22,9 +33,9 @@ from typing import Any, Callable, Iterable, Iterator
 
 from ..errors import SLRError, SLRTimeout
 from .schema import migrate
-from .sqltext import split_sql_script
+from .sqltext import busy_error, split_sql_script
 
-__all__ = ["Database", "DatabaseError", "CACHE_SIZE_KIB", "run_sql_file"]
+__all__ = ["Database", "DatabaseError", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT", "run_sql_file"]
 
 # The base class of the errors the database raises while running a statement (a missing
 # table, a syntax error, a constraint, an interrupted statement...). Callers outside the
@@ -32,6 +43,18 @@ __all__ = ["Database", "DatabaseError", "CACHE_SIZE_KIB", "run_sql_file"]
 DatabaseError = sqlite3.Error
 
 CACHE_SIZE_KIB = 65536  # PRAGMA cache_size of the store's connection (64 MiB)
+
+# Seconds a write waits for another connection's write transaction before SLRBusy: long
+# enough for any ordinary transaction of another writer (milliseconds) and a checkpoint,
+# short enough that a process stuck holding the lock is reported rather than waited for.
+DEFAULT_BUSY_TIMEOUT = 5.0
+
+
+def _check_busy_timeout(value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+            not 0 <= value < float("inf"):
+        raise SLRError(f"busy_timeout must be a number of seconds >= 0, not {value!r}")
+    return float(value)
 
 
 class WallClock:
@@ -51,7 +74,8 @@ class Database:
     """
 
     def __init__(self, path: str | os.PathLike | None = None, clock: Any = None,
-                 synchronous: str = "FULL"):
+                 synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT):
+        busy_timeout = _check_busy_timeout(busy_timeout)
         self.path = None if path in (None, ":memory:") else str(path)
         self.clock = clock if clock is not None else WallClock()
         self.lock = threading.RLock()
@@ -59,18 +83,32 @@ class Database:
         self.closed = False
         # called, lock held, after a transaction rolled back (the event-type cache reloads)
         self.rollback_listeners: list[Callable[[], None]] = []
-        self.open_cursors: weakref.WeakSet = weakref.WeakSet()  # iterators still reading
+        # streams (event scans read in batches) whose statement may still be open: suspended
+        # when a transaction begins (see suspend_streams)
+        self.open_streams: weakref.WeakSet = weakref.WeakSet()
         self.deadline: float | None = None  # of the compiled statement running now
+        self.busy_timeout = busy_timeout
         self.conn = sqlite3.connect(self.path or ":memory:", check_same_thread=False,
-                                    isolation_level=None, timeout=30.0,
+                                    isolation_level=None, timeout=busy_timeout,
                                     cached_statements=512)
         if synchronous.upper() not in ("OFF", "NORMAL", "FULL", "EXTRA"):
             raise ValueError(f"synchronous must be OFF, NORMAL, FULL or EXTRA, not {synchronous!r}")
         conn = self.conn
-        # auto_vacuum must be chosen before the first table exists; it is a no-op afterwards.
-        conn.execute("PRAGMA auto_vacuum=INCREMENTAL")
-        if self.path is not None:
-            conn.execute("PRAGMA journal_mode=WAL")
+        # auto_vacuum must be chosen before the first table exists (a no-op afterwards, but
+        # one that wants the write lock: only a new file gets it); a file already in WAL mode
+        # is not switched again (that too would want a lock)
+        try:
+            if conn.execute("PRAGMA page_count").fetchone()[0] == 0:
+                conn.execute("PRAGMA auto_vacuum=INCREMENTAL")
+            if self.path is not None and \
+                    conn.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
+                conn.execute("PRAGMA journal_mode=WAL")
+        except sqlite3.OperationalError as exc:
+            busy = busy_error(exc, self.path, self.busy_timeout)
+            if busy is None:
+                raise
+            conn.close()
+            raise busy from None
         conn.execute(f"PRAGMA synchronous={synchronous.upper()}")
         conn.execute("PRAGMA foreign_keys=ON")
         # Every event type has four indexes; SQLite's default 2 MiB page cache makes large
@@ -90,8 +128,28 @@ class Database:
         with self.lock:
             return self.conn.execute("PRAGMA user_version").fetchone()[0]
 
+    def data_version(self) -> int:
+        """``PRAGMA data_version``: a number that changes when another connection (another
+        process, or another store object on the same file) commits — the cheap first check
+        of "did anyone else change the file?".
+
+        >>> db = Database(None); db.data_version() == db.data_version()
+        True
+        """
+        with self.lock:
+            self.check_open()
+            return self.conn.execute("PRAGMA data_version").fetchone()[0]
+
+    def suspend_streams(self) -> None:
+        """Close the statements of the streams still reading (lock held): each resumes
+        after its last row with a statement of its own when next read. Called when a
+        transaction begins, so that no statement of another thread stays open across it."""
+        for stream in list(self.open_streams):
+            stream.suspend()
+
     def close(self) -> None:
-        """Checkpoint the WAL into the main file and close. Idempotent.
+        """Checkpoint what the WAL holds, as far as no reader needs it (``PASSIVE``: never
+        waits for another connection), and close. Idempotent.
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None); s.close(); s.close()
@@ -104,11 +162,10 @@ class Database:
                 if self.tx_depth:
                     self.conn.execute("ROLLBACK")
                     self.tx_depth = 0
-                for cursor in list(self.open_cursors):  # iterators still open
-                    cursor.close()
+                self.suspend_streams()  # iterators still open: they fail when read again
                 if self.path is not None:
                     try:
-                        self.conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+                        self.conn.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchall()
                     except sqlite3.OperationalError:
                         pass  # best effort: the WAL is checkpointed on the next open anyway
             finally:
@@ -139,7 +196,8 @@ class Database:
             depth = self.tx_depth
             conn = self.conn
             if depth == 0:
-                conn.execute("BEGIN IMMEDIATE")
+                self.suspend_streams()
+                self._begin()
             else:
                 conn.execute(f"SAVEPOINT slr_sp{depth}")
             self.tx_depth = depth + 1
@@ -165,6 +223,38 @@ class Database:
                 self._rolled_back()
                 raise
 
+    def _begin(self) -> None:
+        """``BEGIN IMMEDIATE``, waiting at most ``busy_timeout`` seconds for another
+        connection's write transaction. SQLite's own busy handler sleeps longer and longer
+        between tries (up to 100 ms), so a process committing back to back keeps the lock
+        from the others for seconds; here the lock is tried again every 0.1 to 2 ms (a try
+        is a few microseconds), so writers take turns."""
+        conn = self.conn
+        if self.path is None:  # in memory: no other connection to wait for
+            conn.execute("BEGIN IMMEDIATE")
+            return
+        conn.execute("PRAGMA busy_timeout = 0")
+        try:
+            deadline = None
+            pause = 1e-4
+            while True:
+                try:
+                    conn.execute("BEGIN IMMEDIATE")
+                    return
+                except sqlite3.OperationalError as exc:
+                    busy = busy_error(exc, self.path, self.busy_timeout)
+                    if busy is None:
+                        raise
+                    now = time.monotonic()
+                    if deadline is None:
+                        deadline = now + self.busy_timeout
+                    if now >= deadline:
+                        raise busy from None
+                    time.sleep(min(pause * (0.5 + random.random()), deadline - now))
+                    pause = min(pause * 2, 2e-3)
+        finally:
+            conn.execute(f"PRAGMA busy_timeout = {int(self.busy_timeout * 1000)}")
+
     def _rolled_back(self) -> None:
         for listener in self.rollback_listeners:
             listener()
@@ -181,9 +271,12 @@ class Database:
         """
         with self.lock:
             self.check_open()
-            cursor = self.conn.execute(query, tuple(params))
-            columns = [d[0] for d in cursor.description] if cursor.description else []
-            return columns, cursor.fetchall()
+            try:
+                cursor = self.conn.execute(query, tuple(params))
+                columns = [d[0] for d in cursor.description] if cursor.description else []
+                return columns, cursor.fetchall()
+            except sqlite3.OperationalError as exc:
+                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
         """Execute one statement for another slr_sql module (triggers, buffer pruning, ...)
@@ -195,7 +288,10 @@ class Database:
         """
         with self.lock:
             self.check_open()
-            return self.conn.execute(sql, tuple(params)).fetchall()
+            try:
+                return self.conn.execute(sql, tuple(params)).fetchall()
+            except sqlite3.OperationalError as exc:
+                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
 
     def executemany(self, sql: str, rows: Iterable[Iterable[Any]]) -> None:
         """``executemany`` for other slr_sql modules.
@@ -305,7 +401,7 @@ class Database:
                 if deadline is not None and time.monotonic() > deadline \
                         and "interrupt" in str(exc):
                     raise SLRTimeout("query timed out (in its compiled SQL statement)") from None
-                raise
+                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
             finally:
                 if deadline is not outer:
                     self.deadline = outer

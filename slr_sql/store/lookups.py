@@ -19,6 +19,31 @@ __all__ = ["Row", "EventReader"]
 
 Row = tuple    # (args: tuple[term, ...], start: float, end: float, seq: int)
 
+# A stream whose statement was suspended (another thread's transaction began, see
+# Database.suspend_streams) goes on with the rows after the last one it read, in its order:
+# the condition added to its statement, and the key of a raw row (start, end, seq) for it.
+_RESUME = {
+    "scan": ("(t_end, t_start, seq) > (?, ?, ?)", lambda s, e, q: (e, s, q)),
+    "prev": ("(t_end, t_start, seq) < (?, ?, ?)", lambda s, e, q: (e, s, q)),
+    "at_end": ("(t_start, seq) > (?, ?)", lambda s, e, q: (s, q)),
+    "next": ("(t_start, t_end, seq) > (?, ?, ?)", lambda s, e, q: (s, e, q)),
+    "at_start": ("(t_end, seq) > (?, ?)", lambda s, e, q: (e, q)),
+}
+
+
+class _OpenStatement:
+    """The statement of one stream, which a transaction may suspend (close) meanwhile."""
+
+    __slots__ = ("cursor", "__weakref__")
+
+    def __init__(self, cursor: Any):
+        self.cursor = cursor
+
+    def suspend(self) -> None:
+        cursor, self.cursor = self.cursor, None
+        if cursor is not None:
+            cursor.close()
+
 
 class EventReader:
     """Looks events up in the tables of one database.
@@ -55,8 +80,8 @@ class EventReader:
         return tuple(positions), values
 
     def _select_sql(self, event_type: EventType, kind: str, positions: tuple[int, ...],
-                    flags: tuple[bool, ...]) -> str:
-        key = (event_type.table, kind, positions, flags)
+                    flags: tuple[bool, ...], resume: bool = False) -> str:
+        key = (event_type.table, kind, positions, flags, resume)
         sql = self.sql_cache.get(key)
         if sql is not None:
             return sql
@@ -97,27 +122,48 @@ class EventReader:
             order = "t_end, seq"
         else:  # pragma: no cover - internal misuse
             raise ValueError(kind)
+        if resume:
+            conditions.append(_RESUME[kind][0])
         where = f" WHERE {' AND '.join(conditions)}" if conditions else ""
         sql = (f"SELECT {event_type.columns} FROM {event_type.quoted} INDEXED BY {index}"
                f"{where} ORDER BY {order}")
         self.sql_cache[key] = sql
         return sql
 
-    def _stream(self, sql: str, params: list, arity: int) -> Iterator[Row]:
-        """Rows decoded lazily, fetched in growing batches; the lock is held per batch only."""
+    def _stream(self, sql: str, params: list, arity: int, kind: str,
+                resume_sql: str) -> Iterator[Row]:
+        """Rows decoded lazily, fetched in growing batches; the lock is held per batch only.
+        If a transaction suspended the statement between two batches (or a rollback aborted
+        it), the rest is read with ``resume_sql``: the rows after the last one read."""
         db = self.db
         with db.lock:
             db.check_open()
-            cursor = db.conn.execute(sql, params)
-            db.open_cursors.add(cursor)
+            statement = _OpenStatement(db.conn.execute(sql, params))
+            db.open_streams.add(statement)
+        key = _RESUME[kind][1]
+        last = None
         try:
             batch = 8  # prev/next callers usually need only the first row or two
             dec = decode
             while True:
                 with db.lock:
-                    rows = cursor.fetchmany(batch)
+                    for attempt in (1, 2):
+                        if statement.cursor is None:
+                            db.check_open()
+                            statement.cursor = db.conn.execute(sql, params) if last is None \
+                                else db.conn.execute(resume_sql, params + list(
+                                    key(last[arity], last[arity + 1], last[arity + 2])))
+                        try:
+                            rows = statement.cursor.fetchmany(batch)
+                            break
+                        except sqlite3.OperationalError as exc:  # "abort due to ROLLBACK"
+                            if attempt == 2 or getattr(exc, "sqlite_errorcode", 0) & 0xFF \
+                                    != sqlite3.SQLITE_ABORT:
+                                raise
+                            statement.cursor = None
                 if not rows:
                     return
+                last = rows[-1]
                 if arity == 0:
                     for row in rows:
                         yield ((), row[0], row[1], row[2])
@@ -136,7 +182,7 @@ class EventReader:
         finally:
             with db.lock:
                 try:
-                    cursor.close()
+                    statement.suspend()
                 except sqlite3.ProgrammingError:  # the store was closed meanwhile
                     pass
 
@@ -149,7 +195,8 @@ class EventReader:
                 return iter(())
             positions, values = self._pushdown(event_type, bound)
             sql = self._select_sql(event_type, kind, positions, flags)
-        return self._stream(sql, values + times, arity)
+            resume_sql = self._select_sql(event_type, kind, positions, flags, resume=True)
+        return self._stream(sql, values + times, arity, kind, resume_sql)
 
     def scan(self, name: str, arity: int, bound: dict[int, Any] | None = None,
              end_le: float | None = None) -> Iterator[Row]:

@@ -1,8 +1,9 @@
 """The schema of the internal ``slr_*`` tables: numbered SQL migrations, applied in order.
 
-Each ``migrations/NNNN_name.sql`` runs once, in its own transaction; ``PRAGMA user_version``
-holds the number of the last one applied. A database written by a newer slr_sql (a higher
-number than the last script) is refused rather than guessed at.
+Each ``migrations/NNNN_name.sql`` runs once, in its own transaction, and is recorded in
+``slr_migrations``; ``PRAGMA user_version`` holds the highest number applied. A database
+written by a newer slr_sql (a higher number than the last script) is refused rather than
+guessed at.
 """
 from __future__ import annotations
 
@@ -13,9 +14,9 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import SLRError
-from .sqltext import split_sql_script
+from .sqltext import busy_error, split_sql_script
 
-__all__ = ["migration_scripts", "migrate"]
+__all__ = ["migration_scripts", "migrate", "applied_migrations"]
 
 
 def _migrations_dir() -> Any:
@@ -45,33 +46,70 @@ def migration_scripts() -> list[tuple[int, str, str]]:
     return scripts
 
 
-def migrate(conn: sqlite3.Connection, path: str | None) -> None:
+def applied_migrations(conn: sqlite3.Connection,
+                       scripts: list[tuple[int, str, str]] | None = None) -> set[int]:
+    """The numbers of the migrations applied to ``conn``'s database: those recorded in
+    ``slr_migrations``, or (a store from before that table) every number up to
+    ``PRAGMA user_version``.
+
+    >>> conn = sqlite3.connect(":memory:", isolation_level=None); migrate(conn, None)
+    >>> sorted(applied_migrations(conn)) == [n for n, _, _ in migration_scripts()]
+    True
+    """
+    current = conn.execute("PRAGMA user_version").fetchone()[0]
+    has_table = conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' "
+                             "AND name = 'slr_migrations'").fetchone()
+    if has_table:
+        return {row[0] for row in conn.execute("SELECT number FROM slr_migrations")}
+    return {number for number, _, _ in (migration_scripts() if scripts is None else scripts)
+            if number <= current}
+
+
+def migrate(conn: sqlite3.Connection, path: str | None,
+            scripts: list[tuple[int, str, str]] | None = None) -> None:
     """Apply the migrations ``conn`` has not seen yet (``path`` names the file in errors).
+
+    Every script not applied yet runs, in number order, whatever the gaps in the numbering
+    (a script merged later with a lower number than one applied already still runs); each
+    is recorded in ``slr_migrations`` and ``PRAGMA user_version`` is the highest applied.
+    A store that is up to date is only read (no write lock needed to open it). ``scripts``
+    (default :func:`migration_scripts`) is for tests.
 
     >>> conn = sqlite3.connect(":memory:", isolation_level=None); migrate(conn, None)
     >>> conn.execute("PRAGMA user_version").fetchone()[0] == migration_scripts()[-1][0]
     True
     """
-    scripts = migration_scripts()
+    if scripts is None:
+        scripts = migration_scripts()
     latest = scripts[-1][0] if scripts else 0
     current = conn.execute("PRAGMA user_version").fetchone()[0]
     if current > latest:
         raise SLRError(f"{path}: database schema version {current} is newer than this "
                        f"slr_sql supports ({latest}); upgrade slr_sql")
+    if all(number in applied_migrations(conn, scripts) for number, _, _ in scripts):
+        return
     for number, filename, text in scripts:
-        if number <= current:
-            continue
-        conn.execute("BEGIN IMMEDIATE")
+        try:
+            conn.execute("BEGIN IMMEDIATE")
+        except sqlite3.OperationalError as exc:
+            raise busy_error(exc, path) or exc from None
         try:
             # another process may have migrated between our check and the lock
-            if conn.execute("PRAGMA user_version").fetchone()[0] >= number:
+            applied = applied_migrations(conn, scripts)
+            if number in applied:
                 conn.execute("COMMIT")
                 continue
             for statement in split_sql_script(text):
                 conn.execute(statement)
-            conn.execute(f"PRAGMA user_version = {int(number)}")
+            conn.execute("CREATE TABLE IF NOT EXISTS slr_migrations (number INTEGER PRIMARY "
+                         "KEY, name TEXT NOT NULL, applied_at REAL)")
+            names = {n: name for n, name, _ in scripts}
+            conn.executemany("INSERT OR IGNORE INTO slr_migrations (number, name, applied_at) "
+                             "VALUES (?, ?, julianday('now'))",
+                             [(n, names.get(n, "?")) for n in sorted(applied | {number})])
+            version = conn.execute("PRAGMA user_version").fetchone()[0]
+            conn.execute(f"PRAGMA user_version = {int(max(version, number))}")
             conn.execute("COMMIT")
         except BaseException:
             conn.execute("ROLLBACK")
             raise
-        current = number

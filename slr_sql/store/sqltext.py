@@ -11,8 +11,10 @@ import re
 import sqlite3
 from typing import Any
 
+from ..errors import SLRBusy
+
 __all__ = ["quote_identifier", "sql_literal", "split_sql_script", "SAFE_IDENTIFIER",
-           "RESERVED_PREFIXES", "SQL_KEYWORDS"]
+           "RESERVED_PREFIXES", "SQL_KEYWORDS", "busy_error"]
 
 SAFE_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 RESERVED_PREFIXES = ("slr_", "sqlite_")
@@ -32,6 +34,26 @@ row rows savepoint select set table temp temporary then ties to transaction trig
 union unique update using vacuum values view virtual when where window with without
 rowid oid _rowid_
 """.split())
+
+
+def busy_error(exc: BaseException, path: str | None,
+               timeout: float | None = None) -> SLRBusy | None:
+    """The :class:`SLRBusy` to raise for ``exc`` if it says the database stayed locked by
+    another connection past the busy timeout (``SQLITE_BUSY``), else None.
+
+    >>> print(busy_error(sqlite3.OperationalError("database is locked"), "robot.db", 5))
+    robot.db: locked by another writer (a process or knowledge base) for more than 5 s
+    >>> busy_error(sqlite3.OperationalError("no such table: x"), "robot.db") is None
+    True
+    """
+    code = getattr(exc, "sqlite_errorcode", None)
+    busy = (code is not None and code & 0xFF == sqlite3.SQLITE_BUSY) or \
+        (code is None and "database is locked" in str(exc))
+    if not busy:
+        return None
+    waited = f" for more than {timeout:g} s" if timeout is not None else ""
+    return SLRBusy(f"{path or ':memory:'}: locked by another writer (a process or knowledge "
+                   f"base){waited}")
 
 
 def quote_identifier(name: str) -> str:
