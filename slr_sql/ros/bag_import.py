@@ -256,8 +256,7 @@ def _import(kb: Any, reader: Any, mapping: Mapping, all_topics: bool,
         bad = 0
         for error in rejected:
             position = getattr(error, "index", None)
-            if not isinstance(position, int) or position >= len(batch) \
-                    or batch[position] is not getattr(error, "event", batch[position]):
+            if not isinstance(position, int) or position >= len(batch):
                 raise SLRError(f"the import checkpoint was rejected: {error}")
             topic, index, at = owners[position]
             report.rejected.append(Rejection(topic, index, at, str(error)))
