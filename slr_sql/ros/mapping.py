@@ -751,6 +751,8 @@ class BoundEntry:
                 time = Path_("item", ("header", "stamp"), "header.stamp")
             elif _has_header(fielddefs, ("msg", msgtype)):
                 time = Path_("msg", ("header", "stamp"), "$msg.header.stamp")
+            elif msgtype == HEADER_TYPE and entry.foreach is None:  # the message is a header
+                time = Path_("msg", ("stamp",), "$msg.stamp")
             elif fielddefs is None and entry.foreach is None:
                 time = "header_or_record"
             else:
