@@ -30,6 +30,8 @@ from __future__ import annotations
 import gc
 import hashlib
 import json
+import queue
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -231,8 +233,27 @@ def _plans(reader: Any, mapping: Mapping, all_topics: bool, report: ImportReport
     return plans
 
 
+@dataclass
+class _Batch:
+    """What the reading thread hands to the storing one."""
+
+    events: list = field(default_factory=list)
+    owners: list = field(default_factory=list)    # owners[i]: (topic, number, record time)
+    checkpoints: list = field(default_factory=list)  # (topic, count, record time)
+    marks: list = field(default_factory=list)     # (event type, time)
+    rejected: list = field(default_factory=list)  # messages the mapping could not convert
+    per_topic: dict = field(default_factory=dict)  # topic -> events in this batch
+    read: int = 0                                 # messages read so far (for progress)
+
+
+_END = object()
+
+
 def _import(kb: Any, reader: Any, mapping: Mapping, all_topics: bool,
             progress: Callable[[int, int], None] | None, batch_size: int) -> ImportReport:
+    """Reading and decoding run in a second thread while this one stores the previous batch:
+    SQLite releases the GIL while it writes, so on a free core both proceed at once. Batches
+    are stored in order, each with its checkpoints, by the calling thread only."""
     report = ImportReport(bag_id(reader))
     plans = _plans(reader, mapping, all_topics, report)
     if not plans:
@@ -240,38 +261,86 @@ def _import(kb: Any, reader: Any, mapping: Mapping, all_topics: bool,
     selected = [c for c in reader.connections if c.id in plans]
     total = sum(c.msgcount for c in selected)
     done = _checkpoints(kb, report.bag_id)
+    handoff: queue.Queue = queue.Queue(maxsize=2)
+    stop = threading.Event()
+
+    def hand(item: Any) -> bool:
+        while not stop.is_set():
+            try:
+                handoff.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def produce() -> None:
+        try:
+            for batch in _batches(reader, selected, plans, done, report, batch_size):
+                if not hand(batch):
+                    return
+            hand(_END)
+        except BaseException as exc:  # noqa: BLE001 - re-raised in the storing thread
+            hand(exc)
+
+    reading = threading.Thread(target=produce, name="slr-bag-reader", daemon=True)
+    reading.start()
+    try:
+        while True:
+            item = handoff.get()
+            if item is _END:
+                break
+            if isinstance(item, BaseException):
+                raise item
+            _store(kb, report, item)
+            if progress is not None:
+                progress(item.read, total)
+    finally:
+        stop.set()
+        reading.join()
+    return report
+
+
+def _store(kb: Any, report: ImportReport, batch: _Batch) -> None:
+    events = batch.events + [(IMPORT_CHECKPOINT, (report.bag_id, topic, count), at, at)
+                             for topic, count, at in batch.checkpoints]
+    for topic, n in batch.per_topic.items():
+        report.topics[topic].events += n
+    report.rejected += batch.rejected
+    rejected = kb.add_many(events) if events else []
+    for error in rejected:
+        position = getattr(error, "index", None)
+        if not isinstance(position, int) or position >= len(batch.events):
+            raise SLRError(f"the import checkpoint was rejected: {error}")
+        topic, index, at = batch.owners[position]
+        report.rejected.append(Rejection(topic, index, at, str(error)))
+        report.topics[topic].events -= 1
+    report.events += len(batch.events) - len(rejected)
+    for event_type, t in batch.marks:
+        kb.mark_complete(event_type, t)
+
+
+def _batches(reader: Any, selected: list, plans: dict, done: dict, report: ImportReport,
+             batch_size: int) -> Any:
+    """Read, decode and map the selected messages; yields :class:`_Batch` es of about
+    ``batch_size`` events (the last one possibly with none, to carry checkpoints)."""
     counts: dict[str, int] = {}
     last_time: dict[str, float] = {}
-    batch: list = []
-    owners: list = []  # owners[i]: (topic, message number, record time) of batch[i]
-    marks: list[tuple[str, float]] = []
+    touched: dict[str, None] = {}
+    batch = _Batch()
     read = 0
 
-    def flush() -> None:
-        nonlocal batch, owners, marks
-        touched = [(t, last_time[t]) for t in batch_topics]
-        events = batch + [(IMPORT_CHECKPOINT, (report.bag_id, t, counts[t]), at, at)
-                          for t, at in touched]
-        rejected = kb.add_many(events) if events else []
-        bad = 0
-        for error in rejected:
-            position = getattr(error, "index", None)
-            if not isinstance(position, int) or position >= len(batch):
-                raise SLRError(f"the import checkpoint was rejected: {error}")
-            topic, index, at = owners[position]
-            report.rejected.append(Rejection(topic, index, at, str(error)))
-            report.topics[topic].events -= 1
-            bad += 1
-        report.events += len(batch) - bad
-        for event_type, t in marks:
-            kb.mark_complete(event_type, t)
-        batch, owners, marks = [], [], []
-        batch_topics.clear()
-        if progress is not None:
-            progress(read, total)
+    def close(b: _Batch) -> _Batch:
+        b.checkpoints = [(t, counts[t], last_time[t]) for t in touched]
+        b.read = read
+        touched.clear()
+        return b
 
-    batch_topics: dict[str, None] = {}
-    for conn, stamp, raw in reader.messages(connections=selected):
+    # One bag file: read its reader directly (AnyReader merges several bag files through a
+    # heap, a cost per message that a single file does not need).
+    readers = getattr(reader, "readers", ())
+    source = (readers[0].messages(connections=selected) if len(readers) == 1
+              else reader.messages(connections=selected))
+    for conn, stamp, raw in source:
         plan = plans[conn.id]
         topic = plan.topic
         index = counts.get(topic, 0) + 1
@@ -286,7 +355,7 @@ def _import(kb: Any, reader: Any, mapping: Mapping, all_topics: bool,
         report.messages += 1
         topic_report.messages += 1
         last_time[topic] = record
-        batch_topics[topic] = None
+        touched[topic] = None
         try:
             if plan.fast is not None:
                 events = plan.fast(raw, record)
@@ -297,24 +366,21 @@ def _import(kb: Any, reader: Any, mapping: Mapping, all_topics: bool,
                     events += bound.events(msg, record)
                 for bound, types in plan.marks:
                     for (_, _, t, _) in bound.events(msg, record):
-                        marks.extend((event_type, t) for event_type in types)
+                        batch.marks.extend((event_type, t) for event_type in types)
         except (MessageError, ValueError, TypeError, AttributeError, IndexError) as exc:
-            report.rejected.append(Rejection(topic, index, record, _reason(exc)))
+            batch.rejected.append(Rejection(topic, index, record, _reason(exc)))
             continue
         except Exception as exc:  # rosbags' SerdeError and friends: a message that does not decode
-            report.rejected.append(Rejection(topic, index, record,
-                                             f"cannot decode the message: {_reason(exc)}"))
+            batch.rejected.append(Rejection(topic, index, record,
+                                            f"cannot decode the message: {_reason(exc)}"))
             continue
-        owners += [(topic, index, record)] * len(events)
-        batch += events
-        topic_report.events += len(events)
-        if len(batch) >= batch_size:
-            flush()
-    if batch or batch_topics or marks:
-        flush()
-    elif progress is not None:
-        progress(read, total)
-    return report
+        batch.owners += [(topic, index, record)] * len(events)
+        batch.events += events
+        batch.per_topic[topic] = batch.per_topic.get(topic, 0) + len(events)
+        if len(batch.events) >= batch_size:
+            yield close(batch)
+            batch = _Batch()
+    yield close(batch)
 
 
 def _reason(exc: BaseException) -> str:
