@@ -6,8 +6,9 @@
   publishers are).
 * Messages arrive as serialized bytes (``raw=True``) and are decoded with ``rosbags`` from the
   standard ROS 2 definitions plus the MAP's ``definitions``: the same decoder and mapping code
-  as ``slr ros import``, and a topic whose message package has no Python module here can be
-  decoded all the same once it is subscribed.
+  as ``slr ros import``. A topic whose message package has no Python module here (tf2_msgs
+  with the ROS 2 wheels) is subscribed through a stand-in type support
+  (:mod:`slr_sql.ros.foreign_types`).
 * Each message becomes events at once (one ``kb.add_many`` per message). The event time is
   the header stamp (or what the MAP says); the arrival time is the store's clock when the
   store receives it, so the learned maximum delays are the real latencies.
@@ -37,6 +38,7 @@ from typing import Any, Callable
 from slr_sql import SLRError, Struct
 
 from . import fast_tf
+from .foreign_types import stand_in_class
 from .mapping import (TF_TOPICS, BoundEntry, Mapping, MessageError, PublishEntry,
                       normalize_topic, normalize_type)
 
@@ -379,7 +381,7 @@ class Bridge:
             self.log(f"warning: {topic}: no definition of {msgtype}; add it under definitions: "
                      f"in the MAP")
             return
-        cls = message_class(msgtype)
+        cls = message_class(msgtype) or stand_in_class(msgtype, self._typestore)
         if cls is None:
             self._refused.add(topic)
             self.log(f"warning: {topic}: cannot subscribe: no Python type support for {msgtype} "
