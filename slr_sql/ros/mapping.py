@@ -174,7 +174,7 @@ def _to_seconds(value: Any) -> float:
 # ---------------------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
-class Path_:
+class FieldPath:
     """A field path: ``root`` is ``"item"`` (the message, or the foreach element) or
     ``"msg"`` (the whole message, written ``$msg.``); steps are names and list indexes."""
 
@@ -183,7 +183,7 @@ class Path_:
     text: str
 
 
-def _parse_path(text: str, where: str) -> Path_:
+def _parse_path(text: str, where: str) -> FieldPath:
     root = "item"
     body = text
     if text == "$msg" or text.startswith("$msg."):
@@ -202,7 +202,7 @@ def _parse_path(text: str, where: str) -> Path_:
                                    f"'.', optionally indexed like data[0])")
             steps.append(m.group(1))
             steps.extend(int(i) for i in _INDEX.findall(m.group(2)))
-    return Path_(root, tuple(steps), text)
+    return FieldPath(root, tuple(steps), text)
 
 
 @dataclass(frozen=True)
@@ -266,7 +266,7 @@ def _constant(value: Any, where: str) -> Template:
     return _parse_template(value, where)
 
 
-def _template_paths(t: Template) -> Iterable[tuple[Path_, str]]:
+def _template_paths(t: Template) -> Iterable[tuple[FieldPath, str]]:
     if t.kind in ("path", "string"):
         yield t.value, t.where
     for a in t.args:
@@ -286,8 +286,8 @@ class TopicEntry:
     topic: str
     event: str
     args: tuple[Template, ...]
-    time: Path_ | str | None
-    foreach: Path_ | None
+    time: FieldPath | str | None
+    foreach: FieldPath | None
     msgtype: str | None
     where: str
     whole_message: bool = False  # args are [$msg]: the --all / pub_sub.xml encoding
@@ -318,7 +318,7 @@ class FullyUpdatedEntry:
 
     topic: str
     types: tuple[str, ...]
-    time: Path_ | str | None
+    time: FieldPath | str | None
     msgtype: str | None
     where: str
 
@@ -408,7 +408,7 @@ def _topic_entry(topic: str, spec: Any, where: str) -> TopicEntry:
         foreach = _parse_path(foreach, f"{where}.foreach")
         if foreach.root == "item" and not foreach.steps:
             raise MappingError(f"{where}.foreach: expects the path of a list field")
-        foreach = Path_("msg", foreach.steps, foreach.text)  # foreach is always over the message
+        foreach = FieldPath("msg", foreach.steps, foreach.text)  # foreach is always over the message
     args_spec = spec.get("args", ["$item" if foreach is not None else "$msg"])
     if not isinstance(args_spec, list):
         raise MappingError(f"{where}.args: expects a list of argument templates")
@@ -422,7 +422,7 @@ def _topic_entry(topic: str, spec: Any, where: str) -> TopicEntry:
                       foreach, msgtype, where)
 
 
-def _time_source(spec: Any, where: str) -> Path_ | str | None:
+def _time_source(spec: Any, where: str) -> FieldPath | str | None:
     if spec is None:
         return None
     if not isinstance(spec, str):
@@ -631,7 +631,7 @@ def _field_list(fielddefs: dict, msgtype: str) -> list:
     return fielddefs[msgtype][1]
 
 
-def _resolve(fielddefs: dict | None, node: Any, path: Path_, where: str) -> Any:
+def _resolve(fielddefs: dict | None, node: Any, path: FieldPath, where: str) -> Any:
     """The definition node a path ends on, starting from ``node`` (``("msg", type)``,
     ``("base", name)``, ``("seq", node)``), or None without definitions. Raises MappingError
     naming ``where``."""
@@ -678,7 +678,7 @@ def _has_header(fielddefs: dict | None, node: Any) -> bool:
                for n, d in _field_list(fielddefs, node[1]))
 
 
-def _getter(path: Path_) -> Callable[[Any, Any], Any]:
+def _getter(path: FieldPath) -> Callable[[Any, Any], Any]:
     """``f(msg, item)`` -> the raw value at the path (MessageError when an index is missing)."""
     steps = path.steps
     from_msg = path.root == "msg"
@@ -748,16 +748,16 @@ class BoundEntry:
         time = entry.time
         if time is None:  # the default: the header stamp of the element, then of the message
             if _has_header(fielddefs, item_node) and entry.foreach is not None:
-                time = Path_("item", ("header", "stamp"), "header.stamp")
+                time = FieldPath("item", ("header", "stamp"), "header.stamp")
             elif _has_header(fielddefs, ("msg", msgtype)):
-                time = Path_("msg", ("header", "stamp"), "$msg.header.stamp")
+                time = FieldPath("msg", ("header", "stamp"), "$msg.header.stamp")
             elif msgtype == HEADER_TYPE and entry.foreach is None:  # the message is a header
-                time = Path_("msg", ("stamp",), "$msg.stamp")
+                time = FieldPath("msg", ("stamp",), "$msg.stamp")
             elif fielddefs is None and entry.foreach is None:
                 time = "header_or_record"
             else:
                 time = "record"
-        elif isinstance(time, Path_):
+        elif isinstance(time, FieldPath):
             node = self._check(fielddefs, msgtype, item_node, time, f"{where}.time")
             if node is not None and not (node == ("msg", TIME_TYPES[0]) or node == ("msg", TIME_TYPES[1])
                                          or (node[0] == "base" and node[1] in _NUMERIC_BASES)):
@@ -765,11 +765,11 @@ class BoundEntry:
         self.time = time
         self._args = [_compile(t) for t in entry.args]
         self._foreach = _getter(entry.foreach) if entry.foreach is not None else None
-        self._time = _getter(time) if isinstance(time, Path_) else None
+        self._time = _getter(time) if isinstance(time, FieldPath) else None
         self.name = entry.event
 
     @staticmethod
-    def _check(fielddefs: dict | None, msgtype: str, item_node: Any, path: Path_,
+    def _check(fielddefs: dict | None, msgtype: str, item_node: Any, path: FieldPath,
                where: str) -> Any:
         start = ("msg", msgtype) if path.root == "msg" else item_node
         return _resolve(fielddefs, start, path, where)
