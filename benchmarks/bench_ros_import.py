@@ -151,6 +151,12 @@ PUBLISHER = textwrap.dedent("""
 """)
 
 
+def _cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process so far (Linux)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def bench_bridge(count: int, rate: float) -> None:
     workdir = Path(tempfile.mkdtemp(prefix="bench_bridge_"))
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
@@ -169,22 +175,28 @@ def bench_bridge(count: int, rate: float) -> None:
                                    env=env, capture_output=True, text=True, timeout=600)
         assert publisher.returncode == 0, publisher.stderr
         deadline = time.monotonic() + 60
-        while True:
+        stored, previous = 0, -1
+        while stored < count and time.monotonic() < deadline:
+            time.sleep(0.5)
             with slr_sql.open(db) as kb:
-                rows = kb.sql("SELECT arrival - t_end FROM pose")[1] if kb.query(
-                    "aggregate_all(count, pose(_)^_, N)")[0]["N"] >= count else None
-            if rows is not None or time.monotonic() > deadline:
+                stored = kb.query("aggregate_all(count, pose(_)^_, N)")[0]["N"]
+            if stored == previous:  # nothing more is coming
                 break
-            time.sleep(0.2)
+            previous = stored
+        cpu = _cpu_seconds(bridge.pid)
         bridge.terminate()
         bridge.wait(timeout=30)
-        latencies = sorted(r[0] * 1000 for r in rows or [])
-        if not latencies:
+        with slr_sql.open(db) as kb:
+            rows = kb.sql("SELECT arrival - t_end FROM pose")[1] if stored else []
+        latencies = sorted(r[0] * 1000 for r in rows)
+        if len(latencies) < 2:
             print("bridge: no events stored")
             return
         q = statistics.quantiles(latencies, n=100)
-        print(f"\nbridge, {len(latencies):,} PoseStamped at {rate:g} Hz, publish -> stored "
-              f"(ms): p50 {q[49]:.2f}  p90 {q[89]:.2f}  p99 {q[98]:.2f}  max {latencies[-1]:.2f}")
+        print(f"\nbridge, {len(latencies):,} of {count:,} PoseStamped at {rate:g} Hz stored, "
+              f"publish -> stored (ms): p50 {q[49]:.2f}  p90 {q[89]:.2f}  p99 {q[98]:.2f}  "
+              f"max {latencies[-1]:.2f}; bridge CPU {cpu * 1e6 / max(stored, 1):.0f} µs/message "
+              f"(start-up included)")
     finally:
         if bridge.poll() is None:
             bridge.kill()
