@@ -124,7 +124,7 @@ def count_events(db: Path) -> int:
         return kb.query("aggregate_all(count, pose(_, _)^_, N)")[0]["N"]
 
 
-@pytest.mark.parametrize("stop_signal", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("stop_signal", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_bridge_stores_published_messages_and_stops_cleanly(tmp_path, ros_env, prefix,
                                                           stop_signal):
     db = tmp_path / "live.db"
