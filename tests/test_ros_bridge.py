@@ -199,7 +199,7 @@ def ros_node(ros_env):
 
 
 def test_publish_answer_to_a_real_subscriber(tmp_path, ros_node, prefix):
-    from geometry_msgs.msg import PoseStamped
+    from geometry_msgs.msg import PoseArray, PoseStamped
     from std_msgs.msg import String
 
     node, executor = ros_node
@@ -212,20 +212,22 @@ def test_publish_answer_to_a_real_subscriber(tmp_path, ros_node, prefix):
                     "pose.orientation.w": {"$const": 1.0}}}]})
     xml = mapping_from_pub_sub_xml(
         f'<publish_subscribe><publish_to name="{prefix.lstrip("/")}/marker1" '
-        f'msg_type="geometry_msgs/PoseStamped"/></publish_subscribe>')
+        f'msg_type="geometry_msgs/PoseStamped"/><publish_to name="{prefix.lstrip("/")}/poses" '
+        f'msg_type="geometry_msgs/PoseArray"/></publish_subscribe>')
     mapping.publish += xml.publish
-    received: dict[str, list] = {"alarm": [], "goal": [], "marker": []}
+    received: dict[str, list] = {"alarm": [], "goal": [], "marker": [], "poses": []}
     node.create_subscription(String, f"{prefix}/alarm", received["alarm"].append, 10)
     node.create_subscription(PoseStamped, f"{prefix}/goal", received["goal"].append, 10)
     node.create_subscription(PoseStamped, f"{prefix}/marker1", received["marker"].append, 10)
+    node.create_subscription(PoseArray, f"{prefix}/poses", received["poses"].append, 10)
     with slr_sql.open(tmp_path / "r.db") as kb:
         bridge = Bridge(kb, mapping, node_name="test_bridge").start()
         try:
-            alarm, goal, marker = bridge.mapping.publish
+            alarm, goal, marker, poses = bridge.mapping.publish
             deadline = time.monotonic() + DEADLINE
             _spin_until(bridge, node, executor,
                         lambda: all(bridge._publishers[e.topic].get_subscription_count() > 0
-                                    for e in (alarm, goal, marker)), deadline)
+                                    for e in (alarm, goal, marker, poses)), deadline)
             bridge.publish_answer(alarm, {"D": Atom("door3"), "T": 12.5})
             bridge.publish_answer(goal, {"F": Atom("map"), "T": 7.25, "X": 1.5,
                                          "P": Struct("p", ())})
@@ -235,6 +237,8 @@ def test_publish_answer_to_a_real_subscriber(tmp_path, ros_node, prefix):
                 Struct("geometry_msgs/msg/Quaternion", (0.0, 0.0, 0.0, 1.0))))
             bridge.publish_answer(marker, {"Msg": Struct("geometry_msgs/msg/PoseStamped",
                                                          (header, pose)), "T": 3.5})
+            bridge.publish_answer(poses, {"Msg": Struct("geometry_msgs/msg/PoseArray",
+                                                        (header, [pose, pose])), "T": 3.5})
             _spin_until(bridge, node, executor,
                         lambda: all(received.values()), deadline)
             with pytest.raises(PublishError, match="fields.data: the answer has no variable D"):
@@ -251,7 +255,9 @@ def test_publish_answer_to_a_real_subscriber(tmp_path, ros_node, prefix):
     assert (m.header.frame_id, m.header.stamp.sec, m.header.stamp.nanosec) == ("cam", 3, 500000000)
     assert (m.pose.position.x, m.pose.position.y, m.pose.position.z, m.pose.orientation.w) == \
         (1.0, 2.0, 3.0, 1.0)
-    assert bridge.stats.published == 3
+    (array,) = received["poses"]
+    assert [p.position.z for p in array.poses] == [3.0, 3.0]
+    assert bridge.stats.published == 4
 
 
 TF_PUBLISHER = textwrap.dedent("""

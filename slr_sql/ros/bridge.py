@@ -40,8 +40,7 @@ from slr_sql import SLRError, Struct
 
 from . import fast_tf
 from .foreign_types import stand_in_class
-from .mapping import (TF_TOPICS, BoundEntry, Mapping, MessageError, PublishEntry,
-                      normalize_topic, normalize_type)
+from .mapping import TF_TOPICS, Mapping, PublishEntry, normalize_topic, normalize_type
 
 __all__ = ["Bridge", "BridgeError", "PublishError", "run_bridge", "field_value",
            "message_class", "BridgeStats"]
@@ -168,18 +167,14 @@ def _set(msg: Any, name: str, value: Any, path: str) -> None:
         _fill(getattr(msg, name), value, f"{path}.")
     elif isinstance(value, tuple) and value and value[0] == "struct":
         _fill_from_term(getattr(msg, name), value[2], path)
-    elif isinstance(value, list) and value and isinstance(value[0], (tuple, dict)):
-        current = getattr(msg, name)
-        cls = type(current[0]) if len(current) else None
+    elif isinstance(value, list) and value and isinstance(value[0], tuple):
         items = []
-        for i, v in enumerate(value):
+        for i, (_, msgtype, term) in enumerate(value):  # nested messages, as compounds
+            cls = message_class(msgtype)
             if cls is None:
-                raise PublishError(f"{path}: lists of messages need fields")
+                raise PublishError(f"{path}[{i}]: no Python module for {msgtype}")
             item = cls()
-            if isinstance(v, dict):
-                _fill(item, v, f"{path}[{i}].")
-            else:
-                _fill_from_term(item, v[2], f"{path}[{i}]")
+            _fill_from_term(item, term, f"{path}[{i}]")
             items.append(item)
         setattr(msg, name, items)
     else:
