@@ -15,7 +15,8 @@ from hypothesis import given, settings, strategies as st
 
 import slr_sql
 from slr_sql import Atom, Struct
-from slr_sql.ros import bag_import, fast_tf, mapping as mapping_module
+from slr_sql.ros import bag_import, bridge as bridge_module, fast_tf, foreign_types, \
+    mapping as mapping_module
 from slr_sql.ros.bag_import import BagError, import_bag
 from slr_sql.ros.mapping import MappingError, load_mapping, mapping_from_dict
 
@@ -475,7 +476,8 @@ def test_cli_without_the_extra_says_what_to_install(tmp_path):
     assert not (tmp_path / "r.db").exists()
 
 
-@pytest.mark.parametrize("module", [mapping_module, fast_tf, bag_import])
+@pytest.mark.parametrize("module", [mapping_module, fast_tf, bag_import, bridge_module,
+                                    foreign_types])
 def test_doctests(module):
     failures, tried = doctest.testmod(module, verbose=False)
     assert tried > 0 and failures == 0
