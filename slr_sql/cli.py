@@ -540,6 +540,10 @@ def shell(db: str) -> None:
                 break
 
 
+from .ros.cli import ros as _ros  # noqa: E402 - issue 13: `slr ros` (its extra is imported on use)
+main.add_command(_ros)
+
+
 # ---------------------------------------------------------------------------------------------
 # plot (issue 13: timelines; the drawing is in slr_sql/plot.py)
 # ---------------------------------------------------------------------------------------------

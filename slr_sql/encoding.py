@@ -205,7 +205,19 @@ def _json(t: Any, depth: int) -> str:
         return ("{" + _quote(t.name) + ":["
                 + ",".join([_json(a, depth + 1) for a in args]) + "]}")
     if tt is list or tt is tuple:
-        return "[" + ",".join([_json(a, depth + 1) for a in t]) + "]"
+        # Python lists (add_many tuples, imported ROS messages) get the same inlined element
+        # kinds as cons lists above: a vector of floats costs a repr per element, no call.
+        items = []
+        add = items.append
+        for head in t:
+            th = type(head)
+            if th is float and _NEG_INF < head < _INF:
+                add(_float_repr(head))
+            elif th is int and INT64_MIN <= head <= INT64_MAX:
+                add(_int_str(head))
+            else:
+                add(_json(head, depth + 1))
+        return "[" + ",".join(items) + "]"
     if tt is str:
         return "[]" if t == "[]" else _quote(t)
     if tt is bool:

@@ -23,6 +23,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
+import lark
 from lark import Lark, Token, Transformer
 from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
 
@@ -452,6 +453,11 @@ _LARK: Lark | None = None
 _LOCK = threading.Lock()
 
 
+# lark 1.x calls the plain lexer "basic"; lark-parser 0.12 (which the ROS 2 wheels install
+# under the same import name `lark`) calls it "standard". Both give the same tokens.
+_BASIC_LEXER = "standard" if lark.__version__.startswith("0.") else "basic"
+
+
 def _parser() -> Lark:
     global _LARK
     if _LARK is None:
@@ -463,7 +469,7 @@ def _parser() -> Lark:
                 # inside an unclosed bracket as the symbol atom `.` (END is not acceptable
                 # there), moving the error to the end of the file.
                 _LARK = Lark(_GRAMMAR_PATH.read_text(encoding="utf-8"), parser="lalr",
-                             lexer="basic", start=["program", "query"],
+                             lexer=_BASIC_LEXER, start=["program", "query"],
                              transformer=_Builder(), maybe_placeholders=False,
                              cache=False)
     return _LARK
