@@ -42,8 +42,11 @@ Inside JSON (list elements, compound arguments)
 * a partial list ``[a|b]`` (tail not ``[]``) is the compound ``'.'(a, b)``: ``{".":["a","b"]}``
 
 JSON is written compactly (no spaces) and keeps non-ASCII characters as they are, so SQLite's
-``json_extract(arg2, '$[0]')`` works on lists. Unbound variables and NaN cannot be stored:
-:func:`encode` raises :class:`Unencodable`.
+``json_extract(arg2, '$[0]')`` works on lists. What has no stored form makes :func:`encode`
+raise :class:`Unencodable`: unbound variables, NaN, text with a lone surrogate (not valid
+Unicode, so SQLite's UTF-8 cannot hold it), integers with more decimal digits than Python
+converts (``sys.get_int_max_str_digits()``, 4300 by default), and terms nested more than
+400 deep.
 
 >>> from slr_sql.terms import Atom, String, Struct, make_list
 >>> encode(make_list([Atom("x"), 1, 2.0])), encode(Struct("f", (Atom("a"), String("s"))))
@@ -55,6 +58,8 @@ from __future__ import annotations
 
 import json
 import math
+import re
+import sys
 from json.encoder import encode_basestring as _quote  # C-accelerated; keeps non-ASCII
 from typing import Any
 
@@ -78,6 +83,32 @@ class Unencodable(ValueError):
         self.reason = reason
 
 
+_SURROGATE = re.compile("[\ud800-\udfff]")
+
+
+def _check_text(text: str) -> str:
+    """``text`` itself, or :class:`Unencodable` if it holds a lone surrogate. ASCII text (the
+    common case) is recognised in constant time, without a scan."""
+    if not text.isascii():
+        found = _SURROGATE.search(text)
+        if found is not None:
+            raise Unencodable(f"text with a lone surrogate ({found.group()!a}) is not valid "
+                              "Unicode")
+    return text
+
+
+def _big_int_json(value: int) -> str:
+    """``{"$int":"digits"}`` for an integer beyond 64 bits; :class:`Unencodable` when it has
+    more digits than Python converts to text."""
+    try:
+        digits = str(value)
+    except ValueError:  # beyond sys.get_int_max_str_digits()
+        raise Unencodable(f"integer too large to be stored (about "
+                          f"{int(value.bit_length() * 0.30103) + 1} digits; at most "
+                          f"{sys.get_int_max_str_digits()})") from None
+    return '{"$int":"' + digits + '"}'
+
+
 def encode(term: Any) -> Any:
     """Encode a ground term as one SQLite column value (``str``, ``int`` or ``float``).
 
@@ -89,6 +120,8 @@ def encode(term: Any) -> Any:
     """
     tt = type(term)
     if tt is Atom:
+        if not term.isascii():
+            _check_text(term)
         if term and term[0] in _JSON_STARTS:
             if term == "[]":
                 return "[]"
@@ -101,11 +134,12 @@ def encode(term: Any) -> Any:
     if tt is int:
         if INT64_MIN <= term <= INT64_MAX:
             return term
-        return '{"$int":"' + str(term) + '"}'
+        return _big_int_json(term)
     if tt is String:
-        return _quote(term)
+        return _quote(_check_text(term))
     if tt is Struct or tt is list or tt is tuple:
-        return _json(term, 0)
+        text = _json(term, 0)
+        return text if text.isascii() else _check_text(text)
     if tt is Var:
         return encode(_deref_or_raise(term))
     if tt is str:
@@ -127,7 +161,8 @@ def encode_json(term: Any) -> str:
     >>> encode_json(Atom("a")), encode_json(String("a")), encode_json(1.0)
     ('"a"', '{"$string":"a"}', '1.0')
     """
-    return _json(term, 0)
+    text = _json(term, 0)
+    return text if text.isascii() else _check_text(text)
 
 
 def _deref_or_raise(var: Var) -> Any:
@@ -156,7 +191,7 @@ def _json(t: Any, depth: int) -> str:
     if tt is int:
         if INT64_MIN <= t <= INT64_MAX:
             return str(t)
-        return '{"$int":"' + str(t) + '"}'
+        return _big_int_json(t)
     if tt is float:
         if t != t:
             raise Unencodable("NaN cannot be stored")

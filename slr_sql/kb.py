@@ -24,6 +24,7 @@ from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
 from .store import EventStore
+from .store.checks import event_arguments, shorten
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
 from .terms import format_term
@@ -70,6 +71,20 @@ def _indicators(t: Any) -> list[tuple[str, int]]:
         items, _ = list_items(t)
         return [ind for x in items for ind in _indicators(x)]
     return [_indicator(t)]
+
+
+def _is_time_expression(t: Any) -> bool:
+    """True if ``t`` may be evaluated as an event time: no string and no list in it."""
+    stack = [t]
+    while stack:
+        x = deref(stack.pop())
+        if type(x) is String or (type(x) is Atom and x == "[]"):
+            return False
+        if type(x) is Struct:
+            if x.name == "." and len(x.args) == 2:
+                return False
+            stack.extend(x.args)
+    return True
 
 
 def _where(clause: Clause | None) -> str:
@@ -359,7 +374,14 @@ class KnowledgeBase:
     def load_file(self, path: str | Path) -> None:
         """Load a program file (see :meth:`load`)."""
         path = Path(path)
-        self.load(path.read_text(encoding="utf-8"), str(path))
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError as exc:
+            raise SLRError(f"{path}: not a program (not UTF-8 text: byte "
+                           f"0x{exc.object[exc.start]:02x} at offset {exc.start})") from None
+        except OSError as exc:
+            raise SLRError(f"{path}: {exc.strerror or exc}") from None
+        self.load(text, str(path))
 
     def define(self, name: str, arity: int, fn: Callable) -> None:
         """Register a Python predicate ``name/arity``.
@@ -397,9 +419,14 @@ class KnowledgeBase:
         if type(t) is Var:
             raise EventRejected(f"{text.strip()}: the event time must be bound")
         if type(t) in (int, float):
-            return float(t)
+            return t  # the store makes it a float (or rejects it: not finite)
+        # An arithmetic expression is evaluated; a string or a list is not a time (evaluated,
+        # "1" would be its character code, 49).
+        if not _is_time_expression(t):
+            raise EventRejected(f"{text.strip()}: the event time must be a number, "
+                                f"not {format_term(t)}")
         try:
-            return float(evaluate(t))
+            return evaluate(t)
         except SLRError:
             raise EventRejected(f"{text.strip()}: the event time must be a number, "
                                 f"not {format_term(t)}") from None
@@ -419,32 +446,50 @@ class KnowledgeBase:
         """
         if end is None:
             end = start
-        self._add([(name, tuple(args), start, end)], atomic=True)
+        self._add([(name, event_arguments(name, args, start, end), start, end)], atomic=True)
 
     def add_many(self, events: Iterable[Any], atomic: bool = False) -> list[EventRejected]:
         """Add many events in one transaction: strings in SLR syntax or
         ``(name, args, start, end)`` tuples. Returns the rejected events (each with its reason);
-        the others are stored. With ``atomic=True`` one bad event rejects the whole batch.
+        the others are stored; each rejection's ``.index`` and ``.event`` are the position
+        and the item in ``events``. With ``atomic=True`` one bad event rejects the whole batch.
 
         >>> kb = open(); kb.add_many(["p(1)^1", ("p", [2], 2.0, 2.0)])
         []
         """
         prepared: list = []
+        given: dict[int, tuple] = {}  # id(prepared event) -> (index, the event as given)
         errors: list[EventRejected] = []
         for i, ev in enumerate(events):
             try:
                 if isinstance(ev, str):
-                    prepared.append(self._event_from_text(ev))
+                    event = self._event_from_text(ev)
                 else:
-                    name, args, start, end = ev
-                    prepared.append((name, tuple(args), start, end))
-            except (SLRError, TypeError, ValueError) as exc:
+                    try:
+                        name, args, start, end = ev
+                    except (TypeError, ValueError):
+                        raise EventRejected(f"event #{i} is neither SLR text nor a (name, args, "
+                                            f"start, end) tuple: {shorten(repr(ev))}") from None
+                    event = (name, event_arguments(name, args, start, end), start, end)
+            except (SLRError, TypeError, ValueError, OverflowError, RecursionError) as exc:
                 if atomic:
                     raise exc if isinstance(exc, SLRError) else EventRejected(str(exc))
-                err = exc if isinstance(exc, EventRejected) else EventRejected(f"{ev!r}: {exc}")
+                err = exc if isinstance(exc, EventRejected) else \
+                    EventRejected(f"{shorten(repr(ev))}: {exc}")
                 err.index = i
+                err.event = ev
                 errors.append(err)
-        return errors + self._add(prepared, atomic=atomic)
+                continue
+            given[id(event)] = (i, ev)
+            prepared.append(event)
+        # the store's and the marks' rejections carry the prepared event: give them the index
+        # of the event the caller passed (lines rejected before storing are not in ``prepared``)
+        for err in self._add(prepared, atomic=atomic):
+            err.index, err.event = given.get(id(getattr(err, "event", None)),
+                                             (getattr(err, "index", None), None))
+            errors.append(err)
+        errors.sort(key=lambda e: e.index if isinstance(e.index, int) else -1)
+        return errors
 
     def _add(self, events: list, atomic: bool) -> list[EventRejected]:
         # -- issue 5: fullyUpdated(p/N)^t / fullyUpdated(p)^t are completeness marks, not events
@@ -537,9 +582,13 @@ class KnowledgeBase:
         >>> kb.query("prev(pos(a, X)^T, 4)")
         [{'X': 1, 'T': 1.0}]
         """
+        if limit is not None and (type(limit) is not int or limit < 0):
+            raise SLRError(f"limit must be a count (an integer >= 0), not {limit!r}")
         if wait:  # issue 5: synchronized (SLRTimeout names the incomplete types)
             return self.submit(goal, at=at, args=args, timeout=timeout).result()
         plan = self._plan(goal, tuple(args) if args else ())
+        if limit == 0:
+            return []
         if plan.lookup is not None and limit is None:
             frame = [None] * plan.compiled.nslots
             if args:

@@ -39,6 +39,7 @@ from .analysis import GoalSet, goal_set
 from .answers import answer_bindings
 from .clocks import ManualClock, StreamClock
 from .errors import EventRejected, SLRError, SLRTimeout
+from .store.checks import BadEvent, check_times
 from .terms import Atom, Struct, Var, deref
 
 __all__ = ["Completeness", "PendingQuery", "Wait", "Synchronizer", "attach", "parse_type"]
@@ -616,10 +617,8 @@ class Synchronizer:
                 continue
             try:
                 tname, n = parse_type(args[0])
-                t = float(end)
-                if math.isnan(t) or math.isinf(t):
-                    raise SLRError("the time must be finite")
-            except (SLRError, TypeError, ValueError) as exc:
+                t = check_times(start, end)[1]  # numbers, finite, start <= end
+            except (SLRError, BadEvent, TypeError, ValueError) as exc:
                 err = EventRejected(f"{MARK_NAME}({args[0]})^{end}: {exc} (a completeness "
                                     f"mark is written fullyUpdated(p/N)^T or fullyUpdated(p)^T)")
                 err.event = ev

@@ -173,6 +173,12 @@ class EventStore:
     def declare_type(self, name: str, arity: int) -> str:
         return self._tables.declare_type(name, arity)
 
+    @property
+    def max_event_arity(self) -> int:
+        """The most data arguments an event may have (SQLite's column limit less the
+        ``seq``, ``t_start``, ``t_end`` and ``arrival`` columns)."""
+        return self._tables.max_arity
+
     @_doc(EventTables.event_types)
     def event_types(self) -> dict[tuple[str, int], str]:
         return self._tables.event_types()

@@ -11,7 +11,8 @@ from typing import Any, Iterable
 
 from ..encoding import Unencodable, encode
 from ..errors import EventRejected
-from .checks import BadEvent, check_times, format_event, rejection_reason
+from .checks import BadEvent, arguments_problem, check_times, format_event, \
+    rejection_reason, shorten, text_problem
 from .connection import Database
 from .tables import EventTables, EventType
 
@@ -39,9 +40,11 @@ class EventWriter:
     def add_events(self, events: Iterable[Event], atomic: bool = False) -> list[EventRejected]:
         """Store events ``(name, args, start, end)`` in one transaction.
 
-        Invalid events (non-ground or NaN arguments, non-finite times, start > end, wrong arity
-        for a declared type) are skipped and returned as :class:`EventRejected` errors (with
-        ``.index`` and ``.event``); the others are stored. With ``atomic=True`` the first
+        Invalid events (arguments not a list or tuple, non-ground or NaN arguments, arguments
+        with no stored form such as lone surrogates or integers of thousands of digits, more
+        arguments than a table can have, times that are not finite numbers, start > end,
+        wrong arity for a declared type) are skipped and returned as :class:`EventRejected`
+        errors (with ``.index`` and ``.event``); the others are stored. With ``atomic=True`` the first
         invalid event is raised and nothing is stored. All events of one call share one
         arrival time, taken from the clock; their order is their arrival order.
 
@@ -68,10 +71,12 @@ class EventWriter:
                 try:
                     try:
                         name, args, start, end = event
-                        arity = len(args)
                     except (TypeError, ValueError):
                         raise BadEvent(f"event #{index} is not a (name, args, start, end) "
-                                       f"tuple: {event!r}") from None
+                                       f"tuple: {shorten(repr(event))}") from None
+                    if type(args) is not tuple and type(args) is not list:
+                        raise BadEvent(arguments_problem(args))
+                    arity = len(args)
                     if not (type(start) is float and type(end) is float
                             and _NEG_INF < start <= end < _INF):
                         start, end = check_times(start, end)
@@ -106,8 +111,14 @@ class EventWriter:
 
     def _type_for_new_event(self, name: Any, arity: int) -> EventType:
         if not isinstance(name, str):
-            raise BadEvent(f"event name must be an atom, not {name!r}")
+            raise BadEvent(f"event name must be an atom, not {shorten(repr(name))}")
         name = str(name)
+        problem = text_problem(name)
+        if problem:
+            raise BadEvent(f"the event name cannot be stored: {problem}")
+        if arity > self.tables.max_arity:
+            raise BadEvent(f"too many arguments: {arity} (an event has at most "
+                           f"{self.tables.max_arity}, the column limit of SQLite)")
         event_type = self.tables.lookup(name, arity)
         if event_type is not None:
             return event_type
@@ -123,7 +134,7 @@ class EventWriter:
             name, args, start, end = event
             text = format_event(name, args, start, end)
             message = f"{text}: {rejection_reason(exc)}"
-        except Exception:
+        except Exception:  # an event too malformed to print (the reason says what it is)
             message = rejection_reason(exc)
         error = EventRejected(message)
         error.index = index
@@ -131,17 +142,13 @@ class EventWriter:
         return error
 
     def add_event(self, name: str, args: Iterable[Any], start: float, end: float) -> None:
-        """Store one event; raises :class:`EventRejected` if it is invalid.
+        """Store one event (``args`` a list or tuple); raises :class:`EventRejected` if it is
+        invalid.
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None); s.add_event("tick", (), 1, 1); s.count("tick", 0)
         1
         """
-        try:
-            args = args if type(args) is tuple else tuple(args)
-        except TypeError:
-            raise EventRejected(f"{name}: event arguments must be a sequence, not "
-                                f"{args!r}") from None
         self.add_events([(name, args, start, end)], atomic=True)
 
     # ------------------------------------------------------------------ the store clock
