@@ -219,9 +219,9 @@ class KnowledgeBase:
     """
 
     def __init__(self, path: str | Path | None = None, clock: Clock | None = None, *,
-                 synchronous: str = "FULL"):
+                 synchronous: str = "FULL", adopt: bool = False):
         self.clock = clock if clock is not None else WallClock()
-        self.store = EventStore(path, self.clock, synchronous=synchronous)
+        self.store = EventStore(path, self.clock, synchronous=synchronous, adopt=adopt)
         self.path = self.store.path
         self.program = Program()
         self.declarations = Declarations()
@@ -702,6 +702,10 @@ class KnowledgeBase:
 
 def open(path: str | Path | None = None, clock: Clock | None = None, **options: Any) -> KnowledgeBase:
     """Open (or create) a knowledge base; ``path=None`` gives an in-memory one.
+
+    A file that is not a store (not SQLite, damaged, a store of a newer slr_sql, or an SQLite
+    file of another application) is refused with an :class:`SLRError` and left untouched;
+    ``adopt=True`` adds a store to another application's SQLite file on purpose.
 
     >>> kb = open(); kb.close()
     """

@@ -74,7 +74,9 @@ class EventStore:
     """Events, program and state of one knowledge base, in one SQLite database.
 
     ``path`` None or ``":memory:"`` gives an in-memory store. ``clock`` is any object with
-    ``now() -> float`` (arrival times); the default is the wall clock.
+    ``now() -> float`` (arrival times); the default is the wall clock. A file that is not a
+    store is refused with an :class:`~slr_sql.errors.SLRError` and left untouched, unless
+    ``adopt=True`` (a foreign SQLite file then gets the store's tables added).
 
     >>> store = EventStore(":memory:")
     >>> store.add_event("obj", ("cup1", "red"), 1.0, 1.0); store.count("obj", 2)
@@ -83,8 +85,8 @@ class EventStore:
     """
 
     def __init__(self, path: str | Path | None = None, clock: Any = None, *,
-                 synchronous: str = "FULL"):
-        self._db = db = Database(path, clock, synchronous)
+                 synchronous: str = "FULL", adopt: bool = False):
+        self._db = db = Database(path, clock, synchronous, adopt)
         self._tables = EventTables(db)
         self._writer = EventWriter(db, self._tables)
         self._reader = EventReader(db, self._tables)

@@ -1,7 +1,7 @@
 """The schema of the internal ``slr_*`` tables: numbered SQL migrations, applied in order.
 
-Each ``migrations/NNNN_name.sql`` runs once, in its own transaction; ``PRAGMA user_version``
-holds the number of the last one applied. A database written by a newer slr_sql (a higher
+Each ``migrations/NNNN_name.sql`` runs once; the migrations an open applies run in one
+transaction (all or nothing); ``PRAGMA user_version`` holds the number of the last one applied. A database written by a newer slr_sql (a higher
 number than the last script) is refused rather than guessed at.
 """
 from __future__ import annotations
@@ -58,20 +58,25 @@ def migrate(conn: sqlite3.Connection, path: str | None) -> None:
     if current > latest:
         raise SLRError(f"{path}: database schema version {current} is newer than this "
                        f"slr_sql supports ({latest}); upgrade slr_sql")
-    for number, filename, text in scripts:
-        if number <= current:
-            continue
-        conn.execute("BEGIN IMMEDIATE")
-        try:
-            # another process may have migrated between our check and the lock
-            if conn.execute("PRAGMA user_version").fetchone()[0] >= number:
-                conn.execute("COMMIT")
+    if all(number <= current for number, _, _ in scripts):
+        return
+    # All pending migrations in one transaction: a failure leaves the file as it was.
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        # another process may have migrated between our check and the lock
+        current = conn.execute("PRAGMA user_version").fetchone()[0]
+        for number, filename, text in scripts:
+            if number <= current:
                 continue
-            for statement in split_sql_script(text):
-                conn.execute(statement)
+            try:
+                for statement in split_sql_script(text):
+                    conn.execute(statement)
+            except sqlite3.Error as exc:
+                raise SLRError(f"{path}: migration {filename} failed ({exc}); the file is "
+                               "left as it was") from None
             conn.execute(f"PRAGMA user_version = {int(number)}")
-            conn.execute("COMMIT")
-        except BaseException:
+        conn.execute("COMMIT")
+    except BaseException:
+        if conn.in_transaction:
             conn.execute("ROLLBACK")
-            raise
-        current = number
+        raise
