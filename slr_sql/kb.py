@@ -474,8 +474,10 @@ class KnowledgeBase:
             except (SLRError, TypeError, ValueError, OverflowError, RecursionError) as exc:
                 if atomic:
                     raise exc if isinstance(exc, SLRError) else EventRejected(str(exc))
+                reason = "the term is nested too deeply" if isinstance(exc, RecursionError) \
+                    else str(exc).split("; use sys.")[0]  # (a Python hint, not for users)
                 err = exc if isinstance(exc, EventRejected) else \
-                    EventRejected(f"{shorten(repr(ev))}: {exc}")
+                    EventRejected(f"{shorten(repr(ev))}: {reason}")
                 err.index = i
                 err.event = ev
                 errors.append(err)
@@ -691,13 +693,20 @@ class KnowledgeBase:
         return self._buffers.infos()
 
     # -- SQL access -----------------------------------------------------------------------
-    def sql(self, query: str, params: Iterable[Any] = ()) -> tuple[list[str], list[tuple]]:
-        """Run SQL on the store's database; returns (column names, rows).
+    def sql(self, query: str, params: Iterable[Any] = (),
+            write: bool = False) -> tuple[list[str], list[tuple]]:
+        """Run one SQL statement on the store's database; returns (column names, rows).
+        Read-only unless ``write=True``; every failure is an :class:`SLRError`.
 
         >>> kb = open(); kb.add("p(a)^1"); kb.sql("SELECT arg1, t_end FROM p")
         (['arg1', 't_end'], [('a', 1.0)])
         """
-        return self.store.sql(query, params)
+        from .store import DatabaseError
+
+        try:
+            return self.store.sql(query, params, write)
+        except DatabaseError as exc:
+            raise SLRError(f"sql: {exc}") from None
 
 
 def open(path: str | Path | None = None, clock: Clock | None = None, **options: Any) -> KnowledgeBase:

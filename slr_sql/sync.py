@@ -1005,7 +1005,8 @@ class Synchronizer:
                     finally:
                         self.cond.acquire()
                     continue
-                self.cond.wait(wait)
+                # a deadline centuries away (at=1e300) is still a finite wait
+                self.cond.wait(None if wait is None else min(wait, threading.TIMEOUT_MAX))
 
 
 def _close_machine(m: Any, solving: Any) -> None:

@@ -368,8 +368,9 @@ class EventStore:
     # ------------------------------------------------------------------ raw and compiled SQL
 
     @_doc(Database.sql)
-    def sql(self, query: str, params: Iterable[Any] = ()) -> tuple[list[str], list[tuple]]:
-        return self._db.sql(query, params)
+    def sql(self, query: str, params: Iterable[Any] = (),
+            write: bool = False) -> tuple[list[str], list[tuple]]:
+        return self._db.sql(query, params, write)
 
     @_doc(Database.execute)
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:

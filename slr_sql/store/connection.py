@@ -319,19 +319,46 @@ class Database:
 
     # ------------------------------------------------------------------ raw SQL
 
-    def sql(self, query: str, params: Iterable[Any] = ()) -> tuple[list[str], list[tuple]]:
-        """Run one SQL statement as given (for ``slr sql``; meant for reading) and return
-        ``(column names, rows)``.
+    def sql(self, query: str, params: Iterable[Any] = (),
+            write: bool = False) -> tuple[list[str], list[tuple]]:
+        """Run one SQL statement as given (for ``slr sql``) and return ``(column names,
+        rows)``. Read-only unless ``write``: a statement that would change the store (an
+        INSERT, a DROP, a pragma assignment, an ATTACH) raises an :class:`SLRError` starting
+        with ``read-only``; other failures raise :data:`DatabaseError`. The connection's
+        SQL functions are there, so compiled statements (``kb.explain``) run as printed.
 
         >>> from slr_sql.store import EventStore
         >>> EventStore(None).sql("SELECT 1 AS one")
         (['one'], [(1,)])
+        >>> EventStore(None).sql("DROP TABLE slr_meta")
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: read-only: the statement would change the store (attempt to write a readonly database); pass write=True to allow it
         """
         with self.lock:
             self.check_open()
-            cursor = self.conn.execute(query, tuple(params))
-            columns = [d[0] for d in cursor.description] if cursor.description else []
-            return columns, cursor.fetchall()
+            conn = self.conn
+            if write:
+                cursor = conn.execute(query, tuple(params))
+                columns = [d[0] for d in cursor.description] if cursor.description else []
+                return columns, cursor.fetchall()
+            # query_only refuses every write to a database file; the authorizer refuses what
+            # it lets through (pragma assignments such as journal_mode, ATTACH, DETACH).
+            conn.execute("PRAGMA query_only = 1")
+            conn.set_authorizer(_read_only_authorizer)
+            try:
+                cursor = conn.execute(query, tuple(params))
+                columns = [d[0] for d in cursor.description] if cursor.description else []
+                return columns, cursor.fetchall()
+            except sqlite3.DatabaseError as exc:
+                text = str(exc)
+                if "readonly" in text or "not authorized" in text:
+                    raise SLRError(f"read-only: the statement would change the store "
+                                   f"({text}); pass write=True to allow it") from None
+                raise
+            finally:
+                conn.set_authorizer(None)
+                conn.execute("PRAGMA query_only = 0")
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
         """Execute one statement for another slr_sql module (triggers, buffer pruning, ...)
@@ -462,6 +489,23 @@ class Database:
                     else:
                         conn.set_progress_handler(
                             lambda: 1 if time.monotonic() > outer else 0, 20000)
+
+
+# Pragmas that take an argument and only read (also table-valued: pragma_table_info('t')).
+_READING_PRAGMAS = frozenset({
+    "table_info", "table_xinfo", "table_list", "index_list", "index_info", "index_xinfo",
+    "foreign_key_list", "foreign_key_check", "integrity_check", "quick_check",
+    "function_list", "module_list", "pragma_list", "collation_list", "database_list",
+    "compile_options"})
+
+
+def _read_only_authorizer(action: int, arg1: Any, arg2: Any, _db: Any, _trigger: Any) -> int:
+    if action in (sqlite3.SQLITE_ATTACH, sqlite3.SQLITE_DETACH):
+        return sqlite3.SQLITE_DENY
+    if action == sqlite3.SQLITE_PRAGMA and arg2 is not None \
+            and str(arg1).lower() not in _READING_PRAGMAS:
+        return sqlite3.SQLITE_DENY
+    return sqlite3.SQLITE_OK
 
 
 def run_sql_file(path: str | os.PathLike, query: str,
