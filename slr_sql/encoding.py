@@ -60,12 +60,15 @@ import json
 import math
 import re
 import sys
+from operator import itemgetter
+from operator import le as _le
 from json.encoder import encode_basestring as _quote  # C-accelerated; keeps non-ASCII
 from typing import Any
 
-from .terms import NIL, Atom, String, Struct, Var, make_list
+from .terms import CONS, NIL, Atom, String, Struct, Var, make_list
 
-__all__ = ["encode", "decode", "encode_json", "Unencodable", "INT64_MIN", "INT64_MAX"]
+__all__ = ["encode", "encode_column", "decode", "encode_json", "Unencodable", "INT64_MIN",
+           "INT64_MAX"]
 
 INT64_MIN = -(2 ** 63)
 INT64_MAX = 2 ** 63 - 1
@@ -135,11 +138,17 @@ def encode(term: Any) -> Any:
         if INT64_MIN <= term <= INT64_MAX:
             return term
         return _big_int_json(term)
+    if tt is Struct or tt is list or tt is tuple:
+        # the fast path: a flat list of numbers or of plain atoms (robot vectors, names)
+        if tt is Struct:
+            text = _cons_list_json(term) if term.name == "." else None
+        else:
+            text = _flat_list_json(term)
+        if text is None:
+            text = _json(term, 0)
+        return text if text.isascii() else _check_text(text)
     if tt is String:
         return _quote(_check_text(term))
-    if tt is Struct or tt is list or tt is tuple:
-        text = _json(term, 0)
-        return text if text.isascii() else _check_text(text)
     if tt is Var:
         return encode(_deref_or_raise(term))
     if tt is str:
@@ -153,6 +162,98 @@ def encode(term: Any) -> Any:
     if isinstance(term, float):
         return encode(float(term))
     raise Unencodable(f"{type(term).__name__} value {term!r} is not a term")
+
+
+def _cons_list_json(cell: Struct) -> str | None:
+    """The JSON array of a proper list of ``'.'/2`` cells whose elements are each a finite
+    float, a 64-bit integer or a plain atom (not ``[]``); None for anything else (another
+    element, a partial list, a variable in the spine), which the general encoder handles.
+    One walk, no call per element but the number's own text (``repr`` of a float is most of
+    the cost of a vector); the text is exactly the general encoder's. (The element tests
+    are those of :func:`_flat_list_json`, for Python lists.)
+
+    >>> from slr_sql.terms import make_list
+    >>> _cons_list_json(make_list([0.5, 1, Atom("cup1")])), _cons_list_json(make_list([[]]))
+    ('[0.5,1,"cup1"]', None)
+    """
+    parts: list = []
+    add = parts.append
+    try:
+        while True:
+            name = cell.name
+            if name is not CONS and name != ".":
+                return None
+            head, cell = cell.args  # ValueError: a '.' with other than two arguments
+            kind = type(head)
+            if kind is float:
+                if not _NEG_INF < head < _INF:
+                    return None  # inf (1e999) and NaN (refused) take the general path
+                add(_float_repr(head))
+            elif kind is int and INT64_MIN <= head <= INT64_MAX:
+                add(_int_str(head))
+            elif (kind is Atom or kind is str) and head != "[]":
+                add(_quote(head))
+            else:
+                return None
+            if type(cell) is not Struct:
+                if type(cell) is Atom and cell == "[]":
+                    return "[" + ",".join(parts) + "]"
+                return None  # a partial list [a|b], or a variable tail
+    except ValueError:
+        return None
+
+
+def _flat_list_json(items: list | tuple) -> str | None:
+    """The JSON array of a Python list or tuple whose elements are each a finite float, a
+    64-bit integer or a plain atom (not ``[]``); None as soon as one is anything else, for
+    the general encoder. (The element tests are those of :func:`_cons_list_json`.)
+
+    >>> _flat_list_json([0.5, 1, Atom("cup1")]), _flat_list_json([1.0, math.inf])
+    ('[0.5,1,"cup1"]', None)
+    """
+    parts: list = []
+    add = parts.append
+    for item in items:
+        kind = type(item)
+        if kind is float:
+            if not _NEG_INF < item < _INF:
+                return None  # inf (1e999) and NaN (refused) take the general path
+            add(_float_repr(item))
+        elif kind is int and INT64_MIN <= item <= INT64_MAX:
+            add(_int_str(item))
+        elif (kind is Atom or kind is str) and item != "[]":
+            add(_quote(item))
+        else:
+            return None
+    return "[" + ",".join(parts) + "]"
+
+
+def encode_column(values: list) -> list:
+    """:func:`encode` of every value of a column (the same argument of many events).
+    A column of one kind is checked whole: plain ASCII atoms are their own text, 64-bit
+    integers and floats other than NaN are themselves; any other column is encoded value
+    by value. Raises :class:`Unencodable` as :func:`encode` does.
+
+    >>> encode_column([Atom("cup1"), Atom("cup2")]), encode_column([1.5, 2.0]), encode_column([Atom("[x")])
+    (['cup1', 'cup2'], [1.5, 2.0], ['{"$atom":"[x"}'])
+    """
+    kinds = set(map(type, values))
+    if len(kinds) == 1:
+        (kind,) = kinds
+        if kind is Atom or kind is str:
+            try:
+                if all(map(str.isascii, values)) \
+                        and _JSON_STARTS.isdisjoint(map(_first_char, values)):
+                    return list(map(str, values))
+            except IndexError:  # an empty atom: encoded one by one
+                pass
+        elif kind is float:
+            if all(map(_le, values, values)):  # False only at a NaN
+                return values
+        elif kind is int:
+            if INT64_MIN <= min(values) and max(values) <= INT64_MAX:
+                return values
+    return list(map(encode, values))
 
 
 def encode_json(term: Any) -> str:
@@ -176,6 +277,7 @@ def _deref_or_raise(var: Var) -> Any:
 
 _INF = math.inf
 _NEG_INF = -math.inf
+_first_char = itemgetter(0)
 _float_repr = float.__repr__
 _int_str = int.__repr__
 _MAX_DEPTH = 400  # nesting of compounds/lists; deeper terms are rejected, not crashed on
