@@ -231,8 +231,9 @@ def _flat_list_json(items: list | tuple) -> str | None:
 def encode_column(values: list) -> list:
     """:func:`encode` of every value of a column (the same argument of many events).
     A column of one kind is checked whole: plain ASCII atoms are their own text, 64-bit
-    integers and floats other than NaN are themselves; any other column is encoded value
-    by value. Raises :class:`Unencodable` as :func:`encode` does.
+    integers and floats other than NaN are themselves, flat lists of numbers and atoms go
+    straight to their encoder; any other column is encoded value by value. Raises
+    :class:`Unencodable` as :func:`encode` does.
 
     >>> encode_column([Atom("cup1"), Atom("cup2")]), encode_column([1.5, 2.0]), encode_column([Atom("[x")])
     (['cup1', 'cup2'], [1.5, 2.0], ['{"$atom":"[x"}'])
@@ -253,6 +254,10 @@ def encode_column(values: list) -> list:
         elif kind is int:
             if INT64_MIN <= min(values) and max(values) <= INT64_MAX:
                 return values
+        elif kind is Struct or kind is list:  # vectors: the fast path, no dispatch
+            texts = list(map(_cons_list_json if kind is Struct else _flat_list_json, values))
+            if None not in texts and all(map(str.isascii, texts)):
+                return texts
     return list(map(encode, values))
 
 

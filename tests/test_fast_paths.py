@@ -110,6 +110,11 @@ COLUMN_VALUES = st.one_of(
     st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=1, max_size=5),
     st.lists(st.integers(-(2 ** 65), 2 ** 65), min_size=1, max_size=5),
     st.lists(ELEMENTS, min_size=1, max_size=5),
+    st.lists(st.one_of(st.lists(ELEMENTS, max_size=3).map(make_list),
+                       st.lists(ELEMENTS, min_size=1, max_size=2).map(
+                           lambda items: make_list(items, Atom("tail"))),
+                       st.just(Struct("f", (Atom("x"),)))), min_size=1, max_size=4),
+    st.lists(st.lists(ELEMENTS, max_size=3), min_size=1, max_size=4),
 )
 
 
