@@ -476,7 +476,7 @@ class KnowledgeBase:
         events = events if type(events) is list else list(events)
         errors: list[EventRejected] = []
         if _all_event_tuples(events):  # the common bulk case: handed to the store as they are
-            prepared, positions = events, None
+            prepared, positions = list(events), None  # (listeners must not see the caller's list)
         else:
             prepared, positions = self._prepare_events(events, atomic, errors)
         stored_errors = self._add(prepared, atomic=atomic)
@@ -484,9 +484,12 @@ class KnowledgeBase:
             # the store's and the marks' rejections carry the prepared event: give them the
             # index and the item the caller passed (events rejected while being prepared are
             # not in ``prepared``)
-            place = {id(event): k for k, event in enumerate(prepared)}
+            place: dict[int, list[int]] = {}  # (one tuple object may be given twice)
+            for k, event in enumerate(prepared):
+                place.setdefault(id(event), []).append(k)
             for err in stored_errors:
-                k = place.get(id(getattr(err, "event", None)))
+                ks = place.get(id(getattr(err, "event", None)))
+                k = ks.pop(0) if ks else None
                 if k is not None:
                     err.index = k if positions is None else positions[k]
                     err.event = events[err.index]

@@ -132,3 +132,11 @@ def test_a_column_encodes_as_its_values_do(values):
         got = "refused"
     assert repr(got) == repr(expected)
     assert got == "refused" or [type(v) for v in got] == [type(v) for v in expected]
+
+
+def test_the_same_bad_tuple_given_twice_is_rejected_at_both_places():
+    with slr_sql.open() as kb:
+        bad = ("p", (math.nan,), 1.0, 1.0)
+        errors = kb.add_many([bad, ("p", (1,), 1.0, 1.0), bad])
+        assert [e.index for e in errors] == [0, 2]
+        assert kb.query("findall(X, p(X)^_, L)") == [{"L": [1]}]
