@@ -434,18 +434,18 @@ class KnowledgeBase:
         t = deref(t)
         if type(t) is Var:
             raise EventRejected(f"{text.strip()}: the event time must be bound")
-        if type(t) in (int, float):
-            return t  # the store makes it a float (or rejects it: not finite)
         # An arithmetic expression is evaluated; a string or a list is not a time (evaluated,
         # "1" would be its character code, 49).
-        if not _is_time_expression(t):
+        if type(t) not in (int, float) and not _is_time_expression(t):
             raise EventRejected(f"{text.strip()}: the event time must be a number, "
                                 f"not {format_term(t)}")
         try:
-            return evaluate(t)
+            return float(t if type(t) in (int, float) else evaluate(t))
         except SLRError:
             raise EventRejected(f"{text.strip()}: the event time must be a number, "
                                 f"not {format_term(t)}") from None
+        except OverflowError:  # an integer beyond floats: 2**2000
+            raise EventRejected(f"{text.strip()}: event times must be finite") from None
 
     def add(self, text: str) -> None:
         """Add one event written in SLR syntax (``p(..)^T`` or ``p(..)^[S,E]``).

@@ -1,8 +1,9 @@
 """The schema of the internal ``slr_*`` tables: numbered SQL migrations, applied in order.
 
 Each ``migrations/NNNN_name.sql`` runs once; the migrations an open applies run in one
-transaction (all or nothing); ``PRAGMA user_version`` holds the number of the last one applied. A database written by a newer slr_sql (a higher
-number than the last script) is refused rather than guessed at.
+transaction (all or nothing); ``PRAGMA user_version`` holds the number of the last one
+applied. A database written by a newer slr_sql (a higher number than the last script) is
+refused rather than guessed at.
 """
 from __future__ import annotations
 
