@@ -14,6 +14,7 @@ import math
 import threading
 import time
 from dataclasses import dataclass, field
+from operator import itemgetter
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
@@ -24,6 +25,7 @@ from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
 from .store import DEFAULT_BUSY_TIMEOUT, EventStore
+from .store.checks import event_arguments, shorten
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
 from .terms import format_term
@@ -70,6 +72,35 @@ def _indicators(t: Any) -> list[tuple[str, int]]:
         items, _ = list_items(t)
         return [ind for x in items for ind in _indicators(x)]
     return [_indicator(t)]
+
+
+_TUPLE = frozenset({tuple})
+_FOUR = {4}
+_second = itemgetter(1)
+
+
+def _all_event_tuples(events: list) -> bool:
+    """True if every item is a ``(name, args, start, end)`` tuple whose ``args`` is a tuple
+    (checked a column at a time, at C speed): such a batch needs no preparing."""
+    try:
+        return (_TUPLE.issuperset(map(type, events)) and set(map(len, events)) == _FOUR
+                and _TUPLE.issuperset(map(type, map(_second, events))))
+    except TypeError:
+        return False
+
+
+def _is_time_expression(t: Any) -> bool:
+    """True if ``t`` may be evaluated as an event time: no string and no list in it."""
+    stack = [t]
+    while stack:
+        x = deref(stack.pop())
+        if type(x) is String or (type(x) is Atom and x == "[]"):
+            return False
+        if type(x) is Struct:
+            if x.name == "." and len(x.args) == 2:
+                return False
+            stack.extend(x.args)
+    return True
 
 
 def _where(clause: Clause | None) -> str:
@@ -221,10 +252,11 @@ class KnowledgeBase:
     """
 
     def __init__(self, path: str | Path | None = None, clock: Clock | None = None, *,
-                 synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT):
+                 synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
+                 adopt: bool = False):
         self.clock = clock if clock is not None else WallClock()
         self.store = EventStore(path, self.clock, synchronous=synchronous,
-                                busy_timeout=busy_timeout)
+                                busy_timeout=busy_timeout, adopt=adopt)
         self.path = self.store.path
         self.program = Program()
         self.declarations = Declarations()
@@ -543,7 +575,14 @@ class KnowledgeBase:
     def load_file(self, path: str | Path, *, name: str = "main", replace: bool = False) -> None:
         """Load a program file (see :meth:`load`)."""
         path = Path(path)
-        self.load(path.read_text(encoding="utf-8"), str(path), name=name, replace=replace)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError as exc:
+            raise SLRError(f"{path}: not a program (not UTF-8 text: byte "
+                           f"0x{exc.object[exc.start]:02x} at offset {exc.start})") from None
+        except OSError as exc:
+            raise SLRError(f"{path}: {exc.strerror or exc}") from None
+        self.load(text, str(path), name=name, replace=replace)
 
     def define(self, name: str, arity: int, fn: Callable) -> None:
         """Register a Python predicate ``name/arity``.
@@ -580,13 +619,18 @@ class KnowledgeBase:
         t = deref(t)
         if type(t) is Var:
             raise EventRejected(f"{text.strip()}: the event time must be bound")
-        if type(t) in (int, float):
-            return float(t)
+        # An arithmetic expression is evaluated; a string or a list is not a time (evaluated,
+        # "1" would be its character code, 49).
+        if type(t) not in (int, float) and not _is_time_expression(t):
+            raise EventRejected(f"{text.strip()}: the event time must be a number, "
+                                f"not {format_term(t)}")
         try:
-            return float(evaluate(t))
+            return float(t if type(t) in (int, float) else evaluate(t))
         except SLRError:
             raise EventRejected(f"{text.strip()}: the event time must be a number, "
                                 f"not {format_term(t)}") from None
+        except OverflowError:  # an integer beyond floats: 2**2000
+            raise EventRejected(f"{text.strip()}: event times must be finite") from None
 
     def add(self, text: str) -> None:
         """Add one event written in SLR syntax (``p(..)^T`` or ``p(..)^[S,E]``).
@@ -603,32 +647,73 @@ class KnowledgeBase:
         """
         if end is None:
             end = start
-        self._add([(name, tuple(args), start, end)], atomic=True)
+        self._add([(name, event_arguments(name, args, start, end), start, end)], atomic=True)
 
     def add_many(self, events: Iterable[Any], atomic: bool = False) -> list[EventRejected]:
         """Add many events in one transaction: strings in SLR syntax or
         ``(name, args, start, end)`` tuples. Returns the rejected events (each with its reason);
-        the others are stored. With ``atomic=True`` one bad event rejects the whole batch.
+        the others are stored; each rejection's ``.index`` and ``.event`` are the position
+        and the item in ``events``. With ``atomic=True`` one bad event rejects the whole batch.
 
         >>> kb = open(); kb.add_many(["p(1)^1", ("p", [2], 2.0, 2.0)])
         []
         """
-        prepared: list = []
+        events = events if type(events) is list else list(events)
         errors: list[EventRejected] = []
+        if _all_event_tuples(events):  # the common bulk case: handed to the store as they are
+            prepared, positions = list(events), None  # (listeners must not see the caller's list)
+        else:
+            prepared, positions = self._prepare_events(events, atomic, errors)
+        stored_errors = self._add(prepared, atomic=atomic)
+        if stored_errors:
+            # the store's and the marks' rejections carry the prepared event: give them the
+            # index and the item the caller passed (events rejected while being prepared are
+            # not in ``prepared``)
+            place: dict[int, list[int]] = {}  # (one tuple object may be given twice)
+            for k, event in enumerate(prepared):
+                place.setdefault(id(event), []).append(k)
+            for err in stored_errors:
+                ks = place.get(id(getattr(err, "event", None)))
+                k = ks.pop(0) if ks else None
+                if k is not None:
+                    err.index = k if positions is None else positions[k]
+                    err.event = events[err.index]
+                errors.append(err)
+            errors.sort(key=lambda e: e.index if isinstance(e.index, int) else -1)
+        return errors
+
+    def _prepare_events(self, events: list, atomic: bool,
+                        errors: list[EventRejected]) -> tuple[list, list[int]]:
+        """``(name, args tuple, start, end)`` for each event of ``events`` (text parsed),
+        with the index in ``events`` of each; the events that cannot be read go to
+        ``errors`` (raised when ``atomic``)."""
+        prepared: list = []
+        positions: list[int] = []
         for i, ev in enumerate(events):
             try:
                 if isinstance(ev, str):
-                    prepared.append(self._event_from_text(ev))
+                    event = self._event_from_text(ev)
                 else:
-                    name, args, start, end = ev
-                    prepared.append((name, tuple(args), start, end))
-            except (SLRError, TypeError, ValueError) as exc:
+                    try:
+                        name, args, start, end = ev
+                    except (TypeError, ValueError):
+                        raise EventRejected(f"event #{i} is neither SLR text nor a (name, args, "
+                                            f"start, end) tuple: {shorten(repr(ev))}") from None
+                    event = (name, event_arguments(name, args, start, end), start, end)
+            except (SLRError, TypeError, ValueError, OverflowError, RecursionError) as exc:
                 if atomic:
                     raise exc if isinstance(exc, SLRError) else EventRejected(str(exc))
-                err = exc if isinstance(exc, EventRejected) else EventRejected(f"{ev!r}: {exc}")
+                reason = "the term is nested too deeply" if isinstance(exc, RecursionError) \
+                    else str(exc).split("; use sys.")[0]  # (a Python hint, not for users)
+                err = exc if isinstance(exc, EventRejected) else \
+                    EventRejected(f"{shorten(repr(ev))}: {reason}")
                 err.index = i
+                err.event = ev
                 errors.append(err)
-        return errors + self._add(prepared, atomic=atomic)
+                continue
+            positions.append(i)
+            prepared.append(event)
+        return prepared, positions
 
     def _add(self, events: list, atomic: bool) -> list[EventRejected]:
         self._refresh()
@@ -644,7 +729,7 @@ class KnowledgeBase:
             raise errors[0]
         if self.add_listeners:
             rejected = {id(e.event) for e in errors if hasattr(e, "event")}
-            stored = [ev for ev in events if id(ev) not in rejected]
+            stored = [ev for ev in events if id(ev) not in rejected] if rejected else events
             for listener in self.add_listeners:
                 listener(stored)
         if marks:  # issue 5: after the events of the same batch are stored
@@ -722,10 +807,14 @@ class KnowledgeBase:
         >>> kb.query("prev(pos(a, X)^T, 4)")
         [{'X': 1, 'T': 1.0}]
         """
+        if limit is not None and (type(limit) is not int or limit < 0):
+            raise SLRError(f"limit must be a count (an integer >= 0), not {limit!r}")
         if wait:  # issue 5: synchronized (SLRTimeout names the incomplete types)
             return self.submit(goal, at=at, args=args, timeout=timeout).result()
         self._refresh()
         plan = self._plan(goal, tuple(args) if args else ())
+        if limit == 0:
+            return []
         if plan.lookup is not None and limit is None:
             frame = [None] * plan.compiled.nslots
             if args:
@@ -835,13 +924,20 @@ class KnowledgeBase:
         return self._buffers.infos()
 
     # -- SQL access -----------------------------------------------------------------------
-    def sql(self, query: str, params: Iterable[Any] = ()) -> tuple[list[str], list[tuple]]:
-        """Run SQL on the store's database; returns (column names, rows).
+    def sql(self, query: str, params: Iterable[Any] = (),
+            write: bool = False) -> tuple[list[str], list[tuple]]:
+        """Run one SQL statement on the store's database; returns (column names, rows).
+        Read-only unless ``write=True``; every failure is an :class:`SLRError`.
 
         >>> kb = open(); kb.add("p(a)^1"); kb.sql("SELECT arg1, t_end FROM p")
         (['arg1', 't_end'], [('a', 1.0)])
         """
-        return self.store.sql(query, params)
+        from .store import DatabaseError
+
+        try:
+            return self.store.sql(query, params, write)
+        except DatabaseError as exc:
+            raise SLRError(f"sql: {exc}") from None
 
     # -- plots ----------------------------------------------------------------------------
     def plot(self, types: Iterable[str] | str | None = None, **options: Any) -> Any:
@@ -863,6 +959,9 @@ def open(path: str | Path | None = None, clock: Clock | None = None, **options: 
     Options: ``synchronous`` (``"FULL"``: an event is on disk when its add returns),
     ``busy_timeout`` (seconds a write waits for another process's write transaction before
     :class:`~slr_sql.errors.SLRBusy`; default 5).
+    A file that is not a store (not SQLite, damaged, a store of a newer slr_sql, or an SQLite
+    file of another application) is refused with an :class:`SLRError` and left untouched;
+    ``adopt=True`` adds a store to another application's SQLite file on purpose.
 
     >>> kb = open(); kb.close()
     """

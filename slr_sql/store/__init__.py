@@ -78,7 +78,9 @@ class EventStore:
     ``path`` None or ``":memory:"`` gives an in-memory store. ``clock`` is any object with
     ``now() -> float`` (arrival times); the default is the wall clock. ``busy_timeout``:
     seconds a write waits for another connection's write transaction before
-    :class:`~slr_sql.errors.SLRBusy`.
+    :class:`~slr_sql.errors.SLRBusy`. A file that is not a store is refused with an
+    :class:`~slr_sql.errors.SLRError` and left untouched, unless ``adopt=True`` (a foreign
+    SQLite file then gets the store's tables added).
 
     >>> store = EventStore(":memory:")
     >>> store.add_event("obj", ("cup1", "red"), 1.0, 1.0); store.count("obj", 2)
@@ -87,8 +89,9 @@ class EventStore:
     """
 
     def __init__(self, path: str | Path | None = None, clock: Any = None, *,
-                 synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT):
-        self._db = db = Database(path, clock, synchronous, busy_timeout)
+                 synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
+                 adopt: bool = False):
+        self._db = db = Database(path, clock, synchronous, busy_timeout, adopt)
         self._tables = EventTables(db)
         self._writer = EventWriter(db, self._tables)
         self._reader = EventReader(db, self._tables)
@@ -176,6 +179,12 @@ class EventStore:
     @_doc(EventTables.declare_type)
     def declare_type(self, name: str, arity: int) -> str:
         return self._tables.declare_type(name, arity)
+
+    @property
+    def max_event_arity(self) -> int:
+        """The most data arguments an event may have (SQLite's column limit less the
+        ``seq``, ``t_start``, ``t_end`` and ``arrival`` columns)."""
+        return self._tables.max_arity
 
     @_doc(EventTables.event_types)
     def event_types(self) -> dict[tuple[str, int], str]:
@@ -403,8 +412,9 @@ class EventStore:
     # ------------------------------------------------------------------ raw and compiled SQL
 
     @_doc(Database.sql)
-    def sql(self, query: str, params: Iterable[Any] = ()) -> tuple[list[str], list[tuple]]:
-        return self._db.sql(query, params)
+    def sql(self, query: str, params: Iterable[Any] = (),
+            write: bool = False) -> tuple[list[str], list[tuple]]:
+        return self._db.sql(query, params, write)
 
     @_doc(Database.execute)
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:

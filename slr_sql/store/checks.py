@@ -11,14 +11,66 @@ import math
 import re
 from typing import Any
 
-from ..encoding import Unencodable
+from ..encoding import Unencodable, encode
+from ..errors import EventRejected
 from ..terms import Atom, String, Struct, Var
 
-__all__ = ["BadEvent", "check_times", "rejection_reason", "format_event"]
+__all__ = ["BadEvent", "check_times", "rejection_reason", "format_event", "arguments_problem",
+           "text_problem", "shorten", "event_arguments"]
 
 
 class BadEvent(Exception):
     """Internal: why an event is rejected (turned into EventRejected with the event text)."""
+
+
+def shorten(text: str, limit: int = 80) -> str:
+    """``text`` cut to about ``limit`` characters for a message (a 10 MB argument must not
+    make a 10 MB error).
+
+    >>> shorten("x" * 100, 10)
+    'xxxxxxxxxx... (100 characters)'
+    """
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
+
+
+def arguments_problem(args: Any) -> str:
+    """Why ``args`` is not an argument list: only a list or a tuple is one (a ``str`` would
+    otherwise be split into one-character atoms).
+
+    >>> arguments_problem("abc")
+    "event arguments must be a list or tuple, not str 'abc'"
+    """
+    shown = "None" if args is None else f"{type(args).__name__} {shorten(repr(args))}"
+    return f"event arguments must be a list or tuple, not {shown}"
+
+
+def event_arguments(name: Any, args: Any, start: Any, end: Any) -> tuple:
+    """The arguments of an event as a tuple, or :class:`EventRejected` naming the event when
+    ``args`` is not a list or tuple.
+
+    >>> event_arguments("p", ["a", 1], 1.0, 1.0)
+    ('a', 1)
+    """
+    if type(args) is tuple:
+        return args
+    if type(args) is list:
+        return tuple(args)
+    error = EventRejected(f"{format_event(name, (), start, end)}: {arguments_problem(args)}")
+    error.event = (name, args, start, end)
+    raise error
+
+
+def text_problem(text: str) -> str | None:
+    """Why ``text`` (an event name) cannot be stored, or None.
+
+    >>> text_problem("seg") is None, text_problem("seg" + chr(0xD800))
+    (True, "text with a lone surrogate ('\\\\ud800') is not valid Unicode")
+    """
+    try:
+        encode(Atom(text))
+    except Unencodable as exc:
+        return exc.reason
+    return None
 
 
 def _event_time(value: Any) -> float:
@@ -29,7 +81,7 @@ def _event_time(value: Any) -> float:
             return float(value)
         except OverflowError:
             raise BadEvent("event times must be finite") from None
-    raise BadEvent(f"event times must be numbers (got {value!r})")
+    raise BadEvent(f"event times must be numbers (got {shorten(repr(value))})")
 
 
 def check_times(start: Any, end: Any) -> tuple[float, float]:
@@ -105,9 +157,14 @@ def format_event(name: Any, args: Any, start: Any, end: Any) -> str:
     'seg(a,1)^2.0'
     """
     try:
+        if type(args) is not tuple and type(args) is not list:
+            args = ()  # not an argument list: the reason shows it
         head = _simple_format(Atom(name)) if not args else _format_term(Struct(name, tuple(args)))
-    except Exception:
-        head = f"{name}{tuple(args)!r}"
+    except Exception:  # a term too deep or too large to print
+        try:
+            head = shorten(f"{name}{tuple(args)!r}")
+        except Exception:  # an integer of more digits than Python prints
+            head = f"{name}(...)"
     if start == end:
         return f"{head}^{start!r}"
     return f"{head}^[{start!r},{end!r}]"

@@ -25,6 +25,7 @@ from __future__ import annotations
 import os
 import random
 import sqlite3
+import stat
 import threading
 import time
 import weakref
@@ -32,10 +33,11 @@ from contextlib import contextmanager
 from typing import Any, Callable, Iterable, Iterator
 
 from ..errors import SLRError, SLRTimeout
-from .schema import migrate
+from .schema import migrate, migration_scripts
 from .sqltext import busy_error, split_sql_script
 
-__all__ = ["Database", "DatabaseError", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT", "run_sql_file"]
+__all__ = ["Database", "DatabaseError", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT", "run_sql_file",
+           "check_file"]
 
 # The base class of the errors the database raises while running a statement (a missing
 # table, a syntax error, a constraint, an interrupted statement...). Callers outside the
@@ -62,11 +64,143 @@ class WallClock:
         return time.time()
 
 
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+# Tables every store has (the first migration creates them).
+_STORE_TABLES = frozenset({"slr_meta", "slr_program", "slr_event_types"})
+
+
+def _ro_uri(path: str) -> str:
+    """A read-only ``file:`` URI for ``path`` (``%``, ``?`` and ``#`` escaped)."""
+    quoted = os.path.abspath(path).replace("%", "%25").replace("?", "%3f").replace("#", "%23")
+    return f"file:{quoted}?mode=ro"
+
+
+def check_file(path: str, adopt: bool = False) -> bool:
+    """Refuse, before anything is written, a ``path`` that is not (and may not become) a
+    store: an :class:`SLRError` naming the path and the reason. Returns True when the store
+    is new (no file yet, an empty file, or an SQLite file with nothing in it), False for an
+    existing store (or, with ``adopt``, a foreign SQLite file to take over).
+
+    Refused: a directory, a path in a missing directory, a file that is not SQLite, a
+    truncated or damaged file, a store written by a newer slr_sql, and an SQLite file with
+    tables that is not a store (unless ``adopt``). The file is read only through its header
+    and a read-only connection, so a refused file keeps every byte and its mtime.
+
+    >>> import tempfile; folder = tempfile.mkdtemp()
+    >>> check_file(os.path.join(folder, "robot.db"))
+    True
+    >>> check_file(folder)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: ...: is a directory, not a store file
+    """
+    if os.path.isdir(path):
+        raise SLRError(f"{path}: is a directory, not a store file")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise SLRError(f"{path}: no such directory: {folder}")
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        if os.path.islink(path):
+            raise SLRError(f"{path}: a symbolic link to a missing file") from None
+        return True
+    except OSError as exc:
+        raise SLRError(f"{path}: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(info.st_mode):
+        raise SLRError(f"{path}: not a regular file, so not a store")
+    if info.st_size == 0:
+        return True
+    try:
+        with open(path, "rb") as handle:
+            header = handle.read(100)
+    except OSError as exc:
+        raise SLRError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    if not header.startswith(_SQLITE_MAGIC[:len(header)]) or len(header) < 16:
+        raise SLRError(f"{path}: not an SQLite database (so not an slr_sql store)")
+    if len(header) < 100:
+        raise SLRError(f"{path}: the file is truncated ({len(header)} bytes, less than an "
+                       "SQLite header)")
+    _check_length(path, header, info.st_size)
+    objects, version = _read_schema(path, header)
+    tables = sorted(name for kind, name in objects if kind == "table")
+    if _STORE_TABLES.issubset(tables) and version >= 1:
+        latest = migration_scripts()[-1][0]
+        if version > latest:
+            raise SLRError(f"{path}: written by a newer slr_sql (schema version {version}; "
+                           f"this one knows versions up to {latest}): upgrade slr_sql")
+        return False
+    if not objects and version == 0:
+        return True  # an SQLite file with nothing in it: it becomes a store
+    shown = ", ".join(tables[:5]) + (", ..." if len(tables) > 5 else "")
+    what = f"an SQLite file with tables {shown}" if tables else "an SQLite file"
+    if not adopt:
+        raise SLRError(f"{path}: not an slr_sql store ({what}); slr_sql.open(path, "
+                       "adopt=True) adds a store to it")
+    if version != 0:
+        raise SLRError(f"{path}: cannot adopt {what}: it uses PRAGMA user_version "
+                       f"({version}) for its own schema, as slr_sql does")
+    return False
+
+
+def _read_schema(path: str, header: bytes) -> tuple[list[tuple[str, str]], int]:
+    """``(type, name)`` of every object of ``sqlite_master``, and ``PRAGMA user_version``,
+    read without creating or changing a file.
+
+    A read-only connection to a database in WAL mode creates its ``-wal`` and ``-shm`` files
+    when they are missing, and cannot remove them when it closes. So a WAL database with no
+    ``-wal`` file (no connection has it open: the file holds everything committed) is read
+    as ``immutable`` (no side files, no locks). Should a writer open and checkpoint it while
+    it is being read, the read may see a torn page: it is retried, with locks once the
+    writer's ``-wal`` exists, before the file is called damaged.
+    """
+    wal_mode = header[18:20] == b"\x02\x02"
+    error: Exception | None = None
+    for _attempt in range(3):
+        immutable = wal_mode and not os.path.exists(path + "-wal")
+        uri = _ro_uri(path) + ("&immutable=1" if immutable else "")
+        try:
+            conn = sqlite3.connect(uri, uri=True, isolation_level=None, timeout=30.0)
+            try:
+                objects = conn.execute("SELECT type, name FROM sqlite_master").fetchall()
+                version = conn.execute("PRAGMA user_version").fetchone()[0]
+                return objects, version
+            finally:
+                conn.close()
+        except sqlite3.DatabaseError as exc:
+            error = exc
+            if not immutable:
+                break
+        except sqlite3.Error as exc:
+            raise SLRError(f"{path}: cannot read it ({exc})") from None
+    if "not a database" in str(error):
+        raise SLRError(f"{path}: not an SQLite database, or its header is damaged "
+                       f"({error})")
+    raise SLRError(f"{path}: the file is damaged ({error})")
+
+
+def _check_length(path: str, header: bytes, size: int) -> None:
+    """Refuse a file shorter than the page count its header records (a truncated copy).
+    Skipped while a write-ahead log holds pages not yet copied into the file."""
+    page_size = int.from_bytes(header[16:18], "big")
+    page_size = 65536 if page_size == 1 else page_size
+    pages = int.from_bytes(header[28:32], "big")
+    header_is_current = header[24:28] == header[92:96]  # "version-valid-for" = change counter
+    try:
+        wal_bytes = os.path.getsize(path + "-wal")
+    except OSError:
+        wal_bytes = 0
+    if header_is_current and pages and not wal_bytes and size < pages * page_size:
+        raise SLRError(f"{path}: the file is truncated ({size} bytes; its header records "
+                       f"{pages} pages of {page_size} bytes)")
+
+
 class Database:
     """The connection of one store, with its lock, transaction depth and clock.
 
     ``path`` None or ``":memory:"`` gives an in-memory database. Opening applies the
-    migrations the file has not seen yet.
+    migrations the file has not seen yet. A file that is not a store is refused
+    (:func:`check_file`) unless ``adopt`` (then a foreign SQLite file gets a store added).
 
     >>> db = Database(None); db.execute("SELECT ? + 1", (1,))
     [(2,)]
@@ -74,9 +208,13 @@ class Database:
     """
 
     def __init__(self, path: str | os.PathLike | None = None, clock: Any = None,
-                 synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT):
+                 synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
+                 adopt: bool = False):
         busy_timeout = _check_busy_timeout(busy_timeout)
-        self.path = None if path in (None, ":memory:") else str(path)
+        if synchronous.upper() not in ("OFF", "NORMAL", "FULL", "EXTRA"):
+            raise ValueError(f"synchronous must be OFF, NORMAL, FULL or EXTRA, not {synchronous!r}")
+        self.path = None if path in (None, ":memory:") else os.fspath(path)
+        new = True if self.path is None else check_file(self.path, adopt)
         self.clock = clock if clock is not None else WallClock()
         self.lock = threading.RLock()
         self.tx_depth = 0
@@ -88,33 +226,41 @@ class Database:
         self.open_streams: weakref.WeakSet = weakref.WeakSet()
         self.deadline: float | None = None  # of the compiled statement running now
         self.busy_timeout = busy_timeout
-        self.conn = sqlite3.connect(self.path or ":memory:", check_same_thread=False,
-                                    isolation_level=None, timeout=busy_timeout,
-                                    cached_statements=512)
-        if synchronous.upper() not in ("OFF", "NORMAL", "FULL", "EXTRA"):
-            raise ValueError(f"synchronous must be OFF, NORMAL, FULL or EXTRA, not {synchronous!r}")
-        conn = self.conn
-        # auto_vacuum must be chosen before the first table exists (a no-op afterwards, but
-        # one that wants the write lock: only a new file gets it); a file already in WAL mode
-        # is not switched again (that too would want a lock)
         try:
+            self.conn = sqlite3.connect(self.path or ":memory:", check_same_thread=False,
+                                        isolation_level=None, timeout=busy_timeout,
+                                        cached_statements=512)
+        except sqlite3.Error as exc:
+            raise SLRError(f"{self.path}: cannot open it ({exc})") from None
+        conn = self.conn
+        try:
+            # auto_vacuum must be chosen before the first table exists (a no-op afterwards,
+            # but one that wants the write lock: only a new file gets it)
             if conn.execute("PRAGMA page_count").fetchone()[0] == 0:
                 conn.execute("PRAGMA auto_vacuum=INCREMENTAL")
-            if self.path is not None and \
+            if self.path is not None and new:
+                conn.execute("PRAGMA journal_mode=WAL")
+            conn.execute(f"PRAGMA synchronous={synchronous.upper()}")
+            conn.execute("PRAGMA foreign_keys=ON")
+            # Every event type has four indexes; SQLite's default 2 MiB page cache makes large
+            # ingests spill and re-read index pages constantly. The cache grows only as used.
+            conn.execute(f"PRAGMA cache_size=-{CACHE_SIZE_KIB}")
+            migrate(conn, self.path)
+            # an existing store is in WAL already (switching again would want a lock); an
+            # adopted file is switched only once its migrations succeeded
+            if self.path is not None and not new and \
                     conn.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
                 conn.execute("PRAGMA journal_mode=WAL")
-        except sqlite3.OperationalError as exc:
-            busy = busy_error(exc, self.path, self.busy_timeout)
-            if busy is None:
-                raise
+        except BaseException as exc:
             conn.close()
-            raise busy from None
-        conn.execute(f"PRAGMA synchronous={synchronous.upper()}")
-        conn.execute("PRAGMA foreign_keys=ON")
-        # Every event type has four indexes; SQLite's default 2 MiB page cache makes large
-        # ingests spill and re-read index pages constantly. The cache grows only as used.
-        conn.execute(f"PRAGMA cache_size=-{CACHE_SIZE_KIB}")
-        migrate(conn, self.path)
+            if isinstance(exc, sqlite3.OperationalError):
+                busy = busy_error(exc, self.path, busy_timeout)
+                if busy is not None:
+                    raise busy from None
+            if isinstance(exc, sqlite3.Error):
+                raise SLRError(f"{self.path or ':memory:'}: cannot open the store "
+                               f"({exc})") from None
+            raise
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -261,22 +407,49 @@ class Database:
 
     # ------------------------------------------------------------------ raw SQL
 
-    def sql(self, query: str, params: Iterable[Any] = ()) -> tuple[list[str], list[tuple]]:
-        """Run one SQL statement as given (for ``slr sql``; meant for reading) and return
-        ``(column names, rows)``.
+    def sql(self, query: str, params: Iterable[Any] = (),
+            write: bool = False) -> tuple[list[str], list[tuple]]:
+        """Run one SQL statement as given (for ``slr sql``) and return ``(column names,
+        rows)``. Read-only unless ``write``: a statement that would change the store (an
+        INSERT, a DROP, a pragma assignment, an ATTACH) raises an :class:`SLRError` starting
+        with ``read-only``; other failures raise :data:`DatabaseError`. The connection's
+        SQL functions are there, so compiled statements (``kb.explain``) run as printed.
 
         >>> from slr_sql.store import EventStore
         >>> EventStore(None).sql("SELECT 1 AS one")
         (['one'], [(1,)])
+        >>> EventStore(None).sql("DROP TABLE slr_meta")
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: read-only: the statement would change the store (attempt to write a readonly database); pass write=True to allow it
         """
         with self.lock:
             self.check_open()
+            conn = self.conn
+            if write:
+                try:
+                    cursor = conn.execute(query, tuple(params))
+                    columns = [d[0] for d in cursor.description] if cursor.description else []
+                    return columns, cursor.fetchall()
+                except sqlite3.OperationalError as exc:
+                    raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+            # query_only refuses every write to a database file; the authorizer refuses what
+            # it lets through (pragma assignments such as journal_mode, ATTACH, DETACH).
+            conn.execute("PRAGMA query_only = 1")
+            conn.set_authorizer(_read_only_authorizer)
             try:
-                cursor = self.conn.execute(query, tuple(params))
+                cursor = conn.execute(query, tuple(params))
                 columns = [d[0] for d in cursor.description] if cursor.description else []
                 return columns, cursor.fetchall()
-            except sqlite3.OperationalError as exc:
-                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+            except sqlite3.DatabaseError as exc:
+                text = str(exc)
+                if "readonly" in text or "not authorized" in text:
+                    raise SLRError(f"read-only: the statement would change the store "
+                                   f"({text}); pass write=True to allow it") from None
+                raise
+            finally:
+                conn.set_authorizer(None)
+                conn.execute("PRAGMA query_only = 0")
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
         """Execute one statement for another slr_sql module (triggers, buffer pruning, ...)
@@ -412,6 +585,23 @@ class Database:
                             lambda: 1 if time.monotonic() > outer else 0, 20000)
 
 
+# Pragmas that take an argument and only read (also table-valued: pragma_table_info('t')).
+_READING_PRAGMAS = frozenset({
+    "table_info", "table_xinfo", "table_list", "index_list", "index_info", "index_xinfo",
+    "foreign_key_list", "foreign_key_check", "integrity_check", "quick_check",
+    "function_list", "module_list", "pragma_list", "collation_list", "database_list",
+    "compile_options"})
+
+
+def _read_only_authorizer(action: int, arg1: Any, arg2: Any, _db: Any, _trigger: Any) -> int:
+    if action in (sqlite3.SQLITE_ATTACH, sqlite3.SQLITE_DETACH):
+        return sqlite3.SQLITE_DENY
+    if action == sqlite3.SQLITE_PRAGMA and arg2 is not None \
+            and str(arg1).lower() not in _READING_PRAGMAS:
+        return sqlite3.SQLITE_DENY
+    return sqlite3.SQLITE_OK
+
+
 def run_sql_file(path: str | os.PathLike, query: str,
                  write: bool = False) -> tuple[list[str], list[tuple]]:
     """Run one SQL statement on the store file ``path`` through a connection of its own,
@@ -426,8 +616,7 @@ def run_sql_file(path: str | os.PathLike, query: str,
     path = os.fspath(path)
     if not os.path.exists(path):
         raise SLRError(f"no such store: {path}")
-    quoted = os.path.abspath(path).replace("%", "%25").replace("?", "%3f").replace("#", "%23")
-    uri = f"file:{quoted}?mode={'rw' if write else 'ro'}"
+    uri = _ro_uri(path)[:-len("ro")] + ("rw" if write else "ro")
     try:
         conn = sqlite3.connect(uri, uri=True, isolation_level=None)
     except sqlite3.Error as exc:

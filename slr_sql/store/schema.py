@@ -1,9 +1,9 @@
 """The schema of the internal ``slr_*`` tables: numbered SQL migrations, applied in order.
 
-Each ``migrations/NNNN_name.sql`` runs once, in its own transaction, and is recorded in
-``slr_migrations``; ``PRAGMA user_version`` holds the highest number applied. A database
-written by a newer slr_sql (a higher number than the last script) is refused rather than
-guessed at.
+Each ``migrations/NNNN_name.sql`` runs once and is recorded in ``slr_migrations``; the
+migrations an open applies run in one transaction (all or nothing), whatever the gaps in the
+numbering; ``PRAGMA user_version`` holds the highest number applied. A database written by a
+newer slr_sql (a higher number than the last script) is refused rather than guessed at.
 """
 from __future__ import annotations
 
@@ -88,28 +88,34 @@ def migrate(conn: sqlite3.Connection, path: str | None,
                        f"slr_sql supports ({latest}); upgrade slr_sql")
     if all(number in applied_migrations(conn, scripts) for number, _, _ in scripts):
         return
-    for number, filename, text in scripts:
-        try:
-            conn.execute("BEGIN IMMEDIATE")
-        except sqlite3.OperationalError as exc:
-            raise busy_error(exc, path) or exc from None
-        try:
-            # another process may have migrated between our check and the lock
-            applied = applied_migrations(conn, scripts)
+    # All pending migrations in one transaction: a failure leaves the file as it was.
+    try:
+        conn.execute("BEGIN IMMEDIATE")
+    except sqlite3.OperationalError as exc:
+        raise busy_error(exc, path) or exc from None
+    try:
+        # another process may have migrated between our check and the lock
+        applied = applied_migrations(conn, scripts)
+        names = {n: name for n, name, _ in scripts}
+        for number, filename, text in scripts:
             if number in applied:
-                conn.execute("COMMIT")
                 continue
-            for statement in split_sql_script(text):
-                conn.execute(statement)
-            conn.execute("CREATE TABLE IF NOT EXISTS slr_migrations (number INTEGER PRIMARY "
-                         "KEY, name TEXT NOT NULL, applied_at REAL)")
-            names = {n: name for n, name, _ in scripts}
-            conn.executemany("INSERT OR IGNORE INTO slr_migrations (number, name, applied_at) "
-                             "VALUES (?, ?, julianday('now'))",
-                             [(n, names.get(n, "?")) for n in sorted(applied | {number})])
-            version = conn.execute("PRAGMA user_version").fetchone()[0]
-            conn.execute(f"PRAGMA user_version = {int(max(version, number))}")
-            conn.execute("COMMIT")
-        except BaseException:
+            try:
+                for statement in split_sql_script(text):
+                    conn.execute(statement)
+            except sqlite3.Error as exc:
+                raise SLRError(f"{path}: migration {filename} failed ({exc}); the file is "
+                               "left as it was") from None
+            applied.add(number)
+        conn.execute("CREATE TABLE IF NOT EXISTS slr_migrations (number INTEGER PRIMARY "
+                     "KEY, name TEXT NOT NULL, applied_at REAL)")
+        conn.executemany("INSERT OR IGNORE INTO slr_migrations (number, name, applied_at) "
+                         "VALUES (?, ?, julianday('now'))",
+                         [(n, names.get(n, "?")) for n in sorted(applied)])
+        version = conn.execute("PRAGMA user_version").fetchone()[0]
+        conn.execute(f"PRAGMA user_version = {int(max([version, *applied]))}")
+        conn.execute("COMMIT")
+    except BaseException:
+        if conn.in_transaction:
             conn.execute("ROLLBACK")
-            raise
+        raise

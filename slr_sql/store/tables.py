@@ -18,8 +18,10 @@ are read straight from an index, never sorted.
 from __future__ import annotations
 
 import re
+import sqlite3
 from typing import Any, Callable
 
+from ..errors import SLRError
 from .connection import Database
 from .sqltext import RESERVED_PREFIXES, SAFE_IDENTIFIER, SQL_KEYWORDS, quote_identifier
 
@@ -70,6 +72,9 @@ class EventTables:
         # creates a new event type's table (slr_sql.buffers installs its triggers there)
         self.table_created_hooks: list[Callable[[str, int, str], Any]] = []
         db.rollback_listeners.append(self.reload)  # types created inside were rolled back too
+        # The most data arguments an event can have: its table has 4 more columns (seq,
+        # t_start, t_end, arrival) and SQLite refuses tables wider than its column limit.
+        self.max_arity = db.conn.getlimit(sqlite3.SQLITE_LIMIT_COLUMN) - 4
         self.reload()
 
     def reload(self) -> None:
@@ -169,6 +174,9 @@ class EventTables:
         """
         if not isinstance(name, str) or not isinstance(arity, int) or arity < 0:
             raise ValueError(f"bad event type {name!r}/{arity!r}")
+        if arity > self.max_arity:
+            raise SLRError(f"cannot declare event {name}/{arity}: too many arguments (an "
+                           f"event has at most {self.max_arity}, the column limit of SQLite)")
         with self.db.transaction():
             return self.register(str(name), arity, declared=True).table
 
