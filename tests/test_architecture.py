@@ -23,7 +23,7 @@ LAYERS = {
     "builtins": 3,
     "analysis": 4, "engine": 4, "sqlcompile": 4,
     "planner": 5,
-    "sync": 6, "buffers": 6, "cep": 6, "plot": 6,
+    "sync": 6, "buffers": 6, "cep": 6, "plot": 6, "subscriptions": 6,
     "kb": 7,
     "__init__": 8,
     "demo": 9, "service": 9, "ros": 9,
