@@ -19,7 +19,7 @@ How it works
   no gap and no duplicate at the seam between history and live.
 * **Delivery.** One hub thread per knowledge base reads the journal of each subscribed type
   once for all its subscriptions (woken by ``kb.add`` through ``kb.add_listeners``, and every
-  ``poll_interval`` seconds by ``PRAGMA data_version`` for other processes' commits), matches
+  ``poll_interval`` seconds to see rows other processes committed), matches
   each row against each pattern and condition, and appends the answers to each
   subscription's bounded queue. ``add`` never waits for a subscriber.
 * **Slow subscribers.** A subscription whose queue is full stops taking answers from the
@@ -68,7 +68,7 @@ log = logging.getLogger("slr_sql.subscriptions")
 DEFAULT_MAX_QUEUE = 10_000     # answers held in memory per subscription
 DEFAULT_MAX_LAG = 1_000_000    # journal rows a subscription may fall behind before it ends
 CHUNK = 512                    # rows per read
-POLL_INTERVAL = 0.05           # s between PRAGMA data_version checks (other processes' commits)
+POLL_INTERVAL = 0.05           # s between journal polls (rows other processes committed)
 PERSIST_INTERVAL = 0.2         # s between writes of durable positions
 LEASE_SECONDS = 30.0           # wall-clock s a process's claim on its subscriptions lasts
 CLEANUP_INTERVAL = 5.0         # s between journal trims
@@ -610,14 +610,14 @@ class SubscriptionHub:
         self._dirty = False
         self._closed = False
         self._thread: threading.Thread | None = None
-        self._data_version: int | None = None
         self._last_persist = 0.0
         self._last_lease = time.monotonic()   # registration writes a fresh lease
         self._last_cleanup = 0.0
         self._subscribed_types: set[tuple[str, int]] = set()   # ever, in this process
         self._journaled: set[tuple[str, int]] = set()   # types whose trigger was seen
         self._last_failure = ""
-        self._retry = False
+        self._passes_started = 0
+        self._passes_done = 0
 
     # -- wiring -------------------------------------------------------------------------------
     def notify(self) -> None:
@@ -926,37 +926,53 @@ class SubscriptionHub:
 
     # -- the hub thread ------------------------------------------------------------------------
     def _loop(self) -> None:
+        """Run a delivery pass whenever ``kb.add`` (or a consumer making room, or ``until``)
+        wakes the hub, and at least every ``poll_interval`` seconds: the pass compares each
+        journal's greatest jid with what was read, which is how events stored by other
+        connections (processes) or by statements on this one are seen."""
         while True:
             with self.cond:
                 if not self._dirty and not self._closed:
                     self.cond.wait(self.poll_interval if self._subs else None)
                 if self._closed:
                     return
-                dirty, self._dirty = self._dirty, False
+                self._dirty = False
                 if not self._subs:
                     continue
+                self._passes_started += 1
+                number = self._passes_started
             try:
-                if dirty or self._retry or self._external_change():
-                    self._retry = False
-                    self._pass()
-                else:
-                    self._serve_stragglers()
+                self._pass()
                 self._housekeeping()
-            except Exception as exc:  # a busy store, a closing kb: try again next time
+            except Exception as exc:  # a busy store, a closing kb: try again on the next tick
                 if self._closed or self.store.closed:
                     return
                 if str(exc) != self._last_failure:   # once per distinct failure, not per tick
                     self._last_failure = str(exc)
                     log.warning("subscriptions: a delivery pass failed (%s: %s); retrying",
                                 type(exc).__name__, exc, exc_info=True)
-                self._retry = True      # a full pass on the next tick
+            finally:
+                with self.cond:
+                    self._passes_done = number
+                    self.cond.notify_all()
 
-    def _external_change(self) -> bool:
-        """Did another connection (process) commit since the last check?"""
-        version = self.store.execute("PRAGMA data_version")[0][0]
-        changed = self._data_version is not None and version != self._data_version
-        self._data_version = version
-        return changed
+    def drain(self, timeout: float | None = None) -> bool:
+        """Wait until a whole delivery pass has run after this call (tests, benchmarks): every
+        event stored before the call has then been matched and queued, or left for a lagging
+        subscription to read later. True if it did within ``timeout`` seconds."""
+        end = None if timeout is None else time.monotonic() + timeout
+        with self.cond:
+            if not self._subs or self._thread is None:
+                return True
+            want = self._passes_started + 1
+            self._dirty = True
+            self.cond.notify_all()
+            while self._passes_done < want and not self._closed:
+                left = None if end is None else end - time.monotonic()
+                if left is not None and left <= 0:
+                    return False
+                self.cond.wait(left)
+        return True
 
     def _snapshot(self) -> dict[tuple[str, int], list[Subscription]]:
         with self.lock:
@@ -964,15 +980,9 @@ class SubscriptionHub:
 
     def _pass(self) -> None:
         for key, subs in self._snapshot().items():
-            self._serve_type(key, subs, shared=True)
+            self._serve_type(key, subs)
 
-    def _serve_stragglers(self) -> None:
-        """Poll tick without news: only subscriptions reading at their own pace move."""
-        for key, subs in self._snapshot().items():
-            if any(s.phase == _HISTORY or s.lagging or s._until_reached for s in subs):
-                self._serve_type(key, subs, shared=False)
-
-    def _serve_type(self, key: tuple[str, int], subs: list[Subscription], shared: bool) -> None:
+    def _serve_type(self, key: tuple[str, int], subs: list[Subscription]) -> None:
         """One round for the subscriptions of one event type: the shared read of the journal
         for those that keep up, then each one that reads at its own pace (history, lagging),
         then the ends (``until`` reached, too far behind)."""
@@ -993,7 +1003,7 @@ class SubscriptionHub:
         pos = self._type_pos.get(key)
         group = [s for s in subs if s.phase == _LIVE and not s.lagging and not s._ended
                  and not s._closed and (pos is None or s.scanned >= pos)]
-        if shared and group:
+        if group:
             if pos is None:
                 pos = min(s.scanned for s in group)
             while True:
