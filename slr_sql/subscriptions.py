@@ -329,41 +329,38 @@ class Subscription:
     # -- consuming ------------------------------------------------------------------------------
     def _take(self, timeout: float | None, block: bool = True) -> Any:
         """The next answer, or an _End; None when nothing came within ``timeout``."""
-        deadline = None if timeout is None else time.monotonic() + timeout
-        notify_hub = False
-        with self._cond:
+        with self._lock:
             self._in_flight = None           # the consumer is back: the previous one is done
-            while not self._queue:
-                if self._closed or not block:
-                    break
-                left = None if deadline is None else deadline - time.monotonic()
-                if left is not None and left <= 0:
-                    break
-                self._thread_waiting += 1
-                try:
-                    self._cond.wait(left)
-                finally:
-                    self._thread_waiting -= 1
-            if not self._queue:
-                if self._closed:
-                    return _End(self.error)
-                return None
-            item = self._queue.popleft()
+            queue = self._queue
+            if not queue and block and not self._closed:
+                deadline = None if timeout is None else time.monotonic() + timeout
+                while not queue and not self._closed:
+                    left = None if deadline is None else deadline - time.monotonic()
+                    if left is not None and left <= 0:
+                        break
+                    self._thread_waiting += 1
+                    try:
+                        self._cond.wait(left)
+                    finally:
+                        self._thread_waiting -= 1
+            if not queue:
+                return _End(self.error) if self._closed else None
+            item = queue.popleft()
             if type(item) is tuple:
                 self._in_flight = (item[0], item[1])
                 self.delivered += 1
-                if (self.lagging or self.phase == _HISTORY) \
-                        and len(self._queue) == self.max_queue // 2:
-                    notify_hub = True
-                answer = item[2]
+                if len(queue) != self.max_queue >> 1 or not (self.lagging
+                                                             or self.phase == _HISTORY):
+                    return item[2]
+                refill = True
             else:
                 self._finished = True
-                answer = item
-        if notify_hub:
+                refill = False
+        if refill:                           # room again: the hub reads on from the store
             self._hub.notify()
-        if type(answer) is _End:
-            self._hub._taken_end(self)
-        return answer
+            return item[2]
+        self._hub._taken_end(self)
+        return item
 
     def get(self, timeout: float | None = None) -> dict | None:
         """The next answer; None once the subscription has ended (``until`` reached or
@@ -403,7 +400,7 @@ class Subscription:
 
     async def __anext__(self) -> dict:
         while True:
-            item = self._take(0, block=False)
+            item = self._take(None, block=False)
             if item is not None:
                 if type(item) is _End:
                     if item.error is not None:
@@ -493,19 +490,28 @@ class Subscription:
         self.close(ack=exc_type is None)
 
     # -- hub side (hub thread) ------------------------------------------------------------------
-    def _offer(self, phase: int, pos: int, answer: dict) -> bool:
-        """Queue an answer at position ``pos``; False when the queue is full."""
+    def _offer_batch(self, phase: int, batch: list, end_pos: int, copy: bool = False) -> bool:
+        """Queue ``batch`` ``[(pos, answer)]`` (in order; each answer copied when ``copy``: it is
+        shared with other subscriptions) and pass every row up to ``end_pos``. When the queue
+        cannot take all of it, queue what fits, pass the rows before the first answer left
+        out, and return False (the hub reads the rest from the store later)."""
         with self._lock:
             if self._closed or self._ended:
                 return True
-            if len(self._queue) >= self.max_queue:
-                return False
-            self._queue.append((phase, pos, answer))
-            if phase == _LIVE:
-                self.scanned = pos
+            room = self.max_queue - len(self._queue)
+            taken = batch if len(batch) <= room else batch[:max(room, 0)]
+            if copy:
+                self._queue.extend([(phase, pos, dict(answer)) for pos, answer in taken])
             else:
-                self.history_pos = pos
-            return True
+                self._queue.extend([(phase, pos, answer) for pos, answer in taken])
+            if len(taken) < len(batch):
+                end_pos = batch[len(taken)][0] - 1
+            if phase == _LIVE:
+                if end_pos > self.scanned:
+                    self.scanned = end_pos
+            elif end_pos > self.history_pos:
+                self.history_pos = end_pos
+            return len(taken) == len(batch)
 
     def _end(self, error: BaseException | None = None, completed: bool = False) -> None:
         with self._lock:
@@ -1019,8 +1025,9 @@ class SubscriptionHub:
                 self._wake(touched)     # a long backlog: let consumers start
                 touched = set()
         for s in subs:
-            if s._ended or s._closed:
-                continue
+            if s._ended or s._closed or (s.phase == _LIVE and not s.lagging and pos is not None
+                                         and s.scanned >= pos and not s._until_reached):
+                continue                 # served by the shared read: nothing else to do
             if s.phase == _HISTORY:
                 self._serve_history(info, s, touched)
             if s.phase == _LIVE and (s.lagging or pos is None or s.scanned < pos):
@@ -1030,40 +1037,67 @@ class SubscriptionHub:
 
     def _deliver_rows(self, key: tuple[str, int], rows: list, group: list[Subscription],
                       touched: set, own_pace: bool = False) -> None:
-        """Match journal rows ``(jid, seq, args.., start, end)`` for ``group``; a subscription
-        whose queue is full is marked lagging at the first answer it cannot take."""
+        """Match journal rows ``(jid, seq, args.., start, end)`` for ``group``: the answers of
+        each distinct (pattern, condition, since, until) are computed once, then given to each
+        subscription in one batch; one whose queue fills up is marked lagging at the first
+        answer it cannot take."""
         arity = key[1]
-        shared = len(group) > 1
-        for row in rows:
-            jid = row[0]
-            args = tuple([decode(v) for v in row[2:2 + arity]])
-            start, end = row[2 + arity], row[3 + arity]
-            results: dict = {}
-            for s in group:
-                if jid <= s.scanned or s.lagging or s._ended:
-                    continue
-                if end < s.since or (s.until is not None and end > s.until):
-                    s.scanned = jid
-                    continue
-                m = s._matcher
-                if m in results:
-                    answer = results[m]
-                else:
-                    try:
-                        answer = results[m] = m.match(args, start, end)
-                    except SLRError as exc:
-                        answer = results[m] = exc
-                if answer is None:
-                    s.scanned = jid
-                elif isinstance(answer, BaseException):
-                    s._end(answer)
+        events = [(row[0], tuple([decode(v) for v in row[2:2 + arity]]), row[2 + arity],
+                   row[3 + arity]) for row in rows]
+        first_jid, last_jid = events[0][0], events[-1][0]
+        cohorts: dict = {}
+        copy = len(group) > 1
+        for s in group:
+            if s.lagging or s._ended or s._closed or s.scanned >= last_jid:
+                continue
+            cohort_key = (s._matcher, s.since, s.until)
+            cohort = cohorts.get(cohort_key)
+            if cohort is None:
+                cohort = cohorts[cohort_key] = self._cohort(s, events)
+            items, error, error_jid = cohort
+            scanned = s.scanned
+            if scanned >= first_jid:
+                items = [item for item in items if item[0] > scanned]
+                if error is not None and error_jid <= scanned:
+                    error = None
+            if error is None:
+                end_pos = last_jid
+            else:
+                end_pos = items[-1][0] if items else scanned
+            if s._offer_batch(_LIVE, items, end_pos, copy):
+                if error is not None:
+                    s._end(error)
+                if items or error is not None:
                     touched.add(s)
-                elif s._offer(_LIVE, jid, dict(answer) if shared else answer):
-                    touched.add(s)
-                else:
-                    s.lagging = True
-                    if not own_pace:
-                        s.overflows += 1
+            else:
+                s.lagging = True
+                touched.add(s)
+                if not own_pace:
+                    s.overflows += 1
+
+    def _cohort(self, s: Subscription, events: list) -> tuple[list, Any, int]:
+        """``s``'s answers among ``events``: ([(jid, answer)], the first error, its jid)."""
+        m = s._matcher
+        since = s.since
+        until = _INF if s.until is None else s.until
+        items = []
+        for jid, args, start, end in events:
+            if end < since or end > until:
+                continue
+            answer = self._match(m, args, start, end)
+            if answer is None:
+                continue
+            if type(answer) is not dict:
+                return items, answer, jid
+            items.append((jid, answer))
+        return items, None, 0
+
+    @staticmethod
+    def _match(m: _Matcher, args: tuple, start: float, end: float) -> Any:
+        try:
+            return m.match(args, start, end)
+        except SLRError as exc:
+            return exc
 
     def _serve_history(self, info: _TypeInfo, s: Subscription, touched: set) -> None:
         """Deliver stored events (seq <= history_top, end in [since, until]) in seq order, as
@@ -1078,23 +1112,30 @@ class SubscriptionHub:
             limit = max(min(room, CHUNK), 16)
             rows = self.store.execute(info.history_sql, (s.history_pos, s.history_top,
                                                          s.since, until, s.live_start, limit))
+            batch = []
+            error = None
             for row in rows:
-                seq = row[0]
-                args = tuple([decode(v) for v in row[1:1 + arity]])
-                try:
-                    answer = m.match(args, row[1 + arity], row[2 + arity])
-                except SLRError as exc:
-                    s._end(exc)
-                    touched.add(s)
-                    return
+                answer = self._match(m, tuple([decode(v) for v in row[1:1 + arity]]),
+                                     row[1 + arity], row[2 + arity])
                 if answer is None:
-                    s.history_pos = seq
-                elif s._offer(_HISTORY, seq, answer):
-                    touched.add(s)
-                else:
-                    return
-            if len(rows) < limit:
-                s.history_pos = s.history_top
+                    continue
+                if type(answer) is not dict:
+                    error = answer
+                    break
+                batch.append((row[0], answer))
+            done = error is None and len(rows) < limit
+            if error is None:
+                end_pos = s.history_top if done else (rows[-1][0] if rows else s.history_pos)
+            else:
+                end_pos = batch[-1][0] if batch else s.history_pos
+            if batch or error is not None:
+                touched.add(s)
+            if not s._offer_batch(_HISTORY, batch, end_pos):
+                return
+            if error is not None:
+                s._end(error)
+                return
+            if done:
                 s._go_live()
 
     def _serve_lagging(self, key: tuple[str, int], info: _TypeInfo, s: Subscription,
