@@ -68,6 +68,7 @@ log = logging.getLogger("slr_sql.subscriptions")
 DEFAULT_MAX_QUEUE = 10_000     # answers held in memory per subscription
 DEFAULT_MAX_LAG = 1_000_000    # journal rows a subscription may fall behind before it ends
 CHUNK = 512                    # rows per read
+FEW_HISTORY = 4096             # a history window this small is read by end time
 POLL_INTERVAL = 0.05           # s between journal polls (rows other processes committed)
 PERSIST_INTERVAL = 0.2         # s between writes of durable positions
 LEASE_SECONDS = 30.0           # wall-clock s a process's claim on its subscriptions lasts
@@ -286,6 +287,7 @@ class Subscription:
         self._final_position: tuple[int, int] | None = None   # set by close()
         self._completed = False      # ended because everything up to `until` was delivered
         self._persisted: tuple | None = None                  # last position written
+        self._history_sql: str | None = None   # how to read its history (by seq or end time)
 
     def __repr__(self) -> str:
         state = "closed" if self._closed else "ended" if self._ended else (
@@ -573,7 +575,8 @@ def _owner_alive(owner: str | None, lease_until: float | None, now_wall: float, 
 
 
 class _TypeInfo:
-    __slots__ = ("table", "journal", "columns", "history_sql", "journal_sql", "max_sql")
+    __slots__ = ("table", "journal", "columns", "history_sql", "history_by_end_sql",
+                 "window_count_sql", "journal_sql", "max_sql")
 
     def __init__(self, table: str, arity: int):
         self.table = table
@@ -587,6 +590,12 @@ class _TypeInfo:
             f"WHERE t.seq > ? AND t.seq <= ? AND t.t_end >= ? AND t.t_end <= ? "
             f"AND NOT EXISTS (SELECT 1 FROM {j} AS j WHERE j.seq = t.seq AND j.jid > ?) "
             f"ORDER BY t.seq LIMIT ?")
+        # few events in [since, until] (e.g. since="now" on a long history): read them through
+        # the end-time index and sort them, rather than walking every row by seq
+        self.history_by_end_sql = self.history_sql.replace(
+            "WHERE t.seq > ? AND t.seq <= ?", "WHERE +t.seq > ? AND +t.seq <= ?")
+        self.window_count_sql = (f"SELECT count(*) FROM (SELECT 1 FROM {t} WHERE t_end >= ? "
+                                 f"AND t_end <= ? LIMIT {FEW_HISTORY + 1})")
         self.journal_sql = (f"SELECT jid, seq{cols}, t_start, t_end FROM {j} WHERE jid > ? "
                             f"ORDER BY jid LIMIT ?")
         self.max_sql = f"SELECT max(jid) FROM {j}"
@@ -715,7 +724,11 @@ class SubscriptionHub:
                 self._thread.start()
             self.cond.notify()
         if sub.until is not None and not sub._ended:
-            self._watch_until(sub)
+            try:
+                self._watch_until(sub)
+            except BaseException:
+                sub.close(ack=False)
+                raise
         if callback is not None:
             sub._thread = threading.Thread(target=sub._run_callback, daemon=True,
                                            name=f"slr-subscription-{sub.id}")
@@ -879,8 +892,15 @@ class SubscriptionHub:
         sub._pending = pending
 
         def reached(future: Any) -> None:
-            if future.cancelled() or future.exception() is not None:
-                return    # the knowledge base closed
+            if future.cancelled() or self._closed:
+                return
+            error = future.exception()
+            if error is not None:
+                if not sub._closed:
+                    sub._end(SLRError(f"subscription {sub.id!r}: waiting for its history to be "
+                                      f"complete up to until={sub.until:g} failed: {error}"))
+                    self._wake({sub})
+                return
             sub._until_reached = True
             self.notify()
 
@@ -1105,13 +1125,16 @@ class SubscriptionHub:
         arity = s.key[1]
         m = s._matcher
         until = _INF if s.until is None else s.until
+        if s._history_sql is None:
+            few = self.store.execute(info.window_count_sql, (s.since, until))[0][0]
+            s._history_sql = info.history_by_end_sql if few <= FEW_HISTORY else info.history_sql
         while s.phase == _HISTORY and not s._ended and not s._closed:
             room = s.max_queue - len(s._queue)
             if room <= 0:
                 return
             limit = max(min(room, CHUNK), 16)
-            rows = self.store.execute(info.history_sql, (s.history_pos, s.history_top,
-                                                         s.since, until, s.live_start, limit))
+            rows = self.store.execute(s._history_sql, (s.history_pos, s.history_top,
+                                                       s.since, until, s.live_start, limit))
             batch = []
             error = None
             for row in rows:

@@ -23,6 +23,7 @@ from hypothesis import given, settings, strategies as st
 import slr_sql
 from slr_sql import ManualClock, SLRError, SLREvaluationError, SLRSyntaxError, SLRTimeout
 from slr_sql.encoding import decode
+from slr_sql import subscriptions
 from slr_sql.subscriptions import SubscriptionOverflow, answer_json, journal_table
 from slr_sql.terms import Atom, String, Struct, make_list, to_python
 
@@ -53,6 +54,15 @@ def xs(answers: list[dict], name: str = "X") -> list:
 @pytest.fixture
 def clock():
     return ManualClock(0.0)
+
+
+@pytest.fixture(params=["by end time", "by arrival sequence"])
+def history_read(request, monkeypatch):
+    """Both ways a history is read: few events in the window (the end-time index) or many
+    (walking the table by seq)."""
+    if request.param == "by arrival sequence":
+        monkeypatch.setattr(subscriptions, "FEW_HISTORY", -1)
+    return request.param
 
 
 @pytest.fixture
@@ -301,7 +311,7 @@ def test_bad_arguments_are_refused_with_a_clear_error(kb, kwargs, message):
 
 # -- since: history, then live, with no gap and no duplicate ---------------------------------------
 
-def test_since_now_skips_stored_events_and_late_live_ones(kb, clock):
+def test_since_now_skips_stored_events_and_late_live_ones(kb, clock, history_read):
     kb.add_many(["p(old)^1", "p(future)^20"])
     clock.set(10)
     sub = kb.subscribe("p(X)^T")                      # since="now" = 10
@@ -309,14 +319,14 @@ def test_since_now_skips_stored_events_and_late_live_ones(kb, clock):
     assert xs(take(sub, 2)) == ["future", "live"]
 
 
-def test_since_a_time_replays_history_then_goes_live(kb):
+def test_since_a_time_replays_history_then_goes_live(kb, history_read):
     kb.add_many([f"p({i})^{i}" for i in range(10)])
     sub = kb.subscribe("p(X)^T", since=4)
     kb.add_many(["p(10)^10", "p(3)^3.5", "p(11)^11"])
     assert xs(take(sub, 8)) == [4, 5, 6, 7, 8, 9, 10, 11]
 
 
-def test_history_longer_than_the_queue_is_read_at_the_consumers_pace(kb):
+def test_history_longer_than_the_queue_is_read_at_the_consumers_pace(kb, history_read):
     kb.add_many([("p", [i], float(i), float(i)) for i in range(3000)])
     sub = kb.subscribe("p(X)^T", since=0, max_queue=50)
     got = []
@@ -328,7 +338,8 @@ def test_history_longer_than_the_queue_is_read_at_the_consumers_pace(kb):
 
 
 @pytest.mark.parametrize("since", [float("-inf"), 0])
-def test_no_gap_and_no_duplicate_at_the_seam_with_a_concurrent_writer(tmp_path, since):
+def test_no_gap_and_no_duplicate_at_the_seam_with_a_concurrent_writer(tmp_path, since,
+                                                                     history_read):
     """A thread adds 1..N in order while the subscription is made in the middle: the answers
     are exactly 1..N once each, in order (history, then live)."""
     n = 3000
@@ -353,7 +364,7 @@ def test_no_gap_and_no_duplicate_at_the_seam_with_a_concurrent_writer(tmp_path, 
         assert sub.phase == 1          # it went live
 
 
-def test_a_reused_arrival_sequence_is_not_replayed_as_history(kb):
+def test_a_reused_arrival_sequence_is_not_replayed_as_history(kb, history_read):
     """SQLite reuses the rowid of a deleted last row: the history (seq <= the top at
     subscription time) must not take the new row, which is live."""
     kb.add_many(["p(1)^1", "p(2)^2", "p(3)^3"])
