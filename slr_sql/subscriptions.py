@@ -267,7 +267,7 @@ class Subscription:
         self._lock = threading.Lock()
         self._cond = threading.Condition(self._lock)
         self._queue: collections.deque = collections.deque()   # (phase, pos, answer) | _End
-        self._in_flight: tuple[int, int] | None = None
+        self._in_flight: tuple | None = None      # (phase, pos, answer) taken, not handled
         self._thread_waiting = 0
         self._async_waiter: tuple[Any, Any] | None = None
         self._ended = False          # an _End was queued: the hub is done with it
@@ -319,8 +319,7 @@ class Subscription:
         if self._final_position is not None:
             return self._final_position
         if self._in_flight is not None:
-            phase, pos = self._in_flight
-            return phase, pos - 1
+            return self._in_flight[0], self._in_flight[1] - 1
         for item in self._queue:
             if type(item) is tuple:
                 return item[0], item[1] - 1
@@ -330,10 +329,23 @@ class Subscription:
 
     # -- consuming ------------------------------------------------------------------------------
     def _take(self, timeout: float | None, block: bool = True) -> Any:
-        """The next answer, or an _End; None when nothing came within ``timeout``."""
+        """The next answer, or an _End; None when nothing came within ``timeout``.
+
+        Taking it marks the previous one handled. Fast path without the lock: ``deque.popleft``
+        is atomic, and while ``_in_flight`` still names the previous answer, ``position()``
+        is one answer early (never late), which only means "delivered again after a crash".
+        With no previous answer in flight, the lock is taken: the position must never pass an
+        answer on its way to the consumer."""
+        queue = self._queue
+        if queue and self._in_flight is not None and not self._closed:
+            try:
+                item = queue.popleft()
+            except IndexError:        # the hub or close() emptied it meanwhile
+                item = None
+            if item is not None:
+                return self._took(item)
         with self._lock:
             self._in_flight = None           # the consumer is back: the previous one is done
-            queue = self._queue
             if not queue and block and not self._closed:
                 deadline = None if timeout is None else time.monotonic() + timeout
                 while not queue and not self._closed:
@@ -349,18 +361,19 @@ class Subscription:
                 return _End(self.error) if self._closed else None
             item = queue.popleft()
             if type(item) is tuple:
-                self._in_flight = (item[0], item[1])
-                self.delivered += 1
-                if len(queue) != self.max_queue >> 1 or not (self.lagging
-                                                             or self.phase == _HISTORY):
-                    return item[2]
-                refill = True
-            else:
-                self._finished = True
-                refill = False
-        if refill:                           # room again: the hub reads on from the store
-            self._hub.notify()
+                self._in_flight = item
+        return self._took(item)
+
+    def _took(self, item: Any) -> Any:
+        if type(item) is tuple:
+            self._in_flight = item            # (phase, pos, answer)
+            self.delivered += 1
+            if len(self._queue) == self.max_queue >> 1 and (self.lagging
+                                                            or self.phase == _HISTORY):
+                self._hub.notify()            # room again: the hub reads on from the store
             return item[2]
+        self._in_flight = None
+        self._finished = True
         self._hub._taken_end(self)
         return item
 
@@ -531,7 +544,12 @@ class Subscription:
             self.scanned = max(self.scanned, self.live_start)
 
     def _wake(self, loops: dict) -> None:
-        """Wake a consumer waiting on this subscription (async ones are collected per loop)."""
+        """Wake a consumer waiting on this subscription (async ones are collected per loop).
+        Called after the answers were queued under the lock: a consumer registers as waiting
+        under the same lock only after seeing an empty queue, so the flags read here without
+        the lock cannot miss one that waits for these answers."""
+        if not self._thread_waiting and self._async_waiter is None:
+            return
         with self._lock:
             if self._thread_waiting:
                 self._cond.notify_all()
