@@ -476,7 +476,7 @@ class Subscription:
                 return
 
     # -- closing --------------------------------------------------------------------------------
-    def close(self, forget: bool = False, ack: bool = True) -> None:
+    def close(self, forget: bool = False, ack: bool = True, join: bool = True) -> None:
         """Unregister. A durable subscription keeps its position (the last answer taken counts
         as handled unless ``ack=False``); ``forget=True`` removes its record too. Answers still
         queued are dropped here and delivered again when a durable subscription resumes."""
@@ -494,6 +494,10 @@ class Subscription:
         if waiter is not None:
             _resolve_threadsafe(waiter[0], [waiter[1]])
         self._hub._close(self, forget)
+        if join:
+            self._join()
+
+    def _join(self) -> None:
         thread = self._thread
         if thread is not None and thread is not threading.current_thread():
             thread.join(timeout=5.0)
@@ -955,8 +959,16 @@ class SubscriptionHub:
             if self._closed:
                 return
             subs = list(self._subs.values())
+        if subs and not self.store.closed:
+            try:
+                with self.store.transaction():   # one commit for every position
+                    for sub in subs:
+                        sub.close(join=False)
+            except SLRError as exc:
+                log.warning("subscriptions: could not record positions at close: %s", exc)
         for sub in subs:
-            sub.close()
+            sub.close(join=False)                # (if the transaction above failed)
+            sub._join()                          # callback threads, outside the transaction
         with self.cond:
             self._closed = True
             self.cond.notify_all()

@@ -590,6 +590,18 @@ def test_kb_close_ends_open_subscriptions(tmp_path):
     assert sub.get(timeout=DEADLINE) is None and sub.closed
 
 
+def test_events_derived_inside_the_adding_transaction_are_delivered(kb):
+    """Complex events are stored in the transaction of the event that completes them and then
+    delivered like any event; here an SQL trigger stands in for the event-rule engine."""
+    kb.load(":- event relFace/1. :- event face/2.")
+    sub = kb.subscribe("relFace(F)^[S, E]", since=0)
+    kb.sql("CREATE TRIGGER derive AFTER INSERT ON face WHEN NEW.arg2 > 60 BEGIN "
+           "INSERT INTO relFace (arg1, t_start, t_end, arrival) "
+           "VALUES (NEW.arg1, NEW.t_start - 1, NEW.t_end, NEW.arrival); END")
+    kb.add_many(["face(bob, 20)^1", "face(antonio, 65)^2"])
+    assert take(sub, 1) == [{"F": "antonio", "S": 1.0, "E": 2.0}]
+
+
 # -- other connections and processes -------------------------------------------------------------
 
 def test_events_added_by_another_connection_are_delivered(tmp_path):
