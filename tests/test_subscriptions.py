@@ -518,6 +518,38 @@ def test_the_journal_exists_only_while_someone_subscribes(tmp_path):
         assert not {n for n in names if n.startswith(("slr_subj_", "slr_subt_"))}
 
 
+def test_the_journal_keeps_only_what_subscriptions_still_need(kb):
+    fast = kb.subscribe("p(X)^T", since=0)
+    slow = kb.subscribe("p(X)^T", since=0, id="slow")
+    kb.add_many([("p", [i], float(i), float(i)) for i in range(100)])
+    assert xs(take(fast, 100)) == list(range(100))
+    assert xs(take(slow, 40)) == list(range(40))
+    hub = kb._subscriptions
+    hub._last_lease = hub._last_persist = 0.0     # renew claims and write positions now
+    assert hub.drain(DEADLINE)
+    hub._cleanup()
+    jids = kb.sql(f"SELECT min(jid), count(*) FROM {journal_table('p')}")[1][0]
+    assert jids == (40, 61)   # from the answer the slow one took last (not handled yet) on
+    assert xs(take(slow, 60)) == list(range(40, 100))
+    slow.close(forget=True)
+    fast.close()
+    assert "slr_subt_p" not in {r[0] for r in kb.sql("SELECT name FROM sqlite_master")[1]}
+
+
+def test_a_registration_removed_behind_its_back_ends_the_subscription_loudly(tmp_path):
+    """A process that stopped renewing its claim (suspended) loses its registration to
+    another process's cleanup; its subscription then ends with an error, not a silent gap."""
+    path = tmp_path / "lease.db"
+    with slr_sql.open(path) as kb, slr_sql.open(path) as other:
+        sub = kb.subscribe("p(X)^T", since=0)
+        kb.sql("UPDATE slr_subscriptions SET lease_until = 0")   # as if not renewed for long
+        other._subscriptions._cleanup()
+        kb._subscriptions._last_lease = kb._subscriptions._last_persist = 0.0
+        assert kb._subscriptions.drain(DEADLINE)
+        with pytest.raises(SLRError, match="removed from the store"):
+            sub.get(timeout=DEADLINE)
+
+
 def test_durable_subscription_resumes_after_a_real_reopen(tmp_path):
     path = tmp_path / "d.db"
     with slr_sql.open(path) as kb:
