@@ -945,8 +945,11 @@ class SubscriptionHub:
             pending.cancel()
         if registered or forget:
             self._unclaim(sub, forget)
-            if forget or not sub.durable:
-                self._cleanup_soon()
+            if (forget or not sub.durable) and sub.key not in self._by_type:
+                try:                    # the last one of its type here: drop what is unused
+                    self._cleanup()
+                except SLRError as exc:
+                    log.warning("subscriptions: journal cleanup failed: %s", exc)
 
     def _taken_end(self, sub: Subscription) -> None:
         """The consumer took the end of ``sub``: record it as finished, unregister."""
@@ -1036,7 +1039,12 @@ class SubscriptionHub:
 
     def _pass(self) -> None:
         for key, subs in self._snapshot().items():
-            self._serve_type(key, subs)
+            try:
+                self._serve_type(key, subs)
+            except Exception:
+                if any(not s._closed for s in subs):
+                    raise
+                # every subscription of the type closed meanwhile (its journal may be gone)
 
     def _serve_type(self, key: tuple[str, int], subs: list[Subscription]) -> None:
         """One round for the subscriptions of one event type: the shared read of the journal
@@ -1294,10 +1302,6 @@ class SubscriptionHub:
         if now - self._last_cleanup >= self.cleanup_interval:
             self._last_cleanup = now
             self._cleanup()
-
-    def _cleanup_soon(self) -> None:
-        self._last_cleanup = 0.0
-        self.notify()
 
     def _cleanup(self) -> None:
         """Remove expired claims, trim each journal to what some subscription still needs, and
