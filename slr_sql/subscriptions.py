@@ -691,6 +691,15 @@ class SubscriptionHub:
                   callback: Callable[[dict], Any] | None = None,
                   max_queue: int = DEFAULT_MAX_QUEUE,
                   max_lag: int | None = DEFAULT_MAX_LAG) -> Subscription:
+        """Register a subscription (see :meth:`slr_sql.KnowledgeBase.subscribe`): validate,
+        register in one write transaction, start delivering.
+
+        >>> import slr_sql
+        >>> kb = slr_sql.open(); sub = kb._subscriptions.subscribe("p(X)^T", since=0)
+        >>> sub.durable, sub.since
+        (False, 0.0)
+        >>> kb.close()
+        """
         if self._closed:
             raise SLRError("the knowledge base is closed")
         if not isinstance(pattern, str):
@@ -758,6 +767,14 @@ class SubscriptionHub:
         return sub
 
     def unsubscribe(self, sub_id: str) -> None:
+        """Remove the subscription ``sub_id`` (closing it if it is open here).
+
+        >>> import slr_sql
+        >>> kb = slr_sql.open(); sub = kb.subscribe("p(X)^T", id="log"); sub.close()
+        >>> kb.unsubscribe("log"); kb._subscriptions.subscriptions()
+        []
+        >>> kb.close()
+        """
         with self.lock:
             sub = self._subs.get(sub_id)
         if sub is not None:
@@ -772,7 +789,14 @@ class SubscriptionHub:
         self._cleanup()
 
     def subscriptions(self) -> list[dict[str, Any]]:
-        """Every registered subscription of the store (all processes), as dicts."""
+        """Every registered subscription of the store (all processes), as dicts.
+
+        >>> import slr_sql
+        >>> kb = slr_sql.open(); sub = kb.subscribe("p(X)^T", id="log")
+        >>> [(r["id"], r["pattern"], r["durable"]) for r in kb._subscriptions.subscriptions()]
+        [('log', 'p(X)^T', 1)]
+        >>> kb.close()
+        """
         columns = ["id", "durable", "pattern", "where_goal", "since", "until", "type_name",
                    "type_arity", "history_done", "live_pos", "finished", "owner",
                    "lease_until"]
