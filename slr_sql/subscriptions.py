@@ -288,6 +288,7 @@ class Subscription:
         self._completed = False      # ended because everything up to `until` was delivered
         self._persisted: tuple | None = None                  # last position written
         self._history_sql: str | None = None   # how to read its history (by seq or end time)
+        self._cohort_key: tuple = (matcher, since, until)
 
     def __repr__(self) -> str:
         state = "closed" if self._closed else "ended" if self._ended else (
@@ -745,6 +746,7 @@ class SubscriptionHub:
                 raise SLRError(f"subscription {id!r} is already open in this process")
             key = (matcher.pattern, matcher.where)
             sub._matcher = self._matchers.setdefault(key, matcher)
+            sub._cohort_key = (sub._matcher, sub.since, sub.until)   # shared answers
             self._subs[sub.id] = sub
             self._by_type.setdefault(sub.key, []).append(sub)
             self._subscribed_types.add(sub.key)
@@ -1130,14 +1132,29 @@ class SubscriptionHub:
         cohorts: dict = {}
         copy = len(group) > 1
         for s in group:
-            if s.lagging or s._ended or s._closed or s.scanned >= last_jid:
-                continue
-            cohort_key = (s._matcher, s.since, s.until)
-            cohort = cohorts.get(cohort_key)
-            if cohort is None:
-                cohort = cohorts[cohort_key] = self._cohort(s, events)
-            items, error, error_jid = cohort
             scanned = s.scanned
+            if scanned >= last_jid or s.lagging or s._ended or s._closed:
+                continue
+            cohort = cohorts.get(s._cohort_key)
+            if cohort is None:
+                cohort = cohorts[s._cohort_key] = self._cohort(s, events)
+            items, error, error_jid = cohort
+            if scanned < first_jid and error is None:
+                # the common case, inline: every answer of the batch, if they all fit
+                with s._lock:
+                    queue = s._queue
+                    fits = not (s._closed or s._ended) and \
+                        len(queue) + len(items) <= s.max_queue
+                    if fits:
+                        if items:
+                            queue.extend([(_LIVE, jid, dict(answer)) for jid, answer in items]
+                                         if copy else [(_LIVE, jid, answer)
+                                                       for jid, answer in items])
+                        s.scanned = last_jid
+                if fits:
+                    if items:
+                        touched.add(s)
+                    continue
             if scanned >= first_jid:
                 items = [item for item in items if item[0] > scanned]
                 if error is not None and error_jid <= scanned:
