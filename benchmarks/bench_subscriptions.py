@@ -7,6 +7,10 @@
   the time the answer is received minus the time ``kb.add`` of its event returned (0 when the
   answer arrived before ``add`` returned). Checks that every subscriber received every event,
   once, in order.
+* **baseline** — the same producer pacing and consumers, with each event handed to the
+  subscribers by a bare in-memory fan-out (a deque and a Condition per subscriber, or one
+  ``call_soon_threadsafe`` per event for async): no store, no matching. It shows what the
+  machine and the interpreter allow at that moment (the machine is shared).
 * **throughput** — ``kb.add`` of ``--events`` single events as fast as possible on a fresh
   store with no subscriber, and with the same subscribers consuming (callback mode): events/s
   and the ratio. Run order alternates; best of ``--repeat``.
@@ -20,6 +24,8 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import collections
+import os
 import sys
 import tempfile
 import threading
@@ -126,6 +132,90 @@ def run_latency(mode: str, subscribers: int, rate: float, seconds: float, synchr
             "cpu": cpu / wall}
 
 
+class _RawSubscriber:
+    """Baseline: a bare Python fan-out queue (deque + Condition), no store, no matching."""
+
+    def __init__(self) -> None:
+        self.queue: collections.deque = collections.deque()
+        self.cond = threading.Condition()
+        self.waiting = False
+        self.future = None
+
+
+def run_baseline(mode: str, subscribers: int, rate: float, seconds: float) -> dict:
+    """The same producer pacing and consumers with the events handed over by a plain in-memory
+    fan-out: what this machine and Python allow, measured in the same run."""
+    n = int(rate * seconds)
+    receivers = [Receiver(n) for _ in range(subscribers)]
+    raws = [_RawSubscriber() for _ in range(subscribers)]
+    added_at = [0.0] * n
+    cpu0 = time.process_time()
+    loop = asyncio.new_event_loop() if mode == "async" else None
+    if mode == "async":
+        async def consume(raw, r):
+            while len(r.got) < r.expected:
+                while not raw.queue:
+                    raw.future = loop.create_future()
+                    await raw.future
+                    raw.future = None
+                r.receive(raw.queue.popleft())
+
+        def wake():
+            for raw in raws:
+                if raw.future is not None and not raw.future.done():
+                    raw.future.set_result(None)
+
+        async def main():
+            await asyncio.gather(*(consume(raw, r) for raw, r in zip(raws, receivers)))
+
+        thread = threading.Thread(target=lambda: loop.run_until_complete(main()), daemon=True)
+    else:
+        def consume_thread(raw, r):
+            while len(r.got) < r.expected:
+                with raw.cond:
+                    while not raw.queue:
+                        raw.waiting = True
+                        raw.cond.wait()
+                        raw.waiting = False
+                    items = list(raw.queue)
+                    raw.queue.clear()
+                for answer in items:
+                    r.receive(answer)
+
+        thread = None
+        for raw, r in zip(raws, receivers):
+            threading.Thread(target=consume_thread, args=(raw, r), daemon=True).start()
+    if thread is not None:
+        thread.start()
+    t0 = time.perf_counter()
+    for i in range(n):
+        target = t0 + i / rate
+        now = time.perf_counter()
+        if target > now:
+            time.sleep(target - now)
+        added_at[i] = time.perf_counter()
+        answer = {"I": i, "V": 0.5, "T": float(i)}
+        for raw in raws:
+            with raw.cond:
+                raw.queue.append(dict(answer))
+                if raw.waiting:
+                    raw.cond.notify()
+        if loop is not None:
+            loop.call_soon_threadsafe(wake)
+    wall = time.perf_counter() - t0
+    deadline = time.monotonic() + 60
+    for r in receivers:
+        r.done.wait(max(deadline - time.monotonic(), 0.0))
+    cpu = time.process_time() - cpu0
+    if thread is not None:
+        thread.join(10)
+    complete = all([i for i, _ in r.got] == list(range(n)) for r in receivers)
+    lat = [max(0.0, t - added_at[i]) * 1e3 for r in receivers for i, t in r.got]
+    return {"mode": f"baseline {mode}", "events": n, "deliveries": len(lat),
+            "complete": complete, "rate": n / wall, "p50": pct(lat, 50), "p99": pct(lat, 99),
+            "max": max(lat), "cpu": cpu / wall}
+
+
 def add_rate(subscribers: int, events: int, synchronous: str, path: Path) -> float:
     with slr_sql.open(path, synchronous=synchronous) as kb:
         receivers = [Receiver(events) for _ in range(subscribers)]
@@ -147,7 +237,8 @@ def main() -> None:
     ap.add_argument("--subscribers", type=int, default=100)
     ap.add_argument("--rate", type=float, default=1000.0)
     ap.add_argument("--seconds", type=float, default=5.0)
-    ap.add_argument("--modes", default="callback,async,iterator")
+    ap.add_argument("--modes", default="baseline-callback,callback,baseline-async,async,"
+                                       "iterator")
     ap.add_argument("--events", type=int, default=5000, help="throughput run: events added")
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--synchronous", default="NORMAL",
@@ -156,13 +247,16 @@ def main() -> None:
     args = ap.parse_args()
     folder = Path(tempfile.mkdtemp(prefix="bench-subs-"))
     print(f"{args.subscribers} subscribers, {args.rate:g} events/s for {args.seconds:g} s, "
-          f"synchronous={args.synchronous}")
+          f"synchronous={args.synchronous}, load average {os.getloadavg()[0]:.1f}")
     print("| mode | events | deliveries | all delivered in order | achieved rate | p50 | p99 "
           "| max | CPU (s/s) |")
     print("|---|---:|---:|---|---:|---:|---:|---:|---:|")
     for mode in args.modes.split(","):
-        r = run_latency(mode, args.subscribers, args.rate, args.seconds, args.synchronous,
-                        folder)
+        if mode.startswith("baseline-"):
+            r = run_baseline(mode.split("-", 1)[1], args.subscribers, args.rate, args.seconds)
+        else:
+            r = run_latency(mode, args.subscribers, args.rate, args.seconds, args.synchronous,
+                            folder)
         print(f"| {r['mode']} | {r['events']:,} | {r['deliveries']:,} | "
               f"{'yes' if r['complete'] else 'NO'} | {r['rate']:,.0f}/s | {r['p50']:.2f} ms | "
               f"{r['p99']:.2f} ms | {r['max']:.1f} ms | {r['cpu']:.2f} |", flush=True)
