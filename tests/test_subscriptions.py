@@ -699,7 +699,8 @@ def test_a_sigkilled_durable_subscriber_resumes_with_no_gap(tmp_path):
 
 # -- slr subscribe ------------------------------------------------------------------------------------
 
-def test_cli_prints_json_lines_and_exits_0_on_sigint(tmp_path):
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_cli_prints_json_lines_and_exits_0_on_a_signal(tmp_path, stop):
     path = str(tmp_path / "cli.db")
     with slr_sql.open(path) as kb:
         kb.add_many(["face(bob, 70)^1", "face(al, 20)^2"])
@@ -713,7 +714,7 @@ def test_cli_prints_json_lines_and_exits_0_on_sigint(tmp_path):
             assert out[1:] == [{"F": "carl", "R": 99.5, "T": 3.0},
                                {"F": {"$string": "dee"}, "R": 61, "T": 4.0}]
         finally:
-            child.send_signal(signal.SIGINT)
+            child.send_signal(stop)
             code = child.wait(DEADLINE)
         assert code == 0, child.stderr.read()
         assert kb.sql("SELECT count(*) FROM slr_subscriptions")[1] == [(0,)]
