@@ -364,6 +364,29 @@ def test_no_gap_and_no_duplicate_at_the_seam_with_a_concurrent_writer(tmp_path, 
         assert sub.phase == 1          # it went live
 
 
+def test_concurrent_writers_and_slow_and_fast_subscribers_all_see_the_store_order(tmp_path):
+    """Two writer threads, subscribers with tiny and large queues: each subscriber gets every
+    event once, in the order the store assigned (seq), whether it kept up or lagged."""
+    with slr_sql.open(tmp_path / "w.db", synchronous="OFF") as kb:
+        subs = [kb.subscribe("p(W, I)^T", since=0, max_queue=q) for q in (1, 3, 7, 10_000)]
+
+        def writer(name):
+            for i in range(400):
+                if i % 50 == 0:
+                    kb.add_many([("p", [name, k], float(k), float(k)) for k in range(i, i + 5)])
+                else:
+                    kb.add_event("p", [name, i], float(i))
+
+        threads = [threading.Thread(target=writer, args=(w,)) for w in ("a", "b")]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(DEADLINE)
+        order = [(w, i) for w, i in kb.sql("SELECT arg1, arg2 FROM p ORDER BY seq")[1]]
+        for sub in subs:
+            assert [(a["W"], a["I"]) for a in take(sub, len(order), timeout=60)] == order
+
+
 def test_a_reused_arrival_sequence_is_not_replayed_as_history(kb, history_read):
     """SQLite reuses the rowid of a deleted last row: the history (seq <= the top at
     subscription time) must not take the new row, which is live."""
