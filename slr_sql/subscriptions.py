@@ -78,6 +78,15 @@ TRIGGER_PREFIX = "slr_subt_"
 
 _INF = math.inf
 _HISTORY, _LIVE = 0, 1         # phases of a position: (phase, seq or jid)
+_H = 2 ** 62                   # queued positions are one int: jid (live) or seq - _H (history)
+
+
+def _code(phase: int, pos: int) -> int:
+    return pos if phase == _LIVE else pos - _H
+
+
+def _decode_position(code: int) -> tuple[int, int]:
+    return (_LIVE, code) if code >= 0 else (_HISTORY, code + _H)
 
 
 class SubscriptionOverflow(SLRError):
@@ -266,8 +275,12 @@ class Subscription:
         self.error: BaseException | None = None
         self._lock = threading.Lock()
         self._cond = threading.Condition(self._lock)
-        self._queue: collections.deque = collections.deque()   # (phase, pos, answer) | _End
-        self._in_flight: tuple | None = None      # (phase, pos, answer) taken, not handled
+        # pairs: a position code (int; None before the end marker), then the answer dict (the
+        # same object for every subscription with the same answers: copied when taken) or _End.
+        # Ints are not tracked by the garbage collector and the dicts are shared, so queued
+        # answers cost the collector (whose full passes are latency spikes) next to nothing.
+        self._queue: collections.deque = collections.deque()
+        self._in_flight: int | None = None        # position code of the answer taken last
         self._thread_waiting = 0
         self._async_waiter: tuple[Any, Any] | None = None
         self._ended = False          # an _End was queued: the hub is done with it
@@ -307,7 +320,7 @@ class Subscription:
     def queued(self) -> int:
         """Answers waiting in memory for the consumer (at most ``max_queue``)."""
         with self._lock:
-            return sum(1 for item in self._queue if type(item) is tuple)
+            return sum(1 for item in self._queue if type(item) is dict)
 
     def position(self) -> tuple[int, int]:
         """``(phase, n)``: every event up to it was handled (phase 0: history, n a ``seq`` of the
@@ -320,33 +333,21 @@ class Subscription:
         if self._final_position is not None:
             return self._final_position
         if self._in_flight is not None:
-            return self._in_flight[0], self._in_flight[1] - 1
-        for item in self._queue:
-            if type(item) is tuple:
-                return item[0], item[1] - 1
+            return _decode_position(self._in_flight - 1)
+        queue = self._queue
+        if queue and queue[0] is not None:
+            return _decode_position(queue[0] - 1)
         if self.phase == _HISTORY:
             return _HISTORY, self.history_pos
         return _LIVE, self.scanned
 
     # -- consuming ------------------------------------------------------------------------------
     def _take(self, timeout: float | None, block: bool = True) -> Any:
-        """The next answer, or an _End; None when nothing came within ``timeout``.
-
-        Taking it marks the previous one handled. Fast path without the lock: ``deque.popleft``
-        is atomic, and while ``_in_flight`` still names the previous answer, ``position()``
-        is one answer early (never late), which only means "delivered again after a crash".
-        With no previous answer in flight, the lock is taken: the position must never pass an
-        answer on its way to the consumer."""
-        queue = self._queue
-        if queue and self._in_flight is not None and not self._closed:
-            try:
-                item = queue.popleft()
-            except IndexError:        # the hub or close() emptied it meanwhile
-                item = None
-            if item is not None:
-                return self._took(item)
+        """The next answer (a dict of its own), or an _End; None when nothing came within
+        ``timeout``. Taking it marks the previous one handled."""
         with self._lock:
             self._in_flight = None           # the consumer is back: the previous one is done
+            queue = self._queue
             if not queue and block and not self._closed:
                 deadline = None if timeout is None else time.monotonic() + timeout
                 while not queue and not self._closed:
@@ -360,23 +361,21 @@ class Subscription:
                         self._thread_waiting -= 1
             if not queue:
                 return _End(self.error) if self._closed else None
+            code = queue.popleft()
             item = queue.popleft()
-            if type(item) is tuple:
-                self._in_flight = item
-        return self._took(item)
-
-    def _took(self, item: Any) -> Any:
-        if type(item) is tuple:
-            self._in_flight = item            # (phase, pos, answer)
-            self.delivered += 1
-            if len(self._queue) == self.max_queue >> 1 and (self.lagging
-                                                            or self.phase == _HISTORY):
-                self._hub.notify()            # room again: the hub reads on from the store
-            return item[2]
-        self._in_flight = None
-        self._finished = True
-        self._hub._taken_end(self)
-        return item
+            if code is None:
+                self._finished = True
+            else:
+                self._in_flight = code
+                self.delivered += 1
+                refill = len(queue) >> 1 == self.max_queue >> 1 and (
+                    self.lagging or self.phase == _HISTORY)
+        if code is None:
+            self._hub._taken_end(self)
+            return item
+        if refill:                           # room again: the hub reads on from the store
+            self._hub.notify()
+        return dict(item)
 
     def get(self, timeout: float | None = None) -> dict | None:
         """The next answer; None once the subscription has ended (``until`` reached or
@@ -510,20 +509,19 @@ class Subscription:
         self.close(ack=exc_type is None)
 
     # -- hub side (hub thread) ------------------------------------------------------------------
-    def _offer_batch(self, phase: int, batch: list, end_pos: int, copy: bool = False) -> bool:
-        """Queue ``batch`` ``[(pos, answer)]`` (in order; each answer copied when ``copy``: it is
-        shared with other subscriptions) and pass every row up to ``end_pos``. When the queue
-        cannot take all of it, queue what fits, pass the rows before the first answer left
-        out, and return False (the hub reads the rest from the store later)."""
+    def _offer_batch(self, phase: int, batch: list, end_pos: int) -> bool:
+        """Queue ``batch`` ``[(pos, answer)]`` (in order) and pass every row up to ``end_pos``.
+        When the queue cannot take all of it, queue what fits, pass the rows before the first
+        answer left out, and return False (the hub reads the rest from the store later)."""
         with self._lock:
             if self._closed or self._ended:
                 return True
-            room = self.max_queue - len(self._queue)
+            queue = self._queue
+            room = self.max_queue - (len(queue) >> 1)
             taken = batch if len(batch) <= room else batch[:max(room, 0)]
-            if copy:
-                self._queue.extend([(phase, pos, dict(answer)) for pos, answer in taken])
-            else:
-                self._queue.extend([(phase, pos, answer) for pos, answer in taken])
+            for pos, answer in taken:
+                queue.append(_code(phase, pos))
+                queue.append(answer)
             if len(taken) < len(batch):
                 end_pos = batch[len(taken)][0] - 1
             if phase == _LIVE:
@@ -541,6 +539,7 @@ class Subscription:
             self._completed = completed
             if error is not None and self.error is None:
                 self.error = error
+            self._queue.append(None)
             self._queue.append(_End(error))
 
     def _go_live(self) -> None:
@@ -1130,7 +1129,6 @@ class SubscriptionHub:
                    row[3 + arity]) for row in rows]
         first_jid, last_jid = events[0][0], events[-1][0]
         cohorts: dict = {}
-        copy = len(group) > 1
         for s in group:
             scanned = s.scanned
             if scanned >= last_jid or s.lagging or s._ended or s._closed:
@@ -1138,18 +1136,15 @@ class SubscriptionHub:
             cohort = cohorts.get(s._cohort_key)
             if cohort is None:
                 cohort = cohorts[s._cohort_key] = self._cohort(s, events)
-            items, error, error_jid = cohort
+            items, error, error_jid, flat = cohort
             if scanned < first_jid and error is None:
                 # the common case, inline: every answer of the batch, if they all fit
                 with s._lock:
                     queue = s._queue
                     fits = not (s._closed or s._ended) and \
-                        len(queue) + len(items) <= s.max_queue
+                        (len(queue) >> 1) + len(items) <= s.max_queue
                     if fits:
-                        if items:
-                            queue.extend([(_LIVE, jid, dict(answer)) for jid, answer in items]
-                                         if copy else [(_LIVE, jid, answer)
-                                                       for jid, answer in items])
+                        queue.extend(flat)
                         s.scanned = last_jid
                 if fits:
                     if items:
@@ -1163,7 +1158,7 @@ class SubscriptionHub:
                 end_pos = last_jid
             else:
                 end_pos = items[-1][0] if items else scanned
-            if s._offer_batch(_LIVE, items, end_pos, copy):
+            if s._offer_batch(_LIVE, items, end_pos):
                 if error is not None:
                     s._end(error)
                 if items or error is not None:
@@ -1174,8 +1169,9 @@ class SubscriptionHub:
                 if not own_pace:
                     s.overflows += 1
 
-    def _cohort(self, s: Subscription, events: list) -> tuple[list, Any, int]:
-        """``s``'s answers among ``events``: ([(jid, answer)], the first error, its jid)."""
+    def _cohort(self, s: Subscription, events: list) -> tuple[list, Any, int, list]:
+        """``s``'s answers among ``events``: ([(jid, answer)], the first error, its jid, and
+        the answers as queue entries ``[jid, answer, ...]``)."""
         m = s._matcher
         since = s.since
         until = _INF if s.until is None else s.until
@@ -1187,9 +1183,9 @@ class SubscriptionHub:
             if answer is None:
                 continue
             if type(answer) is not dict:
-                return items, answer, jid
+                return items, answer, jid, []
             items.append((jid, answer))
-        return items, None, 0
+        return items, None, 0, [x for item in items for x in item]
 
     @staticmethod
     def _match(m: _Matcher, args: tuple, start: float, end: float) -> Any:
@@ -1208,7 +1204,7 @@ class SubscriptionHub:
             few = self.store.execute(info.window_count_sql, (s.since, until))[0][0]
             s._history_sql = info.history_by_end_sql if few <= FEW_HISTORY else info.history_sql
         while s.phase == _HISTORY and not s._ended and not s._closed:
-            room = s.max_queue - len(s._queue)
+            room = s.max_queue - (len(s._queue) >> 1)
             if room <= 0:
                 return
             limit = max(min(room, CHUNK), 16)
@@ -1245,7 +1241,7 @@ class SubscriptionHub:
         """Read the journal after ``s.scanned`` at ``s``'s own pace, until its queue is full or
         it reaches the end of the journal (and so rejoins the shared read)."""
         while not s._ended and not s._closed:
-            room = s.max_queue - len(s._queue)
+            room = s.max_queue - (len(s._queue) >> 1)
             if room <= 0:
                 s.lagging = True
                 return
