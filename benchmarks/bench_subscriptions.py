@@ -46,19 +46,27 @@ def pct(xs: list[float], p: float) -> float:
 
 
 class Receiver:
-    """What one subscriber received: (event index, perf_counter at receipt)."""
+    """What one subscriber received: event indexes and perf_counter at receipt, in two lists
+    of numbers (numbers are not tracked by the garbage collector: recording 500,000 receipts
+    must not itself cause the collector pauses the run measures)."""
 
-    __slots__ = ("got", "done", "expected")
+    __slots__ = ("indexes", "times", "done", "expected")
 
     def __init__(self, expected: int):
-        self.got: list[tuple[int, float]] = []
+        self.indexes: list[int] = []
+        self.times: list[float] = []
         self.done = threading.Event()
         self.expected = expected
 
     def receive(self, answer: dict) -> None:
-        self.got.append((answer["I"], time.perf_counter()))
-        if len(self.got) >= self.expected:
+        self.times.append(time.perf_counter())
+        self.indexes.append(answer["I"])
+        if len(self.indexes) >= self.expected:
             self.done.set()
+
+    @property
+    def got(self) -> list[tuple[int, float]]:
+        return list(zip(self.indexes, self.times))
 
 
 def produce(kb, n: int, rate: float, added_at: list) -> float:
@@ -153,7 +161,7 @@ def run_baseline(mode: str, subscribers: int, rate: float, seconds: float) -> di
     loop = asyncio.new_event_loop() if mode == "async" else None
     if mode == "async":
         async def consume(raw, r):
-            while len(r.got) < r.expected:
+            while len(r.indexes) < r.expected:
                 while not raw.queue:
                     raw.future = loop.create_future()
                     await raw.future
@@ -171,7 +179,7 @@ def run_baseline(mode: str, subscribers: int, rate: float, seconds: float) -> di
         thread = threading.Thread(target=lambda: loop.run_until_complete(main()), daemon=True)
     else:
         def consume_thread(raw, r):
-            while len(r.got) < r.expected:
+            while len(r.indexes) < r.expected:
                 with raw.cond:
                     while not raw.queue:
                         raw.waiting = True
@@ -226,7 +234,7 @@ def add_rate(subscribers: int, events: int, synchronous: str, path: Path) -> flo
         elapsed = time.perf_counter() - t0
         for r in receivers:
             r.done.wait(120)
-        assert all(len(r.got) == events for r in receivers), "a subscriber missed events"
+        assert all(len(r.indexes) == events for r in receivers), "a subscriber missed events"
         for s in subs:
             s.close()
     return events / elapsed
