@@ -35,7 +35,8 @@ How it works
   delivered.
 
 This module sits beside sync and buffers: it gets the knowledge base as an object and uses
-its public methods (``query``, ``submit``, ``add_listeners``) and the store's.
+its public methods (``query``, ``submit``, ``add_listeners``; and the synchronizer's
+``watch_external``, so that marks other processes write end an ``until``) and the store's.
 """
 from __future__ import annotations
 
