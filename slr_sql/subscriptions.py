@@ -73,7 +73,7 @@ FEW_HISTORY = 4096             # a history window this small is read by end time
 POLL_INTERVAL = 0.05           # s between journal polls (rows other processes committed)
 PERSIST_INTERVAL = 0.2         # s between writes of durable positions
 LEASE_SECONDS = 30.0           # wall-clock s a process's claim on its subscriptions lasts
-CLEANUP_INTERVAL = 5.0         # s between journal trims
+CLEANUP_INTERVAL = 1.0         # s between journal trims (when something was delivered)
 JOURNAL_PREFIX = "slr_subj_"
 TRIGGER_PREFIX = "slr_subt_"
 
@@ -656,6 +656,7 @@ class SubscriptionHub:
         self._last_failure = ""
         self._passes_started = 0
         self._passes_done = 0
+        self._cleaned_at_pass = -1
 
     # -- wiring -------------------------------------------------------------------------------
     def notify(self) -> None:
@@ -1303,8 +1304,9 @@ class SubscriptionHub:
 
     # -- housekeeping: durable positions, leases, journal trimming --------------------------------
     def _housekeeping(self) -> None:
-        """Write the positions of durable subscriptions that moved (every persist_interval) and
-        renew this process's claims (every lease/3); trim journals (every cleanup_interval)."""
+        """Write the positions of durable subscriptions that moved (every persist_interval),
+        renew this process's claims (every lease/3), trim journals (every cleanup_interval,
+        when something was delivered). Each is one short write transaction."""
         now = time.monotonic()
         if now - self._last_persist >= self.persist_interval:
             self._last_persist = now
@@ -1314,36 +1316,51 @@ class SubscriptionHub:
             todo = []
             for s in subs:
                 position = s.position()
-                if renew or (s.durable and position != s._persisted):
+                if position != s._persisted and (s.durable or renew):
                     todo.append((s, position))
-            if todo:
-                lost = []
+            if todo or renew:
                 with self.store.transaction():
                     for s, position in todo:
-                        if s._closed:
-                            continue
-                        self._write_position(s)
-                        s._persisted = position
-                        if renew and not self.store.execute(
-                                "SELECT 1 FROM slr_subscriptions WHERE id = ? AND owner = ?",
-                                (s.id, self.owner)):
-                            lost.append(s)
+                        if not s._closed:
+                            self._write_position(s)
+                            s._persisted = position
+                    if renew:
+                        self.store.execute("UPDATE slr_subscriptions SET lease_until = ? "
+                                           "WHERE owner = ?",
+                                           (time.time() + self.lease_seconds, self.owner))
+                        mine = {r[0] for r in self.store.execute(
+                            "SELECT id FROM slr_subscriptions WHERE owner = ?", (self.owner,))}
                 if renew:
                     self._last_lease = now
-                for s in lost:
-                    s._end(SLRError(
-                        f"subscription {s.id!r} was removed from the store (kb.unsubscribe "
-                        f"elsewhere, or this process did not renew its claim for "
-                        f"{self.lease_seconds:g} s); events after its position may be "
-                        f"missing"))
-                    self._wake({s})
-        if now - self._last_cleanup >= self.cleanup_interval:
+                    for s in subs:
+                        if s.id not in mine and not s._closed and not s._ended:
+                            s._end(SLRError(
+                                f"subscription {s.id!r} was removed from the store "
+                                f"(kb.unsubscribe elsewhere, or this process did not renew "
+                                f"its claim for {self.lease_seconds:g} s); events after its "
+                                f"position may be missing"))
+                            self._wake({s})
+        if now - self._last_cleanup >= self.cleanup_interval and \
+                self._passes_done != self._cleaned_at_pass:
             self._last_cleanup = now
+            self._cleaned_at_pass = self._passes_done
             self._cleanup()
 
+    def _local_positions(self) -> dict[str, int]:
+        """The journal position each open subscription of this process still needs (in memory:
+        never behind what it wrote to the store)."""
+        with self.lock:
+            subs = list(self._subs.values())
+        out = {}
+        for s in subs:
+            phase, pos = s.position()
+            out[s.id] = pos if phase == _LIVE else s.live_start
+        return out
+
     def _cleanup(self) -> None:
-        """Remove expired claims, trim each journal to what some subscription still needs, and
-        drop the journal and trigger of types no subscription wants any more."""
+        """Remove expired claims, trim each journal to what some subscription still needs (this
+        process's from memory, the others' as written), and drop the journal and trigger of
+        types no subscription wants any more."""
         store = self.store
         if store.closed:
             return
@@ -1353,6 +1370,7 @@ class SubscriptionHub:
         tables = {table: key for key, table in store.event_types().items()}
         with self.lock:
             local = set(self._by_type)
+        positions = self._local_positions()
         with store.transaction():
             store.execute("DELETE FROM slr_subscriptions WHERE durable = 0 AND "
                           "lease_until < ?", (time.time(),))
@@ -1361,18 +1379,21 @@ class SubscriptionHub:
                 key = tables.get(table)
                 if key is None:
                     continue
-                low = store.execute(
-                    "SELECT count(*), min(live_pos) FROM slr_subscriptions WHERE "
-                    "type_name = ? AND type_arity = ? AND finished = 0", key)[0]
-                if low[0] == 0 and key not in local:
+                rows = store.execute(
+                    "SELECT id, owner, live_pos FROM slr_subscriptions WHERE "
+                    "type_name = ? AND type_arity = ? AND finished = 0", key)
+                if not rows and key not in local:
                     store.execute(f"DROP TRIGGER IF EXISTS "
                                   f"{quote_identifier(TRIGGER_PREFIX + table)}")
                     store.execute(f"DROP TABLE IF EXISTS {quote_identifier(journal)}")
                     self._types.pop(key, None)
                     self._journaled.discard(key)
-                elif low[1] is not None:
+                    self._type_pos.pop(key, None)
+                elif rows:
+                    low = min(positions.get(sid, pos) if owner == self.owner else pos
+                              for sid, owner, pos in rows)
                     store.execute(f"DELETE FROM {quote_identifier(journal)} WHERE jid <= ?",
-                                  (low[1],))
+                                  (low,))
 
 
 def attach(kb: Any) -> SubscriptionHub:
