@@ -740,6 +740,63 @@ def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None
 
 
 # ---------------------------------------------------------------------------------------------
+# subscribe (issue 12: subscriptions)
+# ---------------------------------------------------------------------------------------------
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.argument("pattern")
+@click.option("--where", default=None, help="A condition on the pattern's variables (an SLR "
+              "goal), e.g. 'R > 60'.")
+@click.option("--since", default="now", show_default=True, help="Only events whose end time "
+              "is at or after S: 'now' or a time; an earlier time prints stored events first.")
+@click.option("--until", type=float, default=None, help="Stop (exit 0) once every matching "
+              "event up to U was printed: the event type is complete up to U.")
+@click.option("--id", "sub_id", default=None, help="Durable: resume after the last event an "
+              "earlier run with the same id printed.")
+def subscribe(db: str, pattern: str, where: str | None, since: str, until: float | None,
+              sub_id: str | None) -> None:
+    """Print the events matching PATTERN (e.g. 'face(F, R)^T') as JSON lines as they arrive,
+    one object per event with the pattern's variables. Ctrl-C or SIGTERM stops (exit 0)."""
+    import signal
+    import threading
+
+    from .subscriptions import answer_json
+
+    if not os.path.exists(db):
+        raise slr_sql.SLRError(f"no such store: {db}")
+    since_value: Any = since.strip()
+    if since_value != "now":
+        try:
+            since_value = float(since_value)
+        except ValueError:
+            raise slr_sql.SLRError(f"--since must be 'now' or a number, not {since!r}") from None
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):   # stop between two events, never inside one
+        signal.signal(signum, lambda *_: stop.set())
+    with _open(db) as kb:
+        sub = kb.subscribe(strip_full_stop(pattern), where=where, since=since_value,
+                           until=until, id=sub_id)
+        try:
+            while not stop.is_set():
+                try:
+                    answer = sub.get(timeout=0.2)
+                except slr_sql.SLRTimeout:
+                    continue
+                if answer is None:       # until reached
+                    break
+                try:
+                    sys.stdout.write(answer_json(answer) + "\n")
+                    sys.stdout.flush()
+                except BrokenPipeError:  # the reader went away (| head): a normal end
+                    os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+                    sub.close(ack=False)
+                    break
+        finally:
+            sub.close()
+
+
+# ---------------------------------------------------------------------------------------------
 # stats (issue 4: event-history management)
 # ---------------------------------------------------------------------------------------------
 

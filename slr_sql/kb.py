@@ -284,6 +284,8 @@ class KnowledgeBase:
         self._sync = _sync.attach(self)
         from . import planner as _planner  # SQL compiler (issue 3): slr_sql/planner.py
         _planner.attach(self)
+        from . import subscriptions as _subscriptions  # subscriptions (issue 12)
+        self._subscriptions = _subscriptions.attach(self)
 
     @property
     def sql_enabled(self) -> bool:
@@ -299,6 +301,8 @@ class KnowledgeBase:
     def close(self) -> None:
         """Close the store. It never waits for another process (the checkpoint of the WAL
         on close is ``PASSIVE``: what a reader still needs stays in the WAL)."""
+        if getattr(self, "_subscriptions", None) is not None:  # issue 12: positions, threads
+            self._subscriptions.close()
         if getattr(self, "_sync", None) is not None:  # issue 5: fail waiting queries, stop threads
             self._sync.close()
         self.store.close()
@@ -951,6 +955,32 @@ class KnowledgeBase:
         """
         from .plot import timeline  # deferred: matplotlib is the optional extra slr_sql[plot]
         return timeline(self, types, **options)
+
+    # -- subscriptions (issue 12; the work is in slr_sql/subscriptions.py) ----------------
+    def subscribe(self, pattern: str, where: str | None = None, since: Any = "now",
+                  until: float | None = None, id: str | None = None,
+                  callback: Callable[[dict], Any] | None = None, max_queue: int = 10_000,
+                  max_lag: int | None = 1_000_000) -> Any:
+        """Deliver each stored event matching ``pattern`` (``p(..)^T`` or ``p(..)^[S,E]``) and
+        the goal ``where`` whose end time lies in [since, until], once, in arrival order, as
+        an answer dict: iterate (``for``/``async for``/``sub.get(timeout)``) or give
+        ``callback``. ``since``: "now", a time, or earlier (stored events first, then live
+        ones); ``until`` ends it once the type is complete up to it; ``id`` makes it durable
+        (a restart resumes after the last answer handled). See docs/subscriptions.md.
+
+        >>> kb = open(); sub = kb.subscribe("p(X)^T", where="X > 1", since=0)
+        >>> kb.add_many(["p(1)^1", "p(2)^2"]); sub.get(timeout=5)
+        []
+        {'X': 2, 'T': 2.0}
+        >>> sub.close(); kb.close()
+        """
+        return self._subscriptions.subscribe(pattern, where=where, since=since, until=until,
+                                             id=id, callback=callback, max_queue=max_queue,
+                                             max_lag=max_lag)
+
+    def unsubscribe(self, id: str) -> None:
+        """Remove the durable subscription ``id`` and its position (closing it if open)."""
+        self._subscriptions.unsubscribe(id)
 
 
 def open(path: str | Path | None = None, clock: Clock | None = None, **options: Any) -> KnowledgeBase:

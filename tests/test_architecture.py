@@ -23,7 +23,7 @@ LAYERS = {
     "builtins": 3,
     "analysis": 4, "engine": 4, "sqlcompile": 4,
     "planner": 5,
-    "sync": 6, "buffers": 6, "cep": 6, "plot": 6,
+    "sync": 6, "buffers": 6, "cep": 6, "plot": 6, "subscriptions": 6,
     "kb": 7,
     "demo": 8, "service": 8, "ros": 8,
     "__init__": 9,  # the public surface: open() from kb, connect() from service
