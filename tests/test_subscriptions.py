@@ -393,7 +393,7 @@ def test_a_reused_arrival_sequence_is_not_replayed_as_history(kb, history_read):
     kb.add_many(["p(1)^1", "p(2)^2", "p(3)^3"])
     sub = kb.subscribe("p(X)^T", since=0, max_queue=1)   # p(1) fills its queue
     assert kb._subscriptions.drain(DEADLINE)
-    kb.sql("DELETE FROM p WHERE seq >= 2")
+    kb.sql("DELETE FROM p WHERE seq >= 2", write=True)
     kb.add("p(new)^4")
     assert kb.sql("SELECT seq FROM p WHERE arg1 = 'new'")[1] == [(2,)]
     assert xs(take(sub, 2)) == [1, "new"]
@@ -565,7 +565,7 @@ def test_a_registration_removed_behind_its_back_ends_the_subscription_loudly(tmp
     path = tmp_path / "lease.db"
     with slr_sql.open(path) as kb, slr_sql.open(path) as other:
         sub = kb.subscribe("p(X)^T", since=0)
-        kb.sql("UPDATE slr_subscriptions SET lease_until = 0")   # as if not renewed for long
+        kb.sql("UPDATE slr_subscriptions SET lease_until = 0", write=True)   # as if not renewed for long
         other._subscriptions._cleanup()
         kb._subscriptions._last_lease = kb._subscriptions._last_persist = 0.0
         assert kb._subscriptions.drain(DEADLINE)
@@ -652,7 +652,7 @@ def test_events_derived_inside_the_adding_transaction_are_delivered(kb):
     sub = kb.subscribe("relFace(F)^[S, E]", since=0)
     kb.sql("CREATE TRIGGER derive AFTER INSERT ON face WHEN NEW.arg2 > 60 BEGIN "
            "INSERT INTO relFace (arg1, t_start, t_end, arrival) "
-           "VALUES (NEW.arg1, NEW.t_start - 1, NEW.t_end, NEW.arrival); END")
+           "VALUES (NEW.arg1, NEW.t_start - 1, NEW.t_end, NEW.arrival); END", write=True)
     kb.add_many(["face(bob, 20)^1", "face(antonio, 65)^2"])
     assert take(sub, 1) == [{"F": "antonio", "S": 1.0, "E": 2.0}]
 
@@ -664,7 +664,7 @@ def test_events_added_by_another_connection_are_delivered(tmp_path):
     with slr_sql.open(path) as kb, slr_sql.open(path) as other:
         sub = kb.subscribe("p(X)^T", since=0)
         other.add("p(from_other)^1")
-        kb.sql("INSERT INTO p (arg1, t_start, t_end, arrival) VALUES ('by_sql', 2, 2, 0)")
+        kb.sql("INSERT INTO p (arg1, t_start, t_end, arrival) VALUES ('by_sql', 2, 2, 0)", write=True)
         assert xs(take(sub, 2)) == ["from_other", "by_sql"]
 
 
