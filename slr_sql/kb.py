@@ -928,10 +928,11 @@ class KnowledgeBase:
         return self._buffers.infos()
 
     # -- SQL access -----------------------------------------------------------------------
-    def sql(self, query: str, params: Iterable[Any] = (),
-            write: bool = False) -> tuple[list[str], list[tuple]]:
+    def sql(self, query: str, params: Iterable[Any] = (), write: bool = False,
+            timeout: float | None = None) -> tuple[list[str], list[tuple]]:
         """Run one SQL statement on the store's database; returns (column names, rows).
-        Read-only unless ``write=True``; every failure is an :class:`SLRError`.
+        Read-only unless ``write=True``; every failure is an :class:`SLRError`
+        (:class:`SLRTimeout` past ``timeout`` seconds).
 
         >>> kb = open(); kb.add("p(a)^1"); kb.sql("SELECT arg1, t_end FROM p")
         (['arg1', 't_end'], [('a', 1.0)])
@@ -939,7 +940,7 @@ class KnowledgeBase:
         from .store import DatabaseError
 
         try:
-            return self.store.sql(query, params, write)
+            return self.store.sql(query, params, write, timeout)
         except DatabaseError as exc:
             raise SLRError(f"sql: {exc}") from None
 

@@ -222,6 +222,10 @@ def _rows(source: Any, query: str, params: Sequence[Any] = ()) -> list[tuple]:
         return list(source.sql(query, tuple(params))[1])
     except DatabaseError as exc:  # locked, busy, unreadable file: say it in words
         raise SLRError(f"reading the store for the plot failed: {exc}") from None
+    except SLRError as exc:
+        if type(exc) is not SLRError:  # SLRBusy, SLRTimeout...: the caller may act on the kind
+            raise
+        raise SLRError(f"reading the store for the plot failed: {exc}") from None
 
 
 def store_types(source: Any) -> list[EventTypeRef]:

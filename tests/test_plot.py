@@ -366,7 +366,7 @@ def test_bad_options_are_slr_errors(kb, options, message):
 def test_a_damaged_store_is_an_slr_error(kb):
     kb.add("move(r1)^[2, 8]")
     kb.sql('DROP TABLE "move"', write=True)  # the catalog still names the table
-    with pytest.raises(slr_sql.SLRError, match="reading the store for the plot failed: no such table"):
+    with pytest.raises(slr_sql.SLRError, match="reading the store for the plot failed: .*no such table"):
         kb.plot()
 
 

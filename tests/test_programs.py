@@ -227,9 +227,10 @@ def test_the_migration_runner_applies_a_lower_number_merged_later(tmp_path):
 
     from slr_sql.store.schema import applied_migrations, migrate, migration_scripts
 
-    scripts = migration_scripts()
+    # a gap at 3: as when 0004 was applied before a 0003 written on another branch arrived
+    scripts = [s for s in migration_scripts() if s[0] != 3]
     numbers = [n for n, _, _ in scripts]
-    assert 3 not in numbers and 4 in numbers   # the gap this test is about
+    assert 3 not in numbers and 4 in numbers
     conn = sqlite3.connect(tmp_path / "s.db", isolation_level=None)
     migrate(conn, "s.db", scripts)
     assert applied_migrations(conn) == set(numbers)

@@ -43,7 +43,7 @@ from starlette.routing import Route, WebSocketRoute
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 import slr_sql
-from slr_sql import EventRejected, SLRError
+from slr_sql import EventRejected, SLRError, SLRTimeout
 
 from .encoding import (decode_args, decode_arguments, decode_term, dumps, encode_answers,
                        encode_plain, loads)
@@ -929,8 +929,8 @@ _PRAGMA = re.compile(r"pragma\s+(?:main\.)?(\w+)\s*(?:\(\s*[\w\"'`\[\]. ]*\s*\))
 
 def _read_only_sql(kb: Any, statement: str, params: list, timeout: float) -> tuple:
     """One statement that cannot change the store: the first keyword must read, and the
-    connection is ``PRAGMA query_only`` while it runs; a statement that runs longer than
-    ``timeout`` seconds is interrupted."""
+    store runs it read-only (``kb.sql`` without ``write``); a statement that runs longer
+    than ``timeout`` seconds is interrupted."""
     text = statement[_COMMENTS.match(statement).end():]
     keyword = re.match(r"\w*", text).group(0).lower()
     if keyword == "pragma":
@@ -940,36 +940,16 @@ def _read_only_sql(kb: Any, statement: str, params: list, timeout: float) -> tup
     elif keyword not in _READ_KEYWORDS:
         raise ServiceError(f"sql over the service is read-only: {keyword.upper() or 'this'} "
                            f"statements are not allowed (SELECT, WITH, VALUES, EXPLAIN)")
-    store = kb.store
-    conn = getattr(store, "_conn", None)
-    interrupt = getattr(conn, "interrupt", None)
-    guard = threading.Lock()
-    running = [True]
-
-    def expire() -> None:
-        with guard:
-            if running[0] and interrupt is not None:
-                interrupt()
-    with store.lock:  # no other thread uses the connection while query_only is on
-        kb.sql("PRAGMA query_only = ON")
-        timer = threading.Timer(timeout, expire)
-        timer.daemon = True
-        timer.start()
-        try:
-            return kb.sql(statement, params)
-        except Exception as exc:
-            if type(exc).__module__ == "sqlite3" or isinstance(exc, SLRError):
-                message = str(exc)
-                if message == "interrupted":
-                    raise ServiceError(f"sql: the statement ran longer than {timeout:g} s",
-                                       kind="RequestTimeout") from None
-                raise ServiceError(f"sql: {message}") from None
+    try:
+        return kb.sql(statement, params, timeout=timeout)
+    except SLRTimeout:
+        raise ServiceError(f"sql: the statement ran longer than {timeout:g} s",
+                           kind="RequestTimeout") from None
+    except SLRError as exc:
+        if type(exc) is not SLRError:  # SLRBusy and the like keep their kind
             raise
-        finally:
-            with guard:
-                running[0] = False
-            timer.cancel()
-            kb.sql("PRAGMA query_only = OFF")
+        message = str(exc)
+        raise ServiceError(message if message.startswith("sql: ") else f"sql: {message}") from None
 
 
 def _stats_of(kb: Any) -> dict:

@@ -412,9 +412,9 @@ class EventStore:
     # ------------------------------------------------------------------ raw and compiled SQL
 
     @_doc(Database.sql)
-    def sql(self, query: str, params: Iterable[Any] = (),
-            write: bool = False) -> tuple[list[str], list[tuple]]:
-        return self._db.sql(query, params, write)
+    def sql(self, query: str, params: Iterable[Any] = (), write: bool = False,
+            timeout: float | None = None) -> tuple[list[str], list[tuple]]:
+        return self._db.sql(query, params, write, timeout)
 
     @_doc(Database.execute)
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:

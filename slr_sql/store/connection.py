@@ -407,13 +407,14 @@ class Database:
 
     # ------------------------------------------------------------------ raw SQL
 
-    def sql(self, query: str, params: Iterable[Any] = (),
-            write: bool = False) -> tuple[list[str], list[tuple]]:
+    def sql(self, query: str, params: Iterable[Any] = (), write: bool = False,
+            timeout: float | None = None) -> tuple[list[str], list[tuple]]:
         """Run one SQL statement as given (for ``slr sql``) and return ``(column names,
         rows)``. Read-only unless ``write``: a statement that would change the store (an
         INSERT, a DROP, a pragma assignment, an ATTACH) raises an :class:`SLRError` starting
         with ``read-only``; other failures raise :data:`DatabaseError`. The connection's
         SQL functions are there, so compiled statements (``kb.explain``) run as printed.
+        ``timeout`` (seconds): a longer statement is interrupted with :class:`SLRTimeout`.
 
         >>> from slr_sql.store import EventStore
         >>> EventStore(None).sql("SELECT 1 AS one")
@@ -423,24 +424,27 @@ class Database:
         ...
         slr_sql.errors.SLRError: read-only: the statement would change the store (attempt to write a readonly database); pass write=True to allow it
         """
+        deadline = None if timeout is None else time.monotonic() + timeout
         with self.lock:
             self.check_open()
             conn = self.conn
             if write:
-                try:
-                    cursor = conn.execute(query, tuple(params))
-                    columns = [d[0] for d in cursor.description] if cursor.description else []
-                    return columns, cursor.fetchall()
-                except sqlite3.OperationalError as exc:
-                    raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+                with self._deadline(deadline, "the SQL statement"):
+                    try:
+                        cursor = conn.execute(query, tuple(params))
+                        columns = [d[0] for d in cursor.description] if cursor.description else []
+                        return columns, cursor.fetchall()
+                    except sqlite3.OperationalError as exc:
+                        raise busy_error(exc, self.path, self.busy_timeout) or exc from None
             # query_only refuses every write to a database file; the authorizer refuses what
             # it lets through (pragma assignments such as journal_mode, ATTACH, DETACH).
             conn.execute("PRAGMA query_only = 1")
             conn.set_authorizer(_read_only_authorizer)
             try:
-                cursor = conn.execute(query, tuple(params))
-                columns = [d[0] for d in cursor.description] if cursor.description else []
-                return columns, cursor.fetchall()
+                with self._deadline(deadline, "the SQL statement"):
+                    cursor = conn.execute(query, tuple(params))
+                    columns = [d[0] for d in cursor.description] if cursor.description else []
+                    return columns, cursor.fetchall()
             except sqlite3.DatabaseError as exc:
                 text = str(exc)
                 if "readonly" in text or "not authorized" in text:
@@ -554,35 +558,40 @@ class Database:
         """
         with self.lock:
             self.check_open()
-            conn = self.conn
-            # a statement run from inside another (a kb.define predicate querying the kb
-            # from SQL) keeps the outer deadline: the handler is per connection
-            outer = self.deadline
-            if deadline is None or (outer is not None and outer <= deadline):
-                deadline = outer
-            if deadline is not outer:
-                self.deadline = deadline
-                conn.set_progress_handler(
-                    lambda: 1 if time.monotonic() > deadline else 0, 20000)
-            try:
-                cursor = conn.execute(sql, params)
+            with self._deadline(deadline, "its compiled SQL statement"):
+                cursor = self.conn.execute(sql, params)
                 try:
                     return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
                 finally:
                     cursor.close()
-            except sqlite3.OperationalError as exc:
-                if deadline is not None and time.monotonic() > deadline \
-                        and "interrupt" in str(exc):
-                    raise SLRTimeout("query timed out (in its compiled SQL statement)") from None
-                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
-            finally:
-                if deadline is not outer:
-                    self.deadline = outer
-                    if outer is None:
-                        conn.set_progress_handler(None, 0)
-                    else:
-                        conn.set_progress_handler(
-                            lambda: 1 if time.monotonic() > outer else 0, 20000)
+
+    @contextmanager
+    def _deadline(self, deadline: float | None, what: str) -> Iterator[None]:
+        """Interrupt the statements run inside past ``deadline`` (``time.monotonic()``) with
+        :class:`SLRTimeout`. A statement run from inside another (a ``kb.define`` predicate
+        querying the kb from SQL) keeps the outer deadline: the handler is per connection.
+        Call with the lock held."""
+        conn = self.conn
+        outer = self.deadline
+        if deadline is None or (outer is not None and outer <= deadline):
+            deadline = outer
+        if deadline is not outer:
+            self.deadline = deadline
+            conn.set_progress_handler(lambda: 1 if time.monotonic() > deadline else 0, 20000)
+        try:
+            yield
+        except sqlite3.OperationalError as exc:
+            if deadline is not None and time.monotonic() > deadline and "interrupt" in str(exc):
+                raise SLRTimeout(f"query timed out (in {what})") from None
+            raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+        finally:
+            if deadline is not outer:
+                self.deadline = outer
+                if outer is None:
+                    conn.set_progress_handler(None, 0)
+                else:
+                    conn.set_progress_handler(lambda: 1 if time.monotonic() > outer else 0,
+                                              20000)
 
 
 # Pragmas that take an argument and only read (also table-valued: pragma_table_info('t')).
