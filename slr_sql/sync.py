@@ -1031,7 +1031,9 @@ class Synchronizer:
                     finally:
                         self.cond.acquire()
                     continue
-                self.cond.wait(wait)
+                # a deadline far away (a query at 1e12) would overflow the platform's
+                # time_t and kill this thread: wake up hourly instead and look again
+                self.cond.wait(None if wait is None else min(wait, 3600.0))
 
 
 def _close_machine(m: Any, solving: Any) -> None:

@@ -318,11 +318,21 @@ def test_synchronized_query_answers_when_complete_without_blocking_others(setup)
     assert reply["answers"] == [{"L": [3.5]}]
 
 
-def test_synchronized_query_times_out_with_an_error_reply(setup):
-    reply = setup.client.query(goal="battery(V)^T", at=time.time() + 20_000.0, wait=True,
-                               timeout=0.2)
+@pytest.mark.parametrize("at", [time.time() + 20_000.0, 1e12, 1e12],
+                         ids=["near", "far", "far-again"])
+def test_synchronized_query_times_out_with_an_error_reply(setup, at):
+    # 1e12 s is beyond the platform's time_t for a timer wait: twice, so the second one
+    # shows the knowledge base's timer still runs after the first
+    reply = setup.client.query(goal="battery(V)^T", at=at, wait=True, timeout=0.2)
     assert reply["error"]["kind"] == "SLRTimeout" and reply["error"]["status"] == 408
     assert "answers" not in reply
+
+
+def test_a_far_synchronized_query_leaves_the_timer_running():
+    with slr_sql.open() as kb:
+        for _ in range(2):
+            with pytest.raises(slr_sql.SLRTimeout):
+                kb.submit("far(V)^T", at=1e12, timeout=0.05).result(timeout=DEADLINE)
 
 
 # -- bad requests ------------------------------------------------------------------------------
