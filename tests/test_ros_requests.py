@@ -6,6 +6,7 @@ checked through its file; waits are deadline loops. Output subscriptions need kb
 with it they are driven for real, without it the error reply is checked."""
 from __future__ import annotations
 
+import doctest
 import itertools
 import json
 import os
@@ -22,6 +23,9 @@ from pathlib import Path
 import pytest
 
 import slr_sql
+from slr_sql.ros import control as control_module
+from slr_sql.ros import protocol as protocol_module
+from slr_sql.ros import requests as requests_module
 from slr_sql.ros.control import program_name
 from slr_sql.ros.mapping import mapping_from_dict
 from slr_sql.ros.protocol import parse_query, read_request
@@ -576,3 +580,9 @@ def test_query_requests_read_back(body):
         assert encode_answers([request.args]) == [body["args"]]
     with pytest.raises(ServiceError):
         parse_query({**read, "limit": 0})
+
+
+@pytest.mark.parametrize("module", [protocol_module, control_module, requests_module])
+def test_doctests(module):
+    failures, tried = doctest.testmod(module, verbose=False)
+    assert tried > 0 and failures == 0

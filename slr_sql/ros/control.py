@@ -38,7 +38,6 @@ from typing import Any, Callable
 from slr_sql import Atom, SLRError, String, Struct
 
 from ..service.encoding import encode_plain
-from ..terms import format_term
 from .mapping import PublishEntry, TopicEntry, _publish_entry, _topic_entry, normalize_topic
 from .protocol import ServiceError, check_keys, number_field, string_field
 
@@ -342,7 +341,7 @@ class Controller:
             return
         text = "\n".join([f"% written by slr ros bridge {self.node_name}: its runtime "
                           f"subscriptions and input topics (docs/ros.md)"]
-                         + [format_term(f) + "." for f in facts]) + "\n"
+                         + [f"{fact}." for fact in facts]) + "\n"
         self.kb.load(text, name=self.program, replace=True)
 
     def resume(self) -> list[str]:

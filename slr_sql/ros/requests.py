@@ -19,6 +19,15 @@ request's token (``null`` when none could be read); nothing a client sends stops
 No ROS 2 *service* is offered: the message packages the ROS 2 wheels install have no service
 type whose request and response are one string each (``std_srvs`` has none either), and a
 message package without a wheel is not an option; the topic protocol is the same payload.
+
+A server that is not started publishes nothing, but still returns control replies:
+
+>>> import slr_sql
+>>> from slr_sql.ros.bridge import Bridge
+>>> from slr_sql.ros.mapping import Mapping
+>>> server = RequestServer(Bridge(slr_sql.open(), Mapping()))
+>>> server.handle_control('{"token": 1, "op": "add_buffer", "pattern": "p(_)", "keep_last": 2}')
+{'token': 1, 'op': 'add_buffer', 'ok': True, 'id': 1}
 """
 from __future__ import annotations
 
