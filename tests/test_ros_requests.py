@@ -21,6 +21,8 @@ import time
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import slr_sql
 from slr_sql.ros import control as control_module
@@ -586,3 +588,37 @@ def test_query_requests_read_back(body):
 def test_doctests(module):
     failures, tried = doctest.testmod(module, verbose=False)
     assert tried > 0 and failures == 0
+
+
+JSON = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats(allow_nan=False, allow_infinity=False)
+    | st.text(),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(), inner, max_size=4),
+    max_leaves=12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(topic=st.text(min_size=1, max_size=20), mapping=JSON,
+       sub_id=st.text(min_size=1, max_size=20), node=st.text(min_size=1, max_size=12))
+def test_the_stored_control_state_reads_back(topic, mapping, sub_id, node):
+    """What _persist writes as facts of the named program reads back as the same JSON,
+    whatever the characters in topics, ids, node names and mappings."""
+    from slr_sql.ros.bridge import Bridge
+    from slr_sql.ros.control import Controller, _Input, _Output, _placeholder
+    from slr_sql.ros.mapping import Mapping
+
+    with slr_sql.open() as kb:
+        controller = Controller(Bridge(kb, Mapping()), node)
+        topic = "/" + topic
+        controller.inputs[topic] = _Input(topic, {"topic": topic, "mapping": mapping})
+        spec = {"id": sub_id, "pattern": "p(X)^T", "extra": mapping}
+        controller.outputs[sub_id] = _Output(sub_id, spec, _placeholder(spec))
+        controller._persist()
+        stored = {(str(a["K"]), str(a["Key"])): json.loads(a["S"])
+                  for a in kb.query("slr_ros_control(N, K, Key, S)", args={"N": slr_sql.Atom(node)})}
+        assert stored == {("input", topic): {"topic": topic, "mapping": mapping},
+                          ("subscription", sub_id): spec}
+        controller.inputs.clear()
+        controller.outputs.clear()
+        controller._persist()
+        assert program_name(node) not in kb.programs()

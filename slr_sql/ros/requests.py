@@ -220,9 +220,9 @@ class RequestServer:
         self.controller.close()
         with self._lock:
             pending, self._pending = list(self._pending), set()
-        self.closed = True
-        for p in pending:
+        for p in pending:  # their callbacks reply "the bridge is stopping" while we still can
             p.cancel()
+        self.closed = True
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
         node = self.bridge.node
