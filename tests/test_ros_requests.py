@@ -622,3 +622,27 @@ def test_the_stored_control_state_reads_back(topic, mapping, sub_id, node):
         controller.outputs.clear()
         controller._persist()
         assert program_name(node) not in kb.programs()
+
+
+def test_a_stored_input_the_map_now_maps_is_listed_and_removable():
+    """A stored input topic that cannot be made again (here: the MAP file took the topic
+    over) stays stored and listed with its error; removing it leaves the MAP's mapping."""
+    from slr_sql.ros.bridge import Bridge
+    from slr_sql.ros.control import Controller
+
+    with slr_sql.open() as kb:
+        first = Controller(Bridge(kb, mapping_from_dict({})), "n1")
+        made = first.handle("add_input", {"op": "add_input", "topic": "/odom",
+                                          "mapping": {"event": "odom", "args": ["data"]}})
+        assert made["events"] == ["odom"]
+        taken = mapping_from_dict({"topics": {"/odom": {"event": "odometry"}}})
+        second = Controller(Bridge(kb, taken), "n1")
+        (line,) = second.resume()
+        assert line.startswith("input /odom not resumed") and "MAP file" in line
+        listed = second.handle("list", {"op": "list"})["inputs"]
+        assert [(i["topic"], "MAP file" in i["error"]) for i in listed] == [("/odom", True)]
+        assert second.handle("remove_input", {"op": "remove_input", "topic": "/odom"}) == \
+            {"removed": "/odom"}
+        assert [e.event for e in taken.topics["/odom"]] == ["odometry"]
+        assert program_name("n1") not in kb.programs()
+        assert Controller(Bridge(kb, taken), "n1").resume() == []

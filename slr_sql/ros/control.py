@@ -277,7 +277,8 @@ class Controller:
         except BaseException:
             self.inputs[topic] = record
             raise
-        self.bridge.remap_topic(topic, None)
+        if record.error is None:  # it was mapped (a stored one that failed to resume was not)
+            self.bridge.remap_topic(topic, None)
         return {"removed": topic}
 
     def _add_buffer(self, body: dict) -> dict:
