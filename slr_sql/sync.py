@@ -1036,8 +1036,9 @@ class Synchronizer:
                     finally:
                         self.cond.acquire()
                     continue
-                # a deadline centuries away (at=1e300) is still a finite wait
-                self.cond.wait(None if wait is None else min(wait, threading.TIMEOUT_MAX))
+                # a deadline far away (a query at 1e12) would overflow the platform's
+                # time_t and kill this thread: wake up hourly instead and look again
+                self.cond.wait(None if wait is None else min(wait, 3600.0))
 
 
 def _close_machine(m: Any, solving: Any) -> None:

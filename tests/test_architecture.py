@@ -25,10 +25,11 @@ LAYERS = {
     "planner": 5,
     "sync": 6, "buffers": 6, "cep": 6, "plot": 6, "subscriptions": 6,
     "kb": 7,
-    "demo": 8, "service": 8, "ros": 8,
-    "__init__": 9,  # the public surface: open() from kb, connect() from service
-    "cli": 10,
-    "__main__": 11,
+    "demo": 8, "service": 8,
+    "ros": 9,  # its request protocol speaks the service's JSON (service/encoding, errors)
+    "__init__": 10,  # the public surface: open() from kb, connect() from service
+    "cli": 11,
+    "__main__": 12,
 }
 
 

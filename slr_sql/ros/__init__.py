@@ -4,10 +4,16 @@
   into a knowledge base, through ``rosbags`` (no ROS installation needed);
 * :mod:`slr_sql.ros.mapping` — MAP files: topics -> events (YAML, or a ``pub_sub.xml``);
 * :mod:`slr_sql.ros.bridge` — a live ROS 2 node (rclpy) storing mapped topics as events;
+* :mod:`slr_sql.ros.requests` — queries and runtime control of the bridge over ROS topics
+  (:mod:`slr_sql.ros.protocol`: the JSON on the wire; :mod:`slr_sql.ros.control`: the
+  control state, kept in the store);
 * :mod:`slr_sql.ros.cli` — ``slr ros import`` and ``slr ros bridge``.
 
 This package sits above the knowledge-base facade: it uses only the public API
-(``slr_sql.open``, ``kb.add_many``, ``kb.mark_complete``, ``kb.query``, ``kb.close``).
+(``slr_sql.open``, ``kb.add_many``, ``kb.mark_complete``, ``kb.query``, ``kb.submit``,
+``kb.load``, ``kb.add_buffer``, ``kb.subscribe``, ``kb.close``), and the network service's
+JSON encoding of terms and errors (:mod:`slr_sql.service.encoding`), so that the request
+topics and ``slr serve`` speak the same payloads.
 Importing it is cheap and needs none of the extra's packages; the submodules import
 ``rosbags``, ``yaml`` and ``rclpy`` themselves. See docs/ros.md.
 

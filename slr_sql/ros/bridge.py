@@ -277,6 +277,8 @@ class Bridge:
         self._refused: set[str] = set()
         self._publishers: dict[str, Any] = {}
         self._publish_classes: dict[str, Any] = {}
+        # topics that are never events, even with all_topics (the request protocol's own)
+        self.reserved_topics: set[str] = set()
         self._context = None
         self._node = None
         self._executor = None
@@ -368,25 +370,69 @@ class Bridge:
                 except Exception:  # noqa: BLE001 - already shut down
                     pass
 
+    @property
+    def node(self) -> Any:
+        """The rclpy node (None before ``start()`` and after ``close()``)."""
+        return self._node
+
     # -- subscriptions --------------------------------------------------------------------
+    def remap_topic(self, topic: str, entries: list | None) -> bool:
+        """Map ``topic`` to ``entries`` at runtime (``None``: stop mapping it). A current
+        subscription of the topic is dropped and, when the topic is still wanted and has a
+        publisher, made again with the new entries; returns whether it is subscribed now.
+        Raises MappingError when the entries do not fit the topic's message type."""
+        topic = normalize_topic(topic)
+        old = self.mapping.topics.get(topic)
+        if entries is None:
+            self.mapping.topics.pop(topic, None)
+        else:
+            self.mapping.topics[topic] = list(entries)
+        self._refused.discard(topic)
+        sub = self._subs.pop(topic, None)
+        if sub is not None:
+            self.stats.subscribed.pop(topic, None)
+            self._node.destroy_subscription(sub.handle)
+        try:
+            self._discover_topics(only=topic, strict=True)
+        except SLRError:
+            if old is None:
+                self.mapping.topics.pop(topic, None)
+            else:
+                self.mapping.topics[topic] = old
+            self._discover_topics(only=topic)
+            raise
+        return topic in self._subs
+
     def _wanted(self, topic: str) -> bool:
-        if topic in _SYSTEM_TOPICS or topic in self._publishers:
+        if topic in _SYSTEM_TOPICS or topic in self._publishers or topic in self.reserved_topics:
             return False
         return bool(self.mapping.entries_for(topic, self.all_topics)
                     or self.mapping.fully_updated_for(topic))
 
     def _discover(self) -> None:
+        # (no parameters: rclpy passes a TimerInfo to a timer callback that takes one)
+        self._discover_topics()
+
+    def _discover_topics(self, only: str | None = None, strict: bool = False) -> None:
         node = self._node
         if node is None:
             return
         for topic, types in node.get_topic_names_and_types():
             topic = normalize_topic(topic)
+            if only is not None and topic != only:
+                continue
             if topic in self._subs or topic in self._refused or not self._wanted(topic):
                 continue
             publishers = node.get_publishers_info_by_topic(topic)
             if not publishers:
                 continue
-            self._subscribe(topic, normalize_type(types[0]), publishers)
+            try:
+                self._subscribe(topic, normalize_type(types[0]), publishers)
+            except SLRError as exc:  # a mapping that does not fit the topic's message type
+                if strict:
+                    raise
+                self._refused.add(topic)
+                self.log(f"warning: {topic}: not subscribed: {exc}")
 
     def _qos(self, publishers: list) -> Any:
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -452,6 +498,29 @@ class Bridge:
         self._pending_messages += 1
 
     # -- publishing -----------------------------------------------------------------------
+    def add_publisher(self, entry: PublishEntry) -> None:
+        """Create the publisher of a publish entry made at runtime (one per topic; a second
+        entry on the topic must have the same message type). Raises BridgeError."""
+        cls = message_class(entry.msgtype)
+        if cls is None:
+            raise BridgeError(f"{entry.where}.type: no Python module for {entry.msgtype} "
+                              f"(install its package or source a ROS 2 installation)")
+        current = self._publish_classes.get(entry.topic)
+        if current is not None:
+            if current is not cls:
+                raise BridgeError(f"{entry.where}.topic: {entry.topic} is published already "
+                                  f"with another message type")
+            return
+        self._publish_classes[entry.topic] = cls
+        self._publishers[entry.topic] = self._node.create_publisher(cls, entry.topic, 10)
+
+    def remove_publisher(self, topic: str) -> None:
+        """Destroy the publisher of ``topic`` made by :meth:`add_publisher`."""
+        publisher = self._publishers.pop(topic, None)
+        self._publish_classes.pop(topic, None)
+        if publisher is not None and self._node is not None:
+            self._node.destroy_publisher(publisher)
+
     def publish_answer(self, entry: PublishEntry, answer: dict) -> Any:
         """Publish one answer of ``entry``'s subscription as a message on ``entry.topic``;
         returns the message. This is the one hook a subscription (``kb.subscribe``, pending)
@@ -497,8 +566,20 @@ def run_bridge(db: str, mapping: Mapping, all_topics: bool = False,
     kb = slr_sql.open(db, synchronous=synchronous)
     bridge = Bridge(kb, mapping, all_topics=all_topics, node_name=node_name,
                     on_ready=lambda topic, msgtype: echo(f"subscribed {topic} ({msgtype})"))
+    requests = mapping.requests
+    if requests.enabled:  # never stored as events, not even by the first discovery
+        bridge.reserved_topics.update(requests.topics())
+    server = None
     try:
         bridge.start()
+        if requests.enabled:  # queries and control over ROS (docs/ros.md, "Requests")
+            from .requests import RequestServer
+
+            server = RequestServer(bridge, requests, node_name=node_name).start()
+            for line in server.resumed:
+                echo(line)
+            echo(f"requests: queries on {requests.query} (answers on {requests.answer}), "
+                 f"control on {requests.control} (replies on {requests.control_reply})")
         wanted = ", ".join(mapping.topic_names() + [t for t in TF_TOPICS if mapping.tf]) or "-"
         echo(f"bridge ready: node {node_name}, waiting for publishers on {wanted}"
              + (" and every other topic" if all_topics else "")
@@ -507,6 +588,8 @@ def run_bridge(db: str, mapping: Mapping, all_topics: bool = False,
         while not stop.is_set():
             bridge.spin_once(0.1)
     finally:
+        if server is not None:
+            server.close()
         bridge.close()
         kb.close()
         for s, handler in previous.items():

@@ -32,7 +32,7 @@ __all__ = [
     "MappingError", "MessageError", "Mapping", "TopicEntry", "PublishEntry", "FullyUpdatedEntry",
     "BoundEntry", "load_mapping", "mapping_from_dict", "mapping_from_pub_sub_xml",
     "topic_event_name", "normalize_topic", "normalize_type", "message_term", "TF_TOPICS",
-    "IMPORT_CHECKPOINT",
+    "IMPORT_CHECKPOINT", "RequestTopics",
 ]
 
 TF_TOPICS = ("/tf", "/tf_static")
@@ -50,7 +50,9 @@ _BASE, _NAME, _ARRAY, _SEQUENCE = 1, 2, 3, 4
 _NUMERIC_BASES = frozenset({"bool", "byte", "char", "int8", "int16", "int32", "int64", "uint8",
                             "uint16", "uint32", "uint64", "float32", "float64"})
 
-_TOP_KEYS = ("version", "tf", "topics", "publish", "fully_updated", "definitions")
+_TOP_KEYS = ("version", "tf", "topics", "publish", "fully_updated", "definitions", "requests")
+_REQUEST_KEYS = ("enabled", "query", "answer", "control", "control_reply", "max_query_time",
+                 "max_wait")
 _TOPIC_KEYS = ("event", "args", "time", "foreach", "type")
 _PUBLISH_KEYS = ("topic", "type", "event", "where", "fields")
 _FULLY_UPDATED_KEYS = ("topic", "types", "time", "type")
@@ -329,6 +331,27 @@ class FullyUpdatedEntry:
                           self.time, None, self.msgtype, self.where)
 
 
+@dataclass(frozen=True)
+class RequestTopics:
+    """The topics of the bridge's request protocol (docs/ros.md, "Requests"): queries
+    arrive on ``query`` and are answered on ``answer``; control requests arrive on
+    ``control`` and are acknowledged on ``control_reply``. ``enabled=False`` (``requests:
+    false`` in a MAP) turns the protocol off. Query times are capped by ``max_query_time``,
+    synchronized waits by ``max_wait`` (seconds), as ``slr serve`` caps them."""
+
+    enabled: bool = True
+    query: str = "/slr/query"
+    answer: str = "/slr/answer"
+    control: str = "/slr/control"
+    control_reply: str = "/slr/control_reply"
+    max_query_time: float = 30.0
+    max_wait: float = 3600.0
+
+    def topics(self) -> tuple[str, str, str, str]:
+        """The four topic names."""
+        return (self.query, self.answer, self.control, self.control_reply)
+
+
 @dataclass
 class Mapping:
     """A whole MAP: topic entries (several per topic allowed), publish and fully_updated
@@ -340,6 +363,7 @@ class Mapping:
     tf: bool = True
     definitions: dict[str, str] = field(default_factory=dict)
     source: str = "<mapping>"
+    requests: RequestTopics = field(default_factory=RequestTopics)
 
     def entries_for(self, topic: str, all_topics: bool = False) -> list[TopicEntry]:
         """The entries that turn ``topic`` into events: the MAP's own, else the built-in tf
@@ -490,7 +514,49 @@ def mapping_from_dict(data: Any, source: str = "<mapping>") -> Mapping:
         if not _TYPE_NAME.match(name):
             raise MappingError(f"definitions.{name}: not a message type (pkg/msg/Name)")
     mapping.definitions = {normalize_type(k): v for k, v in definitions.items()}
+    mapping.requests = _request_topics(data.get("requests", True))
+    if mapping.requests.enabled:
+        used = {**{t: f"topics.{t}" for t in mapping.topics},
+                **{e.topic: e.where for e in mapping.publish + mapping.fully_updated}}
+        for topic in mapping.requests.topics():
+            if topic in used:
+                raise MappingError(f"{used[topic]}: {topic} is a topic of the request protocol "
+                                   f"(requests:); choose other names there or here")
     return mapping
+
+
+def _request_topics(spec: Any) -> RequestTopics:
+    """The ``requests:`` section: ``true``/``false``, or a mapping of the RequestTopics
+    fields; topics must be distinct."""
+    if isinstance(spec, bool):
+        return RequestTopics(enabled=spec)
+    if not isinstance(spec, dict):
+        raise MappingError(f"requests: expects true, false or a mapping with the keys "
+                           f"{', '.join(_REQUEST_KEYS)}")
+    _check_keys(spec, _REQUEST_KEYS, "requests")
+    values: dict[str, Any] = {}
+    if "enabled" in spec:
+        if not isinstance(spec["enabled"], bool):
+            raise MappingError("requests.enabled: expects true or false")
+        values["enabled"] = spec["enabled"]
+    for key in ("query", "answer", "control", "control_reply"):
+        if key in spec:
+            topic = spec[key]
+            if not isinstance(topic, str) or not topic.strip("/") or any(c.isspace() for c in topic):
+                raise MappingError(f"requests.{key}: {topic!r} is not a topic name")
+            values[key] = normalize_topic(topic)
+    for key in ("max_query_time", "max_wait"):
+        if key in spec:
+            number = spec[key]
+            if isinstance(number, bool) or not isinstance(number, (int, float)) \
+                    or not number > 0 or not math.isfinite(number):
+                raise MappingError(f"requests.{key}: expects a positive number of seconds")
+            values[key] = float(number)
+    topics = RequestTopics(**values)
+    names = topics.topics()
+    if len(set(names)) != len(names):
+        raise MappingError(f"requests: the four topics must differ ({', '.join(names)})")
+    return topics
 
 
 def _publish_entry(spec: Any, where: str) -> PublishEntry:
