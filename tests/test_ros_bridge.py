@@ -260,6 +260,35 @@ def test_publish_answer_to_a_real_subscriber(tmp_path, ros_node, prefix):
     assert bridge.stats.published == 4
 
 
+def test_publish_entries_of_the_map_publish_what_the_store_derives(tmp_path, ros_node, prefix):
+    """A MAP publish entry is a subscription of the knowledge base: events added after the
+    bridge started (matching the entry's event and where) reach the ROS topic, others not."""
+    from std_msgs.msg import String
+
+    node, executor = ros_node
+    mapping = mapping_from_dict({"tf": False, "publish": [
+        {"topic": f"{prefix}/alarm", "type": "std_msgs/msg/String", "event": "alarm(D)^T",
+         "where": "D \\== quiet", "fields": {"data": "D"}}]})
+    received: list = []
+    node.create_subscription(String, f"{prefix}/alarm", received.append, 10)
+    # "now" when the bridge starts is 1.5: the entry publishes what ends from then on
+    with slr_sql.open(tmp_path / "r.db", clock=slr_sql.ManualClock(1.5)) as kb:
+        kb.add("alarm(before_start)^1")
+        bridge = Bridge(kb, mapping, node_name="test_bridge_feed").start()
+        try:
+            (alarm,) = bridge.mapping.publish
+            deadline = time.monotonic() + DEADLINE
+            _spin_until(bridge, node, executor,
+                        lambda: bridge._publishers[alarm.topic].get_subscription_count() > 0,
+                        deadline)
+            kb.add_many(["alarm(quiet)^2", "alarm(door3)^3", "other(door4)^4", "alarm(door5)^5"])
+            _spin_until(bridge, node, executor, lambda: len(received) >= 2, deadline)
+        finally:
+            bridge.close()
+    assert [m.data for m in received] == ["door3", "door5"]
+    assert bridge.stats.published == 2
+
+
 TF_PUBLISHER = textwrap.dedent("""
     import sys, time
     import rclpy

@@ -16,7 +16,7 @@
 * ``fully_updated`` entries call ``kb.mark_complete`` for each message on their topic.
 * ``publish`` entries: :meth:`Bridge.publish_answer` turns one answer (a dict of variable
   values, as a subscription delivers it) into a message on the entry's topic. Feeding it
-  from ``kb.subscribe`` is pending until the knowledge base has subscriptions.
+  from ``kb.subscribe``: each entry is a subscription whose answers are published.
 
 :func:`run_bridge` is the command: it runs until SIGINT or SIGTERM, then closes the node and
 the store and returns 0.
@@ -277,6 +277,7 @@ class Bridge:
         self._refused: set[str] = set()
         self._publishers: dict[str, Any] = {}
         self._publish_classes: dict[str, Any] = {}
+        self._answer_feeds: list = []  # the kb subscriptions feeding the MAP's publish entries
         # topics that are never events, even with all_topics (the request protocol's own)
         self.reserved_topics: set[str] = set()
         self._context = None
@@ -323,6 +324,8 @@ class Bridge:
         for entry in self.mapping.publish:
             self._publishers[entry.topic] = self._node.create_publisher(
                 self._publish_classes[entry.topic], entry.topic, 10)
+        for entry in self.mapping.publish:
+            self._answer_feeds.append(self._feed(entry))
         self._discover()
         self._node.create_timer(DISCOVERY_PERIOD, self._discover)
         return self
@@ -356,8 +359,29 @@ class Bridge:
             self.kb.mark_complete(event_type, t)
             self.stats.marks += 1
 
+    def _feed(self, entry: PublishEntry) -> Any:
+        """Subscribe the MAP's publish entry to the knowledge base: every answer of its
+        ``event`` (and ``where``) from now on, incoming or complex, becomes a message."""
+        subscribe = getattr(self.kb, "subscribe", None)
+        if subscribe is None:
+            raise BridgeError(f"{entry.where}: publishing needs subscriptions, which this "
+                              f"knowledge base does not offer")
+
+        def deliver(answer: dict) -> None:  # the subscription's delivery thread
+            if self._node is None:
+                return
+            try:
+                self.publish_answer(entry, answer)
+            except PublishError as exc:  # one bad answer must not stop the others
+                self.log(f"publish {entry.topic}: {exc}")
+
+        return subscribe(entry.event, where=entry.where_goal, since="now", callback=deliver)
+
     def close(self) -> None:
-        """Destroy the node and its context (idempotent)."""
+        """Stop the publish feeds, destroy the node and its context (idempotent)."""
+        feeds, self._answer_feeds = self._answer_feeds, []
+        for feed in feeds:
+            feed.close()
         if self._node is not None:
             try:
                 self._executor.remove_node(self._node)
@@ -523,7 +547,7 @@ class Bridge:
 
     def publish_answer(self, entry: PublishEntry, answer: dict) -> Any:
         """Publish one answer of ``entry``'s subscription as a message on ``entry.topic``;
-        returns the message. This is the one hook a subscription (``kb.subscribe``, pending)
+        returns the message. This is the one hook a subscription (``kb.subscribe``)
         calls for each delivered answer.
 
         Raises :class:`PublishError` when the answer does not fit the message type.
