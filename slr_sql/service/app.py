@@ -10,7 +10,7 @@ Every knowledge-base call that may block (SQLite, evaluation, a lock) runs in st
 thread pool; the KnowledgeBase serializes its store access with a lock and keeps no per-call
 state on itself, so calls from several threads are safe. Waiting is never done on a thread:
 a long-poll for a synchronized query awaits the query's future on the event loop, and a
-subscription's answers are read by one dedicated thread per subscription.
+subscription is consumed with ``async for`` on the event loop (no thread per subscriber).
 
 >>> import slr_sql
 >>> kb = slr_sql.open()
@@ -481,7 +481,7 @@ class _Service:
         paths["/subscribe"] = {"get": {
             "summary": "WebSocket: subscribe to events matching a pattern (kb.subscribe); "
                        "send {\"op\": \"subscribe\", \"pattern\", \"where\", \"since\", "
-                       "\"until\", \"id\"}, receive subscribed / answer / end / error "
+                       "\"until\", \"id\", \"batch\"}, receive subscribed / answer(s) / end / error "
                        "messages (docs/service.md).",
             "operationId": "subscribe",
             "responses": {"101": {"description": "Switching to the WebSocket protocol"}}}}
