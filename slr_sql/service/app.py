@@ -10,7 +10,7 @@ Every knowledge-base call that may block (SQLite, evaluation, a lock) runs in st
 thread pool; the KnowledgeBase serializes its store access with a lock and keeps no per-call
 state on itself, so calls from several threads are safe. Waiting is never done on a thread:
 a long-poll for a synchronized query awaits the query's future on the event loop, and a
-subscription's answers are read by one dedicated thread per subscription.
+subscription is consumed with ``async for`` on the event loop (no thread per subscriber).
 
 >>> import slr_sql
 >>> kb = slr_sql.open()
@@ -28,7 +28,6 @@ import inspect
 import logging
 import math
 import re
-import threading
 import time
 import uuid
 from dataclasses import dataclass
@@ -68,7 +67,7 @@ class Limits:
     result_ttl: float = 600.0        # seconds a finished submitted query's answer is kept
     max_pending: int = 10_000        # submitted queries kept at once (503 beyond)
     sql_timeout: float = 30.0        # seconds a read-only SQL statement may run
-    subscribe_queue: int = 1000      # answers buffered per subscriber before delivery waits
+    subscribe_queue: int = 1000      # answers held in memory per WebSocket subscriber
 
 
 # -- small helpers -----------------------------------------------------------------------------
@@ -347,62 +346,96 @@ class _Service:
     # -- subscriptions over WebSocket --------------------------------------------------------
     async def subscribe(self, websocket: WebSocket) -> None:
         """``/subscribe``: see docs/service.md, "Subscriptions". One subscription per
-        connection; answers are delivered in order with a sequence number."""
+        connection; answers are delivered in order with a sequence number.
+
+        The subscription is consumed with ``async for`` on the event loop (the knowledge
+        base's hub thread wakes it through ``call_soon_threadsafe``), so a subscriber costs
+        no thread. Each send awaits the socket's drain: a slow client holds back only its
+        own subscription, whose bounded queue (``subscribe_queue``) then makes it read the
+        store at its own pace and, too far behind, end with an overflow error."""
         await websocket.accept()
         sub = None
-        stop = threading.Event()
-        queue: asyncio.Queue = asyncio.Queue()
-        slots = threading.Semaphore(self.limits.subscribe_queue)
-        reader = None
+        watcher = None
+        closing: list = []
         try:
             request = await self._first_message(websocket)
             self.check_token(websocket.headers.get("authorization")
                              or (f"Bearer {request['token']}" if isinstance(request.get("token"), str)
                                  else None))
             pattern, kwargs = _subscribe_request(request)
+            batch = _batch_size(request)
             if not hasattr(self.kb, "subscribe"):
                 raise ServiceError("subscriptions are not available: this knowledge base has "
                                    "no subscribe() yet", kind="NotImplemented")
+            if "max_queue" in _parameters(self.kb.subscribe):
+                kwargs["max_queue"] = max(self.limits.subscribe_queue, batch)
             sub = await self.call(self.kb.subscribe, pattern, **kwargs)
             await websocket.send_text(dumps({"type": "subscribed", "pattern": pattern,
                                              "id": kwargs.get("id")}).decode("utf-8"))
-            loop = asyncio.get_running_loop()
-            threading.Thread(target=_pump, args=(sub, queue, slots, loop, stop), daemon=True,
-                             name="slr-subscription").start()
-            reader = asyncio.create_task(_watch_client(websocket, queue))
+            watcher = asyncio.create_task(self._watch_client(websocket, sub, closing))
             seq = 0
-            while True:
-                kind, payload = await queue.get()
-                slots.release()
-                if kind == "answer":
+            failure: BaseException | None = None
+            async for answer in sub:
+                answers = [answer]
+                while len(answers) < batch:        # what is queued already goes along
+                    try:
+                        more = sub.get(timeout=0)
+                    except SLRTimeout:
+                        break
+                    except SLRError as exc:        # sent after the answers before it
+                        failure = exc
+                        break
+                    if more is None:               # ended: "end" follows these answers
+                        break
+                    answers.append(more)
+                if len(answers) == 1:
                     seq += 1
-                    await websocket.send_text(dumps({"type": "answer", "seq": seq,
-                                                     "answer": encode_answers([payload])[0]})
-                                              .decode("utf-8"))
-                elif kind == "end":
-                    await websocket.send_text('{"type":"end"}')
-                    await websocket.close(1000)
-                    break
-                elif kind == "error":
-                    raise payload
-                else:  # "gone": the client closed or vanished
-                    break
+                    frame = {"type": "answer", "seq": seq,
+                             "answer": encode_answers(answers)[0]}
+                else:
+                    frame = {"type": "answers", "seq": seq + 1,
+                             "answers": encode_answers(answers)}
+                    seq += len(answers)
+                await websocket.send_text(dumps(frame).decode("utf-8"))
+                if failure is not None:
+                    raise failure
+            if not closing:
+                await websocket.send_text('{"type":"end"}')
+                await websocket.close(1000)
         except WebSocketDisconnect:
             pass
         except Exception as exc:
-            await _send_error(websocket, _classify(exc))
+            if not closing:
+                await _send_error(websocket, _classify(exc))
         finally:
-            stop.set()
-            if reader is not None:
-                reader.cancel()
-            while not queue.empty():   # let a pump blocked on a full queue see the stop
-                queue.get_nowait()
-                slots.release()
-            if sub is not None:
-                try:
-                    await self.call(sub.close)
-                except Exception:
-                    log.warning("closing a subscription failed", exc_info=True)
+            if watcher is not None:
+                watcher.cancel()
+            if sub is not None and not closing:
+                await self._close_subscription(sub)
+            elif closing:
+                await closing[0]
+
+    async def _watch_client(self, websocket: WebSocket, sub: Any, closing: list) -> None:
+        """Read what the client sends after subscribing; when it closes (close frame,
+        ``{"op": "close"}`` or a vanished peer) close the subscription, which ends the
+        ``async for`` that delivers it."""
+        try:
+            while True:
+                message = await websocket.receive()
+                if message["type"] == "websocket.disconnect":
+                    break
+                text = message.get("text")
+                if text and '"close"' in text:
+                    break
+        except Exception:  # the peer vanished
+            pass
+        closing.append(asyncio.ensure_future(self._close_subscription(sub)))
+
+    async def _close_subscription(self, sub: Any) -> None:
+        try:
+            await self.call(sub.close)
+        except Exception:
+            log.warning("closing a subscription failed", exc_info=True)
 
     async def _first_message(self, websocket: WebSocket) -> dict:
         try:
@@ -448,7 +481,7 @@ class _Service:
         paths["/subscribe"] = {"get": {
             "summary": "WebSocket: subscribe to events matching a pattern (kb.subscribe); "
                        "send {\"op\": \"subscribe\", \"pattern\", \"where\", \"since\", "
-                       "\"until\", \"id\"}, receive subscribed / answer / end / error "
+                       "\"until\", \"id\", \"batch\"}, receive subscribed / answer(s) / end / error "
                        "messages (docs/service.md).",
             "operationId": "subscribe",
             "responses": {"101": {"description": "Switching to the WebSocket protocol"}}}}
@@ -859,49 +892,18 @@ def _parameters(fn: Callable) -> set[str]:
         return set()
 
 
-# -- subscriptions: the thread that reads one subscription ------------------------------------
+# -- subscriptions ------------------------------------------------------------------------------
 
-def _pump(sub: Any, queue: asyncio.Queue, slots: threading.Semaphore,
-          loop: asyncio.AbstractEventLoop, stop: threading.Event) -> None:
-    """Iterate the blocking subscription and hand each answer to the event loop. At most
-    ``subscribe_queue`` answers wait for the WebSocket; beyond that this thread waits, so a
-    slow client slows only its own subscription (whose own bounded queue then reports the
-    overflow), never ``kb.add``."""
-    def hand(item: tuple) -> bool:
-        while not slots.acquire(timeout=0.5):
-            if stop.is_set():
-                return False
-        try:
-            loop.call_soon_threadsafe(queue.put_nowait, item)
-        except RuntimeError:  # the event loop is closed: the server is going down
-            return False
-        return True
-
-    try:
-        for answer in sub:
-            if stop.is_set() or not hand(("answer", answer)):
-                return
-        final: tuple = ("end", None)
-    except BaseException as exc:  # the subscription failed: tell the client
-        final = ("error", exc)
-    if not stop.is_set():
-        hand(final)
+MAX_BATCH = 1000
 
 
-async def _watch_client(websocket: WebSocket, queue: asyncio.Queue) -> None:
-    """Read what the client sends after subscribing; a close (frame, op or vanished peer)
-    puts ``("gone", None)`` in the delivery queue."""
-    try:
-        while True:
-            message = await websocket.receive()
-            if message["type"] == "websocket.disconnect":
-                break
-            text = message.get("text")
-            if text and '"close"' in text:
-                break
-    except Exception:
-        pass
-    queue.put_nowait(("gone", None))
+def _batch_size(request: dict) -> int:
+    """``"batch": N`` in the subscribe message: up to N answers already queued go in one
+    ``answers`` frame (1, the default, sends each in an ``answer`` frame of its own)."""
+    batch = request.get("batch", 1)
+    if isinstance(batch, bool) or not isinstance(batch, int) or not 1 <= batch <= MAX_BATCH:
+        raise ServiceError(f'"batch" must be an integer from 1 to {MAX_BATCH}')
+    return batch
 
 
 async def _send_error(websocket: WebSocket, exc: BaseException) -> None:

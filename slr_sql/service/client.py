@@ -19,6 +19,7 @@ What differs from a local knowledge base:
 """
 from __future__ import annotations
 
+import collections
 import os
 import threading
 from concurrent.futures import Future, InvalidStateError
@@ -350,11 +351,19 @@ class RemoteKnowledgeBase:
 
     # -- subscriptions --------------------------------------------------------------------------
     def subscribe(self, pattern: str, where: str | None = None, since: Any = "now",
-                  until: float | None = None, id: str | None = None) -> "RemoteSubscription":
+                  until: float | None = None, id: str | None = None, *,
+                  batch: int = 256) -> "RemoteSubscription":
         """Events matching ``pattern`` (and ``where``) as they arrive, over a WebSocket:
-        ``for answer in sub``; ``sub.close()``. Needs a server whose knowledge base has
-        ``subscribe``."""
-        return RemoteSubscription(self, pattern, where=where, since=since, until=until, id=id)
+        ``for answer in sub`` (ends when ``until`` is complete); ``sub.close()``, from any
+        thread, ends the iteration. ``batch``: up to that many answers already waiting on
+        the server travel in one frame (the answers and their order are the same).
+
+        >>> sub = connect("http://127.0.0.1:8765").subscribe("p(X)^T", since=0)  # doctest: +SKIP
+        >>> next(sub)                                                          # doctest: +SKIP
+        {'X': Atom('a'), 'T': 1.0}
+        """
+        return RemoteSubscription(self, pattern, where=where, since=since, until=until, id=id,
+                                  batch=batch)
 
 
 class RemotePendingQuery(Future):
@@ -443,7 +452,7 @@ class RemoteSubscription:
     for the next answer and ends when the subscription ends (``until``); ``close()``."""
 
     def __init__(self, client: RemoteKnowledgeBase, pattern: str, *, where: str | None,
-                 since: Any, until: float | None, id: str | None):
+                 since: Any, until: float | None, id: str | None, batch: int = 1):
         try:
             from websockets.exceptions import WebSocketException
             from websockets.sync.client import connect as ws_connect
@@ -462,9 +471,12 @@ class RemoteSubscription:
             request["until"] = _number(until, "until")
         if id is not None:
             request["id"] = id
+        if batch != 1:
+            request["batch"] = batch
         self.pattern = pattern
         self.id = id
         self._done = False
+        self._ready: collections.deque = collections.deque()   # answers of the last frame
         try:
             # entered as a context manager (what websockets >= 17 asks); closed by close()
             self._ws = ws_connect(url, additional_headers=headers, open_timeout=client.timeout,
@@ -483,6 +495,8 @@ class RemoteSubscription:
         try:
             data = self._ws.recv()
         except self._closed_exc as exc:
+            if self._done:             # close() was called (maybe from another thread)
+                return {"type": "end"}
             self._done = True
             raise ServiceError(f"the subscription's connection closed: {exc}",
                                kind="Unavailable", status=0) from None
@@ -500,12 +514,19 @@ class RemoteSubscription:
         return self
 
     def __next__(self) -> dict[str, Any]:
+        if self._ready:
+            return self._ready.popleft()
         if self._done:
             raise StopIteration
         message = self._receive()
         kind = message.get("type")
         if kind == "answer":
             return decode_answers([message.get("answer", {})])[0]
+        if kind == "answers":
+            self._ready.extend(decode_answers(message.get("answers", [])))
+            if self._ready:
+                return self._ready.popleft()
+            return self.__next__()
         if kind == "end":
             self._done = True
             self._close_socket()
@@ -520,8 +541,10 @@ class RemoteSubscription:
             pass
 
     def close(self) -> None:
-        """Unsubscribe (closes the WebSocket)."""
+        """Unsubscribe (closes the WebSocket); an iteration blocked in another thread
+        ends. Answers received but not iterated yet are dropped."""
         self._done = True
+        self._ready.clear()
         self._close_socket()
 
     def __enter__(self) -> "RemoteSubscription":
