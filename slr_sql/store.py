@@ -54,7 +54,10 @@ from .errors import EventRejected, SLRError
 from .terms import Atom, String, Struct, Var
 
 __all__ = ["EventStore", "Event", "Row", "CACHE_SIZE_KIB", "quote_identifier", "format_event",
-           "migration_scripts", "split_sql_script"]
+           "migration_scripts", "split_sql_script", "DatabaseError"]
+
+# What a failed statement raises (callers outside the store catch this, not sqlite3's).
+DatabaseError = sqlite3.Error
 
 Event = tuple  # (name: str, args: tuple[term, ...], start: float, end: float)
 Row = tuple    # (args: tuple[term, ...], start: float, end: float, seq: int)

@@ -500,6 +500,9 @@ class _Writer:
             self.put(_format_float(t))
         elif tt is bool:
             self.put("true" if t else "false")
+        elif tt is list or tt is tuple:
+            # a Python list inside a returned Struct (to_python): its Prolog text
+            self.term(make_list([from_python(x) for x in t]), prec, operand)
         else:
             self.put(str(t))
 
