@@ -23,7 +23,6 @@ CREATE TABLE slr_cep_rules (
 --             chronological rule (rowids = [its rowid])
 --   wait_*    the history the decision waits for, when known (NULL: the rule's inputs, or
 --             its negated types, up to t_end)
---   tiekey    the terminating row's arguments, to order decisions by occurrence alone
 CREATE TABLE slr_cep_pending (
     id          INTEGER PRIMARY KEY,
     rule        TEXT NOT NULL,
@@ -33,7 +32,6 @@ CREATE TABLE slr_cep_pending (
     rowids      TEXT NOT NULL,
     t_start     REAL NOT NULL,
     t_end       REAL NOT NULL,
-    tiekey      TEXT,
     wait_type   TEXT,
     wait_arity  INTEGER,
     wait_time   REAL,

@@ -72,6 +72,17 @@ def _instantiate(t: Any, bindings: dict) -> Any:
     return t
 
 
+def _sqlite_key(v: Any) -> tuple:
+    """A stored value's place in SQLite's order: numbers, then text, then blobs."""
+    if type(v) is int:
+        return (0, v, "integer")
+    if type(v) is float:
+        return (0, v, "real")
+    if isinstance(v, str):
+        return (1, 0, v)
+    return (2, 0, repr(v))
+
+
 class RuleRuntime:
     """One installed event rule: its SQL (per alternative), residual goals, counters and
     the summary of its pending decisions."""
@@ -134,6 +145,8 @@ class RuleRuntime:
                              - {self.head_key})
             self.residuals.append(residual)
             self.reads_store.append(reads)
+        for key in self.rule.input_types():   # their completeness parameters exist
+            eng.complete_sql(key, "x")
         self.generation = eng.generation
 
     def ensure_built(self) -> None:
@@ -153,11 +166,9 @@ class RuleRuntime:
         params = eng.params(now)
         params["rule"] = self.key
         for n, alt in enumerate(self.alts):
-            if not alt.runnable:
-                continue
             positions = [p for p, leaf in enumerate(alt.alt.leaves) if leaf.key in dirty]
-            if not positions:
-                continue
+            if not positions or (self.policy == "unrestricted" and not alt.runnable):
+                continue   # a type without a table has no row to match yet
             p2 = dict(params)
             p2.update(alt.params)
             for p, leaf in enumerate(alt.alt.leaves):
@@ -176,9 +187,11 @@ class RuleRuntime:
                             changed |= self._candidates(n, rows, now)
             else:
                 for pos in positions:
-                    if pos not in alt.alt.terminators:
+                    if pos not in alt.alt.terminators or alt.tables[pos] is None:
                         continue
-                    if self.policy == "recent" and alt.pure:
+                    # a terminator is kept even while a partner type has no table: its
+                    # partners may still arrive (late) before it is decided
+                    if self.policy == "recent" and alt.pure and alt.runnable:
                         store.run_compiled(alt.recent_insert(pos), p2)
                         store.run_compiled(alt.term_pending(pos, True), p2)
                     else:
@@ -201,7 +214,7 @@ class RuleRuntime:
             if alt.negs:
                 if not row[-2]:
                     pend.append(self._pending_row(n, "match", None, row[:k], row[k],
-                                                  row[k + 1], None, None))
+                                                  row[k + 1], None))
                     continue
                 if not row[-1]:
                     continue
@@ -209,13 +222,13 @@ class RuleRuntime:
                 self._derive_from(n, row, now)
             except MustWait as w:
                 pend.append(self._pending_row(n, "match", None, row[:k], row[k], row[k + 1],
-                                              None, w))
+                                              w))
         if pend:
             self._insert_pending(pend)
         return bool(pend)
 
-    def _pending_row(self, n, kind, pos, rowids, start, end, tiekey, wait) -> tuple:
-        return (self.key, n, kind, pos, json.dumps(list(rowids)), start, end, tiekey,
+    def _pending_row(self, n, kind, pos, rowids, start, end, wait) -> tuple:
+        return (self.key, n, kind, pos, json.dumps(list(rowids)), start, end,
                 wait.key[0] if wait else None, wait.key[1] if wait else None,
                 wait.time if wait else None, wait.reason if wait else None,
                 float(self.eng.clock.now()))
@@ -223,8 +236,8 @@ class RuleRuntime:
     def _insert_pending(self, rows: list) -> None:
         self.eng.store.executemany(
             "INSERT INTO slr_cep_pending (rule, alt, kind, pos, rowids, t_start, t_end, "
-            "tiekey, wait_type, wait_arity, wait_time, wait_reason, created_at) "
-            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", rows)
+            "wait_type, wait_arity, wait_time, wait_reason, created_at) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", rows)
 
     def _bindings(self, n: int, row: tuple) -> dict:
         alt = self.alts[n]
@@ -307,10 +320,9 @@ class RuleRuntime:
         eng = self.eng
         store = eng.store
         if self.policy == "chronological":
-            rows = store.execute(
+            rows = self._occurrence_order(store.execute(
                 "SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, wait_arity, "
-                "wait_time FROM slr_cep_pending WHERE rule = ? "
-                "ORDER BY t_end, t_start, pos, tiekey, rowids", (self.key,))
+                "wait_time FROM slr_cep_pending WHERE rule = ?", (self.key,)))
             changed = False
             for row in rows:
                 if not self._decide_row(row, now):
@@ -353,13 +365,46 @@ class RuleRuntime:
                 changed |= self._decide_row(row, now)
         return changed
 
+    def _occurrence_order(self, rows: list) -> list:
+        """Pending terminators in occurrence order: end, start, alternative, position, then
+        the row's arguments as SQLite orders them (numbers before text), then rowid -- never
+        the arrival order (chronological decisions consume rows, so their order matters)."""
+        args: dict = {}
+        groups: dict = {}
+        for row in rows:
+            groups.setdefault((row[1], row[3]), []).append(json.loads(row[4])[0])
+        for (n, pos), seqs in groups.items():
+            if n >= len(self.alts) or self.alts[n].tables[pos] is None:
+                continue
+            arity = self.alts[n].alt.leaves[pos].arity
+            cols = ", ".join(["seq"] + [f"arg{j + 1}" for j in range(arity)])
+            for i in range(0, len(seqs), 500):
+                chunk = seqs[i:i + 500]
+                for r in self.eng.store.execute(
+                        f"SELECT {cols} FROM {self.alts[n].tables[pos]} WHERE seq IN "
+                        f"({', '.join('?' * len(chunk))})", chunk):
+                    args[(n, pos, r[0])] = tuple(_sqlite_key(v) for v in r[1:])
+
+        def key(row: tuple) -> tuple:
+            seq = json.loads(row[4])[0]
+            return (row[6], row[5], row[1], row[3] if row[3] is not None else -1,
+                    args.get((row[1], row[3], seq), ()), seq)
+
+        return sorted(rows, key=key)
+
     def _decide_row(self, row: tuple, now: float) -> bool:
         """Decide one pending row; False if it must still wait (its wait is updated)."""
         rid, n, kind, pos, rowids, start, end = row[:7]
         store = self.eng.store
-        if n >= len(self.alts) or not self.alts[n].runnable:
+        if n >= len(self.alts):
             store.execute("DELETE FROM slr_cep_pending WHERE id = ?", (rid,))
             return True
+        if not self.alts[n].runnable:
+            # a partner type still has no event: once the inputs are complete, it never will
+            if kind == "term" and self._ready((n, "term", None), end, now):
+                store.execute("DELETE FROM slr_cep_pending WHERE id = ?", (rid,))
+                return True
+            return False
         if row[7] is not None and not self.eng.complete((row[7], row[8]), row[9], now):
             return False
         try:

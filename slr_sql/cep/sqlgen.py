@@ -115,6 +115,7 @@ class AltSQL:
     def __post_init__(self) -> None:
         alt = self.alt
         self._table_names: dict = {}
+        self._cache: dict = {}
         self.k = len(alt.leaves)
         self.S = _expr(alt.interval[0])
         self.E = _expr(alt.interval[1])
@@ -142,6 +143,9 @@ class AltSQL:
         for n, (interval, leaf) in enumerate(alt.negations):
             self._negation(n, interval, leaf)
         self.head_sql = self._head()
+        if self.used_table is not None:   # chronological: the tables' names as parameters
+            for p in range(self.k):
+                self._table_names[p] = self._param(self.table_names[p])
         # the variables whose values the Python side needs (residual goals, head)
         needed = []
         seen = set()
@@ -442,6 +446,13 @@ class AltSQL:
 
     # ---------------------------------------------------------------- statements
     def delta_insert(self, pos: int, dirty: set) -> str:
+        key = ("delta_insert", pos, tuple(self.alt.leaves[j].key in dirty for j in range(pos)))
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._delta_insert(pos, dirty)
+        return sql
+
+    def _delta_insert(self, pos: int, dirty: set) -> str:
         """unrestricted, pure: the new matches with position ``pos`` new, straight into the
         provenance table (only those whose negations can be decided now)."""
         a = self.aliases()
@@ -452,6 +463,13 @@ class AltSQL:
                 f"{self._from(self._order_from(pos), a)} WHERE {self._where(conds)}")
 
     def delta_pending(self, pos: int, dirty: set) -> str:
+        key = ("delta_pending", pos, tuple(self.alt.leaves[j].key in dirty for j in range(pos)))
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._delta_pending(pos, dirty)
+        return sql
+
+    def _delta_pending(self, pos: int, dirty: set) -> str:
         """The new matches whose negated types are not complete yet: kept as pending."""
         a = self.aliases()
         conds = self._delta_conds(pos, dirty, a) + self.cond_sql(a) \
@@ -464,6 +482,13 @@ class AltSQL:
                 f"{self._from(self._order_from(pos), a)} WHERE {self._where(conds)}")
 
     def delta_select(self, pos: int, dirty: set) -> str:
+        key = ("delta_select", pos, tuple(self.alt.leaves[j].key in dirty for j in range(pos)))
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._delta_select(pos, dirty)
+        return sql
+
+    def _delta_select(self, pos: int, dirty: set) -> str:
         """The new matches with position ``pos`` new, for the Python side: value columns,
         then (with negations) 'complete' and 'ok' flags."""
         a = self.aliases()
@@ -475,6 +500,13 @@ class AltSQL:
                 f"WHERE {self._where(conds)}")
 
     def match_select(self) -> str:
+        key = ("match_select", )
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._match_select()
+        return sql
+
+    def _match_select(self) -> str:
         """One pending match by its rowids (:r0, :r1, ...): values and negation flags."""
         a = self.aliases()
         cols = self.value_columns(a)
@@ -501,8 +533,12 @@ class AltSQL:
     def _key_order(self, p: int, alias: str, descending: bool) -> list[str]:
         d = " DESC" if descending else ""
         leaf = self.alt.leaves[p]
-        return ([f"{alias}.t_end{d}", f"{alias}.t_start{d}"]
-                + [f"{alias}.arg{j + 1}{d}" for j in range(leaf.arity)] + [f"{alias}.seq{d}"])
+        # by occurrence, then by the stored values (and their SQL type: 1 before 1.0), so
+        # that only identical events are told apart by their arrival (seq)
+        keys = [f"{alias}.t_end{d}", f"{alias}.t_start{d}"]
+        for j in range(leaf.arity):
+            keys += [f"{alias}.arg{j + 1}{d}", f"typeof({alias}.arg{j + 1}){d}"]
+        return keys + [f"{alias}.seq{d}"]
 
     def partner_order(self, pos: int) -> list[int]:
         """The order in which the other positions are chosen: right to left under
@@ -520,6 +556,13 @@ class AltSQL:
                 f"AND u.seq = {alias}.seq)")
 
     def term_select(self, pos: int, limit: bool) -> str:
+        key = ("term_select", pos, limit)
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._term_select(pos, limit)
+        return sql
+
+    def _term_select(self, pos: int, limit: bool) -> str:
         """The matches that end with the terminator row :t at ``pos``, best first under the
         policy (recent: newest partners; chronological: oldest unused partners)."""
         a = self.aliases()
@@ -541,6 +584,13 @@ class AltSQL:
         return sql
 
     def recent_insert(self, pos: int) -> str:
+        key = ("recent_insert", pos)
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._recent_insert(pos)
+        return sql
+
+    def _recent_insert(self, pos: int) -> str:
         """recent, pure: for every new terminator at ``pos`` whose inputs are complete up to
         its end, the match with the newest partners, chosen by nested correlated
         sub-queries (each partner: the newest for which the remaining partners exist)."""
@@ -593,6 +643,13 @@ class AltSQL:
                 f"({t}.t_end, {t}.t_start)"]
 
     def term_pending(self, pos: int, only_incomplete: bool) -> str:
+        key = ("term_pending", pos, only_incomplete)
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._term_pending(pos, only_incomplete)
+        return sql
+
+    def _term_pending(self, pos: int, only_incomplete: bool) -> str:
         """New rows at terminator position ``pos`` kept as pending decisions (all of them,
         or only those whose inputs are not complete up to their end yet)."""
         a = self.aliases()
@@ -600,12 +657,11 @@ class AltSQL:
         conds = [f"{t}.seq > :w{pos}"] + self.cond_sql(a, within={pos})
         if only_incomplete:
             conds.append(f"NOT ({self.inputs_complete(f'{t}.t_end')})")
-        args = ", ".join(f"{t}.arg{j + 1}" for j in range(self.alt.leaves[pos].arity))
         return ("INSERT INTO slr_cep_pending (rule, alt, kind, pos, rowids, t_start, t_end, "
-                "tiekey, created_at) "
+                "created_at) "
                 f"SELECT :rule, {self.index}, 'term', {pos}, json_array({t}.seq), "
-                f"{t}.t_start, {t}.t_end, json_array({args}), :now FROM {self.tables[pos]} "
-                f"AS {t} WHERE {self._where(conds)}")
+                f"{t}.t_start, {t}.t_end, :now FROM {self.tables[pos]} AS {t} "
+                f"WHERE {self._where(conds)}")
 
     def used_insert(self) -> str:
         return f"INSERT OR IGNORE INTO {self.used_table} (tbl, seq) VALUES (?, ?)"
