@@ -478,28 +478,29 @@ class RuleRuntime:
         self.pending = count
 
     def flush(self, before: int, now: float) -> list:
-        """Copy the matches found in this round into the complex event type's table;
-        returns them as events."""
-        store = self.eng.store
-        rows = store.execute(
-            f"SELECT {', '.join([f'h{i + 1}' for i in range(self.rule.arity)] + ['t_start', 't_end'])} "
-            f"FROM {self.prov} WHERE id > ? ORDER BY id", (before,))
-        if not rows:
-            return []
+        """Copy the matches found in this round (provenance rows after ``before``) into the
+        complex event type's table; returns the events stored (a buffer's trigger may refuse
+        some), as ``(name, args, start, end)``."""
         name, arity = self.head_key
         table = self.eng.table(self.head_key)
         if table is None:
             self.eng.store.declare_type(name, arity)
             table = self.eng.table(self.head_key)
+        values = [f"h{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
         cols = [f"arg{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
-        store.run_compiled(
+        rows = self.eng.store.run_compiled(
             f"INSERT INTO {table} ({', '.join(cols)}, arrival) "
-            f"SELECT {', '.join([f'h{i + 1}' for i in range(arity)] + ['t_start', 't_end'])}, "
-            f":now FROM {self.prov} WHERE id > :before ORDER BY id",
-            {"now": now, "before": before})
+            f"SELECT {', '.join(values)}, :now FROM {self.prov} WHERE id > :before "
+            f"ORDER BY id RETURNING {', '.join(cols)}", {"now": now, "before": before})
+        if not rows:
+            return []
         self.detections += len(rows)
-        return [(name, tuple(decode(v) for v in row[:arity]), row[arity], row[arity + 1])
-                for row in rows]
+        dec = decode
+        if arity == 0:
+            return [(name, (), r[0], r[1]) for r in rows]
+        if arity == 1:
+            return [(name, (dec(r[0]),), r[1], r[2]) for r in rows]
+        return [(name, tuple(map(dec, r[:arity])), r[arity], r[arity + 1]) for r in rows]
 
 
 class EventRules:
