@@ -65,9 +65,15 @@ def prepare(rules: list[EventRule], consumption: dict, program: Any) -> list[Eve
                 types |= set(gs)
         reads[id(rule)] = types
     policies = {k: v for k, v in consumption.items() if k is not None}
-    ordered = order_rules(copies, policies, consumption.get(None),
-                          reads)
-    return ordered
+    ordered = order_rules(copies, policies, consumption.get(None), reads)
+    # the same rule (same text up to variable names, same policy) loaded twice is one rule
+    seen: set = set()
+    unique = []
+    for rule in ordered:
+        if rule.key not in seen:
+            seen.add(rule.key)
+            unique.append(rule)
+    return unique
 
 
 def attach(kb: Any) -> EventRules:
@@ -82,6 +88,7 @@ def attach(kb: Any) -> EventRules:
     if eng.sync is not None:
         eng.sync.progress_listeners.append(eng.on_progress)
     eng._sync_rules()
+    eng.on_progress()   # a reopened file: decisions that became possible while it was closed
     return eng
 
 

@@ -21,6 +21,7 @@ positions' start and end times, which :mod:`slr_sql.cep.sqlgen` turns into SQL.
 from __future__ import annotations
 
 import hashlib
+import re
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -82,7 +83,7 @@ class Alternative:
 
     leaves: list[Leaf] = field(default_factory=list)
     relations: list[tuple[str, Interval, Interval]] = field(default_factory=list)
-    windows: list[tuple[Interval, float]] = field(default_factory=list)
+    windows: list[tuple[Interval, float, tuple]] = field(default_factory=list)  # + positions
     negations: list[tuple[Interval, Leaf]] = field(default_factory=list)
     goals: list[Any] = field(default_factory=list)
     interval: Interval = (("s", 0), ("e", 0))
@@ -138,32 +139,27 @@ class EventRule:
 
 # ------------------------------------------------------------------------ errors
 
-def rule_error(clause: Clause | None, message: str, near: Any = None) -> SLRSyntaxError:
+def rule_error(clause: Clause | None, message: str, near: Any = None,
+               in_head: bool = False) -> SLRSyntaxError:
     """An SLRSyntaxError at the rule's clause, at the text of ``near`` when it can be found
-    in the clause (else at the clause's start)."""
+    in the clause (in the head with ``in_head``, else in the pattern; the clause's start
+    when it cannot be found)."""
     if clause is None or clause.span is None:
         return SLRSyntaxError(message)
     span = clause.span
     text = clause.text or ""
+    arrow = text.find("<-")
     offset = 0
     if near is not None:
-        candidates = []
-        if isinstance(near, str):
-            candidates.append(near)
+        printed = near if isinstance(near, str) else format_term(near)
+        # the printed term with any layout between its characters: `X>1` finds `X > 1`
+        regex = r"\s*".join(re.escape(c) for c in printed if not c.isspace())
+        if in_head or arrow < 0:
+            found = re.compile(regex).search(text, 0, arrow if arrow >= 0 else len(text))
         else:
-            candidates.append(format_term(near))
-            t = deref(near)
-            if type(t) is Struct:
-                candidates.append(t.name + "(")
-                candidates.append(str(t.name))
-            elif type(t) is Var:
-                candidates.append(t.name)
-        arrow = text.find("<-")
-        for needle in candidates:
-            k = text.find(needle, arrow + 2 if arrow >= 0 else 0)
-            if needle and k >= 0:
-                offset = k
-                break
+            found = re.compile(regex).search(text, arrow + 2)
+        if found is not None and regex:
+            offset = found.start()
     before = text[:offset]
     line = span.line + before.count("\n")
     if "\n" in before:
@@ -275,6 +271,7 @@ class _Reader:
         if type(p) is Struct and len(p.args) == 2 and p.name in _PATTERN_OPS:
             op = p.name
             if op == "within":
+                first = len(self.alt.leaves)
                 interval, terms = self.node(p.args[0])
                 d = deref(p.args[1])
                 try:
@@ -283,7 +280,8 @@ class _Reader:
                     raise self.error(f"within: the window must be a non-negative number of "
                                      f"seconds (or a duration such as 5s), not "
                                      f"{format_term(d)}", d) from None
-                self.alt.windows.append((interval, seconds))
+                self.alt.windows.append((interval, seconds,
+                                         tuple(range(first, len(self.alt.leaves)))))
                 return interval, terms
             if op == "where":
                 interval, terms = self.node(p.args[0])
@@ -422,7 +420,7 @@ def compile_rule(clause: Clause) -> EventRule:
     head, pattern = deref(rule.args[0]), deref(rule.args[1])
     if type(head) is Struct and head.name == "^" and len(head.args) == 2:
         raise rule_error(clause, "the head of an event rule takes its interval from the "
-                                 "pattern: write it without ^", head)
+                                 "pattern: write it without ^", head, in_head=True)
     if type(head) is Var:
         raise rule_error(clause, "the head of an event rule cannot be a variable", head)
     if type(head) not in (Atom, Struct) or type(head) is String:
@@ -431,7 +429,8 @@ def compile_rule(clause: Clause) -> EventRule:
     name = str(head.name) if type(head) is Struct else str(head)
     arity = len(head.args) if type(head) is Struct else 0
     if name == "fullyUpdated" or name in _GOAL_NAMES or name in _PATTERN_OPS:
-        raise rule_error(clause, f"{name}/{arity} cannot be the head of an event rule", head)
+        raise rule_error(clause, f"{name}/{arity} cannot be the head of an event rule", head,
+                         in_head=True)
     if type(pattern) is Var:
         raise rule_error(clause, "the pattern of an event rule cannot be a variable", pattern)
     alternatives = []
@@ -446,7 +445,7 @@ def compile_rule(clause: Clause) -> EventRule:
                     f" in the alternative {' '.join(leaf.text for leaf in alt.leaves)}"
                 raise rule_error(clause, f"unsafe head variable {v.name}: it is bound by no "
                                          f"event of the pattern{where} nor by its where goal",
-                                 v)
+                                 v, in_head=True)
         alternatives.append(alt)
     text = f"{format_term(head)} <- {format_term(pattern, priority=1199)}"
     key = hashlib.sha1(_canonical(rule).encode("utf-8")).hexdigest()[:12]

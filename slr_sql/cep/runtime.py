@@ -844,7 +844,7 @@ class EventRules:
             lines.append(f"  alternative {n + 1}: positions {leaves}")
             s, e = alt.alt.interval
             lines.append(f"    interval of the complex event: [{_show(s)}, {_show(e)}]")
-            for (_, seconds) in alt.alt.windows:
+            for (_, seconds, _) in alt.alt.windows:
                 lines.append(f"    within {_fmt(seconds)} s: the search window of every "
                              f"delta statement")
             if alt.pushed:
@@ -890,6 +890,7 @@ class EventRules:
                 else:
                     continue
                 lines.extend("      " + line for line in _wrap(sql))
+                lines.extend("      plan: " + step for step in self._plan(alt, sql))
         lines.append(f"  {_type(rt.head_key)} is complete up to z once "
                      + ", ".join(_type(t) for t in self.inputs.get(rt.head_key, ()))
                      + " are complete up to z and no pending decision ends at or before z")
@@ -897,6 +898,19 @@ class EventRules:
                      f"pending, {rt.errors} rejected by errors"
                      + (f" (last: {rt.last_error})" if rt.last_error else ""))
         return lines
+
+    def _plan(self, alt: AltSQL, sql: str) -> list[str]:
+        """SQLite's query plan of a statement (how the indexes bound it)."""
+        params = self.params(float(self.clock.now()))
+        params.update(alt.params)
+        params.update({f"w{p}": 0 for p in range(alt.k)})
+        params.update({f"r{p}": 0 for p in range(alt.k)})
+        params.update(rule="", t=0)
+        try:
+            return [row[3] for row in self.store.run_compiled("EXPLAIN QUERY PLAN " + sql,
+                                                              params)]
+        except DatabaseError as exc:  # pragma: no cover - explain must not fail
+            return [f"(no plan: {exc})"]
 
     def explain(self, goal: str) -> tuple[bool, list[str]] | None:
         """How the event rules behind ``goal`` run: ``(True, lines)`` for a rule's text,

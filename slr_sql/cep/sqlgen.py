@@ -131,8 +131,8 @@ class AltSQL:
                 pos = _expr_positions(left[0]) | _expr_positions(left[1]) \
                     | _expr_positions(right[0]) | _expr_positions(right[1])
                 self.conds.append(_Cond(pos, sql))
-        for interval, seconds in alt.windows:
-            self._window(interval, seconds)
+        for interval, seconds, positions in alt.windows:
+            self._window(interval, seconds, positions)
         for goal in alt.goals:
             sql = self._push(goal)
             if sql is None:
@@ -238,11 +238,12 @@ class AltSQL:
             return f"{e1} = {e2}"
         return None  # and: both occurred, in any order
 
-    def _window(self, interval: tuple, seconds: float) -> None:
+    def _window(self, interval: tuple, seconds: float, within: tuple) -> None:
         s, e = _expr(interval[0]), _expr(interval[1])
         positions = _expr_positions(interval[0]) | _expr_positions(interval[1])
         d = self._param(float(seconds))
         self.conds.append(_Cond(positions, f"{e} - {s} <= {d}"))
+        positions = frozenset(within)
         # Implied bounds between every two rows of the window, widened by a margin far above
         # the rounding of the subtraction: pure pre-filters that the indexes can use.
         loose = self._param(float(seconds) * (1 + 1e-9) + 1e-9)
