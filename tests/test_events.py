@@ -485,3 +485,18 @@ def test_rules_and_detections_persist(tmp_path):
         assert intervals(kb) == [(1, 1.0, 2.0), (1, 1.0, 3.0)]
         kb.load("c(X) <- a(X) seq b(X).")    # the same rule again: one rule, no new matches
         assert len(kb.event_rules()) == 1 and intervals(kb) == [(1, 1.0, 2.0), (1, 1.0, 3.0)]
+
+
+def test_the_demo_scene_detects_and_explains():
+    import io
+
+    from rich.console import Console
+
+    from slr_sql.demo import _event_rules_scene
+
+    out = io.StringIO()
+    faces, doors = _event_rules_scene(Console(file=out, width=200))
+    assert [str(x) for x in faces.answers[0]["L"]] == ["antonio-[8.0,11.0]"]
+    assert [str(x) for x in doors.answers[0]["L"]] == ["d2-[30.0,33.0]"]
+    text = out.getvalue()
+    assert "1 candidate waiting" in text and "made of the face rows 4, 6, 5" in text
