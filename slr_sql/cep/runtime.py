@@ -264,6 +264,7 @@ class RuleRuntime:
                 self.last_error = describe_error(exc)
                 return False
         rows = []
+        seen: set = set()
         head_args = alt.head_args
         for sol in solutions:
             b = dict(bindings)
@@ -280,6 +281,10 @@ class RuleRuntime:
                 except Unencodable:
                     break
             else:
+                key = tuple((type(v).__name__, v) for v in values)
+                if key in seen:
+                    continue   # two solutions, one complex event
+                seen.add(key)
                 rows.append((n,) + tuple(row[:k]) + (None,) * (self.width - k)
                             + (row[k], row[k + 1]) + tuple(values) + (now,))
         if rows:
@@ -521,6 +526,7 @@ class EventRules:
         self.generation = 0
         self._decls: Any = None
         self._local = threading.local()
+        self._woken: dict = {}     # type -> the time a wake-up was asked for
         self.closed = False
 
     # ----------------------------------------------------------------- install
@@ -665,7 +671,12 @@ class EventRules:
         return max(h, tracker.mark(key))
 
     def deadline(self, key: tuple[str, int], z: float) -> float:
-        return _INF   # released by the rounds (Synchronizer.recheck), not by a timer
+        """When the clock alone makes ``key`` complete up to ``z``: once its inputs are, if
+        no decision up to z is pending (a pending decision releases waiting queries through
+        :meth:`recheck` when it is made, not by a timer)."""
+        if self.pmin(key) <= z:
+            return _INF
+        return max((self.tracker.deadline(t, z) for t in self.inputs[key]), default=_INF)
 
     def why(self, key: tuple[str, int], z: float, now: float) -> str:
         if z <= self.tracker.mark(key):
@@ -764,6 +775,7 @@ class EventRules:
             self._local.again = False
             now = float(self.clock.now())
             if not self._any_ready(now):
+                self._wake_timers()
                 self.recheck()
                 return
             try:
@@ -800,6 +812,7 @@ class EventRules:
         complete by the clock (wall clock; clocks that tell when they move need no timer)."""
         if self.sync is None:
             return
+        due: dict = {}
         for rt in self.rules:
             for (n, kind, wait), t in rt.waits.items():
                 if wait is not None:
@@ -812,8 +825,12 @@ class EventRules:
                 else:
                     keys = []
                 for key in keys:
-                    if key not in self.types:
-                        self.sync.wake_at(key, t)
+                    if key not in self.types and t < due.get(key, _INF):
+                        due[key] = t
+        for key, t in due.items():   # the earliest time per type (the next wake asks again)
+            if self._woken.get(key) != t:
+                self._woken[key] = t
+                self.sync.wake_at(key, t)
 
     def close(self) -> None:
         self.closed = True
