@@ -132,7 +132,8 @@ class RuleRuntime:
             neg_tables = [eng.table(leaf.key) for _, leaf in alt.negations]
             names = [eng.table_name(leaf.key) for leaf in alt.leaves]
             sql = AltSQL(alt, n, tables, neg_tables, head_args, self.policy, eng.complete_sql,
-                         used_table=self.used, prov_table=self.prov, table_names=names)
+                         used_table=self.used, prov_table=self.prov, table_names=names,
+                         fact_table=eng.fact_table)
             self.alts.append(sql)
             residual = None
             reads = False
@@ -193,6 +194,18 @@ class RuleRuntime:
                     # partners may still arrive (late) before it is decided
                     if self.policy == "recent" and alt.pure and alt.runnable:
                         store.run_compiled(alt.recent_insert(pos), p2)
+                        store.run_compiled(alt.term_pending(pos, True), p2)
+                    elif self.policy == "recent" and alt.runnable:
+                        # independent decisions: those that can be made now, at once
+                        pend = []
+                        for seq, end in store.run_compiled(alt.term_ready(pos), p2):
+                            try:
+                                self._decide_term(n, pos, seq, end, now, p2, checked=True)
+                            except MustWait as w:
+                                pend.append(self._pending_row(n, "term", pos, [seq], end,
+                                                              end, w))
+                        if pend:
+                            self._insert_pending(pend)
                         store.run_compiled(alt.term_pending(pos, True), p2)
                     else:
                         store.run_compiled(alt.term_pending(pos, False), p2)
@@ -256,7 +269,8 @@ class RuleRuntime:
             values = {name: bindings[id(v)] for v, name in residual.inputs}
             try:
                 solutions = residual.solve(self.eng.kb, values, row[k + 1], self.eng.complete,
-                                           skip=frozenset({self.head_key}))
+                                           skip=frozenset({self.head_key}),
+                                           use_sql=self.reads_store[n])
             except MustWait:
                 raise
             except (SLRError, RecursionError, ValueError, TypeError, DatabaseError) as exc:
@@ -448,12 +462,14 @@ class RuleRuntime:
         self._derive_from(n, row, now)
         return True
 
-    def _decide_term(self, n: int, pos: int, rowid: int, end: float, now: float) -> bool:
+    def _decide_term(self, n: int, pos: int, rowid: int, end: float, now: float,
+                     params: dict | None = None, checked: bool = False) -> bool:
         alt = self.alts[n]
-        if not self._ready((n, "term", None), end, now):
+        if not checked and not self._ready((n, "term", None), end, now):
             return False
-        params = self.eng.params(now)
-        params.update(alt.params)
+        if params is None:
+            params = self.eng.params(now)
+            params.update(alt.params)
         params["t"] = rowid
         rows = self.eng.store.run_compiled(alt.term_select(pos, alt.pure), params)
         for row in rows:
@@ -603,6 +619,15 @@ class EventRules:
 
     def table_name(self, key: tuple[str, int]) -> str | None:
         return self.store.table_for(*key)
+
+    def fact_table(self, key: tuple[str, int]) -> str | None:
+        """The SQL table of a predicate made only of ground facts (the planner keeps them),
+        or None."""
+        from ..planner import state_of
+
+        if not self.kb.sql_enabled:
+            return None
+        return state_of(self.kb).fact_tables(self.kb).get(key)
 
     def known_types(self) -> set:
         return set(self.store.event_types()) | set(self.kb.declarations.event_types)

@@ -12,7 +12,8 @@ Every positive event atom of the alternative is a row of its type's table, alias
   ``t_end``/``t_start`` within D of each other row, which let the indexes bound the search);
 * comparisons and equalities in ``where`` whose operands are bound by the atoms (``R2 > R1``,
   ``F \\== G``): pushed into the statement, exactly (a non-number falls back to the SQL function
-  ``slr_cep_cmp``, which evaluates as Prolog does);
+  ``slr_cep_cmp``, which evaluates as Prolog does); so is a call of a predicate made of ground
+  facts with its arguments bound (``softDrink(O)``: EXISTS a row of its fact table);
 * ``cnot c``: ``NOT EXISTS`` a row of c strictly inside the interval, once c's history is
   complete up to the interval's end (the completeness condition is SQL too, its inputs bound
   as parameters).
@@ -103,6 +104,7 @@ class AltSQL:
     complete_sql: Callable[[tuple, str], str]   # (type, end expression) -> SQL condition
     used_table: str | None = None
     prov_table: str = ""
+    fact_table: Callable[[tuple], str | None] | None = None  # planner's slr_facts_* tables
     table_names: list = field(default_factory=list)   # unquoted, for the used-rows table
     params: dict = field(default_factory=dict)
     refs: dict = field(default_factory=dict)
@@ -275,7 +277,7 @@ class AltSQL:
     def _push(self, goal: Any) -> _Cond | None:
         """A where goal that SQL can decide exactly, as a condition; None otherwise."""
         g = deref(goal)
-        if type(g) is not Struct or len(g.args) != 2:
+        if type(g) is not Struct:
             return None
         positions = frozenset()
         for v in term_vars(g):
@@ -283,6 +285,12 @@ class AltSQL:
             if ref is None:
                 return None
             positions |= ref.positions
+        if self.fact_table is not None:
+            table = self.fact_table((str(g.name), len(g.args)))
+            if table is not None:
+                return self._fact(g, table, positions)
+        if len(g.args) != 2:
+            return None
         if g.name in _CMP:
             a, b = self._side(g.args[0]), self._side(g.args[1])
             if a is None or b is None:
@@ -322,6 +330,25 @@ class AltSQL:
                 return None  # two constants: the interpreter's business
             return _Cond(positions, sql if _EQ[g.name] else f"NOT ({sql})")
         return None
+
+    def _fact(self, g: Struct, table: str, positions: frozenset) -> _Cond:
+        """``p(A..)`` over a predicate made of ground facts, its arguments bound: a row of
+        its fact table with the same values (and SQL types) exists."""
+        alias = f"f{len(self.conds)}"
+        conds = []
+        for j, a in enumerate(g.args):
+            column = Ref(f"{alias}.arg{j + 1}", "data", frozenset())
+            a = deref(a)
+            if type(a) is Var:
+                ref = self.refs[id(a)]
+                if ref.kind == "time":   # a time is a float: a fact's 5 is not 5.0
+                    conds.append(f"(typeof({column.sql}) = 'real' AND {column.sql} = {ref.sql})")
+                else:
+                    conds.append(self._eq(column, ref))
+            else:
+                conds.append(self._const_cond(column, a) or "0")
+        where = " AND ".join(conds) or "1"
+        return _Cond(positions, f"EXISTS (SELECT 1 FROM {table} AS {alias} WHERE {where})")
 
     def _negation(self, n: int, interval: tuple, leaf: Leaf) -> None:
         s, e = _expr(interval[0]), _expr(interval[1])
@@ -642,6 +669,23 @@ class AltSQL:
         cmp = "<=" if j < pos else "<"
         return [f"{x}.t_end <= {t}.t_end AND ({x}.t_end, {x}.t_start) {cmp} "
                 f"({t}.t_end, {t}.t_start)"]
+
+    def term_ready(self, pos: int) -> str:
+        key = ("term_ready", pos)
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._term_ready(pos)
+        return sql
+
+    def _term_ready(self, pos: int) -> str:
+        """New rows at terminator position ``pos`` whose inputs are complete up to their end
+        (decided at once): their seq and end."""
+        a = self.aliases()
+        t = a[f"e{pos}"]
+        conds = [f"{t}.seq > :w{pos}"] + self.cond_sql(a, within={pos}) \
+            + [self.inputs_complete(f"{t}.t_end")]
+        return (f"SELECT {t}.seq, {t}.t_end FROM {self.tables[pos]} AS {t} "
+                f"WHERE {self._where(conds)} ORDER BY {t}.t_end, {t}.t_start, {t}.seq")
 
     def term_pending(self, pos: int, only_incomplete: bool) -> str:
         key = ("term_pending", pos, only_incomplete)

@@ -90,17 +90,19 @@ class Residual:
         return self.reads
 
     def solve(self, kb: Any, values: dict, at: float,
-              complete: Callable[[tuple, float], bool], skip: frozenset = frozenset()
-              ) -> list[dict]:
+              complete: Callable[[tuple, float], bool], skip: frozenset = frozenset(),
+              use_sql: bool = True) -> list[dict]:
         """The solutions (dicts output name -> ground term) for the input ``values``
-        (input name -> term). Raises :class:`MustWait`, or SLRError for an error of G."""
+        (input name -> term). Raises :class:`MustWait`, or SLRError for an error of G.
+        ``use_sql=False``: a goal that reads no stored event runs in the interpreter (there
+        is nothing for SQL to read; a statement per candidate would only cost)."""
         for key in sorted(self.reads - skip):
             if not complete(key, at):
                 raise MustWait(key, at, "the where goal's goal set")
         args = {name: values[name] for _, name in self.inputs}
         plan = kb._plan(self.text, tuple(args))
         deadline = time.monotonic() + WHERE_TIMEOUT
-        if kb.sql_enabled:
+        if kb.sql_enabled and use_sql:
             rows = self._sql(kb, plan, args, at, complete, deadline)
             if rows is not None:
                 self.last_engine = "sql"
