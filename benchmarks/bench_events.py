@@ -154,6 +154,7 @@ def ours(scenario: str, policy: str, n: int, batch: int, synchronous: str,
             start = 0.0
         kb.load(_program(scenario, policy))
         evs = gen(n, start)
+        n = len(evs)
         # as Python values, the way a ROS bridge hands them over (ETALIS gets terms too)
         items = [(name, [_value(a) for a in args], t, t) for name, args, t in evs]
         table = RULES[scenario][2]

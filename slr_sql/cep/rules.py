@@ -307,6 +307,9 @@ class _Reader:
             if op in ("and", "par"):
                 return (("min", s1, s2), ("max", e1, e2)), lterms | rterms
             if op == "equals":
+                if _uniform(p.args[0]) and _uniform(p.args[1]):
+                    # every event of the part has the same interval: the rightmost ends it
+                    return (s1, e1), {max(lterms | rterms)}
                 return (s1, e1), lterms | rterms
             if op == "during":
                 return (s2, e2), lterms | rterms
@@ -387,6 +390,19 @@ class _Reader:
             return float(t)
         raise self.error(f"an event time must be a variable or a number, not "
                          f"{format_term(t)}", near)
+
+
+def _uniform(p: Any) -> bool:
+    """Do all event atoms of this (or-free) part have the same interval? (an atom, or
+    ``equals`` of such parts, possibly under within/where/cnot)."""
+    p = deref(p)
+    if type(p) is Struct and len(p.args) == 2 and p.name in _PATTERN_OPS:
+        if p.name == "equals":
+            return _uniform(p.args[0]) and _uniform(p.args[1])
+        if p.name in ("within", "where", "cnot"):
+            return _uniform(p.args[0])
+        return False
+    return True
 
 
 def _canonical(term: Any) -> str:

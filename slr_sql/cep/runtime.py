@@ -556,8 +556,10 @@ class EventRules:
         previous object)."""
         decls = self.kb.declarations
         if decls is not self._decls:
-            self.install(list(getattr(decls, "event_rules", ())))
-            self._decls = decls
+            with self.store.lock:
+                if decls is not self._decls:
+                    self.install(list(getattr(decls, "event_rules", ())))
+                    self._decls = decls
 
     def install(self, rules: list[EventRule]) -> None:
         """Make ``rules`` (already in dependency order, policies resolved) the active rules:

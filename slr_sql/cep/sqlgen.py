@@ -118,6 +118,7 @@ class AltSQL:
         alt = self.alt
         self._table_names: dict = {}
         self._cache: dict = {}
+        self._others: dict = {}   # variable -> its later occurrences in positive atoms
         self.k = len(alt.leaves)
         self.S = _expr(alt.interval[0])
         self.E = _expr(alt.interval[1])
@@ -128,11 +129,9 @@ class AltSQL:
                 if alt.leaves[i].key == alt.leaves[j].key:
                     self.conds.append(_Cond(frozenset((i, j)), f"{{e{i}}}.seq <> {{e{j}}}.seq"))
         for op, left, right in alt.relations:
-            sql = self._relation(op, left, right)
-            if sql:
-                pos = _expr_positions(left[0]) | _expr_positions(left[1]) \
-                    | _expr_positions(right[0]) | _expr_positions(right[1])
-                self.conds.append(_Cond(pos, sql))
+            for a, cmp, b in self._relation(op, left, right):
+                self.conds.append(_Cond(_expr_positions(a) | _expr_positions(b),
+                                        f"{_expr(a)} {cmp} {_expr(b)}"))
         for interval, seconds, positions in alt.windows:
             self._window(interval, seconds, positions)
         for goal in alt.goals:
@@ -202,7 +201,13 @@ class AltSQL:
             if first is None:
                 refs[id(term)] = ref
             else:
-                out.append(_Cond(first.positions | ref.positions, self._eq(first, ref)))
+                # an equality with every earlier occurrence, not only the first: any two
+                # positions sharing the variable are tied without the others (the recent
+                # policy's sub-queries pick positions one at a time)
+                for other in [first] + self._others.get(id(term), []):
+                    out.append(_Cond(other.positions | ref.positions, self._eq(other, ref)))
+                if ref.positions:
+                    self._others.setdefault(id(term), []).append(ref)
             return
         sql = self._const_cond(ref, term)
         out.append(_Cond(ref.positions, sql if sql is not None else "0"))
@@ -221,24 +226,25 @@ class AltSQL:
             self._bind(leaf.end, Ref(f"{alias}.t_end", "time", positions), refs, out)
 
     @staticmethod
-    def _relation(op: str, left: tuple, right: tuple) -> str | None:
-        s1, e1 = _expr(left[0]), _expr(left[1])
-        s2, e2 = _expr(right[0]), _expr(right[1])
+    def _relation(op: str, left: tuple, right: tuple) -> list[tuple]:
+        """The comparisons (expression, operator, expression) an operator requires between
+        its operands' intervals (each kept apart: it involves fewer positions)."""
+        (s1, e1), (s2, e2) = left, right
         if op == "seq":
-            return f"{e1} < {s2}"
+            return [(e1, "<", s2)]
         if op == "par":
-            return f"{s1} <= {e2} AND {s2} <= {e1}"
+            return [(s1, "<=", e2), (s2, "<=", e1)]
         if op == "equals":
-            return f"{s1} = {s2} AND {e1} = {e2}"
+            return [(s1, "=", s2), (e1, "=", e2)]
         if op == "meets":
-            return f"{e1} = {s2}"
+            return [(e1, "=", s2)]
         if op == "during":
-            return f"{s2} <= {s1} AND {e1} <= {e2}"
+            return [(s2, "<=", s1), (e1, "<=", e2)]
         if op == "starts":
-            return f"{s1} = {s2}"
+            return [(s1, "=", s2)]
         if op == "finishes":
-            return f"{e1} = {e2}"
-        return None  # and: both occurred, in any order
+            return [(e1, "=", e2)]
+        return []  # and: both occurred, in any order
 
     def _window(self, interval: tuple, seconds: float, within: tuple) -> None:
         s, e = _expr(interval[0]), _expr(interval[1])
