@@ -136,8 +136,9 @@ def _program(scenario: str, policy: str) -> str:
 
 
 def ours(scenario: str, policy: str, n: int, batch: int, synchronous: str,
-         history: int = 0) -> tuple[float, int]:
-    """events/s and detections for n events (after ``history`` events already stored)."""
+         history: int = 0) -> tuple[float, float, int]:
+    """events/s (wall clock, and CPU time of this process) and detections for n events
+    (after ``history`` events already stored)."""
     folder = tempfile.mkdtemp(prefix="bench_events_")
     try:
         clock = ManualClock(0.0)
@@ -160,6 +161,7 @@ def ours(scenario: str, policy: str, n: int, batch: int, synchronous: str,
         table = RULES[scenario][2]
         before = kb.sql(f"SELECT count(*) FROM {table}")[1][0][0]
         t0 = time.perf_counter()
+        c0 = time.process_time()
         if batch == 1:
             for ev, item in zip(evs, items):
                 clock.set(max(clock.now(), ev[2] + 0.5))
@@ -169,9 +171,10 @@ def ours(scenario: str, policy: str, n: int, batch: int, synchronous: str,
                 clock.set(max(clock.now(), evs[min(i + batch, n) - 1][2] + 0.5))
                 kb.add_many(items[i:i + batch])
         elapsed = time.perf_counter() - t0
+        cpu = time.process_time() - c0
         detections = kb.sql(f"SELECT count(*) FROM {table}")[1][0][0] - before
         kb.close()
-        return n / elapsed, detections
+        return n / elapsed, n / max(cpu, 1e-9), detections
     finally:
         shutil.rmtree(folder, ignore_errors=True)
 
@@ -216,8 +219,8 @@ softDrink(cola). softDrink(fanta).
 
 
 def etalis(scenario: str, policy: str, n: int, etalis_dir: str,
-           timeout: float) -> tuple[float, int] | str:
-    """events/s and detections of ETALIS for the same events, or why not."""
+           timeout: float) -> tuple[float, float, int] | str:
+    """events/s (wall, CPU) and detections of ETALIS for the same events, or why not."""
     swipl = shutil.which("swipl")
     if swipl is None:
         return "no swipl"
@@ -242,11 +245,11 @@ main :-
     compile_event_file('{folder}/rules.event'),
     consult('{folder}/events.pl'),
     findall(E-T, ev(E, T), L),
-    statistics(walltime, [T0, _]),
+    statistics(walltime, [T0, _]), statistics(cputime, C0),
     forall(member(E-T, L), event(E, [T, T])),
-    statistics(walltime, [T1, _]),
+    statistics(walltime, [T1, _]), statistics(cputime, C1),
     aggregate_all(count, fired_event({template}, _), N),
-    D is T1 - T0, format("RESULT ~w ~w~n", [D, N]).
+    D is T1 - T0, C is C1 - C0, format("RESULT ~w ~w ~w~n", [D, C, N]).
 """)
         try:
             proc = subprocess.run([swipl, "--traditional", "--stack-limit=4g",
@@ -256,8 +259,9 @@ main :-
             return f"> {timeout:g} s"
         for line in proc.stdout.splitlines():
             if line.startswith("RESULT"):
-                _, ms, count = line.split()
-                return n / max(float(ms) / 1000, 1e-9), int(count)
+                _, ms, cpu, count = line.split()
+                return (n / max(float(ms) / 1000, 1e-9), n / max(float(cpu), 1e-9),
+                        int(count))
         return "failed: " + (proc.stderr.strip().splitlines() or ["?"])[-1]
     finally:
         shutil.rmtree(folder, ignore_errors=True)
@@ -281,24 +285,25 @@ def main() -> None:
     print(f"# bench_events  n={args.n}  synchronous={args.synchronous}  "
           f"ETALIS={'yes: ' + etalis_dir if etalis_dir else 'no (set ETALIS_DIR)'}")
     if args.part in ("throughput", "all"):
-        print("\n| rule | policy | add_many ev/s | add ev/s | detections | ETALIS ev/s | "
-              "ETALIS detections | add_many / ETALIS |")
+        print("\n| rule | policy | add_many ev/s (wall / CPU) | add ev/s | detections | "
+              "ETALIS ev/s (wall / CPU) | ETALIS detections | add_many / ETALIS (wall / CPU) |")
         print("|---|---|---:|---:|---:|---:|---:|---:|")
         for scenario in ("seq2", "seq3", "equals3"):
             for policy in ("recent", "unrestricted"):
-                rate, det = ours(scenario, policy, args.n, 1000, args.synchronous)
-                one, _ = ours(scenario, policy, args.n_one, 1, args.synchronous)
+                rate, cpu, det = ours(scenario, policy, args.n, 1000, args.synchronous)
+                one, _, _ = ours(scenario, policy, args.n_one, 1, args.synchronous)
                 if etalis_dir:
                     e = etalis(scenario, policy, args.n, etalis_dir, args.etalis_timeout)
                 else:
                     e = "not run"
                 if isinstance(e, tuple):
-                    erate, edet = e
-                    cells = f"{erate:,.0f} | {edet:,} | {rate / erate:.2f}x"
+                    erate, ecpu, edet = e
+                    cells = (f"{erate:,.0f} / {ecpu:,.0f} | {edet:,} | {rate / erate:.2f}x / "
+                             f"{cpu / ecpu:.2f}x")
                 else:
                     cells = f"{e} | - | -"
-                print(f"| {scenario} | {policy} | {rate:,.0f} | {one:,.0f} | {det:,} | {cells} |",
-                      flush=True)
+                print(f"| {scenario} | {policy} | {rate:,.0f} / {cpu:,.0f} | {one:,.0f} | "
+                      f"{det:,} | {cells} |", flush=True)
     if args.part in ("latency", "all"):
         print("\n| synchronous | p50 ms | p99 ms | max ms |")
         print("|---|---:|---:|---:|")
@@ -306,13 +311,14 @@ def main() -> None:
             p50, p99, worst = latency(args.n_one, sync)
             print(f"| {sync} | {p50:.3f} | {p99:.3f} | {worst:.3f} |", flush=True)
     if args.part in ("flat", "all"):
-        print("\n| rule | policy | stored before | add_many ev/s | detections |")
+        print("\n| rule | policy | stored before | add_many ev/s (wall / CPU) | detections |")
         print("|---|---|---:|---:|---:|")
         for scenario, policy in (("seq2", "recent"), ("seq3", "unrestricted")):
             for history in args.history:
-                rate, det = ours(scenario, policy, 20_000, 1000, args.synchronous, history)
-                print(f"| {scenario} | {policy} | {history:,} | {rate:,.0f} | {det:,} |",
-                      flush=True)
+                rate, cpu, det = ours(scenario, policy, 20_000, 1000, args.synchronous,
+                                      history)
+                print(f"| {scenario} | {policy} | {history:,} | {rate:,.0f} / {cpu:,.0f} | "
+                      f"{det:,} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -479,7 +479,7 @@ class KnowledgeBase:
             # issue 11: event rules detect in the transaction that stores the events
             with self.store.transaction():
                 token = cep.before_add(events)
-                errors = self.store.add_events(events, atomic=atomic)
+                errors = cep.store_events(events, atomic)
                 derived = cep.after_add(token)
         else:
             errors = self.store.add_events(events, atomic=atomic)

@@ -750,6 +750,38 @@ class EventRules:
             return None
         return {key: self._max_seq(key) for key in keys}
 
+    def store_events(self, events: list, atomic: bool) -> list:
+        """``store.add_events``, with the events grouped by type first when types alternate
+        (a stream of a, b, a, b costs one insert statement per event otherwise). Grouping is
+        stable, so each type's events keep their arrival order -- the order of their rows --
+        and the rejected events keep their index in the batch."""
+        store = self.store
+        if atomic or len(events) < 16:
+            return store.add_events(events, atomic=atomic)
+        keys = []
+        switches = 0
+        last = None
+        for ev in events:
+            try:
+                key = (ev[0], len(ev[1]))
+            except (TypeError, IndexError):
+                return store.add_events(events, atomic=atomic)
+            if key != last:
+                switches += 1
+                last = key
+            keys.append(key)
+        if switches * 4 < len(events):
+            return store.add_events(events, atomic=atomic)
+        first: dict = {}
+        for key in keys:
+            first.setdefault(key, len(first))
+        order = sorted(range(len(events)), key=lambda i: first[keys[i]])
+        errors = store.add_events([events[i] for i in order], atomic=atomic)
+        for error in errors:
+            if getattr(error, "index", None) is not None:
+                error.index = order[error.index]
+        return sorted(errors, key=lambda e: getattr(e, "index", 0))
+
     def after_add(self, token: Any) -> list:
         """Inside the add's transaction, after the events are stored: the round. Returns
         the complex events derived."""
