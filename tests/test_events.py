@@ -500,3 +500,12 @@ def test_the_demo_scene_detects_and_explains():
     assert [str(x) for x in doors.answers[0]["L"]] == ["d2-[30.0,33.0]"]
     text = out.getvalue()
     assert "1 candidate waiting" in text and "made of the face rows 4, 6, 5" in text
+
+
+def test_rules_index_the_arguments_their_joins_need(kb):
+    kb.load("c(X) <- a(I, X) seq b(J, X).")
+    kb.add_many(["a(1, 2)^1", "a(5, 3)^1", "b(3, 2)^2"])
+    assert intervals(kb) == [(2, 1.0, 2.0)]
+    plans = [line for line in kb.explain("c(X)").splitlines() if "plan:" in line]
+    assert any("slr_cep_ix__a__arg2_end (arg2=? AND t_end<?)" in p for p in plans)
+    assert any("slr_cep_ix__b__arg2_start (arg2=? AND t_start>?)" in p for p in plans)

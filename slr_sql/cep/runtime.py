@@ -148,7 +148,38 @@ class RuleRuntime:
             self.reads_store.append(reads)
         for key in self.rule.input_types():   # their completeness parameters exist
             eng.complete_sql(key, "x")
+        for table, column in self.indexes():
+            for first, second in (("t_end", "t_start"), ("t_start", "t_end")):
+                name = f"slr_cep_ix__{table}__{column}_{first[2:]}"
+                eng.store.execute(f"CREATE INDEX IF NOT EXISTS {quote_identifier(name)} ON "
+                                  f"{quote_identifier(table)} ({column}, {first}, {second})")
         self.generation = eng.generation
+
+    def indexes(self) -> list[tuple[str, str]]:
+        """(table, column) of the indexes the delta statements need beyond the event tables'
+        own: an atom whose first argument is unconstrained but another is shared with a
+        position or constant is searched by that argument and time."""
+        out = []
+        for alt in self.rule.alternatives:
+            names = [self.eng.table_name(leaf.key) for leaf in alt.leaves]
+            counts: dict[int, int] = {}
+            for leaf in alt.leaves:
+                for v in {id(a) for a in leaf.args if type(deref(a)) is Var}:
+                    counts[v] = counts.get(v, 0) + 1
+
+            def constrained(a: Any) -> bool:
+                a = deref(a)
+                return type(a) is not Var or (a.name != "_" and counts.get(id(a), 0) > 1)
+
+            for leaf, table in zip(alt.leaves, names):
+                if table is None or not leaf.args or constrained(leaf.args[0]):
+                    continue
+                for j, a in enumerate(leaf.args[1:], start=2):
+                    if constrained(a):
+                        if (table, f"arg{j}") not in out:
+                            out.append((table, f"arg{j}"))
+                        break
+        return out
 
     def ensure_built(self) -> None:
         if self.generation != self.eng.generation:
