@@ -384,6 +384,29 @@ class RuleRuntime:
             return False
         changed = False
         seen = set()
+        # pure alternatives: all their ready decisions in one statement each
+        params = None
+        for group in [g for g in groups if g is not None and g[2] is None]:
+            n, kind, _ = group
+            alt = self.alts[n] if n < len(self.alts) else None
+            if alt is None or not alt.pure or not alt.runnable:
+                continue
+            if params is None:
+                params = self.eng.params(now)
+                params["rule"] = self.key
+            p2 = dict(params)
+            p2.update(alt.params)
+            if kind == "term" and self.policy == "recent":
+                for pos in sorted(alt.alt.terminators):
+                    store.run_compiled(alt.pending_recent_insert(pos), p2)
+                    store.run_compiled(alt.pending_term_delete(pos), p2)
+            elif kind == "match" and self.policy == "unrestricted":
+                store.run_compiled(alt.pending_match_insert(), p2)
+                store.run_compiled(alt.pending_match_delete(), p2)
+            else:
+                continue
+            groups.remove(group)
+            changed = True
         if everything:
             rows = store.execute(
                 "SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, wait_arity, "

@@ -624,10 +624,47 @@ class AltSQL:
             sql = self._cache[key] = self._recent_insert(pos)
         return sql
 
-    def _recent_insert(self, pos: int) -> str:
+    def pending_recent_insert(self, pos: int) -> str:
+        """:meth:`recent_insert` for the terminators kept in slr_cep_pending whose inputs
+        are complete now (decided together, in one statement)."""
+        key = ("pending_recent_insert", pos)
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._recent_insert(pos, pending=True)
+        return sql
+
+    def pending_term_delete(self, pos: int) -> str:
+        """Delete the pending terminators at ``pos`` whose inputs are complete now."""
+        return ("DELETE FROM slr_cep_pending WHERE rule = :rule AND alt = "
+                f"{self.index} AND kind = 'term' AND pos = {pos} AND wait_type IS NULL AND "
+                f"{self.inputs_complete('slr_cep_pending.t_end')}")
+
+    def _pending_join(self, aliases: dict[str, str]) -> str:
+        """FROM the pending matches of this alternative, joined with their events."""
+        joins = " ".join(f"JOIN {self.tables[p]} AS {aliases[f'e{p}']} ON "
+                         f"{aliases[f'e{p}']}.seq = json_extract(p.rowids, '$[{p}]')"
+                         for p in range(self.k))
+        return (f"slr_cep_pending AS p {joins} WHERE p.rule = :rule AND p.alt = {self.index} "
+                f"AND p.kind = 'match' AND p.wait_type IS NULL")
+
+    def pending_match_insert(self) -> str:
+        """unrestricted, pure, with negations: the pending matches whose negated types are
+        complete now and hold, into the provenance table (one statement)."""
+        a = self.aliases()
+        return (self._prov_insert() + f"SELECT {', '.join(self._prov_values(a))} FROM "
+                f"{self._pending_join(a)} AND {self.neg_complete(a)} AND {self.neg_ok(a)}")
+
+    def pending_match_delete(self) -> str:
+        """Delete the pending matches that can be decided now (made, or refuted)."""
+        a = self.aliases()
+        return (f"DELETE FROM slr_cep_pending WHERE id IN (SELECT p.id FROM "
+                f"{self._pending_join(a)} AND {self.neg_complete(a)})")
+
+    def _recent_insert(self, pos: int, pending: bool = False) -> str:
         """recent, pure: for every new terminator at ``pos`` whose inputs are complete up to
         its end, the match with the newest partners, chosen by nested correlated
-        sub-queries (each partner: the newest for which the remaining partners exist)."""
+        sub-queries (each partner: the newest for which the remaining partners exist).
+        ``pending``: the terminators kept in slr_cep_pending instead of the new rows."""
         t = "e%d" % pos
         top = self.aliases()
         chosen = {pos}
@@ -639,9 +676,17 @@ class AltSQL:
             joins.append(f"JOIN {self.tables[p]} AS e{p} ON e{p}.seq = ({sub})")
             chosen = chosen | {p}
         own = self.cond_sql(top, within={pos})
-        conds = [f"{t}.seq > :w{pos}", self.inputs_complete(f"{t}.t_end")] + own
+        conds = [self.inputs_complete(f"{t}.t_end")] + own
+        if pending:
+            source = (f"slr_cep_pending AS p JOIN {self.tables[pos]} AS {t} ON {t}.seq = "
+                      f"json_extract(p.rowids, '$[0]')")
+            conds = [f"p.rule = :rule", f"p.alt = {self.index}", "p.kind = 'term'",
+                     f"p.pos = {pos}", "p.wait_type IS NULL"] + conds
+        else:
+            source = f"{self.tables[pos]} AS {t}"
+            conds = [f"{t}.seq > :w{pos}"] + conds
         return (self._prov_insert() + f"SELECT {', '.join(self._prov_values(top))} FROM "
-                f"{self.tables[pos]} AS {t} {' '.join(joins)} WHERE {self._where(conds)}")
+                f"{source} {' '.join(joins)} WHERE {self._where(conds)}")
 
     def _choose(self, pos: int, p: int, chosen: set, rest: list, top: dict,
                 level: int) -> str:
