@@ -27,13 +27,13 @@ from __future__ import annotations
 import json
 import math
 import threading
-from typing import Any, Iterable
+from typing import Any
 
 from ..encoding import Unencodable, decode, encode
 from ..errors import SLRError
 from ..store import DatabaseError, quote_identifier
 from ..terms import Struct, Var, deref, format_term, term_vars
-from .rules import EventRule, POLICIES
+from .rules import EventRule
 from .sqlgen import AltSQL
 from .where import MustWait, Residual, describe_error
 

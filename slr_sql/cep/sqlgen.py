@@ -680,7 +680,7 @@ class AltSQL:
         if pending:
             source = (f"slr_cep_pending AS p JOIN {self.tables[pos]} AS {t} ON {t}.seq = "
                       f"json_extract(p.rowids, '$[0]')")
-            conds = [f"p.rule = :rule", f"p.alt = {self.index}", "p.kind = 'term'",
+            conds = ["p.rule = :rule", f"p.alt = {self.index}", "p.kind = 'term'",
                      f"p.pos = {pos}", "p.wait_type IS NULL"] + conds
         else:
             source = f"{self.tables[pos]} AS {t}"
