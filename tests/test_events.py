@@ -509,3 +509,14 @@ def test_rules_index_the_arguments_their_joins_need(kb):
     plans = [line for line in kb.explain("c(X)").splitlines() if "plan:" in line]
     assert any("slr_cep_ix__a__arg2_end (arg2=? AND t_end<?)" in p for p in plans)
     assert any("slr_cep_ix__b__arg2_start (arg2=? AND t_start>?)" in p for p in plans)
+
+
+def test_doctests_of_the_event_rule_modules():
+    import doctest
+
+    from slr_sql import cep
+    from slr_sql.cep import rules, runtime, sqlgen, where
+
+    for module in (cep, rules, sqlgen, where, runtime):
+        failures, _ = doctest.testmod(module, verbose=False)
+        assert failures == 0, module.__name__

@@ -80,7 +80,12 @@ def attach(kb: Any) -> EventRules:
     """Install event rules on a knowledge base (called by KnowledgeBase.__init__, after the
     synchronizer and the planner): the load listener, the hooks on new tables and on
     completeness, the SQL function ``slr_cep_cmp`` of pushed comparisons, and the rules of
-    the program restored from the file."""
+    the program restored from the file.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(); kb.load("c <- a seq b."); type(kb._cep).__name__
+    'EventRules'
+    """
     eng = EventRules(kb)
     kb.load_listeners.append(eng.on_load)
     kb.store.table_created_hooks.append(eng.on_table)

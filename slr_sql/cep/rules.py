@@ -143,7 +143,13 @@ def rule_error(clause: Clause | None, message: str, near: Any = None,
                in_head: bool = False) -> SLRSyntaxError:
     """An SLRSyntaxError at the rule's clause, at the text of ``near`` when it can be found
     in the clause (in the head with ``in_head``, else in the pattern; the clause's start
-    when it cannot be found)."""
+    when it cannot be found).
+
+    >>> from slr_sql.parser import parse_program
+    >>> e = rule_error(parse_program("c(X) <- a(X) seq 5.")[0], "not an event", 5)
+    >>> (e.line, e.column)
+    (1, 18)
+    """
     if clause is None or clause.span is None:
         return SLRSyntaxError(message)
     span = clause.span
@@ -176,20 +182,35 @@ def rule_error(clause: Clause | None, message: str, near: Any = None,
 # ------------------------------------------------------------------------ reading
 
 def is_event_rule(head: Any) -> bool:
-    """Is this clause head an event rule ``H <- P``?"""
+    """Is this clause head an event rule ``H <- P``?
+
+    >>> from slr_sql.parser import parse_term
+    >>> is_event_rule(parse_term("c(X) <- a(X) seq b(X)")[0]), is_event_rule(Atom("c"))
+    (True, False)
+    """
     head = deref(head)
     return type(head) is Struct and head.name == "<-" and len(head.args) == 2
 
 
 def is_ignored_fact(head: Any) -> bool:
-    """``print_trigger(_)`` and the other ETALIS-only facts (see :data:`IGNORED_FACTS`)."""
+    """``print_trigger(_)`` and the other ETALIS-only facts (see :data:`IGNORED_FACTS`).
+
+    >>> from slr_sql.parser import parse_term
+    >>> is_ignored_fact(parse_term("print_trigger(a/1)")[0])
+    True
+    """
     head = deref(head)
     return type(head) is Struct and (str(head.name), len(head.args)) in IGNORED_FACTS
 
 
 def consumption_directive(goal: Any) -> tuple[tuple[str, int] | None, str] | None:
     """``consumption(P)`` -> (None, P); ``consumption(H/N, P)`` -> ((H, N), P); None if the
-    directive is not a consumption directive. Raises SLRError on a bad one."""
+    directive is not a consumption directive. Raises SLRError on a bad one.
+
+    >>> from slr_sql.parser import parse_term
+    >>> consumption_directive(parse_term("consumption(relFace/1, recent)")[0])
+    (('relFace', 1), 'recent')
+    """
     goal = deref(goal)
     if type(goal) is not Struct or goal.name != "consumption" or len(goal.args) not in (1, 2):
         return None
@@ -269,7 +290,7 @@ class _Reader:
     def node(self, p: Any) -> tuple[Interval, set]:
         p = deref(p)
         if type(p) is Struct and len(p.args) == 2 and p.name in _PATTERN_OPS:
-            op = p.name
+            op = str(p.name)
             if op == "within":
                 first = len(self.alt.leaves)
                 interval, terms = self.node(p.args[0])

@@ -55,7 +55,11 @@ class Ref:
 
 
 def render(template: str, aliases: dict[str, str]) -> str:
-    """Put the aliases into a template (``{e0}`` -> ``e0`` or a sub-query's alias)."""
+    """Put the aliases into a template (``{e0}`` -> ``e0`` or a sub-query's alias).
+
+    >>> render("{e0}.t_end < {e1}.t_start", {"e0": "q0_e0", "e1": "e1"})
+    'q0_e0.t_end < e1.t_start'
+    """
     return template.format_map(aliases)
 
 
