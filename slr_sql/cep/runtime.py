@@ -108,6 +108,8 @@ class RuleRuntime:
         self.last_error: str | None = None
         self.generation = -1
         self.eng = eng
+        self._prov_rows: list = []   # matches found by the Python side, not yet written
+        self._done: list = []        # pending rows decided, not yet deleted
 
     # ----------------------------------------------------------------- building
     def schema(self) -> list[str]:
@@ -244,6 +246,8 @@ class RuleRuntime:
                     changed = True
         if decide or fresh_terms:
             changed |= self.decide(now, everything=fresh_terms and not decide)
+        self._write_prov()
+        self._delete_done()
         derived = self.flush(before, now)
         if changed or decide:
             self.refresh()
@@ -332,6 +336,11 @@ class RuleRuntime:
                 seen.add(key)
                 rows.append((n,) + tuple(row[:k]) + (None,) * (self.width - k)
                             + (row[k], row[k + 1]) + tuple(values) + (now,))
+        self._prov_rows += rows   # written together before the round's flush
+        return bool(rows)
+
+    def _write_prov(self) -> None:
+        rows, self._prov_rows = self._prov_rows, []
         if rows:
             cols = (["alt"] + [f"r{p + 1}" for p in range(self.width)]
                     + ["t_start", "t_end"] + [f"h{i + 1}" for i in range(self.rule.arity)]
@@ -339,7 +348,6 @@ class RuleRuntime:
             self.eng.store.executemany(
                 f"INSERT INTO {self.prov} ({', '.join(cols)}) VALUES "
                 f"({', '.join('?' * len(cols))})", rows)
-        return bool(rows)
 
     # ----------------------------------------------------------------- pending
     def ready_groups(self, now: float) -> list:
@@ -369,13 +377,16 @@ class RuleRuntime:
         occurrence order and stop at the first row that must still wait."""
         eng = self.eng
         store = eng.store
+        base = eng.params(now)
+        base["rule"] = self.key
+        per_alt = [dict(base, **alt.params) for alt in self.alts]
         if self.policy == "chronological":
             rows = self._occurrence_order(store.execute(
                 "SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, wait_arity, "
                 "wait_time FROM slr_cep_pending WHERE rule = ?", (self.key,)))
             changed = False
             for row in rows:
-                if not self._decide_row(row, now):
+                if not self._decide_row(row, now, per_alt):
                     break
                 changed = True
             return changed
@@ -385,17 +396,12 @@ class RuleRuntime:
         changed = False
         seen = set()
         # pure alternatives: all their ready decisions in one statement each
-        params = None
         for group in [g for g in groups if g is not None and g[2] is None]:
             n, kind, _ = group
             alt = self.alts[n] if n < len(self.alts) else None
             if alt is None or not alt.pure or not alt.runnable:
                 continue
-            if params is None:
-                params = self.eng.params(now)
-                params["rule"] = self.key
-            p2 = dict(params)
-            p2.update(alt.params)
+            p2 = per_alt[n]
             if kind == "term" and self.policy == "recent":
                 for pos in sorted(alt.alt.terminators):
                     store.run_compiled(alt.pending_recent_insert(pos), p2)
@@ -413,7 +419,7 @@ class RuleRuntime:
                 "wait_time FROM slr_cep_pending WHERE rule = ? ORDER BY t_end, t_start, id",
                 (self.key,))
             for row in rows:
-                changed |= self._decide_row(row, now)
+                changed |= self._decide_row(row, now, per_alt)
             return changed
         for n, kind, wait in groups:
             if wait is None:
@@ -435,7 +441,7 @@ class RuleRuntime:
                 wt = row[9] if row[7] is not None else row[6]
                 if not self._ready((n, kind, wait), wt, now):
                     break   # the rest of the group needs a later time
-                changed |= self._decide_row(row, now)
+                changed |= self._decide_row(row, now, per_alt)
         return changed
 
     def _occurrence_order(self, rows: list) -> list:
@@ -465,26 +471,28 @@ class RuleRuntime:
 
         return sorted(rows, key=key)
 
-    def _decide_row(self, row: tuple, now: float) -> bool:
-        """Decide one pending row; False if it must still wait (its wait is updated)."""
+    def _decide_row(self, row: tuple, now: float, params: list | None = None) -> bool:
+        """Decide one pending row; False if it must still wait (its wait is updated).
+        ``params``: per alternative, the statement parameters of this round."""
         rid, n, kind, pos, rowids, start, end = row[:7]
         store = self.eng.store
         if n >= len(self.alts):
-            store.execute("DELETE FROM slr_cep_pending WHERE id = ?", (rid,))
+            self._done.append(rid)
             return True
         if not self.alts[n].runnable:
             # a partner type still has no event: once the inputs are complete, it never will
             if kind == "term" and self._ready((n, "term", None), end, now):
-                store.execute("DELETE FROM slr_cep_pending WHERE id = ?", (rid,))
+                self._done.append(rid)
                 return True
             return False
         if row[7] is not None and not self.eng.complete((row[7], row[8]), row[9], now):
             return False
         try:
             if kind == "match":
-                done = self._decide_match(n, json.loads(rowids), end, now)
+                done = self._decide_match(n, json.loads(rowids), end, now, params)
             else:
-                done = self._decide_term(n, pos, json.loads(rowids)[0], end, now)
+                done = self._decide_term(n, pos, json.loads(rowids)[0], end, now,
+                                         params[n] if params else None)
         except MustWait as w:
             store.execute("UPDATE slr_cep_pending SET wait_type = ?, wait_arity = ?, "
                           "wait_time = ?, wait_reason = ? WHERE id = ?",
@@ -496,13 +504,24 @@ class RuleRuntime:
                               "wait_arity = NULL, wait_time = NULL, wait_reason = NULL "
                               "WHERE id = ?", (rid,))
             return False
-        store.execute("DELETE FROM slr_cep_pending WHERE id = ?", (rid,))
+        self._done.append(rid)
         return True
 
-    def _decide_match(self, n: int, rowids: list, end: float, now: float) -> bool:
+    def _delete_done(self) -> None:
+        done, self._done = self._done, []
+        for i in range(0, len(done), 500):
+            chunk = done[i:i + 500]
+            self.eng.store.execute(f"DELETE FROM slr_cep_pending WHERE id IN "
+                                   f"({', '.join('?' * len(chunk))})", chunk)
+
+    def _decide_match(self, n: int, rowids: list, end: float, now: float,
+                      params: list | None = None) -> bool:
         alt = self.alts[n]
-        params = self.eng.params(now)
-        params.update(alt.params)
+        if params:
+            params = dict(params[n])
+        else:
+            params = self.eng.params(now)
+            params.update(alt.params)
         for p, r in enumerate(rowids):
             params[f"r{p}"] = r
         rows = self.eng.store.run_compiled(alt.match_select(), params)
