@@ -7,13 +7,26 @@
 [{'O': Atom('cup1'), 'C': Atom('red'), 'T': 2.0}]
 """
 from .clocks import Clock, ManualClock, StreamClock, WallClock
-from .errors import EventRejected, SLRError, SLREvaluationError, SLRSyntaxError, SLRTimeout
+from .errors import EventRejected, SLRBusy, SLRError, SLREvaluationError, SLRSyntaxError, \
+    SLRTimeout
 from .kb import KnowledgeBase, open
 from .terms import Atom, String, Struct, Var
 
+
+def connect(url: str, token: str | None = None, **options):
+    """A client for the ``slr serve`` at ``url`` with the methods of a local knowledge base
+    (``token`` defaults to ``$SLR_TOKEN``; needs ``pip install 'slr_sql[service]'``).
+
+    >>> kb = connect("http://127.0.0.1:8765")   # doctest: +SKIP
+    """
+    from .service.client import connect as _connect  # deferred: `import slr_sql` needs no httpx
+
+    return _connect(url, token=token, **options)
+
+
 __all__ = [
-    "open", "KnowledgeBase", "Clock", "WallClock", "ManualClock", "StreamClock",
-    "SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "EventRejected",
+    "open", "connect", "KnowledgeBase", "Clock", "WallClock", "ManualClock", "StreamClock",
+    "SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRBusy", "EventRejected",
     "Atom", "String", "Struct", "Var",
 ]
 __version__ = "0.1.0"

@@ -15,7 +15,7 @@ import sys
 from typing import Any, Callable, Iterator
 
 from .arith import evaluate, instantiation_error, iso_error, type_error
-from .unify import bound_args, copy_term, resolve, unify, undo, unify_tuple
+from .unify import bound_args, copy_term, resolve, unify, undo, unify_event_row
 from .errors import SLREvaluationError
 from .program import Program, split_event_atom, event_key
 from .terms import (Atom, NIL, String, Struct, Var, deref, from_python, is_callable,
@@ -1057,23 +1057,25 @@ def _event_pattern(t: Any, op: str):
 
 
 def _matching(m: "Machine", pattern: tuple, rows) -> Iterator[tuple]:
-    """Rows of ``rows`` that unify with ``pattern`` (tested, bindings undone)."""
+    """Rows of ``rows`` that match ``pattern`` (data arguments + (start, end); the stored
+    times by value, see :func:`slr_sql.unify.match_time`), tested, bindings undone."""
     trail = m.trail
-
+    args, s, e = pattern[:-2], pattern[-2], pattern[-1]
     for row in rows:
         mark = len(trail)
-        ok = unify_tuple(pattern, tuple(row[0]) + (row[1], row[2]), trail)
+        ok = unify_event_row(args, s, e, row[0], row[1], row[2], trail)
         undo(trail, mark)
         if ok:
             yield row
 
 
 def _yield_rows(m: "Machine", pattern: tuple, rows) -> Iterator[None]:
-
+    """Bind ``pattern`` to each row it matches in turn (as :func:`_matching`)."""
     trail = m.trail
+    args, s, e = pattern[:-2], pattern[-2], pattern[-1]
     for row in rows:
         mark = len(trail)
-        if unify_tuple(pattern, tuple(row[0]) + (row[1], row[2]), trail):
+        if unify_event_row(args, s, e, row[0], row[1], row[2], trail):
             yield None
         undo(trail, mark)
 

@@ -2,15 +2,18 @@
 
 Every command opens the store with :func:`slr_sql.open`, does one thing through the public
 API and closes it.  Errors: a :class:`slr_sql.SLRSyntaxError` prints its own text
-(``file:line:col: message``, the source line and a caret) on stderr; any other
-:class:`slr_sql.SLRError` prints ``error: message``; both exit with status 1.
+(``file:line:col: message``, the source line and a caret) on stderr; an ISO error raised by a
+goal prints in words (``error: unknown procedure nosuch/1``); any other error prints
+``error: message``; all exit with status 1, never with a traceback.  Only ``load``, ``add``,
+``ingest`` and ``demo`` create a store; the other commands on a missing path say
+``no such store: PATH``.
 """
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
-import sqlite3
 import sys
 from dataclasses import dataclass
 from typing import Any, Iterable, Iterator
@@ -34,8 +37,69 @@ def _err(message: str) -> None:
     click.echo(message, err=True)
 
 
+def _iso_words(term: Any) -> str | None:
+    """An ISO error term ``error(Formal, Context)`` in words, as a Prolog top level says it
+    (``unknown procedure nosuch/1``); None for a term that is not one."""
+    if not (isinstance(term, Struct) and term.name == "error" and len(term.args) == 2):
+        return None
+    formal = term.args[0]
+    name = str(formal.name) if isinstance(formal, Struct) else str(formal)
+    args = [value_text(a) for a in formal.args] if isinstance(formal, Struct) else []
+    evaluation = {"zero_divisor": "division by zero", "undefined": "undefined result",
+                  "float_overflow": "float overflow", "int_overflow": "integer overflow",
+                  "float_underflow": "float underflow"}
+    if name == "instantiation_error":
+        return "arguments are not sufficiently instantiated"
+    if name == "existence_error" and len(args) == 2:
+        if args[0] == "procedure":
+            return f"unknown procedure {args[1]}"
+        return f"{args[0]} does not exist: {args[1]}"
+    if name == "type_error" and len(args) == 2:
+        return f"type error: expected {args[0]}, found {args[1]}"
+    if name == "domain_error" and len(args) == 2:
+        return f"domain error: expected {args[0]}, found {args[1]}"
+    if name == "evaluation_error" and len(args) == 1:
+        return f"arithmetic: {evaluation.get(args[0], args[0])}"
+    if name == "representation_error" and len(args) == 1:
+        return f"cannot represent {args[0]}"
+    if name == "resource_error" and len(args) == 1:
+        return f"out of {args[0]}"
+    if name == "permission_error" and len(args) == 3:
+        return f"permission error: cannot {args[0]} {args[1]} {args[2]}"
+    if name == "syntax_error" and len(args) == 1:
+        return f"syntax error: {args[0]}"
+    if name == "uninstantiation_error" and len(args) == 1:
+        return f"expected an unbound variable, found {args[0]}"
+    return None
+
+
+def error_words(exc: BaseException) -> str:
+    """What the command line prints for an error (without the ``error:`` prefix): an ISO
+    error term in words, a database error with what it is, anything else as its message.
+
+    >>> from slr_sql import open as open_kb
+    >>> try:
+    ...     open_kb().query("nosuch(1)")
+    ... except slr_sql.SLRError as exc:
+    ...     print(error_words(exc))
+    unknown procedure nosuch/1
+    """
+    if isinstance(exc, slr_sql.SLREvaluationError):
+        words = _iso_words(getattr(exc, "term", None))
+        if words is not None:
+            return words
+    from .store import DatabaseError
+
+    if isinstance(exc, DatabaseError):
+        return f"database: {exc}"
+    if isinstance(exc, slr_sql.SLRError):
+        return str(exc)
+    return f"{type(exc).__name__}: {exc} (this is a bug in slr_sql; please report it)"
+
+
 class SLRGroup(click.Group):
-    """Turns library errors into the CLI's error contract instead of tracebacks."""
+    """Turns every error into the CLI's error contract (words, exit 1) instead of a
+    traceback; click's own usage errors and exits pass through."""
 
     def invoke(self, ctx: click.Context) -> Any:
         try:
@@ -43,8 +107,14 @@ class SLRGroup(click.Group):
         except slr_sql.SLRSyntaxError as exc:
             _err(str(exc))
             ctx.exit(1)
-        except slr_sql.SLRError as exc:
-            _err(f"error: {exc}")
+        except (click.exceptions.ClickException, click.exceptions.Exit,
+                click.exceptions.Abort):
+            raise
+        except RecursionError:
+            _err("error: the term is nested too deeply")
+            ctx.exit(1)
+        except Exception as exc:  # SLRError, a database error, or a bug: words, exit 1
+            _err(f"error: {error_words(exc)}")
             ctx.exit(1)
 
 
@@ -57,17 +127,56 @@ def strip_full_stop(text: str) -> str:
     return text
 
 
-def _open(db: str) -> Any:
+def _is_url(db: str) -> bool:
+    return db.startswith(("http://", "https://"))
+
+
+def _open(db: str, create: bool = True) -> Any:
+    """The knowledge base in DB: a file opened in this process (only commands that add to a
+    store may create it), or the URL of a running `slr serve`."""
+    if _is_url(db):
+        ctx = click.get_current_context(silent=True)
+        token = (ctx.find_root().obj or {}).get("token") if ctx is not None else None
+        return slr_sql.connect(db, token=token)
+    if not create and not os.path.lexists(db):
+        raise slr_sql.SLRError(f"no such store: {db}")
     return slr_sql.open(db)
+
+
+def _existing_file(path: str) -> str:
+    """``path`` if it is a readable file, else an SLRError in words (exit 1, not click's
+    usage error)."""
+    if not os.path.exists(path):
+        raise slr_sql.SLRError(f"no such file: {path}")
+    if os.path.isdir(path):
+        raise slr_sql.SLRError(f"{path}: is a directory, not a file")
+    return path
+
+
+def _finite(option: str, value: float | None, minimum: float | None = None) -> float | None:
+    """A number option checked: finite (``--at 1e400`` is not a time), and >= ``minimum``."""
+    if value is None:
+        return None
+    if not math.isfinite(value):
+        raise slr_sql.SLRError(f"{option} must be a finite number, not {value}")
+    if minimum is not None and value < minimum:
+        raise slr_sql.SLRError(f"{option} must be at least {minimum:g}, not {value:g}")
+    return value
 
 
 @click.group(cls=SLRGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(version=slr_sql.__version__, prog_name="slr")
-def main() -> None:
+@click.option("--token", envvar="SLR_TOKEN", default=None,
+              help="Token for a DB given as the URL of `slr serve` (default: $SLR_TOKEN).")
+@click.pass_context
+def main(ctx: click.Context, token: str | None) -> None:
     """SLR: a Prolog-like language over robot event streams, in one SQLite file.
 
-    DB is the store's file; it is created on first use.
+    DB is the store's file; load, add, ingest and demo create it, the other commands
+    need an existing store. DB may also be the URL of a running `slr serve`
+    (http://HOST:PORT).
     """
+    ctx.obj = {"token": token}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -94,23 +203,49 @@ def demo(db_path: str | None) -> None:
 
 @main.command()
 @click.argument("db", type=click.Path(dir_okay=False))
-@click.argument("file", type=click.Path(exists=True, dir_okay=False))
-def load(db: str, file: str) -> None:
-    """Append the clauses and declarations of FILE to the program in DB."""
+@click.argument("file", type=click.Path(dir_okay=False))
+@click.option("--name", default="main", show_default=True,
+              help="the program to add FILE's clauses to")
+@click.option("--replace", is_flag=True,
+              help="make the program NAME exactly FILE (rerunnable: no second copy)")
+def load(db: str, file: str, name: str, replace: bool) -> None:
+    """Add the clauses and declarations of FILE to the program NAME in DB."""
+    _existing_file(file)
     with _open(db) as kb:
-        kb.load_file(file)
-    click.echo(f"loaded {file}")
+        kb.load_file(file, name=name, replace=replace)
+    click.echo(f"{'replaced' if replace else 'loaded'} {file} as program {name!r}")
 
 
 @main.command()
 @click.argument("db", type=click.Path(dir_okay=False))
 @click.argument("events", nargs=-1, required=True)
 def add(db: str, events: tuple[str, ...]) -> None:
-    """Add EVENTS, each in SLR syntax: 'obj(cup1, cup, red)^2.0' or 'seen(x)^[1,2]'."""
+    """Add EVENTS, each in SLR syntax: 'obj(cup1, cup, red)^2.0' or 'seen(x)^[1,2]'.
+
+    Each event is stored or rejected on its own; if any is rejected, the output says which
+    were stored and which were not, and the exit status is 1.
+    """
+    stored: list[int] = []
+    rejected: list[int] = []
     with _open(db) as kb:
-        for event in events:
-            kb.add(strip_full_stop(event))
-    click.echo(f"added {len(events)} event{'s' if len(events) != 1 else ''}")
+        for number, event in enumerate(events, start=1):
+            try:
+                kb.add(strip_full_stop(event))
+            except slr_sql.SLRSyntaxError as exc:
+                rejected.append(number)
+                _err(f"error: event {number} rejected:\n{exc}")
+            except slr_sql.SLRError as exc:
+                rejected.append(number)
+                _err(f"error: event {number} rejected: {error_words(exc)}")
+            else:
+                stored.append(number)
+    if not rejected:
+        click.echo(f"added {len(events)} event{'s' if len(events) != 1 else ''}")
+        return
+    listed = ", ".join(map(str, stored))
+    click.echo(f"stored {len(stored)} of {len(events)} events" + (f" ({listed})" if stored else "")
+               + f"; rejected {len(rejected)} ({', '.join(map(str, rejected))})")
+    sys.exit(1)
 
 
 class BadLine(ValueError):
@@ -123,6 +258,8 @@ def _json_args(args: list) -> list:
     ``f(..)``, an array a list.  So what ``slr sql`` shows can be ingested back."""
     try:
         items, _ = list_items(decode(json.dumps(args)))
+    except RecursionError:
+        raise BadLine("bad argument: nested too deeply") from None
     except (ValueError, TypeError) as exc:
         raise BadLine(f"bad argument: {exc}") from None
     return items
@@ -132,7 +269,25 @@ def _json_time(obj: dict, key: str) -> float:
     value = obj.get(key)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise BadLine(f'"{key}" must be a number')
-    return float(value)
+    try:
+        return float(value)
+    except OverflowError:
+        raise BadLine(f'"{key}" must be a finite number') from None
+
+
+def _json_object(text: str) -> Any:
+    """``json.loads`` with every failure a :class:`BadLine` in words."""
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise BadLine(f"invalid JSON: {exc.msg} at column {exc.colno}") from None
+    except RecursionError:
+        raise BadLine("invalid JSON: nested too deeply") from None
+    except ValueError as exc:  # an integer of more digits than Python converts
+        found = re.search(r"value has (\d+) digits", str(exc))
+        raise BadLine(f"invalid JSON: an integer too large to read ("
+                      f"{found.group(1) + ' digits' if found else exc}; at most "
+                      f"{sys.get_int_max_str_digits()})") from None
 
 
 def parse_event_line(line: str) -> str | tuple | None:
@@ -148,11 +303,11 @@ def parse_event_line(line: str) -> str | tuple | None:
         return None
     if not text.startswith("{"):
         text = strip_full_stop(text)
-        return parse_event_fast(text) or text
-    try:
-        obj = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise BadLine(f"invalid JSON: {exc.msg} at column {exc.colno}") from None
+        try:
+            return parse_event_fast(text) or text
+        except (ValueError, RecursionError):  # the full parser (in add_many) says why
+            return text
+    obj = _json_object(text)
     if not isinstance(obj, dict):
         raise BadLine("a JSON line must be an object")
     name = obj.get("name")
@@ -225,7 +380,7 @@ def _add_batch(kb: Any, batch: list[tuple[int, Any]], bad: list[tuple[int, str]]
     return added
 
 
-def _numbered_lines(handle: Iterable[str]) -> Iterator[tuple[int, str]]:
+def _numbered_lines(handle: Iterable[bytes]) -> Iterator[tuple[int, bytes]]:
     for lineno, line in enumerate(handle, start=1):
         yield lineno, line
 
@@ -236,11 +391,16 @@ def ingest_file(kb: Any, path: str, progress: Any = None, task: Any = None) -> I
     bad: list[tuple[int, str]] = []
     added = 0
     batch: list[tuple[int, Any]] = []
-    with open(path, encoding="utf-8") as handle:
-        for lineno, line in _numbered_lines(handle):
+    with open(path, "rb") as handle:  # decoded line by line: one bad byte costs one line
+        for lineno, raw in _numbered_lines(handle):
             if progress is not None:
-                progress.update(task, advance=len(line.encode("utf-8")))
+                progress.update(task, advance=len(raw))
             try:
+                try:
+                    line = raw.decode("utf-8")
+                except UnicodeDecodeError as exc:
+                    raise BadLine(f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at column "
+                                  f"{exc.start + 1})") from None
                 event = parse_event_line(line)
             except BadLine as exc:
                 bad.append((lineno, str(exc)))
@@ -258,7 +418,7 @@ def ingest_file(kb: Any, path: str, progress: Any = None, task: Any = None) -> I
 
 @main.command()
 @click.argument("db", type=click.Path(dir_okay=False))
-@click.argument("file", type=click.Path(exists=True, dir_okay=False))
+@click.argument("file", type=click.Path(dir_okay=False))
 def ingest(db: str, file: str) -> None:
     """Add the events of FILE: one per line, SLR text or a JSON object.
 
@@ -271,7 +431,7 @@ def ingest(db: str, file: str) -> None:
     from rich.console import Console
     from rich.progress import BarColumn, DownloadColumn, Progress, TimeRemainingColumn
 
-    size = os.path.getsize(file)
+    size = os.path.getsize(_existing_file(file))
     with _open(db) as kb:
         if size >= PROGRESS_MIN_BYTES:
             columns = ("[progress.description]{task.description}", BarColumn(),
@@ -318,7 +478,9 @@ def _print_answers(answers: list[dict[str, Any]]) -> None:
 def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | None) -> None:
     """Ask GOAL and print one answer per line (`false.` when there is none)."""
     goal = strip_full_stop(goal)
-    with _open(db) as kb:
+    at = _finite("--at", at)
+    timeout = _finite("--timeout", timeout, minimum=0.0)
+    with _open(db, create=False) as kb:
         if wait:
             if not hasattr(kb, "submit"):
                 _err("error: synchronized queries are not available in this build")
@@ -351,7 +513,7 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
 @click.argument("goal")
 def explain(db: str, goal: str) -> None:
     """Show how GOAL would run: compiled to SQL or interpreted, and why."""
-    with _open(db) as kb:
+    with _open(db, create=False) as kb:
         click.echo(kb.explain(strip_full_stop(goal)))
 
 
@@ -359,40 +521,38 @@ def explain(db: str, goal: str) -> None:
 # sql
 # ---------------------------------------------------------------------------------------------
 
-def run_sql(db: str, statement: str) -> tuple[list[str], list[tuple]]:
+def run_sql(db: str, statement: str, write: bool = False) -> tuple[list[str], list[tuple]]:
     """Run one SQL statement against the store; returns (column names, rows).
 
-    Uses ``kb.sql`` when the library offers it; otherwise opens the file read-only, so a
-    mistyped UPDATE cannot damage the store.
+    Through ``kb.sql``, so the store's ``slr_`` SQL functions (which the statements printed by
+    ``slr explain`` call) are there; read-only unless ``write``, so a mistyped UPDATE or DROP
+    cannot damage the store.
     """
-    if not os.path.exists(db):
-        raise slr_sql.SLRError(f"no such store: {db}")
-    with _open(db) as kb:
-        if hasattr(kb, "sql"):
-            try:
-                columns, rows = kb.sql(statement)
-            except sqlite3.Error as exc:
-                raise slr_sql.SLRError(f"sql: {exc}") from None
+    with _open(db, create=False) as kb:
+        if _is_url(db):
+            if write:
+                raise slr_sql.SLRError("sql over the service is read-only: --write needs "
+                                       "the store's file")
+            columns, rows = kb.sql(statement)
             return list(columns), [tuple(r) for r in rows]
-    uri = "file:" + os.path.abspath(db).replace("?", "%3f").replace("#", "%23") + "?mode=ro"
-    con = sqlite3.connect(uri, uri=True)
-    try:
-        cur = con.execute(statement)
-        columns = [d[0] for d in cur.description or ()]
-        return columns, [tuple(r) for r in cur.fetchall()]
-    except sqlite3.Error as exc:
-        raise slr_sql.SLRError(f"sql: {exc}") from None
-    finally:
-        con.close()
+        try:
+            columns, rows = kb.sql(statement, write=write)
+        except slr_sql.SLRError as exc:
+            if str(exc).startswith("read-only"):
+                raise slr_sql.SLRError(f"read-only: the statement would change the store; "
+                                       f"slr sql --write allows it ({exc})") from None
+            raise
+        return list(columns), [tuple(r) for r in rows]
 
 
 @main.command()
 @click.argument("db", type=click.Path(dir_okay=False))
 @click.argument("statement")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON list of row objects.")
-def sql(db: str, statement: str, as_json: bool) -> None:
-    """Run a SQL STATEMENT on the store, e.g. "SELECT * FROM seg"."""
-    columns, rows = run_sql(db, statement)
+@click.option("--write", is_flag=True, help="Allow the statement to change the store.")
+def sql(db: str, statement: str, as_json: bool, write: bool) -> None:
+    """Run a SQL STATEMENT on the store, e.g. "SELECT * FROM seg" (read-only unless --write)."""
+    columns, rows = run_sql(db, statement, write=write)
     if as_json:
         click.echo(json.dumps([dict(zip(columns, row)) for row in rows], indent=None))
         return
@@ -464,10 +624,12 @@ class Shell:
             action()
         except slr_sql.SLRSyntaxError as exc:
             self.echo_err(str(exc))
-        except slr_sql.SLRError as exc:
-            self.echo_err(f"error: {exc}")
         except (ValueError, OSError) as exc:
             self.echo_err(f"error: {exc}")
+        except RecursionError:
+            self.echo_err("error: the term is nested too deeply")
+        except Exception as exc:  # SLRError, a database error: words, and the shell goes on
+            self.echo_err(f"error: {error_words(exc)}")
         return True
 
     def _load_file(self, path: str) -> None:
@@ -503,7 +665,7 @@ def _history_path() -> str:
 @click.argument("db", type=click.Path(dir_okay=False))
 def shell(db: str) -> None:
     """Interactive goals and program text on DB (history in ~/.slr_history or $SLR_HISTORY)."""
-    with _open(db) as kb:
+    with _open(db, create=False) as kb:
         session = Shell(kb)
         if not sys.stdin.isatty():
             # Piped input (scripts, tests): plain lines, no prompt, no history file.
@@ -530,19 +692,134 @@ def shell(db: str) -> None:
                 break
 
 
+from .ros.cli import ros as _ros  # noqa: E402 - issue 13: `slr ros` (its extra is imported on use)
+main.add_command(_ros)
+
+
+# ---------------------------------------------------------------------------------------------
+# plot (issue 13: timelines; the drawing is in slr_sql/plot.py)
+# ---------------------------------------------------------------------------------------------
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.argument("types", nargs=-1)
+@click.option("--from", "start", type=float, default=None, help="Start of the time window.")
+@click.option("--to", "end", type=float, default=None, help="End of the time window.")
+@click.option("--value", "values", multiple=True, metavar="TYPE:ARG",
+              help="Draw a numeric argument as a line, e.g. speed:1, seg:2[0], tf:3.pose[0][0].")
+@click.option("--complex", "complex_types", multiple=True, metavar="TYPE",
+              help="Mark TYPE as a complex event type (default: the store's own list, if any).")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="The PNG file to write.")
+@click.option("--size", default=None, metavar="WxH", help="Image size in pixels (default 1200 wide).")
+@click.option("--dpi", type=int, default=100, show_default=True, help="Scales text and lines.")
+@click.option("--title", default=None, help="Title above the rows (default: the DB's file name).")
+def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None,
+         values: tuple[str, ...], complex_types: tuple[str, ...], output: str,
+         size: str | None, dpi: int, title: str | None) -> None:
+    """Draw the event histories of DB as a timeline PNG: one row per event TYPE (default: all).
+
+    Intervals are bars, points ticks, --value arguments lines; histories too long for the
+    picture are aggregated per pixel column.
+    """
+    from .plot import parse_size, save_timeline, timeline
+
+    if not os.path.exists(db):
+        raise slr_sql.SLRError(f"no such store: {db}")
+    dimensions = parse_size(size) if size is not None else None
+    with _open(db) as kb:
+        figure = timeline(kb, list(types) or None, start=start, end=end, values=values,
+                          complex_types=complex_types or None, size=dimensions, dpi=dpi,
+                          title=os.path.basename(db) if title is None else title)
+    save_timeline(figure, output)
+    drawn = figure.slr_timeline
+    click.echo(f"wrote {output} ({drawn.width}x{drawn.height} px, {len(drawn.rows)} "
+               f"row{'s' if len(drawn.rows) != 1 else ''}"
+               + (f", {len(drawn.series)} value line{'s' if len(drawn.series) != 1 else ''}"
+                  if drawn.series else "") + ")")
+
+
+# ---------------------------------------------------------------------------------------------
+# subscribe (issue 12: subscriptions)
+# ---------------------------------------------------------------------------------------------
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.argument("pattern")
+@click.option("--where", default=None, help="A condition on the pattern's variables (an SLR "
+              "goal), e.g. 'R > 60'.")
+@click.option("--since", default="now", show_default=True, help="Only events whose end time "
+              "is at or after S: 'now' or a time; an earlier time prints stored events first.")
+@click.option("--until", type=float, default=None, help="Stop (exit 0) once every matching "
+              "event up to U was printed: the event type is complete up to U.")
+@click.option("--id", "sub_id", default=None, help="Durable: resume after the last event an "
+              "earlier run with the same id printed.")
+def subscribe(db: str, pattern: str, where: str | None, since: str, until: float | None,
+              sub_id: str | None) -> None:
+    """Print the events matching PATTERN (e.g. 'face(F, R)^T') as JSON lines as they arrive,
+    one object per event with the pattern's variables. Ctrl-C or SIGTERM stops (exit 0)."""
+    import signal
+    import threading
+
+    from .subscriptions import answer_json
+
+    if not os.path.exists(db):
+        raise slr_sql.SLRError(f"no such store: {db}")
+    since_value: Any = since.strip()
+    if since_value != "now":
+        try:
+            since_value = float(since_value)
+        except ValueError:
+            raise slr_sql.SLRError(f"--since must be 'now' or a number, not {since!r}") from None
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):   # stop between two events, never inside one
+        signal.signal(signum, lambda *_: stop.set())
+    with _open(db) as kb:
+        sub = kb.subscribe(strip_full_stop(pattern), where=where, since=since_value,
+                           until=until, id=sub_id)
+        try:
+            while not stop.is_set():
+                try:
+                    answer = sub.get(timeout=0.2)
+                except slr_sql.SLRTimeout:
+                    continue
+                if answer is None:       # until reached
+                    break
+                try:
+                    sys.stdout.write(answer_json(answer) + "\n")
+                    sys.stdout.flush()
+                except BrokenPipeError:  # the reader went away (| head): a normal end
+                    os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+                    sub.close(ack=False)
+                    break
+        finally:
+            sub.close()
+
+
 # ---------------------------------------------------------------------------------------------
 # stats (issue 4: event-history management)
 # ---------------------------------------------------------------------------------------------
 
 @main.command()
-@click.argument("db", type=click.Path(exists=True, dir_okay=False))
+@click.argument("db")
 def stats(db: str) -> None:
     """Print the file size, events stored per type and each buffer's counters."""
     from .buffers import format_stats
     from .store import EventStore
 
+    if _is_url(db):
+        with _open(db) as kb:
+            click.echo(kb.stats()["text"])
+        return
+    if not os.path.lexists(db):
+        raise slr_sql.SLRError(f"no such store: {db}")
     with EventStore(db) as store:
         click.echo(format_stats(store, db))
+
+
+from .service.cli import serve  # noqa: E402  (slr serve; its body imports uvicorn when run)
+
+main.add_command(serve)
 
 
 if __name__ == "__main__":  # pragma: no cover

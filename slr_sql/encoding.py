@@ -42,8 +42,11 @@ Inside JSON (list elements, compound arguments)
 * a partial list ``[a|b]`` (tail not ``[]``) is the compound ``'.'(a, b)``: ``{".":["a","b"]}``
 
 JSON is written compactly (no spaces) and keeps non-ASCII characters as they are, so SQLite's
-``json_extract(arg2, '$[0]')`` works on lists. Unbound variables and NaN cannot be stored:
-:func:`encode` raises :class:`Unencodable`.
+``json_extract(arg2, '$[0]')`` works on lists. What has no stored form makes :func:`encode`
+raise :class:`Unencodable`: unbound variables, NaN, text with a lone surrogate (not valid
+Unicode, so SQLite's UTF-8 cannot hold it), integers with more decimal digits than Python
+converts (``sys.get_int_max_str_digits()``, 4300 by default), and terms nested more than
+400 deep.
 
 >>> from slr_sql.terms import Atom, String, Struct, make_list
 >>> encode(make_list([Atom("x"), 1, 2.0])), encode(Struct("f", (Atom("a"), String("s"))))
@@ -55,12 +58,17 @@ from __future__ import annotations
 
 import json
 import math
+import re
+import sys
+from operator import itemgetter
+from operator import le as _le
 from json.encoder import encode_basestring as _quote  # C-accelerated; keeps non-ASCII
 from typing import Any
 
-from .terms import NIL, Atom, String, Struct, Var, make_list
+from .terms import CONS, NIL, Atom, String, Struct, Var, make_list
 
-__all__ = ["encode", "decode", "encode_json", "Unencodable", "INT64_MIN", "INT64_MAX"]
+__all__ = ["encode", "encode_column", "decode", "encode_json", "Unencodable", "INT64_MIN",
+           "INT64_MAX"]
 
 INT64_MIN = -(2 ** 63)
 INT64_MAX = 2 ** 63 - 1
@@ -78,6 +86,32 @@ class Unencodable(ValueError):
         self.reason = reason
 
 
+_SURROGATE = re.compile("[\ud800-\udfff]")
+
+
+def _check_text(text: str) -> str:
+    """``text`` itself, or :class:`Unencodable` if it holds a lone surrogate. ASCII text (the
+    common case) is recognised in constant time, without a scan."""
+    if not text.isascii():
+        found = _SURROGATE.search(text)
+        if found is not None:
+            raise Unencodable(f"text with a lone surrogate ({found.group()!a}) is not valid "
+                              "Unicode")
+    return text
+
+
+def _big_int_json(value: int) -> str:
+    """``{"$int":"digits"}`` for an integer beyond 64 bits; :class:`Unencodable` when it has
+    more digits than Python converts to text."""
+    try:
+        digits = str(value)
+    except ValueError:  # beyond sys.get_int_max_str_digits()
+        raise Unencodable(f"integer too large to be stored (about "
+                          f"{int(value.bit_length() * 0.30103) + 1} digits; at most "
+                          f"{sys.get_int_max_str_digits()})") from None
+    return '{"$int":"' + digits + '"}'
+
+
 def encode(term: Any) -> Any:
     """Encode a ground term as one SQLite column value (``str``, ``int`` or ``float``).
 
@@ -89,6 +123,8 @@ def encode(term: Any) -> Any:
     """
     tt = type(term)
     if tt is Atom:
+        if not term.isascii():
+            _check_text(term)
         if term and term[0] in _JSON_STARTS:
             if term == "[]":
                 return "[]"
@@ -101,11 +137,18 @@ def encode(term: Any) -> Any:
     if tt is int:
         if INT64_MIN <= term <= INT64_MAX:
             return term
-        return '{"$int":"' + str(term) + '"}'
-    if tt is String:
-        return _quote(term)
+        return _big_int_json(term)
     if tt is Struct or tt is list or tt is tuple:
-        return _json(term, 0)
+        # the fast path: a flat list of numbers or of plain atoms (robot vectors, names)
+        if tt is Struct:
+            text = _cons_list_json(term) if term.name == "." else None
+        else:
+            text = _flat_list_json(term)
+        if text is None:
+            text = _json(term, 0)
+        return text if text.isascii() else _check_text(text)
+    if tt is String:
+        return _quote(_check_text(term))
     if tt is Var:
         return encode(_deref_or_raise(term))
     if tt is str:
@@ -121,13 +164,111 @@ def encode(term: Any) -> Any:
     raise Unencodable(f"{type(term).__name__} value {term!r} is not a term")
 
 
+def _cons_list_json(cell: Struct) -> str | None:
+    """The JSON array of a proper list of ``'.'/2`` cells whose elements are each a finite
+    float, a 64-bit integer or a plain atom (not ``[]``); None for anything else (another
+    element, a partial list, a variable in the spine), which the general encoder handles.
+    One walk, no call per element but the number's own text (``repr`` of a float is most of
+    the cost of a vector); the text is exactly the general encoder's. (The element tests
+    are those of :func:`_flat_list_json`, for Python lists.)
+
+    >>> from slr_sql.terms import make_list
+    >>> _cons_list_json(make_list([0.5, 1, Atom("cup1")])), _cons_list_json(make_list([[]]))
+    ('[0.5,1,"cup1"]', None)
+    """
+    parts: list = []
+    add = parts.append
+    try:
+        while True:
+            name = cell.name
+            if name is not CONS and name != ".":
+                return None
+            head, cell = cell.args  # ValueError: a '.' with other than two arguments
+            kind = type(head)
+            if kind is float:
+                if not _NEG_INF < head < _INF:
+                    return None  # inf (1e999) and NaN (refused) take the general path
+                add(_float_repr(head))
+            elif kind is int and INT64_MIN <= head <= INT64_MAX:
+                add(_int_str(head))
+            elif (kind is Atom or kind is str) and head != "[]":
+                add(_quote(head))
+            else:
+                return None
+            if type(cell) is not Struct:
+                if type(cell) is Atom and cell == "[]":
+                    return "[" + ",".join(parts) + "]"
+                return None  # a partial list [a|b], or a variable tail
+    except ValueError:
+        return None
+
+
+def _flat_list_json(items: list | tuple) -> str | None:
+    """The JSON array of a Python list or tuple whose elements are each a finite float, a
+    64-bit integer or a plain atom (not ``[]``); None as soon as one is anything else, for
+    the general encoder. (The element tests are those of :func:`_cons_list_json`.)
+
+    >>> _flat_list_json([0.5, 1, Atom("cup1")]), _flat_list_json([1.0, math.inf])
+    ('[0.5,1,"cup1"]', None)
+    """
+    parts: list = []
+    add = parts.append
+    for item in items:
+        kind = type(item)
+        if kind is float:
+            if not _NEG_INF < item < _INF:
+                return None  # inf (1e999) and NaN (refused) take the general path
+            add(_float_repr(item))
+        elif kind is int and INT64_MIN <= item <= INT64_MAX:
+            add(_int_str(item))
+        elif (kind is Atom or kind is str) and item != "[]":
+            add(_quote(item))
+        else:
+            return None
+    return "[" + ",".join(parts) + "]"
+
+
+def encode_column(values: list) -> list:
+    """:func:`encode` of every value of a column (the same argument of many events).
+    A column of one kind is checked whole: plain ASCII atoms are their own text, 64-bit
+    integers and floats other than NaN are themselves, flat lists of numbers and atoms go
+    straight to their encoder; any other column is encoded value by value. Raises
+    :class:`Unencodable` as :func:`encode` does.
+
+    >>> encode_column([Atom("cup1"), Atom("cup2")]), encode_column([1.5, 2.0]), encode_column([Atom("[x")])
+    (['cup1', 'cup2'], [1.5, 2.0], ['{"$atom":"[x"}'])
+    """
+    kinds = set(map(type, values))
+    if len(kinds) == 1:
+        (kind,) = kinds
+        if kind is Atom or kind is str:
+            try:
+                if all(map(str.isascii, values)) \
+                        and _JSON_STARTS.isdisjoint(map(_first_char, values)):
+                    return list(map(str, values))
+            except IndexError:  # an empty atom: encoded one by one
+                pass
+        elif kind is float:
+            if all(map(_le, values, values)):  # False only at a NaN
+                return values
+        elif kind is int:
+            if INT64_MIN <= min(values) and max(values) <= INT64_MAX:
+                return values
+        elif kind is Struct or kind is list:  # vectors: the fast path, no dispatch
+            texts = list(map(_cons_list_json if kind is Struct else _flat_list_json, values))
+            if None not in texts and all(map(str.isascii, texts)):
+                return texts
+    return list(map(encode, values))
+
+
 def encode_json(term: Any) -> str:
     """The JSON text of a term as it appears *inside* a stored list or compound.
 
     >>> encode_json(Atom("a")), encode_json(String("a")), encode_json(1.0)
     ('"a"', '{"$string":"a"}', '1.0')
     """
-    return _json(term, 0)
+    text = _json(term, 0)
+    return text if text.isascii() else _check_text(text)
 
 
 def _deref_or_raise(var: Var) -> Any:
@@ -141,6 +282,7 @@ def _deref_or_raise(var: Var) -> Any:
 
 _INF = math.inf
 _NEG_INF = -math.inf
+_first_char = itemgetter(0)
 _float_repr = float.__repr__
 _int_str = int.__repr__
 _MAX_DEPTH = 400  # nesting of compounds/lists; deeper terms are rejected, not crashed on
@@ -156,7 +298,7 @@ def _json(t: Any, depth: int) -> str:
     if tt is int:
         if INT64_MIN <= t <= INT64_MAX:
             return str(t)
-        return '{"$int":"' + str(t) + '"}'
+        return _big_int_json(t)
     if tt is float:
         if t != t:
             raise Unencodable("NaN cannot be stored")
@@ -205,7 +347,19 @@ def _json(t: Any, depth: int) -> str:
         return ("{" + _quote(t.name) + ":["
                 + ",".join([_json(a, depth + 1) for a in args]) + "]}")
     if tt is list or tt is tuple:
-        return "[" + ",".join([_json(a, depth + 1) for a in t]) + "]"
+        # Python lists (add_many tuples, imported ROS messages) get the same inlined element
+        # kinds as cons lists above: a vector of floats costs a repr per element, no call.
+        items = []
+        add = items.append
+        for head in t:
+            th = type(head)
+            if th is float and _NEG_INF < head < _INF:
+                add(_float_repr(head))
+            elif th is int and INT64_MIN <= head <= INT64_MAX:
+                add(_int_str(head))
+            else:
+                add(_json(head, depth + 1))
+        return "[" + ",".join(items) + "]"
     if tt is str:
         return "[]" if t == "[]" else _quote(t)
     if tt is bool:

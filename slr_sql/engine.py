@@ -21,8 +21,9 @@ from typing import Any, Callable, Iterator
 from .arith import evaluate, instantiation_error, iso_error, type_error
 from .errors import SLREvaluationError, SLRTimeout
 from .program import Predicate, Program, Slot, Template, build, split_event_atom, event_key
-from .terms import Atom, NIL, String, Struct, Var, deref, list_items, make_list
-from .unify import bound_args, copy_term, resolve, undo, unify, unify_tuple
+from .terms import (Atom, NIL, String, Struct, Var, deref, format_atom, format_term, list_items,
+                    make_list, term_vars)
+from .unify import bound_args, copy_term, resolve, undo, unify, unify_event_row
 
 __all__ = ["Engine", "Machine", "unify", "copy_term", "PrologThrow"]
 
@@ -308,11 +309,40 @@ class Machine:
             from .builtins import call_python_pred
 
             return nxt if call_python_pred(self, fn, args) else False
-        if key in self.engine.program.dynamic or key in self.engine.program.temporal:
+        if key in self.engine.program.dynamic:
             return False
         name, arity = key
-        raise iso_error(Struct("existence_error", (
+        error = iso_error(Struct("existence_error", (
             Atom("procedure"), Struct("/", (Atom(name), arity)))))
+        hint = self._event_hint(name, arity, args)
+        if hint:
+            error = SLREvaluationError(error.term, f"{error}: {hint}")
+        raise error
+
+    def _event_hint(self, name: str, arity: int, args: tuple) -> str:
+        """Why an unknown ``p(..)`` may be a slip for the event goal ``p(..)^T``: p/N has
+        clauses with a ``^T`` head, or stored events. Empty when neither."""
+        if (name, arity) in self.engine.program.temporal:
+            what = "is defined with ^T"
+        else:
+            table_of = getattr(self.engine.events, "event_table_sql", None)
+            try:
+                known = table_of is not None and table_of(name, arity) is not None
+            except Exception:  # only a hint: a store that cannot answer gives none
+                known = False
+            if not known:
+                return ""
+            what = "is an event type"
+        taken = {v.name for a in args for v in term_vars(a)}
+        stamp = "T"
+        i = 0
+        while stamp in taken:
+            i += 1
+            stamp = f"T{i}"
+        goal = format_atom(name)
+        if args:
+            goal += "(" + ", ".join(format_term(a, priority=999) for a in args) + ")"
+        return f"{format_atom(name)}/{arity} {what}: did you mean {goal}^{stamp}?"
 
     # -- control constructs -------------------------------------------------------------
     def _control(self, key, args, cb, nxt):
@@ -467,12 +497,12 @@ class Machine:
 
 
 def _match_rows(m: Machine, args: tuple, s: Any, e: Any, rows) -> Iterator[None]:
+    """Bind the event goal to each stored row it matches: data by unification, the stored
+    float times by value (``seen(X)^5`` finds ``seen(x)^5.0``)."""
     trail = m.trail
-    pattern = args + (s, e)
     for row in rows:
-        vals, start, end = row[0], row[1], row[2]
         mark = len(trail)
-        if unify_tuple(pattern, tuple(vals) + (start, end), trail):
+        if unify_event_row(args, s, e, row[0], row[1], row[2], trail):
             yield None
         undo(trail, mark)
 

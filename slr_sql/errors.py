@@ -3,7 +3,8 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "EventRejected"]
+__all__ = ["SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRBusy",
+           "EventRejected"]
 
 
 class SLRError(Exception):
@@ -52,6 +53,17 @@ class SLREvaluationError(SLRError):
 
 class SLRTimeout(SLRError):
     """A query ran out of its ``timeout=`` (seconds) or step limit."""
+
+
+class SLRBusy(SLRError):
+    """The store file stayed locked by another connection (another process, or another
+    knowledge base on the same file) for longer than the ``busy_timeout`` given to
+    :func:`slr_sql.open`; the message names the file. Nothing of the failed call was
+    written: retrying it later is safe.
+
+    >>> issubclass(SLRBusy, SLRError)
+    True
+    """
 
 
 class EventRejected(SLRError):

@@ -14,6 +14,7 @@ import math
 import threading
 import time
 from dataclasses import dataclass, field
+from operator import itemgetter
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
@@ -23,12 +24,13 @@ from .engine import Engine, Machine
 from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
-from .store import EventStore
+from .store import DEFAULT_BUSY_TIMEOUT, EventStore
+from .store.checks import event_arguments, shorten
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
 from .terms import format_term
 
-__all__ = ["KnowledgeBase", "open", "Declarations", "parse_duration"]
+__all__ = ["KnowledgeBase", "open", "Declarations", "ProgramInfo", "parse_duration"]
 
 
 @dataclass
@@ -75,10 +77,56 @@ def _indicators(t: Any) -> list[tuple[str, int]]:
     return [_indicator(t)]
 
 
+_TUPLE = frozenset({tuple})
+_FOUR = {4}
+_second = itemgetter(1)
+
+
+def _all_event_tuples(events: list) -> bool:
+    """True if every item is a ``(name, args, start, end)`` tuple whose ``args`` is a tuple
+    (checked a column at a time, at C speed): such a batch needs no preparing."""
+    try:
+        return (_TUPLE.issuperset(map(type, events)) and set(map(len, events)) == _FOUR
+                and _TUPLE.issuperset(map(type, map(_second, events))))
+    except TypeError:
+        return False
+
+
+def _is_time_expression(t: Any) -> bool:
+    """True if ``t`` may be evaluated as an event time: no string and no list in it."""
+    stack = [t]
+    while stack:
+        x = deref(stack.pop())
+        if type(x) is String or (type(x) is Atom and x == "[]"):
+            return False
+        if type(x) is Struct:
+            if x.name == "." and len(x.args) == 2:
+                return False
+            stack.extend(x.args)
+    return True
+
+
 def _where(clause: Clause | None) -> str:
     if clause is None or clause.span is None:
         return ""
     return f"{clause.span.filename}:{clause.span.line}: "
+
+
+@dataclass(frozen=True)
+class ProgramInfo:
+    """One named program, as :meth:`KnowledgeBase.programs` describes it."""
+
+    name: str
+    source: str             # its texts, in load order, joined by newlines
+    texts: int              # how many texts were loaded under the name
+    filenames: tuple        # the file (or "<string>") of each text
+    loaded_at: float | None  # store clock time of its latest text
+
+
+def _program_name(name: Any) -> str:
+    if not isinstance(name, str) or not name:
+        raise SLRError(f"a program name is a non-empty string, not {name!r}")
+    return name
 
 
 @dataclass
@@ -207,19 +255,32 @@ class KnowledgeBase:
     """
 
     def __init__(self, path: str | Path | None = None, clock: Clock | None = None, *,
-                 synchronous: str = "FULL"):
+                 synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
+                 adopt: bool = False):
         self.clock = clock if clock is not None else WallClock()
-        self.store = EventStore(path, self.clock, synchronous=synchronous)
+        self.store = EventStore(path, self.clock, synchronous=synchronous,
+                                busy_timeout=busy_timeout, adopt=adopt)
         self.path = self.store.path
         self.program = Program()
         self.declarations = Declarations()
         self.engine = Engine(self.program, self.store)
         self._plans: dict[tuple, _Plan] = {}
         self._load_lock = threading.RLock()
+        # the stored program version self.program was built from, the parsed stored texts
+        # (by id), and the store's data_version when the file was last checked for changes
+        self._program_version = -1
+        self._parsed: dict[int, tuple[str, list]] = {}
+        self._seen_data_version: int | None = None
         # extension points for the SQL compiler, buffers and synchronization
         self.load_listeners: list[Callable[["KnowledgeBase"], None]] = []
         self.add_listeners: list[Callable[[list], None]] = []
-        self._restore_program()
+        # called after the program was re-read from the file (another connection changed
+        # it): like load_listeners, but nothing is written (the writer did that)
+        self.reload_listeners: list[Callable[["KnowledgeBase"], None]] = []
+        # called when another connection raised learned delays or completeness marks
+        self.progress_listeners: list[Callable[[], None]] = []
+        self._progress_version = self.store.versions()[1]
+        self._reload_program()
         from . import buffers as _buffers  # event-history management (issue 4)
         self._buffers = _buffers.attach(self)
         from . import sync as _sync  # synchronized queries (issue 5): slr_sql/sync.py
@@ -228,6 +289,8 @@ class KnowledgeBase:
         _planner.attach(self)
         from . import cep as _cep  # event rules (issue 11): slr_sql/cep/
         self._cep = _cep.attach(self)
+        from . import subscriptions as _subscriptions  # subscriptions (issue 12)
+        self._subscriptions = _subscriptions.attach(self)
 
     @property
     def sql_enabled(self) -> bool:
@@ -241,7 +304,10 @@ class KnowledgeBase:
 
     # -- lifecycle ----------------------------------------------------------------------
     def close(self) -> None:
-        """Close the store (a checkpoint of the WAL included)."""
+        """Close the store. It never waits for another process (the checkpoint of the WAL
+        on close is ``PASSIVE``: what a reader still needs stays in the WAL)."""
+        if getattr(self, "_subscriptions", None) is not None:  # issue 12: positions, threads
+            self._subscriptions.close()
         if getattr(self, "_cep", None) is not None:  # issue 11
             self._cep.close()
         if getattr(self, "_sync", None) is not None:  # issue 5: fail waiting queries, stop threads
@@ -254,19 +320,75 @@ class KnowledgeBase:
     def __exit__(self, *exc: Any) -> None:
         self.close()
 
-    # -- program ------------------------------------------------------------------------
-    def _restore_program(self) -> None:
-        for source, filename in self.store.program_sources():
-            program, decls = self._compile_program(source, filename or "<stored>",
-                                                   self.program, self.declarations)
-            self.program, self.declarations = program, decls
-        self.engine.program = self.program
+    # -- the file is the truth ----------------------------------------------------------
+    def _refresh(self) -> None:
+        """See what other connections (processes, knowledge bases) wrote since the last
+        call: a cheap ``PRAGMA data_version`` first; when it moved, the program and progress
+        versions; the program is re-read when its version moved, and the synchronizer
+        re-reads delays and marks when theirs did."""
+        store = self.store
+        if store.path is None:  # in memory: no other connection can write it
+            return
+        data_version = store.data_version()
+        if data_version == self._seen_data_version:
+            return
+        program_version, progress_version = store.versions()
+        if program_version != self._program_version:
+            with self._load_lock:
+                if store.program_version() != self._program_version:
+                    self._reload_program()
+        if progress_version != self._progress_version:
+            self._progress_version = progress_version
+            for listener in self.progress_listeners:
+                listener()
+        self._seen_data_version = data_version   # (not before: a failed re-read is retried)
 
-    def _compile_program(self, text: str, filename: str, base: Program,
-                         base_decls: Declarations) -> tuple[Program, Declarations]:
-        clauses = parse_program(text, filename)
-        program = base.copy()
-        decls = base_decls.copy()
+    def _reload_program(self) -> None:
+        """Build the program from the texts stored now (the union of every named program,
+        in load order) and tell the reload listeners. The version is read before the texts:
+        a change committed in between is seen again at the next call."""
+        version = self.store.program_version()
+        texts = self.store.program_texts()
+        self.store.event_types()   # re-read the event types too: declared arities may be new
+        program, decls = self._build(self._parse_texts(texts))
+        self.program, self.declarations = program, decls
+        self.engine.program = program
+        self._program_version = version
+        self._plans.clear()
+        for listener in self.reload_listeners:
+            listener(self)
+
+    def _ensure_current(self) -> bool:
+        """Inside a write transaction: make sure the program is the stored one (re-read it
+        if another connection changed it); True if it had to be re-read. (Without taking
+        the load lock: a thread holding it may be waiting for the store lock we hold, and
+        no load can be between its write and its commit while we hold that.)"""
+        if self.store.program_version() == self._program_version:
+            return False
+        self._reload_program()
+        return True
+
+    def _parse_texts(self, texts: list) -> list[list[Clause]]:
+        """The clauses of each stored text, parsed once per text id."""
+        parsed = {}
+        out = []
+        for text in texts:
+            cached = self._parsed.get(text.id)
+            if cached is None or cached[0] is not text.source and cached[0] != text.source:
+                cached = (text.source, parse_program(text.source, text.filename or "<stored>"))
+            parsed[text.id] = cached
+            out.append(cached[1])
+        self._parsed = parsed
+        return out
+
+    def _build(self, texts: Iterable[list[Clause]]) -> tuple[Program, Declarations]:
+        program, decls = Program(), Declarations()
+        for clauses in texts:
+            self._add_clauses(clauses, program, decls)
+        return program, decls
+
+    # -- program ------------------------------------------------------------------------
+    def _add_clauses(self, clauses: list[Clause], program: Program, decls: Declarations) -> None:
         from . import cep as _cep  # issue 11: event rules Head <- Pattern
         for clause in clauses:
             if clause.head is None:
@@ -284,7 +406,6 @@ class KnowledgeBase:
             program.add_clause(clause)
         if decls.event_rules:  # issue 11: policies, dependency order, no cycles
             decls.event_rules = _cep.prepare(decls.event_rules, decls.consumption, program)
-        return program, decls
 
     def _buffer_decl(self, head: Struct, clause: Clause) -> BufferDecl:
         pattern, amount = deref(head.args[0]), deref(head.args[1])
@@ -348,37 +469,143 @@ class KnowledgeBase:
                 msg = _where(clause) + msg
             raise SLRError(msg) from None
 
-    def load(self, text: str, filename: str = "<string>") -> None:
-        """Add the clauses and declarations of ``text`` to the program (persisted).
+    def load(self, text: str, filename: str = "<string>", *, name: str = "main",
+             replace: bool = False) -> None:
+        """Add the clauses and declarations of ``text`` to the program ``name`` (persisted);
+        with ``replace=True`` the program ``name`` becomes ``text`` alone, in its place.
 
-        All or nothing: a program with any error is rejected whole and the loaded program
-        stays as it was.
+        All or nothing: a text with any error is rejected whole and the program stays as it
+        was. The program a knowledge base runs is every named program stored in the file,
+        in load order, whoever loaded them (another process included).
 
         >>> kb = open(); kb.load("p(1). p(2)."); [a["X"] for a in kb.query("p(X)")]
         [1, 2]
+        >>> kb.load("p(3).", name="main", replace=True); [a["X"] for a in kb.query("p(X)")]
+        [3]
         """
-        with self._load_lock:
-            program, decls = self._compile_program(text, filename, self.program,
-                                                   self.declarations)
-            old = (self.program, self.declarations)
-            with self.store.transaction():
-                self.store.append_program(text, filename)
-                for name, arity in sorted(decls.event_types - self.declarations.event_types):
-                    self.store.declare_type(name, arity)
-                self.program, self.declarations = program, decls
-                try:
-                    for listener in self.load_listeners:
-                        listener(self)
-                except BaseException:
-                    self.program, self.declarations = old
-                    raise
-            self.engine.program = program
-            self._plans.clear()
+        name = _program_name(name)
+        clauses = parse_program(text, filename)   # syntax errors before taking the lock
+        with self._load_lock, self.store.transaction():
+            # the write lock is ours: the texts stored now are the latest
+            stale = self.store.program_version() != self._program_version
+            if replace or stale:
+                texts = [t for t in self.store.program_texts() if not (replace and t.name == name)]
+                parsed = self._parse_texts(texts)
+                if replace:
+                    first = self._first_text_of(name)
+                    at = len([t for t in texts if first is not None and t.id < first])
+                    parsed = parsed[:at] + [clauses] + parsed[at:] if first is not None \
+                        else parsed + [clauses]
+                else:
+                    parsed = parsed + [clauses]
+                program, decls = self._build(parsed)
+            else:
+                program, decls = self.program.copy(), self.declarations.copy()
+                self._add_clauses(clauses, program, decls)
+            self._check_event_arities(decls, filename)
+            self._install(program, decls, lambda: self.store.replace_named_program(
+                name, text, filename) if replace else self.store.append_program(
+                text, filename, name), (text, clauses))
 
-    def load_file(self, path: str | Path) -> None:
+    def _first_text_of(self, name: str) -> int | None:
+        ids = [t.id for t in self.store.program_texts() if t.name == name]
+        return min(ids) if ids else None
+
+    def _check_event_arities(self, decls: Declarations, filename: str) -> None:
+        """Refuse ``:- event p/N`` when the store already has events of p with another
+        arity M that nobody declared: p/N would silently become a second type (its own
+        table) beside them -- most often a changed mind about p's arguments. Declaring p/M
+        too (``:- event p/M, p/N.``) says both are meant."""
+        new = decls.event_types - self.declarations.event_types
+        if not new:
+            return
+        stored = self.store.event_types()
+        declared = decls.event_types | self.store.declared_types()
+        for name, arity in sorted(new):
+            others = sorted(a for (n, a) in stored if n == name and a != arity
+                            and (n, a) not in declared)
+            if others:
+                other = others[0]
+                p = format_term(Atom(name))
+                raise SLRError(
+                    f"{filename}: :- event {p}/{arity}: the store already holds events of "
+                    f"{p}/{other} (table {stored[(name, other)]}), which no program "
+                    f"declares; an event type is name/arity, so {p}/{arity} would be a "
+                    f"second type beside it, with a table of its own. If both are meant, "
+                    f"declare both (:- event {p}/{other}, {p}/{arity}.)")
+
+    def _install(self, program: Program, decls: Declarations, write: Callable[[], Any],
+                 parsed: tuple[str, list] | None = None) -> None:
+        """Inside the load transaction: store the change (``write``, returning the new
+        text's id), declare the event types, make ``program`` the kb's and let the load
+        listeners build what is derived from it (fact tables, views, buffers); on any error
+        everything is as before."""
+        old = (self.program, self.declarations, self._program_version, dict(self._parsed))
+        try:
+            text_id = write()
+            if parsed is not None:
+                self._parsed[text_id] = parsed
+            declared = self.store.declared_types()
+            for type_name, arity in sorted(decls.event_types - declared):
+                self.store.declare_type(type_name, arity)
+            self.program, self.declarations = program, decls
+            self._program_version = self.store.program_version()
+            for listener in self.load_listeners:
+                listener(self)
+        except BaseException:
+            self.program, self.declarations, self._program_version, self._parsed = old
+            raise
+        self.engine.program = program
+        self._plans.clear()
+
+    def unload(self, name: str) -> None:
+        """Remove the program ``name`` (its clauses, declarations and buffers; the events
+        stay). An error if no program has that name.
+
+        >>> kb = open(); kb.load("p(1).", name="tea"); kb.unload("tea"); kb.programs()
+        {}
+        """
+        name = _program_name(name)
+        with self._load_lock, self.store.transaction():
+            stored = self.store.program_texts()
+            texts = [t for t in stored if t.name != name]
+            if len(texts) == len(stored):
+                names = list(dict.fromkeys(t.name for t in stored))
+                raise SLRError(f"no program named {name!r} (loaded: "
+                               f"{', '.join(repr(n) for n in names) or 'none'})")
+            program, decls = self._build(self._parse_texts(texts))
+            self._install(program, decls, lambda: self.store.delete_program(name))
+
+    def programs(self) -> dict[str, "ProgramInfo"]:
+        """The named programs stored in the file, in load order of their first text.
+
+        >>> kb = open(); kb.load("p(1).", name="tea"); kb.programs()["tea"].source
+        'p(1).'
+        """
+        self._refresh()
+        out: dict[str, ProgramInfo] = {}
+        for text in self.store.program_texts():
+            info = out.get(text.name)
+            if info is None:
+                out[text.name] = ProgramInfo(text.name, text.source, 1,
+                                             (text.filename or "<string>",), text.loaded_at)
+            else:
+                out[text.name] = ProgramInfo(
+                    text.name, info.source + "\n" + text.source, info.texts + 1,
+                    info.filenames + (text.filename or "<string>",), text.loaded_at)
+        return out
+
+    def load_file(self, path: str | Path, *, name: str = "main", replace: bool = False) -> None:
         """Load a program file (see :meth:`load`)."""
         path = Path(path)
-        self.load(path.read_text(encoding="utf-8"), str(path))
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError as exc:
+            raise SLRError(f"{path}: not a program (not UTF-8 text: byte "
+                           f"0x{exc.object[exc.start]:02x} at offset {exc.start})") from None
+        except OSError as exc:
+            raise SLRError(f"{path}: {exc.strerror or exc}") from None
+        self.load(text, str(path), name=name, replace=replace)
 
     def define(self, name: str, arity: int, fn: Callable) -> None:
         """Register a Python predicate ``name/arity``.
@@ -415,13 +642,18 @@ class KnowledgeBase:
         t = deref(t)
         if type(t) is Var:
             raise EventRejected(f"{text.strip()}: the event time must be bound")
-        if type(t) in (int, float):
-            return float(t)
+        # An arithmetic expression is evaluated; a string or a list is not a time (evaluated,
+        # "1" would be its character code, 49).
+        if type(t) not in (int, float) and not _is_time_expression(t):
+            raise EventRejected(f"{text.strip()}: the event time must be a number, "
+                                f"not {format_term(t)}")
         try:
-            return float(evaluate(t))
+            return float(t if type(t) in (int, float) else evaluate(t))
         except SLRError:
             raise EventRejected(f"{text.strip()}: the event time must be a number, "
                                 f"not {format_term(t)}") from None
+        except OverflowError:  # an integer beyond floats: 2**2000
+            raise EventRejected(f"{text.strip()}: event times must be finite") from None
 
     def add(self, text: str) -> None:
         """Add one event written in SLR syntax (``p(..)^T`` or ``p(..)^[S,E]``).
@@ -438,34 +670,76 @@ class KnowledgeBase:
         """
         if end is None:
             end = start
-        self._add([(name, tuple(args), start, end)], atomic=True)
+        self._add([(name, event_arguments(name, args, start, end), start, end)], atomic=True)
 
     def add_many(self, events: Iterable[Any], atomic: bool = False) -> list[EventRejected]:
         """Add many events in one transaction: strings in SLR syntax or
         ``(name, args, start, end)`` tuples. Returns the rejected events (each with its reason);
-        the others are stored. With ``atomic=True`` one bad event rejects the whole batch.
+        the others are stored; each rejection's ``.index`` and ``.event`` are the position
+        and the item in ``events``. With ``atomic=True`` one bad event rejects the whole batch.
 
         >>> kb = open(); kb.add_many(["p(1)^1", ("p", [2], 2.0, 2.0)])
         []
         """
-        prepared: list = []
+        events = events if type(events) is list else list(events)
         errors: list[EventRejected] = []
+        if _all_event_tuples(events):  # the common bulk case: handed to the store as they are
+            prepared, positions = list(events), None  # (listeners must not see the caller's list)
+        else:
+            prepared, positions = self._prepare_events(events, atomic, errors)
+        stored_errors = self._add(prepared, atomic=atomic)
+        if stored_errors:
+            # the store's and the marks' rejections carry the prepared event: give them the
+            # index and the item the caller passed (events rejected while being prepared are
+            # not in ``prepared``)
+            place: dict[int, list[int]] = {}  # (one tuple object may be given twice)
+            for k, event in enumerate(prepared):
+                place.setdefault(id(event), []).append(k)
+            for err in stored_errors:
+                ks = place.get(id(getattr(err, "event", None)))
+                k = ks.pop(0) if ks else None
+                if k is not None:
+                    err.index = k if positions is None else positions[k]
+                    err.event = events[err.index]
+                errors.append(err)
+            errors.sort(key=lambda e: e.index if isinstance(e.index, int) else -1)
+        return errors
+
+    def _prepare_events(self, events: list, atomic: bool,
+                        errors: list[EventRejected]) -> tuple[list, list[int]]:
+        """``(name, args tuple, start, end)`` for each event of ``events`` (text parsed),
+        with the index in ``events`` of each; the events that cannot be read go to
+        ``errors`` (raised when ``atomic``)."""
+        prepared: list = []
+        positions: list[int] = []
         for i, ev in enumerate(events):
             try:
                 if isinstance(ev, str):
-                    prepared.append(self._event_from_text(ev))
+                    event = self._event_from_text(ev)
                 else:
-                    name, args, start, end = ev
-                    prepared.append((name, tuple(args), start, end))
-            except (SLRError, TypeError, ValueError) as exc:
+                    try:
+                        name, args, start, end = ev
+                    except (TypeError, ValueError):
+                        raise EventRejected(f"event #{i} is neither SLR text nor a (name, args, "
+                                            f"start, end) tuple: {shorten(repr(ev))}") from None
+                    event = (name, event_arguments(name, args, start, end), start, end)
+            except (SLRError, TypeError, ValueError, OverflowError, RecursionError) as exc:
                 if atomic:
                     raise exc if isinstance(exc, SLRError) else EventRejected(str(exc))
-                err = exc if isinstance(exc, EventRejected) else EventRejected(f"{ev!r}: {exc}")
+                reason = "the term is nested too deeply" if isinstance(exc, RecursionError) \
+                    else str(exc).split("; use sys.")[0]  # (a Python hint, not for users)
+                err = exc if isinstance(exc, EventRejected) else \
+                    EventRejected(f"{shorten(repr(ev))}: {reason}")
                 err.index = i
+                err.event = ev
                 errors.append(err)
-        return errors + self._add(prepared, atomic=atomic)
+                continue
+            positions.append(i)
+            prepared.append(event)
+        return prepared, positions
 
     def _add(self, events: list, atomic: bool) -> list[EventRejected]:
+        self._refresh()
         # -- issue 5: fullyUpdated(p/N)^t / fullyUpdated(p)^t are completeness marks, not events
         marks: list = []
         if getattr(self, "_sync", None) is not None:
@@ -487,7 +761,9 @@ class KnowledgeBase:
             raise errors[0]
         if self.add_listeners:
             rejected = {id(e.event) for e in errors if hasattr(e, "event")}
-            stored = [ev for ev in events if id(ev) not in rejected] + derived
+            stored = [ev for ev in events if id(ev) not in rejected] if rejected else events
+            if derived:   # issue 11: the complex events of this add, with its events
+                stored = list(stored) + derived
             for listener in self.add_listeners:
                 listener(stored)
         if marks:  # issue 5: after the events of the same batch are stored
@@ -565,9 +841,14 @@ class KnowledgeBase:
         >>> kb.query("prev(pos(a, X)^T, 4)")
         [{'X': 1, 'T': 1.0}]
         """
+        if limit is not None and (type(limit) is not int or limit < 0):
+            raise SLRError(f"limit must be a count (an integer >= 0), not {limit!r}")
         if wait:  # issue 5: synchronized (SLRTimeout names the incomplete types)
             return self.submit(goal, at=at, args=args, timeout=timeout).result()
+        self._refresh()
         plan = self._plan(goal, tuple(args) if args else ())
+        if limit == 0:
+            return []
         if plan.lookup is not None and limit is None:
             frame = [None] * plan.compiled.nslots
             if args:
@@ -598,6 +879,7 @@ class KnowledgeBase:
         >>> open().explain("p(X)").splitlines()[0]
         'goal: p(X)'
         """
+        self._refresh()
         rules = self._cep.explain(goal)  # issue 11: (is a rule, lines) or None
         if rules is not None and rules[0]:
             return "\n".join(rules[1])
@@ -636,6 +918,7 @@ class KnowledgeBase:
         >>> kb.mark_complete("p/1", 1); p.result(timeout=5)
         [{'L': [Atom('a')]}]
         """
+        self._refresh()
         return self._sync.submit(goal, at=at, id=id, args=args, timeout=timeout,
                                  callback=callback)
 
@@ -650,11 +933,13 @@ class KnowledgeBase:
     def mark_complete(self, event_type: str, t: float) -> None:
         """Declare the history of ``"p/N"`` (or ``"p"``: every arity) complete up to ``t``
         (persisted), like a ``fullyUpdated(p/N)^t`` event."""
+        self._refresh()
         self._sync.mark_complete(event_type, t)
 
     def complete_until(self, event_type: str) -> float:
         """The time up to which the history of ``"p/N"`` is complete now: the greatest of
         now − max_delay, the latest mark, and (in_order types) the latest end received."""
+        self._refresh()
         return self._sync.complete_until(event_type)
 
     def pending(self) -> list:
@@ -674,29 +959,86 @@ class KnowledgeBase:
         >>> kb = open(); kb.add_buffer("face(P, _)", keep_last=1)
         1
         """
+        self._refresh()
         return self._buffers.add_runtime(pattern, keep_last=keep_last,
                                          keep_seconds=keep_seconds, keep_between=keep_between)
 
     def remove_buffer(self, buffer_id: int) -> None:
         """Remove a runtime buffer (the events it kept stay)."""
+        self._refresh()
         self._buffers.remove_runtime(buffer_id)
 
     def buffers(self) -> list:
         """The active buffers (program and runtime) with their counters."""
+        self._refresh()
         return self._buffers.infos()
 
     # -- SQL access -----------------------------------------------------------------------
-    def sql(self, query: str, params: Iterable[Any] = ()) -> tuple[list[str], list[tuple]]:
-        """Run SQL on the store's database; returns (column names, rows).
+    def sql(self, query: str, params: Iterable[Any] = (), write: bool = False,
+            timeout: float | None = None) -> tuple[list[str], list[tuple]]:
+        """Run one SQL statement on the store's database; returns (column names, rows).
+        Read-only unless ``write=True``; every failure is an :class:`SLRError`
+        (:class:`SLRTimeout` past ``timeout`` seconds).
 
         >>> kb = open(); kb.add("p(a)^1"); kb.sql("SELECT arg1, t_end FROM p")
         (['arg1', 't_end'], [('a', 1.0)])
         """
-        return self.store.sql(query, params)
+        from .store import DatabaseError
+
+        try:
+            return self.store.sql(query, params, write, timeout)
+        except DatabaseError as exc:
+            raise SLRError(f"sql: {exc}") from None
+
+    # -- plots ----------------------------------------------------------------------------
+    def plot(self, types: Iterable[str] | str | None = None, **options: Any) -> Any:
+        """A timeline of the event histories as a matplotlib Figure: one row per event type,
+        intervals as bars, points as ticks, ``values=["speed:1"]`` as lines, complex events
+        marked. Options: see :func:`slr_sql.plot.timeline` and docs/plots.md.
+
+        >>> kb = open(); kb.add("move(r1)^[2, 8]")
+        >>> kb.plot(start=0, end=10, size=(600, 120)).get_size_inches().tolist()
+        [6.0, 1.2]
+        """
+        from .plot import timeline  # deferred: matplotlib is the optional extra slr_sql[plot]
+        return timeline(self, types, **options)
+
+    # -- subscriptions (issue 12; the work is in slr_sql/subscriptions.py) ----------------
+    def subscribe(self, pattern: str, where: str | None = None, since: Any = "now",
+                  until: float | None = None, id: str | None = None,
+                  callback: Callable[[dict], Any] | None = None, max_queue: int = 10_000,
+                  max_lag: int | None = 1_000_000) -> Any:
+        """Deliver each stored event matching ``pattern`` (``p(..)^T`` or ``p(..)^[S,E]``) and
+        the goal ``where`` whose end time lies in [since, until], once, in arrival order, as
+        an answer dict: iterate (``for``/``async for``/``sub.get(timeout)``) or give
+        ``callback``. ``since``: "now", a time, or earlier (stored events first, then live
+        ones); ``until`` ends it once the type is complete up to it; ``id`` makes it durable
+        (a restart resumes after the last answer handled). See docs/subscriptions.md.
+
+        >>> kb = open(); sub = kb.subscribe("p(X)^T", where="X > 1", since=0)
+        >>> kb.add_many(["p(1)^1", "p(2)^2"]); sub.get(timeout=5)
+        []
+        {'X': 2, 'T': 2.0}
+        >>> sub.close(); kb.close()
+        """
+        return self._subscriptions.subscribe(pattern, where=where, since=since, until=until,
+                                             id=id, callback=callback, max_queue=max_queue,
+                                             max_lag=max_lag)
+
+    def unsubscribe(self, id: str) -> None:
+        """Remove the durable subscription ``id`` and its position (closing it if open)."""
+        self._subscriptions.unsubscribe(id)
 
 
 def open(path: str | Path | None = None, clock: Clock | None = None, **options: Any) -> KnowledgeBase:
     """Open (or create) a knowledge base; ``path=None`` gives an in-memory one.
+
+    Options: ``synchronous`` (``"FULL"``: an event is on disk when its add returns),
+    ``busy_timeout`` (seconds a write waits for another process's write transaction before
+    :class:`~slr_sql.errors.SLRBusy`; default 5).
+    A file that is not a store (not SQLite, damaged, a store of a newer slr_sql, or an SQLite
+    file of another application) is refused with an :class:`SLRError` and left untouched;
+    ``adopt=True`` adds a store to another application's SQLite file on purpose.
 
     >>> kb = open(); kb.close()
     """

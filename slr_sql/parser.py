@@ -5,7 +5,7 @@ Two stages, both run inside one LALR parse:
 1. ``grammar/slr.lark`` recognises tokens and bracket structure and hands each bracketed
    region to this module as a flat *sequence* of operands and names.
 2. :class:`_Resolver` turns a sequence into a term with Prolog's operator-precedence rules
-   and the operator table of :mod:`slr_sql.printer` (SWI-Prolog 9 defaults).  It decides
+   and the operator table of :mod:`slr_sql.terms` (SWI-Prolog 9 defaults).  It decides
    whether a name is a prefix operator, an infix operator or an atom, and whether ``-``
    before a number makes a negative literal (only when written directly against it:
    ``-1`` is an integer, ``- 1`` the compound ``-(1)``, as SWI-Prolog 9 reads them).
@@ -23,6 +23,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
+import lark
 from lark import Lark, Token, Transformer
 from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
 
@@ -452,6 +453,11 @@ _LARK: Lark | None = None
 _LOCK = threading.Lock()
 
 
+# lark 1.x calls the plain lexer "basic"; lark-parser 0.12 (which the ROS 2 wheels install
+# under the same import name `lark`) calls it "standard". Both give the same tokens.
+_BASIC_LEXER = "standard" if lark.__version__.startswith("0.") else "basic"
+
+
 def _parser() -> Lark:
     global _LARK
     if _LARK is None:
@@ -463,7 +469,7 @@ def _parser() -> Lark:
                 # inside an unclosed bracket as the symbol atom `.` (END is not acceptable
                 # there), moving the error to the end of the file.
                 _LARK = Lark(_GRAMMAR_PATH.read_text(encoding="utf-8"), parser="lalr",
-                             lexer="basic", start=["program", "query"],
+                             lexer=_BASIC_LEXER, start=["program", "query"],
                              transformer=_Builder(), maybe_placeholders=False,
                              cache=False)
     return _LARK

@@ -16,13 +16,12 @@ A compiled statement that meets, at run time, anything the interpreter would tre
 differently (a type error in arithmetic, a non-ground result of a builtin) raises inside
 SQLite; the query is then answered by the interpreter (which raises the proper error).
 
-The inspection side: every ground-fact predicate is materialized as ``slr_facts_<name>_<n>``
+The inspection side: every ground-fact predicate is materialized as ``slr_facts_<n>_<name>``
 and every non-temporal derived predicate that compiles to plain SQL (no slr_ functions) gets
 a view of its name (docs/sql.md).
 """
 from __future__ import annotations
 
-import sqlite3
 import weakref
 from typing import Any
 
@@ -34,6 +33,8 @@ from .encoding import _from_json, _quote
 from .unify import undo, unify
 from .program import Slot, Template, build
 from .sqlcompile import SITES, Col, ColRef, Compiler, Fallback, Part, resolve
+from .errors import SLRBusy
+from .store import DatabaseError
 from .terms import Atom, NIL, Struct, Var, deref, from_python, list_items, make_list, to_python
 
 __all__ = ["SqlPlan", "plan_for", "try_sql", "explain", "attach", "refresh", "Fallback",
@@ -234,12 +235,34 @@ class _State:
         _register(kb.store)
 
     def fact_tables(self, kb) -> dict:
-        if self.facts_program is not kb.program:
-            self.materialize(kb)
+        """The fact tables of kb's program. They are written by whoever changes the stored
+        program, in the same transaction, for the union of the stored programs; a kb whose
+        program is that union (same version) only reads their names. A store whose tables
+        were built for another version (written before versions existed) gets them
+        rebuilt here, if the program is still the stored one when the write lock is ours."""
+        program = kb.program
+        if self.facts_program is not program:
+            store = kb.store
+            if store.facts_version() == kb._program_version:
+                self.facts = store.fact_tables_for(fact_rows(program))
+            else:
+                self.facts = {}
+                try:
+                    with store.transaction():
+                        if store.program_version() == kb._program_version:
+                            self.facts = store.replace_fact_tables(
+                                fact_rows(program), version=kb._program_version)
+                            self.facts_program = program
+                            refresh_views(kb)   # views of the old tables go with them
+                except SLRBusy:
+                    pass   # compile without fact tables (facts unfolded) until next time
+            self.facts_program = program
         return self.facts
 
     def materialize(self, kb) -> None:
-        self.facts = kb.store.replace_fact_tables(fact_rows(kb.program))
+        """Rebuild the fact tables for kb's program (inside its load transaction)."""
+        self.facts = kb.store.replace_fact_tables(fact_rows(kb.program),
+                                                  version=kb._program_version)
         self.facts_program = kb.program
 
 
@@ -276,6 +299,7 @@ def attach(kb) -> None:
     state_of(kb)
     kb.engine.sql_calls = compiled_calls(kb)   # the program restored from the file
     kb.load_listeners.append(refresh)
+    kb.reload_listeners.append(reloaded)
     hooks = kb.store.table_created_hooks
     ref = weakref.ref(kb)
 
@@ -283,10 +307,18 @@ def attach(kb) -> None:
         k = ref()
         if k is not None and (name, arity) in state_of(k).view_missing:
             try:
+                k._ensure_current()   # (inside the add's transaction: the stored program)
                 refresh_views(k)
             except Exception:
                 pass
     hooks.append(on_table)
+
+
+def reloaded(kb) -> None:
+    """Reload listener: the program was re-read from the file (another connection changed
+    it); its fact tables and views were written by that connection: only choose again the
+    predicates an interpreter run calls through SQL."""
+    kb.engine.sql_calls = compiled_calls(kb)
 
 
 def refresh(kb) -> None:
@@ -312,6 +344,10 @@ class SqlPlan:
         # interpreter (which raises, or not, exactly when a goal reaches it)
         self.num_args = frozenset(sqlcompile.NUM_ARG.findall(
             (sql or "") + "".join(guards))) & frozenset(arg_params.values())
+        # arguments from Python matched with stored times: one beyond 64 bits goes to the
+        # interpreter (SQL holds it as text, the interpreter compares it by value)
+        self.time_args = frozenset(sqlcompile.TIME_ARG.findall(
+            (sql or "") + "".join(guards))) & frozenset(arg_params.values())
         self.time_sites = time_sites      # ((name, n), time parameter or SQL) per prev/next
         self.params = params
         self.arg_params = arg_params      # variable name -> parameter name
@@ -333,6 +369,9 @@ class SqlPlan:
             params = dict(params)
             for name, pname in self.arg_params.items():
                 params[pname] = encode(values[name])
+                if pname in self.time_args and type(params[pname]) is str \
+                        and type(values[name]) is int:
+                    raise TypeError(f"argument :{pname} is a time beyond 64 bits")
             if self.has_at:
                 params["at"] = float(at)
         for name in self.num_args:
@@ -411,8 +450,6 @@ def _value(v):
 
 
 def _py_list(items):
-    if not items:
-        return Atom("[]")  # to_python gives the empty list as the atom []
     out = []
     for x in items:
         tx = type(x)
@@ -599,7 +636,7 @@ def try_sql(kb, plan, args, at, limit=None, deadline=None):
         return None
     try:
         return entry.run(kb, args or {}, at, limit, deadline)
-    except (sqlite3.Error, Unencodable, ValueError, TypeError, KeyError, OverflowError):
+    except (DatabaseError, Unencodable, ValueError, TypeError, KeyError, OverflowError):
         return None
 
 
@@ -784,7 +821,7 @@ class CompiledCall:
             return None
         try:
             rows = entry.term_rows(kb, terms, m.at, m.deadline)
-        except (sqlite3.Error, Unencodable, ValueError, TypeError, KeyError, OverflowError):
+        except (DatabaseError, Unencodable, ValueError, TypeError, KeyError, OverflowError):
             return None
         self.answered += 1
         return [[(int(name[1:]) - 1, t) for name, t in row if name not in terms]

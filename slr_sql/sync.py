@@ -33,18 +33,21 @@ import math
 import threading
 import time
 from concurrent.futures import Future, InvalidStateError, ThreadPoolExecutor
+from operator import itemgetter
 from typing import Any, Callable, Iterable
 
 from .analysis import GoalSet, goal_set
 from .answers import answer_bindings
 from .clocks import ManualClock, StreamClock
 from .errors import EventRejected, SLRError, SLRTimeout
+from .store.checks import BadEvent, check_times
 from .terms import Atom, Struct, Var, deref
 
 __all__ = ["Completeness", "PendingQuery", "Wait", "Synchronizer", "attach", "parse_type"]
 
 _INF = math.inf
 MARK_NAME = "fullyUpdated"
+_first_item = itemgetter(0)
 
 
 def _fmt(t: float, decimals: int = 6) -> str:
@@ -238,6 +241,8 @@ class Completeness:
     State persisted in ``slr_meta``: ``sync/learned/<name>/<n>`` (seconds),
     ``sync/mark/<name>/<n>`` and ``sync/mark/<name>`` (time; the latter for
     ``fullyUpdated(p)`` = every arity of p), each mark with its source in ``sync/marksrc/...``.
+    Delays and marks only grow: they are written with the store's ``meta_raise`` (the larger
+    of the stored and the new value is kept, compared inside SQLite) and read back.
     """
 
     def __init__(self, store: Any, clock: Any, decls: Callable[[], Any]):
@@ -258,15 +263,20 @@ class Completeness:
         self.load()
 
     def flush(self, learned: dict | None = None) -> None:
-        """Persist learned delays (all that grew since the last write by default)."""
+        """Persist learned delays (all that grew since the last write by default). The
+        store keeps the larger of its value and ours (another process may have learned a
+        larger one meanwhile): we take the stored value back."""
         if learned is None:
             learned = {k: d for k, d in self.learned.items() if d > self._persisted.get(k, 0.0)}
         if not learned:
             return
+        stored = {}
         with self.store.transaction():
             for key, d in learned.items():
-                self.store.meta_set(f"sync/learned/{key[0]}/{key[1]}", d)
-        self._persisted.update(learned)
+                stored[key] = self.store.meta_raise(f"sync/learned/{key[0]}/{key[1]}", d)
+        for key, d in stored.items():
+            self._persisted[key] = max(self._persisted.get(key, 0.0), d)
+            self.learned[key] = max(self.learned.get(key, 0.0), d)
 
     def load(self) -> None:
         """(Re)read learned delays and marks from the store."""
@@ -397,10 +407,18 @@ class Completeness:
                 return False
             self.name_marks[key] = t
             mk = f"{key}/*"
-        self.mark_src[key] = source
+        # the store keeps the larger mark (another process may have stored one meanwhile)
         with self.store.transaction():
-            self.store.meta_set(f"sync/mark/{mk}", t)
-            self.store.meta_set(f"sync/marksrc/{mk}", source)
+            stored = self.store.meta_raise(f"sync/mark/{mk}", t)
+            if stored == t:
+                self.store.meta_set(f"sync/marksrc/{mk}", source)
+            else:
+                source = self.store.meta_get(f"sync/marksrc/{mk}", source)
+        if isinstance(key, tuple):
+            self.marks[key] = stored
+        else:
+            self.name_marks[key] = stored
+        self.mark_src[key] = source
         return True
 
     def observe(self, events: list, arrival: float) -> set:
@@ -564,6 +582,13 @@ class Synchronizer:
         except Exception:
             return None
 
+    def on_progress(self) -> None:
+        """Progress listener of the kb: another connection raised learned delays or
+        completeness marks; re-read them and release the queries they complete."""
+        with self.lock:
+            released = self._reread()
+        self._schedule_all(released)
+
     def _external_changes(self) -> list:
         """Reload marks, learned delays and in-order ends if another connection committed
         (lock held); returns the queries that may now go on."""
@@ -571,6 +596,9 @@ class Synchronizer:
         if version is None or version == self._data_version:
             return []
         self._data_version = version
+        return self._reread()
+
+    def _reread(self) -> list:
         tracker = self.tracker
         tracker.load()
         tracker.max_end.clear()
@@ -620,8 +648,12 @@ class Synchronizer:
     def take_marks(self, events: list, atomic: bool) -> tuple[list, list, list]:
         """Split ``fullyUpdated(p/N)^t`` / ``fullyUpdated(p)^t`` out of an add batch:
         returns (events, marks, rejected)."""
-        if not any(ev[0] == MARK_NAME for ev in events if isinstance(ev, tuple) and ev):
-            return events, [], []
+        try:  # the common case, a batch without marks, seen at C speed
+            if MARK_NAME not in set(map(_first_item, events)):
+                return events, [], []
+        except (TypeError, IndexError, KeyError):
+            if not any(ev[0] == MARK_NAME for ev in events if isinstance(ev, tuple) and ev):
+                return events, [], []
         keep, marks, errors = [], [], []
         for ev in events:
             try:
@@ -634,10 +666,8 @@ class Synchronizer:
                 continue
             try:
                 tname, n = parse_type(args[0])
-                t = float(end)
-                if math.isnan(t) or math.isinf(t):
-                    raise SLRError("the time must be finite")
-            except (SLRError, TypeError, ValueError) as exc:
+                t = check_times(start, end)[1]  # numbers, finite, start <= end
+            except (SLRError, BadEvent, TypeError, ValueError) as exc:
                 err = EventRejected(f"{MARK_NAME}({args[0]})^{end}: {exc} (a completeness "
                                     f"mark is written fullyUpdated(p/N)^T or fullyUpdated(p)^T)")
                 err.event = ev
@@ -1055,7 +1085,9 @@ class Synchronizer:
                     finally:
                         self.cond.acquire()
                     continue
-                self.cond.wait(wait)
+                # a deadline far away (a query at 1e12) would overflow the platform's
+                # time_t and kill this thread: wake up hourly instead and look again
+                self.cond.wait(None if wait is None else min(wait, 3600.0))
 
 
 def _close_machine(m: Any, solving: Any) -> None:
@@ -1077,15 +1109,15 @@ def attach(kb: Any) -> Synchronizer:
     """Create the synchronizer of ``kb`` and hook it into its add path."""
     sync = Synchronizer(kb)
     kb.add_listeners.append(sync.on_add)
+    kb.progress_listeners.append(sync.on_progress)
     return sync
 
 
 def _try_run(kb: Any, entry: Any, q: PendingQuery) -> list | None:
-    import sqlite3
-
     from .encoding import Unencodable
+    from .store import DatabaseError
 
     try:
         return entry.run(kb, q.args or {}, q.at, None, q._deadline)
-    except (sqlite3.Error, Unencodable, ValueError, TypeError, KeyError, OverflowError):
+    except (DatabaseError, Unencodable, ValueError, TypeError, KeyError, OverflowError):
         return None

@@ -249,15 +249,18 @@ def from_python(value: Any) -> Any:
 def to_python(t: Any) -> Any:
     """Convert a term into the value handed to callers (SPEC §4).
 
-    Atoms stay :class:`Atom`, strings become ``str``, proper lists become ``list``, compounds
-    :class:`Struct` with converted args, unbound variables stay :class:`Var`.
+    Atoms stay :class:`Atom`, strings become ``str``, proper lists become ``list`` (the
+    empty list ``[]`` too), compounds :class:`Struct` with converted args, unbound variables
+    stay :class:`Var`.
 
-    >>> to_python(make_list([Atom("a"), String("s")]))
-    [Atom('a'), 's']
+    >>> to_python(make_list([Atom("a"), String("s")])), to_python(NIL)
+    ([Atom('a'), 's'], [])
     """
     t = deref(t)
     tt = type(t)
-    if tt is Atom or tt is int or tt is float:
+    if tt is Atom:
+        return [] if t == "[]" else t
+    if tt is int or tt is float:
         return t
     if tt is String:
         return str(t)
@@ -500,9 +503,9 @@ class _Writer:
             self.put(_format_float(t))
         elif tt is bool:
             self.put("true" if t else "false")
-        elif tt is list or tt is tuple:
-            # a Python list inside a returned Struct (to_python): its Prolog text
-            self.term(make_list([from_python(x) for x in t]), prec, operand)
+        elif tt is list:
+            # a list inside a value returned to Python (to_python): Prolog's list text
+            self.term(make_list(t), prec, operand)
         else:
             self.put(str(t))
 

@@ -10,7 +10,8 @@ from typing import Any
 
 from .terms import Atom, String, Struct, Var, deref, is_ground, list_items, make_list
 
-__all__ = ["unify", "undo", "copy_term", "resolve", "unify_tuple", "bound_args"]
+__all__ = ["unify", "undo", "copy_term", "resolve", "unify_tuple", "bound_args", "match_time",
+           "unify_event_row"]
 
 
 def unify(a: Any, b: Any, trail: list) -> bool:
@@ -114,6 +115,41 @@ def unify_tuple(xs: tuple, ys: tuple, trail: list) -> bool:
         if not unify(x, y, trail):
             return False
     return True
+
+
+def match_time(t: Any, stored: float, trail: list) -> bool:
+    """Match a goal's time term with a stored event time (a float) *by value*: an unbound
+    variable is bound to the stored float, a number matches when it is numerically equal
+    (``5`` matches ``5.0``), anything else fails. Stored times only; data arguments and
+    clause heads unify as Prolog terms (``1 \\= 1.0``).
+
+    >>> T = Var("T"); tr = []; match_time(5, 5.0, tr), match_time(T, 5.0, tr), T.ref
+    (True, True, 5.0)
+    """
+    while type(t) is Var:
+        r = t.ref
+        if r is None:
+            t.ref = stored
+            trail.append(t)
+            return True
+        t = r
+    tt = type(t)
+    # exact comparison (Python compares an int with a float exactly); NaN equals nothing
+    return (tt is float or tt is int) and t == stored
+
+
+def unify_event_row(args: tuple, start_term: Any, end_term: Any, values, start: float,
+                    end: float, trail: list) -> bool:
+    """Match an event pattern (data arguments, start and end terms) with a stored row:
+    the data by unification, then the times by value (:func:`match_time`).
+
+    >>> T = Var("T"); unify_event_row((Atom("x"),), T, T, (Atom("x"),), 5.0, 5.0, []), T.ref
+    (True, 5.0)
+    """
+    for x, y in zip(args, values):
+        if not unify(x, y, trail):
+            return False
+    return match_time(start_term, start, trail) and match_time(end_term, end, trail)
 
 
 def bound_args(args: tuple) -> dict:

@@ -17,18 +17,19 @@ PACKAGE = Path(__file__).resolve().parent.parent / "slr_sql"
 # modules of its own family (the same subpackage). Mirrors the table in docs/architecture.md.
 LAYERS = {
     "errors": 0, "terms": 0,
-    "printer": 1, "unify": 1, "arith": 1, "encoding": 1, "program": 1, "parser": 1,
+    "unify": 1, "arith": 1, "encoding": 1, "program": 1, "parser": 1,
     "robotlib": 1, "clocks": 1, "answers": 1, "grammar": 1,
     "store": 2,
     "builtins": 3,
     "analysis": 4, "engine": 4, "sqlcompile": 4,
     "planner": 5,
-    "sync": 6, "buffers": 6, "cep": 6, "plot": 6,
+    "sync": 6, "buffers": 6, "cep": 6, "plot": 6, "subscriptions": 6,
     "kb": 7,
-    "__init__": 8,
-    "demo": 9, "service": 9, "ros": 9,
-    "cli": 10,
-    "__main__": 11,
+    "demo": 8, "service": 8,
+    "ros": 9,  # its request protocol speaks the service's JSON (service/encoding, errors)
+    "__init__": 10,  # the public surface: open() from kb, connect() from service
+    "cli": 11,
+    "__main__": 12,
 }
 
 

@@ -225,6 +225,7 @@ def test_shell_reads_plain_lines_when_stdin_is_not_a_terminal(db, tmp_path):
         "halt.",
         "color(cup1, C)^12.",  # after halt: not run
     ]) + "\n"
+    slr_sql.open(db).close()  # shell does not create a store
     r = slr("shell", db, stdin=script)
     assert r.returncode == 0, r.stderr
     out = r.stdout.splitlines()

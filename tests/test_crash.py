@@ -1,7 +1,9 @@
-"""Durability: an event whose add returned survives SIGKILL of the process that added it."""
+"""Durability: an event whose add returned survives SIGKILL of the process that added it,
+also with several writer processes on one file."""
 from __future__ import annotations
 
 import os
+import random
 import signal
 import sqlite3
 import subprocess
@@ -11,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+import slr_sql
 from slr_sql.store import EventStore
 from slr_sql.terms import make_list
 
@@ -95,3 +98,62 @@ def test_a_killed_batch_is_all_or_nothing(tmp_path):
         assert acknowledged * batch <= written * batch <= count <= (written + 1) * batch
         starts = [start for _, start, _, _ in store.scan("seg", 2)]
     assert starts == [float(k) for k in range(count)]
+
+
+# Several writer processes on one file through the public API, killed together at random
+# points: every event whose add_many returned (acknowledged on stdout) must be stored.
+WRITER = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, {repo!r})
+    import slr_sql
+
+    kb = slr_sql.open({path!r})
+    writer, seq = {writer}, {start}
+    while True:
+        kb.add_many([("w", ("w%d" % writer, seq + k), float(seq + k), float(seq + k))
+                     for k in range(5)])
+        sys.stdout.write("%d\\n" % seq)
+        sys.stdout.flush()
+        seq += 5
+""")
+
+
+def test_concurrent_writers_killed_together_lose_nothing(tmp_path):
+    path = tmp_path / "shared.db"
+    with slr_sql.open(path) as kb:
+        kb.load(":- event(w/2).")
+    rng = random.Random(11)
+    acknowledged: dict[str, set] = {"w0": set(), "w1": set()}
+    for round_ in range(3):
+        writers = [subprocess.Popen(
+            [sys.executable, "-c", WRITER.format(repo=str(REPO), path=str(path), writer=w,
+                                                 start=1_000_000 * round_)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=str(REPO))
+            for w in (0, 1)]
+        try:
+            for w, child in enumerate(writers):
+                for _ in range(rng.randint(5, 40)):
+                    line = child.stdout.readline()
+                    if not line:
+                        raise AssertionError(f"writer died: {child.stderr.read()}")
+                    acknowledged[f"w{w}"].update(range(int(line), int(line) + 5))
+        finally:
+            for child in writers:
+                os.kill(child.pid, signal.SIGKILL)
+            for w, child in enumerate(writers):
+                child.wait()
+                for line in child.stdout.read().split():   # acknowledged before the kill
+                    acknowledged[f"w{w}"].update(range(int(line), int(line) + 5))
+                child.stdout.close()
+                child.stderr.close()
+                assert child.returncode == -signal.SIGKILL
+    conn = sqlite3.connect(path)
+    assert conn.execute("PRAGMA integrity_check").fetchone() == ("ok",)
+    stored: dict[str, set] = {"w0": set(), "w1": set()}
+    for writer, seq in conn.execute("SELECT arg1, arg2 FROM w"):
+        stored[writer].add(seq)
+    conn.close()
+    for writer, seqs in acknowledged.items():
+        assert seqs and seqs <= stored[writer], f"{writer}: lost {sorted(seqs - stored[writer])[:5]}"
+    with slr_sql.open(path) as kb:   # and the file reopens as a knowledge base
+        assert kb.query("w(w0, 0)^_") == [{}]

@@ -11,7 +11,8 @@ bound arguments:
   end <= B, ties all, store order.
 
 Store order is (end, start, arrival). A stamp ``^T`` matches only events with start = end
-(unifiable with T); ``^[S,E]`` matches any. prev/next ignore the stream view (SPEC §2).
+(equal to T by value: ``^2`` matches a stored 2.0); ``^[S,E]`` matches any. prev/next ignore
+the stream view (SPEC §2).
 """
 from __future__ import annotations
 
@@ -25,6 +26,7 @@ from slr_sql import Atom
 TYPES = {"a": 1, "b": 2}
 VALUES = [0, 1, "p", "q"]
 TIMES = [0.0, 1.0, 1.5, 2.0, 3.0]
+INT_TIMES = [0, 1, 2, 3]
 BOUNDS = [0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, math.inf]
 
 
@@ -59,11 +61,15 @@ def pattern(draw, type_name: str | None = None):
 @st.composite
 def goals(draw):
     name, args = draw(pattern())
-    stamp_kind = draw(st.sampled_from(["point", "interval", "interval", "point_const"]))
+    stamp_kind = draw(st.sampled_from(["point", "interval", "interval", "point_const",
+                                       "interval_const"]))
     if stamp_kind == "point":
         stamp = ("point", ("var", "T"))
     elif stamp_kind == "point_const":
-        stamp = ("point", ("const", draw(st.sampled_from(TIMES))))
+        # integer times too: they match the stored float times by value (SPEC: times)
+        stamp = ("point", ("const", draw(st.sampled_from(TIMES + INT_TIMES))))
+    elif stamp_kind == "interval_const":
+        stamp = ("interval", ("const", draw(st.sampled_from(TIMES + INT_TIMES))), ("var", "E"))
     else:
         stamp = ("interval", ("var", "S"), ("var", "E"))
     kind = draw(st.sampled_from(["plain", "plain_at", "prev", "prev_iv", "next2", "next3"]))
@@ -121,13 +127,22 @@ def match(goal, event) -> dict | None:
         binding[p[1]] = value
         return True
 
+    def unify_time(p, stored: float) -> bool:
+        # a stored time matches a goal's time by numeric value (5 matches 5.0)
+        if p[0] == "const":
+            return p[1] == stored
+        if p[1] in binding:
+            return binding[p[1]] == stored
+        binding[p[1]] = stored
+        return True
+
     for p, v in zip(args, eargs):
         if not unify(p, v):
             return None
     if stamp[0] == "point":
-        if not (unify(stamp[1], start) and unify(stamp[1], end)):
+        if not (unify_time(stamp[1], start) and unify_time(stamp[1], end)):
             return None
-    elif not (unify(stamp[1], start) and unify(stamp[2], end)):
+    elif not (unify_time(stamp[1], start) and unify_time(stamp[2], end)):
         return None
     return binding
 

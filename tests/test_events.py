@@ -520,3 +520,19 @@ def test_doctests_of_the_event_rule_modules():
     for module in (cep, rules, sqlgen, where, runtime):
         failures, _ = doctest.testmod(module, verbose=False)
         assert failures == 0, module.__name__
+
+
+def test_subscriptions_deliver_complex_events_and_end_on_their_completeness(kb, clock):
+    kb.load("""
+        :- max_delay(a/1, 1). :- max_delay(b/1, 1). :- max_delay(c/1, 1).
+        n(X) <- (a(X) seq b(X)) cnot c(X).
+    """)
+    got, seen = [], threading.Event()
+    live = kb.subscribe("n(X)^[S, E]", since=0, callback=lambda a: (got.append(a), seen.set()))
+    kb.add_many(["a(1)^1", "b(1)^2", "a(2)^3", "b(2)^4", "c(2)^3.5"])
+    clock.set(10)                       # decided on the clock's move, outside any add
+    assert seen.wait(10)
+    live.close()
+    assert got == [{"X": 1, "S": 1.0, "E": 2.0}]
+    ended = kb.subscribe("n(X)^[S, E]", since=0, until=5)   # n/1 is complete up to 5 now
+    assert list(ended) == [{"X": 1, "S": 1.0, "E": 2.0}]

@@ -101,7 +101,7 @@ def expected_value(data):
 def answer_value(value):
     """An answer value of kb.query -> the same tree as expected_value."""
     if isinstance(value, slr_sql.Atom):
-        return ("list", []) if value == "[]" else ("atom", str(value))
+        return ("atom", str(value))  # the empty list comes back as [], never as an atom
     if isinstance(value, str):
         return ("string", value)
     if isinstance(value, (int, float)):

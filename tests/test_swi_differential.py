@@ -277,7 +277,7 @@ def from_slr(v, varmap: dict) -> tuple:
     if type(v) is list:
         return ("l", tuple(from_slr(x, varmap) for x in v))
     if type(v) is Atom:
-        return ("l", ()) if v == "[]" else ("a", str(v))
+        return ("a", str(v))  # the empty list comes back as [], never as an atom
     if type(v) is str:
         return ("s", v)
     if type(v) is Struct:
@@ -321,6 +321,8 @@ INTS = [0, 1, 2, 3]
 FLOATS = [0.5, 1.5, 2.0]
 STRINGS = ['"s"']
 TIMES = [1.0, 2.0, 3.0]
+# times written in goals: floats, and integers, which match the stored float times by value
+TIME_TEXTS = ["1.0", "2.0", "3.0", "1", "2", "3"]
 CMP_OPS = ["=:=", "=\\=", "<", ">", "=<", ">="]
 ARITH_OPS = ["+", "-", "*", "/", "//", "mod", "max", "min"]
 TERM_TESTS = ["==", "\\==", "@<", "@>=", "=", "\\="]
@@ -399,9 +401,9 @@ class Gen:
             elif stamp == 1:
                 t = self.var()
             elif stamp == 2:
-                t = f"[{self.pick([repr(x) for x in TIMES])}, {self.var()}]"
+                t = f"[{self.pick(TIME_TEXTS)}, {self.var()}]"
             else:
-                t = repr(self.pick(TIMES))
+                t = self.pick(TIME_TEXTS)
             return ("ev", (self.term(), self.term()), t)
         return ("lit", name, tuple(self.term() for _ in range(arity)))
 
@@ -538,17 +540,27 @@ def examples(draw):
             slr.append(fact)
             swi.append(fact)
         g.preds.append((name, arity))
-    # events, as SWI facts in store order (end, start, arrival) before the temporal rules
+    # events, as SWI facts in store order (end, start, arrival) before the temporal rules.
+    # SLR matches a stored event's times by value (SPEC §2, "Times match by value": the
+    # goal ev(..)^2 finds an event stored at 2.0), where SWI would not unify 2 with 2.0; the
+    # SPEC wins, so the oracle models it: the facts are ev_stored/4 with float times, and
+    # the first clause of ev/4 matches a goal's times against them by value ('$tm'/2: an
+    # unbound time is bound to the stored float, a number compares with =:=, anything else
+    # fails) after unifying the data arguments, as slr_sql does. The temporal rules follow
+    # as further clauses of ev/4, unified as Prolog clauses (only stored times go by value).
     events = []
     for _ in range(draw(st.integers(0, 4))):
         s = g.pick(TIMES)
         e = g.pick([t for t in TIMES if t >= s])
         events.append((g.constant(), g.constant(), s, e))
     order = sorted(range(len(events)), key=lambda i: (events[i][3], events[i][2], i))
+    swi.append(":- dynamic(ev_stored/4).")  # no events and no rules: an event goal fails
     for i in order:
         a, b, s, e = events[i]
-        swi.append(f"ev({a}, {b}, {s!r}, {e!r}).")
-    swi.append(":- dynamic(ev/4).")  # no events and no rules: an event goal fails (SPEC §2)
+        swi.append(f"ev_stored({a}, {b}, {s!r}, {e!r}).")
+    swi.append("'$tm'(T, T0) :- var(T), !, T = T0.")
+    swi.append("'$tm'(T, T0) :- number(T), T =:= T0.")
+    swi.append("ev(A, B, S, E) :- ev_stored(A, B, S0, E0), '$tm'(S, S0), '$tm'(E, E0).")
     g.preds.append(("ev", 2))
     if draw(st.booleans()):
         # a temporal rule: answers after the stored events

@@ -1,4 +1,4 @@
--- slr_sql schema, version 3: event rules (complex event processing). See docs/events.md.
+-- slr_sql schema, version 5: event rules (complex event processing). See docs/events.md.
 -- Per rule, slr_sql.cep also creates slr_cep_m_<key> (one row per complex event derived:
 -- the rule's alternative, the rowids of its constituent events r1..rN, its interval and head
 -- arguments h1..hN, and when it was detected) and, for chronological rules, slr_cep_u_<key>

@@ -1,0 +1,286 @@
+"""Service subscriptions: 100 WebSocket subscribers on one ``slr serve`` at 1,000 events/s,
+against the same fan-out in process (``kb.subscribe``) in the same run; and a memory soak.
+
+* **service** — ``slr serve`` on a temporary file store (a real process). ``--subscribers``
+  (100) WebSocket subscriptions to ``e(I)^T`` (``batch`` answers per frame at most) run on
+  one asyncio loop in a child process. The producer (this process) sends ``add_many`` over
+  HTTP in batches of ``--batch-events`` (10) paced to ``--rate`` (1,000) events/s. Latency of
+  one delivery = the time its answer's frame is received minus the time the HTTP
+  ``add_many`` holding the event was answered (0 when the frame came first; both read
+  ``time.monotonic``, one clock for every process on Linux), over the first
+  ``--latency-seconds`` (20). Every subscriber must receive every event, once, in order
+  (counted over the whole run).
+* **soak** — the same run lasts ``--minutes`` (10); the server's RSS (``/proc/PID/status``)
+  is sampled every ``--sample-seconds`` (5): first, last, max and the least-squares slope.
+* **in process** — the same producer pacing (``kb.add_many`` of the same batches) and 100
+  ``kb.subscribe`` subscriptions consumed with ``async for`` on one asyncio loop in the same
+  process, for ``--latency-seconds``: the baseline of the ratio.
+
+Run by hand::
+
+    python benchmarks/bench_service_ws.py                     # 10-minute soak
+    python benchmarks/bench_service_ws.py --minutes 3
+"""
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import multiprocessing as mp
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+import httpx  # noqa: E402
+
+import slr_sql  # noqa: E402
+
+
+def pct(xs: list[float], p: float) -> float:
+    if not xs:
+        return float("nan")
+    xs = sorted(xs)
+    return xs[min(len(xs) - 1, int(p / 100 * len(xs)))]
+
+
+def rss_mb(pid: int) -> float:
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def slope_per_min(samples: list[tuple[float, float]]) -> float:
+    n = len(samples)
+    if n < 2:
+        return 0.0
+    mt = sum(t for t, _ in samples) / n
+    mr = sum(r for _, r in samples) / n
+    var = sum((t - mt) ** 2 for t, _ in samples)
+    return 60 * sum((t - mt) * (r - mr) for t, r in samples) / var if var else 0.0
+
+
+def produce(add_many, rate: float, batch: int, seconds: float, answered: list,
+            stop_latency_at: float) -> tuple[int, float]:
+    """Call ``add_many`` with batches of ``batch`` events ``e(I)^I`` paced to ``rate``
+    events/s for ``seconds``; ``answered[I]`` = when the call holding event I returned
+    (only up to ``stop_latency_at``). Returns the number of events sent and the rate
+    achieved (below ``rate`` when a call takes longer than its share of the period)."""
+    period = batch / rate
+    start = time.monotonic()
+    i = 0
+    k = 0
+    while True:
+        due = start + k * period
+        now = time.monotonic()
+        if due - start >= seconds:
+            break
+        if due > now:
+            time.sleep(due - now)
+        add_many([f"e({j})^{j + 1}" for j in range(i, i + batch)])
+        done = time.monotonic()
+        if done < stop_latency_at:
+            answered.extend([done] * batch)
+        i += batch
+        k += 1
+    return i, i / (time.monotonic() - start)
+
+
+# -- the WebSocket subscribers (a child process) -----------------------------------------------
+
+def ws_subscribers(url: str, n: int, batch: int, ready, conn) -> None:
+    from websockets.asyncio.client import connect
+
+    latency_window = [0.0]                # until when receive times are kept (sent later)
+    counts = [0] * n
+    bad = [0] * n
+    times: list[list[float]] = [[] for _ in range(n)]
+
+    async def one(k: int, started: asyncio.Event, go: list) -> None:
+        async with connect(url, max_size=None) as ws:
+            await ws.send(json.dumps({"op": "subscribe", "pattern": "e(I)^T", "since": 0.5,
+                                      "batch": batch}))
+            json.loads(await ws.recv())
+            go[0] += 1
+            if go[0] == n:
+                started.set()
+            expect = 0
+            mine = times[k]
+            async for data in ws:
+                now = time.monotonic()
+                msg = json.loads(data)
+                answers = msg["answers"] if msg["type"] == "answers" else [msg["answer"]] \
+                    if msg["type"] == "answer" else None
+                if answers is None:
+                    break
+                for a in answers:
+                    if a["I"] != expect:
+                        bad[k] += 1
+                    expect = a["I"] + 1
+                    counts[k] += 1
+                    if now < latency_window[0]:
+                        mine.append(now)
+
+    async def main() -> None:
+        started = asyncio.Event()
+        go = [0]
+        tasks = [asyncio.create_task(one(k, started, go)) for k in range(n)]
+        await started.wait()
+        ready.set()
+        latency_window[0] = (await asyncio.get_running_loop().run_in_executor(
+            None, conn.recv))[0]
+        await asyncio.get_running_loop().run_in_executor(None, conn.poll, None)
+        for t in tasks:
+            t.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+
+    asyncio.run(main())
+    conn.recv()                            # the "stop" message
+    conn.send((counts, bad, times))
+
+
+def run_service(args, tmp: Path) -> dict:
+    db = tmp / "ws.db"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.Popen([sys.executable, "-m", "slr_sql", "serve", str(db), "--port", "0"],
+                            stdout=subprocess.PIPE, stderr=open(tmp / "server.log", "wb"),
+                            env=env)
+    url = proc.stdout.readline().decode().strip().rsplit(" on ", 1)[1]
+    try:
+        client = slr_sql.connect(url)
+        client.add("e(-1)^0")
+        ctx = mp.get_context("spawn")
+        ready = ctx.Event()
+        parent, child = ctx.Pipe()
+        sub_proc = ctx.Process(target=ws_subscribers,
+                               args=(url.replace("http", "ws") + "/subscribe",
+                                     args.subscribers, args.frame_batch, ready, child))
+        sub_proc.start()
+        seconds = args.minutes * 60
+        answered: list[float] = []
+        samples: list[tuple[float, float]] = []
+        if not ready.wait(60):
+            raise RuntimeError("the subscribers did not connect")
+        t0 = time.monotonic()
+        latency_end = t0 + args.latency_seconds
+        parent.send([latency_end])
+        stop = threading.Event()
+
+        def sample() -> None:
+            while not stop.wait(args.sample_seconds):
+                samples.append((time.monotonic() - t0, rss_mb(proc.pid)))
+        sampler = threading.Thread(target=sample, daemon=True)
+        samples.append((0.0, rss_mb(proc.pid)))
+        sampler.start()
+        load_start = os.getloadavg()
+        sent, achieved = produce(client.add_many, args.rate, args.batch_events, seconds, answered,
+                       latency_end)
+        # every event must arrive: wait (bounded) for the stragglers
+        time.sleep(2.0)
+        stop.set()
+        sampler.join()
+        samples.append((time.monotonic() - t0, rss_mb(proc.pid)))
+        parent.send("stop")
+        counts, bad, times = parent.recv()
+        sub_proc.join(30)
+        lat = []
+        for mine in times:
+            for i, t in enumerate(mine):
+                if i < len(answered):
+                    lat.append(max(0.0, t - answered[i]))
+        rss = [r for _, r in samples]
+        client.close()
+        return {"sent": sent, "achieved": achieved, "complete": sum(c == sent for c in counts),
+                "min_count": min(counts), "out_of_order": sum(bad),
+                "p50_ms": 1000 * pct(lat, 50), "p99_ms": 1000 * pct(lat, 99),
+                "max_ms": 1000 * max(lat) if lat else float("nan"), "latencies": len(lat),
+                "rss_first": rss[0], "rss_last": rss[-1], "rss_max": max(rss),
+                "rss_slope_mb_per_min": slope_per_min(samples[len(samples) // 10:]),
+                "rss_samples": len(samples), "load_start": load_start,
+                "load_end": os.getloadavg()}
+    finally:
+        proc.terminate()
+        proc.wait(30)
+
+
+# -- the same fan-out in process -------------------------------------------------------------
+
+def run_in_process(args, tmp: Path) -> dict:
+    kb = slr_sql.open(tmp / "inproc.db")
+    kb.add("e(-1)^0")
+    n = args.subscribers
+    counts = [0] * n
+    times: list[list[float]] = [[] for _ in range(n)]
+    answered: list[float] = []
+    seconds = args.latency_seconds
+    loop = asyncio.new_event_loop()
+    subs = [kb.subscribe("e(I)^T", since=0.5) for _ in range(n)]
+
+    async def one(k: int) -> None:
+        mine = times[k]
+        async for a in subs[k]:
+            mine.append(time.monotonic())
+            counts[k] += 1
+
+    def run_loop() -> None:
+        asyncio.set_event_loop(loop)
+        loop.run_until_complete(asyncio.gather(*[one(k) for k in range(n)],
+                                               return_exceptions=True))
+    thread = threading.Thread(target=run_loop, daemon=True)
+    thread.start()
+    sent, achieved = produce(kb.add_many, args.rate, args.batch_events, seconds, answered, float("inf"))
+    deadline = time.monotonic() + 10
+    while min(counts) < sent and time.monotonic() < deadline:
+        time.sleep(0.05)
+    for s in subs:
+        s.close()
+    thread.join(10)
+    kb.close()
+    lat = [max(0.0, t - answered[i]) for mine in times for i, t in enumerate(mine)
+           if i < len(answered)]
+    return {"sent": sent, "achieved": achieved, "complete": sum(c == sent for c in counts),
+            "p50_ms": 1000 * pct(lat, 50), "p99_ms": 1000 * pct(lat, 99)}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--subscribers", type=int, default=100)
+    ap.add_argument("--rate", type=float, default=1000.0)
+    ap.add_argument("--batch-events", type=int, default=10)
+    ap.add_argument("--frame-batch", type=int, default=256)
+    ap.add_argument("--minutes", type=float, default=10.0)
+    ap.add_argument("--latency-seconds", type=float, default=20.0)
+    ap.add_argument("--sample-seconds", type=float, default=5.0)
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        local = run_in_process(args, tmp)
+        print(f"in process : {args.subscribers} subscribers, {local['sent']} events: "
+              f"{local['complete']} complete (achieved {local['achieved']:.0f} events/s); p50 {local['p50_ms']:.2f} ms, "
+              f"p99 {local['p99_ms']:.2f} ms", flush=True)
+        remote = run_service(args, tmp)
+        print(f"service    : {args.subscribers} WebSocket subscribers, {remote['sent']} events "
+              f"over HTTP add_many x{args.batch_events} at {args.rate:g}/s for "
+              f"{args.minutes:g} min worth (achieved {remote['achieved']:.0f} events/s): {remote['complete']} complete (min count "
+              f"{remote['min_count']}, out of order {remote['out_of_order']}); latency over the "
+              f"first {args.latency_seconds:g} s ({remote['latencies']} deliveries): p50 "
+              f"{remote['p50_ms']:.2f} ms, p99 {remote['p99_ms']:.2f} ms, max "
+              f"{remote['max_ms']:.1f} ms", flush=True)
+        print(f"p99 ratio service / in process: {remote['p99_ms'] / local['p99_ms']:.1f}x")
+        print(f"server RSS: first {remote['rss_first']:.1f} MB, last {remote['rss_last']:.1f} "
+              f"MB, max {remote['rss_max']:.1f} MB, slope {remote['rss_slope_mb_per_min']:+.2f} "
+              f"MB/min ({remote['rss_samples']} samples, first 10% left out of the slope)")
+        print("load average (1, 5, 15 min): start %.2f %.2f %.2f, end %.2f %.2f %.2f"
+              % (*remote["load_start"], *remote["load_end"]))
+
+
+if __name__ == "__main__":
+    main()

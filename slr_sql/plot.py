@@ -1,0 +1,711 @@
+"""Timelines of event histories: ``slr plot`` and ``kb.plot`` (matplotlib, headless).
+
+One row per event type: intervals as bars, points (start = end) as ticks; numeric arguments
+(``values=["seg:2[0]"]``) as lines on axes of their own below the rows; complex events (the
+types an event-rule engine derives) in their own color, with a diamond before the row label.
+
+A history too long for the picture is aggregated in SQL before anything is drawn: when a type
+has more events in the window than the plot has pixel columns (or than ``exact_limit``, when
+given), its events are counted per pixel column
+(``GROUP BY CAST((t - t0) / bin AS INTEGER)``) and the row shows how many events cover each
+column (darker = more); a value line becomes the mean per column inside a min/max envelope.
+The figure then holds a few artists per row whatever the number of events, so a million
+events draw in about a second (``benchmarks/bench_plot.py``).
+
+The module reads the store only through ``source.sql(query, params)`` — a
+:class:`slr_sql.KnowledgeBase`, an :class:`slr_sql.store.EventStore`, or anything with that
+method — so the knowledge base can offer it as ``kb.plot`` without an import cycle.
+matplotlib is imported only when a figure is made (the ``slr_sql[plot]`` extra), and only its
+object-oriented API with the Agg canvas: no pyplot, no display, no global backend change.
+
+>>> import slr_sql
+>>> from slr_sql.plot import timeline
+>>> kb = slr_sql.open()
+>>> kb.add("move(r1)^[2, 8]"); kb.add("bump(r1)^5")
+>>> fig = timeline(kb, start=0, end=10, size=(600, 200))
+>>> [row.label for row in fig.slr_timeline.rows], fig.get_size_inches().tolist()
+(['bump/1', 'move/1'], [6.0, 2.0])
+>>> kb.close()
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Sequence
+
+from .errors import SLRError
+from .store import DatabaseError, quote_identifier
+
+__all__ = [
+    "timeline", "collect_timeline", "draw_timeline", "save_timeline", "parse_value_spec",
+    "parse_size", "Timeline", "TypeRow", "ValueSeries", "EventTypeRef", "ValueSpec",
+    "INSTALL_HINT", "DEFAULT_WIDTH", "DEFAULT_DPI",
+]
+
+INSTALL_HINT = "plots need matplotlib: pip install 'slr_sql[plot]'"
+DEFAULT_WIDTH = 1200         # pixels
+DEFAULT_DPI = 100
+MAX_PIXELS = 20000           # per side: beyond this a PNG is a mistake, not a picture
+
+# Colors: intervals blue, points near-black, complex events red, values purple.
+INTERVAL_COLOR = "#1f77b4"
+POINT_COLOR = "#222222"
+COMPLEX_COLOR = "#d62728"
+VALUE_COLOR = "#6a3d9a"
+COMPLEX_MARK = "\u25c6 "     # ◆ before the label of a complex event type
+
+FONT_PT = 9.0
+BAR_HALF = 0.32              # half the height of an interval bar, in row units
+TICK_HALF = 0.42             # half the height of a point tick
+MAX_LANES = 6                # overlapping intervals of a row are stacked in up to this many lanes
+
+
+# ---------------------------------------------------------------------------------------------
+# What to draw
+# ---------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class EventTypeRef:
+    """One event type of the store and the table holding its events."""
+
+    name: str
+    arity: int
+    table: str
+
+    @property
+    def label(self) -> str:
+        return f"{self.name}/{self.arity}"
+
+
+@dataclass(frozen=True)
+class ValueSpec:
+    """A numeric argument to draw: ``seg:2``, ``seg/2:arg2``, ``tf:3.pose[0][0]``.
+
+    ``argument`` is the 1-based argument index; ``path`` a JSON path inside that argument
+    (``$[0]``, ``$.pose[0][0]``) for lists and compound terms, or None for the whole argument.
+    """
+
+    type_text: str
+    argument: int | None
+    path: str | None
+    text: str
+
+
+@dataclass
+class TypeRow:
+    """The data of one timeline row. ``mode`` is ``"exact"`` (every event: ``intervals`` as
+    (start, end) pairs, ``points`` as times) or ``"binned"`` (``coverage[i]`` = intervals
+    overlapping pixel column i, ``point_counts[i]`` = points falling in it)."""
+
+    type: EventTypeRef
+    complex: bool
+    count: int
+    mode: str
+    intervals: list[tuple[float, float]] = field(default_factory=list)
+    points: list[float] = field(default_factory=list)
+    coverage: Any = None
+    point_counts: Any = None
+
+    @property
+    def label(self) -> str:
+        return self.type.label
+
+
+@dataclass
+class ValueSeries:
+    """The data of one value axes: ``times``/``values`` (exact: one sample per event, at its
+    end time) or per pixel column ``times`` (column centres), ``values`` (mean), ``lows`` and
+    ``highs`` (binned)."""
+
+    spec: ValueSpec
+    type: EventTypeRef
+    complex: bool
+    count: int
+    mode: str
+    times: list[float] = field(default_factory=list)
+    values: list[float] = field(default_factory=list)
+    lows: list[float] = field(default_factory=list)
+    highs: list[float] = field(default_factory=list)
+
+
+@dataclass
+class Timeline:
+    """Everything a figure shows, read from the store; drawing needs nothing else."""
+
+    start: float
+    end: float
+    width: int
+    height: int
+    dpi: int
+    bins: int
+    left: float                     # axes placement, as fractions of the figure
+    right: float
+    top: float
+    bottom: float
+    rows: list[TypeRow]
+    series: list[ValueSeries]
+    title: str
+
+    @property
+    def bin_width(self) -> float:
+        return (self.end - self.start) / self.bins
+
+
+# ---------------------------------------------------------------------------------------------
+# Parsing options
+# ---------------------------------------------------------------------------------------------
+
+_VALUE_SPEC = re.compile(
+    r"(?P<type>[^:]+):(?:arg)?(?P<index>[0-9]+)(?P<path>(?:\[[0-9]+\]|\.[A-Za-z_$][A-Za-z0-9_$]*)*)\Z")
+
+
+def parse_value_spec(text: str) -> ValueSpec:
+    """``TYPE:ARG[PATH]`` as a :class:`ValueSpec`. ARG is the argument's index (from 1) or its
+    column name (``arg2``); PATH reaches into a list or compound argument.
+
+    >>> parse_value_spec("tf/3:3.pose[0][0]")
+    ValueSpec(type_text='tf/3', argument=3, path='$.pose[0][0]', text='tf/3:3.pose[0][0]')
+    >>> parse_value_spec("seg:arg2[1]").path
+    '$[1]'
+    """
+    match = _VALUE_SPEC.match(text.strip()) if isinstance(text, str) else None
+    if match is None:
+        raise SLRError(f"bad value {text!r}: expected TYPE:ARG with ARG an argument index or "
+                       "column name and an optional path into it, e.g. speed:1, seg:2[0], "
+                       "tf:3.pose[0][0]")
+    index = int(match.group("index"))
+    if index < 1:
+        raise SLRError(f"bad value {text!r}: arguments are numbered from 1")
+    path = match.group("path")
+    return ValueSpec(match.group("type").strip(), index, "$" + path if path else None, text.strip())
+
+
+def parse_size(text: str) -> tuple[int, int | None]:
+    """``"1200x400"`` → (1200, 400); ``"1200"`` or ``"1200x"`` → (1200, None): the height
+    follows from the number of rows.
+
+    >>> parse_size("800x300"), parse_size("640")
+    ((800, 300), (640, None))
+    """
+    match = re.fullmatch(r"\s*([0-9]+)\s*(?:[xX×]\s*([0-9]*)\s*)?", text or "")
+    if match is None:
+        raise SLRError(f"bad size {text!r}: expected WIDTHxHEIGHT in pixels, e.g. 1200x400")
+    return int(match.group(1)), int(match.group(2)) if match.group(2) else None
+
+
+def _check_pixels(what: str, value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not 16 <= value <= MAX_PIXELS:
+        raise SLRError(f"the {what} must be a whole number of pixels between 16 and {MAX_PIXELS}, "
+                       f"not {value!r}")
+    return value
+
+
+def _check_time(what: str, value: Any) -> float | None:
+    if value is None:
+        return None
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise SLRError(f"{what} must be a number, not {value!r}") from None
+    if not math.isfinite(number):
+        raise SLRError(f"{what} must be a finite number, not {value!r}")
+    return number
+
+
+# ---------------------------------------------------------------------------------------------
+# Reading the store
+# ---------------------------------------------------------------------------------------------
+
+def _rows(source: Any, query: str, params: Sequence[Any] = ()) -> list[tuple]:
+    try:
+        return list(source.sql(query, tuple(params))[1])
+    except DatabaseError as exc:  # locked, busy, unreadable file: say it in words
+        raise SLRError(f"reading the store for the plot failed: {exc}") from None
+    except SLRError as exc:
+        if type(exc) is not SLRError:  # SLRBusy, SLRTimeout...: the caller may act on the kind
+            raise
+        raise SLRError(f"reading the store for the plot failed: {exc}") from None
+
+
+def store_types(source: Any) -> list[EventTypeRef]:
+    """Every event type in the store's catalog (``slr_event_types``), by name and arity."""
+    rows = _rows(source, "SELECT name, arity, table_name FROM slr_event_types ORDER BY name, arity")
+    return [EventTypeRef(str(name), int(arity), str(table)) for name, arity, table in rows]
+
+
+def _split_type(text: str) -> tuple[str, int | None]:
+    name, slash, arity = text.strip().rpartition("/")
+    if slash and arity.isdigit() and name:
+        return name, int(arity)
+    return text.strip(), None
+
+
+def _resolve_types(catalog: list[EventTypeRef], texts: Iterable[str]) -> list[EventTypeRef]:
+    chosen: list[EventTypeRef] = []
+    for text in texts:
+        if not isinstance(text, str) or not text.strip():
+            raise SLRError(f"an event type is a name or name/arity, not {text!r}")
+        name, arity = _split_type(text)
+        found = [t for t in catalog if t.name == name and (arity is None or t.arity == arity)]
+        if not found:
+            known = ", ".join(t.label for t in catalog) or "none"
+            raise SLRError(f"unknown event type: {text.strip()} (the store has: {known})")
+        chosen.extend(t for t in found if t not in chosen)
+    return chosen
+
+
+def _type_matches(ref: EventTypeRef, names: set[str]) -> bool:
+    return ref.name in names or ref.label in names
+
+
+def _complex_names(source: Any, complex_types: Iterable[str] | None) -> set[str]:
+    """The names (``p`` or ``p/N``) of complex event types. Given explicitly, or asked of
+    the source: an event-rule engine that stores derived events offers
+    ``complex_event_types()`` (an iterable of such names) on the knowledge base."""
+    if complex_types is None:
+        hook = getattr(source, "complex_event_types", None)
+        complex_types = hook() if callable(hook) else ()
+    if isinstance(complex_types, str):
+        complex_types = [complex_types]
+    return {str(name).strip() for name in complex_types}
+
+
+def _window(source: Any, types: list[EventTypeRef], start: float | None,
+            end: float | None) -> tuple[float, float]:
+    """The time window: as given, or the span of the events of ``types`` with a margin."""
+    lo, hi = start, end
+    if lo is None or hi is None:
+        firsts, lasts = [], []
+        for t in types:
+            table = quote_identifier(t.table)
+            # One aggregate per statement: SQLite answers a lone min()/max() from the index.
+            first = _rows(source, f"SELECT min(t_start) FROM {table}")[0][0]
+            last = _rows(source, f"SELECT max(t_end) FROM {table}")[0][0]
+            if first is not None:
+                firsts.append(float(first))
+                lasts.append(float(last))
+        data_lo = min(firsts) if firsts else 0.0
+        data_hi = max(lasts) if lasts else 1.0
+        if lo is not None and hi is None:
+            data_lo = lo
+            data_hi = max(data_hi, lo)
+        if hi is not None and lo is None:
+            data_hi = hi
+            data_lo = min(data_lo, hi)
+        span = data_hi - data_lo
+        margin = span * 0.02 if span > 0 else max(abs(data_hi) * 0.02, 0.5)
+        lo = data_lo - margin if lo is None else lo
+        hi = data_hi + margin if hi is None else hi
+    if not lo < hi:
+        raise SLRError(f"empty time window: from {lo:g} to {hi:g} (from must be before to)")
+    if not math.isfinite(hi - lo):
+        raise SLRError(f"the time window from {lo:g} to {hi:g} is too wide to draw")
+    return float(lo), float(hi)
+
+
+def _collect_row(source: Any, ref: EventTypeRef, is_complex: bool, lo: float, hi: float,
+                 bins: int, exact_limit: int) -> TypeRow:
+    table = quote_identifier(ref.table)
+    # Read the events themselves, up to one more than fits: that answers "exact or binned?"
+    # without a count(*) over a long history.
+    events = _rows(source, f"SELECT t_start, t_end FROM {table} WHERE t_end >= ? AND t_start <= ? "
+                           "ORDER BY t_end, t_start, seq LIMIT ?", (lo, hi, exact_limit + 1))
+    if len(events) <= exact_limit:
+        row = TypeRow(ref, is_complex, len(events), "exact")
+        for s, e in events:
+            if s == e:
+                row.points.append(float(s))
+            else:
+                row.intervals.append((float(s), float(e)))
+        return row
+
+    try:
+        import numpy as np  # comes with matplotlib; only the binned path needs it
+    except ImportError:
+        raise SLRError(INSTALL_HINT) from None
+
+    bin_width = (hi - lo) / bins
+    starts = np.zeros(bins + 1, dtype=np.int64)
+    ends = np.zeros(bins + 1, dtype=np.int64)
+    point_counts = np.zeros(bins, dtype=np.int64)
+    # Per pixel column: how many points fall in it, and where the intervals start and end.
+    # The intervals covering column i are those started at or before i and not ended before i.
+    for b, is_point, n in _rows(
+            source, f"SELECT CAST((max(t_start, ?) - ?) / ? AS INTEGER) AS b, t_start = t_end, "
+                    f"count(*) FROM {table} WHERE t_end >= ? AND t_start <= ? GROUP BY 1, 2",
+            (lo, lo, bin_width, lo, hi)):
+        b = min(int(b), bins - 1)
+        if is_point:
+            point_counts[b] += n
+        else:
+            starts[b] += n
+    if starts.any():
+        for b, n in _rows(
+                source, f"SELECT CAST((min(t_end, ?) - ?) / ? AS INTEGER) AS b, count(*) "
+                        f"FROM {table} WHERE t_end >= ? AND t_start <= ? AND t_start < t_end "
+                        "GROUP BY 1", (hi, lo, bin_width, lo, hi)):
+            ends[min(int(b), bins - 1) + 1] += n
+    # (two statements: an interval added in between could end without having started)
+    coverage = np.maximum(np.cumsum(starts)[:bins] - np.cumsum(ends)[:bins], 0)
+    count = int(starts.sum() + point_counts.sum())
+    return TypeRow(ref, is_complex, count, "binned", coverage=coverage, point_counts=point_counts)
+
+
+def _resolve_value(catalog: list[EventTypeRef], spec: ValueSpec) -> EventTypeRef:
+    name, arity = _split_type(spec.type_text)
+    found = [t for t in catalog if t.name == name and (arity is None or t.arity == arity)]
+    if not found:
+        known = ", ".join(t.label for t in catalog) or "none"
+        raise SLRError(f"bad value {spec.text!r}: unknown event type {spec.type_text} "
+                       f"(the store has: {known})")
+    fitting = [t for t in found if t.arity >= spec.argument]
+    if not fitting:
+        raise SLRError(f"bad value {spec.text!r}: {found[0].label} has {found[0].arity} "
+                       f"argument{'s' if found[0].arity != 1 else ''}, not {spec.argument}")
+    if len(fitting) > 1:
+        raise SLRError(f"bad value {spec.text!r}: {name} has several arities "
+                       f"({', '.join(t.label for t in fitting)}); write {fitting[0].label}:...")
+    return fitting[0]
+
+
+_NUMERIC = "typeof(v) IN ('integer', 'real')"
+
+
+def _collect_series(source: Any, spec: ValueSpec, ref: EventTypeRef, is_complex: bool,
+                    lo: float, hi: float, bins: int, exact_limit: int) -> ValueSeries:
+    table = quote_identifier(ref.table)
+    column = quote_identifier(f"arg{spec.argument}")
+    expr, params = (f"json_extract({column}, ?)", [spec.path]) if spec.path else (column, [])
+    # A JSON path on a value that is not JSON (an atom, a number) is no value, not an error.
+    if spec.path:
+        expr = f"CASE WHEN json_valid({column}) THEN {expr} END"
+    where = "WHERE t_end >= ? AND t_end <= ?"
+    inner = f"SELECT t_start, t_end, seq, {expr} AS v FROM {table} {where}"
+    inner_params = [*params, lo, hi]
+    samples = _rows(source, f"SELECT t_end, v FROM ({inner}) WHERE {_NUMERIC} "
+                            "ORDER BY t_end, t_start, seq LIMIT ?", [*inner_params, exact_limit + 1])
+    if len(samples) <= exact_limit:
+        series = ValueSeries(spec, ref, is_complex, len(samples), "exact")
+        series.times = [float(t) for t, _ in samples]
+        series.values = [float(v) for _, v in samples]
+    else:
+        bin_width = (hi - lo) / bins
+        series = ValueSeries(spec, ref, is_complex, 0, "binned")
+        for b, low, high, mean, n in _rows(
+                source, f"SELECT CAST((t_end - ?) / ? AS INTEGER) AS b, min(v), max(v), avg(v), "
+                        f"count(*) FROM (SELECT t_end, {expr} AS v FROM {table} {where}) "
+                        f"WHERE {_NUMERIC} GROUP BY 1 ORDER BY 1",
+                [lo, bin_width, *inner_params]):
+            b = min(int(b), bins - 1)
+            series.times.append(lo + (b + 0.5) * bin_width)
+            series.values.append(float(mean))
+            series.lows.append(float(low))
+            series.highs.append(float(high))
+            series.count += int(n)
+    if not series.count and _rows(source, f"SELECT 1 FROM {table} {where} LIMIT 1", (lo, hi)):
+        sample = _rows(source, f"SELECT v FROM ({inner}) WHERE v IS NOT NULL LIMIT 1",
+                       inner_params)
+        seen = f" (e.g. {sample[0][0]})" if sample else ""
+        hint = ("; give a path into it, e.g. "
+                f"{spec.type_text}:{spec.argument}[0]" if sample and str(sample[0][0])[:1] in "[{"
+                else "")
+        raise SLRError(f"bad value {spec.text!r}: argument {spec.argument} of {ref.label} has "
+                       f"no numeric values between {lo:g} and {hi:g}{seen}{hint}")
+    return series
+
+
+def _horizontal(width: int, dpi: int, labels: list[str]) -> tuple[float, float]:
+    """Left and right edges of the axes (fractions of the figure width), from sizes in points
+    so that they hold at any dpi: room for the longest row label on the left."""
+    font_px = FONT_PT * dpi / 72.0
+    longest = max((len(label) for label in labels), default=4)
+    left_px = min(max(24 + 0.62 * font_px * (longest + 2), 8 * font_px), 0.45 * width)
+    right_px = 2.2 * font_px
+    return left_px / width, 1 - right_px / width
+
+
+def _vertical(height: int | None, dpi: int, n_rows: int, n_series: int,
+              has_title: bool) -> tuple[int, float, float]:
+    """Figure height (when not given: enough for the rows and value axes) and the top and
+    bottom edges of the axes: room for the title and legend above, the time axis below."""
+    font_px = FONT_PT * dpi / 72.0
+    top_px = (4.6 if has_title else 3.0) * font_px
+    bottom_px = 4.0 * font_px
+    if height is None:
+        inner = (max(n_rows, 1) * 3.2 + n_series * 12.0) * font_px
+        height = min(int(round(max(top_px + bottom_px + inner, 12 * font_px))), MAX_PIXELS)
+    return height, 1 - top_px / height, bottom_px / height
+
+
+def collect_timeline(source: Any, types: Iterable[str] | str | None = None, *,
+                     start: float | None = None, end: float | None = None,
+                     values: Iterable[str] | str = (),
+                     complex_types: Iterable[str] | None = None,
+                     size: tuple[int, int | None] | None = None, dpi: int = DEFAULT_DPI,
+                     title: str | None = None, exact_limit: int | None = None) -> Timeline:
+    """Read what :func:`timeline` draws, without drawing (no matplotlib needed unless a row is
+    binned, which uses numpy). Arguments as for :func:`timeline`.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(); kb.add("move(r1)^[2, 8]")
+    >>> row = collect_timeline(kb, start=0, end=10).rows[0]
+    >>> row.label, row.mode, row.intervals
+    ('move/1', 'exact', [(2.0, 8.0)])
+    >>> kb.close()
+    """
+    if isinstance(types, str):
+        types = [types]
+    if isinstance(values, str):
+        values = [values]
+    width, height = size if size is not None else (DEFAULT_WIDTH, None)
+    width = _check_pixels("width", width)
+    if height is not None:
+        height = _check_pixels("height", height)
+    if isinstance(dpi, bool) or not isinstance(dpi, int) or not 10 <= dpi <= 1000:
+        raise SLRError(f"dpi must be a whole number between 10 and 1000, not {dpi!r}")
+    if exact_limit is not None and (isinstance(exact_limit, bool)
+                                    or not isinstance(exact_limit, int) or exact_limit < 0):
+        raise SLRError(f"exact_limit must be a whole number >= 0, not {exact_limit!r}")
+    lo, hi = _check_time("from", start), _check_time("to", end)
+    if lo is not None and hi is not None and not lo < hi:
+        raise SLRError(f"empty time window: from {lo:g} to {hi:g} (from must be before to)")
+    specs = [parse_value_spec(text) for text in values]
+
+    catalog = store_types(source)
+    complex_names = _complex_names(source, complex_types)
+    value_types = [_resolve_value(catalog, spec) for spec in specs]
+    chosen = _resolve_types(catalog, types) if types is not None else None
+    lo, hi = _window(source, (chosen if chosen is not None else catalog) + value_types, lo, hi)
+
+    candidates = chosen if chosen is not None else catalog
+    left, right = _horizontal(width, dpi, [COMPLEX_MARK + t.label for t in candidates]
+                              + [s.text for s in specs])
+    bins = max(1, int(round(width * (right - left))))  # one bin per pixel column of the axes
+    if exact_limit is None:  # aggregate what does not fit the pixels
+        exact_limit = bins
+    rows = []
+    for ref in candidates:
+        row = _collect_row(source, ref, _type_matches(ref, complex_names), lo, hi, bins,
+                           exact_limit)
+        if row.count or chosen is not None:  # by default, only types with events in the window
+            rows.append(row)
+    series = [_collect_series(source, spec, ref, _type_matches(ref, complex_names), lo, hi,
+                              bins, exact_limit)
+              for spec, ref in zip(specs, value_types)]
+    height, top, bottom = _vertical(height, dpi, len(rows), len(series), bool(title))
+    return Timeline(lo, hi, width, height, dpi, bins, left, right, top, bottom, rows, series,
+                    title or "")
+
+
+# ---------------------------------------------------------------------------------------------
+# Drawing
+# ---------------------------------------------------------------------------------------------
+
+def _matplotlib() -> Any:
+    try:
+        import matplotlib  # noqa: F401
+        from matplotlib.figure import Figure
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+    except ImportError:
+        raise SLRError(INSTALL_HINT) from None
+    return Figure, FigureCanvasAgg
+
+
+def _density_alpha(counts: Any) -> Any:
+    """0 where nothing is, 0.3..1 growing with the logarithm of the count elsewhere."""
+    import numpy as np
+
+    counts = np.asarray(counts, dtype=float)
+    top = counts.max() if counts.size else 0.0
+    if top <= 0:
+        return np.zeros_like(counts)
+    scale = np.log1p(counts) / math.log1p(top)
+    return np.where(counts > 0, 0.3 + 0.7 * scale, 0.0)
+
+
+def _lanes(intervals: list[tuple[float, float]]) -> list[int]:
+    """A lane for each interval (in the order given) so that overlapping intervals of one row
+    sit one above the other: the first lane free at its start, at most MAX_LANES lanes (the
+    rest share the last lane and show through it)."""
+    order = sorted(range(len(intervals)), key=lambda i: intervals[i])
+    lane_ends: list[float] = []
+    lanes = [0] * len(intervals)
+    for i in order:
+        start, end = intervals[i]
+        lane = next((k for k, free_at in enumerate(lane_ends) if free_at <= start), None)
+        if lane is None:
+            if len(lane_ends) < MAX_LANES:
+                lane_ends.append(end)
+                lane = len(lane_ends) - 1
+            else:
+                lane = MAX_LANES - 1
+        lane_ends[lane] = max(lane_ends[lane], end)
+        lanes[i] = lane
+    return lanes
+
+
+def _draw_row(ax: Any, y: int, row: TypeRow, timeline: Timeline) -> None:
+    import numpy as np
+    from matplotlib.collections import PolyCollection
+    from matplotlib.colors import to_rgba
+
+    bar_color = COMPLEX_COLOR if row.complex else INTERVAL_COLOR
+    tick_color = COMPLEX_COLOR if row.complex else POINT_COLOR
+    if row.mode == "exact":
+        if row.intervals:
+            lanes = _lanes(row.intervals)
+            n_lanes = max(lanes) + 1
+            height = 2 * BAR_HALF / n_lanes
+            bottoms = [y - BAR_HALF + lane * height for lane in lanes]
+            # one PolyCollection per row whatever the number of intervals: one artist
+            ax.add_collection(PolyCollection(
+                [[(s, b), (s, b + height), (e, b + height), (e, b)]
+                 for (s, e), b in zip(row.intervals, bottoms)],
+                facecolors=bar_color, edgecolors="white", linewidths=0.5, alpha=0.8,
+                hatch="///" if row.complex else None))
+        if row.points:
+            ax.vlines(row.points, y - TICK_HALF, y + TICK_HALF, colors=tick_color,
+                      linewidth=1.4 if len(row.points) < 200 else 0.8)
+        return
+    # binned: one image strip for the interval coverage, one set of ticks for the points
+    width = timeline.bin_width
+    if row.coverage is not None and row.coverage.any():
+        rgba = np.zeros((1, timeline.bins, 4))
+        rgba[0, :, :3] = to_rgba(bar_color)[:3]
+        rgba[0, :, 3] = _density_alpha(row.coverage)
+        ax.imshow(rgba, extent=(timeline.start, timeline.end, y + BAR_HALF, y - BAR_HALF),
+                  aspect="auto", interpolation="nearest", origin="upper", zorder=2)
+    if row.point_counts is not None and row.point_counts.any():
+        used = np.nonzero(row.point_counts)[0]
+        colors = np.tile(to_rgba(tick_color), (len(used), 1))
+        colors[:, 3] = _density_alpha(row.point_counts)[used]
+        ax.vlines(timeline.start + (used + 0.5) * width, y - TICK_HALF, y + TICK_HALF,
+                  colors=colors, linewidth=1.0)
+
+
+def _draw_series(ax: Any, series: ValueSeries, timeline: Timeline) -> None:
+    color = COMPLEX_COLOR if series.complex else VALUE_COLOR
+    if series.mode == "binned":
+        ax.fill_between(series.times, series.lows, series.highs, color=color, alpha=0.25,
+                        linewidth=0, step="mid")
+        ax.plot(series.times, series.values, color=color, linewidth=1.0)
+    elif series.times:
+        ax.plot(series.times, series.values, color=color, linewidth=1.3,
+                marker="o" if len(series.times) <= 200 else None, markersize=3)
+    if not series.times:
+        ax.text(0.5, 0.5, "no values in the window", transform=ax.transAxes, ha="center",
+                va="center", color="#777777", fontsize=FONT_PT)
+    label = (COMPLEX_MARK if series.complex else "") + series.spec.text
+    ax.set_ylabel(label, fontsize=FONT_PT, rotation=0, ha="right", va="center",
+                  color=color if series.complex else "black")
+    ax.tick_params(labelsize=FONT_PT * 0.85)
+    ax.grid(True, axis="y", color="#e6e6e6", linewidth=0.6)
+
+
+def draw_timeline(timeline: Timeline) -> Any:
+    """The matplotlib Figure of a :class:`Timeline` (Agg canvas; never a window)."""
+    Figure, FigureCanvasAgg = _matplotlib()
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    fig = Figure(figsize=(timeline.width / timeline.dpi, timeline.height / timeline.dpi),
+                 dpi=timeline.dpi)
+    FigureCanvasAgg(fig)
+    n_rows, n_series = len(timeline.rows), len(timeline.series)
+    ratios = [max(n_rows, 1) * 3.2] + [12.0] * n_series
+    grid = fig.add_gridspec(1 + n_series, 1, height_ratios=ratios, left=timeline.left,
+                            right=timeline.right, top=timeline.top, bottom=timeline.bottom,
+                            hspace=0.12 if n_series else 0)
+    ax = fig.add_subplot(grid[0])
+    ax.set_xlim(timeline.start, timeline.end)
+    ax.set_ylim(max(n_rows, 1) - 0.5, -0.5)
+    ax.set_yticks(range(n_rows))
+    ax.set_yticklabels([(COMPLEX_MARK if row.complex else "") + row.label
+                        for row in timeline.rows], fontsize=FONT_PT)
+    for label, row in zip(ax.get_yticklabels(), timeline.rows):
+        if row.complex:
+            label.set_color(COMPLEX_COLOR)
+    ax.tick_params(axis="y", length=0)
+    ax.tick_params(axis="x", labelsize=FONT_PT * 0.85)
+    for y in range(n_rows - 1):
+        ax.axhline(y + 0.5, color="#eeeeee", linewidth=0.6, zorder=0)
+    for y, row in enumerate(timeline.rows):
+        _draw_row(ax, y, row, timeline)
+    if not n_rows:
+        ax.text(0.5, 0.5, f"no events between {timeline.start:g} and {timeline.end:g}",
+                transform=ax.transAxes, ha="center", va="center", color="#777777",
+                fontsize=FONT_PT)
+    axes = [ax]
+    for series in timeline.series:
+        value_ax = fig.add_subplot(grid[len(axes)], sharex=ax)
+        _draw_series(value_ax, series, timeline)
+        axes.append(value_ax)
+    for upper in axes[:-1]:
+        upper.tick_params(axis="x", labelbottom=False)
+    axes[-1].set_xlabel("time (s)", fontsize=FONT_PT)
+
+    # The legend names what the picture shows, and nothing else.
+    plain = [row for row in timeline.rows if not row.complex]
+    handles = []
+    if any(row.intervals or (row.coverage is not None and row.coverage.any()) for row in plain):
+        handles.append(Patch(facecolor=INTERVAL_COLOR, alpha=0.8, label="interval"))
+    if any(row.points or (row.point_counts is not None and row.point_counts.any())
+           for row in plain):
+        handles.append(Line2D([], [], color=POINT_COLOR, linewidth=1.4, label="point"))
+    if any(row.complex and row.count for row in timeline.rows) or any(
+            s.complex and s.count for s in timeline.series):
+        handles.append(Patch(facecolor=COMPLEX_COLOR, alpha=0.8, hatch="///",
+                             label=COMPLEX_MARK + "complex event"))
+    if any(row.mode == "binned" for row in timeline.rows) or any(
+            s.mode == "binned" for s in timeline.series):
+        handles.append(Patch(facecolor="#bbbbbb",
+                             label="binned: darker = more events per pixel column"))
+    if handles:
+        ax.legend(handles=handles, loc="lower right", bbox_to_anchor=(1.0, 1.0),
+                  ncol=len(handles), fontsize=FONT_PT * 0.85, frameon=False, borderaxespad=0.2,
+                  handlelength=1.4)
+    if timeline.title:
+        fig.suptitle(timeline.title, x=timeline.left, ha="left", fontsize=FONT_PT * 1.15,
+                     y=1 - 0.6 * FONT_PT * timeline.dpi / 72 / timeline.height)
+    fig.slr_timeline = timeline  # what was drawn, for callers that want the numbers
+    return fig
+
+
+def timeline(source: Any, types: Iterable[str] | str | None = None, *,
+             start: float | None = None, end: float | None = None,
+             values: Iterable[str] | str = (), complex_types: Iterable[str] | None = None,
+             size: tuple[int, int | None] | None = None, dpi: int = DEFAULT_DPI,
+             title: str | None = None, exact_limit: int | None = None) -> Any:
+    """A timeline of the event histories in ``source`` as a matplotlib Figure.
+
+    ``source`` is anything with ``sql(query, params)`` (a knowledge base or an EventStore).
+    ``types``: event types to draw, each ``name`` (every arity) or ``name/arity``, one row each
+    in that order; default every type with events in the window, by name. ``start``/``end``:
+    the time window (default: the span of the events, plus 2 %). ``values``: numeric arguments
+    drawn as lines, each ``TYPE:ARG`` (``speed:1``, ``seg:arg2[0]``, ``tf:3.pose[0][0]``).
+    ``complex_types``: names of complex event types, marked in red with a diamond; None asks
+    ``source.complex_event_types()`` when the source has it. ``size``: (width, height) in
+    pixels, height None to fit the rows; ``dpi`` scales the text and lines. Types or value
+    series with more events in the window than ``exact_limit`` (default: the number of pixel
+    columns of the plot area) are aggregated per pixel column.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(); kb.add("speed(0.5)^1"); kb.add("speed(0.7)^2")
+    >>> fig = timeline(kb, values=["speed:1"], size=(400, 300), dpi=50)
+    >>> fig.get_size_inches().tolist(), len(fig.axes)
+    ([8.0, 6.0], 2)
+    >>> kb.close()
+    """
+    _matplotlib()  # say how to install matplotlib before reading anything
+    return draw_timeline(collect_timeline(
+        source, types, start=start, end=end, values=values, complex_types=complex_types,
+        size=size, dpi=dpi, title=title, exact_limit=exact_limit))
+
+
+def save_timeline(figure: Any, path: str) -> None:
+    """Write a timeline figure as PNG at its own size and dpi (``slr plot -o``)."""
+    try:
+        figure.savefig(path, dpi=figure.dpi, format="png")
+    except OSError as exc:
+        raise SLRError(f"cannot write {path}: {exc.strerror or exc}") from None

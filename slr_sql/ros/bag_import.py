@@ -1,0 +1,388 @@
+"""Import rosbag1, rosbag2 (sqlite3 or MCAP) and MCAP files into a knowledge base.
+
+Messages are read and decoded with ``rosbags`` from the message definitions stored in the
+bag, so no ROS installation is needed. Each mapped message becomes events (see
+:mod:`slr_sql.ros.mapping`) added with ``kb.add_many`` in batches.
+
+Resuming and idempotence: every batch also stores, for each topic it touched, the event
+``slr_import(BagId, Topic, Count)^T`` — ``BagId`` identifies the bag by its contents
+(topics, types, message counts, first and last record time), ``Count`` is how many of the
+topic's messages (in the bag's order) are imported, ``T`` the record time of the last one.
+It goes in the same ``add_many`` call, so it commits in the same transaction as the data: a
+crash leaves either both or neither. Importing the same bag again skips, per topic, the
+messages already counted (without decoding them), so a finished import adds nothing and an
+interrupted one continues where it stopped.
+
+Messages whose events the store rejects (a NaN in a field, a time that is not finite) or
+that the mapping cannot convert are counted as imported and reported in
+:attr:`ImportReport.rejected` (topic, message number, record time, reason); the other events
+of the batch are stored.
+
+>>> import slr_sql
+>>> kb = slr_sql.open()
+>>> import_bag(kb, "/no/such.bag")
+Traceback (most recent call last):
+...
+slr_sql.ros.bag_import.BagError: cannot read /no/such.bag: no such file or directory
+"""
+from __future__ import annotations
+
+import gc
+import hashlib
+import json
+import queue
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from slr_sql import SLRError
+
+from .mapping import IMPORT_CHECKPOINT, BoundEntry, Mapping, MessageError, normalize_topic
+from . import fast_tf
+
+__all__ = ["import_bag", "ImportReport", "Rejection", "BagError", "open_bag", "bag_id",
+           "ros1_typestore", "TF_MESSAGE_MSGDEF", "DEFAULT_BATCH"]
+
+DEFAULT_BATCH = 10_000  # events per add_many (one transaction, one fsync)
+
+# tf2_msgs/msg/TFMessage as a .msg definition: the ROS 1 Noetic type store of rosbags lacks it.
+TF_MESSAGE_MSGDEF = "geometry_msgs/TransformStamped[] transforms\n"
+
+
+class BagError(SLRError):
+    """A bag that cannot be opened or read."""
+
+
+@dataclass
+class Rejection:
+    """A message that gave no events: ``index`` is its number on the topic (from 1)."""
+
+    topic: str
+    index: int
+    record_time: float
+    reason: str
+
+    def __str__(self) -> str:
+        return f"{self.topic} message {self.index} (recorded at {self.record_time:.9f}): {self.reason}"
+
+
+@dataclass
+class TopicReport:
+    event: str            # event name(s), comma separated
+    msgtype: str
+    messages: int = 0     # messages imported in this run
+    events: int = 0       # events stored in this run
+    skipped: int = 0      # messages already imported by an earlier run
+
+
+@dataclass
+class ImportReport:
+    """What one :func:`import_bag` call did."""
+
+    bag_id: str
+    events: int = 0
+    messages: int = 0
+    skipped: int = 0
+    rejected: list[Rejection] = field(default_factory=list)
+    topics: dict[str, TopicReport] = field(default_factory=dict)
+    unmapped: list[str] = field(default_factory=list)       # topics in the bag left out
+    missing: list[str] = field(default_factory=list)        # mapped topics not in the bag
+
+
+def ros1_typestore() -> Any:
+    """The ROS 1 Noetic type store of ``rosbags`` with ``tf2_msgs/msg/TFMessage`` added (for
+    writing ROS 1 bags, and for ROS 1 bags that carry no definitions).
+
+    >>> "tf2_msgs/msg/TFMessage" in ros1_typestore().fielddefs
+    True
+    """
+    from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    store.register(get_types_from_msg(TF_MESSAGE_MSGDEF, "tf2_msgs/msg/TFMessage"))
+    return store
+
+
+def open_bag(path: str | Path) -> Any:
+    """An opened ``rosbags`` AnyReader on a rosbag1 file (``.bag``), a rosbag2 directory
+    (sqlite3 or MCAP storage), or a single ``.mcap`` / ``.db3`` file. Bags without stored
+    message definitions decode with the standard types (ROS 2 Kilted, or ROS 1 Noetic plus
+    tf2_msgs)."""
+    try:
+        from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError as exc:  # pragma: no cover - the extra is part of the test install
+        raise BagError(f"reading bags needs rosbags ({exc}): pip install 'slr_sql[ros]'") from None
+    path = Path(path)
+    if not path.exists():
+        raise BagError(f"cannot read {path}: no such file or directory")
+    default = ros1_typestore() if path.suffix == ".bag" else get_typestore(Stores.ROS2_KILTED)
+    try:
+        reader = AnyReader([path], default_typestore=default)
+        reader.open()
+    except Exception as exc:  # rosbags raises its own errors, OSError, and a few bare ones
+        reason = " ".join(str(a) for a in exc.args) or type(exc).__name__
+        raise BagError(f"cannot read {path}: {reason}") from None
+    return reader
+
+
+def bag_id(reader: Any) -> str:
+    """A short id of a bag computed from its contents (topics, types, message counts, first
+    and last record time): the same recording has the same id wherever it lies."""
+    summary = {
+        "topics": sorted((name, info.msgtype or "", info.msgcount)
+                         for name, info in reader.topics.items()),
+        "start": reader.start_time if reader.message_count else 0,
+        "end": reader.end_time if reader.message_count else 0,
+        "count": reader.message_count,
+    }
+    digest = hashlib.sha256(json.dumps(summary, sort_keys=True).encode()).hexdigest()
+    return "bag_" + digest[:16]
+
+
+def _checkpoints(kb: Any, bag: str) -> dict[str, int]:
+    done: dict[str, int] = {}
+    for answer in kb.query(f"{IMPORT_CHECKPOINT}(B, Topic, N)^_", args={"B": bag}):
+        topic, count = str(answer["Topic"]), answer["N"]
+        if isinstance(count, int) and count > done.get(topic, 0):
+            done[topic] = count
+    return done
+
+
+class _Plan:
+    """What to do with the messages of one connection."""
+
+    __slots__ = ("topic", "msgtype", "bound", "marks", "fast", "deserialize")
+
+    def __init__(self, topic: str, msgtype: str, bound: list[BoundEntry],
+                 marks: list[tuple[BoundEntry, tuple[str, ...]]], fast: Any, deserialize: Any):
+        self.topic = topic
+        self.msgtype = msgtype
+        self.bound = bound
+        self.marks = marks
+        self.fast = fast
+        self.deserialize = deserialize
+
+
+def import_bag(kb: Any, path: str | Path, mapping: Mapping | None = None,
+               all_topics: bool = False,
+               progress: Callable[[int, int], None] | None = None,
+               batch_size: int = DEFAULT_BATCH) -> ImportReport:
+    """Import the bag at ``path`` into ``kb`` as events, by ``mapping`` (default: the
+    built-in /tf and /tf_static mapping only); ``all_topics`` adds every other topic as an
+    event named after the topic with the message as a term. ``progress(done, total)`` is
+    called after each batch with message counts. Importing the same bag again adds nothing.
+
+    >>> import slr_sql, tempfile, os
+    >>> from slr_sql.ros.bag_import import import_bag
+    >>> report = import_bag(slr_sql.open(), os.devnull)
+    Traceback (most recent call last):
+    ...
+    slr_sql.ros.bag_import.BagError: cannot read /dev/null: Unrecognized storage format ''
+    """
+    mapping = mapping if mapping is not None else Mapping()
+    reader = open_bag(path)
+    # A batch is tens of thousands of young objects without cycles; the cyclic collector
+    # would walk them again and again while they wait for add_many (measured: 10-30 % of
+    # the import's time). Reference counting still frees everything.
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        return _import(kb, reader, mapping, all_topics, progress, max(1, int(batch_size)))
+    finally:
+        if collecting:
+            gc.enable()
+        try:
+            reader.close()
+        except Exception:  # noqa: BLE001 - closing a reader must not hide the real error
+            pass
+
+
+def _plans(reader: Any, mapping: Mapping, all_topics: bool, report: ImportReport) -> dict:
+    fielddefs = reader.typestore.fielddefs
+    plans: dict[int, _Plan] = {}  # by connection id (one bag: ids are unique)
+    seen_names: dict[str, str] = {}
+    deserialize = reader.typestore.deserialize_cdr if reader.is2 else \
+        reader.typestore.deserialize_ros1
+    for conn in reader.connections:
+        topic = normalize_topic(conn.topic)
+        entries = mapping.entries_for(topic, all_topics)
+        marks = mapping.fully_updated_for(topic)
+        if not entries and not marks:
+            if topic not in report.unmapped:
+                report.unmapped.append(topic)
+            continue
+        bound = [e.bind(conn.msgtype, fielddefs) for e in entries]
+        for b in bound:
+            if b.entry.whole_message:
+                other = seen_names.setdefault(b.name, topic)
+                if other != topic:
+                    raise SLRError(f"the topics {other} and {topic} would both become events named "
+                                   f"{b.name}; map one of them in the MAP file")
+        bound_marks = [(m.as_topic_entry().bind(conn.msgtype, fielddefs), m.types) for m in marks]
+        fast = None
+        if len(bound) == 1 and not bound_marks:
+            fast = fast_tf.compile_for(bound[0], conn, reader)
+        plans[conn.id] = _Plan(topic, conn.msgtype, bound, bound_marks, fast, deserialize)
+        names = ", ".join(dict.fromkeys(b.name for b in bound)) or "fullyUpdated"
+        report.topics.setdefault(topic, TopicReport(names, conn.msgtype))
+    mapped = set(mapping.topic_names())
+    present = {normalize_topic(c.topic) for c in reader.connections}
+    report.missing = sorted(mapped - present)
+    return plans
+
+
+@dataclass
+class _Batch:
+    """What the reading thread hands to the storing one."""
+
+    events: list = field(default_factory=list)
+    owners: list = field(default_factory=list)    # owners[i]: (topic, number, record time)
+    checkpoints: list = field(default_factory=list)  # (topic, count, record time)
+    marks: list = field(default_factory=list)     # (event type, time)
+    rejected: list = field(default_factory=list)  # messages the mapping could not convert
+    per_topic: dict = field(default_factory=dict)  # topic -> events in this batch
+    read: int = 0                                 # messages read so far (for progress)
+
+
+_END = object()
+
+
+def _import(kb: Any, reader: Any, mapping: Mapping, all_topics: bool,
+            progress: Callable[[int, int], None] | None, batch_size: int) -> ImportReport:
+    """Reading and decoding run in a second thread while this one stores the previous batch:
+    SQLite releases the GIL while it writes, so on a free core both proceed at once. Batches
+    are stored in order, each with its checkpoints, by the calling thread only."""
+    report = ImportReport(bag_id(reader))
+    plans = _plans(reader, mapping, all_topics, report)
+    if not plans:
+        return report
+    selected = [c for c in reader.connections if c.id in plans]
+    total = sum(c.msgcount for c in selected)
+    done = _checkpoints(kb, report.bag_id)
+    handoff: queue.Queue = queue.Queue(maxsize=2)
+    stop = threading.Event()
+
+    def hand(item: Any) -> bool:
+        while not stop.is_set():
+            try:
+                handoff.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def produce() -> None:
+        try:
+            for batch in _batches(reader, selected, plans, done, report, batch_size):
+                if not hand(batch):
+                    return
+            hand(_END)
+        except BaseException as exc:  # noqa: BLE001 - re-raised in the storing thread
+            hand(exc)
+
+    reading = threading.Thread(target=produce, name="slr-bag-reader", daemon=True)
+    reading.start()
+    try:
+        while True:
+            item = handoff.get()
+            if item is _END:
+                break
+            if isinstance(item, BaseException):
+                raise item
+            _store(kb, report, item)
+            if progress is not None:
+                progress(item.read, total)
+    finally:
+        stop.set()
+        reading.join()
+    return report
+
+
+def _store(kb: Any, report: ImportReport, batch: _Batch) -> None:
+    events = batch.events + [(IMPORT_CHECKPOINT, (report.bag_id, topic, count), at, at)
+                             for topic, count, at in batch.checkpoints]
+    for topic, n in batch.per_topic.items():
+        report.topics[topic].events += n
+    report.rejected += batch.rejected
+    rejected = kb.add_many(events) if events else []
+    for error in rejected:
+        position = getattr(error, "index", None)
+        if not isinstance(position, int) or position >= len(batch.events):
+            raise SLRError(f"the import checkpoint was rejected: {error}")
+        topic, index, at = batch.owners[position]
+        report.rejected.append(Rejection(topic, index, at, str(error)))
+        report.topics[topic].events -= 1
+    report.events += len(batch.events) - len(rejected)
+    for event_type, t in batch.marks:
+        kb.mark_complete(event_type, t)
+
+
+def _batches(reader: Any, selected: list, plans: dict, done: dict, report: ImportReport,
+             batch_size: int) -> Any:
+    """Read, decode and map the selected messages; yields :class:`_Batch` es of about
+    ``batch_size`` events (the last one possibly with none, to carry checkpoints)."""
+    counts: dict[str, int] = {}
+    last_time: dict[str, float] = {}
+    touched: dict[str, None] = {}
+    batch = _Batch()
+    read = 0
+
+    def close(b: _Batch) -> _Batch:
+        b.checkpoints = [(t, counts[t], last_time[t]) for t in touched]
+        b.read = read
+        touched.clear()
+        return b
+
+    # One bag file: read its reader directly (AnyReader merges several bag files through a
+    # heap, a cost per message that a single file does not need).
+    readers = getattr(reader, "readers", ())
+    source = (readers[0].messages(connections=selected) if len(readers) == 1
+              else reader.messages(connections=selected))
+    for conn, stamp, raw in source:
+        plan = plans[conn.id]
+        topic = plan.topic
+        index = counts.get(topic, 0) + 1
+        counts[topic] = index
+        read += 1
+        topic_report = report.topics[topic]
+        record = stamp * 1e-9
+        if index <= done.get(topic, 0):
+            report.skipped += 1
+            topic_report.skipped += 1
+            continue
+        report.messages += 1
+        topic_report.messages += 1
+        last_time[topic] = record
+        touched[topic] = None
+        try:
+            if plan.fast is not None:
+                events = plan.fast(raw, record)
+            else:
+                msg = plan.deserialize(raw, plan.msgtype)
+                events = []
+                for bound in plan.bound:
+                    events += bound.events(msg, record)
+                for bound, types in plan.marks:
+                    for (_, _, t, _) in bound.events(msg, record):
+                        batch.marks.extend((event_type, t) for event_type in types)
+        except (MessageError, ValueError, TypeError, AttributeError, IndexError) as exc:
+            batch.rejected.append(Rejection(topic, index, record, _reason(exc)))
+            continue
+        except Exception as exc:  # rosbags' SerdeError and friends: a message that does not decode
+            batch.rejected.append(Rejection(topic, index, record,
+                                            f"cannot decode the message: {_reason(exc)}"))
+            continue
+        batch.owners += [(topic, index, record)] * len(events)
+        batch.events += events
+        batch.per_topic[topic] = batch.per_topic.get(topic, 0) + len(events)
+        if len(batch.events) >= batch_size:
+            yield close(batch)
+            batch = _Batch()
+    yield close(batch)
+
+
+def _reason(exc: BaseException) -> str:
+    text = " ".join(str(a) for a in exc.args) if exc.args else ""
+    return text or type(exc).__name__

@@ -1,0 +1,625 @@
+"""``slr ros bridge``: a live ROS 2 node (rclpy) that stores mapped topics as events.
+
+* Topics are found on the ROS graph: a mapped topic (or, with ``all_topics``, any topic) is
+  subscribed as soon as a publisher for it appears, with a QoS that matches every publisher
+  (best effort if one of them is, transient local if all of them are, as ``/tf_static``
+  publishers are).
+* Messages arrive as serialized bytes (``raw=True``) and are decoded with ``rosbags`` from the
+  standard ROS 2 definitions plus the MAP's ``definitions``: the same decoder and mapping code
+  as ``slr ros import``. A topic whose message package has no Python module here (tf2_msgs
+  with the ROS 2 wheels) is subscribed through a stand-in type support
+  (:mod:`slr_sql.ros.foreign_types`).
+* Each message becomes events at once (one ``kb.add_many`` per message, or per burst of
+  messages that queued up meanwhile). The event time is
+  the header stamp (or what the MAP says); the arrival time is the store's clock when the
+  store receives it, so the learned maximum delays are the real latencies.
+* ``fully_updated`` entries call ``kb.mark_complete`` for each message on their topic.
+* ``publish`` entries: :meth:`Bridge.publish_answer` turns one answer (a dict of variable
+  values, as a subscription delivers it) into a message on the entry's topic. Feeding it
+  from ``kb.subscribe``: each entry is a subscription whose answers are published.
+
+:func:`run_bridge` is the command: it runs until SIGINT or SIGTERM, then closes the node and
+the store and returns 0.
+
+>>> from slr_sql.ros.bridge import field_value
+>>> field_value(1.25, "builtin_interfaces/Time", "header.stamp")
+{'sec': 1, 'nanosec': 250000000}
+"""
+from __future__ import annotations
+
+import importlib
+import math
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from slr_sql import SLRError, Struct
+
+from . import fast_tf
+from .foreign_types import stand_in_class
+from .mapping import TF_TOPICS, Mapping, PublishEntry, normalize_topic, normalize_type
+
+__all__ = ["Bridge", "BridgeError", "PublishError", "run_bridge", "field_value",
+           "message_class", "BridgeStats"]
+
+# Topics every ROS 2 node has; never events, even with all_topics.
+_SYSTEM_TOPICS = frozenset({"/rosout", "/parameter_events"})
+DISCOVERY_PERIOD = 0.2  # seconds between looks at the ROS graph for new publishers
+MAX_BATCH = 1000        # messages stored in one transaction when they queued up
+
+
+class BridgeError(SLRError):
+    """The bridge cannot start or run (rclpy missing, a bad MAP for the live topics, ...)."""
+
+
+class PublishError(SLRError):
+    """An answer that cannot become a message of the publish entry's type."""
+
+
+def _rclpy() -> Any:
+    try:
+        import rclpy  # noqa: F401
+        import rclpy.node  # noqa: F401
+        import rclpy.qos  # noqa: F401
+    except ImportError as exc:
+        raise BridgeError(
+            f"the bridge needs rclpy ({exc}): pip install 'slr_sql[ros]' (the ROS 2 wheels) "
+            f"or source a ROS 2 installation") from None
+    return sys.modules["rclpy"]
+
+
+def message_class(msgtype: str) -> Any | None:
+    """The rclpy message class of ``pkg/msg/Name``, or None when its Python package is not
+    installed (tf2_msgs has no wheel, for one).
+
+    >>> message_class("no_such_msgs/msg/Nothing") is None
+    True
+    """
+    pkg, _, name = normalize_type(msgtype).partition("/msg/")
+    try:
+        module = importlib.import_module(f"{pkg}.msg")
+    except ImportError:
+        return None
+    return getattr(module, name, None)
+
+
+# ---------------------------------------------------------------------------------------------
+# answers -> messages
+# ---------------------------------------------------------------------------------------------
+
+_INT_TYPES = frozenset({"byte", "char", "int8", "uint8", "int16", "uint16", "int32", "uint32",
+                        "int64", "uint64", "octet"})
+_FLOAT_TYPES = frozenset({"float", "double", "float32", "float64", "long double"})
+_TIME_TYPES = frozenset({"builtin_interfaces/Time", "builtin_interfaces/Duration",
+                         "builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration"})
+
+
+def _element_type(ftype: str) -> str | None:
+    if ftype.startswith("sequence<"):
+        inner = ftype[len("sequence<"):-1]
+        return inner.split(",")[0].strip()
+    if ftype.endswith("]") and "[" in ftype:
+        return ftype[:ftype.index("[")]
+    return None
+
+
+def field_value(value: Any, ftype: str, path: str) -> Any:
+    """An answer value as the Python value of a message field of rclpy type ``ftype``
+    (``double``, ``string``, ``sequence<double>``, ``geometry_msgs/Point``, ...). Nested
+    messages come back as dicts of field values; :func:`_fill` sets them.
+
+    >>> field_value([1, 2.5], "sequence<double>", "data")
+    [1.0, 2.5]
+    """
+    element = _element_type(ftype)
+    if element is not None:
+        if not isinstance(value, list):
+            raise PublishError(f"{path}: expects a list for {ftype}, not {value!r}")
+        return [field_value(v, element, f"{path}[{i}]") for i, v in enumerate(value)]
+    base = ftype.split("<")[0]
+    if base == "boolean":
+        if value in ("true", "false") or isinstance(value, bool):
+            return value is True or value == "true"
+        raise PublishError(f"{path}: expects true or false, not {value!r}")
+    if base in _INT_TYPES:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        raise PublishError(f"{path}: expects an integer for {ftype}, not {value!r}")
+    if base in _FLOAT_TYPES:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        raise PublishError(f"{path}: expects a number for {ftype}, not {value!r}")
+    if base in ("string", "wstring"):
+        if isinstance(value, str):
+            return str(value)
+        if isinstance(value, (int, float)):
+            return str(value)
+        return str(value)  # a compound or list: its Prolog text
+    if base in _TIME_TYPES:
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
+            sec = math.floor(value)
+            nanosec = int(round((value - sec) * 1e9))
+            if nanosec >= 1_000_000_000:
+                sec, nanosec = sec + 1, nanosec - 1_000_000_000
+            return {"sec": int(sec), "nanosec": nanosec}
+        if isinstance(value, Struct) and len(value.args) == 2:
+            return {"sec": value.args[0], "nanosec": value.args[1]}
+        raise PublishError(f"{path}: expects a time in seconds, not {value!r}")
+    if "/" in ftype:  # a nested message: a compound named by its type, fields in order
+        if isinstance(value, Struct):
+            return ("struct", normalize_type(ftype), value)
+        raise PublishError(f"{path}: expects a {ftype} message as a term, not {value!r}")
+    raise PublishError(f"{path}: unsupported field type {ftype}")
+
+
+def _fill(msg: Any, values: dict, path: str) -> None:
+    """Set fields of the rclpy message ``msg`` from ``{field: value}`` (values as
+    :func:`field_value` returns them)."""
+    for name, value in values.items():
+        _set(msg, name, value, f"{path}{name}")
+
+
+def _set(msg: Any, name: str, value: Any, path: str) -> None:
+    if isinstance(value, dict):
+        _fill(getattr(msg, name), value, f"{path}.")
+    elif isinstance(value, tuple) and value and value[0] == "struct":
+        _fill_from_term(getattr(msg, name), value[2], path)
+    elif isinstance(value, list) and value and isinstance(value[0], tuple):
+        items = []
+        for i, (_, msgtype, term) in enumerate(value):  # nested messages, as compounds
+            cls = message_class(msgtype)
+            if cls is None:
+                raise PublishError(f"{path}[{i}]: no Python module for {msgtype}")
+            item = cls()
+            _fill_from_term(item, term, f"{path}[{i}]")
+            items.append(item)
+        setattr(msg, name, items)
+    else:
+        try:
+            setattr(msg, name, value)
+        except (AssertionError, TypeError, ValueError) as exc:
+            raise PublishError(f"{path}: {exc or 'value out of range'}") from None
+
+
+def _fill_from_term(msg: Any, term: Any, path: str) -> None:
+    """Set every field of ``msg`` from a compound whose arguments are its fields in order
+    (the ``--all`` encoding)."""
+    fields = msg.get_fields_and_field_types()
+    if not isinstance(term, Struct) or len(term.args) != len(fields):
+        raise PublishError(f"{path or 'message'}: expects a compound with {len(fields)} "
+                           f"arguments ({', '.join(fields)}), not {term!s}")
+    for (name, ftype), arg in zip(fields.items(), term.args):
+        _set(msg, name, field_value(arg, ftype, f"{path}.{name}" if path else name),
+             f"{path}.{name}" if path else name)
+
+
+def build_message(entry: PublishEntry, cls: Any, answer: dict) -> Any:
+    """The rclpy message of ``entry`` for one answer."""
+    msg = cls()
+    if entry.fields is None:
+        values = [v for k, v in answer.items() if k not in ("T", "S", "E")] or list(answer.values())
+        if len(values) != 1:
+            raise PublishError(f"{entry.where}: without fields, the answer must have one "
+                               f"variable holding the message; it has {sorted(answer)}")
+        _fill_from_term(msg, values[0], "")
+        return msg
+    for path, (kind, value) in entry.fields:
+        if kind == "var":
+            if value not in answer:
+                raise PublishError(f"{entry.where}.fields.{path}: the answer has no variable "
+                                   f"{value} (it has {', '.join(sorted(answer)) or 'none'})")
+            value = answer[value]
+        target, name = _walk(msg, path, entry.where)
+        ftypes = target.get_fields_and_field_types()
+        if name not in ftypes:
+            raise PublishError(f"{entry.where}.fields.{path}: {type(target).__name__} has no "
+                               f"field {name!r} (fields: {', '.join(ftypes)})")
+        _set(target, name, field_value(value, ftypes[name], path), path)
+    return msg
+
+
+def _walk(msg: Any, path: str, where: str) -> tuple[Any, str]:
+    parts = path.split(".")
+    target = msg
+    for part in parts[:-1]:
+        if not hasattr(target, part):
+            raise PublishError(f"{where}.fields.{path}: no field {part!r}")
+        target = getattr(target, part)
+    return target, parts[-1]
+
+
+# ---------------------------------------------------------------------------------------------
+# the node
+# ---------------------------------------------------------------------------------------------
+
+@dataclass
+class BridgeStats:
+    messages: int = 0
+    events: int = 0
+    rejected: int = 0
+    marks: int = 0
+    published: int = 0
+    subscribed: dict = field(default_factory=dict)  # topic -> message type
+
+
+@dataclass
+class _Subscription:
+    topic: str
+    msgtype: str
+    bound: list
+    marks: list
+    fast: Callable | None
+    handle: Any = None
+
+
+class Bridge:
+    """The bridge node. ``start()`` creates it; ``spin_once(timeout)`` serves callbacks;
+    ``close()`` destroys it (the knowledge base stays open: its owner closes it).
+
+    ``on_ready(topic, msgtype)`` is called after each subscription is made;
+    ``log(text)`` receives warnings (a topic that cannot be subscribed, a rejected message).
+    """
+
+    def __init__(self, kb: Any, mapping: Mapping, all_topics: bool = False,
+                 node_name: str = "slr_bridge", log: Callable[[str], None] | None = None,
+                 on_ready: Callable[[str, str], None] | None = None):
+        self.kb = kb
+        self.mapping = mapping
+        self.all_topics = all_topics
+        self.node_name = node_name
+        self.log = log or (lambda text: print(text, file=sys.stderr, flush=True))
+        self.on_ready = on_ready
+        self.stats = BridgeStats()
+        self._subs: dict[str, _Subscription] = {}
+        self._refused: set[str] = set()
+        self._publishers: dict[str, Any] = {}
+        self._publish_classes: dict[str, Any] = {}
+        self._answer_feeds: list = []  # the kb subscriptions feeding the MAP's publish entries
+        # topics that are never events, even with all_topics (the request protocol's own)
+        self.reserved_topics: set[str] = set()
+        self._context = None
+        self._node = None
+        self._executor = None
+        self._typestore = None
+        self._pending_events: list = []
+        self._pending_marks: list = []
+        self._pending_messages = 0
+        clock = getattr(kb, "clock", None)
+        self._now = clock.now if clock is not None and hasattr(clock, "now") else time.time
+
+    # -- lifecycle ------------------------------------------------------------------------
+    def start(self) -> "Bridge":
+        rclpy = _rclpy()
+        from rclpy.executors import SingleThreadedExecutor
+        from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+
+        store = get_typestore(Stores.ROS2_KILTED)
+        for name, text in self.mapping.definitions.items():
+            try:
+                store.register(get_types_from_msg(text, name))
+            except Exception as exc:  # noqa: BLE001 - rosbags' parse errors
+                raise BridgeError(f"definitions.{name}: {exc}") from None
+        self._typestore = store
+        for entry in self.mapping.publish:
+            cls = message_class(entry.msgtype)
+            if cls is None:
+                raise BridgeError(f"{entry.where}.type: no Python module for {entry.msgtype} "
+                                  f"(install its package or source a ROS 2 installation)")
+            self._publish_classes[entry.topic] = cls
+        self._context = rclpy.Context()
+        try:
+            # Our own SIGINT/SIGTERM handling (run_bridge) closes the store cleanly.
+            from rclpy.signals import SignalHandlerOptions
+            rclpy.init(context=self._context, signal_handler_options=SignalHandlerOptions.NO)
+        except ImportError:  # pragma: no cover - older rclpy
+            rclpy.init(context=self._context)
+        from rclpy.node import Node
+
+        self._node = Node(self.node_name, context=self._context)
+        self._executor = _executor(self._context, SingleThreadedExecutor)
+        self._executor.add_node(self._node)
+        for entry in self.mapping.publish:
+            self._publishers[entry.topic] = self._node.create_publisher(
+                self._publish_classes[entry.topic], entry.topic, 10)
+        for entry in self.mapping.publish:
+            self._answer_feeds.append(self._feed(entry))
+        self._discover()
+        self._node.create_timer(DISCOVERY_PERIOD, self._discover)
+        return self
+
+    def spin_once(self, timeout: float = 0.1) -> None:
+        """Serve what arrives within ``timeout`` seconds, then store it. A message that finds
+        the node idle is stored alone, at once; messages that queued up meanwhile (a burst,
+        a slow disk) are taken together and stored in one transaction, so a backlog shrinks
+        instead of growing."""
+        executor = self._executor
+        executor.spin_once(timeout_sec=timeout)
+        while self._pending_messages and self._pending_messages < MAX_BATCH:
+            before = self._pending_messages
+            executor.spin_once(timeout_sec=0)
+            if self._pending_messages == before:
+                break
+        self._flush()
+
+    def _flush(self) -> None:
+        if not self._pending_messages:
+            return
+        events, marks = self._pending_events, self._pending_marks
+        self._pending_events, self._pending_marks, self._pending_messages = [], [], 0
+        if events:
+            rejected = self.kb.add_many(events)
+            self.stats.events += len(events) - len(rejected)
+            for error in rejected:
+                self.stats.rejected += 1
+                self.log(f"warning: event rejected: {error}")
+        for event_type, t in marks:
+            self.kb.mark_complete(event_type, t)
+            self.stats.marks += 1
+
+    def _feed(self, entry: PublishEntry) -> Any:
+        """Subscribe the MAP's publish entry to the knowledge base: every answer of its
+        ``event`` (and ``where``) from now on, incoming or complex, becomes a message."""
+        subscribe = getattr(self.kb, "subscribe", None)
+        if subscribe is None:
+            raise BridgeError(f"{entry.where}: publishing needs subscriptions, which this "
+                              f"knowledge base does not offer")
+
+        def deliver(answer: dict) -> None:  # the subscription's delivery thread
+            if self._node is None:
+                return
+            try:
+                self.publish_answer(entry, answer)
+            except PublishError as exc:  # one bad answer must not stop the others
+                self.log(f"publish {entry.topic}: {exc}")
+
+        return subscribe(entry.event, where=entry.where_goal, since="now", callback=deliver)
+
+    def close(self) -> None:
+        """Stop the publish feeds, destroy the node and its context (idempotent)."""
+        feeds, self._answer_feeds = self._answer_feeds, []
+        for feed in feeds:
+            feed.close()
+        if self._node is not None:
+            try:
+                self._executor.remove_node(self._node)
+                self._node.destroy_node()
+                self._executor.shutdown(timeout_sec=1.0)
+            finally:
+                self._node = None
+                try:
+                    self._context.try_shutdown()
+                except Exception:  # noqa: BLE001 - already shut down
+                    pass
+
+    @property
+    def node(self) -> Any:
+        """The rclpy node (None before ``start()`` and after ``close()``)."""
+        return self._node
+
+    # -- subscriptions --------------------------------------------------------------------
+    def remap_topic(self, topic: str, entries: list | None) -> bool:
+        """Map ``topic`` to ``entries`` at runtime (``None``: stop mapping it). A current
+        subscription of the topic is dropped and, when the topic is still wanted and has a
+        publisher, made again with the new entries; returns whether it is subscribed now.
+        Raises MappingError when the entries do not fit the topic's message type."""
+        topic = normalize_topic(topic)
+        old = self.mapping.topics.get(topic)
+        if entries is None:
+            self.mapping.topics.pop(topic, None)
+        else:
+            self.mapping.topics[topic] = list(entries)
+        self._refused.discard(topic)
+        sub = self._subs.pop(topic, None)
+        if sub is not None:
+            self.stats.subscribed.pop(topic, None)
+            self._node.destroy_subscription(sub.handle)
+        try:
+            self._discover_topics(only=topic, strict=True)
+        except SLRError:
+            if old is None:
+                self.mapping.topics.pop(topic, None)
+            else:
+                self.mapping.topics[topic] = old
+            self._discover_topics(only=topic)
+            raise
+        return topic in self._subs
+
+    def _wanted(self, topic: str) -> bool:
+        if topic in _SYSTEM_TOPICS or topic in self._publishers or topic in self.reserved_topics:
+            return False
+        return bool(self.mapping.entries_for(topic, self.all_topics)
+                    or self.mapping.fully_updated_for(topic))
+
+    def _discover(self) -> None:
+        # (no parameters: rclpy passes a TimerInfo to a timer callback that takes one)
+        self._discover_topics()
+
+    def _discover_topics(self, only: str | None = None, strict: bool = False) -> None:
+        node = self._node
+        if node is None:
+            return
+        for topic, types in node.get_topic_names_and_types():
+            topic = normalize_topic(topic)
+            if only is not None and topic != only:
+                continue
+            if topic in self._subs or topic in self._refused or not self._wanted(topic):
+                continue
+            publishers = node.get_publishers_info_by_topic(topic)
+            if not publishers:
+                continue
+            try:
+                self._subscribe(topic, normalize_type(types[0]), publishers)
+            except SLRError as exc:  # a mapping that does not fit the topic's message type
+                if strict:
+                    raise
+                self._refused.add(topic)
+                self.log(f"warning: {topic}: not subscribed: {exc}")
+
+    def _qos(self, publishers: list) -> Any:
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+        offered = [p.qos_profile for p in publishers]
+        reliable = all(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
+        latched = all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered)
+        return QoSProfile(
+            depth=1000,
+            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+    def _subscribe(self, topic: str, msgtype: str, publishers: list) -> None:
+        fielddefs = self._typestore.fielddefs
+        if msgtype not in fielddefs:
+            self._refused.add(topic)
+            self.log(f"warning: {topic}: no definition of {msgtype}; add it under definitions: "
+                     f"in the MAP")
+            return
+        cls = message_class(msgtype) or stand_in_class(msgtype, self._typestore)
+        if cls is None:
+            self._refused.add(topic)
+            self.log(f"warning: {topic}: cannot subscribe: no Python type support for {msgtype} "
+                     f"here (install its package or source a ROS 2 installation)")
+            return
+        entries = self.mapping.entries_for(topic, self.all_topics)
+        bound = [e.bind(msgtype, fielddefs) for e in entries]
+        marks = [(m.as_topic_entry().bind(msgtype, fielddefs), m.types)
+                 for m in self.mapping.fully_updated_for(topic)]
+        fast = None
+        if len(bound) == 1 and not marks and bound[0].entry.where.startswith("built-in") \
+                and fast_tf._matches(fielddefs, fast_tf._ROS2) and topic in TF_TOPICS:
+            fast = fast_tf.decode_cdr
+        sub = _Subscription(topic, msgtype, bound, marks, fast)
+        sub.handle = self._node.create_subscription(
+            cls, topic, lambda raw, s=sub: self._on_message(s, raw), self._qos(publishers),
+            raw=True)
+        self._subs[topic] = sub
+        self.stats.subscribed[topic] = msgtype
+        if self.on_ready is not None:
+            self.on_ready(topic, msgtype)
+
+    def _on_message(self, sub: _Subscription, raw: bytes) -> None:
+        arrival = float(self._now())
+        self.stats.messages += 1
+        try:
+            if sub.fast is not None:
+                events = sub.fast(raw, arrival)
+                marks = []
+            else:
+                msg = self._typestore.deserialize_cdr(raw, sub.msgtype)
+                events = []
+                for bound in sub.bound:
+                    events += bound.events(msg, arrival)
+                marks = [(t, e[2]) for bound, types in sub.marks
+                         for e in bound.events(msg, arrival) for t in types]
+        except Exception as exc:  # noqa: BLE001 - a message that does not decode or map
+            self.stats.rejected += 1
+            self.log(f"warning: {sub.topic}: message rejected: {exc}")
+            return
+        self._pending_events += events
+        self._pending_marks += marks
+        self._pending_messages += 1
+
+    # -- publishing -----------------------------------------------------------------------
+    def add_publisher(self, entry: PublishEntry) -> None:
+        """Create the publisher of a publish entry made at runtime (one per topic; a second
+        entry on the topic must have the same message type). Raises BridgeError."""
+        cls = message_class(entry.msgtype)
+        if cls is None:
+            raise BridgeError(f"{entry.where}.type: no Python module for {entry.msgtype} "
+                              f"(install its package or source a ROS 2 installation)")
+        current = self._publish_classes.get(entry.topic)
+        if current is not None:
+            if current is not cls:
+                raise BridgeError(f"{entry.where}.topic: {entry.topic} is published already "
+                                  f"with another message type")
+            return
+        self._publish_classes[entry.topic] = cls
+        self._publishers[entry.topic] = self._node.create_publisher(cls, entry.topic, 10)
+
+    def remove_publisher(self, topic: str) -> None:
+        """Destroy the publisher of ``topic`` made by :meth:`add_publisher`."""
+        publisher = self._publishers.pop(topic, None)
+        self._publish_classes.pop(topic, None)
+        if publisher is not None and self._node is not None:
+            self._node.destroy_publisher(publisher)
+
+    def publish_answer(self, entry: PublishEntry, answer: dict) -> Any:
+        """Publish one answer of ``entry``'s subscription as a message on ``entry.topic``;
+        returns the message. This is the one hook a subscription (``kb.subscribe``)
+        calls for each delivered answer.
+
+        Raises :class:`PublishError` when the answer does not fit the message type.
+        """
+        publisher = self._publishers.get(entry.topic)
+        if publisher is None:
+            raise PublishError(f"{entry.where}: the bridge has no publisher for {entry.topic} "
+                               f"(not started, or not an entry of its MAP)")
+        msg = build_message(entry, self._publish_classes[entry.topic], answer)
+        publisher.publish(msg)
+        self.stats.published += 1
+        return msg
+
+
+def _executor(context: Any, fallback: Any) -> Any:
+    """rclpy's events executor (C++, a fraction of the per-message cost of the Python one)
+    where this rclpy has it; the single-threaded executor otherwise."""
+    try:
+        from rclpy.experimental import EventsExecutor
+    except ImportError:
+        return fallback(context=context)
+    return EventsExecutor(context=context)
+
+
+def run_bridge(db: str, mapping: Mapping, all_topics: bool = False,
+               node_name: str = "slr_bridge", synchronous: str = "NORMAL",
+               echo: Callable[[str], None] | None = None) -> int:
+    """Open the store at ``db``, run the bridge until SIGINT or SIGTERM, then close the node
+    and the store; returns the exit status (0)."""
+    import slr_sql
+
+    echo = echo or (lambda text: print(text, flush=True))
+    _rclpy()
+    stop = threading.Event()
+
+    def request_stop(signum: int, frame: Any) -> None:
+        stop.set()
+
+    previous = {s: signal.signal(s, request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    kb = slr_sql.open(db, synchronous=synchronous)
+    bridge = Bridge(kb, mapping, all_topics=all_topics, node_name=node_name,
+                    on_ready=lambda topic, msgtype: echo(f"subscribed {topic} ({msgtype})"))
+    requests = mapping.requests
+    if requests.enabled:  # never stored as events, not even by the first discovery
+        bridge.reserved_topics.update(requests.topics())
+    server = None
+    try:
+        bridge.start()
+        if requests.enabled:  # queries and control over ROS (docs/ros.md, "Requests")
+            from .requests import RequestServer
+
+            server = RequestServer(bridge, requests, node_name=node_name).start()
+            for line in server.resumed:
+                echo(line)
+            echo(f"requests: queries on {requests.query} (answers on {requests.answer}), "
+                 f"control on {requests.control} (replies on {requests.control_reply})")
+        wanted = ", ".join(mapping.topic_names() + [t for t in TF_TOPICS if mapping.tf]) or "-"
+        echo(f"bridge ready: node {node_name}, waiting for publishers on {wanted}"
+             + (" and every other topic" if all_topics else "")
+             + (f"; publishing to {', '.join(e.topic for e in mapping.publish)}"
+                if mapping.publish else ""))
+        while not stop.is_set():
+            bridge.spin_once(0.1)
+    finally:
+        if server is not None:
+            server.close()
+        bridge.close()
+        kb.close()
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    s = bridge.stats
+    echo(f"bridge stopped: {s.events} events from {s.messages} messages"
+         + (f", {s.rejected} rejected" if s.rejected else "")
+         + (f", {s.marks} completeness marks" if s.marks else ""))
+    return 0

@@ -1,0 +1,142 @@
+"""``slr ros import`` and ``slr ros bridge`` (the ``slr_sql[ros]`` extra).
+
+The group is attached to ``slr`` by slr_sql/cli.py. This module imports only click and
+slr_sql at load time, so ``slr --help`` stays fast and works without the extra; each command
+imports ``rosbags`` / ``yaml`` / ``rclpy`` when it runs and says in words what to install
+when they are missing. Errors are :class:`slr_sql.SLRError`, which ``slr`` prints as
+``error: ...`` with exit status 1.
+"""
+from __future__ import annotations
+
+import os
+import sys
+from typing import Any
+
+import click
+
+import slr_sql
+
+from . import EXTRA_HINT
+
+__all__ = ["ros"]
+
+MAX_REJECTIONS_SHOWN = 20
+
+
+def _need_extra(command: str, exc: ImportError) -> slr_sql.SLRError:
+    missing = getattr(exc, "name", None) or str(exc)
+    return slr_sql.SLRError(f"slr ros {command} needs the ROS extra ({missing} is not "
+                            f"installed): {EXTRA_HINT}")
+
+
+def _load_mapping(path: str | None, command: str) -> Any:
+    try:
+        from .mapping import Mapping, load_mapping
+        if path is None:
+            return Mapping()
+        import yaml  # noqa: F401 - the MAP reader needs it; fail here with the hint
+    except ImportError as exc:
+        raise _need_extra(command, exc) from None
+    return load_mapping(path)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+def ros() -> None:
+    """ROS: import bags, or bridge live ROS 2 topics into DB (needs slr_sql[ros])."""
+
+
+@ros.command("import")
+@click.argument("bag", type=click.Path())
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.option("--map", "map_path", type=click.Path(), default=None,
+              help="MAP file (YAML or pub_sub.xml): topics -> events. Default: /tf and "
+                   "/tf_static only.")
+@click.option("--all", "all_topics", is_flag=True,
+              help="Also import every unmapped topic as an event named after the topic, with "
+                   "the message as a term.")
+@click.option("--batch", "batch_size", type=click.IntRange(min=1), default=None,
+              help="Events per transaction (default 10000).")
+def import_command(bag: str, db: str, map_path: str | None, all_topics: bool,
+                   batch_size: int | None) -> None:
+    """Import BAG (rosbag1 .bag, rosbag2 directory, .mcap or .db3) into DB.
+
+    Importing the same bag again adds nothing; an interrupted import continues.
+    Messages that give no event are reported and the exit status is 1.
+    """
+    mapping = _load_mapping(map_path, "import")
+    try:
+        from .bag_import import DEFAULT_BATCH, import_bag
+        import rosbags  # noqa: F401
+    except ImportError as exc:
+        raise _need_extra("import", exc) from None
+    if not os.path.exists(bag):
+        raise slr_sql.SLRError(f"no such bag: {bag}")
+    from rich.console import Console
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
+                               TimeRemainingColumn)
+
+    console = Console(stderr=True)
+    with slr_sql.open(db) as kb, Progress(
+            TextColumn("[progress.description]{task.description}"), BarColumn(),
+            MofNCompleteColumn(), TimeRemainingColumn(), console=console,
+            transient=True) as bar:
+        task = bar.add_task(f"importing {os.path.basename(os.path.normpath(bag))}", total=None)
+
+        def progress(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        report = import_bag(kb, bag, mapping, all_topics=all_topics, progress=progress,
+                            batch_size=batch_size or DEFAULT_BATCH)
+    _print_report(report, bag)
+    if report.rejected:
+        sys.exit(1)
+
+
+def _print_report(report: Any, bag: str) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    if report.topics:
+        table = Table("topic", "type", "event", "messages", "events", "already imported")
+        for topic, t in sorted(report.topics.items()):
+            table.add_row(topic, t.msgtype, t.event, str(t.messages), str(t.events), str(t.skipped))
+        Console(highlight=False, width=None if sys.stdout.isatty() else 200).print(table)
+    if report.unmapped:
+        click.echo(f"not imported (no mapping; --all imports them): {', '.join(report.unmapped)}")
+    if report.missing:
+        click.echo(f"mapped but not in the bag: {', '.join(report.missing)}")
+    for rejection in report.rejected[:MAX_REJECTIONS_SHOWN]:
+        click.echo(f"{bag}: {rejection}", err=True)
+    if len(report.rejected) > MAX_REJECTIONS_SHOWN:
+        click.echo(f"{bag}: ... and {len(report.rejected) - MAX_REJECTIONS_SHOWN} more rejected "
+                   f"messages", err=True)
+    click.echo(f"imported {report.events} event{'s' if report.events != 1 else ''} from "
+               f"{report.messages} message{'s' if report.messages != 1 else ''}"
+               + (f" ({report.skipped} already imported)" if report.skipped else "")
+               + (f", {len(report.rejected)} rejected" if report.rejected else "")
+               + f" [{report.bag_id}]")
+
+
+@ros.command("bridge")
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.option("--map", "map_path", type=click.Path(), default=None,
+              help="MAP file (YAML or pub_sub.xml). Default: /tf and /tf_static only.")
+@click.option("--all", "all_topics", is_flag=True,
+              help="Also store every other topic, as `slr ros import --all` does.")
+@click.option("--node-name", default="slr_bridge", show_default=True, help="The ROS node name.")
+@click.option("--synchronous", type=click.Choice(["NORMAL", "FULL"]), default="NORMAL",
+              show_default=True,
+              help="SQLite durability: NORMAL survives a crash of the process, FULL also a "
+                   "power cut (an fsync per message).")
+def bridge_command(db: str, map_path: str | None, all_topics: bool, node_name: str,
+                   synchronous: str) -> None:
+    """Run a ROS 2 node storing mapped topics in DB as events, until SIGINT or SIGTERM."""
+    mapping = _load_mapping(map_path, "bridge")
+    try:
+        import rosbags  # noqa: F401
+
+        from .bridge import run_bridge
+    except ImportError as exc:
+        raise _need_extra("bridge", exc) from None
+    sys.exit(run_bridge(db, mapping, all_topics=all_topics, node_name=node_name,
+                        synchronous=synchronous))

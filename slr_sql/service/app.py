@@ -1,0 +1,1078 @@
+"""The network service: one knowledge base served over HTTP/JSON and WebSocket (starlette).
+
+:func:`create_app` returns a plain Starlette application with explicit routes; it does not own
+the knowledge base (whoever opened it closes it), so it can be mounted inside a larger ASGI
+application (``Mount("/slr", app=create_app(kb))``). ``slr serve`` runs it on uvicorn
+(:mod:`slr_sql.service.cli`). The endpoints, the JSON encoding of terms and the errors are
+described in ``docs/service.md``; ``GET /openapi.json`` describes the same routes.
+
+Every knowledge-base call that may block (SQLite, evaluation, a lock) runs in starlette's
+thread pool; the KnowledgeBase serializes its store access with a lock and keeps no per-call
+state on itself, so calls from several threads are safe. Waiting is never done on a thread:
+a long-poll for a synchronized query awaits the query's future on the event loop, and a
+subscription is consumed with ``async for`` on the event loop (no thread per subscriber).
+
+>>> import slr_sql
+>>> kb = slr_sql.open()
+>>> app = create_app(kb, token="secret")
+>>> sorted({r.path for r in app.routes})[:3]
+['/add', '/add_event', '/add_many']
+>>> kb.close()
+"""
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import hmac
+import inspect
+import logging
+import math
+import re
+import time
+import uuid
+from dataclasses import dataclass
+from typing import Any, Awaitable, Callable
+
+from starlette.applications import Starlette
+from starlette.concurrency import run_in_threadpool
+from starlette.exceptions import HTTPException
+from starlette.requests import Request
+from starlette.responses import Response
+from starlette.routing import Route, WebSocketRoute
+from starlette.websockets import WebSocket, WebSocketDisconnect
+
+import slr_sql
+from slr_sql import EventRejected, SLRError, SLRTimeout
+
+from .encoding import (decode_args, decode_arguments, decode_term, dumps, encode_answers,
+                       encode_plain, loads)
+from .errors import ServiceError, error_body
+
+__all__ = ["create_app", "Limits", "API_VERSION"]
+
+log = logging.getLogger("slr_sql.service")
+
+API_VERSION = "1"
+
+
+@dataclass
+class Limits:
+    """What one request may cost the server (``slr serve`` options of the same names)."""
+
+    max_body: int = 1 << 20          # bytes of a request body or WebSocket message (413 beyond)
+    max_query_time: float = 30.0     # seconds a query may run (its timeout=, capped)
+    max_wait: float = 3600.0         # seconds a synchronized query may wait (submit timeout=)
+    max_poll: float = 30.0           # seconds one long-poll GET waits before "not done yet"
+    body_timeout: float = 30.0       # seconds to receive a request body (408 beyond)
+    result_ttl: float = 600.0        # seconds a finished submitted query's answer is kept
+    max_pending: int = 10_000        # submitted queries kept at once (503 beyond)
+    sql_timeout: float = 30.0        # seconds a read-only SQL statement may run
+    subscribe_queue: int = 1000      # answers held in memory per WebSocket subscriber
+
+
+# -- small helpers -----------------------------------------------------------------------------
+
+def _json(obj: Any, status: int = 200, headers: dict | None = None) -> Response:
+    return Response(dumps(obj), status_code=status, media_type="application/json",
+                    headers=headers)
+
+
+def _error_response(exc: BaseException) -> Response:
+    body = error_body(exc)
+    status = body["error"]["status"]
+    headers = {"WWW-Authenticate": 'Bearer realm="slr"'} if status == 401 else None
+    return _json(body, status, headers)
+
+
+def _classify(exc: BaseException) -> BaseException:
+    """Exceptions that escape the knowledge base without being SLRErrors become the error
+    the client sees: input it could not take is the request's fault (400), a locked or busy
+    file is 503, anything else an internal error (500, logged with its traceback)."""
+    if isinstance(exc, SLRError):
+        return exc
+    if type(exc).__module__ == "sqlite3":
+        text = str(exc)
+        if "locked" in text or "busy" in text:
+            return ServiceError(f"the store is busy: {text}", kind="Unavailable")
+        log.error("SQLite error", exc_info=exc)
+        return exc
+    if isinstance(exc, (TypeError, ValueError, UnicodeError, OverflowError, RecursionError,
+                        ArithmeticError)):
+        log.warning("input the knowledge base did not take: %r", exc)
+        reason = "too deeply nested" if isinstance(exc, RecursionError) else str(exc)
+        return ServiceError(f"bad request: {reason}", kind="BadRequest")
+    log.error("internal error", exc_info=exc)
+    return exc
+
+
+def _field(body: dict, name: str, types: type | tuple, *, required: bool = False,
+           default: Any = None) -> Any:
+    value = body.get(name, default)
+    if value is None:
+        if required:
+            raise ServiceError(f'"{name}" is required', kind="BadRequest")
+        return default
+    if isinstance(value, bool) and bool not in (types if isinstance(types, tuple) else (types,)):
+        raise ServiceError(f'"{name}" must be {_type_words(types)}, not a boolean')
+    if not isinstance(value, types):
+        raise ServiceError(f'"{name}" must be {_type_words(types)}, not {type(value).__name__}')
+    return value
+
+
+def _type_words(types: type | tuple) -> str:
+    names = {str: "a string", int: "an integer", float: "a number", bool: "true or false",
+             list: "an array", dict: "an object"}
+    types = types if isinstance(types, tuple) else (types,)
+    return " or ".join(dict.fromkeys(names.get(t, t.__name__) for t in types))
+
+
+def _number(body: dict, name: str, *, required: bool = False, minimum: float | None = None) -> Any:
+    """A JSON number, or a tagged float (``{"$float": "inf"}``), as float (None if absent)."""
+    value = body.get(name)
+    if value is None:
+        if required:
+            raise ServiceError(f'"{name}" is required', kind="BadRequest")
+        return None
+    if isinstance(value, dict):
+        value = decode_term(value, _where=name)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ServiceError(f'"{name}" must be a number', kind="BadRequest")
+    try:
+        number = float(value)
+    except OverflowError:
+        raise ServiceError(f'"{name}" is out of range', kind="BadRequest") from None
+    if minimum is not None and not number >= minimum:
+        raise ServiceError(f'"{name}" must be a number >= {minimum:g}', kind="BadRequest")
+    return number
+
+
+def _query_number(request: Request, name: str) -> float:
+    """A non-negative number from the query string (0 when absent)."""
+    text = request.query_params.get(name)
+    if text is None:
+        return 0.0
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not value >= 0:
+        raise ServiceError(f'the query parameter "{name}" must be a number >= 0')
+    return value
+
+
+def _cap(requested: float | None, limit: float) -> float:
+    return limit if requested is None else min(requested, limit)
+
+
+def _plain(value: Any) -> Any:
+    """Library values (dataclasses, tuples) as plain JSON values."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        value = dataclasses.asdict(value)
+    elif isinstance(value, list):
+        value = [_plain(v) for v in value]
+    return encode_plain(value)
+
+
+# -- the route table (routes and the OpenAPI description come from it) ------------------------
+
+@dataclass
+class _Endpoint:
+    method: str
+    path: str
+    handler: Callable[..., Awaitable[Any]]
+    summary: str
+    body: dict | None = None      # field -> (schema name, required)
+    query: dict | None = None     # query parameter -> (schema name, required)
+    response: dict | None = None  # field -> schema name
+    auth: bool = True
+
+
+_ROUTE_PARAM = re.compile(r"\{(\w+)(?::\w+)?\}")
+
+
+class _Service:
+    """State shared by the endpoints: the knowledge base, the token, the limits and the
+    submitted queries (handle -> _Submitted)."""
+
+    def __init__(self, kb: Any, token: str | None, limits: Limits):
+        self.kb = kb
+        self.token = token.encode("utf-8") if token else None
+        self.limits = limits
+        self.submitted: dict[str, _Submitted] = {}
+        self.endpoints = _ENDPOINTS
+        params = _parameters(kb.load)
+        self.load_takes_name = "name" in params and "replace" in params
+        self.load_takes_filename = "filename" in params
+
+    # -- plumbing -----------------------------------------------------------------------------
+    def check_token(self, header: str | None) -> None:
+        if self.token is None:
+            return
+        given = b""
+        if header and header[:7].lower() == "bearer ":
+            given = header[7:].strip().encode("utf-8", "surrogatepass")
+        if not hmac.compare_digest(given, self.token):
+            raise ServiceError("a valid token is required (Authorization: Bearer TOKEN; "
+                               "the server's --token or SLR_TOKEN)", kind="Unauthorized")
+
+    async def body(self, request: Request) -> dict:
+        """The request's JSON object, read within the size and time limits."""
+        limit = self.limits.max_body
+        length = request.headers.get("content-length")
+        if length is not None:
+            try:
+                declared = int(length)
+            except ValueError:
+                raise ServiceError("bad Content-Length header") from None
+            if declared > limit:
+                await self._discard(request, declared)
+                raise ServiceError(f"request body of {declared} bytes is larger than the "
+                                   f"limit of {limit} bytes", kind="PayloadTooLarge")
+        chunks: list[bytes] = []
+
+        async def read() -> None:
+            size = 0
+            async for chunk in request.stream():
+                size += len(chunk)
+                if size > limit:
+                    raise ServiceError(f"request body larger than the limit of {limit} bytes",
+                                       kind="PayloadTooLarge")
+                chunks.append(chunk)
+        try:
+            await asyncio.wait_for(read(), self.limits.body_timeout)
+        except asyncio.TimeoutError:
+            raise ServiceError(f"the request body did not arrive within "
+                               f"{self.limits.body_timeout:g} s", kind="RequestTimeout") from None
+        data = b"".join(chunks)
+        request.state.body = data
+        if not data.strip():
+            return {}
+        try:
+            obj = loads(data)
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise ServiceError(f"the body is not valid JSON: {exc}") from None
+        if type(obj) is not dict:
+            raise ServiceError("the body must be a JSON object")
+        return obj
+
+    async def _discard(self, request: Request, declared: int) -> None:
+        """Read (and drop) a body that is too large but not absurdly so, so the client reads
+        the 413 instead of a connection reset; a larger one is cut off."""
+        if declared > 64 * self.limits.max_body:
+            return
+
+        async def drain() -> None:
+            async for _ in request.stream():
+                pass
+        try:
+            await asyncio.wait_for(drain(), self.limits.body_timeout)
+        except (asyncio.TimeoutError, Exception):
+            pass
+
+    def starlette_routes(self) -> list:
+        routes: dict[str, list[_Endpoint]] = {}
+        for e in self.endpoints:
+            routes.setdefault(e.path, []).append(e)
+        out: list = []
+        for path, endpoints in routes.items():
+            out.append(Route(path, self._dispatch(endpoints),
+                             methods=[e.method for e in endpoints]))
+        out.append(WebSocketRoute("/subscribe", self.subscribe))
+        return out
+
+    def _dispatch(self, endpoints: list[_Endpoint]) -> Callable:
+        by_method = {e.method: e for e in endpoints}
+
+        async def handle(request: Request) -> Response:
+            e = by_method.get(request.method) or by_method.get("GET")
+            try:
+                if e.auth:
+                    self.check_token(request.headers.get("authorization"))
+                result = await e.handler(self, request)
+                status = 200
+                if isinstance(result, tuple):
+                    status, result = result
+                return _json(result, status)
+            except Exception as exc:  # every failure is an error response, never a crash
+                return _error_response(_classify(exc))
+        return handle
+
+    async def call(self, fn: Callable, *args: Any, **kwargs: Any) -> Any:
+        """Run a blocking knowledge-base call on the thread pool."""
+        return await run_in_threadpool(fn, *args, **kwargs)
+
+    # -- submitted queries ----------------------------------------------------------------------
+    def _entry(self, request: Request) -> "_Submitted":
+        handle = request.path_params["handle"]
+        entry = self.submitted.get(handle)
+        if entry is None:
+            raise ServiceError(f"no submitted query {handle!r} (unknown, cancelled, or its "
+                               f"answer expired after {self.limits.result_ttl:g} s)",
+                               kind="NotFound")
+        return entry
+
+    async def _poll(self, entry: "_Submitted", wait: float) -> Any:
+        wait = min(wait, self.limits.max_poll)
+        if wait > 0 and not entry.pending.done():
+            await asyncio.wait({entry.waiter}, timeout=wait)
+        pending = entry.pending
+        state: dict[str, Any] = {"handle": entry.handle, "id": pending.id,
+                                 "done": pending.done()}
+        if not pending.done():
+            return 202, state
+        if pending.cancelled():
+            state["cancelled"] = True
+            return state
+        if hasattr(pending, "explain"):
+            try:
+                state["explain"] = pending.explain()
+            except Exception:  # an explanation is a courtesy; the answer matters
+                log.warning("PendingQuery.explain failed", exc_info=True)
+        exc = pending.exception()
+        if exc is not None:
+            body = error_body(_classify(exc))
+            body.update(state)
+            return body["error"]["status"], body
+        state["answers"] = encode_answers(pending.result())
+        return state
+
+    def _expire(self) -> None:
+        now = time.monotonic()
+        ttl = self.limits.result_ttl
+        for handle in [h for h, s in self.submitted.items()
+                       if s.finished_at is not None and now - s.finished_at > ttl]:
+            del self.submitted[handle]
+
+    # -- subscriptions over WebSocket --------------------------------------------------------
+    async def subscribe(self, websocket: WebSocket) -> None:
+        """``/subscribe``: see docs/service.md, "Subscriptions". One subscription per
+        connection; answers are delivered in order with a sequence number.
+
+        The subscription is consumed with ``async for`` on the event loop (the knowledge
+        base's hub thread wakes it through ``call_soon_threadsafe``), so a subscriber costs
+        no thread. Each send awaits the socket's drain: a slow client holds back only its
+        own subscription, whose bounded queue (``subscribe_queue``) then makes it read the
+        store at its own pace and, too far behind, end with an overflow error."""
+        await websocket.accept()
+        sub = None
+        watcher = None
+        closing: list = []
+        try:
+            request = await self._first_message(websocket)
+            self.check_token(websocket.headers.get("authorization")
+                             or (f"Bearer {request['token']}" if isinstance(request.get("token"), str)
+                                 else None))
+            pattern, kwargs = _subscribe_request(request)
+            batch = _batch_size(request)
+            if not hasattr(self.kb, "subscribe"):
+                raise ServiceError("subscriptions are not available: this knowledge base has "
+                                   "no subscribe() yet", kind="NotImplemented")
+            if "max_queue" in _parameters(self.kb.subscribe):
+                kwargs["max_queue"] = max(self.limits.subscribe_queue, batch)
+            sub = await self.call(self.kb.subscribe, pattern, **kwargs)
+            await websocket.send_text(dumps({"type": "subscribed", "pattern": pattern,
+                                             "id": kwargs.get("id")}).decode("utf-8"))
+            watcher = asyncio.create_task(self._watch_client(websocket, sub, closing))
+            seq = 0
+            failure: BaseException | None = None
+            async for answer in sub:
+                answers = [answer]
+                while len(answers) < batch:        # what is queued already goes along
+                    try:
+                        more = sub.get(timeout=0)
+                    except SLRTimeout:
+                        break
+                    except SLRError as exc:        # sent after the answers before it
+                        failure = exc
+                        break
+                    if more is None:               # ended: "end" follows these answers
+                        break
+                    answers.append(more)
+                if len(answers) == 1:
+                    seq += 1
+                    frame = {"type": "answer", "seq": seq,
+                             "answer": encode_answers(answers)[0]}
+                else:
+                    frame = {"type": "answers", "seq": seq + 1,
+                             "answers": encode_answers(answers)}
+                    seq += len(answers)
+                await websocket.send_text(dumps(frame).decode("utf-8"))
+                if failure is not None:
+                    raise failure
+            if not closing:
+                await websocket.send_text('{"type":"end"}')
+                await websocket.close(1000)
+        except WebSocketDisconnect:
+            pass
+        except Exception as exc:
+            if not closing:
+                await _send_error(websocket, _classify(exc))
+        finally:
+            if watcher is not None:
+                watcher.cancel()
+            if sub is not None and not closing:
+                await self._close_subscription(sub)
+            elif closing:
+                await closing[0]
+
+    async def _watch_client(self, websocket: WebSocket, sub: Any, closing: list) -> None:
+        """Read what the client sends after subscribing; when it closes (close frame,
+        ``{"op": "close"}`` or a vanished peer) close the subscription, which ends the
+        ``async for`` that delivers it."""
+        try:
+            while True:
+                message = await websocket.receive()
+                if message["type"] == "websocket.disconnect":
+                    break
+                text = message.get("text")
+                if text and '"close"' in text:
+                    break
+        except Exception:  # the peer vanished
+            pass
+        closing.append(asyncio.ensure_future(self._close_subscription(sub)))
+
+    async def _close_subscription(self, sub: Any) -> None:
+        try:
+            await self.call(sub.close)
+        except Exception:
+            log.warning("closing a subscription failed", exc_info=True)
+
+    async def _first_message(self, websocket: WebSocket) -> dict:
+        try:
+            message = await asyncio.wait_for(websocket.receive(), self.limits.body_timeout)
+        except asyncio.TimeoutError:
+            raise ServiceError(f"no subscribe message within {self.limits.body_timeout:g} s",
+                               kind="RequestTimeout") from None
+        if message["type"] == "websocket.disconnect":
+            raise WebSocketDisconnect(message.get("code", 1000))
+        data = message.get("text")
+        if data is None:
+            data = message.get("bytes") or b""
+        try:
+            request = loads(data)
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise ServiceError(f"the subscribe message is not valid JSON: {exc}") from None
+        if type(request) is not dict or request.get("op") != "subscribe":
+            raise ServiceError('the first message must be {"op": "subscribe", "pattern": ...}')
+        return request
+
+    # -- OpenAPI ----------------------------------------------------------------------------
+    def openapi(self) -> dict:
+        paths: dict[str, dict] = {}
+        for e in self.endpoints:
+            path = _ROUTE_PARAM.sub(r"{\1}", e.path)
+            op: dict[str, Any] = {"summary": e.summary, "operationId": f"{e.method.lower()}"
+                                  f"{path.replace('/', '_').replace('{', '').replace('}', '')}",
+                                  "responses": _responses(e)}
+            params = [{"name": name, "in": "path", "required": True,
+                       "schema": {"type": "integer" if ":int" in e.path else "string"}}
+                      for name in _ROUTE_PARAM.findall(e.path)]
+            params += [{"name": name, "in": "query", "required": req, "schema": _ref(kind)}
+                       for name, (kind, req) in (e.query or {}).items()]
+            if params:
+                op["parameters"] = params
+            if e.body:
+                op["requestBody"] = {"required": True, "content": {"application/json": {
+                    "schema": _object_schema({k: v[0] for k, v in e.body.items()},
+                                             [k for k, v in e.body.items() if v[1]])}}}
+            if not e.auth:
+                op["security"] = []
+            paths.setdefault(path, {})[e.method.lower()] = op
+        paths["/subscribe"] = {"get": {
+            "summary": "WebSocket: subscribe to events matching a pattern (kb.subscribe); "
+                       "send {\"op\": \"subscribe\", \"pattern\", \"where\", \"since\", "
+                       "\"until\", \"id\", \"batch\"}, receive subscribed / answer(s) / end / error "
+                       "messages (docs/service.md).",
+            "operationId": "subscribe",
+            "responses": {"101": {"description": "Switching to the WebSocket protocol"}}}}
+        return {"openapi": "3.1.0",
+                "info": {"title": "slr_sql service", "version": slr_sql.__version__,
+                         "description": "One SLR knowledge base over HTTP/JSON. Terms use the "
+                                        "JSON term encoding (components/schemas/Term)."},
+                "paths": paths,
+                "components": {"schemas": _SCHEMAS,
+                               "securitySchemes": {"bearer": {"type": "http",
+                                                              "scheme": "bearer"}}},
+                "security": [{"bearer": []}]}
+
+
+# -- the endpoints -----------------------------------------------------------------------------
+
+_ENDPOINTS: list[_Endpoint] = []
+
+
+def _route(method: str, path: str, summary: str, *, body: dict | None = None,
+           query: dict | None = None, response: dict | None = None,
+           auth: bool = True) -> Callable:
+    """Register an endpoint: its handler, and what the OpenAPI description says of it."""
+    def register(handler: Callable) -> Callable:
+        _ENDPOINTS.append(_Endpoint(method, path, handler, summary, body, query, response,
+                                    auth))
+        return handler
+    return register
+
+
+@_route("GET", "/health", "Liveness, version and limits (no token needed).",
+        auth=False, response={"status": "string", "version": "string",
+                              "api": "string", "limits": "object"})
+async def _health(svc: "_Service", request: Request) -> Any:
+    return {"status": "ok", "version": slr_sql.__version__, "api": API_VERSION,
+            "limits": dataclasses.asdict(svc.limits)}
+
+
+@_route("GET", "/openapi.json", "This API's OpenAPI 3.1 description.",
+        auth=False)
+async def _openapi(svc: "_Service", request: Request) -> Any:
+    return svc.openapi()
+
+
+@_route("POST", "/add", "Add one event written in SLR syntax (kb.add).",
+        body={"event": ("string", True)}, response={"added": "integer"})
+async def _add(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    await svc.call(svc.kb.add, _field(b, "event", str, required=True))
+    return {"added": 1}
+
+
+@_route("POST", "/add_event", "Add one event from terms (kb.add_event).",
+        body={"name": ("string", True), "args": ("TermList", False),
+              "start": ("Number", True), "end": ("Number", False)},
+        response={"added": "integer"})
+async def _add_event(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    name, args, start, end = _event_tuple(b)
+    await svc.call(svc.kb.add_event, name, args, start=start, end=end)
+    return {"added": 1}
+
+
+@_route("POST", "/add_many", "Add many events in one transaction "
+        "(kb.add_many); returns the rejected ones with their index.",
+        body={"events": ("EventList", True), "atomic": ("boolean", False)},
+        response={"accepted": "integer", "rejected": "RejectedList"})
+async def _add_many(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    events = _field(b, "events", list, required=True)
+    atomic = _field(b, "atomic", bool, default=False)
+    plain = _plain_arguments(request.state.body, events)
+    prepared, positions, rejected = [], [], []
+    for i, ev in enumerate(events):
+        try:
+            if isinstance(ev, str):
+                prepared.append(ev)
+            elif isinstance(ev, dict):
+                prepared.append(_event_tuple(ev, plain))
+            else:
+                raise ServiceError(f"events[{i}]: an event is SLR text or an object "
+                                   f'{{"name", "args", "start", "end"}}')
+            positions.append(i)
+        except SLRError as exc:
+            if atomic:
+                raise
+            rejected.append(_rejection(exc, i))
+    kb_rejected = await svc.call(svc.kb.add_many, prepared, atomic=atomic)
+    for exc in kb_rejected or ():
+        index = getattr(exc, "index", None)
+        original = positions[index] if isinstance(index, int) and \
+            0 <= index < len(positions) else None
+        rejected.append(_rejection(exc, original))
+    rejected.sort(key=lambda r: (r["index"] is None, r["index"] or 0))
+    return {"accepted": len(events) - len(rejected), "rejected": rejected}
+
+
+@_route("POST", "/load", "Load program text (kb.load); name= and replace= "
+        "need a knowledge base with named programs.",
+        body={"text": ("string", True), "filename": ("string", False),
+              "name": ("string", False), "replace": ("boolean", False)},
+        response={"loaded": "boolean"})
+async def _load(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    text = _field(b, "text", str, required=True)
+    filename = _field(b, "filename", str)
+    name = _field(b, "name", str)
+    replace = _field(b, "replace", bool, default=False)
+    kwargs: dict[str, Any] = {}
+    if filename is not None and svc.load_takes_filename:
+        kwargs["filename"] = filename
+    if name is not None or replace:
+        if not svc.load_takes_name:
+            raise ServiceError("this knowledge base has no named programs yet "
+                               "(load(text, name=, replace=)); load without name and "
+                               "replace", kind="NotImplemented")
+        if name is not None:
+            kwargs["name"] = name
+        kwargs["replace"] = replace
+    await svc.call(svc.kb.load, text, **kwargs)
+    return {"loaded": True}
+
+
+@_route("POST", "/unload", "Remove a named program (kb.unload).",
+        body={"name": ("string", True)}, response={"unloaded": "string"})
+async def _unload(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    name = _field(b, "name", str, required=True)
+    if not hasattr(svc.kb, "unload"):
+        raise ServiceError("this knowledge base cannot unload programs yet",
+                           kind="NotImplemented")
+    await svc.call(svc.kb.unload, name)
+    return {"unloaded": name}
+
+
+@_route("GET", "/programs", "The loaded named programs (kb.programs).",
+        response={"programs": "array"})
+async def _programs(svc: "_Service", request: Request) -> Any:
+    if not hasattr(svc.kb, "programs"):
+        raise ServiceError("this knowledge base has no named programs yet",
+                           kind="NotImplemented")
+    return {"programs": _plain(await svc.call(svc.kb.programs))}
+
+
+@_route("POST", "/query", "Answer a goal (kb.query); wait=true makes it "
+        "synchronized. timeout is capped by the server's max_query_time "
+        "(max_wait when synchronized).",
+        body={"goal": ("string", True), "args": ("Args", False),
+              "at": ("Number", False), "timeout": ("Number", False),
+              "limit": ("integer", False), "wait": ("boolean", False)},
+        response={"answers": "AnswerList"})
+async def _query(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    goal = _field(b, "goal", str, required=True)
+    args = decode_args(b.get("args"))
+    at = _number(b, "at")
+    timeout = _number(b, "timeout", minimum=0)
+    limit = _field(b, "limit", int)
+    if _field(b, "wait", bool, default=False):
+        pending = await svc.call(svc.kb.submit, goal, at=at, args=args,
+                                  timeout=_cap(timeout, svc.limits.max_wait))
+        answers = await asyncio.wrap_future(pending)
+    else:
+        answers = await svc.call(svc.kb.query, goal, at=at, args=args, limit=limit,
+                                  timeout=_cap(timeout, svc.limits.max_query_time))
+    return {"answers": encode_answers(answers)}
+
+
+@_route("POST", "/submit", "Submit a synchronized query (kb.submit); returns "
+        "a handle to poll. wait= (s) waits for the answer first.",
+        body={"goal": ("string", True), "args": ("Args", False),
+              "at": ("Number", False), "id": ("string", False),
+              "timeout": ("Number", False), "wait": ("Number", False)},
+        response={"handle": "string", "id": "string", "done": "boolean",
+                  "answers": "AnswerList"})
+async def _submit(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    goal = _field(b, "goal", str, required=True)
+    args = decode_args(b.get("args"))
+    at = _number(b, "at")
+    qid = _field(b, "id", str)
+    timeout = _number(b, "timeout", minimum=0)
+    wait = _number(b, "wait", minimum=0) or 0.0
+    svc._expire()
+    if sum(1 for s in svc.submitted.values() if not s.pending.done()) >= svc.limits.max_pending:
+        raise ServiceError(f"{svc.limits.max_pending} submitted queries are pending already",
+                           kind="Unavailable")
+    pending = await svc.call(svc.kb.submit, goal, at=at, id=qid, args=args,
+                              timeout=_cap(timeout, svc.limits.max_wait))
+    handle = uuid.uuid4().hex
+    entry = _Submitted(handle, pending, asyncio.wrap_future(pending))
+    pending.add_done_callback(entry.finished)
+    svc.submitted[handle] = entry
+    return await svc._poll(entry, wait)
+
+
+@_route("GET", "/submit/{handle}", "The state of a submitted query; waits up "
+        "to wait= s (capped by max_poll) for its answer.",
+        query={"wait": ("Number", False)},
+        response={"handle": "string", "id": "string", "done": "boolean",
+                  "answers": "AnswerList", "explain": "string"})
+async def _poll(svc: "_Service", request: Request) -> Any:
+    entry = svc._entry(request)
+    wait = _query_number(request, "wait")
+    return await svc._poll(entry, wait)
+
+
+@_route("DELETE", "/submit/{handle}", "Cancel a submitted query and forget it.",
+        response={"handle": "string", "cancelled": "boolean"})
+async def _cancel(svc: "_Service", request: Request) -> Any:
+    entry = svc._entry(request)
+    cancelled = entry.pending.cancel()
+    svc.submitted.pop(entry.handle, None)
+    return {"handle": entry.handle, "cancelled": cancelled}
+
+
+@_route("POST", "/explain", "How a goal would run (kb.explain).",
+        body={"goal": ("string", True)}, response={"explain": "string"})
+async def _explain(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    return {"explain": await svc.call(svc.kb.explain, _field(b, "goal", str, required=True))}
+
+
+@_route("POST", "/mark_complete", "Declare a history complete up to a time "
+        "(kb.mark_complete).",
+        body={"type": ("string", True), "time": ("Number", True)},
+        response={"type": "string", "time": "Number"})
+async def _mark_complete(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    event_type = _field(b, "type", str, required=True)
+    t = _number(b, "time", required=True)
+    await svc.call(svc.kb.mark_complete, event_type, t)
+    return {"type": event_type, "time": encode_plain(t)}
+
+
+@_route("GET", "/complete_until", "The time up to which a history is complete "
+        "(kb.complete_until).", query={"type": ("string", True)},
+        response={"type": "string", "time": "Number"})
+async def _complete_until(svc: "_Service", request: Request) -> Any:
+    event_type = request.query_params.get("type")
+    if not event_type:
+        raise ServiceError('the query parameter "type" (p/N) is required')
+    t = await svc.call(svc.kb.complete_until, event_type)
+    return {"type": event_type, "time": encode_plain(float(t))}
+
+
+@_route("GET", "/buffers", "The active buffers with their counters "
+        "(kb.buffers).", response={"buffers": "array"})
+async def _buffers(svc: "_Service", request: Request) -> Any:
+    return {"buffers": _plain(await svc.call(svc.kb.buffers))}
+
+
+@_route("POST", "/buffers", "Keep a history (kb.add_buffer): exactly one of "
+        "keep_last (N most recent per key), keep_seconds (the last l s), "
+        "keep_between ([t1, t2]).",
+        body={"pattern": ("string", True), "keep_last": ("integer", False),
+              "keep_seconds": ("Number", False),
+              "keep_between": ("NumberPair", False)},
+        response={"id": "integer"})
+async def _add_buffer(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    pattern = _field(b, "pattern", str, required=True)
+    kwargs: dict[str, Any] = {}
+    if b.get("keep_last") is not None:
+        kwargs["keep_last"] = _field(b, "keep_last", int)
+    if b.get("keep_seconds") is not None:
+        kwargs["keep_seconds"] = _number(b, "keep_seconds")
+    if b.get("keep_between") is not None:
+        pair = _field(b, "keep_between", list)
+        if len(pair) != 2:
+            raise ServiceError('"keep_between" must be [t1, t2]')
+        kwargs["keep_between"] = (_number({"t1": pair[0]}, "t1", required=True),
+                                  _number({"t2": pair[1]}, "t2", required=True))
+    buffer_id = await svc.call(svc.kb.add_buffer, pattern, **kwargs)
+    return {"id": buffer_id}
+
+
+@_route("DELETE", "/buffers/{buffer_id:int}", "Remove a runtime buffer "
+        "(kb.remove_buffer); the events it kept stay.",
+        response={"removed": "integer"})
+async def _remove_buffer(svc: "_Service", request: Request) -> Any:
+    buffer_id = request.path_params["buffer_id"]
+
+    def remove() -> None:
+        if not any(getattr(info, "id", None) == buffer_id for info in svc.kb.buffers()):
+            raise ServiceError(f"no active buffer #{buffer_id}", kind="NotFound")
+        svc.kb.remove_buffer(buffer_id)
+    await svc.call(remove)
+    return {"removed": buffer_id}
+
+
+@_route("POST", "/sql", "Run one read-only SQL statement on the store "
+        "(SELECT, WITH, VALUES, EXPLAIN, introspection PRAGMAs).",
+        body={"query": ("string", True), "params": ("array", False)},
+        response={"columns": "array", "rows": "array"})
+async def _sql(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    statement = _field(b, "query", str, required=True)
+    params = _field(b, "params", list, default=[])
+    for i, p in enumerate(params):
+        if p is not None and type(p) not in (int, float, str):
+            raise ServiceError(f"params[{i}]: a SQL parameter is a number, a string "
+                               f"or null")
+    columns, rows = await svc.call(_read_only_sql, svc.kb, statement, params,
+                                    svc.limits.sql_timeout)
+    return {"columns": list(columns), "rows": encode_plain([list(r) for r in rows])}
+
+
+@_route("GET", "/stats", "File size, events per type, buffers and their "
+        "counters (what slr stats prints, as data and as text).",
+        response={"path": "string", "rows": "array", "space": "object",
+                  "buffers": "array", "now": "Number", "text": "string"})
+async def _stats(svc: "_Service", request: Request) -> Any:
+    return await svc.call(_stats_of, svc.kb)
+
+
+
+@dataclass
+class _Submitted:
+    handle: str
+    pending: Any                      # the kb's PendingQuery (a concurrent.futures.Future)
+    waiter: Any                       # the same as an asyncio future, for long-polls
+    finished_at: float | None = None
+
+    def finished(self, _future: Any) -> None:
+        self.finished_at = time.monotonic()
+
+
+# -- request pieces ----------------------------------------------------------------------------
+
+def _plain_arguments(body: bytes, events: list) -> bool:
+    """True when no event argument in this body holds an object, ``true``, ``false`` or
+    ``null``: then every argument is already the Python value the knowledge base takes (a JSON
+    string is an atom, as a ``str`` is for ``kb.add_many``; numbers and arrays are themselves)
+    and decoding can be skipped. Checked on the bytes, at C speed: the body's only ``{`` are
+    the outer object's and one per event object (a ``{`` inside a string only makes this say
+    False, which is always safe)."""
+    objects = sum(1 for ev in events if type(ev) is dict)
+    return body.count(b"{") == 1 + objects and b"true" not in body \
+        and b"false" not in body and b"null" not in body
+
+
+def _event_tuple(obj: dict, plain: bool = False) -> tuple:
+    """``{"name", "args", "start", "end"}`` (or ``"time"``) -> ``(name, args, start, end)``.
+    ``plain``: the arguments need no decoding (:func:`_plain_arguments`). In a batch, the
+    index of the event says which one a message is about."""
+    name = obj.get("name")
+    if type(name) is not str or not name:
+        raise ServiceError('"name" must be a non-empty string')
+    args = obj.get("args", [])
+    if type(args) is not list:
+        raise ServiceError('"args" must be an array of terms')
+    terms = args if plain else decode_arguments(args)
+    if "start" in obj or "time" not in obj:
+        start = _event_time(obj, "start")
+        end = _event_time(obj, "end") if obj.get("end") is not None else start
+    else:
+        start = end = _event_time(obj, "time")
+    return (name, terms, start, end)
+
+
+def _event_time(obj: dict, key: str) -> Any:
+    value = obj.get(key)
+    if type(value) is float:
+        return value
+    if value is None:
+        raise ServiceError(f'"{key}" is required')
+    value = decode_term(value, _where=key) if isinstance(value, dict) else value
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise EventRejected(f"{key}: event times must be numbers (got {value!r})")
+    try:
+        return float(value)
+    except OverflowError:
+        raise EventRejected(f"{key}: event time out of range") from None
+
+
+def _rejection(exc: BaseException, index: int | None) -> dict:
+    err = error_body(exc)["error"]
+    err["kind"] = "EventRejected"
+    err["index"] = index
+    if "line" in err:  # a syntax error inside one event: keep the words and where
+        err["message"] = str(exc)
+        for key in ("line", "column", "source_line", "filename"):
+            err.pop(key, None)
+    return err
+
+
+def _subscribe_request(request: dict) -> tuple[str, dict]:
+    pattern = _field(request, "pattern", str, required=True)
+    kwargs: dict[str, Any] = {}
+    where = _field(request, "where", str)
+    if where is not None:
+        kwargs["where"] = where
+    since = request.get("since", "now")
+    kwargs["since"] = "now" if since == "now" else _number(request, "since")
+    if request.get("until") is not None:
+        kwargs["until"] = _number(request, "until")
+    sid = _field(request, "id", str)
+    if sid is not None:
+        kwargs["id"] = sid
+    return pattern, kwargs
+
+
+def _parameters(fn: Callable) -> set[str]:
+    try:
+        return set(inspect.signature(fn).parameters)
+    except (TypeError, ValueError):
+        return set()
+
+
+# -- subscriptions ------------------------------------------------------------------------------
+
+MAX_BATCH = 1000
+
+
+def _batch_size(request: dict) -> int:
+    """``"batch": N`` in the subscribe message: up to N answers already queued go in one
+    ``answers`` frame (1, the default, sends each in an ``answer`` frame of its own)."""
+    batch = request.get("batch", 1)
+    if isinstance(batch, bool) or not isinstance(batch, int) or not 1 <= batch <= MAX_BATCH:
+        raise ServiceError(f'"batch" must be an integer from 1 to {MAX_BATCH}')
+    return batch
+
+
+async def _send_error(websocket: WebSocket, exc: BaseException) -> None:
+    body = error_body(exc)
+    body["type"] = "error"
+    try:
+        await websocket.send_text(dumps(body).decode("utf-8"))
+        await websocket.close(4000 + body["error"]["status"])
+    except Exception:  # the client is gone already
+        pass
+
+
+# -- read-only SQL and stats (run on the thread pool) ------------------------------------------
+
+_READ_KEYWORDS = {"select", "with", "values", "explain"}
+_READ_PRAGMAS = {"table_info", "table_xinfo", "table_list", "index_list", "index_info",
+                 "index_xinfo", "foreign_key_list", "database_list", "page_count", "page_size",
+                 "freelist_count", "user_version", "schema_version", "compile_options",
+                 "function_list", "pragma_list", "collation_list", "integrity_check",
+                 "quick_check", "journal_mode", "encoding"}
+_COMMENTS = re.compile(r"\A(?:\s+|--[^\n]*(?:\n|\Z)|/\*.*?\*/)*", re.S)
+_PRAGMA = re.compile(r"pragma\s+(?:main\.)?(\w+)\s*(?:\(\s*[\w\"'`\[\]. ]*\s*\))?\s*;?\s*\Z",
+                     re.I | re.S)
+
+
+def _read_only_sql(kb: Any, statement: str, params: list, timeout: float) -> tuple:
+    """One statement that cannot change the store: the first keyword must read, and the
+    store runs it read-only (``kb.sql`` without ``write``); a statement that runs longer
+    than ``timeout`` seconds is interrupted."""
+    text = statement[_COMMENTS.match(statement).end():]
+    keyword = re.match(r"\w*", text).group(0).lower()
+    if keyword == "pragma":
+        m = _PRAGMA.match(text)
+        if m is None or m.group(1).lower() not in _READ_PRAGMAS:
+            raise ServiceError("sql over the service is read-only: this PRAGMA is not allowed")
+    elif keyword not in _READ_KEYWORDS:
+        raise ServiceError(f"sql over the service is read-only: {keyword.upper() or 'this'} "
+                           f"statements are not allowed (SELECT, WITH, VALUES, EXPLAIN)")
+    try:
+        return kb.sql(statement, params, timeout=timeout)
+    except SLRTimeout:
+        raise ServiceError(f"sql: the statement ran longer than {timeout:g} s",
+                           kind="RequestTimeout") from None
+    except SLRError as exc:
+        if type(exc) is not SLRError:  # SLRBusy and the like keep their kind
+            raise
+        message = str(exc)
+        raise ServiceError(message if message.startswith("sql: ") else f"sql: {message}") from None
+
+
+def _stats_of(kb: Any) -> dict:
+    if hasattr(kb, "stats"):
+        return encode_plain(_plain(kb.stats()))
+    from slr_sql import buffers as history   # the same figures `slr stats` prints
+
+    data = history.stats(kb.store)
+    path = str(kb.path or ":memory:")
+    return {"path": path,
+            "rows": [{"type": f"{name}/{arity}", "count": count}
+                     for (name, arity), count in data["rows"].items()],
+            "space": encode_plain(data["space"]),
+            "buffers": encode_plain(data["buffers"]),
+            "now": encode_plain(float(data["now"])),
+            "text": history.format_stats(kb.store, path)}
+
+
+# -- OpenAPI schemas -----------------------------------------------------------------------
+
+_SCHEMAS: dict[str, Any] = {
+    "Term": {"description": "An SLR term in the JSON term encoding: atom = JSON string; "
+                            "string = {\"$string\": text}; integer = JSON integer (beyond 64 "
+                            "bits {\"$int\": digits}); float = JSON number with . or exponent, "
+                            "{\"$float\": \"inf\"|\"-inf\"|\"nan\"}; list = array; compound "
+                            "f(..) = {\"f\": [args]}; variable = {\"$var\": name}.",
+             "anyOf": [{"type": "string"}, {"type": "number"}, {"type": "array"},
+                       {"type": "object", "minProperties": 1, "maxProperties": 1}]},
+    "TermList": {"type": "array", "items": {"$ref": "#/components/schemas/Term"}},
+    "Number": {"anyOf": [{"type": "number"}, {"type": "object", "properties": {
+        "$float": {"enum": ["inf", "-inf", "nan"]}}}]},
+    "NumberPair": {"type": "array", "items": {"$ref": "#/components/schemas/Number"},
+                   "minItems": 2, "maxItems": 2},
+    "Args": {"type": "object", "additionalProperties": {"$ref": "#/components/schemas/Term"},
+             "description": "Goal variables bound from values (no text splicing)."},
+    "Answer": {"type": "object", "additionalProperties": {"$ref": "#/components/schemas/Term"}},
+    "AnswerList": {"type": "array", "items": {"$ref": "#/components/schemas/Answer"}},
+    "Event": {"anyOf": [{"type": "string", "description": "SLR text, p(..)^T or p(..)^[S,E]"},
+                        {"type": "object", "required": ["name"], "properties": {
+                            "name": {"type": "string"},
+                            "args": {"$ref": "#/components/schemas/TermList"},
+                            "start": {"$ref": "#/components/schemas/Number"},
+                            "end": {"$ref": "#/components/schemas/Number"},
+                            "time": {"$ref": "#/components/schemas/Number"}}}]},
+    "EventList": {"type": "array", "items": {"$ref": "#/components/schemas/Event"}},
+    "RejectedList": {"type": "array", "items": {"type": "object", "properties": {
+        "index": {"type": ["integer", "null"]}, "kind": {"type": "string"},
+        "message": {"type": "string"}}}},
+    "Error": {"type": "object", "required": ["error"], "properties": {"error": {
+        "type": "object", "required": ["kind", "status", "message"], "properties": {
+            "kind": {"type": "string", "description": "SLRSyntaxError, SLREvaluationError, "
+                     "SLRTimeout, EventRejected, SLRError, BadRequest, Unauthorized, NotFound, "
+                     "MethodNotAllowed, RequestTimeout, PayloadTooLarge, NotImplemented, "
+                     "Unavailable, InternalError"},
+            "status": {"type": "integer"}, "message": {"type": "string"},
+            "line": {"type": "integer"}, "column": {"type": "integer"},
+            "source_line": {"type": "string"}, "filename": {"type": "string"},
+            "term": {"$ref": "#/components/schemas/Term"},
+            "index": {"type": "integer"}}}}},
+}
+
+_BASIC = {"string", "integer", "number", "boolean", "array", "object"}
+
+
+def _ref(kind: str) -> dict:
+    return {"type": kind} if kind in _BASIC else {"$ref": f"#/components/schemas/{kind}"}
+
+
+def _object_schema(fields: dict[str, str], required: list[str]) -> dict:
+    schema: dict[str, Any] = {"type": "object",
+                              "properties": {k: _ref(v) for k, v in fields.items()}}
+    if required:
+        schema["required"] = required
+    return schema
+
+
+def _responses(e: _Endpoint) -> dict:
+    error = {"description": "an error", "content": {"application/json": {
+        "schema": {"$ref": "#/components/schemas/Error"}}}}
+    ok: dict[str, Any] = {"description": "success"}
+    if e.response:
+        ok["content"] = {"application/json": {"schema": _object_schema(e.response, [])}}
+    out = {"200": ok, "400": error}
+    if e.auth:
+        out["401"] = error
+    if e.path.startswith("/submit/"):
+        out["202"] = {"description": "not answered yet (done: false)"}
+        out["404"] = error
+    return out
+
+
+# -- the application -----------------------------------------------------------------------
+
+def create_app(kb: Any, *, token: str | None = None, limits: Limits | None = None) -> Starlette:
+    """The Starlette application serving ``kb`` (which the caller keeps and closes).
+
+    ``token``: when given, every request but ``/health`` and ``/openapi.json`` must carry
+    ``Authorization: Bearer TOKEN`` (compared in constant time). ``limits``: see
+    :class:`Limits`.
+
+    >>> import slr_sql
+    >>> with slr_sql.open() as kb:
+    ...     app = create_app(kb)
+    ...     "/query" in {r.path for r in app.routes}
+    True
+    """
+    service = _Service(kb, token or None, limits or Limits())
+
+    async def http_error(request: Request, exc: Exception) -> Response:
+        assert isinstance(exc, HTTPException)
+        kind = {404: "NotFound", 405: "MethodNotAllowed"}.get(exc.status_code, "BadRequest")
+        message = {404: f"no such endpoint: {request.url.path} (GET /openapi.json lists them)",
+                   405: f"{request.method} is not allowed on {request.url.path}"}.get(
+            exc.status_code, str(exc.detail))
+        return _error_response(ServiceError(message, kind=kind, status=exc.status_code))
+
+    async def internal_error(request: Request, exc: Exception) -> Response:
+        log.error("internal error", exc_info=exc)
+        return _error_response(exc)
+
+    app = Starlette(routes=service.starlette_routes(),
+                    exception_handlers={HTTPException: http_error, Exception: internal_error})
+    app.state.service = service
+    return app

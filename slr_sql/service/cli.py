@@ -1,0 +1,175 @@
+"""``slr serve DB``: the network service on uvicorn (registered on the ``slr`` group by
+slr_sql/cli.py). Starlette and uvicorn are imported only when the command runs."""
+from __future__ import annotations
+
+import contextlib
+import ipaddress
+import signal
+import socket
+import sys
+import threading
+from typing import Any
+
+import click
+
+import slr_sql
+
+__all__ = ["serve", "run_server", "is_loopback"]
+
+
+def is_loopback(host: str) -> bool:
+    """True when every address ``host`` names is a loopback address.
+
+    >>> is_loopback("127.0.0.1"), is_loopback("::1"), is_loopback("0.0.0.0"), is_loopback("")
+    (True, True, False, False)
+    """
+    host = host.strip().strip("[]")
+    if not host:
+        return False      # "" binds every interface
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        pass
+    try:
+        infos = socket.getaddrinfo(host, None)
+    except OSError:
+        return False
+    return bool(infos) and all(ipaddress.ip_address(info[4][0].split("%")[0]).is_loopback
+                               for info in infos)
+
+
+def _listen(host: str, port: int) -> socket.socket:
+    """A listening socket on host:port (port 0: any free port)."""
+    try:
+        infos = socket.getaddrinfo(host or None, port, type=socket.SOCK_STREAM,
+                                   flags=socket.AI_PASSIVE)
+    except OSError as exc:
+        raise slr_sql.SLRError(f"cannot listen on {host}:{port}: {exc}") from None
+    last: OSError | None = None
+    for family, kind, proto, _name, address in infos:
+        sock = socket.socket(family, kind, proto)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            sock.bind(address)
+            sock.listen(512)
+            sock.set_inheritable(True)
+            return sock
+        except OSError as exc:
+            sock.close()
+            last = exc
+    raise slr_sql.SLRError(f"cannot listen on {host}:{port}: "
+                           f"{getattr(last, 'strerror', None) or last}")
+
+
+class _Stop(BaseException):
+    """SIGINT/SIGTERM after uvicorn's graceful shutdown."""
+
+
+@contextlib.contextmanager
+def _stop_on_signals() -> Any:
+    """uvicorn shuts down on SIGINT/SIGTERM, then raises the signal again for the previous
+    handler; this handler turns it into :class:`_Stop` so the store is closed and the
+    process exits with status 0."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum: int, frame: Any) -> None:
+        raise _Stop()
+    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | None = None,
+               *, limits: Any = None, max_connections: int | None = 1000,
+               ssl_keyfile: str | None = None, ssl_certfile: str | None = None,
+               log_level: str = "warning") -> None:
+    """Open ``db`` and serve it until SIGINT/SIGTERM; then close it.
+
+    Refuses (SLRError) to listen on a non-loopback address without a token. Prints
+    ``slr serve: DB on http://HOST:PORT`` on stdout once listening.
+    """
+    token = token or None
+    if token is None and not is_loopback(host):
+        raise slr_sql.SLRError(
+            f"refusing to serve on {host or 'every interface'} without a token: anyone who can "
+            f"reach it could read and change the store. Give --token TOKEN (or set SLR_TOKEN), "
+            f"or bind to 127.0.0.1")
+    if bool(ssl_keyfile) != bool(ssl_certfile):
+        raise slr_sql.SLRError("TLS needs both --ssl-keyfile and --ssl-certfile")
+    try:
+        import uvicorn
+
+        from .app import Limits, create_app
+    except ImportError as exc:
+        raise slr_sql.SLRError(f"slr serve needs the service extra ({exc.name} is missing): "
+                               f"pip install 'slr_sql[service]'") from None
+    limits = limits or Limits()
+    sock = _listen(host, port)
+    try:
+        kb = slr_sql.open(db)
+    except BaseException:
+        sock.close()
+        raise
+    try:
+        app = create_app(kb, token=token, limits=limits)
+        config = uvicorn.Config(app, log_level=log_level, access_log=False, lifespan="off",
+                                ws_max_size=limits.max_body, limit_concurrency=max_connections,
+                                timeout_keep_alive=30, ssl_keyfile=ssl_keyfile,
+                                ssl_certfile=ssl_certfile, server_header=False)
+        server = uvicorn.Server(config)
+        bound_host, bound_port = sock.getsockname()[:2]
+        shown = f"[{bound_host}]" if ":" in bound_host else bound_host
+        scheme = "https" if ssl_certfile else "http"
+        print(f"slr serve: {db} on {scheme}://{shown}:{bound_port}", flush=True)
+        with _stop_on_signals():
+            server.run(sockets=[sock])
+    except _Stop:
+        pass   # uvicorn shut down gracefully and re-raised SIGINT/SIGTERM: a normal exit
+    finally:
+        sock.close()
+        kb.close()
+
+
+@click.command("serve")
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.option("--host", default="127.0.0.1", show_default=True,
+              help="Address to listen on; anything but loopback needs a token.")
+@click.option("--port", default=8765, type=click.IntRange(0, 65535), show_default=True,
+              help="Port (0: any free port; the URL is printed).")
+@click.option("--token", envvar="SLR_TOKEN", default=None,
+              help="Clients must send it (Authorization: Bearer TOKEN). Default: $SLR_TOKEN.")
+@click.option("--max-body", default=1 << 20, type=click.IntRange(1024), show_default=True,
+              help="Largest request body, bytes (larger: HTTP 413).")
+@click.option("--max-query-time", default=30.0, type=click.FloatRange(0.001),
+              show_default=True, help="Seconds a query may run (the cap of timeout=).")
+@click.option("--max-wait", default=3600.0, type=click.FloatRange(0.001), show_default=True,
+              help="Seconds a synchronized query may wait.")
+@click.option("--max-connections", default=1000, type=click.IntRange(1), show_default=True,
+              help="Open connections at once (beyond: HTTP 503).")
+@click.option("--ssl-keyfile", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="TLS private key (with --ssl-certfile); or put a TLS proxy in front.")
+@click.option("--ssl-certfile", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="TLS certificate chain.")
+def serve(db: str, host: str, port: int, token: str | None, max_body: int,
+          max_query_time: float, max_wait: float, max_connections: int,
+          ssl_keyfile: str | None, ssl_certfile: str | None) -> None:
+    """Serve DB to other processes over HTTP/JSON and WebSocket (docs/service.md).
+
+    Clients: slr_sql.connect(URL, token=...) or any slr command with the URL in place of DB.
+    """
+    try:
+        from .app import Limits
+    except ImportError as exc:
+        raise slr_sql.SLRError(f"slr serve needs the service extra ({exc.name} is missing): "
+                               f"pip install 'slr_sql[service]'") from None
+    limits = Limits(max_body=max_body, max_query_time=max_query_time, max_wait=max_wait)
+    run_server(db, host, port, token, limits=limits, max_connections=max_connections,
+               ssl_keyfile=ssl_keyfile, ssl_certfile=ssl_certfile)
+    sys.stdout.flush()

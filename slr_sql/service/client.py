@@ -1,0 +1,613 @@
+"""The client of ``slr serve``: :func:`connect` gives an object with the methods of a local
+KnowledgeBase, returning the same Python values and raising the same SLRError classes.
+
+>>> import slr_sql
+>>> kb = slr_sql.connect("http://127.0.0.1:8765")       # doctest: +SKIP
+>>> kb.add("obj(cup1, cup, red)^2.0")                    # doctest: +SKIP
+>>> kb.query("obj(O, cup, C)^T")                         # doctest: +SKIP
+[{'O': Atom('cup1'), 'C': Atom('red'), 'T': 2.0}]
+
+What differs from a local knowledge base:
+
+* ``add_many`` of more events than fit in one request body (the server's ``max_body``) sends
+  several requests, each one transaction; ``atomic=True`` sends one request or fails.
+* ``submit`` returns a :class:`RemotePendingQuery`, a ``concurrent.futures.Future`` that one
+  background thread per pending query completes by long-polling the server.
+* ``define`` is not available (Python predicates run in the server's process).
+* Failures to reach the server are :class:`~slr_sql.service.errors.ServiceError` (an
+  SLRError) with ``status`` 0.
+"""
+from __future__ import annotations
+
+import collections
+import os
+import threading
+from concurrent.futures import Future, InvalidStateError
+from pathlib import Path
+from typing import Any, Callable, Iterable
+from urllib.parse import quote
+
+from slr_sql import EventRejected, SLRError
+
+from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args,
+                       encode_arguments, encode_term, loads)
+from .errors import ServiceError, error_from_body
+
+__all__ = ["connect", "RemoteKnowledgeBase", "RemotePendingQuery", "RemoteSubscription"]
+
+POLL_WAIT = 25.0          # seconds one long-poll asks the server to wait
+DEFAULT_MAX_BODY = 1 << 20
+
+
+def connect(url: str, token: str | None = None, *, timeout: float = 60.0) -> "RemoteKnowledgeBase":
+    """A client for the ``slr serve`` at ``url``; ``token`` defaults to ``$SLR_TOKEN``.
+    ``timeout`` bounds how long one request may take beyond the query's own timeout.
+
+    >>> kb = connect("http://127.0.0.1:8765", token="secret")   # doctest: +SKIP
+    """
+    return RemoteKnowledgeBase(url, token=token, timeout=timeout)
+
+
+class RemoteKnowledgeBase:
+    """A knowledge base served by ``slr serve``; see :func:`connect`."""
+
+    def __init__(self, url: str, token: str | None = None, *, timeout: float = 60.0):
+        try:
+            import httpx
+        except ImportError:  # pragma: no cover - the service extra is missing
+            raise SLRError("slr_sql.connect needs the service extra: "
+                           "pip install 'slr_sql[service]'") from None
+        if not url.startswith(("http://", "https://")):
+            raise SLRError(f"not a service URL (http://HOST:PORT or https://...): {url}")
+        self.url = url.rstrip("/")
+        if token is None:
+            token = os.environ.get("SLR_TOKEN") or None
+        self._token = token
+        self._headers = {"Content-Type": "application/json"}
+        if token:
+            self._headers["Authorization"] = f"Bearer {token}"
+        self.timeout = float(timeout)
+        self._httpx = httpx
+        self._http = httpx.Client(base_url=self.url, headers=self._headers,
+                                  timeout=httpx.Timeout(self.timeout, connect=10.0),
+                                  limits=httpx.Limits(max_connections=None,
+                                                      max_keepalive_connections=32))
+        self._limits: dict | None = None
+        self._pending: set[RemotePendingQuery] = set()
+        self._lock = threading.Lock()
+        self.closed = False
+
+    def __repr__(self) -> str:
+        return f"<RemoteKnowledgeBase {self.url}>"
+
+    # -- transport ------------------------------------------------------------------------------
+    def _request(self, method: str, path: str, body: Any = None, *,
+                 params: dict | None = None, timeout: float | None = None,
+                 ok: tuple = (200,), content: bytes | None = None) -> tuple[int, Any]:
+        if self.closed:
+            raise SLRError("the connection to the knowledge base is closed")
+        httpx = self._httpx
+        if body is not None:
+            content = dumps(body)
+        try:
+            response = self._http.request(
+                method, path, content=content, params=params,
+                timeout=None if timeout is None else httpx.Timeout(timeout, connect=10.0))
+        except httpx.TimeoutException:
+            raise ServiceError(f"no answer from {self.url} within "
+                               f"{timeout if timeout is not None else self.timeout:g} s",
+                               kind="RequestTimeout", status=0) from None
+        except httpx.HTTPError as exc:
+            raise ServiceError(f"cannot reach slr serve at {self.url}: {exc}",
+                               kind="Unavailable", status=0) from None
+        except RuntimeError as exc:  # the client was closed by another thread
+            raise SLRError(f"the connection to {self.url} is closed ({exc})") from None
+        try:
+            data = loads(response.content) if response.content else None
+        except (ValueError, UnicodeDecodeError):
+            data = None
+        if response.status_code in ok:
+            if not isinstance(data, dict):
+                raise ServiceError(f"{method} {path}: the server's answer is not JSON "
+                                   f"(HTTP {response.status_code})", kind="InternalError",
+                                   status=response.status_code)
+            return response.status_code, data
+        if data is None:
+            text = response.text[:200].strip()
+            raise ServiceError(f"HTTP {response.status_code} from {self.url}{path}"
+                               + (f": {text}" if text else ""),
+                               kind="BadRequest", status=response.status_code)
+        raise error_from_body(data, response.status_code)
+
+    def _post(self, path: str, body: dict, timeout: float | None = None) -> dict:
+        return self._request("POST", path, body, timeout=timeout)[1]
+
+    def _get(self, path: str, params: dict | None = None) -> dict:
+        return self._request("GET", path, params=params)[1]
+
+    def _read_timeout(self, query_timeout: float | None) -> float:
+        return self.timeout + (query_timeout or 0.0)
+
+    def limits(self) -> dict:
+        """The server's limits (``GET /health``), fetched once."""
+        if self._limits is None:
+            self._limits = self.health().get("limits", {})
+        return self._limits
+
+    def health(self) -> dict:
+        """``{"status": "ok", "version", "api", "limits"}`` of the server."""
+        return self._get("/health")
+
+    # -- lifecycle ------------------------------------------------------------------------------
+    def close(self) -> None:
+        """Close the connection; submitted queries still waiting fail with SLRError."""
+        if self.closed:
+            return
+        self.closed = True
+        with self._lock:
+            pending = list(self._pending)
+        for p in pending:
+            p._fail(SLRError("the connection to the knowledge base was closed"))
+        self._http.close()
+
+    def __enter__(self) -> "RemoteKnowledgeBase":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    # -- events ---------------------------------------------------------------------------------
+    def add(self, text: str) -> None:
+        """Add one event written in SLR syntax (``p(..)^T`` or ``p(..)^[S,E]``)."""
+        self._post("/add", {"event": _text(text, "event")})
+
+    def add_event(self, name: str, args: Iterable[Any], start: float,
+                  end: float | None = None) -> None:
+        """Add one event from Python values (``str`` is an atom, ``String`` a string)."""
+        self._post("/add_event", _event_object(name, args, start, end, ""))
+
+    def add_many(self, events: Iterable[Any], atomic: bool = False) -> list[EventRejected]:
+        """Add many events (SLR strings or ``(name, args, start, end)`` tuples); returns the
+        rejected ones, each with ``.index``. Batches larger than the server's body limit go in
+        several requests (one transaction each) unless ``atomic``."""
+        items: list = []
+        rejected: list[EventRejected] = []
+        for i, ev in enumerate(events):
+            if isinstance(ev, str):
+                items.append(ev)
+                continue
+            try:
+                items.append(_tuple_object(ev))
+            except SLRError as exc:
+                if atomic:
+                    raise
+                rejected.append(_rejected(exc, i))
+                items.append(None)          # a hole keeps the indexes of the others
+        budget = int(self.limits().get("max_body", DEFAULT_MAX_BODY)) - 1024
+        rejected += self._send_events(items, 0, atomic, budget)
+        rejected.sort(key=lambda e: e.index if isinstance(e.index, int) else len(items))
+        return rejected
+
+    def _send_events(self, items: list, offset: int, atomic: bool,
+                     budget: int) -> list[EventRejected]:
+        """POST /add_many for ``items`` (None: a hole), halving what does not fit."""
+        present = [i for i, item in enumerate(items) if item is not None]
+        if not present:
+            return []
+        body = dumps({"events": [items[i] for i in present], "atomic": atomic})
+        if len(body) > budget and not atomic and len(present) > 1:
+            half = len(items) // 2
+            return (self._send_events(items[:half], offset, atomic, budget)
+                    + self._send_events(items[half:], offset + half, atomic, budget))
+        reply = self._request("POST", "/add_many", content=body)[1]
+        out = []
+        for r in reply.get("rejected", []):
+            exc = EventRejected(str(r.get("message", "")))
+            index = r.get("index")
+            exc.index = offset + present[index] if isinstance(index, int) and \
+                0 <= index < len(present) else None
+            out.append(exc)
+        return out
+
+    # -- program ----------------------------------------------------------------------------------
+    def load(self, text: str, filename: str | None = None, *, name: str | None = None,
+             replace: bool = False) -> None:
+        """Add program text (all or nothing). ``name=``/``replace=`` need a server whose
+        knowledge base has named programs."""
+        body: dict[str, Any] = {"text": _text(text, "text")}
+        if filename is not None:
+            body["filename"] = str(filename)
+        if name is not None:
+            body["name"] = name
+        if replace:
+            body["replace"] = True
+        self._post("/load", body)
+
+    def load_file(self, path: str | Path, *, name: str | None = None,
+                  replace: bool = False) -> None:
+        """Read a program file here and load its text on the server."""
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise SLRError(f"cannot read {path}: {exc}") from None
+        self.load(text, str(path), name=name, replace=replace)
+
+    def unload(self, name: str) -> None:
+        """Remove the program loaded under ``name``."""
+        self._post("/unload", {"name": name})
+
+    def programs(self) -> list:
+        """The named programs (as the server's knowledge base describes them)."""
+        return decode_plain(self._get("/programs")["programs"])
+
+    def define(self, name: str, arity: int, fn: Callable) -> None:
+        """Not available remotely: Python predicates must run in the server's process."""
+        raise ServiceError("define() is not available over the network: register Python "
+                           "predicates in the process that runs the server",
+                           kind="NotImplemented")
+
+    # -- queries --------------------------------------------------------------------------------
+    def query(self, goal: str, at: float | None = None, args: dict | None = None,
+              timeout: float | None = None, max_steps: int | None = None,
+              limit: int | None = None, wait: bool = False) -> list[dict[str, Any]]:
+        """Answer ``goal`` on the server (see ``KnowledgeBase.query``); ``timeout`` is
+        capped by the server's ``max_query_time``."""
+        if max_steps is not None:
+            raise ServiceError("max_steps is not available over the network; use timeout=",
+                               kind="NotImplemented")
+        if wait:  # synchronized: long-polls, however long the wait (as kb.query does it)
+            return self.submit(goal, at=at, args=args, timeout=timeout).result()
+        body = _goal_body(goal, at, args, timeout)
+        if limit is not None:
+            body["limit"] = limit
+        reply = self._post("/query", body, timeout=self._read_timeout(timeout))
+        return decode_answers(reply["answers"])
+
+    def submit(self, goal: str, at: float | None = None, id: str | None = None,
+               args: dict | None = None, timeout: float | None = None,
+               callback: Callable[[Any], Any] | None = None) -> "RemotePendingQuery":
+        """A synchronized query on the server: a Future answered with the answer list."""
+        body = _goal_body(goal, at, args, timeout)
+        if id is not None:
+            body["id"] = str(id)
+        status, reply = self._request("POST", "/submit", body, ok=(200, 202))
+        pending = RemotePendingQuery(self, reply["handle"], reply.get("id"), goal, at)
+        if callback is not None:
+            pending.add_done_callback(callback)
+        pending._settle(status, reply)
+        if not pending.done():
+            pending._start()
+        return pending
+
+    async def ask(self, goal: str, at: float | None = None, id: str | None = None,
+                  args: dict | None = None, timeout: float | None = None) -> list:
+        """``await kb.ask(goal, at=z)``: :meth:`submit` for asyncio code."""
+        import asyncio
+
+        return await asyncio.wrap_future(self.submit(goal, at=at, id=id, args=args,
+                                                     timeout=timeout))
+
+    def explain(self, goal: str) -> str:
+        """How ``goal`` would run on the server: which engine, and why."""
+        return self._post("/explain", {"goal": _text(goal, "goal")})["explain"]
+
+    def mark_complete(self, event_type: str, t: float) -> None:
+        """Declare the history of ``"p/N"`` complete up to ``t``."""
+        self._post("/mark_complete", {"type": event_type, "time": _number(t, "t")})
+
+    def complete_until(self, event_type: str) -> float:
+        """The time up to which the history of ``"p/N"`` is complete now."""
+        return float(decode_plain(self._get("/complete_until", {"type": event_type})["time"]))
+
+    # -- buffers --------------------------------------------------------------------------------
+    def add_buffer(self, pattern: str, *, keep_last: int | None = None,
+                   keep_seconds: float | None = None,
+                   keep_between: tuple[float, float] | None = None) -> int:
+        """Keep a history of the events matching ``pattern``: the ``keep_last`` most recent
+        per key, the last ``keep_seconds``, or those inside ``keep_between=(t1, t2)``."""
+        body: dict[str, Any] = {"pattern": _text(pattern, "pattern")}
+        if keep_last is not None:
+            body["keep_last"] = keep_last
+        if keep_seconds is not None:
+            body["keep_seconds"] = _number(keep_seconds, "keep_seconds")
+        if keep_between is not None:
+            t1, t2 = keep_between
+            body["keep_between"] = [_number(t1, "keep_between"), _number(t2, "keep_between")]
+        return int(self._post("/buffers", body)["id"])
+
+    def remove_buffer(self, buffer_id: int) -> None:
+        """Remove a runtime buffer (the events it kept stay)."""
+        self._request("DELETE", f"/buffers/{int(buffer_id)}")
+
+    def buffers(self) -> list:
+        """The active buffers with their counters (``BufferInfo`` objects)."""
+        infos = decode_plain(self._get("/buffers")["buffers"])
+        try:
+            from slr_sql.buffers import BufferInfo
+        except ImportError:  # pragma: no cover
+            return infos
+        names = {f for f in BufferInfo.__dataclass_fields__}
+        out = []
+        for info in infos:
+            if isinstance(info, dict) and names <= set(info):
+                fields = {k: info[k] for k in names}
+                if isinstance(fields.get("keep_between"), list):
+                    fields["keep_between"] = tuple(fields["keep_between"])
+                out.append(BufferInfo(**fields))
+            else:
+                out.append(info)
+        return out
+
+    # -- SQL and stats --------------------------------------------------------------------------
+    def sql(self, query: str, params: Iterable[Any] = ()) -> tuple[list[str], list[tuple]]:
+        """Run one read-only SQL statement on the server's store: (column names, rows)."""
+        reply = self._post("/sql", {"query": _text(query, "query"), "params": list(params)})
+        return list(reply["columns"]), [tuple(row) for row in decode_plain(reply["rows"])]
+
+    def stats(self) -> dict:
+        """File size, events per type, buffers and counters; ``["text"]`` is what
+        ``slr stats`` prints."""
+        return decode_plain(self._get("/stats"))
+
+    # -- subscriptions --------------------------------------------------------------------------
+    def subscribe(self, pattern: str, where: str | None = None, since: Any = "now",
+                  until: float | None = None, id: str | None = None, *,
+                  batch: int = 256) -> "RemoteSubscription":
+        """Events matching ``pattern`` (and ``where``) as they arrive, over a WebSocket:
+        ``for answer in sub`` (ends when ``until`` is complete); ``sub.close()``, from any
+        thread, ends the iteration. ``batch``: up to that many answers already waiting on
+        the server travel in one frame (the answers and their order are the same).
+
+        >>> sub = connect("http://127.0.0.1:8765").subscribe("p(X)^T", since=0)  # doctest: +SKIP
+        >>> next(sub)                                                          # doctest: +SKIP
+        {'X': Atom('a'), 'T': 1.0}
+        """
+        return RemoteSubscription(self, pattern, where=where, since=since, until=until, id=id,
+                                  batch=batch)
+
+
+class RemotePendingQuery(Future):
+    """A synchronized query submitted to the server: a ``concurrent.futures.Future`` whose
+    result is the answer list. ``id``, ``goal``, ``at``, ``handle``; ``explain()`` says what
+    it waited for (once answered). ``cancel()`` cancels it on the server too."""
+
+    def __init__(self, client: RemoteKnowledgeBase, handle: str, id: str | None, goal: str,
+                 at: float | None):
+        super().__init__()
+        self.client = client
+        self.handle = handle
+        self.id = id
+        self.goal = goal
+        self.at = at
+        self._explanation: str | None = None
+
+    def __repr__(self) -> str:
+        state = "answered" if self.done() else "waiting"
+        return f"<RemotePendingQuery {self.id!r} {self.goal!r}: {state}>"
+
+    def explain(self) -> str:
+        """What the query waited for and what released it (the server's explanation)."""
+        if self._explanation is not None:
+            return self._explanation
+        return "answered" if self.done() else "waiting (the explanation comes with the answer)"
+
+    def cancel(self) -> bool:
+        if self.done():
+            return False
+        try:
+            self.client._request("DELETE", f"/submit/{quote(self.handle)}", ok=(200, 404))
+        except SLRError:
+            pass
+        return super().cancel()
+
+    # the result, from a reply of POST /submit or GET /submit/{handle}
+    def _settle(self, status: int, reply: dict) -> None:
+        if not reply.get("done"):
+            return
+        if isinstance(reply.get("explain"), str):
+            self._explanation = reply["explain"]
+        if reply.get("cancelled"):
+            super().cancel()
+            return
+        try:
+            if "error" in reply:
+                self.set_exception(error_from_body(reply, status))
+            else:
+                self.set_result(decode_answers(reply.get("answers", [])))
+        except InvalidStateError:  # cancelled meanwhile
+            pass
+
+    def _fail(self, exc: BaseException) -> None:
+        try:
+            self.set_exception(exc)
+        except InvalidStateError:
+            pass
+
+    def _start(self) -> None:
+        with self.client._lock:
+            self.client._pending.add(self)
+        threading.Thread(target=self._poll, name=f"slr-remote-query-{self.id}",
+                         daemon=True).start()
+
+    def _poll(self) -> None:
+        client = self.client
+        path = f"/submit/{quote(self.handle)}"
+        try:
+            while not self.done() and not client.closed:
+                try:
+                    status, reply = client._request("GET", path, params={"wait": POLL_WAIT},
+                                                    timeout=POLL_WAIT + client.timeout,
+                                                    ok=(200, 202))
+                except SLRError as exc:  # the query's own error, or the server is gone
+                    self._fail(exc)
+                    return
+                self._settle(status, reply)
+        finally:
+            with client._lock:
+                client._pending.discard(self)
+
+
+class RemoteSubscription:
+    """A subscription on the server (WebSocket ``/subscribe``): ``for answer in sub`` blocks
+    for the next answer and ends when the subscription ends (``until``); ``close()``."""
+
+    def __init__(self, client: RemoteKnowledgeBase, pattern: str, *, where: str | None,
+                 since: Any, until: float | None, id: str | None, batch: int = 1):
+        try:
+            from websockets.exceptions import WebSocketException
+            from websockets.sync.client import connect as ws_connect
+        except ImportError:  # pragma: no cover
+            raise SLRError("subscriptions over the network need the service extra: "
+                           "pip install 'slr_sql[service]'") from None
+        self._closed_exc = WebSocketException
+        url = "ws" + client.url[len("http"):] + "/subscribe"
+        headers = {"Authorization": client._headers["Authorization"]} \
+            if "Authorization" in client._headers else None
+        request: dict[str, Any] = {"op": "subscribe", "pattern": _text(pattern, "pattern"),
+                                   "since": since if since == "now" else _number(since, "since")}
+        if where is not None:
+            request["where"] = where
+        if until is not None:
+            request["until"] = _number(until, "until")
+        if id is not None:
+            request["id"] = id
+        if batch != 1:
+            request["batch"] = batch
+        self.pattern = pattern
+        self.id = id
+        self._done = False
+        self._ready: collections.deque = collections.deque()   # answers of the last frame
+        try:
+            # entered as a context manager (what websockets >= 17 asks); closed by close()
+            self._ws = ws_connect(url, additional_headers=headers, open_timeout=client.timeout,
+                                  max_size=None).__enter__()
+            self._ws.send(dumps(request).decode("utf-8"))
+        except (OSError, WebSocketException) as exc:
+            raise ServiceError(f"cannot subscribe at {url}: {exc}", kind="Unavailable",
+                               status=0) from None
+        first = self._receive()
+        if first.get("type") != "subscribed":
+            self.close()
+            raise ServiceError(f"unexpected first message from the server: {first!r}",
+                               kind="InternalError", status=0)
+
+    def _receive(self) -> dict:
+        try:
+            data = self._ws.recv()
+        except self._closed_exc as exc:
+            if self._done:             # close() was called (maybe from another thread)
+                return {"type": "end"}
+            self._done = True
+            raise ServiceError(f"the subscription's connection closed: {exc}",
+                               kind="Unavailable", status=0) from None
+        message = loads(data)
+        if not isinstance(message, dict):
+            raise ServiceError("the server sent a message that is not an object",
+                               kind="InternalError", status=0)
+        if message.get("type") == "error":
+            self._done = True
+            self._close_socket()
+            raise error_from_body(message, int(message.get("error", {}).get("status", 400)))
+        return message
+
+    def __iter__(self) -> "RemoteSubscription":
+        return self
+
+    def __next__(self) -> dict[str, Any]:
+        if self._ready:
+            return self._ready.popleft()
+        if self._done:
+            raise StopIteration
+        message = self._receive()
+        kind = message.get("type")
+        if kind == "answer":
+            return decode_answers([message.get("answer", {})])[0]
+        if kind == "answers":
+            self._ready.extend(decode_answers(message.get("answers", [])))
+            if self._ready:
+                return self._ready.popleft()
+            return self.__next__()
+        if kind == "end":
+            self._done = True
+            self._close_socket()
+            raise StopIteration
+        raise ServiceError(f"unexpected message from the server: {message!r}",
+                           kind="InternalError", status=0)
+
+    def _close_socket(self) -> None:
+        try:
+            self._ws.close()
+        except Exception:
+            pass
+
+    def close(self) -> None:
+        """Unsubscribe (closes the WebSocket); an iteration blocked in another thread
+        ends. Answers received but not iterated yet are dropped."""
+        self._done = True
+        self._ready.clear()
+        self._close_socket()
+
+    def __enter__(self) -> "RemoteSubscription":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+# -- request bodies ----------------------------------------------------------------------------
+
+def _text(value: Any, what: str) -> str:
+    if not isinstance(value, str):
+        raise SLRError(f"{what} must be a string of SLR text, not {type(value).__name__}")
+    return str(value)
+
+
+def _number(value: Any, what: str) -> Any:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SLRError(f"{what} must be a number, not {value!r}")
+    return encode_term(float(value) if isinstance(value, float) else int(value))
+
+
+def _goal_body(goal: str, at: Any, args: dict | None, timeout: Any) -> dict:
+    body: dict[str, Any] = {"goal": _text(goal, "goal")}
+    if args:
+        body["args"] = encode_args(args)
+    if at is not None:
+        body["at"] = _number(at, "at")
+    if timeout is not None:
+        body["timeout"] = _number(timeout, "timeout")
+    return body
+
+
+def _event_object(name: Any, args: Iterable[Any], start: Any, end: Any, where: str) -> dict:
+    try:
+        arg_list = args if type(args) is list else list(args)
+    except TypeError:
+        raise EventRejected(f"{where}args must be a list of values, not {args!r}") from None
+    obj: dict[str, Any] = {"name": name if isinstance(name, str) else str(name),
+                           "args": encode_arguments(arg_list, f"{where}args"),
+                           "start": _time(start, f"{where}start")}
+    if end is not None:
+        obj["end"] = _time(end, f"{where}end")
+    return obj
+
+
+def _time(t: Any, where: str) -> Any:
+    return t if type(t) is float and t - t == 0.0 else encode_term(t, _where=where)
+
+
+def _tuple_object(ev: Any) -> dict:
+    try:
+        name, args, start, end = ev
+    except (TypeError, ValueError):
+        raise EventRejected(f"{ev!r}: an event is SLR text or (name, args, start, end)") from None
+    try:
+        return _event_object(name, args, start, end, "")
+    except TermError as exc:
+        raise EventRejected(f"{ev!r}: {exc}") from None
+
+
+def _rejected(exc: SLRError, index: int) -> EventRejected:
+    out = exc if isinstance(exc, EventRejected) else EventRejected(str(exc))
+    out.index = index
+    return out

@@ -1,0 +1,122 @@
+"""Errors on the wire: one JSON shape, one HTTP status per kind, rebuilt as the same
+exception class by the client.
+
+``{"error": {"kind": "SLRSyntaxError", "status": 400, "message": "...", "line": 1,
+"column": 5, "source_line": "foo(", "filename": "<query>"}}``
+
+>>> from slr_sql import SLRTimeout
+>>> body = error_body(SLRTimeout("the query ran out of its 1 s"))
+>>> body["error"]["kind"], body["error"]["status"]
+('SLRTimeout', 408)
+>>> type(error_from_body(body, 408)).__name__
+'SLRTimeout'
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import slr_sql
+from slr_sql import EventRejected, SLREvaluationError, SLRError, SLRSyntaxError, SLRTimeout
+
+from .encoding import TermError, decode_term, encode_term
+
+__all__ = ["ServiceError", "error_body", "error_status", "error_from_body", "STATUS_KINDS"]
+
+# kind of a ServiceError -> its HTTP status
+STATUS_KINDS = {
+    "BadRequest": 400, "Unauthorized": 401, "NotFound": 404, "MethodNotAllowed": 405,
+    "RequestTimeout": 408, "PayloadTooLarge": 413, "InternalError": 500,
+    "NotImplemented": 501, "Unavailable": 503,
+}
+
+
+class ServiceError(SLRError):
+    """A failure of the service itself rather than of the knowledge base: a bad request, a
+    wrong token, an unknown resource, a body too large, an unreachable server. ``status`` is
+    the HTTP status (0 when no answer came), ``kind`` the name in the error JSON.
+
+    >>> e = ServiceError("no such buffer #9", kind="NotFound"); e.status
+    404
+    """
+
+    def __init__(self, message: str, kind: str = "BadRequest", status: int | None = None):
+        self.kind = kind
+        self.status = STATUS_KINDS.get(kind, 400) if status is None else status
+        super().__init__(message)
+
+
+def error_status(exc: BaseException) -> int:
+    """The HTTP status an exception is answered with."""
+    if isinstance(exc, ServiceError):
+        return exc.status
+    if isinstance(exc, SLRTimeout):
+        return 408
+    if type(exc).__name__ == "SLRBusy":   # a lock wait on the file ran out: try again
+        return 503
+    return 400  # syntax, evaluation, rejected events, bad terms: the request's fault
+
+
+def error_body(exc: BaseException) -> dict[str, Any]:
+    """The JSON body of an error response for ``exc``."""
+    if isinstance(exc, ServiceError):
+        kind = exc.kind
+    elif isinstance(exc, SLRError):
+        kind = type(exc).__name__ if not isinstance(exc, TermError) else "BadRequest"
+    else:
+        kind = "InternalError"
+    err: dict[str, Any] = {"kind": kind, "status": error_status(exc) if kind != "InternalError"
+                           else 500}
+    if isinstance(exc, SLRSyntaxError):
+        err.update(message=exc.message, line=exc.line, column=exc.column,
+                   source_line=exc.source_line, filename=exc.filename)
+    else:
+        err["message"] = str(exc) if kind != "InternalError" else \
+            f"internal error ({type(exc).__name__}); the server log has the details"
+    if isinstance(exc, SLREvaluationError):
+        try:
+            err["term"] = encode_term(exc.term)
+        except SLRError:
+            pass
+    index = getattr(exc, "index", None)
+    if isinstance(exc, EventRejected) and isinstance(index, int):
+        err["index"] = index
+    return {"error": err}
+
+
+def error_from_body(body: Any, status: int) -> SLRError:
+    """The exception an error response stands for, of the class the server raised when it is
+    an slr_sql error class (``SLRSyntaxError`` with its line and column, ...), else a
+    :class:`ServiceError`."""
+    err = body.get("error") if isinstance(body, dict) else None
+    if not isinstance(err, dict):
+        return ServiceError(f"HTTP {status} without an error description", kind="BadRequest",
+                            status=status)
+    kind = str(err.get("kind", "SLRError"))
+    message = str(err.get("message", ""))
+    if kind == "SLRSyntaxError":
+        return SLRSyntaxError(message, line=_int(err.get("line")), column=_int(err.get("column")),
+                              source_line=str(err.get("source_line") or ""),
+                              filename=str(err.get("filename") or "<string>"))
+    if kind == "SLREvaluationError":
+        term = None
+        if "term" in err:
+            try:
+                term = decode_term(err["term"])
+            except SLRError:
+                term = None
+        return SLREvaluationError(term, message)
+    cls = getattr(slr_sql, kind, None)
+    if isinstance(cls, type) and issubclass(cls, SLRError) and kind not in ("TermError",):
+        try:
+            exc = cls(message)
+        except TypeError:
+            exc = None
+        if exc is not None:
+            if isinstance(exc, EventRejected) and isinstance(err.get("index"), int):
+                exc.index = err["index"]
+            return exc
+    return ServiceError(message, kind=kind, status=status)
+
+
+def _int(value: Any) -> int:
+    return value if isinstance(value, int) and not isinstance(value, bool) else 0

@@ -1,0 +1,215 @@
+"""Builtins in SQL: arithmetic (SQLite's own for float ``+ - *``, application-defined
+``slr_`` functions for the rest), comparisons, ``=``, ``is``, and every other deterministic
+builtin or ``kb.define`` predicate as a call of ``slr_det`` on a :class:`Site`.
+
+Mixed into :class:`slr_sql.sqlcompile.Compiler` (uses ``self.solve``, ``self.unify``,
+``self.const``, ``self.udf``, ``self.record_mode``, ``self.ctx``, ``self.sites``).
+"""
+from __future__ import annotations
+
+import math
+import operator
+from typing import Any
+
+from ..terms import Atom, Struct, Var, deref
+from .model import (NUMERIC, SITES, Col, ColRef, Fallback, Site, _fmt, _shown, _site_ids,
+                    has_col, has_var, resolve, term_free_vars)
+
+
+# det builtins that only test (never bind): free variables passed to them stay free
+NO_BIND = frozenset([
+    ("\\=", 2), ("==", 2), ("\\==", 2), ("@<", 2), ("@>", 2), ("@=<", 2), ("@>=", 2),
+    ("var", 1), ("nonvar", 1), ("atom", 1), ("number", 1), ("integer", 1), ("float", 1),
+    ("atomic", 1), ("compound", 1), ("callable", 1), ("is_list", 1), ("string", 1),
+    ("ground", 1),
+])
+
+
+# det builtins with effects outside the answer: never called from SQL
+EFFECTS = frozenset([
+    ("write", 1), ("print", 1), ("writeq", 1), ("write_canonical", 1), ("writeln", 1),
+    ("nl", 0), ("tab", 1), ("format", 1), ("format", 2), ("format", 3), ("halt", 0),
+])
+
+
+COMPARISONS = {"<": "<", ">": ">", "=<": "<=", ">=": ">=", "=:=": "=", "=\\=": "<>"}
+# two constant operands: decided at compile time by Python's comparison of the numbers, as
+# the interpreter's builtins do (without importing them: the engine is not below the compiler)
+CONSTANT_COMPARISONS = {"<": operator.lt, ">": operator.gt, "=<": operator.le,
+                        ">=": operator.ge, "=:=": operator.eq, "=\\=": operator.ne}
+
+
+class BuiltinGoals:
+    """Arithmetic expressions, comparisons, ``=``, ``is`` and deterministic builtins."""
+
+    # ------------------------------------------------------------------ arithmetic
+    def arith_sql(self, t: Any):
+        """(sql, kind) of an arithmetic expression, or ('const', value) when constant."""
+        t = deref(t)
+        tt = type(t)
+        if tt is int or tt is float:
+            return None, t
+        if tt is Var:
+            raise Fallback(f"the unbound variable {t.name} in arithmetic (instantiation error)")
+        if tt is Col:
+            if t.kind in NUMERIC:
+                return t.sql, t.kind
+            if t.kind == "text":
+                raise Fallback("arithmetic on a list value")
+            return self.udf(f"slr_num({t.sql})"), "num"
+        if not has_col(t):
+            if has_var(t):
+                raise Fallback(f"unbound variable in the arithmetic expression {_fmt(_shown(t))}")
+            from ..arith import evaluate
+
+            if tt is Atom and t in ("random", "cputime", "realtime"):
+                raise Fallback(f"the non-deterministic function {t}")
+            if tt is Struct and any(deref(a) in ("random", "cputime", "realtime")
+                                    for a in _atoms(t)):
+                raise Fallback("a non-deterministic arithmetic function")
+            try:
+                return None, evaluate(t)
+            except Exception as exc:
+                raise Fallback(f"arithmetic error: {exc}")
+        if tt is Struct and len(t.args) in (1, 2):
+            from ..arith import BINARY, UNARY
+
+            op = str(t.name)
+            subs = [self.arith_sql(a) for a in t.args]
+            if len(subs) == 2 and op in BINARY:
+                (sa, va), (sb, vb) = subs
+                if op in ("+", "-", "*") and _floatish(sa, va) and _floatish(sb, vb) \
+                        and (_is_float(sa, va) or _is_float(sb, vb)):
+                    xa = sa if sa is not None else self.const(float(va))
+                    xb = sb if sb is not None else self.const(float(vb))
+                    return f"({xa} {op} {xb})", "float"
+                xa = sa if sa is not None else self.const(va)
+                xb = sb if sb is not None else self.const(vb)
+                return self.udf(f"slr_ar2({self.const(op)}, {xa}, {xb})"), "num"
+            if len(subs) == 1 and op in UNARY:
+                (sa, va), = subs
+                xa = sa if sa is not None else self.const(va)
+                return self.udf(f"slr_ar1({self.const(op)}, {xa})"), "num"
+        raise Fallback(f"arithmetic expression {_fmt(_shown(t))} has no SQL form")
+
+    def num_sql(self, t: Any) -> str:
+        sql, v = self.arith_sql(t)
+        if sql is None:
+            if type(v) is float and v != v:
+                raise Fallback("NaN in arithmetic")
+            return self.const(v)
+        return sql
+
+    def time_sql(self, t: Any) -> str:
+        """A time argument of prev/next: float(evaluate(t))."""
+        sql, v = self.arith_sql(t)
+        if sql is None:
+            try:
+                f = float(v)
+            except OverflowError:
+                raise Fallback("time out of range")
+            if f != f:
+                raise Fallback("NaN time")
+            return self.const(f)
+        return sql
+
+    # ------------------------------------------------------------------ builtins
+    def builtin_sql(self, key, args, ctx, nxt, st, emit):
+        name = key[0]
+        if key == ("=", 2):
+            m = st.mark()
+            if self.unify(args[0], args[1], st):
+                self.solve(nxt, st, emit)
+            st.restore(m)
+            return
+        if name in COMPARISONS and len(args) == 2:
+            a_sql, a_v = self.arith_sql(args[0])
+            b_sql, b_v = self.arith_sql(args[1])
+            if a_sql is None and b_sql is None:
+                if CONSTANT_COMPARISONS[name](a_v, b_v):
+                    self.solve(nxt, st, emit)
+                return
+            xa = a_sql if a_sql is not None else self.num_sql(a_v)
+            xb = b_sql if b_sql is not None else self.num_sql(b_v)
+            m = st.mark()
+            st.conds.append(f"{xa} {COMPARISONS[name]} {xb}")
+            self.solve(nxt, st, emit)
+            st.restore(m)
+            return
+        if key == ("is", 2):
+            sql, v = self.arith_sql(args[1])
+            m = st.mark()
+            value = v if sql is None else Col(sql, v)
+            if sql is not None and "slr_" in sql:
+                # evaluated where the goal stands (its loop level), as Prolog does, even when
+                # the value is used only later or not at all
+                st.conds.append(f"({sql}) IS NOT NULL")
+            if self.unify(args[0], value, st):
+                self.solve(nxt, st, emit)
+            st.restore(m)
+            return
+        if key in EFFECTS:
+            raise Fallback(f"{name}/{key[1]} has effects (output) and runs in the interpreter")
+        self.det_sql(key, self.ctx.det[key], False, args, nxt, st, emit)
+
+    def det_sql(self, key, fn, python, args, nxt, st, emit):
+        """A deterministic builtin or ``kb.define`` predicate as the function ``slr_det``."""
+        self.record_mode(Struct(key[0], args) if args else Atom(key[0]))
+        resolved = [resolve(a) for a in args]
+        cols: list[Col] = []
+        index: dict[str, int] = {}
+
+        def subst(t):
+            t = deref(t)
+            if type(t) is Col:
+                i = index.get(t.sql)
+                if i is None:
+                    i = index[t.sql] = len(cols)
+                    cols.append(t)
+                return ColRef(i)
+            if type(t) is Struct:
+                return Struct(t.name, tuple(subst(a) for a in t.args))
+            return t
+
+        templ = tuple(subst(a) for a in resolved)
+        outs = [] if key in NO_BIND else term_free_vars(Struct("t", tuple(resolved)))
+        if python and not cols and len(outs) == len(term_free_vars(Struct("t", tuple(resolved)))) \
+                and outs and all(type(deref(a)) is Var for a in args):
+            raise Fallback(f"the Python predicate {key[0]}/{key[1]} called with every argument "
+                           f"unbound (a non-functional mode)")
+        site = Site(fn, python, templ, len(cols), outs, self.ctx.engine)
+        sid = next(_site_ids)
+        SITES[sid] = site
+        self.sites.append(site)
+        inputs = "".join(f", {c.sql}" for c in cols)
+        m = st.mark()
+        st.conds.append(self.udf(f"slr_det({sid}, -1{inputs}) IS NOT NULL"))
+        ok = True
+        for i, v in enumerate(outs):
+            if not self.unify(v, Col(self.udf(f"slr_det({sid}, {i}{inputs})")), st):
+                ok = False
+                break
+        if ok:
+            self.solve(nxt, st, emit)
+        st.restore(m)
+
+
+def _floatish(sql, v) -> bool:
+    """An operand SQLite's float arithmetic computes exactly as Python does."""
+    if sql is None:
+        return (type(v) is float and math.isfinite(v)) or (type(v) is int and abs(v) < 2 ** 53)
+    return v == "float"
+
+
+def _is_float(sql, v) -> bool:
+    return v == "float" if sql is not None else type(v) is float
+
+
+def _atoms(t):
+    stack = [t]
+    while stack:
+        x = deref(stack.pop())
+        if type(x) is Struct:
+            stack.extend(x.args)
+        else:
+            yield x

@@ -1,0 +1,190 @@
+"""Event goals and prev/next.
+
+An event goal ``p(X)^T`` is a row of the table of p/1 (its store order ``t_end, t_start,
+seq`` among the ordering keys) or, when p/1 has rules, also each of their clauses. prev
+(next) is a row of the same table whose end (start) time is the latest (earliest) one a
+subquery on the same pattern finds.
+
+Mixed into :class:`slr_sql.sqlcompile.Compiler` (uses ``self.solve``, ``self.unify``,
+``self.alias``, ``self.time_sql``, ``self.clauses_sql``, ``self.record_mode``; reads
+``self.ctx``, ``self.program``, ``self.has_at``; records ``self.missing``, ``self.time_sites``).
+"""
+from __future__ import annotations
+
+from ..program import event_key, split_event_atom
+from ..terms import Atom, Struct, Var, deref, list_items
+from .model import Col, Fallback, State
+
+
+class EventGoals:
+    """Handlers of event goals (``^``), prev/2 and next/2,3."""
+
+    def caret_sql(self, g, args, ctx, nxt, st, emit):
+        ev = split_event_atom(g)
+        if ev is None:
+            return self.solve((args[1], ctx, nxt), st, emit)
+        self.record_mode(g)
+        return self.event_sql(ev, ctx, nxt, st, emit)
+
+    def row_unify(self, pattern: tuple, alias: str, n: int, st: State) -> bool:
+        """Match an event pattern (data arguments + (start, end)) with a row of ``alias``:
+        the data by unification, the stored times by value (``^5`` finds 5.0)."""
+        for i, p in enumerate(pattern[:n]):
+            if not self.unify(p, Col(f"{alias}.arg{i + 1}"), st):
+                return False
+        return (self.match_time(pattern[n], Col(f"{alias}.t_start", "float"), st)
+                and self.match_time(pattern[n + 1], Col(f"{alias}.t_end", "float"), st))
+
+    def event_table(self, name: str, n: int) -> str | None:
+        table = self.ctx.event_table(name, n)
+        if table is None:
+            self.missing.add((name, n))
+        return table
+
+    def event_sql(self, ev, ctx, nxt, st, emit):
+        atom, s, e = ev
+        atom = deref(atom)
+        if type(atom) not in (Struct, Atom):
+            raise Fallback("an event goal whose name is not known")
+        name, n = event_key(atom)
+        args = tuple(atom.args) if type(atom) is Struct else ()
+        rules = self.program.temporal.get((name, n))
+        has_rules = rules is not None and bool(rules.clauses)
+        table = self.event_table(name, n)
+        if table is not None:
+            m = st.mark()
+            if has_rules:
+                st.keys.append("0")
+            alias = self.alias()
+            st.froms.append((table, alias, "seq"))
+            if self.row_unify(args + (s, e), alias, n, st):
+                if self.has_at:
+                    st.conds.append(f"{alias}.t_end <= :at")
+                st.keys.extend([f"{alias}.t_end", f"{alias}.t_start", f"{alias}.seq"])
+                self.solve(nxt, st, emit)
+            st.restore(m)
+        if has_rules:
+            self.clauses_sql(rules, ("event", name, n), args + (s, e), ctx, nxt, st, emit,
+                             offset=1)
+
+    def _prev_next_pattern(self, t):
+        ev = split_event_atom(t)
+        if ev is None:
+            raise Fallback("prev/next of something that is not an event atom (error at run time)")
+        atom, s, e = ev
+        atom = deref(atom)
+        if type(atom) not in (Struct, Atom):
+            raise Fallback("prev/next of an event with an unknown name")
+        name, n = event_key(atom)
+        args = tuple(atom.args) if type(atom) is Struct else ()
+        return name, n, args + (s, e)
+
+    def _interval(self, t):
+        t = deref(t)
+        if type(t) is Struct and t.name == "." and len(t.args) == 2:
+            items, tail = list_items(t)
+            if len(items) == 2 and type(tail) is Atom and tail == "[]":
+                return self.time_sql(items[0]), self.time_sql(items[1])
+            raise Fallback("a malformed interval (type error at run time)")
+        return None
+
+    def _sandbox(self, pattern, table, n, st):
+        """Conditions of the pattern on a fresh alias, bindings undone; None: never matches."""
+        q = self.alias("q")
+        m = st.mark()
+        st.nested += 1   # these conditions go into a subquery on q, not into the branch
+        try:
+            ok = self.row_unify(pattern, q, n, st)
+        finally:
+            st.nested -= 1
+        conds = list(st.conds[m[1]:])
+        st.restore(m)
+        return (q, conds) if ok else None
+
+    def prev_sql(self, args, ctx, nxt, st, emit):
+        name, n, pattern = self._prev_next_pattern(args[0])
+        iv = self._interval(args[1])
+        if iv is None:
+            if type(deref(args[1])) is Var:
+                raise Fallback("prev/2 with an unbound time (instantiation error)")
+            lo, hi = None, self.time_sql(args[1])
+        else:
+            lo, hi = iv
+        self.time_sites.append(((name, n), hi))
+        m0 = st.mark()
+        self._time_checks(st, lo, hi)
+        try:
+            self._prev_rows(name, n, pattern, lo, hi, nxt, st, emit)
+        finally:
+            st.restore(m0)
+
+    def _time_checks(self, st, *times) -> None:
+        """Prolog evaluates a prev/next time before it looks at the history (an error even
+        when no event matches): one computed through an slr_ function is tested here."""
+        for t in times:
+            if t is not None and "slr_" in t:
+                st.conds.append(f"({t}) IS NOT NULL")
+
+    def _prev_rows(self, name, n, pattern, lo, hi, nxt, st, emit):
+        table = self.event_table(name, n)
+        if table is None:
+            return
+        sb = self._sandbox(pattern, table, n, st)
+        if sb is None:
+            return
+        q, qconds = sb
+        qconds.append(f"{q}.t_end <= {hi}")
+        if lo is not None:
+            qconds.append(f"{q}.t_start >= {lo}")
+        sub = (f"(SELECT {q}.t_end FROM {table} AS {q} WHERE {' AND '.join(qconds)} "
+               f"ORDER BY {q}.t_end DESC LIMIT 1)")
+        m = st.mark()
+        p = self.alias("p")
+        st.froms.append((table, p, "seq"))
+        if self.row_unify(pattern, p, n, st):
+            st.conds.append(f"{p}.t_end = {sub}")
+            if lo is not None:
+                st.conds.append(f"{p}.t_start >= {lo}")
+            st.keys.extend([f"{p}.t_start", f"{p}.seq"])
+            self.solve(nxt, st, emit)
+        st.restore(m)
+
+    def next_sql(self, args, ctx, nxt, st, emit):
+        name, n, pattern = self._prev_next_pattern(args[0])
+        if len(args) == 2:
+            iv = self._interval(args[1])
+            if iv is None:
+                raise Fallback("next/2 without an interval (error at run time)")
+            lo, hi = iv
+        else:
+            lo, hi = self.time_sql(args[1]), self.time_sql(args[2])
+        self.time_sites.append(((name, n), hi))
+        m0 = st.mark()
+        self._time_checks(st, lo, hi)
+        try:
+            self._next_rows(name, n, pattern, lo, hi, nxt, st, emit)
+        finally:
+            st.restore(m0)
+
+    def _next_rows(self, name, n, pattern, lo, hi, nxt, st, emit):
+        table = self.event_table(name, n)
+        if table is None:
+            return
+        sb = self._sandbox(pattern, table, n, st)
+        if sb is None:
+            return
+        q, qconds = sb
+        qconds.append(f"{q}.t_start >= {lo}")
+        qconds.append(f"{q}.t_start <= {hi}")
+        qconds.append(f"{q}.t_end <= {hi}")
+        sub = (f"(SELECT {q}.t_start FROM {table} AS {q} WHERE {' AND '.join(qconds)} "
+               f"ORDER BY {q}.t_start LIMIT 1)")
+        m = st.mark()
+        p = self.alias("p")
+        st.froms.append((table, p, "seq"))
+        if self.row_unify(pattern, p, n, st):
+            st.conds.append(f"{p}.t_start = {sub}")
+            st.conds.append(f"{p}.t_end <= {hi}")
+            st.keys.extend([f"{p}.t_end", f"{p}.seq"])
+            self.solve(nxt, st, emit)
+        st.restore(m)

@@ -1,0 +1,249 @@
+"""The shared model of the SQL compiler: what a variable is bound to while a goal is compiled
+(:class:`Col`, a value known only when the statement runs), the branches it produces
+(:class:`Part`), the walk's mutable state (:class:`State`), the call sites of det builtins
+run from SQL (:class:`Site`, :data:`SITES`), and the term walks every part uses.
+"""
+from __future__ import annotations
+
+import itertools
+import weakref
+from typing import Any
+
+from ..terms import Atom, Struct, Var, deref, list_items
+
+
+class Fallback(Exception):
+    """The goal cannot be compiled exactly; ``reason`` says why (shown by explain)."""
+
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
+
+
+class Col:
+    """A value known only when the statement runs: an SQL expression and what it can be.
+
+    kinds: ``float`` (REAL: times), ``int`` (INTEGER: counts), ``num`` (INTEGER or REAL:
+    arithmetic), ``text`` (encoded JSON text: findall lists), ``any`` (a stored value).
+
+    ``src``: for an element taken out of a stored list or compound, ``(json, path)``: the SQL
+    of the JSON text it sits in and the SQL of its JSON path (so a later pattern on it reads
+    the element's parts from the same text instead of re-parsing its encoding).
+    """
+
+    __slots__ = ("sql", "kind", "src")
+
+    def __init__(self, sql: str, kind: str = "any", src: tuple | None = None):
+        self.sql = sql
+        self.kind = kind
+        self.src = src
+
+    def __repr__(self) -> str:
+        return f"Col({self.sql!r}, {self.kind!r})"
+
+
+NUMERIC = frozenset(("float", "int", "num"))
+
+
+def quote_ident(name: str) -> str:
+    return '"' + name.replace('"', '""') + '"'
+
+
+class Site:
+    """One call of a det builtin or a ``kb.define`` predicate from SQL (``slr_det``)."""
+
+    __slots__ = ("fn", "python", "args", "cols", "outs", "engine", "last", "__weakref__")
+
+    def __init__(self, fn, python, args, cols, outs, engine):
+        self.fn = fn
+        self.python = python
+        self.args = args      # argument terms with ColRef(i) for the SQL inputs
+        self.cols = cols      # number of SQL inputs
+        self.outs = outs      # free variables whose values are returned
+        self.engine = engine
+        self.last = None      # (inputs, result) memo: one call serves all its outputs
+
+
+SITES: "weakref.WeakValueDictionary[int, Site]" = weakref.WeakValueDictionary()
+
+
+_site_ids = itertools.count(1)
+
+
+class ColRef:
+    """Position ``i`` of a row (answer recipes) or of a function's inputs (sites)."""
+
+    __slots__ = ("i",)
+
+    def __init__(self, i: int):
+        self.i = i
+
+
+class Part:
+    """One branch: a flat SELECT."""
+
+    __slots__ = ("froms", "conds", "keys", "proj", "extra")
+
+    def __init__(self, froms, conds, keys, proj=None, extra=None):
+        self.froms = froms    # [(table sql, alias, id column)]
+        self.conds = conds    # [sql]
+        self.keys = keys      # [sql]
+        self.proj = proj      # projected sql expressions
+        self.extra = extra    # whatever the emitter attached (answer recipes)
+
+    def from_sql(self) -> str:
+        # CROSS JOIN: SQLite keeps the goal order as the join order (the binding order the
+        # modes were computed for; each later table is reached through its indexes)
+        return " CROSS JOIN ".join(f"{t} AS {a}" for t, a, _ in self.froms)
+
+    def select(self, cols: list[str]) -> str:
+        sql = "SELECT " + ", ".join(cols)
+        if self.froms:
+            sql += " FROM " + self.from_sql()
+        if self.conds:
+            sql += " WHERE " + " AND ".join(self.conds)
+        return sql
+
+
+class _Conds(list):
+    """The WHERE conditions of a branch; one that calls an slr_ function (which may raise
+    an error Prolog would raise) is also recorded with its prefix (see Compiler.guards)."""
+
+    __slots__ = ("st",)
+
+    def append(self, cond: str) -> None:
+        if "slr_" in cond:
+            self.st.raised(cond, len(self), True)
+        list.append(self, cond)
+
+
+class State:
+    __slots__ = ("froms", "conds", "keys", "trail", "checks", "raising", "nested", "branches",
+                 "live", "first")
+
+    def __init__(self):
+        self.froms: list = []
+        self.conds: _Conds = _Conds()
+        self.conds.st = self
+        # (expr, froms prefix, conds prefix, is a condition, inside \+ or ->) of every goal
+        # that may raise, in goal order; never undone (a branch that fails later still
+        # evaluated it)
+        self.raising: list = []
+        self.nested = 0       # > 0 while a prev/next pattern is matched on its subquery alias
+        # (froms, conds, live) of every branch emitted, subquery branches (findall, \+, ...)
+        # included with the tables and conditions of the goals before them
+        self.branches: list = []
+        self.live: list = []  # indexes into raising of the goals on the current path
+        self.first = 0        # > 0 inside a subquery SQLite stops at its first row (\+, ->)
+        self.keys: list = []
+        self.trail: list = []
+        # values that may raise (arithmetic through slr_ functions, findall/aggregate_all
+        # subqueries): SQLite computes a value only where the statement uses it, Prolog
+        # computes it when the goal runs, so an unused one still gets a condition
+        self.checks: list = []
+
+    def raised(self, expr: str, nc: int, is_cond: bool) -> None:
+        if not self.nested:
+            self.live.append(len(self.raising))
+            self.raising.append((expr, list(self.froms), list(self.conds[:nc]), is_cond,
+                                 self.first > 0))
+
+    def mark(self) -> tuple:
+        return (len(self.froms), len(self.conds), len(self.keys), len(self.trail),
+                len(self.checks), len(self.live))
+
+    def restore(self, m: tuple) -> None:
+        del self.froms[m[0]:]
+        del self.conds[m[1]:]
+        del self.keys[m[2]:]
+        del self.checks[m[4]:]
+        del self.live[m[5]:]
+        trail = self.trail
+        while len(trail) > m[3]:
+            trail.pop().ref = None
+
+
+def resolve(t: Any) -> Any:
+    """The term with bound variables replaced by their values (Cols and free Vars kept)."""
+    t = deref(t)
+    if type(t) is Struct:
+        if t.name == "." and len(t.args) == 2:
+            items, tail = list_items(t)
+            out = resolve(tail)
+            for x in reversed(items):
+                out = Struct(".", (resolve(x), out))
+            return out
+        return Struct(t.name, tuple(resolve(a) for a in t.args))
+    return t
+
+
+# The interpreter unifies without occurs check (as Prolog does) and can build X = f(X);
+# the compiler's walks over bound terms would not terminate on one, so it leaves such goals
+# to the interpreter.
+CYCLIC = "a unification can build a cyclic term (no occurs check)"
+
+
+def _occurs(v: Var, t: Any) -> bool:
+    stack = [t]
+    while stack:
+        x = deref(stack.pop())
+        if x is v:
+            return True
+        if type(x) is Struct:
+            stack.extend(x.args)
+    return False
+
+
+def _contains(t: Any, kind: type) -> bool:
+    stack = [t]
+    while stack:
+        x = deref(stack.pop())
+        if type(x) is kind:
+            return True
+        if type(x) is Struct:
+            stack.extend(x.args)
+    return False
+
+
+def has_var(t: Any) -> bool:
+    return _contains(t, Var)
+
+
+def _has_float(t: Any) -> bool:
+    return _contains(t, float)
+
+
+def has_col(t: Any) -> bool:
+    return _contains(t, Col)
+
+
+def term_free_vars(t: Any) -> list:
+    out, seen, stack = [], set(), [t]
+    while stack:
+        x = deref(stack.pop())
+        if type(x) is Var:
+            if id(x) not in seen:
+                seen.add(id(x))
+                out.append(x)
+        elif type(x) is Struct:
+            stack.extend(reversed(x.args))
+    return out
+
+
+def _fmt(t: Any) -> str:
+    from ..terms import format_term
+
+    try:
+        return format_term(t)
+    except Exception:
+        return repr(t)
+
+
+def _shown(t: Any) -> Any:
+    """A term for messages: Cols shown as '$value'."""
+    t = deref(t)
+    if type(t) is Col:
+        return Atom("<stored value>")
+    if type(t) is Struct:
+        return Struct(t.name, tuple(_shown(a) for a in t.args))
+    return t

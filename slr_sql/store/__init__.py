@@ -1,0 +1,450 @@
+"""The persistent event store: one SQLite file (or an in-memory database).
+
+This package is the only part of slr_sql that talks to SQLite. :class:`EventStore` is its
+whole interface: a facade over small parts that share one :class:`~.connection.Database`
+(the connection, its lock, the transaction depth and the clock):
+
+* :mod:`.connection` -- opening the file (WAL, ``synchronous``, cache), transactions
+  (savepoints when nested), the deadline of compiled statements, raw SQL, and
+  :func:`run_sql_file` (a connection of its own, read-only unless asked, for ``slr sql``);
+* :mod:`.schema` -- the numbered migrations of the ``slr_*`` tables (``PRAGMA user_version``);
+* :mod:`.tables` -- event types and their tables and indexes (``slr_event_types``);
+* :mod:`.events` -- adding events (checks in :mod:`.checks`), the store clock ``slr_clock``;
+* :mod:`.lookups` -- the indexed lookups behind ``prev``/``next``/stream scans;
+* :mod:`.catalog` -- program text, meta keys, buffer rows and objects, fact tables, views;
+* :mod:`.space` -- row counts, page statistics, reclaiming free pages, bounding the WAL;
+* :mod:`.sqltext` -- quoting identifiers and literals, splitting SQL scripts.
+
+Callers outside the package catch :data:`DatabaseError` (the base of the errors a statement
+raises) and never import ``sqlite3``. The SQL dialect lives here and in slr_sql.sqlcompile
+only, so a second backend (PostgreSQL, for fleets) would sit beside this package with the
+same :class:`EventStore` methods: a ``Database`` (connect, transactions as savepoints,
+migrations of its own, a statement deadline), the table DDL and lookup statements of
+``tables``/``lookups`` (``INDEXED BY`` becomes plain indexes), the catalog's upserts and
+``sqlite_master`` queries against its own catalog, and ``space`` mapped to its own
+statistics (or reporting none). Buffer triggers come from slr_sql.buffers as SQL text, so
+that module would need its dialect too.
+
+Durability: file databases use ``journal_mode=WAL`` with ``synchronous=FULL``: when
+:meth:`EventStore.add_events` returns, its transaction is in the WAL *and* fsynced, so the
+events survive a process kill and a power loss. (``synchronous=NORMAL`` would survive a kill
+but may lose the last transactions on power loss; pass ``synchronous="NORMAL"`` to trade that
+for speed.) Values are always bound parameters; identifiers are always quoted.
+
+Threads: one connection, serialized by ``EventStore.lock`` (an ``RLock``); a
+:meth:`EventStore.transaction` holds the lock until it ends, and suspends the event scans
+other threads left open (they resume after it, from where they were).
+
+>>> store = EventStore(None)
+>>> store.add_events([("seg", ("cup1", 1), 2.0, 2.0)])
+[]
+>>> [row[:3] for row in store.scan("seg", 2, {})]
+[((Atom('cup1'), 1), 2.0, 2.0)]
+"""
+from __future__ import annotations
+
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Callable, Iterable, Iterator
+
+from ..errors import EventRejected
+from .catalog import BufferTables, Catalog, ProgramText
+from .checks import format_event
+from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, DatabaseError, \
+    run_sql_file
+from .events import Event, EventWriter
+from .lookups import EventReader, Row
+from .schema import migration_scripts
+from .space import Space
+from .sqltext import quote_identifier, split_sql_script, sql_literal
+from .tables import EventTables
+
+__all__ = ["EventStore", "Event", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
+           "DatabaseError", "quote_identifier", "sql_literal", "format_event",
+           "migration_scripts", "split_sql_script", "run_sql_file"]
+
+
+def _doc(part_method: Callable) -> Callable:
+    """Give a facade method the docstring of the part's method it calls."""
+    def copy(method: Callable) -> Callable:
+        method.__doc__ = part_method.__doc__
+        return method
+    return copy
+
+
+class EventStore:
+    """Events, program and state of one knowledge base, in one SQLite database.
+
+    ``path`` None or ``":memory:"`` gives an in-memory store. ``clock`` is any object with
+    ``now() -> float`` (arrival times); the default is the wall clock. ``busy_timeout``:
+    seconds a write waits for another connection's write transaction before
+    :class:`~slr_sql.errors.SLRBusy`. A file that is not a store is refused with an
+    :class:`~slr_sql.errors.SLRError` and left untouched, unless ``adopt=True`` (a foreign
+    SQLite file then gets the store's tables added).
+
+    >>> store = EventStore(":memory:")
+    >>> store.add_event("obj", ("cup1", "red"), 1.0, 1.0); store.count("obj", 2)
+    1
+    >>> store.close()
+    """
+
+    def __init__(self, path: str | Path | None = None, clock: Any = None, *,
+                 synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
+                 adopt: bool = False):
+        self._db = db = Database(path, clock, synchronous, busy_timeout, adopt)
+        self._tables = EventTables(db)
+        self._writer = EventWriter(db, self._tables)
+        self._reader = EventReader(db, self._tables)
+        self._catalog = Catalog(db)
+        self._buffers = BufferTables(db)
+        self._space = Space(db, self._tables)
+
+    # ------------------------------------------------------------------ shared state
+
+    @property
+    def path(self) -> str | None:
+        """The database file (None for an in-memory store)."""
+        return self._db.path
+
+    @property
+    def clock(self) -> Any:
+        """The clock giving arrival times (``now() -> float``)."""
+        return self._db.clock
+
+    @clock.setter
+    def clock(self, clock: Any) -> None:
+        self._db.clock = clock
+
+    @property
+    def lock(self) -> Any:
+        """The ``RLock`` serializing the connection (held by a whole transaction)."""
+        return self._db.lock
+
+    @property
+    def table_created_hooks(self) -> list:
+        """Called as ``hook(name, arity, table)`` inside the transaction that creates a new
+        event type's table (slr_sql.buffers installs its triggers there)."""
+        return self._tables.table_created_hooks
+
+    @table_created_hooks.setter
+    def table_created_hooks(self, hooks: list) -> None:
+        self._tables.table_created_hooks = hooks
+
+    @property
+    def _conn(self) -> Any:  # the raw connection, for benchmarks comparing against it
+        return self._db.conn
+
+    # ------------------------------------------------------------------ lifecycle
+
+    @_doc(Database.schema_version)
+    def schema_version(self) -> int:
+        return self._db.schema_version()
+
+    @_doc(Database.close)
+    def close(self) -> None:
+        self._db.close()
+
+    def __enter__(self) -> "EventStore":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    @property
+    def closed(self) -> bool:
+        return self._db.closed
+
+    @contextmanager
+    def transaction(self) -> Iterator["EventStore"]:
+        """Run several store calls as one atomic unit (BEGIN IMMEDIATE ... COMMIT).
+
+        Re-entrant: nested uses become savepoints, so an inner failure undoes only the inner
+        part. The store lock is held for the whole transaction.
+
+        >>> s = EventStore(None)
+        >>> with s.transaction():
+        ...     table = s.declare_type("seg", 2); program_id = s.append_program("seg.", None)
+        >>> s.event_types(), s.program_sources()
+        ({('seg', 2): 'seg'}, [('seg.', None)])
+        """
+        with self._db.transaction():
+            yield self
+
+    @property
+    def in_transaction(self) -> bool:
+        return self._db.tx_depth > 0
+
+    # ------------------------------------------------------------------ event types
+
+    @_doc(EventTables.declare_type)
+    def declare_type(self, name: str, arity: int) -> str:
+        return self._tables.declare_type(name, arity)
+
+    @property
+    def max_event_arity(self) -> int:
+        """The most data arguments an event may have (SQLite's column limit less the
+        ``seq``, ``t_start``, ``t_end`` and ``arrival`` columns)."""
+        return self._tables.max_arity
+
+    @_doc(EventTables.event_types)
+    def event_types(self) -> dict[tuple[str, int], str]:
+        return self._tables.event_types()
+
+    @_doc(EventTables.declared_types)
+    def declared_types(self) -> set[tuple[str, int]]:
+        return self._tables.declared_types()
+
+    @_doc(EventTables.table_for)
+    def table_for(self, name: str, arity: int) -> str | None:
+        return self._tables.table_for(name, arity)
+
+    @_doc(EventTables.event_table_sql)
+    def event_table_sql(self, name: str, arity: int) -> str | None:
+        return self._tables.event_table_sql(name, arity)
+
+    # ------------------------------------------------------------------ adding events
+
+    @_doc(EventWriter.add_events)
+    def add_events(self, events: Iterable[Event], atomic: bool = False) -> list[EventRejected]:
+        return self._writer.add_events(events, atomic)
+
+    @_doc(EventWriter.add_event)
+    def add_event(self, name: str, args: Iterable[Any], start: float, end: float) -> None:
+        self._writer.add_event(name, args, start, end)
+
+    @_doc(EventWriter.record_now)
+    def record_now(self, now: float) -> None:
+        self._writer.record_now(now)
+
+    @_doc(EventWriter.recorded_now)
+    def recorded_now(self) -> float:
+        return self._writer.recorded_now()
+
+    # ------------------------------------------------------------------ reading events
+
+    @_doc(EventReader.scan)
+    def scan(self, name: str, arity: int, bound: dict[int, Any] | None = None,
+             end_le: float | None = None) -> Iterator[Row]:
+        return self._reader.scan(name, arity, bound, end_le)
+
+    @_doc(EventReader.prev_candidates)
+    def prev_candidates(self, name: str, arity: int, bound: dict[int, Any] | None,
+                        t: float, start_ge: float | None = None) -> Iterator[Row]:
+        return self._reader.prev_candidates(name, arity, bound, t, start_ge)
+
+    @_doc(EventReader.rows_at_end)
+    def rows_at_end(self, name: str, arity: int, bound: dict[int, Any] | None, end: float,
+                    start_ge: float | None = None, end_le: float | None = None
+                    ) -> Iterator[Row]:
+        return self._reader.rows_at_end(name, arity, bound, end, start_ge, end_le)
+
+    @_doc(EventReader.next_candidates)
+    def next_candidates(self, name: str, arity: int, bound: dict[int, Any] | None,
+                        a: float, b: float) -> Iterator[Row]:
+        return self._reader.next_candidates(name, arity, bound, a, b)
+
+    @_doc(EventReader.rows_at_start)
+    def rows_at_start(self, name: str, arity: int, bound: dict[int, Any] | None,
+                      start: float, b: float) -> Iterator[Row]:
+        return self._reader.rows_at_start(name, arity, bound, start, b)
+
+    @_doc(EventReader.lookup_sql)
+    def lookup_sql(self, kind: str, name: str, arity: int,
+                   bound: dict[int, Any] | None = None, *, start_ge: bool = False,
+                   end_le: bool = False) -> str | None:
+        return self._reader.lookup_sql(kind, name, arity, bound, start_ge=start_ge,
+                                       end_le=end_le)
+
+    @_doc(EventReader.latest_at_or_before)
+    def latest_at_or_before(self, name: str, arity: int, bound: dict[int, Any], t: float,
+                            point: bool) -> list[Row] | None:
+        return self._reader.latest_at_or_before(name, arity, bound, t, point)
+
+    @_doc(EventReader.count)
+    def count(self, name: str, arity: int) -> int:
+        return self._reader.count(name, arity)
+
+    @_doc(EventReader.max_end)
+    def max_end(self, name: str, arity: int) -> float | None:
+        return self._reader.max_end(name, arity)
+
+    # ------------------------------------------------------------------ program and meta keys
+
+    @_doc(Catalog.append_program)
+    def append_program(self, source: str, filename: str | None = None,
+                       name: str = "main") -> int:
+        return self._catalog.append_program(source, filename, name)
+
+    @_doc(Catalog.replace_named_program)
+    def replace_named_program(self, name: str, source: str, filename: str | None = None) -> int:
+        return self._catalog.replace_named_program(name, source, filename)
+
+    @_doc(Catalog.delete_program)
+    def delete_program(self, name: str) -> int:
+        return self._catalog.delete_program(name)
+
+    @_doc(Catalog.program_texts)
+    def program_texts(self) -> list[ProgramText]:
+        return self._catalog.program_texts()
+
+    @_doc(Catalog.program_version)
+    def program_version(self) -> int:
+        return self._catalog.program_version()
+
+    @_doc(Catalog.versions)
+    def versions(self) -> tuple[int, int]:
+        return self._catalog.versions()
+
+    @_doc(Database.data_version)
+    def data_version(self) -> int:
+        return self._db.data_version()
+
+    @_doc(Catalog.program_sources)
+    def program_sources(self) -> list[tuple[str, str | None]]:
+        return self._catalog.program_sources()
+
+    @_doc(Catalog.replace_program)
+    def replace_program(self, sources: Iterable[tuple[str, str | None]]) -> None:
+        self._catalog.replace_program(sources)
+
+    @_doc(Catalog.meta_get)
+    def meta_get(self, key: str, default: Any = None) -> Any:
+        return self._catalog.meta_get(key, default)
+
+    @_doc(Catalog.meta_set)
+    def meta_set(self, key: str, value: Any) -> None:
+        self._catalog.meta_set(key, value)
+
+    @_doc(Catalog.meta_raise)
+    def meta_raise(self, key: str, value: float) -> float:
+        return self._catalog.meta_raise(key, value)
+
+    @_doc(Catalog.meta_delete)
+    def meta_delete(self, key: str) -> None:
+        self._catalog.meta_delete(key)
+
+    @_doc(Catalog.meta_items)
+    def meta_items(self, prefix: str = "") -> dict[str, Any]:
+        return self._catalog.meta_items(prefix)
+
+    # ------------------------------------------------------------------ fact tables and views
+
+    fact_table_name = staticmethod(Catalog.fact_table_name)
+    view_name = staticmethod(Catalog.view_name)
+
+    @_doc(Catalog.replace_fact_tables)
+    def replace_fact_tables(self, tables: dict[tuple[str, int], list[tuple]],
+                            version: int | None = None) -> dict:
+        return self._catalog.replace_fact_tables(tables, version)
+
+    @_doc(Catalog.fact_tables_for)
+    def fact_tables_for(self, keys: Iterable[tuple[str, int]]) -> dict:
+        return self._catalog.fact_tables_for(keys)
+
+    @_doc(Catalog.facts_version)
+    def facts_version(self) -> int:
+        return self._catalog.facts_version()
+
+    @_doc(Catalog.replace_views)
+    def replace_views(self, views: dict[str, str]) -> list[str]:
+        return self._catalog.replace_views(views)
+
+    # ------------------------------------------------------------------ buffers
+
+    @_doc(BufferTables.buffer_rows)
+    def buffer_rows(self, active_only: bool = True) -> list[dict[str, Any]]:
+        return self._buffers.buffer_rows(active_only)
+
+    @_doc(BufferTables.insert_buffer)
+    def insert_buffer(self, kind: str, source: str, pattern_text: str, type_name: str,
+                      type_arity: int, amount: float | None, t1: float | None,
+                      t2: float | None, origin: str) -> int:
+        return self._buffers.insert_buffer(kind, source, pattern_text, type_name, type_arity,
+                                           amount, t1, t2, origin)
+
+    @_doc(BufferTables.mark_buffer_removed)
+    def mark_buffer_removed(self, buffer_id: int) -> None:
+        self._buffers.mark_buffer_removed(buffer_id)
+
+    @_doc(BufferTables.count_buffer)
+    def count_buffer(self, buffer_id: int, pruned: int = 0, dropped: int = 0) -> None:
+        self._buffers.count_buffer(buffer_id, pruned, dropped)
+
+    @_doc(BufferTables.set_buffer_cutoff)
+    def set_buffer_cutoff(self, buffer_id: int, cutoff: float) -> None:
+        self._buffers.set_buffer_cutoff(buffer_id, cutoff)
+
+    @_doc(BufferTables.buffer_objects)
+    def buffer_objects(self, buffer_id: int) -> dict[str, str]:
+        return self._buffers.buffer_objects(buffer_id)
+
+    @_doc(BufferTables.install_buffer_objects)
+    def install_buffer_objects(self, buffer_id: int, statements: dict[str, str]) -> bool:
+        return self._buffers.install_buffer_objects(buffer_id, statements)
+
+    @_doc(BufferTables.drop_buffer_objects)
+    def drop_buffer_objects(self, buffer_id: int) -> None:
+        self._buffers.drop_buffer_objects(buffer_id)
+
+    @_doc(BufferTables.prune)
+    def prune(self, sql: str, buffer_id: int) -> int:
+        return self._buffers.prune(sql, buffer_id)
+
+    # ------------------------------------------------------------------ space
+
+    @_doc(Space.table_rows)
+    def table_rows(self) -> dict[tuple[str, int], int]:
+        return self._space.table_rows()
+
+    @_doc(Space.space_stats)
+    def space_stats(self) -> dict[str, Any]:
+        return self._space.space_stats()
+
+    @_doc(Space.reclaim_space)
+    def reclaim_space(self, min_free_pages: int = 2048, min_free_fraction: float = 0.25,
+                      keep_fraction: float = 0.10) -> int:
+        return self._space.reclaim_space(min_free_pages, min_free_fraction, keep_fraction)
+
+    @_doc(Space.limit_wal)
+    def limit_wal(self, max_bytes: int = 64 * 1024 * 1024) -> None:
+        self._space.limit_wal(max_bytes)
+
+    # ------------------------------------------------------------------ raw and compiled SQL
+
+    @_doc(Database.sql)
+    def sql(self, query: str, params: Iterable[Any] = (), write: bool = False,
+            timeout: float | None = None) -> tuple[list[str], list[tuple]]:
+        return self._db.sql(query, params, write, timeout)
+
+    @_doc(Database.execute)
+    def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
+        return self._db.execute(sql, params)
+
+    @_doc(Database.executemany)
+    def executemany(self, sql: str, rows: Iterable[Iterable[Any]]) -> None:
+        self._db.executemany(sql, rows)
+
+    @_doc(Database.executescript)
+    def executescript(self, script: str) -> None:
+        self._db.executescript(script)
+
+    @_doc(Database.changes)
+    def changes(self) -> int:
+        return self._db.changes()
+
+    @_doc(Database.query_plan)
+    def query_plan(self, sql: str) -> list[str]:
+        return self._db.query_plan(sql)
+
+    @_doc(Database.create_function)
+    def create_function(self, name: str, narg: int, fn: Any, deterministic: bool = True) -> None:
+        self._db.create_function(name, narg, fn, deterministic)
+
+    @_doc(Database.create_aggregate)
+    def create_aggregate(self, name: str, narg: int, cls: Any) -> None:
+        self._db.create_aggregate(name, narg, cls)
+
+    @_doc(Database.run_compiled)
+    def run_compiled(self, sql: str, params: dict, limit: int | None = None,
+                     deadline: float | None = None) -> list[tuple]:
+        return self._db.run_compiled(sql, params, limit, deadline)

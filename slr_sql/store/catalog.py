@@ -1,0 +1,527 @@
+"""What the store keeps besides events: program text, meta keys, buffers, fact tables, views.
+
+* ``slr_program``: every loaded program text with the name of the program it belongs to, in
+  load order (a reopened store reloads it); ``version/program`` in ``slr_meta`` counts its
+  changes, so that every connection can tell cheaply that another one changed the program.
+* ``slr_meta``: JSON values by key (delays, view names, settings of other modules); values
+  that must only grow (learned delays, completeness marks) are written by
+  :meth:`Catalog.meta_raise`, which keeps the larger of the stored and the new value.
+* ``slr_buffers`` / ``slr_counters`` (migrations/0002_buffers.sql): one row per event-history
+  buffer with its counters; its schema objects are named ``slr_buf_<id>_*`` (triggers) and
+  ``slr_bix_<id>`` (indexes). slr_sql.buffers decides *what* they are; this runs the SQL.
+* ``slr_facts_<arity>_<name>`` (``ord, arg1..argN``) tables and the inspection views of
+  derived predicates, written by the SQL compiler (view names kept in ``slr_meta`` under
+  ``sql_views``; ``facts/version`` is the program version they were built for). Names are
+  derived so that any Prolog name works: see :meth:`Catalog.fact_table_name` and
+  :meth:`Catalog.view_name`.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from typing import Any, Iterable
+
+from .connection import Database
+from .sqltext import RESERVED_PREFIXES, quote_identifier
+
+__all__ = ["Catalog", "BufferTables", "ProgramText", "PROGRAM_VERSION", "PROGRESS_VERSION",
+           "FACTS_VERSION"]
+
+PROGRAM_VERSION = "version/program"    # bumped with every change of slr_program
+PROGRESS_VERSION = "version/progress"  # bumped whenever meta_raise raises a value
+FACTS_VERSION = "facts/version"        # the program version the fact tables were built for
+
+_INSERT_TEXT = "INSERT INTO slr_program (id, name, source, filename, loaded_at) VALUES (?, ?, ?, ?, ?)"
+
+
+@dataclass(frozen=True)
+class ProgramText:
+    """One stored program text: its row id (load order), program name, text, file name and
+    the store clock's time when it was loaded."""
+
+    id: int
+    name: str
+    source: str
+    filename: str | None
+    loaded_at: float | None
+
+
+def _number_text(value: float) -> str:
+    """A float as JSON text that SQLite's ``CAST(... AS REAL)`` reads back exactly
+    (``1e999`` for infinity, which both JSON and SQLite read as infinity)."""
+    if value == math.inf:
+        return "1e999"
+    if value == -math.inf:
+        return "-1e999"
+    return repr(float(value))
+
+
+# The stored number of a meta value, in SQL (texts written by json.dumps may spell infinity).
+_STORED_NUMBER = ("(CASE slr_meta.value WHEN 'Infinity' THEN 9e999 WHEN '-Infinity' THEN -9e999 "
+                  "ELSE CAST(slr_meta.value AS REAL) END)")
+
+
+def _escape_name(name: str) -> str:
+    """An injective spelling of a name in lowercase letters, digits and ``_``: SQLite names
+    are case-insensitive and may not hold NUL, Prolog names are neither. Lowercase letters
+    and digits stay, ``_`` is ``__``, an uppercase letter is ``_`` and the letter, anything
+    else ``_0<hex>_``."""
+    out = []
+    for c in name:
+        if "a" <= c <= "z" or "0" <= c <= "9":
+            out.append(c)
+        elif c == "_":
+            out.append("__")
+        elif "A" <= c <= "Z":
+            out.append("_" + c.lower())
+        else:
+            out.append(f"_0{ord(c):x}_")
+    return "".join(out)
+
+
+class Catalog:
+    """Program text, meta keys, fact tables and views of one database.
+
+    >>> from slr_sql.store import EventStore
+    >>> s = EventStore(None); s.meta_set("k", [1]); s.meta_get("k")
+    [1]
+    """
+
+    def __init__(self, db: Database):
+        self.db = db
+
+    # ------------------------------------------------------------------ program
+
+    def _bump(self, key: str) -> int:
+        """Add one to the counter ``key`` (in the caller's transaction); returns the new value."""
+        conn = self.db.conn
+        conn.execute("INSERT INTO slr_meta (key, value) VALUES (?, '1') ON CONFLICT(key) "
+                     "DO UPDATE SET value = CAST(value AS INTEGER) + 1", (key,))
+        return int(conn.execute("SELECT value FROM slr_meta WHERE key = ?", (key,)).fetchone()[0])
+
+    def _counter(self, key: str) -> int:
+        row = self.db.conn.execute("SELECT value FROM slr_meta WHERE key = ?", (key,)).fetchone()
+        return 0 if row is None else int(row[0])
+
+    def program_version(self) -> int:
+        """How many times the stored program changed (0 for a store never loaded).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); v = s.program_version(); s.append_program("p(1)."); s.program_version() - v
+        1
+        1
+        """
+        with self.db.lock:
+            self.db.check_open()
+            return self._counter(PROGRAM_VERSION)
+
+    def versions(self) -> tuple[int, int]:
+        """``(program version, progress version)``: what another connection may have
+        changed (the program texts; learned delays and completeness marks), in one read.
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).versions()
+        (0, 0)
+        """
+        with self.db.lock:
+            self.db.check_open()
+            rows = dict(self.db.conn.execute(
+                "SELECT key, value FROM slr_meta WHERE key IN (?, ?)",
+                (PROGRAM_VERSION, PROGRESS_VERSION)).fetchall())
+        return int(rows.get(PROGRAM_VERSION, 0)), int(rows.get(PROGRESS_VERSION, 0))
+
+    def append_program(self, source: str, filename: str | None = None,
+                       name: str = "main") -> int:
+        """Persist one loaded program text under the program ``name``; returns its id (load
+        order). Bumps the program version in the same transaction.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.append_program("p(1).", "a.slr"); s.program_sources()
+        1
+        [('p(1).', 'a.slr')]
+        """
+        with self.db.transaction():
+            cursor = self.db.conn.execute(_INSERT_TEXT, (None, str(name), source, filename,
+                                                         float(self.db.clock.now())))
+            self._bump(PROGRAM_VERSION)
+            return cursor.lastrowid
+
+    def replace_named_program(self, name: str, source: str, filename: str | None = None) -> int:
+        """Make the program ``name`` the one text ``source``, in the place of its first text
+        (appended if there is no such program); returns the text's id. Atomic; bumps the
+        program version.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); _ = s.append_program("a(1).", None, "a"); _ = s.append_program("b.", None, "b")
+        >>> _ = s.replace_named_program("a", "a(2)."); [(t.name, t.source) for t in s.program_texts()]
+        [('a', 'a(2).'), ('b', 'b.')]
+        """
+        with self.db.transaction():
+            conn = self.db.conn
+            first = conn.execute("SELECT min(id) FROM slr_program WHERE name = ?",
+                                 (str(name),)).fetchone()[0]
+            conn.execute("DELETE FROM slr_program WHERE name = ?", (str(name),))
+            cursor = conn.execute(_INSERT_TEXT, (first, str(name), source, filename,
+                                                 float(self.db.clock.now())))
+            self._bump(PROGRAM_VERSION)
+            return cursor.lastrowid
+
+    def delete_program(self, name: str) -> int:
+        """Remove every text of the program ``name``; returns how many there were (the
+        program version moves only if some were removed).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); _ = s.append_program("a.", None, "a"); s.delete_program("a"), s.delete_program("a")
+        (1, 0)
+        """
+        with self.db.transaction():
+            removed = self.db.conn.execute("DELETE FROM slr_program WHERE name = ?",
+                                           (str(name),)).rowcount
+            if removed > 0:
+                self._bump(PROGRAM_VERSION)
+            return max(removed, 0)
+
+    def program_texts(self) -> list[ProgramText]:
+        """Every stored program text, in load order.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); _ = s.append_program("p(1).", "a.slr", "tea"); s.program_texts()[0].name
+        'tea'
+        """
+        with self.db.lock:
+            self.db.check_open()
+            return [ProgramText(*row) for row in self.db.conn.execute(
+                "SELECT id, name, source, filename, loaded_at FROM slr_program ORDER BY id")]
+
+    def program_sources(self) -> list[tuple[str, str | None]]:
+        """Every persisted program text with its file name, in load order.
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).program_sources()
+        []
+        """
+        return [(text.source, text.filename) for text in self.program_texts()]
+
+    def replace_program(self, sources: Iterable[tuple[str, str | None]]) -> None:
+        """Replace the persisted program by ``sources`` (``(text, filename)`` pairs, all in
+        the program "main"), atomically.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.append_program("a.", None); s.replace_program([("b.", None)])
+        1
+        >>> s.program_sources()
+        [('b.', None)]
+        """
+        with self.db.transaction():
+            self.db.conn.execute("DELETE FROM slr_program")
+            now = float(self.db.clock.now())
+            self.db.conn.executemany(
+                _INSERT_TEXT, [(None, "main", source, filename, now) for source, filename in sources])
+            self._bump(PROGRAM_VERSION)
+
+    # ------------------------------------------------------------------ meta keys
+
+    def meta_get(self, key: str, default: Any = None) -> Any:
+        """A persisted JSON value from ``slr_meta``, or ``default``.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.meta_set("delay/seg/2", 0.5); s.meta_get("delay/seg/2")
+        0.5
+        """
+        with self.db.lock:
+            self.db.check_open()
+            row = self.db.conn.execute("SELECT value FROM slr_meta WHERE key = ?",
+                                       (key,)).fetchone()
+        return default if row is None else json.loads(row[0])
+
+    def meta_set(self, key: str, value: Any) -> None:
+        """Persist a JSON-serializable value under ``key`` (replacing any previous one).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.meta_set("k", {"a": [1, 2]}); s.meta_get("k")
+        {'a': [1, 2]}
+        """
+        text = json.dumps(value)
+        with self.db.transaction():
+            self.db.conn.execute("INSERT INTO slr_meta (key, value) VALUES (?, ?) "
+                                 "ON CONFLICT(key) DO UPDATE SET value = excluded.value",
+                                 (key, text))
+
+    def meta_raise(self, key: str, value: float) -> float:
+        """Store the number ``value`` under ``key`` unless the stored number is already as
+        large, in one statement that compares inside SQLite (so a writer whose own copy is
+        behind never lowers what another wrote); returns the number stored now. When it
+        grows, the progress version moves in the same transaction.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.meta_raise("mark", 50.0), s.meta_raise("mark", 20.0)
+        (50.0, 50.0)
+        """
+        value = float(value)
+        if value != value:
+            raise ValueError(f"{key}: NaN cannot be stored as a growing value")
+        with self.db.transaction():
+            conn = self.db.conn
+            conn.execute("INSERT INTO slr_meta (key, value) VALUES (?, ?) ON CONFLICT(key) DO "
+                         "UPDATE SET value = excluded.value "
+                         f"WHERE {_STORED_NUMBER} < CAST(excluded.value AS REAL)",
+                         (key, _number_text(value)))
+            if conn.execute("SELECT changes()").fetchone()[0]:
+                self._bump(PROGRESS_VERSION)
+            stored = conn.execute("SELECT value FROM slr_meta WHERE key = ?",
+                                  (key,)).fetchone()[0]
+        return float(json.loads(stored))
+
+    def meta_delete(self, key: str) -> None:
+        """Remove ``key`` from ``slr_meta`` (no error if absent).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.meta_set("k", 1); s.meta_delete("k"); s.meta_get("k", 0)
+        0
+        """
+        with self.db.transaction():
+            self.db.conn.execute("DELETE FROM slr_meta WHERE key = ?", (key,))
+
+    def meta_items(self, prefix: str = "") -> dict[str, Any]:
+        """Every ``slr_meta`` entry whose key starts with ``prefix``.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.meta_set("delay/a", 1); s.meta_items("delay/")
+        {'delay/a': 1}
+        """
+        with self.db.lock:
+            self.db.check_open()
+            rows = self.db.conn.execute(
+                "SELECT key, value FROM slr_meta WHERE substr(key, 1, ?) = ? ORDER BY key",
+                (len(prefix), prefix)).fetchall()
+        return {key: json.loads(value) for key, value in rows}
+
+    # ------------------------------------------------------------------ fact tables and views
+
+    @staticmethod
+    def fact_table_name(name: str, arity: int) -> str:
+        """``slr_facts_<arity>_<name>``, the name spelled so that every Prolog name gets a
+        table of its own (SQLite names ignore case and cannot hold NUL): lowercase letters
+        and digits as they are, ``_`` doubled, an uppercase letter as ``_`` and the letter,
+        any other character as ``_0<hex>_``.
+
+        >>> Catalog.fact_table_name("usedFor", 2), Catalog.fact_table_name("a b", 1)
+        ('slr_facts_2_used_for', 'slr_facts_1_a_020_b')
+        """
+        return f"slr_facts_{int(arity)}_{_escape_name(name)}"
+
+    @staticmethod
+    def view_name(name: str) -> str:
+        """The name of the inspection view of the predicate ``name``: the name itself, with
+        NUL written ``\\0`` and ``v_`` before a name that starts with a prefix SQLite or
+        slr_sql reserve (``sqlite_``, ``slr_``, any case) or is empty.
+
+        >>> Catalog.view_name("color"), Catalog.view_name("sqlite_foo"), Catalog.view_name("SLR_x")
+        ('color', 'v_sqlite_foo', 'v_SLR_x')
+        """
+        name = name.replace("\0", "\\0")
+        if not name or name.lower().startswith(RESERVED_PREFIXES):
+            return "v_" + name
+        return name
+
+    def facts_version(self) -> int:
+        """The program version the fact tables and views were last built for (0: never).
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).facts_version()
+        0
+        """
+        with self.db.lock:
+            self.db.check_open()
+            return self._counter(FACTS_VERSION)
+
+    def replace_fact_tables(self, tables: dict[tuple[str, int], list[tuple]],
+                            version: int | None = None) -> dict:
+        """Make the ``slr_facts_*`` tables exactly ``{(name, arity): [encoded rows]}`` (rows
+        in clause order; ``ord`` is the position). Returns ``{(name, arity): quoted table}``.
+        ``version``: the program version they are built for (recorded with them).
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).replace_fact_tables({("color", 2): [("cup1", "red")]})
+        {('color', 2): '"slr_facts_2_color"'}
+        """
+        out = {}
+        with self.db.transaction():
+            conn = self.db.conn
+            existing = [row[0] for row in conn.execute(
+                "SELECT name FROM sqlite_master WHERE type = 'table' AND name LIKE 'slr!_facts!_%' "
+                "ESCAPE '!'")]
+            for table in existing:
+                conn.execute(f"DROP TABLE {quote_identifier(table)}")
+            for (name, arity), rows in tables.items():
+                plain = self.fact_table_name(name, arity)
+                table = quote_identifier(plain)
+                cols = "".join(f", arg{i}" for i in range(1, arity + 1))
+                conn.execute(f"CREATE TABLE {table} (ord INTEGER PRIMARY KEY{cols})")
+                if arity:
+                    index = quote_identifier("slr_facts_ix_" + plain[len("slr_facts_"):])
+                    conn.execute(f"CREATE INDEX {index} ON {table} (arg1)")
+                conn.executemany(f"INSERT INTO {table} VALUES (?{', ?' * arity})",
+                                 [(i,) + tuple(row) for i, row in enumerate(rows)])
+                out[(name, arity)] = table
+            if version is not None:
+                conn.execute("INSERT INTO slr_meta (key, value) VALUES (?, ?) ON CONFLICT(key) "
+                             "DO UPDATE SET value = excluded.value", (FACTS_VERSION, int(version)))
+        return out
+
+    def fact_tables_for(self, keys: Iterable[tuple[str, int]]) -> dict:
+        """``{(name, arity): quoted table}`` of the fact tables that exist for ``keys``
+        (read only: for a connection whose program the stored tables were built for).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); _ = s.replace_fact_tables({("c", 1): [("x",)]})
+        >>> s.fact_tables_for([("c", 1), ("d", 1)])
+        {('c', 1): '"slr_facts_1_c"'}
+        """
+        with self.db.lock:
+            self.db.check_open()
+            present = {row[0] for row in self.db.conn.execute(
+                "SELECT name FROM sqlite_master WHERE type = 'table' AND name LIKE 'slr!_facts!_%' "
+                "ESCAPE '!'")}
+        out = {}
+        for name, arity in keys:
+            table = self.fact_table_name(name, arity)
+            if table in present:
+                out[(name, arity)] = quote_identifier(table)
+        return out
+
+    def replace_views(self, views: dict[str, str]) -> list[str]:
+        """Drop the views created last time and create ``{predicate name: select sql}``,
+        each named by :meth:`view_name` (a name already used by a table, index or earlier
+        view is skipped). Returns the names created.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.replace_views({"answer": "SELECT 42 AS x", "slr_meta": "SELECT 1"})
+        ['answer', 'v_slr_meta']
+        """
+        created = []
+        with self.db.transaction():
+            conn = self.db.conn
+            for name in self.meta_get("sql_views", []):
+                conn.execute(f"DROP VIEW IF EXISTS {quote_identifier(name)}")
+            taken = {row[0].lower() for row in conn.execute("SELECT name FROM sqlite_master")}
+            for predicate, select in views.items():
+                name = self.view_name(predicate)
+                if name.lower() in taken:
+                    continue
+                conn.execute(f"CREATE VIEW {quote_identifier(name)} AS {select}")
+                created.append(name)
+                taken.add(name.lower())
+            self.meta_set("sql_views", created)
+        return created
+
+
+class BufferTables:
+    """The rows of ``slr_buffers`` / ``slr_counters`` and each buffer's triggers and indexes.
+
+    >>> from slr_sql.store import EventStore
+    >>> s = EventStore(None); s.insert_buffer("cBuffer", "program", "p(_)", "p", 1, 2.0,
+    ...                                       None, None, "cBuffer(p(_), 2)")
+    1
+    >>> [(row["id"], row["kind"], row["pruned"]) for row in s.buffer_rows()]
+    [(1, 'cBuffer', 0)]
+    """
+
+    def __init__(self, db: Database):
+        self.db = db
+
+    def buffer_rows(self, active_only: bool = True) -> list[dict[str, Any]]:
+        """The rows of ``slr_buffers`` (oldest first) with their counters, as dicts.
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).buffer_rows()
+        []
+        """
+        where = " WHERE b.removed_at IS NULL" if active_only else ""
+        with self.db.lock:
+            self.db.check_open()
+            cursor = self.db.conn.execute(
+                "SELECT b.id, b.kind, b.source, b.pattern_text, b.type_name, b.type_arity, "
+                "b.amount, b.t1, b.t2, b.origin, b.cutoff, b.created_at, b.removed_at, "
+                "coalesce(c.pruned, 0) AS pruned, coalesce(c.dropped, 0) AS dropped "
+                "FROM slr_buffers b LEFT JOIN slr_counters c ON c.buffer_id = b.id"
+                f"{where} ORDER BY b.id")
+            names = [d[0] for d in cursor.description]
+            return [dict(zip(names, row)) for row in cursor.fetchall()]
+
+    def insert_buffer(self, kind: str, source: str, pattern_text: str, type_name: str,
+                      type_arity: int, amount: float | None, t1: float | None,
+                      t2: float | None, origin: str) -> int:
+        """Add a row to ``slr_buffers`` (and its counters); returns the new buffer id."""
+        with self.db.transaction():
+            cursor = self.db.conn.execute(
+                "INSERT INTO slr_buffers (kind, source, pattern_text, type_name, type_arity, "
+                "amount, t1, t2, origin, created_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (kind, source, pattern_text, type_name, type_arity, amount, t1, t2, origin,
+                 float(self.db.clock.now())))
+            buffer_id = cursor.lastrowid
+            self.db.conn.execute("INSERT OR IGNORE INTO slr_counters (buffer_id) VALUES (?)",
+                                 (buffer_id,))
+            return buffer_id
+
+    def mark_buffer_removed(self, buffer_id: int) -> None:
+        """Deactivate a buffer (its row and counters stay, for statistics)."""
+        with self.db.transaction():
+            self.db.conn.execute("UPDATE slr_buffers SET removed_at = ? WHERE id = ?",
+                                 (float(self.db.clock.now()), int(buffer_id)))
+
+    def count_buffer(self, buffer_id: int, pruned: int = 0, dropped: int = 0) -> None:
+        """Add to a buffer's counters."""
+        with self.db.transaction():
+            self.db.conn.execute("UPDATE slr_counters SET pruned = pruned + ?, "
+                                 "dropped = dropped + ? WHERE buffer_id = ?",
+                                 (int(pruned), int(dropped), int(buffer_id)))
+
+    def set_buffer_cutoff(self, buffer_id: int, cutoff: float) -> None:
+        """Record the time before which a buffer has dropped events."""
+        with self.db.transaction():
+            self.db.conn.execute("UPDATE slr_buffers SET cutoff = ? WHERE id = ?",
+                                 (float(cutoff), int(buffer_id)))
+
+    def buffer_objects(self, buffer_id: int) -> dict[str, str]:
+        """The triggers and indexes of one buffer: ``{name: sql}``."""
+        with self.db.lock:
+            self.db.check_open()
+            rows = self.db.conn.execute(
+                "SELECT name, sql FROM sqlite_master WHERE type IN ('trigger', 'index') "
+                "AND (name LIKE ? ESCAPE '!' OR name = ?)",
+                (f"slr!_buf!_{int(buffer_id)}!_%", f"slr_bix_{int(buffer_id)}")).fetchall()
+        return {name: sql for name, sql in rows}
+
+    def install_buffer_objects(self, buffer_id: int, statements: dict[str, str]) -> bool:
+        """Make the triggers/indexes of ``buffer_id`` exactly ``statements`` (``{name: CREATE
+        ...}``): objects whose SQL differs are re-created, missing ones created, others
+        dropped. Returns True if anything changed."""
+        with self.db.transaction():
+            existing = self.buffer_objects(buffer_id)
+            changed = False
+            for name, sql in existing.items():
+                if statements.get(name) != sql:
+                    kind = "INDEX" if name.startswith("slr_bix_") else "TRIGGER"
+                    self.db.conn.execute(f"DROP {kind} IF EXISTS {quote_identifier(name)}")
+                    changed = True
+            for name, sql in statements.items():
+                if existing.get(name) != sql:
+                    self.db.conn.execute(sql)
+                    changed = True
+            return changed
+
+    def drop_buffer_objects(self, buffer_id: int) -> None:
+        """Drop every trigger and index of one buffer."""
+        self.install_buffer_objects(buffer_id, {})
+
+    def prune(self, sql: str, buffer_id: int) -> int:
+        """Run one buffer's DELETE statement (generated by slr_sql.buffers; constants in it
+        come from :func:`sql_literal`) and add the deleted rows to its ``pruned`` counter."""
+        with self.db.transaction():
+            deleted = self.db.conn.execute(sql).rowcount
+            if deleted > 0:
+                self.db.conn.execute("UPDATE slr_counters SET pruned = pruned + ? "
+                                     "WHERE buffer_id = ?", (deleted, int(buffer_id)))
+            return max(deleted, 0)

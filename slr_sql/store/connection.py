@@ -1,0 +1,640 @@
+"""One open SQLite database: connection settings, transactions, deadlines and raw SQL.
+
+:class:`Database` is the object every part of an :class:`~slr_sql.store.EventStore` shares:
+the connection, the lock that serializes it, the transaction depth and the clock. The parts
+run their statements through ``db.conn`` while holding ``db.lock`` (or inside
+:meth:`Database.transaction`, which holds it).
+
+Durability: file databases use ``journal_mode=WAL`` with ``synchronous=FULL``: when a
+transaction commits it is in the WAL *and* fsynced, so it survives a process kill and a
+power loss. (``synchronous=NORMAL`` would survive a kill but may lose the last transactions
+on power loss.)
+
+Sharing: any number of processes may open the file. Readers never wait (WAL); a writer waits
+for another's write transaction at most ``busy_timeout`` seconds (default
+:data:`DEFAULT_BUSY_TIMEOUT`), then gets :class:`~slr_sql.errors.SLRBusy` naming the file.
+Opening a store that is up to date only reads it, and closing never waits for anyone (the
+checkpoint on close is ``PASSIVE``). Threads share the one connection: every statement runs
+and is read holding :attr:`Database.lock`, a transaction holds it to the end, and the
+statements other threads left open (event scans read in batches) are *suspended* when a
+transaction begins and resumed after it from where they were (so a rollback or a dropped
+table in one thread never aborts another thread's scan).
+"""
+from __future__ import annotations
+
+import os
+import random
+import sqlite3
+import stat
+import threading
+import time
+import weakref
+from contextlib import contextmanager
+from typing import Any, Callable, Iterable, Iterator
+
+from ..errors import SLRError, SLRTimeout
+from .schema import migrate, migration_scripts
+from .sqltext import busy_error, split_sql_script
+
+__all__ = ["Database", "DatabaseError", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT", "run_sql_file",
+           "check_file"]
+
+# The base class of the errors the database raises while running a statement (a missing
+# table, a syntax error, a constraint, an interrupted statement...). Callers outside the
+# store catch this name, never sqlite3's.
+DatabaseError = sqlite3.Error
+
+CACHE_SIZE_KIB = 65536  # PRAGMA cache_size of the store's connection (64 MiB)
+
+# Seconds a write waits for another connection's write transaction before SLRBusy: long
+# enough for any ordinary transaction of another writer (milliseconds) and a checkpoint,
+# short enough that a process stuck holding the lock is reported rather than waited for.
+DEFAULT_BUSY_TIMEOUT = 5.0
+
+
+def _check_busy_timeout(value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+            not 0 <= value < float("inf"):
+        raise SLRError(f"busy_timeout must be a number of seconds >= 0, not {value!r}")
+    return float(value)
+
+
+class WallClock:
+    def now(self) -> float:
+        return time.time()
+
+
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+# Tables every store has (the first migration creates them).
+_STORE_TABLES = frozenset({"slr_meta", "slr_program", "slr_event_types"})
+
+
+def _ro_uri(path: str) -> str:
+    """A read-only ``file:`` URI for ``path`` (``%``, ``?`` and ``#`` escaped)."""
+    quoted = os.path.abspath(path).replace("%", "%25").replace("?", "%3f").replace("#", "%23")
+    return f"file:{quoted}?mode=ro"
+
+
+def check_file(path: str, adopt: bool = False) -> bool:
+    """Refuse, before anything is written, a ``path`` that is not (and may not become) a
+    store: an :class:`SLRError` naming the path and the reason. Returns True when the store
+    is new (no file yet, an empty file, or an SQLite file with nothing in it), False for an
+    existing store (or, with ``adopt``, a foreign SQLite file to take over).
+
+    Refused: a directory, a path in a missing directory, a file that is not SQLite, a
+    truncated or damaged file, a store written by a newer slr_sql, and an SQLite file with
+    tables that is not a store (unless ``adopt``). The file is read only through its header
+    and a read-only connection, so a refused file keeps every byte and its mtime.
+
+    >>> import tempfile; folder = tempfile.mkdtemp()
+    >>> check_file(os.path.join(folder, "robot.db"))
+    True
+    >>> check_file(folder)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: ...: is a directory, not a store file
+    """
+    if os.path.isdir(path):
+        raise SLRError(f"{path}: is a directory, not a store file")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise SLRError(f"{path}: no such directory: {folder}")
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        if os.path.islink(path):
+            raise SLRError(f"{path}: a symbolic link to a missing file") from None
+        return True
+    except OSError as exc:
+        raise SLRError(f"{path}: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(info.st_mode):
+        raise SLRError(f"{path}: not a regular file, so not a store")
+    if info.st_size == 0:
+        return True
+    try:
+        with open(path, "rb") as handle:
+            header = handle.read(100)
+    except OSError as exc:
+        raise SLRError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    if not header.startswith(_SQLITE_MAGIC[:len(header)]) or len(header) < 16:
+        raise SLRError(f"{path}: not an SQLite database (so not an slr_sql store)")
+    if len(header) < 100:
+        raise SLRError(f"{path}: the file is truncated ({len(header)} bytes, less than an "
+                       "SQLite header)")
+    _check_length(path, header, info.st_size)
+    objects, version = _read_schema(path, header)
+    tables = sorted(name for kind, name in objects if kind == "table")
+    if _STORE_TABLES.issubset(tables) and version >= 1:
+        latest = migration_scripts()[-1][0]
+        if version > latest:
+            raise SLRError(f"{path}: written by a newer slr_sql (schema version {version}; "
+                           f"this one knows versions up to {latest}): upgrade slr_sql")
+        return False
+    if not objects and version == 0:
+        return True  # an SQLite file with nothing in it: it becomes a store
+    shown = ", ".join(tables[:5]) + (", ..." if len(tables) > 5 else "")
+    what = f"an SQLite file with tables {shown}" if tables else "an SQLite file"
+    if not adopt:
+        raise SLRError(f"{path}: not an slr_sql store ({what}); slr_sql.open(path, "
+                       "adopt=True) adds a store to it")
+    if version != 0:
+        raise SLRError(f"{path}: cannot adopt {what}: it uses PRAGMA user_version "
+                       f"({version}) for its own schema, as slr_sql does")
+    return False
+
+
+def _read_schema(path: str, header: bytes) -> tuple[list[tuple[str, str]], int]:
+    """``(type, name)`` of every object of ``sqlite_master``, and ``PRAGMA user_version``,
+    read without creating or changing a file.
+
+    A read-only connection to a database in WAL mode creates its ``-wal`` and ``-shm`` files
+    when they are missing, and cannot remove them when it closes. So a WAL database with no
+    ``-wal`` file (no connection has it open: the file holds everything committed) is read
+    as ``immutable`` (no side files, no locks). Should a writer open and checkpoint it while
+    it is being read, the read may see a torn page: it is retried, with locks once the
+    writer's ``-wal`` exists, before the file is called damaged.
+    """
+    wal_mode = header[18:20] == b"\x02\x02"
+    error: Exception | None = None
+    for _attempt in range(3):
+        immutable = wal_mode and not os.path.exists(path + "-wal")
+        uri = _ro_uri(path) + ("&immutable=1" if immutable else "")
+        try:
+            conn = sqlite3.connect(uri, uri=True, isolation_level=None, timeout=30.0)
+            try:
+                objects = conn.execute("SELECT type, name FROM sqlite_master").fetchall()
+                version = conn.execute("PRAGMA user_version").fetchone()[0]
+                return objects, version
+            finally:
+                conn.close()
+        except sqlite3.DatabaseError as exc:
+            error = exc
+            if not immutable:
+                break
+        except sqlite3.Error as exc:
+            raise SLRError(f"{path}: cannot read it ({exc})") from None
+    if "not a database" in str(error):
+        raise SLRError(f"{path}: not an SQLite database, or its header is damaged "
+                       f"({error})")
+    raise SLRError(f"{path}: the file is damaged ({error})")
+
+
+def _check_length(path: str, header: bytes, size: int) -> None:
+    """Refuse a file shorter than the page count its header records (a truncated copy).
+    Skipped while a write-ahead log holds pages not yet copied into the file."""
+    page_size = int.from_bytes(header[16:18], "big")
+    page_size = 65536 if page_size == 1 else page_size
+    pages = int.from_bytes(header[28:32], "big")
+    header_is_current = header[24:28] == header[92:96]  # "version-valid-for" = change counter
+    try:
+        wal_bytes = os.path.getsize(path + "-wal")
+    except OSError:
+        wal_bytes = 0
+    if header_is_current and pages and not wal_bytes and size < pages * page_size:
+        raise SLRError(f"{path}: the file is truncated ({size} bytes; its header records "
+                       f"{pages} pages of {page_size} bytes)")
+
+
+class Database:
+    """The connection of one store, with its lock, transaction depth and clock.
+
+    ``path`` None or ``":memory:"`` gives an in-memory database. Opening applies the
+    migrations the file has not seen yet. A file that is not a store is refused
+    (:func:`check_file`) unless ``adopt`` (then a foreign SQLite file gets a store added).
+
+    >>> db = Database(None); db.execute("SELECT ? + 1", (1,))
+    [(2,)]
+    >>> db.close()
+    """
+
+    def __init__(self, path: str | os.PathLike | None = None, clock: Any = None,
+                 synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
+                 adopt: bool = False):
+        busy_timeout = _check_busy_timeout(busy_timeout)
+        if synchronous.upper() not in ("OFF", "NORMAL", "FULL", "EXTRA"):
+            raise ValueError(f"synchronous must be OFF, NORMAL, FULL or EXTRA, not {synchronous!r}")
+        self.path = None if path in (None, ":memory:") else os.fspath(path)
+        new = True if self.path is None else check_file(self.path, adopt)
+        self.clock = clock if clock is not None else WallClock()
+        self.lock = threading.RLock()
+        self.tx_depth = 0
+        self.closed = False
+        # called, lock held, after a transaction rolled back (the event-type cache reloads)
+        self.rollback_listeners: list[Callable[[], None]] = []
+        # streams (event scans read in batches) whose statement may still be open: suspended
+        # when a transaction begins (see suspend_streams)
+        self.open_streams: weakref.WeakSet = weakref.WeakSet()
+        self.deadline: float | None = None  # of the compiled statement running now
+        self.busy_timeout = busy_timeout
+        try:
+            self.conn = sqlite3.connect(self.path or ":memory:", check_same_thread=False,
+                                        isolation_level=None, timeout=busy_timeout,
+                                        cached_statements=512)
+        except sqlite3.Error as exc:
+            raise SLRError(f"{self.path}: cannot open it ({exc})") from None
+        conn = self.conn
+        try:
+            # auto_vacuum must be chosen before the first table exists (a no-op afterwards,
+            # but one that wants the write lock: only a new file gets it)
+            if conn.execute("PRAGMA page_count").fetchone()[0] == 0:
+                conn.execute("PRAGMA auto_vacuum=INCREMENTAL")
+            if self.path is not None and new:
+                conn.execute("PRAGMA journal_mode=WAL")
+            conn.execute(f"PRAGMA synchronous={synchronous.upper()}")
+            conn.execute("PRAGMA foreign_keys=ON")
+            # Every event type has four indexes; SQLite's default 2 MiB page cache makes large
+            # ingests spill and re-read index pages constantly. The cache grows only as used.
+            conn.execute(f"PRAGMA cache_size=-{CACHE_SIZE_KIB}")
+            migrate(conn, self.path)
+            # an existing store is in WAL already (switching again would want a lock); an
+            # adopted file is switched only once its migrations succeeded
+            if self.path is not None and not new and \
+                    conn.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
+                conn.execute("PRAGMA journal_mode=WAL")
+        except BaseException as exc:
+            conn.close()
+            if isinstance(exc, sqlite3.OperationalError):
+                busy = busy_error(exc, self.path, busy_timeout)
+                if busy is not None:
+                    raise busy from None
+            if isinstance(exc, sqlite3.Error):
+                raise SLRError(f"{self.path or ':memory:'}: cannot open the store "
+                               f"({exc})") from None
+            raise
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def schema_version(self) -> int:
+        """The number of the last migration applied (``PRAGMA user_version``).
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).schema_version() >= 1
+        True
+        """
+        with self.lock:
+            return self.conn.execute("PRAGMA user_version").fetchone()[0]
+
+    def data_version(self) -> int:
+        """``PRAGMA data_version``: a number that changes when another connection (another
+        process, or another store object on the same file) commits — the cheap first check
+        of "did anyone else change the file?".
+
+        >>> db = Database(None); db.data_version() == db.data_version()
+        True
+        """
+        with self.lock:
+            self.check_open()
+            return self.conn.execute("PRAGMA data_version").fetchone()[0]
+
+    def suspend_streams(self) -> None:
+        """Close the statements of the streams still reading (lock held): each resumes
+        after its last row with a statement of its own when next read. Called when a
+        transaction begins, so that no statement of another thread stays open across it."""
+        for stream in list(self.open_streams):
+            stream.suspend()
+
+    def close(self) -> None:
+        """Checkpoint what the WAL holds, as far as no reader needs it (``PASSIVE``: never
+        waits for another connection), and close. Idempotent.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.close(); s.close()
+        """
+        with self.lock:
+            if self.closed:
+                return
+            self.closed = True
+            try:
+                if self.tx_depth:
+                    self.conn.execute("ROLLBACK")
+                    self.tx_depth = 0
+                self.suspend_streams()  # iterators still open: they fail when read again
+                if self.path is not None:
+                    try:
+                        self.conn.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchall()
+                    except sqlite3.OperationalError:
+                        pass  # best effort: the WAL is checkpointed on the next open anyway
+            finally:
+                self.conn.close()
+
+    def check_open(self) -> None:
+        if self.closed:
+            raise SLRError("the event store is closed")
+
+    # ------------------------------------------------------------------ transactions
+
+    @contextmanager
+    def transaction(self) -> Iterator["Database"]:
+        """Run several statements as one atomic unit (BEGIN IMMEDIATE ... COMMIT).
+
+        Re-entrant: nested uses become savepoints, so an inner failure undoes only the inner
+        part. The lock is held for the whole transaction.
+
+        >>> db = Database(None)
+        >>> with db.transaction():
+        ...     db.execute("INSERT INTO slr_meta VALUES ('a', '1')")
+        []
+        >>> db.execute("SELECT value FROM slr_meta WHERE key = 'a'")
+        [('1',)]
+        """
+        with self.lock:
+            self.check_open()
+            depth = self.tx_depth
+            conn = self.conn
+            if depth == 0:
+                self.suspend_streams()
+                self._begin()
+            else:
+                conn.execute(f"SAVEPOINT slr_sp{depth}")
+            self.tx_depth = depth + 1
+            try:
+                yield self
+            except BaseException:
+                self.tx_depth = depth
+                try:
+                    if depth == 0:
+                        conn.execute("ROLLBACK")
+                    else:
+                        conn.execute(f"ROLLBACK TO slr_sp{depth}")
+                        conn.execute(f"RELEASE slr_sp{depth}")
+                finally:
+                    self._rolled_back()
+                raise
+            self.tx_depth = depth
+            try:
+                conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
+            except BaseException:
+                if depth == 0 and conn.in_transaction:
+                    conn.execute("ROLLBACK")
+                self._rolled_back()
+                raise
+
+    def _begin(self) -> None:
+        """``BEGIN IMMEDIATE``, waiting at most ``busy_timeout`` seconds for another
+        connection's write transaction. SQLite's own busy handler sleeps longer and longer
+        between tries (up to 100 ms), so a process committing back to back keeps the lock
+        from the others for seconds; here the lock is tried again every 0.1 to 2 ms (a try
+        is a few microseconds), so writers take turns."""
+        conn = self.conn
+        if self.path is None:  # in memory: no other connection to wait for
+            conn.execute("BEGIN IMMEDIATE")
+            return
+        conn.execute("PRAGMA busy_timeout = 0")
+        try:
+            deadline = None
+            pause = 1e-4
+            while True:
+                try:
+                    conn.execute("BEGIN IMMEDIATE")
+                    return
+                except sqlite3.OperationalError as exc:
+                    busy = busy_error(exc, self.path, self.busy_timeout)
+                    if busy is None:
+                        raise
+                    now = time.monotonic()
+                    if deadline is None:
+                        deadline = now + self.busy_timeout
+                    if now >= deadline:
+                        raise busy from None
+                    time.sleep(min(pause * (0.5 + random.random()), deadline - now))
+                    pause = min(pause * 2, 2e-3)
+        finally:
+            conn.execute(f"PRAGMA busy_timeout = {int(self.busy_timeout * 1000)}")
+
+    def _rolled_back(self) -> None:
+        for listener in self.rollback_listeners:
+            listener()
+
+    # ------------------------------------------------------------------ raw SQL
+
+    def sql(self, query: str, params: Iterable[Any] = (), write: bool = False,
+            timeout: float | None = None) -> tuple[list[str], list[tuple]]:
+        """Run one SQL statement as given (for ``slr sql``) and return ``(column names,
+        rows)``. Read-only unless ``write``: a statement that would change the store (an
+        INSERT, a DROP, a pragma assignment, an ATTACH) raises an :class:`SLRError` starting
+        with ``read-only``; other failures raise :data:`DatabaseError`. The connection's
+        SQL functions are there, so compiled statements (``kb.explain``) run as printed.
+        ``timeout`` (seconds): a longer statement is interrupted with :class:`SLRTimeout`.
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).sql("SELECT 1 AS one")
+        (['one'], [(1,)])
+        >>> EventStore(None).sql("DROP TABLE slr_meta")
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: read-only: the statement would change the store (attempt to write a readonly database); pass write=True to allow it
+        """
+        deadline = None if timeout is None else time.monotonic() + timeout
+        with self.lock:
+            self.check_open()
+            conn = self.conn
+            if write:
+                with self._deadline(deadline, "the SQL statement"):
+                    try:
+                        cursor = conn.execute(query, tuple(params))
+                        columns = [d[0] for d in cursor.description] if cursor.description else []
+                        return columns, cursor.fetchall()
+                    except sqlite3.OperationalError as exc:
+                        raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+            # query_only refuses every write to a database file; the authorizer refuses what
+            # it lets through (pragma assignments such as journal_mode, ATTACH, DETACH).
+            conn.execute("PRAGMA query_only = 1")
+            conn.set_authorizer(_read_only_authorizer)
+            try:
+                with self._deadline(deadline, "the SQL statement"):
+                    cursor = conn.execute(query, tuple(params))
+                    columns = [d[0] for d in cursor.description] if cursor.description else []
+                    return columns, cursor.fetchall()
+            except sqlite3.DatabaseError as exc:
+                text = str(exc)
+                if "readonly" in text or "not authorized" in text:
+                    raise SLRError(f"read-only: the statement would change the store "
+                                   f"({text}); pass write=True to allow it") from None
+                raise
+            finally:
+                conn.set_authorizer(None)
+                conn.execute("PRAGMA query_only = 0")
+
+    def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
+        """Execute one statement for another slr_sql module (triggers, buffer pruning, ...)
+        and return its rows. Inside :meth:`transaction` it is part of the transaction.
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).execute("SELECT ? + 1", (1,))
+        [(2,)]
+        """
+        with self.lock:
+            self.check_open()
+            try:
+                return self.conn.execute(sql, tuple(params)).fetchall()
+            except sqlite3.OperationalError as exc:
+                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+
+    def executemany(self, sql: str, rows: Iterable[Iterable[Any]]) -> None:
+        """``executemany`` for other slr_sql modules.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.executemany("INSERT INTO slr_meta VALUES (?, ?)", [("a", "1")])
+        """
+        with self.lock:
+            self.check_open()
+            self.conn.executemany(sql, rows)
+
+    def executescript(self, script: str) -> None:
+        """Run several statements (e.g. ``CREATE TRIGGER`` ... ``END;``) in one transaction.
+        (Unlike ``sqlite3``'s ``executescript`` it does not commit an enclosing transaction.)
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.executescript("CREATE TABLE slr_x(a); CREATE TABLE slr_y(b);")
+        """
+        with self.transaction():
+            for statement in split_sql_script(script):
+                self.conn.execute(statement)
+
+    def changes(self) -> int:
+        """Rows changed by the last statement (``changes()``).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.executemany("INSERT INTO slr_meta VALUES (?, ?)", [("a", "1")])
+        >>> s.changes()
+        1
+        """
+        with self.lock:
+            return self.conn.execute("SELECT changes()").fetchone()[0]
+
+    def query_plan(self, sql: str) -> list[str]:
+        """SQLite's ``EXPLAIN QUERY PLAN`` lines for a statement (parameters bound to NULL).
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).query_plan("SELECT * FROM slr_meta WHERE key = ?")
+        ['SEARCH slr_meta USING INDEX sqlite_autoindex_slr_meta_1 (key=?)']
+        """
+        with self.lock:
+            self.check_open()
+            cursor = self.conn.execute("EXPLAIN QUERY PLAN " + sql, [None] * sql.count("?"))
+            return [row[3] for row in cursor.fetchall()]
+
+    # ------------------------------------------------------------------ compiled queries
+    # Execution helpers for slr_sql.planner / slr_sql.sqlcompile: application-defined
+    # functions and running compiled statements (parameters always bound).
+
+    def create_function(self, name: str, narg: int, fn: Any, deterministic: bool = True) -> None:
+        """Register a scalar function on the store's connection.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.create_function("twice", 1, lambda x: 2 * x)
+        >>> s.execute("SELECT twice(21)")
+        [(42,)]
+        """
+        with self.lock:
+            self.check_open()
+            self.conn.create_function(name, narg, fn, deterministic=deterministic)
+
+    def create_aggregate(self, name: str, narg: int, cls: Any) -> None:
+        """Register an aggregate function (a class with step/finalize).
+
+        >>> class Count:
+        ...     def __init__(self): self.n = 0
+        ...     def step(self, value): self.n += 1
+        ...     def finalize(self): return self.n
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.create_aggregate("how_many", 1, Count)
+        >>> s.execute("SELECT how_many(x) FROM (SELECT 1 AS x UNION ALL SELECT 2)")
+        [(2,)]
+        """
+        with self.lock:
+            self.check_open()
+            self.conn.create_aggregate(name, narg, cls)
+
+    def run_compiled(self, sql: str, params: dict, limit: int | None = None,
+                     deadline: float | None = None) -> list[tuple]:
+        """Run a compiled SELECT with named parameters; all rows, or the first ``limit``.
+        ``deadline`` (``time.monotonic()``): past it the statement is interrupted and
+        :class:`SLRTimeout` raised, as the interpreter does for ``timeout=``.
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).run_compiled("SELECT :a + 1", {"a": 1})
+        [(2,)]
+        """
+        with self.lock:
+            self.check_open()
+            with self._deadline(deadline, "its compiled SQL statement"):
+                cursor = self.conn.execute(sql, params)
+                try:
+                    return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+                finally:
+                    cursor.close()
+
+    @contextmanager
+    def _deadline(self, deadline: float | None, what: str) -> Iterator[None]:
+        """Interrupt the statements run inside past ``deadline`` (``time.monotonic()``) with
+        :class:`SLRTimeout`. A statement run from inside another (a ``kb.define`` predicate
+        querying the kb from SQL) keeps the outer deadline: the handler is per connection.
+        Call with the lock held."""
+        conn = self.conn
+        outer = self.deadline
+        if deadline is None or (outer is not None and outer <= deadline):
+            deadline = outer
+        if deadline is not outer:
+            self.deadline = deadline
+            conn.set_progress_handler(lambda: 1 if time.monotonic() > deadline else 0, 20000)
+        try:
+            yield
+        except sqlite3.OperationalError as exc:
+            if deadline is not None and time.monotonic() > deadline and "interrupt" in str(exc):
+                raise SLRTimeout(f"query timed out (in {what})") from None
+            raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+        finally:
+            if deadline is not outer:
+                self.deadline = outer
+                if outer is None:
+                    conn.set_progress_handler(None, 0)
+                else:
+                    conn.set_progress_handler(lambda: 1 if time.monotonic() > outer else 0,
+                                              20000)
+
+
+# Pragmas that take an argument and only read (also table-valued: pragma_table_info('t')).
+_READING_PRAGMAS = frozenset({
+    "table_info", "table_xinfo", "table_list", "index_list", "index_info", "index_xinfo",
+    "foreign_key_list", "foreign_key_check", "integrity_check", "quick_check",
+    "function_list", "module_list", "pragma_list", "collation_list", "database_list",
+    "compile_options"})
+
+
+def _read_only_authorizer(action: int, arg1: Any, arg2: Any, _db: Any, _trigger: Any) -> int:
+    if action in (sqlite3.SQLITE_ATTACH, sqlite3.SQLITE_DETACH):
+        return sqlite3.SQLITE_DENY
+    if action == sqlite3.SQLITE_PRAGMA and arg2 is not None \
+            and str(arg1).lower() not in _READING_PRAGMAS:
+        return sqlite3.SQLITE_DENY
+    return sqlite3.SQLITE_OK
+
+
+def run_sql_file(path: str | os.PathLike, query: str,
+                 write: bool = False) -> tuple[list[str], list[tuple]]:
+    """Run one SQL statement on the store file ``path`` through a connection of its own,
+    read-only unless ``write``; returns ``(column names, rows)``. Every failure (no such
+    file, an SQL error, a write to a read-only connection) is an :class:`SLRError`.
+
+    >>> import os, tempfile
+    >>> path = os.path.join(tempfile.mkdtemp(), "robot.db"); Database(path).close()
+    >>> run_sql_file(path, "SELECT count(*) AS n FROM slr_program")
+    (['n'], [(0,)])
+    """
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise SLRError(f"no such store: {path}")
+    uri = _ro_uri(path)[:-len("ro")] + ("rw" if write else "ro")
+    try:
+        conn = sqlite3.connect(uri, uri=True, isolation_level=None)
+    except sqlite3.Error as exc:
+        raise SLRError(f"sql: {exc}") from None
+    try:
+        cursor = conn.execute(query)
+        columns = [d[0] for d in cursor.description or ()]
+        return columns, [tuple(row) for row in cursor.fetchall()]
+    except sqlite3.Error as exc:
+        raise SLRError(f"sql: {exc}") from None
+    finally:
+        conn.close()

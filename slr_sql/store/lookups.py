@@ -1,0 +1,369 @@
+"""Reading events: the indexed lookups behind ``prev``, ``next`` and stream scans.
+
+Every lookup is one ``SELECT ... INDEXED BY`` over an event table (see
+:mod:`slr_sql.store.tables` for the indexes), built once per shape and cached. Ground
+arguments are pushed into the ``WHERE`` clause as bound parameters; rows come back decoded,
+as ``(args, start, end, seq)``, streamed in growing batches so that a caller wanting the
+first row or two does not read the rest.
+"""
+from __future__ import annotations
+
+import sqlite3
+from typing import Any, Iterator
+
+from ..encoding import Unencodable, decode, encode
+from .connection import Database
+from .tables import EventTables, EventType
+
+__all__ = ["Row", "EventReader"]
+
+Row = tuple    # (args: tuple[term, ...], start: float, end: float, seq: int)
+
+# A stream whose statement was suspended (another thread's transaction began, see
+# Database.suspend_streams) goes on with the rows after the last one it read, in its order:
+# the condition added to its statement, and the key of a raw row (start, end, seq) for it.
+_RESUME = {
+    "scan": ("(t_end, t_start, seq) > (?, ?, ?)", lambda s, e, q: (e, s, q)),
+    "prev": ("(t_end, t_start, seq) < (?, ?, ?)", lambda s, e, q: (e, s, q)),
+    "at_end": ("(t_start, seq) > (?, ?)", lambda s, e, q: (s, q)),
+    "next": ("(t_start, t_end, seq) > (?, ?, ?)", lambda s, e, q: (s, e, q)),
+    "at_start": ("(t_end, seq) > (?, ?)", lambda s, e, q: (e, q)),
+}
+
+
+class _OpenStatement:
+    """The statement of one stream, which a transaction may suspend (close) meanwhile."""
+
+    __slots__ = ("cursor", "__weakref__")
+
+    def __init__(self, cursor: Any):
+        self.cursor = cursor
+
+    def suspend(self) -> None:
+        cursor, self.cursor = self.cursor, None
+        if cursor is not None:
+            cursor.close()
+
+
+class EventReader:
+    """Looks events up in the tables of one database.
+
+    >>> from slr_sql.store import EventStore
+    >>> store = EventStore(None); store.add_events([("seg", ("cup1", 1), 2.0, 2.0)])
+    []
+    >>> [row[:3] for row in store.scan("seg", 2, {})]
+    [((Atom('cup1'), 1), 2.0, 2.0)]
+    """
+
+    def __init__(self, db: Database, tables: EventTables):
+        self.db = db
+        self.tables = tables
+        self.sql_cache: dict[tuple, str] = {}
+
+    def _pushdown(self, event_type: EventType, bound: dict[int, Any] | None
+                  ) -> tuple[tuple[int, ...], list]:
+        """Which bound argument positions go into SQL, with their encoded values."""
+        if not bound:
+            return (), []
+        positions = []
+        values = []
+        for position in sorted(bound):
+            if not 0 <= position < event_type.arity:
+                raise IndexError(f"argument position {position} out of range for "
+                                 f"{event_type.name}/{event_type.arity}")
+            try:
+                value = encode(bound[position])
+            except Unencodable:
+                continue  # not ground (or NaN): the caller filters by unification
+            positions.append(position)
+            values.append(value)
+        return tuple(positions), values
+
+    def _select_sql(self, event_type: EventType, kind: str, positions: tuple[int, ...],
+                    flags: tuple[bool, ...], resume: bool = False) -> str:
+        key = (event_type.table, kind, positions, flags, resume)
+        sql = self.sql_cache.get(key)
+        if sql is not None:
+            return sql
+        by_arg1 = bool(positions) and positions[0] == 0
+        conditions = [f"arg{p + 1} = ?" for p in positions]
+        if kind == "scan":
+            index = event_type.index_arg1_end if by_arg1 else event_type.index_end
+            if flags[0]:
+                conditions.append("t_end <= ?")
+            order = "t_end, t_start, seq"
+        elif kind == "prev":
+            index = event_type.index_arg1_end if by_arg1 else event_type.index_end
+            conditions.append("t_end <= ?")
+            if flags[0]:
+                # start >= A implies end >= A: bounds the backwards index scan
+                conditions.append("t_start >= ?")
+                conditions.append("t_end >= ?")
+            order = "t_end DESC, t_start DESC, seq DESC"
+        elif kind == "at_end":
+            index = event_type.index_arg1_end if by_arg1 else event_type.index_end
+            conditions.append("t_end = ?")
+            if flags[0]:
+                conditions.append("t_start >= ?")
+            if flags[1]:
+                conditions.append("t_end <= ?")
+            order = "t_start, seq"
+        elif kind == "next":
+            index = event_type.index_arg1_start if by_arg1 else event_type.index_start
+            # end <= B implies start <= B: bounds the forwards index scan
+            conditions.append("t_start >= ?")
+            conditions.append("t_start <= ?")
+            conditions.append("t_end <= ?")
+            order = "t_start, t_end, seq"
+        elif kind == "at_start":
+            index = event_type.index_arg1_start if by_arg1 else event_type.index_start
+            conditions.append("t_start = ?")
+            conditions.append("t_end <= ?")
+            order = "t_end, seq"
+        else:  # pragma: no cover - internal misuse
+            raise ValueError(kind)
+        if resume:
+            conditions.append(_RESUME[kind][0])
+        where = f" WHERE {' AND '.join(conditions)}" if conditions else ""
+        sql = (f"SELECT {event_type.columns} FROM {event_type.quoted} INDEXED BY {index}"
+               f"{where} ORDER BY {order}")
+        self.sql_cache[key] = sql
+        return sql
+
+    def _stream(self, sql: str, params: list, arity: int, kind: str,
+                resume_sql: str) -> Iterator[Row]:
+        """Rows decoded lazily, fetched in growing batches; the lock is held per batch only.
+        If a transaction suspended the statement between two batches (or a rollback aborted
+        it), the rest is read with ``resume_sql``: the rows after the last one read."""
+        db = self.db
+        with db.lock:
+            db.check_open()
+            statement = _OpenStatement(db.conn.execute(sql, params))
+            db.open_streams.add(statement)
+        key = _RESUME[kind][1]
+        last = None
+        try:
+            batch = 8  # prev/next callers usually need only the first row or two
+            dec = decode
+            while True:
+                with db.lock:
+                    for attempt in (1, 2):
+                        if statement.cursor is None:
+                            db.check_open()
+                            statement.cursor = db.conn.execute(sql, params) if last is None \
+                                else db.conn.execute(resume_sql, params + list(
+                                    key(last[arity], last[arity + 1], last[arity + 2])))
+                        try:
+                            rows = statement.cursor.fetchmany(batch)
+                            break
+                        except sqlite3.OperationalError as exc:  # "abort due to ROLLBACK"
+                            if attempt == 2 or getattr(exc, "sqlite_errorcode", 0) & 0xFF \
+                                    != sqlite3.SQLITE_ABORT:
+                                raise
+                            statement.cursor = None
+                if not rows:
+                    return
+                last = rows[-1]
+                if arity == 0:
+                    for row in rows:
+                        yield ((), row[0], row[1], row[2])
+                elif arity == 1:
+                    for a, s, e, q in rows:
+                        yield ((dec(a),), s, e, q)
+                elif arity == 2:
+                    for a, b, s, e, q in rows:
+                        yield ((dec(a), dec(b)), s, e, q)
+                else:
+                    for row in rows:
+                        yield (tuple([dec(v) for v in row[:arity]]),
+                               row[arity], row[arity + 1], row[arity + 2])
+                if batch < 2048:
+                    batch *= 4
+        finally:
+            with db.lock:
+                try:
+                    statement.suspend()
+                except sqlite3.ProgrammingError:  # the store was closed meanwhile
+                    pass
+
+    def _query(self, name: str, arity: int, bound: dict[int, Any] | None, kind: str,
+               flags: tuple[bool, ...], times: list) -> Iterator[Row]:
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return iter(())
+            positions, values = self._pushdown(event_type, bound)
+            sql = self._select_sql(event_type, kind, positions, flags)
+            resume_sql = self._select_sql(event_type, kind, positions, flags, resume=True)
+        return self._stream(sql, values + times, arity, kind, resume_sql)
+
+    def scan(self, name: str, arity: int, bound: dict[int, Any] | None = None,
+             end_le: float | None = None) -> Iterator[Row]:
+        """Stored events of name/arity in store order (end, start, arrival), as
+        ``(args, start, end, seq)``; only ``end <= end_le`` when given (the stream view).
+        ``bound`` maps 0-based argument positions to ground terms that must be equal (SQL
+        equality: the int 1 also finds 1.0 — the caller unifies anyway).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a",), 2, 2), ("p", ("b",), 1, 1)])
+        []
+        >>> [row[0] for row in s.scan("p", 1, {})], [row[0] for row in s.scan("p", 1, {0: "a"})]
+        ([(Atom('b'),), (Atom('a'),)], [(Atom('a'),)])
+        """
+        has_end = end_le is not None
+        return self._query(name, arity, bound, "scan", (has_end,),
+                           [float(end_le)] if has_end else [])
+
+    def prev_candidates(self, name: str, arity: int, bound: dict[int, Any] | None,
+                        t: float, start_ge: float | None = None) -> Iterator[Row]:
+        """Events with ``end <= t`` (and ``start >= start_ge`` when given), latest end first
+        (streamed backwards from an index). Use :meth:`rows_at_end` for the tied rows of the
+        first match in store order.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a",), 1, 1), ("p", ("b",), 2, 2)])
+        []
+        >>> next(s.prev_candidates("p", 1, {}, 1.5))[0]
+        (Atom('a'),)
+        """
+        has_start = start_ge is not None
+        times = [float(t)] + ([float(start_ge), float(start_ge)] if has_start else [])
+        return self._query(name, arity, bound, "prev", (has_start,), times)
+
+    def rows_at_end(self, name: str, arity: int, bound: dict[int, Any] | None, end: float,
+                    start_ge: float | None = None, end_le: float | None = None
+                    ) -> Iterator[Row]:
+        """Events whose end is exactly ``end`` (and ``start >= start_ge``, ``end <= end_le``
+        when given) in store order (start, arrival).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a",), 1, 2), ("p", ("b",), 0, 2)])
+        []
+        >>> [row[0] for row in s.rows_at_end("p", 1, {}, 2.0)]
+        [(Atom('b'),), (Atom('a'),)]
+        """
+        flags = (start_ge is not None, end_le is not None)
+        times = [float(end)] + ([float(start_ge)] if flags[0] else []) \
+            + ([float(end_le)] if flags[1] else [])
+        return self._query(name, arity, bound, "at_end", flags, times)
+
+    def next_candidates(self, name: str, arity: int, bound: dict[int, Any] | None,
+                        a: float, b: float) -> Iterator[Row]:
+        """Events with ``a <= start`` and ``end <= b``, earliest start first (streamed from an
+        index). Use :meth:`rows_at_start` for the tied rows of the first match.
+
+        >>> import math; from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a",), 1, 1), ("p", ("b",), 2, 2)])
+        []
+        >>> next(s.next_candidates("p", 1, {}, 1.5, math.inf))[0]
+        (Atom('b'),)
+        """
+        return self._query(name, arity, bound, "next", (), [float(a), float(b), float(b)])
+
+    def rows_at_start(self, name: str, arity: int, bound: dict[int, Any] | None,
+                      start: float, b: float) -> Iterator[Row]:
+        """Events whose start is exactly ``start`` and whose end is ``<= b``, in store order
+        (end, arrival).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a",), 1, 3), ("p", ("b",), 1, 2)])
+        []
+        >>> [row[0] for row in s.rows_at_start("p", 1, {}, 1.0, 10.0)]
+        [(Atom('b'),), (Atom('a'),)]
+        """
+        return self._query(name, arity, bound, "at_start", (), [float(start), float(b)])
+
+    def lookup_sql(self, kind: str, name: str, arity: int,
+                   bound: dict[int, Any] | None = None, *, start_ge: bool = False,
+                   end_le: bool = False) -> str | None:
+        """The SQL a lookup runs (for explain output and plan tests). ``kind`` is ``scan``,
+        ``prev``, ``at_end``, ``next`` or ``at_start``; ``start_ge``/``end_le`` say whether
+        those optional bounds are given. None if the type has no table.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.declare_type("p", 1)
+        'p'
+        >>> s.lookup_sql("prev", "p", 1)
+        'SELECT arg1, t_start, t_end, seq FROM "p" INDEXED BY "slr_ix__p__end" WHERE t_end <= ? ORDER BY t_end DESC, t_start DESC, seq DESC'
+        """
+        flags = {"scan": (end_le,), "prev": (start_ge,), "at_end": (start_ge, end_le),
+                 "next": (), "at_start": ()}[kind]
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return None
+            positions, _ = self._pushdown(event_type, bound)
+            return self._select_sql(event_type, kind, positions, flags)
+
+    def latest_at_or_before(self, name: str, arity: int, bound: dict[int, Any], t: float,
+                            point: bool) -> list[Row] | None:
+        """The whole answer of ``prev`` for a pattern whose bound arguments are all atomic and
+        whose other arguments are distinct variables, in one statement: the events with the
+        greatest end <= t (only point events, start = end, when ``point``), in store order.
+
+        Returns None when a bound value cannot be pushed into SQL exactly (the caller then
+        takes the general path). SQL's ``1 = 1.0`` is re-checked by the caller.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a",), 1, 1), ("p", ("a",), 2, 2)])
+        []
+        >>> [row[2] for row in s.latest_at_or_before("p", 1, {0: "a"}, 1.5, True)]
+        [1.0]
+        """
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return []
+            positions, values = self._pushdown(event_type, bound)
+            if len(positions) != len(bound):
+                return None
+            key = (event_type.table, "latest", positions, point)
+            sql = self.sql_cache.get(key)
+            if sql is None:
+                where = " AND ".join([f"arg{p + 1} = ?" for p in positions]
+                                     + (["t_start = t_end"] if point else []))
+                where = (where + " AND ") if where else ""
+                columns = ", ".join([f"arg{i + 1}" for i in range(arity)]
+                                    + ["t_start", "t_end", "seq"])
+                # ORDER BY ... LIMIT 1 rather than max(): max() with the extra start = end
+                # filter is an aggregate over every row of the key, LIMIT 1 stops at the first
+                sql = (f"SELECT {columns} FROM {event_type.quoted} WHERE {where}t_end = "
+                       f"(SELECT t_end FROM {event_type.quoted} WHERE {where}t_end <= ? "
+                       f"ORDER BY t_end DESC LIMIT 1) ORDER BY t_start, seq")
+                self.sql_cache[key] = sql
+            rows = self.db.conn.execute(sql, values + values + [float(t)]).fetchall()
+        dec = decode
+        return [(tuple([dec(v) for v in row[:arity]]), row[arity], row[arity + 1], row[arity + 2])
+                for row in rows]
+
+    def count(self, name: str, arity: int) -> int:
+        """Number of stored events of name/arity.
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).count("p", 1)
+        0
+        """
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return 0
+            return self.db.conn.execute(f"SELECT count(*) FROM {event_type.quoted}").fetchone()[0]
+
+    def max_end(self, name: str, arity: int) -> float | None:
+        """The greatest end time stored for name/arity, or None.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_event("p", (1,), 1, 4); s.max_end("p", 1)
+        4.0
+        """
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return None
+            return self.db.conn.execute(
+                f"SELECT max(t_end) FROM {event_type.quoted}").fetchone()[0]

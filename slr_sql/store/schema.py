@@ -1,0 +1,121 @@
+"""The schema of the internal ``slr_*`` tables: numbered SQL migrations, applied in order.
+
+Each ``migrations/NNNN_name.sql`` runs once and is recorded in ``slr_migrations``; the
+migrations an open applies run in one transaction (all or nothing), whatever the gaps in the
+numbering; ``PRAGMA user_version`` holds the highest number applied. A database written by a
+newer slr_sql (a higher number than the last script) is refused rather than guessed at.
+"""
+from __future__ import annotations
+
+import importlib.resources
+import re
+import sqlite3
+from pathlib import Path
+from typing import Any
+
+from ..errors import SLRError
+from .sqltext import busy_error, split_sql_script
+
+__all__ = ["migration_scripts", "migrate", "applied_migrations"]
+
+
+def _migrations_dir() -> Any:
+    """The migrations folder: the installed ``slr_sql.migrations`` package, or the source
+    checkout's top-level ``migrations/``."""
+    try:
+        folder = importlib.resources.files("slr_sql.migrations")
+        if any(entry.name.endswith(".sql") for entry in folder.iterdir()):
+            return folder
+    except Exception:  # not installed as a package: running from a source checkout
+        pass
+    return Path(__file__).resolve().parents[2] / "migrations"
+
+
+def migration_scripts() -> list[tuple[int, str, str]]:
+    """``(number, file name, sql text)`` of every ``NNNN_name.sql`` migration, in order.
+
+    >>> migration_scripts()[0][:2]
+    (1, '0001_initial.sql')
+    """
+    scripts = []
+    for entry in _migrations_dir().iterdir():
+        match = re.match(r"(\d+)_.*\.sql\Z", entry.name)
+        if match:
+            scripts.append((int(match.group(1)), entry.name, entry.read_text(encoding="utf-8")))
+    scripts.sort()
+    return scripts
+
+
+def applied_migrations(conn: sqlite3.Connection,
+                       scripts: list[tuple[int, str, str]] | None = None) -> set[int]:
+    """The numbers of the migrations applied to ``conn``'s database: those recorded in
+    ``slr_migrations``, or (a store from before that table) every number up to
+    ``PRAGMA user_version``.
+
+    >>> conn = sqlite3.connect(":memory:", isolation_level=None); migrate(conn, None)
+    >>> sorted(applied_migrations(conn)) == [n for n, _, _ in migration_scripts()]
+    True
+    """
+    current = conn.execute("PRAGMA user_version").fetchone()[0]
+    has_table = conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' "
+                             "AND name = 'slr_migrations'").fetchone()
+    if has_table:
+        return {row[0] for row in conn.execute("SELECT number FROM slr_migrations")}
+    return {number for number, _, _ in (migration_scripts() if scripts is None else scripts)
+            if number <= current}
+
+
+def migrate(conn: sqlite3.Connection, path: str | None,
+            scripts: list[tuple[int, str, str]] | None = None) -> None:
+    """Apply the migrations ``conn`` has not seen yet (``path`` names the file in errors).
+
+    Every script not applied yet runs, in number order, whatever the gaps in the numbering
+    (a script merged later with a lower number than one applied already still runs); each
+    is recorded in ``slr_migrations`` and ``PRAGMA user_version`` is the highest applied.
+    A store that is up to date is only read (no write lock needed to open it). ``scripts``
+    (default :func:`migration_scripts`) is for tests.
+
+    >>> conn = sqlite3.connect(":memory:", isolation_level=None); migrate(conn, None)
+    >>> conn.execute("PRAGMA user_version").fetchone()[0] == migration_scripts()[-1][0]
+    True
+    """
+    if scripts is None:
+        scripts = migration_scripts()
+    latest = scripts[-1][0] if scripts else 0
+    current = conn.execute("PRAGMA user_version").fetchone()[0]
+    if current > latest:
+        raise SLRError(f"{path}: database schema version {current} is newer than this "
+                       f"slr_sql supports ({latest}); upgrade slr_sql")
+    if all(number in applied_migrations(conn, scripts) for number, _, _ in scripts):
+        return
+    # All pending migrations in one transaction: a failure leaves the file as it was.
+    try:
+        conn.execute("BEGIN IMMEDIATE")
+    except sqlite3.OperationalError as exc:
+        raise busy_error(exc, path) or exc from None
+    try:
+        # another process may have migrated between our check and the lock
+        applied = applied_migrations(conn, scripts)
+        names = {n: name for n, name, _ in scripts}
+        for number, filename, text in scripts:
+            if number in applied:
+                continue
+            try:
+                for statement in split_sql_script(text):
+                    conn.execute(statement)
+            except sqlite3.Error as exc:
+                raise SLRError(f"{path}: migration {filename} failed ({exc}); the file is "
+                               "left as it was") from None
+            applied.add(number)
+        conn.execute("CREATE TABLE IF NOT EXISTS slr_migrations (number INTEGER PRIMARY "
+                     "KEY, name TEXT NOT NULL, applied_at REAL)")
+        conn.executemany("INSERT OR IGNORE INTO slr_migrations (number, name, applied_at) "
+                         "VALUES (?, ?, julianday('now'))",
+                         [(n, names.get(n, "?")) for n in sorted(applied)])
+        version = conn.execute("PRAGMA user_version").fetchone()[0]
+        conn.execute(f"PRAGMA user_version = {int(max([version, *applied]))}")
+        conn.execute("COMMIT")
+    except BaseException:
+        if conn.in_transaction:
+            conn.execute("ROLLBACK")
+        raise

@@ -1,0 +1,116 @@
+"""Disk space of one store file: statistics, giving free pages back, bounding the WAL.
+
+The file uses ``auto_vacuum=INCREMENTAL`` (chosen when it is created), so pages freed by
+pruned events go to a free list that :meth:`Space.reclaim_space` can release without a full
+``VACUUM``.
+"""
+from __future__ import annotations
+
+import os
+from typing import Any
+
+from .connection import Database
+from .sqltext import quote_identifier
+from .tables import EventTables
+
+__all__ = ["Space"]
+
+
+class Space:
+    """Row counts, page statistics and space reclaiming of one database.
+
+    >>> from slr_sql.store import EventStore
+    >>> EventStore(None).space_stats()["free_pages"]
+    0
+    """
+
+    def __init__(self, db: Database, tables: EventTables):
+        self.db = db
+        self.tables = tables
+
+    def table_rows(self) -> dict[tuple[str, int], int]:
+        """Rows stored now per event type (a full count: for statistics).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_event("p", (1,), 1, 1); s.table_rows()
+        {('p', 1): 1}
+        """
+        with self.db.lock:
+            self.db.check_open()
+            out = {}
+            for key, table in sorted(self.tables.event_types().items()):
+                out[key] = self.db.conn.execute(
+                    f"SELECT count(*) FROM {quote_identifier(table)}").fetchone()[0]
+            return out
+
+    def space_stats(self) -> dict[str, Any]:
+        """Page size/count, free pages, and the sizes of the file and its WAL (bytes).
+
+        >>> from slr_sql.store import EventStore
+        >>> sorted(EventStore(None).space_stats())
+        ['file_bytes', 'free_pages', 'page_count', 'page_size', 'wal_bytes']
+        """
+        path = self.db.path
+        with self.db.lock:
+            self.db.check_open()
+            conn = self.db.conn
+            page_size = conn.execute("PRAGMA page_size").fetchone()[0]
+            page_count = conn.execute("PRAGMA page_count").fetchone()[0]
+            free = conn.execute("PRAGMA freelist_count").fetchone()[0]
+        file_bytes = wal_bytes = 0
+        if path is not None:
+            try:
+                file_bytes = os.path.getsize(path)
+            except OSError:
+                pass
+            try:
+                wal_bytes = os.path.getsize(path + "-wal")
+            except OSError:
+                pass
+        else:
+            file_bytes = page_size * page_count
+        return {"page_size": page_size, "page_count": page_count, "free_pages": free,
+                "file_bytes": file_bytes, "wal_bytes": wal_bytes}
+
+    def reclaim_space(self, min_free_pages: int = 2048, min_free_fraction: float = 0.25,
+                      keep_fraction: float = 0.10) -> int:
+        """Give free pages back to the file system (``PRAGMA incremental_vacuum``) when the
+        free list is large: more than ``min_free_pages`` pages and ``min_free_fraction`` of
+        the file. ``keep_fraction`` of the file is left free for the next inserts to reuse.
+        Returns the number of pages released (0 for in-memory stores).
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).reclaim_space()
+        0
+        """
+        if self.db.path is None:
+            return 0
+        with self.db.lock:
+            self.db.check_open()
+            conn = self.db.conn
+            page_count = conn.execute("PRAGMA page_count").fetchone()[0]
+            free = conn.execute("PRAGMA freelist_count").fetchone()[0]
+            if free <= min_free_pages or free < min_free_fraction * page_count:
+                return 0
+            release = free - int(keep_fraction * page_count)
+            if release <= 0:
+                return 0
+            with self.db.transaction():
+                conn.execute(f"PRAGMA incremental_vacuum({int(release)})").fetchall()
+            after = conn.execute("PRAGMA freelist_count").fetchone()[0]
+            if not self.db.tx_depth:
+                conn.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchall()
+            return max(free - after, 0)
+
+    def limit_wal(self, max_bytes: int = 64 * 1024 * 1024) -> None:
+        """Truncate the WAL file to at most ``max_bytes`` after each checkpoint
+        (``PRAGMA journal_size_limit``; the WAL is checkpointed every 1000 pages by SQLite).
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).limit_wal(1 << 20)
+        """
+        if self.db.path is None:
+            return
+        with self.db.lock:
+            self.db.check_open()
+            self.db.conn.execute(f"PRAGMA journal_size_limit = {int(max_bytes)}").fetchall()

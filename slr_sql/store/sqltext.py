@@ -1,0 +1,132 @@
+"""SQL text for SQLite: quoting identifiers and constants, splitting scripts, safe table names.
+
+Every identifier the store writes into SQL goes through :func:`quote_identifier`; values are
+bound parameters, except in ``CREATE TRIGGER`` bodies (which cannot have parameters), where
+:func:`sql_literal` writes them strictly.
+"""
+from __future__ import annotations
+
+import math
+import re
+import sqlite3
+from typing import Any
+
+from ..errors import SLRBusy
+
+__all__ = ["quote_identifier", "sql_literal", "split_sql_script", "SAFE_IDENTIFIER",
+           "RESERVED_PREFIXES", "SQL_KEYWORDS", "busy_error"]
+
+SAFE_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+RESERVED_PREFIXES = ("slr_", "sqlite_")
+# SQLite keywords: an event named like one gets a sanitized table name, so that
+# ``SELECT * FROM <table>`` works without quoting for every table we create.
+SQL_KEYWORDS = frozenset("""
+abort action add after all alter always analyze and as asc attach autoincrement before begin
+between by cascade case cast check collate column commit conflict constraint create cross
+current current_date current_time current_timestamp database default deferrable deferred
+delete desc detach distinct do drop each else end escape except exclude exclusive exists
+explain fail filter first following for foreign from full generated glob group groups having
+if ignore immediate in index indexed initially inner insert instead intersect into is isnull
+join key last left like limit match materialized natural no not nothing notnull null nulls of
+offset on or order others outer over partition plan pragma preceding primary query raise range
+recursive references regexp reindex release rename replace restrict returning right rollback
+row rows savepoint select set table temp temporary then ties to transaction trigger unbounded
+union unique update using vacuum values view virtual when where window with without
+rowid oid _rowid_
+""".split())
+
+
+def busy_error(exc: BaseException, path: str | None,
+               timeout: float | None = None) -> SLRBusy | None:
+    """The :class:`SLRBusy` to raise for ``exc`` if it says the database stayed locked by
+    another connection past the busy timeout (``SQLITE_BUSY``), else None.
+
+    >>> print(busy_error(sqlite3.OperationalError("database is locked"), "robot.db", 5))
+    robot.db: locked by another writer (a process or knowledge base) for more than 5 s
+    >>> busy_error(sqlite3.OperationalError("no such table: x"), "robot.db") is None
+    True
+    """
+    code = getattr(exc, "sqlite_errorcode", None)
+    busy = (code is not None and code & 0xFF == sqlite3.SQLITE_BUSY) or \
+        (code is None and "database is locked" in str(exc))
+    if not busy:
+        return None
+    waited = f" for more than {timeout:g} s" if timeout is not None else ""
+    return SLRBusy(f"{path or ':memory:'}: locked by another writer (a process or knowledge "
+                   f"base){waited}")
+
+
+def quote_identifier(name: str) -> str:
+    """Quote an SQL identifier (``"`` doubled).
+
+    >>> print(quote_identifier('a"b'))
+    "a""b"
+    """
+    return '"' + name.replace('"', '""') + '"'
+
+
+def sql_literal(value: Any) -> str:
+    """Quote a constant as an SQL literal, strictly.
+
+    The buffer triggers (slr_sql.buffers) are the one place where slr_sql writes constants
+    into SQL text: ``CREATE TRIGGER`` bodies cannot have bound parameters, so a pattern
+    constant such as ``bob`` in ``cBuffer(face(bob, L), 1)`` must appear as a literal. Only
+    ``int`` (64-bit), finite or infinite ``float`` and ``str`` without NUL are accepted;
+    quotes are doubled; anything else is rejected.
+
+    >>> sql_literal("it's"), sql_literal(3), sql_literal(0.5), sql_literal(float("inf"))
+    ("'it''s'", '3', '0.5', '9e999')
+    >>> sql_literal(True)
+    Traceback (most recent call last):
+    ...
+    TypeError: no SQL literal for bool value True
+    """
+    tv = type(value)
+    if tv is int or (isinstance(value, int) and tv is not bool):
+        value = int(value)
+        if not -(2 ** 63) <= value < 2 ** 63:
+            raise ValueError(f"integer {value} does not fit an SQL literal")
+        return repr(value)
+    if tv is float or (isinstance(value, float) and tv is not bool):
+        value = float(value)
+        if value != value:
+            raise ValueError("NaN has no SQL literal")
+        if value == math.inf:
+            return "9e999"
+        if value == -math.inf:
+            return "-9e999"
+        return repr(value)
+    if isinstance(value, str):
+        text = str.__str__(value)
+        if "\x00" in text:
+            raise ValueError("a NUL character cannot be written as an SQL literal")
+        return "'" + text.replace("'", "''") + "'"
+    raise TypeError(f"no SQL literal for {tv.__name__} value {value!r}")
+
+
+def split_sql_script(script: str) -> list[str]:
+    """Split SQL text into complete statements (trigger bodies stay whole).
+
+    >>> split_sql_script("CREATE TABLE a(x); CREATE TABLE b(y);")
+    ['CREATE TABLE a(x);', 'CREATE TABLE b(y);']
+    """
+    statements = []
+    buffer = ""
+    pieces = script.split(";")
+    for number, piece in enumerate(pieces):
+        buffer += piece
+        if number < len(pieces) - 1:
+            buffer += ";"
+            # a ';' inside a string or a trigger body does not end the statement
+            if sqlite3.complete_statement(buffer):
+                if _has_sql(buffer):
+                    statements.append(buffer.strip())
+                buffer = ""
+    if _has_sql(buffer):  # a last statement without its ';'
+        statements.append(buffer.strip())
+    return statements
+
+
+def _has_sql(text: str) -> bool:
+    stripped = re.sub(r"--[^\n]*|/\*.*?\*/", "", text, flags=re.S)
+    return stripped.strip(" \t\r\n;") != ""

@@ -1,0 +1,233 @@
+"""Event types and their tables: naming, creating and finding one table per name/arity.
+
+A type's table is named after the event when that is a plain SQL identifier (``seg``),
+otherwise a sanitized unique name (``seg__3``, ``ev_my_event``); ``slr_event_types`` holds
+the mapping. Columns::
+
+    seq      INTEGER PRIMARY KEY   -- arrival sequence (the rowid)
+    arg1..N                        -- data arguments, encoded by slr_sql.encoding
+    t_start  REAL NOT NULL
+    t_end    REAL NOT NULL
+    arrival  REAL NOT NULL         -- store clock time of the add that stored the event
+
+Indexes ``(t_end, t_start)`` and ``(t_start, t_end)``, plus ``(arg1, t_end, t_start)`` and
+``(arg1, t_start, t_end)`` when there is a first argument. Every index entry ends with the
+rowid, so *store order* (``ORDER BY t_end, t_start, seq``) and the reverse order prev needs
+are read straight from an index, never sorted.
+"""
+from __future__ import annotations
+
+import re
+import sqlite3
+from typing import Any, Callable
+
+from ..errors import SLRError
+from .connection import Database
+from .sqltext import RESERVED_PREFIXES, SAFE_IDENTIFIER, SQL_KEYWORDS, quote_identifier
+
+__all__ = ["EventType", "EventTables"]
+
+
+class EventType:
+    """What the store knows about one event type (cached per name/arity)."""
+
+    __slots__ = ("name", "arity", "table", "declared", "insert_sql", "quoted", "columns",
+                 "index_end", "index_start", "index_arg1_end", "index_arg1_start")
+
+    def __init__(self, name: str, arity: int, table: str, declared: bool):
+        self.name = name
+        self.arity = arity
+        self.table = table
+        self.declared = declared
+        self.quoted = quote_identifier(table)
+        arg_columns = [f"arg{i}" for i in range(1, arity + 1)]
+        self.columns = ", ".join(arg_columns + ["t_start", "t_end", "seq"])
+        insert_columns = arg_columns + ["t_start", "t_end", "arrival"]
+        self.insert_sql = (f"INSERT INTO {self.quoted} ({', '.join(insert_columns)}) "
+                           f"VALUES ({', '.join('?' * len(insert_columns))})")
+        self.index_end = quote_identifier(f"slr_ix__{table}__end")
+        self.index_start = quote_identifier(f"slr_ix__{table}__start")
+        self.index_arg1_end = quote_identifier(f"slr_ix__{table}__a1_end")
+        self.index_arg1_start = quote_identifier(f"slr_ix__{table}__a1_start")
+
+
+def _index_names(table: str) -> list[str]:
+    return [f"slr_ix__{table}__{suffix}" for suffix in ("end", "start", "a1_end", "a1_start")]
+
+
+class EventTables:
+    """The event types of one database, cached from ``slr_event_types``.
+
+    >>> tables = EventTables(Database(None)); tables.declare_type("seg", 2)
+    'seg'
+    >>> tables.lookup("seg", 2).insert_sql
+    'INSERT INTO "seg" (arg1, arg2, t_start, t_end, arrival) VALUES (?, ?, ?, ?, ?)'
+    """
+
+    def __init__(self, db: Database):
+        self.db = db
+        self.types: dict[tuple[str, int], EventType] = {}
+        self.declared_arities: dict[str, set[int]] = {}
+        # buffers (issue 4): called as hook(name, arity, table) inside the transaction that
+        # creates a new event type's table (slr_sql.buffers installs its triggers there)
+        self.table_created_hooks: list[Callable[[str, int, str], Any]] = []
+        db.rollback_listeners.append(self.reload)  # types created inside were rolled back too
+        # The most data arguments an event can have: its table has 4 more columns (seq,
+        # t_start, t_end, arrival) and SQLite refuses tables wider than its column limit.
+        self.max_arity = db.conn.getlimit(sqlite3.SQLITE_LIMIT_COLUMN) - 4
+        self.reload()
+
+    def reload(self) -> None:
+        """Read every type again (others may have created some; a rollback undid some)."""
+        types: dict[tuple[str, int], EventType] = {}
+        declared: dict[str, set[int]] = {}
+        if not self.db.closed:
+            for name, arity, table, is_declared in self.db.conn.execute(
+                    "SELECT name, arity, table_name, declared FROM slr_event_types"):
+                types[(name, arity)] = EventType(name, arity, table, bool(is_declared))
+                if is_declared:
+                    declared.setdefault(name, set()).add(arity)
+        self.types = types
+        self.declared_arities = declared
+
+    def lookup(self, name: str, arity: int) -> EventType | None:
+        """The type name/arity, or None if it has no table (lock held by the caller)."""
+        event_type = self.types.get((name, arity))
+        if event_type is None:
+            # another connection (process) may have created it since we last looked
+            row = self.db.conn.execute(
+                "SELECT table_name, declared FROM slr_event_types WHERE name = ? AND arity = ?",
+                (str(name), arity)).fetchone()
+            if row is not None:
+                event_type = EventType(str(name), arity, row[0], bool(row[1]))
+                self.types[(str(name), arity)] = event_type
+                if row[1]:
+                    self.declared_arities.setdefault(str(name), set()).add(arity)
+        return event_type
+
+    def _choose_table_name(self, name: str, arity: int) -> str:
+        taken = {row[0].lower() for row in self.db.conn.execute("SELECT name FROM sqlite_master")}
+
+        def free(candidate: str) -> bool:
+            return all(n.lower() not in taken for n in [candidate] + _index_names(candidate))
+
+        lowered = name.lower()
+        if (SAFE_IDENTIFIER.match(name) and not lowered.startswith(RESERVED_PREFIXES)
+                and lowered not in SQL_KEYWORDS):
+            base = name
+            if free(base):
+                return base
+        else:
+            base = "ev_" + re.sub(r"[^A-Za-z0-9_]", "_", name)
+            if free(base):
+                return base
+        candidate = f"{base}__{arity}"
+        suffix = 2
+        while not free(candidate):
+            candidate = f"{base}__{arity}_{suffix}"
+            suffix += 1
+        return candidate
+
+    def register(self, name: str, arity: int, declared: bool) -> EventType:
+        """Create the table of a new type. Must run inside a write transaction."""
+        existing = self.lookup(name, arity)
+        if existing is not None:
+            if declared and not existing.declared:
+                self.db.conn.execute("UPDATE slr_event_types SET declared = 1 "
+                                     "WHERE name = ? AND arity = ?", (name, arity))
+                existing.declared = True
+                self.declared_arities.setdefault(name, set()).add(arity)
+            return existing
+        table = self._choose_table_name(name, arity)
+        event_type = EventType(name, arity, table, declared)
+        arg_columns = "".join(f", arg{i}" for i in range(1, arity + 1))
+        conn = self.db.conn
+        # arg columns have no declared type: SQLite keeps INTEGER / REAL / TEXT as given.
+        conn.execute(f"CREATE TABLE {event_type.quoted} (seq INTEGER PRIMARY KEY{arg_columns}, "
+                     "t_start REAL NOT NULL, t_end REAL NOT NULL, arrival REAL NOT NULL)")
+        conn.execute(f"CREATE INDEX {event_type.index_end} ON {event_type.quoted} (t_end, t_start)")
+        conn.execute(f"CREATE INDEX {event_type.index_start} ON {event_type.quoted} "
+                     "(t_start, t_end)")
+        if arity >= 1:
+            conn.execute(f"CREATE INDEX {event_type.index_arg1_end} ON {event_type.quoted} "
+                         "(arg1, t_end, t_start)")
+            conn.execute(f"CREATE INDEX {event_type.index_arg1_start} ON {event_type.quoted} "
+                         "(arg1, t_start, t_end)")
+        conn.execute("INSERT INTO slr_event_types (name, arity, table_name, declared) "
+                     "VALUES (?, ?, ?, ?)", (name, arity, table, int(declared)))
+        self.types[(name, arity)] = event_type
+        if declared:
+            self.declared_arities.setdefault(name, set()).add(arity)
+        for hook in self.table_created_hooks:  # buffers (issue 4)
+            hook(name, arity, table)
+        return event_type
+
+    def declare_type(self, name: str, arity: int) -> str:
+        """Declare event type name/arity (``:- event name/arity.``); returns its table name.
+
+        Once a name is declared with some arity, events of that name with an arity that is
+        neither declared nor already stored are rejected as a wrong-arity mistake.
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).declare_type("seg", 2)
+        'seg'
+        """
+        if not isinstance(name, str) or not isinstance(arity, int) or arity < 0:
+            raise ValueError(f"bad event type {name!r}/{arity!r}")
+        if arity > self.max_arity:
+            raise SLRError(f"cannot declare event {name}/{arity}: too many arguments (an "
+                           f"event has at most {self.max_arity}, the column limit of SQLite)")
+        with self.db.transaction():
+            return self.register(str(name), arity, declared=True).table
+
+    def event_types(self) -> dict[tuple[str, int], str]:
+        """Every known event type ``(name, arity)`` -> its table name.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.declare_type("seg", 2); s.event_types()
+        'seg'
+        {('seg', 2): 'seg'}
+        """
+        with self.db.lock:
+            self.db.check_open()
+            if not self.db.tx_depth:
+                self.reload()  # pick up types other processes created
+            return {key: t.table for key, t in self.types.items()}
+
+    def declared_types(self) -> set[tuple[str, int]]:
+        """The types declared with :meth:`declare_type` (not merely created by an event).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.declare_type("seg", 2); sorted(s.declared_types())
+        'seg'
+        [('seg', 2)]
+        """
+        with self.db.lock:
+            self.db.check_open()
+            return {key for key, t in self.types.items() if t.declared}
+
+    def table_for(self, name: str, arity: int) -> str | None:
+        """The table holding events of name/arity, or None if there is none yet.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.table_for("seg", 2) is None
+        True
+        """
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.lookup(name, arity)
+            return None if event_type is None else event_type.table
+
+    def event_table_sql(self, name: str, arity: int) -> str | None:
+        """The quoted table of an event type (for compiled SQL), or None if it has none.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_event("my event", (), 1, 1); s.event_table_sql("my event", 0)
+        '"ev_my_event"'
+        """
+        event_type = self.types.get((name, arity))
+        if event_type is None:
+            with self.db.lock:
+                self.db.check_open()
+                event_type = self.lookup(name, arity)
+        return None if event_type is None else event_type.quoted

@@ -1,0 +1,123 @@
+"""Helpers of the service tests: a real `python -m slr_sql serve` process, and term equality.
+
+The server is started on port 0 (the kernel picks a free port, so parallel runs never
+collide) and prints ``slr serve: DB on http://HOST:PORT`` once it listens; the tests read that
+line (waiting on a queue, with a deadline), then wait for ``/health`` in a deadline loop.
+"""
+from __future__ import annotations
+
+import os
+import queue
+import signal
+import subprocess
+import sys
+import threading
+import time
+import math
+from pathlib import Path
+
+import httpx
+
+from slr_sql import Struct, Var
+
+ROOT = Path(__file__).resolve().parent.parent
+START_DEADLINE = 30.0
+
+
+def slr_env(extra: dict | None = None) -> dict:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    env.pop("SLR_TOKEN", None)
+    env["COLUMNS"] = "200"
+    env.setdefault("SLR_HISTORY", os.devnull)
+    if extra:
+        env.update(extra)
+    return env
+
+
+class ServiceProcess:
+    """``with ServiceProcess(db, "--token", "t") as server: server.url``"""
+
+    def __init__(self, db: Path | str, *args: str, env: dict | None = None):
+        self.db = str(db)
+        self.log = Path(str(db) + ".server.log")
+        self._log_handle = open(self.log, "wb")
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "slr_sql", "serve", self.db, "--port", "0", *args],
+            stdout=subprocess.PIPE, stderr=self._log_handle, stdin=subprocess.DEVNULL,
+            env=slr_env(env), cwd=ROOT)
+        lines: queue.Queue = queue.Queue()
+        threading.Thread(target=lambda: lines.put(self.proc.stdout.readline()),
+                         daemon=True).start()
+        try:
+            first = lines.get(timeout=START_DEADLINE).decode()
+        except queue.Empty:
+            self.stop()
+            raise RuntimeError(f"slr serve did not start: {self.log.read_text()}") from None
+        if " on http" not in first:
+            self.stop()
+            raise RuntimeError(f"slr serve failed: {first!r} {self.log.read_text()}")
+        self.url = first.strip().rsplit(" on ", 1)[1]
+        self.wait_healthy()
+
+    def wait_healthy(self) -> None:
+        deadline = time.monotonic() + START_DEADLINE
+        while True:
+            try:
+                if httpx.get(self.url + "/health", timeout=5).status_code == 200:
+                    return
+            except httpx.HTTPError:
+                if time.monotonic() > deadline or self.proc.poll() is not None:
+                    raise RuntimeError(f"slr serve is not healthy: {self.log.read_text()}")
+                time.sleep(0.02)
+
+    def healthy(self) -> bool:
+        try:
+            return httpx.get(self.url + "/health", timeout=10).json()["status"] == "ok"
+        except httpx.HTTPError:
+            return False
+
+    def kill(self) -> None:
+        """SIGKILL: no shutdown code runs."""
+        self.proc.send_signal(signal.SIGKILL)
+        self.proc.wait(timeout=30)
+        self._close()
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout=15)
+        self._close()
+
+    def _close(self) -> None:
+        if self.proc.stdout is not None:
+            self.proc.stdout.close()
+        self._log_handle.close()
+
+    def __enter__(self) -> "ServiceProcess":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+def same(a, b, names: dict | None = None) -> bool:
+    """Terms equal with their Python types (Atom vs String vs str, 1 vs 1.0, -0.0 vs 0.0,
+    NaN equal to NaN), variables by name."""
+    names = {} if names is None else names
+    if type(a) is not type(b):
+        return False
+    if type(a) is float:
+        return (math.isnan(a) and math.isnan(b)) or (a == b and math.copysign(1, a) == math.copysign(1, b))
+    if type(a) is list:
+        return len(a) == len(b) and all(same(x, y, names) for x, y in zip(a, b))
+    if type(a) is Struct:
+        return a.name == b.name and len(a.args) == len(b.args) and \
+            all(same(x, y, names) for x, y in zip(a.args, b.args))
+    if type(a) is Var:
+        return names.setdefault(a.name, b.name) == b.name
+    return a == b

@@ -1,0 +1,234 @@
+"""Bad input to the library: every event that cannot be stored is an EventRejected with its
+reason (never a raw Python or sqlite3 exception), and nothing else in its batch is lost."""
+from __future__ import annotations
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+import slr_sql
+from slr_sql import EventRejected, SLRError
+from slr_sql.store import EventStore
+from slr_sql.terms import Atom, String, Struct
+
+
+def stored(kb, name: str, arity: int) -> list:
+    """The argument tuples of the stored events name/arity, in store order."""
+    return [args for args, *_ in kb.store.scan(name, arity)]
+
+
+# ---------------------------------------------------------------- arguments that cannot be stored
+
+SURROGATE = "\ud800"
+
+BAD_ARGUMENTS = [
+    pytest.param([10 ** 5000], "too large", id="integer of 5001 digits"),
+    pytest.param([-(10 ** 5000)], "too large", id="negative integer of 5001 digits"),
+    pytest.param([[1, 10 ** 5000]], "too large", id="huge integer inside a list"),
+    pytest.param([Struct("f", (10 ** 5000,))], "too large", id="huge integer inside a compound"),
+    pytest.param(["a" + SURROGATE], "surrogate", id="lone surrogate in an atom"),
+    pytest.param([String("x\udc00y")], "surrogate", id="lone surrogate in a string"),
+    pytest.param([["ok", "b" + SURROGATE]], "surrogate", id="lone surrogate in a list"),
+    pytest.param([Struct("f" + SURROGATE, (1,))], "surrogate", id="lone surrogate in a functor"),
+    pytest.param([Atom("[" + SURROGATE)], "surrogate", id="lone surrogate in a JSON-escaped atom"),
+]
+
+
+@pytest.mark.parametrize("args, reason", BAD_ARGUMENTS)
+def test_unstorable_arguments_are_rejected_and_the_rest_of_the_batch_is_kept(kb, args, reason):
+    with pytest.raises(EventRejected, match=reason) as raised:
+        kb.add_event("p", args, 1.0)
+    assert str(raised.value).startswith("p(")
+    errors = kb.add_many([("p", [0], 0.0, 0.0), ("p", args, 1.0, 1.0), ("p", [2], 2.0, 2.0)])
+    assert [e.index for e in errors] == [1] and reason in str(errors[0])
+    assert stored(kb, "p", 1) == [(0,), (2,)]
+
+
+def test_a_lone_surrogate_in_the_event_name_is_rejected(kb):
+    errors = kb.add_many([("p" + SURROGATE, [1], 1.0, 1.0), ("p", [1], 1.0, 1.0)])
+    assert [e.index for e in errors] == [0] and "surrogate" in str(errors[0])
+    assert stored(kb, "p", 1) == [(1,)]
+
+
+def test_a_lone_surrogate_written_as_an_escape_in_event_text_is_rejected(kb):
+    with pytest.raises(EventRejected, match="surrogate"):
+        kb.add("p('\\xD800\\')^1")
+    assert kb.query("p(X)^T") == []
+
+
+TEXT_WITH_SURROGATES = st.lists(st.one_of(st.characters(), st.integers(0xD800, 0xDFFF).map(chr)),
+                                max_size=8).map("".join)
+
+
+@given(TEXT_WITH_SURROGATES)
+def test_any_text_is_stored_exactly_or_rejected_for_its_surrogates(text):
+    with slr_sql.open() as kb:
+        has_surrogate = any(0xD800 <= ord(c) <= 0xDFFF for c in text)
+        for value in (Atom(text), String(text), [Atom(text)], Struct("f", (String(text),))):
+            try:
+                kb.add_event("p", [value], 1.0)
+            except EventRejected as exc:
+                assert has_surrogate, exc
+                continue
+            assert not has_surrogate
+        if not has_surrogate:
+            values = [args[0] for args in stored(kb, "p", 1)]
+            assert values == [Atom(text), String(text), slr_sql.terms.make_list([Atom(text)]),
+                              Struct("f", (String(text),))]
+
+
+def test_the_largest_integers_that_fit_are_stored_exactly(kb):
+    big = 10 ** 4000 + 7
+    kb.add_event("p", [big, [-big]], 1.0)
+    assert kb.query("p(X, Y)^_") == [{"X": big, "Y": [-big]}]
+
+
+# ---------------------------------------------------------------- too many arguments
+
+def test_an_event_with_2000_arguments_is_rejected_not_a_raw_sqlite_error(kb):
+    with pytest.raises(EventRejected, match="too many arguments"):
+        kb.add_event("wide", list(range(2000)), 1.0)
+    with pytest.raises(EventRejected, match="too many arguments"):
+        kb.add("wide(" + ",".join(["1"] * 2000) + ")^1")
+    errors = kb.add_many([("wide", list(range(2000)), 1.0, 1.0), ("wide", [1], 1.0, 1.0)])
+    assert [e.index for e in errors] == [0] and "too many arguments" in str(errors[0])
+    assert stored(kb, "wide", 1) == [(1,)]
+
+
+def test_the_widest_event_that_fits_is_stored_and_read_back(kb):
+    widest = kb.store.max_event_arity
+    kb.add_event("wide", list(range(widest)), 1.0)
+    assert stored(kb, "wide", widest) == [tuple(range(widest))]
+    with pytest.raises(EventRejected, match="too many arguments"):
+        kb.add_event("wide", list(range(widest + 1)), 1.0)
+
+
+def test_declaring_an_event_type_with_too_many_arguments_is_an_error(kb):
+    with pytest.raises(SLRError, match="too many arguments"):
+        kb.load(":- event wide/5000.")
+    kb.load(":- event wide/3.")  # the failed load changed nothing
+    assert kb.store.declared_types() == {("wide", 3)}
+
+
+# ---------------------------------------------------------------- the argument list itself
+
+@pytest.mark.parametrize("args, shown", [
+    pytest.param(None, "None", id="None"),
+    pytest.param("abc", "'abc'", id="a str (not split into characters)"),
+    pytest.param(5, "5", id="an int"),
+    pytest.param({"a": 1}, "{'a': 1}", id="a dict"),
+    pytest.param(Atom("abc"), "abc", id="an Atom"),
+])
+def test_arguments_must_be_a_list_or_tuple(kb, args, shown):
+    with pytest.raises(EventRejected, match="arguments must be a list or tuple") as raised:
+        kb.add_event("p", args, 1.0)
+    assert shown in str(raised.value)
+    errors = kb.add_many([("p", args, 1.0, 1.0), ("p", ["ok"], 1.0, 1.0)])
+    assert [e.index for e in errors] == [0]
+    assert "arguments must be a list or tuple" in str(errors[0])
+    errors = kb.store.add_events([("p", args, 1.0, 1.0)])
+    assert len(errors) == 1 and "arguments must be a list or tuple" in str(errors[0])
+    assert kb.query("findall(X, p(X)^_, L)") == [{"L": [Atom("ok")]}]
+    assert kb.store.table_for("p", 3) is None
+
+
+def test_a_list_of_arguments_is_still_accepted(kb):
+    kb.add_event("p", ["a", [1, 2]], 1.0)
+    kb.store.add_events([("p", ["b", [3]], 2.0, 2.0)])
+    assert kb.query("p(X, Y)^_") == [{"X": "a", "Y": [1, 2]}, {"X": "b", "Y": [3]}]
+
+
+# ---------------------------------------------------------------- times
+
+@pytest.mark.parametrize("text, reason", [
+    pytest.param('foo(1)^"1"', "must be a number", id="a string time (not its character code)"),
+    pytest.param('foo(1)^[1, "2"]', "must be a number", id="a string end time"),
+    pytest.param("foo(1)^[[1], 2]", "must be a number", id="a list start time"),
+    pytest.param("foo(1)^(2**2000)", "finite", id="a time too large for a float"),
+    pytest.param("foo(1)^" + "9" * 400, "finite", id="an integer time too large for a float"),
+])
+def test_event_times_must_be_numbers(kb, text, reason):
+    with pytest.raises(EventRejected, match=reason):
+        kb.add(text)
+    errors = kb.add_many(["foo(0)^0", text, "foo(2)^2"])
+    assert [e.index for e in errors] == [1]
+    assert kb.query("findall(X-T, foo(X)^T, L)") == [{"L": [Struct("-", (0, 0.0)),
+                                                           Struct("-", (2, 2.0))]}]
+
+
+def test_arithmetic_times_are_still_evaluated(kb):
+    kb.add("foo(1)^(2 + 0.5)")
+    kb.add("foo(2)^[1, 2*2]")
+    assert kb.query("foo(X)^[S, E]") == [{"X": 1, "S": 2.5, "E": 2.5},
+                                         {"X": 2, "S": 1.0, "E": 4.0}]
+
+
+@pytest.mark.parametrize("text, reason", [
+    pytest.param("fullyUpdated(seg/2)^[5,3]", "after end time", id="mark with start after end"),
+    pytest.param('fullyUpdated(seg/2)^"5"', "must be a number", id="mark with a string time"),
+])
+def test_bad_completeness_marks_are_rejected(text, reason):
+    with slr_sql.open(clock=slr_sql.ManualClock(0.0)) as kb:
+        with pytest.raises(EventRejected, match=reason):
+            kb.add(text)
+        assert kb.complete_until("seg/2") < 3.0
+        errors = kb.add_many(["seg(a, 1)^1", text, "seg(b, 2)^2"])
+        assert [e.index for e in errors] == [1]
+        assert kb.complete_until("seg/2") < 3.0
+        assert len(stored(kb, "seg", 2)) == 2
+
+
+# ---------------------------------------------------------------- add_many's .index
+
+def test_rejection_index_counts_the_lines_rejected_before_storing():
+    with slr_sql.open(clock=slr_sql.ManualClock(0.0)) as kb:
+        events = ["p(1)^1", "p(1^1", "p(2)^[3,2]", ("p", None, 1.0, 1.0), "p(4)^4",
+                  "fullyUpdated(p/1)^[9,8]", ("p", [5], 5.0, 5.0), "p(X)^6", "p(7)^7"]
+        errors = kb.add_many(events)
+        assert [e.index for e in errors] == [1, 2, 3, 5, 7]
+        for error in errors:
+            assert error.event is events[error.index]
+        assert kb.query("findall(X, p(X)^_, L)") == [{"L": [1, 4, 5, 7]}]
+
+
+def test_atomic_add_many_with_a_bad_line_stores_nothing(kb):
+    with pytest.raises(SLRError):
+        kb.add_many(["p(1)^1", ("p", "abc", 2.0, 2.0)], atomic=True)
+    with pytest.raises(SLRError):
+        kb.add_many(["p(1)^1", "p(1^1"], atomic=True)
+    assert kb.query("p(X)^_") == []
+
+
+def test_malformed_batch_entries_are_rejected_with_their_index(kb):
+    errors = kb.add_many([("p", [1], 1.0), None, 17, ("p", [1], 1.0, 1.0)])
+    assert [e.index for e in errors] == [0, 1, 2]
+    assert all(isinstance(e, EventRejected) for e in errors)
+    assert stored(kb, "p", 1) == [(1,)]
+
+
+# ---------------------------------------------------------------- query limit
+
+@pytest.mark.parametrize("goal", [
+    "p(X)^_",                     # compiled SQL
+    "p(X)^_, X > 0",              # compiled SQL with a condition
+    "prev(p(X)^Z, 10)",           # the single-prev fast path
+    "between(1, 5, X)",           # the interpreter
+    "p(X)^_, !",                  # the interpreter (cut)
+])
+def test_limit_zero_returns_no_answer(kb, goal):
+    kb.add_many(["p(1)^1", "p(2)^2"])
+    assert kb.query(goal, limit=0) == []
+    assert len(kb.query(goal, limit=1)) == 1
+
+
+@pytest.mark.parametrize("limit", [-1, 1.5, "2", True])
+def test_a_limit_that_is_not_a_count_is_an_error(kb, limit):
+    with pytest.raises(SLRError, match="limit"):
+        kb.query("p(X)^_", limit=limit)
+
+
+def test_the_store_rejects_a_str_argument_list_directly():
+    store = EventStore(None)
+    with pytest.raises(EventRejected, match="list or tuple"):
+        store.add_event("p", "abc", 1.0, 1.0)
+    assert store.table_for("p", 3) is None
