@@ -536,3 +536,29 @@ def test_subscriptions_deliver_complex_events_and_end_on_their_completeness(kb, 
     assert got == [{"X": 1, "S": 1.0, "E": 2.0}]
     ended = kb.subscribe("n(X)^[S, E]", since=0, until=5)   # n/1 is complete up to 5 now
     assert list(ended) == [{"X": 1, "S": 1.0, "E": 2.0}]
+
+
+def test_rules_in_named_programs_replace_and_unload(kb):
+    kb.load("c(X) <- a(X) seq b(X).", name="rules")
+    kb.load("c(X) <- a(X) seq b(X).", name="rules", replace=True)   # the same script again
+    assert [r["head"] for r in kb.event_rules()] == ["c/1"]
+    kb.add_many(["a(1)^1", "b(1)^2"])
+    kb.load("d(X) <- a(X) and b(X).", name="rules", replace=True)
+    assert [r["head"] for r in kb.event_rules()] == ["d/1"]
+    kb.add("b(1)^3")
+    assert intervals(kb) == [(1, 1.0, 2.0)] and intervals(kb, "d(X)") == [(1, 1.0, 3.0)]
+    kb.unload("rules")
+    assert kb.event_rules() == []
+    kb.add("b(1)^4")
+    assert intervals(kb, "d(X)") == [(1, 1.0, 3.0)]
+
+
+def test_another_process_rule_is_seen_at_the_next_call(tmp_path):
+    path = tmp_path / "kb.db"
+    with slr_sql.open(path, clock=ManualClock(0)) as writer, \
+            slr_sql.open(path, clock=ManualClock(0)) as loader:
+        writer.add("a(1)^1")
+        loader.load("c(X) <- a(X) seq b(X).")
+        writer.add("b(1)^2")       # the writer sees the rule loaded by the other kb
+        assert intervals(writer) == [(1, 1.0, 2.0)]
+        assert intervals(loader) == [(1, 1.0, 2.0)]
