@@ -7,6 +7,10 @@ Robot X looks at table1 while its components publish, with delays, into SLR:
 * *segmentation*: ``seg(O, [X,Y,Z])^T``, object segments relative to the camera;
 * *objRec*: ``obj(O, Type, Color)^T``, the type and color of each new segment.
 
+A last scene shows event rules (the event-processing library paper): the paper's relFace rule
+detecting a reliable face as (late) face recognitions arrive, and a ``cnot`` rule that waits
+until no late event can contradict it.
+
 The *control* component then asks the paper's questions: which cups are on table1 and where
 they are in the world, the color of an object, whether a location is fresh, outdated or never
 observed, and which objects can be used for tea.  Everything runs through the public API
@@ -27,7 +31,7 @@ from typing import Any, Iterable
 import slr_sql
 
 __all__ = [
-    "ROBOT_PROGRAM", "TABLE_SWEEP", "DemoQuery", "DemoResult", "scenario_events",
+    "ROBOT_PROGRAM", "EVENT_RULES", "TABLE_SWEEP", "DemoQuery", "DemoResult", "scenario_events",
     "open_robot_kb", "demo_queries", "run_demo", "value_text", "answer_text",
 ]
 
@@ -413,6 +417,83 @@ def _synchronized_cups_query(kb: Any, clock: Any, console: Any) -> DemoResult:
     return DemoResult(q, answers, notes=notes)
 
 
+#: The event-rule scene (the event-processing library paper): a reliable face, and a door
+#: the robot left open -- a negation that must wait until no late door_closed can come.
+EVENT_RULES = r"""
+relFace(F) <- (face(F, R1) seq face(F, R2) seq face(F, R3)) within 5
+              where (R1 > 60, R2 > R1, R3 > R2).
+:- max_delay(door_closed/1, 2s).
+:- max_delay(door_open/1, 2s).
+:- max_delay(robot_left/1, 2s).
+doorLeftOpen(D) <- (door_open(D) seq robot_left(_R)) cnot door_closed(D).
+"""
+
+
+def _event_rules_scene(console: Any) -> list[DemoResult]:
+    """Event rules on a store of their own: complex events detected as the events arrive
+    (one of them late), with the events that made each one, and a cnot rule that waits."""
+    clock = slr_sql.ManualClock(0.0)
+    results = []
+    with slr_sql.open(clock=clock) as kb:
+        kb.load(EVENT_RULES, "event_rules.slr")
+        console.rule("[bold]event rules (the event-processing library paper)[/bold]")
+        for line in EVENT_RULES.strip().splitlines():
+            console.print(f"  [dim]{line}[/dim]", markup=True, highlight=False)
+        # the face recognizer's results, one of them late (arrival order != occurrence)
+        faces = [("face(antonio, 65)^8", 8.3), ("face(antonio, 90)^11", 11.3),
+                 ("face(antonio, 70)^9", 11.5), ("face(bob, 61)^1", 1.3),
+                 ("face(bob, 59)^2", 2.3), ("face(bob, 70)^3", 3.3)]
+        notes = []
+        for text, arrival in sorted(faces, key=lambda f: f[1]):
+            clock.set(max(clock.now(), arrival))
+            kb.add(text)
+        notes.append("face(antonio, 70)^9 arrived last (t=11.5), after the face at 11: "
+                     "matching is by occurrence time, so it still completes 8 -> 9 -> 11; "
+                     "bob's 61, 59, 70 do not rise")
+        info = kb.event_rules()[0]
+        _, why = kb.sql(f"SELECT r1, r2, r3, t_start, t_end FROM {info['provenance']}")
+        for r1, r2, r3, start, end in why:
+            notes.append(f"relFace over [{start:g}, {end:g}] is made of the face rows "
+                         f"{r1}, {r2}, {r3} ({info['provenance']})")
+        q = DemoQuery("Which faces were recognized reliably?",
+                      "findall(F-[S, E], relFace(F)^[S, E], L)", None,
+                      "relFace(F) is a complex event: stored in its own table, detected in "
+                      "the transaction of the add that completed it")
+        results.append(DemoResult(q, kb.query(q.goal), plan="event rule, compiled to SQL",
+                                  notes=notes))
+        _print_result(console, results[-1])
+
+        notes = []
+        for text, arrival in [("door_open(d1)^20", 20.1), ("robot_left(r1)^25", 25.1)]:
+            clock.set(arrival)
+            kb.add(text)
+        pending = kb.event_rules()[1]["pending"]
+        notes.append(f"t={clock.now():g}: door d1 open at 20, robot left at 25: "
+                     f"{pending} candidate waiting -- a door_closed(d1) inside [20, 25] "
+                     f"could still arrive until door_closed/1 is complete up to 25 "
+                     f"(max_delay 2 s: after t=27)")
+        clock.set(26.0)
+        kb.add("door_closed(d1)^22")
+        notes.append("t=26: a late door_closed(d1)^22 arrives, inside [20, 25]")
+        clock.set(27.5)
+        notes.append(f"t=27.5: door_closed/1 complete up to 25: decided, no complex event "
+                     f"(the door was closed); pending: {kb.event_rules()[1]['pending']}")
+        for text, arrival in [("door_open(d2)^30", 30.1), ("robot_left(r1)^33", 33.1)]:
+            clock.set(arrival)
+            kb.add(text)
+        clock.set(35.5)
+        notes.append("t=35.5: door d2 open at 30, robot left at 33, no door_closed(d2) by "
+                     "t=35 (complete up to 33): doorLeftOpen(d2) detected, arrival 35.5")
+        q = DemoQuery("Which doors did the robot leave open?",
+                      "findall(D-[S, E], doorLeftOpen(D)^[S, E], L)", None,
+                      "cnot: no door_closed(D) strictly inside the interval, decided only once "
+                      "door_closed/1 is complete up to its end, so a late event is never missed")
+        results.append(DemoResult(q, kb.query(q.goal), plan="event rule with cnot: waits for "
+                                  "completeness in slr_cep_pending", notes=notes))
+        _print_result(console, results[-1])
+    return results
+
+
 def run_demo(console: Any = None, db_path: str | None = None) -> list[DemoResult]:
     """Play the scenario and print every question with its answers; returns the results."""
     if console is None:
@@ -442,4 +523,5 @@ def run_demo(console: Any = None, db_path: str | None = None) -> list[DemoResult
             _print_result(console, result)
     finally:
         kb.close()
+    results += _event_rules_scene(console)
     return results

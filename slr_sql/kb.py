@@ -50,10 +50,13 @@ class Declarations:
     max_delay: dict = field(default_factory=dict)         # (name, arity) -> seconds | "learn"
     in_order: set = field(default_factory=set)            # {(name, arity)}
     buffers: list = field(default_factory=list)           # [BufferDecl]
+    event_rules: list = field(default_factory=list)       # [cep.EventRule], dependency order
+    consumption: dict = field(default_factory=dict)       # (name, arity) | None -> policy
 
     def copy(self) -> "Declarations":
         return Declarations(set(self.event_types), dict(self.max_delay), set(self.in_order),
-                            list(self.buffers))
+                            list(self.buffers), list(self.event_rules),
+                            dict(self.consumption))
 
 
 def _indicator(t: Any) -> tuple[str, int]:
@@ -285,6 +288,8 @@ class KnowledgeBase:
         self._sync = _sync.attach(self)
         from . import planner as _planner  # SQL compiler (issue 3): slr_sql/planner.py
         _planner.attach(self)
+        from . import cep as _cep  # event rules (issue 11): slr_sql/cep/
+        self._cep = _cep.attach(self)
         from . import subscriptions as _subscriptions  # subscriptions (issue 12)
         self._subscriptions = _subscriptions.attach(self)
 
@@ -304,6 +309,8 @@ class KnowledgeBase:
         on close is ``PASSIVE``: what a reader still needs stays in the WAL)."""
         if getattr(self, "_subscriptions", None) is not None:  # issue 12: positions, threads
             self._subscriptions.close()
+        if getattr(self, "_cep", None) is not None:  # issue 11
+            self._cep.close()
         if getattr(self, "_sync", None) is not None:  # issue 5: fail waiting queries, stop threads
             self._sync.close()
         self.store.close()
@@ -383,15 +390,23 @@ class KnowledgeBase:
 
     # -- program ------------------------------------------------------------------------
     def _add_clauses(self, clauses: list[Clause], program: Program, decls: Declarations) -> None:
+        from . import cep as _cep  # issue 11: event rules Head <- Pattern
         for clause in clauses:
             if clause.head is None:
                 self._directive(clause, program, decls)
                 continue
             head = deref(clause.head)
+            if _cep.is_event_rule(head):
+                decls.event_rules.append(_cep.compile_rule(clause))
+                continue
+            if _cep.is_ignored_fact(head):
+                continue   # ETALIS-only facts such as print_trigger/1 (docs/events.md)
             self._check_head(head, clause)
             if type(head) is Struct and head.name in ("tBuffer", "cBuffer") and len(head.args) == 2:
                 decls.buffers.append(self._buffer_decl(head, clause))
             program.add_clause(clause)
+        if decls.event_rules:  # issue 11: policies, dependency order, no cycles
+            decls.event_rules = _cep.prepare(decls.event_rules, decls.consumption, program)
 
     def _buffer_decl(self, head: Struct, clause: Clause) -> BufferDecl:
         pattern, amount = deref(head.args[0]), deref(head.args[1])
@@ -443,6 +458,10 @@ class KnowledgeBase:
                 pass  # accepted for compatibility with Prolog sources; nothing to do here
             elif name in ("tBuffer", "cBuffer") and len(args) == 2:
                 decls.buffers.append(self._buffer_decl(goal, clause))
+            elif name == "consumption" and len(args) in (1, 2):  # issue 11
+                from .cep import consumption_directive
+                target, policy = consumption_directive(goal)
+                decls.consumption[target] = policy
             else:
                 raise SLRError(f"unknown directive :- {format_term(goal)}")
         except SLRError as exc:
@@ -729,12 +748,23 @@ class KnowledgeBase:
         else:
             mark_errors = []
         # -- end issue 5
-        errors = self.store.add_events(events, atomic=atomic)
+        derived: list = []
+        cep = getattr(self, "_cep", None)
+        if cep is not None and cep.active and events:
+            # issue 11: event rules detect in the transaction that stores the events
+            with self.store.transaction():
+                token = cep.before_add(events)
+                errors = cep.store_events(events, atomic)
+                derived = cep.after_add(token)
+        else:
+            errors = self.store.add_events(events, atomic=atomic)
         if atomic and errors:
             raise errors[0]
         if self.add_listeners:
             rejected = {id(e.event) for e in errors if hasattr(e, "event")}
             stored = [ev for ev in events if id(ev) not in rejected] if rejected else events
+            if derived:   # issue 11: the complex events of this add, with its events
+                stored = list(stored) + derived
             for listener in self.add_listeners:
                 listener(stored)
         if marks:  # issue 5: after the events of the same batch are stored
@@ -855,10 +885,26 @@ class KnowledgeBase:
         'goal: p(X)'
         """
         self._refresh()
+        rules = self._cep.explain(goal)  # issue 11: (is a rule, lines) or None
+        if rules is not None and rules[0]:
+            return "\n".join(rules[1])
         plan = self._plan(goal, ())
         from .planner import explain as _explain  # issue 3: SQL or interpreter, and why
-        lines = [f"goal: {goal}"] + _explain(self, plan)
+        lines = [f"goal: {goal}"] + _explain(self, plan) + (rules[1] if rules else [])
         return "\n".join(lines)
+
+    def event_rules(self) -> list[dict[str, Any]]:
+        """The event rules (``Head <- Pattern``) in force, in the order they run: each a
+        dict with ``head`` (name/arity), ``rule`` (its text), ``pattern``, ``policy``,
+        ``source`` (file:line), ``line``, ``table`` (where its complex events are stored),
+        ``provenance`` (the table recording each match's events), and counters:
+        ``detections`` (this session), ``pending`` (decisions waiting for completeness),
+        ``errors`` (candidates a where goal rejected by an error) with ``last_error``.
+
+        >>> kb = open(); kb.load("c(X) <- a(X) seq b(X)."); [r["head"] for r in kb.event_rules()]
+        ['c/1']
+        """
+        return self._cep.infos()
 
     # -- synchronized queries (issue 5; the work is in slr_sql/sync.py) -----------------
     def submit(self, goal: str, at: float | None = None, id: str | None = None,

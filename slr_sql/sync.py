@@ -256,6 +256,10 @@ class Completeness:
         self.max_end: dict[tuple[str, int], float] = {}
         self.arrivals: dict[tuple[str, int], int] = {}
         self._persisted: dict[tuple[str, int], float] = {}   # learned delays as stored
+        # event rules (slr_sql.cep): the completeness of complex event types, which follows
+        # from the types their rules read; an object with ``types``, ``complete``,
+        # ``horizon``, ``deadline``, ``why`` and ``describe`` (None: no event rules)
+        self.derived: Any = None
         self.load()
 
     def flush(self, learned: dict | None = None) -> None:
@@ -330,6 +334,8 @@ class Completeness:
 
     def complete(self, key: tuple[str, int], z: float, now: float | None = None) -> bool:
         """Is the history of ``key`` complete up to ``z``?"""
+        if self.derived is not None and key in self.derived.types:
+            return self.derived.complete(key, z, now)
         if z <= self.mark(key):
             return True
         if now is None:
@@ -342,6 +348,8 @@ class Completeness:
         """The time up to which ``key`` is complete now: max(now − max_delay, latest mark,
         and for in_order types the latest end received) — strictly below it for the first
         and last, up to and including it for a mark."""
+        if self.derived is not None and key in self.derived.types:
+            return self.derived.horizon(key, now)
         if now is None:
             now = self.clock.now()
         h = max(now - self.delay(key), self.mark(key))
@@ -351,9 +359,13 @@ class Completeness:
 
     def deadline(self, key: tuple[str, int], z: float) -> float:
         """The clock time the clock must pass for ``key`` to be complete up to ``z``."""
+        if self.derived is not None and key in self.derived.types:
+            return self.derived.deadline(key, z)
         return z + self.delay(key)
 
     def describe(self, key: tuple[str, int], now: float | None = None) -> str:
+        if self.derived is not None and key in self.derived.types:
+            return self.derived.describe(key, now)
         if now is None:
             now = self.clock.now()
         dd = self.declared_delay(key)
@@ -370,6 +382,8 @@ class Completeness:
 
     def why(self, key: tuple[str, int], z: float, now: float) -> str:
         """Why ``key`` is complete up to ``z`` (for explanations)."""
+        if self.derived is not None and key in self.derived.types:
+            return self.derived.why(key, z, now)
         if z <= self.mark(key):
             src = self.mark_src.get(key) if self.marks.get(key, -_INF) >= z else None
             return src or self.mark_src.get(key[0]) or f"a mark >= {_fmt(z)}"
@@ -472,6 +486,7 @@ class Synchronizer:
         self._worker_threads: set = set()
         self._closed = False
         self._inflight = 0
+        self._fired = False   # a timer fired since the timer loop last told the listeners
         # other processes writing the same file (e.g. `slr add DB "fullyUpdated(seg/2)^14"`
         # while `slr query DB G --wait` waits): SQLite cannot notify us, so while queries are
         # pending the timer thread checks PRAGMA data_version every `external_poll` seconds.
@@ -479,6 +494,9 @@ class Synchronizer:
         self._data_version: int | None = None
         # clocks that tell when they move serve time-driven wake-ups from their listener
         self._clock_driven = isinstance(self.clock, (ManualClock, StreamClock))
+        # called (no lock held) whenever completeness may have advanced: a mark, an add, the
+        # clock moving, a timer of wake_at firing (event rules decide what they waited for)
+        self.progress_listeners: list[Callable[[], None]] = []
         if hasattr(self.clock, "subscribe"):
             self.clock.subscribe(self._on_clock)
 
@@ -677,6 +695,7 @@ class Synchronizer:
                 for k in keys:
                     released += self._release(k)
         self._schedule_all(released)
+        self._progress()
 
     def on_add(self, stored: list) -> None:
         """Add listener: learn delays, move in-order horizons, release waiting queries."""
@@ -692,6 +711,30 @@ class Synchronizer:
             for key in moved:
                 released += self._release(key, arrival=True)
         self._schedule_all(released)
+        self._progress()
+
+    # -- event rules (slr_sql.cep) ---------------------------------------------------------------
+    def _progress(self) -> None:
+        if self._closed:
+            return
+        for fn in list(self.progress_listeners):
+            fn()
+
+    def recheck(self, keys: Iterable[tuple[str, int]]) -> None:
+        """Release the queries parked on ``keys`` whose condition holds now (complex event
+        types: their completeness moves when the event rules decide, not by a timer)."""
+        released: list = []
+        with self.lock:
+            for key in keys:
+                if key in self._heaps:
+                    released += self._release(key)
+        self._schedule_all(released)
+
+    def wake_at(self, key: tuple[str, int], z: float) -> None:
+        """Tell the progress listeners when the clock completes ``key`` up to ``z``."""
+        with self.cond:
+            if not self._closed:
+                self._push_timer(key, self.tracker.deadline(key, z))
 
     # -- internals ----------------------------------------------------------------------------
     def _known_types(self) -> set:
@@ -985,6 +1028,7 @@ class Synchronizer:
         keys = set()
         while timers and timers[0][0] < now:
             keys.add(heapq.heappop(timers)[2])
+            self._fired = True
         out = []
         for key in keys:
             out += self._release(key)
@@ -996,7 +1040,9 @@ class Synchronizer:
             return
         with self.lock:
             released = self._fire_timers(float(t))
+            self._fired = False
         self._schedule_all(released)
+        self._progress()
 
     def _expire(self, mono: float) -> list:
         out = []
@@ -1026,9 +1072,12 @@ class Synchronizer:
                     wait = w2 if wait is None else min(wait, w2)
                 if self.external_poll is not None and self._queries:
                     wait = self.external_poll if wait is None else min(wait, self.external_poll)
-                if released or expired:
+                if released or expired or self._fired:
+                    fired, self._fired = self._fired, False
                     self.cond.release()
                     try:
+                        if fired:
+                            self._progress()
                         self._schedule_all(released)
                         for q in expired:
                             self._set_exception(q, SLRTimeout(

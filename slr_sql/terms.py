@@ -323,15 +323,25 @@ class Clause:
 # The operator table lives here (not in parser.py) so that printing never imports lark.
 # ---------------------------------------------------------------------------------------
 
-# (priority, type, names): SWI-Prolog 9 defaults plus SLR's `event` declaration operator.
+# (priority, type, names): SWI-Prolog 9 defaults plus SLR's `event` declaration operator and
+# the event-rule operators of ETALIS (`<-`, `where`, `within`, `or`, `par`, `and`, `cnot`, `seq`, ...).
 OPERATORS: tuple[tuple[int, str, tuple[str, ...]], ...] = (
     (1200, "xfx", (":-", "-->")),
     (1200, "fx", (":-", "?-")),
+    # event rules (the event-processing library, as ETALIS declares them): Head <- Pattern
+    (1200, "xfy", ("<-",)),
     (1150, "fx", ("dynamic", "discontiguous", "initialization", "module_transparent",
                   "multifile", "public", "table", "event")),
     (1105, "xfy", ("|",)),
     (1100, "xfy", (";",)),
+    (1060, "yfx", ("where",)),        # event-rule operators (ETALIS priorities)
+    (1055, "xfy", ("within",)),
+    (1053, "yfx", ("or",)),
     (1050, "xfy", ("->", "*->")),
+    (1045, "yfx", ("par",)),
+    (1040, "yfx", ("and",)),
+    (1031, "yfx", ("cnot",)),
+    (1025, "yfx", ("seq", "equals", "meets", "during", "starts", "finishes")),
     (1000, "xfy", (",",)),
     (990, "xfx", (":=",)),
     (900, "fy", ("\\+",)),

@@ -1,0 +1,121 @@
+"""Event rules: complex event processing over the event store (docs/events.md).
+
+``Head <- Pattern`` derives a complex event -- stored in Head's own event table like any
+added event -- whenever stored events match Pattern, a tree of the operators of the
+event-processing library (ETALIS): ``seq and par or equals meets during starts finishes``,
+``cnot``, ``within`` and ``where``. Each rule is compiled to SQL over the event tables
+(:mod:`.sqlgen`) and run in the transaction that stores its completing event
+(:mod:`.runtime`); a rule that must read a history (``cnot``, a ``where`` goal reading the
+store, the ``recent`` and ``chronological`` policies) decides once that history is complete,
+with the completeness of synchronized queries (:mod:`slr_sql.sync`).
+
+* :mod:`.rules` -- reading and checking rules (alternatives, positions, intervals);
+* :mod:`.sqlgen` -- the SQL of an alternative (delta statements, policies, negation);
+* :mod:`.where` -- ``where`` goals SQL cannot take, run per candidate match;
+* :mod:`.runtime` -- rounds, pending decisions, the completeness of complex event types.
+
+>>> import slr_sql
+>>> kb = slr_sql.open()
+>>> kb.load("c(X) <- a(X) seq b(X).")
+>>> kb.add_many(["a(1)^1", "b(1)^2", "b(2)^3"])
+[]
+>>> kb.query("c(X)^[S, E]")
+[{'X': 1, 'S': 1.0, 'E': 2.0}]
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from ..terms import Struct
+from .rules import (IGNORED_FACTS, POLICIES, EventRule, compile_rule, consumption_directive,
+                    is_event_rule, is_ignored_fact, order_rules)
+from .runtime import EventRules
+
+__all__ = ["attach", "prepare", "compile_rule", "consumption_directive", "is_event_rule",
+           "is_ignored_fact", "EventRule", "EventRules", "POLICIES", "IGNORED_FACTS"]
+
+
+def prepare(rules: list[EventRule], consumption: dict, program: Any) -> list[EventRule]:
+    """The rules of a program with their policies resolved (``consumption`` maps a head
+    name/arity, or None for the default, to a policy), in dependency order; raises an
+    SLRError for cyclic definitions. The rules given are not changed (a failed load must
+    leave the loaded program as it was).
+
+    >>> from slr_sql.parser import parse_program
+    >>> from slr_sql.program import Program
+    >>> rs = [compile_rule(c) for c in parse_program("c(X) <- a(X) seq b(X).")]
+    >>> [r.policy for r in prepare(rs, {None: "recent"}, Program())]
+    ['recent']
+    """
+    from ..analysis import goal_set
+
+    copies = [dataclasses.replace(rule) for rule in rules]
+    reads: dict = {}
+    for rule in copies:
+        types: set = set()
+        for alt in rule.alternatives:
+            if not alt.goals:
+                continue
+            goal = alt.goals[-1]
+            for g in reversed(alt.goals[:-1]):
+                goal = Struct(",", (g, goal))
+            gs = goal_set(program, goal)
+            if not gs.unknown:
+                types |= set(gs)
+        reads[id(rule)] = types
+    policies = {k: v for k, v in consumption.items() if k is not None}
+    ordered = order_rules(copies, policies, consumption.get(None), reads)
+    # the same rule (same text up to variable names, same policy) loaded twice is one rule
+    seen: set = set()
+    unique = []
+    for rule in ordered:
+        if rule.key not in seen:
+            seen.add(rule.key)
+            unique.append(rule)
+    return unique
+
+
+def attach(kb: Any) -> EventRules:
+    """Install event rules on a knowledge base (called by KnowledgeBase.__init__, after the
+    synchronizer and the planner): the load listener, the hooks on new tables and on
+    completeness, the SQL function ``slr_cep_cmp`` of pushed comparisons, and the rules of
+    the program restored from the file.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(); kb.load("c <- a seq b."); type(kb._cep).__name__
+    'EventRules'
+    """
+    eng = EventRules(kb)
+    kb.load_listeners.append(eng.on_load)
+    kb.store.table_created_hooks.append(eng.on_table)
+    kb.store.create_function("slr_cep_cmp", 3, _compare)
+    if eng.sync is not None:
+        eng.sync.progress_listeners.append(eng.on_progress)
+    eng._sync_rules()
+    eng.on_progress()   # a reopened file: decisions that became possible while it was closed
+    return eng
+
+
+def _compare(op: str, a: Any, b: Any) -> int:
+    """``slr_cep_cmp(op, a, b)``: the comparison ``A op B`` of two stored values as Prolog
+    evaluates it (big integers, arithmetic atoms such as ``pi``, expressions); an error is
+    false."""
+    from ..arith import evaluate
+    from ..encoding import decode
+
+    try:
+        x, y = evaluate(decode(a)), evaluate(decode(b))
+        if op == "<":
+            return int(x < y)
+        if op == ">":
+            return int(x > y)
+        if op == "=<":
+            return int(x <= y)
+        if op == ">=":
+            return int(x >= y)
+        if op == "=:=":
+            return int(x == y)
+        return int(x != y)
+    except Exception:  # a type error in Prolog: the candidate does not match
+        return 0

@@ -1,0 +1,547 @@
+"""Event rules as data: ``Head <- Pattern`` read into alternatives of event atoms, temporal
+relations, windows, negations and goals, with the static checks of a load (docs/events.md).
+
+An event rule's pattern is a tree of the operators of the event-processing library (ETALIS):
+``seq and par or equals meets during starts finishes`` between sub-patterns, ``cnot`` (no
+event of a kind inside the sub-pattern's interval), ``within D`` (the interval lasts at most
+D seconds) and ``where G`` (the goal G holds). ``or`` is expanded first: a rule is the union
+of its :class:`Alternative` s, each free of ``or``. An alternative lists its positive event
+atoms (:class:`Leaf`, numbered left to right: the *positions*), the relation each binary
+operator imposes between the intervals of its operands, the windows, the negations and the
+goals, and the interval of the complex event -- all as small expression trees over the
+positions' start and end times, which :mod:`slr_sql.cep.sqlgen` turns into SQL.
+
+>>> from slr_sql.parser import parse_program
+>>> rule = compile_rule(parse_program("c(X) <- (a(X) or b(X)) seq d(X).")[0])
+>>> [[leaf.name for leaf in alt.leaves] for alt in rule.alternatives]
+[['a', 'd'], ['b', 'd']]
+>>> rule.alternatives[0].relations
+[('seq', (('s', 0), ('e', 0)), (('s', 1), ('e', 1)))]
+"""
+from __future__ import annotations
+
+import hashlib
+import re
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..clocks import parse_duration
+from ..errors import SLRError, SLRSyntaxError
+from ..terms import Atom, Clause, String, Struct, Var, deref, format_term, is_ground, term_vars
+
+__all__ = ["POLICIES", "BINARY", "IGNORED_FACTS", "Leaf", "Alternative", "EventRule",
+           "compile_rule", "is_event_rule", "is_ignored_fact", "consumption_directive",
+           "order_rules", "rule_error"]
+
+POLICIES = ("unrestricted", "recent", "chronological")
+
+# binary operators between two sub-patterns (``or`` is expanded before these are read)
+BINARY = ("seq", "and", "par", "equals", "meets", "during", "starts", "finishes")
+_PATTERN_OPS = frozenset(BINARY + ("or", "cnot", "within", "where"))
+
+# ETALIS program facts that only steer ETALIS itself (what it prints, which events it takes
+# from outside): accepted so that ETALIS rule files load unchanged, and ignored.
+IGNORED_FACTS = frozenset({("print_trigger", 1), ("external_trigger", 1)})
+
+# Names that read as goals, not events: a pattern operand written like this is a mistake.
+_GOAL_NAMES = frozenset({",", ";", "->", "*->", "\\+", "|", ":-", "<-", "=", "\\=", "==",
+                         "\\==", "<", ">", "=<", ">=", "=:=", "=\\=", "is", "!", "true",
+                         "fail", "false", "call", "findall", "prev", "next"})
+
+
+# ------------------------------------------------------------------------ the data
+
+@dataclass
+class Leaf:
+    """One event atom of a pattern: ``name(args)``, optionally stamped ``^T`` (a point
+    event: start = end = T) or ``^[S, E]``. ``args`` are variables or ground terms
+    (a compound argument with variables is moved into the goals as ``V = f(..)``);
+    ``start``/``end`` are a variable, a number or None (no stamp)."""
+
+    name: str
+    arity: int
+    args: tuple
+    start: Any = None
+    end: Any = None
+    point: bool = False
+    text: str = ""
+
+    @property
+    def key(self) -> tuple[str, int]:
+        return (self.name, self.arity)
+
+
+# An interval endpoint expression: ("s", i) / ("e", i) the start / end of position i,
+# ("min", a, b) / ("max", a, b).
+Expr = tuple
+Interval = tuple  # (start Expr, end Expr)
+
+
+@dataclass
+class Alternative:
+    """One ``or``-free reading of a rule's pattern."""
+
+    leaves: list[Leaf] = field(default_factory=list)
+    relations: list[tuple[str, Interval, Interval]] = field(default_factory=list)
+    windows: list[tuple[Interval, float, tuple]] = field(default_factory=list)  # + positions
+    negations: list[tuple[Interval, Leaf]] = field(default_factory=list)
+    goals: list[Any] = field(default_factory=list)
+    interval: Interval = (("s", 0), ("e", 0))
+    terminators: frozenset = frozenset()   # positions that can end a match (docs/events.md)
+
+    def leaf_vars(self) -> set[int]:
+        """ids of the variables a positive event atom binds (arguments and stamps)."""
+        out: set[int] = set()
+        for leaf in self.leaves:
+            for t in leaf.args + (leaf.start, leaf.end):
+                if t is not None:
+                    out.update(id(v) for v in term_vars(t))
+        return out
+
+
+@dataclass
+class EventRule:
+    """A compiled event rule; ``policy`` is filled in by :func:`order_rules` (a directive
+    may come after the rule)."""
+
+    clause: Clause
+    head: Any
+    name: str
+    arity: int
+    pattern: Any
+    alternatives: list[Alternative]
+    text: str
+    key: str = ""
+    policy: str = "unrestricted"
+
+    @property
+    def head_key(self) -> tuple[str, int]:
+        return (self.name, self.arity)
+
+    @property
+    def source(self) -> str:
+        span = self.clause.span
+        return f"{span.filename}:{span.line}" if span is not None else "<rule>"
+
+    @property
+    def line(self) -> int:
+        return self.clause.span.line if self.clause.span is not None else 0
+
+    def input_types(self) -> list[tuple[str, int]]:
+        """Every event type the rule's patterns read (positive atoms, then negated ones)."""
+        out: list[tuple[str, int]] = []
+        for alt in self.alternatives:
+            for leaf in alt.leaves + [neg for _, neg in alt.negations]:
+                if leaf.key not in out:
+                    out.append(leaf.key)
+        return out
+
+
+# ------------------------------------------------------------------------ errors
+
+def rule_error(clause: Clause | None, message: str, near: Any = None,
+               in_head: bool = False) -> SLRSyntaxError:
+    """An SLRSyntaxError at the rule's clause, at the text of ``near`` when it can be found
+    in the clause (in the head with ``in_head``, else in the pattern; the clause's start
+    when it cannot be found).
+
+    >>> from slr_sql.parser import parse_program
+    >>> e = rule_error(parse_program("c(X) <- a(X) seq 5.")[0], "not an event", 5)
+    >>> (e.line, e.column)
+    (1, 18)
+    """
+    if clause is None or clause.span is None:
+        return SLRSyntaxError(message)
+    span = clause.span
+    text = clause.text or ""
+    arrow = text.find("<-")
+    offset = 0
+    if near is not None:
+        printed = near if isinstance(near, str) else format_term(near)
+        # the printed term with any layout between its characters: `X>1` finds `X > 1`
+        regex = r"\s*".join(re.escape(c) for c in printed if not c.isspace())
+        if in_head or arrow < 0:
+            found = re.compile(regex).search(text, 0, arrow if arrow >= 0 else len(text))
+        else:
+            found = re.compile(regex).search(text, arrow + 2)
+        if found is not None and regex:
+            offset = found.start()
+    before = text[:offset]
+    line = span.line + before.count("\n")
+    if "\n" in before:
+        column = offset - before.rfind("\n")
+    else:
+        column = span.column + offset
+    lines = text.split("\n")
+    source_line = lines[before.count("\n")] if lines else ""
+    if "\n" not in before and span.column > 1:
+        source_line = " " * (span.column - 1) + source_line
+    return SLRSyntaxError(message, line, column, source_line, span.filename)
+
+
+# ------------------------------------------------------------------------ reading
+
+def is_event_rule(head: Any) -> bool:
+    """Is this clause head an event rule ``H <- P``?
+
+    >>> from slr_sql.parser import parse_term
+    >>> is_event_rule(parse_term("c(X) <- a(X) seq b(X)")[0]), is_event_rule(Atom("c"))
+    (True, False)
+    """
+    head = deref(head)
+    return type(head) is Struct and head.name == "<-" and len(head.args) == 2
+
+
+def is_ignored_fact(head: Any) -> bool:
+    """``print_trigger(_)`` and the other ETALIS-only facts (see :data:`IGNORED_FACTS`).
+
+    >>> from slr_sql.parser import parse_term
+    >>> is_ignored_fact(parse_term("print_trigger(a/1)")[0])
+    True
+    """
+    head = deref(head)
+    return type(head) is Struct and (str(head.name), len(head.args)) in IGNORED_FACTS
+
+
+def consumption_directive(goal: Any) -> tuple[tuple[str, int] | None, str] | None:
+    """``consumption(P)`` -> (None, P); ``consumption(H/N, P)`` -> ((H, N), P); None if the
+    directive is not a consumption directive. Raises SLRError on a bad one.
+
+    >>> from slr_sql.parser import parse_term
+    >>> consumption_directive(parse_term("consumption(relFace/1, recent)")[0])
+    (('relFace', 1), 'recent')
+    """
+    goal = deref(goal)
+    if type(goal) is not Struct or goal.name != "consumption" or len(goal.args) not in (1, 2):
+        return None
+    policy = deref(goal.args[-1])
+    if type(policy) is not Atom or str(policy) not in POLICIES:
+        raise SLRError(f"consumption: the policy must be one of {', '.join(POLICIES)}, not "
+                       f"{format_term(policy)}")
+    if len(goal.args) == 1:
+        return None, str(policy)
+    ind = deref(goal.args[0])
+    if type(ind) is Struct and ind.name == "/" and len(ind.args) == 2:
+        name, n = deref(ind.args[0]), deref(ind.args[1])
+        if type(name) is Atom and type(n) is int and n >= 0:
+            return (str(name), n), str(policy)
+    raise SLRError(f"consumption: expected Head/N, not {format_term(ind)}")
+
+
+def _flatten_and(goal: Any) -> list:
+    out = []
+    stack = [goal]
+    while stack:
+        g = deref(stack.pop())
+        if type(g) is Struct and g.name == "," and len(g.args) == 2:
+            stack.append(g.args[1])
+            stack.append(g.args[0])
+        else:
+            out.append(_bar_to_semicolon(g))
+    return out
+
+
+def _bar_to_semicolon(goal: Any) -> Any:
+    """``(a | b)`` in a goal is ``(a ; b)``, as in a clause body."""
+    goal = deref(goal)
+    if type(goal) is not Struct or goal.name not in (",", ";", "|", "->", "*->", "\\+"):
+        return goal
+    args = tuple(_bar_to_semicolon(a) for a in goal.args)
+    name = ";" if goal.name == "|" and len(args) == 2 else goal.name
+    return Struct(name, args)
+
+
+def _alternatives(pattern: Any, clause: Clause) -> list[Any]:
+    """The ``or``-free readings of a pattern (``a or b`` -> [a, b]; operators distribute)."""
+    p = deref(pattern)
+    if type(p) is Struct and len(p.args) == 2 and p.name in _PATTERN_OPS:
+        if p.name == "or":
+            return _alternatives(p.args[0], clause) + _alternatives(p.args[1], clause)
+        if p.name in ("within", "where"):
+            return [Struct(p.name, (left, p.args[1]))
+                    for left in _alternatives(p.args[0], clause)]
+        if p.name == "cnot":
+            return [Struct("cnot", (left, p.args[1]))
+                    for left in _alternatives(p.args[0], clause)]
+        return [Struct(p.name, (left, right))
+                for left in _alternatives(p.args[0], clause)
+                for right in _alternatives(p.args[1], clause)]
+    return [p]
+
+
+class _Reader:
+    """Builds one :class:`Alternative` from an ``or``-free pattern tree."""
+
+    def __init__(self, clause: Clause):
+        self.clause = clause
+        self.alt = Alternative()
+        self.unify_goals: list = []   # V = f(..) for compound arguments with variables
+
+    def error(self, message: str, near: Any = None) -> SLRSyntaxError:
+        return rule_error(self.clause, message, near)
+
+    def read(self, pattern: Any) -> Alternative:
+        interval, terms = self.node(pattern)
+        self.alt.interval = interval
+        self.alt.terminators = frozenset(terms)
+        self.alt.goals = self.unify_goals + self.alt.goals
+        return self.alt
+
+    def node(self, p: Any) -> tuple[Interval, set]:
+        p = deref(p)
+        if type(p) is Struct and len(p.args) == 2 and p.name in _PATTERN_OPS:
+            op = str(p.name)
+            if op == "within":
+                first = len(self.alt.leaves)
+                interval, terms = self.node(p.args[0])
+                d = deref(p.args[1])
+                try:
+                    seconds = float(parse_duration(d))
+                except SLRError:
+                    raise self.error(f"within: the window must be a non-negative number of "
+                                     f"seconds (or a duration such as 5s), not "
+                                     f"{format_term(d)}", d) from None
+                self.alt.windows.append((interval, seconds,
+                                         tuple(range(first, len(self.alt.leaves)))))
+                return interval, terms
+            if op == "where":
+                interval, terms = self.node(p.args[0])
+                goal = deref(p.args[1])
+                if type(goal) not in (Atom, Struct):
+                    raise self.error(f"where: the condition must be a goal, not "
+                                     f"{format_term(goal)}", goal)
+                self.alt.goals.extend(_flatten_and(goal))
+                return interval, terms
+            if op == "cnot":
+                interval, terms = self.node(p.args[0])
+                for negated in self.negated(p.args[1]):
+                    self.alt.negations.append((interval, negated))
+                return interval, terms
+            if op == "or":  # pragma: no cover - expanded before
+                raise self.error("internal: or not expanded", p)
+            left, lterms = self.node(p.args[0])
+            right, rterms = self.node(p.args[1])
+            (s1, e1), (s2, e2) = left, right
+            self.alt.relations.append((op, left, right))
+            if op == "seq" or op == "meets":
+                return (s1, e2), rterms
+            if op in ("and", "par"):
+                return (("min", s1, s2), ("max", e1, e2)), lterms | rterms
+            if op == "equals":
+                if _uniform(p.args[0]) and _uniform(p.args[1]):
+                    # every event of the part has the same interval: the rightmost ends it
+                    return (s1, e1), {max(lterms | rterms)}
+                return (s1, e1), lterms | rterms
+            if op == "during":
+                return (s2, e2), lterms | rterms
+            if op == "starts":
+                return (s1, ("max", e1, e2)), lterms | rterms
+            if op == "finishes":
+                return (("min", s1, s2), e1), lterms | rterms
+            raise self.error(f"unknown event operator {op}", p)  # pragma: no cover
+        leaf = self.leaf(p, negated=False)
+        pos = len(self.alt.leaves)
+        self.alt.leaves.append(leaf)
+        return (("s", pos), ("e", pos)), {pos}
+
+    def negated(self, p: Any) -> list[Leaf]:
+        p = deref(p)
+        if type(p) is Struct and p.name == "or" and len(p.args) == 2:
+            return self.negated(p.args[0]) + self.negated(p.args[1])
+        if type(p) is Struct and p.name in _PATTERN_OPS and len(p.args) == 2:
+            raise self.error(f"cnot: the negated part must be an event atom (or atoms joined "
+                             f"by or), not the pattern {format_term(p)}; define it as its own "
+                             f"event rule and negate that", p)
+        return [self.leaf(p, negated=True)]
+
+    def leaf(self, p: Any, negated: bool) -> Leaf:
+        p = deref(p)
+        start = end = None
+        point = False
+        atom = p
+        if type(p) is Struct and p.name == "^" and len(p.args) == 2:
+            atom = deref(p.args[0])
+            stamp = deref(p.args[1])
+            if type(stamp) is Struct and stamp.name == "." and len(stamp.args) == 2 \
+                    and type(deref(stamp.args[1])) is Struct \
+                    and deref(stamp.args[1]).name == "." \
+                    and deref(deref(stamp.args[1]).args[1]) == "[]":
+                start = self.time(deref(stamp.args[0]), p)
+                end = self.time(deref(deref(stamp.args[1]).args[0]), p)
+            else:
+                start = end = self.time(stamp, p)
+                point = True
+        what = "the negated part of cnot" if negated else "an operand of an event operator"
+        if type(atom) is Var:
+            raise self.error(f"{what} must be an event atom, not the variable {atom.name}",
+                             atom)
+        if type(atom) not in (Atom, Struct) or type(atom) is String:
+            raise self.error(f"{what} must be an event atom such as p(X) or p(X)^T, not "
+                             f"{format_term(atom)}", atom)
+        name = str(atom.name) if type(atom) is Struct else str(atom)
+        args = tuple(atom.args) if type(atom) is Struct else ()
+        if name in (".", "[]", "{}"):
+            raise self.error(f"{what} must be an event atom such as p(X) or p(X)^T, not "
+                             f"{format_term(atom)}", atom)
+        if name in _GOAL_NAMES or name in _PATTERN_OPS or name == "^":
+            raise self.error(f"{what} must be an event atom, not the goal "
+                             f"{format_term(atom)} (conditions go after where)", atom)
+        if name == "fullyUpdated":
+            raise self.error("fullyUpdated(..) is a completeness mark, not an event a "
+                             "pattern can match", atom)
+        out = []
+        for a in args:
+            a = deref(a)
+            if type(a) is Struct and not is_ground(a):
+                if negated:
+                    raise self.error("cnot: the negated event's arguments must be variables "
+                                     "or ground terms", a)
+                v = Var(f"_Arg{len(self.unify_goals)}")
+                self.unify_goals.append(Struct("=", (v, a)))
+                out.append(v)
+            else:
+                out.append(a)
+        return Leaf(name, len(args), tuple(out), start, end, point, format_term(p))
+
+    def time(self, t: Any, near: Any) -> Any:
+        t = deref(t)
+        if type(t) is Var:
+            return t
+        if type(t) in (int, float) and t == t and abs(t) != float("inf"):
+            return float(t)
+        raise self.error(f"an event time must be a variable or a number, not "
+                         f"{format_term(t)}", near)
+
+
+def _uniform(p: Any) -> bool:
+    """Do all event atoms of this (or-free) part have the same interval? (an atom, or
+    ``equals`` of such parts, possibly under within/where/cnot)."""
+    p = deref(p)
+    if type(p) is Struct and len(p.args) == 2 and p.name in _PATTERN_OPS:
+        if p.name == "equals":
+            return _uniform(p.args[0]) and _uniform(p.args[1])
+        if p.name in ("within", "where", "cnot"):
+            return _uniform(p.args[0])
+        return False
+    return True
+
+
+def _canonical(term: Any) -> str:
+    """The rule's text with its variables renamed in order of appearance (the rule's key)."""
+    mapping: dict[int, Var] = {}
+
+    def walk(t: Any) -> Any:
+        t = deref(t)
+        if type(t) is Var:
+            v = mapping.get(id(t))
+            if v is None:
+                v = mapping[id(t)] = Var(f"V{len(mapping)}")
+            return v
+        if type(t) is Struct:
+            return Struct(t.name, tuple(walk(a) for a in t.args))
+        return t
+
+    return format_term(walk(term))
+
+
+def compile_rule(clause: Clause) -> EventRule:
+    """Read the clause ``Head <- Pattern`` into an :class:`EventRule`; raises
+    :class:`SLRSyntaxError` (with line and column) for a rule that is not well formed.
+
+    >>> from slr_sql.parser import parse_program
+    >>> r = compile_rule(parse_program("r(F) <- face(F, R1) seq face(F, R2) where R2 > R1.")[0])
+    >>> r.name, r.arity, len(r.alternatives[0].leaves), r.alternatives[0].goals
+    ('r', 1, 2, [Struct('>', (Var('R2'), Var('R1')))])
+    """
+    rule = deref(clause.head)
+    head, pattern = deref(rule.args[0]), deref(rule.args[1])
+    if type(head) is Struct and head.name == "^" and len(head.args) == 2:
+        raise rule_error(clause, "the head of an event rule takes its interval from the "
+                                 "pattern: write it without ^", head, in_head=True)
+    if type(head) is Var:
+        raise rule_error(clause, "the head of an event rule cannot be a variable", head)
+    if type(head) not in (Atom, Struct) or type(head) is String:
+        raise rule_error(clause, f"the head of an event rule must be an event atom, not "
+                                 f"{format_term(head)}", head)
+    name = str(head.name) if type(head) is Struct else str(head)
+    arity = len(head.args) if type(head) is Struct else 0
+    if name == "fullyUpdated" or name in _GOAL_NAMES or name in _PATTERN_OPS:
+        raise rule_error(clause, f"{name}/{arity} cannot be the head of an event rule", head,
+                         in_head=True)
+    if type(pattern) is Var:
+        raise rule_error(clause, "the pattern of an event rule cannot be a variable", pattern)
+    alternatives = []
+    for tree in _alternatives(pattern, clause):
+        alt = _Reader(clause).read(tree)
+        bound = alt.leaf_vars()
+        for goal in alt.goals:
+            bound.update(id(v) for v in term_vars(goal))
+        for v in term_vars(head):
+            if id(v) not in bound:
+                where = "" if len(alternatives) == 0 and not _has_or(pattern) else \
+                    f" in the alternative {' '.join(leaf.text for leaf in alt.leaves)}"
+                raise rule_error(clause, f"unsafe head variable {v.name}: it is bound by no "
+                                         f"event of the pattern{where} nor by its where goal",
+                                 v, in_head=True)
+        alternatives.append(alt)
+    text = f"{format_term(head)} <- {format_term(pattern, priority=1199)}"
+    key = hashlib.sha1(_canonical(rule).encode("utf-8")).hexdigest()[:12]
+    return EventRule(clause, head, name, arity, pattern, alternatives, text, key)
+
+
+def _has_or(p: Any) -> bool:
+    p = deref(p)
+    if type(p) is Struct and p.name in _PATTERN_OPS and len(p.args) == 2:
+        return p.name == "or" or _has_or(p.args[0]) or (p.name != "where"
+                                                         and _has_or(p.args[1]))
+    return False
+
+
+def order_rules(rules: list[EventRule], policies: dict, default: str | None,
+                reads: dict | None = None) -> list[EventRule]:
+    """Fill in each rule's policy (``policies[(name, n)]``, else ``default``, else
+    unrestricted) and its key, and return the rules in dependency order: a rule comes after
+    every rule whose complex events it reads (its event atoms, negated ones, and the event
+    types ``reads[id(rule)]`` its where goal reads). Cyclic definitions are an SLRError
+    naming the rules and lines.
+
+    >>> from slr_sql.parser import parse_program
+    >>> rs = [compile_rule(c) for c in parse_program("b(X) <- a(X). c(X) <- b(X) seq a(X).")]
+    >>> [r.name for r in order_rules(list(reversed(rs)), {}, None)]
+    ['b', 'c']
+    """
+    for rule in rules:
+        rule.policy = policies.get(rule.head_key) or default or "unrestricted"
+        rule.key = hashlib.sha1((_canonical(deref(rule.clause.head)) + "|" + rule.policy)
+                                .encode("utf-8")).hexdigest()[:12]
+    by_head: dict[tuple[str, int], list[EventRule]] = {}
+    for rule in rules:
+        by_head.setdefault(rule.head_key, []).append(rule)
+    deps: dict[int, list[EventRule]] = {}
+    for i, rule in enumerate(rules):
+        needed = list(rule.input_types()) + list((reads or {}).get(id(rule), ()))
+        deps[i] = [r for key in needed for r in by_head.get(key, ())]
+    order: list[EventRule] = []
+    state: dict[int, int] = {}
+    index = {id(r): i for i, r in enumerate(rules)}
+
+    def visit(i: int, trail: list[int]) -> None:
+        state[i] = 1
+        for dep in deps[i]:
+            j = index[id(dep)]
+            if state.get(j) == 1:
+                cycle = trail[trail.index(j):] + [j] if j in trail else [i, j]
+                names = " -> ".join(f"{rules[k].name}/{rules[k].arity} ({rules[k].source})"
+                                    for k in reversed(cycle))
+                raise rule_error(rules[i].clause, f"cyclic event rules: {names}; an event "
+                                                  f"rule cannot read, directly or through "
+                                                  f"other rules, the events it derives")
+            if state.get(j) is None:
+                visit(j, trail + [j])
+        state[i] = 2
+        order.append(rules[i])
+
+    for i in range(len(rules)):
+        if state.get(i) is None:
+            visit(i, [i])
+    return order

@@ -1,0 +1,1112 @@
+"""Running event rules on a knowledge base: detection rounds, pending decisions, the
+completeness of complex event types (docs/events.md).
+
+A *round* runs inside a store transaction. It visits the rules in dependency order; for each
+it runs the delta statements of the positions whose event types have new rows in this round,
+decides the pending candidates that can be decided, and copies the new matches from the
+rule's provenance table ``slr_cep_m_<key>`` into the complex event type's table (arrival =
+the clock's time). Complex events derived by one rule are new rows for the rules after it,
+so a hierarchy of rules completes in the same round.
+
+Rounds run
+
+* inside the transaction of every ``kb.add`` / ``add_many`` (:meth:`EventRules.before_add`,
+  :meth:`EventRules.after_add`): detection is part of the transaction that stores the
+  completing event, so after ``add`` returns its complex events are stored, and a crash loses
+  either both or neither;
+* when completeness advances (the clock moves, a ``fullyUpdated`` mark or ``mark_complete``,
+  an in-order arrival): :meth:`EventRules.on_progress` decides the pending candidates whose
+  histories are now complete, in their own transaction.
+
+Complex events reach ``kb.add_listeners`` like added events (subscriptions, buffers and
+synchronized queries see them), and synchronized queries waiting on a complex event type are
+re-checked after every round.
+"""
+from __future__ import annotations
+
+import json
+import math
+import threading
+from typing import Any
+
+from ..encoding import Unencodable, decode, encode
+from ..errors import SLRError
+from ..store import DatabaseError, quote_identifier
+from ..terms import Struct, Var, deref, format_term, term_vars
+from .rules import EventRule
+from .sqlgen import AltSQL
+from .where import MustWait, Residual, describe_error
+
+__all__ = ["EventRules", "RuleRuntime"]
+
+_INF = math.inf
+
+
+def _fmt(t: float) -> str:
+    if t == _INF:
+        return "inf"
+    if t == -_INF:
+        return "-inf"
+    text = f"{t:.6f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
+
+
+def _type(key: tuple[str, int]) -> str:
+    return f"{key[0]}/{key[1]}"
+
+
+def _instantiate(t: Any, bindings: dict) -> Any:
+    """The term with the pattern's variables replaced by their values; None if one is
+    unbound."""
+    t = deref(t)
+    if type(t) is Var:
+        return bindings.get(id(t))
+    if type(t) is Struct:
+        args = []
+        for a in t.args:
+            v = _instantiate(a, bindings)
+            if v is None:
+                return None
+            args.append(v)
+        return Struct(t.name, tuple(args))
+    return t
+
+
+def _sqlite_key(v: Any) -> tuple:
+    """A stored value's place in SQLite's order: numbers, then text, then blobs."""
+    if type(v) is int:
+        return (0, v, "integer")
+    if type(v) is float:
+        return (0, v, "real")
+    if isinstance(v, str):
+        return (1, 0, v)
+    return (2, 0, repr(v))
+
+
+class RuleRuntime:
+    """One installed event rule: its SQL (per alternative), residual goals, counters and
+    the summary of its pending decisions."""
+
+    def __init__(self, eng: "EventRules", rule: EventRule):
+        self.rule = rule
+        self.key = rule.key
+        self.policy = rule.policy
+        self.head_key = rule.head_key
+        self.prov_name = f"slr_cep_m_{rule.key}"
+        self.prov = quote_identifier(self.prov_name)
+        self.used_name = f"slr_cep_u_{rule.key}" if rule.policy == "chronological" else None
+        self.used = quote_identifier(self.used_name) if self.used_name else None
+        self.width = max(len(alt.leaves) for alt in rule.alternatives)
+        self.alts: list[AltSQL] = []
+        self.residuals: list[Residual | None] = []
+        self.reads_store: list[bool] = []
+        self.waits: dict = {}       # (alt, kind, wait key | None) -> earliest time
+        self.pmin = _INF            # earliest end of a pending decision
+        self.pending = 0
+        self.detections = 0
+        self.errors = 0
+        self.last_error: str | None = None
+        self.generation = -1
+        self.eng = eng
+        self._prov_rows: list = []   # matches found by the Python side, not yet written
+        self._done: list = []        # pending rows decided, not yet deleted
+
+    # ----------------------------------------------------------------- building
+    def schema(self) -> list[str]:
+        cols = ["id INTEGER PRIMARY KEY", "alt INTEGER NOT NULL"]
+        cols += [f"r{p + 1} INTEGER" for p in range(self.width)]
+        cols += ["t_start REAL NOT NULL", "t_end REAL NOT NULL"]
+        cols += [f"h{i + 1}" for i in range(self.rule.arity)]
+        cols += ["detected REAL NOT NULL"]
+        out = [f"CREATE TABLE IF NOT EXISTS {self.prov} ({', '.join(cols)})"]
+        if self.used:
+            out.append(f"CREATE TABLE IF NOT EXISTS {self.used} (tbl TEXT NOT NULL, "
+                       f"seq INTEGER NOT NULL, PRIMARY KEY (tbl, seq)) WITHOUT ROWID")
+        return out
+
+    def build(self) -> None:
+        """(Re)build the SQL of every alternative for the tables that exist now."""
+        eng = self.eng
+        head_args = tuple(self.rule.head.args) if type(self.rule.head) is Struct else ()
+        self.alts, self.residuals, self.reads_store = [], [], []
+        for n, alt in enumerate(self.rule.alternatives):
+            tables = [eng.table(leaf.key) for leaf in alt.leaves]
+            neg_tables = [eng.table(leaf.key) for _, leaf in alt.negations]
+            names = [eng.table_name(leaf.key) for leaf in alt.leaves]
+            sql = AltSQL(alt, n, tables, neg_tables, head_args, self.policy, eng.complete_sql,
+                         used_table=self.used, prov_table=self.prov, table_names=names,
+                         fact_table=eng.fact_table)
+            self.alts.append(sql)
+            residual = None
+            reads = False
+            if sql.residual:
+                in_residual = {id(v) for g in sql.residual for v in term_vars(g)}
+                inputs = [v for v in sql.value_vars if id(v) in in_residual]
+                outputs = [v for v in term_vars(self.rule.head) if id(v) not in sql.refs]
+                residual = Residual(sql.residual, inputs, outputs)
+                reads = bool(residual.analyse(eng.kb.program, eng.known_types())
+                             - {self.head_key})
+            self.residuals.append(residual)
+            self.reads_store.append(reads)
+        for key in self.rule.input_types():   # their completeness parameters exist
+            eng.complete_sql(key, "x")
+        for table, column in self.indexes():
+            for first, second in (("t_end", "t_start"), ("t_start", "t_end")):
+                name = f"slr_cep_ix__{table}__{column}_{first[2:]}"
+                eng.store.execute(f"CREATE INDEX IF NOT EXISTS {quote_identifier(name)} ON "
+                                  f"{quote_identifier(table)} ({column}, {first}, {second})")
+        self.generation = eng.generation
+
+    def indexes(self) -> list[tuple[str, str]]:
+        """(table, column) of the indexes the delta statements need beyond the event tables'
+        own: an atom whose first argument is unconstrained but another is shared with a
+        position or constant is searched by that argument and time."""
+        out = []
+        for alt in self.rule.alternatives:
+            names = [self.eng.table_name(leaf.key) for leaf in alt.leaves]
+            counts: dict[int, int] = {}
+            for leaf in alt.leaves:
+                for v in {id(a) for a in leaf.args if type(deref(a)) is Var}:
+                    counts[v] = counts.get(v, 0) + 1
+
+            def constrained(a: Any) -> bool:
+                a = deref(a)
+                return type(a) is not Var or (a.name != "_" and counts.get(id(a), 0) > 1)
+
+            for leaf, table in zip(alt.leaves, names):
+                if table is None or not leaf.args or constrained(leaf.args[0]):
+                    continue
+                for j, a in enumerate(leaf.args[1:], start=2):
+                    if constrained(a):
+                        if (table, f"arg{j}") not in out:
+                            out.append((table, f"arg{j}"))
+                        break
+        return out
+
+    def ensure_built(self) -> None:
+        if self.generation != self.eng.generation:
+            self.build()
+
+    # ----------------------------------------------------------------- running
+    def run(self, new_from: dict, dirty: set, now: float, decide: bool) -> list:
+        """Detection for this rule in the current round; returns the complex events
+        derived, as ``(name, args, start, end)``."""
+        eng = self.eng
+        self.ensure_built()
+        store = eng.store
+        before = store.execute(f"SELECT coalesce(max(id), 0) FROM {self.prov}")[0][0]
+        changed = False
+        fresh_terms = False
+        params = eng.params(now)
+        params["rule"] = self.key
+        for n, alt in enumerate(self.alts):
+            positions = [p for p, leaf in enumerate(alt.alt.leaves) if leaf.key in dirty]
+            if not positions or (self.policy == "unrestricted" and not alt.runnable):
+                continue   # a type without a table has no row to match yet
+            p2 = dict(params)
+            p2.update(alt.params)
+            for p, leaf in enumerate(alt.alt.leaves):
+                if leaf.key in new_from:
+                    p2[f"w{p}"] = new_from[leaf.key]
+            if self.policy == "unrestricted":
+                for pos in positions:
+                    if alt.pure and not self.reads_store[n]:
+                        store.run_compiled(alt.delta_insert(pos, dirty), p2)
+                        if alt.negs:
+                            store.run_compiled(alt.delta_pending(pos, dirty), p2)
+                            changed = True
+                    else:
+                        rows = store.run_compiled(alt.delta_select(pos, dirty), p2)
+                        if rows:
+                            changed |= self._candidates(n, rows, now)
+            else:
+                for pos in positions:
+                    if pos not in alt.alt.terminators or alt.tables[pos] is None:
+                        continue
+                    # a terminator is kept even while a partner type has no table: its
+                    # partners may still arrive (late) before it is decided
+                    if self.policy == "recent" and alt.pure and alt.runnable:
+                        store.run_compiled(alt.recent_insert(pos), p2)
+                        store.run_compiled(alt.term_pending(pos, True), p2)
+                    elif self.policy == "recent" and alt.runnable:
+                        # independent decisions: those that can be made now, at once
+                        pend = []
+                        for seq, end in store.run_compiled(alt.term_ready(pos), p2):
+                            try:
+                                self._decide_term(n, pos, seq, end, now, p2, checked=True)
+                            except MustWait as w:
+                                pend.append(self._pending_row(n, "term", pos, [seq], end,
+                                                              end, w))
+                        if pend:
+                            self._insert_pending(pend)
+                        store.run_compiled(alt.term_pending(pos, True), p2)
+                    else:
+                        store.run_compiled(alt.term_pending(pos, False), p2)
+                        fresh_terms = True
+                    changed = True
+        if decide or fresh_terms:
+            changed |= self.decide(now, everything=fresh_terms and not decide)
+        self._write_prov()
+        self._delete_done()
+        derived = self.flush(before, now)
+        if changed or decide:
+            self.refresh()
+        return derived
+
+    def _candidates(self, n: int, rows: list, now: float) -> bool:
+        """unrestricted with Python work: decide each candidate now or keep it pending."""
+        alt = self.alts[n]
+        k = alt.k
+        pend = []
+        for row in rows:
+            if alt.negs:
+                if not row[-2]:
+                    pend.append(self._pending_row(n, "match", None, row[:k], row[k],
+                                                  row[k + 1], None))
+                    continue
+                if not row[-1]:
+                    continue
+            try:
+                self._derive_from(n, row, now)
+            except MustWait as w:
+                pend.append(self._pending_row(n, "match", None, row[:k], row[k], row[k + 1],
+                                              w))
+        if pend:
+            self._insert_pending(pend)
+        return bool(pend)
+
+    def _pending_row(self, n, kind, pos, rowids, start, end, wait) -> tuple:
+        return (self.key, n, kind, pos, json.dumps(list(rowids)), start, end,
+                wait.key[0] if wait else None, wait.key[1] if wait else None,
+                wait.time if wait else None, wait.reason if wait else None,
+                float(self.eng.clock.now()))
+
+    def _insert_pending(self, rows: list) -> None:
+        self.eng.store.executemany(
+            "INSERT INTO slr_cep_pending (rule, alt, kind, pos, rowids, t_start, t_end, "
+            "wait_type, wait_arity, wait_time, wait_reason, created_at) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", rows)
+
+    def _bindings(self, n: int, row: tuple) -> dict:
+        alt = self.alts[n]
+        base = alt.k + 2
+        return {id(v): decode(row[base + i]) for i, v in enumerate(alt.value_vars)}
+
+    def _derive_from(self, n: int, row: tuple, now: float) -> bool:
+        """Derive the complex events of one match (value columns ``row``); raises MustWait.
+        Returns whether any was derived."""
+        alt = self.alts[n]
+        k = alt.k
+        bindings = self._bindings(n, row)
+        residual = self.residuals[n]
+        solutions: list[dict] = [{}]
+        if residual is not None:
+            values = {name: bindings[id(v)] for v, name in residual.inputs}
+            try:
+                solutions = residual.solve(self.eng.kb, values, row[k + 1], self.eng.complete,
+                                           skip=frozenset({self.head_key}),
+                                           use_sql=self.reads_store[n])
+            except MustWait:
+                raise
+            except (SLRError, RecursionError, ValueError, TypeError, DatabaseError) as exc:
+                self.errors += 1
+                self.last_error = describe_error(exc)
+                return False
+        rows = []
+        seen: set = set()
+        head_args = alt.head_args
+        for sol in solutions:
+            b = dict(bindings)
+            if residual is not None:
+                for v, name in residual.outputs:
+                    b[id(v)] = sol[name]
+            values = []
+            for a in head_args:
+                t = _instantiate(a, b)
+                if t is None:
+                    break
+                try:
+                    values.append(encode(t))
+                except Unencodable:
+                    break
+            else:
+                key = tuple((type(v).__name__, v) for v in values)
+                if key in seen:
+                    continue   # two solutions, one complex event
+                seen.add(key)
+                rows.append((n,) + tuple(row[:k]) + (None,) * (self.width - k)
+                            + (row[k], row[k + 1]) + tuple(values) + (now,))
+        self._prov_rows += rows   # written together before the round's flush
+        return bool(rows)
+
+    def _write_prov(self) -> None:
+        rows, self._prov_rows = self._prov_rows, []
+        if rows:
+            cols = (["alt"] + [f"r{p + 1}" for p in range(self.width)]
+                    + ["t_start", "t_end"] + [f"h{i + 1}" for i in range(self.rule.arity)]
+                    + ["detected"])
+            self.eng.store.executemany(
+                f"INSERT INTO {self.prov} ({', '.join(cols)}) VALUES "
+                f"({', '.join('?' * len(cols))})", rows)
+
+    # ----------------------------------------------------------------- pending
+    def ready_groups(self, now: float) -> list:
+        """The pending groups whose condition holds now."""
+        out = []
+        for group, t in self.waits.items():
+            if self._ready(group, t, now):
+                out.append(group)
+        return out
+
+    def _ready(self, group: tuple, t: float, now: float) -> bool:
+        n, kind, wait = group
+        complete = self.eng.complete
+        if wait is not None:
+            return complete(wait, t, now)
+        if n >= len(self.rule.alternatives):
+            return True
+        alt = self.rule.alternatives[n]
+        if kind == "match":
+            keys = [leaf.key for _, leaf in alt.negations]
+        else:
+            keys = [leaf.key for leaf in alt.leaves] + [leaf.key for _, leaf in alt.negations]
+        return all(complete(key, t, now) for key in keys)
+
+    def decide(self, now: float, everything: bool = False) -> bool:
+        """Decide the pending rows that can be decided now. Chronological rules decide in
+        occurrence order and stop at the first row that must still wait."""
+        eng = self.eng
+        store = eng.store
+        base = eng.params(now)
+        base["rule"] = self.key
+        per_alt = [dict(base, **alt.params) for alt in self.alts]
+        if self.policy == "chronological":
+            rows = self._occurrence_order(store.execute(
+                "SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, wait_arity, "
+                "wait_time FROM slr_cep_pending WHERE rule = ?", (self.key,)))
+            changed = False
+            for row in rows:
+                if not self._decide_row(row, now, per_alt):
+                    break
+                changed = True
+            return changed
+        groups = self.ready_groups(now) if not everything else list(self.waits) + [None]
+        if not groups:
+            return False
+        changed = False
+        seen = set()
+        # pure alternatives: all their ready decisions in one statement each
+        for group in [g for g in groups if g is not None and g[2] is None]:
+            n, kind, _ = group
+            alt = self.alts[n] if n < len(self.alts) else None
+            if alt is None or not alt.pure or not alt.runnable:
+                continue
+            p2 = per_alt[n]
+            if kind == "term" and self.policy == "recent":
+                for pos in sorted(alt.alt.terminators):
+                    store.run_compiled(alt.pending_recent_insert(pos), p2)
+                    store.run_compiled(alt.pending_term_delete(pos), p2)
+            elif kind == "match" and self.policy == "unrestricted":
+                store.run_compiled(alt.pending_match_insert(), p2)
+                store.run_compiled(alt.pending_match_delete(), p2)
+            else:
+                continue
+            groups.remove(group)
+            changed = True
+        if everything:
+            rows = store.execute(
+                "SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, wait_arity, "
+                "wait_time FROM slr_cep_pending WHERE rule = ? ORDER BY t_end, t_start, id",
+                (self.key,))
+            for row in rows:
+                changed |= self._decide_row(row, now, per_alt)
+            return changed
+        for n, kind, wait in groups:
+            if wait is None:
+                rows = store.execute(
+                    "SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, "
+                    "wait_arity, wait_time FROM slr_cep_pending WHERE rule = ? AND alt = ? "
+                    "AND kind = ? AND wait_type IS NULL ORDER BY t_end, t_start, id",
+                    (self.key, n, kind))
+            else:
+                rows = store.execute(
+                    "SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, "
+                    "wait_arity, wait_time FROM slr_cep_pending WHERE rule = ? AND alt = ? "
+                    "AND kind = ? AND wait_type = ? AND wait_arity = ? "
+                    "ORDER BY wait_time, t_end, id", (self.key, n, kind, wait[0], wait[1]))
+            for row in rows:
+                if row[0] in seen:
+                    continue
+                seen.add(row[0])
+                wt = row[9] if row[7] is not None else row[6]
+                if not self._ready((n, kind, wait), wt, now):
+                    break   # the rest of the group needs a later time
+                changed |= self._decide_row(row, now, per_alt)
+        return changed
+
+    def _occurrence_order(self, rows: list) -> list:
+        """Pending terminators in occurrence order: end, start, alternative, position, then
+        the row's arguments as SQLite orders them (numbers before text), then rowid -- never
+        the arrival order (chronological decisions consume rows, so their order matters)."""
+        args: dict = {}
+        groups: dict = {}
+        for row in rows:
+            groups.setdefault((row[1], row[3]), []).append(json.loads(row[4])[0])
+        for (n, pos), seqs in groups.items():
+            if n >= len(self.alts) or self.alts[n].tables[pos] is None:
+                continue
+            arity = self.alts[n].alt.leaves[pos].arity
+            cols = ", ".join(["seq"] + [f"arg{j + 1}" for j in range(arity)])
+            for i in range(0, len(seqs), 500):
+                chunk = seqs[i:i + 500]
+                for r in self.eng.store.execute(
+                        f"SELECT {cols} FROM {self.alts[n].tables[pos]} WHERE seq IN "
+                        f"({', '.join('?' * len(chunk))})", chunk):
+                    args[(n, pos, r[0])] = tuple(_sqlite_key(v) for v in r[1:])
+
+        def key(row: tuple) -> tuple:
+            seq = json.loads(row[4])[0]
+            return (row[6], row[5], row[1], row[3] if row[3] is not None else -1,
+                    args.get((row[1], row[3], seq), ()), seq)
+
+        return sorted(rows, key=key)
+
+    def _decide_row(self, row: tuple, now: float, params: list | None = None) -> bool:
+        """Decide one pending row; False if it must still wait (its wait is updated).
+        ``params``: per alternative, the statement parameters of this round."""
+        rid, n, kind, pos, rowids, start, end = row[:7]
+        store = self.eng.store
+        if n >= len(self.alts):
+            self._done.append(rid)
+            return True
+        if not self.alts[n].runnable:
+            # a partner type still has no event: once the inputs are complete, it never will
+            if kind == "term" and self._ready((n, "term", None), end, now):
+                self._done.append(rid)
+                return True
+            return False
+        if row[7] is not None and not self.eng.complete((row[7], row[8]), row[9], now):
+            return False
+        try:
+            if kind == "match":
+                done = self._decide_match(n, json.loads(rowids), end, now, params)
+            else:
+                done = self._decide_term(n, pos, json.loads(rowids)[0], end, now,
+                                         params[n] if params else None)
+        except MustWait as w:
+            store.execute("UPDATE slr_cep_pending SET wait_type = ?, wait_arity = ?, "
+                          "wait_time = ?, wait_reason = ? WHERE id = ?",
+                          (w.key[0], w.key[1], w.time, w.reason, rid))
+            return False
+        if not done:
+            if row[7] is not None:
+                store.execute("UPDATE slr_cep_pending SET wait_type = NULL, "
+                              "wait_arity = NULL, wait_time = NULL, wait_reason = NULL "
+                              "WHERE id = ?", (rid,))
+            return False
+        self._done.append(rid)
+        return True
+
+    def _delete_done(self) -> None:
+        done, self._done = self._done, []
+        for i in range(0, len(done), 500):
+            chunk = done[i:i + 500]
+            self.eng.store.execute(f"DELETE FROM slr_cep_pending WHERE id IN "
+                                   f"({', '.join('?' * len(chunk))})", chunk)
+
+    def _decide_match(self, n: int, rowids: list, end: float, now: float,
+                      params: list | None = None) -> bool:
+        alt = self.alts[n]
+        if params:
+            params = dict(params[n])
+        else:
+            params = self.eng.params(now)
+            params.update(alt.params)
+        for p, r in enumerate(rowids):
+            params[f"r{p}"] = r
+        rows = self.eng.store.run_compiled(alt.match_select(), params)
+        if not rows:
+            return True  # its events are gone (a buffer pruned them)
+        row = rows[0]
+        if not row[-2]:
+            return False
+        if not row[-1]:
+            return True
+        self._derive_from(n, row, now)
+        return True
+
+    def _decide_term(self, n: int, pos: int, rowid: int, end: float, now: float,
+                     params: dict | None = None, checked: bool = False) -> bool:
+        alt = self.alts[n]
+        if not checked and not self._ready((n, "term", None), end, now):
+            return False
+        if params is None:
+            params = self.eng.params(now)
+            params.update(alt.params)
+        params["t"] = rowid
+        rows = self.eng.store.run_compiled(alt.term_select(pos, alt.pure), params)
+        for row in rows:
+            if self._derive_from(n, row, now):
+                if self.used is not None:
+                    self.eng.store.executemany(
+                        alt.used_insert(),
+                        [(alt.table_names[p], row[p]) for p in range(alt.k)])
+                return True
+        return True
+
+    def refresh(self) -> None:
+        """Re-read the summary of this rule's pending decisions."""
+        rows = self.eng.store.execute(
+            "SELECT alt, kind, wait_type, wait_arity, min(coalesce(wait_time, t_end)), "
+            "min(t_end), count(*) FROM slr_cep_pending WHERE rule = ? "
+            "GROUP BY alt, kind, wait_type, wait_arity", (self.key,))
+        waits = {}
+        pmin = _INF
+        count = 0
+        for n, kind, wtype, warity, t, tend, c in rows:
+            waits[(n, kind, (wtype, warity) if wtype is not None else None)] = t
+            pmin = min(pmin, tend)
+            count += c
+        self.waits = waits
+        self.pmin = pmin
+        self.pending = count
+
+    def flush(self, before: int, now: float) -> list:
+        """Copy the matches found in this round (provenance rows after ``before``) into the
+        complex event type's table; returns the events stored (a buffer's trigger may refuse
+        some), as ``(name, args, start, end)``."""
+        name, arity = self.head_key
+        table = self.eng.table(self.head_key)
+        if table is None:
+            self.eng.store.declare_type(name, arity)
+            table = self.eng.table(self.head_key)
+        values = [f"h{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
+        cols = [f"arg{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
+        rows = self.eng.store.run_compiled(
+            f"INSERT INTO {table} ({', '.join(cols)}, arrival) "
+            f"SELECT {', '.join(values)}, :now FROM {self.prov} WHERE id > :before "
+            f"ORDER BY id RETURNING {', '.join(cols)}", {"now": now, "before": before})
+        if not rows:
+            return []
+        self.detections += len(rows)
+        dec = decode
+        if arity == 0:
+            return [(name, (), r[0], r[1]) for r in rows]
+        if arity == 1:
+            return [(name, (dec(r[0]),), r[1], r[2]) for r in rows]
+        return [(name, tuple(map(dec, r[:arity])), r[arity], r[arity + 1]) for r in rows]
+
+
+class EventRules:
+    """The event rules of one knowledge base (created by :func:`slr_sql.cep.attach`)."""
+
+    def __init__(self, kb: Any):
+        self.kb = kb
+        self.store = kb.store
+        self.clock = kb.clock
+        self.sync = getattr(kb, "_sync", None)
+        self.tracker = self.sync.tracker if self.sync is not None else None
+        self.rules: list[RuleRuntime] = []
+        self.by_head: dict[tuple[str, int], list[RuleRuntime]] = {}
+        self.types: frozenset = frozenset()          # complex event types (rule heads)
+        self.leaf_types: frozenset = frozenset()     # types read by positive event atoms
+        self.inputs: dict = {}                       # head -> types its events are made of
+        self.key_index: dict[tuple[str, int], int] = {}
+        self.generation = 0
+        self._decls: Any = None
+        self._local = threading.local()
+        self._woken: dict = {}     # type -> the time a wake-up was asked for
+        self.closed = False
+
+    # ----------------------------------------------------------------- install
+    @property
+    def active(self) -> bool:
+        self._sync_rules()
+        return bool(self.rules)
+
+    def _sync_rules(self) -> None:
+        """Follow the kb's declarations (a load replaces them; a failed load restores the
+        previous object)."""
+        decls = self.kb.declarations
+        if decls is not self._decls:
+            with self.store.lock:
+                if decls is not self._decls:
+                    self.install(list(getattr(decls, "event_rules", ())))
+                    self._decls = decls
+
+    def install(self, rules: list[EventRule]) -> None:
+        """Make ``rules`` (already in dependency order, policies resolved) the active rules:
+        their tables exist, their SQL is built, their pending summary read."""
+        old = {rt.key: rt for rt in self.rules}
+        runtimes = []
+        for rule in rules:
+            rt = old.get(rule.key)
+            if rt is None or rt.rule is not rule:
+                keep = rt
+                rt = RuleRuntime(self, rule)
+                if keep is not None:
+                    rt.detections, rt.errors, rt.last_error = \
+                        keep.detections, keep.errors, keep.last_error
+            runtimes.append(rt)
+        by_head: dict = {}
+        for rt in runtimes:
+            by_head.setdefault(rt.head_key, []).append(rt)
+        self.types = frozenset(by_head)
+        self.leaf_types = frozenset(leaf.key for rt in runtimes
+                                    for alt in rt.rule.alternatives for leaf in alt.leaves)
+        self.inputs = {h: sorted({leaf.key for rt in rts for alt in rt.rule.alternatives
+                                  for leaf in alt.leaves}) for h, rts in by_head.items()}
+        self.rules = runtimes
+        self.by_head = by_head
+        self.generation += 1
+        if runtimes:
+            with self.store.transaction():
+                for rt in runtimes:
+                    name, arity = rt.head_key
+                    if self.store.table_for(name, arity) is None:
+                        self.store.declare_type(name, arity)
+                    for sql in rt.schema():
+                        self.store.execute(sql)
+                    self.store.execute(
+                        "INSERT INTO slr_cep_rules (key, head, rule, policy, source, "
+                        "prov_table, installed_at) VALUES (?, ?, ?, ?, ?, ?, ?) "
+                        "ON CONFLICT(key) DO NOTHING",
+                        (rt.key, _type(rt.head_key), rt.rule.text, rt.policy, rt.rule.source,
+                         rt.prov_name, float(self.clock.now())))
+                for rt in runtimes:
+                    rt.build()
+                    rt.refresh()
+        if self.tracker is not None:
+            self.tracker.derived = self if runtimes else None
+        self._wake_timers()
+
+    def on_load(self, kb: Any) -> None:
+        """Load listener (inside the load's transaction)."""
+        self._sync_rules()
+
+    def on_table(self, name: str, arity: int, table: str) -> None:
+        """A new event table: rules reading that type can now match (rebuild their SQL)."""
+        self.generation += 1
+
+    def table(self, key: tuple[str, int]) -> str | None:
+        name = self.store.table_for(*key)
+        return None if name is None else quote_identifier(name)
+
+    def table_name(self, key: tuple[str, int]) -> str | None:
+        return self.store.table_for(*key)
+
+    def fact_table(self, key: tuple[str, int]) -> str | None:
+        """The SQL table of a predicate made only of ground facts (the planner keeps them),
+        or None."""
+        from ..planner import state_of
+
+        if not self.kb.sql_enabled:
+            return None
+        return state_of(self.kb).fact_tables(self.kb).get(key)
+
+    def known_types(self) -> set:
+        return set(self.store.event_types()) | set(self.kb.declarations.event_types)
+
+    # ----------------------------------------------------------------- completeness
+    def _index(self, key: tuple[str, int]) -> int:
+        n = self.key_index.get(key)
+        if n is None:
+            n = self.key_index[key] = len(self.key_index)
+        return n
+
+    def complete_sql(self, key: tuple[str, int], x: str) -> str:
+        """SQL: the history of ``key`` is complete up to the time ``x`` (an SQL expression),
+        with the inputs as parameters (:meth:`params`) -- the same test as
+        :meth:`slr_sql.sync.Completeness.complete`, and for complex event types as
+        :meth:`complete`."""
+        n = self._index(key)
+        if key in self.types:
+            inner = " AND ".join(f"({self.complete_sql(t, x)})" for t in self.inputs[key])
+            return f"{x} <= :mk{n} OR (({inner or '1'}) AND {x} < :pm{n})"
+        return f"{x} <= :mk{n} OR {x} + :dl{n} < :now OR {x} < :le{n}"
+
+    def params(self, now: float) -> dict:
+        """The parameters of the completeness conditions, now."""
+        tracker = self.tracker
+        out: dict = {"now": now}
+        for key, n in self.key_index.items():
+            if tracker is None:
+                out[f"mk{n}"], out[f"dl{n}"], out[f"le{n}"], out[f"pm{n}"] = \
+                    _INF, 0.0, -_INF, _INF
+                continue
+            out[f"mk{n}"] = tracker.mark(key)
+            if key in self.types:
+                out[f"pm{n}"] = self.pmin(key)
+            else:
+                out[f"dl{n}"] = tracker.delay(key)
+                out[f"le{n}"] = tracker.latest_end(key) if tracker.in_order(key) else -_INF
+        return out
+
+    def pmin(self, key: tuple[str, int]) -> float:
+        return min((rt.pmin for rt in self.by_head.get(key, ())), default=_INF)
+
+    def complete(self, key: tuple[str, int], z: float, now: float | None = None) -> bool:
+        """Is the history of ``key`` complete up to ``z``? For a complex event type: a mark
+        says so, or every type its events are made of is complete up to z and no pending
+        decision ends at or before z."""
+        tracker = self.tracker
+        if tracker is None:
+            return True
+        if key not in self.types:
+            return tracker.complete(key, z, now)
+        if z <= tracker.mark(key):
+            return True
+        if now is None:
+            now = float(self.clock.now())
+        for t in self.inputs[key]:
+            if not tracker.complete(t, z, now):
+                return False
+        return z < self.pmin(key)
+
+    def horizon(self, key: tuple[str, int], now: float | None = None) -> float:
+        tracker = self.tracker
+        if now is None:
+            now = float(self.clock.now())
+        h = min([tracker.horizon(t, now) for t in self.inputs[key]] + [self.pmin(key)])
+        return max(h, tracker.mark(key))
+
+    def deadline(self, key: tuple[str, int], z: float) -> float:
+        """When the clock alone makes ``key`` complete up to ``z``: once its inputs are, if
+        no decision up to z is pending (a pending decision releases waiting queries through
+        :meth:`recheck` when it is made, not by a timer)."""
+        if self.pmin(key) <= z:
+            return _INF
+        return max((self.tracker.deadline(t, z) for t in self.inputs[key]), default=_INF)
+
+    def why(self, key: tuple[str, int], z: float, now: float) -> str:
+        if z <= self.tracker.mark(key):
+            return self.tracker.mark_src.get(key) or f"a mark >= {_fmt(z)}"
+        reads = ", ".join(_type(t) for t in self.inputs[key])
+        return (f"{reads} complete up to {_fmt(z)} and every decision of its event rules up "
+                f"to {_fmt(z)} made")
+
+    def describe(self, key: tuple[str, int], now: float | None = None) -> str:
+        if now is None:
+            now = float(self.clock.now())
+        parts = [f"complex event type of {len(self.by_head[key])} event "
+                 f"rule{'s' if len(self.by_head[key]) != 1 else ''}"]
+        for t in self.inputs[key]:
+            parts.append(f"{_type(t)} complete up to {_fmt(self.tracker.horizon(t, now))}")
+        pending = sum(rt.pending for rt in self.by_head[key])
+        if pending:
+            parts.append(f"{pending} pending decision{'s' if pending != 1 else ''} from "
+                         f"{_fmt(self.pmin(key))}")
+        return "; ".join(parts)
+
+    # ----------------------------------------------------------------- rounds
+    def _max_seq(self, key: tuple[str, int]) -> int:
+        table = self.table(key)
+        if table is None:
+            return 0
+        return self.store.execute(f"SELECT coalesce(max(seq), 0) FROM {table}")[0][0]
+
+    def before_add(self, events: list) -> Any:
+        """Inside the add's transaction, before the events are stored: where each type's
+        new rows will start."""
+        if not self.active or not events:
+            return None
+        leaf = self.leaf_types
+        keys = set()
+        for ev in events:
+            try:
+                key = (ev[0], len(ev[1]))
+            except (TypeError, IndexError):
+                continue
+            if key in leaf:
+                keys.add(key)
+        if not keys:
+            return None
+        return {key: self._max_seq(key) for key in keys}
+
+    def store_events(self, events: list, atomic: bool) -> list:
+        """``store.add_events``, with the events grouped by type first when types alternate
+        (a stream of a, b, a, b costs one insert statement per event otherwise). Grouping is
+        stable, so each type's events keep their arrival order -- the order of their rows --
+        and the rejected events keep their index in the batch."""
+        store = self.store
+        if atomic or len(events) < 16:
+            return store.add_events(events, atomic=atomic)
+        keys = []
+        switches = 0
+        last = None
+        for ev in events:
+            try:
+                key = (ev[0], len(ev[1]))
+            except (TypeError, IndexError):
+                return store.add_events(events, atomic=atomic)
+            if key != last:
+                switches += 1
+                last = key
+            keys.append(key)
+        if switches * 4 < len(events):
+            return store.add_events(events, atomic=atomic)
+        first: dict = {}
+        for key in keys:
+            first.setdefault(key, len(first))
+        order = sorted(range(len(events)), key=lambda i: first[keys[i]])
+        errors = store.add_events([events[i] for i in order], atomic=atomic)
+        for error in errors:
+            if getattr(error, "index", None) is not None:
+                error.index = order[error.index]
+        return sorted(errors, key=lambda e: getattr(e, "index", 0))
+
+    def after_add(self, token: Any) -> list:
+        """Inside the add's transaction, after the events are stored: the round. Returns
+        the complex events derived."""
+        if not token:
+            return []
+        return self._round(dict(token), set(token), False)
+
+    def _round(self, new_from: dict, dirty: set, decide: bool) -> list:
+        now = float(self.clock.now())
+        for key in self.types & self.leaf_types:
+            if key not in new_from:
+                new_from[key] = self._max_seq(key)
+        derived: list = []
+        self._local.in_round = True
+        try:
+            for rt in self.rules:
+                if not decide and not (rt.rule.input_types() and
+                                       any(k in dirty for k in rt.rule.input_types())):
+                    continue
+                if decide and not rt.waits and not any(k in dirty
+                                                       for k in rt.rule.input_types()):
+                    continue
+                try:
+                    out = rt.run(new_from, dirty, now, decide)
+                except DatabaseError as exc:
+                    raise SLRError(f"event rule {rt.rule.text} ({rt.rule.source}): {exc}") \
+                        from None
+                if out:
+                    dirty.add(rt.head_key)
+                    derived += out
+        finally:
+            self._local.in_round = False
+        return derived
+
+    def _any_ready(self, now: float) -> bool:
+        for rt in self.rules:
+            if rt.waits and rt.ready_groups(now):
+                return True
+        return False
+
+    def on_progress(self) -> None:
+        """Completeness may have advanced: decide what can be decided now (own transaction),
+        hand the complex events to the add listeners, re-check waiting queries."""
+        if self.closed or not self.rules or getattr(self._local, "in_round", False):
+            return
+        if getattr(self._local, "notifying", False):
+            self._local.again = True
+            return
+        while True:
+            self._local.again = False
+            now = float(self.clock.now())
+            if not self._any_ready(now):
+                self._wake_timers()
+                self.recheck()
+                return
+            try:
+                with self.store.transaction():
+                    derived = self._round({}, set(), True)
+            except SLRError:
+                if self.store.closed:
+                    return
+                raise
+            self.notify(derived)
+            self._wake_timers()
+            if not self._local.again:
+                self.recheck()
+                return
+
+    def notify(self, derived: list) -> None:
+        """Hand complex events decided outside an add to the add listeners."""
+        if not derived:
+            return
+        self._local.notifying = True
+        try:
+            for listener in list(self.kb.add_listeners):
+                listener(derived)
+        finally:
+            self._local.notifying = False
+
+    def recheck(self) -> None:
+        """Synchronized queries waiting on a complex event type: release those that can go."""
+        if self.sync is not None and self.types:
+            self.sync.recheck(self.types)
+
+    def _wake_timers(self) -> None:
+        """Ask the synchronizer's timer to call us when a pending decision's history will be
+        complete by the clock (wall clock; clocks that tell when they move need no timer)."""
+        if self.sync is None:
+            return
+        due: dict = {}
+        for rt in self.rules:
+            for (n, kind, wait), t in rt.waits.items():
+                if wait is not None:
+                    keys = [wait]
+                elif n < len(rt.rule.alternatives):
+                    alt = rt.rule.alternatives[n]
+                    keys = [leaf.key for _, leaf in alt.negations]
+                    if kind == "term":
+                        keys += [leaf.key for leaf in alt.leaves]
+                else:
+                    keys = []
+                for key in keys:
+                    if key not in self.types and t < due.get(key, _INF):
+                        due[key] = t
+        for key, t in due.items():   # the earliest time per type (the next wake asks again)
+            if self._woken.get(key) != t:
+                self._woken[key] = t
+                self.sync.wake_at(key, t)
+
+    def close(self) -> None:
+        self.closed = True
+
+    # ----------------------------------------------------------------- inspection
+    def infos(self) -> list[dict]:
+        self._sync_rules()
+        out = []
+        for rt in self.rules:
+            rule = rt.rule
+            out.append({"head": _type(rt.head_key), "rule": rule.text,
+                        "pattern": format_term(rule.pattern, priority=1199),
+                        "policy": rt.policy, "source": rule.source, "line": rule.line,
+                        "key": rt.key, "table": self.store.table_for(*rt.head_key),
+                        "provenance": rt.prov_name, "detections": rt.detections,
+                        "pending": rt.pending, "errors": rt.errors,
+                        "last_error": rt.last_error})
+        return out
+
+    def explain_rule(self, rt: RuleRuntime) -> list[str]:
+        rt.ensure_built()
+        rule = rt.rule
+        lines = [f"event rule {rule.text}   ({rule.source})",
+                 f"  derives {_type(rt.head_key)} (table {self.store.table_for(*rt.head_key)}; "
+                 f"each match recorded in {rt.prov_name}), consumption policy {rt.policy}"]
+        for n, alt in enumerate(rt.alts):
+            leaves = ", ".join(f"{p}: {leaf.text}" for p, leaf in enumerate(alt.alt.leaves))
+            lines.append(f"  alternative {n + 1}: positions {leaves}")
+            s, e = alt.alt.interval
+            lines.append(f"    interval of the complex event: [{_show(s)}, {_show(e)}]")
+            for (_, seconds, _) in alt.alt.windows:
+                lines.append(f"    within {_fmt(seconds)} s: the search window of every "
+                             f"delta statement")
+            if alt.pushed:
+                lines.append("    where, in SQL: " + ", ".join(format_term(g)
+                                                               for g in alt.pushed))
+            if alt.residual:
+                how = "reads the store: decided once its goal set and prev/next are complete " \
+                      "up to the match's end" if rt.reads_store[n] else \
+                      "reads no stored event: run at once"
+                lines.append("    where, per candidate (compiled SQL or the interpreter): "
+                             + ", ".join(format_term(g) for g in alt.residual) + f" -- {how}")
+            for _, leaf in alt.alt.negations:
+                lines.append(f"    cnot {leaf.text}: decided once {leaf.name}/{leaf.arity} "
+                             f"is complete up to the end of the interval; until then the "
+                             f"candidate waits in slr_cep_pending")
+            if rt.policy != "unrestricted":
+                terms = ", ".join(str(p) for p in sorted(alt.alt.terminators))
+                lines.append(f"    {rt.policy}: a row at position {terms} ends a match; it "
+                             f"is decided once every input type is complete up to its end")
+            if not alt.runnable:
+                missing = [leaf.text for leaf, t in zip(alt.alt.leaves, alt.tables)
+                           if t is None]
+                lines.append("    no statement yet: no event of " + ", ".join(missing)
+                             + " has been stored")
+                continue
+            dirty = {leaf.key for leaf in alt.alt.leaves}
+            for pos in range(alt.k):
+                if rt.policy == "unrestricted":
+                    if alt.pure and not rt.reads_store[n]:
+                        sql = alt.delta_insert(pos, dirty)
+                    else:
+                        sql = alt.delta_select(pos, dirty)
+                    lines.append(f"    delta SQL when position {pos} "
+                                 f"({alt.alt.leaves[pos].text}) has new rows:")
+                elif pos in alt.alt.terminators:
+                    if rt.policy == "recent" and alt.pure:
+                        sql = alt.recent_insert(pos)
+                        lines.append(f"    SQL when position {pos} ({alt.alt.leaves[pos].text}) "
+                                     f"has new rows (terminators complete now):")
+                    else:
+                        sql = alt.term_select(pos, alt.pure)
+                        lines.append(f"    SQL deciding a terminator :t at position {pos}:")
+                else:
+                    continue
+                lines.extend("      " + line for line in _wrap(sql))
+                lines.extend("      plan: " + step for step in self._plan(alt, sql))
+        lines.append(f"  {_type(rt.head_key)} is complete up to z once "
+                     + ", ".join(_type(t) for t in self.inputs.get(rt.head_key, ()))
+                     + " are complete up to z and no pending decision ends at or before z")
+        lines.append(f"  now: {rt.detections} detections in this session, {rt.pending} "
+                     f"pending, {rt.errors} rejected by errors"
+                     + (f" (last: {rt.last_error})" if rt.last_error else ""))
+        return lines
+
+    def _plan(self, alt: AltSQL, sql: str) -> list[str]:
+        """SQLite's query plan of a statement (how the indexes bound it)."""
+        params = self.params(float(self.clock.now()))
+        params.update(alt.params)
+        params.update({f"w{p}": 0 for p in range(alt.k)})
+        params.update({f"r{p}": 0 for p in range(alt.k)})
+        params.update(rule="", t=0)
+        try:
+            return [row[3] for row in self.store.run_compiled("EXPLAIN QUERY PLAN " + sql,
+                                                              params)]
+        except DatabaseError as exc:  # pragma: no cover - explain must not fail
+            return [f"(no plan: {exc})"]
+
+    def explain(self, goal: str) -> tuple[bool, list[str]] | None:
+        """How the event rules behind ``goal`` run: ``(True, lines)`` for a rule's text,
+        ``(False, lines)`` for a goal on a complex event type, None otherwise."""
+        from ..parser import parse_program, parse_term
+        from .rules import compile_rule, is_event_rule, order_rules
+
+        self._sync_rules()
+        try:
+            term, _ = parse_term(goal, "<explain>")
+        except SLRError:
+            return None
+        if is_event_rule(term):
+            clause = parse_program(goal.rstrip().rstrip(".") + " .", "<explain>")[0]
+            rule = compile_rule(clause)
+            order_rules([rule], self.kb.declarations.consumption,
+                        self.kb.declarations.consumption.get(None))
+            for rt in self.rules:
+                if rt.key == rule.key:
+                    return True, self.explain_rule(rt)
+            rt = RuleRuntime(self, rule)
+            return True, ["(not loaded: how it would run)"] + self.explain_rule(rt)
+        t = deref(term)
+        if type(t) is Struct and t.name == "^" and len(t.args) == 2:
+            t = deref(t.args[0])
+        key = (str(t.name), len(t.args)) if type(t) is Struct else (str(t), 0)
+        if key not in self.by_head:
+            return None
+        lines = [f"{_type(key)} is a complex event type, derived by "
+                 f"{len(self.by_head[key])} event rule(s):"]
+        for rt in self.by_head[key]:
+            lines += self.explain_rule(rt)
+        return False, lines
+
+
+def _show(e: tuple) -> str:
+    if e[0] == "s":
+        return f"start of {e[1]}"
+    if e[0] == "e":
+        return f"end of {e[1]}"
+    return f"{e[0]}({_show(e[1])}, {_show(e[2])})"
+
+
+def _wrap(sql: str) -> list[str]:
+    """Break a long statement at its clauses, for explain."""
+    out = []
+    for part in sql.replace(" FROM ", "\nFROM ").replace(" WHERE ", "\nWHERE ") \
+            .replace(" ORDER BY ", "\nORDER BY ").split("\n"):
+        out.append(part)
+    return out

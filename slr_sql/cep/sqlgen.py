@@ -1,0 +1,767 @@
+"""SQL for one alternative of an event rule (docs/events.md, "How a rule runs as SQL").
+
+Every positive event atom of the alternative is a row of its type's table, aliased ``e0``,
+``e1``, ... by position. The pattern becomes conditions between those rows:
+
+* the atoms' own arguments: a constant is compared with its stored encoding (and SQL type,
+  so that ``1`` does not match ``1.0``); a variable met again is an equality with its first
+  occurrence (same SQL type for data arguments; by value for times);
+* ``^T`` (a point event: start = end = T) and ``^[S, E]`` bind the times;
+* each binary operator's relation between the intervals of its operands (``seq``: end of the
+  left < start of the right, ...), ``within D`` (end − start ≤ D, plus the per-row bounds
+  ``t_end``/``t_start`` within D of each other row, which let the indexes bound the search);
+* comparisons and equalities in ``where`` whose operands are bound by the atoms (``R2 > R1``,
+  ``F \\== G``): pushed into the statement, exactly (a non-number falls back to the SQL function
+  ``slr_cep_cmp``, which evaluates as Prolog does); so is a call of a predicate made of ground
+  facts with its arguments bound (``softDrink(O)``: EXISTS a row of its fact table);
+* ``cnot c``: ``NOT EXISTS`` a row of c strictly inside the interval, once c's history is
+  complete up to the interval's end (the completeness condition is SQL too, its inputs bound
+  as parameters).
+
+A *delta* statement finds the matches in which position i is one of the rows that are new in
+this round (``e_i.seq > :w_i``) and every earlier position with new rows is an old row
+(``e_j.seq <= :w_j``): each new combination is found once, by exactly one statement. The new
+row is the outer loop (``CROSS JOIN`` fixes the order), so a statement's cost depends on the
+new rows and on what the indexes reach from them, not on the size of the history.
+
+The templates use ``{eN}`` for the alias of position N (``str.format_map``), because the
+``recent`` policy nests the same conditions inside correlated sub-queries with other aliases.
+Values only ever appear as named parameters.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from ..encoding import Unencodable, encode
+from ..terms import Struct, Var, deref, is_ground, term_vars
+from .rules import Alternative, Expr, Leaf
+
+__all__ = ["Ref", "AltSQL", "render"]
+
+_CMP = {"<": "<", ">": ">", "=<": "<=", ">=": ">=", "=:=": "=", "=\\=": "<>"}
+_EQ = {"==": True, "=": True, "\\==": False, "\\=": False}
+_NUMERIC = "IN ('integer', 'real')"
+
+
+@dataclass(frozen=True)
+class Ref:
+    """Where a variable's value is: an SQL expression (a template over the aliases) and
+    whether it is a data argument (any encoded term) or a time (always a REAL)."""
+
+    sql: str
+    kind: str          # "data" | "time"
+    positions: frozenset
+
+
+def render(template: str, aliases: dict[str, str]) -> str:
+    """Put the aliases into a template (``{e0}`` -> ``e0`` or a sub-query's alias).
+
+    >>> render("{e0}.t_end < {e1}.t_start", {"e0": "q0_e0", "e1": "e1"})
+    'q0_e0.t_end < e1.t_start'
+    """
+    return template.format_map(aliases)
+
+
+def _expr(e: Expr) -> str:
+    if e[0] == "s":
+        return f"{{e{e[1]}}}.t_start"
+    if e[0] == "e":
+        return f"{{e{e[1]}}}.t_end"
+    return f"{e[0]}({_expr(e[1])}, {_expr(e[2])})"
+
+
+def _expr_positions(e: Expr) -> frozenset:
+    if e[0] in ("s", "e"):
+        return frozenset((e[1],))
+    return _expr_positions(e[1]) | _expr_positions(e[2])
+
+
+@dataclass
+class _Cond:
+    positions: frozenset
+    sql: str
+
+
+@dataclass
+class _Neg:
+    key: tuple[str, int]
+    positions: frozenset
+    sql: str | None          # NOT EXISTS (...) or None: the type has no table yet (holds)
+    end: str                 # the interval end the completeness condition is about
+
+
+@dataclass
+class AltSQL:
+    """The SQL pieces of one alternative, and the statements built from them.
+
+    ``tables[p]`` is the quoted table of position p (None: the type has no table yet, so the
+    alternative cannot match now); ``neg_tables`` likewise for the negations.
+    """
+
+    alt: Alternative
+    index: int
+    tables: list
+    neg_tables: list
+    head_args: tuple
+    policy: str
+    complete_sql: Callable[[tuple, str], str]   # (type, end expression) -> SQL condition
+    used_table: str | None = None
+    prov_table: str = ""
+    fact_table: Callable[[tuple], str | None] | None = None  # planner's slr_facts_* tables
+    table_names: list = field(default_factory=list)   # unquoted, for the used-rows table
+    params: dict = field(default_factory=dict)
+    refs: dict = field(default_factory=dict)
+    conds: list = field(default_factory=list)
+    negs: list = field(default_factory=list)
+    residual: list = field(default_factory=list)
+    pushed: list = field(default_factory=list)
+    head_sql: list | None = None
+
+    def __post_init__(self) -> None:
+        alt = self.alt
+        self._table_names: dict = {}
+        self._cache: dict = {}
+        self._others: dict = {}   # variable -> its later occurrences in positive atoms
+        self.k = len(alt.leaves)
+        self.S = _expr(alt.interval[0])
+        self.E = _expr(alt.interval[1])
+        for pos, leaf in enumerate(alt.leaves):
+            self._leaf(leaf, f"{{e{pos}}}", frozenset((pos,)))
+        for i in range(self.k):
+            for j in range(i + 1, self.k):
+                if alt.leaves[i].key == alt.leaves[j].key:
+                    self.conds.append(_Cond(frozenset((i, j)), f"{{e{i}}}.seq <> {{e{j}}}.seq"))
+        for op, left, right in alt.relations:
+            for a, cmp, b in self._relation(op, left, right):
+                self.conds.append(_Cond(_expr_positions(a) | _expr_positions(b),
+                                        f"{_expr(a)} {cmp} {_expr(b)}"))
+        for interval, seconds, positions in alt.windows:
+            self._window(interval, seconds, positions)
+        for goal in alt.goals:
+            sql = self._push(goal)
+            if sql is None:
+                self.residual.append(goal)
+            else:
+                self.pushed.append(goal)
+                self.conds.append(sql)
+        for n, (interval, leaf) in enumerate(alt.negations):
+            self._negation(n, interval, leaf)
+        self.head_sql = self._head()
+        if self.used_table is not None:   # chronological: the tables' names as parameters
+            for p in range(self.k):
+                self._table_names[p] = self._param(self.table_names[p])
+        # the variables whose values the Python side needs (residual goals, head)
+        needed = []
+        seen = set()
+        for t in list(self.residual) + list(self.head_args):
+            for v in term_vars(t):
+                if id(v) in self.refs and id(v) not in seen:
+                    seen.add(id(v))
+                    needed.append(v)
+        self.value_vars = needed
+
+    # ---------------------------------------------------------------- building blocks
+    def _param(self, value: Any) -> str:
+        name = f"c{self.index}_{len(self.params)}"
+        self.params[name] = value
+        return f":{name}"
+
+    def _const_cond(self, ref: Ref, value: Any) -> str | None:
+        """The condition ``ref`` equals the constant term ``value`` (None: always false)."""
+        value = deref(value)
+        if ref.kind == "time":
+            if type(value) in (int, float):
+                return f"{ref.sql} = {self._param(float(value))}"
+            return None
+        try:
+            encoded = encode(value)
+        except Unencodable:
+            return None
+        p = self._param(encoded)
+        if type(value) is int and type(encoded) is int:
+            return f"({ref.sql} = {p} AND typeof({ref.sql}) = 'integer')"
+        if type(value) is float:
+            return f"({ref.sql} = {p} AND typeof({ref.sql}) = 'real')"
+        return f"{ref.sql} = {p}"
+
+    @staticmethod
+    def _eq(a: Ref, b: Ref) -> str:
+        if a.kind == "time" and b.kind == "time":
+            return f"{a.sql} = {b.sql}"
+        if a.kind == "data" and b.kind == "data":
+            return f"({a.sql} = {b.sql} AND typeof({a.sql}) = typeof({b.sql}))"
+        d, t = (a, b) if a.kind == "data" else (b, a)
+        # times match by value (a time 5.0 and a data argument 5 are the same instant)
+        return f"({d.sql} = {t.sql} AND typeof({d.sql}) {_NUMERIC})"
+
+    def _bind(self, term: Any, ref: Ref, refs: dict, out: list) -> None:
+        """Constrain the column ``ref`` by the pattern term at that place."""
+        term = deref(term)
+        if type(term) is Var:
+            if term.name == "_":
+                return
+            first = refs.get(id(term))
+            if first is None:
+                refs[id(term)] = ref
+            else:
+                # an equality with every earlier occurrence, not only the first: any two
+                # positions sharing the variable are tied without the others (the recent
+                # policy's sub-queries pick positions one at a time)
+                for other in [first] + self._others.get(id(term), []):
+                    out.append(_Cond(other.positions | ref.positions, self._eq(other, ref)))
+                if ref.positions:
+                    self._others.setdefault(id(term), []).append(ref)
+            return
+        sql = self._const_cond(ref, term)
+        out.append(_Cond(ref.positions, sql if sql is not None else "0"))
+
+    def _leaf(self, leaf: Leaf, alias: str, positions: frozenset,
+              refs: dict | None = None, out: list | None = None) -> None:
+        refs = self.refs if refs is None else refs
+        out = self.conds if out is None else out
+        for j, arg in enumerate(leaf.args):
+            self._bind(arg, Ref(f"{alias}.arg{j + 1}", "data", positions), refs, out)
+        if leaf.point:
+            out.append(_Cond(positions, f"{alias}.t_start = {alias}.t_end"))
+        if leaf.start is not None:
+            self._bind(leaf.start, Ref(f"{alias}.t_start", "time", positions), refs, out)
+        if leaf.end is not None and not leaf.point:
+            self._bind(leaf.end, Ref(f"{alias}.t_end", "time", positions), refs, out)
+
+    @staticmethod
+    def _relation(op: str, left: tuple, right: tuple) -> list[tuple]:
+        """The comparisons (expression, operator, expression) an operator requires between
+        its operands' intervals (each kept apart: it involves fewer positions)."""
+        (s1, e1), (s2, e2) = left, right
+        if op == "seq":
+            return [(e1, "<", s2)]
+        if op == "par":
+            return [(s1, "<=", e2), (s2, "<=", e1)]
+        if op == "equals":
+            return [(s1, "=", s2), (e1, "=", e2)]
+        if op == "meets":
+            return [(e1, "=", s2)]
+        if op == "during":
+            return [(s2, "<=", s1), (e1, "<=", e2)]
+        if op == "starts":
+            return [(s1, "=", s2)]
+        if op == "finishes":
+            return [(e1, "=", e2)]
+        return []  # and: both occurred, in any order
+
+    def _window(self, interval: tuple, seconds: float, within: tuple) -> None:
+        s, e = _expr(interval[0]), _expr(interval[1])
+        positions = _expr_positions(interval[0]) | _expr_positions(interval[1])
+        d = self._param(float(seconds))
+        self.conds.append(_Cond(positions, f"{e} - {s} <= {d}"))
+        positions = frozenset(within)
+        # Implied bounds between every two rows of the window, widened by a margin far above
+        # the rounding of the subtraction: pure pre-filters that the indexes can use.
+        loose = self._param(float(seconds) * (1 + 1e-9) + 1e-9)
+        for i in sorted(positions):
+            for j in sorted(positions):
+                if i == j:
+                    continue
+                ei, si, ej, sj = (f"{{e{i}}}.t_end", f"{{e{i}}}.t_start", f"{{e{j}}}.t_end",
+                                  f"{{e{j}}}.t_start")
+                slack = f"abs({ei}) * 1e-12"
+                self.conds.append(_Cond(frozenset((i, j)),
+                                        f"{ej} >= {ei} - {loose} - {slack} AND "
+                                        f"{sj} <= {si} + {loose} + {slack}"))
+
+    def _side(self, t: Any) -> tuple[str, str] | None:
+        """An operand of a pushed comparison: (SQL, kind) with kind data/time/num."""
+        t = deref(t)
+        if type(t) is Var:
+            ref = self.refs.get(id(t))
+            return None if ref is None else (ref.sql, ref.kind)
+        if type(t) in (int, float) and t == t:
+            try:
+                encode(t)
+            except Unencodable:
+                return None
+            return self._param(t), "num"
+        return None
+
+    def _push(self, goal: Any) -> _Cond | None:
+        """A where goal that SQL can decide exactly, as a condition; None otherwise."""
+        g = deref(goal)
+        if type(g) is not Struct:
+            return None
+        positions = frozenset()
+        for v in term_vars(g):
+            ref = self.refs.get(id(v))
+            if ref is None:
+                return None
+            positions |= ref.positions
+        if self.fact_table is not None:
+            table = self.fact_table((str(g.name), len(g.args)))
+            if table is not None:
+                return self._fact(g, table, positions)
+        if len(g.args) != 2:
+            return None
+        if g.name in _CMP:
+            a, b = self._side(g.args[0]), self._side(g.args[1])
+            if a is None or b is None:
+                return None
+            core = f"{a[0]} {_CMP[g.name]} {b[0]}"
+            guards = [f"typeof({x}) {_NUMERIC}" for x, kind in (a, b) if kind == "data"]
+            if not guards:
+                return _Cond(positions, core)
+            op = self._param(str(g.name))
+            return _Cond(positions, f"(CASE WHEN {' AND '.join(guards)} THEN {core} ELSE "
+                                    f"slr_cep_cmp({op}, {a[0]}, {b[0]}) END)")
+        if g.name in _EQ:
+            if not all(is_ground(a) or type(deref(a)) is Var for a in g.args):
+                return None
+            sides = []
+            for a in g.args:
+                a = deref(a)
+                if type(a) is Var:
+                    sides.append(self.refs[id(a)])
+                else:
+                    sides.append(a)
+            x, y = sides
+            if isinstance(x, Ref) and isinstance(y, Ref):
+                if x.kind != y.kind:
+                    d, t = (x, y) if x.kind == "data" else (y, x)
+                    sql = f"(typeof({d.sql}) = 'real' AND {d.sql} = {t.sql})"
+                else:
+                    sql = self._eq(x, y)
+            elif isinstance(x, Ref) or isinstance(y, Ref):
+                ref, value = (x, y) if isinstance(x, Ref) else (y, x)
+                if ref.kind == "time":
+                    sql = (f"{ref.sql} = {self._param(value)}" if type(value) is float
+                           else "0")
+                else:
+                    sql = self._const_cond(ref, value) or "0"
+            else:
+                return None  # two constants: the interpreter's business
+            return _Cond(positions, sql if _EQ[g.name] else f"NOT ({sql})")
+        return None
+
+    def _fact(self, g: Struct, table: str, positions: frozenset) -> _Cond:
+        """``p(A..)`` over a predicate made of ground facts, its arguments bound: a row of
+        its fact table with the same values (and SQL types) exists."""
+        alias = f"f{len(self.conds)}"
+        conds = []
+        for j, a in enumerate(g.args):
+            column = Ref(f"{alias}.arg{j + 1}", "data", frozenset())
+            a = deref(a)
+            if type(a) is Var:
+                ref = self.refs[id(a)]
+                if ref.kind == "time":   # a time is a float: a fact's 5 is not 5.0
+                    conds.append(f"(typeof({column.sql}) = 'real' AND {column.sql} = {ref.sql})")
+                else:
+                    conds.append(self._eq(column, ref))
+            else:
+                conds.append(self._const_cond(column, a) or "0")
+        where = " AND ".join(conds) or "1"
+        return _Cond(positions, f"EXISTS (SELECT 1 FROM {table} AS {alias} WHERE {where})")
+
+    def _negation(self, n: int, interval: tuple, leaf: Leaf) -> None:
+        s, e = _expr(interval[0]), _expr(interval[1])
+        positions = _expr_positions(interval[0]) | _expr_positions(interval[1])
+        table = self.neg_tables[n]
+        if table is None:
+            self.negs.append(_Neg(leaf.key, positions, None, e))
+            return
+        alias = f"n{n}"
+        local = dict(self.refs)   # shared variables: equalities; new ones are local
+        conds: list = []
+        self._leaf(leaf, alias, frozenset(), local, conds)
+        for c in conds:
+            positions |= c.positions
+        where = [f"{alias}.t_start > {s}", f"{alias}.t_end < {e}"] + [c.sql for c in conds]
+        # the index on (t_end, t_start) bounds the scan to the interval
+        sql = (f"NOT EXISTS (SELECT 1 FROM {table} AS {alias} WHERE "
+               f"{' AND '.join(where)})")
+        self.negs.append(_Neg(leaf.key, positions, sql, e))
+
+    def _head(self) -> list | None:
+        """SQL of each head argument, or None when one needs the Python side (a residual
+        goal binds it, or it is a compound term with variables)."""
+        out = []
+        for a in self.head_args:
+            a = deref(a)
+            if type(a) is Var:
+                ref = self.refs.get(id(a))
+                if ref is None:
+                    return None
+                out.append(ref.sql)
+            elif is_ground(a):
+                try:
+                    out.append(self._param(encode(a)))
+                except Unencodable:
+                    return None
+            else:
+                return None
+        return out
+
+    # ---------------------------------------------------------------- properties
+    @property
+    def runnable(self) -> bool:
+        """False while a positive atom's type has no table (nothing can match yet)."""
+        return all(t is not None for t in self.tables)
+
+    @property
+    def pure(self) -> bool:
+        """Everything in SQL: no residual goal, head computable in SQL."""
+        return not self.residual and self.head_sql is not None
+
+    def aliases(self, prefix: str = "") -> dict[str, str]:
+        return {f"e{p}": f"{prefix}e{p}" for p in range(self.k)}
+
+    def _where(self, conds: list[str]) -> str:
+        return " AND ".join(c for c in conds if c) or "1"
+
+    def _from(self, order: list[int], aliases: dict[str, str]) -> str:
+        return " CROSS JOIN ".join(f"{self.tables[p]} AS {aliases[f'e{p}']}" for p in order)
+
+    def _order_from(self, first: int) -> list[int]:
+        """The join order: the given position first, then outwards by distance."""
+        order = [first]
+        for d in range(1, self.k):
+            for p in (first - d, first + d):
+                if 0 <= p < self.k:
+                    order.append(p)
+        return order
+
+    def neg_complete(self, aliases: dict[str, str]) -> str:
+        """Every negated type complete up to the end of its interval."""
+        parts = [self.complete_sql(n.key, render(n.end, aliases)) for n in self.negs]
+        return " AND ".join(f"({p})" for p in parts) or "1"
+
+    def neg_ok(self, aliases: dict[str, str]) -> str:
+        parts = [render(n.sql, aliases) for n in self.negs if n.sql is not None]
+        return " AND ".join(parts) or "1"
+
+    def inputs_complete(self, end: str) -> str:
+        """Every positive and negated type complete up to ``end`` (a terminator's end)."""
+        keys = []
+        for leaf in self.alt.leaves + [leaf for _, leaf in self.alt.negations]:
+            if leaf.key not in keys:
+                keys.append(leaf.key)
+        return " AND ".join(f"({self.complete_sql(k, end)})" for k in keys) or "1"
+
+    def cond_sql(self, aliases: dict[str, str], within: set | None = None,
+                 exclude: set | None = None) -> list[str]:
+        """The conditions (rendered) whose positions all lie in ``within`` (all if None),
+        except those entirely inside ``exclude``."""
+        out = []
+        for c in self.conds:
+            if within is not None and not c.positions <= within:
+                continue
+            if exclude is not None and c.positions <= exclude:
+                continue
+            out.append(render(c.sql, aliases))
+        return out
+
+    def value_columns(self, aliases: dict[str, str]) -> list[str]:
+        """seq of every position, start, end, then the values of ``value_vars``."""
+        cols = [f"{aliases[f'e{p}']}.seq" for p in range(self.k)]
+        cols += [render(self.S, aliases), render(self.E, aliases)]
+        cols += [render(self.refs[id(v)].sql, aliases) for v in self.value_vars]
+        return cols
+
+    def _prov_insert(self) -> str:
+        cols = ["alt"] + [f"r{p + 1}" for p in range(self.k)] + ["t_start", "t_end"] \
+            + [f"h{i + 1}" for i in range(len(self.head_args))] + ["detected"]
+        return f"INSERT INTO {self.prov_table} ({', '.join(cols)}) "
+
+    def _prov_values(self, aliases: dict[str, str]) -> list[str]:
+        return ([f"{self.index}"] + [f"{aliases[f'e{p}']}.seq" for p in range(self.k)]
+                + [render(self.S, aliases), render(self.E, aliases)]
+                + [render(h, aliases) for h in self.head_sql] + [":now"])
+
+    def _delta_conds(self, pos: int, dirty: set, aliases: dict[str, str]) -> list[str]:
+        conds = [f"{aliases[f'e{pos}']}.seq > :w{pos}"]
+        for j in range(pos):
+            if self.alt.leaves[j].key in dirty:
+                conds.append(f"{aliases[f'e{j}']}.seq <= :w{j}")
+        return conds
+
+    # ---------------------------------------------------------------- statements
+    def delta_insert(self, pos: int, dirty: set) -> str:
+        key = ("delta_insert", pos, tuple(self.alt.leaves[j].key in dirty for j in range(pos)))
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._delta_insert(pos, dirty)
+        return sql
+
+    def _delta_insert(self, pos: int, dirty: set) -> str:
+        """unrestricted, pure: the new matches with position ``pos`` new, straight into the
+        provenance table (only those whose negations can be decided now)."""
+        a = self.aliases()
+        conds = self._delta_conds(pos, dirty, a) + self.cond_sql(a)
+        if self.negs:
+            conds += [self.neg_complete(a), self.neg_ok(a)]
+        return (self._prov_insert() + f"SELECT {', '.join(self._prov_values(a))} FROM "
+                f"{self._from(self._order_from(pos), a)} WHERE {self._where(conds)}")
+
+    def delta_pending(self, pos: int, dirty: set) -> str:
+        key = ("delta_pending", pos, tuple(self.alt.leaves[j].key in dirty for j in range(pos)))
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._delta_pending(pos, dirty)
+        return sql
+
+    def _delta_pending(self, pos: int, dirty: set) -> str:
+        """The new matches whose negated types are not complete yet: kept as pending."""
+        a = self.aliases()
+        conds = self._delta_conds(pos, dirty, a) + self.cond_sql(a) \
+            + [f"NOT ({self.neg_complete(a)})"]
+        seqs = ", ".join(f"e{p}.seq" for p in range(self.k))
+        return ("INSERT INTO slr_cep_pending (rule, alt, kind, pos, rowids, t_start, t_end, "
+                "created_at) "
+                f"SELECT :rule, {self.index}, 'match', NULL, json_array({seqs}), "
+                f"{render(self.S, a)}, {render(self.E, a)}, :now FROM "
+                f"{self._from(self._order_from(pos), a)} WHERE {self._where(conds)}")
+
+    def delta_select(self, pos: int, dirty: set) -> str:
+        key = ("delta_select", pos, tuple(self.alt.leaves[j].key in dirty for j in range(pos)))
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._delta_select(pos, dirty)
+        return sql
+
+    def _delta_select(self, pos: int, dirty: set) -> str:
+        """The new matches with position ``pos`` new, for the Python side: value columns,
+        then (with negations) 'complete' and 'ok' flags."""
+        a = self.aliases()
+        cols = self.value_columns(a)
+        if self.negs:
+            cols += [f"({self.neg_complete(a)})", f"({self.neg_ok(a)})"]
+        conds = self._delta_conds(pos, dirty, a) + self.cond_sql(a)
+        return (f"SELECT {', '.join(cols)} FROM {self._from(self._order_from(pos), a)} "
+                f"WHERE {self._where(conds)}")
+
+    def match_select(self) -> str:
+        key = ("match_select", )
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._match_select()
+        return sql
+
+    def _match_select(self) -> str:
+        """One pending match by its rowids (:r0, :r1, ...): values and negation flags."""
+        a = self.aliases()
+        cols = self.value_columns(a)
+        cols += [f"({self.neg_complete(a)})", f"({self.neg_ok(a)})"]
+        conds = [f"e{p}.seq = :r{p}" for p in range(self.k)]
+        return (f"SELECT {', '.join(cols)} FROM {self._from(list(range(self.k)), a)} "
+                f"WHERE {self._where(conds)}")
+
+    # -- policies ---------------------------------------------------------------------
+    def _terminator_conds(self, pos: int, aliases: dict[str, str]) -> list[str]:
+        """Position ``pos`` holds the match's last event: every other row ends (then
+        starts) no later, strictly so for rows to its right (ties go to the rightmost)."""
+        t = aliases[f"e{pos}"]
+        out = []
+        for j in range(self.k):
+            if j == pos:
+                continue
+            x = aliases[f"e{j}"]
+            cmp = "<=" if j < pos else "<"
+            out.append(f"{x}.t_end <= {t}.t_end AND ({x}.t_end, {x}.t_start) {cmp} "
+                       f"({t}.t_end, {t}.t_start)")
+        return out
+
+    def _key_order(self, p: int, alias: str, descending: bool) -> list[str]:
+        d = " DESC" if descending else ""
+        leaf = self.alt.leaves[p]
+        # by occurrence, then by the stored values (and their SQL type: 1 before 1.0), so
+        # that only identical events are told apart by their arrival (seq)
+        keys = [f"{alias}.t_end{d}", f"{alias}.t_start{d}"]
+        for j in range(leaf.arity):
+            keys += [f"{alias}.arg{j + 1}{d}", f"typeof({alias}.arg{j + 1}){d}"]
+        return keys + [f"{alias}.seq{d}"]
+
+    def partner_order(self, pos: int) -> list[int]:
+        """The order in which the other positions are chosen: right to left under
+        ``recent`` (the closest to the end first), left to right under ``chronological``."""
+        others = [p for p in range(self.k) if p != pos]
+        return list(reversed(others)) if self.policy == "recent" else others
+
+    def _unused(self, p: int, alias: str) -> str:
+        """chronological: the row at position p was used by no earlier match of the rule
+        (``slr_cep_u_<key>`` lists the rows used, by table name and seq)."""
+        name = self._table_names.get(p)
+        if name is None:
+            name = self._table_names[p] = self._param(self.table_names[p])
+        return (f"NOT EXISTS (SELECT 1 FROM {self.used_table} AS u WHERE u.tbl = {name} "
+                f"AND u.seq = {alias}.seq)")
+
+    def term_select(self, pos: int, limit: bool) -> str:
+        key = ("term_select", pos, limit)
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._term_select(pos, limit)
+        return sql
+
+    def _term_select(self, pos: int, limit: bool) -> str:
+        """The matches that end with the terminator row :t at ``pos``, best first under the
+        policy (recent: newest partners; chronological: oldest unused partners)."""
+        a = self.aliases()
+        order = [pos] + self.partner_order(pos)
+        conds = [f"e{pos}.seq = :t"] + self.cond_sql(a) + self._terminator_conds(pos, a)
+        if self.negs:
+            conds.append(self.neg_ok(a))
+        if self.policy == "chronological":
+            conds += [self._unused(p, f"e{p}") for p in range(self.k)]
+        keys = []
+        for p in self.partner_order(pos):
+            keys += self._key_order(p, f"e{p}", self.policy == "recent")
+        sql = (f"SELECT {', '.join(self.value_columns(a))} FROM {self._from(order, a)} "
+               f"WHERE {self._where(conds)}")
+        if keys:
+            sql += " ORDER BY " + ", ".join(keys)
+        if limit:
+            sql += " LIMIT 1"
+        return sql
+
+    def recent_insert(self, pos: int) -> str:
+        key = ("recent_insert", pos)
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._recent_insert(pos)
+        return sql
+
+    def pending_recent_insert(self, pos: int) -> str:
+        """:meth:`recent_insert` for the terminators kept in slr_cep_pending whose inputs
+        are complete now (decided together, in one statement)."""
+        key = ("pending_recent_insert", pos)
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._recent_insert(pos, pending=True)
+        return sql
+
+    def pending_term_delete(self, pos: int) -> str:
+        """Delete the pending terminators at ``pos`` whose inputs are complete now."""
+        return ("DELETE FROM slr_cep_pending WHERE rule = :rule AND alt = "
+                f"{self.index} AND kind = 'term' AND pos = {pos} AND wait_type IS NULL AND "
+                f"{self.inputs_complete('slr_cep_pending.t_end')}")
+
+    def _pending_join(self, aliases: dict[str, str]) -> str:
+        """FROM the pending matches of this alternative, joined with their events."""
+        joins = " ".join(f"JOIN {self.tables[p]} AS {aliases[f'e{p}']} ON "
+                         f"{aliases[f'e{p}']}.seq = json_extract(p.rowids, '$[{p}]')"
+                         for p in range(self.k))
+        return (f"slr_cep_pending AS p {joins} WHERE p.rule = :rule AND p.alt = {self.index} "
+                f"AND p.kind = 'match' AND p.wait_type IS NULL")
+
+    def pending_match_insert(self) -> str:
+        """unrestricted, pure, with negations: the pending matches whose negated types are
+        complete now and hold, into the provenance table (one statement)."""
+        a = self.aliases()
+        return (self._prov_insert() + f"SELECT {', '.join(self._prov_values(a))} FROM "
+                f"{self._pending_join(a)} AND {self.neg_complete(a)} AND {self.neg_ok(a)}")
+
+    def pending_match_delete(self) -> str:
+        """Delete the pending matches that can be decided now (made, or refuted)."""
+        a = self.aliases()
+        return (f"DELETE FROM slr_cep_pending WHERE id IN (SELECT p.id FROM "
+                f"{self._pending_join(a)} AND {self.neg_complete(a)})")
+
+    def _recent_insert(self, pos: int, pending: bool = False) -> str:
+        """recent, pure: for every new terminator at ``pos`` whose inputs are complete up to
+        its end, the match with the newest partners, chosen by nested correlated
+        sub-queries (each partner: the newest for which the remaining partners exist).
+        ``pending``: the terminators kept in slr_cep_pending instead of the new rows."""
+        t = "e%d" % pos
+        top = self.aliases()
+        chosen = {pos}
+        joins = []
+        partners = self.partner_order(pos)
+        for level, p in enumerate(partners):
+            rest = partners[level + 1:]
+            sub = self._choose(pos, p, chosen, rest, top, level)
+            joins.append(f"JOIN {self.tables[p]} AS e{p} ON e{p}.seq = ({sub})")
+            chosen = chosen | {p}
+        own = self.cond_sql(top, within={pos})
+        conds = [self.inputs_complete(f"{t}.t_end")] + own
+        if pending:
+            source = (f"slr_cep_pending AS p JOIN {self.tables[pos]} AS {t} ON {t}.seq = "
+                      f"json_extract(p.rowids, '$[0]')")
+            conds = ["p.rule = :rule", f"p.alt = {self.index}", "p.kind = 'term'",
+                     f"p.pos = {pos}", "p.wait_type IS NULL"] + conds
+        else:
+            source = f"{self.tables[pos]} AS {t}"
+            conds = [f"{t}.seq > :w{pos}"] + conds
+        return (self._prov_insert() + f"SELECT {', '.join(self._prov_values(top))} FROM "
+                f"{source} {' '.join(joins)} WHERE {self._where(conds)}")
+
+    def _choose(self, pos: int, p: int, chosen: set, rest: list, top: dict,
+                level: int) -> str:
+        """SELECT the seq of the newest row for position p given the chosen rows (aliases
+        of ``top``) such that rows for ``rest`` exist."""
+        q = f"q{level}_"
+        aliases = dict(top)
+        aliases[f"e{p}"] = f"{q}e{p}"
+        for r in rest:
+            aliases[f"e{r}"] = f"{q}e{r}"
+        have = chosen | {p}
+        conds = self.cond_sql(aliases, within=have, exclude=chosen)
+        conds += self._terminator_one(pos, p, aliases)
+        if rest:
+            inner_have = have | set(rest)
+            inner = self.cond_sql(aliases, within=inner_have, exclude=have)
+            for r in rest:
+                inner += self._terminator_one(pos, r, aliases)
+            if self.negs:
+                inner.append(self.neg_ok(aliases))
+            froms = ", ".join(f"{self.tables[r]} AS {aliases[f'e{r}']}" for r in rest)
+            conds.append(f"EXISTS (SELECT 1 FROM {froms} WHERE {self._where(inner)})")
+        elif self.negs:
+            conds.append(self.neg_ok(aliases))
+        keys = self._key_order(p, aliases[f"e{p}"], True)
+        return (f"SELECT {aliases[f'e{p}']}.seq FROM {self.tables[p]} AS {aliases[f'e{p}']} "
+                f"WHERE {self._where(conds)} ORDER BY {', '.join(keys)} LIMIT 1")
+
+    def _terminator_one(self, pos: int, j: int, aliases: dict[str, str]) -> list[str]:
+        t, x = aliases[f"e{pos}"], aliases[f"e{j}"]
+        cmp = "<=" if j < pos else "<"
+        return [f"{x}.t_end <= {t}.t_end AND ({x}.t_end, {x}.t_start) {cmp} "
+                f"({t}.t_end, {t}.t_start)"]
+
+    def term_ready(self, pos: int) -> str:
+        key = ("term_ready", pos)
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._term_ready(pos)
+        return sql
+
+    def _term_ready(self, pos: int) -> str:
+        """New rows at terminator position ``pos`` whose inputs are complete up to their end
+        (decided at once): their seq and end."""
+        a = self.aliases()
+        t = a[f"e{pos}"]
+        conds = [f"{t}.seq > :w{pos}"] + self.cond_sql(a, within={pos}) \
+            + [self.inputs_complete(f"{t}.t_end")]
+        return (f"SELECT {t}.seq, {t}.t_end FROM {self.tables[pos]} AS {t} "
+                f"WHERE {self._where(conds)} ORDER BY {t}.t_end, {t}.t_start, {t}.seq")
+
+    def term_pending(self, pos: int, only_incomplete: bool) -> str:
+        key = ("term_pending", pos, only_incomplete)
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._term_pending(pos, only_incomplete)
+        return sql
+
+    def _term_pending(self, pos: int, only_incomplete: bool) -> str:
+        """New rows at terminator position ``pos`` kept as pending decisions (all of them,
+        or only those whose inputs are not complete up to their end yet)."""
+        a = self.aliases()
+        t = a[f"e{pos}"]
+        conds = [f"{t}.seq > :w{pos}"] + self.cond_sql(a, within={pos})
+        if only_incomplete:
+            conds.append(f"NOT ({self.inputs_complete(f'{t}.t_end')})")
+        return ("INSERT INTO slr_cep_pending (rule, alt, kind, pos, rowids, t_start, t_end, "
+                "created_at) "
+                f"SELECT :rule, {self.index}, 'term', {pos}, json_array({t}.seq), "
+                f"{t}.t_start, {t}.t_end, :now FROM {self.tables[pos]} AS {t} "
+                f"WHERE {self._where(conds)}")
+
+    def used_insert(self) -> str:
+        return f"INSERT OR IGNORE INTO {self.used_table} (tbl, seq) VALUES (?, ?)"
