@@ -434,7 +434,7 @@ def _char_code(m, a):
         raise instantiation_error()
     if type(c) is not int:
         raise type_error("integer", c)
-    if not 0 <= c <= 0x10FFFF:
+    if not 0 <= c <= 0x10FFFF or 0xD800 <= c <= 0xDFFF:  # surrogates too, as SWI-Prolog
         raise type_error("character_code", c)
     return m.unify(x, Atom(chr(c)))
 
@@ -936,11 +936,12 @@ def _count(num: str, default: int) -> int:
 
 
 def _char(code: Any) -> str:
-    """The character of a code (``~c``), as an ISO representation error when it is none."""
+    """The character of a code (``~c``); as SWI-Prolog, representation_error(code_point)
+    when the code is no Unicode character."""
     if type(code) is not int:
         raise type_error("integer", code)
     if not 0 <= code <= 0x10FFFF or 0xD800 <= code <= 0xDFFF:
-        raise iso_error(Struct("representation_error", (Atom("character_code"),)))
+        raise iso_error(Struct("representation_error", (Atom("code_point"),)))
     return chr(code)
 
 

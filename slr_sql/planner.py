@@ -1,4 +1,4 @@
-"""Query plans: SQL when the goal compiles exactly, the interpreter otherwise (SPEC §3).
+"""Query plans: SQL when the goal compiles exactly, the interpreter otherwise (docs/sql.md).
 
 For a query goal the planner
 

@@ -1,4 +1,5 @@
-"""Differential test: the interpreter against SWI-Prolog (SPEC §3, the correctness contract).
+"""Differential test: the interpreter against SWI-Prolog (the correctness contract:
+docs/semantics.md).
 
 Hypothesis generates small random programs -- facts over a few constants, stratified rules with
 joins, cut (also inside if-then-else conditions, ``\\+``, ``findall`` and ``call/1``), negation,
@@ -7,7 +8,7 @@ ints and floats (``/``, ``//``, ``mod``), if-then-else, ``*->``, ``;``, member/a
 nested ``call/1``, and stored events with a temporal rule -- plus a few queries. Every query
 runs through slr_sql (``kb.load`` + ``kb.query(goal, max_steps=...)``) and through SWI-Prolog
 (the events written as facts ``ev(A, B, Start, End)`` in store order, before the temporal
-rules, as SPEC §2 says). The answer lists must be equal, in order; an error must be the same
+rules, as docs/semantics.md says). The answer lists must be equal, in order; an error must be the same
 ISO formal term, after the same answers (checked with ``limit=``).
 
 SWI-Prolog runs as one long-lived process that consults each example's program from its own
@@ -310,7 +311,7 @@ def from_swi(j: dict, varmap: dict) -> tuple:
 
 
 def from_slr(v, varmap: dict) -> tuple:
-    """A value as kb.query returns it (SPEC §4) -> canonical tuple."""
+    """A value as kb.query returns it (docs/api.md) -> canonical tuple."""
     if type(v) is Var:
         return ("v", varmap.setdefault(("slr", id(v)), len(varmap)))
     if type(v) is bool:
@@ -338,7 +339,7 @@ def from_slr(v, varmap: dict) -> tuple:
 
 def swi_answer(values: list, names: list[str]) -> dict:
     """Named bindings as SLR's answers show them: a variable left unbound is omitted unless
-    it is shared with another named variable (SWI's toplevel rule, SPEC §4 / kb._answer)."""
+    it is shared with another named variable (SWI's toplevel rule, answers.answer_bindings)."""
     top = [v["v"] for v in values if "v" in v]
     kept = [(n, v) for n, v in zip(names, values) if not ("v" in v and top.count(v["v"]) < 2)]
     varmap: dict = {}
@@ -593,7 +594,7 @@ def examples(draw):
     for i in order:
         a, b, s, e = events[i]
         swi.append(f"ev({a}, {b}, {s!r}, {e!r}).")
-    swi.append(":- dynamic(ev/4).")  # no events and no rules: an event goal fails (SPEC §2)
+    swi.append(":- dynamic(ev/4).")  # no events and no rules: an event goal fails
     g.preds.append(("ev", 2))
     if draw(st.booleans()):
         # a temporal rule: answers after the stored events
