@@ -13,7 +13,7 @@ Nodes of the graph are :class:`Node` tuples:
 An edge A → B means a clause of A may call B. Besides the edges, each node lists the event
 types whose *stored* events its clauses read directly: an event goal reads its own type, and
 ``prev(E^Z, ..)`` / ``next(E^Z, ..)`` read E's type — and only the stored events: prev and next
-never call rules (SPEC §1), so they add no edge.
+never call rules, so they add no edge.
 
 Calls the analysis cannot resolve — ``call(G)`` or a goal that is a variable, ``prev(E, T)``
 with E unbound — make the node *unknown*: anything may be called. Meta-predicates are

@@ -9,17 +9,19 @@ interpreter enumerates solutions in the same order as SWI-Prolog.
 from __future__ import annotations
 
 import functools
+import gc
 import io
 import math
 import sys
 from typing import Any, Callable, Iterator
 
-from .arith import evaluate, instantiation_error, iso_error, type_error
-from .unify import bound_args, copy_term, resolve, unify, undo, unify_event_row
-from .errors import SLREvaluationError
+from .arith import (evaluate, evaluation_error, instantiation_error, iso_error,
+                    resource_error, type_error)
+from .unify import bound_args, copy_term, resolve, unify, undo, unify_event_row, unify_tuple
+from .errors import SLRError, SLREvaluationError
 from .program import Program, split_event_atom, event_key
-from .terms import (Atom, NIL, String, Struct, Var, deref, from_python, is_callable,
-                    is_ground, list_items, make_list, term_vars, to_python)
+from .terms import (CONS, Atom, NIL, String, Struct, Var, deref, from_python, int_text,
+                    is_callable, is_ground, list_items, make_list, term_vars, to_python)
 
 DET: dict[tuple[str, int], Callable[["Machine", tuple], bool]] = {}
 NONDET: dict[tuple[str, int], Callable[["Machine", tuple], Iterator[None]]] = {}
@@ -263,7 +265,12 @@ def _functor(m, a):
         return m.unify(t, name)
     if type(name) is not Atom:
         raise type_error("atomic" if type(name) is Struct else "atom", name)
-    return m.unify(t, Struct(name, tuple(Var() for _ in range(n))))
+    if n < 0:
+        raise _err_domain("not_less_than_zero", n)
+    # the arguments as a (deadline-checked, bounded) list first: functor(F, f, 10**8)
+    # is a resource error, not minutes of allocation
+    args, _ = list_items(build_list(m, n, lambda _: Var()))
+    return m.unify(t, Struct(name, tuple(args)))
 
 
 @nondet("arg", 3)
@@ -324,7 +331,7 @@ def text_of(t: Any, what: str = "atomic") -> str:
     if tt is Atom or tt is String:
         return str(t)
     if tt is int:
-        return str(t)
+        return int_text(t)
     if tt is float:
         from .terms import format_term
 
@@ -335,7 +342,7 @@ def text_of(t: Any, what: str = "atomic") -> str:
             try:
                 return "".join(chr(deref(x)) if type(deref(x)) is int else str(deref(x))
                                for x in items)
-            except (TypeError, ValueError):
+            except (TypeError, ValueError, OverflowError):  # not a character code
                 pass
     raise type_error(what, t)
 
@@ -427,7 +434,7 @@ def _char_code(m, a):
         raise instantiation_error()
     if type(c) is not int:
         raise type_error("integer", c)
-    if not 0 <= c <= 0x10FFFF:
+    if not 0 <= c <= 0x10FFFF or 0xD800 <= c <= 0xDFFF:  # surrogates too, as SWI-Prolog
         raise type_error("character_code", c)
     return m.unify(x, Atom(chr(c)))
 
@@ -571,6 +578,45 @@ def proper_list(t: Any) -> list:
     return items
 
 
+# The longest list one builtin call builds from a number (numlist/3, length/2): about
+# 150 bytes a cell, so 1.5 GB. Longer is resource_error(memory) at once, instead of a
+# MemoryError after minutes (SWI-Prolog's 1 GB stacks stop at a similar size).
+MAX_BUILT_LIST = 10_000_000
+# Cells built between two looks at the query's deadline.
+_CELLS_PER_DEADLINE_CHECK = 1 << 16
+
+
+def build_list(m: "Machine", n: int, item: Callable[[int], Any], tail: Any = NIL) -> Any:
+    """The list ``[item(0), ..., item(n-1) | tail]`` built back to front, in chunks between
+    which the query's deadline is checked (SLRTimeout); longer than MAX_BUILT_LIST is
+    resource_error(memory). The cyclic garbage collector is paused while building a long
+    list: it would otherwise re-scan the growing list again and again (3-4x slower).
+
+    >>> from slr_sql.engine import Engine; from slr_sql.program import Program
+    >>> str(build_list(Engine(Program()).machine(), 3, lambda i: i + 1))
+    '[1,2,3]'
+    """
+    if n > MAX_BUILT_LIST:
+        raise resource_error("memory")
+    out = tail
+    paused = n > _CELLS_PER_DEADLINE_CHECK and gc.isenabled()
+    if paused:
+        gc.disable()
+    try:
+        stop = n
+        while stop > 0:
+            start = max(0, stop - _CELLS_PER_DEADLINE_CHECK)
+            for i in range(stop - 1, start - 1, -1):
+                out = Struct(CONS, (item(i), out))
+            stop = start
+            if stop:
+                m.check_deadline()
+    finally:
+        if paused:
+            gc.enable()
+    return out
+
+
 @nondet("length", 2)
 def _length(m, a):
     items, tail = list_items(a[0])
@@ -592,20 +638,27 @@ def _length(m, a):
     if type(n) is int:
         if n < len(items):
             return
-        if m.unify(tail, make_list([Var() for _ in range(n - len(items))])):
+        if m.unify(tail, build_list(m, n - len(items), lambda _: Var())):
             yield None
         return
     if type(n) is not Var:
         raise type_error("integer", n)
     if n is tail:  # length([a|T], T): no list is its own length (fails, as in SWI-Prolog)
         return
+    # Lists of 0, 1, 2, ... fresh variables. Each one is the previous one with a fresh
+    # variable in front (all are unbound again after backtracking), so each solution costs
+    # one cell, not a whole new list.
     k = 0
+    fresh = NIL
     while True:
+        if k > MAX_BUILT_LIST:
+            raise resource_error("memory")
         mark = len(m.trail)
-        if m.unify(tail, make_list([Var() for _ in range(k)])) and m.unify(n, len(items) + k):
+        if m.unify(tail, fresh) and m.unify(n, len(items) + k):
             yield None
         m.undo_to(mark)
         k += 1
+        fresh = Struct(CONS, (Var(), fresh))
 
 
 @det("msort", 2)
@@ -717,7 +770,7 @@ def _numlist(m, a):
         raise type_error("integer", hi)
     if lo > hi:
         return False
-    return m.unify(a[2], make_list(range(lo, hi + 1)))
+    return m.unify(a[2], build_list(m, hi - lo + 1, lambda i: lo + i))
 
 
 @det("reverse", 2)
@@ -803,7 +856,7 @@ def format_text(fmt: str, args: list) -> str:
         num = ""
         while i < n and (fmt[i].isdigit() or fmt[i] == "*"):
             if fmt[i] == "*":
-                num = str(evaluate(take()))
+                num = int_text(evaluate(take()))
             else:
                 num += fmt[i]
             i += 1
@@ -821,26 +874,39 @@ def format_text(fmt: str, args: list) -> str:
             v = evaluate(take())
             if type(v) is not int:
                 raise type_error("integer", v)
-            if num and int(num) > 0:
-                k = int(num)
-                s = str(abs(v)).rjust(k + 1, "0")
-                s = ("-" if v < 0 else "") + s[:-k] + "." + s[-k:]
-            else:
-                s = f"{v:,}" if d == "D" else str(v)
-            out.append(s)
+            k = _count(num, 0)
+            digits = int_text(abs(v))
+            if d == "D":  # groups of three digits left of the point
+                whole = digits[:-k] if k else digits
+                whole = whole or "0"
+                lead = len(whole) % 3 or 3
+                whole = ",".join([whole[:lead]] + [whole[j:j + 3]
+                                                    for j in range(lead, len(whole), 3)])
+                digits = whole + (digits[-k:] if k else "")
+            if k > 0:  # ~2d: the last k digits after a decimal point
+                digits = digits.rjust(k + 1, "0")
+                digits = digits[:-k] + "." + digits[-k:]
+            out.append(("-" if v < 0 else "") + digits)
         elif d == "f" or d == "e" or d == "g":
-            v = float(evaluate(take()))
-            prec = int(num) if num else 6
+            try:
+                v = float(evaluate(take()))
+            except OverflowError:  # an integer beyond the largest float
+                raise evaluation_error("float_overflow") from None
+            prec = min(_count(num, 6), 1000)
             out.append(f"{v:.{prec}{d}}")
         elif d == "s":
             out.append(text_of(take()))
         elif d == "n":
-            out.append("\n" * (int(num) if num else 1))
+            out.append("\n" * _count(num, 1))
         elif d == "c":
-            out.append(chr(evaluate(take())) * (int(num) if num else 1))
+            out.append(_char(evaluate(take())) * _count(num, 1))
         elif d == "r":
             v = evaluate(take())
-            base = int(num) if num else 8
+            if type(v) is not int:
+                raise type_error("integer", v)
+            base = _count(num, 8)
+            if not 2 <= base <= 36:
+                raise _err_domain("radix", base)
             digits = "0123456789abcdefghijklmnopqrstuvwxyz"
             s, x = "", abs(v)
             while True:
@@ -858,6 +924,25 @@ def format_text(fmt: str, args: list) -> str:
         else:
             raise iso_error(Struct("format", (String(f"unknown directive ~{d}"),)))
     return "".join(out)
+
+
+def _count(num: str, default: int) -> int:
+    """The numeric argument of a format directive (``~3d``, ``~*c``), or ``default``."""
+    if not num:
+        return default
+    if len(num) > 12:  # ~99999999999999999d: no column or count is that large
+        raise resource_error("memory")
+    return int(num)
+
+
+def _char(code: Any) -> str:
+    """The character of a code (``~c``); as SWI-Prolog, representation_error(code_point)
+    when the code is no Unicode character."""
+    if type(code) is not int:
+        raise type_error("integer", code)
+    if not 0 <= code <= 0x10FFFF or 0xD800 <= code <= 0xDFFF:
+        raise iso_error(Struct("representation_error", (Atom("code_point"),)))
+    return chr(code)
 
 
 def _format_args(t: Any) -> list:
@@ -1053,7 +1138,11 @@ def _time_value(t: Any) -> float:
     if type(t) is Var:
         raise instantiation_error()
     v = evaluate(t)
-    return float(v)
+    try:
+        return float(v)
+    except OverflowError:
+        # an integer beyond the largest float compares beyond every stored (float) time
+        return math.inf if v > 0 else -math.inf
 
 
 def _interval(t: Any) -> tuple[float, float] | None:
@@ -1228,7 +1317,15 @@ def call_python_pred(m: "Machine", fn: Callable, args: tuple) -> bool:
     (unified with the arguments), or a dict ``{position: value}`` (0-based positions).
     """
     values = [to_python(x) for x in args]
-    result = fn(*values)
+    try:
+        result = fn(*values)
+    except (SLRError, MemoryError, RecursionError):
+        raise  # ours, or resource errors the machine turns into ISO ones
+    except Exception as exc:
+        # a bug in the user's function reaches the caller as an SLR error naming it
+        name = getattr(fn, "__name__", "a defined predicate")
+        raise iso_error(Struct("python_error", (String(
+            f"{name} raised {type(exc).__name__}: {exc}"),))) from exc
     if result is None or result is False:
         return False
     if result is True:

@@ -18,7 +18,7 @@ import math
 import time
 from typing import Any, Callable, Iterator
 
-from .arith import evaluate, instantiation_error, iso_error, type_error
+from .arith import evaluate, instantiation_error, iso_error, resource_error, type_error
 from .errors import SLREvaluationError, SLRTimeout
 from .program import MAX_RECURSIVE_NEST, Predicate, Program, Slot, Template, build, \
     event_key, split_event_atom
@@ -198,6 +198,22 @@ class Machine:
                 cont = self._handle_throw(exc.ball)
             except SLREvaluationError as exc:
                 cont = self._handle_throw(exc.term, exc)
+            except MemoryError:
+                # a builtin or a Python predicate ran out of memory: an ISO resource error
+                # (catchable by catch/3, as in SWI-Prolog), never a raw MemoryError
+                err = resource_error("memory")
+                cont = self._handle_throw(err.term, err)
+            except RecursionError:  # a safety net: term walks are iterative
+                err = resource_error("c_stack")
+                cont = self._handle_throw(err.term, err)
+
+    def check_deadline(self) -> None:
+        """Raise SLRTimeout once the query's time is up: for builtins that loop long inside
+        one step (building a list of millions of cells), which the machine's own check
+        every 2048 steps would not see in time."""
+        if self.deadline is not None and time.monotonic() > self.deadline:
+            raise SLRTimeout(f"query timed out after {self.timeout} s "
+                             f"({self.steps} inference steps)")
 
     def _check_limits(self, n: int) -> None:
         self.steps += n

@@ -1,4 +1,4 @@
-"""Query plans: SQL when the goal compiles exactly, the interpreter otherwise (SPEC §3).
+"""Query plans: SQL when the goal compiles exactly, the interpreter otherwise (docs/sql.md).
 
 For a query goal the planner
 
@@ -636,7 +636,10 @@ def try_sql(kb, plan, args, at, limit=None, deadline=None):
         return None
     try:
         return entry.run(kb, args or {}, at, limit, deadline)
-    except (DatabaseError, Unencodable, ValueError, TypeError, KeyError, OverflowError):
+    except (DatabaseError, Unencodable, ValueError, TypeError, KeyError, OverflowError,
+            MemoryError, RecursionError):
+        # (a defined predicate called from SQL that runs out of memory surfaces here as
+        # MemoryError): the interpreter answers, and reports it as an ISO resource error
         return None
 
 
@@ -717,6 +720,8 @@ def view_sql(kb, name: str, arity: int):
         comp.compile(goal, emit)
     except Fallback as exc:
         return None, exc.reason, comp.missing
+    except RecursionError:  # as plan_for: a term nested too deeply for the compiler's walks
+        return None, "a clause is nested too deeply to compile", comp.missing
     except (ValueError, OverflowError) as exc:  # a constant SQL cannot hold: no view
         return None, str(exc), comp.missing
     if comp.uses_udf:

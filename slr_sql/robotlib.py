@@ -1,4 +1,4 @@
-"""Robot library: continuous knowledge over numbers, vectors and poses (SPEC §1 "Robot library").
+"""Robot library: continuous knowledge over numbers, vectors and poses (docs/language.md, "Robot library").
 
 Everything here works on *Python values*, not terms: the engine converts arguments with
 :func:`slr_sql.terms.to_python` and results back with :func:`slr_sql.terms.from_python`.

@@ -1,4 +1,4 @@
-"""Synchronized queries over asynchronous events (SPEC §3; the SLR paper, "Synchronizing
+"""Synchronized queries over asynchronous events (the SLR paper, "Synchronizing
 Queries over Asynchronous Events"). See docs/synchronization.md.
 
 Three parts:
@@ -873,8 +873,8 @@ class Synchronizer:
     def _sql_answers(self, q: PendingQuery, now: float) -> list | None:
         """The answers through the compiled statement, when the goal compiles and every
         prev/next in it reads a history that is complete up to its (constant) time — the
-        dynamic condition of SPEC §3 checked before the statement runs, for all of them at
-        once. None: evaluate in the interpreter, whose hooks wait for exactly what the
+        dynamic condition of docs/synchronization.md checked before the statement runs, for
+        all of them at once. None: evaluate in the interpreter, whose hooks wait for exactly what the
         evaluation reaches."""
         kb = self.kb
         if not kb.sql_enabled:

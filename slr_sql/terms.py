@@ -120,10 +120,10 @@ class Var:
         self.name = name
 
     def __repr__(self) -> str:
-        return f"Var({self.name!r})" if self.ref is None else f"Var({self.name!r}={self.ref!r})"
+        return f"Var({self.name!r})" if self.ref is None else _term_repr(self)
 
     def __str__(self) -> str:
-        return self.name if self.ref is None else str(self.ref)
+        return self.name if self.ref is None else format_term(self)
 
 
 class Struct:
@@ -152,10 +152,64 @@ class Struct:
         return hash((self.name, len(self.args)))
 
     def __repr__(self) -> str:
-        return f"Struct({str(self.name)!r}, {self.args!r})"
+        return _term_repr(self)
 
     def __str__(self) -> str:
         return format_term(self)
+
+
+def _term_repr(t: Any) -> str:
+    """repr() of a term, ``Struct('f', (Atom('a'),))`` style, from an explicit stack (a
+    term nested 100,000 deep has a repr); a binding met again inside itself (a cyclic
+    term) is shown as ``Var('X'=...)``."""
+    out: list[str] = []
+    todo: list = [t]
+    open_vars: set[int] = set()
+    while todo:
+        x = todo.pop()
+        tx = type(x)
+        if tx is _ReprText:
+            out.append(x.text)
+            if x.closes is not None:
+                open_vars.discard(x.closes)
+        elif tx is Struct:
+            out.append(f"Struct({str(x.name)!r}, (")
+            todo.append(_ReprText(",))" if len(x.args) == 1 else "))"))
+            _push_items(todo, x.args)
+        elif tx is Var and x.ref is not None:
+            if id(x) in open_vars:
+                out.append(f"Var({x.name!r}=...)")
+                continue
+            open_vars.add(id(x))
+            out.append(f"Var({x.name!r}=")
+            todo.append(_ReprText(")", id(x)))
+            todo.append(x.ref)
+        elif tx is list or tx is tuple:
+            out.append("[" if tx is list else "(")
+            todo.append(_ReprText("]" if tx is list else (",)" if len(x) == 1 else ")")))
+            _push_items(todo, x)
+        elif tx is int:
+            out.append(int_text(x))  # repr() refuses more than 4,300 digits
+        else:
+            out.append(repr(x))
+    return "".join(out)
+
+
+def _push_items(todo: list, items: Any) -> None:
+    for k in range(len(items) - 1, -1, -1):
+        todo.append(items[k])
+        if k:
+            todo.append(_ReprText(", "))
+
+
+class _ReprText:
+    """_term_repr's marker: text to write (and a binding to close) after the items above."""
+
+    __slots__ = ("text", "closes")
+
+    def __init__(self, text: str, closes: int | None = None):
+        self.text = text
+        self.closes = closes
 
 
 NIL = Atom("[]")

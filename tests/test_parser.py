@@ -9,6 +9,7 @@ and review the diff.
 """
 from __future__ import annotations
 
+import json
 import math
 import os
 import shutil
@@ -290,6 +291,10 @@ SWI_TEXTS = [
     "X = \"tab\\there\"", "X = (p *-> q ; r)", "X = (a := b)", "X = ñandú",
     "X = ['\\e', '\\0\\', '\\x7f\\', 'a\\x85\\b', \"\\a\\e\"]", "X = (a, b | c)",
     "X = (a ; b | c)", "p:-(a;b),\\+ (c;d)", "X = a-(b)*c", "X = f(a, (b :- c))",
+    # big integers (beyond Python's 4,300-digit str() limit), deep nesting, escapes
+    "X = " + "7" * 5000 + " - -" + "9" * 4400, "X = " + "f(" * 600 + "- a" + ")" * 600,
+    "X = " + "- " * 600 + "1", "X = " + "^".join(["a"] * 600), "X = 0'\\x41\\ + 0'\\101\\",
+    "X = 'it''s\\x41\\\\101\\'", "X = 1.0e308 + 5.0e-324",
 ]
 _SWI_SCRIPT = r"""
 :- initialization(main, main).
@@ -305,17 +310,35 @@ main :-
 """
 
 
-def test_cross_check_with_swi_prolog(tmp_path):
-    swipl = shutil.which("swipl")
-    assert swipl, "swipl (SWI-Prolog) is required for this test: install it (apt install swi-prolog-nox)"
-    script = tmp_path / "print.pl"
+SWI_PRINT_CORPUS = Path(__file__).parent / "golden" / "swi_print.json"
+
+
+def swi_writeq(texts: list[str], workdir: Path) -> list[str]:
+    """What a live SWI-Prolog prints for each text (read_term + writeq), in order."""
+    script = workdir / "print.pl"
     script.write_text(_SWI_SCRIPT)
-    proc = subprocess.run([swipl, str(script)], input="\n".join(SWI_TEXTS) + "\n",
+    proc = subprocess.run([shutil.which("swipl"), str(script)], input="\n".join(texts) + "\n",
                           capture_output=True, text=True, timeout=60)
-    swi = proc.stdout.splitlines()
-    assert len(swi) == len(SWI_TEXTS), proc.stderr
+    printed = proc.stdout.splitlines()
+    assert len(printed) == len(texts), proc.stderr
+    return printed
+
+
+def test_cross_check_with_swi_prolog(tmp_path):
+    """Our printed form of each text is SWI-Prolog's. SWI's answers are committed in
+    tests/golden/swi_print.json (written by tests/golden/make_swi_corpus.py), so the test
+    runs on machines without SWI-Prolog; where ``swipl`` is installed the live answers must
+    equal the committed ones (else the corpus is stale: run the script)."""
+    corpus = {x["text"]: x["printed"]
+              for x in json.loads(SWI_PRINT_CORPUS.read_text(encoding="utf-8"))["texts"]}
+    assert sorted(corpus) == sorted(SWI_TEXTS), "tests/golden/swi_print.json is stale: " \
+        "run tests/golden/make_swi_corpus.py"
+    if shutil.which("swipl"):
+        live = dict(zip(SWI_TEXTS, swi_writeq(SWI_TEXTS, tmp_path)))
+        assert live == corpus, "SWI-Prolog prints differently from tests/golden/swi_print.json"
     mismatches = []
-    for text, expected in zip(SWI_TEXTS, swi):
+    for text in SWI_TEXTS:
+        expected = corpus[text]
         assert expected != "<syntax error>", f"SWI-Prolog rejects {text!r}: fix the test list"
         mine = format_term(parse_term(text)[0])
         if mine != expected:
@@ -323,7 +346,8 @@ def test_cross_check_with_swi_prolog(tmp_path):
     assert not mismatches
 
 
-@pytest.mark.parametrize("text", SWI_TEXTS)
+@pytest.mark.parametrize("text", SWI_TEXTS, ids=[t if len(t) < 60 else t[:40] + "..."
+                                                  for t in SWI_TEXTS])
 def test_round_trip_of_cross_check_texts(text):
     t, _ = parse_term(text)
     back, _ = parse_term(format_term(t))
