@@ -113,6 +113,19 @@ class Machine:
     def undo_to(self, mark: int) -> None:
         undo(self.trail, mark)
 
+    def abandon(self, solving: Iterator[None]) -> None:
+        """Stop a run of :meth:`solve` before its end: close the generators left on its
+        choicepoints (they hold store cursors) now, rather than whenever the garbage
+        collector gets to them, then the run itself."""
+        for cp in reversed(self.cps):
+            if cp[0] == K_GEN:
+                try:
+                    cp[3].close()
+                except Exception:  # noqa: BLE001 - a generator failing to close is done anyway
+                    pass
+        self.cps.clear()
+        solving.close()
+
     # -- the main loop ------------------------------------------------------------------
     def solve(self, goal: Any) -> Iterator[None]:
         """Prove ``goal``; yields after each solution (bindings readable until resumed)."""

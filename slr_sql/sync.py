@@ -852,7 +852,7 @@ class Synchronizer:
             for _ in solving:
                 answers.append(answer_bindings(plan.names, frame))
         except _MustWait as w:
-            _close_machine(m, solving)
+            m.abandon(solving)
             wait = Wait(w.key, w.time, w.reason, self.clock.now(), w.kind)
             wait.seen = w.seen
             self._park(q, [wait], [(w.key, w.time, w.kind, w.seen)])
@@ -1088,21 +1088,6 @@ class Synchronizer:
                 # a deadline far away (a query at 1e12) would overflow the platform's
                 # time_t and kill this thread: wake up hourly instead and look again
                 self.cond.wait(None if wait is None else min(wait, 3600.0))
-
-
-def _close_machine(m: Any, solving: Any) -> None:
-    """Close the generators an abandoned evaluation left on its choicepoints (they hold
-    store cursors) now, rather than whenever the garbage collector gets to them."""
-    from .engine import K_GEN
-
-    for cp in reversed(m.cps):
-        if cp[0] == K_GEN:
-            try:
-                cp[3].close()
-            except Exception:
-                pass
-    m.cps.clear()
-    solving.close()
 
 
 def attach(kb: Any) -> Synchronizer:

@@ -173,22 +173,8 @@ class Residual:
                 else:
                     out.append(sol)
         finally:
-            _close(m, solving)
+            m.abandon(solving)
         return out
-
-
-def _close(m: Any, solving: Any) -> None:
-    """Close the store cursors an abandoned run left on its choicepoints now."""
-    from ..engine import K_GEN
-
-    for cp in reversed(m.cps):
-        if cp[0] == K_GEN:
-            try:
-                cp[3].close()
-            except Exception:
-                pass
-    m.cps.clear()
-    solving.close()
 
 
 def describe_error(exc: BaseException) -> str:
