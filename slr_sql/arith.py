@@ -8,10 +8,11 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from .terms import Atom, Struct, Var, deref, String
+from .terms import MAX_INTEGER_BITS, Atom, Struct, Var, deref, String
 from .errors import SLREvaluationError
 
-__all__ = ["evaluate", "type_error", "instantiation_error", "evaluation_error", "iso_error"]
+__all__ = ["evaluate", "type_error", "instantiation_error", "evaluation_error", "iso_error",
+           "resource_error"]
 
 
 def iso_error(formal: Any, context: Any = None) -> SLREvaluationError:
@@ -31,6 +32,31 @@ def type_error(kind: str, culprit: Any) -> SLREvaluationError:
 
 def evaluation_error(what: str) -> SLREvaluationError:
     return iso_error(Struct("evaluation_error", (Atom(what),)))
+
+
+def resource_error(what: str) -> SLREvaluationError:
+    """ISO ``resource_error(What)``: a computation would exceed a limit (memory, integer size)."""
+    return iso_error(Struct("resource_error", (Atom(what),)))
+
+
+def _too_big() -> SLREvaluationError:
+    return resource_error("max_integer_size")
+
+
+def _mul(a, b):
+    if type(a) is int and type(b) is int and a.bit_length() + b.bit_length() > MAX_INTEGER_BITS + 1:
+        raise _too_big()
+    return a * b
+
+
+def _int_power(a: int, b: int) -> int:
+    """a ** b for integers with b >= 0, refused before computing when the result would be
+    beyond MAX_INTEGER_BITS (7 ** 100000000 would take hours, uninterruptibly)."""
+    if a in (0, 1, -1) or b == 0:
+        return a ** b
+    if b * (abs(a).bit_length() - 1) > MAX_INTEGER_BITS:
+        raise _too_big()
+    return a ** b
 
 
 def _int_required(x: Any) -> int:
@@ -84,7 +110,7 @@ def _pow_star(a, b):
     # SWI (prefer_rationals=false): int ** int is an int when the result is integral
     if type(a) is int and type(b) is int:
         if b >= 0:
-            return a ** b
+            return _int_power(a, b)
         if a in (1, -1):
             return a ** b and int(a ** b)
         if a == 0:
@@ -104,7 +130,7 @@ def _pow_caret(a, b):
             if a == 0:
                 raise evaluation_error("zero_divisor")
             raise type_error("float", a)
-        return a ** b
+        return _int_power(a, b)
     try:
         return float(a) ** float(b)
     except ZeroDivisionError:
@@ -166,7 +192,10 @@ def _minmax(pick_first):
 
 
 def _shift_l(a, b):
-    return _int_required(a) << _int_required(b)
+    a, b = _int_required(a), _int_required(b)
+    if a and b > 0 and a.bit_length() + b > MAX_INTEGER_BITS:
+        raise _too_big()
+    return a << b
 
 
 def _shift_r(a, b):
@@ -176,7 +205,7 @@ def _shift_r(a, b):
 BINARY = {
     "+": lambda a, b: a + b,
     "-": lambda a, b: a - b,
-    "*": lambda a, b: a * b,
+    "*": _mul,
     "/": _div,
     "//": _intdiv,
     "mod": _mod,
@@ -240,7 +269,12 @@ CONSTANTS = {
 }
 
 
-def evaluate(t: Any) -> int | float:
+# Expressions nested deeper than this are evaluated from an explicit stack (1+1+...+1 with
+# 100,000 terms), below Python's recursion limit, which the caller's frames share.
+_MAX_RECURSIVE_DEPTH = 200
+
+
+def evaluate(t: Any, _depth: int = 0) -> int | float:
     """Evaluate an arithmetic expression term.
 
     >>> from slr_sql.terms import Struct
@@ -254,6 +288,8 @@ def evaluate(t: Any) -> int | float:
     if tt is Var:
         raise instantiation_error()
     if tt is Struct:
+        if _depth > _MAX_RECURSIVE_DEPTH:
+            return _evaluate_deep(t)
         name = t.name
         args = t.args
         n = len(args)
@@ -263,35 +299,54 @@ def evaluate(t: Any) -> int | float:
                 if f is not None:
                     # right argument first, as SWI-Prolog: it decides which error is
                     # raised when both arguments are faulty ((1/0) + Y: instantiation_error)
-                    b = evaluate(args[1])
-                    r = f(evaluate(args[0]), b)
-                    return _float_check(r) if type(r) is float else r
+                    b = evaluate(args[1], _depth + 1)
+                    return _checked(f(evaluate(args[0], _depth + 1), b))
             elif n == 1:
                 f = UNARY.get(name)
                 if f is not None:
-                    r = f(evaluate(args[0]))
-                    return _float_check(r) if type(r) is float else r
-            if name == "." and n == 2:
-                # [X] is the character code X, as in SWI-Prolog: a code or a one-char atom
-                tail = deref(args[1])
-                if tail == "[]" and type(tail) is Atom:
-                    x = deref(args[0])
-                    if type(x) is Var:
-                        raise instantiation_error()
-                    if type(x) is int and x >= 0:
-                        return x
-                    if type(x) is Atom and len(x) == 1:
-                        return ord(x)
-                    raise type_error("character", x)
+                    return _checked(f(evaluate(args[0], _depth + 1)))
         except (OverflowError,) as exc:
             raise evaluation_error("float_overflow") from exc
         except (ValueError, ZeroDivisionError) as exc:
             raise evaluation_error("undefined") from exc
-        # as SWI-Prolog: the arguments are evaluated (right first) before the functor is
-        # found unknown, so f(Y) with Y unbound is an instantiation error
-        for a in reversed(args):
-            evaluate(a)
-        raise type_error("evaluable", Struct("/", (name, n)))
+        return _other_compound(t, _depth)
+    return _atomic_value(t, tt)
+
+
+def _checked(r: Any) -> Any:
+    """An operation's result: NaN is undefined; an integer beyond MAX_INTEGER_BITS (one that
+    grew slowly, by + or -) is a resource error."""
+    if type(r) is float:
+        return _float_check(r)
+    if type(r) is int and r.bit_length() > MAX_INTEGER_BITS:
+        raise _too_big()
+    return r
+
+
+def _other_compound(t: Struct, depth: int) -> int | float:
+    """A compound that is not a known operation: ``[X]`` (a character code) or an error."""
+    name, args = t.name, t.args
+    n = len(args)
+    if name == "." and n == 2:
+        # [X] is the character code X, as in SWI-Prolog: a code or a one-char atom
+        tail = deref(args[1])
+        if tail == "[]" and type(tail) is Atom:
+            x = deref(args[0])
+            if type(x) is Var:
+                raise instantiation_error()
+            if type(x) is int and x >= 0:
+                return x
+            if type(x) is Atom and len(x) == 1:
+                return ord(x)
+            raise type_error("character", x)
+    # as SWI-Prolog: the arguments are evaluated (right first) before the functor is
+    # found unknown, so f(Y) with Y unbound is an instantiation error
+    for a in reversed(args):
+        evaluate(a, depth + 1)
+    raise type_error("evaluable", Struct("/", (name, n)))
+
+
+def _atomic_value(t: Any, tt: type) -> int | float:
     if tt is Atom:
         if t in CONSTANTS:
             v = CONSTANTS[t]
@@ -308,6 +363,73 @@ def evaluate(t: Any) -> int | float:
     if tt is String and len(t) == 1:
         return ord(t)
     raise type_error("evaluable", t)
+
+
+class _Apply:
+    """_evaluate_deep's marker: apply ``f`` to the last ``n`` values (in argument order)."""
+
+    __slots__ = ("f", "n", "term")
+
+    def __init__(self, f: Any, n: int, term: Struct):
+        self.f = f
+        self.n = n
+        self.term = term
+
+
+def _evaluate_deep(t: Any) -> int | float:
+    """evaluate() from an explicit stack, in the same order (right argument first)."""
+    values: list = []
+    todo: list = [t]
+    while todo:
+        x = todo.pop()
+        if type(x) is _Apply:
+            try:
+                if x.n == 2:
+                    b = values.pop()
+                    a = values.pop()
+                    values.append(_checked(x.f(a, b)))
+                else:
+                    values.append(_checked(x.f(values.pop())))
+            except OverflowError as exc:
+                raise evaluation_error("float_overflow") from exc
+            except (ValueError, ZeroDivisionError) as exc:
+                raise evaluation_error("undefined") from exc
+            continue
+        x = deref(x)
+        tx = type(x)
+        if tx is int or tx is float:
+            values.append(x)
+        elif tx is Var:
+            raise instantiation_error()
+        elif tx is Struct:
+            n = len(x.args)
+            f = BINARY.get(x.name) if n == 2 else UNARY.get(x.name) if n == 1 else None
+            if f is None:
+                values.append(_other_compound(x, 0))
+                continue
+            todo.append(_Apply(f, n, x))
+            if n == 2:
+                # the right argument is evaluated first (as evaluate() does), so its value
+                # lands first: _Swap puts the two back in argument order for _Apply
+                todo.append(_SWAP)
+                todo.append(x.args[0])
+                todo.append(x.args[1])
+            else:
+                todo.append(x.args[0])
+        elif type(x) is _Swap:
+            values[-1], values[-2] = values[-2], values[-1]
+        else:
+            values.append(_atomic_value(x, tx))
+    return values[0]
+
+
+class _Swap:
+    """_evaluate_deep's marker: the right operand's value was pushed first: swap the two."""
+
+    __slots__ = ()
+
+
+_SWAP = _Swap()
 
 
 def compare_num(a: int | float, b: int | float) -> int:

@@ -76,13 +76,13 @@ class ManualClock(Clock):
 
     def set(self, t: float) -> None:
         if t < self._t:
-            raise ValueError(f"ManualClock cannot go back in time ({t} < {self._t})")
+            raise SLRError(f"ManualClock cannot go back in time ({t} < {self._t})")
         self._t = float(t)
         self._moved(self._t)
 
     def advance(self, dt: float) -> None:
         if dt < 0:
-            raise ValueError("ManualClock.advance needs dt >= 0")
+            raise SLRError("ManualClock.advance needs dt >= 0")
         self.set(self._t + dt)
 
 

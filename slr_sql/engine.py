@@ -20,10 +20,11 @@ from typing import Any, Callable, Iterator
 
 from .arith import evaluate, instantiation_error, iso_error, type_error
 from .errors import SLREvaluationError, SLRTimeout
-from .program import Predicate, Program, Slot, Template, build, split_event_atom, event_key
+from .program import MAX_RECURSIVE_NEST, Predicate, Program, Slot, Template, build, \
+    event_key, split_event_atom
 from .terms import (Atom, NIL, String, Struct, Var, deref, format_atom, format_term, list_items,
                     make_list, term_vars)
-from .unify import bound_args, copy_term, resolve, undo, unify, unify_event_row
+from .unify import bound_args, copy_term, resolve, undo, unify, unify_event_row, unify_tuple
 
 __all__ = ["Engine", "Machine", "unify", "copy_term", "PrologThrow"]
 
@@ -543,6 +544,8 @@ def _unify_pattern(p: Any, t: Any, frame: list, trail: list) -> bool:
             return True
         return unify(cur, t, trail)
     if tp is Template:
+        if p.nest > MAX_RECURSIVE_NEST:  # a deeply nested head argument: no recursion
+            return unify(build(p, frame), t, trail)
         while type(t) is Var:
             r = t.ref
             if r is None:

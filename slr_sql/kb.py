@@ -10,6 +10,7 @@
 """
 from __future__ import annotations
 
+import functools
 import math
 import threading
 import time
@@ -24,7 +25,7 @@ from .engine import Engine, Machine
 from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
-from .store import DEFAULT_BUSY_TIMEOUT, EventStore
+from .store import DEFAULT_BUSY_TIMEOUT, DatabaseError, EventStore
 from .store.checks import event_arguments, shorten
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
@@ -776,6 +777,8 @@ class KnowledgeBase:
         plan = self._plans.get(key)
         if plan is not None:
             return plan
+        if not isinstance(goal, str):
+            raise SLRError(f"a goal is SLR text (a str), not {type(goal).__name__} {goal!r}")
         term, varnames = parse_term(goal, "<query>")
         compiled = compile_clause((), term)
         slots: dict[str, int] = {}
@@ -843,6 +846,8 @@ class KnowledgeBase:
         """
         if limit is not None and (type(limit) is not int or limit < 0):
             raise SLRError(f"limit must be a count (an integer >= 0), not {limit!r}")
+        _check_time_option("at", at)
+        _check_time_option("timeout", timeout, minimum=0.0)
         if wait:  # issue 5: synchronized (SLRTimeout names the incomplete types)
             return self.submit(goal, at=at, args=args, timeout=timeout).result()
         self._refresh()
@@ -1028,6 +1033,59 @@ class KnowledgeBase:
     def unsubscribe(self, id: str) -> None:
         """Remove the durable subscription ``id`` and its position (closing it if open)."""
         self._subscriptions.unsubscribe(id)
+
+
+def _check_time_option(name: str, value: Any, minimum: float | None = None) -> None:
+    """``at=`` and ``timeout=`` are numbers of seconds (``None``: not given)."""
+    if value is None:
+        return
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SLRError(f"{name} must be a number of seconds, not {value!r}")
+    try:
+        number = float(value)
+    except OverflowError:
+        raise SLRError(f"{name} is out of range (an integer of {value.bit_length()} bits)") \
+            from None
+    if math.isnan(number) or (minimum is not None and number < minimum):
+        raise SLRError(f"{name} must be a number of seconds"
+                       f"{'' if minimum is None else f' >= {minimum:g}'}, not {value!r}")
+
+
+def _boundary(method: Callable) -> Callable:
+    """The facade's promise, kept at its edge: whatever goes wrong below (a check a layer
+    lacks, a Python error inside a user's ``define``d predicate, a damaged file), the caller
+    gets an :class:`SLRError` in words, never a raw Python or SQLite exception."""
+    where = "open" if method.__name__ == "__init__" else method.__name__
+
+    @functools.wraps(method)
+    def guarded(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return method(*args, **kwargs)
+        except SLRError:
+            raise
+        except RecursionError:
+            raise SLRError(f"{where}: the term is nested too deeply") from None
+        except MemoryError:
+            raise SLRError(f"{where}: out of memory") from None
+        except DatabaseError as exc:
+            kb = args[0] if args and isinstance(args[0], KnowledgeBase) else None
+            path = getattr(getattr(kb, "store", None), "path", None) or (
+                args[1] if where == "open" and len(args) > 1 else kwargs.get("path"))
+            raise SLRError(f"{path or ':memory:'}: the store failed ({exc}); if the file is "
+                           f"damaged, restore it from a copy") from None
+        except Exception as exc:  # noqa: BLE001 - the boundary: every kind becomes words
+            raise SLRError(f"{where}: {type(exc).__name__}: {exc}") from exc
+    return guarded
+
+
+# Every public method of the facade goes through the boundary (one list, kept next to it).
+for _name in ("__init__", "close", "load", "unload", "programs", "load_file", "define", "add",
+              "add_event", "add_many", "query", "explain", "submit", "mark_complete",
+              "complete_until", "pending", "add_buffer", "remove_buffer", "buffers", "sql",
+              "plot", "subscribe", "unsubscribe", "event_rules"):
+    if hasattr(KnowledgeBase, _name):
+        setattr(KnowledgeBase, _name, _boundary(getattr(KnowledgeBase, _name)))
+del _name
 
 
 def open(path: str | Path | None = None, clock: Clock | None = None, **options: Any) -> KnowledgeBase:

@@ -30,6 +30,7 @@ from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput
 from .errors import SLRSyntaxError
 from .terms import INFIX_OPS, PREFIX_OPS
 from .terms import CONS, NIL, TRUE, Atom, Clause, Span, String, Struct, Var, make_list
+from .terms import MAX_INTEGER_BITS, int_from_text
 
 __all__ = ["parse_program", "parse_term", "parse_event_fast"]
 
@@ -58,45 +59,66 @@ class _Fail(Exception):
 
 
 # ---------------------------------------------------------------------------- tokens
-def _unescape(body: str, pos: int) -> str:
-    """Decode the inside of a quoted atom or string (quotes already stripped)."""
+def _quoted_text(tok: str, pos: int) -> str:
+    """The text of a quoted atom or string token; ``pos`` is the token's offset in the source.
+
+    Plain runs are copied in one slice each (a 10 MB atom is not walked character by
+    character); doubled quotes and escapes are decoded, and an error points at its escape.
+    """
+    q = tok[0]
+    body = tok[1:-1]
     if "\\" not in body:
-        return body
+        return body.replace(q + q, q) if q in body else body
     out = []
+    qq = q + q
     i, n = 0, len(body)
     while i < n:
-        ch = body[i]
-        if ch != "\\":
-            out.append(ch)
-            i += 1
-            continue
-        i += 1
-        c = body[i]
-        if c == "\n":  # `\` newline: line continuation
-            i += 1
-        elif c == "x":
-            j = i + 1
-            while j < n and body[j] in "0123456789abcdefABCDEF":
-                j += 1
-            out.append(chr(int(body[i + 1:j], 16)))
-            i = j + 1 if j < n and body[j] == "\\" else j
-        elif c in "01234567":
-            j = i
-            while j < n and body[j] in "01234567":
-                j += 1
-            out.append(chr(int(body[i:j], 8)))
-            i = j + 1 if j < n and body[j] == "\\" else j
-        elif c in _ESC:
-            out.append(_ESC[c])
-            i += 1
-        else:
-            raise _Fail(f"undefined escape sequence '\\{c}'", pos)
+        j = body.find("\\", i)
+        if j < 0:
+            j = n
+        if j > i:
+            chunk = body[i:j]
+            out.append(chunk.replace(qq, q) if q in chunk else chunk)
+        if j == n:
+            break
+        ch, i = _escape_at(body, j, pos + 1)
+        out.append(ch)
     return "".join(out)
 
 
-def _quoted_text(tok: str, pos: int) -> str:
-    q = tok[0]
-    return _unescape(tok[1:-1].replace(q + q, q), pos)
+_HEX_DIGITS = frozenset("0123456789abcdefABCDEF")
+_OCT_DIGITS = frozenset("01234567")
+
+
+def _escape_at(body: str, j: int, base: int) -> tuple[str, int]:
+    """Decode the escape sequence starting with the backslash at ``body[j]``: (text, end).
+
+    ``base`` is the source offset of ``body[0]``, for the error position. As SWI-Prolog,
+    ``\\xHH..\\`` and ``\\OOO..\\`` must name a Unicode character: at most 0x10FFFF and not a
+    surrogate (D800-DFFF, which no UTF-8 text can hold).
+    """
+    n = len(body)
+    c = body[j + 1]  # the lexer only ends a token after a complete escape
+    if c == "\n":  # `\` newline: line continuation
+        return "", j + 2
+    if c == "x" or c in _OCT_DIGITS:
+        digits = _HEX_DIGITS if c == "x" else _OCT_DIGITS
+        start = j + 2 if c == "x" else j + 1
+        k = start
+        while k < n and body[k] in digits:
+            k += 1
+        if k == start:
+            raise _Fail("\\x escape without hexadecimal digits", base + j)
+        end = k + 1 if k < n and body[k] == "\\" else k
+        text = body[start:k].lstrip("0") or "0"
+        code = int(text, 16 if c == "x" else 8) if len(text) <= 8 else -1
+        if not 0 <= code <= 0x10FFFF or 0xD800 <= code <= 0xDFFF:
+            raise _Fail(f"illegal character code {body[j:end]} (not a Unicode character)",
+                        base + j)
+        return chr(code), end
+    if c in _ESC:
+        return _ESC[c], j + 2
+    raise _Fail(f"undefined escape sequence '\\{c}'", base + j)
 
 
 def _int_value(text: str, pos: int) -> int:
@@ -104,29 +126,55 @@ def _int_value(text: str, pos: int) -> int:
         c = text[2:]
         if c == "''":
             return 39
-        return ord(_unescape(c, pos) if c[0] == "\\" else c)
+        if c[0] != "\\":
+            return ord(c)
+        ch, _ = _escape_at(c, 0, pos + 2)
+        if len(ch) != 1:  # `0'\` followed by a newline
+            raise _Fail("incomplete character code 0'", pos)
+        return ord(ch)
     if text[:2] in ("0x", "0o", "0b"):
-        return int(text[2:], {"x": 16, "o": 8, "b": 2}[text[1]])
-    return int(text)
+        base = {"x": 16, "o": 8, "b": 2}[text[1]]
+        digits = text[2:]
+        return _checked_int(digits, base, len(digits) * (base.bit_length() - 1), pos)
+    return _checked_int(text, 10, int(len(text) * 3.33), pos)
 
 
-def _float_value(text: str) -> float:
+def _checked_int(digits: str, base: int, approx_bits: int, pos: int) -> int:
+    """An integer literal, refused beyond MAX_INTEGER_BITS (checked on the length first,
+    so that a megabyte of digits is not converted only to be refused)."""
+    if approx_bits > MAX_INTEGER_BITS + 8:
+        raise _Fail(f"integer too large (more than {MAX_INTEGER_BITS} bits)", pos)
+    value = int_from_text(digits, base)
+    if value.bit_length() > MAX_INTEGER_BITS:
+        raise _Fail(f"integer too large (more than {MAX_INTEGER_BITS} bits)", pos)
+    return value
+
+
+def _float_value(text: str, pos: int) -> float:
     if text.endswith("Inf"):
         return float("inf")
     if text.endswith("NaN"):
         return float("nan")
-    return float(text)
+    value = float(text)
+    if value == _INF:  # 1.0e400: as SWI-Prolog (float_overflow=error), not infinity
+        raise _Fail("float overflow (the number is beyond the largest float)", pos)
+    return value
 
 
-def _duration_value(text: str) -> int | float:
+_INF = float("inf")
+
+
+def _duration_value(text: str, pos: int) -> int | float:
     i = len(text)
     while not text[i - 1].isdigit():
         i -= 1
     num, unit = text[:i], text[i:]
     scale = _UNITS[unit]
     if "." not in num and type(scale) is int:
-        return int(num) * scale
+        return _checked_int(num, 10, int(len(num) * 3.33), pos) * scale
     value = float(num) * scale
+    if value == _INF:
+        raise _Fail("float overflow (the number is beyond the largest float)", pos)
     return value
 
 
@@ -144,9 +192,16 @@ def _numlist_value(text: str, pos: int) -> Any:
                 # float() also takes `1.`, `.5` and `1.e5`, which Prolog does not
                 if not _NUMBER.match(part):
                     raise ValueError(part)
-                append(float(part))
-            else:
+                value = float(part)
+                if value == _INF:
+                    raise _Fail("float overflow (the number is beyond the largest float)",
+                                pos + text.find(part.strip(), 1))
+                append(value)
+            elif len(part) < 100:
                 append(int(part))
+            else:  # the position is only looked up for a long integer (rare)
+                append(_checked_int(part.strip(), 10, int(len(part) * 3.33),
+                                    pos + text.find(part.strip(), 1)))
         except ValueError:
             offset = text.find(part.strip(), 1) if part.strip() else text.find(",,")
             raise _Fail("malformed number in list", pos + max(offset, 0)) from None
@@ -197,95 +252,110 @@ class _Resolver:
         return _Fail("operator expected", tok.start_pos)
 
     def parse(self, maxp: int) -> tuple[Any, int]:
-        left, lp = self.primary(maxp)
-        return self.infix(left, lp, maxp)
+        """The term of priority ≤ maxp starting at ``self.i``, and its priority.
 
-    def primary(self, maxp: int) -> tuple[Any, int]:
+        A Pratt parser written as a loop: an operator waiting for its (right) operand is
+        pushed on ``pending`` instead of recursing, so ``- - ... - a``, ``a^a^...^a`` or a
+        body of 100,000 goals is read in constant Python stack.
+        """
         items = self.items
-        i = self.i
-        if i >= self.n:
-            tok = items[i - 1][2]
-            op = items[i - 1][1]
-            what = "a goal" if op in _GOAL_OPS else "a term"
-            raise _Fail(f"{{unexpected}} (expected {what} after '{op}')", -tok.end_pos - 1)
-        item = items[i]
-        self.i = i + 1
-        kind = item[0]
-        if kind != _NAME:
-            return item[1], 0
-        name, tok = item[1], item[2]
-        if i + 1 < self.n:
-            nxt = items[i + 1]
-            nk = nxt[0]
-            # `-1`: a minus written directly against a number is a negative literal.
-            if name == "-" and nk == _NUM and nxt[2].start_pos == tok.end_pos:
-                self.i = i + 2
-                return -nxt[1], 0
-            pre = PREFIX_OPS.get(name)
-            # A prefix operator followed by an infix operator is an atom: `- = a`.
-            if pre is not None and not (nk == _NAME and nxt[1] in INFIX_OPS
-                                        and nxt[1] not in PREFIX_OPS):
-                p, ap = pre
-                if p > maxp:
-                    raise _Fail(f"operator priority clash at '{name}'", tok.start_pos)
-                arg, _ = self.parse(ap)
-                return Struct(name, (arg,)), p
-        if name == "," or name == "|":
-            raise _Fail(f"unexpected '{name}' (expected a term)", tok.start_pos)
-        # An operator as an atom (`f(-)`, `X = (+)`, `- (-)`): lenient like SWI.
-        return Atom(name), 0
-
-    def infix(self, left: Any, lp: int, maxp: int) -> tuple[Any, int]:
-        items = self.items
-        while self.i < self.n:
-            item = items[self.i]
-            kind = item[0]
-            if kind == _FUNC:
-                # `a-(b,c)` lexes as the functor `-(` but, in infix position, it is the
-                # operator `-` followed by a parenthesised term.
-                op = item[1].name
-                if op not in INFIX_OPS:
-                    raise self.operator_expected(item[2])
-                p, lmax, rmax = INFIX_OPS[op]
-                if p > maxp or lp > lmax:
-                    break
-                self.i += 1
-                args = item[3]
-                if len(args) == 1:
-                    group = args[0][0]
-                elif max(a[1] for a in args) <= 999:
-                    group = args[-1][0]
-                    for a in reversed(args[:-1]):
-                        group = Struct(",", (a[0], group))
-                else:
-                    # An argument above 999 (`=(a, b;c)`): re-read the whole bracket as
-                    # one sequence in which the commas are operators.
-                    joined = list(args[0][2])
-                    for a in args[1:]:
-                        first = a[2][0][2]
-                        joined.append((_NAME, ",", Token.new_borrow_pos("COMMA", ",", first)))
-                        joined.extend(a[2])
-                    group = _Resolver(joined).run()[0]
-                # The bracketed group is only the first operand of the right-hand side:
-                # `p:-(a;b),c` is p :- ((a;b), c).
-                right, _ = self.infix(group, 0, rmax)
-                left = Struct(op, (left, right))
+        n = self.n
+        # (prefix name or None, left operand of an infix operator, operator, priority,
+        #  the maxp to resume with once the operand is read)
+        pending: list[tuple] = []
+        while True:
+            # -- a primary term at maxp (an operand, a prefix operator, an atom) ----------
+            i = self.i
+            if i >= n:
+                tok = items[i - 1][2]
+                op = items[i - 1][1]
+                what = "a goal" if op in _GOAL_OPS else "a term"
+                raise _Fail(f"{{unexpected}} (expected {what} after '{op}')", -tok.end_pos - 1)
+            item = items[i]
+            self.i = i + 1
+            if item[0] != _NAME:
+                left, lp = item[1], 0
+            else:
+                name, tok = item[1], item[2]
+                left = None
+                if i + 1 < n:
+                    nxt = items[i + 1]
+                    nk = nxt[0]
+                    pre = PREFIX_OPS.get(name)
+                    # `-1`: a minus written directly against a number is a negative literal.
+                    if name == "-" and nk == _NUM and nxt[2].start_pos == tok.end_pos:
+                        self.i = i + 2
+                        left, lp = -nxt[1], 0
+                    # A prefix operator followed by an infix operator is an atom: `- = a`.
+                    elif pre is not None and not (nk == _NAME and nxt[1] in INFIX_OPS
+                                                  and nxt[1] not in PREFIX_OPS):
+                        p, ap = pre
+                        if p > maxp:
+                            raise _Fail(f"operator priority clash at '{name}'", tok.start_pos)
+                        pending.append((name, None, None, p, maxp))
+                        maxp = ap
+                        continue  # read the operand
+                if left is None:
+                    if name == "," or name == "|":
+                        raise _Fail(f"unexpected '{name}' (expected a term)", tok.start_pos)
+                    # An operator as an atom (`f(-)`, `X = (+)`, `- (-)`): lenient like SWI.
+                    left, lp = Atom(name), 0
+            # -- infix operators that fit at maxp; a finished operand completes its operator
+            while True:
+                if self.i < n:
+                    item = items[self.i]
+                    kind = item[0]
+                    if kind == _FUNC:
+                        # `a-(b,c)` lexes as the functor `-(` but, in infix position, it is
+                        # the operator `-` followed by a parenthesised term.
+                        op = item[1].name
+                        if op not in INFIX_OPS:
+                            raise self.operator_expected(item[2])
+                        p, lmax, rmax = INFIX_OPS[op]
+                        if p <= maxp and lp <= lmax:
+                            self.i += 1
+                            # The bracketed group is only the first operand of the right-hand
+                            # side: `p:-(a;b),c` is p :- ((a;b), c).
+                            pending.append((None, left, op, p, maxp))
+                            left, lp, maxp = self.group(item[3]), 0, rmax
+                            continue
+                    else:
+                        if kind != _NAME:
+                            raise self.operator_expected(item[2])
+                        spec = INFIX_OPS.get(item[1])
+                        if spec is None:
+                            raise self.operator_expected(item[2])
+                        p, lmax, rmax = spec
+                        if p <= maxp and lp <= lmax:
+                            self.i += 1
+                            pending.append((None, left, item[1], p, maxp))
+                            maxp = rmax
+                            break  # read the right operand
+                # nothing more fits at this priority: `left` completes the newest operator
+                if not pending:
+                    return left, lp
+                prefix, left0, op, p, maxp = pending.pop()
+                left = Struct(prefix, (left,)) if prefix is not None else Struct(op, (left0, left))
                 lp = p
-                continue
-            if kind != _NAME:
-                raise self.operator_expected(item[2])
-            name = item[1]
-            spec = INFIX_OPS.get(name)
-            if spec is None:
-                raise self.operator_expected(item[2])
-            p, lmax, rmax = spec
-            if p > maxp or lp > lmax:
-                break
-            self.i += 1
-            right, _ = self.parse(rmax)
-            left = Struct(name, (left, right))
-            lp = p
-        return left, lp
+
+    @staticmethod
+    def group(args: list) -> Any:
+        """The term of a bracket ``(a, b)`` met in infix position (``x-(a, b)``)."""
+        if len(args) == 1:
+            return args[0][0]
+        if max(a[1] for a in args) <= 999:
+            group = args[-1][0]
+            for a in reversed(args[:-1]):
+                group = Struct(",", (a[0], group))
+            return group
+        # An argument above 999 (`=(a, b;c)`): re-read the whole bracket as one sequence
+        # in which the commas are operators.
+        joined = list(args[0][2])
+        for a in args[1:]:
+            first = a[2][0][2]
+            joined.append((_NAME, ",", Token.new_borrow_pos("COMMA", ",", first)))
+            joined.extend(a[2])
+        return _Resolver(joined).run()[0]
 
 
 # ----------------------------------------------------------------------- transformer
@@ -405,7 +475,7 @@ def _item(c: Any) -> tuple:
             entry[1] = c.start_pos
         return (_TERM, entry[0], c)
     if t == "FLOAT":
-        return (_NUM, _float_value(c.value), c)
+        return (_NUM, _float_value(c.value, c.start_pos), c)
     if t == "INT":
         return (_NUM, _int_value(c.value, c.start_pos), c)
     if t == "NUMLIST":
@@ -417,7 +487,7 @@ def _item(c: Any) -> tuple:
     if t == "STRING":
         return (_TERM, String(_quoted_text(c.value, c.start_pos)), c)
     if t == "DURATION":
-        return (_NUM, _duration_value(c.value), c)
+        return (_NUM, _duration_value(c.value, c.start_pos), c)
     raise _Fail(f"unexpected token {c.value!r}", c.start_pos)  # pragma: no cover
 
 
@@ -437,15 +507,33 @@ def _ordered_vars(varmap: dict) -> tuple:
 
 
 def _bar_to_semicolon(goal: Any) -> Any:
-    """SWI reads `(a | b)` as '|'(a, b) but runs it as `;` in a body: do that here."""
+    """SWI reads `(a | b)` as '|'(a, b) but runs it as `;` in a body: do that here.
+
+    Rebuilds the control constructs bottom-up with an explicit stack (a body may hold
+    100,000 goals); subterms without a `|` are kept as they are.
+    """
     if type(goal) is not Struct or goal.name not in _CONTROL:
         return goal
-    stack_changed = goal.name == "|" and len(goal.args) == 2
-    args = tuple(_bar_to_semicolon(a) for a in goal.args)
-    name = ";" if stack_changed else goal.name
-    if not stack_changed and all(a is b for a, b in zip(args, goal.args)):
-        return goal
-    return Struct(name, args)
+    done: list = []                    # rebuilt terms, in order
+    todo: list = [(goal, False)]       # (term, its arguments are rebuilt and on `done`)
+    while todo:
+        t, ready = todo.pop()
+        if not ready:
+            if type(t) is Struct and t.name in _CONTROL:
+                todo.append((t, True))
+                todo.extend((a, False) for a in reversed(t.args))
+            else:
+                done.append(t)
+            continue
+        k = len(t.args)
+        args = tuple(done[-k:])
+        del done[-k:]
+        name = ";" if t.name == "|" and k == 2 else t.name
+        if name == t.name and all(a is b for a, b in zip(args, t.args)):
+            done.append(t)
+        else:
+            done.append(Struct(name, args))
+    return done[0]
 
 
 # ------------------------------------------------------------------------ entry points
@@ -499,7 +587,9 @@ def _line_col(text: str, pos: int) -> tuple[int, int, str]:
     line_end = text.find("\n", pos)
     if line_end < 0:
         line_end = len(text)
-    return text.count("\n", 0, pos) + 1, pos - line_start + 1, text[line_start:line_end]
+    # the source line as shown under the message: printable (no CR, no lone surrogate)
+    shown = _SURROGATE.sub("\ufffd", text[line_start:line_end].rstrip("\r"))
+    return text.count("\n", 0, pos) + 1, pos - line_start + 1, shown
 
 
 def _describe(text: str, pos: int) -> str:
@@ -689,16 +779,27 @@ def _parse(text: str, filename: str, start: str) -> Any:
     return _parse1(text, filename, start)
 
 
+# A lone surrogate (U+D800..U+DFFF) can sit in a Python str but in no UTF-8 text: refused
+# here, as SWI-Prolog refuses it, instead of failing later when the program is stored.
+_SURROGATE = re.compile("[\ud800-\udfff]")
+
+
 def _parse1(text: str, filename: str, start: str) -> Any:
     st = _state
     saved = getattr(st, "varmap", None), getattr(st, "text", None), getattr(st, "filename", None)
     try:
+        bad = _SURROGATE.search(text)
+        if bad is not None:
+            raise _Fail(f"illegal character code \\x{ord(bad.group()):X}\\ (a lone surrogate, "
+                        "not a Unicode character)", bad.start())
         return _run(text, filename, start)
     except _Fail as f:
         raise _syntax_error(text, filename, f.message, f.pos) from None
     except UnexpectedInput as e:
         err = _lark_error(e, text, filename, start)
         raise err from None
+    except RecursionError:  # pragma: no cover - a safety net: the parser itself is iterative
+        raise _syntax_error(text, filename, "term nested too deeply", 0) from None
     finally:
         st.varmap, st.text, st.filename = saved
 
@@ -743,6 +844,9 @@ class _NotFast(Exception):
     pass
 
 
+_FAST_MAX_DEPTH = 50
+
+
 def parse_event_fast(text: str) -> tuple | None:
     """``name(args)^T`` / ``name(args)^[S,E]`` in the simple subset -> ``(name, args, S, E)``
     with float times, or None when the text is outside it (then use :func:`parse_term`).
@@ -777,8 +881,10 @@ def parse_event_fast(text: str) -> tuple | None:
         i += 1
         return v
 
+    depth = 0
+
     def term() -> object:
-        nonlocal i
+        nonlocal i, depth
         k, v = peek()
         if k == "float":
             i += 1
@@ -789,15 +895,22 @@ def parse_event_fast(text: str) -> tuple | None:
         if k == "atom":
             i += 1
             return Atom(v)
+        if depth > _FAST_MAX_DEPTH:
+            raise _NotFast  # deeper terms are left to the (iterative) parser
         if k == "functor":
             i += 1
-            return Struct(v, args_until(")"))
+            depth += 1
+            out = Struct(v, args_until(")"))
+            depth -= 1
+            return out
         if k == "punct" and v == "[":
             i += 1
             if peek() == ("punct", "]"):
                 i += 1
                 return NIL
+            depth += 1
             items = args_until("]")
+            depth -= 1
             return make_list(items)
         raise _NotFast
 

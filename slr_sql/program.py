@@ -33,17 +33,33 @@ class Template:
     """A compound term of a compiled clause that contains at least one Slot.
 
     ``spine`` marks a list cell whose tail is again a template, built iteratively.
+    ``nest`` is how deep :func:`build` would recurse on it; deeper templates (a term nested
+    thousands of levels) are built from an explicit stack instead.
     """
 
-    __slots__ = ("name", "args", "spine")
+    __slots__ = ("name", "args", "spine", "nest")
 
     def __init__(self, name: str, args: tuple):
         self.name = name
         self.args = args
         self.spine = name == "." and len(args) == 2 and type(args[1]) is Template
+        nest = 0
+        for a in args:
+            if type(a) is Template and a.nest > nest:
+                nest = a.nest
+        if self.spine:  # build walks list spines in a loop: the tail adds no depth
+            head = args[0]
+            self.nest = max(args[1].nest, head.nest + 1 if type(head) is Template else 1)
+        else:
+            self.nest = nest + 1
 
     def __repr__(self) -> str:
         return f"Template({self.name!r}, {self.args!r})"
+
+
+# Templates nested deeper than this are built (and matched, in the engine) iteratively: well
+# below Python's recursion limit, which the caller's own frames share.
+MAX_RECURSIVE_NEST = 200
 
 
 def build(t: Any, frame: list) -> Any:
@@ -56,6 +72,8 @@ def build(t: Any, frame: list) -> Any:
         return v
     if tt is not Template:
         return t
+    if t.nest > MAX_RECURSIVE_NEST:
+        return _build_deep(t, frame)
     if t.spine:
         # long list templates: walk the spine iteratively
         heads = []
@@ -82,6 +100,31 @@ def build(t: Any, frame: list) -> Any:
     return Struct(t.name, tuple(out))
 
 
+def _build_deep(t: Template, frame: list) -> Any:
+    """build() for a deeply nested template, from an explicit stack."""
+    done: list = []
+    todo: list = [t]
+    while todo:
+        x = todo.pop()
+        tx = type(x)
+        if tx is Template:
+            todo.append((x.name, len(x.args)))  # assemble once the arguments are built
+            todo.extend(reversed(x.args))
+        elif tx is tuple:
+            name, k = x
+            args = tuple(done[len(done) - k:])
+            del done[len(done) - k:]
+            done.append(Struct(name, args))
+        elif tx is Slot:
+            v = frame[x.index]
+            if v is None:
+                v = frame[x.index] = Var(x.name)
+            done.append(v)
+        else:
+            done.append(x)
+    return done[0]
+
+
 @dataclass(slots=True)
 class CompiledClause:
     head: tuple  # compiled head arguments (for temporal rules: data args + (start, end))
@@ -92,6 +135,12 @@ class CompiledClause:
 
 
 def _compile(t: Any, slots: dict) -> Any:
+    """A clause term with its variables replaced by Slots (numbered in order of first
+    appearance, depth-first left to right) and every compound holding one by a Template.
+
+    Iterative (an explicit stack, not recursion): clause terms nested 100,000 deep and
+    million-element list facts compile.
+    """
     t = deref(t)
     tt = type(t)
     if tt is Var:
@@ -99,28 +148,48 @@ def _compile(t: Any, slots: dict) -> Any:
         if s is None:
             s = slots[id(t)] = Slot(len(slots), t.name)
         return s
-    if tt is Struct:
-        # iterative over list spines so that million-element list facts compile
-        if t.name == "." and len(t.args) == 2:
-            heads = []
-            cur = t
-            while type(cur) is Struct and cur.name == "." and len(cur.args) == 2:
-                heads.append(_compile(cur.args[0], slots))
-                cur = deref(cur.args[1])
-            out = _compile(cur, slots)
-            for h in reversed(heads):
-                if type(h) in (Slot, Template) or type(out) in (Slot, Template):
-                    out = Template(".", (h, out))
-                else:
-                    out = Struct(".", (h, out))
-            return out
-        args = tuple(_compile(a, slots) for a in t.args)
-        if any(type(a) is Slot or type(a) is Template for a in args):
-            return Template(t.name, args)
-        if all(a is b for a, b in zip(args, t.args)):
-            return t
-        return Struct(t.name, args)
-    return t
+    if tt is not Struct:
+        return t
+    done: list = []
+    todo: list = [t]
+    while todo:
+        x = todo.pop()
+        tx = type(x)
+        if tx is _Assemble:
+            original = x.struct
+            k = len(original.args)
+            args = tuple(done[len(done) - k:])
+            del done[len(done) - k:]
+            if any(type(a) is Slot or type(a) is Template for a in args):
+                done.append(Template(original.name, args))
+            elif all(a is b for a, b in zip(args, original.args)):
+                done.append(original)
+            else:
+                done.append(Struct(original.name, args))
+            continue
+        while tx is Var and x.ref is not None:
+            x = x.ref
+            tx = type(x)
+        if tx is Var:
+            s = slots.get(id(x))
+            if s is None:
+                s = slots[id(x)] = Slot(len(slots), x.name)
+            done.append(s)
+        elif tx is Struct:
+            todo.append(_Assemble(x))
+            todo.extend(reversed(x.args))
+        else:
+            done.append(x)
+    return done[0]
+
+
+class _Assemble:
+    """_compile's marker: the arguments of ``struct`` are compiled, build its template."""
+
+    __slots__ = ("struct",)
+
+    def __init__(self, struct: Struct):
+        self.struct = struct
 
 
 def first_arg_key(t: Any) -> Any:

@@ -15,6 +15,7 @@ mutated, and renamed apart before use.
 """
 from __future__ import annotations
 
+import functools
 import math
 import re
 from dataclasses import dataclass
@@ -25,7 +26,54 @@ __all__ = [
     "deref", "make_list", "list_items", "is_ground", "is_callable", "from_python",
     "to_python", "term_vars", "Span", "Clause", "indicator",
     "format_term", "format_atom", "INFIX_OPS", "PREFIX_OPS", "OPERATORS",
+    "MAX_INTEGER_BITS", "int_text", "int_from_text", "factorize_cycles",
 ]
+
+# The largest integer slr_sql reads, computes or stores, in bits (2**18 bits: about 78,900
+# decimal digits). Python's integers are unbounded, but CPython multiplies, divides and
+# converts big ones in quadratic time, within one uninterruptible call: beyond this size one
+# operation could outlast a query's timeout. Arithmetic that would go beyond it raises
+# resource_error(max_integer_size); a literal beyond it is a syntax error.
+MAX_INTEGER_BITS = 1 << 18
+# Python's own str(int)/int(str) refuse more than 4,300 decimal digits; pieces below this
+# many digits are converted by Python, bigger ones split in halves (divide and conquer).
+_PIECE_DIGITS = 3000
+
+
+@functools.lru_cache(maxsize=64)
+def _power_of_ten(k: int) -> int:
+    return 10 ** k
+
+
+def int_text(n: int) -> str:
+    """Decimal text of an integer, also beyond Python's 4,300-digit ``str()`` limit.
+
+    >>> len(int_text(10 ** 5000)), int_text(-42)
+    (5001, '-42')
+    """
+    if n.bit_length() <= _PIECE_DIGITS * 3:
+        return str(n)
+    if n < 0:
+        return "-" + int_text(-n)
+    half = int(n.bit_length() * 0.30103) // 2  # about half the decimal digits
+    high, low = divmod(n, _power_of_ten(half))
+    return int_text(high) + int_text(low).rjust(half, "0")
+
+
+def int_from_text(digits: str, base: int = 10) -> int:
+    """The integer written by ``digits`` (digits of ``base``, optionally after ``-``), also
+    beyond Python's 4,300-digit ``int()`` limit.
+
+    >>> int_from_text("1" * 5000) % 1000, int_from_text("ff", 16), int_from_text("-7")
+    (111, 255, -7)
+    """
+    if base != 10 or len(digits) <= _PIECE_DIGITS:
+        return int(digits, base)
+    if digits[0] == "-":
+        return -int_from_text(digits[1:])
+    half = len(digits) // 2
+    return (int_from_text(digits[:-half]) * _power_of_ten(half)
+            + int_from_text(digits[-half:]))
 
 
 class Atom(str):
@@ -133,12 +181,19 @@ def deref(t: Any) -> Any:
 
 
 def term_equal(a: Any, b: Any) -> bool:
-    """Structural identity (``==``) after dereferencing; no recursion limit on long lists."""
+    """Structural identity (``==``) after dereferencing: iterative (no recursion limit on
+    deep or long terms), and finite on cyclic terms (compared as rational trees)."""
     stack = [(a, b)]
+    seen = None  # pairs of compounds reached through a binding, already being compared
     while stack:
         x, y = stack.pop()
-        x = deref(x)
-        y = deref(y)
+        via = False
+        while type(x) is Var and x.ref is not None:
+            x = x.ref
+            via = True
+        while type(y) is Var and y.ref is not None:
+            y = y.ref
+            via = True
         if x is y:
             continue
         tx = type(x)
@@ -147,6 +202,15 @@ def term_equal(a: Any, b: Any) -> bool:
         if tx is Struct:
             if x.name != y.name or len(x.args) != len(y.args):
                 return False
+            if via:
+                # a cycle always passes through a binding: comparing the same pair again
+                # adds nothing (the pair is equal if everything else is)
+                key = (id(x), id(y))
+                if seen is None:
+                    seen = set()
+                elif key in seen:
+                    continue
+                seen.add(key)
             stack.extend(zip(x.args, y.args))
         elif tx is Var:
             return False
@@ -172,23 +236,51 @@ def make_list(items: Iterable[Any], tail: Any = NIL) -> Any:
 
 
 def list_items(t: Any) -> tuple[list, Any]:
-    """Split a (possibly partial) list into its dereferenced items and its dereferenced tail."""
+    """Split a (possibly partial) list into its dereferenced items and its dereferenced tail.
+
+    A cyclic list (``L = [a|L]``) stops at the cell where the cycle is found (Brent's
+    method: constant extra work per cell): its "tail" is then a list cell, so callers that
+    want a proper list see a type error instead of looping forever.
+
+    >>> items, tail = list_items(make_list([1, 2], Var("T"))); items, tail
+    ([1, 2], Var('T'))
+    """
     items = []
     t = deref(t)
+    mark = t
+    power = steps = 1
     while type(t) is Struct and t.name == "." and len(t.args) == 2:
         items.append(t.args[0])
         t = deref(t.args[1])
+        if t is mark:
+            return items, t
+        if steps == power:
+            mark = t
+            power *= 2
+            steps = 0
+        steps += 1
     return items, t
 
 
 def is_ground(t: Any) -> bool:
+    """True when the term has no unbound variable (finite on cyclic terms)."""
     stack = [t]
+    seen = None  # compounds reached through a binding and already walked (cycles)
     while stack:
-        x = deref(stack.pop())
-        tx = type(x)
-        if tx is Var:
-            return False
-        if tx is Struct:
+        x = stack.pop()
+        via = False
+        while type(x) is Var:
+            if x.ref is None:
+                return False
+            x = x.ref
+            via = True
+        if type(x) is Struct:
+            if via:
+                if seen is None:
+                    seen = set()
+                elif id(x) in seen:
+                    continue
+                seen.add(id(x))
             stack.extend(x.args)
     return True
 
@@ -199,18 +291,27 @@ def is_callable(t: Any) -> bool:
 
 
 def term_vars(t: Any) -> list[Var]:
-    """Unbound variables of a term, depth-first left to right, each once."""
+    """Unbound variables of a term, depth-first left to right, each once (finite on cyclic
+    terms)."""
     seen: set[int] = set()
     out: list[Var] = []
     stack = [t]
     while stack:
-        x = deref(stack.pop())
+        x = stack.pop()
+        via = False
+        while type(x) is Var and x.ref is not None:
+            x = x.ref
+            via = True
         tx = type(x)
         if tx is Var:
             if id(x) not in seen:
                 seen.add(id(x))
                 out.append(x)
         elif tx is Struct:
+            if via:
+                if id(x) in seen:
+                    continue
+                seen.add(id(x))
             stack.extend(reversed(x.args))
     return out
 
@@ -220,10 +321,56 @@ def from_python(value: Any) -> Any:
 
     ``str`` -> atom, :class:`String` -> string, ``int``/``float``, ``list``/``tuple`` -> list,
     :class:`Struct` (its args converted too). Terms already in engine form pass through.
+    Iterative: a list nested 100,000 deep converts; a list that contains itself is a
+    ``TypeError``, like any other value that is not a term.
 
     >>> str(from_python(["cup1", 1, 2.5]))
     '[cup1,1,2.5]'
     """
+    leaf = _python_leaf(value)
+    if leaf is not _NOT_LEAF:
+        return leaf
+    done: list = []        # converted values, in order
+    todo: list = [value]   # values to convert; _Build markers to assemble containers
+    on_path: set[int] = set()
+    while todo:
+        v = todo.pop()
+        if type(v) is _Build:
+            k = len(v.items)
+            args = done[len(done) - k:]
+            del done[len(done) - k:]
+            on_path.discard(v.key)
+            done.append(make_list(args) if v.name is None else Struct(v.name, tuple(args)))
+            continue
+        leaf = _python_leaf(v)
+        if leaf is not _NOT_LEAF:
+            done.append(leaf)
+            continue
+        items = v.args if type(v) is Struct else v
+        if id(v) in on_path:
+            raise TypeError("cannot convert a list that contains itself to an SLR term")
+        on_path.add(id(v))
+        todo.append(_Build(v.name if type(v) is Struct else None, items, id(v)))
+        todo.extend(reversed(items))
+    return done[0]
+
+
+class _Build:
+    """from_python's marker: assemble the last ``len(items)`` converted values."""
+
+    __slots__ = ("name", "items", "key")
+
+    def __init__(self, name: Any, items: Any, key: int):
+        self.name = name
+        self.items = items
+        self.key = key
+
+
+_NOT_LEAF = object()
+
+
+def _python_leaf(value: Any) -> Any:
+    """The term of a Python value that is not a container, else _NOT_LEAF."""
     tv = type(value)
     if tv is Atom or tv is String or tv is int or tv is float or tv is Var:
         return value
@@ -231,10 +378,8 @@ def from_python(value: Any) -> Any:
         return Atom(value)
     if tv is bool:
         return Atom("true" if value else "false")
-    if isinstance(value, (list, tuple)):
-        return make_list([from_python(v) for v in value])
-    if tv is Struct:
-        return Struct(value.name, tuple(from_python(a) for a in value.args))
+    if tv is Struct or isinstance(value, (list, tuple)):
+        return _NOT_LEAF
     if isinstance(value, String):
         return String(value)
     if isinstance(value, str):
@@ -246,38 +391,188 @@ def from_python(value: Any) -> Any:
     raise TypeError(f"cannot convert {value!r} ({tv.__name__}) to an SLR term")
 
 
+class _CyclicTerm(Exception):
+    """Raised inside to_python/format_term when a term turns out to be cyclic."""
+
+
 def to_python(t: Any) -> Any:
-    """Convert a term into the value handed to callers (SPEC §4).
+    """Convert a term into the value handed to callers.
 
     Atoms stay :class:`Atom`, strings become ``str``, proper lists become ``list`` (the
     empty list ``[]`` too), compounds :class:`Struct` with converted args, unbound variables
-    stay :class:`Var`.
+    stay :class:`Var`. Iterative (a term nested 100,000 deep converts). A cyclic term
+    (``X = f(X)``) comes back as SWI-Prolog prints it: ``@(Template, [S_1 = Value, ...])``
+    with the variables ``S_1``... standing for the repeated subterms (see
+    :func:`factorize_cycles`).
 
     >>> to_python(make_list([Atom("a"), String("s")])), to_python(NIL)
     ([Atom('a'), 's'], [])
     """
-    t = deref(t)
     tt = type(t)
     if tt is Atom:
         return [] if t == "[]" else t
     if tt is int or tt is float:
         return t
-    if tt is String:
-        return str(t)
-    if tt is Var:
+    try:
+        return _to_python(t)
+    except _CyclicTerm:
+        return _to_python(factorize_cycles(t))
+
+
+def _to_python(t: Any) -> Any:
+    done: list = []
+    # work items: a term to convert, or a tuple (k, name, gray ids) that assembles the last k
+    # converted values into a list (name None), a partial list (name CONS) or a compound
+    todo: list = [t]
+    gray: set[int] = set()  # compounds reached through a binding, being converted
+    while todo:
+        x = todo.pop()
+        if type(x) is tuple:
+            k, name, keys = x
+            if k:
+                vals = done[len(done) - k:]
+                del done[len(done) - k:]
+            else:
+                vals = []
+            if name is None:
+                done.append(vals)
+            elif name is CONS:  # a partial list: vals are the items then the tail
+                out = vals[-1]
+                for v in reversed(vals[:-1]):
+                    out = Struct(CONS, (v, out))
+                done.append(out)
+            else:
+                done.append(Struct(name, tuple(vals)))
+            gray.difference_update(keys)
+            continue
+        via = False
+        while type(x) is Var and x.ref is not None:
+            x = x.ref
+            via = True
+        tx = type(x)
+        if tx is not Struct:
+            done.append(str(x) if tx is String else [] if tx is Atom and x == "[]" else x)
+            continue
+        keys: list[int] = []
+        if via:
+            if id(x) in gray:
+                raise _CyclicTerm
+            gray.add(id(x))
+            keys.append(id(x))
+        if x.name == "." and len(x.args) == 2:
+            items = []
+            cell = x
+            while True:
+                items.append(cell.args[0])
+                nxt = cell.args[1]
+                via = False
+                while type(nxt) is Var and nxt.ref is not None:
+                    nxt = nxt.ref
+                    via = True
+                if type(nxt) is not Struct or nxt.name != "." or len(nxt.args) != 2:
+                    break
+                if via:
+                    if id(nxt) in gray:
+                        raise _CyclicTerm
+                    gray.add(id(nxt))
+                    keys.append(id(nxt))
+                cell = nxt
+            if type(nxt) is Atom and nxt == "[]":
+                todo.append((len(items), None, keys))
+            else:
+                todo.append((len(items) + 1, CONS, keys))
+                todo.append(nxt)
+            todo.extend(reversed(items))
+        else:
+            todo.append((len(x.args), x.name, keys))
+            todo.extend(reversed(x.args))
+    return done[0]
+
+
+def factorize_cycles(t: Any) -> Any:
+    """An acyclic term for a possibly cyclic one, as SWI-Prolog writes cyclic terms:
+    ``@(Template, [S_1 = Value_1, ...])`` where each ``S_k`` stands for a subterm that
+    contains itself. An acyclic term is returned as it is.
+
+    >>> X = Var("X"); X.ref = Struct("f", (X,)); format_term(factorize_cycles(X))
+    '@(S_1,[S_1=f(S_1)])'
+    """
+    targets = _cycle_targets(t)
+    if not targets:
         return t
-    if tt is Struct:
-        if t.name == "." and len(t.args) == 2:
-            items, tail = list_items(t)
-            if tail == NIL and type(tail) is Atom:
-                return [to_python(x) for x in items]
-            # a partial list: rebuild the spine in a loop, not by recursing on each tail
-            out = to_python(tail)
-            for x in reversed(items):
-                out = Struct(CONS, (to_python(x), out))
-            return out
-        return Struct(t.name, tuple(to_python(a) for a in t.args))
-    return t
+    labels: dict[int, Var] = {}
+    order: list = []
+    memo: dict[int, Any] = {}
+
+    def copy(root: Any) -> Any:
+        """``root`` with every cycle target replaced by its label (iterative)."""
+        done: list = []
+        todo: list = [root]
+        while todo:
+            x = todo.pop()
+            if type(x) is _Build:
+                k = len(x.items)
+                args = tuple(done[len(done) - k:])
+                del done[len(done) - k:]
+                out = Struct(x.name, args)
+                memo[x.key] = out
+                done.append(out)
+                continue
+            x = deref(x)
+            if type(x) is not Struct:
+                done.append(x)
+                continue
+            key = id(x)
+            if key in targets:
+                label = labels.get(key)
+                if label is None:
+                    label = labels[key] = Var(f"S_{len(labels) + 1}")
+                    order.append(x)
+                done.append(label)
+            elif key in memo:
+                done.append(memo[key])
+            else:
+                todo.append(_Build(x.name, x.args, key))
+                todo.extend(reversed(x.args))
+        return done[0]
+
+    template = copy(t)
+    definitions = []
+    k = 0
+    while k < len(order):  # copying a definition may find further targets
+        target = order[k]
+        k += 1
+        value = Struct(target.name, tuple(copy(a) for a in target.args))
+        definitions.append(Struct("=", (labels[id(target)], value)))
+    return Struct("@", (template, make_list(definitions)))
+
+
+def _cycle_targets(t: Any) -> dict[int, Any]:
+    """The compounds that contain themselves: the ends of the back edges of a depth-first
+    walk (every cycle has one)."""
+    targets: dict[int, Any] = {}
+    gray: set[int] = set()
+    black: set[int] = set()
+    todo: list = [(t, False)]
+    while todo:
+        x, leaving = todo.pop()
+        if leaving:
+            gray.discard(id(x))
+            black.add(id(x))
+            continue
+        x = deref(x)
+        if type(x) is not Struct:
+            continue
+        key = id(x)
+        if key in gray:
+            targets.setdefault(key, x)
+            continue
+        if key in black:
+            continue
+        gray.add(key)
+        todo.append((x, True))
+        todo.extend((a, False) for a in reversed(x.args))
+    return targets
 
 
 @dataclass(frozen=True, slots=True)
@@ -449,8 +744,27 @@ def _is_op_atom(t: Any) -> bool:
     return type(t) is Atom and (t in INFIX_OPS or t in PREFIX_OPS)
 
 
+class _Op:
+    """The tag of a _Writer work item that is an action, not a term to write."""
+
+    __slots__ = ("name",)
+
+    def __init__(self, name: str):
+        self.name = name
+
+
+# Work items of _Writer.write, besides (term, priority, operand) triples.
+_PUT, _SPACE, _PREFIX_END, _LIST_REST, _UNGRAY = (
+    _Op("put"), _Op("space"), _Op("prefix end"), _Op("list rest"), _Op("ungray"))
+
+
 class _Writer:
-    """Accumulates tokens, inserting a space where two tokens would otherwise glue."""
+    """Accumulates tokens, inserting a space where two tokens would otherwise glue.
+
+    Terms are written from an explicit stack of work items (no recursion: a term nested
+    100,000 deep prints). A compound reached through a variable binding is "gray" while
+    it is being written: meeting it again inside itself means the term is cyclic.
+    """
 
     __slots__ = ("out", "last", "quoted")
 
@@ -474,11 +788,50 @@ class _Writer:
         self.out.append(" ")
         self.last = " "
 
-    # -- terms ---------------------------------------------------------------------
-    def term(self, t: Any, prec: int, operand: bool = False) -> None:
-        """Write t at priority ≤ prec; ``operand``: t is the operand of an operator."""
-        while type(t) is Var and t.ref is not None:
-            t = t.ref
+    def write(self, t: Any, prec: int) -> None:
+        """Write t at priority ≤ prec; raises _CyclicTerm on a cyclic term."""
+        todo: list = [(t, prec, False)]
+        gray: set[int] = set()
+        put = self.put
+        while todo:
+            item = todo.pop()
+            kind = item[0]
+            if type(kind) is _Op:
+                if kind is _PUT:
+                    put(item[1])
+                elif kind is _SPACE:
+                    self.space()
+                elif kind is _LIST_REST:
+                    self._list_rest(item[1], todo, gray)
+                elif kind is _UNGRAY:
+                    gray.discard(item[1])
+                else:  # _PREFIX_END
+                    self._prefix_end(item[1], item[2])
+                continue
+            t, prec, operand = item
+            via = False
+            while type(t) is Var and t.ref is not None:
+                t = t.ref
+                via = True
+            if type(t) is Struct:
+                if via:
+                    if id(t) in gray:
+                        raise _CyclicTerm
+                    gray.add(id(t))
+                    todo.append((_UNGRAY, id(t)))
+                self._struct(t, prec, todo)
+            elif type(t) is list or type(t) is tuple:
+                # a list as to_python returns it (inside a returned Struct)
+                put("[")
+                todo.append((_PUT, "]"))
+                for k in range(len(t) - 1, -1, -1):
+                    todo.append((t[k], _ARG_PRIORITY, False))
+                    if k:
+                        todo.append((_PUT, ","))
+            else:
+                self._atomic(t, operand)
+
+    def _atomic(self, t: Any, operand: bool) -> None:
         tt = type(t)
         if tt is Atom:
             if operand and _is_op_atom(t):
@@ -488,8 +841,6 @@ class _Writer:
                 self.put(")")
             else:
                 self.put(format_atom(t, self.quoted))
-        elif tt is Struct:
-            self.struct(t, prec)
         elif tt is Var:
             self.put(t.name)
         elif tt is String or isinstance(t, str):
@@ -498,7 +849,7 @@ class _Writer:
             else:
                 self.put(str(t))
         elif tt is int:
-            self.put(str(t))
+            self.put(int_text(t))
         elif tt is float:
             self.put(_format_float(t))
         elif tt is bool:
@@ -509,87 +860,91 @@ class _Writer:
         else:
             self.put(str(t))
 
-    def struct(self, t: Struct, prec: int) -> None:
+    def _struct(self, t: Struct, prec: int, todo: list) -> None:
+        """Write the start of a compound now; push the rest (in reverse order) on todo."""
         name, args = t.name, t.args
         n = len(args)
+        put = self.put
         if n == 2 and name == ".":
-            self.list(t)
+            put("[")
+            todo.append((_PUT, "]"))
+            todo.append((_LIST_REST, args[1]))
+            todo.append((args[0], _ARG_PRIORITY, False))
             return
         if n == 1 and name == "{}":
-            self.put("{")
-            self.term(args[0], 1200)
-            self.put("}")
+            put("{")
+            todo.append((_PUT, "}"))
+            todo.append((args[0], 1200, False))
             return
         if n == 2 and name in INFIX_OPS:
             p, lp, rp = INFIX_OPS[name]
-            open_ = p > prec
-            if open_:
-                self.put("(")
-            self.term(args[0], lp, True)
+            if p > prec:
+                put("(")
+                todo.append((_PUT, ")"))
+            todo.append((args[1], rp, True))
             if name == "," or name == "|":
-                self.put(name)
+                todo.append((_PUT, name))
             elif name[0].isalpha():
-                self.space()
-                self.put(format_atom(name, self.quoted))
-                self.space()
+                todo.append((_SPACE,))
+                todo.append((_PUT, format_atom(name, self.quoted)))
+                todo.append((_SPACE,))
             else:
-                self.put(format_atom(name, self.quoted))
-            self.term(args[1], rp, True)
-            if open_:
-                self.put(")")
+                todo.append((_PUT, format_atom(name, self.quoted)))
+            todo.append((args[0], lp, True))
             return
         if n == 1 and name in PREFIX_OPS and name not in ("|", ","):
             p, ap = PREFIX_OPS[name]
             open_ = p > prec
             if open_:
-                self.put("(")
-            self.put(format_atom(name, self.quoted))
-            arg = args[0]
-            while type(arg) is Var and arg.ref is not None:
-                arg = arg.ref
-            mark = len(self.out)
-            self.term(arg, ap, True)
-            first = self.out[mark][0] if mark < len(self.out) else ""
-            # `- (a,b)` is -((a,b)) but `-(a,b)` is -(a,b); `- 1` is -(1) but `-1` is -1.
-            if first != " " and (
-                    first == "(" or (name == "-" and first.isdigit()) or name[0].isalpha()):
-                self.out.insert(mark, " ")
-            if open_:
-                self.put(")")
+                put("(")
+                todo.append((_PUT, ")"))
+            put(format_atom(name, self.quoted))
+            todo.append((_PREFIX_END, len(self.out), name))
+            todo.append((args[0], ap, True))
             return
         # canonical form: name(arg, ...)
-        self.put(format_atom(name, self.quoted))
+        put(format_atom(name, self.quoted))
         self.out.append("(")
         self.last = "("
-        for i, a in enumerate(args):
-            if i:
-                self.put(",")
-            self.term(a, _ARG_PRIORITY)
-        self.put(")")
+        todo.append((_PUT, ")"))
+        for k in range(n - 1, -1, -1):
+            todo.append((args[k], _ARG_PRIORITY, False))
+            if k:
+                todo.append((_PUT, ","))
 
-    def list(self, t: Any) -> None:
-        # Iterative over the tail: a million-element list must not recurse.
-        self.put("[")
-        self.term(t.args[0], _ARG_PRIORITY)
-        t = t.args[1]
-        while True:
-            while type(t) is Var and t.ref is not None:
-                t = t.ref
-            if type(t) is Struct and t.name == "." and len(t.args) == 2:
-                self.put(",")
-                self.term(t.args[0], _ARG_PRIORITY)
-                t = t.args[1]
-            elif type(t) is Atom and t == "[]":
-                break
-            else:
-                self.put("|")
-                self.term(t, _ARG_PRIORITY)
-                break
-        self.put("]")
+    def _prefix_end(self, mark: int, name: str) -> None:
+        """After a prefix operator's argument (written from ``mark`` on): separate it where
+        `- (a,b)` is -((a,b)) but `-(a,b)` is -(a,b), and `- 1` is -(1) but `-1` is -1."""
+        first = self.out[mark][0] if mark < len(self.out) else ""
+        if first != " " and (
+                first == "(" or (name == "-" and first.isdigit()) or name[0].isalpha()):
+            self.out.insert(mark, " ")
+
+    def _list_rest(self, t: Any, todo: list, gray: set) -> None:
+        """The tail of a list after an element: one more element, `|Tail`, or nothing."""
+        via = False
+        while type(t) is Var and t.ref is not None:
+            t = t.ref
+            via = True
+        if type(t) is Struct and t.name == "." and len(t.args) == 2:
+            if via:
+                if id(t) in gray:
+                    raise _CyclicTerm
+                gray.add(id(t))
+                todo.append((_UNGRAY, id(t)))
+            self.put(",")
+            todo.append((_LIST_REST, t.args[1]))
+            todo.append((t.args[0], _ARG_PRIORITY, False))
+        elif not (type(t) is Atom and t == "[]"):
+            self.put("|")
+            todo.append((t, _ARG_PRIORITY, False))
 
 
 def format_term(t: Any, quoted: bool = True, priority: int = 1200) -> str:
     """Prolog text of a term, like SWI-Prolog's ``writeq`` (``quoted=False``: like ``write``).
+
+    A cyclic term is written as SWI-Prolog writes it, ``@(Template, [S_1=Value, ...])``
+    (see :func:`factorize_cycles`).
 
     >>> from slr_sql.terms import make_list
     >>> format_term(Struct(":-", (Atom("a"), Struct(",", (Atom("b"), Atom("c"))))))
@@ -600,5 +955,9 @@ def format_term(t: Any, quoted: bool = True, priority: int = 1200) -> str:
     "['hello world',\\"s\\",1.0|T]"
     """
     w = _Writer(quoted)
-    w.term(t, priority)
+    try:
+        w.write(t, priority)
+    except _CyclicTerm:
+        w = _Writer(quoted)
+        w.write(factorize_cycles(t), priority)
     return "".join(w.out)

@@ -8,10 +8,15 @@ from __future__ import annotations
 
 from typing import Any
 
-from .terms import Atom, String, Struct, Var, deref, is_ground, list_items, make_list
+from .terms import CONS, Atom, String, Struct, Var, deref, is_ground
 
 __all__ = ["unify", "undo", "copy_term", "resolve", "unify_tuple", "bound_args", "match_time",
            "unify_event_row"]
+
+
+# Compound pairs one unify() call walks before it starts remembering pairs (so that two
+# cyclic terms, X = f(X) and Y = f(Y), unify instead of looping forever).
+_PAIRS_BEFORE_CYCLE_CHECK = 1_000_000
 
 
 def unify(a: Any, b: Any, trail: list) -> bool:
@@ -21,6 +26,7 @@ def unify(a: Any, b: Any, trail: list) -> bool:
     (True, 1)
     """
     stack = None
+    budget = _PAIRS_BEFORE_CYCLE_CHECK
     while True:
         while type(a) is Var:
             r = a.ref
@@ -49,6 +55,9 @@ def unify(a: Any, b: Any, trail: list) -> bool:
                 n = len(aa)
                 if n != len(ba):
                     return False
+                budget -= 1
+                if not budget:
+                    return _unify_remembering(a, b, stack or [], trail)
                 if stack is None:
                     stack = []
                 if n == 2:
@@ -67,6 +76,39 @@ def unify(a: Any, b: Any, trail: list) -> bool:
         a, b = stack.pop()
 
 
+def _unify_remembering(a: Any, b: Any, stack: list, trail: list) -> bool:
+    """unify() after a million compound pairs: each pair of compounds is unified once, so
+    cyclic terms (rational trees) unify in finite time, as in SWI-Prolog."""
+    seen: set[tuple[int, int]] = set()
+    stack.append((a, b))
+    while stack:
+        a, b = stack.pop()
+        a = deref(a)
+        b = deref(b)
+        if a is b:
+            continue
+        ta = type(a)
+        tb = type(b)
+        if ta is Var:
+            a.ref = b
+            trail.append(a)
+        elif tb is Var:
+            b.ref = a
+            trail.append(b)
+        elif ta is Struct:
+            if tb is not Struct or a.name != b.name or len(a.args) != len(b.args):
+                return False
+            key = (id(a), id(b))
+            if key in seen:  # already unified, or being unified further down the stack
+                continue
+            seen.add(key)
+            stack.extend(zip(a.args, b.args))
+        elif ta is not tb or a != b:
+            if not (ta is float and tb is float and a != a and b != b):
+                return False
+    return True
+
+
 def undo(trail: list, mark: int) -> None:
     """Unbind every variable bound since the trail had ``mark`` entries."""
     while len(trail) > mark:
@@ -74,7 +116,15 @@ def undo(trail: list, mark: int) -> None:
 
 
 def copy_term(t: Any, mapping: dict | None = None) -> Any:
-    """Copy a term with fresh variables (bindings resolved). Iterative over list spines."""
+    """Copy a term with fresh variables (bindings resolved).
+
+    Iterative (terms nested 100,000 deep copy), and finite on cyclic terms: their copy is
+    cyclic too, through fresh bound variables. ``mapping`` (id of a variable -> its copy)
+    keeps the renaming consistent across calls.
+
+    >>> X = Var("X"); c = copy_term(Struct("f", (X, X))); c.args[0] is c.args[1] is not X
+    True
+    """
     if mapping is None:
         mapping = {}
     t = deref(t)
@@ -84,30 +134,159 @@ def copy_term(t: Any, mapping: dict | None = None) -> Any:
         if v is None:
             v = mapping[id(t)] = Var()
         return v
-    if tt is Struct:
-        if t.name == "." and len(t.args) == 2:
-            heads = []
-            cur = t
-            while type(cur) is Struct and cur.name == "." and len(cur.args) == 2:
-                heads.append(copy_term(cur.args[0], mapping))
-                cur = deref(cur.args[1])
-            out = copy_term(cur, mapping)
-            for h in reversed(heads):
-                out = Struct(".", (h, out))
-            return out
-        return Struct(t.name, tuple([copy_term(a, mapping) for a in t.args]))
-    return t
+    if tt is not Struct:
+        return t
+    try:
+        return _copy(t, mapping, None)
+    except _CyclicTerm:
+        return _copy(t, mapping, {})
+
+
+class _CyclicTerm(Exception):
+    pass
+
+
+class _Copied:
+    """_copy's marker: the arguments of ``struct`` are copied, assemble the copy."""
+
+    __slots__ = ("struct", "key", "placeholder")
+
+    def __init__(self, struct: Struct, key: int | None, placeholder: Var | None):
+        self.struct = struct
+        self.key = key
+        self.placeholder = placeholder
+
+
+def _copy(t: Any, mapping: dict, shared: dict | None) -> Any:
+    """copy_term's walk. ``shared`` None: raise _CyclicTerm on a cycle; a dict: each
+    compound reached through a binding is copied once, and a later (or inner) occurrence
+    refers to the copy through a fresh variable bound to it."""
+    done: list = []
+    todo: list = [t]
+    gray: set[int] = set()  # compounds reached through a binding, being copied
+    while todo:
+        x = todo.pop()
+        tx = type(x)
+        if tx is _SpineCopied:
+            k = x.n + 1
+            values = done[len(done) - k:]
+            del done[len(done) - k:]
+            out = values[-1]
+            for head in reversed(values[:-1]):
+                out = Struct(CONS, (head, out))
+            done.append(out)
+            continue
+        if tx is _Copied:
+            k = len(x.struct.args)
+            args = tuple(done[len(done) - k:])
+            del done[len(done) - k:]
+            out = Struct(x.struct.name, args)
+            if x.placeholder is not None:
+                x.placeholder.ref = out
+            elif x.key is not None:
+                gray.discard(x.key)
+            done.append(out)
+            continue
+        via = False
+        while type(x) is Var and x.ref is not None:
+            x = x.ref
+            via = True
+        tx = type(x)
+        if tx is Var:
+            v = mapping.get(id(x))
+            if v is None:
+                v = mapping[id(x)] = Var()
+            done.append(v)
+        elif tx is Struct:
+            args = x.args
+            if len(args) == 2 and x.name == "." and not via:
+                # a list spine: copy the cells of a long list without a marker each
+                cells = [x]
+                tail = args[1]
+                while type(tail) is Struct and tail.name == "." and len(tail.args) == 2:
+                    cells.append(tail)
+                    tail = tail.args[1]
+                if len(cells) > 1:
+                    todo.append(_SpineCopied(len(cells)))
+                    todo.append(tail)
+                    todo.extend(c.args[0] for c in reversed(cells))
+                    continue
+            key = placeholder = None
+            if via:
+                key = id(x)
+                if shared is not None:
+                    known = shared.get(key)
+                    if known is not None:
+                        done.append(known)
+                        continue
+                    placeholder = shared[key] = Var()
+                elif key in gray:
+                    raise _CyclicTerm
+                else:
+                    gray.add(key)
+            todo.append(_Copied(x, key, placeholder))
+            todo.extend(reversed(args))
+        else:
+            done.append(x)
+    return done[0]
+
+
+class _SpineCopied:
+    """_copy's marker: the heads and the tail of an n-cell list are copied."""
+
+    __slots__ = ("n",)
+
+    def __init__(self, n: int):
+        self.n = n
 
 
 def resolve(t: Any) -> Any:
-    """The term with all bound variables replaced by their values (unbound ones kept)."""
+    """The term with all bound variables replaced by their values (unbound ones kept).
+
+    Iterative; a cyclic term has no such form and is returned as it is.
+
+    >>> X = Var("X"); X.ref = 1; resolve(Struct("f", (X,))).args
+    (1,)
+    """
     t = deref(t)
-    if type(t) is Struct:
-        if t.name == "." and len(t.args) == 2:
-            items, tail = list_items(t)
-            return make_list([resolve(x) for x in items], resolve(tail))
-        return Struct(t.name, tuple([resolve(a) for a in t.args]))
-    return t
+    if type(t) is not Struct:
+        return t
+    try:
+        return _copy_keeping_vars(t)
+    except _CyclicTerm:
+        return t
+
+
+def _copy_keeping_vars(t: Any) -> Any:
+    done: list = []
+    todo: list = [t]
+    gray: set[int] = set()
+    while todo:
+        x = todo.pop()
+        if type(x) is _Copied:
+            k = len(x.struct.args)
+            args = tuple(done[len(done) - k:])
+            del done[len(done) - k:]
+            if x.key is not None:
+                gray.discard(x.key)
+            done.append(Struct(x.struct.name, args))
+            continue
+        via = False
+        while type(x) is Var and x.ref is not None:
+            x = x.ref
+            via = True
+        if type(x) is Struct:
+            key = None
+            if via:
+                key = id(x)
+                if key in gray:
+                    raise _CyclicTerm
+                gray.add(key)
+            todo.append(_Copied(x, key, None))
+            todo.extend(reversed(x.args))
+        else:
+            done.append(x)
+    return done[0]
 
 
 def unify_tuple(xs: tuple, ys: tuple, trail: list) -> bool:

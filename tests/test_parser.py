@@ -407,3 +407,125 @@ def test_fast_event_reader_is_used_for_common_events():
 def test_lists_starting_with_numbers(text, printed):
     """A number list is lexed as one token; lists that only start with numbers are not."""
     assert format_term(parse_term(text, "<t>")[0]) == printed
+
+
+# --------------------------------------------------------- bad inputs (hardening)
+# Every bad text is an SLRSyntaxError at the offending character (line, column, a fragment of
+# the message), never a raw Python exception. "\\" below is one backslash in the SLR text.
+_BIG_DIGITS = "9" * 400_000  # ~1.3 million bits: beyond terms.MAX_INTEGER_BITS
+BAD_INPUTS = [
+    # (text, line, column, message fragment)
+    ("X = '\\xFFFFFFFFFF\\'", 1, 6, "illegal character code"),
+    ("X = '\\x110000\\'", 1, 6, "illegal character code"),
+    ("X = '\\xD800\\'", 1, 6, "illegal character code"),           # a surrogate, as SWI
+    ('X = "ab\\x110000\\"', 1, 8, "illegal character code"),       # in a string
+    ("X = '\\7777777\\'", 1, 6, "illegal character code"),          # octal
+    ("X = 0'\\x110000\\", 1, 7, "illegal character code"),          # a character code
+    ("X = 'a\\xg'", 1, 7, "\\x escape without hexadecimal digits"),
+    ("X = f('\\x')", 1, 8, "\\x escape without hexadecimal digits"),
+    ("X = 'it''s\\q'", 1, 11, "undefined escape sequence '\\q'"),  # after a doubled quote
+    ("X = 1.0e400", 1, 5, "float overflow"),
+    ("X = [1.0, 2.5e999]", 1, 11, "float overflow"),                # a number list token
+    ("X = 'a\ud800b'", 1, 7, "illegal character code"),            # a lone surrogate itself
+    ("a.\r\np('\udfff').", 2, 4, "illegal character code"),
+    ("X = " + _BIG_DIGITS, 1, 5, "integer too large"),
+    ("X = 0x" + "f" * 300_000, 1, 5, "integer too large"),
+    ("X = " + _BIG_DIGITS + "s", 1, 5, "integer too large"),         # a duration
+    ("p :-\n  X = '\\q'.", 2, 8, "undefined escape sequence"),
+]
+
+
+@pytest.mark.parametrize("text,line,column,fragment", BAD_INPUTS,
+                         ids=[f"bad{i}" for i in range(len(BAD_INPUTS))])
+def test_bad_input_is_a_syntax_error_at_its_place(text, line, column, fragment):
+    with pytest.raises(SLRSyntaxError) as ei:
+        parse_program(text if text.endswith(".") else text + ".")
+    e = ei.value
+    assert fragment in e.message, str(e)
+    assert (e.line, e.column) == (line, column), str(e)
+    assert "\r" not in e.source_line
+    str(e).encode("utf-8")  # printable as it is: no lone surrogate in the message
+
+
+def test_big_integers_read_and_print_beyond_pythons_digit_limit():
+    # Python refuses int(text) beyond 4,300 digits by default; SLR reads them, as SWI does.
+    digits = "7" * 5000
+    t, _ = parse_term(f"X = {digits}")
+    assert t.args[1] == 7 * (10**5000 - 1) // 9
+    assert format_term(t) == f"X={digits}"
+    assert format_term(parse_term(f"f(-{digits})")[0]) == f"f(-{digits})"
+
+
+def test_characters_up_to_the_last_code_point_are_fine():
+    t, _ = parse_term("X = '\\x10FFFF\\\\x0\\'")
+    assert t.args[1] == "\U0010ffff\x00"
+
+
+# ------------------------------------------------- deep inputs: no recursion limit
+DEEP = 100_000  # the shapes that used to recurse once per level; the others share their code
+SOME = 20_000
+# shape -> (text, its printed form; None when that is the text without spaces)
+DEEP_SHAPES = {
+    "compound": ("f(" * DEEP + "a" + ")" * DEEP, None),
+    "nested lists": ("[" * DEEP + "a" + "]" * DEEP, None),
+    "prefix chain": ("- " * DEEP + "a", "- " * (DEEP - 1) + "-a"),
+    "xfy chain": ("^".join(["a"] * DEEP), None),
+    "yfx chain": ("+".join(["a"] * SOME), None),
+    "parentheses": ("(" * SOME + "a" + ")" * SOME, "a"),
+    "curly": ("{" * SOME + "a" + "}" * SOME, None),
+    "conjunction": (", ".join(["a"] * SOME), ",".join(["a"] * SOME)),
+    "if-then-else": ("(a -> b ; " * SOME + "c" + ")" * SOME, "a->b;" * SOME + "c"),
+    "mixed": ("f(- [" * SOME + "a" + "])" * SOME, "f(-[" * SOME + "a" + "])" * SOME),
+}
+
+
+@pytest.mark.parametrize("shape", sorted(DEEP_SHAPES))
+def test_deep_terms_parse_and_print(shape):
+    text, printed = DEEP_SHAPES[shape]
+    term, _ = parse_term(text)
+    assert format_term(term) == (text.replace(" ", "") if printed is None else printed)
+
+
+def test_a_body_of_many_goals_parses():
+    n = DEEP // 2
+    (c,) = parse_program("p :- " + ", ".join(f"q({i})" for i in range(n)) + ".")
+    goals, body = [], c.body
+    while type(body) is Struct and body.name == ",":
+        goals.append(body.args[0])
+        body = body.args[1]
+    assert len(goals) + 1 == n
+    (d,) = parse_program("p :- " + " | ".join(["a"] * n) + ".")  # `|` read as `;`
+    assert d.body.name == ";" and d.body.args[1].name == ";"
+
+
+def test_deep_event_text_falls_back_to_the_parser():
+    text = "p(" + "f(" * 5000 + "a" + ")" * 5000 + ")^1"
+    assert parse_event_fast(text) is None
+    term, _ = parse_term(text)
+    assert term.name == "^"
+
+
+def test_cyclic_terms_print_as_swi_does():
+    x = Var("X")
+    x.ref = Struct("f", (x,))
+    assert format_term(x) == "@(S_1,[S_1=f(S_1)])"
+    y = Var("Y")
+    y.ref = make_list([Atom("a")], y)
+    assert format_term(Struct("g", (y, y))) == "@(g(S_1,S_1),[S_1=[a|S_1]])"
+
+
+# ------------------------------------------------------------------ big quoted text
+@pytest.mark.parametrize("quote", ["'", '"'])
+def test_a_large_quoted_atom_costs_memory_proportional_to_its_size(quote):
+    import tracemalloc
+
+    n = 500_000
+    text = "X = " + quote + "ab\\n" * (n // 4) + "x" * (n // 2) + quote
+    tracemalloc.start()
+    try:
+        term, _ = parse_term(text)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert len(term.args[1]) == 3 * (n // 4) + n // 2
+    assert peak < 40 * n, f"peak {peak / 1e6:.0f} MB for a {n / 1e6:.0f} MB atom"
