@@ -317,7 +317,7 @@ class _Resolver:
                             # The bracketed group is only the first operand of the right-hand
                             # side: `p:-(a;b),c` is p :- ((a;b), c).
                             pending.append((None, left, op, p, maxp))
-                            left, lp, maxp = self.group(item[3]), 0, rmax
+                            left, lp, maxp = _group_of(item), 0, rmax
                             continue
                     else:
                         if kind != _NAME:
@@ -340,7 +340,8 @@ class _Resolver:
 
     @staticmethod
     def group(args: list) -> Any:
-        """The term of a bracket ``(a, b)`` met in infix position (``x-(a, b)``)."""
+        """The term of a bracket ``(a, b)`` met in infix position (``x-(a, b)``); see
+        _group_of."""
         if len(args) == 1:
             return args[0][0]
         if max(a[1] for a in args) <= 999:
@@ -397,7 +398,18 @@ class _Builder(Transformer):
         tok = c[0]
         args = c[1]
         name = _functor_name(tok.value, tok.start_pos)
-        return (_FUNC, Struct(name, tuple([a[0] for a in args])), tok, args)
+        item = (_FUNC, Struct(name, tuple([a[0] for a in args])), tok, args)
+        if len(args) > 1 and max(a[1] for a in args) > 999:
+            # The rare bracket that, in infix position, must be re-read as one sequence:
+            # read it now, while inner brackets already have theirs, so that nesting
+            # `a-(b:-c, a-(b:-c, ...))` does not recurse. An error is kept, and raised
+            # only if the bracket does stand in infix position.
+            try:
+                group = _Resolver.group(args)
+            except _Fail as fail:
+                group = fail
+            item += (group,)
+        return item
 
     def paren(self, c: list) -> tuple:
         return (_TERM, _resolve(c[1])[0], c[0])
@@ -452,6 +464,16 @@ class _Builder(Transformer):
         # Returned exactly as read (no `|` -> `;` rewrite): parse_term is also the reader
         # for data, and format_term/parse_term must round-trip.
         return _resolve(c[0])[0], dict(_ordered_vars(_state.varmap))
+
+
+def _group_of(item: tuple) -> Any:
+    """The term of a _FUNC item's bracket in infix position (``x-(a, b)``)."""
+    if len(item) > 4:  # read when the compound was built
+        group = item[4]
+        if type(group) is _Fail:
+            raise group
+        return group
+    return _Resolver.group(item[3])
 
 
 def _item(c: Any) -> tuple:

@@ -500,6 +500,8 @@ DEEP_SHAPES = {
     "conjunction": (", ".join(["a"] * SOME), ",".join(["a"] * SOME)),
     "if-then-else": ("(a -> b ; " * SOME + "c" + ")" * SOME, "a->b;" * SOME + "c"),
     "mixed": ("f(- [" * SOME + "a" + "])" * SOME, "f(-[" * SOME + "a" + "])" * SOME),
+    # an infix operator before a bracket whose commas are operators (re-read as one term)
+    "infix bracket": ("a-(b:-c, " * SOME + "d" + ")" * SOME, None),
 }
 
 
