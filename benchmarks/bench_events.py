@@ -164,7 +164,7 @@ def ours(scenario: str, policy: str, n: int, batch: int, synchronous: str,
         # as Python values, the way a ROS bridge hands them over (ETALIS gets terms too)
         items = [(name, [_value(a) for a in args], t, t) for name, args, t in evs]
         table = RULES[scenario][2]
-        before = kb.sql(f"SELECT count(*) FROM {table}")[1][0][0] if with_rule else 0
+        before = kb.sql(f"SELECT count(*) FROM {quote_identifier(table)}")[1][0][0] if with_rule else 0
         t0 = time.perf_counter()
         c0 = time.process_time()
         # once a batch is added the clock reaches its last occurrence time: everything
@@ -181,7 +181,7 @@ def ours(scenario: str, policy: str, n: int, batch: int, synchronous: str,
         clock.set(evs[-1][2] + 1.0)   # the last decisions
         elapsed = time.perf_counter() - t0
         cpu = time.process_time() - c0
-        detections = (kb.sql(f"SELECT count(*) FROM {table}")[1][0][0] - before
+        detections = (kb.sql(f"SELECT count(*) FROM {quote_identifier(table)}")[1][0][0] - before
                       if with_rule else 0)
         kb.close()
         return n / elapsed, n / max(cpu, 1e-9), detections

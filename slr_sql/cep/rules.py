@@ -27,6 +27,7 @@ from typing import Any
 
 from ..clocks import parse_duration
 from ..errors import SLRError, SLRSyntaxError
+from ..program import flatten_conjunction
 from ..terms import Atom, Clause, String, Struct, Var, deref, format_term, is_ground, term_vars
 
 __all__ = ["POLICIES", "BINARY", "IGNORED_FACTS", "Leaf", "Alternative", "EventRule",
@@ -229,16 +230,7 @@ def consumption_directive(goal: Any) -> tuple[tuple[str, int] | None, str] | Non
 
 
 def _flatten_and(goal: Any) -> list:
-    out = []
-    stack = [goal]
-    while stack:
-        g = deref(stack.pop())
-        if type(g) is Struct and g.name == "," and len(g.args) == 2:
-            stack.append(g.args[1])
-            stack.append(g.args[0])
-        else:
-            out.append(_bar_to_semicolon(g))
-    return out
+    return [_bar_to_semicolon(g) for g in flatten_conjunction(goal)]
 
 
 def _bar_to_semicolon(goal: Any) -> Any:
