@@ -44,6 +44,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import slr_sql  # noqa: E402
+from slr_sql.store import quote_identifier  # noqa: E402
 from slr_sql import ManualClock  # noqa: E402
 
 # ----------------------------------------------------------------------------- scenarios
