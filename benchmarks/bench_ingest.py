@@ -38,16 +38,21 @@ class FixedClock:
         return 1000.0
 
 
-def make_events(n: int, objects: int = 1000, decimals: int | None = None) -> list[tuple]:
+def make_events(n: int, objects: int = 1000, decimals: int | None = None,
+                vectors: str = "prolog") -> list[tuple]:
     """``seg(oK, [x,y,z])^t`` events; positions are random floats (17 significant digits,
-    the slowest to write as text), or rounded to ``decimals`` places (a sensor's resolution)."""
+    the slowest to write as text), or rounded to ``decimals`` places (a sensor's resolution),
+    as Prolog lists (``make_list``: what parsed text gives) or Python lists (what decoded
+    ROS messages and most robot code give)."""
     rng = random.Random(7)
     names = [Atom(f"o{i}") for i in range(objects)]
     coordinate = rng.random if decimals is None else (lambda: round(rng.random(), decimals))
     events = []
     for i in range(n):
         t = i * 0.01
-        position = make_list([coordinate(), coordinate(), coordinate()])
+        position = [coordinate(), coordinate(), coordinate()]
+        if vectors == "prolog":
+            position = make_list(position)
         events.append(("seg", (names[i % objects], position), t, t))
     return events
 
@@ -101,9 +106,9 @@ def run_raw(path: Path, events: list[tuple], synchronous: str) -> tuple[float, f
 
 
 def measure(n: int, repeat: int, synchronous: str, api: str,
-            decimals: int | None = None) -> tuple[float, float]:
+            decimals: int | None = None, vectors: str = "prolog") -> tuple[float, float]:
     """Print the runs and the best of each for ``n`` events; returns (wall, cpu) ratios."""
-    events = make_events(n, decimals=decimals)
+    events = make_events(n, decimals=decimals, vectors=vectors)
     run_api = run_kb if api == "kb" else run_store
     label = "kb.add_many" if api == "kb" else "EventStore.add_events"
     raw_runs, api_runs = [], []
@@ -128,7 +133,8 @@ def measure(n: int, repeat: int, synchronous: str, api: str,
             raw_path.unlink()
             api_path.unlink()
     digits = "random floats" if decimals is None else f"floats rounded to {decimals} decimals"
-    print(f"ingest of {n:,} events seg(oN, [x,y,z])^t ({digits}), synchronous={synchronous}, "
+    print(f"ingest of {n:,} events seg(oN, [x,y,z])^t ({digits}, {vectors} lists), "
+          f"synchronous={synchronous}, "
           f"SQLite {sqlite3.sqlite_version}, best of {repeat}")
     print(f"{'method':<34}{'wall s':>9}{'events/s':>12}{'cpu s':>9}{'events/cpu-s':>14}")
     for name, runs in (("raw sqlite3.executemany (encoded)", raw_runs), (label, api_runs)):
@@ -151,9 +157,12 @@ def main(argv: list[str] | None = None) -> None:
                         help="kb.add_many (default) or the store's add_events")
     parser.add_argument("--decimals", type=int, default=None,
                         help="round the coordinates to this many decimals (default: not)")
+    parser.add_argument("--vectors", choices=("prolog", "python"), default="prolog",
+                        help="positions as Prolog lists (make_list, default) or Python lists")
     options = parser.parse_args(argv)
     for n in options.n:
-        measure(n, options.repeat, options.synchronous, options.api, options.decimals)
+        measure(n, options.repeat, options.synchronous, options.api, options.decimals,
+                options.vectors)
 
 
 if __name__ == "__main__":

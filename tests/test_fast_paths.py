@@ -140,3 +140,65 @@ def test_the_same_bad_tuple_given_twice_is_rejected_at_both_places():
         errors = kb.add_many([bad, ("p", (1,), 1.0, 1.0), bad])
         assert [e.index for e in errors] == [0, 2]
         assert kb.query("findall(X, p(X)^_, L)") == [{"L": [1]}]
+
+
+# Numbers in every magnitude and at the integer limits of the C path (53 bits) and of the
+# stored form (64 bits): where orjson's text is used it must be repr's, everywhere else the
+# Python path must take over.
+NUMBERS = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.floats(min_value=-1e-3, max_value=1e-3),
+    st.floats(min_value=1e15, max_value=1e17),
+    st.integers(-(2 ** 65), 2 ** 65),
+    st.sampled_from([2 ** 53, 2 ** 53 + 1, -(2 ** 53) - 1, 2 ** 63 - 1, 2 ** 63, -(2 ** 63),
+                     1e-4, 1e-5, 9.999999999999999e-05, 1e16, 9999999999999998.0, 10.00001,
+                     -0.0, 5e-324, 1.7976931348623157e308]),
+)
+VECTORS = st.lists(NUMBERS, max_size=7)
+
+
+@given(VECTORS)
+@example([1e-05, 0.0001, 1e16, 1e15, 2 ** 53 + 1, 2 ** 63, True])
+def test_vectors_of_numbers_encode_as_the_general_encoder_does(items):
+    for term in (items, tuple(items), make_list(items)):
+        assert fast(term) == general(term)
+
+
+@given(st.lists(VECTORS, min_size=1, max_size=3), st.sampled_from(["pose", "p_2", "é", "a\nb", "[]"]))
+def test_compounds_of_number_lists_encode_as_the_general_encoder_does(lists, name):
+    term = Struct(name, tuple(lists))
+    assert fast(term) == general(term)
+    assert fast(Struct(Atom(name), (lists[0], 1.5, 2))) == general(Struct(name, (lists[0], 1.5, 2)))
+
+
+@given(st.lists(VECTORS, min_size=1, max_size=5))
+def test_a_column_of_vectors_encodes_as_the_general_encoder_does(rows):
+    from slr_sql.encoding import encode_column
+
+    expected = [general(row) for row in rows]
+    try:
+        got = encode_column([list(row) for row in rows])
+    except Unencodable as exc:
+        assert any(isinstance(e, tuple) for e in expected), exc
+    else:
+        assert got == expected
+
+
+def test_the_c_float_text_is_repr_on_random_bit_patterns():
+    import random
+    import struct
+
+    from slr_sql.encoding import _numbers_json
+
+    rng = random.Random(20261122)
+    used = 0
+    for _ in range(200_000):
+        (x,) = struct.unpack("<d", rng.getrandbits(64).to_bytes(8, "little"))
+        for value in (x, rng.uniform(-1000, 1000), round(rng.uniform(-10, 10), 3)):
+            text = _numbers_json([value])
+            if text is not None:
+                used += 1
+                assert text == "[" + repr(value) + "]"
+            elif math.isfinite(value):
+                assert "e" in repr(value) or "0.0000" in repr(value), value
+    assert used > 400_000  # the C path is taken for nearly every value
