@@ -240,14 +240,14 @@ def _cons_heads(cell: Struct) -> list | None:
     """
     heads: list = []
     add = heads.append
-    while type(cell) is Struct:
-        if cell.name is not CONS and cell.name != ".":
-            return None
-        args = cell.args
-        if len(args) != 2:
-            return None
-        add(args[0])
-        cell = args[1]
+    try:
+        while type(cell) is Struct:
+            if cell.name is not CONS and cell.name != ".":
+                return None
+            head, cell = cell.args  # ValueError: a '.' with other than two arguments
+            add(head)
+    except ValueError:
+        return None
     if cell is NIL or (type(cell) is Atom and cell == "[]"):
         return heads
     return None
