@@ -414,19 +414,25 @@ def encode_column(values: list) -> list:
             texts = _numbers_column_json(values)
             if texts is not None:
                 return texts
-            texts = list(map(_python_list_json, values))
-            if None not in texts and all(map(str.isascii, texts)):
-                return texts
+            return _completed(list(map(_python_list_json, values)), values)
         elif kind is Struct:  # parsed lists, and compounds of numbers (poses)
-            heads = list(map(_cons_heads, values))
-            if None not in heads:
-                texts = _numbers_column_json(heads)
-                if texts is not None:
-                    return texts
-            texts = list(map(_struct_json, values))
-            if None not in texts and all(map(str.isascii, texts)):
-                return texts
+            if values[0].name == ".":
+                heads = list(map(_cons_heads, values))
+                if None not in heads:
+                    texts = _numbers_column_json(heads)
+                    if texts is not None:
+                        return texts
+            return _completed(list(map(_struct_json, values)), values)
     return list(map(encode, values))
+
+
+def _completed(texts: list, values: list) -> list:
+    """``texts`` (a fast path's texts of ``values``, None where it declined) with :func:`encode`
+    of the values it declined or whose text is not ASCII (checked for lone surrogates)."""
+    if None in texts or not all(map(str.isascii, texts)):
+        return [encode(value) if text is None or not text.isascii() else text
+                for text, value in zip(texts, values)]
+    return texts
 
 
 def encode_json(term: Any) -> str:
