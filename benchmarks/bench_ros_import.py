@@ -170,7 +170,11 @@ def bench_bridge(count: int, rate: float) -> None:
                                "--map", str(mapfile)], stdout=subprocess.PIPE, text=True, env=env,
                               cwd=REPO)
     try:
-        assert "bridge ready" in bridge.stdout.readline()
+        for line in bridge.stdout:  # (it says first which request topics it serves)
+            if "bridge ready" in line:
+                break
+        else:
+            raise SystemExit("the bridge stopped before it was ready")
         publisher = subprocess.run([sys.executable, "-c", PUBLISHER, str(count), str(rate)],
                                    env=env, capture_output=True, text=True, timeout=600)
         assert publisher.returncode == 0, publisher.stderr

@@ -257,10 +257,10 @@ class KnowledgeBase:
 
     def __init__(self, path: str | Path | None = None, clock: Clock | None = None, *,
                  synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
-                 adopt: bool = False):
+                 adopt: bool = False, checkpoint: str = "auto"):
         self.clock = clock if clock is not None else WallClock()
         self.store = EventStore(path, self.clock, synchronous=synchronous,
-                                busy_timeout=busy_timeout, adopt=adopt)
+                                busy_timeout=busy_timeout, adopt=adopt, checkpoint=checkpoint)
         self.path = self.store.path
         self.program = Program()
         self.declarations = Declarations()
@@ -1093,7 +1093,10 @@ def open(path: str | Path | None = None, clock: Clock | None = None, **options: 
 
     Options: ``synchronous`` (``"FULL"``: an event is on disk when its add returns),
     ``busy_timeout`` (seconds a write waits for another process's write transaction before
-    :class:`~slr_sql.errors.SLRBusy`; default 5).
+    :class:`~slr_sql.errors.SLRBusy`; default 5), ``checkpoint`` (``"auto"``: SQLite copies
+    the write-ahead log into the file during the commit that fills it; ``"background"``: a
+    thread of the store does it, so no ``add`` waits for it -- for long-running writers with
+    a latency budget, such as ``slr serve`` and ``slr ros bridge``).
     A file that is not a store (not SQLite, damaged, a store of a newer slr_sql, or an SQLite
     file of another application) is refused with an :class:`SLRError` and left untouched;
     ``adopt=True`` adds a store to another application's SQLite file on purpose.

@@ -587,7 +587,7 @@ def run_bridge(db: str, mapping: Mapping, all_topics: bool = False,
         stop.set()
 
     previous = {s: signal.signal(s, request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
-    kb = slr_sql.open(db, synchronous=synchronous)
+    kb = slr_sql.open(db, synchronous=synchronous, checkpoint="background")
     bridge = Bridge(kb, mapping, all_topics=all_topics, node_name=node_name,
                     on_ready=lambda topic, msgtype: echo(f"subscribed {topic} ({msgtype})"))
     requests = mapping.requests

@@ -80,7 +80,8 @@ class EventStore:
     seconds a write waits for another connection's write transaction before
     :class:`~slr_sql.errors.SLRBusy`. A file that is not a store is refused with an
     :class:`~slr_sql.errors.SLRError` and left untouched, unless ``adopt=True`` (a foreign
-    SQLite file then gets the store's tables added).
+    SQLite file then gets the store's tables added). ``checkpoint="background"`` copies the
+    write-ahead log into the file on a thread of its own (:mod:`slr_sql.store.checkpointer`).
 
     >>> store = EventStore(":memory:")
     >>> store.add_event("obj", ("cup1", "red"), 1.0, 1.0); store.count("obj", 2)
@@ -90,8 +91,8 @@ class EventStore:
 
     def __init__(self, path: str | Path | None = None, clock: Any = None, *,
                  synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
-                 adopt: bool = False):
-        self._db = db = Database(path, clock, synchronous, busy_timeout, adopt)
+                 adopt: bool = False, checkpoint: str = "auto"):
+        self._db = db = Database(path, clock, synchronous, busy_timeout, adopt, checkpoint)
         self._tables = EventTables(db)
         self._writer = EventWriter(db, self._tables)
         self._reader = EventReader(db, self._tables)

@@ -33,6 +33,7 @@ from contextlib import contextmanager
 from typing import Any, Callable, Iterable, Iterator
 
 from ..errors import SLRError, SLRTimeout
+from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
 from .schema import migrate, migration_scripts
 from .sqltext import busy_error, split_sql_script
 
@@ -209,10 +210,14 @@ class Database:
 
     def __init__(self, path: str | os.PathLike | None = None, clock: Any = None,
                  synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
-                 adopt: bool = False):
+                 adopt: bool = False, checkpoint: str = "auto",
+                 checkpoint_interval: float = CHECKPOINT_INTERVAL):
         busy_timeout = _check_busy_timeout(busy_timeout)
         if synchronous.upper() not in ("OFF", "NORMAL", "FULL", "EXTRA"):
             raise ValueError(f"synchronous must be OFF, NORMAL, FULL or EXTRA, not {synchronous!r}")
+        if checkpoint not in CHECKPOINT_MODES:
+            raise ValueError(f"checkpoint must be 'auto' or 'background', not {checkpoint!r}")
+        self.checkpointer: WalCheckpointer | None = None
         self.path = None if path in (None, ":memory:") else os.fspath(path)
         new = True if self.path is None else check_file(self.path, adopt)
         self.clock = clock if clock is not None else WallClock()
@@ -251,6 +256,10 @@ class Database:
             if self.path is not None and not new and \
                     conn.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
                 conn.execute("PRAGMA journal_mode=WAL")
+            if checkpoint == "background" and self.path is not None:
+                # see store/checkpointer.py: no commit waits for a checkpoint's fsync
+                conn.execute("PRAGMA wal_autocheckpoint=0")
+                self.checkpointer = WalCheckpointer(self.path, checkpoint_interval)
         except BaseException as exc:
             conn.close()
             if isinstance(exc, sqlite3.OperationalError):
@@ -304,6 +313,8 @@ class Database:
             if self.closed:
                 return
             self.closed = True
+            if self.checkpointer is not None:
+                self.checkpointer.stop()
             try:
                 if self.tx_depth:
                     self.conn.execute("ROLLBACK")

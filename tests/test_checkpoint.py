@@ -1,0 +1,105 @@
+"""checkpoint="background": the store's thread copies the write-ahead log into the database
+file, SQLite's own checkpoint (inside a commit) is off, durability and sharing are unchanged."""
+from __future__ import annotations
+
+import sqlite3
+import threading
+import time
+
+import pytest
+
+import slr_sql
+from slr_sql.store.connection import Database
+
+
+def rows_in_main_file(path) -> int:
+    """Rows of table p as the database file alone holds them (``immutable``: the WAL is
+    not read), i.e. what has been checkpointed."""
+    conn = sqlite3.connect(f"file:{path}?immutable=1", uri=True)
+    try:
+        names = [r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")]
+        return conn.execute('SELECT count(*) FROM "p"').fetchone()[0] if "p" in names else 0
+    finally:
+        conn.close()
+
+
+def wait_for(condition, seconds=20.0):
+    deadline = time.monotonic() + seconds
+    while not condition():
+        assert time.monotonic() < deadline, "condition not reached before the deadline"
+        time.sleep(0.01)
+
+
+def checkpointer_threads():
+    return [t for t in threading.enumerate() if t.name.startswith("slr-checkpoint")]
+
+
+def test_background_checkpoints_reach_the_file_without_close(tmp_path):
+    path = tmp_path / "kb.db"
+    kb = slr_sql.open(path, synchronous="NORMAL", checkpoint="background")
+    try:
+        for i in range(300):  # one transaction each
+            kb.add(f"p({i})^{i}")
+        db = kb.store._db
+        assert db.conn.execute("PRAGMA wal_autocheckpoint").fetchone()[0] == 0
+        runs = db.checkpointer.complete
+        wait_for(lambda: db.checkpointer.complete > runs + 1)  # two more after the last add
+        assert rows_in_main_file(path) == 300
+        assert kb.query("aggregate_all(count, p(_)^_, N)") == [{"N": 300}]
+    finally:
+        kb.close()
+    assert not checkpointer_threads()
+
+
+def test_the_default_leaves_checkpoints_to_sqlite(tmp_path):
+    kb = slr_sql.open(tmp_path / "kb.db")
+    try:
+        assert kb.store._db.checkpointer is None
+        assert kb.store._db.conn.execute("PRAGMA wal_autocheckpoint").fetchone()[0] == 1000
+        assert not checkpointer_threads()
+    finally:
+        kb.close()
+
+
+def test_the_wal_stays_bounded_while_a_writer_adds(tmp_path):
+    """The writer starts the log again once a checkpoint copied all of it: with SQLite's own
+    checkpoint off, the log would otherwise hold every transaction."""
+    path = tmp_path / "kb.db"
+    db = Database(path, synchronous="NORMAL", checkpoint="background", checkpoint_interval=0.01)
+    db.conn.execute("CREATE TABLE t (x)")
+    try:
+        largest = 0
+        for i in range(3000):
+            db.conn.execute("INSERT INTO t VALUES (?)", (i,))
+            if i % 100 == 0:
+                wait_for(lambda n=db.checkpointer.runs: db.checkpointer.runs > n)
+                largest = max(largest, (tmp_path / "kb.db-wal").stat().st_size)
+        # 3,000 transactions of one page or more each: ~12 MB of log without checkpoints
+        assert largest < 2_000_000
+    finally:
+        db.close()
+
+
+def test_other_processes_and_a_reopen_see_everything(tmp_path):
+    path = tmp_path / "kb.db"
+    with slr_sql.open(path, checkpoint="background") as kb:
+        kb.add_many([f"p({i})^{i}" for i in range(50)])
+        with slr_sql.open(path) as other:  # a second connection, SQLite's own checkpoints
+            assert other.query("aggregate_all(count, p(_)^_, N)") == [{"N": 50}]
+            other.add("p(50)^50")
+        assert kb.query("aggregate_all(count, p(_)^_, N)") == [{"N": 51}]
+    with slr_sql.open(path) as kb:
+        assert kb.query("aggregate_all(count, p(_)^_, N)") == [{"N": 51}]
+
+
+@pytest.mark.parametrize("mode", ["sometimes", "", None])
+def test_an_unknown_mode_is_refused(tmp_path, mode):
+    with pytest.raises(slr_sql.SLRError, match="checkpoint must be"):
+        slr_sql.open(tmp_path / "kb.db", checkpoint=mode)
+    assert not checkpointer_threads()
+
+
+def test_an_in_memory_store_has_no_thread():
+    with slr_sql.open(None, checkpoint="background") as kb:
+        kb.add("p(1)^1")
+        assert kb.store._db.checkpointer is None
