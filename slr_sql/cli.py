@@ -1,4 +1,4 @@
-"""``slr``: the command line, a thin layer over the library API (SPEC §5).
+"""``slr``: the command line, a thin layer over the library API (README.md, "Command line").
 
 Every command opens the store with :func:`slr_sql.open`, does one thing through the public
 API and closes it.  Errors: a :class:`slr_sql.SLRSyntaxError` prints its own text

@@ -1,4 +1,4 @@
-"""The public knowledge-base API (SPEC §4): open, load, add, query, explain.
+"""The public knowledge-base API (docs/api.md): open, load, add, query, explain.
 
 >>> import slr_sql
 >>> kb = slr_sql.open()
@@ -44,7 +44,7 @@ class BufferDecl:
 
 @dataclass
 class Declarations:
-    """What the program declares beyond clauses (SPEC §1 "Declarations")."""
+    """What the program declares beyond clauses (docs/language.md, "Declarations")."""
 
     event_types: set = field(default_factory=set)         # {(name, arity)}
     max_delay: dict = field(default_factory=dict)         # (name, arity) -> seconds | "learn"

@@ -1,4 +1,4 @@
-"""Compile non-recursive SLR goals to one SQL statement (SPEC §3 "Execution").
+"""Compile non-recursive SLR goals to one SQL statement (docs/sql.md).
 
 The compiler is an *abstract interpreter*: it walks the goal depth-first exactly like the
 top-down interpreter does, but instead of values it binds variables to :class:`Col` objects,
