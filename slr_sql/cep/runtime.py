@@ -580,12 +580,23 @@ class RuleRuntime:
         if table is None:
             self.eng.store.declare_type(name, arity)
             table = self.eng.table(self.head_key)
+        store = self.eng.store
         values = [f"h{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
         cols = [f"arg{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
-        rows = self.eng.store.run_compiled(
-            f"INSERT INTO {table} ({', '.join(cols)}, arrival) "
-            f"SELECT {', '.join(values)}, :now FROM {self.prov} WHERE id > :before "
-            f"ORDER BY id RETURNING {', '.join(cols)}", {"now": now, "before": before})
+        copy = (f"INSERT INTO {table} ({', '.join(cols)}, arrival) "
+                f"SELECT {', '.join(values)}, :now FROM {self.prov} WHERE id > :before "
+                f"ORDER BY id")
+        args = {"now": now, "before": before}
+        if store.execute("SELECT 1 FROM sqlite_master WHERE type = 'trigger' AND "
+                         "tbl_name = ? LIMIT 1", (self.eng.table_name(self.head_key),)):
+            # a buffer's trigger may refuse rows: the rows stored are those RETURNING gives
+            rows = store.run_compiled(f"{copy} RETURNING {', '.join(cols)}", args)
+        else:
+            # no trigger: every match is stored as it is; reading the provenance rows back
+            # (a rowid range) costs less than RETURNING's buffered copy
+            store.run_compiled(copy, args)
+            rows = store.run_compiled(f"SELECT {', '.join(values)} FROM {self.prov} "
+                                      f"WHERE id > :before ORDER BY id", {"before": before})
         if not rows:
             return []
         self.detections += len(rows)
@@ -593,7 +604,8 @@ class RuleRuntime:
         if arity == 0:
             return [(name, (), r[0], r[1]) for r in rows]
         if arity == 1:
-            return [(name, (dec(r[0]),), r[1], r[2]) for r in rows]
+            return [(name, (v if type(v) is int or type(v) is float else dec(v),), r[1], r[2])
+                    for r in rows for v in (r[0],)]
         return [(name, tuple(map(dec, r[:arity])), r[arity], r[arity + 1]) for r in rows]
 
 
