@@ -591,6 +591,8 @@ class RuleRuntime:
                          "tbl_name = ? LIMIT 1", (self.eng.table_name(self.head_key),)):
             # a buffer's trigger may refuse rows: the rows stored are those RETURNING gives
             rows = store.run_compiled(f"{copy} RETURNING {', '.join(cols)}", args)
+            # RETURNING gives an integral REAL as an int: the times as stored (floats)
+            rows = [r[:arity] + (float(r[arity]), float(r[arity + 1])) for r in rows]
         else:
             # no trigger: every match is stored as it is; reading the provenance rows back
             # (a rowid range) costs less than RETURNING's buffered copy
