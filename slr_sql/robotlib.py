@@ -28,6 +28,7 @@ from .terms import Struct
 __all__ = [
     "RobotValueError", "value_kind", "interpolate", "extrapolate", "pos_multiply", "distance",
     "quat_multiply", "quat_conjugate", "quat_normalize", "quat_rotate", "slerp", "make_pose",
+    "pos_multiply_fast", "transform_point",
 ]
 
 #: Above this |dot| between two unit quaternions, slerp falls back to normalized lerp.
@@ -291,7 +292,6 @@ def _pos_multiply_checked(p: Any, transforms: Sequence[Any]) -> Any:
         return x
     raise RobotValueError(
         f"pos_multiply: first element must be a point [X,Y,Z] or a pose, got {p!r}")
-
 
 
 # --------------------------------------------------------------------------- fast paths

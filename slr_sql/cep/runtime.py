@@ -627,8 +627,10 @@ class RuleRuntime:
                 f"SELECT {', '.join(values)}, :now FROM {self.prov} WHERE id > :before "
                 f"ORDER BY id")
         args = {"now": now, "before": before}
-        if store.execute("SELECT 1 FROM sqlite_master WHERE type = 'trigger' AND "
-                         "tbl_name = ? LIMIT 1", (self.eng.table_name(self.head_key),)):
+        head_table = self.eng.table_name(self.head_key)
+        if store.execute("SELECT 1 FROM sqlite_master WHERE type = 'trigger' AND tbl_name = ? "
+                         "UNION ALL SELECT 1 FROM sqlite_temp_master WHERE type = 'trigger' "
+                         "AND tbl_name = ? LIMIT 1", (head_table, head_table)):
             # a buffer's trigger may refuse rows: the rows stored are those RETURNING gives
             rows = store.run_compiled(f"{copy} RETURNING {', '.join(cols)}", args)
             # RETURNING gives an integral REAL as an int: the times as stored (floats)
