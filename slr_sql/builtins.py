@@ -1306,15 +1306,23 @@ def _pos_multiply(m, a):
 def _number_tuple(t: Any, n: int) -> tuple | None:
     """The numbers of a proper list of exactly ``n`` ints/floats, else None."""
     out = []
-    t = deref(t)
+    if type(t) is Var:
+        t = deref(t)
     for _ in range(n):
-        if type(t) is not Struct or t.name != "." or len(t.args) != 2:
+        if type(t) is not Struct:
             return None
-        x = deref(t.args[0])
+        args = t.args
+        if len(args) != 2 or t.name != ".":
+            return None
+        x = args[0]
+        if type(x) is Var:
+            x = deref(x)
         if type(x) is not float and type(x) is not int:
             return None
         out.append(x)
-        t = deref(t.args[1])
+        t = args[1]
+        if type(t) is Var:
+            t = deref(t)
     return tuple(out) if type(t) is Atom and t == "[]" else None
 
 
