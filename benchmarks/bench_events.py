@@ -2,6 +2,7 @@
 
     python benchmarks/bench_events.py                    # everything
     python benchmarks/bench_events.py --part throughput  # or latency, flat
+    python benchmarks/bench_events.py --part throughput --rules equals3 --policies recent --no-one
     ETALIS_DIR=/tmp/etalis python benchmarks/bench_events.py --part throughput
 
 * **throughput** -- events/s through ``kb.add_many`` (batches of 1,000) and through ``kb.add``
@@ -291,6 +292,13 @@ def main() -> None:
     ap.add_argument("--etalis-dir", default=os.environ.get("ETALIS_DIR", ""))
     ap.add_argument("--etalis-timeout", type=float, default=600.0)
     ap.add_argument("--history", type=int, nargs="*", default=[10_000, 1_000_000])
+    ap.add_argument("--rules", nargs="*", choices=sorted(RULES), default=["seq2", "seq3",
+                                                                          "equals3"],
+                    help="throughput: only these rules")
+    ap.add_argument("--policies", nargs="*", choices=["recent", "unrestricted"],
+                    default=["recent", "unrestricted"], help="throughput: only these policies")
+    ap.add_argument("--no-one", action="store_true",
+                    help="throughput: skip the kb.add one-at-a-time runs")
     args = ap.parse_args()
     etalis_dir = args.etalis_dir
     if etalis_dir and not (Path(etalis_dir) / "src" / "etalis.P").exists():
@@ -301,10 +309,11 @@ def main() -> None:
         print("\n| rule | policy | add_many ev/s (wall / CPU) | add ev/s | detections | "
               "ETALIS ev/s (wall / CPU) | ETALIS detections | add_many / ETALIS (wall / CPU) |")
         print("|---|---|---:|---:|---:|---:|---:|---:|")
-        for scenario in ("seq2", "seq3", "equals3"):
-            for policy in ("recent", "unrestricted"):
+        for scenario in args.rules:
+            for policy in args.policies:
                 rate, cpu, det = ours(scenario, policy, args.n, 1000, args.synchronous)
-                one, _, _ = ours(scenario, policy, args.n_one, 1, args.synchronous)
+                one = (ours(scenario, policy, args.n_one, 1, args.synchronous)[0]
+                       if not args.no_one else math.nan)
                 if etalis_dir:
                     e = etalis(scenario, policy, args.n, etalis_dir, args.etalis_timeout)
                 else:

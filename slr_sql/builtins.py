@@ -1295,9 +1295,65 @@ def _pos_multiply(m, a):
     items = proper_list(a[0])
     if not items:
         raise _err_domain("non_empty_list", NIL)
+    fast = _pos_multiply_terms(items)
+    if fast is not None:
+        return m.unify(a[1], fast)
     p = to_python(items[0])
     transforms = [to_python(x) for x in items[1:]]
     return m.unify(a[1], from_python(_robot_call(robotlib.pos_multiply, p, transforms)))
+
+
+def _number_tuple(t: Any, n: int) -> tuple | None:
+    """The numbers of a proper list of exactly ``n`` ints/floats, else None."""
+    out = []
+    if type(t) is Var:
+        t = deref(t)
+    for _ in range(n):
+        if type(t) is not Struct:
+            return None
+        args = t.args
+        if len(args) != 2 or t.name != ".":
+            return None
+        x = args[0]
+        if type(x) is Var:
+            x = deref(x)
+        if type(x) is not float and type(x) is not int:
+            return None
+        out.append(x)
+        t = args[1]
+        if type(t) is Var:
+            t = deref(t)
+    return tuple(out) if type(t) is Atom and t == "[]" else None
+
+
+def _plain_value(t: Any) -> Any:
+    """A point ``[X,Y,Z]`` or ``pose([X,Y,Z],[QX,QY,QZ,QW])`` of numbers as tuples (what
+    robotlib.pos_multiply_fast reads), else None."""
+    t = deref(t)
+    if type(t) is Struct and t.name == "pose" and len(t.args) == 2:
+        tr = _number_tuple(t.args[0], 3)
+        q = _number_tuple(t.args[1], 4)
+        return None if tr is None or q is None else Struct("pose", (tr, q))
+    return _number_tuple(t, 3)
+
+
+def _pos_multiply_terms(items: list) -> Any:
+    """pos_multiply of plain points and poses straight from the terms (no to_python /
+    from_python round trip; the same floats), or None for the general path."""
+    from . import robotlib
+
+    values = []
+    for x in items:
+        v = _plain_value(x)
+        if v is None:
+            return None
+        values.append(v)
+    out = robotlib.pos_multiply_fast(values[0], values[1:])
+    if out is None:
+        return None
+    if type(out) is list:
+        return make_list(out)
+    return Struct("pose", (make_list(out.args[0]), make_list(out.args[1])))
 
 
 @det("distance", 3)

@@ -806,13 +806,16 @@ class KnowledgeBase:
         self._plans[key] = plan
         return plan
 
-    def _instantiate(self, plan: _Plan, args: dict | None) -> tuple[Any, list]:
+    def _instantiate(self, plan: _Plan, args: dict | None,
+                     terms: bool = False) -> tuple[Any, list]:
+        """The goal of ``plan`` with ``args`` bound, and its frame. ``terms``: the values
+        are ground terms already (decoded stored values), bound as they are."""
         frame: list = [None] * plan.compiled.nslots
         if args:
             for name, value in args.items():
                 slot = plan.bind_slots.get(name)
                 if slot is not None:
-                    frame[slot] = from_python(value)
+                    frame[slot] = value if terms else from_python(value)
         goals = [build(g, frame) for g in plan.compiled.body]
         if not goals:
             goal: Any = Atom("true")

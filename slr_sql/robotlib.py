@@ -28,6 +28,7 @@ from .terms import Struct
 __all__ = [
     "RobotValueError", "value_kind", "interpolate", "extrapolate", "pos_multiply", "distance",
     "quat_multiply", "quat_conjugate", "quat_normalize", "quat_rotate", "slerp", "make_pose",
+    "pos_multiply_fast", "transform_point",
 ]
 
 #: Above this |dot| between two unit quaternions, slerp falls back to normalized lerp.
@@ -267,6 +268,14 @@ def pos_multiply(p: Any, transforms: Sequence[Any]) -> Any:
     >>> [round(c, 9) for c in pos_multiply([1, 0, 0], [make_pose([0, 0, 5], [0, 0, s, s])])]
     [0.0, 1.0, 5.0]
     """
+    fast = pos_multiply_fast(p, transforms)
+    if fast is not None:
+        return fast
+    return _pos_multiply_checked(p, transforms)
+
+
+def _pos_multiply_checked(p: Any, transforms: Sequence[Any]) -> Any:
+    """pos_multiply through the general helpers: every value validated with a clear error."""
     if not isinstance(transforms, (list, tuple)):
         raise RobotValueError(f"pos_multiply expects a list of pose transforms, got {transforms!r}")
     parts = [_pose_parts(a, f"transform #{i + 1}") for i, a in enumerate(transforms)]
@@ -283,6 +292,128 @@ def pos_multiply(p: Any, transforms: Sequence[Any]) -> Any:
         return x
     raise RobotValueError(
         f"pos_multiply: first element must be a point [X,Y,Z] or a pose, got {p!r}")
+
+
+# --------------------------------------------------------------------------- fast paths
+# pos_multiply runs once per candidate match of an event rule's ``where`` goal (the paper's
+# softDrinkRec rule), so its common case -- plain floats and ints in plain lists, poses as
+# Struct("pose", ([x, y, z], [qx, qy, qz, qw])) -- is done inline here, without the
+# validating helpers' calls and intermediate tuples. The arithmetic is *the same sequence
+# of float operations* as quat_normalize / quat_multiply / quat_rotate (terms with a zero
+# factor included), so the results are bit for bit those of the general path; anything else
+# (other number types, a zero quaternion, a malformed value) returns None and takes the
+# general path, which raises its RobotValueError.
+
+
+def _floats(v: Any, n: int) -> tuple | None:
+    """``v`` as a tuple of ``n`` floats when it is a list/tuple of exactly ``n`` plain ints or
+    floats (not bools, not subclasses); else None."""
+    tv = type(v)
+    if (tv is not list and tv is not tuple) or len(v) != n:
+        return None
+    out = []
+    for c in v:
+        tc = type(c)
+        if tc is float:
+            out.append(c)
+        elif tc is int:
+            out.append(float(c))
+        else:
+            return None
+    return tuple(out)
+
+
+def _unit(x: float, y: float, z: float, w: float) -> tuple | None:
+    """quat_normalize's arithmetic on floats; None for a zero or infinite norm."""
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if not n > 0.0 or math.isinf(n):
+        return None
+    return (x / n, y / n, z / n, w / n)
+
+
+def _rotate(q: tuple, px: float, py: float, pz: float) -> tuple:
+    """quat_rotate(q, p) for a unit ``q`` already normalized once: quat_rotate normalizes
+    again, then forms (q·(p, 0))·q* with quat_multiply's operation order."""
+    q = _unit(*q)
+    if q is None:  # cannot happen for a unit quaternion; keep the general path's error
+        raise RobotValueError("cannot normalize quaternion")
+    x1, y1, z1, w1 = q
+    a = w1 * px + x1 * 0.0 + y1 * pz - z1 * py
+    b = w1 * py - x1 * pz + y1 * 0.0 + z1 * px
+    c = w1 * pz + x1 * py - y1 * px + z1 * 0.0
+    d = w1 * 0.0 - x1 * px - y1 * py - z1 * pz
+    x2, y2, z2, w2 = -x1, -y1, -z1, w1
+    return (d * x2 + a * w2 + b * z2 - c * y2,
+            d * y2 - a * z2 + b * w2 + c * x2,
+            d * z2 + a * y2 - b * x2 + c * w2)
+
+
+def _pose_floats(v: Any) -> tuple | None:
+    """(translation floats, unit rotation) of a plain pose value, else None."""
+    if type(v) is not Struct or v.name != "pose" or len(v.args) != 2:
+        return None
+    t = _floats(v.args[0], 3)
+    q = _floats(v.args[1], 4)
+    if t is None or q is None:
+        return None
+    q = _unit(*q)
+    if q is None:
+        return None
+    return t, q
+
+
+def pos_multiply_fast(p: Any, transforms: Any) -> Any:
+    """pos_multiply's common case (plain numbers in lists or tuples, see above), or None
+    when the general path must decide (and raise its error).
+
+    >>> pos_multiply_fast((1, 0, 0), [Struct("pose", ((0, 0, 5), (0, 0, 0, 1)))])
+    [1.0, 0.0, 5.0]
+    >>> pos_multiply_fast([1, 0, 0], ["not a pose"]) is None
+    True
+    """
+    tt = type(transforms)
+    if tt is not list and tt is not tuple:
+        return None
+    parts = []
+    for a in transforms:
+        part = _pose_floats(a)
+        if part is None:
+            return None
+        parts.append(part)
+    x = _floats(p, 3)
+    if x is not None:
+        return transform_point(x, parts)
+    pose = _pose_floats(p)
+    if pose is None:
+        return None
+    t, q = pose
+    for (tx, ty, tz), qa in parts:
+        rx, ry, rz = _rotate(qa, *t)
+        x1, y1, z1, w1 = qa
+        x2, y2, z2, w2 = q
+        q = _unit(w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                  w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+                  w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+                  w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2)
+        if q is None:
+            return None
+        t = (tx + rx, ty + ry, tz + rz)
+    return Struct("pose", (list(t), list(q)))
+
+
+def transform_point(point: tuple, parts: list) -> list[float]:
+    """The point ``(x, y, z)`` (floats) moved by each transform of ``parts`` in turn, a
+    transform given as ``((tx, ty, tz), unit quaternion)``: pos_multiply's arithmetic for a
+    point, exactly.
+
+    >>> transform_point((1.0, 0.0, 0.0), [((0.0, 0.0, 5.0), (0.0, 0.0, 0.0, 1.0))])
+    [1.0, 0.0, 5.0]
+    """
+    px, py, pz = point
+    for (tx, ty, tz), qa in parts:
+        rx, ry, rz = _rotate(qa, px, py, pz)
+        px, py, pz = tx + rx, ty + ry, tz + rz
+    return [px, py, pz]
 
 
 def distance(p1: Any, p2: Any) -> float:

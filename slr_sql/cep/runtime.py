@@ -434,6 +434,11 @@ class RuleRuntime:
                     "wait_arity, wait_time FROM slr_cep_pending WHERE rule = ? AND alt = ? "
                     "AND kind = ? AND wait_type = ? AND wait_arity = ? "
                     "ORDER BY wait_time, t_end, id", (self.key, n, kind, wait[0], wait[1]))
+            # recent, with Python work: the terminators of a group decide independently of
+            # each other, so their candidates are read in one statement per position
+            together = (kind == "term" and wait is None and self.policy == "recent"
+                        and n < len(self.alts) and self.alts[n].runnable)
+            ready = []
             for row in rows:
                 if row[0] in seen:
                     continue
@@ -441,7 +446,42 @@ class RuleRuntime:
                 wt = row[9] if row[7] is not None else row[6]
                 if not self._ready((n, kind, wait), wt, now):
                     break   # the rest of the group needs a later time
-                changed |= self._decide_row(row, now, per_alt)
+                if together:
+                    ready.append(row)
+                else:
+                    changed |= self._decide_row(row, now, per_alt)
+            if ready:
+                changed |= self._decide_terms(n, ready, now, per_alt[n])
+        return changed
+
+    def _decide_terms(self, n: int, rows: list, now: float, params: dict) -> bool:
+        """Decide pending ``recent`` terminators of alternative ``n`` (pending rows whose
+        inputs are complete up to their end, checked by the caller), as :meth:`_decide_row`
+        does one by one: the candidates of up to 200 terminators come from one statement
+        (:meth:`AltSQL.term_select_many`), then each terminator takes its first candidate
+        that derives, in the order of ``rows``."""
+        alt = self.alts[n]
+        store = self.eng.store
+        changed = False
+        for i in range(0, len(rows), 200):
+            chunk = [(row, json.loads(row[4])[0]) for row in rows[i:i + 200]]
+            candidates: dict = {}
+            for pos in sorted({row[3] for row, _ in chunk}):
+                params["ts"] = json.dumps([seq for row, seq in chunk if row[3] == pos])
+                for cand in store.run_compiled(alt.term_select_many(pos), params):
+                    candidates.setdefault((pos, cand[pos]), []).append(cand)
+            for row, seq in chunk:
+                try:
+                    for cand in candidates.get((row[3], seq), ()):
+                        if self._derive_from(n, cand, now):
+                            break
+                except MustWait as w:
+                    store.execute("UPDATE slr_cep_pending SET wait_type = ?, wait_arity = ?, "
+                                  "wait_time = ?, wait_reason = ? WHERE id = ?",
+                                  (w.key[0], w.key[1], w.time, w.reason, row[0]))
+                    continue
+                self._done.append(row[0])
+                changed = True
         return changed
 
     def _occurrence_order(self, rows: list) -> list:
@@ -580,12 +620,27 @@ class RuleRuntime:
         if table is None:
             self.eng.store.declare_type(name, arity)
             table = self.eng.table(self.head_key)
+        store = self.eng.store
         values = [f"h{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
         cols = [f"arg{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
-        rows = self.eng.store.run_compiled(
-            f"INSERT INTO {table} ({', '.join(cols)}, arrival) "
-            f"SELECT {', '.join(values)}, :now FROM {self.prov} WHERE id > :before "
-            f"ORDER BY id RETURNING {', '.join(cols)}", {"now": now, "before": before})
+        copy = (f"INSERT INTO {table} ({', '.join(cols)}, arrival) "
+                f"SELECT {', '.join(values)}, :now FROM {self.prov} WHERE id > :before "
+                f"ORDER BY id")
+        args = {"now": now, "before": before}
+        head_table = self.eng.table_name(self.head_key)
+        if store.execute("SELECT 1 FROM sqlite_master WHERE type = 'trigger' AND tbl_name = ? "
+                         "UNION ALL SELECT 1 FROM sqlite_temp_master WHERE type = 'trigger' "
+                         "AND tbl_name = ? LIMIT 1", (head_table, head_table)):
+            # a buffer's trigger may refuse rows: the rows stored are those RETURNING gives
+            rows = store.run_compiled(f"{copy} RETURNING {', '.join(cols)}", args)
+            # RETURNING gives an integral REAL as an int: the times as stored (floats)
+            rows = [r[:arity] + (float(r[arity]), float(r[arity + 1])) for r in rows]
+        else:
+            # no trigger: every match is stored as it is; reading the provenance rows back
+            # (a rowid range) costs less than RETURNING's buffered copy
+            store.run_compiled(copy, args)
+            rows = store.run_compiled(f"SELECT {', '.join(values)} FROM {self.prov} "
+                                      f"WHERE id > :before ORDER BY id", {"before": before})
         if not rows:
             return []
         self.detections += len(rows)
@@ -593,7 +648,8 @@ class RuleRuntime:
         if arity == 0:
             return [(name, (), r[0], r[1]) for r in rows]
         if arity == 1:
-            return [(name, (dec(r[0]),), r[1], r[2]) for r in rows]
+            return [(name, (v if type(v) is int or type(v) is float else dec(v),), r[1], r[2])
+                    for r in rows for v in (r[0],)]
         return [(name, tuple(map(dec, r[:arity])), r[arity], r[arity + 1]) for r in rows]
 
 

@@ -600,17 +600,29 @@ class AltSQL:
             sql = self._cache[key] = self._term_select(pos, limit)
         return sql
 
-    def _term_select(self, pos: int, limit: bool) -> str:
+    def term_select_many(self, pos: int) -> str:
+        """:meth:`term_select` (all matches) for several terminator rows at once: their seqs
+        in the JSON array :ts; the rows come grouped by terminator (its seq, column ``pos``
+        of each row), each group in :meth:`term_select`'s order."""
+        key = ("term_select_many", pos)
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._term_select(pos, False, many=True)
+        return sql
+
+    def _term_select(self, pos: int, limit: bool, many: bool = False) -> str:
         """The matches that end with the terminator row :t at ``pos``, best first under the
         policy (recent: newest partners; chronological: oldest unused partners)."""
         a = self.aliases()
         order = [pos] + self.partner_order(pos)
-        conds = [f"e{pos}.seq = :t"] + self.cond_sql(a) + self._terminator_conds(pos, a)
+        first = (f"e{pos}.seq IN (SELECT value FROM json_each(:ts))" if many
+                 else f"e{pos}.seq = :t")
+        conds = [first] + self.cond_sql(a) + self._terminator_conds(pos, a)
         if self.negs:
             conds.append(self.neg_ok(a))
         if self.policy == "chronological":
             conds += [self._unused(p, f"e{p}") for p in range(self.k)]
-        keys = []
+        keys = [f"e{pos}.seq"] if many else []
         for p in self.partner_order(pos):
             keys += self._key_order(p, f"e{p}", self.policy == "recent")
         sql = (f"SELECT {', '.join(self.value_columns(a))} FROM {self._from(order, a)} "

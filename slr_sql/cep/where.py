@@ -93,7 +93,8 @@ class Residual:
               complete: Callable[[tuple, float], bool], skip: frozenset = frozenset(),
               use_sql: bool = True) -> list[dict]:
         """The solutions (dicts output name -> ground term) for the input ``values``
-        (input name -> term). Raises :class:`MustWait`, or SLRError for an error of G.
+        (input name -> ground term, as decoded from the store: bound as they are). Raises
+        :class:`MustWait`, or SLRError for an error of G.
         ``use_sql=False``: a goal that reads no stored event runs in the interpreter (there
         is nothing for SQL to read; a statement per candidate would only cost)."""
         for key in sorted(self.reads - skip):
@@ -144,7 +145,7 @@ class Residual:
 
     def _interpret(self, kb: Any, plan: Any, args: dict, at: float,
                    complete: Callable) -> list:
-        term, frame = kb._instantiate(plan, args)
+        term, frame = kb._instantiate(plan, args, terms=True)   # decoded: terms already
         m = kb.engine.machine(at=at, timeout=WHERE_TIMEOUT)
 
         def on_prev(name: str, n: int, t: float) -> None:
