@@ -560,6 +560,8 @@ class BufferManager:
         table = self.store.table_for(spec.pattern.name, spec.pattern.arity)
         if table is not None:
             self.store.install_buffer_objects(spec.id, trigger_sql(spec, table))
+            if spec.kind == "tBuffer":  # clock moves were not recorded without a tBuffer
+                self.store.record_now(self.kb.clock.now())
             now = self.store.recorded_now()
             sql = initial_prune_sql(spec, table, now)
             if sql is not None:
@@ -625,6 +627,10 @@ class BufferManager:
             clock = self._clock
             if clock is not None:
                 clock.unsubscribe(self.on_tick)
+            return
+        # Only a tBuffer's trigger reads the recorded "now" between adds (every add records it
+        # in its own transaction): without one, a clock move costs no durable commit.
+        if not any(row["kind"] == "tBuffer" for row in store.buffer_rows()):
             return
         store.record_now(now)
         if not store.in_transaction:

@@ -537,3 +537,24 @@ def _decode(value):
     from slr_sql.encoding import decode
 
     return decode(value)
+
+
+@pytest.mark.parametrize("how", ["runtime", "declared"])
+def test_a_tbuffer_added_after_the_clock_moved_keeps_the_window_of_the_clock_now(tmp_path, how):
+    """Without a tBuffer, moving the clock writes nothing (no commit per move); a tBuffer
+    added later still starts from the clock's current time, not from the last add's."""
+    clock = ManualClock(0.0)
+    with slr_sql.open(tmp_path / "kb.db", clock=clock) as kb:
+        kb.add_many([("seen", (i,), float(i), float(i)) for i in range(100)])
+        clock.set(150.0)
+        clock.set(200.0)
+        if how == "runtime":
+            kb.add_buffer("seen(X)", keep_seconds=10)
+        else:
+            kb.load("tBuffer(seen(X), 10s).")
+        # 200 - 10 = 190: every stored event (ends 0..99) is outside the window
+        assert kb.query("aggregate_all(count, seen(_)^_, N)") == [{"N": 0}]
+        kb.add_many([("seen", (i,), float(i), float(i)) for i in range(185, 200)])
+        assert kb.query("findall(X, seen(X)^_, L)") == [{"L": list(range(190, 200))}]
+        clock.set(205.0)
+        assert kb.query("findall(X, seen(X)^_, L)") == [{"L": list(range(195, 200))}]
