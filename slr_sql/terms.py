@@ -1005,8 +1005,8 @@ def format_term(t: Any, quoted: bool = True, priority: int = 1200) -> str:
     'a:-b,c'
     >>> format_term(Struct("*", (Struct("+", (1, 2)), 3))), format_term(Struct("-", (1,)))
     ('(1+2)*3', '- 1')
-    >>> format_term(make_list([Atom("hello world"), String("s"), 1.0], Var("T")))
-    "['hello world',\\"s\\",1.0|T]"
+    >>> print(format_term(make_list([Atom("hello world"), String("s"), 1.0], Var("T"))))
+    ['hello world',"s",1.0|T]
     """
     w = _Writer(quoted)
     try:
