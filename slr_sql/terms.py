@@ -129,7 +129,7 @@ class Var:
 class Struct:
     """A compound term ``name(args...)``. ``args`` is a tuple; ``str()`` gives Prolog text.
 
-    >>> str(Struct("f", ("x", 1)))
+    >>> str(Struct("f", (Atom("x"), 1)))
     'f(x,1)'
     """
 
