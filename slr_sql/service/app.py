@@ -173,6 +173,47 @@ def _plain(value: Any) -> Any:
     return encode_plain(value)
 
 
+class _AnswerTexts:
+    """The JSON text of each delivered answer, made once for every WebSocket subscriber that
+    receives the same answer. The subscription hub computes the answers of one pattern,
+    condition and window once and queues the same dict for each of their subscriptions
+    (``next_answers(copy=False)``), so the text is keyed by the dict's identity; an entry
+    holds its dict, so the identity cannot be reused while the entry lives. At most ``size``
+    entries (then the cache starts over): a subscriber that reads far behind the others, or
+    alone, encodes its own answers. Used on the event loop only (no lock).
+
+    >>> texts = _AnswerTexts()
+    >>> a = {"X": "s", "T": 1.0}
+    >>> texts.frame(1, [a]), texts.frame(7, [a, a])
+    ('{"type":"answer","seq":1,"answer":{"X":{"$string":"s"},"T":1.0}}', \
+'{"type":"answers","seq":7,"answers":[{"X":{"$string":"s"},"T":1.0},{"X":{"$string":"s"},"T":1.0}]}')
+    """
+
+    def __init__(self, size: int = 4096):
+        self.size = size
+        self._texts: dict[int, tuple[dict, str]] = {}
+        self.encoded = 0                  # answers encoded (the rest came from the cache)
+
+    def text(self, answer: dict) -> str:
+        hit = self._texts.get(id(answer))
+        if hit is not None and hit[0] is answer:
+            return hit[1]
+        text = dumps(encode_answers([answer])[0]).decode("utf-8")
+        if len(self._texts) >= self.size:
+            self._texts.clear()
+        self._texts[id(answer)] = (answer, text)
+        self.encoded += 1
+        return text
+
+    def frame(self, seq: int, answers: list[dict]) -> str:
+        """An ``answer`` frame (one answer) or an ``answers`` frame, numbered from ``seq``."""
+        if len(answers) == 1:
+            return f'{{"type":"answer","seq":{seq},"answer":{self.text(answers[0])}}}'
+        text = self.text
+        return (f'{{"type":"answers","seq":{seq},"answers":['
+                f'{",".join([text(a) for a in answers])}]}}')
+
+
 # -- the route table (routes and the OpenAPI description come from it) ------------------------
 
 @dataclass
@@ -199,6 +240,7 @@ class _Service:
         self.token = token.encode("utf-8") if token else None
         self.limits = limits
         self.submitted: dict[str, _Submitted] = {}
+        self.answer_texts = _AnswerTexts()
         self.endpoints = _ENDPOINTS
         params = _parameters(kb.load)
         self.load_takes_name = "name" in params and "replace" in params
@@ -373,32 +415,16 @@ class _Service:
             await websocket.send_text(dumps({"type": "subscribed", "pattern": pattern,
                                              "id": kwargs.get("id")}).decode("utf-8"))
             watcher = asyncio.create_task(self._watch_client(websocket, sub, closing))
+            texts = self.answer_texts
             seq = 0
-            failure: BaseException | None = None
-            async for answer in sub:
-                answers = [answer]
-                while len(answers) < batch:        # what is queued already goes along
-                    try:
-                        more = sub.get(timeout=0)
-                    except SLRTimeout:
-                        break
-                    except SLRError as exc:        # sent after the answers before it
-                        failure = exc
-                        break
-                    if more is None:               # ended: "end" follows these answers
-                        break
-                    answers.append(more)
-                if len(answers) == 1:
-                    seq += 1
-                    frame = {"type": "answer", "seq": seq,
-                             "answer": encode_answers(answers)[0]}
-                else:
-                    frame = {"type": "answers", "seq": seq + 1,
-                             "answers": encode_answers(answers)}
-                    seq += len(answers)
-                await websocket.send_text(dumps(frame).decode("utf-8"))
-                if failure is not None:
-                    raise failure
+            while True:
+                # what is queued goes along (batch at most); the error that ended the
+                # subscription is raised by the call after the answers queued before it
+                answers = await sub.next_answers(batch, copy=False)
+                if not answers:
+                    break
+                await websocket.send_text(texts.frame(seq + 1, answers))
+                seq += len(answers)
             if not closing:
                 await websocket.send_text('{"type":"end"}')
                 await websocket.close(1000)
