@@ -1033,6 +1033,10 @@ class SubscriptionHub:
                 if not subs:
                     self._by_type.pop(sub.key, None)
                     self._type_pos.pop(sub.key, None)
+                key = (sub._matcher.pattern, sub._matcher.where)
+                if self._matchers.get(key) is sub._matcher and not any(
+                        s._matcher is sub._matcher for s in subs):
+                    del self._matchers[key]      # kept only while some subscription uses it
         pending = sub._pending
         if pending is not None and not pending.done():
             pending.cancel()
