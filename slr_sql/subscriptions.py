@@ -485,12 +485,11 @@ class Subscription:
                 taken = None
             else:
                 before = len(queue) >> 1
+                self._in_flight = queue[0]       # the batch is in the consumer's hands
                 taken = []
-                code = None
                 while queue and len(taken) < limit and queue[0] is not None:
-                    code = queue.popleft()
+                    queue.popleft()
                     taken.append(queue.popleft())
-                self._in_flight = code
                 self.delivered += len(taken)
                 half = self.max_queue >> 1
                 refill = before > half >= len(queue) >> 1 and (
@@ -1150,13 +1149,19 @@ class SubscriptionHub:
         info = self._type_info(key)
         touched: set = set()
         if info is None:   # no event of this type yet: nothing to read; until may still end it
-            for s in subs:
-                if s._until_reached and not s._ended:
+            ending = [s for s in subs if s._until_reached and not s._ended]
+            # looked up again after reading the flags: events stored (creating the table) before
+            # `until` was reached must be delivered first, by the reading below
+            if ending and self._type_info(key) is None:
+                for s in ending:
                     s._go_live()
                     s._end(completed=True)
                     touched.add(s)
-            self._wake(touched)
-            return
+                self._wake(touched)
+                return
+            info = self._type_info(key)
+            if info is None:
+                return
         self._check_journal(key, info)
         for s in subs:
             if s._until_reached and s._end_jid is None:
