@@ -260,3 +260,26 @@ def test_a_stray_non_finite_float_is_never_written():
     with pytest.raises(ValueError):
         dumps({"a": [1.0, math.nan]})
     assert dumps({"a": None, "b": 10 ** 30}) == b'{"a":null,"b":' + b"1" + b"0" * 30 + b"}"
+
+
+# -- add_many: arguments used as parsed ------------------------------------------------------
+
+@pytest.mark.parametrize("atomic", [None, False])
+def test_plain_event_arguments_are_atoms_and_their_rejections_say_so(server, atomic):
+    import httpx
+    tag = f"a{next(_tags)}_"
+    events = [{"name": f"{tag}o", "args": ["cup1", [1, 2.5, "x"]], "start": 1.0},
+              {"name": f"{tag}o", "args": ["cup2", []], "start": 6.0, "end": 5.0}]
+    body = {"events": events} if atomic is None else {"events": events, "atomic": atomic}
+    reply = httpx.post(server.url + "/add_many", content=json.dumps(body),
+                       headers={"Content-Type": "application/json"}, timeout=DEADLINE).json()
+    assert reply["accepted"] == 1
+    (rejection,) = reply["rejected"]
+    assert rejection["index"] == 1
+    assert rejection["message"].startswith(f"{tag}o(cup2,[])^[6.0,5.0]: ")
+    with slr_sql.connect(server.url) as client:
+        (answer,) = client.query(f"{tag}o(O, L)^T")
+    local = slr_sql.open()
+    local.add(f"{tag}o(cup1, [1, 2.5, x])^1")
+    assert answer == local.query(f"{tag}o(O, L)^T")[0] and type(answer["O"]) is slr_sql.Atom
+    local.close()

@@ -43,6 +43,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 
 import slr_sql
 from slr_sql import EventRejected, SLRError, SLRTimeout
+from slr_sql.store.checks import format_event
 
 from .encoding import (decode_args, decode_arguments, decode_term, dumps, encode_answers,
                        encode_plain, loads)
@@ -579,9 +580,19 @@ async def _add_many(svc: "_Service", request: Request) -> Any:
     b = await svc.body(request)
     events = _field(b, "events", list, required=True)
     atomic = _field(b, "atomic", bool, default=False)
-    plain = _plain_arguments(request.state.body, events)
+    plain = _plain_arguments(request.state.body, events, b.get("atomic"))
     prepared, positions, rejected = [], [], []
     for i, ev in enumerate(events):
+        if plain and type(ev) is dict:
+            # the common case inline (what _event_tuple does for it): a plain event with a
+            # name, an array of arguments and float times
+            name, args, start = ev.get("name"), ev.get("args"), ev.get("start")
+            end = ev.get("end", start)
+            if type(start) is float and type(end) is float and type(name) is str and name \
+                    and type(args) is list:
+                prepared.append((name, args, start, end))
+                positions.append(i)
+                continue
         try:
             if isinstance(ev, str):
                 prepared.append(ev)
@@ -600,6 +611,8 @@ async def _add_many(svc: "_Service", request: Request) -> Any:
         index = getattr(exc, "index", None)
         original = positions[index] if isinstance(index, int) and \
             0 <= index < len(positions) else None
+        if plain and original is not None and type(events[original]) is dict:
+            exc = _as_decoded(exc, events[original])
         rejected.append(_rejection(exc, original))
     rejected.sort(key=lambda r: (r["index"] is None, r["index"] or 0))
     return {"accepted": len(events) - len(rejected), "rejected": rejected}
@@ -838,16 +851,38 @@ class _Submitted:
 
 # -- request pieces ----------------------------------------------------------------------------
 
-def _plain_arguments(body: bytes, events: list) -> bool:
+def _plain_arguments(body: bytes, events: list, atomic: bool | None = None) -> bool:
     """True when no event argument in this body holds an object, ``true``, ``false`` or
     ``null``: then every argument is already the Python value the knowledge base takes (a JSON
     string is an atom, as a ``str`` is for ``kb.add_many``; numbers and arrays are themselves)
     and decoding can be skipped. Checked on the bytes, at C speed: the body's only ``{`` are
-    the outer object's and one per event object (a ``{`` inside a string only makes this say
-    False, which is always safe)."""
+    the outer object's and one per event object, its only ``true``/``false`` the value of
+    ``"atomic"`` (``atomic``: that value, None when absent); a ``{`` or a ``true`` inside a
+    string only makes this say False, which is always safe."""
     objects = sum(1 for ev in events if type(ev) is dict)
-    return body.count(b"{") == 1 + objects and b"true" not in body \
-        and b"false" not in body and b"null" not in body
+    return body.count(b"{") == 1 + objects and body.count(b"true") == (atomic is True) \
+        and body.count(b"false") == (atomic is False) and b"null" not in body
+
+
+def _as_decoded(exc: BaseException, obj: dict) -> BaseException:
+    """A rejection of an event whose arguments were passed as parsed (``plain``), worded as
+    for the same event decoded: its atoms written as atoms (``cup4``), not as the strings
+    the knowledge base printed (``"cup4"``)."""
+    event = getattr(exc, "event", None)
+    if type(event) is not tuple or len(event) != 4:
+        return exc
+    name, args, start, end = event
+    message = str(exc)
+    head = format_event(name, args, start, end)
+    if not message.startswith(head):
+        return exc
+    try:
+        decoded = decode_arguments(args)
+    except SLRError:
+        return exc
+    out = EventRejected(format_event(name, decoded, start, end) + message[len(head):])
+    out.index, out.event = getattr(exc, "index", None), (name, decoded, start, end)
+    return out
 
 
 def _event_tuple(obj: dict, plain: bool = False) -> tuple:

@@ -427,14 +427,16 @@ def dumps(obj: Any) -> bytes:
 
 
 # What orjson reads differently from Python's json is found on the bytes, in C: one
-# translate keeps the brackets, writes every digit as 0 and everything else as a space.
-_SKELETON = bytes(b if b in b"[]{}" else 48 if 48 <= b <= 57 else 32 for b in range(256))
-_LONG_DIGITS = b"0" * 19     # an integer literal beyond 64 bits (orjson: a float) has 19+
+# translate keeps the brackets and the points, writes every digit as 0 and everything else
+# as a space; an integer literal (after a space or a bracket, not a point) beyond 64 bits,
+# which orjson reads as a float and json keeps exact, has 19 digits or more.
+_SKELETON = bytes(b if b in b"[]{}." else 48 if 48 <= b <= 57 else 32 for b in range(256))
+_LONG_INTEGERS = (b" " + b"0" * 19, b"[" + b"0" * 19)
 _FAST_DEPTH = 32
 
 
 def _orjson_reads_it(raw: bytes) -> bool:
-    """True when orjson reads ``raw`` as Python's json does: no run of 19 digits (an integer
+    """True when orjson reads ``raw`` as Python's json does: no integer of 19 digits (one
     beyond 64 bits, which orjson turns into a float: json keeps it exact) and brackets
     nested at most :data:`_FAST_DEPTH` levels (orjson reads any depth; a body nested too
     deeply must be refused). The nesting is measured by removing the innermost pairs
@@ -442,10 +444,10 @@ def _orjson_reads_it(raw: bytes) -> bool:
     json reads it: slower, same result)."""
     if raw.count(b"[") + raw.count(b"{") <= _FAST_DEPTH and len(raw) < 19:
         return True
-    skeleton = raw.translate(_SKELETON)
-    if _LONG_DIGITS in skeleton:
+    skeleton = b" " + raw.translate(_SKELETON)
+    if _LONG_INTEGERS[0] in skeleton or _LONG_INTEGERS[1] in skeleton:
         return False
-    brackets = skeleton.translate(None, b" 0")
+    brackets = skeleton.translate(None, b" 0.")
     for _ in range(_FAST_DEPTH):
         shorter = brackets.replace(b"[]", b"").replace(b"{}", b"")
         if not shorter:
