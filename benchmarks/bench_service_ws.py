@@ -59,6 +59,13 @@ def rss_mb(pid: int) -> float:
     return float("nan")
 
 
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process so far (/proc/PID/stat)."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def file_mb(db: Path) -> float:
     return sum(os.path.getsize(p) for p in (db, Path(f"{db}-wal")) if p.exists()) / 2 ** 20
 
@@ -196,8 +203,10 @@ def run_service(args, tmp: Path) -> dict:
         sizes.append(file_mb(db))
         sampler.start()
         load_start = os.getloadavg()
+        cpu_start, cpu_t0 = cpu_seconds(proc.pid), time.monotonic()
         sent, achieved = produce(client.add_many, args.rate, args.batch_events, seconds, answered,
                        latency_end)
+        server_cpu = (cpu_seconds(proc.pid) - cpu_start) / (time.monotonic() - cpu_t0)
         # every event must arrive: wait (bounded) for the stragglers
         time.sleep(2.0)
         stop.set()
@@ -221,7 +230,7 @@ def run_service(args, tmp: Path) -> dict:
                 "rss_first": rss[0], "rss_last": rss[-1], "rss_max": max(rss),
                 "rss_slope_mb_per_min": slope_per_min(samples[len(samples) // 10:]),
                 "rss_samples": len(samples), "load_start": load_start,
-                "file_first": sizes[0], "file_last": sizes[-1],
+                "file_first": sizes[0], "file_last": sizes[-1], "server_cpu": server_cpu,
                 "load_end": os.getloadavg()}
     finally:
         proc.terminate()
@@ -298,6 +307,10 @@ def main() -> None:
               f"first {args.latency_seconds:g} s ({remote['latencies']} deliveries): p50 "
               f"{remote['p50_ms']:.2f} ms, p99 {remote['p99_ms']:.2f} ms, max "
               f"{remote['max_ms']:.1f} ms", flush=True)
+        print(f"server CPU while producing: {remote['server_cpu']:.2f} s per second "
+              f"({remote['server_cpu'] / remote['achieved'] * 1e6:.0f} µs per event, "
+              f"{remote['server_cpu'] / remote['achieved'] / args.subscribers * 1e6:.2f} µs "
+              f"per delivery)")
         print(f"p99 ratio service / in process: {remote['p99_ms'] / local['p99_ms']:.1f}x")
         print(f"server RSS: first {remote['rss_first']:.1f} MB, last {remote['rss_last']:.1f} "
               f"MB, max {remote['rss_max']:.1f} MB, slope {remote['rss_slope_mb_per_min']:+.2f} "
