@@ -6,6 +6,7 @@ where it reads and writes as Python's json does) against Python's json."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import itertools
 import json
 import math
@@ -157,8 +158,8 @@ def server(tmp_path_factory):
         yield s
 
 
-def receive_all(ws) -> tuple[list, list]:
-    """(answers, frame seqs checked against the count) until the end frame."""
+def receive_all(ws) -> list:
+    """The answers of every frame until the end frame, checking each frame's seq."""
     answers: list = []
     while True:
         msg = json.loads(ws.recv(timeout=DEADLINE))
@@ -181,23 +182,19 @@ def test_subscribers_sharing_answer_texts_each_get_exactly_their_own(server, bat
         {"pattern": f"{tag}v(I, 7)^T", "since": 1},                          # a constant
         {"pattern": f"{tag}v(I, V)^T", "where": "V =< 5", "since": 1},      # the others
     ]
-    with slr_sql.connect(server.url) as client:
+    with slr_sql.connect(server.url) as client, contextlib.ExitStack() as stack:
         client.add(f"{tag}v(0, 0)^0")        # the type exists: complete as far as marked
         sockets = []
-        try:
-            for r in requests:
-                ws = ws_connect(server.url.replace("http", "ws") + "/subscribe")
-                sockets.append(ws)
-                ws.send(json.dumps({"op": "subscribe", "until": until, "batch": batch, **r}))
-                assert json.loads(ws.recv(timeout=DEADLINE))["type"] == "subscribed"
-            events = [(i, (i * 7) % 11) for i in range(1, until + 1)]
-            for k in range(0, len(events), 25):
-                client.add_many([f"{tag}v({i}, {v})^{i}" for i, v in events[k:k + 25]])
-            client.mark_complete(f"{tag}v/2", until)
-            got = [receive_all(ws) for ws in sockets]
-        finally:
-            for ws in sockets:
-                ws.close()
+        for r in requests:
+            ws = stack.enter_context(ws_connect(server.url.replace("http", "ws") + "/subscribe"))
+            sockets.append(ws)
+            ws.send(json.dumps({"op": "subscribe", "until": until, "batch": batch, **r}))
+            assert json.loads(ws.recv(timeout=DEADLINE))["type"] == "subscribed"
+        events = [(i, (i * 7) % 11) for i in range(1, until + 1)]
+        for k in range(0, len(events), 25):
+            client.add_many([f"{tag}v({i}, {v})^{i}" for i, v in events[k:k + 25]])
+        client.mark_complete(f"{tag}v/2", until)
+        got = [receive_all(ws) for ws in sockets]
 
     def answers(keep, since=1, bind_v=True) -> list:
         return [{"I": i, "V": v, "T": float(i)} if bind_v else {"I": i, "T": float(i)}
