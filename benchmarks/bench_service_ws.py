@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import math
 import multiprocessing as mp
 import os
 import subprocess
@@ -56,6 +57,17 @@ def rss_mb(pid: int) -> float:
             if line.startswith("VmRSS:"):
                 return int(line.split()[1]) / 1024
     return float("nan")
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process so far (/proc/PID/stat)."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def file_mb(db: Path) -> float:
+    return sum(os.path.getsize(p) for p in (db, Path(f"{db}-wal")) if p.exists()) / 2 ** 20
 
 
 def slope_per_min(samples: list[tuple[float, float]]) -> float:
@@ -150,9 +162,13 @@ def ws_subscribers(url: str, n: int, batch: int, ready, conn) -> None:
 def run_service(args, tmp: Path) -> dict:
     db = tmp / "ws.db"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.Popen([sys.executable, "-m", "slr_sql", "serve", str(db), "--port", "0"],
-                            stdout=subprocess.PIPE, stderr=open(tmp / "server.log", "wb"),
-                            env=env)
+    command = [sys.executable, "-m", "slr_sql", "serve", str(db), "--port", "0"]
+    if args.cache_kib:     # the same server with another SQLite page cache bound
+        command[1:3] = ["-c", "import sys; import slr_sql.store.connection as c; "
+                        f"c.CACHE_SIZE_KIB = {int(args.cache_kib)}; from slr_sql.cli import main; "
+                        "main(args=sys.argv[1:], prog_name='slr')"]
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE,
+                            stderr=open(tmp / "server.log", "wb"), env=env)
     url = proc.stdout.readline().decode().strip().rsplit(" on ", 1)[1]
     try:
         client = slr_sql.connect(url)
@@ -167,6 +183,7 @@ def run_service(args, tmp: Path) -> dict:
         seconds = args.minutes * 60
         answered: list[float] = []
         samples: list[tuple[float, float]] = []
+        sizes: list[float] = []        # MB of the store file and its WAL, with each sample
         if not ready.wait(60):
             raise RuntimeError("the subscribers did not connect")
         t0 = time.monotonic()
@@ -177,17 +194,25 @@ def run_service(args, tmp: Path) -> dict:
         def sample() -> None:
             while not stop.wait(args.sample_seconds):
                 samples.append((time.monotonic() - t0, rss_mb(proc.pid)))
+                sizes.append(file_mb(db))
+                if args.trace:
+                    print(f"  {samples[-1][0]:6.0f} s  RSS {samples[-1][1]:6.1f} MB  file "
+                          f"{sizes[-1]:6.1f} MB", flush=True)
         sampler = threading.Thread(target=sample, daemon=True)
         samples.append((0.0, rss_mb(proc.pid)))
+        sizes.append(file_mb(db))
         sampler.start()
         load_start = os.getloadavg()
+        cpu_start, cpu_t0 = cpu_seconds(proc.pid), time.monotonic()
         sent, achieved = produce(client.add_many, args.rate, args.batch_events, seconds, answered,
                        latency_end)
+        server_cpu = (cpu_seconds(proc.pid) - cpu_start) / (time.monotonic() - cpu_t0)
         # every event must arrive: wait (bounded) for the stragglers
         time.sleep(2.0)
         stop.set()
         sampler.join()
         samples.append((time.monotonic() - t0, rss_mb(proc.pid)))
+        sizes.append(file_mb(db))
         parent.send("stop")
         counts, bad, times = parent.recv()
         sub_proc.join(30)
@@ -205,6 +230,7 @@ def run_service(args, tmp: Path) -> dict:
                 "rss_first": rss[0], "rss_last": rss[-1], "rss_max": max(rss),
                 "rss_slope_mb_per_min": slope_per_min(samples[len(samples) // 10:]),
                 "rss_samples": len(samples), "load_start": load_start,
+                "file_first": sizes[0], "file_last": sizes[-1], "server_cpu": server_cpu,
                 "load_end": os.getloadavg()}
     finally:
         proc.terminate()
@@ -259,10 +285,17 @@ def main() -> None:
     ap.add_argument("--minutes", type=float, default=10.0)
     ap.add_argument("--latency-seconds", type=float, default=20.0)
     ap.add_argument("--sample-seconds", type=float, default=5.0)
+    ap.add_argument("--cache-kib", type=int, default=0,
+                    help="run the server with this SQLite page cache (KiB; default: the "
+                         "store's own, 64 MiB)")
+    ap.add_argument("--trace", action="store_true", help="print each RSS sample")
+    ap.add_argument("--no-in-process", action="store_true",
+                    help="skip the in-process baseline (a soak of the server alone)")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
-        local = run_in_process(args, tmp)
+        local = {"sent": 0, "achieved": 0, "complete": 0, "p50_ms": math.nan,
+                 "p99_ms": math.nan} if args.no_in_process else run_in_process(args, tmp)
         print(f"in process : {args.subscribers} subscribers, {local['sent']} events: "
               f"{local['complete']} complete (achieved {local['achieved']:.0f} events/s); p50 {local['p50_ms']:.2f} ms, "
               f"p99 {local['p99_ms']:.2f} ms", flush=True)
@@ -274,10 +307,16 @@ def main() -> None:
               f"first {args.latency_seconds:g} s ({remote['latencies']} deliveries): p50 "
               f"{remote['p50_ms']:.2f} ms, p99 {remote['p99_ms']:.2f} ms, max "
               f"{remote['max_ms']:.1f} ms", flush=True)
+        print(f"server CPU while producing: {remote['server_cpu']:.2f} s per second "
+              f"({remote['server_cpu'] / remote['achieved'] * 1e6:.0f} µs per event, "
+              f"{remote['server_cpu'] / remote['achieved'] / args.subscribers * 1e6:.2f} µs "
+              f"per delivery)")
         print(f"p99 ratio service / in process: {remote['p99_ms'] / local['p99_ms']:.1f}x")
         print(f"server RSS: first {remote['rss_first']:.1f} MB, last {remote['rss_last']:.1f} "
               f"MB, max {remote['rss_max']:.1f} MB, slope {remote['rss_slope_mb_per_min']:+.2f} "
-              f"MB/min ({remote['rss_samples']} samples, first 10% left out of the slope)")
+              f"MB/min ({remote['rss_samples']} samples, first 10% left out of the slope); "
+              f"store file + WAL {remote['file_first']:.1f} -> {remote['file_last']:.1f} MB"
+              + (f" (page cache bound {args.cache_kib} KiB)" if args.cache_kib else ""))
         print("load average (1, 5, 15 min): start %.2f %.2f %.2f, end %.2f %.2f %.2f"
               % (*remote["load_start"], *remote["load_end"]))
 

@@ -423,18 +423,83 @@ class Subscription:
                         raise item.error
                     raise StopAsyncIteration
                 return item
-            loop = asyncio.get_running_loop()
-            future = loop.create_future()
+            await self._wait_async()
+
+    async def _wait_async(self) -> None:
+        """Wait on the running loop until something is queued or the subscription closed (the
+        hub resolves the future through ``call_soon_threadsafe``, once per loop per pass)."""
+        loop = asyncio.get_running_loop()
+        future = loop.create_future()
+        with self._lock:
+            if self._queue or self._closed:
+                return
+            self._async_waiter = (loop, future)
+        try:
+            await future
+        finally:
             with self._lock:
-                if self._queue or self._closed:
-                    continue
-                self._async_waiter = (loop, future)
-            try:
-                await future
-            finally:
-                with self._lock:
-                    if self._async_waiter is not None and self._async_waiter[1] is future:
-                        self._async_waiter = None
+                if self._async_waiter is not None and self._async_waiter[1] is future:
+                    self._async_waiter = None
+
+    async def next_answers(self, limit: int, copy: bool = True) -> list[dict]:
+        """Wait (on the running asyncio loop) for the next answer, then return it with the
+        answers queued behind it, ``limit`` at most, in order; ``[]`` once the subscription
+        has ended; raises the error that ended it after the answers queued before it. Taking
+        a batch marks the previous batch handled (the position of a durable subscription moves
+        past it), as taking one answer does. ``copy=False`` returns the queued answer dicts
+        themselves, shared with every subscription that has the same answers: the caller must
+        not change them (what the service does to encode each answer once for all its
+        WebSocket subscribers).
+
+        >>> import asyncio, slr_sql
+        >>> kb = slr_sql.open(); sub = kb.subscribe("p(X)^T", since=0)
+        >>> rejected = kb.add_many(["p(a)^1", "p(b)^2"])
+        >>> asyncio.run(sub.next_answers(10))
+        [{'X': Atom('a'), 'T': 1.0}, {'X': Atom('b'), 'T': 2.0}]
+        >>> sub.close(); kb.close()
+        """
+        self._check_pull()
+        while True:
+            got = self._take_batch(limit)
+            if type(got) is _End:
+                if got.error is not None:
+                    raise got.error
+                return []
+            if got:
+                return [dict(a) for a in got] if copy else got
+            await self._wait_async()
+
+    def _take_batch(self, limit: int) -> Any:
+        """Up to ``limit`` queued answers (the shared dicts), never waiting: ``[]`` when none is
+        queued, the _End when it is next (never after answers taken in the same call, so
+        those are handled before the end closes the subscription). One lock for the batch."""
+        with self._lock:
+            self._in_flight = None           # the consumer is back: the previous batch is done
+            queue = self._queue
+            if not queue:
+                return _End(self.error) if self._closed else []
+            if queue[0] is None:              # the end marker
+                queue.popleft()
+                end = queue.popleft()
+                self._finished = True
+                taken = None
+            else:
+                before = len(queue) >> 1
+                self._in_flight = queue[0]       # the batch is in the consumer's hands
+                taken = []
+                while queue and len(taken) < limit and queue[0] is not None:
+                    queue.popleft()
+                    taken.append(queue.popleft())
+                self.delivered += len(taken)
+                half = self.max_queue >> 1
+                refill = before > half >= len(queue) >> 1 and (
+                    self.lagging or self.phase == _HISTORY)
+        if taken is None:
+            self._hub._taken_end(self)
+            return end
+        if refill:                           # room again: the hub reads on from the store
+            self._hub.notify()
+        return taken
 
     def wait(self, timeout: float | None = None) -> bool:
         """Wait until a callback subscription has ended (``until`` reached, closed, or failed);
@@ -967,6 +1032,10 @@ class SubscriptionHub:
                 if not subs:
                     self._by_type.pop(sub.key, None)
                     self._type_pos.pop(sub.key, None)
+                key = (sub._matcher.pattern, sub._matcher.where)
+                if self._matchers.get(key) is sub._matcher and not any(
+                        s._matcher is sub._matcher for s in subs):
+                    del self._matchers[key]      # kept only while some subscription uses it
         pending = sub._pending
         if pending is not None and not pending.done():
             pending.cancel()
@@ -1080,13 +1149,19 @@ class SubscriptionHub:
         info = self._type_info(key)
         touched: set = set()
         if info is None:   # no event of this type yet: nothing to read; until may still end it
-            for s in subs:
-                if s._until_reached and not s._ended:
+            ending = [s for s in subs if s._until_reached and not s._ended]
+            # looked up again after reading the flags: events stored (creating the table) before
+            # `until` was reached must be delivered first, by the reading below
+            if ending and self._type_info(key) is None:
+                for s in ending:
                     s._go_live()
                     s._end(completed=True)
                     touched.add(s)
-            self._wake(touched)
-            return
+                self._wake(touched)
+                return
+            info = self._type_info(key)
+            if info is None:
+                return
         self._check_journal(key, info)
         for s in subs:
             if s._until_reached and s._end_jid is None:

@@ -43,6 +43,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 
 import slr_sql
 from slr_sql import EventRejected, SLRError, SLRTimeout
+from slr_sql.store.checks import format_event
 
 from .encoding import (decode_args, decode_arguments, decode_term, dumps, encode_answers,
                        encode_plain, loads)
@@ -173,6 +174,47 @@ def _plain(value: Any) -> Any:
     return encode_plain(value)
 
 
+class _AnswerTexts:
+    """The JSON text of each delivered answer, made once for every WebSocket subscriber that
+    receives the same answer. The subscription hub computes the answers of one pattern,
+    condition and window once and queues the same dict for each of their subscriptions
+    (``next_answers(copy=False)``), so the text is keyed by the dict's identity; an entry
+    holds its dict, so the identity cannot be reused while the entry lives. At most ``size``
+    entries (then the cache starts over): a subscriber that reads far behind the others, or
+    alone, encodes its own answers. Used on the event loop only (no lock).
+
+    >>> texts = _AnswerTexts()
+    >>> a = {"X": "s", "T": 1.0}
+    >>> texts.frame(1, [a]), texts.frame(7, [a, a])
+    ('{"type":"answer","seq":1,"answer":{"X":{"$string":"s"},"T":1.0}}', \
+'{"type":"answers","seq":7,"answers":[{"X":{"$string":"s"},"T":1.0},{"X":{"$string":"s"},"T":1.0}]}')
+    """
+
+    def __init__(self, size: int = 4096):
+        self.size = size
+        self._texts: dict[int, tuple[dict, str]] = {}
+        self.encoded = 0                  # answers encoded (the rest came from the cache)
+
+    def text(self, answer: dict) -> str:
+        hit = self._texts.get(id(answer))
+        if hit is not None and hit[0] is answer:
+            return hit[1]
+        text = dumps(encode_answers([answer])[0]).decode("utf-8")
+        if len(self._texts) >= self.size:
+            self._texts.clear()
+        self._texts[id(answer)] = (answer, text)
+        self.encoded += 1
+        return text
+
+    def frame(self, seq: int, answers: list[dict]) -> str:
+        """An ``answer`` frame (one answer) or an ``answers`` frame, numbered from ``seq``."""
+        if len(answers) == 1:
+            return f'{{"type":"answer","seq":{seq},"answer":{self.text(answers[0])}}}'
+        text = self.text
+        return (f'{{"type":"answers","seq":{seq},"answers":['
+                f'{",".join([text(a) for a in answers])}]}}')
+
+
 # -- the route table (routes and the OpenAPI description come from it) ------------------------
 
 @dataclass
@@ -199,6 +241,7 @@ class _Service:
         self.token = token.encode("utf-8") if token else None
         self.limits = limits
         self.submitted: dict[str, _Submitted] = {}
+        self.answer_texts = _AnswerTexts()
         self.endpoints = _ENDPOINTS
         params = _parameters(kb.load)
         self.load_takes_name = "name" in params and "replace" in params
@@ -373,32 +416,16 @@ class _Service:
             await websocket.send_text(dumps({"type": "subscribed", "pattern": pattern,
                                              "id": kwargs.get("id")}).decode("utf-8"))
             watcher = asyncio.create_task(self._watch_client(websocket, sub, closing))
+            texts = self.answer_texts
             seq = 0
-            failure: BaseException | None = None
-            async for answer in sub:
-                answers = [answer]
-                while len(answers) < batch:        # what is queued already goes along
-                    try:
-                        more = sub.get(timeout=0)
-                    except SLRTimeout:
-                        break
-                    except SLRError as exc:        # sent after the answers before it
-                        failure = exc
-                        break
-                    if more is None:               # ended: "end" follows these answers
-                        break
-                    answers.append(more)
-                if len(answers) == 1:
-                    seq += 1
-                    frame = {"type": "answer", "seq": seq,
-                             "answer": encode_answers(answers)[0]}
-                else:
-                    frame = {"type": "answers", "seq": seq + 1,
-                             "answers": encode_answers(answers)}
-                    seq += len(answers)
-                await websocket.send_text(dumps(frame).decode("utf-8"))
-                if failure is not None:
-                    raise failure
+            while True:
+                # what is queued goes along (batch at most); the error that ended the
+                # subscription is raised by the call after the answers queued before it
+                answers = await sub.next_answers(batch, copy=False)
+                if not answers:
+                    break
+                await websocket.send_text(texts.frame(seq + 1, answers))
+                seq += len(answers)
             if not closing:
                 await websocket.send_text('{"type":"end"}')
                 await websocket.close(1000)
@@ -553,9 +580,19 @@ async def _add_many(svc: "_Service", request: Request) -> Any:
     b = await svc.body(request)
     events = _field(b, "events", list, required=True)
     atomic = _field(b, "atomic", bool, default=False)
-    plain = _plain_arguments(request.state.body, events)
+    plain = _plain_arguments(request.state.body, events, b.get("atomic"))
     prepared, positions, rejected = [], [], []
     for i, ev in enumerate(events):
+        if plain and type(ev) is dict:
+            # the common case inline (what _event_tuple does for it): a plain event with a
+            # name, an array of arguments and float times
+            name, args, start = ev.get("name"), ev.get("args"), ev.get("start")
+            end = ev.get("end", start)
+            if type(start) is float and type(end) is float and type(name) is str and name \
+                    and type(args) is list:
+                prepared.append((name, args, start, end))
+                positions.append(i)
+                continue
         try:
             if isinstance(ev, str):
                 prepared.append(ev)
@@ -574,6 +611,8 @@ async def _add_many(svc: "_Service", request: Request) -> Any:
         index = getattr(exc, "index", None)
         original = positions[index] if isinstance(index, int) and \
             0 <= index < len(positions) else None
+        if plain and original is not None and type(events[original]) is dict:
+            exc = _as_decoded(exc, events[original])
         rejected.append(_rejection(exc, original))
     rejected.sort(key=lambda r: (r["index"] is None, r["index"] or 0))
     return {"accepted": len(events) - len(rejected), "rejected": rejected}
@@ -812,16 +851,38 @@ class _Submitted:
 
 # -- request pieces ----------------------------------------------------------------------------
 
-def _plain_arguments(body: bytes, events: list) -> bool:
+def _plain_arguments(body: bytes, events: list, atomic: bool | None = None) -> bool:
     """True when no event argument in this body holds an object, ``true``, ``false`` or
     ``null``: then every argument is already the Python value the knowledge base takes (a JSON
     string is an atom, as a ``str`` is for ``kb.add_many``; numbers and arrays are themselves)
     and decoding can be skipped. Checked on the bytes, at C speed: the body's only ``{`` are
-    the outer object's and one per event object (a ``{`` inside a string only makes this say
-    False, which is always safe)."""
+    the outer object's and one per event object, its only ``true``/``false`` the value of
+    ``"atomic"`` (``atomic``: that value, None when absent); a ``{`` or a ``true`` inside a
+    string only makes this say False, which is always safe."""
     objects = sum(1 for ev in events if type(ev) is dict)
-    return body.count(b"{") == 1 + objects and b"true" not in body \
-        and b"false" not in body and b"null" not in body
+    return body.count(b"{") == 1 + objects and body.count(b"true") == (atomic is True) \
+        and body.count(b"false") == (atomic is False) and b"null" not in body
+
+
+def _as_decoded(exc: BaseException, obj: dict) -> BaseException:
+    """A rejection of an event whose arguments were passed as parsed (``plain``), worded as
+    for the same event decoded: its atoms written as atoms (``cup4``), not as the strings
+    the knowledge base printed (``"cup4"``)."""
+    event = getattr(exc, "event", None)
+    if type(event) is not tuple or len(event) != 4:
+        return exc
+    name, args, start, end = event
+    message = str(exc)
+    head = format_event(name, args, start, end)
+    if not message.startswith(head):
+        return exc
+    try:
+        decoded = decode_arguments(args)
+    except SLRError:
+        return exc
+    out = EventRejected(format_event(name, decoded, start, end) + message[len(head):])
+    out.index, out.event = getattr(exc, "index", None), (name, decoded, start, end)
+    return out
 
 
 def _event_tuple(obj: dict, plain: bool = False) -> tuple:

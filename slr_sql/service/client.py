@@ -194,7 +194,10 @@ class RemoteKnowledgeBase:
         present = [i for i, item in enumerate(items) if item is not None]
         if not present:
             return []
-        body = dumps({"events": [items[i] for i in present], "atomic": atomic})
+        request = {"events": [items[i] for i in present]}
+        if atomic:                  # absent is false (and keeps the body free of booleans)
+            request["atomic"] = True
+        body = dumps(request)
         if len(body) > budget and not atomic and len(present) > 1:
             half = len(items) // 2
             return (self._send_events(items[:half], offset, atomic, budget)

@@ -11,7 +11,7 @@ string (``String``; ``str``    ``{"$string": text}``                ``{"$string"
 in answers)
 integer, 64-bit                a JSON integer (no fraction)         ``42``
 integer beyond 64 bits         ``{"$int": "digits"}``               ``{"$int":"-123..."}``
-float, finite                  a JSON number that always has a      ``2.0``, ``1e+22``,
+float, finite                  a JSON number that always has a      ``2.0``, ``1e22``,
                                ``.`` or an exponent                 ``-0.0``
 float +inf / -inf / NaN        ``{"$float": "inf" | "-inf" |        ``{"$float":"nan"}``
                                "nan"}``
@@ -53,6 +53,8 @@ import json
 import math
 import re
 from typing import Any
+
+import orjson
 
 from slr_sql import Atom, SLRError, String, Struct, Var
 
@@ -403,27 +405,83 @@ def _refuse_constant(name: str) -> Any:
 def dumps(obj: Any) -> bytes:
     """Compact UTF-8 JSON; never writes NaN/Infinity (they are tagged by the encoders).
 
+    orjson writes it (in C); its text differs from Python's ``json`` only in how an
+    exponent is spelled (``1e16``, ``1e-5`` written ``0.00001``; the same shortest
+    round-trip digits, read back as the same float). What orjson does not write the Python
+    way goes through ``json``: output holding ``null`` (orjson writes a stray NaN as
+    ``null``; ``json`` refuses it), integers beyond 64 bits, lone surrogates, and values
+    orjson does not know.
+
     >>> dumps({"a": [1, 2.0, "é"]})
     b'{"a":[1,2.0,"\\xc3\\xa9"]}'
     """
+    try:
+        data = orjson.dumps(obj)
+    except TypeError:       # orjson.JSONEncodeError is a TypeError
+        pass
+    else:
+        if b"null" not in data:
+            return data
     return json.dumps(obj, ensure_ascii=False, allow_nan=False,
                       separators=(",", ":")).encode("utf-8", "surrogatepass")
+
+
+# What orjson reads differently from Python's json is found on the bytes, in C: one
+# translate keeps the brackets and the points, writes every digit as 0 and everything else
+# as a space; an integer literal (after a space or a bracket, not a point) beyond 64 bits,
+# which orjson reads as a float and json keeps exact, has 19 digits or more.
+_SKELETON = bytes(b if b in b"[]{}." else 48 if 48 <= b <= 57 else 32 for b in range(256))
+_LONG_INTEGERS = (b" " + b"0" * 19, b"[" + b"0" * 19)
+_FAST_DEPTH = 32
+
+
+def _orjson_reads_it(raw: bytes) -> bool:
+    """True when orjson reads ``raw`` as Python's json does: no integer of 19 digits (one
+    beyond 64 bits, which orjson turns into a float: json keeps it exact) and brackets
+    nested at most :data:`_FAST_DEPTH` levels (orjson reads any depth; a body nested too
+    deeply must be refused). The nesting is measured by removing the innermost pairs
+    level by level; a bracket inside a string can only make this say False (then Python's
+    json reads it: slower, same result)."""
+    if raw.count(b"[") + raw.count(b"{") <= _FAST_DEPTH and len(raw) < 19:
+        return True
+    skeleton = b" " + raw.translate(_SKELETON)
+    if _LONG_INTEGERS[0] in skeleton or _LONG_INTEGERS[1] in skeleton:
+        return False
+    brackets = skeleton.translate(None, b" 0.")
+    for _ in range(_FAST_DEPTH):
+        shorter = brackets.replace(b"[]", b"").replace(b"{}", b"")
+        if not shorter:
+            return True
+        if len(shorter) == len(brackets):
+            return False
+        brackets = shorter
+    return False
 
 
 def loads(data: bytes | str) -> Any:
     """Strict JSON: UTF-8, no NaN/Infinity literals, and no lone surrogates (``"\\ud800"``,
     which no store can keep). Raises ValueError with a short reason.
 
+    orjson reads it (in C) when it reads it as Python's ``json`` would
+    (:func:`_orjson_reads_it`); a body it refuses (``1e999``, which is +inf here, a lone
+    surrogate, bad JSON: the reason comes from Python's ``json``) is read by Python's
+    ``json``.
+
     >>> loads(b'{"a": 1e999}')
     {'a': inf}
     """
     if isinstance(data, (bytes, bytearray)):
         data = bytes(data)
-        text = data.decode("utf-8")
-        check = _SURROGATE_ESCAPE.search(data) is not None
+        raw = data
     else:
-        text = data
-        check = _SURROGATE_ESCAPE.search(data.encode("utf-8", "surrogatepass")) is not None
+        raw = data.encode("utf-8", "surrogatepass")
+    if _orjson_reads_it(raw):
+        try:
+            return orjson.loads(raw)
+        except orjson.JSONDecodeError:
+            pass            # the reason (or the reading orjson does not give) comes below
+    text = data.decode("utf-8") if isinstance(data, bytes) else data
+    check = _SURROGATE_ESCAPE.search(raw) is not None
     try:
         obj = json.loads(text, parse_constant=_refuse_constant)
     except RecursionError:
