@@ -419,8 +419,10 @@ class _Service:
                 raise ServiceError("acknowledgements are not available: this knowledge "
                                    "base's subscriptions have no acknowledge()",
                                    kind="NotImplemented")
-            await websocket.send_text(dumps({"type": "subscribed", "pattern": pattern,
-                                             "id": kwargs.get("id")}).decode("utf-8"))
+            subscribed = {"type": "subscribed", "pattern": pattern, "id": kwargs.get("id")}
+            if acks is not None:
+                subscribed["ack_window"] = acks.bound
+            await websocket.send_text(dumps(subscribed).decode("utf-8"))
             watcher = asyncio.create_task(self._watch_client(websocket, sub, closing, acks))
             texts = self.answer_texts
             seq = 0
