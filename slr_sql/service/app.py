@@ -543,8 +543,9 @@ class _Service:
         paths["/subscribe"] = {"get": {
             "summary": "WebSocket: subscribe to events matching a pattern (kb.subscribe); "
                        "send {\"op\": \"subscribe\", \"pattern\", \"where\", \"since\", "
-                       "\"until\", \"id\", \"batch\"}, receive subscribed / answer(s) / end / error "
-                       "messages (docs/service.md).",
+                       "\"until\", \"id\", \"batch\", \"ack\"}, receive subscribed / answer(s) / "
+                       "end / error messages; with \"ack\": true send {\"op\": \"ack\", "
+                       "\"seq\": N} for the answers handled (docs/service.md).",
             "operationId": "subscribe",
             "responses": {"101": {"description": "Switching to the WebSocket protocol"}}}}
         return {"openapi": "3.1.0",
