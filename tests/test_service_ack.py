@@ -324,3 +324,15 @@ def test_a_remote_subscription_acknowledges_what_its_consumer_handled(server, cl
     with sub:
         client.mark_complete(f"{tag}h/1", 20)
         assert [a["I"] for a in sub] == list(range(9, 21))
+
+
+def test_a_remote_subscription_batches_its_acknowledgements(server, client, tag):
+    n = 3000
+    pattern = f"{tag}m(I)^T"
+    client.add_many([f"{tag}m({i})^{i}" for i in range(1, n + 1)])
+    with client.subscribe(pattern, since=0, until=n) as sub:
+        client.mark_complete(f"{tag}m/1", n)
+        got = [a["I"] for a in sub]
+        assert got == list(range(1, n + 1))
+        # one per half window (500) handled, or per wait for answers that did not come
+        assert 1 <= sub.acks_sent <= n // 50

@@ -494,6 +494,7 @@ class RemoteSubscription:
         self._handled = 0           # seq of the last answer handled (the consumer came back)
         self._acked = 0             # seq of the last answer acknowledged to the server
         self._ack_every = 1
+        self.acks_sent = 0          # acknowledgement messages sent (they are batched)
         try:
             # entered as a context manager (what websockets >= 17 asks); closed by close()
             self._ws = ws_connect(url, additional_headers=headers, open_timeout=client.timeout,
@@ -514,6 +515,7 @@ class RemoteSubscription:
         """Tell the server that every answer up to ``seq`` was handled."""
         if seq > self._acked:
             self._acked = seq
+            self.acks_sent += 1
             try:
                 self._ws.send(f'{{"op":"ack","seq":{seq}}}')
             except (OSError, self._closed_exc):
