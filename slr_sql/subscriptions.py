@@ -282,6 +282,9 @@ class Subscription:
         # answers cost the collector (whose full passes are latency spikes) next to nothing.
         self._queue: collections.deque = collections.deque()
         self._in_flight: int | None = None        # position code of the answer taken last
+        # position codes of the answers taken with handled=False and not acknowledged yet, in
+        # order (the network service's clients acknowledge what they handled)
+        self._unacked: collections.deque = collections.deque()
         self._thread_waiting = 0
         self._async_waiter: tuple[Any, Any] | None = None
         self._ended = False          # an _End was queued: the hub is done with it
@@ -330,9 +333,20 @@ class Subscription:
         with self._lock:
             return self._position_locked()
 
+    @property
+    def unacknowledged(self) -> int:
+        """Answers taken with ``next_answers(handled=False)`` and not acknowledged yet."""
+        with self._lock:
+            return len(self._unacked)
+
     def _position_locked(self) -> tuple[int, int]:
         if self._final_position is not None:
             return self._final_position
+        if self._unacked:                    # codes grow: the first unhandled answer is the
+            first = self._unacked[0]         # smaller of the two
+            if self._in_flight is not None and self._in_flight < first:
+                first = self._in_flight
+            return _decode_position(first - 1)
         if self._in_flight is not None:
             return _decode_position(self._in_flight - 1)
         queue = self._queue
@@ -425,13 +439,14 @@ class Subscription:
                 return item
             await self._wait_async()
 
-    async def _wait_async(self) -> None:
+    async def _wait_async(self, acks: bool = False) -> None:
         """Wait on the running loop until something is queued or the subscription closed (the
-        hub resolves the future through ``call_soon_threadsafe``, once per loop per pass)."""
+        hub resolves the future through ``call_soon_threadsafe``, once per loop per pass);
+        ``acks``: until every answer taken was acknowledged, or closed."""
         loop = asyncio.get_running_loop()
         future = loop.create_future()
         with self._lock:
-            if self._queue or self._closed:
+            if (not self._unacked if acks else self._queue) or self._closed:
                 return
             self._async_waiter = (loop, future)
         try:
@@ -441,7 +456,8 @@ class Subscription:
                 if self._async_waiter is not None and self._async_waiter[1] is future:
                     self._async_waiter = None
 
-    async def next_answers(self, limit: int, copy: bool = True) -> list[dict]:
+    async def next_answers(self, limit: int, copy: bool = True,
+                           handled: bool = True) -> list[dict]:
         """Wait (on the running asyncio loop) for the next answer, then return it with the
         answers queued behind it, ``limit`` at most, in order; ``[]`` once the subscription
         has ended; raises the error that ended it after the answers queued before it. Taking
@@ -450,6 +466,12 @@ class Subscription:
         themselves, shared with every subscription that has the same answers: the caller must
         not change them (what the service does to encode each answer once for all its
         WebSocket subscribers).
+
+        ``handled=False``: taking a batch marks nothing handled; the answers taken stay
+        unhandled until :meth:`acknowledge` says so (what the service does for clients that
+        acknowledge). The end of the subscription then comes only once every answer taken
+        was acknowledged (it waits for that), so a durable subscription is recorded as
+        finished only when its consumer handled everything.
 
         >>> import asyncio, slr_sql
         >>> kb = slr_sql.open(); sub = kb.subscribe("p(X)^T", since=0)
@@ -460,24 +482,63 @@ class Subscription:
         """
         self._check_pull()
         while True:
-            got = self._take_batch(limit)
+            got = self._take_batch(limit, handled)
             if type(got) is _End:
                 if got.error is not None:
                     raise got.error
                 return []
             if got:
                 return [dict(a) for a in got] if copy else got
-            await self._wait_async()
+            await self._wait_async(acks=got is None)
 
-    def _take_batch(self, limit: int) -> Any:
+    def acknowledge(self, count: int) -> None:
+        """Mark the first ``count`` answers taken with ``next_answers(handled=False)`` and
+        not acknowledged yet handled, in order: the position of a durable subscription moves
+        past the last of them (written as usual, every 0.2 s and at close). Answers never
+        acknowledged stay unhandled, also when the subscription is closed: a durable
+        subscription delivers them again. Callable from any thread.
+
+        >>> import asyncio, slr_sql
+        >>> kb = slr_sql.open(); sub = kb.subscribe("p(X)^T", since=0)
+        >>> rejected = kb.add_many(["p(a)^1", "p(b)^2"])
+        >>> len(asyncio.run(sub.next_answers(10, handled=False))), sub.unacknowledged
+        (2, 2)
+        >>> sub.acknowledge(1); sub.unacknowledged
+        1
+        >>> sub.close(); kb.close()
+        """
+        if type(count) is not int or count < 0:
+            raise SLRError(f"subscription {self.id!r}: acknowledge() takes a count >= 0, "
+                           f"not {count!r}")
+        with self._lock:
+            unacked = self._unacked
+            if count > len(unacked):
+                raise SLRError(f"subscription {self.id!r}: {count} answers acknowledged, but "
+                               f"only {len(unacked)} were taken and not acknowledged")
+            if self._final_position is not None:     # closed: its position is written
+                return
+            for _ in range(count):
+                unacked.popleft()
+            waiter = None
+            if not unacked and self._async_waiter is not None:
+                waiter, self._async_waiter = self._async_waiter, None
+        if waiter is not None:               # an end waits for the acknowledgements
+            _resolve_threadsafe(waiter[0], [waiter[1]])
+
+    def _take_batch(self, limit: int, handled: bool = True) -> Any:
         """Up to ``limit`` queued answers (the shared dicts), never waiting: ``[]`` when none is
         queued, the _End when it is next (never after answers taken in the same call, so
-        those are handled before the end closes the subscription). One lock for the batch."""
+        those are handled before the end closes the subscription). One lock for the batch.
+        ``handled=False``: the batch goes to the unacknowledged answers (the previous one
+        is not marked handled), and an end waits for them to be acknowledged (None then)."""
         with self._lock:
-            self._in_flight = None           # the consumer is back: the previous batch is done
+            if handled:
+                self._in_flight = None       # the consumer is back: the previous batch is done
             queue = self._queue
             if not queue:
                 return _End(self.error) if self._closed else []
+            if queue[0] is None and not handled and self._unacked:
+                return None                  # the end after the acknowledgements
             if queue[0] is None:              # the end marker
                 queue.popleft()
                 end = queue.popleft()
@@ -485,11 +546,17 @@ class Subscription:
                 taken = None
             else:
                 before = len(queue) >> 1
-                self._in_flight = queue[0]       # the batch is in the consumer's hands
                 taken = []
-                while queue and len(taken) < limit and queue[0] is not None:
-                    queue.popleft()
-                    taken.append(queue.popleft())
+                if handled:
+                    self._in_flight = queue[0]   # the batch is in the consumer's hands
+                    while queue and len(taken) < limit and queue[0] is not None:
+                        queue.popleft()
+                        taken.append(queue.popleft())
+                else:
+                    unacked = self._unacked
+                    while queue and len(taken) < limit and queue[0] is not None:
+                        unacked.append(queue.popleft())
+                        taken.append(queue.popleft())
                 self.delivered += len(taken)
                 half = self.max_queue >> 1
                 refill = before > half >= len(queue) >> 1 and (

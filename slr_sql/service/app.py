@@ -412,21 +412,41 @@ class _Service:
                                    "no subscribe() yet", kind="NotImplemented")
             if "max_queue" in _parameters(self.kb.subscribe):
                 kwargs["max_queue"] = max(self.limits.subscribe_queue, batch)
+            acks = _Acks(max(self.limits.subscribe_queue, batch)) \
+                if _ack_flag(request) else None
             sub = await self.call(self.kb.subscribe, pattern, **kwargs)
-            await websocket.send_text(dumps({"type": "subscribed", "pattern": pattern,
-                                             "id": kwargs.get("id")}).decode("utf-8"))
-            watcher = asyncio.create_task(self._watch_client(websocket, sub, closing))
+            if acks is not None and not hasattr(sub, "acknowledge"):
+                raise ServiceError("acknowledgements are not available: this knowledge "
+                                   "base's subscriptions have no acknowledge()",
+                                   kind="NotImplemented")
+            subscribed = {"type": "subscribed", "pattern": pattern, "id": kwargs.get("id")}
+            if acks is not None:
+                subscribed["ack_window"] = acks.bound
+            await websocket.send_text(dumps(subscribed).decode("utf-8"))
+            watcher = asyncio.create_task(self._watch_client(websocket, sub, closing, acks))
             texts = self.answer_texts
             seq = 0
             while True:
                 # what is queued goes along (batch at most); the error that ended the
                 # subscription is raised by the call after the answers queued before it
-                answers = await sub.next_answers(batch, copy=False)
+                if acks is None:
+                    answers = await sub.next_answers(batch, copy=False)
+                else:
+                    # at most acks.bound answers unacknowledged: wait for acks beyond that
+                    room = await acks.room()
+                    if room <= 0:
+                        break
+                    answers = await sub.next_answers(min(batch, room), copy=False,
+                                                     handled=False)
                 if not answers:
                     break
+                if acks is not None:
+                    acks.sent = seq + len(answers)   # before the send: an ack may come back
                 await websocket.send_text(texts.frame(seq + 1, answers))
                 seq += len(answers)
-            if not closing:
+            if acks is not None and acks.error is not None:
+                await _send_error(websocket, acks.error)
+            elif not closing:
                 await websocket.send_text('{"type":"end"}')
                 await websocket.close(1000)
         except WebSocketDisconnect:
@@ -442,21 +462,36 @@ class _Service:
             elif closing:
                 await closing[0]
 
-    async def _watch_client(self, websocket: WebSocket, sub: Any, closing: list) -> None:
-        """Read what the client sends after subscribing; when it closes (close frame,
-        ``{"op": "close"}`` or a vanished peer) close the subscription, which ends the
-        ``async for`` that delivers it."""
+    async def _watch_client(self, websocket: WebSocket, sub: Any, closing: list,
+                            acks: "_Acks | None" = None) -> None:
+        """Read what the client sends after subscribing: acknowledgements (``{"op": "ack",
+        "seq": N}`` when it subscribed with ``"ack": true``); when it closes (close frame,
+        ``{"op": "close"}``, a vanished peer, or a bad ack) close the subscription, which ends
+        the loop that delivers it. Answers not acknowledged then stay unhandled."""
         try:
             while True:
                 message = await websocket.receive()
                 if message["type"] == "websocket.disconnect":
                     break
                 text = message.get("text")
-                if text and '"close"' in text:
+                if not text:
+                    continue
+                if acks is not None and '"ack"' in text:
+                    seq = acks.parse(text)
+                    if seq is None:
+                        break                # a bad ack: acks.error says why
+                    if seq > acks.acked:
+                        sub.acknowledge(seq - acks.acked)
+                        acks.acked = seq
+                        acks.changed()
+                elif '"close"' in text:
                     break
         except Exception:  # the peer vanished
             pass
-        closing.append(asyncio.ensure_future(self._close_subscription(sub)))
+        finally:
+            closing.append(asyncio.ensure_future(self._close_subscription(sub)))
+            if acks is not None:
+                acks.stop()
 
     async def _close_subscription(self, sub: Any) -> None:
         try:
@@ -508,8 +543,9 @@ class _Service:
         paths["/subscribe"] = {"get": {
             "summary": "WebSocket: subscribe to events matching a pattern (kb.subscribe); "
                        "send {\"op\": \"subscribe\", \"pattern\", \"where\", \"since\", "
-                       "\"until\", \"id\", \"batch\"}, receive subscribed / answer(s) / end / error "
-                       "messages (docs/service.md).",
+                       "\"until\", \"id\", \"batch\", \"ack\"}, receive subscribed / answer(s) / "
+                       "end / error messages; with \"ack\": true send {\"op\": \"ack\", "
+                       "\"seq\": N} for the answers handled (docs/service.md).",
             "operationId": "subscribe",
             "responses": {"101": {"description": "Switching to the WebSocket protocol"}}}}
         return {"openapi": "3.1.0",
@@ -965,6 +1001,73 @@ def _batch_size(request: dict) -> int:
     if isinstance(batch, bool) or not isinstance(batch, int) or not 1 <= batch <= MAX_BATCH:
         raise ServiceError(f'"batch" must be an integer from 1 to {MAX_BATCH}')
     return batch
+
+
+def _ack_flag(request: dict) -> bool:
+    """``"ack": true`` in the subscribe message: the client acknowledges what it handled."""
+    ack = request.get("ack", False)
+    if type(ack) is not bool:
+        raise ServiceError(f'"ack" must be true or false, not {ack!r}')
+    return ack
+
+
+class _Acks:
+    """The acknowledgements of one WebSocket subscriber that asked for them: ``sent`` answers
+    went out (numbered 1..sent on the connection), ``acked`` were acknowledged (``{"op":
+    "ack", "seq": N}``: every answer up to N). The sender waits in :meth:`room` while
+    ``bound`` answers are unacknowledged. Used on the event loop only.
+
+    >>> acks = _Acks(10); acks.sent = 5
+    >>> acks.parse('{"op": "ack", "seq": 3}'), acks.parse('{"op": "ack", "seq": 9}')
+    (3, None)
+    >>> acks.error
+    ServiceError('bad ack: seq 9 is beyond the last answer sent (5)')
+    """
+
+    def __init__(self, bound: int):
+        self.bound = bound
+        self.sent = 0
+        self.acked = 0
+        self.error: ServiceError | None = None
+        self._stopped = False
+        self._event = asyncio.Event()
+
+    def parse(self, text: str) -> int | None:
+        """The ``seq`` of an ack message; None (and ``error`` set) when it is not a valid
+        ack: not JSON, ``seq`` not an integer, beyond what was sent, or going backwards."""
+        try:
+            message = loads(text)
+        except (ValueError, UnicodeDecodeError) as exc:
+            self.error = ServiceError(f"bad ack: not valid JSON: {exc}")
+            return None
+        seq = message.get("seq") if type(message) is dict else None
+        if type(message) is not dict or message.get("op") != "ack" or type(seq) is not int:
+            self.error = ServiceError(f'bad ack: expected {{"op": "ack", "seq": N}} with an '
+                                      f'integer N, got {text[:100]!r}')
+        elif seq > self.sent:
+            self.error = ServiceError(f"bad ack: seq {seq} is beyond the last answer sent "
+                                      f"({self.sent})")
+        elif seq < self.acked:
+            self.error = ServiceError(f"bad ack: seq {seq} goes backwards (answers up to "
+                                      f"{self.acked} were acknowledged)")
+        else:
+            return seq
+        return None
+
+    def changed(self) -> None:
+        self._event.set()
+
+    def stop(self) -> None:
+        self._stopped = True
+        self._event.set()
+
+    async def room(self) -> int:
+        """Wait until fewer than ``bound`` answers are unacknowledged; how many more may go
+        (0 once the client left or sent a bad ack)."""
+        while not self._stopped and self.sent - self.acked >= self.bound:
+            self._event.clear()
+            await self._event.wait()
+        return 0 if self._stopped else self.bound - (self.sent - self.acked)
 
 
 async def _send_error(websocket: WebSocket, exc: BaseException) -> None:

@@ -452,7 +452,16 @@ class RemotePendingQuery(Future):
 
 class RemoteSubscription:
     """A subscription on the server (WebSocket ``/subscribe``): ``for answer in sub`` blocks
-    for the next answer and ends when the subscription ends (``until``); ``close()``."""
+    for the next answer and ends when the subscription ends (``until``); ``close()``.
+
+    It subscribes with acknowledgements: an answer counts as handled on the server (a durable
+    subscription's position moves past it) when the consumer comes back for the next one, or
+    at a normal ``close()``, as with a local subscription. Acknowledgements are batched: sent
+    once half the server's window (``ack_window`` answers may be unacknowledged) was handled,
+    or when the consumer waits for answers and none came within ``ack_delay`` seconds, or at
+    ``close()``."""
+
+    ack_delay = 0.05
 
     def __init__(self, client: RemoteKnowledgeBase, pattern: str, *, where: str | None,
                  since: Any, until: float | None, id: str | None, batch: int = 1):
@@ -476,10 +485,16 @@ class RemoteSubscription:
             request["id"] = id
         if batch != 1:
             request["batch"] = batch
+        request["ack"] = True
         self.pattern = pattern
         self.id = id
         self._done = False
         self._ready: collections.deque = collections.deque()   # answers of the last frame
+        self._returned = 0          # seq of the last answer given to the consumer
+        self._handled = 0           # seq of the last answer handled (the consumer came back)
+        self._acked = 0             # seq of the last answer acknowledged to the server
+        self._ack_every = 1
+        self.acks_sent = 0          # acknowledgement messages sent (they are batched)
         try:
             # entered as a context manager (what websockets >= 17 asks); closed by close()
             self._ws = ws_connect(url, additional_headers=headers, open_timeout=client.timeout,
@@ -493,10 +508,33 @@ class RemoteSubscription:
             self.close()
             raise ServiceError(f"unexpected first message from the server: {first!r}",
                                kind="InternalError", status=0)
+        window = first.get("ack_window")
+        self._ack_every = max(1, window // 2) if type(window) is int else 1
 
-    def _receive(self) -> dict:
+    def _ack(self, seq: int) -> None:
+        """Tell the server that every answer up to ``seq`` was handled."""
+        if seq > self._acked:
+            self._acked = seq
+            self.acks_sent += 1
+            try:
+                self._ws.send(f'{{"op":"ack","seq":{seq}}}')
+            except (OSError, self._closed_exc):
+                pass                   # the connection is gone: the next receive says so
+
+    def _receive_frame(self) -> dict:
+        """The next message; answers handled and not acknowledged are acknowledged before
+        waiting (after ``ack_delay`` without a message, so a stream of answers costs one
+        acknowledgement per ``ack_delay`` or per half window, not one per answer)."""
+        if self._handled > self._acked:
+            try:
+                return self._receive(self.ack_delay)
+            except TimeoutError:
+                self._ack(self._handled)
+        return self._receive()
+
+    def _receive(self, timeout: float | None = None) -> dict:
         try:
-            data = self._ws.recv()
+            data = self._ws.recv(timeout)
         except self._closed_exc as exc:
             if self._done:             # close() was called (maybe from another thread)
                 return {"type": "end"}
@@ -517,17 +555,24 @@ class RemoteSubscription:
         return self
 
     def __next__(self) -> dict[str, Any]:
+        self._handled = self._returned          # the consumer is back: the last one is done
+        if self._handled - self._acked >= self._ack_every:
+            self._ack(self._handled)
         if self._ready:
+            self._returned += 1
             return self._ready.popleft()
         if self._done:
             raise StopIteration
-        message = self._receive()
+        message = self._receive_frame()
         kind = message.get("type")
         if kind == "answer":
-            return decode_answers([message.get("answer", {})])[0]
+            answer = decode_answers([message.get("answer", {})])[0]
+            self._returned += 1
+            return answer
         if kind == "answers":
             self._ready.extend(decode_answers(message.get("answers", [])))
             if self._ready:
+                self._returned += 1
                 return self._ready.popleft()
             return self.__next__()
         if kind == "end":
@@ -543,9 +588,13 @@ class RemoteSubscription:
         except Exception:
             pass
 
-    def close(self) -> None:
+    def close(self, ack: bool = True) -> None:
         """Unsubscribe (closes the WebSocket); an iteration blocked in another thread
-        ends. Answers received but not iterated yet are dropped."""
+        ends. The last answer given out counts as handled unless ``ack=False``; answers
+        received but not iterated yet are dropped (unhandled: a durable subscription
+        delivers them again)."""
+        if not self._done:
+            self._ack(self._returned if ack else self._handled)
         self._done = True
         self._ready.clear()
         self._close_socket()
@@ -553,8 +602,8 @@ class RemoteSubscription:
     def __enter__(self) -> "RemoteSubscription":
         return self
 
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
+    def __exit__(self, exc_type: Any, *rest: Any) -> None:
+        self.close(ack=exc_type is None)
 
 
 # -- request bodies ----------------------------------------------------------------------------
