@@ -25,7 +25,7 @@ from .engine import Engine, Machine
 from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
-from .store import DEFAULT_BUSY_TIMEOUT, DatabaseError, EventStore
+from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventStore
 from .store.checks import event_arguments, shorten
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
@@ -257,10 +257,12 @@ class KnowledgeBase:
 
     def __init__(self, path: str | Path | None = None, clock: Clock | None = None, *,
                  synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
-                 adopt: bool = False, checkpoint: str = "auto"):
+                 adopt: bool = False, checkpoint: str = "auto",
+                 cache_mib: float = CACHE_SIZE_KIB / 1024):
         self.clock = clock if clock is not None else WallClock()
         self.store = EventStore(path, self.clock, synchronous=synchronous,
-                                busy_timeout=busy_timeout, adopt=adopt, checkpoint=checkpoint)
+                                busy_timeout=busy_timeout, adopt=adopt, checkpoint=checkpoint,
+                                cache_mib=cache_mib)
         self.path = self.store.path
         self.program = Program()
         self.declarations = Declarations()
@@ -1099,7 +1101,9 @@ def open(path: str | Path | None = None, clock: Clock | None = None, **options: 
     :class:`~slr_sql.errors.SLRBusy`; default 5), ``checkpoint`` (``"auto"``: SQLite copies
     the write-ahead log into the file during the commit that fills it; ``"background"``: a
     thread of the store does it, so no ``add`` waits for it -- for long-running writers with
-    a latency budget, such as ``slr serve`` and ``slr ros bridge``).
+    a latency budget, such as ``slr serve`` and ``slr ros bridge``), ``cache_mib`` (SQLite's
+    page cache, default 64 MiB: it fills as the store is used, then the process's memory stays
+    flat; a smaller one makes it flat sooner and makes large ingests and scans re-read pages).
     A file that is not a store (not SQLite, damaged, a store of a newer slr_sql, or an SQLite
     file of another application) is refused with an :class:`SLRError` and left untouched;
     ``adopt=True`` adds a store to another application's SQLite file on purpose.

@@ -103,3 +103,13 @@ def test_an_in_memory_store_has_no_thread():
     with slr_sql.open(None, checkpoint="background") as kb:
         kb.add("p(1)^1")
         assert kb.store._db.checkpointer is None
+
+
+def test_the_page_cache_bound_is_an_option(tmp_path):
+    with slr_sql.open(tmp_path / "kb.db", cache_mib=8) as kb:
+        assert kb.store._db.conn.execute("PRAGMA cache_size").fetchone()[0] == -8 * 1024
+    with slr_sql.open(tmp_path / "kb.db") as kb:
+        assert kb.store._db.conn.execute("PRAGMA cache_size").fetchone()[0] == -64 * 1024
+    for bad in (0, -1, "64", True):
+        with pytest.raises(slr_sql.SLRError, match="cache_mib"):
+            slr_sql.open(tmp_path / "kb.db", cache_mib=bad)

@@ -90,13 +90,16 @@ def _stop_on_signals() -> Any:
 def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | None = None,
                *, limits: Any = None, max_connections: int | None = 1000,
                ssl_keyfile: str | None = None, ssl_certfile: str | None = None,
-               log_level: str = "warning", ws_compression: bool = False) -> None:
+               log_level: str = "warning", ws_compression: bool = False,
+               cache_mib: float | None = None) -> None:
     """Open ``db`` and serve it until SIGINT/SIGTERM; then close it.
 
     Refuses (SLRError) to listen on a non-loopback address without a token. Prints
     ``slr serve: DB on http://HOST:PORT`` on stdout once listening. ``ws_compression``:
     accept WebSocket clients' offer of permessage-deflate (off by default: compressing every
-    frame for every subscriber costs more CPU than loopback or a LAN saves).
+    frame for every subscriber costs more CPU than loopback or a LAN saves). ``cache_mib``:
+    the store's SQLite page cache (default 64 MiB), the part of the server's memory that
+    grows with the store until it is full.
     """
     token = token or None
     if token is None and not is_loopback(host):
@@ -116,7 +119,8 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
     limits = limits or Limits()
     sock = _listen(host, port)
     try:
-        kb = slr_sql.open(db)
+        options = {} if cache_mib is None else {"cache_mib": cache_mib}
+        kb = slr_sql.open(db, checkpoint="background", **options)  # no add waits for a checkpoint
     except BaseException:
         sock.close()
         raise
@@ -168,9 +172,14 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
               help="TLS certificate chain.")
 @click.option("--ws-compression/--no-ws-compression", default=False, show_default=True,
               help="Compress WebSocket frames (permessage-deflate) for clients that offer it.")
+@click.option("--cache-mib", default=64.0, type=click.FloatRange(0.0625, 1 << 20),
+              show_default=True,
+              help="SQLite page cache of the store (the memory that grows with the store until "
+                   "full).")
 def serve(db: str, host: str, port: int, token: str | None, max_body: int,
           max_query_time: float, max_wait: float, max_connections: int,
-          ssl_keyfile: str | None, ssl_certfile: str | None, ws_compression: bool) -> None:
+          ssl_keyfile: str | None, ssl_certfile: str | None, ws_compression: bool,
+          cache_mib: float) -> None:
     """Serve DB to other processes over HTTP/JSON and WebSocket (docs/service.md).
 
     Clients: slr_sql.connect(URL, token=...) or any slr command with the URL in place of DB.
@@ -183,5 +192,5 @@ def serve(db: str, host: str, port: int, token: str | None, max_body: int,
     limits = Limits(max_body=max_body, max_query_time=max_query_time, max_wait=max_wait)
     run_server(db, host, port, token, limits=limits, max_connections=max_connections,
                ssl_keyfile=ssl_keyfile, ssl_certfile=ssl_certfile,
-               ws_compression=ws_compression)
+               ws_compression=ws_compression, cache_mib=cache_mib)
     sys.stdout.flush()

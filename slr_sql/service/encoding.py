@@ -188,8 +188,8 @@ def encode_arguments(args: list, where: str = "args") -> list:
 def encode_answers(answers: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Answers as ``kb.query`` returns them (strings as ``str``) -> JSON-ready answers.
 
-    >>> encode_answers([{"X": "text", "Y": Atom("a")}])
-    [{'X': {'$string': 'text'}, 'Y': 'a'}]
+    >>> encode_answers([{"X": "text", "Y": Atom("a")}]) == [{"X": {"$string": "text"}, "Y": "a"}]
+    True
     """
     return [{name: encode_term(value, plain_str="string", _where=name)
              for name, value in answer.items()} for answer in answers]

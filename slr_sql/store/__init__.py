@@ -82,6 +82,8 @@ class EventStore:
     :class:`~slr_sql.errors.SLRError` and left untouched, unless ``adopt=True`` (a foreign
     SQLite file then gets the store's tables added). ``checkpoint="background"`` copies the
     write-ahead log into the file on a thread of its own (:mod:`slr_sql.store.checkpointer`).
+    ``cache_mib``: the bound of SQLite's page cache for this connection (default 64 MiB; it
+    fills as the store is used and stays there).
 
     >>> store = EventStore(":memory:")
     >>> store.add_event("obj", ("cup1", "red"), 1.0, 1.0); store.count("obj", 2)
@@ -91,8 +93,10 @@ class EventStore:
 
     def __init__(self, path: str | Path | None = None, clock: Any = None, *,
                  synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
-                 adopt: bool = False, checkpoint: str = "auto"):
-        self._db = db = Database(path, clock, synchronous, busy_timeout, adopt, checkpoint)
+                 adopt: bool = False, checkpoint: str = "auto",
+                 cache_mib: float = CACHE_SIZE_KIB / 1024):
+        self._db = db = Database(path, clock, synchronous, busy_timeout, adopt, checkpoint,
+                                 cache_mib=cache_mib)
         self._tables = EventTables(db)
         self._writer = EventWriter(db, self._tables)
         self._reader = EventReader(db, self._tables)

@@ -211,8 +211,13 @@ class Database:
     def __init__(self, path: str | os.PathLike | None = None, clock: Any = None,
                  synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
                  adopt: bool = False, checkpoint: str = "auto",
-                 checkpoint_interval: float = CHECKPOINT_INTERVAL):
+                 checkpoint_interval: float = CHECKPOINT_INTERVAL,
+                 cache_mib: float = CACHE_SIZE_KIB / 1024):
         busy_timeout = _check_busy_timeout(busy_timeout)
+        if isinstance(cache_mib, bool) or not isinstance(cache_mib, (int, float)) \
+                or not 0.0625 <= cache_mib <= 1 << 20:
+            raise ValueError(f"cache_mib must be a number of MiB from 0.0625 to 1048576, "
+                             f"not {cache_mib!r}")
         if synchronous.upper() not in ("OFF", "NORMAL", "FULL", "EXTRA"):
             raise ValueError(f"synchronous must be OFF, NORMAL, FULL or EXTRA, not {synchronous!r}")
         if checkpoint not in CHECKPOINT_MODES:
@@ -249,7 +254,7 @@ class Database:
             conn.execute("PRAGMA foreign_keys=ON")
             # Every event type has four indexes; SQLite's default 2 MiB page cache makes large
             # ingests spill and re-read index pages constantly. The cache grows only as used.
-            conn.execute(f"PRAGMA cache_size=-{CACHE_SIZE_KIB}")
+            conn.execute(f"PRAGMA cache_size=-{int(cache_mib * 1024)}")
             migrate(conn, self.path)
             # an existing store is in WAL already (switching again would want a lock); an
             # adopted file is switched only once its migrations succeeded

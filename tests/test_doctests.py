@@ -1,0 +1,28 @@
+"""Every docstring example in the package runs as written (public functions carry one: it
+must stay true as the code changes)."""
+from __future__ import annotations
+
+import doctest
+import importlib
+import pkgutil
+
+import pytest
+
+import slr_sql
+
+MODULES = sorted(info.name for info in pkgutil.walk_packages(slr_sql.__path__, "slr_sql.")
+                 if info.name != "slr_sql.__main__")
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_the_examples_of_each_module_run(name):
+    module = importlib.import_module(name)
+    failures, _tried = doctest.testmod(module, verbose=False,
+                                       optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    assert failures == 0, f"{name}: {failures} docstring example(s) failed (run "\
+        f"python -m pytest --doctest-modules {name.replace('.', '/')}.py to see them)"
+
+
+def test_every_module_is_checked():
+    assert "slr_sql.encoding" in MODULES and "slr_sql.store.connection" in MODULES
+    assert len(MODULES) > 40
