@@ -164,9 +164,7 @@ def run_service(args, tmp: Path) -> dict:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     command = [sys.executable, "-m", "slr_sql", "serve", str(db), "--port", "0"]
     if args.cache_kib:     # the same server with another SQLite page cache bound
-        command[1:3] = ["-c", "import sys; import slr_sql.store.connection as c; "
-                        f"c.CACHE_SIZE_KIB = {int(args.cache_kib)}; from slr_sql.cli import main; "
-                        "main(args=sys.argv[1:], prog_name='slr')"]
+        command += ["--cache-mib", str(args.cache_kib / 1024)]
     proc = subprocess.Popen(command, stdout=subprocess.PIPE,
                             stderr=open(tmp / "server.log", "wb"), env=env)
     url = proc.stdout.readline().decode().strip().rsplit(" on ", 1)[1]
