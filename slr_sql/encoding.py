@@ -167,8 +167,9 @@ def encode(term: Any) -> Any:
 
 # The C fast path for numbers. orjson writes a float as its shortest round-trip text (Ryu),
 # the same digits as Python's repr (checked on millions of values in tests/test_fast_paths.py)
-# about ten times faster; it spells only the exponent forms differently (1e16 for 1e+16,
-# 0.00001 for 1e-05) and writes NaN and infinities as null. So its text is used only when
+# about ten times faster; it may spell the exponent forms differently (0.00001 for 1e-05;
+# 1e16 for 1e+16 before orjson 3.10 or so) and writes NaN and infinities as null. So its
+# text is used only when
 # it holds nothing but digits, signs, points, commas and brackets, and no "0.0000" (where
 # repr would switch to an exponent); anything else (an atom, a big integer, 1e16, inf, a
 # value orjson refuses) takes the Python path, which gives the stored text by definition.

@@ -75,7 +75,7 @@ def test_args_survive(args):
     (2 ** 70, '{"$int":"1180591620717411303424"}'),
     (1.0, "1.0"),
     (-0.0, "-0.0"),
-    (1e22, "1e22"),
+    (1e22, ("1e22", "1e+22")),   # the exponent's spelling depends on orjson's version
     (math.inf, '{"$float":"inf"}'),
     (-math.inf, '{"$float":"-inf"}'),
     (math.nan, '{"$float":"nan"}'),
@@ -86,8 +86,10 @@ def test_args_survive(args):
     (Var("X"), '{"$var":"X"}'),
 ])
 def test_documented_forms(value, wire):
-    assert dumps(encode_term(value)).decode() == wire
-    assert same(decode_term(json.loads(wire)), value)
+    spellings = wire if isinstance(wire, tuple) else (wire,)
+    assert dumps(encode_term(value)).decode() in spellings
+    for text in spellings:
+        assert same(decode_term(json.loads(text)), value)
 
 
 @given(st.floats(allow_nan=False, allow_infinity=False))
