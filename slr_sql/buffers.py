@@ -630,7 +630,7 @@ class BufferManager:
             return
         # Only a tBuffer's trigger reads the recorded "now" between adds (every add records it
         # in its own transaction): without one, a clock move costs no durable commit.
-        if not any(row["kind"] == "tBuffer" for row in store.buffer_rows()):
+        if not store.has_active_buffer("tBuffer"):
             return
         store.record_now(now)
         if not store.in_transaction:

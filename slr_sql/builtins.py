@@ -1305,25 +1305,17 @@ def _pos_multiply(m, a):
 
 def _number_tuple(t: Any, n: int) -> tuple | None:
     """The numbers of a proper list of exactly ``n`` ints/floats, else None."""
+    items, tail = list_items(t)
+    if len(items) != n or not (type(tail) is Atom and tail == "[]"):
+        return None
     out = []
-    if type(t) is Var:
-        t = deref(t)
-    for _ in range(n):
-        if type(t) is not Struct:
-            return None
-        args = t.args
-        if len(args) != 2 or t.name != ".":
-            return None
-        x = args[0]
+    for x in items:
         if type(x) is Var:
             x = deref(x)
         if type(x) is not float and type(x) is not int:
             return None
         out.append(x)
-        t = args[1]
-        if type(t) is Var:
-            t = deref(t)
-    return tuple(out) if type(t) is Atom and t == "[]" else None
+    return tuple(out)
 
 
 def _plain_value(t: Any) -> Any:

@@ -58,8 +58,6 @@ from __future__ import annotations
 
 import json
 import math
-from bisect import bisect_right
-from itertools import accumulate
 import re
 import sys
 from operator import itemgetter
@@ -169,15 +167,21 @@ def encode(term: Any) -> Any:
 # the same digits as Python's repr (checked on millions of values in tests/test_fast_paths.py)
 # about ten times faster; it may spell the exponent forms differently (0.00001 for 1e-05;
 # 1e16 for 1e+16 before orjson 3.10 or so) and writes NaN and infinities as null. So its
-# text is used only when
-# it holds nothing but digits, signs, points, commas and brackets, and no "0.0000" (where
-# repr would switch to an exponent); anything else (an atom, a big integer, 1e16, inf, a
-# value orjson refuses) takes the Python path, which gives the stored text by definition.
+# text is used only when it holds nothing but digits, signs, points, commas and brackets,
+# and no "0.0000" (where repr would switch to an exponent); anything else (an atom, a big
+# integer, 1e16, inf, a value orjson refuses) takes the Python path, which gives the stored
+# text by definition.
 _dumps = orjson.dumps
 _STRICT_INTEGER = orjson.OPT_STRICT_INTEGER  # integers beyond 53 bits are refused, not written
 _NUMBER_BYTES = b"0123456789-.,[]"
 _SMALL = b"0.0000"
+_SMALL_TEXT = _SMALL.decode()
 _NUMBER_KINDS = frozenset((float, int))
+
+
+def _is_repr_text(data: bytes) -> bool:
+    """True when orjson's ``data`` (numbers in arrays) is the text repr would give."""
+    return not data.translate(None, _NUMBER_BYTES) and _SMALL not in data
 
 
 def _numbers_json(items: Any) -> str | None:
@@ -192,9 +196,7 @@ def _numbers_json(items: Any) -> str | None:
         data = _dumps(items, option=_STRICT_INTEGER)
     except TypeError:  # orjson.JSONEncodeError: an object it does not know, a big integer
         return None
-    if data.translate(None, _NUMBER_BYTES) or _SMALL in data:
-        return None
-    return data.decode()
+    return data.decode() if _is_repr_text(data) else None
 
 
 def _cons_list_json(cell: Struct) -> str | None:
@@ -209,22 +211,9 @@ def _cons_list_json(cell: Struct) -> str | None:
     >>> _cons_list_json(make_list([0.5, 1, Atom("cup1")])), _cons_list_json(make_list([[]]))
     ('[0.5,1,"cup1"]', None)
     """
-    heads: list = []
-    add = heads.append
-    spine = cell
-    try:
-        while True:
-            name = spine.name
-            if name is not CONS and name != ".":
-                return None
-            head, spine = spine.args  # ValueError: a '.' with other than two arguments
-            add(head)
-            if type(spine) is not Struct:
-                if type(spine) is Atom and spine == "[]":
-                    break
-                return None  # a partial list [a|b], or a variable tail
-    except ValueError:
-        return None
+    heads = _cons_heads(cell)
+    if heads is None:
+        return None  # a partial list [a|b], a variable tail, another compound in the spine
     if _NUMBER_KINDS.issuperset(map(type, heads)):
         text = _numbers_json(heads)
         if text is not None:
@@ -330,10 +319,7 @@ def _numbers_compound_json(term: Struct) -> str | None:
         data = _dumps({key[1]: args}, option=_STRICT_INTEGER)
     except TypeError:
         return None
-    body = data[len(key[0]):-1]
-    if body.translate(None, _NUMBER_BYTES) or _SMALL in body:
-        return None
-    return data.decode()
+    return data.decode() if _is_repr_text(data[len(key[0]):-1]) else None
 
 
 _LIST_OR_NUMBER = frozenset((list, tuple, float, int))
@@ -380,9 +366,6 @@ def _numbers_column_json(values: list) -> list | None:
             end = rows.find("\n", at)
             at = rows.find(needle, end) if end >= 0 else -1
     return texts
-
-
-_SMALL_TEXT = _SMALL.decode()
 
 
 def encode_column(values: list) -> list:

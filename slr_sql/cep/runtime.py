@@ -476,9 +476,7 @@ class RuleRuntime:
                         if self._derive_from(n, cand, now):
                             break
                 except MustWait as w:
-                    store.execute("UPDATE slr_cep_pending SET wait_type = ?, wait_arity = ?, "
-                                  "wait_time = ?, wait_reason = ? WHERE id = ?",
-                                  (w.key[0], w.key[1], w.time, w.reason, row[0]))
+                    self._park(row[0], w)
                     continue
                 self._done.append(row[0])
                 changed = True
@@ -534,9 +532,7 @@ class RuleRuntime:
                 done = self._decide_term(n, pos, json.loads(rowids)[0], end, now,
                                          params[n] if params else None)
         except MustWait as w:
-            store.execute("UPDATE slr_cep_pending SET wait_type = ?, wait_arity = ?, "
-                          "wait_time = ?, wait_reason = ? WHERE id = ?",
-                          (w.key[0], w.key[1], w.time, w.reason, rid))
+            self._park(rid, w)
             return False
         if not done:
             if row[7] is not None:
@@ -546,6 +542,12 @@ class RuleRuntime:
             return False
         self._done.append(rid)
         return True
+
+    def _park(self, rid: int, wait: MustWait) -> None:
+        """Record on pending row ``rid`` what it waits for (a history not complete yet)."""
+        self.eng.store.execute("UPDATE slr_cep_pending SET wait_type = ?, wait_arity = ?, "
+                               "wait_time = ?, wait_reason = ? WHERE id = ?",
+                               (wait.key[0], wait.key[1], wait.time, wait.reason, rid))
 
     def _delete_done(self) -> None:
         done, self._done = self._done, []

@@ -360,6 +360,10 @@ class EventStore:
     def buffer_rows(self, active_only: bool = True) -> list[dict[str, Any]]:
         return self._buffers.buffer_rows(active_only)
 
+    @_doc(BufferTables.has_active_buffer)
+    def has_active_buffer(self, kind: str) -> bool:
+        return self._buffers.has_active_buffer(kind)
+
     @_doc(BufferTables.insert_buffer)
     def insert_buffer(self, kind: str, source: str, pattern_text: str, type_name: str,
                       type_arity: int, amount: float | None, t1: float | None,

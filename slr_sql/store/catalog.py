@@ -450,6 +450,20 @@ class BufferTables:
             names = [d[0] for d in cursor.description]
             return [dict(zip(names, row)) for row in cursor.fetchall()]
 
+    def has_active_buffer(self, kind: str) -> bool:
+        """Whether a buffer of ``kind`` (``"tBuffer"``, ``"cBuffer"``, ...) is active, in any
+        process (one probe of a table of a few rows: asked at every clock move).
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).has_active_buffer("tBuffer")
+        False
+        """
+        with self.db.lock:
+            self.db.check_open()
+            return self.db.conn.execute(
+                "SELECT 1 FROM slr_buffers WHERE kind = ? AND removed_at IS NULL LIMIT 1",
+                (kind,)).fetchone() is not None
+
     def insert_buffer(self, kind: str, source: str, pattern_text: str, type_name: str,
                       type_arity: int, amount: float | None, t1: float | None,
                       t2: float | None, origin: str) -> int:
