@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 import sys
 from operator import itemgetter
@@ -68,6 +69,17 @@ from typing import Any
 import orjson
 
 from .terms import CONS, NIL, Atom, String, Struct, Var, make_list
+
+# The optional C loops of the column encoder (csrc/, built by setup.py when a compiler is
+# there): the same texts as the Python code below, which stays the reference and the
+# fallback. SLR_SQL_NO_SPEEDUPS=1 turns them off (to measure or test the Python path).
+if os.environ.get("SLR_SQL_NO_SPEEDUPS"):
+    _speedups = None
+else:
+    try:
+        import _slr_sql_speedups as _speedups
+    except ImportError:
+        _speedups = None
 
 __all__ = ["encode", "encode_column", "decode", "encode_json", "Unencodable", "INT64_MIN",
            "INT64_MAX"]
@@ -349,6 +361,11 @@ def _numbers_column_json(values: list) -> list | None:
         data = _dumps(values, option=_STRICT_INTEGER)
     except TypeError:
         return None
+    if _speedups is not None:
+        texts = _speedups.split_rows(data, len(values))
+        if texts is not None and None in texts:
+            return _rows_redone(texts, values, _python_list_json)
+        return texts
     if data.translate(None, _COLUMN_BYTES) or data.count(b"[") != len(values) + 1:
         return None  # null (inf, NaN), true/false, atoms, or a nested list (rows unsplittable)
     rows = data[1:-1].decode().replace("],[", "]\n[")
@@ -368,6 +385,50 @@ def _numbers_column_json(values: list) -> list | None:
     return texts
 
 
+def _cons_column_json(values: list) -> list | None:
+    """:func:`_cons_list_json` of every value of a column of ``'.'/2`` lists of numbers (parsed
+    vectors), or None when one is not such a list. With the C loops, one walk collects every
+    element into one flat list, written by one orjson call and cut back into rows; without
+    them, the elements of each list are collected (:func:`_cons_heads`) and written as a
+    column of Python lists.
+
+    >>> from slr_sql.terms import make_list
+    >>> _cons_column_json([make_list([0.5, 1]), make_list([]), make_list([1e-05])])
+    ['[0.5,1]', '[]', '[1e-05]']
+    """
+    if _speedups is None:
+        heads = list(map(_cons_heads, values))
+        return None if None in heads else _numbers_column_json(heads)
+    found = _speedups.cons_numbers(values, Struct, Atom, CONS, NIL)
+    if found is None:
+        return None
+    flat, lengths = found
+    try:
+        data = _dumps(flat, option=_STRICT_INTEGER)
+    except TypeError:  # an integer beyond 53 bits
+        return None
+    texts = _speedups.split_flat(data, lengths)
+    if texts is not None and None in texts:
+        return _rows_redone(texts, values, _cons_list_json)
+    return texts
+
+
+def _rows_redone(texts: list, values: list, row_json: Any) -> list | None:
+    """``texts`` with the rows the C splitter left out (None: orjson may spell one of their
+    numbers differently from repr) written by ``row_json``, the Python path; None if one of
+    them needs the general encoder."""
+    row = texts.index(None)  # (few rows: found at C speed, not by a loop over all)
+    while True:
+        text = row_json(values[row])
+        if text is None:
+            return None
+        texts[row] = text
+        try:
+            row = texts.index(None, row + 1)
+        except ValueError:
+            return texts
+
+
 def encode_column(values: list) -> list:
     """:func:`encode` of every value of a column (the same argument of many events).
     A column of one kind is checked whole: plain ASCII atoms are their own text, 64-bit
@@ -382,10 +443,15 @@ def encode_column(values: list) -> list:
     if len(kinds) == 1:
         (kind,) = kinds
         if kind is Atom or kind is str:
+            # a column of names repeats few atoms: check (and copy to plain str) each once
+            distinct = dict.fromkeys(values)
             try:
-                if all(map(str.isascii, values)) \
-                        and _JSON_STARTS.isdisjoint(map(_first_char, values)):
-                    return list(map(str, values))
+                if all(map(str.isascii, distinct)) \
+                        and _JSON_STARTS.isdisjoint(map(_first_char, distinct)):
+                    if len(distinct) * 2 > len(values):
+                        return list(map(str, values))
+                    texts = {atom: str(atom) for atom in distinct}
+                    return list(map(texts.__getitem__, values))
             except IndexError:  # an empty atom: encoded one by one
                 pass
         elif kind is float:
@@ -401,11 +467,9 @@ def encode_column(values: list) -> list:
             return _completed(list(map(_python_list_json, values)), values)
         elif kind is Struct:  # parsed lists, and compounds of numbers (poses)
             if values[0].name == ".":
-                heads = list(map(_cons_heads, values))
-                if None not in heads:
-                    texts = _numbers_column_json(heads)
-                    if texts is not None:
-                        return texts
+                texts = _cons_column_json(values)
+                if texts is not None:
+                    return texts
             return _completed(list(map(_struct_json, values)), values)
     return list(map(encode, values))
 

@@ -1,0 +1,371 @@
+/* Optional C accelerator for the column encoder (slr_sql/encoding.py).
+ *
+ * The loops that cost most of a vector column's encoding in Python, and nothing else:
+ *
+ *   split_rows(data, count)
+ *       the JSON texts of the `count` arrays in `data` (orjson's bytes of a list of lists
+ *       of numbers), as encoding._numbers_column_json splits them; None for a row whose text
+ *       Python's repr may spell differently (an exponent, "0.0000"), which the caller writes
+ *       with the Python encoder; None for the whole column if anything is not digits, signs,
+ *       points, commas, brackets or exponents, or the rows do not number `count`;
+ *   cons_numbers(values, struct_type, atom_type, cons, nil)
+ *       every element of the proper lists of '.'/2 cells in `values`, in one flat list, and
+ *       the length of each list (None unless every value is such a list of floats and
+ *       integers): the walk of encoding._cons_heads without a Python list per value;
+ *   split_flat(data, lengths)
+ *       orjson's bytes of that flat list cut back into one JSON array per value, with the
+ *       same None rows and None column as split_rows.
+ *
+ * `data` is orjson's output: its JSON syntax is trusted, every byte is checked. All three are
+ * pure functions of their arguments (the byte table is constant). The Python versions stay
+ * the reference and the fallback: tests/test_speedups.py compares them on random input.
+ * The module is built by setup.py when a C compiler is there (optional=True); without it
+ * slr_sql runs the same encoding in Python, slower.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <structmember.h>
+#include <string.h>
+
+#ifndef Py_T_OBJECT_EX
+#define Py_T_OBJECT_EX T_OBJECT_EX
+#endif
+
+/* The offset of a __slots__ attribute in instances of `type`: Struct keeps `name` and `args`
+ * in slots, read here without an attribute lookup per cell. -1 with an exception set when
+ * the attribute is not an object slot. */
+static Py_ssize_t
+slot_offset(PyTypeObject *type, const char *attribute)
+{
+    PyObject *descr = PyObject_GetAttrString((PyObject *)type, attribute);
+    Py_ssize_t offset = -1;
+    if (descr == NULL)
+        return -1;
+    if (Py_IS_TYPE(descr, &PyMemberDescr_Type)) {
+        PyMemberDef *member = ((PyMemberDescrObject *)descr)->d_member;
+        if (member->type == Py_T_OBJECT_EX || member->type == T_OBJECT)
+            offset = member->offset;
+    }
+    Py_DECREF(descr);
+    if (offset < 0)
+        PyErr_Format(PyExc_TypeError, "%s.%s is not a slot", type->tp_name, attribute);
+    return offset;
+}
+
+#define SLOT(object, offset) (*(PyObject **)((char *)(object) + (offset)))
+
+/* 1 if `name` is the atom '.', 0 if not, -1 on error. */
+static int
+is_cons_name(PyObject *name, PyObject *cons)
+{
+    if (name == cons)
+        return 1;
+    if (!PyUnicode_Check(name))
+        return 0;
+    return PyUnicode_CompareWithASCIIString(name, ".") == 0;
+}
+
+/* What each byte of orjson's text of numbers in arrays is to the splitters. */
+enum {
+    INVALID = 0,  /* null, true, a string, an object: the column is not numbers */
+    DIGIT,        /* digits and minus signs */
+    POINT,        /* '.': where repr's and orjson's texts of small numbers part */
+    EXPONENT,     /* 'e', 'E', '+': a number repr may spell differently */
+    COMMA,
+    OPEN,
+    CLOSE,
+};
+static unsigned char BYTE_KIND[256];
+
+static void
+fill_byte_kinds(void)
+{
+    const char *digits = "0123456789-";
+    for (; *digits; digits++)
+        BYTE_KIND[(unsigned char)*digits] = DIGIT;
+    BYTE_KIND['.'] = POINT;
+    BYTE_KIND['e'] = BYTE_KIND['E'] = BYTE_KIND['+'] = EXPONENT;
+    BYTE_KIND[','] = COMMA;
+    BYTE_KIND['['] = OPEN;
+    BYTE_KIND[']'] = CLOSE;
+}
+
+/* 1 if the '.' at `at` starts "0.0000" (repr writes such values, below 1e-4, with an
+ * exponent): the Python check is the same ("0.0000" anywhere, so 10.00001 too). */
+static inline int
+small_at(const char *text, Py_ssize_t at, Py_ssize_t size)
+{
+    return at >= 1 && text[at - 1] == '0' && at + 4 < size && memcmp(text + at + 1, "0000", 4) == 0;
+}
+
+/* A str of the ASCII bytes `text[start:end]`, between `open` and `close` when not 0. */
+static PyObject *
+ascii_text(const char *text, Py_ssize_t start, Py_ssize_t end, char open, char close)
+{
+    Py_ssize_t extra = open ? 2 : 0;
+    PyObject *item = PyUnicode_New(end - start + extra, 127);
+    Py_UCS1 *out;
+    if (item == NULL)
+        return NULL;
+    out = PyUnicode_1BYTE_DATA(item);
+    if (open)
+        *out++ = (Py_UCS1)open;
+    memcpy(out, text + start, (size_t)(end - start));
+    if (open)
+        out[end - start] = (Py_UCS1)close;
+    return item;
+}
+
+static PyObject *
+split_rows(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    const char *text;
+    Py_ssize_t size, count, row = 0, at;
+    PyObject *rows;
+    if (nargs != 2 || !PyBytes_Check(args[0])) {
+        PyErr_SetString(PyExc_TypeError, "split_rows(data: bytes, count: int)");
+        return NULL;
+    }
+    count = PyLong_AsSsize_t(args[1]);
+    if (count < 0) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "split_rows: count must be >= 0");
+        return NULL;
+    }
+    text = PyBytes_AS_STRING(args[0]);
+    size = PyBytes_GET_SIZE(args[0]);
+    if (size < 2 || text[0] != '[' || text[size - 1] != ']')
+        Py_RETURN_NONE;
+    rows = PyList_New(count);
+    if (rows == NULL)
+        return NULL;
+    at = 1;
+    while (at < size - 1) {
+        Py_ssize_t start = at, depth = 0;
+        int redo = 0;
+        PyObject *item;
+        if (text[at] != '[' || row >= count)
+            goto decline;
+        while (at < size - 1) {
+            unsigned char kind = BYTE_KIND[(unsigned char)text[at]];
+            if (kind == DIGIT || kind == COMMA) {
+                at++;
+                continue;
+            }
+            if (kind == POINT)
+                redo |= small_at(text, at, size);
+            else if (kind == EXPONENT)
+                redo = 1;
+            else if (kind == OPEN)
+                depth++;
+            else if (kind == CLOSE) {
+                if (--depth == 0) {
+                    at++;
+                    break;
+                }
+            }
+            else
+                goto decline;
+            at++;
+        }
+        if (depth != 0)
+            goto decline;
+        if (redo) {
+            item = Py_None;
+            Py_INCREF(item);
+        }
+        else if ((item = ascii_text(text, start, at, 0, 0)) == NULL) {
+            Py_DECREF(rows);
+            return NULL;
+        }
+        PyList_SET_ITEM(rows, row, item);
+        row++;
+        if (at < size - 1) {
+            if (text[at] != ',' || at + 1 == size - 1)
+                goto decline;  /* not a comma, or a trailing one */
+            at++;
+        }
+    }
+    if (row != count)
+        goto decline;
+    return rows;
+decline:
+    /* rows not yet filled are NULL: list_dealloc skips them */
+    Py_DECREF(rows);
+    Py_RETURN_NONE;
+}
+
+/* cons_numbers(values, struct_type, atom_type, cons, nil) -> (flat, lengths) | None */
+static PyObject *
+cons_numbers(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    PyObject *values, *cons, *nil, *flat = NULL, *lengths = NULL;
+    PyTypeObject *struct_type, *atom_type;
+    Py_ssize_t name_at, args_at, count, i;
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError,
+                        "cons_numbers(values, struct_type, atom_type, cons, nil)");
+        return NULL;
+    }
+    values = args[0];
+    if (!PyList_CheckExact(values) || !PyType_Check(args[1]) || !PyType_Check(args[2])) {
+        PyErr_SetString(PyExc_TypeError, "cons_numbers: a list and two types");
+        return NULL;
+    }
+    struct_type = (PyTypeObject *)args[1];
+    atom_type = (PyTypeObject *)args[2];
+    cons = args[3];
+    nil = args[4];
+    if ((name_at = slot_offset(struct_type, "name")) < 0
+            || (args_at = slot_offset(struct_type, "args")) < 0)
+        return NULL;
+    count = PyList_GET_SIZE(values);
+    if ((flat = PyList_New(0)) == NULL || (lengths = PyList_New(count)) == NULL)
+        goto error;
+    for (i = 0; i < count; i++) {
+        PyObject *cell = PyList_GET_ITEM(values, i), *length;
+        Py_ssize_t n = 0;
+        while (Py_IS_TYPE(cell, struct_type)) {
+            PyObject *name = SLOT(cell, name_at);
+            PyObject *cell_args = SLOT(cell, args_at);
+            PyObject *head;
+            int cons_cell;
+            if (name == NULL || cell_args == NULL || !PyTuple_CheckExact(cell_args)
+                    || PyTuple_GET_SIZE(cell_args) != 2)
+                goto decline;
+            if ((cons_cell = is_cons_name(name, cons)) < 0)
+                goto error;
+            head = PyTuple_GET_ITEM(cell_args, 0);
+            if (!cons_cell || !(PyFloat_CheckExact(head) || PyLong_CheckExact(head)))
+                goto decline;
+            if (PyList_Append(flat, head) < 0)
+                goto error;
+            n++;
+            cell = PyTuple_GET_ITEM(cell_args, 1);
+        }
+        if (!(cell == nil || (Py_IS_TYPE(cell, atom_type)
+                              && PyUnicode_CompareWithASCIIString(cell, "[]") == 0)))
+            goto decline;
+        if ((length = PyLong_FromSsize_t(n)) == NULL)
+            goto error;
+        PyList_SET_ITEM(lengths, i, length);
+    }
+    return Py_BuildValue("(NN)", flat, lengths);
+decline:
+    Py_DECREF(flat);
+    Py_DECREF(lengths);
+    Py_RETURN_NONE;
+error:
+    Py_XDECREF(flat);
+    Py_XDECREF(lengths);
+    return NULL;
+}
+
+/* split_flat(data, lengths) -> list | None: orjson's bytes of one flat list of numbers cut
+ * into rows of lengths[k] numbers each, every row written as a JSON array. */
+static PyObject *
+split_flat(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    const char *text;
+    Py_ssize_t size, count, row, at = 1;
+    PyObject *lengths, *rows;
+    if (nargs != 2 || !PyBytes_Check(args[0]) || !PyList_CheckExact(args[1])) {
+        PyErr_SetString(PyExc_TypeError, "split_flat(data: bytes, lengths: list)");
+        return NULL;
+    }
+    text = PyBytes_AS_STRING(args[0]);
+    size = PyBytes_GET_SIZE(args[0]);
+    lengths = args[1];
+    count = PyList_GET_SIZE(lengths);
+    if (size < 2 || text[0] != '[' || text[size - 1] != ']')
+        Py_RETURN_NONE;
+    if ((rows = PyList_New(count)) == NULL)
+        return NULL;
+    for (row = 0; row < count; row++) {
+        Py_ssize_t n = PyLong_AsSsize_t(PyList_GET_ITEM(lengths, row)), start, commas;
+        int redo = 0;
+        PyObject *item;
+        if (n < 0) {
+            if (PyErr_Occurred()) {
+                Py_DECREF(rows);
+                return NULL;
+            }
+            goto decline;
+        }
+        if (n > 0 && at > 1) {  /* the comma before this row's first number */
+            if (text[at] != ',')
+                goto decline;
+            at++;
+        }
+        start = at;
+        /* n numbers: n - 1 commas inside the row, ended by the next comma or the ']' */
+        for (commas = n - 1; n > 0;) {
+            unsigned char kind = BYTE_KIND[(unsigned char)text[at]];
+            if (kind == DIGIT) {
+                at++;
+            }
+            else if (kind == COMMA) {
+                if (at == start || text[at - 1] == ',')
+                    goto decline;  /* an empty number */
+                if (commas-- == 0)
+                    break;
+                at++;
+            }
+            else if (kind == POINT) {
+                redo |= small_at(text, at, size);
+                at++;
+            }
+            else if (kind == EXPONENT) {
+                redo = 1;
+                at++;
+            }
+            else if (at == size - 1 && commas == 0)
+                break;  /* the closing ']' of the whole text */
+            else
+                goto decline;
+        }
+        if (n > 0 && (at == start || text[at - 1] == ','))
+            goto decline;  /* an empty number: the lengths do not fit the text */
+        if (redo) {
+            item = Py_None;
+            Py_INCREF(item);
+        }
+        else if ((item = ascii_text(text, start, at, '[', ']')) == NULL) {
+            Py_DECREF(rows);
+            return NULL;
+        }
+        PyList_SET_ITEM(rows, row, item);
+    }
+    if (at != size - 1)
+        goto decline;  /* numbers left over */
+    return rows;
+decline:
+    Py_DECREF(rows);
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef methods[] = {
+    {"cons_numbers", (PyCFunction)(void (*)(void))cons_numbers, METH_FASTCALL,
+     "cons_numbers(values, struct_type, atom_type, cons, nil) -> (flat, lengths) | None\n\n"
+     "All elements of the proper '.'/2 lists of numbers in values, and each list's length."},
+    {"split_flat", (PyCFunction)(void (*)(void))split_flat, METH_FASTCALL,
+     "split_flat(data, lengths) -> list | None\n\n"
+     "orjson's text of a flat list of numbers cut into JSON arrays of the given lengths."},
+    {"split_rows", (PyCFunction)(void (*)(void))split_rows, METH_FASTCALL,
+     "split_rows(data, count) -> list | None\n\n"
+     "The texts of the count JSON arrays of numbers in data (None for rows to write again)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_slr_sql_speedups",
+    "Optional C loops for slr_sql's column encoder (see slr_sql/encoding.py).", -1, methods,
+    NULL, NULL, NULL, NULL,
+};
+
+PyMODINIT_FUNC
+PyInit__slr_sql_speedups(void)
+{
+    fill_byte_kinds();
+    return PyModule_Create(&module);
+}

@@ -1,0 +1,208 @@
+"""The optional C loops of the column encoder (csrc/_slr_sql_speedups.c) give exactly the
+texts of the Python path and of the general encoder, decline whatever they do not know, and
+are built wherever a C compiler is."""
+from __future__ import annotations
+
+import contextlib
+import math
+import random
+import shutil
+
+import pytest
+from hypothesis import example, given
+from hypothesis import strategies as st
+
+from slr_sql import encoding
+from slr_sql.encoding import Unencodable, encode, encode_column
+from slr_sql.terms import CONS, NIL, Atom, Struct, Var, make_list
+
+speedups = encoding._speedups
+
+
+def test_the_accelerator_is_built_where_a_c_compiler_is():
+    import os
+
+    if os.environ.get("SLR_SQL_NO_SPEEDUPS"):
+        assert speedups is None
+    elif shutil.which("cc") or shutil.which("gcc"):
+        # setup.py builds it (optional=True keeps a compiler error from failing the install;
+        # this test is where such an error shows)
+        assert speedups is not None, "csrc/_slr_sql_speedups.c was not built"
+
+
+@contextlib.contextmanager
+def encoder(path: str):
+    """The column encoder with the C loops ("c") or without them ("python")."""
+    saved = encoding._speedups
+    encoding._speedups = speedups if path == "c" else None
+    try:
+        yield
+    finally:
+        encoding._speedups = saved
+
+
+PATHS = ["python", "c"] if speedups is not None else ["python"]
+
+
+def expected_texts(values):
+    try:
+        return [encode(v) for v in values]
+    except Unencodable:
+        return "refused"
+
+
+def column_texts(values, path):
+    with encoder(path):
+        try:
+            return encode_column(list(values))
+        except Unencodable:
+            return "refused"
+
+
+# Every magnitude where repr and orjson part (exponents, 0.0000, 1e16), the integer limits
+# of orjson (53 bits) and of the stored form (64 bits), and values that are not numbers.
+NUMBERS = st.one_of(
+    st.floats(allow_nan=False, allow_infinity=False),
+    st.floats(min_value=-1e-3, max_value=1e-3),
+    st.floats(min_value=1e15, max_value=1e17),
+    st.integers(-(2 ** 54), 2 ** 54),
+    st.sampled_from([2 ** 53, 2 ** 53 + 1, 2 ** 63 - 1, 2 ** 63, -(2 ** 63), 1e-4, 1e-5,
+                     10.00001, -0.0, 5e-324, 1e22, 1.7976931348623157e308, 100.0]),
+)
+ODD = st.sampled_from([math.inf, -math.inf, math.nan, True, Atom("cup1"), Atom("[]"),
+                       make_list([1.0]), [2.0]])
+ROW = st.lists(st.one_of(NUMBERS, NUMBERS, NUMBERS, ODD), max_size=5)
+
+
+@pytest.mark.parametrize("path", PATHS)
+@given(rows=st.lists(ROW, max_size=6))
+@example(rows=[[1e-05, 0.5], [], [1e16, 2 ** 53 + 1]])
+@example(rows=[[[1.0, 2.0]], [[1.0], [2.0]], [[]]])
+def test_a_column_of_python_lists_encodes_as_each_value_does(path, rows):
+    if not rows:
+        return
+    assert column_texts(rows, path) == expected_texts(rows)
+
+
+@pytest.mark.parametrize("path", PATHS)
+@given(rows=st.lists(ROW, min_size=1, max_size=6))
+@example(rows=[[1e-05, 0.5], [], [10.00001]])
+@example(rows=[[], [], [1.0]])
+@example(rows=[[2 ** 60], [1.0]])
+def test_a_column_of_prolog_lists_encodes_as_each_value_does(path, rows):
+    values = [make_list(row) for row in rows]
+    assert column_texts(values, path) == expected_texts(values)
+
+
+@pytest.mark.parametrize("path", PATHS)
+@pytest.mark.parametrize("odd", [
+    make_list([1.0], Atom("tail")),                 # a partial list
+    make_list([1.0], Var("T")),                     # an unbound tail
+    Struct(".", (1.0,)),                            # a '.' of one argument
+    Struct(".", (1.0, Struct("f", (NIL,)))),        # another compound in the spine
+    Struct("pose", ([1.0, 2.0], [0.0, 0.0, 0.0, 1.0])),
+])
+def test_a_column_with_one_value_that_is_not_a_list_of_numbers(path, odd):
+    values = [make_list([0.5, 1.5]), odd, make_list([2.5])]
+    assert column_texts(values, path) == expected_texts(values)
+
+
+@pytest.mark.parametrize("path", PATHS)
+@pytest.mark.parametrize("vectors", ["python", "prolog"])
+def test_a_long_column_of_random_vectors_with_the_rows_orjson_spells_otherwise(path, vectors):
+    rng = random.Random(5)
+    rows = [[rng.random() ** rng.choice((1, 8)), rng.uniform(-1e6, 1e6),
+             rng.choice((1e-5, 0.25, 3, 1e16, 123.0))] for _ in range(30_000)]
+    values = rows if vectors == "python" else [make_list(row) for row in rows]
+    got = column_texts(values, path)
+    assert got == expected_texts(values)
+    assert sum("e" in text for text in got) > 1_000  # the rows written again by Python
+
+
+class Cell(Struct):
+    """A subclass of Struct: the C walk reads the slots of Struct itself only."""
+
+    __slots__ = ()
+
+
+needs_c = pytest.mark.skipif(speedups is None, reason="the accelerator is not built")
+
+
+@needs_c
+def test_cons_numbers_collects_every_element_and_each_length():
+    values = [make_list([1.0, 2]), NIL, make_list([3.5])]
+    flat, lengths = speedups.cons_numbers(values, Struct, Atom, CONS, NIL)
+    assert (flat, lengths) == ([1.0, 2, 3.5], [2, 0, 1])
+    assert speedups.cons_numbers([], Struct, Atom, CONS, NIL) == ([], [])
+
+
+@needs_c
+@pytest.mark.parametrize("value", [
+    make_list([Atom("a")]), make_list([True]), make_list([make_list([1.0])]),
+    make_list([1.0], Atom("t")), make_list([1.0], Var("T")), Cell(".", (1.0, NIL)),
+    Struct(".", (1.0, 2.0, NIL)), Atom("[]x"), 1.0,
+])
+def test_cons_numbers_declines_anything_but_proper_lists_of_numbers(value):
+    assert speedups.cons_numbers([make_list([1.0]), value], Struct, Atom, CONS, NIL) is None
+
+
+@needs_c
+def test_the_empty_list_may_be_any_atom_spelled_brackets():
+    values = [make_list([1.0], Atom("[]"))]
+    assert speedups.cons_numbers(values, Struct, Atom, CONS, NIL) == ([1.0], [1])
+
+
+@needs_c
+@pytest.mark.parametrize("data, count, rows", [
+    (b"[[1.0,2],[],[3]]", 3, ["[1.0,2]", "[]", "[3]"]),
+    (b"[]", 0, []),
+    (b"[[[1],[2]],[3]]", 2, ["[[1],[2]]", "[3]"]),
+    (b"[[1e-05],[0.5],[10.00001],[1e+16]]", 4, [None, "[0.5]", None, None]),
+])
+def test_split_rows_cuts_the_rows_and_leaves_out_those_repr_may_spell_otherwise(data, count,
+                                                                                rows):
+    assert speedups.split_rows(data, count) == rows
+
+
+@needs_c
+@pytest.mark.parametrize("data, count", [
+    (b"[[1],[2]]", 3), (b"[[1],[2]]", 1), (b"[[1],[2],]", 2), (b"[[1],null]", 2),
+    (b'[["a"]]', 1), (b"[[1]", 1), (b"[1,2]", 2), (b"[[1]][[2]]", 2), (b"", 0), (b"[[1]x]", 1),
+    (b"[[1],[2]", 2), (b"[{}]", 1),
+])
+def test_split_rows_declines_text_that_is_not_count_arrays_of_numbers(data, count):
+    assert speedups.split_rows(data, count) is None
+
+
+@needs_c
+@pytest.mark.parametrize("data, lengths, rows", [
+    (b"[1.0,2,3]", [2, 0, 1], ["[1.0,2]", "[]", "[3]"]),
+    (b"[]", [0, 0], ["[]", "[]"]),
+    (b"[1,2]", [0, 2], ["[]", "[1,2]"]),
+    (b"[0.00001,5,1e16]", [1, 1, 1], [None, "[5]", None]),
+])
+def test_split_flat_cuts_the_numbers_into_rows(data, lengths, rows):
+    assert speedups.split_flat(data, lengths) == rows
+
+
+@needs_c
+@pytest.mark.parametrize("data, lengths", [
+    (b"[1,2,3]", [2]), (b"[1,2]", [3]), (b"[1,,2]", [3]), (b"[1,2,]", [3]),
+    (b"[1,null]", [2]), (b"[[1]]", [1]), (b"[1", [1]), (b"", []), (b"[1,2]", [1, -1]),
+])
+def test_split_flat_declines_lengths_that_do_not_fit_the_text(data, lengths):
+    assert speedups.split_flat(data, lengths) is None
+
+
+@needs_c
+@pytest.mark.parametrize("call", [
+    lambda: speedups.split_rows("[[1]]", 1),
+    lambda: speedups.split_rows(b"[[1]]"),
+    lambda: speedups.split_flat(b"[1]", (1,)),
+    lambda: speedups.split_flat(b"[1]", ["1"]),
+    lambda: speedups.cons_numbers((), Struct, Atom, CONS, NIL),
+    lambda: speedups.cons_numbers([], Atom, Atom, CONS, NIL),  # Atom has no slots
+])
+def test_misuse_is_a_python_error_not_a_crash(call):
+    with pytest.raises((TypeError, ValueError, AttributeError)):
+        call()
