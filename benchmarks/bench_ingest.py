@@ -13,6 +13,7 @@ Run by hand::
     python benchmarks/bench_ingest.py                       # 1,000,000 events through kb.add_many
     python benchmarks/bench_ingest.py --n 10000 100000 --repeat 5
     python benchmarks/bench_ingest.py --api store --n 100000
+    SLR_SQL_NO_SPEEDUPS=1 python benchmarks/bench_ingest.py ...   # without the C loops
 """
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import slr_sql  # noqa: E402
+from slr_sql import encoding  # noqa: E402
 from slr_sql.encoding import encode  # noqa: E402
 from slr_sql.store import CACHE_SIZE_KIB, EventStore  # noqa: E402
 from slr_sql.terms import Atom, make_list  # noqa: E402
@@ -133,9 +135,10 @@ def measure(n: int, repeat: int, synchronous: str, api: str,
             raw_path.unlink()
             api_path.unlink()
     digits = "random floats" if decimals is None else f"floats rounded to {decimals} decimals"
+    loops = "C loops" if encoding._speedups is not None else "Python only"
     print(f"ingest of {n:,} events seg(oN, [x,y,z])^t ({digits}, {vectors} lists), "
           f"synchronous={synchronous}, "
-          f"SQLite {sqlite3.sqlite_version}, best of {repeat}")
+          f"SQLite {sqlite3.sqlite_version}, column encoder: {loops}, best of {repeat}")
     print(f"{'method':<34}{'wall s':>9}{'events/s':>12}{'cpu s':>9}{'events/cpu-s':>14}")
     for name, runs in (("raw sqlite3.executemany (encoded)", raw_runs), (label, api_runs)):
         wall = min(r[0] for r in runs)

@@ -25,7 +25,7 @@ from .engine import Engine, Machine
 from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
-from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventStore
+from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore
 from .store.checks import event_arguments, shorten
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
@@ -687,7 +687,9 @@ class KnowledgeBase:
         events = events if type(events) is list else list(events)
         errors: list[EventRejected] = []
         if _all_event_tuples(events):  # the common bulk case: handed to the store as they are
-            prepared, positions = list(events), None  # (listeners must not see the caller's list)
+            # (a copy: listeners must not see the caller's list; the store notes each type's
+            # end times in it as it inserts, for the learned delays)
+            prepared, positions = EventBatch(events), None
         else:
             prepared, positions = self._prepare_events(events, atomic, errors)
         stored_errors = self._add(prepared, atomic=atomic)

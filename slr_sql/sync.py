@@ -52,6 +52,33 @@ MARK_NAME = "fullyUpdated"
 _first_item = itemgetter(0)
 
 
+def _end_spans(events: list) -> dict:
+    """``{(name, arity): (earliest end, latest end)}`` of ``(name, args, start, end)`` events;
+    a batch of one type (a recording) column-wise, with no loop in Python.
+
+    >>> _end_spans([("p", (1,), 1.0, 2.0), ("q", (), 0.0, 0.5), ("p", (2,), 3.0, 3.0)])
+    {('p', 1): (2.0, 3.0), ('q', 0): (0.5, 0.5)}
+    """
+    names = set(map(_first, events))
+    if len(names) == 1:
+        arities = set(map(len, map(_second, events)))
+        if len(arities) == 1:
+            ends = list(map(_fourth, events))
+            return {(names.pop(), arities.pop()): (min(ends), max(ends))}
+    spans: dict = {}
+    for ev in events:
+        key = (ev[0], len(ev[1]))
+        end = ev[3]
+        span = spans.get(key)
+        if span is None:
+            spans[key] = (end, end)
+        elif end < span[0]:
+            spans[key] = (end, span[1])
+        elif end > span[1]:
+            spans[key] = (span[0], end)
+    return spans
+
+
 def _fmt(t: float, decimals: int = 6) -> str:
     """A time for messages: ``14``, ``10.55``, ``1795281441.94`` (no exponent, no noise)."""
     if t == _INF:
@@ -425,46 +452,24 @@ class Completeness:
 
     def observe(self, events: list, arrival: float) -> set:
         """Learn delays from stored ``(name, args, start, end)`` events; returns the in_order
-        types that received events (their latest end / arrival counter moved)."""
+        types that received events (their latest end / arrival counter moved). A batch the
+        store filled with its types' end times (``events.ends``, an
+        :class:`slr_sql.store.EventBatch`) is not walked again."""
+        spans = getattr(events, "ends", None)
+        if spans is None:
+            spans = _end_spans(events)
         learned = self.learned
         in_order = self._decls().in_order
         grew: dict[tuple[str, int], float] = {}
         moved: set = set()
-        last_key = None
-        best = -_INF
-        names = set(map(_first, events))
-        if len(names) == 1:  # a batch of one type (a recording): column-wise, no loop
-            arities = set(map(len, map(_second, events)))
-            if len(arities) == 1:
-                key = (names.pop(), arities.pop())
-                ends = list(map(_fourth, events))
-                best = arrival - min(ends)
-                events = ()  # the loop below has nothing left to do
-                last_key = key
-                if in_order and key in in_order:
-                    end = max(ends)
-                    if end > self.latest_end(key):
-                        self.max_end[key] = end
-                    moved.add(key)
-        for ev in events:
-            key = (ev[0], len(ev[1]))
-            end = ev[3]
-            if key != last_key:
-                if last_key is not None and best > learned.get(last_key, 0.0):
-                    if best > grew.get(last_key, 0.0):
-                        grew[last_key] = best
-                last_key = key
-                best = -_INF
-            d = arrival - end
-            if d > best:
-                best = d
+        for key, (earliest, latest) in spans.items():
+            best = arrival - earliest
+            if best > learned.get(key, 0.0):
+                grew[key] = best
             if in_order and key in in_order:
-                if end > self.latest_end(key):
-                    self.max_end[key] = end
+                if latest > self.latest_end(key):
+                    self.max_end[key] = latest
                 moved.add(key)
-        if last_key is not None and best > learned.get(last_key, 0.0) \
-                and best > grew.get(last_key, 0.0):
-            grew[last_key] = best
         if grew:
             learned.update(grew)
             # persist when it grew by more than 1 ms (or 1 %): a stream whose delay creeps up
@@ -719,7 +724,9 @@ class Synchronizer:
             return
         clock = self.clock
         if isinstance(clock, StreamClock):
-            clock.observe_event(max(ev[3] for ev in stored))
+            spans = getattr(stored, "ends", None)
+            clock.observe_event(max(span[1] for span in spans.values()) if spans
+                                else max(map(_fourth, stored)))
         arrival = float(clock.now())
         released: list = []
         with self.lock:

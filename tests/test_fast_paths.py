@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 
+import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
@@ -90,6 +91,56 @@ def test_a_batch_bigger_than_a_chunk_keeps_its_order_and_its_rejections():
     assert [e.index for e in errors] == [30_000]
     values = [args[0] for args, *_ in store.scan("p", 1)]
     assert values == [i for i in range(45_000) if i != 30_000]
+
+
+BATCH_EVENTS = st.lists(st.tuples(st.sampled_from(["p", "q"]), st.sampled_from([(1,), (1, 2), (math.nan,)]),
+                                   TIMES, TIMES), max_size=12)
+
+
+@given(BATCH_EVENTS, st.booleans())
+def test_an_event_batch_gets_the_end_times_of_what_was_stored(specs, one_type):
+    from slr_sql.store import EventBatch
+    from slr_sql.sync import _end_spans
+
+    events = [("p" if one_type else name, args, start, end) for name, args, start, end in specs]
+    store = EventStore(None)
+    batch = EventBatch(events)
+    errors = store.add_events(batch)
+    rejected = {e.index for e in errors}
+    stored = [ev for k, ev in enumerate(events) if k not in rejected]
+    # the store's spans are those of the stored events (floats: the store's times)
+    expected = {key: (float(a), float(b)) for key, (a, b) in _end_spans(stored).items()} \
+        if stored else {}
+    assert batch.ends == expected
+
+
+def test_an_event_batch_over_several_chunks_and_a_failed_atomic_add():
+    from slr_sql.store import EventBatch
+
+    store = EventStore(None)
+    batch = EventBatch(("p", (i,), float(i), float(i) + 0.5) for i in range(45_000))
+    assert store.add_events(batch) == [] and batch.ends == {("p", 1): (0.5, 44_999.5)}
+    bad = EventBatch([("p", (1,), 1.0, 1.0), ("p", (math.nan,), 2.0, 2.0)])
+    with pytest.raises(slr_sql.EventRejected):
+        store.add_events(bad, atomic=True)
+    assert bad.ends is None  # nothing stored, nothing described
+
+
+@pytest.mark.parametrize("form", ["tuples", "text"])
+def test_add_many_learns_the_same_delays_and_horizons_from_tuples_and_text(form):
+    # tuples take the pass-through (the store describes the batch), text the preparing loop
+    # (the synchronizer walks the stored events): the same learned delay and in-order horizon
+    with slr_sql.open(clock=slr_sql.ManualClock(100.0)) as kb:
+        kb.load(":- in_order(r/1).")
+        spec = [("r", 1, 40.0), ("r", 2, 90.5), ("s", 3, 12.0), ("r", 3, 55.0), ("s", 4, 97.0)]
+        if form == "tuples":
+            kb.add_many([(name, (x,), t, t) for name, x, t in spec])
+        else:
+            kb.add_many([f"{name}({x})^{t}" for name, x, t in spec])
+        tracker = kb._sync.tracker
+        assert tracker.learned[("r", 1)] == 60.0 and tracker.learned[("s", 1)] == 88.0
+        assert tracker.latest_end(("r", 1)) == 90.5
+        assert kb.complete_until("r/1") >= 90.5
 
 
 def test_add_many_passes_tuples_through_and_maps_rejections_back():

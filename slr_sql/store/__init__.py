@@ -52,14 +52,14 @@ from .catalog import BufferTables, Catalog, ProgramText
 from .checks import format_event
 from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, DatabaseError, \
     run_sql_file
-from .events import Event, EventWriter
+from .events import Event, EventBatch, EventWriter
 from .lookups import EventReader, Row
 from .schema import migration_scripts
 from .space import Space
 from .sqltext import quote_identifier, split_sql_script, sql_literal
 from .tables import EventTables
 
-__all__ = ["EventStore", "Event", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
+__all__ = ["EventStore", "Event", "EventBatch", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "DatabaseError", "quote_identifier", "sql_literal", "format_event",
            "migration_scripts", "split_sql_script", "run_sql_file"]
 

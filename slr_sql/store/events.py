@@ -20,9 +20,31 @@ from .checks import BadEvent, arguments_problem, check_times, format_event, \
 from .connection import Database
 from .tables import EventTables, EventType
 
-__all__ = ["Event", "EventWriter"]
+__all__ = ["Event", "EventBatch", "EventWriter"]
 
 Event = tuple  # (name: str, args: tuple[term, ...], start: float, end: float)
+
+
+class EventBatch(list):
+    """A list of events that :meth:`EventWriter.add_events` also describes while it stores
+    them: ``ends`` becomes ``{(name, arity): (earliest end, latest end)}`` of the events it
+    stored, so that what follows an add (learned delays, in-order horizons) need not walk a
+    big batch again. ``ends`` stays None until an add of the batch completes.
+
+    >>> from slr_sql.store import EventStore
+    >>> batch = EventBatch([("p", (1,), 1.0, 2.0), ("p", (2,), 0.5, 0.5), ("q", (), 1.0, 1.0)])
+    >>> EventStore(None).add_events(batch), batch.ends
+    ([], {('p', 1): (0.5, 2.0), ('q', 0): (1.0, 1.0)})
+    """
+
+    ends: dict | None = None
+
+
+def _widen(ends: dict, key: tuple, earliest: float, latest: float) -> None:
+    known = ends.get(key)
+    if known is not None:
+        earliest, latest = min(known[0], earliest), max(known[1], latest)
+    ends[key] = (earliest, latest)
 
 _INF = math.inf
 _NEG_INF = -math.inf
@@ -35,7 +57,7 @@ _first, _second, _third, _fourth = (itemgetter(i) for i in range(4))
 
 def _chunks(events: Iterable[Event]) -> Iterator[tuple[int, list]]:
     """``(index of the first event, list of events)`` for slices of ``events``."""
-    if type(events) is list or type(events) is tuple:
+    if type(events) is list or type(events) is tuple or type(events) is EventBatch:
         for base in range(0, len(events), _INSERT_CHUNK):
             yield base, events[base:base + _INSERT_CHUNK]
         return
@@ -47,6 +69,14 @@ def _chunks(events: Iterable[Event]) -> Iterator[tuple[int, list]]:
             return
         yield base, chunk
         base += len(chunk)
+
+
+_end_of_row = itemgetter(-2)  # a row is (*arguments, start, end, arrival)
+
+
+def _widen_by_rows(ends: dict, event_type: EventType, rows: list) -> None:
+    row_ends = list(map(_end_of_row, rows))
+    _widen(ends, (event_type.name, event_type.arity), min(row_ends), max(row_ends))
 
 
 class EventWriter:
@@ -78,21 +108,27 @@ class EventWriter:
         ['p(2)^[3.0,2.0]: start time 3.0 is after end time 2.0']
         """
         errors: list[EventRejected] = []
-        if type(events) in (list, tuple) and not events:
+        ends = {} if type(events) is EventBatch else None
+        if type(events) in (list, tuple, EventBatch) and not events:
+            if ends is not None:
+                events.ends = ends
             return errors
         with self.db.transaction():
             arrival = float(self.db.clock.now())
             self.record_now(arrival)  # buffers (issue 4): "now" for the buffer triggers
             for base, chunk in _chunks(events):
-                if not self._insert_uniform(chunk, arrival):
-                    self._insert_each(chunk, base, arrival, atomic, errors)
+                if not self._insert_uniform(chunk, arrival, ends):
+                    self._insert_each(chunk, base, arrival, atomic, errors, ends)
+        if ends is not None:
+            events.ends = ends
         return errors
 
-    def _insert_uniform(self, chunk: list, arrival: float) -> bool:
+    def _insert_uniform(self, chunk: list, arrival: float, ends: dict | None) -> bool:
         """The fast path: insert ``chunk`` if it is uniform -- every event a 4-tuple of one
         type whose arguments are a tuple or list, with float times, finite, start <= end --
         and every argument encodes; return False (having stored nothing) otherwise, for
-        :meth:`_insert_each` to check event by event and say what is wrong.
+        :meth:`_insert_each` to check event by event and say what is wrong. The end times
+        of what it stored widen ``ends`` (when not None).
 
         The checks run over whole columns (``set(map(type, ...))``, ``min``/``max``), so
         the only Python work per event is encoding its arguments: a recording of one event
@@ -115,10 +151,12 @@ class EventWriter:
             return False
         (arity,) = arities
         starts = list(map(_third, chunk))
-        ends = list(map(_fourth, chunk))
-        if not (_FLOAT.issuperset(map(type, starts)) and _FLOAT.issuperset(map(type, ends))
-                and all(map(_le, starts, ends))  # False at a NaN, too
-                and _NEG_INF < min(starts) and max(ends) < _INF):
+        ends_column = list(map(_fourth, chunk))
+        if not (_FLOAT.issuperset(map(type, starts)) and _FLOAT.issuperset(map(type, ends_column))
+                and all(map(_le, starts, ends_column))):  # False at a NaN, too
+            return False
+        latest = max(ends_column)
+        if not (_NEG_INF < min(starts) and latest < _INF):
             return False
         try:
             columns = [encode_column(list(map(itemgetter(i), argss))) for i in range(arity)]
@@ -131,14 +169,17 @@ class EventWriter:
             except BadEvent:
                 return False
         self.db.conn.executemany(event_type.insert_sql,
-                                 zip(*columns, starts, ends, repeat(arrival)))
+                                 zip(*columns, starts, ends_column, repeat(arrival)))
+        if ends is not None:
+            _widen(ends, (name, arity), min(ends_column), latest)
         return True
 
     def _insert_each(self, chunk: list, base: int, arrival: float, atomic: bool,
-                     errors: list[EventRejected]) -> None:
+                     errors: list[EventRejected], ends: dict | None) -> None:
         """Check, encode and insert the events of ``chunk`` one by one (runs of one type
         go in with one ``executemany``); a bad event is rejected with its reason and index
-        (``base`` + its place in the chunk), or raised when ``atomic``."""
+        (``base`` + its place in the chunk), or raised when ``atomic``. The end times of
+        what it stored widen ``ends`` (when not None)."""
         enc = encode
         executemany = self.db.conn.executemany
         types = self.tables.types
@@ -169,6 +210,8 @@ class EventWriter:
                 if arity != current_arity or name != current_name:
                     if rows:
                         executemany(current_type.insert_sql, rows)
+                        if ends is not None:
+                            _widen_by_rows(ends, current_type, rows)
                         rows = []
                         append = rows.append
                     current_type = (isinstance(name, str) and types.get((name, arity))
@@ -183,6 +226,8 @@ class EventWriter:
                 errors.append(error)
         if rows:
             executemany(current_type.insert_sql, rows)
+            if ends is not None:
+                _widen_by_rows(ends, current_type, rows)
 
     def _type_for_new_event(self, name: Any, arity: int) -> EventType:
         if not isinstance(name, str):
