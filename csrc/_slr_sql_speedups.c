@@ -2,6 +2,9 @@
  *
  * The loops that cost most of a vector column's encoding in Python, and nothing else:
  *
+ *   number_rows(values)
+ *       whether every value is a list or tuple of floats and ints (exact types: what the
+ *       general encoder writes as numbers), checked before orjson writes the column;
  *   split_rows(data, count)
  *       the JSON texts of the `count` arrays in `data` (orjson's bytes of a list of lists
  *       of numbers), as encoding._numbers_column_json splits them; None for a row whose text
@@ -16,7 +19,7 @@
  *       orjson's bytes of that flat list cut back into one JSON array per value, with the
  *       same None rows and None column as split_rows.
  *
- * `data` is orjson's output: its JSON syntax is trusted, every byte is checked. All three are
+ * `data` is orjson's output: its JSON syntax is trusted, every byte is checked. All are
  * pure functions of their arguments (the byte table is constant). The Python versions stay
  * the reference and the fallback: tests/test_speedups.py compares them on random input.
  * The module is built by setup.py when a C compiler is there (optional=True); without it
@@ -41,7 +44,10 @@ slot_offset(PyTypeObject *type, const char *attribute)
     Py_ssize_t offset = -1;
     if (descr == NULL)
         return -1;
-    if (Py_IS_TYPE(descr, &PyMemberDescr_Type)) {
+    /* (a descriptor of another type, borrowed as a class attribute, would give an offset
+     * outside the instances of this one) */
+    if (Py_IS_TYPE(descr, &PyMemberDescr_Type)
+            && PyType_IsSubtype(type, PyDescr_TYPE(descr))) {
         PyMemberDef *member = ((PyMemberDescrObject *)descr)->d_member;
         if (member->type == Py_T_OBJECT_EX || member->type == T_OBJECT)
             offset = member->offset;
@@ -54,15 +60,13 @@ slot_offset(PyTypeObject *type, const char *attribute)
 
 #define SLOT(object, offset) (*(PyObject **)((char *)(object) + (offset)))
 
-/* 1 if `name` is the atom '.', 0 if not, -1 on error. */
+/* 1 if `name` is the atom '.', 0 if not. */
 static int
 is_cons_name(PyObject *name, PyObject *cons)
 {
     if (name == cons)
         return 1;
-    if (!PyUnicode_Check(name))
-        return 0;
-    return PyUnicode_CompareWithASCIIString(name, ".") == 0;
+    return PyUnicode_Check(name) && PyUnicode_CompareWithASCIIString(name, ".") == 0;
 }
 
 /* What each byte of orjson's text of numbers in arrays is to the splitters. */
@@ -117,7 +121,7 @@ ascii_text(const char *text, Py_ssize_t start, Py_ssize_t end, char open, char c
 }
 
 static PyObject *
-split_rows(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+split_rows(PyObject *Py_UNUSED(module), PyObject *const *args, Py_ssize_t nargs)
 {
     const char *text;
     Py_ssize_t size, count, row = 0, at;
@@ -134,7 +138,7 @@ split_rows(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     }
     text = PyBytes_AS_STRING(args[0]);
     size = PyBytes_GET_SIZE(args[0]);
-    if (size < 2 || text[0] != '[' || text[size - 1] != ']')
+    if (size < 2 || text[0] != '[' || text[size - 1] != ']' || count > size)
         Py_RETURN_NONE;
     rows = PyList_New(count);
     if (rows == NULL)
@@ -195,9 +199,42 @@ decline:
     Py_RETURN_NONE;
 }
 
+/* number_rows(values) -> bool: every value a list or tuple (exactly) whose elements are
+ * each a float or an int (exactly: not bool, not an enum, not another subclass). orjson
+ * writes more than that as numbers (an Enum member as its value, a list subclass as an
+ * array) which the general encoder refuses: a column passes this before orjson sees it. */
+static PyObject *
+number_rows(PyObject *Py_UNUSED(module), PyObject *values)
+{
+    Py_ssize_t count, i, k;
+    if (!PyList_CheckExact(values)) {
+        PyErr_SetString(PyExc_TypeError, "number_rows: a list");
+        return NULL;
+    }
+    count = PyList_GET_SIZE(values);
+    for (i = 0; i < count; i++) {
+        PyObject *row = PyList_GET_ITEM(values, i), **items;
+        Py_ssize_t n;
+        if (PyList_CheckExact(row)) {
+            items = ((PyListObject *)row)->ob_item;
+            n = PyList_GET_SIZE(row);
+        }
+        else if (PyTuple_CheckExact(row)) {
+            items = ((PyTupleObject *)row)->ob_item;
+            n = PyTuple_GET_SIZE(row);
+        }
+        else
+            Py_RETURN_FALSE;
+        for (k = 0; k < n; k++)
+            if (!PyFloat_CheckExact(items[k]) && !PyLong_CheckExact(items[k]))
+                Py_RETURN_FALSE;
+    }
+    Py_RETURN_TRUE;
+}
+
 /* cons_numbers(values, struct_type, atom_type, cons, nil) -> (flat, lengths) | None */
 static PyObject *
-cons_numbers(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+cons_numbers(PyObject *Py_UNUSED(module), PyObject *const *args, Py_ssize_t nargs)
 {
     PyObject *values, *cons, *nil, *flat = NULL, *lengths = NULL;
     PyTypeObject *struct_type, *atom_type;
@@ -233,14 +270,15 @@ cons_numbers(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
             if (name == NULL || cell_args == NULL || !PyTuple_CheckExact(cell_args)
                     || PyTuple_GET_SIZE(cell_args) != 2)
                 goto decline;
-            if ((cons_cell = is_cons_name(name, cons)) < 0)
-                goto error;
+            cons_cell = is_cons_name(name, cons);
             head = PyTuple_GET_ITEM(cell_args, 0);
             if (!cons_cell || !(PyFloat_CheckExact(head) || PyLong_CheckExact(head)))
                 goto decline;
             if (PyList_Append(flat, head) < 0)
                 goto error;
-            n++;
+            /* a term made cyclic by hand never ends: let signals (Ctrl-C) in now and then */
+            if ((++n & 0xFFFF) == 0 && PyErr_CheckSignals() < 0)
+                goto error;
             cell = PyTuple_GET_ITEM(cell_args, 1);
         }
         if (!(cell == nil || (Py_IS_TYPE(cell, atom_type)
@@ -264,7 +302,7 @@ error:
 /* split_flat(data, lengths) -> list | None: orjson's bytes of one flat list of numbers cut
  * into rows of lengths[k] numbers each, every row written as a JSON array. */
 static PyObject *
-split_flat(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+split_flat(PyObject *Py_UNUSED(module), PyObject *const *args, Py_ssize_t nargs)
 {
     const char *text;
     Py_ssize_t size, count, row, at = 1;
@@ -286,11 +324,10 @@ split_flat(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
         int redo = 0;
         PyObject *item;
         if (n < 0) {
-            if (PyErr_Occurred()) {
-                Py_DECREF(rows);
-                return NULL;
-            }
-            goto decline;
+            if (!PyErr_Occurred())
+                PyErr_SetString(PyExc_ValueError, "split_flat: lengths must be >= 0");
+            Py_DECREF(rows);
+            return NULL;
         }
         if (n > 0 && at > 1) {  /* the comma before this row's first number */
             if (text[at] != ',')
@@ -345,6 +382,9 @@ decline:
 }
 
 static PyMethodDef methods[] = {
+    {"number_rows", (PyCFunction)number_rows, METH_O,
+     "number_rows(values) -> bool\n\n"
+     "Every value a list or tuple of floats and ints (exact types)."},
     {"cons_numbers", (PyCFunction)(void (*)(void))cons_numbers, METH_FASTCALL,
      "cons_numbers(values, struct_type, atom_type, cons, nil) -> (flat, lengths) | None\n\n"
      "All elements of the proper '.'/2 lists of numbers in values, and each list's length."},
@@ -363,9 +403,19 @@ static struct PyModuleDef module = {
     NULL, NULL, NULL, NULL,
 };
 
+/* What encoding.py expects (LOOPS_VERSION there): raised with every change of these
+ * functions' contracts, so that a build older than the source is not used. */
+#define LOOPS_VERSION 2
+
 PyMODINIT_FUNC
 PyInit__slr_sql_speedups(void)
 {
+    PyObject *m;
     fill_byte_kinds();
-    return PyModule_Create(&module);
+    m = PyModule_Create(&module);
+    if (m != NULL && PyModule_AddIntConstant(m, "LOOPS_VERSION", LOOPS_VERSION) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
 }

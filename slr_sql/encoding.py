@@ -61,6 +61,7 @@ import math
 import os
 import re
 import sys
+from itertools import chain
 from operator import itemgetter
 from operator import le as _le
 from json.encoder import encode_basestring as _quote  # C-accelerated; keeps non-ASCII
@@ -73,6 +74,7 @@ from .terms import CONS, NIL, Atom, String, Struct, Var, make_list
 # The optional C loops of the column encoder (csrc/, built by setup.py when a compiler is
 # there): the same texts as the Python code below, which stays the reference and the
 # fallback. SLR_SQL_NO_SPEEDUPS=1 turns them off (to measure or test the Python path).
+_LOOPS_VERSION = 2  # the version of csrc/_slr_sql_speedups.c this module is written for
 if os.environ.get("SLR_SQL_NO_SPEEDUPS"):
     _speedups = None
 else:
@@ -80,6 +82,8 @@ else:
         import _slr_sql_speedups as _speedups
     except ImportError:
         _speedups = None
+    if getattr(_speedups, "LOOPS_VERSION", None) != _LOOPS_VERSION:
+        _speedups = None  # a build older (or newer) than this source: not used
 
 __all__ = ["encode", "encode_column", "decode", "encode_json", "Unencodable", "INT64_MIN",
            "INT64_MAX"]
@@ -182,7 +186,8 @@ def encode(term: Any) -> Any:
 # text is used only when it holds nothing but digits, signs, points, commas and brackets,
 # and no "0.0000" (where repr would switch to an exponent); anything else (an atom, a big
 # integer, 1e16, inf, a value orjson refuses) takes the Python path, which gives the stored
-# text by definition.
+# text by definition. Only floats and ints of exactly those types are given to it: orjson
+# also writes an Enum member (as its value) and list subclasses, which encode() refuses.
 _dumps = orjson.dumps
 _STRICT_INTEGER = orjson.OPT_STRICT_INTEGER  # integers beyond 53 bits are refused, not written
 _NUMBER_BYTES = b"0123456789-.,[]"
@@ -198,12 +203,16 @@ def _is_repr_text(data: bytes) -> bool:
 
 def _numbers_json(items: Any) -> str | None:
     """The JSON array of a Python list or tuple holding only finite floats and integers of at
-    most 53 bits (nested lists of them too), written in C; None for anything else, and for
-    values whose text orjson spells differently from Python, so the caller takes its own path.
+    most 53 bits, written in C; None for anything else, and for values whose text orjson
+    spells differently from Python, so the caller takes its own path.
 
     >>> _numbers_json([0.5, 1, -2.25]), _numbers_json([1e16]), _numbers_json([0.5, "a"])
     ('[0.5,1,-2.25]', None, None)
     """
+    # exact types: orjson also writes an Enum member (as its value) and list subclasses,
+    # which the general encoder refuses
+    if not _NUMBER_KINDS.issuperset(map(type, items)):
+        return None
     try:
         data = _dumps(items, option=_STRICT_INTEGER)
     except TypeError:  # orjson.JSONEncodeError: an object it does not know, a big integer
@@ -324,6 +333,12 @@ def _numbers_compound_json(term: Struct) -> str | None:
     args = term.args
     if not args or type(args[0]) not in _LIST_OR_NUMBER:
         return None
+    for arg in args:  # exact types only (see _numbers_json)
+        kind = type(arg)
+        if (kind is list or kind is tuple) and _NUMBER_KINDS.issuperset(map(type, arg)):
+            continue
+        if kind is not float and kind is not int:
+            return None
     key = _compound_key(term.name)
     if key is None:
         return None
@@ -344,7 +359,9 @@ def _struct_json(term: Struct) -> str | None:
     return _numbers_compound_json(term)
 
 
-_COLUMN_BYTES = _NUMBER_BYTES + b"e"  # e: the exponents orjson writes (1e16, 5e-324)
+# e and +: the exponents orjson writes (1e16 before 3.10 or so, 1e+16 after, 5e-324)
+_COLUMN_BYTES = _NUMBER_BYTES + b"e+"
+_SEQUENCE_KINDS = frozenset((list, tuple))
 
 
 def _numbers_column_json(values: list) -> list | None:
@@ -357,6 +374,13 @@ def _numbers_column_json(values: list) -> list | None:
     >>> _numbers_column_json([[0.5, 1], [], [1e-05, 2.0]])
     ['[0.5,1]', '[]', '[1e-05,2.0]']
     """
+    # exact types only (see _numbers_json); the C loop checks a column in ~10 ns a number
+    if _speedups is not None:
+        if not _speedups.number_rows(values):
+            return None
+    elif not (_SEQUENCE_KINDS.issuperset(map(type, values))
+              and _NUMBER_KINDS.issuperset(map(type, chain.from_iterable(values)))):
+        return None
     try:
         data = _dumps(values, option=_STRICT_INTEGER)
     except TypeError:
@@ -439,6 +463,8 @@ def encode_column(values: list) -> list:
     >>> encode_column([Atom("cup1"), Atom("cup2")]), encode_column([1.5, 2.0]), encode_column([Atom("[x")])
     (['cup1', 'cup2'], [1.5, 2.0], ['{"$atom":"[x"}'])
     """
+    if type(values) is not list:
+        values = list(values)
     kinds = set(map(type, values))
     if len(kinds) == 1:
         (kind,) = kinds
