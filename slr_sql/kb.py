@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 from .answers import answer_bindings
-from .clocks import Clock, WallClock, parse_duration
+from .clocks import Clock, StreamClock, WallClock, parse_duration
 from .engine import Engine, Machine
 from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
@@ -753,6 +753,7 @@ class KnowledgeBase:
             mark_errors = []
         # -- end issue 5
         derived: list = []
+        learn = self._learner(events)
         cep = getattr(self, "_cep", None)
         if cep is not None and cep.active and events:
             # issue 11: event rules detect in the transaction that stores the events
@@ -760,8 +761,10 @@ class KnowledgeBase:
                 token = cep.before_add(events)
                 errors = cep.store_events(events, atomic)
                 derived = cep.after_add(token)
+                if learn is not None:
+                    learn(float(self.clock.now()), errors)
         else:
-            errors = self.store.add_events(events, atomic=atomic)
+            errors = self.store.add_events(events, atomic=atomic, before_commit=learn)
         if atomic and errors:
             raise errors[0]
         if self.add_listeners:
@@ -774,6 +777,24 @@ class KnowledgeBase:
         if marks:  # issue 5: after the events of the same batch are stored
             self._sync.apply_marks(marks)
         return mark_errors + errors if mark_errors else errors
+
+    def _learner(self, events: list) -> Callable[[float, list], None] | None:
+        """What raises the learned delays by ``events`` inside the transaction that stores
+        them (one commit for both), given the arrival and the rejections; None without a
+        synchronizer, and with a StreamClock, whose time moves with the events: its
+        synchronizer learns after moving it (``Synchronizer.on_add``)."""
+        sync = getattr(self, "_sync", None)
+        if sync is None or not events or isinstance(self.clock, StreamClock):
+            return None
+        tracker = sync.tracker
+
+        def learn(arrival: float, rejected: list) -> None:
+            stored = events
+            if rejected:
+                ids = {id(e.event) for e in rejected if hasattr(e, "event")}
+                stored = [ev for ev in events if id(ev) not in ids]
+            tracker.learn(stored, arrival)
+        return learn
 
     # -- queries ------------------------------------------------------------------------
     def _plan(self, goal: str, arg_names: tuple) -> _Plan:

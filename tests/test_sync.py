@@ -5,9 +5,9 @@ or running, so that ``p.done()`` says exactly whether the condition released the
 """
 from __future__ import annotations
 
-import collections
-
 import asyncio
+import collections
+import math
 
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
@@ -265,6 +265,48 @@ def test_learned_delay_is_the_largest_seen_and_persists(tmp_path):
         assert kb.complete_until("q/2") == 7.0        # the persisted mark
         assert kb.complete_until("r/1") == 8.0        # fullyUpdated(r)^8, every arity
         assert kb.sql("SELECT value FROM slr_meta WHERE key = 'sync/learned/p/1'")[1] == [("1.0",)]
+
+
+def commits_during(kb, action):
+    """The COMMITs the store's own connection runs while ``action`` runs."""
+    statements: list = []
+    conn = kb.store._db.conn
+    conn.set_trace_callback(statements.append)
+    try:
+        action()
+    finally:
+        conn.set_trace_callback(None)
+    return sum(1 for sql in statements if sql.strip().upper() == "COMMIT")
+
+
+@pytest.mark.parametrize("rule", [False, True])
+@pytest.mark.parametrize("form", ["text", "tuples"])
+def test_a_learned_delay_commits_with_the_events_that_taught_it(tmp_path, rule, form):
+    # one durable commit per add, not a second one for the delay (and no file where the
+    # events are stored but the delay they taught is not); also with event rules loaded
+    clock = ManualClock(100.0)
+    with slr_sql.open(str(tmp_path / "d.db"), clock=clock) as kb:
+        if rule:
+            kb.load("ab <- a seq b.")
+        events = ["p(1)^40", "p(2)^90.5", "q(1)^97"] if form == "text" else \
+            [("p", (1,), 40.0, 40.0), ("p", (2,), 90.5, 90.5), ("q", (1,), 97.0, 97.0)]
+        assert commits_during(kb, lambda: kb.add_many(events)) == 1
+        stored = dict(kb.sql("SELECT key, value FROM slr_meta WHERE key LIKE 'sync/learned/%'")[1])
+        assert stored == {"sync/learned/p/1": "60.0", "sync/learned/q/1": "3.0"}
+        assert kb.complete_until("p/1") == 40.0
+
+
+def test_rejected_events_teach_no_delay_and_a_failed_atomic_add_teaches_nothing(tmp_path):
+    clock = ManualClock(100.0)
+    with slr_sql.open(str(tmp_path / "d.db"), clock=clock) as kb:
+        errors = kb.add_many([("p", (1,), 90.0, 90.0), ("p", (math.nan,), 10.0, 10.0)])
+        assert [e.index for e in errors] == [1]
+        assert kb.complete_until("p/1") == 90.0             # learned 10, not 90
+        with pytest.raises(slr_sql.EventRejected):
+            kb.add_many([("p", (1,), 5.0, 5.0), ("p", (math.nan,), 5.0, 5.0)], atomic=True)
+        assert kb.complete_until("p/1") == 90.0
+        assert kb.sql("SELECT value FROM slr_meta WHERE key = 'sync/learned/p/1'")[1] == \
+            [("10.0",)]
 
 
 def test_declared_delay_overrides_learned(kb, clock):

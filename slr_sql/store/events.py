@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from itertools import islice, repeat
 from operator import itemgetter, le as _le
-from typing import Any, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator
 
 from ..encoding import Unencodable, encode, encode_column
 from ..errors import EventRejected
@@ -91,7 +91,9 @@ class EventWriter:
         self.db = db
         self.tables = tables
 
-    def add_events(self, events: Iterable[Event], atomic: bool = False) -> list[EventRejected]:
+    def add_events(self, events: Iterable[Event], atomic: bool = False,
+                   before_commit: Callable[[float, list], None] | None = None
+                   ) -> list[EventRejected]:
         """Store events ``(name, args, start, end)`` in one transaction.
 
         Invalid events (arguments not a list or tuple, non-ground or NaN arguments, arguments
@@ -101,6 +103,8 @@ class EventWriter:
         errors (with ``.index`` and ``.event``); the others are stored. With ``atomic=True`` the first
         invalid event is raised and nothing is stored. All events of one call share one
         arrival time, taken from the clock; their order is their arrival order.
+        ``before_commit(arrival, rejections)``, when given, runs inside the transaction after
+        the inserts: what it writes commits with the events (or not at all).
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None)
@@ -119,8 +123,10 @@ class EventWriter:
             for base, chunk in _chunks(events):
                 if not self._insert_uniform(chunk, arrival, ends):
                     self._insert_each(chunk, base, arrival, atomic, errors, ends)
-        if ends is not None:
-            events.ends = ends
+            if ends is not None:
+                events.ends = ends
+            if before_commit is not None:
+                before_commit(arrival, errors)
         return errors
 
     def _insert_uniform(self, chunk: list, arrival: float, ends: dict | None) -> bool:
