@@ -753,6 +753,8 @@ class KnowledgeBase:
             mark_errors = []
         # -- end issue 5
         derived: list = []
+        if type(events) is not EventBatch:  # (the store notes each type's end times in it)
+            events = EventBatch(events)
         learn = self._learner(events)
         cep = getattr(self, "_cep", None)
         if cep is not None and cep.active and events:
@@ -778,7 +780,7 @@ class KnowledgeBase:
             self._sync.apply_marks(marks)
         return mark_errors + errors if mark_errors else errors
 
-    def _learner(self, events: list) -> Callable[[float, list], None] | None:
+    def _learner(self, events: EventBatch) -> Callable[[float, list], None] | None:
         """What raises the learned delays by ``events`` inside the transaction that stores
         them (one commit for both), given the arrival and the rejections; None without a
         synchronizer, and with a StreamClock, whose time moves with the events: its
@@ -789,11 +791,12 @@ class KnowledgeBase:
         tracker = sync.tracker
 
         def learn(arrival: float, rejected: list) -> None:
-            stored = events
             if rejected:
                 ids = {id(e.event) for e in rejected if hasattr(e, "event")}
-                stored = [ev for ev in events if id(ev) not in ids]
-            tracker.learn(stored, arrival)
+                tracker.learn([ev for ev in events if id(ev) not in ids], arrival)
+            else:
+                tracker.learn(events, arrival)
+                events.learned = True  # (the synchronizer's add listener need not again)
         return learn
 
     # -- queries ------------------------------------------------------------------------

@@ -492,8 +492,11 @@ class Completeness:
         """Learn delays from stored ``(name, args, start, end)`` events; returns the in_order
         types that received events (their latest end / arrival counter moved). A batch the
         store filled with its types' end times (``events.ends``, an
-        :class:`slr_sql.store.EventBatch`) is not walked again."""
-        spans = self.learn(events, arrival)
+        :class:`slr_sql.store.EventBatch`) is not walked again, and one whose delays were
+        learned in its own transaction (``events.learned``) is not learned from again."""
+        spans = getattr(events, "ends", None)
+        if spans is None or not getattr(events, "learned", False):
+            spans = self.learn(events, arrival)
         in_order = self._decls().in_order
         moved: set = set()
         if in_order:

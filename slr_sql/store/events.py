@@ -29,7 +29,8 @@ class EventBatch(list):
     """A list of events that :meth:`EventWriter.add_events` also describes while it stores
     them: ``ends`` becomes ``{(name, arity): (earliest end, latest end)}`` of the events it
     stored, so that what follows an add (learned delays, in-order horizons) need not walk a
-    big batch again. ``ends`` stays None until an add of the batch completes.
+    big batch again. ``ends`` stays None until an add of the batch completes. ``learned``
+    is for the caller: the knowledge base sets it once its learned delays took the batch in.
 
     >>> from slr_sql.store import EventStore
     >>> batch = EventBatch([("p", (1,), 1.0, 2.0), ("p", (2,), 0.5, 0.5), ("q", (), 1.0, 1.0)])
@@ -38,6 +39,7 @@ class EventBatch(list):
     """
 
     ends: dict | None = None
+    learned: bool = False
 
 
 def _widen(ends: dict, key: tuple, earliest: float, latest: float) -> None:
