@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 from .answers import answer_bindings
-from .clocks import Clock, StreamClock, WallClock, parse_duration
+from .clocks import Clock, WallClock, parse_duration
 from .engine import Engine, Machine
 from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
@@ -755,7 +755,6 @@ class KnowledgeBase:
         derived: list = []
         if type(events) is not EventBatch:  # (the store notes each type's end times in it)
             events = EventBatch(events)
-        learn = self._learner(events)
         cep = getattr(self, "_cep", None)
         if cep is not None and cep.active and events:
             # issue 11: event rules detect in the transaction that stores the events
@@ -763,10 +762,8 @@ class KnowledgeBase:
                 token = cep.before_add(events)
                 errors = cep.store_events(events, atomic)
                 derived = cep.after_add(token)
-                if learn is not None:
-                    learn(float(self.clock.now()), errors)
         else:
-            errors = self.store.add_events(events, atomic=atomic, before_commit=learn)
+            errors = self.store.add_events(events, atomic=atomic)
         if atomic and errors:
             raise errors[0]
         if self.add_listeners:
@@ -779,25 +776,6 @@ class KnowledgeBase:
         if marks:  # issue 5: after the events of the same batch are stored
             self._sync.apply_marks(marks)
         return mark_errors + errors if mark_errors else errors
-
-    def _learner(self, events: EventBatch) -> Callable[[float, list], None] | None:
-        """What raises the learned delays by ``events`` inside the transaction that stores
-        them (one commit for both), given the arrival and the rejections; None without a
-        synchronizer, and with a StreamClock, whose time moves with the events: its
-        synchronizer learns after moving it (``Synchronizer.on_add``)."""
-        sync = getattr(self, "_sync", None)
-        if sync is None or not events or isinstance(self.clock, StreamClock):
-            return None
-        tracker = sync.tracker
-
-        def learn(arrival: float, rejected: list) -> None:
-            if rejected:
-                ids = {id(e.event) for e in rejected if hasattr(e, "event")}
-                tracker.learn([ev for ev in events if id(ev) not in ids], arrival)
-            else:
-                tracker.learn(events, arrival)
-                events.learned = True  # (the synchronizer's add listener need not again)
-        return learn
 
     # -- queries ------------------------------------------------------------------------
     def _plan(self, goal: str, arg_names: tuple) -> _Plan:

@@ -285,10 +285,6 @@ class Completeness:
         self.max_end: dict[tuple[str, int], float] = {}
         self.arrivals: dict[tuple[str, int], int] = {}
         self._persisted: dict[tuple[str, int], float] = {}   # learned delays as stored
-        # guards ``learned`` and ``_persisted`` (raised only): taken last and never held
-        # while the store is used, because learning also runs inside an add's transaction
-        # (KnowledgeBase._add), where the synchronizer's lock must not be taken
-        self._learn_lock = threading.Lock()
         # event rules (slr_sql.cep): the completeness of complex event types, which follows
         # from the types their rules read; an object with ``types``, ``complete``,
         # ``horizon``, ``deadline``, ``why`` and ``describe`` (None: no event rules)
@@ -300,28 +296,20 @@ class Completeness:
         store keeps the larger of its value and ours (another process may have learned a
         larger one meanwhile): we take the stored value back."""
         if learned is None:
-            with self._learn_lock:
-                learned = {k: d for k, d in self.learned.items()
-                           if d > self._persisted.get(k, 0.0)}
+            learned = {k: d for k, d in self.learned.items() if d > self._persisted.get(k, 0.0)}
         if not learned:
             return
         stored = {}
         with self.store.transaction():
             for key, d in learned.items():
                 stored[key] = self.store.meta_raise(f"sync/learned/{key[0]}/{key[1]}", d)
-        with self._learn_lock:
-            for key, d in stored.items():
-                self._persisted[key] = max(self._persisted.get(key, 0.0), d)
-                self.learned[key] = max(self.learned.get(key, 0.0), d)
+        for key, d in stored.items():
+            self._persisted[key] = max(self._persisted.get(key, 0.0), d)
+            self.learned[key] = max(self.learned.get(key, 0.0), d)
 
     def load(self) -> None:
         """(Re)read learned delays and marks from the store."""
-        items = self.store.meta_items("sync/")
-        with self._learn_lock:  # (nothing in the loop uses the store)
-            self._load(items)
-
-    def _load(self, items: dict) -> None:
-        for k, v in items.items():
+        for k, v in self.store.meta_items("sync/").items():
             parts = k.split("/")
             try:
                 if parts[1] == "learned" and len(parts) >= 4:
@@ -462,49 +450,35 @@ class Completeness:
         self.mark_src[key] = source
         return True
 
-    def learn(self, events: list, arrival: float) -> dict:
-        """Raise the learned delays by stored ``(name, args, start, end)`` events that arrived
-        at ``arrival``, persisting those that grew by more than 1 ms (or 1 %); returns the
-        batch's ``{(name, arity): (earliest end, latest end)}``. Run inside an add's
-        transaction (KnowledgeBase._add), the write commits with the events: one commit, and
-        no file where the events are stored but the delay they taught is not."""
-        spans = getattr(events, "ends", None)
-        if spans is None:
-            spans = _end_spans(events)
-        with self._learn_lock:
-            learned = self.learned
-            persisted = self._persisted
-            due: dict[tuple[str, int], float] = {}
-            for key, (earliest, _latest) in spans.items():
-                best = arrival - earliest
-                if best > learned.get(key, 0.0):
-                    learned[key] = best
-                    # a stream whose delay creeps up by float noise must not cost a durable
-                    # write per event; close() writes the rest
-                    known = persisted.get(key, 0.0)
-                    if best > known + max(1e-3, 0.01 * known):
-                        due[key] = best
-        if due:
-            self.flush(due)
-        return spans
-
     def observe(self, events: list, arrival: float) -> set:
         """Learn delays from stored ``(name, args, start, end)`` events; returns the in_order
         types that received events (their latest end / arrival counter moved). A batch the
         store filled with its types' end times (``events.ends``, an
-        :class:`slr_sql.store.EventBatch`) is not walked again, and one whose delays were
-        learned in its own transaction (``events.learned``) is not learned from again."""
+        :class:`slr_sql.store.EventBatch`) is not walked again."""
         spans = getattr(events, "ends", None)
-        if spans is None or not getattr(events, "learned", False):
-            spans = self.learn(events, arrival)
+        if spans is None:
+            spans = _end_spans(events)
+        learned = self.learned
         in_order = self._decls().in_order
+        grew: dict[tuple[str, int], float] = {}
         moved: set = set()
-        if in_order:
-            for key, (_earliest, latest) in spans.items():
-                if key in in_order:
-                    if latest > self.latest_end(key):
-                        self.max_end[key] = latest
-                    moved.add(key)
+        for key, (earliest, latest) in spans.items():
+            best = arrival - earliest
+            if best > learned.get(key, 0.0):
+                grew[key] = best
+            if in_order and key in in_order:
+                if latest > self.latest_end(key):
+                    self.max_end[key] = latest
+                moved.add(key)
+        if grew:
+            learned.update(grew)
+            # persist when it grew by more than 1 ms (or 1 %): a stream whose delay creeps up
+            # by float noise must not cost a durable write per event; close() writes the rest
+            persisted = self._persisted
+            due = {k: d for k, d in grew.items()
+                   if d > persisted.get(k, 0.0) + max(1e-3, 0.01 * persisted.get(k, 0.0))}
+            if due:
+                self.flush(due)
         for key in moved:
             self.arrivals[key] = self.arrivals.get(key, 0) + 1
         return moved

@@ -124,6 +124,10 @@ def test_an_event_batch_over_several_chunks_and_a_failed_atomic_add():
     with pytest.raises(slr_sql.EventRejected):
         store.add_events(bad, atomic=True)
     assert bad.ends is None  # nothing stored, nothing described
+    batch[:] = [("p", (1,), 2.0, 2.0), ("p", (math.nan,), 3.0, 3.0)]  # given again: fails
+    with pytest.raises(slr_sql.EventRejected):
+        store.add_events(batch, atomic=True)
+    assert batch.ends is None  # not the first add's description
 
 
 @pytest.mark.parametrize("form", ["tuples", "text"])

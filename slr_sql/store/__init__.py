@@ -210,10 +210,8 @@ class EventStore:
     # ------------------------------------------------------------------ adding events
 
     @_doc(EventWriter.add_events)
-    def add_events(self, events: Iterable[Event], atomic: bool = False,
-                   before_commit: Callable[[float, list], None] | None = None
-                   ) -> list[EventRejected]:
-        return self._writer.add_events(events, atomic, before_commit)
+    def add_events(self, events: Iterable[Event], atomic: bool = False) -> list[EventRejected]:
+        return self._writer.add_events(events, atomic)
 
     @_doc(EventWriter.add_event)
     def add_event(self, name: str, args: Iterable[Any], start: float, end: float) -> None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from itertools import islice, repeat
 from operator import itemgetter, le as _le
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any, Iterable, Iterator
 
 from ..encoding import Unencodable, encode, encode_column
 from ..errors import EventRejected
@@ -29,8 +29,8 @@ class EventBatch(list):
     """A list of events that :meth:`EventWriter.add_events` also describes while it stores
     them: ``ends`` becomes ``{(name, arity): (earliest end, latest end)}`` of the events it
     stored, so that what follows an add (learned delays, in-order horizons) need not walk a
-    big batch again. ``ends`` stays None until an add of the batch completes. ``learned``
-    is for the caller: the knowledge base sets it once its learned delays took the batch in.
+    big batch again. ``ends`` is None until an add of the batch completes (and again while
+    another add of it runs, or after one failed).
 
     >>> from slr_sql.store import EventStore
     >>> batch = EventBatch([("p", (1,), 1.0, 2.0), ("p", (2,), 0.5, 0.5), ("q", (), 1.0, 1.0)])
@@ -39,7 +39,6 @@ class EventBatch(list):
     """
 
     ends: dict | None = None
-    learned: bool = False
 
 
 def _widen(ends: dict, key: tuple, earliest: float, latest: float) -> None:
@@ -93,9 +92,7 @@ class EventWriter:
         self.db = db
         self.tables = tables
 
-    def add_events(self, events: Iterable[Event], atomic: bool = False,
-                   before_commit: Callable[[float, list], None] | None = None
-                   ) -> list[EventRejected]:
+    def add_events(self, events: Iterable[Event], atomic: bool = False) -> list[EventRejected]:
         """Store events ``(name, args, start, end)`` in one transaction.
 
         Invalid events (arguments not a list or tuple, non-ground or NaN arguments, arguments
@@ -105,8 +102,6 @@ class EventWriter:
         errors (with ``.index`` and ``.event``); the others are stored. With ``atomic=True`` the first
         invalid event is raised and nothing is stored. All events of one call share one
         arrival time, taken from the clock; their order is their arrival order.
-        ``before_commit(arrival, rejections)``, when given, runs inside the transaction after
-        the inserts: what it writes commits with the events (or not at all).
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None)
@@ -114,7 +109,10 @@ class EventWriter:
         ['p(2)^[3.0,2.0]: start time 3.0 is after end time 2.0']
         """
         errors: list[EventRejected] = []
-        ends = {} if type(events) is EventBatch else None
+        ends = None
+        if type(events) is EventBatch:
+            ends = {}
+            events.ends = None  # (a batch given again: not the last add's description)
         if type(events) in (list, tuple, EventBatch) and not events:
             if ends is not None:
                 events.ends = ends
@@ -125,10 +123,8 @@ class EventWriter:
             for base, chunk in _chunks(events):
                 if not self._insert_uniform(chunk, arrival, ends):
                     self._insert_each(chunk, base, arrival, atomic, errors, ends)
-            if ends is not None:
-                events.ends = ends
-            if before_commit is not None:
-                before_commit(arrival, errors)
+        if ends is not None:
+            events.ends = ends
         return errors
 
     def _insert_uniform(self, chunk: list, arrival: float, ends: dict | None) -> bool:
