@@ -331,7 +331,7 @@ def _numbers_compound_json(term: Struct) -> str | None:
     '{"pose":[[0.5,1.0,2.0],[0.0,0.0,0.0,1.0]]}'
     """
     args = term.args
-    if not args or type(args[0]) not in _LIST_OR_NUMBER:
+    if not args:
         return None
     for arg in args:  # exact types only (see _numbers_json)
         kind = type(arg)
@@ -348,8 +348,6 @@ def _numbers_compound_json(term: Struct) -> str | None:
         return None
     return data.decode() if _is_repr_text(data[len(key[0]):-1]) else None
 
-
-_LIST_OR_NUMBER = frozenset((list, tuple, float, int))
 
 
 def _struct_json(term: Struct) -> str | None:
@@ -390,8 +388,8 @@ def _numbers_column_json(values: list) -> list | None:
         if texts is not None and None in texts:
             return _rows_redone(texts, values, _python_list_json)
         return texts
-    if data.translate(None, _COLUMN_BYTES) or data.count(b"[") != len(values) + 1:
-        return None  # null (inf, NaN), true/false, atoms, or a nested list (rows unsplittable)
+    if data.translate(None, _COLUMN_BYTES):
+        return None  # null: inf or NaN (the rows are flat lists of numbers: checked above)
     rows = data[1:-1].decode().replace("],[", "]\n[")
     texts = rows.split("\n") if values else []
     for needle in (_SMALL_TEXT, "e"):

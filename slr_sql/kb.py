@@ -687,8 +687,7 @@ class KnowledgeBase:
         events = events if type(events) is list else list(events)
         errors: list[EventRejected] = []
         if _all_event_tuples(events):  # the common bulk case: handed to the store as they are
-            # (a copy: listeners must not see the caller's list; the store notes each type's
-            # end times in it as it inserts, for the learned delays)
+            # (a copy: listeners must not see the caller's list)
             prepared, positions = EventBatch(events), None
         else:
             prepared, positions = self._prepare_events(events, atomic, errors)
@@ -715,7 +714,7 @@ class KnowledgeBase:
         """``(name, args tuple, start, end)`` for each event of ``events`` (text parsed),
         with the index in ``events`` of each; the events that cannot be read go to
         ``errors`` (raised when ``atomic``)."""
-        prepared: list = []
+        prepared: list = EventBatch()  # (what _add hands to the store)
         positions: list[int] = []
         for i, ev in enumerate(events):
             try:

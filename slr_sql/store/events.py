@@ -41,12 +41,6 @@ class EventBatch(list):
     ends: dict | None = None
 
 
-def _widen(ends: dict, key: tuple, earliest: float, latest: float) -> None:
-    known = ends.get(key)
-    if known is not None:
-        earliest, latest = min(known[0], earliest), max(known[1], latest)
-    ends[key] = (earliest, latest)
-
 _INF = math.inf
 _NEG_INF = -math.inf
 _INSERT_CHUNK = 20_000  # events checked and inserted together: bounds memory on huge batches
@@ -70,6 +64,13 @@ def _chunks(events: Iterable[Event]) -> Iterator[tuple[int, list]]:
             return
         yield base, chunk
         base += len(chunk)
+
+
+def _widen(ends: dict, key: tuple, earliest: float, latest: float) -> None:
+    known = ends.get(key)
+    if known is not None:
+        earliest, latest = min(known[0], earliest), max(known[1], latest)
+    ends[key] = (earliest, latest)
 
 
 _end_of_row = itemgetter(-2)  # a row is (*arguments, start, end, arrival)
