@@ -20,8 +20,12 @@ __all__ = ["migration_scripts", "migrate", "applied_migrations"]
 
 
 def _migrations_dir() -> Any:
-    """The migrations folder: the installed ``slr_sql.migrations`` package, or the source
-    checkout's top-level ``migrations/``."""
+    """The migrations folder: the source checkout's top-level ``migrations/`` when this module
+    runs from a checkout (so a worktree uses its own migrations, not an editable install's),
+    else the installed ``slr_sql.migrations`` package."""
+    checkout = Path(__file__).resolve().parents[2] / "migrations"
+    if checkout.is_dir() and any(entry.name.endswith(".sql") for entry in checkout.iterdir()):
+        return checkout
     try:
         folder = importlib.resources.files("slr_sql.migrations")
         if any(entry.name.endswith(".sql") for entry in folder.iterdir()):
