@@ -618,6 +618,186 @@ def explain(db: str, goal: str) -> None:
 
 
 # ---------------------------------------------------------------------------------------------
+# programs / unload / describe: what is in a store
+# ---------------------------------------------------------------------------------------------
+
+EPOCH_2001 = 978_307_200.0   # times past this are read as Unix time (a robot's clock)
+
+
+def time_text(t: float | None) -> str:
+    """A time as the command line prints it: the number, and for an epoch-second time
+    (after 2001) also the UTC date and time.
+
+    >>> time_text(12.5), time_text(1700000000.25)
+    ('12.5', '1700000000.25 (2023-11-14 22:13:20.250 UTC)')
+    """
+    if t is None:
+        return "-"
+    if not math.isfinite(t) or t < EPOCH_2001:
+        return f"{t:g}" if abs(t) < 1e15 else repr(t)
+    import datetime
+
+    moment = datetime.datetime.fromtimestamp(t, tz=datetime.UTC)
+    return f"{t:.2f} ({moment.strftime('%Y-%m-%d %H:%M:%S.%f')[:-3]} UTC)"
+
+
+def _program_infos(kb: Any) -> list[Any]:
+    infos = kb.programs()
+    return list(infos.values()) if isinstance(infos, dict) else list(infos)
+
+
+def _info_field(info: Any, name: str) -> Any:
+    return info.get(name) if isinstance(info, dict) else getattr(info, name, None)
+
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.option("--source", is_flag=True, help="Print each program's text too.")
+def programs(db: str, source: bool) -> None:
+    """List the named programs in DB: name, texts loaded, files, when."""
+    with _open(db, create=False) as kb:
+        infos = _program_infos(kb)
+    if not infos:
+        click.echo("no programs")
+    for info in infos:
+        files = ", ".join(dict.fromkeys(_info_field(info, "filenames") or ()))
+        texts = _info_field(info, "texts") or 0
+        click.echo(f"{_info_field(info, 'name')}: {texts} text{'s' if texts != 1 else ''}"
+                   f" from {files or '<string>'}, loaded {time_text(_info_field(info, 'loaded_at'))}")
+        if source:
+            for line in (_info_field(info, "source") or "").splitlines():
+                click.echo(f"    {line}")
+
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.argument("name")
+def unload(db: str, name: str) -> None:
+    """Remove the program NAME (its clauses, declarations and buffers; events stay)."""
+    with _open(db, create=False) as kb:
+        kb.unload(name)
+    click.echo(f"unloaded program {name!r}")
+
+
+@dataclass
+class TypeSummary:
+    """One event type of a store, as ``slr describe`` shows it."""
+
+    name: str
+    arity: int
+    table: str
+    count: int
+    first: float | None          # the earliest end time
+    last: float | None           # the latest end time
+    sample: str | None           # the first event in store order, as SLR text
+    rules: list[str]             # predicates (rules) that read or define it
+    buffers: list[str]           # buffers whose pattern is of this type
+    event_rules: list[str]       # event rules that match it or derive it
+
+
+def describe_types(kb: Any, wanted: Iterable[str] = ()) -> list[TypeSummary]:
+    """What ``slr describe`` prints: a :class:`TypeSummary` per event type of ``kb`` (or of
+    ``wanted``: ``seg`` or ``seg/2``), in name order.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(); kb.load("color(O,C)^T :- prev(obj(O,_,C)^Z, T).")
+    >>> kb.add_many(["obj(cup1, cup, red)^2", "obj(cup1, cup, blue)^5"])
+    []
+    >>> s = describe_types(kb)[0]; (s.name, s.arity, s.count, s.first, s.last, s.rules)
+    ('obj', 3, 2, 2.0, 5.0, ['color/2^'])
+    """
+    from .analysis import analyze
+    from .parser import parse_term
+    from .program import event_key, split_event_atom
+    from .terms import format_atom, format_term
+
+    store = kb.store
+    types = dict(store.event_types())
+    for key in store.declared_types():
+        types.setdefault(key, store.table_for(*key) or "-")
+    chosen = []
+    for spec in wanted:
+        name, _, arity = spec.partition("/")
+        found = [k for k in types if k[0] == name and (not arity or str(k[1]) == arity)]
+        if not found:
+            raise slr_sql.SLRError(f"no event type {spec} in the store (known: "
+                                   f"{', '.join(sorted(f'{n}/{a}' for n, a in types)) or 'none'})")
+        chosen += found
+    keys = sorted(set(chosen) if chosen else types)
+    analysis = analyze(kb.engine.program)
+    readers: dict[tuple[str, int], list[str]] = {}
+    for node, stored in analysis.stored.items():
+        for key in stored:
+            if node.kind == "event" and (node.name, node.arity) == key:
+                continue
+            mark = "^" if node.kind == "event" else ""   # color/2^: the rules of color(..)^T
+            readers.setdefault(key, []).append(f"{format_atom(node.name)}/{node.arity}{mark}")
+    buffers: dict[tuple[str, int], list[str]] = {}
+    for info in kb.buffers():
+        try:
+            pattern = parse_term(info.pattern, "<buffer>")[0]
+            key = event_key(split_event_atom(pattern)[0] if split_event_atom(pattern)
+                            else pattern)
+        except (slr_sql.SLRError, TypeError, ValueError, AttributeError):
+            continue
+        buffers.setdefault(key, []).append(f"{info.kind}({info.pattern}, {info.amount:g})")
+    event_rules = kb.event_rules() if hasattr(kb, "event_rules") else []
+    out = []
+    for name, arity in keys:
+        rules = sorted(set(readers.get((name, arity), [])))
+        if (name, arity) in kb.engine.program.temporal:
+            rules.insert(0, f"{format_atom(name)}/{arity}^ (defines it)")
+        rows = iter(store.scan(name, arity)) if store.table_for(name, arity) else iter(())
+        first_row = next(rows, None)
+        sample = None
+        if first_row is not None:
+            args, start, end = first_row[0], first_row[1], first_row[2]
+            atom = format_term(slr_sql.Struct(name, tuple(args))) if args else format_atom(name)
+            sample = f"{atom}^{end!r}" if start == end else f"{atom}^[{start!r},{end!r}]"
+        derived = [r["rule"] for r in event_rules if r.get("head") == f"{name}/{arity}"]
+        matching = [r["rule"] for r in event_rules
+                    if re.search(rf"(?<![\w']){re.escape(name)}\(", str(r.get("pattern", "")))]
+        out.append(TypeSummary(
+            name, arity, types.get((name, arity)) or "-", store.count(name, arity)
+            if store.table_for(name, arity) else 0,
+            first_row[2] if first_row is not None else None,
+            store.max_end(name, arity) if first_row is not None else None,
+            sample, rules, buffers.get((name, arity), []),
+            list(dict.fromkeys(derived + matching))))
+    return out
+
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.argument("types", nargs=-1, metavar="[TYPE]...")
+@click.option("--all", "show_all", is_flag=True,
+              help="Include the store's internal types (slr_import/3, ...).")
+def describe(db: str, types: tuple[str, ...], show_all: bool) -> None:
+    """Each event type: arity, count, first/last time, a sample, the rules and buffers on it."""
+    if _is_url(db):
+        raise slr_sql.SLRError("describe needs the store itself, not a service URL")
+    with _open(db, create=False) as kb:
+        summaries = describe_types(kb, types)
+    if not types and not show_all:
+        summaries = [s for s in summaries if not s.name.startswith("slr_")]
+    if not summaries:
+        click.echo("no event types")
+    for s in summaries:
+        click.echo(f"{s.name}/{s.arity}  (table {s.table})")
+        click.echo(f"  events:      {s.count}")
+        if s.count:
+            click.echo(f"  end times:   {time_text(s.first)} .. {time_text(s.last)}")
+        if s.sample:
+            click.echo(f"  sample:      {s.sample}")
+        for label, items in (("rules:", s.rules), ("buffers:", s.buffers),
+                             ("event rules:", s.event_rules)):
+            if items:
+                click.echo(f"  {label:<12} {items[0]}")
+                for item in items[1:]:
+                    click.echo(f"  {'':<12} {item}")
+
+
+# ---------------------------------------------------------------------------------------------
 # sql
 # ---------------------------------------------------------------------------------------------
 

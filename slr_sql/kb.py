@@ -905,7 +905,7 @@ class KnowledgeBase:
             plan = self._plan(goal, tuple(args) if args else ())
         except SLRError:
             raise
-        except Exception as exc:  # noqa: BLE001 - the facade's promise (see _boundary)
+        except Exception as exc:  # the facade's promise (see _boundary)
             raise SLRError(f"solutions: {type(exc).__name__}: {exc}") from exc
         from .planner import Fallback, plan_for
         if plan.lookup is not None or (self.sql_enabled
@@ -926,7 +926,7 @@ class KnowledgeBase:
                 raise
             except RecursionError:
                 raise SLRError("solutions: the term is nested too deeply") from None
-            except Exception as exc:  # noqa: BLE001 - the facade's promise (see _boundary)
+            except Exception as exc:  # the facade's promise (see _boundary)
                 raise SLRError(f"solutions: {type(exc).__name__}: {exc}") from exc
             yield answer_bindings(plan.names, frame)
 

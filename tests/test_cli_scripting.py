@@ -10,9 +10,9 @@ import sys
 
 import pexpect
 import pytest
+from test_cli import ROOT, slr
 
 from slr_sql.service.encoding import decode_answers
-from test_cli import ROOT, slr
 
 
 @pytest.fixture
