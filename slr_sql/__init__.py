@@ -7,8 +7,8 @@
 [{'O': Atom('cup1'), 'C': Atom('red'), 'T': 2.0}]
 """
 from .clocks import Clock, ManualClock, StreamClock, WallClock
-from .errors import EventRejected, SLRBusy, SLRError, SLREvaluationError, SLRSyntaxError, \
-    SLRTimeout
+from .errors import EventRejected, SLRBusy, SLRError, SLREvaluationError, SLRStoreFull, \
+    SLRSyntaxError, SLRTimeout, SLRUnavailable
 from .kb import KnowledgeBase, open
 from .terms import Atom, String, Struct, Var
 
@@ -27,6 +27,7 @@ def connect(url: str, token: str | None = None, **options):
 __all__ = [
     "open", "connect", "KnowledgeBase", "Clock", "WallClock", "ManualClock", "StreamClock",
     "SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRBusy", "EventRejected",
+    "SLRUnavailable", "SLRStoreFull",
     "Atom", "String", "Struct", "Var",
 ]
 __version__ = "0.1.0"

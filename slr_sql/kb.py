@@ -25,7 +25,8 @@ from .engine import Engine, Machine
 from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
-from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore
+from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore, \
+    store_error
 from .store.checks import event_arguments, shorten
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
@@ -1079,8 +1080,7 @@ def _boundary(method: Callable) -> Callable:
             kb = args[0] if args and isinstance(args[0], KnowledgeBase) else None
             path = getattr(getattr(kb, "store", None), "path", None) or (
                 args[1] if where == "open" and len(args) > 1 else kwargs.get("path"))
-            raise SLRError(f"{path or ':memory:'}: the store failed ({exc}); if the file is "
-                           f"damaged, restore it from a copy") from None
+            raise store_error(exc, path) from None
         except Exception as exc:  # noqa: BLE001 - the boundary: every kind becomes words
             raise SLRError(f"{where}: {type(exc).__name__}: {exc}") from exc
     return guarded

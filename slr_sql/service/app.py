@@ -47,7 +47,7 @@ from slr_sql.store.checks import format_event
 
 from .encoding import (decode_args, decode_arguments, decode_term, dumps, encode_answers,
                        encode_plain, loads)
-from .errors import ServiceError, error_body
+from .errors import ServiceError, error_body, retry_after
 
 __all__ = ["create_app", "Limits", "API_VERSION"]
 
@@ -82,6 +82,9 @@ def _error_response(exc: BaseException) -> Response:
     body = error_body(exc)
     status = body["error"]["status"]
     headers = {"WWW-Authenticate": 'Bearer realm="slr"'} if status == 401 else None
+    wait = retry_after(exc)
+    if wait is not None:  # a condition that may pass: the client keeps its events and retries
+        headers = {"Retry-After": str(wait)}
     return _json(body, status, headers)
 
 
@@ -95,6 +98,8 @@ def _classify(exc: BaseException) -> BaseException:
         text = str(exc)
         if "locked" in text or "busy" in text:
             return ServiceError(f"the store is busy: {text}", kind="Unavailable")
+        if "disk is full" in text:
+            return ServiceError(f"the store is full: {text}", kind="Unavailable")
         log.error("SQLite error", exc_info=exc)
         return exc
     if isinstance(exc, (TypeError, ValueError, UnicodeError, OverflowError, RecursionError,

@@ -56,12 +56,12 @@ from .events import Event, EventBatch, EventWriter
 from .lookups import EventReader, Row
 from .schema import migration_scripts
 from .space import Space
-from .sqltext import quote_identifier, split_sql_script, sql_literal
+from .sqltext import quote_identifier, split_sql_script, sql_literal, store_error
 from .tables import EventTables
 
 __all__ = ["EventStore", "Event", "EventBatch", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "DatabaseError", "quote_identifier", "sql_literal", "format_event",
-           "migration_scripts", "split_sql_script", "run_sql_file"]
+           "migration_scripts", "split_sql_script", "run_sql_file", "store_error"]
 
 
 def _doc(part_method: Callable) -> Callable:
