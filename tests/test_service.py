@@ -148,7 +148,7 @@ def test_health_and_openapi_describe_the_routes(server):
     expected = {"/health", "/openapi.json", "/add", "/add_event", "/add_many", "/load",
                 "/unload", "/programs", "/query", "/submit", "/submit/{handle}", "/explain",
                 "/mark_complete", "/complete_until", "/buffers", "/buffers/{buffer_id}", "/sql",
-                "/stats", "/subscribe"}
+                "/stats", "/subscribe", "/event_rules", "/unsubscribe"}
     assert set(spec["paths"]) == expected
     for path, methods in spec["paths"].items():
         for method, op in methods.items():
@@ -483,11 +483,19 @@ def test_subscribe_over_websocket(remote, tag):
         assert list(sub) == [{"X": Atom("a"), "T": 1.0}, {"X": Atom("b"), "T": 5.0}]
 
 
-def test_named_programs(remote, tag):
+def test_named_programs(server, remote, tag):
     remote.load(f"{tag}r(1).", name=f"{tag}tea")
     remote.load(f"{tag}r(2).", name=f"{tag}tea", replace=True)
     assert remote.query(f"{tag}r(X)") == [{"X": 2}]
-    assert f"{tag}tea" in json.dumps(remote.programs())
+    # the same objects as the local call, read from the same file
+    programs = remote.programs()
+    info = programs[f"{tag}tea"]
+    assert isinstance(info, slr_sql.ProgramInfo)
+    assert (info.name, info.source, info.texts, info.filenames) == \
+        (f"{tag}tea", f"{tag}r(2).", 1, ("<string>",))
+    assert type(info.loaded_at) is float
+    with slr_sql.open(server.db) as local_view:
+        assert local_view.programs()[f"{tag}tea"] == info
     remote.unload(f"{tag}tea")
     with pytest.raises(SLREvaluationError):
         remote.query(f"{tag}r(X)")
