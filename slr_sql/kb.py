@@ -20,8 +20,9 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 from .answers import answer_bindings
+from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import Clock, WallClock, parse_duration
-from .engine import Engine, Machine
+from .engine import Engine
 from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
@@ -112,17 +113,6 @@ def _where(clause: Clause | None) -> str:
     if clause is None or clause.span is None:
         return ""
     return f"{clause.span.filename}:{clause.span.line}: "
-
-
-@dataclass(frozen=True)
-class ProgramInfo:
-    """One named program, as :meth:`KnowledgeBase.programs` describes it."""
-
-    name: str
-    source: str             # its texts, in load order, joined by newlines
-    texts: int              # how many texts were loaded under the name
-    filenames: tuple        # the file (or "<string>") of each text
-    loaded_at: float | None  # store clock time of its latest text
 
 
 def _program_name(name: Any) -> str:
@@ -580,7 +570,7 @@ class KnowledgeBase:
             program, decls = self._build(self._parse_texts(texts))
             self._install(program, decls, lambda: self.store.delete_program(name))
 
-    def programs(self) -> dict[str, "ProgramInfo"]:
+    def programs(self) -> dict[str, ProgramInfo]:
         """The named programs stored in the file, in load order of their first text.
 
         >>> kb = open(); kb.load("p(1).", name="tea"); kb.programs()["tea"].source
@@ -834,10 +824,6 @@ class KnowledgeBase:
                 frame[slot] = Var(name)
         return goal, frame
 
-    def machine(self, at: float | None = None, timeout: float | None = None,
-                max_steps: int | None = None) -> Machine:
-        return self.engine.machine(at=at, timeout=timeout, max_steps=max_steps)
-
     def query(self, goal: str, at: float | None = None, args: dict | None = None,
               timeout: float | None = None, max_steps: int | None = None,
               limit: int | None = None, wait: bool = False) -> list[dict[str, Any]]:
@@ -918,7 +904,7 @@ class KnowledgeBase:
     # -- synchronized queries (issue 5; the work is in slr_sql/sync.py) -----------------
     def submit(self, goal: str, at: float | None = None, id: str | None = None,
                args: dict | None = None, timeout: float | None = None,
-               callback: Callable[[Any], Any] | None = None) -> Any:
+               callback: Callable[[Any], Any] | None = None) -> PendingQueryAPI:
         """Synchronized query ⟨goal, at⟩: returns a PendingQuery (a concurrent.futures.Future)
         answered with the answer list as soon as every event type the goal depends on is
         complete up to ``at`` (default: now), and every prev/next it evaluates is complete up
@@ -956,7 +942,7 @@ class KnowledgeBase:
         self._refresh()
         return self._sync.complete_until(event_type)
 
-    def pending(self) -> list:
+    def pending(self) -> list[PendingQueryAPI]:
         """The waiting synchronized queries; each PendingQuery's ``waiting_for`` lists the
         event types and times it waits for."""
         return self._sync.pending()
@@ -1021,7 +1007,7 @@ class KnowledgeBase:
     def subscribe(self, pattern: str, where: str | None = None, since: Any = "now",
                   until: float | None = None, id: str | None = None,
                   callback: Callable[[dict], Any] | None = None, max_queue: int = 10_000,
-                  max_lag: int | None = 1_000_000) -> Any:
+                  max_lag: int | None = 1_000_000) -> SubscriptionAPI:
         """Deliver each stored event matching ``pattern`` (``p(..)^T`` or ``p(..)^[S,E]``) and
         the goal ``where`` whose end time lies in [since, until], once, in arrival order, as
         an answer dict: iterate (``for``/``async for``/``sub.get(timeout)``) or give
