@@ -24,17 +24,17 @@ CREATE TABLE slr_fleet_positions (
     PRIMARY KEY (robot, type_name, type_arity)
 ) WITHOUT ROWID;
 
--- Per robot, what its pusher said at its last contact:
---   shipped        events (incoming and complex) shipped so far
---   head           events in the robot's store at that contact
---   last_arrival   the robot's arrival time of the last event shipped
---   head_arrival   the robot's arrival time of its latest event at that contact
---   contact_at     wall-clock time (seconds since the epoch) of the contact
+-- Per robot that shipped to this store:
+--   shipped        events (incoming and complex) stored here from it
+--   last_arrival   the robot's arrival time of the latest event stored here from it
+--   pending        events its store held that were not shipped yet, at the last contact
+--   head_arrival   the robot's arrival time of its latest event, at the last contact
+--   contact_at     wall-clock time (seconds since the epoch) of the last contact
 CREATE TABLE slr_fleet_robots (
     robot        TEXT PRIMARY KEY,
     shipped      INTEGER NOT NULL DEFAULT 0,
-    head         INTEGER NOT NULL DEFAULT 0,
     last_arrival REAL,
+    pending      INTEGER NOT NULL DEFAULT 0,
     head_arrival REAL,
     contact_at   REAL
 ) WITHOUT ROWID;

@@ -224,9 +224,8 @@ class EventStore:
         return self._fleet.receive(robot, name, arity, rows, store_events)
 
     @_doc(Fleet.record_contact)
-    def fleet_record_contact(self, robot: str, shipped: int, head: int,
-                             last_arrival: float | None, head_arrival: float | None) -> None:
-        self._fleet.record_contact(robot, shipped, head, last_arrival, head_arrival)
+    def fleet_record_contact(self, robot: str, pending: int, head_arrival: float | None) -> None:
+        self._fleet.record_contact(robot, pending, head_arrival)
 
     @_doc(Fleet.contacts)
     def fleet_contacts(self) -> list[dict[str, Any]]:

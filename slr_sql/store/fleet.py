@@ -163,6 +163,13 @@ class Fleet:
                 sql = event_type.insert_sql
                 conn.executemany(sql, [r[1:-1] + ((r[-1] if r[-1] is not None else robot),)
                                        for r in fresh])
+            # the arrival column sits after the arguments and the two times
+            latest = max(r[3 + arity] for r in fresh)
+            conn.execute("INSERT INTO slr_fleet_robots (robot, shipped, last_arrival) "
+                         "VALUES (?, ?, ?) ON CONFLICT (robot) DO UPDATE SET shipped = "
+                         "shipped + excluded.shipped, last_arrival = max(coalesce("
+                         "last_arrival, excluded.last_arrival), excluded.last_arrival)",
+                         (robot, len(fresh), latest))
             conn.execute("INSERT INTO slr_fleet_positions (robot, type_name, type_arity, "
                          "position) VALUES (?, ?, ?, ?) ON CONFLICT (robot, type_name, "
                          "type_arity) DO UPDATE SET position = excluded.position",
@@ -193,25 +200,23 @@ class Fleet:
         finally:
             self.writer.robot = saved
 
-    def record_contact(self, robot: str, shipped: int, head: int,
-                       last_arrival: float | None, head_arrival: float | None) -> None:
-        """Note what ``robot``'s pusher reported at a contact (for ``slr fleet status``)."""
+    def record_contact(self, robot: str, pending: int, head_arrival: float | None) -> None:
+        """Note what ``robot``'s pusher reported at a contact (for ``slr fleet status``):
+        the events its store holds that are not shipped yet and the arrival of its latest."""
         with self.db.transaction():
             self.db.conn.execute(
-                "INSERT INTO slr_fleet_robots (robot, shipped, head, last_arrival, "
-                "head_arrival, contact_at) VALUES (?, ?, ?, ?, ?, ?) ON CONFLICT (robot) DO "
-                "UPDATE SET shipped = excluded.shipped, head = excluded.head, "
-                "last_arrival = coalesce(excluded.last_arrival, last_arrival), "
-                "head_arrival = coalesce(excluded.head_arrival, head_arrival), "
-                "contact_at = excluded.contact_at",
-                (robot, shipped, head, last_arrival, head_arrival, time.time()))
+                "INSERT INTO slr_fleet_robots (robot, pending, head_arrival, contact_at) "
+                "VALUES (?, ?, ?, ?) ON CONFLICT (robot) DO UPDATE SET pending = "
+                "excluded.pending, head_arrival = coalesce(excluded.head_arrival, "
+                "head_arrival), contact_at = excluded.contact_at",
+                (robot, pending, head_arrival, time.time()))
 
     def contacts(self) -> list[dict[str, Any]]:
         """Per robot that shipped: its ``slr_fleet_robots`` row as a dict, in name order."""
         with self.db.lock:
             self.db.check_open()
             cur = self.db.conn.execute(
-                "SELECT robot, shipped, head, last_arrival, head_arrival, contact_at "
+                "SELECT robot, shipped, last_arrival, pending, head_arrival, contact_at "
                 "FROM slr_fleet_robots ORDER BY robot")
             cols = [d[0] for d in cur.description]
             return [dict(zip(cols, r)) for r in cur.fetchall()]
