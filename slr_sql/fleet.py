@@ -68,7 +68,7 @@ class _RemoteTarget:
     """The fleet store of a running ``slr serve`` (its ``/fleet/*`` endpoints)."""
 
     def __init__(self, url: str, token: str | None):
-        from .service import connect
+        from .service.client import connect
         self.client = connect(url, token=token)
 
     def positions(self, robot: str) -> dict[tuple[str, int], int]:
@@ -133,6 +133,22 @@ class _Pusher:
         self.say = say
         self.fleet_name = fleet_name
         self.report = PushReport(robot)
+        self.outage: str | None = None   # why the fleet is unreachable, while it is
+
+    def reached(self) -> None:
+        """A request to the fleet succeeded: an outage, if any, is over."""
+        if self.outage is not None:
+            self.outage = None
+            self.say(f"fleet {self.fleet_name} reachable again; shipping resumed")
+
+    def unreachable(self, exc: BaseException) -> None:
+        """A request to the fleet failed: say so if an outage begins."""
+        if self.outage is None:
+            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            self.outage = reason
+            self.report.outages += 1
+            self.say(f"fleet {self.fleet_name} unreachable ({reason}); retrying with "
+                     "backoff, the robot's store is not affected")
 
     def connect(self) -> FleetTarget:
         if self.target is None:
@@ -152,6 +168,7 @@ class _Pusher:
         early when ``stop`` is set); returns the rows the fleet stored."""
         target = self.connect()
         positions = target.positions(self.robot)
+        self.reached()
         heads = self.store.fleet_heads()
         shipped = 0
         marks = {k[len("sync/mark/"):]: v for k, v in self.store.meta_items("sync/mark/").items()
@@ -173,6 +190,7 @@ class _Pusher:
                                         None, None, None)
                 position = rows[-1][0]
                 shipped += stored
+                self.report.shipped += stored
                 self.report.batches += 1
                 self.report.per_type[f"{name}/{arity}"] = \
                     self.report.per_type.get(f"{name}/{arity}", 0) + stored
@@ -182,7 +200,6 @@ class _Pusher:
             pending += left
         # marks and what is left, after the events they speak of
         target.receive(self.robot, [], marks or None, pending, head_arrival)
-        self.report.shipped += shipped
         self.report.rounds += 1
         return shipped
 
@@ -245,25 +262,16 @@ def _follow(pusher: _Pusher, stop: threading.Event) -> None:
     with a backoff, saying so once per outage."""
     store = pusher.store
     retry = RETRY_MIN
-    outage: str | None = None
     while not stop.is_set():
         seen = store.data_version()
         try:
             pusher.round(stop)
-        except Exception as exc:  # noqa: BLE001 - unreachable, refused, busy: try again
+        except (SLRError, OSError) as exc:  # unreachable, busy, refused: try again later
             pusher.drop()
-            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            if outage is None:
-                outage = reason
-                pusher.report.outages += 1
-                pusher.say(f"fleet {pusher.fleet_name} unreachable ({reason}); "
-                           f"retrying with backoff, the robot's store is not affected")
+            pusher.unreachable(exc)
             stop.wait(retry)
             retry = min(retry * 2, RETRY_MAX)
             continue
-        if outage is not None:
-            pusher.say(f"fleet {pusher.fleet_name} reachable again; shipping resumed")
-            outage = None
         retry = RETRY_MIN
         wait = WAKE_MIN
         while not stop.is_set() and store.data_version() == seen:
@@ -283,7 +291,7 @@ def status(fleet: str, token: str | None = None, now: float | None = None) -> li
     """
     now = time.time() if now is None else now
     if fleet.startswith(("http://", "https://")):
-        from .service import connect
+        from .service.client import connect
         with connect(fleet, token=token) as client:
             rows = client.fleet_status()
     else:
