@@ -475,12 +475,18 @@ def _print_answers(answers: list[dict[str, Any]]) -> None:
               help="Synchronized: answer once the events the goal depends on are complete up to "
                    "--at (default: now).")
 @click.option("--timeout", type=float, default=None, help="Give up after S seconds.")
-def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | None) -> None:
+@click.option("--robot", default=None,
+              help="Only this robot's events (every event goal, prev and next).")
+def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | None,
+          robot: str | None) -> None:
     """Ask GOAL and print one answer per line (`false.` when there is none)."""
     goal = strip_full_stop(goal)
     at = _finite("--at", at)
     timeout = _finite("--timeout", timeout, minimum=0.0)
     with _open(db, create=False) as kb:
+        if wait and robot is not None:
+            raise slr_sql.SLRError("--robot cannot be combined with --wait yet: ask "
+                                   "origin(R, Goal) in the goal instead")
         if wait:
             if not hasattr(kb, "submit"):
                 _err("error: synchronized queries are not available in this build")
@@ -504,7 +510,8 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
                     _err(f"% {line}")
             # -- end issue 5
         else:
-            answers = kb.query(goal, at=at, timeout=timeout)
+            answers = kb.query(goal, at=at, timeout=timeout,
+                               **({"robot": robot} if robot is not None else {}))
     _print_answers(answers)
 
 
@@ -694,6 +701,9 @@ def shell(db: str) -> None:
 
 from .ros.cli import ros as _ros  # noqa: E402 - issue 13: `slr ros` (its extra is imported on use)
 main.add_command(_ros)
+
+from .fleet import _click_group as _fleet_group  # noqa: E402 - `slr fleet push|status`
+main.add_command(_fleet_group())
 
 
 # ---------------------------------------------------------------------------------------------

@@ -27,7 +27,7 @@ from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
 from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore, \
-    store_error
+    store_error, check_robot_name
 from .store.checks import event_arguments, shorten
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
@@ -249,11 +249,11 @@ class KnowledgeBase:
     def __init__(self, path: str | Path | None = None, clock: Clock | None = None, *,
                  synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
                  adopt: bool = False, checkpoint: str = "auto",
-                 cache_mib: float = CACHE_SIZE_KIB / 1024):
+                 cache_mib: float = CACHE_SIZE_KIB / 1024, robot: str | None = None):
         self.clock = clock if clock is not None else WallClock()
         self.store = EventStore(path, self.clock, synchronous=synchronous,
                                 busy_timeout=busy_timeout, adopt=adopt, checkpoint=checkpoint,
-                                cache_mib=cache_mib)
+                                cache_mib=cache_mib, robot=robot)
         self.path = self.store.path
         self.program = Program()
         self.declarations = Declarations()
@@ -826,13 +826,16 @@ class KnowledgeBase:
 
     def query(self, goal: str, at: float | None = None, args: dict | None = None,
               timeout: float | None = None, max_steps: int | None = None,
-              limit: int | None = None, wait: bool = False) -> list[dict[str, Any]]:
+              limit: int | None = None, wait: bool = False,
+              robot: str | None = None) -> list[dict[str, Any]]:
         """Answer ``goal`` now, on the events that have arrived (unsynchronized).
 
         ``at`` restricts event goals to the stream view (events with end <= at); ``args``
         binds goal variables from Python values (no text splicing; the parsed plan is reused);
         ``timeout`` (seconds) or ``max_steps`` stop an endless computation with SLRTimeout.
         ``wait=True`` makes it synchronized: ``submit(goal, at, timeout=timeout).result()``.
+        ``robot`` restricts every event goal, prev and next (in rules too) to the events of
+        that robot (their ``robot`` column; see docs/fleet.md).
 
         >>> kb = open(); kb.add_many(["pos(a, 1)^1", "pos(a, 4)^5"])
         []
@@ -843,13 +846,18 @@ class KnowledgeBase:
             raise SLRError(f"limit must be a count (an integer >= 0), not {limit!r}")
         _check_time_option("at", at)
         _check_time_option("timeout", timeout, minimum=0.0)
+        if robot is not None:
+            check_robot_name(robot)
         if wait:  # issue 5: synchronized (SLRTimeout names the incomplete types)
+            if robot is not None:
+                raise SLRError("a synchronized query (wait=True) cannot be restricted to one "
+                               "robot yet: ask origin(R, Goal) inside the goal instead")
             return self.submit(goal, at=at, args=args, timeout=timeout).result()
         self._refresh()
         plan = self._plan(goal, tuple(args) if args else ())
         if limit == 0:
             return []
-        if plan.lookup is not None and limit is None:
+        if plan.lookup is not None and limit is None and robot is None:
             frame = [None] * plan.compiled.nslots
             if args:
                 for name, value in args.items():
@@ -860,11 +868,12 @@ class KnowledgeBase:
         if max_steps is None and self.sql_enabled:  # issue 3: the compiled SQL plan, if any
             from .planner import try_sql
             deadline = time.monotonic() + timeout if timeout is not None else None
-            answers = try_sql(self, plan, args, at, limit, deadline)
+            answers = try_sql(self, plan, args, at, limit, deadline, robot)
             if answers is not None:
                 return answers
         term, frame = self._instantiate(plan, args)
         m = self.engine.machine(at=at, timeout=timeout, max_steps=max_steps)
+        m.robot = robot
         answers = []
         names = plan.names
         for _ in m.solve(term):
@@ -1096,6 +1105,9 @@ def open(path: str | Path | None = None, clock: Clock | None = None, **options: 
     A file that is not a store (not SQLite, damaged, a store of a newer slr_sql, or an SQLite
     file of another application) is refused with an :class:`SLRError` and left untouched;
     ``adopt=True`` adds a store to another application's SQLite file on purpose.
+    ``robot`` names the robot the store belongs to (kept in the store; a store has one name
+    for life): its events are stored with that name in their ``robot`` column, for
+    ``origin/2`` and fleets (docs/fleet.md).
 
     >>> kb = open(); kb.close()
     """

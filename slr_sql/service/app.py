@@ -750,7 +750,7 @@ async def _event_rules(svc: "_Service", request: Request) -> Any:
         body={"goal": ("string", True), "args": ("Args", False),
               "at": ("Number", False), "timeout": ("Number", False),
               "max_steps": ("integer", False), "limit": ("integer", False),
-              "wait": ("boolean", False)},
+              "wait": ("boolean", False), "robot": ("string", False)},
         response={"answers": "AnswerList"})
 async def _query(svc: "_Service", request: Request) -> Any:
     b = await svc.body(request)
@@ -760,6 +760,7 @@ async def _query(svc: "_Service", request: Request) -> Any:
     timeout = _number(b, "timeout", minimum=0)
     limit = _field(b, "limit", int)
     max_steps = _field(b, "max_steps", int)
+    robot = _field(b, "robot", str)
     if _field(b, "wait", bool, default=False):
         pending = await svc.call(svc.kb.submit, goal, at=at, args=args,
                                   timeout=_cap(timeout, svc.limits.max_wait))
@@ -767,7 +768,8 @@ async def _query(svc: "_Service", request: Request) -> Any:
     else:
         answers = await svc.call(svc.kb.query, goal, at=at, args=args, limit=limit,
                                   timeout=_cap(timeout, svc.limits.max_query_time),
-                                  max_steps=max_steps)
+                                  max_steps=max_steps,
+                                  **({"robot": robot} if robot is not None else {}))
     return {"answers": encode_answers(answers)}
 
 
@@ -928,6 +930,41 @@ async def _sql(svc: "_Service", request: Request) -> Any:
 async def _stats(svc: "_Service", request: Request) -> Any:
     return await svc.call(_stats_of, svc.kb)
 
+
+
+@_route("GET", "/fleet/positions", "What this fleet store holds of a robot: per event "
+        "type, the last sequence of the robot's store stored here (slr fleet push).",
+        query={"robot": "string"}, response={"positions": "array"})
+async def _fleet_positions(svc: "_Service", request: Request) -> Any:
+    from slr_sql.shipping import positions
+    robot = request.query_params.get("robot")
+    if not robot:
+        raise SLRError("robot= names the robot")
+    found = await svc.call(positions, svc.kb, robot)
+    return {"positions": [[n, a, p] for (n, a), p in sorted(found.items())]}
+
+
+@_route("POST", "/fleet/receive", "Store a robot's shipment exactly once (slr fleet "
+        "push): batches of [name, arity, rows], its marks, what it holds unshipped.",
+        body={"robot": ("string", True), "batches": ("array", True),
+              "marks": ("object", False), "pending": ("integer", False),
+              "head_arrival": ("Number", False)},
+        response={"stored": "integer"})
+async def _fleet_receive(svc: "_Service", request: Request) -> Any:
+    from slr_sql.shipping import receive
+    b = await svc.body(request)
+    robot = _field(b, "robot", str, required=True)
+    stored = await svc.call(receive, svc.kb, robot, _field(b, "batches", list, required=True),
+                            _field(b, "marks", dict), _field(b, "pending", int),
+                            _number(b, "head_arrival"))
+    return {"stored": stored}
+
+
+@_route("GET", "/fleet/status", "Per robot that shipped here: events stored, what it "
+        "held unshipped and its last contact (slr fleet status).",
+        response={"robots": "array"})
+async def _fleet_status(svc: "_Service", request: Request) -> Any:
+    return {"robots": await svc.call(svc.kb.store.fleet_contacts)}
 
 
 @dataclass

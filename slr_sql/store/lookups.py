@@ -80,13 +80,15 @@ class EventReader:
         return tuple(positions), values
 
     def _select_sql(self, event_type: EventType, kind: str, positions: tuple[int, ...],
-                    flags: tuple[bool, ...], resume: bool = False) -> str:
-        key = (event_type.table, kind, positions, flags, resume)
+                    flags: tuple[bool, ...], resume: bool = False, robot: bool = False) -> str:
+        key = (event_type.table, kind, positions, flags, resume, robot)
         sql = self.sql_cache.get(key)
         if sql is not None:
             return sql
         by_arg1 = bool(positions) and positions[0] == 0
-        conditions = [f"arg{p + 1} = ?" for p in positions]
+        # one robot's events (a fleet store asked per robot): its parameter follows the
+        # arguments'
+        conditions = [f"arg{p + 1} = ?" for p in positions] + (["robot = ?"] if robot else [])
         if kind == "scan":
             index = event_type.index_arg1_end if by_arg1 else event_type.index_end
             if flags[0]:
@@ -187,19 +189,24 @@ class EventReader:
                     pass
 
     def _query(self, name: str, arity: int, bound: dict[int, Any] | None, kind: str,
-               flags: tuple[bool, ...], times: list) -> Iterator[Row]:
+               flags: tuple[bool, ...], times: list, robot: str | None = None
+               ) -> Iterator[Row]:
         with self.db.lock:
             self.db.check_open()
             event_type = self.tables.lookup(name, arity)
             if event_type is None:
                 return iter(())
             positions, values = self._pushdown(event_type, bound)
-            sql = self._select_sql(event_type, kind, positions, flags)
-            resume_sql = self._select_sql(event_type, kind, positions, flags, resume=True)
+            by_robot = robot is not None
+            sql = self._select_sql(event_type, kind, positions, flags, robot=by_robot)
+            resume_sql = self._select_sql(event_type, kind, positions, flags, resume=True,
+                                          robot=by_robot)
+        if by_robot:
+            values.append(robot)
         return self._stream(sql, values + times, arity, kind, resume_sql)
 
     def scan(self, name: str, arity: int, bound: dict[int, Any] | None = None,
-             end_le: float | None = None) -> Iterator[Row]:
+             end_le: float | None = None, robot: str | None = None) -> Iterator[Row]:
         """Stored events of name/arity in store order (end, start, arrival), as
         ``(args, start, end, seq)``; only ``end <= end_le`` when given (the stream view).
         ``bound`` maps 0-based argument positions to ground terms that must be equal (SQL
@@ -213,10 +220,11 @@ class EventReader:
         """
         has_end = end_le is not None
         return self._query(name, arity, bound, "scan", (has_end,),
-                           [float(end_le)] if has_end else [])
+                           [float(end_le)] if has_end else [], robot)
 
     def prev_candidates(self, name: str, arity: int, bound: dict[int, Any] | None,
-                        t: float, start_ge: float | None = None) -> Iterator[Row]:
+                        t: float, start_ge: float | None = None,
+                        robot: str | None = None) -> Iterator[Row]:
         """Events with ``end <= t`` (and ``start >= start_ge`` when given), latest end first
         (streamed backwards from an index). Use :meth:`rows_at_end` for the tied rows of the
         first match in store order.
@@ -229,11 +237,11 @@ class EventReader:
         """
         has_start = start_ge is not None
         times = [float(t)] + ([float(start_ge), float(start_ge)] if has_start else [])
-        return self._query(name, arity, bound, "prev", (has_start,), times)
+        return self._query(name, arity, bound, "prev", (has_start,), times, robot)
 
     def rows_at_end(self, name: str, arity: int, bound: dict[int, Any] | None, end: float,
-                    start_ge: float | None = None, end_le: float | None = None
-                    ) -> Iterator[Row]:
+                    start_ge: float | None = None, end_le: float | None = None,
+                    robot: str | None = None) -> Iterator[Row]:
         """Events whose end is exactly ``end`` (and ``start >= start_ge``, ``end <= end_le``
         when given) in store order (start, arrival).
 
@@ -246,10 +254,10 @@ class EventReader:
         flags = (start_ge is not None, end_le is not None)
         times = [float(end)] + ([float(start_ge)] if flags[0] else []) \
             + ([float(end_le)] if flags[1] else [])
-        return self._query(name, arity, bound, "at_end", flags, times)
+        return self._query(name, arity, bound, "at_end", flags, times, robot)
 
     def next_candidates(self, name: str, arity: int, bound: dict[int, Any] | None,
-                        a: float, b: float) -> Iterator[Row]:
+                        a: float, b: float, robot: str | None = None) -> Iterator[Row]:
         """Events with ``a <= start`` and ``end <= b``, earliest start first (streamed from an
         index). Use :meth:`rows_at_start` for the tied rows of the first match.
 
@@ -259,10 +267,11 @@ class EventReader:
         >>> next(s.next_candidates("p", 1, {}, 1.5, math.inf))[0]
         (Atom('b'),)
         """
-        return self._query(name, arity, bound, "next", (), [float(a), float(b), float(b)])
+        return self._query(name, arity, bound, "next", (), [float(a), float(b), float(b)],
+                           robot)
 
     def rows_at_start(self, name: str, arity: int, bound: dict[int, Any] | None,
-                      start: float, b: float) -> Iterator[Row]:
+                      start: float, b: float, robot: str | None = None) -> Iterator[Row]:
         """Events whose start is exactly ``start`` and whose end is ``<= b``, in store order
         (end, arrival).
 
@@ -272,11 +281,12 @@ class EventReader:
         >>> [row[0] for row in s.rows_at_start("p", 1, {}, 1.0, 10.0)]
         [(Atom('b'),), (Atom('a'),)]
         """
-        return self._query(name, arity, bound, "at_start", (), [float(start), float(b)])
+        return self._query(name, arity, bound, "at_start", (), [float(start), float(b)],
+                           robot)
 
     def lookup_sql(self, kind: str, name: str, arity: int,
                    bound: dict[int, Any] | None = None, *, start_ge: bool = False,
-                   end_le: bool = False) -> str | None:
+                   end_le: bool = False, robot: bool = False) -> str | None:
         """The SQL a lookup runs (for explain output and plan tests). ``kind`` is ``scan``,
         ``prev``, ``at_end``, ``next`` or ``at_start``; ``start_ge``/``end_le`` say whether
         those optional bounds are given. None if the type has no table.
@@ -295,7 +305,7 @@ class EventReader:
             if event_type is None:
                 return None
             positions, _ = self._pushdown(event_type, bound)
-            return self._select_sql(event_type, kind, positions, flags)
+            return self._select_sql(event_type, kind, positions, flags, robot=robot)
 
     def latest_at_or_before(self, name: str, arity: int, bound: dict[int, Any], t: float,
                             point: bool) -> list[Row] | None:
