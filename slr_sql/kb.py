@@ -22,7 +22,8 @@ from typing import Any, Callable, Iterable
 from .answers import answer_bindings
 from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import Clock, WallClock, parse_duration
-from .engine import Engine
+from .encoding import Unencodable, decode_answer, encode
+from .engine import Engine, Machine
 from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
@@ -130,6 +131,7 @@ class _Plan:
     bind_slots: dict[str, int]    # args name -> slot index
     text: str
     lookup: "_PrevLookup | None" = None
+    bound_lookup: "_BoundPrev | None" = None
 
 
 _ATOMIC = (Atom, String, int, float)
@@ -240,6 +242,109 @@ class _PrevLookup:
         return answers
 
 
+class _BoundPrev:
+    """A :class:`_PrevLookup` with the names its ``args`` bind, prepared once per plan (goal
+    text and argument names): a call encodes the bound Python values, runs the cached
+    statement and builds the answer dicts straight from the rows, with no frame, term or
+    unification in between. Anything unusual in a call (a value of another type, a number
+    stored as another type) returns None and the caller takes :meth:`_PrevLookup.run`'s
+    path, so answers never differ.
+    """
+
+    __slots__ = ("name", "arity", "point", "time", "positions", "sources", "fields")
+
+    def __init__(self, name, arity, point, time, positions, sources, fields):
+        self.name, self.arity, self.point, self.time = name, arity, point, time
+        self.positions, self.sources, self.fields = positions, sources, fields
+
+    @classmethod
+    def prepare(cls, lookup: _PrevLookup, bind_slots: dict[str, int],
+                names: list[tuple[str, int]]) -> "_BoundPrev | None":
+        by_slot = {slot: name for name, slot in bind_slots.items()}
+        if any(slot in by_slot for slot in lookup.stamp):
+            return None   # a bound stamp: the general path compares it
+        if type(lookup.time) is tuple:
+            time: Any = ("const", lookup.time[1])
+        elif lookup.time in by_slot:
+            time = by_slot[lookup.time]
+        else:
+            return None   # an unbound time: the general path raises the instantiation error
+        positions, sources, column = [], [], {}
+        for i, a in enumerate(lookup.args):
+            if type(a) is tuple:
+                positions.append(i)
+                sources.append(("const", a[1]))
+            elif a in by_slot:
+                positions.append(i)
+                sources.append(by_slot[a])
+            else:
+                column[a] = i
+        stamp = {lookup.stamp[0]: lookup.arity + 1} if lookup.point else {
+            lookup.stamp[0]: lookup.arity, lookup.stamp[1]: lookup.arity + 1}
+        # each answer variable: (name, 0 = a row's argument column, 1 = a row's time column,
+        # 2 = a bound argument value, 3 = the time bound by args; index)
+        fields = []
+        for name, slot in names:
+            if slot in column:
+                fields.append((name, 0, column[slot]))
+            elif slot in stamp:
+                fields.append((name, 1, stamp[slot]))
+            elif slot == lookup.time:
+                fields.append((name, 3, 0))
+            elif slot in lookup.args:
+                fields.append((name, 2, positions.index(lookup.args.index(slot))))
+            else:
+                return None
+        return cls(lookup.name, lookup.arity, lookup.point, time, tuple(positions),
+                   tuple(sources), tuple(fields))
+
+    def answer(self, store: EventStore, args: dict) -> tuple[list, tuple | None] | None:
+        """The answers and the (program, progress) versions read with them (None when
+        nothing matched), or None when the general path must answer."""
+        t = self.time
+        t = t[1] if type(t) is tuple else args[t]
+        if type(t) is not float and type(t) is not int:
+            return None
+        terms = []
+        values = []
+        checks = []
+        for i, source in enumerate(self.sources):
+            v = source[1] if type(source) is tuple else args[source]
+            tv = type(v)
+            if tv is str:
+                v = Atom(v)
+            elif tv is float:
+                if v != v:
+                    return None
+                checks.append((self.positions[i], float))
+            elif tv is int:
+                checks.append((self.positions[i], int))
+            elif tv is not Atom and tv is not String:
+                return None
+            try:
+                values.append(encode(v))
+            except Unencodable:
+                return None
+            terms.append(v)
+        rows = store.latest_rows(self.name, self.arity, self.positions, values, t, self.point)
+        if not rows:
+            return [], None
+        for position, kind in checks:
+            for row in rows:
+                if type(row[position]) is not kind:
+                    return None   # SQL's 1 = 1.0: not a Prolog match
+        bound = [to_python(term) for term in terms]
+        fields = self.fields
+        answers = []
+        for row in rows:
+            answer = {}
+            for name, kind, i in fields:
+                answer[name] = decode_answer(row[i]) if kind == 0 else row[i] if kind == 1 \
+                    else bound[i] if kind == 2 else t
+            answers.append(answer)
+        return answers, rows[0][-2:]
+
+
 class KnowledgeBase:
     """One SLR knowledge base: program + events + state in one SQLite file.
 
@@ -265,6 +370,9 @@ class KnowledgeBase:
         self._program_version = -1
         self._parsed: dict[int, tuple[str, list]] = {}
         self._seen_data_version: int | None = None
+        # the stored (program, progress) versions a bound prev lookup last read with its rows:
+        # while they stay the same, no other connection changed what a refresh re-reads
+        self._lookup_versions: tuple | None = None
         # extension points for the SQL compiler, buffers and synchronization
         self.load_listeners: list[Callable[["KnowledgeBase"], None]] = []
         self.add_listeners: list[Callable[[list], None]] = []
@@ -797,6 +905,8 @@ class KnowledgeBase:
         names = [(n, slots[n]) for n in varnames if not n.startswith("_") and n in slots]
         plan = _Plan(compiled, names, {n: slots[n] for n in arg_names if n in slots}, goal,
                      _PrevLookup.recognise(compiled))
+        if plan.lookup is not None:
+            plan.bound_lookup = _BoundPrev.prepare(plan.lookup, plan.bind_slots, names)
         if len(self._plans) > 1024:
             self._plans.clear()
         self._plans[key] = plan
@@ -853,6 +963,23 @@ class KnowledgeBase:
                 raise SLRError("a synchronized query (wait=True) cannot be restricted to one "
                                "robot yet: ask origin(R, Goal) inside the goal instead")
             return self.submit(goal, at=at, args=args, timeout=timeout).result()
+        if args and limit is None and robot is None:
+            key = (goal, tuple(args))
+            plan = self._plans.get(key)
+            if plan is not None and plan.bound_lookup is not None:
+                # the file is the truth: the lookup reads the stored versions with its rows;
+                # when they moved (or nothing matched), refresh as every call does, and keep
+                # the answers only if the plan survived it (a reloaded program clears it)
+                found = plan.bound_lookup.answer(self.store, args)
+                if found is not None:
+                    answers, versions = found
+                    if versions is None or versions != self._lookup_versions:
+                        self._refresh()
+                        self._lookup_versions = versions
+                        if self._plans.get(key) is not plan:
+                            found = None
+                    if found is not None:
+                        return answers
         self._refresh()
         plan = self._plan(goal, tuple(args) if args else ())
         if limit == 0:

@@ -319,6 +319,11 @@ class EventStore:
                             point: bool) -> list[Row] | None:
         return self._reader.latest_at_or_before(name, arity, bound, t, point)
 
+    @_doc(EventReader.latest_rows)
+    def latest_rows(self, name: str, arity: int, positions: tuple[int, ...], values: list,
+                    t: float, point: bool) -> list[tuple]:
+        return self._reader.latest_rows(name, arity, positions, values, t, point)
+
     @_doc(EventReader.count)
     def count(self, name: str, arity: int) -> int:
         return self._reader.count(name, arity)

@@ -12,6 +12,7 @@ import sqlite3
 from typing import Any, Iterator
 
 from ..encoding import Unencodable, decode, encode
+from .catalog import PROGRAM_VERSION, PROGRESS_VERSION
 from .connection import Database
 from .tables import EventTables, EventType
 
@@ -330,6 +331,32 @@ class EventReader:
             positions, values = self._pushdown(event_type, bound)
             if len(positions) != len(bound):
                 return None
+            rows = self.latest_rows(name, arity, positions, values, t, point)
+        dec = decode
+        return [(tuple([dec(v) for v in row[:arity]]), row[arity], row[arity + 1], row[arity + 2])
+                for row in rows]
+
+    def latest_rows(self, name: str, arity: int, positions: tuple[int, ...], values: list,
+                    t: float, point: bool) -> list[tuple]:
+        """:meth:`latest_at_or_before` for callers that encoded the bound values themselves
+        (``values``, for the argument ``positions`` in increasing order) and decode what they
+        need: the raw rows ``(arg1, ..., argN, t_start, t_end, seq, program version, progress
+        version)``, one statement. The two versions (see :meth:`Catalog.versions`) are read
+        in the same snapshot as the rows, so that a caller learns in the same statement
+        whether another connection changed the program or the progress meanwhile.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a",), 1, 1), ("p", ("a",), 2, 2)])
+        []
+        >>> s.latest_rows("p", 1, (0,), ["a"], 1.5, True)
+        [('a', 1.0, 1.0, 1, None, None)]
+        """
+        db = self.db
+        with db.lock:
+            db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return []
             key = (event_type.table, "latest", positions, point)
             sql = self.sql_cache.get(key)
             if sql is None:
@@ -337,17 +364,16 @@ class EventReader:
                                      + (["t_start = t_end"] if point else []))
                 where = (where + " AND ") if where else ""
                 columns = ", ".join([f"arg{i + 1}" for i in range(arity)]
-                                    + ["t_start", "t_end", "seq"])
+                                    + ["t_start", "t_end", "seq"]
+                                    + ["(SELECT value FROM slr_meta WHERE key = ?)"] * 2)
                 # ORDER BY ... LIMIT 1 rather than max(): max() with the extra start = end
                 # filter is an aggregate over every row of the key, LIMIT 1 stops at the first
                 sql = (f"SELECT {columns} FROM {event_type.quoted} WHERE {where}t_end = "
                        f"(SELECT t_end FROM {event_type.quoted} WHERE {where}t_end <= ? "
                        f"ORDER BY t_end DESC LIMIT 1) ORDER BY t_start, seq")
                 self.sql_cache[key] = sql
-            rows = self.db.conn.execute(sql, values + values + [float(t)]).fetchall()
-        dec = decode
-        return [(tuple([dec(v) for v in row[:arity]]), row[arity], row[arity + 1], row[arity + 2])
-                for row in rows]
+            return db.conn.execute(sql, (PROGRAM_VERSION, PROGRESS_VERSION, *values, *values,
+                                         float(t))).fetchall()
 
     def count(self, name: str, arity: int) -> int:
         """Number of stored events of name/arity.
