@@ -17,7 +17,7 @@ import time
 from dataclasses import dataclass, field
 from operator import itemgetter
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Iterator
 
 from .answers import answer_bindings
 from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
@@ -32,7 +32,7 @@ from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBat
 from .store.checks import event_arguments, shorten
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
-from .terms import format_term
+from .terms import format_atom, format_term
 
 __all__ = ["KnowledgeBase", "open", "Declarations", "ProgramInfo", "parse_duration"]
 
@@ -1009,6 +1009,87 @@ class KnowledgeBase:
                 break
         return answers
 
+    def solutions(self, goal: str, at: float | None = None, args: dict | None = None,
+                  timeout: float | None = None,
+                  robot: str | None = None) -> Iterator[dict[str, Any]]:
+        """The answers of ``goal`` one at a time, as they are found (unsynchronized): what
+        :meth:`query` returns, lazily. A consumer that stops early (a command line's
+        ``--limit``, a shell's "stop") never pays for the rest, so a goal with endless answers
+        is usable; past ``timeout`` the iteration raises :class:`SLRTimeout` after the answers
+        already yielded.
+
+        >>> from itertools import islice
+        >>> list(islice(open().solutions("between(1, inf, X)"), 3))
+        [{'X': 1}, {'X': 2}, {'X': 3}]
+        """
+        _check_time_option("at", at)
+        _check_time_option("timeout", timeout, minimum=0.0)
+        if robot is not None:
+            check_robot_name(robot)
+        try:
+            self._refresh()
+            plan = self._plan(goal, tuple(args) if args else ())
+        except SLRError:
+            raise
+        except Exception as exc:  # the facade's promise (see _boundary)
+            raise SLRError(f"solutions: {type(exc).__name__}: {exc}") from exc
+        from .planner import Fallback, plan_for
+        if plan.lookup is not None or (self.sql_enabled
+                                       and type(plan_for(self, plan, at is not None))
+                                       is not Fallback):
+            # A compiled plan answers as one statement: all its answers at once.
+            yield from self.query(goal, at=at, args=args, timeout=timeout, robot=robot)
+            return
+        term, frame = self._instantiate(plan, args)
+        m = self.engine.machine(at=at, timeout=timeout)
+        m.robot = robot
+        solving = m.solve(term)
+        while True:
+            try:
+                next(solving)
+            except StopIteration:
+                return
+            except SLRError:
+                raise
+            except RecursionError:
+                raise SLRError("solutions: the term is nested too deeply") from None
+            except Exception as exc:  # the facade's promise (see _boundary)
+                raise SLRError(f"solutions: {type(exc).__name__}: {exc}") from exc
+            yield answer_bindings(plan.names, frame)
+
+    def goal_warnings(self, goal: str) -> list[str]:
+        """Warnings about ``goal`` that do not change its answer: an event goal or prev/next
+        on a type with no stored events, no rules and no declaration is most likely a typo
+        (it simply fails, SPEC §2, since its events may not have arrived yet); each warning
+        names the nearest known names.
+
+        >>> kb = open(); kb.load("color(O,C)^T :- prev(obj(O,_,C)^Z, T).")
+        >>> kb.goal_warnings("colour(cup2, C)^20")
+        ['no events or rules of colour/2; did you mean color/2?']
+        """
+        import difflib
+
+        from .analysis import goal_refs
+
+        self._refresh()
+        term, _ = parse_term(goal, "<query>")
+        program = self.engine.program
+        known = set(self.store.event_types()) | set(self.store.declared_types())
+        known |= set(program.temporal) | set(program.preds) | set(program.dynamic)
+        names = sorted({f"{format_atom(n)}/{a}" for n, a in known
+                        if not n.startswith(("slr_", "$"))})
+        warnings = []
+        for name, arity in sorted(goal_refs(term, program).stored):
+            if (name, arity) in known:
+                continue
+            written = f"{format_atom(name)}/{arity}"
+            near = difflib.get_close_matches(written, names, n=3, cutoff=0.6)
+            near += [n for n in names if n.rpartition("/")[0] == format_atom(name)
+                     and n not in near]  # the same name with another arity
+            hint = f"; did you mean {' or '.join(near[:3])}?" if near else ""
+            warnings.append(f"no events or rules of {written}{hint}")
+        return warnings
+
     def explain(self, goal: str) -> str:
         """How ``goal`` would be run: which engine, and why.
 
@@ -1210,6 +1291,7 @@ def _boundary(method: Callable) -> Callable:
 
 # Every public method of the facade goes through the boundary (one list, kept next to it).
 for _name in ("__init__", "close", "load", "unload", "programs", "load_file", "define", "add",
+              "goal_warnings",
               "add_event", "add_many", "query", "explain", "submit", "mark_complete",
               "complete_until", "pending", "add_buffer", "remove_buffer", "buffers", "sql",
               "plot", "subscribe", "unsubscribe", "event_rules"):
