@@ -19,7 +19,7 @@ LAYERS = {
     "errors": 0, "terms": 0,
     "unify": 1, "arith": 1, "encoding": 1, "program": 1, "parser": 1,
     "robotlib": 1, "clocks": 1, "answers": 1, "grammar": 1,
-    "store": 2,
+    "store": 2, "frames": 2,
     "builtins": 3,
     "analysis": 4, "engine": 4, "sqlcompile": 4,
     "planner": 5,
