@@ -324,6 +324,20 @@ class EventStore:
                     t: float, point: bool) -> list[tuple]:
         return self._reader.latest_rows(name, arity, positions, values, t, point)
 
+    @_doc(EventReader.bracket)
+    def bracket(self, name: str, arity: int, bound: dict[int, Any], t: float
+                ) -> tuple[Row | None, Row | None] | None:
+        return self._reader.bracket(name, arity, bound, t)
+
+    @_doc(EventReader.distinct_pairs)
+    def distinct_pairs(self, name: str, arity: int, after_seq: int = 0
+                       ) -> tuple[list[tuple[Any, Any]], int]:
+        return self._reader.distinct_pairs(name, arity, after_seq)
+
+    @_doc(EventReader.max_seq)
+    def max_seq(self, name: str, arity: int) -> int:
+        return self._reader.max_seq(name, arity)
+
     @_doc(EventReader.count)
     def count(self, name: str, arity: int) -> int:
         return self._reader.count(name, arity)

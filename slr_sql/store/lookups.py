@@ -403,3 +403,88 @@ class EventReader:
                 return None
             return self.db.conn.execute(
                 f"SELECT max(t_end) FROM {event_type.quoted}").fetchone()[0]
+
+    def bracket(self, name: str, arity: int, bound: dict[int, Any], t: float
+                ) -> tuple[Row | None, Row | None] | None:
+        """The observations around ``t`` of the events matching ``bound`` (ground values at
+        0-based positions, the first one included): the one with the greatest end ``<= t``
+        and the one with the smallest start ``>= t`` (ties: the last in store order, and the last
+        stored among those starting at that time),
+        in one statement; ``(None, None)`` parts when there are none. None when a bound
+        value cannot be pushed into SQL (the caller then takes the general path). Used by
+        ``tf_lookup`` (:mod:`slr_sql.frames`) for each edge of a chain.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a", 1), 1, 1), ("p", ("a", 2), 3, 3)])
+        []
+        >>> [row[0][1] for row in s.bracket("p", 2, {0: "a"}, 2.0)]
+        [1, 2]
+        """
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return None, None
+            positions, values = self._pushdown(event_type, bound)
+            if len(positions) != len(bound) or 0 not in positions:
+                return None
+            key = (event_type.table, "bracket", positions)
+            sql = self.sql_cache.get(key)
+            if sql is None:
+                where = " AND ".join(f"arg{p + 1} = ?" for p in positions)
+                cols = event_type.columns
+                sql = (f"SELECT 0, * FROM (SELECT {cols} FROM {event_type.quoted} "
+                       f"INDEXED BY {event_type.index_arg1_end} WHERE {where} AND t_end <= ? "
+                       f"ORDER BY t_end DESC, t_start DESC, seq DESC LIMIT 1) "
+                       f"UNION ALL SELECT 1, * FROM (SELECT {cols} FROM {event_type.quoted} "
+                       f"INDEXED BY {event_type.index_arg1_start} WHERE {where} AND t_start >= ? "
+                       f"ORDER BY t_start, seq DESC LIMIT 1)")
+                self.sql_cache[key] = sql
+            rows = self.db.conn.execute(sql, values + [float(t)] + values + [float(t)]).fetchall()
+        out: list = [None, None]
+        dec = decode
+        for row in rows:
+            out[row[0]] = (tuple([dec(v) for v in row[1:arity + 1]]), row[arity + 1],
+                           row[arity + 2], row[arity + 3])
+        return out[0], out[1]
+
+    def distinct_pairs(self, name: str, arity: int, after_seq: int = 0
+                       ) -> tuple[list[tuple[Any, Any]], int]:
+        """The distinct (first, second) argument pairs of name/arity among the events stored
+        after arrival sequence ``after_seq``, and the greatest sequence number now (so that a
+        caller keeping the pairs reads only what is new next time).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a", "b"), 1, 1), ("p", ("a", "b"), 2, 2)])
+        []
+        >>> s.distinct_pairs("p", 2)
+        ([(Atom('a'), Atom('b'))], 2)
+        """
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None or arity < 2:
+                return [], 0
+            conn = self.db.conn
+            top = conn.execute(f"SELECT max(seq) FROM {event_type.quoted}").fetchone()[0] or 0
+            if top <= after_seq:
+                return [], top
+            rows = conn.execute(f"SELECT DISTINCT arg1, arg2 FROM {event_type.quoted} "
+                                f"WHERE seq > ? AND seq <= ?", (after_seq, top)).fetchall()
+        return [(decode(a), decode(b)) for a, b in rows], top
+
+    def max_seq(self, name: str, arity: int) -> int:
+        """The greatest arrival sequence number stored for name/arity (0 when none): it moves
+        whenever an event of the type is added, by this process or another.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.max_seq("p", 1)
+        0
+        """
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return 0
+            return self.db.conn.execute(
+                f"SELECT max(seq) FROM {event_type.quoted}").fetchone()[0] or 0
