@@ -59,6 +59,10 @@ class EventReader:
         self.db = db
         self.tables = tables
         self.sql_cache: dict[tuple, str] = {}
+        # a server's typed columns (store/dialect.py): values converted both ways
+        self.to_column = db.dialect.to_column
+        from_column = db.dialect.from_column
+        self.decode = decode if from_column is None else (lambda v: decode(from_column(v)))
 
     def _pushdown(self, event_type: EventType, bound: dict[int, Any] | None
                   ) -> tuple[tuple[int, ...], list]:
@@ -75,6 +79,8 @@ class EventReader:
                 value = encode(bound[position])
             except Unencodable:
                 continue  # not ground (or NaN): the caller filters by unification
+            if self.to_column is not None:
+                value = self.to_column(value)
             positions.append(position)
             values.append(value)
         return tuple(positions), values
@@ -125,7 +131,8 @@ class EventReader:
         if resume:
             conditions.append(_RESUME[kind][0])
         where = f" WHERE {' AND '.join(conditions)}" if conditions else ""
-        sql = (f"SELECT {event_type.columns} FROM {event_type.quoted} INDEXED BY {index}"
+        hint = f" INDEXED BY {index}" if self.db.dialect.index_hints else ""
+        sql = (f"SELECT {event_type.columns} FROM {event_type.quoted}{hint}"
                f"{where} ORDER BY {order}")
         self.sql_cache[key] = sql
         return sql
@@ -144,7 +151,7 @@ class EventReader:
         last = None
         try:
             batch = 8  # prev/next callers usually need only the first row or two
-            dec = decode
+            dec = self.decode
             while True:
                 with db.lock:
                     for attempt in (1, 2):
@@ -335,7 +342,7 @@ class EventReader:
                        f"ORDER BY t_end DESC LIMIT 1) ORDER BY t_start, seq")
                 self.sql_cache[key] = sql
             rows = self.db.conn.execute(sql, values + values + [float(t)]).fetchall()
-        dec = decode
+        dec = self.decode
         return [(tuple([dec(v) for v in row[:arity]]), row[arity], row[arity + 1], row[arity + 2])
                 for row in rows]
 
