@@ -612,7 +612,7 @@ class Synchronizer:
 
     def _read_data_version(self) -> int | None:
         try:
-            return self.store.execute("PRAGMA data_version")[0][0]
+            return self.store.data_version()
         except Exception:
             return None
 

@@ -35,6 +35,7 @@ from typing import Any, Callable, Iterable, Iterator
 from ..errors import SLRError, SLRTimeout
 from .authorizer import READ_ONLY_VALUE_BYTES, SqlGuard, harden_connection
 from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
+from .dialect import SQLITE
 from .schema import migrate, migration_scripts
 from .sqltext import busy_error, split_sql_script
 
@@ -44,6 +45,7 @@ __all__ = ["Database", "DatabaseError", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT"
 # The base class of the errors the database raises while running a statement (a missing
 # table, a syntax error, a constraint, an interrupted statement...). Callers outside the
 # store catch this name, never sqlite3's.
+# (the PostgreSQL backend's PgStatementError derives from it)
 DatabaseError = sqlite3.Error
 
 CACHE_SIZE_KIB = 65536  # PRAGMA cache_size of the store's connection (64 MiB)
@@ -210,6 +212,9 @@ class Database:
     >>> db.close()
     """
 
+    dialect = SQLITE
+    python_functions = True  # create_function's Python functions run inside statements
+
     def __init__(self, path: str | os.PathLike | None = None, clock: Any = None,
                  synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
                  adopt: bool = False, checkpoint: str = "auto",
@@ -302,6 +307,43 @@ class Database:
         with self.lock:
             self.check_open()
             return self.conn.execute("PRAGMA data_version").fetchone()[0]
+
+    def table_names(self) -> set[str]:
+        """Names of the tables of the database.
+
+        >>> "slr_meta" in Database(None).table_names()
+        True
+        """
+        with self.lock:
+            return {row[0] for row in self.conn.execute(
+                "SELECT name FROM sqlite_master WHERE type = 'table'")}
+
+    def triggers(self, table: str | None = None) -> set[str]:
+        """Names of the triggers (on ``table`` only, when given), temporary ones included.
+
+        >>> Database(None).triggers("slr_clock")
+        {'slr_clock_back'}
+        """
+        with self.lock:
+            return {row[0] for row in self.conn.execute(
+                "SELECT name FROM sqlite_master WHERE type = 'trigger' AND "
+                "(? IS NULL OR tbl_name = ?) UNION ALL SELECT name FROM sqlite_temp_master "
+                "WHERE type = 'trigger' AND (? IS NULL OR tbl_name = ?)",
+                (table, table, table, table))}
+
+    def object_names(self) -> set[str]:
+        """Lower-cased names of every table, index, view and trigger of the database.
+
+        >>> "slr_meta" in Database(None).object_names()
+        True
+        """
+        with self.lock:
+            return {row[0].lower() for row in self.conn.execute("SELECT name FROM sqlite_master")}
+
+    @property
+    def max_columns(self) -> int:
+        """The most columns a table may have (SQLite's compile-time limit)."""
+        return self.conn.getlimit(sqlite3.SQLITE_LIMIT_COLUMN)
 
     def suspend_streams(self) -> None:
         """Close the statements of the streams still reading (lock held): each resumes

@@ -60,6 +60,10 @@ class EventReader:
         self.db = db
         self.tables = tables
         self.sql_cache: dict[tuple, str] = {}
+        # a server's typed columns (store/dialect.py): values converted both ways
+        self.to_column = db.dialect.to_column
+        from_column = db.dialect.from_column
+        self.decode = decode if from_column is None else (lambda v: decode(from_column(v)))
 
     def _pushdown(self, event_type: EventType, bound: dict[int, Any] | None
                   ) -> tuple[tuple[int, ...], list]:
@@ -76,6 +80,8 @@ class EventReader:
                 value = encode(bound[position])
             except Unencodable:
                 continue  # not ground (or NaN): the caller filters by unification
+            if self.to_column is not None:
+                value = self.to_column(value)
             positions.append(position)
             values.append(value)
         return tuple(positions), values
@@ -128,7 +134,8 @@ class EventReader:
         if resume:
             conditions.append(_RESUME[kind][0])
         where = f" WHERE {' AND '.join(conditions)}" if conditions else ""
-        sql = (f"SELECT {event_type.columns} FROM {event_type.quoted} INDEXED BY {index}"
+        hint = f" INDEXED BY {index}" if self.db.dialect.index_hints else ""
+        sql = (f"SELECT {event_type.columns} FROM {event_type.quoted}{hint}"
                f"{where} ORDER BY {order}")
         self.sql_cache[key] = sql
         return sql
@@ -147,7 +154,7 @@ class EventReader:
         last = None
         try:
             batch = 8  # prev/next callers usually need only the first row or two
-            dec = decode
+            dec = self.decode
             while True:
                 with db.lock:
                     for attempt in (1, 2):
@@ -332,7 +339,7 @@ class EventReader:
             if len(positions) != len(bound):
                 return None
             rows = self.latest_rows(name, arity, positions, values, t, point)
-        dec = decode
+        dec = self.decode
         return [(tuple([dec(v) for v in row[:arity]]), row[arity], row[arity + 1], row[arity + 2])
                 for row in rows]
 
@@ -442,7 +449,7 @@ class EventReader:
                 self.sql_cache[key] = sql
             rows = self.db.conn.execute(sql, values + [float(t)] + values + [float(t)]).fetchall()
         out: list = [None, None]
-        dec = decode
+        dec = self.decode
         for row in rows:
             out[row[0]] = (tuple([dec(v) for v in row[1:arity + 1]]), row[arity + 1],
                            row[arity + 2], row[arity + 3])
