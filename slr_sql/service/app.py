@@ -828,6 +828,16 @@ async def _explain(svc: "_Service", request: Request) -> Any:
     return {"explain": await svc.call(svc.kb.explain, _field(b, "goal", str, required=True))}
 
 
+@_route("POST", "/warnings", "Warnings about a goal that do not change its answer: a "
+        "predicate with no events, rules or declaration and the nearest known names "
+        "(kb.goal_warnings).",
+        body={"goal": ("string", True)}, response={"warnings": "array"})
+async def _warnings(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    goal = _field(b, "goal", str, required=True)
+    return {"warnings": await svc.call(svc.kb.goal_warnings, goal)}
+
+
 @_route("POST", "/mark_complete", "Declare a history complete up to a time "
         "(kb.mark_complete).",
         body={"type": ("string", True), "time": ("Number", True)},
@@ -934,7 +944,7 @@ async def _stats(svc: "_Service", request: Request) -> Any:
 
 @_route("GET", "/fleet/positions", "What this fleet store holds of a robot: per event "
         "type, the last sequence of the robot's store stored here (slr fleet push).",
-        query={"robot": "string"}, response={"positions": "array"})
+        query={"robot": ("string", True)}, response={"positions": "array"})
 async def _fleet_positions(svc: "_Service", request: Request) -> Any:
     from slr_sql.shipping import positions
     robot = request.query_params.get("robot")

@@ -32,7 +32,7 @@ import threading
 import time
 from concurrent.futures import Future, InvalidStateError
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Iterator
 from urllib.parse import quote
 
 from slr_sql import EventRejected, SLRError, SLRTimeout
@@ -351,6 +351,20 @@ class RemoteKnowledgeBase:
     def explain(self, goal: str) -> str:
         """How ``goal`` would run on the server: which engine, and why."""
         return self._post("/explain", {"goal": _text(goal, "goal")})["explain"]
+
+    def solutions(self, goal: str, at: float | None = None, args: dict | None = None,
+                  timeout: float | None = None,
+                  robot: str | None = None) -> Iterator[dict[str, Any]]:
+        """The answers of ``goal`` one at a time (see ``KnowledgeBase.solutions``). The server
+        answers a request as a whole, so this iterates over one :meth:`query`'s answers; a
+        goal with endless answers needs ``timeout`` (capped by the server's
+        ``max_query_time``) or ``query(..., limit=N)``."""
+        yield from self.query(goal, at=at, args=args, timeout=timeout, robot=robot)
+
+    def goal_warnings(self, goal: str) -> list[str]:
+        """The server's warnings about ``goal`` that do not change its answer (likely typos:
+        see ``KnowledgeBase.goal_warnings``)."""
+        return list(self._post("/warnings", {"goal": _text(goal, "goal")})["warnings"])
 
     def pending(self) -> list[PendingQueryAPI]:
         """The synchronized queries this client submitted that are still waiting (each
