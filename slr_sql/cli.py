@@ -559,14 +559,19 @@ def _warn_about(kb: Any, goal: str) -> None:
               help="Stop after N answers.")
 @click.option("--json", "as_json", is_flag=True,
               help="One JSON object per answer (the service's encoding); no answer: no line.")
+@click.option("--robot", default=None,
+              help="Only this robot's events (every event goal, prev and next).")
 def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | None,
-          limit: int | None, as_json: bool) -> None:
+          limit: int | None, as_json: bool, robot: str | None) -> None:
     """Ask GOAL and print one answer per line (`false.` when there is none)."""
     goal = strip_full_stop(goal)
     at = _finite("--at", at)
     timeout = _finite("--timeout", timeout, minimum=0.0)
     printer = AnswerPrinter(as_json)
     with _open(db, create=False) as kb:
+        if wait and robot is not None:
+            raise slr_sql.SLRError("--robot cannot be combined with --wait yet: ask "
+                                   "origin(R, Goal) in the goal instead")
         _warn_about(kb, goal)
         if wait:
             if not hasattr(kb, "submit"):
@@ -592,11 +597,13 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
             for answer in answers[:limit]:
                 printer(answer)
         elif not hasattr(kb, "solutions"):   # a service URL: the server applies the limit
-            for answer in kb.query(goal, at=at, timeout=timeout, limit=limit):
+            for answer in kb.query(goal, at=at, timeout=timeout, limit=limit,
+                                   **({"robot": robot} if robot is not None else {})):
                 printer(answer)
         elif limit != 0:
             try:
-                for answer in kb.solutions(goal, at=at, timeout=timeout):
+                for answer in kb.solutions(goal, at=at, timeout=timeout,
+                                        **({"robot": robot} if robot is not None else {})):
                     printer(answer)
                     if printer.count == limit:
                         break
@@ -1281,6 +1288,9 @@ def shell(db: str) -> None:
 
 from .ros.cli import ros as _ros  # noqa: E402 - issue 13: `slr ros` (its extra is imported on use)
 main.add_command(_ros)
+
+from .fleet import _click_group as _fleet_group  # noqa: E402 - `slr fleet push|status`
+main.add_command(_fleet_group())
 
 
 # ---------------------------------------------------------------------------------------------
