@@ -220,6 +220,32 @@ def load(db: str, file: str, name: str, replace: bool) -> None:
     with _open(db) as kb:
         kb.load_file(file, name=name, replace=replace)
     click.echo(f"{'replaced' if replace else 'loaded'} {file} as program {name!r}")
+    _warn_event_like_facts(file, db)
+
+
+def _warn_event_like_facts(file: str, db: str) -> None:
+    """Facts written like events (``obj(cup1, cup, red)^2.0.``) in a loaded program are
+    rules' facts, which prev/next never see: say so, and how to add them as events."""
+    from .example_files import event_like_facts, parse_example
+
+    try:
+        with open(file, encoding="utf-8") as handle:
+            text = handle.read()
+        facts = event_like_facts(text, file)
+    except (OSError, UnicodeDecodeError, slr_sql.SLRError):
+        return
+    if not facts:
+        return
+    line, first = facts[0]
+    more = f" (and {len(facts) - 1} more)" if len(facts) > 1 else ""
+    _err(f"warning: {file}:{line}: {first} is a fact{more}, not an event: prev and next see "
+         f"only events")
+    if parse_example(text, file).has_events_part:
+        _err(f"  to load its rules and add the events after '%% events' into a new store: "
+             f"slr run {file} --db NEW.db")
+    else:
+        _err(f"  to add such lines as events: slr add {db} 'EVENT' ..., or one per line "
+             f"with slr ingest {db} FILE")
 
 
 @main.command()
@@ -489,6 +515,75 @@ def ingest(db: str, file: str, progress: bool | None) -> None:
     click.echo(f"ingested {report.added} event{'s' if report.added != 1 else ''}"
                + (f", {len(report.bad)} bad line{'s' if len(report.bad) != 1 else ''}" if report.bad else ""))
     if report.bad:
+        sys.exit(1)
+
+
+# ---------------------------------------------------------------------------------------------
+# run: an example file (program, events, queries with expected answers)
+# ---------------------------------------------------------------------------------------------
+
+@main.command()
+@click.argument("file", type=click.Path(dir_okay=False))
+@click.option("--db", "db", type=click.Path(dir_okay=False), default=None,
+              help="Keep the store in this file (default: in memory).")
+@click.option("-q", "--quiet", is_flag=True, help="Print only the mismatches and the summary.")
+def run(file: str, db: str | None, quiet: bool) -> None:
+    """Run an example FILE: load its rules, add its events, ask its queries, compare.
+
+    The rules are the text before '%% events', the events the lines after it; each
+    '%% query:' is asked and its answers compared with '%% expect:' (examples/README.md).
+    Exit status 1 when an answer differs.
+    """
+    from .example_files import check_case, parse_example
+
+    _existing_file(file)
+    try:
+        with open(file, encoding="utf-8") as handle:
+            text = handle.read()
+    except UnicodeDecodeError:
+        raise slr_sql.SLRError(f"{file}: not an example file (not UTF-8 text)") from None
+    example = parse_example(text, file)
+    if db is not None and os.path.exists(db) and os.path.getsize(db) > 0:
+        raise slr_sql.SLRError(f"{db} exists; slr run wants a fresh store (remove it first)")
+    # The events are a recording: time stands still at 0, so no buffer prunes them and
+    # every query sees the file's events however long ago their times are.
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.load(example.program, file)
+        rejected = kb.add_many(example.events) if example.events else []
+        for rejection in rejected:
+            index = getattr(rejection, "index", None)
+            where = (example.event_lines[index] if isinstance(index, int)
+                     and 0 <= index < len(example.event_lines) else 0)
+            _err(f"{file}:{where}: event rejected: {error_words(rejection)}")
+        if not quiet:
+            click.echo(f"% {file}: {len(example.events) - len(rejected)} events, "
+                       f"{len(example.cases)} quer{'y' if len(example.cases) == 1 else 'ies'}")
+        failed = 0
+        for case in example.cases:
+            view = "" if case.at is None else f"  (at {case.at:g})"
+            try:
+                result = check_case(kb, case)
+            except slr_sql.SLRError as exc:
+                failed += 1
+                click.echo(f"ERROR {file}:{case.line}: ?- {case.goal}.{view}\n"
+                           f"      {error_words(exc)}")
+                continue
+            lines = answer_lines(result.answers)
+            if result.ok is False:
+                failed += 1
+                click.echo(f"FAIL  {file}:{case.line}: ?- {case.goal}.{view}")
+                click.echo(f"      expected {case.expect}")
+                for line in lines:
+                    click.echo(f"      got      {line}")
+            elif not quiet:
+                mark = "ok   " if result.ok else "     "
+                click.echo(f"{mark} ?- {case.goal}.{view}")
+                for line in lines:
+                    click.echo(f"        {line}")
+    compared = sum(1 for c in example.cases if c.expect is not None)
+    click.echo(f"{compared - failed} of {compared} expected answers matched"
+               + (f"; {len(rejected)} events rejected" if rejected else ""))
+    if failed or rejected:
         sys.exit(1)
 
 
