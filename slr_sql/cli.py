@@ -1401,32 +1401,66 @@ main.add_command(_fleet_group())
               help="Draw a numeric argument as a line, e.g. speed:1, seg:2[0], tf:3.pose[0][0].")
 @click.option("--complex", "complex_types", multiple=True, metavar="TYPE",
               help="Mark TYPE as a complex event type (default: the store's own list, if any).")
+@click.option("--by", "by", multiple=True, metavar="TYPE:ARG",
+              help="A row and a color per value of this argument, e.g. seg:1 (a row per "
+                   "object); value lines of TYPE split the same way.")
+@click.option("--lag/--no-lag", "lags", default=None,
+              help="Draw each event's arrival lag, end time -> arrival (default: when the "
+                   "arrivals share the events' clock).")
+@click.option("--internal", is_flag=True, help="Also the store's own types (slr_import/3, ...).")
+@click.option("--relative/--absolute", "relative", default=None,
+              help="Time axis in seconds since the window's start (default: for epoch times).")
+@click.option("--query", "query_goal", default=None, metavar="GOAL",
+              help="A row with GOAL's answers over time, GOAL asked with T at each --every "
+                   "step, e.g. 'location(cup1, L)^T'.")
+@click.option("--every", type=float, default=None, metavar="S",
+              help="Seconds between the times --query asks its goal (default: 1/200 of the window).")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
-              help="The PNG file to write.")
+              help="The image to write: .png, .jpg, .svg or .pdf.")
 @click.option("--size", default=None, metavar="WxH", help="Image size in pixels (default 1200 wide).")
 @click.option("--dpi", type=int, default=100, show_default=True, help="Scales text and lines.")
 @click.option("--title", default=None, help="Title above the rows (default: the DB's file name).")
 def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None,
-         values: tuple[str, ...], complex_types: tuple[str, ...], output: str,
-         size: str | None, dpi: int, title: str | None) -> None:
-    """Draw the event histories of DB as a timeline PNG: one row per event TYPE (default: all).
+         values: tuple[str, ...], complex_types: tuple[str, ...], by: tuple[str, ...],
+         lags: bool | None, internal: bool, relative: bool | None, query_goal: str | None,
+         every: float | None, output: str, size: str | None, dpi: int,
+         title: str | None) -> None:
+    """Draw the event histories of DB as a timeline image: one row per event TYPE (default:
+    all but the store's own).
 
-    Intervals are bars, points ticks, --value arguments lines; histories too long for the
-    picture are aggregated per pixel column.
+    Intervals are bars, points ticks, --value arguments lines, arrival lags orange lines;
+    histories too long for the picture are aggregated per pixel column.
     """
-    from .plot import parse_size, save_timeline, timeline
+    from .plot import IMAGE_FORMATS, collect_timeline, draw_timeline, parse_size
 
+    suffix = os.path.splitext(output)[1].lower()
+    if suffix not in IMAGE_FORMATS:   # before any work: nothing is written
+        raise slr_sql.SLRError(f"cannot write {output}: the suffix {suffix or '(none)'} names "
+                               f"no image format; use {', '.join(IMAGE_FORMATS)}")
+    if every is not None and query_goal is None:
+        raise click.UsageError("--every goes with --query")
     if not os.path.exists(db):
         raise slr_sql.SLRError(f"no such store: {db}")
     dimensions = parse_size(size) if size is not None else None
-    with _open(db) as kb:
-        figure = timeline(kb, list(types) or None, start=start, end=end, values=values,
-                          complex_types=complex_types or None, size=dimensions, dpi=dpi,
-                          title=os.path.basename(db) if title is None else title)
+    with _open(db, create=False) as kb:
+        if query_goal is not None and every is None:
+            window = collect_timeline(kb, list(types) or None, start=start, end=end,
+                                      internal=internal)
+            every = (window.end - window.start) / 200
+        collected = collect_timeline(
+            kb, list(types) or None, start=start, end=end, values=values,
+            complex_types=complex_types or None, size=dimensions, dpi=dpi,
+            title=os.path.basename(db) if title is None else title, by=by, lags=lags,
+            internal=internal, relative=relative,
+            query=None if query_goal is None else strip_full_stop(query_goal), every=every)
+    figure = draw_timeline(collected)
+    from .plot import save_timeline
+
     save_timeline(figure, output)
     drawn = figure.slr_timeline
-    click.echo(f"wrote {output} ({drawn.width}x{drawn.height} px, {len(drawn.rows)} "
-               f"row{'s' if len(drawn.rows) != 1 else ''}"
+    n_rows = len(drawn.rows) + len(drawn.queries)
+    click.echo(f"wrote {output} ({drawn.width}x{drawn.height} px, {n_rows} "
+               f"row{'s' if n_rows != 1 else ''}"
                + (f", {len(drawn.series)} value line{'s' if len(drawn.series) != 1 else ''}"
                   if drawn.series else "") + ")")
 
