@@ -291,7 +291,13 @@ def _complex_names(source: Any, complex_types: Iterable[str] | None) -> set[str]
     ``complex_event_types()`` (an iterable of such names) on the knowledge base."""
     if complex_types is None:
         hook = getattr(source, "complex_event_types", None)
-        complex_types = hook() if callable(hook) else ()
+        rules = getattr(source, "event_rules", None)
+        if callable(hook):
+            complex_types = hook()
+        elif callable(rules):   # the heads of the event rules in force derive complex events
+            complex_types = [str(rule.get("head")) for rule in rules() if rule.get("head")]
+        else:
+            complex_types = ()
     if isinstance(complex_types, str):
         complex_types = [complex_types]
     return {str(name).strip() for name in complex_types}
