@@ -103,9 +103,37 @@ def error_words(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc} (this is a bug in slr_sql; please report it)"
 
 
+_SENTENCE_END = re.compile(r"(?<!e\.g)(?<!i\.e)(?<!etc)\.(?=\s|$)")
+
+
+def one_liner(command: click.Command) -> str:
+    """A command's line in ``slr --help``: its ``short_help``, or the first sentence of its
+    help, whole (click would cut it at 45 characters, or at the "." of "e.g.").
+
+    >>> one_liner(click.Command("x", help="Run a SQL STATEMENT, e.g. SELECT 1. More."))
+    'Run a SQL STATEMENT, e.g. SELECT 1.'
+    """
+    if command.short_help:
+        return command.short_help
+    paragraph = (command.help or "").split("\n\n")[0]
+    text = " ".join(paragraph.replace("\b", "").split())
+    end = _SENTENCE_END.search(text)
+    return text[:end.end()] if end else text
+
+
 class SLRGroup(click.Group):
     """Turns every error into the CLI's error contract (words, exit 1) instead of a
     traceback; click's own usage errors and exits pass through."""
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        rows = []
+        for name in self.list_commands(ctx):
+            command = self.get_command(ctx, name)
+            if command is not None and not command.hidden:
+                rows.append((name, one_liner(command)))
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
 
     def invoke(self, ctx: click.Context) -> Any:
         try:
@@ -144,9 +172,20 @@ def _open(db: str, create: bool = True) -> Any:
         ctx = click.get_current_context(silent=True)
         token = (ctx.find_root().obj or {}).get("token") if ctx is not None else None
         return slr_sql.connect(db, token=token)
-    if not create and not os.path.lexists(db):
-        raise slr_sql.SLRError(f"no such store: {db}")
+    _check_existing_store(db, create)
     return slr_sql.open(db)
+
+
+def _check_existing_store(db: str, create: bool = False) -> None:
+    """Commands that do not add to a store never create one: neither from a missing path nor
+    from an empty file (SQLite would make an empty file a database on the first write)."""
+    if create:
+        return
+    if not os.path.lexists(db):
+        raise slr_sql.SLRError(f"no such store: {db}")
+    if os.path.isfile(db) and os.path.getsize(db) == 0:
+        raise slr_sql.SLRError(f"no such store: {db} is an empty file (only load, add, "
+                               f"ingest, demo and serve create a store)")
 
 
 def _existing_file(path: str) -> str:
@@ -178,8 +217,8 @@ def _finite(option: str, value: float | None, minimum: float | None = None) -> f
 def main(ctx: click.Context, token: str | None) -> None:
     """SLR: a Prolog-like language over robot event streams, in one SQLite file.
 
-    DB is the store's file; load, add, ingest and demo create it, the other commands
-    need an existing store. DB may also be the URL of a running `slr serve`
+    DB is the store's file; load, add, ingest, run, demo and serve create it, the other
+    commands need an existing store. DB may also be the URL of a running `slr serve`
     (http://HOST:PORT).
     """
     ctx.obj = {"token": token}
@@ -1489,8 +1528,8 @@ def subscribe(db: str, pattern: str, where: str | None, since: str, until: float
 
     from .subscriptions import answer_json
 
-    if not os.path.exists(db):
-        raise slr_sql.SLRError(f"no such store: {db}")
+    if not _is_url(db):
+        _check_existing_store(db)
     since_value: Any = since.strip()
     if since_value != "now":
         try:
@@ -1500,7 +1539,7 @@ def subscribe(db: str, pattern: str, where: str | None, since: str, until: float
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):   # stop between two events, never inside one
         signal.signal(signum, lambda *_: stop.set())
-    with _open(db) as kb:
+    with _open(db, create=False) as kb:
         sub = kb.subscribe(strip_full_stop(pattern), where=where, since=since_value,
                            until=until, id=sub_id)
         try:
@@ -1537,8 +1576,7 @@ def stats(db: str) -> None:
         with _open(db) as kb:
             click.echo(kb.stats()["text"])
         return
-    if not os.path.lexists(db):
-        raise slr_sql.SLRError(f"no such store: {db}")
+    _check_existing_store(db)
     with EventStore(db) as store:
         click.echo(format_stats(store, db))
 
