@@ -36,7 +36,7 @@ from ..errors import SLRError, SLRTimeout
 from .authorizer import READ_ONLY_VALUE_BYTES, SqlGuard, harden_connection
 from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
 from .schema import migrate, migration_scripts
-from .sqltext import busy_error, split_sql_script
+from .sqltext import busy_error, split_sql_script, store_error
 
 __all__ = ["Database", "DatabaseError", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT", "run_sql_file",
            "check_file"]
@@ -179,6 +179,14 @@ def _read_schema(path: str, header: bytes) -> tuple[list[tuple[str, str]], int]:
     if "not a database" in str(error):
         raise SLRError(f"{path}: not an SQLite database, or its header is damaged "
                        f"({error})")
+    code = getattr(error, "sqlite_errorcode", None)
+    if code is not None and code & 0xFF != sqlite3.SQLITE_CORRUPT:
+        # the file could not be read (a full disk refusing the -shm file, permissions...):
+        # that says nothing about its pages
+        reason = store_error(error, path, outcome="it was not opened")  # type: ignore[arg-type]
+        if type(reason) is not SLRError:
+            raise reason
+        raise SLRError(f"{path}: cannot read it ({error})")
     raise SLRError(f"{path}: the file is damaged ({error})")
 
 
@@ -238,6 +246,11 @@ class Database:
         self.open_streams: weakref.WeakSet = weakref.WeakSet()
         self.deadline: float | None = None  # of the compiled statement running now
         self.busy_timeout = busy_timeout
+        # the files this open creates: removed again should it fail (a store it could not
+        # create leaves no empty file, -wal or -shm behind)
+        created = [] if self.path is None or os.path.lexists(self.path) else \
+            [name for name in (self.path, self.path + "-wal", self.path + "-shm",
+                               self.path + "-journal") if not os.path.lexists(name)]
         try:
             self.conn = sqlite3.connect(self.path or ":memory:", check_same_thread=False,
                                         isolation_level=None, timeout=busy_timeout,
@@ -270,11 +283,17 @@ class Database:
                 self.checkpointer = WalCheckpointer(self.path, checkpoint_interval)
         except BaseException as exc:
             conn.close()
-            if isinstance(exc, sqlite3.OperationalError):
-                busy = busy_error(exc, self.path, busy_timeout)
-                if busy is not None:
-                    raise busy from None
+            for name in created:
+                try:
+                    os.remove(name)
+                except OSError:
+                    pass  # not created after all, or already gone
             if isinstance(exc, sqlite3.Error):
+                outcome = "it was not created, and nothing was left behind" if created else \
+                    "it was not opened"
+                reason = store_error(exc, self.path, busy_timeout, outcome)
+                if type(reason) is not SLRError:  # busy, full: a condition that may pass
+                    raise reason from None
                 raise SLRError(f"{self.path or ':memory:'}: cannot open the store "
                                f"({exc})") from None
             raise
