@@ -8,7 +8,7 @@
 """
 from .clocks import Clock, ManualClock, StreamClock, WallClock
 from .errors import EventRejected, SLRBusy, SLRError, SLREvaluationError, SLRStoreFull, \
-    SLRSyntaxError, SLRTimeout, SLRUnavailable
+    SLRStoreGone, SLRSyntaxError, SLRTimeout, SLRUnavailable
 from .kb import KnowledgeBase, open
 from .terms import Atom, String, Struct, Var
 
@@ -27,7 +27,7 @@ def connect(url: str, token: str | None = None, **options):
 __all__ = [
     "open", "connect", "KnowledgeBase", "Clock", "WallClock", "ManualClock", "StreamClock",
     "SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRBusy", "EventRejected",
-    "SLRUnavailable", "SLRStoreFull",
+    "SLRUnavailable", "SLRStoreFull", "SLRStoreGone",
     "Atom", "String", "Struct", "Var",
 ]
 __version__ = "0.1.0"
