@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import math
+import re
 import threading
 import time
 from dataclasses import dataclass, field
@@ -27,7 +28,7 @@ from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
 from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore, \
     store_error
-from .store.checks import event_arguments, shorten
+from .store.checks import event_arguments, shorten, shown
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
 from .terms import format_term
@@ -665,7 +666,15 @@ class KnowledgeBase:
         >>> kb = open(); kb.add("seg(cup1, [0.4,0.1,0.9])^12.31"); len(kb.query("seg(O,L)^T"))
         1
         """
-        self._add([self._event_from_text(text)], atomic=True)
+        if not isinstance(text, str):
+            raise SLRError(f"add takes one event written in SLR syntax (a str), not a "
+                           f"{type(text).__name__}; add_event(name, args, start, end) and "
+                           f"add_many([...]) take tuples")
+        try:
+            event = self._event_from_text(text)
+        except (ValueError, OverflowError) as exc:  # a number too long for Python to read
+            raise EventRejected(f"{shorten(text)}: {_python_words(exc)}") from None
+        self._add([event], atomic=True)
 
     def add_event(self, name: str, args: Iterable[Any], start: float, end: float | None = None) -> None:
         """Add one event from Python values (``str`` is an atom, ``String`` a string).
@@ -726,15 +735,15 @@ class KnowledgeBase:
                         name, args, start, end = ev
                     except (TypeError, ValueError):
                         raise EventRejected(f"event #{i} is neither SLR text nor a (name, args, "
-                                            f"start, end) tuple: {shorten(repr(ev))}") from None
+                                            f"start, end) tuple: {shown(ev)}") from None
                     event = (name, event_arguments(name, args, start, end), start, end)
             except (SLRError, TypeError, ValueError, OverflowError, RecursionError) as exc:
                 if atomic:
                     raise exc if isinstance(exc, SLRError) else EventRejected(str(exc))
                 reason = "the term is nested too deeply" if isinstance(exc, RecursionError) \
-                    else str(exc).split("; use sys.")[0]  # (a Python hint, not for users)
+                    else _python_words(exc)
                 err = exc if isinstance(exc, EventRejected) else \
-                    EventRejected(f"{shorten(repr(ev))}: {reason}")
+                    EventRejected(f"{shown(ev)}: {reason}")
                 err.index = i
                 err.event = ev
                 errors.append(err)
@@ -1042,6 +1051,18 @@ class KnowledgeBase:
     def unsubscribe(self, id: str) -> None:
         """Remove the durable subscription ``id`` and its position (closing it if open)."""
         self._subscriptions.unsubscribe(id)
+
+
+def _python_words(exc: BaseException) -> str:
+    """The message of a Python exception raised by a conversion, in the user's terms (the
+    advice about ``sys.set_int_max_str_digits`` is for Python programmers, not users)."""
+    text = str(exc)
+    digits = re.search(r"limit \((\d+) digits\) for integer string conversion(?:: value has "
+                       r"(\d+) digits)?", text)
+    if digits:
+        has = f" ({digits.group(2)} digits)" if digits.group(2) else ""
+        return f"an integer too long{has}: at most {digits.group(1)} digits are read"
+    return text.split("; use sys.")[0]
 
 
 def _check_time_option(name: str, value: Any, minimum: float | None = None) -> None:
