@@ -28,7 +28,7 @@ from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
 from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore, \
     store_error
-from .store.checks import event_arguments, shorten, shown
+from .store.checks import event_arguments, shorten, shown, text_problem
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
 from .terms import format_term
@@ -128,7 +128,10 @@ class ProgramInfo:
 
 def _program_name(name: Any) -> str:
     if not isinstance(name, str) or not name:
-        raise SLRError(f"a program name is a non-empty string, not {name!r}")
+        raise SLRError(f"a program name is a non-empty string, not {shown(name)}")
+    problem = text_problem(name)
+    if problem:
+        raise SLRError(f"the program name {shown(name)} cannot be stored: {problem}")
     return name
 
 
@@ -830,7 +833,7 @@ class KnowledgeBase:
             for name, value in args.items():
                 slot = plan.bind_slots.get(name)
                 if slot is not None:
-                    frame[slot] = value if terms else from_python(value)
+                    frame[slot] = value if terms else _argument_term(name, value)
         goals = [build(g, frame) for g in plan.compiled.body]
         if not goals:
             goal: Any = Atom("true")
@@ -876,7 +879,7 @@ class KnowledgeBase:
             frame = [None] * plan.compiled.nslots
             if args:
                 for name, value in args.items():
-                    frame[plan.bind_slots[name]] = from_python(value)
+                    frame[plan.bind_slots[name]] = _argument_term(name, value)
             answers = plan.lookup.run(self.store, frame, plan.names)
             if answers is not None:
                 return answers
@@ -956,6 +959,10 @@ class KnowledgeBase:
     def mark_complete(self, event_type: str, t: float) -> None:
         """Declare the history of ``"p/N"`` (or ``"p"``: every arity) complete up to ``t``
         (persisted), like a ``fullyUpdated(p/N)^t`` event."""
+        if not isinstance(event_type, str):
+            raise SLRError(f"mark_complete: the event type is text such as \"p/2\" or \"p\", "
+                           f"not {shown(event_type)}")
+        _check_time_option("mark_complete: t", t)
         self._refresh()
         self._sync.mark_complete(event_type, t)
 
@@ -1053,6 +1060,18 @@ class KnowledgeBase:
         self._subscriptions.unsubscribe(id)
 
 
+def _argument_term(name: str, value: Any) -> Any:
+    """The term for ``args[name]`` of a query, or an SLRError naming the argument."""
+    try:
+        return from_python(value)
+    except (TypeError, ValueError) as exc:
+        raise SLRError(f"args[{name!r}] = {shown(value)} is not a term: "
+                       f"{_python_words(exc)} (atoms are str, strings slr_sql.String, numbers "
+                       f"int or float, lists list, compounds slr_sql.Struct)") from None
+    except RecursionError:
+        raise SLRError(f"args[{name!r}]: the term is nested too deeply") from None
+
+
 def _python_words(exc: BaseException) -> str:
     """The message of a Python exception raised by a conversion, in the user's terms (the
     advice about ``sys.set_int_max_str_digits`` is for Python programmers, not users)."""
@@ -1070,7 +1089,7 @@ def _check_time_option(name: str, value: Any, minimum: float | None = None) -> N
     if value is None:
         return
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SLRError(f"{name} must be a number of seconds, not {value!r}")
+        raise SLRError(f"{name} must be a number of seconds, not {shown(value)}")
     try:
         number = float(value)
     except OverflowError:
