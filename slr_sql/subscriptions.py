@@ -221,7 +221,11 @@ class _Matcher:
 def _time_arg(value: Any, what: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SLRError(f"subscribe: {what} must be a number of seconds, not {value!r}")
-    value = float(value)
+    try:
+        value = float(value)
+    except OverflowError:
+        raise SLRError(f"subscribe: {what} is out of range (an integer of "
+                       f"{value.bit_length()} bits; a time is a float)") from None
     if math.isnan(value):
         raise SLRError(f"subscribe: {what} must be a number, not NaN")
     return value
