@@ -28,6 +28,7 @@ from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
 from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore
 from .store.checks import event_arguments, shorten
+from .sync import DEFAULT_MAX_LEARNED_DELAY
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
 from .terms import format_term
@@ -248,7 +249,13 @@ class KnowledgeBase:
     def __init__(self, path: str | Path | None = None, clock: Clock | None = None, *,
                  synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
                  adopt: bool = False, checkpoint: str = "auto",
-                 cache_mib: float = CACHE_SIZE_KIB / 1024):
+                 cache_mib: float = CACHE_SIZE_KIB / 1024,
+                 max_learned_delay: float | None = DEFAULT_MAX_LEARNED_DELAY):
+        if max_learned_delay is not None:
+            _check_time_option("max_learned_delay", max_learned_delay, minimum=0.0)
+            max_learned_delay = float(max_learned_delay)
+        # the largest delay a type may learn (sync.DEFAULT_MAX_LEARNED_DELAY; None: no cap)
+        self.max_learned_delay = max_learned_delay
         self.clock = clock if clock is not None else WallClock()
         self.store = EventStore(path, self.clock, synchronous=synchronous,
                                 busy_timeout=busy_timeout, adopt=adopt, checkpoint=checkpoint,
@@ -1092,7 +1099,10 @@ def open(path: str | Path | None = None, clock: Clock | None = None, **options: 
     thread of the store does it, so no ``add`` waits for it -- for long-running writers with
     a latency budget, such as ``slr serve`` and ``slr ros bridge``), ``cache_mib`` (SQLite's
     page cache, default 64 MiB: it fills as the store is used, then the process's memory stays
-    flat; a smaller one makes it flat sooner and makes large ingests and scans re-read pages).
+    flat; a smaller one makes it flat sooner and makes large ingests and scans re-read pages),
+    ``max_learned_delay`` (seconds a learned delay may reach, default 3600; ``None``: no cap;
+    an event arriving later than that after its end warns with
+    :class:`~slr_sql.sync.LearnedDelayWarning`: its times are probably not the clock's).
     A file that is not a store (not SQLite, damaged, a store of a newer slr_sql, or an SQLite
     file of another application) is refused with an :class:`SLRError` and left untouched;
     ``adopt=True`` adds a store to another application's SQLite file on purpose.
