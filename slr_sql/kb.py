@@ -933,8 +933,11 @@ class KnowledgeBase:
         """``await kb.ask(goal, at=z)``: :meth:`submit` for asyncio code."""
         import asyncio
 
-        return await asyncio.wrap_future(self.submit(goal, at=at, id=id, args=args,
-                                                     timeout=timeout))
+        from concurrent.futures import Future
+
+        pending = self.submit(goal, at=at, id=id, args=args, timeout=timeout)
+        assert isinstance(pending, Future)   # a PendingQueryAPI here is a Future
+        return await asyncio.wrap_future(pending)
 
     def mark_complete(self, event_type: str, t: float) -> None:
         """Declare the history of ``"p/N"`` (or ``"p"``: every arity) complete up to ``t``
