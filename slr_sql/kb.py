@@ -21,14 +21,13 @@ from typing import Any, Callable, Iterable
 
 from .answers import answer_bindings
 from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
-from .clocks import Clock, WallClock, parse_duration
+from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .engine import Engine
 from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
 from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore
 from .store.checks import event_arguments, shorten
-from .sync import DEFAULT_MAX_LEARNED_DELAY
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
 from .terms import format_term

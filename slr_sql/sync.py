@@ -41,7 +41,7 @@ from typing import Any, Callable, Iterable
 
 from .analysis import GoalSet, goal_set
 from .answers import answer_bindings
-from .clocks import ManualClock, StreamClock
+from .clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning, ManualClock, StreamClock
 from .errors import EventRejected, SLRError, SLRTimeout
 from .store.checks import BadEvent, check_times
 from .terms import Atom, Struct, Var, deref
@@ -275,20 +275,6 @@ class PendingQuery(Future):
         after = f" within {timeout:g} s" if timeout is not None else ""
         return (f"synchronized query {self.id!r} ({self.goal} at {_fmt(self.at)}) was not "
                 f"answerable{after}: {what}")
-
-
-DEFAULT_MAX_LEARNED_DELAY = 3600.0
-"""Seconds a learned delay may reach (``slr_sql.open(max_learned_delay=)``; None: no cap).
-An event that arrives later than this after its end time is still stored; its type's
-history counts as complete up to ``now - max_learned_delay`` at most, so a clock far from
-the events' times (events stamped 2.0, 5.0 on a store with a wall clock) cannot make
-synchronized queries and ``until`` subscriptions wait for decades."""
-
-
-class LearnedDelayWarning(UserWarning):
-    """Events arrived much later than their end time: the store's clock and the events'
-    times are probably not the same time (a wall clock and simulated or recorded times);
-    the learned delay was capped (:data:`DEFAULT_MAX_LEARNED_DELAY`)."""
 
 
 def _delay_warning(key: tuple[str, int], observed: float, cap: float, clock: Any) -> str:

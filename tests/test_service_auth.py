@@ -24,6 +24,8 @@ def test_the_token_passes(header):
     f"Bearer {TOKEN}ANYTHING", f"Bearer {TOKEN[:-1]}", f"Bearer {TOKEN.upper()}",
     f"Bearer {TOKEN} {TOKEN}", f"Bearer{TOKEN}", f"Bearer x{TOKEN}", f"Bearer {TOKEN}\x00",
     f"XBearer {TOKEN}", f"Bearer {TOKEN[1:]}", "Bearer \ud800",
+    # another seven-character scheme before the token: sorting below or above "bearer "
+    f"Basic  {TOKEN}", f"Token  {TOKEN}", f"bearer_{TOKEN}", f"Bearer\t{TOKEN}",
 ])
 def test_near_misses_are_refused_as_unauthorized(header):
     with pytest.raises(ServiceError) as info:

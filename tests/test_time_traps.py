@@ -87,3 +87,24 @@ def test_a_wait_for_a_synchronized_answer_that_runs_out_says_what_it_waits_for()
         assert [(w.type, w.time) for w in pending.waiting_for] == [("seen/1", 50.0)]
         kb.mark_complete("seen/1", 50.0)
         assert pending.result(timeout=10) == [{"L": ["a"]}]
+
+
+def test_subscribe_since_now_on_a_type_stamped_long_before_now_warns():
+    with slr_sql.open() as kb:
+        _add_recorded(kb)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            kb.subscribe("seen(W)^T").close()                 # since="now": would miss them
+            kb.subscribe("seen(W)^T", since=0).close()        # history first: fine
+            kb.subscribe("never(W)^T").close()                # nothing stored: nothing said
+        said = [str(w.message) for w in caught if issubclass(w.category, LearnedDelayWarning)]
+        assert len(said) == 1 and said[0].startswith('subscribe(since="now") on seen/1'), said
+        assert "since=0" in said[0] and "StreamClock" in said[0]
+    clock = slr_sql.ManualClock(0.0)
+    with slr_sql.open(clock=clock) as kb:                    # times in the clock's base
+        clock.set(10.0)
+        _add_recorded(kb)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            kb.subscribe("seen(W)^T").close()
+        assert not [w for w in caught if issubclass(w.category, LearnedDelayWarning)]
