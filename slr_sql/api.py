@@ -24,7 +24,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Iterator, Protocol, runtime_checkable
 
 from .errors import EventRejected
 
@@ -126,7 +126,14 @@ class KnowledgeBaseAPI(Protocol):
     # -- queries
     def query(self, goal: str, at: float | None = None, args: dict | None = None,
               timeout: float | None = None, max_steps: int | None = None,
-              limit: int | None = None, wait: bool = False) -> list[dict[str, Any]]: ...
+              limit: int | None = None, wait: bool = False,
+              robot: str | None = None) -> list[dict[str, Any]]: ...
+
+    def solutions(self, goal: str, at: float | None = None, args: dict | None = None,
+                  timeout: float | None = None,
+                  robot: str | None = None) -> Iterator[dict[str, Any]]: ...
+
+    def goal_warnings(self, goal: str) -> list[str]: ...
 
     def explain(self, goal: str) -> str: ...
 

@@ -156,6 +156,8 @@ def test_every_method_gives_the_same_values_local_and_remote(pair, tmp_path):
     run("query", lambda kb: kb.query("between(1, 10, X)", limit=3))
     run("query", lambda kb: kb.query("findall(W, seen(W)^_, L)", at=9.0, wait=True,
                                      timeout=5))
+    run("solutions", lambda kb: list(kb.solutions("color(cup1, C)^12.5")))
+    run("goal_warnings", lambda kb: kb.goal_warnings("colour(cup1, C)^12.5"))
     run("explain", lambda kb: kb.explain("color(cup1, C)^5").splitlines()[0])
     run("mark_complete", lambda kb: kb.mark_complete("obj/3", 20.0))
     run("complete_until", lambda kb: kb.complete_until("obj/3") >= 20.0)

@@ -47,7 +47,7 @@ from slr_sql.store.checks import format_event
 from .encoding import (decode_args, decode_arguments, decode_term, dumps, encode_answers,
                        encode_plain, loads)
 from .auth import BearerToken
-from .errors import ServiceError, error_body
+from .errors import ServiceError, error_body, retry_after
 
 __all__ = ["create_app", "Limits", "API_VERSION"]
 
@@ -82,6 +82,9 @@ def _error_response(exc: BaseException) -> Response:
     body = error_body(exc)
     status = body["error"]["status"]
     headers = {"WWW-Authenticate": 'Bearer realm="slr"'} if status == 401 else None
+    wait = retry_after(exc)
+    if wait is not None:  # a condition that may pass: the client keeps its events and retries
+        headers = {"Retry-After": str(wait)}
     return _json(body, status, headers)
 
 
@@ -95,6 +98,8 @@ def _classify(exc: BaseException) -> BaseException:
         text = str(exc)
         if "locked" in text or "busy" in text:
             return ServiceError(f"the store is busy: {text}", kind="Unavailable")
+        if "disk is full" in text:
+            return ServiceError(f"the store is full: {text}", kind="Unavailable")
         log.error("SQLite error", exc_info=exc)
         return exc
     if isinstance(exc, (TypeError, ValueError, UnicodeError, OverflowError, RecursionError,
@@ -735,7 +740,7 @@ async def _event_rules(svc: "_Service", request: Request) -> Any:
         body={"goal": ("string", True), "args": ("Args", False),
               "at": ("Number", False), "timeout": ("Number", False),
               "max_steps": ("integer", False), "limit": ("integer", False),
-              "wait": ("boolean", False)},
+              "wait": ("boolean", False), "robot": ("string", False)},
         response={"answers": "AnswerList"})
 async def _query(svc: "_Service", request: Request) -> Any:
     b = await svc.body(request)
@@ -745,6 +750,7 @@ async def _query(svc: "_Service", request: Request) -> Any:
     timeout = _number(b, "timeout", minimum=0)
     limit = _field(b, "limit", int)
     max_steps = _field(b, "max_steps", int)
+    robot = _field(b, "robot", str)
     if _field(b, "wait", bool, default=False):
         pending = await svc.call(svc.kb.submit, goal, at=at, args=args,
                                   timeout=_cap(timeout, svc.limits.max_wait))
@@ -752,7 +758,8 @@ async def _query(svc: "_Service", request: Request) -> Any:
     else:
         answers = await svc.call(svc.kb.query, goal, at=at, args=args, limit=limit,
                                   timeout=_cap(timeout, svc.limits.max_query_time),
-                                  max_steps=max_steps)
+                                  max_steps=max_steps,
+                                  **({"robot": robot} if robot is not None else {}))
     return {"answers": encode_answers(answers)}
 
 
@@ -809,6 +816,16 @@ async def _cancel(svc: "_Service", request: Request) -> Any:
 async def _explain(svc: "_Service", request: Request) -> Any:
     b = await svc.body(request)
     return {"explain": await svc.call(svc.kb.explain, _field(b, "goal", str, required=True))}
+
+
+@_route("POST", "/warnings", "Warnings about a goal that do not change its answer: a "
+        "predicate with no events, rules or declaration and the nearest known names "
+        "(kb.goal_warnings).",
+        body={"goal": ("string", True)}, response={"warnings": "array"})
+async def _warnings(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    goal = _field(b, "goal", str, required=True)
+    return {"warnings": await svc.call(svc.kb.goal_warnings, goal)}
 
 
 @_route("POST", "/mark_complete", "Declare a history complete up to a time "
@@ -913,6 +930,41 @@ async def _sql(svc: "_Service", request: Request) -> Any:
 async def _stats(svc: "_Service", request: Request) -> Any:
     return await svc.call(_stats_of, svc.kb)
 
+
+
+@_route("GET", "/fleet/positions", "What this fleet store holds of a robot: per event "
+        "type, the last sequence of the robot's store stored here (slr fleet push).",
+        query={"robot": ("string", True)}, response={"positions": "array"})
+async def _fleet_positions(svc: "_Service", request: Request) -> Any:
+    from slr_sql.shipping import positions
+    robot = request.query_params.get("robot")
+    if not robot:
+        raise SLRError("robot= names the robot")
+    found = await svc.call(positions, svc.kb, robot)
+    return {"positions": [[n, a, p] for (n, a), p in sorted(found.items())]}
+
+
+@_route("POST", "/fleet/receive", "Store a robot's shipment exactly once (slr fleet "
+        "push): batches of [name, arity, rows], its marks, what it holds unshipped.",
+        body={"robot": ("string", True), "batches": ("array", True),
+              "marks": ("object", False), "pending": ("integer", False),
+              "head_arrival": ("Number", False)},
+        response={"stored": "integer"})
+async def _fleet_receive(svc: "_Service", request: Request) -> Any:
+    from slr_sql.shipping import receive
+    b = await svc.body(request)
+    robot = _field(b, "robot", str, required=True)
+    stored = await svc.call(receive, svc.kb, robot, _field(b, "batches", list, required=True),
+                            _field(b, "marks", dict), _field(b, "pending", int),
+                            _number(b, "head_arrival"))
+    return {"stored": stored}
+
+
+@_route("GET", "/fleet/status", "Per robot that shipped here: events stored, what it "
+        "held unshipped and its last contact (slr fleet status).",
+        response={"robots": "array"})
+async def _fleet_status(svc: "_Service", request: Request) -> Any:
+    return {"robots": await svc.call(svc.kb.store.fleet_contacts)}
 
 
 @dataclass

@@ -32,7 +32,7 @@ import threading
 import time
 from concurrent.futures import Future, InvalidStateError
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Iterator
 from urllib.parse import quote
 
 from slr_sql import EventRejected, SLRError, SLRTimeout
@@ -49,6 +49,7 @@ log = logging.getLogger("slr_sql.service.client")
 
 POLL_WAIT = 25.0          # seconds one long-poll asks the server to wait
 DEFAULT_MAX_BODY = 1 << 20
+FLEET_ROWS = 1000         # shipped rows per request (well within the default body limit)
 
 
 def connect(url: str, token: str | None = None, *, timeout: float = 60.0) -> "RemoteKnowledgeBase":
@@ -276,7 +277,8 @@ class RemoteKnowledgeBase:
     # -- queries --------------------------------------------------------------------------------
     def query(self, goal: str, at: float | None = None, args: dict | None = None,
               timeout: float | None = None, max_steps: int | None = None,
-              limit: int | None = None, wait: bool = False) -> list[dict[str, Any]]:
+              limit: int | None = None, wait: bool = False,
+              robot: str | None = None) -> list[dict[str, Any]]:
         """Answer ``goal`` on the server (see ``KnowledgeBase.query``); ``timeout`` is
         capped by the server's ``max_query_time``."""
         if wait:  # synchronized: long-polls, however long the wait (as kb.query does it)
@@ -286,8 +288,40 @@ class RemoteKnowledgeBase:
             body["limit"] = limit
         if max_steps is not None:
             body["max_steps"] = max_steps
+        if robot is not None:
+            body["robot"] = robot
         reply = self._post("/query", body, timeout=self._read_timeout(timeout))
         return decode_answers(reply["answers"])
+
+    # -- fleets (slr fleet push / status to an `slr serve` fleet store) -------------------------
+    def fleet_positions(self, robot: str) -> dict[tuple[str, int], int]:
+        """Per event type, the last sequence of ``robot``'s store the server's store holds."""
+        reply = self._request("GET", "/fleet/positions", params={"robot": robot})[1]
+        return {(str(n), int(a)): int(p) for n, a, p in reply["positions"]}
+
+    def fleet_receive(self, robot: str, batches: list, marks: dict | None = None,
+                      pending: int | None = None, head_arrival: float | None = None) -> int:
+        """Send one shipment of ``robot`` (see :func:`slr_sql.shipping.receive`); returns
+        the rows the server stored. Rows go in requests of at most FLEET_ROWS (each stored
+        exactly once with its position), within the server's body limit."""
+        stored = 0
+        pieces = [(n, a, rows[i:i + FLEET_ROWS]) for n, a, rows in batches
+                  for i in range(0, max(len(rows), 1), FLEET_ROWS)]
+        for k, piece in enumerate(pieces or [None]):
+            body: dict[str, Any] = {"robot": robot, "batches": [list(piece)] if piece else []}
+            if k == len(pieces or [None]) - 1:
+                if marks:
+                    body["marks"] = marks
+                if pending is not None:
+                    body["pending"] = pending
+                if head_arrival is not None:
+                    body["head_arrival"] = head_arrival
+            stored += int(self._post("/fleet/receive", body)["stored"])
+        return stored
+
+    def fleet_status(self) -> list[dict[str, Any]]:
+        """Per robot that shipped to the server's store: its contact row."""
+        return list(self._get("/fleet/status")["robots"])
 
     def submit(self, goal: str, at: float | None = None, id: str | None = None,
                args: dict | None = None, timeout: float | None = None,
@@ -320,6 +354,20 @@ class RemoteKnowledgeBase:
     def explain(self, goal: str) -> str:
         """How ``goal`` would run on the server: which engine, and why."""
         return self._post("/explain", {"goal": _text(goal, "goal")})["explain"]
+
+    def solutions(self, goal: str, at: float | None = None, args: dict | None = None,
+                  timeout: float | None = None,
+                  robot: str | None = None) -> Iterator[dict[str, Any]]:
+        """The answers of ``goal`` one at a time (see ``KnowledgeBase.solutions``). The server
+        answers a request as a whole, so this iterates over one :meth:`query`'s answers; a
+        goal with endless answers needs ``timeout`` (capped by the server's
+        ``max_query_time``) or ``query(..., limit=N)``."""
+        yield from self.query(goal, at=at, args=args, timeout=timeout, robot=robot)
+
+    def goal_warnings(self, goal: str) -> list[str]:
+        """The server's warnings about ``goal`` that do not change its answer (likely typos:
+        see ``KnowledgeBase.goal_warnings``)."""
+        return list(self._post("/warnings", {"goal": _text(goal, "goal")})["warnings"])
 
     def pending(self) -> list[PendingQueryAPI]:
         """The synchronized queries this client submitted that are still waiting (each
