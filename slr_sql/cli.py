@@ -15,6 +15,7 @@ import math
 import os
 import re
 import sys
+import warnings
 from dataclasses import dataclass
 from typing import Any, Iterable, Iterator
 
@@ -183,6 +184,13 @@ def main(ctx: click.Context, token: str | None) -> None:
     (http://HOST:PORT).
     """
     ctx.obj = {"token": token}
+    warnings.showwarning = _show_warning
+
+
+def _show_warning(message: Warning | str, category: type[Warning], filename: str,
+                  lineno: int, file: Any = None, line: str | None = None) -> None:
+    """The library's warnings (a learned delay capped, ...) as ``warning: ...`` lines."""
+    _err(f"warning: {message}")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -22,9 +22,9 @@ from typing import Any, Callable, Iterable, Iterator
 
 from .answers import answer_bindings
 from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
-from .clocks import Clock, WallClock, parse_duration
+from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .encoding import Unencodable, decode_answer, encode
-from .engine import Engine, Machine
+from .engine import Engine
 from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
@@ -358,7 +358,13 @@ class KnowledgeBase:
     def __init__(self, path: str | Path | None = None, clock: Clock | None = None, *,
                  synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
                  adopt: bool = False, checkpoint: str = "auto",
-                 cache_mib: float = CACHE_SIZE_KIB / 1024, robot: str | None = None):
+                 cache_mib: float = CACHE_SIZE_KIB / 1024, robot: str | None = None,
+                 max_learned_delay: float | None = DEFAULT_MAX_LEARNED_DELAY):
+        if max_learned_delay is not None:
+            _check_time_option("max_learned_delay", max_learned_delay, minimum=0.0)
+            max_learned_delay = float(max_learned_delay)
+        # the largest delay a type may learn (clocks.DEFAULT_MAX_LEARNED_DELAY; None: no cap)
+        self.max_learned_delay = max_learned_delay
         self.clock = clock if clock is not None else WallClock()
         self.store = EventStore(path, self.clock, synchronous=synchronous,
                                 busy_timeout=busy_timeout, adopt=adopt, checkpoint=checkpoint,
@@ -1156,8 +1162,11 @@ class KnowledgeBase:
         """``await kb.ask(goal, at=z)``: :meth:`submit` for asyncio code."""
         import asyncio
 
-        return await asyncio.wrap_future(self.submit(goal, at=at, id=id, args=args,
-                                                     timeout=timeout))
+        from concurrent.futures import Future
+
+        pending = self.submit(goal, at=at, id=id, args=args, timeout=timeout)
+        assert isinstance(pending, Future)   # a PendingQueryAPI here is a Future
+        return await asyncio.wrap_future(pending)
 
     def mark_complete(self, event_type: str, t: float) -> None:
         """Declare the history of ``"p/N"`` (or ``"p"``: every arity) complete up to ``t``
@@ -1350,7 +1359,10 @@ def open(path: str | Path | None = None, clock: Clock | None = None, **options: 
     thread of the store does it, so no ``add`` waits for it -- for long-running writers with
     a latency budget, such as ``slr serve`` and ``slr ros bridge``), ``cache_mib`` (SQLite's
     page cache, default 64 MiB: it fills as the store is used, then the process's memory stays
-    flat; a smaller one makes it flat sooner and makes large ingests and scans re-read pages).
+    flat; a smaller one makes it flat sooner and makes large ingests and scans re-read pages),
+    ``max_learned_delay`` (seconds a learned delay may reach, default 3600; ``None``: no cap;
+    an event arriving later than that after its end warns with
+    :class:`~slr_sql.sync.LearnedDelayWarning`: its times are probably not the clock's).
     A file that is not a store (not SQLite, damaged, a store of a newer slr_sql, or an SQLite
     file of another application) is refused with an :class:`SLRError` and left untouched;
     ``adopt=True`` adds a store to another application's SQLite file on purpose.

@@ -51,8 +51,10 @@ import socket
 import threading
 import time
 import uuid
+import warnings
 from typing import Any, Callable
 
+from .clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning
 from .encoding import decode, encode_json
 from .errors import SLRError, SLRSyntaxError, SLRTimeout
 from .parser import parse_term
@@ -869,6 +871,8 @@ class SubscriptionHub:
                            f"not {max_lag!r}")
         pattern = pattern.strip()
         matcher = _Matcher(self.kb, pattern, where)   # SLRSyntaxError for bad texts
+        if isinstance(since, str):
+            self._warn_if_stamped_long_before(matcher.key, since_value)
         durable = id is not None
         with self.lock:
             if durable and id in self._subs:
@@ -904,6 +908,22 @@ class SubscriptionHub:
                                            name=f"slr-subscription-{sub.id}")
             sub._thread.start()
         return sub
+
+    def _warn_if_stamped_long_before(self, key: tuple[str, int], now: float) -> None:
+        """``since="now"`` on a type whose events end long before the clock's now (robot or
+        recorded times on a store with a wall clock): the new events will most likely be
+        stamped the same way, end before ``since`` and never be delivered. Say so."""
+        latest = self.store.max_end(*key)
+        gap = getattr(self.kb, "max_learned_delay", None) or DEFAULT_MAX_LEARNED_DELAY
+        if latest is None or now - latest <= gap:
+            return
+        name = f"{key[0]}/{key[1]}"
+        warnings.warn(LearnedDelayWarning(
+            f"subscribe(since=\"now\") on {name}: its latest event ends at {latest:g}, "
+            f"{now - latest:.6g} s before the clock's now ({type(self.clock).__name__}); "
+            f"events stamped like it end before since and are not delivered. Subscribe "
+            f"since=0 (history first, then live), or give the store a ManualClock or a "
+            f"StreamClock for simulated or recorded times"), stacklevel=3)
 
     def unsubscribe(self, sub_id: str) -> None:
         """Remove the subscription ``sub_id`` (closing it if it is open here).
