@@ -75,6 +75,10 @@ class SQLiteDialect:
     def statement(self, sql: str) -> str:
         return sql
 
+    def scalar(self, name: str) -> str:
+        """The two-argument ``max``/``min`` of values (not the aggregates)."""
+        return name
+
     def json_array(self, items: str) -> str:
         return f"json_array({items})"
 
@@ -130,6 +134,9 @@ class PostgresDialect:
     true = "TRUE"
     false = "FALSE"
     python_functions = False
+
+    def scalar(self, name: str) -> str:
+        return {"max": "GREATEST", "min": "LEAST"}.get(name, name)
 
     def json_array(self, items: str) -> str:
         return f"json_build_array({items})::text"
