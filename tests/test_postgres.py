@@ -19,14 +19,14 @@ import re
 
 import psycopg
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+import test_cep_differential as cepdiff
+import test_sql_differential as sqldiff
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import slr_sql
 from slr_sql import ManualClock
 from slr_sql.errors import SLRBusy, SLRError, SLRTimeout
-
-import test_cep_differential as cepdiff
-import test_sql_differential as sqldiff
 
 
 def _schema_url(url: str, schema: str) -> str:

@@ -25,9 +25,10 @@ from __future__ import annotations
 
 import json
 import re
-from typing import Any, Callable, Protocol
+from collections.abc import Callable
+from typing import Any, Protocol
 
-__all__ = ["Dialect", "SQLiteDialect", "PostgresDialect", "SQLITE", "POSTGRES"]
+__all__ = ["POSTGRES", "SQLITE", "Dialect", "PostgresDialect", "SQLiteDialect"]
 
 # A stored text that reads as a number (PostgreSQL columns): integers, and Python's float
 # texts (repr: always a '.', an exponent, or inf).

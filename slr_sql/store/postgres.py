@@ -23,8 +23,9 @@ import sqlite3
 import threading
 import time
 import weakref
-from contextlib import contextmanager
-from typing import Any, Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager, suppress
+from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
 from ..errors import SLRBusy, SLRError, SLRTimeout
@@ -116,9 +117,9 @@ def _first_line(exc: BaseException) -> str:
 class PgCursor:
     """The part of a DB-API cursor the store's parts use, over a psycopg cursor."""
 
-    __slots__ = ("_cursor", "_owner", "rowcount", "description", "__weakref__")
+    __slots__ = ("__weakref__", "_cursor", "_owner", "description", "rowcount")
 
-    def __init__(self, cursor: Any, owner: "PgConnection"):
+    def __init__(self, cursor: Any, owner: PgConnection):
         self._cursor = cursor
         self._owner = owner
         self.rowcount = cursor.rowcount
@@ -178,10 +179,15 @@ class PgConnection:
         return PgCursor(cursor, self)
 
     def close(self) -> None:
-        try:
+        # closing a connection the server already dropped: nothing is left to close
+        with suppress(_psycopg().Error):
             self.raw.close()
-        except Exception:  # pragma: no cover - closing a broken connection
-            pass
+
+    def rollback(self) -> None:
+        """ROLLBACK, if the connection still works (a dropped connection's transaction is
+        rolled back by the server)."""
+        with suppress(_psycopg().Error):
+            self.raw.execute("ROLLBACK")
 
 
 class PgDatabase:
@@ -214,10 +220,13 @@ class PgDatabase:
             raise SLRError(f"{self.path}: cannot connect ({_first_line(exc)})") from None
         self.conn = PgConnection(raw, self.path, busy_timeout)
         try:
-            raw.execute(f"SET lock_timeout = {int(busy_timeout * 1000)}")
-            raw.execute("SET TIME ZONE 'UTC'")
-            migrate_postgres(self, schema, adopt)
-            raw.execute(f"SET search_path = {quote_identifier(schema)}")
+            try:
+                raw.execute(f"SET lock_timeout = {int(busy_timeout * 1000)}")
+                raw.execute("SET TIME ZONE 'UTC'")
+                migrate_postgres(self, schema, adopt)
+                raw.execute(f"SET search_path = {quote_identifier(schema)}")
+            except psycopg.Error as exc:
+                raise _error(exc, self.path, busy_timeout) from None
         except BaseException:
             self.conn.close()
             raise
@@ -276,10 +285,7 @@ class PgDatabase:
             self.closed = True
             try:
                 if self.tx_depth:
-                    try:
-                        self.conn.raw.execute("ROLLBACK")
-                    except Exception:
-                        pass
+                    self.conn.rollback()
                     self.tx_depth = 0
                 self.suspend_streams()
             finally:
@@ -292,7 +298,7 @@ class PgDatabase:
     # ------------------------------------------------------------------ transactions
 
     @contextmanager
-    def transaction(self) -> Iterator["PgDatabase"]:
+    def transaction(self) -> Iterator[PgDatabase]:
         with self.lock:
             self.check_open()
             depth = self.tx_depth
@@ -309,13 +315,10 @@ class PgDatabase:
                 self.tx_depth = depth
                 try:
                     if depth == 0:
-                        conn.raw.execute("ROLLBACK")
+                        conn.rollback()
                     else:
-                        conn.raw.execute(f"ROLLBACK TO slr_sp{depth}")
-                        conn.raw.execute(f"RELEASE slr_sp{depth}")
-                except Exception:
-                    if depth:
-                        raise
+                        conn.execute(f"ROLLBACK TO slr_sp{depth}")
+                        conn.execute(f"RELEASE slr_sp{depth}")
                 finally:
                     self._rolled_back()
                 raise
@@ -324,10 +327,7 @@ class PgDatabase:
                 conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
             except BaseException:
                 if depth == 0:
-                    try:
-                        conn.raw.execute("ROLLBACK")
-                    except Exception:
-                        pass
+                    conn.rollback()
                 self._rolled_back()
                 raise
 
@@ -423,7 +423,7 @@ class PgDatabase:
                     self.conn.execute("SET LOCAL statement_timeout = 0")
             except BaseException:
                 if own:
-                    self.conn.raw.execute("ROLLBACK")
+                    self.conn.rollback()
                 raise
             if own:
                 self.conn.execute("COMMIT")
@@ -481,7 +481,7 @@ def migrate_postgres(db: Any, schema: str, adopt: bool = False) -> None:
                             (number, filename))
             raw.execute("COMMIT")
         except BaseException:
-            raw.execute("ROLLBACK")
+            db.conn.rollback()
             raise
     except psycopg.Error as exc:
         raise _error(exc, db.path, db.busy_timeout) from None
