@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import re
+from pathlib import Path
 
 import psycopg
 import pytest
@@ -257,3 +258,51 @@ def test_event_rules_on_postgres_equal_the_reference(corpus_database, rule, even
     want = [(tuple(h), s, e) for h, s, e in expected]
     assert cepdiff._typed(got) == cepdiff._typed(sorted(want, key=repr)), \
         cepdiff.rule_text(rule)
+
+
+# ------------------------------------------------------------------ many writers
+
+WRITER = r"""
+import sys
+import slr_sql
+url, who, n = sys.argv[1], sys.argv[2], int(sys.argv[3])
+with slr_sql.open(url) as kb:
+    kb.load(":- consumption(unrestricted).\npair(K) <- a(K) seq b(K).", name="rules", replace=True)
+    print("ready", flush=True)
+    sys.stdin.readline()             # every writer starts together
+    for i in range(n):
+        kb.add(f"{who}(k{i % 3})^{2.0 * i + (0.5 if who == 'b' else 0.0)}")
+"""
+
+
+def test_concurrent_writers_derive_each_complex_event_once(backend, tmp_path):
+    """Two processes write the two halves of a seq rule at once: every match is derived,
+    once (on PostgreSQL the writers of the rule's types take turns on an advisory lock;
+    each process sees the other's new tables)."""
+    postgres_url = backend
+    import os
+    import subprocess
+    import sys
+
+    script = tmp_path / "writer.py"
+    script.write_text(WRITER)
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parent.parent))
+    with slr_sql.open(postgres_url) as kb:
+        kb.load(":- consumption(unrestricted).\npair(K) <- a(K) seq b(K).", name="rules")
+    n = 40
+    procs = [subprocess.Popen([sys.executable, str(script), postgres_url, who, str(n)],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, text=True)
+             for who in ("a", "b")]
+    for p in procs:
+        assert p.stdout.readline().strip() == "ready"
+    for p in procs:
+        p.stdin.write("go\n")
+        p.stdin.flush()
+    for p in procs:
+        assert p.wait(timeout=120) == 0
+    a = [(f"k{i % 3}", 2.0 * i) for i in range(n)]
+    b = [(f"k{i % 3}", 2.0 * i + 0.5) for i in range(n)]
+    expected = sorted((k, s, e) for k, s in a for k2, e in b if k == k2 and s < e)
+    with slr_sql.open(postgres_url) as kb:
+        got = sorted((str(args[0]), s, e) for args, s, e, _ in kb.store.scan("pair", 1))
+    assert got == expected

@@ -31,6 +31,10 @@ __all__ = ["Backend", "CompiledSQL", "RawStatements"]
 class Backend(Protocol):
     """The store's interface to the layers above it."""
 
+    def set_write_groups(self, groups: Iterable[Iterable[tuple[str, int]]]) -> None: ...
+
+    def lock_for_write(self, types: Iterable[tuple[str, int]]) -> None: ...
+
     @staticmethod
     def fact_table_name(name: str, arity: int) -> str: ...
 

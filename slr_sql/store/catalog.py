@@ -22,6 +22,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Iterable
 
+from ..errors import SLRError
 from .connection import Database
 from .sqltext import RESERVED_PREFIXES, quote_identifier
 
@@ -543,6 +544,8 @@ class BufferTables:
 
     def buffer_objects(self, buffer_id: int) -> dict[str, str]:
         """The triggers and indexes of one buffer: ``{name: sql}``."""
+        if self.db.dialect.name != "sqlite":
+            return {}   # no buffer objects elsewhere yet (install_buffer_objects)
         with self.db.lock:
             self.db.check_open()
             rows = self.db.conn.execute(
@@ -555,6 +558,9 @@ class BufferTables:
         """Make the triggers/indexes of ``buffer_id`` exactly ``statements`` (``{name: CREATE
         ...}``): objects whose SQL differs are re-created, missing ones created, others
         dropped. Returns True if anything changed."""
+        if statements and self.db.dialect.name != "sqlite":
+            raise SLRError("buffers (tBuffer, cBuffer, windows) are not available on "
+                           f"{self.db.dialect.name} stores yet: their triggers are SQLite's")
         with self.db.transaction():
             existing = self.buffer_objects(buffer_id)
             changed = False

@@ -23,6 +23,7 @@ import sqlite3
 import threading
 import time
 import weakref
+import zlib
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager, suppress
 from typing import Any
@@ -214,6 +215,7 @@ class PgDatabase:
         self.deadline: float | None = None
         self.busy_timeout = busy_timeout
         self.notify_channel = f"slr_{schema}"
+        self.write_groups: dict[tuple[str, int], int] = {}
         try:
             raw = psycopg.connect(conninfo, autocommit=True)
         except psycopg.Error as exc:
@@ -255,6 +257,31 @@ class PgDatabase:
         with self.lock:
             return {row[0] for row in self.conn.execute(
                 "SELECT tablename FROM pg_tables WHERE schemaname = current_schema()")}
+
+    def set_write_groups(self, groups: Iterable[Iterable[tuple[str, int]]]) -> None:
+        """Each type of a group gets the group's advisory lock key: a number derived from
+        the schema and the group's least type, so every process computes the same one."""
+        keys: dict[tuple[str, int], int] = {}
+        for group in groups:
+            members = sorted(group)
+            if not members:
+                continue
+            first = f"{self.schema}\x00{members[0][0]}/{members[0][1]}".encode()
+            key = zlib.crc32(first) | (zlib.adler32(first) << 32)
+            key = key - (1 << 64) if key >= 1 << 63 else key
+            for member in members:
+                keys[member] = key
+        self.write_groups = keys
+
+    def lock_for_write(self, types: Iterable[tuple[str, int]]) -> None:
+        """``pg_advisory_xact_lock`` of the groups of ``types``, in key order (no deadlock
+        between two writers of several groups); held until the transaction ends."""
+        groups = self.write_groups
+        if not groups:
+            return
+        keys = sorted({groups[t] for t in types if t in groups})
+        for key in keys:
+            self.conn.execute("SELECT pg_advisory_xact_lock(?)", (key,))
 
     def triggers(self, table: str | None = None) -> set[str]:
         """Names of the triggers of the store's schema (on ``table`` only, when given)."""
