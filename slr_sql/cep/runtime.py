@@ -630,10 +630,12 @@ class RuleRuntime:
         store = self.eng.store
         values = [f"h{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
         cols = [f"arg{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
-        copy = (f"INSERT INTO {table} ({', '.join(cols)}, arrival) "
-                f"SELECT {', '.join(values)}, :now FROM {self.prov} WHERE id > :before "
+        # a complex event is the deriving store's: its robot (NULL on an unnamed or fleet
+        # store, whatever robots the constituent events came from)
+        copy = (f"INSERT INTO {table} ({', '.join(cols)}, arrival, robot) "
+                f"SELECT {', '.join(values)}, :now, :robot FROM {self.prov} WHERE id > :before "
                 f"ORDER BY id")
-        args = {"now": now, "before": before}
+        args = {"now": now, "before": before, "robot": store.robot}
         head_table = self.eng.table_name(self.head_key)
         if store.triggers(head_table):
             # a buffer's trigger may refuse rows: the rows stored are those RETURNING gives

@@ -9,6 +9,7 @@ the mapping. Columns::
     t_start  REAL NOT NULL
     t_end    REAL NOT NULL
     arrival  REAL NOT NULL         -- store clock time of the add that stored the event
+    robot    TEXT                  -- the robot that observed or derived it (NULL: unnamed)
 
 Indexes ``(t_end, t_start)`` and ``(t_start, t_end)``, plus ``(arg1, t_end, t_start)`` and
 ``(arg1, t_start, t_end)`` when there is a first argument. Every index entry ends with the
@@ -41,7 +42,7 @@ class EventType:
         self.quoted = quote_identifier(table)
         arg_columns = [f"arg{i}" for i in range(1, arity + 1)]
         self.columns = ", ".join(arg_columns + ["t_start", "t_end", "seq"])
-        insert_columns = arg_columns + ["t_start", "t_end", "arrival"]
+        insert_columns = arg_columns + ["t_start", "t_end", "arrival", "robot"]
         self.insert_sql = (f"INSERT INTO {self.quoted} ({', '.join(insert_columns)}) "
                            f"VALUES ({', '.join('?' * len(insert_columns))})")
         self.index_end = quote_identifier(f"slr_ix__{table}__end")
@@ -60,7 +61,7 @@ class EventTables:
     >>> tables = EventTables(Database(None)); tables.declare_type("seg", 2)
     'seg'
     >>> tables.lookup("seg", 2).insert_sql
-    'INSERT INTO "seg" (arg1, arg2, t_start, t_end, arrival) VALUES (?, ?, ?, ?, ?)'
+    'INSERT INTO "seg" (arg1, arg2, t_start, t_end, arrival, robot) VALUES (?, ?, ?, ?, ?, ?)'
     """
 
     def __init__(self, db: Database):
@@ -71,9 +72,9 @@ class EventTables:
         # creates a new event type's table (slr_sql.buffers installs its triggers there)
         self.table_created_hooks: list[Callable[[str, int, str], Any]] = []
         db.rollback_listeners.append(self.reload)  # types created inside were rolled back too
-        # The most data arguments an event can have: its table has 4 more columns (seq,
-        # t_start, t_end, arrival) and SQLite refuses tables wider than its column limit.
-        self.max_arity = db.max_columns - 4
+        # The most data arguments an event can have: its table has 5 more columns (seq,
+        # t_start, t_end, arrival, robot) and the engine refuses tables wider than its limit.
+        self.max_arity = db.max_columns - 5
         self.reload()
 
     def reload(self) -> None:
@@ -146,7 +147,8 @@ class EventTables:
         conn = self.db.conn
         real = dialect.real
         conn.execute(f"CREATE TABLE {event_type.quoted} (seq {dialect.integer_key}{arg_columns}, "
-                     f"t_start {real} NOT NULL, t_end {real} NOT NULL, arrival {real} NOT NULL)")
+                     f"t_start {real} NOT NULL, t_end {real} NOT NULL, arrival {real} NOT NULL, "
+                     "robot TEXT)")
         conn.execute(f"CREATE INDEX {event_type.index_end} ON {event_type.quoted} (t_end, t_start)")
         conn.execute(f"CREATE INDEX {event_type.index_start} ON {event_type.quoted} "
                      "(t_start, t_end)")
