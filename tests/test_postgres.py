@@ -73,7 +73,7 @@ def test_psql_sees_one_table_per_event_type(postgres_url):
                                "ORDER BY ordinal_position").fetchall()
     assert rows == [(1, "antonio", "65", 28.0, 28.0, 5.0), (2, "antonio", "65.0", 29.0, 29.0, 5.0),
                     (3, '{"$atom":"65"}', "x", 30.0, 30.0, 5.0)]
-    assert [c for c, _ in columns] == ["seq", "arg1", "arg2", "t_start", "t_end", "arrival"]
+    assert [c for c, _ in columns] == ["seq", "arg1", "arg2", "t_start", "t_end", "arrival", "robot"]
     assert dict(columns)["arg1"] == "text" and dict(columns)["t_end"] == "double precision"
 
 
