@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import math
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import psycopg
@@ -281,8 +283,6 @@ def test_concurrent_writers_derive_each_complex_event_once(backend, tmp_path):
     each process sees the other's new tables)."""
     postgres_url = backend
     import os
-    import subprocess
-    import sys
 
     script = tmp_path / "writer.py"
     script.write_text(WRITER)
@@ -306,3 +306,49 @@ def test_concurrent_writers_derive_each_complex_event_once(backend, tmp_path):
     with slr_sql.open(postgres_url) as kb:
         got = sorted((str(args[0]), s, e) for args, s, e, _ in kb.store.scan("pair", 1))
     assert got == expected
+
+
+# ------------------------------------------------------------------ the command line and the service
+
+def _slr(*args: str) -> subprocess.CompletedProcess:
+    from service_helpers import ROOT, slr_env
+    return subprocess.run([sys.executable, "-m", "slr_sql", *args], capture_output=True,
+                          text=True, env=slr_env(), cwd=ROOT, timeout=120)
+
+
+def test_the_command_line_takes_a_postgres_url(postgres_url, tmp_path):
+    program = tmp_path / "p.slr"
+    program.write_text("color(O, C)^T :- prev(obj(O, _, C)^_, T).\n")
+    assert _slr("load", postgres_url, str(program)).returncode == 0
+    assert _slr("add", postgres_url, "obj(cup1, cup, red)^2.0").returncode == 0
+    assert _slr("query", postgres_url, "color(cup1, C)^5").stdout.strip() == "C = red"
+    out = _slr("sql", postgres_url, "--csv", "SELECT arg1, arg3, t_end FROM obj")
+    assert out.stdout.splitlines() == ["arg1,arg3,t_end", "cup1,red,2.0"]
+    refused = _slr("sql", postgres_url, "DELETE FROM obj")
+    assert refused.returncode == 1 and "read-only" in refused.stderr
+    assert "Traceback" not in refused.stderr
+    assert "obj/3: 1 stored" in _slr("stats", postgres_url).stdout
+
+
+def test_slr_serve_serves_a_postgres_store(postgres_url):
+    import queue
+    import threading
+
+    from service_helpers import ROOT, slr_env
+    proc = subprocess.Popen([sys.executable, "-m", "slr_sql", "serve", postgres_url, "--port",
+                             "0"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                            stdin=subprocess.DEVNULL, env=slr_env(), cwd=ROOT)
+    try:
+        lines: queue.Queue = queue.Queue()
+        threading.Thread(target=lambda: lines.put(proc.stdout.readline()), daemon=True).start()
+        first = lines.get(timeout=60).decode()
+        assert " on http" in first, first
+        url = first.strip().rsplit(" on ", 1)[1]
+        with slr_sql.connect(url) as remote:
+            remote.add("face(antonio, 65)^28")
+            assert remote.query("face(W, R)^T") == [{"W": "antonio", "R": 65, "T": 28.0}]
+        with slr_sql.open(postgres_url) as kb:   # the server wrote the database
+            assert kb.query("face(W, 65)^_") == [{"W": "antonio"}]
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
