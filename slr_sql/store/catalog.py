@@ -149,6 +149,7 @@ class Catalog:
         [('p(1).', 'a.slr')]
         """
         with self.db.transaction():
+            self.db.lock_named("program")
             cursor = self.db.conn.execute(_INSERT_TEXT, (None, str(name), source, filename,
                                                          float(self.db.clock.now())))
             text_id = cursor.fetchone()[0]
@@ -166,6 +167,7 @@ class Catalog:
         [('a', 'a(2).'), ('b', 'b.')]
         """
         with self.db.transaction():
+            self.db.lock_named("program")
             conn = self.db.conn
             first = conn.execute("SELECT min(id) FROM slr_program WHERE name = ?",
                                  (str(name),)).fetchone()[0]
@@ -185,6 +187,7 @@ class Catalog:
         (1, 0)
         """
         with self.db.transaction():
+            self.db.lock_named("program")
             removed = self.db.conn.execute("DELETE FROM slr_program WHERE name = ?",
                                            (str(name),)).rowcount
             if removed > 0:
@@ -223,6 +226,7 @@ class Catalog:
         [('b.', None)]
         """
         with self.db.transaction():
+            self.db.lock_named("program")
             self.db.conn.execute("DELETE FROM slr_program")
             now = float(self.db.clock.now())
             for source, filename in sources:
@@ -428,6 +432,7 @@ class Catalog:
         cols += [f"h{i + 1}{dialect.value}" for i in range(arity)]
         cols += [f"detected {real} NOT NULL"]
         with self.db.transaction():
+            self.db.lock_named("program")   # two processes installing the same rule
             self.db.conn.execute(f"CREATE TABLE IF NOT EXISTS {prov} ({', '.join(cols)})")
             if used:
                 self.db.conn.execute(

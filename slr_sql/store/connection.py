@@ -324,6 +324,9 @@ class Database:
     def lock_for_write(self, types: Iterable[tuple[str, int]]) -> None:
         """Nothing to wait for: this connection holds the database's one write lock."""
 
+    def lock_named(self, name: str) -> None:
+        """Nothing to wait for (see :meth:`lock_for_write`)."""
+
     def triggers(self, table: str | None = None) -> set[str]:
         """Names of the triggers (on ``table`` only, when given), temporary ones included.
 

@@ -66,6 +66,7 @@ class SQLiteDialect:
     value = ""               # an untyped column keeps INTEGER / REAL / TEXT as given
     index_hints = True       # INDEXED BY: lookups name the index they must use
     without_rowid = " WITHOUT ROWID"
+    pages_streams = False    # a statement's rows are read as needed (sqlite3 steps it)
     to_column: Callable[[Any], Any] | None = None     # identity: no conversion at all
     from_column: Callable[[Any], Any] | None = None
 
@@ -118,6 +119,7 @@ class PostgresDialect:
     value = " TEXT"
     index_hints = False      # the planner chooses (no INDEXED BY)
     without_rowid = ""
+    pages_streams = True     # psycopg reads a whole result: lookups read growing pages
 
     def __init__(self) -> None:
         self._printed: dict[str, str] = {}

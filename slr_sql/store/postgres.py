@@ -283,6 +283,12 @@ class PgDatabase:
         for key in keys:
             self.conn.execute("SELECT pg_advisory_xact_lock(?)", (key,))
 
+    def lock_named(self, name: str) -> None:
+        """Inside a transaction: take the advisory lock ``name`` of this store's schema
+        until it ends (writers of the program texts take turns: their ids are the next
+        free number)."""
+        self.conn.execute("SELECT pg_advisory_xact_lock(hashtext(?))", (f"{self.schema}:{name}",))
+
     def triggers(self, table: str | None = None) -> set[str]:
         """Names of the triggers of the store's schema (on ``table`` only, when given)."""
         with self.lock:
