@@ -138,6 +138,16 @@ def _is_url(db: str) -> bool:
     return db.startswith(("http://", "https://"))
 
 
+def _is_database_url(db: str) -> bool:
+    """A store on a database server (``postgresql://...``): no file to look for."""
+    return db.startswith(("postgresql://", "postgres://"))
+
+
+def _missing(db: str) -> bool:
+    """No store file at ``db`` (a server URL is never missing here: opening it says)."""
+    return not _is_database_url(db) and not os.path.lexists(db)
+
+
 def _open(db: str, create: bool = True) -> Any:
     """The knowledge base in DB: a file opened in this process (only commands that add to a
     store may create it), or the URL of a running `slr serve`."""
@@ -145,7 +155,7 @@ def _open(db: str, create: bool = True) -> Any:
         ctx = click.get_current_context(silent=True)
         token = (ctx.find_root().obj or {}).get("token") if ctx is not None else None
         return slr_sql.connect(db, token=token)
-    if not create and not os.path.lexists(db):
+    if not create and _missing(db):
         raise slr_sql.SLRError(f"no such store: {db}")
     return slr_sql.open(db)
 
@@ -1058,7 +1068,7 @@ def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None
     """
     from .plot import parse_size, save_timeline, timeline
 
-    if not os.path.exists(db):
+    if _missing(db):
         raise slr_sql.SLRError(f"no such store: {db}")
     dimensions = parse_size(size) if size is not None else None
     with _open(db) as kb:
@@ -1097,7 +1107,7 @@ def subscribe(db: str, pattern: str, where: str | None, since: str, until: float
 
     from .subscriptions import answer_json
 
-    if not os.path.exists(db):
+    if _missing(db):
         raise slr_sql.SLRError(f"no such store: {db}")
     since_value: Any = since.strip()
     if since_value != "now":
@@ -1145,7 +1155,7 @@ def stats(db: str) -> None:
         with _open(db) as kb:
             click.echo(kb.stats()["text"])
         return
-    if not os.path.lexists(db):
+    if _missing(db):
         raise slr_sql.SLRError(f"no such store: {db}")
     with EventStore(db) as store:
         click.echo(format_stats(store, db))

@@ -176,8 +176,20 @@ class RuleRuntime:
         return out
 
     def ensure_built(self) -> None:
-        if self.generation != self.eng.generation:
+        if self.generation != self.eng.generation or self._tables_appeared():
             self.build()
+
+    def _tables_appeared(self) -> bool:
+        """A type that had no table when the SQL was built has one now: another process
+        (or another store object) created it, so this one's table hooks never heard."""
+        for sql in self.alts:
+            for table, leaf in zip(sql.tables, sql.alt.leaves):
+                if table is None and self.eng.table(leaf.key) is not None:
+                    return True
+            for table, (_, leaf) in zip(sql.neg_tables, sql.alt.negations):
+                if table is None and self.eng.table(leaf.key) is not None:
+                    return True
+        return False
 
     # ----------------------------------------------------------------- running
     def run(self, new_from: dict, dirty: set, now: float, decide: bool) -> list:
@@ -715,6 +727,9 @@ class EventRules:
         self.rules = runtimes
         self.by_head = by_head
         self.generation += 1
+        # writers of types one rule joins take turns (a server's concurrent writers would
+        # each miss the other's half of a match); other writers do not wait for them
+        self.store.set_write_groups(_rule_groups(runtimes))
         if runtimes:
             with self.store.transaction():
                 for rt in runtimes:
@@ -876,6 +891,7 @@ class EventRules:
                 keys.add(key)
         if not keys:
             return None
+        self.store.lock_for_write(keys)   # before the watermarks: see set_write_groups
         return {key: self._max_seq(key) for key in keys}
 
     def store_events(self, events: list, atomic: bool) -> list:
@@ -967,6 +983,7 @@ class EventRules:
                 return
             try:
                 with self.store.transaction():
+                    self.store.lock_for_write(self.types | self.leaf_types)
                     derived = self._round({}, set(), True)
             except SLRError:
                 if self.store.closed:
@@ -1165,3 +1182,20 @@ def _wrap(sql: str) -> list[str]:
             .replace(" ORDER BY ", "\nORDER BY ").split("\n"):
         out.append(part)
     return out
+
+
+def _rule_groups(runtimes: list) -> list[set]:
+    """The event types rules tie together (head, positive and negated atoms), merged into
+    groups: two rules sharing a type are one group."""
+    groups: list[set] = []
+    for rt in runtimes:
+        types = {rt.head_key}
+        for alt in rt.rule.alternatives:
+            types |= {leaf.key for leaf in alt.leaves}
+            types |= {leaf.key for _, leaf in alt.negations}
+        joined = [g for g in groups if g & types]
+        for g in joined:
+            groups.remove(g)
+            types |= g
+        groups.append(types)
+    return groups

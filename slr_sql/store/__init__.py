@@ -162,6 +162,23 @@ class EventStore:
         self._db.check_open()
         return self._db.triggers(table)
 
+    def set_write_groups(self, groups: Iterable[Iterable[tuple[str, int]]]) -> None:
+        """Event types whose writers must take turns, in groups (the types one event rule
+        reads and derives): :meth:`lock_for_write` of a type waits for every transaction
+        writing a type of its group. SQLite writers take turns anyway (one write
+        transaction at a time); on a server the groups become advisory locks.
+
+        >>> s = EventStore(None); s.set_write_groups([{("a", 1), ("r", 0)}])
+        >>> with s.transaction(): s.lock_for_write([("a", 1)])
+        """
+        self._db.set_write_groups(groups)
+
+    def lock_for_write(self, types: Iterable[tuple[str, int]]) -> None:
+        """Inside a transaction: wait until no other transaction writes a type of the
+        groups of ``types`` (:meth:`set_write_groups`), and hold that until the commit; a
+        wait longer than ``busy_timeout`` is :class:`~slr_sql.errors.SLRBusy`."""
+        self._db.lock_for_write(types)
+
     @property
     def dialect(self) -> Any:
         """The SQL dialect of the database (:mod:`slr_sql.store.dialect`)."""

@@ -343,6 +343,15 @@ class Database:
             return {row[0] for row in self.conn.execute(
                 "SELECT name FROM sqlite_master WHERE type = 'table'")}
 
+    def set_write_groups(self, groups: Iterable[Iterable[tuple[str, int]]]) -> None:
+        """Writers take turns on SQLite already (``BEGIN IMMEDIATE``): nothing to keep."""
+
+    def lock_for_write(self, types: Iterable[tuple[str, int]]) -> None:
+        """Nothing to wait for: this connection holds the database's one write lock."""
+
+    def lock_named(self, name: str) -> None:
+        """Nothing to wait for (see :meth:`lock_for_write`)."""
+
     def triggers(self, table: str | None = None) -> set[str]:
         """Names of the triggers (on ``table`` only, when given), temporary ones included.
 

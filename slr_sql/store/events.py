@@ -123,7 +123,10 @@ class EventWriter:
             return errors
         with self.db.transaction():
             arrival = float(self.db.clock.now())
-            self.record_now(arrival)  # buffers (issue 4): "now" for the buffer triggers
+            if self.db.dialect.to_column is None:
+                # buffers (issue 4): "now" for the buffer triggers (SQLite's only: on a
+                # server every writer would wait for the one row's lock)
+                self.record_now(arrival)
             for base, chunk in _chunks(events):
                 if not self._insert_uniform(chunk, arrival, ends):
                     self._insert_each(chunk, base, arrival, atomic, errors, ends)

@@ -76,9 +76,9 @@ class Fleet:
             if row is not None and _json_text(row[0]) != robot:  # another process named it
                 raise SLRError(f"{self.db.path or ':memory:'} is the store of robot "
                                f"{_json_text(row[0])!r}, not {robot!r}")
-            self.db.conn.execute("INSERT OR REPLACE INTO slr_meta (key, value) "
-                                 "VALUES ('robot', ?)", (json.dumps(robot),))
-            self.db.conn.execute("INSERT OR IGNORE INTO slr_robots (name) VALUES (?)", (robot,))
+            self.db.conn.execute("INSERT INTO slr_meta (key, value) VALUES ('robot', ?) "
+                                 "ON CONFLICT (key) DO UPDATE SET value = excluded.value", (json.dumps(robot),))
+            self.db.conn.execute("INSERT INTO slr_robots (name) VALUES (?) ON CONFLICT DO NOTHING", (robot,))
         self.robot = robot
         self.writer.robot = robot
 
@@ -153,9 +153,9 @@ class Fleet:
             fresh = [r for r in rows if r[0] > position]
             if not fresh:
                 return 0
-            conn.execute("INSERT OR IGNORE INTO slr_robots (name) VALUES (?)", (robot,))
+            conn.execute("INSERT INTO slr_robots (name) VALUES (?) ON CONFLICT DO NOTHING", (robot,))
             for other in {r[-1] for r in fresh if r[-1] is not None and r[-1] != robot}:
-                conn.execute("INSERT OR IGNORE INTO slr_robots (name) VALUES (?)", (other,))
+                conn.execute("INSERT INTO slr_robots (name) VALUES (?) ON CONFLICT DO NOTHING", (other,))
             if store_events is not None:
                 self._store_decoded(robot, name, arity, fresh, store_events)
             else:
@@ -167,7 +167,8 @@ class Fleet:
             latest = max(r[3 + arity] for r in fresh)
             conn.execute("INSERT INTO slr_fleet_robots (robot, shipped, last_arrival) "
                          "VALUES (?, ?, ?) ON CONFLICT (robot) DO UPDATE SET shipped = "
-                         "shipped + excluded.shipped, last_arrival = max(coalesce("
+                         "slr_fleet_robots.shipped + excluded.shipped, last_arrival = "
+                         f"{self.db.dialect.scalar('max')}(coalesce(slr_fleet_robots."
                          "last_arrival, excluded.last_arrival), excluded.last_arrival)",
                          (robot, len(fresh), latest))
             conn.execute("INSERT INTO slr_fleet_positions (robot, type_name, type_arity, "
@@ -208,7 +209,7 @@ class Fleet:
                 "INSERT INTO slr_fleet_robots (robot, pending, head_arrival, contact_at) "
                 "VALUES (?, ?, ?, ?) ON CONFLICT (robot) DO UPDATE SET pending = "
                 "excluded.pending, head_arrival = coalesce(excluded.head_arrival, "
-                "head_arrival), contact_at = excluded.contact_at",
+                "slr_fleet_robots.head_arrival), contact_at = excluded.contact_at",
                 (robot, pending, head_arrival, time.time()))
 
     def contacts(self) -> list[dict[str, Any]]:
