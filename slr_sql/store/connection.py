@@ -37,8 +37,8 @@ from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
 from .schema import migrate, migration_scripts
 from .sqltext import busy_error, split_sql_script
 
-__all__ = ["Database", "DatabaseError", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT", "run_sql_file",
-           "check_file"]
+__all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
+           "run_sql_file", "check_file"]
 
 # The base class of the errors the database raises while running a statement (a missing
 # table, a syntax error, a constraint, an interrupted statement...). Callers outside the
@@ -333,6 +333,12 @@ class Database:
             finally:
                 self.conn.close()
 
+    def open_reader(self) -> "ReadConnection | None":
+        """A :class:`ReadConnection` to this store's file (None in memory: no other
+        connection can reach an in-memory database)."""
+        self.check_open()
+        return None if self.path is None else ReadConnection(self.path, self.busy_timeout)
+
     def check_open(self) -> None:
         if self.closed:
             raise SLRError("the event store is closed")
@@ -611,6 +617,53 @@ class Database:
 
 
 # Pragmas that take an argument and only read (also table-valued: pragma_table_info('t')).
+class ReadConnection:
+    """A connection of its own to a store's file, for a reader that must not queue behind the
+    store's connection: its statements never wait for the store's lock, which a writer holds
+    for a whole transaction, fsync included (WAL lets a reader and the writer work at the same
+    time; each statement sees what was committed when it started). ``query_only``: it cannot
+    write. Opened with :meth:`Database.open_reader`; an in-memory store has none.
+
+    >>> import os, tempfile
+    >>> path = os.path.join(tempfile.mkdtemp(), "r.db"); db = Database(path)
+    >>> reader = db.open_reader(); reader.execute("SELECT count(*) FROM slr_program")
+    [(0,)]
+    >>> reader.close(); db.close()
+    """
+
+    def __init__(self, path: str, busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
+                 cache_kib: int = 2048):
+        self.path = path
+        self.busy_timeout = busy_timeout
+        self.lock = threading.Lock()
+        self.closed = False
+        try:
+            self.conn = sqlite3.connect(path, check_same_thread=False, isolation_level=None,
+                                        timeout=busy_timeout, cached_statements=64)
+            self.conn.execute("PRAGMA query_only=ON")
+            self.conn.execute(f"PRAGMA cache_size=-{int(cache_kib)}")
+        except sqlite3.Error as exc:
+            raise SLRError(f"{path}: cannot open a reading connection ({exc})") from None
+
+    def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
+        """Run one reading statement and return its rows."""
+        with self.lock:
+            if self.closed:
+                raise SLRError("the event store is closed")
+            try:
+                return self.conn.execute(sql, tuple(params)).fetchall()
+            except sqlite3.OperationalError as exc:
+                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+
+    def close(self) -> None:
+        """Close the connection (idempotent)."""
+        with self.lock:
+            if not self.closed:
+                self.closed = True
+                self.conn.close()
+
+
+
 _READING_PRAGMAS = frozenset({
     "table_info", "table_xinfo", "table_list", "index_list", "index_info", "index_xinfo",
     "foreign_key_list", "foreign_key_check", "integrity_check", "quick_check",
