@@ -51,7 +51,7 @@ from ..errors import EventRejected
 from .catalog import BufferTables, Catalog, ProgramText
 from .checks import format_event
 from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, DatabaseError, \
-    run_sql_file
+    ReadConnection, run_sql_file
 from .events import Event, EventBatch, EventWriter
 from .fleet import Fleet, check_robot_name
 from .lookups import EventReader, Row
@@ -64,7 +64,7 @@ from .tables import EventTables
 __all__ = ["EventStore", "Event", "EventBatch", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "DatabaseError", "quote_identifier", "sql_literal", "format_event",
            "migration_scripts", "split_sql_script", "run_sql_file", "store_error",
-           "check_robot_name"]
+           "check_robot_name", "ReadConnection"]
 
 
 def _doc(part_method: Callable) -> Callable:
@@ -203,6 +203,10 @@ class EventStore:
     @_doc(Database.close)
     def close(self) -> None:
         self._db.close()
+
+    @_doc(Database.open_reader)
+    def open_reader(self) -> "ReadConnection | None":
+        return self._db.open_reader()
 
     def __enter__(self) -> "EventStore":
         return self
