@@ -25,6 +25,7 @@ LAYERS = {
     "planner": 5,
     "sync": 6, "buffers": 6, "cep": 6, "plot": 6, "subscriptions": 6,
     "kb": 7,
+    "viz": 7.5,  # Foxglove and MCAP views of a store; serve --foxglove uses it
     "demo": 8, "service": 8,
     "ros": 9,  # its request protocol speaks the service's JSON (service/encoding, errors)
     "__init__": 10,  # the public surface: open() from kb, connect() from service
