@@ -183,3 +183,35 @@ def test_a_port_in_use_is_a_clear_error(server, tmp_path):
                           "--port", str(port)], capture_output=True, text=True, timeout=DEADLINE,
                          env={**os.environ, "PYTHONPATH": str(REPO)})
     assert out.returncode == 1 and "error:" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_slr_serve_with_foxglove_shows_what_clients_of_the_service_add(tmp_path):
+    db = tmp_path / "served.db"
+    with slr_sql.open(db) as kb:
+        kb.add("seg(cup1, [0.0, 0.0, 0.0])^1")
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    process = subprocess.Popen([sys.executable, "-m", "slr_sql", "serve", str(db), "--port", "0",
+                                "--foxglove", "--foxglove-port", "0"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        fox = process.stdout.readline()
+        assert fox.startswith("slr serve: foxglove on ws://127.0.0.1:"), process.stderr.read()
+        url = process.stdout.readline().split(" on ")[1].strip()
+        with FoxgloveClient(int(fox.rsplit(":", 1)[1])) as client:
+            deadline = time.monotonic() + DEADLINE
+            client.pump(lambda: "/seg/2" in client.channels, deadline)
+            client.subscribe("/seg/2")
+            remote = slr_sql.connect(url)
+            # subscribed before the add: the view sends what is stored from now on
+            time_before = time.monotonic()
+            while not client.on("/seg/2"):
+                remote.add(f"seg(cup2, [1.0, 2.0, 3.0])^{2 + time.monotonic() - time_before}")
+                client.pump(lambda: client.on("/seg/2") or time.monotonic() > time_before + 1,
+                            deadline)
+                time_before = time.monotonic()
+            (_, message), *_ = client.on("/seg/2")
+            assert message["arg1"] == "cup2" and message["arg2"] == [1.0, 2.0, 3.0]
+    finally:
+        process.terminate()
+        out, err = process.communicate(timeout=DEADLINE)
+    assert process.returncode == 0, err
