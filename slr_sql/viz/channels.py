@@ -38,6 +38,14 @@ TRANSFORMS_SCHEMA_NAME = "foxglove.FrameTransforms"
 TF_TOPICS = {("tf", 3): "/tf", ("tf_static", 3): "/tf_static"}
 MARKS_TOPIC = "/slr/completeness"
 
+_JSON_STARTS = frozenset('[{"')
+# the JSON text of atoms seen (frame and object names repeat): bounded, shared, only grows
+# with distinct names; a str key is the stored column value (atoms are stored as themselves)
+_TEXTS: dict[str, str] = {}
+_INF, _NEG_INF = math.inf, -math.inf
+_float_repr = float.__repr__
+_int_str = int.__repr__
+
 _VEC = {"type": "object", "properties": {k: {"type": "number"} for k in "xyz"}}
 TRANSFORMS_SCHEMA: dict = {
     "title": TRANSFORMS_SCHEMA_NAME,
@@ -99,6 +107,7 @@ class EventChannel:
     topic: str
     schema: dict
     metadata: dict = field(default_factory=dict)
+    _keys: list | None = field(default=None, repr=False, compare=False)
 
     @property
     def schema_name(self) -> str:
@@ -107,10 +116,36 @@ class EventChannel:
     def message(self, row: tuple) -> bytes:
         """The JSON message of a stored row ``(arg1..argN, start, end, arrival, seq)``."""
         n = self.arity
-        parts = [f'"arg{i + 1}":{column_json(row[i])}' for i in range(n)]
-        start, end, arrival = row[n], row[n + 1], row[n + 2]
-        parts.append(f'"start":{float(start)!r},"end":{float(end)!r},"arrival":{float(arrival)!r}')
-        return ("{" + ",".join(parts) + "}").encode()
+        keys = self._keys
+        if keys is None:
+            keys = self._keys = [('{"arg1":' if i == 0 else f',"arg{i + 1}":') for i in range(n)]
+        parts = []
+        texts = _TEXTS
+        for i in range(n):
+            parts.append(keys[i])
+            value = row[i]
+            tv = type(value)
+            if tv is str:
+                if value[:1] in "[{":
+                    if not value.startswith('{"$atom":'):
+                        parts.append(value)   # a list or compound: JSON already
+                        continue
+                text = texts.get(value)   # atoms repeat (names, frames): each once
+                if text is None:
+                    text = column_json(value)
+                    if len(texts) < 65_536:
+                        texts[value] = text
+                parts.append(text)
+            elif tv is float and _NEG_INF < value < _INF:
+                parts.append(_float_repr(value))
+            elif tv is int:
+                parts.append(_int_str(value))
+            else:
+                parts.append(column_json(value))
+        parts.append(('{"start":' if not n else ',"start":') + _float_repr(float(row[n]))
+                     + ',"end":' + _float_repr(float(row[n + 1])) + ',"arrival":'
+                     + _float_repr(float(row[n + 2])) + "}")
+        return "".join(parts).encode()
 
 
 def event_channel(name: str, arity: int, sample: tuple | None = None) -> EventChannel:
@@ -142,7 +177,15 @@ def _frame(value: Any) -> str:
 def transform_message(rows: list) -> bytes | None:
     """``foxglove.FrameTransforms`` of stored tf / tf_static rows (``(parent, child, pose,
     start, end, arrival, seq)``); rows whose third argument is not a pose are left out
-    (None when none is left)."""
+    (None when none is left).
+
+    >>> transform_message([("map", "base", '{"pose":[[1.0,2.0,3.0],[0.0,0.0,0.0,1.0]]}', 2.5, 2.5, 3.0, 1)])
+    b'{"transforms":[{"timestamp":{"sec":2,"nsec":500000000},"parent_frame_id":"map","child_frame_id":"base","translation":{"x":1.0,"y":2.0,"z":3.0},"rotation":{"x":0.0,"y":0.0,"z":0.0,"w":1.0}}]}'
+    """
+    if len(rows) == 1:
+        fast = _one_transform(rows[0])
+        if fast is not None:
+            return fast
     out = []
     for row in rows:
         try:
@@ -161,6 +204,43 @@ def transform_message(rows: list) -> bytes | None:
     if not out:
         return None
     return json.dumps({"transforms": out}, separators=(",", ":")).encode()
+
+
+def _plain_frame(value: Any) -> str | None:
+    """The JSON string of a frame stored as a plain atom, else None."""
+    if type(value) is not str or value[:1] in _JSON_STARTS:
+        return None
+    text = _TEXTS.get(value)
+    if text is None:
+        text = column_json(value)
+        if len(_TEXTS) < 65_536:
+            _TEXTS[value] = text
+    return text
+
+
+_NUMBER_CHARS = frozenset("0123456789.-+eE")
+
+
+def _one_transform(row: tuple) -> bytes | None:
+    """transform_message of one row in its common form (plain frame names, a pose of finite
+    numbers), written from the stored text directly (the encoder wrote each number's
+    shortest text); None for anything else (the general path decides)."""
+    parent, child, pose = _plain_frame(row[0]), _plain_frame(row[1]), row[2]
+    if parent is None or child is None or type(pose) is not str \
+            or not pose.startswith('{"pose":[[') or not pose.endswith("]]}"):
+        return None
+    halves = pose[10:-3].split("],[")
+    if len(halves) != 2:
+        return None
+    t, q = halves[0].split(","), halves[1].split(",")
+    if len(t) != 3 or len(q) != 4 or "e999" in pose \
+            or not _NUMBER_CHARS.issuperset(halves[0].replace(",", "") + halves[1].replace(",", "")):
+        return None
+    ns = time_ns(row[4])
+    return (f'{{"transforms":[{{"timestamp":{{"sec":{ns // 1_000_000_000},"nsec":'
+            f'{ns % 1_000_000_000}}},"parent_frame_id":{parent},"child_frame_id":{child},'
+            f'"translation":{{"x":{t[0]},"y":{t[1]},"z":{t[2]}}},"rotation":{{"x":{q[0]},'
+            f'"y":{q[1]},"z":{q[2]},"w":{q[3]}}}}}]}}').encode()
 
 
 def mark_message(type_text: str, until: float, source: str) -> bytes:

@@ -128,22 +128,25 @@ def export_mcap(store: Any, path: str | Path, start: float | None = None,
                    for index, key in enumerate(keys)]
         add = writer.add_message
         count = 0
-        for end_time, _, index, seq, row in heapq.merge(*streams):
-            key = keys[index]
-            event, channel_id = channels[key]
-            n = key[1]
+        info = [(channels[key][0].message, channels[key][1], key[1] + 2, tf_channels.get(key))
+                for key in keys]
+        per_index = [0] * len(keys)
+        merged = heapq.merge(*streams) if len(streams) > 1 else (streams[0] if streams else ())
+        for end_time, _, index, seq, row in merged:
+            message, channel_id, arrival_at, tf = info[index]
             log_time = time_ns(end_time)
-            publish_time = time_ns(row[n + 2])
-            add(channel_id, log_time, event.message(row), publish_time, seq & 0xFFFFFFFF)
-            tf = tf_channels.get(key)
+            publish_time = time_ns(row[arrival_at])
+            seq &= 0xFFFFFFFF
+            add(channel_id, log_time, message(row), publish_time, seq)
             if tf is not None:
                 data = transform_message([row])
                 if data is not None:
-                    add(tf, log_time, data, publish_time, seq & 0xFFFFFFFF)
-            report.per_type[key] = report.per_type.get(key, 0) + 1
+                    add(tf, log_time, data, publish_time, seq)
+            per_index[index] += 1
             count += 1
             if progress is not None and count % 10_000 == 0:
                 progress(count)
+        report.per_type = {key: per_index[i] for i, key in enumerate(keys) if per_index[i]}
         marks = {k[len("sync/mark/"):]: v for k, v in store.meta_items("sync/mark/").items()}
         if marks:
             schema_id = writer.register_schema(MARKS_SCHEMA["title"], JSON_SCHEMA_ENCODING,
