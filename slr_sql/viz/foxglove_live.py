@@ -114,13 +114,22 @@ class FoxgloveView:
     def _run(self) -> None:
         version = None
         next_static = 0.0
+        next_catalog = 0.0
         while not self._stop.is_set():
             try:
                 now = time.monotonic()
                 current = self.store.data_version()
                 if current != version:
                     version = current
-                    self._follow()
+                    # new types and moved marks are looked for every 50 ms at most; the
+                    # rows of the known types at every change
+                    catalog = now >= next_catalog
+                    if catalog:
+                        next_catalog = now + 0.05
+                    self._follow(catalog=catalog)
+                elif now >= next_catalog and next_catalog:
+                    next_catalog = 0.0
+                    self._follow(catalog=True)
                 if self._static_due.is_set() or now >= next_static:
                     self._static_due.clear()
                     next_static = now + self.static_every
@@ -139,9 +148,9 @@ class FoxgloveView:
         self.channels[key] = (event, channel)
         return self.channels[key]
 
-    def _follow(self, initial: bool = False) -> None:
+    def _follow(self, initial: bool = False, catalog: bool = True) -> None:
         store = self.store
-        for key in store.event_types():
+        for key in (store.event_types() if catalog or initial else ()):
             if key not in self.channels:
                 latest = store.max_seq(*key)
                 sample = store.raw_rows(key[0], key[1], after_seq=latest - 1, limit=1) \
@@ -166,7 +175,8 @@ class FoxgloveView:
                     data = transform_message([row])
                     if data is not None:
                         tf.log(data, log_time=time_ns(row[4]))
-        self._send_marks(initial)
+        if catalog or initial:
+            self._send_marks(initial)
 
     def _send_marks(self, initial: bool) -> None:
         items = self.store.meta_items(_MARK_PREFIX)
