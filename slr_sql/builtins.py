@@ -1210,6 +1210,13 @@ def _prev(m, a):
 
     bound = bound_args(args)
     pattern = args + (s, e)
+    if m.robot is not None:  # one robot's events (a fleet store asked per robot)
+        first = next(_matching(m, pattern, store.prev_candidates(
+            name, n, bound, t, start_ge, robot=m.robot)), None)
+        if first is not None:
+            yield from _yield_rows(m, pattern, store.rows_at_end(
+                name, n, bound, first[2], start_ge=start_ge, robot=m.robot))
+        return
     first = next(_matching(m, pattern, store.prev_candidates(name, n, bound, t, start_ge)), None)
     if first is None:
         return
@@ -1227,6 +1234,13 @@ def _next(m, event, lo_t, hi_t):
 
     bound = bound_args(args)
     pattern = args + (s, e)
+    if m.robot is not None:  # one robot's events (a fleet store asked per robot)
+        first = next(_matching(m, pattern, store.next_candidates(
+            name, n, bound, lo, hi, robot=m.robot)), None)
+        if first is not None:
+            yield from _yield_rows(m, pattern, store.rows_at_start(
+                name, n, bound, first[1], hi, robot=m.robot))
+        return
     first = next(_matching(m, pattern, store.next_candidates(name, n, bound, lo, hi)), None)
     if first is None:
         return
@@ -1247,6 +1261,60 @@ def _next2(m, a):
 @nondet("next", 3)
 def _next3(m, a):
     yield from _next(m, a[0], a[1], a[2])
+
+
+# -- origin/2: whose events ---------------------------------------------------------------------------
+
+def origin_goal(goal: Any) -> Any:
+    """The goal of ``origin(R, Goal)`` if it is an event goal, prev/2, next/2 or next/3;
+    raises the ISO error otherwise."""
+    g = deref(goal)
+    if type(g) is Var:
+        raise instantiation_error()
+    if type(g) is Struct and ((g.name == "^" and len(g.args) == 2 and split_event_atom(g))
+                              or (g.name, len(g.args)) in (("prev", 2), ("next", 2),
+                                                           ("next", 3))):
+        return g
+    raise type_error("event_goal", g)
+
+
+@nondet("origin", 2)
+def _origin(m, a):
+    """origin(R, Goal): Goal (an event goal, prev or next) over robot R's events only; with R
+    unbound, robot by robot in name order, binding R. Inside a query restricted to one robot
+    (``kb.query(goal, robot=...)``) only that robot is seen."""
+    goal = origin_goal(a[1])
+    r = deref(a[0])
+    if type(r) is Var:
+        store = m.engine.events
+        robots = store.robots() if store is not None else []
+    elif type(r) is Atom:
+        robots = [str(r)]
+    else:
+        raise type_error("atom", r)
+    if m.robot is not None:
+        robots = [name for name in robots if name == m.robot]
+    for name in robots:
+        # the goal runs in a machine of its own reading only this robot's events; its
+        # answers (event rows: ground) are copied out and bound here one by one
+        sub = m.engine.machine(at=m.at)
+        sub.deadline, sub.max_steps, sub.timeout = m.deadline, m.max_steps, m.timeout
+        sub.on_prev, sub.on_next = m.on_prev, m.on_next
+        sub.robot = name
+        answers = []
+        solving = sub.solve(goal)
+        try:
+            for _ in solving:
+                answers.append(copy_term(goal))
+        finally:
+            sub.abandon(solving)
+            undo(sub.trail, 0)
+        robot = Atom(name)
+        for answer in answers:
+            mark = len(m.trail)
+            if m.unify(a[0], robot) and m.unify(goal, answer):
+                yield None
+            m.undo_to(mark)
 
 
 # -- robot library -----------------------------------------------------------------------------------

@@ -109,6 +109,8 @@ class Machine:
         # after t, that has not arrived (tf_lookup beyond an edge's last observation)
         self.on_arrival: Callable | None = None
         self.sql_calls: dict | None = None   # set by solve(): compiled sub-goals, if allowed
+        # the robot whose events every event goal, prev and next reads (None: everyone's)
+        self.robot: str | None = None
 
     # -- helpers used by builtins -------------------------------------------------------
     def unify(self, a: Any, b: Any) -> bool:
@@ -145,7 +147,8 @@ class Machine:
         # a synchronized run (its prev/next hooks must see every lookup)
         sql_calls = engine.sql_calls if (engine.use_sql and self.max_steps is None
                                          and self.on_prev is None
-                                         and self.on_next is None) else None
+                                         and self.on_next is None
+                                         and self.robot is None) else None
         self.sql_calls = sql_calls
         while True:
             try:
@@ -523,7 +526,8 @@ class Machine:
         if events is None:
             return False
         bound = bound_args(args)
-        rows = events.scan(name, n, bound, end_le=self.at)
+        rows = events.scan(name, n, bound, end_le=self.at, robot=self.robot) \
+            if self.robot is not None else events.scan(name, n, bound, end_le=self.at)
         return self._push_gen(_match_rows(self, args, s, e, rows), nxt)
 
     def event_source(self):

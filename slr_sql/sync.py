@@ -247,6 +247,18 @@ class PendingQuery(Future):
                          f"{', by ' + self.engine if self.engine else ''})")
         return "\n".join(lines)
 
+    def result(self, timeout: float | None = None) -> list[dict[str, Any]]:
+        """The answer list, waiting up to ``timeout`` seconds (None: for ever). When the
+        wait runs out first: :class:`~slr_sql.SLRTimeout` saying what the query waits for
+        (it goes on waiting: call ``result`` again, or ``cancel()``)."""
+        try:
+            return super().result(timeout)
+        except TimeoutError:
+            if self.done():      # answered (or failed with its own SLRTimeout) meanwhile
+                return super().result(0)
+            raise SLRTimeout(self.timeout_message(timeout) + "; it is still waiting "
+                             "(call result() again, or cancel())") from None
+
     def timeout_message(self, timeout: float | None) -> str:
         """The SLRTimeout text: which types were not complete, and their horizons."""
         sync = self._sync
@@ -600,7 +612,7 @@ class Synchronizer:
 
     def _read_data_version(self) -> int | None:
         try:
-            return self.store.execute("PRAGMA data_version")[0][0]
+            return self.store.data_version()
         except Exception:
             return None
 

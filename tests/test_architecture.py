@@ -17,17 +17,19 @@ PACKAGE = Path(__file__).resolve().parent.parent / "slr_sql"
 # modules of its own family (the same subpackage). Mirrors the table in docs/architecture.md.
 LAYERS = {
     "errors": 0, "terms": 0,
+    "api": 1,  # the KnowledgeBaseAPI protocol: typing only (errors for EventRejected)
     "unify": 1, "arith": 1, "encoding": 1, "program": 1, "parser": 1,
     "robotlib": 1, "clocks": 1, "answers": 1, "grammar": 1,
     "store": 2, "frames": 2,
     "builtins": 3,
     "analysis": 4, "engine": 4, "sqlcompile": 4,
     "planner": 5,
-    "sync": 6, "buffers": 6, "cep": 6, "plot": 6, "subscriptions": 6,
+    "sync": 6, "buffers": 6, "cep": 6, "plot": 6, "subscriptions": 6, "shipping": 6,
     "kb": 7,
     "viz": 7.5,  # Foxglove and MCAP views of a store; serve --foxglove uses it
     "demo": 8, "service": 8,
     "ros": 9,  # its request protocol speaks the service's JSON (service/encoding, errors)
+    "fleet": 9,  # pushes to a fleet store in this process or through the service's client
     "__init__": 10,  # the public surface: open() from kb, connect() from service
     "cli": 11,
     "__main__": 12,

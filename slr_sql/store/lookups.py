@@ -12,6 +12,7 @@ import sqlite3
 from typing import Any, Iterator
 
 from ..encoding import Unencodable, decode, encode
+from .catalog import PROGRAM_VERSION, PROGRESS_VERSION
 from .connection import Database
 from .tables import EventTables, EventType
 
@@ -59,6 +60,10 @@ class EventReader:
         self.db = db
         self.tables = tables
         self.sql_cache: dict[tuple, str] = {}
+        # a server's typed columns (store/dialect.py): values converted both ways
+        self.to_column = db.dialect.to_column
+        from_column = db.dialect.from_column
+        self.decode = decode if from_column is None else (lambda v: decode(from_column(v)))
 
     def _pushdown(self, event_type: EventType, bound: dict[int, Any] | None
                   ) -> tuple[tuple[int, ...], list]:
@@ -75,18 +80,22 @@ class EventReader:
                 value = encode(bound[position])
             except Unencodable:
                 continue  # not ground (or NaN): the caller filters by unification
+            if self.to_column is not None:
+                value = self.to_column(value)
             positions.append(position)
             values.append(value)
         return tuple(positions), values
 
     def _select_sql(self, event_type: EventType, kind: str, positions: tuple[int, ...],
-                    flags: tuple[bool, ...], resume: bool = False) -> str:
-        key = (event_type.table, kind, positions, flags, resume)
+                    flags: tuple[bool, ...], resume: bool = False, robot: bool = False) -> str:
+        key = (event_type.table, kind, positions, flags, resume, robot)
         sql = self.sql_cache.get(key)
         if sql is not None:
             return sql
         by_arg1 = bool(positions) and positions[0] == 0
-        conditions = [f"arg{p + 1} = ?" for p in positions]
+        # one robot's events (a fleet store asked per robot): its parameter follows the
+        # arguments'
+        conditions = [f"arg{p + 1} = ?" for p in positions] + (["robot = ?"] if robot else [])
         if kind == "scan":
             index = event_type.index_arg1_end if by_arg1 else event_type.index_end
             if flags[0]:
@@ -125,7 +134,8 @@ class EventReader:
         if resume:
             conditions.append(_RESUME[kind][0])
         where = f" WHERE {' AND '.join(conditions)}" if conditions else ""
-        sql = (f"SELECT {event_type.columns} FROM {event_type.quoted} INDEXED BY {index}"
+        hint = f" INDEXED BY {index}" if self.db.dialect.index_hints else ""
+        sql = (f"SELECT {event_type.columns} FROM {event_type.quoted}{hint}"
                f"{where} ORDER BY {order}")
         self.sql_cache[key] = sql
         return sql
@@ -144,7 +154,7 @@ class EventReader:
         last = None
         try:
             batch = 8  # prev/next callers usually need only the first row or two
-            dec = decode
+            dec = self.decode
             while True:
                 with db.lock:
                     for attempt in (1, 2):
@@ -187,19 +197,24 @@ class EventReader:
                     pass
 
     def _query(self, name: str, arity: int, bound: dict[int, Any] | None, kind: str,
-               flags: tuple[bool, ...], times: list) -> Iterator[Row]:
+               flags: tuple[bool, ...], times: list, robot: str | None = None
+               ) -> Iterator[Row]:
         with self.db.lock:
             self.db.check_open()
             event_type = self.tables.lookup(name, arity)
             if event_type is None:
                 return iter(())
             positions, values = self._pushdown(event_type, bound)
-            sql = self._select_sql(event_type, kind, positions, flags)
-            resume_sql = self._select_sql(event_type, kind, positions, flags, resume=True)
+            by_robot = robot is not None
+            sql = self._select_sql(event_type, kind, positions, flags, robot=by_robot)
+            resume_sql = self._select_sql(event_type, kind, positions, flags, resume=True,
+                                          robot=by_robot)
+        if by_robot:
+            values.append(robot)
         return self._stream(sql, values + times, arity, kind, resume_sql)
 
     def scan(self, name: str, arity: int, bound: dict[int, Any] | None = None,
-             end_le: float | None = None) -> Iterator[Row]:
+             end_le: float | None = None, robot: str | None = None) -> Iterator[Row]:
         """Stored events of name/arity in store order (end, start, arrival), as
         ``(args, start, end, seq)``; only ``end <= end_le`` when given (the stream view).
         ``bound`` maps 0-based argument positions to ground terms that must be equal (SQL
@@ -213,10 +228,11 @@ class EventReader:
         """
         has_end = end_le is not None
         return self._query(name, arity, bound, "scan", (has_end,),
-                           [float(end_le)] if has_end else [])
+                           [float(end_le)] if has_end else [], robot)
 
     def prev_candidates(self, name: str, arity: int, bound: dict[int, Any] | None,
-                        t: float, start_ge: float | None = None) -> Iterator[Row]:
+                        t: float, start_ge: float | None = None,
+                        robot: str | None = None) -> Iterator[Row]:
         """Events with ``end <= t`` (and ``start >= start_ge`` when given), latest end first
         (streamed backwards from an index). Use :meth:`rows_at_end` for the tied rows of the
         first match in store order.
@@ -229,11 +245,11 @@ class EventReader:
         """
         has_start = start_ge is not None
         times = [float(t)] + ([float(start_ge), float(start_ge)] if has_start else [])
-        return self._query(name, arity, bound, "prev", (has_start,), times)
+        return self._query(name, arity, bound, "prev", (has_start,), times, robot)
 
     def rows_at_end(self, name: str, arity: int, bound: dict[int, Any] | None, end: float,
-                    start_ge: float | None = None, end_le: float | None = None
-                    ) -> Iterator[Row]:
+                    start_ge: float | None = None, end_le: float | None = None,
+                    robot: str | None = None) -> Iterator[Row]:
         """Events whose end is exactly ``end`` (and ``start >= start_ge``, ``end <= end_le``
         when given) in store order (start, arrival).
 
@@ -246,10 +262,10 @@ class EventReader:
         flags = (start_ge is not None, end_le is not None)
         times = [float(end)] + ([float(start_ge)] if flags[0] else []) \
             + ([float(end_le)] if flags[1] else [])
-        return self._query(name, arity, bound, "at_end", flags, times)
+        return self._query(name, arity, bound, "at_end", flags, times, robot)
 
     def next_candidates(self, name: str, arity: int, bound: dict[int, Any] | None,
-                        a: float, b: float) -> Iterator[Row]:
+                        a: float, b: float, robot: str | None = None) -> Iterator[Row]:
         """Events with ``a <= start`` and ``end <= b``, earliest start first (streamed from an
         index). Use :meth:`rows_at_start` for the tied rows of the first match.
 
@@ -259,10 +275,11 @@ class EventReader:
         >>> next(s.next_candidates("p", 1, {}, 1.5, math.inf))[0]
         (Atom('b'),)
         """
-        return self._query(name, arity, bound, "next", (), [float(a), float(b), float(b)])
+        return self._query(name, arity, bound, "next", (), [float(a), float(b), float(b)],
+                           robot)
 
     def rows_at_start(self, name: str, arity: int, bound: dict[int, Any] | None,
-                      start: float, b: float) -> Iterator[Row]:
+                      start: float, b: float, robot: str | None = None) -> Iterator[Row]:
         """Events whose start is exactly ``start`` and whose end is ``<= b``, in store order
         (end, arrival).
 
@@ -272,11 +289,12 @@ class EventReader:
         >>> [row[0] for row in s.rows_at_start("p", 1, {}, 1.0, 10.0)]
         [(Atom('b'),), (Atom('a'),)]
         """
-        return self._query(name, arity, bound, "at_start", (), [float(start), float(b)])
+        return self._query(name, arity, bound, "at_start", (), [float(start), float(b)],
+                           robot)
 
     def lookup_sql(self, kind: str, name: str, arity: int,
                    bound: dict[int, Any] | None = None, *, start_ge: bool = False,
-                   end_le: bool = False) -> str | None:
+                   end_le: bool = False, robot: bool = False) -> str | None:
         """The SQL a lookup runs (for explain output and plan tests). ``kind`` is ``scan``,
         ``prev``, ``at_end``, ``next`` or ``at_start``; ``start_ge``/``end_le`` say whether
         those optional bounds are given. None if the type has no table.
@@ -295,7 +313,7 @@ class EventReader:
             if event_type is None:
                 return None
             positions, _ = self._pushdown(event_type, bound)
-            return self._select_sql(event_type, kind, positions, flags)
+            return self._select_sql(event_type, kind, positions, flags, robot=robot)
 
     def latest_at_or_before(self, name: str, arity: int, bound: dict[int, Any], t: float,
                             point: bool) -> list[Row] | None:
@@ -320,6 +338,32 @@ class EventReader:
             positions, values = self._pushdown(event_type, bound)
             if len(positions) != len(bound):
                 return None
+            rows = self.latest_rows(name, arity, positions, values, t, point)
+        dec = self.decode
+        return [(tuple([dec(v) for v in row[:arity]]), row[arity], row[arity + 1], row[arity + 2])
+                for row in rows]
+
+    def latest_rows(self, name: str, arity: int, positions: tuple[int, ...], values: list,
+                    t: float, point: bool) -> list[tuple]:
+        """:meth:`latest_at_or_before` for callers that encoded the bound values themselves
+        (``values``, for the argument ``positions`` in increasing order) and decode what they
+        need: the raw rows ``(arg1, ..., argN, t_start, t_end, seq, program version, progress
+        version)``, one statement. The two versions (see :meth:`Catalog.versions`) are read
+        in the same snapshot as the rows, so that a caller learns in the same statement
+        whether another connection changed the program or the progress meanwhile.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a",), 1, 1), ("p", ("a",), 2, 2)])
+        []
+        >>> s.latest_rows("p", 1, (0,), ["a"], 1.5, True)
+        [('a', 1.0, 1.0, 1, None, None)]
+        """
+        db = self.db
+        with db.lock:
+            db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return []
             key = (event_type.table, "latest", positions, point)
             sql = self.sql_cache.get(key)
             if sql is None:
@@ -327,17 +371,16 @@ class EventReader:
                                      + (["t_start = t_end"] if point else []))
                 where = (where + " AND ") if where else ""
                 columns = ", ".join([f"arg{i + 1}" for i in range(arity)]
-                                    + ["t_start", "t_end", "seq"])
+                                    + ["t_start", "t_end", "seq"]
+                                    + ["(SELECT value FROM slr_meta WHERE key = ?)"] * 2)
                 # ORDER BY ... LIMIT 1 rather than max(): max() with the extra start = end
                 # filter is an aggregate over every row of the key, LIMIT 1 stops at the first
                 sql = (f"SELECT {columns} FROM {event_type.quoted} WHERE {where}t_end = "
                        f"(SELECT t_end FROM {event_type.quoted} WHERE {where}t_end <= ? "
                        f"ORDER BY t_end DESC LIMIT 1) ORDER BY t_start, seq")
                 self.sql_cache[key] = sql
-            rows = self.db.conn.execute(sql, values + values + [float(t)]).fetchall()
-        dec = decode
-        return [(tuple([dec(v) for v in row[:arity]]), row[arity], row[arity + 1], row[arity + 2])
-                for row in rows]
+            return db.conn.execute(sql, (PROGRAM_VERSION, PROGRESS_VERSION, *values, *values,
+                                         float(t))).fetchall()
 
     def count(self, name: str, arity: int) -> int:
         """Number of stored events of name/arity.
@@ -406,7 +449,7 @@ class EventReader:
                 self.sql_cache[key] = sql
             rows = self.db.conn.execute(sql, values + [float(t)] + values + [float(t)]).fetchall()
         out: list = [None, None]
-        dec = decode
+        dec = self.decode
         for row in rows:
             out[row[0]] = (tuple([dec(v) for v in row[1:arity + 1]]), row[arity + 1],
                            row[arity + 2], row[arity + 3])
