@@ -440,12 +440,15 @@ class EventReader:
             if sql is None:
                 where = " AND ".join(f"arg{p + 1} = ?" for p in positions)
                 cols = event_type.columns
-                sql = (f"SELECT 0, * FROM (SELECT {cols} FROM {event_type.quoted} "
-                       f"INDEXED BY {event_type.index_arg1_end} WHERE {where} AND t_end <= ? "
-                       f"ORDER BY t_end DESC, t_start DESC, seq DESC LIMIT 1) "
-                       f"UNION ALL SELECT 1, * FROM (SELECT {cols} FROM {event_type.quoted} "
-                       f"INDEXED BY {event_type.index_arg1_start} WHERE {where} AND t_start >= ? "
-                       f"ORDER BY t_start, seq DESC LIMIT 1)")
+                hints = self.db.dialect.index_hints
+                by_end = f" INDEXED BY {event_type.index_arg1_end}" if hints else ""
+                by_start = f" INDEXED BY {event_type.index_arg1_start}" if hints else ""
+                sql = (f"SELECT 0, * FROM (SELECT {cols} FROM {event_type.quoted}{by_end} "
+                       f"WHERE {where} AND t_end <= ? "
+                       f"ORDER BY t_end DESC, t_start DESC, seq DESC LIMIT 1) AS before_t "
+                       f"UNION ALL SELECT 1, * FROM (SELECT {cols} FROM {event_type.quoted}"
+                       f"{by_start} WHERE {where} AND t_start >= ? "
+                       f"ORDER BY t_start, seq DESC LIMIT 1) AS after_t")
                 self.sql_cache[key] = sql
             rows = self.db.conn.execute(sql, values + [float(t)] + values + [float(t)]).fetchall()
         out: list = [None, None]
@@ -478,7 +481,8 @@ class EventReader:
                 return [], top
             rows = conn.execute(f"SELECT DISTINCT arg1, arg2 FROM {event_type.quoted} "
                                 f"WHERE seq > ? AND seq <= ?", (after_seq, top)).fetchall()
-        return [(decode(a), decode(b)) for a, b in rows], top
+        dec = self.decode
+        return [(dec(a), dec(b)) for a, b in rows], top
 
     def max_seq(self, name: str, arity: int) -> int:
         """The greatest arrival sequence number stored for name/arity (0 when none): it moves
@@ -539,4 +543,9 @@ class EventReader:
             if limit is not None:
                 sql += " LIMIT ?"
                 params.append(int(limit))
-            return self.db.conn.execute(sql, params).fetchall()
+            rows = self.db.conn.execute(sql, params).fetchall()
+        from_column = self.db.dialect.from_column
+        if from_column is not None:   # a server's typed columns: as SQLite stores them
+            rows = [tuple([from_column(v) for v in row[:arity]]) + tuple(row[arity:])
+                    for row in rows]
+        return rows
