@@ -1401,6 +1401,9 @@ def shell(db: str) -> None:
 
 from .ros.cli import ros as _ros  # noqa: E402 - issue 13: `slr ros` (its extra is imported on use)
 main.add_command(_ros)
+from .viz.cli import export_command as _export, foxglove_command as _foxglove  # noqa: E402
+main.add_command(_foxglove)
+main.add_command(_export)
 
 from .fleet import _click_group as _fleet_group  # noqa: E402 - `slr fleet push|status`
 main.add_command(_fleet_group())

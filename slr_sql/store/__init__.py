@@ -386,6 +386,13 @@ class EventStore:
     def max_seq(self, name: str, arity: int) -> int:
         return self._reader.max_seq(name, arity)
 
+    @_doc(EventReader.raw_rows)
+    def raw_rows(self, name: str, arity: int, *, after_seq: int | None = None,
+                 end_from: float | None = None, end_to: float | None = None,
+                 limit: int | None = None, after_key: tuple | None = None) -> list[tuple]:
+        return self._reader.raw_rows(name, arity, after_seq=after_seq, end_from=end_from,
+                                     end_to=end_to, limit=limit, after_key=after_key)
+
     @_doc(EventReader.count)
     def count(self, name: str, arity: int) -> int:
         return self._reader.count(name, arity)
