@@ -323,6 +323,16 @@ def _click_group() -> Any:
     def fleet_group() -> None:
         """Ship a robot's store to a fleet store, and see what the fleet holds."""
 
+    @fleet_group.command("name")
+    @click.argument("db", type=click.Path(dir_okay=False))
+    @click.argument("robot")
+    def name_command(db: str, robot: str) -> None:
+        """Name the robot the store DB belongs to (kept in the store; once for life). Its
+        events from now on carry the name; ``slr_sql.open(DB, robot=NAME)`` does the same."""
+        with EventStore(db, robot=robot):
+            pass
+        click.echo(f"{db} is the store of robot {robot}")
+
     @fleet_group.command("push")
     @click.argument("db", type=click.Path(dir_okay=False))
     @click.argument("fleet")

@@ -407,3 +407,24 @@ def test_several_robots_follow_into_one_fleet_store(tmp_path):
     status = {r["robot"]: r for r in fleet.status(str(fleet_db))}
     assert {r: (s["shipped"], s["pending"]) for r, s in status.items()} == {
         r: (3000, 0) for r in robots}
+
+
+def test_the_worked_example_runs_as_written(tmp_path):
+    """docs/fleet.md's warehouse session: each `$ slr ...` line prints what follows it."""
+    text = (ROOT / "docs" / "fleet.md").read_text(encoding="utf-8")
+    block = text.split("## A worked example", 1)[1].split("```sh\n", 1)[1].split("```", 1)[0]
+    steps: list[tuple[str, list[str]]] = []
+    for line in block.splitlines():
+        if line.startswith("$ "):
+            steps.append((line[2:], []))
+        else:
+            steps[-1][1].append(line)
+    assert len(steps) == 10
+    import shlex
+    for command, shown in steps:
+        argv = shlex.split(command)
+        assert argv[0] == "slr"
+        done = subprocess.run([sys.executable, "-m", "slr_sql", *argv[1:]], capture_output=True,
+                              text=True, env=slr_env(), cwd=tmp_path, timeout=120)
+        assert done.returncode == 0, (command, done.stderr)
+        assert done.stdout.splitlines() == shown, command
