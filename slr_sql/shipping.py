@@ -50,7 +50,7 @@ def receive(kb: Any, robot: str, batches: list, marks: dict | None = None,
     >>> receive(fleet, "r1", [("seen", 1, [(1, "pallet7", 10.0, 10.0, 3.0, "r1")])])
     1
     >>> fleet.query("origin(R, seen(P)^T)")
-    [{'R': 'r1', 'P': 'pallet7', 'T': 10.0}]
+    [{'R': Atom('r1'), 'P': Atom('pallet7'), 'T': 10.0}]
     """
     store = kb.store
     _check_shipment(batches, marks)
