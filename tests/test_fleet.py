@@ -15,6 +15,7 @@ import time
 from collections import Counter
 from pathlib import Path
 
+import httpx
 import pytest
 
 import slr_sql
@@ -357,6 +358,26 @@ def test_a_fleet_that_does_not_answer_never_holds_the_robot_up(tmp_path):
             wait_until(lambda: fleet_count(fleet_db) == 8000, "the second backlog")
             pusher.send_signal(signal.SIGTERM)
             assert pusher.wait(timeout=DEADLINE) == 0
+            with slr_sql.connect(url) as client:
+                # asking the fleet through the service, per robot
+                # (both writes stored w7 at 7.0: prev gives the tied rows)
+                assert client.query("origin(R, prev(seen(pallet7, W)^T, 10))") == [
+                    {"R": "r1", "W": "w7", "T": 7.0}] * 2
+                assert len(client.query("seen(pallet7, W)^T", robot="r1")) == 160
+                assert client.query("seen(pallet7, W)^T", robot="r2") == []
+                # a malformed shipment is refused with its reason and changes nothing
+                for bad in ([["seen", 2, [[1, "a", "b", 1.0, 1.0, 1.0, None]]]],   # short
+                            [["seen", 2, [[9, "a", "b", 1.0, "x", 1.0, 1.0, None]]]],
+                            [["seen", 2, [[9, "a", "b", 1.0, 1.0, 1.0, None],
+                                          [8, "a", "b", 1.0, 1.0, 1.0, None]]]], "x"):
+                    reply = httpx.post(url + "/fleet/receive",
+                                       json={"robot": "r1", "batches": bad}, timeout=30)
+                    assert reply.status_code == 400, reply.text
+                    assert "shipment" in reply.text or "shipped row" in reply.text
+                status = client.fleet_status()
+                assert [(r["robot"], r["shipped"], r["pending"]) for r in status] == [
+                    ("r1", 8000, 0)]
+            assert fleet_count(fleet_db) == 8000
         finally:
             server.stop()
     finally:

@@ -103,24 +103,32 @@ class Fleet:
                 out[key] = row[0] or 0
             return out
 
-    def read_after(self, name: str, arity: int, position: int, limit: int
-                   ) -> tuple[list[tuple], int, float | None]:
+    def read_after(self, name: str, arity: int, position: int, limit: int) -> list[tuple]:
         """Up to ``limit`` stored rows of name/arity with ``seq > position`` in sequence
-        order, as ``(seq, *encoded arguments, start, end, arrival, robot)``; with the number
-        of rows after ``position`` and the arrival of the latest of them (the lag)."""
+        order, as ``(seq, *encoded arguments, start, end, arrival, robot)``."""
         with self.db.lock:
             self.db.check_open()
             event_type = self.tables.lookup(name, arity)
             if event_type is None:
-                return [], 0, None
+                return []
             args = "".join(f"arg{i}, " for i in range(1, arity + 1))
-            rows = self.db.conn.execute(
+            return self.db.conn.execute(
                 f"SELECT seq, {args}t_start, t_end, arrival, robot FROM {event_type.quoted} "
                 "WHERE seq > ? ORDER BY seq LIMIT ?", (position, limit)).fetchall()
-            left, latest = self.db.conn.execute(
-                f"SELECT count(*), max(arrival) FROM {event_type.quoted} WHERE seq > ?",
-                (position,)).fetchone()
-            return rows, left, latest
+
+    def backlog(self, name: str, arity: int, position: int) -> tuple[int, float | None]:
+        """The number of rows of name/arity after ``position`` and the arrival time of the
+        latest row (None for an empty table): what is left to ship, and how recent."""
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return 0, None
+            left = self.db.conn.execute(f"SELECT count(*) FROM {event_type.quoted} "
+                                        "WHERE seq > ?", (position,)).fetchone()[0]
+            row = self.db.conn.execute(f"SELECT arrival FROM {event_type.quoted} "
+                                       "ORDER BY seq DESC LIMIT 1").fetchone()
+            return left, None if row is None else row[0]
 
     # ------------------------------------------------------------------ the fleet's side
 
@@ -159,10 +167,13 @@ class Fleet:
             if store_events is not None:
                 self._store_decoded(robot, name, arity, fresh, store_events)
             else:
+                # as an add: the fleet store's clock is the rows' arrival (and its "now")
+                arrival = float(self.db.clock.now())
+                self.writer.record_now(arrival)
                 event_type = self.writer._type_for_new_event(name, arity)
-                sql = event_type.insert_sql
-                conn.executemany(sql, [r[1:-1] + ((r[-1] if r[-1] is not None else robot),)
-                                       for r in fresh])
+                end = 1 + arity + 2
+                conn.executemany(event_type.insert_sql, [
+                    r[1:end] + (arrival, r[-1] if r[-1] is not None else robot) for r in fresh])
             # the arrival column sits after the arguments and the two times
             latest = max(r[3 + arity] for r in fresh)
             conn.execute("INSERT INTO slr_fleet_robots (robot, shipped, last_arrival) "
