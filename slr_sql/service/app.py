@@ -879,7 +879,7 @@ async def _stats(svc: "_Service", request: Request) -> Any:
 
 @_route("GET", "/fleet/positions", "What this fleet store holds of a robot: per event "
         "type, the last sequence of the robot's store stored here (slr fleet push).",
-        query={"robot": "string"}, response={"positions": "array"})
+        query={"robot": ("string", True)}, response={"positions": "array"})
 async def _fleet_positions(svc: "_Service", request: Request) -> Any:
     from slr_sql.shipping import positions
     robot = request.query_params.get("robot")
