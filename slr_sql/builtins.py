@@ -1423,6 +1423,74 @@ def _distance(m, a):
     return m.unify(a[2], from_python(_robot_call(robotlib.distance, to_python(a[0]), to_python(a[1]))))
 
 
+# -- tf_lookup: tf2's lookupTransform over the stored tf / tf_static events (slr_sql.frames) --
+
+def _frame(t: Any) -> Any:
+    t = deref(t)
+    if type(t) is Var:
+        raise instantiation_error()
+    if not is_ground(t):
+        raise instantiation_error()
+    return t
+
+
+def _tf_hooks(m: "Machine") -> Any:
+    if m.on_prev is None and m.on_next is None and m.on_arrival is None:
+        return None
+    from .frames import TfHooks
+
+    def prev(key, t):
+        if m.on_prev is not None:
+            m.on_prev(key[0], key[1], t)
+
+    def next_(key, lo, hi, args):
+        if m.on_next is not None:
+            m.on_next(key[0], key[1], lo, hi, tuple(args) + (Var(),), Var(), Var())
+
+    def arrival(key, t, args):
+        if m.on_arrival is not None:
+            m.on_arrival(key[0], key[1], t, tuple(args) + (Var(),))
+    return TfHooks(prev, next_, arrival)
+
+
+def _tf_lookup(m: "Machine", a: tuple, extrapolate: bool) -> bool:
+    from .frames import FrameTree, lookup
+
+    target, source = _frame(a[0]), _frame(a[1])
+    t = _time_value(a[2])
+    store = m.engine.events
+    if store is None:
+        return False
+    tree = m.engine.frames
+    if tree is None:
+        tree = m.engine.frames = FrameTree()
+    pose = lookup(store, tree, target, source, t, extrapolate, _tf_hooks(m))
+    if pose is None:
+        return False
+    return m.unify(a[3], Struct("pose", (make_list(list(pose[0])), make_list(list(pose[1])))))
+
+
+@det("tf_lookup", 4)
+def _tf_lookup4(m, a):
+    """tf_lookup(Target, Source, T, Pose): the pose of frame Source in frame Target at T,
+    chained through the stored frame tree; fails outside an edge's observations."""
+    return _tf_lookup(m, a, False)
+
+
+@det("tf_lookup", 5)
+def _tf_lookup5(m, a):
+    """tf_lookup(Target, Source, T, Pose, Mode): Mode ``interpolate`` is tf_lookup/4;
+    ``extrapolate`` holds an edge's nearest observation outside its observations."""
+    mode = deref(a[4])
+    if type(mode) is Var:
+        raise instantiation_error()
+    if type(mode) is not Atom:
+        raise type_error("atom", mode)
+    if mode not in ("interpolate", "extrapolate"):
+        raise _err_domain("tf_lookup_mode", mode)
+    return _tf_lookup(m, a, mode == "extrapolate")
+
+
 # -- Python-defined predicates ---------------------------------------------------------------------
 
 def call_python_pred(m: "Machine", fn: Callable, args: tuple) -> bool:

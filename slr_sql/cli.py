@@ -85,8 +85,14 @@ def error_words(exc: BaseException) -> str:
     unknown procedure nosuch/1
     """
     if isinstance(exc, slr_sql.SLREvaluationError):
-        words = _iso_words(getattr(exc, "term", None))
+        term = getattr(exc, "term", None)
+        words = _iso_words(term)
         if words is not None:
+            # The library's hint after the term (``color/2 is defined with ^T: did you
+            # mean color(cup2, C)^T?``) is for the user too.
+            message = str(exc)
+            if message.startswith("error(") and "): " in message:
+                words += "; " + message.split("): ", 1)[1]
             return words
     from .store import DatabaseError
 
@@ -385,16 +391,18 @@ def _numbered_lines(handle: Iterable[bytes]) -> Iterator[tuple[int, bytes]]:
         yield lineno, line
 
 
-def ingest_file(kb: Any, path: str, progress: Any = None, task: Any = None) -> IngestReport:
-    """Ingest every event line of ``path`` into ``kb`` in batches; bad lines are collected,
-    the rest still goes in."""
+def ingest_file(kb: Any, path: str | Any, progress: Any = None) -> IngestReport:
+    """Ingest every event line of ``path`` (a file name, or a binary stream such as
+    ``sys.stdin.buffer``) into ``kb`` in batches; bad lines are collected, the rest still goes
+    in. ``progress(nbytes)`` is called with the size of each line read."""
     bad: list[tuple[int, str]] = []
     added = 0
     batch: list[tuple[int, Any]] = []
-    with open(path, "rb") as handle:  # decoded line by line: one bad byte costs one line
+    handle = open(path, "rb") if isinstance(path, (str, os.PathLike)) else path
+    try:  # decoded line by line: one bad byte costs one line
         for lineno, raw in _numbered_lines(handle):
             if progress is not None:
-                progress.update(task, advance=len(raw))
+                progress(len(raw))
             try:
                 try:
                     line = raw.decode("utf-8")
@@ -411,16 +419,41 @@ def ingest_file(kb: Any, path: str, progress: Any = None, task: Any = None) -> I
             if len(batch) >= INGEST_BATCH:
                 added += _add_batch(kb, batch, bad)
                 batch = []
+    finally:
+        if handle is not path:
+            handle.close()
     added += _add_batch(kb, batch, bad)
     bad.sort()
     return IngestReport(added, bad)
 
 
+class LineProgress:
+    """Progress of an ingest into a log (stderr not a terminal, ``--progress``): one line
+    per tenth of a file, or per 64 MiB of a stream whose size is unknown."""
+
+    def __init__(self, label: str, total: int | None):
+        self.label, self.total, self.done, self.next_mark = label, total, 0, 0
+
+    def __call__(self, nbytes: int) -> None:
+        self.done += nbytes
+        if self.done < self.next_mark:
+            return
+        if self.total:
+            percent = min(100, 100 * self.done // self.total)
+            _err(f"{self.label}: {percent}% ({self.done:,} of {self.total:,} bytes)")
+            self.next_mark = (percent // 10 + 1) * self.total // 10
+        else:
+            _err(f"{self.label}: {self.done:,} bytes")
+            self.next_mark = self.done + 64 * 1024 * 1024
+
+
 @main.command()
 @click.argument("db", type=click.Path(dir_okay=False))
-@click.argument("file", type=click.Path(dir_okay=False))
-def ingest(db: str, file: str) -> None:
-    """Add the events of FILE: one per line, SLR text or a JSON object.
+@click.argument("file", type=click.Path(dir_okay=False, allow_dash=True))
+@click.option("--progress/--no-progress", default=None,
+              help="Report progress on stderr (default: a bar on a terminal for long input).")
+def ingest(db: str, file: str, progress: bool | None) -> None:
+    """Add the events of FILE (- for standard input): one per line, SLR text or JSON.
 
     \b
       seg(cup1,[0.4,0.1,0.9])^12.31
@@ -428,21 +461,31 @@ def ingest(db: str, file: str) -> None:
 
     Bad lines are reported as FILE:LINE: reason and skipped; the exit status is 1 if any.
     """
-    from rich.console import Console
-    from rich.progress import BarColumn, DownloadColumn, Progress, TimeRemainingColumn
-
-    size = os.path.getsize(_existing_file(file))
+    if file == "-":
+        source: Any = sys.stdin.buffer
+        label, size = "<stdin>", None
+    else:
+        source = _existing_file(file)
+        label, size = file, os.path.getsize(file)
+    terminal = sys.stderr.isatty()
+    if progress is None:   # a bar only where a person watches, and only when it is long
+        progress = terminal and (size is None or size >= PROGRESS_MIN_BYTES)
     with _open(db) as kb:
-        if size >= PROGRESS_MIN_BYTES:
+        if progress and terminal:
+            from rich.console import Console
+            from rich.progress import BarColumn, DownloadColumn, Progress, TimeRemainingColumn
+
             columns = ("[progress.description]{task.description}", BarColumn(),
                        DownloadColumn(), TimeRemainingColumn())
-            with Progress(*columns, console=Console(stderr=True), transient=True) as progress:
-                task = progress.add_task(f"ingesting {os.path.basename(file)}", total=size)
-                report = ingest_file(kb, file, progress, task)
+            with Progress(*columns, console=Console(stderr=True), transient=True) as bar:
+                task = bar.add_task(f"ingesting {os.path.basename(label)}", total=size)
+                report = ingest_file(kb, source, lambda n: bar.update(task, advance=n))
+        elif progress:
+            report = ingest_file(kb, source, LineProgress(f"ingesting {label}", size))
         else:
-            report = ingest_file(kb, file)
+            report = ingest_file(kb, source)
     for lineno, reason in report.bad:
-        _err(f"{file}:{lineno}: {reason}")
+        _err(f"{label}:{lineno}: {reason}")
     click.echo(f"ingested {report.added} event{'s' if report.added != 1 else ''}"
                + (f", {len(report.bad)} bad line{'s' if len(report.bad) != 1 else ''}" if report.bad else ""))
     if report.bad:
@@ -466,6 +509,42 @@ def _print_answers(answers: list[dict[str, Any]]) -> None:
         click.echo(line)
 
 
+class AnswerPrinter:
+    """Prints answers as they come: Prolog's top-level lines, or one JSON object per
+    answer (the service's encoding, docs/service.md) for ``--json``; ``false.`` (text only)
+    when there was none."""
+
+    def __init__(self, as_json: bool):
+        self.as_json = as_json
+        self.count = 0
+
+    def __call__(self, answer: dict[str, Any]) -> None:
+        self.count += 1
+        if self.as_json:
+            from .service.encoding import dumps, encode_answers
+
+            line = dumps(encode_answers([answer])[0]).decode("utf-8")
+        else:
+            line = answer_text(answer) if answer else "true."
+        click.echo(line)
+
+    def finish(self) -> None:
+        if not self.count and not self.as_json:
+            click.echo("false.")
+
+
+def _warn_about(kb: Any, goal: str) -> None:
+    """The library's warnings about a goal (a predicate nobody defined: a typo?) on stderr."""
+    if not hasattr(kb, "goal_warnings"):
+        return
+    try:
+        warnings = kb.goal_warnings(goal)
+    except slr_sql.SLRError:   # the query itself reports a bad goal, once
+        return
+    for warning in warnings:
+        _err(f"warning: {warning}")
+
+
 @main.command()
 @click.argument("db", type=click.Path(dir_okay=False))
 @click.argument("goal")
@@ -474,27 +553,34 @@ def _print_answers(answers: list[dict[str, Any]]) -> None:
 @click.option("--wait", is_flag=True,
               help="Synchronized: answer once the events the goal depends on are complete up to "
                    "--at (default: now).")
-@click.option("--timeout", type=float, default=None, help="Give up after S seconds.")
+@click.option("--timeout", type=float, default=None,
+              help="Give up after S seconds (the answers found so far are printed first).")
+@click.option("--limit", type=click.IntRange(min=0), default=None, metavar="N",
+              help="Stop after N answers.")
+@click.option("--json", "as_json", is_flag=True,
+              help="One JSON object per answer (the service's encoding); no answer: no line.")
 @click.option("--robot", default=None,
               help="Only this robot's events (every event goal, prev and next).")
 def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | None,
-          robot: str | None) -> None:
+          limit: int | None, as_json: bool, robot: str | None) -> None:
     """Ask GOAL and print one answer per line (`false.` when there is none)."""
     goal = strip_full_stop(goal)
     at = _finite("--at", at)
     timeout = _finite("--timeout", timeout, minimum=0.0)
+    printer = AnswerPrinter(as_json)
     with _open(db, create=False) as kb:
         if wait and robot is not None:
             raise slr_sql.SLRError("--robot cannot be combined with --wait yet: ask "
                                    "origin(R, Goal) in the goal instead")
+        _warn_about(kb, goal)
         if wait:
             if not hasattr(kb, "submit"):
                 _err("error: synchronized queries are not available in this build")
                 sys.exit(2)
             import concurrent.futures
 
-            # Without --at the library synchronizes on "now" (the store clock).
-            # -- issue 5: other processes may add the events/marks it waits for
+            # Without --at the library synchronizes on "now" (the store clock); other
+            # processes may add the events and marks it waits for.
             if hasattr(kb, "_sync"):
                 kb._sync.watch_external()
             pending = kb.submit(goal, at=at, id=f"slr-query-{os.getpid()}", timeout=timeout)
@@ -508,11 +594,25 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
             if hasattr(pending, "explain"):  # what it waited for and how long, as comments
                 for line in pending.explain().splitlines():
                     _err(f"% {line}")
-            # -- end issue 5
-        else:
-            answers = kb.query(goal, at=at, timeout=timeout,
-                               **({"robot": robot} if robot is not None else {}))
-    _print_answers(answers)
+            for answer in answers[:limit]:
+                printer(answer)
+        elif not hasattr(kb, "solutions"):   # a service URL: the server applies the limit
+            for answer in kb.query(goal, at=at, timeout=timeout, limit=limit,
+                                   **({"robot": robot} if robot is not None else {})):
+                printer(answer)
+        elif limit != 0:
+            try:
+                for answer in kb.solutions(goal, at=at, timeout=timeout,
+                                        **({"robot": robot} if robot is not None else {})):
+                    printer(answer)
+                    if printer.count == limit:
+                        break
+            except slr_sql.SLRTimeout as exc:
+                _err(f"error: {error_words(exc)}"
+                     + (f" ({printer.count} answer{'s' if printer.count != 1 else ''} "
+                        f"printed before it)" if printer.count else ""))
+                sys.exit(1)
+    printer.finish()
 
 
 @main.command()
@@ -522,6 +622,186 @@ def explain(db: str, goal: str) -> None:
     """Show how GOAL would run: compiled to SQL or interpreted, and why."""
     with _open(db, create=False) as kb:
         click.echo(kb.explain(strip_full_stop(goal)))
+
+
+# ---------------------------------------------------------------------------------------------
+# programs / unload / describe: what is in a store
+# ---------------------------------------------------------------------------------------------
+
+EPOCH_2001 = 978_307_200.0   # times past this are read as Unix time (a robot's clock)
+
+
+def time_text(t: float | None) -> str:
+    """A time as the command line prints it: the number, and for an epoch-second time
+    (after 2001) also the UTC date and time.
+
+    >>> time_text(12.5), time_text(1700000000.25)
+    ('12.5', '1700000000.25 (2023-11-14 22:13:20.250 UTC)')
+    """
+    if t is None:
+        return "-"
+    if not math.isfinite(t) or t < EPOCH_2001:
+        return f"{t:g}" if abs(t) < 1e15 else repr(t)
+    import datetime
+
+    moment = datetime.datetime.fromtimestamp(t, tz=datetime.UTC)
+    return f"{t:.2f} ({moment.strftime('%Y-%m-%d %H:%M:%S.%f')[:-3]} UTC)"
+
+
+def _program_infos(kb: Any) -> list[Any]:
+    infos = kb.programs()
+    return list(infos.values()) if isinstance(infos, dict) else list(infos)
+
+
+def _info_field(info: Any, name: str) -> Any:
+    return info.get(name) if isinstance(info, dict) else getattr(info, name, None)
+
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.option("--source", is_flag=True, help="Print each program's text too.")
+def programs(db: str, source: bool) -> None:
+    """List the named programs in DB: name, texts loaded, files, when."""
+    with _open(db, create=False) as kb:
+        infos = _program_infos(kb)
+    if not infos:
+        click.echo("no programs")
+    for info in infos:
+        files = ", ".join(dict.fromkeys(_info_field(info, "filenames") or ()))
+        texts = _info_field(info, "texts") or 0
+        click.echo(f"{_info_field(info, 'name')}: {texts} text{'s' if texts != 1 else ''}"
+                   f" from {files or '<string>'}, loaded {time_text(_info_field(info, 'loaded_at'))}")
+        if source:
+            for line in (_info_field(info, "source") or "").splitlines():
+                click.echo(f"    {line}")
+
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.argument("name")
+def unload(db: str, name: str) -> None:
+    """Remove the program NAME (its clauses, declarations and buffers; events stay)."""
+    with _open(db, create=False) as kb:
+        kb.unload(name)
+    click.echo(f"unloaded program {name!r}")
+
+
+@dataclass
+class TypeSummary:
+    """One event type of a store, as ``slr describe`` shows it."""
+
+    name: str
+    arity: int
+    table: str
+    count: int
+    first: float | None          # the earliest end time
+    last: float | None           # the latest end time
+    sample: str | None           # the first event in store order, as SLR text
+    rules: list[str]             # predicates (rules) that read or define it
+    buffers: list[str]           # buffers whose pattern is of this type
+    event_rules: list[str]       # event rules that match it or derive it
+
+
+def describe_types(kb: Any, wanted: Iterable[str] = ()) -> list[TypeSummary]:
+    """What ``slr describe`` prints: a :class:`TypeSummary` per event type of ``kb`` (or of
+    ``wanted``: ``seg`` or ``seg/2``), in name order.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(); kb.load("color(O,C)^T :- prev(obj(O,_,C)^Z, T).")
+    >>> kb.add_many(["obj(cup1, cup, red)^2", "obj(cup1, cup, blue)^5"])
+    []
+    >>> s = describe_types(kb)[0]; (s.name, s.arity, s.count, s.first, s.last, s.rules)
+    ('obj', 3, 2, 2.0, 5.0, ['color/2^'])
+    """
+    from .analysis import analyze
+    from .parser import parse_term
+    from .program import event_key, split_event_atom
+    from .terms import format_atom, format_term
+
+    store = kb.store
+    types = dict(store.event_types())
+    for key in store.declared_types():
+        types.setdefault(key, store.table_for(*key) or "-")
+    chosen = []
+    for spec in wanted:
+        name, _, arity = spec.partition("/")
+        found = [k for k in types if k[0] == name and (not arity or str(k[1]) == arity)]
+        if not found:
+            raise slr_sql.SLRError(f"no event type {spec} in the store (known: "
+                                   f"{', '.join(sorted(f'{n}/{a}' for n, a in types)) or 'none'})")
+        chosen += found
+    keys = sorted(set(chosen) if chosen else types)
+    analysis = analyze(kb.engine.program)
+    readers: dict[tuple[str, int], list[str]] = {}
+    for node, stored in analysis.stored.items():
+        for key in stored:
+            if node.kind == "event" and (node.name, node.arity) == key:
+                continue
+            mark = "^" if node.kind == "event" else ""   # color/2^: the rules of color(..)^T
+            readers.setdefault(key, []).append(f"{format_atom(node.name)}/{node.arity}{mark}")
+    buffers: dict[tuple[str, int], list[str]] = {}
+    for info in kb.buffers():
+        try:
+            pattern = parse_term(info.pattern, "<buffer>")[0]
+            key = event_key(split_event_atom(pattern)[0] if split_event_atom(pattern)
+                            else pattern)
+        except (slr_sql.SLRError, TypeError, ValueError, AttributeError):
+            continue
+        buffers.setdefault(key, []).append(f"{info.kind}({info.pattern}, {info.amount:g})")
+    event_rules = kb.event_rules() if hasattr(kb, "event_rules") else []
+    out = []
+    for name, arity in keys:
+        rules = sorted(set(readers.get((name, arity), [])))
+        if (name, arity) in kb.engine.program.temporal:
+            rules.insert(0, f"{format_atom(name)}/{arity}^ (defines it)")
+        rows = iter(store.scan(name, arity)) if store.table_for(name, arity) else iter(())
+        first_row = next(rows, None)
+        sample = None
+        if first_row is not None:
+            args, start, end = first_row[0], first_row[1], first_row[2]
+            atom = format_term(slr_sql.Struct(name, tuple(args))) if args else format_atom(name)
+            sample = f"{atom}^{end!r}" if start == end else f"{atom}^[{start!r},{end!r}]"
+        derived = [r["rule"] for r in event_rules if r.get("head") == f"{name}/{arity}"]
+        matching = [r["rule"] for r in event_rules
+                    if re.search(rf"(?<![\w']){re.escape(name)}\(", str(r.get("pattern", "")))]
+        out.append(TypeSummary(
+            name, arity, types.get((name, arity)) or "-", store.count(name, arity)
+            if store.table_for(name, arity) else 0,
+            first_row[2] if first_row is not None else None,
+            store.max_end(name, arity) if first_row is not None else None,
+            sample, rules, buffers.get((name, arity), []),
+            list(dict.fromkeys(derived + matching))))
+    return out
+
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.argument("types", nargs=-1, metavar="[TYPE]...")
+@click.option("--all", "show_all", is_flag=True,
+              help="Include the store's internal types (slr_import/3, ...).")
+def describe(db: str, types: tuple[str, ...], show_all: bool) -> None:
+    """Each event type: arity, count, first/last time, a sample, the rules and buffers on it."""
+    if _is_url(db):
+        raise slr_sql.SLRError("describe needs the store itself, not a service URL")
+    with _open(db, create=False) as kb:
+        summaries = describe_types(kb, types)
+    if not types and not show_all:
+        summaries = [s for s in summaries if not s.name.startswith("slr_")]
+    if not summaries:
+        click.echo("no event types")
+    for s in summaries:
+        click.echo(f"{s.name}/{s.arity}  (table {s.table})")
+        click.echo(f"  events:      {s.count}")
+        if s.count:
+            click.echo(f"  end times:   {time_text(s.first)} .. {time_text(s.last)}")
+        if s.sample:
+            click.echo(f"  sample:      {s.sample}")
+        for label, items in (("rules:", s.rules), ("buffers:", s.buffers),
+                             ("event rules:", s.event_rules)):
+            if items:
+                click.echo(f"  {label:<12} {items[0]}")
+                for item in items[1:]:
+                    click.echo(f"  {'':<12} {item}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -545,32 +825,68 @@ def run_sql(db: str, statement: str, write: bool = False) -> tuple[list[str], li
         try:
             columns, rows = kb.sql(statement, write=write)
         except slr_sql.SLRError as exc:
-            if str(exc).startswith("read-only"):
-                raise slr_sql.SLRError(f"read-only: the statement would change the store; "
-                                       f"slr sql --write allows it ({exc})") from None
+            message = str(exc)
+            if message.startswith("read-only"):
+                # The library's message speaks to Python callers (write=True); say it the
+                # command line's way, once.
+                message = re.sub(r"[;,]? *(pass|use|with) `?write=True`?[^;()]*", "", message)
+                raise slr_sql.SLRError(f"{message.rstrip('. ')}; `slr sql --write` allows it") \
+                    from None
             raise
         return list(columns), [tuple(r) for r in rows]
+
+
+SQL_FORMATS = ("table", "csv", "tsv", "json", "nl")
+
+
+def write_rows(columns: list[str], rows: Iterable[tuple], fmt: str, out: Any = None) -> None:
+    """Rows in one of :data:`SQL_FORMATS`, as ``sqlite-utils query`` writes them: ``json`` a
+    JSON array of row objects (one row a line), ``nl`` one JSON object a line, ``csv`` and
+    ``tsv`` with a header line, ``table`` a box table for reading.
+
+    >>> write_rows(["n", "name"], [(1, "cup1"), (2, None)], "nl")
+    {"n": 1, "name": "cup1"}
+    {"n": 2, "name": null}
+    """
+    import csv
+
+    out = out or sys.stdout
+    if fmt in ("json", "nl"):
+        from sqlite_utils.cli import output_rows  # sqlite-utils' own JSON writer
+
+        for line in output_rows(rows, columns, nl=fmt == "nl", arrays=False, json_cols=False):
+            out.write(line + "\n")
+    elif fmt in ("csv", "tsv"):
+        writer = csv.writer(out, dialect="excel-tab" if fmt == "tsv" else "excel",
+                            lineterminator="\n")
+        writer.writerow(columns)
+        writer.writerows(rows)
+    else:
+        from rich.console import Console
+        from rich.table import Table
+
+        table = Table(*columns, show_lines=False)
+        for row in rows:
+            table.add_row(*("NULL" if v is None else str(v) for v in row))
+        # Into a pipe the table is not cut to the terminal's width.
+        Console(file=out, highlight=False, width=None if out.isatty() else 500).print(table)
 
 
 @main.command()
 @click.argument("db", type=click.Path(dir_okay=False))
 @click.argument("statement")
-@click.option("--json", "as_json", is_flag=True, help="Print a JSON list of row objects.")
+@click.option("--table", "fmt", flag_value="table",
+              help="A box table (the default on a terminal).")
+@click.option("--csv", "fmt", flag_value="csv", help="CSV with a header line.")
+@click.option("--tsv", "fmt", flag_value="tsv",
+              help="Tab-separated with a header line (the default into a pipe or file).")
+@click.option("--json", "fmt", flag_value="json", help="A JSON array of row objects.")
+@click.option("--nl", "fmt", flag_value="nl", help="One JSON object per row (JSON lines).")
 @click.option("--write", is_flag=True, help="Allow the statement to change the store.")
-def sql(db: str, statement: str, as_json: bool, write: bool) -> None:
+def sql(db: str, statement: str, fmt: str | None, write: bool) -> None:
     """Run a SQL STATEMENT on the store, e.g. "SELECT * FROM seg" (read-only unless --write)."""
     columns, rows = run_sql(db, statement, write=write)
-    if as_json:
-        click.echo(json.dumps([dict(zip(columns, row)) for row in rows], indent=None))
-        return
-    from rich.console import Console
-    from rich.table import Table
-
-    table = Table(*columns, show_lines=False)
-    for row in rows:
-        table.add_row(*("NULL" if v is None else str(v) for v in row))
-    # Piped output is not cut to 80 columns: the table is for reading, and --json for programs.
-    Console(highlight=False, width=None if sys.stdout.isatty() else 500).print(table)
+    write_rows(columns, rows, fmt or ("table" if sys.stdout.isatty() else "tsv"))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -57,6 +57,7 @@ True
 from __future__ import annotations
 
 import json
+import json.scanner
 import math
 import os
 import re
@@ -69,7 +70,7 @@ from typing import Any
 
 import orjson
 
-from .terms import CONS, NIL, Atom, String, Struct, Var, make_list
+from .terms import CONS, NIL, Atom, String, Struct, Var, make_list, to_python
 
 # The optional C loops of the column encoder (csrc/, built by setup.py when a compiler is
 # there): the same texts as the Python code below, which stays the reference and the
@@ -85,8 +86,8 @@ else:
     if getattr(_speedups, "LOOPS_VERSION", None) != _LOOPS_VERSION:
         _speedups = None  # a build older (or newer) than this source: not used
 
-__all__ = ["encode", "encode_column", "decode", "encode_json", "Unencodable", "INT64_MIN",
-           "INT64_MAX"]
+__all__ = ["encode", "encode_column", "decode", "decode_answer", "encode_json", "Unencodable",
+           "INT64_MIN", "INT64_MAX"]
 
 INT64_MIN = -(2 ** 63)
 INT64_MAX = 2 ** 63 - 1
@@ -652,6 +653,42 @@ def decode(value: Any) -> Any:
     if tv is bytes:
         return decode(value.decode("utf-8"))
     raise ValueError(f"cannot decode column value {value!r}")
+
+
+# json.loads without its wrappers (the same C scanner, the same default decoder settings)
+_scan_json = json.scanner.make_scanner(json.JSONDecoder())
+
+
+def decode_answer(value: Any) -> Any:
+    """A stored column value as an answer shows it: ``to_python(decode(value))``, without
+    building the term first when the value is a list of numbers (a position, a pose's
+    vector), the common argument of a robot's events.
+
+    >>> decode_answer("[0.5,1,2.0]"), decode_answer("cup1"), decode_answer('"hi"')
+    ([0.5, 1, 2.0], Atom('cup1'), 'hi')
+    """
+    tv = type(value)
+    if tv is str:
+        if not value or value[0] not in _JSON_STARTS:
+            return Atom(value)
+        if value[0] == "[":
+            try:
+                data, end = _scan_json(value, 0)
+            except StopIteration:
+                end = -1
+            if end != len(value):
+                return to_python(decode(value))   # (not stored JSON: decode says so)
+            for x in data:
+                tx = type(x)
+                if tx is not float and tx is not int:
+                    break
+            else:
+                return data
+            return to_python(_from_json(data))
+        return to_python(_decode_top_json(value))
+    if tv is int or tv is float:
+        return value
+    return to_python(decode(value))
 
 
 def _decode_top_json(text: str) -> Any:

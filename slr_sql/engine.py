@@ -73,6 +73,7 @@ class Engine:
         # the SQL compiler answers (slr_sql.planner.CompiledCall); use_sql switches them off
         self.sql_calls: dict = {}
         self.use_sql = True
+        self.frames: Any = None  # tf_lookup's frame tree (slr_sql.frames), made on first use
 
     def machine(self, at: float | None = None, timeout: float | None = None,
                 max_steps: int | None = None) -> "Machine":
@@ -104,6 +105,9 @@ class Machine:
         # hooks for synchronized queries: called before prev/next read the store
         self.on_prev: Callable | None = None
         self.on_next: Callable | None = None
+        # (name, n, t, args): the answer depends on an event matching args, starting at or
+        # after t, that has not arrived (tf_lookup beyond an edge's last observation)
+        self.on_arrival: Callable | None = None
         self.sql_calls: dict | None = None   # set by solve(): compiled sub-goals, if allowed
         # the robot whose events every event goal, prev and next reads (None: everyone's)
         self.robot: str | None = None

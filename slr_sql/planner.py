@@ -631,11 +631,18 @@ def plan_for(kb, plan, has_at: bool, robot: bool = False):
     return entry
 
 
+def compiles_for(store) -> bool:
+    """Whether the SQL compiler's statements run on ``store``: they are printed for SQLite
+    and call Python functions (``slr_j``, the aggregates, ``slr_det``); on another engine
+    the interpreter answers every goal (through the store's indexed lookups)."""
+    return store.dialect.name == "sqlite"
+
+
 def try_sql(kb, plan, args, at, limit=None, deadline=None, robot=None):
     """Answers through SQL, or None when the interpreter must answer. Past ``deadline``
     (``time.monotonic()``) the statement stops with SLRTimeout. ``robot``: only that
     robot's events."""
-    if not getattr(kb, "sql_enabled", True):
+    if not getattr(kb, "sql_enabled", True) or not compiles_for(kb.store):
         return None
     entry = plan_for(kb, plan, at is not None, robot is not None)
     if type(entry) is Fallback:
@@ -759,6 +766,8 @@ def refresh_views(kb) -> list[str]:
             cols = ", ".join(f"arg{i + 1}" for i in range(arity))
             views.setdefault(name, f"SELECT {cols} FROM {table} ORDER BY ord")
             continue
+        if not compiles_for(kb.store):
+            continue
         sql, _reason, miss = view_sql(kb, name, arity)
         missing |= set(miss)
         if sql is not None and name not in views:
@@ -857,6 +866,8 @@ def compiled_calls(kb) -> dict:
     first-argument index answers them faster than a statement would."""
     from .analysis import Node, analyze, reachable, recursive_predicates
 
+    if not compiles_for(kb.store):
+        return {}
     program = kb.program
     a = analyze(program)
     recursive = recursive_predicates(program)

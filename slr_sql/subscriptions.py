@@ -1428,9 +1428,7 @@ class SubscriptionHub:
         """A table created by a program without this module (raw SQL) has no journal yet."""
         if key in self._journaled:
             return
-        rows = self.store.execute("SELECT 1 FROM sqlite_master WHERE type = 'trigger' AND "
-                                  "name = ?", (TRIGGER_PREFIX + info.table,))
-        if not rows:
+        if TRIGGER_PREFIX + info.table not in self.store.triggers(info.table):
             with self.store.transaction():
                 self._ensure_journal(key[0], key[1], info.table)
         self._journaled.add(key)
@@ -1506,9 +1504,8 @@ class SubscriptionHub:
         store = self.store
         if store.closed:
             return
-        journals = [r[0] for r in store.execute(
-            "SELECT name FROM sqlite_master WHERE type = 'table' AND substr(name, 1, ?) = ?",
-            (len(JOURNAL_PREFIX), JOURNAL_PREFIX))]
+        journals = sorted(name for name in store.table_names()
+                          if name.startswith(JOURNAL_PREFIX))
         tables = {table: key for key, table in store.event_types().items()}
         with self.lock:
             local = set(self._by_type)

@@ -247,6 +247,18 @@ class PendingQuery(Future):
                          f"{', by ' + self.engine if self.engine else ''})")
         return "\n".join(lines)
 
+    def result(self, timeout: float | None = None) -> list[dict[str, Any]]:
+        """The answer list, waiting up to ``timeout`` seconds (None: for ever). When the
+        wait runs out first: :class:`~slr_sql.SLRTimeout` saying what the query waits for
+        (it goes on waiting: call ``result`` again, or ``cancel()``)."""
+        try:
+            return super().result(timeout)
+        except TimeoutError:
+            if self.done():      # answered (or failed with its own SLRTimeout) meanwhile
+                return super().result(0)
+            raise SLRTimeout(self.timeout_message(timeout) + "; it is still waiting "
+                             "(call result() again, or cancel())") from None
+
     def timeout_message(self, timeout: float | None) -> str:
         """The SLRTimeout text: which types were not complete, and their horizons."""
         sync = self._sync
@@ -479,8 +491,9 @@ class Completeness:
                    if d > persisted.get(k, 0.0) + max(1e-3, 0.01 * persisted.get(k, 0.0))}
             if due:
                 self.flush(due)
-        for key in moved:
-            self.arrivals[key] = self.arrivals.get(key, 0) + 1
+        arrivals = self.arrivals
+        for key in spans:   # every type: tf_lookup waits for an arrival of any type
+            arrivals[key] = arrivals.get(key, 0) + 1
         return moved
 
 
@@ -599,7 +612,7 @@ class Synchronizer:
 
     def _read_data_version(self) -> int | None:
         try:
-            return self.store.execute("PRAGMA data_version")[0][0]
+            return self.store.data_version()
         except Exception:
             return None
 
@@ -731,6 +744,10 @@ class Synchronizer:
         released: list = []
         with self.lock:
             moved = self.tracker.observe(stored, arrival)
+            if self._arrival_waits:   # waits for an arrival of a type that is not in order
+                spans = getattr(stored, "ends", None)
+                arrived = spans.keys() if spans is not None else _end_spans(stored).keys()
+                moved = moved | (arrived & self._arrival_waits.keys())
             for key in moved:
                 released += self._release(key, arrival=True)
         self._schedule_all(released)
@@ -834,7 +851,7 @@ class Synchronizer:
             if tracker.complete(w.key, w.time, now):
                 why = tracker.why(w.key, w.time, now)
             elif w.kind == "arrival" and tracker.arrivals.get(w.key, 0) != w.seen:
-                why = f"the arrival of an in-order {w.type} event inside the interval"
+                why = f"the arrival of a {w.type} event it waited for"
             else:
                 continue
             w.released_at = now
@@ -868,6 +885,7 @@ class Synchronizer:
         m.on_prev = self._check_prev
         m.on_next = lambda name, n, lo, hi, args, s=None, e=None: \
             self._check_next(m, name, n, lo, hi, args, s, e)
+        m.on_arrival = lambda name, n, t, args: self._check_arrival(m, name, n, t, args)
         answers = []
         q.evaluations += 1
         solving = m.solve(term)
@@ -958,6 +976,17 @@ class Synchronizer:
                 return
             raise _MustWait(key, hi, reason, "arrival", seen)
         raise _MustWait(key, hi, reason)
+
+    def _check_arrival(self, m: Any, name: str, n: int, t: float, args: tuple) -> None:
+        """tf_lookup found no observation of an edge at or after ``t``: wait until an event
+        of the type arrives (then evaluate again). An event that arrived since the lookup
+        read the store makes the query run again at once."""
+        key = (name, n)
+        seen = self.tracker.arrivals.get(key, 0)
+        if self._stored_match(m, name, n, t, _INF, args, None, None):
+            seen = -1
+        raise _MustWait(key, _INF, f"an observation of {name}/{n} at or after {_fmt(t)}",
+                        "arrival", seen)
 
     def _stored_match(self, m: Any, name: str, n: int, lo: float, hi: float, args: tuple,
                       s: Any, e: Any) -> bool:

@@ -17,9 +17,10 @@ PACKAGE = Path(__file__).resolve().parent.parent / "slr_sql"
 # modules of its own family (the same subpackage). Mirrors the table in docs/architecture.md.
 LAYERS = {
     "errors": 0, "terms": 0,
+    "api": 1,  # the KnowledgeBaseAPI protocol: typing only (errors for EventRejected)
     "unify": 1, "arith": 1, "encoding": 1, "program": 1, "parser": 1,
     "robotlib": 1, "clocks": 1, "answers": 1, "grammar": 1,
-    "store": 2,
+    "store": 2, "frames": 2,
     "builtins": 3,
     "analysis": 4, "engine": 4, "sqlcompile": 4,
     "planner": 5,

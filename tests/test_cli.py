@@ -89,8 +89,6 @@ def test_query_at_limits_the_stream_view(loaded_db):
 
 
 def test_query_wait_answers_once_complete(db, tmp_path):
-    import slr_sql
-
     program = tmp_path / "colors.slr"
     # A fixed delay of 0: with the wall clock far past these event times, obj/3 is complete.
     program.write_text(":- max_delay(obj/3, 0).\ncolor(O, C)^T :- prev(obj(O, _, C)^_Z, T).\n",
@@ -98,10 +96,6 @@ def test_query_wait_answers_once_complete(db, tmp_path):
     assert slr("load", db, str(program)).returncode == 0
     assert slr("add", db, "obj(cup1, cup, red)^2.0", "obj(cup1, cup, green)^9.0").returncode == 0
     r = slr("query", db, "color(cup1, C)^12", "--at", "12", "--wait", "--timeout", "20")
-    if not hasattr(slr_sql.KnowledgeBase, "submit"):
-        assert r.returncode == 2
-        assert "synchronized queries are not available in this build" in r.stderr
-        return
     assert (r.returncode, r.stdout.strip()) == (0, "C = green"), r.stderr
     r = slr("query", db, "color(cup1, C)^12", "--wait", "--timeout", "20")  # complete up to now
     assert (r.returncode, r.stdout.strip()) == (0, "C = green"), r.stderr

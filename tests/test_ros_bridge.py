@@ -349,7 +349,8 @@ def test_bridge_tf_without_a_tf2_msgs_package(tmp_path, ros_env):
         Lines(publisher).wait_for("published", deadline)
         while True:
             with slr_sql.open(db) as kb:
-                stored = kb.query("aggregate_all(count, tf(_, _, _)^_, N)")[0]["N"]
+                stored = kb.query("aggregate_all(count, (tf(_, _, _)^_ ; tf_static(_, _, _)^_), N)"
+                                  )[0]["N"]
             if stored >= 11:
                 break
             assert time.monotonic() < deadline, f"stored {stored} of 11"
@@ -363,7 +364,7 @@ def test_bridge_tf_without_a_tf2_msgs_package(tmp_path, ros_env):
                 process.kill()
                 process.wait()
     with slr_sql.open(db) as kb:
-        static = kb.query("tf(base, cam, P)^T")
+        static = kb.query("tf_static(base, cam, P)^T")
         moving = kb.query("tf(map, base, pose([X, _, _], _))^T")
     assert static == [{"P": Struct("pose", ([0.1, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])), "T": 5.0}]
     assert [(a["X"], a["T"]) for a in moving] == [(float(i), 10.0 + i) for i in range(10)]

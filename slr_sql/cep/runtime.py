@@ -112,17 +112,9 @@ class RuleRuntime:
         self._done: list = []        # pending rows decided, not yet deleted
 
     # ----------------------------------------------------------------- building
-    def schema(self) -> list[str]:
-        cols = ["id INTEGER PRIMARY KEY", "alt INTEGER NOT NULL"]
-        cols += [f"r{p + 1} INTEGER" for p in range(self.width)]
-        cols += ["t_start REAL NOT NULL", "t_end REAL NOT NULL"]
-        cols += [f"h{i + 1}" for i in range(self.rule.arity)]
-        cols += ["detected REAL NOT NULL"]
-        out = [f"CREATE TABLE IF NOT EXISTS {self.prov} ({', '.join(cols)})"]
-        if self.used:
-            out.append(f"CREATE TABLE IF NOT EXISTS {self.used} (tbl TEXT NOT NULL, "
-                       f"seq INTEGER NOT NULL, PRIMARY KEY (tbl, seq)) WITHOUT ROWID")
-        return out
+    def create_tables(self) -> None:
+        """The rule's provenance table (and used-rows table), if they are not there yet."""
+        self.eng.store.create_rule_tables(self.prov, self.width, self.rule.arity, self.used)
 
     def build(self) -> None:
         """(Re)build the SQL of every alternative for the tables that exist now."""
@@ -135,7 +127,7 @@ class RuleRuntime:
             names = [eng.table_name(leaf.key) for leaf in alt.leaves]
             sql = AltSQL(alt, n, tables, neg_tables, head_args, self.policy, eng.complete_sql,
                          used_table=self.used, prov_table=self.prov, table_names=names,
-                         fact_table=eng.fact_table)
+                         fact_table=eng.fact_table, dialect=eng.store.dialect)
             self.alts.append(sql)
             residual = None
             reads = False
@@ -290,7 +282,8 @@ class RuleRuntime:
     def _bindings(self, n: int, row: tuple) -> dict:
         alt = self.alts[n]
         base = alt.k + 2
-        return {id(v): decode(row[base + i]) for i, v in enumerate(alt.value_vars)}
+        dec = self.eng.decode
+        return {id(v): dec(row[base + i]) for i, v in enumerate(alt.value_vars)}
 
     def _derive_from(self, n: int, row: tuple, now: float) -> bool:
         """Derive the complex events of one match (value columns ``row``); raises MustWait.
@@ -326,7 +319,7 @@ class RuleRuntime:
                 if t is None:
                     break
                 try:
-                    values.append(encode(t))
+                    values.append(self.eng.encode(t))
                 except Unencodable:
                     break
             else:
@@ -632,9 +625,7 @@ class RuleRuntime:
                 f"ORDER BY id")
         args = {"now": now, "before": before, "robot": store.robot}
         head_table = self.eng.table_name(self.head_key)
-        if store.execute("SELECT 1 FROM sqlite_master WHERE type = 'trigger' AND tbl_name = ? "
-                         "UNION ALL SELECT 1 FROM sqlite_temp_master WHERE type = 'trigger' "
-                         "AND tbl_name = ? LIMIT 1", (head_table, head_table)):
+        if store.triggers(head_table):
             # a buffer's trigger may refuse rows: the rows stored are those RETURNING gives
             rows = store.run_compiled(f"{copy} RETURNING {', '.join(cols)}", args)
             # RETURNING gives an integral REAL as an int: the times as stored (floats)
@@ -648,7 +639,7 @@ class RuleRuntime:
         if not rows:
             return []
         self.detections += len(rows)
-        dec = decode
+        dec = self.eng.decode
         if arity == 0:
             return [(name, (), r[0], r[1]) for r in rows]
         if arity == 1:
@@ -663,6 +654,11 @@ class EventRules:
     def __init__(self, kb: Any):
         self.kb = kb
         self.store = kb.store
+        # the store's columns: encoded terms as they are (SQLite) or as a server holds them
+        from_column, to_column = kb.store.dialect.from_column, kb.store.dialect.to_column
+        self.decode: Any = decode if from_column is None else \
+            (lambda v: decode(from_column(v)))
+        self.encode: Any = encode if to_column is None else (lambda t: to_column(encode(t)))
         self.clock = kb.clock
         self.sync = getattr(kb, "_sync", None)
         self.tracker = self.sync.tracker if self.sync is not None else None
@@ -725,8 +721,7 @@ class EventRules:
                     name, arity = rt.head_key
                     if self.store.table_for(name, arity) is None:
                         self.store.declare_type(name, arity)
-                    for sql in rt.schema():
-                        self.store.execute(sql)
+                    rt.create_tables()
                     self.store.execute(
                         "INSERT INTO slr_cep_rules (key, head, rule, policy, source, "
                         "prov_table, installed_at) VALUES (?, ?, ?, ?, ?, ?, ?) "
@@ -782,7 +777,7 @@ class EventRules:
         n = self._index(key)
         if key in self.types:
             inner = " AND ".join(f"({self.complete_sql(t, x)})" for t in self.inputs[key])
-            return f"{x} <= :mk{n} OR (({inner or '1'}) AND {x} < :pm{n})"
+            return f"{x} <= :mk{n} OR (({inner or self.store.dialect.true}) AND {x} < :pm{n})"
         return f"{x} <= :mk{n} OR {x} + :dl{n} < :now OR {x} < :le{n}"
 
     def params(self, now: float) -> dict:

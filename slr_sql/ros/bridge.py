@@ -27,6 +27,7 @@ the store and returns 0.
 """
 from __future__ import annotations
 
+import functools
 import importlib
 import math
 import signal
@@ -489,7 +490,7 @@ class Bridge:
         fast = None
         if len(bound) == 1 and not marks and bound[0].entry.where.startswith("built-in") \
                 and fast_tf._matches(fielddefs, fast_tf._ROS2) and topic in TF_TOPICS:
-            fast = fast_tf.decode_cdr
+            fast = functools.partial(fast_tf.decode_cdr, event=bound[0].entry.event)
         sub = _Subscription(topic, msgtype, bound, marks, fast)
         sub.handle = self._node.create_subscription(
             cls, topic, lambda raw, s=sub: self._on_message(s, raw), self._qos(publishers),

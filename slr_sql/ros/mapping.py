@@ -396,8 +396,13 @@ class Mapping:
 def tf_entry(topic: str) -> TopicEntry:
     """The built-in mapping of /tf and /tf_static, as if written in a MAP:
     ``tf(Parent, Child, pose([X,Y,Z],[QX,QY,QZ,QW]))^T``, one event per transform, T its
-    header stamp."""
-    spec = {"event": "tf", "foreach": "transforms", "type": TF_TYPE, "args": [
+    header stamp; /tf_static gives ``tf_static(..)^T`` events, which ``tf_lookup`` takes as
+    valid for all time.
+
+    >>> tf_entry("/tf_static").event
+    'tf_static'
+    """
+    spec = {"event": "tf_static" if topic == "/tf_static" else "tf", "foreach": "transforms", "type": TF_TYPE, "args": [
         "header.frame_id", "child_frame_id",
         {"pose": [["transform.translation.x", "transform.translation.y",
                    "transform.translation.z"],

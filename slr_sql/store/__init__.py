@@ -55,14 +55,16 @@ from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, Database
 from .events import Event, EventBatch, EventWriter
 from .fleet import Fleet, check_robot_name
 from .lookups import EventReader, Row
+from .postgres import PgDatabase, PgStatementError, is_postgres_url
 from .schema import migration_scripts
-from .space import Space
-from .sqltext import quote_identifier, split_sql_script, sql_literal
+from .space import ServerSpace, Space
+from .sqltext import quote_identifier, split_sql_script, sql_literal, store_error
 from .tables import EventTables
 
 __all__ = ["EventStore", "Event", "EventBatch", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "DatabaseError", "quote_identifier", "sql_literal", "format_event",
-           "migration_scripts", "split_sql_script", "run_sql_file", "check_robot_name"]
+           "migration_scripts", "split_sql_script", "run_sql_file", "store_error",
+           "check_robot_name"]
 
 
 def _doc(part_method: Callable) -> Callable:
@@ -98,14 +100,19 @@ class EventStore:
                  cache_mib: float = CACHE_SIZE_KIB / 1024, robot: str | None = None):
         if robot is not None:
             check_robot_name(robot)
-        self._db = db = Database(path, clock, synchronous, busy_timeout, adopt, checkpoint,
-                                 cache_mib=cache_mib)
+        db: Any
+        if is_postgres_url(path):
+            db = PgDatabase(str(path), clock, busy_timeout=busy_timeout, adopt=adopt)
+        else:
+            db = Database(path, clock, synchronous, busy_timeout, adopt, checkpoint,
+                          cache_mib=cache_mib)
+        self._db = db
         self._tables = EventTables(db)
         self._writer = EventWriter(db, self._tables)
         self._reader = EventReader(db, self._tables)
         self._catalog = Catalog(db)
         self._buffers = BufferTables(db)
-        self._space = Space(db, self._tables)
+        self._space = (ServerSpace if is_postgres_url(path) else Space)(db, self._tables)
         try:
             self._fleet = Fleet(db, self._tables, self._writer)
             if robot is not None:
@@ -144,6 +151,27 @@ class EventStore:
     @table_created_hooks.setter
     def table_created_hooks(self, hooks: list) -> None:
         self._tables.table_created_hooks = hooks
+
+    def table_names(self) -> set[str]:
+        """Names of every table of the store (event tables, ``slr_*`` tables, journals)."""
+        self._db.check_open()
+        return self._db.table_names()
+
+    def triggers(self, table: str | None = None) -> set[str]:
+        """Names of the triggers of the store (on ``table`` only, when given)."""
+        self._db.check_open()
+        return self._db.triggers(table)
+
+    @property
+    def dialect(self) -> Any:
+        """The SQL dialect of the database (:mod:`slr_sql.store.dialect`)."""
+        return self._db.dialect
+
+    @property
+    def python_functions(self) -> bool:
+        """True when statements may call Python functions (SQLite's ``create_function``);
+        on a server they cannot, and goals needing one run in the interpreter."""
+        return self._db.python_functions
 
     @property
     def _conn(self) -> Any:  # the raw connection, for benchmarks comparing against it
@@ -321,6 +349,25 @@ class EventStore:
                             point: bool) -> list[Row] | None:
         return self._reader.latest_at_or_before(name, arity, bound, t, point)
 
+    @_doc(EventReader.latest_rows)
+    def latest_rows(self, name: str, arity: int, positions: tuple[int, ...], values: list,
+                    t: float, point: bool) -> list[tuple]:
+        return self._reader.latest_rows(name, arity, positions, values, t, point)
+
+    @_doc(EventReader.bracket)
+    def bracket(self, name: str, arity: int, bound: dict[int, Any], t: float
+                ) -> tuple[Row | None, Row | None] | None:
+        return self._reader.bracket(name, arity, bound, t)
+
+    @_doc(EventReader.distinct_pairs)
+    def distinct_pairs(self, name: str, arity: int, after_seq: int = 0
+                       ) -> tuple[list[tuple[Any, Any]], int]:
+        return self._reader.distinct_pairs(name, arity, after_seq)
+
+    @_doc(EventReader.max_seq)
+    def max_seq(self, name: str, arity: int) -> int:
+        return self._reader.max_seq(name, arity)
+
     @_doc(EventReader.count)
     def count(self, name: str, arity: int) -> int:
         return self._reader.count(name, arity)
@@ -405,6 +452,11 @@ class EventStore:
     @_doc(Catalog.facts_version)
     def facts_version(self) -> int:
         return self._catalog.facts_version()
+
+    @_doc(Catalog.create_rule_tables)
+    def create_rule_tables(self, prov: str, width: int, arity: int,
+                           used: str | None = None) -> None:
+        self._catalog.create_rule_tables(prov, width, arity, used)
 
     @_doc(Catalog.replace_views)
     def replace_views(self, views: dict[str, str]) -> list[str]:

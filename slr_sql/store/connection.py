@@ -33,7 +33,9 @@ from contextlib import contextmanager
 from typing import Any, Callable, Iterable, Iterator
 
 from ..errors import SLRError, SLRTimeout
+from .authorizer import READ_ONLY_VALUE_BYTES, SqlGuard, harden_connection
 from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
+from .dialect import SQLITE
 from .schema import migrate, migration_scripts
 from .sqltext import busy_error, split_sql_script
 
@@ -43,6 +45,7 @@ __all__ = ["Database", "DatabaseError", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT"
 # The base class of the errors the database raises while running a statement (a missing
 # table, a syntax error, a constraint, an interrupted statement...). Callers outside the
 # store catch this name, never sqlite3's.
+# (the PostgreSQL backend's PgStatementError derives from it)
 DatabaseError = sqlite3.Error
 
 CACHE_SIZE_KIB = 65536  # PRAGMA cache_size of the store's connection (64 MiB)
@@ -163,6 +166,7 @@ def _read_schema(path: str, header: bytes) -> tuple[list[tuple[str, str]], int]:
         try:
             conn = sqlite3.connect(uri, uri=True, isolation_level=None, timeout=30.0)
             try:
+                harden_connection(conn)
                 objects = conn.execute("SELECT type, name FROM sqlite_master").fetchall()
                 version = conn.execute("PRAGMA user_version").fetchone()[0]
                 return objects, version
@@ -208,6 +212,9 @@ class Database:
     >>> db.close()
     """
 
+    dialect = SQLITE
+    python_functions = True  # create_function's Python functions run inside statements
+
     def __init__(self, path: str | os.PathLike | None = None, clock: Any = None,
                  synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
                  adopt: bool = False, checkpoint: str = "auto",
@@ -244,6 +251,7 @@ class Database:
             raise SLRError(f"{self.path}: cannot open it ({exc})") from None
         conn = self.conn
         try:
+            self.guard = harden_connection(conn)
             # auto_vacuum must be chosen before the first table exists (a no-op afterwards,
             # but one that wants the write lock: only a new file gets it)
             if conn.execute("PRAGMA page_count").fetchone()[0] == 0:
@@ -299,6 +307,43 @@ class Database:
         with self.lock:
             self.check_open()
             return self.conn.execute("PRAGMA data_version").fetchone()[0]
+
+    def table_names(self) -> set[str]:
+        """Names of the tables of the database.
+
+        >>> "slr_meta" in Database(None).table_names()
+        True
+        """
+        with self.lock:
+            return {row[0] for row in self.conn.execute(
+                "SELECT name FROM sqlite_master WHERE type = 'table'")}
+
+    def triggers(self, table: str | None = None) -> set[str]:
+        """Names of the triggers (on ``table`` only, when given), temporary ones included.
+
+        >>> Database(None).triggers("slr_clock")
+        {'slr_clock_back'}
+        """
+        with self.lock:
+            return {row[0] for row in self.conn.execute(
+                "SELECT name FROM sqlite_master WHERE type = 'trigger' AND "
+                "(? IS NULL OR tbl_name = ?) UNION ALL SELECT name FROM sqlite_temp_master "
+                "WHERE type = 'trigger' AND (? IS NULL OR tbl_name = ?)",
+                (table, table, table, table))}
+
+    def object_names(self) -> set[str]:
+        """Lower-cased names of every table, index, view and trigger of the database.
+
+        >>> "slr_meta" in Database(None).object_names()
+        True
+        """
+        with self.lock:
+            return {row[0].lower() for row in self.conn.execute("SELECT name FROM sqlite_master")}
+
+    @property
+    def max_columns(self) -> int:
+        """The most columns a table may have (SQLite's compile-time limit)."""
+        return self.conn.getlimit(sqlite3.SQLITE_LIMIT_COLUMN)
 
     def suspend_streams(self) -> None:
         """Close the statements of the streams still reading (lock held): each resumes
@@ -444,31 +489,35 @@ class Database:
         with self.lock:
             self.check_open()
             conn = self.conn
+            guard = self.guard
+            guard.denied = None
             if write:
                 with self._deadline(deadline, "the SQL statement"):
                     try:
                         cursor = conn.execute(query, tuple(params))
                         columns = [d[0] for d in cursor.description] if cursor.description else []
                         return columns, cursor.fetchall()
-                    except sqlite3.OperationalError as exc:
+                    except sqlite3.DatabaseError as exc:
+                        if guard.denied is not None and "authoriz" in str(exc):
+                            raise SLRError(f"sql: {guard.denied}") from None
                         raise busy_error(exc, self.path, self.busy_timeout) or exc from None
             # query_only refuses every write to a database file; the authorizer refuses what
-            # it lets through (pragma assignments such as journal_mode, ATTACH, DETACH).
+            # it lets through (pragma assignments such as journal_mode, ATTACH, DETACH) and
+            # the functions no statement may call; the length limit turns a memory bomb
+            # (randomblob(2e9), printf('%.*c', 2e9, 'x')) into an error
             conn.execute("PRAGMA query_only = 1")
-            conn.set_authorizer(_read_only_authorizer)
+            conn.set_authorizer(guard.read_only)
+            longest = conn.setlimit(sqlite3.SQLITE_LIMIT_LENGTH, READ_ONLY_VALUE_BYTES)
             try:
                 with self._deadline(deadline, "the SQL statement"):
                     cursor = conn.execute(query, tuple(params))
                     columns = [d[0] for d in cursor.description] if cursor.description else []
                     return columns, cursor.fetchall()
             except sqlite3.DatabaseError as exc:
-                text = str(exc)
-                if "readonly" in text or "not authorized" in text:
-                    raise SLRError(f"read-only: the statement would change the store "
-                                   f"({text}); pass write=True to allow it") from None
-                raise
+                raise _read_only_error(exc, guard) from None
             finally:
-                conn.set_authorizer(None)
+                conn.setlimit(sqlite3.SQLITE_LIMIT_LENGTH, longest)
+                conn.set_authorizer(guard.always)
                 conn.execute("PRAGMA query_only = 0")
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
@@ -610,21 +659,21 @@ class Database:
                                               20000)
 
 
-# Pragmas that take an argument and only read (also table-valued: pragma_table_info('t')).
-_READING_PRAGMAS = frozenset({
-    "table_info", "table_xinfo", "table_list", "index_list", "index_info", "index_xinfo",
-    "foreign_key_list", "foreign_key_check", "integrity_check", "quick_check",
-    "function_list", "module_list", "pragma_list", "collation_list", "database_list",
-    "compile_options"})
-
-
-def _read_only_authorizer(action: int, arg1: Any, arg2: Any, _db: Any, _trigger: Any) -> int:
-    if action in (sqlite3.SQLITE_ATTACH, sqlite3.SQLITE_DETACH):
-        return sqlite3.SQLITE_DENY
-    if action == sqlite3.SQLITE_PRAGMA and arg2 is not None \
-            and str(arg1).lower() not in _READING_PRAGMAS:
-        return sqlite3.SQLITE_DENY
-    return sqlite3.SQLITE_OK
+def _read_only_error(exc: sqlite3.DatabaseError, guard: SqlGuard) -> Exception:
+    """The error to raise for ``exc``, raised by a read-only statement: the authorizer's
+    reason, the read-only refusal, the value limit in words, else ``exc`` itself."""
+    text = str(exc)
+    if "authoriz" in text and guard.denied is not None:
+        if guard.denied.startswith("read-only"):
+            return SLRError(f"{guard.denied}; pass write=True to allow it")
+        return SLRError(f"sql: {guard.denied}")
+    if "readonly" in text or "authoriz" in text:
+        return SLRError(f"read-only: the statement would change the store ({text}); pass "
+                        f"write=True to allow it")
+    if "too big" in text:
+        return SLRError(f"sql: a read-only statement may make or read strings and blobs of at "
+                        f"most {READ_ONLY_VALUE_BYTES >> 20} MiB ({text})")
+    return exc
 
 
 def run_sql_file(path: str | os.PathLike, query: str,
@@ -646,11 +695,21 @@ def run_sql_file(path: str | os.PathLike, query: str,
         conn = sqlite3.connect(uri, uri=True, isolation_level=None)
     except sqlite3.Error as exc:
         raise SLRError(f"sql: {exc}") from None
+    guard = harden_connection(conn)
     try:
+        if not write:
+            conn.set_authorizer(guard.read_only)
+            conn.setlimit(sqlite3.SQLITE_LIMIT_LENGTH, READ_ONLY_VALUE_BYTES)
         cursor = conn.execute(query)
         columns = [d[0] for d in cursor.description or ()]
         return columns, [tuple(row) for row in cursor.fetchall()]
     except sqlite3.Error as exc:
-        raise SLRError(f"sql: {exc}") from None
+        text = str(exc)
+        if guard.denied is not None and "authoriz" in text:
+            text = guard.denied
+        elif not write and "too big" in text:
+            text = f"{text} (a read-only statement's values are at most " \
+                   f"{READ_ONLY_VALUE_BYTES >> 20} MiB)"
+        raise SLRError(f"sql: {text}") from None
     finally:
         conn.close()

@@ -176,6 +176,9 @@ class EventWriter:
                 event_type = self._type_for_new_event(name, arity)
             except BadEvent:
                 return False
+        to_column = self.db.dialect.to_column
+        if to_column is not None:  # a server's typed columns: see store/dialect.py
+            columns = [list(map(to_column, column)) for column in columns]
         self.db.conn.executemany(event_type.insert_sql,
                                  zip(*columns, starts, ends_column, repeat(arrival),
                                      repeat(self.robot)))
@@ -189,7 +192,11 @@ class EventWriter:
         go in with one ``executemany``); a bad event is rejected with its reason and index
         (``base`` + its place in the chunk), or raised when ``atomic``. The end times of
         what it stored widen ``ends`` (when not None)."""
-        enc = encode
+        enc: Any = encode
+        to_column = self.db.dialect.to_column
+        if to_column is not None:  # a server's typed columns: see store/dialect.py
+            def enc(term: Any) -> Any:
+                return to_column(encode(term))
         executemany = self.db.conn.executemany
         types = self.tables.types
         robot = self.robot
@@ -296,7 +303,7 @@ class EventWriter:
         now = float(now)
         if now != now:
             return
-        sql = "UPDATE slr_clock SET now = ? WHERE id = 1 AND now IS NOT ?"
+        sql = "UPDATE slr_clock SET now = ? WHERE id = 1 AND now <> ?"
         with self.db.lock:
             if self.db.tx_depth:  # inside add_events: part of its transaction
                 self.db.check_open()

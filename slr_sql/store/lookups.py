@@ -12,6 +12,7 @@ import sqlite3
 from typing import Any, Iterator
 
 from ..encoding import Unencodable, decode, encode
+from .catalog import PROGRAM_VERSION, PROGRESS_VERSION
 from .connection import Database
 from .tables import EventTables, EventType
 
@@ -59,6 +60,10 @@ class EventReader:
         self.db = db
         self.tables = tables
         self.sql_cache: dict[tuple, str] = {}
+        # a server's typed columns (store/dialect.py): values converted both ways
+        self.to_column = db.dialect.to_column
+        from_column = db.dialect.from_column
+        self.decode = decode if from_column is None else (lambda v: decode(from_column(v)))
 
     def _pushdown(self, event_type: EventType, bound: dict[int, Any] | None
                   ) -> tuple[tuple[int, ...], list]:
@@ -75,6 +80,8 @@ class EventReader:
                 value = encode(bound[position])
             except Unencodable:
                 continue  # not ground (or NaN): the caller filters by unification
+            if self.to_column is not None:
+                value = self.to_column(value)
             positions.append(position)
             values.append(value)
         return tuple(positions), values
@@ -127,7 +134,8 @@ class EventReader:
         if resume:
             conditions.append(_RESUME[kind][0])
         where = f" WHERE {' AND '.join(conditions)}" if conditions else ""
-        sql = (f"SELECT {event_type.columns} FROM {event_type.quoted} INDEXED BY {index}"
+        hint = f" INDEXED BY {index}" if self.db.dialect.index_hints else ""
+        sql = (f"SELECT {event_type.columns} FROM {event_type.quoted}{hint}"
                f"{where} ORDER BY {order}")
         self.sql_cache[key] = sql
         return sql
@@ -146,7 +154,7 @@ class EventReader:
         last = None
         try:
             batch = 8  # prev/next callers usually need only the first row or two
-            dec = decode
+            dec = self.decode
             while True:
                 with db.lock:
                     for attempt in (1, 2):
@@ -330,6 +338,32 @@ class EventReader:
             positions, values = self._pushdown(event_type, bound)
             if len(positions) != len(bound):
                 return None
+            rows = self.latest_rows(name, arity, positions, values, t, point)
+        dec = self.decode
+        return [(tuple([dec(v) for v in row[:arity]]), row[arity], row[arity + 1], row[arity + 2])
+                for row in rows]
+
+    def latest_rows(self, name: str, arity: int, positions: tuple[int, ...], values: list,
+                    t: float, point: bool) -> list[tuple]:
+        """:meth:`latest_at_or_before` for callers that encoded the bound values themselves
+        (``values``, for the argument ``positions`` in increasing order) and decode what they
+        need: the raw rows ``(arg1, ..., argN, t_start, t_end, seq, program version, progress
+        version)``, one statement. The two versions (see :meth:`Catalog.versions`) are read
+        in the same snapshot as the rows, so that a caller learns in the same statement
+        whether another connection changed the program or the progress meanwhile.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a",), 1, 1), ("p", ("a",), 2, 2)])
+        []
+        >>> s.latest_rows("p", 1, (0,), ["a"], 1.5, True)
+        [('a', 1.0, 1.0, 1, None, None)]
+        """
+        db = self.db
+        with db.lock:
+            db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return []
             key = (event_type.table, "latest", positions, point)
             sql = self.sql_cache.get(key)
             if sql is None:
@@ -337,17 +371,16 @@ class EventReader:
                                      + (["t_start = t_end"] if point else []))
                 where = (where + " AND ") if where else ""
                 columns = ", ".join([f"arg{i + 1}" for i in range(arity)]
-                                    + ["t_start", "t_end", "seq"])
+                                    + ["t_start", "t_end", "seq"]
+                                    + ["(SELECT value FROM slr_meta WHERE key = ?)"] * 2)
                 # ORDER BY ... LIMIT 1 rather than max(): max() with the extra start = end
                 # filter is an aggregate over every row of the key, LIMIT 1 stops at the first
                 sql = (f"SELECT {columns} FROM {event_type.quoted} WHERE {where}t_end = "
                        f"(SELECT t_end FROM {event_type.quoted} WHERE {where}t_end <= ? "
                        f"ORDER BY t_end DESC LIMIT 1) ORDER BY t_start, seq")
                 self.sql_cache[key] = sql
-            rows = self.db.conn.execute(sql, values + values + [float(t)]).fetchall()
-        dec = decode
-        return [(tuple([dec(v) for v in row[:arity]]), row[arity], row[arity + 1], row[arity + 2])
-                for row in rows]
+            return db.conn.execute(sql, (PROGRAM_VERSION, PROGRESS_VERSION, *values, *values,
+                                         float(t))).fetchall()
 
     def count(self, name: str, arity: int) -> int:
         """Number of stored events of name/arity.
@@ -377,3 +410,88 @@ class EventReader:
                 return None
             return self.db.conn.execute(
                 f"SELECT max(t_end) FROM {event_type.quoted}").fetchone()[0]
+
+    def bracket(self, name: str, arity: int, bound: dict[int, Any], t: float
+                ) -> tuple[Row | None, Row | None] | None:
+        """The observations around ``t`` of the events matching ``bound`` (ground values at
+        0-based positions, the first one included): the one with the greatest end ``<= t``
+        and the one with the smallest start ``>= t`` (ties: the last in store order, and the last
+        stored among those starting at that time),
+        in one statement; ``(None, None)`` parts when there are none. None when a bound
+        value cannot be pushed into SQL (the caller then takes the general path). Used by
+        ``tf_lookup`` (:mod:`slr_sql.frames`) for each edge of a chain.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a", 1), 1, 1), ("p", ("a", 2), 3, 3)])
+        []
+        >>> [row[0][1] for row in s.bracket("p", 2, {0: "a"}, 2.0)]
+        [1, 2]
+        """
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return None, None
+            positions, values = self._pushdown(event_type, bound)
+            if len(positions) != len(bound) or 0 not in positions:
+                return None
+            key = (event_type.table, "bracket", positions)
+            sql = self.sql_cache.get(key)
+            if sql is None:
+                where = " AND ".join(f"arg{p + 1} = ?" for p in positions)
+                cols = event_type.columns
+                sql = (f"SELECT 0, * FROM (SELECT {cols} FROM {event_type.quoted} "
+                       f"INDEXED BY {event_type.index_arg1_end} WHERE {where} AND t_end <= ? "
+                       f"ORDER BY t_end DESC, t_start DESC, seq DESC LIMIT 1) "
+                       f"UNION ALL SELECT 1, * FROM (SELECT {cols} FROM {event_type.quoted} "
+                       f"INDEXED BY {event_type.index_arg1_start} WHERE {where} AND t_start >= ? "
+                       f"ORDER BY t_start, seq DESC LIMIT 1)")
+                self.sql_cache[key] = sql
+            rows = self.db.conn.execute(sql, values + [float(t)] + values + [float(t)]).fetchall()
+        out: list = [None, None]
+        dec = self.decode
+        for row in rows:
+            out[row[0]] = (tuple([dec(v) for v in row[1:arity + 1]]), row[arity + 1],
+                           row[arity + 2], row[arity + 3])
+        return out[0], out[1]
+
+    def distinct_pairs(self, name: str, arity: int, after_seq: int = 0
+                       ) -> tuple[list[tuple[Any, Any]], int]:
+        """The distinct (first, second) argument pairs of name/arity among the events stored
+        after arrival sequence ``after_seq``, and the greatest sequence number now (so that a
+        caller keeping the pairs reads only what is new next time).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a", "b"), 1, 1), ("p", ("a", "b"), 2, 2)])
+        []
+        >>> s.distinct_pairs("p", 2)
+        ([(Atom('a'), Atom('b'))], 2)
+        """
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None or arity < 2:
+                return [], 0
+            conn = self.db.conn
+            top = conn.execute(f"SELECT max(seq) FROM {event_type.quoted}").fetchone()[0] or 0
+            if top <= after_seq:
+                return [], top
+            rows = conn.execute(f"SELECT DISTINCT arg1, arg2 FROM {event_type.quoted} "
+                                f"WHERE seq > ? AND seq <= ?", (after_seq, top)).fetchall()
+        return [(decode(a), decode(b)) for a, b in rows], top
+
+    def max_seq(self, name: str, arity: int) -> int:
+        """The greatest arrival sequence number stored for name/arity (0 when none): it moves
+        whenever an event of the type is added, by this process or another.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.max_seq("p", 1)
+        0
+        """
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return 0
+            return self.db.conn.execute(
+                f"SELECT max(seq) FROM {event_type.quoted}").fetchone()[0] or 0

@@ -135,3 +135,19 @@ def migrate(conn: sqlite3.Connection, path: str | None,
         if conn.in_transaction:
             conn.execute("ROLLBACK")
         raise
+
+
+def postgres_migration_scripts() -> list[tuple[int, str, str]]:
+    """``(number, file name, sql text)`` of every ``pg_NNNN_name.sql`` migration: the
+    PostgreSQL spelling of the SQLite migration with the same number.
+
+    >>> [n for n, _, _ in postgres_migration_scripts()] == [n for n, _, _ in migration_scripts()]
+    True
+    """
+    scripts = []
+    for entry in _migrations_dir().iterdir():
+        match = re.match(r"pg_(\d+)_.*\.sql\Z", entry.name)
+        if match:
+            scripts.append((int(match.group(1)), entry.name, entry.read_text(encoding="utf-8")))
+    scripts.sort()
+    return scripts

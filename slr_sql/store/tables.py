@@ -19,7 +19,6 @@ are read straight from an index, never sorted.
 from __future__ import annotations
 
 import re
-import sqlite3
 from typing import Any, Callable
 
 from ..errors import SLRError
@@ -74,8 +73,8 @@ class EventTables:
         self.table_created_hooks: list[Callable[[str, int, str], Any]] = []
         db.rollback_listeners.append(self.reload)  # types created inside were rolled back too
         # The most data arguments an event can have: its table has 5 more columns (seq,
-        # t_start, t_end, arrival, robot) and SQLite refuses tables wider than its limit.
-        self.max_arity = db.conn.getlimit(sqlite3.SQLITE_LIMIT_COLUMN) - 5
+        # t_start, t_end, arrival, robot) and the engine refuses tables wider than its limit.
+        self.max_arity = db.max_columns - 5
         self.reload()
 
     def reload(self) -> None:
@@ -107,7 +106,7 @@ class EventTables:
         return event_type
 
     def _choose_table_name(self, name: str, arity: int) -> str:
-        taken = {row[0].lower() for row in self.db.conn.execute("SELECT name FROM sqlite_master")}
+        taken = self.db.object_names()
 
         def free(candidate: str) -> bool:
             return all(n.lower() not in taken for n in [candidate] + _index_names(candidate))
@@ -141,11 +140,15 @@ class EventTables:
             return existing
         table = self._choose_table_name(name, arity)
         event_type = EventType(name, arity, table, declared)
-        arg_columns = "".join(f", arg{i}" for i in range(1, arity + 1))
+        dialect = self.db.dialect
+        # arg columns have no declared type on SQLite: it keeps INTEGER / REAL / TEXT as given
+        # (PostgreSQL: TEXT spelling the type, see store/dialect.py)
+        arg_columns = "".join(f", arg{i}{dialect.value}" for i in range(1, arity + 1))
         conn = self.db.conn
-        # arg columns have no declared type: SQLite keeps INTEGER / REAL / TEXT as given.
-        conn.execute(f"CREATE TABLE {event_type.quoted} (seq INTEGER PRIMARY KEY{arg_columns}, "
-                     "t_start REAL NOT NULL, t_end REAL NOT NULL, arrival REAL NOT NULL, robot TEXT)")
+        real = dialect.real
+        conn.execute(f"CREATE TABLE {event_type.quoted} (seq {dialect.integer_key}{arg_columns}, "
+                     f"t_start {real} NOT NULL, t_end {real} NOT NULL, arrival {real} NOT NULL, "
+                     "robot TEXT)")
         conn.execute(f"CREATE INDEX {event_type.index_end} ON {event_type.quoted} (t_end, t_start)")
         conn.execute(f"CREATE INDEX {event_type.index_start} ON {event_type.quoted} "
                      "(t_start, t_end)")
