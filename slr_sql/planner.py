@@ -614,7 +614,8 @@ def plan_for(kb, plan, has_at: bool, robot: bool = False):
     cache = getattr(plan, "sql_plans", None)
     if cache is None:
         cache = plan.sql_plans = {}
-    entry = cache.get((has_at, robot))
+    key = (has_at, True) if robot else has_at
+    entry = cache.get(key)
     if entry is not None and (type(entry) is Fallback or not entry.missing
                               or not entry.stale(kb.store)):
         return entry
@@ -626,7 +627,7 @@ def plan_for(kb, plan, has_at: bool, robot: bool = False):
         entry = Fallback("the goal is nested too deeply to compile")
     except (ValueError, OverflowError) as exc:  # e.g. an integer constant beyond 64 bits
         entry = Fallback(f"a constant SQL cannot hold ({exc})")
-    cache[(has_at, robot)] = entry
+    cache[key] = entry
     return entry
 
 

@@ -259,9 +259,12 @@ class EventStore:
         return self._fleet.heads()
 
     @_doc(Fleet.read_after)
-    def fleet_read_after(self, name: str, arity: int, position: int, limit: int
-                         ) -> tuple[list[tuple], int, float | None]:
+    def fleet_read_after(self, name: str, arity: int, position: int, limit: int) -> list[tuple]:
         return self._fleet.read_after(name, arity, position, limit)
+
+    @_doc(Fleet.backlog)
+    def fleet_backlog(self, name: str, arity: int, position: int) -> tuple[int, float | None]:
+        return self._fleet.backlog(name, arity, position)
 
     @_doc(Fleet.positions)
     def fleet_positions(self, robot: str) -> dict[tuple[str, int], int]:
