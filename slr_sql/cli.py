@@ -15,6 +15,7 @@ import math
 import os
 import re
 import sys
+import warnings
 from dataclasses import dataclass
 from typing import Any, Iterable, Iterator
 
@@ -165,6 +166,16 @@ def _is_url(db: str) -> bool:
     return db.startswith(("http://", "https://"))
 
 
+def _is_database_url(db: str) -> bool:
+    """A store on a database server (``postgresql://...``): no file to look for."""
+    return db.startswith(("postgresql://", "postgres://"))
+
+
+def _missing(db: str) -> bool:
+    """No store file at ``db`` (a server URL is never missing here: opening it says)."""
+    return not _is_database_url(db) and not os.path.lexists(db)
+
+
 def _open(db: str, create: bool = True) -> Any:
     """The knowledge base in DB: a file opened in this process (only commands that add to a
     store may create it), or the URL of a running `slr serve`."""
@@ -179,9 +190,9 @@ def _open(db: str, create: bool = True) -> Any:
 def _check_existing_store(db: str, create: bool = False) -> None:
     """Commands that do not add to a store never create one: neither from a missing path nor
     from an empty file (SQLite would make an empty file a database on the first write)."""
-    if create:
+    if create or _is_database_url(db):
         return
-    if not os.path.lexists(db):
+    if _missing(db):
         raise slr_sql.SLRError(f"no such store: {db}")
     if os.path.isfile(db) and os.path.getsize(db) == 0:
         raise slr_sql.SLRError(f"no such store: {db} is an empty file (only load, add, "
@@ -222,6 +233,13 @@ def main(ctx: click.Context, token: str | None) -> None:
     (http://HOST:PORT).
     """
     ctx.obj = {"token": token}
+    warnings.showwarning = _show_warning
+
+
+def _show_warning(message: Warning | str, category: type[Warning], filename: str,
+                  lineno: int, file: Any = None, line: str | None = None) -> None:
+    """The library's warnings (a learned delay capped, ...) as ``warning: ...`` lines."""
+    _err(f"warning: {message}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1422,6 +1440,9 @@ def shell(db: str) -> None:
 
 from .ros.cli import ros as _ros  # noqa: E402 - issue 13: `slr ros` (its extra is imported on use)
 main.add_command(_ros)
+from .viz.cli import export_command as _export, foxglove_command as _foxglove  # noqa: E402
+main.add_command(_foxglove)
+main.add_command(_export)
 
 from .fleet import _click_group as _fleet_group  # noqa: E402 - `slr fleet push|status`
 main.add_command(_fleet_group())
@@ -1478,8 +1499,7 @@ def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None
                                f"no image format; use {', '.join(IMAGE_FORMATS)}")
     if every is not None and query_goal is None:
         raise click.UsageError("--every goes with --query")
-    if not os.path.exists(db):
-        raise slr_sql.SLRError(f"no such store: {db}")
+    _check_existing_store(db)
     dimensions = parse_size(size) if size is not None else None
     with _open(db, create=False) as kb:
         if query_goal is not None and every is None:
