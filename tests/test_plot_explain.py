@@ -66,6 +66,7 @@ def test_each_late_event_shows_its_arrival_lag(tmp_path):
     kb.close()
 
 
+@pytest.mark.filterwarnings("ignore:.*after its end time")   # (said on purpose: an import)
 def test_arrivals_on_another_clock_draw_no_lag(tmp_path):
     with slr_sql.open(clock=slr_sql.ManualClock(1_800_000_000.0)) as kb:  # an import's clock
         kb.add_many(["seen(a)^2", "seen(b)^3"])
