@@ -6,7 +6,6 @@ import os
 import re
 
 import pytest
-
 from test_cli import slr
 from test_ros_import import make_bag, robot_items
 
@@ -112,4 +111,4 @@ def test_demo_db_keeps_the_event_rule_scene(tmp_path):
     doors = slr("query", str(db), "findall(D, doorLeftOpen(D)^[_, _], L)")
     assert doors.stdout == "L = [d2]\n"
     programs = slr("programs", str(db)).stdout
-    assert re.search(r"^event_rules: 1 text from event_rules\.slr", programs, re.M)
+    assert re.search(r"^event_rules: 1 text from event_rules\.slr", programs, re.MULTILINE)

@@ -28,7 +28,7 @@ def corpus() -> list[tuple[str, str]]:
     texts = [("program", p.read_text(encoding="utf-8"))
              for p in sorted((ROOT / "examples").glob("*.slr"))]
     for page in sorted((ROOT / "docs").glob("*.md")):
-        for block in re.findall(r"```prolog\n(.*?)```", page.read_text(encoding="utf-8"), re.S):
+        for block in re.findall(r"```prolog\n(.*?)```", page.read_text(encoding="utf-8"), re.DOTALL):
             texts.append(("program", block))
     texts += [("program", bad) for examples in _EXAMPLES.values() for bad in examples]
     texts += [("query", goal) for goal in ("color(cup1, C)^12.5", "X = [1,2|T], Y = - 1",

@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from matplotlib.colors import to_rgb
+from test_cli import slr
+from test_plot import blue, inside_columns, pixel, render, row_band, runs
 
 import slr_sql
 from slr_sql.plot import LAG_COLOR, PALETTE
-from test_cli import slr
-from test_plot import blue, inside_columns, pixel, render, row_band, runs
 
 
 def colored(img, color: str, tolerance: float = 0.12):

@@ -16,7 +16,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-__all__ = ["GRAMMAR", "PARSER", "grammar_digest", "generate"]
+__all__ = ["GRAMMAR", "PARSER", "generate", "grammar_digest"]
 
 GRAMMAR = Path(__file__).with_name("slr.lark")
 PARSER = Path(__file__).with_name("slr_parser.py")
