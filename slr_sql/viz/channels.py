@@ -126,7 +126,7 @@ class EventChannel:
             value = row[i]
             tv = type(value)
             if tv is str:
-                if value[:1] in "[{":
+                if value and value[0] in "[{":
                     if not value.startswith('{"$atom":'):
                         parts.append(value)   # a list or compound: JSON already
                         continue
