@@ -146,6 +146,9 @@ class EventReader:
         If a transaction suspended the statement between two batches (or a rollback aborted
         it), the rest is read with ``resume_sql``: the rows after the last one read."""
         db = self.db
+        if db.dialect.pages_streams:
+            yield from self._pages(sql, params, arity, kind, resume_sql)
+            return
         with db.lock:
             db.check_open()
             statement = _OpenStatement(db.conn.execute(sql, params))
@@ -195,6 +198,32 @@ class EventReader:
                     statement.suspend()
                 except sqlite3.ProgrammingError:  # the store was closed meanwhile
                     pass
+
+    def _pages(self, sql: str, params: list, arity: int, kind: str,
+               resume_sql: str) -> Iterator[Row]:
+        """:meth:`_stream` on a server, whose driver reads a statement's whole result at
+        once: growing pages (``LIMIT``), each after the last row of the one before."""
+        db = self.db
+        key = _RESUME[kind][1]
+        dec = self.decode
+        batch = 8
+        last = None
+        while True:
+            with db.lock:
+                db.check_open()
+                if last is None:
+                    rows = db.conn.execute(f"{sql} LIMIT {batch}", params).fetchall()
+                else:
+                    rows = db.conn.execute(f"{resume_sql} LIMIT {batch}", params + list(
+                        key(last[arity], last[arity + 1], last[arity + 2]))).fetchall()
+            for row in rows:
+                yield (tuple([dec(v) for v in row[:arity]]), row[arity], row[arity + 1],
+                       row[arity + 2])
+            if len(rows) < batch:
+                return
+            last = rows[-1]
+            if batch < 2048:
+                batch *= 4
 
     def _query(self, name: str, arity: int, bound: dict[int, Any] | None, kind: str,
                flags: tuple[bool, ...], times: list, robot: str | None = None
