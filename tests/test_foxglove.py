@@ -178,11 +178,16 @@ def check_live(client: FoxgloveClient, db: Path) -> None:
 
 
 def test_a_port_in_use_is_a_clear_error(server, tmp_path):
-    _, port, _ = server
-    out = subprocess.run([sys.executable, "-m", "slr_sql", "foxglove", str(tmp_path / "x.db"),
+    db, port, _ = server
+    out = subprocess.run([sys.executable, "-m", "slr_sql", "foxglove", str(db),
                           "--port", str(port)], capture_output=True, text=True, timeout=DEADLINE,
                          env={**os.environ, "PYTHONPATH": str(REPO)})
     assert out.returncode == 1 and "error:" in out.stderr and "Traceback" not in out.stderr
+    missing = subprocess.run([sys.executable, "-m", "slr_sql", "foxglove", str(tmp_path / "no.db")],
+                             capture_output=True, text=True, timeout=DEADLINE,
+                             env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert missing.returncode == 1 and "no such store" in missing.stderr
+    assert not (tmp_path / "no.db").exists()
 
 
 def test_slr_serve_with_foxglove_shows_what_clients_of_the_service_add(tmp_path):
