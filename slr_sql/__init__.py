@@ -6,6 +6,7 @@
 ...     kb.query("obj(O, cup, C)^T")
 [{'O': Atom('cup1'), 'C': Atom('red'), 'T': 2.0}]
 """
+from .api import KnowledgeBaseAPI, PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import Clock, ManualClock, StreamClock, WallClock
 from .errors import EventRejected, SLRBusy, SLRError, SLREvaluationError, SLRStoreFull, \
     SLRStoreGone, SLRSyntaxError, SLRTimeout, SLRUnavailable
@@ -25,7 +26,8 @@ def connect(url: str, token: str | None = None, **options):
 
 
 __all__ = [
-    "open", "connect", "KnowledgeBase", "Clock", "WallClock", "ManualClock", "StreamClock",
+    "open", "connect", "KnowledgeBase", "KnowledgeBaseAPI", "PendingQueryAPI", "SubscriptionAPI",
+    "ProgramInfo", "Clock", "WallClock", "ManualClock", "StreamClock",
     "SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRBusy", "EventRejected",
     "SLRUnavailable", "SLRStoreFull", "SLRStoreGone",
     "Atom", "String", "Struct", "Var",

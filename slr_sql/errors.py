@@ -51,8 +51,11 @@ class SLREvaluationError(SLRError):
         super().__init__(message or f"{term}")
 
 
-class SLRTimeout(SLRError):
-    """A query ran out of its ``timeout=`` (seconds) or step limit."""
+class SLRTimeout(SLRError, TimeoutError):
+    """A query ran out of its ``timeout=`` (seconds) or step limit, or a wait for a
+    synchronized query's answer (``PendingQuery.result(timeout=)``) ran out. It is also a
+    ``TimeoutError`` (so ``concurrent.futures.TimeoutError``), what a Future's ``result``
+    raises."""
 
 
 class SLRUnavailable(SLRError):

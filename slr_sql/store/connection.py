@@ -35,15 +35,17 @@ from typing import Any, Callable, Iterable, Iterator
 from ..errors import SLRError, SLRStoreGone, SLRTimeout
 from .authorizer import READ_ONLY_VALUE_BYTES, SqlGuard, harden_connection
 from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
+from .dialect import SQLITE
 from .schema import migrate, migration_scripts
 from .sqltext import busy_error, split_sql_script, store_error
 
-__all__ = ["Database", "DatabaseError", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT", "run_sql_file",
-           "check_file"]
+__all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
+           "run_sql_file", "check_file"]
 
 # The base class of the errors the database raises while running a statement (a missing
 # table, a syntax error, a constraint, an interrupted statement...). Callers outside the
 # store catch this name, never sqlite3's.
+# (the PostgreSQL backend's PgStatementError derives from it)
 DatabaseError = sqlite3.Error
 
 CACHE_SIZE_KIB = 65536  # PRAGMA cache_size of the store's connection (64 MiB)
@@ -218,6 +220,9 @@ class Database:
     >>> db.close()
     """
 
+    dialect = SQLITE
+    python_functions = True  # create_function's Python functions run inside statements
+
     def __init__(self, path: str | os.PathLike | None = None, clock: Any = None,
                  synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
                  adopt: bool = False, checkpoint: str = "auto",
@@ -328,6 +333,52 @@ class Database:
             self.check_open()
             return self.conn.execute("PRAGMA data_version").fetchone()[0]
 
+    def table_names(self) -> set[str]:
+        """Names of the tables of the database.
+
+        >>> "slr_meta" in Database(None).table_names()
+        True
+        """
+        with self.lock:
+            return {row[0] for row in self.conn.execute(
+                "SELECT name FROM sqlite_master WHERE type = 'table'")}
+
+    def set_write_groups(self, groups: Iterable[Iterable[tuple[str, int]]]) -> None:
+        """Writers take turns on SQLite already (``BEGIN IMMEDIATE``): nothing to keep."""
+
+    def lock_for_write(self, types: Iterable[tuple[str, int]]) -> None:
+        """Nothing to wait for: this connection holds the database's one write lock."""
+
+    def lock_named(self, name: str) -> None:
+        """Nothing to wait for (see :meth:`lock_for_write`)."""
+
+    def triggers(self, table: str | None = None) -> set[str]:
+        """Names of the triggers (on ``table`` only, when given), temporary ones included.
+
+        >>> Database(None).triggers("slr_clock")
+        {'slr_clock_back'}
+        """
+        with self.lock:
+            return {row[0] for row in self.conn.execute(
+                "SELECT name FROM sqlite_master WHERE type = 'trigger' AND "
+                "(? IS NULL OR tbl_name = ?) UNION ALL SELECT name FROM sqlite_temp_master "
+                "WHERE type = 'trigger' AND (? IS NULL OR tbl_name = ?)",
+                (table, table, table, table))}
+
+    def object_names(self) -> set[str]:
+        """Lower-cased names of every table, index, view and trigger of the database.
+
+        >>> "slr_meta" in Database(None).object_names()
+        True
+        """
+        with self.lock:
+            return {row[0].lower() for row in self.conn.execute("SELECT name FROM sqlite_master")}
+
+    @property
+    def max_columns(self) -> int:
+        """The most columns a table may have (SQLite's compile-time limit)."""
+        return self.conn.getlimit(sqlite3.SQLITE_LIMIT_COLUMN)
+
     def suspend_streams(self) -> None:
         """Close the statements of the streams still reading (lock held): each resumes
         after its last row with a statement of its own when next read. Called when a
@@ -364,6 +415,12 @@ class Database:
                         pass  # best effort: the WAL is checkpointed on the next open anyway
             finally:
                 self.conn.close()
+
+    def open_reader(self) -> "ReadConnection | None":
+        """A :class:`ReadConnection` to this store's file (None in memory: no other
+        connection can reach an in-memory database)."""
+        self.check_open()
+        return None if self.path is None else ReadConnection(self.path, self.busy_timeout)
 
     def check_open(self) -> None:
         if self.closed:
@@ -723,6 +780,54 @@ def _read_only_error(exc: sqlite3.DatabaseError, guard: SqlGuard) -> Exception:
         return SLRError(f"sql: a read-only statement may make or read strings and blobs of at "
                         f"most {READ_ONLY_VALUE_BYTES >> 20} MiB ({text})")
     return exc
+
+
+class ReadConnection:
+    """A connection of its own to a store's file, for a reader that must not queue behind the
+    store's connection: its statements never wait for the store's lock, which a writer holds
+    for a whole transaction, fsync included (WAL lets a reader and the writer work at the same
+    time; each statement sees what was committed when it started). ``query_only``: it cannot
+    write. Opened with :meth:`Database.open_reader`; an in-memory store has none.
+
+    >>> import os, tempfile
+    >>> path = os.path.join(tempfile.mkdtemp(), "r.db"); db = Database(path)
+    >>> reader = db.open_reader(); reader.execute("SELECT count(*) FROM slr_program")
+    [(0,)]
+    >>> reader.close(); db.close()
+    """
+
+    def __init__(self, path: str, busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
+                 cache_kib: int = 2048):
+        self.path = path
+        self.busy_timeout = busy_timeout
+        self.lock = threading.Lock()
+        self.closed = False
+        try:
+            self.conn = sqlite3.connect(path, check_same_thread=False, isolation_level=None,
+                                        timeout=busy_timeout, cached_statements=64)
+            harden_connection(self.conn)
+            self.conn.execute("PRAGMA query_only=ON")
+            self.conn.execute(f"PRAGMA cache_size=-{int(cache_kib)}")
+        except sqlite3.Error as exc:
+            raise SLRError(f"{path}: cannot open a reading connection ({exc})") from None
+
+    def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
+        """Run one reading statement and return its rows."""
+        with self.lock:
+            if self.closed:
+                raise SLRError("the event store is closed")
+            try:
+                return self.conn.execute(sql, tuple(params)).fetchall()
+            except sqlite3.OperationalError as exc:
+                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+
+    def close(self) -> None:
+        """Close the connection (idempotent)."""
+        with self.lock:
+            if not self.closed:
+                self.closed = True
+                self.conn.close()
+
 
 
 def run_sql_file(path: str | os.PathLike, query: str,
