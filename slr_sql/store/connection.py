@@ -429,8 +429,8 @@ class Database:
     def _identities(self, shm: bool = True) -> tuple:
         """``(device, inode)`` of the file, its write-ahead log and (unless not ``shm``) its
         shared-memory file (None where missing)."""
-        found = []
-        names = (self._absolute, f"{self._absolute}-wal", f"{self._absolute}-shm")
+        found: list[tuple[int, int] | None] = []
+        names = (str(self._absolute), f"{self._absolute}-wal", f"{self._absolute}-shm")
         for name in names if shm else names[:2]:
             try:
                 info = os.stat(name)
