@@ -25,7 +25,7 @@ from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .encoding import Unencodable, decode_answer, encode
 from .engine import Engine
-from .errors import EventRejected, SLRError, SLRSyntaxError
+from .errors import EventRejected, SLRError, SLRSyntaxError, SLRUnavailable
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
 from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore, \
@@ -1268,6 +1268,9 @@ class KnowledgeBase:
         try:
             return self.store.sql(query, params, write, timeout)
         except DatabaseError as exc:
+            reason = store_error(exc, self.store.path)
+            if isinstance(reason, SLRUnavailable):  # a full disk, a lock: may pass
+                raise reason from None
             raise SLRError(f"sql: {exc}") from None
         except UnicodeEncodeError:
             raise SLRError("sql: the statement or a parameter is not valid Unicode (a lone "
