@@ -20,7 +20,8 @@ from .arith import (evaluate, evaluation_error, instantiation_error, iso_error,
 from .unify import bound_args, copy_term, resolve, unify, undo, unify_event_row, unify_tuple
 from .errors import SLRError, SLREvaluationError
 from .program import Program, split_event_atom, event_key
-from .terms import (CONS, Atom, NIL, String, Struct, Var, deref, from_python, int_text,
+from .terms import (CONS, NODES_BETWEEN_CLOCK_CHECKS, Atom, NIL, String, Struct, Var, check_deadline,
+                    deref, from_python, int_text,
                     is_callable, is_ground, list_items, make_list, term_vars, to_python)
 
 DET: dict[tuple[str, int], Callable[["Machine", tuple], bool]] = {}
@@ -318,7 +319,7 @@ def _univ(m, a):
 
 @det("copy_term", 2)
 def _copy_term(m, a):
-    return m.unify(a[1], copy_term(a[0]))
+    return m.unify(a[1], copy_term(a[0], deadline=m.deadline))
 
 
 # -- atoms and strings -------------------------------------------------------------------------------
@@ -493,7 +494,7 @@ def _term_to_atom(m, a):
     t = deref(a[0])
     if type(t) is Var and type(deref(a[1])) is not Var:
         return m.unify(t, _parse_any(a[1]))
-    return m.unify(a[1], Atom(format_term(t)))
+    return m.unify(a[1], Atom(format_term(t, deadline=m.deadline)))
 
 
 @det("upcase_atom", 2)
@@ -807,30 +808,30 @@ def _out(m: "Machine"):
     return m.engine.out or sys.stdout
 
 
-def _write_text(t: Any, quoted: bool = False) -> str:
+def _write_text(t: Any, quoted: bool = False, deadline: float | None = None) -> str:
     from .terms import format_term
 
     t = deref(t)
     if not quoted and type(t) in (Atom, String):
         return str(t)
-    return format_term(t, quoted=quoted)
+    return format_term(t, quoted=quoted, deadline=deadline)
 
 
 @det("write", 1)
 def _write(m, a):
-    _out(m).write(_write_text(a[0]))
+    _out(m).write(_write_text(a[0], deadline=m.deadline))
     return True
 
 
-DET[("print", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], True)), True)[1]
-DET[("writeq", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], True)), True)[1]
+DET[("print", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], True, m.deadline)), True)[1]
+DET[("writeq", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], True, m.deadline)), True)[1]
 DET[("write_canonical", 1)] = DET[("writeq", 1)]
-DET[("writeln", 1)] = lambda m, a: (_out(m).write(_write_text(a[0]) + "\n"), True)[1]
+DET[("writeln", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], deadline=m.deadline) + "\n"), True)[1]
 DET[("nl", 0)] = lambda m, a: (_out(m).write("\n"), True)[1]
 DET[("tab", 1)] = lambda m, a: (_out(m).write(" " * evaluate(a[0])), True)[1]
 
 
-def format_text(fmt: str, args: list) -> str:
+def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
     """SWI-style ``format/2`` directives: ~w ~p ~q ~a ~d ~D ~s ~e ~f ~g ~n ~c ~r ~8| ~t ~~ ~i ~*c.
 
     >>> format_text("~w has ~d items~n", [Atom("cup"), 3])
@@ -865,9 +866,9 @@ def format_text(fmt: str, args: list) -> str:
         d = fmt[i]
         i += 1
         if d == "w":
-            out.append(_write_text(take()))
+            out.append(_write_text(take(), deadline=deadline))
         elif d in "pq":
-            out.append(_write_text(take(), True))
+            out.append(_write_text(take(), True, deadline))
         elif d == "a":
             out.append(text_of(take()))
         elif d in "dD":
@@ -955,20 +956,20 @@ def _format_args(t: Any) -> list:
 
 @det("format", 1)
 def _format1(m, a):
-    _out(m).write(format_text(text_of(a[0]), []))
+    _out(m).write(format_text(text_of(a[0]), [], m.deadline))
     return True
 
 
 @det("format", 2)
 def _format2(m, a):
-    _out(m).write(format_text(text_of(a[0]), _format_args(a[1])))
+    _out(m).write(format_text(text_of(a[0]), _format_args(a[1]), m.deadline))
     return True
 
 
 @det("format", 3)
 def _format3(m, a):
     sink = deref(a[0])
-    text = format_text(text_of(a[1]), _format_args(a[2]))
+    text = format_text(text_of(a[1]), _format_args(a[2]), m.deadline)
     if type(sink) is Struct and len(sink.args) == 1:
         kind = sink.name
         if kind == "atom":
@@ -1112,11 +1113,19 @@ def _bag_solutions(m: "Machine", witness, out, groups) -> Iterator[None]:
         m.undo_to(mark)
 
 
-def _variant(a: Any, b: Any) -> bool:
+def _variant(a: Any, b: Any, deadline: float | None = None) -> bool:
     mapping: dict = {}
     back: dict = {}
     stack = [(a, b)]
+    # pairs of compounds already compared (or being compared further down the stack):
+    # comparing one again adds nothing, so cyclic and shared terms take finite, linear time
+    seen: set[tuple[int, int]] = set()
+    clock = NODES_BETWEEN_CLOCK_CHECKS
     while stack:
+        clock -= 1
+        if not clock:
+            clock = NODES_BETWEEN_CLOCK_CHECKS
+            check_deadline(deadline)
         x, y = stack.pop()
         x, y = deref(x), deref(y)
         if type(x) is Var and type(y) is Var:
@@ -1125,6 +1134,10 @@ def _variant(a: Any, b: Any) -> bool:
         elif type(x) is Struct and type(y) is Struct:
             if x.name != y.name or len(x.args) != len(y.args):
                 return False
+            key = (id(x), id(y))
+            if key in seen:
+                continue
+            seen.add(key)
             stack.extend(zip(x.args, y.args))
         elif type(x) is not type(y) or x != y:
             return False
