@@ -65,7 +65,8 @@ def unify(a: Any, b: Any, trail: list, deadline: float | None = None) -> bool:
                     return False
                 budget -= 1
                 if not budget:
-                    return _unify_remembering(a, b, stack or [], trail, deadline)
+                    return _unify_remembering(a, b, stack if stack is not None else [],
+                                              trail, deadline)
                 if stack is None:
                     stack = []
                 if n == 2:
@@ -86,41 +87,68 @@ def unify(a: Any, b: Any, trail: list, deadline: float | None = None) -> bool:
 
 def _unify_remembering(a: Any, b: Any, stack: list, trail: list,
                        deadline: float | None) -> bool:
-    """unify() after its first compound pairs: each pair of compounds is unified once, so
-    cyclic terms (rational trees) unify in finite time, as in SWI-Prolog."""
+    """unify() after its first compound pairs: each pair of compounds reached through a
+    variable binding is unified once (a cycle always passes through a binding), so cyclic
+    terms (rational trees) unify in finite time, as in SWI-Prolog, and shared subterms once."""
     seen: set[tuple[int, int]] = set()
-    stack.append((a, b))
     clock = _PAIRS_BETWEEN_CLOCK_CHECKS
-    while stack:
-        clock -= 1
-        if not clock:
-            clock = _PAIRS_BETWEEN_CLOCK_CHECKS
-            check_deadline(deadline)
+    while True:
+        via = False
+        while type(a) is Var:
+            r = a.ref
+            if r is None:
+                break
+            a = r
+            via = True
+        while type(b) is Var:
+            r = b.ref
+            if r is None:
+                break
+            b = r
+            via = True
+        if a is not b:
+            ta = type(a)
+            tb = type(b)
+            if ta is Var:
+                a.ref = b
+                trail.append(a)
+            elif tb is Var:
+                b.ref = a
+                trail.append(b)
+            elif ta is Struct:
+                if tb is not Struct or a.name != b.name:
+                    return False
+                aa = a.args
+                ba = b.args
+                n = len(aa)
+                if n != len(ba):
+                    return False
+                clock -= 1
+                if not clock:
+                    clock = _PAIRS_BETWEEN_CLOCK_CHECKS
+                    check_deadline(deadline)
+                if via:
+                    key = (id(a), id(b))
+                    if key in seen:  # unified already, or being unified further down
+                        a = None
+                        b = None
+                        if not stack:
+                            return True
+                        a, b = stack.pop()
+                        continue
+                    seen.add(key)
+                if n == 2:
+                    stack.append((aa[0], ba[0]))
+                    a = aa[1]
+                    b = ba[1]
+                    continue
+                stack.extend(zip(aa, ba))
+            elif ta is not tb or a != b:
+                if not (ta is float and tb is float and a != a and b != b):
+                    return False
+        if not stack:
+            return True
         a, b = stack.pop()
-        a = deref(a)
-        b = deref(b)
-        if a is b:
-            continue
-        ta = type(a)
-        tb = type(b)
-        if ta is Var:
-            a.ref = b
-            trail.append(a)
-        elif tb is Var:
-            b.ref = a
-            trail.append(b)
-        elif ta is Struct:
-            if tb is not Struct or a.name != b.name or len(a.args) != len(b.args):
-                return False
-            key = (id(a), id(b))
-            if key in seen:  # already unified, or being unified further down the stack
-                continue
-            seen.add(key)
-            stack.extend(zip(a.args, b.args))
-        elif ta is not tb or a != b:
-            if not (ta is float and tb is float and a != a and b != b):
-                return False
-    return True
 
 
 def undo(trail: list, mark: int) -> None:
