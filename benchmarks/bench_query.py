@@ -2,6 +2,12 @@
 
     python benchmarks/bench_query.py            # 10k, 100k and 1M stored events
     python benchmarks/bench_query.py --sizes 10000
+    python benchmarks/bench_query.py --sizes 100000 --before /tmp/old   # before/after, one run
+
+``--before DIR``: a checkout of earlier code (e.g. ``git archive COMMIT | tar -x -C DIR``)
+measured on the same file in a child process, in alternation with this code (rounds of
+``--rounds``), each side against raw sqlite3 timed in its own process: the ratios of the
+two codes come from one run on one machine state.
 
 For each size: N events seg(oK, [x,y,z])^t over 1,000 objects (t = 0.01 * i), then the p50/p99 of
 kb.query("prev(seg(O, L)^Z, T)", args={"O": ..., "T": ...}) over random objects and times, and the
@@ -10,6 +16,9 @@ p50 of the hand-written sqlite3 lookup returning the same row (same file, same i
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import subprocess
 import random
 import sqlite3
 import statistics
@@ -18,7 +27,9 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+_code = sys.argv[sys.argv.index("--code") + 1] if "--code" in sys.argv else \
+    str(Path(__file__).resolve().parent.parent)
+sys.path.insert(0, _code)
 
 import slr_sql  # noqa: E402
 
@@ -69,17 +80,61 @@ def measure(path: Path, n: int, reps: int = 3000) -> dict:
             "raw_p50": percentile(raw, 0.5) * 1e6}
 
 
+def measure_before(code: str, path: Path, n: int, reps: int) -> dict:
+    """measure() with the code of the checkout ``code``, in a child process."""
+    env = dict(os.environ, PYTHONPATH=code)
+    out = subprocess.run([sys.executable, __file__, "--code", code, "--measure", str(path),
+                          str(n), str(reps)], env=env, capture_output=True, text=True,
+                         check=True).stdout
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def compare(args) -> None:
+    """This code and the code of ``--before`` in alternation on one file per size."""
+    print(f"{'events':>10} | {'before p50':>10} {'raw p50':>8} {'ratio':>6} | "
+          f"{'after p50':>10} {'raw p50':>8} {'ratio':>6} | after/before")
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in args.sizes:
+            path = Path(tmp) / f"q{n}.db"
+            build(path, n)
+            old, new = [], []
+            for _ in range(args.rounds):
+                old.append(measure_before(args.before, path, n, args.reps))
+                new.append(measure(path, n, args.reps))
+            o = min(old, key=lambda r: r["api_p50"] / r["raw_p50"])
+            w = min(new, key=lambda r: r["api_p50"] / r["raw_p50"])
+            ro, rw = o["api_p50"] / o["raw_p50"], w["api_p50"] / w["raw_p50"]
+            print(f"{n:>10} | {o['api_p50']:>8.1f}µs {o['raw_p50']:>6.1f}µs {ro:>5.2f}x | "
+                  f"{w['api_p50']:>8.1f}µs {w['raw_p50']:>6.1f}µs {rw:>5.2f}x | "
+                  f"{w['api_p50'] / o['api_p50']:.2f}")
+            print("   rounds (api/raw) before: " + ", ".join(
+                f"{r['api_p50'] / r['raw_p50']:.2f}" for r in old) + "; after: " + ", ".join(
+                f"{r['api_p50'] / r['raw_p50']:.2f}" for r in new), flush=True)
+
+
 def main() -> None:
+    if "--measure" in sys.argv:   # the child process of --before
+        i = sys.argv.index("--measure")
+        path, n, reps = Path(sys.argv[i + 1]), int(sys.argv[i + 2]), int(sys.argv[i + 3])
+        print(json.dumps(measure(path, n, reps)))
+        return
     ap = argparse.ArgumentParser()
     ap.add_argument("--sizes", type=int, nargs="*", default=[10_000, 100_000, 1_000_000])
+    ap.add_argument("--before", help="a checkout of earlier code to compare with, same run")
+    ap.add_argument("--rounds", type=int, default=3, help="--before: alternations per size")
+    ap.add_argument("--reps", type=int, default=3000, help="lookups per measurement")
+    ap.add_argument("--code", help="(internal) the checkout to import slr_sql from")
     args = ap.parse_args()
+    if args.before:
+        compare(args)
+        return
     print(f"{'events':>10} {'api p50 µs':>11} {'api p99 µs':>11} {'raw p50 µs':>11} {'api/raw':>8}")
     results = []
     with tempfile.TemporaryDirectory() as tmp:
         for n in args.sizes:
             path = Path(tmp) / f"q{n}.db"
             build(path, n)
-            r = measure(path, n)
+            r = measure(path, n, args.reps)
             results.append(r)
             print(f"{n:>10} {r['api_p50']:>11.1f} {r['api_p99']:>11.1f} {r['raw_p50']:>11.1f} "
                   f"{r['api_p50'] / r['raw_p50']:>8.2f}")

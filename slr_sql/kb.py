@@ -12,24 +12,28 @@ from __future__ import annotations
 
 import functools
 import math
+import re
 import threading
 import time
 from dataclasses import dataclass, field
 from operator import itemgetter
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Iterator
 
 from .answers import answer_bindings
-from .clocks import Clock, WallClock, parse_duration
-from .engine import Engine, Machine
+from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
+from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
+from .encoding import Unencodable, decode_answer, encode
+from .engine import Engine
 from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
-from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore
-from .store.checks import event_arguments, shorten
+from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore, \
+    store_error, check_robot_name
+from .store.checks import event_arguments, shorten, shown, text_problem
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
-from .terms import format_term
+from .terms import format_atom, format_term
 
 __all__ = ["KnowledgeBase", "open", "Declarations", "ProgramInfo", "parse_duration"]
 
@@ -113,20 +117,12 @@ def _where(clause: Clause | None) -> str:
     return f"{clause.span.filename}:{clause.span.line}: "
 
 
-@dataclass(frozen=True)
-class ProgramInfo:
-    """One named program, as :meth:`KnowledgeBase.programs` describes it."""
-
-    name: str
-    source: str             # its texts, in load order, joined by newlines
-    texts: int              # how many texts were loaded under the name
-    filenames: tuple        # the file (or "<string>") of each text
-    loaded_at: float | None  # store clock time of its latest text
-
-
 def _program_name(name: Any) -> str:
     if not isinstance(name, str) or not name:
-        raise SLRError(f"a program name is a non-empty string, not {name!r}")
+        raise SLRError(f"a program name is a non-empty string, not {shown(name)}")
+    problem = text_problem(name)
+    if problem:
+        raise SLRError(f"the program name {shown(name)} cannot be stored: {problem}")
     return name
 
 
@@ -139,6 +135,7 @@ class _Plan:
     bind_slots: dict[str, int]    # args name -> slot index
     text: str
     lookup: "_PrevLookup | None" = None
+    bound_lookup: "_BoundPrev | None" = None
 
 
 _ATOMIC = (Atom, String, int, float)
@@ -249,6 +246,131 @@ class _PrevLookup:
         return answers
 
 
+class _BoundPrev:
+    """A :class:`_PrevLookup` with the names its ``args`` bind, prepared once per plan (goal
+    text and argument names): a call encodes the bound Python values, runs the cached
+    statement and builds the answer dicts straight from the rows, with no frame, term or
+    unification in between. Anything unusual in a call (a value of another type, a number
+    stored as another type) returns None and the caller takes :meth:`_PrevLookup.run`'s
+    path, so answers never differ.
+    """
+
+    __slots__ = ("name", "arity", "point", "time", "positions", "sources", "fields")
+
+    def __init__(self, name, arity, point, time, positions, sources, fields):
+        self.name, self.arity, self.point, self.time = name, arity, point, time
+        self.positions, self.sources, self.fields = positions, sources, fields
+
+    @classmethod
+    def prepare(cls, lookup: _PrevLookup, bind_slots: dict[str, int],
+                names: list[tuple[str, int]]) -> "_BoundPrev | None":
+        by_slot = {slot: name for name, slot in bind_slots.items()}
+        if any(slot in by_slot for slot in lookup.stamp):
+            return None   # a bound stamp: the general path compares it
+        if type(lookup.time) is tuple:
+            time: Any = ("const", lookup.time[1])
+        elif lookup.time in by_slot:
+            time = by_slot[lookup.time]
+        else:
+            return None   # an unbound time: the general path raises the instantiation error
+        positions, sources, column = [], [], {}
+        for i, a in enumerate(lookup.args):
+            if type(a) is tuple:
+                positions.append(i)
+                sources.append(("const", a[1]))
+            elif a in by_slot:
+                positions.append(i)
+                sources.append(by_slot[a])
+            else:
+                column[a] = i
+        stamp = {lookup.stamp[0]: lookup.arity + 1} if lookup.point else {
+            lookup.stamp[0]: lookup.arity, lookup.stamp[1]: lookup.arity + 1}
+        # each answer variable: (name, 0 = a row's argument column, 1 = a row's time column,
+        # 2 = a bound argument value, 3 = the time bound by args; index)
+        fields = []
+        for name, slot in names:
+            if slot in column:
+                fields.append((name, 0, column[slot]))
+            elif slot in stamp:
+                fields.append((name, 1, stamp[slot]))
+            elif slot == lookup.time:
+                fields.append((name, 3, 0))
+            elif slot in lookup.args:
+                fields.append((name, 2, positions.index(lookup.args.index(slot))))
+            else:
+                return None
+        return cls(lookup.name, lookup.arity, lookup.point, time, tuple(positions),
+                   tuple(sources), tuple(fields))
+
+    def answer(self, store: EventStore, args: dict) -> tuple[list, tuple | None] | None:
+        """The answers and the (program, progress) versions read with them (None when
+        nothing matched), or None when the general path must answer."""
+        t = self.time
+        t = t[1] if type(t) is tuple else args[t]
+        if type(t) is not float and type(t) is not int:
+            return None
+        terms = []
+        values = []
+        checks = []
+        for i, source in enumerate(self.sources):
+            v = source[1] if type(source) is tuple else args[source]
+            tv = type(v)
+            if tv is str:
+                v = Atom(v)
+            elif tv is float:
+                if v != v:
+                    return None
+                checks.append((self.positions[i], float))
+            elif tv is int:
+                checks.append((self.positions[i], int))
+            elif tv is not Atom and tv is not String:
+                return None
+            try:
+                values.append(encode(v))
+            except Unencodable:
+                return None
+            terms.append(v)
+        rows = store.latest_rows(self.name, self.arity, self.positions, values, t, self.point)
+        if not rows:
+            return [], None
+        for position, kind in checks:
+            for row in rows:
+                if type(row[position]) is not kind:
+                    return None   # SQL's 1 = 1.0: not a Prolog match
+        bound = [to_python(term) for term in terms]
+        fields = self.fields
+        answers = []
+        for row in rows:
+            answer = {}
+            for name, kind, i in fields:
+                answer[name] = decode_answer(row[i]) if kind == 0 else row[i] if kind == 1 \
+                    else bound[i] if kind == 2 else t
+            answers.append(answer)
+        return answers, rows[0][-2:]
+
+
+def _with_derived(stored: list, derived: list) -> list:
+    """The events of an add and the complex events it derived, in one list for the add
+    listeners; described like the store's EventBatch (each type's earliest and latest end)
+    when the add's events were, so that the listeners need not walk the whole batch again.
+
+    >>> both = _with_derived(EventBatch([("a", (1,), 1.0, 1.0)]), [("c", (1,), 1.0, 2.0)])
+    >>> both.ends is None, len(both)
+    (True, 2)
+    """
+    both = EventBatch(stored)
+    both.extend(derived)
+    ends = getattr(stored, "ends", None)
+    if ends is not None:
+        ends = dict(ends)
+        for name, args, _start, end in derived:
+            key = (name, len(args))
+            span = ends.get(key)
+            ends[key] = (end, end) if span is None else (min(span[0], end), max(span[1], end))
+        both.ends = ends
+    return both
+
+
 class KnowledgeBase:
     """One SLR knowledge base: program + events + state in one SQLite file.
 
@@ -258,11 +380,17 @@ class KnowledgeBase:
     def __init__(self, path: str | Path | None = None, clock: Clock | None = None, *,
                  synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
                  adopt: bool = False, checkpoint: str = "auto",
-                 cache_mib: float = CACHE_SIZE_KIB / 1024):
+                 cache_mib: float = CACHE_SIZE_KIB / 1024, robot: str | None = None,
+                 max_learned_delay: float | None = DEFAULT_MAX_LEARNED_DELAY):
+        if max_learned_delay is not None:
+            _check_time_option("max_learned_delay", max_learned_delay, minimum=0.0)
+            max_learned_delay = float(max_learned_delay)
+        # the largest delay a type may learn (clocks.DEFAULT_MAX_LEARNED_DELAY; None: no cap)
+        self.max_learned_delay = max_learned_delay
         self.clock = clock if clock is not None else WallClock()
         self.store = EventStore(path, self.clock, synchronous=synchronous,
                                 busy_timeout=busy_timeout, adopt=adopt, checkpoint=checkpoint,
-                                cache_mib=cache_mib)
+                                cache_mib=cache_mib, robot=robot)
         self.path = self.store.path
         self.program = Program()
         self.declarations = Declarations()
@@ -274,6 +402,9 @@ class KnowledgeBase:
         self._program_version = -1
         self._parsed: dict[int, tuple[str, list]] = {}
         self._seen_data_version: int | None = None
+        # the stored (program, progress) versions a bound prev lookup last read with its rows:
+        # while they stay the same, no other connection changed what a refresh re-reads
+        self._lookup_versions: tuple | None = None
         # extension points for the SQL compiler, buffers and synchronization
         self.load_listeners: list[Callable[["KnowledgeBase"], None]] = []
         self.add_listeners: list[Callable[[list], None]] = []
@@ -579,7 +710,7 @@ class KnowledgeBase:
             program, decls = self._build(self._parse_texts(texts))
             self._install(program, decls, lambda: self.store.delete_program(name))
 
-    def programs(self) -> dict[str, "ProgramInfo"]:
+    def programs(self) -> dict[str, ProgramInfo]:
         """The named programs stored in the file, in load order of their first text.
 
         >>> kb = open(); kb.load("p(1).", name="tea"); kb.programs()["tea"].source
@@ -664,7 +795,15 @@ class KnowledgeBase:
         >>> kb = open(); kb.add("seg(cup1, [0.4,0.1,0.9])^12.31"); len(kb.query("seg(O,L)^T"))
         1
         """
-        self._add([self._event_from_text(text)], atomic=True)
+        if not isinstance(text, str):
+            raise SLRError(f"add takes one event written in SLR syntax (a str), not a "
+                           f"{type(text).__name__}; add_event(name, args, start, end) and "
+                           f"add_many([...]) take tuples")
+        try:
+            event = self._event_from_text(text)
+        except (ValueError, OverflowError) as exc:  # a number too long for Python to read
+            raise EventRejected(f"{shorten(text)}: {_python_words(exc)}") from None
+        self._add([event], atomic=True)
 
     def add_event(self, name: str, args: Iterable[Any], start: float, end: float | None = None) -> None:
         """Add one event from Python values (``str`` is an atom, ``String`` a string).
@@ -725,15 +864,15 @@ class KnowledgeBase:
                         name, args, start, end = ev
                     except (TypeError, ValueError):
                         raise EventRejected(f"event #{i} is neither SLR text nor a (name, args, "
-                                            f"start, end) tuple: {shorten(repr(ev))}") from None
+                                            f"start, end) tuple: {shown(ev)}") from None
                     event = (name, event_arguments(name, args, start, end), start, end)
             except (SLRError, TypeError, ValueError, OverflowError, RecursionError) as exc:
                 if atomic:
                     raise exc if isinstance(exc, SLRError) else EventRejected(str(exc))
                 reason = "the term is nested too deeply" if isinstance(exc, RecursionError) \
-                    else str(exc).split("; use sys.")[0]  # (a Python hint, not for users)
+                    else _python_words(exc)
                 err = exc if isinstance(exc, EventRejected) else \
-                    EventRejected(f"{shorten(repr(ev))}: {reason}")
+                    EventRejected(f"{shown(ev)}: {reason}")
                 err.index = i
                 err.event = ev
                 errors.append(err)
@@ -769,7 +908,7 @@ class KnowledgeBase:
             rejected = {id(e.event) for e in errors if hasattr(e, "event")}
             stored = [ev for ev in events if id(ev) not in rejected] if rejected else events
             if derived:   # issue 11: the complex events of this add, with its events
-                stored = list(stored) + derived
+                stored = _with_derived(stored, derived)
             for listener in self.add_listeners:
                 listener(stored)
         if marks:  # issue 5: after the events of the same batch are stored
@@ -806,6 +945,8 @@ class KnowledgeBase:
         names = [(n, slots[n]) for n in varnames if not n.startswith("_") and n in slots]
         plan = _Plan(compiled, names, {n: slots[n] for n in arg_names if n in slots}, goal,
                      _PrevLookup.recognise(compiled))
+        if plan.lookup is not None:
+            plan.bound_lookup = _BoundPrev.prepare(plan.lookup, plan.bind_slots, names)
         if len(self._plans) > 1024:
             self._plans.clear()
         self._plans[key] = plan
@@ -820,7 +961,7 @@ class KnowledgeBase:
             for name, value in args.items():
                 slot = plan.bind_slots.get(name)
                 if slot is not None:
-                    frame[slot] = value if terms else from_python(value)
+                    frame[slot] = value if terms else _argument_term(name, value)
         goals = [build(g, frame) for g in plan.compiled.body]
         if not goals:
             goal: Any = Atom("true")
@@ -833,19 +974,18 @@ class KnowledgeBase:
                 frame[slot] = Var(name)
         return goal, frame
 
-    def machine(self, at: float | None = None, timeout: float | None = None,
-                max_steps: int | None = None) -> Machine:
-        return self.engine.machine(at=at, timeout=timeout, max_steps=max_steps)
-
     def query(self, goal: str, at: float | None = None, args: dict | None = None,
               timeout: float | None = None, max_steps: int | None = None,
-              limit: int | None = None, wait: bool = False) -> list[dict[str, Any]]:
+              limit: int | None = None, wait: bool = False,
+              robot: str | None = None) -> list[dict[str, Any]]:
         """Answer ``goal`` now, on the events that have arrived (unsynchronized).
 
         ``at`` restricts event goals to the stream view (events with end <= at); ``args``
         binds goal variables from Python values (no text splicing; the parsed plan is reused);
         ``timeout`` (seconds) or ``max_steps`` stop an endless computation with SLRTimeout.
         ``wait=True`` makes it synchronized: ``submit(goal, at, timeout=timeout).result()``.
+        ``robot`` restricts every event goal, prev and next (in rules too) to the events of
+        that robot (their ``robot`` column; see docs/fleet.md).
 
         >>> kb = open(); kb.add_many(["pos(a, 1)^1", "pos(a, 4)^5"])
         []
@@ -856,28 +996,51 @@ class KnowledgeBase:
             raise SLRError(f"limit must be a count (an integer >= 0), not {limit!r}")
         _check_time_option("at", at)
         _check_time_option("timeout", timeout, minimum=0.0)
+        if robot is not None:
+            check_robot_name(robot)
         if wait:  # issue 5: synchronized (SLRTimeout names the incomplete types)
+            if robot is not None:
+                raise SLRError("a synchronized query (wait=True) cannot be restricted to one "
+                               "robot yet: ask origin(R, Goal) inside the goal instead")
             return self.submit(goal, at=at, args=args, timeout=timeout).result()
+        if args and limit is None and robot is None:
+            key = (goal, tuple(args))
+            plan = self._plans.get(key)
+            if plan is not None and plan.bound_lookup is not None:
+                # the file is the truth: the lookup reads the stored versions with its rows;
+                # when they moved (or nothing matched), refresh as every call does, and keep
+                # the answers only if the plan survived it (a reloaded program clears it)
+                found = plan.bound_lookup.answer(self.store, args)
+                if found is not None:
+                    answers, versions = found
+                    if versions is None or versions != self._lookup_versions:
+                        self._refresh()
+                        self._lookup_versions = versions
+                        if self._plans.get(key) is not plan:
+                            found = None
+                    if found is not None:
+                        return answers
         self._refresh()
         plan = self._plan(goal, tuple(args) if args else ())
         if limit == 0:
             return []
-        if plan.lookup is not None and limit is None:
+        if plan.lookup is not None and limit is None and robot is None:
             frame = [None] * plan.compiled.nslots
             if args:
                 for name, value in args.items():
-                    frame[plan.bind_slots[name]] = from_python(value)
+                    frame[plan.bind_slots[name]] = _argument_term(name, value)
             answers = plan.lookup.run(self.store, frame, plan.names)
             if answers is not None:
                 return answers
         if max_steps is None and self.sql_enabled:  # issue 3: the compiled SQL plan, if any
             from .planner import try_sql
             deadline = time.monotonic() + timeout if timeout is not None else None
-            answers = try_sql(self, plan, args, at, limit, deadline)
+            answers = try_sql(self, plan, args, at, limit, deadline, robot)
             if answers is not None:
                 return answers
         term, frame = self._instantiate(plan, args)
         m = self.engine.machine(at=at, timeout=timeout, max_steps=max_steps)
+        m.robot = robot
         answers = []
         names = plan.names
         for _ in m.solve(term):
@@ -885,6 +1048,87 @@ class KnowledgeBase:
             if limit is not None and len(answers) >= limit:
                 break
         return answers
+
+    def solutions(self, goal: str, at: float | None = None, args: dict | None = None,
+                  timeout: float | None = None,
+                  robot: str | None = None) -> Iterator[dict[str, Any]]:
+        """The answers of ``goal`` one at a time, as they are found (unsynchronized): what
+        :meth:`query` returns, lazily. A consumer that stops early (a command line's
+        ``--limit``, a shell's "stop") never pays for the rest, so a goal with endless answers
+        is usable; past ``timeout`` the iteration raises :class:`SLRTimeout` after the answers
+        already yielded.
+
+        >>> from itertools import islice
+        >>> list(islice(open().solutions("between(1, inf, X)"), 3))
+        [{'X': 1}, {'X': 2}, {'X': 3}]
+        """
+        _check_time_option("at", at)
+        _check_time_option("timeout", timeout, minimum=0.0)
+        if robot is not None:
+            check_robot_name(robot)
+        try:
+            self._refresh()
+            plan = self._plan(goal, tuple(args) if args else ())
+        except SLRError:
+            raise
+        except Exception as exc:  # the facade's promise (see _boundary)
+            raise SLRError(f"solutions: {type(exc).__name__}: {exc}") from exc
+        from .planner import Fallback, plan_for
+        if plan.lookup is not None or (self.sql_enabled
+                                       and type(plan_for(self, plan, at is not None))
+                                       is not Fallback):
+            # A compiled plan answers as one statement: all its answers at once.
+            yield from self.query(goal, at=at, args=args, timeout=timeout, robot=robot)
+            return
+        term, frame = self._instantiate(plan, args)
+        m = self.engine.machine(at=at, timeout=timeout)
+        m.robot = robot
+        solving = m.solve(term)
+        while True:
+            try:
+                next(solving)
+            except StopIteration:
+                return
+            except SLRError:
+                raise
+            except RecursionError:
+                raise SLRError("solutions: the term is nested too deeply") from None
+            except Exception as exc:  # the facade's promise (see _boundary)
+                raise SLRError(f"solutions: {type(exc).__name__}: {exc}") from exc
+            yield answer_bindings(plan.names, frame)
+
+    def goal_warnings(self, goal: str) -> list[str]:
+        """Warnings about ``goal`` that do not change its answer: an event goal or prev/next
+        on a type with no stored events, no rules and no declaration is most likely a typo
+        (it simply fails, SPEC §2, since its events may not have arrived yet); each warning
+        names the nearest known names.
+
+        >>> kb = open(); kb.load("color(O,C)^T :- prev(obj(O,_,C)^Z, T).")
+        >>> kb.goal_warnings("colour(cup2, C)^20")
+        ['no events or rules of colour/2; did you mean color/2?']
+        """
+        import difflib
+
+        from .analysis import goal_refs
+
+        self._refresh()
+        term, _ = parse_term(goal, "<query>")
+        program = self.engine.program
+        known = set(self.store.event_types()) | set(self.store.declared_types())
+        known |= set(program.temporal) | set(program.preds) | set(program.dynamic)
+        names = sorted({f"{format_atom(n)}/{a}" for n, a in known
+                        if not n.startswith(("slr_", "$"))})
+        warnings = []
+        for name, arity in sorted(goal_refs(term, program).stored):
+            if (name, arity) in known:
+                continue
+            written = f"{format_atom(name)}/{arity}"
+            near = difflib.get_close_matches(written, names, n=3, cutoff=0.6)
+            near += [n for n in names if n.rpartition("/")[0] == format_atom(name)
+                     and n not in near]  # the same name with another arity
+            hint = f"; did you mean {' or '.join(near[:3])}?" if near else ""
+            warnings.append(f"no events or rules of {written}{hint}")
+        return warnings
 
     def explain(self, goal: str) -> str:
         """How ``goal`` would be run: which engine, and why.
@@ -917,7 +1161,7 @@ class KnowledgeBase:
     # -- synchronized queries (issue 5; the work is in slr_sql/sync.py) -----------------
     def submit(self, goal: str, at: float | None = None, id: str | None = None,
                args: dict | None = None, timeout: float | None = None,
-               callback: Callable[[Any], Any] | None = None) -> Any:
+               callback: Callable[[Any], Any] | None = None) -> PendingQueryAPI:
         """Synchronized query ⟨goal, at⟩: returns a PendingQuery (a concurrent.futures.Future)
         answered with the answer list as soon as every event type the goal depends on is
         complete up to ``at`` (default: now), and every prev/next it evaluates is complete up
@@ -940,12 +1184,19 @@ class KnowledgeBase:
         """``await kb.ask(goal, at=z)``: :meth:`submit` for asyncio code."""
         import asyncio
 
-        return await asyncio.wrap_future(self.submit(goal, at=at, id=id, args=args,
-                                                     timeout=timeout))
+        from concurrent.futures import Future
+
+        pending = self.submit(goal, at=at, id=id, args=args, timeout=timeout)
+        assert isinstance(pending, Future)   # a PendingQueryAPI here is a Future
+        return await asyncio.wrap_future(pending)
 
     def mark_complete(self, event_type: str, t: float) -> None:
         """Declare the history of ``"p/N"`` (or ``"p"``: every arity) complete up to ``t``
         (persisted), like a ``fullyUpdated(p/N)^t`` event."""
+        if not isinstance(event_type, str):
+            raise SLRError(f"mark_complete: the event type is text such as \"p/2\" or \"p\", "
+                           f"not {shown(event_type)}")
+        _check_time_option("mark_complete: t", t)
         self._refresh()
         self._sync.mark_complete(event_type, t)
 
@@ -955,7 +1206,7 @@ class KnowledgeBase:
         self._refresh()
         return self._sync.complete_until(event_type)
 
-    def pending(self) -> list:
+    def pending(self) -> list[PendingQueryAPI]:
         """The waiting synchronized queries; each PendingQuery's ``waiting_for`` lists the
         event types and times it waits for."""
         return self._sync.pending()
@@ -1020,7 +1271,7 @@ class KnowledgeBase:
     def subscribe(self, pattern: str, where: str | None = None, since: Any = "now",
                   until: float | None = None, id: str | None = None,
                   callback: Callable[[dict], Any] | None = None, max_queue: int = 10_000,
-                  max_lag: int | None = 1_000_000) -> Any:
+                  max_lag: int | None = 1_000_000) -> SubscriptionAPI:
         """Deliver each stored event matching ``pattern`` (``p(..)^T`` or ``p(..)^[S,E]``) and
         the goal ``where`` whose end time lies in [since, until], once, in arrival order, as
         an answer dict: iterate (``for``/``async for``/``sub.get(timeout)``) or give
@@ -1043,12 +1294,36 @@ class KnowledgeBase:
         self._subscriptions.unsubscribe(id)
 
 
+def _argument_term(name: str, value: Any) -> Any:
+    """The term for ``args[name]`` of a query, or an SLRError naming the argument."""
+    try:
+        return from_python(value)
+    except (TypeError, ValueError) as exc:
+        raise SLRError(f"args[{name!r}] = {shown(value)} is not a term: "
+                       f"{_python_words(exc)} (atoms are str, strings slr_sql.String, numbers "
+                       f"int or float, lists list, compounds slr_sql.Struct)") from None
+    except RecursionError:
+        raise SLRError(f"args[{name!r}]: the term is nested too deeply") from None
+
+
+def _python_words(exc: BaseException) -> str:
+    """The message of a Python exception raised by a conversion, in the user's terms (the
+    advice about ``sys.set_int_max_str_digits`` is for Python programmers, not users)."""
+    text = str(exc)
+    digits = re.search(r"limit \((\d+) digits\) for integer string conversion(?:: value has "
+                       r"(\d+) digits)?", text)
+    if digits:
+        has = f" ({digits.group(2)} digits)" if digits.group(2) else ""
+        return f"an integer too long{has}: at most {digits.group(1)} digits are read"
+    return text.split("; use sys.")[0]
+
+
 def _check_time_option(name: str, value: Any, minimum: float | None = None) -> None:
     """``at=`` and ``timeout=`` are numbers of seconds (``None``: not given)."""
     if value is None:
         return
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SLRError(f"{name} must be a number of seconds, not {value!r}")
+        raise SLRError(f"{name} must be a number of seconds, not {shown(value)}")
     try:
         number = float(value)
     except OverflowError:
@@ -1079,8 +1354,7 @@ def _boundary(method: Callable) -> Callable:
             kb = args[0] if args and isinstance(args[0], KnowledgeBase) else None
             path = getattr(getattr(kb, "store", None), "path", None) or (
                 args[1] if where == "open" and len(args) > 1 else kwargs.get("path"))
-            raise SLRError(f"{path or ':memory:'}: the store failed ({exc}); if the file is "
-                           f"damaged, restore it from a copy") from None
+            raise store_error(exc, path) from None
         except Exception as exc:  # noqa: BLE001 - the boundary: every kind becomes words
             raise SLRError(f"{where}: {type(exc).__name__}: {exc}") from exc
     return guarded
@@ -1088,6 +1362,7 @@ def _boundary(method: Callable) -> Callable:
 
 # Every public method of the facade goes through the boundary (one list, kept next to it).
 for _name in ("__init__", "close", "load", "unload", "programs", "load_file", "define", "add",
+              "goal_warnings",
               "add_event", "add_many", "query", "explain", "submit", "mark_complete",
               "complete_until", "pending", "add_buffer", "remove_buffer", "buffers", "sql",
               "plot", "subscribe", "unsubscribe", "event_rules"):
@@ -1106,10 +1381,16 @@ def open(path: str | Path | None = None, clock: Clock | None = None, **options: 
     thread of the store does it, so no ``add`` waits for it -- for long-running writers with
     a latency budget, such as ``slr serve`` and ``slr ros bridge``), ``cache_mib`` (SQLite's
     page cache, default 64 MiB: it fills as the store is used, then the process's memory stays
-    flat; a smaller one makes it flat sooner and makes large ingests and scans re-read pages).
+    flat; a smaller one makes it flat sooner and makes large ingests and scans re-read pages),
+    ``max_learned_delay`` (seconds a learned delay may reach, default 3600; ``None``: no cap;
+    an event arriving later than that after its end warns with
+    :class:`~slr_sql.sync.LearnedDelayWarning`: its times are probably not the clock's).
     A file that is not a store (not SQLite, damaged, a store of a newer slr_sql, or an SQLite
     file of another application) is refused with an :class:`SLRError` and left untouched;
     ``adopt=True`` adds a store to another application's SQLite file on purpose.
+    ``robot`` names the robot the store belongs to (kept in the store; a store has one name
+    for life): its events are stored with that name in their ``robot`` column, for
+    ``origin/2`` and fleets (docs/fleet.md).
 
     >>> kb = open(); kb.close()
     """
