@@ -1054,7 +1054,7 @@ class KnowledgeBase:
         answers = []
         names = plan.names
         for _ in m.solve(term):
-            answers.append(answer_bindings(names, frame))
+            answers.append(answer_bindings(names, frame, m.deadline))
             if limit is not None and len(answers) >= limit:
                 break
         return answers

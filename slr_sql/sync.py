@@ -926,7 +926,7 @@ class Synchronizer:
         solving = m.solve(term)
         try:
             for _ in solving:
-                answers.append(answer_bindings(plan.names, frame))
+                answers.append(answer_bindings(plan.names, frame, m.deadline))
         except _MustWait as w:
             m.abandon(solving)
             wait = Wait(w.key, w.time, w.reason, self.clock.now(), w.kind)
