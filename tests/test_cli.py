@@ -215,7 +215,7 @@ def test_shell_reads_plain_lines_when_stdin_is_not_a_terminal(db, tmp_path):
         "color(cup1,",       # a goal over two lines
         "      C)^12.",
         ":- event seg/2.",
-        "usedFor(cup, tea) :- true.",
+        "assert((usedFor(cup, tea) :- true)).",
         "usedFor(cup, X).",
         "color(cup1, blue)^12.",
         "at 5",
