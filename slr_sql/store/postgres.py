@@ -115,6 +115,11 @@ def _first_line(exc: BaseException) -> str:
     return text.splitlines()[0] if text else type(exc).__name__
 
 
+# INSERT INTO "table" (columns) VALUES (?, ...): nothing but values, so COPY does the same
+_PLAIN_INSERT = re.compile(r'INSERT INTO ("(?:[^"]|"")+"|[A-Za-z_][A-Za-z0-9_]*) '
+                           r'\(([A-Za-z0-9_, ]+)\) VALUES \(\?(?:, \?)*\)\Z')
+
+
 class PgCursor:
     """The part of a DB-API cursor the store's parts use, over a psycopg cursor."""
 
@@ -171,9 +176,19 @@ class PgConnection:
         return PgCursor(cursor, self)
 
     def executemany(self, sql: str, rows: Iterable[Iterable[Any]]) -> PgCursor:
-        text = POSTGRES.statement(sql)
         rows = [tuple(r) for r in rows]
         cursor = self.raw.cursor()
+        plain = _PLAIN_INSERT.match(sql)
+        if plain is not None and len(rows) > 1:
+            # many rows into one table: COPY (one stream) rather than one INSERT per row
+            def copy() -> None:
+                with cursor.copy(f"COPY {plain.group(1)} ({plain.group(2)}) FROM STDIN") as out:
+                    for row in rows:
+                        out.write_row(row)
+            self._guard(copy)
+            self.last_rowcount = len(rows)
+            return PgCursor(cursor, self)
+        text = POSTGRES.statement(sql)
         if rows:
             self._guard(lambda: cursor.executemany(text, rows))
         self.last_rowcount = cursor.rowcount
