@@ -219,6 +219,7 @@ class PgDatabase:
         psycopg = _psycopg()
         conninfo, schema = split_url(url)
         self.url = url
+        self.conninfo = conninfo
         self.path = _shown(url)
         self.schema = schema
         self.clock = clock if clock is not None else WallClock()
@@ -297,6 +298,35 @@ class PgDatabase:
         keys = sorted({groups[t] for t in types if t in groups})
         for key in keys:
             self.conn.execute("SELECT pg_advisory_xact_lock(?)", (key,))
+
+    def listen(self, callback: Callable[[], Any]) -> Callable[[], None]:
+        """LISTEN on the store's channel on a connection of its own, in a daemon thread:
+        ``callback()`` for every notification (the journals' triggers send one per
+        statement). Returns the function that stops the thread. A lost connection is
+        opened again after a second (meanwhile the readers' own polling covers)."""
+        psycopg = _psycopg()
+        stopped = threading.Event()
+        channel = quote_identifier(self.notify_channel)
+        conninfo = self.conninfo
+
+        def run() -> None:
+            while not stopped.is_set():
+                try:
+                    with psycopg.connect(conninfo, autocommit=True) as conn:
+                        conn.execute(f"LISTEN {channel}")
+                        while not stopped.is_set():
+                            for _ in conn.notifies(timeout=0.5):
+                                callback()
+                except psycopg.Error:
+                    stopped.wait(1.0)
+
+        thread = threading.Thread(target=run, name="slr-listen", daemon=True)
+        thread.start()
+
+        def stop() -> None:
+            stopped.set()
+            thread.join(timeout=5.0)
+        return stop
 
     def lock_named(self, name: str) -> None:
         """Inside a transaction: take the advisory lock ``name`` of this store's schema
