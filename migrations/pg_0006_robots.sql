@@ -1,5 +1,7 @@
--- slr_sql schema on PostgreSQL, version 6: robots and fleets (as 0006_robots.sql).
--- The robot column of every event table that exists already (new tables are created with it).
+-- slr_sql PostgreSQL schema, version 6: robots and fleets (the counterpart of 0006_robots.sql;
+-- see docs/fleet.md). Event tables get their robot column when they are created.
+
+-- The robot column of every event table that exists already (tables created later have it).
 DO $$
 DECLARE t TEXT;
 BEGIN
@@ -8,10 +10,13 @@ BEGIN
     END LOOP;
 END $$;
 
+-- Every robot whose events the store holds, in name order for origin/2.
 CREATE TABLE slr_robots (
     name TEXT PRIMARY KEY
 );
 
+-- Fleet shipping: per robot and event type, the greatest sequence (seq in the robot's own
+-- store) stored here; moved in the transaction that stores a batch.
 CREATE TABLE slr_fleet_positions (
     robot      TEXT NOT NULL,
     type_name  TEXT NOT NULL,
@@ -20,6 +25,8 @@ CREATE TABLE slr_fleet_positions (
     PRIMARY KEY (robot, type_name, type_arity)
 );
 
+-- Per robot that shipped here: events stored from it, the robot's arrival time of the latest
+-- of them, and what its pusher reported at its last contact.
 CREATE TABLE slr_fleet_robots (
     robot        TEXT PRIMARY KEY,
     shipped      BIGINT NOT NULL DEFAULT 0,

@@ -58,7 +58,8 @@ class _LocalTarget:
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
                 head_arrival: float | None) -> int:
         from .shipping import receive
-        return receive(self.kb, robot, batches, marks, pending, head_arrival)
+        # (rows read from a store by this process: no need to check them as the service does)
+        return receive(self.kb, robot, batches, marks, pending, head_arrival, check=False)
 
     def close(self) -> None:
         self.kb.close()
@@ -179,25 +180,22 @@ class _Pusher:
         for name, arity in keys:
             position = positions.get((name, arity), 0)
             while not stop.is_set():
-                rows, left, latest = self.store.fleet_read_after(name, arity, position,
-                                                                 self.batch)
-                if latest is not None:
-                    head_arrival = latest if head_arrival is None else max(head_arrival, latest)
+                rows = self.store.fleet_read_after(name, arity, position, self.batch)
                 if not rows:
                     break
-                more = left - len(rows)
-                stored = target.receive(self.robot, [(name, arity, [list(r) for r in rows])],
-                                        None, None, None)
+                stored = target.receive(self.robot, [(name, arity, rows)], None, None, None)
                 position = rows[-1][0]
                 shipped += stored
                 self.report.shipped += stored
                 self.report.batches += 1
                 self.report.per_type[f"{name}/{arity}"] = \
                     self.report.per_type.get(f"{name}/{arity}", 0) + stored
-                if more <= 0:
+                if len(rows) < self.batch:
                     break
-            _, left, _ = self.store.fleet_read_after(name, arity, position, 0)
+            left, latest = self.store.fleet_backlog(name, arity, position)
             pending += left
+            if latest is not None:
+                head_arrival = latest if head_arrival is None else max(head_arrival, latest)
         # marks and what is left, after the events they speak of
         target.receive(self.robot, [], marks or None, pending, head_arrival)
         self.report.rounds += 1
@@ -322,6 +320,16 @@ def _click_group() -> Any:
     @click.group("fleet")
     def fleet_group() -> None:
         """Ship a robot's store to a fleet store, and see what the fleet holds."""
+
+    @fleet_group.command("name")
+    @click.argument("db", type=click.Path(dir_okay=False))
+    @click.argument("robot")
+    def name_command(db: str, robot: str) -> None:
+        """Name the robot the store DB belongs to (kept in the store; once for life). Its
+        events from now on carry the name; ``slr_sql.open(DB, robot=NAME)`` does the same."""
+        with EventStore(db, robot=robot):
+            pass
+        click.echo(f"{db} is the store of robot {robot}")
 
     @fleet_group.command("push")
     @click.argument("db", type=click.Path(dir_okay=False))

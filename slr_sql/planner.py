@@ -614,7 +614,8 @@ def plan_for(kb, plan, has_at: bool, robot: bool = False):
     cache = getattr(plan, "sql_plans", None)
     if cache is None:
         cache = plan.sql_plans = {}
-    entry = cache.get((has_at, robot))
+    key = (has_at, True) if robot else has_at
+    entry = cache.get(key)
     if entry is not None and (type(entry) is Fallback or not entry.missing
                               or not entry.stale(kb.store)):
         return entry
@@ -626,7 +627,7 @@ def plan_for(kb, plan, has_at: bool, robot: bool = False):
         entry = Fallback("the goal is nested too deeply to compile")
     except (ValueError, OverflowError) as exc:  # e.g. an integer constant beyond 64 bits
         entry = Fallback(f"a constant SQL cannot hold ({exc})")
-    cache[(has_at, robot)] = entry
+    cache[key] = entry
     return entry
 
 
@@ -681,9 +682,18 @@ def explain(kb, plan, at=None) -> list[str]:
         lines.extend("  " + line for line in entry.sql.splitlines())
     if entry.params or entry.arg_params:
         shown = {k: v for k, v in entry.params.items()}
-        lines.append("parameters: " + ", ".join(f":{k} = {v!r}" for k, v in shown.items())
+        lines.append("parameters: " + ", ".join(f":{k} = {_parameter_text(v)}"
+                                                for k, v in shown.items())
                      + "".join(f", :{p} = <{n} from args>" for n, p in entry.arg_params.items()))
     return lines
+
+
+def _parameter_text(value) -> str:
+    """A parameter's value as explain prints it: its repr, or for an integer of more digits
+    than Python prints, its size."""
+    if type(value) is int and value.bit_length() > 14000:
+        return f"<an integer of about {int(value.bit_length() * 0.30103) + 1} digits>"
+    return repr(value)
 
 
 def _compiled_subgoals(kb, plan) -> list[str]:

@@ -34,12 +34,14 @@ def positions(kb: Any, robot: str) -> dict[tuple[str, int], int]:
 
 
 def receive(kb: Any, robot: str, batches: list, marks: dict | None = None,
-            pending: int | None = None, head_arrival: float | None = None) -> int:
+            pending: int | None = None, head_arrival: float | None = None, *,
+            check: bool = True) -> int:
     """Store one shipment of ``robot`` in the fleet store ``kb``; returns the number of rows
     stored (rows already held are skipped). ``batches``: ``[(name, arity, rows)]`` with rows
     as :meth:`slr_sql.store.EventStore.fleet_read_after` gives them; ``marks``: ``{"p/1":
     t}`` (the robot's completeness marks, ``p/*`` for every arity); ``pending``,
     ``head_arrival``: what the robot still holds unshipped (for ``slr fleet status``).
+    ``check=False`` skips checking the shipment's shape (rows this process read from a store).
 
     A robot's mark is kept per robot; the fleet store's own mark of a type is the least mark
     of the robots it knows, once every one of them has marked it (a history of the fleet is
@@ -50,10 +52,11 @@ def receive(kb: Any, robot: str, batches: list, marks: dict | None = None,
     >>> receive(fleet, "r1", [("seen", 1, [(1, "pallet7", 10.0, 10.0, 3.0, "r1")])])
     1
     >>> fleet.query("origin(R, seen(P)^T)")
-    [{'R': 'r1', 'P': 'pallet7', 'T': 10.0}]
+    [{'R': Atom('r1'), 'P': Atom('pallet7'), 'T': 10.0}]
     """
     store = kb.store
-    _check_shipment(batches, marks)
+    if check:
+        _check_shipment(batches, marks)
     kb._refresh()
     cep = getattr(kb, "_cep", None)
     store_events = None
@@ -66,8 +69,9 @@ def receive(kb: Any, robot: str, batches: list, marks: dict | None = None,
     stored = 0
     with store.transaction():
         for name, arity, rows in batches:
-            stored += store.fleet_receive(robot, name, arity, [tuple(r) for r in rows],
-                                          store_events)
+            if rows and type(rows[0]) is not tuple:
+                rows = [tuple(r) for r in rows]
+            stored += store.fleet_receive(robot, name, arity, rows, store_events)
         if marks:
             robots = store.robots()
             for mk, t in marks.items():

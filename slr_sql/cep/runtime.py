@@ -27,15 +27,19 @@ from __future__ import annotations
 import json
 import math
 import threading
+from itertools import islice
+from operator import itemgetter, ne
 from typing import Any
 
 from ..encoding import Unencodable, decode, encode
 from ..errors import SLRError
-from ..store import DatabaseError, quote_identifier
+from ..store import DatabaseError, EventBatch, quote_identifier
 from ..terms import Struct, Var, deref, format_term, term_vars
 from .rules import EventRule
 from .sqlgen import AltSQL
 from .where import MustWait, Residual, describe_error
+
+_first, _second = itemgetter(0), itemgetter(1)
 
 __all__ = ["EventRules", "RuleRuntime"]
 
@@ -881,14 +885,17 @@ class EventRules:
         if not self.active or not events:
             return None
         leaf = self.leaf_types
-        keys = set()
-        for ev in events:
-            try:
-                key = (ev[0], len(ev[1]))
-            except (TypeError, IndexError):
-                continue
-            if key in leaf:
-                keys.add(key)
+        try:   # (column-wise: no loop in Python over a big batch)
+            keys = set(zip(map(_first, events), map(len, map(_second, events)))) & leaf
+        except (TypeError, IndexError, KeyError):
+            keys = set()
+            for ev in events:
+                try:
+                    key = (ev[0], len(ev[1]))
+                except (TypeError, IndexError, KeyError):
+                    continue
+                if key in leaf:
+                    keys.add(key)
         if not keys:
             return None
         self.store.lock_for_write(keys)   # before the watermarks: see set_write_groups
@@ -902,25 +909,19 @@ class EventRules:
         store = self.store
         if atomic or len(events) < 16:
             return store.add_events(events, atomic=atomic)
-        keys = []
-        switches = 0
-        last = None
-        for ev in events:
-            try:
-                key = (ev[0], len(ev[1]))
-            except (TypeError, IndexError):
-                return store.add_events(events, atomic=atomic)
-            if key != last:
-                switches += 1
-                last = key
-            keys.append(key)
+        try:   # (column-wise: no loop in Python over a big batch)
+            keys = list(zip(map(_first, events), map(len, map(_second, events))))
+        except (TypeError, IndexError, KeyError):
+            return store.add_events(events, atomic=atomic)
+        switches = 1 + sum(map(ne, keys, islice(keys, 1, None)))
         if switches * 4 < len(events):
             return store.add_events(events, atomic=atomic)
-        first: dict = {}
-        for key in keys:
-            first.setdefault(key, len(first))
-        order = sorted(range(len(events)), key=lambda i: first[keys[i]])
-        errors = store.add_events([events[i] for i in order], atomic=atomic)
+        rank = {key: i for i, key in enumerate(dict.fromkeys(keys))}
+        order = sorted(range(len(events)), key=list(map(rank.__getitem__, keys)).__getitem__)
+        grouped = EventBatch(map(events.__getitem__, order))
+        errors = store.add_events(grouped, atomic=atomic)
+        if type(events) is EventBatch:
+            events.ends = grouped.ends   # (the same events: the same end times per type)
         for error in errors:
             if getattr(error, "index", None) is not None:
                 error.index = order[error.index]

@@ -107,13 +107,15 @@ class EventGoals:
             self.clauses_sql(rules, ("event", name, n), args + (s, e), ctx, nxt, st, emit,
                              offset=1)
 
-    @staticmethod
-    def _correlated(origin, p):
-        """The robot the subquery of prev/next is restricted to: origin, or, when origin is
-        unbound (it becomes the robot of the row ``p`` found), that row's robot."""
+    def _robot_sandbox(self, pattern, table, n, st, origin):
+        """The alias of prev/next's row and its subquery's sandbox, restricted to the robot
+        origin, or, when origin is unbound (it becomes the robot of the row found), to that
+        row's robot."""
         if origin is not None and type(deref(origin)) is Var:
-            return Col(f"{p}.robot")
-        return origin
+            p = self.alias("p")
+            return p, self._sandbox(pattern, table, n, st, Col(f"{p}.robot"))
+        sb = self._sandbox(pattern, table, n, st, origin)
+        return (None, None) if sb is None else (self.alias("p"), sb)
 
     def _prev_next_pattern(self, t):
         ev = split_event_atom(t)
@@ -177,8 +179,7 @@ class EventGoals:
         table = self.event_table(name, n)
         if table is None:
             return
-        p = self.alias("p")
-        sb = self._sandbox(pattern, table, n, st, self._correlated(origin, p))
+        p, sb = self._robot_sandbox(pattern, table, n, st, origin)
         if sb is None:
             return
         q, qconds = sb
@@ -219,8 +220,7 @@ class EventGoals:
         table = self.event_table(name, n)
         if table is None:
             return
-        p = self.alias("p")
-        sb = self._sandbox(pattern, table, n, st, self._correlated(origin, p))
+        p, sb = self._robot_sandbox(pattern, table, n, st, origin)
         if sb is None:
             return
         q, qconds = sb

@@ -51,7 +51,7 @@ from ..errors import EventRejected
 from .catalog import BufferTables, Catalog, ProgramText
 from .checks import format_event
 from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, DatabaseError, \
-    run_sql_file
+    ReadConnection, run_sql_file
 from .events import Event, EventBatch, EventWriter
 from .fleet import Fleet, check_robot_name
 from .lookups import EventReader, Row
@@ -64,7 +64,7 @@ from .tables import EventTables
 __all__ = ["EventStore", "Event", "EventBatch", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "DatabaseError", "quote_identifier", "sql_literal", "format_event",
            "migration_scripts", "split_sql_script", "run_sql_file", "store_error",
-           "check_robot_name"]
+           "check_robot_name", "ReadConnection"]
 
 
 def _doc(part_method: Callable) -> Callable:
@@ -204,6 +204,10 @@ class EventStore:
     def close(self) -> None:
         self._db.close()
 
+    @_doc(Database.open_reader)
+    def open_reader(self) -> "ReadConnection | None":
+        return self._db.open_reader()
+
     def __enter__(self) -> "EventStore":
         return self
 
@@ -255,9 +259,12 @@ class EventStore:
         return self._fleet.heads()
 
     @_doc(Fleet.read_after)
-    def fleet_read_after(self, name: str, arity: int, position: int, limit: int
-                         ) -> tuple[list[tuple], int, float | None]:
+    def fleet_read_after(self, name: str, arity: int, position: int, limit: int) -> list[tuple]:
         return self._fleet.read_after(name, arity, position, limit)
+
+    @_doc(Fleet.backlog)
+    def fleet_backlog(self, name: str, arity: int, position: int) -> tuple[int, float | None]:
+        return self._fleet.backlog(name, arity, position)
 
     @_doc(Fleet.positions)
     def fleet_positions(self, robot: str) -> dict[tuple[str, int], int]:
@@ -381,6 +388,13 @@ class EventStore:
     @_doc(EventReader.max_seq)
     def max_seq(self, name: str, arity: int) -> int:
         return self._reader.max_seq(name, arity)
+
+    @_doc(EventReader.raw_rows)
+    def raw_rows(self, name: str, arity: int, *, after_seq: int | None = None,
+                 end_from: float | None = None, end_to: float | None = None,
+                 limit: int | None = None, after_key: tuple | None = None) -> list[tuple]:
+        return self._reader.raw_rows(name, arity, after_seq=after_seq, end_from=end_from,
+                                     end_to=end_to, limit=limit, after_key=after_key)
 
     @_doc(EventReader.count)
     def count(self, name: str, arity: int) -> int:

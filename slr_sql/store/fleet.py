@@ -23,6 +23,9 @@ from .tables import EventTables
 
 __all__ = ["Fleet", "check_robot_name"]
 
+# (an upsert both engines take)
+_ADD_ROBOT = "INSERT INTO slr_robots (name) VALUES (?) ON CONFLICT (name) DO NOTHING"
+
 
 def check_robot_name(name: Any) -> str:
     """``name`` if it can name a robot (a non-empty text without control characters), else
@@ -77,8 +80,9 @@ class Fleet:
                 raise SLRError(f"{self.db.path or ':memory:'} is the store of robot "
                                f"{_json_text(row[0])!r}, not {robot!r}")
             self.db.conn.execute("INSERT INTO slr_meta (key, value) VALUES ('robot', ?) "
-                                 "ON CONFLICT (key) DO UPDATE SET value = excluded.value", (json.dumps(robot),))
-            self.db.conn.execute("INSERT INTO slr_robots (name) VALUES (?) ON CONFLICT DO NOTHING", (robot,))
+                                 "ON CONFLICT (key) DO UPDATE SET value = excluded.value",
+                                 (json.dumps(robot),))
+            self.db.conn.execute(_ADD_ROBOT, (robot,))
         self.robot = robot
         self.writer.robot = robot
 
@@ -103,24 +107,37 @@ class Fleet:
                 out[key] = row[0] or 0
             return out
 
-    def read_after(self, name: str, arity: int, position: int, limit: int
-                   ) -> tuple[list[tuple], int, float | None]:
+    def read_after(self, name: str, arity: int, position: int, limit: int) -> list[tuple]:
         """Up to ``limit`` stored rows of name/arity with ``seq > position`` in sequence
-        order, as ``(seq, *encoded arguments, start, end, arrival, robot)``; with the number
-        of rows after ``position`` and the arrival of the latest of them (the lag)."""
+        order, as ``(seq, *encoded arguments, start, end, arrival, robot)``."""
         with self.db.lock:
             self.db.check_open()
             event_type = self.tables.lookup(name, arity)
             if event_type is None:
-                return [], 0, None
+                return []
             args = "".join(f"arg{i}, " for i in range(1, arity + 1))
             rows = self.db.conn.execute(
                 f"SELECT seq, {args}t_start, t_end, arrival, robot FROM {event_type.quoted} "
                 "WHERE seq > ? ORDER BY seq LIMIT ?", (position, limit)).fetchall()
-            left, latest = self.db.conn.execute(
-                f"SELECT count(*), max(arrival) FROM {event_type.quoted} WHERE seq > ?",
-                (position,)).fetchone()
-            return rows, left, latest
+            dialect = self.db.dialect
+            if dialect.name != "sqlite" and arity:  # shipped as SQLite stores them
+                from_column = dialect.from_column
+                rows = [(r[0], *map(from_column, r[1:1 + arity]), *r[1 + arity:]) for r in rows]
+            return rows
+
+    def backlog(self, name: str, arity: int, position: int) -> tuple[int, float | None]:
+        """The number of rows of name/arity after ``position`` and the arrival time of the
+        latest row (None for an empty table): what is left to ship, and how recent."""
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return 0, None
+            left = self.db.conn.execute(f"SELECT count(*) FROM {event_type.quoted} "
+                                        "WHERE seq > ?", (position,)).fetchone()[0]
+            row = self.db.conn.execute(f"SELECT arrival FROM {event_type.quoted} "
+                                       "ORDER BY seq DESC LIMIT 1").fetchone()
+            return left, None if row is None else row[0]
 
     # ------------------------------------------------------------------ the fleet's side
 
@@ -153,24 +170,34 @@ class Fleet:
             fresh = [r for r in rows if r[0] > position]
             if not fresh:
                 return 0
-            conn.execute("INSERT INTO slr_robots (name) VALUES (?) ON CONFLICT DO NOTHING", (robot,))
+            conn.execute(_ADD_ROBOT, (robot,))
             for other in {r[-1] for r in fresh if r[-1] is not None and r[-1] != robot}:
-                conn.execute("INSERT INTO slr_robots (name) VALUES (?) ON CONFLICT DO NOTHING", (other,))
+                conn.execute(_ADD_ROBOT, (other,))
             if store_events is not None:
                 self._store_decoded(robot, name, arity, fresh, store_events)
             else:
+                # as an add: the fleet store's clock is the rows' arrival (and its "now")
+                arrival = float(self.db.clock.now())
+                self.writer.record_now(arrival)
                 event_type = self.writer._type_for_new_event(name, arity)
-                sql = event_type.insert_sql
-                conn.executemany(sql, [r[1:-1] + ((r[-1] if r[-1] is not None else robot),)
-                                       for r in fresh])
+                end = 1 + arity + 2
+                dialect = self.db.dialect
+                if dialect.name != "sqlite" and arity:  # rows come as SQLite stores them
+                    to_column = dialect.to_column
+                    values = [(*map(to_column, r[1:1 + arity]), *r[1 + arity:end]) for r in fresh]
+                else:
+                    values = [r[1:end] for r in fresh]
+                conn.executemany(event_type.insert_sql, [
+                    v + (arrival, r[-1] if r[-1] is not None else robot)
+                    for v, r in zip(values, fresh)])
             # the arrival column sits after the arguments and the two times
             latest = max(r[3 + arity] for r in fresh)
             conn.execute("INSERT INTO slr_fleet_robots (robot, shipped, last_arrival) "
                          "VALUES (?, ?, ?) ON CONFLICT (robot) DO UPDATE SET shipped = "
-                         "slr_fleet_robots.shipped + excluded.shipped, last_arrival = "
-                         f"{self.db.dialect.scalar('max')}(coalesce(slr_fleet_robots."
-                         "last_arrival, excluded.last_arrival), excluded.last_arrival)",
-                         (robot, len(fresh), latest))
+                         "slr_fleet_robots.shipped + excluded.shipped, last_arrival = CASE "
+                         "WHEN slr_fleet_robots.last_arrival IS NULL OR excluded.last_arrival "
+                         "> slr_fleet_robots.last_arrival THEN excluded.last_arrival ELSE "
+                         "slr_fleet_robots.last_arrival END", (robot, len(fresh), latest))
             conn.execute("INSERT INTO slr_fleet_positions (robot, type_name, type_arity, "
                          "position) VALUES (?, ?, ?, ?) ON CONFLICT (robot, type_name, "
                          "type_arity) DO UPDATE SET position = excluded.position",
