@@ -206,6 +206,39 @@ class PgConnection:
             self.raw.execute("ROLLBACK")
 
 
+class PgReadConnection:
+    """A read-only connection of its own to a store's schema (see
+    :meth:`PgDatabase.open_reader`): each statement sees what was committed when it
+    started."""
+
+    def __init__(self, conninfo: str, schema: str, where: str, busy_timeout: float):
+        psycopg = _psycopg()
+        self.lock = threading.Lock()
+        self.closed = False
+        try:
+            raw = psycopg.connect(conninfo, autocommit=True)
+            raw.execute("SET default_transaction_read_only = on")
+            raw.execute(f"SET search_path = {quote_identifier(schema)}")
+        except psycopg.Error as exc:
+            raise SLRError(f"{where}: cannot open a reading connection "
+                           f"({_first_line(exc)})") from None
+        self.conn = PgConnection(raw, where, busy_timeout)
+
+    def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
+        """Run one reading statement and return its rows."""
+        with self.lock:
+            if self.closed:
+                raise SLRError("the event store is closed")
+            return self.conn.execute(sql, tuple(params)).fetchall()
+
+    def close(self) -> None:
+        """Close the connection (idempotent)."""
+        with self.lock:
+            if not self.closed:
+                self.closed = True
+                self.conn.close()
+
+
 class PgDatabase:
     """The connection of one store in a PostgreSQL schema, with its lock, transaction
     depth and clock (the counterpart of :class:`~slr_sql.store.connection.Database`)."""
@@ -298,6 +331,12 @@ class PgDatabase:
         keys = sorted({groups[t] for t in types if t in groups})
         for key in keys:
             self.conn.execute("SELECT pg_advisory_xact_lock(?)", (key,))
+
+    def open_reader(self) -> "PgReadConnection":
+        """A read-only connection of its own (a reader that must not queue behind this
+        connection's lock, held by a writer for a whole transaction)."""
+        self.check_open()
+        return PgReadConnection(self.conninfo, self.schema, self.path, self.busy_timeout)
 
     def listen(self, callback: Callable[[], Any]) -> Callable[[], None]:
         """LISTEN on the store's channel on a connection of its own, in a daemon thread:
