@@ -411,3 +411,17 @@ def test_a_subscription_misses_nothing_while_writers_commit_out_of_order(postgre
                                       for j in range(3))
         with pytest.raises(SLRTimeout):
             sub.get(timeout=0.5)   # and nothing twice
+
+
+def test_a_dropped_connection_is_an_slr_error_then_works_again(postgres_url):
+    """The server drops the store's connection (as a restart does): the next call is an
+    SLRError, the one after works, and nothing acknowledged is lost."""
+    with slr_sql.open(postgres_url) as kb:
+        kb.add("p(1)^1")
+        with psycopg.connect(postgres_url, autocommit=True) as admin:
+            admin.execute("SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE "
+                          "datname = current_database() AND pid <> pg_backend_pid()")
+        with pytest.raises(SLRError):
+            kb.add("p(2)^2")
+        kb.add("p(3)^3")
+        assert [a["X"] for a in kb.query("p(X)^_")] == [1, 3]

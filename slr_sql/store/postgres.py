@@ -156,6 +156,20 @@ class PgConnection:
         self.where = where
         self.busy_timeout = busy_timeout
         self.last_rowcount = 0
+        # set by PgDatabase: open a new connection, and whether a transaction is open
+        self.reopen: Callable[[], Any] | None = None
+        self.in_transaction: Callable[[], bool] = lambda: False
+
+    def _alive(self) -> None:
+        """A connection the server dropped (a restart, a terminated backend) is opened
+        again before the next statement outside a transaction: the failed statement was an
+        SLRError, the next one works. Inside a transaction it stays an error (what the
+        transaction did is gone: it must fail as a whole)."""
+        if self.raw.closed and self.reopen is not None and not self.in_transaction():
+            try:
+                self.raw = self.reopen()
+            except _psycopg().Error as exc:
+                raise _error(exc, self.where, self.busy_timeout) from None
 
     def _guard(self, call: Callable[[], Any]) -> Any:
         psycopg = _psycopg()
@@ -170,6 +184,7 @@ class PgConnection:
             args: Any = params
         else:
             args = tuple(params) if params else None
+        self._alive()
         cursor = self.raw.cursor()
         self._guard(lambda: cursor.execute(text, args, prepare=None))
         self.last_rowcount = cursor.rowcount
@@ -177,6 +192,7 @@ class PgConnection:
 
     def executemany(self, sql: str, rows: Iterable[Iterable[Any]]) -> PgCursor:
         rows = [tuple(r) for r in rows]
+        self._alive()
         cursor = self.raw.cursor()
         plain = _PLAIN_INSERT.match(sql)
         if plain is not None and len(rows) > 1:
@@ -276,6 +292,15 @@ class PgDatabase:
                 raw.execute("SET TIME ZONE 'UTC'")
                 migrate_postgres(self, schema, adopt)
                 raw.execute(f"SET search_path = {quote_identifier(schema)}")
+
+                def reopen() -> Any:
+                    again = psycopg.connect(conninfo, autocommit=True)
+                    again.execute(f"SET lock_timeout = {int(busy_timeout * 1000)}")
+                    again.execute("SET TIME ZONE 'UTC'")
+                    again.execute(f"SET search_path = {quote_identifier(schema)}")
+                    return again
+                self.conn.reopen = reopen
+                self.conn.in_transaction = lambda: self.tx_depth > 0
             except psycopg.Error as exc:
                 raise _error(exc, self.path, busy_timeout) from None
         except BaseException:
