@@ -986,8 +986,9 @@ class KnowledgeBase:
         """
         if limit is not None and (type(limit) is not int or limit < 0):
             raise SLRError(f"limit must be a count (an integer >= 0), not {limit!r}")
-        _check_time_option("at", at)
-        _check_time_option("timeout", timeout, minimum=0.0)
+        if at is not None or timeout is not None:
+            _check_time_option("at", at)
+            _check_time_option("timeout", timeout, minimum=0.0)
         if wait:  # issue 5: synchronized (SLRTimeout names the incomplete types)
             return self.submit(goal, at=at, args=args, timeout=timeout).result()
         if args and limit is None:
