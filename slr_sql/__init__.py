@@ -6,9 +6,10 @@
 ...     kb.query("obj(O, cup, C)^T")
 [{'O': Atom('cup1'), 'C': Atom('red'), 'T': 2.0}]
 """
+from .api import KnowledgeBaseAPI, PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import Clock, ManualClock, StreamClock, WallClock
-from .errors import EventRejected, SLRBusy, SLRError, SLREvaluationError, SLRSyntaxError, \
-    SLRTimeout
+from .errors import EventRejected, SLRBusy, SLRError, SLREvaluationError, SLRStoreFull, \
+    SLRStoreGone, SLRSyntaxError, SLRTimeout, SLRUnavailable
 from .kb import KnowledgeBase, open
 from .terms import Atom, String, Struct, Var
 
@@ -25,8 +26,10 @@ def connect(url: str, token: str | None = None, **options):
 
 
 __all__ = [
-    "open", "connect", "KnowledgeBase", "Clock", "WallClock", "ManualClock", "StreamClock",
+    "open", "connect", "KnowledgeBase", "KnowledgeBaseAPI", "PendingQueryAPI", "SubscriptionAPI",
+    "ProgramInfo", "Clock", "WallClock", "ManualClock", "StreamClock",
     "SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRBusy", "EventRejected",
+    "SLRUnavailable", "SLRStoreFull", "SLRStoreGone",
     "Atom", "String", "Struct", "Var",
 ]
 __version__ = "0.1.0"

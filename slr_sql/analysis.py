@@ -90,6 +90,9 @@ _GOAL_ARGS: dict[tuple[str, int], tuple[int, ...]] = {
     ("aggregate_all", 3): (1,), ("bagof", 3): (1,), ("setof", 3): (1,), ("catch", 3): (0, 2),
 }
 _PREV_NEXT = {("prev", 2), ("next", 2), ("next", 3)}
+# tf_lookup/4,5 read the stored transforms (slr_sql.frames), like prev/next
+_TF_LOOKUP = {("tf_lookup", 4), ("tf_lookup", 5)}
+_TF_TYPES = (("tf", 3), ("tf_static", 3))
 
 
 class _Refs:
@@ -173,6 +176,9 @@ def goal_refs(goal: Any, program: Program | None = None, library: Program | None
                                     f"before the call")
             else:
                 refs.stored.add(event_key(deref(ev[0])))
+            continue
+        if key in _TF_LOOKUP:
+            refs.stored.update(_TF_TYPES)
             continue
         if name == "call" and len(args) > 1:
             stack.append((args[0], len(args) - 1))

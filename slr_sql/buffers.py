@@ -214,6 +214,10 @@ class _Analyzer:
                         self.nested(i, item, f"{path}[{k}]")
                     return
                 # an improper list [a|b] is stored as the compound '.'(a, b): fall through
+            if "/" in str(t.name):
+                raise SLRError(f"buffer patterns cannot look inside compounds named {t.name!r} "
+                               f"(a message type: messages are stored as objects of fields); "
+                               f"write _ or a variable for the message")
             inner = path + _path_key(str(t.name))
             q = sql_literal(inner)
             self.add((i,), f"json_type({c}, {q}) = 'array' AND "
@@ -368,6 +372,90 @@ def _num(x: Any) -> str:
     return repr(x)
 
 
+# The largest count a cBuffer may keep per key: slr_buffers stores the amount as a REAL, exact
+# up to 2^53 (and a trigger's LIMIT must stay a 64-bit integer).
+MAX_KEEP_LAST = 2 ** 53
+
+
+def check_count(value: Any, what: str = "keep_last") -> int:
+    """A cBuffer's count: an integer from 0 to :data:`MAX_KEEP_LAST`, else an SLRError in
+    words.
+
+    >>> check_count(5)
+    5
+    >>> check_count(10 ** 30)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: keep_last is out of range: at most 9007199254740992 events per key, not an integer of 31 digits
+    """
+    if type(value) is not int or value < 0:
+        raise SLRError(f"{what} must be a non-negative integer, not {_shown(value)}")
+    if value > MAX_KEEP_LAST:
+        raise SLRError(f"{what} is out of range: at most {MAX_KEEP_LAST} events per key, not "
+                       f"{_shown(value)}")
+    return value
+
+
+def check_seconds(value: Any, what: str = "keep_seconds") -> float:
+    """A tBuffer's duration: a number of seconds >= 0 (``inf``: keep everything), else an
+    SLRError in words.
+
+    >>> check_seconds(2), check_seconds(float("inf"))
+    (2.0, inf)
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value \
+            or value < 0:
+        raise SLRError(f"{what} must be a non-negative number of seconds, not {_shown(value)}")
+    try:
+        return float(value)
+    except OverflowError:
+        raise SLRError(f"{what} is out of range: {_shown(value)} is more seconds than a "
+                       f"float holds (inf keeps everything)") from None
+
+
+def check_time(value: Any, what: str) -> float:
+    """A window bound: a number (``-inf``/``inf`` allowed), else an SLRError in words."""
+    if isinstance(value, str):
+        try:
+            value = float(value)
+        except ValueError:
+            raise SLRError(f"{what} must be a number, not {_shown(value)}") from None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
+        raise SLRError(f"{what} must be a number, not {_shown(value)}")
+    try:
+        return float(value)
+    except OverflowError:
+        raise SLRError(f"{what} is out of range: {_shown(value)} is larger than a float "
+                       f"holds (-inf/inf are the unbounded ends)") from None
+
+
+def _shown(value: Any) -> str:
+    """``repr`` for a message, short; an integer too long to print by its digit count."""
+    if type(value) is int and value.bit_length() > 64:
+        digits = len(str(abs(value))) if value.bit_length() < 14000 else \
+            f"about {int(value.bit_length() * math.log10(2)) + 1}"
+        return f"an integer of {digits} digits"
+    try:
+        text = repr(value)
+    except Exception:  # noqa: BLE001 - a value that cannot print itself
+        return f"a {type(value).__name__}"
+    return text if len(text) <= 80 else text[:80] + "..."
+
+
+def _lenient_amount(kind: str, amount: Any) -> Any:
+    """The amount of a buffer read back from a store (or its stored program) that older
+    versions accepted out of range: as the nearest bound that works (a count above
+    :data:`MAX_KEEP_LAST` keeps that many, a duration beyond a float is ``inf``)."""
+    if amount is None:
+        return None
+    if kind == "cBuffer":
+        return min(int(amount), MAX_KEEP_LAST) if amount == amount else MAX_KEEP_LAST
+    try:
+        return float(amount)
+    except OverflowError:
+        return math.inf
+
+
 @dataclass
 class BufferInfo:
     """What :meth:`KnowledgeBase.buffers` returns for each active buffer."""
@@ -408,7 +496,7 @@ def conflicts(specs: list[BufferSpec]) -> None:
 # ----------------------------------------------------------------------------- SQL
 
 def _n(spec: BufferSpec) -> int:
-    return int(spec.amount)
+    return _lenient_amount("cBuffer", spec.amount)
 
 
 def trigger_sql(spec: BufferSpec, table: str) -> dict[str, str]:
@@ -511,9 +599,7 @@ def _parse_pattern(text: str) -> Any:
 
 def _spec_from_row(row: dict) -> BufferSpec:
     pattern = analyze(_parse_pattern(row["pattern_text"]))
-    amount = row["amount"]
-    if row["kind"] == "cBuffer" and amount is not None:
-        amount = int(amount)
+    amount = _lenient_amount(row["kind"], row["amount"])
     return BufferSpec(row["kind"], pattern, amount, row["t1"], row["t2"], row["source"],
                       row["origin"], row["id"])
 
@@ -535,16 +621,25 @@ class BufferManager:
         self._clock = None
 
     # -- specs -----------------------------------------------------------------------
-    def program_specs(self) -> list[BufferSpec]:
+    def program_specs(self, strict: bool = False) -> list[BufferSpec]:
+        """The buffers the loaded program declares. ``strict`` (a program being loaded): an
+        amount out of range is an SLRError naming the clause; otherwise (a program read back
+        from the store, which older versions may have accepted) it is taken as the nearest
+        bound that works."""
         specs = []
         for decl in self.kb.declarations.buffers:
+            where = _where(decl.clause)
             try:
                 pattern = analyze(decl.pattern)
+                if not strict:
+                    amount = _lenient_amount(decl.kind, decl.amount)
+                elif decl.kind == "cBuffer":
+                    amount = check_count(decl.amount, "the count")
+                else:
+                    amount = check_seconds(decl.amount, "the duration")
             except SLRError as exc:
-                where = _where(decl.clause)
-                raise SLRError(f"{where}: {exc}") from None
-            specs.append(BufferSpec(decl.kind, pattern, decl.amount, None, None, "program",
-                                    _where(decl.clause)))
+                raise SLRError(f"{where}: {decl.kind}: {exc}") from None
+            specs.append(BufferSpec(decl.kind, pattern, amount, None, None, "program", where))
         return specs
 
     def active(self) -> list[BufferSpec]:
@@ -584,7 +679,7 @@ class BufferManager:
     def sync_program(self, check: bool = True) -> None:
         """Make the installed program buffers those the loaded program declares."""
         with self.lock, self.store.transaction():
-            desired = self.program_specs()
+            desired = self.program_specs(strict=check)
             installed = self.active()
             runtime = [s for s in installed if s.source == "runtime"]
             if check:
@@ -653,16 +748,15 @@ class BufferManager:
         compiled = analyze(term)
         t1 = t2 = amount = None
         if keep_last is not None:
-            if type(keep_last) is not int or keep_last < 0:
-                raise SLRError(f"keep_last must be a non-negative integer, not {keep_last!r}")
-            kind, amount = "cBuffer", keep_last
+            kind, amount = "cBuffer", check_count(keep_last)
         elif keep_seconds is not None:
             kind, amount = "tBuffer", _seconds(keep_seconds)
         else:
             try:
-                t1, t2 = (float(x) for x in keep_between)
+                t1, t2 = keep_between
             except (TypeError, ValueError):
                 raise SLRError("keep_between must be a pair of times (T1, T2)") from None
+            t1, t2 = check_time(t1, "keep_between's T1"), check_time(t2, "keep_between's T2")
             if not t1 <= t2:
                 raise SLRError(f"keep_between=({t1}, {t2}): T1 must not be after T2")
             kind = "window"
@@ -685,9 +779,7 @@ class BufferManager:
     def infos(self) -> list[BufferInfo]:
         out = []
         for row in self.store.buffer_rows():
-            amount = row["amount"]
-            if row["kind"] == "cBuffer" and amount is not None:
-                amount = int(amount)
+            amount = _lenient_amount(row["kind"], row["amount"])
             window = (row["t1"], row["t2"]) if row["kind"] == "window" else None
             out.append(BufferInfo(row["id"], row["kind"], row["pattern_text"], amount, window,
                                   row["source"], row["origin"], row["pruned"], row["dropped"]))
@@ -702,12 +794,8 @@ class BufferManager:
 
 def _seconds(value: Any) -> float:
     if isinstance(value, str):
-
         value = parse_duration(_parse_pattern(value))
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value \
-            or value < 0:
-        raise SLRError(f"keep_seconds must be a non-negative number of seconds, not {value!r}")
-    return float(value)
+    return check_seconds(value)
 
 
 def attach(kb: Any) -> BufferManager:

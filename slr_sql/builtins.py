@@ -1210,6 +1210,13 @@ def _prev(m, a):
 
     bound = bound_args(args)
     pattern = args + (s, e)
+    if m.robot is not None:  # one robot's events (a fleet store asked per robot)
+        first = next(_matching(m, pattern, store.prev_candidates(
+            name, n, bound, t, start_ge, robot=m.robot)), None)
+        if first is not None:
+            yield from _yield_rows(m, pattern, store.rows_at_end(
+                name, n, bound, first[2], start_ge=start_ge, robot=m.robot))
+        return
     first = next(_matching(m, pattern, store.prev_candidates(name, n, bound, t, start_ge)), None)
     if first is None:
         return
@@ -1227,6 +1234,13 @@ def _next(m, event, lo_t, hi_t):
 
     bound = bound_args(args)
     pattern = args + (s, e)
+    if m.robot is not None:  # one robot's events (a fleet store asked per robot)
+        first = next(_matching(m, pattern, store.next_candidates(
+            name, n, bound, lo, hi, robot=m.robot)), None)
+        if first is not None:
+            yield from _yield_rows(m, pattern, store.rows_at_start(
+                name, n, bound, first[1], hi, robot=m.robot))
+        return
     first = next(_matching(m, pattern, store.next_candidates(name, n, bound, lo, hi)), None)
     if first is None:
         return
@@ -1247,6 +1261,60 @@ def _next2(m, a):
 @nondet("next", 3)
 def _next3(m, a):
     yield from _next(m, a[0], a[1], a[2])
+
+
+# -- origin/2: whose events ---------------------------------------------------------------------------
+
+def origin_goal(goal: Any) -> Any:
+    """The goal of ``origin(R, Goal)`` if it is an event goal, prev/2, next/2 or next/3;
+    raises the ISO error otherwise."""
+    g = deref(goal)
+    if type(g) is Var:
+        raise instantiation_error()
+    if type(g) is Struct and ((g.name == "^" and len(g.args) == 2 and split_event_atom(g))
+                              or (g.name, len(g.args)) in (("prev", 2), ("next", 2),
+                                                           ("next", 3))):
+        return g
+    raise type_error("event_goal", g)
+
+
+@nondet("origin", 2)
+def _origin(m, a):
+    """origin(R, Goal): Goal (an event goal, prev or next) over robot R's events only; with R
+    unbound, robot by robot in name order, binding R. Inside a query restricted to one robot
+    (``kb.query(goal, robot=...)``) only that robot is seen."""
+    goal = origin_goal(a[1])
+    r = deref(a[0])
+    if type(r) is Var:
+        store = m.engine.events
+        robots = store.robots() if store is not None else []
+    elif type(r) is Atom:
+        robots = [str(r)]
+    else:
+        raise type_error("atom", r)
+    if m.robot is not None:
+        robots = [name for name in robots if name == m.robot]
+    for name in robots:
+        # the goal runs in a machine of its own reading only this robot's events; its
+        # answers (event rows: ground) are copied out and bound here one by one
+        sub = m.engine.machine(at=m.at)
+        sub.deadline, sub.max_steps, sub.timeout = m.deadline, m.max_steps, m.timeout
+        sub.on_prev, sub.on_next = m.on_prev, m.on_next
+        sub.robot = name
+        answers = []
+        solving = sub.solve(goal)
+        try:
+            for _ in solving:
+                answers.append(copy_term(goal))
+        finally:
+            sub.abandon(solving)
+            undo(sub.trail, 0)
+        robot = Atom(name)
+        for answer in answers:
+            mark = len(m.trail)
+            if m.unify(a[0], robot) and m.unify(goal, answer):
+                yield None
+            m.undo_to(mark)
 
 
 # -- robot library -----------------------------------------------------------------------------------
@@ -1353,6 +1421,168 @@ def _distance(m, a):
     from . import robotlib
 
     return m.unify(a[2], from_python(_robot_call(robotlib.distance, to_python(a[0]), to_python(a[1]))))
+
+
+# -- get_field/3: message terms read by field name ------------------------------------------
+
+def _message_fields(t: Any) -> list | None:
+    """[(name, value)] of a message term ``Type(Name: Value, ...)``; else None."""
+    t = deref(t)
+    if type(t) is not Struct or not t.args or (t.name == "." and len(t.args) == 2):
+        return None
+    out = []
+    for arg in t.args:
+        arg = deref(arg)
+        if type(arg) is not Struct or arg.name != ":" or len(arg.args) != 2:
+            return None
+        key = deref(arg.args[0])
+        if type(key) is not Atom:
+            return None
+        out.append((key, arg.args[1]))
+    return out
+
+
+def _field_steps(path: Any) -> list:
+    """The steps of a field path: an atom ``'pose.position.x'`` / ``'poses[0].position'``, or a
+    list of field names (atoms) and list indexes (integers, from 0)."""
+    path = deref(path)
+    if type(path) is Atom:
+        steps: list = []
+        for segment in str(path).split("."):
+            name, _, rest = segment.partition("[")
+            if not name:
+                raise _err_domain("field_path", path)
+            steps.append(Atom(name))
+            while rest:
+                index, close, rest = rest.partition("]")
+                if not close or not index.lstrip("-").isdigit() or (rest and rest[0] != "["):
+                    raise _err_domain("field_path", path)
+                steps.append(int(index))
+                rest = rest[1:]
+        return steps
+    if type(path) is int:
+        return [path]
+    items = proper_list(path)
+    out = []
+    for item in items:
+        item = deref(item)
+        if type(item) is Var:
+            raise instantiation_error()
+        if type(item) is not Atom and type(item) is not int:
+            raise _err_domain("field_path", path)
+        out.append(item)
+    return out
+
+
+@nondet("get_field", 3)
+def _get_field(m, a):
+    """get_field(Message, Path, Value): the field of a message term (how ROS messages reach
+    SLR: ``'geometry_msgs/msg/Point'(x: 1.0, y: 2.0, z: 0.5)``) at Path -- an atom naming a
+    field or a dotted path with list indexes (``'poses[0].position.x'``), or a list of names
+    and indexes. Fails when there is no such field. With Path unbound: each field of the
+    message in turn, Path bound to its name."""
+    msg = deref(a[0])
+    if type(msg) is Var:
+        raise instantiation_error()
+    fields = _message_fields(msg)
+    if fields is None:
+        raise type_error("message", msg)
+    path = deref(a[1])
+    if type(path) is Var:
+        trail = m.trail
+        for key, value in fields:
+            mark = len(trail)
+            if m.unify(path, key) and m.unify(a[2], value):
+                yield None
+            undo(trail, mark)
+        return
+    value: Any = msg
+    for step in _field_steps(path):
+        if type(step) is int:
+            items, tail = list_items(deref(value))
+            if not (type(tail) is Atom and tail == "[]") or not -len(items) <= step < len(items):
+                return
+            value = items[step]
+            continue
+        fields = _message_fields(value)
+        if fields is None:
+            return
+        for key, v in fields:
+            if key == step:
+                value = v
+                break
+        else:
+            return
+    if m.unify(a[2], value):
+        yield None
+
+
+# -- tf_lookup: tf2's lookupTransform over the stored tf / tf_static events (slr_sql.frames) --
+
+def _frame(t: Any) -> Any:
+    t = deref(t)
+    if type(t) is Var:
+        raise instantiation_error()
+    if not is_ground(t):
+        raise instantiation_error()
+    return t
+
+
+def _tf_hooks(m: "Machine") -> Any:
+    if m.on_prev is None and m.on_next is None and m.on_arrival is None:
+        return None
+    from .frames import TfHooks
+
+    def prev(key, t):
+        if m.on_prev is not None:
+            m.on_prev(key[0], key[1], t)
+
+    def next_(key, lo, hi, args):
+        if m.on_next is not None:
+            m.on_next(key[0], key[1], lo, hi, tuple(args) + (Var(),), Var(), Var())
+
+    def arrival(key, t, args):
+        if m.on_arrival is not None:
+            m.on_arrival(key[0], key[1], t, tuple(args) + (Var(),))
+    return TfHooks(prev, next_, arrival)
+
+
+def _tf_lookup(m: "Machine", a: tuple, extrapolate: bool) -> bool:
+    from .frames import FrameTree, lookup
+
+    target, source = _frame(a[0]), _frame(a[1])
+    t = _time_value(a[2])
+    store = m.engine.events
+    if store is None:
+        return False
+    tree = m.engine.frames
+    if tree is None:
+        tree = m.engine.frames = FrameTree()
+    pose = lookup(store, tree, target, source, t, extrapolate, _tf_hooks(m))
+    if pose is None:
+        return False
+    return m.unify(a[3], Struct("pose", (make_list(list(pose[0])), make_list(list(pose[1])))))
+
+
+@det("tf_lookup", 4)
+def _tf_lookup4(m, a):
+    """tf_lookup(Target, Source, T, Pose): the pose of frame Source in frame Target at T,
+    chained through the stored frame tree; fails outside an edge's observations."""
+    return _tf_lookup(m, a, False)
+
+
+@det("tf_lookup", 5)
+def _tf_lookup5(m, a):
+    """tf_lookup(Target, Source, T, Pose, Mode): Mode ``interpolate`` is tf_lookup/4;
+    ``extrapolate`` holds an edge's nearest observation outside its observations."""
+    mode = deref(a[4])
+    if type(mode) is Var:
+        raise instantiation_error()
+    if type(mode) is not Atom:
+        raise type_error("atom", mode)
+    if mode not in ("interpolate", "extrapolate"):
+        raise _err_domain("tf_lookup_mode", mode)
+    return _tf_lookup(m, a, mode == "extrapolate")
 
 
 # -- Python-defined predicates ---------------------------------------------------------------------

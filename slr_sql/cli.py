@@ -15,6 +15,7 @@ import math
 import os
 import re
 import sys
+import warnings
 from dataclasses import dataclass
 from typing import Any, Iterable, Iterator
 
@@ -85,8 +86,14 @@ def error_words(exc: BaseException) -> str:
     unknown procedure nosuch/1
     """
     if isinstance(exc, slr_sql.SLREvaluationError):
-        words = _iso_words(getattr(exc, "term", None))
+        term = getattr(exc, "term", None)
+        words = _iso_words(term)
         if words is not None:
+            # The library's hint after the term (``color/2 is defined with ^T: did you
+            # mean color(cup2, C)^T?``) is for the user too.
+            message = str(exc)
+            if message.startswith("error(") and "): " in message:
+                words += "; " + message.split("): ", 1)[1]
             return words
     from .store import DatabaseError
 
@@ -131,6 +138,16 @@ def _is_url(db: str) -> bool:
     return db.startswith(("http://", "https://"))
 
 
+def _is_database_url(db: str) -> bool:
+    """A store on a database server (``postgresql://...``): no file to look for."""
+    return db.startswith(("postgresql://", "postgres://"))
+
+
+def _missing(db: str) -> bool:
+    """No store file at ``db`` (a server URL is never missing here: opening it says)."""
+    return not _is_database_url(db) and not os.path.lexists(db)
+
+
 def _open(db: str, create: bool = True) -> Any:
     """The knowledge base in DB: a file opened in this process (only commands that add to a
     store may create it), or the URL of a running `slr serve`."""
@@ -138,7 +155,7 @@ def _open(db: str, create: bool = True) -> Any:
         ctx = click.get_current_context(silent=True)
         token = (ctx.find_root().obj or {}).get("token") if ctx is not None else None
         return slr_sql.connect(db, token=token)
-    if not create and not os.path.lexists(db):
+    if not create and _missing(db):
         raise slr_sql.SLRError(f"no such store: {db}")
     return slr_sql.open(db)
 
@@ -177,6 +194,13 @@ def main(ctx: click.Context, token: str | None) -> None:
     (http://HOST:PORT).
     """
     ctx.obj = {"token": token}
+    warnings.showwarning = _show_warning
+
+
+def _show_warning(message: Warning | str, category: type[Warning], filename: str,
+                  lineno: int, file: Any = None, line: str | None = None) -> None:
+    """The library's warnings (a learned delay capped, ...) as ``warning: ...`` lines."""
+    _err(f"warning: {message}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -214,6 +238,32 @@ def load(db: str, file: str, name: str, replace: bool) -> None:
     with _open(db) as kb:
         kb.load_file(file, name=name, replace=replace)
     click.echo(f"{'replaced' if replace else 'loaded'} {file} as program {name!r}")
+    _warn_event_like_facts(file, db)
+
+
+def _warn_event_like_facts(file: str, db: str) -> None:
+    """Facts written like events (``obj(cup1, cup, red)^2.0.``) in a loaded program are
+    rules' facts, which prev/next never see: say so, and how to add them as events."""
+    from .example_files import event_like_facts, parse_example
+
+    try:
+        with open(file, encoding="utf-8") as handle:
+            text = handle.read()
+        facts = event_like_facts(text, file)
+    except (OSError, UnicodeDecodeError, slr_sql.SLRError):
+        return
+    if not facts:
+        return
+    line, first = facts[0]
+    more = f" (and {len(facts) - 1} more)" if len(facts) > 1 else ""
+    _err(f"warning: {file}:{line}: {first} is a fact{more}, not an event: prev and next see "
+         f"only events")
+    if parse_example(text, file).has_events_part:
+        _err(f"  to load its rules and add the events after '%% events' into a new store: "
+             f"slr run {file} --db NEW.db")
+    else:
+        _err(f"  to add such lines as events: slr add {db} 'EVENT' ..., or one per line "
+             f"with slr ingest {db} FILE")
 
 
 @main.command()
@@ -385,16 +435,18 @@ def _numbered_lines(handle: Iterable[bytes]) -> Iterator[tuple[int, bytes]]:
         yield lineno, line
 
 
-def ingest_file(kb: Any, path: str, progress: Any = None, task: Any = None) -> IngestReport:
-    """Ingest every event line of ``path`` into ``kb`` in batches; bad lines are collected,
-    the rest still goes in."""
+def ingest_file(kb: Any, path: str | Any, progress: Any = None) -> IngestReport:
+    """Ingest every event line of ``path`` (a file name, or a binary stream such as
+    ``sys.stdin.buffer``) into ``kb`` in batches; bad lines are collected, the rest still goes
+    in. ``progress(nbytes)`` is called with the size of each line read."""
     bad: list[tuple[int, str]] = []
     added = 0
     batch: list[tuple[int, Any]] = []
-    with open(path, "rb") as handle:  # decoded line by line: one bad byte costs one line
+    handle = open(path, "rb") if isinstance(path, (str, os.PathLike)) else path
+    try:  # decoded line by line: one bad byte costs one line
         for lineno, raw in _numbered_lines(handle):
             if progress is not None:
-                progress.update(task, advance=len(raw))
+                progress(len(raw))
             try:
                 try:
                     line = raw.decode("utf-8")
@@ -411,16 +463,41 @@ def ingest_file(kb: Any, path: str, progress: Any = None, task: Any = None) -> I
             if len(batch) >= INGEST_BATCH:
                 added += _add_batch(kb, batch, bad)
                 batch = []
+    finally:
+        if handle is not path:
+            handle.close()
     added += _add_batch(kb, batch, bad)
     bad.sort()
     return IngestReport(added, bad)
 
 
+class LineProgress:
+    """Progress of an ingest into a log (stderr not a terminal, ``--progress``): one line
+    per tenth of a file, or per 64 MiB of a stream whose size is unknown."""
+
+    def __init__(self, label: str, total: int | None):
+        self.label, self.total, self.done, self.next_mark = label, total, 0, 0
+
+    def __call__(self, nbytes: int) -> None:
+        self.done += nbytes
+        if self.done < self.next_mark:
+            return
+        if self.total:
+            percent = min(100, 100 * self.done // self.total)
+            _err(f"{self.label}: {percent}% ({self.done:,} of {self.total:,} bytes)")
+            self.next_mark = (percent // 10 + 1) * self.total // 10
+        else:
+            _err(f"{self.label}: {self.done:,} bytes")
+            self.next_mark = self.done + 64 * 1024 * 1024
+
+
 @main.command()
 @click.argument("db", type=click.Path(dir_okay=False))
-@click.argument("file", type=click.Path(dir_okay=False))
-def ingest(db: str, file: str) -> None:
-    """Add the events of FILE: one per line, SLR text or a JSON object.
+@click.argument("file", type=click.Path(dir_okay=False, allow_dash=True))
+@click.option("--progress/--no-progress", default=None,
+              help="Report progress on stderr (default: a bar on a terminal for long input).")
+def ingest(db: str, file: str, progress: bool | None) -> None:
+    """Add the events of FILE (- for standard input): one per line, SLR text or JSON.
 
     \b
       seg(cup1,[0.4,0.1,0.9])^12.31
@@ -428,24 +505,103 @@ def ingest(db: str, file: str) -> None:
 
     Bad lines are reported as FILE:LINE: reason and skipped; the exit status is 1 if any.
     """
-    from rich.console import Console
-    from rich.progress import BarColumn, DownloadColumn, Progress, TimeRemainingColumn
-
-    size = os.path.getsize(_existing_file(file))
+    if file == "-":
+        source: Any = sys.stdin.buffer
+        label, size = "<stdin>", None
+    else:
+        source = _existing_file(file)
+        label, size = file, os.path.getsize(file)
+    terminal = sys.stderr.isatty()
+    if progress is None:   # a bar only where a person watches, and only when it is long
+        progress = terminal and (size is None or size >= PROGRESS_MIN_BYTES)
     with _open(db) as kb:
-        if size >= PROGRESS_MIN_BYTES:
+        if progress and terminal:
+            from rich.console import Console
+            from rich.progress import BarColumn, DownloadColumn, Progress, TimeRemainingColumn
+
             columns = ("[progress.description]{task.description}", BarColumn(),
                        DownloadColumn(), TimeRemainingColumn())
-            with Progress(*columns, console=Console(stderr=True), transient=True) as progress:
-                task = progress.add_task(f"ingesting {os.path.basename(file)}", total=size)
-                report = ingest_file(kb, file, progress, task)
+            with Progress(*columns, console=Console(stderr=True), transient=True) as bar:
+                task = bar.add_task(f"ingesting {os.path.basename(label)}", total=size)
+                report = ingest_file(kb, source, lambda n: bar.update(task, advance=n))
+        elif progress:
+            report = ingest_file(kb, source, LineProgress(f"ingesting {label}", size))
         else:
-            report = ingest_file(kb, file)
+            report = ingest_file(kb, source)
     for lineno, reason in report.bad:
-        _err(f"{file}:{lineno}: {reason}")
+        _err(f"{label}:{lineno}: {reason}")
     click.echo(f"ingested {report.added} event{'s' if report.added != 1 else ''}"
                + (f", {len(report.bad)} bad line{'s' if len(report.bad) != 1 else ''}" if report.bad else ""))
     if report.bad:
+        sys.exit(1)
+
+
+# ---------------------------------------------------------------------------------------------
+# run: an example file (program, events, queries with expected answers)
+# ---------------------------------------------------------------------------------------------
+
+@main.command()
+@click.argument("file", type=click.Path(dir_okay=False))
+@click.option("--db", "db", type=click.Path(dir_okay=False), default=None,
+              help="Keep the store in this file (default: in memory).")
+@click.option("-q", "--quiet", is_flag=True, help="Print only the mismatches and the summary.")
+def run(file: str, db: str | None, quiet: bool) -> None:
+    """Run an example FILE: load its rules, add its events, ask its queries, compare.
+
+    The rules are the text before '%% events', the events the lines after it; each
+    '%% query:' is asked and its answers compared with '%% expect:' (examples/README.md).
+    Exit status 1 when an answer differs.
+    """
+    from .example_files import check_case, parse_example
+
+    _existing_file(file)
+    try:
+        with open(file, encoding="utf-8") as handle:
+            text = handle.read()
+    except UnicodeDecodeError:
+        raise slr_sql.SLRError(f"{file}: not an example file (not UTF-8 text)") from None
+    example = parse_example(text, file)
+    if db is not None and os.path.exists(db) and os.path.getsize(db) > 0:
+        raise slr_sql.SLRError(f"{db} exists; slr run wants a fresh store (remove it first)")
+    # The events are a recording: time stands still at 0, so no buffer prunes them and
+    # every query sees the file's events however long ago their times are.
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.load(example.program, file)
+        rejected = kb.add_many(example.events) if example.events else []
+        for rejection in rejected:
+            index = getattr(rejection, "index", None)
+            where = (example.event_lines[index] if isinstance(index, int)
+                     and 0 <= index < len(example.event_lines) else 0)
+            _err(f"{file}:{where}: event rejected: {error_words(rejection)}")
+        if not quiet:
+            click.echo(f"% {file}: {len(example.events) - len(rejected)} events, "
+                       f"{len(example.cases)} quer{'y' if len(example.cases) == 1 else 'ies'}")
+        failed = 0
+        for case in example.cases:
+            view = "" if case.at is None else f"  (at {case.at:g})"
+            try:
+                result = check_case(kb, case)
+            except slr_sql.SLRError as exc:
+                failed += 1
+                click.echo(f"ERROR {file}:{case.line}: ?- {case.goal}.{view}\n"
+                           f"      {error_words(exc)}")
+                continue
+            lines = answer_lines(result.answers)
+            if result.ok is False:
+                failed += 1
+                click.echo(f"FAIL  {file}:{case.line}: ?- {case.goal}.{view}")
+                click.echo(f"      expected {case.expect}")
+                for line in lines:
+                    click.echo(f"      got      {line}")
+            elif not quiet:
+                mark = "ok   " if result.ok else "     "
+                click.echo(f"{mark} ?- {case.goal}.{view}")
+                for line in lines:
+                    click.echo(f"        {line}")
+    compared = sum(1 for c in example.cases if c.expect is not None)
+    click.echo(f"{compared - failed} of {compared} expected answers matched"
+               + (f"; {len(rejected)} events rejected" if rejected else ""))
+    if failed or rejected:
         sys.exit(1)
 
 
@@ -466,6 +622,42 @@ def _print_answers(answers: list[dict[str, Any]]) -> None:
         click.echo(line)
 
 
+class AnswerPrinter:
+    """Prints answers as they come: Prolog's top-level lines, or one JSON object per
+    answer (the service's encoding, docs/service.md) for ``--json``; ``false.`` (text only)
+    when there was none."""
+
+    def __init__(self, as_json: bool):
+        self.as_json = as_json
+        self.count = 0
+
+    def __call__(self, answer: dict[str, Any]) -> None:
+        self.count += 1
+        if self.as_json:
+            from .service.encoding import dumps, encode_answers
+
+            line = dumps(encode_answers([answer])[0]).decode("utf-8")
+        else:
+            line = answer_text(answer) if answer else "true."
+        click.echo(line)
+
+    def finish(self) -> None:
+        if not self.count and not self.as_json:
+            click.echo("false.")
+
+
+def _warn_about(kb: Any, goal: str) -> None:
+    """The library's warnings about a goal (a predicate nobody defined: a typo?) on stderr."""
+    if not hasattr(kb, "goal_warnings"):
+        return
+    try:
+        warnings = kb.goal_warnings(goal)
+    except slr_sql.SLRError:   # the query itself reports a bad goal, once
+        return
+    for warning in warnings:
+        _err(f"warning: {warning}")
+
+
 @main.command()
 @click.argument("db", type=click.Path(dir_okay=False))
 @click.argument("goal")
@@ -474,21 +666,34 @@ def _print_answers(answers: list[dict[str, Any]]) -> None:
 @click.option("--wait", is_flag=True,
               help="Synchronized: answer once the events the goal depends on are complete up to "
                    "--at (default: now).")
-@click.option("--timeout", type=float, default=None, help="Give up after S seconds.")
-def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | None) -> None:
+@click.option("--timeout", type=float, default=None,
+              help="Give up after S seconds (the answers found so far are printed first).")
+@click.option("--limit", type=click.IntRange(min=0), default=None, metavar="N",
+              help="Stop after N answers.")
+@click.option("--json", "as_json", is_flag=True,
+              help="One JSON object per answer (the service's encoding); no answer: no line.")
+@click.option("--robot", default=None,
+              help="Only this robot's events (every event goal, prev and next).")
+def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | None,
+          limit: int | None, as_json: bool, robot: str | None) -> None:
     """Ask GOAL and print one answer per line (`false.` when there is none)."""
     goal = strip_full_stop(goal)
     at = _finite("--at", at)
     timeout = _finite("--timeout", timeout, minimum=0.0)
+    printer = AnswerPrinter(as_json)
     with _open(db, create=False) as kb:
+        if wait and robot is not None:
+            raise slr_sql.SLRError("--robot cannot be combined with --wait yet: ask "
+                                   "origin(R, Goal) in the goal instead")
+        _warn_about(kb, goal)
         if wait:
             if not hasattr(kb, "submit"):
                 _err("error: synchronized queries are not available in this build")
                 sys.exit(2)
             import concurrent.futures
 
-            # Without --at the library synchronizes on "now" (the store clock).
-            # -- issue 5: other processes may add the events/marks it waits for
+            # Without --at the library synchronizes on "now" (the store clock); other
+            # processes may add the events and marks it waits for.
             if hasattr(kb, "_sync"):
                 kb._sync.watch_external()
             pending = kb.submit(goal, at=at, id=f"slr-query-{os.getpid()}", timeout=timeout)
@@ -502,10 +707,25 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
             if hasattr(pending, "explain"):  # what it waited for and how long, as comments
                 for line in pending.explain().splitlines():
                     _err(f"% {line}")
-            # -- end issue 5
-        else:
-            answers = kb.query(goal, at=at, timeout=timeout)
-    _print_answers(answers)
+            for answer in answers[:limit]:
+                printer(answer)
+        elif not hasattr(kb, "solutions"):   # a service URL: the server applies the limit
+            for answer in kb.query(goal, at=at, timeout=timeout, limit=limit,
+                                   **({"robot": robot} if robot is not None else {})):
+                printer(answer)
+        elif limit != 0:
+            try:
+                for answer in kb.solutions(goal, at=at, timeout=timeout,
+                                        **({"robot": robot} if robot is not None else {})):
+                    printer(answer)
+                    if printer.count == limit:
+                        break
+            except slr_sql.SLRTimeout as exc:
+                _err(f"error: {error_words(exc)}"
+                     + (f" ({printer.count} answer{'s' if printer.count != 1 else ''} "
+                        f"printed before it)" if printer.count else ""))
+                sys.exit(1)
+    printer.finish()
 
 
 @main.command()
@@ -515,6 +735,186 @@ def explain(db: str, goal: str) -> None:
     """Show how GOAL would run: compiled to SQL or interpreted, and why."""
     with _open(db, create=False) as kb:
         click.echo(kb.explain(strip_full_stop(goal)))
+
+
+# ---------------------------------------------------------------------------------------------
+# programs / unload / describe: what is in a store
+# ---------------------------------------------------------------------------------------------
+
+EPOCH_2001 = 978_307_200.0   # times past this are read as Unix time (a robot's clock)
+
+
+def time_text(t: float | None) -> str:
+    """A time as the command line prints it: the number, and for an epoch-second time
+    (after 2001) also the UTC date and time.
+
+    >>> time_text(12.5), time_text(1700000000.25)
+    ('12.5', '1700000000.25 (2023-11-14 22:13:20.250 UTC)')
+    """
+    if t is None:
+        return "-"
+    if not math.isfinite(t) or t < EPOCH_2001:
+        return f"{t:g}" if abs(t) < 1e15 else repr(t)
+    import datetime
+
+    moment = datetime.datetime.fromtimestamp(t, tz=datetime.UTC)
+    return f"{t:.2f} ({moment.strftime('%Y-%m-%d %H:%M:%S.%f')[:-3]} UTC)"
+
+
+def _program_infos(kb: Any) -> list[Any]:
+    infos = kb.programs()
+    return list(infos.values()) if isinstance(infos, dict) else list(infos)
+
+
+def _info_field(info: Any, name: str) -> Any:
+    return info.get(name) if isinstance(info, dict) else getattr(info, name, None)
+
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.option("--source", is_flag=True, help="Print each program's text too.")
+def programs(db: str, source: bool) -> None:
+    """List the named programs in DB: name, texts loaded, files, when."""
+    with _open(db, create=False) as kb:
+        infos = _program_infos(kb)
+    if not infos:
+        click.echo("no programs")
+    for info in infos:
+        files = ", ".join(dict.fromkeys(_info_field(info, "filenames") or ()))
+        texts = _info_field(info, "texts") or 0
+        click.echo(f"{_info_field(info, 'name')}: {texts} text{'s' if texts != 1 else ''}"
+                   f" from {files or '<string>'}, loaded {time_text(_info_field(info, 'loaded_at'))}")
+        if source:
+            for line in (_info_field(info, "source") or "").splitlines():
+                click.echo(f"    {line}")
+
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.argument("name")
+def unload(db: str, name: str) -> None:
+    """Remove the program NAME (its clauses, declarations and buffers; events stay)."""
+    with _open(db, create=False) as kb:
+        kb.unload(name)
+    click.echo(f"unloaded program {name!r}")
+
+
+@dataclass
+class TypeSummary:
+    """One event type of a store, as ``slr describe`` shows it."""
+
+    name: str
+    arity: int
+    table: str
+    count: int
+    first: float | None          # the earliest end time
+    last: float | None           # the latest end time
+    sample: str | None           # the first event in store order, as SLR text
+    rules: list[str]             # predicates (rules) that read or define it
+    buffers: list[str]           # buffers whose pattern is of this type
+    event_rules: list[str]       # event rules that match it or derive it
+
+
+def describe_types(kb: Any, wanted: Iterable[str] = ()) -> list[TypeSummary]:
+    """What ``slr describe`` prints: a :class:`TypeSummary` per event type of ``kb`` (or of
+    ``wanted``: ``seg`` or ``seg/2``), in name order.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(); kb.load("color(O,C)^T :- prev(obj(O,_,C)^Z, T).")
+    >>> kb.add_many(["obj(cup1, cup, red)^2", "obj(cup1, cup, blue)^5"])
+    []
+    >>> s = describe_types(kb)[0]; (s.name, s.arity, s.count, s.first, s.last, s.rules)
+    ('obj', 3, 2, 2.0, 5.0, ['color/2^'])
+    """
+    from .analysis import analyze
+    from .parser import parse_term
+    from .program import event_key, split_event_atom
+    from .terms import format_atom, format_term
+
+    store = kb.store
+    types = dict(store.event_types())
+    for key in store.declared_types():
+        types.setdefault(key, store.table_for(*key) or "-")
+    chosen = []
+    for spec in wanted:
+        name, _, arity = spec.partition("/")
+        found = [k for k in types if k[0] == name and (not arity or str(k[1]) == arity)]
+        if not found:
+            raise slr_sql.SLRError(f"no event type {spec} in the store (known: "
+                                   f"{', '.join(sorted(f'{n}/{a}' for n, a in types)) or 'none'})")
+        chosen += found
+    keys = sorted(set(chosen) if chosen else types)
+    analysis = analyze(kb.engine.program)
+    readers: dict[tuple[str, int], list[str]] = {}
+    for node, stored in analysis.stored.items():
+        for key in stored:
+            if node.kind == "event" and (node.name, node.arity) == key:
+                continue
+            mark = "^" if node.kind == "event" else ""   # color/2^: the rules of color(..)^T
+            readers.setdefault(key, []).append(f"{format_atom(node.name)}/{node.arity}{mark}")
+    buffers: dict[tuple[str, int], list[str]] = {}
+    for info in kb.buffers():
+        try:
+            pattern = parse_term(info.pattern, "<buffer>")[0]
+            key = event_key(split_event_atom(pattern)[0] if split_event_atom(pattern)
+                            else pattern)
+        except (slr_sql.SLRError, TypeError, ValueError, AttributeError):
+            continue
+        buffers.setdefault(key, []).append(f"{info.kind}({info.pattern}, {info.amount:g})")
+    event_rules = kb.event_rules() if hasattr(kb, "event_rules") else []
+    out = []
+    for name, arity in keys:
+        rules = sorted(set(readers.get((name, arity), [])))
+        if (name, arity) in kb.engine.program.temporal:
+            rules.insert(0, f"{format_atom(name)}/{arity}^ (defines it)")
+        rows = iter(store.scan(name, arity)) if store.table_for(name, arity) else iter(())
+        first_row = next(rows, None)
+        sample = None
+        if first_row is not None:
+            args, start, end = first_row[0], first_row[1], first_row[2]
+            atom = format_term(slr_sql.Struct(name, tuple(args))) if args else format_atom(name)
+            sample = f"{atom}^{end!r}" if start == end else f"{atom}^[{start!r},{end!r}]"
+        derived = [r["rule"] for r in event_rules if r.get("head") == f"{name}/{arity}"]
+        matching = [r["rule"] for r in event_rules
+                    if re.search(rf"(?<![\w']){re.escape(name)}\(", str(r.get("pattern", "")))]
+        out.append(TypeSummary(
+            name, arity, types.get((name, arity)) or "-", store.count(name, arity)
+            if store.table_for(name, arity) else 0,
+            first_row[2] if first_row is not None else None,
+            store.max_end(name, arity) if first_row is not None else None,
+            sample, rules, buffers.get((name, arity), []),
+            list(dict.fromkeys(derived + matching))))
+    return out
+
+
+@main.command()
+@click.argument("db", type=click.Path(dir_okay=False))
+@click.argument("types", nargs=-1, metavar="[TYPE]...")
+@click.option("--all", "show_all", is_flag=True,
+              help="Include the store's internal types (slr_import/3, ...).")
+def describe(db: str, types: tuple[str, ...], show_all: bool) -> None:
+    """Each event type: arity, count, first/last time, a sample, the rules and buffers on it."""
+    if _is_url(db):
+        raise slr_sql.SLRError("describe needs the store itself, not a service URL")
+    with _open(db, create=False) as kb:
+        summaries = describe_types(kb, types)
+    if not types and not show_all:
+        summaries = [s for s in summaries if not s.name.startswith("slr_")]
+    if not summaries:
+        click.echo("no event types")
+    for s in summaries:
+        click.echo(f"{s.name}/{s.arity}  (table {s.table})")
+        click.echo(f"  events:      {s.count}")
+        if s.count:
+            click.echo(f"  end times:   {time_text(s.first)} .. {time_text(s.last)}")
+        if s.sample:
+            click.echo(f"  sample:      {s.sample}")
+        for label, items in (("rules:", s.rules), ("buffers:", s.buffers),
+                             ("event rules:", s.event_rules)):
+            if items:
+                click.echo(f"  {label:<12} {items[0]}")
+                for item in items[1:]:
+                    click.echo(f"  {'':<12} {item}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -538,32 +938,68 @@ def run_sql(db: str, statement: str, write: bool = False) -> tuple[list[str], li
         try:
             columns, rows = kb.sql(statement, write=write)
         except slr_sql.SLRError as exc:
-            if str(exc).startswith("read-only"):
-                raise slr_sql.SLRError(f"read-only: the statement would change the store; "
-                                       f"slr sql --write allows it ({exc})") from None
+            message = str(exc)
+            if message.startswith("read-only"):
+                # The library's message speaks to Python callers (write=True); say it the
+                # command line's way, once.
+                message = re.sub(r"[;,]? *(pass|use|with) `?write=True`?[^;()]*", "", message)
+                raise slr_sql.SLRError(f"{message.rstrip('. ')}; `slr sql --write` allows it") \
+                    from None
             raise
         return list(columns), [tuple(r) for r in rows]
+
+
+SQL_FORMATS = ("table", "csv", "tsv", "json", "nl")
+
+
+def write_rows(columns: list[str], rows: Iterable[tuple], fmt: str, out: Any = None) -> None:
+    """Rows in one of :data:`SQL_FORMATS`, as ``sqlite-utils query`` writes them: ``json`` a
+    JSON array of row objects (one row a line), ``nl`` one JSON object a line, ``csv`` and
+    ``tsv`` with a header line, ``table`` a box table for reading.
+
+    >>> write_rows(["n", "name"], [(1, "cup1"), (2, None)], "nl")
+    {"n": 1, "name": "cup1"}
+    {"n": 2, "name": null}
+    """
+    import csv
+
+    out = out or sys.stdout
+    if fmt in ("json", "nl"):
+        from sqlite_utils.cli import output_rows  # sqlite-utils' own JSON writer
+
+        for line in output_rows(rows, columns, nl=fmt == "nl", arrays=False, json_cols=False):
+            out.write(line + "\n")
+    elif fmt in ("csv", "tsv"):
+        writer = csv.writer(out, dialect="excel-tab" if fmt == "tsv" else "excel",
+                            lineterminator="\n")
+        writer.writerow(columns)
+        writer.writerows(rows)
+    else:
+        from rich.console import Console
+        from rich.table import Table
+
+        table = Table(*columns, show_lines=False)
+        for row in rows:
+            table.add_row(*("NULL" if v is None else str(v) for v in row))
+        # Into a pipe the table is not cut to the terminal's width.
+        Console(file=out, highlight=False, width=None if out.isatty() else 500).print(table)
 
 
 @main.command()
 @click.argument("db", type=click.Path(dir_okay=False))
 @click.argument("statement")
-@click.option("--json", "as_json", is_flag=True, help="Print a JSON list of row objects.")
+@click.option("--table", "fmt", flag_value="table",
+              help="A box table (the default on a terminal).")
+@click.option("--csv", "fmt", flag_value="csv", help="CSV with a header line.")
+@click.option("--tsv", "fmt", flag_value="tsv",
+              help="Tab-separated with a header line (the default into a pipe or file).")
+@click.option("--json", "fmt", flag_value="json", help="A JSON array of row objects.")
+@click.option("--nl", "fmt", flag_value="nl", help="One JSON object per row (JSON lines).")
 @click.option("--write", is_flag=True, help="Allow the statement to change the store.")
-def sql(db: str, statement: str, as_json: bool, write: bool) -> None:
+def sql(db: str, statement: str, fmt: str | None, write: bool) -> None:
     """Run a SQL STATEMENT on the store, e.g. "SELECT * FROM seg" (read-only unless --write)."""
     columns, rows = run_sql(db, statement, write=write)
-    if as_json:
-        click.echo(json.dumps([dict(zip(columns, row)) for row in rows], indent=None))
-        return
-    from rich.console import Console
-    from rich.table import Table
-
-    table = Table(*columns, show_lines=False)
-    for row in rows:
-        table.add_row(*("NULL" if v is None else str(v) for v in row))
-    # Piped output is not cut to 80 columns: the table is for reading, and --json for programs.
-    Console(highlight=False, width=None if sys.stdout.isatty() else 500).print(table)
+    write_rows(columns, rows, fmt or ("table" if sys.stdout.isatty() else "tsv"))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -571,33 +1007,105 @@ def sql(db: str, statement: str, as_json: bool, write: bool) -> None:
 # ---------------------------------------------------------------------------------------------
 
 SHELL_HELP = """\
-  GOAL.              ask a goal (may span lines; ends with a full stop)
-  :- DIRECTIVE.      load program text; so does any clause written with :-
-  load FILE          load a program file
+  GOAL.              ask a goal (may span lines; ends with a full stop). After an answer:
+                     ; (or n, space) the next one, Enter (or .) stop, w the answer in full
+  :- DIRECTIVE.      a directive (e.g. :- event seen/1.), kept in the program 'user'
+  [user].            type clauses into the program 'user'; end_of_file. or Ctrl-D ends
+  assert(CLAUSE).    add a clause to the program 'user' (assertz; asserta puts it first)
+  retract(CLAUSE).   remove the first clause of 'user' that unifies with CLAUSE
+  listing.           the program 'user'; listing(NAME) or listing(NAME/N): its clauses
+                     in every program
+  programs.          the named programs of the store
+  load FILE          load a program file (into 'main')
   add EVENT          add one event, e.g. add obj(cup1, cup, red)^2.0
   at Z | at none     set / clear the stream view for the following goals
   explain GOAL.      show the plan of a goal
-  help               this text;  Ctrl-D or `halt.` leaves"""
+  help               this text;  Ctrl-C stops a goal;  Ctrl-D or `halt.` leaves"""
+
+SHELL_PROGRAM = "user"      # where the shell's clauses go (SWI-Prolog's module user)
+MAX_LIST_ITEMS = 10         # longer lists print as [a,b,...|...] unless `w` is pressed
+MAX_STRING_CHARS = 200
+
+
+def abbreviated(value: Any) -> Any:
+    """``value`` with long lists and strings cut, as SWI-Prolog's top level prints answers
+    (``[1,2,3,4,5,6,7,8,9|...]``).
+
+    >>> value_text(abbreviated(list(range(1, 20))))
+    '[1,2,3,4,5,6,7,8,9|...]'
+    """
+    if isinstance(value, list):
+        items = [abbreviated(v) for v in value[:MAX_LIST_ITEMS]]
+        if len(value) < MAX_LIST_ITEMS:
+            return items
+        tail: Any = Atom("...")
+        for item in reversed(items[:MAX_LIST_ITEMS - 1]):
+            tail = Struct(".", (item, tail))
+        return tail
+    if isinstance(value, Struct):
+        return Struct(value.name, tuple(abbreviated(a) for a in value.args))
+    if isinstance(value, str) and not isinstance(value, Atom) and len(value) > MAX_STRING_CHARS:
+        return value[:MAX_STRING_CHARS] + "..."
+    return value
+
+
+class ShellState:
+    """What the next input line is: a new goal or command, the rest of an unfinished goal
+    or clause, or a clause typed after ``[user].``."""
+
+    READY = "ready"
+    CONTINUING = "continuing"
+    CONSULTING = "consulting"
 
 
 class Shell:
-    """The interactive loop, independent of where lines come from (prompt or plain stdin)."""
+    """The interactive loop, independent of where lines come from (prompt or plain stdin).
 
-    def __init__(self, kb: Any, echo: Any = click.echo, echo_err: Any = _err):
+    ``ask`` reads the key a person presses after an answer (None: every answer is printed,
+    one per line, for piped input)."""
+
+    def __init__(self, kb: Any, echo: Any = click.echo, echo_err: Any = _err,
+                 ask: Any = None):
         self.kb = kb
         self.echo = echo
         self.echo_err = echo_err
+        self.ask = ask
         self.at: float | None = None
         self.pending: list[str] = []
+        self.consulted: list[str] = []
+        self.state = ShellState.READY
 
     @property
     def continuing(self) -> bool:
-        return bool(self.pending)
+        return self.state != ShellState.READY
+
+    @property
+    def prompt(self) -> str:
+        return {ShellState.READY: "?- ", ShellState.CONTINUING: "   | ",
+                ShellState.CONSULTING: "|: "}[self.state]
+
+    def interrupt(self) -> None:
+        """Ctrl-C at the prompt: drop the unfinished goal (a consult keeps what it has)."""
+        self.pending = []
+        if self.state == ShellState.CONTINUING:
+            self.state = ShellState.READY
+
+    def end_of_input(self) -> bool:
+        """Ctrl-D: ends a consult (True: stay), else leaves the shell (False)."""
+        if self.state == ShellState.CONSULTING:
+            self._guarded(self._end_consult)
+            return True
+        return False
 
     def feed(self, line: str) -> bool:
         """Handle one input line; returns False when the user asked to leave."""
         stripped = line.strip()
-        if not self.pending:
+        if self.state == ShellState.CONSULTING:
+            if stripped in ("end_of_file.", "end_of_file"):
+                return self._guarded(self._end_consult)
+            self.consulted.append(line.rstrip("\n"))
+            return True
+        if self.state == ShellState.READY:
             if not stripped or stripped.startswith("%"):
                 return True
             word, _, rest = stripped.partition(" ")
@@ -615,8 +1123,10 @@ class Shell:
         self.pending.append(line.rstrip("\n"))
         text = "\n".join(self.pending).strip()
         if not text.endswith(".") or text.endswith(".."):
-            return True  # a clause or goal spanning several lines
+            self.state = ShellState.CONTINUING  # a goal spanning several lines
+            return True
         self.pending = []
+        self.state = ShellState.READY
         return self._guarded(lambda: self._run(text))
 
     def _guarded(self, action: Any) -> bool:
@@ -644,21 +1154,192 @@ class Shell:
         self.at = None if value in ("none", "off") else float(value)
         self.echo(f"stream view: {'every stored event' if self.at is None else f'at {self.at:g}'}")
 
+    # -- the program 'user' ----------------------------------------------------------------
+    def _user_clauses(self) -> list[Any]:
+        from .parser import parse_program
+
+        infos = {(_info_field(i, "name")): i for i in _program_infos(self.kb)}
+        info = infos.get(SHELL_PROGRAM)
+        return parse_program(_info_field(info, "source"), SHELL_PROGRAM) if info else []
+
+    def _set_user_program(self, texts: list[str]) -> None:
+        if texts:
+            self.kb.load("\n".join(texts), name=SHELL_PROGRAM, replace=True)
+        elif SHELL_PROGRAM in {_info_field(i, "name") for i in _program_infos(self.kb)}:
+            self.kb.unload(SHELL_PROGRAM)
+
+    def _end_consult(self) -> None:
+        text, self.consulted = "\n".join(self.consulted), []
+        self.state = ShellState.READY
+        if text.strip():
+            self.kb.load(text, filename="user", name=SHELL_PROGRAM)
+        self.echo(f"% consulted into the program '{SHELL_PROGRAM}'")
+
+    def _assert(self, clause_text: str, first: bool) -> None:
+        from .parser import parse_program
+
+        # A full stop after a symbol character would join it (`:-.` is one atom).
+        clause_text += " ." if clause_text[-1:] in set("+-*/\\^<>=~:.?@#&$") else "."
+        parse_program(clause_text, "<assert>")   # a bad clause changes nothing
+        if first:
+            self._set_user_program([clause_text] + [c.text for c in self._user_clauses()])
+        else:
+            self.kb.load(clause_text, filename="<assert>", name=SHELL_PROGRAM)
+        self.echo("true.")
+
+    def _retract(self, pattern: Any) -> None:
+        from .unify import undo, unify
+
+        clauses = self._user_clauses()
+        for i, clause in enumerate(clauses):
+            if clause.head is None:
+                continue
+            term = (clause.head if clause.body == Atom("true") and not _is_clause(pattern)
+                    else Struct(":-", (clause.head, clause.body)))
+            trail: list = []
+            if unify(pattern, term, trail):
+                undo(trail, 0)
+                self._set_user_program([c.text for j, c in enumerate(clauses) if j != i])
+                self.echo("true.")
+                return
+            undo(trail, 0)
+        self.echo("false.")
+
+    def _listing(self, spec: Any) -> None:
+        from .parser import parse_program
+
+        if spec is None:
+            clauses = self._user_clauses()
+            if not clauses:
+                self.echo(f"% the program '{SHELL_PROGRAM}' is empty")
+            for clause in clauses:
+                self.echo(clause.text)
+            return
+        if isinstance(spec, Struct) and spec.name == "/" and len(spec.args) == 2:
+            name, arity = str(spec.args[0]), spec.args[1]
+        else:
+            name, arity = str(spec), None
+        shown = 0
+        for info in _program_infos(self.kb):
+            for clause in parse_program(_info_field(info, "source"), _info_field(info, "name")):
+                head = clause.head
+                if isinstance(head, Struct) and head.name == "^" and len(head.args) == 2:
+                    head = head.args[0]
+                head_name = head.name if isinstance(head, Struct) else head
+                head_arity = len(head.args) if isinstance(head, Struct) else 0
+                if head is not None and str(head_name) == name and arity in (None, head_arity):
+                    self.echo(f"{clause.text}   % {_info_field(info, 'name')}")
+                    shown += 1
+        if not shown:
+            self.echo(f"% no clauses of {name}{'' if arity is None else f'/{arity}'}")
+
+    def _programs(self) -> None:
+        for info in _program_infos(self.kb):
+            texts = _info_field(info, "texts") or 0
+            self.echo(f"{_info_field(info, 'name')}: {texts} text{'s' if texts != 1 else ''}")
+
+    def _command(self, text: str) -> bool:
+        """A shell command written as a goal (assert, retract, listing, programs); False
+        when ``text`` is an ordinary goal."""
+        from .parser import parse_term
+
+        match = re.fullmatch(r"(assertz?|asserta|retract)\s*\((.*)\)", strip_full_stop(text),
+                             re.DOTALL)
+        if match:
+            parse_term(strip_full_stop(text), "<shell>")   # a syntax error points into the line
+            inner = match.group(2).strip()
+            if match.group(1) == "retract":
+                self._retract(parse_term(inner, "<retract>")[0])
+            else:
+                if inner.startswith("(") and inner.endswith(")"):
+                    inner = inner[1:-1].strip()
+                self._assert(inner, first=match.group(1) == "asserta")
+            return True
+        goal = strip_full_stop(text)
+        if goal in ("listing", "programs"):
+            self._listing(None) if goal == "listing" else self._programs()
+            return True
+        if goal.startswith("listing(") and goal.endswith(")"):
+            self._listing(parse_term(goal[len("listing("):-1], "<listing>")[0])
+            return True
+        if goal in ("[user]", "consult(user)"):
+            self.state = ShellState.CONSULTING
+            self.echo("% type clauses; end_of_file. or Ctrl-D ends")
+            return True
+        return False
+
     def _run(self, text: str) -> None:
         if text.startswith("explain "):
             self.echo(self.kb.explain(strip_full_stop(text[len("explain "):])))
             return
-        if text.startswith(":-") or ":-" in text:
-            self.kb.load(text)
-            self.echo("ok.")
+        if text.startswith(":-"):
+            self.kb.load(text, filename="<shell>", name=SHELL_PROGRAM)
+            self.echo("true.")
             return
-        answers = self.kb.query(strip_full_stop(text), at=self.at)
-        for line in answer_lines(answers):
-            self.echo(line)
+        if self._command(text):
+            return
+        goal = strip_full_stop(text)
+        from .parser import parse_term
+
+        if _is_clause(parse_term(goal, "<shell>")[0]):
+            raise slr_sql.SLRError("a clause typed at ?- is a goal, and (:-)/2 is no "
+                                   "predicate: add it with assert((Head :- Body)). or [user].")
+        for warning in (self.kb.goal_warnings(goal) if hasattr(self.kb, "goal_warnings") else []):
+            self.echo_err(f"warning: {warning}")
+        if self.ask is None or not hasattr(self.kb, "solutions"):
+            answers = self.kb.query(goal, at=self.at)
+            for line in answer_lines(answers):
+                self.echo(line)
+            return
+        self._one_at_a_time(self.kb.solutions(goal, at=self.at))
+
+    def _one_at_a_time(self, answers: Iterator[dict[str, Any]]) -> None:
+        """SWI-Prolog's way: an answer, then the key pressed decides: the next or stop."""
+        try:
+            for answer in answers:
+                shown = {k: abbreviated(v) for k, v in answer.items()}
+                self.echo(answer_text(shown) if answer else "true", nl=False)
+                while True:
+                    key = self.ask()
+                    if key == "w":
+                        self.echo("\n" + answer_text(answer), nl=False)
+                        continue
+                    break
+                if key in (";", "n", "r", " ", "\t"):
+                    self.echo(" ;")
+                    continue
+                self.echo(" .")
+                return
+            self.echo("false.")
+        finally:
+            close = getattr(answers, "close", None)
+            if close is not None:
+                close()
+
+
+def _is_clause(term: Any) -> bool:
+    return isinstance(term, Struct) and term.name == ":-" and len(term.args) == 2
 
 
 def _history_path() -> str:
     return os.environ.get("SLR_HISTORY") or os.path.join(os.path.expanduser("~"), ".slr_history")
+
+
+def _completion_words(kb: Any) -> list[str]:
+    """Predicate and event-type names for tab completion: the program's, the store's event
+    types, the shell's commands and the builtins."""
+    words = {"assert", "asserta", "assertz", "retract", "listing", "programs", "explain",
+             "load", "add", "help", "halt", "prev", "next"}
+    program = getattr(getattr(kb, "engine", None), "program", None)
+    if program is not None:
+        words |= {name for name, _ in list(program.preds) + list(program.temporal)
+                  if not name.startswith("$")}
+    store = getattr(kb, "store", None)
+    if store is not None:
+        words |= {name for name, _ in store.event_types()}
+    from .builtins import BUILTIN_NAMES
+    words |= {name for name, _ in BUILTIN_NAMES}
+    return sorted(w for w in words if re.fullmatch(r"[a-z][A-Za-z0-9_]*", w))
 
 
 @main.command()
@@ -666,34 +1347,66 @@ def _history_path() -> str:
 def shell(db: str) -> None:
     """Interactive goals and program text on DB (history in ~/.slr_history or $SLR_HISTORY)."""
     with _open(db, create=False) as kb:
-        session = Shell(kb)
         if not sys.stdin.isatty():
+            session = Shell(kb)
             # Piped input (scripts, tests): plain lines, no prompt, no history file.
             for line in sys.stdin:
                 if not session.feed(line):
                     break
-            if session.pending:
+            if session.state == ShellState.CONSULTING:
+                session.end_of_input()
+            elif session.pending:
                 _err("error: input ended inside an unfinished clause (missing full stop)")
             return
         from prompt_toolkit import PromptSession
+        from prompt_toolkit.completion import Completer, Completion
+        from prompt_toolkit.document import Document
         from prompt_toolkit.history import FileHistory
 
-        prompt = PromptSession(history=FileHistory(_history_path()))
-        click.echo(f"slr shell on {db} — `help` for commands, Ctrl-D to leave")
+        class PredicateCompleter(Completer):
+            """Completes the word before the cursor with the names known at that moment."""
+
+            def get_completions(self, document: Document, complete_event: Any) -> Any:
+                word = document.get_word_before_cursor(pattern=re.compile(r"[a-z][A-Za-z0-9_]*"))
+                if not word:
+                    return
+                for name in _completion_words(kb):
+                    if name.startswith(word) and name != word:
+                        yield Completion(name, start_position=-len(word))
+
+        session = Shell(kb, ask=click.getchar)
+        prompt = PromptSession(history=FileHistory(_history_path()),
+                               completer=PredicateCompleter(), complete_while_typing=False)
+        click.echo(f"slr shell on {db} — `help` for commands, Ctrl-C stops a goal, "
+                   f"Ctrl-D leaves")
         while True:
             try:
-                line = prompt.prompt("   | " if session.continuing else "?- ")
-            except KeyboardInterrupt:
-                session.pending = []
+                # Ctrl-C at the prompt is a key (the terminal is raw); no signal handler of
+                # prompt_toolkit's may outlive the prompt and swallow the Ctrl-C of a goal.
+                line = prompt.prompt(session.prompt, handle_sigint=False)
+            except KeyboardInterrupt:   # at the prompt: drop the line
+                session.interrupt()
                 continue
             except EOFError:
+                if session.end_of_input():
+                    continue
                 break
-            if not session.feed(line):
-                break
+            try:
+                if not session.feed(line):
+                    break
+            except KeyboardInterrupt:   # during a goal: stop it, keep the shell
+                session.interrupt()
+                click.echo("\n% interrupted")
 
 
 from .ros.cli import ros as _ros  # noqa: E402 - issue 13: `slr ros` (its extra is imported on use)
 main.add_command(_ros)
+from .viz.cli import export_command as _export, foxglove_command as _foxglove  # noqa: E402
+main.add_command(_foxglove)
+main.add_command(_export)
+
+from .fleet import _click_group as _fleet_group  # noqa: E402 - `slr fleet push|status`
+main.add_command(_fleet_group())
 
 
 # ---------------------------------------------------------------------------------------------
@@ -724,7 +1437,7 @@ def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None
     """
     from .plot import parse_size, save_timeline, timeline
 
-    if not os.path.exists(db):
+    if _missing(db):
         raise slr_sql.SLRError(f"no such store: {db}")
     dimensions = parse_size(size) if size is not None else None
     with _open(db) as kb:
@@ -763,7 +1476,7 @@ def subscribe(db: str, pattern: str, where: str | None, since: str, until: float
 
     from .subscriptions import answer_json
 
-    if not os.path.exists(db):
+    if _missing(db):
         raise slr_sql.SLRError(f"no such store: {db}")
     since_value: Any = since.strip()
     if since_value != "now":
@@ -811,7 +1524,7 @@ def stats(db: str) -> None:
         with _open(db) as kb:
             click.echo(kb.stats()["text"])
         return
-    if not os.path.lexists(db):
+    if _missing(db):
         raise slr_sql.SLRError(f"no such store: {db}")
     with EventStore(db) as store:
         click.echo(format_stats(store, db))

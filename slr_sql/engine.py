@@ -73,6 +73,7 @@ class Engine:
         # the SQL compiler answers (slr_sql.planner.CompiledCall); use_sql switches them off
         self.sql_calls: dict = {}
         self.use_sql = True
+        self.frames: Any = None  # tf_lookup's frame tree (slr_sql.frames), made on first use
 
     def machine(self, at: float | None = None, timeout: float | None = None,
                 max_steps: int | None = None) -> "Machine":
@@ -104,7 +105,12 @@ class Machine:
         # hooks for synchronized queries: called before prev/next read the store
         self.on_prev: Callable | None = None
         self.on_next: Callable | None = None
+        # (name, n, t, args): the answer depends on an event matching args, starting at or
+        # after t, that has not arrived (tf_lookup beyond an edge's last observation)
+        self.on_arrival: Callable | None = None
         self.sql_calls: dict | None = None   # set by solve(): compiled sub-goals, if allowed
+        # the robot whose events every event goal, prev and next reads (None: everyone's)
+        self.robot: str | None = None
 
     # -- helpers used by builtins -------------------------------------------------------
     def unify(self, a: Any, b: Any) -> bool:
@@ -141,7 +147,8 @@ class Machine:
         # a synchronized run (its prev/next hooks must see every lookup)
         sql_calls = engine.sql_calls if (engine.use_sql and self.max_steps is None
                                          and self.on_prev is None
-                                         and self.on_next is None) else None
+                                         and self.on_next is None
+                                         and self.robot is None) else None
         self.sql_calls = sql_calls
         while True:
             try:
@@ -519,7 +526,8 @@ class Machine:
         if events is None:
             return False
         bound = bound_args(args)
-        rows = events.scan(name, n, bound, end_le=self.at)
+        rows = events.scan(name, n, bound, end_le=self.at, robot=self.robot) \
+            if self.robot is not None else events.scan(name, n, bound, end_le=self.at)
         return self._push_gen(_match_rows(self, args, s, e, rows), nxt)
 
     def event_source(self):

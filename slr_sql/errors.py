@@ -3,8 +3,8 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRBusy",
-           "EventRejected"]
+__all__ = ["SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRUnavailable",
+           "SLRBusy", "SLRStoreFull", "SLRStoreGone", "EventRejected"]
 
 
 class SLRError(Exception):
@@ -51,11 +51,26 @@ class SLREvaluationError(SLRError):
         super().__init__(message or f"{term}")
 
 
-class SLRTimeout(SLRError):
-    """A query ran out of its ``timeout=`` (seconds) or step limit."""
+class SLRTimeout(SLRError, TimeoutError):
+    """A query ran out of its ``timeout=`` (seconds) or step limit, or a wait for a
+    synchronized query's answer (``PendingQuery.result(timeout=)``) ran out. It is also a
+    ``TimeoutError`` (so ``concurrent.futures.TimeoutError``), what a Future's ``result``
+    raises."""
 
 
-class SLRBusy(SLRError):
+class SLRUnavailable(SLRError):
+    """A condition that may pass: nothing of the failed call was written, and the same call
+    may succeed later (the service answers it with 503 and ``Retry-After``).
+    ``retry_after`` is a suggested wait in seconds.
+
+    >>> issubclass(SLRBusy, SLRUnavailable), issubclass(SLRStoreFull, SLRUnavailable)
+    (True, True)
+    """
+
+    retry_after = 1
+
+
+class SLRBusy(SLRUnavailable):
     """The store file stayed locked by another connection (another process, or another
     knowledge base on the same file) for longer than the ``busy_timeout`` given to
     :func:`slr_sql.open`; the message names the file. Nothing of the failed call was
@@ -64,6 +79,31 @@ class SLRBusy(SLRError):
     >>> issubclass(SLRBusy, SLRError)
     True
     """
+
+
+class SLRStoreFull(SLRUnavailable):
+    """The store could not grow: the disk (or file system quota) is full, or SQLite's size
+    limit of the file was reached. Nothing of the failed call was written; the message
+    names the file. Retry once space is freed.
+
+    >>> issubclass(SLRStoreFull, SLRError)
+    True
+    """
+
+    retry_after = 10
+
+
+class SLRStoreGone(SLRUnavailable):
+    """The store's file was deleted, moved or replaced by another file while it was open:
+    what this knowledge base would write could never be read by anyone opening the path.
+    Raised before a write is acknowledged (nothing of the failed call counts as stored);
+    the message names the path. Restore the file, or close and reopen to start a new store.
+
+    >>> issubclass(SLRStoreGone, SLRError)
+    True
+    """
+
+    retry_after = 10
 
 
 class EventRejected(SLRError):

@@ -12,25 +12,28 @@ from __future__ import annotations
 
 import functools
 import math
+import re
 import threading
 import time
 from dataclasses import dataclass, field
 from operator import itemgetter
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Iterator
 
 from .answers import answer_bindings
-from .clocks import Clock, WallClock, parse_duration
+from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
+from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .encoding import Unencodable, decode_answer, encode
-from .engine import Engine, Machine
+from .engine import Engine
 from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
-from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore
-from .store.checks import event_arguments, shorten
+from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore, \
+    store_error, check_robot_name
+from .store.checks import event_arguments, shorten, shown, text_problem
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
-from .terms import format_term
+from .terms import format_atom, format_term
 
 __all__ = ["KnowledgeBase", "open", "Declarations", "ProgramInfo", "parse_duration"]
 
@@ -114,20 +117,12 @@ def _where(clause: Clause | None) -> str:
     return f"{clause.span.filename}:{clause.span.line}: "
 
 
-@dataclass(frozen=True)
-class ProgramInfo:
-    """One named program, as :meth:`KnowledgeBase.programs` describes it."""
-
-    name: str
-    source: str             # its texts, in load order, joined by newlines
-    texts: int              # how many texts were loaded under the name
-    filenames: tuple        # the file (or "<string>") of each text
-    loaded_at: float | None  # store clock time of its latest text
-
-
 def _program_name(name: Any) -> str:
     if not isinstance(name, str) or not name:
-        raise SLRError(f"a program name is a non-empty string, not {name!r}")
+        raise SLRError(f"a program name is a non-empty string, not {shown(name)}")
+    problem = text_problem(name)
+    if problem:
+        raise SLRError(f"the program name {shown(name)} cannot be stored: {problem}")
     return name
 
 
@@ -385,11 +380,17 @@ class KnowledgeBase:
     def __init__(self, path: str | Path | None = None, clock: Clock | None = None, *,
                  synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
                  adopt: bool = False, checkpoint: str = "auto",
-                 cache_mib: float = CACHE_SIZE_KIB / 1024):
+                 cache_mib: float = CACHE_SIZE_KIB / 1024, robot: str | None = None,
+                 max_learned_delay: float | None = DEFAULT_MAX_LEARNED_DELAY):
+        if max_learned_delay is not None:
+            _check_time_option("max_learned_delay", max_learned_delay, minimum=0.0)
+            max_learned_delay = float(max_learned_delay)
+        # the largest delay a type may learn (clocks.DEFAULT_MAX_LEARNED_DELAY; None: no cap)
+        self.max_learned_delay = max_learned_delay
         self.clock = clock if clock is not None else WallClock()
         self.store = EventStore(path, self.clock, synchronous=synchronous,
                                 busy_timeout=busy_timeout, adopt=adopt, checkpoint=checkpoint,
-                                cache_mib=cache_mib)
+                                cache_mib=cache_mib, robot=robot)
         self.path = self.store.path
         self.program = Program()
         self.declarations = Declarations()
@@ -709,7 +710,7 @@ class KnowledgeBase:
             program, decls = self._build(self._parse_texts(texts))
             self._install(program, decls, lambda: self.store.delete_program(name))
 
-    def programs(self) -> dict[str, "ProgramInfo"]:
+    def programs(self) -> dict[str, ProgramInfo]:
         """The named programs stored in the file, in load order of their first text.
 
         >>> kb = open(); kb.load("p(1).", name="tea"); kb.programs()["tea"].source
@@ -794,7 +795,15 @@ class KnowledgeBase:
         >>> kb = open(); kb.add("seg(cup1, [0.4,0.1,0.9])^12.31"); len(kb.query("seg(O,L)^T"))
         1
         """
-        self._add([self._event_from_text(text)], atomic=True)
+        if not isinstance(text, str):
+            raise SLRError(f"add takes one event written in SLR syntax (a str), not a "
+                           f"{type(text).__name__}; add_event(name, args, start, end) and "
+                           f"add_many([...]) take tuples")
+        try:
+            event = self._event_from_text(text)
+        except (ValueError, OverflowError) as exc:  # a number too long for Python to read
+            raise EventRejected(f"{shorten(text)}: {_python_words(exc)}") from None
+        self._add([event], atomic=True)
 
     def add_event(self, name: str, args: Iterable[Any], start: float, end: float | None = None) -> None:
         """Add one event from Python values (``str`` is an atom, ``String`` a string).
@@ -855,15 +864,15 @@ class KnowledgeBase:
                         name, args, start, end = ev
                     except (TypeError, ValueError):
                         raise EventRejected(f"event #{i} is neither SLR text nor a (name, args, "
-                                            f"start, end) tuple: {shorten(repr(ev))}") from None
+                                            f"start, end) tuple: {shown(ev)}") from None
                     event = (name, event_arguments(name, args, start, end), start, end)
             except (SLRError, TypeError, ValueError, OverflowError, RecursionError) as exc:
                 if atomic:
                     raise exc if isinstance(exc, SLRError) else EventRejected(str(exc))
                 reason = "the term is nested too deeply" if isinstance(exc, RecursionError) \
-                    else str(exc).split("; use sys.")[0]  # (a Python hint, not for users)
+                    else _python_words(exc)
                 err = exc if isinstance(exc, EventRejected) else \
-                    EventRejected(f"{shorten(repr(ev))}: {reason}")
+                    EventRejected(f"{shown(ev)}: {reason}")
                 err.index = i
                 err.event = ev
                 errors.append(err)
@@ -952,7 +961,7 @@ class KnowledgeBase:
             for name, value in args.items():
                 slot = plan.bind_slots.get(name)
                 if slot is not None:
-                    frame[slot] = value if terms else from_python(value)
+                    frame[slot] = value if terms else _argument_term(name, value)
         goals = [build(g, frame) for g in plan.compiled.body]
         if not goals:
             goal: Any = Atom("true")
@@ -965,19 +974,18 @@ class KnowledgeBase:
                 frame[slot] = Var(name)
         return goal, frame
 
-    def machine(self, at: float | None = None, timeout: float | None = None,
-                max_steps: int | None = None) -> Machine:
-        return self.engine.machine(at=at, timeout=timeout, max_steps=max_steps)
-
     def query(self, goal: str, at: float | None = None, args: dict | None = None,
               timeout: float | None = None, max_steps: int | None = None,
-              limit: int | None = None, wait: bool = False) -> list[dict[str, Any]]:
+              limit: int | None = None, wait: bool = False,
+              robot: str | None = None) -> list[dict[str, Any]]:
         """Answer ``goal`` now, on the events that have arrived (unsynchronized).
 
         ``at`` restricts event goals to the stream view (events with end <= at); ``args``
         binds goal variables from Python values (no text splicing; the parsed plan is reused);
         ``timeout`` (seconds) or ``max_steps`` stop an endless computation with SLRTimeout.
         ``wait=True`` makes it synchronized: ``submit(goal, at, timeout=timeout).result()``.
+        ``robot`` restricts every event goal, prev and next (in rules too) to the events of
+        that robot (their ``robot`` column; see docs/fleet.md).
 
         >>> kb = open(); kb.add_many(["pos(a, 1)^1", "pos(a, 4)^5"])
         []
@@ -989,9 +997,14 @@ class KnowledgeBase:
         if at is not None or timeout is not None:
             _check_time_option("at", at)
             _check_time_option("timeout", timeout, minimum=0.0)
+        if robot is not None:
+            check_robot_name(robot)
         if wait:  # issue 5: synchronized (SLRTimeout names the incomplete types)
+            if robot is not None:
+                raise SLRError("a synchronized query (wait=True) cannot be restricted to one "
+                               "robot yet: ask origin(R, Goal) inside the goal instead")
             return self.submit(goal, at=at, args=args, timeout=timeout).result()
-        if args and limit is None:
+        if args and limit is None and robot is None:
             key = (goal, tuple(args))
             plan = self._plans.get(key)
             if plan is not None and plan.bound_lookup is not None:
@@ -1012,22 +1025,23 @@ class KnowledgeBase:
         plan = self._plan(goal, tuple(args) if args else ())
         if limit == 0:
             return []
-        if plan.lookup is not None and limit is None:
+        if plan.lookup is not None and limit is None and robot is None:
             frame = [None] * plan.compiled.nslots
             if args:
                 for name, value in args.items():
-                    frame[plan.bind_slots[name]] = from_python(value)
+                    frame[plan.bind_slots[name]] = _argument_term(name, value)
             answers = plan.lookup.run(self.store, frame, plan.names)
             if answers is not None:
                 return answers
         if max_steps is None and self.sql_enabled:  # issue 3: the compiled SQL plan, if any
             from .planner import try_sql
             deadline = time.monotonic() + timeout if timeout is not None else None
-            answers = try_sql(self, plan, args, at, limit, deadline)
+            answers = try_sql(self, plan, args, at, limit, deadline, robot)
             if answers is not None:
                 return answers
         term, frame = self._instantiate(plan, args)
         m = self.engine.machine(at=at, timeout=timeout, max_steps=max_steps)
+        m.robot = robot
         answers = []
         names = plan.names
         for _ in m.solve(term):
@@ -1035,6 +1049,87 @@ class KnowledgeBase:
             if limit is not None and len(answers) >= limit:
                 break
         return answers
+
+    def solutions(self, goal: str, at: float | None = None, args: dict | None = None,
+                  timeout: float | None = None,
+                  robot: str | None = None) -> Iterator[dict[str, Any]]:
+        """The answers of ``goal`` one at a time, as they are found (unsynchronized): what
+        :meth:`query` returns, lazily. A consumer that stops early (a command line's
+        ``--limit``, a shell's "stop") never pays for the rest, so a goal with endless answers
+        is usable; past ``timeout`` the iteration raises :class:`SLRTimeout` after the answers
+        already yielded.
+
+        >>> from itertools import islice
+        >>> list(islice(open().solutions("between(1, inf, X)"), 3))
+        [{'X': 1}, {'X': 2}, {'X': 3}]
+        """
+        _check_time_option("at", at)
+        _check_time_option("timeout", timeout, minimum=0.0)
+        if robot is not None:
+            check_robot_name(robot)
+        try:
+            self._refresh()
+            plan = self._plan(goal, tuple(args) if args else ())
+        except SLRError:
+            raise
+        except Exception as exc:  # the facade's promise (see _boundary)
+            raise SLRError(f"solutions: {type(exc).__name__}: {exc}") from exc
+        from .planner import Fallback, plan_for
+        if plan.lookup is not None or (self.sql_enabled
+                                       and type(plan_for(self, plan, at is not None))
+                                       is not Fallback):
+            # A compiled plan answers as one statement: all its answers at once.
+            yield from self.query(goal, at=at, args=args, timeout=timeout, robot=robot)
+            return
+        term, frame = self._instantiate(plan, args)
+        m = self.engine.machine(at=at, timeout=timeout)
+        m.robot = robot
+        solving = m.solve(term)
+        while True:
+            try:
+                next(solving)
+            except StopIteration:
+                return
+            except SLRError:
+                raise
+            except RecursionError:
+                raise SLRError("solutions: the term is nested too deeply") from None
+            except Exception as exc:  # the facade's promise (see _boundary)
+                raise SLRError(f"solutions: {type(exc).__name__}: {exc}") from exc
+            yield answer_bindings(plan.names, frame)
+
+    def goal_warnings(self, goal: str) -> list[str]:
+        """Warnings about ``goal`` that do not change its answer: an event goal or prev/next
+        on a type with no stored events, no rules and no declaration is most likely a typo
+        (it simply fails, SPEC §2, since its events may not have arrived yet); each warning
+        names the nearest known names.
+
+        >>> kb = open(); kb.load("color(O,C)^T :- prev(obj(O,_,C)^Z, T).")
+        >>> kb.goal_warnings("colour(cup2, C)^20")
+        ['no events or rules of colour/2; did you mean color/2?']
+        """
+        import difflib
+
+        from .analysis import goal_refs
+
+        self._refresh()
+        term, _ = parse_term(goal, "<query>")
+        program = self.engine.program
+        known = set(self.store.event_types()) | set(self.store.declared_types())
+        known |= set(program.temporal) | set(program.preds) | set(program.dynamic)
+        names = sorted({f"{format_atom(n)}/{a}" for n, a in known
+                        if not n.startswith(("slr_", "$"))})
+        warnings = []
+        for name, arity in sorted(goal_refs(term, program).stored):
+            if (name, arity) in known:
+                continue
+            written = f"{format_atom(name)}/{arity}"
+            near = difflib.get_close_matches(written, names, n=3, cutoff=0.6)
+            near += [n for n in names if n.rpartition("/")[0] == format_atom(name)
+                     and n not in near]  # the same name with another arity
+            hint = f"; did you mean {' or '.join(near[:3])}?" if near else ""
+            warnings.append(f"no events or rules of {written}{hint}")
+        return warnings
 
     def explain(self, goal: str) -> str:
         """How ``goal`` would be run: which engine, and why.
@@ -1067,7 +1162,7 @@ class KnowledgeBase:
     # -- synchronized queries (issue 5; the work is in slr_sql/sync.py) -----------------
     def submit(self, goal: str, at: float | None = None, id: str | None = None,
                args: dict | None = None, timeout: float | None = None,
-               callback: Callable[[Any], Any] | None = None) -> Any:
+               callback: Callable[[Any], Any] | None = None) -> PendingQueryAPI:
         """Synchronized query ⟨goal, at⟩: returns a PendingQuery (a concurrent.futures.Future)
         answered with the answer list as soon as every event type the goal depends on is
         complete up to ``at`` (default: now), and every prev/next it evaluates is complete up
@@ -1090,12 +1185,19 @@ class KnowledgeBase:
         """``await kb.ask(goal, at=z)``: :meth:`submit` for asyncio code."""
         import asyncio
 
-        return await asyncio.wrap_future(self.submit(goal, at=at, id=id, args=args,
-                                                     timeout=timeout))
+        from concurrent.futures import Future
+
+        pending = self.submit(goal, at=at, id=id, args=args, timeout=timeout)
+        assert isinstance(pending, Future)   # a PendingQueryAPI here is a Future
+        return await asyncio.wrap_future(pending)
 
     def mark_complete(self, event_type: str, t: float) -> None:
         """Declare the history of ``"p/N"`` (or ``"p"``: every arity) complete up to ``t``
         (persisted), like a ``fullyUpdated(p/N)^t`` event."""
+        if not isinstance(event_type, str):
+            raise SLRError(f"mark_complete: the event type is text such as \"p/2\" or \"p\", "
+                           f"not {shown(event_type)}")
+        _check_time_option("mark_complete: t", t)
         self._refresh()
         self._sync.mark_complete(event_type, t)
 
@@ -1105,7 +1207,7 @@ class KnowledgeBase:
         self._refresh()
         return self._sync.complete_until(event_type)
 
-    def pending(self) -> list:
+    def pending(self) -> list[PendingQueryAPI]:
         """The waiting synchronized queries; each PendingQuery's ``waiting_for`` lists the
         event types and times it waits for."""
         return self._sync.pending()
@@ -1170,7 +1272,7 @@ class KnowledgeBase:
     def subscribe(self, pattern: str, where: str | None = None, since: Any = "now",
                   until: float | None = None, id: str | None = None,
                   callback: Callable[[dict], Any] | None = None, max_queue: int = 10_000,
-                  max_lag: int | None = 1_000_000) -> Any:
+                  max_lag: int | None = 1_000_000) -> SubscriptionAPI:
         """Deliver each stored event matching ``pattern`` (``p(..)^T`` or ``p(..)^[S,E]``) and
         the goal ``where`` whose end time lies in [since, until], once, in arrival order, as
         an answer dict: iterate (``for``/``async for``/``sub.get(timeout)``) or give
@@ -1193,12 +1295,36 @@ class KnowledgeBase:
         self._subscriptions.unsubscribe(id)
 
 
+def _argument_term(name: str, value: Any) -> Any:
+    """The term for ``args[name]`` of a query, or an SLRError naming the argument."""
+    try:
+        return from_python(value)
+    except (TypeError, ValueError) as exc:
+        raise SLRError(f"args[{name!r}] = {shown(value)} is not a term: "
+                       f"{_python_words(exc)} (atoms are str, strings slr_sql.String, numbers "
+                       f"int or float, lists list, compounds slr_sql.Struct)") from None
+    except RecursionError:
+        raise SLRError(f"args[{name!r}]: the term is nested too deeply") from None
+
+
+def _python_words(exc: BaseException) -> str:
+    """The message of a Python exception raised by a conversion, in the user's terms (the
+    advice about ``sys.set_int_max_str_digits`` is for Python programmers, not users)."""
+    text = str(exc)
+    digits = re.search(r"limit \((\d+) digits\) for integer string conversion(?:: value has "
+                       r"(\d+) digits)?", text)
+    if digits:
+        has = f" ({digits.group(2)} digits)" if digits.group(2) else ""
+        return f"an integer too long{has}: at most {digits.group(1)} digits are read"
+    return text.split("; use sys.")[0]
+
+
 def _check_time_option(name: str, value: Any, minimum: float | None = None) -> None:
     """``at=`` and ``timeout=`` are numbers of seconds (``None``: not given)."""
     if value is None:
         return
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SLRError(f"{name} must be a number of seconds, not {value!r}")
+        raise SLRError(f"{name} must be a number of seconds, not {shown(value)}")
     try:
         number = float(value)
     except OverflowError:
@@ -1229,8 +1355,7 @@ def _boundary(method: Callable) -> Callable:
             kb = args[0] if args and isinstance(args[0], KnowledgeBase) else None
             path = getattr(getattr(kb, "store", None), "path", None) or (
                 args[1] if where == "open" and len(args) > 1 else kwargs.get("path"))
-            raise SLRError(f"{path or ':memory:'}: the store failed ({exc}); if the file is "
-                           f"damaged, restore it from a copy") from None
+            raise store_error(exc, path) from None
         except Exception as exc:  # noqa: BLE001 - the boundary: every kind becomes words
             raise SLRError(f"{where}: {type(exc).__name__}: {exc}") from exc
     return guarded
@@ -1238,6 +1363,7 @@ def _boundary(method: Callable) -> Callable:
 
 # Every public method of the facade goes through the boundary (one list, kept next to it).
 for _name in ("__init__", "close", "load", "unload", "programs", "load_file", "define", "add",
+              "goal_warnings",
               "add_event", "add_many", "query", "explain", "submit", "mark_complete",
               "complete_until", "pending", "add_buffer", "remove_buffer", "buffers", "sql",
               "plot", "subscribe", "unsubscribe", "event_rules"):
@@ -1256,10 +1382,16 @@ def open(path: str | Path | None = None, clock: Clock | None = None, **options: 
     thread of the store does it, so no ``add`` waits for it -- for long-running writers with
     a latency budget, such as ``slr serve`` and ``slr ros bridge``), ``cache_mib`` (SQLite's
     page cache, default 64 MiB: it fills as the store is used, then the process's memory stays
-    flat; a smaller one makes it flat sooner and makes large ingests and scans re-read pages).
+    flat; a smaller one makes it flat sooner and makes large ingests and scans re-read pages),
+    ``max_learned_delay`` (seconds a learned delay may reach, default 3600; ``None``: no cap;
+    an event arriving later than that after its end warns with
+    :class:`~slr_sql.sync.LearnedDelayWarning`: its times are probably not the clock's).
     A file that is not a store (not SQLite, damaged, a store of a newer slr_sql, or an SQLite
     file of another application) is refused with an :class:`SLRError` and left untouched;
     ``adopt=True`` adds a store to another application's SQLite file on purpose.
+    ``robot`` names the robot the store belongs to (kept in the store; a store has one name
+    for life): its events are stored with that name in their ``robot`` column, for
+    ``origin/2`` and fleets (docs/fleet.md).
 
     >>> kb = open(); kb.close()
     """

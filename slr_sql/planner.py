@@ -337,8 +337,9 @@ class SqlPlan:
     answers."""
 
     def __init__(self, sql, params, arg_params, has_at, recipes, missing, sites, modes, goal,
-                 time_sites=(), guards=()):
+                 time_sites=(), guards=(), has_robot=False):
         self.sql = sql
+        self.has_robot = has_robot        # restricted to one robot's events (:robot)
         self.guards = guards              # statements run first: goals that may raise
         # arguments from Python the statement uses as numbers: a non-number goes to the
         # interpreter (which raises, or not, exactly when a goal reaches it)
@@ -361,12 +362,14 @@ class SqlPlan:
     def stale(self, store) -> bool:
         return any(store.event_table_sql(n, a) is not None for n, a in self.missing)
 
-    def _rows(self, kb, values: dict, at, limit, deadline) -> list:
+    def _rows(self, kb, values: dict, at, limit, deadline, robot=None) -> list:
         """Bind the parameters (``values``: answer variable name -> term), run the guards,
         then the statement."""
         params = self.params
-        if self.arg_params or self.has_at:
+        if self.arg_params or self.has_at or self.has_robot:
             params = dict(params)
+            if self.has_robot:
+                params["robot"] = robot
             for name, pname in self.arg_params.items():
                 params[pname] = encode(values[name])
                 if pname in self.time_args and type(params[pname]) is str \
@@ -384,9 +387,9 @@ class SqlPlan:
             return []
         return kb.store.run_compiled(self.sql, params, limit, deadline)
 
-    def run(self, kb, args, at, limit, deadline=None):
+    def run(self, kb, args, at, limit, deadline=None, robot=None):
         values = {name: from_python(args[name]) for name in self.arg_params}
-        rows = self._rows(kb, values, at, limit, deadline)
+        rows = self._rows(kb, values, at, limit, deadline, robot)
         recipes = self.recipes
         out = []
         for row in rows:
@@ -503,10 +506,11 @@ def _conj(goals: list) -> Any:
     return goal
 
 
-def compile_goal(kb, plan, has_at: bool) -> SqlPlan:
-    """Compile a parsed query plan (kb._plan) to SQL; raises :class:`Fallback`."""
+def compile_goal(kb, plan, has_at: bool, robot: bool = False) -> SqlPlan:
+    """Compile a parsed query plan (kb._plan) to SQL; raises :class:`Fallback`. ``robot``:
+    every event row read must be the robot's of the parameter ``:robot``."""
     ctx = _Ctx(kb, state_of(kb))
-    comp = Compiler(ctx, has_at)
+    comp = Compiler(ctx, has_at, robot=robot)
     frame: list = [None] * plan.compiled.nslots
     arg_params = {}
     for name, slot in plan.bind_slots.items():
@@ -583,7 +587,7 @@ def compile_goal(kb, plan, has_at: bool) -> SqlPlan:
             sql += "\nORDER BY " + ", ".join(f"k{i}" for i in range(nk))
     return SqlPlan(sql, dict(comp.params), arg_params, has_at,
                    [p.extra for p in parts], frozenset(comp.missing), comp.sites, comp.modes,
-                   plan.text, tuple(dict.fromkeys(comp.time_sites)), guards)
+                   plan.text, tuple(dict.fromkeys(comp.time_sites)), guards, robot)
 
 
 def _has_ref(t) -> bool:
@@ -605,37 +609,46 @@ def _shift(t, off):
     return t
 
 
-def plan_for(kb, plan, has_at: bool):
+def plan_for(kb, plan, has_at: bool, robot: bool = False):
     """The cached SqlPlan for a parsed query plan, or the Fallback explaining why none."""
     cache = getattr(plan, "sql_plans", None)
     if cache is None:
         cache = plan.sql_plans = {}
-    entry = cache.get(has_at)
+    key = (has_at, True) if robot else has_at
+    entry = cache.get(key)
     if entry is not None and (type(entry) is Fallback or not entry.missing
                               or not entry.stale(kb.store)):
         return entry
     try:
-        entry = compile_goal(kb, plan, has_at)
+        entry = compile_goal(kb, plan, has_at, robot)
     except Fallback as exc:
         entry = exc
     except RecursionError:
         entry = Fallback("the goal is nested too deeply to compile")
     except (ValueError, OverflowError) as exc:  # e.g. an integer constant beyond 64 bits
         entry = Fallback(f"a constant SQL cannot hold ({exc})")
-    cache[has_at] = entry
+    cache[key] = entry
     return entry
 
 
-def try_sql(kb, plan, args, at, limit=None, deadline=None):
+def compiles_for(store) -> bool:
+    """Whether the SQL compiler's statements run on ``store``: they are printed for SQLite
+    and call Python functions (``slr_j``, the aggregates, ``slr_det``); on another engine
+    the interpreter answers every goal (through the store's indexed lookups)."""
+    return store.dialect.name == "sqlite"
+
+
+def try_sql(kb, plan, args, at, limit=None, deadline=None, robot=None):
     """Answers through SQL, or None when the interpreter must answer. Past ``deadline``
-    (``time.monotonic()``) the statement stops with SLRTimeout."""
-    if not getattr(kb, "sql_enabled", True):
+    (``time.monotonic()``) the statement stops with SLRTimeout. ``robot``: only that
+    robot's events."""
+    if not getattr(kb, "sql_enabled", True) or not compiles_for(kb.store):
         return None
-    entry = plan_for(kb, plan, at is not None)
+    entry = plan_for(kb, plan, at is not None, robot is not None)
     if type(entry) is Fallback:
         return None
     try:
-        return entry.run(kb, args or {}, at, limit, deadline)
+        return entry.run(kb, args or {}, at, limit, deadline, robot)
     except (DatabaseError, Unencodable, ValueError, TypeError, KeyError, OverflowError,
             MemoryError, RecursionError):
         # (a defined predicate called from SQL that runs out of memory surfaces here as
@@ -669,9 +682,18 @@ def explain(kb, plan, at=None) -> list[str]:
         lines.extend("  " + line for line in entry.sql.splitlines())
     if entry.params or entry.arg_params:
         shown = {k: v for k, v in entry.params.items()}
-        lines.append("parameters: " + ", ".join(f":{k} = {v!r}" for k, v in shown.items())
+        lines.append("parameters: " + ", ".join(f":{k} = {_parameter_text(v)}"
+                                                for k, v in shown.items())
                      + "".join(f", :{p} = <{n} from args>" for n, p in entry.arg_params.items()))
     return lines
+
+
+def _parameter_text(value) -> str:
+    """A parameter's value as explain prints it: its repr, or for an integer of more digits
+    than Python prints, its size."""
+    if type(value) is int and value.bit_length() > 14000:
+        return f"<an integer of about {int(value.bit_length() * 0.30103) + 1} digits>"
+    return repr(value)
 
 
 def _compiled_subgoals(kb, plan) -> list[str]:
@@ -752,6 +774,8 @@ def refresh_views(kb) -> list[str]:
             table = facts[(name, arity)]
             cols = ", ".join(f"arg{i + 1}" for i in range(arity))
             views.setdefault(name, f"SELECT {cols} FROM {table} ORDER BY ord")
+            continue
+        if not compiles_for(kb.store):
             continue
         sql, _reason, miss = view_sql(kb, name, arity)
         missing |= set(miss)
@@ -851,6 +875,8 @@ def compiled_calls(kb) -> dict:
     first-argument index answers them faster than a statement would."""
     from .analysis import Node, analyze, reachable, recursive_predicates
 
+    if not compiles_for(kb.store):
+        return {}
     program = kb.program
     a = analyze(program)
     recursive = recursive_predicates(program)

@@ -51,8 +51,10 @@ import socket
 import threading
 import time
 import uuid
+import warnings
 from typing import Any, Callable
 
+from .clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning
 from .encoding import decode, encode_json
 from .errors import SLRError, SLRSyntaxError, SLRTimeout
 from .parser import parse_term
@@ -221,7 +223,11 @@ class _Matcher:
 def _time_arg(value: Any, what: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SLRError(f"subscribe: {what} must be a number of seconds, not {value!r}")
-    value = float(value)
+    try:
+        value = float(value)
+    except OverflowError:
+        raise SLRError(f"subscribe: {what} is out of range (an integer of "
+                       f"{value.bit_length()} bits; a time is a float)") from None
     if math.isnan(value):
         raise SLRError(f"subscribe: {what} must be a number, not NaN")
     return value
@@ -877,6 +883,8 @@ class SubscriptionHub:
                            f"not {max_lag!r}")
         pattern = pattern.strip()
         matcher = _Matcher(self.kb, pattern, where)   # SLRSyntaxError for bad texts
+        if isinstance(since, str):
+            self._warn_if_stamped_long_before(matcher.key, since_value)
         durable = id is not None
         with self.lock:
             if durable and id in self._subs:
@@ -912,6 +920,22 @@ class SubscriptionHub:
                                            name=f"slr-subscription-{sub.id}")
             sub._thread.start()
         return sub
+
+    def _warn_if_stamped_long_before(self, key: tuple[str, int], now: float) -> None:
+        """``since="now"`` on a type whose events end long before the clock's now (robot or
+        recorded times on a store with a wall clock): the new events will most likely be
+        stamped the same way, end before ``since`` and never be delivered. Say so."""
+        latest = self.store.max_end(*key)
+        gap = getattr(self.kb, "max_learned_delay", None) or DEFAULT_MAX_LEARNED_DELAY
+        if latest is None or now - latest <= gap:
+            return
+        name = f"{key[0]}/{key[1]}"
+        warnings.warn(LearnedDelayWarning(
+            f"subscribe(since=\"now\") on {name}: its latest event ends at {latest:g}, "
+            f"{now - latest:.6g} s before the clock's now ({type(self.clock).__name__}); "
+            f"events stamped like it end before since and are not delivered. Subscribe "
+            f"since=0 (history first, then live), or give the store a ManualClock or a "
+            f"StreamClock for simulated or recorded times"), stacklevel=3)
 
     def unsubscribe(self, sub_id: str) -> None:
         """Remove the subscription ``sub_id`` (closing it if it is open here).
@@ -1507,9 +1531,7 @@ class SubscriptionHub:
         """A table created by a program without this module (raw SQL) has no journal yet."""
         if key in self._journaled:
             return
-        rows = self.store.execute("SELECT 1 FROM sqlite_master WHERE type = 'trigger' AND "
-                                  "name = ?", (TRIGGER_PREFIX + info.table,))
-        if not rows:
+        if TRIGGER_PREFIX + info.table not in self.store.triggers(info.table):
             with self.store.transaction():
                 self._ensure_journal(key[0], key[1], info.table)
         self._journaled.add(key)
@@ -1585,9 +1607,8 @@ class SubscriptionHub:
         store = self.store
         if store.closed:
             return
-        journals = [r[0] for r in store.execute(
-            "SELECT name FROM sqlite_master WHERE type = 'table' AND substr(name, 1, ?) = ?",
-            (len(JOURNAL_PREFIX), JOURNAL_PREFIX))]
+        journals = sorted(name for name in store.table_names()
+                          if name.startswith(JOURNAL_PREFIX))
         tables = {table: key for key, table in store.event_types().items()}
         with self.lock:
             local = set(self._by_type)

@@ -32,6 +32,7 @@ import itertools
 import math
 import threading
 import time
+import warnings
 from concurrent.futures import Future, InvalidStateError, ThreadPoolExecutor
 from operator import itemgetter
 
@@ -40,7 +41,7 @@ from typing import Any, Callable, Iterable
 
 from .analysis import GoalSet, goal_set
 from .answers import answer_bindings
-from .clocks import ManualClock, StreamClock
+from .clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning, ManualClock, StreamClock
 from .errors import EventRejected, SLRError, SLRTimeout
 from .store.checks import BadEvent, check_times
 from .terms import Atom, Struct, Var, deref
@@ -247,6 +248,18 @@ class PendingQuery(Future):
                          f"{', by ' + self.engine if self.engine else ''})")
         return "\n".join(lines)
 
+    def result(self, timeout: float | None = None) -> list[dict[str, Any]]:
+        """The answer list, waiting up to ``timeout`` seconds (None: for ever). When the
+        wait runs out first: :class:`~slr_sql.SLRTimeout` saying what the query waits for
+        (it goes on waiting: call ``result`` again, or ``cancel()``)."""
+        try:
+            return super().result(timeout)
+        except TimeoutError:
+            if self.done():      # answered (or failed with its own SLRTimeout) meanwhile
+                return super().result(0)
+            raise SLRTimeout(self.timeout_message(timeout) + "; it is still waiting "
+                             "(call result() again, or cancel())") from None
+
     def timeout_message(self, timeout: float | None) -> str:
         """The SLRTimeout text: which types were not complete, and their horizons."""
         sync = self._sync
@@ -264,6 +277,18 @@ class PendingQuery(Future):
                 f"answerable{after}: {what}")
 
 
+def _delay_warning(key: tuple[str, int], observed: float, cap: float, clock: Any) -> str:
+    name = type_text(key)
+    return (f"{name}: an event arrived {_fmt(observed, 1)} s after its end time on a store "
+            f"whose clock is a {type(clock).__name__} (now {_fmt(clock.now(), 1)}): the "
+            f"events' times are probably not the clock's time. The learned delay of {name} "
+            f"is capped at {_fmt(cap)} s (max_learned_delay). For simulated or recorded "
+            f"times give the store a ManualClock or a StreamClock (slr_sql.open(path, "
+            f"clock=slr_sql.StreamClock())), or declare the delay (:- max_delay({name}, D).); "
+            f"note that subscribe(since=\"now\") delivers only events that end after the "
+            f"clock's now, so it does not deliver these")
+
+
 class Completeness:
     """Per event type: max delay (declared or learned), marks, in-order latest end.
 
@@ -274,10 +299,13 @@ class Completeness:
     of the stored and the new value is kept, compared inside SQLite) and read back.
     """
 
-    def __init__(self, store: Any, clock: Any, decls: Callable[[], Any]):
+    def __init__(self, store: Any, clock: Any, decls: Callable[[], Any],
+                 max_learned: float | None = DEFAULT_MAX_LEARNED_DELAY):
         self.store = store
         self.clock = clock
         self._decls = decls
+        self.max_learned = max_learned     # None: learned delays grow without a cap
+        self.warned: set[tuple[str, int]] = set()   # types whose delay hit the cap
         self.learned: dict[tuple[str, int], float] = {}
         self.marks: dict[tuple[str, int], float] = {}
         self.name_marks: dict[str, float] = {}
@@ -290,6 +318,18 @@ class Completeness:
         # ``horizon``, ``deadline``, ``why`` and ``describe`` (None: no event rules)
         self.derived: Any = None
         self.load()
+
+    def _capped(self, key: tuple[str, int], observed: float, cap: float) -> None:
+        """An event of ``key`` arrived ``observed`` s after its end, beyond the cap: say so,
+        once per type, where it happens (a Python warning and the log)."""
+        if key in self.warned:
+            return
+        self.warned.add(key)
+        d = self._decls().max_delay.get(key)
+        if d is not None and d != "learn":
+            return                          # a declared delay: nothing is learned
+        warnings.warn(LearnedDelayWarning(_delay_warning(key, observed, cap, self.clock)),
+                      stacklevel=2)
 
     def flush(self, learned: dict | None = None) -> None:
         """Persist learned delays (all that grew since the last write by default). The
@@ -346,7 +386,9 @@ class Completeness:
         d = self._decls().max_delay.get(key)
         if d is not None and d != "learn":
             return float(d)
-        return self.learned.get(key, 0.0)
+        learned = self.learned.get(key, 0.0)
+        cap = self.max_learned
+        return learned if cap is None or learned <= cap else cap
 
     def mark(self, key: tuple[str, int]) -> float:
         return max(self.marks.get(key, -_INF), self.name_marks.get(key[0], -_INF))
@@ -462,8 +504,12 @@ class Completeness:
         in_order = self._decls().in_order
         grew: dict[tuple[str, int], float] = {}
         moved: set = set()
+        cap = self.max_learned
         for key, (earliest, latest) in spans.items():
             best = arrival - earliest
+            if cap is not None and best > cap:
+                self._capped(key, best, cap)
+                best = cap
             if best > learned.get(key, 0.0):
                 grew[key] = best
             if in_order and key in in_order:
@@ -479,8 +525,9 @@ class Completeness:
                    if d > persisted.get(k, 0.0) + max(1e-3, 0.01 * persisted.get(k, 0.0))}
             if due:
                 self.flush(due)
-        for key in moved:
-            self.arrivals[key] = self.arrivals.get(key, 0) + 1
+        arrivals = self.arrivals
+        for key in spans:   # every type: tf_lookup waits for an arrival of any type
+            arrivals[key] = arrivals.get(key, 0) + 1
         return moved
 
 
@@ -493,7 +540,8 @@ class Synchronizer:
         self.store = kb.store
         self.lock = threading.RLock()
         self.cond = threading.Condition(self.lock)
-        self.tracker = Completeness(kb.store, kb.clock, lambda: kb.declarations)
+        self.tracker = Completeness(kb.store, kb.clock, lambda: kb.declarations,
+                                    getattr(kb, "max_learned_delay", DEFAULT_MAX_LEARNED_DELAY))
         self.workers = workers
         self._heaps: dict[tuple[str, int], list] = {}       # key -> [(time, seq, q, gen)]
         self._arrival_waits: dict[tuple[str, int], list] = {}  # key -> [(q, gen)]
@@ -599,7 +647,7 @@ class Synchronizer:
 
     def _read_data_version(self) -> int | None:
         try:
-            return self.store.execute("PRAGMA data_version")[0][0]
+            return self.store.data_version()
         except Exception:
             return None
 
@@ -731,6 +779,10 @@ class Synchronizer:
         released: list = []
         with self.lock:
             moved = self.tracker.observe(stored, arrival)
+            if self._arrival_waits:   # waits for an arrival of a type that is not in order
+                spans = getattr(stored, "ends", None)
+                arrived = spans.keys() if spans is not None else _end_spans(stored).keys()
+                moved = moved | (arrived & self._arrival_waits.keys())
             for key in moved:
                 released += self._release(key, arrival=True)
         self._schedule_all(released)
@@ -834,7 +886,7 @@ class Synchronizer:
             if tracker.complete(w.key, w.time, now):
                 why = tracker.why(w.key, w.time, now)
             elif w.kind == "arrival" and tracker.arrivals.get(w.key, 0) != w.seen:
-                why = f"the arrival of an in-order {w.type} event inside the interval"
+                why = f"the arrival of a {w.type} event it waited for"
             else:
                 continue
             w.released_at = now
@@ -868,6 +920,7 @@ class Synchronizer:
         m.on_prev = self._check_prev
         m.on_next = lambda name, n, lo, hi, args, s=None, e=None: \
             self._check_next(m, name, n, lo, hi, args, s, e)
+        m.on_arrival = lambda name, n, t, args: self._check_arrival(m, name, n, t, args)
         answers = []
         q.evaluations += 1
         solving = m.solve(term)
@@ -958,6 +1011,17 @@ class Synchronizer:
                 return
             raise _MustWait(key, hi, reason, "arrival", seen)
         raise _MustWait(key, hi, reason)
+
+    def _check_arrival(self, m: Any, name: str, n: int, t: float, args: tuple) -> None:
+        """tf_lookup found no observation of an edge at or after ``t``: wait until an event
+        of the type arrives (then evaluate again). An event that arrived since the lookup
+        read the store makes the query run again at once."""
+        key = (name, n)
+        seen = self.tracker.arrivals.get(key, 0)
+        if self._stored_match(m, name, n, t, _INF, args, None, None):
+            seen = -1
+        raise _MustWait(key, _INF, f"an observation of {name}/{n} at or after {_fmt(t)}",
+                        "arrival", seen)
 
     def _stored_match(self, m: Any, name: str, n: int, lo: float, hi: float, args: tuple,
                       s: Any, e: Any) -> bool:

@@ -9,7 +9,6 @@ Values are compared strictly: ``int`` is not ``float``, an atom (expected as ``s
 from __future__ import annotations
 
 import math
-import time
 
 import pytest
 
@@ -460,20 +459,16 @@ def test_deep_non_tail_recursion(kb):
     check(kb, "numlist(1, 100000, _L), len(_L, N)", [{"N": 100000}])
 
 
-def test_million_element_list(kb):
-    t0 = time.monotonic()
+def test_million_element_list(kb):   # its speed: benchmarks/bench_big_terms.py
     check(kb, "numlist(1, 1000000, _L), length(_L, N), last(_L, X), sum_list(_L, S), "
               "msort(_L, _M), nth1(1, _M, F), max_list(_L, Max)",
           [{"N": 1000000, "X": 1000000, "S": 500000500000, "F": 1, "Max": 1000000}])
-    assert time.monotonic() - t0 < 60
 
 
 def test_endless_loop_stops(kb):
     kb.load("loop :- loop. loop2(X) :- loop2(f(X)).")
-    t0 = time.monotonic()
-    with pytest.raises(SLRTimeout):
+    with pytest.raises(SLRTimeout):   # how soon it gives up: benchmarks/bench_big_terms.py
         kb.query("loop", timeout=0.5)
-    assert time.monotonic() - t0 < 5
     with pytest.raises(SLRTimeout):
         kb.query("loop2(a)", max_steps=20000)
     with pytest.raises(SLRTimeout):

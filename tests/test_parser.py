@@ -14,7 +14,6 @@ import math
 import os
 import shutil
 import subprocess
-import time
 from pathlib import Path
 
 import pytest
@@ -358,10 +357,8 @@ def test_round_trip_of_cross_check_texts(text):
 def test_million_element_list():
     n = 1_000_000
     text = "[" + ",".join(map(str, range(n))) + "]"
-    t0 = time.perf_counter()
-    term, _ = parse_term(text)
+    term, _ = parse_term(text)   # its speed: benchmarks/bench_big_terms.py
     assert format_term(term) == text
-    assert time.perf_counter() - t0 < 20  # typically ~4 s
 
 
 def test_long_list_of_atoms_and_long_program():

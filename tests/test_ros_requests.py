@@ -40,14 +40,6 @@ DEADLINE = 30.0   # seconds; every wait ends as soon as its condition holds
 NODE = "slr_req_bridge"
 
 
-def _has_subscribe() -> bool:
-    with slr_sql.open() as kb:
-        return hasattr(kb, "subscribe")
-
-
-HAS_SUBSCRIBE = _has_subscribe()
-
-
 class Process:
     """A subprocess whose stdout lines are read by a thread, waited for with a deadline."""
 
@@ -411,8 +403,7 @@ def test_bad_control_requests_get_an_error_reply_with_their_token(setup, text, t
     assert reply["_topic"] == setup.topics["control_reply"]
     assert reply["token"] == token and "ok" not in reply
     if kind is None:   # a subscription of a type without a Python module
-        kind, words = ("BridgeError", "no Python module for no_msgs/msg/Nope") if HAS_SUBSCRIBE \
-            else ("NotImplemented", "subscriptions are not available in this build")
+        kind, words = "BridgeError", "no Python module for no_msgs/msg/Nope"
     assert reply["error"]["kind"] == kind, reply
     assert words in reply["error"]["message"]
     assert setup.bridge.popen.poll() is None
@@ -492,13 +483,6 @@ def test_output_subscriptions_from_ros(setup):
     source, out = f"{prefix}/door_in", f"{prefix}/alarms"
     subscribe = {"id": "alarms", "topic": out, "type": "std_msgs/msg/String",
                  "pattern": "alarm(D)^T", "where": "D \\= door0", "fields": {"data": "D"}}
-    if not HAS_SUBSCRIBE:
-        reply = client.control("subscribe", **subscribe)
-        assert reply["error"]["kind"] == "NotImplemented"
-        assert reply["error"]["message"].startswith("subscriptions are not available in this build")
-        assert client.control("list")["subscriptions"] == []
-        assert all(kind != "subscription" for kind, _, _ in _stored_control(setup))
-        return
     client.send({"listen": out})
     client.send({"advertise": source, "type": "String"})
     assert client.control("add_input", topic=source,
@@ -524,13 +508,11 @@ def test_a_restarted_bridge_resumes_the_control_state(setup):
     assert client.control("add_input", topic=topic,
                           mapping={"event": "level", "args": ["data"], "time": "receive"})["ok"]
     buffer_id = client.control("add_buffer", pattern="level(_)", keep_last=3)["id"]
-    subscribed = None
-    if HAS_SUBSCRIBE:
-        subscribed = client.control("subscribe", id="levels", topic=f"{prefix}/levels",
-                                    type="std_msgs/msg/String", pattern="level(V)^T",
-                                    fields={"data": "V"})
-        assert subscribed["ok"], subscribed
-        client.send({"listen": f"{prefix}/levels"})
+    subscribed = client.control("subscribe", id="levels", topic=f"{prefix}/levels",
+                                type="std_msgs/msg/String", pattern="level(V)^T",
+                                fields={"data": "V"})
+    assert subscribed["ok"], subscribed
+    client.send({"listen": f"{prefix}/levels"})
     before = client.control("list")
     old_lines = setup.restart_bridge()
     assert any("bridge stopped" in line for line in old_lines)
@@ -547,8 +529,7 @@ def test_a_restarted_bridge_resumes_the_control_state(setup):
     while _local(setup, "findall(V, level(V)^_, L)") != [{"L": [2.0, 3.0, 4.0]}]:
         assert time.monotonic() < deadline, _local(setup, "findall(V, level(V)^_, L)")
         time.sleep(0.02)   # polling the store file: the resumed buffer keeps the last 3
-    if subscribed is not None:
-        client.wait(lambda: (f"{prefix}/levels", "4.0") in client.received)
+    client.wait(lambda: (f"{prefix}/levels", "4.0") in client.received)
 
 
 # -- the protocol without ROS ------------------------------------------------------------------

@@ -16,7 +16,7 @@ import slr_sql
 from slr_sql import Atom, SLREvaluationError, SLRSyntaxError, SLRTimeout, String, Struct
 from slr_sql.service.errors import ServiceError
 
-from service_helpers import ServiceProcess, same
+from service_helpers import ServiceProcess, complete_only_as_marked, same
 
 _tags = itertools.count()
 
@@ -78,6 +78,7 @@ def same_value(a, b) -> bool:
 
 def program(tag: str) -> str:
     return f"""\
+:- max_delay({tag}obj/3, 1e10).
 {tag}color(O, C)^T :- prev({tag}obj(O, _, C)^_Z, T).
 {tag}location(O, L)^T :- prev({tag}seg(O, L)^Z, T), T - Z =< 5, !.
 {tag}location(O, "outdated")^T :- prev({tag}seg(O, _)^Z, T), T - Z > 5, !.
@@ -148,7 +149,8 @@ def test_health_and_openapi_describe_the_routes(server):
     expected = {"/health", "/openapi.json", "/add", "/add_event", "/add_many", "/load",
                 "/unload", "/programs", "/query", "/submit", "/submit/{handle}", "/explain",
                 "/mark_complete", "/complete_until", "/buffers", "/buffers/{buffer_id}", "/sql",
-                "/stats", "/subscribe"}
+                "/stats", "/subscribe", "/event_rules", "/unsubscribe", "/fleet/positions",
+                "/fleet/receive", "/fleet/status"}
     assert set(spec["paths"]) == expected
     for path, methods in spec["paths"].items():
         for method, op in methods.items():
@@ -269,6 +271,7 @@ def test_a_large_batch_goes_in_several_requests_and_keeps_indexes(remote, tag):
 # -- synchronized queries over long-poll ---------------------------------------------------
 
 def test_submitted_query_waits_until_another_client_completes_the_history(server, remote, tag):
+    complete_only_as_marked(remote, f"{tag}seen/1")
     remote.add(f"{tag}seen(a)^1")
     done = threading.Event()
     pending = remote.submit(f"findall(X, {tag}seen(X)^_, L)", at=10, id=f"{tag}q",
@@ -293,6 +296,7 @@ def test_submitted_query_waits_until_another_client_completes_the_history(server
 
 
 def test_a_synchronized_query_in_one_request(server, remote, tag):
+    complete_only_as_marked(remote, f"{tag}seen/1")
     remote.add(f"{tag}seen(a)^1")
     remote.mark_complete(f"{tag}seen/1", 5)
     response = httpx.post(server.url + "/query", json={"goal": f"{tag}seen(X)^T", "at": 5,
@@ -304,7 +308,8 @@ def test_a_synchronized_query_in_one_request(server, remote, tag):
 
 
 def test_a_long_poll_cut_off_by_its_client_leaves_the_query_answerable(server, remote, tag):
-    remote.add(f"{tag}late(y)^1")     # its delay (wall clock - 1 s) keeps at=20 incomplete
+    complete_only_as_marked(remote, f"{tag}late/1")    # at=20 stays incomplete until marked
+    remote.add(f"{tag}late(y)^1")
     pending = remote.submit(f"{tag}late(X)^T", at=20)
     with pytest.raises(httpx.ReadTimeout):
         httpx.get(f"{server.url}/submit/{pending.handle}", params={"wait": 30}, timeout=0.3)
@@ -320,8 +325,14 @@ def test_a_token_is_required_and_checked(tmp_path, monkeypatch, how):
     args, env = (("--token", "s3cret"), None) if how == "option" else ((), {"SLR_TOKEN": "s3cret"})
     with ServiceProcess(tmp_path / "secure.db", *args, env=env) as server:
         assert httpx.get(server.url + "/health").status_code == 200
+        # a missing, wrong, shorter or longer token (the comparison is of the whole token,
+        # not of a prefix), the token without its scheme, a token with a NUL appended
         for headers in ({}, {"Authorization": "Bearer wrong"}, {"Authorization": "s3cret"},
-                        {"Authorization": "Bearer s3cre"}):
+                        {"Authorization": "Bearer s3cre"},
+                        {"Authorization": "Bearer s3cretANYTHING"},
+                        {"Authorization": "Bearer s3cret s3cret"},
+                        {"Authorization": "Basic s3cret"},
+                        {"Authorization": "Bearer S3CRET"}):
             response = httpx.post(server.url + "/query", json={"goal": "true"}, headers=headers)
             assert response.status_code == 401
             assert response.json()["error"]["kind"] == "Unauthorized"
@@ -383,7 +394,7 @@ def test_many_concurrent_clients(server, tag):
 def test_a_killed_server_loses_no_answered_write(tmp_path):
     db = tmp_path / "robot.db"
     answered: list[str] = []
-    lock = threading.Lock()
+    lock = threading.Condition()    # answered grows under it; the test waits on it
     server = ServiceProcess(db)
     stop = threading.Event()
 
@@ -399,6 +410,7 @@ def test_a_killed_server_loses_no_answered_write(tmp_path):
                     return
                 with lock:
                     answered.append(event)
+                    lock.notify_all()
 
     try:
         with slr_sql.connect(server.url) as kb:
@@ -409,10 +421,10 @@ def test_a_killed_server_loses_no_answered_write(tmp_path):
         writers = [threading.Thread(target=writer, args=(n,)) for n in range(3)]
         for w in writers:
             w.start()
-        while True:                        # until every writer has had some answers
-            with lock:
-                if len({e.split(",")[0] for e in answered}) == 3 and len(answered) >= 30:
-                    break
+        with lock:                         # until every writer has had some answers
+            assert lock.wait_for(lambda: len({e.split(",")[0] for e in answered}) == 3
+                                 and len(answered) >= 30, timeout=60), \
+                f"the writers got {len(answered)} answers within 60 s"
         server.kill()
         stop.set()
         for w in writers:
@@ -467,14 +479,9 @@ def test_vanishing_and_slow_clients_do_not_take_the_server_down(server, remote, 
 # -- subscriptions and named programs (as far as the knowledge base offers them) -------------
 
 def test_subscribe_over_websocket(remote, tag):
-    if not hasattr(slr_sql.KnowledgeBase, "subscribe"):
-        with pytest.raises(ServiceError) as info:
-            remote.subscribe(f"{tag}p(X)^T")
-        assert info.value.status == 501 and info.value.kind == "NotImplemented"
-        assert remote.health()["status"] == "ok"
-        return
     # the knowledge base subscribes (SPEC: history first when since is in the past, then
     # live; until ends the subscription once the history up to it is complete)
+    complete_only_as_marked(remote, f"{tag}p/1")
     remote.add(f"{tag}p(a)^1")
     with remote.subscribe(f"{tag}p(X)^T", since=0, until=10) as sub:
         remote.add(f"{tag}p(b)^5")
@@ -482,23 +489,19 @@ def test_subscribe_over_websocket(remote, tag):
         assert list(sub) == [{"X": Atom("a"), "T": 1.0}, {"X": Atom("b"), "T": 5.0}]
 
 
-def test_named_programs(remote, tag):
-    if not hasattr(slr_sql.KnowledgeBase, "unload"):
-        with pytest.raises(ServiceError) as info:
-            remote.load(f"{tag}r(1).", name=f"{tag}tea")
-        assert info.value.status == 501
-        with pytest.raises(ServiceError) as info:
-            remote.unload(f"{tag}tea")
-        assert info.value.status == 501
-        with pytest.raises(ServiceError):
-            remote.programs()
-        remote.load(f"{tag}r(1).")               # plain load still works
-        assert remote.query(f"{tag}r(X)") == [{"X": 1}]
-        return
+def test_named_programs(server, remote, tag):
     remote.load(f"{tag}r(1).", name=f"{tag}tea")
     remote.load(f"{tag}r(2).", name=f"{tag}tea", replace=True)
     assert remote.query(f"{tag}r(X)") == [{"X": 2}]
-    assert f"{tag}tea" in json.dumps(remote.programs())
+    # the same objects as the local call, read from the same file
+    programs = remote.programs()
+    info = programs[f"{tag}tea"]
+    assert isinstance(info, slr_sql.ProgramInfo)
+    assert (info.name, info.source, info.texts, info.filenames) == \
+        (f"{tag}tea", f"{tag}r(2).", 1, ("<string>",))
+    assert type(info.loaded_at) is float
+    with slr_sql.open(server.db) as local_view:
+        assert local_view.programs()[f"{tag}tea"] == info
     remote.unload(f"{tag}tea")
     with pytest.raises(SLREvaluationError):
         remote.query(f"{tag}r(X)")

@@ -186,8 +186,8 @@ def test_tables_are_readable_with_plain_sqlite(tmp_path):
     conn = sqlite3.connect(path)
     cursor = conn.execute("SELECT * FROM seg")
     assert [d[0] for d in cursor.description] == ["seq", "arg1", "arg2", "t_start", "t_end",
-                                                  "arrival"]
-    assert cursor.fetchall() == [(1, "cup1", "[0.4,0.1,0.9]", 2.0, 2.0, 9.0)]
+                                                  "arrival", "robot"]
+    assert cursor.fetchall() == [(1, "cup1", "[0.4,0.1,0.9]", 2.0, 2.0, 9.0, None)]
     assert conn.execute("SELECT arg1, arg2, arg3, t_start, t_end FROM obj").fetchall() == [
         ("cup1", '"red cup"', 3, 1.0, 2.0)]
     assert conn.execute("SELECT json_extract(arg2, '$[2]') FROM seg").fetchone() == (0.9,)

@@ -116,17 +116,9 @@ class RuleRuntime:
         self._done: list = []        # pending rows decided, not yet deleted
 
     # ----------------------------------------------------------------- building
-    def schema(self) -> list[str]:
-        cols = ["id INTEGER PRIMARY KEY", "alt INTEGER NOT NULL"]
-        cols += [f"r{p + 1} INTEGER" for p in range(self.width)]
-        cols += ["t_start REAL NOT NULL", "t_end REAL NOT NULL"]
-        cols += [f"h{i + 1}" for i in range(self.rule.arity)]
-        cols += ["detected REAL NOT NULL"]
-        out = [f"CREATE TABLE IF NOT EXISTS {self.prov} ({', '.join(cols)})"]
-        if self.used:
-            out.append(f"CREATE TABLE IF NOT EXISTS {self.used} (tbl TEXT NOT NULL, "
-                       f"seq INTEGER NOT NULL, PRIMARY KEY (tbl, seq)) WITHOUT ROWID")
-        return out
+    def create_tables(self) -> None:
+        """The rule's provenance table (and used-rows table), if they are not there yet."""
+        self.eng.store.create_rule_tables(self.prov, self.width, self.rule.arity, self.used)
 
     def build(self) -> None:
         """(Re)build the SQL of every alternative for the tables that exist now."""
@@ -139,7 +131,7 @@ class RuleRuntime:
             names = [eng.table_name(leaf.key) for leaf in alt.leaves]
             sql = AltSQL(alt, n, tables, neg_tables, head_args, self.policy, eng.complete_sql,
                          used_table=self.used, prov_table=self.prov, table_names=names,
-                         fact_table=eng.fact_table)
+                         fact_table=eng.fact_table, dialect=eng.store.dialect)
             self.alts.append(sql)
             residual = None
             reads = False
@@ -188,8 +180,20 @@ class RuleRuntime:
         return out
 
     def ensure_built(self) -> None:
-        if self.generation != self.eng.generation:
+        if self.generation != self.eng.generation or self._tables_appeared():
             self.build()
+
+    def _tables_appeared(self) -> bool:
+        """A type that had no table when the SQL was built has one now: another process
+        (or another store object) created it, so this one's table hooks never heard."""
+        for sql in self.alts:
+            for table, leaf in zip(sql.tables, sql.alt.leaves):
+                if table is None and self.eng.table(leaf.key) is not None:
+                    return True
+            for table, (_, leaf) in zip(sql.neg_tables, sql.alt.negations):
+                if table is None and self.eng.table(leaf.key) is not None:
+                    return True
+        return False
 
     # ----------------------------------------------------------------- running
     def run(self, new_from: dict, dirty: set, now: float, decide: bool) -> list:
@@ -294,7 +298,8 @@ class RuleRuntime:
     def _bindings(self, n: int, row: tuple) -> dict:
         alt = self.alts[n]
         base = alt.k + 2
-        return {id(v): decode(row[base + i]) for i, v in enumerate(alt.value_vars)}
+        dec = self.eng.decode
+        return {id(v): dec(row[base + i]) for i, v in enumerate(alt.value_vars)}
 
     def _derive_from(self, n: int, row: tuple, now: float) -> bool:
         """Derive the complex events of one match (value columns ``row``); raises MustWait.
@@ -330,7 +335,7 @@ class RuleRuntime:
                 if t is None:
                     break
                 try:
-                    values.append(encode(t))
+                    values.append(self.eng.encode(t))
                 except Unencodable:
                     break
             else:
@@ -629,14 +634,14 @@ class RuleRuntime:
         store = self.eng.store
         values = [f"h{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
         cols = [f"arg{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
-        copy = (f"INSERT INTO {table} ({', '.join(cols)}, arrival) "
-                f"SELECT {', '.join(values)}, :now FROM {self.prov} WHERE id > :before "
+        # a complex event is the deriving store's: its robot (NULL on an unnamed or fleet
+        # store, whatever robots the constituent events came from)
+        copy = (f"INSERT INTO {table} ({', '.join(cols)}, arrival, robot) "
+                f"SELECT {', '.join(values)}, :now, :robot FROM {self.prov} WHERE id > :before "
                 f"ORDER BY id")
-        args = {"now": now, "before": before}
+        args = {"now": now, "before": before, "robot": store.robot}
         head_table = self.eng.table_name(self.head_key)
-        if store.execute("SELECT 1 FROM sqlite_master WHERE type = 'trigger' AND tbl_name = ? "
-                         "UNION ALL SELECT 1 FROM sqlite_temp_master WHERE type = 'trigger' "
-                         "AND tbl_name = ? LIMIT 1", (head_table, head_table)):
+        if store.triggers(head_table):
             # a buffer's trigger may refuse rows: the rows stored are those RETURNING gives
             rows = store.run_compiled(f"{copy} RETURNING {', '.join(cols)}", args)
             # RETURNING gives an integral REAL as an int: the times as stored (floats)
@@ -650,7 +655,7 @@ class RuleRuntime:
         if not rows:
             return []
         self.detections += len(rows)
-        dec = decode
+        dec = self.eng.decode
         if arity == 0:
             return [(name, (), r[0], r[1]) for r in rows]
         if arity == 1:
@@ -665,6 +670,11 @@ class EventRules:
     def __init__(self, kb: Any):
         self.kb = kb
         self.store = kb.store
+        # the store's columns: encoded terms as they are (SQLite) or as a server holds them
+        from_column, to_column = kb.store.dialect.from_column, kb.store.dialect.to_column
+        self.decode: Any = decode if from_column is None else \
+            (lambda v: decode(from_column(v)))
+        self.encode: Any = encode if to_column is None else (lambda t: to_column(encode(t)))
         self.clock = kb.clock
         self.sync = getattr(kb, "_sync", None)
         self.tracker = self.sync.tracker if self.sync is not None else None
@@ -721,14 +731,16 @@ class EventRules:
         self.rules = runtimes
         self.by_head = by_head
         self.generation += 1
+        # writers of types one rule joins take turns (a server's concurrent writers would
+        # each miss the other's half of a match); other writers do not wait for them
+        self.store.set_write_groups(_rule_groups(runtimes))
         if runtimes:
             with self.store.transaction():
                 for rt in runtimes:
                     name, arity = rt.head_key
                     if self.store.table_for(name, arity) is None:
                         self.store.declare_type(name, arity)
-                    for sql in rt.schema():
-                        self.store.execute(sql)
+                    rt.create_tables()
                     self.store.execute(
                         "INSERT INTO slr_cep_rules (key, head, rule, policy, source, "
                         "prov_table, installed_at) VALUES (?, ?, ?, ?, ?, ?, ?) "
@@ -784,7 +796,7 @@ class EventRules:
         n = self._index(key)
         if key in self.types:
             inner = " AND ".join(f"({self.complete_sql(t, x)})" for t in self.inputs[key])
-            return f"{x} <= :mk{n} OR (({inner or '1'}) AND {x} < :pm{n})"
+            return f"{x} <= :mk{n} OR (({inner or self.store.dialect.true}) AND {x} < :pm{n})"
         return f"{x} <= :mk{n} OR {x} + :dl{n} < :now OR {x} < :le{n}"
 
     def params(self, now: float) -> dict:
@@ -886,6 +898,7 @@ class EventRules:
                     keys.add(key)
         if not keys:
             return None
+        self.store.lock_for_write(keys)   # before the watermarks: see set_write_groups
         return {key: self._max_seq(key) for key in keys}
 
     def store_events(self, events: list, atomic: bool) -> list:
@@ -971,6 +984,7 @@ class EventRules:
                 return
             try:
                 with self.store.transaction():
+                    self.store.lock_for_write(self.types | self.leaf_types)
                     derived = self._round({}, set(), True)
             except SLRError:
                 if self.store.closed:
@@ -1169,3 +1183,20 @@ def _wrap(sql: str) -> list[str]:
             .replace(" ORDER BY ", "\nORDER BY ").split("\n"):
         out.append(part)
     return out
+
+
+def _rule_groups(runtimes: list) -> list[set]:
+    """The event types rules tie together (head, positive and negated atoms), merged into
+    groups: two rules sharing a type are one group."""
+    groups: list[set] = []
+    for rt in runtimes:
+        types = {rt.head_key}
+        for alt in rt.rule.alternatives:
+            types |= {leaf.key for leaf in alt.leaves}
+            types |= {leaf.key for _, leaf in alt.negations}
+        joined = [g for g in groups if g & types]
+        for g in joined:
+            groups.remove(g)
+            types |= g
+        groups.append(types)
+    return groups

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from ..encoding import Unencodable, encode
+from ..store.dialect import SQLITE
 from ..terms import Struct, Var, deref, is_ground, term_vars
 from .rules import Alternative, Expr, Leaf
 
@@ -63,12 +64,12 @@ def render(template: str, aliases: dict[str, str]) -> str:
     return template.format_map(aliases)
 
 
-def _expr(e: Expr) -> str:
+def _expr(e: Expr, dialect: Any = SQLITE) -> str:
     if e[0] == "s":
         return f"{{e{e[1]}}}.t_start"
     if e[0] == "e":
         return f"{{e{e[1]}}}.t_end"
-    return f"{e[0]}({_expr(e[1])}, {_expr(e[2])})"
+    return f"{dialect.scalar(e[0])}({_expr(e[1], dialect)}, {_expr(e[2], dialect)})"
 
 
 def _expr_positions(e: Expr) -> frozenset:
@@ -117,6 +118,7 @@ class AltSQL:
     residual: list = field(default_factory=list)
     pushed: list = field(default_factory=list)
     head_sql: list | None = None
+    dialect: Any = SQLITE     # the SQL printed: store/dialect.py
 
     def __post_init__(self) -> None:
         alt = self.alt
@@ -124,8 +126,8 @@ class AltSQL:
         self._cache: dict = {}
         self._others: dict = {}   # variable -> its later occurrences in positive atoms
         self.k = len(alt.leaves)
-        self.S = _expr(alt.interval[0])
-        self.E = _expr(alt.interval[1])
+        self.S = _expr(alt.interval[0], self.dialect)
+        self.E = _expr(alt.interval[1], self.dialect)
         for pos, leaf in enumerate(alt.leaves):
             self._leaf(leaf, f"{{e{pos}}}", frozenset((pos,)))
         for i in range(self.k):
@@ -135,7 +137,7 @@ class AltSQL:
         for op, left, right in alt.relations:
             for a, cmp, b in self._relation(op, left, right):
                 self.conds.append(_Cond(_expr_positions(a) | _expr_positions(b),
-                                        f"{_expr(a)} {cmp} {_expr(b)}"))
+                                        f"{_expr(a, self.dialect)} {cmp} {_expr(b, self.dialect)}"))
         for interval, seconds, positions in alt.windows:
             self._window(interval, seconds, positions)
         for goal in alt.goals:
@@ -178,22 +180,28 @@ class AltSQL:
             encoded = encode(value)
         except Unencodable:
             return None
-        p = self._param(encoded)
+        typeof = self.dialect.typeof
+        p = self._param(self._stored(encoded))
         if type(value) is int and type(encoded) is int:
-            return f"({ref.sql} = {p} AND typeof({ref.sql}) = 'integer')"
+            return f"({ref.sql} = {p} AND {typeof(ref.sql)} = 'integer')"
         if type(value) is float:
-            return f"({ref.sql} = {p} AND typeof({ref.sql}) = 'real')"
+            return f"({ref.sql} = {p} AND {typeof(ref.sql)} = 'real')"
         return f"{ref.sql} = {p}"
 
-    @staticmethod
-    def _eq(a: Ref, b: Ref) -> str:
+    def _stored(self, encoded: Any) -> Any:
+        """An encoded value as the store's columns hold it."""
+        to_column = self.dialect.to_column
+        return encoded if to_column is None else to_column(encoded)
+
+    def _eq(self, a: Ref, b: Ref) -> str:
+        typeof = self.dialect.typeof
         if a.kind == "time" and b.kind == "time":
             return f"{a.sql} = {b.sql}"
         if a.kind == "data" and b.kind == "data":
-            return f"({a.sql} = {b.sql} AND typeof({a.sql}) = typeof({b.sql}))"
+            return f"({a.sql} = {b.sql} AND {typeof(a.sql)} = {typeof(b.sql)})"
         d, t = (a, b) if a.kind == "data" else (b, a)
         # times match by value (a time 5.0 and a data argument 5 are the same instant)
-        return f"({d.sql} = {t.sql} AND typeof({d.sql}) {_NUMERIC})"
+        return f"({self.dialect.number(d.sql)} = {t.sql} AND {typeof(d.sql)} {_NUMERIC})"
 
     def _bind(self, term: Any, ref: Ref, refs: dict, out: list) -> None:
         """Constrain the column ``ref`` by the pattern term at that place."""
@@ -214,7 +222,7 @@ class AltSQL:
                     self._others.setdefault(id(term), []).append(ref)
             return
         sql = self._const_cond(ref, term)
-        out.append(_Cond(ref.positions, sql if sql is not None else "0"))
+        out.append(_Cond(ref.positions, sql if sql is not None else self.dialect.false))
 
     def _leaf(self, leaf: Leaf, alias: str, positions: frozenset,
               refs: dict | None = None, out: list | None = None) -> None:
@@ -251,7 +259,7 @@ class AltSQL:
         return []  # and: both occurred, in any order
 
     def _window(self, interval: tuple, seconds: float, within: tuple) -> None:
-        s, e = _expr(interval[0]), _expr(interval[1])
+        s, e = _expr(interval[0], self.dialect), _expr(interval[1], self.dialect)
         positions = _expr_positions(interval[0]) | _expr_positions(interval[1])
         d = self._param(float(seconds))
         self.conds.append(_Cond(positions, f"{e} - {s} <= {d}"))
@@ -305,10 +313,15 @@ class AltSQL:
             a, b = self._side(g.args[0]), self._side(g.args[1])
             if a is None or b is None:
                 return None
-            core = f"{a[0]} {_CMP[g.name]} {b[0]}"
-            guards = [f"typeof({x}) {_NUMERIC}" for x, kind in (a, b) if kind == "data"]
+            number = self.dialect.number
+            core = (f"{number(a[0]) if a[1] == 'data' else a[0]} {_CMP[g.name]} "
+                    f"{number(b[0]) if b[1] == 'data' else b[0]}")
+            guards = [f"{self.dialect.typeof(x)} {_NUMERIC}" for x, kind in (a, b)
+                      if kind == "data"]
             if not guards:
                 return _Cond(positions, core)
+            if not self.dialect.python_functions:
+                return None  # slr_cep_cmp is Python: the goal is evaluated on the Python side
             op = self._param(str(g.name))
             return _Cond(positions, f"(CASE WHEN {' AND '.join(guards)} THEN {core} ELSE "
                                     f"slr_cep_cmp({op}, {a[0]}, {b[0]}) END)")
@@ -326,16 +339,17 @@ class AltSQL:
             if isinstance(x, Ref) and isinstance(y, Ref):
                 if x.kind != y.kind:
                     d, t = (x, y) if x.kind == "data" else (y, x)
-                    sql = f"(typeof({d.sql}) = 'real' AND {d.sql} = {t.sql})"
+                    sql = (f"({self.dialect.typeof(d.sql)} = 'real' AND "
+                           f"{self.dialect.number(d.sql)} = {t.sql})")
                 else:
                     sql = self._eq(x, y)
             elif isinstance(x, Ref) or isinstance(y, Ref):
                 ref, value = (x, y) if isinstance(x, Ref) else (y, x)
                 if ref.kind == "time":
                     sql = (f"{ref.sql} = {self._param(value)}" if type(value) is float
-                           else "0")
+                           else self.dialect.false)
                 else:
-                    sql = self._const_cond(ref, value) or "0"
+                    sql = self._const_cond(ref, value) or self.dialect.false
             else:
                 return None  # two constants: the interpreter's business
             return _Cond(positions, sql if _EQ[g.name] else f"NOT ({sql})")
@@ -352,16 +366,17 @@ class AltSQL:
             if type(a) is Var:
                 ref = self.refs[id(a)]
                 if ref.kind == "time":   # a time is a float: a fact's 5 is not 5.0
-                    conds.append(f"(typeof({column.sql}) = 'real' AND {column.sql} = {ref.sql})")
+                    conds.append(f"({self.dialect.typeof(column.sql)} = 'real' AND "
+                                 f"{self.dialect.number(column.sql)} = {ref.sql})")
                 else:
                     conds.append(self._eq(column, ref))
             else:
-                conds.append(self._const_cond(column, a) or "0")
-        where = " AND ".join(conds) or "1"
+                conds.append(self._const_cond(column, a) or self.dialect.false)
+        where = " AND ".join(conds) or self.dialect.true
         return _Cond(positions, f"EXISTS (SELECT 1 FROM {table} AS {alias} WHERE {where})")
 
     def _negation(self, n: int, interval: tuple, leaf: Leaf) -> None:
-        s, e = _expr(interval[0]), _expr(interval[1])
+        s, e = _expr(interval[0], self.dialect), _expr(interval[1], self.dialect)
         positions = _expr_positions(interval[0]) | _expr_positions(interval[1])
         table = self.neg_tables[n]
         if table is None:
@@ -392,7 +407,7 @@ class AltSQL:
                 out.append(ref.sql)
             elif is_ground(a):
                 try:
-                    out.append(self._param(encode(a)))
+                    out.append(self._param(self._stored(encode(a))))
                 except Unencodable:
                     return None
             else:
@@ -414,7 +429,7 @@ class AltSQL:
         return {f"e{p}": f"{prefix}e{p}" for p in range(self.k)}
 
     def _where(self, conds: list[str]) -> str:
-        return " AND ".join(c for c in conds if c) or "1"
+        return " AND ".join(c for c in conds if c) or self.dialect.true
 
     def _from(self, order: list[int], aliases: dict[str, str]) -> str:
         return " CROSS JOIN ".join(f"{self.tables[p]} AS {aliases[f'e{p}']}" for p in order)
@@ -431,11 +446,11 @@ class AltSQL:
     def neg_complete(self, aliases: dict[str, str]) -> str:
         """Every negated type complete up to the end of its interval."""
         parts = [self.complete_sql(n.key, render(n.end, aliases)) for n in self.negs]
-        return " AND ".join(f"({p})" for p in parts) or "1"
+        return " AND ".join(f"({p})" for p in parts) or self.dialect.true
 
     def neg_ok(self, aliases: dict[str, str]) -> str:
         parts = [render(n.sql, aliases) for n in self.negs if n.sql is not None]
-        return " AND ".join(parts) or "1"
+        return " AND ".join(parts) or self.dialect.true
 
     def inputs_complete(self, end: str) -> str:
         """Every positive and negated type complete up to ``end`` (a terminator's end)."""
@@ -443,7 +458,7 @@ class AltSQL:
         for leaf in self.alt.leaves + [leaf for _, leaf in self.alt.negations]:
             if leaf.key not in keys:
                 keys.append(leaf.key)
-        return " AND ".join(f"({self.complete_sql(k, end)})" for k in keys) or "1"
+        return " AND ".join(f"({self.complete_sql(k, end)})" for k in keys) or self.dialect.true
 
     def cond_sql(self, aliases: dict[str, str], within: set | None = None,
                  exclude: set | None = None) -> list[str]:
@@ -515,7 +530,7 @@ class AltSQL:
         seqs = ", ".join(f"e{p}.seq" for p in range(self.k))
         return ("INSERT INTO slr_cep_pending (rule, alt, kind, pos, rowids, t_start, t_end, "
                 "created_at) "
-                f"SELECT :rule, {self.index}, 'match', NULL, json_array({seqs}), "
+                f"SELECT :rule, {self.index}, 'match', NULL, {self.dialect.json_array(seqs)}, "
                 f"{render(self.S, a)}, {render(self.E, a)}, :now FROM "
                 f"{self._from(self._order_from(pos), a)} WHERE {self._where(conds)}")
 
@@ -575,7 +590,7 @@ class AltSQL:
         # that only identical events are told apart by their arrival (seq)
         keys = [f"{alias}.t_end{d}", f"{alias}.t_start{d}"]
         for j in range(leaf.arity):
-            keys += [f"{alias}.arg{j + 1}{d}", f"typeof({alias}.arg{j + 1}){d}"]
+            keys += [f"{alias}.arg{j + 1}{d}", f"{self.dialect.typeof(f'{alias}.arg{j + 1}')}{d}"]
         return keys + [f"{alias}.seq{d}"]
 
     def partner_order(self, pos: int) -> list[int]:
@@ -615,7 +630,7 @@ class AltSQL:
         policy (recent: newest partners; chronological: oldest unused partners)."""
         a = self.aliases()
         order = [pos] + self.partner_order(pos)
-        first = (f"e{pos}.seq IN (SELECT value FROM json_each(:ts))" if many
+        first = (f"e{pos}.seq IN ({self.dialect.json_integers(':ts')})" if many
                  else f"e{pos}.seq = :t")
         conds = [first] + self.cond_sql(a) + self._terminator_conds(pos, a)
         if self.negs:
@@ -658,7 +673,7 @@ class AltSQL:
     def _pending_join(self, aliases: dict[str, str]) -> str:
         """FROM the pending matches of this alternative, joined with their events."""
         joins = " ".join(f"JOIN {self.tables[p]} AS {aliases[f'e{p}']} ON "
-                         f"{aliases[f'e{p}']}.seq = json_extract(p.rowids, '$[{p}]')"
+                         f"{aliases[f'e{p}']}.seq = {self.dialect.json_integer('p.rowids', p)}"
                          for p in range(self.k))
         return (f"slr_cep_pending AS p {joins} WHERE p.rule = :rule AND p.alt = {self.index} "
                 f"AND p.kind = 'match' AND p.wait_type IS NULL")
@@ -695,7 +710,7 @@ class AltSQL:
         conds = [self.inputs_complete(f"{t}.t_end")] + own
         if pending:
             source = (f"slr_cep_pending AS p JOIN {self.tables[pos]} AS {t} ON {t}.seq = "
-                      f"json_extract(p.rowids, '$[0]')")
+                      f"{self.dialect.json_integer('p.rowids', 0)}")
             conds = ["p.rule = :rule", f"p.alt = {self.index}", "p.kind = 'term'",
                      f"p.pos = {pos}", "p.wait_type IS NULL"] + conds
         else:
@@ -771,9 +786,9 @@ class AltSQL:
             conds.append(f"NOT ({self.inputs_complete(f'{t}.t_end')})")
         return ("INSERT INTO slr_cep_pending (rule, alt, kind, pos, rowids, t_start, t_end, "
                 "created_at) "
-                f"SELECT :rule, {self.index}, 'term', {pos}, json_array({t}.seq), "
+                f"SELECT :rule, {self.index}, 'term', {pos}, {self.dialect.json_array(f'{t}.seq')}, "
                 f"{t}.t_start, {t}.t_end, :now FROM {self.tables[pos]} AS {t} "
                 f"WHERE {self._where(conds)}")
 
     def used_insert(self) -> str:
-        return f"INSERT OR IGNORE INTO {self.used_table} (tbl, seq) VALUES (?, ?)"
+        return self.dialect.insert_ignore(self.used_table, "tbl, seq", "?, ?")

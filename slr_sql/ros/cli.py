@@ -1,4 +1,4 @@
-"""``slr ros import`` and ``slr ros bridge`` (the ``slr_sql[ros]`` extra).
+"""``slr ros import``, ``slr ros info`` and ``slr ros bridge`` (the ``slr_sql[ros]`` extra).
 
 The group is attached to ``slr`` by slr_sql/cli.py. This module imports only click and
 slr_sql at load time, so ``slr --help`` stays fast and works without the extra; each command
@@ -115,6 +115,53 @@ def _print_report(report: Any, bag: str) -> None:
                + (f" ({report.skipped} already imported)" if report.skipped else "")
                + (f", {len(report.rejected)} rejected" if report.rejected else "")
                + f" [{report.bag_id}]")
+
+
+@ros.command("info")
+@click.argument("bag", type=click.Path())
+@click.option("--map-only", is_flag=True,
+              help="Print only the draft MAP (YAML), e.g. to redirect into a file.")
+@click.option("--json", "as_json", is_flag=True, help="The summary as JSON (no draft MAP).")
+def info_command(bag: str, map_only: bool, as_json: bool) -> None:
+    """Topics of BAG (type, messages, time span), the frames in /tf and /tf_static, and a
+    draft MAP for the topics (YAML, to edit and pass to `slr ros import --map`)."""
+    try:
+        import rosbags  # noqa: F401
+
+        from .bag_info import bag_info, draft_map
+    except ImportError as exc:
+        raise _need_extra("info", exc) from None
+    info = bag_info(bag)
+    if as_json:
+        click.echo(info.as_json())
+        return
+    if map_only:
+        click.echo(draft_map(info), nl=False)
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console(highlight=False, width=None if sys.stdout.isatty() else 200)
+
+    def when(t: float | None) -> str:
+        return "" if t is None else f"{t:.3f}"
+
+    click.echo(f"bag:       {info.path} [{info.bag_id}]")
+    click.echo(f"messages:  {info.count}")
+    click.echo(f"time span: {when(info.start)} .. {when(info.end)} ({info.duration:.3f} s)")
+    table = Table("topic", "type", "messages", "first", "last")
+    for t in info.topics:
+        table.add_row(t.topic, t.msgtype, str(t.count), when(t.first), when(t.last))
+    console.print(table)
+    if info.frames:
+        frames = Table("topic", "parent", "child", "transforms", "first stamp", "last stamp")
+        for e in info.frames:
+            frames.add_row(e.topic, e.parent, e.child, str(e.count), when(e.first), when(e.last))
+        console.print(frames)
+    else:
+        click.echo("no transforms in /tf or /tf_static")
+    click.echo("\n# ---- draft MAP (slr ros info BAG --map-only > robot.yaml) ----")
+    click.echo(draft_map(info), nl=False)
 
 
 @ros.command("bridge")

@@ -19,6 +19,7 @@ a ``seq`` field in the header, times as two unsigned 32-bit numbers).
 """
 from __future__ import annotations
 
+from functools import partial
 from struct import Struct as _Packing
 from typing import Any, Callable
 
@@ -88,14 +89,17 @@ def compile_for(bound: Any, conn: Any, reader: Any) -> Callable[[Any, float], li
     if not bound.entry.where.startswith("built-in") or conn.msgtype != _TF:
         return None
     fielddefs = reader.typestore.fielddefs
-    if reader.is2:
-        return decode_cdr if _matches(fielddefs, _ROS2) else None
-    return decode_ros1 if _matches(fielddefs, _ROS1) else None
+    decode = decode_cdr if reader.is2 else decode_ros1
+    if not _matches(fielddefs, _ROS2 if reader.is2 else _ROS1):
+        return None
+    event = bound.entry.event
+    return decode if event == "tf" else partial(decode, event=event)
 
 
-def decode_cdr(raw: Any, record: float) -> list:
+def decode_cdr(raw: Any, record: float, event: str = "tf") -> list:
     """The tf events of one CDR-serialized TFMessage (``record`` is unused: tf events take
-    the header stamp of each transform)."""
+    the header stamp of each transform); ``event`` names them (``tf_static`` for
+    /tf_static)."""
     little = raw[1] == 1
     u32, time_len, length, pose = _U32[little], _TIME_LEN[little], _LEN[little], _POSE[little]
     (count,) = u32.unpack_from(raw, 4)
@@ -117,11 +121,11 @@ def decode_cdr(raw: Any, record: float) -> list:
         tx, ty, tz, qx, qy, qz, qw = pose.unpack_from(raw, pos)
         pos += 56
         t = sec + nanosec * 1e-9
-        append(("tf", (parent, child, Struct("pose", ([tx, ty, tz], [qx, qy, qz, qw]))), t, t))
+        append((event, (parent, child, Struct("pose", ([tx, ty, tz], [qx, qy, qz, qw]))), t, t))
     return out
 
 
-def decode_ros1(raw: Any, record: float) -> list:
+def decode_ros1(raw: Any, record: float, event: str = "tf") -> list:
     """The tf events of one ROS 1-serialized TFMessage."""
     (count,) = _ROS1_LEN.unpack_from(raw, 0)
     pos = 4
@@ -139,5 +143,5 @@ def decode_ros1(raw: Any, record: float) -> list:
         tx, ty, tz, qx, qy, qz, qw = _ROS1_POSE.unpack_from(raw, pos)
         pos += 56
         t = sec + nanosec * 1e-9
-        append(("tf", (parent, child, Struct("pose", ([tx, ty, tz], [qx, qy, qz, qw]))), t, t))
+        append((event, (parent, child, Struct("pose", ([tx, ty, tz], [qx, qy, qz, qw]))), t, t))
     return out

@@ -23,8 +23,6 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
-import hmac
-import inspect
 import logging
 import math
 import re
@@ -34,9 +32,10 @@ from dataclasses import dataclass
 from typing import Any, Awaitable, Callable
 
 from starlette.applications import Starlette
+from starlette.middleware import Middleware
 from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException
-from starlette.requests import Request
+from starlette.requests import ClientDisconnect, Request
 from starlette.responses import Response
 from starlette.routing import Route, WebSocketRoute
 from starlette.websockets import WebSocket, WebSocketDisconnect
@@ -47,7 +46,8 @@ from slr_sql.store.checks import format_event
 
 from .encoding import (decode_args, decode_arguments, decode_term, dumps, encode_answers,
                        encode_plain, loads)
-from .errors import ServiceError, error_body
+from .auth import BearerToken
+from .errors import ServiceError, error_body, retry_after
 
 __all__ = ["create_app", "Limits", "API_VERSION"]
 
@@ -82,6 +82,9 @@ def _error_response(exc: BaseException) -> Response:
     body = error_body(exc)
     status = body["error"]["status"]
     headers = {"WWW-Authenticate": 'Bearer realm="slr"'} if status == 401 else None
+    wait = retry_after(exc)
+    if wait is not None:  # a condition that may pass: the client keeps its events and retries
+        headers = {"Retry-After": str(wait)}
     return _json(body, status, headers)
 
 
@@ -95,6 +98,8 @@ def _classify(exc: BaseException) -> BaseException:
         text = str(exc)
         if "locked" in text or "busy" in text:
             return ServiceError(f"the store is busy: {text}", kind="Unavailable")
+        if "disk is full" in text:
+            return ServiceError(f"the store is full: {text}", kind="Unavailable")
         log.error("SQLite error", exc_info=exc)
         return exc
     if isinstance(exc, (TypeError, ValueError, UnicodeError, OverflowError, RecursionError,
@@ -171,7 +176,52 @@ def _plain(value: Any) -> Any:
         value = dataclasses.asdict(value)
     elif isinstance(value, list):
         value = [_plain(v) for v in value]
+    elif isinstance(value, dict):
+        value = {k: _plain(v) for k, v in value.items()}
     return encode_plain(value)
+
+
+class _AnswerOnce:
+    """ASGI middleware: an answer that can no longer be sent is dropped without a word.
+
+    When the HTTP server finds a request body malformed (a broken chunked encoding, say), it
+    answers 400 itself and closes the connection while the endpoint may be running already
+    (an unauthenticated request is refused before its body is read): the endpoint's own
+    answer then fails to send (uvicorn's h11 protocol raises). The client has its 400 and
+    the server logged its one line; the failed send is not an error of the service, so it
+    is dropped (a debug line), and the middleware waits (briefly) until the server has seen
+    the connection close, so that it does not report an unfinished response either."""
+
+    def __init__(self, app: Any):
+        self.app = app
+
+    async def __call__(self, scope: dict, receive: Callable, send: Callable) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        failed: list[BaseException] = []
+
+        async def send_once(message: dict) -> None:
+            if failed:
+                return
+            try:
+                await send(message)
+            except Exception as exc:  # noqa: BLE001 - whatever the server raises: it is gone
+                failed.append(exc)
+                log.debug("an answer to %s %s could not be sent (%s): the connection is "
+                          "closed", scope.get("method"), scope.get("path"), type(exc).__name__)
+
+        await self.app(scope, receive, send_once)
+        if failed:
+            try:
+                await asyncio.wait_for(_disconnected(receive), 5.0)
+            except (TimeoutError, asyncio.TimeoutError, Exception):  # noqa: BLE001
+                pass        # the server closes the connection on its own
+
+
+async def _disconnected(receive: Callable) -> None:
+    while (await receive())["type"] != "http.disconnect":
+        pass
 
 
 class _AnswerTexts:
@@ -238,26 +288,13 @@ class _Service:
 
     def __init__(self, kb: Any, token: str | None, limits: Limits):
         self.kb = kb
-        self.token = token.encode("utf-8") if token else None
+        self.check_token = BearerToken(token)
         self.limits = limits
         self.submitted: dict[str, _Submitted] = {}
         self.answer_texts = _AnswerTexts()
         self.endpoints = _ENDPOINTS
-        params = _parameters(kb.load)
-        self.load_takes_name = "name" in params and "replace" in params
-        self.load_takes_filename = "filename" in params
 
     # -- plumbing -----------------------------------------------------------------------------
-    def check_token(self, header: str | None) -> None:
-        if self.token is None:
-            return
-        given = b""
-        if header and header[:7].lower() == "bearer ":
-            given = header[7:].strip().encode("utf-8", "surrogatepass")
-        if not hmac.compare_digest(given, self.token):
-            raise ServiceError("a valid token is required (Authorization: Bearer TOKEN; "
-                               "the server's --token or SLR_TOKEN)", kind="Unauthorized")
-
     async def body(self, request: Request) -> dict:
         """The request's JSON object, read within the size and time limits."""
         limit = self.limits.max_body
@@ -336,6 +373,10 @@ class _Service:
                 if isinstance(result, tuple):
                     status, result = result
                 return _json(result, status)
+            except ClientDisconnect:
+                # the client left (or the server refused its malformed body and closed the
+                # connection): nobody reads an answer, and there is nothing to log
+                return Response(status_code=400)
             except Exception as exc:  # every failure is an error response, never a crash
                 return _error_response(_classify(exc))
         return handle
@@ -362,6 +403,10 @@ class _Service:
         state: dict[str, Any] = {"handle": entry.handle, "id": pending.id,
                                  "done": pending.done()}
         if not pending.done():
+            state["waiting_for"] = [
+                {"type": w.type, "time": encode_plain(float(w.time)), "reason": w.reason,
+                 "kind": w.kind} for w in list(getattr(pending, "waiting_for", ()))]
+            state["waiting"] = pending.timeout_message(None)
             return 202, state
         if pending.cancelled():
             state["cancelled"] = True
@@ -407,18 +452,11 @@ class _Service:
                                  else None))
             pattern, kwargs = _subscribe_request(request)
             batch = _batch_size(request)
-            if not hasattr(self.kb, "subscribe"):
-                raise ServiceError("subscriptions are not available: this knowledge base has "
-                                   "no subscribe() yet", kind="NotImplemented")
-            if "max_queue" in _parameters(self.kb.subscribe):
-                kwargs["max_queue"] = max(self.limits.subscribe_queue, batch)
+            kwargs["max_queue"] = max(min(kwargs.get("max_queue", self.limits.subscribe_queue),
+                                          self.limits.subscribe_queue), batch)
             acks = _Acks(max(self.limits.subscribe_queue, batch)) \
                 if _ack_flag(request) else None
             sub = await self.call(self.kb.subscribe, pattern, **kwargs)
-            if acks is not None and not hasattr(sub, "acknowledge"):
-                raise ServiceError("acknowledgements are not available: this knowledge "
-                                   "base's subscriptions have no acknowledge()",
-                                   kind="NotImplemented")
             subscribed = {"type": "subscribed", "pattern": pattern, "id": kwargs.get("id")}
             if acks is not None:
                 subscribed["ack_window"] = acks.bound
@@ -665,17 +703,11 @@ async def _load(svc: "_Service", request: Request) -> Any:
     filename = _field(b, "filename", str)
     name = _field(b, "name", str)
     replace = _field(b, "replace", bool, default=False)
-    kwargs: dict[str, Any] = {}
-    if filename is not None and svc.load_takes_filename:
+    kwargs: dict[str, Any] = {"replace": replace}
+    if filename is not None:
         kwargs["filename"] = filename
-    if name is not None or replace:
-        if not svc.load_takes_name:
-            raise ServiceError("this knowledge base has no named programs yet "
-                               "(load(text, name=, replace=)); load without name and "
-                               "replace", kind="NotImplemented")
-        if name is not None:
-            kwargs["name"] = name
-        kwargs["replace"] = replace
+    if name is not None:
+        kwargs["name"] = name
     await svc.call(svc.kb.load, text, **kwargs)
     return {"loaded": True}
 
@@ -685,20 +717,21 @@ async def _load(svc: "_Service", request: Request) -> Any:
 async def _unload(svc: "_Service", request: Request) -> Any:
     b = await svc.body(request)
     name = _field(b, "name", str, required=True)
-    if not hasattr(svc.kb, "unload"):
-        raise ServiceError("this knowledge base cannot unload programs yet",
-                           kind="NotImplemented")
     await svc.call(svc.kb.unload, name)
     return {"unloaded": name}
 
 
-@_route("GET", "/programs", "The loaded named programs (kb.programs).",
-        response={"programs": "array"})
+@_route("GET", "/programs", "The loaded named programs (kb.programs): name -> "
+        "{name, source, texts, filenames, loaded_at}, in load order.",
+        response={"programs": "ProgramMap"})
 async def _programs(svc: "_Service", request: Request) -> Any:
-    if not hasattr(svc.kb, "programs"):
-        raise ServiceError("this knowledge base has no named programs yet",
-                           kind="NotImplemented")
     return {"programs": _plain(await svc.call(svc.kb.programs))}
+
+
+@_route("GET", "/event_rules", "The event rules in force, in the order they run "
+        "(kb.event_rules).", response={"event_rules": "array"})
+async def _event_rules(svc: "_Service", request: Request) -> Any:
+    return {"event_rules": _plain(await svc.call(svc.kb.event_rules))}
 
 
 @_route("POST", "/query", "Answer a goal (kb.query); wait=true makes it "
@@ -706,7 +739,8 @@ async def _programs(svc: "_Service", request: Request) -> Any:
         "(max_wait when synchronized).",
         body={"goal": ("string", True), "args": ("Args", False),
               "at": ("Number", False), "timeout": ("Number", False),
-              "limit": ("integer", False), "wait": ("boolean", False)},
+              "max_steps": ("integer", False), "limit": ("integer", False),
+              "wait": ("boolean", False), "robot": ("string", False)},
         response={"answers": "AnswerList"})
 async def _query(svc: "_Service", request: Request) -> Any:
     b = await svc.body(request)
@@ -715,13 +749,17 @@ async def _query(svc: "_Service", request: Request) -> Any:
     at = _number(b, "at")
     timeout = _number(b, "timeout", minimum=0)
     limit = _field(b, "limit", int)
+    max_steps = _field(b, "max_steps", int)
+    robot = _field(b, "robot", str)
     if _field(b, "wait", bool, default=False):
         pending = await svc.call(svc.kb.submit, goal, at=at, args=args,
                                   timeout=_cap(timeout, svc.limits.max_wait))
         answers = await asyncio.wrap_future(pending)
     else:
         answers = await svc.call(svc.kb.query, goal, at=at, args=args, limit=limit,
-                                  timeout=_cap(timeout, svc.limits.max_query_time))
+                                  timeout=_cap(timeout, svc.limits.max_query_time),
+                                  max_steps=max_steps,
+                                  **({"robot": robot} if robot is not None else {}))
     return {"answers": encode_answers(answers)}
 
 
@@ -778,6 +816,16 @@ async def _cancel(svc: "_Service", request: Request) -> Any:
 async def _explain(svc: "_Service", request: Request) -> Any:
     b = await svc.body(request)
     return {"explain": await svc.call(svc.kb.explain, _field(b, "goal", str, required=True))}
+
+
+@_route("POST", "/warnings", "Warnings about a goal that do not change its answer: a "
+        "predicate with no events, rules or declaration and the nearest known names "
+        "(kb.goal_warnings).",
+        body={"goal": ("string", True)}, response={"warnings": "array"})
+async def _warnings(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    goal = _field(b, "goal", str, required=True)
+    return {"warnings": await svc.call(svc.kb.goal_warnings, goal)}
 
 
 @_route("POST", "/mark_complete", "Declare a history complete up to a time "
@@ -848,20 +896,30 @@ async def _remove_buffer(svc: "_Service", request: Request) -> Any:
     return {"removed": buffer_id}
 
 
+@_route("POST", "/unsubscribe", "Remove a durable subscription and its position "
+        "(kb.unsubscribe).", body={"id": ("string", True)}, response={"unsubscribed": "string"})
+async def _unsubscribe(svc: "_Service", request: Request) -> Any:
+    b = await svc.body(request)
+    sid = _field(b, "id", str, required=True)
+    await svc.call(svc.kb.unsubscribe, sid)
+    return {"unsubscribed": sid}
+
+
 @_route("POST", "/sql", "Run one read-only SQL statement on the store "
         "(SELECT, WITH, VALUES, EXPLAIN, introspection PRAGMAs).",
-        body={"query": ("string", True), "params": ("array", False)},
+        body={"query": ("string", True), "params": ("array", False),
+              "timeout": ("Number", False)},
         response={"columns": "array", "rows": "array"})
 async def _sql(svc: "_Service", request: Request) -> Any:
     b = await svc.body(request)
     statement = _field(b, "query", str, required=True)
     params = _field(b, "params", list, default=[])
+    timeout = _cap(_number(b, "timeout", minimum=0), svc.limits.sql_timeout)
     for i, p in enumerate(params):
         if p is not None and type(p) not in (int, float, str):
             raise ServiceError(f"params[{i}]: a SQL parameter is a number, a string "
                                f"or null")
-    columns, rows = await svc.call(_read_only_sql, svc.kb, statement, params,
-                                    svc.limits.sql_timeout)
+    columns, rows = await svc.call(_read_only_sql, svc.kb, statement, params, timeout)
     return {"columns": list(columns), "rows": encode_plain([list(r) for r in rows])}
 
 
@@ -872,6 +930,41 @@ async def _sql(svc: "_Service", request: Request) -> Any:
 async def _stats(svc: "_Service", request: Request) -> Any:
     return await svc.call(_stats_of, svc.kb)
 
+
+
+@_route("GET", "/fleet/positions", "What this fleet store holds of a robot: per event "
+        "type, the last sequence of the robot's store stored here (slr fleet push).",
+        query={"robot": ("string", True)}, response={"positions": "array"})
+async def _fleet_positions(svc: "_Service", request: Request) -> Any:
+    from slr_sql.shipping import positions
+    robot = request.query_params.get("robot")
+    if not robot:
+        raise SLRError("robot= names the robot")
+    found = await svc.call(positions, svc.kb, robot)
+    return {"positions": [[n, a, p] for (n, a), p in sorted(found.items())]}
+
+
+@_route("POST", "/fleet/receive", "Store a robot's shipment exactly once (slr fleet "
+        "push): batches of [name, arity, rows], its marks, what it holds unshipped.",
+        body={"robot": ("string", True), "batches": ("array", True),
+              "marks": ("object", False), "pending": ("integer", False),
+              "head_arrival": ("Number", False)},
+        response={"stored": "integer"})
+async def _fleet_receive(svc: "_Service", request: Request) -> Any:
+    from slr_sql.shipping import receive
+    b = await svc.body(request)
+    robot = _field(b, "robot", str, required=True)
+    stored = await svc.call(receive, svc.kb, robot, _field(b, "batches", list, required=True),
+                            _field(b, "marks", dict), _field(b, "pending", int),
+                            _number(b, "head_arrival"))
+    return {"stored": stored}
+
+
+@_route("GET", "/fleet/status", "Per robot that shipped here: events stored, what it "
+        "held unshipped and its last contact (slr fleet status).",
+        response={"robots": "array"})
+async def _fleet_status(svc: "_Service", request: Request) -> Any:
+    return {"robots": await svc.call(svc.kb.store.fleet_contacts)}
 
 
 @dataclass
@@ -979,14 +1072,17 @@ def _subscribe_request(request: dict) -> tuple[str, dict]:
     sid = _field(request, "id", str)
     if sid is not None:
         kwargs["id"] = sid
+    max_queue = _field(request, "max_queue", int)
+    if max_queue is not None:
+        if max_queue < 1:
+            raise ServiceError('"max_queue" must be a positive integer')
+        kwargs["max_queue"] = max_queue
+    if "max_lag" in request:     # null: never ends for lagging (the store keeps its place)
+        max_lag = _field(request, "max_lag", int)
+        if max_lag is not None and max_lag < 1:
+            raise ServiceError('"max_lag" must be a positive integer or null')
+        kwargs["max_lag"] = max_lag
     return pattern, kwargs
-
-
-def _parameters(fn: Callable) -> set[str]:
-    try:
-        return set(inspect.signature(fn).parameters)
-    except (TypeError, ValueError):
-        return set()
 
 
 # -- subscriptions ------------------------------------------------------------------------------
@@ -1161,6 +1257,19 @@ _SCHEMAS: dict[str, Any] = {
                             "end": {"$ref": "#/components/schemas/Number"},
                             "time": {"$ref": "#/components/schemas/Number"}}}]},
     "EventList": {"type": "array", "items": {"$ref": "#/components/schemas/Event"}},
+    "ProgramInfo": {"type": "object", "required": ["name", "source", "texts", "filenames",
+                                                   "loaded_at"], "properties": {
+        "name": {"type": "string"}, "source": {"type": "string"},
+        "texts": {"type": "integer"}, "filenames": {"type": "array",
+                                                    "items": {"type": "string"}},
+        "loaded_at": {"anyOf": [{"type": "number"}, {"type": "null"}]}}},
+    "ProgramMap": {"type": "object", "description": "program name -> ProgramInfo, in load "
+                   "order of each program's first text",
+                   "additionalProperties": {"$ref": "#/components/schemas/ProgramInfo"}},
+    "WaitList": {"type": "array", "items": {"type": "object", "properties": {
+        "type": {"type": "string", "description": "name/arity"},
+        "time": {"$ref": "#/components/schemas/Number"},
+        "reason": {"type": "string"}, "kind": {"type": "string"}}}},
     "RejectedList": {"type": "array", "items": {"type": "object", "properties": {
         "index": {"type": ["integer", "null"]}, "kind": {"type": "string"},
         "message": {"type": "string"}}}},
@@ -1168,8 +1277,7 @@ _SCHEMAS: dict[str, Any] = {
         "type": "object", "required": ["kind", "status", "message"], "properties": {
             "kind": {"type": "string", "description": "SLRSyntaxError, SLREvaluationError, "
                      "SLRTimeout, EventRejected, SLRError, BadRequest, Unauthorized, NotFound, "
-                     "MethodNotAllowed, RequestTimeout, PayloadTooLarge, NotImplemented, "
-                     "Unavailable, InternalError"},
+                     "MethodNotAllowed, RequestTimeout, PayloadTooLarge, Unavailable"},
             "status": {"type": "integer"}, "message": {"type": "string"},
             "line": {"type": "integer"}, "column": {"type": "integer"},
             "source_line": {"type": "string"}, "filename": {"type": "string"},
@@ -1193,17 +1301,33 @@ def _object_schema(fields: dict[str, str], required: list[str]) -> dict:
 
 
 def _responses(e: _Endpoint) -> dict:
+    """Every status the endpoint may answer with (a method the path does not take gets 405
+    with ``Allow``; a path that is not here, 404)."""
     error = {"description": "an error", "content": {"application/json": {
         "schema": {"$ref": "#/components/schemas/Error"}}}}
     ok: dict[str, Any] = {"description": "success"}
     if e.response:
         ok["content"] = {"application/json": {"schema": _object_schema(e.response, [])}}
-    out = {"200": ok, "400": error}
+    out: dict[str, Any] = {"200": ok, "400": error}
     if e.auth:
         out["401"] = error
-    if e.path.startswith("/submit/"):
-        out["202"] = {"description": "not answered yet (done: false)"}
-        out["404"] = error
+    if e.body:                     # the body's time and size limits
+        out["408"] = dict(error, description="the body did not arrive in time, or the "
+                                             "query ran out of its time")
+        out["413"] = dict(error, description="the body is larger than max_body")
+    if e.path.startswith("/submit"):
+        out["202"] = {"description": "not answered yet (done: false): waiting_for lists "
+                                     "what it waits for, waiting says it in words",
+                      "content": {"application/json": {"schema": _object_schema(
+                          {"handle": "string", "id": "string", "done": "boolean",
+                           "waiting_for": "WaitList", "waiting": "string"}, [])}}}
+        out["408"] = dict(error, description="the synchronized query timed out")
+    if "{" in e.path:
+        out["404"] = dict(error, description="no such resource")
+    if e.auth:                     # the store busy or out of space: retry later
+        out["503"] = dict(error, description="a condition that may pass (the store busy, "
+                                             "the disk full, too many pending queries); "
+                                             "retry after Retry-After")
     return out
 
 
@@ -1230,13 +1354,17 @@ def create_app(kb: Any, *, token: str | None = None, limits: Limits | None = Non
         message = {404: f"no such endpoint: {request.url.path} (GET /openapi.json lists them)",
                    405: f"{request.method} is not allowed on {request.url.path}"}.get(
             exc.status_code, str(exc.detail))
-        return _error_response(ServiceError(message, kind=kind, status=exc.status_code))
+        response = _error_response(ServiceError(message, kind=kind, status=exc.status_code))
+        if exc.headers:             # 405: Allow lists the methods the path takes
+            response.headers.update(exc.headers)
+        return response
 
     async def internal_error(request: Request, exc: Exception) -> Response:
         log.error("internal error", exc_info=exc)
         return _error_response(exc)
 
     app = Starlette(routes=service.starlette_routes(),
+                    middleware=[Middleware(_AnswerOnce)],
                     exception_handlers={HTTPException: http_error, Exception: internal_error})
     app.state.service = service
     return app

@@ -13,30 +13,43 @@ What differs from a local knowledge base:
   several requests, each one transaction; ``atomic=True`` sends one request or fails.
 * ``submit`` returns a :class:`RemotePendingQuery`, a ``concurrent.futures.Future`` that one
   background thread per pending query completes by long-polling the server.
-* ``define`` is not available (Python predicates run in the server's process).
+* ``define`` raises :class:`~slr_sql.service.errors.ServiceError` (Python predicates run in
+  the server's process); ``sql(write=True)`` is refused (the service runs read-only SQL).
+* ``pending()`` lists the queries this client submitted that are still waiting.
+* ``subscribe(max_queue=)`` is capped by the server's ``subscribe_queue``; answers travel
+  in frames of up to ``subscribe_batch`` answers (an attribute of the client, 256).
 * Failures to reach the server are :class:`~slr_sql.service.errors.ServiceError` (an
   SLRError) with ``status`` 0.
+
+Both this client and a local knowledge base implement :class:`slr_sql.KnowledgeBaseAPI`.
 """
 from __future__ import annotations
 
 import collections
+import logging
 import os
 import threading
+import time
 from concurrent.futures import Future, InvalidStateError
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Iterator
 from urllib.parse import quote
 
-from slr_sql import EventRejected, SLRError
+from slr_sql import EventRejected, SLRError, SLRTimeout
+from slr_sql.api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 
 from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args,
                        encode_arguments, encode_term, loads)
 from .errors import ServiceError, error_from_body
 
-__all__ = ["connect", "RemoteKnowledgeBase", "RemotePendingQuery", "RemoteSubscription"]
+__all__ = ["connect", "RemoteKnowledgeBase", "RemotePendingQuery", "RemoteSubscription",
+           "RemoteWait"]
+
+log = logging.getLogger("slr_sql.service.client")
 
 POLL_WAIT = 25.0          # seconds one long-poll asks the server to wait
 DEFAULT_MAX_BODY = 1 << 20
+FLEET_ROWS = 1000         # shipped rows per request (well within the default body limit)
 
 
 def connect(url: str, token: str | None = None, *, timeout: float = 60.0) -> "RemoteKnowledgeBase":
@@ -73,7 +86,8 @@ class RemoteKnowledgeBase:
                                   limits=httpx.Limits(max_connections=None,
                                                       max_keepalive_connections=32))
         self._limits: dict | None = None
-        self._pending: set[RemotePendingQuery] = set()
+        self.subscribe_batch = 256        # answers per WebSocket frame at most (1..1000)
+        self._pending: dict[RemotePendingQuery, None] = {}   # waiting, in submission order
         self._lock = threading.Lock()
         self.closed = False
 
@@ -213,20 +227,18 @@ class RemoteKnowledgeBase:
         return out
 
     # -- program ----------------------------------------------------------------------------------
-    def load(self, text: str, filename: str | None = None, *, name: str | None = None,
+    def load(self, text: str, filename: str = "<string>", *, name: str = "main",
              replace: bool = False) -> None:
-        """Add program text (all or nothing). ``name=``/``replace=`` need a server whose
-        knowledge base has named programs."""
-        body: dict[str, Any] = {"text": _text(text, "text")}
-        if filename is not None:
+        """Add program text to the program ``name`` (all or nothing); ``replace=True`` swaps
+        that program for ``text``."""
+        body: dict[str, Any] = {"text": _text(text, "text"), "name": _text(name, "name")}
+        if filename != "<string>":
             body["filename"] = str(filename)
-        if name is not None:
-            body["name"] = name
         if replace:
             body["replace"] = True
         self._post("/load", body)
 
-    def load_file(self, path: str | Path, *, name: str | None = None,
+    def load_file(self, path: str | Path, *, name: str = "main",
                   replace: bool = False) -> None:
         """Read a program file here and load its text on the server."""
         try:
@@ -239,9 +251,22 @@ class RemoteKnowledgeBase:
         """Remove the program loaded under ``name``."""
         self._post("/unload", {"name": name})
 
-    def programs(self) -> list:
-        """The named programs (as the server's knowledge base describes them)."""
-        return decode_plain(self._get("/programs")["programs"])
+    def programs(self) -> dict[str, ProgramInfo]:
+        """The named programs stored in the file, in load order of their first text."""
+        out: dict[str, ProgramInfo] = {}
+        for name, info in decode_plain(self._get("/programs")["programs"]).items():
+            try:
+                out[name] = ProgramInfo(str(info["name"]), str(info["source"]),
+                                        int(info["texts"]), tuple(info["filenames"]),
+                                        info["loaded_at"])
+            except (KeyError, TypeError, ValueError):
+                raise ServiceError(f"GET /programs: not a program description: {info!r}",
+                                   kind="InternalError", status=0) from None
+        return out
+
+    def event_rules(self) -> list[dict[str, Any]]:
+        """The event rules in force on the server, in the order they run."""
+        return decode_plain(self._get("/event_rules")["event_rules"])
 
     def define(self, name: str, arity: int, fn: Callable) -> None:
         """Not available remotely: Python predicates must run in the server's process."""
@@ -252,23 +277,55 @@ class RemoteKnowledgeBase:
     # -- queries --------------------------------------------------------------------------------
     def query(self, goal: str, at: float | None = None, args: dict | None = None,
               timeout: float | None = None, max_steps: int | None = None,
-              limit: int | None = None, wait: bool = False) -> list[dict[str, Any]]:
+              limit: int | None = None, wait: bool = False,
+              robot: str | None = None) -> list[dict[str, Any]]:
         """Answer ``goal`` on the server (see ``KnowledgeBase.query``); ``timeout`` is
         capped by the server's ``max_query_time``."""
-        if max_steps is not None:
-            raise ServiceError("max_steps is not available over the network; use timeout=",
-                               kind="NotImplemented")
         if wait:  # synchronized: long-polls, however long the wait (as kb.query does it)
             return self.submit(goal, at=at, args=args, timeout=timeout).result()
         body = _goal_body(goal, at, args, timeout)
         if limit is not None:
             body["limit"] = limit
+        if max_steps is not None:
+            body["max_steps"] = max_steps
+        if robot is not None:
+            body["robot"] = robot
         reply = self._post("/query", body, timeout=self._read_timeout(timeout))
         return decode_answers(reply["answers"])
 
+    # -- fleets (slr fleet push / status to an `slr serve` fleet store) -------------------------
+    def fleet_positions(self, robot: str) -> dict[tuple[str, int], int]:
+        """Per event type, the last sequence of ``robot``'s store the server's store holds."""
+        reply = self._request("GET", "/fleet/positions", params={"robot": robot})[1]
+        return {(str(n), int(a)): int(p) for n, a, p in reply["positions"]}
+
+    def fleet_receive(self, robot: str, batches: list, marks: dict | None = None,
+                      pending: int | None = None, head_arrival: float | None = None) -> int:
+        """Send one shipment of ``robot`` (see :func:`slr_sql.shipping.receive`); returns
+        the rows the server stored. Rows go in requests of at most FLEET_ROWS (each stored
+        exactly once with its position), within the server's body limit."""
+        stored = 0
+        pieces = [(n, a, rows[i:i + FLEET_ROWS]) for n, a, rows in batches
+                  for i in range(0, max(len(rows), 1), FLEET_ROWS)]
+        for k, piece in enumerate(pieces or [None]):
+            body: dict[str, Any] = {"robot": robot, "batches": [list(piece)] if piece else []}
+            if k == len(pieces or [None]) - 1:
+                if marks:
+                    body["marks"] = marks
+                if pending is not None:
+                    body["pending"] = pending
+                if head_arrival is not None:
+                    body["head_arrival"] = head_arrival
+            stored += int(self._post("/fleet/receive", body)["stored"])
+        return stored
+
+    def fleet_status(self) -> list[dict[str, Any]]:
+        """Per robot that shipped to the server's store: its contact row."""
+        return list(self._get("/fleet/status")["robots"])
+
     def submit(self, goal: str, at: float | None = None, id: str | None = None,
                args: dict | None = None, timeout: float | None = None,
-               callback: Callable[[Any], Any] | None = None) -> "RemotePendingQuery":
+               callback: Callable[[Any], Any] | None = None) -> PendingQueryAPI:
         """A synchronized query on the server: a Future answered with the answer list."""
         body = _goal_body(goal, at, args, timeout)
         if id is not None:
@@ -283,16 +340,40 @@ class RemoteKnowledgeBase:
         return pending
 
     async def ask(self, goal: str, at: float | None = None, id: str | None = None,
-                  args: dict | None = None, timeout: float | None = None) -> list:
+                  args: dict | None = None,
+                  timeout: float | None = None) -> list[dict[str, Any]]:
         """``await kb.ask(goal, at=z)``: :meth:`submit` for asyncio code."""
         import asyncio
 
-        return await asyncio.wrap_future(self.submit(goal, at=at, id=id, args=args,
-                                                     timeout=timeout))
+        from concurrent.futures import Future
+
+        pending = self.submit(goal, at=at, id=id, args=args, timeout=timeout)
+        assert isinstance(pending, Future)   # a PendingQueryAPI here is a Future
+        return await asyncio.wrap_future(pending)
 
     def explain(self, goal: str) -> str:
         """How ``goal`` would run on the server: which engine, and why."""
         return self._post("/explain", {"goal": _text(goal, "goal")})["explain"]
+
+    def solutions(self, goal: str, at: float | None = None, args: dict | None = None,
+                  timeout: float | None = None,
+                  robot: str | None = None) -> Iterator[dict[str, Any]]:
+        """The answers of ``goal`` one at a time (see ``KnowledgeBase.solutions``). The server
+        answers a request as a whole, so this iterates over one :meth:`query`'s answers; a
+        goal with endless answers needs ``timeout`` (capped by the server's
+        ``max_query_time``) or ``query(..., limit=N)``."""
+        yield from self.query(goal, at=at, args=args, timeout=timeout, robot=robot)
+
+    def goal_warnings(self, goal: str) -> list[str]:
+        """The server's warnings about ``goal`` that do not change its answer (likely typos:
+        see ``KnowledgeBase.goal_warnings``)."""
+        return list(self._post("/warnings", {"goal": _text(goal, "goal")})["warnings"])
+
+    def pending(self) -> list[PendingQueryAPI]:
+        """The synchronized queries this client submitted that are still waiting (each
+        with ``waiting_for`` as of its latest poll)."""
+        with self._lock:
+            return [p for p in self._pending if not p.done()]
 
     def mark_complete(self, event_type: str, t: float) -> None:
         """Declare the history of ``"p/N"`` complete up to ``t``."""
@@ -342,9 +423,21 @@ class RemoteKnowledgeBase:
         return out
 
     # -- SQL and stats --------------------------------------------------------------------------
-    def sql(self, query: str, params: Iterable[Any] = ()) -> tuple[list[str], list[tuple]]:
-        """Run one read-only SQL statement on the server's store: (column names, rows)."""
-        reply = self._post("/sql", {"query": _text(query, "query"), "params": list(params)})
+    def sql(self, query: str, params: Iterable[Any] = (), write: bool = False,
+            timeout: float | None = None) -> tuple[list[str], list[tuple]]:
+        """Run one read-only SQL statement on the server's store: (column names, rows).
+        ``timeout`` is capped by the server's ``sql_timeout``; ``write=True`` is refused
+        (the service runs read-only SQL only: write in the server's process)."""
+        if write:
+            raise ServiceError("sql(write=True) is not available over the network: the "
+                               "service runs read-only SQL only (write with `slr sql DB "
+                               "--write` in the server's machine)", kind="BadRequest",
+                               status=0)
+        body: dict[str, Any] = {"query": _text(query, "query"), "params": list(params)}
+        if timeout is not None:
+            body["timeout"] = _number(timeout, "timeout")
+        reply = self._post("/sql", body, timeout=self._read_timeout(
+            timeout if isinstance(timeout, (int, float)) else None))
         return list(reply["columns"]), [tuple(row) for row in decode_plain(reply["rows"])]
 
     def stats(self) -> dict:
@@ -352,21 +445,68 @@ class RemoteKnowledgeBase:
         ``slr stats`` prints."""
         return decode_plain(self._get("/stats"))
 
+    def plot(self, types: Iterable[str] | str | None = None, **options: Any) -> Any:
+        """A timeline of the server's event histories as a matplotlib Figure (read through
+        :meth:`sql`); options as for ``KnowledgeBase.plot``."""
+        from slr_sql.plot import timeline  # deferred: matplotlib is the extra slr_sql[plot]
+        return timeline(self, types, **options)
+
     # -- subscriptions --------------------------------------------------------------------------
     def subscribe(self, pattern: str, where: str | None = None, since: Any = "now",
-                  until: float | None = None, id: str | None = None, *,
-                  batch: int = 256) -> "RemoteSubscription":
+                  until: float | None = None, id: str | None = None,
+                  callback: Callable[[dict], Any] | None = None, max_queue: int = 10_000,
+                  max_lag: int | None = 1_000_000) -> SubscriptionAPI:
         """Events matching ``pattern`` (and ``where``) as they arrive, over a WebSocket:
-        ``for answer in sub`` (ends when ``until`` is complete); ``sub.close()``, from any
-        thread, ends the iteration. ``batch``: up to that many answers already waiting on
-        the server travel in one frame (the answers and their order are the same).
+        ``for answer in sub`` or ``sub.get(timeout)`` (ends when ``until`` is complete), or
+        ``callback(answer)`` on a thread of the client; ``sub.close()``, from any thread,
+        ends it. ``max_queue`` is capped by the server's ``subscribe_queue``; up to
+        ``subscribe_batch`` answers already waiting on the server travel in one frame.
 
         >>> sub = connect("http://127.0.0.1:8765").subscribe("p(X)^T", since=0)  # doctest: +SKIP
         >>> next(sub)                                                          # doctest: +SKIP
         {'X': Atom('a'), 'T': 1.0}
         """
         return RemoteSubscription(self, pattern, where=where, since=since, until=until, id=id,
-                                  batch=batch)
+                                  batch=self.subscribe_batch, callback=callback,
+                                  max_queue=max_queue, max_lag=max_lag)
+
+    def unsubscribe(self, id: str) -> None:
+        """Remove the durable subscription ``id`` and its position on the server."""
+        self._post("/unsubscribe", {"id": _text(id, "id")})
+
+
+class RemoteWait:
+    """One condition a remote synchronized query waits for (``waiting_for``): event type
+    ``type`` (name/arity) complete up to ``time``, and why (``reason``); printed as the
+    local ``Wait`` is."""
+
+    __slots__ = ("type", "time", "reason", "kind")
+
+    def __init__(self, type: str, time: float, reason: str, kind: str = "complete"):
+        self.type, self.time, self.reason, self.kind = type, time, reason, kind
+
+    @classmethod
+    def from_json(cls, obj: dict) -> "RemoteWait":
+        t = decode_plain(obj.get("time"))
+        return cls(str(obj.get("type", "")), float(t) if isinstance(t, (int, float)) else
+                   float("nan"), str(obj.get("reason", "")), str(obj.get("kind", "complete")))
+
+    def __str__(self) -> str:
+        what = f"{self.type} complete up to {_time_text(self.time)}"
+        if self.kind == "arrival":
+            what += " (or a matching in-order event)"
+        return f"{what} ({self.reason})"
+
+    def __repr__(self) -> str:
+        return f"RemoteWait({self.type}, {_time_text(self.time)}, {self.reason!r})"
+
+
+def _time_text(t: float) -> str:
+    """A time for messages, as the local knowledge base prints it (no exponent, no noise)."""
+    if t != t or t in (float("inf"), float("-inf")):
+        return str(t)
+    text = f"{t:.6f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
 
 
 class RemotePendingQuery(Future):
@@ -382,11 +522,35 @@ class RemotePendingQuery(Future):
         self.id = id
         self.goal = goal
         self.at = at
+        self.waiting_for: list[RemoteWait] = []   # as of the latest reply
+        self._waiting = ""                        # the server's words for it
         self._explanation: str | None = None
 
     def __repr__(self) -> str:
         state = "answered" if self.done() else "waiting"
         return f"<RemotePendingQuery {self.id!r} {self.goal!r}: {state}>"
+
+    def result(self, timeout: float | None = None) -> list[dict[str, Any]]:
+        """The answer list, waiting up to ``timeout`` seconds (None: for ever). When the
+        wait runs out first: :class:`~slr_sql.SLRTimeout` saying what the query waits for
+        on the server (it goes on waiting: call ``result`` again, or ``cancel()``)."""
+        try:
+            return super().result(timeout)
+        except TimeoutError:
+            if self.done():      # answered (or failed with its own SLRTimeout) meanwhile
+                return super().result(0)
+        try:                     # what it waits for now, in the server's words
+            status, reply = self.client._request("GET", f"/submit/{quote(self.handle)}",
+                                                 params={"wait": 0}, ok=(200, 202))
+            self._settle(status, reply)
+        except SLRError:
+            pass
+        if self.done():
+            return super().result(0)
+        what = self._waiting or (", ".join(map(str, self.waiting_for)) or "its answer")
+        raise SLRTimeout(f"synchronized query {self.id!r} ({self.goal} at {self.at}) was not "
+                         f"answered within {timeout:g} s: {what}; it is still waiting (call "
+                         f"result() again, or cancel())")
 
     def explain(self) -> str:
         """What the query waited for and what released it (the server's explanation)."""
@@ -406,7 +570,14 @@ class RemotePendingQuery(Future):
     # the result, from a reply of POST /submit or GET /submit/{handle}
     def _settle(self, status: int, reply: dict) -> None:
         if not reply.get("done"):
+            waits = reply.get("waiting_for")
+            if isinstance(waits, list):
+                self.waiting_for = [RemoteWait.from_json(w) for w in waits
+                                    if isinstance(w, dict)]
+            if isinstance(reply.get("waiting"), str):
+                self._waiting = reply["waiting"]
             return
+        self.waiting_for = []
         if isinstance(reply.get("explain"), str):
             self._explanation = reply["explain"]
         if reply.get("cancelled"):
@@ -428,7 +599,7 @@ class RemotePendingQuery(Future):
 
     def _start(self) -> None:
         with self.client._lock:
-            self.client._pending.add(self)
+            self.client._pending[self] = None
         threading.Thread(target=self._poll, name=f"slr-remote-query-{self.id}",
                          daemon=True).start()
 
@@ -447,7 +618,7 @@ class RemotePendingQuery(Future):
                 self._settle(status, reply)
         finally:
             with client._lock:
-                client._pending.discard(self)
+                client._pending.pop(self, None)
 
 
 class RemoteSubscription:
@@ -462,9 +633,12 @@ class RemoteSubscription:
     ``close()``."""
 
     ack_delay = 0.05
+    _join_timeout = 30.0       # close() waits this long for a callback that is running
 
     def __init__(self, client: RemoteKnowledgeBase, pattern: str, *, where: str | None,
-                 since: Any, until: float | None, id: str | None, batch: int = 1):
+                 since: Any, until: float | None, id: str | None, batch: int = 1,
+                 callback: Callable[[dict], Any] | None = None, max_queue: int | None = None,
+                 max_lag: int | None = 1_000_000):
         try:
             from websockets.exceptions import WebSocketException
             from websockets.sync.client import connect as ws_connect
@@ -485,9 +659,15 @@ class RemoteSubscription:
             request["id"] = id
         if batch != 1:
             request["batch"] = batch
+        if max_queue is not None:
+            request["max_queue"] = max_queue
+        request["max_lag"] = max_lag
         request["ack"] = True
         self.pattern = pattern
         self.id = id
+        self.callback = callback
+        self.error: BaseException | None = None   # what ended a callback subscription
+        self._thread: threading.Thread | None = None
         self._done = False
         self._ready: collections.deque = collections.deque()   # answers of the last frame
         self._returned = 0          # seq of the last answer given to the consumer
@@ -510,6 +690,32 @@ class RemoteSubscription:
                                kind="InternalError", status=0)
         window = first.get("ack_window")
         self._ack_every = max(1, window // 2) if type(window) is int else 1
+        if callback is not None:
+            self._thread = threading.Thread(target=self._run_callback, daemon=True,
+                                            name=f"slr-remote-subscription-{id or pattern}")
+            self._thread.start()
+
+    def _run_callback(self) -> None:
+        fn = self.callback
+        assert fn is not None
+        try:
+            while True:
+                try:
+                    answer = self._next(None)
+                except StopIteration:
+                    return
+                try:
+                    fn(answer)
+                except BaseException as exc:  # the callback's failure ends its subscription
+                    log.exception("subscription %r: the callback raised; the subscription "
+                                  "ends", self.id or self.pattern)
+                    self.error = exc
+                    self.close(ack=False)
+                    return
+        except SLRError as exc:          # the connection or the server ended it
+            if not self._done or self.error is None:
+                self.error = exc
+            log.warning("subscription %r ended: %s", self.id or self.pattern, exc)
 
     def _ack(self, seq: int) -> None:
         """Tell the server that every answer up to ``seq`` was handled."""
@@ -521,16 +727,24 @@ class RemoteSubscription:
             except (OSError, self._closed_exc):
                 pass                   # the connection is gone: the next receive says so
 
-    def _receive_frame(self) -> dict:
+    def _receive_frame(self, timeout: float | None = None) -> dict:
         """The next message; answers handled and not acknowledged are acknowledged before
         waiting (after ``ack_delay`` without a message, so a stream of answers costs one
-        acknowledgement per ``ack_delay`` or per half window, not one per answer)."""
+        acknowledgement per ``ack_delay`` or per half window, not one per answer).
+        ``timeout``: SLRTimeout when no message came within it."""
+        deadline = None if timeout is None else time.monotonic() + timeout
         if self._handled > self._acked:
             try:
-                return self._receive(self.ack_delay)
+                return self._receive(self.ack_delay if timeout is None
+                                     else min(self.ack_delay, timeout))
             except TimeoutError:
                 self._ack(self._handled)
-        return self._receive()
+        try:
+            return self._receive(None if deadline is None
+                                 else max(0.0, deadline - time.monotonic()))
+        except TimeoutError:
+            raise SLRTimeout(f"subscription {self.id or self.pattern!r}: no event within "
+                             f"{timeout:g} s") from None
 
     def _receive(self, timeout: float | None = None) -> dict:
         try:
@@ -555,6 +769,25 @@ class RemoteSubscription:
         return self
 
     def __next__(self) -> dict[str, Any]:
+        self._check_pull()
+        return self._next(None)
+
+    def get(self, timeout: float | None = None) -> dict | None:
+        """The next answer; None once the subscription has ended (``until`` reached or
+        closed). Raises SLRTimeout when none came within ``timeout`` seconds, and the error
+        that ended the subscription on the server."""
+        self._check_pull()
+        try:
+            return self._next(timeout)
+        except StopIteration:
+            return None
+
+    def _check_pull(self) -> None:
+        if self.callback is not None:
+            raise SLRError(f"subscription {self.id or self.pattern!r} delivers to its "
+                           f"callback; it cannot also be iterated")
+
+    def _next(self, timeout: float | None) -> dict[str, Any]:
         self._handled = self._returned          # the consumer is back: the last one is done
         if self._handled - self._acked >= self._ack_every:
             self._ack(self._handled)
@@ -563,7 +796,7 @@ class RemoteSubscription:
             return self._ready.popleft()
         if self._done:
             raise StopIteration
-        message = self._receive_frame()
+        message = self._receive_frame(timeout)
         kind = message.get("type")
         if kind == "answer":
             answer = decode_answers([message.get("answer", {})])[0]
@@ -574,7 +807,7 @@ class RemoteSubscription:
             if self._ready:
                 self._returned += 1
                 return self._ready.popleft()
-            return self.__next__()
+            return self._next(timeout)
         if kind == "end":
             self._done = True
             self._close_socket()
@@ -598,6 +831,9 @@ class RemoteSubscription:
         self._done = True
         self._ready.clear()
         self._close_socket()
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(self._join_timeout)
 
     def __enter__(self) -> "RemoteSubscription":
         return self

@@ -16,11 +16,13 @@ from __future__ import annotations
 from typing import Any
 
 import slr_sql
-from slr_sql import EventRejected, SLREvaluationError, SLRError, SLRSyntaxError, SLRTimeout
+from slr_sql import EventRejected, SLREvaluationError, SLRError, SLRSyntaxError, SLRTimeout, \
+    SLRUnavailable
 
 from .encoding import TermError, decode_term, encode_term
 
-__all__ = ["ServiceError", "error_body", "error_status", "error_from_body", "STATUS_KINDS"]
+__all__ = ["ServiceError", "error_body", "error_status", "error_from_body", "retry_after",
+           "STATUS_KINDS"]
 
 # kind of a ServiceError -> its HTTP status
 STATUS_KINDS = {
@@ -51,9 +53,21 @@ def error_status(exc: BaseException) -> int:
         return exc.status
     if isinstance(exc, SLRTimeout):
         return 408
-    if type(exc).__name__ == "SLRBusy":   # a lock wait on the file ran out: try again
+    if isinstance(exc, SLRUnavailable):   # a lock wait ran out, the disk is full: try again
         return 503
     return 400  # syntax, evaluation, rejected events, bad terms: the request's fault
+
+
+def retry_after(exc: BaseException) -> int | None:
+    """Seconds for the ``Retry-After`` header of a 503 answer (None for other statuses).
+
+    >>> from slr_sql import SLRStoreFull
+    >>> retry_after(SLRStoreFull("robot.db: the disk is full")), retry_after(SLRTimeout("x"))
+    (10, None)
+    """
+    if error_status(exc) != 503:
+        return None
+    return max(1, int(getattr(exc, "retry_after", 1)))
 
 
 def error_body(exc: BaseException) -> dict[str, Any]:

@@ -32,6 +32,11 @@ EFFECTS = frozenset([
 ])
 
 
+# det builtins that read the store themselves (and wait in a synchronized query, through
+# the machine's hooks): never called from inside a statement
+STORE_READERS = frozenset([("tf_lookup", 4), ("tf_lookup", 5)])
+
+
 COMPARISONS = {"<": "<", ">": ">", "=<": "<=", ">=": ">=", "=:=": "=", "=\\=": "<>"}
 # two constant operands: decided at compile time by Python's comparison of the numbers, as
 # the interpreter's builtins do (without importing them: the engine is not below the compiler)
@@ -150,6 +155,9 @@ class BuiltinGoals:
             return
         if key in EFFECTS:
             raise Fallback(f"{name}/{key[1]} has effects (output) and runs in the interpreter")
+        if key in STORE_READERS:
+            raise Fallback(f"{name}/{key[1]} reads the stored transforms (and waits for them "
+                           f"in a synchronized query): it runs in the interpreter")
         self.det_sql(key, self.ctx.det[key], False, args, nxt, st, emit)
 
     def det_sql(self, key, fn, python, args, nxt, st, emit):

@@ -40,8 +40,11 @@ class Compiler(Unification, BuiltinGoals, ControlGoals, RuleGoals, EventGoals, A
 
     MAX_BRANCHES = 512
 
-    def __init__(self, ctx: Any, has_at: bool, literal: bool = False):
+    def __init__(self, ctx: Any, has_at: bool, literal: bool = False, robot: bool = False):
         self.ctx = ctx
+        # every event row read must belong to each of these robots (terms unified with the
+        # row's robot column): the query's robot (the parameter :robot), when it has one
+        self.robot_terms: list[Any] = [Col(":robot", "any")] if robot else []
         self.program = ctx.program
         self.has_at = has_at
         self.literal = literal        # views: constants as literals, no parameters
@@ -169,6 +172,9 @@ class Compiler(Unification, BuiltinGoals, ControlGoals, RuleGoals, EventGoals, A
         if key in (("prev", 2), ("next", 2), ("next", 3)):
             self.record_mode(g)
             return (self.prev_sql if name == "prev" else self.next_sql)(args, ctx, nxt, st, emit)
+        if key == ("origin", 2):
+            self.record_mode(g)
+            return self.origin_sql(args, ctx, nxt, st, emit)
         if key in self.ctx.nondet:
             raise Fallback(f"the builtin {name}/{len(args)} has no SQL form")
         fn = self.ctx.python_preds.get(key)

@@ -19,6 +19,42 @@ from .model import Col, Fallback, State
 class EventGoals:
     """Handlers of event goals (``^``), prev/2 and next/2,3."""
 
+    def origin_sql(self, args, ctx, nxt, st, emit):
+        """origin(R, Goal): Goal's rows restricted to robot R (rows of unnamed events have
+        none); with R unbound, R is the row's robot and the robots come in name order (the
+        robot column leads Goal's ordering keys)."""
+        r = deref(args[0])
+        if not (type(r) in (Var, Atom) or (type(r) is Col and r.sql.endswith(".robot"))):
+            raise Fallback("origin/2 of a robot that is not an atom (an error at run time)")
+        g = deref(args[1])
+        if type(g) is Struct and g.name == "^" and len(g.args) == 2:
+            ev = split_event_atom(g)
+            if ev is None:
+                raise Fallback("origin/2 of something that is not an event goal")
+            atom = deref(ev[0])
+            if type(atom) in (Struct, Atom):
+                rules = self.program.temporal.get(event_key(atom))
+                if rules is not None and rules.clauses:
+                    raise Fallback("origin/2 of an event defined by rules")
+            return self.event_sql(ev, ctx, nxt, st, emit, origin=r)
+        if type(g) is Struct and (g.name, len(g.args)) in (("prev", 2), ("next", 2),
+                                                            ("next", 3)):
+            return (self.prev_sql if g.name == "prev" else self.next_sql)(
+                g.args, ctx, nxt, st, emit, origin=r)
+        raise Fallback("origin/2 of a goal that is not an event goal, prev or next "
+                       "(an error at run time)")
+
+    def robot_rows(self, alias: str, st: State, origin) -> bool:
+        """Restrict ``alias`` to the query's robot and to ``origin`` (a robot term, None:
+        any); an unbound origin is bound to the row's robot, which then must be a name."""
+        terms = self.robot_terms if origin is None else self.robot_terms + [origin]
+        for t in terms:
+            if type(deref(t)) is Var:
+                st.conds.append(f"{alias}.robot IS NOT NULL")
+            if not self.unify(t, Col(f"{alias}.robot"), st):
+                return False
+        return True
+
     def caret_sql(self, g, args, ctx, nxt, st, emit):
         ev = split_event_atom(g)
         if ev is None:
@@ -41,7 +77,7 @@ class EventGoals:
             self.missing.add((name, n))
         return table
 
-    def event_sql(self, ev, ctx, nxt, st, emit):
+    def event_sql(self, ev, ctx, nxt, st, emit, origin=None):
         atom, s, e = ev
         atom = deref(atom)
         if type(atom) not in (Struct, Atom):
@@ -57,15 +93,29 @@ class EventGoals:
                 st.keys.append("0")
             alias = self.alias()
             st.froms.append((table, alias, "seq"))
-            if self.row_unify(args + (s, e), alias, n, st):
+            by_robot = origin is not None and type(deref(origin)) is Var
+            if self.row_unify(args + (s, e), alias, n, st) \
+                    and self.robot_rows(alias, st, origin):
                 if self.has_at:
                     st.conds.append(f"{alias}.t_end <= :at")
+                if by_robot:
+                    st.keys.append(f"{alias}.robot")
                 st.keys.extend([f"{alias}.t_end", f"{alias}.t_start", f"{alias}.seq"])
                 self.solve(nxt, st, emit)
             st.restore(m)
         if has_rules:
             self.clauses_sql(rules, ("event", name, n), args + (s, e), ctx, nxt, st, emit,
                              offset=1)
+
+    def _robot_sandbox(self, pattern, table, n, st, origin):
+        """The alias of prev/next's row and its subquery's sandbox, restricted to the robot
+        origin, or, when origin is unbound (it becomes the robot of the row found), to that
+        row's robot."""
+        if origin is not None and type(deref(origin)) is Var:
+            p = self.alias("p")
+            return p, self._sandbox(pattern, table, n, st, Col(f"{p}.robot"))
+        sb = self._sandbox(pattern, table, n, st, origin)
+        return (None, None) if sb is None else (self.alias("p"), sb)
 
     def _prev_next_pattern(self, t):
         ev = split_event_atom(t)
@@ -88,20 +138,20 @@ class EventGoals:
             raise Fallback("a malformed interval (type error at run time)")
         return None
 
-    def _sandbox(self, pattern, table, n, st):
+    def _sandbox(self, pattern, table, n, st, origin=None):
         """Conditions of the pattern on a fresh alias, bindings undone; None: never matches."""
         q = self.alias("q")
         m = st.mark()
         st.nested += 1   # these conditions go into a subquery on q, not into the branch
         try:
-            ok = self.row_unify(pattern, q, n, st)
+            ok = self.row_unify(pattern, q, n, st) and self.robot_rows(q, st, origin)
         finally:
             st.nested -= 1
         conds = list(st.conds[m[1]:])
         st.restore(m)
         return (q, conds) if ok else None
 
-    def prev_sql(self, args, ctx, nxt, st, emit):
+    def prev_sql(self, args, ctx, nxt, st, emit, origin=None):
         name, n, pattern = self._prev_next_pattern(args[0])
         iv = self._interval(args[1])
         if iv is None:
@@ -114,7 +164,7 @@ class EventGoals:
         m0 = st.mark()
         self._time_checks(st, lo, hi)
         try:
-            self._prev_rows(name, n, pattern, lo, hi, nxt, st, emit)
+            self._prev_rows(name, n, pattern, lo, hi, nxt, st, emit, origin)
         finally:
             st.restore(m0)
 
@@ -125,11 +175,11 @@ class EventGoals:
             if t is not None and "slr_" in t:
                 st.conds.append(f"({t}) IS NOT NULL")
 
-    def _prev_rows(self, name, n, pattern, lo, hi, nxt, st, emit):
+    def _prev_rows(self, name, n, pattern, lo, hi, nxt, st, emit, origin=None):
         table = self.event_table(name, n)
         if table is None:
             return
-        sb = self._sandbox(pattern, table, n, st)
+        p, sb = self._robot_sandbox(pattern, table, n, st, origin)
         if sb is None:
             return
         q, qconds = sb
@@ -139,17 +189,17 @@ class EventGoals:
         sub = (f"(SELECT {q}.t_end FROM {table} AS {q} WHERE {' AND '.join(qconds)} "
                f"ORDER BY {q}.t_end DESC LIMIT 1)")
         m = st.mark()
-        p = self.alias("p")
+        by_robot = origin is not None and type(deref(origin)) is Var
         st.froms.append((table, p, "seq"))
-        if self.row_unify(pattern, p, n, st):
+        if self.row_unify(pattern, p, n, st) and self.robot_rows(p, st, origin):
             st.conds.append(f"{p}.t_end = {sub}")
             if lo is not None:
                 st.conds.append(f"{p}.t_start >= {lo}")
-            st.keys.extend([f"{p}.t_start", f"{p}.seq"])
+            st.keys.extend(([f"{p}.robot"] if by_robot else []) + [f"{p}.t_start", f"{p}.seq"])
             self.solve(nxt, st, emit)
         st.restore(m)
 
-    def next_sql(self, args, ctx, nxt, st, emit):
+    def next_sql(self, args, ctx, nxt, st, emit, origin=None):
         name, n, pattern = self._prev_next_pattern(args[0])
         if len(args) == 2:
             iv = self._interval(args[1])
@@ -162,15 +212,15 @@ class EventGoals:
         m0 = st.mark()
         self._time_checks(st, lo, hi)
         try:
-            self._next_rows(name, n, pattern, lo, hi, nxt, st, emit)
+            self._next_rows(name, n, pattern, lo, hi, nxt, st, emit, origin)
         finally:
             st.restore(m0)
 
-    def _next_rows(self, name, n, pattern, lo, hi, nxt, st, emit):
+    def _next_rows(self, name, n, pattern, lo, hi, nxt, st, emit, origin=None):
         table = self.event_table(name, n)
         if table is None:
             return
-        sb = self._sandbox(pattern, table, n, st)
+        p, sb = self._robot_sandbox(pattern, table, n, st, origin)
         if sb is None:
             return
         q, qconds = sb
@@ -180,11 +230,11 @@ class EventGoals:
         sub = (f"(SELECT {q}.t_start FROM {table} AS {q} WHERE {' AND '.join(qconds)} "
                f"ORDER BY {q}.t_start LIMIT 1)")
         m = st.mark()
-        p = self.alias("p")
+        by_robot = origin is not None and type(deref(origin)) is Var
         st.froms.append((table, p, "seq"))
-        if self.row_unify(pattern, p, n, st):
+        if self.row_unify(pattern, p, n, st) and self.robot_rows(p, st, origin):
             st.conds.append(f"{p}.t_start = {sub}")
             st.conds.append(f"{p}.t_end <= {hi}")
-            st.keys.extend([f"{p}.t_end", f"{p}.seq"])
+            st.keys.extend(([f"{p}.robot"] if by_robot else []) + [f"{p}.t_end", f"{p}.seq"])
             self.solve(nxt, st, emit)
         st.restore(m)

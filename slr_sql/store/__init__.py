@@ -53,15 +53,18 @@ from .checks import format_event
 from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, DatabaseError, \
     ReadConnection, run_sql_file
 from .events import Event, EventBatch, EventWriter
+from .fleet import Fleet, check_robot_name
 from .lookups import EventReader, Row
+from .postgres import PgDatabase, PgStatementError, is_postgres_url
 from .schema import migration_scripts
-from .space import Space
-from .sqltext import quote_identifier, split_sql_script, sql_literal
+from .space import ServerSpace, Space
+from .sqltext import quote_identifier, split_sql_script, sql_literal, store_error
 from .tables import EventTables
 
 __all__ = ["EventStore", "Event", "EventBatch", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "DatabaseError", "quote_identifier", "sql_literal", "format_event",
-           "migration_scripts", "split_sql_script", "run_sql_file", "ReadConnection"]
+           "migration_scripts", "split_sql_script", "run_sql_file", "store_error",
+           "check_robot_name", "ReadConnection"]
 
 
 def _doc(part_method: Callable) -> Callable:
@@ -94,15 +97,29 @@ class EventStore:
     def __init__(self, path: str | Path | None = None, clock: Any = None, *,
                  synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
                  adopt: bool = False, checkpoint: str = "auto",
-                 cache_mib: float = CACHE_SIZE_KIB / 1024):
-        self._db = db = Database(path, clock, synchronous, busy_timeout, adopt, checkpoint,
-                                 cache_mib=cache_mib)
+                 cache_mib: float = CACHE_SIZE_KIB / 1024, robot: str | None = None):
+        if robot is not None:
+            check_robot_name(robot)
+        db: Any
+        if is_postgres_url(path):
+            db = PgDatabase(str(path), clock, busy_timeout=busy_timeout, adopt=adopt)
+        else:
+            db = Database(path, clock, synchronous, busy_timeout, adopt, checkpoint,
+                          cache_mib=cache_mib)
+        self._db = db
         self._tables = EventTables(db)
         self._writer = EventWriter(db, self._tables)
         self._reader = EventReader(db, self._tables)
         self._catalog = Catalog(db)
         self._buffers = BufferTables(db)
-        self._space = Space(db, self._tables)
+        self._space = (ServerSpace if is_postgres_url(path) else Space)(db, self._tables)
+        try:
+            self._fleet = Fleet(db, self._tables, self._writer)
+            if robot is not None:
+                self._fleet.name(robot)
+        except BaseException:
+            db.close()
+            raise
 
     # ------------------------------------------------------------------ shared state
 
@@ -134,6 +151,44 @@ class EventStore:
     @table_created_hooks.setter
     def table_created_hooks(self, hooks: list) -> None:
         self._tables.table_created_hooks = hooks
+
+    def table_names(self) -> set[str]:
+        """Names of every table of the store (event tables, ``slr_*`` tables, journals)."""
+        self._db.check_open()
+        return self._db.table_names()
+
+    def triggers(self, table: str | None = None) -> set[str]:
+        """Names of the triggers of the store (on ``table`` only, when given)."""
+        self._db.check_open()
+        return self._db.triggers(table)
+
+    def set_write_groups(self, groups: Iterable[Iterable[tuple[str, int]]]) -> None:
+        """Event types whose writers must take turns, in groups (the types one event rule
+        reads and derives): :meth:`lock_for_write` of a type waits for every transaction
+        writing a type of its group. SQLite writers take turns anyway (one write
+        transaction at a time); on a server the groups become advisory locks.
+
+        >>> s = EventStore(None); s.set_write_groups([{("a", 1), ("r", 0)}])
+        >>> with s.transaction(): s.lock_for_write([("a", 1)])
+        """
+        self._db.set_write_groups(groups)
+
+    def lock_for_write(self, types: Iterable[tuple[str, int]]) -> None:
+        """Inside a transaction: wait until no other transaction writes a type of the
+        groups of ``types`` (:meth:`set_write_groups`), and hold that until the commit; a
+        wait longer than ``busy_timeout`` is :class:`~slr_sql.errors.SLRBusy`."""
+        self._db.lock_for_write(types)
+
+    @property
+    def dialect(self) -> Any:
+        """The SQL dialect of the database (:mod:`slr_sql.store.dialect`)."""
+        return self._db.dialect
+
+    @property
+    def python_functions(self) -> bool:
+        """True when statements may call Python functions (SQLite's ``create_function``);
+        on a server they cannot, and goals needing one run in the interpreter."""
+        return self._db.python_functions
 
     @property
     def _conn(self) -> Any:  # the raw connection, for benchmarks comparing against it
@@ -182,6 +237,51 @@ class EventStore:
     @property
     def in_transaction(self) -> bool:
         return self._db.tx_depth > 0
+
+    # ------------------------------------------------------------------ robots and fleets
+
+    @property
+    def robot(self) -> str | None:
+        """The name of the robot this store belongs to (None: unnamed); new events are
+        stored with it in their ``robot`` column."""
+        return self._fleet.robot
+
+    @_doc(Fleet.name)
+    def name_robot(self, robot: str) -> None:
+        self._fleet.name(robot)
+
+    @_doc(Fleet.robots)
+    def robots(self) -> list[str]:
+        return self._fleet.robots()
+
+    @_doc(Fleet.heads)
+    def fleet_heads(self) -> dict[tuple[str, int], int]:
+        return self._fleet.heads()
+
+    @_doc(Fleet.read_after)
+    def fleet_read_after(self, name: str, arity: int, position: int, limit: int) -> list[tuple]:
+        return self._fleet.read_after(name, arity, position, limit)
+
+    @_doc(Fleet.backlog)
+    def fleet_backlog(self, name: str, arity: int, position: int) -> tuple[int, float | None]:
+        return self._fleet.backlog(name, arity, position)
+
+    @_doc(Fleet.positions)
+    def fleet_positions(self, robot: str) -> dict[tuple[str, int], int]:
+        return self._fleet.positions(robot)
+
+    @_doc(Fleet.receive)
+    def fleet_receive(self, robot: str, name: str, arity: int, rows: list[tuple],
+                      store_events: Any = None) -> int:
+        return self._fleet.receive(robot, name, arity, rows, store_events)
+
+    @_doc(Fleet.record_contact)
+    def fleet_record_contact(self, robot: str, pending: int, head_arrival: float | None) -> None:
+        self._fleet.record_contact(robot, pending, head_arrival)
+
+    @_doc(Fleet.contacts)
+    def fleet_contacts(self) -> list[dict[str, Any]]:
+        return self._fleet.contacts()
 
     # ------------------------------------------------------------------ event types
 
@@ -233,36 +333,37 @@ class EventStore:
 
     @_doc(EventReader.scan)
     def scan(self, name: str, arity: int, bound: dict[int, Any] | None = None,
-             end_le: float | None = None) -> Iterator[Row]:
-        return self._reader.scan(name, arity, bound, end_le)
+             end_le: float | None = None, robot: str | None = None) -> Iterator[Row]:
+        return self._reader.scan(name, arity, bound, end_le, robot)
 
     @_doc(EventReader.prev_candidates)
     def prev_candidates(self, name: str, arity: int, bound: dict[int, Any] | None,
-                        t: float, start_ge: float | None = None) -> Iterator[Row]:
-        return self._reader.prev_candidates(name, arity, bound, t, start_ge)
+                        t: float, start_ge: float | None = None,
+                        robot: str | None = None) -> Iterator[Row]:
+        return self._reader.prev_candidates(name, arity, bound, t, start_ge, robot)
 
     @_doc(EventReader.rows_at_end)
     def rows_at_end(self, name: str, arity: int, bound: dict[int, Any] | None, end: float,
-                    start_ge: float | None = None, end_le: float | None = None
-                    ) -> Iterator[Row]:
-        return self._reader.rows_at_end(name, arity, bound, end, start_ge, end_le)
+                    start_ge: float | None = None, end_le: float | None = None,
+                    robot: str | None = None) -> Iterator[Row]:
+        return self._reader.rows_at_end(name, arity, bound, end, start_ge, end_le, robot)
 
     @_doc(EventReader.next_candidates)
     def next_candidates(self, name: str, arity: int, bound: dict[int, Any] | None,
-                        a: float, b: float) -> Iterator[Row]:
-        return self._reader.next_candidates(name, arity, bound, a, b)
+                        a: float, b: float, robot: str | None = None) -> Iterator[Row]:
+        return self._reader.next_candidates(name, arity, bound, a, b, robot)
 
     @_doc(EventReader.rows_at_start)
     def rows_at_start(self, name: str, arity: int, bound: dict[int, Any] | None,
-                      start: float, b: float) -> Iterator[Row]:
-        return self._reader.rows_at_start(name, arity, bound, start, b)
+                      start: float, b: float, robot: str | None = None) -> Iterator[Row]:
+        return self._reader.rows_at_start(name, arity, bound, start, b, robot)
 
     @_doc(EventReader.lookup_sql)
     def lookup_sql(self, kind: str, name: str, arity: int,
                    bound: dict[int, Any] | None = None, *, start_ge: bool = False,
-                   end_le: bool = False) -> str | None:
+                   end_le: bool = False, robot: bool = False) -> str | None:
         return self._reader.lookup_sql(kind, name, arity, bound, start_ge=start_ge,
-                                       end_le=end_le)
+                                       end_le=end_le, robot=robot)
 
     @_doc(EventReader.latest_at_or_before)
     def latest_at_or_before(self, name: str, arity: int, bound: dict[int, Any], t: float,
@@ -273,6 +374,27 @@ class EventStore:
     def latest_rows(self, name: str, arity: int, positions: tuple[int, ...], values: list,
                     t: float, point: bool) -> list[tuple]:
         return self._reader.latest_rows(name, arity, positions, values, t, point)
+
+    @_doc(EventReader.bracket)
+    def bracket(self, name: str, arity: int, bound: dict[int, Any], t: float
+                ) -> tuple[Row | None, Row | None] | None:
+        return self._reader.bracket(name, arity, bound, t)
+
+    @_doc(EventReader.distinct_pairs)
+    def distinct_pairs(self, name: str, arity: int, after_seq: int = 0
+                       ) -> tuple[list[tuple[Any, Any]], int]:
+        return self._reader.distinct_pairs(name, arity, after_seq)
+
+    @_doc(EventReader.max_seq)
+    def max_seq(self, name: str, arity: int) -> int:
+        return self._reader.max_seq(name, arity)
+
+    @_doc(EventReader.raw_rows)
+    def raw_rows(self, name: str, arity: int, *, after_seq: int | None = None,
+                 end_from: float | None = None, end_to: float | None = None,
+                 limit: int | None = None, after_key: tuple | None = None) -> list[tuple]:
+        return self._reader.raw_rows(name, arity, after_seq=after_seq, end_from=end_from,
+                                     end_to=end_to, limit=limit, after_key=after_key)
 
     @_doc(EventReader.count)
     def count(self, name: str, arity: int) -> int:
@@ -358,6 +480,11 @@ class EventStore:
     @_doc(Catalog.facts_version)
     def facts_version(self) -> int:
         return self._catalog.facts_version()
+
+    @_doc(Catalog.create_rule_tables)
+    def create_rule_tables(self, prov: str, width: int, arity: int,
+                           used: str | None = None) -> None:
+        self._catalog.create_rule_tables(prov, width, arity, used)
 
     @_doc(Catalog.replace_views)
     def replace_views(self, views: dict[str, str]) -> list[str]:

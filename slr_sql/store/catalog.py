@@ -22,6 +22,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Iterable
 
+from ..errors import SLRError
 from .connection import Database
 from .sqltext import RESERVED_PREFIXES, quote_identifier
 
@@ -32,7 +33,10 @@ PROGRAM_VERSION = "version/program"    # bumped with every change of slr_program
 PROGRESS_VERSION = "version/progress"  # bumped whenever meta_raise raises a value
 FACTS_VERSION = "facts/version"        # the program version the fact tables were built for
 
-_INSERT_TEXT = "INSERT INTO slr_program (id, name, source, filename, loaded_at) VALUES (?, ?, ?, ?, ?)"
+# id NULL: the next id, as SQLite's rowid would choose it (spelled out for other engines)
+_INSERT_TEXT = ("INSERT INTO slr_program (id, name, source, filename, loaded_at) VALUES "
+                "(coalesce(?, (SELECT coalesce(max(id), 0) + 1 FROM slr_program)), ?, ?, ?, ?) "
+                "RETURNING id")
 
 
 @dataclass(frozen=True)
@@ -57,9 +61,12 @@ def _number_text(value: float) -> str:
     return repr(float(value))
 
 
-# The stored number of a meta value, in SQL (texts written by json.dumps may spell infinity).
-_STORED_NUMBER = ("(CASE slr_meta.value WHEN 'Infinity' THEN 9e999 WHEN '-Infinity' THEN -9e999 "
-                  "ELSE CAST(slr_meta.value AS REAL) END)")
+def _stored_number(dialect: Any) -> str:
+    """The stored number of a meta value, in SQL (texts written by json.dumps may spell
+    infinity)."""
+    return (f"(CASE slr_meta.value WHEN 'Infinity' THEN {dialect.infinity()} "
+            f"WHEN '-Infinity' THEN {dialect.infinity(negative=True)} "
+            f"ELSE CAST(slr_meta.value AS {dialect.real}) END)")
 
 
 def _escape_name(name: str) -> str:
@@ -97,7 +104,7 @@ class Catalog:
         """Add one to the counter ``key`` (in the caller's transaction); returns the new value."""
         conn = self.db.conn
         conn.execute("INSERT INTO slr_meta (key, value) VALUES (?, '1') ON CONFLICT(key) "
-                     "DO UPDATE SET value = CAST(value AS INTEGER) + 1", (key,))
+                     "DO UPDATE SET value = CAST(slr_meta.value AS INTEGER) + 1", (key,))
         return int(conn.execute("SELECT value FROM slr_meta WHERE key = ?", (key,)).fetchone()[0])
 
     def _counter(self, key: str) -> int:
@@ -142,10 +149,12 @@ class Catalog:
         [('p(1).', 'a.slr')]
         """
         with self.db.transaction():
+            self.db.lock_named("program")
             cursor = self.db.conn.execute(_INSERT_TEXT, (None, str(name), source, filename,
                                                          float(self.db.clock.now())))
+            text_id = cursor.fetchone()[0]
             self._bump(PROGRAM_VERSION)
-            return cursor.lastrowid
+            return text_id
 
     def replace_named_program(self, name: str, source: str, filename: str | None = None) -> int:
         """Make the program ``name`` the one text ``source``, in the place of its first text
@@ -158,14 +167,16 @@ class Catalog:
         [('a', 'a(2).'), ('b', 'b.')]
         """
         with self.db.transaction():
+            self.db.lock_named("program")
             conn = self.db.conn
             first = conn.execute("SELECT min(id) FROM slr_program WHERE name = ?",
                                  (str(name),)).fetchone()[0]
             conn.execute("DELETE FROM slr_program WHERE name = ?", (str(name),))
             cursor = conn.execute(_INSERT_TEXT, (first, str(name), source, filename,
                                                  float(self.db.clock.now())))
+            text_id = cursor.fetchone()[0]
             self._bump(PROGRAM_VERSION)
-            return cursor.lastrowid
+            return text_id
 
     def delete_program(self, name: str) -> int:
         """Remove every text of the program ``name``; returns how many there were (the
@@ -176,6 +187,7 @@ class Catalog:
         (1, 0)
         """
         with self.db.transaction():
+            self.db.lock_named("program")
             removed = self.db.conn.execute("DELETE FROM slr_program WHERE name = ?",
                                            (str(name),)).rowcount
             if removed > 0:
@@ -214,10 +226,11 @@ class Catalog:
         [('b.', None)]
         """
         with self.db.transaction():
+            self.db.lock_named("program")
             self.db.conn.execute("DELETE FROM slr_program")
             now = float(self.db.clock.now())
-            self.db.conn.executemany(
-                _INSERT_TEXT, [(None, "main", source, filename, now) for source, filename in sources])
+            for source, filename in sources:
+                self.db.conn.execute(_INSERT_TEXT, (None, "main", source, filename, now))
             self._bump(PROGRAM_VERSION)
 
     # ------------------------------------------------------------------ meta keys
@@ -263,11 +276,16 @@ class Catalog:
             raise ValueError(f"{key}: NaN cannot be stored as a growing value")
         with self.db.transaction():
             conn = self.db.conn
-            conn.execute("INSERT INTO slr_meta (key, value) VALUES (?, ?) ON CONFLICT(key) DO "
-                         "UPDATE SET value = excluded.value "
-                         f"WHERE {_STORED_NUMBER} < CAST(excluded.value AS REAL)",
-                         (key, _number_text(value)))
-            if conn.execute("SELECT changes()").fetchone()[0]:
+            dialect = self.db.dialect
+            # 1e999 (infinity in SQLite's CAST) is out of a PostgreSQL float's range
+            text = _number_text(value) if dialect.infinity() == "9e999" or math.isfinite(value) \
+                else json.dumps(value)
+            changed = conn.execute(
+                "INSERT INTO slr_meta (key, value) VALUES (?, ?) ON CONFLICT(key) DO "
+                "UPDATE SET value = excluded.value "
+                f"WHERE {_stored_number(dialect)} < CAST(excluded.value AS {dialect.real})",
+                (key, text)).rowcount
+            if changed > 0:
                 self._bump(PROGRESS_VERSION)
             stored = conn.execute("SELECT value FROM slr_meta WHERE key = ?",
                                   (key,)).fetchone()[0]
@@ -349,16 +367,20 @@ class Catalog:
         out = {}
         with self.db.transaction():
             conn = self.db.conn
-            existing = [row[0] for row in conn.execute(
-                "SELECT name FROM sqlite_master WHERE type = 'table' AND name LIKE 'slr!_facts!_%' "
-                "ESCAPE '!'")]
+            existing = sorted(name for name in self.db.table_names()
+                              if name.startswith("slr_facts_"))
             for table in existing:
                 conn.execute(f"DROP TABLE {quote_identifier(table)}")
             for (name, arity), rows in tables.items():
                 plain = self.fact_table_name(name, arity)
                 table = quote_identifier(plain)
-                cols = "".join(f", arg{i}" for i in range(1, arity + 1))
-                conn.execute(f"CREATE TABLE {table} (ord INTEGER PRIMARY KEY{cols})")
+                dialect = self.db.dialect
+                cols = "".join(f", arg{i}{dialect.value}" for i in range(1, arity + 1))
+                conn.execute(f"CREATE TABLE {table} (ord BIGINT PRIMARY KEY{cols})"
+                             if dialect.to_column else
+                             f"CREATE TABLE {table} (ord INTEGER PRIMARY KEY{cols})")
+                if dialect.to_column is not None:
+                    rows = [tuple(map(dialect.to_column, row)) for row in rows]
                 if arity:
                     index = quote_identifier("slr_facts_ix_" + plain[len("slr_facts_"):])
                     conn.execute(f"CREATE INDEX {index} ON {table} (arg1)")
@@ -381,15 +403,41 @@ class Catalog:
         """
         with self.db.lock:
             self.db.check_open()
-            present = {row[0] for row in self.db.conn.execute(
-                "SELECT name FROM sqlite_master WHERE type = 'table' AND name LIKE 'slr!_facts!_%' "
-                "ESCAPE '!'")}
+            present = {name for name in self.db.table_names() if name.startswith("slr_facts_")}
         out = {}
         for name, arity in keys:
             table = self.fact_table_name(name, arity)
             if table in present:
                 out[(name, arity)] = quote_identifier(table)
         return out
+
+    def create_rule_tables(self, prov: str, width: int, arity: int,
+                           used: str | None = None) -> None:
+        """An event rule's tables, unless they exist: ``prov`` (quoted) holds one row per
+        complex event derived (``id``, the alternative, the seqs ``r1..r<width>`` of its
+        events, its interval, its head arguments ``h1..h<arity>`` and when it was
+        detected); ``used`` (quoted, optional) the rows a chronological rule consumed.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.create_rule_tables('"slr_cep_m_x"', 2, 1)
+        >>> s.execute('SELECT count(*) FROM "slr_cep_m_x"')
+        [(0,)]
+        """
+        dialect = self.db.dialect
+        real = dialect.real
+        cols = [f"id {dialect.integer_key}", "alt INTEGER NOT NULL"]
+        cols += [f"r{p + 1} BIGINT" if dialect.to_column else f"r{p + 1} INTEGER"
+                 for p in range(width)]
+        cols += [f"t_start {real} NOT NULL", f"t_end {real} NOT NULL"]
+        cols += [f"h{i + 1}{dialect.value}" for i in range(arity)]
+        cols += [f"detected {real} NOT NULL"]
+        with self.db.transaction():
+            self.db.lock_named("program")   # two processes installing the same rule
+            self.db.conn.execute(f"CREATE TABLE IF NOT EXISTS {prov} ({', '.join(cols)})")
+            if used:
+                self.db.conn.execute(
+                    f"CREATE TABLE IF NOT EXISTS {used} (tbl TEXT NOT NULL, seq BIGINT NOT "
+                    f"NULL, PRIMARY KEY (tbl, seq)){dialect.without_rowid}")
 
     def replace_views(self, views: dict[str, str]) -> list[str]:
         """Drop the views created last time and create ``{predicate name: select sql}``,
@@ -405,7 +453,7 @@ class Catalog:
             conn = self.db.conn
             for name in self.meta_get("sql_views", []):
                 conn.execute(f"DROP VIEW IF EXISTS {quote_identifier(name)}")
-            taken = {row[0].lower() for row in conn.execute("SELECT name FROM sqlite_master")}
+            taken = self.db.object_names()
             for predicate, select in views.items():
                 name = self.view_name(predicate)
                 if name.lower() in taken:
@@ -471,11 +519,12 @@ class BufferTables:
         with self.db.transaction():
             cursor = self.db.conn.execute(
                 "INSERT INTO slr_buffers (kind, source, pattern_text, type_name, type_arity, "
-                "amount, t1, t2, origin, created_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                "amount, t1, t2, origin, created_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?) "
+                "RETURNING id",
                 (kind, source, pattern_text, type_name, type_arity, amount, t1, t2, origin,
                  float(self.db.clock.now())))
-            buffer_id = cursor.lastrowid
-            self.db.conn.execute("INSERT OR IGNORE INTO slr_counters (buffer_id) VALUES (?)",
+            buffer_id = cursor.fetchone()[0]
+            self.db.conn.execute(self.db.dialect.insert_ignore("slr_counters", "buffer_id", "?"),
                                  (buffer_id,))
             return buffer_id
 
@@ -500,6 +549,8 @@ class BufferTables:
 
     def buffer_objects(self, buffer_id: int) -> dict[str, str]:
         """The triggers and indexes of one buffer: ``{name: sql}``."""
+        if self.db.dialect.name != "sqlite":
+            return {}   # no buffer objects elsewhere yet (install_buffer_objects)
         with self.db.lock:
             self.db.check_open()
             rows = self.db.conn.execute(
@@ -512,6 +563,9 @@ class BufferTables:
         """Make the triggers/indexes of ``buffer_id`` exactly ``statements`` (``{name: CREATE
         ...}``): objects whose SQL differs are re-created, missing ones created, others
         dropped. Returns True if anything changed."""
+        if statements and self.db.dialect.name != "sqlite":
+            raise SLRError("buffers (tBuffer, cBuffer, windows) are not available on "
+                           f"{self.db.dialect.name} stores yet: their triggers are SQLite's")
         with self.db.transaction():
             existing = self.buffer_objects(buffer_id)
             changed = False

@@ -26,6 +26,8 @@ from __future__ import annotations
 import sqlite3
 import threading
 
+from .authorizer import harden_connection
+
 __all__ = ["WalCheckpointer", "CHECKPOINT_MODES", "CHECKPOINT_INTERVAL"]
 
 CHECKPOINT_MODES = ("auto", "background")
@@ -55,6 +57,7 @@ class WalCheckpointer:
         except sqlite3.Error:
             return  # the writer's own connection still checkpoints on close
         try:
+            harden_connection(conn)
             conn.execute("PRAGMA cache_size=-256")  # the copy reads the log, not the cache
             while not self._stopping.wait(self.interval):
                 try:

@@ -32,10 +32,12 @@ import weakref
 from contextlib import contextmanager
 from typing import Any, Callable, Iterable, Iterator
 
-from ..errors import SLRError, SLRTimeout
+from ..errors import SLRError, SLRStoreGone, SLRTimeout
+from .authorizer import READ_ONLY_VALUE_BYTES, SqlGuard, harden_connection
 from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
+from .dialect import SQLITE
 from .schema import migrate, migration_scripts
-from .sqltext import busy_error, split_sql_script
+from .sqltext import busy_error, split_sql_script, store_error
 
 __all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "run_sql_file", "check_file"]
@@ -43,6 +45,7 @@ __all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEF
 # The base class of the errors the database raises while running a statement (a missing
 # table, a syntax error, a constraint, an interrupted statement...). Callers outside the
 # store catch this name, never sqlite3's.
+# (the PostgreSQL backend's PgStatementError derives from it)
 DatabaseError = sqlite3.Error
 
 CACHE_SIZE_KIB = 65536  # PRAGMA cache_size of the store's connection (64 MiB)
@@ -163,6 +166,7 @@ def _read_schema(path: str, header: bytes) -> tuple[list[tuple[str, str]], int]:
         try:
             conn = sqlite3.connect(uri, uri=True, isolation_level=None, timeout=30.0)
             try:
+                harden_connection(conn)
                 objects = conn.execute("SELECT type, name FROM sqlite_master").fetchall()
                 version = conn.execute("PRAGMA user_version").fetchone()[0]
                 return objects, version
@@ -177,6 +181,14 @@ def _read_schema(path: str, header: bytes) -> tuple[list[tuple[str, str]], int]:
     if "not a database" in str(error):
         raise SLRError(f"{path}: not an SQLite database, or its header is damaged "
                        f"({error})")
+    code = getattr(error, "sqlite_errorcode", None)
+    if code is not None and code & 0xFF != sqlite3.SQLITE_CORRUPT:
+        # the file could not be read (a full disk refusing the -shm file, permissions...):
+        # that says nothing about its pages
+        reason = store_error(error, path, outcome="it was not opened")  # type: ignore[arg-type]
+        if type(reason) is not SLRError:
+            raise reason
+        raise SLRError(f"{path}: cannot read it ({error})")
     raise SLRError(f"{path}: the file is damaged ({error})")
 
 
@@ -208,6 +220,9 @@ class Database:
     >>> db.close()
     """
 
+    dialect = SQLITE
+    python_functions = True  # create_function's Python functions run inside statements
+
     def __init__(self, path: str | os.PathLike | None = None, clock: Any = None,
                  synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
                  adopt: bool = False, checkpoint: str = "auto",
@@ -236,6 +251,13 @@ class Database:
         self.open_streams: weakref.WeakSet = weakref.WeakSet()
         self.deadline: float | None = None  # of the compiled statement running now
         self.busy_timeout = busy_timeout
+        self._absolute: str | None = None  # set once open (check_identity)
+        self._identity: tuple = (None, None, None)
+        # the files this open creates: removed again should it fail (a store it could not
+        # create leaves no empty file, -wal or -shm behind)
+        created = [] if self.path is None or os.path.lexists(self.path) else \
+            [name for name in (self.path, self.path + "-wal", self.path + "-shm",
+                               self.path + "-journal") if not os.path.lexists(name)]
         try:
             self.conn = sqlite3.connect(self.path or ":memory:", check_same_thread=False,
                                         isolation_level=None, timeout=busy_timeout,
@@ -244,6 +266,7 @@ class Database:
             raise SLRError(f"{self.path}: cannot open it ({exc})") from None
         conn = self.conn
         try:
+            self.guard = harden_connection(conn)
             # auto_vacuum must be chosen before the first table exists (a no-op afterwards,
             # but one that wants the write lock: only a new file gets it)
             if conn.execute("PRAGMA page_count").fetchone()[0] == 0:
@@ -267,14 +290,24 @@ class Database:
                 self.checkpointer = WalCheckpointer(self.path, checkpoint_interval)
         except BaseException as exc:
             conn.close()
-            if isinstance(exc, sqlite3.OperationalError):
-                busy = busy_error(exc, self.path, busy_timeout)
-                if busy is not None:
-                    raise busy from None
+            for name in created:
+                try:
+                    os.remove(name)
+                except OSError:
+                    pass  # not created after all, or already gone
             if isinstance(exc, sqlite3.Error):
+                outcome = "it was not created, and nothing was left behind" if created else \
+                    "it was not opened"
+                reason = store_error(exc, self.path, busy_timeout, outcome)
+                if type(reason) is not SLRError:  # busy, full: a condition that may pass
+                    raise reason from None
                 raise SLRError(f"{self.path or ':memory:'}: cannot open the store "
                                f"({exc})") from None
             raise
+        # which file is open (device, inode), to notice it deleted or replaced before a
+        # commit is acknowledged; the path made absolute now (a later chdir changes nothing)
+        self._absolute = None if self.path is None else os.path.abspath(self.path)
+        self._identity = (None, None, None) if self.path is None else self._identities()
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -300,6 +333,52 @@ class Database:
             self.check_open()
             return self.conn.execute("PRAGMA data_version").fetchone()[0]
 
+    def table_names(self) -> set[str]:
+        """Names of the tables of the database.
+
+        >>> "slr_meta" in Database(None).table_names()
+        True
+        """
+        with self.lock:
+            return {row[0] for row in self.conn.execute(
+                "SELECT name FROM sqlite_master WHERE type = 'table'")}
+
+    def set_write_groups(self, groups: Iterable[Iterable[tuple[str, int]]]) -> None:
+        """Writers take turns on SQLite already (``BEGIN IMMEDIATE``): nothing to keep."""
+
+    def lock_for_write(self, types: Iterable[tuple[str, int]]) -> None:
+        """Nothing to wait for: this connection holds the database's one write lock."""
+
+    def lock_named(self, name: str) -> None:
+        """Nothing to wait for (see :meth:`lock_for_write`)."""
+
+    def triggers(self, table: str | None = None) -> set[str]:
+        """Names of the triggers (on ``table`` only, when given), temporary ones included.
+
+        >>> Database(None).triggers("slr_clock")
+        {'slr_clock_back'}
+        """
+        with self.lock:
+            return {row[0] for row in self.conn.execute(
+                "SELECT name FROM sqlite_master WHERE type = 'trigger' AND "
+                "(? IS NULL OR tbl_name = ?) UNION ALL SELECT name FROM sqlite_temp_master "
+                "WHERE type = 'trigger' AND (? IS NULL OR tbl_name = ?)",
+                (table, table, table, table))}
+
+    def object_names(self) -> set[str]:
+        """Lower-cased names of every table, index, view and trigger of the database.
+
+        >>> "slr_meta" in Database(None).object_names()
+        True
+        """
+        with self.lock:
+            return {row[0].lower() for row in self.conn.execute("SELECT name FROM sqlite_master")}
+
+    @property
+    def max_columns(self) -> int:
+        """The most columns a table may have (SQLite's compile-time limit)."""
+        return self.conn.getlimit(sqlite3.SQLITE_LIMIT_COLUMN)
+
     def suspend_streams(self) -> None:
         """Close the statements of the streams still reading (lock held): each resumes
         after its last row with a statement of its own when next read. Called when a
@@ -320,6 +399,10 @@ class Database:
             self.closed = True
             if self.checkpointer is not None:
                 self.checkpointer.stop()
+            if self._absolute is not None:
+                now = self._identities()
+                if now[0] != self._identity[0]:  # replaced: leave the new file's side alone
+                    self._remove_own_side_files(now)
             try:
                 if self.tx_depth:
                     self.conn.execute("ROLLBACK")
@@ -342,6 +425,66 @@ class Database:
     def check_open(self) -> None:
         if self.closed:
             raise SLRError("the event store is closed")
+
+    def _identities(self, shm: bool = True) -> tuple:
+        """``(device, inode)`` of the file, its write-ahead log and (unless not ``shm``) its
+        shared-memory file (None where missing)."""
+        found = []
+        names = (self._absolute, f"{self._absolute}-wal", f"{self._absolute}-shm")
+        for name in names if shm else names[:2]:
+            try:
+                info = os.stat(name)
+                found.append((info.st_dev, info.st_ino))
+            except OSError:
+                found.append(None)
+        return tuple(found)
+
+    def check_identity(self) -> None:
+        """Raise :class:`SLRStoreGone` naming the path if the file open is no longer the one
+        at the path (deleted, moved, replaced), or its write-ahead log was deleted (another
+        process would start a second one): what is written now would be lost. A file
+        database only; a few microseconds (``stat`` calls).
+
+        When the file was replaced, this connection's ``-wal`` and ``-shm`` still at the path
+        are removed at once: left there, SQLite would apply the old store's log to the new
+        file when it is next opened.
+
+        >>> import os, tempfile
+        >>> path = os.path.join(tempfile.mkdtemp(), "robot.db"); db = Database(path)
+        >>> db.check_identity(); os.remove(path); db.check_identity()
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRStoreGone: ...robot.db: the store file was deleted or replaced while open ...
+        """
+        if self._absolute is None:
+            return
+        now = self._identities(shm=False)
+        main, wal, shm = self._identity
+        if now[0] == main and now[1] == wal:
+            return
+        if now[0] != main:
+            self._remove_own_side_files(self._identities())
+            what = "the store file was deleted or replaced"
+        elif wal is not None and now[1] != wal:
+            what = "the store's write-ahead log (-wal) was deleted or replaced"
+        else:  # a log that appeared since the open: that is its identity from now on
+            self._identity = (main, now[1], shm if shm is not None else self._identities()[2])
+            return
+        raise SLRStoreGone(f"{self.path}: {what} while open (by another program?); nothing of "
+                           f"this call was stored. Restore the file, or close this knowledge "
+                           f"base and open the path again")
+
+    def _remove_own_side_files(self, now: tuple) -> None:
+        """Remove the ``-wal`` and ``-shm`` at the path that are this connection's own (same
+        inode as when opened) once the file beside them is another one."""
+        for suffix, mine, there in (("-wal", self._identity[1], now[1]),
+                                    ("-shm", self._identity[2], now[2])):
+            if mine is not None and there == mine:
+                try:
+                    os.remove(f"{self._absolute}{suffix}")
+                except OSError:
+                    pass  # gone already
+        self._identity = (self._identity[0], None, None)
 
     # ------------------------------------------------------------------ transactions
 
@@ -384,6 +527,8 @@ class Database:
                 raise
             self.tx_depth = depth
             try:
+                if depth == 0:
+                    self.check_identity()  # before anything is acknowledged
                 conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
             except BaseException:
                 if depth == 0 and conn.in_transaction:
@@ -450,31 +595,35 @@ class Database:
         with self.lock:
             self.check_open()
             conn = self.conn
+            guard = self.guard
+            guard.denied = None
             if write:
                 with self._deadline(deadline, "the SQL statement"):
                     try:
                         cursor = conn.execute(query, tuple(params))
                         columns = [d[0] for d in cursor.description] if cursor.description else []
                         return columns, cursor.fetchall()
-                    except sqlite3.OperationalError as exc:
+                    except sqlite3.DatabaseError as exc:
+                        if guard.denied is not None and "authoriz" in str(exc):
+                            raise SLRError(f"sql: {guard.denied}") from None
                         raise busy_error(exc, self.path, self.busy_timeout) or exc from None
             # query_only refuses every write to a database file; the authorizer refuses what
-            # it lets through (pragma assignments such as journal_mode, ATTACH, DETACH).
+            # it lets through (pragma assignments such as journal_mode, ATTACH, DETACH) and
+            # the functions no statement may call; the length limit turns a memory bomb
+            # (randomblob(2e9), printf('%.*c', 2e9, 'x')) into an error
             conn.execute("PRAGMA query_only = 1")
-            conn.set_authorizer(_read_only_authorizer)
+            conn.set_authorizer(guard.read_only)
+            longest = conn.setlimit(sqlite3.SQLITE_LIMIT_LENGTH, READ_ONLY_VALUE_BYTES)
             try:
                 with self._deadline(deadline, "the SQL statement"):
                     cursor = conn.execute(query, tuple(params))
                     columns = [d[0] for d in cursor.description] if cursor.description else []
                     return columns, cursor.fetchall()
             except sqlite3.DatabaseError as exc:
-                text = str(exc)
-                if "readonly" in text or "not authorized" in text:
-                    raise SLRError(f"read-only: the statement would change the store "
-                                   f"({text}); pass write=True to allow it") from None
-                raise
+                raise _read_only_error(exc, guard) from None
             finally:
-                conn.set_authorizer(None)
+                conn.setlimit(sqlite3.SQLITE_LIMIT_LENGTH, longest)
+                conn.set_authorizer(guard.always)
                 conn.execute("PRAGMA query_only = 0")
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
@@ -616,7 +765,23 @@ class Database:
                                               20000)
 
 
-# Pragmas that take an argument and only read (also table-valued: pragma_table_info('t')).
+def _read_only_error(exc: sqlite3.DatabaseError, guard: SqlGuard) -> Exception:
+    """The error to raise for ``exc``, raised by a read-only statement: the authorizer's
+    reason, the read-only refusal, the value limit in words, else ``exc`` itself."""
+    text = str(exc)
+    if "authoriz" in text and guard.denied is not None:
+        if guard.denied.startswith("read-only"):
+            return SLRError(f"{guard.denied}; pass write=True to allow it")
+        return SLRError(f"sql: {guard.denied}")
+    if "readonly" in text or "authoriz" in text:
+        return SLRError(f"read-only: the statement would change the store ({text}); pass "
+                        f"write=True to allow it")
+    if "too big" in text:
+        return SLRError(f"sql: a read-only statement may make or read strings and blobs of at "
+                        f"most {READ_ONLY_VALUE_BYTES >> 20} MiB ({text})")
+    return exc
+
+
 class ReadConnection:
     """A connection of its own to a store's file, for a reader that must not queue behind the
     store's connection: its statements never wait for the store's lock, which a writer holds
@@ -640,6 +805,7 @@ class ReadConnection:
         try:
             self.conn = sqlite3.connect(path, check_same_thread=False, isolation_level=None,
                                         timeout=busy_timeout, cached_statements=64)
+            harden_connection(self.conn)
             self.conn.execute("PRAGMA query_only=ON")
             self.conn.execute(f"PRAGMA cache_size=-{int(cache_kib)}")
         except sqlite3.Error as exc:
@@ -664,22 +830,6 @@ class ReadConnection:
 
 
 
-_READING_PRAGMAS = frozenset({
-    "table_info", "table_xinfo", "table_list", "index_list", "index_info", "index_xinfo",
-    "foreign_key_list", "foreign_key_check", "integrity_check", "quick_check",
-    "function_list", "module_list", "pragma_list", "collation_list", "database_list",
-    "compile_options"})
-
-
-def _read_only_authorizer(action: int, arg1: Any, arg2: Any, _db: Any, _trigger: Any) -> int:
-    if action in (sqlite3.SQLITE_ATTACH, sqlite3.SQLITE_DETACH):
-        return sqlite3.SQLITE_DENY
-    if action == sqlite3.SQLITE_PRAGMA and arg2 is not None \
-            and str(arg1).lower() not in _READING_PRAGMAS:
-        return sqlite3.SQLITE_DENY
-    return sqlite3.SQLITE_OK
-
-
 def run_sql_file(path: str | os.PathLike, query: str,
                  write: bool = False) -> tuple[list[str], list[tuple]]:
     """Run one SQL statement on the store file ``path`` through a connection of its own,
@@ -699,11 +849,21 @@ def run_sql_file(path: str | os.PathLike, query: str,
         conn = sqlite3.connect(uri, uri=True, isolation_level=None)
     except sqlite3.Error as exc:
         raise SLRError(f"sql: {exc}") from None
+    guard = harden_connection(conn)
     try:
+        if not write:
+            conn.set_authorizer(guard.read_only)
+            conn.setlimit(sqlite3.SQLITE_LIMIT_LENGTH, READ_ONLY_VALUE_BYTES)
         cursor = conn.execute(query)
         columns = [d[0] for d in cursor.description or ()]
         return columns, [tuple(row) for row in cursor.fetchall()]
     except sqlite3.Error as exc:
-        raise SLRError(f"sql: {exc}") from None
+        text = str(exc)
+        if guard.denied is not None and "authoriz" in text:
+            text = guard.denied
+        elif not write and "too big" in text:
+            text = f"{text} (a read-only statement's values are at most " \
+                   f"{READ_ONLY_VALUE_BYTES >> 20} MiB)"
+        raise SLRError(f"sql: {text}") from None
     finally:
         conn.close()

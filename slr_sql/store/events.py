@@ -16,7 +16,7 @@ from typing import Any, Iterable, Iterator
 from ..encoding import Unencodable, encode, encode_column
 from ..errors import EventRejected
 from .checks import BadEvent, arguments_problem, check_times, format_event, \
-    rejection_reason, shorten, text_problem
+    rejection_reason, shown, text_problem
 from .connection import Database
 from .tables import EventTables, EventType
 
@@ -73,7 +73,7 @@ def _widen(ends: dict, key: tuple, earliest: float, latest: float) -> None:
     ends[key] = (earliest, latest)
 
 
-_end_of_row = itemgetter(-2)  # a row is (*arguments, start, end, arrival)
+_end_of_row = itemgetter(-3)  # a row is (*arguments, start, end, arrival, robot)
 
 
 def _widen_by_rows(ends: dict, event_type: EventType, rows: list) -> None:
@@ -92,6 +92,9 @@ class EventWriter:
     def __init__(self, db: Database, tables: EventTables):
         self.db = db
         self.tables = tables
+        # the robot the rows of an add are stored with: the store's name (None: unnamed),
+        # or, while a fleet store receives a shipped batch, the shipping robot
+        self.robot: str | None = None
 
     def add_events(self, events: Iterable[Event], atomic: bool = False) -> list[EventRejected]:
         """Store events ``(name, args, start, end)`` in one transaction.
@@ -120,7 +123,10 @@ class EventWriter:
             return errors
         with self.db.transaction():
             arrival = float(self.db.clock.now())
-            self.record_now(arrival)  # buffers (issue 4): "now" for the buffer triggers
+            if self.db.dialect.to_column is None:
+                # buffers (issue 4): "now" for the buffer triggers (SQLite's only: on a
+                # server every writer would wait for the one row's lock)
+                self.record_now(arrival)
             for base, chunk in _chunks(events):
                 if not self._insert_uniform(chunk, arrival, ends):
                     self._insert_each(chunk, base, arrival, atomic, errors, ends)
@@ -173,8 +179,12 @@ class EventWriter:
                 event_type = self._type_for_new_event(name, arity)
             except BadEvent:
                 return False
+        to_column = self.db.dialect.to_column
+        if to_column is not None:  # a server's typed columns: see store/dialect.py
+            columns = [list(map(to_column, column)) for column in columns]
         self.db.conn.executemany(event_type.insert_sql,
-                                 zip(*columns, starts, ends_column, repeat(arrival)))
+                                 zip(*columns, starts, ends_column, repeat(arrival),
+                                     repeat(self.robot)))
         if ends is not None:
             _widen(ends, (name, arity), min(ends_column), latest)
         return True
@@ -185,9 +195,14 @@ class EventWriter:
         go in with one ``executemany``); a bad event is rejected with its reason and index
         (``base`` + its place in the chunk), or raised when ``atomic``. The end times of
         what it stored widen ``ends`` (when not None)."""
-        enc = encode
+        enc: Any = encode
+        to_column = self.db.dialect.to_column
+        if to_column is not None:  # a server's typed columns: see store/dialect.py
+            def enc(term: Any) -> Any:
+                return to_column(encode(term))
         executemany = self.db.conn.executemany
         types = self.tables.types
+        robot = self.robot
         rows: list = []
         append = rows.append
         current_name: Any = None
@@ -199,7 +214,7 @@ class EventWriter:
                     name, args, start, end = event
                 except (TypeError, ValueError):
                     raise BadEvent(f"event #{index} is not a (name, args, start, end) "
-                                   f"tuple: {shorten(repr(event))}") from None
+                                   f"tuple: {shown(event)}") from None
                 if type(args) is not tuple and type(args) is not list:
                     raise BadEvent(arguments_problem(args))
                 arity = len(args)
@@ -207,11 +222,11 @@ class EventWriter:
                         and _NEG_INF < start <= end < _INF):
                     start, end = check_times(start, end)
                 if arity == 1:
-                    row = (enc(args[0]), start, end, arrival)
+                    row = (enc(args[0]), start, end, arrival, robot)
                 elif arity == 2:
-                    row = (enc(args[0]), enc(args[1]), start, end, arrival)
+                    row = (enc(args[0]), enc(args[1]), start, end, arrival, robot)
                 else:
-                    row = (*map(enc, args), start, end, arrival)
+                    row = (*map(enc, args), start, end, arrival, robot)
                 if arity != current_arity or name != current_name:
                     if rows:
                         executemany(current_type.insert_sql, rows)
@@ -236,7 +251,7 @@ class EventWriter:
 
     def _type_for_new_event(self, name: Any, arity: int) -> EventType:
         if not isinstance(name, str):
-            raise BadEvent(f"event name must be an atom, not {shorten(repr(name))}")
+            raise BadEvent(f"event name must be an atom, not {shown(name)}")
         name = str(name)
         problem = text_problem(name)
         if problem:
@@ -291,7 +306,7 @@ class EventWriter:
         now = float(now)
         if now != now:
             return
-        sql = "UPDATE slr_clock SET now = ? WHERE id = 1 AND now IS NOT ?"
+        sql = "UPDATE slr_clock SET now = ? WHERE id = 1 AND now <> ?"
         with self.db.lock:
             if self.db.tx_depth:  # inside add_events: part of its transaction
                 self.db.check_open()

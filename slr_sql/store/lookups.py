@@ -60,6 +60,10 @@ class EventReader:
         self.db = db
         self.tables = tables
         self.sql_cache: dict[tuple, str] = {}
+        # a server's typed columns (store/dialect.py): values converted both ways
+        self.to_column = db.dialect.to_column
+        from_column = db.dialect.from_column
+        self.decode = decode if from_column is None else (lambda v: decode(from_column(v)))
 
     def _pushdown(self, event_type: EventType, bound: dict[int, Any] | None
                   ) -> tuple[tuple[int, ...], list]:
@@ -76,18 +80,22 @@ class EventReader:
                 value = encode(bound[position])
             except Unencodable:
                 continue  # not ground (or NaN): the caller filters by unification
+            if self.to_column is not None:
+                value = self.to_column(value)
             positions.append(position)
             values.append(value)
         return tuple(positions), values
 
     def _select_sql(self, event_type: EventType, kind: str, positions: tuple[int, ...],
-                    flags: tuple[bool, ...], resume: bool = False) -> str:
-        key = (event_type.table, kind, positions, flags, resume)
+                    flags: tuple[bool, ...], resume: bool = False, robot: bool = False) -> str:
+        key = (event_type.table, kind, positions, flags, resume, robot)
         sql = self.sql_cache.get(key)
         if sql is not None:
             return sql
         by_arg1 = bool(positions) and positions[0] == 0
-        conditions = [f"arg{p + 1} = ?" for p in positions]
+        # one robot's events (a fleet store asked per robot): its parameter follows the
+        # arguments'
+        conditions = [f"arg{p + 1} = ?" for p in positions] + (["robot = ?"] if robot else [])
         if kind == "scan":
             index = event_type.index_arg1_end if by_arg1 else event_type.index_end
             if flags[0]:
@@ -126,7 +134,8 @@ class EventReader:
         if resume:
             conditions.append(_RESUME[kind][0])
         where = f" WHERE {' AND '.join(conditions)}" if conditions else ""
-        sql = (f"SELECT {event_type.columns} FROM {event_type.quoted} INDEXED BY {index}"
+        hint = f" INDEXED BY {index}" if self.db.dialect.index_hints else ""
+        sql = (f"SELECT {event_type.columns} FROM {event_type.quoted}{hint}"
                f"{where} ORDER BY {order}")
         self.sql_cache[key] = sql
         return sql
@@ -137,6 +146,9 @@ class EventReader:
         If a transaction suspended the statement between two batches (or a rollback aborted
         it), the rest is read with ``resume_sql``: the rows after the last one read."""
         db = self.db
+        if db.dialect.pages_streams:
+            yield from self._pages(sql, params, arity, kind, resume_sql)
+            return
         with db.lock:
             db.check_open()
             statement = _OpenStatement(db.conn.execute(sql, params))
@@ -145,7 +157,7 @@ class EventReader:
         last = None
         try:
             batch = 8  # prev/next callers usually need only the first row or two
-            dec = decode
+            dec = self.decode
             while True:
                 with db.lock:
                     for attempt in (1, 2):
@@ -187,20 +199,51 @@ class EventReader:
                 except sqlite3.ProgrammingError:  # the store was closed meanwhile
                     pass
 
+    def _pages(self, sql: str, params: list, arity: int, kind: str,
+               resume_sql: str) -> Iterator[Row]:
+        """:meth:`_stream` on a server, whose driver reads a statement's whole result at
+        once: growing pages (``LIMIT``), each after the last row of the one before."""
+        db = self.db
+        key = _RESUME[kind][1]
+        dec = self.decode
+        batch = 8
+        last = None
+        while True:
+            with db.lock:
+                db.check_open()
+                if last is None:
+                    rows = db.conn.execute(f"{sql} LIMIT {batch}", params).fetchall()
+                else:
+                    rows = db.conn.execute(f"{resume_sql} LIMIT {batch}", params + list(
+                        key(last[arity], last[arity + 1], last[arity + 2]))).fetchall()
+            for row in rows:
+                yield (tuple([dec(v) for v in row[:arity]]), row[arity], row[arity + 1],
+                       row[arity + 2])
+            if len(rows) < batch:
+                return
+            last = rows[-1]
+            if batch < 2048:
+                batch *= 4
+
     def _query(self, name: str, arity: int, bound: dict[int, Any] | None, kind: str,
-               flags: tuple[bool, ...], times: list) -> Iterator[Row]:
+               flags: tuple[bool, ...], times: list, robot: str | None = None
+               ) -> Iterator[Row]:
         with self.db.lock:
             self.db.check_open()
             event_type = self.tables.lookup(name, arity)
             if event_type is None:
                 return iter(())
             positions, values = self._pushdown(event_type, bound)
-            sql = self._select_sql(event_type, kind, positions, flags)
-            resume_sql = self._select_sql(event_type, kind, positions, flags, resume=True)
+            by_robot = robot is not None
+            sql = self._select_sql(event_type, kind, positions, flags, robot=by_robot)
+            resume_sql = self._select_sql(event_type, kind, positions, flags, resume=True,
+                                          robot=by_robot)
+        if by_robot:
+            values.append(robot)
         return self._stream(sql, values + times, arity, kind, resume_sql)
 
     def scan(self, name: str, arity: int, bound: dict[int, Any] | None = None,
-             end_le: float | None = None) -> Iterator[Row]:
+             end_le: float | None = None, robot: str | None = None) -> Iterator[Row]:
         """Stored events of name/arity in store order (end, start, arrival), as
         ``(args, start, end, seq)``; only ``end <= end_le`` when given (the stream view).
         ``bound`` maps 0-based argument positions to ground terms that must be equal (SQL
@@ -214,10 +257,11 @@ class EventReader:
         """
         has_end = end_le is not None
         return self._query(name, arity, bound, "scan", (has_end,),
-                           [float(end_le)] if has_end else [])
+                           [float(end_le)] if has_end else [], robot)
 
     def prev_candidates(self, name: str, arity: int, bound: dict[int, Any] | None,
-                        t: float, start_ge: float | None = None) -> Iterator[Row]:
+                        t: float, start_ge: float | None = None,
+                        robot: str | None = None) -> Iterator[Row]:
         """Events with ``end <= t`` (and ``start >= start_ge`` when given), latest end first
         (streamed backwards from an index). Use :meth:`rows_at_end` for the tied rows of the
         first match in store order.
@@ -230,11 +274,11 @@ class EventReader:
         """
         has_start = start_ge is not None
         times = [float(t)] + ([float(start_ge), float(start_ge)] if has_start else [])
-        return self._query(name, arity, bound, "prev", (has_start,), times)
+        return self._query(name, arity, bound, "prev", (has_start,), times, robot)
 
     def rows_at_end(self, name: str, arity: int, bound: dict[int, Any] | None, end: float,
-                    start_ge: float | None = None, end_le: float | None = None
-                    ) -> Iterator[Row]:
+                    start_ge: float | None = None, end_le: float | None = None,
+                    robot: str | None = None) -> Iterator[Row]:
         """Events whose end is exactly ``end`` (and ``start >= start_ge``, ``end <= end_le``
         when given) in store order (start, arrival).
 
@@ -247,10 +291,10 @@ class EventReader:
         flags = (start_ge is not None, end_le is not None)
         times = [float(end)] + ([float(start_ge)] if flags[0] else []) \
             + ([float(end_le)] if flags[1] else [])
-        return self._query(name, arity, bound, "at_end", flags, times)
+        return self._query(name, arity, bound, "at_end", flags, times, robot)
 
     def next_candidates(self, name: str, arity: int, bound: dict[int, Any] | None,
-                        a: float, b: float) -> Iterator[Row]:
+                        a: float, b: float, robot: str | None = None) -> Iterator[Row]:
         """Events with ``a <= start`` and ``end <= b``, earliest start first (streamed from an
         index). Use :meth:`rows_at_start` for the tied rows of the first match.
 
@@ -260,10 +304,11 @@ class EventReader:
         >>> next(s.next_candidates("p", 1, {}, 1.5, math.inf))[0]
         (Atom('b'),)
         """
-        return self._query(name, arity, bound, "next", (), [float(a), float(b), float(b)])
+        return self._query(name, arity, bound, "next", (), [float(a), float(b), float(b)],
+                           robot)
 
     def rows_at_start(self, name: str, arity: int, bound: dict[int, Any] | None,
-                      start: float, b: float) -> Iterator[Row]:
+                      start: float, b: float, robot: str | None = None) -> Iterator[Row]:
         """Events whose start is exactly ``start`` and whose end is ``<= b``, in store order
         (end, arrival).
 
@@ -273,11 +318,12 @@ class EventReader:
         >>> [row[0] for row in s.rows_at_start("p", 1, {}, 1.0, 10.0)]
         [(Atom('b'),), (Atom('a'),)]
         """
-        return self._query(name, arity, bound, "at_start", (), [float(start), float(b)])
+        return self._query(name, arity, bound, "at_start", (), [float(start), float(b)],
+                           robot)
 
     def lookup_sql(self, kind: str, name: str, arity: int,
                    bound: dict[int, Any] | None = None, *, start_ge: bool = False,
-                   end_le: bool = False) -> str | None:
+                   end_le: bool = False, robot: bool = False) -> str | None:
         """The SQL a lookup runs (for explain output and plan tests). ``kind`` is ``scan``,
         ``prev``, ``at_end``, ``next`` or ``at_start``; ``start_ge``/``end_le`` say whether
         those optional bounds are given. None if the type has no table.
@@ -296,7 +342,7 @@ class EventReader:
             if event_type is None:
                 return None
             positions, _ = self._pushdown(event_type, bound)
-            return self._select_sql(event_type, kind, positions, flags)
+            return self._select_sql(event_type, kind, positions, flags, robot=robot)
 
     def latest_at_or_before(self, name: str, arity: int, bound: dict[int, Any], t: float,
                             point: bool) -> list[Row] | None:
@@ -322,7 +368,7 @@ class EventReader:
             if len(positions) != len(bound):
                 return None
             rows = self.latest_rows(name, arity, positions, values, t, point)
-        dec = decode
+        dec = self.decode
         return [(tuple([dec(v) for v in row[:arity]]), row[arity], row[arity + 1], row[arity + 2])
                 for row in rows]
 
@@ -393,3 +439,142 @@ class EventReader:
                 return None
             return self.db.conn.execute(
                 f"SELECT max(t_end) FROM {event_type.quoted}").fetchone()[0]
+
+    def bracket(self, name: str, arity: int, bound: dict[int, Any], t: float
+                ) -> tuple[Row | None, Row | None] | None:
+        """The observations around ``t`` of the events matching ``bound`` (ground values at
+        0-based positions, the first one included): the one with the greatest end ``<= t``
+        and the one with the smallest start ``>= t`` (ties: the last in store order, and the last
+        stored among those starting at that time),
+        in one statement; ``(None, None)`` parts when there are none. None when a bound
+        value cannot be pushed into SQL (the caller then takes the general path). Used by
+        ``tf_lookup`` (:mod:`slr_sql.frames`) for each edge of a chain.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a", 1), 1, 1), ("p", ("a", 2), 3, 3)])
+        []
+        >>> [row[0][1] for row in s.bracket("p", 2, {0: "a"}, 2.0)]
+        [1, 2]
+        """
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return None, None
+            positions, values = self._pushdown(event_type, bound)
+            if len(positions) != len(bound) or 0 not in positions:
+                return None
+            key = (event_type.table, "bracket", positions)
+            sql = self.sql_cache.get(key)
+            if sql is None:
+                where = " AND ".join(f"arg{p + 1} = ?" for p in positions)
+                cols = event_type.columns
+                hints = self.db.dialect.index_hints
+                by_end = f" INDEXED BY {event_type.index_arg1_end}" if hints else ""
+                by_start = f" INDEXED BY {event_type.index_arg1_start}" if hints else ""
+                sql = (f"SELECT 0, * FROM (SELECT {cols} FROM {event_type.quoted}{by_end} "
+                       f"WHERE {where} AND t_end <= ? "
+                       f"ORDER BY t_end DESC, t_start DESC, seq DESC LIMIT 1) AS before_t "
+                       f"UNION ALL SELECT 1, * FROM (SELECT {cols} FROM {event_type.quoted}"
+                       f"{by_start} WHERE {where} AND t_start >= ? "
+                       f"ORDER BY t_start, seq DESC LIMIT 1) AS after_t")
+                self.sql_cache[key] = sql
+            rows = self.db.conn.execute(sql, values + [float(t)] + values + [float(t)]).fetchall()
+        out: list = [None, None]
+        dec = self.decode
+        for row in rows:
+            out[row[0]] = (tuple([dec(v) for v in row[1:arity + 1]]), row[arity + 1],
+                           row[arity + 2], row[arity + 3])
+        return out[0], out[1]
+
+    def distinct_pairs(self, name: str, arity: int, after_seq: int = 0
+                       ) -> tuple[list[tuple[Any, Any]], int]:
+        """The distinct (first, second) argument pairs of name/arity among the events stored
+        after arrival sequence ``after_seq``, and the greatest sequence number now (so that a
+        caller keeping the pairs reads only what is new next time).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a", "b"), 1, 1), ("p", ("a", "b"), 2, 2)])
+        []
+        >>> s.distinct_pairs("p", 2)
+        ([(Atom('a'), Atom('b'))], 2)
+        """
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None or arity < 2:
+                return [], 0
+            conn = self.db.conn
+            top = conn.execute(f"SELECT max(seq) FROM {event_type.quoted}").fetchone()[0] or 0
+            if top <= after_seq:
+                return [], top
+            rows = conn.execute(f"SELECT DISTINCT arg1, arg2 FROM {event_type.quoted} "
+                                f"WHERE seq > ? AND seq <= ?", (after_seq, top)).fetchall()
+        dec = self.decode
+        return [(dec(a), dec(b)) for a, b in rows], top
+
+    def max_seq(self, name: str, arity: int) -> int:
+        """The greatest arrival sequence number stored for name/arity (0 when none): it moves
+        whenever an event of the type is added, by this process or another.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.max_seq("p", 1)
+        0
+        """
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return 0
+            return self.db.conn.execute(
+                f"SELECT max(seq) FROM {event_type.quoted}").fetchone()[0] or 0
+
+    def raw_rows(self, name: str, arity: int, *, after_seq: int | None = None,
+                 end_from: float | None = None, end_to: float | None = None,
+                 limit: int | None = None, after_key: tuple | None = None) -> list[tuple]:
+        """Stored rows of name/arity *as stored* (column values undecoded, see
+        :mod:`slr_sql.encoding`) with ``t_start, t_end, arrival, seq``: those after arrival
+        sequence ``after_seq`` in arrival order (new events, for live views), else those with
+        ``end_from <= end <= end_to`` in store order (exports), after the row whose
+        ``(end, start, seq)`` is ``after_key`` (the next page); at most ``limit``.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a", [1, 2]), 1, 1)])
+        []
+        >>> [row[:3] for row in s.raw_rows("p", 2, after_seq=0)]
+        [('a', '[1,2]', 1.0)]
+        """
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return []
+            columns = ", ".join([f"arg{i + 1}" for i in range(arity)]
+                                + ["t_start", "t_end", "arrival", "seq"])
+            params: list = []
+            if after_seq is not None:
+                where, order = "seq > ?", "seq"
+                params.append(int(after_seq))
+            else:
+                conditions = []
+                if end_from is not None:
+                    conditions.append("t_end >= ?")
+                    params.append(float(end_from))
+                if end_to is not None:
+                    conditions.append("t_end <= ?")
+                    params.append(float(end_to))
+                if after_key is not None:
+                    conditions.append("(t_end, t_start, seq) > (?, ?, ?)")
+                    params += [float(after_key[0]), float(after_key[1]), int(after_key[2])]
+                where = " AND ".join(conditions) or "1"
+                order = "t_end, t_start, seq"
+            sql = f"SELECT {columns} FROM {event_type.quoted} WHERE {where} ORDER BY {order}"
+            if limit is not None:
+                sql += " LIMIT ?"
+                params.append(int(limit))
+            rows = self.db.conn.execute(sql, params).fetchall()
+        from_column = self.db.dialect.from_column
+        if from_column is not None:   # a server's typed columns: as SQLite stores them
+            rows = [tuple([from_column(v) for v in row[:arity]]) + tuple(row[arity:])
+                    for row in rows]
+        return rows

@@ -4,6 +4,8 @@ Each ``migrations/NNNN_name.sql`` runs once and is recorded in ``slr_migrations`
 migrations an open applies run in one transaction (all or nothing), whatever the gaps in the
 numbering; ``PRAGMA user_version`` holds the highest number applied. A database written by a
 newer slr_sql (a higher number than the last script) is refused rather than guessed at.
+A statement naming ``{event_table}`` runs once per event table (``0006_robots.sql`` adds the
+``robot`` column to the tables a store already has).
 """
 from __future__ import annotations
 
@@ -14,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import SLRError
-from .sqltext import busy_error, split_sql_script
+from .sqltext import busy_error, quote_identifier, split_sql_script
 
 __all__ = ["migration_scripts", "migrate", "applied_migrations"]
 
@@ -69,6 +71,15 @@ def applied_migrations(conn: sqlite3.Connection,
             if number <= current}
 
 
+def _per_event_table(conn: sqlite3.Connection, statement: str) -> list[str]:
+    """``statement`` itself, or, when it names ``{event_table}``, one copy per event table
+    (the quoted table name in its place): a migration that changes every event table."""
+    if "{event_table}" not in statement:
+        return [statement]
+    tables = [row[0] for row in conn.execute("SELECT table_name FROM slr_event_types")]
+    return [statement.replace("{event_table}", quote_identifier(t)) for t in tables]
+
+
 def migrate(conn: sqlite3.Connection, path: str | None,
             scripts: list[tuple[int, str, str]] | None = None) -> None:
     """Apply the migrations ``conn`` has not seen yet (``path`` names the file in errors).
@@ -106,7 +117,8 @@ def migrate(conn: sqlite3.Connection, path: str | None,
                 continue
             try:
                 for statement in split_sql_script(text):
-                    conn.execute(statement)
+                    for each in _per_event_table(conn, statement):
+                        conn.execute(each)
             except sqlite3.Error as exc:
                 raise SLRError(f"{path}: migration {filename} failed ({exc}); the file is "
                                "left as it was") from None
@@ -123,3 +135,19 @@ def migrate(conn: sqlite3.Connection, path: str | None,
         if conn.in_transaction:
             conn.execute("ROLLBACK")
         raise
+
+
+def postgres_migration_scripts() -> list[tuple[int, str, str]]:
+    """``(number, file name, sql text)`` of every ``pg_NNNN_name.sql`` migration: the
+    PostgreSQL spelling of the SQLite migration with the same number.
+
+    >>> [n for n, _, _ in postgres_migration_scripts()] == [n for n, _, _ in migration_scripts()]
+    True
+    """
+    scripts = []
+    for entry in _migrations_dir().iterdir():
+        match = re.match(r"pg_(\d+)_.*\.sql\Z", entry.name)
+        if match:
+            scripts.append((int(match.group(1)), entry.name, entry.read_text(encoding="utf-8")))
+    scripts.sort()
+    return scripts

@@ -114,3 +114,28 @@ class Space:
         with self.db.lock:
             self.db.check_open()
             self.db.conn.execute(f"PRAGMA journal_size_limit = {int(max_bytes)}").fetchall()
+
+
+class ServerSpace(Space):
+    """Space on a database server: the server manages its files (autovacuum, its own
+    write-ahead log), so reclaiming and bounding the WAL are the server's; the statistics
+    are the schema's relation sizes in the same keys (``page_size`` 8 KiB pages)."""
+
+    def space_stats(self) -> dict[str, Any]:
+        with self.db.lock:
+            self.db.check_open()
+            size = self.db.conn.execute(
+                "SELECT coalesce(sum(pg_total_relation_size(c.oid)), 0)::bigint, "
+                "current_setting('block_size')::int FROM pg_class c JOIN pg_namespace n "
+                "ON n.oid = c.relnamespace WHERE n.nspname = current_schema() "
+                "AND c.relkind IN ('r', 'm')").fetchone()
+        file_bytes, page_size = int(size[0]), int(size[1])
+        return {"page_size": page_size, "page_count": file_bytes // page_size,
+                "free_pages": 0, "file_bytes": file_bytes, "wal_bytes": 0}
+
+    def reclaim_space(self, min_free_pages: int = 2048, min_free_fraction: float = 0.25,
+                      keep_fraction: float = 0.10) -> int:
+        return 0
+
+    def limit_wal(self, max_bytes: int = 64 * 1024 * 1024) -> None:
+        return None

@@ -11,10 +11,10 @@ import re
 import sqlite3
 from typing import Any
 
-from ..errors import SLRBusy
+from ..errors import SLRBusy, SLRError, SLRStoreFull
 
 __all__ = ["quote_identifier", "sql_literal", "split_sql_script", "SAFE_IDENTIFIER",
-           "RESERVED_PREFIXES", "SQL_KEYWORDS", "busy_error"]
+           "RESERVED_PREFIXES", "SQL_KEYWORDS", "busy_error", "store_error", "disk_is_full"]
 
 SAFE_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 RESERVED_PREFIXES = ("slr_", "sqlite_")
@@ -54,6 +54,55 @@ def busy_error(exc: BaseException, path: str | None,
     waited = f" for more than {timeout:g} s" if timeout is not None else ""
     return SLRBusy(f"{path or ':memory:'}: locked by another writer (a process or knowledge "
                    f"base){waited}")
+
+
+def _primary_code(exc: BaseException) -> int | None:
+    code = getattr(exc, "sqlite_errorcode", None)
+    return None if code is None else code & 0xFF
+
+
+def disk_is_full(path: str | None) -> bool:
+    """Is the file system holding ``path`` out of space (less than 64 KiB left for this
+    user)? Asked after an I/O error, whose code alone does not say (a failed ``-shm`` or
+    ``-wal`` extension is ``SQLITE_IOERR``)."""
+    if path is None:
+        return False
+    import os
+
+    try:
+        info = os.statvfs(os.path.dirname(os.path.abspath(path)))
+    except OSError:
+        return False
+    return info.f_bavail * info.f_frsize < 65536
+
+
+def store_error(exc: BaseException, path: str | None, timeout: float | None = None,
+                outcome: str = "nothing of this call was written") -> SLRError:
+    """The :class:`SLRError` in words for a database error ``exc`` on the store ``path``:
+    :class:`SLRBusy` for a lock held too long, :class:`SLRStoreFull` for a full disk (or
+    size limit), "damaged" only when SQLite found the file corrupt or not a database, and
+    otherwise what failed, without guessing. ``outcome`` says what became of the call.
+
+    >>> print(store_error(sqlite3.OperationalError("database or disk is full"), "robot.db"))
+    robot.db: the disk is full (or the store reached its size limit; database or disk is full); nothing of this call was written: free space and retry
+    >>> print(store_error(sqlite3.OperationalError("datatype mismatch"), "robot.db"))
+    robot.db: the store failed (datatype mismatch)
+    """
+    where = path or ":memory:"
+    busy = busy_error(exc, path, timeout)
+    if busy is not None:
+        return busy
+    code = _primary_code(exc)
+    text = str(exc)
+    if code == sqlite3.SQLITE_FULL or (code is None and "disk is full" in text) or \
+            (code in (sqlite3.SQLITE_IOERR, sqlite3.SQLITE_CANTOPEN) and disk_is_full(path)):
+        return SLRStoreFull(f"{where}: the disk is full (or the store reached its size limit; "
+                            f"{text}); {outcome}: free space and retry")
+    if code in (sqlite3.SQLITE_CORRUPT, sqlite3.SQLITE_NOTADB):
+        return SLRError(f"{where}: the file is damaged ({text}); restore it from a copy")
+    if code == sqlite3.SQLITE_IOERR:
+        return SLRError(f"{where}: the disk failed to read or write the store ({text})")
+    return SLRError(f"{where}: the store failed ({text})")
 
 
 def quote_identifier(name: str) -> str:

@@ -9,6 +9,7 @@ the mapping. Columns::
     t_start  REAL NOT NULL
     t_end    REAL NOT NULL
     arrival  REAL NOT NULL         -- store clock time of the add that stored the event
+    robot    TEXT                  -- the robot that observed or derived it (NULL: unnamed)
 
 Indexes ``(t_end, t_start)`` and ``(t_start, t_end)``, plus ``(arg1, t_end, t_start)`` and
 ``(arg1, t_start, t_end)`` when there is a first argument. Every index entry ends with the
@@ -18,7 +19,6 @@ are read straight from an index, never sorted.
 from __future__ import annotations
 
 import re
-import sqlite3
 from typing import Any, Callable
 
 from ..errors import SLRError
@@ -42,7 +42,7 @@ class EventType:
         self.quoted = quote_identifier(table)
         arg_columns = [f"arg{i}" for i in range(1, arity + 1)]
         self.columns = ", ".join(arg_columns + ["t_start", "t_end", "seq"])
-        insert_columns = arg_columns + ["t_start", "t_end", "arrival"]
+        insert_columns = arg_columns + ["t_start", "t_end", "arrival", "robot"]
         self.insert_sql = (f"INSERT INTO {self.quoted} ({', '.join(insert_columns)}) "
                            f"VALUES ({', '.join('?' * len(insert_columns))})")
         self.index_end = quote_identifier(f"slr_ix__{table}__end")
@@ -61,7 +61,7 @@ class EventTables:
     >>> tables = EventTables(Database(None)); tables.declare_type("seg", 2)
     'seg'
     >>> tables.lookup("seg", 2).insert_sql
-    'INSERT INTO "seg" (arg1, arg2, t_start, t_end, arrival) VALUES (?, ?, ?, ?, ?)'
+    'INSERT INTO "seg" (arg1, arg2, t_start, t_end, arrival, robot) VALUES (?, ?, ?, ?, ?, ?)'
     """
 
     def __init__(self, db: Database):
@@ -72,9 +72,9 @@ class EventTables:
         # creates a new event type's table (slr_sql.buffers installs its triggers there)
         self.table_created_hooks: list[Callable[[str, int, str], Any]] = []
         db.rollback_listeners.append(self.reload)  # types created inside were rolled back too
-        # The most data arguments an event can have: its table has 4 more columns (seq,
-        # t_start, t_end, arrival) and SQLite refuses tables wider than its column limit.
-        self.max_arity = db.conn.getlimit(sqlite3.SQLITE_LIMIT_COLUMN) - 4
+        # The most data arguments an event can have: its table has 5 more columns (seq,
+        # t_start, t_end, arrival, robot) and the engine refuses tables wider than its limit.
+        self.max_arity = db.max_columns - 5
         self.reload()
 
     def reload(self) -> None:
@@ -106,7 +106,7 @@ class EventTables:
         return event_type
 
     def _choose_table_name(self, name: str, arity: int) -> str:
-        taken = {row[0].lower() for row in self.db.conn.execute("SELECT name FROM sqlite_master")}
+        taken = self.db.object_names()
 
         def free(candidate: str) -> bool:
             return all(n.lower() not in taken for n in [candidate] + _index_names(candidate))
@@ -131,6 +131,10 @@ class EventTables:
     def register(self, name: str, arity: int, declared: bool) -> EventType:
         """Create the table of a new type. Must run inside a write transaction."""
         existing = self.lookup(name, arity)
+        if existing is None:
+            # on a server, another process may be creating it now: take turns, look again
+            self.db.lock_named("types")
+            existing = self.lookup(name, arity)
         if existing is not None:
             if declared and not existing.declared:
                 self.db.conn.execute("UPDATE slr_event_types SET declared = 1 "
@@ -140,11 +144,15 @@ class EventTables:
             return existing
         table = self._choose_table_name(name, arity)
         event_type = EventType(name, arity, table, declared)
-        arg_columns = "".join(f", arg{i}" for i in range(1, arity + 1))
+        dialect = self.db.dialect
+        # arg columns have no declared type on SQLite: it keeps INTEGER / REAL / TEXT as given
+        # (PostgreSQL: TEXT spelling the type, see store/dialect.py)
+        arg_columns = "".join(f", arg{i}{dialect.value}" for i in range(1, arity + 1))
         conn = self.db.conn
-        # arg columns have no declared type: SQLite keeps INTEGER / REAL / TEXT as given.
-        conn.execute(f"CREATE TABLE {event_type.quoted} (seq INTEGER PRIMARY KEY{arg_columns}, "
-                     "t_start REAL NOT NULL, t_end REAL NOT NULL, arrival REAL NOT NULL)")
+        real = dialect.real
+        conn.execute(f"CREATE TABLE {event_type.quoted} (seq {dialect.integer_key}{arg_columns}, "
+                     f"t_start {real} NOT NULL, t_end {real} NOT NULL, arrival {real} NOT NULL, "
+                     "robot TEXT)")
         conn.execute(f"CREATE INDEX {event_type.index_end} ON {event_type.quoted} (t_end, t_start)")
         conn.execute(f"CREATE INDEX {event_type.index_start} ON {event_type.quoted} "
                      "(t_start, t_end)")

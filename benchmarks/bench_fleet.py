@@ -1,0 +1,219 @@
+"""Fleet shipping (docs/fleet.md): throughput against a raw copy, lag under --follow, catch-up.
+
+Three figures, each with its baseline measured in the same run:
+
+* ``throughput`` — ``slr_sql.fleet.push`` of a robot store of ``--events`` events (one type,
+  two arguments) into a new fleet store file, against the raw copy of the same rows: SELECT
+  from the robot's table and ``executemany`` INSERT into a table of the same shape and
+  indexes in a new SQLite file (WAL, synchronous=FULL, transactions of the same batch size).
+  Also through ``slr serve`` (the HTTP path), with ``--remote``.
+* ``lag`` — ``--robots`` robot processes each add ``--rate`` events/s (batches every 20 ms)
+  for ``--seconds`` s while one ``slr fleet push --follow`` process per robot ships to one
+  fleet store file; an event's lag is the fleet store's arrival time (its clock when the batch
+  was stored) less the robot's arrival time; p50/p99/max over every event. The baseline is
+  the robot's own add latency (a commit, p99) in the same run.
+* ``catchup`` — a backlog of ``--offline`` seconds at ``--rate`` events/s per robot (as left
+  by an outage), then one push: events/s.
+
+Run by hand (scaled down for a shared 2-core machine; the issue's figures are 8 robots at
+1,000 events/s and 10 minutes offline)::
+
+    python benchmarks/bench_fleet.py                       # all three, default scale
+    python benchmarks/bench_fleet.py --events 200000 --robots 4 --rate 500 --seconds 20
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sqlite3
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import slr_sql  # noqa: E402
+from slr_sql import fleet  # noqa: E402
+from percentiles import pct  # noqa: E402  (benchmarks/percentiles.py)
+
+ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+
+def robot_store(path: Path, robot: str, n: int, t0: float = 0.0) -> None:
+    with slr_sql.open(path, robot=robot) as kb:
+        for i in range(0, n, 20_000):
+            kb.add_many([("seen", (f"pallet{j % 500}", f"place{j % 37}"), t0 + j * 0.001,
+                          t0 + j * 0.001) for j in range(i, min(n, i + 20_000))])
+
+
+def raw_copy(source: Path, target: Path, batch: int) -> float:
+    """Seconds to copy every row of ``seen`` into a fresh file: plain sqlite3 executemany."""
+    src = sqlite3.connect(source)
+    dst = sqlite3.connect(target, isolation_level=None)
+    dst.execute("PRAGMA journal_mode=WAL")
+    dst.execute("PRAGMA synchronous=FULL")
+    dst.execute("CREATE TABLE seen (seq INTEGER PRIMARY KEY, arg1, arg2, t_start REAL NOT NULL, "
+                "t_end REAL NOT NULL, arrival REAL NOT NULL, robot TEXT)")
+    for ix, cols in (("e", "t_end, t_start"), ("s", "t_start, t_end"),
+                     ("ae", "arg1, t_end, t_start"), ("as", "arg1, t_start, t_end")):
+        dst.execute(f"CREATE INDEX ix_{ix} ON seen ({cols})")
+    start = time.perf_counter()
+    last = 0
+    while True:
+        rows = src.execute("SELECT seq, arg1, arg2, t_start, t_end, arrival, robot FROM seen "
+                           "WHERE seq > ? ORDER BY seq LIMIT ?", (last, batch)).fetchall()
+        if not rows:
+            break
+        dst.execute("BEGIN IMMEDIATE")
+        dst.executemany("INSERT INTO seen (arg1, arg2, t_start, t_end, arrival, robot) "
+                        "VALUES (?, ?, ?, ?, ?, ?)", [r[1:] for r in rows])
+        dst.execute("COMMIT")
+        last = rows[-1][0]
+    elapsed = time.perf_counter() - start
+    src.close()
+    dst.close()
+    return elapsed
+
+
+def throughput(folder: Path, n: int, batch: int, remote: bool) -> None:
+    robot = folder / "thr_r1.db"
+    robot_store(robot, "r1", n)
+    raw = raw_copy(robot, folder / "thr_raw.db", batch)
+    start = time.perf_counter()
+    report = fleet.push(str(robot), str(folder / "thr_fleet.db"), batch=batch)
+    shipped = time.perf_counter() - start
+    assert report.shipped == n, report
+    print(f"throughput ({n:,} events, batches of {batch}):")
+    print(f"  raw executemany copy   {n / raw:>10,.0f} events/s")
+    print(f"  slr fleet push (file)  {n / shipped:>10,.0f} events/s   "
+          f"ratio {raw / shipped:.2f}x of raw")
+    if remote:
+        sys.path.insert(0, str(ROOT / "tests"))
+        from service_helpers import ServiceProcess
+        server = ServiceProcess(folder / "thr_served.db")
+        try:
+            start = time.perf_counter()
+            report = fleet.push(str(robot), server.url, batch=batch)
+            served = time.perf_counter() - start
+        finally:
+            server.stop()
+        assert report.shipped == n, report
+        print(f"  slr fleet push (serve) {n / served:>10,.0f} events/s   "
+              f"ratio {raw / served:.2f}x of raw")
+
+
+WRITER = """
+import sys, time, slr_sql
+path, robot, rate, seconds = sys.argv[1], sys.argv[2], float(sys.argv[3]), float(sys.argv[4])
+per = max(1, int(rate * 0.02))
+lat = []
+with slr_sql.open(path, robot=robot) as kb:
+    start = time.time(); k = 0
+    while time.time() - start < seconds:
+        t = time.time()
+        kb.add_many([("seen", (f"pallet{(k + i) % 500}", robot), t, t) for i in range(per)])
+        lat.append(time.time() - t)
+        k += per
+        pause = start + k / rate - time.time()
+        if pause > 0:
+            time.sleep(pause)
+print(k, " ".join(f"{x:.6f}" for x in lat))
+"""
+
+
+def lag(folder: Path, robots: int, rate: float, seconds: float) -> None:
+    fleet_db = folder / "lag_fleet.db"
+    names = [f"r{i + 1}" for i in range(robots)]
+    for name in names:
+        with slr_sql.open(folder / f"lag_{name}.db", robot=name):
+            pass
+    pushers = [subprocess.Popen([sys.executable, "-m", "slr_sql", "fleet", "push",
+                                 str(folder / f"lag_{n}.db"), str(fleet_db), "--follow"],
+                                env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+               for n in names]
+    time.sleep(3)   # let the pushers start (a benchmark, not a test)
+    writers = [subprocess.Popen([sys.executable, "-c", WRITER, str(folder / f"lag_{n}.db"), n,
+                                 str(rate), str(seconds)], env=ENV, stdout=subprocess.PIPE,
+                                text=True) for n in names]
+    added = 0
+    add_latency: list[float] = []
+    for w in writers:
+        out, _ = w.communicate()
+        count, *lats = out.split()
+        added += int(count)
+        add_latency += [float(x) for x in lats]
+    deadline = time.time() + 120
+    while time.time() < deadline:
+        with sqlite3.connect(fleet_db) as conn:
+            try:
+                if conn.execute("SELECT count(*) FROM seen").fetchone()[0] >= added:
+                    break
+            except sqlite3.OperationalError:
+                pass
+        time.sleep(0.2)
+    for p in pushers:
+        p.terminate()
+    for p in pushers:
+        p.wait()
+    lags: list[float] = []
+    with sqlite3.connect(fleet_db) as fleet_conn:
+        fleet_rows = {}
+        for arg1, robot, t, arrival in fleet_conn.execute(
+                "SELECT arg1, robot, t_start, arrival FROM seen"):
+            fleet_rows[(arg1, robot, t)] = arrival
+    for n in names:
+        with sqlite3.connect(folder / f"lag_{n}.db") as conn:
+            for arg1, robot, t, arrival in conn.execute(
+                    "SELECT arg1, robot, t_start, arrival FROM seen"):
+                lags.append(fleet_rows[(arg1, robot, t)] - arrival)
+    print(f"lag ({robots} robots x {rate:g} events/s for {seconds:g} s, one --follow pusher "
+          f"each, one fleet file; {added:,} events):")
+    print(f"  robot add (commit)     p50 {pct(add_latency, 50) * 1e3:7.1f} ms   "
+          f"p99 {pct(add_latency, 99) * 1e3:7.1f} ms")
+    print(f"  robot -> fleet lag     p50 {pct(lags, 50) * 1e3:7.1f} ms   "
+          f"p99 {pct(lags, 99) * 1e3:7.1f} ms   max {max(lags) * 1e3:7.1f} ms")
+
+
+def catchup(folder: Path, robots: int, rate: float, offline: float, batch: int) -> None:
+    n = int(rate * offline)
+    total = 0
+    elapsed = 0.0
+    for i in range(robots):
+        path = folder / f"cu_r{i + 1}.db"
+        robot_store(path, f"r{i + 1}", n, t0=1000.0 * i)
+        start = time.perf_counter()
+        report = fleet.push(str(path), str(folder / "cu_fleet.db"), batch=batch)
+        elapsed += time.perf_counter() - start
+        total += report.shipped
+    print(f"catch-up ({robots} robots x {offline:g} s offline at {rate:g} events/s = "
+          f"{total:,} events, one push each):")
+    print(f"  {total / elapsed:,.0f} events/s ({elapsed:.1f} s)")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("which", nargs="*", default=["throughput", "lag", "catchup"])
+    ap.add_argument("--events", type=int, default=100_000)
+    ap.add_argument("--batch", type=int, default=fleet.BATCH)
+    ap.add_argument("--remote", action="store_true", help="also ship through slr serve")
+    ap.add_argument("--robots", type=int, default=4)
+    ap.add_argument("--rate", type=float, default=250.0)
+    ap.add_argument("--seconds", type=float, default=15.0)
+    ap.add_argument("--offline", type=float, default=60.0)
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory(prefix="slr-bench-fleet-") as tmp:
+        folder = Path(tmp)
+        if "throughput" in args.which:
+            throughput(folder, args.events, args.batch, args.remote)
+        if "lag" in args.which:
+            lag(folder, args.robots, args.rate, args.seconds)
+        if "catchup" in args.which:
+            catchup(folder, args.robots, args.rate, args.offline, args.batch)
+
+
+if __name__ == "__main__":
+    main()

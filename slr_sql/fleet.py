@@ -1,0 +1,401 @@
+"""Fleets: a robot ships its events, complex events and completeness marks to a fleet store
+(``slr fleet push``), and the fleet store says what it holds of each robot
+(``slr fleet status``). See docs/fleet.md.
+
+Shipping is append-only and exactly once: the pusher asks the fleet store for the robot's
+positions (per event type, the last sequence of the robot's store it holds), reads the rows
+after them from the robot's store in sequence order, and sends them in batches; the fleet
+store stores a batch's rows and moves the position in one transaction
+(:func:`slr_sql.shipping.receive`). Whichever side is killed, the next push starts from the
+positions the fleet store committed: nothing is lost and nothing stored twice.
+
+The pusher only reads the robot's store (a WAL reader never blocks a writer): the robot's
+own adds never wait for the fleet. With ``follow`` it keeps shipping as events arrive,
+woken by the robot store's change counter (``PRAGMA data_version``, read with a backoff
+while nothing changes), and while the fleet cannot be reached it retries with backoff and
+says so once per outage.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Protocol
+
+from .errors import SLRError
+from .store import EventStore, check_robot_name
+
+__all__ = ["push", "status", "PushReport", "FleetTarget", "open_target", "parse_type_spec"]
+
+BATCH = 5000                 # rows per batch (one fleet transaction)
+WAKE_MIN, WAKE_MAX = 0.005, 0.25    # s between change checks of the robot store (backoff)
+RETRY_MIN, RETRY_MAX = 0.1, 5.0     # s between attempts while the fleet is unreachable
+
+
+class FleetTarget(Protocol):
+    """Where a pusher ships to: a fleet store opened in this process, or `slr serve`."""
+
+    def positions(self, robot: str) -> dict[tuple[str, int], int]: ...
+
+    def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
+                head_arrival: float | None) -> int: ...
+
+    def close(self) -> None: ...
+
+
+class _LocalTarget:
+    """A fleet store opened with :func:`slr_sql.open` (a path, or a database URL)."""
+
+    def __init__(self, where: str):
+        from .kb import KnowledgeBase
+        self.kb = KnowledgeBase(where)
+
+    def positions(self, robot: str) -> dict[tuple[str, int], int]:
+        from .shipping import positions
+        return positions(self.kb, robot)
+
+    def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
+                head_arrival: float | None) -> int:
+        from .shipping import receive
+        # (rows read from a store by this process: no need to check them as the service does)
+        return receive(self.kb, robot, batches, marks, pending, head_arrival, check=False)
+
+    def close(self) -> None:
+        self.kb.close()
+
+
+class _RemoteTarget:
+    """The fleet store of a running ``slr serve`` (its ``/fleet/*`` endpoints)."""
+
+    def __init__(self, url: str, token: str | None):
+        from .service.client import connect
+        self.client = connect(url, token=token)
+
+    def positions(self, robot: str) -> dict[tuple[str, int], int]:
+        return self.client.fleet_positions(robot)
+
+    def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
+                head_arrival: float | None) -> int:
+        return self.client.fleet_receive(robot, batches, marks, pending, head_arrival)
+
+    def close(self) -> None:
+        self.client.close()
+
+
+def open_target(fleet: str, token: str | None = None) -> FleetTarget:
+    """The fleet store ``fleet`` names: the URL of an `slr serve` (http://, https://), else
+    a store path or database URL opened in this process.
+
+    >>> import tempfile, os; target = open_target(os.path.join(tempfile.mkdtemp(), "f.db"))
+    >>> target.positions("r1"); target.close()
+    {}
+    """
+    if fleet.startswith(("http://", "https://")):
+        return _RemoteTarget(fleet, token)
+    return _LocalTarget(fleet)
+
+
+def parse_type_spec(spec: str) -> tuple[str, int]:
+    """``"seen/2"`` -> ``("seen", 2)``.
+
+    >>> parse_type_spec("seen/2")
+    ('seen', 2)
+    """
+    name, slash, arity = spec.rpartition("/")
+    if not slash or not name or not arity.isdigit():
+        raise SLRError(f"an event type is name/arity (seen/2), not {spec!r}")
+    return name, int(arity)
+
+
+@dataclass
+class PushReport:
+    """What a push did: rows shipped (stored by the fleet), batches sent, rounds, and the
+    outages it lived through."""
+
+    robot: str
+    shipped: int = 0
+    batches: int = 0
+    rounds: int = 0
+    outages: int = 0
+    per_type: dict = field(default_factory=dict)
+
+
+class _Pusher:
+    def __init__(self, store: EventStore, target_factory: Callable[[], FleetTarget],
+                 robot: str, types: set | None, batch: int, say: Callable[[str], None],
+                 fleet_name: str):
+        self.store = store
+        self.target_factory = target_factory
+        self.target: FleetTarget | None = None
+        self.robot = robot
+        self.types = types
+        self.batch = batch
+        self.say = say
+        self.fleet_name = fleet_name
+        self.report = PushReport(robot)
+        self.outage: str | None = None   # why the fleet is unreachable, while it is
+
+    def reached(self) -> None:
+        """A request to the fleet succeeded: an outage, if any, is over."""
+        if self.outage is not None:
+            self.outage = None
+            self.say(f"fleet {self.fleet_name} reachable again; shipping resumed")
+
+    def unreachable(self, exc: BaseException) -> None:
+        """A request to the fleet failed: say so if an outage begins."""
+        if self.outage is None:
+            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            self.outage = reason
+            self.report.outages += 1
+            self.say(f"fleet {self.fleet_name} unreachable ({reason}); retrying with "
+                     "backoff, the robot's store is not affected")
+
+    def connect(self) -> FleetTarget:
+        if self.target is None:
+            self.target = self.target_factory()
+        return self.target
+
+    def drop(self) -> None:
+        target, self.target = self.target, None
+        if target is not None:
+            try:
+                target.close()
+            except Exception:  # noqa: BLE001 - a broken connection closes as it can
+                pass
+
+    def round(self, stop: threading.Event) -> int:
+        """Ship everything the robot's store holds beyond the fleet's positions (stopping
+        early when ``stop`` is set); returns the rows the fleet stored."""
+        target = self.connect()
+        positions = target.positions(self.robot)
+        self.reached()
+        heads = self.store.fleet_heads()
+        shipped = 0
+        marks = {k[len("sync/mark/"):]: v for k, v in self.store.meta_items("sync/mark/").items()
+                 if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)}
+        keys = sorted(k for k in heads if self.types is None or k in self.types)
+        pending = 0
+        head_arrival = None
+        for name, arity in keys:
+            position = positions.get((name, arity), 0)
+            while not stop.is_set():
+                rows = self.store.fleet_read_after(name, arity, position, self.batch)
+                if not rows:
+                    break
+                stored = target.receive(self.robot, [(name, arity, rows)], None, None, None)
+                position = rows[-1][0]
+                shipped += stored
+                self.report.shipped += stored
+                self.report.batches += 1
+                self.report.per_type[f"{name}/{arity}"] = \
+                    self.report.per_type.get(f"{name}/{arity}", 0) + stored
+                if len(rows) < self.batch:
+                    break
+            left, latest = self.store.fleet_backlog(name, arity, position)
+            pending += left
+            if latest is not None:
+                head_arrival = latest if head_arrival is None else max(head_arrival, latest)
+        # marks and what is left, after the events they speak of
+        target.receive(self.robot, [], marks or None, pending, head_arrival)
+        self.report.rounds += 1
+        return shipped
+
+
+def push(db: str, fleet: str, *, robot: str | None = None,
+         types: Iterable[str | tuple[str, int]] | None = None, follow: bool = False,
+         batch: int = BATCH, stop: threading.Event | None = None,
+         say: Callable[[str], None] | None = None, token: str | None = None) -> PushReport:
+    """Ship the events (incoming and complex) and completeness marks of the robot store
+    ``db`` to the fleet store ``fleet`` (a store path, a database URL, or the URL of `slr
+    serve`), each event once. ``robot``: the name to ship as (default: the store's name;
+    a store without one needs it); ``types``: only these event types (``"seen/2"``);
+    ``follow``: keep shipping as events arrive until ``stop`` is set (retrying with backoff
+    while the fleet is unreachable, ``say`` telling once per outage); ``batch``: rows per
+    fleet transaction.
+
+    >>> import os, tempfile, slr_sql
+    >>> folder = tempfile.mkdtemp()
+    >>> with slr_sql.open(os.path.join(folder, "r1.db"), robot="r1") as kb:
+    ...     kb.add("seen(pallet7, dock)^10")
+    >>> push(os.path.join(folder, "r1.db"), os.path.join(folder, "fleet.db")).shipped
+    1
+    >>> push(os.path.join(folder, "r1.db"), os.path.join(folder, "fleet.db")).shipped
+    0
+    """
+    if type(batch) is not int or batch < 1:
+        raise SLRError(f"batch must be a count of rows (at least 1), not {batch!r}")
+    say = say if say is not None else (lambda message: None)
+    stop = stop if stop is not None else threading.Event()
+    wanted = None if types is None else {
+        t if isinstance(t, tuple) else parse_type_spec(t) for t in types}
+    store = EventStore(db)
+    try:
+        name = store.robot
+        if robot is not None:
+            check_robot_name(robot)
+            if name is not None and name != robot:
+                raise SLRError(f"{db} is the store of robot {name!r}, not {robot!r}")
+            name = robot
+        if name is None:
+            raise SLRError(f"{db} has no robot name: open it with robot=NAME once, or "
+                           "push with --robot NAME")
+        pusher = _Pusher(store, lambda: open_target(fleet, token), name, wanted, batch, say,
+                         fleet)
+        try:
+            if not follow:
+                pusher.round(stop)
+                return pusher.report
+            _follow(pusher, stop)
+            return pusher.report
+        finally:
+            pusher.drop()
+    finally:
+        store.close()
+
+
+def _follow(pusher: _Pusher, stop: threading.Event) -> None:
+    """Rounds until ``stop``: after a round that left nothing, wait for the robot's store to
+    change (its data_version, read with a backoff); while the fleet is unreachable, retry
+    with a backoff, saying so once per outage."""
+    store = pusher.store
+    retry = RETRY_MIN
+    while not stop.is_set():
+        seen = store.data_version()
+        try:
+            pusher.round(stop)
+        except (SLRError, OSError) as exc:  # unreachable, busy, refused: try again later
+            pusher.drop()
+            pusher.unreachable(exc)
+            stop.wait(retry)
+            retry = min(retry * 2, RETRY_MAX)
+            continue
+        retry = RETRY_MIN
+        wait = WAKE_MIN
+        while not stop.is_set() and store.data_version() == seen:
+            stop.wait(wait)
+            wait = min(wait * 2, WAKE_MAX)
+
+
+def status(fleet: str, token: str | None = None, now: float | None = None) -> list[dict[str, Any]]:
+    """Per robot that shipped to the fleet store ``fleet``: ``robot``, ``shipped`` (events
+    stored from it), ``pending`` (events its store held unshipped at the last contact),
+    ``lag_seconds`` (arrival of its latest event less arrival of the latest shipped, at the
+    last contact; 0 when nothing was pending), ``last_contact`` (seconds since the epoch)
+    and ``since_contact`` (seconds), in name order.
+
+    >>> import os, tempfile; status(os.path.join(tempfile.mkdtemp(), "f.db"))
+    []
+    """
+    now = time.time() if now is None else now
+    if fleet.startswith(("http://", "https://")):
+        from .service.client import connect
+        with connect(fleet, token=token) as client:
+            rows = client.fleet_status()
+    else:
+        from .kb import KnowledgeBase
+        with KnowledgeBase(fleet) as kb:
+            rows = kb.store.fleet_contacts()
+    out = []
+    for r in rows:
+        lag = 0.0
+        if r["pending"] and r["head_arrival"] is not None:
+            lag = max(0.0, r["head_arrival"] - (r["last_arrival"] if r["last_arrival"]
+                                                is not None else r["head_arrival"]))
+        out.append({"robot": r["robot"], "shipped": r["shipped"], "pending": r["pending"],
+                    "lag_seconds": lag, "last_contact": r["contact_at"],
+                    "since_contact": None if r["contact_at"] is None
+                    else max(0.0, now - r["contact_at"])})
+    return out
+
+
+# -- the command line: `slr fleet push`, `slr fleet status` (registered by slr_sql.cli) --------
+
+def _click_group() -> Any:
+    import click
+
+    def token_of(ctx: click.Context) -> str | None:
+        return (ctx.find_root().obj or {}).get("token")
+
+    @click.group("fleet")
+    def fleet_group() -> None:
+        """Ship a robot's store to a fleet store, and see what the fleet holds."""
+
+    @fleet_group.command("name")
+    @click.argument("db", type=click.Path(dir_okay=False))
+    @click.argument("robot")
+    def name_command(db: str, robot: str) -> None:
+        """Name the robot the store DB belongs to (kept in the store; once for life). Its
+        events from now on carry the name; ``slr_sql.open(DB, robot=NAME)`` does the same."""
+        with EventStore(db, robot=robot):
+            pass
+        click.echo(f"{db} is the store of robot {robot}")
+
+    @fleet_group.command("push")
+    @click.argument("db", type=click.Path(dir_okay=False))
+    @click.argument("fleet")
+    @click.option("--robot", default=None, help="Ship as this robot (default: the store's name).")
+    @click.option("--follow", is_flag=True,
+                  help="Keep shipping as events arrive, until SIGINT/SIGTERM.")
+    @click.option("--type", "types", multiple=True, metavar="NAME/N",
+                  help="Ship only this event type (repeatable).")
+    @click.option("--batch", type=int, default=BATCH, show_default=True,
+                  help="Events per fleet transaction.")
+    @click.pass_context
+    def push_command(ctx: click.Context, db: str, fleet: str, robot: str | None,
+                     follow: bool, types: tuple, batch: int) -> None:
+        """Ship DB's events, complex events and completeness marks to FLEET (a store path,
+        or the URL of `slr serve`), each once; resumable after a crash of either side."""
+        import os
+        import signal
+
+        if not os.path.lexists(db):
+            raise SLRError(f"no such store: {db}")
+        stop = threading.Event()
+        if follow:
+            def on_signal(signum: int, frame: Any) -> None:
+                stop.set()
+            signal.signal(signal.SIGINT, on_signal)
+            signal.signal(signal.SIGTERM, on_signal)
+            click.echo(f"following {db}: shipping to {fleet} (SIGINT or SIGTERM stops)",
+                       err=True)
+
+        def say(message: str) -> None:
+            click.echo(message, err=True)
+
+        report = push(db, fleet, robot=robot, types=types or None, follow=follow, batch=batch,
+                      stop=stop, say=say, token=token_of(ctx))
+        click.echo(f"robot {report.robot}: shipped {report.shipped} events in "
+                   f"{report.batches} batches")
+
+    @fleet_group.command("status")
+    @click.argument("fleet")
+    @click.option("--json", "as_json", is_flag=True, help="Print a JSON list of robots.")
+    @click.pass_context
+    def status_command(ctx: click.Context, fleet: str, as_json: bool) -> None:
+        """Per robot: events shipped, lag (events and seconds) and last contact."""
+        import json
+        import os
+
+        if not fleet.startswith(("http://", "https://", "postgresql://", "postgres://")) \
+                and not os.path.lexists(fleet):
+            raise SLRError(f"no such store: {fleet}")
+        rows = status(fleet, token=token_of(ctx))
+        if as_json:
+            click.echo(json.dumps(rows, indent=2))
+            return
+        if not rows:
+            click.echo("no robot has shipped to this store")
+            return
+        header = ("robot", "shipped", "lag events", "lag s", "last contact")
+        table = [header] + [
+            (r["robot"], str(r["shipped"]), str(r["pending"]), f"{r['lag_seconds']:.3f}",
+             "never" if r["last_contact"] is None else
+             time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(r["last_contact"]))
+             + f" UTC ({r['since_contact']:.0f} s ago)")
+            for r in rows]
+        widths = [max(len(row[i]) for row in table) for i in range(len(header))]
+        for row in table:
+            click.echo("  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip())
+
+    return fleet_group

@@ -1,0 +1,305 @@
+"""tf2's ``lookupTransform`` over stored transforms: the frame tree, chains, interpolation.
+
+The stored transforms are events ``tf(Parent, Child, pose([X,Y,Z],[QX,QY,QZ,QW]))^T`` (the
+pose of Child in Parent at T, which maps Child's coordinates into Parent's, as
+``geometry_msgs/TransformStamped``) and, for transforms that never change,
+``tf_static(Parent, Child, pose(..))^T`` (``slr ros import`` and the bridge store
+``/tf_static`` so). :func:`lookup` gives the pose of frame ``source`` in frame ``target`` at
+time ``t`` (docs/language.md, "tf_lookup"):
+
+* **the frame tree** is every (Parent, Child) pair stored in ``tf`` or ``tf_static``, taken
+  as undirected edges; the chain is the shortest path from ``source`` to ``target``
+  (breadth first, neighbours in the order the edges were first stored). An edge is walked
+  as stored from Child to Parent, inverted from Parent to Child;
+* **a tf edge** at ``t`` is its observation at ``t`` if there is one, else the interpolation
+  between the last observation before ``t`` and the first after it (translation linearly,
+  rotation by slerp, the robot library's ``interpolate``). Outside its observations the
+  lookup fails; with ``extrapolate`` the nearest observation is held instead. Several
+  observations at one time: the last stored counts;
+* **a tf_static edge** (a pair never seen in ``tf``) holds its last stored value at every
+  time.
+
+:class:`FrameTree` keeps the edges between calls and reads only the events stored since
+(by arrival sequence), so a lookup costs one small statement per type plus one indexed
+statement per edge of the chain; chains are cached until a new edge appears. The store is
+any object with ``distinct_pairs``, ``bracket`` (see :mod:`slr_sql.store`).
+
+>>> from slr_sql.store import EventStore
+>>> from slr_sql.terms import Struct
+>>> s = EventStore(None)
+>>> s.add_events([("tf", ("map", "base", Struct("pose", ([t, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]))), t, t)
+...               for t in (0.0, 2.0)] + [("tf_static", ("base", "cam", Struct("pose", (
+...               [0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 1.0]))), 0.0, 0.0)])
+[]
+>>> lookup(s, FrameTree(), "map", "cam", 1.5)
+((1.5, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0))
+>>> lookup(s, FrameTree(), "map", "cam", 3.0) is None  # after the last map->base observation
+True
+"""
+from __future__ import annotations
+
+import math
+import threading
+from collections import deque
+from typing import Any, Callable
+
+from .robotlib import slerp
+from .terms import Atom, Struct, list_items
+
+__all__ = ["TF", "TF_STATIC", "FrameTree", "Pose", "lookup", "pose_value", "compose",
+           "invert", "IDENTITY", "TfHooks"]
+
+TF = ("tf", 3)
+TF_STATIC = ("tf_static", 3)
+
+Pose = tuple  # ((x, y, z), (qx, qy, qz, qw)) with a unit quaternion
+IDENTITY: Pose = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+
+
+class TfHooks:
+    """What a synchronized evaluation must wait for (slr_sql.sync): ``prev(key, t)`` — the
+    history of ``key`` complete up to ``t``; ``next(key, lo, hi, args)`` — as ``next`` over
+    [lo, hi] with the pattern ``args``; ``arrival(key, t, args)`` — an event matching
+    ``args`` starting at or after ``t`` has yet to arrive. Each may raise to stop the
+    evaluation; the defaults do nothing (an unsynchronized query)."""
+
+    def __init__(self, prev: Callable | None = None, next: Callable | None = None,
+                 arrival: Callable | None = None):
+        self.prev = prev
+        self.next = next
+        self.arrival = arrival
+
+
+class FrameTree:
+    """The edges of the stored frame tree, kept up to date incrementally.
+
+    >>> FrameTree().path("a", "a")
+    []
+    """
+
+    def __init__(self) -> None:
+        self.seen = {TF: 0, TF_STATIC: 0}      # arrival sequence read up to, per type
+        self.kind: dict[tuple, tuple] = {}      # (parent, child) -> TF or TF_STATIC
+        self.neighbours: dict[Any, list] = {}   # frame -> [(frame, parent, child)]
+        self.paths: dict[tuple, list | None] = {}
+        self.lock = threading.Lock()   # the threads of one knowledge base share the tree
+
+    def chain(self, store: Any, target: Any, source: Any) -> list | None:
+        """:meth:`refresh`, then :meth:`path`, under the tree's lock."""
+        with self.lock:
+            self.refresh(store)
+            return self.path(target, source)
+
+    def refresh(self, store: Any) -> None:
+        """Read the (parent, child) pairs stored since the last refresh."""
+        for key in (TF, TF_STATIC):
+            pairs, top = store.distinct_pairs(key[0], key[1], self.seen[key])
+            if top < self.seen[key]:  # the newest events were deleted: read all again
+                self.seen = {TF: 0, TF_STATIC: 0}
+                self.kind.clear()
+                self.neighbours.clear()
+                self.paths.clear()
+                return self.refresh(store)
+            self.seen[key] = top
+            for parent, child in pairs:
+                self._add(parent, child, key)
+
+    def _add(self, parent: Any, child: Any, key: tuple) -> None:
+        pair = (parent, child)
+        old = self.kind.get(pair)
+        if old == TF or old == key:
+            return
+        self.kind[pair] = key   # a pair seen in tf is a tf edge, even if also static
+        self.paths.clear()
+        if old is None:
+            self.neighbours.setdefault(child, []).append((parent, parent, child))
+            self.neighbours.setdefault(parent, []).append((child, parent, child))
+
+    def path(self, target: Any, source: Any) -> list | None:
+        """The edges from ``source`` to ``target``: ``[(parent, child, inverse)]`` in the
+        order they apply (``inverse``: walked from parent to child); None when the frames
+        are not connected."""
+        if target == source:
+            return []
+        key = (target, source)
+        if key in self.paths:
+            return self.paths[key]
+        came: dict[Any, tuple] = {source: ()}
+        queue = deque([source])
+        found = None
+        while queue and found is None:
+            frame = queue.popleft()
+            for other, parent, child in self.neighbours.get(frame, ()):
+                if other in came:
+                    continue
+                came[other] = (frame, parent, child)
+                if other == target:
+                    found = other
+                    break
+                queue.append(other)
+        if found is None:
+            result = None
+        else:
+            result = []
+            frame = target
+            while frame != source:
+                before, parent, child = came[frame]
+                result.append((parent, child, parent == before))
+                frame = before
+            result.reverse()
+        self.paths[key] = result
+        return result
+
+
+def pose_value(term: Any) -> Pose | None:
+    """A stored ``pose([X,Y,Z],[QX,QY,QZ,QW])`` as floats with a unit quaternion; None if
+    it is not one (or its quaternion is zero).
+
+    >>> pose_value(Struct("pose", ([1, 2, 3], [0, 0, 0, 2])))
+    ((1.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0))
+    """
+    if type(term) is not Struct or term.name != "pose" or len(term.args) != 2:
+        return None
+    parts = []
+    for arg, n in zip(term.args, (3, 4)):
+        items = arg if type(arg) is list else list_items(arg)[0]
+        if len(items) != n:
+            return None
+        values = []
+        for x in items:
+            if type(x) is float:
+                values.append(x)
+            elif type(x) is int:
+                values.append(float(x))
+            else:
+                return None
+        parts.append(values)
+    qx, qy, qz, qw = parts[1]
+    norm = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
+    if not norm > 0.0 or math.isinf(norm):
+        return None
+    return (tuple(parts[0]), (qx / norm, qy / norm, qz / norm, qw / norm))
+
+
+def _rotate(q: tuple, v: tuple) -> tuple:
+    """v rotated by the unit quaternion q (q·v·q*, expanded)."""
+    qx, qy, qz, qw = q
+    vx, vy, vz = v
+    # t = 2 q_vec x v; v' = v + qw t + q_vec x t
+    tx = 2.0 * (qy * vz - qz * vy)
+    ty = 2.0 * (qz * vx - qx * vz)
+    tz = 2.0 * (qx * vy - qy * vx)
+    return (vx + qw * tx + (qy * tz - qz * ty),
+            vy + qw * ty + (qz * tx - qx * tz),
+            vz + qw * tz + (qx * ty - qy * tx))
+
+
+def compose(a: Pose, b: Pose) -> Pose:
+    """The transform ``a·b``: first ``b``, then ``a`` (a point p goes to a(b(p))).
+
+    >>> compose(((1.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)), ((0.0, 2.0, 0.0), (0.0, 0.0, 0.0, 1.0)))
+    ((1.0, 2.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+    """
+    (ax, ay, az), qa = a
+    tb, (x2, y2, z2, w2) = b
+    rx, ry, rz = _rotate(qa, tb)
+    x1, y1, z1, w1 = qa
+    q = (w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+         w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+         w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+         w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2)
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return ((ax + rx, ay + ry, az + rz), (q[0] / n, q[1] / n, q[2] / n, q[3] / n))
+
+
+def invert(a: Pose) -> Pose:
+    """The inverse transform of ``a``.
+
+    >>> invert(((1.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0)))
+    ((-1.0, -2.0, -3.0), (-0.0, -0.0, -0.0, 1.0))
+    """
+    t, (qx, qy, qz, qw) = a
+    inv = (-qx, -qy, -qz, qw)
+    rx, ry, rz = _rotate(inv, t)
+    return ((-rx, -ry, -rz), inv)
+
+
+def _interpolate(t: float, t1: float, p1: Pose, t2: float, p2: Pose) -> Pose:
+    s = (t - t1) / (t2 - t1)
+    (a, b) = p1[0], p2[0]
+    q = slerp(p1[1], p2[1], s)
+    return ((a[0] + (b[0] - a[0]) * s, a[1] + (b[1] - a[1]) * s, a[2] + (b[2] - a[2]) * s),
+            tuple(q))
+
+
+class _Unusable(Exception):
+    """A stored edge value that is not a pose: the lookup fails on it."""
+
+
+def _edge_pose(row: Any) -> Pose:
+    value = pose_value(row[0][2])
+    if value is None:
+        raise _Unusable()
+    return value
+
+
+def _edge_at(store: Any, key: tuple, parent: Any, child: Any, t: float, extrapolate: bool,
+             hooks: TfHooks | None) -> Pose | None:
+    name, arity = key
+    bound = {0: parent, 1: child}
+    if key == TF_STATIC:
+        if hooks is not None and hooks.prev is not None:
+            hooks.prev(key, t)
+        found = store.bracket(name, arity, bound, math.inf)
+        if found is None or found[0] is None:
+            return None
+        return _edge_pose(found[0])
+    if hooks is not None and hooks.prev is not None:
+        hooks.prev(key, t)
+    found = store.bracket(name, arity, bound, t)
+    if found is None:
+        return None
+    before, after = found
+    if before is not None and before[2] == t:
+        return _edge_pose(before)
+    args = (parent, child)
+    if after is not None and hooks is not None and hooks.next is not None:
+        hooks.next(key, t, after[1], args)
+    if before is None:
+        if after is not None and extrapolate:
+            return _edge_pose(after)
+        return None
+    if after is None:
+        if extrapolate:
+            return _edge_pose(before)
+        if hooks is not None and hooks.arrival is not None:
+            hooks.arrival(key, t, args)
+        return None
+    return _interpolate(t, before[2], _edge_pose(before), after[1], _edge_pose(after))
+
+
+def lookup(store: Any, tree: FrameTree, target: Any, source: Any, t: float,
+           extrapolate: bool = False, hooks: TfHooks | None = None) -> Pose | None:
+    """The pose of frame ``source`` in frame ``target`` at time ``t`` (the transform that
+    maps ``source`` coordinates into ``target``'s), or None when the frames are not
+    connected or an edge has no value at ``t`` (see the module's text)."""
+    if type(target) is str:
+        target = Atom(target)
+    if type(source) is str:
+        source = Atom(source)
+    if target == source:
+        return IDENTITY
+    chain = tree.chain(store, target, source)
+    if chain is None:
+        return None
+    result = IDENTITY
+    kind = tree.kind
+    try:
+        for parent, child, inverse in chain:
+            step = _edge_at(store, kind[(parent, child)], parent, child, t, extrapolate, hooks)
+            if step is None:
+                return None
+            result = compose(invert(step) if inverse else step, result)
+    except _Unusable:
+        return None
+    return result

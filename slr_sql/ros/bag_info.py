@@ -1,0 +1,207 @@
+"""``slr ros info BAG``: what a recording holds, and a draft MAP for it.
+
+:func:`bag_info` reads a bag once: per topic the message type, the number of messages and
+the first and last record time (read from the record index, nothing decoded), and the
+frames of ``/tf`` and ``/tf_static`` (those messages decoded: parent, child, how many
+transforms). :func:`draft_map` writes a MAP (YAML, with comments) that maps every other
+topic to an event named after it, with the message's leaf fields as arguments, for the user
+to edit: it loads as it is (``slr ros import BAG DB --map draft.yaml``).
+
+>>> info = bag_info("/no/such.bag")
+Traceback (most recent call last):
+...
+slr_sql.ros.bag_import.BagError: cannot read /no/such.bag: no such file or directory
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .bag_import import bag_id, open_bag
+from .mapping import TF_TOPICS, TF_TYPE, TIME_TYPES, normalize_topic, topic_event_name
+
+__all__ = ["TopicInfo", "FrameEdge", "BagInfo", "bag_info", "draft_map"]
+
+_BASE, _NAME, _ARRAY, _SEQUENCE = 1, 2, 3, 4
+# leaf fields a draft lists at most per topic (the rest: edit the draft, or take $msg)
+MAX_DRAFT_ARGS = 12
+
+
+@dataclass
+class TopicInfo:
+    """One topic of a bag: record times are seconds (None when it has no messages)."""
+
+    topic: str
+    msgtype: str
+    count: int
+    first: float | None = None
+    last: float | None = None
+
+
+@dataclass
+class FrameEdge:
+    """A (parent, child) pair seen in /tf or /tf_static, how often, and its time span."""
+
+    parent: str
+    child: str
+    topic: str
+    count: int = 0
+    first: float | None = None
+    last: float | None = None
+
+
+@dataclass
+class BagInfo:
+    """What :func:`bag_info` found; ``fields`` maps each message type to its fields (rosbags
+    definitions, for :func:`draft_map`)."""
+
+    path: str
+    bag_id: str
+    count: int
+    start: float | None
+    end: float | None
+    topics: list[TopicInfo] = field(default_factory=list)
+    frames: list[FrameEdge] = field(default_factory=list)
+    fielddefs: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def duration(self) -> float:
+        return 0.0 if self.start is None or self.end is None else self.end - self.start
+
+    def as_json(self) -> str:
+        """The summary as JSON (without the definitions)."""
+        data = asdict(self)
+        data.pop("fielddefs")
+        data["duration"] = self.duration
+        return json.dumps(data, indent=2)
+
+
+def bag_info(path: str | Path) -> BagInfo:
+    """Read the bag at ``path`` (any format ``slr ros import`` reads) and summarize it."""
+    from . import fast_tf
+
+    reader = open_bag(path)
+    try:
+        topics: dict[str, TopicInfo] = {}
+        tf_conns = []
+        for conn in reader.connections:
+            topic = normalize_topic(conn.topic)
+            info = topics.setdefault(topic, TopicInfo(topic, conn.msgtype, 0))
+            info.count += conn.msgcount
+            if topic in TF_TOPICS and conn.msgtype == TF_TYPE:
+                tf_conns.append(conn.id)
+        deserialize = reader.typestore.deserialize_cdr if reader.is2 \
+            else reader.typestore.deserialize_ros1
+        decode = fast_tf.decode_cdr if reader.is2 else fast_tf.decode_ros1
+        standard = fast_tf._matches(reader.typestore.fielddefs,
+                                    fast_tf._ROS2 if reader.is2 else fast_tf._ROS1)
+        frames: dict[tuple, FrameEdge] = {}
+        for conn, stamp, raw in reader.messages():
+            t = stamp * 1e-9
+            info = topics[normalize_topic(conn.topic)]
+            if info.first is None or t < info.first:
+                info.first = t
+            if info.last is None or t > info.last:
+                info.last = t
+            if conn.id not in tf_conns:
+                continue
+            if standard:
+                transforms = [(args[0], args[1], end) for _, args, _, end in decode(raw, t)]
+            else:
+                msg = deserialize(raw, conn.msgtype)
+                transforms = [(tr.header.frame_id, tr.child_frame_id,
+                               tr.header.stamp.sec + tr.header.stamp.nanosec * 1e-9)
+                              for tr in msg.transforms]
+            for parent, child, at in transforms:
+                edge = frames.setdefault((info.topic, parent, child),
+                                         FrameEdge(str(parent), str(child), info.topic))
+                edge.count += 1
+                edge.first = at if edge.first is None else min(edge.first, at)
+                edge.last = at if edge.last is None else max(edge.last, at)
+        count = reader.message_count
+        return BagInfo(str(path), bag_id(reader), count,
+                       reader.start_time * 1e-9 if count else None,
+                       reader.end_time * 1e-9 if count else None,
+                       sorted(topics.values(), key=lambda i: i.topic),
+                       sorted(frames.values(), key=lambda e: (e.topic, e.parent, e.child)),
+                       dict(reader.typestore.fielddefs))
+    finally:
+        reader.close()
+
+
+def _leaves(fielddefs: dict, msgtype: str, prefix: str = "", depth: int = 0) -> list[str]:
+    """Field paths of the numbers, strings and times of ``msgtype`` (lists whole), in
+    declaration order; a header's stamp and seq are left out (the event time takes it)."""
+    found = fielddefs.get(msgtype)
+    if found is None or depth > 8:
+        return [prefix.rstrip(".")] if prefix else []
+    out: list[str] = []
+    for name, (kind, detail) in found[1]:
+        path = prefix + name
+        if kind == _NAME:
+            if detail in TIME_TYPES:
+                if not (name == "stamp" and msgtype == "std_msgs/msg/Header"):
+                    out.append(path)
+                continue
+            out += _leaves(fielddefs, detail, path + ".", depth + 1)
+        elif kind == _BASE:
+            if msgtype == "std_msgs/msg/Header" and name == "seq":
+                continue
+            out.append(path)
+        else:   # arrays and sequences: the whole list (or foreach, by hand)
+            out.append(path)
+    return out
+
+
+def _has_header(fielddefs: dict, msgtype: str) -> bool:
+    found = fielddefs.get(msgtype)
+    return found is not None and any(
+        name == "header" and kind == _NAME and detail == "std_msgs/msg/Header"
+        for name, (kind, detail) in found[1])
+
+
+def _yaml_text(value: str) -> str:
+    return json.dumps(value)  # a JSON string is a YAML string
+
+
+def draft_map(info: BagInfo) -> str:
+    """A MAP (YAML) for every topic of ``info`` except /tf and /tf_static (the built-in
+    mapping takes them): an event named after the topic whose arguments are the message's
+    leaf fields (at most :data:`MAX_DRAFT_ARGS`; a message with more, or with none, is taken
+    whole as ``$msg``), timed by ``header.stamp`` when the message has one."""
+    lines = [f"# Draft MAP for {info.path} ({info.bag_id}), written by `slr ros info`.",
+             "# Edit the event names and arguments, then: slr ros import BAG DB --map THIS_FILE",
+             "# /tf and /tf_static need no entry: the built-in mapping makes",
+             "#   tf(Parent, Child, pose([X,Y,Z],[QX,QY,QZ,QW]))^T and tf_static(...)^T",
+             "version: 1"]
+    entries = [t for t in info.topics if t.topic not in TF_TOPICS]
+    if not entries:
+        lines.append("topics: {}")
+        return "\n".join(lines) + "\n"
+    lines.append("topics:")
+    used: dict[str, str] = {}
+    for t in entries:
+        name = topic_event_name(t.topic)
+        if name in used:   # two topics with one name: number the second
+            n = 2
+            while f"{name}_{n}" in used:
+                n += 1
+            name = f"{name}_{n}"
+        used[name] = t.topic
+        leaves = _leaves(info.fielddefs, t.msgtype)
+        lines.append(f"  {_yaml_text(t.topic)}:")
+        lines.append(f"    # {t.count} messages" + (
+            f", {t.first:.3f} .. {t.last:.3f}" if t.first is not None else ""))
+        lines.append(f"    event: {name}")
+        lines.append(f"    type: {t.msgtype}")
+        if 0 < len(leaves) <= MAX_DRAFT_ARGS:
+            lines.append("    args:")
+            lines += [f"      - {_yaml_text(p)}" for p in leaves]
+        else:
+            lines.append(f"    # {len(leaves)} fields: the whole message as one argument")
+            lines.append("    args: [\"$msg\"]")
+        timing = "header.stamp" if _has_header(info.fielddefs, t.msgtype) else "record"
+        lines.append(f"    time: {timing}")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,112 @@
+"""The fleet store's side of shipping: storing one shipment of a robot exactly once.
+
+A shipment is what a pusher (:mod:`slr_sql.fleet`) sends in one request: batches of stored
+rows (one event type each, with their sequence numbers in the robot's store), the robot's
+completeness marks, and what is still waiting on the robot. :func:`receive` stores it in one
+transaction of the fleet store: rows after the robot's position for their type, the new
+positions, the marks. Called in-process for a fleet store path (or URL of a database) and
+by the ``/fleet/*`` endpoints of ``slr serve``.
+
+Event rules loaded on the fleet store run over the shipped events in that transaction (their
+complex events have the fleet store's robot: NULL on an unnamed fleet store); without event
+rules the rows go in as they are stored on the robot (no decoding).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from .errors import SLRError
+
+__all__ = ["receive", "positions", "FLEET_MARK"]
+
+FLEET_MARK = "fleet/mark/"   # slr_meta prefix: fleet/mark/<robot>/<name>/<arity or *>
+
+
+def positions(kb: Any, robot: str) -> dict[tuple[str, int], int]:
+    """Per event type, the last sequence of ``robot``'s store that ``kb`` (a fleet store)
+    holds.
+
+    >>> import slr_sql; positions(slr_sql.open(), "r1")
+    {}
+    """
+    return kb.store.fleet_positions(robot)
+
+
+def receive(kb: Any, robot: str, batches: list, marks: dict | None = None,
+            pending: int | None = None, head_arrival: float | None = None, *,
+            check: bool = True) -> int:
+    """Store one shipment of ``robot`` in the fleet store ``kb``; returns the number of rows
+    stored (rows already held are skipped). ``batches``: ``[(name, arity, rows)]`` with rows
+    as :meth:`slr_sql.store.EventStore.fleet_read_after` gives them; ``marks``: ``{"p/1":
+    t}`` (the robot's completeness marks, ``p/*`` for every arity); ``pending``,
+    ``head_arrival``: what the robot still holds unshipped (for ``slr fleet status``).
+    ``check=False`` skips checking the shipment's shape (rows this process read from a store).
+
+    A robot's mark is kept per robot; the fleet store's own mark of a type is the least mark
+    of the robots it knows, once every one of them has marked it (a history of the fleet is
+    complete up to t when each robot's is).
+
+    >>> import slr_sql
+    >>> fleet = slr_sql.open()
+    >>> receive(fleet, "r1", [("seen", 1, [(1, "pallet7", 10.0, 10.0, 3.0, "r1")])])
+    1
+    >>> fleet.query("origin(R, seen(P)^T)")
+    [{'R': Atom('r1'), 'P': Atom('pallet7'), 'T': 10.0}]
+    """
+    store = kb.store
+    if check:
+        _check_shipment(batches, marks)
+    kb._refresh()
+    cep = getattr(kb, "_cep", None)
+    store_events = None
+    if cep is not None and cep.active:
+        def store_events(events: list) -> list:
+            token = cep.before_add(events)
+            errors = cep.store_events(events, False)
+            cep.after_add(token)
+            return errors
+    stored = 0
+    with store.transaction():
+        for name, arity, rows in batches:
+            if rows and type(rows[0]) is not tuple:
+                rows = [tuple(r) for r in rows]
+            stored += store.fleet_receive(robot, name, arity, rows, store_events)
+        if marks:
+            robots = store.robots()
+            for mk, t in marks.items():
+                store.meta_raise(f"{FLEET_MARK}{robot}/{mk}", float(t))
+                known = [store.meta_get(f"{FLEET_MARK}{r}/{mk}") for r in robots]
+                if all(v is not None for v in known):
+                    store.meta_raise(f"sync/mark/{mk}", min(float(v) for v in known))
+        if pending is not None:
+            store.fleet_record_contact(robot, int(pending), head_arrival)
+    return stored
+
+
+def _check_shipment(batches: Any, marks: Any) -> None:
+    """A shipment from the network is checked before anything is stored."""
+    if not isinstance(batches, list):
+        raise SLRError("a shipment's batches are a list of [name, arity, rows]")
+    for batch in batches:
+        if not (isinstance(batch, (list, tuple)) and len(batch) == 3
+                and isinstance(batch[0], str) and type(batch[1]) is int and batch[1] >= 0
+                and isinstance(batch[2], list)):
+            raise SLRError("a shipment's batch is [name, arity, rows]")
+        name, arity, rows = batch
+        last = 0
+        for row in rows:
+            if not (isinstance(row, (list, tuple)) and len(row) == arity + 5
+                    and type(row[0]) is int and row[0] > last
+                    and all(type(v) in (int, float, str) or v is None for v in row)
+                    and all(type(v) in (int, float) for v in row[arity + 1:arity + 4])):
+                raise SLRError(f"a shipped row of {name}/{arity} is [seq, arg1..arg{arity}, "
+                               "start, end, arrival, robot] with sequences ascending")
+            if not all(math.isfinite(v) for v in row[arity + 1:arity + 4]):
+                raise SLRError(f"a shipped row of {name}/{arity} has a time that is not finite")
+            last = row[0]
+    if marks is not None:
+        if not isinstance(marks, dict) or not all(
+                isinstance(k, str) and type(v) in (int, float) and v == v
+                for k, v in marks.items()):
+            raise SLRError("a shipment's marks are {\"name/arity\": time}")

@@ -1,0 +1,184 @@
+"""What a statement on a store connection may do: SQLite's authorizer and its own switches.
+
+Every connection the store opens gets :func:`harden_connection`: the SQLite functions in
+:data:`DENIED_FUNCTIONS` are refused in every statement (the store's own SQL never calls
+them; a user's ``kb.sql(..., write=True)`` may not either), and SQLite's
+``SQLITE_DBCONFIG_ENABLE_FTS3_TOKENIZER`` switch is turned off where Python lets it be
+reached safely (:func:`fts3_tokenizer_switch_off`). A *read-only* statement (``kb.sql``
+without ``write``, ``slr sql``, the service's ``/sql``) runs under the stricter
+:meth:`SqlGuard.read_only`: no ``ATTACH``/``DETACH`` (also what ``VACUUM INTO`` asks for), no
+pragma that changes a setting or acts (:data:`ACTING_PRAGMAS`), and each string or blob it
+makes at most :data:`READ_ONLY_VALUE_BYTES` long (``randomblob``, ``zeroblob``, ``printf``
+widths, ``replace``/``group_concat`` growth: a memory bomb is an error, not an allocation).
+
+The authorizer cannot carry a message: :class:`SqlGuard` remembers why it refused, and
+:class:`~slr_sql.store.connection.Database` raises that reason in words.
+
+>>> import sqlite3
+>>> conn = sqlite3.connect(":memory:"); guard = harden_connection(conn)
+>>> conn.execute("SELECT fts3_tokenizer('simple')")
+Traceback (most recent call last):
+...
+sqlite3.OperationalError: not authorized to use function: fts3_tokenizer
+>>> guard.denied
+"fts3_tokenizer() is not allowed (it reads and re-points SQLite's full-text tokenizers, which are addresses in the process's memory)"
+"""
+from __future__ import annotations
+
+import ctypes
+import sqlite3
+import sys
+from typing import Any
+
+__all__ = ["SqlGuard", "harden_connection", "fts3_tokenizer_switch_off", "DENIED_FUNCTIONS",
+           "READING_PRAGMAS", "ACTING_PRAGMAS", "READ_ONLY_VALUE_BYTES"]
+
+# Functions no statement on a store connection may call, with the reason given.
+DENIED_FUNCTIONS = {
+    "fts3_tokenizer": "it reads and re-points SQLite's full-text tokenizers, which are "
+                      "addresses in the process's memory",
+    "load_extension": "it loads native code into the process",
+    "rtreenode": "a debugging function that decodes any blob as an R*Tree node",
+    "rtreedepth": "a debugging function that decodes any blob as an R*Tree node",
+}
+
+# Pragmas that take an argument and only read (also table-valued: pragma_table_info('t')).
+READING_PRAGMAS = frozenset({
+    "table_info", "table_xinfo", "table_list", "index_list", "index_info", "index_xinfo",
+    "foreign_key_list", "foreign_key_check", "integrity_check", "quick_check",
+    "function_list", "module_list", "pragma_list", "collation_list", "database_list",
+    "compile_options"})
+
+# Pragmas that act even without an argument (a read-only statement may not run them).
+ACTING_PRAGMAS = frozenset({"optimize", "wal_checkpoint", "incremental_vacuum",
+                            "shrink_memory"})
+
+# The longest string or blob a read-only statement may make or read (SQLITE_LIMIT_LENGTH).
+READ_ONLY_VALUE_BYTES = 64 << 20
+
+_OK, _DENY = sqlite3.SQLITE_OK, sqlite3.SQLITE_DENY
+_FUNCTION = sqlite3.SQLITE_FUNCTION
+_PRAGMA = sqlite3.SQLITE_PRAGMA
+_ATTACHING = frozenset({sqlite3.SQLITE_ATTACH, sqlite3.SQLITE_DETACH})
+_FTS3_TOKENIZER_SWITCH = 1004  # SQLITE_DBCONFIG_ENABLE_FTS3_TOKENIZER
+
+
+class SqlGuard:
+    """The authorizer callbacks of one connection; ``denied`` is the reason of the last
+    refusal (None before any)."""
+
+    def __init__(self) -> None:
+        self.denied: str | None = None
+
+    def always(self, action: int, arg1: Any, arg2: Any, _db: Any, _trigger: Any) -> int:
+        """Every statement: no function of :data:`DENIED_FUNCTIONS`."""
+        if action == _FUNCTION and isinstance(arg2, str):
+            reason = DENIED_FUNCTIONS.get(arg2.lower())
+            if reason is not None:
+                self.denied = f"{arg2.lower()}() is not allowed ({reason})"
+                return _DENY
+        return _OK
+
+    def read_only(self, action: int, arg1: Any, arg2: Any, db: Any, trigger: Any) -> int:
+        """A read-only statement: :meth:`always`, and no ATTACH, DETACH (nor ``VACUUM
+        INTO``, which attaches its target), no pragma assignment, no acting pragma."""
+        if action in _ATTACHING:
+            self.denied = "read-only: the statement would write a database file (ATTACH, " \
+                          "DETACH, VACUUM, VACUUM INTO)"
+            return _DENY
+        if action == _PRAGMA:
+            name = str(arg1).lower()
+            if name in ACTING_PRAGMAS or (arg2 is not None and name not in READING_PRAGMAS):
+                self.denied = f"read-only: PRAGMA {name} with an argument, or one that acts, " \
+                              "would change the store or its settings"
+                return _DENY
+            return _OK
+        return self.always(action, arg1, arg2, db, trigger)
+
+
+def harden_connection(conn: sqlite3.Connection) -> SqlGuard:
+    """Install the store's authorizer on ``conn`` and turn the FTS3 tokenizer switch off;
+    returns the guard (whose ``denied`` says why a statement was refused)."""
+    guard = SqlGuard()
+    conn.set_authorizer(guard.always)
+    fts3_tokenizer_switch_off(conn)
+    return guard
+
+
+def fts3_tokenizer_switch_off(conn: sqlite3.Connection) -> bool:
+    """Turn ``SQLITE_DBCONFIG_ENABLE_FTS3_TOKENIZER`` off on ``conn`` (the two-argument
+    ``fts3_tokenizer()`` then refuses an address written into the statement); True when it
+    is off. Python 3.12 has ``Connection.setconfig``; on CPython 3.11 the connection's
+    ``sqlite3*`` is read from the object (the first field after the object header) and used
+    only after two checks that it is one: its first field is SQLite's default VFS and it
+    names the file the connection opened. Elsewhere (or if a check fails) False: the
+    authorizer alone refuses the function.
+
+    (SQLite still accepts an address passed as a bound parameter with the switch off, so
+    the authorizer is the defence; the switch is the second line.)
+    """
+    setconfig = getattr(conn, "setconfig", None)
+    if setconfig is not None:  # Python >= 3.12
+        try:
+            setconfig(_FTS3_TOKENIZER_SWITCH, False)
+            return not conn.getconfig(_FTS3_TOKENIZER_SWITCH)  # type: ignore[attr-defined]
+        except sqlite3.Error:
+            return False
+    library = _library()
+    handle = _connection_handle(conn, library)
+    if library is None or handle is None:
+        return False
+    state = ctypes.c_int(-1)
+    rc = library.sqlite3_db_config(ctypes.c_void_p(handle), _FTS3_TOKENIZER_SWITCH,
+                                   ctypes.c_int(0), ctypes.byref(state))
+    return rc == sqlite3.SQLITE_OK and state.value == 0
+
+
+_LIBRARY: Any = False  # not looked up yet
+
+
+def _library() -> Any:
+    """The SQLite library the ``_sqlite3`` module uses (its symbols, through the module's
+    own handle), or None."""
+    global _LIBRARY
+    if _LIBRARY is False:
+        _LIBRARY = None
+        try:
+            import _sqlite3
+
+            library = ctypes.CDLL(_sqlite3.__file__)
+            library.sqlite3_vfs_find.restype = ctypes.c_void_p
+            library.sqlite3_vfs_find.argtypes = [ctypes.c_char_p]
+            library.sqlite3_db_filename.restype = ctypes.c_char_p
+            library.sqlite3_db_filename.argtypes = [ctypes.c_void_p, ctypes.c_char_p]
+            library.sqlite3_db_config.restype = ctypes.c_int
+            library.sqlite3_libversion_number.restype = ctypes.c_int
+            if library.sqlite3_libversion_number() == sqlite3.sqlite_version_info[0] * 1000000 \
+                    + sqlite3.sqlite_version_info[1] * 1000 + sqlite3.sqlite_version_info[2]:
+                _LIBRARY = library
+        except (ImportError, OSError, AttributeError):
+            pass
+    return _LIBRARY
+
+
+def _connection_handle(conn: sqlite3.Connection, library: Any) -> int | None:
+    """The ``sqlite3*`` of ``conn`` on CPython 3.11 (release build), checked, or None."""
+    if library is None or sys.implementation.name != "cpython" \
+            or sys.version_info[:2] != (3, 11) or hasattr(sys, "getobjects") \
+            or not isinstance(conn, sqlite3.Connection):
+        return None
+    pointer = ctypes.sizeof(ctypes.c_void_p)
+    handle = ctypes.c_void_p.from_address(id(conn) + 2 * pointer).value  # after ob_refcnt, ob_type
+    if not handle or handle % pointer:
+        return None
+    if ctypes.c_void_p.from_address(handle).value != library.sqlite3_vfs_find(None):
+        return None  # not an sqlite3 struct (whose first field is its VFS)
+    try:
+        opened = conn.execute("PRAGMA database_list").fetchone()[2]
+    except sqlite3.Error:
+        return None
+    named = library.sqlite3_db_filename(handle, b"main")
+    if (named or b"").decode("utf-8", "surrogateescape") != opened:
+        return None
+    return handle
+

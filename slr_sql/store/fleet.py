@@ -1,0 +1,259 @@
+"""Robots and fleets in one store: the store's robot name, the robots it holds events of,
+reading a robot's events for shipping and storing a shipped batch exactly once.
+
+A robot store names itself (``slr_meta`` key ``robot``); its event rows carry that name in
+their ``robot`` column. A fleet store receives batches: the rows of one event type from one
+robot with their sequence numbers in the robot's store. :meth:`Fleet.receive` stores the
+rows after the robot's recorded position for that type and moves the position, in one
+transaction: a batch sent twice (a pusher killed after the fleet committed) is stored once,
+and a batch the fleet never committed is sent again.
+"""
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from ..encoding import encode
+from ..errors import SLRError
+from ..terms import Atom
+from .checks import text_problem
+from .connection import Database
+from .events import EventWriter
+from .tables import EventTables
+
+__all__ = ["Fleet", "check_robot_name"]
+
+# (an upsert both engines take)
+_ADD_ROBOT = "INSERT INTO slr_robots (name) VALUES (?) ON CONFLICT (name) DO NOTHING"
+
+
+def check_robot_name(name: Any) -> str:
+    """``name`` if it can name a robot (a non-empty text without control characters), else
+    an :class:`SLRError` saying why.
+
+    >>> check_robot_name("r1")
+    'r1'
+    """
+    if not isinstance(name, str) or not name:
+        raise SLRError(f"a robot's name is a non-empty text, not {name!r}")
+    problem = text_problem(name)
+    if problem or any(ord(c) < 32 or c == "\x7f" for c in name):
+        raise SLRError(f"robot name {name!r} cannot be stored: {problem or 'a control character'}")
+    if encode(Atom(name)) != name:  # the column holds the atom's stored form: the name itself
+        raise SLRError(f"robot name {name!r} reads as a compound term or string when stored; "
+                       "name robots with plain words (r1, forklift-2, ...)")
+    return name
+
+
+class Fleet:
+    """The robot name of a store and the shipping tables (``slr_robots``,
+    ``slr_fleet_positions``, ``slr_fleet_robots``, migration 0006).
+
+    >>> from slr_sql.store import EventStore
+    >>> s = EventStore(None, robot="r1"); s.robot, s.robots()
+    ('r1', ['r1'])
+    """
+
+    def __init__(self, db: Database, tables: EventTables, writer: EventWriter):
+        self.db = db
+        self.tables = tables
+        self.writer = writer
+        row = db.conn.execute("SELECT value FROM slr_meta WHERE key = 'robot'").fetchone()
+        self.robot: str | None = None if row is None else _json_text(row[0])
+        writer.robot = self.robot
+
+    def name(self, robot: str) -> None:
+        """Name the store's robot (kept in the store). A store has one name for life:
+        naming it again with another name is an error; events stored before it was named
+        keep robot NULL."""
+        robot = check_robot_name(robot)
+        if self.robot == robot:
+            return
+        if self.robot is not None:
+            raise SLRError(f"{self.db.path or ':memory:'} is the store of robot "
+                           f"{self.robot!r}, not {robot!r}")
+        import json
+        with self.db.transaction():
+            row = self.db.conn.execute(
+                "SELECT value FROM slr_meta WHERE key = 'robot'").fetchone()
+            if row is not None and _json_text(row[0]) != robot:  # another process named it
+                raise SLRError(f"{self.db.path or ':memory:'} is the store of robot "
+                               f"{_json_text(row[0])!r}, not {robot!r}")
+            self.db.conn.execute("INSERT INTO slr_meta (key, value) VALUES ('robot', ?) "
+                                 "ON CONFLICT (key) DO UPDATE SET value = excluded.value",
+                                 (json.dumps(robot),))
+            self.db.conn.execute(_ADD_ROBOT, (robot,))
+        self.robot = robot
+        self.writer.robot = robot
+
+    def robots(self) -> list[str]:
+        """The robots whose events the store holds (its own name, and every robot that
+        shipped to it), in name order."""
+        with self.db.lock:
+            self.db.check_open()
+            return [r[0] for r in self.db.conn.execute("SELECT name FROM slr_robots ORDER BY name")]
+
+    # ------------------------------------------------------------------ the robot's side
+
+    def heads(self) -> dict[tuple[str, int], int]:
+        """Per event type, the greatest sequence stored (0 for an empty table)."""
+        with self.db.lock:
+            self.db.check_open()
+            self.tables.reload()
+            out = {}
+            for key, event_type in self.tables.types.items():
+                row = self.db.conn.execute(
+                    f"SELECT max(seq) FROM {event_type.quoted}").fetchone()
+                out[key] = row[0] or 0
+            return out
+
+    def read_after(self, name: str, arity: int, position: int, limit: int) -> list[tuple]:
+        """Up to ``limit`` stored rows of name/arity with ``seq > position`` in sequence
+        order, as ``(seq, *encoded arguments, start, end, arrival, robot)``."""
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return []
+            args = "".join(f"arg{i}, " for i in range(1, arity + 1))
+            rows = self.db.conn.execute(
+                f"SELECT seq, {args}t_start, t_end, arrival, robot FROM {event_type.quoted} "
+                "WHERE seq > ? ORDER BY seq LIMIT ?", (position, limit)).fetchall()
+            dialect = self.db.dialect
+            if dialect.name != "sqlite" and arity:  # shipped as SQLite stores them
+                from_column = dialect.from_column
+                rows = [(r[0], *map(from_column, r[1:1 + arity]), *r[1 + arity:]) for r in rows]
+            return rows
+
+    def backlog(self, name: str, arity: int, position: int) -> tuple[int, float | None]:
+        """The number of rows of name/arity after ``position`` and the arrival time of the
+        latest row (None for an empty table): what is left to ship, and how recent."""
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return 0, None
+            left = self.db.conn.execute(f"SELECT count(*) FROM {event_type.quoted} "
+                                        "WHERE seq > ?", (position,)).fetchone()[0]
+            row = self.db.conn.execute(f"SELECT arrival FROM {event_type.quoted} "
+                                       "ORDER BY seq DESC LIMIT 1").fetchone()
+            return left, None if row is None else row[0]
+
+    # ------------------------------------------------------------------ the fleet's side
+
+    def positions(self, robot: str) -> dict[tuple[str, int], int]:
+        """What the fleet store holds of ``robot``: per event type, the last sequence (in the
+        robot's store) stored."""
+        with self.db.lock:
+            self.db.check_open()
+            return {(n, a): p for n, a, p in self.db.conn.execute(
+                "SELECT type_name, type_arity, position FROM slr_fleet_positions "
+                "WHERE robot = ?", (robot,))}
+
+    def receive(self, robot: str, name: str, arity: int, rows: list[tuple],
+                store_events: Any = None) -> int:
+        """Store a shipped batch of ``robot`` (rows as :meth:`read_after` gives them, one
+        type, in sequence order) exactly once: the rows after the robot's position for the
+        type go in and the position moves to the last row's sequence, in one transaction
+        (which the caller may have opened). ``store_events(events)``, when given, stores
+        decoded ``(name, args, start, end)`` events instead of the raw rows (the path that
+        runs the fleet's event rules); the rows keep the robot they were stored with
+        (``robot`` when NULL). Returns the number of rows stored."""
+        robot = check_robot_name(robot)
+        if not rows:
+            return 0
+        with self.db.transaction():
+            conn = self.db.conn
+            row = conn.execute("SELECT position FROM slr_fleet_positions WHERE robot = ? AND "
+                               "type_name = ? AND type_arity = ?", (robot, name, arity)).fetchone()
+            position = row[0] if row is not None else 0
+            fresh = [r for r in rows if r[0] > position]
+            if not fresh:
+                return 0
+            conn.execute(_ADD_ROBOT, (robot,))
+            for other in {r[-1] for r in fresh if r[-1] is not None and r[-1] != robot}:
+                conn.execute(_ADD_ROBOT, (other,))
+            if store_events is not None:
+                self._store_decoded(robot, name, arity, fresh, store_events)
+            else:
+                # as an add: the fleet store's clock is the rows' arrival (and its "now")
+                arrival = float(self.db.clock.now())
+                self.writer.record_now(arrival)
+                event_type = self.writer._type_for_new_event(name, arity)
+                end = 1 + arity + 2
+                dialect = self.db.dialect
+                if dialect.name != "sqlite" and arity:  # rows come as SQLite stores them
+                    to_column = dialect.to_column
+                    values = [(*map(to_column, r[1:1 + arity]), *r[1 + arity:end]) for r in fresh]
+                else:
+                    values = [r[1:end] for r in fresh]
+                conn.executemany(event_type.insert_sql, [
+                    v + (arrival, r[-1] if r[-1] is not None else robot)
+                    for v, r in zip(values, fresh)])
+            # the arrival column sits after the arguments and the two times
+            latest = max(r[3 + arity] for r in fresh)
+            conn.execute("INSERT INTO slr_fleet_robots (robot, shipped, last_arrival) "
+                         "VALUES (?, ?, ?) ON CONFLICT (robot) DO UPDATE SET shipped = "
+                         "slr_fleet_robots.shipped + excluded.shipped, last_arrival = CASE "
+                         "WHEN slr_fleet_robots.last_arrival IS NULL OR excluded.last_arrival "
+                         "> slr_fleet_robots.last_arrival THEN excluded.last_arrival ELSE "
+                         "slr_fleet_robots.last_arrival END", (robot, len(fresh), latest))
+            conn.execute("INSERT INTO slr_fleet_positions (robot, type_name, type_arity, "
+                         "position) VALUES (?, ?, ?, ?) ON CONFLICT (robot, type_name, "
+                         "type_arity) DO UPDATE SET position = excluded.position",
+                         (robot, name, arity, fresh[-1][0]))
+            return len(fresh)
+
+    def _store_decoded(self, robot: str, name: str, arity: int, rows: list[tuple],
+                       store_events: Any) -> None:
+        from ..encoding import decode
+        saved = self.writer.robot
+        try:
+            # runs of one robot (a robot store may hold rows it received from others)
+            start = 0
+            while start < len(rows):
+                who = rows[start][-1] if rows[start][-1] is not None else robot
+                end = start
+                while end < len(rows) and (rows[end][-1] if rows[end][-1] is not None
+                                           else robot) == who:
+                    end += 1
+                self.writer.robot = who
+                events = [(name, tuple(decode(v) for v in r[1:1 + arity]),
+                           float(r[1 + arity]), float(r[2 + arity])) for r in rows[start:end]]
+                errors = store_events(events)
+                if errors:
+                    raise SLRError(f"the fleet store refused a shipped event of robot "
+                                   f"{robot!r}: {errors[0]}")
+                start = end
+        finally:
+            self.writer.robot = saved
+
+    def record_contact(self, robot: str, pending: int, head_arrival: float | None) -> None:
+        """Note what ``robot``'s pusher reported at a contact (for ``slr fleet status``):
+        the events its store holds that are not shipped yet and the arrival of its latest."""
+        with self.db.transaction():
+            self.db.conn.execute(
+                "INSERT INTO slr_fleet_robots (robot, pending, head_arrival, contact_at) "
+                "VALUES (?, ?, ?, ?) ON CONFLICT (robot) DO UPDATE SET pending = "
+                "excluded.pending, head_arrival = coalesce(excluded.head_arrival, "
+                "slr_fleet_robots.head_arrival), contact_at = excluded.contact_at",
+                (robot, pending, head_arrival, time.time()))
+
+    def contacts(self) -> list[dict[str, Any]]:
+        """Per robot that shipped: its ``slr_fleet_robots`` row as a dict, in name order."""
+        with self.db.lock:
+            self.db.check_open()
+            cur = self.db.conn.execute(
+                "SELECT robot, shipped, last_arrival, pending, head_arrival, contact_at "
+                "FROM slr_fleet_robots ORDER BY robot")
+            cols = [d[0] for d in cur.description]
+            return [dict(zip(cols, r)) for r in cur.fetchall()]
+
+
+def _json_text(value: str) -> str:
+    import json
+    try:
+        decoded = json.loads(value)
+    except ValueError:
+        return value
+    return decoded if isinstance(decoded, str) else str(decoded)

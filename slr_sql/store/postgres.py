@@ -1,0 +1,520 @@
+"""One store in a PostgreSQL schema: the connection, transactions, deadlines and raw SQL.
+
+:class:`PgDatabase` offers what :class:`~slr_sql.store.connection.Database` offers the parts
+of an :class:`~slr_sql.store.EventStore` (``conn``, ``lock``, ``transaction()``,
+``tx_depth``...), so the parts run unchanged where the SQL is the same and ask
+``db.dialect`` (:data:`~slr_sql.store.dialect.POSTGRES`) where it is not. ``conn`` is a
+:class:`PgConnection`: it prints every statement's parameters in psycopg's style, runs it
+on one psycopg 3 connection in autocommit mode (transactions are explicit ``BEGIN`` /
+``SAVEPOINT``, as on SQLite), and turns every psycopg error into an
+:class:`~slr_sql.errors.SLRError` or a :class:`PgStatementError` (a ``DatabaseError``).
+
+URL: ``postgresql://USER@HOST:PORT/DB`` or ``postgres://``; every libpq parameter in the
+query string is passed through (``?host=/socket/dir&sslmode=require``), except ``schema``
+(default ``slr``): the PostgreSQL schema holding the store's tables. A schema with tables
+but no store is refused unless ``adopt=True``. ``timeout=`` of queries becomes the
+statement's ``statement_timeout``; a lock wait longer than ``busy_timeout`` is
+:class:`~slr_sql.errors.SLRBusy` (``lock_timeout``).
+"""
+from __future__ import annotations
+
+import re
+import sqlite3
+import threading
+import time
+import weakref
+import zlib
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager, suppress
+from typing import Any
+from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
+
+from ..errors import SLRBusy, SLRError, SLRTimeout
+from .dialect import POSTGRES
+from .schema import postgres_migration_scripts
+from .sqltext import quote_identifier
+
+__all__ = ["PgDatabase", "PgStatementError", "is_postgres_url", "split_url"]
+
+_STORE_TABLES = frozenset({"slr_meta", "slr_program", "slr_event_types"})
+
+
+class PgStatementError(sqlite3.DatabaseError):
+    """A statement failed on the PostgreSQL server (the message is the server's).
+
+    It derives from ``sqlite3.DatabaseError`` only so that the store's one
+    :data:`~slr_sql.store.DatabaseError` (which the layers above catch, and which is
+    ``sqlite3.Error``) covers both engines without a tuple in every ``except``."""
+
+
+def is_postgres_url(where: Any) -> bool:
+    """True for ``postgresql://...`` and ``postgres://...``.
+
+    >>> is_postgres_url("postgres://u@h/db"), is_postgres_url("robot.db")
+    (True, False)
+    """
+    return isinstance(where, str) and where.startswith(("postgresql://", "postgres://"))
+
+
+def split_url(url: str) -> tuple[str, str]:
+    """``(libpq connection string, schema)``: ``?schema=`` taken out, the rest passed on.
+
+    >>> split_url("postgres://u@/db?host=/tmp&schema=fleet")
+    ('postgresql://u@/db?host=%2Ftmp', 'fleet')
+    >>> split_url("postgresql://u@h:5432/db")[1]
+    'slr'
+    """
+    parts = urlsplit(url)
+    query = parse_qsl(parts.query, keep_blank_values=True)
+    schema = "slr"
+    kept = []
+    for key, value in query:
+        if key == "schema":
+            schema = value
+        else:
+            kept.append((key, value))
+    if not schema or "\x00" in schema:
+        raise SLRError(f"{_shown(url)}: schema= must name a PostgreSQL schema")
+    return urlunsplit(("postgresql", parts.netloc, parts.path, urlencode(kept), "")), schema
+
+
+def _shown(url: str) -> str:
+    """The URL without a password (for messages)."""
+    return re.sub(r"(://[^:/@]*):[^@]*@", r"\1:***@", url)
+
+
+def _psycopg() -> Any:
+    try:
+        import psycopg
+    except ImportError:  # pragma: no cover - the extra is installed in tests
+        raise SLRError("a postgresql:// store needs psycopg 3: pip install "
+                       "'slr_sql[postgres]'") from None
+    return psycopg
+
+
+def _error(exc: BaseException, where: str, busy_timeout: float | None = None) -> Exception:
+    """The slr_sql exception for a psycopg error."""
+    psycopg = _psycopg()
+    errors = psycopg.errors
+    if isinstance(exc, (errors.LockNotAvailable, errors.DeadlockDetected,
+                        errors.SerializationFailure)):
+        waited = f" for more than {busy_timeout:g} s" if busy_timeout is not None else ""
+        return SLRBusy(f"{where}: locked by another writer{waited} ({_first_line(exc)})")
+    if isinstance(exc, errors.QueryCanceled):
+        return SLRTimeout(f"query timed out ({_first_line(exc)})")
+    if isinstance(exc, (psycopg.OperationalError, psycopg.InterfaceError)):
+        return SLRError(f"{where}: the server is not reachable ({_first_line(exc)})")
+    if isinstance(exc, errors.ReadOnlySqlTransaction):
+        return SLRError(f"read-only: the statement would change the store "
+                        f"({_first_line(exc)}); pass write=True to allow it")
+    return PgStatementError(_first_line(exc))
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+class PgCursor:
+    """The part of a DB-API cursor the store's parts use, over a psycopg cursor."""
+
+    __slots__ = ("__weakref__", "_cursor", "_owner", "description", "rowcount")
+
+    def __init__(self, cursor: Any, owner: PgConnection):
+        self._cursor = cursor
+        self._owner = owner
+        self.rowcount = cursor.rowcount
+        self.description = cursor.description
+
+    def fetchone(self) -> Any:
+        return self._owner._guard(self._cursor.fetchone) if self.description else None
+
+    def fetchall(self) -> list:
+        return self._owner._guard(self._cursor.fetchall) if self.description else []
+
+    def fetchmany(self, size: int) -> list:
+        return self._owner._guard(lambda: self._cursor.fetchmany(size)) \
+            if self.description else []
+
+    def __iter__(self) -> Iterator:
+        return iter(self.fetchall())
+
+    def close(self) -> None:
+        self._cursor.close()
+
+
+class PgConnection:
+    """``execute``/``executemany`` with slr_sql's parameters, on one psycopg connection."""
+
+    def __init__(self, conn: Any, where: str, busy_timeout: float):
+        self.raw = conn
+        self.where = where
+        self.busy_timeout = busy_timeout
+        self.last_rowcount = 0
+
+    def _guard(self, call: Callable[[], Any]) -> Any:
+        psycopg = _psycopg()
+        try:
+            return call()
+        except psycopg.Error as exc:
+            raise _error(exc, self.where, self.busy_timeout) from None
+
+    def execute(self, sql: str, params: Any = ()) -> PgCursor:
+        text = POSTGRES.statement(sql)
+        if isinstance(params, dict):
+            args: Any = params
+        else:
+            args = tuple(params) if params else None
+        cursor = self.raw.cursor()
+        self._guard(lambda: cursor.execute(text, args, prepare=None))
+        self.last_rowcount = cursor.rowcount
+        return PgCursor(cursor, self)
+
+    def executemany(self, sql: str, rows: Iterable[Iterable[Any]]) -> PgCursor:
+        text = POSTGRES.statement(sql)
+        rows = [tuple(r) for r in rows]
+        cursor = self.raw.cursor()
+        if rows:
+            self._guard(lambda: cursor.executemany(text, rows))
+        self.last_rowcount = cursor.rowcount
+        return PgCursor(cursor, self)
+
+    def close(self) -> None:
+        # closing a connection the server already dropped: nothing is left to close
+        with suppress(_psycopg().Error):
+            self.raw.close()
+
+    def rollback(self) -> None:
+        """ROLLBACK, if the connection still works (a dropped connection's transaction is
+        rolled back by the server)."""
+        with suppress(_psycopg().Error):
+            self.raw.execute("ROLLBACK")
+
+
+class PgDatabase:
+    """The connection of one store in a PostgreSQL schema, with its lock, transaction
+    depth and clock (the counterpart of :class:`~slr_sql.store.connection.Database`)."""
+
+    dialect = POSTGRES
+    checkpointer = None
+
+    def __init__(self, url: str, clock: Any = None, busy_timeout: float = 5.0,
+                 adopt: bool = False):
+        from .connection import WallClock
+        psycopg = _psycopg()
+        conninfo, schema = split_url(url)
+        self.url = url
+        self.path = _shown(url)
+        self.schema = schema
+        self.clock = clock if clock is not None else WallClock()
+        self.lock = threading.RLock()
+        self.tx_depth = 0
+        self.closed = False
+        self.rollback_listeners: list[Callable[[], None]] = []
+        self.open_streams: weakref.WeakSet = weakref.WeakSet()
+        self.deadline: float | None = None
+        self.busy_timeout = busy_timeout
+        self.notify_channel = f"slr_{schema}"
+        self.write_groups: dict[tuple[str, int], int] = {}
+        try:
+            raw = psycopg.connect(conninfo, autocommit=True)
+        except psycopg.Error as exc:
+            raise SLRError(f"{self.path}: cannot connect ({_first_line(exc)})") from None
+        self.conn = PgConnection(raw, self.path, busy_timeout)
+        try:
+            try:
+                raw.execute(f"SET lock_timeout = {int(busy_timeout * 1000)}")
+                raw.execute("SET TIME ZONE 'UTC'")
+                migrate_postgres(self, schema, adopt)
+                raw.execute(f"SET search_path = {quote_identifier(schema)}")
+            except psycopg.Error as exc:
+                raise _error(exc, self.path, busy_timeout) from None
+        except BaseException:
+            self.conn.close()
+            raise
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def schema_version(self) -> int:
+        with self.lock:
+            self.check_open()
+            row = self.conn.execute("SELECT coalesce(max(number), 0) FROM slr_migrations"
+                                    ).fetchone()
+            return int(row[0])
+
+    def data_version(self) -> int:
+        """A number that moves when any connection may have committed a change: the next
+        transaction id of the server (``pg_snapshot_xmax``), which every writing
+        transaction advances and no read does. It moves for other databases' writes too:
+        a false alarm costs the caller one cheap re-check, never a missed change."""
+        with self.lock:
+            self.check_open()
+            return int(self.conn.execute(
+                "SELECT pg_snapshot_xmax(pg_current_snapshot())::text::bigint").fetchone()[0])
+
+    def table_names(self) -> set[str]:
+        """Names of the tables of the store's schema."""
+        with self.lock:
+            return {row[0] for row in self.conn.execute(
+                "SELECT tablename FROM pg_tables WHERE schemaname = current_schema()")}
+
+    def set_write_groups(self, groups: Iterable[Iterable[tuple[str, int]]]) -> None:
+        """Each type of a group gets the group's advisory lock key: a number derived from
+        the schema and the group's least type, so every process computes the same one."""
+        keys: dict[tuple[str, int], int] = {}
+        for group in groups:
+            members = sorted(group)
+            if not members:
+                continue
+            first = f"{self.schema}\x00{members[0][0]}/{members[0][1]}".encode()
+            key = zlib.crc32(first) | (zlib.adler32(first) << 32)
+            key = key - (1 << 64) if key >= 1 << 63 else key
+            for member in members:
+                keys[member] = key
+        self.write_groups = keys
+
+    def lock_for_write(self, types: Iterable[tuple[str, int]]) -> None:
+        """``pg_advisory_xact_lock`` of the groups of ``types``, in key order (no deadlock
+        between two writers of several groups); held until the transaction ends."""
+        groups = self.write_groups
+        if not groups:
+            return
+        keys = sorted({groups[t] for t in types if t in groups})
+        for key in keys:
+            self.conn.execute("SELECT pg_advisory_xact_lock(?)", (key,))
+
+    def lock_named(self, name: str) -> None:
+        """Inside a transaction: take the advisory lock ``name`` of this store's schema
+        until it ends (writers of the program texts take turns: their ids are the next
+        free number)."""
+        self.conn.execute("SELECT pg_advisory_xact_lock(hashtext(?))", (f"{self.schema}:{name}",))
+
+    def triggers(self, table: str | None = None) -> set[str]:
+        """Names of the triggers of the store's schema (on ``table`` only, when given)."""
+        with self.lock:
+            return {row[0] for row in self.conn.execute(
+                "SELECT t.tgname FROM pg_trigger t JOIN pg_class c ON c.oid = t.tgrelid "
+                "JOIN pg_namespace n ON n.oid = c.relnamespace WHERE NOT t.tgisinternal "
+                "AND n.nspname = current_schema() AND (%s::text IS NULL OR c.relname = %s)"
+                .replace("%s", "?"), (table, table))}
+
+    def object_names(self) -> set[str]:
+        """Lower-cased names of the tables, views, indexes and sequences of the schema."""
+        with self.lock:
+            return {row[0].lower() for row in self.conn.execute(
+                "SELECT c.relname FROM pg_class c JOIN pg_namespace n ON n.oid = c.relnamespace "
+                "WHERE n.nspname = current_schema()")}
+
+    max_columns = 1600
+
+    def suspend_streams(self) -> None:
+        for stream in list(self.open_streams):
+            stream.suspend()
+
+    def close(self) -> None:
+        with self.lock:
+            if self.closed:
+                return
+            self.closed = True
+            try:
+                if self.tx_depth:
+                    self.conn.rollback()
+                    self.tx_depth = 0
+                self.suspend_streams()
+            finally:
+                self.conn.close()
+
+    def check_open(self) -> None:
+        if self.closed:
+            raise SLRError("the event store is closed")
+
+    # ------------------------------------------------------------------ transactions
+
+    @contextmanager
+    def transaction(self) -> Iterator[PgDatabase]:
+        with self.lock:
+            self.check_open()
+            depth = self.tx_depth
+            conn = self.conn
+            if depth == 0:
+                self.suspend_streams()
+                conn.execute("BEGIN")
+            else:
+                conn.execute(f"SAVEPOINT slr_sp{depth}")
+            self.tx_depth = depth + 1
+            try:
+                yield self
+            except BaseException:
+                self.tx_depth = depth
+                try:
+                    if depth == 0:
+                        conn.rollback()
+                    else:
+                        conn.execute(f"ROLLBACK TO slr_sp{depth}")
+                        conn.execute(f"RELEASE slr_sp{depth}")
+                finally:
+                    self._rolled_back()
+                raise
+            self.tx_depth = depth
+            try:
+                conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
+            except BaseException:
+                if depth == 0:
+                    conn.rollback()
+                self._rolled_back()
+                raise
+
+    def _rolled_back(self) -> None:
+        for listener in self.rollback_listeners:
+            listener()
+
+    # ------------------------------------------------------------------ raw SQL
+
+    def sql(self, query: str, params: Iterable[Any] = (), write: bool = False,
+            timeout: float | None = None) -> tuple[list[str], list[tuple]]:
+        """Run one statement as given (``slr sql``): read-only (a READ ONLY transaction)
+        unless ``write``; ``timeout`` seconds as ``statement_timeout``."""
+        with self.lock:
+            self.check_open()
+            raw = self.conn.raw
+            psycopg = _psycopg()
+            own = self.tx_depth == 0
+            try:
+                if own:
+                    raw.execute("BEGIN" if write else "BEGIN READ ONLY")
+                if timeout is not None:
+                    raw.execute(f"SET LOCAL statement_timeout = {max(1, int(timeout * 1000))}")
+                cursor = raw.cursor()
+                cursor.execute(query, tuple(params) or None, prepare=False)
+                columns = [d.name for d in cursor.description] if cursor.description else []
+                rows = [tuple(r) for r in cursor.fetchall()] if cursor.description else []
+                if own:
+                    raw.execute("COMMIT")
+                return columns, rows
+            except psycopg.Error as exc:
+                if own:
+                    try:
+                        raw.execute("ROLLBACK")
+                    except psycopg.Error:
+                        pass
+                raise _error(exc, self.path, self.busy_timeout) from None
+
+    def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
+        with self.lock:
+            self.check_open()
+            return self.conn.execute(sql, tuple(params)).fetchall()
+
+    def executemany(self, sql: str, rows: Iterable[Iterable[Any]]) -> None:
+        with self.lock:
+            self.check_open()
+            self.conn.executemany(sql, rows)
+
+    def executescript(self, script: str) -> None:
+        from .sqltext import split_sql_script
+        with self.transaction():
+            for statement in split_sql_script(script):
+                self.conn.execute(statement)
+
+    def changes(self) -> int:
+        with self.lock:
+            return max(0, self.conn.last_rowcount)
+
+    def query_plan(self, sql: str) -> list[str]:
+        with self.lock:
+            self.check_open()
+            rows = self.conn.execute("EXPLAIN " + sql, [None] * sql.count("?")).fetchall()
+            return [row[0] for row in rows]
+
+    def create_function(self, name: str, narg: int, fn: Any, deterministic: bool = True) -> None:
+        """Python functions cannot run inside the server: goals that need one run in the
+        interpreter on PostgreSQL (the planner asks :attr:`python_functions`)."""
+
+    def create_aggregate(self, name: str, narg: int, cls: Any) -> None:
+        """See :meth:`create_function`."""
+
+    python_functions = False
+
+    def run_compiled(self, sql: str, params: dict, limit: int | None = None,
+                     deadline: float | None = None) -> list[tuple]:
+        with self.lock:
+            self.check_open()
+            deadline = self._outer(deadline)
+            if deadline is None:
+                cursor = self.conn.execute(sql, params)
+                return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise SLRTimeout("query timed out (in its compiled SQL statement)")
+            own = self.tx_depth == 0
+            if own:
+                self.conn.execute("BEGIN")
+            try:
+                self.conn.execute(f"SET LOCAL statement_timeout = {max(1, int(left * 1000))}")
+                cursor = self.conn.execute(sql, params)
+                rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+                if not own:
+                    self.conn.execute("SET LOCAL statement_timeout = 0")
+            except BaseException:
+                if own:
+                    self.conn.rollback()
+                raise
+            if own:
+                self.conn.execute("COMMIT")
+            return rows
+
+    def _outer(self, deadline: float | None) -> float | None:
+        outer = self.deadline
+        if deadline is None or (outer is not None and outer <= deadline):
+            return outer
+        return deadline
+
+
+def migrate_postgres(db: Any, schema: str, adopt: bool = False) -> None:
+    """Create or update the store in PostgreSQL schema ``schema`` through ``db.conn``
+    (a :class:`~slr_sql.store.postgres.PgConnection`): the ``pg_NNNN`` scripts not applied
+    yet, in one transaction, under an advisory lock (two processes opening a new store at
+    once apply them once). A schema holding tables but no store is refused unless
+    ``adopt``; a store written by a newer slr_sql is refused."""
+    raw = db.conn.raw
+    quoted = quote_identifier(schema)
+    scripts = postgres_migration_scripts()
+    latest = scripts[-1][0] if scripts else 0
+    psycopg = _psycopg()
+    try:
+        raw.execute("BEGIN")
+        try:
+            raw.execute("SELECT pg_advisory_xact_lock(hashtext(%s))", ("slr_migrate:" + schema,))
+            raw.execute(f"CREATE SCHEMA IF NOT EXISTS {quoted}")
+            raw.execute(f"SET LOCAL search_path = {quoted}")
+            tables = {row[0] for row in raw.execute(
+                "SELECT tablename FROM pg_tables WHERE schemaname = %s", (schema,))}
+            if tables and not _STORE_TABLES.issubset(tables) and not adopt:
+                shown = ", ".join(sorted(tables)[:5]) + (", ..." if len(tables) > 5 else "")
+                raise SLRError(f"{db.path}: schema {schema} holds tables ({shown}) but no "
+                               "slr_sql store; slr_sql.open(url, adopt=True) adds a store to it")
+            if "slr_migrations" in tables:
+                applied = {row[0] for row in raw.execute("SELECT number FROM slr_migrations")}
+            else:
+                raw.execute("CREATE TABLE slr_migrations (number INTEGER PRIMARY KEY, "
+                            "name TEXT NOT NULL, applied_at TIMESTAMPTZ DEFAULT now())")
+                applied = set()
+            if applied and max(applied) > latest:
+                raise SLRError(f"{db.path}: written by a newer slr_sql (schema version "
+                               f"{max(applied)}; this one knows versions up to {latest}): "
+                               "upgrade slr_sql")
+            for number, filename, text in scripts:
+                if number in applied:
+                    continue
+                try:
+                    raw.execute(text)
+                except psycopg.Error as exc:
+                    raise SLRError(f"{db.path}: migration {filename} failed ({exc}); the "
+                                   "schema is left as it was") from None
+                raw.execute("INSERT INTO slr_migrations (number, name) VALUES (%s, %s)",
+                            (number, filename))
+            raw.execute("COMMIT")
+        except BaseException:
+            db.conn.rollback()
+            raise
+    except psycopg.Error as exc:
+        raise _error(exc, db.path, db.busy_timeout) from None

@@ -1,0 +1,221 @@
+"""One interface for local and remote (slr_sql.KnowledgeBaseAPI): every public method of the
+local KnowledgeBase is in the protocol, and the local knowledge base and `slr_sql.connect`'s
+client have it with the same parameters, defaults and return types; then every method runs
+on both -- a local knowledge base and a real `slr serve` process -- and gives the same
+values."""
+from __future__ import annotations
+
+import asyncio
+import inspect
+import threading
+import typing
+
+import pytest
+from service_helpers import ServiceProcess, same
+
+import slr_sql
+from slr_sql import Atom, KnowledgeBaseAPI, PendingQueryAPI, ProgramInfo, SubscriptionAPI
+from slr_sql.service.client import RemoteKnowledgeBase
+from slr_sql.service.errors import ServiceError
+
+
+def _public_methods(cls: type) -> set[str]:
+    return {name for name, value in inspect.getmembers(cls)
+            if not name.startswith("_") and callable(value)} | {"__enter__", "__exit__"}
+
+
+PROTOCOL_METHODS = {name for name in dir(KnowledgeBaseAPI)
+                    if callable(getattr(KnowledgeBaseAPI, name, None))
+                    and (not name.startswith("_") or name in ("__enter__", "__exit__"))}
+
+
+def test_every_public_method_of_the_local_knowledge_base_is_in_the_protocol():
+    assert _public_methods(slr_sql.KnowledgeBase) == PROTOCOL_METHODS
+    assert PROTOCOL_METHODS <= _public_methods(RemoteKnowledgeBase)
+
+
+def _params(fn) -> list[tuple]:
+    sig = inspect.signature(fn)
+    return [(p.name, p.kind, p.default) for p in sig.parameters.values()]
+
+
+def _return(cls: type, name: str):
+    return typing.get_type_hints(getattr(cls, name))["return"]
+
+
+@pytest.mark.parametrize("name", sorted(PROTOCOL_METHODS))
+def test_same_parameters_defaults_and_return_types(name):
+    want = _params(getattr(KnowledgeBaseAPI, name))
+    assert _params(getattr(slr_sql.KnowledgeBase, name)) == want
+    assert _params(getattr(RemoteKnowledgeBase, name)) == want
+    if name in ("__enter__",):         # each returns itself
+        return
+    expected = _return(KnowledgeBaseAPI, name)
+    assert _return(slr_sql.KnowledgeBase, name) == expected
+    assert _return(RemoteKnowledgeBase, name) == expected
+    assert inspect.iscoroutinefunction(getattr(slr_sql.KnowledgeBase, name)) == \
+        inspect.iscoroutinefunction(getattr(RemoteKnowledgeBase, name)) == \
+        inspect.iscoroutinefunction(getattr(KnowledgeBaseAPI, name))
+
+
+# -- every method, run on both ----------------------------------------------------------------
+
+PROGRAM = """\
+:- max_delay(seen/1, 0).
+color(O, C)^T :- prev(obj(O, _, C)^_Z, T).
+loop :- loop.
+c(X) <- a(X) seq b(X).
+"""
+
+
+@pytest.fixture(scope="module")
+def pair(tmp_path_factory):
+    """A local knowledge base and a served one, each on a file of its own."""
+    base = tmp_path_factory.mktemp("parity")
+    with ServiceProcess(base / "served.db", "--max-query-time", "2") as server:
+        local = slr_sql.open(base / "local.db")
+        remote = slr_sql.connect(server.url)
+        yield local, remote
+        remote.close()
+        local.close()
+
+
+def _outcome(fn, kb):
+    try:
+        return "value", fn(kb)
+    except slr_sql.SLRError as exc:
+        return "error", type(exc).__name__
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)) and type(a) is type(b):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if isinstance(a, ProgramInfo) and isinstance(b, ProgramInfo):  # loaded at other times
+        return (a.name, a.source, a.texts, a.filenames) == (b.name, b.source, b.texts,
+                                                            b.filenames)
+    if type(a).__name__ == "BufferInfo":
+        return type(a) is type(b) and a == b
+    return same(a, b)
+
+
+def both(pair, fn, check=None):
+    """Run ``fn`` on the local and the remote knowledge base: the same value (or the same
+    SLRError class); ``check`` sees each value."""
+    local, remote = pair
+    a, b = _outcome(fn, local), _outcome(fn, remote)
+    assert a[0] == b[0], (a, b)
+    if a[0] == "value":
+        if check is not None:
+            check(a[1])
+            check(b[1])
+        else:
+            assert _same(a[1], b[1]), (a[1], b[1])
+    else:
+        assert a == b
+    return a[1], b[1]
+
+
+def test_every_method_gives_the_same_values_local_and_remote(pair, tmp_path):
+    ran: set[str] = set()
+
+    def run(name, fn, check=None):
+        ran.add(name)
+        return both(pair, fn, check)
+
+    for kb in pair:
+        assert isinstance(kb, KnowledgeBaseAPI)
+    run("load", lambda kb: kb.load(PROGRAM))
+    run("load", lambda kb: kb.load("tea(1).", name="tea"))
+    run("load", lambda kb: kb.load("tea(2).", name="tea", replace=True))
+    program_file = tmp_path / "more.slr"
+    program_file.write_text("more(1).\n", encoding="utf-8")
+    run("load_file", lambda kb: kb.load_file(program_file, name="more"))
+    run("programs", lambda kb: kb.programs(),
+        check=lambda v: (isinstance(v, dict) and list(v) == ["main", "tea", "more"]
+                         and all(isinstance(i, ProgramInfo) for i in v.values())) or
+        pytest.fail(repr(v)))
+    run("programs", lambda kb: {n: (i.source, i.texts) for n, i in kb.programs().items()})
+    run("unload", lambda kb: kb.unload("more"))
+    run("unload", lambda kb: kb.unload("nosuch"))           # the same SLRError
+    local, remote = pair
+    local.define("double", 2, lambda x, y: (x, 2 * x))    # remote: below
+    ran.add("define")
+    run("event_rules", lambda kb: [(r["head"], r["policy"]) for r in kb.event_rules()])
+    run("add", lambda kb: kb.add("obj(cup1, cup, red)^2.0"))
+    run("add", lambda kb: kb.add("seen(X)^2"))                # rejected alike
+    run("add_event", lambda kb: kb.add_event("obj", ["cup1", "cup", "green"], start=9.0))
+    run("add_many", lambda kb: [(e.index, type(e).__name__) for e in kb.add_many(
+        ["a(1)^1", "b(1)^3", "bad(X)^1", ("seen", ["x"], 5.0, 5.0)])])
+    run("query", lambda kb: kb.query("color(cup1, C)^12.5"))
+    run("query", lambda kb: kb.query("color(O, C)^T", args={"O": "cup1", "T": 5.0}))
+    run("query", lambda kb: kb.query("c(X)^[S, E]"))
+    run("query", lambda kb: kb.query("loop", timeout=0.2))    # SLRTimeout alike
+    run("query", lambda kb: kb.query("loop", max_steps=1000))
+    run("query", lambda kb: kb.query("between(1, 10, X)", limit=3))
+    run("query", lambda kb: kb.query("findall(W, seen(W)^_, L)", at=9.0, wait=True,
+                                     timeout=5))
+    run("solutions", lambda kb: list(kb.solutions("color(cup1, C)^12.5")))
+    run("goal_warnings", lambda kb: kb.goal_warnings("colour(cup1, C)^12.5"))
+    run("explain", lambda kb: kb.explain("color(cup1, C)^5").splitlines()[0])
+    run("mark_complete", lambda kb: kb.mark_complete("obj/3", 20.0))
+    run("complete_until", lambda kb: kb.complete_until("obj/3") >= 20.0)
+
+    def submitted(kb):
+        p = kb.submit("findall(C, obj(_, _, C)^_, L)", at=15.0, id="q1")
+        assert isinstance(p, PendingQueryAPI)
+        return p.result(timeout=10)
+    run("submit", submitted)
+
+    def waiting(kb):
+        p = kb.submit("findall(W, w(W)^_, L)", at=1e12, id="far")
+        try:
+            listed = [q.id for q in kb.pending()]
+            with pytest.raises(slr_sql.SLRTimeout) as info:
+                p.result(timeout=0.2)
+            assert "w/1" in str(info.value) and "still waiting" in str(info.value)
+            waits = [(w.type, w.time, w.reason) for w in p.waiting_for]
+            return listed, waits
+        finally:
+            p.cancel()
+    (listed, waits), _ = run("pending", waiting)
+    assert listed == ["far"] and waits and waits[0][:2] == ("w/1", 1e12)
+    ran.add("pending")
+    run("ask", lambda kb: asyncio.run(kb.ask("findall(C, obj(_, _, C)^_, L)", at=15.0)))
+    run("add_buffer", lambda kb: kb.add_buffer("seen(_)", keep_last=1))
+    run("buffers", lambda kb: [(b.pattern, b.kind, b.amount) for b in kb.buffers()])
+    run("remove_buffer", lambda kb: kb.remove_buffer(kb.buffers()[0].id))
+    run("sql", lambda kb: kb.sql("SELECT arg1, arg3, t_end FROM obj ORDER BY t_end"))
+    run("sql", lambda kb: kb.sql("SELECT ? + 1", [41], timeout=5))
+    local.sql("CREATE TABLE IF NOT EXISTS scratch (x)", write=True)
+    with pytest.raises(ServiceError) as refused:          # the service runs read-only SQL
+        remote.sql("CREATE TABLE scratch (x)", write=True)
+    assert "read-only" in str(refused.value)
+    run("plot", lambda kb: [t.get_text() for t in kb.plot(["obj/3"], start=0, end=10)
+                            .axes[0].get_yticklabels()])
+
+    def subscribed(kb):
+        got, done = [], threading.Event()
+        with kb.subscribe("sub(X)^T", where="X > 1", since=0, id="durable-one") as pulled:
+            assert isinstance(pulled, SubscriptionAPI)
+            sub = kb.subscribe("sub(X)^T", since=0,
+                               callback=lambda a: (got.append(a), len(got) == 2 and done.set()))
+            kb.add_many(["sub(1)^1", "sub(2)^2"])
+            first = pulled.get(timeout=10)
+            assert done.wait(10)
+            sub.close()
+        return first, got
+    run("subscribe", subscribed)
+    run("unsubscribe", lambda kb: kb.unsubscribe("durable-one"))
+    with pytest.raises(ServiceError) as info:              # Python runs where the store is
+        remote.define("triple", 2, lambda x, y: (x, 3 * x))
+    assert "server" in str(info.value)
+    assert local.query("double(21, Y)") == [{"Y": 42}]
+    assert remote.query("tea(X)") == local.query("tea(X)") == [{"X": 2}]
+    assert remote.event_rules()[0]["head"] == local.event_rules()[0]["head"] == "c/1"
+    assert isinstance(remote.query("obj(O, _, _)^2")[0]["O"], Atom)
+    ran |= {"close", "__enter__", "__exit__"}     # the fixture and the with blocks
+    with slr_sql.connect(remote.url) as other:
+        assert other.query("true") == [{}]
+    assert ran == PROTOCOL_METHODS, PROTOCOL_METHODS - ran

@@ -1,0 +1,177 @@
+"""`slr` in scripts: query --json/--limit, sql output formats, ingest from standard input and
+its progress report, typo warnings. Real subprocesses on a real store file."""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import sys
+
+import pexpect
+import pytest
+from test_cli import ROOT, slr
+
+from slr_sql.service.encoding import decode_answers
+
+
+@pytest.fixture
+def store(tmp_path) -> str:
+    db = str(tmp_path / "robot.db")
+    program = tmp_path / "robot.slr"
+    program.write_text("color(O, C)^T :- prev(obj(O, _, C)^_Z, T).\n", encoding="utf-8")
+    assert slr("load", db, str(program)).returncode == 0
+    r = slr("add", db, "obj(cup1, cup, red)^2.0", 'obj(cup2, "a cup", [1, 2.5])^3.0',
+            "obj(cup1, cup, green)^9.0")
+    assert r.returncode == 0, r.stderr
+    return db
+
+
+# -- query --json / --limit ----------------------------------------------------------------
+
+def test_query_json_prints_one_object_per_answer_in_the_service_encoding(store):
+    r = slr("query", store, "obj(O, K, C)^T", "--json")
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.splitlines()
+    assert len(lines) == 3
+    objects = [json.loads(line) for line in lines]
+    assert objects[1] == {"O": "cup2", "K": {"$string": "a cup"}, "C": [1, 2.5], "T": 3.0}
+    # the same decoder the service's clients use reads it back
+    assert decode_answers(objects)[0]["C"] == "red"
+
+
+def test_query_json_with_no_answer_prints_nothing(store):
+    r = slr("query", store, "obj(nothing, K, C)^T", "--json")
+    assert (r.returncode, r.stdout) == (0, "")
+
+
+def test_query_limit_stops_an_endless_goal_at_once(store):
+    r = slr("query", store, "between(1, inf, X)", "--limit", "3", timeout=30)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines() == ["X = 1", "X = 2", "X = 3"]
+
+
+def test_query_limit_counts_answers_of_stored_events(store):
+    r = slr("query", store, "obj(O, _, C)^T", "--limit", "2", "--json")
+    assert [json.loads(line)["T"] for line in r.stdout.splitlines()] == [2.0, 3.0]
+
+
+def test_query_timeout_prints_the_answers_found_then_the_timeout(store):
+    r = slr("query", store, "between(1, inf, X)", "--timeout", "0.3")
+    assert r.returncode == 1
+    lines = r.stdout.splitlines()
+    assert len(lines) > 10 and lines[:2] == ["X = 1", "X = 2"]
+    assert lines[-1] == f"X = {len(lines)}"
+    assert "timed out" in r.stderr and f"{len(lines)} answers printed before it" in r.stderr
+
+
+# -- typos ---------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("goal, written, near", [
+    ("colour(cup2, C)^20", "colour/2", "color/2"),
+    ("color(cup2)^20", "color/1", "color/2"),
+    ("prev(ojb(O, K, C)^Z, 5)", "ojb/3", "obj/3"),
+])
+def test_a_typo_warns_with_the_nearest_name_and_still_answers_false(store, goal, written, near):
+    r = slr("query", store, goal)
+    assert r.returncode == 0
+    assert r.stdout == "false.\n"
+    assert f"warning: no events or rules of {written}; did you mean {near}?" in r.stderr
+
+
+def test_a_known_goal_gives_no_warning(store):
+    r = slr("query", store, "color(cup1, C)^5")
+    assert (r.returncode, r.stdout, r.stderr) == (0, "C = red\n", "")
+
+
+def test_the_library_hint_about_a_missing_stamp_reaches_the_user(store):
+    r = slr("query", store, "color(cup2, C)")
+    assert r.returncode == 1
+    assert r.stderr.strip() == ("error: unknown procedure color/2; color/2 is defined with ^T: "
+                                "did you mean color(cup2, C)^T?")
+
+
+# -- sql output formats --------------------------------------------------------------------
+
+SELECT = "SELECT arg1, arg2, t_end FROM obj ORDER BY t_end"
+
+
+def test_sql_into_a_pipe_is_plain_tab_separated_text(store):
+    r = slr("sql", store, SELECT)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines()[:2] == ["arg1\targ2\tt_end", "cup1\tcup\t2.0"]
+    assert "┃" not in r.stdout
+
+
+@pytest.mark.parametrize("option, dialect", [("--csv", "excel"), ("--tsv", "excel-tab")])
+def test_sql_csv_and_tsv_read_back_with_a_header(store, option, dialect):
+    r = slr("sql", store, SELECT, option)
+    rows = list(csv.reader(io.StringIO(r.stdout), dialect=dialect))
+    assert rows[0] == ["arg1", "arg2", "t_end"]
+    stored = json.loads(slr("sql", store, SELECT, "--json").stdout)[1]["arg2"]
+    assert rows[2] == ["cup2", stored, "3.0"] and "a cup" in stored
+
+
+def test_sql_json_and_nl(store):
+    whole = json.loads(slr("sql", store, SELECT, "--json").stdout)
+    lines = [json.loads(line) for line in slr("sql", store, SELECT, "--nl").stdout.splitlines()]
+    assert whole == lines
+    assert lines[0] == {"arg1": "cup1", "arg2": "cup", "t_end": 2.0}
+
+
+def test_sql_table_is_the_default_on_a_terminal_and_asked_for_in_a_pipe(store):
+    assert "┃ arg1" in slr("sql", store, SELECT, "--table").stdout
+    child = _spawn("sql", store, SELECT)
+    child.expect(pexpect.EOF)
+    assert "┏━━━━━━┳" in child.before and "│ cup2 │" in child.before
+
+
+def test_sql_read_only_message_is_said_once_in_the_command_lines_words(store):
+    r = slr("sql", store, "DELETE FROM obj")
+    assert r.returncode == 1
+    assert r.stderr.count("read-only") == 1
+    assert "write=True" not in r.stderr and "slr sql --write" in r.stderr
+
+
+# -- ingest from standard input, progress ----------------------------------------------------
+
+def test_ingest_dash_reads_standard_input(store):
+    lines = 'seg(cup1, [0.4, 0.1, 0.9])^10\n{"name": "seg", "args": ["cup2", [1, 2, 3]], "time": 11}\nbad(\n'
+    r = slr("ingest", store, "-", stdin=lines)
+    assert r.returncode == 1
+    assert r.stdout.strip() == "ingested 2 events, 1 bad line"
+    assert r.stderr.startswith("<stdin>:3: ")
+    assert slr("query", store, "seg(O, _)^T", "--json").stdout.count("\n") == 2
+
+
+def _events_file(path, n: int) -> str:
+    path.write_text("".join(f"seg(cup{i % 7}, [0.4, 0.1, {i}])^{i}.5\n" for i in range(n)),
+                    encoding="utf-8")
+    return str(path)
+
+
+def test_ingest_progress_is_reported_on_request_even_into_a_log(store, tmp_path):
+    events = _events_file(tmp_path / "events.txt", 3000)
+    quiet = slr("ingest", store, events)
+    assert quiet.stderr == ""   # into a pipe: no bar unless asked
+    r = slr("ingest", store, events, "--progress")
+    assert r.returncode == 0, r.stderr
+    percents = [line.split(": ")[1].split("%")[0] for line in r.stderr.splitlines()]
+    assert percents[-1] == "100" and len(percents) >= 10
+
+
+def _spawn(*args: str) -> pexpect.spawn:
+    env = dict(os.environ, PYTHONPATH=str(ROOT), SLR_HISTORY=os.devnull, COLUMNS="120",
+               LINES="40", TERM="xterm")
+    return pexpect.spawn(sys.executable, ["-m", "slr_sql", *args], env=env, cwd=str(ROOT),
+                         encoding="utf-8", timeout=60, dimensions=(40, 120))
+
+
+def test_ingest_shows_a_bar_on_a_terminal_for_a_long_file(store, tmp_path):
+    events = _events_file(tmp_path / "long.txt", 12000)   # past the bar's size threshold
+    child = _spawn("ingest", store, events)
+    child.expect("ingesting long.txt")
+    child.expect("ingested 12000 events")
+    child.expect(pexpect.EOF)
+    child.close()
+    assert child.exitstatus == 0

