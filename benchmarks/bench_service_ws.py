@@ -20,6 +20,12 @@ Run by hand::
 
     python benchmarks/bench_service_ws.py                     # 10-minute soak
     python benchmarks/bench_service_ws.py --minutes 3
+    python benchmarks/bench_service_ws.py --minutes 1 --burn 1    # beside a competing CPU load
+    python benchmarks/bench_service_ws.py --minutes 1 --server-code /tmp/old   # earlier server
+
+``--burn N`` starts N processes spinning on a core (``python -c "while 1: pass"``) for the whole
+run and stops them at its end; the load averages at start and end are printed with the
+figures (the machine may be shared: they say how idle it was).
 """
 from __future__ import annotations
 
@@ -161,7 +167,7 @@ def ws_subscribers(url: str, n: int, batch: int, ready, conn) -> None:
 
 def run_service(args, tmp: Path) -> dict:
     db = tmp / "ws.db"
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    env = dict(os.environ, PYTHONPATH=str(args.server_code or ROOT))
     command = [sys.executable, "-m", "slr_sql", "serve", str(db), "--port", "0"]
     if args.cache_kib:     # the same server with another SQLite page cache bound
         command += ["--cache-mib", str(args.cache_kib / 1024)]
@@ -287,9 +293,25 @@ def main() -> None:
                     help="run the server with this SQLite page cache (KiB; default: the "
                          "store's own, 64 MiB)")
     ap.add_argument("--trace", action="store_true", help="print each RSS sample")
+    ap.add_argument("--burn", type=int, default=0,
+                    help="processes spinning on a core beside the run (a competing CPU load)")
+    ap.add_argument("--server-code", help="run `slr serve` from this checkout (before/after)")
     ap.add_argument("--no-in-process", action="store_true",
                     help="skip the in-process baseline (a soak of the server alone)")
     args = ap.parse_args()
+    burners = [subprocess.Popen([sys.executable, "-c", "while 1: pass"])
+               for _ in range(args.burn)]
+    try:
+        run(args)
+    finally:
+        for burner in burners:
+            burner.kill()
+            burner.wait()
+
+
+def run(args) -> None:
+    if args.burn:
+        print(f"competing load: {args.burn} process(es) spinning on a core", flush=True)
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         local = {"sent": 0, "achieved": 0, "complete": 0, "p50_ms": math.nan,

@@ -1,6 +1,15 @@
 -- slr_sql PostgreSQL schema, version 6: robots and fleets (the counterpart of 0006_robots.sql;
 -- see docs/fleet.md). Event tables get their robot column when they are created.
 
+-- The robot column of every event table that exists already (tables created later have it).
+DO $$
+DECLARE t TEXT;
+BEGIN
+    FOR t IN SELECT table_name FROM slr_event_types LOOP
+        EXECUTE format('ALTER TABLE %I ADD COLUMN IF NOT EXISTS robot TEXT', t);
+    END LOOP;
+END $$;
+
 -- Every robot whose events the store holds, in name order for origin/2.
 CREATE TABLE slr_robots (
     name TEXT PRIMARY KEY

@@ -214,6 +214,10 @@ class _Analyzer:
                         self.nested(i, item, f"{path}[{k}]")
                     return
                 # an improper list [a|b] is stored as the compound '.'(a, b): fall through
+            if "/" in str(t.name):
+                raise SLRError(f"buffer patterns cannot look inside compounds named {t.name!r} "
+                               f"(a message type: messages are stored as objects of fields); "
+                               f"write _ or a variable for the message")
             inner = path + _path_key(str(t.name))
             q = sql_literal(inner)
             self.add((i,), f"json_type({c}, {q}) = 'array' AND "

@@ -1423,6 +1423,100 @@ def _distance(m, a):
     return m.unify(a[2], from_python(_robot_call(robotlib.distance, to_python(a[0]), to_python(a[1]))))
 
 
+# -- get_field/3: message terms read by field name ------------------------------------------
+
+def _message_fields(t: Any) -> list | None:
+    """[(name, value)] of a message term ``Type(Name: Value, ...)``; else None."""
+    t = deref(t)
+    if type(t) is not Struct or not t.args or (t.name == "." and len(t.args) == 2):
+        return None
+    out = []
+    for arg in t.args:
+        arg = deref(arg)
+        if type(arg) is not Struct or arg.name != ":" or len(arg.args) != 2:
+            return None
+        key = deref(arg.args[0])
+        if type(key) is not Atom:
+            return None
+        out.append((key, arg.args[1]))
+    return out
+
+
+def _field_steps(path: Any) -> list:
+    """The steps of a field path: an atom ``'pose.position.x'`` / ``'poses[0].position'``, or a
+    list of field names (atoms) and list indexes (integers, from 0)."""
+    path = deref(path)
+    if type(path) is Atom:
+        steps: list = []
+        for segment in str(path).split("."):
+            name, _, rest = segment.partition("[")
+            if not name:
+                raise _err_domain("field_path", path)
+            steps.append(Atom(name))
+            while rest:
+                index, close, rest = rest.partition("]")
+                if not close or not index.lstrip("-").isdigit() or (rest and rest[0] != "["):
+                    raise _err_domain("field_path", path)
+                steps.append(int(index))
+                rest = rest[1:]
+        return steps
+    if type(path) is int:
+        return [path]
+    items = proper_list(path)
+    out = []
+    for item in items:
+        item = deref(item)
+        if type(item) is Var:
+            raise instantiation_error()
+        if type(item) is not Atom and type(item) is not int:
+            raise _err_domain("field_path", path)
+        out.append(item)
+    return out
+
+
+@nondet("get_field", 3)
+def _get_field(m, a):
+    """get_field(Message, Path, Value): the field of a message term (how ROS messages reach
+    SLR: ``'geometry_msgs/msg/Point'(x: 1.0, y: 2.0, z: 0.5)``) at Path -- an atom naming a
+    field or a dotted path with list indexes (``'poses[0].position.x'``), or a list of names
+    and indexes. Fails when there is no such field. With Path unbound: each field of the
+    message in turn, Path bound to its name."""
+    msg = deref(a[0])
+    if type(msg) is Var:
+        raise instantiation_error()
+    fields = _message_fields(msg)
+    if fields is None:
+        raise type_error("message", msg)
+    path = deref(a[1])
+    if type(path) is Var:
+        trail = m.trail
+        for key, value in fields:
+            mark = len(trail)
+            if m.unify(path, key) and m.unify(a[2], value):
+                yield None
+            undo(trail, mark)
+        return
+    value: Any = msg
+    for step in _field_steps(path):
+        if type(step) is int:
+            items, tail = list_items(deref(value))
+            if not (type(tail) is Atom and tail == "[]") or not -len(items) <= step < len(items):
+                return
+            value = items[step]
+            continue
+        fields = _message_fields(value)
+        if fields is None:
+            return
+        for key, v in fields:
+            if key == step:
+                value = v
+                break
+        else:
+            return
+    if m.unify(a[2], value):
+        yield None
+
+
 # -- tf_lookup: tf2's lookupTransform over the stored tf / tf_static events (slr_sql.frames) --
 
 def _frame(t: Any) -> Any:

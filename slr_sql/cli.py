@@ -15,6 +15,7 @@ import math
 import os
 import re
 import sys
+import warnings
 from dataclasses import dataclass
 from typing import Any, Iterable, Iterator
 
@@ -137,6 +138,16 @@ def _is_url(db: str) -> bool:
     return db.startswith(("http://", "https://"))
 
 
+def _is_database_url(db: str) -> bool:
+    """A store on a database server (``postgresql://...``): no file to look for."""
+    return db.startswith(("postgresql://", "postgres://"))
+
+
+def _missing(db: str) -> bool:
+    """No store file at ``db`` (a server URL is never missing here: opening it says)."""
+    return not _is_database_url(db) and not os.path.lexists(db)
+
+
 def _open(db: str, create: bool = True) -> Any:
     """The knowledge base in DB: a file opened in this process (only commands that add to a
     store may create it), or the URL of a running `slr serve`."""
@@ -144,7 +155,7 @@ def _open(db: str, create: bool = True) -> Any:
         ctx = click.get_current_context(silent=True)
         token = (ctx.find_root().obj or {}).get("token") if ctx is not None else None
         return slr_sql.connect(db, token=token)
-    if not create and not os.path.lexists(db):
+    if not create and _missing(db):
         raise slr_sql.SLRError(f"no such store: {db}")
     return slr_sql.open(db)
 
@@ -183,6 +194,13 @@ def main(ctx: click.Context, token: str | None) -> None:
     (http://HOST:PORT).
     """
     ctx.obj = {"token": token}
+    warnings.showwarning = _show_warning
+
+
+def _show_warning(message: Warning | str, category: type[Warning], filename: str,
+                  lineno: int, file: Any = None, line: str | None = None) -> None:
+    """The library's warnings (a learned delay capped, ...) as ``warning: ...`` lines."""
+    _err(f"warning: {message}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -220,6 +238,32 @@ def load(db: str, file: str, name: str, replace: bool) -> None:
     with _open(db) as kb:
         kb.load_file(file, name=name, replace=replace)
     click.echo(f"{'replaced' if replace else 'loaded'} {file} as program {name!r}")
+    _warn_event_like_facts(file, db)
+
+
+def _warn_event_like_facts(file: str, db: str) -> None:
+    """Facts written like events (``obj(cup1, cup, red)^2.0.``) in a loaded program are
+    rules' facts, which prev/next never see: say so, and how to add them as events."""
+    from .example_files import event_like_facts, parse_example
+
+    try:
+        with open(file, encoding="utf-8") as handle:
+            text = handle.read()
+        facts = event_like_facts(text, file)
+    except (OSError, UnicodeDecodeError, slr_sql.SLRError):
+        return
+    if not facts:
+        return
+    line, first = facts[0]
+    more = f" (and {len(facts) - 1} more)" if len(facts) > 1 else ""
+    _err(f"warning: {file}:{line}: {first} is a fact{more}, not an event: prev and next see "
+         f"only events")
+    if parse_example(text, file).has_events_part:
+        _err(f"  to load its rules and add the events after '%% events' into a new store: "
+             f"slr run {file} --db NEW.db")
+    else:
+        _err(f"  to add such lines as events: slr add {db} 'EVENT' ..., or one per line "
+             f"with slr ingest {db} FILE")
 
 
 @main.command()
@@ -489,6 +533,75 @@ def ingest(db: str, file: str, progress: bool | None) -> None:
     click.echo(f"ingested {report.added} event{'s' if report.added != 1 else ''}"
                + (f", {len(report.bad)} bad line{'s' if len(report.bad) != 1 else ''}" if report.bad else ""))
     if report.bad:
+        sys.exit(1)
+
+
+# ---------------------------------------------------------------------------------------------
+# run: an example file (program, events, queries with expected answers)
+# ---------------------------------------------------------------------------------------------
+
+@main.command()
+@click.argument("file", type=click.Path(dir_okay=False))
+@click.option("--db", "db", type=click.Path(dir_okay=False), default=None,
+              help="Keep the store in this file (default: in memory).")
+@click.option("-q", "--quiet", is_flag=True, help="Print only the mismatches and the summary.")
+def run(file: str, db: str | None, quiet: bool) -> None:
+    """Run an example FILE: load its rules, add its events, ask its queries, compare.
+
+    The rules are the text before '%% events', the events the lines after it; each
+    '%% query:' is asked and its answers compared with '%% expect:' (examples/README.md).
+    Exit status 1 when an answer differs.
+    """
+    from .example_files import check_case, parse_example
+
+    _existing_file(file)
+    try:
+        with open(file, encoding="utf-8") as handle:
+            text = handle.read()
+    except UnicodeDecodeError:
+        raise slr_sql.SLRError(f"{file}: not an example file (not UTF-8 text)") from None
+    example = parse_example(text, file)
+    if db is not None and os.path.exists(db) and os.path.getsize(db) > 0:
+        raise slr_sql.SLRError(f"{db} exists; slr run wants a fresh store (remove it first)")
+    # The events are a recording: time stands still at 0, so no buffer prunes them and
+    # every query sees the file's events however long ago their times are.
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.load(example.program, file)
+        rejected = kb.add_many(example.events) if example.events else []
+        for rejection in rejected:
+            index = getattr(rejection, "index", None)
+            where = (example.event_lines[index] if isinstance(index, int)
+                     and 0 <= index < len(example.event_lines) else 0)
+            _err(f"{file}:{where}: event rejected: {error_words(rejection)}")
+        if not quiet:
+            click.echo(f"% {file}: {len(example.events) - len(rejected)} events, "
+                       f"{len(example.cases)} quer{'y' if len(example.cases) == 1 else 'ies'}")
+        failed = 0
+        for case in example.cases:
+            view = "" if case.at is None else f"  (at {case.at:g})"
+            try:
+                result = check_case(kb, case)
+            except slr_sql.SLRError as exc:
+                failed += 1
+                click.echo(f"ERROR {file}:{case.line}: ?- {case.goal}.{view}\n"
+                           f"      {error_words(exc)}")
+                continue
+            lines = answer_lines(result.answers)
+            if result.ok is False:
+                failed += 1
+                click.echo(f"FAIL  {file}:{case.line}: ?- {case.goal}.{view}")
+                click.echo(f"      expected {case.expect}")
+                for line in lines:
+                    click.echo(f"      got      {line}")
+            elif not quiet:
+                mark = "ok   " if result.ok else "     "
+                click.echo(f"{mark} ?- {case.goal}.{view}")
+                for line in lines:
+                    click.echo(f"        {line}")
+    compared = sum(1 for c in example.cases if c.expect is not None)
+    click.echo(f"{compared - failed} of {compared} expected answers matched"
+               + (f"; {len(rejected)} events rejected" if rejected else ""))
+    if failed or rejected:
         sys.exit(1)
 
 
@@ -894,33 +1007,105 @@ def sql(db: str, statement: str, fmt: str | None, write: bool) -> None:
 # ---------------------------------------------------------------------------------------------
 
 SHELL_HELP = """\
-  GOAL.              ask a goal (may span lines; ends with a full stop)
-  :- DIRECTIVE.      load program text; so does any clause written with :-
-  load FILE          load a program file
+  GOAL.              ask a goal (may span lines; ends with a full stop). After an answer:
+                     ; (or n, space) the next one, Enter (or .) stop, w the answer in full
+  :- DIRECTIVE.      a directive (e.g. :- event seen/1.), kept in the program 'user'
+  [user].            type clauses into the program 'user'; end_of_file. or Ctrl-D ends
+  assert(CLAUSE).    add a clause to the program 'user' (assertz; asserta puts it first)
+  retract(CLAUSE).   remove the first clause of 'user' that unifies with CLAUSE
+  listing.           the program 'user'; listing(NAME) or listing(NAME/N): its clauses
+                     in every program
+  programs.          the named programs of the store
+  load FILE          load a program file (into 'main')
   add EVENT          add one event, e.g. add obj(cup1, cup, red)^2.0
   at Z | at none     set / clear the stream view for the following goals
   explain GOAL.      show the plan of a goal
-  help               this text;  Ctrl-D or `halt.` leaves"""
+  help               this text;  Ctrl-C stops a goal;  Ctrl-D or `halt.` leaves"""
+
+SHELL_PROGRAM = "user"      # where the shell's clauses go (SWI-Prolog's module user)
+MAX_LIST_ITEMS = 10         # longer lists print as [a,b,...|...] unless `w` is pressed
+MAX_STRING_CHARS = 200
+
+
+def abbreviated(value: Any) -> Any:
+    """``value`` with long lists and strings cut, as SWI-Prolog's top level prints answers
+    (``[1,2,3,4,5,6,7,8,9|...]``).
+
+    >>> value_text(abbreviated(list(range(1, 20))))
+    '[1,2,3,4,5,6,7,8,9|...]'
+    """
+    if isinstance(value, list):
+        items = [abbreviated(v) for v in value[:MAX_LIST_ITEMS]]
+        if len(value) < MAX_LIST_ITEMS:
+            return items
+        tail: Any = Atom("...")
+        for item in reversed(items[:MAX_LIST_ITEMS - 1]):
+            tail = Struct(".", (item, tail))
+        return tail
+    if isinstance(value, Struct):
+        return Struct(value.name, tuple(abbreviated(a) for a in value.args))
+    if isinstance(value, str) and not isinstance(value, Atom) and len(value) > MAX_STRING_CHARS:
+        return value[:MAX_STRING_CHARS] + "..."
+    return value
+
+
+class ShellState:
+    """What the next input line is: a new goal or command, the rest of an unfinished goal
+    or clause, or a clause typed after ``[user].``."""
+
+    READY = "ready"
+    CONTINUING = "continuing"
+    CONSULTING = "consulting"
 
 
 class Shell:
-    """The interactive loop, independent of where lines come from (prompt or plain stdin)."""
+    """The interactive loop, independent of where lines come from (prompt or plain stdin).
 
-    def __init__(self, kb: Any, echo: Any = click.echo, echo_err: Any = _err):
+    ``ask`` reads the key a person presses after an answer (None: every answer is printed,
+    one per line, for piped input)."""
+
+    def __init__(self, kb: Any, echo: Any = click.echo, echo_err: Any = _err,
+                 ask: Any = None):
         self.kb = kb
         self.echo = echo
         self.echo_err = echo_err
+        self.ask = ask
         self.at: float | None = None
         self.pending: list[str] = []
+        self.consulted: list[str] = []
+        self.state = ShellState.READY
 
     @property
     def continuing(self) -> bool:
-        return bool(self.pending)
+        return self.state != ShellState.READY
+
+    @property
+    def prompt(self) -> str:
+        return {ShellState.READY: "?- ", ShellState.CONTINUING: "   | ",
+                ShellState.CONSULTING: "|: "}[self.state]
+
+    def interrupt(self) -> None:
+        """Ctrl-C at the prompt: drop the unfinished goal (a consult keeps what it has)."""
+        self.pending = []
+        if self.state == ShellState.CONTINUING:
+            self.state = ShellState.READY
+
+    def end_of_input(self) -> bool:
+        """Ctrl-D: ends a consult (True: stay), else leaves the shell (False)."""
+        if self.state == ShellState.CONSULTING:
+            self._guarded(self._end_consult)
+            return True
+        return False
 
     def feed(self, line: str) -> bool:
         """Handle one input line; returns False when the user asked to leave."""
         stripped = line.strip()
-        if not self.pending:
+        if self.state == ShellState.CONSULTING:
+            if stripped in ("end_of_file.", "end_of_file"):
+                return self._guarded(self._end_consult)
+            self.consulted.append(line.rstrip("\n"))
+            return True
+        if self.state == ShellState.READY:
             if not stripped or stripped.startswith("%"):
                 return True
             word, _, rest = stripped.partition(" ")
@@ -938,8 +1123,10 @@ class Shell:
         self.pending.append(line.rstrip("\n"))
         text = "\n".join(self.pending).strip()
         if not text.endswith(".") or text.endswith(".."):
-            return True  # a clause or goal spanning several lines
+            self.state = ShellState.CONTINUING  # a goal spanning several lines
+            return True
         self.pending = []
+        self.state = ShellState.READY
         return self._guarded(lambda: self._run(text))
 
     def _guarded(self, action: Any) -> bool:
@@ -967,21 +1154,192 @@ class Shell:
         self.at = None if value in ("none", "off") else float(value)
         self.echo(f"stream view: {'every stored event' if self.at is None else f'at {self.at:g}'}")
 
+    # -- the program 'user' ----------------------------------------------------------------
+    def _user_clauses(self) -> list[Any]:
+        from .parser import parse_program
+
+        infos = {(_info_field(i, "name")): i for i in _program_infos(self.kb)}
+        info = infos.get(SHELL_PROGRAM)
+        return parse_program(_info_field(info, "source"), SHELL_PROGRAM) if info else []
+
+    def _set_user_program(self, texts: list[str]) -> None:
+        if texts:
+            self.kb.load("\n".join(texts), name=SHELL_PROGRAM, replace=True)
+        elif SHELL_PROGRAM in {_info_field(i, "name") for i in _program_infos(self.kb)}:
+            self.kb.unload(SHELL_PROGRAM)
+
+    def _end_consult(self) -> None:
+        text, self.consulted = "\n".join(self.consulted), []
+        self.state = ShellState.READY
+        if text.strip():
+            self.kb.load(text, filename="user", name=SHELL_PROGRAM)
+        self.echo(f"% consulted into the program '{SHELL_PROGRAM}'")
+
+    def _assert(self, clause_text: str, first: bool) -> None:
+        from .parser import parse_program
+
+        # A full stop after a symbol character would join it (`:-.` is one atom).
+        clause_text += " ." if clause_text[-1:] in set("+-*/\\^<>=~:.?@#&$") else "."
+        parse_program(clause_text, "<assert>")   # a bad clause changes nothing
+        if first:
+            self._set_user_program([clause_text] + [c.text for c in self._user_clauses()])
+        else:
+            self.kb.load(clause_text, filename="<assert>", name=SHELL_PROGRAM)
+        self.echo("true.")
+
+    def _retract(self, pattern: Any) -> None:
+        from .unify import undo, unify
+
+        clauses = self._user_clauses()
+        for i, clause in enumerate(clauses):
+            if clause.head is None:
+                continue
+            term = (clause.head if clause.body == Atom("true") and not _is_clause(pattern)
+                    else Struct(":-", (clause.head, clause.body)))
+            trail: list = []
+            if unify(pattern, term, trail):
+                undo(trail, 0)
+                self._set_user_program([c.text for j, c in enumerate(clauses) if j != i])
+                self.echo("true.")
+                return
+            undo(trail, 0)
+        self.echo("false.")
+
+    def _listing(self, spec: Any) -> None:
+        from .parser import parse_program
+
+        if spec is None:
+            clauses = self._user_clauses()
+            if not clauses:
+                self.echo(f"% the program '{SHELL_PROGRAM}' is empty")
+            for clause in clauses:
+                self.echo(clause.text)
+            return
+        if isinstance(spec, Struct) and spec.name == "/" and len(spec.args) == 2:
+            name, arity = str(spec.args[0]), spec.args[1]
+        else:
+            name, arity = str(spec), None
+        shown = 0
+        for info in _program_infos(self.kb):
+            for clause in parse_program(_info_field(info, "source"), _info_field(info, "name")):
+                head = clause.head
+                if isinstance(head, Struct) and head.name == "^" and len(head.args) == 2:
+                    head = head.args[0]
+                head_name = head.name if isinstance(head, Struct) else head
+                head_arity = len(head.args) if isinstance(head, Struct) else 0
+                if head is not None and str(head_name) == name and arity in (None, head_arity):
+                    self.echo(f"{clause.text}   % {_info_field(info, 'name')}")
+                    shown += 1
+        if not shown:
+            self.echo(f"% no clauses of {name}{'' if arity is None else f'/{arity}'}")
+
+    def _programs(self) -> None:
+        for info in _program_infos(self.kb):
+            texts = _info_field(info, "texts") or 0
+            self.echo(f"{_info_field(info, 'name')}: {texts} text{'s' if texts != 1 else ''}")
+
+    def _command(self, text: str) -> bool:
+        """A shell command written as a goal (assert, retract, listing, programs); False
+        when ``text`` is an ordinary goal."""
+        from .parser import parse_term
+
+        match = re.fullmatch(r"(assertz?|asserta|retract)\s*\((.*)\)", strip_full_stop(text),
+                             re.DOTALL)
+        if match:
+            parse_term(strip_full_stop(text), "<shell>")   # a syntax error points into the line
+            inner = match.group(2).strip()
+            if match.group(1) == "retract":
+                self._retract(parse_term(inner, "<retract>")[0])
+            else:
+                if inner.startswith("(") and inner.endswith(")"):
+                    inner = inner[1:-1].strip()
+                self._assert(inner, first=match.group(1) == "asserta")
+            return True
+        goal = strip_full_stop(text)
+        if goal in ("listing", "programs"):
+            self._listing(None) if goal == "listing" else self._programs()
+            return True
+        if goal.startswith("listing(") and goal.endswith(")"):
+            self._listing(parse_term(goal[len("listing("):-1], "<listing>")[0])
+            return True
+        if goal in ("[user]", "consult(user)"):
+            self.state = ShellState.CONSULTING
+            self.echo("% type clauses; end_of_file. or Ctrl-D ends")
+            return True
+        return False
+
     def _run(self, text: str) -> None:
         if text.startswith("explain "):
             self.echo(self.kb.explain(strip_full_stop(text[len("explain "):])))
             return
-        if text.startswith(":-") or ":-" in text:
-            self.kb.load(text)
-            self.echo("ok.")
+        if text.startswith(":-"):
+            self.kb.load(text, filename="<shell>", name=SHELL_PROGRAM)
+            self.echo("true.")
             return
-        answers = self.kb.query(strip_full_stop(text), at=self.at)
-        for line in answer_lines(answers):
-            self.echo(line)
+        if self._command(text):
+            return
+        goal = strip_full_stop(text)
+        from .parser import parse_term
+
+        if _is_clause(parse_term(goal, "<shell>")[0]):
+            raise slr_sql.SLRError("a clause typed at ?- is a goal, and (:-)/2 is no "
+                                   "predicate: add it with assert((Head :- Body)). or [user].")
+        for warning in (self.kb.goal_warnings(goal) if hasattr(self.kb, "goal_warnings") else []):
+            self.echo_err(f"warning: {warning}")
+        if self.ask is None or not hasattr(self.kb, "solutions"):
+            answers = self.kb.query(goal, at=self.at)
+            for line in answer_lines(answers):
+                self.echo(line)
+            return
+        self._one_at_a_time(self.kb.solutions(goal, at=self.at))
+
+    def _one_at_a_time(self, answers: Iterator[dict[str, Any]]) -> None:
+        """SWI-Prolog's way: an answer, then the key pressed decides: the next or stop."""
+        try:
+            for answer in answers:
+                shown = {k: abbreviated(v) for k, v in answer.items()}
+                self.echo(answer_text(shown) if answer else "true", nl=False)
+                while True:
+                    key = self.ask()
+                    if key == "w":
+                        self.echo("\n" + answer_text(answer), nl=False)
+                        continue
+                    break
+                if key in (";", "n", "r", " ", "\t"):
+                    self.echo(" ;")
+                    continue
+                self.echo(" .")
+                return
+            self.echo("false.")
+        finally:
+            close = getattr(answers, "close", None)
+            if close is not None:
+                close()
+
+
+def _is_clause(term: Any) -> bool:
+    return isinstance(term, Struct) and term.name == ":-" and len(term.args) == 2
 
 
 def _history_path() -> str:
     return os.environ.get("SLR_HISTORY") or os.path.join(os.path.expanduser("~"), ".slr_history")
+
+
+def _completion_words(kb: Any) -> list[str]:
+    """Predicate and event-type names for tab completion: the program's, the store's event
+    types, the shell's commands and the builtins."""
+    words = {"assert", "asserta", "assertz", "retract", "listing", "programs", "explain",
+             "load", "add", "help", "halt", "prev", "next"}
+    program = getattr(getattr(kb, "engine", None), "program", None)
+    if program is not None:
+        words |= {name for name, _ in list(program.preds) + list(program.temporal)
+                  if not name.startswith("$")}
+    store = getattr(kb, "store", None)
+    if store is not None:
+        words |= {name for name, _ in store.event_types()}
+    from .builtins import BUILTIN_NAMES
+    words |= {name for name, _ in BUILTIN_NAMES}
+    return sorted(w for w in words if re.fullmatch(r"[a-z][A-Za-z0-9_]*", w))
 
 
 @main.command()
@@ -989,34 +1347,63 @@ def _history_path() -> str:
 def shell(db: str) -> None:
     """Interactive goals and program text on DB (history in ~/.slr_history or $SLR_HISTORY)."""
     with _open(db, create=False) as kb:
-        session = Shell(kb)
         if not sys.stdin.isatty():
+            session = Shell(kb)
             # Piped input (scripts, tests): plain lines, no prompt, no history file.
             for line in sys.stdin:
                 if not session.feed(line):
                     break
-            if session.pending:
+            if session.state == ShellState.CONSULTING:
+                session.end_of_input()
+            elif session.pending:
                 _err("error: input ended inside an unfinished clause (missing full stop)")
             return
         from prompt_toolkit import PromptSession
+        from prompt_toolkit.completion import Completer, Completion
+        from prompt_toolkit.document import Document
         from prompt_toolkit.history import FileHistory
 
-        prompt = PromptSession(history=FileHistory(_history_path()))
-        click.echo(f"slr shell on {db} — `help` for commands, Ctrl-D to leave")
+        class PredicateCompleter(Completer):
+            """Completes the word before the cursor with the names known at that moment."""
+
+            def get_completions(self, document: Document, complete_event: Any) -> Any:
+                word = document.get_word_before_cursor(pattern=re.compile(r"[a-z][A-Za-z0-9_]*"))
+                if not word:
+                    return
+                for name in _completion_words(kb):
+                    if name.startswith(word) and name != word:
+                        yield Completion(name, start_position=-len(word))
+
+        session = Shell(kb, ask=click.getchar)
+        prompt = PromptSession(history=FileHistory(_history_path()),
+                               completer=PredicateCompleter(), complete_while_typing=False)
+        click.echo(f"slr shell on {db} — `help` for commands, Ctrl-C stops a goal, "
+                   f"Ctrl-D leaves")
         while True:
             try:
-                line = prompt.prompt("   | " if session.continuing else "?- ")
-            except KeyboardInterrupt:
-                session.pending = []
+                # Ctrl-C at the prompt is a key (the terminal is raw); no signal handler of
+                # prompt_toolkit's may outlive the prompt and swallow the Ctrl-C of a goal.
+                line = prompt.prompt(session.prompt, handle_sigint=False)
+            except KeyboardInterrupt:   # at the prompt: drop the line
+                session.interrupt()
                 continue
             except EOFError:
+                if session.end_of_input():
+                    continue
                 break
-            if not session.feed(line):
-                break
+            try:
+                if not session.feed(line):
+                    break
+            except KeyboardInterrupt:   # during a goal: stop it, keep the shell
+                session.interrupt()
+                click.echo("\n% interrupted")
 
 
 from .ros.cli import ros as _ros  # noqa: E402 - issue 13: `slr ros` (its extra is imported on use)
 main.add_command(_ros)
+from .viz.cli import export_command as _export, foxglove_command as _foxglove  # noqa: E402
+main.add_command(_foxglove)
+main.add_command(_export)
 
 from .fleet import _click_group as _fleet_group  # noqa: E402 - `slr fleet push|status`
 main.add_command(_fleet_group())
@@ -1050,7 +1437,7 @@ def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None
     """
     from .plot import parse_size, save_timeline, timeline
 
-    if not os.path.exists(db):
+    if _missing(db):
         raise slr_sql.SLRError(f"no such store: {db}")
     dimensions = parse_size(size) if size is not None else None
     with _open(db) as kb:
@@ -1089,7 +1476,7 @@ def subscribe(db: str, pattern: str, where: str | None, since: str, until: float
 
     from .subscriptions import answer_json
 
-    if not os.path.exists(db):
+    if _missing(db):
         raise slr_sql.SLRError(f"no such store: {db}")
     since_value: Any = since.strip()
     if since_value != "now":
@@ -1137,7 +1524,7 @@ def stats(db: str) -> None:
         with _open(db) as kb:
             click.echo(kb.stats()["text"])
         return
-    if not os.path.lexists(db):
+    if _missing(db):
         raise slr_sql.SLRError(f"no such store: {db}")
     with EventStore(db) as store:
         click.echo(format_stats(store, db))

@@ -17,7 +17,22 @@ from typing import Any, Callable
 from .errors import SLRError
 from .terms import Atom, deref, format_term
 
-__all__ = ["Clock", "WallClock", "ManualClock", "StreamClock", "parse_duration"]
+__all__ = ["Clock", "WallClock", "ManualClock", "StreamClock", "parse_duration",
+           "DEFAULT_MAX_LEARNED_DELAY", "LearnedDelayWarning"]
+
+
+DEFAULT_MAX_LEARNED_DELAY = 3600.0
+"""Seconds a learned delay may reach (``slr_sql.open(max_learned_delay=)``; None: no cap).
+An event that arrives later than this after its end time is still stored; its type's
+history counts as complete up to ``now - max_learned_delay`` at most, so a clock far from
+the events' times (events stamped 2.0, 5.0 on a store with a wall clock) cannot make
+synchronized queries and ``until`` subscriptions wait for decades."""
+
+
+class LearnedDelayWarning(UserWarning):
+    """Events arrived much later than their end time: the store's clock and the events'
+    times are probably not the same time (a wall clock and simulated or recorded times);
+    the learned delay was capped (:data:`DEFAULT_MAX_LEARNED_DELAY`)."""
 
 
 class Clock:

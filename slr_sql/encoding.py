@@ -18,6 +18,8 @@ string                  TEXT, a JSON string         ``"hello world"``
 proper list             TEXT, a JSON array          ``[0.4,0.1,0.9]``  ``["a","b"]``
 the empty list ``[]``   TEXT, an empty JSON array   ``[]``
 compound ``f(a,1)``     TEXT, a single-key object   ``{"f":["a",1]}``
+message ``'p/msg/T'``   TEXT, an object of fields   ``{"$type":"p/msg/T","x":1.0}``
+``(x:1.0)``
 atom starting with      TEXT, JSON                  ``{"$atom":"[x"}``
 ``[`` ``{`` or ``"``
 ======================  ==========================  ==================================
@@ -40,6 +42,11 @@ Inside JSON (list elements, compound arguments)
   as ``'$string'``: the reserved ``$string``/``$atom``/``$int`` keys always have a JSON
   *string* value, a compound always an *array*, so they never clash)
 * a partial list ``[a|b]`` (tail not ``[]``) is the compound ``'.'(a, b)``: ``{".":["a","b"]}``
+* a *message term* -- a compound whose name holds a ``/`` and whose every argument is
+  ``Key: Value`` with distinct atom keys not starting with ``$`` (how ROS messages reach
+  SLR: ``'geometry_msgs/msg/Point'(x: 1.0, y: 2.0, z: 0.5)``) -- is the object
+  ``{"$type":"geometry_msgs/msg/Point","x":1.0,"y":2.0,"z":0.5}`` (at the top level too),
+  so that ``json_extract(arg1, '$.pose.position.x')`` reads a field by name
 
 JSON is written compactly (no spaces) and keeps non-ASCII characters as they are, so SQLite's
 ``json_extract(arg2, '$[0]')`` works on lists. What has no stored form makes :func:`encode`
@@ -87,7 +94,7 @@ else:
         _speedups = None  # a build older (or newer) than this source: not used
 
 __all__ = ["encode", "encode_column", "decode", "decode_answer", "encode_json", "Unencodable",
-           "INT64_MIN", "INT64_MAX"]
+           "INT64_MIN", "INT64_MAX", "field_pairs", "column_json", "decode_json"]
 
 INT64_MIN = -(2 ** 63)
 INT64_MAX = 2 ** 63 - 1
@@ -518,6 +525,38 @@ def encode_json(term: Any) -> str:
     return text if text.isascii() else _check_text(text)
 
 
+def column_json(value: Any) -> str:
+    """A stored column value as the JSON of its term *inside* a list or compound (what
+    :func:`encode_json` gives for the decoded term), without decoding lists and compounds:
+    they are JSON already. Live views and exports write events with it.
+
+    >>> column_json("cup1"), column_json(3), column_json('[0.5,1.0]'), column_json('"hi"')
+    ('"cup1"', '3', '[0.5,1.0]', '{"$string":"hi"}')
+    """
+    tv = type(value)
+    if tv is str:
+        c = value[:1]
+        if c == "[" or (c == "{" and not value.startswith('{"$atom":"')):
+            return value
+        if c and c != "{" and c != '"':
+            return _quote(value)
+    elif tv is int:
+        return str(value)
+    elif tv is float and _NEG_INF < value < _INF:
+        return _float_repr(value)
+    return encode_json(decode(value))
+
+
+def decode_json(data: Any) -> Any:
+    """The term of a value parsed from the JSON :func:`encode_json` / :func:`column_json`
+    wrote (``json.loads`` of it).
+
+    >>> str(decode_json({"pose": [[1.0, 2.0, 3.0], [0.0, 0.0, 0.0, 1.0]]}))
+    'pose([1.0,2.0,3.0],[0.0,0.0,0.0,1.0])'
+    """
+    return _from_json(data)
+
+
 def _deref_or_raise(var: Var) -> Any:
     t = var
     while type(t) is Var:
@@ -591,6 +630,12 @@ def _json(t: Any, depth: int) -> str:
                 # the innermost cell outwards so the encoding stays a plain compound.
                 break
             return _improper_list_json(t, depth)
+        if "/" in t.name:
+            fields = field_pairs(t)
+            if fields is not None:
+                return ('{"$type":' + _quote(t.name) + "".join(
+                    ["," + _quote(key) + ":" + _json(value, depth + 1) for key, value in fields])
+                    + "}")
         return ("{" + _quote(t.name) + ":["
                 + ",".join([_json(a, depth + 1) for a in args]) + "]}")
     if tt is list or tt is tuple:
@@ -620,6 +665,38 @@ def _json(t: Any, depth: int) -> str:
     if isinstance(t, float):
         return _json(float(t), depth)
     raise Unencodable(f"{type(t).__name__} value {t!r} is not a term")
+
+
+def field_pairs(t: Struct) -> list[tuple[str, Any]] | None:
+    """The fields of a message term -- a compound whose every argument is ``Key: Value``
+    with distinct atom keys not starting with ``$`` -- as ``[(key, value)]``; else None.
+    A message term whose name holds a ``/`` (a ROS message type, ``pkg/msg/Name``) is stored
+    as a JSON object ``{"$type": Name, Key: Value, ...}``, so that SQL reads its fields by
+    name (``json_extract(arg1, '$.pose.position.x')``).
+
+    >>> field_pairs(Struct("geometry_msgs/msg/Point", (Struct(":", (Atom("x"), 1.0)),)))
+    [('x', 1.0)]
+    >>> field_pairs(Struct("f", (1,))) is None
+    True
+    """
+    args = t.args
+    if not args:
+        return None
+    out = []
+    seen = set()
+    for arg in args:
+        while type(arg) is Var and arg.ref is not None:
+            arg = arg.ref
+        if type(arg) is not Struct or arg.name != ":" or len(arg.args) != 2:
+            return None
+        key, value = arg.args
+        while type(key) is Var and key.ref is not None:
+            key = key.ref
+        if type(key) is not Atom or key.startswith("$") or key in seen:
+            return None
+        seen.add(key)
+        out.append((str(key), value))
+    return out
 
 
 def _improper_list_json(t: Struct, depth: int) -> str:
@@ -706,6 +783,11 @@ def _from_json(data: Any) -> Any:
         return data
     if td is list:
         return make_list([_from_json(x) for x in data])
+    if td is dict and "$type" in data:
+        name = data["$type"]
+        if type(name) is str and len(data) > 1:
+            return Struct(Atom(name), tuple([
+                Struct(":", (Atom(k), _from_json(v))) for k, v in data.items() if k != "$type"]))
     if td is dict and len(data) == 1:
         ((key, val),) = data.items()
         if type(val) is list:

@@ -4,7 +4,7 @@ from __future__ import annotations
 from typing import Any
 
 __all__ = ["SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRUnavailable",
-           "SLRBusy", "SLRStoreFull", "EventRejected"]
+           "SLRBusy", "SLRStoreFull", "SLRStoreGone", "EventRejected"]
 
 
 class SLRError(Exception):
@@ -87,6 +87,19 @@ class SLRStoreFull(SLRUnavailable):
     names the file. Retry once space is freed.
 
     >>> issubclass(SLRStoreFull, SLRError)
+    True
+    """
+
+    retry_after = 10
+
+
+class SLRStoreGone(SLRUnavailable):
+    """The store's file was deleted, moved or replaced by another file while it was open:
+    what this knowledge base would write could never be read by anyone opening the path.
+    Raised before a write is acknowledged (nothing of the failed call counts as stored);
+    the message names the path. Restore the file, or close and reopen to start a new store.
+
+    >>> issubclass(SLRStoreGone, SLRError)
     True
     """
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import math
+import re
 import threading
 import time
 from dataclasses import dataclass, field
@@ -21,15 +22,15 @@ from typing import Any, Callable, Iterable, Iterator
 
 from .answers import answer_bindings
 from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
-from .clocks import Clock, WallClock, parse_duration
+from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .encoding import Unencodable, decode_answer, encode
-from .engine import Engine, Machine
+from .engine import Engine
 from .errors import EventRejected, SLRError, SLRSyntaxError
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
 from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore, \
     store_error, check_robot_name
-from .store.checks import event_arguments, shorten
+from .store.checks import event_arguments, shorten, shown, text_problem
 from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
     list_items, to_python
 from .terms import format_atom, format_term
@@ -118,7 +119,10 @@ def _where(clause: Clause | None) -> str:
 
 def _program_name(name: Any) -> str:
     if not isinstance(name, str) or not name:
-        raise SLRError(f"a program name is a non-empty string, not {name!r}")
+        raise SLRError(f"a program name is a non-empty string, not {shown(name)}")
+    problem = text_problem(name)
+    if problem:
+        raise SLRError(f"the program name {shown(name)} cannot be stored: {problem}")
     return name
 
 
@@ -345,6 +349,28 @@ class _BoundPrev:
         return answers, rows[0][-2:]
 
 
+def _with_derived(stored: list, derived: list) -> list:
+    """The events of an add and the complex events it derived, in one list for the add
+    listeners; described like the store's EventBatch (each type's earliest and latest end)
+    when the add's events were, so that the listeners need not walk the whole batch again.
+
+    >>> both = _with_derived(EventBatch([("a", (1,), 1.0, 1.0)]), [("c", (1,), 1.0, 2.0)])
+    >>> both.ends is None, len(both)
+    (True, 2)
+    """
+    both = EventBatch(stored)
+    both.extend(derived)
+    ends = getattr(stored, "ends", None)
+    if ends is not None:
+        ends = dict(ends)
+        for name, args, _start, end in derived:
+            key = (name, len(args))
+            span = ends.get(key)
+            ends[key] = (end, end) if span is None else (min(span[0], end), max(span[1], end))
+        both.ends = ends
+    return both
+
+
 class KnowledgeBase:
     """One SLR knowledge base: program + events + state in one SQLite file.
 
@@ -354,7 +380,13 @@ class KnowledgeBase:
     def __init__(self, path: str | Path | None = None, clock: Clock | None = None, *,
                  synchronous: str = "FULL", busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
                  adopt: bool = False, checkpoint: str = "auto",
-                 cache_mib: float = CACHE_SIZE_KIB / 1024, robot: str | None = None):
+                 cache_mib: float = CACHE_SIZE_KIB / 1024, robot: str | None = None,
+                 max_learned_delay: float | None = DEFAULT_MAX_LEARNED_DELAY):
+        if max_learned_delay is not None:
+            _check_time_option("max_learned_delay", max_learned_delay, minimum=0.0)
+            max_learned_delay = float(max_learned_delay)
+        # the largest delay a type may learn (clocks.DEFAULT_MAX_LEARNED_DELAY; None: no cap)
+        self.max_learned_delay = max_learned_delay
         self.clock = clock if clock is not None else WallClock()
         self.store = EventStore(path, self.clock, synchronous=synchronous,
                                 busy_timeout=busy_timeout, adopt=adopt, checkpoint=checkpoint,
@@ -763,7 +795,15 @@ class KnowledgeBase:
         >>> kb = open(); kb.add("seg(cup1, [0.4,0.1,0.9])^12.31"); len(kb.query("seg(O,L)^T"))
         1
         """
-        self._add([self._event_from_text(text)], atomic=True)
+        if not isinstance(text, str):
+            raise SLRError(f"add takes one event written in SLR syntax (a str), not a "
+                           f"{type(text).__name__}; add_event(name, args, start, end) and "
+                           f"add_many([...]) take tuples")
+        try:
+            event = self._event_from_text(text)
+        except (ValueError, OverflowError) as exc:  # a number too long for Python to read
+            raise EventRejected(f"{shorten(text)}: {_python_words(exc)}") from None
+        self._add([event], atomic=True)
 
     def add_event(self, name: str, args: Iterable[Any], start: float, end: float | None = None) -> None:
         """Add one event from Python values (``str`` is an atom, ``String`` a string).
@@ -824,15 +864,15 @@ class KnowledgeBase:
                         name, args, start, end = ev
                     except (TypeError, ValueError):
                         raise EventRejected(f"event #{i} is neither SLR text nor a (name, args, "
-                                            f"start, end) tuple: {shorten(repr(ev))}") from None
+                                            f"start, end) tuple: {shown(ev)}") from None
                     event = (name, event_arguments(name, args, start, end), start, end)
             except (SLRError, TypeError, ValueError, OverflowError, RecursionError) as exc:
                 if atomic:
                     raise exc if isinstance(exc, SLRError) else EventRejected(str(exc))
                 reason = "the term is nested too deeply" if isinstance(exc, RecursionError) \
-                    else str(exc).split("; use sys.")[0]  # (a Python hint, not for users)
+                    else _python_words(exc)
                 err = exc if isinstance(exc, EventRejected) else \
-                    EventRejected(f"{shorten(repr(ev))}: {reason}")
+                    EventRejected(f"{shown(ev)}: {reason}")
                 err.index = i
                 err.event = ev
                 errors.append(err)
@@ -868,7 +908,7 @@ class KnowledgeBase:
             rejected = {id(e.event) for e in errors if hasattr(e, "event")}
             stored = [ev for ev in events if id(ev) not in rejected] if rejected else events
             if derived:   # issue 11: the complex events of this add, with its events
-                stored = list(stored) + derived
+                stored = _with_derived(stored, derived)
             for listener in self.add_listeners:
                 listener(stored)
         if marks:  # issue 5: after the events of the same batch are stored
@@ -921,7 +961,7 @@ class KnowledgeBase:
             for name, value in args.items():
                 slot = plan.bind_slots.get(name)
                 if slot is not None:
-                    frame[slot] = value if terms else from_python(value)
+                    frame[slot] = value if terms else _argument_term(name, value)
         goals = [build(g, frame) for g in plan.compiled.body]
         if not goals:
             goal: Any = Atom("true")
@@ -988,7 +1028,7 @@ class KnowledgeBase:
             frame = [None] * plan.compiled.nslots
             if args:
                 for name, value in args.items():
-                    frame[plan.bind_slots[name]] = from_python(value)
+                    frame[plan.bind_slots[name]] = _argument_term(name, value)
             answers = plan.lookup.run(self.store, frame, plan.names)
             if answers is not None:
                 return answers
@@ -1144,12 +1184,19 @@ class KnowledgeBase:
         """``await kb.ask(goal, at=z)``: :meth:`submit` for asyncio code."""
         import asyncio
 
-        return await asyncio.wrap_future(self.submit(goal, at=at, id=id, args=args,
-                                                     timeout=timeout))
+        from concurrent.futures import Future
+
+        pending = self.submit(goal, at=at, id=id, args=args, timeout=timeout)
+        assert isinstance(pending, Future)   # a PendingQueryAPI here is a Future
+        return await asyncio.wrap_future(pending)
 
     def mark_complete(self, event_type: str, t: float) -> None:
         """Declare the history of ``"p/N"`` (or ``"p"``: every arity) complete up to ``t``
         (persisted), like a ``fullyUpdated(p/N)^t`` event."""
+        if not isinstance(event_type, str):
+            raise SLRError(f"mark_complete: the event type is text such as \"p/2\" or \"p\", "
+                           f"not {shown(event_type)}")
+        _check_time_option("mark_complete: t", t)
         self._refresh()
         self._sync.mark_complete(event_type, t)
 
@@ -1247,12 +1294,36 @@ class KnowledgeBase:
         self._subscriptions.unsubscribe(id)
 
 
+def _argument_term(name: str, value: Any) -> Any:
+    """The term for ``args[name]`` of a query, or an SLRError naming the argument."""
+    try:
+        return from_python(value)
+    except (TypeError, ValueError) as exc:
+        raise SLRError(f"args[{name!r}] = {shown(value)} is not a term: "
+                       f"{_python_words(exc)} (atoms are str, strings slr_sql.String, numbers "
+                       f"int or float, lists list, compounds slr_sql.Struct)") from None
+    except RecursionError:
+        raise SLRError(f"args[{name!r}]: the term is nested too deeply") from None
+
+
+def _python_words(exc: BaseException) -> str:
+    """The message of a Python exception raised by a conversion, in the user's terms (the
+    advice about ``sys.set_int_max_str_digits`` is for Python programmers, not users)."""
+    text = str(exc)
+    digits = re.search(r"limit \((\d+) digits\) for integer string conversion(?:: value has "
+                       r"(\d+) digits)?", text)
+    if digits:
+        has = f" ({digits.group(2)} digits)" if digits.group(2) else ""
+        return f"an integer too long{has}: at most {digits.group(1)} digits are read"
+    return text.split("; use sys.")[0]
+
+
 def _check_time_option(name: str, value: Any, minimum: float | None = None) -> None:
     """``at=`` and ``timeout=`` are numbers of seconds (``None``: not given)."""
     if value is None:
         return
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SLRError(f"{name} must be a number of seconds, not {value!r}")
+        raise SLRError(f"{name} must be a number of seconds, not {shown(value)}")
     try:
         number = float(value)
     except OverflowError:
@@ -1310,7 +1381,10 @@ def open(path: str | Path | None = None, clock: Clock | None = None, **options: 
     thread of the store does it, so no ``add`` waits for it -- for long-running writers with
     a latency budget, such as ``slr serve`` and ``slr ros bridge``), ``cache_mib`` (SQLite's
     page cache, default 64 MiB: it fills as the store is used, then the process's memory stays
-    flat; a smaller one makes it flat sooner and makes large ingests and scans re-read pages).
+    flat; a smaller one makes it flat sooner and makes large ingests and scans re-read pages),
+    ``max_learned_delay`` (seconds a learned delay may reach, default 3600; ``None``: no cap;
+    an event arriving later than that after its end warns with
+    :class:`~slr_sql.sync.LearnedDelayWarning`: its times are probably not the clock's).
     A file that is not a store (not SQLite, damaged, a store of a newer slr_sql, or an SQLite
     file of another application) is refused with an :class:`SLRError` and left untouched;
     ``adopt=True`` adds a store to another application's SQLite file on purpose.

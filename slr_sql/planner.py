@@ -682,9 +682,18 @@ def explain(kb, plan, at=None) -> list[str]:
         lines.extend("  " + line for line in entry.sql.splitlines())
     if entry.params or entry.arg_params:
         shown = {k: v for k, v in entry.params.items()}
-        lines.append("parameters: " + ", ".join(f":{k} = {v!r}" for k, v in shown.items())
+        lines.append("parameters: " + ", ".join(f":{k} = {_parameter_text(v)}"
+                                                for k, v in shown.items())
                      + "".join(f", :{p} = <{n} from args>" for n, p in entry.arg_params.items()))
     return lines
+
+
+def _parameter_text(value) -> str:
+    """A parameter's value as explain prints it: its repr, or for an integer of more digits
+    than Python prints, its size."""
+    if type(value) is int and value.bit_length() > 14000:
+        return f"<an integer of about {int(value.bit_length() * 0.30103) + 1} digits>"
+    return repr(value)
 
 
 def _compiled_subgoals(kb, plan) -> list[str]:

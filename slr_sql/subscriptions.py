@@ -51,8 +51,10 @@ import socket
 import threading
 import time
 import uuid
+import warnings
 from typing import Any, Callable
 
+from .clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning
 from .encoding import decode, encode_json
 from .errors import SLRError, SLRSyntaxError, SLRTimeout
 from .parser import parse_term
@@ -221,7 +223,11 @@ class _Matcher:
 def _time_arg(value: Any, what: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SLRError(f"subscribe: {what} must be a number of seconds, not {value!r}")
-    value = float(value)
+    try:
+        value = float(value)
+    except OverflowError:
+        raise SLRError(f"subscribe: {what} is out of range (an integer of "
+                       f"{value.bit_length()} bits; a time is a float)") from None
     if math.isnan(value):
         raise SLRError(f"subscribe: {what} must be a number, not NaN")
     return value
@@ -789,12 +795,24 @@ class SubscriptionHub:
         self._passes_started = 0
         self._passes_done = 0
         self._cleaned_at_pass = -1
+        # the hub thread's own connection for its journal and history reads (None: in memory,
+        # or not started): they never wait for the store's lock, which a writer holds through
+        # its commit, and a lagging subscriber's reads never delay the writers
+        self._reader: Any = None
+        self._max_jids: dict[str, int] = {}   # per type and pass: max(jid) of each journal
+        # woken from inside a transaction (not committed yet): the next pass reads through the
+        # store's connection, which waits for the commit, as every read did before
+        self._through_store = False
+        self._pass_through_store = False
 
     # -- wiring -------------------------------------------------------------------------------
-    def notify(self) -> None:
-        """Something may be new: wake the hub thread (never waits on delivery)."""
+    def notify(self, through_store: bool = False) -> None:
+        """Something may be new: wake the hub thread (never waits on delivery).
+        ``through_store``: called inside a transaction, so the next pass must read through
+        the store's connection (which waits for its commit)."""
         with self.cond:
             self._dirty = True
+            self._through_store = self._through_store or through_store
             self.cond.notify()
 
     def on_add(self, stored: list) -> None:
@@ -805,7 +823,7 @@ class SubscriptionHub:
         for ev in stored:
             try:
                 if (ev[0], len(ev[1])) in keys:
-                    self.notify()
+                    self.notify(through_store=self.store.in_transaction)
                     return
             except (TypeError, IndexError):
                 continue
@@ -865,6 +883,8 @@ class SubscriptionHub:
                            f"not {max_lag!r}")
         pattern = pattern.strip()
         matcher = _Matcher(self.kb, pattern, where)   # SLRSyntaxError for bad texts
+        if isinstance(since, str):
+            self._warn_if_stamped_long_before(matcher.key, since_value)
         durable = id is not None
         with self.lock:
             if durable and id in self._subs:
@@ -900,6 +920,22 @@ class SubscriptionHub:
                                            name=f"slr-subscription-{sub.id}")
             sub._thread.start()
         return sub
+
+    def _warn_if_stamped_long_before(self, key: tuple[str, int], now: float) -> None:
+        """``since="now"`` on a type whose events end long before the clock's now (robot or
+        recorded times on a store with a wall clock): the new events will most likely be
+        stamped the same way, end before ``since`` and never be delivered. Say so."""
+        latest = self.store.max_end(*key)
+        gap = getattr(self.kb, "max_learned_delay", None) or DEFAULT_MAX_LEARNED_DELAY
+        if latest is None or now - latest <= gap:
+            return
+        name = f"{key[0]}/{key[1]}"
+        warnings.warn(LearnedDelayWarning(
+            f"subscribe(since=\"now\") on {name}: its latest event ends at {latest:g}, "
+            f"{now - latest:.6g} s before the clock's now ({type(self.clock).__name__}); "
+            f"events stamped like it end before since and are not delivered. Subscribe "
+            f"since=0 (history first, then live), or give the store a ManualClock or a "
+            f"StreamClock for simulated or recorded times"), stacklevel=3)
 
     def unsubscribe(self, sub_id: str) -> None:
         """Remove the subscription ``sub_id`` (closing it if it is open here).
@@ -1147,11 +1183,31 @@ class SubscriptionHub:
                 pass
 
     # -- the hub thread ------------------------------------------------------------------------
+    def _read(self, sql: str, params: tuple = ()) -> list[tuple]:
+        """A reading statement of the hub thread, on its own connection when it has one."""
+        reader = self._reader
+        if reader is None or self._pass_through_store:
+            return self.store.execute(sql, params)
+        return reader.execute(sql, params)
+
     def _loop(self) -> None:
         """Run a delivery pass whenever ``kb.add`` (or a consumer making room, or ``until``)
         wakes the hub, and at least every ``poll_interval`` seconds: the pass compares each
         journal's greatest jid with what was read, which is how events stored by other
         connections (processes) or by statements on this one are seen."""
+        try:
+            self._reader = self.store.open_reader()
+        except SLRError as exc:   # (too many open files, ...): read on the store's connection
+            log.warning("subscriptions: no connection of their own (%s); reading on the "
+                        "store's", exc)
+        try:
+            self._run_passes()
+        finally:
+            reader, self._reader = self._reader, None
+            if reader is not None:
+                reader.close()
+
+    def _run_passes(self) -> None:
         while True:
             with self.cond:
                 if not self._dirty and not self._closed:
@@ -1159,6 +1215,7 @@ class SubscriptionHub:
                 if self._closed:
                     return
                 self._dirty = False
+                self._pass_through_store, self._through_store = self._through_store, False
                 if not self._subs:
                     continue
                 self._passes_started += 1
@@ -1215,6 +1272,7 @@ class SubscriptionHub:
         then the ends (``until`` reached, too far behind)."""
         info = self._type_info(key)
         touched: set = set()
+        self._max_jids.clear()
         if info is None:   # no event of this type yet: nothing to read; until may still end it
             ending = [s for s in subs if s._until_reached and not s._ended]
             # looked up again after reading the flags: events stored (creating the table) before
@@ -1240,7 +1298,7 @@ class SubscriptionHub:
             if pos is None:
                 pos = min(s.scanned for s in group)
             while True:
-                rows = self.store.execute(info.journal_sql, (pos, CHUNK))
+                rows = self._read(info.journal_sql, (pos, CHUNK))
                 if not rows:
                     break
                 self._deliver_rows(key, rows, group, touched)
@@ -1251,14 +1309,20 @@ class SubscriptionHub:
                 group = [s for s in group if not s.lagging and not s._ended]
                 self._wake(touched)     # a long backlog: let consumers start
                 touched = set()
+        rest = []
+        behind = []
         for s in subs:
             if s._ended or s._closed or (s.phase == _LIVE and not s.lagging and pos is not None
                                          and s.scanned >= pos and not s._until_reached):
                 continue                 # served by the shared read: nothing else to do
+            rest.append(s)
             if s.phase == _HISTORY:
                 self._serve_history(info, s, touched)
             if s.phase == _LIVE and (s.lagging or pos is None or s.scanned < pos):
-                self._serve_lagging(key, info, s, touched)   # not (yet) in the shared read
+                behind.append(s)         # not (yet) in the shared read
+        if behind:
+            self._serve_behind(key, info, behind, touched)
+        for s in rest:
             self._check_end(key, info, s, touched)
         self._wake(touched)
 
@@ -1345,15 +1409,15 @@ class SubscriptionHub:
         m = s._matcher
         until = _INF if s.until is None else s.until
         if s._history_sql is None:
-            few = self.store.execute(info.window_count_sql, (s.since, until))[0][0]
+            few = self._read(info.window_count_sql, (s.since, until))[0][0]
             s._history_sql = info.history_by_end_sql if few <= FEW_HISTORY else info.history_sql
         while s.phase == _HISTORY and not s._ended and not s._closed:
             room = s.max_queue - (len(s._queue) >> 1)
             if room <= 0:
                 return
             limit = max(min(room, CHUNK), 16)
-            rows = self.store.execute(s._history_sql, (s.history_pos, s.history_top,
-                                                       s.since, until, s.live_start, limit))
+            rows = self._read(s._history_sql, (s.history_pos, s.history_top, s.since, until,
+                                               s.live_start, limit))
             batch = []
             error = None
             for row in rows:
@@ -1380,6 +1444,40 @@ class SubscriptionHub:
             if done:
                 s._go_live()
 
+    def _serve_behind(self, key: tuple[str, int], info: _TypeInfo, behind: list[Subscription],
+                      touched: set) -> None:
+        """Read the journal for the live subscriptions behind the shared read (lagging ones,
+        new ones) together, from the earliest position among them: each chunk is read,
+        decoded and matched once for all of them (once per distinct pattern, condition and
+        window, as in the shared read), and each takes the answers after its own position
+        that its queue has room for. One whose queue is full stays lagging until its consumer
+        makes room. So the work per event does not grow with the number of subscriptions
+        behind, nor with how far behind they are."""
+        active = behind
+        while True:
+            room = 0
+            going = []
+            for s in active:
+                if s._ended or s._closed:
+                    continue
+                free = s.max_queue - (len(s._queue) >> 1)
+                if free <= 0:
+                    s.lagging = True
+                    continue
+                going.append(s)
+                room = max(room, free)
+            if not going:
+                return
+            limit = max(min(room, CHUNK), 16)
+            rows = self._read(info.journal_sql, (min(s.scanned for s in going), limit))
+            for s in going:
+                s.lagging = False
+            if rows:
+                self._deliver_rows(key, rows, going, touched, own_pace=True)
+            if len(rows) < limit:
+                return                   # the end of the journal: all caught up
+            active = [s for s in going if not s.lagging]
+
     def _serve_lagging(self, key: tuple[str, int], info: _TypeInfo, s: Subscription,
                        touched: set) -> None:
         """Read the journal after ``s.scanned`` at ``s``'s own pace, until its queue is full or
@@ -1390,7 +1488,7 @@ class SubscriptionHub:
                 s.lagging = True
                 return
             limit = max(min(room, CHUNK), 16)
-            rows = self.store.execute(info.journal_sql, (s.scanned, limit))
+            rows = self._read(info.journal_sql, (s.scanned, limit))
             s.lagging = False
             if rows:
                 self._deliver_rows(key, rows, [s], touched, own_pace=True)
@@ -1421,8 +1519,13 @@ class SubscriptionHub:
                 touched.add(s)
 
     def _max_jid(self, info: _TypeInfo) -> int:
-        value = self.store.execute(info.max_sql)[0][0]
-        return 0 if value is None else value
+        """The journal's greatest jid, read once per type and pass (every lagging subscription
+        of the type compares its position with it)."""
+        value = self._max_jids.get(info.journal)
+        if value is None:
+            value = self._read(info.max_sql)[0][0] or 0
+            self._max_jids[info.journal] = value
+        return value
 
     def _check_journal(self, key: tuple[str, int], info: _TypeInfo) -> None:
         """A table created by a program without this module (raw SQL) has no journal yet."""

@@ -32,6 +32,7 @@ import itertools
 import math
 import threading
 import time
+import warnings
 from concurrent.futures import Future, InvalidStateError, ThreadPoolExecutor
 from operator import itemgetter
 
@@ -40,7 +41,7 @@ from typing import Any, Callable, Iterable
 
 from .analysis import GoalSet, goal_set
 from .answers import answer_bindings
-from .clocks import ManualClock, StreamClock
+from .clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning, ManualClock, StreamClock
 from .errors import EventRejected, SLRError, SLRTimeout
 from .store.checks import BadEvent, check_times
 from .terms import Atom, Struct, Var, deref
@@ -276,6 +277,18 @@ class PendingQuery(Future):
                 f"answerable{after}: {what}")
 
 
+def _delay_warning(key: tuple[str, int], observed: float, cap: float, clock: Any) -> str:
+    name = type_text(key)
+    return (f"{name}: an event arrived {_fmt(observed, 1)} s after its end time on a store "
+            f"whose clock is a {type(clock).__name__} (now {_fmt(clock.now(), 1)}): the "
+            f"events' times are probably not the clock's time. The learned delay of {name} "
+            f"is capped at {_fmt(cap)} s (max_learned_delay). For simulated or recorded "
+            f"times give the store a ManualClock or a StreamClock (slr_sql.open(path, "
+            f"clock=slr_sql.StreamClock())), or declare the delay (:- max_delay({name}, D).); "
+            f"note that subscribe(since=\"now\") delivers only events that end after the "
+            f"clock's now, so it does not deliver these")
+
+
 class Completeness:
     """Per event type: max delay (declared or learned), marks, in-order latest end.
 
@@ -286,10 +299,13 @@ class Completeness:
     of the stored and the new value is kept, compared inside SQLite) and read back.
     """
 
-    def __init__(self, store: Any, clock: Any, decls: Callable[[], Any]):
+    def __init__(self, store: Any, clock: Any, decls: Callable[[], Any],
+                 max_learned: float | None = DEFAULT_MAX_LEARNED_DELAY):
         self.store = store
         self.clock = clock
         self._decls = decls
+        self.max_learned = max_learned     # None: learned delays grow without a cap
+        self.warned: set[tuple[str, int]] = set()   # types whose delay hit the cap
         self.learned: dict[tuple[str, int], float] = {}
         self.marks: dict[tuple[str, int], float] = {}
         self.name_marks: dict[str, float] = {}
@@ -302,6 +318,18 @@ class Completeness:
         # ``horizon``, ``deadline``, ``why`` and ``describe`` (None: no event rules)
         self.derived: Any = None
         self.load()
+
+    def _capped(self, key: tuple[str, int], observed: float, cap: float) -> None:
+        """An event of ``key`` arrived ``observed`` s after its end, beyond the cap: say so,
+        once per type, where it happens (a Python warning and the log)."""
+        if key in self.warned:
+            return
+        self.warned.add(key)
+        d = self._decls().max_delay.get(key)
+        if d is not None and d != "learn":
+            return                          # a declared delay: nothing is learned
+        warnings.warn(LearnedDelayWarning(_delay_warning(key, observed, cap, self.clock)),
+                      stacklevel=2)
 
     def flush(self, learned: dict | None = None) -> None:
         """Persist learned delays (all that grew since the last write by default). The
@@ -358,7 +386,9 @@ class Completeness:
         d = self._decls().max_delay.get(key)
         if d is not None and d != "learn":
             return float(d)
-        return self.learned.get(key, 0.0)
+        learned = self.learned.get(key, 0.0)
+        cap = self.max_learned
+        return learned if cap is None or learned <= cap else cap
 
     def mark(self, key: tuple[str, int]) -> float:
         return max(self.marks.get(key, -_INF), self.name_marks.get(key[0], -_INF))
@@ -474,8 +504,12 @@ class Completeness:
         in_order = self._decls().in_order
         grew: dict[tuple[str, int], float] = {}
         moved: set = set()
+        cap = self.max_learned
         for key, (earliest, latest) in spans.items():
             best = arrival - earliest
+            if cap is not None and best > cap:
+                self._capped(key, best, cap)
+                best = cap
             if best > learned.get(key, 0.0):
                 grew[key] = best
             if in_order and key in in_order:
@@ -506,7 +540,8 @@ class Synchronizer:
         self.store = kb.store
         self.lock = threading.RLock()
         self.cond = threading.Condition(self.lock)
-        self.tracker = Completeness(kb.store, kb.clock, lambda: kb.declarations)
+        self.tracker = Completeness(kb.store, kb.clock, lambda: kb.declarations,
+                                    getattr(kb, "max_learned_delay", DEFAULT_MAX_LEARNED_DELAY))
         self.workers = workers
         self._heaps: dict[tuple[str, int], list] = {}       # key -> [(time, seq, q, gen)]
         self._arrival_waits: dict[tuple[str, int], list] = {}  # key -> [(q, gen)]

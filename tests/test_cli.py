@@ -155,8 +155,13 @@ def test_ingest_text_json_and_bad_lines(db, tmp_path):
     ]), encoding="utf-8")
     r = slr("ingest", db, str(events))
     assert r.returncode == 1
-    bad = r.stderr.splitlines()
+    bad = [line for line in r.stderr.splitlines() if not line.startswith("warning: ")]
     assert [line.split(": ")[0] for line in bad] == [f"{events}:5", f"{events}:6"], r.stderr
+    # times like 12.31 on a store with a wall clock: said once per type, with the fix
+    warned = [line for line in r.stderr.splitlines() if line.startswith("warning: ")]
+    assert sorted(line.split(":")[1].strip() for line in warned) == ["note/2", "seen/1",
+                                                                     "seg/2"], r.stderr
+    assert all("StreamClock" in line and "max_delay" in line for line in warned)
     assert "ingested 5 events" in r.stdout
     q = slr("query", db, "findall(O, seg(O, _)^_, L)")
     assert q.stdout.strip() == "L = [cup1,cup2,cup3]"
@@ -210,7 +215,7 @@ def test_shell_reads_plain_lines_when_stdin_is_not_a_terminal(db, tmp_path):
         "color(cup1,",       # a goal over two lines
         "      C)^12.",
         ":- event seg/2.",
-        "usedFor(cup, tea) :- true.",
+        "assert((usedFor(cup, tea) :- true)).",
         "usedFor(cup, X).",
         "color(cup1, blue)^12.",
         "at 5",

@@ -204,3 +204,15 @@ def test_parse_example_format(tmp_path):
     assert (case.goal, case.at, json.loads(case.expect)) == ("p(X)", 2.0, [{"X": "a"}])
     assert same(expected_value({"-": ["a", 1.0]}), ("struct", "-", [("atom", "a"), 1.0000001]), 1e-6)
     assert not same(expected_value({"$string": "a"}), ("atom", "a"), 1e-6)
+
+
+# -- the same files through the command line: `slr run FILE` ---------------------------------
+
+@pytest.mark.parametrize("path", sorted(EXAMPLES.glob("*.slr")), ids=lambda p: p.stem)
+def test_every_example_runs_with_slr_run(path: Path):
+    from test_cli import slr
+
+    example = parse_example(path)
+    r = slr("run", str(path), "-q")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert r.stdout == f"{len(example.cases)} of {len(example.cases)} expected answers matched\n"

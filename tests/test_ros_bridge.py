@@ -237,8 +237,18 @@ def test_publish_answer_to_a_real_subscriber(tmp_path, ros_node, prefix):
                 Struct("geometry_msgs/msg/Quaternion", (0.0, 0.0, 0.0, 1.0))))
             bridge.publish_answer(marker, {"Msg": Struct("geometry_msgs/msg/PoseStamped",
                                                          (header, pose)), "T": 3.5})
-            bridge.publish_answer(poses, {"Msg": Struct("geometry_msgs/msg/PoseArray",
-                                                        (header, [pose, pose])), "T": 3.5})
+            # a message term with field names (how --all stores messages): the fields it
+            # names are set, in any order; the others keep their defaults
+            def named(msgtype, **fields):
+                return Struct(msgtype, tuple(Struct(":", (Atom(k), v)) for k, v in fields.items()))
+            named_pose = named("geometry_msgs/msg/Pose",
+                               position=named("geometry_msgs/msg/Point", z=3.0, x=1.0))
+            bridge.publish_answer(poses, {"Msg": named(
+                "geometry_msgs/msg/PoseArray", poses=[pose, named_pose],
+                header=named("std_msgs/msg/Header", frame_id=Atom("cam"))), "T": 3.5})
+            with pytest.raises(PublishError, match="no field 'nope'"):
+                bridge.publish_answer(poses, {"Msg": named("geometry_msgs/msg/PoseArray",
+                                                           nope=1)})
             _spin_until(bridge, node, executor,
                         lambda: all(received.values()), deadline)
             with pytest.raises(PublishError, match="fields.data: the answer has no variable D"):
@@ -257,6 +267,7 @@ def test_publish_answer_to_a_real_subscriber(tmp_path, ros_node, prefix):
         (1.0, 2.0, 3.0, 1.0)
     (array,) = received["poses"]
     assert [p.position.z for p in array.poses] == [3.0, 3.0]
+    assert array.header.frame_id == "cam" and array.poses[1].orientation.w == 1.0
     assert bridge.stats.published == 4
 
 

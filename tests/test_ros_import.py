@@ -208,14 +208,52 @@ def test_all_topics_become_events_named_after_the_topic(tmp_path, fmt):
         goal = all_events(kb, "robot_goal", 1)
         tf = all_events(kb, "tf", 3)
     assert report.unmapped == [] and report.rejected == []
-    assert status == [((Struct("std_msgs/msg/String", (Atom(f"ok{i}"),)),), recorded(50.3 + i),
+    assert status == [((message("std_msgs/msg/String", data=Atom(f"ok{i}")),), recorded(50.3 + i),
                        recorded(50.3 + i)) for i in range(3)]
-    header = (lambda t: Struct("std_msgs/msg/Header", (0, t, Atom("map")))) if fmt == "ros1" else \
-        (lambda t: Struct("std_msgs/msg/Header", (t, Atom("map"))))
-    assert goal == [((Struct("geometry_msgs/msg/PointStamped", (
-        header(50.1 + i), Struct("geometry_msgs/msg/Point", (1.0, 2.0, 3.0)))),), 50.1 + i, 50.1 + i)
-        for i in range(3)]
+    header = (lambda t: message("std_msgs/msg/Header", seq=0, stamp=t, frame_id=Atom("map"))) \
+        if fmt == "ros1" else \
+        (lambda t: message("std_msgs/msg/Header", stamp=t, frame_id=Atom("map")))
+    assert goal == [((message("geometry_msgs/msg/PointStamped", header=header(50.1 + i),
+                              point=message("geometry_msgs/msg/Point", x=1.0, y=2.0, z=3.0)),),
+                     50.1 + i, 50.1 + i)
+                    for i in range(3)]
     assert len(tf) == 2  # /tf keeps its built-in mapping
+
+
+def message(msgtype: str, **fields) -> Struct:
+    """A message term: the compound named by the type, fields as Name: Value."""
+    return Struct(msgtype, tuple(Struct(":", (Atom(k), v)) for k, v in fields.items()))
+
+
+@pytest.mark.parametrize("fmt", ["mcap", "ros1"])
+def test_whole_messages_keep_their_field_names_in_sql_and_slr(tmp_path, fmt):
+    path = make_bag.write_bag(bag_path(tmp_path, fmt), fmt, robot_items(fmt))
+    db = tmp_path / "r.db"
+    mapping = mapping_from_dict({"topics": {"/detections": [
+        {"event": "detection", "foreach": "poses", "args": ["$msg.header", "$item"]},
+        {"event": "detections"}]}})
+    with slr_sql.open(db) as kb:
+        import_bag(kb, path, mapping, all_topics=True)
+        # SQL reads fields by name (--all: the whole message; templates taking a message too)
+        x = kb.sql("SELECT json_extract(arg1, '$.point.x'), json_extract(arg1, '$.header.frame_id'),"
+                   " json_extract(arg1, '$.\"$type\"') FROM robot_goal ORDER BY t_end")[1]
+        assert x == [(1.0, "map", "geometry_msgs/msg/PointStamped")] * 3
+        frames = kb.sql("SELECT DISTINCT json_extract(arg1, '$.frame_id'),"
+                        " json_extract(arg2, '$.position.z') FROM detection ORDER BY 2")[1]
+        assert frames == [("cam", 1.0), ("cam", 2.0), ("cam", 3.0)]
+        lists = kb.sql("SELECT json_extract(arg1, '$.poses[1].position.x') FROM detections")[1]
+        assert lists == [(1.0,)] * 3
+        # SLR: get_field/3 by a dotted path, a list path, or unification of Name: Value
+        answers = kb.query("robot_goal(M)^T, get_field(M, 'point.y', Y), "
+                           "get_field(M, [header, frame_id], F)")
+        assert [(a["Y"], a["F"]) for a in answers] == [(2.0, "map")] * 3
+        xs = kb.query("detections(M)^T, get_field(M, 'poses[1].position.x', X)")
+        assert [a["X"] for a in xs] == [1.0] * 3
+        named = kb.query("robot_goal(M)^T, M = 'geometry_msgs/msg/PointStamped'(_, point: P), "
+                         "P = 'geometry_msgs/msg/Point'(x: X, _, _)")
+        assert [a["X"] for a in named] == [1.0] * 3
+        fields = kb.query("robot_status(M)^_, get_field(M, Name, V)", limit=1)
+        assert (fields[0]["Name"], fields[0]["V"]) == ("data", "ok0")
 
 
 def test_all_topics_name_clash_is_an_error(tmp_path):

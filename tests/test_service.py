@@ -16,7 +16,7 @@ import slr_sql
 from slr_sql import Atom, SLREvaluationError, SLRSyntaxError, SLRTimeout, String, Struct
 from slr_sql.service.errors import ServiceError
 
-from service_helpers import ServiceProcess, same
+from service_helpers import ServiceProcess, complete_only_as_marked, same
 
 _tags = itertools.count()
 
@@ -78,6 +78,7 @@ def same_value(a, b) -> bool:
 
 def program(tag: str) -> str:
     return f"""\
+:- max_delay({tag}obj/3, 1e10).
 {tag}color(O, C)^T :- prev({tag}obj(O, _, C)^_Z, T).
 {tag}location(O, L)^T :- prev({tag}seg(O, L)^Z, T), T - Z =< 5, !.
 {tag}location(O, "outdated")^T :- prev({tag}seg(O, _)^Z, T), T - Z > 5, !.
@@ -270,6 +271,7 @@ def test_a_large_batch_goes_in_several_requests_and_keeps_indexes(remote, tag):
 # -- synchronized queries over long-poll ---------------------------------------------------
 
 def test_submitted_query_waits_until_another_client_completes_the_history(server, remote, tag):
+    complete_only_as_marked(remote, f"{tag}seen/1")
     remote.add(f"{tag}seen(a)^1")
     done = threading.Event()
     pending = remote.submit(f"findall(X, {tag}seen(X)^_, L)", at=10, id=f"{tag}q",
@@ -294,6 +296,7 @@ def test_submitted_query_waits_until_another_client_completes_the_history(server
 
 
 def test_a_synchronized_query_in_one_request(server, remote, tag):
+    complete_only_as_marked(remote, f"{tag}seen/1")
     remote.add(f"{tag}seen(a)^1")
     remote.mark_complete(f"{tag}seen/1", 5)
     response = httpx.post(server.url + "/query", json={"goal": f"{tag}seen(X)^T", "at": 5,
@@ -305,7 +308,8 @@ def test_a_synchronized_query_in_one_request(server, remote, tag):
 
 
 def test_a_long_poll_cut_off_by_its_client_leaves_the_query_answerable(server, remote, tag):
-    remote.add(f"{tag}late(y)^1")     # its delay (wall clock - 1 s) keeps at=20 incomplete
+    complete_only_as_marked(remote, f"{tag}late/1")    # at=20 stays incomplete until marked
+    remote.add(f"{tag}late(y)^1")
     pending = remote.submit(f"{tag}late(X)^T", at=20)
     with pytest.raises(httpx.ReadTimeout):
         httpx.get(f"{server.url}/submit/{pending.handle}", params={"wait": 30}, timeout=0.3)
@@ -477,6 +481,7 @@ def test_vanishing_and_slow_clients_do_not_take_the_server_down(server, remote, 
 def test_subscribe_over_websocket(remote, tag):
     # the knowledge base subscribes (SPEC: history first when since is in the past, then
     # live; until ends the subscription once the history up to it is complete)
+    complete_only_as_marked(remote, f"{tag}p/1")
     remote.add(f"{tag}p(a)^1")
     with remote.subscribe(f"{tag}p(X)^T", since=0, until=10) as sub:
         remote.add(f"{tag}p(b)^5")

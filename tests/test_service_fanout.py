@@ -21,7 +21,7 @@ from slr_sql import ManualClock, SLRError
 from slr_sql.service.app import _AnswerTexts
 from slr_sql.service.encoding import dumps, loads
 
-from service_helpers import ServiceProcess
+from service_helpers import ServiceProcess, complete_only_as_marked
 
 _tags = itertools.count()
 DEADLINE = 30.0
@@ -183,7 +183,8 @@ def test_subscribers_sharing_answer_texts_each_get_exactly_their_own(server, bat
         {"pattern": f"{tag}v(I, V)^T", "where": "V =< 5", "since": 1},      # the others
     ]
     with slr_sql.connect(server.url) as client, contextlib.ExitStack() as stack:
-        client.add(f"{tag}v(0, 0)^0")        # the type exists: complete as far as marked
+        complete_only_as_marked(client, f"{tag}v/2")
+        client.add(f"{tag}v(0, 0)^0")
         sockets = []
         for r in requests:
             ws = stack.enter_context(ws_connect(server.url.replace("http", "ws") + "/subscribe"))

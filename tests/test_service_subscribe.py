@@ -16,7 +16,7 @@ import slr_sql
 from slr_sql import Atom
 from slr_sql.service.errors import ServiceError
 
-from service_helpers import ServiceProcess, slr_env
+from service_helpers import ServiceProcess, complete_only_as_marked, slr_env
 
 _tags = itertools.count()
 DEADLINE = 30.0
@@ -56,6 +56,7 @@ def consume(sub, out: list) -> threading.Thread:
 
 @pytest.mark.parametrize("batch", [1, 256])
 def test_history_then_live_with_where_until_completeness(remote, tag, batch):
+    complete_only_as_marked(remote, f"{tag}p/1")
     remote.add_many([f"{tag}p({i})^{i}" for i in range(4)])            # history: 0..3
     remote.subscribe_batch = batch
     with remote.subscribe(f"{tag}p(X)^T", where="X > 1", since=1, until=20) as sub:
@@ -103,7 +104,8 @@ def test_bad_batch_is_refused_in_words(remote, tag):
 
 def test_many_concurrent_subscribers_receive_every_event(server, remote, tag):
     n_subs, n_events = 20, 600
-    remote.add(f"{tag}e(-1)^0")     # the type exists: complete only as far as marked
+    complete_only_as_marked(remote, f"{tag}e/1")
+    remote.add(f"{tag}e(-1)^0")
     subs = []
     for k in range(n_subs):
         remote.subscribe_batch = 1 if k % 2 else 64
@@ -144,7 +146,8 @@ with connect(sys.argv[1]) as ws:
 def test_clients_that_vanish_or_stop_reading_do_not_stop_the_others(server, remote, tag):
     ws_url = server.url.replace("http", "ws") + "/subscribe"
     pattern = f"{tag}big(I, S)^T"
-    remote.add(f'{tag}big(-1, "")^0')    # the type exists: complete only as far as marked
+    complete_only_as_marked(remote, f"{tag}big/2")
+    remote.add(f'{tag}big(-1, "")^0')
     clients = [subprocess.Popen([sys.executable, "-c", VANISHING_CLIENT, ws_url, pattern],
                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=slr_env())
                for _ in range(3)]
@@ -183,7 +186,8 @@ def test_durable_subscription_resumes_after_the_server_is_killed(tmp_path):
     server = ServiceProcess(db)
     try:
         with slr_sql.connect(server.url) as client:
-            client.add("d(0)^0")        # the type exists: complete only as far as marked
+            complete_only_as_marked(client, "d/1")
+            client.add("d(0)^0")
             client.subscribe_batch = 8
             sub = client.subscribe(pattern, since=1, until=n, id="resume-me")
             client.add_many([f"d({i})^{i}" for i in range(1, 31)])    # answered writes

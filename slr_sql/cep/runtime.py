@@ -27,15 +27,19 @@ from __future__ import annotations
 import json
 import math
 import threading
+from itertools import islice
+from operator import itemgetter, ne
 from typing import Any
 
 from ..encoding import Unencodable, decode, encode
 from ..errors import SLRError
-from ..store import DatabaseError, quote_identifier
+from ..store import DatabaseError, EventBatch, quote_identifier
 from ..terms import Struct, Var, deref, format_term, term_vars
 from .rules import EventRule
 from .sqlgen import AltSQL
 from .where import MustWait, Residual, describe_error
+
+_first, _second = itemgetter(0), itemgetter(1)
 
 __all__ = ["EventRules", "RuleRuntime"]
 
@@ -176,8 +180,20 @@ class RuleRuntime:
         return out
 
     def ensure_built(self) -> None:
-        if self.generation != self.eng.generation:
+        if self.generation != self.eng.generation or self._tables_appeared():
             self.build()
+
+    def _tables_appeared(self) -> bool:
+        """A type that had no table when the SQL was built has one now: another process
+        (or another store object) created it, so this one's table hooks never heard."""
+        for sql in self.alts:
+            for table, leaf in zip(sql.tables, sql.alt.leaves):
+                if table is None and self.eng.table(leaf.key) is not None:
+                    return True
+            for table, (_, leaf) in zip(sql.neg_tables, sql.alt.negations):
+                if table is None and self.eng.table(leaf.key) is not None:
+                    return True
+        return False
 
     # ----------------------------------------------------------------- running
     def run(self, new_from: dict, dirty: set, now: float, decide: bool) -> list:
@@ -715,6 +731,9 @@ class EventRules:
         self.rules = runtimes
         self.by_head = by_head
         self.generation += 1
+        # writers of types one rule joins take turns (a server's concurrent writers would
+        # each miss the other's half of a match); other writers do not wait for them
+        self.store.set_write_groups(_rule_groups(runtimes))
         if runtimes:
             with self.store.transaction():
                 for rt in runtimes:
@@ -866,16 +885,20 @@ class EventRules:
         if not self.active or not events:
             return None
         leaf = self.leaf_types
-        keys = set()
-        for ev in events:
-            try:
-                key = (ev[0], len(ev[1]))
-            except (TypeError, IndexError):
-                continue
-            if key in leaf:
-                keys.add(key)
+        try:   # (column-wise: no loop in Python over a big batch)
+            keys = set(zip(map(_first, events), map(len, map(_second, events)))) & leaf
+        except (TypeError, IndexError, KeyError):
+            keys = set()
+            for ev in events:
+                try:
+                    key = (ev[0], len(ev[1]))
+                except (TypeError, IndexError, KeyError):
+                    continue
+                if key in leaf:
+                    keys.add(key)
         if not keys:
             return None
+        self.store.lock_for_write(keys)   # before the watermarks: see set_write_groups
         return {key: self._max_seq(key) for key in keys}
 
     def store_events(self, events: list, atomic: bool) -> list:
@@ -886,25 +909,19 @@ class EventRules:
         store = self.store
         if atomic or len(events) < 16:
             return store.add_events(events, atomic=atomic)
-        keys = []
-        switches = 0
-        last = None
-        for ev in events:
-            try:
-                key = (ev[0], len(ev[1]))
-            except (TypeError, IndexError):
-                return store.add_events(events, atomic=atomic)
-            if key != last:
-                switches += 1
-                last = key
-            keys.append(key)
+        try:   # (column-wise: no loop in Python over a big batch)
+            keys = list(zip(map(_first, events), map(len, map(_second, events))))
+        except (TypeError, IndexError, KeyError):
+            return store.add_events(events, atomic=atomic)
+        switches = 1 + sum(map(ne, keys, islice(keys, 1, None)))
         if switches * 4 < len(events):
             return store.add_events(events, atomic=atomic)
-        first: dict = {}
-        for key in keys:
-            first.setdefault(key, len(first))
-        order = sorted(range(len(events)), key=lambda i: first[keys[i]])
-        errors = store.add_events([events[i] for i in order], atomic=atomic)
+        rank = {key: i for i, key in enumerate(dict.fromkeys(keys))}
+        order = sorted(range(len(events)), key=list(map(rank.__getitem__, keys)).__getitem__)
+        grouped = EventBatch(map(events.__getitem__, order))
+        errors = store.add_events(grouped, atomic=atomic)
+        if type(events) is EventBatch:
+            events.ends = grouped.ends   # (the same events: the same end times per type)
         for error in errors:
             if getattr(error, "index", None) is not None:
                 error.index = order[error.index]
@@ -967,6 +984,7 @@ class EventRules:
                 return
             try:
                 with self.store.transaction():
+                    self.store.lock_for_write(self.types | self.leaf_types)
                     derived = self._round({}, set(), True)
             except SLRError:
                 if self.store.closed:
@@ -1165,3 +1183,20 @@ def _wrap(sql: str) -> list[str]:
             .replace(" ORDER BY ", "\nORDER BY ").split("\n"):
         out.append(part)
     return out
+
+
+def _rule_groups(runtimes: list) -> list[set]:
+    """The event types rules tie together (head, positive and negated atoms), merged into
+    groups: two rules sharing a type are one group."""
+    groups: list[set] = []
+    for rt in runtimes:
+        types = {rt.head_key}
+        for alt in rt.rule.alternatives:
+            types |= {leaf.key for leaf in alt.leaves}
+            types |= {leaf.key for _, leaf in alt.negations}
+        joined = [g for g in groups if g & types]
+        for g in joined:
+            groups.remove(g)
+            types |= g
+        groups.append(types)
+    return groups

@@ -64,12 +64,12 @@ def render(template: str, aliases: dict[str, str]) -> str:
     return template.format_map(aliases)
 
 
-def _expr(e: Expr) -> str:
+def _expr(e: Expr, dialect: Any = SQLITE) -> str:
     if e[0] == "s":
         return f"{{e{e[1]}}}.t_start"
     if e[0] == "e":
         return f"{{e{e[1]}}}.t_end"
-    return f"{e[0]}({_expr(e[1])}, {_expr(e[2])})"
+    return f"{dialect.scalar(e[0])}({_expr(e[1], dialect)}, {_expr(e[2], dialect)})"
 
 
 def _expr_positions(e: Expr) -> frozenset:
@@ -126,8 +126,8 @@ class AltSQL:
         self._cache: dict = {}
         self._others: dict = {}   # variable -> its later occurrences in positive atoms
         self.k = len(alt.leaves)
-        self.S = _expr(alt.interval[0])
-        self.E = _expr(alt.interval[1])
+        self.S = _expr(alt.interval[0], self.dialect)
+        self.E = _expr(alt.interval[1], self.dialect)
         for pos, leaf in enumerate(alt.leaves):
             self._leaf(leaf, f"{{e{pos}}}", frozenset((pos,)))
         for i in range(self.k):
@@ -137,7 +137,7 @@ class AltSQL:
         for op, left, right in alt.relations:
             for a, cmp, b in self._relation(op, left, right):
                 self.conds.append(_Cond(_expr_positions(a) | _expr_positions(b),
-                                        f"{_expr(a)} {cmp} {_expr(b)}"))
+                                        f"{_expr(a, self.dialect)} {cmp} {_expr(b, self.dialect)}"))
         for interval, seconds, positions in alt.windows:
             self._window(interval, seconds, positions)
         for goal in alt.goals:
@@ -259,7 +259,7 @@ class AltSQL:
         return []  # and: both occurred, in any order
 
     def _window(self, interval: tuple, seconds: float, within: tuple) -> None:
-        s, e = _expr(interval[0]), _expr(interval[1])
+        s, e = _expr(interval[0], self.dialect), _expr(interval[1], self.dialect)
         positions = _expr_positions(interval[0]) | _expr_positions(interval[1])
         d = self._param(float(seconds))
         self.conds.append(_Cond(positions, f"{e} - {s} <= {d}"))
@@ -376,7 +376,7 @@ class AltSQL:
         return _Cond(positions, f"EXISTS (SELECT 1 FROM {table} AS {alias} WHERE {where})")
 
     def _negation(self, n: int, interval: tuple, leaf: Leaf) -> None:
-        s, e = _expr(interval[0]), _expr(interval[1])
+        s, e = _expr(interval[0], self.dialect), _expr(interval[1], self.dialect)
         positions = _expr_positions(interval[0]) | _expr_positions(interval[1])
         table = self.neg_tables[n]
         if table is None:

@@ -182,6 +182,10 @@ def import_bag(kb: Any, path: str | Path, mapping: Mapping | None = None,
     slr_sql.ros.bag_import.BagError: cannot read /dev/null: Unrecognized storage format ''
     """
     mapping = mapping if mapping is not None else Mapping()
+    from slr_sql.viz.mcap_export import is_slr_export
+
+    if is_slr_export(path):
+        return _import_export(kb, Path(path), progress, max(1, int(batch_size)))
     reader = open_bag(path)
     # A batch is tens of thousands of young objects without cycles; the cyclic collector
     # would walk them again and again while they wait for add_many (measured: 10-30 % of
@@ -197,6 +201,55 @@ def import_bag(kb: Any, path: str | Path, mapping: Mapping | None = None,
             reader.close()
         except Exception:  # noqa: BLE001 - closing a reader must not hide the real error
             pass
+
+
+def _import_export(kb: Any, path: Path, progress: Callable[[int, int], None] | None,
+                   batch_size: int) -> ImportReport:
+    """An MCAP file of ``slr export``: its events as they were stored (no mapping: its
+    channels name their event types), with the same checkpoints as a bag."""
+    from mcap.reader import make_reader
+
+    from slr_sql.viz.mcap_export import export_batches
+
+    with open(path, "rb") as stream:
+        summary = make_reader(stream).get_summary()
+    channels = sorted((c.topic, c.metadata.get("slr_event", ""), c.metadata.get("slr_arity", ""),
+                       (summary.statistics.channel_message_counts.get(c.id, 0)
+                        if summary.statistics else 0))
+                      for c in summary.channels.values())
+    digest = hashlib.sha256(json.dumps(channels).encode()).hexdigest()
+    report = ImportReport("export_" + digest[:16])
+    total = sum(c[3] for c in channels if c[1])
+    for topic, event, arity, count in channels:
+        if event:
+            report.topics[topic] = TopicReport(f"{event}/{arity}", "slr event (JSON)")
+    done = _checkpoints(kb, report.bag_id)
+    for topic, n in done.items():
+        if topic in report.topics:
+            report.topics[topic].skipped = n
+            report.skipped += n
+    stored: dict[str, int] = dict(done)
+    read = report.skipped
+    for events, counts, marks in export_batches(path, done, batch_size):
+        checkpoints = [(IMPORT_CHECKPOINT, (report.bag_id, topic, n), 0.0, 0.0)
+                       for topic, n in counts.items() if n > stored.get(topic, 0)]
+        rejected = kb.add_many(events + checkpoints) if events or checkpoints else []
+        if rejected:
+            raise SLRError(f"{path}: the store refused events of the export: {rejected[0]}")
+        for topic, n in counts.items():
+            new = n - stored.get(topic, 0)
+            if new > 0 and topic in report.topics:
+                report.topics[topic].messages += new
+                report.topics[topic].events += new
+                report.messages += new
+                report.events += new
+                read += new
+            stored[topic] = max(stored.get(topic, 0), n)
+        for type_text, until in marks:
+            kb.mark_complete(type_text, until)
+        if progress is not None:
+            progress(read, total)
+    return report
 
 
 def _plans(reader: Any, mapping: Mapping, all_topics: bool, report: ImportReport) -> dict:

@@ -185,10 +185,34 @@ def _set(msg: Any, name: str, value: Any, path: str) -> None:
             raise PublishError(f"{path}: {exc or 'value out of range'}") from None
 
 
+def _named_fields(term: Any) -> list | None:
+    """``[(name, value)]`` of a message term whose arguments are ``Name: Value`` pairs."""
+    if not isinstance(term, Struct) or not term.args:
+        return None
+    out = []
+    for arg in term.args:
+        if not (isinstance(arg, Struct) and arg.name == ":" and len(arg.args) == 2
+                and isinstance(arg.args[0], str)):
+            return None
+        out.append((str(arg.args[0]), arg.args[1]))
+    return out
+
+
 def _fill_from_term(msg: Any, term: Any, path: str) -> None:
-    """Set every field of ``msg`` from a compound whose arguments are its fields in order
-    (the ``--all`` encoding)."""
+    """Set the fields of ``msg`` from a message term: ``Name: Value`` arguments (the
+    ``--all`` encoding; the fields it names, the others keep their defaults), or a compound
+    whose arguments are all the fields in order."""
     fields = msg.get_fields_and_field_types()
+    named = _named_fields(term)
+    if named is not None:
+        for name, arg in named:
+            ftype = fields.get(name)
+            where = f"{path}.{name}" if path else name
+            if ftype is None:
+                raise PublishError(f"{path or 'message'}: no field {name!r} (fields: "
+                                   f"{', '.join(fields)})")
+            _set(msg, name, field_value(arg, ftype, where), where)
+        return
     if not isinstance(term, Struct) or len(term.args) != len(fields):
         raise PublishError(f"{path or 'message'}: expects a compound with {len(fields)} "
                            f"arguments ({', '.join(fields)}), not {term!s}")

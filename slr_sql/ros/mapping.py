@@ -26,7 +26,7 @@ from operator import attrgetter
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from slr_sql import SLRError, String, Struct
+from slr_sql import Atom, SLRError, String, Struct
 
 __all__ = [
     "MappingError", "MessageError", "Mapping", "TopicEntry", "PublishEntry", "FullyUpdatedEntry",
@@ -125,10 +125,13 @@ def _fields_of(cls: type) -> tuple[str, ...]:
 
 
 def message_term(value: Any) -> Any:
-    """A message value as a term (the encoding of ``--all`` and ``pub_sub.xml`` events):
-    a message is the compound named by its full type with its fields as arguments, in
-    declaration order; ``builtin_interfaces`` Time and Duration are float seconds; strings
-    are atoms; ``bool`` is ``true``/``false``; arrays and sequences are lists.
+    """A message value as a term (the encoding of ``--all``, ``$msg``/``$item`` templates
+    and ``pub_sub.xml`` events): a message is the compound named by its full type whose
+    arguments are its fields as ``Name: Value`` pairs, in declaration order (stored as a
+    JSON object of fields, see :mod:`slr_sql.encoding`; read in SLR with ``get_field/3`` or
+    by unification); a message without fields is the atom of its type;
+    ``builtin_interfaces`` Time and Duration are float seconds; strings are atoms; ``bool``
+    is ``true``/``false``; arrays and sequences are lists.
 
     >>> from dataclasses import dataclass
     >>> @dataclass
@@ -136,7 +139,7 @@ def message_term(value: Any) -> Any:
     ...     x: float; y: float; z: float
     ...     __msgtype__ = "geometry_msgs/msg/Point"
     >>> str(message_term(Point(1.0, 2.0, 0.5)))
-    "'geometry_msgs/msg/Point'(1.0,2.0,0.5)"
+    "'geometry_msgs/msg/Point'(x:1.0,y:2.0,z:0.5)"
     """
     kind = type(value)
     if kind is float or kind is int or kind is str:
@@ -147,7 +150,11 @@ def message_term(value: Any) -> Any:
     if msgtype is not None:
         if msgtype in TIME_TYPES:
             return value.sec + value.nanosec * 1e-9
-        return Struct(msgtype, [message_term(getattr(value, n)) for n in _fields_of(kind)])
+        names = _fields_of(kind)
+        if not names:
+            return Atom(msgtype)
+        return Struct(msgtype, [Struct(":", (Atom(n), message_term(getattr(value, n))))
+                                for n in names])
     tolist = getattr(value, "tolist", None)
     if tolist is not None:  # numpy arrays and scalars (rosbags decodes numeric arrays so)
         items = tolist()

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
-import hmac
 import logging
 import math
 import re
@@ -47,6 +46,7 @@ from slr_sql.store.checks import format_event
 
 from .encoding import (decode_args, decode_arguments, decode_term, dumps, encode_answers,
                        encode_plain, loads)
+from .auth import BearerToken
 from .errors import ServiceError, error_body, retry_after
 
 __all__ = ["create_app", "Limits", "API_VERSION"]
@@ -288,23 +288,13 @@ class _Service:
 
     def __init__(self, kb: Any, token: str | None, limits: Limits):
         self.kb = kb
-        self.token = token.encode("utf-8") if token else None
+        self.check_token = BearerToken(token)
         self.limits = limits
         self.submitted: dict[str, _Submitted] = {}
         self.answer_texts = _AnswerTexts()
         self.endpoints = _ENDPOINTS
 
     # -- plumbing -----------------------------------------------------------------------------
-    def check_token(self, header: str | None) -> None:
-        if self.token is None:
-            return
-        given = b""
-        if header and header[:7].lower() == "bearer ":
-            given = header[7:].strip().encode("utf-8", "surrogatepass")
-        if not hmac.compare_digest(given, self.token):
-            raise ServiceError("a valid token is required (Authorization: Bearer TOKEN; "
-                               "the server's --token or SLR_TOKEN)", kind="Unauthorized")
-
     async def body(self, request: Request) -> dict:
         """The request's JSON object, read within the size and time limits."""
         limit = self.limits.max_body

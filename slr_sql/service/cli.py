@@ -91,7 +91,7 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
                *, limits: Any = None, max_connections: int | None = 1000,
                ssl_keyfile: str | None = None, ssl_certfile: str | None = None,
                log_level: str = "warning", ws_compression: bool = False,
-               cache_mib: float | None = None) -> None:
+               cache_mib: float | None = None, foxglove: tuple[str, int] | None = None) -> None:
     """Open ``db`` and serve it until SIGINT/SIGTERM; then close it.
 
     Refuses (SLRError) to listen on a non-loopback address without a token. Prints
@@ -99,7 +99,9 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
     accept WebSocket clients' offer of permessage-deflate (off by default: compressing every
     frame for every subscriber costs more CPU than loopback or a LAN saves). ``cache_mib``:
     the store's SQLite page cache (default 64 MiB), the part of the server's memory that
-    grows with the store until it is full.
+    grows with the store until it is full. ``foxglove``: ``(host, port)`` of a live Foxglove
+    view of the store beside the service (:mod:`slr_sql.viz.foxglove_live`; it has no token:
+    keep it on loopback unless the network is yours).
     """
     token = token or None
     if token is None and not is_loopback(host):
@@ -124,7 +126,17 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
     except BaseException:
         sock.close()
         raise
+    view = view_kb = None
     try:
+        if foxglove is not None:
+            from ..viz.foxglove_live import FoxgloveView
+
+            view_kb = slr_sql.open(db)   # a connection of its own: it reads while others write
+            try:
+                view = FoxgloveView(view_kb.store, host=foxglove[0], port=foxglove[1]).start()
+            except OSError as exc:
+                raise slr_sql.SLRError(f"cannot listen on {foxglove[0]}:{foxglove[1]} for "
+                                       f"Foxglove: {exc}") from None
         app = create_app(kb, token=token, limits=limits)
         config = uvicorn.Config(app, log_level=log_level, access_log=False, lifespan="off",
                                 ws_max_size=limits.max_body, limit_concurrency=max_connections,
@@ -140,6 +152,8 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
         # walk is a pause of several ms for every request and subscriber at that moment).
         gc.collect()
         gc.freeze()
+        if view is not None:
+            print(f"slr serve: foxglove on ws://{foxglove[0]}:{view.port}", flush=True)
         print(f"slr serve: {db} on {scheme}://{shown}:{bound_port}", flush=True)
         with _stop_on_signals():
             server.run(sockets=[sock])
@@ -147,6 +161,10 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
         pass   # uvicorn shut down gracefully and re-raised SIGINT/SIGTERM: a normal exit
     finally:
         sock.close()
+        if view is not None:
+            view.close()
+        if view_kb is not None:
+            view_kb.close()
         kb.close()
 
 
@@ -176,10 +194,16 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
               show_default=True,
               help="SQLite page cache of the store (the memory that grows with the store until "
                    "full).")
+@click.option("--foxglove", "foxglove", is_flag=True,
+              help="Also serve a live Foxglove view of DB (WebSocket; slr foxglove).")
+@click.option("--foxglove-host", default="127.0.0.1", show_default=True,
+              help="Address of the Foxglove view (it has no token).")
+@click.option("--foxglove-port", default=8766, type=click.IntRange(0, 65535), show_default=True,
+              help="Port of the Foxglove view.")
 def serve(db: str, host: str, port: int, token: str | None, max_body: int,
           max_query_time: float, max_wait: float, max_connections: int,
           ssl_keyfile: str | None, ssl_certfile: str | None, ws_compression: bool,
-          cache_mib: float) -> None:
+          cache_mib: float, foxglove: bool, foxglove_host: str, foxglove_port: int) -> None:
     """Serve DB to other processes over HTTP/JSON and WebSocket (docs/service.md).
 
     Clients: slr_sql.connect(URL, token=...) or any slr command with the URL in place of DB.
@@ -192,5 +216,6 @@ def serve(db: str, host: str, port: int, token: str | None, max_body: int,
     limits = Limits(max_body=max_body, max_query_time=max_query_time, max_wait=max_wait)
     run_server(db, host, port, token, limits=limits, max_connections=max_connections,
                ssl_keyfile=ssl_keyfile, ssl_certfile=ssl_certfile,
-               ws_compression=ws_compression, cache_mib=cache_mib)
+               ws_compression=ws_compression, cache_mib=cache_mib,
+               foxglove=(foxglove_host, foxglove_port) if foxglove else None)
     sys.stdout.flush()

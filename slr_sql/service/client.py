@@ -345,8 +345,11 @@ class RemoteKnowledgeBase:
         """``await kb.ask(goal, at=z)``: :meth:`submit` for asyncio code."""
         import asyncio
 
-        return await asyncio.wrap_future(self.submit(goal, at=at, id=id, args=args,
-                                                     timeout=timeout))
+        from concurrent.futures import Future
+
+        pending = self.submit(goal, at=at, id=id, args=args, timeout=timeout)
+        assert isinstance(pending, Future)   # a PendingQueryAPI here is a Future
+        return await asyncio.wrap_future(pending)
 
     def explain(self, goal: str) -> str:
         """How ``goal`` would run on the server: which engine, and why."""

@@ -241,6 +241,10 @@ class Unification:
                 subs.append((None, tail))
         else:
             name = str(pat.name)
+            if "/" in name:
+                raise Fallback(f"matching a stored value against a compound named {name!r} "
+                               f"(a message type: message terms are stored as objects of "
+                               f"fields, read by the interpreter)")
             if '"' in name or "\\" in name or any(ord(ch) < 0x20 for ch in name):
                 raise Fallback(f"matching a stored value against a compound named {name!r} "
                                f"(the name has characters a JSON path cannot hold)")
@@ -318,6 +322,10 @@ class Unification:
                     raise Fallback("a partial list in a template")
                 inner = " || ',' || ".join(self.json_sql(x) for x in items)
                 return f"('[' || {inner} || ']')"
+            if "/" in str(t.name):
+                raise Fallback(f"building a compound named {str(t.name)!r} from stored values "
+                               f"(a message type: message terms are stored as objects of "
+                               f"fields)")
             inner = " || ',' || ".join(self.json_sql(x) for x in t.args)
             name = self.const(encode_json(Atom(t.name)))
             return "('{' || " + name + " || ':[' || " + inner + " || ']}')"

@@ -51,7 +51,7 @@ from ..errors import EventRejected
 from .catalog import BufferTables, Catalog, ProgramText
 from .checks import format_event
 from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, DatabaseError, \
-    run_sql_file
+    ReadConnection, run_sql_file
 from .events import Event, EventBatch, EventWriter
 from .fleet import Fleet, check_robot_name
 from .lookups import EventReader, Row
@@ -64,7 +64,7 @@ from .tables import EventTables
 __all__ = ["EventStore", "Event", "EventBatch", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "DatabaseError", "quote_identifier", "sql_literal", "format_event",
            "migration_scripts", "split_sql_script", "run_sql_file", "store_error",
-           "check_robot_name"]
+           "check_robot_name", "ReadConnection"]
 
 
 def _doc(part_method: Callable) -> Callable:
@@ -162,6 +162,23 @@ class EventStore:
         self._db.check_open()
         return self._db.triggers(table)
 
+    def set_write_groups(self, groups: Iterable[Iterable[tuple[str, int]]]) -> None:
+        """Event types whose writers must take turns, in groups (the types one event rule
+        reads and derives): :meth:`lock_for_write` of a type waits for every transaction
+        writing a type of its group. SQLite writers take turns anyway (one write
+        transaction at a time); on a server the groups become advisory locks.
+
+        >>> s = EventStore(None); s.set_write_groups([{("a", 1), ("r", 0)}])
+        >>> with s.transaction(): s.lock_for_write([("a", 1)])
+        """
+        self._db.set_write_groups(groups)
+
+    def lock_for_write(self, types: Iterable[tuple[str, int]]) -> None:
+        """Inside a transaction: wait until no other transaction writes a type of the
+        groups of ``types`` (:meth:`set_write_groups`), and hold that until the commit; a
+        wait longer than ``busy_timeout`` is :class:`~slr_sql.errors.SLRBusy`."""
+        self._db.lock_for_write(types)
+
     @property
     def dialect(self) -> Any:
         """The SQL dialect of the database (:mod:`slr_sql.store.dialect`)."""
@@ -186,6 +203,10 @@ class EventStore:
     @_doc(Database.close)
     def close(self) -> None:
         self._db.close()
+
+    @_doc(Database.open_reader)
+    def open_reader(self) -> "ReadConnection | None":
+        return self._db.open_reader()
 
     def __enter__(self) -> "EventStore":
         return self
@@ -367,6 +388,13 @@ class EventStore:
     @_doc(EventReader.max_seq)
     def max_seq(self, name: str, arity: int) -> int:
         return self._reader.max_seq(name, arity)
+
+    @_doc(EventReader.raw_rows)
+    def raw_rows(self, name: str, arity: int, *, after_seq: int | None = None,
+                 end_from: float | None = None, end_to: float | None = None,
+                 limit: int | None = None, after_key: tuple | None = None) -> list[tuple]:
+        return self._reader.raw_rows(name, arity, after_seq=after_seq, end_from=end_from,
+                                     end_to=end_to, limit=limit, after_key=after_key)
 
     @_doc(EventReader.count)
     def count(self, name: str, arity: int) -> int:

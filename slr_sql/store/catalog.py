@@ -22,6 +22,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Iterable
 
+from ..errors import SLRError
 from .connection import Database
 from .sqltext import RESERVED_PREFIXES, quote_identifier
 
@@ -148,6 +149,7 @@ class Catalog:
         [('p(1).', 'a.slr')]
         """
         with self.db.transaction():
+            self.db.lock_named("program")
             cursor = self.db.conn.execute(_INSERT_TEXT, (None, str(name), source, filename,
                                                          float(self.db.clock.now())))
             text_id = cursor.fetchone()[0]
@@ -165,6 +167,7 @@ class Catalog:
         [('a', 'a(2).'), ('b', 'b.')]
         """
         with self.db.transaction():
+            self.db.lock_named("program")
             conn = self.db.conn
             first = conn.execute("SELECT min(id) FROM slr_program WHERE name = ?",
                                  (str(name),)).fetchone()[0]
@@ -184,6 +187,7 @@ class Catalog:
         (1, 0)
         """
         with self.db.transaction():
+            self.db.lock_named("program")
             removed = self.db.conn.execute("DELETE FROM slr_program WHERE name = ?",
                                            (str(name),)).rowcount
             if removed > 0:
@@ -222,6 +226,7 @@ class Catalog:
         [('b.', None)]
         """
         with self.db.transaction():
+            self.db.lock_named("program")
             self.db.conn.execute("DELETE FROM slr_program")
             now = float(self.db.clock.now())
             for source, filename in sources:
@@ -427,6 +432,7 @@ class Catalog:
         cols += [f"h{i + 1}{dialect.value}" for i in range(arity)]
         cols += [f"detected {real} NOT NULL"]
         with self.db.transaction():
+            self.db.lock_named("program")   # two processes installing the same rule
             self.db.conn.execute(f"CREATE TABLE IF NOT EXISTS {prov} ({', '.join(cols)})")
             if used:
                 self.db.conn.execute(
@@ -543,6 +549,8 @@ class BufferTables:
 
     def buffer_objects(self, buffer_id: int) -> dict[str, str]:
         """The triggers and indexes of one buffer: ``{name: sql}``."""
+        if self.db.dialect.name != "sqlite":
+            return {}   # no buffer objects elsewhere yet (install_buffer_objects)
         with self.db.lock:
             self.db.check_open()
             rows = self.db.conn.execute(
@@ -555,6 +563,9 @@ class BufferTables:
         """Make the triggers/indexes of ``buffer_id`` exactly ``statements`` (``{name: CREATE
         ...}``): objects whose SQL differs are re-created, missing ones created, others
         dropped. Returns True if anything changed."""
+        if statements and self.db.dialect.name != "sqlite":
+            raise SLRError("buffers (tBuffer, cBuffer, windows) are not available on "
+                           f"{self.db.dialect.name} stores yet: their triggers are SQLite's")
         with self.db.transaction():
             existing = self.buffer_objects(buffer_id)
             changed = False

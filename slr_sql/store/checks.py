@@ -16,7 +16,7 @@ from ..errors import EventRejected
 from ..terms import Atom, String, Struct, Var
 
 __all__ = ["BadEvent", "check_times", "rejection_reason", "format_event", "arguments_problem",
-           "text_problem", "shorten", "event_arguments"]
+           "text_problem", "shorten", "shown", "event_arguments"]
 
 
 class BadEvent(Exception):
@@ -33,6 +33,23 @@ def shorten(text: str, limit: int = 80) -> str:
     return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
 
 
+def shown(value: Any, limit: int = 80) -> str:
+    """``repr(value)`` for a message, cut to about ``limit`` characters, and never an error:
+    an integer of more digits than Python prints (10**5000) is described by its size.
+
+    >>> shown(10 ** 5000), shown(("p", 10 ** 5000))
+    ('an integer of about 5001 digits', 'a tuple holding an integer too long to print')
+    """
+    if type(value) is int and value.bit_length() > 14000:
+        return f"an integer of about {int(value.bit_length() * math.log10(2)) + 1} digits"
+    try:
+        return shorten(repr(value), limit)
+    except ValueError:  # an integer inside with more digits than Python converts
+        return f"a {type(value).__name__} holding an integer too long to print"
+    except Exception:  # noqa: BLE001 - a value whose repr fails says only its type
+        return f"a {type(value).__name__}"
+
+
 def arguments_problem(args: Any) -> str:
     """Why ``args`` is not an argument list: only a list or a tuple is one (a ``str`` would
     otherwise be split into one-character atoms).
@@ -40,8 +57,10 @@ def arguments_problem(args: Any) -> str:
     >>> arguments_problem("abc")
     "event arguments must be a list or tuple, not str 'abc'"
     """
-    shown = "None" if args is None else f"{type(args).__name__} {shorten(repr(args))}"
-    return f"event arguments must be a list or tuple, not {shown}"
+    described = shown(args)
+    what = "None" if args is None else described if described.startswith("an integer of") \
+        else f"{type(args).__name__} {described}"
+    return f"event arguments must be a list or tuple, not {what}"
 
 
 def event_arguments(name: Any, args: Any, start: Any, end: Any) -> tuple:
@@ -81,7 +100,7 @@ def _event_time(value: Any) -> float:
             return float(value)
         except OverflowError:
             raise BadEvent("event times must be finite") from None
-    raise BadEvent(f"event times must be numbers (got {shorten(repr(value))})")
+    raise BadEvent(f"event times must be numbers (got {shown(value)})")
 
 
 def check_times(start: Any, end: Any) -> tuple[float, float]:
@@ -156,6 +175,8 @@ def format_event(name: Any, args: Any, start: Any, end: Any) -> str:
     >>> format_event("seg", (Atom("a"), 1), 2.0, 2.0)
     'seg(a,1)^2.0'
     """
+    if not isinstance(name, str):  # not a name at all: the reason shows what it is
+        name, args = "event", ()
     try:
         if type(args) is not tuple and type(args) is not list:
             args = ()  # not an argument list: the reason shows it
@@ -166,5 +187,5 @@ def format_event(name: Any, args: Any, start: Any, end: Any) -> str:
         except Exception:  # an integer of more digits than Python prints
             head = f"{name}(...)"
     if start == end:
-        return f"{head}^{start!r}"
-    return f"{head}^[{start!r},{end!r}]"
+        return f"{head}^{shown(start)}"
+    return f"{head}^[{shown(start)},{shown(end)}]"

@@ -32,15 +32,15 @@ import weakref
 from contextlib import contextmanager
 from typing import Any, Callable, Iterable, Iterator
 
-from ..errors import SLRError, SLRTimeout
+from ..errors import SLRError, SLRStoreGone, SLRTimeout
 from .authorizer import READ_ONLY_VALUE_BYTES, SqlGuard, harden_connection
 from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
 from .dialect import SQLITE
 from .schema import migrate, migration_scripts
-from .sqltext import busy_error, split_sql_script
+from .sqltext import busy_error, split_sql_script, store_error
 
-__all__ = ["Database", "DatabaseError", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT", "run_sql_file",
-           "check_file"]
+__all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
+           "run_sql_file", "check_file"]
 
 # The base class of the errors the database raises while running a statement (a missing
 # table, a syntax error, a constraint, an interrupted statement...). Callers outside the
@@ -181,6 +181,14 @@ def _read_schema(path: str, header: bytes) -> tuple[list[tuple[str, str]], int]:
     if "not a database" in str(error):
         raise SLRError(f"{path}: not an SQLite database, or its header is damaged "
                        f"({error})")
+    code = getattr(error, "sqlite_errorcode", None)
+    if code is not None and code & 0xFF != sqlite3.SQLITE_CORRUPT:
+        # the file could not be read (a full disk refusing the -shm file, permissions...):
+        # that says nothing about its pages
+        reason = store_error(error, path, outcome="it was not opened")  # type: ignore[arg-type]
+        if type(reason) is not SLRError:
+            raise reason
+        raise SLRError(f"{path}: cannot read it ({error})")
     raise SLRError(f"{path}: the file is damaged ({error})")
 
 
@@ -243,6 +251,13 @@ class Database:
         self.open_streams: weakref.WeakSet = weakref.WeakSet()
         self.deadline: float | None = None  # of the compiled statement running now
         self.busy_timeout = busy_timeout
+        self._absolute: str | None = None  # set once open (check_identity)
+        self._identity: tuple = (None, None, None)
+        # the files this open creates: removed again should it fail (a store it could not
+        # create leaves no empty file, -wal or -shm behind)
+        created = [] if self.path is None or os.path.lexists(self.path) else \
+            [name for name in (self.path, self.path + "-wal", self.path + "-shm",
+                               self.path + "-journal") if not os.path.lexists(name)]
         try:
             self.conn = sqlite3.connect(self.path or ":memory:", check_same_thread=False,
                                         isolation_level=None, timeout=busy_timeout,
@@ -275,14 +290,24 @@ class Database:
                 self.checkpointer = WalCheckpointer(self.path, checkpoint_interval)
         except BaseException as exc:
             conn.close()
-            if isinstance(exc, sqlite3.OperationalError):
-                busy = busy_error(exc, self.path, busy_timeout)
-                if busy is not None:
-                    raise busy from None
+            for name in created:
+                try:
+                    os.remove(name)
+                except OSError:
+                    pass  # not created after all, or already gone
             if isinstance(exc, sqlite3.Error):
+                outcome = "it was not created, and nothing was left behind" if created else \
+                    "it was not opened"
+                reason = store_error(exc, self.path, busy_timeout, outcome)
+                if type(reason) is not SLRError:  # busy, full: a condition that may pass
+                    raise reason from None
                 raise SLRError(f"{self.path or ':memory:'}: cannot open the store "
                                f"({exc})") from None
             raise
+        # which file is open (device, inode), to notice it deleted or replaced before a
+        # commit is acknowledged; the path made absolute now (a later chdir changes nothing)
+        self._absolute = None if self.path is None else os.path.abspath(self.path)
+        self._identity = (None, None, None) if self.path is None else self._identities()
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -317,6 +342,15 @@ class Database:
         with self.lock:
             return {row[0] for row in self.conn.execute(
                 "SELECT name FROM sqlite_master WHERE type = 'table'")}
+
+    def set_write_groups(self, groups: Iterable[Iterable[tuple[str, int]]]) -> None:
+        """Writers take turns on SQLite already (``BEGIN IMMEDIATE``): nothing to keep."""
+
+    def lock_for_write(self, types: Iterable[tuple[str, int]]) -> None:
+        """Nothing to wait for: this connection holds the database's one write lock."""
+
+    def lock_named(self, name: str) -> None:
+        """Nothing to wait for (see :meth:`lock_for_write`)."""
 
     def triggers(self, table: str | None = None) -> set[str]:
         """Names of the triggers (on ``table`` only, when given), temporary ones included.
@@ -365,6 +399,10 @@ class Database:
             self.closed = True
             if self.checkpointer is not None:
                 self.checkpointer.stop()
+            if self._absolute is not None:
+                now = self._identities()
+                if now[0] != self._identity[0]:  # replaced: leave the new file's side alone
+                    self._remove_own_side_files(now)
             try:
                 if self.tx_depth:
                     self.conn.execute("ROLLBACK")
@@ -378,9 +416,75 @@ class Database:
             finally:
                 self.conn.close()
 
+    def open_reader(self) -> "ReadConnection | None":
+        """A :class:`ReadConnection` to this store's file (None in memory: no other
+        connection can reach an in-memory database)."""
+        self.check_open()
+        return None if self.path is None else ReadConnection(self.path, self.busy_timeout)
+
     def check_open(self) -> None:
         if self.closed:
             raise SLRError("the event store is closed")
+
+    def _identities(self, shm: bool = True) -> tuple:
+        """``(device, inode)`` of the file, its write-ahead log and (unless not ``shm``) its
+        shared-memory file (None where missing)."""
+        found = []
+        names = (self._absolute, f"{self._absolute}-wal", f"{self._absolute}-shm")
+        for name in names if shm else names[:2]:
+            try:
+                info = os.stat(name)
+                found.append((info.st_dev, info.st_ino))
+            except OSError:
+                found.append(None)
+        return tuple(found)
+
+    def check_identity(self) -> None:
+        """Raise :class:`SLRStoreGone` naming the path if the file open is no longer the one
+        at the path (deleted, moved, replaced), or its write-ahead log was deleted (another
+        process would start a second one): what is written now would be lost. A file
+        database only; a few microseconds (``stat`` calls).
+
+        When the file was replaced, this connection's ``-wal`` and ``-shm`` still at the path
+        are removed at once: left there, SQLite would apply the old store's log to the new
+        file when it is next opened.
+
+        >>> import os, tempfile
+        >>> path = os.path.join(tempfile.mkdtemp(), "robot.db"); db = Database(path)
+        >>> db.check_identity(); os.remove(path); db.check_identity()
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRStoreGone: ...robot.db: the store file was deleted or replaced while open ...
+        """
+        if self._absolute is None:
+            return
+        now = self._identities(shm=False)
+        main, wal, shm = self._identity
+        if now[0] == main and now[1] == wal:
+            return
+        if now[0] != main:
+            self._remove_own_side_files(self._identities())
+            what = "the store file was deleted or replaced"
+        elif wal is not None and now[1] != wal:
+            what = "the store's write-ahead log (-wal) was deleted or replaced"
+        else:  # a log that appeared since the open: that is its identity from now on
+            self._identity = (main, now[1], shm if shm is not None else self._identities()[2])
+            return
+        raise SLRStoreGone(f"{self.path}: {what} while open (by another program?); nothing of "
+                           f"this call was stored. Restore the file, or close this knowledge "
+                           f"base and open the path again")
+
+    def _remove_own_side_files(self, now: tuple) -> None:
+        """Remove the ``-wal`` and ``-shm`` at the path that are this connection's own (same
+        inode as when opened) once the file beside them is another one."""
+        for suffix, mine, there in (("-wal", self._identity[1], now[1]),
+                                    ("-shm", self._identity[2], now[2])):
+            if mine is not None and there == mine:
+                try:
+                    os.remove(f"{self._absolute}{suffix}")
+                except OSError:
+                    pass  # gone already
+        self._identity = (self._identity[0], None, None)
 
     # ------------------------------------------------------------------ transactions
 
@@ -423,6 +527,8 @@ class Database:
                 raise
             self.tx_depth = depth
             try:
+                if depth == 0:
+                    self.check_identity()  # before anything is acknowledged
                 conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
             except BaseException:
                 if depth == 0 and conn.in_transaction:
@@ -674,6 +780,54 @@ def _read_only_error(exc: sqlite3.DatabaseError, guard: SqlGuard) -> Exception:
         return SLRError(f"sql: a read-only statement may make or read strings and blobs of at "
                         f"most {READ_ONLY_VALUE_BYTES >> 20} MiB ({text})")
     return exc
+
+
+class ReadConnection:
+    """A connection of its own to a store's file, for a reader that must not queue behind the
+    store's connection: its statements never wait for the store's lock, which a writer holds
+    for a whole transaction, fsync included (WAL lets a reader and the writer work at the same
+    time; each statement sees what was committed when it started). ``query_only``: it cannot
+    write. Opened with :meth:`Database.open_reader`; an in-memory store has none.
+
+    >>> import os, tempfile
+    >>> path = os.path.join(tempfile.mkdtemp(), "r.db"); db = Database(path)
+    >>> reader = db.open_reader(); reader.execute("SELECT count(*) FROM slr_program")
+    [(0,)]
+    >>> reader.close(); db.close()
+    """
+
+    def __init__(self, path: str, busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
+                 cache_kib: int = 2048):
+        self.path = path
+        self.busy_timeout = busy_timeout
+        self.lock = threading.Lock()
+        self.closed = False
+        try:
+            self.conn = sqlite3.connect(path, check_same_thread=False, isolation_level=None,
+                                        timeout=busy_timeout, cached_statements=64)
+            harden_connection(self.conn)
+            self.conn.execute("PRAGMA query_only=ON")
+            self.conn.execute(f"PRAGMA cache_size=-{int(cache_kib)}")
+        except sqlite3.Error as exc:
+            raise SLRError(f"{path}: cannot open a reading connection ({exc})") from None
+
+    def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
+        """Run one reading statement and return its rows."""
+        with self.lock:
+            if self.closed:
+                raise SLRError("the event store is closed")
+            try:
+                return self.conn.execute(sql, tuple(params)).fetchall()
+            except sqlite3.OperationalError as exc:
+                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+
+    def close(self) -> None:
+        """Close the connection (idempotent)."""
+        with self.lock:
+            if not self.closed:
+                self.closed = True
+                self.conn.close()
+
 
 
 def run_sql_file(path: str | os.PathLike, query: str,

@@ -25,9 +25,10 @@ from __future__ import annotations
 
 import json
 import re
-from typing import Any, Callable, Protocol
+from collections.abc import Callable
+from typing import Any, Protocol
 
-__all__ = ["Dialect", "SQLiteDialect", "PostgresDialect", "SQLITE", "POSTGRES"]
+__all__ = ["POSTGRES", "SQLITE", "Dialect", "PostgresDialect", "SQLiteDialect"]
 
 # A stored text that reads as a number (PostgreSQL columns): integers, and Python's float
 # texts (repr: always a '.', an exponent, or inf).
@@ -65,6 +66,7 @@ class SQLiteDialect:
     value = ""               # an untyped column keeps INTEGER / REAL / TEXT as given
     index_hints = True       # INDEXED BY: lookups name the index they must use
     without_rowid = " WITHOUT ROWID"
+    pages_streams = False    # a statement's rows are read as needed (sqlite3 steps it)
     to_column: Callable[[Any], Any] | None = None     # identity: no conversion at all
     from_column: Callable[[Any], Any] | None = None
 
@@ -74,6 +76,10 @@ class SQLiteDialect:
 
     def statement(self, sql: str) -> str:
         return sql
+
+    def scalar(self, name: str) -> str:
+        """The two-argument ``max``/``min`` of values (not the aggregates)."""
+        return name
 
     def json_array(self, items: str) -> str:
         return f"json_array({items})"
@@ -113,6 +119,7 @@ class PostgresDialect:
     value = " TEXT"
     index_hints = False      # the planner chooses (no INDEXED BY)
     without_rowid = ""
+    pages_streams = True     # psycopg reads a whole result: lookups read growing pages
 
     def __init__(self) -> None:
         self._printed: dict[str, str] = {}
@@ -130,6 +137,9 @@ class PostgresDialect:
     true = "TRUE"
     false = "FALSE"
     python_functions = False
+
+    def scalar(self, name: str) -> str:
+        return {"max": "GREATEST", "min": "LEAST"}.get(name, name)
 
     def json_array(self, items: str) -> str:
         return f"json_build_array({items})::text"

@@ -16,7 +16,7 @@ from typing import Any, Iterable, Iterator
 from ..encoding import Unencodable, encode, encode_column
 from ..errors import EventRejected
 from .checks import BadEvent, arguments_problem, check_times, format_event, \
-    rejection_reason, shorten, text_problem
+    rejection_reason, shown, text_problem
 from .connection import Database
 from .tables import EventTables, EventType
 
@@ -123,7 +123,10 @@ class EventWriter:
             return errors
         with self.db.transaction():
             arrival = float(self.db.clock.now())
-            self.record_now(arrival)  # buffers (issue 4): "now" for the buffer triggers
+            if self.db.dialect.to_column is None:
+                # buffers (issue 4): "now" for the buffer triggers (SQLite's only: on a
+                # server every writer would wait for the one row's lock)
+                self.record_now(arrival)
             for base, chunk in _chunks(events):
                 if not self._insert_uniform(chunk, arrival, ends):
                     self._insert_each(chunk, base, arrival, atomic, errors, ends)
@@ -211,7 +214,7 @@ class EventWriter:
                     name, args, start, end = event
                 except (TypeError, ValueError):
                     raise BadEvent(f"event #{index} is not a (name, args, start, end) "
-                                   f"tuple: {shorten(repr(event))}") from None
+                                   f"tuple: {shown(event)}") from None
                 if type(args) is not tuple and type(args) is not list:
                     raise BadEvent(arguments_problem(args))
                 arity = len(args)
@@ -248,7 +251,7 @@ class EventWriter:
 
     def _type_for_new_event(self, name: Any, arity: int) -> EventType:
         if not isinstance(name, str):
-            raise BadEvent(f"event name must be an atom, not {shorten(repr(name))}")
+            raise BadEvent(f"event name must be an atom, not {shown(name)}")
         name = str(name)
         problem = text_problem(name)
         if problem:

@@ -146,6 +146,9 @@ class EventReader:
         If a transaction suspended the statement between two batches (or a rollback aborted
         it), the rest is read with ``resume_sql``: the rows after the last one read."""
         db = self.db
+        if db.dialect.pages_streams:
+            yield from self._pages(sql, params, arity, kind, resume_sql)
+            return
         with db.lock:
             db.check_open()
             statement = _OpenStatement(db.conn.execute(sql, params))
@@ -195,6 +198,32 @@ class EventReader:
                     statement.suspend()
                 except sqlite3.ProgrammingError:  # the store was closed meanwhile
                     pass
+
+    def _pages(self, sql: str, params: list, arity: int, kind: str,
+               resume_sql: str) -> Iterator[Row]:
+        """:meth:`_stream` on a server, whose driver reads a statement's whole result at
+        once: growing pages (``LIMIT``), each after the last row of the one before."""
+        db = self.db
+        key = _RESUME[kind][1]
+        dec = self.decode
+        batch = 8
+        last = None
+        while True:
+            with db.lock:
+                db.check_open()
+                if last is None:
+                    rows = db.conn.execute(f"{sql} LIMIT {batch}", params).fetchall()
+                else:
+                    rows = db.conn.execute(f"{resume_sql} LIMIT {batch}", params + list(
+                        key(last[arity], last[arity + 1], last[arity + 2]))).fetchall()
+            for row in rows:
+                yield (tuple([dec(v) for v in row[:arity]]), row[arity], row[arity + 1],
+                       row[arity + 2])
+            if len(rows) < batch:
+                return
+            last = rows[-1]
+            if batch < 2048:
+                batch *= 4
 
     def _query(self, name: str, arity: int, bound: dict[int, Any] | None, kind: str,
                flags: tuple[bool, ...], times: list, robot: str | None = None
@@ -440,12 +469,15 @@ class EventReader:
             if sql is None:
                 where = " AND ".join(f"arg{p + 1} = ?" for p in positions)
                 cols = event_type.columns
-                sql = (f"SELECT 0, * FROM (SELECT {cols} FROM {event_type.quoted} "
-                       f"INDEXED BY {event_type.index_arg1_end} WHERE {where} AND t_end <= ? "
-                       f"ORDER BY t_end DESC, t_start DESC, seq DESC LIMIT 1) "
-                       f"UNION ALL SELECT 1, * FROM (SELECT {cols} FROM {event_type.quoted} "
-                       f"INDEXED BY {event_type.index_arg1_start} WHERE {where} AND t_start >= ? "
-                       f"ORDER BY t_start, seq DESC LIMIT 1)")
+                hints = self.db.dialect.index_hints
+                by_end = f" INDEXED BY {event_type.index_arg1_end}" if hints else ""
+                by_start = f" INDEXED BY {event_type.index_arg1_start}" if hints else ""
+                sql = (f"SELECT 0, * FROM (SELECT {cols} FROM {event_type.quoted}{by_end} "
+                       f"WHERE {where} AND t_end <= ? "
+                       f"ORDER BY t_end DESC, t_start DESC, seq DESC LIMIT 1) AS before_t "
+                       f"UNION ALL SELECT 1, * FROM (SELECT {cols} FROM {event_type.quoted}"
+                       f"{by_start} WHERE {where} AND t_start >= ? "
+                       f"ORDER BY t_start, seq DESC LIMIT 1) AS after_t")
                 self.sql_cache[key] = sql
             rows = self.db.conn.execute(sql, values + [float(t)] + values + [float(t)]).fetchall()
         out: list = [None, None]
@@ -478,7 +510,8 @@ class EventReader:
                 return [], top
             rows = conn.execute(f"SELECT DISTINCT arg1, arg2 FROM {event_type.quoted} "
                                 f"WHERE seq > ? AND seq <= ?", (after_seq, top)).fetchall()
-        return [(decode(a), decode(b)) for a, b in rows], top
+        dec = self.decode
+        return [(dec(a), dec(b)) for a, b in rows], top
 
     def max_seq(self, name: str, arity: int) -> int:
         """The greatest arrival sequence number stored for name/arity (0 when none): it moves
@@ -495,3 +528,53 @@ class EventReader:
                 return 0
             return self.db.conn.execute(
                 f"SELECT max(seq) FROM {event_type.quoted}").fetchone()[0] or 0
+
+    def raw_rows(self, name: str, arity: int, *, after_seq: int | None = None,
+                 end_from: float | None = None, end_to: float | None = None,
+                 limit: int | None = None, after_key: tuple | None = None) -> list[tuple]:
+        """Stored rows of name/arity *as stored* (column values undecoded, see
+        :mod:`slr_sql.encoding`) with ``t_start, t_end, arrival, seq``: those after arrival
+        sequence ``after_seq`` in arrival order (new events, for live views), else those with
+        ``end_from <= end <= end_to`` in store order (exports), after the row whose
+        ``(end, start, seq)`` is ``after_key`` (the next page); at most ``limit``.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a", [1, 2]), 1, 1)])
+        []
+        >>> [row[:3] for row in s.raw_rows("p", 2, after_seq=0)]
+        [('a', '[1,2]', 1.0)]
+        """
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return []
+            columns = ", ".join([f"arg{i + 1}" for i in range(arity)]
+                                + ["t_start", "t_end", "arrival", "seq"])
+            params: list = []
+            if after_seq is not None:
+                where, order = "seq > ?", "seq"
+                params.append(int(after_seq))
+            else:
+                conditions = []
+                if end_from is not None:
+                    conditions.append("t_end >= ?")
+                    params.append(float(end_from))
+                if end_to is not None:
+                    conditions.append("t_end <= ?")
+                    params.append(float(end_to))
+                if after_key is not None:
+                    conditions.append("(t_end, t_start, seq) > (?, ?, ?)")
+                    params += [float(after_key[0]), float(after_key[1]), int(after_key[2])]
+                where = " AND ".join(conditions) or "1"
+                order = "t_end, t_start, seq"
+            sql = f"SELECT {columns} FROM {event_type.quoted} WHERE {where} ORDER BY {order}"
+            if limit is not None:
+                sql += " LIMIT ?"
+                params.append(int(limit))
+            rows = self.db.conn.execute(sql, params).fetchall()
+        from_column = self.db.dialect.from_column
+        if from_column is not None:   # a server's typed columns: as SQLite stores them
+            rows = [tuple([from_column(v) for v in row[:arity]]) + tuple(row[arity:])
+                    for row in rows]
+        return rows

@@ -23,8 +23,10 @@ import sqlite3
 import threading
 import time
 import weakref
-from contextlib import contextmanager
-from typing import Any, Callable, Iterable, Iterator
+import zlib
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager, suppress
+from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
 from ..errors import SLRBusy, SLRError, SLRTimeout
@@ -116,9 +118,9 @@ def _first_line(exc: BaseException) -> str:
 class PgCursor:
     """The part of a DB-API cursor the store's parts use, over a psycopg cursor."""
 
-    __slots__ = ("_cursor", "_owner", "rowcount", "description", "__weakref__")
+    __slots__ = ("__weakref__", "_cursor", "_owner", "description", "rowcount")
 
-    def __init__(self, cursor: Any, owner: "PgConnection"):
+    def __init__(self, cursor: Any, owner: PgConnection):
         self._cursor = cursor
         self._owner = owner
         self.rowcount = cursor.rowcount
@@ -178,10 +180,15 @@ class PgConnection:
         return PgCursor(cursor, self)
 
     def close(self) -> None:
-        try:
+        # closing a connection the server already dropped: nothing is left to close
+        with suppress(_psycopg().Error):
             self.raw.close()
-        except Exception:  # pragma: no cover - closing a broken connection
-            pass
+
+    def rollback(self) -> None:
+        """ROLLBACK, if the connection still works (a dropped connection's transaction is
+        rolled back by the server)."""
+        with suppress(_psycopg().Error):
+            self.raw.execute("ROLLBACK")
 
 
 class PgDatabase:
@@ -208,16 +215,20 @@ class PgDatabase:
         self.deadline: float | None = None
         self.busy_timeout = busy_timeout
         self.notify_channel = f"slr_{schema}"
+        self.write_groups: dict[tuple[str, int], int] = {}
         try:
             raw = psycopg.connect(conninfo, autocommit=True)
         except psycopg.Error as exc:
             raise SLRError(f"{self.path}: cannot connect ({_first_line(exc)})") from None
         self.conn = PgConnection(raw, self.path, busy_timeout)
         try:
-            raw.execute(f"SET lock_timeout = {int(busy_timeout * 1000)}")
-            raw.execute("SET TIME ZONE 'UTC'")
-            migrate_postgres(self, schema, adopt)
-            raw.execute(f"SET search_path = {quote_identifier(schema)}")
+            try:
+                raw.execute(f"SET lock_timeout = {int(busy_timeout * 1000)}")
+                raw.execute("SET TIME ZONE 'UTC'")
+                migrate_postgres(self, schema, adopt)
+                raw.execute(f"SET search_path = {quote_identifier(schema)}")
+            except psycopg.Error as exc:
+                raise _error(exc, self.path, busy_timeout) from None
         except BaseException:
             self.conn.close()
             raise
@@ -246,6 +257,37 @@ class PgDatabase:
         with self.lock:
             return {row[0] for row in self.conn.execute(
                 "SELECT tablename FROM pg_tables WHERE schemaname = current_schema()")}
+
+    def set_write_groups(self, groups: Iterable[Iterable[tuple[str, int]]]) -> None:
+        """Each type of a group gets the group's advisory lock key: a number derived from
+        the schema and the group's least type, so every process computes the same one."""
+        keys: dict[tuple[str, int], int] = {}
+        for group in groups:
+            members = sorted(group)
+            if not members:
+                continue
+            first = f"{self.schema}\x00{members[0][0]}/{members[0][1]}".encode()
+            key = zlib.crc32(first) | (zlib.adler32(first) << 32)
+            key = key - (1 << 64) if key >= 1 << 63 else key
+            for member in members:
+                keys[member] = key
+        self.write_groups = keys
+
+    def lock_for_write(self, types: Iterable[tuple[str, int]]) -> None:
+        """``pg_advisory_xact_lock`` of the groups of ``types``, in key order (no deadlock
+        between two writers of several groups); held until the transaction ends."""
+        groups = self.write_groups
+        if not groups:
+            return
+        keys = sorted({groups[t] for t in types if t in groups})
+        for key in keys:
+            self.conn.execute("SELECT pg_advisory_xact_lock(?)", (key,))
+
+    def lock_named(self, name: str) -> None:
+        """Inside a transaction: take the advisory lock ``name`` of this store's schema
+        until it ends (writers of the program texts take turns: their ids are the next
+        free number)."""
+        self.conn.execute("SELECT pg_advisory_xact_lock(hashtext(?))", (f"{self.schema}:{name}",))
 
     def triggers(self, table: str | None = None) -> set[str]:
         """Names of the triggers of the store's schema (on ``table`` only, when given)."""
@@ -276,10 +318,7 @@ class PgDatabase:
             self.closed = True
             try:
                 if self.tx_depth:
-                    try:
-                        self.conn.raw.execute("ROLLBACK")
-                    except Exception:
-                        pass
+                    self.conn.rollback()
                     self.tx_depth = 0
                 self.suspend_streams()
             finally:
@@ -292,7 +331,7 @@ class PgDatabase:
     # ------------------------------------------------------------------ transactions
 
     @contextmanager
-    def transaction(self) -> Iterator["PgDatabase"]:
+    def transaction(self) -> Iterator[PgDatabase]:
         with self.lock:
             self.check_open()
             depth = self.tx_depth
@@ -309,13 +348,10 @@ class PgDatabase:
                 self.tx_depth = depth
                 try:
                     if depth == 0:
-                        conn.raw.execute("ROLLBACK")
+                        conn.rollback()
                     else:
-                        conn.raw.execute(f"ROLLBACK TO slr_sp{depth}")
-                        conn.raw.execute(f"RELEASE slr_sp{depth}")
-                except Exception:
-                    if depth:
-                        raise
+                        conn.execute(f"ROLLBACK TO slr_sp{depth}")
+                        conn.execute(f"RELEASE slr_sp{depth}")
                 finally:
                     self._rolled_back()
                 raise
@@ -324,10 +360,7 @@ class PgDatabase:
                 conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
             except BaseException:
                 if depth == 0:
-                    try:
-                        conn.raw.execute("ROLLBACK")
-                    except Exception:
-                        pass
+                    conn.rollback()
                 self._rolled_back()
                 raise
 
@@ -423,7 +456,7 @@ class PgDatabase:
                     self.conn.execute("SET LOCAL statement_timeout = 0")
             except BaseException:
                 if own:
-                    self.conn.raw.execute("ROLLBACK")
+                    self.conn.rollback()
                 raise
             if own:
                 self.conn.execute("COMMIT")
@@ -481,7 +514,7 @@ def migrate_postgres(db: Any, schema: str, adopt: bool = False) -> None:
                             (number, filename))
             raw.execute("COMMIT")
         except BaseException:
-            raw.execute("ROLLBACK")
+            db.conn.rollback()
             raise
     except psycopg.Error as exc:
         raise _error(exc, db.path, db.busy_timeout) from None

@@ -14,7 +14,7 @@ from typing import Any
 from ..errors import SLRBusy, SLRError, SLRStoreFull
 
 __all__ = ["quote_identifier", "sql_literal", "split_sql_script", "SAFE_IDENTIFIER",
-           "RESERVED_PREFIXES", "SQL_KEYWORDS", "busy_error", "store_error"]
+           "RESERVED_PREFIXES", "SQL_KEYWORDS", "busy_error", "store_error", "disk_is_full"]
 
 SAFE_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 RESERVED_PREFIXES = ("slr_", "sqlite_")
@@ -61,14 +61,30 @@ def _primary_code(exc: BaseException) -> int | None:
     return None if code is None else code & 0xFF
 
 
-def store_error(exc: BaseException, path: str | None, timeout: float | None = None) -> SLRError:
+def disk_is_full(path: str | None) -> bool:
+    """Is the file system holding ``path`` out of space (less than 64 KiB left for this
+    user)? Asked after an I/O error, whose code alone does not say (a failed ``-shm`` or
+    ``-wal`` extension is ``SQLITE_IOERR``)."""
+    if path is None:
+        return False
+    import os
+
+    try:
+        info = os.statvfs(os.path.dirname(os.path.abspath(path)))
+    except OSError:
+        return False
+    return info.f_bavail * info.f_frsize < 65536
+
+
+def store_error(exc: BaseException, path: str | None, timeout: float | None = None,
+                outcome: str = "nothing of this call was written") -> SLRError:
     """The :class:`SLRError` in words for a database error ``exc`` on the store ``path``:
     :class:`SLRBusy` for a lock held too long, :class:`SLRStoreFull` for a full disk (or
     size limit), "damaged" only when SQLite found the file corrupt or not a database, and
-    otherwise what failed, without guessing.
+    otherwise what failed, without guessing. ``outcome`` says what became of the call.
 
     >>> print(store_error(sqlite3.OperationalError("database or disk is full"), "robot.db"))
-    robot.db: the disk is full (or the store reached its size limit); nothing of this call was written: free space and retry
+    robot.db: the disk is full (or the store reached its size limit; database or disk is full); nothing of this call was written: free space and retry
     >>> print(store_error(sqlite3.OperationalError("datatype mismatch"), "robot.db"))
     robot.db: the store failed (datatype mismatch)
     """
@@ -78,9 +94,10 @@ def store_error(exc: BaseException, path: str | None, timeout: float | None = No
         return busy
     code = _primary_code(exc)
     text = str(exc)
-    if code == sqlite3.SQLITE_FULL or (code is None and "disk is full" in text):
-        return SLRStoreFull(f"{where}: the disk is full (or the store reached its size limit); "
-                            f"nothing of this call was written: free space and retry")
+    if code == sqlite3.SQLITE_FULL or (code is None and "disk is full" in text) or \
+            (code in (sqlite3.SQLITE_IOERR, sqlite3.SQLITE_CANTOPEN) and disk_is_full(path)):
+        return SLRStoreFull(f"{where}: the disk is full (or the store reached its size limit; "
+                            f"{text}); {outcome}: free space and retry")
     if code in (sqlite3.SQLITE_CORRUPT, sqlite3.SQLITE_NOTADB):
         return SLRError(f"{where}: the file is damaged ({text}); restore it from a copy")
     if code == sqlite3.SQLITE_IOERR:

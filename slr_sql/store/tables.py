@@ -131,6 +131,10 @@ class EventTables:
     def register(self, name: str, arity: int, declared: bool) -> EventType:
         """Create the table of a new type. Must run inside a write transaction."""
         existing = self.lookup(name, arity)
+        if existing is None:
+            # on a server, another process may be creating it now: take turns, look again
+            self.db.lock_named("types")
+            existing = self.lookup(name, arity)
         if existing is not None:
             if declared and not existing.declared:
                 self.db.conn.execute("UPDATE slr_event_types SET declared = 1 "

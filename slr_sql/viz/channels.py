@@ -1,0 +1,249 @@
+"""The channels of a store, shared by the live Foxglove view and MCAP export.
+
+An event row as stored (:meth:`slr_sql.store.EventStore.raw_rows`) becomes one JSON message
+without decoding its terms: each argument is written as it appears inside a stored list or
+compound (:func:`slr_sql.encoding.column_json`) -- numbers as numbers, atoms as strings,
+lists as arrays, compounds as ``{"name": [args]}``, message terms as objects of their
+fields, strings as ``{"$string": text}`` -- so that a message reads naturally in Foxglove's
+panels (``/seg/2.arg2[0]`` is a number to plot) *and* gives the exact term back
+(:func:`event_from_message`), which is how ``slr ros import`` reads an export.
+
+>>> ch = event_channel("seg", 2)
+>>> ch.topic, ch.schema_name
+('/seg/2', 'slr.seg/2')
+>>> ch.message(("cup1", "[0.4,0.1]", 1.5, 2.0, 2.5, 7))
+b'{"arg1":"cup1","arg2":[0.4,0.1],"start":1.5,"end":2.0,"arrival":2.5}'
+>>> event_from_message(ch.name, ch.arity, b'{"arg1":"cup1","arg2":[0.4,0.1],"start":1.5,"end":2.0,"arrival":2.5}')
+('seg', (Atom('cup1'), Struct('.', (0.4, Struct('.', (0.1, Atom('[]')))))), 1.5, 2.0)
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..encoding import column_json, decode, decode_json
+from ..terms import Atom, format_term
+
+__all__ = ["EventChannel", "event_channel", "event_from_message", "TRANSFORMS_SCHEMA",
+           "TRANSFORMS_SCHEMA_NAME", "MARKS_TOPIC", "MARKS_SCHEMA", "transform_message",
+           "mark_message", "time_ns", "TF_TOPICS", "METADATA_EVENT", "METADATA_ARITY",
+           "JSON_SCHEMA_ENCODING"]
+
+METADATA_EVENT = "slr_event"       # channel metadata: the event name
+METADATA_ARITY = "slr_arity"       # channel metadata: its arity (a decimal string)
+JSON_SCHEMA_ENCODING = "jsonschema"
+TRANSFORMS_SCHEMA_NAME = "foxglove.FrameTransforms"
+TF_TOPICS = {("tf", 3): "/tf", ("tf_static", 3): "/tf_static"}
+MARKS_TOPIC = "/slr/completeness"
+
+_JSON_STARTS = frozenset('[{"')
+# the JSON text of atoms seen (frame and object names repeat): bounded, shared, only grows
+# with distinct names; a str key is the stored column value (atoms are stored as themselves)
+_TEXTS: dict[str, str] = {}
+_INF, _NEG_INF = math.inf, -math.inf
+_float_repr = float.__repr__
+_int_str = int.__repr__
+
+_VEC = {"type": "object", "properties": {k: {"type": "number"} for k in "xyz"}}
+TRANSFORMS_SCHEMA: dict = {
+    "title": TRANSFORMS_SCHEMA_NAME,
+    "description": "An array of FrameTransform messages",
+    "type": "object",
+    "properties": {"transforms": {"type": "array", "items": {
+        "title": "foxglove.FrameTransform", "type": "object",
+        "properties": {
+            "timestamp": {"type": "object", "title": "time", "properties": {
+                "sec": {"type": "integer", "minimum": 0},
+                "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999}}},
+            "parent_frame_id": {"type": "string"},
+            "child_frame_id": {"type": "string"},
+            "translation": _VEC,
+            "rotation": {"type": "object",
+                         "properties": {k: {"type": "number"} for k in "xyzw"}}}}}}}
+
+MARKS_SCHEMA: dict = {
+    "title": "slr.completeness",
+    "description": "A completeness mark: the history of `type` is complete up to `until`",
+    "type": "object",
+    "properties": {"type": {"type": "string"}, "until": {"type": "number"},
+                   "source": {"type": "string"}}}
+
+
+def time_ns(t: float) -> int:
+    """Seconds as the unsigned nanoseconds of MCAP and Foxglove (negative times clamp to 0).
+
+    >>> time_ns(1.5), time_ns(-3.0)
+    (1500000000, 0)
+    """
+    if not t > 0.0:
+        return 0
+    return min(int(round(t * 1e9)), 2 ** 64 - 1)
+
+
+def _kind_schema(value: Any) -> dict:
+    """The JSON schema of one stored column value (from a sample row)."""
+    if type(value) is int or type(value) is float:
+        return {"type": "number"}
+    if type(value) is str:
+        c = value[:1]
+        if c == "[":
+            return {"type": "array"}
+        if c == "{":
+            return {"type": "object"} if not value.startswith('{"$atom"') else {"type": "string"}
+        if c == '"':
+            return {"type": "object", "description": "a string, as {\"$string\": text}"}
+        return {"type": "string"}
+    return {}
+
+
+@dataclass
+class EventChannel:
+    """The channel of one event type name/arity."""
+
+    name: str
+    arity: int
+    topic: str
+    schema: dict
+    metadata: dict = field(default_factory=dict)
+    _keys: list | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def schema_name(self) -> str:
+        return f"slr.{self.name}/{self.arity}"
+
+    def message(self, row: tuple) -> bytes:
+        """The JSON message of a stored row ``(arg1..argN, start, end, arrival, seq)``."""
+        n = self.arity
+        keys = self._keys
+        if keys is None:
+            keys = self._keys = [('{"arg1":' if i == 0 else f',"arg{i + 1}":') for i in range(n)]
+        parts = []
+        texts = _TEXTS
+        for i in range(n):
+            parts.append(keys[i])
+            value = row[i]
+            tv = type(value)
+            if tv is str:
+                if value[:1] in "[{":
+                    if not value.startswith('{"$atom":'):
+                        parts.append(value)   # a list or compound: JSON already
+                        continue
+                text = texts.get(value)   # atoms repeat (names, frames): each once
+                if text is None:
+                    text = column_json(value)
+                    if len(texts) < 65_536:
+                        texts[value] = text
+                parts.append(text)
+            elif tv is float and _NEG_INF < value < _INF:
+                parts.append(_float_repr(value))
+            elif tv is int:
+                parts.append(_int_str(value))
+            else:
+                parts.append(column_json(value))
+        parts.append(('{"start":' if not n else ',"start":') + _float_repr(float(row[n]))
+                     + ',"end":' + _float_repr(float(row[n + 1])) + ',"arrival":'
+                     + _float_repr(float(row[n + 2])) + "}")
+        return "".join(parts).encode()
+
+
+def event_channel(name: str, arity: int, sample: tuple | None = None) -> EventChannel:
+    """The channel of name/arity; ``sample`` (a stored row) gives the arguments' kinds."""
+    props: dict = {}
+    for i in range(arity):
+        props[f"arg{i + 1}"] = _kind_schema(sample[i]) if sample is not None else {}
+    for key, text in (("start", "start time (s)"), ("end", "end time (s): the log time"),
+                      ("arrival", "when the store received it (s): the publish time")):
+        props[key] = {"type": "number", "description": text}
+    schema = {"title": f"slr.{name}/{arity}", "type": "object", "properties": props,
+              "required": list(props)}
+    return EventChannel(name, arity, f"/{name}/{arity}", schema,
+                        {METADATA_EVENT: name, METADATA_ARITY: str(arity)})
+
+
+def event_from_message(name: str, arity: int, data: bytes | str) -> tuple:
+    """The event ``(name, args, start, end)`` of a message :meth:`EventChannel.message` wrote."""
+    obj = json.loads(data)
+    args = tuple(decode_json(obj[f"arg{i + 1}"]) for i in range(arity))
+    return (name, args, float(obj["start"]), float(obj["end"]))
+
+
+def _frame(value: Any) -> str:
+    term = decode(value)
+    return str(term) if type(term) is Atom else format_term(term)
+
+
+def transform_message(rows: list) -> bytes | None:
+    """``foxglove.FrameTransforms`` of stored tf / tf_static rows (``(parent, child, pose,
+    start, end, arrival, seq)``); rows whose third argument is not a pose are left out
+    (None when none is left).
+
+    >>> transform_message([("map", "base", '{"pose":[[1.0,2.0,3.0],[0.0,0.0,0.0,1.0]]}', 2.5, 2.5, 3.0, 1)])
+    b'{"transforms":[{"timestamp":{"sec":2,"nsec":500000000},"parent_frame_id":"map","child_frame_id":"base","translation":{"x":1.0,"y":2.0,"z":3.0},"rotation":{"x":0.0,"y":0.0,"z":0.0,"w":1.0}}]}'
+    """
+    if len(rows) == 1:
+        fast = _one_transform(rows[0])
+        if fast is not None:
+            return fast
+    out = []
+    for row in rows:
+        try:
+            pose = json.loads(row[2]) if type(row[2]) is str else None
+            (x, y, z), (qx, qy, qz, qw) = pose["pose"]
+            values = [float(v) for v in (x, y, z, qx, qy, qz, qw)]
+        except (TypeError, ValueError, KeyError, AttributeError):
+            continue
+        if not all(math.isfinite(v) for v in values):
+            continue
+        ns = time_ns(row[4])
+        out.append({"timestamp": {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000},
+                    "parent_frame_id": _frame(row[0]), "child_frame_id": _frame(row[1]),
+                    "translation": dict(zip("xyz", values[:3])),
+                    "rotation": dict(zip("xyzw", values[3:]))})
+    if not out:
+        return None
+    return json.dumps({"transforms": out}, separators=(",", ":")).encode()
+
+
+def _plain_frame(value: Any) -> str | None:
+    """The JSON string of a frame stored as a plain atom, else None."""
+    if type(value) is not str or value[:1] in _JSON_STARTS:
+        return None
+    text = _TEXTS.get(value)
+    if text is None:
+        text = column_json(value)
+        if len(_TEXTS) < 65_536:
+            _TEXTS[value] = text
+    return text
+
+
+_NUMBER_CHARS = frozenset("0123456789.-+eE")
+
+
+def _one_transform(row: tuple) -> bytes | None:
+    """transform_message of one row in its common form (plain frame names, a pose of finite
+    numbers), written from the stored text directly (the encoder wrote each number's
+    shortest text); None for anything else (the general path decides)."""
+    parent, child, pose = _plain_frame(row[0]), _plain_frame(row[1]), row[2]
+    if parent is None or child is None or type(pose) is not str \
+            or not pose.startswith('{"pose":[[') or not pose.endswith("]]}"):
+        return None
+    halves = pose[10:-3].split("],[")
+    if len(halves) != 2:
+        return None
+    t, q = halves[0].split(","), halves[1].split(",")
+    if len(t) != 3 or len(q) != 4 or "e999" in pose \
+            or not _NUMBER_CHARS.issuperset(halves[0].replace(",", "") + halves[1].replace(",", "")):
+        return None
+    ns = time_ns(row[4])
+    return (f'{{"transforms":[{{"timestamp":{{"sec":{ns // 1_000_000_000},"nsec":'
+            f'{ns % 1_000_000_000}}},"parent_frame_id":{parent},"child_frame_id":{child},'
+            f'"translation":{{"x":{t[0]},"y":{t[1]},"z":{t[2]}}},"rotation":{{"x":{q[0]},'
+            f'"y":{q[1]},"z":{q[2]},"w":{q[3]}}}}}]}}').encode()
+
+
+def mark_message(type_text: str, until: float, source: str) -> bytes:
+    """A completeness mark message."""
+    return json.dumps({"type": type_text, "until": until, "source": source},
+                      separators=(",", ":")).encode()

@@ -1,0 +1,205 @@
+"""A live Foxglove view of a store: ``slr foxglove DB`` and ``slr serve --foxglove``.
+
+:class:`FoxgloveView` runs a Foxglove WebSocket server (the ``foxglove-sdk`` package,
+protocol ``foxglove.websocket.v1``) and a thread that follows the store through a connection
+of its own:
+
+* every ``poll`` seconds it asks SQLite whether anyone committed (``PRAGMA data_version``:
+  any process, any thread, the bridge, an import, event rules deriving complex events);
+* if so, it advertises a channel for each event type it has not seen (:mod:`.channels`),
+  reads the rows stored since the last look (by arrival sequence, per type) and logs each as
+  one message, its log time the event's end time; ``tf`` and ``tf_static`` rows also go to
+  ``/tf`` and ``/tf_static`` as ``foxglove.FrameTransforms`` (the 3D panel's frames);
+* completeness marks that moved go to ``/slr/completeness``.
+
+Only events stored after the view started are sent, except the static transforms: the last
+one of each edge is sent again whenever a client subscribes to ``/tf_static`` (and every
+``static_every`` seconds), as ROS's latched ``/tf_static`` would, so the 3D panel knows
+the static frames however late it connects.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any, Callable
+
+from ..errors import SLRError
+from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, TF_TOPICS,
+                       TRANSFORMS_SCHEMA, TRANSFORMS_SCHEMA_NAME, event_channel, mark_message,
+                       time_ns, transform_message)
+
+__all__ = ["FoxgloveView", "FoxgloveUnavailable"]
+
+_MARK_PREFIX = "sync/mark/"
+_MARK_SOURCE = "sync/marksrc/"
+
+
+class FoxgloveUnavailable(SLRError):
+    """The foxglove-sdk package is not installed (``pip install 'slr_sql[foxglove]'``)."""
+
+
+def _schema(name: str, schema: dict) -> Any:
+    import json
+
+    import foxglove
+
+    return foxglove.Schema(name=name, encoding=JSON_SCHEMA_ENCODING,
+                           data=json.dumps(schema).encode())
+
+
+class FoxgloveView:
+    """The Foxglove server of one store. ``store`` is an :class:`slr_sql.store.EventStore`
+    the view may use from its own thread (open one for it: the view reads while others
+    write). ``port`` 0 picks a free port (:attr:`port` says which).
+    """
+
+    def __init__(self, store: Any, host: str = "127.0.0.1", port: int = 8765,
+                 poll: float = 0.002, static_every: float = 5.0, name: str = "slr_sql",
+                 log: Callable[[str], None] | None = None):
+        try:
+            import foxglove
+        except ImportError as exc:
+            raise FoxgloveUnavailable(
+                f"the Foxglove view needs the foxglove-sdk package ({exc}): "
+                f"pip install 'slr_sql[foxglove]'") from None
+        self.store = store
+        self.poll = poll
+        self.static_every = static_every
+        self.log = log or (lambda text: None)
+        self.context = foxglove.Context()
+        self.channels: dict[tuple[str, int], Any] = {}   # event type -> (EventChannel, Channel)
+        self.seen: dict[tuple[str, int], int] = {}       # event type -> arrival sequence read
+        self.marks: dict[str, float] = {}
+        self.sent = 0
+        self._static_due = threading.Event()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._tf: dict[str, Any] = {}
+        for key, topic in TF_TOPICS.items():
+            self._tf[key[0]] = foxglove.Channel(
+                topic, schema=_schema(TRANSFORMS_SCHEMA_NAME, TRANSFORMS_SCHEMA),
+                message_encoding="json", context=self.context)
+        self._marks_channel = foxglove.Channel(
+            MARKS_TOPIC, schema=_schema(MARKS_SCHEMA["title"], MARKS_SCHEMA),
+            message_encoding="json", context=self.context)
+        view = self
+
+        class Listener(foxglove.ServerListener):
+            def on_subscribe(self, client: Any, channel: Any) -> None:
+                if channel.topic == TF_TOPICS[("tf_static", 3)]:
+                    view._static_due.set()
+
+        # the channels of what is stored now, before any client sees the server
+        self._follow(initial=True)
+        self.server = foxglove.start_server(name=name, host=host, port=port,
+                                            context=self.context, server_listener=Listener())
+
+    @property
+    def port(self) -> int:
+        return int(self.server.port)
+
+    def start(self) -> "FoxgloveView":
+        """Follow the store on a thread of its own until :meth:`close`."""
+        self._thread = threading.Thread(target=self._run, name="slr-foxglove", daemon=True)
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+        self.server.stop()
+
+    # -- following the store ---------------------------------------------------------------------
+    def _run(self) -> None:
+        version = None
+        next_static = 0.0
+        next_catalog = 0.0
+        while not self._stop.is_set():
+            try:
+                now = time.monotonic()
+                current = self.store.data_version()
+                if current != version:
+                    version = current
+                    # new types and moved marks are looked for every 50 ms at most; the
+                    # rows of the known types at every change
+                    catalog = now >= next_catalog
+                    if catalog:
+                        next_catalog = now + 0.05
+                    self._follow(catalog=catalog)
+                elif now >= next_catalog and next_catalog:
+                    next_catalog = 0.0
+                    self._follow(catalog=True)
+                if self._static_due.is_set() or now >= next_static:
+                    self._static_due.clear()
+                    next_static = now + self.static_every
+                    self._send_static()
+            except Exception as exc:  # noqa: BLE001 - a bad moment of the store: try again
+                self.log(f"foxglove: {type(exc).__name__}: {exc}")
+            self._stop.wait(self.poll)
+
+    def _channel(self, key: tuple[str, int], sample: tuple | None) -> Any:
+        import foxglove
+
+        event = event_channel(key[0], key[1], sample)
+        channel = foxglove.Channel(event.topic, schema=_schema(event.schema_name, event.schema),
+                                   message_encoding="json", context=self.context,
+                                   metadata=event.metadata)
+        self.channels[key] = (event, channel)
+        return self.channels[key]
+
+    def _follow(self, initial: bool = False, catalog: bool = True) -> None:
+        store = self.store
+        for key in (store.event_types() if catalog or initial else ()):
+            if key not in self.channels:
+                latest = store.max_seq(*key)
+                sample = store.raw_rows(key[0], key[1], after_seq=latest - 1, limit=1) \
+                    if latest else []
+                self._channel(key, sample[0] if sample else None)
+                # a type seen at start: only what comes later; a new type: all of it
+                self.seen[key] = latest if initial else 0
+        for key, (event, channel) in self.channels.items():
+            rows = store.raw_rows(key[0], key[1], after_seq=self.seen[key], limit=10_000)
+            if not rows:
+                continue
+            self.seen[key] = rows[-1][-1]
+            if initial:
+                continue
+            end = key[1] + 1
+            for row in rows:
+                channel.log(event.message(row), log_time=time_ns(row[end]))
+            self.sent += len(rows)
+            tf = self._tf.get(key[0]) if key[1] == 3 else None
+            if tf is not None:
+                for row in rows:
+                    data = transform_message([row])
+                    if data is not None:
+                        tf.log(data, log_time=time_ns(row[4]))
+        if catalog or initial:
+            self._send_marks(initial)
+
+    def _send_marks(self, initial: bool) -> None:
+        items = self.store.meta_items(_MARK_PREFIX)
+        for meta_key, value in items.items():
+            try:
+                until = float(value)
+            except (TypeError, ValueError):
+                continue
+            type_text = meta_key[len(_MARK_PREFIX):]
+            if self.marks.get(type_text) == until:
+                continue
+            self.marks[type_text] = until
+            if initial:
+                continue
+            source = self.store.meta_get(_MARK_SOURCE + type_text, "") or ""
+            self._marks_channel.log(mark_message(type_text, until, str(source)),
+                                    log_time=time_ns(time.time()))
+
+    def _send_static(self) -> None:
+        """The last stored value of each tf_static edge, on /tf_static."""
+        last: dict = {}
+        for row in self.store.raw_rows("tf_static", 3):   # few rows: one per edge, mostly
+            last[(row[0], row[1])] = row
+        data = transform_message(list(last.values())) if last else None
+        if data is not None:
+            self._tf["tf_static"].log(data, log_time=time_ns(time.time()))

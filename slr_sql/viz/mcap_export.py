@@ -1,0 +1,223 @@
+"""``slr export DB FILE.mcap``: the store's channels (:mod:`.channels`) written to an MCAP file
+with the ``mcap`` package, and read back by ``slr ros import``.
+
+* One channel per exported event type (JSON messages, ``jsonschema`` schema, channel
+  metadata ``slr_event`` / ``slr_arity``); each event one message whose **log time** is its
+  end time (the occurrence), **publish time** its arrival time (when the store received
+  it), sequence its arrival sequence number in the store.
+* ``tf`` and ``tf_static`` events also as ``foxglove.FrameTransforms`` on ``/tf`` and
+  ``/tf_static``, so Foxglove's 3D panel shows the frames of the file.
+* The completeness marks on ``/slr/completeness`` (log time: the time they complete up to).
+* Messages are written in log-time order (a merge of the types' histories, each read in store
+  order a page at a time), ZSTD-compressed chunks with the message index.
+
+:func:`export_batches` reads such a file back (``slr ros import`` uses it): every event of
+the ``slr_event`` channels with its type, arguments, start and end (the arrival is the
+importing store's), and the marks.
+"""
+from __future__ import annotations
+
+import heapq
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable, Iterator
+
+from ..errors import SLRError
+from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, METADATA_ARITY,
+                       METADATA_EVENT, TF_TOPICS, TRANSFORMS_SCHEMA, TRANSFORMS_SCHEMA_NAME,
+                       event_channel, event_from_message, mark_message, time_ns,
+                       transform_message)
+
+__all__ = ["export_mcap", "ExportReport", "McapUnavailable", "is_slr_export", "export_batches",
+           "select_types"]
+
+PAGE = 20_000   # rows read per statement
+
+
+class McapUnavailable(SLRError):
+    """The mcap package is not installed (``pip install 'slr_sql[mcap]'``)."""
+
+
+@dataclass
+class ExportReport:
+    path: str
+    messages: int = 0
+    per_type: dict = field(default_factory=dict)
+
+
+def _writer_module() -> Any:
+    try:
+        from mcap import writer
+    except ImportError as exc:
+        raise McapUnavailable(f"MCAP export needs the mcap package ({exc}): "
+                              f"pip install 'slr_sql[mcap]'") from None
+    return writer
+
+
+def select_types(available: Iterable[tuple[str, int]], wanted: Iterable[str]) -> list:
+    """The event types named by ``wanted`` (``name/arity``, or ``name`` for every arity);
+    all of ``available`` when ``wanted`` is empty. An unknown name is an error.
+
+    >>> select_types([("seg", 2), ("tf", 3), ("seg", 3)], ["seg"])
+    [('seg', 2), ('seg', 3)]
+    """
+    available = sorted(available)
+    wanted = list(wanted)
+    if not wanted:
+        return available
+    out: list = []
+    for spec in wanted:
+        name, _, arity = spec.partition("/")
+        found = [k for k in available if k[0] == name and (not arity or str(k[1]) == arity)]
+        if not found:
+            raise SLRError(f"no event type {spec} in the store (it has: "
+                           f"{', '.join(f'{n}/{a}' for n, a in available) or 'none'})")
+        out += [k for k in found if k not in out]
+    return out
+
+
+def _rows(store: Any, key: tuple, start: float | None, end: float | None) -> Iterator[tuple]:
+    after = None
+    while True:
+        page = store.raw_rows(key[0], key[1], end_from=start, end_to=end, limit=PAGE,
+                              after_key=after)
+        yield from page
+        if len(page) < PAGE:
+            return
+        last = page[-1]
+        n = key[1]
+        after = (last[n + 1], last[n], last[n + 3])
+
+
+def _keyed(rows: Iterator[tuple], n: int, index: int) -> Iterator[tuple]:
+    """``(end, start, type index, seq, row)`` of each row of a type of arity ``n``."""
+    for row in rows:
+        yield (row[n + 1], row[n], index, row[n + 3], row)
+
+
+def export_mcap(store: Any, path: str | Path, start: float | None = None,
+                end: float | None = None, types: Iterable[str] = (),
+                progress: Callable[[int], None] | None = None) -> ExportReport:
+    """Write the events of ``store`` (an :class:`slr_sql.store.EventStore`) with
+    ``start <= end time <= end`` of the chosen ``types`` (all by default) to ``path``."""
+    writer_module = _writer_module()
+    keys = select_types(store.event_types(), types)
+    report = ExportReport(str(path))
+    with open(path, "wb") as out:
+        writer = writer_module.Writer(out, compression=writer_module.CompressionType.ZSTD)
+        writer.start(profile="", library="slr_sql")
+        channels = {}
+        for key in keys:
+            sample = store.raw_rows(key[0], key[1], limit=1)
+            event = event_channel(key[0], key[1], sample[0] if sample else None)
+            schema_id = writer.register_schema(event.schema_name, JSON_SCHEMA_ENCODING,
+                                               json.dumps(event.schema).encode())
+            channels[key] = (event, writer.register_channel(event.topic, "json", schema_id,
+                                                            event.metadata))
+        tf_channels = {}
+        tf_schema = None
+        for key, topic in TF_TOPICS.items():
+            if key in channels:
+                if tf_schema is None:
+                    tf_schema = writer.register_schema(TRANSFORMS_SCHEMA_NAME, JSON_SCHEMA_ENCODING,
+                                                       json.dumps(TRANSFORMS_SCHEMA).encode())
+                tf_channels[key] = writer.register_channel(topic, "json", tf_schema, {})
+        # merge the types' histories by end time (then start, then the type, then seq)
+        streams = [_keyed(_rows(store, key, start, end), key[1], index)
+                   for index, key in enumerate(keys)]
+        add = writer.add_message
+        count = 0
+        info = [(channels[key][0].message, channels[key][1], key[1] + 2, tf_channels.get(key))
+                for key in keys]
+        per_index = [0] * len(keys)
+        merged = heapq.merge(*streams) if len(streams) > 1 else (streams[0] if streams else ())
+        for end_time, _, index, seq, row in merged:
+            message, channel_id, arrival_at, tf = info[index]
+            log_time = time_ns(end_time)
+            publish_time = time_ns(row[arrival_at])
+            seq &= 0xFFFFFFFF
+            add(channel_id, log_time, message(row), publish_time, seq)
+            if tf is not None:
+                data = transform_message([row])
+                if data is not None:
+                    add(tf, log_time, data, publish_time, seq)
+            per_index[index] += 1
+            count += 1
+            if progress is not None and count % 10_000 == 0:
+                progress(count)
+        report.per_type = {key: per_index[i] for i, key in enumerate(keys) if per_index[i]}
+        marks = {k[len("sync/mark/"):]: v for k, v in store.meta_items("sync/mark/").items()}
+        if marks:
+            schema_id = writer.register_schema(MARKS_SCHEMA["title"], JSON_SCHEMA_ENCODING,
+                                               json.dumps(MARKS_SCHEMA).encode())
+            channel_id = writer.register_channel(MARKS_TOPIC, "json", schema_id, {})
+            for type_text, until in sorted(marks.items()):
+                try:
+                    until = float(until)
+                except (TypeError, ValueError):
+                    continue
+                source = store.meta_get("sync/marksrc/" + type_text, "") or ""
+                add(channel_id, time_ns(until), mark_message(type_text, until, str(source)),
+                    time_ns(until))
+        writer.add_metadata("slr_sql", {"from": "" if start is None else repr(float(start)),
+                                        "to": "" if end is None else repr(float(end)),
+                                        "types": ",".join(f"{n}/{a}" for n, a in keys)})
+        writer.finish()
+        report.messages = count
+    return report
+
+
+def is_slr_export(path: str | Path) -> bool:
+    """True when ``path`` is an MCAP file with at least one slr event channel."""
+    path = Path(path)
+    if not path.is_file() or path.suffix != ".mcap":
+        return False
+    try:
+        from mcap.reader import make_reader
+    except ImportError:
+        return False
+    try:
+        with open(path, "rb") as stream:
+            summary = make_reader(stream).get_summary()
+    except Exception:  # noqa: BLE001 - not an MCAP file we can read: the bag reader decides
+        return False
+    return summary is not None and any(METADATA_EVENT in c.metadata
+                                       for c in summary.channels.values())
+
+
+def export_batches(path: str | Path, done: dict | None = None, batch_size: int = 10_000
+                   ) -> Iterator[tuple[list, dict, list]]:
+    """The events of an MCAP file :func:`export_mcap` wrote, in file order, in batches:
+    ``(events, counts, marks)`` -- ``counts`` maps each topic to the number of its messages
+    read so far (for checkpoints), ``marks`` the completeness marks ``(type, until)`` (with
+    the last batch). ``done`` skips the first so many messages of a topic (an import that
+    already took them)."""
+    from mcap.reader import make_reader
+
+    done = done or {}
+    counts: dict = {}
+    batch: list = []
+    marks: list = []
+    with open(path, "rb") as stream:
+        reader = make_reader(stream)
+        for _schema, channel, message in reader.iter_messages(log_time_order=False):
+            meta = channel.metadata
+            topic = channel.topic
+            if METADATA_EVENT in meta:
+                n = counts[topic] = counts.get(topic, 0) + 1
+                if n <= done.get(topic, 0):
+                    continue
+                try:
+                    batch.append(event_from_message(meta[METADATA_EVENT],
+                                                    int(meta[METADATA_ARITY]), message.data))
+                except (ValueError, KeyError, TypeError) as exc:
+                    raise SLRError(f"{path}: {topic}: message {n} is not an slr event: "
+                                   f"{exc}") from None
+                if len(batch) >= batch_size:
+                    yield batch, dict(counts), []
+                    batch = []
+            elif topic == MARKS_TOPIC:
+                mark = json.loads(message.data)
+                marks.append((str(mark["type"]), float(mark["until"])))
+    yield batch, dict(counts), marks

@@ -1,0 +1,210 @@
+"""A full disk, for real: a tiny tmpfs mounted in a private mount namespace (``unshare -Urm``:
+a user namespace, so no root is needed and the mount vanishes with the process), filled
+until the kernel says ENOSPC. Then every add is :class:`SLRStoreFull` (retryable; nothing
+written), opening a healthy store says the disk is full (never "damaged"), a store that
+cannot be created leaves no file behind, and the service answers 503 with Retry-After.
+SQLite's ``max_page_count`` gives the same SQLITE_FULL without a mount (the last tests)."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import textwrap
+import threading
+
+import httpx
+import pytest
+
+import slr_sql
+from slr_sql import SLRError, SLRStoreFull, SLRUnavailable
+
+from service_helpers import ROOT, ServiceProcess, slr_env
+
+# Run by the child inside the namespace: fill() writes a file until the disk is full,
+# free() removes it, files() lists the directory with sizes.
+PRELUDE = """
+import json, os, sys
+import slr_sql
+folder = sys.argv[1]
+path = os.path.join(folder, "robot.db")
+def fill():
+    fd = os.open(os.path.join(folder, "filler"), os.O_WRONLY | os.O_CREAT | os.O_APPEND)
+    try:
+        while True:
+            os.write(fd, b"x" * 4096)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+def free():
+    os.remove(os.path.join(folder, "filler"))
+def files():
+    return {n: os.path.getsize(os.path.join(folder, n)) for n in sorted(os.listdir(folder))
+            if n != "filler"}
+def attempt(call):
+    try:
+        return ["ok", call()]
+    except slr_sql.SLRError as exc:
+        return [type(exc).__name__, str(exc)]
+"""
+
+
+def on_full_disk(tmp_path, script: str, size: str = "1m") -> dict:
+    """Run ``script`` (after PRELUDE) with a fresh tmpfs of ``size`` at a folder of
+    ``tmp_path``; it prints one JSON object, returned."""
+    folder = tmp_path / "tiny"
+    folder.mkdir()
+    code = PRELUDE + textwrap.dedent(script)
+    r = subprocess.run(
+        ["unshare", "-Urm", "sh", "-c",
+         f'mount -t tmpfs -o size={size} tmpfs "$1" && exec "$2" -c "$3" "$1"', "sh",
+         str(folder), sys.executable, code],
+        capture_output=True, text=True, env=slr_env(), cwd=ROOT, timeout=120)
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def test_adds_on_a_full_disk_raise_store_full_and_lose_nothing(tmp_path):
+    out = on_full_disk(tmp_path, """
+        kb = slr_sql.open(path)
+        kb.add_many([f"p({i})^{i}" for i in range(100)] + ["q(first)^0", "r(first, 0)^0"])
+        fill()
+        results = []
+        for i in range(400):                   # 4 KB events until the log cannot grow
+            results.append(attempt(lambda: kb.add(f"q({'y' * 4000})^{i}")))
+            if results[-1][0] != "ok":
+                break
+        stored_before = kb.sql("SELECT count(*) FROM q")[1][0][0]
+        many = attempt(lambda: kb.add_many([f"r({'z' * 4000}, {i})^{i}" for i in range(50)]))
+        r_rows = kb.query("findall(I, r(_, I)^_, L)")[0]["L"]
+        free()
+        kb.add("q(after)^1000")
+        print(json.dumps({"last": results[-1], "adds": len(results), "q": stored_before,
+                          "many": many, "r": len(r_rows),
+                          "p": kb.sql("SELECT count(*) FROM p")[1][0][0],
+                          "q_after": kb.sql("SELECT count(*) FROM q")[1][0][0]}))
+        kb.close()
+    """)
+    kind, message = out["last"]
+    assert kind == "SLRStoreFull", out
+    assert "robot.db: the disk is full" in message and "nothing of this call was written" in message
+    assert out["q"] == 1 + out["adds"] - 1      # every acknowledged add is there, no more
+    assert out["many"][0] == "SLRStoreFull" and out["r"] == 1   # a batch: all or nothing
+    assert out["p"] == 100 and out["q_after"] == out["q"] + 1
+
+
+def test_opening_a_healthy_store_on_a_full_disk_says_full_not_damaged(tmp_path):
+    out = on_full_disk(tmp_path, """
+        with slr_sql.open(path) as kb:
+            kb.add_many([f"p({i})^{i}" for i in range(100)])
+        fill()
+        tries = [attempt(lambda: slr_sql.open(path).close()) for _ in range(3)]
+        free()
+        with slr_sql.open(path) as kb:
+            count = kb.sql("SELECT count(*) FROM p")[1][0][0]
+        print(json.dumps({"tries": tries, "count": count}))
+    """)
+    for kind, message in out["tries"]:
+        assert kind == "SLRStoreFull", out
+        assert "the disk is full" in message and "it was not opened" in message
+        assert "damaged" not in message
+    assert out["count"] == 100
+
+
+def test_a_store_that_cannot_be_created_leaves_nothing_behind(tmp_path):
+    out = on_full_disk(tmp_path, """
+        fill()
+        tries = [attempt(lambda: slr_sql.open(path).close()) for _ in range(2)]
+        left = files()
+        free()
+        with slr_sql.open(path) as kb:
+            kb.add("p(1)^1")
+        print(json.dumps({"tries": tries, "left": left}))
+    """)
+    for kind, message in out["tries"]:
+        assert kind == "SLRStoreFull", out
+        assert "it was not created, and nothing was left behind" in message
+    assert out["left"] == {}, out
+
+
+def test_the_service_answers_503_with_retry_after_on_a_full_disk(tmp_path):
+    """The server runs in the namespace; the test fills the disk through the child's stdin
+    once the server is up, then adds until the answer is 503 (a client keeps the events
+    and retries: 400 would tell it to drop them)."""
+    folder = tmp_path / "tiny"
+    folder.mkdir()
+    script = ('mount -t tmpfs -o size=1m tmpfs "$1" && { "$2" -m slr_sql serve "$1/robot.db" '
+              '--port 0 & read line; dd if=/dev/zero of="$1/filler" bs=4096 2>/dev/null; '
+              'echo filled; wait; }')
+    proc = subprocess.Popen(["unshare", "-Urm", "sh", "-c", script, "sh", str(folder),
+                             sys.executable], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, env=slr_env(), cwd=ROOT, text=True,
+                            start_new_session=True)
+    try:
+        url = proc.stdout.readline().strip().rsplit(" on ", 1)[1]
+        assert httpx.post(url + "/add", json={"event": "p(1)^1"}, timeout=30).status_code == 200
+        proc.stdin.write("fill\n")
+        proc.stdin.flush()
+        assert proc.stdout.readline().strip() == "filled"
+        answer = None
+        for i in range(400):
+            answer = httpx.post(url + "/add", json={"event": f"q({'y' * 4000}, {i})^{i}"},
+                                timeout=30)
+            if answer.status_code != 200:
+                break
+        assert answer.status_code == 503, answer.text
+        assert answer.headers["Retry-After"] == "10"
+        error = answer.json()["error"]
+        assert error["kind"] == "SLRStoreFull" and "the disk is full" in error["message"]
+        remote = slr_sql.connect(url)
+        with pytest.raises(SLRStoreFull):       # the client raises the class the server did
+            remote.add(f"q({'y' * 4000}, x)^1")
+        assert httpx.get(url + "/health", timeout=30).status_code == 200
+    finally:
+        os.killpg(proc.pid, signal.SIGTERM)   # the shell and the server it started
+        _, errors = proc.communicate(timeout=30)
+    assert "Traceback" not in errors, errors
+
+
+def test_the_size_limit_of_sqlite_is_store_full_too(tmp_path):
+    """SQLITE_FULL without a mount: the connection's page limit. The same words and class,
+    and the store takes events again once the limit is raised."""
+    with slr_sql.open(tmp_path / "robot.db") as kb:
+        kb.add_many([f"p({i})^{i}" for i in range(10)])
+        pages = kb.sql("PRAGMA page_count")[1][0][0]
+        kb.sql(f"PRAGMA max_page_count = {pages + 2}", write=True)
+        with pytest.raises(SLRStoreFull, match="robot.db: the disk is full .*nothing of this "
+                                               "call was written"):
+            kb.add_many([f"q({'y' * 4000}, {i})^{i}" for i in range(20)])
+        assert kb.sql("SELECT count(*) FROM p")[1] == [(10,)]
+        assert "q" not in [name for name, in kb.sql("SELECT name FROM sqlite_master")[1]]
+        kb.sql("PRAGMA max_page_count = 1073741823", write=True)
+        kb.add_many([f"q({'y' * 4000}, {i})^{i}" for i in range(20)])
+        assert kb.sql("SELECT count(*) FROM q")[1] == [(20,)]
+
+
+def test_a_lock_held_too_long_is_503_with_retry_after(tmp_path):
+    db = tmp_path / "robot.db"
+    with slr_sql.open(db) as kb:
+        kb.add("p(1)^1")
+    with ServiceProcess(db) as server:
+        holder = sqlite3.connect(db, isolation_level=None)
+        holder.execute("BEGIN IMMEDIATE")
+        try:
+            answer = httpx.post(server.url + "/add", json={"event": "p(2)^2"}, timeout=60)
+        finally:
+            holder.execute("ROLLBACK")
+            holder.close()
+        assert answer.status_code == 503, answer.text
+        assert answer.headers["Retry-After"] == "1"
+        assert answer.json()["error"]["kind"] == "SLRBusy"
+        assert httpx.post(server.url + "/add", json={"event": "p(2)^2"},
+                          timeout=30).status_code == 200
+
+
+def test_unavailable_conditions_are_one_family():
+    assert issubclass(SLRStoreFull, SLRUnavailable) and issubclass(SLRUnavailable, SLRError)
+    assert {"SLRStoreFull", "SLRUnavailable"} <= set(slr_sql.__all__)

@@ -1,0 +1,202 @@
+"""`slr shell`: through a pseudo-terminal (pexpect), Ctrl-C included, and with piped input."""
+from __future__ import annotations
+
+import os
+import re
+import sys
+import termios
+import time
+
+import pexpect
+import pytest
+
+from test_cli import ROOT, slr
+
+PROMPT = r"\?-"
+
+
+@pytest.fixture
+def store(tmp_path) -> str:
+    db = str(tmp_path / "robot.db")
+    assert slr("add", db, "seg(cup1, table)^1", "seg(cup2, shelf)^2",
+               "gripper_state(open)^1").returncode == 0
+    return db
+
+
+def spawn_shell(db: str) -> pexpect.spawn:
+    env = dict(os.environ, PYTHONPATH=str(ROOT), SLR_HISTORY=os.devnull, TERM="xterm",
+               PROMPT_TOOLKIT_NO_CPR="1")
+    child = pexpect.spawn(sys.executable, ["-m", "slr_sql", "shell", db], env=env,
+                          cwd=str(ROOT), encoding="utf-8", timeout=60, dimensions=(40, 160))
+    child.expect("Ctrl-D leaves")
+    child.expect(PROMPT)
+    return child
+
+
+def wait_for_terminal(child: pexpect.spawn, raw: bool) -> None:
+    """Wait (up to a deadline) until the shell has put its terminal in raw mode (reading
+    keys: the line editor, the key after an answer) or back in cooked mode (running a goal:
+    Ctrl-C is a signal). A key sent in the other mode means something else."""
+    deadline = time.monotonic() + 30
+    while bool(termios.tcgetattr(child.child_fd)[3] & termios.ICANON) == raw:
+        assert time.monotonic() < deadline, f"the terminal never became {'raw' if raw else 'cooked'}"
+        child.expect([pexpect.TIMEOUT], timeout=0.02)
+
+
+def press(child: pexpect.spawn, keys: str) -> None:
+    wait_for_terminal(child, raw=True)
+    child.send(keys)
+
+
+def interrupt_the_goal(child: pexpect.spawn) -> None:
+    wait_for_terminal(child, raw=False)
+    child.sendintr()
+
+
+def leave(child: pexpect.spawn) -> None:
+    wait_for_terminal(child, raw=True)
+    child.sendeof()
+    child.expect(pexpect.EOF)
+    child.close()
+    assert child.exitstatus == 0
+
+
+def test_ctrl_c_stops_a_long_goal_and_gives_the_prompt_back(store):
+    child = spawn_shell(store)
+    child.sendline("between(1, inf, X), X < 0.")
+    child.expect(r"X < 0\.")      # the goal was read and is running
+    interrupt_the_goal(child)
+    child.expect("% interrupted")
+    child.expect(PROMPT)
+    # the shell and the store still work: a new event, a new goal
+    assert slr("add", store, "seg(cup3, floor)^3").returncode == 0
+    child.sendline("seg(cup3, L)^T.")
+    child.expect(r"L = floor, T = 3\.0")
+    press(child, "\r")
+    child.expect(PROMPT)
+    leave(child)
+
+
+def test_answers_come_one_at_a_time_semicolon_for_more_enter_to_stop(store):
+    child = spawn_shell(store)
+    child.sendline("seg(O, L)^T.")
+    child.expect(r"O = cup1, L = table, T = 1\.0")
+    press(child, ";")
+    child.expect(r" ;\r\n")
+    child.expect(r"O = cup2, L = shelf, T = 2\.0")
+    press(child, ";")
+    child.expect(r"false\.")
+    child.sendline("between(1, inf, X).")
+    child.expect("X = 1")
+    press(child, "\r")          # Enter stops an endless goal after its first answer
+    child.expect(r" \.\r\n")
+    child.expect(PROMPT)
+    leave(child)
+
+
+def test_long_answers_are_abbreviated_and_w_shows_them_whole(store):
+    child = spawn_shell(store)
+    child.sendline("numlist(1, 30, L).")
+    child.expect(re.escape("L = [1,2,3,4,5,6,7,8,9|...]"))
+    press(child, "w")
+    child.expect(re.escape("L = [" + ",".join(map(str, range(1, 31))) + "]"))
+    press(child, "\r")
+    child.expect(PROMPT)
+    leave(child)
+
+
+def test_tab_completes_predicate_and_event_type_names(store):
+    child = spawn_shell(store)
+    child.sendline("assert(tabletop_item(x)).")
+    child.expect(r"true\.")
+    child.send("tablet")
+    child.send("\t")
+    child.expect("op_item")
+    child.sendline("(X).")
+    child.expect("X = x")
+    press(child, "\r")
+    child.expect(PROMPT)
+    child.send("grip")     # an event type of the store
+    child.send("\t")
+    child.expect("per_state")
+    child.sendline("(S)^T.")
+    child.expect(r"S = open, T = 1\.0")
+    press(child, "\r")
+    child.expect(PROMPT)
+    leave(child)
+
+
+def test_user_consult_in_the_terminal_ends_with_ctrl_d(store):
+    child = spawn_shell(store)
+    child.sendline("[user].")
+    child.expect(r"\|:")
+    child.sendline("on_table(O) :- seg(O, table)^_.")
+    child.expect(r"\|:")
+    wait_for_terminal(child, raw=True)
+    child.sendeof()
+    child.expect("consulted into the program 'user'")
+    child.expect(PROMPT)
+    child.sendline("on_table(O).")
+    child.expect("O = cup1")
+    press(child, "\r")
+    child.expect(PROMPT)
+    leave(child)
+
+
+def run_piped(db: str, *lines: str):
+    return slr("shell", db, stdin="\n".join(lines) + "\n")
+
+
+def test_only_directives_are_program_text_a_goal_with_neck_is_a_goal(store):
+    r = run_piped(store,
+                  "assert((nearby(X) :- seg(X, table)^_)).",
+                  "nearby(X).",
+                  "retract((nearby(X) :- B)).",
+                  "listing.",
+                  ":- event seen/1.",
+                  "programs.")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines() == [
+        "true.",
+        "X = cup1",
+        "true.",                                 # retracted, not stored as a clause
+        "% the program 'user' is empty",
+        "true.",
+        "user: 1 text",
+    ]
+    assert slr("programs", store, "--source").stdout.splitlines()[1:] == ["    :- event seen/1."]
+
+
+def test_a_clause_typed_as_a_goal_says_how_to_add_it(store):
+    r = run_piped(store, "nearby(X) :- seg(X, table)^_.", "listing.")
+    assert r.stderr == ("error: a clause typed at ?- is a goal, and (:-)/2 is no predicate: "
+                        "add it with assert((Head :- Body)). or [user].\n")
+    assert r.stdout == "% the program 'user' is empty\n"
+
+
+def test_consult_assert_asserta_retract_and_listing(store):
+    r = run_piped(store,
+                  "[user].",
+                  "near(cup1).",
+                  "near(cup2).",
+                  "end_of_file.",
+                  "asserta(near(cup0)).",
+                  "assertz(near(cup9)).",
+                  "retract(near(cup2)).",
+                  "near(X).",
+                  "listing(near/1).",
+                  "retract(near(nothing)).")
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.splitlines()
+    assert lines[lines.index("true.") + 3:] == [
+        "X = cup0", "X = cup1", "X = cup9",
+        "near(cup0).   % user", "near(cup1).   % user", "near(cup9).   % user",
+        "false."]
+    # what the shell changed is the store's program 'user', seen by every later process
+    assert slr("query", store, "near(X)", "--limit", "1").stdout == "X = cup0\n"
+
+
+def test_a_bad_assert_changes_nothing(store):
+    r = run_piped(store, "assert((broken(X) :- )).", "listing.")
+    assert r.stderr.startswith("<shell>:1:") and "unexpected" in r.stderr
+    assert r.stdout.splitlines() == ["% the program 'user' is empty"]

@@ -1,0 +1,90 @@
+"""The subscription hub reads journals on a connection of its own: a lagging subscriber catches
+up while a writer holds the store (its transaction, fsync included), and subscribers behind the
+shared read are served by one read per chunk, however many they are."""
+from __future__ import annotations
+
+import threading
+
+import slr_sql
+
+DEADLINE = 30.0
+
+
+def answers_of(sub, count):
+    out = []
+    while len(out) < count:
+        answer = sub.get(timeout=DEADLINE)
+        assert answer is not None
+        out.append(answer["X"])
+    return out
+
+
+def test_a_lagging_subscriber_catches_up_while_a_writer_holds_the_store(db_path):
+    with slr_sql.open(db_path) as kb:
+        hub = kb._subscriptions
+        hub.cleanup_interval = 1e9          # no journal trimming (a write) during the test
+        sub = kb.subscribe("p(X)^T", since=0, max_queue=10)
+        kb.add_many([f"p({i})^{i}" for i in range(1, 101)])
+        assert hub.drain(DEADLINE)          # 10 answers queued, the rest left in the journal
+        holding, release = threading.Event(), threading.Event()
+
+        def writer():
+            with kb.store.transaction():    # the store's lock, held as a long commit holds it
+                holding.set()
+                release.wait(DEADLINE)
+
+        thread = threading.Thread(target=writer)
+        thread.start()
+        try:
+            assert holding.wait(DEADLINE)
+            # taking answers makes room; the hub reads on from the journal on its own
+            # connection, not waiting for the writer's lock
+            assert answers_of(sub, 40) == list(range(1, 41))
+            assert thread.is_alive()        # the transaction was held all along
+        finally:
+            release.set()
+            thread.join()
+        assert answers_of(sub, 60) == list(range(41, 101))
+        sub.close()
+
+
+def test_subscribers_behind_share_one_read_per_chunk(db_path):
+    subscribers = 20
+    with slr_sql.open(db_path) as kb:
+        hub = kb._subscriptions
+        hub.cleanup_interval = 1e9
+        subs = [kb.subscribe("p(X)^T", since=0, max_queue=10) for _ in range(subscribers)]
+        kb.add_many([f"p({i})^{i}" for i in range(1, 201)])
+        assert hub.drain(DEADLINE)          # every one full (10 answers) and lagging
+        gate = threading.Event()
+        journal_reads = []
+        read = hub._read
+
+        def counting_read(sql, params=()):
+            if "ORDER BY jid" in sql:
+                journal_reads.append(params)
+                gate.wait(DEADLINE)         # hold the hub until every consumer made room
+            return read(sql, params)
+
+        hub._read = counting_read
+        try:
+            taken = [answers_of(s, 5) for s in subs]   # each makes room for 5 more
+            gate.set()
+            assert hub.drain(DEADLINE)
+        finally:
+            gate.set()
+            hub._read = read
+        assert taken == [list(range(1, 6))] * subscribers
+        # the first read (whoever made room first) and one read for all the others: not one
+        # per subscriber
+        assert len(journal_reads) <= 3, journal_reads
+        for s in subs:
+            assert answers_of(s, 195) == list(range(6, 201))
+            s.close()
+
+
+def test_an_in_memory_store_has_no_second_connection_and_still_delivers(kb):
+    sub = kb.subscribe("p(X)^T", since=0, max_queue=4)
+    kb.add_many([f"p({i})^{i}" for i in range(1, 21)])
+    assert answers_of(sub, 20) == list(range(1, 21))
+    sub.close()
