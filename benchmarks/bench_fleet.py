@@ -37,9 +37,10 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-import slr_sql  # noqa: E402
-from slr_sql import fleet  # noqa: E402
-from percentiles import pct  # noqa: E402  (benchmarks/percentiles.py)
+from percentiles import pct
+
+import slr_sql
+from slr_sql import fleet
 
 ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
 

@@ -20,13 +20,14 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Protocol
+from typing import Any, Protocol
 
 from .errors import SLRError
 from .store import EventStore, check_robot_name
 
-__all__ = ["push", "status", "PushReport", "FleetTarget", "open_target", "parse_type_spec"]
+__all__ = ["FleetTarget", "PushReport", "open_target", "parse_type_spec", "push", "status"]
 
 BATCH = 5000                 # rows per batch (one fleet transaction)
 WAKE_MIN, WAKE_MAX = 0.005, 0.25    # s between change checks of the robot store (backoff)

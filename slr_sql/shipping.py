@@ -18,7 +18,7 @@ from typing import Any
 
 from .errors import SLRError
 
-__all__ = ["receive", "positions", "FLEET_MARK"]
+__all__ = ["FLEET_MARK", "positions", "receive"]
 
 FLEET_MARK = "fleet/mark/"   # slr_meta prefix: fleet/mark/<robot>/<name>/<arity or *>
 
@@ -109,6 +109,6 @@ def _check_shipment(batches: Any, marks: Any) -> None:
             last = row[0]
     if marks is not None:
         if not isinstance(marks, dict) or not all(
-                isinstance(k, str) and type(v) in (int, float) and v == v
+                isinstance(k, str) and type(v) in (int, float) and not math.isnan(v)
                 for k, v in marks.items()):
             raise SLRError("a shipment's marks are {\"name/arity\": time}")

@@ -17,14 +17,13 @@ from pathlib import Path
 
 import httpx
 import pytest
+from service_helpers import ServiceProcess, slr_env
 
 import slr_sql
 from slr_sql import fleet, planner
 from slr_sql.errors import SLREvaluationError
 from slr_sql.sqlcompile import Fallback
 from slr_sql.store.schema import migrate, migration_scripts
-
-from service_helpers import ServiceProcess, slr_env
 
 ROOT = Path(__file__).resolve().parent.parent
 DEADLINE = 60.0
@@ -375,7 +374,7 @@ def test_a_pusher_killed_mid_batch_loses_nothing_and_ships_nothing_twice(tmp_pat
                                  target, "--batch", "700"], env=slr_env(), cwd=ROOT,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         before = count()
-        wait_until(lambda: count() > before or proc.poll() is not None,
+        wait_until(lambda before=before, proc=proc: count() > before or proc.poll() is not None,
                    "the pusher's first batches")
         proc.send_signal(signal.SIGKILL)
         proc.wait()

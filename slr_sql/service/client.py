@@ -305,11 +305,11 @@ class RemoteKnowledgeBase:
         the rows the server stored. Rows go in requests of at most FLEET_ROWS (each stored
         exactly once with its position), within the server's body limit."""
         stored = 0
-        pieces = [(n, a, rows[i:i + FLEET_ROWS]) for n, a, rows in batches
-                  for i in range(0, max(len(rows), 1), FLEET_ROWS)]
-        for k, piece in enumerate(pieces or [None]):
-            body: dict[str, Any] = {"robot": robot, "batches": [list(piece)] if piece else []}
-            if k == len(pieces or [None]) - 1:
+        pieces: list[list] = [[[n, a, rows[i:i + FLEET_ROWS]]] for n, a, rows in batches
+                              for i in range(0, max(len(rows), 1), FLEET_ROWS)] or [[]]
+        for k, piece in enumerate(pieces):
+            body: dict[str, Any] = {"robot": robot, "batches": piece}
+            if k == len(pieces) - 1:
                 if marks:
                     body["marks"] = marks
                 if pending is not None:

@@ -123,7 +123,7 @@ class Fleet:
                 "WHERE seq > ? ORDER BY seq LIMIT ?", (position, limit)).fetchall()
             dialect = self.db.dialect
             if dialect.name != "sqlite" and arity:  # shipped as SQLite stores them
-                from_column = dialect.from_column
+                from_column: Any = dialect.from_column
                 rows = [(r[0], *map(from_column, r[1:1 + arity]), *r[1 + arity:]) for r in rows]
             at = 3 + arity
             if not all(map(_finite, [r[at] for r in rows])):
@@ -189,7 +189,7 @@ class Fleet:
                 end = 1 + arity + 2
                 dialect = self.db.dialect
                 if dialect.name != "sqlite" and arity:  # rows come as SQLite stores them
-                    to_column = dialect.to_column
+                    to_column: Any = dialect.to_column
                     values = [(*map(to_column, r[1:1 + arity]), *r[1 + arity:end]) for r in fresh]
                 else:
                     values = [r[1:end] for r in fresh]
