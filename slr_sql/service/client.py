@@ -281,6 +281,9 @@ class RemoteKnowledgeBase:
               robot: str | None = None) -> list[dict[str, Any]]:
         """Answer ``goal`` on the server (see ``KnowledgeBase.query``); ``timeout`` is
         capped by the server's ``max_query_time``."""
+        if wait and robot is not None:  # as the local knowledge base says it
+            raise SLRError("a synchronized query (wait=True) cannot be restricted to one "
+                           "robot yet: ask origin(R, Goal) inside the goal instead")
         if wait:  # synchronized: long-polls, however long the wait (as kb.query does it)
             return self.submit(goal, at=at, args=args, timeout=timeout).result()
         body = _goal_body(goal, at, args, timeout)
