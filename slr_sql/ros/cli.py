@@ -198,7 +198,7 @@ def info_command(bag: str, map_only: bool, as_json: bool) -> None:
     click.echo(draft_map(info), nl=False)
 
 
-@ros.command("bridge")
+@ros.command("bridge", context_settings={"ignore_unknown_options": True})
 @click.argument("db", type=click.Path(dir_okay=False))
 @click.option("--map", "map_path", type=click.Path(), default=None,
               help="MAP file (YAML or pub_sub.xml). Default: /tf and /tf_static only.")
@@ -209,9 +209,17 @@ def info_command(bag: str, map_only: bool, as_json: bool) -> None:
               show_default=True,
               help="SQLite durability: NORMAL survives a crash of the process, FULL also a "
                    "power cut (an fsync per message).")
+@click.argument("ros_args", nargs=-1, type=click.UNPROCESSED)
 def bridge_command(db: str, map_path: str | None, all_topics: bool, node_name: str,
-                   synchronous: str) -> None:
-    """Run a ROS 2 node storing mapped topics in DB as events, until SIGINT or SIGTERM."""
+                   synchronous: str, ros_args: tuple[str, ...]) -> None:
+    """Run a ROS 2 node storing mapped topics in DB as events, until SIGINT or SIGTERM.
+
+    ROS arguments may follow: --ros-args -p map:=robot.yaml -p all_topics:=true
+    -r __node:=name --params-file params.yaml (the parameters map and all_topics).
+    """
+    if ros_args and ros_args[0] != "--ros-args":
+        raise slr_sql.SLRError(f"unexpected argument {ros_args[0]!r} (ROS arguments start with "
+                               f"--ros-args)")
     mapping = _load_mapping(map_path, "bridge")
     try:
         import rosbags  # noqa: F401
@@ -220,4 +228,5 @@ def bridge_command(db: str, map_path: str | None, all_topics: bool, node_name: s
     except ImportError as exc:
         raise _need_extra("bridge", exc) from None
     sys.exit(run_bridge(db, mapping, all_topics=all_topics, node_name=node_name,
-                        synchronous=synchronous))
+                        synchronous=synchronous, ros_args=list(ros_args),
+                        mapping_given=map_path is not None))
