@@ -165,7 +165,7 @@ class PgConnection:
             args: Any = params
         else:
             args = tuple(params) if params else None
-        cursor = self.raw.cursor()
+        cursor = self._guard(self.raw.cursor)   # (a closed connection fails here already)
         self._guard(lambda: cursor.execute(text, args, prepare=None))
         self.last_rowcount = cursor.rowcount
         return PgCursor(cursor, self)
@@ -173,7 +173,7 @@ class PgConnection:
     def executemany(self, sql: str, rows: Iterable[Iterable[Any]]) -> PgCursor:
         text = POSTGRES.statement(sql)
         rows = [tuple(r) for r in rows]
-        cursor = self.raw.cursor()
+        cursor = self._guard(self.raw.cursor)   # (a closed connection fails here already)
         if rows:
             self._guard(lambda: cursor.executemany(text, rows))
         self.last_rowcount = cursor.rowcount
