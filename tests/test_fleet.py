@@ -26,7 +26,7 @@ from slr_sql.sqlcompile import Fallback
 from slr_sql.store.schema import migrate, migration_scripts
 
 ROOT = Path(__file__).resolve().parent.parent
-DEADLINE = 60.0
+DEADLINE = 120.0   # a bound, not a pause: generous for a loaded 2-core machine
 
 
 def slr(*args: str, check: bool = True) -> subprocess.CompletedProcess:
