@@ -1005,8 +1005,9 @@ class KnowledgeBase:
         """
         if limit is not None and (type(limit) is not int or limit < 0):
             raise SLRError(f"limit must be a count (an integer >= 0), not {shown(limit)}")
-        _check_time_option("at", at)
-        _check_time_option("timeout", timeout, minimum=0.0)
+        if at is not None or timeout is not None:
+            _check_time_option("at", at)
+            _check_time_option("timeout", timeout, minimum=0.0)
         if robot is not None:
             check_robot_name(robot)
         if wait:  # issue 5: synchronized (SLRTimeout names the incomplete types)
@@ -1055,7 +1056,7 @@ class KnowledgeBase:
         answers = []
         names = plan.names
         for _ in m.solve(term):
-            answers.append(answer_bindings(names, frame))
+            answers.append(answer_bindings(names, frame, m.deadline))
             if limit is not None and len(answers) >= limit:
                 break
         return answers

@@ -788,7 +788,7 @@ def refresh_views(kb) -> list[str]:
 # ---------------------------------------------------------------------- compiled sub-goals
 
 class CompiledCall:
-    """Calls of one derived predicate, made by an interpreter run, answered by SQL.
+    r"""Calls of one derived predicate, made by an interpreter run, answered by SQL.
 
     The interpreter takes over a query the compiler cannot handle (a cut, recursion, ...),
     but the predicates that query calls may still compile: ``reach(A, B)`` may recurse over
@@ -797,7 +797,7 @@ class CompiledCall:
     are ground: they become parameters) once, and returns the rows as terms, in the order
     the interpreter would find them. ``None`` means "run the clauses": an argument that is
     neither ground nor a fresh variable (an instance the compiled goal does not stand for,
-    as var/1 or ``\\+`` may tell the difference), a mode that does not compile, or a statement
+    as var/1 or ``\+`` may tell the difference), a mode that does not compile, or a statement
     that meets at run time something only the interpreter handles exactly.
 
     >>> import slr_sql

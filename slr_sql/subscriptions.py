@@ -770,6 +770,10 @@ class SubscriptionHub:
     def __init__(self, kb: Any):
         self.kb = kb
         self.store = kb.store
+        # the store's columns: encoded terms as they are (SQLite) or as a server holds them
+        from_column = self.store.dialect.from_column
+        self._decode: Any = decode if from_column is None else \
+            (lambda v: decode(from_column(v)))
         self.clock = kb.clock
         self.lock = threading.Lock()
         self.cond = threading.Condition(self.lock)
@@ -909,6 +913,8 @@ class SubscriptionHub:
                 self._thread = threading.Thread(target=self._loop, name="slr-subscriptions",
                                                 daemon=True)
                 self._thread.start()
+                # a server tells when other processes stored events of journaled types
+                self._stop_listening = self.store.listen(self.notify)
             self.cond.notify()
         if sub.until is not None and not sub._ended:
             try:
@@ -988,20 +994,7 @@ class SubscriptionHub:
 
     def _ensure_journal(self, name: str, arity: int, table: str) -> None:
         """Create the journal of ``table`` and its trigger (inside the caller's transaction)."""
-        journal = journal_table(table)
-        j, t = quote_identifier(journal), quote_identifier(table)
-        args = [f"arg{i}" for i in range(1, arity + 1)]
-        cols = "".join(f", {a}" for a in args)
-        new = "".join(f", NEW.{a}" for a in args)
-        execute = self.store.execute
-        execute(f"CREATE TABLE IF NOT EXISTS {j} (jid INTEGER PRIMARY KEY AUTOINCREMENT, "
-                f"seq INTEGER NOT NULL{cols}, t_start REAL NOT NULL, t_end REAL NOT NULL, "
-                f"arrival REAL NOT NULL)")
-        execute(f"CREATE INDEX IF NOT EXISTS {quote_identifier(journal + '__seq')} "
-                f"ON {j} (seq)")
-        execute(f"CREATE TRIGGER IF NOT EXISTS {quote_identifier(TRIGGER_PREFIX + table)} "
-                f"AFTER INSERT ON {t} BEGIN INSERT INTO {j} (seq{cols}, t_start, t_end, "
-                f"arrival) VALUES (NEW.seq{new}, NEW.t_start, NEW.t_end, NEW.arrival); END")
+        self.store.create_journal(table, arity, journal_table(table), TRIGGER_PREFIX + table)
 
     def _register(self, sub: Subscription) -> None:
         store = self.store
@@ -1089,7 +1082,7 @@ class SubscriptionHub:
             hdone, hpos, lpos = 1, sub.history_top, pos
         self.store.execute(
             "UPDATE slr_subscriptions SET history_done = ?, history_pos = ?, live_pos = ?, "
-            "finished = max(finished, ?), lease_until = ?, owner = ? "
+            "finished = CASE WHEN ? = 1 THEN 1 ELSE finished END, lease_until = ?, owner = ? "
             "WHERE id = ? AND owner = ? AND (history_done < ? OR (history_done = ? AND "
             "history_pos <= ? AND live_pos <= ?))",
             (hdone, hpos, lpos, finished,
@@ -1175,6 +1168,9 @@ class SubscriptionHub:
         with self.cond:
             self._closed = True
             self.cond.notify_all()
+        stop = getattr(self, "_stop_listening", None)
+        if stop is not None:
+            stop()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout=10.0)
         if self._subscribed_types and not self.store.closed:
@@ -1334,7 +1330,7 @@ class SubscriptionHub:
         subscription in one batch; one whose queue fills up is marked lagging at the first
         answer it cannot take."""
         arity = key[1]
-        events = [(row[0], tuple([decode(v) for v in row[2:2 + arity]]), row[2 + arity],
+        events = [(row[0], tuple([self._decode(v) for v in row[2:2 + arity]]), row[2 + arity],
                    row[3 + arity]) for row in rows]
         first_jid, last_jid = events[0][0], events[-1][0]
         cohorts: dict = {}
@@ -1422,7 +1418,7 @@ class SubscriptionHub:
             batch = []
             error = None
             for row in rows:
-                answer = self._match(m, tuple([decode(v) for v in row[1:1 + arity]]),
+                answer = self._match(m, tuple([self._decode(v) for v in row[1:1 + arity]]),
                                      row[1 + arity], row[2 + arity])
                 if answer is None:
                     continue
@@ -1626,9 +1622,7 @@ class SubscriptionHub:
                     "SELECT id, owner, live_pos FROM slr_subscriptions WHERE "
                     "type_name = ? AND type_arity = ? AND finished = 0", key)
                 if not rows and key not in local:
-                    store.execute(f"DROP TRIGGER IF EXISTS "
-                                  f"{quote_identifier(TRIGGER_PREFIX + table)}")
-                    store.execute(f"DROP TABLE IF EXISTS {quote_identifier(journal)}")
+                    store.drop_journal(table, journal, TRIGGER_PREFIX + table)
                     self._types.pop(key, None)
                     self._journaled.discard(key)
                     self._type_pos.pop(key, None)
