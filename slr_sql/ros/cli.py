@@ -94,7 +94,7 @@ def import_command(bag: str, db_argument: str | None, db_option: str | None,
 
     console = Console(stderr=True)
     created = not os.path.lexists(db)
-    batches = []   # the progress of each stored batch: none means nothing was stored
+    started = False  # whether the import read its first message (events may be stored)
     try:
         with slr_sql.open(db) as kb, Progress(
                 TextColumn("[progress.description]{task.description}"), BarColumn(),
@@ -104,7 +104,8 @@ def import_command(bag: str, db_argument: str | None, db_option: str | None,
                                 total=None)
 
             def progress(done: int, total: int) -> None:
-                batches.append(done)
+                nonlocal started
+                started = started or done > 0
                 bar.update(task, completed=done, total=total)
 
             report = import_bag(kb, bag, mapping, all_topics=all_topics, progress=progress,
@@ -112,7 +113,7 @@ def import_command(bag: str, db_argument: str | None, db_option: str | None,
     except Exception:
         # A MAP that does not fit the bag, a bag that cannot be read: no empty store is left
         # behind. A store that got events keeps them (a later run continues the import).
-        if created and not any(batches):
+        if created and not started:
             _remove_new_store(db)
         raise
     _print_report(report, bag)
