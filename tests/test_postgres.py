@@ -312,7 +312,7 @@ def test_concurrent_writers_derive_each_complex_event_once(backend, tmp_path):
 
 def _slr(*args: str) -> subprocess.CompletedProcess:
     from service_helpers import ROOT, slr_env
-    return subprocess.run([sys.executable, "-m", "slr_sql", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "slr_sql", *args], capture_output=True, check=False,
                           text=True, env=slr_env(), cwd=ROOT, timeout=120)
 
 
