@@ -13,14 +13,15 @@ from .terms import Var, deref, to_python
 __all__ = ["answer_bindings"]
 
 
-def answer_bindings(names: list, frame: list) -> dict[str, Any]:
+def answer_bindings(names: list, frame: list, deadline: float | None = None) -> dict[str, Any]:
     """Bindings of the named variables, as SWI-Prolog's toplevel shows them: a variable left
-    unbound is omitted unless it is shared with another named variable (``X = Y``)."""
+    unbound is omitted unless it is shared with another named variable (``X = Y``).
+    ``deadline`` (the query's, ``time.monotonic()``) also bounds converting a huge answer."""
     values = [(name, deref(frame[slot])) for name, slot in names]
     free = [id(v) for _, v in values if type(v) is Var]
     answer = {}
     for name, v in values:
         if type(v) is Var and free.count(id(v)) < 2:
             continue
-        answer[name] = to_python(v)
+        answer[name] = to_python(v, deadline)
     return answer

@@ -17,9 +17,9 @@ __all__ = ["evaluate", "type_error", "instantiation_error", "evaluation_error", 
 
 def iso_error(formal: Any, context: Any = None) -> SLREvaluationError:
     term = Struct("error", (formal, context if context is not None else Var("_")))
-    from .terms import format_term
+    from .terms import MESSAGE_TOKENS, format_term
 
-    return SLREvaluationError(term, format_term(term))
+    return SLREvaluationError(term, format_term(term, limit=MESSAGE_TOKENS))
 
 
 def instantiation_error() -> SLREvaluationError:

@@ -43,6 +43,7 @@ from .errors import SLRError
 from .terms import format_term
 from .program import event_key, split_event_atom
 from .store import quote_identifier, sql_literal
+from .store.checks import shown
 from .terms import NIL, Atom, String, Struct, Var, deref, is_ground, list_items
 
 __all__ = ["Pattern", "BufferSpec", "BufferInfo", "analyze", "attach", "conflicts",
@@ -185,6 +186,9 @@ class _Analyzer:
             if INT64_MIN <= t <= INT64_MAX:
                 self.add((i,), f"json_type({c}, {p}) = 'integer' AND json_extract({c}, {p}) = "
                                f"{sql_literal(t)}")
+            elif t.bit_length() > 14000:  # more digits than a stored event may hold
+                raise SLRError("buffer pattern constant cannot be stored: integer too large to "
+                               "be stored (more than 4300 digits)")
             else:
                 self.tagged(i, path, "$int", str(t))
         elif tt is float:
@@ -225,7 +229,7 @@ class _Analyzer:
             for k, arg in enumerate(t.args):
                 self.nested(i, arg, f"{inner}[{k}]")
         else:
-            raise SLRError(f"unsupported term in a buffer pattern: {t!r}")
+            raise SLRError(f"unsupported term in a buffer pattern: {shown(t)}")
 
     def tagged(self, i: int, path: str, tag: str, text: str) -> None:
         c = self.col(i)

@@ -18,9 +18,10 @@ from typing import Any, Callable, Iterator
 from .arith import (evaluate, evaluation_error, instantiation_error, iso_error,
                     resource_error, type_error)
 from .unify import bound_args, copy_term, resolve, unify, undo, unify_event_row, unify_tuple
-from .errors import SLRError, SLREvaluationError
+from .errors import SLRError, SLREvaluationError, SLRSyntaxError
 from .program import Program, split_event_atom, event_key
-from .terms import (CONS, Atom, NIL, String, Struct, Var, deref, from_python, int_text,
+from .terms import (CONS, NODES_BETWEEN_CLOCK_CHECKS, Atom, NIL, String, Struct, Var, check_deadline,
+                    deref, from_python, int_text,
                     is_callable, is_ground, list_items, make_list, term_vars, to_python)
 
 DET: dict[tuple[str, int], Callable[["Machine", tuple], bool]] = {}
@@ -234,7 +235,7 @@ def _typecheck(name, test):
 
 _typecheck("var", lambda t: type(t) is Var)
 _typecheck("nonvar", lambda t: type(t) is not Var)
-_typecheck("atom", lambda t: type(t) is Atom)
+_typecheck("atom", lambda t: type(t) is Atom and t != "[]")  # SWI-7: [] is no atom
 _typecheck("number", lambda t: type(t) in (int, float))
 _typecheck("integer", lambda t: type(t) is int)
 _typecheck("float", lambda t: type(t) is float)
@@ -252,7 +253,7 @@ _typecheck("ground", is_ground)
 def _functor(m, a):
     t = deref(a[0])
     if type(t) is Struct:
-        return m.unify(a[1], t.name) and m.unify(a[2], len(t.args))
+        return m.unify(a[1], _visible_name(t)) and m.unify(a[2], len(t.args))
     if type(t) is not Var:
         return m.unify(a[1], t) and m.unify(a[2], 0)
     name = deref(a[1])
@@ -270,7 +271,20 @@ def _functor(m, a):
     # the arguments as a (deadline-checked, bounded) list first: functor(F, f, 10**8)
     # is a resource error, not minutes of allocation
     args, _ = list_items(build_list(m, n, lambda _: Var()))
-    return m.unify(t, Struct(name, tuple(args)))
+    return m.unify(t, Struct(_internal_name(name, n), tuple(args)))
+
+
+# SWI-Prolog 7 names the list cell '[|]' (functor/3, =../2 show it, and build a list from
+# it); inside, a cell is the compound '.'/2, as the parser and the store encode it.
+LIST_CELL = Atom("[|]")
+
+
+def _visible_name(t: Struct) -> Atom:
+    return LIST_CELL if t.name == "." and len(t.args) == 2 else t.name
+
+
+def _internal_name(name: Atom, arity: int) -> Atom:
+    return CONS if arity == 2 and name == "[|]" else name
 
 
 @nondet("arg", 3)
@@ -298,7 +312,7 @@ def _arg(m, a):
 def _univ(m, a):
     t = deref(a[0])
     if type(t) is Struct:
-        return m.unify(a[1], make_list((t.name,) + t.args))
+        return m.unify(a[1], make_list((_visible_name(t),) + t.args))
     if type(t) is not Var:
         return m.unify(a[1], make_list([t]))
     items, tail = list_items(a[1])
@@ -313,12 +327,12 @@ def _univ(m, a):
         raise instantiation_error()
     if type(head) is not Atom:
         raise type_error("atom", head)
-    return m.unify(t, Struct(head, tuple(items[1:])))
+    return m.unify(t, Struct(_internal_name(head, len(items) - 1), tuple(items[1:])))
 
 
 @det("copy_term", 2)
 def _copy_term(m, a):
-    return m.unify(a[1], copy_term(a[0]))
+    return m.unify(a[1], copy_term(a[0], deadline=m.deadline))
 
 
 # -- atoms and strings -------------------------------------------------------------------------------
@@ -362,22 +376,258 @@ def _parse_number(s: str) -> Any:
     return None
 
 
+# -- the classic atom builtins, as SWI-Prolog 7+ has them (its answers and errors are the
+# contract, docs/semantics.md): the text of an atom, a string or a number is accepted where
+# an atom is read; `[]` is not an atom (SWI-7), compounds are type errors.
+
+def _atom_text(t: Any, compound_error: str = "atomic", nil_error: str = "atom") -> str:
+    """The text of an atomic argument read as an atom: an unbound one is an instantiation
+    error, ``[]`` a ``type_error(nil_error, [])``, a compound ``type_error(compound_error, _)``."""
+    t = deref(t)
+    tt = type(t)
+    if tt is Var:
+        raise instantiation_error()
+    if tt is Atom:
+        if t == "[]":
+            raise type_error(nil_error, t)
+        return str(t)
+    if tt is String:
+        return str(t)
+    if tt is int:
+        return int_text(t)
+    if tt is float:
+        from .terms import format_term
+
+        return format_term(t)
+    raise type_error(compound_error, t)
+
+
+def _list_text(t: Any) -> str:
+    """The text of a code or character list (SWI accepts either kind, even mixed) or a
+    string: a partial list is an instantiation error, anything else a type error."""
+    t = deref(t)
+    if type(t) is String:
+        return str(t)
+    items, tail = list_items(t)
+    if type(tail) is Var:
+        raise instantiation_error()
+    if not (type(tail) is Atom and tail == "[]"):
+        raise type_error("list", t)
+    out = []
+    for x in items:
+        x = deref(x)
+        if type(x) is Var:
+            raise instantiation_error()
+        if type(x) is int:
+            if not 0 <= x <= 0x10FFFF or 0xD800 <= x <= 0xDFFF:
+                raise type_error("character_code", x)
+            out.append(chr(x))
+        elif type(x) is Atom and len(x) == 1:
+            out.append(str(x))
+        else:
+            raise type_error("character_code", x)
+    return "".join(out)
+
+
+def _number_of_text(s: str, leading_layout: bool) -> Any:
+    """The number a text is in Prolog syntax (an optional sign, then a number token: 12,
+    -1.5, 0x1A, 0'a, 1.0Inf), or None. ``leading_layout`` allows spaces before it (as
+    number_codes/2 does; atom_number/2 and name/2 do not)."""
+    if leading_layout:
+        s = s.lstrip()
+    if s != s.rstrip():
+        return None  # "3 " is no number, in any of the three
+    sign = 1
+    if s[:1] in ("-", "+"):
+        sign = -1 if s[0] == "-" else 1
+        s = s[1:]
+    if not s[:1].isdigit():
+        return None
+    from .parser import parse_term
+
+    try:
+        t, _ = parse_term(s)
+    except SLRError:
+        return None
+    t = deref(t)
+    if type(t) is not int and type(t) is not float:
+        return None
+    return -t if sign < 0 else t
+
+
 @nondet("atom_concat", 3)
 def _atom_concat(m, a):
     x, y = deref(a[0]), deref(a[1])
     if type(x) is not Var and type(y) is not Var:
-        if m.unify(a[2], Atom(text_of(x) + text_of(y))):
+        if m.unify(a[2], Atom(_atom_text(x) + _atom_text(y))):
             yield None
         return
     z = deref(a[2])
     if type(z) is Var:
         raise instantiation_error()
-    s = text_of(z)
+    s = _atom_text(z)
+    # a bound part is checked (type errors) and pins the split
+    if type(x) is not Var:
+        px = _atom_text(x)
+        if s.startswith(px) and m.unify(y, Atom(s[len(px):])):
+            yield None
+        return
+    if type(y) is not Var:
+        py = _atom_text(y)
+        if s.endswith(py) and m.unify(x, Atom(s[:len(s) - len(py)])):
+            yield None
+        return
     for i in range(len(s) + 1):
         mark = len(m.trail)
         if m.unify(x, Atom(s[:i])) and m.unify(y, Atom(s[i:])):
             yield None
         m.undo_to(mark)
+
+
+def _length_argument(t: Any) -> Any:
+    """The length argument of atom_length/2 and sub_atom/5: unbound or an integer."""
+    t = deref(t)
+    if type(t) is not Var and type(t) is not int:
+        raise type_error("integer", t)
+    return t
+
+
+@det("atom_length", 2)
+def _atom_length(m, a):
+    t = deref(a[0])
+    n = _length_argument(a[1])
+    if type(t) is Atom and t == "[]":
+        text = ""   # as SWI-Prolog 7: [] has no characters of its own
+    else:
+        text = _atom_text(t, "text")
+    return m.unify(n, len(text))
+
+
+@det("string_length", 2)
+def _string_length(m, a):
+    return m.unify(a[1], len(text_of(a[0])))
+
+
+def _from_text(make: Callable[[str], Any], parse: Callable[[str], Any]):
+    """atom_codes/2 and atom_chars/2: from the atom when it is bound, else from the list."""
+    def f(m, a):
+        x = deref(a[0])
+        if type(x) is not Var:
+            return m.unify(a[1], make(_atom_text(x, "atom")))
+        return m.unify(x, parse(_list_text(a[1])))
+    return f
+
+
+DET[("atom_codes", 2)] = _from_text(lambda s: make_list([ord(c) for c in s]), Atom)
+DET[("atom_chars", 2)] = _from_text(lambda s: make_list([Atom(c) for c in s]), Atom)
+
+
+@det("name", 2)
+def _name(m, a):
+    """name(AtomOrNumber, Codes): a text that is a number (no leading layout) gives the
+    number, any other text an atom."""
+    x = deref(a[0])
+    if type(x) is not Var:
+        return m.unify(a[1], make_list([ord(c) for c in _atom_text(x, "atomic", "atomic")]))
+    text = _list_text(a[1])
+    n = _number_of_text(text, leading_layout=False)
+    return m.unify(x, Atom(text) if n is None else n)
+
+
+@det("number_codes", 2)
+def _number_codes(m, a):
+    x = deref(a[0])
+    if type(x) is not Var:
+        if type(x) is not int and type(x) is not float:
+            raise type_error("number", x)
+        return m.unify(a[1], make_list([ord(c) for c in _atom_text(x)]))
+    n = _number_of_text(_list_text(a[1]), leading_layout=True)
+    if n is None:
+        raise iso_error(Struct("syntax_error", (Atom("illegal_number"),)))
+    return m.unify(x, n)
+
+
+@det("atom_number", 2)
+def _atom_number(m, a):
+    x = deref(a[0])
+    if type(x) is Var:
+        n = deref(a[1])
+        if type(n) is Var:
+            raise instantiation_error()
+        if type(n) is not int and type(n) is not float:
+            raise type_error("number", n)
+        return m.unify(x, Atom(_atom_text(n)))
+    if type(x) is not Atom and type(x) is not String:
+        raise type_error("atom", x)
+    n = _number_of_text(_atom_text(x, "atom"), leading_layout=False)
+    return n is not None and m.unify(a[1], n)
+
+
+@det("term_to_atom", 2)
+def _term_to_atom(m, a):
+    from .terms import format_term
+
+    t = deref(a[0])
+    text = deref(a[1])
+    if type(text) is not Var:  # as SWI-Prolog: a given text is read, then unified
+        source = _atom_text(text, "text")
+        if not source.strip():
+            return m.unify(t, Atom("end_of_file"))
+        return m.unify(t, _parse_any(Atom(source)))
+    return m.unify(text, Atom(format_term(t, deadline=m.deadline)))
+
+
+def _case_converted(m, a, convert: Callable[[str], str]) -> bool:
+    """upcase_atom/2, downcase_atom/2: a bound result (atom or string) is compared as text."""
+    out = convert(_atom_text(a[0]))
+    r = deref(a[1])
+    if type(r) is Var:
+        return m.unify(r, Atom(out))
+    if type(r) is not Atom and type(r) is not String:
+        raise type_error("atom", r)
+    return str(r) == out
+
+
+@det("upcase_atom", 2)
+def _upcase(m, a):
+    return _case_converted(m, a, str.upper)
+
+
+@nondet("sub_atom", 5)
+def _sub_atom(m, a):
+    s = _atom_text(a[0], "atom")
+    bounds = []
+    for k in (1, 2, 3):
+        v = _length_argument(a[k])
+        if type(v) is int and v < 0:
+            raise _err_domain("not_less_than_zero", v)
+        bounds.append(v)
+    sub = deref(a[4])
+    n = len(s)
+    if type(sub) is not Var:
+        t = _atom_text(sub, "atom")
+        start = s.find(t)
+        while start >= 0:
+            mark = len(m.trail)
+            if m.unify(a[1], start) and m.unify(a[2], len(t)) and m.unify(a[3], n - start - len(t)):
+                yield None
+            m.undo_to(mark)
+            start = s.find(t, start + 1)
+        return
+    b0, l0, a0 = bounds
+    for b in (range(n + 1) if type(b0) is Var else [b0] if b0 <= n else []):
+        if type(l0) is int:
+            lengths = [l0] if b + l0 <= n else []
+        elif type(a0) is int:
+            lengths = [n - b - a0] if n - b - a0 >= 0 else []
+        else:
+            lengths = range(n - b + 1)
+        for length in lengths:
+            mark = len(m.trail)
+            if m.unify(a[1], b) and m.unify(a[2], length) and m.unify(a[3], n - b - length) \
+                    and m.unify(sub, Atom(s[b:b + length])):
+                yield None
+            m.undo_to(mark)
 
 
 @nondet("string_concat", 3)
@@ -395,14 +645,6 @@ def _string_concat(m, a):
         m.undo_to(mark)
 
 
-@det("atom_length", 2)
-def _atom_length(m, a):
-    return m.unify(a[1], len(text_of(a[0])))
-
-
-DET[("string_length", 2)] = _atom_length
-
-
 def _text_conv(name: str, make: Callable[[str], Any], parse: Callable[[Any], str]):
     def f(m, a):
         x = deref(a[0])
@@ -412,8 +654,6 @@ def _text_conv(name: str, make: Callable[[str], Any], parse: Callable[[Any], str
     DET[(name, 2)] = f
 
 
-_text_conv("atom_chars", lambda s: make_list([Atom(c) for c in s]), lambda t: Atom(text_of(t)))
-_text_conv("atom_codes", lambda s: make_list([ord(c) for c in s]), lambda t: Atom(text_of(t)))
 _text_conv("atom_string", lambda s: String(s), lambda t: Atom(text_of(t)))
 _text_conv("string_chars", lambda s: make_list([Atom(c) for c in s]), lambda t: String(text_of(t)))
 _text_conv("string_codes", lambda s: make_list([ord(c) for c in s]), lambda t: String(text_of(t)))
@@ -440,9 +680,14 @@ def _char_code(m, a):
 
 
 def _parse_any(t):
+    """The term a text reads as; a syntax error is the ISO error ``syntax_error(Message)``
+    (catchable, as in SWI-Prolog), never a raw SLRSyntaxError."""
     from .parser import parse_term
 
-    return parse_term(text_of(t))[0]
+    try:
+        return parse_term(text_of(t))[0]
+    except SLRSyntaxError as exc:
+        raise iso_error(Struct("syntax_error", (Atom(exc.message),))) from None
 
 
 @det("string_code", 3)
@@ -450,29 +695,6 @@ def _string_code(m, a):
     i = deref(a[0])
     s = text_of(a[1])
     return type(i) is int and 1 <= i <= len(s) and m.unify(a[2], ord(s[i - 1]))
-
-
-@det("number_codes", 2)
-def _number_codes(m, a):
-    x = deref(a[0])
-    if type(x) is not Var:
-        return m.unify(a[1], make_list([ord(c) for c in text_of(x)]))
-    n = _parse_number(text_of(a[1]))
-    if n is None:
-        raise iso_error(Struct("syntax_error", (Atom("illegal_number"),)))
-    return m.unify(x, n)
-
-
-@det("atom_number", 2)
-def _atom_number(m, a):
-    x = deref(a[0])
-    if type(x) is Var:
-        n = deref(a[1])
-        if type(n) is Var:
-            raise instantiation_error()
-        return m.unify(x, Atom(text_of(n)))
-    n = _parse_number(text_of(x))
-    return n is not None and m.unify(a[1], n)
 
 
 @det("number_string", 2)
@@ -486,24 +708,9 @@ def _number_string(m, a):
     return m.unify(s, String(text_of(a[0])))
 
 
-@det("term_to_atom", 2)
-def _term_to_atom(m, a):
-    from .terms import format_term
-
-    t = deref(a[0])
-    if type(t) is Var and type(deref(a[1])) is not Var:
-        return m.unify(t, _parse_any(a[1]))
-    return m.unify(a[1], Atom(format_term(t)))
-
-
-@det("upcase_atom", 2)
-def _upcase(m, a):
-    return m.unify(a[1], Atom(text_of(a[0]).upper()))
-
-
 @det("downcase_atom", 2)
 def _downcase(m, a):
-    return m.unify(a[1], Atom(text_of(a[0]).lower()))
+    return _case_converted(m, a, str.lower)
 
 
 @det("atomic_list_concat", 2)
@@ -541,30 +748,6 @@ def _split_any(s: str, seps: str) -> list[str]:
             cur.append(ch)
     out.append("".join(cur))
     return out
-
-
-@nondet("sub_atom", 5)
-def _sub_atom(m, a):
-    s = text_of(a[0])
-    sub = deref(a[4])
-    n = len(s)
-    if type(sub) is not Var:
-        t = text_of(sub)
-        start = s.find(t)
-        while start >= 0:
-            mark = len(m.trail)
-            if m.unify(a[1], start) and m.unify(a[2], len(t)) and m.unify(a[3], n - start - len(t)):
-                yield None
-            m.undo_to(mark)
-            start = s.find(t, start + 1)
-        return
-    for b in range(n + 1):
-        for length in range(n - b + 1):
-            mark = len(m.trail)
-            if m.unify(a[1], b) and m.unify(a[2], length) and m.unify(a[3], n - b - length) \
-                    and m.unify(sub, Atom(s[b:b + length])):
-                yield None
-            m.undo_to(mark)
 
 
 # -- lists -----------------------------------------------------------------------------------------
@@ -807,30 +990,30 @@ def _out(m: "Machine"):
     return m.engine.out or sys.stdout
 
 
-def _write_text(t: Any, quoted: bool = False) -> str:
+def _write_text(t: Any, quoted: bool = False, deadline: float | None = None) -> str:
     from .terms import format_term
 
     t = deref(t)
     if not quoted and type(t) in (Atom, String):
         return str(t)
-    return format_term(t, quoted=quoted)
+    return format_term(t, quoted=quoted, deadline=deadline)
 
 
 @det("write", 1)
 def _write(m, a):
-    _out(m).write(_write_text(a[0]))
+    _out(m).write(_write_text(a[0], deadline=m.deadline))
     return True
 
 
-DET[("print", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], True)), True)[1]
-DET[("writeq", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], True)), True)[1]
+DET[("print", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], True, m.deadline)), True)[1]
+DET[("writeq", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], True, m.deadline)), True)[1]
 DET[("write_canonical", 1)] = DET[("writeq", 1)]
-DET[("writeln", 1)] = lambda m, a: (_out(m).write(_write_text(a[0]) + "\n"), True)[1]
+DET[("writeln", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], deadline=m.deadline) + "\n"), True)[1]
 DET[("nl", 0)] = lambda m, a: (_out(m).write("\n"), True)[1]
 DET[("tab", 1)] = lambda m, a: (_out(m).write(" " * evaluate(a[0])), True)[1]
 
 
-def format_text(fmt: str, args: list) -> str:
+def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
     """SWI-style ``format/2`` directives: ~w ~p ~q ~a ~d ~D ~s ~e ~f ~g ~n ~c ~r ~8| ~t ~~ ~i ~*c.
 
     >>> format_text("~w has ~d items~n", [Atom("cup"), 3])
@@ -865,9 +1048,9 @@ def format_text(fmt: str, args: list) -> str:
         d = fmt[i]
         i += 1
         if d == "w":
-            out.append(_write_text(take()))
+            out.append(_write_text(take(), deadline=deadline))
         elif d in "pq":
-            out.append(_write_text(take(), True))
+            out.append(_write_text(take(), True, deadline))
         elif d == "a":
             out.append(text_of(take()))
         elif d in "dD":
@@ -955,20 +1138,20 @@ def _format_args(t: Any) -> list:
 
 @det("format", 1)
 def _format1(m, a):
-    _out(m).write(format_text(text_of(a[0]), []))
+    _out(m).write(format_text(text_of(a[0]), [], m.deadline))
     return True
 
 
 @det("format", 2)
 def _format2(m, a):
-    _out(m).write(format_text(text_of(a[0]), _format_args(a[1])))
+    _out(m).write(format_text(text_of(a[0]), _format_args(a[1]), m.deadline))
     return True
 
 
 @det("format", 3)
 def _format3(m, a):
     sink = deref(a[0])
-    text = format_text(text_of(a[1]), _format_args(a[2]))
+    text = format_text(text_of(a[1]), _format_args(a[2]), m.deadline)
     if type(sink) is Struct and len(sink.args) == 1:
         kind = sink.name
         if kind == "atom":
@@ -1112,11 +1295,19 @@ def _bag_solutions(m: "Machine", witness, out, groups) -> Iterator[None]:
         m.undo_to(mark)
 
 
-def _variant(a: Any, b: Any) -> bool:
+def _variant(a: Any, b: Any, deadline: float | None = None) -> bool:
     mapping: dict = {}
     back: dict = {}
     stack = [(a, b)]
+    # pairs of compounds already compared (or being compared further down the stack):
+    # comparing one again adds nothing, so cyclic and shared terms take finite, linear time
+    seen: set[tuple[int, int]] = set()
+    clock = NODES_BETWEEN_CLOCK_CHECKS
     while stack:
+        clock -= 1
+        if not clock:
+            clock = NODES_BETWEEN_CLOCK_CHECKS
+            check_deadline(deadline)
         x, y = stack.pop()
         x, y = deref(x), deref(y)
         if type(x) is Var and type(y) is Var:
@@ -1125,6 +1316,10 @@ def _variant(a: Any, b: Any) -> bool:
         elif type(x) is Struct and type(y) is Struct:
             if x.name != y.name or len(x.args) != len(y.args):
                 return False
+            key = (id(x), id(y))
+            if key in seen:
+                continue
+            seen.add(key)
             stack.extend(zip(x.args, y.args))
         elif type(x) is not type(y) or x != y:
             return False

@@ -114,7 +114,7 @@ class Machine:
 
     # -- helpers used by builtins -------------------------------------------------------
     def unify(self, a: Any, b: Any) -> bool:
-        return unify(a, b, self.trail)
+        return unify(a, b, self.trail, self.deadline)
 
     def undo_to(self, mark: int) -> None:
         undo(self.trail, mark)
@@ -436,7 +436,7 @@ class Machine:
             ball = deref(args[0])
             if type(ball) is Var:
                 raise instantiation_error()
-            raise PrologThrow(copy_term(ball))
+            raise PrologThrow(copy_term(ball, deadline=self.deadline))
         if name == "catch":
             height = len(cps)
             cp = [K_CATCH, len(self.trail), nxt, args[1], args[2], cb]
@@ -460,7 +460,7 @@ class Machine:
             return False
         if op == S_COLLECT:
             template, results = goal.data
-            results.append(copy_term(template))
+            results.append(copy_term(template, deadline=self.deadline))
             return False
         if op == S_RULES:
             pred, args = goal.data
@@ -486,7 +486,7 @@ class Machine:
         return (goal, height + 1, (Special(S_COLLECT, (template, results)), 0, None))
 
     def _handle_throw(self, ball: Any, original: SLREvaluationError | None = None):
-        ball = copy_term(ball)
+        ball = copy_term(ball, deadline=self.deadline)
         cps = self.cps
         while cps:
             cp = cps.pop()
@@ -500,9 +500,10 @@ class Machine:
             # the copy taken before the bindings were undone: the culprit keeps its values
             original.term = ball
             raise original
-        from .terms import format_term
+        from .terms import MESSAGE_TOKENS, format_term
 
-        raise SLREvaluationError(ball, f"unhandled exception: {format_term(ball)}")
+        raise SLREvaluationError(ball, "unhandled exception: "
+                                 + format_term(ball, limit=MESSAGE_TOKENS, deadline=self.deadline))
 
     # -- events -------------------------------------------------------------------------
     def _event_goal(self, ev, nxt):

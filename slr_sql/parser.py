@@ -398,6 +398,8 @@ class _Builder(Transformer):
         tok = c[0]
         args = c[1]
         name = _functor_name(tok.value, tok.start_pos)
+        if name == "[|]" and len(args) == 2:
+            name = CONS  # SWI-Prolog 7's name of the list cell: '[|]'(H, T) is [H|T]
         item = (_FUNC, Struct(name, tuple([a[0] for a in args])), tok, args)
         if len(args) > 1 and max(a[1] for a in args) > 999:
             # The rare bracket that, in infix position, must be re-read as one sequence:
@@ -924,6 +926,8 @@ def parse_event_fast(text: str) -> tuple | None:
             depth += 1
             out = Struct(v, args_until(")"))
             depth -= 1
+            if v == "[|]" and len(out.args) == 2:
+                out = Struct(CONS, out.args)
             return out
         if k == "punct" and v == "[":
             i += 1

@@ -60,6 +60,7 @@ from .errors import SLRError, SLRSyntaxError, SLRTimeout
 from .parser import parse_term
 from .program import split_event_atom
 from .store import quote_identifier
+from .store.checks import shown
 from .terms import Atom, String, Struct, Var, deref, format_atom, make_list, to_python
 from .unify import undo, unify
 
@@ -222,7 +223,7 @@ class _Matcher:
 
 def _time_arg(value: Any, what: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SLRError(f"subscribe: {what} must be a number of seconds, not {value!r}")
+        raise SLRError(f"subscribe: {what} must be a number of seconds, not {shown(value)}")
     try:
         value = float(value)
     except OverflowError:
@@ -860,9 +861,9 @@ class SubscriptionHub:
             raise SLRError("the knowledge base is closed")
         if not isinstance(pattern, str):
             raise SLRError(f"subscribe: the pattern must be text such as 'face(F, R)^T', "
-                           f"not {pattern!r}")
+                           f"not {shown(pattern)}")
         if where is not None and not isinstance(where, str):
-            raise SLRError(f"subscribe: where must be a goal as text, not {where!r}")
+            raise SLRError(f"subscribe: where must be a goal as text, not {shown(where)}")
         if where is not None and not where.strip():
             where = None
         if isinstance(since, str) and since.strip() == "now":
@@ -876,15 +877,15 @@ class SubscriptionHub:
             raise SLRError(f"subscribe: until ({until_value:g}) is before since "
                            f"({since_value:g})")
         if id is not None and (not isinstance(id, str) or not id):
-            raise SLRError(f"subscribe: id must be a non-empty string, not {id!r}")
+            raise SLRError(f"subscribe: id must be a non-empty string, not {shown(id)}")
         if callback is not None and not callable(callback):
             raise SLRError("subscribe: callback must be callable")
         if isinstance(max_queue, bool) or not isinstance(max_queue, int) or max_queue < 1:
-            raise SLRError(f"subscribe: max_queue must be a positive integer, not {max_queue!r}")
+            raise SLRError(f"subscribe: max_queue must be a positive integer, not {shown(max_queue)}")
         if max_lag is not None and (isinstance(max_lag, bool) or not isinstance(max_lag, int)
                                     or max_lag < 1):
             raise SLRError(f"subscribe: max_lag must be a positive integer or None, "
-                           f"not {max_lag!r}")
+                           f"not {shown(max_lag)}")
         pattern = pattern.strip()
         matcher = _Matcher(self.kb, pattern, where)   # SLRSyntaxError for bad texts
         if isinstance(since, str):
@@ -961,7 +962,7 @@ class SubscriptionHub:
             rows = self.store.execute("SELECT type_name FROM slr_subscriptions WHERE id = ?",
                                       (sub_id,))
             if not rows:
-                raise SLRError(f"no subscription with id {sub_id!r}")
+                raise SLRError(f"no subscription with id {shown(sub_id)}")
             self.store.execute("DELETE FROM slr_subscriptions WHERE id = ?", (sub_id,))
         self._cleanup()
 

@@ -18,8 +18,11 @@ from __future__ import annotations
 import functools
 import math
 import re
+import time
 from dataclasses import dataclass
 from typing import Any, Iterable
+
+from .errors import SLRTimeout
 
 __all__ = [
     "Atom", "String", "Struct", "Var", "NIL", "TRUE", "CONS",
@@ -222,6 +225,26 @@ def indicator(term: Any) -> tuple[str, int]:
     if type(term) is Struct:
         return term.name, len(term.args)
     return str(term), 0
+
+
+# Nodes a term walk (printing, converting, copying, comparing) visits between two looks at
+# the clock when it has a deadline: a cheap counter, a clock read a few times a millisecond.
+NODES_BETWEEN_CLOCK_CHECKS = 4096
+
+
+# Tokens of a term an error message shows (the error term itself keeps it whole).
+MESSAGE_TOKENS = 4096
+
+
+def check_deadline(deadline: float | None) -> None:
+    """Raise :class:`SLRTimeout` when ``deadline`` (a ``time.monotonic()`` value) has passed:
+    the long walks over terms call it every few thousand nodes, so that a query's
+    ``timeout=`` holds inside one huge or cyclic term too.
+
+    >>> check_deadline(None); check_deadline(time.monotonic() + 60)
+    """
+    if deadline is not None and time.monotonic() > deadline:
+        raise SLRTimeout("query timed out inside a term walk (a huge or deeply shared term)")
 
 
 def deref(t: Any) -> Any:
@@ -449,7 +472,7 @@ class _CyclicTerm(Exception):
     """Raised inside to_python/format_term when a term turns out to be cyclic."""
 
 
-def to_python(t: Any) -> Any:
+def to_python(t: Any, deadline: float | None = None) -> Any:
     """Convert a term into the value handed to callers.
 
     Atoms stay :class:`Atom`, strings become ``str``, proper lists become ``list`` (the
@@ -457,7 +480,8 @@ def to_python(t: Any) -> Any:
     stay :class:`Var`. Iterative (a term nested 100,000 deep converts). A cyclic term
     (``X = f(X)``) comes back as SWI-Prolog prints it: ``@(Template, [S_1 = Value, ...])``
     with the variables ``S_1``... standing for the repeated subterms (see
-    :func:`factorize_cycles`).
+    :func:`factorize_cycles`). ``deadline`` (``time.monotonic()``) stops the conversion of
+    a huge term (one with shared subterms is exponential as a tree) with SLRTimeout.
 
     >>> to_python(make_list([Atom("a"), String("s")])), to_python(NIL)
     ([Atom('a'), 's'], [])
@@ -468,18 +492,23 @@ def to_python(t: Any) -> Any:
     if tt is int or tt is float:
         return t
     try:
-        return _to_python(t)
+        return _to_python(t, deadline)
     except _CyclicTerm:
-        return _to_python(factorize_cycles(t))
+        return _to_python(factorize_cycles(t, deadline), deadline)
 
 
-def _to_python(t: Any) -> Any:
+def _to_python(t: Any, deadline: float | None) -> Any:
     done: list = []
     # work items: a term to convert, or a tuple (k, name, gray ids) that assembles the last k
     # converted values into a list (name None), a partial list (name CONS) or a compound
     todo: list = [t]
     gray: set[int] = set()  # compounds reached through a binding, being converted
+    clock = NODES_BETWEEN_CLOCK_CHECKS
     while todo:
+        clock -= 1
+        if not clock:
+            clock = NODES_BETWEEN_CLOCK_CHECKS
+            check_deadline(deadline)
         x = todo.pop()
         if type(x) is tuple:
             k, name, keys = x
@@ -543,7 +572,7 @@ def _to_python(t: Any) -> Any:
     return done[0]
 
 
-def factorize_cycles(t: Any) -> Any:
+def factorize_cycles(t: Any, deadline: float | None = None) -> Any:
     """An acyclic term for a possibly cyclic one, as SWI-Prolog writes cyclic terms:
     ``@(Template, [S_1 = Value_1, ...])`` where each ``S_k`` stands for a subterm that
     contains itself. An acyclic term is returned as it is.
@@ -551,7 +580,7 @@ def factorize_cycles(t: Any) -> Any:
     >>> X = Var("X"); X.ref = Struct("f", (X,)); format_term(factorize_cycles(X))
     '@(S_1,[S_1=f(S_1)])'
     """
-    targets = _cycle_targets(t)
+    targets = _cycle_targets(t, deadline)
     if not targets:
         return t
     labels: dict[int, Var] = {}
@@ -562,7 +591,12 @@ def factorize_cycles(t: Any) -> Any:
         """``root`` with every cycle target replaced by its label (iterative)."""
         done: list = []
         todo: list = [root]
+        clock = NODES_BETWEEN_CLOCK_CHECKS
         while todo:
+            clock -= 1
+            if not clock:
+                clock = NODES_BETWEEN_CLOCK_CHECKS
+                check_deadline(deadline)
             x = todo.pop()
             if type(x) is _Build:
                 k = len(x.items)
@@ -601,14 +635,19 @@ def factorize_cycles(t: Any) -> Any:
     return Struct("@", (template, make_list(definitions)))
 
 
-def _cycle_targets(t: Any) -> dict[int, Any]:
+def _cycle_targets(t: Any, deadline: float | None) -> dict[int, Any]:
     """The compounds that contain themselves: the ends of the back edges of a depth-first
     walk (every cycle has one)."""
     targets: dict[int, Any] = {}
     gray: set[int] = set()
     black: set[int] = set()
     todo: list = [(t, False)]
+    clock = NODES_BETWEEN_CLOCK_CHECKS
     while todo:
+        clock -= 1
+        if not clock:
+            clock = NODES_BETWEEN_CLOCK_CHECKS
+            check_deadline(deadline)
         x, leaving = todo.pop()
         if leaving:
             gray.discard(id(x))
@@ -683,14 +722,18 @@ OPERATORS: tuple[tuple[int, str, tuple[str, ...]], ...] = (
                   "multifile", "public", "table", "event")),
     (1105, "xfy", ("|",)),
     (1100, "xfy", (";",)),
-    (1060, "yfx", ("where",)),        # event-rule operators (ETALIS priorities)
+    # event-rule operators (ETALIS priorities), each also in ETALIS's synonyms 'Seq', 'SEQ'
+    # (capitalized: quoted in a file, as ETALIS's examples write them)
+    (1060, "yfx", ("where", "Where", "WHERE")),
     (1055, "xfy", ("within",)),
-    (1053, "yfx", ("or",)),
+    (1053, "yfx", ("or", "Or", "OR")),
     (1050, "xfy", ("->", "*->")),
-    (1045, "yfx", ("par",)),
-    (1040, "yfx", ("and",)),
-    (1031, "yfx", ("cnot",)),
-    (1025, "yfx", ("seq", "equals", "meets", "during", "starts", "finishes")),
+    (1045, "yfx", ("par", "Par", "PAR")),
+    (1040, "yfx", ("and", "And", "AND")),
+    (1031, "yfx", ("cnot", "Cnot", "CNOT")),
+    (1025, "yfx", ("seq", "Seq", "SEQ", "equals", "Equals", "EQUALS", "meets", "Meets", "MEETS",
+                   "during", "During", "DURING", "starts", "Starts", "STARTS", "finishes",
+                   "Finishes", "FINISHES")),
     (1000, "xfy", (",",)),
     (990, "xfx", (":=",)),
     (900, "fy", ("\\+",)),
@@ -820,12 +863,14 @@ class _Writer:
     it is being written: meeting it again inside itself means the term is cyclic.
     """
 
-    __slots__ = ("out", "last", "quoted")
+    __slots__ = ("out", "last", "quoted", "deadline", "limit")
 
-    def __init__(self, quoted: bool):
+    def __init__(self, quoted: bool, deadline: float | None = None, limit: int | None = None):
         self.out: list[str] = []
         self.last = ""  # last character written
         self.quoted = quoted
+        self.deadline = deadline
+        self.limit = limit  # pieces of text after which the writer stops (with "...")
 
     def put(self, s: str) -> None:
         if not s:
@@ -847,7 +892,15 @@ class _Writer:
         todo: list = [(t, prec, False)]
         gray: set[int] = set()
         put = self.put
+        clock = NODES_BETWEEN_CLOCK_CHECKS
         while todo:
+            clock -= 1
+            if not clock:
+                clock = NODES_BETWEEN_CLOCK_CHECKS
+                check_deadline(self.deadline)
+                if self.limit is not None and len(self.out) > self.limit:
+                    self.out.append(" ...")
+                    return
             item = todo.pop()
             kind = item[0]
             if type(kind) is _Op:
@@ -994,11 +1047,14 @@ class _Writer:
             todo.append((t, _ARG_PRIORITY, False))
 
 
-def format_term(t: Any, quoted: bool = True, priority: int = 1200) -> str:
+def format_term(t: Any, quoted: bool = True, priority: int = 1200,
+                deadline: float | None = None, limit: int | None = None) -> str:
     """Prolog text of a term, like SWI-Prolog's ``writeq`` (``quoted=False``: like ``write``).
 
     A cyclic term is written as SWI-Prolog writes it, ``@(Template, [S_1=Value, ...])``
-    (see :func:`factorize_cycles`).
+    (see :func:`factorize_cycles`). ``deadline`` (``time.monotonic()``) stops writing a
+    huge term with SLRTimeout; ``limit`` (for messages) cuts the text after about that
+    many tokens with ``...``.
 
     >>> from slr_sql.terms import make_list
     >>> format_term(Struct(":-", (Atom("a"), Struct(",", (Atom("b"), Atom("c"))))))
@@ -1008,10 +1064,10 @@ def format_term(t: Any, quoted: bool = True, priority: int = 1200) -> str:
     >>> print(format_term(make_list([Atom("hello world"), String("s"), 1.0], Var("T"))))
     ['hello world',"s",1.0|T]
     """
-    w = _Writer(quoted)
+    w = _Writer(quoted, deadline, limit)
     try:
         w.write(t, priority)
     except _CyclicTerm:
-        w = _Writer(quoted)
-        w.write(factorize_cycles(t), priority)
+        w = _Writer(quoted, deadline, limit)
+        w.write(factorize_cycles(t, deadline), priority)
     return "".join(w.out)

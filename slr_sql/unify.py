@@ -8,19 +8,27 @@ from __future__ import annotations
 
 from typing import Any
 
-from .terms import CONS, Atom, String, Struct, Var, deref, is_ground
+from .terms import (CONS, NODES_BETWEEN_CLOCK_CHECKS, Atom, String, Struct, Var, check_deadline,
+                    deref, is_ground)
 
 __all__ = ["unify", "undo", "copy_term", "resolve", "unify_tuple", "bound_args", "match_time",
            "unify_event_row"]
 
 
-# Compound pairs one unify() call walks before it starts remembering pairs (so that two
-# cyclic terms, X = f(X) and Y = f(Y), unify instead of looping forever).
-_PAIRS_BEFORE_CYCLE_CHECK = 1_000_000
+# Compound pairs one unify() call walks before it starts remembering pairs: small terms
+# (nearly every unification) pay nothing for it, and two cyclic terms (X = f(X,X) and
+# Y = f(Y,Y)) or two copies of a term with shared subterms (a DAG, exponential as a tree)
+# unify after a few thousand pairs, in time linear in their distinct subterm pairs.
+_PAIRS_BEFORE_CYCLE_CHECK = 2048
+# Remembering pairs, unify() looks at the clock this often (pairs) when given a deadline.
+_PAIRS_BETWEEN_CLOCK_CHECKS = 16384
 
 
-def unify(a: Any, b: Any, trail: list) -> bool:
+def unify(a: Any, b: Any, trail: list, deadline: float | None = None) -> bool:
     """Unify two terms, recording bindings on ``trail``. No occurs check (as in Prolog).
+
+    Cyclic terms (rational trees) unify in finite time, as in SWI-Prolog. ``deadline`` (a
+    ``time.monotonic()`` value) stops a unification of huge terms with :class:`SLRTimeout`.
 
     >>> X = Var("X"); tr = []; unify(Struct("f", (X,)), Struct("f", (1,)), tr), X.ref
     (True, 1)
@@ -57,7 +65,8 @@ def unify(a: Any, b: Any, trail: list) -> bool:
                     return False
                 budget -= 1
                 if not budget:
-                    return _unify_remembering(a, b, stack or [], trail)
+                    return _unify_remembering(a, b, stack if stack is not None else [],
+                                              trail, deadline)
                 if stack is None:
                     stack = []
                 if n == 2:
@@ -76,37 +85,70 @@ def unify(a: Any, b: Any, trail: list) -> bool:
         a, b = stack.pop()
 
 
-def _unify_remembering(a: Any, b: Any, stack: list, trail: list) -> bool:
-    """unify() after a million compound pairs: each pair of compounds is unified once, so
-    cyclic terms (rational trees) unify in finite time, as in SWI-Prolog."""
+def _unify_remembering(a: Any, b: Any, stack: list, trail: list,
+                       deadline: float | None) -> bool:
+    """unify() after its first compound pairs: each pair of compounds reached through a
+    variable binding is unified once (a cycle always passes through a binding), so cyclic
+    terms (rational trees) unify in finite time, as in SWI-Prolog, and shared subterms once."""
     seen: set[tuple[int, int]] = set()
-    stack.append((a, b))
-    while stack:
+    clock = _PAIRS_BETWEEN_CLOCK_CHECKS
+    while True:
+        via = False
+        while type(a) is Var:
+            r = a.ref
+            if r is None:
+                break
+            a = r
+            via = True
+        while type(b) is Var:
+            r = b.ref
+            if r is None:
+                break
+            b = r
+            via = True
+        if a is not b:
+            ta = type(a)
+            tb = type(b)
+            if ta is Var:
+                a.ref = b
+                trail.append(a)
+            elif tb is Var:
+                b.ref = a
+                trail.append(b)
+            elif ta is Struct:
+                if tb is not Struct or a.name != b.name:
+                    return False
+                aa = a.args
+                ba = b.args
+                n = len(aa)
+                if n != len(ba):
+                    return False
+                clock -= 1
+                if not clock:
+                    clock = _PAIRS_BETWEEN_CLOCK_CHECKS
+                    check_deadline(deadline)
+                if via:
+                    key = (id(a), id(b))
+                    if key in seen:  # unified already, or being unified further down
+                        a = None
+                        b = None
+                        if not stack:
+                            return True
+                        a, b = stack.pop()
+                        continue
+                    seen.add(key)
+                if n == 2:
+                    stack.append((aa[0], ba[0]))
+                    a = aa[1]
+                    b = ba[1]
+                    continue
+                stack.extend(zip(aa, ba))
+            elif ta is not tb or a != b:
+                if not (ta is float and tb is float and a != a and b != b):
+                    return False
+        if not stack:
+            return True
         a, b = stack.pop()
-        a = deref(a)
-        b = deref(b)
-        if a is b:
-            continue
-        ta = type(a)
-        tb = type(b)
-        if ta is Var:
-            a.ref = b
-            trail.append(a)
-        elif tb is Var:
-            b.ref = a
-            trail.append(b)
-        elif ta is Struct:
-            if tb is not Struct or a.name != b.name or len(a.args) != len(b.args):
-                return False
-            key = (id(a), id(b))
-            if key in seen:  # already unified, or being unified further down the stack
-                continue
-            seen.add(key)
-            stack.extend(zip(a.args, b.args))
-        elif ta is not tb or a != b:
-            if not (ta is float and tb is float and a != a and b != b):
-                return False
-    return True
 
 
 def undo(trail: list, mark: int) -> None:
@@ -115,12 +157,19 @@ def undo(trail: list, mark: int) -> None:
         trail.pop().ref = None
 
 
-def copy_term(t: Any, mapping: dict | None = None) -> Any:
+# Nodes copy_term() copies as a tree before it starts copying each shared compound once:
+# a term with shared subterms (X1 = f(X0,X0), X2 = f(X1,X1), ...) is exponential as a tree.
+_NODES_BEFORE_SHARING = 8192
+
+
+def copy_term(t: Any, mapping: dict | None = None, deadline: float | None = None) -> Any:
     """Copy a term with fresh variables (bindings resolved).
 
     Iterative (terms nested 100,000 deep copy), and finite on cyclic terms: their copy is
-    cyclic too, through fresh bound variables. ``mapping`` (id of a variable -> its copy)
-    keeps the renaming consistent across calls.
+    cyclic too, through fresh bound variables; a large term's shared subterms are copied
+    once (the copy shares them too). ``mapping`` (id of a variable -> its copy) keeps the
+    renaming consistent across calls; ``deadline`` (``time.monotonic()``) stops the copy of
+    a huge term with :class:`SLRTimeout`.
 
     >>> X = Var("X"); c = copy_term(Struct("f", (X, X))); c.args[0] is c.args[1] is not X
     True
@@ -137,9 +186,9 @@ def copy_term(t: Any, mapping: dict | None = None) -> Any:
     if tt is not Struct:
         return t
     try:
-        return _copy(t, mapping, None)
+        return _copy(t, mapping, None, deadline)
     except _CyclicTerm:
-        return _copy(t, mapping, {})
+        return _copy(t, mapping, {}, deadline)
 
 
 class _CyclicTerm(Exception):
@@ -157,14 +206,22 @@ class _Copied:
         self.placeholder = placeholder
 
 
-def _copy(t: Any, mapping: dict, shared: dict | None) -> Any:
-    """copy_term's walk. ``shared`` None: raise _CyclicTerm on a cycle; a dict: each
-    compound reached through a binding is copied once, and a later (or inner) occurrence
-    refers to the copy through a fresh variable bound to it."""
+def _copy(t: Any, mapping: dict, shared: dict | None, deadline: float | None) -> Any:
+    """copy_term's walk. ``shared`` None: raise _CyclicTerm on a cycle or after
+    _NODES_BEFORE_SHARING nodes; a dict: each compound reached through a binding is copied
+    once, and a later (or inner) occurrence refers to the copy through a fresh variable
+    bound to it."""
     done: list = []
     todo: list = [t]
     gray: set[int] = set()  # compounds reached through a binding, being copied
+    nodes = 0
     while todo:
+        nodes += 1
+        if not nodes % NODES_BETWEEN_CLOCK_CHECKS:
+            check_deadline(deadline)
+            if shared is None and nodes >= _NODES_BEFORE_SHARING:
+                # for the mapping: variables met so far get the same copies the second time
+                raise _CyclicTerm
         x = todo.pop()
         tx = type(x)
         if tx is _SpineCopied:

@@ -62,6 +62,8 @@ def _leaves(tree):
         return [tree]
     if tree[0] == "or":
         raise AssertionError("expand first")
+    if tree[0] == "cnot":   # ("cnot", part, negated leaf): only the part's atoms match
+        return _leaves(tree[1])
     return _leaves(tree[1]) + _leaves(tree[2])
 
 
@@ -70,6 +72,8 @@ def _alternatives(tree):
         return [tree]
     if tree[0] == "or":
         return _alternatives(tree[1]) + _alternatives(tree[2])
+    if tree[0] == "cnot":
+        return [("cnot", part, tree[2]) for part in _alternatives(tree[1])]
     return [(tree[0], l, r) for l in _alternatives(tree[1]) for r in _alternatives(tree[2])]
 
 
@@ -89,14 +93,30 @@ def _bind(pattern_args, event_args, bindings):
     return b
 
 
-def _eval_interval(tree, chosen, k):
-    """Interval of the sub-pattern (leaves numbered from k); None if a relation fails."""
+def _eval_interval(tree, chosen, k, events=()):
+    """Interval of the sub-pattern (leaves numbered from k); None if a relation fails, or
+    if a cnot inside it finds its negated event inside its part: checked with the bindings
+    of that part's own atoms only (SPEC §6, scope)."""
     if tree[0] == "leaf":
         ev = chosen[k[0]]
         k[0] += 1
         return (ev[2], ev[3])
-    left = _eval_interval(tree[1], chosen, k)
-    right = _eval_interval(tree[2], chosen, k)
+    if tree[0] == "cnot":
+        first = k[0]
+        iv = _eval_interval(tree[1], chosen, k, events)
+        if iv is None:
+            return None
+        own = {}
+        for leaf, ev in zip(_leaves(tree[1]), chosen[first:k[0]]):
+            own = _bind(leaf[2], ev[1], own)
+        _, cname, cargs = tree[2]
+        s, e = iv
+        if any(ev[0] == cname and s < ev[2] and ev[3] < e and _bind(cargs, ev[1], own)
+               is not None for ev in events):
+            return None
+        return iv
+    left = _eval_interval(tree[1], chosen, k, events)
+    right = _eval_interval(tree[2], chosen, k, events)
     if left is None or right is None:
         return None
     return _interval(tree[0], left, right)
@@ -134,7 +154,7 @@ def reference(rule, events):
                     break
             if b is None:
                 continue
-            iv = _eval_interval(alt, evs, [0])
+            iv = _eval_interval(alt, evs, [0], events)
             if iv is None:
                 continue
             s, e = iv
@@ -208,6 +228,8 @@ def _text_leaf(leaf):
 def _text(tree):
     if tree[0] == "leaf":
         return _text_leaf(tree)
+    if tree[0] == "cnot":
+        return f"({_text(tree[1])}) cnot {_text_leaf(tree[2])}"
     return f"({_text(tree[1])}) {tree[0]} ({_text(tree[2])})"
 
 
@@ -250,13 +272,18 @@ def patterns(draw, depth=2, allow_or=True):
         return draw(leaves())
     ops = BINARY + (["or"] if allow_or else [])
     op = draw(st.sampled_from(ops))
-    return (op, draw(patterns(depth=depth - 1, allow_or=allow_or)),
-            draw(patterns(depth=depth - 1, allow_or=allow_or)))
+    left = draw(patterns(depth=depth - 1, allow_or=allow_or))
+    if depth == 2 and draw(st.integers(0, 3)) == 0:
+        # a cnot on the left part only, its variable maybe bound only by the right part
+        left = ("cnot", left, ("leaf", "c", (draw(st.sampled_from(["X", "Y", "_", 1])),)))
+    return (op, left, draw(patterns(depth=depth - 1, allow_or=allow_or)))
 
 
 def _vars(tree):
     if tree[0] == "leaf":
         return {a for a in tree[2] if isinstance(a, str) and a != "_"}
+    if tree[0] == "cnot":
+        return _vars(tree[1])
     if tree[0] == "or":
         return _vars(tree[1]) & _vars(tree[2])
     return _vars(tree[1]) | _vars(tree[2])
@@ -412,6 +439,20 @@ def test_where_run_by_the_interpreter_equals_the_reference(rule, events, data):
     expected = reference(rule, events)
     got = run(rule, events, order, cuts, marks, False)
     assert _typed(got) == _typed([(tuple(h), s, e) for h, s, e in expected]), rule_text(rule)
+
+
+def test_a_cnot_sees_only_its_own_parts_bindings():
+    # ((a(1) seq b(1)) cnot c(X)) and d(X, 0): any c inside [1, 3] blocks, whatever d binds
+    rule = {"pattern": ("and", ("cnot", ("seq", ("leaf", "a", (1,)), ("leaf", "b", (1,))),
+                                ("leaf", "c", ("X",))), ("leaf", "d", ("X", 0))),
+            "head": ["X"], "where": [], "cnot": None, "within": None, "policy": "unrestricted"}
+    events = [("a", (1,), 1.0, 1.0), ("c", (5,), 2.0, 2.0), ("b", (1,), 3.0, 3.0),
+              ("d", (7, 0), 4.0, 4.0)]
+    assert reference(rule, events) == []
+    assert run(rule, events, [0, 1, 2, 3], [], True, False) == []
+    without_c = [ev for ev in events if ev[0] != "c"]
+    assert reference(rule, without_c) == [((7,), 1.0, 4.0)]
+    assert run(rule, without_c, [0, 1, 2], [], True, False) == [((7,), 1.0, 4.0)]
 
 
 def test_reference_examples_by_hand():

@@ -468,6 +468,29 @@ def test_etalis_files_load_and_ignore_etalis_only_facts(kb):
     assert intervals(kb, "d(X)") == [(2, 4.0, 6.0)]
 
 
+# ETALIS's parser (its src/parser.P) reads every operator also capitalized and in capitals;
+# its regression examples write them quoted: ce2(X,Y3) <- a(X,Y1) 'SEQ' a(X,Y2) 'SEQ' a(X,Y3).
+@pytest.mark.parametrize("lower", ["seq", "and", "par", "or", "equals", "meets", "during",
+                                   "starts", "finishes", "cnot", "where"])
+@pytest.mark.parametrize("spelling", [str.capitalize, str.upper])
+def test_etalis_operator_synonyms_are_the_same_operators(kb, lower, spelling):
+    right = "X > 1" if lower == "where" else "b(X)"
+    kb.load(f"c(X) <- a(X) '{spelling(lower)}' {right}.")
+    kb.load(f"c(X) <- a(X) {lower} {right}.")   # the same rule: not a second one
+    assert [r["rule"] for r in kb.event_rules()] == [f"c(X) <- a(X) {lower} " + (
+        "X>1" if lower == "where" else "b(X)")]
+
+
+def test_an_etalis_regression_file_with_synonyms_detects_as_etalis(kb):
+    kb.load("""
+        print_trigger(ce2/2).
+        print_trigger(a/2).
+        ce2(X,Y3) <- a(X,Y1) 'SEQ' a(X,Y2) 'SEQ' a(X,Y3).
+    """)
+    kb.add_many(["a(1,10)^1", "a(1,20)^2", "a(1,30)^3"])
+    assert intervals(kb, "ce2(X, Y)") == [(1, 30, 1.0, 3.0)]
+
+
 def test_existing_programs_still_use_the_operator_names_as_atoms(kb):
     kb.load("op(and). op(or). op(seq). pick(X) :- op(X), X \\== or.")
     assert [r["X"] for r in kb.query("pick(X)")] == ["and", "seq"]

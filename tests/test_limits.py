@@ -11,7 +11,7 @@ from __future__ import annotations
 import pytest
 
 from slr_sql.builtins import MAX_BUILT_LIST
-from slr_sql.errors import SLREvaluationError, SLRTimeout
+from slr_sql.errors import SLRError, SLREvaluationError, SLRTimeout
 from slr_sql.terms import MAX_INTEGER_BITS, Struct, Var, format_term
 
 DEEP = 100_000
@@ -89,6 +89,68 @@ def test_a_cyclic_list_is_not_a_list(kb):
 
 
 # ------------------------------------------------------- timeouts and resource bounds
+# X1 = f(X0, X0), X2 = f(X1, X1), ...: 41 cells, 2**40 nodes as a tree
+SHARED = "dag(0, z) :- !.\ndag(N, f(X, X)) :- M is N - 1, dag(M, X).\n"
+CYCLIC = "X = f(X,X,X,X,X,X), Y = f(Y,Y,Y,Y,Y,Y)"
+ARITY_40 = "X = f({0}), Y = f({1})".format(",".join(["X"] * 40), ",".join(["Y"] * 40))
+# what "timeout=1 holds" allows, generously (a loaded machine, a slow thread start): a walk
+# that ignores the deadline runs for half a minute (the cycles) to hours (the shared terms)
+FINISHES_WITHIN = 15.0
+
+
+def finishes(kb, goal: str, timeout: float = 1):
+    """kb.query(goal, timeout=...) in a thread: its answers, or the SLRError it raised; the
+    test fails if it has not finished FINISHES_WITHIN seconds later."""
+    import threading
+
+    box: list = []
+
+    def run():
+        try:
+            box.append(kb.query(goal, timeout=timeout))
+        except SLRError as exc:
+            box.append(exc)
+
+    worker = threading.Thread(target=run, daemon=True)
+    worker.start()
+    worker.join(FINISHES_WITHIN)
+    assert box, f"{goal} ignored timeout={timeout}"
+    return box[0]
+
+
+@pytest.mark.parametrize("goal,expected", [
+    (f"{CYCLIC}, X = Y, fail", []),
+    (f"{ARITY_40}, X = Y, fail", []),
+    (f"\\+ \\+ ({CYCLIC}, X = Y, X == Y, copy_term(X, C), C = Y, findall(X, true, [F]), F = Y)",
+     [{}]),
+    # shared terms: unify, compare, copy and group as a graph, not as a 2**40-node tree
+    ("\\+ \\+ (dag(40, X), dag(40, Y), X = Y, X == Y, compare(=, X, Y), X @>= Y, "
+     "copy_term(X, C), C = Y, findall(X, true, [F]), F == Y, catch(throw(X), B, true), B = Y, "
+     "msort([X, Y], [_, _]), bagof(K, member(K-W, [1-X, 2-Y]), [1, 2]))", [{}]),
+])
+def test_cyclic_and_shared_terms_meet_the_timeout_with_the_answer(kb, goal, expected):
+    kb.load(SHARED)
+    assert finishes(kb, goal) == expected
+
+
+@pytest.mark.parametrize("goal", [
+    "dag(40, X)",                                   # the answer itself
+    "dag(40, X), format(atom(A), '~w', [X])",
+    "dag(40, X), term_to_atom(X, A)",
+    "dag(40, X), write(X)",
+])
+def test_writing_a_huge_shared_term_stops_at_the_timeout(kb, goal):
+    kb.load(SHARED)
+    assert isinstance(finishes(kb, goal), SLRTimeout)
+
+
+def test_an_error_about_a_huge_term_has_a_bounded_message(kb):
+    kb.load(SHARED)
+    error = finishes(kb, "dag(40, X), length(X, N)")
+    assert isinstance(error, SLREvaluationError) and len(str(error)) < 100_000
+    assert str(error).startswith("error(type_error(list,f(f(") and str(error).endswith(" ...")
+
+
 @pytest.mark.parametrize("timeout", [1, None])
 def test_a_list_of_fifty_million_cells_is_a_resource_error_at_once(kb, timeout):
     assert error_of(kb, "length(L, 50000000)", timeout=timeout) == "resource_error(memory)"

@@ -149,8 +149,8 @@ def test_health_and_openapi_describe_the_routes(server):
     expected = {"/health", "/openapi.json", "/add", "/add_event", "/add_many", "/load",
                 "/unload", "/programs", "/query", "/submit", "/submit/{handle}", "/explain",
                 "/mark_complete", "/complete_until", "/buffers", "/buffers/{buffer_id}", "/sql",
-                "/stats", "/subscribe", "/event_rules", "/unsubscribe", "/fleet/positions",
-                "/fleet/receive", "/fleet/status"}
+                "/stats", "/subscribe", "/event_rules", "/unsubscribe", "/warnings",
+                "/fleet/positions", "/fleet/receive", "/fleet/status"}
     assert set(spec["paths"]) == expected
     for path, methods in spec["paths"].items():
         for method, op in methods.items():
@@ -202,6 +202,19 @@ def test_query_time_is_bounded_by_the_server(remote, tag):
         remote.query(f"{tag}loop", timeout=0.2)
     response = httpx.post(remote.url + "/query", json={"goal": f"{tag}loop", "timeout": 0.1})
     assert response.status_code == 408 and response.json()["error"]["kind"] == "SLRTimeout"
+
+
+def test_query_time_holds_inside_huge_and_cyclic_terms(remote, tag):
+    # the server's --max-query-time 1 also bounds unifying, copying and writing terms
+    cyclic = "X = f({0}), Y = f({1})".format(",".join(["X"] * 40), ",".join(["Y"] * 40))
+    assert remote.query(f"{cyclic}, X = Y, fail") == []
+    remote.load(f"{tag}dag(0, z) :- !.\n{tag}dag(N, f(X, X)) :- M is N - 1, {tag}dag(M, X).")
+    with pytest.raises(SLRTimeout):
+        remote.query(f"{tag}dag(40, X)")       # an answer of 2**40 nodes as a tree
+    with pytest.raises(SLRTimeout):
+        remote.query(f"{tag}dag(40, X), format(atom(A), '~w', [X])")
+    assert remote.query(f"\\+ \\+ ({tag}dag(40, X), {tag}dag(40, Y), X = Y, copy_term(X, C), "
+                        "C == Y)") == [{}]
 
 
 BIG = b'{"goal": "X = 1", "pad": "' + b"x" * (2 * 1024 * 1024) + b'"}'

@@ -135,7 +135,7 @@ ser(T, Vs) :- T = [_|_], !, spine(T, Items, Tail),     % a partial list, flat
 ser(T, _) :- atom(T), !, atom_codes(T, Cs), format('{"a":~w}', [Cs]).
 ser(T, _) :- string(T), !, string_codes(T, Cs), format('{"s":~w}', [Cs]).
 ser(T, Vs) :- compound(T), !, compound_name_arguments(T, N, As),
-    ( N == '[|]' -> N1 = '.' ; N1 = N ), atom_codes(N1, Cs),
+    ( N == '[|]', As = [_, _] -> N1 = '.' ; N1 = N ), atom_codes(N1, Cs),
     format('{"c":~w,"args":[', [Cs]), ser_args(As, Vs), write(']}').
 ser(T, _) :- format('{"a":"unknown ~q"}', [T]).
 
@@ -642,6 +642,80 @@ def examples(draw):
     return "\n".join(slr) + "\n", events, "\n".join(swi) + "\n", queries
 
 
+# The classic atom builtins and SWI-7's lists, every mode and error, one query each (in the
+# corpus as one example each). Left out, with the reason: atom('[]') (slr_sql reads '[]' as
+# the empty list, which SWI-7 tells apart), term_to_atom/2 of a term with variables (the
+# names SWI makes up, _123), and the wording inside syntax_error(...).
+BUILTIN_GOALS = [
+    'atom_concat(a, b, X)', 'atom_concat(X, b, ab)', 'atom_concat(a, X, ab)',
+    'atom_concat(X, Y, ab)', 'atom_concat(a, b, ab)', 'atom_concat(a, b, ba)',
+    'atom_concat(1, 2, X)', 'atom_concat(a, 1.5, X)', 'atom_concat("s", b, X)',
+    'atom_concat([a], b, X)', 'atom_concat(a, [b], a1)', 'atom_concat(X, [b], ab)',
+    'atom_concat([], a, X)', 'atom_concat(X, Y, [a])', 'atom_concat(f(x), b, X)',
+    'atom_concat(X, b, f(x))', 'atom_concat(X, Y, Z)', 'atom_concat(a, Y, Z)',
+    'atom_concat(X, Y, 12)', 'atom([])', 'atomic([])', 'atom(a)', 'atom("s")', 'atom(1)',
+    '[a] =.. L', '[a, b] =.. L', "X =.. ['[|]', a, []]", 'functor([a], N, A)',
+    "functor(X, '[|]', 2)", 'X =.. [foo, a]', 'f(a, b) =.. L', 'a =.. L', 'X =.. [1]',
+    'X =.. [f(a), b]', 'name(X, "12")', 'name(X, "ab")', 'name(ab, X)', 'name(12, X)',
+    'name(1.5, X)', 'name(X, [])', 'name(X, Y)', 'name(f(x), Y)', 'name(X, "-12")',
+    'name(X, " 12")', "name(X, [0'a|_])", 'name("s", X)', 'atom_codes(ab, X)',
+    'atom_codes(X, "ab")', "atom_codes(X, [0'a, 0'b])", 'atom_codes(12, X)', 'atom_codes(X, Y)',
+    'atom_codes(f(x), Y)', 'atom_codes(X, [a|_])', "atom_codes(ab, [0'a|T])", 'atom_codes([], C)',
+    'atom_codes(X, [-1])', 'atom_codes(X, foo)', 'atom_chars(ab, X)', 'atom_chars(X, [a, b])',
+    'atom_chars(12, X)', 'atom_chars(X, Y)', 'atom_chars(X, [a|_])', 'atom_chars(ab, [a|T])',
+    'atom_chars(X, [ab])', 'atom_chars(X, [1])', 'atom_chars(1.5, L)', "atom_chars(X, ['1', '2'])",
+    'char_code(a, X)', 'char_code(X, 98)', 'char_code(X, Y)', 'char_code(ab, X)', 'char_code(X, a)',
+    'char_code(1, X)', 'char_code(a, 97)', 'char_code(X, -1)', 'atom_length(abc, L)',
+    'atom_length(12, L)', "atom_length('', L)", 'atom_length(X, L)', 'atom_length(abc, foo)',
+    'atom_length(abc, -1)', 'atom_length(f(x), L)', 'atom_length("str", L)', 'atom_length([], L)',
+    'atom_length(abc, 3)', 'atom_length(1.5, L)', 'sub_atom(abc, B, 2, A, S)',
+    'sub_atom(abc, B, L, A, S)', 'sub_atom(abc, 1, L, A, S)', 'sub_atom(abcab, B, L, A, ab)',
+    'sub_atom(abc, B, L, 0, S)', 'sub_atom(abc, 4, L, A, S)', 'sub_atom(X, B, L, A, S)',
+    'sub_atom(f(x), B, L, A, S)', 'sub_atom(abc, a, L, A, S)', 'sub_atom(abc, B, L, A, f(x))',
+    'sub_atom(abc, 0, 1, A, S)', 'sub_atom(12, B, 1, A, S)', 'sub_atom(abc, B, -1, A, S)',
+    'number_codes(12, X)', 'number_codes(X, "12")', 'number_codes(X, "1.5")',
+    'number_codes(X, "a")', 'number_codes(X, Y)', 'number_codes(a, X)', 'number_codes(X, " 12")',
+    'number_codes(X, "0x1A")', 'number_codes(X, "-3")', "number_codes(X, [0'1|_])",
+    "atom_number('12', X)", "atom_number('1.5', X)", 'atom_number(abc, X)', 'atom_number(X, 12)',
+    'atom_number(X, Y)', "atom_number('12', 12)", 'atom_number(12, X)', "atom_number('-7', X)",
+    "atom_number(' 3', X)", "atom_number('0b101', X)", 'atom_number(X, a)', "atom_number('3 ', X)",
+    'upcase_atom(abc, X)', "upcase_atom('aB1', X)", "upcase_atom(X, 'ABC')", 'upcase_atom(12, X)',
+    'upcase_atom(f(x), X)', "upcase_atom(abc, 'ABC')", 'upcase_atom("s", X)',
+    "term_to_atom(T, 'foo(a, [1,2])')", "term_to_atom(f(a), 'f(a)')", 'term_to_atom(1+2*3, A)',
+    "term_to_atom(T, '- 1')", 'term_to_atom(- (1), A)', 'term_to_atom(a- -1, A)',
+    'term_to_atom(T, 12)', 'term_to_atom([a|b], A)', 'number_codes(X, "12 ")',
+    'number_codes(X, "\\n12")', 'name(X, "12 ")', 'atom_number(X, "12")', 'atom_number("12", X)',
+    "downcase_atom('AbC', X)", 'downcase_atom(X, y)', 'atom_concat(a, [], X)',
+    'atom_concat(X, Y, [])', 'name([], X)', 'atom_chars([], X)', 'upcase_atom([], X)',
+    'sub_atom([], B, L, A, S)', 'atom_number([], X)', 'number_codes(X, [])', 'atom_codes(X, [])',
+    'atom_chars(X, [])', 'char_code([], X)', 'atom_length(X, 3)', "atom_codes(X, [0'a|foo])",
+    'atom_chars(X, [a|foo])', 'atom_codes(X, [a])', 'atom_codes(X, ["a"])', "atom_chars(X, [0'a])",
+    'atom_codes(X, [f(x)])', 'name(X, [a])', 'name(X, foo)', 'number_codes(X, foo)',
+    'atom_number(a, 3)', 'atom_number(A, 1.5)', 'atom_number(f(x), Y)', 'upcase_atom(abc, f(x))',
+    'upcase_atom(abc, "ABC")', 'sub_atom(abc, B, L, A, "b")', 'sub_atom("abc", B, 1, 0, S)',
+    'atom_length(abc, 1.5)', 'char_code(X, 1114112)', 'atom_codes(X, [1114112])',
+    'number_codes(X, "1e10")', 'number_codes(X, "12a")', "atom_number('1e10', X)",
+    'atom_number(inf, X)', "atom_number('0''a', X)", 'name(X, "1.0e3")', 'number_codes(X, "- 3")',
+    'number_codes(X, "+3")', "atom_number('+3', X)", "atom_number('-', X)", 'name(X, "0x1A")',
+    'name(X, "+3")', 'term_to_atom(f(x), "f(x)")', 'term_to_atom(T, "f(x)")',
+    'term_to_atom(T, f(x))', "atom_chars(X, ['1'|T])", 'sub_atom(abc, B, L, A, abcd)',
+    'sub_atom(abc, 1, 1, 1, S)', 'sub_atom(abc, B, 1, 1, S)', 'sub_atom(abc, B, 4, A, S)',
+    'sub_atom(abc, B, L, 1, S)', 'sub_atom(abc, 1, L, 1, S)', "upcase_atom('äb', X)",
+    "atom_length('äb', L)", 'atom_codes(X, "äb")', "T = '[|]'(a, []), is_list(T)",
+    'X = [a|b], X =.. [F|Args]', "functor(T, '[|]', 2), T = [a]", "functor(T, '[|]', 3)",
+    "X =.. ['[|]', a]",
+]
+_QUOTED = re.compile(r"'[^']*'|\"[^\"]*\"|0'.")
+
+
+def builtin_example(goal: str) -> tuple:
+    """One BUILTIN_GOALS query as an example (no program, no events)."""
+    names = var_names(_QUOTED.sub("", goal))
+    swi = (f"query(0, ({goal}), [{', '.join(repr(n) for n in names)}], "
+           f"[{', '.join(names)}]).\n")
+    return "", [], swi, [(goal, goal, names)]
+
+
 class Hang(BaseException):
     """Not an Exception: a broad ``except Exception`` in the code under test must not swallow
     it, and hypothesis reports it at once instead of shrinking through more hangs."""
@@ -762,7 +836,9 @@ def test_corpus_answers(swipl, start):
 def test_the_corpus_is_a_real_sample():
     """The committed examples exercise what the generator exercises: answers, errors and
     events (a corpus of trivial examples would replay nothing)."""
-    assert len(CORPUS) >= 150
+    assert len(CORPUS) >= 150 + len(BUILTIN_GOALS)
+    replayed = {e["queries"][0][0] for e in CORPUS if not e["program"]}
+    assert [g for g in BUILTIN_GOALS if g not in replayed] == []
     results = [r for e in CORPUS for r in e["swi"].values()]
     assert sum(bool(r["answers"]) for r in results) >= 100
     assert sum(r["error"] is not None for r in results) >= 10

@@ -39,6 +39,10 @@ POLICIES = ("unrestricted", "recent", "chronological")
 # binary operators between two sub-patterns (``or`` is expanded before these are read)
 BINARY = ("seq", "and", "par", "equals", "meets", "during", "starts", "finishes")
 _PATTERN_OPS = frozenset(BINARY + ("or", "cnot", "within", "where"))
+# ETALIS's parser also reads each operator capitalized and in capitals ('SEQ', 'Where'):
+# the same operator (rules written either way are one rule)
+SYNONYMS = {variant: op for op in BINARY + ("or", "cnot", "where")
+            for variant in (op.capitalize(), op.upper())}
 
 # ETALIS program facts that only steer ETALIS itself (what it prints, which events it takes
 # from outside): accepted so that ETALIS rule files load unchanged, and ignored.
@@ -305,9 +309,11 @@ class _Reader:
                 self.alt.goals.extend(_flatten_and(goal))
                 return interval, terms
             if op == "cnot":
+                marks = (len(self.alt.leaves), len(self.alt.goals), len(self.unify_goals))
                 interval, terms = self.node(p.args[0])
+                own = self.bound_since(*marks)
                 for negated in self.negated(p.args[1]):
-                    self.alt.negations.append((interval, negated))
+                    self.alt.negations.append((interval, _scoped(negated, own)))
                 return interval, terms
             if op == "or":  # pragma: no cover - expanded before
                 raise self.error("internal: or not expanded", p)
@@ -335,6 +341,18 @@ class _Reader:
         pos = len(self.alt.leaves)
         self.alt.leaves.append(leaf)
         return (("s", pos), ("e", pos)), {pos}
+
+    def bound_since(self, leaves: int, goals: int, unify_goals: int) -> set[int]:
+        """ids of the variables the part read since these counts binds: its event atoms
+        and its own where goals (the scope of a cnot over that part, SPEC §6)."""
+        own: set[int] = set()
+        for leaf in self.alt.leaves[leaves:]:
+            for t in leaf.args + (leaf.start, leaf.end):
+                if t is not None:
+                    own.update(id(v) for v in term_vars(t))
+        for goal in self.alt.goals[goals:] + self.unify_goals[unify_goals:]:
+            own.update(id(v) for v in term_vars(goal))
+        return own
 
     def negated(self, p: Any) -> list[Leaf]:
         p = deref(p)
@@ -405,6 +423,29 @@ class _Reader:
                          f"{format_term(t)}", near)
 
 
+def _scoped(leaf: Leaf, own: set[int]) -> Leaf:
+    """The negated event atom with every variable its part does not bind renamed apart:
+    in ``((a seq b) cnot x(X)) and y(X)`` the x(X) blocks for any X (a seq b binds no X),
+    whatever y(X) binds later. A variable repeated in the atom stays one variable."""
+    fresh: dict[int, Var] = {}
+
+    def rename(t: Any) -> Any:
+        t = deref(t)
+        if type(t) is Var and id(t) not in own:
+            v = fresh.get(id(t))
+            if v is None:
+                v = fresh[id(t)] = Var(f"_Free{len(fresh)}")
+            return v
+        return t
+
+    if all(id(v) in own for t in leaf.args + (leaf.start, leaf.end) if t is not None
+           for v in term_vars(t)):
+        return leaf
+    return Leaf(leaf.name, leaf.arity, tuple(rename(a) for a in leaf.args),
+                None if leaf.start is None else rename(leaf.start),
+                None if leaf.end is None else rename(leaf.end), leaf.point, leaf.text)
+
+
 def _uniform(p: Any) -> bool:
     """Do all event atoms of this (or-free) part have the same interval? (an atom, or
     ``equals`` of such parts, possibly under within/where/cnot)."""
@@ -446,7 +487,8 @@ def compile_rule(clause: Clause) -> EventRule:
     ('r', 1, 2, [Struct('>', (Var('R2'), Var('R1')))])
     """
     rule = deref(clause.head)
-    head, pattern = deref(rule.args[0]), deref(rule.args[1])
+    head, pattern = deref(rule.args[0]), _lowercase_operators(rule.args[1])
+    rule = Struct(rule.name, (rule.args[0], pattern))
     if type(head) is Struct and head.name == "^" and len(head.args) == 2:
         raise rule_error(clause, "the head of an event rule takes its interval from the "
                                  "pattern: write it without ^", head, in_head=True)
@@ -481,6 +523,19 @@ def compile_rule(clause: Clause) -> EventRule:
     return EventRule(clause, head, name, arity, pattern, alternatives, text, key)
 
 
+def _lowercase_operators(p: Any) -> Any:
+    """The pattern with ETALIS's operator synonyms (``'SEQ'``, ``'Where'``) as the operators
+    they stand for; the operands of ``where`` and ``within`` are left as they are."""
+    p = deref(p)
+    if type(p) is not Struct or len(p.args) != 2:
+        return p
+    name = SYNONYMS.get(str(p.name), p.name)
+    if name not in _PATTERN_OPS:
+        return p
+    right = p.args[1] if name in ("where", "within") else _lowercase_operators(p.args[1])
+    return Struct(Atom(name), (_lowercase_operators(p.args[0]), right))
+
+
 def _has_or(p: Any) -> bool:
     p = deref(p)
     if type(p) is Struct and p.name in _PATTERN_OPS and len(p.args) == 2:
@@ -504,7 +559,9 @@ def order_rules(rules: list[EventRule], policies: dict, default: str | None,
     """
     for rule in rules:
         rule.policy = policies.get(rule.head_key) or default or "unrestricted"
-        rule.key = hashlib.sha1((_canonical(deref(rule.clause.head)) + "|" + rule.policy)
+        # the pattern as read (ETALIS's synonyms lowercased): 'SEQ' and seq are one rule
+        rule.key = hashlib.sha1((_canonical(Struct("<-", (rule.head, rule.pattern)))
+                                 + "|" + rule.policy)
                                 .encode("utf-8")).hexdigest()[:12]
     by_head: dict[tuple[str, int], list[EventRule]] = {}
     for rule in rules:

@@ -1158,6 +1158,8 @@ class EventRules:
         t = deref(term)
         if type(t) is Struct and t.name == "^" and len(t.args) == 2:
             t = deref(t.args[0])
+        if type(t) is not Struct and not isinstance(t, str):
+            return None  # a number or a variable: never an event type
         key = (str(t.name), len(t.args)) if type(t) is Struct else (str(t), 0)
         if key not in self.by_head:
             return None

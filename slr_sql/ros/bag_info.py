@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+
 
 from .bag_import import bag_id, open_bag
 from .mapping import TF_TOPICS, TF_TYPE, TIME_TYPES, normalize_topic, topic_event_name

@@ -7,7 +7,8 @@
 * ``swi_differential.json``: 200 examples drawn (deterministically) from the program
   generator of tests/test_swi_differential.py, each with SWI-Prolog's answers to its
   queries; examples outside the comparison (cyclic terms, too many answers, no termination)
-  are left out.
+  are left out. Then one example per query of its BUILTIN_GOALS (the atom builtins in every
+  mode, their errors, SWI-7's lists).
 
 The tests replay both files on every machine and, where ``swipl`` is installed, check that
 SWI-Prolog still gives exactly these answers. Review the diff after regenerating: a changed
@@ -73,8 +74,9 @@ def draw_examples() -> list[tuple]:
 def differential_corpus(workdir: Path) -> list[dict]:
     swipl = differential.Swipl(workdir)
     entries = []
+    builtins = [differential.builtin_example(g) for g in differential.BUILTIN_GOALS]
     try:
-        for example in draw_examples():
+        for example in draw_examples() + builtins:
             program, events, swi_program, queries = example
             swi = swipl.run(swi_program)
             if differential.check_example(example, swi) is differential.DISCARDED:
