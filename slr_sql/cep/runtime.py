@@ -927,6 +927,35 @@ class EventRules:
                 error.index = order[error.index]
         return sorted(errors, key=lambda e: getattr(e, "index", 0))
 
+    def rounds(self, events: list) -> list[tuple[int, int]]:
+        """Where a batch must be cut into rounds so that it derives what its events added one
+        by one derive (SPEC §6): before each event of a type a rule's event atoms read and a
+        count buffer prunes as rows go in (its insert may prune a row an earlier event of
+        the batch still pairs with). One round, ``[(0, len)]``, when no buffer meets a rule.
+
+        >>> import slr_sql
+        >>> kb = slr_sql.open(); kb.load("c(X) <- a(X) seq b(X).\ncBuffer(a(_), 2).")
+        >>> kb._cep.rounds([("a", (1,), 1.0, 1.0), ("b", (1,), 2.0, 2.0), ("a", (1,), 3.0, 3.0)])
+        [(0, 2), (2, 3)]
+        """
+        whole = [(0, len(events))]
+        if len(events) < 2 or not self.leaf_types or not self.store.has_active_buffer("cBuffer"):
+            return whole
+        pruned = {(row["type_name"], row["type_arity"]) for row in self.store.buffer_rows()
+                  if row["kind"] == "cBuffer"} & self.leaf_types
+        if not pruned:
+            return whole
+        cuts = []
+        for i, ev in enumerate(events):
+            try:
+                key = (ev[0], len(ev[1]))
+            except (TypeError, IndexError, KeyError):
+                continue
+            if i and key in pruned:
+                cuts.append(i)
+        bounds = [0] + cuts + [len(events)]
+        return list(zip(bounds, bounds[1:]))
+
     def after_add(self, token: Any) -> list:
         """Inside the add's transaction, after the events are stored: the round. Returns
         the complex events derived."""
