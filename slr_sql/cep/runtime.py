@@ -379,7 +379,7 @@ class RuleRuntime:
             keys = [leaf.key for _, leaf in alt.negations]
         else:
             keys = [leaf.key for leaf in alt.leaves] + [leaf.key for _, leaf in alt.negations]
-        return all(complete(key, t, now) for key in keys)
+        return all(self.eng.settled(key, t, now) for key in keys)
 
     def decide(self, now: float, everything: bool = False) -> bool:
         """Decide the pending rows that can be decided now. Chronological rules decide in
@@ -789,15 +789,14 @@ class EventRules:
         return n
 
     def complete_sql(self, key: tuple[str, int], x: str) -> str:
-        """SQL: the history of ``key`` is complete up to the time ``x`` (an SQL expression),
-        with the inputs as parameters (:meth:`params`) -- the same test as
-        :meth:`slr_sql.sync.Completeness.complete`, and for complex event types as
-        :meth:`complete`."""
+        """SQL: the history of ``key`` is settled up to the time ``x`` (an SQL expression)
+        for a cnot or a consumption decision, with the inputs as parameters (:meth:`params`)
+        -- :meth:`settled`, and for complex event types as :meth:`complete`."""
         n = self._index(key)
         if key in self.types:
             inner = " AND ".join(f"({self.complete_sql(t, x)})" for t in self.inputs[key])
             return f"{x} <= :mk{n} OR (({inner or self.store.dialect.true}) AND {x} < :pm{n})"
-        return f"{x} <= :mk{n} OR {x} + :dl{n} < :now OR {x} < :le{n}"
+        return f"{x} <= :mk{n} OR {x} + :dl{n} < :now OR {x} <= :le{n}"
 
     def params(self, now: float) -> dict:
         """The parameters of the completeness conditions, now."""
@@ -836,6 +835,17 @@ class EventRules:
             if not tracker.complete(t, z, now):
                 return False
         return z < self.pmin(key)
+
+    def settled(self, key: tuple[str, int], z: float, now: float | None = None) -> bool:
+        """Complete up to ``z`` for a cnot (an event strictly inside an interval) or for a
+        recent/chronological decision at a terminator ending at ``z``: :meth:`complete`, and
+        an in_order type up to and including the end of its newest event (SPEC §6: a later
+        event of it ends at z at the earliest, which is never strictly inside, nor newer
+        than what ends at z) -- so in-order streams decide as their events arrive."""
+        if self.complete(key, z, now):
+            return True
+        tracker = self.tracker
+        return key not in self.types and tracker.in_order(key) and z <= tracker.latest_end(key)
 
     def horizon(self, key: tuple[str, int], now: float | None = None) -> float:
         tracker = self.tracker
