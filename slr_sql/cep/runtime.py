@@ -944,7 +944,7 @@ class EventRules:
         the batch still pairs with). One round, ``[(0, len)]``, when no buffer meets a rule.
 
         >>> import slr_sql
-        >>> kb = slr_sql.open(); kb.load("c(X) <- a(X) seq b(X).\ncBuffer(a(_), 2).")
+        >>> kb = slr_sql.open(); kb.load("c(X) <- a(X) seq b(X).\\ncBuffer(a(_), 2).")
         >>> kb._cep.rounds([("a", (1,), 1.0, 1.0), ("b", (1,), 2.0, 2.0), ("a", (1,), 3.0, 3.0)])
         [(0, 2), (2, 3)]
         """
