@@ -27,7 +27,7 @@ from __future__ import annotations
 import json
 import math
 import threading
-from itertools import islice
+from itertools import islice, pairwise
 from operator import itemgetter, ne
 from typing import Any
 
@@ -845,7 +845,8 @@ class EventRules:
         if self.complete(key, z, now):
             return True
         tracker = self.tracker
-        return key not in self.types and tracker.in_order(key) and z <= tracker.latest_end(key)
+        return (tracker is not None and key not in self.types and tracker.in_order(key)
+                and z <= tracker.latest_end(key))
 
     def horizon(self, key: tuple[str, int], now: float | None = None) -> float:
         tracker = self.tracker
@@ -963,8 +964,7 @@ class EventRules:
                 continue
             if i and key in pruned:
                 cuts.append(i)
-        bounds = [0] + cuts + [len(events)]
-        return list(zip(bounds, bounds[1:]))
+        return list(pairwise([0] + cuts + [len(events)]))
 
     def after_add(self, token: Any) -> list:
         """Inside the add's transaction, after the events are stored: the round. Returns
