@@ -336,7 +336,9 @@ class RuleRuntime:
                     break
                 try:
                     values.append(self.eng.encode(t))
-                except Unencodable:
+                except Unencodable as exc:   # (a non-ground or too large head value)
+                    self.errors += 1
+                    self.last_error = f"the complex event cannot be stored: {exc.reason}"
                     break
             else:
                 key = tuple((type(v).__name__, v) for v in values)
