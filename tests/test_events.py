@@ -509,6 +509,18 @@ def test_an_etalis_regression_file_with_synonyms_detects_as_etalis(kb):
     assert intervals(kb, "ce2(X, Y)") == [(1, 30, 1.0, 3.0)]
 
 
+def test_etalis_string_containment_example_runs_with_name_2(kb):
+    # the shape of ETALIS's examples/string_01: a where goal over the classic atom builtins
+    kb.load("""
+        within_text(Part, Whole) :- append(_, Rest, Whole), append(Part, _, Rest).
+        contains(A, B) :- atom(A), atom(B), name(A, AA), name(B, BB), within_text(BB, AA).
+        stop <- a(X) seq b(Z) where (contains(X, Z)).
+        print_trigger(stop/0).
+    """)
+    kb.add_many(["a(aba)^1", "b(a)^2", "b(c)^3"])
+    assert kb.query("stop^[S, E]") == [{"S": 1.0, "E": 2.0}]
+
+
 def test_existing_programs_still_use_the_operator_names_as_atoms(kb):
     kb.load("op(and). op(or). op(seq). pick(X) :- op(X), X \\== or.")
     assert [r["X"] for r in kb.query("pick(X)")] == ["and", "seq"]
