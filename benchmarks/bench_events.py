@@ -99,17 +99,21 @@ RULES = {
     # seq3's window written as ETALIS can run it (see ETALIS_RULES): the same text on both
     "seq3where": ("r(F) <- face(F, R1, T1) seq face(F, R2, _) seq face(F, R3, T3) "
                   "where (R1 > 60, R2 > R1, R3 > R2, T3 - T1 =< 5).", [("face", 3)], "r"),
+    # the operands in the stream's order (camTF, baseTF, objRec at each instant): `equals`
+    # is symmetric for us (SPEC §6), but ETALIS's detects only when its operands arrive in
+    # the written order (with objRec first it detects nothing on this stream)
     "equals3": ("softDrink(cola). softDrink(fanta).\n"
-                "softDrinkRec(APos) <- objRec(O, Pos, _) equals camTF(CTF, _) equals "
-                "baseTF(BTF, _) where (softDrink(O), pos_multiply([Pos, CTF, BTF], APos)).",
+                "softDrinkRec(APos) <- camTF(CTF, _) equals baseTF(BTF, _) equals "
+                "objRec(O, Pos, _) where (softDrink(O), pos_multiply([Pos, CTF, BTF], APos)).",
                 [("objRec", 3), ("camTF", 2), ("baseTF", 2)], "softDrinkRec"),
 }
 # What ETALIS is given. Its `within` is implemented for a two-part `seq` only, and only with
 # its datime/7 time stamps (a three-part sequence within 5 detects nothing, with numeric or
 # datime times: checked on ETALIS's src/binarizer.P and compiler.P), so seq3 gets its window
 # as a `where` test of the times (the seq3where row runs that same text on both engines). The
-# other rules are our text as it is: ETALIS reads `equals`, and `pos_multiply/2` is defined
-# for it in Prolog (POS_MULTIPLY_PL), with softDrink/1 as facts.
+# other rules are our text as it is: ETALIS reads `equals` (operands in arrival order, see
+# equals3), and `pos_multiply/2` is defined for it in Prolog (POS_MULTIPLY_PL), with
+# softDrink/1 as facts.
 ETALIS_RULES = {
     "seq2": RULES["seq2"][0],
     "seq3": RULES["seq3where"][0],

@@ -5,7 +5,8 @@
     python benchmarks/bench_query.py --sizes 100000 --before /tmp/old   # before/after, one run
 
 ``--before DIR``: a checkout of earlier code (e.g. ``git archive COMMIT | tar -x -C DIR``)
-measured on the same file in a child process, in alternation with this code (rounds of
+measured in a child process on a file of the same events that it built itself, in alternation
+with this code (rounds of
 ``--rounds``), each side against raw sqlite3 timed in its own process: the ratios of the
 two codes come from one run on one machine state.
 
@@ -95,11 +96,13 @@ def compare(args) -> None:
           f"{'after p50':>10} {'raw p50':>8} {'ratio':>6} | after/before")
     with tempfile.TemporaryDirectory() as tmp:
         for n in args.sizes:
-            path = Path(tmp) / f"q{n}.db"
+            # each code builds its own file of the same events (a newer schema may be one
+            # the earlier code refuses to open)
+            path, old_path = Path(tmp) / f"q{n}.db", Path(tmp) / f"q{n}-before.db"
             build(path, n)
             old, new = [], []
             for _ in range(args.rounds):
-                old.append(measure_before(args.before, path, n, args.reps))
+                old.append(measure_before(args.before, old_path, n, args.reps))
                 new.append(measure(path, n, args.reps))
             o = min(old, key=lambda r: r["api_p50"] / r["raw_p50"])
             w = min(new, key=lambda r: r["api_p50"] / r["raw_p50"])
@@ -116,6 +119,8 @@ def main() -> None:
     if "--measure" in sys.argv:   # the child process of --before
         i = sys.argv.index("--measure")
         path, n, reps = Path(sys.argv[i + 1]), int(sys.argv[i + 2]), int(sys.argv[i + 3])
+        if not path.exists():
+            build(path, n)
         print(json.dumps(measure(path, n, reps)))
         return
     ap = argparse.ArgumentParser()

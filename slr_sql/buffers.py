@@ -32,6 +32,7 @@ This module does not touch SQLite itself: every statement goes through
 from __future__ import annotations
 
 import math
+import numbers
 import threading
 from dataclasses import dataclass, field
 from typing import Any, Iterable
@@ -43,6 +44,7 @@ from .errors import SLRError
 from .terms import format_term
 from .program import event_key, split_event_atom
 from .store import quote_identifier, sql_literal
+from .store.checks import shown
 from .terms import NIL, Atom, String, Struct, Var, deref, is_ground, list_items
 
 __all__ = ["Pattern", "BufferSpec", "BufferInfo", "analyze", "attach", "conflicts",
@@ -185,6 +187,9 @@ class _Analyzer:
             if INT64_MIN <= t <= INT64_MAX:
                 self.add((i,), f"json_type({c}, {p}) = 'integer' AND json_extract({c}, {p}) = "
                                f"{sql_literal(t)}")
+            elif t.bit_length() > 14000:  # more digits than a stored event may hold
+                raise SLRError("buffer pattern constant cannot be stored: integer too large to "
+                               "be stored (more than 4300 digits)")
             else:
                 self.tagged(i, path, "$int", str(t))
         elif tt is float:
@@ -225,7 +230,7 @@ class _Analyzer:
             for k, arg in enumerate(t.args):
                 self.nested(i, arg, f"{inner}[{k}]")
         else:
-            raise SLRError(f"unsupported term in a buffer pattern: {t!r}")
+            raise SLRError(f"unsupported term in a buffer pattern: {shown(t)}")
 
     def tagged(self, i: int, path: str, tag: str, text: str) -> None:
         c = self.col(i)
@@ -420,7 +425,7 @@ def check_time(value: Any, what: str) -> float:
             value = float(value)
         except ValueError:
             raise SLRError(f"{what} must be a number, not {_shown(value)}") from None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or value != value:
         raise SLRError(f"{what} must be a number, not {_shown(value)}")
     try:
         return float(value)

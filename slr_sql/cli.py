@@ -104,9 +104,37 @@ def error_words(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc} (this is a bug in slr_sql; please report it)"
 
 
+_SENTENCE_END = re.compile(r"(?<!e\.g)(?<!i\.e)(?<!etc)\.(?=\s|$)")
+
+
+def one_liner(command: click.Command) -> str:
+    """A command's line in ``slr --help``: its ``short_help``, or the first sentence of its
+    help, whole (click would cut it at 45 characters, or at the "." of "e.g.").
+
+    >>> one_liner(click.Command("x", help="Run a SQL STATEMENT, e.g. SELECT 1. More."))
+    'Run a SQL STATEMENT, e.g. SELECT 1.'
+    """
+    if command.short_help:
+        return command.short_help
+    paragraph = (command.help or "").split("\n\n")[0]
+    text = " ".join(paragraph.replace("\b", "").split())
+    end = _SENTENCE_END.search(text)
+    return text[:end.end()] if end else text
+
+
 class SLRGroup(click.Group):
     """Turns every error into the CLI's error contract (words, exit 1) instead of a
     traceback; click's own usage errors and exits pass through."""
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        rows = []
+        for name in self.list_commands(ctx):
+            command = self.get_command(ctx, name)
+            if command is not None and not command.hidden:
+                rows.append((name, one_liner(command)))
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
 
     def invoke(self, ctx: click.Context) -> Any:
         try:
@@ -155,9 +183,20 @@ def _open(db: str, create: bool = True) -> Any:
         ctx = click.get_current_context(silent=True)
         token = (ctx.find_root().obj or {}).get("token") if ctx is not None else None
         return slr_sql.connect(db, token=token)
-    if not create and _missing(db):
-        raise slr_sql.SLRError(f"no such store: {db}")
+    _check_existing_store(db, create)
     return slr_sql.open(db)
+
+
+def _check_existing_store(db: str, create: bool = False) -> None:
+    """Commands that do not add to a store never create one: neither from a missing path nor
+    from an empty file (SQLite would make an empty file a database on the first write)."""
+    if create or _is_database_url(db):
+        return
+    if _missing(db):
+        raise slr_sql.SLRError(f"no such store: {db}")
+    if os.path.isfile(db) and os.path.getsize(db) == 0:
+        raise slr_sql.SLRError(f"no such store: {db} is an empty file (only load, add, "
+                               f"ingest, demo and serve create a store)")
 
 
 def _existing_file(path: str) -> str:
@@ -189,8 +228,8 @@ def _finite(option: str, value: float | None, minimum: float | None = None) -> f
 def main(ctx: click.Context, token: str | None) -> None:
     """SLR: a Prolog-like language over robot event streams, in one SQLite file.
 
-    DB is the store's file; load, add, ingest and demo create it, the other commands
-    need an existing store. DB may also be the URL of a running `slr serve`
+    DB is the store's file; load, add, ingest, run, demo and serve create it, the other
+    commands need an existing store. DB may also be the URL of a running `slr serve`
     (http://HOST:PORT).
     """
     ctx.obj = {"token": token}
@@ -1422,32 +1461,65 @@ main.add_command(_fleet_group())
               help="Draw a numeric argument as a line, e.g. speed:1, seg:2[0], tf:3.pose[0][0].")
 @click.option("--complex", "complex_types", multiple=True, metavar="TYPE",
               help="Mark TYPE as a complex event type (default: the store's own list, if any).")
+@click.option("--by", "by", multiple=True, metavar="TYPE:ARG",
+              help="A row and a color per value of this argument, e.g. seg:1 (a row per "
+                   "object); value lines of TYPE split the same way.")
+@click.option("--lag/--no-lag", "lags", default=None,
+              help="Draw each event's arrival lag, end time -> arrival (default: when the "
+                   "arrivals share the events' clock).")
+@click.option("--internal", is_flag=True, help="Also the store's own types (slr_import/3, ...).")
+@click.option("--relative/--absolute", "relative", default=None,
+              help="Time axis in seconds since the window's start (default: for epoch times).")
+@click.option("--query", "query_goal", default=None, metavar="GOAL",
+              help="A row with GOAL's answers over time, GOAL asked with T at each --every "
+                   "step, e.g. 'location(cup1, L)^T'.")
+@click.option("--every", type=float, default=None, metavar="S",
+              help="Seconds between the times --query asks its goal (default: 1/200 of the window).")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
-              help="The PNG file to write.")
+              help="The image to write: .png, .jpg, .svg or .pdf.")
 @click.option("--size", default=None, metavar="WxH", help="Image size in pixels (default 1200 wide).")
 @click.option("--dpi", type=int, default=100, show_default=True, help="Scales text and lines.")
 @click.option("--title", default=None, help="Title above the rows (default: the DB's file name).")
 def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None,
-         values: tuple[str, ...], complex_types: tuple[str, ...], output: str,
-         size: str | None, dpi: int, title: str | None) -> None:
-    """Draw the event histories of DB as a timeline PNG: one row per event TYPE (default: all).
+         values: tuple[str, ...], complex_types: tuple[str, ...], by: tuple[str, ...],
+         lags: bool | None, internal: bool, relative: bool | None, query_goal: str | None,
+         every: float | None, output: str, size: str | None, dpi: int,
+         title: str | None) -> None:
+    """Draw the event histories of DB as a timeline image: one row per event TYPE (default:
+    all but the store's own).
 
-    Intervals are bars, points ticks, --value arguments lines; histories too long for the
-    picture are aggregated per pixel column.
+    Intervals are bars, points ticks, --value arguments lines, arrival lags orange lines;
+    histories too long for the picture are aggregated per pixel column.
     """
-    from .plot import parse_size, save_timeline, timeline
+    from .plot import IMAGE_FORMATS, collect_timeline, draw_timeline, parse_size
 
-    if _missing(db):
-        raise slr_sql.SLRError(f"no such store: {db}")
+    suffix = os.path.splitext(output)[1].lower()
+    if suffix not in IMAGE_FORMATS:   # before any work: nothing is written
+        raise slr_sql.SLRError(f"cannot write {output}: the suffix {suffix or '(none)'} names "
+                               f"no image format; use {', '.join(IMAGE_FORMATS)}")
+    if every is not None and query_goal is None:
+        raise click.UsageError("--every goes with --query")
+    _check_existing_store(db)
     dimensions = parse_size(size) if size is not None else None
-    with _open(db) as kb:
-        figure = timeline(kb, list(types) or None, start=start, end=end, values=values,
-                          complex_types=complex_types or None, size=dimensions, dpi=dpi,
-                          title=os.path.basename(db) if title is None else title)
+    with _open(db, create=False) as kb:
+        if query_goal is not None and every is None:
+            window = collect_timeline(kb, list(types) or None, start=start, end=end,
+                                      internal=internal)
+            every = (window.end - window.start) / 200
+        collected = collect_timeline(
+            kb, list(types) or None, start=start, end=end, values=values,
+            complex_types=complex_types or None, size=dimensions, dpi=dpi,
+            title=os.path.basename(db) if title is None else title, by=by, lags=lags,
+            internal=internal, relative=relative,
+            query=None if query_goal is None else strip_full_stop(query_goal), every=every)
+    figure = draw_timeline(collected)
+    from .plot import save_timeline
+
     save_timeline(figure, output)
     drawn = figure.slr_timeline
-    click.echo(f"wrote {output} ({drawn.width}x{drawn.height} px, {len(drawn.rows)} "
-               f"row{'s' if len(drawn.rows) != 1 else ''}"
+    n_rows = len(drawn.rows) + len(drawn.queries)
+    click.echo(f"wrote {output} ({drawn.width}x{drawn.height} px, {n_rows} "
+               f"row{'s' if n_rows != 1 else ''}"
                + (f", {len(drawn.series)} value line{'s' if len(drawn.series) != 1 else ''}"
                   if drawn.series else "") + ")")
 
@@ -1476,8 +1548,8 @@ def subscribe(db: str, pattern: str, where: str | None, since: str, until: float
 
     from .subscriptions import answer_json
 
-    if _missing(db):
-        raise slr_sql.SLRError(f"no such store: {db}")
+    if not _is_url(db):
+        _check_existing_store(db)
     since_value: Any = since.strip()
     if since_value != "now":
         try:
@@ -1487,7 +1559,7 @@ def subscribe(db: str, pattern: str, where: str | None, since: str, until: float
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):   # stop between two events, never inside one
         signal.signal(signum, lambda *_: stop.set())
-    with _open(db) as kb:
+    with _open(db, create=False) as kb:
         sub = kb.subscribe(strip_full_stop(pattern), where=where, since=since_value,
                            until=until, id=sub_id)
         try:
@@ -1524,8 +1596,7 @@ def stats(db: str) -> None:
         with _open(db) as kb:
             click.echo(kb.stats()["text"])
         return
-    if _missing(db):
-        raise slr_sql.SLRError(f"no such store: {db}")
+    _check_existing_store(db)
     with EventStore(db) as store:
         click.echo(format_stats(store, db))
 

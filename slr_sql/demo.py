@@ -429,13 +429,14 @@ doorLeftOpen(D) <- (door_open(D) seq robot_left(_R)) cnot door_closed(D).
 """
 
 
-def _event_rules_scene(console: Any) -> list[DemoResult]:
-    """Event rules on a store of their own: complex events detected as the events arrive
-    (one of them late), with the events that made each one, and a cnot rule that waits."""
+def _event_rules_scene(console: Any, db_path: str | None = None) -> list[DemoResult]:
+    """Event rules: complex events detected as the events arrive (one of them late), with
+    the events that made each one, and a cnot rule that waits. In the demo's file when it
+    has one (``slr demo --db``; the types are the scene's own), else in memory."""
     clock = slr_sql.ManualClock(0.0)
     results = []
-    with slr_sql.open(clock=clock) as kb:
-        kb.load(EVENT_RULES, "event_rules.slr")
+    with slr_sql.open(db_path, clock=clock) as kb:
+        kb.load(EVENT_RULES, "event_rules.slr", name="event_rules")
         console.rule("[bold]event rules (the event-processing library paper)[/bold]")
         for line in EVENT_RULES.strip().splitlines():
             console.print(f"  [dim]{line}[/dim]", markup=True, highlight=False)
@@ -523,5 +524,5 @@ def run_demo(console: Any = None, db_path: str | None = None) -> list[DemoResult
             _print_result(console, result)
     finally:
         kb.close()
-    results += _event_rules_scene(console)
+    results += _event_rules_scene(console, db_path)
     return results

@@ -185,7 +185,13 @@ def encode(term: Any) -> Any:
         return encode(int(term))
     if isinstance(term, float):
         return encode(float(term))
-    raise Unencodable(f"{type(term).__name__} value {term!r} is not a term")
+    try:
+        shown = repr(term)
+    except ValueError:  # an integer inside with more digits than Python prints
+        shown = "(holding an integer too long to print)"
+    if len(shown) > 80:
+        shown = shown[:80] + "..."
+    raise Unencodable(f"{type(term).__name__} value {shown} is not a term")
 
 
 # The C fast path for numbers. orjson writes a float as its shortest round-trip text (Ryu),

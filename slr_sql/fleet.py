@@ -20,17 +20,19 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Protocol
+from typing import Any, Protocol
 
 from .errors import SLRError
 from .store import EventStore, check_robot_name
 
-__all__ = ["push", "status", "PushReport", "FleetTarget", "open_target", "parse_type_spec"]
+__all__ = ["FleetTarget", "PushReport", "open_target", "parse_type_spec", "push", "status"]
 
 BATCH = 5000                 # rows per batch (one fleet transaction)
 WAKE_MIN, WAKE_MAX = 0.005, 0.25    # s between change checks of the robot store (backoff)
 RETRY_MIN, RETRY_MAX = 0.1, 5.0     # s between attempts while the fleet is unreachable
+HEARTBEAT = 5.0              # s between contacts of a following pusher that has nothing new
 
 
 class FleetTarget(Protocol):
@@ -135,6 +137,10 @@ class _Pusher:
         self.fleet_name = fleet_name
         self.report = PushReport(robot)
         self.outage: str | None = None   # why the fleet is unreachable, while it is
+        # the fleet's positions (asked once per connection), the last contact sent and when
+        self.positions: dict | None = None
+        self.last_contact: tuple | None = None
+        self.contact_at = -math.inf
 
     def reached(self) -> None:
         """A request to the fleet succeeded: an outage, if any, is over."""
@@ -157,6 +163,7 @@ class _Pusher:
         return self.target
 
     def drop(self) -> None:
+        self.positions = None
         target, self.target = self.target, None
         if target is not None:
             try:
@@ -164,40 +171,70 @@ class _Pusher:
             except Exception:  # noqa: BLE001 - a broken connection closes as it can
                 pass
 
-    def round(self, stop: threading.Event) -> int:
+    def round(self, stop: threading.Event, heartbeat: float | None = None) -> int:
         """Ship everything the robot's store holds beyond the fleet's positions (stopping
-        early when ``stop`` is set); returns the rows the fleet stored."""
+        early when ``stop`` is set); returns the rows the fleet stored.
+
+        The marks and the contact (what is left, for ``slr fleet status``) go with the last
+        batch, in its transaction; a round that has no batch sends them alone when they
+        changed, or when ``heartbeat`` seconds passed since the last contact (None: always).
+        The fleet's positions are asked once per connection: every batch carries its
+        sequences, and the fleet skips what it holds already."""
         target = self.connect()
-        positions = target.positions(self.robot)
-        self.reached()
+        if self.positions is None:
+            self.positions = target.positions(self.robot)
+            self.reached()
+        positions = self.positions
         heads = self.store.fleet_heads()
         shipped = 0
         marks = {k[len("sync/mark/"):]: v for k, v in self.store.meta_items("sync/mark/").items()
                  if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)}
         keys = sorted(k for k in heads if self.types is None or k in self.types)
-        pending = 0
-        head_arrival = None
+        held: tuple | None = None     # the batch read last, sent once the next one is read
+
+        def send(batch: tuple | None, contact: tuple = (None, None, None)) -> None:
+            nonlocal shipped
+            stored = target.receive(self.robot, [batch] if batch else [], *contact)
+            self.reached()
+            if batch is None:
+                return
+            name, arity, rows = batch
+            positions[(name, arity)] = rows[-1][0]
+            shipped += stored
+            self.report.shipped += stored
+            self.report.batches += 1
+            key = f"{name}/{arity}"
+            self.report.per_type[key] = self.report.per_type.get(key, 0) + stored
+
         for name, arity in keys:
             position = positions.get((name, arity), 0)
             while not stop.is_set():
                 rows = self.store.fleet_read_after(name, arity, position, self.batch)
                 if not rows:
                     break
-                stored = target.receive(self.robot, [(name, arity, rows)], None, None, None)
+                if held is not None:
+                    send(held)
+                held = (name, arity, rows)
                 position = rows[-1][0]
-                shipped += stored
-                self.report.shipped += stored
-                self.report.batches += 1
-                self.report.per_type[f"{name}/{arity}"] = \
-                    self.report.per_type.get(f"{name}/{arity}", 0) + stored
                 if len(rows) < self.batch:
                     break
+        pending = 0
+        head_arrival = None
+        for name, arity in keys:
+            position = positions.get((name, arity), 0)
+            if held is not None and held[:2] == (name, arity):
+                position = held[2][-1][0]
             left, latest = self.store.fleet_backlog(name, arity, position)
             pending += left
             if latest is not None:
                 head_arrival = latest if head_arrival is None else max(head_arrival, latest)
-        # marks and what is left, after the events they speak of
-        target.receive(self.robot, [], marks or None, pending, head_arrival)
+        contact = (marks or None, pending, head_arrival)
+        now = time.monotonic()
+        if held is not None or heartbeat is None or contact != self.last_contact \
+                or now - self.contact_at >= heartbeat:
+            # marks and what is left, with the last batch (after the events they speak of)
+            send(held, contact)
+            self.last_contact, self.contact_at = contact, now
         self.report.rounds += 1
         return shipped
 
@@ -263,7 +300,7 @@ def _follow(pusher: _Pusher, stop: threading.Event) -> None:
     while not stop.is_set():
         seen = store.data_version()
         try:
-            pusher.round(stop)
+            pusher.round(stop, HEARTBEAT)
         except (SLRError, OSError) as exc:  # unreachable, busy, refused: try again later
             pusher.drop()
             pusher.unreachable(exc)
@@ -272,7 +309,9 @@ def _follow(pusher: _Pusher, stop: threading.Event) -> None:
             continue
         retry = RETRY_MIN
         wait = WAKE_MIN
-        while not stop.is_set() and store.data_version() == seen:
+        beat = time.monotonic() + HEARTBEAT   # an idle robot's contact stays fresh too
+        while not stop.is_set() and store.data_version() == seen \
+                and time.monotonic() < beat:
             stop.wait(wait)
             wait = min(wait * 2, WAKE_MAX)
 

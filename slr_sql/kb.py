@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import math
+import numbers
 import re
 import threading
 import time
@@ -25,7 +26,7 @@ from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .encoding import Unencodable, decode_answer, encode
 from .engine import Engine
-from .errors import EventRejected, SLRError, SLRSyntaxError
+from .errors import EventRejected, SLRError, SLRSyntaxError, SLRUnavailable
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
 from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore, \
@@ -618,6 +619,12 @@ class KnowledgeBase:
         [3]
         """
         name = _program_name(name)
+        if not isinstance(text, str):
+            raise SLRError(f"load takes program text (a str), not a {type(text).__name__}; "
+                           f"load_file(path) reads a file")
+        if not isinstance(filename, str) or text_problem(filename):
+            raise SLRError(f"load: filename is the text shown in messages (a str without lone "
+                           f"surrogates), not {shown(filename)}")
         clauses = parse_program(text, filename)   # syntax errors before taking the lock
         with self._load_lock, self.store.transaction():
             # the write lock is ours: the texts stored now are the latest
@@ -705,7 +712,7 @@ class KnowledgeBase:
             texts = [t for t in stored if t.name != name]
             if len(texts) == len(stored):
                 names = list(dict.fromkeys(t.name for t in stored))
-                raise SLRError(f"no program named {name!r} (loaded: "
+                raise SLRError(f"no program named {shown(name)} (loaded: "
                                f"{', '.join(repr(n) for n in names) or 'none'})")
             program, decls = self._build(self._parse_texts(texts))
             self._install(program, decls, lambda: self.store.delete_program(name))
@@ -812,6 +819,9 @@ class KnowledgeBase:
         """
         if end is None:
             end = start
+        if not isinstance(name, str):
+            raise EventRejected(f"add_event: event name must be an atom (a str), not "
+                                f"{shown(name)}")
         self._add([(name, event_arguments(name, args, start, end), start, end)], atomic=True)
 
     def add_many(self, events: Iterable[Any], atomic: bool = False) -> list[EventRejected]:
@@ -868,7 +878,8 @@ class KnowledgeBase:
                     event = (name, event_arguments(name, args, start, end), start, end)
             except (SLRError, TypeError, ValueError, OverflowError, RecursionError) as exc:
                 if atomic:
-                    raise exc if isinstance(exc, SLRError) else EventRejected(str(exc))
+                    raise exc if isinstance(exc, SLRError) else \
+                        EventRejected(f"{shown(ev)}: {_python_words(exc)}")
                 reason = "the term is nested too deeply" if isinstance(exc, RecursionError) \
                     else _python_words(exc)
                 err = exc if isinstance(exc, EventRejected) else \
@@ -951,7 +962,7 @@ class KnowledgeBase:
         if plan is not None:
             return plan
         if not isinstance(goal, str):
-            raise SLRError(f"a goal is SLR text (a str), not {type(goal).__name__} {goal!r}")
+            raise SLRError(f"a goal is SLR text (a str), not {type(goal).__name__} {shown(goal)}")
         term, varnames = parse_term(goal, "<query>")
         compiled = compile_clause((), term)
         slots: dict[str, int] = {}
@@ -970,7 +981,7 @@ class KnowledgeBase:
             walk(g)
         for name in arg_names:
             if name not in varnames:
-                raise SLRError(f"args names {name!r}, which is not a variable of the goal {goal!r}")
+                raise SLRError(f"args names {shown(name)}, which is not a variable of the goal {shown(goal)}")
         names = [(n, slots[n]) for n in varnames if not n.startswith("_") and n in slots]
         plan = _Plan(compiled, names, {n: slots[n] for n in arg_names if n in slots}, goal,
                      _PrevLookup.recognise(compiled))
@@ -1022,9 +1033,10 @@ class KnowledgeBase:
         [{'X': 1, 'T': 1.0}]
         """
         if limit is not None and (type(limit) is not int or limit < 0):
-            raise SLRError(f"limit must be a count (an integer >= 0), not {limit!r}")
-        _check_time_option("at", at)
-        _check_time_option("timeout", timeout, minimum=0.0)
+            raise SLRError(f"limit must be a count (an integer >= 0), not {shown(limit)}")
+        if at is not None or timeout is not None:
+            _check_time_option("at", at)
+            _check_time_option("timeout", timeout, minimum=0.0)
         if robot is not None:
             check_robot_name(robot)
         if wait:  # issue 5: synchronized (SLRTimeout names the incomplete types)
@@ -1222,16 +1234,22 @@ class KnowledgeBase:
     def mark_complete(self, event_type: str, t: float) -> None:
         """Declare the history of ``"p/N"`` (or ``"p"``: every arity) complete up to ``t``
         (persisted), like a ``fullyUpdated(p/N)^t`` event."""
-        if not isinstance(event_type, str):
-            raise SLRError(f"mark_complete: the event type is text such as \"p/2\" or \"p\", "
-                           f"not {shown(event_type)}")
-        _check_time_option("mark_complete: t", t)
+        _check_event_type("mark_complete", event_type)
+        if isinstance(t, bool) or not isinstance(t, numbers.Real):  # (numpy numbers are Real)
+            raise SLRError(f"mark_complete: t must be a number of seconds, not {shown(t)}")
+        try:
+            if math.isnan(float(t)):
+                raise SLRError("mark_complete: t must be a number of seconds, not NaN")
+        except OverflowError:
+            raise SLRError(f"mark_complete: t is out of range (an integer of "
+                           f"{int(t).bit_length()} bits; a time is a float)") from None
         self._refresh()
         self._sync.mark_complete(event_type, t)
 
     def complete_until(self, event_type: str) -> float:
         """The time up to which the history of ``"p/N"`` is complete now: the greatest of
         now − max_delay, the latest mark, and (in_order types) the latest end received."""
+        _check_event_type("complete_until", event_type)
         self._refresh()
         return self._sync.complete_until(event_type)
 
@@ -1258,6 +1276,11 @@ class KnowledgeBase:
 
     def remove_buffer(self, buffer_id: int) -> None:
         """Remove a runtime buffer (the events it kept stay)."""
+        if type(buffer_id) is not int:
+            raise SLRError(f"remove_buffer: a buffer id is an integer (kb.buffers() lists "
+                           f"them), not {shown(buffer_id)}")
+        if not -2 ** 63 <= buffer_id < 2 ** 63:
+            raise SLRError(f"no active buffer #{shown(buffer_id)}")
         self._refresh()
         self._buffers.remove_runtime(buffer_id)
 
@@ -1278,10 +1301,21 @@ class KnowledgeBase:
         """
         from .store import DatabaseError
 
+        if not isinstance(query, str):
+            raise SLRError(f"sql: the statement is text (a str), not a {type(query).__name__}")
         try:
             return self.store.sql(query, params, write, timeout)
         except DatabaseError as exc:
+            reason = store_error(exc, self.store.path)
+            if isinstance(reason, SLRUnavailable):  # a full disk, a lock: may pass
+                raise reason from None
             raise SLRError(f"sql: {exc}") from None
+        except UnicodeEncodeError:
+            raise SLRError("sql: the statement or a parameter is not valid Unicode (a lone "
+                           "surrogate such as '\\ud800'); nothing was run") from None
+        except (OverflowError, TypeError, ValueError) as exc:  # a parameter SQLite cannot take
+            raise SLRError(f"sql: a parameter cannot be bound: {_python_words(exc)} "
+                           f"(parameters are None, int of 64 bits, float, str or bytes)") from None
 
     # -- plots ----------------------------------------------------------------------------
     def plot(self, types: Iterable[str] | str | None = None, **options: Any) -> Any:
@@ -1323,16 +1357,36 @@ class KnowledgeBase:
         self._subscriptions.unsubscribe(id)
 
 
+def _check_event_type(method: str, spec: Any) -> None:
+    """An event type argument: text ``"p/N"`` or ``"p"`` (or a ``(name, arity)`` pair) that
+    can be stored, with an arity an event may have."""
+    if isinstance(spec, tuple) and len(spec) == 2 and isinstance(spec[0], str) and \
+            (spec[1] is None or (type(spec[1]) is int and 0 <= spec[1] <= 100_000)):
+        text = spec[0]
+    elif isinstance(spec, str):
+        text = spec
+        name, sep, arity = spec.rpartition("/")
+        if sep and name and arity.isdigit() and len(arity) > 6:
+            raise SLRError(f"{method}: the arity of {shown(spec)} is out of range (an event "
+                           f"has at most a few thousand arguments)")
+    else:
+        raise SLRError(f"{method}: the event type is text such as \"p/2\" or \"p\", not "
+                       f"{shown(spec)}")
+    problem = text_problem(text)
+    if problem:
+        raise SLRError(f"{method}: the event type {shown(spec)} cannot be stored: {problem}")
+
+
 def _argument_term(name: str, value: Any) -> Any:
     """The term for ``args[name]`` of a query, or an SLRError naming the argument."""
     try:
         return from_python(value)
     except (TypeError, ValueError) as exc:
-        raise SLRError(f"args[{name!r}] = {shown(value)} is not a term: "
+        raise SLRError(f"args[{shown(name)}] = {shown(value)} is not a term: "
                        f"{_python_words(exc)} (atoms are str, strings slr_sql.String, numbers "
                        f"int or float, lists list, compounds slr_sql.Struct)") from None
     except RecursionError:
-        raise SLRError(f"args[{name!r}]: the term is nested too deeply") from None
+        raise SLRError(f"args[{shown(name)}]: the term is nested too deeply") from None
 
 
 def _python_words(exc: BaseException) -> str:
@@ -1360,7 +1414,7 @@ def _check_time_option(name: str, value: Any, minimum: float | None = None) -> N
             from None
     if math.isnan(number) or (minimum is not None and number < minimum):
         raise SLRError(f"{name} must be a number of seconds"
-                       f"{'' if minimum is None else f' >= {minimum:g}'}, not {value!r}")
+                       f"{'' if minimum is None else f' >= {minimum:g}'}, not {shown(value)}")
 
 
 def _boundary(method: Callable) -> Callable:

@@ -35,7 +35,8 @@ from .program import Slot, Template, build
 from .sqlcompile import SITES, Col, ColRef, Compiler, Fallback, Part, resolve
 from .errors import SLRBusy
 from .store import DatabaseError
-from .terms import Atom, NIL, Struct, Var, deref, from_python, list_items, make_list, to_python
+from .terms import Atom, NIL, Struct, Var, deref, from_python, int_text, list_items, make_list, \
+    to_python
 
 __all__ = ["SqlPlan", "plan_for", "try_sql", "explain", "attach", "refresh", "Fallback",
            "compile_goal", "CompiledCall", "compiled_calls"]
@@ -689,10 +690,9 @@ def explain(kb, plan, at=None) -> list[str]:
 
 
 def _parameter_text(value) -> str:
-    """A parameter's value as explain prints it: its repr, or for an integer of more digits
-    than Python prints, its size."""
-    if type(value) is int and value.bit_length() > 14000:
-        return f"<an integer of about {int(value.bit_length() * 0.30103) + 1} digits>"
+    """A parameter's value as explain prints it: its repr, an integer in all its digits."""
+    if type(value) is int:
+        return int_text(value)  # (Python's repr refuses more than 4,300 digits)
     return repr(value)
 
 
@@ -788,7 +788,7 @@ def refresh_views(kb) -> list[str]:
 # ---------------------------------------------------------------------- compiled sub-goals
 
 class CompiledCall:
-    """Calls of one derived predicate, made by an interpreter run, answered by SQL.
+    r"""Calls of one derived predicate, made by an interpreter run, answered by SQL.
 
     The interpreter takes over a query the compiler cannot handle (a cut, recursion, ...),
     but the predicates that query calls may still compile: ``reach(A, B)`` may recurse over
@@ -797,7 +797,7 @@ class CompiledCall:
     are ground: they become parameters) once, and returns the rows as terms, in the order
     the interpreter would find them. ``None`` means "run the clauses": an argument that is
     neither ground nor a fresh variable (an instance the compiled goal does not stand for,
-    as var/1 or ``\\+`` may tell the difference), a mode that does not compile, or a statement
+    as var/1 or ``\+`` may tell the difference), a mode that does not compile, or a statement
     that meets at run time something only the interpreter handles exactly.
 
     >>> import slr_sql

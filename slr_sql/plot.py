@@ -106,10 +106,31 @@ class TypeRow:
     points: list[float] = field(default_factory=list)
     coverage: Any = None
     point_counts: Any = None
+    key: str | None = None          # the --by value this row holds (None: every event)
+    color: str | None = None        # the key's color (None: by kind)
+    # (end time, arrival time) of each event that arrived after it happened (exact rows)
+    lags: list[tuple[float, float]] = field(default_factory=list)
 
     @property
     def label(self) -> str:
-        return self.type.label
+        return self.type.label if self.key is None else f"{self.type.label} {self.key}"
+
+
+@dataclass
+class QueryRow:
+    """A goal's answers over time (``--query 'location(cup1, L)^T' --every 0.1``): the goal
+    asked with T at each sample time; ``runs`` are (start, end, answer text) of consecutive
+    samples with the same answer (text ``None``: no answer)."""
+
+    goal: str
+    every: float
+    samples: int
+    runs: list[tuple[float, float, str | None]] = field(default_factory=list)
+    colors: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def label(self) -> str:
+        return self.goal
 
 
 @dataclass
@@ -127,6 +148,9 @@ class ValueSeries:
     values: list[float] = field(default_factory=list)
     lows: list[float] = field(default_factory=list)
     highs: list[float] = field(default_factory=list)
+    # split per key (the --by argument, or the first argument naming the object): one line
+    # each, as (key, color, times, values); ``times``/``values`` above stay the whole series
+    lines: list[tuple[str, str, list[float], list[float]]] = field(default_factory=list)
 
 
 @dataclass
@@ -146,6 +170,8 @@ class Timeline:
     rows: list[TypeRow]
     series: list[ValueSeries]
     title: str
+    origin: float = 0.0             # the time axis shows t - origin (epoch-second data)
+    queries: list[QueryRow] = field(default_factory=list)
 
     @property
     def bin_width(self) -> float:
@@ -265,16 +291,24 @@ def _complex_names(source: Any, complex_types: Iterable[str] | None) -> set[str]
     ``complex_event_types()`` (an iterable of such names) on the knowledge base."""
     if complex_types is None:
         hook = getattr(source, "complex_event_types", None)
-        complex_types = hook() if callable(hook) else ()
+        rules = getattr(source, "event_rules", None)
+        if callable(hook):
+            complex_types = hook()
+        elif callable(rules):   # the heads of the event rules in force derive complex events
+            complex_types = [str(rule.get("head")) for rule in rules() if rule.get("head")]
+        else:
+            complex_types = ()
     if isinstance(complex_types, str):
         complex_types = [complex_types]
     return {str(name).strip() for name in complex_types}
 
 
 def _window(source: Any, types: list[EventTypeRef], start: float | None,
-            end: float | None) -> tuple[float, float]:
-    """The time window: as given, or the span of the events of ``types`` with a margin."""
+            end: float | None) -> tuple[float, float, float]:
+    """The time window: as given, or the span of the events of ``types`` with a margin; and
+    where the data starts (the window's start when given)."""
     lo, hi = start, end
+    first_event = lo
     if lo is None or hi is None:
         firsts, lasts = [], []
         for t in types:
@@ -294,6 +328,7 @@ def _window(source: Any, types: list[EventTypeRef], start: float | None,
             data_hi = hi
             data_lo = min(data_lo, hi)
         span = data_hi - data_lo
+        first_event = data_lo if lo is None else lo
         margin = span * 0.02 if span > 0 else max(abs(data_hi) * 0.02, 0.5)
         lo = data_lo - margin if lo is None else lo
         hi = data_hi + margin if hi is None else hi
@@ -301,23 +336,37 @@ def _window(source: Any, types: list[EventTypeRef], start: float | None,
         raise SLRError(f"empty time window: from {lo:g} to {hi:g} (from must be before to)")
     if not math.isfinite(hi - lo):
         raise SLRError(f"the time window from {lo:g} to {hi:g} is too wide to draw")
-    return float(lo), float(hi)
+    return float(lo), float(hi), float(first_event if first_event is not None else lo)
 
 
 def _collect_row(source: Any, ref: EventTypeRef, is_complex: bool, lo: float, hi: float,
-                 bins: int, exact_limit: int) -> TypeRow:
+                 bins: int, exact_limit: int, key: tuple[int, Any, str] | None = None,
+                 lags: bool | None = None) -> TypeRow:
     table = quote_identifier(ref.table)
+    # --by: only the events whose argument holds the key (stored value, label)
+    only, only_params = "", ()
+    if key is not None:
+        only, only_params = f" AND {quote_identifier(f'arg{key[0]}')} IS ?", (key[1],)
     # Read the events themselves, up to one more than fits: that answers "exact or binned?"
     # without a count(*) over a long history.
-    events = _rows(source, f"SELECT t_start, t_end FROM {table} WHERE t_end >= ? AND t_start <= ? "
-                           "ORDER BY t_end, t_start, seq LIMIT ?", (lo, hi, exact_limit + 1))
+    events = _rows(source, f"SELECT t_start, t_end, arrival FROM {table} WHERE t_end >= ? AND "
+                           f"t_start <= ?{only} ORDER BY t_end, t_start, seq LIMIT ?",
+                   (lo, hi, *only_params, exact_limit + 1))
     if len(events) <= exact_limit:
-        row = TypeRow(ref, is_complex, len(events), "exact")
-        for s, e in events:
+        row = TypeRow(ref, is_complex, len(events), "exact",
+                      key=None if key is None else key[2])
+        for s, e, _ in events:
             if s == e:
                 row.points.append(float(s))
             else:
                 row.intervals.append((float(s), float(e)))
+        arrivals = [(float(e), float(a)) for _, e, a in events if a is not None]
+        # Arrival times come from the store's clock; they say something about the events only
+        # when that clock is the events' own (a live robot), not an import's wall clock.
+        span = hi - lo
+        same_clock = all(lo - span <= a <= hi + span for _, a in arrivals)
+        if lags or (lags is None and same_clock):
+            row.lags = [(e, a) for e, a in arrivals if a > e]
         return row
 
     try:
@@ -333,8 +382,8 @@ def _collect_row(source: Any, ref: EventTypeRef, is_complex: bool, lo: float, hi
     # The intervals covering column i are those started at or before i and not ended before i.
     for b, is_point, n in _rows(
             source, f"SELECT CAST((max(t_start, ?) - ?) / ? AS INTEGER) AS b, t_start = t_end, "
-                    f"count(*) FROM {table} WHERE t_end >= ? AND t_start <= ? GROUP BY 1, 2",
-            (lo, lo, bin_width, lo, hi)):
+                    f"count(*) FROM {table} WHERE t_end >= ? AND t_start <= ?{only} GROUP BY 1, 2",
+            (lo, lo, bin_width, lo, hi, *only_params)):
         b = min(int(b), bins - 1)
         if is_point:
             point_counts[b] += n
@@ -343,13 +392,14 @@ def _collect_row(source: Any, ref: EventTypeRef, is_complex: bool, lo: float, hi
     if starts.any():
         for b, n in _rows(
                 source, f"SELECT CAST((min(t_end, ?) - ?) / ? AS INTEGER) AS b, count(*) "
-                        f"FROM {table} WHERE t_end >= ? AND t_start <= ? AND t_start < t_end "
-                        "GROUP BY 1", (hi, lo, bin_width, lo, hi)):
+                        f"FROM {table} WHERE t_end >= ? AND t_start <= ? AND t_start < t_end"
+                        f"{only} GROUP BY 1", (hi, lo, bin_width, lo, hi, *only_params)):
             ends[min(int(b), bins - 1) + 1] += n
     # (two statements: an interval added in between could end without having started)
     coverage = np.maximum(np.cumsum(starts)[:bins] - np.cumsum(ends)[:bins], 0)
     count = int(starts.sum() + point_counts.sum())
-    return TypeRow(ref, is_complex, count, "binned", coverage=coverage, point_counts=point_counts)
+    return TypeRow(ref, is_complex, count, "binned", coverage=coverage, point_counts=point_counts,
+                   key=None if key is None else key[2])
 
 
 def _resolve_value(catalog: list[EventTypeRef], spec: ValueSpec) -> EventTypeRef:
@@ -372,23 +422,55 @@ def _resolve_value(catalog: list[EventTypeRef], spec: ValueSpec) -> EventTypeRef
 _NUMERIC = "typeof(v) IN ('integer', 'real')"
 
 
+# one color per key: neither the complex events' red nor the arrival lags' orange
+PALETTE = ["#1f77b4", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22",
+           "#7f7f7f", "#393b79", "#637939", "#843c39", "#3182bd"]
+MAX_KEYS = len(PALETTE)
+LAG_COLOR = "#ff7f0e"
+
+
+def _keys(source: Any, ref: EventTypeRef, argument: int, lo: float, hi: float,
+          what: str) -> list[tuple[Any, str]]:
+    """The distinct values of an argument in the window, as (stored value, label)."""
+    column = quote_identifier(f"arg{argument}")
+    values = _rows(source, f"SELECT DISTINCT {column} FROM {quote_identifier(ref.table)} "
+                           f"WHERE t_end >= ? AND t_start <= ? ORDER BY 1 LIMIT ?",
+                   (lo, hi, MAX_KEYS + 1))
+    if len(values) > MAX_KEYS:
+        raise SLRError(f"{what}: argument {argument} of {ref.label} has more than {MAX_KEYS} "
+                       f"values in the window; choose fewer with --from/--to or another argument")
+    return [(v, str(v)) for (v,) in values]
+
+
 def _collect_series(source: Any, spec: ValueSpec, ref: EventTypeRef, is_complex: bool,
-                    lo: float, hi: float, bins: int, exact_limit: int) -> ValueSeries:
+                    lo: float, hi: float, bins: int, exact_limit: int,
+                    split: int | None = None, colors: dict[str, str] | None = None
+                    ) -> ValueSeries:
     table = quote_identifier(ref.table)
     column = quote_identifier(f"arg{spec.argument}")
     expr, params = (f"json_extract({column}, ?)", [spec.path]) if spec.path else (column, [])
     # A JSON path on a value that is not JSON (an atom, a number) is no value, not an error.
     if spec.path:
         expr = f"CASE WHEN json_valid({column}) THEN {expr} END"
+    key_expr = quote_identifier(f"arg{split}") if split is not None else "NULL"
     where = "WHERE t_end >= ? AND t_end <= ?"
-    inner = f"SELECT t_start, t_end, seq, {expr} AS v FROM {table} {where}"
+    inner = f"SELECT t_start, t_end, seq, {expr} AS v, {key_expr} AS k FROM {table} {where}"
     inner_params = [*params, lo, hi]
-    samples = _rows(source, f"SELECT t_end, v FROM ({inner}) WHERE {_NUMERIC} "
+    samples = _rows(source, f"SELECT t_end, v, k FROM ({inner}) WHERE {_NUMERIC} "
                             "ORDER BY t_end, t_start, seq LIMIT ?", [*inner_params, exact_limit + 1])
     if len(samples) <= exact_limit:
         series = ValueSeries(spec, ref, is_complex, len(samples), "exact")
-        series.times = [float(t) for t, _ in samples]
-        series.values = [float(v) for _, v in samples]
+        series.times = [float(t) for t, _, _ in samples]
+        series.values = [float(v) for _, v, _ in samples]
+        if split is not None:   # one line per object, never one line through several
+            by_key: dict[str, tuple[list[float], list[float]]] = {}
+            for t, v, k in samples:
+                times, values = by_key.setdefault(str(k), ([], []))
+                times.append(float(t))
+                values.append(float(v))
+            colors = colors or {}
+            for i, (k, (times, values)) in enumerate(sorted(by_key.items())):
+                series.lines.append((k, colors.get(k, PALETTE[i % MAX_KEYS]), times, values))
     else:
         bin_width = (hi - lo) / bins
         series = ValueSeries(spec, ref, is_complex, 0, "binned")
@@ -438,12 +520,70 @@ def _vertical(height: int | None, dpi: int, n_rows: int, n_series: int,
     return height, 1 - top_px / height, bottom_px / height
 
 
+EPOCH_2001 = 978_307_200.0   # a window starting after this is Unix time: drawn relative
+MAX_SAMPLES = 5000           # times a --query is asked
+
+
+def _by_specs(source_types: list[EventTypeRef], by: Iterable[str]) -> dict[EventTypeRef, int]:
+    """``--by seg:1`` → {seg/2: 1}: which argument splits the rows of which type."""
+    out: dict[EventTypeRef, int] = {}
+    for text in by:
+        spec = parse_value_spec(text)
+        if spec.path is not None:
+            raise SLRError(f"bad --by {text!r}: an argument, TYPE:ARG, without a path")
+        ref = _resolve_value(source_types, spec)
+        out[ref] = spec.argument
+    return out
+
+
+def _term_text(value: Any) -> str:
+    """An answer value as Prolog text (answers give strings as ``str``)."""
+    from .terms import String, format_term
+
+    return format_term(String(value) if type(value) is str else value)
+
+
+def _collect_query(source: Any, goal: str, every: float, lo: float, hi: float) -> QueryRow:
+    """Ask ``goal`` (with a variable T for the time) at lo, lo + every, ... <= hi."""
+    if not callable(getattr(source, "query", None)):
+        raise SLRError("a --query plot needs a knowledge base (kb.plot), not a bare store")
+    every = _check_time("every", every)
+    if every is None or every <= 0:
+        raise SLRError(f"--every must be a positive number of seconds, not {every!r}")
+    n = int(math.floor((hi - lo) / every + 1e-9)) + 1
+    if n > MAX_SAMPLES:
+        raise SLRError(f"--every {every:g} asks the goal {n} times between {lo:g} and {hi:g}; "
+                       f"at most {MAX_SAMPLES}: a larger --every or a shorter window")
+    row = QueryRow(goal, every, n)
+    for i in range(n):
+        t = lo + i * every
+        answers = source.query(goal, args={"T": t})
+        text = None
+        if answers:
+            shown = [f"{name} = {_term_text(value)}" for name, value in answers[0].items()
+                     if name != "T"]
+            text = ", ".join(shown) or "true"
+            if len(answers) > 1:
+                text += f" (+{len(answers) - 1})"
+        end = t + every
+        if row.runs and row.runs[-1][2] == text and abs(row.runs[-1][1] - t) < every / 2:
+            row.runs[-1] = (row.runs[-1][0], end, text)
+        else:
+            row.runs.append((t, end, text))
+    for text in dict.fromkeys(r[2] for r in row.runs if r[2] is not None):
+        row.colors[text] = PALETTE[len(row.colors) % MAX_KEYS]
+    return row
+
+
 def collect_timeline(source: Any, types: Iterable[str] | str | None = None, *,
                      start: float | None = None, end: float | None = None,
                      values: Iterable[str] | str = (),
                      complex_types: Iterable[str] | None = None,
                      size: tuple[int, int | None] | None = None, dpi: int = DEFAULT_DPI,
-                     title: str | None = None, exact_limit: int | None = None) -> Timeline:
+                     title: str | None = None, exact_limit: int | None = None,
+                     by: Iterable[str] | str = (), lags: bool | None = None,
+                     internal: bool = False, relative: bool | None = None,
+                     query: str | None = None, every: float | None = None) -> Timeline:
     """Read what :func:`timeline` draws, without drawing (no matplotlib needed unless a row is
     binned, which uses numpy). Arguments as for :func:`timeline`.
 
@@ -472,30 +612,60 @@ def collect_timeline(source: Any, types: Iterable[str] | str | None = None, *,
         raise SLRError(f"empty time window: from {lo:g} to {hi:g} (from must be before to)")
     specs = [parse_value_spec(text) for text in values]
 
+    if isinstance(by, str):
+        by = [by]
     catalog = store_types(source)
     complex_names = _complex_names(source, complex_types)
     value_types = [_resolve_value(catalog, spec) for spec in specs]
+    split_by = _by_specs(catalog, by)
     chosen = _resolve_types(catalog, types) if types is not None else None
-    lo, hi = _window(source, (chosen if chosen is not None else catalog) + value_types, lo, hi)
+    if chosen is None and not internal:   # the store's own bookkeeping (slr_import/3, ...)
+        catalog = [t for t in catalog if not t.name.startswith("slr_")]
+    window_types = (chosen if chosen is not None else catalog) + value_types
+    lo, hi, first_event = _window(source, window_types, lo, hi)
+    if relative is None:
+        relative = lo >= EPOCH_2001
+    origin = float(math.floor(first_event)) if relative else 0.0
 
     candidates = chosen if chosen is not None else catalog
-    left, right = _horizontal(width, dpi, [COMPLEX_MARK + t.label for t in candidates]
-                              + [s.text for s in specs])
+    left, right = _horizontal(width, dpi, [COMPLEX_MARK + t.label + " " * 10 for t in candidates]
+                              + [s.text for s in specs] + ([query] if query else []))
     bins = max(1, int(round(width * (right - left))))  # one bin per pixel column of the axes
     if exact_limit is None:  # aggregate what does not fit the pixels
         exact_limit = bins
     rows = []
+    key_colors: dict[str, str] = {}
     for ref in candidates:
-        row = _collect_row(source, ref, _type_matches(ref, complex_names), lo, hi, bins,
-                           exact_limit)
+        is_complex = _type_matches(ref, complex_names)
+        if ref in split_by:
+            for value, label in _keys(source, ref, split_by[ref], lo, hi, "--by"):
+                row = _collect_row(source, ref, is_complex, lo, hi, bins, exact_limit,
+                                   key=(split_by[ref], value, label), lags=lags)
+                row.color = key_colors.setdefault(label, PALETTE[len(key_colors) % MAX_KEYS])
+                rows.append(row)
+            continue
+        row = _collect_row(source, ref, is_complex, lo, hi, bins, exact_limit, lags=lags)
         if row.count or chosen is not None:  # by default, only types with events in the window
             rows.append(row)
-    series = [_collect_series(source, spec, ref, _type_matches(ref, complex_names), lo, hi,
-                              bins, exact_limit)
-              for spec, ref in zip(specs, value_types)]
-    height, top, bottom = _vertical(height, dpi, len(rows), len(series), bool(title))
+    series = []
+    for spec, ref in zip(specs, value_types):
+        split = split_by.get(ref)
+        if split is None and ref.arity > 1 and spec.argument != 1:
+            # the first argument names the object (seg(cup1, ..)): a line per object when
+            # there are a few, never one line zigzagging through several
+            keys = _keys(source, ref, 1, lo, hi, f"--value {spec.text}") if len(
+                _rows(source, f"SELECT DISTINCT arg1 FROM {quote_identifier(ref.table)} "
+                              "WHERE t_end >= ? AND t_start <= ? LIMIT ?",
+                      (lo, hi, MAX_KEYS + 1))) <= MAX_KEYS else []
+            split = 1 if len(keys) > 1 else None
+        series.append(_collect_series(source, spec, ref, _type_matches(ref, complex_names),
+                                      lo, hi, bins, exact_limit, split=split,
+                                      colors=key_colors))
+    queries = [] if query is None else [_collect_query(source, query, every, lo, hi)]
+    height, top, bottom = _vertical(height, dpi, len(rows) + len(queries), len(series),
+                                    bool(title))
     return Timeline(lo, hi, width, height, dpi, bins, left, right, top, bottom, rows, series,
-                    title or "")
+                    title or "", origin, queries)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -550,8 +720,18 @@ def _draw_row(ax: Any, y: int, row: TypeRow, timeline: Timeline) -> None:
     from matplotlib.collections import PolyCollection
     from matplotlib.colors import to_rgba
 
-    bar_color = COMPLEX_COLOR if row.complex else INTERVAL_COLOR
-    tick_color = COMPLEX_COLOR if row.complex else POINT_COLOR
+    bar_color = COMPLEX_COLOR if row.complex else (row.color or INTERVAL_COLOR)
+    tick_color = COMPLEX_COLOR if row.complex else (row.color or POINT_COLOR)
+    if row.lags:
+        # occurrence -> arrival: a thin line from the event's end time to when the store
+        # received it, a dot at the arrival; shorter than a pixel column is not drawn
+        late = [(e, a) for e, a in row.lags if a - e > timeline.bin_width]
+        if late:
+            ys = y + TICK_HALF * 0.75
+            ax.hlines([ys] * len(late), [e for e, _ in late], [a for _, a in late],
+                      colors=LAG_COLOR, linewidth=1.0, zorder=3)
+            ax.plot([a for _, a in late], [ys] * len(late), linestyle="none", marker="o",
+                    markersize=2.5, color=LAG_COLOR, zorder=3)
     if row.mode == "exact":
         if row.intervals:
             lanes = _lanes(row.intervals)
@@ -584,9 +764,36 @@ def _draw_row(ax: Any, y: int, row: TypeRow, timeline: Timeline) -> None:
                   colors=colors, linewidth=1.0)
 
 
+def _draw_query(ax: Any, y: int, row: QueryRow) -> None:
+    """A goal's answers over time: a bar per run of one answer, in that answer's color,
+    labelled when the bar is wide enough; no bar where there was no answer."""
+    from matplotlib.collections import PolyCollection
+
+    shown = [(a, b, text) for a, b, text in row.runs if text is not None]
+    if shown:
+        ax.add_collection(PolyCollection(
+            [[(a, y - BAR_HALF), (a, y + BAR_HALF), (b, y + BAR_HALF), (b, y - BAR_HALF)]
+             for a, b, _ in shown],
+            facecolors=[row.colors[text] for _, _, text in shown], edgecolors="white",
+            linewidths=0.5, alpha=0.85))
+    x0, x1 = ax.get_xlim()
+    width_px = ax.get_window_extent().width or 1.0
+    font_px = FONT_PT * ax.figure.dpi / 72.0
+    for a, b, text in shown:
+        bar_px = (b - a) / (x1 - x0) * width_px
+        if bar_px > 0.62 * font_px * 0.85 * (len(text) + 1):
+            ax.text((a + b) / 2, y, text, ha="center", va="center", color="white",
+                    fontsize=FONT_PT * 0.85, clip_on=True)
+
+
 def _draw_series(ax: Any, series: ValueSeries, timeline: Timeline) -> None:
     color = COMPLEX_COLOR if series.complex else VALUE_COLOR
-    if series.mode == "binned":
+    if series.lines:
+        for key, key_color, times, values in series.lines:
+            ax.plot(times, values, color=key_color, linewidth=1.3, label=key,
+                    marker="o" if len(times) <= 200 else None, markersize=3)
+        ax.legend(fontsize=FONT_PT * 0.8, frameon=False, loc="best")
+    elif series.mode == "binned":
         ax.fill_between(series.times, series.lows, series.highs, color=color, alpha=0.25,
                         linewidth=0, step="mid")
         ax.plot(series.times, series.values, color=color, linewidth=1.0)
@@ -604,7 +811,38 @@ def _draw_series(ax: Any, series: ValueSeries, timeline: Timeline) -> None:
 
 
 def draw_timeline(timeline: Timeline) -> Any:
-    """The matplotlib Figure of a :class:`Timeline` (Agg canvas; never a window)."""
+    """The matplotlib Figure of a :class:`Timeline` (Agg canvas; never a window).
+    Epoch-second data (``timeline.origin`` set) is drawn on a relative axis: seconds since
+    the origin, which the axis label names as a UTC time."""
+    drawn = timeline
+    if timeline.origin:
+        timeline = _shifted(timeline, timeline.origin)
+    fig = _draw(timeline)
+    fig.slr_timeline = drawn  # what was drawn, for callers that want the numbers
+    return fig
+
+
+def _shifted(timeline: Timeline, origin: float) -> Timeline:
+    """A copy of ``timeline`` with every time minus ``origin``."""
+    import dataclasses
+
+    rows = [dataclasses.replace(
+        row, intervals=[(a - origin, b - origin) for a, b in row.intervals],
+        points=[p - origin for p in row.points],
+        lags=[(e - origin, a - origin) for e, a in row.lags]) for row in timeline.rows]
+    series = [dataclasses.replace(
+        s, times=[t - origin for t in s.times],
+        lines=[(k, c, [t - origin for t in ts], vs) for k, c, ts, vs in s.lines])
+        for s in timeline.series]
+    queries = [dataclasses.replace(q, runs=[(a - origin, b - origin, text)
+                                            for a, b, text in q.runs])
+               for q in timeline.queries]
+    return dataclasses.replace(timeline, start=timeline.start - origin,
+                               end=timeline.end - origin, rows=rows, series=series,
+                               queries=queries)
+
+
+def _draw(timeline: Timeline) -> Any:
     Figure, FigureCanvasAgg = _matplotlib()
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
@@ -612,7 +850,8 @@ def draw_timeline(timeline: Timeline) -> Any:
     fig = Figure(figsize=(timeline.width / timeline.dpi, timeline.height / timeline.dpi),
                  dpi=timeline.dpi)
     FigureCanvasAgg(fig)
-    n_rows, n_series = len(timeline.rows), len(timeline.series)
+    n_rows = len(timeline.rows) + len(timeline.queries)
+    n_series = len(timeline.series)
     ratios = [max(n_rows, 1) * 3.2] + [12.0] * n_series
     grid = fig.add_gridspec(1 + n_series, 1, height_ratios=ratios, left=timeline.left,
                             right=timeline.right, top=timeline.top, bottom=timeline.bottom,
@@ -622,7 +861,8 @@ def draw_timeline(timeline: Timeline) -> Any:
     ax.set_ylim(max(n_rows, 1) - 0.5, -0.5)
     ax.set_yticks(range(n_rows))
     ax.set_yticklabels([(COMPLEX_MARK if row.complex else "") + row.label
-                        for row in timeline.rows], fontsize=FONT_PT)
+                        for row in timeline.rows] + [q.label for q in timeline.queries],
+                       fontsize=FONT_PT)
     for label, row in zip(ax.get_yticklabels(), timeline.rows):
         if row.complex:
             label.set_color(COMPLEX_COLOR)
@@ -632,6 +872,8 @@ def draw_timeline(timeline: Timeline) -> Any:
         ax.axhline(y + 0.5, color="#eeeeee", linewidth=0.6, zorder=0)
     for y, row in enumerate(timeline.rows):
         _draw_row(ax, y, row, timeline)
+    for y, query_row in enumerate(timeline.queries, start=len(timeline.rows)):
+        _draw_query(ax, y, query_row)
     if not n_rows:
         ax.text(0.5, 0.5, f"no events between {timeline.start:g} and {timeline.end:g}",
                 transform=ax.transAxes, ha="center", va="center", color="#777777",
@@ -643,7 +885,14 @@ def draw_timeline(timeline: Timeline) -> Any:
         axes.append(value_ax)
     for upper in axes[:-1]:
         upper.tick_params(axis="x", labelbottom=False)
-    axes[-1].set_xlabel("time (s)", fontsize=FONT_PT)
+    if timeline.origin:
+        import datetime
+
+        since = datetime.datetime.fromtimestamp(timeline.origin, tz=datetime.UTC)
+        axes[-1].set_xlabel(f"time (s) since {since:%Y-%m-%d %H:%M:%S} UTC "
+                            f"({timeline.origin:.0f})", fontsize=FONT_PT)
+    else:
+        axes[-1].set_xlabel("time (s)", fontsize=FONT_PT)
 
     # The legend names what the picture shows, and nothing else.
     plain = [row for row in timeline.rows if not row.complex]
@@ -657,6 +906,10 @@ def draw_timeline(timeline: Timeline) -> Any:
             s.complex and s.count for s in timeline.series):
         handles.append(Patch(facecolor=COMPLEX_COLOR, alpha=0.8, hatch="///",
                              label=COMPLEX_MARK + "complex event"))
+    if any(row.lags and any(a - e > timeline.bin_width for e, a in row.lags)
+           for row in timeline.rows):
+        handles.append(Line2D([], [], color=LAG_COLOR, linewidth=1.0, marker="o",
+                              markersize=2.5, label="arrival lag"))
     if any(row.mode == "binned" for row in timeline.rows) or any(
             s.mode == "binned" for s in timeline.series):
         handles.append(Patch(facecolor="#bbbbbb",
@@ -668,7 +921,6 @@ def draw_timeline(timeline: Timeline) -> Any:
     if timeline.title:
         fig.suptitle(timeline.title, x=timeline.left, ha="left", fontsize=FONT_PT * 1.15,
                      y=1 - 0.6 * FONT_PT * timeline.dpi / 72 / timeline.height)
-    fig.slr_timeline = timeline  # what was drawn, for callers that want the numbers
     return fig
 
 
@@ -676,7 +928,10 @@ def timeline(source: Any, types: Iterable[str] | str | None = None, *,
              start: float | None = None, end: float | None = None,
              values: Iterable[str] | str = (), complex_types: Iterable[str] | None = None,
              size: tuple[int, int | None] | None = None, dpi: int = DEFAULT_DPI,
-             title: str | None = None, exact_limit: int | None = None) -> Any:
+             title: str | None = None, exact_limit: int | None = None,
+             by: Iterable[str] | str = (), lags: bool | None = None, internal: bool = False,
+             relative: bool | None = None, query: str | None = None,
+             every: float | None = None) -> Any:
     """A timeline of the event histories in ``source`` as a matplotlib Figure.
 
     ``source`` is anything with ``sql(query, params)`` (a knowledge base or an EventStore).
@@ -688,7 +943,15 @@ def timeline(source: Any, types: Iterable[str] | str | None = None, *,
     ``source.complex_event_types()`` when the source has it. ``size``: (width, height) in
     pixels, height None to fit the rows; ``dpi`` scales the text and lines. Types or value
     series with more events in the window than ``exact_limit`` (default: the number of pixel
-    columns of the plot area) are aggregated per pixel column.
+    columns of the plot area) are aggregated per pixel column. ``by``: ``TYPE:ARG`` gives
+    each value of that argument its own row and color (``seg:1``: a row per object), and a
+    value line of that type a line per value (without it, a value line is split by the first
+    argument when it names a few objects). ``lags``: draw each event's arrival lag, from its
+    end time to its arrival (default: when the arrivals share the events' clock).
+    ``internal``: also the store's own types (``slr_import/3``). ``relative``: a time axis
+    relative to the window's start (default: for epoch-second data). ``query`` with
+    ``every``: a row with the goal's answers over time, the goal asked with ``T`` bound to
+    each sample time (``location(cup1, L)^T``).
 
     >>> import slr_sql
     >>> kb = slr_sql.open(); kb.add("speed(0.5)^1"); kb.add("speed(0.7)^2")
@@ -700,12 +963,24 @@ def timeline(source: Any, types: Iterable[str] | str | None = None, *,
     _matplotlib()  # say how to install matplotlib before reading anything
     return draw_timeline(collect_timeline(
         source, types, start=start, end=end, values=values, complex_types=complex_types,
-        size=size, dpi=dpi, title=title, exact_limit=exact_limit))
+        size=size, dpi=dpi, title=title, exact_limit=exact_limit, by=by, lags=lags,
+        internal=internal, relative=relative, query=query, every=every))
+
+
+IMAGE_FORMATS = {".png": "png", ".jpg": "jpg", ".jpeg": "jpg", ".svg": "svg", ".pdf": "pdf"}
 
 
 def save_timeline(figure: Any, path: str) -> None:
-    """Write a timeline figure as PNG at its own size and dpi (``slr plot -o``)."""
+    """Write a timeline figure at its own size and dpi (``slr plot -o``) in the format its
+    suffix names: .png, .jpg/.jpeg, .svg or .pdf; any other suffix is refused."""
+    import os
+
+    suffix = os.path.splitext(str(path))[1].lower()
+    fmt = IMAGE_FORMATS.get(suffix)
+    if fmt is None:
+        raise SLRError(f"cannot write {path}: the suffix {suffix or '(none)'} names no image "
+                       f"format; use {', '.join(IMAGE_FORMATS)}")
     try:
-        figure.savefig(path, dpi=figure.dpi, format="png")
+        figure.savefig(path, dpi=figure.dpi, format=fmt)
     except OSError as exc:
         raise SLRError(f"cannot write {path}: {exc.strerror or exc}") from None

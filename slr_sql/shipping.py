@@ -18,7 +18,7 @@ from typing import Any
 
 from .errors import SLRError
 
-__all__ = ["receive", "positions", "FLEET_MARK"]
+__all__ = ["FLEET_MARK", "positions", "receive"]
 
 FLEET_MARK = "fleet/mark/"   # slr_meta prefix: fleet/mark/<robot>/<name>/<arity or *>
 
@@ -99,14 +99,16 @@ def _check_shipment(batches: Any, marks: Any) -> None:
             if not (isinstance(row, (list, tuple)) and len(row) == arity + 5
                     and type(row[0]) is int and row[0] > last
                     and all(type(v) in (int, float, str) or v is None for v in row)
-                    and all(type(v) in (int, float) for v in row[arity + 1:arity + 4])):
+                    and all(type(v) in (int, float) for v in row[arity + 1:arity + 3])
+                    and (row[arity + 3] is None or type(row[arity + 3]) in (int, float))):
                 raise SLRError(f"a shipped row of {name}/{arity} is [seq, arg1..arg{arity}, "
-                               "start, end, arrival, robot] with sequences ascending")
-            if not all(math.isfinite(v) for v in row[arity + 1:arity + 4]):
+                               "start, end, arrival or null, robot or null] with sequences "
+                               "ascending")
+            if not all(math.isfinite(v) for v in row[arity + 1:arity + 4] if v is not None):
                 raise SLRError(f"a shipped row of {name}/{arity} has a time that is not finite")
             last = row[0]
     if marks is not None:
         if not isinstance(marks, dict) or not all(
-                isinstance(k, str) and type(v) in (int, float) and v == v
+                isinstance(k, str) and type(v) in (int, float) and not math.isnan(v)
                 for k, v in marks.items()):
             raise SLRError("a shipment's marks are {\"name/arity\": time}")

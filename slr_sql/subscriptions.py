@@ -60,6 +60,7 @@ from .errors import SLRError, SLRSyntaxError, SLRTimeout
 from .parser import parse_term
 from .program import split_event_atom
 from .store import quote_identifier
+from .store.checks import shown
 from .terms import Atom, String, Struct, Var, deref, format_atom, make_list, to_python
 from .unify import undo, unify
 
@@ -222,7 +223,7 @@ class _Matcher:
 
 def _time_arg(value: Any, what: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SLRError(f"subscribe: {what} must be a number of seconds, not {value!r}")
+        raise SLRError(f"subscribe: {what} must be a number of seconds, not {shown(value)}")
     try:
         value = float(value)
     except OverflowError:
@@ -769,6 +770,10 @@ class SubscriptionHub:
     def __init__(self, kb: Any):
         self.kb = kb
         self.store = kb.store
+        # the store's columns: encoded terms as they are (SQLite) or as a server holds them
+        from_column = self.store.dialect.from_column
+        self._decode: Any = decode if from_column is None else \
+            (lambda v: decode(from_column(v)))
         self.clock = kb.clock
         self.lock = threading.Lock()
         self.cond = threading.Condition(self.lock)
@@ -856,9 +861,9 @@ class SubscriptionHub:
             raise SLRError("the knowledge base is closed")
         if not isinstance(pattern, str):
             raise SLRError(f"subscribe: the pattern must be text such as 'face(F, R)^T', "
-                           f"not {pattern!r}")
+                           f"not {shown(pattern)}")
         if where is not None and not isinstance(where, str):
-            raise SLRError(f"subscribe: where must be a goal as text, not {where!r}")
+            raise SLRError(f"subscribe: where must be a goal as text, not {shown(where)}")
         if where is not None and not where.strip():
             where = None
         if isinstance(since, str) and since.strip() == "now":
@@ -872,15 +877,15 @@ class SubscriptionHub:
             raise SLRError(f"subscribe: until ({until_value:g}) is before since "
                            f"({since_value:g})")
         if id is not None and (not isinstance(id, str) or not id):
-            raise SLRError(f"subscribe: id must be a non-empty string, not {id!r}")
+            raise SLRError(f"subscribe: id must be a non-empty string, not {shown(id)}")
         if callback is not None and not callable(callback):
             raise SLRError("subscribe: callback must be callable")
         if isinstance(max_queue, bool) or not isinstance(max_queue, int) or max_queue < 1:
-            raise SLRError(f"subscribe: max_queue must be a positive integer, not {max_queue!r}")
+            raise SLRError(f"subscribe: max_queue must be a positive integer, not {shown(max_queue)}")
         if max_lag is not None and (isinstance(max_lag, bool) or not isinstance(max_lag, int)
                                     or max_lag < 1):
             raise SLRError(f"subscribe: max_lag must be a positive integer or None, "
-                           f"not {max_lag!r}")
+                           f"not {shown(max_lag)}")
         pattern = pattern.strip()
         matcher = _Matcher(self.kb, pattern, where)   # SLRSyntaxError for bad texts
         if isinstance(since, str):
@@ -908,6 +913,8 @@ class SubscriptionHub:
                 self._thread = threading.Thread(target=self._loop, name="slr-subscriptions",
                                                 daemon=True)
                 self._thread.start()
+                # a server tells when other processes stored events of journaled types
+                self._stop_listening = self.store.listen(self.notify)
             self.cond.notify()
         if sub.until is not None and not sub._ended:
             try:
@@ -955,7 +962,7 @@ class SubscriptionHub:
             rows = self.store.execute("SELECT type_name FROM slr_subscriptions WHERE id = ?",
                                       (sub_id,))
             if not rows:
-                raise SLRError(f"no subscription with id {sub_id!r}")
+                raise SLRError(f"no subscription with id {shown(sub_id)}")
             self.store.execute("DELETE FROM slr_subscriptions WHERE id = ?", (sub_id,))
         self._cleanup()
 
@@ -987,20 +994,7 @@ class SubscriptionHub:
 
     def _ensure_journal(self, name: str, arity: int, table: str) -> None:
         """Create the journal of ``table`` and its trigger (inside the caller's transaction)."""
-        journal = journal_table(table)
-        j, t = quote_identifier(journal), quote_identifier(table)
-        args = [f"arg{i}" for i in range(1, arity + 1)]
-        cols = "".join(f", {a}" for a in args)
-        new = "".join(f", NEW.{a}" for a in args)
-        execute = self.store.execute
-        execute(f"CREATE TABLE IF NOT EXISTS {j} (jid INTEGER PRIMARY KEY AUTOINCREMENT, "
-                f"seq INTEGER NOT NULL{cols}, t_start REAL NOT NULL, t_end REAL NOT NULL, "
-                f"arrival REAL NOT NULL)")
-        execute(f"CREATE INDEX IF NOT EXISTS {quote_identifier(journal + '__seq')} "
-                f"ON {j} (seq)")
-        execute(f"CREATE TRIGGER IF NOT EXISTS {quote_identifier(TRIGGER_PREFIX + table)} "
-                f"AFTER INSERT ON {t} BEGIN INSERT INTO {j} (seq{cols}, t_start, t_end, "
-                f"arrival) VALUES (NEW.seq{new}, NEW.t_start, NEW.t_end, NEW.arrival); END")
+        self.store.create_journal(table, arity, journal_table(table), TRIGGER_PREFIX + table)
 
     def _register(self, sub: Subscription) -> None:
         store = self.store
@@ -1088,7 +1082,7 @@ class SubscriptionHub:
             hdone, hpos, lpos = 1, sub.history_top, pos
         self.store.execute(
             "UPDATE slr_subscriptions SET history_done = ?, history_pos = ?, live_pos = ?, "
-            "finished = max(finished, ?), lease_until = ?, owner = ? "
+            "finished = CASE WHEN ? = 1 THEN 1 ELSE finished END, lease_until = ?, owner = ? "
             "WHERE id = ? AND owner = ? AND (history_done < ? OR (history_done = ? AND "
             "history_pos <= ? AND live_pos <= ?))",
             (hdone, hpos, lpos, finished,
@@ -1174,6 +1168,9 @@ class SubscriptionHub:
         with self.cond:
             self._closed = True
             self.cond.notify_all()
+        stop = getattr(self, "_stop_listening", None)
+        if stop is not None:
+            stop()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout=10.0)
         if self._subscribed_types and not self.store.closed:
@@ -1333,7 +1330,7 @@ class SubscriptionHub:
         subscription in one batch; one whose queue fills up is marked lagging at the first
         answer it cannot take."""
         arity = key[1]
-        events = [(row[0], tuple([decode(v) for v in row[2:2 + arity]]), row[2 + arity],
+        events = [(row[0], tuple([self._decode(v) for v in row[2:2 + arity]]), row[2 + arity],
                    row[3 + arity]) for row in rows]
         first_jid, last_jid = events[0][0], events[-1][0]
         cohorts: dict = {}
@@ -1421,7 +1418,7 @@ class SubscriptionHub:
             batch = []
             error = None
             for row in rows:
-                answer = self._match(m, tuple([decode(v) for v in row[1:1 + arity]]),
+                answer = self._match(m, tuple([self._decode(v) for v in row[1:1 + arity]]),
                                      row[1 + arity], row[2 + arity])
                 if answer is None:
                     continue
@@ -1625,9 +1622,7 @@ class SubscriptionHub:
                     "SELECT id, owner, live_pos FROM slr_subscriptions WHERE "
                     "type_name = ? AND type_arity = ? AND finished = 0", key)
                 if not rows and key not in local:
-                    store.execute(f"DROP TRIGGER IF EXISTS "
-                                  f"{quote_identifier(TRIGGER_PREFIX + table)}")
-                    store.execute(f"DROP TABLE IF EXISTS {quote_identifier(journal)}")
+                    store.drop_journal(table, journal, TRIGGER_PREFIX + table)
                     self._types.pop(key, None)
                     self._journaled.discard(key)
                     self._type_pos.pop(key, None)

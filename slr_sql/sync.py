@@ -508,7 +508,8 @@ class Completeness:
         for key, (earliest, latest) in spans.items():
             best = arrival - earliest
             if cap is not None and best > cap:
-                self._capped(key, best, cap)
+                if learned.get(key, 0.0) < cap:   # said once, when the store first hits it
+                    self._capped(key, best, cap)
                 best = cap
             if best > learned.get(key, 0.0):
                 grew[key] = best

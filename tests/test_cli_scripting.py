@@ -140,7 +140,9 @@ def test_ingest_dash_reads_standard_input(store):
     r = slr("ingest", store, "-", stdin=lines)
     assert r.returncode == 1
     assert r.stdout.strip() == "ingested 2 events, 1 bad line"
-    assert r.stderr.startswith("<stdin>:3: ")
+    # times like 10 on a store with the wall clock: a warning first (tests/test_time_traps.py)
+    errors = [line for line in r.stderr.splitlines() if not line.startswith("warning: ")]
+    assert errors[0].startswith("<stdin>:3: ") and r.stderr.startswith("warning: seg/2: ")
     assert slr("query", store, "seg(O, _)^T", "--json").stdout.count("\n") == 2
 
 
@@ -153,7 +155,10 @@ def _events_file(path, n: int) -> str:
 def test_ingest_progress_is_reported_on_request_even_into_a_log(store, tmp_path):
     events = _events_file(tmp_path / "events.txt", 3000)
     quiet = slr("ingest", store, events)
-    assert quiet.stderr == ""   # into a pipe: no bar unless asked
+    # into a pipe: no bar unless asked (times like 1.5 on a store with the wall clock are
+    # warned about once, when the store first learns the capped delay)
+    assert [line for line in quiet.stderr.splitlines()
+            if not line.startswith("warning: seg/2: ")] == []
     r = slr("ingest", store, events, "--progress")
     assert r.returncode == 0, r.stderr
     percents = [line.split(": ")[1].split("%")[0] for line in r.stderr.splitlines()]

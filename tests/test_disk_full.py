@@ -13,7 +13,6 @@ import sqlite3
 import subprocess
 import sys
 import textwrap
-import threading
 
 import httpx
 import pytest
@@ -181,6 +180,8 @@ def test_the_size_limit_of_sqlite_is_store_full_too(tmp_path):
             kb.add_many([f"q({'y' * 4000}, {i})^{i}" for i in range(20)])
         assert kb.sql("SELECT count(*) FROM p")[1] == [(10,)]
         assert "q" not in [name for name, in kb.sql("SELECT name FROM sqlite_master")[1]]
+        with pytest.raises(SLRStoreFull):       # also a statement of kb.sql that writes
+            kb.sql("CREATE TABLE notes AS SELECT randomblob(100000) AS body", write=True)
         kb.sql("PRAGMA max_page_count = 1073741823", write=True)
         kb.add_many([f"q({'y' * 4000}, {i})^{i}" for i in range(20)])
         assert kb.sql("SELECT count(*) FROM q")[1] == [(20,)]

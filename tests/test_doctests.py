@@ -26,3 +26,23 @@ def test_the_examples_of_each_module_run(name):
 def test_every_module_is_checked():
     assert "slr_sql.encoding" in MODULES and "slr_sql.store.connection" in MODULES
     assert len(MODULES) > 40
+
+
+def test_examples_are_valid_python_without_escape_warnings():
+    r"""A docstring that is not raw turns ``"\\="`` into ``"\="``, which Python reads with a
+    warning (an error in a later Python): every example must compile cleanly."""
+    import warnings
+
+    finder = doctest.DocTestFinder()
+    bad = []
+    for name in MODULES:
+        for test in finder.find(importlib.import_module(name)):
+            for example in test.examples:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("error")
+                    try:
+                        compile(example.source, f"<{test.name}>", "single")
+                    except (SyntaxError, DeprecationWarning, SyntaxWarning) as exc:
+                        if "escape" in str(exc):
+                            bad.append(f"{test.name}: {example.source.strip()} ({exc})")
+    assert not bad, "\n".join(bad)

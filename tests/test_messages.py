@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import slr_sql
-from slr_sql import Atom, SLREvaluationError, SLRError, String, Struct
+from slr_sql import Atom, ManualClock, SLREvaluationError, SLRError, String, Struct
 from slr_sql.encoding import decode, encode, encode_json
 from slr_sql.terms import make_list
 
@@ -78,7 +78,7 @@ def goal_message(frame: str, x: float) -> Struct:
 def test_the_sql_compiler_and_the_interpreter_agree_on_message_terms(goal):
     answers = {}
     for sql in (True, False):
-        with slr_sql.open(None) as kb:
+        with slr_sql.open(None, clock=ManualClock(100.0)) as kb:
             kb.sql_enabled = sql
             kb.load(PROGRAM)
             kb.add_many([("goal", (goal_message("map", 1.0),), 1.0, 1.0),
@@ -90,9 +90,9 @@ def test_the_sql_compiler_and_the_interpreter_agree_on_message_terms(goal):
 
 
 def test_buffer_patterns_refuse_to_look_inside_messages():
-    with slr_sql.open(None) as kb, pytest.raises(SLRError, match="message type"):
+    with slr_sql.open(None, clock=ManualClock(100.0)) as kb, pytest.raises(SLRError, match="message type"):
         kb.load("cBuffer(goal('geometry_msgs/msg/PointStamped'(_, point: P)), 1).")
-    with slr_sql.open(None) as kb:
+    with slr_sql.open(None, clock=ManualClock(100.0)) as kb:
         kb.load("cBuffer(goal(_), 1).")     # the message as a whole is fine
         kb.add_many([("goal", (goal_message("map", float(i)),), float(i), float(i))
                      for i in range(3)])
@@ -106,7 +106,7 @@ def test_buffer_patterns_refuse_to_look_inside_messages():
     ("get_field('a/b'(x:1), [x, 1.5], V)", "domain_error(field_path"),
 ])
 def test_get_field_errors(goal, error):
-    with slr_sql.open(None) as kb, pytest.raises(SLREvaluationError) as info:
+    with slr_sql.open(None, clock=ManualClock(100.0)) as kb, pytest.raises(SLREvaluationError) as info:
         kb.query(goal)
     assert error in str(info.value).replace(" ", "")
 
@@ -121,5 +121,5 @@ def test_get_field_errors(goal, error):
     ("get_field('a/b'(x:1, y:2), y, 2)", [{}]),
 ])
 def test_get_field(goal, answers):
-    with slr_sql.open(None) as kb:
+    with slr_sql.open(None, clock=ManualClock(100.0)) as kb:
         assert kb.query(goal) == answers

@@ -352,3 +352,76 @@ def test_slr_serve_serves_a_postgres_store(postgres_url):
     finally:
         proc.terminate()
         proc.wait(timeout=30)
+
+
+# ------------------------------------------------------------------ subscriptions
+
+def test_a_subscription_is_woken_by_another_connections_add(postgres_url):
+    """LISTEN/NOTIFY: an event another connection stores reaches the subscriber at once,
+    not at its next poll (the poll is set to a minute here)."""
+    with slr_sql.open(postgres_url) as reader, slr_sql.open(postgres_url) as writer:
+        reader._subscriptions.poll_interval = 60.0
+        sub = reader.subscribe("p(X)^T", since=0)
+        writer.add("p(a)^1")
+        assert sub.get(timeout=10) == {"X": "a", "T": 1.0}
+        writer.add_many(["p(1)^2", "p(1.0)^3"])
+        assert [sub.get(timeout=10) for _ in range(2)] == [{"X": 1, "T": 2.0},
+                                                             {"X": 1.0, "T": 3.0}]
+
+
+SUB_WRITER = r"""
+import sys
+import slr_sql
+url, who, n = sys.argv[1], sys.argv[2], int(sys.argv[3])
+with slr_sql.open(url) as kb:
+    print("ready", flush=True)
+    sys.stdin.readline()
+    for i in range(n):
+        kb.add_many([f"p({who}, {i}, {j})^{i}" for j in range(3)])
+"""
+
+
+def test_a_subscription_misses_nothing_while_writers_commit_out_of_order(postgres_url,
+                                                                         tmp_path):
+    """Three processes add at once while a subscription reads: every event once (the
+    journals' jid order is their commit order on the server)."""
+    import os
+
+    script = tmp_path / "writer.py"
+    script.write_text(SUB_WRITER)
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parent.parent))
+    n = 30
+    with slr_sql.open(postgres_url) as kb:
+        kb.add("p(x, 0, 0)^0")
+        sub = kb.subscribe("p(W, I, J)^_", since=0)
+        assert sub.get(timeout=10) == {"W": "x", "I": 0, "J": 0}
+        procs = [subprocess.Popen([sys.executable, str(script), postgres_url, who, str(n)],
+                                  stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env,
+                                  text=True) for who in ("a", "b", "c")]
+        for p in procs:
+            assert p.stdout.readline().strip() == "ready"
+        for p in procs:
+            p.stdin.write("go\n")
+            p.stdin.flush()
+        got = [sub.get(timeout=30) for _ in range(3 * n * 3)]
+        for p in procs:
+            assert p.wait(timeout=60) == 0
+        seen = [(str(a["W"]), a["I"], a["J"]) for a in got]
+        assert sorted(seen) == sorted((w, i, j) for w in "abc" for i in range(n)
+                                      for j in range(3))
+        with pytest.raises(SLRTimeout):
+            sub.get(timeout=0.5)   # and nothing twice
+
+
+def test_a_dropped_connection_is_an_slr_error_then_works_again(postgres_url):
+    """The server drops the store's connection (as a restart does): the next call is an
+    SLRError, the one after works, and nothing acknowledged is lost."""
+    with slr_sql.open(postgres_url) as kb:
+        kb.add("p(1)^1")
+        with psycopg.connect(postgres_url, autocommit=True) as admin:
+            admin.execute("SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE "
+                          "datname = current_database() AND pid <> pg_backend_pid()")
+        with pytest.raises(SLRError):
+            kb.add("p(2)^2")
+        kb.add("p(3)^3")
+        assert [a["X"] for a in kb.query("p(X)^_")] == [1, 3]

@@ -137,6 +137,18 @@ def test_dangerous_read_only_statements_are_refused_in_words(kb, statement, word
     unchanged(kb)
 
 
+def test_a_result_of_many_large_rows_is_refused_in_words(kb):
+    """Each value is within the limit, their sum is not: 140 rows of 1 MB."""
+    with pytest.raises(SLRError, match=r"^sql: the result of a read-only statement is larger "
+                                       r"than 128 MiB of text and blobs: ask for fewer rows"):
+        kb.sql("WITH RECURSIVE c(i) AS (SELECT 1 UNION ALL SELECT i + 1 FROM c WHERE i < 140) "
+               "SELECT zeroblob(1000000) FROM c")
+    rows = kb.sql("WITH RECURSIVE c(i) AS (SELECT 1 UNION ALL SELECT i + 1 FROM c "
+                  "WHERE i < 100) SELECT zeroblob(1000000) FROM c")[1]
+    assert len(rows) == 100   # 100 MB: within the bound
+    unchanged(kb)
+
+
 def test_vacuum_into_is_refused_before_the_file_is_created(kb, tmp_path):
     target = tmp_path / "copy.db"
     with pytest.raises(SLRError, match="read-only: the statement would write a database file"):

@@ -139,7 +139,7 @@ def test_tf_lookup_matches_an_independent_implementation_on_random_trees(tree, d
     source = f"f{data.draw(st.integers(0, n - 1))}"
     t = data.draw(st.sampled_from([0.0, 2.5, 5.0, 7.25, 10.0, 11.0, -1.0]))
     extrapolate = data.draw(st.booleans())
-    with slr_sql.open(None) as kb:
+    with slr_sql.open(None, clock=ManualClock(100.0)) as kb:
         kb.add_many(events)
         goal = "tf_lookup(Target, Source, T, P, extrapolate)" if extrapolate \
             else "tf_lookup(Target, Source, T, P)"
@@ -159,7 +159,7 @@ def test_tf_lookup_matches_an_independent_implementation_on_random_trees(tree, d
 def robot():
     """map -> odom (static), odom -> base (moving along x, turning about z), base -> cam
     (static, on the head), and cam stored the other way round: tf(cam, laser)."""
-    kb = slr_sql.open(None)
+    kb = slr_sql.open(None, clock=ManualClock(100.0))
     kb.add_many([
         tf_event("tf_static", "map", "odom", 0.0, (10.0, 0.0, 0.0), (0, 0, 0, 1)),
         tf_event("tf", "odom", "base", 1.0, (0.0, 0.0, 0.0), (0, 0, 0, 1)),
@@ -338,3 +338,21 @@ def test_tf_lookup_on_an_imported_bag_through_a_static_edge(tmp_path):
                              args={"T": make_bag.EPOCH + 5.05})
     (x, y, z), q = answer["P"].args
     assert (round(x, 6), y, z) == (0.505, 0.0, 1.0) and q == [0.0, 0.0, 0.0, 1.0]
+
+
+# -- both backends -----------------------------------------------------------------------------
+
+def test_tf_lookup_gives_the_same_poses_on_postgresql(postgres_url):
+    events = [tf_event("tf_static", "map", "odom", 0.0, (10.0, 0.0, 0.0), (0, 0, 0, 1)),
+              tf_event("tf", "odom", "base", 1.0, (0.0, 0.0, 0.0), (0, 0, 0, 1)),
+              tf_event("tf", "odom", "base", 3.0, (2.0, 0.0, 0.0), (0, 0, S, S)),
+              tf_event("tf", "laser", "base", 2.0, (0.5, 0.0, 0.0), (0, 0, 0, 1))]
+    goals = ["tf_lookup(map, base, 2, P)", "tf_lookup(laser, map, 2, P)",
+             "tf_lookup(map, base, 4, P)", "tf_lookup(map, base, 4, P, extrapolate)"]
+    answers = {}
+    for where in (None, postgres_url):
+        with slr_sql.open(where, clock=ManualClock(100.0)) as kb:
+            kb.add_many(events)
+            answers[where] = [pose_of(kb, goal) for goal in goals]
+    assert answers[None] == answers[postgres_url]
+    assert answers[None][2] == [] and answers[None][0]

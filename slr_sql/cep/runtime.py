@@ -905,10 +905,10 @@ class EventRules:
             for ev in events:
                 try:
                     key = (ev[0], len(ev[1]))
+                    if key in leaf:  # (an unhashable name: the store rejects that event)
+                        keys.add(key)
                 except (TypeError, IndexError, KeyError):
                     continue
-                if key in leaf:
-                    keys.add(key)
         if not keys:
             return None
         self.store.lock_for_write(keys)   # before the watermarks: see set_write_groups
@@ -1199,6 +1199,8 @@ class EventRules:
         t = deref(term)
         if type(t) is Struct and t.name == "^" and len(t.args) == 2:
             t = deref(t.args[0])
+        if type(t) is not Struct and not isinstance(t, str):
+            return None  # a number or a variable: never an event type
         key = (str(t.name), len(t.args)) if type(t) is Struct else (str(t), 0)
         if key not in self.by_head:
             return None

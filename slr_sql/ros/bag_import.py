@@ -213,6 +213,8 @@ def _import_export(kb: Any, path: Path, progress: Callable[[int, int], None] | N
 
     with open(path, "rb") as stream:
         summary = make_reader(stream).get_summary()
+    if summary is None:   # is_slr_export read it: only a file changed since has none
+        raise BagError(f"cannot read {path}: the MCAP file has no summary")
     channels = sorted((c.topic, c.metadata.get("slr_event", ""), c.metadata.get("slr_arity", ""),
                        (summary.statistics.channel_message_counts.get(c.id, 0)
                         if summary.statistics else 0))

@@ -290,9 +290,15 @@ class Bridge:
 
     def __init__(self, kb: Any, mapping: Mapping, all_topics: bool = False,
                  node_name: str = "slr_bridge", log: Callable[[str], None] | None = None,
-                 on_ready: Callable[[str, str], None] | None = None):
+                 on_ready: Callable[[str, str], None] | None = None,
+                 ros_args: list[str] | None = None, mapping_given: bool = True):
         self.kb = kb
         self.mapping = mapping
+        # ROS command-line arguments (``--ros-args -p map:=robot.yaml -r __node:=name``): the
+        # node's parameters ``map`` (a MAP file, used when no mapping was given) and
+        # ``all_topics``, remappings, a ``--params-file``
+        self.ros_args = list(ros_args or [])
+        self.mapping_given = mapping_given
         self.all_topics = all_topics
         self.node_name = node_name
         self.log = log or (lambda text: print(text, file=sys.stderr, flush=True))
@@ -321,6 +327,22 @@ class Bridge:
         from rclpy.executors import SingleThreadedExecutor
         from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 
+        self._context = rclpy.Context()
+        args = ["slr_bridge"] + self.ros_args if self.ros_args else None
+        try:
+            # Our own SIGINT/SIGTERM handling (run_bridge) closes the store cleanly.
+            from rclpy.signals import SignalHandlerOptions
+            rclpy.init(args=args, context=self._context,
+                       signal_handler_options=SignalHandlerOptions.NO)
+        except ImportError:  # pragma: no cover - older rclpy
+            rclpy.init(args=args, context=self._context)
+        except Exception as exc:  # noqa: BLE001 - rcl's parse errors of --ros-args
+            raise BridgeError(f"--ros-args: {exc}") from None
+        from rclpy.node import Node
+
+        self._node = Node(self.node_name, context=self._context,
+                          automatically_declare_parameters_from_overrides=True)
+        self._apply_parameters()
         store = get_typestore(Stores.ROS2_KILTED)
         for name, text in self.mapping.definitions.items():
             try:
@@ -334,16 +356,8 @@ class Bridge:
                 raise BridgeError(f"{entry.where}.type: no Python module for {entry.msgtype} "
                                   f"(install its package or source a ROS 2 installation)")
             self._publish_classes[entry.topic] = cls
-        self._context = rclpy.Context()
-        try:
-            # Our own SIGINT/SIGTERM handling (run_bridge) closes the store cleanly.
-            from rclpy.signals import SignalHandlerOptions
-            rclpy.init(context=self._context, signal_handler_options=SignalHandlerOptions.NO)
-        except ImportError:  # pragma: no cover - older rclpy
-            rclpy.init(context=self._context)
-        from rclpy.node import Node
-
-        self._node = Node(self.node_name, context=self._context)
+        if self.mapping.requests.enabled:  # never stored as events, not even at discovery
+            self.reserved_topics.update(self.mapping.requests.topics())
         self._executor = _executor(self._context, SingleThreadedExecutor)
         self._executor.add_node(self._node)
         for entry in self.mapping.publish:
@@ -354,6 +368,32 @@ class Bridge:
         self._discover()
         self._node.create_timer(DISCOVERY_PERIOD, self._discover)
         return self
+
+    def _apply_parameters(self) -> None:
+        """The node's ROS parameters: ``map`` (a MAP file; only when no mapping was given
+        otherwise, ``--map`` wins) and ``all_topics`` (bool)."""
+        node = self._node
+        names = set(node._parameters) if hasattr(node, "_parameters") else set()
+        # what the command line and parameter files gave (rclpy's own parameters aside)
+        given = set(getattr(node, "_parameter_overrides", {}) or {})
+        unknown = sorted(n for n in given if n not in ("map", "all_topics", "use_sim_time",
+                                                       "start_type_description_service"))
+        if unknown:
+            raise BridgeError(f"unknown ROS parameter(s) {', '.join(unknown)} (the bridge "
+                              f"takes map and all_topics)")
+        if "map" in names:
+            value = node.get_parameter("map").value
+            if not isinstance(value, str) or not value:
+                raise BridgeError(f"ROS parameter map: a MAP file name, not {value!r}")
+            if not self.mapping_given:
+                from .mapping import load_mapping
+
+                self.mapping = load_mapping(value)
+        if "all_topics" in names:
+            value = node.get_parameter("all_topics").value
+            if not isinstance(value, bool):
+                raise BridgeError(f"ROS parameter all_topics: true or false, not {value!r}")
+            self.all_topics = self.all_topics or value
 
     def spin_once(self, timeout: float = 0.1) -> None:
         """Serve what arrives within ``timeout`` seconds, then store it. A message that finds
@@ -409,9 +449,11 @@ class Bridge:
             feed.close()
         if self._node is not None:
             try:
-                self._executor.remove_node(self._node)
+                if self._executor is not None:   # None: start() failed before it
+                    self._executor.remove_node(self._node)
                 self._node.destroy_node()
-                self._executor.shutdown(timeout_sec=1.0)
+                if self._executor is not None:
+                    self._executor.shutdown(timeout_sec=1.0)
             finally:
                 self._node = None
                 try:
@@ -599,9 +641,11 @@ def _executor(context: Any, fallback: Any) -> Any:
 
 def run_bridge(db: str, mapping: Mapping, all_topics: bool = False,
                node_name: str = "slr_bridge", synchronous: str = "NORMAL",
-               echo: Callable[[str], None] | None = None) -> int:
+               echo: Callable[[str], None] | None = None, ros_args: list[str] | None = None,
+               mapping_given: bool = True) -> int:
     """Open the store at ``db``, run the bridge until SIGINT or SIGTERM, then close the node
-    and the store; returns the exit status (0)."""
+    and the store; returns the exit status (0). ``ros_args``: ROS command-line arguments
+    (parameters ``map`` and ``all_topics``, remappings; see :class:`Bridge`)."""
     import slr_sql
 
     echo = echo or (lambda text: print(text, flush=True))
@@ -614,13 +658,14 @@ def run_bridge(db: str, mapping: Mapping, all_topics: bool = False,
     previous = {s: signal.signal(s, request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
     kb = slr_sql.open(db, synchronous=synchronous, checkpoint="background")
     bridge = Bridge(kb, mapping, all_topics=all_topics, node_name=node_name,
-                    on_ready=lambda topic, msgtype: echo(f"subscribed {topic} ({msgtype})"))
-    requests = mapping.requests
-    if requests.enabled:  # never stored as events, not even by the first discovery
-        bridge.reserved_topics.update(requests.topics())
+                    on_ready=lambda topic, msgtype: echo(f"subscribed {topic} ({msgtype})"),
+                    ros_args=ros_args, mapping_given=mapping_given)
     server = None
     try:
         bridge.start()
+        mapping, all_topics = bridge.mapping, bridge.all_topics   # ROS parameters applied
+        node_name = bridge._node.get_name() if bridge._node is not None else node_name
+        requests = mapping.requests
         if requests.enabled:  # queries and control over ROS (docs/ros.md, "Requests")
             from .requests import RequestServer
 

@@ -45,9 +45,21 @@ def ros() -> None:
     """ROS: import bags, or bridge live ROS 2 topics into DB (needs slr_sql[ros])."""
 
 
+def _remove_new_store(db: str) -> None:
+    """Remove the files of a store this command created and could not fill (an import that
+    failed before its first event): a failed command leaves nothing behind."""
+    for suffix in ("", "-wal", "-shm", "-journal"):
+        try:
+            os.remove(db + suffix)
+        except OSError:
+            pass
+
+
 @ros.command("import")
 @click.argument("bag", type=click.Path())
-@click.argument("db", type=click.Path(dir_okay=False))
+@click.argument("db_argument", metavar="[DB]", required=False, type=click.Path(dir_okay=False))
+@click.option("--db", "db_option", type=click.Path(dir_okay=False), default=None,
+              help="The store (as for every other command; `slr ros import BAG DB` works too).")
 @click.option("--map", "map_path", type=click.Path(), default=None,
               help="MAP file (YAML or pub_sub.xml): topics -> events. Default: /tf and "
                    "/tf_static only.")
@@ -56,13 +68,18 @@ def ros() -> None:
                    "the message as a term.")
 @click.option("--batch", "batch_size", type=click.IntRange(min=1), default=None,
               help="Events per transaction (default 10000).")
-def import_command(bag: str, db: str, map_path: str | None, all_topics: bool,
-                   batch_size: int | None) -> None:
-    """Import BAG (rosbag1 .bag, rosbag2 directory, .mcap or .db3) into DB.
+def import_command(bag: str, db_argument: str | None, db_option: str | None,
+                   map_path: str | None, all_topics: bool, batch_size: int | None) -> None:
+    """Import BAG (rosbag1 .bag, rosbag2 directory, .mcap or .db3) into DB (--db DB).
 
     Importing the same bag again adds nothing; an interrupted import continues.
     Messages that give no event are reported and the exit status is 1.
     """
+    if db_argument is not None and db_option is not None and db_argument != db_option:
+        raise click.UsageError(f"two stores given: {db_argument} and --db {db_option}")
+    db = db_option or db_argument
+    if db is None:
+        raise click.UsageError("no store: slr ros import BAG --db DB")
     mapping = _load_mapping(map_path, "import")
     try:
         from .bag_import import DEFAULT_BATCH, import_bag
@@ -76,17 +93,29 @@ def import_command(bag: str, db: str, map_path: str | None, all_topics: bool,
                                TimeRemainingColumn)
 
     console = Console(stderr=True)
-    with slr_sql.open(db) as kb, Progress(
-            TextColumn("[progress.description]{task.description}"), BarColumn(),
-            MofNCompleteColumn(), TimeRemainingColumn(), console=console,
-            transient=True) as bar:
-        task = bar.add_task(f"importing {os.path.basename(os.path.normpath(bag))}", total=None)
+    created = not os.path.lexists(db)
+    started = False  # whether the import read its first message (events may be stored)
+    try:
+        with slr_sql.open(db) as kb, Progress(
+                TextColumn("[progress.description]{task.description}"), BarColumn(),
+                MofNCompleteColumn(), TimeRemainingColumn(), console=console,
+                transient=True) as bar:
+            task = bar.add_task(f"importing {os.path.basename(os.path.normpath(bag))}",
+                                total=None)
 
-        def progress(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total)
+            def progress(done: int, total: int) -> None:
+                nonlocal started
+                started = started or done > 0
+                bar.update(task, completed=done, total=total)
 
-        report = import_bag(kb, bag, mapping, all_topics=all_topics, progress=progress,
-                            batch_size=batch_size or DEFAULT_BATCH)
+            report = import_bag(kb, bag, mapping, all_topics=all_topics, progress=progress,
+                                batch_size=batch_size or DEFAULT_BATCH)
+    except Exception:
+        # A MAP that does not fit the bag, a bag that cannot be read: no empty store is left
+        # behind. A store that got events keeps them (a later run continues the import).
+        if created and not started:
+            _remove_new_store(db)
+        raise
     _print_report(report, bag)
     if report.rejected:
         sys.exit(1)
@@ -164,7 +193,7 @@ def info_command(bag: str, map_only: bool, as_json: bool) -> None:
     click.echo(draft_map(info), nl=False)
 
 
-@ros.command("bridge")
+@ros.command("bridge", context_settings={"ignore_unknown_options": True})
 @click.argument("db", type=click.Path(dir_okay=False))
 @click.option("--map", "map_path", type=click.Path(), default=None,
               help="MAP file (YAML or pub_sub.xml). Default: /tf and /tf_static only.")
@@ -175,9 +204,17 @@ def info_command(bag: str, map_only: bool, as_json: bool) -> None:
               show_default=True,
               help="SQLite durability: NORMAL survives a crash of the process, FULL also a "
                    "power cut (an fsync per message).")
+@click.argument("ros_args", nargs=-1, type=click.UNPROCESSED)
 def bridge_command(db: str, map_path: str | None, all_topics: bool, node_name: str,
-                   synchronous: str) -> None:
-    """Run a ROS 2 node storing mapped topics in DB as events, until SIGINT or SIGTERM."""
+                   synchronous: str, ros_args: tuple[str, ...]) -> None:
+    """Run a ROS 2 node storing mapped topics in DB as events, until SIGINT or SIGTERM.
+
+    ROS arguments may follow: --ros-args -p map:=robot.yaml -p all_topics:=true
+    -r __node:=name --params-file params.yaml (the parameters map and all_topics).
+    """
+    if ros_args and ros_args[0] != "--ros-args":
+        raise slr_sql.SLRError(f"unexpected argument {ros_args[0]!r} (ROS arguments start with "
+                               f"--ros-args)")
     mapping = _load_mapping(map_path, "bridge")
     try:
         import rosbags  # noqa: F401
@@ -186,4 +223,5 @@ def bridge_command(db: str, map_path: str | None, all_topics: bool, node_name: s
     except ImportError as exc:
         raise _need_extra("bridge", exc) from None
     sys.exit(run_bridge(db, mapping, all_topics=all_topics, node_name=node_name,
-                        synchronous=synchronous))
+                        synchronous=synchronous, ros_args=list(ros_args),
+                        mapping_given=map_path is not None))

@@ -752,6 +752,9 @@ async def _query(svc: "_Service", request: Request) -> Any:
     max_steps = _field(b, "max_steps", int)
     robot = _field(b, "robot", str)
     if _field(b, "wait", bool, default=False):
+        if robot is not None:  # as kb.query(wait=True, robot=...) says it
+            raise SLRError("a synchronized query (wait=true) cannot be restricted to one "
+                           "robot yet: ask origin(R, Goal) inside the goal instead")
         pending = await svc.call(svc.kb.submit, goal, at=at, args=args,
                                   timeout=_cap(timeout, svc.limits.max_wait))
         answers = await asyncio.wrap_future(pending)

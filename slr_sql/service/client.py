@@ -281,6 +281,9 @@ class RemoteKnowledgeBase:
               robot: str | None = None) -> list[dict[str, Any]]:
         """Answer ``goal`` on the server (see ``KnowledgeBase.query``); ``timeout`` is
         capped by the server's ``max_query_time``."""
+        if wait and robot is not None:  # as the local knowledge base says it
+            raise SLRError("a synchronized query (wait=True) cannot be restricted to one "
+                           "robot yet: ask origin(R, Goal) inside the goal instead")
         if wait:  # synchronized: long-polls, however long the wait (as kb.query does it)
             return self.submit(goal, at=at, args=args, timeout=timeout).result()
         body = _goal_body(goal, at, args, timeout)
@@ -305,11 +308,11 @@ class RemoteKnowledgeBase:
         the rows the server stored. Rows go in requests of at most FLEET_ROWS (each stored
         exactly once with its position), within the server's body limit."""
         stored = 0
-        pieces = [(n, a, rows[i:i + FLEET_ROWS]) for n, a, rows in batches
-                  for i in range(0, max(len(rows), 1), FLEET_ROWS)]
-        for k, piece in enumerate(pieces or [None]):
-            body: dict[str, Any] = {"robot": robot, "batches": [list(piece)] if piece else []}
-            if k == len(pieces or [None]) - 1:
+        pieces: list[list] = [[[n, a, rows[i:i + FLEET_ROWS]]] for n, a, rows in batches
+                              for i in range(0, max(len(rows), 1), FLEET_ROWS)] or [[]]
+        for k, piece in enumerate(pieces):
+            body: dict[str, Any] = {"robot": robot, "batches": piece}
+            if k == len(pieces) - 1:
                 if marks:
                     body["marks"] = marks
                 if pending is not None:

@@ -486,6 +486,36 @@ class EventStore:
                            used: str | None = None) -> None:
         self._catalog.create_rule_tables(prov, width, arity, used)
 
+    @_doc(Catalog.create_journal)
+    def create_journal(self, table: str, arity: int, journal: str, trigger: str) -> None:
+        self._catalog.create_journal(table, arity, journal, trigger)
+
+    @_doc(Catalog.drop_journal)
+    def drop_journal(self, table: str, journal: str, trigger: str) -> None:
+        self._catalog.drop_journal(table, journal, trigger)
+
+    def listen(self, callback: Callable[[], Any]) -> Callable[[], None] | None:
+        """Call ``callback()`` whenever another connection stored events in a journal
+        (:meth:`create_journal`), from a thread of the store's own; returns the function
+        that stops it. None on SQLite, which cannot tell: its readers poll.
+
+        >>> EventStore(None).listen(lambda: None) is None
+        True
+        """
+        listen = getattr(self._db, "listen", None)
+        return None if listen is None else listen(callback)
+
+    @property
+    def notify_channel(self) -> str | None:
+        """The channel a server store notifies when events reach a journal (LISTEN to it),
+        None where there is none (SQLite: poll)."""
+        return getattr(self._db, "notify_channel", None)
+
+    @property
+    def connect_info(self) -> str | None:
+        """The connection string of a server store (for a second, listening connection)."""
+        return getattr(self._db, "conninfo", None)
+
     @_doc(Catalog.replace_views)
     def replace_views(self, views: dict[str, str]) -> list[str]:
         return self._catalog.replace_views(views)

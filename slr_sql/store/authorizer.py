@@ -9,7 +9,8 @@ without ``write``, ``slr sql``, the service's ``/sql``) runs under the stricter
 :meth:`SqlGuard.read_only`: no ``ATTACH``/``DETACH`` (also what ``VACUUM INTO`` asks for), no
 pragma that changes a setting or acts (:data:`ACTING_PRAGMAS`), and each string or blob it
 makes at most :data:`READ_ONLY_VALUE_BYTES` long (``randomblob``, ``zeroblob``, ``printf``
-widths, ``replace``/``group_concat`` growth: a memory bomb is an error, not an allocation).
+widths, ``replace``/``group_concat`` growth: a memory bomb is an error, not an allocation),
+and all its rows' strings and blobs at most :data:`READ_ONLY_RESULT_BYTES`.
 
 The authorizer cannot carry a message: :class:`SqlGuard` remembers why it refused, and
 :class:`~slr_sql.store.connection.Database` raises that reason in words.
@@ -31,7 +32,7 @@ import sys
 from typing import Any
 
 __all__ = ["SqlGuard", "harden_connection", "fts3_tokenizer_switch_off", "DENIED_FUNCTIONS",
-           "READING_PRAGMAS", "ACTING_PRAGMAS", "READ_ONLY_VALUE_BYTES"]
+           "READING_PRAGMAS", "ACTING_PRAGMAS", "READ_ONLY_VALUE_BYTES", "READ_ONLY_RESULT_BYTES"]
 
 # Functions no statement on a store connection may call, with the reason given.
 DENIED_FUNCTIONS = {
@@ -55,6 +56,8 @@ ACTING_PRAGMAS = frozenset({"optimize", "wal_checkpoint", "incremental_vacuum",
 
 # The longest string or blob a read-only statement may make or read (SQLITE_LIMIT_LENGTH).
 READ_ONLY_VALUE_BYTES = 64 << 20
+# The most text and blob bytes a read-only statement's rows may hold together.
+READ_ONLY_RESULT_BYTES = 128 << 20
 
 _OK, _DENY = sqlite3.SQLITE_OK, sqlite3.SQLITE_DENY
 _FUNCTION = sqlite3.SQLITE_FUNCTION

@@ -24,7 +24,12 @@ from typing import Any, Iterable
 
 from ..errors import SLRError
 from .connection import Database
-from .sqltext import RESERVED_PREFIXES, quote_identifier
+from .sqltext import RESERVED_PREFIXES, quote_identifier, sql_literal
+
+
+def sql_text_literal(text: str) -> str:
+    """A text constant for a statement that cannot take parameters (a function body)."""
+    return sql_literal(text)
 
 __all__ = ["Catalog", "BufferTables", "ProgramText", "PROGRAM_VERSION", "PROGRESS_VERSION",
            "FACTS_VERSION"]
@@ -438,6 +443,71 @@ class Catalog:
                 self.db.conn.execute(
                     f"CREATE TABLE IF NOT EXISTS {used} (tbl TEXT NOT NULL, seq BIGINT NOT "
                     f"NULL, PRIMARY KEY (tbl, seq)){dialect.without_rowid}")
+
+    def create_journal(self, table: str, arity: int, journal: str, trigger: str) -> None:
+        """The journal of event table ``table`` (unless it exists): ``journal`` gets a row
+        (``jid`` in arrival order, never reused; the event's ``seq``, arguments and times)
+        for every row stored in ``table``, by the trigger ``trigger``, in the transaction
+        that stores it. On a server the trigger also takes the journal's advisory lock
+        until the commit (so ``jid`` order is commit order: a reader of ``jid > n`` misses
+        nothing) and notifies the store's channel with the table's name.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_event("p", ("a",), 1, 1)
+        >>> s.create_journal("p", 1, "slr_subj_p", "slr_subt_p"); s.add_event("p", ("b",), 2, 2)
+        >>> s.execute('SELECT jid, seq, arg1 FROM "slr_subj_p"')
+        [(1, 2, 'b')]
+        """
+        dialect = self.db.dialect
+        j, t, name = quote_identifier(journal), quote_identifier(table), quote_identifier(trigger)
+        args = [f"arg{i}" for i in range(1, arity + 1)]
+        cols = "".join(f", {a}" for a in args)
+        typed = "".join(f", {a}{dialect.value}" for a in args)
+        real = dialect.real
+        key = ("jid INTEGER PRIMARY KEY AUTOINCREMENT" if dialect.name == "sqlite"
+               else "jid BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY")
+        conn = self.db.conn
+        with self.db.transaction():
+            conn.execute(f"CREATE TABLE IF NOT EXISTS {j} ({key}, seq BIGINT NOT NULL{typed}, "
+                         f"t_start {real} NOT NULL, t_end {real} NOT NULL, "
+                         f"arrival {real} NOT NULL)" if dialect.name != "sqlite" else
+                         f"CREATE TABLE IF NOT EXISTS {j} ({key}, seq INTEGER NOT NULL{cols}, "
+                         f"t_start REAL NOT NULL, t_end REAL NOT NULL, arrival REAL NOT NULL)")
+            conn.execute(f"CREATE INDEX IF NOT EXISTS {quote_identifier(journal + '__seq')} "
+                         f"ON {j} (seq)")
+            if dialect.name == "sqlite":
+                new = "".join(f", NEW.{a}" for a in args)
+                conn.execute(f"CREATE TRIGGER IF NOT EXISTS {name} AFTER INSERT ON {t} BEGIN "
+                             f"INSERT INTO {j} (seq{cols}, t_start, t_end, arrival) VALUES "
+                             f"(NEW.seq{new}, NEW.t_start, NEW.t_end, NEW.arrival); END")
+                return
+            self.db.lock_named("journals")
+            if trigger in self.db.triggers(table):
+                return
+            function = quote_identifier(trigger + "_f")
+            lock = sql_text_literal(f"{self.db.schema}:journal:{table}")
+            channel = sql_text_literal(self.db.notify_channel)
+            conn.execute(
+                f"CREATE OR REPLACE FUNCTION {function}() RETURNS trigger LANGUAGE plpgsql AS "
+                f"$slr$ BEGIN PERFORM pg_advisory_xact_lock(hashtext({lock})); "
+                f"INSERT INTO {j} (seq{cols}, t_start, t_end, arrival) SELECT seq{cols}, "
+                f"t_start, t_end, arrival FROM slr_new_rows ORDER BY seq; "
+                f"PERFORM pg_notify({channel}, {sql_text_literal(table)}); RETURN NULL; "
+                f"END $slr$")
+            conn.execute(f"CREATE TRIGGER {name} AFTER INSERT ON {t} REFERENCING NEW TABLE "
+                         f"AS slr_new_rows FOR EACH STATEMENT EXECUTE FUNCTION {function}()")
+
+    def drop_journal(self, table: str, journal: str, trigger: str) -> None:
+        """Drop the journal of ``table`` and its trigger (if they exist)."""
+        with self.db.transaction():
+            if self.db.dialect.name == "sqlite":
+                self.db.conn.execute(f"DROP TRIGGER IF EXISTS {quote_identifier(trigger)}")
+            else:
+                self.db.conn.execute(f"DROP TRIGGER IF EXISTS {quote_identifier(trigger)} ON "
+                                     f"{quote_identifier(table)}")
+                self.db.conn.execute(f"DROP FUNCTION IF EXISTS "
+                                     f"{quote_identifier(trigger + '_f')}()")
+            self.db.conn.execute(f"DROP TABLE IF EXISTS {quote_identifier(journal)}")
 
     def replace_views(self, views: dict[str, str]) -> list[str]:
         """Drop the views created last time and create ``{predicate name: select sql}``,

@@ -33,7 +33,8 @@ from contextlib import contextmanager
 from typing import Any, Callable, Iterable, Iterator
 
 from ..errors import SLRError, SLRStoreGone, SLRTimeout
-from .authorizer import READ_ONLY_VALUE_BYTES, SqlGuard, harden_connection
+from .authorizer import READ_ONLY_RESULT_BYTES, READ_ONLY_VALUE_BYTES, SqlGuard, \
+    harden_connection
 from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
 from .dialect import SQLITE
 from .schema import migrate, migration_scripts
@@ -429,8 +430,8 @@ class Database:
     def _identities(self, shm: bool = True) -> tuple:
         """``(device, inode)`` of the file, its write-ahead log and (unless not ``shm``) its
         shared-memory file (None where missing)."""
-        found = []
-        names = (self._absolute, f"{self._absolute}-wal", f"{self._absolute}-shm")
+        found: list[tuple[int, int] | None] = []
+        names = (str(self._absolute), f"{self._absolute}-wal", f"{self._absolute}-shm")
         for name in names if shm else names[:2]:
             try:
                 info = os.stat(name)
@@ -618,7 +619,7 @@ class Database:
                 with self._deadline(deadline, "the SQL statement"):
                     cursor = conn.execute(query, tuple(params))
                     columns = [d[0] for d in cursor.description] if cursor.description else []
-                    return columns, cursor.fetchall()
+                    return columns, _bounded_rows(cursor)
             except sqlite3.DatabaseError as exc:
                 raise _read_only_error(exc, guard) from None
             finally:
@@ -765,6 +766,28 @@ class Database:
                                               20000)
 
 
+def _bounded_rows(cursor: sqlite3.Cursor) -> list[tuple]:
+    """Every row of a read-only statement, or an SLRError once its strings and blobs add up
+    to more than :data:`READ_ONLY_RESULT_BYTES` (a statement repeating a large value over
+    many rows would otherwise fill the memory before its time limit)."""
+    rows: list[tuple] = []
+    size = 0
+    while True:
+        batch = cursor.fetchmany(256)
+        if not batch:
+            return rows
+        for row in batch:
+            for value in row:
+                if type(value) is str or type(value) is bytes:
+                    size += len(value)
+        if size > READ_ONLY_RESULT_BYTES:
+            cursor.close()
+            raise SLRError(f"sql: the result of a read-only statement is larger than "
+                           f"{READ_ONLY_RESULT_BYTES >> 20} MiB of text and blobs: ask for "
+                           f"fewer rows (LIMIT) or columns")
+        rows.extend(batch)
+
+
 def _read_only_error(exc: sqlite3.DatabaseError, guard: SqlGuard) -> Exception:
     """The error to raise for ``exc``, raised by a read-only statement: the authorizer's
     reason, the read-only refusal, the value limit in words, else ``exc`` itself."""
@@ -856,7 +879,8 @@ def run_sql_file(path: str | os.PathLike, query: str,
             conn.setlimit(sqlite3.SQLITE_LIMIT_LENGTH, READ_ONLY_VALUE_BYTES)
         cursor = conn.execute(query)
         columns = [d[0] for d in cursor.description or ()]
-        return columns, [tuple(row) for row in cursor.fetchall()]
+        return columns, ([tuple(row) for row in cursor.fetchall()] if write
+                         else _bounded_rows(cursor))
     except sqlite3.Error as exc:
         text = str(exc)
         if guard.denied is not None and "authoriz" in text:

@@ -10,6 +10,7 @@ and a batch the fleet never committed is sent again.
 """
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -109,7 +110,8 @@ class Fleet:
 
     def read_after(self, name: str, arity: int, position: int, limit: int) -> list[tuple]:
         """Up to ``limit`` stored rows of name/arity with ``seq > position`` in sequence
-        order, as ``(seq, *encoded arguments, start, end, arrival, robot)``."""
+        order, as ``(seq, *encoded arguments, start, end, arrival, robot)`` (arrival None when
+        it is not a finite time)."""
         with self.db.lock:
             self.db.check_open()
             event_type = self.tables.lookup(name, arity)
@@ -121,8 +123,12 @@ class Fleet:
                 "WHERE seq > ? ORDER BY seq LIMIT ?", (position, limit)).fetchall()
             dialect = self.db.dialect
             if dialect.name != "sqlite" and arity:  # shipped as SQLite stores them
-                from_column = dialect.from_column
+                from_column: Any = dialect.from_column
                 rows = [(r[0], *map(from_column, r[1:1 + arity]), *r[1 + arity:]) for r in rows]
+            at = 3 + arity
+            if not all(map(_finite, [r[at] for r in rows])):
+                # a StreamClock's arrival before its first event is -inf: not sent (JSON)
+                rows = [r[:at] + (r[at] if _finite(r[at]) else None, r[-1]) for r in rows]
             return rows
 
     def backlog(self, name: str, arity: int, position: int) -> tuple[int, float | None]:
@@ -137,7 +143,7 @@ class Fleet:
                                         "WHERE seq > ?", (position,)).fetchone()[0]
             row = self.db.conn.execute(f"SELECT arrival FROM {event_type.quoted} "
                                        "ORDER BY seq DESC LIMIT 1").fetchone()
-            return left, None if row is None else row[0]
+            return left, row[0] if row is not None and _finite(row[0]) else None
 
     # ------------------------------------------------------------------ the fleet's side
 
@@ -183,7 +189,7 @@ class Fleet:
                 end = 1 + arity + 2
                 dialect = self.db.dialect
                 if dialect.name != "sqlite" and arity:  # rows come as SQLite stores them
-                    to_column = dialect.to_column
+                    to_column: Any = dialect.to_column
                     values = [(*map(to_column, r[1:1 + arity]), *r[1 + arity:end]) for r in fresh]
                 else:
                     values = [r[1:end] for r in fresh]
@@ -191,7 +197,8 @@ class Fleet:
                     v + (arrival, r[-1] if r[-1] is not None else robot)
                     for v, r in zip(values, fresh)])
             # the arrival column sits after the arguments and the two times
-            latest = max(r[3 + arity] for r in fresh)
+            latest = max((r[3 + arity] for r in fresh if r[3 + arity] is not None),
+                         default=None)
             conn.execute("INSERT INTO slr_fleet_robots (robot, shipped, last_arrival) "
                          "VALUES (?, ?, ?) ON CONFLICT (robot) DO UPDATE SET shipped = "
                          "slr_fleet_robots.shipped + excluded.shipped, last_arrival = CASE "
@@ -248,6 +255,10 @@ class Fleet:
                 "FROM slr_fleet_robots ORDER BY robot")
             cols = [d[0] for d in cur.description]
             return [dict(zip(cols, r)) for r in cur.fetchall()]
+
+
+def _finite(value: Any) -> bool:
+    return type(value) in (int, float) and math.isfinite(value)
 
 
 def _json_text(value: str) -> str:

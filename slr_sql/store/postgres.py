@@ -115,6 +115,11 @@ def _first_line(exc: BaseException) -> str:
     return text.splitlines()[0] if text else type(exc).__name__
 
 
+# INSERT INTO "table" (columns) VALUES (?, ...): nothing but values, so COPY does the same
+_PLAIN_INSERT = re.compile(r'INSERT INTO ("(?:[^"]|"")+"|[A-Za-z_][A-Za-z0-9_]*) '
+                           r'\(([A-Za-z0-9_, ]+)\) VALUES \(\?(?:, \?)*\)\Z')
+
+
 class PgCursor:
     """The part of a DB-API cursor the store's parts use, over a psycopg cursor."""
 
@@ -151,6 +156,20 @@ class PgConnection:
         self.where = where
         self.busy_timeout = busy_timeout
         self.last_rowcount = 0
+        # set by PgDatabase: open a new connection, and whether a transaction is open
+        self.reopen: Callable[[], Any] | None = None
+        self.in_transaction: Callable[[], bool] = lambda: False
+
+    def _alive(self) -> None:
+        """A connection the server dropped (a restart, a terminated backend) is opened
+        again before the next statement outside a transaction: the failed statement was an
+        SLRError, the next one works. Inside a transaction it stays an error (what the
+        transaction did is gone: it must fail as a whole)."""
+        if self.raw.closed and self.reopen is not None and not self.in_transaction():
+            try:
+                self.raw = self.reopen()
+            except _psycopg().Error as exc:
+                raise _error(exc, self.where, self.busy_timeout) from None
 
     def _guard(self, call: Callable[[], Any]) -> Any:
         psycopg = _psycopg()
@@ -165,15 +184,27 @@ class PgConnection:
             args: Any = params
         else:
             args = tuple(params) if params else None
+        self._alive()
         cursor = self.raw.cursor()
         self._guard(lambda: cursor.execute(text, args, prepare=None))
         self.last_rowcount = cursor.rowcount
         return PgCursor(cursor, self)
 
     def executemany(self, sql: str, rows: Iterable[Iterable[Any]]) -> PgCursor:
-        text = POSTGRES.statement(sql)
         rows = [tuple(r) for r in rows]
+        self._alive()
         cursor = self.raw.cursor()
+        plain = _PLAIN_INSERT.match(sql)
+        if plain is not None and len(rows) > 1:
+            # many rows into one table: COPY (one stream) rather than one INSERT per row
+            def copy() -> None:
+                with cursor.copy(f"COPY {plain.group(1)} ({plain.group(2)}) FROM STDIN") as out:
+                    for row in rows:
+                        out.write_row(row)
+            self._guard(copy)
+            self.last_rowcount = len(rows)
+            return PgCursor(cursor, self)
+        text = POSTGRES.statement(sql)
         if rows:
             self._guard(lambda: cursor.executemany(text, rows))
         self.last_rowcount = cursor.rowcount
@@ -191,6 +222,39 @@ class PgConnection:
             self.raw.execute("ROLLBACK")
 
 
+class PgReadConnection:
+    """A read-only connection of its own to a store's schema (see
+    :meth:`PgDatabase.open_reader`): each statement sees what was committed when it
+    started."""
+
+    def __init__(self, conninfo: str, schema: str, where: str, busy_timeout: float):
+        psycopg = _psycopg()
+        self.lock = threading.Lock()
+        self.closed = False
+        try:
+            raw = psycopg.connect(conninfo, autocommit=True)
+            raw.execute("SET default_transaction_read_only = on")
+            raw.execute(f"SET search_path = {quote_identifier(schema)}")
+        except psycopg.Error as exc:
+            raise SLRError(f"{where}: cannot open a reading connection "
+                           f"({_first_line(exc)})") from None
+        self.conn = PgConnection(raw, where, busy_timeout)
+
+    def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
+        """Run one reading statement and return its rows."""
+        with self.lock:
+            if self.closed:
+                raise SLRError("the event store is closed")
+            return self.conn.execute(sql, tuple(params)).fetchall()
+
+    def close(self) -> None:
+        """Close the connection (idempotent)."""
+        with self.lock:
+            if not self.closed:
+                self.closed = True
+                self.conn.close()
+
+
 class PgDatabase:
     """The connection of one store in a PostgreSQL schema, with its lock, transaction
     depth and clock (the counterpart of :class:`~slr_sql.store.connection.Database`)."""
@@ -204,6 +268,7 @@ class PgDatabase:
         psycopg = _psycopg()
         conninfo, schema = split_url(url)
         self.url = url
+        self.conninfo = conninfo
         self.path = _shown(url)
         self.schema = schema
         self.clock = clock if clock is not None else WallClock()
@@ -227,6 +292,15 @@ class PgDatabase:
                 raw.execute("SET TIME ZONE 'UTC'")
                 migrate_postgres(self, schema, adopt)
                 raw.execute(f"SET search_path = {quote_identifier(schema)}")
+
+                def reopen() -> Any:
+                    again = psycopg.connect(conninfo, autocommit=True)
+                    again.execute(f"SET lock_timeout = {int(busy_timeout * 1000)}")
+                    again.execute("SET TIME ZONE 'UTC'")
+                    again.execute(f"SET search_path = {quote_identifier(schema)}")
+                    return again
+                self.conn.reopen = reopen
+                self.conn.in_transaction = lambda: self.tx_depth > 0
             except psycopg.Error as exc:
                 raise _error(exc, self.path, busy_timeout) from None
         except BaseException:
@@ -282,6 +356,41 @@ class PgDatabase:
         keys = sorted({groups[t] for t in types if t in groups})
         for key in keys:
             self.conn.execute("SELECT pg_advisory_xact_lock(?)", (key,))
+
+    def open_reader(self) -> "PgReadConnection":
+        """A read-only connection of its own (a reader that must not queue behind this
+        connection's lock, held by a writer for a whole transaction)."""
+        self.check_open()
+        return PgReadConnection(self.conninfo, self.schema, self.path, self.busy_timeout)
+
+    def listen(self, callback: Callable[[], Any]) -> Callable[[], None]:
+        """LISTEN on the store's channel on a connection of its own, in a daemon thread:
+        ``callback()`` for every notification (the journals' triggers send one per
+        statement). Returns the function that stops the thread. A lost connection is
+        opened again after a second (meanwhile the readers' own polling covers)."""
+        psycopg = _psycopg()
+        stopped = threading.Event()
+        channel = quote_identifier(self.notify_channel)
+        conninfo = self.conninfo
+
+        def run() -> None:
+            while not stopped.is_set():
+                try:
+                    with psycopg.connect(conninfo, autocommit=True) as conn:
+                        conn.execute(f"LISTEN {channel}")
+                        while not stopped.is_set():
+                            for _ in conn.notifies(timeout=0.5):
+                                callback()
+                except psycopg.Error:
+                    stopped.wait(1.0)
+
+        thread = threading.Thread(target=run, name="slr-listen", daemon=True)
+        thread.start()
+
+        def stop() -> None:
+            stopped.set()
+            thread.join(timeout=5.0)
+        return stop
 
     def lock_named(self, name: str) -> None:
         """Inside a transaction: take the advisory lock ``name`` of this store's schema

@@ -126,7 +126,7 @@ class EventChannel:
             value = row[i]
             tv = type(value)
             if tv is str:
-                if value[:1] in "[{":
+                if value and value[0] in "[{":
                     if not value.startswith('{"$atom":'):
                         parts.append(value)   # a list or compound: JSON already
                         continue
@@ -189,8 +189,9 @@ def transform_message(rows: list) -> bytes | None:
     out = []
     for row in rows:
         try:
-            pose = json.loads(row[2]) if type(row[2]) is str else None
-            (x, y, z), (qx, qy, qz, qw) = pose["pose"]
+            if type(row[2]) is not str:
+                continue
+            (x, y, z), (qx, qy, qz, qw) = json.loads(row[2])["pose"]
             values = [float(v) for v in (x, y, z, qx, qy, qz, qw)]
         except (TypeError, ValueError, KeyError, AttributeError):
             continue
