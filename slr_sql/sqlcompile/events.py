@@ -13,7 +13,17 @@ from __future__ import annotations
 
 from ..program import event_key, split_event_atom
 from ..terms import Atom, Struct, Var, deref, list_items
-from .model import Col, Fallback, State
+from .model import NUMERIC, Col, Fallback, State
+
+
+def _check_point_stamp(s, e) -> None:
+    """``E^T`` with T a value from a stored column: at run time T may be a list ``[S, E]``,
+    which makes the goal an interval goal (the interpreter splits the stamp when it reaches
+    the goal); SQL would compare the list with a time and fail, so the interpreter answers."""
+    s = deref(s)
+    if s is deref(e) and type(s) is Col and s.kind not in NUMERIC:
+        raise Fallback("an event's time taken from a stored value, which may be an interval "
+                       "[S, E] at run time")
 
 
 class EventGoals:
@@ -79,6 +89,7 @@ class EventGoals:
 
     def event_sql(self, ev, ctx, nxt, st, emit, origin=None):
         atom, s, e = ev
+        _check_point_stamp(s, e)
         atom = deref(atom)
         if type(atom) not in (Struct, Atom):
             raise Fallback("an event goal whose name is not known")
@@ -122,6 +133,7 @@ class EventGoals:
         if ev is None:
             raise Fallback("prev/next of something that is not an event atom (error at run time)")
         atom, s, e = ev
+        _check_point_stamp(s, e)
         atom = deref(atom)
         if type(atom) not in (Struct, Atom):
             raise Fallback("prev/next of an event with an unknown name")
