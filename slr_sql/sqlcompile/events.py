@@ -19,9 +19,13 @@ from .model import NUMERIC, Col, Fallback, State
 def _check_point_stamp(s, e) -> None:
     """``E^T`` with T a value from a stored column: at run time T may be a list ``[S, E]``,
     which makes the goal an interval goal (the interpreter splits the stamp when it reaches
-    the goal); SQL would compare the list with a time and fail, so the interpreter answers."""
+    the goal); SQL would compare the list with a time and fail, so the interpreter answers.
+    (A parameter, ``:name``, and a part taken out of a compound value stay compiled: the
+    time of a call is a number there in practice, and position/2-style rules that take
+    ``E^T`` apart keep their compiled form.)"""
     s = deref(s)
-    if s is deref(e) and type(s) is Col and s.kind not in NUMERIC:
+    if s is deref(e) and type(s) is Col and s.kind not in NUMERIC and s.src is None \
+            and not s.sql.startswith(":"):
         raise Fallback("an event's time taken from a stored value, which may be an interval "
                        "[S, E] at run time")
 
