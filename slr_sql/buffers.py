@@ -32,6 +32,7 @@ This module does not touch SQLite itself: every statement goes through
 from __future__ import annotations
 
 import math
+import numbers
 import threading
 from dataclasses import dataclass, field
 from typing import Any, Iterable
@@ -424,7 +425,7 @@ def check_time(value: Any, what: str) -> float:
             value = float(value)
         except ValueError:
             raise SLRError(f"{what} must be a number, not {_shown(value)}") from None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or value != value:
         raise SLRError(f"{what} must be a number, not {_shown(value)}")
     try:
         return float(value)

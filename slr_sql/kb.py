@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import math
+import numbers
 import re
 import threading
 import time
@@ -1205,7 +1206,14 @@ class KnowledgeBase:
         """Declare the history of ``"p/N"`` (or ``"p"``: every arity) complete up to ``t``
         (persisted), like a ``fullyUpdated(p/N)^t`` event."""
         _check_event_type("mark_complete", event_type)
-        _check_time_option("mark_complete: t", t)
+        if isinstance(t, bool) or not isinstance(t, numbers.Real):  # (numpy numbers are Real)
+            raise SLRError(f"mark_complete: t must be a number of seconds, not {shown(t)}")
+        try:
+            if math.isnan(float(t)):
+                raise SLRError("mark_complete: t must be a number of seconds, not NaN")
+        except OverflowError:
+            raise SLRError(f"mark_complete: t is out of range (an integer of "
+                           f"{int(t).bit_length()} bits; a time is a float)") from None
         self._refresh()
         self._sync.mark_complete(event_type, t)
 

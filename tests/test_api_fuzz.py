@@ -16,7 +16,7 @@ import os
 import re
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import slr_sql
@@ -154,6 +154,9 @@ def fuzzed(tmp_path_factory):
 @settings(max_examples=EXAMPLES, suppress_health_check=[HealthCheck.too_slow,
                                                         HealthCheck.data_too_large])
 @given(calls=st.lists(CALLS, min_size=1, max_size=4))
+# found by this test (explore profile): an unhashable event name next to an event rule
+@example(calls=[("load", ("c(X) <- p(X) seq q(X, _).",), {}),
+                ("add_many", ([({"a": 1}, (1,), 1.0, 1.0), "p(a)^1"],), {})])
 def test_only_slr_errors_escape_and_the_store_stays_usable(fuzzed, calls):
     kb = fuzzed
     for call in calls:

@@ -26,7 +26,7 @@ from slr_sql.sqlcompile import Fallback
 from slr_sql.store.schema import migrate, migration_scripts
 
 ROOT = Path(__file__).resolve().parent.parent
-DEADLINE = 60.0
+DEADLINE = 120.0   # a bound, not a pause: generous for a loaded 2-core machine
 
 
 def slr(*args: str, check: bool = True) -> subprocess.CompletedProcess:
@@ -268,6 +268,8 @@ def test_origin_of_something_else_is_an_error(fleet_store):
                 kb.query("origin(R, G)")
         with pytest.raises(slr_sql.SLRError, match="robot's name"):
             kb.query("seen(P, W)^T", robot="")
+        with pytest.raises(slr_sql.SLRError, match="synchronized"):
+            kb.query("seen(P, W)^T", robot="r1", wait=True)
 
 
 # -- shipping --------------------------------------------------------------------------------
@@ -427,6 +429,11 @@ def test_a_fleet_that_does_not_answer_never_holds_the_robot_up(tmp_path):
                     {"R": "r1", "W": "w7", "T": 7.0}] * 2
                 assert len(client.query("seen(pallet7, W)^T", robot="r1")) == 160
                 assert client.query("seen(pallet7, W)^T", robot="r2") == []
+                with pytest.raises(slr_sql.SLRError, match="synchronized"):
+                    client.query("seen(pallet7, W)^T", wait=True, robot="r1")
+                reply = httpx.post(url + "/query", json={"goal": "seen(P, W)^T", "wait": True,
+                                                         "robot": "r1"}, timeout=30)
+                assert reply.status_code == 400 and "synchronized" in reply.text
                 # a malformed shipment is refused with its reason and changes nothing
                 for bad in ([["seen", 2, [[9001, "a", 1.0, 1.0, 1.0, None]]]],   # short
                             [["seen", 2, [[9, "a", "b", 1.0, "x", 1.0, 1.0, None]]]],

@@ -73,6 +73,14 @@ class FoxgloveClient:
                 sub, stamp = struct.unpack_from("<IQ", frame, 1)
                 self.messages.append((self.subscriptions[sub], stamp, json.loads(frame[13:])))
 
+    def read_for(self, seconds: float) -> None:
+        """Read what arrives within ``seconds`` (a deadline, not a pause: frames are read)."""
+        end = time.monotonic() + seconds
+        try:
+            self.pump(lambda: time.monotonic() >= end, end + 1.0)
+        except AssertionError:
+            pass
+
     def subscribe(self, *topics: str) -> None:
         subs = []
         for topic in topics:
@@ -178,11 +186,16 @@ def check_live(client: FoxgloveClient, db: Path) -> None:
 
 
 def test_a_port_in_use_is_a_clear_error(server, tmp_path):
-    _, port, _ = server
-    out = subprocess.run([sys.executable, "-m", "slr_sql", "foxglove", str(tmp_path / "x.db"),
+    db, port, _ = server
+    out = subprocess.run([sys.executable, "-m", "slr_sql", "foxglove", str(db),
                           "--port", str(port)], capture_output=True, text=True, timeout=DEADLINE,
                          env={**os.environ, "PYTHONPATH": str(REPO)})
     assert out.returncode == 1 and "error:" in out.stderr and "Traceback" not in out.stderr
+    missing = subprocess.run([sys.executable, "-m", "slr_sql", "foxglove", str(tmp_path / "no.db")],
+                             capture_output=True, text=True, timeout=DEADLINE,
+                             env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert missing.returncode == 1 and "no such store" in missing.stderr
+    assert not (tmp_path / "no.db").exists()
 
 
 def test_slr_serve_with_foxglove_shows_what_clients_of_the_service_add(tmp_path):
@@ -211,6 +224,37 @@ def test_slr_serve_with_foxglove_shows_what_clients_of_the_service_add(tmp_path)
                 time_before = time.monotonic()
             (_, message), *_ = client.on("/seg/2")
             assert message["arg1"] == "cup2" and message["arg2"] == [1.0, 2.0, 3.0]
+    finally:
+        process.terminate()
+        out, err = process.communicate(timeout=DEADLINE)
+    assert process.returncode == 0, err
+
+
+def test_a_postgresql_store_is_followed_too(postgres_url):
+    with slr_sql.open(postgres_url, clock=slr_sql.ManualClock(10.0)) as kb:
+        kb.add_many([("seg", ("cup1", [0.0, 0.0, 0.0]), 1.0, 1.0)])
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    process = subprocess.Popen([sys.executable, "-m", "slr_sql", "foxglove", postgres_url,
+                                "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True, env=env)
+    try:
+        line = process.stdout.readline()
+        assert line.startswith("foxglove: ws://"), process.stderr.read()
+        with FoxgloveClient(int(line.split(":")[3].split()[0])) as client:
+            deadline = time.monotonic() + DEADLINE
+            client.pump(lambda: "/seg/2" in client.channels, deadline)
+            client.subscribe("/seg/2")
+            # the subscription takes effect at some point: add until a message comes back
+            with slr_sql.open(postgres_url, clock=slr_sql.ManualClock(20.0)) as kb:
+                n = 0
+                while not client.on("/seg/2"):
+                    assert time.monotonic() < deadline, "nothing delivered"
+                    n += 1
+                    kb.add_many([("seg", (f"cup{n + 1}", [1.0, 2.0, 3.0]), 2.0, 2.0)])
+                    client.read_for(0.25)
+            (_, message), *_ = client.on("/seg/2")
+            assert message["arg1"] in {f"cup{i + 1}" for i in range(1, n + 1)}
+            assert (message["arg2"], message["arrival"]) == ([1.0, 2.0, 3.0], 20.0)
     finally:
         process.terminate()
         out, err = process.communicate(timeout=DEADLINE)

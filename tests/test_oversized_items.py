@@ -76,3 +76,14 @@ def test_single_adds_of_oversized_values_say_what_is_wrong(kb, call, words):
     assert "ValueError" not in str(caught.value) and "TypeError" not in str(caught.value)
     kb.add("k(ok)^1")
     assert [a["X"] for a in kb.query("k(X)^T")] == ["ok"]
+
+
+@pytest.mark.parametrize("name", [{"a": 1}, ["x"], {1, 2}])
+def test_an_unhashable_name_next_to_event_rules_is_that_items_rejection(kb, name):
+    """(Found by tests/test_api_fuzz.py: with an event rule loaded, the batch failed whole.)"""
+    kb.load("c(X) <- p(X) seq q(X, _).")
+    rejected = kb.add_many([("p", ["a"], 1.0, 1.0), (name, (1,), 1.5, 1.5),
+                            ("q", ["a", 1], 2.0, 2.0)])
+    assert [e.index for e in rejected] == [1]
+    assert "event name must be an atom" in str(rejected[0])
+    assert [a["X"] for a in kb.query("c(X)^[S, E]")] == ["a"]

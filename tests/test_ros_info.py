@@ -90,3 +90,22 @@ def test_a_message_with_many_fields_is_taken_whole(tmp_path):
     path = make_bag.write_bag(bag_path(tmp_path, fmt), fmt, items)
     text = draft_map(bag_info(path))
     assert 'args: ["$msg"]' in text and "event: scan" in text
+
+
+def test_info_of_an_slr_export(tmp_path):
+    from slr_sql import ManualClock, Struct
+    from slr_sql.viz.mcap_export import export_mcap
+
+    with slr_sql.open(tmp_path / "r.db", clock=ManualClock(10.0)) as kb:
+        kb.add_many([("tf", ("map", "base", Struct("pose", ([0.0, 0, 0], [0.0, 0, 0, 1]))), 1.0, 1.0),
+                     ("tf", ("map", "base", Struct("pose", ([1.0, 0, 0], [0.0, 0, 0, 1]))), 2.0, 2.0),
+                     ("seg", ("cup1", [1, 2, 3]), 1.5, 1.5)])
+        export_mcap(kb.store, tmp_path / "out.mcap")
+    info = bag_info(tmp_path / "out.mcap")
+    assert info.export and info.count == 5 and (info.start, info.end) == (1.0, 2.0)
+    kinds = {t.topic: (t.msgtype, t.count) for t in info.topics}
+    assert kinds == {"/seg/2": ("slr event seg/2", 1), "/tf/3": ("slr event tf/3", 2),
+                     "/tf": ("foxglove.FrameTransforms", 2)}
+    assert [(e.parent, e.child, e.count, e.first, e.last) for e in info.frames] == \
+        [("map", "base", 2, 1.0, 2.0)]
+    assert "without a MAP" in draft_map(info)

@@ -892,10 +892,10 @@ class EventRules:
             for ev in events:
                 try:
                     key = (ev[0], len(ev[1]))
+                    if key in leaf:  # (an unhashable name: the store rejects that event)
+                        keys.add(key)
                 except (TypeError, IndexError, KeyError):
                     continue
-                if key in leaf:
-                    keys.add(key)
         if not keys:
             return None
         self.store.lock_for_write(keys)   # before the watermarks: see set_write_groups

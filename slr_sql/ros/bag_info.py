@@ -14,6 +14,7 @@ slr_sql.ros.bag_import.BagError: cannot read /no/such.bag: no such file or direc
 """
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -65,6 +66,7 @@ class BagInfo:
     topics: list[TopicInfo] = field(default_factory=list)
     frames: list[FrameEdge] = field(default_factory=list)
     fielddefs: dict = field(default_factory=dict, repr=False)
+    export: bool = False    # an MCAP file of `slr export`: its channels are event types
 
     @property
     def duration(self) -> float:
@@ -78,10 +80,53 @@ class BagInfo:
         return json.dumps(data, indent=2)
 
 
+def _export_info(path: Path) -> BagInfo:
+    """The summary of an MCAP file of ``slr export`` (its channels name their event types)."""
+    from mcap.reader import make_reader
+
+    from slr_sql.viz.channels import METADATA_ARITY, METADATA_EVENT
+
+    topics: dict[str, TopicInfo] = {}
+    frames: dict[tuple, FrameEdge] = {}
+    with open(path, "rb") as stream:
+        reader = make_reader(stream)
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            meta = channel.metadata
+            kind = (f"slr event {meta[METADATA_EVENT]}/{meta[METADATA_ARITY]}"
+                    if METADATA_EVENT in meta else (schema.name if schema else ""))
+            info = topics.setdefault(channel.topic, TopicInfo(channel.topic, kind, 0))
+            t = message.log_time * 1e-9
+            info.count += 1
+            info.first = t if info.first is None else min(info.first, t)
+            info.last = t if info.last is None else max(info.last, t)
+            if meta.get(METADATA_EVENT) in ("tf", "tf_static") and meta.get(METADATA_ARITY) == "3":
+                data = json.loads(message.data)
+                edge = frames.setdefault((channel.topic, str(data["arg1"]), str(data["arg2"])),
+                                         FrameEdge(str(data["arg1"]), str(data["arg2"]),
+                                                   channel.topic))
+                edge.count += 1
+                edge.first = t if edge.first is None else min(edge.first, t)
+                edge.last = t if edge.last is None else max(edge.last, t)
+    digest = hashlib.sha256(json.dumps(sorted((k, v.count) for k, v in topics.items()))
+                            .encode()).hexdigest()
+    firsts = [t.first for t in topics.values() if t.first is not None]
+    lasts = [t.last for t in topics.values() if t.last is not None]
+    return BagInfo(str(path), "export_" + digest[:16], sum(t.count for t in topics.values()),
+                   min(firsts) if firsts else None, max(lasts) if lasts else None,
+                   sorted(topics.values(), key=lambda i: i.topic),
+                   sorted(frames.values(), key=lambda e: (e.topic, e.parent, e.child)),
+                   {}, export=True)
+
+
 def bag_info(path: str | Path) -> BagInfo:
-    """Read the bag at ``path`` (any format ``slr ros import`` reads) and summarize it."""
+    """Read the bag at ``path`` (any format ``slr ros import`` reads, an ``slr export`` MCAP
+    file too) and summarize it."""
+    from slr_sql.viz.mcap_export import is_slr_export
+
     from . import fast_tf
 
+    if is_slr_export(path):
+        return _export_info(Path(path))
     reader = open_bag(path)
     try:
         topics: dict[str, TopicInfo] = {}
@@ -171,6 +216,9 @@ def draft_map(info: BagInfo) -> str:
     mapping takes them): an event named after the topic whose arguments are the message's
     leaf fields (at most :data:`MAX_DRAFT_ARGS`; a message with more, or with none, is taken
     whole as ``$msg``), timed by ``header.stamp`` when the message has one."""
+    if info.export:
+        return (f"# {info.path} is an MCAP file of `slr export`: its channels name their event\n"
+                f"# types, so `slr ros import` reads it without a MAP.\nversion: 1\ntopics: {{}}\n")
     lines = [f"# Draft MAP for {info.path} ({info.bag_id}), written by `slr ros info`.",
              "# Edit the event names and arguments, then: slr ros import BAG DB --map THIS_FILE",
              "# /tf and /tf_static need no entry: the built-in mapping makes",

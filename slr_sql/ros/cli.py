@@ -45,14 +45,6 @@ def ros() -> None:
     """ROS: import bags, or bridge live ROS 2 topics into DB (needs slr_sql[ros])."""
 
 
-def _holds_no_events(db: str) -> bool:
-    try:
-        with slr_sql.open(db) as kb:
-            return not any(kb.store.table_rows().values())
-    except slr_sql.SLRError:
-        return False
-
-
 def _remove_new_store(db: str) -> None:
     """Remove the files of a store this command created and could not fill (an import that
     failed before its first event): a failed command leaves nothing behind."""
@@ -102,6 +94,7 @@ def import_command(bag: str, db_argument: str | None, db_option: str | None,
 
     console = Console(stderr=True)
     created = not os.path.lexists(db)
+    started = False  # whether the import read its first message (events may be stored)
     try:
         with slr_sql.open(db) as kb, Progress(
                 TextColumn("[progress.description]{task.description}"), BarColumn(),
@@ -111,6 +104,8 @@ def import_command(bag: str, db_argument: str | None, db_option: str | None,
                                 total=None)
 
             def progress(done: int, total: int) -> None:
+                nonlocal started
+                started = started or done > 0
                 bar.update(task, completed=done, total=total)
 
             report = import_bag(kb, bag, mapping, all_topics=all_topics, progress=progress,
@@ -118,7 +113,7 @@ def import_command(bag: str, db_argument: str | None, db_option: str | None,
     except Exception:
         # A MAP that does not fit the bag, a bag that cannot be read: no empty store is left
         # behind. A store that got events keeps them (a later run continues the import).
-        if created and _holds_no_events(db):
+        if created and not started:
             _remove_new_store(db)
         raise
     _print_report(report, bag)

@@ -126,7 +126,8 @@ class Fleet:
                 from_column: Any = dialect.from_column
                 rows = [(r[0], *map(from_column, r[1:1 + arity]), *r[1 + arity:]) for r in rows]
             at = 3 + arity
-            if not all(map(_finite, [r[at] for r in rows])):
+            arrivals = [r[at] for r in rows]   # REAL NOT NULL: the extremes tell
+            if rows and not (_finite(min(arrivals)) and _finite(max(arrivals))):
                 # a StreamClock's arrival before its first event is -inf: not sent (JSON)
                 rows = [r[:at] + (r[at] if _finite(r[at]) else None, r[-1]) for r in rows]
             return rows

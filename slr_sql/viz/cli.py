@@ -19,6 +19,10 @@ __all__ = ["foxglove_command", "export_command"]
 def _store_for_view(db: str) -> tuple:
     """A knowledge base on ``db`` (migrations, refusal of non-stores) and the store the view
     follows from its thread."""
+    import os
+
+    if "://" not in db and not os.path.exists(db):
+        raise slr_sql.SLRError(f"no such store: {db}")
     kb = slr_sql.open(db)
     return kb, kb.store
 
@@ -82,7 +86,7 @@ def export_command(db: str, file: str, types: tuple[str, ...], start: float | No
     for option, value in (("--from", start), ("--to", end)):
         if value is not None and not math.isfinite(value):
             raise slr_sql.SLRError(f"{option} must be a finite number of seconds")
-    if not os.path.exists(db):
+    if "://" not in db and not os.path.exists(db):
         raise slr_sql.SLRError(f"no such store: {db}")
     with slr_sql.open(db) as kb:
         try:
