@@ -1606,5 +1606,18 @@ from .service.cli import serve  # noqa: E402  (slr serve; its body imports uvico
 main.add_command(serve)
 
 
+def _whole_one_liners(group: click.Group) -> None:
+    """Every subcommand of every group (``slr ros``, ``slr fleet``, ...) lists with its first
+    sentence whole in its group's --help, as the top-level commands do."""
+    for command in group.commands.values():
+        if not command.short_help:
+            command.short_help = one_liner(command)
+        if isinstance(command, click.Group):
+            _whole_one_liners(command)
+
+
+_whole_one_liners(main)   # (last: after every command was added)
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

@@ -168,6 +168,7 @@ def encode(term: Any) -> Any:
         # the fast path: a flat list of numbers or of plain atoms (robot vectors, names)
         text = _struct_json(term) if tt is Struct else _python_list_json(term)
         if text is None:
+            _check_size(term)
             text = _json(term, 0)
         return text if text.isascii() else _check_text(text)
     if tt is String:
@@ -527,8 +528,48 @@ def encode_json(term: Any) -> str:
     >>> encode_json(Atom("a")), encode_json(String("a")), encode_json(1.0)
     ('"a"', '{"$string":"a"}', '1.0')
     """
+    _check_size(term)
     text = _json(term, 0)
     return text if text.isascii() else _check_text(text)
+
+
+# Nodes (compounds, list cells, values) a stored term may have, written out as a tree: a
+# term that shares subterms (X1 = f(X0, X0), X2 = f(X1, X1), ...) is small in memory but
+# exponential as text, and is refused before its text is built.
+MAX_STORED_NODES = 10_000_000
+
+
+def _check_size(term: Any) -> None:
+    """Unencodable when ``term`` written out has more than MAX_STORED_NODES nodes; linear
+    in its distinct compounds (each shared one is sized once)."""
+    sizes: dict[int, int] = {}
+    todo: list = [(term, False)]
+    done: list = []
+    while todo:
+        t, leaving = todo.pop()
+        if leaving:
+            k = len(t.args) if type(t) is Struct else len(t)
+            n = 1 + sum(done[len(done) - k:]) if k else 1
+            del done[len(done) - k:]
+            sizes[id(t)] = n
+            if n > MAX_STORED_NODES:
+                raise Unencodable(f"term too large to be stored (more than "
+                                  f"{MAX_STORED_NODES} nodes written out)")
+            done.append(n)
+            continue
+        while type(t) is Var and t.ref is not None:
+            t = t.ref
+        tt = type(t)
+        if tt is Struct or tt is list or tt is tuple:
+            known = sizes.get(id(t))
+            if known is not None:
+                done.append(known)
+                continue
+            sizes[id(t)] = MAX_STORED_NODES + 1   # met again inside itself: cyclic
+            todo.append((t, True))
+            todo.extend((a, False) for a in reversed(t.args if tt is Struct else t))
+        else:
+            done.append(1)
 
 
 def column_json(value: Any) -> str:

@@ -27,7 +27,7 @@ from typing import Any
 from .errors import SLRError
 from .terms import NIL, Atom, Struct, Var, list_items
 
-__all__ = ["Case", "Example", "CaseResult", "parse_example", "check_case", "event_like_facts"]
+__all__ = ["Case", "CaseResult", "Example", "check_case", "event_like_facts", "parse_example"]
 
 _KEY = re.compile(r"^%%\s*(query|at|expect|tolerance):\s?(.*)$")
 _CONTINUATION = re.compile(r"^%%\s+(.*)$")

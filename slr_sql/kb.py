@@ -908,9 +908,13 @@ class KnowledgeBase:
         if cep is not None and cep.active and events:
             # issue 11: event rules detect in the transaction that stores the events
             with self.store.transaction():
-                token = cep.before_add(events)
-                errors = cep.store_events(events, atomic)
-                derived = cep.after_add(token)
+                rounds = cep.rounds(events)
+                if len(rounds) == 1:
+                    token = cep.before_add(events)
+                    errors = cep.store_events(events, atomic)
+                    derived = cep.after_add(token)
+                else:
+                    errors, derived = self._add_in_rounds(cep, events, rounds, atomic)
         else:
             errors = self.store.add_events(events, atomic=atomic)
         if atomic and errors:
@@ -925,6 +929,31 @@ class KnowledgeBase:
         if marks:  # issue 5: after the events of the same batch are stored
             self._sync.apply_marks(marks)
         return mark_errors + errors if mark_errors else errors
+
+    def _add_in_rounds(self, cep: Any, events: EventBatch, rounds: list,
+                       atomic: bool) -> tuple[list, list]:
+        """Store a batch in consecutive rounds of event-rule detection, inside the caller's
+        transaction: a count buffer that a rule's events meet prunes between rounds just as
+        between single adds. The batch's errors keep their indices, its ``ends`` cover all."""
+        errors: list = []
+        derived: list = []
+        ends: dict = {}
+        for start, stop in rounds:
+            part = EventBatch(events[start:stop])
+            token = cep.before_add(part)
+            part_errors = cep.store_events(part, atomic)
+            for error in part_errors:
+                if getattr(error, "index", None) is not None:
+                    error.index += start
+            if atomic and part_errors:
+                raise part_errors[0]   # (rolls the whole batch back)
+            errors += part_errors
+            derived += cep.after_add(token)
+            for key, (lo, hi) in (part.ends or {}).items():
+                old = ends.get(key)
+                ends[key] = (lo, hi) if old is None else (min(old[0], lo), max(old[1], hi))
+        events.ends = ends
+        return errors, derived
 
     # -- queries ------------------------------------------------------------------------
     def _plan(self, goal: str, arg_names: tuple) -> _Plan:

@@ -1,4 +1,4 @@
-"""SLR text -> terms.  The only module that imports lark.
+"""SLR text -> terms.  The only module that uses the LALR parser of ``grammar/slr.lark``.
 
 Two stages, both run inside one LALR parse:
 
@@ -10,7 +10,8 @@ Two stages, both run inside one LALR parse:
    before a number makes a negative literal (only when written directly against it:
    ``-1`` is an integer, ``- 1`` the compound ``-(1)``, as SWI-Prolog 9 reads them).
 
-The lark parser is built once per process (``_parser()``) with the transformer inlined,
+The parser (the module lark's standalone tool generates from the grammar,
+``grammar/slr_parser.py``) is built once per process (``_parser()``) with the transformer inlined,
 so terms are built while parsing and no parse tree is materialised.  Per-parse state (the
 variable table of the current clause, the source text) is thread-local, so several threads
 may parse at once.
@@ -23,9 +24,12 @@ import threading
 from pathlib import Path
 from typing import Any
 
-import lark
-from lark import Lark, Token, Transformer
-from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
+# The LALR parser is a module generated from grammar/slr.lark by lark's standalone tool
+# (grammar/__init__.py says how): it needs no `lark` at run time, so it works whichever
+# `lark` an environment has -- lark-parser 0.12 (which ROS 2's rosidl parser installs into
+# the same `lark/` directory) or none.
+from .grammar.slr_parser import (Lark, Lark_StandAlone, Token, Transformer, UnexpectedCharacters,
+                                 UnexpectedEOF, UnexpectedInput, UnexpectedToken)
 
 from .errors import SLRSyntaxError
 from .terms import INFIX_OPS, PREFIX_OPS
@@ -565,11 +569,6 @@ _LARK: Lark | None = None
 _LOCK = threading.Lock()
 
 
-# lark 1.x calls the plain lexer "basic"; lark-parser 0.12 (which the ROS 2 wheels install
-# under the same import name `lark`) calls it "standard". Both give the same tokens.
-_BASIC_LEXER = "standard" if lark.__version__.startswith("0.") else "basic"
-
-
 def _parser() -> Lark:
     global _LARK
     if _LARK is None:
@@ -580,10 +579,8 @@ def _parser() -> Lark:
                 # anything (measured: same speed); but it would lex a clause-ending `.`
                 # inside an unclosed bracket as the symbol atom `.` (END is not acceptable
                 # there), moving the error to the end of the file.
-                _LARK = Lark(_GRAMMAR_PATH.read_text(encoding="utf-8"), parser="lalr",
-                             lexer=_BASIC_LEXER, start=["program", "query"],
-                             transformer=_Builder(), maybe_placeholders=False,
-                             cache=False)
+                # (generated with: -s program -s query -l basic, no placeholders)
+                _LARK = Lark_StandAlone(transformer=_Builder())
     return _LARK
 
 

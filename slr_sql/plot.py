@@ -429,13 +429,19 @@ MAX_KEYS = len(PALETTE)
 LAG_COLOR = "#ff7f0e"
 
 
+def _distinct(source: Any, ref: EventTypeRef, argument: int, lo: float,
+              hi: float) -> list[tuple]:
+    """Up to MAX_KEYS + 1 distinct values of an argument in the window, in order."""
+    column = quote_identifier(f"arg{argument}")
+    return _rows(source, f"SELECT DISTINCT {column} FROM {quote_identifier(ref.table)} "
+                         f"WHERE t_end >= ? AND t_start <= ? ORDER BY 1 LIMIT ?",
+                 (lo, hi, MAX_KEYS + 1))
+
+
 def _keys(source: Any, ref: EventTypeRef, argument: int, lo: float, hi: float,
           what: str) -> list[tuple[Any, str]]:
     """The distinct values of an argument in the window, as (stored value, label)."""
-    column = quote_identifier(f"arg{argument}")
-    values = _rows(source, f"SELECT DISTINCT {column} FROM {quote_identifier(ref.table)} "
-                           f"WHERE t_end >= ? AND t_start <= ? ORDER BY 1 LIMIT ?",
-                   (lo, hi, MAX_KEYS + 1))
+    values = _distinct(source, ref, argument, lo, hi)
     if len(values) > MAX_KEYS:
         raise SLRError(f"{what}: argument {argument} of {ref.label} has more than {MAX_KEYS} "
                        f"values in the window; choose fewer with --from/--to or another argument")
@@ -485,9 +491,11 @@ def _collect_series(source: Any, spec: ValueSpec, ref: EventTypeRef, is_complex:
             series.lows.append(float(low))
             series.highs.append(float(high))
             series.count += int(n)
-    if not series.count and _rows(source, f"SELECT 1 FROM {table} {where} LIMIT 1", (lo, hi)):
-        sample = _rows(source, f"SELECT v FROM ({inner}) WHERE v IS NOT NULL LIMIT 1",
-                       inner_params)
+    # no numeric value but events in the window: one of their values, for the message
+    first = _rows(source, f"SELECT v FROM ({inner}) ORDER BY v IS NULL LIMIT 1",
+                  inner_params) if not series.count else []
+    if first:
+        sample = first if first[0][0] is not None else []
         seen = f" (e.g. {sample[0][0]})" if sample else ""
         hint = ("; give a path into it, e.g. "
                 f"{spec.type_text}:{spec.argument}[0]" if sample and str(sample[0][0])[:1] in "[{"
@@ -653,11 +661,7 @@ def collect_timeline(source: Any, types: Iterable[str] | str | None = None, *,
         if split is None and ref.arity > 1 and spec.argument != 1:
             # the first argument names the object (seg(cup1, ..)): a line per object when
             # there are a few, never one line zigzagging through several
-            keys = _keys(source, ref, 1, lo, hi, f"--value {spec.text}") if len(
-                _rows(source, f"SELECT DISTINCT arg1 FROM {quote_identifier(ref.table)} "
-                              "WHERE t_end >= ? AND t_start <= ? LIMIT ?",
-                      (lo, hi, MAX_KEYS + 1))) <= MAX_KEYS else []
-            split = 1 if len(keys) > 1 else None
+            split = 1 if 1 < len(_distinct(source, ref, 1, lo, hi)) <= MAX_KEYS else None
         series.append(_collect_series(source, spec, ref, _type_matches(ref, complex_names),
                                       lo, hi, bins, exact_limit, split=split,
                                       colors=key_colors))

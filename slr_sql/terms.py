@@ -343,6 +343,7 @@ def is_ground(t: Any) -> bool:
     """True when the term has no unbound variable (finite on cyclic terms)."""
     stack = [t]
     seen = None  # compounds reached through a binding and already walked (cycles)
+    budget = NODES_BETWEEN_CLOCK_CHECKS
     while stack:
         x = stack.pop()
         via = False
@@ -352,7 +353,10 @@ def is_ground(t: Any) -> bool:
             x = x.ref
             via = True
         if type(x) is Struct:
-            if via:
+            budget -= 1
+            # past a few thousand nodes every compound is remembered: a term that shares
+            # subterms directly (one resolve() made) is walked once per distinct subterm
+            if via or budget < 0:
                 if seen is None:
                     seen = set()
                 elif id(x) in seen:
@@ -373,6 +377,7 @@ def term_vars(t: Any) -> list[Var]:
     seen: set[int] = set()
     out: list[Var] = []
     stack = [t]
+    budget = NODES_BETWEEN_CLOCK_CHECKS
     while stack:
         x = stack.pop()
         via = False
@@ -385,7 +390,8 @@ def term_vars(t: Any) -> list[Var]:
                 seen.add(id(x))
                 out.append(x)
         elif tx is Struct:
-            if via:
+            budget -= 1
+            if via or budget < 0:   # (as in is_ground: shared subterms walked once)
                 if id(x) in seen:
                     continue
                 seen.add(id(x))

@@ -318,15 +318,20 @@ def _copy_keeping_vars(t: Any) -> Any:
     done: list = []
     todo: list = [t]
     gray: set[int] = set()
+    # compounds reached through a binding, resolved: met again (a shared subterm), the
+    # resolved term is shared too, so that X1 = f(X0, X0), X2 = f(X1, X1)... stays linear
+    resolved: dict[int, Struct] = {}
     while todo:
         x = todo.pop()
         if type(x) is _Copied:
             k = len(x.struct.args)
             args = tuple(done[len(done) - k:])
             del done[len(done) - k:]
+            out = Struct(x.struct.name, args)
             if x.key is not None:
                 gray.discard(x.key)
-            done.append(Struct(x.struct.name, args))
+                resolved[x.key] = out
+            done.append(out)
             continue
         via = False
         while type(x) is Var and x.ref is not None:
@@ -336,6 +341,10 @@ def _copy_keeping_vars(t: Any) -> Any:
             key = None
             if via:
                 key = id(x)
+                known = resolved.get(key)
+                if known is not None:
+                    done.append(known)
+                    continue
                 if key in gray:
                     raise _CyclicTerm
                 gray.add(key)

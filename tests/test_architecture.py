@@ -17,10 +17,10 @@ PACKAGE = Path(__file__).resolve().parent.parent / "slr_sql"
 # Lower numbers are lower layers; a module may import only modules of a lower layer, or
 # modules of its own family (the same subpackage). Mirrors the table in docs/architecture.md.
 LAYERS = {
-    "errors": -1, "terms": 0,
+    "errors": -1, "terms": 0, "grammar": 0,  # grammar/: the generated parser, self-contained
     "api": 1,  # the KnowledgeBaseAPI protocol: typing only (errors for EventRejected)
     "unify": 1, "arith": 1, "encoding": 1, "program": 1, "parser": 1,
-    "robotlib": 1, "clocks": 1, "answers": 1, "grammar": 1,
+    "robotlib": 1, "clocks": 1, "answers": 1,
     "store": 2, "frames": 2,
     "builtins": 3,
     "analysis": 4, "engine": 4, "sqlcompile": 4,
@@ -139,7 +139,7 @@ _SQL_START = re.compile(r"^\s*(SELECT|INSERT|UPDATE|DELETE|CREATE|DROP|ALTER|PRA
                         r"COMMIT|ROLLBACK|SAVEPOINT|RELEASE|REPLACE|VACUUM|ANALYZE)\b", re.I)
 _RAW_CALLS = {"execute", "executemany", "executescript"}
 SQL_TEXT_ALLOWED = {"buffers.py": 12, "cep/runtime.py": 17, "demo.py": 1, "planner.py": 2,
-                    "plot.py": 11, "service/app.py": 1, "subscriptions.py": 21}
+                    "plot.py": 13, "service/app.py": 1, "subscriptions.py": 21}
 RAW_CALLS_ALLOWED = {"cep/runtime.py": 16, "subscriptions.py": 19}
 
 

@@ -5,7 +5,6 @@ import datetime
 import re
 
 import pytest
-
 from test_cli import slr
 
 PROGRAM = """\

@@ -161,7 +161,8 @@ def test_ingest_progress_is_reported_on_request_even_into_a_log(store, tmp_path)
             if not line.startswith("warning: seg/2: ")] == []
     r = slr("ingest", store, events, "--progress")
     assert r.returncode == 0, r.stderr
-    percents = [line.split(": ")[1].split("%")[0] for line in r.stderr.splitlines()]
+    percents = [line.split(": ")[1].split("%")[0] for line in r.stderr.splitlines()
+                if line.startswith("ingesting")]
     assert percents[-1] == "100" and len(percents) >= 10
 
 

@@ -468,6 +468,24 @@ def test_etalis_files_load_and_ignore_etalis_only_facts(kb):
     assert intervals(kb, "d(X)") == [(2, 4.0, 6.0)]
 
 
+def test_in_order_streams_decide_recent_and_chronological_at_once():
+    # SPEC §6: an in_order type is complete up to the end of its newest event, so a recent
+    # or chronological decision needs no clock move, only the events up to its terminator
+    kb = slr_sql.open(clock=ManualClock(0.0))
+    kb.load(":- consumption(chronological).\n:- in_order(a/1).\nc(X, Y) <- a(X) seq a(Y).")
+    for e in ["a(1)^1", "a(2)^2", "a(3)^3", "a(4)^4"]:
+        kb.add(e)
+    assert intervals(kb, "c(X, Y)") == [(1, 2, 1.0, 2.0), (3, 4, 3.0, 4.0)]
+    kb = slr_sql.open(clock=ManualClock(0.0))
+    kb.load(":- consumption(recent).\n:- in_order(a/1).\n:- in_order(b/1).\n"
+            "c(X) <- a(X) seq b(X).")
+    kb.add_many(["a(1)^1", "a(1)^2", "b(1)^3"])
+    # an a at 2.5 may still come and would be the more recent match: b^3 waits for a
+    assert intervals(kb) == [] and kb.event_rules()[0]["pending"] == 1
+    kb.add("a(1)^4")
+    assert intervals(kb) == [(1, 2.0, 3.0)] and kb.event_rules()[0]["pending"] == 0
+
+
 # ETALIS's parser (its src/parser.P) reads every operator also capitalized and in capitals;
 # its regression examples write them quoted: ce2(X,Y3) <- a(X,Y1) 'SEQ' a(X,Y2) 'SEQ' a(X,Y3).
 @pytest.mark.parametrize("lower", ["seq", "and", "par", "or", "equals", "meets", "during",
@@ -489,6 +507,18 @@ def test_an_etalis_regression_file_with_synonyms_detects_as_etalis(kb):
     """)
     kb.add_many(["a(1,10)^1", "a(1,20)^2", "a(1,30)^3"])
     assert intervals(kb, "ce2(X, Y)") == [(1, 30, 1.0, 3.0)]
+
+
+def test_etalis_string_containment_example_runs_with_name_2(kb):
+    # the shape of ETALIS's examples/string_01: a where goal over the classic atom builtins
+    kb.load("""
+        within_text(Part, Whole) :- append(_, Rest, Whole), append(Part, _, Rest).
+        contains(A, B) :- atom(A), atom(B), name(A, AA), name(B, BB), within_text(BB, AA).
+        stop <- a(X) seq b(Z) where (contains(X, Z)).
+        print_trigger(stop/0).
+    """)
+    kb.add_many(["a(aba)^1", "b(a)^2", "b(c)^3"])
+    assert kb.query("stop^[S, E]") == [{"S": 1.0, "E": 2.0}]
 
 
 def test_existing_programs_still_use_the_operator_names_as_atoms(kb):

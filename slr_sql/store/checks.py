@@ -137,8 +137,8 @@ def rejection_reason(exc: Exception) -> str:
 
 def _format_term(term: Any) -> str:
     try:
-        from ..terms import format_term  # the project's printer, when available
-        return format_term(term)
+        from ..terms import MESSAGE_TOKENS, format_term  # the project's printer
+        return format_term(term, limit=MESSAGE_TOKENS)   # (a huge term: its start)
     except Exception:
         return _simple_format(term)
 

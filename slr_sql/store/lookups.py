@@ -364,11 +364,11 @@ class EventReader:
             event_type = self.tables.lookup(name, arity)
             if event_type is None:
                 return []
-            positions, values = self._pushdown(event_type, bound)
+            positions, values = self._pushdown(event_type, bound)   # (in the stored form)
             if len(positions) != len(bound):
                 return None
-            rows = self.latest_rows(name, arity, positions, values, t, point)
-        dec = self.decode
+            rows = self._latest_rows(event_type, positions, values, t, point)
+        dec = decode
         return [(tuple([dec(v) for v in row[:arity]]), row[arity], row[arity + 1], row[arity + 2])
                 for row in rows]
 
@@ -393,23 +393,38 @@ class EventReader:
             event_type = self.tables.lookup(name, arity)
             if event_type is None:
                 return []
-            key = (event_type.table, "latest", positions, point)
-            sql = self.sql_cache.get(key)
-            if sql is None:
-                where = " AND ".join([f"arg{p + 1} = ?" for p in positions]
-                                     + (["t_start = t_end"] if point else []))
-                where = (where + " AND ") if where else ""
-                columns = ", ".join([f"arg{i + 1}" for i in range(arity)]
-                                    + ["t_start", "t_end", "seq"]
-                                    + ["(SELECT value FROM slr_meta WHERE key = ?)"] * 2)
-                # ORDER BY ... LIMIT 1 rather than max(): max() with the extra start = end
-                # filter is an aggregate over every row of the key, LIMIT 1 stops at the first
-                sql = (f"SELECT {columns} FROM {event_type.quoted} WHERE {where}t_end = "
-                       f"(SELECT t_end FROM {event_type.quoted} WHERE {where}t_end <= ? "
-                       f"ORDER BY t_end DESC LIMIT 1) ORDER BY t_start, seq")
-                self.sql_cache[key] = sql
-            return db.conn.execute(sql, (PROGRAM_VERSION, PROGRESS_VERSION, *values, *values,
-                                         float(t))).fetchall()
+            if self.to_column is not None:   # a server's columns (store/dialect.py)
+                values = [self.to_column(v) for v in values]
+            return self._latest_rows(event_type, positions, values, t, point)
+
+    def _latest_rows(self, event_type: EventType, positions: tuple[int, ...], values: list,
+                     t: float, point: bool) -> list[tuple]:
+        """:meth:`latest_rows` with ``values`` in the stored form (lock held); the rows'
+        arguments as :func:`~slr_sql.encoding.decode` reads them."""
+        db = self.db
+        arity = event_type.arity
+        key = (event_type.table, "latest", positions, point)
+        sql = self.sql_cache.get(key)
+        if sql is None:
+            where = " AND ".join([f"arg{p + 1} = ?" for p in positions]
+                                 + (["t_start = t_end"] if point else []))
+            where = (where + " AND ") if where else ""
+            columns = ", ".join([f"arg{i + 1}" for i in range(arity)]
+                                + ["t_start", "t_end", "seq"]
+                                + ["(SELECT value FROM slr_meta WHERE key = ?)"] * 2)
+            # ORDER BY ... LIMIT 1 rather than max(): max() with the extra start = end
+            # filter is an aggregate over every row of the key, LIMIT 1 stops at the first
+            sql = (f"SELECT {columns} FROM {event_type.quoted} WHERE {where}t_end = "
+                   f"(SELECT t_end FROM {event_type.quoted} WHERE {where}t_end <= ? "
+                   f"ORDER BY t_end DESC LIMIT 1) ORDER BY t_start, seq")
+            self.sql_cache[key] = sql
+        rows = db.conn.execute(sql, (PROGRAM_VERSION, PROGRESS_VERSION, *values, *values,
+                                     float(t))).fetchall()
+        from_column = db.dialect.from_column
+        if from_column is None:
+            return rows
+        return [tuple([from_column(v) for v in row[:arity]]) + tuple(row[arity:])
+                for row in rows]
 
     def count(self, name: str, arity: int) -> int:
         """Number of stored events of name/arity.

@@ -357,7 +357,7 @@ class PgDatabase:
         for key in keys:
             self.conn.execute("SELECT pg_advisory_xact_lock(?)", (key,))
 
-    def open_reader(self) -> "PgReadConnection":
+    def open_reader(self) -> PgReadConnection:
         """A read-only connection of its own (a reader that must not queue behind this
         connection's lock, held by a writer for a whole transaction)."""
         self.check_open()
