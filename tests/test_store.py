@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from slr_sql.encoding import decode, encode, encode_json
 from slr_sql.errors import EventRejected
-from slr_sql.store import EventStore, migration_scripts, split_sql_script
+from slr_sql.store import EventBatch, EventStore, migration_scripts, split_sql_script
 from slr_sql.terms import NIL, Atom, String, Struct, Var, make_list
 
 
@@ -519,3 +519,24 @@ def test_closed_store_refuses_work(tmp_path):
     pending.close()  # an iterator left open does not complain after close
     with pytest.raises(Exception, match="closed"):
         store.add_event("p", (1,), 1, 1)
+
+
+@pytest.mark.parametrize("robot", [None, "r1"])
+@pytest.mark.parametrize("path", ["uniform", "each"])
+def test_added_rows_carry_the_store_robot_and_the_batch_its_end_times(tmp_path, robot, path):
+    # an unnamed store leaves robot to the column's NULL (not bound per row), a named one
+    # binds its name; both on the columnar fast path and the event-by-event path, whose rows
+    # then differ in width (the batch's end times are read from them)
+    store = EventStore(tmp_path / "r.db", robot=robot)
+    events = [("seg", ("a", 1), 1.0, 2.0), ("seg", ("b", 2), 0.5, 7.0)]
+    if path == "each":  # a second type in one chunk: not uniform
+        events.append(("other", (3,), 4.0, 4.0))
+    batch = EventBatch(events)
+    assert store.add_events(batch) == []
+    table = store.declare_type("seg", 2)
+    rows = store.execute(f'SELECT arg1, t_end, robot FROM "{table}" ORDER BY seq')
+    assert rows == [(encode(Atom("a")), 2.0, robot), (encode(Atom("b")), 7.0, robot)]
+    assert batch.ends[("seg", 2)] == (2.0, 7.0)
+    if path == "each":
+        assert batch.ends[("other", 1)] == (4.0, 4.0)
+    store.close()

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from itertools import islice, repeat
-from operator import itemgetter, le as _le
+from operator import attrgetter, itemgetter, le as _le
 from typing import Any, Iterable, Iterator
 
 from ..encoding import Unencodable, encode, encode_column
@@ -73,11 +73,13 @@ def _widen(ends: dict, key: tuple, earliest: float, latest: float) -> None:
     ends[key] = (earliest, latest)
 
 
-_end_of_row = itemgetter(-3)  # a row is (*arguments, start, end, arrival, robot)
+# a row is (*arguments, start, end, arrival, robot), or (*arguments, start, end, arrival) for
+# a store that has no robot name (EventType.insert_unnamed_sql)
+_END_OF_ROW = {True: itemgetter(-3), False: itemgetter(-2)}
 
 
-def _widen_by_rows(ends: dict, event_type: EventType, rows: list) -> None:
-    row_ends = list(map(_end_of_row, rows))
+def _widen_by_rows(ends: dict, event_type: EventType, rows: list, with_robot: bool) -> None:
+    row_ends = list(map(_END_OF_ROW[with_robot], rows))
     _widen(ends, (event_type.name, event_type.arity), min(row_ends), max(row_ends))
 
 
@@ -182,9 +184,14 @@ class EventWriter:
         to_column = self.db.dialect.to_column
         if to_column is not None:  # a server's typed columns: see store/dialect.py
             columns = [list(map(to_column, column)) for column in columns]
-        self.db.conn.executemany(event_type.insert_sql,
-                                 zip(*columns, starts, ends_column, repeat(arrival),
-                                     repeat(self.robot)))
+        robot = self.robot
+        if robot is None:  # the column's NULL, not a parameter bound per row
+            self.db.conn.executemany(event_type.insert_unnamed_sql,
+                                     zip(*columns, starts, ends_column, repeat(arrival)))
+        else:
+            self.db.conn.executemany(event_type.insert_sql,
+                                     zip(*columns, starts, ends_column, repeat(arrival),
+                                         repeat(robot)))
         if ends is not None:
             _widen(ends, (name, arity), min(ends_column), latest)
         return True
@@ -203,6 +210,9 @@ class EventWriter:
         executemany = self.db.conn.executemany
         types = self.tables.types
         robot = self.robot
+        with_robot = robot is not None  # else the column's NULL, not bound per row
+        tail = (arrival, robot) if with_robot else (arrival,)
+        insert_sql = attrgetter("insert_sql" if with_robot else "insert_unnamed_sql")
         rows: list = []
         append = rows.append
         current_name: Any = None
@@ -222,16 +232,16 @@ class EventWriter:
                         and _NEG_INF < start <= end < _INF):
                     start, end = check_times(start, end)
                 if arity == 1:
-                    row = (enc(args[0]), start, end, arrival, robot)
+                    row = (enc(args[0]), start, end, *tail)
                 elif arity == 2:
-                    row = (enc(args[0]), enc(args[1]), start, end, arrival, robot)
+                    row = (enc(args[0]), enc(args[1]), start, end, *tail)
                 else:
-                    row = (*map(enc, args), start, end, arrival, robot)
+                    row = (*map(enc, args), start, end, *tail)
                 if arity != current_arity or name != current_name:
                     if rows:
-                        executemany(current_type.insert_sql, rows)
+                        executemany(insert_sql(current_type), rows)
                         if ends is not None:
-                            _widen_by_rows(ends, current_type, rows)
+                            _widen_by_rows(ends, current_type, rows, with_robot)
                         rows = []
                         append = rows.append
                     current_type = (isinstance(name, str) and types.get((name, arity))
@@ -245,9 +255,9 @@ class EventWriter:
                     raise error from None
                 errors.append(error)
         if rows:
-            executemany(current_type.insert_sql, rows)
+            executemany(insert_sql(current_type), rows)
             if ends is not None:
-                _widen_by_rows(ends, current_type, rows)
+                _widen_by_rows(ends, current_type, rows, with_robot)
 
     def _type_for_new_event(self, name: Any, arity: int) -> EventType:
         if not isinstance(name, str):

@@ -31,7 +31,8 @@ __all__ = ["EventType", "EventTables"]
 class EventType:
     """What the store knows about one event type (cached per name/arity)."""
 
-    __slots__ = ("name", "arity", "table", "declared", "insert_sql", "quoted", "columns",
+    __slots__ = ("name", "arity", "table", "declared", "insert_sql", "insert_unnamed_sql",
+                 "quoted", "columns",
                  "index_end", "index_start", "index_arg1_end", "index_arg1_start")
 
     def __init__(self, name: str, arity: int, table: str, declared: bool):
@@ -45,6 +46,12 @@ class EventType:
         insert_columns = arg_columns + ["t_start", "t_end", "arrival", "robot"]
         self.insert_sql = (f"INSERT INTO {self.quoted} ({', '.join(insert_columns)}) "
                            f"VALUES ({', '.join('?' * len(insert_columns))})")
+        # the rows of a store that has no robot name: robot is left to the column's NULL
+        # instead of a NULL bound per row (a bulk add of an unnamed store spends ~10% of its
+        # time in executemany binding that one extra parameter)
+        unnamed_columns = insert_columns[:-1]
+        self.insert_unnamed_sql = (f"INSERT INTO {self.quoted} ({', '.join(unnamed_columns)}) "
+                                   f"VALUES ({', '.join('?' * len(unnamed_columns))})")
         self.index_end = quote_identifier(f"slr_ix__{table}__end")
         self.index_start = quote_identifier(f"slr_ix__{table}__start")
         self.index_arg1_end = quote_identifier(f"slr_ix__{table}__a1_end")
