@@ -1,4 +1,4 @@
-"""Buffers benchmark (issue 4).
+"""Buffers benchmark.
 
 1. Ingest rate with a tBuffer and a cBuffer active vs with no buffer, same run, same events:
    ``tBuffer(tf(_,_,_), 10)`` and ``cBuffer(seg(O,_), 5)`` over a 1 kHz stream of tf/3 (a pose

@@ -1,4 +1,4 @@
-"""Timeline plot figures (issue 13), recorded in benchmarks/README.md under "Plots".
+"""Timeline plot figures, recorded in benchmarks/README.md under "Plots".
 
 A file store with N events (default 1,000,000) of three types between t=0 and t=1000 s:
 60 % `pose_x(X)^T` points carrying a number (drawn as a row and as a --value line), 30 %

@@ -1,4 +1,4 @@
-"""SQL compiler figures (issue 3), recorded in benchmarks/README.md.
+"""SQL compiler figures, recorded in benchmarks/README.md.
 
 1. The paper's tea/coffee findall (obj ⨝ usedFor ⨝ prev(seg) ⨝ position, position through
    the tf interpolation/extrapolation rules) over a store of 100,000 events: the compiled

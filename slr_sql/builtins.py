@@ -1422,7 +1422,7 @@ def _next(m, event, lo_t, hi_t):
     name, n, args, s, e = _event_pattern(event, "next")
     lo, hi = _time_value(lo_t), _time_value(hi_t)
     if m.on_next is not None:
-        m.on_next(name, n, lo, hi, args, s, e)  # sync (issue 5): the full pattern, for in_order
+        m.on_next(name, n, lo, hi, args, s, e)  # sync: the full pattern, for in_order
     store = m.engine.events
     if store is None:
         return

@@ -1438,7 +1438,7 @@ def shell(db: str) -> None:
                 click.echo("\n% interrupted")
 
 
-from .ros.cli import ros as _ros  # noqa: E402 - issue 13: `slr ros` (its extra is imported on use)
+from .ros.cli import ros as _ros  # noqa: E402 - `slr ros` (its extra is imported on use)
 main.add_command(_ros)
 from .viz.cli import export_command as _export, foxglove_command as _foxglove  # noqa: E402
 main.add_command(_foxglove)
@@ -1449,7 +1449,7 @@ main.add_command(_fleet_group())
 
 
 # ---------------------------------------------------------------------------------------------
-# plot (issue 13: timelines; the drawing is in slr_sql/plot.py)
+# plot (timelines; the drawing is in slr_sql/plot.py)
 # ---------------------------------------------------------------------------------------------
 
 @main.command()
@@ -1525,7 +1525,7 @@ def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None
 
 
 # ---------------------------------------------------------------------------------------------
-# subscribe (issue 12: subscriptions)
+# subscribe (subscriptions)
 # ---------------------------------------------------------------------------------------------
 
 @main.command()
@@ -1582,7 +1582,7 @@ def subscribe(db: str, pattern: str, where: str | None, since: str, until: float
 
 
 # ---------------------------------------------------------------------------------------------
-# stats (issue 4: event-history management)
+# stats (event-history management)
 # ---------------------------------------------------------------------------------------------
 
 @main.command()

@@ -385,7 +385,7 @@ def _synchronized_cups_query(kb: Any, clock: Any, console: Any) -> DemoResult:
 
     def answered() -> str:
         # Answers are produced by the store's scheduler: let it finish reacting, then say
-        # whether the query is answered or what it still waits for (issue 5).
+        # whether the query is answered or what it still waits for.
         sync = getattr(kb, "_sync", None)
         if sync is not None:
             sync.drain(timeout=5.0)

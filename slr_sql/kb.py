@@ -416,15 +416,15 @@ class KnowledgeBase:
         self.progress_listeners: list[Callable[[], None]] = []
         self._progress_version = self.store.versions()[1]
         self._reload_program()
-        from . import buffers as _buffers  # event-history management (issue 4)
+        from . import buffers as _buffers  # event-history management
         self._buffers = _buffers.attach(self)
-        from . import sync as _sync  # synchronized queries (issue 5): slr_sql/sync.py
+        from . import sync as _sync  # synchronized queries: slr_sql/sync.py
         self._sync = _sync.attach(self)
-        from . import planner as _planner  # SQL compiler (issue 3): slr_sql/planner.py
+        from . import planner as _planner  # SQL compiler: slr_sql/planner.py
         _planner.attach(self)
-        from . import cep as _cep  # event rules (issue 11): slr_sql/cep/
+        from . import cep as _cep  # event rules: slr_sql/cep/
         self._cep = _cep.attach(self)
-        from . import subscriptions as _subscriptions  # subscriptions (issue 12)
+        from . import subscriptions as _subscriptions  # subscriptions
         self._subscriptions = _subscriptions.attach(self)
 
     @property
@@ -441,11 +441,11 @@ class KnowledgeBase:
     def close(self) -> None:
         """Close the store. It never waits for another process (the checkpoint of the WAL
         on close is ``PASSIVE``: what a reader still needs stays in the WAL)."""
-        if getattr(self, "_subscriptions", None) is not None:  # issue 12: positions, threads
+        if getattr(self, "_subscriptions", None) is not None:  # positions, threads
             self._subscriptions.close()
-        if getattr(self, "_cep", None) is not None:  # issue 11
+        if getattr(self, "_cep", None) is not None:
             self._cep.close()
-        if getattr(self, "_sync", None) is not None:  # issue 5: fail waiting queries, stop threads
+        if getattr(self, "_sync", None) is not None:  # fail waiting queries, stop threads
             self._sync.close()
         self.store.close()
 
@@ -524,7 +524,7 @@ class KnowledgeBase:
 
     # -- program ------------------------------------------------------------------------
     def _add_clauses(self, clauses: list[Clause], program: Program, decls: Declarations) -> None:
-        from . import cep as _cep  # issue 11: event rules Head <- Pattern
+        from . import cep as _cep  # event rules Head <- Pattern
         for clause in clauses:
             if clause.head is None:
                 self._directive(clause, program, decls)
@@ -539,7 +539,7 @@ class KnowledgeBase:
             if type(head) is Struct and head.name in ("tBuffer", "cBuffer") and len(head.args) == 2:
                 decls.buffers.append(self._buffer_decl(head, clause))
             program.add_clause(clause)
-        if decls.event_rules:  # issue 11: policies, dependency order, no cycles
+        if decls.event_rules:  # policies, dependency order, no cycles
             decls.event_rules = _cep.prepare(decls.event_rules, decls.consumption, program)
 
     def _buffer_decl(self, head: Struct, clause: Clause) -> BufferDecl:
@@ -592,7 +592,7 @@ class KnowledgeBase:
                 pass  # accepted for compatibility with Prolog sources; nothing to do here
             elif name in ("tBuffer", "cBuffer") and len(args) == 2:
                 decls.buffers.append(self._buffer_decl(goal, clause))
-            elif name == "consumption" and len(args) in (1, 2):  # issue 11
+            elif name == "consumption" and len(args) in (1, 2):
                 from .cep import consumption_directive
                 target, policy = consumption_directive(goal)
                 decls.consumption[target] = policy
@@ -894,19 +894,18 @@ class KnowledgeBase:
 
     def _add(self, events: list, atomic: bool) -> list[EventRejected]:
         self._refresh()
-        # -- issue 5: fullyUpdated(p/N)^t / fullyUpdated(p)^t are completeness marks, not events
+        # -- fullyUpdated(p/N)^t / fullyUpdated(p)^t are completeness marks, not events
         marks: list = []
         if getattr(self, "_sync", None) is not None:
             events, marks, mark_errors = self._sync.take_marks(events, atomic)
         else:
             mark_errors = []
-        # -- end issue 5
         derived: list = []
         if type(events) is not EventBatch:  # (the store notes each type's end times in it)
             events = EventBatch(events)
         cep = getattr(self, "_cep", None)
         if cep is not None and cep.active and events:
-            # issue 11: event rules detect in the transaction that stores the events
+            # event rules detect in the transaction that stores the events
             with self.store.transaction():
                 rounds = cep.rounds(events)
                 if len(rounds) == 1:
@@ -922,11 +921,11 @@ class KnowledgeBase:
         if self.add_listeners:
             rejected = {id(e.event) for e in errors if hasattr(e, "event")}
             stored = [ev for ev in events if id(ev) not in rejected] if rejected else events
-            if derived:   # issue 11: the complex events of this add, with its events
+            if derived:   # the complex events of this add, with its events
                 stored = _with_derived(stored, derived)
             for listener in self.add_listeners:
                 listener(stored)
-        if marks:  # issue 5: after the events of the same batch are stored
+        if marks:  # after the events of the same batch are stored
             self._sync.apply_marks(marks)
         return mark_errors + errors if mark_errors else errors
 
@@ -1039,7 +1038,7 @@ class KnowledgeBase:
             _check_time_option("timeout", timeout, minimum=0.0)
         if robot is not None:
             check_robot_name(robot)
-        if wait:  # issue 5: synchronized (SLRTimeout names the incomplete types)
+        if wait:  # synchronized (SLRTimeout names the incomplete types)
             if robot is not None:
                 raise SLRError("a synchronized query (wait=True) cannot be restricted to one "
                                "robot yet: ask origin(R, Goal) inside the goal instead")
@@ -1073,7 +1072,7 @@ class KnowledgeBase:
             answers = plan.lookup.run(self.store, frame, plan.names)
             if answers is not None:
                 return answers
-        if max_steps is None and self.sql_enabled:  # issue 3: the compiled SQL plan, if any
+        if max_steps is None and self.sql_enabled:  # the compiled SQL plan, if any
             from .planner import try_sql
             deadline = time.monotonic() + timeout if timeout is not None else None
             answers = try_sql(self, plan, args, at, limit, deadline, robot)
@@ -1178,11 +1177,11 @@ class KnowledgeBase:
         'goal: p(X)'
         """
         self._refresh()
-        rules = self._cep.explain(goal)  # issue 11: (is a rule, lines) or None
+        rules = self._cep.explain(goal)  # (is a rule, lines) or None
         if rules is not None and rules[0]:
             return "\n".join(rules[1])
         plan = self._plan(goal, ())
-        from .planner import explain as _explain  # issue 3: SQL or interpreter, and why
+        from .planner import explain as _explain  # SQL or interpreter, and why
         lines = [f"goal: {goal}"] + _explain(self, plan) + (rules[1] if rules else [])
         return "\n".join(lines)
 
@@ -1199,7 +1198,7 @@ class KnowledgeBase:
         """
         return self._cep.infos()
 
-    # -- synchronized queries (issue 5; the work is in slr_sql/sync.py) -----------------
+    # -- synchronized queries (the work is in slr_sql/sync.py) -----------------
     def submit(self, goal: str, at: float | None = None, id: str | None = None,
                args: dict | None = None, timeout: float | None = None,
                callback: Callable[[Any], Any] | None = None) -> PendingQueryAPI:
@@ -1258,7 +1257,7 @@ class KnowledgeBase:
         event types and times it waits for."""
         return self._sync.pending()
 
-    # -- history buffers (issue 4; the work is in slr_sql/buffers.py) --------------------
+    # -- history buffers (the work is in slr_sql/buffers.py) --------------------
     def add_buffer(self, pattern: str, *, keep_last: int | None = None,
                    keep_seconds: float | None = None,
                    keep_between: tuple[float, float] | None = None) -> int:
@@ -1330,7 +1329,7 @@ class KnowledgeBase:
         from .plot import timeline  # deferred: matplotlib is the optional extra slr_sql[plot]
         return timeline(self, types, **options)
 
-    # -- subscriptions (issue 12; the work is in slr_sql/subscriptions.py) ----------------
+    # -- subscriptions (the work is in slr_sql/subscriptions.py) ----------------
     def subscribe(self, pattern: str, where: str | None = None, since: Any = "now",
                   until: float | None = None, id: str | None = None,
                   callback: Callable[[dict], Any] | None = None, max_queue: int = 10_000,

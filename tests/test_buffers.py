@@ -1,4 +1,4 @@
-"""Event-history management (issue 4): tBuffer / cBuffer declarations, runtime history
+"""Event-history management: tBuffer / cBuffer declarations, runtime history
 policies, conflict detection, persistence, counters, and a model-based property test.
 
 No sleeps: every test drives time with a ManualClock.

@@ -126,7 +126,7 @@ class EventWriter:
         with self.db.transaction():
             arrival = float(self.db.clock.now())
             if self.db.dialect.to_column is None:
-                # buffers (issue 4): "now" for the buffer triggers (SQLite's only: on a
+                # buffers: "now" for the buffer triggers (SQLite's only: on a
                 # server every writer would wait for the one row's lock)
                 self.record_now(arrival)
             for base, chunk in _chunks(events):

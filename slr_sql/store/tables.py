@@ -75,7 +75,7 @@ class EventTables:
         self.db = db
         self.types: dict[tuple[str, int], EventType] = {}
         self.declared_arities: dict[str, set[int]] = {}
-        # buffers (issue 4): called as hook(name, arity, table) inside the transaction that
+        # buffers: called as hook(name, arity, table) inside the transaction that
         # creates a new event type's table (slr_sql.buffers installs its triggers there)
         self.table_created_hooks: list[Callable[[str, int, str], Any]] = []
         db.rollback_listeners.append(self.reload)  # types created inside were rolled back too
@@ -173,7 +173,7 @@ class EventTables:
         self.types[(name, arity)] = event_type
         if declared:
             self.declared_arities.setdefault(name, set()).add(arity)
-        for hook in self.table_created_hooks:  # buffers (issue 4)
+        for hook in self.table_created_hooks:  # buffers
             hook(name, arity, table)
         return event_type
 
