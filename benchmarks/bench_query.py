@@ -22,7 +22,6 @@ import os
 import subprocess
 import random
 import sqlite3
-import statistics
 import sys
 import tempfile
 import time
@@ -72,7 +71,7 @@ def measure(path: Path, n: int, reps: int = 3000) -> dict:
     raw = []
     for obj, t in probes:
         t0 = time.perf_counter()
-        rows = con.execute(sql, (obj, obj, t)).fetchall()
+        con.execute(sql, (obj, obj, t)).fetchall()
         raw.append(time.perf_counter() - t0)
     raw_check = con.execute(sql, (probes[0][0], probes[0][0], probes[0][1])).fetchall()
     con.close()

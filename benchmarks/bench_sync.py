@@ -136,7 +136,7 @@ def scenario_clock(n: int, path: str, spread: float = 2.0, delay: float = 0.02) 
         offset = time.perf_counter() - time.time()
         for i in range(n):
             z = start + spread * i / n
-            kb.submit(f"findall(X, w(X)^_, L)", at=z, id=f"c{i}", callback=lat.callback)
+            kb.submit("findall(X, w(X)^_, L)", at=z, id=f"c{i}", callback=lat.callback)
             deadline_wall[f"c{i}"] = z + delay + offset
         lat.release = deadline_wall
         lat.all_done.wait(timeout=spread + 30)

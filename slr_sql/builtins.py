@@ -10,19 +10,18 @@ from __future__ import annotations
 
 import functools
 import gc
-import io
 import math
 import sys
 from typing import Any, Callable, Iterator
 
 from .arith import (evaluate, evaluation_error, instantiation_error, iso_error,
                     resource_error, type_error)
-from .unify import bound_args, copy_term, resolve, unify, undo, unify_event_row, unify_tuple
+from .unify import bound_args, copy_term, unify, undo, unify_event_row
 from .errors import SLRError, SLREvaluationError, SLRSyntaxError
 from .program import Program, split_event_atom, event_key
 from .terms import (CONS, NODES_BETWEEN_CLOCK_CHECKS, Atom, NIL, String, Struct, Var, check_deadline,
                     deref, from_python, int_text,
-                    is_callable, is_ground, list_items, make_list, term_vars, to_python)
+                    is_ground, list_items, make_list, term_vars, to_python)
 
 DET: dict[tuple[str, int], Callable[["Machine", tuple], bool]] = {}
 NONDET: dict[tuple[str, int], Callable[["Machine", tuple], Iterator[None]]] = {}

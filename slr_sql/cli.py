@@ -26,7 +26,7 @@ import slr_sql
 from .demo import answer_text, value_text
 from .encoding import decode
 from .parser import parse_event_fast
-from .terms import NIL, Atom, Struct, list_items, make_list
+from .terms import Atom, Struct, list_items
 
 __all__ = ["main", "parse_event_line", "ingest_file", "IngestReport", "strip_full_stop"]
 

@@ -14,17 +14,15 @@ so they need no nested interpreter either.
 """
 from __future__ import annotations
 
-import math
 import time
 from typing import Any, Callable, Iterator
 
-from .arith import evaluate, instantiation_error, iso_error, resource_error, type_error
+from .arith import instantiation_error, iso_error, resource_error, type_error
 from .errors import SLREvaluationError, SLRTimeout
 from .program import MAX_RECURSIVE_NEST, Predicate, Program, Slot, Template, build, \
     event_key, split_event_atom
-from .terms import (Atom, NIL, String, Struct, Var, deref, format_atom, format_term, list_items,
-                    make_list, term_vars)
-from .unify import bound_args, copy_term, resolve, undo, unify, unify_event_row, unify_tuple
+from .terms import (Atom, Struct, Var, deref, format_atom, format_term, term_vars)
+from .unify import bound_args, copy_term, undo, unify, unify_event_row
 
 __all__ = ["Engine", "Machine", "unify", "copy_term", "PrologThrow"]
 

@@ -26,14 +26,13 @@ from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .encoding import Unencodable, decode_answer, encode
 from .engine import Engine
-from .errors import EventRejected, SLRError, SLRSyntaxError, SLRUnavailable
+from .errors import EventRejected, SLRError, SLRUnavailable
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
 from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore, \
     store_error, check_robot_name
 from .store.checks import event_arguments, shorten, shown, text_problem
-from .terms import Atom, Clause, String, Struct, Var, deref, from_python, is_ground, \
-    list_items, to_python
+from .terms import Atom, Clause, String, Struct, Var, deref, from_python, list_items, to_python
 from .terms import format_atom, format_term
 
 __all__ = ["KnowledgeBase", "open", "Declarations", "ProgramInfo", "parse_duration"]

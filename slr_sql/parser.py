@@ -29,7 +29,7 @@ from typing import Any
 # `lark` an environment has -- lark-parser 0.12 (which ROS 2's rosidl parser installs into
 # the same `lark/` directory) or none.
 from .grammar.slr_parser import (Lark, Lark_StandAlone, Token, Transformer, UnexpectedCharacters,
-                                 UnexpectedEOF, UnexpectedInput, UnexpectedToken)
+                                 UnexpectedInput, UnexpectedToken)
 
 from .errors import SLRSyntaxError
 from .terms import INFIX_OPS, PREFIX_OPS

@@ -35,7 +35,7 @@ from .program import Slot, Template, build
 from .sqlcompile import SITES, Col, ColRef, Compiler, Fallback, Part, resolve
 from .errors import SLRBusy
 from .store import DatabaseError
-from .terms import Atom, NIL, Struct, Var, deref, from_python, int_text, list_items, make_list, \
+from .terms import Atom, Struct, Var, deref, from_python, int_text, list_items, make_list, \
     to_python
 
 __all__ = ["SqlPlan", "plan_for", "try_sql", "explain", "attach", "refresh", "Fallback",

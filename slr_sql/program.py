@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from .terms import Atom, Clause, Span, Struct, Var, deref, TRUE
+from .terms import Atom, Clause, Struct, Var, deref
 
 __all__ = ["Slot", "Template", "CompiledClause", "Predicate", "Program", "compile_clause",
            "split_event_atom", "event_key"]

@@ -35,8 +35,6 @@ import time
 import warnings
 from concurrent.futures import Future, InvalidStateError, ThreadPoolExecutor
 from operator import itemgetter
-
-_first, _second, _fourth = itemgetter(0), itemgetter(1), itemgetter(3)
 from typing import Any, Callable, Iterable
 
 from .analysis import GoalSet, goal_set
@@ -45,6 +43,8 @@ from .clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning, ManualClock,
 from .errors import EventRejected, SLRError, SLRTimeout
 from .store.checks import BadEvent, check_times
 from .terms import Atom, Struct, Var, deref
+
+_first, _second, _fourth = itemgetter(0), itemgetter(1), itemgetter(3)
 
 __all__ = ["Completeness", "PendingQuery", "Wait", "Synchronizer", "attach", "parse_type"]
 
@@ -895,9 +895,7 @@ class Synchronizer:
             w.released_by = why
 
     def _attempt(self, q: PendingQuery) -> None:
-
         kb = self.kb
-        tracker = self.tracker
         now = self.clock.now()
         released_at = q._released_at
         if released_at is not None:   # the clock when the scheduler released it

@@ -967,10 +967,7 @@ class _Writer:
             self.put(_format_float(t))
         elif tt is bool:
             self.put("true" if t else "false")
-        elif tt is list:
-            # a list inside a value returned to Python (to_python): Prolog's list text
-            self.term(make_list(t), prec, operand)
-        else:
+        else:   # lists are written by the caller's loop, never here
             self.put(str(t))
 
     def _struct(self, t: Struct, prec: int, todo: list) -> None:

@@ -74,7 +74,8 @@ def _alternatives(tree):
         return _alternatives(tree[1]) + _alternatives(tree[2])
     if tree[0] == "cnot":
         return [("cnot", part, tree[2]) for part in _alternatives(tree[1])]
-    return [(tree[0], l, r) for l in _alternatives(tree[1]) for r in _alternatives(tree[2])]
+    return [(tree[0], left, right) for left in _alternatives(tree[1])
+            for right in _alternatives(tree[2])]
 
 
 def _bind(pattern_args, event_args, bindings):

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 import slr_sql
-from slr_sql import SLRError, SLRSyntaxError
+from slr_sql import SLRError
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -5,7 +5,6 @@ that vanish or stop reading, and many subscribers at once."""
 from __future__ import annotations
 
 import itertools
-import json
 import subprocess
 import sys
 import threading

@@ -146,7 +146,7 @@ def test_fallback_reason_and_answer(goal, reason, expected):
     kb = fallback_kb()
     how = engine(kb, goal)
     assert how.startswith("interpreter") and reason in how, how
-    assert f"reason: " in kb.explain(goal)
+    assert "reason: " in kb.explain(goal)
     sql, interp = both(kb, goal)
     assert sql == interp
     assert expected is None or sql == expected

@@ -21,7 +21,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import slr_sql
-from slr_sql import ManualClock, SLRError, SLREvaluationError, SLRSyntaxError, SLRTimeout
+from slr_sql import ManualClock, SLRError, SLREvaluationError, SLRSyntaxError
 from slr_sql.encoding import decode
 from slr_sql import subscriptions
 from slr_sql.subscriptions import SubscriptionOverflow, answer_json, journal_table

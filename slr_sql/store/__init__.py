@@ -55,7 +55,7 @@ from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, Database
 from .events import Event, EventBatch, EventWriter
 from .fleet import Fleet, check_robot_name
 from .lookups import EventReader, Row
-from .postgres import PgDatabase, PgStatementError, is_postgres_url
+from .postgres import PgDatabase, is_postgres_url
 from .schema import migration_scripts
 from .space import ServerSpace, Space
 from .sqltext import quote_identifier, split_sql_script, sql_literal, store_error

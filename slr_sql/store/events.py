@@ -22,7 +22,7 @@ from .tables import EventTables, EventType
 
 __all__ = ["Event", "EventBatch", "EventWriter"]
 
-Event = tuple  # (name: str, args: tuple[term, ...], start: float, end: float)
+Event = tuple[Any, ...]  # (name: str, args: tuple[term, ...], start: float, end: float)
 
 
 class EventBatch(list):

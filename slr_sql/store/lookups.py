@@ -18,7 +18,7 @@ from .tables import EventTables, EventType
 
 __all__ = ["Row", "EventReader"]
 
-Row = tuple    # (args: tuple[term, ...], start: float, end: float, seq: int)
+Row = tuple[Any, ...]    # (args: tuple[term, ...], start: float, end: float, seq: int)
 
 # A stream whose statement was suspended (another thread's transaction began, see
 # Database.suspend_streams) goes on with the rows after the last one it read, in its order:
