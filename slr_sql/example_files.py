@@ -27,7 +27,8 @@ from typing import Any
 from .errors import SLRError
 from .terms import NIL, Atom, Struct, Var, list_items
 
-__all__ = ["Case", "CaseResult", "Example", "check_case", "event_like_facts", "parse_example"]
+__all__ = ["Case", "CaseResult", "Example", "check_case", "event_like_facts", "parse_example",
+           "expected_term", "answer_term", "same_term"]
 
 _KEY = re.compile(r"^%%\s*(query|at|expect|tolerance):\s?(.*)$")
 _CONTINUATION = re.compile(r"^%%\s+(.*)$")
@@ -139,9 +140,13 @@ def event_like_facts(text: str, filename: str = "<string>") -> list[tuple[int, s
 
 # -- comparing answers with an expectation -------------------------------------------------
 
-def _expected(data: Any) -> Any:
+def expected_term(data: Any) -> Any:
     """Expected JSON -> a comparable tree: ('atom', s), ('string', s), numbers,
-    ('list', [..]), ('struct', name, [..]), ('var',)."""
+    ('list', [..]), ('struct', name, [..]), ('var',).
+
+    >>> expected_term({"-": ["a", 1.0]})
+    ('struct', '-', [('atom', 'a'), 1.0])
+    """
     if isinstance(data, str):
         return ("list", []) if data == "[]" else ("atom", data)
     if isinstance(data, bool) or data is None:
@@ -149,7 +154,7 @@ def _expected(data: Any) -> Any:
     if isinstance(data, (int, float)):
         return data
     if isinstance(data, list):
-        return ("list", [_expected(x) for x in data])
+        return ("list", [expected_term(x) for x in data])
     if isinstance(data, dict) and len(data) == 1:
         ((key, val),) = data.items()
         if key == "$var":
@@ -157,11 +162,16 @@ def _expected(data: Any) -> Any:
         if key == "$string" and isinstance(val, str):
             return ("string", val)
         if isinstance(val, list):
-            return ("struct", key, [_expected(x) for x in val])
+            return ("struct", key, [expected_term(x) for x in val])
     raise SLRError(f"expect: {json.dumps(data)} is no term in the store's JSON encoding")
 
 
-def _answer(value: Any) -> Any:
+def answer_term(value: Any) -> Any:
+    """An answer value of ``kb.query`` -> the same tree as :func:`expected_term`.
+
+    >>> answer_term([Atom("a"), 1])
+    ('list', [('atom', 'a'), 1])
+    """
     if isinstance(value, Atom):
         return ("atom", str(value))
     if isinstance(value, str):
@@ -169,15 +179,20 @@ def _answer(value: Any) -> Any:
     if isinstance(value, (int, float)):
         return value
     if isinstance(value, list):
-        return ("list", [_answer(x) for x in value])
+        return ("list", [answer_term(x) for x in value])
     if isinstance(value, Struct):
-        return ("struct", str(value.name), [_answer(x) for x in value.args])
+        return ("struct", str(value.name), [answer_term(x) for x in value.args])
     if isinstance(value, Var):
         return ("var",)
     return ("other", repr(value))
 
 
-def _same(expected: Any, got: Any, tolerance: float) -> bool:
+def same_term(expected: Any, got: Any, tolerance: float) -> bool:
+    """Whether two trees agree, numbers within ``tolerance`` (integers exactly).
+
+    >>> same_term(("list", [1.0]), ("list", [1.0000001]), 1e-6)
+    True
+    """
     if isinstance(expected, (int, float)):
         if isinstance(got, bool) or not isinstance(got, (int, float)):
             return False
@@ -192,9 +207,9 @@ def _same(expected: Any, got: Any, tolerance: float) -> bool:
         return bool(expected[1] == got[1])
     if expected[0] == "list":
         return len(expected[1]) == len(got[1]) and all(
-            _same(e, g, tolerance) for e, g in zip(expected[1], got[1]))
+            same_term(e, g, tolerance) for e, g in zip(expected[1], got[1]))
     return (expected[1] == got[1] and len(expected[2]) == len(got[2])
-            and all(_same(e, g, tolerance) for e, g in zip(expected[2], got[2])))
+            and all(same_term(e, g, tolerance) for e, g in zip(expected[2], got[2])))
 
 
 @dataclass
@@ -223,10 +238,10 @@ def check_case(kb: Any, case: Case) -> CaseResult:
         raise SLRError(f"line {case.line}: expect is not JSON ({exc.msg})") from None
     if not isinstance(data, list):
         raise SLRError(f"line {case.line}: expect is a JSON list of answers")
-    expected = [{k: _expected(v) for k, v in a.items()} for a in data]
-    got = [{k: _answer(v) for k, v in a.items() if not (isinstance(v, Var) and k not in e)}
+    expected = [{k: expected_term(v) for k, v in a.items()} for a in data]
+    got = [{k: answer_term(v) for k, v in a.items() if not (isinstance(v, Var) and k not in e)}
            for a, e in zip(answers, expected + [{}] * len(answers))]
     ok = len(expected) == len(got) and all(
-        e.keys() == g.keys() and all(_same(e[k], g[k], case.tolerance) for k in e)
+        e.keys() == g.keys() and all(same_term(e[k], g[k], case.tolerance) for k in e)
         for e, g in zip(expected, got))
     return CaseResult(case, answers, ok)

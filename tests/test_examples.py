@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -10,6 +9,7 @@ from pathlib import Path
 import pytest
 
 import slr_sql
+from slr_sql.example_files import answer_term, expected_term, same_term
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 KEY = re.compile(r"^%%\s*(query|at|expect|tolerance):\s?(.*)$")
@@ -76,65 +76,7 @@ def parse_example(path: Path) -> Example:
     return example
 
 
-def expected_value(data):
-    """JSON of examples/README.md -> a comparable tree: ('atom', s), ('string', s), numbers,
-    ('list', [...]), ('struct', name, [...])."""
-    if isinstance(data, str):
-        return ("list", []) if data == "[]" else ("atom", data)
-    if isinstance(data, bool) or data is None:
-        raise ValueError(f"unsupported expected value {data!r}")
-    if isinstance(data, (int, float)):
-        return data
-    if isinstance(data, list):
-        return ("list", [expected_value(x) for x in data])
-    if isinstance(data, dict) and len(data) == 1:
-        ((key, val),) = data.items()
-        if key == "$var":
-            return ("var",)
-        if key == "$string" and isinstance(val, str):
-            return ("string", val)
-        if isinstance(val, list):
-            return ("struct", key, [expected_value(x) for x in val])
-    raise ValueError(f"unsupported expected value {data!r}")
-
-
-def answer_value(value):
-    """An answer value of kb.query -> the same tree as expected_value."""
-    if isinstance(value, slr_sql.Atom):
-        return ("atom", str(value))  # the empty list comes back as [], never as an atom
-    if isinstance(value, str):
-        return ("string", value)
-    if isinstance(value, (int, float)):
-        return value
-    if isinstance(value, list):
-        return ("list", [answer_value(x) for x in value])
-    if isinstance(value, slr_sql.Struct):
-        return ("struct", str(value.name), [answer_value(x) for x in value.args])
-    if isinstance(value, slr_sql.Var):
-        return ("var",)
-    return ("other", repr(value))
-
-
-def same(expected, got, tolerance: float) -> bool:
-    if isinstance(expected, (int, float)) and not isinstance(expected, bool):
-        if not isinstance(got, (int, float)):
-            return False
-        if isinstance(expected, int) and isinstance(got, int):
-            return expected == got
-        return math.isclose(expected, got, rel_tol=0.0, abs_tol=tolerance)
-    if not isinstance(got, tuple) or not isinstance(expected, tuple) or expected[0] != got[0]:
-        return False
-    if expected[0] == "var":
-        return True
-    if expected[0] in ("atom", "string"):
-        return expected[1] == got[1]
-    if expected[0] == "list":
-        return len(expected[1]) == len(got[1]) and all(
-            same(e, g, tolerance) for e, g in zip(expected[1], got[1]))
-    if expected[0] == "struct":
-        return expected[1] == got[1] and len(expected[2]) == len(got[2]) and all(
-            same(e, g, tolerance) for e, g in zip(expected[2], got[2]))
-    return False
+expected_value, answer_value, same = expected_term, answer_term, same_term
 
 
 def collect_cases():
