@@ -737,6 +737,8 @@ class BufferManager:
             store.reclaim_space()
 
     def on_add(self, stored: list) -> None:
+        """Events were stored (the event pipeline's buffer stage): reclaim what pruning
+        freed."""
         if not self.store.closed and not self.store.in_transaction:
             self.store.reclaim_space()
 
@@ -809,7 +811,6 @@ def attach(kb: Any) -> BufferManager:
     table-creation hook, the clock listener and the space reclaimer."""
     manager = BufferManager(kb)
     kb.load_listeners.append(manager.on_load)
-    kb.add_listeners.append(manager.on_add)
     kb.store.table_created_hooks.append(manager.on_table_created)
     kb.store.limit_wal()
     clock = kb.clock

@@ -349,28 +349,6 @@ class _BoundPrev:
         return answers, rows[0][-2:]
 
 
-def _with_derived(stored: list, derived: list) -> list:
-    """The events of an add and the complex events it derived, in one list for the add
-    listeners; described like the store's EventBatch (each type's earliest and latest end)
-    when the add's events were, so that the listeners need not walk the whole batch again.
-
-    >>> both = _with_derived(EventBatch([("a", (1,), 1.0, 1.0)]), [("c", (1,), 1.0, 2.0)])
-    >>> both.ends is None, len(both)
-    (True, 2)
-    """
-    both = EventBatch(stored)
-    both.extend(derived)
-    ends = getattr(stored, "ends", None)
-    if ends is not None:
-        ends = dict(ends)
-        for name, args, _start, end in derived:
-            key = (name, len(args))
-            span = ends.get(key)
-            ends[key] = (end, end) if span is None else (min(span[0], end), max(span[1], end))
-        both.ends = ends
-    return both
-
-
 class KnowledgeBase:
     """One SLR knowledge base: program + events + state in one SQLite file.
 
@@ -407,6 +385,8 @@ class KnowledgeBase:
         self._lookup_versions: tuple | None = None
         # extension points for the SQL compiler, buffers and synchronization
         self.load_listeners: list[Callable[["KnowledgeBase"], None]] = []
+        # outside observers of stored events: the last stage of the event pipeline calls
+        # them with each batch (the parts below are stages of the pipeline, not listeners)
         self.add_listeners: list[Callable[[list], None]] = []
         # called after the program was re-read from the file (another connection changed
         # it): like load_listeners, but nothing is written (the writer did that)
@@ -425,6 +405,10 @@ class KnowledgeBase:
         self._cep = _cep.attach(self)
         from . import subscriptions as _subscriptions  # subscriptions
         self._subscriptions = _subscriptions.attach(self)
+        from .pipeline import EventPipeline  # the stages of adds, marks and progress
+        self._pipeline = EventPipeline(self.store, self._sync, self._cep, self._buffers,
+                                       self._subscriptions, self.add_listeners)
+        self._pipeline.progress()  # decisions that became possible while the file was closed
 
     @property
     def sql_enabled(self) -> bool:
@@ -893,65 +877,7 @@ class KnowledgeBase:
 
     def _add(self, events: list, atomic: bool) -> list[EventRejected]:
         self._refresh()
-        # -- fullyUpdated(p/N)^t / fullyUpdated(p)^t are completeness marks, not events
-        marks: list = []
-        if getattr(self, "_sync", None) is not None:
-            events, marks, mark_errors = self._sync.take_marks(events, atomic)
-        else:
-            mark_errors = []
-        derived: list = []
-        if type(events) is not EventBatch:  # (the store notes each type's end times in it)
-            events = EventBatch(events)
-        cep = getattr(self, "_cep", None)
-        if cep is not None and cep.active and events:
-            # event rules detect in the transaction that stores the events
-            with self.store.transaction():
-                rounds = cep.rounds(events)
-                if len(rounds) == 1:
-                    token = cep.before_add(events)
-                    errors = cep.store_events(events, atomic)
-                    derived = cep.after_add(token)
-                else:
-                    errors, derived = self._add_in_rounds(cep, events, rounds, atomic)
-        else:
-            errors = self.store.add_events(events, atomic=atomic)
-        if atomic and errors:
-            raise errors[0]
-        if self.add_listeners:
-            rejected = {id(e.event) for e in errors if hasattr(e, "event")}
-            stored = [ev for ev in events if id(ev) not in rejected] if rejected else events
-            if derived:   # the complex events of this add, with its events
-                stored = _with_derived(stored, derived)
-            for listener in self.add_listeners:
-                listener(stored)
-        if marks:  # after the events of the same batch are stored
-            self._sync.apply_marks(marks)
-        return mark_errors + errors if mark_errors else errors
-
-    def _add_in_rounds(self, cep: Any, events: EventBatch, rounds: list,
-                       atomic: bool) -> tuple[list, list]:
-        """Store a batch in consecutive rounds of event-rule detection, inside the caller's
-        transaction: a count buffer that a rule's events meet prunes between rounds just as
-        between single adds. The batch's errors keep their indices, its ``ends`` cover all."""
-        errors: list = []
-        derived: list = []
-        ends: dict = {}
-        for start, stop in rounds:
-            part = EventBatch(events[start:stop])
-            token = cep.before_add(part)
-            part_errors = cep.store_events(part, atomic)
-            for error in part_errors:
-                if getattr(error, "index", None) is not None:
-                    error.index += start
-            if atomic and part_errors:
-                raise part_errors[0]   # (rolls the whole batch back)
-            errors += part_errors
-            derived += cep.after_add(token)
-            for key, (lo, hi) in (part.ends or {}).items():
-                old = ends.get(key)
-                ends[key] = (lo, hi) if old is None else (min(old[0], lo), max(old[1], hi))
-        events.ends = ends
-        return errors, derived
+        return self._pipeline.add(events, atomic)
 
     # -- queries ------------------------------------------------------------------------
     def _plan(self, goal: str, arg_names: tuple) -> _Plan:
@@ -1242,7 +1168,7 @@ class KnowledgeBase:
             raise SLRError(f"mark_complete: t is out of range (an integer of "
                            f"{int(t).bit_length()} bits; a time is a float)") from None
         self._refresh()
-        self._sync.mark_complete(event_type, t)
+        self._pipeline.mark(event_type, t)
 
     def complete_until(self, event_type: str) -> float:
         """The time up to which the history of ``"p/N"`` is complete now: the greatest of

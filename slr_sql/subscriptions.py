@@ -18,7 +18,7 @@ How it works
   ``jid`` (live events are the rows after it). Nothing committed can fall between the two:
   no gap and no duplicate at the seam between history and live.
 * **Delivery.** One hub thread per knowledge base reads the journal of each subscribed type
-  once for all its subscriptions (woken by ``kb.add`` through ``kb.add_listeners``, and every
+  once for all its subscriptions (woken by the last stage of ``kb.add``'s event pipeline, and every
   ``poll_interval`` seconds to see rows other processes committed), matches
   each row against each pattern and condition, and appends the answers to each
   subscription's bounded queue. ``add`` never waits for a subscriber.
@@ -35,7 +35,7 @@ How it works
   delivered.
 
 This module sits beside sync and buffers: it gets the knowledge base as an object and uses
-its public methods (``query``, ``submit``, ``add_listeners``; and the synchronizer's
+its public methods (``query``, ``submit``; and the synchronizer's
 ``watch_external``, so that marks other processes write end an ``until``) and the store's.
 """
 from __future__ import annotations
@@ -821,7 +821,8 @@ class SubscriptionHub:
             self.cond.notify()
 
     def on_add(self, stored: list) -> None:
-        """``kb.add_listeners`` entry: events of subscribed types were stored."""
+        """Events were stored (the event pipeline's wake stage): wake the hub if some are of
+        subscribed types."""
         if not self._by_type or not stored:
             return
         keys = self._by_type
@@ -1634,8 +1635,8 @@ class SubscriptionHub:
 
 
 def attach(kb: Any) -> SubscriptionHub:
-    """Create the subscription hub of ``kb`` and hook it into its add path and store."""
+    """Create the subscription hub of ``kb`` and hook it into its store (the event pipeline
+    wakes it after adds)."""
     hub = SubscriptionHub(kb)
-    kb.add_listeners.append(hub.on_add)
     kb.store.table_created_hooks.append(hub.on_table_created)
     return hub

@@ -564,9 +564,10 @@ class Synchronizer:
         self._data_version: int | None = None
         # clocks that tell when they move serve time-driven wake-ups from their listener
         self._clock_driven = isinstance(self.clock, (ManualClock, StreamClock))
-        # called (no lock held) whenever completeness may have advanced: a mark, an add, the
-        # clock moving, a timer of wake_at firing (event rules decide what they waited for)
-        self.progress_listeners: list[Callable[[], None]] = []
+        # called (no lock held) when completeness may have advanced outside an add: the
+        # clock moving, a timer of wake_at firing, mark_complete (the event pipeline's
+        # decision stage; an add's own marks and events go through it directly)
+        self.progress_hook: Callable[[], None] | None = None
         if hasattr(self.clock, "subscribe"):
             self.clock.subscribe(self._on_clock)
 
@@ -618,6 +619,13 @@ class Synchronizer:
             return [q for q in self._queries.values() if not q.done()]
 
     def mark_complete(self, spec: Any, t: float, source: str | None = None) -> None:
+        """Apply a mark and tell the progress hook (decisions it makes possible are made)."""
+        self.mark(spec, t, source)
+        self._progress()
+
+    def mark(self, spec: Any, t: float, source: str | None = None) -> None:
+        """Apply a mark: persist it, release the queries it completes (the event pipeline's
+        completeness stage: the caller runs the decisions)."""
         name, n = parse_type(spec)
         t = float(t)
         if math.isnan(t):
@@ -751,6 +759,7 @@ class Synchronizer:
         return keep, marks, errors
 
     def apply_marks(self, marks: list) -> None:
+        """The marks taken from an add (completeness stage of the event pipeline)."""
         if marks:
             self._apply_marks(marks)
 
@@ -765,10 +774,10 @@ class Synchronizer:
                 for k in keys:
                     released += self._release(k)
         self._schedule_all(released)
-        self._progress()
 
     def on_add(self, stored: list) -> None:
-        """Add listener: learn delays, move in-order horizons, release waiting queries."""
+        """Events were stored (the event pipeline's completeness stage): learn delays, move
+        in-order horizons, release waiting queries."""
         if not stored:
             return
         clock = self.clock
@@ -787,14 +796,12 @@ class Synchronizer:
             for key in moved:
                 released += self._release(key, arrival=True)
         self._schedule_all(released)
-        self._progress()
 
     # -- event rules (slr_sql.cep) ---------------------------------------------------------------
     def _progress(self) -> None:
-        if self._closed:
-            return
-        for fn in list(self.progress_listeners):
-            fn()
+        hook = self.progress_hook
+        if hook is not None and not self._closed:
+            hook()
 
     def recheck(self, keys: Iterable[tuple[str, int]]) -> None:
         """Release the queries parked on ``keys`` whose condition holds now (complex event
@@ -1177,9 +1184,8 @@ class Synchronizer:
 
 
 def attach(kb: Any) -> Synchronizer:
-    """Create the synchronizer of ``kb`` and hook it into its add path."""
+    """Create the synchronizer of ``kb`` (the event pipeline calls it for adds and marks)."""
     sync = Synchronizer(kb)
-    kb.add_listeners.append(sync.on_add)
     kb.progress_listeners.append(sync.on_progress)
     return sync
 

@@ -26,6 +26,7 @@ LAYERS = {
     "analysis": 4, "engine": 4, "sqlcompile": 4,
     "planner": 5,
     "sync": 6, "buffers": 6, "cep": 6, "plot": 6, "subscriptions": 6, "shipping": 6,
+    "pipeline": 6.5,  # the stages of an add: drives sync, cep, buffers, subscriptions
     "kb": 7,
     "viz": 7.5,  # Foxglove and MCAP views of a store; serve --foxglove uses it
     "demo": 8, "service": 8, "example_files": 8,

@@ -78,9 +78,10 @@ def prepare(rules: list[EventRule], consumption: dict, program: Any) -> list[Eve
 
 def attach(kb: Any) -> EventRules:
     """Install event rules on a knowledge base (called by KnowledgeBase.__init__, after the
-    synchronizer and the planner): the load listener, the hooks on new tables and on
-    completeness, the SQL function ``slr_cep_cmp`` of pushed comparisons, and the rules of
-    the program restored from the file.
+    synchronizer and the planner): the load listener, the hook on new tables, the SQL
+    function ``slr_cep_cmp`` of pushed comparisons, and the rules of the program restored
+    from the file (the event pipeline then makes the decisions that became possible while
+    the file was closed).
 
     >>> import slr_sql
     >>> kb = slr_sql.open(); kb.load("c <- a seq b."); type(kb._cep).__name__
@@ -90,10 +91,7 @@ def attach(kb: Any) -> EventRules:
     kb.load_listeners.append(eng.on_load)
     kb.store.table_created_hooks.append(eng.on_table)
     kb.store.create_function("slr_cep_cmp", 3, _compare)
-    if eng.sync is not None:
-        eng.sync.progress_listeners.append(eng.on_progress)
     eng._sync_rules()
-    eng.on_progress()   # a reopened file: decisions that became possible while it was closed
     return eng
 
 

@@ -15,18 +15,18 @@ Rounds run
   completing event, so after ``add`` returns its complex events are stored, and a crash loses
   either both or neither;
 * when completeness advances (the clock moves, a ``fullyUpdated`` mark or ``mark_complete``,
-  an in-order arrival): :meth:`EventRules.on_progress` decides the pending candidates whose
+  an in-order arrival): :meth:`EventRules.decide` decides the pending candidates whose
   histories are now complete, in their own transaction.
 
-Complex events reach ``kb.add_listeners`` like added events (subscriptions, buffers and
-synchronized queries see them), and synchronized queries waiting on a complex event type are
-re-checked after every round.
+Both are stages of the knowledge base's event pipeline (:mod:`slr_sql.pipeline`), which
+hands the complex events on like added events (synchronized queries, buffers,
+subscriptions and ``kb.add_listeners`` see them) and re-checks the synchronized queries
+waiting on a complex event type after the decisions.
 """
 from __future__ import annotations
 
 import json
 import math
-import threading
 from itertools import islice, pairwise
 from operator import itemgetter, ne
 from typing import Any
@@ -688,7 +688,6 @@ class EventRules:
         self.key_index: dict[tuple[str, int], int] = {}
         self.generation = 0
         self._decls: Any = None
-        self._local = threading.local()
         self._woken: dict = {}     # type -> the time a wake-up was asked for
         self.closed = False
 
@@ -754,7 +753,7 @@ class EventRules:
                     rt.refresh()
         if self.tracker is not None:
             self.tracker.derived = self if runtimes else None
-        self._wake_timers()
+        self.wake_timers()
 
     def on_load(self, kb: Any) -> None:
         """Load listener (inside the load's transaction)."""
@@ -981,79 +980,43 @@ class EventRules:
             if key not in new_from:
                 new_from[key] = self._max_seq(key)
         derived: list = []
-        self._local.in_round = True
-        try:
-            for rt in self.rules:
-                if not decide and not (rt.rule.input_types() and
-                                       any(k in dirty for k in rt.rule.input_types())):
-                    continue
-                if decide and not rt.waits and not any(k in dirty
-                                                       for k in rt.rule.input_types()):
-                    continue
-                try:
-                    out = rt.run(new_from, dirty, now, decide)
-                except DatabaseError as exc:
-                    raise SLRError(f"event rule {rt.rule.text} ({rt.rule.source}): {exc}") \
-                        from None
-                if out:
-                    dirty.add(rt.head_key)
-                    derived += out
-        finally:
-            self._local.in_round = False
+        for rt in self.rules:
+            if not decide and not (rt.rule.input_types() and
+                                   any(k in dirty for k in rt.rule.input_types())):
+                continue
+            if decide and not rt.waits and not any(k in dirty
+                                                   for k in rt.rule.input_types()):
+                continue
+            try:
+                out = rt.run(new_from, dirty, now, decide)
+            except DatabaseError as exc:
+                raise SLRError(f"event rule {rt.rule.text} ({rt.rule.source}): {exc}") \
+                    from None
+            if out:
+                dirty.add(rt.head_key)
+                derived += out
         return derived
 
-    def _any_ready(self, now: float) -> bool:
+    def ready(self, now: float) -> bool:
+        """Can some pending decision be made at ``now`` (its histories are complete)?"""
         for rt in self.rules:
             if rt.waits and rt.ready_groups(now):
                 return True
         return False
 
-    def on_progress(self) -> None:
-        """Completeness may have advanced: decide what can be decided now (own transaction),
-        hand the complex events to the add listeners, re-check waiting queries."""
-        if self.closed or not self.rules or getattr(self._local, "in_round", False):
-            return
-        if getattr(self._local, "notifying", False):
-            self._local.again = True
-            return
-        while True:
-            self._local.again = False
-            now = float(self.clock.now())
-            if not self._any_ready(now):
-                self._wake_timers()
-                self.recheck()
-                return
-            try:
-                with self.store.transaction():
-                    self.store.lock_for_write(self.types | self.leaf_types)
-                    derived = self._round({}, set(), True)
-            except SLRError:
-                if self.store.closed:
-                    return
-                raise
-            self.notify(derived)
-            self._wake_timers()
-            if not self._local.again:
-                self.recheck()
-                return
-
-    def notify(self, derived: list) -> None:
-        """Hand complex events decided outside an add to the add listeners."""
-        if not derived:
-            return
-        self._local.notifying = True
-        try:
-            for listener in list(self.kb.add_listeners):
-                listener(derived)
-        finally:
-            self._local.notifying = False
+    def decide(self) -> list:
+        """One round of the pending decisions that can be made now, in a transaction of its
+        own (the event pipeline's decision stage). Returns the complex events derived."""
+        with self.store.transaction():
+            self.store.lock_for_write(self.types | self.leaf_types)
+            return self._round({}, set(), True)
 
     def recheck(self) -> None:
         """Synchronized queries waiting on a complex event type: release those that can go."""
         if self.sync is not None and self.types:
             self.sync.recheck(self.types)
 
-    def _wake_timers(self) -> None:
+    def wake_timers(self) -> None:
         """Ask the synchronizer's timer to call us when a pending decision's history will be
         complete by the clock (wall clock; clocks that tell when they move need no timer)."""
         if self.sync is None:

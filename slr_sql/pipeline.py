@@ -1,0 +1,266 @@
+"""The path of an event through a knowledge base, in fixed stages (docs/architecture.md).
+
+Every way something new reaches a knowledge base -- ``kb.add`` / ``add_event`` /
+``add_many``, ``kb.mark_complete``, the clock moving, a timer of the synchronizer firing,
+the decisions left over in a reopened file -- goes through :class:`EventPipeline`, always in
+this order:
+
+1. **marks**: ``fullyUpdated(p/N)^t`` / ``fullyUpdated(p)^t`` are split out of the batch
+   (they are completeness marks, not events);
+2. **store** (insert and rule rounds): one transaction stores the events and runs the
+   event rules' delta statements over the new rows (a batch a count buffer cuts is stored
+   in consecutive rounds of that one transaction); the complex events it derives are
+   stored before it commits;
+3. **completeness**: the synchronizer learns delays and moves in-order horizons from what
+   was stored, then applies the batch's marks; waiting synchronized queries it completes
+   are released;
+4. **decisions until nothing changes**: the event rules' pending decisions whose histories
+   are complete now are made, each round in a transaction of its own; the complex events a
+   round derives go through stage 3 and the next round runs, until a round derives nothing
+   and nothing asked for another one; then synchronized queries waiting on complex event
+   types are re-checked;
+5. **buffers**: space the buffers' pruning freed is reclaimed;
+6. **wake**: the subscription hub is woken and ``kb.add_listeners`` are called, once per
+   batch, in the order the batches were stored (the add's events with the complex events
+   its transaction derived, then each decision round's).
+
+No stage calls back into an earlier one. A request for decisions that arrives while this
+thread is already running the pipeline (a ``StreamClock`` moving while stage 3 observes
+the events, a listener of stage 6 setting a ``ManualClock``) does not start a second run
+inside the first: it joins the run under way, which goes back to stage 4 before it ends.
+Other threads run the pipeline side by side; the store's transactions order their writes.
+
+>>> import slr_sql
+>>> kb = slr_sql.open(); kb.load("c(X) <- a(X) seq b(X).")
+>>> seen = []; kb.add_listeners.append(lambda batch: seen.append([e[0] for e in batch]))
+>>> kb.add_many(["a(1)^1", "b(1)^2"]); seen
+[]
+[['a', 'b', 'c']]
+"""
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+from .errors import EventRejected, SLRError
+from .store import EventBatch, EventStore
+
+if TYPE_CHECKING:
+    from .buffers import BufferManager
+    from .cep import EventRules
+    from .subscriptions import SubscriptionHub
+    from .sync import Synchronizer
+
+__all__ = ["EventPipeline", "STAGES", "with_derived"]
+
+STAGES = ("marks", "store", "completeness", "decisions", "buffers", "wake")
+
+
+class _Run:
+    """One pass of the pipeline on one thread: the stage it is in, and whether a request
+    for decisions arrived since its decision stage last looked."""
+
+    __slots__ = ("stage", "again")
+
+    def __init__(self) -> None:
+        self.stage = STAGES[0]
+        self.again = False
+
+
+def with_derived(stored: list, derived: list) -> list:
+    """The events of an add and the complex events it derived, in one batch for stage 6;
+    described like the store's EventBatch (each type's earliest and latest end) when the
+    add's events were, so that later stages need not walk the whole batch again.
+
+    >>> both = with_derived(EventBatch([("a", (1,), 1.0, 1.0)]), [("c", (1,), 1.0, 2.0)])
+    >>> both.ends is None, len(both)
+    (True, 2)
+    """
+    both = EventBatch(stored)
+    both.extend(derived)
+    ends = getattr(stored, "ends", None)
+    if ends is not None:
+        ends = dict(ends)
+        for name, args, _start, end in derived:
+            key = (name, len(args))
+            span = ends.get(key)
+            ends[key] = (end, end) if span is None else (min(span[0], end), max(span[1], end))
+        both.ends = ends
+    return both
+
+
+class EventPipeline:
+    """The stages an event goes through (module docstring), over the parts of one knowledge
+    base: its store, synchronizer, event rules, buffers, subscription hub, and the
+    ``add_listeners`` list of outside observers (called in stage 6)."""
+
+    def __init__(self, store: EventStore, sync: Synchronizer, cep: EventRules,
+                 buffers: BufferManager, hub: SubscriptionHub,
+                 listeners: list[Callable[[list], None]]):
+        self.store = store
+        self.sync = sync
+        self.cep = cep
+        self.buffers = buffers
+        self.hub = hub
+        self.listeners = listeners
+        # the run under way on each thread (an entry lives only while its run does)
+        self._runs: dict[int, _Run] = {}
+        sync.progress_hook = self.progress
+
+    # -- entries ---------------------------------------------------------------------------
+    def add(self, events: list, atomic: bool) -> list[EventRejected]:
+        """Stages 1-6 for a batch of ``(name, args, start, end)`` events; returns the
+        rejected ones (the marks' first), raises the first when ``atomic``."""
+        run = self._enter()
+        try:
+            run.stage = "marks"
+            events, marks, mark_errors = self.sync.take_marks(events, atomic)
+            run.stage = "store"
+            if type(events) is not EventBatch:  # (the store notes each type's end times in it)
+                events = EventBatch(events)
+            errors, derived = self._insert(events, atomic)
+            if atomic and errors:
+                raise errors[0]
+            rejected = {id(e.event) for e in errors if hasattr(e, "event")}
+            stored = [ev for ev in events if id(ev) not in rejected] if rejected else events
+            if derived:   # the complex events of this add, with its events
+                stored = with_derived(stored, derived)
+            run.stage = "completeness"
+            self.sync.on_add(stored)
+            if marks:   # after the events of the same batch are stored
+                self.sync.apply_marks(marks)
+            self._settle(run, [stored])   # (even empty: the listeners hear every add)
+        finally:
+            self._leave(run)
+        return mark_errors + errors if mark_errors else errors
+
+    def mark(self, event_type: Any, t: float) -> None:
+        """Stages 3-6 for ``kb.mark_complete(event_type, t)``."""
+        run = self._enter()
+        try:
+            run.stage = "completeness"
+            self.sync.mark(event_type, t)
+            self._settle(run, [])
+        finally:
+            self._leave(run)
+
+    def progress(self) -> None:
+        """Stages 4-6: completeness may have advanced (the clock moved, a timer fired, a
+        file was reopened). On a thread already running the pipeline, the request joins
+        that run."""
+        run = self._runs.get(threading.get_ident())
+        if run is not None:
+            run.again = True
+            return
+        run = self._enter()
+        try:
+            self._settle(run, [])
+        finally:
+            self._leave(run)
+
+    def stage(self) -> str | None:
+        """The stage this thread's run is in, or None outside the pipeline.
+
+        >>> import slr_sql
+        >>> kb = slr_sql.open(); seen = []
+        >>> kb.add_listeners.append(lambda batch: seen.append(kb._pipeline.stage()))
+        >>> kb.add("p(1)^1"); seen, kb._pipeline.stage()
+        (['wake'], None)
+        """
+        run = self._runs.get(threading.get_ident())
+        return None if run is None else run.stage
+
+    # -- stages ----------------------------------------------------------------------------
+    def _enter(self) -> _Run:
+        run = self._runs[threading.get_ident()] = _Run()
+        return run
+
+    def _leave(self, run: _Run) -> None:
+        self._runs.pop(threading.get_ident(), None)
+
+    def _insert(self, events: EventBatch, atomic: bool) -> tuple[list, list]:
+        """Stage 2: store the batch; with event rules, detect in the same transaction."""
+        cep = self.cep
+        if not (cep.active and events):
+            return self.store.add_events(events, atomic=atomic), []
+        with self.store.transaction():
+            rounds = cep.rounds(events)
+            if len(rounds) == 1:
+                token = cep.before_add(events)
+                errors = cep.store_events(events, atomic)
+                return errors, cep.after_add(token)
+            return self._insert_in_rounds(events, rounds, atomic)
+
+    def _insert_in_rounds(self, events: EventBatch, rounds: list,
+                          atomic: bool) -> tuple[list, list]:
+        """Store a batch in consecutive rounds of event-rule detection, inside the caller's
+        transaction: a count buffer that a rule's events meet prunes between rounds just as
+        between single adds. The batch's errors keep their indices, its ``ends`` cover all."""
+        cep = self.cep
+        errors: list = []
+        derived: list = []
+        ends: dict = {}
+        for start, stop in rounds:
+            part = EventBatch(events[start:stop])
+            token = cep.before_add(part)
+            part_errors = cep.store_events(part, atomic)
+            for error in part_errors:
+                if getattr(error, "index", None) is not None:
+                    error.index += start
+            if atomic and part_errors:
+                raise part_errors[0]   # (rolls the whole batch back)
+            errors += part_errors
+            derived += cep.after_add(token)
+            for key, (lo, hi) in (part.ends or {}).items():
+                old = ends.get(key)
+                ends[key] = (lo, hi) if old is None else (min(old[0], lo), max(old[1], hi))
+        events.ends = ends
+        return errors, derived
+
+    def _settle(self, run: _Run, batches: list[list]) -> None:
+        """Stages 4, 5 and 6; back to 4 when a request for decisions arrived meanwhile."""
+        while True:
+            run.stage = "decisions"
+            self._decide(run, batches)
+            run.stage = "buffers"
+            if batches:
+                self.buffers.on_add(batches[0])
+            run.stage = "wake"
+            for batch in batches:
+                self.hub.on_add(batch)
+                for listener in list(self.listeners):
+                    listener(batch)
+            if not run.again:
+                return
+            batches = []
+
+    def _decide(self, run: _Run, batches: list[list]) -> None:
+        """Stage 4: decision rounds until one derives nothing and nothing asked for another;
+        each round's complex events go through stage 3 and join ``batches``."""
+        cep = self.cep
+        if cep.closed or not cep.rules:
+            run.again = False
+            return
+        while True:
+            run.again = False
+            if not cep.ready(float(cep.clock.now())):
+                cep.wake_timers()
+                cep.recheck()
+                return
+            try:
+                derived = cep.decide()
+            except SLRError:
+                if self.store.closed:
+                    return
+                raise
+            if derived:
+                run.stage = "completeness"
+                self.sync.on_add(derived)
+                run.stage = "decisions"
+                batches.append(derived)
+            cep.wake_timers()
+            if not derived and not run.again:
+                cep.recheck()
+                return
+
