@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import math
 import numbers
-import threading
 from dataclasses import dataclass, field
 from typing import Any, Iterable
 
@@ -41,6 +40,7 @@ from .clocks import parse_duration
 from .encoding import INT64_MAX, INT64_MIN, Unencodable, encode
 from .unify import copy_term, undo, unify
 from .errors import SLRError
+from .lockorder import ordered_lock
 from .terms import format_term
 from .program import event_key, split_event_atom
 from .store import quote_identifier, sql_literal
@@ -622,7 +622,7 @@ class BufferManager:
     def __init__(self, kb: Any):
         self.kb = kb
         self.store = kb.store
-        self.lock = threading.RLock()
+        self.lock = ordered_lock("buffers", reentrant=True)
         self._clock = None
 
     # -- specs -----------------------------------------------------------------------
@@ -683,7 +683,7 @@ class BufferManager:
 
     def sync_program(self, check: bool = True) -> None:
         """Make the installed program buffers those the loaded program declares."""
-        with self.lock, self.store.transaction():
+        with self.store.transaction(), self.lock:
             desired = self.program_specs(strict=check)
             installed = self.active()
             runtime = [s for s in installed if s.source == "runtime"]
@@ -768,12 +768,12 @@ class BufferManager:
                 raise SLRError(f"keep_between=({t1}, {t2}): T1 must not be after T2")
             kind = "window"
         spec = BufferSpec(kind, compiled, amount, t1, t2, "runtime", "kb.add_buffer")
-        with self.kb._load_lock, self.lock, self.store.transaction():
+        with self.kb._load_lock, self.store.transaction(), self.lock:
             conflicts(self.active() + [spec])
             return self.install(spec)
 
     def remove_runtime(self, buffer_id: int) -> None:
-        with self.kb._load_lock, self.lock, self.store.transaction():
+        with self.kb._load_lock, self.store.transaction(), self.lock:
             for spec in self.active():
                 if spec.id == buffer_id:
                     if spec.source != "runtime":

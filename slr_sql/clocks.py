@@ -10,11 +10,11 @@ queries, time-driven pruning) is woken by the move itself rather than by polling
 from __future__ import annotations
 
 import math
-import threading
 import time
 from typing import Any, Callable
 
 from .errors import SLRError
+from .lockorder import ordered_lock
 from .terms import Atom, deref, format_term
 
 __all__ = ["Clock", "WallClock", "ManualClock", "StreamClock", "parse_duration",
@@ -40,7 +40,7 @@ class Clock:
 
     def __init__(self) -> None:
         self._listeners: list[Callable[[float], None]] = []
-        self._lock = threading.Lock()
+        self._lock = ordered_lock("clock.listeners")
 
     def now(self) -> float:  # pragma: no cover - abstract
         raise NotImplementedError

@@ -39,11 +39,11 @@ True
 from __future__ import annotations
 
 import math
-import threading
 from collections import deque
 from typing import Any, Callable
 
 from .robotlib import slerp
+from .lockorder import ordered_lock
 from .terms import Atom, Struct, list_items
 
 __all__ = ["TF", "TF_STATIC", "FrameTree", "Pose", "lookup", "pose_value", "compose",
@@ -82,7 +82,7 @@ class FrameTree:
         self.kind: dict[tuple, tuple] = {}      # (parent, child) -> TF or TF_STATIC
         self.neighbours: dict[Any, list] = {}   # frame -> [(frame, parent, child)]
         self.paths: dict[tuple, list | None] = {}
-        self.lock = threading.Lock()   # the threads of one knowledge base share the tree
+        self.lock = ordered_lock("frames")   # the threads of one knowledge base share the tree
 
     def chain(self, store: Any, target: Any, source: Any) -> list | None:
         """:meth:`refresh`, then :meth:`path`, under the tree's lock."""

@@ -14,7 +14,6 @@ import functools
 import math
 import numbers
 import re
-import threading
 import time
 from dataclasses import dataclass, field
 from operator import itemgetter
@@ -27,6 +26,7 @@ from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .encoding import Unencodable, decode_answer, encode
 from .engine import Engine
 from .errors import EventRejected, SLRError, SLRUnavailable
+from .lockorder import ordered_lock
 from .parser import parse_event_fast, parse_program, parse_term
 from .program import Program, build, compile_clause, split_event_atom, event_key
 from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore, \
@@ -374,7 +374,7 @@ class KnowledgeBase:
         self.declarations = Declarations()
         self.engine = Engine(self.program, self.store)
         self._plans: dict[tuple, _Plan] = {}
-        self._load_lock = threading.RLock()
+        self._load_lock = ordered_lock("kb.load", reentrant=True)
         # the stored program version self.program was built from, the parsed stored texts
         # (by id), and the store's data_version when the file was last checked for changes
         self._program_version = -1
@@ -630,6 +630,7 @@ class KnowledgeBase:
             self._install(program, decls, lambda: self.store.replace_named_program(
                 name, text, filename) if replace else self.store.append_program(
                 text, filename, name), (text, clauses))
+        self._pipeline.loaded()
 
     def _first_text_of(self, name: str) -> int | None:
         ids = [t.id for t in self.store.program_texts() if t.name == name]
@@ -699,6 +700,7 @@ class KnowledgeBase:
                                f"{', '.join(repr(n) for n in names) or 'none'})")
             program, decls = self._build(self._parse_texts(texts))
             self._install(program, decls, lambda: self.store.delete_program(name))
+        self._pipeline.loaded()
 
     def programs(self) -> dict[str, ProgramInfo]:
         """The named programs stored in the file, in load order of their first text.

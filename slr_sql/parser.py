@@ -32,6 +32,7 @@ from .grammar.slr_parser import (Lark, Lark_StandAlone, Token, Transformer, Unex
                                  UnexpectedInput, UnexpectedToken)
 
 from .errors import SLRSyntaxError
+from .lockorder import ordered_lock
 from .terms import INFIX_OPS, PREFIX_OPS
 from .terms import CONS, NIL, TRUE, Atom, Clause, Span, String, Struct, Var, make_list
 from .terms import MAX_INTEGER_BITS, int_from_text
@@ -566,7 +567,7 @@ def _bar_to_semicolon(goal: Any) -> Any:
 
 # ------------------------------------------------------------------------ entry points
 _LARK: Lark | None = None
-_LOCK = threading.Lock()
+_LOCK = ordered_lock("parser")
 
 
 def _parser() -> Lark:

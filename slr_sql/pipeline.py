@@ -159,6 +159,12 @@ class EventPipeline:
         finally:
             self._leave(run)
 
+    def loaded(self) -> None:
+        """After a load or unload committed: the timers of the pending decisions of the
+        rules it installed (not asked for inside its transaction: the synchronizer's lock
+        comes before the store's)."""
+        self.cep.wake_if_due()
+
     def stage(self) -> str | None:
         """The stage this thread's run is in, or None outside the pipeline.
 

@@ -57,6 +57,7 @@ from typing import Any, Callable
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning
 from .encoding import decode, encode_json
 from .errors import SLRError, SLRSyntaxError, SLRTimeout
+from .lockorder import ordered_lock
 from .parser import parse_term
 from .program import split_event_atom
 from .store import quote_identifier
@@ -281,7 +282,7 @@ class Subscription:
         self.delivered = 0
         self.overflows = 0
         self.error: BaseException | None = None
-        self._lock = threading.Lock()
+        self._lock = ordered_lock("subscription")
         self._cond = threading.Condition(self._lock)
         # pairs: a position code (int; None before the end marker), then the answer dict (the
         # same object for every subscription with the same answers: copied when taken) or _End.
@@ -775,7 +776,7 @@ class SubscriptionHub:
         self._decode: Any = decode if from_column is None else \
             (lambda v: decode(from_column(v)))
         self.clock = kb.clock
-        self.lock = threading.Lock()
+        self.lock = ordered_lock("subscriptions.hub")
         self.cond = threading.Condition(self.lock)
         self.owner = f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:12]}"
         self.poll_interval = POLL_INTERVAL

@@ -41,6 +41,7 @@ from .analysis import GoalSet, goal_set
 from .answers import answer_bindings
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning, ManualClock, StreamClock
 from .errors import EventRejected, SLRError, SLRTimeout
+from .lockorder import ordered_lock
 from .store.checks import BadEvent, check_times
 from .terms import Atom, Struct, Var, deref
 
@@ -539,7 +540,7 @@ class Synchronizer:
         self.kb = kb
         self.clock = kb.clock
         self.store = kb.store
-        self.lock = threading.RLock()
+        self.lock = ordered_lock("sync", reentrant=True)
         self.cond = threading.Condition(self.lock)
         self.tracker = Completeness(kb.store, kb.clock, lambda: kb.declarations,
                                     getattr(kb, "max_learned_delay", DEFAULT_MAX_LEARNED_DELAY))

@@ -689,6 +689,7 @@ class EventRules:
         self.generation = 0
         self._decls: Any = None
         self._woken: dict = {}     # type -> the time a wake-up was asked for
+        self._wake_due = False     # rules installed since the timers were last asked for
         self.closed = False
 
     # ----------------------------------------------------------------- install
@@ -706,6 +707,7 @@ class EventRules:
                 if decls is not self._decls:
                     self.install(list(getattr(decls, "event_rules", ())))
                     self._decls = decls
+        self.wake_if_due()
 
     def install(self, rules: list[EventRule]) -> None:
         """Make ``rules`` (already in dependency order, policies resolved) the active rules:
@@ -753,7 +755,9 @@ class EventRules:
                     rt.refresh()
         if self.tracker is not None:
             self.tracker.derived = self if runtimes else None
-        self.wake_timers()
+        # the synchronizer's lock comes before the store's (slr_sql.lockorder), which the
+        # caller holds: the timers are asked for once it is let go (wake_if_due)
+        self._wake_due = True
 
     def on_load(self, kb: Any) -> None:
         """Load listener (inside the load's transaction)."""
@@ -1016,9 +1020,16 @@ class EventRules:
         if self.sync is not None and self.types:
             self.sync.recheck(self.types)
 
+    def wake_if_due(self) -> None:
+        """Ask for the timers of rules installed since, unless this thread holds the store's
+        lock (a load's transaction: the load asks once it committed)."""
+        if self._wake_due and not self.store.owns_lock():
+            self.wake_timers()
+
     def wake_timers(self) -> None:
         """Ask the synchronizer's timer to call us when a pending decision's history will be
         complete by the clock (wall clock; clocks that tell when they move need no timer)."""
+        self._wake_due = False
         if self.sync is None:
             return
         due: dict = {}

@@ -142,6 +142,11 @@ class EventStore:
         """The ``RLock`` serializing the connection (held by a whole transaction)."""
         return self._db.lock
 
+    def owns_lock(self) -> bool:
+        """Does this thread hold the store's lock (in a transaction, say)? A caller that
+        must take a lock ordered before the store's (slr_sql.lockorder) waits until not."""
+        return bool(self._db.lock._is_owned())
+
     @property
     def table_created_hooks(self) -> list:
         """Called as ``hook(name, arity, table)`` inside the transaction that creates a new

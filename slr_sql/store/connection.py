@@ -26,13 +26,13 @@ import os
 import random
 import sqlite3
 import stat
-import threading
 import time
 import weakref
 from contextlib import contextmanager
 from typing import Any, Callable, Iterable, Iterator
 
 from ..errors import SLRError, SLRStoreGone, SLRTimeout
+from ..lockorder import ordered_lock
 from .authorizer import READ_ONLY_RESULT_BYTES, READ_ONLY_VALUE_BYTES, SqlGuard, \
     harden_connection
 from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
@@ -242,7 +242,7 @@ class Database:
         self.path = None if path in (None, ":memory:") else os.fspath(path)
         new = True if self.path is None else check_file(self.path, adopt)
         self.clock = clock if clock is not None else WallClock()
-        self.lock = threading.RLock()
+        self.lock = ordered_lock("store", reentrant=True)
         self.tx_depth = 0
         self.closed = False
         # called, lock held, after a transaction rolled back (the event-type cache reloads)
@@ -823,7 +823,7 @@ class ReadConnection:
                  cache_kib: int = 2048):
         self.path = path
         self.busy_timeout = busy_timeout
-        self.lock = threading.Lock()
+        self.lock = ordered_lock("store.reader")
         self.closed = False
         try:
             self.conn = sqlite3.connect(path, check_same_thread=False, isolation_level=None,

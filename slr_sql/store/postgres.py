@@ -30,6 +30,7 @@ from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
 from ..errors import SLRBusy, SLRError, SLRServerUnreachable, SLRTimeout
+from ..lockorder import ordered_lock
 from .dialect import POSTGRES
 from .schema import postgres_migration_scripts
 from .sqltext import quote_identifier
@@ -230,7 +231,7 @@ class PgReadConnection:
 
     def __init__(self, conninfo: str, schema: str, where: str, busy_timeout: float):
         psycopg = _psycopg()
-        self.lock = threading.Lock()
+        self.lock = ordered_lock("store.reader")
         self.closed = False
         try:
             raw = psycopg.connect(conninfo, autocommit=True)
@@ -273,7 +274,7 @@ class PgDatabase:
         self.path = _shown(url)
         self.schema = schema
         self.clock = clock if clock is not None else WallClock()
-        self.lock = threading.RLock()
+        self.lock = ordered_lock("store", reentrant=True)
         self.tx_depth = 0
         self.closed = False
         self.rollback_listeners: list[Callable[[], None]] = []
