@@ -75,8 +75,10 @@ def violations() -> list[str]:
 
 
 def clear_violations() -> None:
+    """Forget the violations and the nesting seen so far."""
     with _violations_lock:
         _violations.clear()
+        _edges.clear()
 
 
 def observed_nesting() -> set[tuple[str, str]]:
@@ -127,9 +129,9 @@ class OrderedLock:
                 return
             problem = f"took a {self.kind} lock it already holds (not re-entrant)"
         else:
-            for entry in stack:
-                if entry.kind != self.kind:
-                    _edges.add((entry.kind, self.kind))
+            with _violations_lock:
+                _edges.update((entry.kind, self.kind) for entry in stack
+                              if entry.kind != self.kind)
             later = [entry for entry in stack if entry.rank > self.rank]
             if not later:
                 return
