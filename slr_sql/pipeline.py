@@ -233,10 +233,12 @@ class EventPipeline:
             if batches:
                 self.buffers.on_add(batches[0])
             run.stage = "wake"
+            listeners = self.listeners
             for batch in batches:
                 self.hub.on_add(batch)
-                for listener in list(self.listeners):
-                    listener(batch)
+                if listeners:
+                    for listener in list(listeners):
+                        listener(batch)
             if not run.again:
                 return
             batches = []
