@@ -91,8 +91,8 @@ def observed_nesting() -> set[tuple[str, str]]:
     return set(_edges)
 
 
-def _stack() -> list:
-    stack = getattr(_held, "stack", None)
+def _stack() -> list[OrderedLock]:
+    stack: list[OrderedLock] | None = getattr(_held, "stack", None)
     if stack is None:
         stack = _held.stack = []
     return stack
@@ -123,7 +123,7 @@ class OrderedLock:
     def held_by_me(self) -> bool:
         return any(entry is self for entry in _stack())
 
-    def _check(self, stack: list) -> None:
+    def _check(self, stack: list[OrderedLock]) -> None:
         if any(entry is self for entry in stack):
             if self.reentrant:
                 return

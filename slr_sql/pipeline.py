@@ -54,6 +54,8 @@ if TYPE_CHECKING:
 
 __all__ = ["EventPipeline", "STAGES", "with_derived"]
 
+Batch = list[Any]   # (name, args, start, end) events, or an EventBatch of them
+
 STAGES = ("marks", "store", "completeness", "decisions", "buffers", "wake")
 
 
@@ -68,7 +70,7 @@ class _Run:
         self.again = False
 
 
-def with_derived(stored: list, derived: list) -> list:
+def with_derived(stored: Batch, derived: Batch) -> Batch:
     """The events of an add and the complex events it derived, in one batch for stage 6;
     described like the store's EventBatch (each type's earliest and latest end) when the
     add's events were, so that later stages need not walk the whole batch again.
@@ -97,7 +99,7 @@ class EventPipeline:
 
     def __init__(self, store: EventStore, sync: Synchronizer, cep: EventRules,
                  buffers: BufferManager, hub: SubscriptionHub,
-                 listeners: list[Callable[[list], None]]):
+                 listeners: list[Callable[[Batch], None]]):
         self.store = store
         self.sync = sync
         self.cep = cep
@@ -109,7 +111,7 @@ class EventPipeline:
         sync.progress_hook = self.progress
 
     # -- entries ---------------------------------------------------------------------------
-    def add(self, events: list, atomic: bool) -> list[EventRejected]:
+    def add(self, events: Batch, atomic: bool) -> list[EventRejected]:
         """Stages 1-6 for a batch of ``(name, args, start, end)`` events; returns the
         rejected ones (the marks' first), raises the first when ``atomic``."""
         run = self._enter()
@@ -185,7 +187,7 @@ class EventPipeline:
     def _leave(self, run: _Run) -> None:
         self._runs.pop(threading.get_ident(), None)
 
-    def _insert(self, events: EventBatch, atomic: bool) -> tuple[list, list]:
+    def _insert(self, events: EventBatch, atomic: bool) -> tuple[list[Any], Batch]:
         """Stage 2: store the batch; with event rules, detect in the same transaction."""
         cep = self.cep
         if not (cep.active and events):
@@ -198,15 +200,15 @@ class EventPipeline:
                 return errors, cep.after_add(token)
             return self._insert_in_rounds(events, rounds, atomic)
 
-    def _insert_in_rounds(self, events: EventBatch, rounds: list,
-                          atomic: bool) -> tuple[list, list]:
+    def _insert_in_rounds(self, events: EventBatch, rounds: list[tuple[int, int]],
+                          atomic: bool) -> tuple[list[Any], Batch]:
         """Store a batch in consecutive rounds of event-rule detection, inside the caller's
         transaction: a count buffer that a rule's events meet prunes between rounds just as
         between single adds. The batch's errors keep their indices, its ``ends`` cover all."""
         cep = self.cep
-        errors: list = []
-        derived: list = []
-        ends: dict = {}
+        errors: list[Any] = []
+        derived: Batch = []
+        ends: dict[Any, tuple[float, float]] = {}
         for start, stop in rounds:
             part = EventBatch(events[start:stop])
             token = cep.before_add(part)
@@ -224,7 +226,7 @@ class EventPipeline:
         events.ends = ends
         return errors, derived
 
-    def _settle(self, run: _Run, batches: list[list]) -> None:
+    def _settle(self, run: _Run, batches: list[Batch]) -> None:
         """Stages 4, 5 and 6; back to 4 when a request for decisions arrived meanwhile."""
         while True:
             run.stage = "decisions"
@@ -243,7 +245,7 @@ class EventPipeline:
                 return
             batches = []
 
-    def _decide(self, run: _Run, batches: list[list]) -> None:
+    def _decide(self, run: _Run, batches: list[Batch]) -> None:
         """Stage 4: decision rounds until one derives nothing and nothing asked for another;
         each round's complex events go through stage 3 and join ``batches``."""
         cep = self.cep
