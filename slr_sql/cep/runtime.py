@@ -36,7 +36,7 @@ from ..errors import SLRError
 from ..store import DatabaseError, EventBatch, quote_identifier
 from ..terms import Struct, Var, deref, format_term, term_vars
 from .rules import EventRule
-from .sqlgen import AltSQL
+from .sqlgen import AltSQL, anchor_index, index_name
 from .where import MustWait, Residual, describe_error
 
 _first, _second = itemgetter(0), itemgetter(1)
@@ -148,9 +148,12 @@ class RuleRuntime:
             eng.complete_sql(key, "x")
         for table, column in self.indexes():
             for first, second in (("t_end", "t_start"), ("t_start", "t_end")):
-                name = f"slr_cep_ix__{table}__{column}_{first[2:]}"
+                name = index_name(table, column, first[2:])
                 eng.store.execute(f"CREATE INDEX IF NOT EXISTS {quote_identifier(name)} ON "
                                   f"{quote_identifier(table)} ({column}, {first}, {second})")
+        for name, table, columns in self.anchor_indexes():
+            eng.store.execute(f"CREATE INDEX IF NOT EXISTS {quote_identifier(name)} ON "
+                              f"{quote_identifier(table)} ({', '.join(columns)})")
         self.generation = eng.generation
 
     def indexes(self) -> list[tuple[str, str]]:
@@ -177,6 +180,20 @@ class RuleRuntime:
                         if (table, f"arg{j}") not in out:
                             out.append((table, f"arg{j}"))
                         break
+        return out
+
+    def anchor_indexes(self) -> list[tuple[str, str, list[str]]]:
+        """(name, table, columns) of the indexes the anchors of pushed where goals search
+        (:meth:`AltSQL.anchored`)."""
+        out = []
+        for sql in self.alts:
+            for pos, anchors in sql.anchors.items():
+                table = sql.table_names[pos] if pos < len(sql.table_names) else None
+                for column, _ in anchors:
+                    if table is not None:
+                        name, columns = anchor_index(table, sql.key_column(pos), column)
+                        if (name, table, columns) not in out:
+                            out.append((name, table, columns))
         return out
 
     def ensure_built(self) -> None:

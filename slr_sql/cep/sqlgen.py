@@ -34,15 +34,23 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from ..encoding import Unencodable, encode
+from ..store import quote_identifier
 from ..store.dialect import SQLITE
-from ..terms import Struct, Var, deref, is_ground, term_vars
+from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
 from .rules import Alternative, Expr, Leaf
 
-__all__ = ["Ref", "AltSQL", "render"]
+__all__ = ["Ref", "AltSQL", "anchor_index", "index_name", "render"]
 
 _CMP = {"<": "<", ">": ">", "=<": "<=", ">=": ">=", "=:=": "=", "=\\=": "<>"}
 _EQ = {"==": True, "=": True, "\\==": False, "\\=": False}
 _NUMERIC = "IN ('integer', 'real')"
+# Arithmetic pushed into SQL (``T3 - T1 =< 5``): + and - over bound variables and numbers,
+# computed by SQL only where it gives Prolog's value -- integers small enough that no sum
+# of _MAX_LEAVES of them leaves the exact range of a double, finite floats far from
+# overflow; any other value is evaluated by the Python function ``slr_cep_arith``.
+_INT_BOUND = 2 ** 48
+_REAL_BOUND = 1e300
+_MAX_LEAVES = 16
 
 
 @dataclass(frozen=True)
@@ -62,6 +70,27 @@ def render(template: str, aliases: dict[str, str]) -> str:
     'q0_e0.t_end < e1.t_start'
     """
     return template.format_map(aliases)
+
+
+def index_name(table: str, column: str, first: str) -> str:
+    """The name of the index a rule adds on ``table`` (``column``, then ``t_<first>`` and
+    the other time).
+
+    >>> index_name("face", "arg3", "end")
+    'slr_cep_ix__face__arg3_end'
+    """
+    return f"slr_cep_ix__{table}__{column}_{first}"
+
+
+def anchor_index(table: str, key: str | None, column: str) -> tuple[str, list[str]]:
+    """The name and columns of the index an anchor (:meth:`AltSQL.anchored`) searches:
+    the key column first when the position has one.
+
+    >>> anchor_index("face", "arg1", "arg3")
+    ('slr_cep_ix__face__arg1_arg3', ['arg1', 'arg3', 't_end'])
+    """
+    columns = ([key] if key and key != column else []) + [column, "t_end"]
+    return f"slr_cep_ix__{table}__{'_'.join(columns[:-1])}", columns
 
 
 def _expr(e: Expr, dialect: Any = SQLITE) -> str:
@@ -119,6 +148,9 @@ class AltSQL:
     pushed: list = field(default_factory=list)
     head_sql: list | None = None
     dialect: Any = SQLITE     # the SQL printed: store/dialect.py
+    # position -> (column, positions bounding it): a pushed ``X - Y =< C`` gives the row of
+    # Y a lower bound on its data column once X's row is chosen (an index range)
+    anchors: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         alt = self.alt
@@ -309,6 +341,8 @@ class AltSQL:
                 return self._fact(g, table, positions)
         if len(g.args) != 2:
             return None
+        if g.name in _CMP and any(type(deref(a)) is Struct for a in g.args):
+            return self._push_arith(g, positions)
         if g.name in _CMP:
             a, b = self._side(g.args[0]), self._side(g.args[1])
             if a is None or b is None:
@@ -354,6 +388,137 @@ class AltSQL:
                 return None  # two constants: the interpreter's business
             return _Cond(positions, sql if _EQ[g.name] else f"NOT ({sql})")
         return None
+
+    def _arith(self, t: Any, leaves: list, names: dict) -> tuple[str, Any] | None:
+        """An arithmetic expression of + and - over bound variables and numbers: its SQL
+        and the same term with each variable renamed ``V<n>`` (n: its place in ``leaves``,
+        the refs the fallback receives); None if it is anything else."""
+        t = deref(t)
+        if type(t) is not Struct:
+            names[None] = names.get(None, 0) + 1   # leaves met (variables and numbers)
+            if names[None] > _MAX_LEAVES:
+                return None
+        if type(t) is Var:
+            ref = self.refs.get(id(t))
+            if ref is None:
+                return None
+            n = names.get(id(t))
+            if n is None:
+                n = names[id(t)] = len(leaves)
+                leaves.append(ref)
+            return (self.dialect.number(ref.sql) if ref.kind == "data" else ref.sql,
+                    Var(f"V{n}"))
+        if type(t) is int:
+            return (self._param(t), t) if abs(t) <= _INT_BOUND else None
+        if type(t) is float:
+            return (self._param(t), t) if abs(t) <= _REAL_BOUND else None   # (NaN: no)
+        if type(t) is Struct and t.name in ("+", "-") and len(t.args) == 2:
+            a = self._arith(t.args[0], leaves, names)
+            b = self._arith(t.args[1], leaves, names) if a is not None else None
+            if b is None:
+                return None
+            return f"({a[0]} {t.name} {b[0]})", Struct(t.name, (a[1], b[1]))
+        if type(t) is Struct and t.name == "-" and len(t.args) == 1:
+            a = self._arith(t.args[0], leaves, names)
+            return None if a is None else (f"(- {a[0]})", Struct("-", (a[1],)))
+        return None
+
+    def _push_arith(self, g: Struct, positions: frozenset) -> _Cond | None:
+        """A comparison with an arithmetic expression on either side, in SQL where its
+        operands are in the exact range (see _INT_BOUND), ``slr_cep_arith`` otherwise."""
+        if not self.dialect.python_functions:
+            return None   # no fallback for the values out of range: the Python side runs it
+        leaves: list = []
+        names: dict = {}
+        a = self._arith(g.args[0], leaves, names)
+        b = self._arith(g.args[1], leaves, names) if a is not None else None
+        if b is None:
+            return None
+        typeof = self.dialect.typeof
+        guards = []
+        for ref in leaves:
+            if ref.kind == "data":
+                guards.append(f"(({typeof(ref.sql)} = 'integer' AND abs({ref.sql}) <= "
+                              f"{_INT_BOUND}) OR ({typeof(ref.sql)} = 'real' AND "
+                              f"abs({ref.sql}) <= {_REAL_BOUND!r}))")
+            else:
+                guards.append(f"abs({ref.sql}) <= {_REAL_BOUND!r}")
+        text = self._param(format_term(Struct(g.name, (a[1], b[1]))))
+        values = ", ".join(ref.sql for ref in leaves)
+        fallback = f"slr_cep_arith({text}{', ' if values else ''}{values})"
+        core = f"{a[0]} {_CMP[g.name]} {b[0]}"
+        self._anchor(g)
+        if not guards:
+            return _Cond(positions, core)
+        return _Cond(positions, f"(CASE WHEN {' AND '.join(guards)} THEN {core} ELSE "
+                                f"{fallback} END)")
+
+    def _anchor(self, g: Struct) -> None:
+        """``X - Y =< C`` (or ``<``, or ``C >= X - Y``, ``C > X - Y``), Y a data argument of
+        another position than X, C a number: also the loose lower bound ``Y >= X - C -
+        slack`` (a pre-filter the index on Y's column can use; the exact comparison stays).
+        The bound is -inf when X is not a number (its value is Prolog's business), and a
+        stored Y that is not a number is greater than every number in SQLite: it passes."""
+        op, lhs, rhs = g.name, deref(g.args[0]), deref(g.args[1])
+        if op in (">=", ">"):
+            op, lhs, rhs = ("=<" if op == ">=" else "<"), rhs, lhs
+        if op not in ("=<", "<") or type(lhs) is not Struct or lhs.name != "-" \
+                or len(lhs.args) != 2 or type(rhs) not in (int, float):
+            return
+        if not (abs(rhs) <= _INT_BOUND if type(rhs) is int else abs(rhs) <= _REAL_BOUND):
+            return
+        x, y = deref(lhs.args[0]), deref(lhs.args[1])
+        if type(x) is not Var or type(y) is not Var:
+            return
+        rx, ry = self.refs.get(id(x)), self.refs.get(id(y))
+        if rx is None or ry is None or ry.kind != "data" or len(ry.positions) != 1 \
+                or ry.positions & rx.positions or not rx.positions:
+            return
+        if self.dialect.typeof(ry.sql) != f"typeof({ry.sql})":
+            return   # (SQLite's order of values: text after numbers)
+        x_num = (f"{self.dialect.typeof(rx.sql)} {_NUMERIC}" if rx.kind == "data"
+                 else self.dialect.true)
+        c = self._param(float(rhs))
+        bound = (f"(CASE WHEN {x_num} AND abs({rx.sql}) <= {_REAL_BOUND!r} THEN {rx.sql} - "
+                 f"{c} - (abs({rx.sql}) + abs({c})) * 1e-9 - 1e-9 ELSE "
+                 f"{self.dialect.infinity(True)} END)")
+        (pos,) = ry.positions
+        self.conds.append(_Cond(ry.positions | rx.positions, f"{ry.sql} >= {bound}"))
+        column = ry.sql.rsplit(".", 1)[1]
+        self.anchors.setdefault(pos, []).append((column, rx.positions))
+
+    def anchored(self, pos: int, chosen: set) -> bool:
+        """Position ``pos`` has a lower bound given the rows of ``chosen``: a window over
+        both, or an anchor (:meth:`_anchor`)."""
+        for _, _, within in self.alt.windows:
+            if pos in within and chosen & set(within):
+                return True
+        return any(bounding <= chosen for _, bounding in self.anchors.get(pos, ()))
+
+    def _anchor_hint(self, pos: int, chosen: set) -> str:
+        """`` INDEXED BY`` the index of an anchor of ``pos`` (SQLite's planner, without
+        statistics, takes the (key, time) index instead, which reaches the whole history)."""
+        if not self.dialect.index_hints or pos >= len(self.table_names):
+            return ""
+        for column, bounding in self.anchors.get(pos, ()):
+            if bounding <= chosen and self.table_names[pos] is not None:
+                name = anchor_index(self.table_names[pos], self.key_column(pos), column)[0]
+                return f" INDEXED BY {quote_identifier(name)}"
+        return ""
+
+    def key_column(self, pos: int) -> str | None:
+        """``arg1`` when position pos's first argument is tied to another position's or a
+        constant (an equality the anchor's index can use first), else None."""
+        leaf = self.alt.leaves[pos]
+        if not leaf.args:
+            return None
+        a = deref(leaf.args[0])
+        if type(a) is not Var:
+            return "arg1"
+        ref = self.refs.get(id(a))
+        if ref is not None and ref.positions != frozenset((pos,)):
+            return "arg1"
+        return "arg1" if self._others.get(id(a)) else None
 
     def _fact(self, g: Struct, table: str, positions: frozenset) -> _Cond:
         """``p(A..)`` over a predicate made of ground facts, its arguments bound: a row of
@@ -738,6 +903,20 @@ class AltSQL:
                 inner += self._terminator_one(pos, r, aliases)
             if self.negs:
                 inner.append(self.neg_ok(aliases))
+            if not self.anchored(p, chosen) and all(self.anchored(r, chosen) for r in rest):
+                # p's history has no bound but the rest's has (seq with a where over the
+                # times): search from the few rows of the rest, the newest p among their
+                # partners (the same row as the EXISTS form, found from the other side)
+                keys = self._key_order(p, aliases[f"e{p}"], True)
+                froms = " CROSS JOIN ".join(f"{self.tables[r]} AS {aliases[f'e{r}']}"
+                                            f"{self._anchor_hint(r, chosen)}"
+                                            for r in rest + [p])
+                # (implied: p ends no later than the terminator, and starts before it
+                # ends; the (key, start) index then reaches only the rows in between)
+                implied = [f"{aliases[f'e{p}']}.t_start <= {aliases[f'e{pos}']}.t_end"]
+                return (f"SELECT {aliases[f'e{p}']}.seq FROM {froms} WHERE "
+                        f"{self._where(conds + inner + implied)} ORDER BY {', '.join(keys)} "
+                        f"LIMIT 1")
             froms = ", ".join(f"{self.tables[r]} AS {aliases[f'e{r}']}" for r in rest)
             conds.append(f"EXISTS (SELECT 1 FROM {froms} WHERE {self._where(inner)})")
         elif self.negs:
