@@ -136,7 +136,6 @@ def _compare_expressions(text: str, *values: Any) -> int:
     """``slr_cep_arith(goal, v0, v1, ...)``: the comparison ``goal`` (its variables named
     ``V0``, ``V1``, ... for the stored values given) as Prolog evaluates it; an error is
     false. The fallback of a pushed comparison whose operands SQL cannot compute exactly."""
-    from ..arith import evaluate
     from ..encoding import decode
     from ..terms import Struct, Var, deref
 
