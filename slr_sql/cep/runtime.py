@@ -36,7 +36,10 @@ from ..errors import SLRError
 from ..store import DatabaseError, EventBatch, quote_identifier
 from ..terms import Struct, Var, deref, format_term, term_vars
 from .rules import EventRule
-from .sqlgen import AltSQL, anchor_index, index_name
+from .sqlgen import (AltSQL, anchor_index, complex_copy, complex_read, create_index,
+                     index_name, max_id, max_seq, pending_delete, pending_insert,
+                     pending_of_group, pending_of_rule, pending_row, pending_summary,
+                     pending_wait, provenance_insert, query_plan, rows_by_seq, rule_record)
 from .where import MustWait, Residual, describe_error
 
 _first, _second = itemgetter(0), itemgetter(1)
@@ -149,11 +152,10 @@ class RuleRuntime:
         for table, column in self.indexes():
             for first, second in (("t_end", "t_start"), ("t_start", "t_end")):
                 name = index_name(table, column, first[2:])
-                eng.store.execute(f"CREATE INDEX IF NOT EXISTS {quote_identifier(name)} ON "
-                                  f"{quote_identifier(table)} ({column}, {first}, {second})")
+                eng.store.run_compiled(create_index(name, table,
+                                                           [column, first, second]), {})
         for name, table, columns in self.anchor_indexes():
-            eng.store.execute(f"CREATE INDEX IF NOT EXISTS {quote_identifier(name)} ON "
-                              f"{quote_identifier(table)} ({', '.join(columns)})")
+            eng.store.run_compiled(create_index(name, table, columns), {})
         self.generation = eng.generation
 
     def indexes(self) -> list[tuple[str, str]]:
@@ -219,7 +221,7 @@ class RuleRuntime:
         eng = self.eng
         self.ensure_built()
         store = eng.store
-        before = store.execute(f"SELECT coalesce(max(id), 0) FROM {self.prov}")[0][0]
+        before = store.run_compiled(max_id(self.prov), {})[0][0]
         changed = False
         fresh_terms = False
         params = eng.params(now)
@@ -307,10 +309,8 @@ class RuleRuntime:
                 float(self.eng.clock.now()))
 
     def _insert_pending(self, rows: list) -> None:
-        self.eng.store.executemany(
-            "INSERT INTO slr_cep_pending (rule, alt, kind, pos, rowids, t_start, t_end, "
-            "wait_type, wait_arity, wait_time, wait_reason, created_at) "
-            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", rows)
+        self.eng.store.run_compiled_many(pending_insert(),
+                                         [pending_row(row) for row in rows])
 
     def _bindings(self, n: int, row: tuple) -> dict:
         alt = self.alts[n]
@@ -370,12 +370,10 @@ class RuleRuntime:
     def _write_prov(self) -> None:
         rows, self._prov_rows = self._prov_rows, []
         if rows:
-            cols = (["alt"] + [f"r{p + 1}" for p in range(self.width)]
-                    + ["t_start", "t_end"] + [f"h{i + 1}" for i in range(self.rule.arity)]
-                    + ["detected"])
-            self.eng.store.executemany(
-                f"INSERT INTO {self.prov} ({', '.join(cols)}) VALUES "
-                f"({', '.join('?' * len(cols))})", rows)
+            names = [f"p{i}" for i in range(len(rows[0]))]
+            self.eng.store.run_compiled_many(
+                provenance_insert(self.prov, self.width, self.rule.arity),
+                [dict(zip(names, row)) for row in rows])
 
     # ----------------------------------------------------------------- pending
     def ready_groups(self, now: float) -> list:
@@ -409,9 +407,8 @@ class RuleRuntime:
         base["rule"] = self.key
         per_alt = [dict(base, **alt.params) for alt in self.alts]
         if self.policy == "chronological":
-            rows = self._occurrence_order(store.execute(
-                "SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, wait_arity, "
-                "wait_time FROM slr_cep_pending WHERE rule = ?", (self.key,)))
+            rows = self._occurrence_order(store.run_compiled(pending_of_rule(False),
+                                                             {"rule": self.key}))
             changed = False
             for row in rows:
                 if not self._decide_row(row, now, per_alt):
@@ -442,26 +439,15 @@ class RuleRuntime:
             groups.remove(group)
             changed = True
         if everything:
-            rows = store.execute(
-                "SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, wait_arity, "
-                "wait_time FROM slr_cep_pending WHERE rule = ? ORDER BY t_end, t_start, id",
-                (self.key,))
+            rows = store.run_compiled(pending_of_rule(True), {"rule": self.key})
             for row in rows:
                 changed |= self._decide_row(row, now, per_alt)
             return changed
         for n, kind, wait in groups:
-            if wait is None:
-                rows = store.execute(
-                    "SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, "
-                    "wait_arity, wait_time FROM slr_cep_pending WHERE rule = ? AND alt = ? "
-                    "AND kind = ? AND wait_type IS NULL ORDER BY t_end, t_start, id",
-                    (self.key, n, kind))
-            else:
-                rows = store.execute(
-                    "SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, "
-                    "wait_arity, wait_time FROM slr_cep_pending WHERE rule = ? AND alt = ? "
-                    "AND kind = ? AND wait_type = ? AND wait_arity = ? "
-                    "ORDER BY wait_time, t_end, id", (self.key, n, kind, wait[0], wait[1]))
+            group = {"rule": self.key, "alt": n, "kind": kind}
+            if wait is not None:
+                group.update(wait_type=wait[0], wait_arity=wait[1])
+            rows = store.run_compiled(pending_of_group(wait is not None), group)
             # recent, with Python work: the terminators of a group decide independently of
             # each other, so their candidates are read in one statement per position
             together = (kind == "term" and wait is None and self.policy == "recent"
@@ -522,12 +508,11 @@ class RuleRuntime:
             if n >= len(self.alts) or self.alts[n].tables[pos] is None:
                 continue
             arity = self.alts[n].alt.leaves[pos].arity
-            cols = ", ".join(["seq"] + [f"arg{j + 1}" for j in range(arity)])
             for i in range(0, len(seqs), 500):
                 chunk = seqs[i:i + 500]
-                for r in self.eng.store.execute(
-                        f"SELECT {cols} FROM {self.alts[n].tables[pos]} WHERE seq IN "
-                        f"({', '.join('?' * len(chunk))})", chunk):
+                for r in self.eng.store.run_compiled(
+                        rows_by_seq(self.alts[n].tables[pos], arity, len(chunk)),
+                        {f"s{j}": seq for j, seq in enumerate(chunk)}):
                     args[(n, pos, r[0])] = tuple(_sqlite_key(v) for v in r[1:])
 
         def key(row: tuple) -> tuple:
@@ -564,25 +549,26 @@ class RuleRuntime:
             return False
         if not done:
             if row[7] is not None:
-                store.execute("UPDATE slr_cep_pending SET wait_type = NULL, "
-                              "wait_arity = NULL, wait_time = NULL, wait_reason = NULL "
-                              "WHERE id = ?", (rid,))
+                store.run_compiled(pending_wait(),
+                                   {"wait_type": None, "wait_arity": None, "wait_time": None,
+                                    "wait_reason": None, "id": rid})
             return False
         self._done.append(rid)
         return True
 
     def _park(self, rid: int, wait: MustWait) -> None:
         """Record on pending row ``rid`` what it waits for (a history not complete yet)."""
-        self.eng.store.execute("UPDATE slr_cep_pending SET wait_type = ?, wait_arity = ?, "
-                               "wait_time = ?, wait_reason = ? WHERE id = ?",
-                               (wait.key[0], wait.key[1], wait.time, wait.reason, rid))
+        self.eng.store.run_compiled(pending_wait(),
+                                    {"wait_type": wait.key[0], "wait_arity": wait.key[1],
+                                     "wait_time": wait.time, "wait_reason": wait.reason,
+                                     "id": rid})
 
     def _delete_done(self) -> None:
         done, self._done = self._done, []
         for i in range(0, len(done), 500):
             chunk = done[i:i + 500]
-            self.eng.store.execute(f"DELETE FROM slr_cep_pending WHERE id IN "
-                                   f"({', '.join('?' * len(chunk))})", chunk)
+            self.eng.store.run_compiled(pending_delete(len(chunk)),
+                                        {f"d{j}": rid for j, rid in enumerate(chunk)})
 
     def _decide_match(self, n: int, rowids: list, end: float, now: float,
                       params: list | None = None) -> bool:
@@ -618,7 +604,7 @@ class RuleRuntime:
         for row in rows:
             if self._derive_from(n, row, now):
                 if self.used is not None:
-                    self.eng.store.executemany(
+                    self.eng.store.run_compiled_many(
                         alt.used_insert(),
                         [(alt.table_names[p], row[p]) for p in range(alt.k)])
                 return True
@@ -626,10 +612,7 @@ class RuleRuntime:
 
     def refresh(self) -> None:
         """Re-read the summary of this rule's pending decisions."""
-        rows = self.eng.store.execute(
-            "SELECT alt, kind, wait_type, wait_arity, min(coalesce(wait_time, t_end)), "
-            "min(t_end), count(*) FROM slr_cep_pending WHERE rule = ? "
-            "GROUP BY alt, kind, wait_type, wait_arity", (self.key,))
+        rows = self.eng.store.run_compiled(pending_summary(), {"rule": self.key})
         waits = {}
         pmin = _INF
         count = 0
@@ -651,26 +634,21 @@ class RuleRuntime:
             self.eng.store.declare_type(name, arity)
             table = self.eng.table(self.head_key)
         store = self.eng.store
-        values = [f"h{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
-        cols = [f"arg{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
         # a complex event is the deriving store's: its robot (NULL on an unnamed or fleet
         # store, whatever robots the constituent events came from)
-        copy = (f"INSERT INTO {table} ({', '.join(cols)}, arrival, robot) "
-                f"SELECT {', '.join(values)}, :now, :robot FROM {self.prov} WHERE id > :before "
-                f"ORDER BY id")
         args = {"now": now, "before": before, "robot": store.robot}
         head_table = self.eng.table_name(self.head_key)
         if store.triggers(head_table):
             # a buffer's trigger may refuse rows: the rows stored are those RETURNING gives
-            rows = store.run_compiled(f"{copy} RETURNING {', '.join(cols)}", args)
+            rows = store.run_compiled(complex_copy(table, self.prov, arity, True), args)
             # RETURNING gives an integral REAL as an int: the times as stored (floats)
             rows = [r[:arity] + (float(r[arity]), float(r[arity + 1])) for r in rows]
         else:
             # no trigger: every match is stored as it is; reading the provenance rows back
             # (a rowid range) costs less than RETURNING's buffered copy
-            store.run_compiled(copy, args)
-            rows = store.run_compiled(f"SELECT {', '.join(values)} FROM {self.prov} "
-                                      f"WHERE id > :before ORDER BY id", {"before": before})
+            store.run_compiled(complex_copy(table, self.prov, arity, False), args)
+            rows = store.run_compiled(complex_read(self.prov, arity),
+                                      {"before": before})
         if not rows:
             return []
         self.detections += len(rows)
@@ -760,12 +738,10 @@ class EventRules:
                     if self.store.table_for(name, arity) is None:
                         self.store.declare_type(name, arity)
                     rt.create_tables()
-                    self.store.execute(
-                        "INSERT INTO slr_cep_rules (key, head, rule, policy, source, "
-                        "prov_table, installed_at) VALUES (?, ?, ?, ?, ?, ?, ?) "
-                        "ON CONFLICT(key) DO NOTHING",
-                        (rt.key, _type(rt.head_key), rt.rule.text, rt.policy, rt.rule.source,
-                         rt.prov_name, float(self.clock.now())))
+                    self.store.run_compiled(rule_record(), {
+                        "key": rt.key, "head": _type(rt.head_key), "rule": rt.rule.text,
+                        "policy": rt.policy, "source": rt.rule.source,
+                        "prov_table": rt.prov_name, "installed_at": float(self.clock.now())})
                 for rt in runtimes:
                     rt.build()
                     rt.refresh()
@@ -907,7 +883,7 @@ class EventRules:
         table = self.table(key)
         if table is None:
             return 0
-        return self.store.execute(f"SELECT coalesce(max(seq), 0) FROM {table}")[0][0]
+        return self.store.run_compiled(max_seq(table), {})[0][0]
 
     def before_add(self, events: list) -> Any:
         """Inside the add's transaction, before the events are stored: where each type's
@@ -1187,8 +1163,7 @@ class EventRules:
         params.update({f"r{p}": 0 for p in range(alt.k)})
         params.update(rule="", t=0)
         try:
-            return [row[3] for row in self.store.run_compiled("EXPLAIN QUERY PLAN " + sql,
-                                                              params)]
+            return [row[3] for row in self.store.run_compiled(query_plan(sql), params)]
         except DatabaseError as exc:  # pragma: no cover - explain must not fail
             return [f"(no plan: {exc})"]
 

@@ -971,3 +971,135 @@ class AltSQL:
 
     def used_insert(self) -> str:
         return self.dialect.insert_ignore(self.used_table, "tbl, seq", "?, ?")
+
+
+# ---------------------------------------------------------------------------- the runtime's
+# The statements of the rule runtime around the delta statements (slr_sql/cep/runtime.py):
+# provenance rows, pending decisions, the copy of matches into the complex event type's
+# table, the catalog of installed rules. Values are named parameters; tables come quoted.
+
+_PENDING_COLUMNS = ("rule", "alt", "kind", "pos", "rowids", "t_start", "t_end", "wait_type",
+                    "wait_arity", "wait_time", "wait_reason", "created_at")
+_PENDING_READ = ("SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, wait_arity, "
+                 "wait_time FROM slr_cep_pending WHERE rule = :rule")
+
+
+def create_index(name: str, table: str, columns: list[str]) -> str:
+    """An index a rule's statements search (created once, kept with the table).
+
+    >>> create_index("slr_cep_ix__a__arg2_end", "a", ["arg2", "t_end", "t_start"])
+    'CREATE INDEX IF NOT EXISTS "slr_cep_ix__a__arg2_end" ON "a" (arg2, t_end, t_start)'
+    """
+    return (f"CREATE INDEX IF NOT EXISTS {quote_identifier(name)} ON "
+            f"{quote_identifier(table)} ({', '.join(columns)})")
+
+
+def max_id(table: str) -> str:
+    """The greatest ``id`` of a (quoted) provenance table, 0 when empty."""
+    return f"SELECT coalesce(max(id), 0) FROM {table}"
+
+
+def max_seq(table: str) -> str:
+    """The greatest ``seq`` of a (quoted) event table, 0 when empty."""
+    return f"SELECT coalesce(max(seq), 0) FROM {table}"
+
+
+def pending_insert() -> str:
+    """One pending decision; its values as the parameters named after the columns.
+
+    >>> pending_insert().split(" VALUES ")[1][:18]
+    '(:rule, :alt, :kin'
+    """
+    return (f"INSERT INTO slr_cep_pending ({', '.join(_PENDING_COLUMNS)}) VALUES "
+            f"({', '.join(':' + c for c in _PENDING_COLUMNS)})")
+
+
+def pending_row(values: tuple) -> dict:
+    """The parameters of :func:`pending_insert` for ``values`` in the columns' order."""
+    return dict(zip(_PENDING_COLUMNS, values))
+
+
+def provenance_columns(width: int, arity: int) -> list[str]:
+    return (["alt"] + [f"r{p + 1}" for p in range(width)] + ["t_start", "t_end"]
+            + [f"h{i + 1}" for i in range(arity)] + ["detected"])
+
+
+def provenance_insert(prov: str, width: int, arity: int) -> str:
+    """One match found on the Python side into the provenance table; parameters ``:p0``,
+    ``:p1``, ... in :func:`provenance_columns` order."""
+    cols = provenance_columns(width, arity)
+    return (f"INSERT INTO {prov} ({', '.join(cols)}) VALUES "
+            f"({', '.join(f':p{i}' for i in range(len(cols)))})")
+
+
+def pending_of_rule(order: bool) -> str:
+    """The pending decisions of rule ``:rule`` (in decision order when ``order``)."""
+    return _PENDING_READ + (" ORDER BY t_end, t_start, id" if order else "")
+
+
+def pending_of_group(waiting: bool) -> str:
+    """The pending decisions of one group: rule ``:rule``, alternative ``:alt``, kind
+    ``:kind``, waiting on nothing or on the type ``:wait_type``/``:wait_arity``."""
+    if not waiting:
+        return (_PENDING_READ + " AND alt = :alt AND kind = :kind AND wait_type IS NULL "
+                "ORDER BY t_end, t_start, id")
+    return (_PENDING_READ + " AND alt = :alt AND kind = :kind AND wait_type = :wait_type "
+            "AND wait_arity = :wait_arity ORDER BY wait_time, t_end, id")
+
+
+def rows_by_seq(table: str, arity: int, count: int) -> str:
+    """seq and arguments of the rows of a (quoted) event table whose seq is one of
+    ``:s0`` .. ``:s<count-1>``."""
+    cols = ", ".join(["seq"] + [f"arg{j + 1}" for j in range(arity)])
+    return (f"SELECT {cols} FROM {table} WHERE seq IN "
+            f"({', '.join(f':s{i}' for i in range(count))})")
+
+
+def pending_wait() -> str:
+    """Record what pending decision ``:id`` waits for (all NULL: nothing)."""
+    return ("UPDATE slr_cep_pending SET wait_type = :wait_type, wait_arity = :wait_arity, "
+            "wait_time = :wait_time, wait_reason = :wait_reason WHERE id = :id")
+
+
+def pending_delete(count: int) -> str:
+    """Delete the pending decisions ``:d0`` .. ``:d<count-1>``."""
+    return (f"DELETE FROM slr_cep_pending WHERE id IN "
+            f"({', '.join(f':d{i}' for i in range(count))})")
+
+
+def pending_summary() -> str:
+    """Per group of rule ``:rule``'s pending decisions: the earliest time it waits for, the
+    earliest end and the count."""
+    return ("SELECT alt, kind, wait_type, wait_arity, min(coalesce(wait_time, t_end)), "
+            "min(t_end), count(*) FROM slr_cep_pending WHERE rule = :rule "
+            "GROUP BY alt, kind, wait_type, wait_arity")
+
+
+def complex_copy(table: str, prov: str, arity: int, returning: bool) -> str:
+    """Copy the matches after provenance id ``:before`` into the complex event type's
+    (quoted) table, arrival ``:now``, robot ``:robot``; ``returning``: the rows stored (a
+    buffer's trigger may refuse some)."""
+    values = [f"h{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
+    cols = [f"arg{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
+    sql = (f"INSERT INTO {table} ({', '.join(cols)}, arrival, robot) "
+           f"SELECT {', '.join(values)}, :now, :robot FROM {prov} WHERE id > :before "
+           f"ORDER BY id")
+    return sql + f" RETURNING {', '.join(cols)}" if returning else sql
+
+
+def complex_read(prov: str, arity: int) -> str:
+    """The head values and times of the matches after provenance id ``:before``."""
+    values = [f"h{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
+    return f"SELECT {', '.join(values)} FROM {prov} WHERE id > :before ORDER BY id"
+
+
+def rule_record() -> str:
+    """Record an installed rule in the catalog (once per key)."""
+    return ("INSERT INTO slr_cep_rules (key, head, rule, policy, source, prov_table, "
+            "installed_at) VALUES (:key, :head, :rule, :policy, :source, :prov_table, "
+            ":installed_at) ON CONFLICT(key) DO NOTHING")
+
+
+def query_plan(sql: str) -> str:
+    """The statement asking SQLite how it runs ``sql`` (explain)."""
+    return "EXPLAIN QUERY PLAN " + sql
