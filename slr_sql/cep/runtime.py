@@ -34,13 +34,13 @@ from typing import Any
 from ..encoding import Unencodable, decode, encode
 from ..errors import SLRError
 from ..store import DatabaseError, EventBatch, quote_identifier
-from ..terms import Struct, Var, deref, format_term, term_vars
+from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
 from .rules import EventRule
 from .sqlgen import (AltSQL, anchor_index, complex_copy, complex_read, create_index,
                      index_name, max_id, max_seq, pending_delete, pending_insert,
                      pending_of_group, pending_of_rule, pending_row, pending_summary,
                      pending_wait, provenance_insert, query_plan, rows_by_seq, rule_record)
-from .where import MustWait, Residual, describe_error
+from .where import MustWait, Residual, describe_error, plain_value
 
 _first, _second = itemgetter(0), itemgetter(1)
 
@@ -107,6 +107,7 @@ class RuleRuntime:
         self.alts: list[AltSQL] = []
         self.residuals: list[Residual | None] = []
         self.reads_store: list[bool] = []
+        self.plain: list[tuple | None] = []   # per alternative: _plain_plan's plan or None
         self.waits: dict = {}       # (alt, kind, wait key | None) -> earliest time
         self.pmin = _INF            # earliest end of a pending decision
         self.pending = 0
@@ -127,7 +128,7 @@ class RuleRuntime:
         """(Re)build the SQL of every alternative for the tables that exist now."""
         eng = self.eng
         head_args = tuple(self.rule.head.args) if type(self.rule.head) is Struct else ()
-        self.alts, self.residuals, self.reads_store = [], [], []
+        self.alts, self.residuals, self.reads_store, self.plain = [], [], [], []
         for n, alt in enumerate(self.rule.alternatives):
             tables = [eng.table(leaf.key) for leaf in alt.leaves]
             neg_tables = [eng.table(leaf.key) for _, leaf in alt.negations]
@@ -147,6 +148,8 @@ class RuleRuntime:
                              - {self.head_key})
             self.residuals.append(residual)
             self.reads_store.append(reads)
+            self.plain.append(self._plain_plan(sql, residual)
+                              if residual is not None and not reads else None)
         for key in self.rule.input_types():   # their completeness parameters exist
             eng.complete_sql(key, "x")
         for table, column in self.indexes():
@@ -157,6 +160,68 @@ class RuleRuntime:
         for name, table, columns in self.anchor_indexes():
             eng.store.run_compiled(create_index(name, table, columns), {})
         self.generation = eng.generation
+
+    def _plain_plan(self, sql: AltSQL, residual: Residual) -> tuple | None:
+        """How a match of this alternative derives without terms (:meth:`_derive_plain`):
+        the where goal is one builtin of plain values (``pos_multiply``, see
+        :func:`where.plain_value`) reading value columns and binding a head variable, the
+        other head arguments constants. None when the terms' path must run."""
+        eng = self.eng
+        if eng.store.dialect.from_column is not None or residual.unknown or residual.reads:
+            return None
+        shape = residual.plain_function(eng.kb.engine)
+        if shape is None:
+            return None
+        names, out_name, fn = shape
+        base = sql.k + 2
+        by_name = {name: v for v, name in residual.inputs}
+        position = {id(v): base + i for i, v in enumerate(sql.value_vars)}
+        columns = []
+        for name in names:
+            v = by_name.get(name)
+            if v is None or id(v) not in position:
+                return None
+            columns.append(position[id(v)])
+        out_var = next((v for v, name in residual.outputs if name == out_name), None)
+        head = []
+        for a in sql.head_args:
+            a = deref(a)
+            if out_var is not None and a is out_var:
+                head.append(None)
+            elif type(a) is not Var and is_ground(a):
+                try:
+                    head.append(eng.encode(a))
+                except Unencodable:
+                    return None
+            else:
+                return None
+        if None not in head:
+            return None
+        return columns, fn, head
+
+    def _derive_plain(self, n: int, row: tuple, now: float) -> bool | None:
+        """:meth:`_derive_from` for an alternative with a plain plan, on the stored values
+        themselves (no terms); None when the values are not plain (the terms' path
+        decides)."""
+        columns, fn, head = self.plain[n]
+        values = []
+        for i in columns:
+            v = plain_value(row[i])
+            if v is None:
+                return None
+            values.append(v)
+        out = fn(values)
+        if out is None:
+            return None
+        try:
+            encoded = self.eng.encode(out)
+        except Unencodable:
+            return None
+        k = self.alts[n].k
+        self._prov_rows.append((n,) + tuple(row[:k]) + (None,) * (self.width - k)
+                               + (row[k], row[k + 1])
+                               + tuple(encoded if h is None else h for h in head) + (now,))
+        return True
 
     def indexes(self) -> list[tuple[str, str]]:
         """(table, column) of the indexes the delta statements need beyond the event tables'
@@ -321,6 +386,10 @@ class RuleRuntime:
     def _derive_from(self, n: int, row: tuple, now: float) -> bool:
         """Derive the complex events of one match (value columns ``row``); raises MustWait.
         Returns whether any was derived."""
+        if self.plain[n] is not None:
+            done = self._derive_plain(n, row, now)
+            if done is not None:
+                return done
         alt = self.alts[n]
         k = alt.k
         bindings = self._bindings(n, row)
