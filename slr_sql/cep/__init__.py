@@ -94,7 +94,7 @@ def attach(kb: Any) -> EventRules:
     kb.store.create_function("slr_cep_arith", -1, _compare_expressions)
     if eng.sync is not None:
         eng.sync.progress_listeners.append(eng.on_progress)
-    eng._sync_rules()
+    eng.sync_rules()
     eng.on_progress()   # a reopened file: decisions that became possible while it was closed
     return eng
 

@@ -62,7 +62,7 @@ def _type(key: tuple[str, int]) -> str:
     return f"{key[0]}/{key[1]}"
 
 
-def _instantiate(t: Any, bindings: dict) -> Any:
+def _head_value(t: Any, bindings: dict) -> Any:
     """The term with the pattern's variables replaced by their values; None if one is
     unbound."""
     t = deref(t)
@@ -71,7 +71,7 @@ def _instantiate(t: Any, bindings: dict) -> Any:
     if type(t) is Struct:
         args = []
         for a in t.args:
-            v = _instantiate(a, bindings)
+            v = _head_value(a, bindings)
             if v is None:
                 return None
             args.append(v)
@@ -417,7 +417,7 @@ class RuleRuntime:
                     b[id(v)] = sol[name]
             values = []
             for a in head_args:
-                t = _instantiate(a, b)
+                t = _head_value(a, b)
                 if t is None:
                     break
                 try:
@@ -759,10 +759,10 @@ class EventRules:
     # ----------------------------------------------------------------- install
     @property
     def active(self) -> bool:
-        self._sync_rules()
+        self.sync_rules()
         return bool(self.rules)
 
-    def _sync_rules(self) -> None:
+    def sync_rules(self) -> None:
         """Follow the kb's declarations (a load replaces them; a failed load restores the
         previous object)."""
         decls = self.kb.declarations
@@ -820,7 +820,7 @@ class EventRules:
 
     def on_load(self, kb: Any) -> None:
         """Load listener (inside the load's transaction)."""
-        self._sync_rules()
+        self.sync_rules()
 
     def on_table(self, name: str, arity: int, table: str) -> None:
         """A new event table: rules reading that type can now match (rebuild their SQL)."""
@@ -1145,7 +1145,7 @@ class EventRules:
 
     # ----------------------------------------------------------------- inspection
     def infos(self) -> list[dict]:
-        self._sync_rules()
+        self.sync_rules()
         out = []
         for rt in self.rules:
             rule = rt.rule
@@ -1215,7 +1215,7 @@ class EventRules:
                 else:
                     continue
                 lines.extend("      " + line for line in _wrap(sql))
-                lines.extend("      plan: " + step for step in self._plan(alt, sql))
+                lines.extend("      plan: " + step for step in self._query_plan_lines(alt, sql))
         lines.append(f"  {_type(rt.head_key)} is complete up to z once "
                      + ", ".join(_type(t) for t in self.inputs.get(rt.head_key, ()))
                      + " are complete up to z and no pending decision ends at or before z")
@@ -1224,7 +1224,7 @@ class EventRules:
                      + (f" (last: {rt.last_error})" if rt.last_error else ""))
         return lines
 
-    def _plan(self, alt: AltSQL, sql: str) -> list[str]:
+    def _query_plan_lines(self, alt: AltSQL, sql: str) -> list[str]:
         """SQLite's query plan of a statement (how the indexes bound it)."""
         params = self.params(float(self.clock.now()))
         params.update(alt.params)
@@ -1242,7 +1242,7 @@ class EventRules:
         from ..parser import parse_program, parse_term
         from .rules import compile_rule, is_event_rule, order_rules
 
-        self._sync_rules()
+        self.sync_rules()
         try:
             term, _ = parse_term(goal, "<explain>")
         except SLRError:
