@@ -210,7 +210,10 @@ class RuleRuntime:
             if v is None:
                 return None
             values.append(v)
-        out = fn(values)
+        try:
+            out = fn(values)
+        except Exception:   # (the terms' path raises what the builtin raises, as before)
+            return None
         if out is None:
             return None
         try:
