@@ -995,12 +995,20 @@ def create_index(name: str, table: str, columns: list[str]) -> str:
 
 
 def max_id(table: str) -> str:
-    """The greatest ``id`` of a (quoted) provenance table, 0 when empty."""
+    """The greatest ``id`` of a (quoted) provenance table, 0 when empty.
+
+    >>> max_id('"slr_cep_m_x"')
+    'SELECT coalesce(max(id), 0) FROM "slr_cep_m_x"'
+    """
     return f"SELECT coalesce(max(id), 0) FROM {table}"
 
 
 def max_seq(table: str) -> str:
-    """The greatest ``seq`` of a (quoted) event table, 0 when empty."""
+    """The greatest ``seq`` of a (quoted) event table, 0 when empty.
+
+    >>> max_seq('"a"')
+    'SELECT coalesce(max(seq), 0) FROM "a"'
+    """
     return f"SELECT coalesce(max(seq), 0) FROM {table}"
 
 
@@ -1015,31 +1023,52 @@ def pending_insert() -> str:
 
 
 def pending_row(values: tuple) -> dict:
-    """The parameters of :func:`pending_insert` for ``values`` in the columns' order."""
+    """The parameters of :func:`pending_insert` for ``values`` in the columns' order.
+
+    >>> pending_row(("k", 0, "term", 1, "[7]", 1.0, 2.0, None, None, None, None, 3.0))["rowids"]
+    '[7]'
+    """
     return dict(zip(_PENDING_COLUMNS, values))
 
 
 def provenance_columns(width: int, arity: int) -> list[str]:
+    """The columns a provenance row is written with (:func:`provenance_insert`).
+
+    >>> provenance_columns(2, 1)
+    ['alt', 'r1', 'r2', 't_start', 't_end', 'h1', 'detected']
+    """
     return (["alt"] + [f"r{p + 1}" for p in range(width)] + ["t_start", "t_end"]
             + [f"h{i + 1}" for i in range(arity)] + ["detected"])
 
 
 def provenance_insert(prov: str, width: int, arity: int) -> str:
     """One match found on the Python side into the provenance table; parameters ``:p0``,
-    ``:p1``, ... in :func:`provenance_columns` order."""
+    ``:p1``, ... in :func:`provenance_columns` order.
+
+    >>> provenance_insert('"m"', 1, 0)
+    'INSERT INTO "m" (alt, r1, t_start, t_end, detected) VALUES (:p0, :p1, :p2, :p3, :p4)'
+    """
     cols = provenance_columns(width, arity)
     return (f"INSERT INTO {prov} ({', '.join(cols)}) VALUES "
             f"({', '.join(f':p{i}' for i in range(len(cols)))})")
 
 
 def pending_of_rule(order: bool) -> str:
-    """The pending decisions of rule ``:rule`` (in decision order when ``order``)."""
+    """The pending decisions of rule ``:rule`` (in decision order when ``order``).
+
+    >>> pending_of_rule(True).endswith("WHERE rule = :rule ORDER BY t_end, t_start, id")
+    True
+    """
     return _PENDING_READ + (" ORDER BY t_end, t_start, id" if order else "")
 
 
 def pending_of_group(waiting: bool) -> str:
     """The pending decisions of one group: rule ``:rule``, alternative ``:alt``, kind
-    ``:kind``, waiting on nothing or on the type ``:wait_type``/``:wait_arity``."""
+    ``:kind``, waiting on nothing or on the type ``:wait_type``/``:wait_arity``.
+
+    >>> "wait_type IS NULL" in pending_of_group(False), "wait_type = :wait_type" in pending_of_group(True)
+    (True, True)
+    """
     if not waiting:
         return (_PENDING_READ + " AND alt = :alt AND kind = :kind AND wait_type IS NULL "
                 "ORDER BY t_end, t_start, id")
@@ -1049,27 +1078,43 @@ def pending_of_group(waiting: bool) -> str:
 
 def rows_by_seq(table: str, arity: int, count: int) -> str:
     """seq and arguments of the rows of a (quoted) event table whose seq is one of
-    ``:s0`` .. ``:s<count-1>``."""
+    ``:s0`` .. ``:s<count-1>``.
+
+    >>> rows_by_seq('"a"', 1, 2)
+    'SELECT seq, arg1 FROM "a" WHERE seq IN (:s0, :s1)'
+    """
     cols = ", ".join(["seq"] + [f"arg{j + 1}" for j in range(arity)])
     return (f"SELECT {cols} FROM {table} WHERE seq IN "
             f"({', '.join(f':s{i}' for i in range(count))})")
 
 
 def pending_wait() -> str:
-    """Record what pending decision ``:id`` waits for (all NULL: nothing)."""
+    """Record what pending decision ``:id`` waits for (all NULL: nothing).
+
+    >>> pending_wait().endswith("WHERE id = :id")
+    True
+    """
     return ("UPDATE slr_cep_pending SET wait_type = :wait_type, wait_arity = :wait_arity, "
             "wait_time = :wait_time, wait_reason = :wait_reason WHERE id = :id")
 
 
 def pending_delete(count: int) -> str:
-    """Delete the pending decisions ``:d0`` .. ``:d<count-1>``."""
+    """Delete the pending decisions ``:d0`` .. ``:d<count-1>``.
+
+    >>> pending_delete(2)
+    'DELETE FROM slr_cep_pending WHERE id IN (:d0, :d1)'
+    """
     return (f"DELETE FROM slr_cep_pending WHERE id IN "
             f"({', '.join(f':d{i}' for i in range(count))})")
 
 
 def pending_summary() -> str:
     """Per group of rule ``:rule``'s pending decisions: the earliest time it waits for, the
-    earliest end and the count."""
+    earliest end and the count.
+
+    >>> pending_summary().endswith("GROUP BY alt, kind, wait_type, wait_arity")
+    True
+    """
     return ("SELECT alt, kind, wait_type, wait_arity, min(coalesce(wait_time, t_end)), "
             "min(t_end), count(*) FROM slr_cep_pending WHERE rule = :rule "
             "GROUP BY alt, kind, wait_type, wait_arity")
@@ -1078,7 +1123,11 @@ def pending_summary() -> str:
 def complex_copy(table: str, prov: str, arity: int, returning: bool) -> str:
     """Copy the matches after provenance id ``:before`` into the complex event type's
     (quoted) table, arrival ``:now``, robot ``:robot``; ``returning``: the rows stored (a
-    buffer's trigger may refuse some)."""
+    buffer's trigger may refuse some).
+
+    >>> complex_copy('"c"', '"m"', 1, False)
+    'INSERT INTO "c" (arg1, t_start, t_end, arrival, robot) SELECT h1, t_start, t_end, :now, :robot FROM "m" WHERE id > :before ORDER BY id'
+    """
     values = [f"h{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
     cols = [f"arg{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
     sql = (f"INSERT INTO {table} ({', '.join(cols)}, arrival, robot) "
@@ -1088,18 +1137,30 @@ def complex_copy(table: str, prov: str, arity: int, returning: bool) -> str:
 
 
 def complex_read(prov: str, arity: int) -> str:
-    """The head values and times of the matches after provenance id ``:before``."""
+    """The head values and times of the matches after provenance id ``:before``.
+
+    >>> complex_read('"m"', 1)
+    'SELECT h1, t_start, t_end FROM "m" WHERE id > :before ORDER BY id'
+    """
     values = [f"h{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
     return f"SELECT {', '.join(values)} FROM {prov} WHERE id > :before ORDER BY id"
 
 
 def rule_record() -> str:
-    """Record an installed rule in the catalog (once per key)."""
+    """Record an installed rule in the catalog (once per key).
+
+    >>> rule_record().endswith("ON CONFLICT(key) DO NOTHING")
+    True
+    """
     return ("INSERT INTO slr_cep_rules (key, head, rule, policy, source, prov_table, "
             "installed_at) VALUES (:key, :head, :rule, :policy, :source, :prov_table, "
             ":installed_at) ON CONFLICT(key) DO NOTHING")
 
 
 def query_plan(sql: str) -> str:
-    """The statement asking SQLite how it runs ``sql`` (explain)."""
+    """The statement asking SQLite how it runs ``sql`` (explain).
+
+    >>> query_plan("SELECT 1")
+    'EXPLAIN QUERY PLAN SELECT 1'
+    """
     return "EXPLAIN QUERY PLAN " + sql
