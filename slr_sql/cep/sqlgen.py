@@ -600,12 +600,29 @@ class AltSQL:
         return " CROSS JOIN ".join(f"{self.tables[p]} AS {aliases[f'e{p}']}" for p in order)
 
     def _order_from(self, first: int) -> list[int]:
-        """The join order: the given position first, then outwards by distance."""
-        order = [first]
+        """The join order: the given position first, then outwards by distance -- except
+        that a position an anchor bounds by those already joined comes before the others
+        (its few rows then bound the search of the positions between)."""
+        outwards = [first]
         for d in range(1, self.k):
             for p in (first - d, first + d):
                 if 0 <= p < self.k:
-                    order.append(p)
+                    outwards.append(p)
+        if not self.anchors:
+            return outwards
+        order, rest = [first], outwards[1:]
+
+        def bounded(q: int, placed: set) -> bool:
+            return any(b <= placed for _, b in self.anchors.get(q, ()))
+
+        while rest:
+            placed = set(order)
+            p = next((q for q in rest if bounded(q, placed)), None)
+            if p is None:   # the position whose row bounds another one, first
+                p = next((q for q in rest if any(bounded(r, placed | {q})
+                                                 for r in rest if r != q)), rest[0])
+            order.append(p)
+            rest.remove(p)
         return order
 
     def neg_complete(self, aliases: dict[str, str]) -> str:
