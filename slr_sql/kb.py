@@ -84,7 +84,7 @@ def _indicators(t: Any) -> list[tuple[str, int]]:
 
 _TUPLE = frozenset({tuple})
 _FOUR = {4}
-_second = itemgetter(1)
+_first, _second, _fourth = itemgetter(0), itemgetter(1), itemgetter(3)
 
 
 def _all_event_tuples(events: list) -> bool:

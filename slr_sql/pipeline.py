@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from operator import itemgetter
 from typing import TYPE_CHECKING, Any
 
 from .errors import EventRejected, SLRError
@@ -55,6 +56,8 @@ if TYPE_CHECKING:
 __all__ = ["EventPipeline", "STAGES", "with_derived"]
 
 Batch = list[Any]   # (name, args, start, end) events, or an EventBatch of them
+
+_first, _second, _fourth = itemgetter(0), itemgetter(1), itemgetter(3)
 
 STAGES = ("marks", "store", "completeness", "decisions", "buffers", "wake")
 
@@ -84,10 +87,22 @@ def with_derived(stored: Batch, derived: Batch) -> Batch:
     ends = getattr(stored, "ends", None)
     if ends is not None:
         ends = dict(ends)
-        for name, args, _start, end in derived:
-            key = (name, len(args))
+        # column-wise (C loops): one rule round may derive 100,000 events of one type
+        names = set(map(_first, derived))
+        arities = set(map(len, map(_second, derived)))
+        if len(names) == 1 and len(arities) == 1:
+            times = list(map(_fourth, derived))
+            spans = {(names.pop(), arities.pop()): (min(times), max(times))}
+        else:
+            spans = {}
+            for name, args, _start, end in derived:
+                key = (name, len(args))
+                span = spans.get(key)
+                spans[key] = (end, end) if span is None else (min(span[0], end),
+                                                              max(span[1], end))
+        for key, (low, high) in spans.items():
             span = ends.get(key)
-            ends[key] = (end, end) if span is None else (min(span[0], end), max(span[1], end))
+            ends[key] = (low, high) if span is None else (min(span[0], low), max(span[1], high))
         both.ends = ends
     return both
 

@@ -375,6 +375,19 @@ class Database:
         with self.lock:
             return {row[0].lower() for row in self.conn.execute("SELECT name FROM sqlite_master")}
 
+    def view_statements(self, names: Iterable[str]) -> dict[str, str]:
+        """``{view name: the statement that creates it}`` of the named views that exist.
+
+        >>> db = Database(None); _ = db.execute("CREATE VIEW answer AS SELECT 42 AS x")
+        >>> db.view_statements(["answer", "nothing"])
+        {'answer': 'CREATE VIEW answer AS SELECT 42 AS x'}
+        """
+        wanted = list(names)
+        with self.lock:
+            rows = self.conn.execute("SELECT name, sql FROM sqlite_master WHERE type = 'view'")
+            found = {name: sql for name, sql in rows}
+        return {name: found[name] for name in wanted if name in found}
+
     @property
     def max_columns(self) -> int:
         """The most columns a table may have (SQLite's compile-time limit)."""
@@ -736,6 +749,24 @@ class Database:
                     return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
                 finally:
                     cursor.close()
+
+    def run_compiled_many(self, sql: str, rows: list) -> None:
+        """Run a compiled writing statement once per row of parameters (dicts for named
+        parameters, tuples for ``?``), in the current transaction.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.run_compiled("CREATE TABLE t (x)", {})
+        []
+        >>> s.run_compiled_many("INSERT INTO t VALUES (:x)", [{"x": 1}, {"x": 2}])
+        >>> s.run_compiled("SELECT sum(x) FROM t", {})
+        [(3,)]
+        """
+        with self.lock:
+            self.check_open()
+            try:
+                self.conn.executemany(sql, rows)
+            except sqlite3.OperationalError as exc:
+                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
 
     @contextmanager
     def _deadline(self, deadline: float | None, what: str) -> Iterator[None]:
