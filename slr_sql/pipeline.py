@@ -66,11 +66,12 @@ class _Run:
     """One pass of the pipeline on one thread: the stage it is in, and whether a request
     for decisions arrived since its decision stage last looked."""
 
-    __slots__ = ("stage", "again")
+    __slots__ = ("stage", "again", "outer")
 
-    def __init__(self) -> None:
+    def __init__(self, outer: _Run | None) -> None:
         self.stage = STAGES[0]
         self.again = False
+        self.outer = outer   # the run a listener's own add interrupted on this thread
 
 
 def with_derived(stored: Batch, derived: Batch) -> Batch:
@@ -196,11 +197,16 @@ class EventPipeline:
 
     # -- stages ----------------------------------------------------------------------------
     def _enter(self) -> _Run:
-        run = self._runs[threading.get_ident()] = _Run()
+        ident = threading.get_ident()
+        run = self._runs[ident] = _Run(self._runs.get(ident))
         return run
 
     def _leave(self, run: _Run) -> None:
-        self._runs.pop(threading.get_ident(), None)
+        ident = threading.get_ident()
+        if run.outer is None:
+            self._runs.pop(ident, None)
+        else:
+            self._runs[ident] = run.outer
 
     def _insert(self, events: EventBatch, atomic: bool) -> tuple[list[Any], Batch]:
         """Stage 2: store the batch; with event rules, detect in the same transaction."""

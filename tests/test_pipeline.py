@@ -84,6 +84,24 @@ def test_a_request_for_decisions_from_the_last_stage_joins_the_run(kb, clock):
     assert kb.query("n^[S, E]") == [{"S": 1.0, "E": 5.0}]
 
 
+def test_a_listener_adding_events_runs_a_pipeline_of_its_own(kb, clock):
+    kb.load(RULE)
+    after: list = []
+
+    def add_more(heard):
+        if heard.batches == [["a", "b"]]:
+            kb.add("z^6")                   # the outer run goes on after this add
+            after.append(kb._pipeline.stage())
+            clock.set(20.0)                 # ... and still takes requests for decisions
+
+    heard = Heard(kb, add_more)
+    kb.add_listeners.append(heard)
+    kb.add_many(["a^1", "b^5"])
+    assert heard.batches == [["a", "b"], ["z"], ["n"]]
+    assert after == ["wake"]
+    assert kb._pipeline.stage() is None
+
+
 def test_a_stream_clock_moved_by_the_add_decides_in_the_same_add():
     with slr_sql.open(clock=StreamClock()) as kb:
         kb.load(RULE + ":- in_order(z/0).\n")
