@@ -28,7 +28,9 @@ No stage calls back into an earlier one. A request for decisions that arrives wh
 thread is already running the pipeline (a ``StreamClock`` moving while stage 3 observes
 the events, a listener of stage 6 setting a ``ManualClock``) does not start a second run
 inside the first: it joins the run under way, which goes back to stage 4 before it ends.
-Other threads run the pipeline side by side; the store's transactions order their writes.
+An add made by a listener in stage 6 is a new batch: it runs a pipeline of its own, then
+the interrupted run goes on. Other threads run the pipeline side by side; the store's
+transactions order their writes.
 
 >>> import slr_sql
 >>> kb = slr_sql.open(); kb.load("c(X) <- a(X) seq b(X).")
