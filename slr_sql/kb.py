@@ -1304,10 +1304,13 @@ class KnowledgeBase:
             timeout: float | None = None) -> tuple[list[str], list[tuple]]:
         """Run one SQL statement on the store's database; returns (column names, rows).
         Read-only unless ``write=True``; every failure is an :class:`SLRError`
-        (:class:`SLRTimeout` past ``timeout`` seconds).
+        (:class:`SLRTimeout` past ``timeout`` seconds). ``params``: values for ``?``
+        placeholders (a sequence) or for ``:name`` ones (a mapping), on either backend.
 
         >>> kb = open(); kb.add("p(a)^1"); kb.sql("SELECT arg1, t_end FROM p")
         (['arg1', 't_end'], [('a', 1.0)])
+        >>> kb.sql("SELECT :x + 1 AS y", {"x": 41})
+        (['y'], [(42,)])
         """
         from .store import DatabaseError
 

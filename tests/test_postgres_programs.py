@@ -52,3 +52,16 @@ def test_text_with_u0000_is_a_value_on_both_backends_and_a_name_only_on_sqlite(b
         else:
             assert rejected == [] and kb.query("'n\\0\\'(X)^_") == [{"X": 1}]
         assert [a["X"] for a in kb.query("p(X)^_")] == ["a\x00b", "ok"]
+
+
+def test_sql_takes_question_mark_and_named_parameters_on_both_backends(backend):
+    """``kb.sql``'s placeholders are the API's (``?`` with a sequence, ``:name`` with a
+    mapping) on either backend; a mapping is never taken for the sequence of its keys."""
+    with slr_sql.open(backend) as kb:
+        kb.add_many(["p(a)^1", "p(b)^2", "p(c)^3"])
+        _, rows = kb.sql("SELECT arg1 FROM p WHERE t_end >= ? ORDER BY t_end", [2.0])
+        assert rows == [("b",), ("c",)]
+        _, rows = kb.sql("SELECT arg1 FROM p WHERE t_end = :t AND arg1 = :a", {"t": 3.0, "a": "c"})
+        assert rows == [("c",)]
+        _, rows = kb.sql("SELECT count(*) FROM p WHERE arg1 LIKE '%'")   # a % as written
+        assert rows[0][0] == 3

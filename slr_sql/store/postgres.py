@@ -32,7 +32,7 @@ from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 from ..errors import SLRBusy, SLRError, SLRServerUnreachable, SLRTimeout
 from .dialect import POSTGRES
 from .schema import postgres_migration_scripts
-from .sqltext import quote_identifier
+from .sqltext import bound_parameters, quote_identifier
 
 __all__ = ["PgDatabase", "PgStatementError", "is_postgres_url", "split_url"]
 
@@ -505,7 +505,13 @@ class PgDatabase:
                 if timeout is not None:
                     raw.execute(f"SET LOCAL statement_timeout = {max(1, int(timeout * 1000))}")
                 cursor = raw.cursor()
-                cursor.execute(query, tuple(params) or None, prepare=False)
+                # the API's placeholders (`?`, `:name`) in psycopg's style, as on SQLite;
+                # without parameters the text goes as written (a `%` stays a `%`)
+                bound = bound_parameters(params)
+                if bound:
+                    cursor.execute(self.dialect.statement(query), bound, prepare=False)
+                else:
+                    cursor.execute(query, None, prepare=False)
                 columns = [d.name for d in cursor.description] if cursor.description else []
                 rows = [tuple(r) for r in cursor.fetchall()] if cursor.description else []
                 if own:
