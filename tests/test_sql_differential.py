@@ -13,6 +13,10 @@ actually run as SQL (the rest exercise the fallbacks).
 from __future__ import annotations
 
 import collections
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
@@ -22,6 +26,7 @@ from slr_sql.errors import SLRError
 from slr_sql.planner import plan_for
 from slr_sql.terms import Struct, Var
 
+HAVE_SWIPL = shutil.which("swipl") is not None
 STATS = collections.Counter()
 EVENTS: dict = {}
 NEGATED_DISJUNCTIONS: set = set()   # texts of the generated \+ (A ; B), to count their plans
@@ -350,3 +355,86 @@ def test_an_event_time_taken_from_a_stored_list_is_an_interval():
            ["f(O, N), b(P)^N", "f(O, N), prev(b(P)^N, 5)", "f(O, N), next(b(P)^N, [0, 5])"],
            None))
 
+
+
+# -- a time known only at run time may be a list [S, E]: the goal is then an interval goal.
+# Its stamp is read when the goal is reached (as call/1 reads a goal term), whether the time
+# comes straight from a stored column, from a part of a stored compound, or from a query
+# parameter; SQL checks both readings (a number: a point, [S, E]: an interval) in one
+# statement. SWI-Prolog is the oracle for the plain event goals: the stored events are
+# facts in store order and an event goal reads its stamp when called (STAMP_MODEL).
+
+STAMP_PROGRAM = ("f(z, g(3)).\n" * 6     # enough rows for a fact table
+                 + "f(x, g(1)). f(x, g([1,2])). f(y, g([1.0,2.0])). f(w, g([1,x])).\n"
+                 + "f(v, g(x)). f(u, g([2])).\n"
+                 + "k(z, 3).\n" * 6 + "k(x, 1). k(x, [1,2]). k(y, [2]).\n"
+                 + "pos(E^T, T) :- E^T.\n")
+STAMP_EVENTS = ["b(x)^[1.0,2.0]", "b(z)^1", "b(q)^[1,1]", "b(r)^2"]
+# the SWI-Prolog side: b/3 holds the stored events (times matched by value, docs/semantics.md
+# "Stored times match by value"), '$stamp'/3 splits a stamp the way a reached goal is read
+STAMP_MODEL = """
+b_stored(z, 1.0, 1.0). b_stored(q, 1.0, 1.0). b_stored(x, 1.0, 2.0). b_stored(r, 2.0, 2.0).
+'$tm'(T, T0) :- var(T), !, T = T0.
+'$tm'(T, T0) :- number(T), T =:= T0.
+b(P, S, E) :- b_stored(P, S0, E0), '$tm'(S, S0), '$tm'(E, E0).
+'$stamp'(T, S, E) :- nonvar(T), T = [S0|R], nonvar(R), R = [E0|R2], R2 == [], !,
+    S = S0, E = E0.
+'$stamp'(T, T, T).
+'$event'(b(P), T) :- '$stamp'(T, S, E), b(P, S, E).
+pos(E^T, T) :- '$event'(E, T).
+"""
+ONE_G1 = [{"O": "x", "N": 1, "P": "z"}, {"O": "x", "N": 1, "P": "q"}]
+LISTS = [{"O": "x", "N": [1, 2], "P": "x"}, {"O": "y", "N": [1.0, 2.0], "P": "x"}]
+
+
+def _canonical(v) -> str:
+    """A value of an answer as SWI-Prolog's write_canonical/1 prints it (simple atoms)."""
+    if type(v) is list:
+        return "[" + ",".join(_canonical(x) for x in v) + "]"
+    return repr(v) if type(v) is float else str(v)
+
+
+def swipl_rows(goal: str, names: list[str]) -> list[str]:
+    """The rows of ``goal`` over STAMP_PROGRAM's facts and STAMP_MODEL in SWI-Prolog, each
+    the list of ``names``' values as write_canonical/1 prints it."""
+    facts = "\n".join(line for line in STAMP_PROGRAM.splitlines() if not line.startswith("pos("))
+    program = (":- style_check(-singleton).\n" + facts + "\n" + STAMP_MODEL
+               + f"main :- forall(({goal}), (write_canonical([{', '.join(names)}]), nl)).\n")
+    with tempfile.TemporaryDirectory(prefix="slr_stamp_") as d:
+        path = Path(d) / "stamps.pl"
+        path.write_text(program)
+        out = subprocess.run(["swipl", "-q", "-g", "main", "-t", "halt", str(path)],
+                             capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    return out.stdout.splitlines()
+
+
+@pytest.mark.parametrize("goal, args, swi_goal, expected", [
+    # a part of a stored compound (the narrower case: it stayed compiled and disagreed)
+    ("f(O, g(N)), b(P)^N", {}, "f(O, g(N)), '$event'(b(P), N)", ONE_G1 + LISTS),
+    # a stored column
+    ("k(O, N), b(P)^N", {}, "k(O, N), '$event'(b(P), N)", ONE_G1 + LISTS[:1]),
+    # a query parameter taken apart by a rule head (position/2-style rules)
+    ("pos(b(P)^T, W)", {"T": [1, 2]}, "T = [1, 2], pos(b(P)^T, W)",
+     [{"P": "x", "T": [1, 2], "W": [1, 2]}]),
+    ("pos(b(P)^T, W)", {"T": 1}, "T = 1, pos(b(P)^T, W)",
+     [{"P": "z", "T": 1, "W": 1}, {"P": "q", "T": 1, "W": 1}]),
+    # prev and next read their pattern's stamp the same way
+    ("f(O, g(N)), prev(b(P)^N, 5)", {}, None, ONE_G1 + LISTS),
+    ("f(O, g(N)), next(b(P)^N, [0, 5])", {}, None, ONE_G1 + LISTS),
+    ("k(O, N), prev(b(P)^N, [0, 5])", {}, None, ONE_G1 + LISTS[:1]),
+])
+def test_an_event_time_that_is_a_list_at_run_time_is_an_interval(goal, args, swi_goal,
+                                                                   expected):
+    with slr_sql.open(clock=slr_sql.ManualClock(10.0)) as kb:
+        kb.load(STAMP_PROGRAM)
+        kb.add_many(STAMP_EVENTS)
+        entry = plan_for(kb, kb._plan(goal, tuple(args)), False)
+        assert not hasattr(entry, "reason"), kb.explain(goal)   # one SQL statement
+        sql = kb.query(goal, args=args)
+        kb.sql_enabled = False
+        assert kb.query(goal, args=args) == sql == expected
+    if swi_goal is not None and HAVE_SWIPL:    # CI installs SWI-Prolog
+        names = list(expected[0])
+        assert swipl_rows(swi_goal, names) == [
+            "[" + ",".join(_canonical(a[n]) for n in names) + "]" for a in expected]
