@@ -455,6 +455,11 @@ BOUNDARY_EVENTS = ["a(x)^1", "b(y)^1"]
     ("a(x)^T, aggregate_all(count, b(_)^_, N), T \\= N", [{"T": 1.0, "N": 1}]),
     ("a(x)^T, aggregate_all(count, b(_)^_, N), T =:= N", [{"T": 1.0, "N": 1}]),
     ("b(y)^T, a(x)^S, T = S", [{"T": 1.0, "S": 1.0}]),
+    # max/min of nothing fail, the sum of nothing is 0 (a goal that fails when compiled)
+    ("aggregate_all(max(X), fail, M)", []),
+    ("aggregate_all(min(X), (f(X), fail), M)", []),
+    ("f(A), aggregate_all(max(X), (X = A, fail), M)", []),
+    ("aggregate_all(sum(X), fail, M)", [{"M": 0}]),
 ])
 def test_compiled_boundaries_agree_with_the_interpreter(goal, expected):
     with slr_sql.open(clock=slr_sql.ManualClock(10.0)) as kb:
