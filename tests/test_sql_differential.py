@@ -13,6 +13,7 @@ actually run as SQL (the rest exercise the fallbacks).
 from __future__ import annotations
 
 import collections
+import re
 import shutil
 import sqlite3
 import subprocess
@@ -23,7 +24,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 import slr_sql
-from slr_sql.errors import SLRError
+from slr_sql.errors import SLREvaluationError, SLRError
 from slr_sql.planner import plan_for
 from slr_sql.terms import Struct, Var
 
@@ -479,6 +480,15 @@ BOUNDARY_EVENTS = ["a(x)^1", "b(y)^1"]
     ("aggregate_all(min(X), (f(X), fail), M)", []),
     ("f(A), aggregate_all(max(X), (X = A, fail), M)", []),
     ("aggregate_all(sum(X), fail, M)", [{"M": 0}]),
+    # a unary minus or another operator is no witness (only X-W is): these compile
+    ("aggregate_all(max(-X), f(X), M)", [{"M": -1}]),
+    ("aggregate_all(max(X+1), f(X), M)", [{"M": 3}]),
+    ("aggregate_all(min(X*2), f(X), M)", [{"M": 2}]),
+    # call/1 and call/N: the extra arguments are appended, none for call/1
+    ("f(A), call(true)", [{"A": 1}, {"A": 2}] * 4),
+    ("call(f, A)", [{"A": 1}, {"A": 2}] * 4),
+    ("call(f(A))", [{"A": 1}, {"A": 2}] * 4),
+    ("f(A), call(=, A, B)", [{"A": 1, "B": 1}, {"A": 2, "B": 2}] * 4),
 ])
 def test_compiled_boundaries_agree_with_the_interpreter(goal, expected):
     with slr_sql.open(clock=slr_sql.ManualClock(10.0)) as kb:
@@ -510,3 +520,18 @@ def test_an_if_then_else_condition_in_a_branch_takes_its_first_solution_in_store
         assert kb.query(goal) == [{"O": "y", "T": 2.0, "X": "y"}]
         kb.sql_enabled = False
         assert kb.query(goal) == [{"O": "y", "T": 2.0, "X": "y"}]
+
+
+@pytest.mark.parametrize("goal, shown", [
+    ("prev(a(X)^T, [2])", "[2]"),
+    ("f(A), prev(a(X)^T, [2, 3, 4])", "[2,3,4]"),
+    ("next(a(X)^T, [0])", "[0]"),
+])
+def test_an_interval_of_another_length_is_a_type_error(goal, shown):
+    with slr_sql.open(clock=slr_sql.ManualClock(10.0)) as kb:
+        kb.load(BOUNDARY_PROGRAM)
+        kb.add_many(BOUNDARY_EVENTS)
+        for sql in (True, False):
+            kb.sql_enabled = sql
+            with pytest.raises(SLREvaluationError, match=re.escape(f"type_error(interval,{shown})")):
+                kb.query(goal)
