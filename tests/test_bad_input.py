@@ -179,6 +179,14 @@ def test_a_rejected_event_is_named_with_its_arguments(kb, args):
     assert kb.query("findall(X, p(X, _)^_, L)") == [{"L": []}]
 
 
+@pytest.mark.parametrize("name, written", [("ok", "ok"), ("My Event", "'My Event'"),
+                                           ("it's", "'it\\'s'")])
+def test_a_rejected_event_without_arguments_is_named_as_an_atom(kb, name, written):
+    with pytest.raises(EventRejected) as raised:
+        kb.add_event(name, [], float("inf"))
+    assert str(raised.value) == f"{written}^inf: event times must be finite (not inf or NaN)"
+
+
 def test_arithmetic_times_are_still_evaluated(kb):
     kb.add("foo(1)^(2 + 0.5)")
     kb.add("foo(2)^[1, 2*2]")
