@@ -149,6 +149,18 @@ def test_a_where_equality_of_event_arguments_is_decided_in_sql(kb, where, shown)
     assert kb.explain("c(X)").count(f"where, in SQL: {shown}") == 1
 
 
+@pytest.mark.parametrize("policy", ["recent", "chronological", "unrestricted"])
+def test_a_cnot_inside_a_sequence_leaves_the_valid_sub_match_to_every_policy(kb, clock,
+                                                                           policy):
+    """``((a seq b) cnot x) seq d``: b^4 with a^1 is cancelled by x^3, b^2 with a^1 is not;
+    so the only sub-match is a^1-b^2, and d^5 completes it under every policy (recent's
+    newest b is the newest of a valid sub-match, not b^4)."""
+    kb.load(f":- consumption({policy}).\nc(X) <- ((a(X) seq b(X)) cnot x(X)) seq d(X).")
+    kb.add_many(["a(1)^1", "b(1)^2", "x(1)^3", "b(1)^4", "d(1)^5"])
+    clock.set(100.0)
+    assert intervals(kb) == [(1, 1.0, 5.0)]
+
+
 def test_where_comparison_of_a_non_number_is_no_match(kb):
     kb.load("c(X) <- a(X, R) seq b(X) where R > 60.")
     kb.add_many(["a(1, high)^1", "a(2, 70)^1", "a(3, pi)^1", "a(4, 123456789012345678901234)^1",
