@@ -7,7 +7,8 @@
 # $MUTATION_WORKDIR/NAME/ (default /tmp/slr-mutation); the summary is printed at the end.
 # BUDGET=SECONDS stops the run after that long (SIGINT: cosmic-ray puts the module back);
 # cosmic-ray runs the pending mutants in random order, so the mutants run by then are a
-# uniform random subset of the sample (the summary counts them).
+# uniform random subset of the sample (the summary counts them). SEED=N draws another
+# sample (default 19).
 set -eu
 name=$1
 sample=${2:-}
@@ -19,7 +20,7 @@ mkdir -p "$work"
 cd "$work"
 cosmic-ray init "mutation/$name.toml" "$name.sqlite"
 if [ -n "$sample" ]; then
-    python mutation/choose.py "$name.sqlite" --sample "$sample"
+    python mutation/choose.py "$name.sqlite" --sample "$sample" --seed "${SEED:-19}"
 else
     python mutation/choose.py "$name.sqlite"
 fi
