@@ -489,6 +489,9 @@ BOUNDARY_EVENTS = ["a(x)^1", "b(y)^1"]
     ("call(f, A)", [{"A": 1}, {"A": 2}] * 4),
     ("call(f(A))", [{"A": 1}, {"A": 2}] * 4),
     ("f(A), call(=, A, B)", [{"A": 1, "B": 1}, {"A": 2, "B": 2}] * 4),
+    # a \= with a variable of its own is decided by the statement (nothing is bound)
+    ("f(A), A \\= g(_)", [{"A": 1}, {"A": 2}] * 4),
+    ("f(A), g(B) \\= A, B = 1", [{"A": 1, "B": 1}, {"A": 2, "B": 1}] * 4),
 ])
 def test_compiled_boundaries_agree_with_the_interpreter(goal, expected):
     with slr_sql.open(clock=slr_sql.ManualClock(10.0)) as kb:
@@ -496,6 +499,7 @@ def test_compiled_boundaries_agree_with_the_interpreter(goal, expected):
         kb.add_many(BOUNDARY_EVENTS)
         entry = plan_for(kb, kb._plan(goal, ()), False)
         assert not hasattr(entry, "reason"), kb.explain(goal)   # one SQL statement
+        assert entry.run(kb, {}, None, None) == expected         # no hand-over at run time
         assert kb.query(goal) == expected
         kb.sql_enabled = False
         assert kb.query(goal) == expected
