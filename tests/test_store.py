@@ -557,3 +557,21 @@ def test_one_name_with_two_arities_in_one_batch(tmp_path, order):
         twos = sorted(str(e) for e in order if "," in e)
         assert [f"p({r['X']})^{int(r['T'])}" for r in kb.query("p(X)^T")] == ones
         assert [f"p({r['X']},{r['Y']})^{int(r['T'])}" for r in kb.query("p(X, Y)^T")] == twos
+
+
+def test_a_lookup_read_across_a_rolled_back_add_loses_no_row(tmp_path):
+    """A scan that has handed out its first rows goes on where it was after an atomic add
+    on the same store failed and rolled back the table of a new type (SQLite aborts the open
+    read when a rollback undoes a schema change)."""
+    import slr_sql
+
+    with slr_sql.open(tmp_path / "t.db", clock=slr_sql.ManualClock(1000.0)) as kb:
+        assert kb.add_many([f"p({i})^{i}" for i in range(300)]) == []
+        rows = kb.store.scan("p", 1)
+        first = [next(rows) for _ in range(5)]
+        with pytest.raises(EventRejected):
+            kb.add_many(["p(1000)^1000", "fresh(1)^1", "p(x)^nan"], atomic=True)
+        seen = first + list(rows)
+        assert [args[0] for args, *_ in seen] == list(range(300))
+        assert kb.query("findall(X, (p(X)^_, X >= 1000), L)") == [{"L": []}]
+        assert kb.store.table_for("fresh", 1) is None
