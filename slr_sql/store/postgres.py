@@ -210,6 +210,15 @@ class PgConnection:
         self.last_rowcount = cursor.rowcount
         return PgCursor(cursor, self)
 
+    def execute_script(self, sql: str) -> PgCursor:
+        """Run SQL text exactly as written (no parameters: DDL, trigger functions whose
+        bodies hold ``%``, ``?`` or ``:`` of their own); several statements may be given."""
+        self._alive()
+        cursor = self.raw.cursor()
+        self._guard(lambda: cursor.execute(sql, None, prepare=False))
+        self.last_rowcount = cursor.rowcount
+        return PgCursor(cursor, self)
+
     def close(self) -> None:
         # closing a connection the server already dropped: nothing is left to close
         with suppress(_psycopg().Error):
