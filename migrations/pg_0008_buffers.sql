@@ -6,14 +6,20 @@
 -- json_type names them ('integer' and 'real' from the number's spelling), so that the two
 -- backends keep Prolog's 1 \= 1.0 inside compounds alike.
 
--- The JSON of a stored value: NULL unless it is JSON (a compound, list, string...).
+-- The JSON of a stored value: NULL unless it is JSON (a compound, list, string...). In
+-- plpgsql, not SQL: the planner would fold the cast of a constant text inside a CASE arm
+-- (and raise) even where the arm's condition is false.
 DO $$
 BEGIN
     IF current_setting('server_version_num')::int >= 160000 THEN
-        EXECUTE $f$CREATE FUNCTION slr_json(v TEXT) RETURNS json LANGUAGE sql IMMUTABLE
+        EXECUTE $f$CREATE FUNCTION slr_json(v TEXT) RETURNS json LANGUAGE plpgsql IMMUTABLE
             PARALLEL SAFE AS $b$
-            SELECT CASE WHEN left(v, 1) IN ('[', '{', '"') AND pg_input_is_valid(v, 'json')
-                        THEN v::json END $b$$f$;
+            BEGIN
+                IF left(v, 1) IN ('[', '{', '"') AND pg_input_is_valid(v, 'json') THEN
+                    RETURN v::json;
+                END IF;
+                RETURN NULL;
+            END $b$ $f$;
     ELSE
         EXECUTE $f$CREATE FUNCTION slr_json(v TEXT) RETURNS json LANGUAGE plpgsql IMMUTABLE
             PARALLEL SAFE AS $b$
@@ -21,7 +27,7 @@ BEGIN
                 IF left(v, 1) IN ('[', '{', '"') THEN RETURN v::json; END IF;
                 RETURN NULL;
             EXCEPTION WHEN others THEN RETURN NULL;
-            END $b$$f$;
+            END $b$ $f$;
     END IF;
 END $$;
 

@@ -123,11 +123,14 @@ class EventWriter:
             if ends is not None:
                 events.ends = ends
             return errors
-        with self.db.transaction():
+        server = self.db.dialect.to_column is not None
+        if server:
             arrival = float(self.db.clock.now())
-            if self.db.dialect.to_column is None:
-                # buffers: "now" for the buffer triggers (SQLite's only: on a
-                # server every writer would wait for the one row's lock)
+            self._record_now_for_tbuffers(arrival)
+        with self.db.transaction():
+            if not server:
+                arrival = float(self.db.clock.now())
+                # buffers: "now" for the buffer triggers, in the add's transaction
                 self.record_now(arrival)
             for base, chunk in _chunks(events):
                 if not self._insert_uniform(chunk, arrival, ends):
@@ -324,6 +327,18 @@ class EventWriter:
                 return
         with self.db.transaction():
             self.db.conn.execute(sql, (now, now))
+
+    def _record_now_for_tbuffers(self, now: float) -> None:
+        """On a server: record ``now`` before an add, only while a tBuffer is active (its
+        triggers read it), as a statement of its own outside the add's transaction (one row
+        that every writer would otherwise hold locked until its commit)."""
+        if now != now:
+            return
+        with self.db.lock:
+            self.db.check_open()
+            self.db.conn.execute(
+                "UPDATE slr_clock SET now = ? WHERE id = 1 AND now <> ? AND EXISTS (SELECT 1 "
+                "FROM slr_buffers WHERE kind = 'tBuffer' AND removed_at IS NULL)", (now, now))
 
     def recorded_now(self) -> float:
         """The "now" buffer triggers currently use (``-inf`` before the first record).
