@@ -279,6 +279,22 @@ def test_buffer_declared_before_its_type_exists_and_quoted_constants(open_kb):
         ("it's", 2.0), ("other", 3.0), ("other", 4.0)]
 
 
+@pytest.mark.parametrize("text", ["50%", "a?b", ":name", "$slr$", "x\\y", "é ✓", "1", "[x"])
+def test_constants_that_mean_something_to_sql_are_only_constants(open_kb, text):
+    kb = open_kb(0)
+    escaped = text.replace("\\", "\\\\")
+    atom, string = f"'{escaped}'", f'"{escaped}"'
+    kb.add_many([f"say({atom}, f({atom}))^1", f"say({atom}, f({atom}))^2",
+                 "say(other, f(other))^3", "say(other, f(other))^4"])
+    kb.add_buffer(f"say({atom}, f({atom}))", keep_last=1)   # applied to the stored rows
+    kb.load(f"cBuffer(said(_, f(_), {string}), 1).")        # a string inside JSON
+    kb.add_many([f"say({atom}, f({atom}))^5", f"said(x, f(x), {string})^6",
+                 f"said(y, f(y), {string})^7", f"said(z, f(z), {atom})^8"])
+    assert [(a["T"], a["W"] == text) for a in kb.query("say(W, _)^T")] == [
+        (3.0, False), (4.0, False), (5.0, True)]
+    assert [a["T"] for a in kb.query("said(_, _, _)^T")] == [7.0, 8.0]
+
+
 def test_pattern_with_time_stamp_and_repeated_variables(open_kb):
     kb = open_kb(0)
     kb.load("cBuffer(pair(X, X)^T, 1).")

@@ -193,7 +193,8 @@ class SQLiteBufferPrinter:
     def mixed(self, t: MixedTerm, row: str) -> str:
         a, b = f"{row}arg{t.column}", f"{row}arg{t.inside}"
         p = sql_literal(self.path(t.path))
-        tag = lambda key: sql_literal(self.path(t.path + (key,)))  # noqa: E731
+        def tag(key: str) -> str:
+            return sql_literal(self.path(t.path + (key,)))
         first = f"substr({a}, 1, 1)"
         quote = sql_literal('"')
         atom = sql_literal('$."$atom"')
@@ -406,8 +407,12 @@ class PostgresBufferPrinter:
         drops the trigger too)."""
         q = quote_identifier(name)
         when_clause = f"\nWHEN ({when})" if when else ""
-        return (f"CREATE FUNCTION {q}() RETURNS trigger LANGUAGE plpgsql AS $slr$\n"
-                f"{declare}BEGIN\n{body}\nEND $slr$;\n"
+        tag, n = "$slr$", 0
+        while tag in body:   # a pattern constant holding the quote's own tag
+            n += 1
+            tag = f"$slr{n}$"
+        return (f"CREATE FUNCTION {q}() RETURNS trigger LANGUAGE plpgsql AS {tag}\n"
+                f"{declare}BEGIN\n{body}\nEND {tag};\n"
                 f"CREATE TRIGGER {q} {timing} ON {table} FOR EACH ROW{when_clause} "
                 f"EXECUTE FUNCTION {q}()")
 
@@ -565,7 +570,7 @@ class BufferTables:
                 "RETURNING id",
                 (kind, source, pattern_text, type_name, type_arity, amount, t1, t2, origin,
                  float(self.db.clock.now())))
-            buffer_id = cursor.fetchone()[0]
+            buffer_id = int(cursor.fetchone()[0])
             self.db.conn.execute(self.db.dialect.insert_ignore("slr_counters", "buffer_id", "?"),
                                  (buffer_id,))
             return buffer_id
@@ -668,7 +673,9 @@ class BufferTables:
         if sql is None:
             return 0
         with self.db.transaction():
-            deleted = self.db.conn.execute(sql).rowcount
+            run = self.db.conn.execute if self.printer is SQLITE_BUFFERS else \
+                self.db.conn.execute_script   # the text as printed (no parameters)
+            deleted = int(run(sql).rowcount)
             if deleted > 0:
                 self.db.conn.execute("UPDATE slr_counters SET pruned = pruned + ? "
                                      "WHERE buffer_id = ?", (deleted, int(plan.id)))

@@ -22,8 +22,6 @@ import math
 from dataclasses import dataclass
 from typing import Any, Iterable
 
-from ..errors import SLRError
-from .buffering import BufferTables
 from .connection import Database
 from .sqltext import RESERVED_PREFIXES, quote_identifier, sql_literal
 
@@ -32,7 +30,7 @@ def sql_text_literal(text: str) -> str:
     """A text constant for a statement that cannot take parameters (a function body)."""
     return sql_literal(text)
 
-__all__ = ["Catalog", "BufferTables", "ProgramText", "PROGRAM_VERSION", "PROGRESS_VERSION",
+__all__ = ["Catalog", "ProgramText", "PROGRAM_VERSION", "PROGRESS_VERSION",
            "FACTS_VERSION"]
 
 PROGRAM_VERSION = "version/program"    # bumped with every change of slr_program
