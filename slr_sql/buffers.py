@@ -196,8 +196,8 @@ def analyze(pattern: Any) -> Pattern:
 
     >>> from slr_sql.parser import parse_term
     >>> p = analyze(parse_term("inView(face(P, _))", "x")[0])
-    >>> (p.name, p.arity, p.text, len(p.keys))
-    ('inView', 1, 'inView(face(P,_))', 1)
+    >>> (p.name, p.arity, p.text, p.match.keys)
+    ('inView', 1, 'inView(face(P,_))', ((1, ('face', 0)),))
     """
     atom = _strip_time(pattern)
     if type(atom) not in (Struct, Atom):
