@@ -9,7 +9,7 @@
 from .api import KnowledgeBaseAPI, PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import Clock, ManualClock, StreamClock, WallClock
 from .errors import EventRejected, SLRBusy, SLRError, SLREvaluationError, SLRStoreFull, \
-    SLRStoreGone, SLRSyntaxError, SLRTimeout, SLRUnavailable
+    SLRServerUnreachable, SLRStoreGone, SLRSyntaxError, SLRTimeout, SLRUnavailable
 from .kb import KnowledgeBase, open
 from .terms import Atom, String, Struct, Var
 
@@ -29,7 +29,7 @@ __all__ = [
     "open", "connect", "KnowledgeBase", "KnowledgeBaseAPI", "PendingQueryAPI", "SubscriptionAPI",
     "ProgramInfo", "Clock", "WallClock", "ManualClock", "StreamClock",
     "SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRBusy", "EventRejected",
-    "SLRUnavailable", "SLRStoreFull", "SLRStoreGone",
+    "SLRUnavailable", "SLRStoreFull", "SLRStoreGone", "SLRServerUnreachable",
     "Atom", "String", "Struct", "Var",
 ]
 __version__ = "0.1.0"

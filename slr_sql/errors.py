@@ -106,5 +106,20 @@ class SLRStoreGone(SLRUnavailable):
     retry_after = 10
 
 
+class SLRServerUnreachable(SLRUnavailable):
+    """The database server of a ``postgresql://`` store could not be reached, or dropped the
+    connection (a restart, a network outage, an administrator ending the session). The next
+    call connects again. A call that failed before its commit wrote nothing; one whose
+    connection was lost *during* the commit has an outcome only the server knows, so a
+    writer that retries it may store that add twice, never lose it (PostgreSQL's own
+    guarantee for a commit without an answer).
+
+    >>> issubclass(SLRServerUnreachable, SLRUnavailable)
+    True
+    """
+
+    retry_after = 5
+
+
 class EventRejected(SLRError):
     """An event that cannot be stored (non-ground, NaN, start > end, wrong arity, ...)."""

@@ -9,18 +9,30 @@ the MAP file and `all_topics` as the node's ROS parameters (docs/ros.md, "The li
 """
 from pathlib import Path
 
-from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, ExecuteProcess
-from launch.substitutions import LaunchConfiguration
-
 HERE = Path(__file__).resolve().parent
 
 
-def generate_launch_description() -> LaunchDescription:
-    db = LaunchConfiguration("db")
-    mapping = LaunchConfiguration("map")
-    all_topics = LaunchConfiguration("all_topics")
-    node_name = LaunchConfiguration("node_name")
+def bridge_command(db, mapping, all_topics, node_name) -> list:
+    """The bridge's command line; each argument a string or a launch substitution.
+
+    Kept apart from the launch description so that it can be read (and run) without ROS 2's
+    `launch` package: tests run exactly this command with a real ROS node.
+
+    >>> bridge_command("robot.db", "robot.yaml", "false", "slr")[:4]
+    ['slr', 'ros', 'bridge', 'robot.db']
+    """
+    return ["slr", "ros", "bridge", db, "--ros-args",
+            "-p", ["map:=", mapping],
+            "-p", ["all_topics:=", all_topics],
+            "-r", ["__node:=", node_name]]
+
+
+def generate_launch_description():
+    # Imported here so that the command above is usable where `launch` is not installed.
+    from launch import LaunchDescription
+    from launch.actions import DeclareLaunchArgument, ExecuteProcess
+    from launch.substitutions import LaunchConfiguration
+
     return LaunchDescription([
         DeclareLaunchArgument("db", default_value="robot.db",
                               description="the store (a file, or a postgresql:// URL)"),
@@ -30,9 +42,8 @@ def generate_launch_description() -> LaunchDescription:
                               description="also store every unmapped topic"),
         DeclareLaunchArgument("node_name", default_value="slr_bridge"),
         ExecuteProcess(
-            cmd=["slr", "ros", "bridge", db, "--ros-args",
-                 "-p", ["map:=", mapping],
-                 "-p", ["all_topics:=", all_topics],
-                 "-r", ["__node:=", node_name]],
+            cmd=bridge_command(LaunchConfiguration("db"), LaunchConfiguration("map"),
+                               LaunchConfiguration("all_topics"),
+                               LaunchConfiguration("node_name")),
             output="screen"),
     ])

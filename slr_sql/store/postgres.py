@@ -29,7 +29,7 @@ from contextlib import contextmanager, suppress
 from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
-from ..errors import SLRBusy, SLRError, SLRTimeout
+from ..errors import SLRBusy, SLRError, SLRServerUnreachable, SLRTimeout
 from .dialect import POSTGRES
 from .schema import postgres_migration_scripts
 from .sqltext import quote_identifier
@@ -103,7 +103,8 @@ def _error(exc: BaseException, where: str, busy_timeout: float | None = None) ->
     if isinstance(exc, errors.QueryCanceled):
         return SLRTimeout(f"query timed out ({_first_line(exc)})")
     if isinstance(exc, (psycopg.OperationalError, psycopg.InterfaceError)):
-        return SLRError(f"{where}: the server is not reachable ({_first_line(exc)})")
+        return SLRServerUnreachable(f"{where}: the server is not reachable "
+                                    f"({_first_line(exc)})")
     if isinstance(exc, errors.ReadOnlySqlTransaction):
         return SLRError(f"read-only: the statement would change the store "
                         f"({_first_line(exc)}); pass write=True to allow it")
@@ -422,6 +423,16 @@ class PgDatabase:
             return {row[0].lower() for row in self.conn.execute(
                 "SELECT c.relname FROM pg_class c JOIN pg_namespace n ON n.oid = c.relnamespace "
                 "WHERE n.nspname = current_schema()")}
+
+    def view_statements(self, names: Iterable[str]) -> dict[str, str]:
+        """``{view name: the statement that creates it}`` of the named views of the schema."""
+        wanted = list(names)
+        with self.lock:
+            rows = self.conn.execute(
+                "SELECT viewname, definition FROM pg_views WHERE schemaname = current_schema()")
+            found = {name: select for name, select in rows}
+        return {name: f"CREATE VIEW {quote_identifier(name)} AS {found[name]}"
+                for name in wanted if name in found}
 
     max_columns = 1600
 

