@@ -109,3 +109,52 @@ def test_postgres_keeps_and_derives_what_sqlite_does(pg_database, buffers, ops, 
     finally:
         for kb in stores:
             kb.close()
+
+
+def test_concurrent_writers_keep_the_count_of_a_key(postgres_url):
+    """Two connections add events of one key of a count buffer while the first's transaction
+    is open: the second waits for it and prunes what it stored (without the buffer's lock,
+    each would keep its own newest event and the key would hold two)."""
+    import threading
+    import time
+
+    import psycopg
+
+    first = slr_sql.open(postgres_url, clock=ManualClock(10.0))
+    second = slr_sql.open(postgres_url, clock=ManualClock(10.0))
+    try:
+        first.add_buffer("p(K, _)", keep_last=1)
+        first.add("p(a, 1)^1")
+        second.buffers()   # (the program and buffers as stored)
+        done = threading.Event()
+        errors: list = []
+
+        def write() -> None:
+            try:
+                second.add("p(a, 3)^3")
+            except Exception as exc:  # noqa: BLE001 - reported by the assertion below
+                errors.append(exc)
+            done.set()
+
+        with first.store.transaction():
+            first.add("p(a, 2)^2")
+            writer = threading.Thread(target=write)
+            writer.start()
+            # until the second writer has finished or waits on a lock (a deadline, no pause)
+            with psycopg.connect(postgres_url, autocommit=True) as watch:
+                deadline = time.monotonic() + 20.0
+                while not done.is_set() and time.monotonic() < deadline:
+                    waiting = watch.execute(
+                        "SELECT count(*) FROM pg_stat_activity WHERE datname = "
+                        "current_database() AND wait_event_type = 'Lock'").fetchone()[0]
+                    if waiting:
+                        break
+                    done.wait(0.01)
+        writer.join(20.0)
+        assert not writer.is_alive() and errors == []
+        assert [a["V"] for a in first.query("p(a, V)^T")] == [3]
+        (info,) = first.buffers()
+        assert (info.pruned, info.dropped) == (2, 0)
+    finally:
+        first.close()
+        second.close()

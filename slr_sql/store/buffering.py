@@ -451,9 +451,13 @@ class PostgresBufferPrinter:
             same = f"{row_match} AND {self.key_equal(m)}"
             newer = (f"SELECT 1 FROM {t} WHERE {same} AND t_end >= NEW.t_end "
                      f"AND (t_end > NEW.t_end OR t_start > NEW.t_start) LIMIT {n}")
+            # concurrent writers take turns per count buffer until their commits: each
+            # must see the rows the other stored, or both keep N of their own
+            lock = (f"  PERFORM pg_advisory_xact_lock(hashtext(current_schema() || "
+                    f"':buffers'), {bid % 2147483647});\n")
             out[late] = self._trigger(
                 late, t, "BEFORE INSERT", when,
-                f"  IF (SELECT count(*) FROM ({newer}) AS newer) >= {n} THEN\n"
+                f"{lock}  IF (SELECT count(*) FROM ({newer}) AS newer) >= {n} THEN\n"
                 f"{drop}\n  END IF;\n  RETURN NEW;")
             keep = f"slr_buf_{bid}_keep"
             out[keep] = self._trigger(
