@@ -158,3 +158,21 @@ def test_concurrent_writers_keep_the_count_of_a_key(postgres_url):
     finally:
         first.close()
         second.close()
+
+
+def test_a_writer_records_its_now_for_a_time_buffer_another_process_added(postgres_url):
+    """A writer that had no time buffer when it last looked still records its clock's now
+    once another connection added one, so the buffer judges its events by it."""
+    writer = slr_sql.open(postgres_url, clock=ManualClock(200.0))
+    other = slr_sql.open(postgres_url, clock=ManualClock(100.0))
+    try:
+        writer.add("p(a)^190")                       # no buffer yet: nothing to record
+        other.add_buffer("p(_)", keep_seconds=5)     # recorded now: the other's 100
+        assert writer.add_many([("p", ("b",), 150.0, 150.0), ("p", ("c",), 199.0, 199.0)]) == []
+        # judged at the writer's 200: 150 < 200 - 5 is late, 199 is kept; 190 expired
+        assert [a["X"] for a in writer.query("p(X)^T")] == ["c"]
+        (info,) = writer.buffers()
+        assert (info.pruned, info.dropped) == (1, 1)
+    finally:
+        writer.close()
+        other.close()

@@ -575,6 +575,8 @@ class BufferTables:
                 (kind, source, pattern_text, type_name, type_arity, amount, t1, t2, origin,
                  float(self.db.clock.now())))
             buffer_id = int(cursor.fetchone()[0])
+            if kind == "tBuffer" and hasattr(self.db, "tbuffers_active"):
+                self.db.tbuffers_active = True
             self.db.conn.execute(self.db.dialect.insert_ignore("slr_counters", "buffer_id", "?"),
                                  (buffer_id,))
             return buffer_id
@@ -584,6 +586,8 @@ class BufferTables:
         with self.db.transaction():
             self.db.conn.execute("UPDATE slr_buffers SET removed_at = ? WHERE id = ?",
                                  (float(self.db.clock.now()), int(buffer_id)))
+            if hasattr(self.db, "tbuffers_active"):
+                self.db.tbuffers_active = None   # (others may remain: the next add asks)
 
     def count_buffer(self, buffer_id: int, pruned: int = 0, dropped: int = 0) -> None:
         """Add to a buffer's counters."""

@@ -137,9 +137,19 @@ class Catalog:
         """
         with self.db.lock:
             self.db.check_open()
-            rows = dict(self.db.conn.execute(
-                "SELECT key, value FROM slr_meta WHERE key IN (?, ?)",
-                (PROGRAM_VERSION, PROGRESS_VERSION)).fetchall())
+            if self.db.dialect.name == "sqlite":
+                rows = dict(self.db.conn.execute(
+                    "SELECT key, value FROM slr_meta WHERE key IN (?, ?)",
+                    (PROGRAM_VERSION, PROGRESS_VERSION)).fetchall())
+            else:
+                # in the same read: whether a tBuffer is active (a server's adds record
+                # "now" only then, see EventWriter.add_events)
+                rows = dict(self.db.conn.execute(
+                    "SELECT key, value FROM slr_meta WHERE key IN (?, ?) UNION ALL "
+                    "SELECT ?, count(*)::text FROM (SELECT 1 FROM slr_buffers WHERE kind = "
+                    "'tBuffer' AND removed_at IS NULL LIMIT 1) AS timed",
+                    (PROGRAM_VERSION, PROGRESS_VERSION, "tbuffers")).fetchall())
+                self.db.tbuffers_active = rows.get("tbuffers") == "1"
         return int(rows.get(PROGRAM_VERSION, 0)), int(rows.get(PROGRESS_VERSION, 0))
 
     def append_program(self, source: str, filename: str | None = None,

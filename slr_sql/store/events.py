@@ -126,7 +126,8 @@ class EventWriter:
         server = self.db.dialect.to_column is not None
         if server:
             arrival = float(self.db.clock.now())
-            self._record_now_for_tbuffers(arrival)
+            if self.db.tbuffers_active is not False:
+                self._record_now_for_tbuffers(arrival)
         with self.db.transaction():
             if not server:
                 arrival = float(self.db.clock.now())
@@ -331,7 +332,9 @@ class EventWriter:
     def _record_now_for_tbuffers(self, now: float) -> None:
         """On a server: record ``now`` before an add, only while a tBuffer is active (its
         triggers read it), as a statement of its own outside the add's transaction (one row
-        that every writer would otherwise hold locked until its commit)."""
+        that every writer would otherwise hold locked until its commit). Skipped while the
+        last read of the versions found no tBuffer (``db.tbuffers_active`` False: a knowledge
+        base reads them whenever another connection may have committed)."""
         if now != now:
             return
         with self.db.lock:

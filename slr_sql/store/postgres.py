@@ -291,6 +291,8 @@ class PgDatabase:
         self.busy_timeout = busy_timeout
         self.notify_channel = f"slr_{schema}"
         self.write_groups: dict[tuple[str, int], int] = {}
+        # whether a tBuffer is active, as of the last read of the versions (None: unknown)
+        self.tbuffers_active: bool | None = None
         try:
             raw = psycopg.connect(conninfo, autocommit=True)
         except psycopg.Error as exc:
