@@ -436,7 +436,7 @@ class EventStore:
 
     @_doc(Database.data_version)
     def data_version(self) -> int:
-        return self._db.data_version()
+        return self._catalog.data_version()
 
     @_doc(Catalog.program_sources)
     def program_sources(self) -> list[tuple[str, str | None]]:

@@ -101,6 +101,28 @@ class Catalog:
 
     def __init__(self, db: Database):
         self.db = db
+        # a server: the versions read with the last data_version, for the versions() call
+        # that follows it (one round trip for the change check instead of two)
+        self._read_with_change: tuple[int, int] | None = None
+
+    def data_version(self) -> int:
+        """The connection's change counter (see ``Database.data_version``). On a server the
+        same statement reads the program and progress versions and whether a tBuffer is
+        active, for the :meth:`versions` call that follows a move (they are as fresh as the
+        counter: a later commit moves it again)."""
+        if self.db.dialect.name == "sqlite":
+            return int(self.db.data_version())
+        with self.db.lock:
+            self.db.check_open()
+            counter, program, progress, timed = self.db.conn.execute(
+                "SELECT pg_snapshot_xmax(pg_current_snapshot())::text::bigint, "
+                "(SELECT value FROM slr_meta WHERE key = ?), "
+                "(SELECT value FROM slr_meta WHERE key = ?), "
+                "EXISTS (SELECT 1 FROM slr_buffers WHERE kind = 'tBuffer' "
+                "AND removed_at IS NULL)", (PROGRAM_VERSION, PROGRESS_VERSION)).fetchone()
+            self._read_with_change = (int(program or 0), int(progress or 0))
+            self.db.tbuffers_active = bool(timed)
+            return int(counter)
 
     # ------------------------------------------------------------------ program
 
@@ -137,6 +159,9 @@ class Catalog:
         """
         with self.db.lock:
             self.db.check_open()
+            read, self._read_with_change = self._read_with_change, None
+            if read is not None:
+                return read
             if self.db.dialect.name == "sqlite":
                 rows = dict(self.db.conn.execute(
                     "SELECT key, value FROM slr_meta WHERE key IN (?, ?)",

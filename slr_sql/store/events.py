@@ -219,6 +219,7 @@ class EventWriter:
         insert_sql = attrgetter("insert_sql" if with_robot else "insert_unnamed_sql")
         rows: list = []
         append = rows.append
+        by_type: dict[EventType, list] | None = {} if to_column is not None else None
         current_name: Any = None
         current_arity = -1
         current_type: EventType | None = None
@@ -242,7 +243,7 @@ class EventWriter:
                 else:
                     row = (*map(enc, args), start, end, *tail)
                 if arity != current_arity or name != current_name:
-                    if rows:
+                    if rows and by_type is None:
                         executemany(insert_sql(current_type), rows)
                         if ends is not None:
                             _widen_by_rows(ends, current_type, rows, with_robot)
@@ -252,13 +253,24 @@ class EventWriter:
                                     or self._type_for_new_event(name, arity))
                     current_name = name
                     current_arity = arity
+                    if by_type is not None:
+                        rows = by_type.setdefault(current_type, [])
+                        append = rows.append
                 append(row)
             except (BadEvent, Unencodable) as exc:
                 error = self._rejection(index, event, exc)
                 if atomic:
                     raise error from None
                 errors.append(error)
-        if rows:
+        if by_type is not None:
+            # a server: one statement per table, each table's rows in their order (what a
+            # table's seq, its triggers and its journal see is the same as run by run;
+            # tables do not see each other's rows), not one round trip per run of a type
+            for event_type, typed_rows in by_type.items():
+                executemany(insert_sql(event_type), typed_rows)
+                if ends is not None:
+                    _widen_by_rows(ends, event_type, typed_rows, with_robot)
+        elif rows:
             executemany(insert_sql(current_type), rows)
             if ends is not None:
                 _widen_by_rows(ends, current_type, rows, with_robot)

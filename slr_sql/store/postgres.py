@@ -116,6 +116,10 @@ def _first_line(exc: BaseException) -> str:
     return text.splitlines()[0] if text else type(exc).__name__
 
 
+# Fewer rows go in by executemany, which psycopg pipelines into one round trip; COPY takes
+# two (its start is answered before the data goes), and wins only on many rows.
+_COPY_FROM = 64
+
 # INSERT INTO "table" (columns) VALUES (?, ...): nothing but values, so COPY does the same
 _PLAIN_INSERT = re.compile(r'INSERT INTO ("(?:[^"]|"")+"|[A-Za-z_][A-Za-z0-9_]*) '
                            r'\(([A-Za-z0-9_, ]+)\) VALUES \(\?(?:, \?)*\)\Z')
@@ -196,7 +200,7 @@ class PgConnection:
         self._alive()
         cursor = self.raw.cursor()
         plain = _PLAIN_INSERT.match(sql)
-        if plain is not None and len(rows) > 1:
+        if plain is not None and len(rows) > _COPY_FROM:
             # many rows into one table: COPY (one stream) rather than one INSERT per row
             def copy() -> None:
                 with cursor.copy(f"COPY {plain.group(1)} ({plain.group(2)}) FROM STDIN") as out:
