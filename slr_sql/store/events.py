@@ -266,9 +266,11 @@ class EventWriter:
             # a server: one statement per table, each table's rows in their order (what a
             # table's seq, its triggers and its journal see is the same as run by run;
             # tables do not see each other's rows), not one round trip per run of a type
-            for event_type, typed_rows in by_type.items():
-                executemany(insert_sql(event_type), typed_rows)
-                if ends is not None:
+            with self.db.conn.pipeline(max(map(len, by_type.values()), default=0)):
+                for event_type, typed_rows in by_type.items():
+                    executemany(insert_sql(event_type), typed_rows)
+            if ends is not None:
+                for event_type, typed_rows in by_type.items():
                     _widen_by_rows(ends, event_type, typed_rows, with_robot)
         elif rows:
             executemany(insert_sql(current_type), rows)

@@ -215,6 +215,21 @@ class PgConnection:
         self.last_rowcount = cursor.rowcount
         return PgCursor(cursor, self)
 
+    @contextmanager
+    def pipeline(self, rows: int) -> Iterator[None]:
+        """Send the statements of the block together, in one round trip (psycopg's
+        pipeline mode), when none of them copies: each of at most ``rows`` rows."""
+        if rows > _COPY_FROM:
+            yield
+            return
+        self._alive()
+        psycopg = _psycopg()
+        try:
+            with self.raw.pipeline():
+                yield
+        except psycopg.Error as exc:
+            raise _error(exc, self.where, self.busy_timeout) from None
+
     def execute_script(self, sql: str) -> PgCursor:
         """Run SQL text exactly as written (no parameters: DDL, trigger functions whose
         bodies hold ``%``, ``?`` or ``:`` of their own); several statements may be given."""
