@@ -58,22 +58,21 @@ def test_subscribers_behind_share_one_read_per_chunk(db_path):
         assert hub.drain(DEADLINE)          # every one full (10 answers) and lagging
         gate = threading.Event()
         journal_reads = []
-        read = hub._read
+        read = hub._journal_rows
 
-        def counting_read(sql, params=()):
-            if "ORDER BY jid" in sql:
-                journal_reads.append(params)
-                gate.wait(DEADLINE)         # hold the hub until every consumer made room
-            return read(sql, params)
+        def counting_read(info, after_jid, limit):
+            journal_reads.append((after_jid, limit))
+            gate.wait(DEADLINE)             # hold the hub until every consumer made room
+            return read(info, after_jid, limit)
 
-        hub._read = counting_read
+        hub._journal_rows = counting_read
         try:
             taken = [answers_of(s, 5) for s in subs]   # each makes room for 5 more
             gate.set()
             assert hub.drain(DEADLINE)
         finally:
             gate.set()
-            hub._read = read
+            hub._journal_rows = read
         assert taken == [list(range(1, 6))] * subscribers
         # the first read (whoever made room first) and one read for all the others: not one
         # per subscriber
