@@ -228,6 +228,11 @@ class Subscription:
             self._to(new)
 
     @property
+    def closed_from(self) -> SubscriptionState | None:
+        """The state it was in when it was closed (None while it is not closed)."""
+        return self._closed_from
+
+    @property
     def closed(self) -> bool:
         """True once closed or ended (until reached, overflow, error) and taken."""
         return self._state is S.CLOSED or self._state is S.FINISHED
