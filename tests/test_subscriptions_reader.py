@@ -87,3 +87,45 @@ def test_an_in_memory_store_has_no_second_connection_and_still_delivers(kb):
     kb.add_many([f"p({i})^{i}" for i in range(1, 21)])
     assert answers_of(sub, 20) == list(range(1, 21))
     sub.close()
+
+
+def test_events_added_while_another_thread_holds_a_transaction_are_read_on_the_hubs_connection(
+        db_path):
+    """The add path wakes the hub while another thread (here a stand-in for the hub's own
+    housekeeping or a second writer) is inside a transaction: the rows are committed, so the
+    hub reads them on its own connection and delivers them without waiting for that
+    transaction."""
+    with slr_sql.open(db_path) as kb:
+        hub = kb._subscriptions
+        hub.cleanup_interval = 1e9
+        sub = kb.subscribe("p(X)^T", since=0)
+        kb.add("p(0)^0")                      # the type's table exists: steady state
+        assert answers_of(sub, 1) == [0]
+        holding, release = threading.Event(), threading.Event()
+
+        def other_writer():
+            with kb.store.transaction():
+                holding.set()
+                release.wait(DEADLINE)
+
+        thread = threading.Thread(target=other_writer)
+
+        def start_the_other_writer(stored):   # runs after the commit, before the hub's listener
+            if not thread.is_alive() and not release.is_set():
+                thread.start()
+                assert holding.wait(DEADLINE)
+
+        kb.add_listeners.insert(0, start_the_other_writer)
+        # the adding thread's later listeners wait for the store, held by the other writer
+        adder = threading.Thread(target=kb.add, args=("p(1)^1",))
+        adder.start()
+        try:
+            assert answers_of(sub, 1) == [1]
+            assert thread.is_alive()          # delivered while the other transaction is open
+        finally:
+            release.set()
+            adder.join()
+            thread.join()
+        kb.add("p(2)^2")
+        assert answers_of(sub, 1) == [2]
+        sub.close()

@@ -240,6 +240,25 @@ class EventStore:
     def in_transaction(self) -> bool:
         return self._db.tx_depth > 0
 
+    @property
+    def in_transaction_here(self) -> bool:
+        """True when the calling thread is inside a transaction of this store; another
+        thread's transaction does not count (``in_transaction`` counts any).
+
+        >>> s = EventStore(None)
+        >>> with s.transaction(): s.in_transaction_here
+        True
+        >>> s.in_transaction_here
+        False
+        """
+        lock = self._db.lock
+        if not lock.acquire(blocking=False):   # another thread holds the store
+            return False
+        try:
+            return self._db.tx_depth > 0
+        finally:
+            lock.release()
+
     # ------------------------------------------------------------------ robots and fleets
 
     @property

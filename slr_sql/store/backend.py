@@ -163,6 +163,9 @@ class Backend(Protocol):
     @property
     def in_transaction(self) -> bool: ...
 
+    @property
+    def in_transaction_here(self) -> bool: ...
+
     def declare_type(self, name: str, arity: int) -> str: ...
 
     @property

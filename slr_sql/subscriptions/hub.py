@@ -132,7 +132,10 @@ class SubscriptionHub:
         for ev in stored:
             try:
                 if (ev[0], len(ev[1])) in keys:
-                    self.notify(through_store=self.store.in_transaction)
+                    # only the adding thread's own transaction hides the rows from the hub's
+                    # connection; another thread's (the hub's housekeeping, another writer)
+                    # does not, and reading through the store would queue behind it
+                    self.notify(through_store=self.store.in_transaction_here)
                     return
             except (TypeError, IndexError):
                 continue
