@@ -129,3 +129,44 @@ def test_events_added_while_another_thread_holds_a_transaction_are_read_on_the_h
         kb.add("p(2)^2")
         assert answers_of(sub, 1) == [2]
         sub.close()
+
+
+def test_a_subscription_to_a_type_without_events_does_not_hold_up_the_others(db_path):
+    """Every pass looks up the table of a type that has none yet (it may appear from another
+    process): on the hub's connection, so that lookup never waits for a writer's transaction
+    while an event of another type waits to be delivered."""
+    with slr_sql.open(db_path) as kb:
+        hub = kb._subscriptions
+        hub.cleanup_interval = 1e9
+        nothing = kb.subscribe("nothing(X)^T", since=0)   # served first in every pass
+        sub = kb.subscribe("p(X)^T", since=0)
+        kb.add("p(0)^0")
+        assert answers_of(sub, 1) == [0]
+        holding, release = threading.Event(), threading.Event()
+
+        def other_writer():
+            with kb.store.transaction():
+                holding.set()
+                release.wait(DEADLINE)
+
+        thread = threading.Thread(target=other_writer)
+
+        def start_the_other_writer(stored):
+            if not thread.is_alive() and not release.is_set():
+                thread.start()
+                assert holding.wait(DEADLINE)
+
+        kb.add_listeners.insert(0, start_the_other_writer)
+        adder = threading.Thread(target=kb.add, args=("p(1)^1",))
+        adder.start()
+        try:
+            assert answers_of(sub, 1) == [1]
+            assert thread.is_alive()
+        finally:
+            release.set()
+            adder.join()
+            thread.join()
+        kb.add("nothing(a)^2")               # the type appears: delivered as usual
+        assert nothing.get(timeout=DEADLINE)["X"] == "a"
+        sub.close()
+        nothing.close()

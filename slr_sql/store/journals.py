@@ -214,6 +214,12 @@ class JournalReader:
         return self._execute(_statements(table, "", 0).window_count,
                              (since, until, max(cap, 0)))[0][0]
 
+    def event_table(self, name: str, arity: int) -> str | None:
+        """The table of event type name/arity as committed (None while it has none)."""
+        rows = self._execute("SELECT table_name FROM slr_event_types WHERE name = ? AND "
+                             "arity = ?", (name, arity))
+        return rows[0][0] if rows else None
+
     def max_jid(self, journal: str) -> int:
         """The greatest jid of ``journal`` (0 when empty)."""
         return self._execute(_statements("", journal, 0).max_jid, ())[0][0] or 0

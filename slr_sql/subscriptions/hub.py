@@ -277,9 +277,12 @@ class SubscriptionHub:
         return self.registry.rows()
 
     def _type_info(self, key: tuple[str, int]) -> _TypeInfo | None:
+        """The table and journal of ``key``; None while it has no table. A type without
+        one is looked up again on every pass, on the pass's connection: never waiting for
+        a writer's transaction (as the store's lookup would) before serving the others."""
         info = self._types.get(key)
         if info is None:
-            table = self.store.table_for(*key)
+            table = self._reads().event_table(*key)
             if table is None:
                 return None
             info = self._types[key] = _TypeInfo(table, key[1])
