@@ -170,3 +170,37 @@ def test_a_subscription_to_a_type_without_events_does_not_hold_up_the_others(db_
         assert nothing.get(timeout=DEADLINE)["X"] == "a"
         sub.close()
         nothing.close()
+
+
+def test_housekeeping_waits_for_a_busy_store_after_the_deliveries_not_before(db_path):
+    """Writing positions is put off while a writer holds the store: delivery passes go on
+    meanwhile (they used to queue behind that transaction), and the positions are written
+    once the store is free."""
+    with slr_sql.open(db_path) as kb:
+        hub = kb._subscriptions
+        sub = kb.subscribe("p(X)^T", since=0, id="log")
+        kb.add_many([f"p({i})^{i}" for i in range(1, 4)])
+        assert answers_of(sub, 3) == [1, 2, 3]
+        holding, release = threading.Event(), threading.Event()
+
+        def other_writer():
+            with kb.store.transaction():
+                holding.set()
+                release.wait(DEADLINE)
+
+        thread = threading.Thread(target=other_writer)
+        thread.start()
+        try:
+            assert holding.wait(DEADLINE)
+            hub._last_persist = 0.0           # positions due now
+            for _ in range(3):                # whole passes, none waiting for the writer
+                assert hub.drain(DEADLINE / 4)
+            assert thread.is_alive()
+        finally:
+            release.set()
+            thread.join()
+        hub._last_persist = 0.0
+        assert hub.drain(DEADLINE)            # the store is free: written now
+        rows = {r["id"]: r for r in hub.subscriptions()}
+        assert rows["log"]["live_pos"] == 2   # up to the answer before the one in hand
+        sub.close()

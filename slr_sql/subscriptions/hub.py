@@ -89,6 +89,7 @@ class SubscriptionHub:
         self._last_persist = 0.0
         self._last_lease = time.monotonic()   # registration writes a fresh lease
         self._last_cleanup = 0.0
+        self._put_off_since: float | None = None   # housekeeping waiting for the store
         self._subscribed_types: set[tuple[str, int]] = set()   # ever, in this process
         self._journaled: set[tuple[str, int]] = set()   # types whose trigger was seen
         self._last_failure = ""
@@ -735,9 +736,27 @@ class SubscriptionHub:
     def _housekeeping(self) -> None:
         """Write the positions of durable subscriptions that moved (every persist_interval),
         renew this process's claims (every lease/3), trim journals (every cleanup_interval,
-        when something was delivered). Each is one short write transaction."""
+        when something was delivered). Each is one short write transaction.
+
+        While another thread holds the store (a writer's transaction, fsync included), it
+        is put off to a later pass rather than waited for: the next events are delivered
+        first. Put off for ``lease_seconds / 6`` at most (claims are renewed in time)."""
         now = time.monotonic()
-        if now - self._last_persist >= self.persist_interval:
+        persist_due = now - self._last_persist >= self.persist_interval
+        cleanup_due = now - self._last_cleanup >= self.cleanup_interval and \
+            self._passes_done != self._cleaned_at_pass
+        if not (persist_due or cleanup_due):
+            return
+        lock = self.store.lock
+        if lock.acquire(blocking=False):
+            lock.release()
+        else:                         # a writer holds the store: deliver first, write later
+            if self._put_off_since is None:
+                self._put_off_since = now
+            if now - self._put_off_since < self.lease_seconds / 6:
+                return
+        self._put_off_since = None
+        if persist_due:
             self._last_persist = now
             with self.lock:
                 subs = list(self._subs.values())
@@ -753,8 +772,7 @@ class SubscriptionHub:
                             f"its claim for {self.lease_seconds:g} s); events after its "
                             f"position may be missing"))
                         self._wake({s})
-        if now - self._last_cleanup >= self.cleanup_interval and \
-                self._passes_done != self._cleaned_at_pass:
+        if cleanup_due:
             self._last_cleanup = now
             self._cleaned_at_pass = self._passes_done
             self.cleanup()
