@@ -750,6 +750,24 @@ class Database:
                 finally:
                     cursor.close()
 
+    def run_compiled_many(self, sql: str, rows: list) -> None:
+        """Run a compiled writing statement once per row of parameters (dicts for named
+        parameters, tuples for ``?``), in the current transaction.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.run_compiled("CREATE TABLE t (x)", {})
+        []
+        >>> s.run_compiled_many("INSERT INTO t VALUES (:x)", [{"x": 1}, {"x": 2}])
+        >>> s.run_compiled("SELECT sum(x) FROM t", {})
+        [(3,)]
+        """
+        with self.lock:
+            self.check_open()
+            try:
+                self.conn.executemany(sql, rows)
+            except sqlite3.OperationalError as exc:
+                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+
     @contextmanager
     def _deadline(self, deadline: float | None, what: str) -> Iterator[None]:
         """Interrupt the statements run inside past ``deadline`` (``time.monotonic()``) with

@@ -582,6 +582,12 @@ class PgDatabase:
                 self.conn.execute("COMMIT")
             return rows
 
+    def run_compiled_many(self, sql: str, rows: list) -> None:
+        with self.lock:
+            self.check_open()
+            for row in rows:
+                self.conn.execute(sql, row)
+
     def _outer(self, deadline: float | None) -> float | None:
         outer = self.deadline
         if deadline is None or (outer is not None and outer <= deadline):
