@@ -1220,10 +1220,13 @@ class KnowledgeBase:
             timeout: float | None = None) -> tuple[list[str], list[tuple]]:
         """Run one SQL statement on the store's database; returns (column names, rows).
         Read-only unless ``write=True``; every failure is an :class:`SLRError`
-        (:class:`SLRTimeout` past ``timeout`` seconds).
+        (:class:`SLRTimeout` past ``timeout`` seconds). ``params``: values for ``?``
+        placeholders (a sequence) or for ``:name`` ones (a mapping), on either backend.
 
         >>> kb = open(); kb.add("p(a)^1"); kb.sql("SELECT arg1, t_end FROM p")
         (['arg1', 't_end'], [('a', 1.0)])
+        >>> kb.sql("SELECT :x + 1 AS y", {"x": 41})
+        (['y'], [(42,)])
         """
         from .store import DatabaseError
 
@@ -1256,7 +1259,7 @@ class KnowledgeBase:
         from .plot import timeline  # deferred: matplotlib is the optional extra slr_sql[plot]
         return timeline(self, types, **options)
 
-    # -- subscriptions (the work is in slr_sql/subscriptions.py) ----------------
+    # -- subscriptions (the work is in slr_sql/subscriptions/) ------------------
     def subscribe(self, pattern: str, where: str | None = None, since: Any = "now",
                   until: float | None = None, id: str | None = None,
                   callback: Callable[[dict], Any] | None = None, max_queue: int = 10_000,
