@@ -20,7 +20,7 @@ this order:
    and nothing asked for another one; then synchronized queries waiting on complex event
    types are re-checked;
 5. **buffers**: space the buffers' pruning freed is reclaimed;
-6. **wake**: the subscription hub is woken and ``kb.add_listeners`` are called, once per
+6. **wake**: ``kb.add_listeners`` are called and the subscription hub is woken, once per
    batch, in the order the batches were stored (the add's events with the complex events
    its transaction derived, then each decision round's).
 
@@ -260,10 +260,10 @@ class EventPipeline:
             run.stage = "wake"
             listeners = self.listeners
             for batch in batches:
-                self.hub.on_add(batch)
-                if listeners:
+                if listeners:   # (before the hub, as when the hub was the last listener)
                     for listener in list(listeners):
                         listener(batch)
+                self.hub.on_add(batch)
             if not run.again:
                 return
             batches = []
