@@ -260,7 +260,7 @@ class EventPipeline:
             run.stage = "wake"
             listeners = self.listeners
             for batch in batches:
-                if listeners:   # (before the hub, as when the hub was the last listener)
+                if listeners:   # (before the hub: a listener may hold up its wake-up)
                     for listener in list(listeners):
                         listener(batch)
                 self.hub.on_add(batch)
