@@ -111,6 +111,15 @@ def test_declaring_an_event_type_with_too_many_arguments_is_an_error(kb):
     assert kb.store.declared_types() == {("wide", 3)}
 
 
+@pytest.mark.parametrize("name, arity", [(5, 1), (None, 2), ("p", -1), ("p", "2"),
+                                         ("p", 1.0)])
+def test_the_store_refuses_a_type_that_is_no_name_and_arity(name, arity):
+    store = EventStore(None)
+    with pytest.raises(ValueError, match="bad event type"):
+        store.declare_type(name, arity)
+    assert store.declared_types() == set()
+
+
 # ---------------------------------------------------------------- the argument list itself
 
 @pytest.mark.parametrize("args, shown", [
