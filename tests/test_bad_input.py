@@ -272,3 +272,18 @@ def test_the_store_rejects_a_str_argument_list_directly():
     with pytest.raises(EventRejected, match="list or tuple"):
         store.add_event("p", "abc", 1.0, 1.0)
     assert store.table_for("p", 3) is None
+
+
+def test_a_declared_arity_holds_after_reopen_and_in_another_connection(tmp_path):
+    """``:- event p/2.`` makes p(1) a wrong-arity mistake: also for the same file opened
+    again, and for a knowledge base that was already open when p/2 was declared."""
+    path = tmp_path / "robot.db"
+    with slr_sql.open(path) as early, slr_sql.open(path) as kb:
+        kb.load(":- event p/2.")
+        with pytest.raises(EventRejected, match="wrong number of arguments"):
+            early.add("p(1)^1")
+    with slr_sql.open(path) as again:
+        with pytest.raises(EventRejected, match="wrong number of arguments"):
+            again.add("p(1)^1")
+        again.add("p(1, 2)^1")
+        assert again.query("p(X, Y)^T") == [{"X": 1, "Y": 2, "T": 1.0}]
