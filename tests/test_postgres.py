@@ -281,6 +281,21 @@ def test_event_rules_on_postgres_equal_the_reference(corpus_database, rule, even
         cepdiff.rule_text(rule)
 
 
+@settings(max_examples=15, deadline=None, derandomize=True,
+          suppress_health_check=list(HealthCheck))
+@given(cepdiff.arith_rules(), cepdiff.arith_streams(), st.data())
+def test_arithmetic_where_on_postgres_equals_the_reference(corpus_database, rule, events, data):
+    """A where of + and - (pushed into SQL with a Python fallback on SQLite) is decided on
+    the Python side on the server: the same complex events as the reference."""
+    order = data.draw(st.permutations(range(len(events))), label="arrival order")
+    expected = cepdiff.reference(rule, events)
+    url = _schema_url(corpus_database, f"w{next(_EXAMPLES)}")
+    got = _run_on(url, rule, events, order, False)
+    want = [(tuple(h), s, e) for h, s, e in expected]
+    assert cepdiff._typed(got) == cepdiff._typed(sorted(want, key=repr)), \
+        cepdiff.rule_text(rule)
+
+
 # ------------------------------------------------------------------ many writers
 
 WRITER = r"""
