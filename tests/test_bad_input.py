@@ -104,6 +104,14 @@ def test_the_widest_event_that_fits_is_stored_and_read_back(kb):
         kb.add_event("wide", list(range(widest + 1)), 1.0)
 
 
+def test_the_widest_event_type_that_fits_can_be_declared(kb):
+    widest = kb.store.max_event_arity
+    kb.load(f":- event wide/{widest}.")
+    with pytest.raises(SLRError, match="too many arguments"):
+        kb.load(f":- event wider/{widest + 1}.")
+    assert kb.store.declared_types() == {("wide", widest)}
+
+
 def test_declaring_an_event_type_with_too_many_arguments_is_an_error(kb):
     with pytest.raises(SLRError, match="too many arguments"):
         kb.load(":- event wide/5000.")
