@@ -501,6 +501,9 @@ BOUNDARY_EVENTS = ["a(x)^1", "b(y)^1", "c(big)^9007199254740992"]
     # an integer no float equals matches no stored time (2**53 + 1 is not 2.0**53)
     ("c(X)^9007199254740993", []),
     ("c(X)^9007199254740992", [{"X": "big"}]),
+    # a count (an integer column) equals an integer constant
+    ("aggregate_all(count, f(_), N), N = 8", [{"N": 8}]),
+    ("aggregate_all(count, f(_), N), N = 8.0", []),
 ])
 def test_compiled_boundaries_agree_with_the_interpreter(goal, expected):
     with slr_sql.open(clock=slr_sql.ManualClock(10.0)) as kb:
