@@ -1444,7 +1444,7 @@ from .viz.cli import export_command as _export, foxglove_command as _foxglove  #
 main.add_command(_foxglove)
 main.add_command(_export)
 
-from .fleet import _click_group as _fleet_group  # noqa: E402 - `slr fleet push|status`
+from .fleet import click_group as _fleet_group  # noqa: E402 - `slr fleet push|status`
 main.add_command(_fleet_group())
 
 

@@ -350,7 +350,13 @@ def status(fleet: str, token: str | None = None, now: float | None = None) -> li
 
 # -- the command line: `slr fleet push`, `slr fleet status` (registered by slr_sql.cli) --------
 
-def _click_group() -> Any:
+def click_group() -> Any:
+    """The ``slr fleet`` command group (``name``, ``push``, ``status``), built on use so
+    that importing this module does not import click.
+
+    >>> click_group().name
+    'fleet'
+    """
     import click
 
     def token_of(ctx: click.Context) -> str | None:

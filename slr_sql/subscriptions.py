@@ -57,6 +57,7 @@ from typing import Any, Callable
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning
 from .encoding import decode, encode_json
 from .errors import SLRError, SLRSyntaxError, SLRTimeout
+from .host import Host
 from .parser import parse_term
 from .program import split_event_atom
 from .store import quote_identifier
@@ -158,7 +159,7 @@ class _Matcher:
     """A pattern and condition, compiled: ``match(args, start, end)`` gives the answer dict or
     None. One matcher serves every subscription with the same texts (the hub thread only)."""
 
-    def __init__(self, kb: Any, pattern: str, where: str | None):
+    def __init__(self, kb: Host, pattern: str, where: str | None):
         self.kb = kb
         self.pattern = pattern
         self.where = where
@@ -767,7 +768,7 @@ class SubscriptionHub:
     """The subscriptions of one knowledge base and the thread that delivers them (created by
     :func:`attach`; ``kb.subscribe`` / ``kb.unsubscribe`` delegate here)."""
 
-    def __init__(self, kb: Any):
+    def __init__(self, kb: Host):
         self.kb = kb
         self.store = kb.store
         # the store's columns: encoded terms as they are (SQLite) or as a server holds them
@@ -1633,7 +1634,7 @@ class SubscriptionHub:
                                   (low,))
 
 
-def attach(kb: Any) -> SubscriptionHub:
+def attach(kb: Host) -> SubscriptionHub:
     """Create the subscription hub of ``kb`` and hook it into its add path and store."""
     hub = SubscriptionHub(kb)
     kb.add_listeners.append(hub.on_add)

@@ -24,8 +24,11 @@ LAYERS = {
     "store": 2, "frames": 2,
     "builtins": 3,
     "analysis": 4, "engine": 4, "sqlcompile": 4,
+    "plans": 4.5,  # query plans: parsed, cached, instantiated; the prev fast path
+    "host": 4.75,  # the Protocol of what the facade offers the parts it attaches
     "planner": 5,
     "sync": 6, "buffers": 6, "cep": 6, "plot": 6, "subscriptions": 6, "shipping": 6,
+    "loader": 6.5,  # program building (event rules compiled by cep/) and refresh
     "kb": 7,
     "viz": 7.5,  # Foxglove and MCAP views of a store; serve --foxglove uses it
     "demo": 8, "service": 8, "example_files": 8,

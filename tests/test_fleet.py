@@ -244,7 +244,7 @@ def test_sql_answers_like_the_interpreter_per_robot(fleet_store, goal, robot):
 def test_origin_and_robot_queries_compile_to_sql(fleet_store):
     with opened(fleet_store) as kb:
         for goal in GOALS[:13]:
-            plan = kb._plan(goal, ())
+            plan = kb.plans.plan(goal, ())
             for robot in (False, True):
                 entry = planner.plan_for(kb, plan, False, robot)
                 assert not isinstance(entry, Fallback), (goal, robot, entry)

@@ -252,7 +252,7 @@ def check(prog):
     for q in queries:
         STATS["queries"] += 1
         try:
-            plan = kb._plan(q, ())
+            plan = kb.plans.plan(q, ())
         except SLRError:
             STATS["bad query"] += 1
             continue
@@ -335,7 +335,7 @@ def test_a_compiled_negated_disjunction_checks_every_branch(goal, expected):
     with slr_sql.open(clock=slr_sql.ManualClock(10.0)) as kb:
         kb.load("f(x). f(y). f(w). g(y).")
         kb.add_many(["a(w, 1)^1", "b(y)^2"])
-        entry = plan_for(kb, kb._plan(goal, ()), False)
+        entry = plan_for(kb, kb.plans.plan(goal, ()), False)
         assert not hasattr(entry, "reason"), kb.explain(goal)   # runs as one SQL statement
         assert kb.query(goal) == [{"O": o} for o in expected]
         kb.sql_enabled = False

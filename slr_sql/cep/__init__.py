@@ -27,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
+from ..host import Host
 from ..terms import Struct
 from .rules import (IGNORED_FACTS, POLICIES, EventRule, compile_rule, consumption_directive,
                     is_event_rule, is_ignored_fact, order_rules)
@@ -76,7 +77,7 @@ def prepare(rules: list[EventRule], consumption: dict, program: Any) -> list[Eve
     return unique
 
 
-def attach(kb: Any) -> EventRules:
+def attach(kb: Host) -> EventRules:
     """Install event rules on a knowledge base (called by KnowledgeBase.__init__, after the
     synchronizer and the planner): the load listener, the hooks on new tables and on
     completeness, the SQL function ``slr_cep_cmp`` of pushed comparisons, and the rules of
@@ -92,7 +93,7 @@ def attach(kb: Any) -> EventRules:
     kb.store.create_function("slr_cep_cmp", 3, _compare)
     if eng.sync is not None:
         eng.sync.progress_listeners.append(eng.on_progress)
-    eng._sync_rules()
+    eng.follow_declarations()
     eng.on_progress()   # a reopened file: decisions that became possible while it was closed
     return eng
 

@@ -33,6 +33,7 @@ from typing import Any
 
 from ..encoding import Unencodable, decode, encode
 from ..errors import SLRError
+from ..host import Host
 from ..store import DatabaseError, EventBatch, quote_identifier
 from ..terms import Struct, Var, deref, format_term, term_vars
 from .rules import EventRule
@@ -669,7 +670,7 @@ class RuleRuntime:
 class EventRules:
     """The event rules of one knowledge base (created by :func:`slr_sql.cep.attach`)."""
 
-    def __init__(self, kb: Any):
+    def __init__(self, kb: Host):
         self.kb = kb
         self.store = kb.store
         # the store's columns: encoded terms as they are (SQLite) or as a server holds them
@@ -695,10 +696,10 @@ class EventRules:
     # ----------------------------------------------------------------- install
     @property
     def active(self) -> bool:
-        self._sync_rules()
+        self.follow_declarations()
         return bool(self.rules)
 
-    def _sync_rules(self) -> None:
+    def follow_declarations(self) -> None:
         """Follow the kb's declarations (a load replaces them; a failed load restores the
         previous object)."""
         decls = self.kb.declarations
@@ -756,9 +757,9 @@ class EventRules:
             self.tracker.derived = self if runtimes else None
         self._wake_timers()
 
-    def on_load(self, kb: Any) -> None:
+    def on_load(self, kb: Host) -> None:
         """Load listener (inside the load's transaction)."""
-        self._sync_rules()
+        self.follow_declarations()
 
     def on_table(self, name: str, arity: int, table: str) -> None:
         """A new event table: rules reading that type can now match (rebuild their SQL)."""
@@ -1083,7 +1084,7 @@ class EventRules:
 
     # ----------------------------------------------------------------- inspection
     def infos(self) -> list[dict]:
-        self._sync_rules()
+        self.follow_declarations()
         out = []
         for rt in self.rules:
             rule = rt.rule
@@ -1181,7 +1182,7 @@ class EventRules:
         from ..parser import parse_program, parse_term
         from .rules import compile_rule, is_event_rule, order_rules
 
-        self._sync_rules()
+        self.follow_declarations()
         try:
             term, _ = parse_term(goal, "<explain>")
         except SLRError:

@@ -186,7 +186,7 @@ class Fleet:
                 # as an add: the fleet store's clock is the rows' arrival (and its "now")
                 arrival = float(self.db.clock.now())
                 self.writer.record_now(arrival)
-                event_type = self.writer._type_for_new_event(name, arity)
+                event_type = self.writer.type_for_new_event(name, arity)
                 end = 1 + arity + 2
                 dialect = self.db.dialect
                 if dialect.name != "sqlite" and arity:  # rows come as SQLite stores them
