@@ -733,8 +733,8 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
 
             # Without --at the library synchronizes on "now" (the store clock); other
             # processes may add the events and marks it waits for.
-            if hasattr(kb, "_sync"):
-                kb._sync.watch_external()
+            if hasattr(kb, "synchronizer"):
+                kb.synchronizer.watch_external()
             pending = kb.submit(goal, at=at, id=f"slr-query-{os.getpid()}", timeout=timeout)
             try:
                 answers = pending.result(timeout=None if timeout is None else timeout + 5.0)

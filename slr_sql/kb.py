@@ -165,6 +165,12 @@ class KnowledgeBase:
         return self.loader.program
 
     @property
+    def synchronizer(self) -> Any:
+        """The synchronizer of waiting queries (:class:`slr_sql.sync.Synchronizer`): a
+        process that waits on what others write calls its ``watch_external()``."""
+        return self._sync
+
+    @property
     def declarations(self) -> Declarations:
         """What the program in force declares beyond clauses (event types, delays, buffers,
         event rules, consumption policies)."""
