@@ -516,6 +516,14 @@ class EventStore:
         """The connection string of a server store (for a second, listening connection)."""
         return getattr(self._db, "conninfo", None)
 
+    @_doc(Catalog.fact_view_select)
+    def fact_view_select(self, table: str, arity: int) -> str:
+        return self._catalog.fact_view_select(table, arity)
+
+    @_doc(Catalog.rule_matches)
+    def rule_matches(self, prov: str, width: int) -> list[tuple]:
+        return self._catalog.rule_matches(prov, width)
+
     @_doc(Catalog.replace_views)
     def replace_views(self, views: dict[str, str]) -> list[str]:
         return self._catalog.replace_views(views)
