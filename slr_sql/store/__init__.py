@@ -22,8 +22,8 @@ same :class:`EventStore` methods: a ``Database`` (connect, transactions as savep
 migrations of its own, a statement deadline), the table DDL and lookup statements of
 ``tables``/``lookups`` (``INDEXED BY`` becomes plain indexes), the catalog's upserts and
 ``sqlite_master`` queries against its own catalog, and ``space`` mapped to its own
-statistics (or reporting none). Buffer triggers come from slr_sql.buffers as SQL text, so
-that module would need its dialect too.
+statistics (or reporting none). Buffer triggers are printed here per engine
+(:mod:`.buffering`) from the typed pattern tests slr_sql.buffers compiles.
 
 Durability: file databases use ``journal_mode=WAL`` with ``synchronous=FULL``: when
 :meth:`EventStore.add_events` returns, its transaction is in the WAL *and* fsynced, so the
@@ -48,7 +48,9 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
 from ..errors import EventRejected
-from .catalog import BufferTables, Catalog, ProgramText
+from .buffering import (ArgEquals, BufferPlan, BufferTables, JsonArray, JsonEquals, MixedTerm,
+                        PatternMatch, SameTerm)
+from .catalog import Catalog, ProgramText
 from .checks import format_event
 from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, DatabaseError, \
     ReadConnection, run_sql_file
@@ -64,7 +66,8 @@ from .tables import EventTables
 __all__ = ["EventStore", "Event", "EventBatch", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "DatabaseError", "quote_identifier", "sql_literal", "format_event",
            "migration_scripts", "split_sql_script", "run_sql_file", "store_error",
-           "check_robot_name", "ReadConnection"]
+           "check_robot_name", "ReadConnection", "ArgEquals", "BufferPlan", "JsonArray",
+           "JsonEquals", "MixedTerm", "PatternMatch", "SameTerm"]
 
 
 def _doc(part_method: Callable) -> Callable:
@@ -433,7 +436,7 @@ class EventStore:
 
     @_doc(Database.data_version)
     def data_version(self) -> int:
-        return self._db.data_version()
+        return self._catalog.data_version()
 
     @_doc(Catalog.program_sources)
     def program_sources(self) -> list[tuple[str, str | None]]:
@@ -561,17 +564,21 @@ class EventStore:
     def buffer_objects(self, buffer_id: int) -> dict[str, str]:
         return self._buffers.buffer_objects(buffer_id)
 
+    @_doc(BufferTables.buffer_statements)
+    def buffer_statements(self, plan: BufferPlan, table: str) -> dict[str, str]:
+        return self._buffers.buffer_statements(plan, table)
+
     @_doc(BufferTables.install_buffer_objects)
-    def install_buffer_objects(self, buffer_id: int, statements: dict[str, str]) -> bool:
-        return self._buffers.install_buffer_objects(buffer_id, statements)
+    def install_buffer_objects(self, plan: BufferPlan, table: str) -> bool:
+        return self._buffers.install_buffer_objects(plan, table)
 
     @_doc(BufferTables.drop_buffer_objects)
     def drop_buffer_objects(self, buffer_id: int) -> None:
         self._buffers.drop_buffer_objects(buffer_id)
 
-    @_doc(BufferTables.prune)
-    def prune(self, sql: str, buffer_id: int) -> int:
-        return self._buffers.prune(sql, buffer_id)
+    @_doc(BufferTables.apply_buffer)
+    def apply_buffer(self, plan: BufferPlan, table: str, now: float) -> int:
+        return self._buffers.apply_buffer(plan, table, now)
 
     # ------------------------------------------------------------------ space
 
@@ -631,3 +638,7 @@ class EventStore:
     def run_compiled(self, sql: str, params: dict, limit: int | None = None,
                      deadline: float | None = None) -> list[tuple]:
         return self._db.run_compiled(sql, params, limit, deadline)
+
+    @_doc(Database.run_compiled_many)
+    def run_compiled_many(self, sql: str, rows: list) -> None:
+        self._db.run_compiled_many(sql, rows)
