@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from typing import Any, Callable, ContextManager, Protocol, runtime_checkable
 
+from .api import PendingQueryAPI
 from .clocks import Clock
 from .engine import Engine
 from .plans import PlanCache
@@ -57,10 +58,12 @@ class Host(Protocol):
     plans: PlanCache
     loader: LoadedProgram
     max_learned_delay: float | None
+    # state an attached part keeps per knowledge base, under its name (the planner's SQL side)
+    attached_state: dict[str, Any]
     # called inside a load's transaction with the host, after the new program is in force
     load_listeners: list[Callable[[Any], None]]
     # called after an add committed, with its events and the complex events it derived
-    add_listeners: list[Callable[[list], None]]
+    add_listeners: list[Callable[[list[Any]], None]]
     # called after the program was re-read from the file (another connection loaded)
     reload_listeners: list[Callable[[Any], None]]
     # called when another connection raised learned delays or completeness marks
@@ -74,3 +77,14 @@ class Host(Protocol):
 
     @property
     def sql_enabled(self) -> bool: ...
+
+    def query(self, goal: str, at: float | None = None, args: dict[str, Any] | None = None,
+              timeout: float | None = None, max_steps: int | None = None,
+              limit: int | None = None, wait: bool = False,
+              robot: str | None = None) -> list[dict[str, Any]]:
+        """Answer ``goal`` now (a subscription's ``where`` condition)."""
+
+    def submit(self, goal: str, at: float | None = None, id: str | None = None,
+               args: dict[str, Any] | None = None, timeout: float | None = None,
+               callback: Callable[[Any], Any] | None = None) -> PendingQueryAPI:
+        """A synchronized query (a subscription waiting for completeness)."""

@@ -134,6 +134,8 @@ class KnowledgeBase:
         self.engine = Engine(Program(), self.store)
         # the parsed, compiled goals (slr_sql/plans.py); a load or define clears them
         self.plans = PlanCache()
+        # state the attached parts keep per knowledge base, under their names (host.Host)
+        self.attached_state: dict[str, Any] = {}
         self._cached_plan = self.plans.entries.get
         # the stored (program, progress) versions a bound prev lookup last read with its rows:
         # while they stay the same, no other connection changed what a refresh re-reads

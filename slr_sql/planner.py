@@ -291,9 +291,9 @@ def fact_rows(program) -> dict:
 
 
 def state_of(kb) -> _State:
-    st = getattr(kb, "_sql_state", None)
+    st = kb.attached_state.get("planner")
     if st is None:
-        st = kb._sql_state = _State(kb)
+        st = kb.attached_state["planner"] = _State(kb)
     return st
 
 

@@ -264,3 +264,41 @@ def test_no_module_reaches_a_private_name_of_another():
 def test_the_private_name_scan_finds_reaches_and_only_those(source, reached):
     trees = {rel: ast.parse(text) for rel, text in source.items()}
     assert private_reaches(trees) == reached
+
+
+# ------------------------------------------------------------------ the host Protocol
+# The parts the facade attaches (layer 6 and the planner) reach it only through what
+# slr_sql.host.Host names; a knowledge base is a Host.
+
+HOSTED = ["sync.py", "buffers.py", "cep/__init__.py", "cep/runtime.py", "cep/where.py",
+          "subscriptions.py", "shipping.py", "planner.py"]
+
+
+def _protocol_members(cls: type) -> set[str]:
+    return {n for n in dir(cls) if not n.startswith("_")} | set(cls.__annotations__)
+
+
+def test_a_knowledge_base_is_a_host():
+    import slr_sql
+    from slr_sql.host import Host, LoadedProgram
+
+    with slr_sql.open() as kb:
+        assert isinstance(kb, Host) and isinstance(kb.loader, LoadedProgram)
+        for name in _protocol_members(Host):
+            assert hasattr(kb, name), name
+
+
+@pytest.mark.parametrize("rel", HOSTED)
+def test_the_attached_parts_use_only_what_the_host_offers(rel):
+    from slr_sql.host import Host
+
+    offered = _protocol_members(Host)
+    used = set()
+    for node in ast.walk(ast.parse((PACKAGE / rel).read_text())):
+        if isinstance(node, ast.Attribute):
+            base = node.value
+            if (isinstance(base, ast.Name) and base.id == "kb") or (
+                    isinstance(base, ast.Attribute) and base.attr == "kb"
+                    and isinstance(base.value, ast.Name) and base.value.id == "self"):
+                used.add(node.attr)
+    assert used <= offered, f"{rel} uses {sorted(used - offered)} of the kb, not in host.Host"

@@ -16,21 +16,35 @@ bin number, of ``IS`` against a parameter, and reads the text columns as numbers
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Protocol
 
 from ..errors import SLRError
-from .dialect import POSTGRES, SQLITE, Dialect
+from .dialect import POSTGRES, SQLITE
 
 __all__ = ["Statement", "TimelineStatements", "timeline_statements"]
 
 Statement = tuple[str, tuple[Any, ...]]
 
 
+class _Printer(Protocol):
+    """What a timeline needs of a dialect (:mod:`slr_sql.store.dialect`)."""
+
+    name: str
+
+    def statement(self, sql: str) -> str: ...
+
+    def typeof(self, expr: str) -> str: ...
+
+    def number(self, expr: str) -> str: ...
+
+    def scalar(self, name: str) -> str: ...
+
+
 class TimelineStatements:
     """The statements of a timeline for one dialect. Table and column names are given
     quoted (``quote_identifier``); values are always parameters."""
 
-    def __init__(self, dialect: Dialect) -> None:
+    def __init__(self, dialect: _Printer) -> None:
         self.dialect = dialect
         self._postgres = dialect.name == "postgresql"
 
