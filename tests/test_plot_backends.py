@@ -68,4 +68,4 @@ def test_bins_are_truncated_on_both_dialects():
     sqlite, postgres = timeline_statements(), timeline_statements(POSTGRES)
     assert "CAST((" in sqlite.start_bins('"t"', 0.0, 1.0, 0.1)[0]
     assert "floor((" in postgres.start_bins('"t"', 0.0, 1.0, 0.1)[0]
-    assert "GREATEST(t_start, %s)" in postgres.start_bins('"t"', 0.0, 1.0, 0.1)[0]
+    assert "GREATEST(t_start, ?)" in postgres.start_bins('"t"', 0.0, 1.0, 0.1)[0]

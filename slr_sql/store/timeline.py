@@ -2,9 +2,9 @@
 
 A plot reads a store through whatever door it was given: a local knowledge base or the
 client of ``slr serve`` (both run read-only SQL with ``sql(query, params)``). So the
-statements are not run here: each method returns one :data:`Statement` (text and
-parameters) for the caller to run, and the text lives with the store, printed by the
-database's dialect (:mod:`slr_sql.store.dialect`): SQLite's text is what plots always ran;
+statements are not run here: each method returns one :data:`Statement` (text with ``?``
+parameters, and the parameters) for the caller to run, and the text lives with the store,
+printed for the database's dialect (:mod:`slr_sql.store.dialect`): SQLite's text is what plots always ran;
 PostgreSQL's uses its spellings of the two-argument ``max``/``min``, of truncation to a
 bin number, of ``IS`` against a parameter, and reads the text columns as numbers.
 
@@ -31,8 +31,6 @@ class _Printer(Protocol):
 
     name: str
 
-    def statement(self, sql: str) -> str: ...
-
     def typeof(self, expr: str) -> str: ...
 
     def number(self, expr: str) -> str: ...
@@ -49,9 +47,9 @@ class TimelineStatements:
         self._postgres = dialect.name == "postgresql"
 
     def _printed(self, text: str, params: tuple[Any, ...]) -> Statement:
-        """A statement as ``sql()`` of a store of this dialect runs it (parameters in the
-        driver's style)."""
-        return self.dialect.statement(text), params
+        """A statement as ``sql()`` takes it: parameters as ``?`` on every engine (a server
+        store's ``sql()`` prints them in its driver's style)."""
+        return text, params
 
     def _bin(self, expr: str) -> str:
         """The bin number of a non-negative expression: truncated toward zero (a cast to an
