@@ -1,8 +1,8 @@
 """Re-run the survivors of a session against the tests of this checkout.
 
 For each surviving mutant of the session NAME (run by run.sh), a fresh copy of this
-checkout (``$MUTATION_WORKDIR/NAME-recheck``, never the session's own copy, where a run may
-be going on) gets the mutant applied and runs the test command (the session's, or
+checkout (``$MUTATION_WORKDIR/NAME-recheck-PID``, never the session's own copy, where a run
+may be going on, nor another recheck's) gets the mutant applied and runs the test command (the session's, or
 ``--tests "pytest ..."`` to run only new tests); prints KILLED or SURVIVED per mutant.
 
 Usage: python mutation/recheck.py NAME [--tests COMMAND] [--only FILE:LINE ...]
@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", nargs="*", default=None)
     args = parser.parse_args(argv)
     base = Path(os.environ.get("MUTATION_WORKDIR", "/tmp/slr-mutation"))
-    work = base / f"{args.name}-recheck"
+    work = base / f"{args.name}-recheck-{os.getpid()}"
     fresh_copy(work)
     command = args.tests or load_config(str(ROOT / "mutation" / f"{args.name}.toml")).test_command
     with use_db(str(base / args.name / f"{args.name}.sqlite"), WorkDB.Mode.open) as db:
@@ -59,6 +59,7 @@ def main(argv: list[str] | None = None) -> int:
             outcome = f"? {out.stdout[-300:]} {out.stderr[-300:]}"
         print(f"{'KILLED' if outcome == 'killed' else outcome.upper()} {where} "
               f"{m.operator_name} #{m.occurrence}", flush=True)
+    shutil.rmtree(work, ignore_errors=True)
     return 0
 
 
