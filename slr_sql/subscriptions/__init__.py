@@ -60,7 +60,6 @@ its public methods (``query``, ``submit``, ``add_listeners``; and the synchroniz
 """
 from __future__ import annotations
 
-
 from ..host import Host
 from .hub import DEFAULT_MAX_LAG, DEFAULT_MAX_QUEUE, SubscriptionHub
 from .matching import Matcher, answer_json
