@@ -388,7 +388,7 @@ def _synchronized_cups_query(kb: Any, clock: Any, console: Any) -> DemoResult:
     def answered() -> str:
         # Answers are produced by the store's scheduler: let it finish reacting, then say
         # whether the query is answered or what it still waits for.
-        sync = getattr(kb, "_sync", None)
+        sync = kb.synchronizer
         if sync is not None:
             sync.drain(timeout=5.0)
         else:

@@ -78,6 +78,14 @@ class Host(Protocol):
     @property
     def sql_enabled(self) -> bool: ...
 
+    @property
+    def synchronizer(self) -> Any:
+        """The synchronizer of waiting queries (``slr_sql.sync``), or None."""
+
+    @property
+    def event_rule_engine(self) -> Any:
+        """The event rules in force (``slr_sql.cep``), or None."""
+
     def query(self, goal: str, at: float | None = None, args: dict[str, Any] | None = None,
               timeout: float | None = None, max_steps: int | None = None,
               limit: int | None = None, wait: bool = False,

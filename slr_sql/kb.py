@@ -180,9 +180,16 @@ class KnowledgeBase:
 
     @property
     def synchronizer(self) -> Any:
-        """The synchronizer of waiting queries (:class:`slr_sql.sync.Synchronizer`): a
-        process that waits on what others write calls its ``watch_external()``."""
-        return self._sync
+        """The synchronizer of waiting queries (:class:`slr_sql.sync.Synchronizer`; None
+        while the knowledge base is being built): a process that waits on what others write
+        calls its ``watch_external()``."""
+        return getattr(self, "_sync", None)
+
+    @property
+    def event_rule_engine(self) -> Any:
+        """The event rules in force (:class:`slr_sql.cep.EventRules`; None while the
+        knowledge base is being built): a fleet store runs them over shipped events."""
+        return getattr(self, "_cep", None)
 
     @property
     def declarations(self) -> Declarations:

@@ -59,7 +59,7 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
     if check:
         _check_shipment(batches, marks)
     kb.loader.refresh()
-    cep = getattr(kb, "_cep", None)
+    cep = kb.event_rule_engine
     store_events = None
     if cep is not None and cep.active:
         def store_events(events: list) -> list:

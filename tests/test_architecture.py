@@ -236,6 +236,16 @@ def private_reaches(trees: dict[str, ast.AST]) -> list[str]:
             if isinstance(node, ast.ImportFrom):
                 places += [f"{rel}:{node.lineno}: imports {a.name}" for a in node.names
                            if a.name.startswith("_") and not a.name.startswith("__")]
+            elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
+                    and node.func.id in ("getattr", "hasattr", "setattr") and len(node.args) >= 2 \
+                    and isinstance(node.args[1], ast.Constant) and isinstance(node.args[1].value, str) \
+                    and not (isinstance(node.args[0], ast.Name) and node.args[0].id in ("self", "cls")):
+                name = node.args[1].value
+                owners = defined.get(name, set())
+                if name.startswith("_") and not name.startswith("__") and owners \
+                        and rel not in owners:
+                    places.append(f"{rel}:{node.lineno}: {node.func.id}(..., {name!r}) (defined in "
+                                  f"{', '.join(sorted(owners))})")
             elif isinstance(node, ast.Attribute) and node.attr.startswith("_") \
                     and not node.attr.startswith("__") \
                     and not (isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")):
@@ -260,6 +270,8 @@ def test_no_module_reaches_a_private_name_of_another():
     ({"a.py": "class K:\n    def __init__(self):\n        self._lock = 1\n"
               "    def f(self):\n        return self._lock"}, []),
     ({"a.py": "def _helper(): pass", "b.py": "def _helper(): pass\nx = y._helper"}, []),
+    ({"a.py": "class K:\n    def __init__(self):\n        self._sync = 1",
+      "b.py": "s = getattr(kb, '_sync', None)"}, ["b.py:1: getattr(..., '_sync') (defined in a.py)"]),
 ])
 def test_the_private_name_scan_finds_reaches_and_only_those(source, reached):
     trees = {rel: ast.parse(text) for rel, text in source.items()}

@@ -746,7 +746,7 @@ class EventRules:
             (lambda v: decode(from_column(v)))
         self.encode: Any = encode if to_column is None else (lambda t: to_column(encode(t)))
         self.clock = kb.clock
-        self.sync = getattr(kb, "_sync", None)
+        self.sync = kb.synchronizer
         self.tracker = self.sync.tracker if self.sync is not None else None
         self.rules: list[RuleRuntime] = []
         self.by_head: dict[tuple[str, int], list[RuleRuntime]] = {}

@@ -296,7 +296,7 @@ class SubscriptionHub:
         until = sub.until
         assert until is not None
         atom = format_atom(name) + (f"({', '.join('_' * arity)})" if arity else "")
-        sync = getattr(self.kb, "_sync", None)
+        sync = self.kb.synchronizer
         if self.store.path is not None and sync is not None and \
                 getattr(sync, "external_poll", 1) is None:
             sync.watch_external(self.poll_interval)   # marks written by other processes
