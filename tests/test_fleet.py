@@ -184,6 +184,44 @@ def test_the_migration_adds_the_robot_column_to_existing_tables(tmp_path):
     assert conn.execute("SELECT seq, robot FROM seen").fetchall() == [(1, None), (2, "r1")]
 
 
+def test_the_migration_makes_sequences_never_reused_keeping_rows_and_buffers(tmp_path):
+    path = tmp_path / "old.db"
+    clock = slr_sql.ManualClock(1000.0)
+    with slr_sql.open(path, robot="r1", clock=clock) as kb:
+        kb.load("tBuffer(seen(_, _), 100).\ncBuffer(battery(_), 2).")
+        kb.add_many(["seen(pallet7, dock)^1000", "seen(pallet8, dock)^1000",
+                     "battery(80)^1000", "battery(79)^1000", "battery(78)^1000"])
+    # the store as schema version 6 wrote it: seq a plain INTEGER PRIMARY KEY
+    conn = sqlite3.connect(path, isolation_level=None)
+    conn.execute("PRAGMA writable_schema = ON")
+    conn.execute("UPDATE sqlite_master SET sql = replace(sql, ' AUTOINCREMENT', '') "
+                 "WHERE type = 'table' AND name IN ('seen', 'battery')")
+    conn.execute("PRAGMA writable_schema = OFF")
+    conn.execute("DELETE FROM sqlite_sequence")
+    conn.execute("DELETE FROM slr_migrations WHERE number = 7")
+    conn.execute("PRAGMA user_version = 6")
+    before = conn.execute("SELECT type, name, tbl_name, sql FROM sqlite_master WHERE type IN "
+                          "('index', 'trigger', 'view') ORDER BY name").fetchall()
+    conn.close()
+    rows = rows_of(path)
+    assert fleet.push(str(path), str(tmp_path / "fleet.db")).shipped == 4
+    with slr_sql.open(path, clock=clock) as kb:     # migrates
+        conn = sqlite3.connect(path)
+        assert all("AUTOINCREMENT" in sql for (sql,) in conn.execute(
+            "SELECT sql FROM sqlite_master WHERE name IN ('seen', 'battery')"))
+        assert conn.execute("SELECT type, name, tbl_name, sql FROM sqlite_master WHERE type "
+                            "IN ('index', 'trigger', 'view') ORDER BY name").fetchall() == before
+        assert conn.execute("SELECT seq FROM battery ORDER BY seq").fetchall() == [(2,), (3,)]
+        conn.close()
+        assert rows_of(path) == rows
+        kb.add("battery(77)^1001")                   # the cBuffer still keeps two
+        assert [a["B"] for a in kb.query("battery(B)^_")] == [78, 77]
+        clock.set(2000.0)
+        kb.add("seen(pallet9, aisle1)^2000")         # the tBuffer prunes both shipped rows
+        assert kb.sql("SELECT seq, arg1 FROM seen")[1] == [(3, "pallet9")]
+    assert fleet.push(str(path), str(tmp_path / "fleet.db")).shipped == 2
+
+
 # -- asking the fleet: SQL == interpreter ---------------------------------------------------
 
 PROGRAM = """
@@ -315,6 +353,26 @@ def test_push_ships_each_event_once_with_complex_events_and_marks(tmp_path):
             (None, "pallet7"), ("r1", "pallet7")]
     assert rows_of(fleet_db) - rows_of(tmp_path / "r1.db") - rows_of(tmp_path / "r2.db") \
         == Counter({("pair", 1, None, "pallet7", 10.0, 20.0): 1})
+
+
+def test_a_buffer_that_empties_a_shipped_table_does_not_hide_later_events(tmp_path):
+    """A robot idle for longer than its tBuffer loses every row of a type, the shipped ones
+    included: the events after that have new sequences (never one the fleet holds), so
+    the next push ships them."""
+    clock = slr_sql.ManualClock(1000.0)
+    with slr_sql.open(tmp_path / "r1.db", robot="r1", clock=clock) as kb:
+        kb.load("tBuffer(seen(_, _), 100).")
+        kb.add_many(["seen(pallet7, dock)^1000", "seen(pallet8, dock)^1000"])
+        assert fleet.push(str(tmp_path / "r1.db"), str(tmp_path / "fleet.db")).shipped == 2
+        clock.set(2000.0)
+        kb.add("seen(pallet9, aisle1)^2000")        # prunes both shipped rows first
+        kb.add("seen(pallet7, aisle2)^2001")
+        assert kb.query("seen(P, W)^T") == [{"P": "pallet9", "W": "aisle1", "T": 2000.0},
+                                            {"P": "pallet7", "W": "aisle2", "T": 2001.0}]
+    assert fleet.push(str(tmp_path / "r1.db"), str(tmp_path / "fleet.db")).shipped == 2
+    with opened(tmp_path / "fleet.db") as kb:
+        assert [a["P"] for a in kb.query("origin(r1, seen(P, _)^_)")] == [
+            "pallet7", "pallet8", "pallet9", "pallet7"]
 
 
 def test_push_with_types_and_a_name_for_an_unnamed_store(tmp_path):
