@@ -178,6 +178,8 @@ path, robot, rate, seconds = sys.argv[1], sys.argv[2], float(sys.argv[3]), float
 per = max(1, int(rate * 0.02))
 lat = []
 with slr_sql.open(path, robot=robot) as kb:
+    print("ready", flush=True)
+    sys.stdin.readline()          # every writer starts adding at once
     start = time.time(); k = 0
     while time.time() - start < seconds:
         t = time.time()
@@ -212,25 +214,42 @@ def lag(folder: Path, robots: int, rate: float, seconds: float, engine: str = "s
         target = base + "&schema=lag"
         slr_sql.open(target).close()
 
-        def fleet_rows() -> list:
+        def fleet_sql(sql: str) -> list:
             with psycopg.connect(base, autocommit=True) as c:
                 c.execute("SET search_path = lag")
-                return c.execute("SELECT arg1, robot, t_start, arrival FROM seen").fetchall()
+                return c.execute(sql).fetchall()
     else:
         target = str(folder / "lag_fleet.db")
+        slr_sql.open(target).close()
 
-        def fleet_rows() -> list:
+        def fleet_sql(sql: str) -> list:
             with sqlite3.connect(target) as conn:
-                return conn.execute("SELECT arg1, robot, t_start, arrival FROM seen").fetchall()
+                return conn.execute(sql).fetchall()
+
+    def fleet_rows() -> list:
+        return fleet_sql("SELECT arg1, robot, t_start, arrival FROM seen")
     try:
         pushers = [subprocess.Popen([sys.executable, "-m", "slr_sql", "fleet", "push",
                                      str(folder / f"lag_{n}.db"), target, "--follow"],
                                     env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
                    for n in names]
-        time.sleep(3)   # let the pushers start (a benchmark, not a test)
+        # steady state, not start-up: every pusher has made its first contact with the fleet
+        # (a process imports and compiles slr_sql first: seconds each on a loaded machine)
+        deadline = time.time() + 120
+        while len(fleet_sql("SELECT robot FROM slr_fleet_robots")) < robots:
+            if time.time() > deadline:
+                raise SystemExit("the pushers did not start within 120 s")
+            time.sleep(0.1)
         writers = [subprocess.Popen([sys.executable, "-c", WRITER, str(folder / f"lag_{n}.db"),
-                                     n, str(rate), str(seconds)], env=ENV,
+                                     n, str(rate), str(seconds)], env=ENV, stdin=subprocess.PIPE,
                                     stdout=subprocess.PIPE, text=True) for n in names]
+        for w in writers:               # each has opened its store
+            assert w.stdout is not None and w.stdout.readline().strip() == "ready"
+        load_before = os.getloadavg()
+        for w in writers:
+            assert w.stdin is not None
+            w.stdin.write("go\n")
+            w.stdin.flush()
         added = 0
         add_latency: list[float] = []
         for w in writers:
@@ -246,6 +265,7 @@ def lag(folder: Path, robots: int, rate: float, seconds: float, engine: str = "s
             except Exception:  # noqa: BLE001 - the table is not there yet
                 pass
             time.sleep(0.2)
+        load_after = os.getloadavg()
         for p in pushers:
             p.terminate()
         for p in pushers:
@@ -261,7 +281,8 @@ def lag(folder: Path, robots: int, rate: float, seconds: float, engine: str = "s
                     "SELECT arg1, robot, t_start, arrival FROM seen"):
                 lags.append(shipped[(arg1, robot, t)] - arrival)
     print(f"lag ({robots} robots x {rate:g} events/s for {seconds:g} s, one --follow pusher "
-          f"each, one fleet store ({engine}); {added:,} events):")
+          f"each, one fleet store ({engine}); {added:,} events; load average "
+          f"{load_before[0]:.1f} before, {load_after[0]:.1f} after):")
     print(f"  robot add (commit)     p50 {pct(add_latency, 50) * 1e3:7.1f} ms   "
           f"p99 {pct(add_latency, 99) * 1e3:7.1f} ms")
     print(f"  robot -> fleet lag     p50 {pct(lags, 50) * 1e3:7.1f} ms   "

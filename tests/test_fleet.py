@@ -388,6 +388,23 @@ def test_push_with_types_and_a_name_for_an_unnamed_store(tmp_path):
         assert kb.store.event_types() == {("seen", 2): "seen"}
 
 
+def test_a_batch_the_fleet_refuses_stops_the_push_after_what_it_stored(tmp_path):
+    """Batches before the last are stored by a sender thread while the next is read: a
+    failure there stops the push with the fleet's reason, after the batches stored before
+    it, and the next push starts from there (nothing twice)."""
+    with opened(tmp_path / "r1.db", robot="r1") as kb:
+        kb.add_many(["arm(up)^1", "arm(down)^2", "arm(up)^3",
+                     "seen(pallet7, dock)^4", "seen(pallet8, dock)^5"])
+    with opened(tmp_path / "fleet.db") as kb:
+        kb.load(":- event seen/3.")           # the fleet takes seen/3 only
+    with pytest.raises(slr_sql.SLRError, match="seen/3 is declared"):
+        fleet.push(str(tmp_path / "r1.db"), str(tmp_path / "fleet.db"), batch=1)
+    with opened(tmp_path / "fleet.db") as kb:
+        assert [a["A"] for a in kb.query("origin(r1, arm(A)^_)")] == ["up", "down", "up"]
+    report = fleet.push(str(tmp_path / "r1.db"), str(tmp_path / "fleet.db"), types=["arm/1"])
+    assert (report.shipped, report.batches) == (0, 0)
+
+
 def test_cli_push_status_and_query_by_robot(tmp_path):
     for robot, event in (("r1", "seen(pallet7, dock)^10"), ("r2", "seen(pallet7, aisle3)^12")):
         with opened(tmp_path / f"{robot}.db", robot=robot) as kb:
