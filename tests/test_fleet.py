@@ -632,6 +632,61 @@ def test_a_postgresql_fleet_store_answers_like_the_sqlite_one(fleet_store, postg
         ("r1", 4, 0), ("r2", 3, 0), ("r3", 2, 0)]
 
 
+ODD_VALUES = ["pallet7", "it's", "item", "inf", "-inf", "12", "-3.5", "1e5", ".5", "-x",
+              "a\tb", "line\nbreak", "back\\slash", "cr\rlf", "\\N", "", "ünï", 7, -12,
+              0, 2.5, -0.1, 1e300, ["l", 1]]
+
+
+def test_rows_shipped_into_postgresql_are_stored_as_its_own_adds_store_them(
+        postgres_url, tmp_path):
+    """Into a PostgreSQL fleet store a pusher sends rows as COPY text, spelled mostly by the
+    robot's SQLite: every column must hold exactly what an add on that store writes
+    (texts that read as numbers, tabs, newlines, backslashes, floats, compound terms,
+    events without arguments, another robot's rows, a batch partly stored already)."""
+    from slr_sql import shipping
+    from slr_sql.store import EventStore
+    events = [("odd", (v, i), float(i), float(i) + 0.25) for i, v in enumerate(ODD_VALUES)]
+    texts = ['odd(pose([0.1, 2], "s"), 90)^[90, 91]', "tick^1.5", "tick^[2, 3]"]
+    with opened(tmp_path / "r1.db", robot="r1") as kb:
+        kb.add_many(events)
+        kb.add_many(texts)
+    conn = sqlite3.connect(tmp_path / "r1.db")
+    conn.execute("UPDATE odd SET robot = 'r0' WHERE seq = 3")   # a row r1 received from r0
+    conn.commit()
+    conn.close()
+    shipped, added = with_schema(postgres_url, "copied"), with_schema(postgres_url, "added")
+    robot = EventStore(str(tmp_path / "r1.db"))
+    try:
+        rows, parts = robot.fleet_read_after_copy_text("odd", 2, 0, 1000, "r1")
+    finally:
+        robot.close()
+    assert parts is not None and len(rows) == len(ODD_VALUES) + 1
+    with opened(shipped) as kb:    # a batch sent again with more rows: the rest is stored
+        assert shipping.receive(kb, "r1", [("odd", 2, rows[:5], parts[:5])],
+                                 check=False) == 5
+        assert shipping.receive(kb, "r1", [("odd", 2, rows, parts)],
+                                 check=False) == len(rows) - 5
+    assert fleet.push(str(tmp_path / "r1.db"), shipped, batch=2).shipped == 2   # the ticks
+    with opened(added, robot="r1") as kb:
+        kb.add_many(events)
+        kb.add_many(texts)
+    import psycopg
+    tables = {}
+    for schema in ("copied", "added"):
+        with psycopg.connect(postgres_url, autocommit=True) as c:
+            c.execute(f'SET search_path = "{schema}"')
+            tables[schema] = (
+                c.execute("SELECT arg1, arg2, t_start, t_end, robot FROM odd ORDER BY t_start"
+                          ).fetchall(),
+                c.execute("SELECT t_start, t_end, robot FROM tick ORDER BY t_start").fetchall())
+    copied, own = tables["copied"], tables["added"]
+    assert copied[1] == own[1]
+    assert [r[:4] for r in copied[0]] == [r[:4] for r in own[0]]
+    assert [r[4] for r in copied[0]] == ["r1"] * 2 + ["r0"] + ["r1"] * (len(rows) - 3)
+    with opened(shipped) as kb, opened(added) as own_kb:
+        assert kb.query("odd(V, I)^T") == own_kb.query("odd(V, I)^T")
+
+
 def test_a_postgresql_restart_mid_stream(postgres_server, postgres_url, tmp_path):
     """PostgreSQL stops at once (``pg_ctl -m immediate``: open transactions are lost) and
     starts again while a robot writes and its pusher follows: the pusher says so once,
