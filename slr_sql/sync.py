@@ -201,6 +201,7 @@ class PendingQuery(Future):
         self.goal = goal
         self.at = at
         self.args = args
+        self.robot: str | None = None    # every event goal, prev and next restricted to it
         self.goal_set: GoalSet | None = None
         self.waiting_for: list[Wait] = []
         self.waits: list[Wait] = []
@@ -573,7 +574,8 @@ class Synchronizer:
     # -- public operations (KnowledgeBase delegates here) ----------------------------------------
     def submit(self, goal: str, at: float | None = None, id: str | None = None,
                args: dict | None = None, timeout: float | None = None,
-               callback: Callable[[PendingQuery], Any] | None = None) -> PendingQuery:
+               callback: Callable[[PendingQuery], Any] | None = None,
+               robot: str | None = None) -> PendingQuery:
         if self._closed:
             raise SLRError("the knowledge base is closed")
         plan = self.kb._plan(goal, tuple(args) if args else ())  # syntax errors raise here
@@ -588,6 +590,7 @@ class Synchronizer:
             elif id in self._queries:
                 raise SLRError(f"a query with id {id!r} is already pending")
             q = PendingQuery(self, str(id), goal, at, args)
+            q.robot = robot
             q._plan = plan
             self._queries[q.id] = q
             if self.external_poll is not None:
@@ -915,6 +918,7 @@ class Synchronizer:
         if q._deadline is not None:
             remaining = max(q._deadline - time.monotonic(), 0.001)
         m = kb.engine.machine(at=q.at, timeout=remaining)
+        m.robot = q.robot
         m.synchronized = True  # for engines that bypass the hooks (SQL): do not
         m.on_prev = self._check_prev
         m.on_next = lambda name, n, lo, hi, args, s=None, e=None: \
@@ -952,7 +956,7 @@ class Synchronizer:
         all of them at once. None: evaluate in the interpreter, whose hooks wait for exactly what the
         evaluation reaches."""
         kb = self.kb
-        if not kb.sql_enabled:
+        if not kb.sql_enabled or q.robot is not None:   # (one robot's: the interpreter)
             return None
         from .planner import SqlPlan, plan_for
 

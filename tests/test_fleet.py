@@ -320,8 +320,29 @@ def test_origin_of_something_else_is_an_error(fleet_store):
                 kb.query("origin(R, G)")
         with pytest.raises(slr_sql.SLRError, match="robot's name"):
             kb.query("seen(P, W)^T", robot="")
-        with pytest.raises(slr_sql.SLRError, match="synchronized"):
-            kb.query("seen(P, W)^T", robot="r1", wait=True)
+
+
+def test_a_synchronized_query_restricted_to_one_robot(tmp_path):
+    """wait=True with robot=: answered once the fleet's history is complete up to `at` (the
+    least of the robots' marks), with that robot's events only; CLI `--wait --robot`."""
+    for robot, events in (("r1", ["seen(pallet7, dock)^10", "seen(pallet7, aisle1)^18",
+                                  "fullyUpdated(seen/2)^20"]),
+                          ("r2", ["seen(pallet7, aisle3)^15", "fullyUpdated(seen/2)^25"])):
+        with opened(tmp_path / f"{robot}.db", robot=robot) as kb:
+            kb.add_many(events)
+        fleet.push(str(tmp_path / f"{robot}.db"), str(tmp_path / "fleet.db"))
+    goal = "findall(W, seen(pallet7, W)^_, L)"
+    with opened(tmp_path / "fleet.db") as kb:
+        for sql in (True, False):
+            kb.sql_enabled = sql
+            assert kb.query(goal, at=20, wait=True, robot="r1") == [{"L": ["dock", "aisle1"]}]
+            assert kb.query(goal, at=20, wait=True, robot="r2") == [{"L": ["aisle3"]}]
+            assert kb.query(goal, at=20, wait=True) == [{"L": ["dock", "aisle3", "aisle1"]}]
+            with pytest.raises(slr_sql.SLRTimeout):      # after the store clock's now
+                kb.query(goal, at=5000, wait=True, robot="r2", timeout=0.2)
+    done = slr("query", str(tmp_path / "fleet.db"), goal, "--at", "20", "--wait",
+               "--robot", "r2")
+    assert done.stdout.strip() == "L = [aisle3]"
 
 
 # -- shipping --------------------------------------------------------------------------------
