@@ -956,9 +956,11 @@ class Synchronizer:
         all of them at once. None: evaluate in the interpreter, whose hooks wait for exactly what the
         evaluation reaches."""
         kb = self.kb
-        if not kb.sql_enabled or q.robot is not None:   # (one robot's: the interpreter)
+        from .planner import SqlPlan, compiles_for, plan_for
+
+        if not kb.sql_enabled or not compiles_for(kb.store) or q.robot is not None:
+            return None   # (one robot's answers: the interpreter)
             return None
-        from .planner import SqlPlan, plan_for
 
         # the kb's current parse of the goal, not q._plan: a load or define while the query
         # waited drops the kb's plans, and the compiled statement with them (the program and

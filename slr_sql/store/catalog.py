@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from typing import Any, Iterable
 
 from ..errors import SLRError
-from .connection import Database
+from .connection import Database, DatabaseError
 from .sqltext import RESERVED_PREFIXES, quote_identifier, sql_literal
 
 
@@ -381,6 +381,11 @@ class Catalog:
         out = {}
         with self.db.transaction():
             conn = self.db.conn
+            # the inspection views read these tables: PostgreSQL refuses to drop a table a
+            # view depends on, so they go first and come back over the new tables
+            views = self.db.view_statements(self.meta_get("sql_views", []))
+            for name in views:
+                conn.execute(f"DROP VIEW {quote_identifier(name)}")
             existing = sorted(name for name in self.db.table_names()
                               if name.startswith("slr_facts_"))
             for table in existing:
@@ -401,6 +406,16 @@ class Catalog:
                 conn.executemany(f"INSERT INTO {table} VALUES (?{', ?' * arity})",
                                  [(i,) + tuple(row) for i, row in enumerate(rows)])
                 out[(name, arity)] = table
+            kept = []
+            for name, statement in views.items():
+                try:
+                    with self.db.transaction():   # a savepoint: a view of a table now gone
+                        conn.execute(statement)
+                    kept.append(name)
+                except DatabaseError:
+                    pass
+            if views:
+                self.meta_set("sql_views", kept)
             if version is not None:
                 conn.execute("INSERT INTO slr_meta (key, value) VALUES (?, ?) ON CONFLICT(key) "
                              "DO UPDATE SET value = excluded.value", (FACTS_VERSION, int(version)))

@@ -375,6 +375,19 @@ class Database:
         with self.lock:
             return {row[0].lower() for row in self.conn.execute("SELECT name FROM sqlite_master")}
 
+    def view_statements(self, names: Iterable[str]) -> dict[str, str]:
+        """``{view name: the statement that creates it}`` of the named views that exist.
+
+        >>> db = Database(None); _ = db.execute("CREATE VIEW answer AS SELECT 42 AS x")
+        >>> db.view_statements(["answer", "nothing"])
+        {'answer': 'CREATE VIEW answer AS SELECT 42 AS x'}
+        """
+        wanted = list(names)
+        with self.lock:
+            rows = self.conn.execute("SELECT name, sql FROM sqlite_master WHERE type = 'view'")
+            found = {name: sql for name, sql in rows}
+        return {name: found[name] for name in wanted if name in found}
+
     @property
     def max_columns(self) -> int:
         """The most columns a table may have (SQLite's compile-time limit)."""

@@ -427,6 +427,16 @@ class PgDatabase:
                 "SELECT c.relname FROM pg_class c JOIN pg_namespace n ON n.oid = c.relnamespace "
                 "WHERE n.nspname = current_schema()")}
 
+    def view_statements(self, names: Iterable[str]) -> dict[str, str]:
+        """``{view name: the statement that creates it}`` of the named views of the schema."""
+        wanted = list(names)
+        with self.lock:
+            rows = self.conn.execute(
+                "SELECT viewname, definition FROM pg_views WHERE schemaname = current_schema()")
+            found = {name: select for name, select in rows}
+        return {name: f"CREATE VIEW {quote_identifier(name)} AS {found[name]}"
+                for name in wanted if name in found}
+
     max_columns = 1600
 
     def suspend_streams(self) -> None:
