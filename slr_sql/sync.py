@@ -960,7 +960,6 @@ class Synchronizer:
 
         if not kb.sql_enabled or not compiles_for(kb.store) or q.robot is not None:
             return None   # (one robot's answers: the interpreter)
-            return None
 
         # the kb's current parse of the goal, not q._plan: a load or define while the query
         # waited drops the kb's plans, and the compiled statement with them (the program and
