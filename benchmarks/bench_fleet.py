@@ -185,7 +185,7 @@ lat = []
 with slr_sql.open(path, robot=robot) as kb:
     print("ready", flush=True)
     sys.stdin.readline()          # every writer starts adding at once
-    start = time.time(); k = 0
+    start = time.time(); k = 0; cpu = time.process_time()
     while time.time() - start < seconds:
         t = time.time()
         kb.add_many([("seen", (f"pallet{(k + i) % 500}", robot), t, t) for i in range(per)])
@@ -194,8 +194,14 @@ with slr_sql.open(path, robot=robot) as kb:
         pause = start + k / rate - time.time()
         if pause > 0:
             time.sleep(pause)
-print(k, " ".join(f"{x:.6f}" for x in lat))
+print(k, time.process_time() - cpu, " ".join(f"{x:.6f}" for x in lat))
 """
+
+
+def process_cpu(pid: int) -> float:
+    """CPU seconds (user + system) process ``pid`` has used so far (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def lag(folder: Path, robots: int, rate: float, seconds: float, engine: str = "sqlite") -> None:
@@ -251,16 +257,20 @@ def lag(folder: Path, robots: int, rate: float, seconds: float, engine: str = "s
         for w in writers:               # each has opened its store
             assert w.stdout is not None and w.stdout.readline().strip() == "ready"
         load_before = os.getloadavg()
+        pushers_cpu = sum(process_cpu(p.pid) for p in pushers)
+        began = time.time()
         for w in writers:
             assert w.stdin is not None
             w.stdin.write("go\n")
             w.stdin.flush()
         added = 0
+        writers_cpu = 0.0
         add_latency: list[float] = []
         for w in writers:
             out, _ = w.communicate()
-            count, *lats = out.split()
+            count, cpu, *lats = out.split()
             added += int(count)
+            writers_cpu += float(cpu)
             add_latency += [float(x) for x in lats]
         deadline = time.time() + 120
         while time.time() < deadline:
@@ -271,6 +281,8 @@ def lag(folder: Path, robots: int, rate: float, seconds: float, engine: str = "s
                 pass
             time.sleep(0.2)
         load_after = os.getloadavg()
+        pushers_cpu = sum(process_cpu(p.pid) for p in pushers) - pushers_cpu
+        wall = time.time() - began
         for p in pushers:
             p.terminate()
         for p in pushers:
@@ -292,6 +304,10 @@ def lag(folder: Path, robots: int, rate: float, seconds: float, engine: str = "s
           f"p99 {pct(add_latency, 99) * 1e3:7.1f} ms")
     print(f"  robot -> fleet lag     p50 {pct(lags, 50) * 1e3:7.1f} ms   "
           f"p99 {pct(lags, 99) * 1e3:7.1f} ms   max {max(lags) * 1e3:7.1f} ms")
+    print(f"  CPU while adding and shipping ({wall:.1f} s): writers {writers_cpu:.1f} s, "
+          f"pushers {pushers_cpu:.1f} s (the fleet store's writes included when it is a "
+          f"file; PostgreSQL's own not counted) = {(writers_cpu + pushers_cpu) / wall:.2f} "
+          f"cores of {os.cpu_count()}")
 
 
 def catchup(folder: Path, robots: int, rate: float, offline: float, batch: int) -> None:
