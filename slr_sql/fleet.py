@@ -56,8 +56,6 @@ class _LocalTarget:
     def __init__(self, where: str):
         from .kb import KnowledgeBase
         self.kb = KnowledgeBase(where)
-        # a PostgreSQL fleet store takes rows as COPY text the robot's SQLite spells
-        self.copy_text = self.kb.store.dialect.name == "postgresql"
 
     def positions(self, robot: str) -> dict[tuple[str, int], int]:
         from .shipping import positions
@@ -197,11 +195,10 @@ class _Pusher:
                  if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)}
         keys = sorted(k for k in heads if self.types is None or k in self.types)
         held: tuple | None = None     # the batch read last, sent once the next one is read
-        copy_text = getattr(target, "copy_text", False)
 
         def record(batch: tuple, stored: int) -> None:
             nonlocal shipped
-            name, arity, rows = batch[:3]
+            name, arity, rows = batch
             positions[(name, arity)] = rows[-1][0]
             shipped += stored
             self.report.shipped += stored
@@ -223,19 +220,14 @@ class _Pusher:
             for name, arity in keys:
                 position = positions.get((name, arity), 0)
                 while not stop.is_set():
-                    if copy_text:
-                        rows, texts = self.store.fleet_read_after_copy_text(
-                            name, arity, position, self.batch, self.robot)
-                    else:
-                        rows, texts = self.store.fleet_read_after(
-                            name, arity, position, self.batch), None
+                    rows = self.store.fleet_read_after(name, arity, position, self.batch)
                     if not rows:
                         break
                     if held is not None:
                         if sender is None:
                             sender = _Sender(target, self.robot, record)
                         sender.put(held)
-                    held = (name, arity, rows) if texts is None else (name, arity, rows, texts)
+                    held = (name, arity, rows)
                     position = rows[-1][0]
                     if len(rows) < self.batch:
                         break

@@ -68,12 +68,10 @@ def receive(kb: Any, robot: str, batches: list, marks: dict | None = None,
             return errors
     stored = 0
     with store.transaction():
-        for name, arity, rows, *texts in batches:
+        for name, arity, rows in batches:
             if rows and type(rows[0]) is not tuple:
                 rows = [tuple(r) for r in rows]
-            # (a pusher in this process may add the rows' COPY texts for a PostgreSQL store)
-            stored += store.fleet_receive(robot, name, arity, rows, store_events,
-                                          texts[0] if texts and store_events is None else None)
+            stored += store.fleet_receive(robot, name, arity, rows, store_events)
         if marks:
             robots = store.robots()
             for mk, t in marks.items():

@@ -660,8 +660,8 @@ ODD_VALUES = ["pallet7", "it's", "item", "inf", "-inf", "12", "-3.5", "1e5", ".5
 
 def test_rows_shipped_into_postgresql_are_stored_as_its_own_adds_store_them(
         postgres_url, tmp_path):
-    """Into a PostgreSQL fleet store a pusher sends rows as COPY text, spelled mostly by the
-    robot's SQLite: every column must hold exactly what an add on that store writes
+    """Rows shipped into a PostgreSQL fleet store are converted from SQLite's stored values
+    to PostgreSQL's: every column must hold exactly what an add on that store writes
     (texts that read as numbers, tabs, newlines, backslashes, floats, compound terms,
     events without arguments, another robot's rows, a batch partly stored already)."""
     from slr_sql import shipping
@@ -678,15 +678,13 @@ def test_rows_shipped_into_postgresql_are_stored_as_its_own_adds_store_them(
     shipped, added = with_schema(postgres_url, "copied"), with_schema(postgres_url, "added")
     robot = EventStore(str(tmp_path / "r1.db"))
     try:
-        rows, parts = robot.fleet_read_after_copy_text("odd", 2, 0, 1000, "r1")
+        rows = robot.fleet_read_after("odd", 2, 0, 1000)
     finally:
         robot.close()
-    assert parts is not None and len(rows) == len(ODD_VALUES) + 1
+    assert len(rows) == len(ODD_VALUES) + 1
     with opened(shipped) as kb:    # a batch sent again with more rows: the rest is stored
-        assert shipping.receive(kb, "r1", [("odd", 2, rows[:5], parts[:5])],
-                                 check=False) == 5
-        assert shipping.receive(kb, "r1", [("odd", 2, rows, parts)],
-                                 check=False) == len(rows) - 5
+        assert shipping.receive(kb, "r1", [("odd", 2, rows[:5])], check=False) == 5
+        assert shipping.receive(kb, "r1", [("odd", 2, rows)], check=False) == len(rows) - 5
     assert fleet.push(str(tmp_path / "r1.db"), shipped, batch=2).shipped == 2   # the ticks
     with opened(added, robot="r1") as kb:
         kb.add_many(events)

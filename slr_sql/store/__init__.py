@@ -262,11 +262,6 @@ class EventStore:
     def fleet_read_after(self, name: str, arity: int, position: int, limit: int) -> list[tuple]:
         return self._fleet.read_after(name, arity, position, limit)
 
-    @_doc(Fleet.read_after_copy_text)
-    def fleet_read_after_copy_text(self, name: str, arity: int, position: int, limit: int,
-                                   robot: str) -> tuple[list[tuple], list[tuple] | None]:
-        return self._fleet.read_after_copy_text(name, arity, position, limit, robot)
-
     @_doc(Fleet.backlog)
     def fleet_backlog(self, name: str, arity: int, position: int) -> tuple[int, float | None]:
         return self._fleet.backlog(name, arity, position)
@@ -277,8 +272,8 @@ class EventStore:
 
     @_doc(Fleet.receive)
     def fleet_receive(self, robot: str, name: str, arity: int, rows: list[tuple],
-                      store_events: Any = None, texts: list[tuple] | None = None) -> int:
-        return self._fleet.receive(robot, name, arity, rows, store_events, texts)
+                      store_events: Any = None) -> int:
+        return self._fleet.receive(robot, name, arity, rows, store_events)
 
     @_doc(Fleet.record_contact)
     def fleet_record_contact(self, robot: str, pending: int, head_arrival: float | None) -> None:

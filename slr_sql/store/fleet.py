@@ -132,39 +132,6 @@ class Fleet:
                 rows = [r[:at] + (r[at] if _finite(r[at]) else None, r[-1]) for r in rows]
             return rows
 
-    def read_after_copy_text(self, name: str, arity: int, position: int, limit: int,
-                             robot: str) -> tuple[list[tuple], list[tuple] | None]:
-        """:meth:`read_after`'s rows, and per row the parts of PostgreSQL's ``COPY`` text
-        that SQLite can spell: ``(arguments or None, robot)``, the arguments as a
-        PostgreSQL store keeps them (:meth:`PostgresDialect.to_column`), escaped and joined
-        by tabs, None when one of them needs Python (a float, a text that reads as a
-        number); the robot escaped (``robot`` when NULL). Texts are None on a store that is
-        not SQLite. Shipping into a PostgreSQL fleet store adapts no value in Python then."""
-        if self.db.dialect.name != "sqlite":
-            return self.read_after(name, arity, position, limit), None
-        with self.db.lock:
-            self.db.check_open()
-            event_type = self.tables.lookup(name, arity)
-            if event_type is None:
-                return [], None
-            args = "".join(f"arg{i}, " for i in range(1, arity + 1))
-            texts = " || char(9) || ".join(_copy_text_sql(f"arg{i}")
-                                           for i in range(1, arity + 1)) or "''"
-            found = self.db.conn.execute(
-                f"SELECT seq, {args}t_start, t_end, arrival, robot, {texts} "
-                f"FROM {event_type.quoted} WHERE seq > ? ORDER BY seq LIMIT ?",
-                (*[_COPY_SPECIAL] * arity, position, limit)).fetchall()
-            at = 3 + arity
-            rows = [r[:-1] for r in found]
-            arrivals = [r[at] for r in rows]
-            if rows and not (_finite(min(arrivals)) and _finite(max(arrivals))):
-                rows = [r[:at] + (r[at] if _finite(r[at]) else None, r[-1]) for r in rows]
-            spelled: dict[Any, str] = {}
-            for r in rows:   # the robot column: the same name, row after row
-                if r[-1] not in spelled:
-                    spelled[r[-1]] = _copy_escape(r[-1] if r[-1] is not None else robot)
-            return rows, [(r[-1], spelled[r[-2]]) for r in found]
-
     def backlog(self, name: str, arity: int, position: int) -> tuple[int, float | None]:
         """The number of rows of name/arity after ``position`` and the arrival time of the
         latest row (None for an empty table): what is left to ship, and how recent."""
@@ -191,16 +158,14 @@ class Fleet:
                 "WHERE robot = ?", (robot,))}
 
     def receive(self, robot: str, name: str, arity: int, rows: list[tuple],
-                store_events: Any = None, texts: list[tuple] | None = None) -> int:
+                store_events: Any = None) -> int:
         """Store a shipped batch of ``robot`` (rows as :meth:`read_after` gives them, one
         type, in sequence order) exactly once: the rows after the robot's position for the
         type go in and the position moves to the last row's sequence, in one transaction
         (which the caller may have opened). ``store_events(events)``, when given, stores
         decoded ``(name, args, start, end)`` events instead of the raw rows (the path that
         runs the fleet's event rules); the rows keep the robot they were stored with
-        (``robot`` when NULL). ``texts``: the rows' COPY text parts from
-        :meth:`read_after_copy_text`, used by a PostgreSQL store. Returns the number of rows
-        stored."""
+        (``robot`` when NULL). Returns the number of rows stored."""
         robot = check_robot_name(robot)
         if not rows:
             return 0
@@ -228,22 +193,14 @@ class Fleet:
                                    f"{robot!r}: {exc}") from None
                 end = 1 + arity + 2
                 dialect = self.db.dialect
-                copy_text = getattr(conn, "copy_text", None)
-                if texts is not None and copy_text is not None and len(texts) == len(rows):
-                    skipped = len(rows) - len(fresh)   # fresh is a tail of rows
-                    copy_text(event_type.quoted, ", ".join(
-                        [f"arg{i}" for i in range(1, arity + 1)]
-                        + ["t_start", "t_end", "robot", "arrival"]),
-                        _copy_lines(fresh, texts[skipped:], arity, arrival))
-                elif dialect.name != "sqlite" and arity:  # rows come as SQLite stores them
+                if dialect.name != "sqlite" and arity:  # rows come as SQLite stores them
                     to_column: Any = dialect.to_column
                     values = [(*map(to_column, r[1:1 + arity]), *r[1 + arity:end]) for r in fresh]
                 else:
                     values = [r[1:end] for r in fresh]
-                if texts is None or copy_text is None or len(texts) != len(rows):
-                    conn.executemany(event_type.insert_sql, [
-                        v + (arrival, r[-1] if r[-1] is not None else robot)
-                        for v, r in zip(values, fresh)])
+                conn.executemany(event_type.insert_sql, [
+                    v + (arrival, r[-1] if r[-1] is not None else robot)
+                    for v, r in zip(values, fresh)])
             # the arrival column sits after the arguments and the two times
             latest = max((r[3 + arity] for r in fresh if r[3 + arity] is not None),
                          default=None)
@@ -303,42 +260,6 @@ class Fleet:
                 "FROM slr_fleet_robots ORDER BY robot")
             cols = [d[0] for d in cur.description]
             return [dict(zip(cols, r)) for r in cur.fetchall()]
-
-
-# a text holding one of the characters COPY's text format escapes (GLOB: no escapes of its own)
-_COPY_SPECIAL = "*[\\\t\n\r]*"
-
-
-def _copy_text_sql(column: str) -> str:
-    """SQL spelling an argument column as :meth:`PostgresDialect.to_column` would, for
-    COPY's text format, or NULL where Python must (a float; a text that may read as a
-    number or holds a character to escape). One ``?``: :data:`_COPY_SPECIAL`."""
-    return (f"CASE typeof({column}) WHEN 'text' THEN CASE WHEN {column} GLOB '[0-9.i-]*' "
-            f"OR {column} GLOB ? THEN NULL ELSE {column} END "
-            f"WHEN 'integer' THEN CAST({column} AS TEXT) WHEN 'null' THEN '\\N' END")
-
-
-def _copy_escape(value: Any) -> str:
-    if value is None:
-        return "\\N"
-    return (str(value).replace("\\", "\\\\").replace("\t", "\\t").replace("\n", "\\n")
-            .replace("\r", "\\r"))
-
-
-def _copy_lines(rows: list[tuple], texts: list[tuple], arity: int, arrival: float) -> str:
-    """The COPY text of shipped rows: arguments, start, end, robot, the fleet's arrival."""
-    from .dialect import POSTGRES
-    to_column = POSTGRES.to_column
-    tail = f"\t{float(arrival)!r}\n"
-    lines = []
-    for row, (args, robot) in zip(rows, texts):
-        if args is None:
-            args = "\t".join(_copy_escape(to_column(v)) for v in row[1:1 + arity])
-        if arity:
-            lines.append(f"{args}\t{row[1 + arity]!r}\t{row[2 + arity]!r}\t{robot}{tail}")
-        else:
-            lines.append(f"{row[1]!r}\t{row[2]!r}\t{robot}{tail}")
-    return "".join(lines)
 
 
 def _finite(value: Any) -> bool:

@@ -211,18 +211,6 @@ class PgConnection:
         self.last_rowcount = cursor.rowcount
         return PgCursor(cursor, self)
 
-    def copy_text(self, table: str, columns: str, data: str) -> None:
-        """``COPY table (columns) FROM STDIN`` of ``data``, rows already in COPY's text
-        format (a pusher's rows, formatted mostly by SQLite: no value is adapted here)."""
-        self._alive()
-        cursor = self.raw.cursor()
-
-        def copy() -> None:
-            with cursor.copy(f"COPY {table} ({columns}) FROM STDIN") as out:
-                out.write(data)
-        self._guard(copy)
-        self.last_rowcount = data.count("\n")
-
     def close(self) -> None:
         # closing a connection the server already dropped: nothing is left to close
         with suppress(_psycopg().Error):
