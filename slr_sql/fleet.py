@@ -34,8 +34,8 @@ WAKE_MIN, WAKE_MAX = 0.005, 0.25    # s between change checks of the robot store
 RETRY_MIN, RETRY_MAX = 0.1, 5.0     # s between attempts while the fleet is unreachable
 HEARTBEAT = 5.0              # s between contacts of a following pusher that has nothing new
 # s from the start of one round of a following pusher to the next: a robot adding every few
-# ms would otherwise cost the fleet a transaction each time (8 pushers x 50 rounds/s
-# saturated a fleet file's write lock); events wait at most this long to be gathered
+# ms would otherwise cost the fleet a transaction each time (and a fleet file has one write
+# lock for every pusher); events wait at most this long to be gathered
 ROUND_GAP = 0.05
 
 
