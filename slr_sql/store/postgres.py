@@ -32,7 +32,7 @@ from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 from ..errors import SLRBusy, SLRError, SLRServerUnreachable, SLRTimeout
 from .dialect import POSTGRES
 from .schema import postgres_migration_scripts
-from .sqltext import quote_identifier
+from .sqltext import bound_parameters, quote_identifier
 
 __all__ = ["PgDatabase", "PgStatementError", "is_postgres_url", "split_url"]
 
@@ -116,6 +116,10 @@ def _first_line(exc: BaseException) -> str:
     return text.splitlines()[0] if text else type(exc).__name__
 
 
+# Fewer rows go in by executemany, which psycopg pipelines into one round trip; COPY takes
+# two (its start is answered before the data goes), and wins only on many rows.
+_COPY_FROM = 64
+
 # INSERT INTO "table" (columns) VALUES (?, ...): nothing but values, so COPY does the same
 _PLAIN_INSERT = re.compile(r'INSERT INTO ("(?:[^"]|"")+"|[A-Za-z_][A-Za-z0-9_]*) '
                            r'\(([A-Za-z0-9_, ]+)\) VALUES \(\?(?:, \?)*\)\Z')
@@ -196,7 +200,7 @@ class PgConnection:
         self._alive()
         cursor = self.raw.cursor()
         plain = _PLAIN_INSERT.match(sql)
-        if plain is not None and len(rows) > 1:
+        if plain is not None and len(rows) > _COPY_FROM:
             # many rows into one table: COPY (one stream) rather than one INSERT per row
             def copy() -> None:
                 with cursor.copy(f"COPY {plain.group(1)} ({plain.group(2)}) FROM STDIN") as out:
@@ -208,6 +212,30 @@ class PgConnection:
         text = POSTGRES.statement(sql)
         if rows:
             self._guard(lambda: cursor.executemany(text, rows))
+        self.last_rowcount = cursor.rowcount
+        return PgCursor(cursor, self)
+
+    @contextmanager
+    def pipeline(self, rows: int) -> Iterator[None]:
+        """Send the statements of the block together, in one round trip (psycopg's
+        pipeline mode), when none of them copies: each of at most ``rows`` rows."""
+        if rows > _COPY_FROM:
+            yield
+            return
+        self._alive()
+        psycopg = _psycopg()
+        try:
+            with self.raw.pipeline():
+                yield
+        except psycopg.Error as exc:
+            raise _error(exc, self.where, self.busy_timeout) from None
+
+    def execute_script(self, sql: str) -> PgCursor:
+        """Run SQL text exactly as written (no parameters: DDL, trigger functions whose
+        bodies hold ``%``, ``?`` or ``:`` of their own); several statements may be given."""
+        self._alive()
+        cursor = self.raw.cursor()
+        self._guard(lambda: cursor.execute(sql, None, prepare=False))
         self.last_rowcount = cursor.rowcount
         return PgCursor(cursor, self)
 
@@ -282,6 +310,8 @@ class PgDatabase:
         self.busy_timeout = busy_timeout
         self.notify_channel = f"slr_{schema}"
         self.write_groups: dict[tuple[str, int], int] = {}
+        # whether a tBuffer is active, as of the last read of the versions (None: unknown)
+        self.tbuffers_active: bool | None = None
         try:
             raw = psycopg.connect(conninfo, autocommit=True)
         except psycopg.Error as exc:
@@ -505,7 +535,13 @@ class PgDatabase:
                 if timeout is not None:
                     raw.execute(f"SET LOCAL statement_timeout = {max(1, int(timeout * 1000))}")
                 cursor = raw.cursor()
-                cursor.execute(query, tuple(params) or None, prepare=False)
+                # the API's placeholders (`?`, `:name`) in psycopg's style, as on SQLite;
+                # without parameters the text goes as written (a `%` stays a `%`)
+                bound = bound_parameters(params)
+                if bound:
+                    cursor.execute(self.dialect.statement(query), bound, prepare=False)
+                else:
+                    cursor.execute(query, None, prepare=False)
                 columns = [d.name for d in cursor.description] if cursor.description else []
                 rows = [tuple(r) for r in cursor.fetchall()] if cursor.description else []
                 if own:
@@ -581,6 +617,12 @@ class PgDatabase:
             if own:
                 self.conn.execute("COMMIT")
             return rows
+
+    def run_compiled_many(self, sql: str, rows: list) -> None:
+        with self.lock:
+            self.check_open()
+            for row in rows:
+                self.conn.execute(sql, row)
 
     def _outer(self, deadline: float | None) -> float | None:
         outer = self.deadline
