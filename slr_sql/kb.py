@@ -84,7 +84,7 @@ def _indicators(t: Any) -> list[tuple[str, int]]:
 
 _TUPLE = frozenset({tuple})
 _FOUR = {4}
-_second = itemgetter(1)
+_first, _second, _fourth = itemgetter(0), itemgetter(1), itemgetter(3)
 
 
 def _all_event_tuples(events: list) -> bool:
@@ -363,10 +363,22 @@ def _with_derived(stored: list, derived: list) -> list:
     ends = getattr(stored, "ends", None)
     if ends is not None:
         ends = dict(ends)
-        for name, args, _start, end in derived:
-            key = (name, len(args))
+        # column-wise (C loops): one rule round may derive 100,000 events of one type
+        names = set(map(_first, derived))
+        arities = set(map(len, map(_second, derived)))
+        if len(names) == 1 and len(arities) == 1:
+            times = list(map(_fourth, derived))
+            spans = {(names.pop(), arities.pop()): (min(times), max(times))}
+        else:
+            spans = {}
+            for name, args, _start, end in derived:
+                key = (name, len(args))
+                span = spans.get(key)
+                spans[key] = (end, end) if span is None else (min(span[0], end),
+                                                              max(span[1], end))
+        for key, (low, high) in spans.items():
             span = ends.get(key)
-            ends[key] = (end, end) if span is None else (min(span[0], end), max(span[1], end))
+            ends[key] = (low, high) if span is None else (min(span[0], low), max(span[1], high))
         both.ends = ends
     return both
 
@@ -1292,10 +1304,13 @@ class KnowledgeBase:
             timeout: float | None = None) -> tuple[list[str], list[tuple]]:
         """Run one SQL statement on the store's database; returns (column names, rows).
         Read-only unless ``write=True``; every failure is an :class:`SLRError`
-        (:class:`SLRTimeout` past ``timeout`` seconds).
+        (:class:`SLRTimeout` past ``timeout`` seconds). ``params``: values for ``?``
+        placeholders (a sequence) or for ``:name`` ones (a mapping), on either backend.
 
         >>> kb = open(); kb.add("p(a)^1"); kb.sql("SELECT arg1, t_end FROM p")
         (['arg1', 't_end'], [('a', 1.0)])
+        >>> kb.sql("SELECT :x + 1 AS y", {"x": 41})
+        (['y'], [(42,)])
         """
         from .store import DatabaseError
 

@@ -157,6 +157,36 @@ def test_event_times_must_be_numbers(kb, text, reason):
                                                            Struct("-", (2, 2.0))]}]
 
 
+class _NoRepr:
+    def __repr__(self):
+        raise RuntimeError("repr failed")
+
+
+@pytest.mark.parametrize("args", [(1, 2), [1, 2]], ids=["tuple", "list"])
+def test_a_rejected_event_is_named_with_its_arguments(kb, args):
+    """The message starts with the event as written (a list of arguments too), and a time
+    whose repr fails is described by its type, not by the failure."""
+    with pytest.raises(EventRejected) as raised:
+        kb.add_event("p", args, float("nan"))
+    assert str(raised.value).startswith("p(1,2)^[nan,nan]: event times must be finite")
+    for errors in (kb.add_many([("p", args, float("nan"), float("nan"))]),
+                   kb.store.add_events([("p", args, float("nan"), float("nan"))])):
+        assert [str(e) for e in errors] == [
+            "p(1,2)^[nan,nan]: event times must be finite (not inf or NaN)"]
+    with pytest.raises(EventRejected) as raised:
+        kb.add_event("p", args, _NoRepr())
+    assert str(raised.value) == "p(1,2)^a _NoRepr: event times must be numbers (got a _NoRepr)"
+    assert kb.query("findall(X, p(X, _)^_, L)") == [{"L": []}]
+
+
+@pytest.mark.parametrize("name, written", [("ok", "ok"), ("My Event", "'My Event'"),
+                                           ("it's", "'it\\'s'")])
+def test_a_rejected_event_without_arguments_is_named_as_an_atom(kb, name, written):
+    with pytest.raises(EventRejected) as raised:
+        kb.add_event(name, [], float("inf"))
+    assert str(raised.value) == f"{written}^inf: event times must be finite (not inf or NaN)"
+
+
 def test_arithmetic_times_are_still_evaluated(kb):
     kb.add("foo(1)^(2 + 0.5)")
     kb.add("foo(2)^[1, 2*2]")

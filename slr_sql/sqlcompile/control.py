@@ -106,7 +106,10 @@ class ControlGoals:
             p = sub[0]
             ids = ", ".join(f"{a}.{idc}" for _, a, idc in froms)
             sub_ids = ", ".join(f"{a}.{idc}" for _, a, idc in p.froms)
-            order = (" ORDER BY " + ", ".join(p.keys)) if p.keys else ""
+            # a branch's index among the keys is one constant for all of p's rows; as an
+            # ORDER BY term SQLite would read it as a column number
+            keys = [k for k in p.keys if not k.isdigit()]
+            order = (" ORDER BY " + ", ".join(keys)) if keys else ""
             sql = p.select([sub_ids]) + order + " LIMIT 1"
             st.conds.append(f"{ids} = ({sql})" if len(froms) == 1 else f"({ids}) = ({sql})")
         else:

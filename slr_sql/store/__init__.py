@@ -630,3 +630,7 @@ class EventStore:
     def run_compiled(self, sql: str, params: dict, limit: int | None = None,
                      deadline: float | None = None) -> list[tuple]:
         return self._db.run_compiled(sql, params, limit, deadline)
+
+    @_doc(Database.run_compiled_many)
+    def run_compiled_many(self, sql: str, rows: list) -> None:
+        self._db.run_compiled_many(sql, rows)

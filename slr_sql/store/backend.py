@@ -258,6 +258,8 @@ class CompiledSQL(Protocol):
 
     def run_compiled(self, sql: str, params: dict[Any, Any], limit: int | None=None, deadline: float | None=None) -> list[tuple[Any, ...]]: ...
 
+    def run_compiled_many(self, sql: str, rows: list[Any]) -> None: ...
+
 
 @runtime_checkable
 class RawStatements(Protocol):

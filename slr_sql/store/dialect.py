@@ -42,6 +42,7 @@ class Dialect(Protocol):
 
     name: str
     paramstyle: str
+    text_holds_nul: bool
 
     def statement(self, sql: str) -> str: ...
     def typeof(self, expr: str) -> str: ...
@@ -65,6 +66,7 @@ class SQLiteDialect:
     real = "REAL"
     value = ""               # an untyped column keeps INTEGER / REAL / TEXT as given
     index_hints = True       # INDEXED BY: lookups name the index they must use
+    text_holds_nul = True    # a TEXT value may contain U+0000
     without_rowid = " WITHOUT ROWID"
     pages_streams = False    # a statement's rows are read as needed (sqlite3 steps it)
     to_column: Callable[[Any], Any] | None = None     # identity: no conversion at all
@@ -118,6 +120,7 @@ class PostgresDialect:
     real = "DOUBLE PRECISION"
     value = " TEXT"
     index_hints = False      # the planner chooses (no INDEXED BY)
+    text_holds_nul = False   # text cannot contain U+0000 (values escape it as JSON)
     without_rowid = ""
     pages_streams = True     # psycopg reads a whole result: lookups read growing pages
 
@@ -169,6 +172,8 @@ class PostgresDialect:
         if tv is str:
             if value and (value[0].isdigit() or value[0] in "-.i") and \
                     (_INT_TEXT.match(value) or _FLOAT_TEXT.match(value)):
+                return '{"$atom":' + json.dumps(value, ensure_ascii=False) + "}"
+            if "\x00" in value:   # PostgreSQL text cannot hold U+0000; JSON escapes it
                 return '{"$atom":' + json.dumps(value, ensure_ascii=False) + "}"
             return value
         if tv is int:

@@ -284,6 +284,9 @@ class EventWriter:
         problem = text_problem(name)
         if problem:
             raise BadEvent(f"the event name cannot be stored: {problem}")
+        if "\x00" in name and not self.db.dialect.text_holds_nul:
+            raise BadEvent("the event name cannot be stored: PostgreSQL text cannot hold the "
+                           "character U+0000 (an argument can: it is stored escaped)")
         if arity > self.tables.max_arity:
             raise BadEvent(f"too many arguments: {arity} (an event has at most "
                            f"{self.tables.max_arity}, the column limit of SQLite)")

@@ -32,7 +32,7 @@ from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 from ..errors import SLRBusy, SLRError, SLRServerUnreachable, SLRTimeout
 from .dialect import POSTGRES
 from .schema import postgres_migration_scripts
-from .sqltext import quote_identifier
+from .sqltext import bound_parameters, quote_identifier
 
 __all__ = ["PgDatabase", "PgStatementError", "is_postgres_url", "split_url"]
 
@@ -576,7 +576,13 @@ class PgDatabase:
                 if timeout is not None:
                     raw.execute(f"SET LOCAL statement_timeout = {max(1, int(timeout * 1000))}")
                 cursor = raw.cursor()
-                cursor.execute(query, tuple(params) or None, prepare=False)
+                # the API's placeholders (`?`, `:name`) in psycopg's style, as on SQLite;
+                # without parameters the text goes as written (a `%` stays a `%`)
+                bound = bound_parameters(params)
+                if bound:
+                    cursor.execute(self.dialect.statement(query), bound, prepare=False)
+                else:
+                    cursor.execute(query, None, prepare=False)
                 columns = [d.name for d in cursor.description] if cursor.description else []
                 rows = [tuple(r) for r in cursor.fetchall()] if cursor.description else []
                 if own:
@@ -652,6 +658,12 @@ class PgDatabase:
             if own:
                 self.conn.execute("COMMIT")
             return rows
+
+    def run_compiled_many(self, sql: str, rows: list) -> None:
+        with self.lock:
+            self.check_open()
+            for row in rows:
+                self.conn.execute(sql, row)
 
     def _outer(self, deadline: float | None) -> float | None:
         outer = self.deadline

@@ -100,6 +100,8 @@ class EventTables:
     def lookup(self, name: str, arity: int) -> EventType | None:
         """The type name/arity, or None if it has no table (lock held by the caller)."""
         event_type = self.types.get((name, arity))
+        if event_type is None and "\x00" in name and not self.db.dialect.text_holds_nul:
+            return None   # a name this database cannot hold was never stored
         if event_type is None:
             # another connection (process) may have created it since we last looked
             row = self.db.conn.execute(
