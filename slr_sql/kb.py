@@ -1343,7 +1343,7 @@ class KnowledgeBase:
         from .plot import timeline  # deferred: matplotlib is the optional extra slr_sql[plot]
         return timeline(self, types, **options)
 
-    # -- subscriptions (the work is in slr_sql/subscriptions.py) ----------------
+    # -- subscriptions (the work is in slr_sql/subscriptions/) ------------------
     def subscribe(self, pattern: str, where: str | None = None, since: Any = "now",
                   until: float | None = None, id: str | None = None,
                   callback: Callable[[dict], Any] | None = None, max_queue: int = 10_000,

