@@ -516,8 +516,11 @@ class KnowledgeBase:
             check_robot_name(robot)
         if wait:  # synchronized (SLRTimeout names the incomplete types)
             if robot is not None:
-                raise SLRError("a synchronized query (wait=True) cannot be restricted to one "
-                               "robot yet: ask origin(R, Goal) inside the goal instead")
+                # waits as the unrestricted query does (for the fleet's marks, the least of
+                # every robot's): never early, and the answers are the robot's
+                self._refresh()
+                return self._sync.submit(goal, at=at, args=args, timeout=timeout,
+                                         robot=robot).result()
             return self.submit(goal, at=at, args=args, timeout=timeout).result()
         if args and limit is None and robot is None:
             key = (goal, tuple(args))

@@ -203,6 +203,7 @@ class PendingQuery(Future):
         self.goal = goal
         self.at = at
         self.args = args
+        self.robot: str | None = None    # every event goal, prev and next restricted to it
         self.goal_set: GoalSet | None = None
         self.waiting_for: list[Wait] = []
         self.waits: list[Wait] = []
@@ -575,7 +576,8 @@ class Synchronizer:
     # -- public operations (KnowledgeBase delegates here) ----------------------------------------
     def submit(self, goal: str, at: float | None = None, id: str | None = None,
                args: dict | None = None, timeout: float | None = None,
-               callback: Callable[[PendingQuery], Any] | None = None) -> PendingQuery:
+               callback: Callable[[PendingQuery], Any] | None = None,
+               robot: str | None = None) -> PendingQuery:
         if self._closed:
             raise SLRError("the knowledge base is closed")
         plan = self.kb.plans.plan(goal, tuple(args) if args else ())  # syntax errors raise here
@@ -590,6 +592,7 @@ class Synchronizer:
             elif id in self._queries:
                 raise SLRError(f"a query with id {id!r} is already pending")
             q = PendingQuery(self, str(id), goal, at, args)
+            q.robot = robot
             q._plan = plan
             self._queries[q.id] = q
             if self.external_poll is not None:
@@ -917,6 +920,7 @@ class Synchronizer:
         if q._deadline is not None:
             remaining = max(q._deadline - time.monotonic(), 0.001)
         m = kb.engine.machine(at=q.at, timeout=remaining)
+        m.robot = q.robot
         m.synchronized = True  # for engines that bypass the hooks (SQL): do not
         m.on_prev = self._check_prev
         m.on_next = lambda name, n, lo, hi, args, s=None, e=None: \
@@ -956,8 +960,8 @@ class Synchronizer:
         kb = self.kb
         from .planner import SqlPlan, compiles_for, plan_for
 
-        if not kb.sql_enabled or not compiles_for(kb.store):
-            return None
+        if not kb.sql_enabled or not compiles_for(kb.store) or q.robot is not None:
+            return None   # (one robot's answers: the interpreter)
 
         # the kb's current parse of the goal, not q._plan: a load or define while the query
         # waited drops the kb's plans, and the compiled statement with them (the program and
