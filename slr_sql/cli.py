@@ -721,7 +721,7 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
     timeout = _finite("--timeout", timeout, minimum=0.0)
     printer = AnswerPrinter(as_json)
     with _open(db, create=False) as kb:
-        if wait and robot is not None and not hasattr(kb, "_sync"):
+        if wait and robot is not None and not hasattr(kb, "synchronizer"):
             raise slr_sql.SLRError("--robot cannot be combined with --wait on a service URL "
                                    "yet: ask origin(R, Goal) in the goal instead")
         _warn_about(kb, goal)
