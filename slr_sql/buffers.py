@@ -39,6 +39,7 @@ from .encoding import INT64_MAX, INT64_MIN, Unencodable, encode
 from .unify import copy_term, undo, unify
 from .errors import SLRError
 from .lockorder import ordered_lock
+from .host import Host
 from .terms import format_term
 from .program import event_key, split_event_atom
 from .store import (ArgEquals, BufferPlan, JsonArray, JsonEquals, MixedTerm, PatternMatch,
@@ -422,7 +423,7 @@ def _where(clause: Any) -> str:
 class BufferManager:
     """The buffers of one knowledge base (installed by :func:`attach`)."""
 
-    def __init__(self, kb: Any):
+    def __init__(self, kb: Host):
         self.kb = kb
         self.store = kb.store
         self.lock = ordered_lock("buffers", reentrant=True)
@@ -515,7 +516,7 @@ class BufferManager:
         return True
 
     # -- listeners -------------------------------------------------------------------
-    def on_load(self, kb: Any) -> None:
+    def on_load(self, kb: Host) -> None:
         self.sync_program(check=True)
 
     def on_table_created(self, name: str, arity: int, table: str) -> None:
@@ -570,12 +571,12 @@ class BufferManager:
                 raise SLRError(f"keep_between=({t1}, {t2}): T1 must not be after T2")
             kind = "window"
         spec = BufferSpec(kind, compiled, amount, t1, t2, "runtime", "kb.add_buffer")
-        with self.kb._load_lock, self.store.transaction(), self.lock:
+        with self.kb.loader.load_lock, self.store.transaction(), self.lock:
             conflicts(self.active() + [spec])
             return self.install(spec)
 
     def remove_runtime(self, buffer_id: int) -> None:
-        with self.kb._load_lock, self.store.transaction(), self.lock:
+        with self.kb.loader.load_lock, self.store.transaction(), self.lock:
             for spec in self.active():
                 if spec.id == buffer_id:
                     if spec.source != "runtime":
@@ -607,7 +608,7 @@ def _seconds(value: Any) -> float:
     return check_seconds(value)
 
 
-def attach(kb: Any) -> BufferManager:
+def attach(kb: Host) -> BufferManager:
     """Install buffer management on a knowledge base (called by KnowledgeBase.__init__):
     the load listener (conflict check, triggers created in the load's transaction), the
     table-creation hook, the clock listener and the space reclaimer."""

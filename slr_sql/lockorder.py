@@ -31,7 +31,7 @@ import threading
 from typing import Any
 
 __all__ = ["LOCK_ORDER", "LockOrderViolation", "OrderedLock", "ordered_lock", "debug_locks",
-           "violations", "clear_violations", "observed_nesting"]
+           "violations", "clear_violations", "observed_nesting", "held_here"]
 
 # outermost first: a thread holding one of these may take only the ones after it
 LOCK_ORDER = (
@@ -185,6 +185,18 @@ class OrderedLock:
         else:
             self._inner.acquire()
         _stack().extend([self] * count)
+
+
+def held_here(lock: Any) -> bool:
+    """Does the calling thread hold ``lock`` (an ``RLock`` or an :class:`OrderedLock`)?
+
+    >>> lock = ordered_lock("store", reentrant=True)
+    >>> with lock: held_here(lock)
+    True
+    >>> held_here(lock)
+    False
+    """
+    return bool(lock._is_owned())
 
 
 def ordered_lock(kind: str, reentrant: bool = False) -> Any:

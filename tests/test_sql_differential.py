@@ -276,7 +276,7 @@ def check(prog):
     for q in queries:
         STATS["queries"] += 1
         try:
-            plan = kb._plan(q, ())
+            plan = kb.plans.plan(q, ())
         except SLRError:
             STATS["bad query"] += 1
             continue
@@ -360,7 +360,7 @@ def test_a_compiled_negated_disjunction_checks_every_branch(goal, expected):
     with slr_sql.open(clock=slr_sql.ManualClock(10.0)) as kb:
         kb.load("f(x). f(y). f(w). g(y).")
         kb.add_many(["a(w, 1)^1", "b(y)^2"])
-        entry = plan_for(kb, kb._plan(goal, ()), False)
+        entry = plan_for(kb, kb.plans.plan(goal, ()), False)
         assert not hasattr(entry, "reason"), kb.explain(goal)   # runs as one SQL statement
         assert kb.query(goal) == [{"O": o} for o in expected]
         kb.sql_enabled = False
@@ -449,7 +449,7 @@ def test_an_event_time_that_is_a_list_at_run_time_is_an_interval(goal, args, swi
     with slr_sql.open(clock=slr_sql.ManualClock(10.0)) as kb:
         kb.load(STAMP_PROGRAM)
         kb.add_many(STAMP_EVENTS)
-        entry = plan_for(kb, kb._plan(goal, tuple(args)), False)
+        entry = plan_for(kb, kb.plans.plan(goal, tuple(args)), False)
         assert not hasattr(entry, "reason"), kb.explain(goal)   # one SQL statement
         sql = kb.query(goal, args=args)
         kb.sql_enabled = False
@@ -510,7 +510,7 @@ def test_compiled_boundaries_agree_with_the_interpreter(goal, expected):
     with slr_sql.open(clock=slr_sql.ManualClock(10.0)) as kb:
         kb.load(BOUNDARY_PROGRAM)
         kb.add_many(BOUNDARY_EVENTS)
-        entry = plan_for(kb, kb._plan(goal, ()), False)
+        entry = plan_for(kb, kb.plans.plan(goal, ()), False)
         assert not hasattr(entry, "reason"), kb.explain(goal)   # one SQL statement
         assert entry.run(kb, {}, None, None) == expected         # no hand-over at run time
         assert kb.query(goal) == expected
@@ -532,7 +532,7 @@ def test_an_if_then_else_condition_in_a_branch_takes_its_first_solution_in_store
     with slr_sql.open(clock=slr_sql.ManualClock(10.0)) as kb:
         kb.load("g(1).")
         kb.add_many(["a(x)^5", "a(y)^2"])    # arrival order is not time order
-        entry = plan_for(kb, kb._plan(goal, ()), False)
+        entry = plan_for(kb, kb.plans.plan(goal, ()), False)
         assert entry.run(kb, {}, None, None) == [{"O": "y", "T": 2.0, "X": "y"}]
         assert kb.query(goal) == [{"O": "y", "T": 2.0, "X": "y"}]
         kb.sql_enabled = False

@@ -28,6 +28,7 @@ import dataclasses
 from functools import lru_cache
 from typing import Any
 
+from ..host import Host
 from ..terms import Struct
 from .rules import (IGNORED_FACTS, POLICIES, EventRule, compile_rule, consumption_directive,
                     is_event_rule, is_ignored_fact, order_rules)
@@ -77,7 +78,7 @@ def prepare(rules: list[EventRule], consumption: dict, program: Any) -> list[Eve
     return unique
 
 
-def attach(kb: Any) -> EventRules:
+def attach(kb: Host) -> EventRules:
     """Install event rules on a knowledge base (called by KnowledgeBase.__init__, after the
     synchronizer and the planner): the load listener, the hook on new tables, the SQL
     function ``slr_cep_cmp`` of pushed comparisons, and the rules of the program restored

@@ -33,6 +33,7 @@ from typing import Any
 
 from ..encoding import Unencodable, decode, encode
 from ..errors import SLRError
+from ..host import Host
 from ..store import DatabaseError, EventBatch, quote_identifier
 from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
 from .rules import EventRule
@@ -736,7 +737,7 @@ class RuleRuntime:
 class EventRules:
     """The event rules of one knowledge base (created by :func:`slr_sql.cep.attach`)."""
 
-    def __init__(self, kb: Any):
+    def __init__(self, kb: Host):
         self.kb = kb
         self.store = kb.store
         # the store's columns: encoded terms as they are (SQLite) or as a server holds them
@@ -745,7 +746,7 @@ class EventRules:
             (lambda v: decode(from_column(v)))
         self.encode: Any = encode if to_column is None else (lambda t: to_column(encode(t)))
         self.clock = kb.clock
-        self.sync = getattr(kb, "_sync", None)
+        self.sync = kb.synchronizer
         self.tracker = self.sync.tracker if self.sync is not None else None
         self.rules: list[RuleRuntime] = []
         self.by_head: dict[tuple[str, int], list[RuleRuntime]] = {}
@@ -824,7 +825,7 @@ class EventRules:
         # caller holds: the timers are asked for once it is let go (wake_if_due)
         self._wake_due = True
 
-    def on_load(self, kb: Any) -> None:
+    def on_load(self, kb: Host) -> None:
         """Load listener (inside the load's transaction)."""
         self.sync_rules()
 

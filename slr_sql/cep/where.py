@@ -23,6 +23,8 @@ from ..store import DatabaseError
 from ..encoding import Unencodable
 from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
 from ..unify import resolve, undo, unify
+from ..host import Host
+from ..plans import instantiate
 
 __all__ = ["MustWait", "Residual", "WHERE_TIMEOUT"]
 
@@ -92,7 +94,7 @@ class Residual:
             self._program = program
         return self.reads
 
-    def solve(self, kb: Any, values: dict, at: float,
+    def solve(self, kb: Host, values: dict, at: float,
               complete: Callable[[tuple, float], bool], skip: frozenset = frozenset(),
               use_sql: bool = True) -> list[dict]:
         """The solutions (dicts output name -> ground term) for the input ``values``
@@ -111,7 +113,7 @@ class Residual:
                 if solutions is not None:
                     self.last_engine = "builtins"
                     return solutions
-        plan = kb._plan(self.text, tuple(args))
+        plan = kb.plans.plan(self.text, tuple(args))
         deadline = time.monotonic() + WHERE_TIMEOUT
         if kb.sql_enabled and use_sql:
             rows = self._sql(kb, plan, args, at, complete, deadline)
@@ -204,7 +206,7 @@ class Residual:
             sol[name] = t
         return [sol]
 
-    def _sql(self, kb: Any, plan: Any, args: dict, at: float, complete: Callable,
+    def _sql(self, kb: Host, plan: Any, args: dict, at: float, complete: Callable,
              deadline: float) -> list | None:
         from ..planner import SqlPlan, plan_for
 
@@ -236,9 +238,9 @@ class Residual:
                 out.append(sol)
         return out
 
-    def _interpret(self, kb: Any, plan: Any, args: dict, at: float,
+    def _interpret(self, kb: Host, plan: Any, args: dict, at: float,
                    complete: Callable) -> list:
-        term, frame = kb._instantiate(plan, args, terms=True)   # decoded: terms already
+        term, frame = instantiate(plan, args, terms=True)   # decoded: terms already
         m = kb.engine.machine(at=at, timeout=WHERE_TIMEOUT)
 
         def on_prev(name: str, n: int, t: float) -> None:

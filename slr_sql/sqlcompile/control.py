@@ -62,7 +62,7 @@ class ControlGoals:
         info = {"m": m0, "parts": parts, "count": count, "ctx": ctx, "cond": cond}
         if parts:
             st.keys.append("0")
-            marker = _Marker(info)
+            marker = IfThenMarker(info)
             self.solve((cond, ctx, (marker, ctx, (then, ctx, nxt))), st, emit)
             st.restore(m0)
         # else: no solution of C
@@ -79,7 +79,7 @@ class ControlGoals:
             self.solve((other, ctx, nxt), st, emit)
         st.restore(m)
 
-    def marker_sql(self, marker: "_Marker", ctx, nxt, st, emit):
+    def marker_sql(self, marker: "IfThenMarker", ctx, nxt, st, emit):
         info = marker.info
         m0 = info["m"]
         parts = info["parts"]
@@ -155,7 +155,7 @@ class ControlGoals:
         self.solve((rewritten, ctx, nxt), st, emit)
 
 
-class _Marker:
+class IfThenMarker:
     """Pushed after the condition of an if-then-else (see :meth:`Compiler.marker_sql`)."""
 
     __slots__ = ("info",)

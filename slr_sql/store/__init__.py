@@ -48,6 +48,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
 from ..errors import EventRejected
+from ..lockorder import held_here
 from .buffering import (ArgEquals, BufferPlan, BufferTables, JsonArray, JsonEquals, MixedTerm,
                         PatternMatch, SameTerm)
 from .catalog import Catalog, ProgramText
@@ -151,7 +152,7 @@ class EventStore:
     def owns_lock(self) -> bool:
         """Does this thread hold the store's lock (in a transaction, say)? A caller that
         must take a lock ordered before the store's (slr_sql.lockorder) waits until not."""
-        return bool(self._db.lock._is_owned())
+        return held_here(self._db.lock)
 
     @property
     def table_created_hooks(self) -> list:
@@ -618,6 +619,14 @@ class EventStore:
     def connect_info(self) -> str | None:
         """The connection string of a server store (for a second, listening connection)."""
         return getattr(self._db, "conninfo", None)
+
+    @_doc(Catalog.fact_view_select)
+    def fact_view_select(self, table: str, arity: int) -> str:
+        return self._catalog.fact_view_select(table, arity)
+
+    @_doc(Catalog.rule_matches)
+    def rule_matches(self, prov: str, width: int) -> list[tuple]:
+        return self._catalog.rule_matches(prov, width)
 
     @_doc(Catalog.replace_views)
     def replace_views(self, views: dict[str, str]) -> list[str]:

@@ -502,6 +502,23 @@ class Catalog:
                     f"CREATE TABLE IF NOT EXISTS {used} (tbl TEXT NOT NULL, seq BIGINT NOT "
                     f"NULL, PRIMARY KEY (tbl, seq)){dialect.without_rowid}")
 
+    def rule_matches(self, prov: str, width: int) -> list[tuple]:
+        """What each complex event of an event rule is made of, as its provenance table
+        ``prov`` (quoted, see :meth:`create_rule_tables`) records it: one row per complex
+        event derived, in the order of derivation, of the seqs of its ``width`` events
+        (``r1..r<width>``) and its interval (start, end).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.create_rule_tables('"slr_cep_m_x"', 2, 1)
+        >>> s.rule_matches('"slr_cep_m_x"', 2)
+        []
+        """
+        columns = "".join(f"r{p + 1}, " for p in range(width))
+        with self.db.lock:
+            self.db.check_open()
+            return [tuple(row) for row in self.db.conn.execute(
+                f"SELECT {columns}t_start, t_end FROM {prov} ORDER BY id")]
+
     def create_journal(self, table: str, arity: int, journal: str, trigger: str) -> None:
         """The journal of event table ``table`` (unless it exists): ``journal`` gets a row
         (``jid`` in arrival order, never reused; the event's ``seq``, arguments and times)
@@ -566,6 +583,18 @@ class Catalog:
                 self.db.conn.execute(f"DROP FUNCTION IF EXISTS "
                                      f"{quote_identifier(trigger + '_f')}()")
             self.db.conn.execute(f"DROP TABLE IF EXISTS {quote_identifier(journal)}")
+
+    def fact_view_select(self, table: str, arity: int) -> str:
+        """The SELECT of the inspection view of a predicate whose clauses are facts, read
+        from its fact table (``table`` quoted, as :meth:`replace_fact_tables` returns it) in
+        clause order: ``arg1..argN``, for :meth:`replace_views`.
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).fact_view_select('"slr_facts_2_color"', 2)
+        'SELECT arg1, arg2 FROM "slr_facts_2_color" ORDER BY ord'
+        """
+        columns = ", ".join(f"arg{i + 1}" for i in range(arity))
+        return f"SELECT {columns} FROM {table} ORDER BY ord"
 
     def replace_views(self, views: dict[str, str]) -> list[str]:
         """Drop the views created last time and create ``{predicate name: select sql}``,

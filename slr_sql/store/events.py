@@ -182,7 +182,7 @@ class EventWriter:
         event_type = self.tables.types.get((name, arity))
         if event_type is None:
             try:
-                event_type = self._type_for_new_event(name, arity)
+                event_type = self.type_for_new_event(name, arity)
             except BadEvent:
                 return False
         to_column = self.db.dialect.to_column
@@ -250,7 +250,7 @@ class EventWriter:
                         rows = []
                         append = rows.append
                     current_type = (isinstance(name, str) and types.get((name, arity))
-                                    or self._type_for_new_event(name, arity))
+                                    or self.type_for_new_event(name, arity))
                     current_name = name
                     current_arity = arity
                     if by_type is not None:
@@ -277,7 +277,10 @@ class EventWriter:
             if ends is not None:
                 _widen_by_rows(ends, current_type, rows, with_robot)
 
-    def _type_for_new_event(self, name: Any, arity: int) -> EventType:
+    def type_for_new_event(self, name: Any, arity: int) -> EventType:
+        """The event type ``name/arity`` an event about to be written goes to, its table
+        created on first sight; :class:`BadEvent` (with the reason) when the name cannot be
+        stored, the arity is too large, or a declaration names other arities."""
         if not isinstance(name, str):
             raise BadEvent(f"event name must be an atom, not {shown(name)}")
         name = str(name)

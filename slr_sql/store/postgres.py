@@ -165,6 +165,33 @@ class PgConnection:
         # set by PgDatabase: open a new connection, and whether a transaction is open
         self.reopen: Callable[[], Any] | None = None
         self.in_transaction: Callable[[], bool] = lambda: False
+        # a BEGIN not sent yet: it goes with the transaction's first statement, in one
+        # round trip (a transaction that runs nothing sends nothing)
+        self.begin_pending = False
+
+    def begin(self) -> None:
+        """Open a transaction with the next statement."""
+        self.begin_pending = True
+
+    def send_begin(self) -> None:
+        """Send a pending BEGIN now (before a statement that cannot go with it)."""
+        if self.begin_pending:
+            self._alive()
+            self.begin_pending = False
+            self._guard(lambda: self.raw.execute("BEGIN"))
+
+    def _with_begin(self, call: Callable[[], Any]) -> Callable[[], Any]:
+        """``call`` preceded by the pending BEGIN in one pipeline (one round trip)."""
+        if not self.begin_pending:
+            return call
+        self.begin_pending = False
+        raw = self.raw
+
+        def both() -> Any:
+            with raw.pipeline():
+                raw.execute("BEGIN")
+                return call()
+        return both
 
     def _alive(self) -> None:
         """A connection the server dropped (a restart, a terminated backend) is opened
@@ -192,7 +219,11 @@ class PgConnection:
             args = tuple(params) if params else None
         self._alive()
         cursor = self.raw.cursor()
-        self._guard(lambda: cursor.execute(text, args, prepare=None))
+        if self.begin_pending and sql in ("COMMIT", "ROLLBACK"):
+            self.begin_pending = False   # nothing was sent: nothing to end
+            self.last_rowcount = 0
+            return PgCursor(cursor, self)
+        self._guard(self._with_begin(lambda: cursor.execute(text, args, prepare=None)))
         self.last_rowcount = cursor.rowcount
         return PgCursor(cursor, self)
 
@@ -202,6 +233,7 @@ class PgConnection:
         cursor = self.raw.cursor()
         plain = _PLAIN_INSERT.match(sql)
         if plain is not None and len(rows) > _COPY_FROM:
+            self.send_begin()   # (COPY does not go in a pipeline)
             # many rows into one table: COPY (one stream) rather than one INSERT per row
             def copy() -> None:
                 with cursor.copy(f"COPY {plain.group(1)} ({plain.group(2)}) FROM STDIN") as out:
@@ -212,7 +244,7 @@ class PgConnection:
             return PgCursor(cursor, self)
         text = POSTGRES.statement(sql)
         if rows:
-            self._guard(lambda: cursor.executemany(text, rows))
+            self._guard(self._with_begin(lambda: cursor.executemany(text, rows)))
         self.last_rowcount = cursor.rowcount
         return PgCursor(cursor, self)
 
@@ -227,6 +259,9 @@ class PgConnection:
         psycopg = _psycopg()
         try:
             with self.raw.pipeline():
+                if self.begin_pending:
+                    self.begin_pending = False
+                    self.raw.execute("BEGIN")
                 yield
         except psycopg.Error as exc:
             raise _error(exc, self.where, self.busy_timeout) from None
@@ -234,6 +269,7 @@ class PgConnection:
     def execute_script(self, sql: str) -> PgCursor:
         """Run SQL text exactly as written (no parameters: DDL, trigger functions whose
         bodies hold ``%``, ``?`` or ``:`` of their own); several statements may be given."""
+        self.send_begin()
         self._alive()
         cursor = self.raw.cursor()
         self._guard(lambda: cursor.execute(sql, None, prepare=False))
@@ -248,6 +284,9 @@ class PgConnection:
     def rollback(self) -> None:
         """ROLLBACK, if the connection still works (a dropped connection's transaction is
         rolled back by the server)."""
+        if self.begin_pending:
+            self.begin_pending = False
+            return
         with suppress(_psycopg().Error):
             self.raw.execute("ROLLBACK")
 
@@ -489,7 +528,7 @@ class PgDatabase:
             conn = self.conn
             if depth == 0:
                 self.suspend_streams()
-                conn.execute("BEGIN")
+                conn.begin()
             else:
                 conn.execute(f"SAVEPOINT slr_sp{depth}")
             self.tx_depth = depth + 1
@@ -527,9 +566,11 @@ class PgDatabase:
         unless ``write``; ``timeout`` seconds as ``statement_timeout``."""
         with self.lock:
             self.check_open()
-            raw = self.conn.raw
             psycopg = _psycopg()
             own = self.tx_depth == 0
+            if not own:
+                self.conn.send_begin()
+            raw = self.conn.raw
             try:
                 if own:
                     raw.execute("BEGIN" if write else "BEGIN READ ONLY")

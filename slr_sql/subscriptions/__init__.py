@@ -60,8 +60,7 @@ its public methods (``query``, ``submit``; and the synchronizer's
 """
 from __future__ import annotations
 
-from typing import Any
-
+from ..host import Host
 from .hub import DEFAULT_MAX_LAG, DEFAULT_MAX_QUEUE, SubscriptionHub
 from .matching import Matcher, answer_json
 from .queue import TRANSITIONS, IllegalTransition, Subscription, SubscriptionOverflow, \
@@ -73,7 +72,7 @@ __all__ = ["Subscription", "SubscriptionOverflow", "SubscriptionHub", "Subscript
            "answer_json", "journal_table", "DEFAULT_MAX_QUEUE", "DEFAULT_MAX_LAG"]
 
 
-def attach(kb: Any) -> SubscriptionHub:
+def attach(kb: Host) -> SubscriptionHub:
     """Create the subscription hub of ``kb`` and hook it into its store (the event pipeline
     wakes it after adds).
 

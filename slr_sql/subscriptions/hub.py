@@ -23,6 +23,7 @@ from ..clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning
 from ..encoding import decode
 from ..errors import SLRError
 from ..lockorder import ordered_lock
+from ..host import Host
 from ..store.checks import shown
 from ..terms import format_atom
 from .matching import Matcher, time_arg
@@ -62,7 +63,7 @@ class SubscriptionHub:
     :func:`slr_sql.subscriptions.attach`; ``kb.subscribe`` / ``kb.unsubscribe`` delegate
     here)."""
 
-    def __init__(self, kb: Any):
+    def __init__(self, kb: Host):
         self.kb = kb
         self.store = kb.store
         # the store's columns: encoded terms as they are (SQLite) or as a server holds them
@@ -297,7 +298,7 @@ class SubscriptionHub:
         until = sub.until
         assert until is not None
         atom = format_atom(name) + (f"({', '.join('_' * arity)})" if arity else "")
-        sync = getattr(self.kb, "_sync", None)
+        sync = self.kb.synchronizer
         if self.store.path is not None and sync is not None and \
                 getattr(sync, "external_poll", 1) is None:
             sync.watch_external(self.poll_interval)   # marks written by other processes
