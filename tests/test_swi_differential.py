@@ -751,8 +751,9 @@ def a_(text: str):
 DISCARDED = "discarded"
 
 
-def check_example(example: tuple, swi: dict[int, dict]) -> str | None:
-    """Run one example through slr_sql and compare with SWI-Prolog's results ``swi``.
+def check_example(example: tuple, swi: dict[int, dict], where: str | None = None) -> str | None:
+    """Run one example through slr_sql (a store at ``where``) and compare with SWI-Prolog's
+    results ``swi``.
 
     Returns DISCARDED for an example outside the comparison (a cyclic term, too many
     answers, no termination within the limits), else None; a difference fails.
@@ -760,7 +761,7 @@ def check_example(example: tuple, swi: dict[int, dict]) -> str | None:
     program, events, swi_program, queries = example
     if any(r["cyclic"] for r in swi.values()):
         return DISCARDED
-    with slr_sql.open() as kb, watchdog(30, f"program:\n{program}queries: {queries}"):
+    with slr_sql.open(where) as kb, watchdog(30, f"program:\n{program}queries: {queries}"):
         kb.load(program)
         if events:
             assert kb.add_many([("ev", [a_(a), a_(b)], s, e) for a, b, s, e in events]) == []
