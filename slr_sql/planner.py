@@ -766,18 +766,7 @@ def view_sql(kb, name: str, arity: int):
         return None, "uses slr_ functions", comp.missing
     if not parts:
         return None, "no rows", comp.missing
-    nk = max(len(p.keys) for p in parts)
-    selects = []
-    for p in parts:
-        cols = [f"{x} AS arg{i + 1}" for i, x in enumerate(p.proj)] or ["1 AS ok"]
-        cols += [f"{k} AS k{i}" for i, k in enumerate(p.keys)]
-        cols += [f"NULL AS k{i}" for i in range(len(p.keys), nk)]
-        selects.append(p.select(cols))
-    inner = " UNION ALL ".join(selects)
-    if nk:
-        inner += " ORDER BY " + ", ".join(f"k{i}" for i in range(nk))
-    outer = ", ".join(f"arg{i + 1}" for i in range(arity)) or "ok"
-    return f"SELECT {outer} FROM ({inner})", None, comp.missing
+    return sqlcompile.view_statement(parts, arity, comp.dialect), None, comp.missing
 
 
 def refresh_views(kb) -> list[str]:
@@ -787,9 +776,7 @@ def refresh_views(kb) -> list[str]:
     facts = st.fact_tables(kb)
     for (name, arity), pred in sorted(kb.program.preds.items()):
         if (name, arity) in facts:
-            table = facts[(name, arity)]
-            cols = ", ".join(f"arg{i + 1}" for i in range(arity))
-            views.setdefault(name, f"SELECT {cols} FROM {table} ORDER BY ord")
+            views.setdefault(name, sqlcompile.fact_view_statement(facts[(name, arity)], arity))
             continue
         if not compiles_for(kb.store) or not kb.store.dialect.query_functions:
             continue   # (views of derived predicates: on SQLite only, see docs/postgres.md)

@@ -27,6 +27,12 @@ the same IEEE doubles. A function that meets something the interpreter would rej
 error, an integer overflow, a non-ground result) raises, and the query is re-run by the
 interpreter, which raises the proper error or answers.
 
+What differs between engines is printed by the store's dialect (its query printers,
+:mod:`slr_sql.store.query_printers`): ``typeof`` above, the JSON functions, the Python
+functions, answer columns. On PostgreSQL the columns hold typed text, so unification is
+text equality there, and a part the engine cannot compute exactly (a Python function)
+raises ``Unprintable``, which makes the goal a fallback like any other.
+
 Whatever the compiler does not handle exactly raises :class:`Fallback` with the reason.
 Handlers are named ``<kind>_sql``.
 
@@ -40,6 +46,7 @@ The package, one module per part of that walk:
 * ``builtin_goals``: arithmetic, comparisons, ``=``, ``is`` and det builtins (``slr_det``);
 * ``unify``: unification, patterns on stored lists and compounds, encoded values;
 * ``guards``: the statements that keep Prolog's error order;
+* ``statements``: the statements of the inspection views;
 * ``model``: :class:`Col`, :class:`ColRef`, :class:`Part`, :class:`State`, :data:`SITES`,
   :class:`Fallback` and the term walks they share.
 """
@@ -48,6 +55,7 @@ from __future__ import annotations
 from .builtin_goals import COMPARISONS, EFFECTS, NO_BIND
 from .compiler import CONTROL_FALLBACK, CONTROL_SQL, Compiler
 from .guards import NUM_ARG, TIME_ARG, guards, unused_checks
+from .statements import fact_view_statement, view_statement
 from .model import (CYCLIC, NUMERIC, SITES, Col, ColRef, Fallback, Part, Site, State, has_col,
                     has_var, quote_ident, resolve, term_free_vars)
 
@@ -55,4 +63,5 @@ __all__ = ["Fallback", "Col", "Compiler", "Part", "SITES", "quote_ident",
            # used by the planner and the modules of this package
            "ColRef", "Site", "State", "resolve", "has_var", "has_col", "term_free_vars",
            "guards", "unused_checks", "NUM_ARG", "TIME_ARG", "NUMERIC", "CYCLIC", "NO_BIND", "EFFECTS",
-           "COMPARISONS", "CONTROL_FALLBACK", "CONTROL_SQL"]
+           "COMPARISONS", "CONTROL_FALLBACK", "CONTROL_SQL", "view_statement",
+           "fact_view_statement"]
