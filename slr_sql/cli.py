@@ -721,9 +721,9 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
     timeout = _finite("--timeout", timeout, minimum=0.0)
     printer = AnswerPrinter(as_json)
     with _open(db, create=False) as kb:
-        if wait and robot is not None:
-            raise slr_sql.SLRError("--robot cannot be combined with --wait yet: ask "
-                                   "origin(R, Goal) in the goal instead")
+        if wait and robot is not None and not hasattr(kb, "synchronizer"):
+            raise slr_sql.SLRError("--robot cannot be combined with --wait on a service URL "
+                                   "yet: ask origin(R, Goal) in the goal instead")
         _warn_about(kb, goal)
         if wait:
             if not hasattr(kb, "submit"):
@@ -733,9 +733,12 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
 
             # Without --at the library synchronizes on "now" (the store clock); other
             # processes may add the events and marks it waits for.
-            if hasattr(kb, "_sync"):
-                kb._sync.watch_external()
-            pending = kb.submit(goal, at=at, id=f"slr-query-{os.getpid()}", timeout=timeout)
+            if hasattr(kb, "synchronizer"):
+                kb.synchronizer.watch_external()
+            pending = (kb.submit(goal, at=at, id=f"slr-query-{os.getpid()}", timeout=timeout)
+                       if robot is None else
+                       kb.synchronizer.submit(goal, at=at, id=f"slr-query-{os.getpid()}",
+                                              timeout=timeout, robot=robot))
             try:
                 answers = pending.result(timeout=None if timeout is None else timeout + 5.0)
             except concurrent.futures.TimeoutError:
@@ -1444,7 +1447,7 @@ from .viz.cli import export_command as _export, foxglove_command as _foxglove  #
 main.add_command(_foxglove)
 main.add_command(_export)
 
-from .fleet import _click_group as _fleet_group  # noqa: E402 - `slr fleet push|status`
+from .fleet import click_group as _fleet_group  # noqa: E402 - `slr fleet push|status`
 main.add_command(_fleet_group())
 
 

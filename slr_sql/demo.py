@@ -30,6 +30,8 @@ from typing import Any, Iterable
 
 import slr_sql
 
+from .store import quote_identifier
+
 __all__ = [
     "ROBOT_PROGRAM", "EVENT_RULES", "TABLE_SWEEP", "DemoQuery", "DemoResult", "scenario_events",
     "open_robot_kb", "demo_queries", "run_demo", "value_text", "answer_text",
@@ -386,7 +388,7 @@ def _synchronized_cups_query(kb: Any, clock: Any, console: Any) -> DemoResult:
     def answered() -> str:
         # Answers are produced by the store's scheduler: let it finish reacting, then say
         # whether the query is answered or what it still waits for.
-        sync = getattr(kb, "_sync", None)
+        sync = kb.synchronizer
         if sync is not None:
             sync.drain(timeout=5.0)
         else:
@@ -452,7 +454,7 @@ def _event_rules_scene(console: Any, db_path: str | None = None) -> list[DemoRes
                      "matching is by occurrence time, so it still completes 8 -> 9 -> 11; "
                      "bob's 61, 59, 70 do not rise")
         info = kb.event_rules()[0]
-        _, why = kb.sql(f"SELECT r1, r2, r3, t_start, t_end FROM {info['provenance']}")
+        why = kb.store.rule_matches(quote_identifier(info["provenance"]), 3)
         for r1, r2, r3, start, end in why:
             notes.append(f"relFace over [{start:g}, {end:g}] is made of the face rows "
                          f"{r1}, {r2}, {r3} ({info['provenance']})")

@@ -601,7 +601,7 @@ def decode_json(data: Any) -> Any:
     >>> str(decode_json({"pose": [[1.0, 2.0, 3.0], [0.0, 0.0, 0.0, 1.0]]}))
     'pose([1.0,2.0,3.0],[0.0,0.0,0.0,1.0])'
     """
-    return _from_json(data)
+    return term_from_json(data)
 
 
 def _deref_or_raise(var: Var) -> Any:
@@ -808,7 +808,7 @@ def decode_answer(value: Any) -> Any:
                     break
             else:
                 return data
-            return to_python(_from_json(data))
+            return to_python(term_from_json(data))
         return to_python(_decode_top_json(value))
     if tv is int or tv is float:
         return value
@@ -819,26 +819,32 @@ def _decode_top_json(text: str) -> Any:
     data = json.loads(text)
     if type(data) is str:  # a top-level JSON string is an SLR string
         return String(data)
-    return _from_json(data)
+    return term_from_json(data)
 
 
-def _from_json(data: Any) -> Any:
+def term_from_json(data: Any) -> Any:
+    """The term of a parsed JSON value in the column encoding (``json.loads`` of a stored
+    compound's text): the inverse of :func:`encode_json` after parsing.
+
+    >>> term_from_json({"f": ["a", 1]})
+    Struct('f', (Atom('a'), 1))
+    """
     td = type(data)
     if td is str:
         return NIL if data == "[]" else Atom(data)
     if td is int or td is float:
         return data
     if td is list:
-        return make_list([_from_json(x) for x in data])
+        return make_list([term_from_json(x) for x in data])
     if td is dict and "$type" in data:
         name = data["$type"]
         if type(name) is str and len(data) > 1:
             return Struct(Atom(name), tuple([
-                Struct(":", (Atom(k), _from_json(v))) for k, v in data.items() if k != "$type"]))
+                Struct(":", (Atom(k), term_from_json(v))) for k, v in data.items() if k != "$type"]))
     if td is dict and len(data) == 1:
         ((key, val),) = data.items()
         if type(val) is list:
-            return Struct(Atom(key), tuple([_from_json(x) for x in val]))
+            return Struct(Atom(key), tuple([term_from_json(x) for x in val]))
         if type(val) is str:
             if key == "$string":
                 return String(val)

@@ -199,7 +199,7 @@ class Machine:
                         if call is not None:
                             rows = call(self, args)
                             if rows is not None:
-                                cont = self._push_gen(self._sql_answers(rows, args), nxt)
+                                cont = self.push_solutions(self._sql_answers(rows, args), nxt)
                                 continue
                     cont = self._call_pred(pred, args, nxt)
                     continue
@@ -209,7 +209,7 @@ class Machine:
                     continue
                 g = nondet.get(key)
                 if g is not None:
-                    cont = self._push_gen(g(self, args), nxt)
+                    cont = self.push_solutions(g(self, args), nxt)
                     continue
                 cont = self._other(key, args, nxt)
             except PrologThrow as exc:
@@ -328,7 +328,10 @@ class Machine:
             else:
                 yield None
 
-    def _push_gen(self, gen: Iterator, nxt):
+    def push_solutions(self, gen: Iterator, nxt):
+        """Solve a goal by a generator: each ``next(gen)`` makes the next solution (binding
+        on the trail, undone on backtracking) and yields; the machine then continues with
+        ``nxt``. Returns ``nxt``, or False when ``gen`` has no solution at all."""
         cp = [K_GEN, len(self.trail), nxt, gen, None, None]
         self.cps.append(cp)
         try:
@@ -518,7 +521,7 @@ class Machine:
                     full = args + ((s,) if deref(s) is deref(e) else (s, e))
                     rows = call(self, full)
                     if rows is not None:
-                        return self._push_gen(self._sql_answers(rows, full), nxt)
+                        return self.push_solutions(self._sql_answers(rows, full), nxt)
             rule_goal = Special(S_RULES, (rules, args + (s, e)))
             cps = self.cps
             cps.append([K_ALT, len(self.trail), (rule_goal, 0, nxt), None, None, None])
@@ -527,7 +530,7 @@ class Machine:
         bound = bound_args(args)
         rows = events.scan(name, n, bound, end_le=self.at, robot=self.robot) \
             if self.robot is not None else events.scan(name, n, bound, end_le=self.at)
-        return self._push_gen(_match_rows(self, args, s, e, rows), nxt)
+        return self.push_solutions(_match_rows(self, args, s, e, rows), nxt)
 
     def event_source(self):
         return self.engine.events

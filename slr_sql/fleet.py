@@ -33,6 +33,10 @@ BATCH = 5000                 # rows per batch (one fleet transaction)
 WAKE_MIN, WAKE_MAX = 0.005, 0.25    # s between change checks of the robot store (backoff)
 RETRY_MIN, RETRY_MAX = 0.1, 5.0     # s between attempts while the fleet is unreachable
 HEARTBEAT = 5.0              # s between contacts of a following pusher that has nothing new
+# s from the start of one round of a following pusher to the next: a robot adding every few
+# ms would otherwise cost the fleet a transaction each time (and a fleet file has one write
+# lock for every pusher); events wait at most this long to be gathered
+ROUND_GAP = 0.05
 
 
 class FleetTarget(Protocol):
@@ -192,12 +196,8 @@ class _Pusher:
         keys = sorted(k for k in heads if self.types is None or k in self.types)
         held: tuple | None = None     # the batch read last, sent once the next one is read
 
-        def send(batch: tuple | None, contact: tuple = (None, None, None)) -> None:
+        def record(batch: tuple, stored: int) -> None:
             nonlocal shipped
-            stored = target.receive(self.robot, [batch] if batch else [], *contact)
-            self.reached()
-            if batch is None:
-                return
             name, arity, rows = batch
             positions[(name, arity)] = rows[-1][0]
             shipped += stored
@@ -206,18 +206,38 @@ class _Pusher:
             key = f"{name}/{arity}"
             self.report.per_type[key] = self.report.per_type.get(key, 0) + stored
 
-        for name, arity in keys:
-            position = positions.get((name, arity), 0)
-            while not stop.is_set():
-                rows = self.store.fleet_read_after(name, arity, position, self.batch)
-                if not rows:
-                    break
-                if held is not None:
-                    send(held)
-                held = (name, arity, rows)
-                position = rows[-1][0]
-                if len(rows) < self.batch:
-                    break
+        def send(batch: tuple | None, contact: tuple = (None, None, None)) -> None:
+            stored = target.receive(self.robot, [batch] if batch else [], *contact)
+            self.reached()
+            if batch is not None:
+                record(batch, stored)
+
+        # All batches but the last go through a sender thread: the fleet stores batch k
+        # (psycopg, sqlite3 and the network wait without the GIL) while this thread reads
+        # batch k + 1 from the robot's store. One batch queued, one in flight.
+        sender: _Sender | None = None
+        try:
+            for name, arity in keys:
+                position = positions.get((name, arity), 0)
+                while not stop.is_set():
+                    rows = self.store.fleet_read_after(name, arity, position, self.batch)
+                    if not rows:
+                        break
+                    if held is not None:
+                        if sender is None:
+                            sender = _Sender(target, self.robot, record)
+                        sender.put(held)
+                    held = (name, arity, rows)
+                    position = rows[-1][0]
+                    if len(rows) < self.batch:
+                        break
+            if sender is not None:
+                sender.finish()
+        finally:
+            if sender is not None:
+                sender.abandon()
+        if sender is not None:
+            self.reached()
         pending = 0
         head_arrival = None
         for name, arity in keys:
@@ -237,6 +257,66 @@ class _Pusher:
             self.last_contact, self.contact_at = contact, now
         self.report.rounds += 1
         return shipped
+
+
+class _Sender:
+    """Sends batches to the fleet in a thread of its own, in order, while the pusher reads
+    the next ones; the first failure stops it and is raised by :meth:`put` or
+    :meth:`finish` in the pusher's thread."""
+
+    def __init__(self, target: FleetTarget, robot: str, record: Callable[[tuple, int], None]):
+        import queue
+        self.target = target
+        self.robot = robot
+        self.record = record
+        self.queue: Any = queue.Queue(maxsize=1)
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._run, name="slr-fleet-sender", daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        while True:
+            batch = self.queue.get()
+            if batch is None or self.error is not None:
+                if batch is None:
+                    return
+                continue   # after a failure: drain what was queued, send nothing more
+            try:
+                self.record(batch, self.target.receive(self.robot, [batch], None, None, None))
+            except BaseException as exc:  # noqa: BLE001 - raised again in the pusher's thread
+                self.error = exc
+
+    def _raise(self) -> None:
+        if self.error is not None:
+            raise self.error
+
+    def put(self, batch: tuple) -> None:
+        """Queue ``batch`` (waiting while one is queued already)."""
+        import queue
+        while True:
+            self._raise()
+            try:
+                self.queue.put(batch, timeout=0.05)
+                return
+            except queue.Full:
+                continue
+
+    def finish(self) -> None:
+        """Wait until every queued batch is stored; raise the first failure."""
+        self.queue.put(None)
+        self.thread.join()
+        self._raise()
+
+    def abandon(self) -> None:
+        """End the thread without waiting for more than the batch in flight (after a
+        failure in the pusher's thread)."""
+        if self.thread.is_alive():
+            self.error = self.error or SLRError("push abandoned")
+            try:
+                self.queue.put_nowait(None)
+            except Exception:  # noqa: BLE001 - full: the thread drains and sees None next
+                self.queue.put(None)
+            self.thread.join()
 
 
 def push(db: str, fleet: str, *, robot: str | None = None,
@@ -299,6 +379,7 @@ def _follow(pusher: _Pusher, stop: threading.Event) -> None:
     retry = RETRY_MIN
     while not stop.is_set():
         seen = store.data_version()
+        began = time.monotonic()
         try:
             pusher.round(stop, HEARTBEAT)
         except (SLRError, OSError) as exc:  # unreachable, busy, refused: try again later
@@ -308,6 +389,9 @@ def _follow(pusher: _Pusher, stop: threading.Event) -> None:
             retry = min(retry * 2, RETRY_MAX)
             continue
         retry = RETRY_MIN
+        gap = began + ROUND_GAP - time.monotonic()
+        if gap > 0:
+            stop.wait(gap)
         wait = WAKE_MIN
         beat = time.monotonic() + HEARTBEAT   # an idle robot's contact stays fresh too
         while not stop.is_set() and store.data_version() == seen \
@@ -350,7 +434,13 @@ def status(fleet: str, token: str | None = None, now: float | None = None) -> li
 
 # -- the command line: `slr fleet push`, `slr fleet status` (registered by slr_sql.cli) --------
 
-def _click_group() -> Any:
+def click_group() -> Any:
+    """The ``slr fleet`` command group (``name``, ``push``, ``status``), built on use so
+    that importing this module does not import click.
+
+    >>> click_group().name
+    'fleet'
+    """
     import click
 
     def token_of(ctx: click.Context) -> str | None:

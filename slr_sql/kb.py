@@ -13,10 +13,7 @@ from __future__ import annotations
 import functools
 import math
 import numbers
-import re
-import threading
 import time
-from dataclasses import dataclass, field
 from operator import itemgetter
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
@@ -24,67 +21,26 @@ from typing import Any, Callable, Iterable, Iterator
 from .answers import answer_bindings
 from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
-from .encoding import Unencodable, decode_answer, encode
 from .engine import Engine
 from .errors import EventRejected, SLRError, SLRUnavailable
 from .parser import parse_event_fast, parse_program, parse_term
-from .program import Program, build, compile_clause, split_event_atom, event_key
+from .loader import ProgramLoader
+from .plans import PlanCache, argument_term, instantiate
+from .plans import python_words as _python_words
+from .program import BufferDecl, Declarations, Program, split_event_atom, event_key
 from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore, \
     store_error, check_robot_name
 from .store.checks import event_arguments, shorten, shown, text_problem
-from .terms import Atom, Clause, String, Struct, Var, deref, from_python, list_items, to_python
+from .terms import Atom, String, Struct, Var, deref
 from .terms import format_atom, format_term
 
-__all__ = ["KnowledgeBase", "open", "Declarations", "ProgramInfo", "parse_duration"]
-
-
-@dataclass
-class BufferDecl:
-    kind: str              # "tBuffer" | "cBuffer"
-    pattern: Any           # the event pattern term
-    amount: float | int    # seconds (tBuffer) or count (cBuffer)
-    clause: Clause | None  # where it was declared (None for runtime buffers)
-
-
-@dataclass
-class Declarations:
-    """What the program declares beyond clauses (docs/language.md, "Declarations")."""
-
-    event_types: set = field(default_factory=set)         # {(name, arity)}
-    max_delay: dict = field(default_factory=dict)         # (name, arity) -> seconds | "learn"
-    in_order: set = field(default_factory=set)            # {(name, arity)}
-    buffers: list = field(default_factory=list)           # [BufferDecl]
-    event_rules: list = field(default_factory=list)       # [cep.EventRule], dependency order
-    consumption: dict = field(default_factory=dict)       # (name, arity) | None -> policy
-
-    def copy(self) -> "Declarations":
-        return Declarations(set(self.event_types), dict(self.max_delay), set(self.in_order),
-                            list(self.buffers), list(self.event_rules),
-                            dict(self.consumption))
-
-
-def _indicator(t: Any) -> tuple[str, int]:
-    t = deref(t)
-    if type(t) is Struct and t.name == "/" and len(t.args) == 2:
-        name, arity = deref(t.args[0]), deref(t.args[1])
-        if type(name) is Atom and type(arity) is int and arity >= 0:
-            return str(name), arity
-    raise SLRError(f"expected a predicate indicator name/arity, not {format_term(t)}")
-
-
-def _indicators(t: Any) -> list[tuple[str, int]]:
-    t = deref(t)
-    if type(t) is Struct and t.name == "," and len(t.args) == 2:
-        return _indicators(t.args[0]) + _indicators(t.args[1])
-    if type(t) is Struct and t.name == "." and len(t.args) == 2:
-        items, _ = list_items(t)
-        return [ind for x in items for ind in _indicators(x)]
-    return [_indicator(t)]
+__all__ = ["KnowledgeBase", "open", "Declarations", "BufferDecl", "ProgramInfo",
+           "parse_duration"]
 
 
 _TUPLE = frozenset({tuple})
 _FOUR = {4}
-_second = itemgetter(1)
+_first, _second, _fourth = itemgetter(0), itemgetter(1), itemgetter(3)
 
 
 def _all_event_tuples(events: list) -> bool:
@@ -111,12 +67,6 @@ def _is_time_expression(t: Any) -> bool:
     return True
 
 
-def _where(clause: Clause | None) -> str:
-    if clause is None or clause.span is None:
-        return ""
-    return f"{clause.span.filename}:{clause.span.line}: "
-
-
 def _program_name(name: Any) -> str:
     if not isinstance(name, str) or not name:
         raise SLRError(f"a program name is a non-empty string, not {shown(name)}")
@@ -124,229 +74,6 @@ def _program_name(name: Any) -> str:
     if problem:
         raise SLRError(f"the program name {shown(name)} cannot be stored: {problem}")
     return name
-
-
-@dataclass
-class _Plan:
-    """A parsed, compiled goal cached per (text, names bound from Python)."""
-
-    compiled: Any                 # CompiledClause of the goal
-    names: list[tuple[str, int]]  # answer variables: (name, slot index)
-    bind_slots: dict[str, int]    # args name -> slot index
-    text: str
-    lookup: "_PrevLookup | None" = None
-    bound_lookup: "_BoundPrev | None" = None
-
-
-_ATOMIC = (Atom, String, int, float)
-
-
-class _PrevLookup:
-    """Fast path for the robot's most frequent question, a single ``prev(p(..)^Z, T)`` whose
-    arguments are constants or distinct variables: one indexed SQL statement, no interpreter.
-
-    Whenever a run-time binding does not fit (a compound or unbound-variable argument value,
-    an int/float clash that SQL cannot see), :meth:`run` returns None and the query takes the
-    general path, so answers never differ from the interpreter's.
-    """
-
-    __slots__ = ("name", "arity", "args", "stamp", "time", "point")
-
-    def __init__(self, name, arity, args, stamp, time, point):
-        self.name, self.arity, self.args = name, arity, args
-        self.stamp, self.time, self.point = stamp, time, point
-
-    @classmethod
-    def recognise(cls, compiled) -> "_PrevLookup | None":
-        from .program import Slot, Template
-
-        body = compiled.body
-        if len(body) != 1 or type(body[0]) is not Template or body[0].name != "prev" \
-                or len(body[0].args) != 2:
-            return None
-        event, time = body[0].args
-        if type(event) is not Template or event.name != "^" or type(time) not in (Slot, int, float):
-            return None
-        atom, stamp = event.args
-        if type(stamp) is Slot:
-            stamp_slots, point = (stamp.index,), True
-        elif type(stamp) is Template and stamp.name == "." and type(stamp.args[0]) is Slot \
-                and type(stamp.args[1]) is Template and type(stamp.args[1].args[0]) is Slot \
-                and stamp.args[1].args[1] == "[]":
-            stamp_slots, point = (stamp.args[0].index, stamp.args[1].args[0].index), False
-            if stamp_slots[0] == stamp_slots[1]:
-                return None
-        else:
-            return None
-        if type(atom) is Atom:
-            name, args = str(atom), ()
-        elif type(atom) in (Template, Struct):
-            name, args = str(atom.name), atom.args
-        else:
-            return None
-        seen = set(stamp_slots)
-        if type(time) is Slot:
-            if time.index in seen:
-                return None
-            seen.add(time.index)
-        spec = []
-        for a in args:
-            if type(a) is Slot:
-                if a.index in seen:
-                    return None
-                seen.add(a.index)
-                spec.append(a.index)
-            elif type(a) in _ATOMIC:
-                spec.append(("const", a))
-            else:
-                return None
-        return cls(name, len(args), tuple(spec), stamp_slots,
-                   time.index if type(time) is Slot else ("const", time), point)
-
-    def run(self, store, frame: list, names: list) -> list | None:
-        for slot in self.stamp:
-            if frame[slot] is not None:
-                return None
-        t = self.time
-        t = t[1] if type(t) is tuple else frame[t]
-        t = deref(t)
-        if type(t) is not int and type(t) is not float:
-            return None
-        bound = {}
-        free = []
-        for i, a in enumerate(self.args):
-            if type(a) is tuple:
-                bound[i] = a[1]
-                continue
-            v = frame[a]
-            if v is None:
-                free.append((i, a))
-                continue
-            v = deref(v)
-            if type(v) not in _ATOMIC or (type(v) is float and v != v):
-                return None
-            bound[i] = v
-        rows = store.latest_at_or_before(self.name, self.arity, bound, t, self.point)
-        if rows is None:
-            return None
-        answers = []
-        for values, start, end, _seq in rows:
-            for i, v in bound.items():
-                if type(values[i]) is not type(v):
-                    return None
-            f = list(frame)
-            for i, slot in free:
-                f[slot] = values[i]
-            if self.point:
-                f[self.stamp[0]] = end
-            else:
-                f[self.stamp[0]] = start
-                f[self.stamp[1]] = end
-            answers.append(answer_bindings(names, f))
-        return answers
-
-
-class _BoundPrev:
-    """A :class:`_PrevLookup` with the names its ``args`` bind, prepared once per plan (goal
-    text and argument names): a call encodes the bound Python values, runs the cached
-    statement and builds the answer dicts straight from the rows, with no frame, term or
-    unification in between. Anything unusual in a call (a value of another type, a number
-    stored as another type) returns None and the caller takes :meth:`_PrevLookup.run`'s
-    path, so answers never differ.
-    """
-
-    __slots__ = ("name", "arity", "point", "time", "positions", "sources", "fields")
-
-    def __init__(self, name, arity, point, time, positions, sources, fields):
-        self.name, self.arity, self.point, self.time = name, arity, point, time
-        self.positions, self.sources, self.fields = positions, sources, fields
-
-    @classmethod
-    def prepare(cls, lookup: _PrevLookup, bind_slots: dict[str, int],
-                names: list[tuple[str, int]]) -> "_BoundPrev | None":
-        by_slot = {slot: name for name, slot in bind_slots.items()}
-        if any(slot in by_slot for slot in lookup.stamp):
-            return None   # a bound stamp: the general path compares it
-        if type(lookup.time) is tuple:
-            time: Any = ("const", lookup.time[1])
-        elif lookup.time in by_slot:
-            time = by_slot[lookup.time]
-        else:
-            return None   # an unbound time: the general path raises the instantiation error
-        positions, sources, column = [], [], {}
-        for i, a in enumerate(lookup.args):
-            if type(a) is tuple:
-                positions.append(i)
-                sources.append(("const", a[1]))
-            elif a in by_slot:
-                positions.append(i)
-                sources.append(by_slot[a])
-            else:
-                column[a] = i
-        stamp = {lookup.stamp[0]: lookup.arity + 1} if lookup.point else {
-            lookup.stamp[0]: lookup.arity, lookup.stamp[1]: lookup.arity + 1}
-        # each answer variable: (name, 0 = a row's argument column, 1 = a row's time column,
-        # 2 = a bound argument value, 3 = the time bound by args; index)
-        fields = []
-        for name, slot in names:
-            if slot in column:
-                fields.append((name, 0, column[slot]))
-            elif slot in stamp:
-                fields.append((name, 1, stamp[slot]))
-            elif slot == lookup.time:
-                fields.append((name, 3, 0))
-            elif slot in lookup.args:
-                fields.append((name, 2, positions.index(lookup.args.index(slot))))
-            else:
-                return None
-        return cls(lookup.name, lookup.arity, lookup.point, time, tuple(positions),
-                   tuple(sources), tuple(fields))
-
-    def answer(self, store: EventStore, args: dict) -> tuple[list, tuple | None] | None:
-        """The answers and the (program, progress) versions read with them (None when
-        nothing matched), or None when the general path must answer."""
-        t = self.time
-        t = t[1] if type(t) is tuple else args[t]
-        if type(t) is not float and type(t) is not int:
-            return None
-        terms = []
-        values = []
-        checks = []
-        for i, source in enumerate(self.sources):
-            v = source[1] if type(source) is tuple else args[source]
-            tv = type(v)
-            if tv is str:
-                v = Atom(v)
-            elif tv is float:
-                if v != v:
-                    return None
-                checks.append((self.positions[i], float))
-            elif tv is int:
-                checks.append((self.positions[i], int))
-            elif tv is not Atom and tv is not String:
-                return None
-            try:
-                values.append(encode(v))
-            except Unencodable:
-                return None
-            terms.append(v)
-        rows = store.latest_rows(self.name, self.arity, self.positions, values, t, self.point)
-        if not rows:
-            return [], None
-        for position, kind in checks:
-            for row in rows:
-                if type(row[position]) is not kind:
-                    return None   # SQL's 1 = 1.0: not a Prolog match
-        bound = [to_python(term) for term in terms]
-        fields = self.fields
-        answers = []
-        for row in rows:
-            answer = {}
-            for name, kind, i in fields:
-                answer[name] = decode_answer(row[i]) if kind == 0 else row[i] if kind == 1 \
-                    else bound[i] if kind == 2 else t
-            answers.append(answer)
-        return answers, rows[0][-2:]
 
 
 def _with_derived(stored: list, derived: list) -> list:
@@ -363,10 +90,22 @@ def _with_derived(stored: list, derived: list) -> list:
     ends = getattr(stored, "ends", None)
     if ends is not None:
         ends = dict(ends)
-        for name, args, _start, end in derived:
-            key = (name, len(args))
+        # column-wise (C loops): one rule round may derive 100,000 events of one type
+        names = set(map(_first, derived))
+        arities = set(map(len, map(_second, derived)))
+        if len(names) == 1 and len(arities) == 1:
+            times = list(map(_fourth, derived))
+            spans = {(names.pop(), arities.pop()): (min(times), max(times))}
+        else:
+            spans = {}
+            for name, args, _start, end in derived:
+                key = (name, len(args))
+                span = spans.get(key)
+                spans[key] = (end, end) if span is None else (min(span[0], end),
+                                                              max(span[1], end))
+        for key, (low, high) in spans.items():
             span = ends.get(key)
-            ends[key] = (end, end) if span is None else (min(span[0], end), max(span[1], end))
+            ends[key] = (low, high) if span is None else (min(span[0], low), max(span[1], high))
         both.ends = ends
     return both
 
@@ -392,16 +131,12 @@ class KnowledgeBase:
                                 busy_timeout=busy_timeout, adopt=adopt, checkpoint=checkpoint,
                                 cache_mib=cache_mib, robot=robot)
         self.path = self.store.path
-        self.program = Program()
-        self.declarations = Declarations()
-        self.engine = Engine(self.program, self.store)
-        self._plans: dict[tuple, _Plan] = {}
-        self._load_lock = threading.RLock()
-        # the stored program version self.program was built from, the parsed stored texts
-        # (by id), and the store's data_version when the file was last checked for changes
-        self._program_version = -1
-        self._parsed: dict[int, tuple[str, list]] = {}
-        self._seen_data_version: int | None = None
+        self.engine = Engine(Program(), self.store)
+        # the parsed, compiled goals (slr_sql/plans.py); a load or define clears them
+        self.plans = PlanCache()
+        # state the attached parts keep per knowledge base, under their names (host.Host)
+        self.attached_state: dict[str, Any] = {}
+        self._cached_plan = self.plans.entries.get
         # the stored (program, progress) versions a bound prev lookup last read with its rows:
         # while they stay the same, no other connection changed what a refresh re-reads
         self._lookup_versions: tuple | None = None
@@ -413,8 +148,10 @@ class KnowledgeBase:
         self.reload_listeners: list[Callable[["KnowledgeBase"], None]] = []
         # called when another connection raised learned delays or completeness marks
         self.progress_listeners: list[Callable[[], None]] = []
-        self._progress_version = self.store.versions()[1]
-        self._reload_program()
+        # the program in force, built from the stored texts and kept current (slr_sql/loader.py)
+        self.loader = ProgramLoader(self)
+        self._refresh = self.loader.refresh
+        self.loader.reload()
         from . import buffers as _buffers  # event-history management
         self._buffers = _buffers.attach(self)
         from . import sync as _sync  # synchronized queries: slr_sql/sync.py
@@ -436,6 +173,30 @@ class KnowledgeBase:
     def sql_enabled(self, value: bool) -> None:
         self.engine.use_sql = bool(value)
 
+    @property
+    def program(self) -> Program:
+        """The program in force (every named program stored in the file, in load order)."""
+        return self.loader.program
+
+    @property
+    def synchronizer(self) -> Any:
+        """The synchronizer of waiting queries (:class:`slr_sql.sync.Synchronizer`; None
+        while the knowledge base is being built): a process that waits on what others write
+        calls its ``watch_external()``."""
+        return getattr(self, "_sync", None)
+
+    @property
+    def event_rule_engine(self) -> Any:
+        """The event rules in force (:class:`slr_sql.cep.EventRules`; None while the
+        knowledge base is being built): a fleet store runs them over shipped events."""
+        return getattr(self, "_cep", None)
+
+    @property
+    def declarations(self) -> Declarations:
+        """What the program in force declares beyond clauses (event types, delays, buffers,
+        event rules, consumption policies)."""
+        return self.loader.declarations
+
     # -- lifecycle ----------------------------------------------------------------------
     def close(self) -> None:
         """Close the store. It never waits for another process (the checkpoint of the WAL
@@ -455,154 +216,7 @@ class KnowledgeBase:
         self.close()
 
     # -- the file is the truth ----------------------------------------------------------
-    def _refresh(self) -> None:
-        """See what other connections (processes, knowledge bases) wrote since the last
-        call: a cheap ``PRAGMA data_version`` first; when it moved, the program and progress
-        versions; the program is re-read when its version moved, and the synchronizer
-        re-reads delays and marks when theirs did."""
-        store = self.store
-        if store.path is None:  # in memory: no other connection can write it
-            return
-        data_version = store.data_version()
-        if data_version == self._seen_data_version:
-            return
-        program_version, progress_version = store.versions()
-        if program_version != self._program_version:
-            with self._load_lock:
-                if store.program_version() != self._program_version:
-                    self._reload_program()
-        if progress_version != self._progress_version:
-            self._progress_version = progress_version
-            for listener in self.progress_listeners:
-                listener()
-        self._seen_data_version = data_version   # (not before: a failed re-read is retried)
-
-    def _reload_program(self) -> None:
-        """Build the program from the texts stored now (the union of every named program,
-        in load order) and tell the reload listeners. The version is read before the texts:
-        a change committed in between is seen again at the next call."""
-        version = self.store.program_version()
-        texts = self.store.program_texts()
-        self.store.event_types()   # re-read the event types too: declared arities may be new
-        program, decls = self._build(self._parse_texts(texts))
-        self.program, self.declarations = program, decls
-        self.engine.program = program
-        self._program_version = version
-        self._plans.clear()
-        for listener in self.reload_listeners:
-            listener(self)
-
-    def _ensure_current(self) -> bool:
-        """Inside a write transaction: make sure the program is the stored one (re-read it
-        if another connection changed it); True if it had to be re-read. (Without taking
-        the load lock: a thread holding it may be waiting for the store lock we hold, and
-        no load can be between its write and its commit while we hold that.)"""
-        if self.store.program_version() == self._program_version:
-            return False
-        self._reload_program()
-        return True
-
-    def _parse_texts(self, texts: list) -> list[list[Clause]]:
-        """The clauses of each stored text, parsed once per text id."""
-        parsed = {}
-        out = []
-        for text in texts:
-            cached = self._parsed.get(text.id)
-            if cached is None or cached[0] is not text.source and cached[0] != text.source:
-                cached = (text.source, parse_program(text.source, text.filename or "<stored>"))
-            parsed[text.id] = cached
-            out.append(cached[1])
-        self._parsed = parsed
-        return out
-
-    def _build(self, texts: Iterable[list[Clause]]) -> tuple[Program, Declarations]:
-        program, decls = Program(), Declarations()
-        for clauses in texts:
-            self._add_clauses(clauses, program, decls)
-        return program, decls
-
     # -- program ------------------------------------------------------------------------
-    def _add_clauses(self, clauses: list[Clause], program: Program, decls: Declarations) -> None:
-        from . import cep as _cep  # event rules Head <- Pattern
-        for clause in clauses:
-            if clause.head is None:
-                self._directive(clause, program, decls)
-                continue
-            head = deref(clause.head)
-            if _cep.is_event_rule(head):
-                decls.event_rules.append(_cep.compile_rule(clause))
-                continue
-            if _cep.is_ignored_fact(head):
-                continue   # ETALIS-only facts such as print_trigger/1 (docs/events.md)
-            self._check_head(head, clause)
-            if type(head) is Struct and head.name in ("tBuffer", "cBuffer") and len(head.args) == 2:
-                decls.buffers.append(self._buffer_decl(head, clause))
-            program.add_clause(clause)
-        if decls.event_rules:  # policies, dependency order, no cycles
-            decls.event_rules = _cep.prepare(decls.event_rules, decls.consumption, program)
-
-    def _buffer_decl(self, head: Struct, clause: Clause) -> BufferDecl:
-        pattern, amount = deref(head.args[0]), deref(head.args[1])
-        if type(pattern) not in (Struct, Atom):
-            raise SLRError(f"{_where(clause)}{head.name}: the pattern must be an event "
-                           f"term, not {format_term(pattern)}")
-        if head.name == "tBuffer":
-            value = parse_duration(amount)
-        else:
-            if type(amount) is not int or amount < 0:
-                raise SLRError(f"{_where(clause)}cBuffer: the count must be a non-negative "
-                               f"integer, not {format_term(amount)}")
-            value = amount
-        return BufferDecl(str(head.name), pattern, value, clause)
-
-    def _check_head(self, head: Any, clause: Clause) -> None:
-        from .builtins import BUILTIN_NAMES
-        from .engine import CONTROL
-
-        if type(head) is Var:
-            raise SLRError(f"{_where(clause)}a clause head cannot be a variable")
-        if type(head) not in (Struct, Atom):
-            raise SLRError(f"{_where(clause)}a clause head must be callable, not "
-                           f"{format_term(head)}")
-        if split_event_atom(head) is not None:
-            return
-        key = (str(head.name), len(head.args)) if type(head) is Struct else (str(head), 0)
-        if key in CONTROL or key in BUILTIN_NAMES or key in (("prev", 2), ("next", 2), ("next", 3)):
-            raise SLRError(f"{_where(clause)}cannot redefine the builtin {key[0]}/{key[1]}")
-
-    def _directive(self, clause: Clause, program: Program, decls: Declarations) -> None:
-        goal = deref(clause.body)
-        name = str(goal.name) if type(goal) is Struct else str(goal)
-        args = goal.args if type(goal) is Struct else ()
-        try:
-            if name == "event" and len(args) == 1:
-                decls.event_types.update(_indicators(args[0]))
-            elif name == "max_delay" and len(args) == 2:
-                ind = _indicator(args[0])
-                value = deref(args[1])
-                decls.max_delay[ind] = "learn" if value == "learn" and type(value) is Atom \
-                    else parse_duration(value)
-            elif name == "in_order" and len(args) == 1:
-                decls.in_order.update(_indicators(args[0]))
-            elif name == "dynamic" and len(args) == 1:
-                program.dynamic.update(_indicators(args[0]))
-            elif name in ("discontiguous", "use_module", "ensure_loaded", "set_prolog_flag",
-                          "module"):
-                pass  # accepted for compatibility with Prolog sources; nothing to do here
-            elif name in ("tBuffer", "cBuffer") and len(args) == 2:
-                decls.buffers.append(self._buffer_decl(goal, clause))
-            elif name == "consumption" and len(args) in (1, 2):
-                from .cep import consumption_directive
-                target, policy = consumption_directive(goal)
-                decls.consumption[target] = policy
-            else:
-                raise SLRError(f"unknown directive :- {format_term(goal)}")
-        except SLRError as exc:
-            msg = str(exc)
-            if not msg.startswith(_where(clause)) or not _where(clause):
-                msg = _where(clause) + msg
-            raise SLRError(msg) from None
-
     def load(self, text: str, filename: str = "<string>", *, name: str = "main",
              replace: bool = False) -> None:
         """Add the clauses and declarations of ``text`` to the program ``name`` (persisted);
@@ -625,78 +239,7 @@ class KnowledgeBase:
             raise SLRError(f"load: filename is the text shown in messages (a str without lone "
                            f"surrogates), not {shown(filename)}")
         clauses = parse_program(text, filename)   # syntax errors before taking the lock
-        with self._load_lock, self.store.transaction():
-            # the write lock is ours: the texts stored now are the latest
-            stale = self.store.program_version() != self._program_version
-            if replace or stale:
-                texts = [t for t in self.store.program_texts() if not (replace and t.name == name)]
-                parsed = self._parse_texts(texts)
-                if replace:
-                    first = self._first_text_of(name)
-                    at = len([t for t in texts if first is not None and t.id < first])
-                    parsed = parsed[:at] + [clauses] + parsed[at:] if first is not None \
-                        else parsed + [clauses]
-                else:
-                    parsed = parsed + [clauses]
-                program, decls = self._build(parsed)
-            else:
-                program, decls = self.program.copy(), self.declarations.copy()
-                self._add_clauses(clauses, program, decls)
-            self._check_event_arities(decls, filename)
-            self._install(program, decls, lambda: self.store.replace_named_program(
-                name, text, filename) if replace else self.store.append_program(
-                text, filename, name), (text, clauses))
-
-    def _first_text_of(self, name: str) -> int | None:
-        ids = [t.id for t in self.store.program_texts() if t.name == name]
-        return min(ids) if ids else None
-
-    def _check_event_arities(self, decls: Declarations, filename: str) -> None:
-        """Refuse ``:- event p/N`` when the store already has events of p with another
-        arity M that nobody declared: p/N would silently become a second type (its own
-        table) beside them -- most often a changed mind about p's arguments. Declaring p/M
-        too (``:- event p/M, p/N.``) says both are meant."""
-        new = decls.event_types - self.declarations.event_types
-        if not new:
-            return
-        stored = self.store.event_types()
-        declared = decls.event_types | self.store.declared_types()
-        for name, arity in sorted(new):
-            others = sorted(a for (n, a) in stored if n == name and a != arity
-                            and (n, a) not in declared)
-            if others:
-                other = others[0]
-                p = format_term(Atom(name))
-                raise SLRError(
-                    f"{filename}: :- event {p}/{arity}: the store already holds events of "
-                    f"{p}/{other} (table {stored[(name, other)]}), which no program "
-                    f"declares; an event type is name/arity, so {p}/{arity} would be a "
-                    f"second type beside it, with a table of its own. If both are meant, "
-                    f"declare both (:- event {p}/{other}, {p}/{arity}.)")
-
-    def _install(self, program: Program, decls: Declarations, write: Callable[[], Any],
-                 parsed: tuple[str, list] | None = None) -> None:
-        """Inside the load transaction: store the change (``write``, returning the new
-        text's id), declare the event types, make ``program`` the kb's and let the load
-        listeners build what is derived from it (fact tables, views, buffers); on any error
-        everything is as before."""
-        old = (self.program, self.declarations, self._program_version, dict(self._parsed))
-        try:
-            text_id = write()
-            if parsed is not None:
-                self._parsed[text_id] = parsed
-            declared = self.store.declared_types()
-            for type_name, arity in sorted(decls.event_types - declared):
-                self.store.declare_type(type_name, arity)
-            self.program, self.declarations = program, decls
-            self._program_version = self.store.program_version()
-            for listener in self.load_listeners:
-                listener(self)
-        except BaseException:
-            self.program, self.declarations, self._program_version, self._parsed = old
-            raise
-        self.engine.program = program
-        self._plans.clear()
+        self.loader.load(name, text, filename, clauses, replace)
 
     def unload(self, name: str) -> None:
         """Remove the program ``name`` (its clauses, declarations and buffers; the events
@@ -706,15 +249,7 @@ class KnowledgeBase:
         {}
         """
         name = _program_name(name)
-        with self._load_lock, self.store.transaction():
-            stored = self.store.program_texts()
-            texts = [t for t in stored if t.name != name]
-            if len(texts) == len(stored):
-                names = list(dict.fromkeys(t.name for t in stored))
-                raise SLRError(f"no program named {shown(name)} (loaded: "
-                               f"{', '.join(repr(n) for n in names) or 'none'})")
-            program, decls = self._build(self._parse_texts(texts))
-            self._install(program, decls, lambda: self.store.delete_program(name))
+        self.loader.unload(name)
 
     def programs(self) -> dict[str, ProgramInfo]:
         """The named programs stored in the file, in load order of their first text.
@@ -758,7 +293,7 @@ class KnowledgeBase:
         [{'Y': 42}]
         """
         self.engine.python_preds[(name, arity)] = fn
-        self._plans.clear()
+        self.plans.clear()
 
     # -- events -------------------------------------------------------------------------
     def _event_from_text(self, text: str) -> tuple:
@@ -954,64 +489,6 @@ class KnowledgeBase:
         return errors, derived
 
     # -- queries ------------------------------------------------------------------------
-    def _plan(self, goal: str, arg_names: tuple) -> _Plan:
-        key = (goal, arg_names)
-        plan = self._plans.get(key)
-        if plan is not None:
-            return plan
-        if not isinstance(goal, str):
-            raise SLRError(f"a goal is SLR text (a str), not {type(goal).__name__} {shown(goal)}")
-        term, varnames = parse_term(goal, "<query>")
-        compiled = compile_clause((), term)
-        slots: dict[str, int] = {}
-        # map names to slots through the compiled body: find Slot objects by name
-        from .program import Slot, Template
-
-        def walk(t):
-            stack = [t]
-            while stack:
-                x = stack.pop()
-                if type(x) is Slot:
-                    slots.setdefault(x.name, x.index)
-                elif type(x) is Template:
-                    stack.extend(x.args)
-        for g in compiled.body:
-            walk(g)
-        for name in arg_names:
-            if name not in varnames:
-                raise SLRError(f"args names {shown(name)}, which is not a variable of the goal {shown(goal)}")
-        names = [(n, slots[n]) for n in varnames if not n.startswith("_") and n in slots]
-        plan = _Plan(compiled, names, {n: slots[n] for n in arg_names if n in slots}, goal,
-                     _PrevLookup.recognise(compiled))
-        if plan.lookup is not None:
-            plan.bound_lookup = _BoundPrev.prepare(plan.lookup, plan.bind_slots, names)
-        if len(self._plans) > 1024:
-            self._plans.clear()
-        self._plans[key] = plan
-        return plan
-
-    def _instantiate(self, plan: _Plan, args: dict | None,
-                     terms: bool = False) -> tuple[Any, list]:
-        """The goal of ``plan`` with ``args`` bound, and its frame. ``terms``: the values
-        are ground terms already (decoded stored values), bound as they are."""
-        frame: list = [None] * plan.compiled.nslots
-        if args:
-            for name, value in args.items():
-                slot = plan.bind_slots.get(name)
-                if slot is not None:
-                    frame[slot] = value if terms else _argument_term(name, value)
-        goals = [build(g, frame) for g in plan.compiled.body]
-        if not goals:
-            goal: Any = Atom("true")
-        else:
-            goal = goals[-1]
-            for g in reversed(goals[:-1]):
-                goal = Struct(",", (g, goal))
-        for name, slot in plan.names:
-            if frame[slot] is None:
-                frame[slot] = Var(name)
-        return goal, frame
-
     def query(self, goal: str, at: float | None = None, args: dict | None = None,
               timeout: float | None = None, max_steps: int | None = None,
               limit: int | None = None, wait: bool = False,
@@ -1039,12 +516,15 @@ class KnowledgeBase:
             check_robot_name(robot)
         if wait:  # synchronized (SLRTimeout names the incomplete types)
             if robot is not None:
-                raise SLRError("a synchronized query (wait=True) cannot be restricted to one "
-                               "robot yet: ask origin(R, Goal) inside the goal instead")
+                # waits as the unrestricted query does (for the fleet's marks, the least of
+                # every robot's): never early, and the answers are the robot's
+                self._refresh()
+                return self._sync.submit(goal, at=at, args=args, timeout=timeout,
+                                         robot=robot).result()
             return self.submit(goal, at=at, args=args, timeout=timeout).result()
         if args and limit is None and robot is None:
             key = (goal, tuple(args))
-            plan = self._plans.get(key)
+            plan = self._cached_plan(key)
             if plan is not None and plan.bound_lookup is not None:
                 # the file is the truth: the lookup reads the stored versions with its rows;
                 # when they moved (or nothing matched), refresh as every call does, and keep
@@ -1055,19 +535,19 @@ class KnowledgeBase:
                     if versions is None or versions != self._lookup_versions:
                         self._refresh()
                         self._lookup_versions = versions
-                        if self._plans.get(key) is not plan:
+                        if self._cached_plan(key) is not plan:
                             found = None
                     if found is not None:
                         return answers
         self._refresh()
-        plan = self._plan(goal, tuple(args) if args else ())
+        plan = self.plans.plan(goal, tuple(args) if args else ())
         if limit == 0:
             return []
         if plan.lookup is not None and limit is None and robot is None:
             frame = [None] * plan.compiled.nslots
             if args:
                 for name, value in args.items():
-                    frame[plan.bind_slots[name]] = _argument_term(name, value)
+                    frame[plan.bind_slots[name]] = argument_term(name, value)
             answers = plan.lookup.run(self.store, frame, plan.names)
             if answers is not None:
                 return answers
@@ -1077,7 +557,7 @@ class KnowledgeBase:
             answers = try_sql(self, plan, args, at, limit, deadline, robot)
             if answers is not None:
                 return answers
-        term, frame = self._instantiate(plan, args)
+        term, frame = instantiate(plan, args)
         m = self.engine.machine(at=at, timeout=timeout, max_steps=max_steps)
         m.robot = robot
         answers = []
@@ -1107,7 +587,7 @@ class KnowledgeBase:
             check_robot_name(robot)
         try:
             self._refresh()
-            plan = self._plan(goal, tuple(args) if args else ())
+            plan = self.plans.plan(goal, tuple(args) if args else ())
         except SLRError:
             raise
         except Exception as exc:  # the facade's promise (see _boundary)
@@ -1119,7 +599,7 @@ class KnowledgeBase:
             # A compiled plan answers as one statement: all its answers at once.
             yield from self.query(goal, at=at, args=args, timeout=timeout, robot=robot)
             return
-        term, frame = self._instantiate(plan, args)
+        term, frame = instantiate(plan, args)
         m = self.engine.machine(at=at, timeout=timeout)
         m.robot = robot
         solving = m.solve(term)
@@ -1179,7 +659,7 @@ class KnowledgeBase:
         rules = self._cep.explain(goal)  # (is a rule, lines) or None
         if rules is not None and rules[0]:
             return "\n".join(rules[1])
-        plan = self._plan(goal, ())
+        plan = self.plans.plan(goal, ())
         from .planner import explain as _explain  # SQL or interpreter, and why
         lines = [f"goal: {goal}"] + _explain(self, plan) + (rules[1] if rules else [])
         return "\n".join(lines)
@@ -1292,10 +772,13 @@ class KnowledgeBase:
             timeout: float | None = None) -> tuple[list[str], list[tuple]]:
         """Run one SQL statement on the store's database; returns (column names, rows).
         Read-only unless ``write=True``; every failure is an :class:`SLRError`
-        (:class:`SLRTimeout` past ``timeout`` seconds).
+        (:class:`SLRTimeout` past ``timeout`` seconds). ``params``: values for ``?``
+        placeholders (a sequence) or for ``:name`` ones (a mapping), on either backend.
 
         >>> kb = open(); kb.add("p(a)^1"); kb.sql("SELECT arg1, t_end FROM p")
         (['arg1', 't_end'], [('a', 1.0)])
+        >>> kb.sql("SELECT :x + 1 AS y", {"x": 41})
+        (['y'], [(42,)])
         """
         from .store import DatabaseError
 
@@ -1328,7 +811,7 @@ class KnowledgeBase:
         from .plot import timeline  # deferred: matplotlib is the optional extra slr_sql[plot]
         return timeline(self, types, **options)
 
-    # -- subscriptions (the work is in slr_sql/subscriptions.py) ----------------
+    # -- subscriptions (the work is in slr_sql/subscriptions/) ------------------
     def subscribe(self, pattern: str, where: str | None = None, since: Any = "now",
                   until: float | None = None, id: str | None = None,
                   callback: Callable[[dict], Any] | None = None, max_queue: int = 10_000,
@@ -1373,30 +856,6 @@ def _check_event_type(method: str, spec: Any) -> None:
     problem = text_problem(text)
     if problem:
         raise SLRError(f"{method}: the event type {shown(spec)} cannot be stored: {problem}")
-
-
-def _argument_term(name: str, value: Any) -> Any:
-    """The term for ``args[name]`` of a query, or an SLRError naming the argument."""
-    try:
-        return from_python(value)
-    except (TypeError, ValueError) as exc:
-        raise SLRError(f"args[{shown(name)}] = {shown(value)} is not a term: "
-                       f"{_python_words(exc)} (atoms are str, strings slr_sql.String, numbers "
-                       f"int or float, lists list, compounds slr_sql.Struct)") from None
-    except RecursionError:
-        raise SLRError(f"args[{shown(name)}]: the term is nested too deeply") from None
-
-
-def _python_words(exc: BaseException) -> str:
-    """The message of a Python exception raised by a conversion, in the user's terms (the
-    advice about ``sys.set_int_max_str_digits`` is for Python programmers, not users)."""
-    text = str(exc)
-    digits = re.search(r"limit \((\d+) digits\) for integer string conversion(?:: value has "
-                       r"(\d+) digits)?", text)
-    if digits:
-        has = f" ({digits.group(2)} digits)" if digits.group(2) else ""
-        return f"an integer too long{has}: at most {digits.group(1)} digits are read"
-    return text.split("; use sys.")[0]
 
 
 def _check_time_option(name: str, value: Any, minimum: float | None = None) -> None:

@@ -29,8 +29,10 @@ from . import sqlcompile
 from json import loads as _json_loads
 
 from .encoding import INT64_MAX, INT64_MIN, Unencodable, decode, encode, encode_json
-from .encoding import _from_json, _quote
+from .encoding import term_from_json
+from json.encoder import encode_basestring as _quote  # C-accelerated; keeps non-ASCII
 from .unify import undo, unify
+from .plans import instantiate
 from .program import Slot, Template, build
 from .sqlcompile import SITES, Col, ColRef, Compiler, Fallback, Part, resolve
 from .errors import SLRBusy
@@ -188,10 +190,10 @@ class _Setof:
         self.items.append(x)
 
     def finalize(self):
-        from .builtins import _cmp_key, _dedup
+        from .builtins import sorted_unique
 
         items, _ = list_items(decode("[" + ",".join(self.items) + "]"))
-        return encode(make_list(_dedup(sorted(items, key=_cmp_key))))
+        return encode(make_list(sorted_unique(items)))
 
 
 def _register(store) -> None:
@@ -246,15 +248,15 @@ class _State:
         program = kb.program
         if self.facts_program is not program:
             store = kb.store
-            if store.facts_version() == kb._program_version:
+            if store.facts_version() == kb.loader.version:
                 self.facts = store.fact_tables_for(fact_rows(program))
             else:
                 self.facts = {}
                 try:
                     with store.transaction():
-                        if store.program_version() == kb._program_version:
+                        if store.program_version() == kb.loader.version:
                             self.facts = store.replace_fact_tables(
-                                fact_rows(program), version=kb._program_version)
+                                fact_rows(program), version=kb.loader.version)
                             self.facts_program = program
                             refresh_views(kb)   # views of the old tables go with them
                 except SLRBusy:
@@ -265,7 +267,7 @@ class _State:
     def materialize(self, kb) -> None:
         """Rebuild the fact tables for kb's program (inside its load transaction)."""
         self.facts = kb.store.replace_fact_tables(fact_rows(kb.program),
-                                                  version=kb._program_version)
+                                                  version=kb.loader.version)
         self.facts_program = kb.program
 
 
@@ -291,9 +293,9 @@ def fact_rows(program) -> dict:
 
 
 def state_of(kb) -> _State:
-    st = getattr(kb, "_sql_state", None)
+    st = kb.attached_state.get("planner")
     if st is None:
-        st = kb._sql_state = _State(kb)
+        st = kb.attached_state["planner"] = _State(kb)
     return st
 
 
@@ -310,7 +312,7 @@ def attach(kb) -> None:
         k = ref()
         if k is not None and (name, arity) in state_of(k).view_missing:
             try:
-                k._ensure_current()   # (inside the add's transaction: the stored program)
+                k.loader.ensure_current()   # (inside the add's transaction: the stored program)
                 refresh_views(k)
             except Exception:
                 pass
@@ -481,7 +483,7 @@ def _py_list(items):
 
 
 def _py_term(x):
-    """``to_python(_from_json(x))`` for one JSON element, compounds without the round trip."""
+    """``to_python(term_from_json(x))`` for one JSON element, compounds without the round trip."""
     tx = type(x)
     if tx is str:
         return Atom(x)
@@ -493,7 +495,7 @@ def _py_term(x):
         ((key, val),) = x.items()
         if type(val) is list and key != ".":
             return Struct(Atom(key), tuple([_py_term(a) for a in val]))
-    return to_python(_from_json(x))
+    return to_python(term_from_json(x))
 
 
 def _inst_row(t, row, varmap):
@@ -720,7 +722,7 @@ def _compiled_subgoals(kb, plan) -> list[str]:
     from .analysis import analyze, goal_refs, reachable
 
     a = analyze(kb.program)
-    goal, _ = kb._instantiate(plan, None)
+    goal, _ = instantiate(plan, None)
     refs = goal_refs(goal, a.program, a.library, a.meta)
     nodes = reachable(kb.program, refs.nodes)
     out = []
@@ -766,7 +768,7 @@ def view_sql(kb, name: str, arity: int):
         return None, "uses slr_ functions", comp.missing
     if not parts:
         return None, "no rows", comp.missing
-    return sqlcompile.view_statement(parts, arity, comp.dialect), None, comp.missing
+    return sqlcompile.view_select(parts, arity), None, comp.missing
 
 
 def refresh_views(kb) -> list[str]:
@@ -776,7 +778,7 @@ def refresh_views(kb) -> list[str]:
     facts = st.fact_tables(kb)
     for (name, arity), pred in sorted(kb.program.preds.items()):
         if (name, arity) in facts:
-            views.setdefault(name, sqlcompile.fact_view_statement(facts[(name, arity)], arity))
+            views.setdefault(name, kb.store.fact_view_select(facts[(name, arity)], arity))
             continue
         if not compiles_for(kb.store) or not kb.store.dialect.query_functions:
             continue   # (views of derived predicates: on SQLite only, see docs/postgres.md)
@@ -848,7 +850,7 @@ class CompiledCall:
         if text is None:
             text = self.plans[key] = self._goal(*key)
         # through kb._plan (a dict hit): define() and load() drop the parsed plans
-        entry = plan_for(kb, kb._plan(*text), m.at is not None)
+        entry = plan_for(kb, kb.plans.plan(*text), m.at is not None)
         if type(entry) is Fallback:
             return None
         try:

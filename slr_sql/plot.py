@@ -32,9 +32,10 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Sequence
+from typing import Any, Iterable
 
 from .errors import SLRError
+from .store.timeline import Statement, TimelineStatements, timeline_statements
 from .store import DatabaseError, quote_identifier
 
 __all__ = [
@@ -243,7 +244,14 @@ def _check_time(what: str, value: Any) -> float | None:
 # Reading the store
 # ---------------------------------------------------------------------------------------------
 
-def _rows(source: Any, query: str, params: Sequence[Any] = ()) -> list[tuple]:
+def _statements(source: Any) -> TimelineStatements:
+    """The statements for the source's database: a local knowledge base's dialect, else
+    SQLite's (what a store served by ``slr serve`` speaks)."""
+    return timeline_statements(getattr(getattr(source, "store", None), "dialect", None))
+
+
+def _rows(source: Any, statement: Statement) -> list[tuple]:
+    query, params = statement
     try:
         return list(source.sql(query, tuple(params))[1])
     except DatabaseError as exc:  # locked, busy, unreadable file: say it in words
@@ -256,7 +264,7 @@ def _rows(source: Any, query: str, params: Sequence[Any] = ()) -> list[tuple]:
 
 def store_types(source: Any) -> list[EventTypeRef]:
     """Every event type in the store's catalog (``slr_event_types``), by name and arity."""
-    rows = _rows(source, "SELECT name, arity, table_name FROM slr_event_types ORDER BY name, arity")
+    rows = _rows(source, _statements(source).event_types())
     return [EventTypeRef(str(name), int(arity), str(table)) for name, arity, table in rows]
 
 
@@ -313,9 +321,8 @@ def _window(source: Any, types: list[EventTypeRef], start: float | None,
         firsts, lasts = [], []
         for t in types:
             table = quote_identifier(t.table)
-            # One aggregate per statement: SQLite answers a lone min()/max() from the index.
-            first = _rows(source, f"SELECT min(t_start) FROM {table}")[0][0]
-            last = _rows(source, f"SELECT max(t_end) FROM {table}")[0][0]
+            first = _rows(source, _statements(source).time_span_first(table))[0][0]
+            last = _rows(source, _statements(source).time_span_last(table))[0][0]
             if first is not None:
                 firsts.append(float(first))
                 lasts.append(float(last))
@@ -343,15 +350,14 @@ def _collect_row(source: Any, ref: EventTypeRef, is_complex: bool, lo: float, hi
                  bins: int, exact_limit: int, key: tuple[int, Any, str] | None = None,
                  lags: bool | None = None) -> TypeRow:
     table = quote_identifier(ref.table)
+    statements = _statements(source)
     # --by: only the events whose argument holds the key (stored value, label)
-    only, only_params = "", ()
+    only: tuple[str | None, Any] = (None, None)
     if key is not None:
-        only, only_params = f" AND {quote_identifier(f'arg{key[0]}')} IS ?", (key[1],)
+        only = (quote_identifier(f"arg{key[0]}"), key[1])
     # Read the events themselves, up to one more than fits: that answers "exact or binned?"
     # without a count(*) over a long history.
-    events = _rows(source, f"SELECT t_start, t_end, arrival FROM {table} WHERE t_end >= ? AND "
-                           f"t_start <= ?{only} ORDER BY t_end, t_start, seq LIMIT ?",
-                   (lo, hi, *only_params, exact_limit + 1))
+    events = _rows(source, statements.events(table, lo, hi, exact_limit + 1, *only))
     if len(events) <= exact_limit:
         row = TypeRow(ref, is_complex, len(events), "exact",
                       key=None if key is None else key[2])
@@ -380,20 +386,14 @@ def _collect_row(source: Any, ref: EventTypeRef, is_complex: bool, lo: float, hi
     point_counts = np.zeros(bins, dtype=np.int64)
     # Per pixel column: how many points fall in it, and where the intervals start and end.
     # The intervals covering column i are those started at or before i and not ended before i.
-    for b, is_point, n in _rows(
-            source, f"SELECT CAST((max(t_start, ?) - ?) / ? AS INTEGER) AS b, t_start = t_end, "
-                    f"count(*) FROM {table} WHERE t_end >= ? AND t_start <= ?{only} GROUP BY 1, 2",
-            (lo, lo, bin_width, lo, hi, *only_params)):
+    for b, is_point, n in _rows(source, statements.start_bins(table, lo, hi, bin_width, *only)):
         b = min(int(b), bins - 1)
         if is_point:
             point_counts[b] += n
         else:
             starts[b] += n
     if starts.any():
-        for b, n in _rows(
-                source, f"SELECT CAST((min(t_end, ?) - ?) / ? AS INTEGER) AS b, count(*) "
-                        f"FROM {table} WHERE t_end >= ? AND t_start <= ? AND t_start < t_end"
-                        f"{only} GROUP BY 1", (hi, lo, bin_width, lo, hi, *only_params)):
+        for b, n in _rows(source, statements.end_bins(table, lo, hi, bin_width, *only)):
             ends[min(int(b), bins - 1) + 1] += n
     # (two statements: an interval added in between could end without having started)
     coverage = np.maximum(np.cumsum(starts)[:bins] - np.cumsum(ends)[:bins], 0)
@@ -419,9 +419,6 @@ def _resolve_value(catalog: list[EventTypeRef], spec: ValueSpec) -> EventTypeRef
     return fitting[0]
 
 
-_NUMERIC = "typeof(v) IN ('integer', 'real')"
-
-
 # one color per key: neither the complex events' red nor the arrival lags' orange
 PALETTE = ["#1f77b4", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22",
            "#7f7f7f", "#393b79", "#637939", "#843c39", "#3182bd"]
@@ -432,10 +429,8 @@ LAG_COLOR = "#ff7f0e"
 def _distinct(source: Any, ref: EventTypeRef, argument: int, lo: float,
               hi: float) -> list[tuple]:
     """Up to MAX_KEYS + 1 distinct values of an argument in the window, in order."""
-    column = quote_identifier(f"arg{argument}")
-    return _rows(source, f"SELECT DISTINCT {column} FROM {quote_identifier(ref.table)} "
-                         f"WHERE t_end >= ? AND t_start <= ? ORDER BY 1 LIMIT ?",
-                 (lo, hi, MAX_KEYS + 1))
+    return _rows(source, _statements(source).distinct(
+        quote_identifier(ref.table), quote_identifier(f"arg{argument}"), lo, hi, MAX_KEYS + 1))
 
 
 def _keys(source: Any, ref: EventTypeRef, argument: int, lo: float, hi: float,
@@ -454,16 +449,10 @@ def _collect_series(source: Any, spec: ValueSpec, ref: EventTypeRef, is_complex:
                     ) -> ValueSeries:
     table = quote_identifier(ref.table)
     column = quote_identifier(f"arg{spec.argument}")
-    expr, params = (f"json_extract({column}, ?)", [spec.path]) if spec.path else (column, [])
-    # A JSON path on a value that is not JSON (an atom, a number) is no value, not an error.
-    if spec.path:
-        expr = f"CASE WHEN json_valid({column}) THEN {expr} END"
-    key_expr = quote_identifier(f"arg{split}") if split is not None else "NULL"
-    where = "WHERE t_end >= ? AND t_end <= ?"
-    inner = f"SELECT t_start, t_end, seq, {expr} AS v, {key_expr} AS k FROM {table} {where}"
-    inner_params = [*params, lo, hi]
-    samples = _rows(source, f"SELECT t_end, v, k FROM ({inner}) WHERE {_NUMERIC} "
-                            "ORDER BY t_end, t_start, seq LIMIT ?", [*inner_params, exact_limit + 1])
+    key_column = quote_identifier(f"arg{split}") if split is not None else None
+    statements = _statements(source)
+    samples = _rows(source, statements.samples(table, column, spec.path, key_column, lo, hi,
+                                               exact_limit + 1))
     if len(samples) <= exact_limit:
         series = ValueSeries(spec, ref, is_complex, len(samples), "exact")
         series.times = [float(t) for t, _, _ in samples]
@@ -481,10 +470,7 @@ def _collect_series(source: Any, spec: ValueSpec, ref: EventTypeRef, is_complex:
         bin_width = (hi - lo) / bins
         series = ValueSeries(spec, ref, is_complex, 0, "binned")
         for b, low, high, mean, n in _rows(
-                source, f"SELECT CAST((t_end - ?) / ? AS INTEGER) AS b, min(v), max(v), avg(v), "
-                        f"count(*) FROM (SELECT t_end, {expr} AS v FROM {table} {where}) "
-                        f"WHERE {_NUMERIC} GROUP BY 1 ORDER BY 1",
-                [lo, bin_width, *inner_params]):
+                source, statements.value_bins(table, column, spec.path, lo, hi, bin_width)):
             b = min(int(b), bins - 1)
             series.times.append(lo + (b + 0.5) * bin_width)
             series.values.append(float(mean))
@@ -492,8 +478,8 @@ def _collect_series(source: Any, spec: ValueSpec, ref: EventTypeRef, is_complex:
             series.highs.append(float(high))
             series.count += int(n)
     # no numeric value but events in the window: one of their values, for the message
-    first = _rows(source, f"SELECT v FROM ({inner}) ORDER BY v IS NULL LIMIT 1",
-                  inner_params) if not series.count else []
+    first = _rows(source, statements.first_value(table, column, spec.path, lo, hi)) \
+        if not series.count else []
     if first:
         sample = first if first[0][0] is not None else []
         seen = f" (e.g. {sample[0][0]})" if sample else ""

@@ -13,7 +13,7 @@ from typing import Any
 from .terms import Atom, Clause, Struct, Var, deref
 
 __all__ = ["Slot", "Template", "CompiledClause", "Predicate", "Program", "compile_clause",
-           "split_event_atom", "event_key"]
+           "split_event_atom", "event_key", "Declarations", "BufferDecl"]
 
 
 class Slot:
@@ -336,3 +336,31 @@ class Program:
                 pred = self.preds[key] = Predicate(name, len(args))
             pred.add(compile_clause(tuple(args), clause.body, clause))
         self.clauses.append(clause)
+
+
+@dataclass
+class BufferDecl:
+    """A buffer declared by a program (``:- tBuffer(Pattern, Seconds)``, ``cBuffer``) or
+    added at run time (``kb.add_buffer``)."""
+
+    kind: str              # "tBuffer" | "cBuffer"
+    pattern: Any           # the event pattern term
+    amount: float | int    # seconds (tBuffer) or count (cBuffer)
+    clause: Clause | None  # where it was declared (None for runtime buffers)
+
+
+@dataclass
+class Declarations:
+    """What the program declares beyond clauses (docs/language.md, "Declarations")."""
+
+    event_types: set = field(default_factory=set)         # {(name, arity)}
+    max_delay: dict = field(default_factory=dict)         # (name, arity) -> seconds | "learn"
+    in_order: set = field(default_factory=set)            # {(name, arity)}
+    buffers: list = field(default_factory=list)           # [BufferDecl]
+    event_rules: list = field(default_factory=list)       # [cep.EventRule], dependency order
+    consumption: dict = field(default_factory=dict)       # (name, arity) | None -> policy
+
+    def copy(self) -> "Declarations":
+        return Declarations(set(self.event_types), dict(self.max_delay), set(self.in_order),
+                            list(self.buffers), list(self.event_rules),
+                            dict(self.consumption))

@@ -17,13 +17,14 @@ import math
 from typing import Any
 
 from .errors import SLRError
+from .host import Host
 
 __all__ = ["FLEET_MARK", "positions", "receive"]
 
 FLEET_MARK = "fleet/mark/"   # slr_meta prefix: fleet/mark/<robot>/<name>/<arity or *>
 
 
-def positions(kb: Any, robot: str) -> dict[tuple[str, int], int]:
+def positions(kb: Host, robot: str) -> dict[tuple[str, int], int]:
     """Per event type, the last sequence of ``robot``'s store that ``kb`` (a fleet store)
     holds.
 
@@ -33,7 +34,7 @@ def positions(kb: Any, robot: str) -> dict[tuple[str, int], int]:
     return kb.store.fleet_positions(robot)
 
 
-def receive(kb: Any, robot: str, batches: list, marks: dict | None = None,
+def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             pending: int | None = None, head_arrival: float | None = None, *,
             check: bool = True) -> int:
     """Store one shipment of ``robot`` in the fleet store ``kb``; returns the number of rows
@@ -57,8 +58,8 @@ def receive(kb: Any, robot: str, batches: list, marks: dict | None = None,
     store = kb.store
     if check:
         _check_shipment(batches, marks)
-    kb._refresh()
-    cep = getattr(kb, "_cep", None)
+    kb.loader.refresh()
+    cep = kb.event_rule_engine
     store_events = None
     if cep is not None and cep.active:
         def store_events(events: list) -> list:

@@ -41,6 +41,8 @@ from .analysis import GoalSet, goal_set
 from .answers import answer_bindings
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning, ManualClock, StreamClock
 from .errors import EventRejected, SLRError, SLRTimeout
+from .host import Host
+from .plans import instantiate
 from .store.checks import BadEvent, check_times
 from .terms import Atom, Struct, Var, deref
 
@@ -201,6 +203,7 @@ class PendingQuery(Future):
         self.goal = goal
         self.at = at
         self.args = args
+        self.robot: str | None = None    # every event goal, prev and next restricted to it
         self.goal_set: GoalSet | None = None
         self.waiting_for: list[Wait] = []
         self.waits: list[Wait] = []
@@ -535,7 +538,7 @@ class Completeness:
 class Synchronizer:
     """Pending synchronized queries of one knowledge base (created by :func:`attach`)."""
 
-    def __init__(self, kb: Any, workers: int = 4):
+    def __init__(self, kb: Host, workers: int = 4):
         self.kb = kb
         self.clock = kb.clock
         self.store = kb.store
@@ -573,10 +576,11 @@ class Synchronizer:
     # -- public operations (KnowledgeBase delegates here) ----------------------------------------
     def submit(self, goal: str, at: float | None = None, id: str | None = None,
                args: dict | None = None, timeout: float | None = None,
-               callback: Callable[[PendingQuery], Any] | None = None) -> PendingQuery:
+               callback: Callable[[PendingQuery], Any] | None = None,
+               robot: str | None = None) -> PendingQuery:
         if self._closed:
             raise SLRError("the knowledge base is closed")
-        plan = self.kb._plan(goal, tuple(args) if args else ())  # syntax errors raise here
+        plan = self.kb.plans.plan(goal, tuple(args) if args else ())  # syntax errors raise here
         if at is None:
             at = float(self.clock.now())
         at = float(at)
@@ -588,6 +592,7 @@ class Synchronizer:
             elif id in self._queries:
                 raise SLRError(f"a query with id {id!r} is already pending")
             q = PendingQuery(self, str(id), goal, at, args)
+            q.robot = robot
             q._plan = plan
             self._queries[q.id] = q
             if self.external_poll is not None:
@@ -604,7 +609,7 @@ class Synchronizer:
         # the goal-set condition is checked here, on the caller's thread: a query that must
         # wait is parked at once, without a trip through the worker pool
         try:
-            term, _frame = self.kb._instantiate(plan, args)
+            term, _frame = instantiate(plan, args)
             ready = self._static_ready(q, term, self.clock.now())
         except BaseException as exc:
             self._set_exception(q, exc)
@@ -902,7 +907,7 @@ class Synchronizer:
             self._release_waits(q, min(released_at, now))
         self._release_waits(q, now)
         plan = q._plan
-        term, frame = kb._instantiate(plan, q.args)
+        term, frame = instantiate(plan, q.args)
         if not self._static_ready(q, term, now):
             return
         answers = self._sql_answers(q, now)
@@ -915,6 +920,7 @@ class Synchronizer:
         if q._deadline is not None:
             remaining = max(q._deadline - time.monotonic(), 0.001)
         m = kb.engine.machine(at=q.at, timeout=remaining)
+        m.robot = q.robot
         m.synchronized = True  # for engines that bypass the hooks (SQL): do not
         m.on_prev = self._check_prev
         m.on_next = lambda name, n, lo, hi, args, s=None, e=None: \
@@ -952,14 +958,15 @@ class Synchronizer:
         all of them at once. None: evaluate in the interpreter, whose hooks wait for exactly what the
         evaluation reaches."""
         kb = self.kb
-        if not kb.sql_enabled:
-            return None
-        from .planner import SqlPlan, plan_for
+        from .planner import SqlPlan, compiles_for, plan_for
+
+        if not kb.sql_enabled or not compiles_for(kb.store) or q.robot is not None:
+            return None   # (one robot's answers: the interpreter)
 
         # the kb's current parse of the goal, not q._plan: a load or define while the query
         # waited drops the kb's plans, and the compiled statement with them (the program and
         # so the statement may have changed)
-        plan = kb._plan(q.goal, tuple(q.args) if q.args else ())
+        plan = kb.plans.plan(q.goal, tuple(q.args) if q.args else ())
         entry = plan_for(kb, plan, q.at is not None)
         if type(entry) is not SqlPlan:
             return None
@@ -1024,12 +1031,12 @@ class Synchronizer:
 
     def _stored_match(self, m: Any, name: str, n: int, lo: float, hi: float, args: tuple,
                       s: Any, e: Any) -> bool:
-        from .builtins import _matching
+        from .builtins import matching_rows
         from .unify import bound_args
 
         pattern = tuple(args) + (Var() if s is None else s, Var() if e is None else e)
         rows = self.store.next_candidates(name, n, bound_args(args), lo, hi)
-        return next(_matching(m, pattern, rows), None) is not None
+        return next(matching_rows(m, pattern, rows), None) is not None
 
     def _park(self, q: PendingQuery, waits: list[Wait], conds: list[tuple]) -> None:
         """Index ``q`` on each condition ``(key, t, kind, seen)`` — released when any of them
@@ -1176,7 +1183,7 @@ class Synchronizer:
                 self.cond.wait(None if wait is None else min(wait, 3600.0))
 
 
-def attach(kb: Any) -> Synchronizer:
+def attach(kb: Host) -> Synchronizer:
     """Create the synchronizer of ``kb`` and hook it into its add path."""
     sync = Synchronizer(kb)
     kb.add_listeners.append(sync.on_add)
@@ -1184,7 +1191,7 @@ def attach(kb: Any) -> Synchronizer:
     return sync
 
 
-def _try_run(kb: Any, entry: Any, q: PendingQuery) -> list | None:
+def _try_run(kb: Host, entry: Any, q: PendingQuery) -> list | None:
     from .encoding import Unencodable
     from .store import DatabaseError
 

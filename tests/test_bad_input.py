@@ -104,11 +104,28 @@ def test_the_widest_event_that_fits_is_stored_and_read_back(kb):
         kb.add_event("wide", list(range(widest + 1)), 1.0)
 
 
+def test_the_widest_event_type_that_fits_can_be_declared(kb):
+    widest = kb.store.max_event_arity
+    kb.load(f":- event wide/{widest}.")
+    with pytest.raises(SLRError, match="too many arguments"):
+        kb.load(f":- event wider/{widest + 1}.")
+    assert kb.store.declared_types() == {("wide", widest)}
+
+
 def test_declaring_an_event_type_with_too_many_arguments_is_an_error(kb):
     with pytest.raises(SLRError, match="too many arguments"):
         kb.load(":- event wide/5000.")
     kb.load(":- event wide/3.")  # the failed load changed nothing
     assert kb.store.declared_types() == {("wide", 3)}
+
+
+@pytest.mark.parametrize("name, arity", [(5, 1), (None, 2), ("p", -1), ("p", "2"),
+                                         ("p", 1.0)])
+def test_the_store_refuses_a_type_that_is_no_name_and_arity(name, arity):
+    store = EventStore(None)
+    with pytest.raises(ValueError, match="bad event type"):
+        store.declare_type(name, arity)
+    assert store.declared_types() == set()
 
 
 # ---------------------------------------------------------------- the argument list itself
@@ -155,6 +172,36 @@ def test_event_times_must_be_numbers(kb, text, reason):
     assert [e.index for e in errors] == [1]
     assert kb.query("findall(X-T, foo(X)^T, L)") == [{"L": [Struct("-", (0, 0.0)),
                                                            Struct("-", (2, 2.0))]}]
+
+
+class _NoRepr:
+    def __repr__(self):
+        raise RuntimeError("repr failed")
+
+
+@pytest.mark.parametrize("args", [(1, 2), [1, 2]], ids=["tuple", "list"])
+def test_a_rejected_event_is_named_with_its_arguments(kb, args):
+    """The message starts with the event as written (a list of arguments too), and a time
+    whose repr fails is described by its type, not by the failure."""
+    with pytest.raises(EventRejected) as raised:
+        kb.add_event("p", args, float("nan"))
+    assert str(raised.value).startswith("p(1,2)^[nan,nan]: event times must be finite")
+    for errors in (kb.add_many([("p", args, float("nan"), float("nan"))]),
+                   kb.store.add_events([("p", args, float("nan"), float("nan"))])):
+        assert [str(e) for e in errors] == [
+            "p(1,2)^[nan,nan]: event times must be finite (not inf or NaN)"]
+    with pytest.raises(EventRejected) as raised:
+        kb.add_event("p", args, _NoRepr())
+    assert str(raised.value) == "p(1,2)^a _NoRepr: event times must be numbers (got a _NoRepr)"
+    assert kb.query("findall(X, p(X, _)^_, L)") == [{"L": []}]
+
+
+@pytest.mark.parametrize("name, written", [("ok", "ok"), ("My Event", "'My Event'"),
+                                           ("it's", "'it\\'s'")])
+def test_a_rejected_event_without_arguments_is_named_as_an_atom(kb, name, written):
+    with pytest.raises(EventRejected) as raised:
+        kb.add_event(name, [], float("inf"))
+    assert str(raised.value) == f"{written}^inf: event times must be finite (not inf or NaN)"
 
 
 def test_arithmetic_times_are_still_evaluated(kb):
@@ -233,3 +280,18 @@ def test_the_store_rejects_a_str_argument_list_directly():
     with pytest.raises(EventRejected, match="list or tuple"):
         store.add_event("p", "abc", 1.0, 1.0)
     assert store.table_for("p", 3) is None
+
+
+def test_a_declared_arity_holds_after_reopen_and_in_another_connection(tmp_path):
+    """``:- event p/2.`` makes p(1) a wrong-arity mistake: also for the same file opened
+    again, and for a knowledge base that was already open when p/2 was declared."""
+    path = tmp_path / "robot.db"
+    with slr_sql.open(path) as early, slr_sql.open(path) as kb:
+        kb.load(":- event p/2.")
+        with pytest.raises(EventRejected, match="wrong number of arguments"):
+            early.add("p(1)^1")
+    with slr_sql.open(path) as again:
+        with pytest.raises(EventRejected, match="wrong number of arguments"):
+            again.add("p(1)^1")
+        again.add("p(1, 2)^1")
+        assert again.query("p(X, Y)^T") == [{"X": 1, "Y": 2, "T": 1.0}]

@@ -32,6 +32,25 @@ def kb_at(t: float = 0.0, path=None):
     return slr_sql.open(path, clock=ManualClock(t))
 
 
+@pytest.fixture
+def open_kb(backend):
+    """``open_kb(t)``: the test's store (a SQLite file, or a fresh PostgreSQL database) with a
+    ManualClock at ``t``; the same place each time (a reopen), closed after the test."""
+    opened = []
+
+    def open_at(t: float = 0.0):
+        kb = slr_sql.open(backend, clock=ManualClock(t))
+        opened.append(kb)
+        return kb
+    yield open_at
+    for kb in opened:
+        kb.close()
+
+
+def buffer_triggers(kb) -> set:
+    return {name for name in kb.store.triggers() if name.startswith("slr_buf_")}
+
+
 def rows(kb, table: str) -> list[tuple]:
     return kb.sql(f'SELECT * FROM "{table}" ORDER BY t_end, t_start, seq')[1]
 
@@ -46,8 +65,8 @@ def by_pattern(kb) -> dict:
 
 # ----------------------------------------------------------------------------- paper
 
-def test_paper_tbuffer_face_60s():
-    kb = kb_at(0)
+def test_paper_tbuffer_face_60s(open_kb):
+    kb = open_kb(0)
     kb.load(PAPER_BUFFERS, "paper.slr")
     kb.add_many(["face(bob)^1", "face(ann)^30", "face(carl)^59"])
     kb.clock.set(61.5)  # bob ended at 1: 1 < 61.5 - 60, expired; ann and carl stay
@@ -63,8 +82,8 @@ def test_paper_tbuffer_face_60s():
     assert (info.pruned, info.dropped) == (2, 1)
 
 
-def test_paper_tbuffer_tf_300s():
-    kb = kb_at(0)
+def test_paper_tbuffer_tf_300s(open_kb):
+    kb = open_kb(0)
     kb.load(PAPER_BUFFERS, "paper.slr")
     for t in range(0, 1000, 10):
         kb.clock.set(float(t))
@@ -76,8 +95,8 @@ def test_paper_tbuffer_tf_300s():
     assert kb.query("prev(tf(base, cam, X)^T, 995)") == [{"X": [990, 0.0, 1.0], "T": 990.0}]
 
 
-def test_paper_cbuffers_findall_last_seen_per_person_and_object():
-    kb = kb_at(0)
+def test_paper_cbuffers_findall_last_seen_per_person_and_object(open_kb):
+    kb = open_kb(0)
     kb.load(PAPER_BUFFERS, "paper.slr")
     kb.add_many([
         "inView(face(neda, kitchen))^1", "inView(obj(cup1, table))^2",
@@ -103,8 +122,8 @@ def test_paper_cbuffers_findall_last_seen_per_person_and_object():
     # the last recognition of each distinct person in each distinct location
     ("face(P, L)", [("bob", "kitchen"), ("bob", "hall"), ("ann", "kitchen"), ("ann", "hall")]),
 ])
-def test_paper_cbuffer_key_variants(pattern, expected):
-    kb = kb_at(0)
+def test_paper_cbuffer_key_variants(pattern, expected, open_kb):
+    kb = open_kb(0)
     kb.load(f"cBuffer(inView({pattern}), 1).", "keys.slr")
     kb.add_many(["inView(face(bob, kitchen))^1", "inView(face(ann, kitchen))^2",
                  "inView(face(bob, kitchen))^3", "inView(face(ann, kitchen))^4",
@@ -116,8 +135,8 @@ def test_paper_cbuffer_key_variants(pattern, expected):
                                  ("ann", "hall")] if pl in expected]
 
 
-def test_cbuffer_ties_keep_store_order():
-    kb = kb_at(0)
+def test_cbuffer_ties_keep_store_order(open_kb):
+    kb = open_kb(0)
     kb.load("cBuffer(p(X, _), 2).")
     # same end: the start time breaks the tie, then arrival
     kb.add_many(["p(a, 1)^[1, 5]", "p(a, 2)^[3, 5]", "p(a, 3)^[2, 5]", "p(a, 4)^[3, 5]"])
@@ -131,8 +150,8 @@ def test_cbuffer_ties_keep_store_order():
 
 # ----------------------------------------------------------------------------- conflicts
 
-def test_conflicting_buffers_name_both_clauses_and_do_not_load():
-    kb = kb_at(0)
+def test_conflicting_buffers_name_both_clauses_and_do_not_load(open_kb):
+    kb = open_kb(0)
     kb.load("keep(me).", "base.slr")
     program = "ok(1).\ntBuffer(face(P), 60).\nfoo(2).\ncBuffer(face(bob), 1).\n"
     with pytest.raises(SLRError) as err:
@@ -143,11 +162,11 @@ def test_conflicting_buffers_name_both_clauses_and_do_not_load():
     assert kb.buffers() == []
     assert kb.query("keep(X)") == [{"X": "me"}]
     assert [src for src, _ in kb.store.program_sources()] == ["keep(me)."]
-    assert kb.sql("SELECT count(*) FROM sqlite_master WHERE name LIKE 'slr!_buf!_%' ESCAPE '!'")[1] == [(0,)]
+    assert buffer_triggers(kb) == set()
 
 
-def test_conflict_across_loads_and_with_runtime_buffers():
-    kb = kb_at(0)
+def test_conflict_across_loads_and_with_runtime_buffers(open_kb):
+    kb = open_kb(0)
     kb.load("cBuffer(inView(face(P, _)), 1).", "a.slr")
     with pytest.raises(SLRError, match=r"a\.slr:1.*b\.slr:2"):
         kb.load("x.\ncBuffer(inView(face(_, _)), 1).", "b.slr")
@@ -165,8 +184,8 @@ def test_conflict_across_loads_and_with_runtime_buffers():
 
 # ----------------------------------------------------------------------------- runtime policies
 
-def test_runtime_policies_keep_last_seconds_between():
-    kb = kb_at(0)
+def test_runtime_policies_keep_last_seconds_between(open_kb):
+    kb = open_kb(0)
     last = kb.add_buffer("pos(O, _)", keep_last=2)
     recent = kb.add_buffer("speech(_)", keep_seconds=5)
     window = kb.add_buffer("door(_)", keep_between=(10, 20))
@@ -210,8 +229,8 @@ def test_runtime_policy_arguments_are_checked():
     assert [b.amount for b in kb.buffers() if b.pattern == "r(_)"] == [120.0]
 
 
-def test_adding_a_buffer_prunes_the_history_already_stored():
-    kb = kb_at(0)
+def test_adding_a_buffer_prunes_the_history_already_stored(open_kb):
+    kb = open_kb(0)
     kb.add_many([f"p(a, {i})^{i}" for i in range(10)] + [f"p(b, {i})^{i}" for i in range(5)])
     kb.clock.set(20)
     kb.add_buffer("p(K, _)", keep_last=3)
@@ -225,8 +244,8 @@ def test_adding_a_buffer_prunes_the_history_already_stored():
 
 # ----------------------------------------------------------------------------- patterns
 
-def test_nested_constants_keys_and_shapes():
-    kb = kb_at(0)
+def test_nested_constants_keys_and_shapes(open_kb):
+    kb = open_kb(0)
     kb.load("""
         cBuffer(obs(f(a, K), "str", [1, _]), 1).
         cBuffer(obs(g(X), _, _), 2).
@@ -250,8 +269,8 @@ def test_nested_constants_keys_and_shapes():
                    ("f(a,2)", "str", "[1,2]", 11.0)]
 
 
-def test_buffer_declared_before_its_type_exists_and_quoted_constants():
-    kb = kb_at(0)
+def test_buffer_declared_before_its_type_exists_and_quoted_constants(open_kb):
+    kb = open_kb(0)
     kb.load("cBuffer(say('it''s', X), 1).")
     assert kb.store.table_for("say", 2) is None
     kb.add_many(["say('it''s', a)^1", "say('it''s', a)^2", "say(other, a)^3",
@@ -260,8 +279,24 @@ def test_buffer_declared_before_its_type_exists_and_quoted_constants():
         ("it's", 2.0), ("other", 3.0), ("other", 4.0)]
 
 
-def test_pattern_with_time_stamp_and_repeated_variables():
-    kb = kb_at(0)
+@pytest.mark.parametrize("text", ["50%", "a?b", ":name", "$slr$", "x\\y", "é ✓", "1", "[x"])
+def test_constants_that_mean_something_to_sql_are_only_constants(open_kb, text):
+    kb = open_kb(0)
+    escaped = text.replace("\\", "\\\\")
+    atom, string = f"'{escaped}'", f'"{escaped}"'
+    kb.add_many([f"say({atom}, f({atom}))^1", f"say({atom}, f({atom}))^2",
+                 "say(other, f(other))^3", "say(other, f(other))^4"])
+    kb.add_buffer(f"say({atom}, f({atom}))", keep_last=1)   # applied to the stored rows
+    kb.load(f"cBuffer(said(_, f(_), {string}), 1).")        # a string inside JSON
+    kb.add_many([f"say({atom}, f({atom}))^5", f"said(x, f(x), {string})^6",
+                 f"said(y, f(y), {string})^7", f"said(z, f(z), {atom})^8"])
+    assert [(a["T"], a["W"] == text) for a in kb.query("say(W, _)^T")] == [
+        (3.0, False), (4.0, False), (5.0, True)]
+    assert [a["T"] for a in kb.query("said(_, _, _)^T")] == [7.0, 8.0]
+
+
+def test_pattern_with_time_stamp_and_repeated_variables(open_kb):
+    kb = open_kb(0)
     kb.load("cBuffer(pair(X, X)^T, 1).")
     kb.add_many(["pair(a, a)^1", "pair(a, a)^2", "pair(a, b)^3", "pair(a, b)^4",
                  "pair(1, 1.0)^5", "pair(1, 1.0)^6"])
@@ -269,8 +304,8 @@ def test_pattern_with_time_stamp_and_repeated_variables():
         ("a", "a"), ("a", "b"), ("a", "b"), ("1", "1.0"), ("1", "1.0")]
 
 
-def test_unsupported_patterns_are_errors_naming_the_clause():
-    kb = kb_at(0)
+def test_unsupported_patterns_are_errors_naming_the_clause(open_kb):
+    kb = open_kb(0)
     with pytest.raises(SLRError, match="bad.slr:2"):
         kb.load("ok.\ncBuffer(p([H|T]), 1).", "bad.slr")
     with pytest.raises(SLRError):
@@ -280,15 +315,31 @@ def test_unsupported_patterns_are_errors_naming_the_clause():
 
 # ----------------------------------------------------------------------------- persistence
 
-def test_buffers_survive_reopen_and_apply_to_external_sql_inserts(tmp_path):
-    path = tmp_path / "robot.db"
-    kb = kb_at(0, path)
+def insert_as_another_tool(where: str, statements: list[str]) -> None:
+    """Rows written by another program through the database's own driver (no slr_sql)."""
+    if where.startswith("postgresql://"):
+        import psycopg
+
+        with psycopg.connect(where, autocommit=True) as conn:
+            conn.execute("SET search_path = slr")
+            for sql in statements:
+                conn.execute(sql)
+        return
+    con = sqlite3.connect(where)
+    for sql in statements:
+        con.execute(sql)
+    con.commit()
+    con.close()
+
+
+def test_buffers_survive_reopen_and_apply_to_external_sql_inserts(backend):
+    kb = kb_at(0, backend)
     kb.load(PAPER_BUFFERS, "paper.slr")
     keep = kb.add_buffer("pos(O, _)", keep_last=1)
     kb.add_many(["face(bob)^1", "pos(cup, 1)^1", "pos(cup, 2)^2"])
     kb.close()
 
-    kb = kb_at(50, path)
+    kb = kb_at(50, backend)
     assert sorted(b.pattern for b in kb.buffers()) == [
         "face(P)", "inView(face(P,_))", "inView(obj(O,_))", "pos(O,_)", "tf(S,D,TF)"]
     assert {b.id: b.pruned for b in kb.buffers()}[keep] == 1
@@ -300,29 +351,37 @@ def test_buffers_survive_reopen_and_apply_to_external_sql_inserts(tmp_path):
     kb.close()
 
     # another tool writing rows through SQL: the triggers still keep the buffers
-    con = sqlite3.connect(path)
-    con.execute("INSERT INTO pos (arg1, arg2, t_start, t_end, arrival) "
-                "VALUES ('cup', 4, 4.0, 4.0, 100.0)")
-    con.execute("INSERT INTO face (arg1, t_start, t_end, arrival) VALUES ('eve', 5.0, 5.0, 100.0)")
-    con.commit()
-    con.close()
-    kb = kb_at(100, path)
+    insert_as_another_tool(backend, [
+        "INSERT INTO pos (arg1, arg2, t_start, t_end, arrival) VALUES ('cup', 4, 4.0, 4.0, 100.0)",
+        "INSERT INTO face (arg1, t_start, t_end, arrival) VALUES ('eve', 5.0, 5.0, 100.0)",
+        # a compound-looking text that is not JSON: matches no pattern, raises nothing
+        "INSERT INTO \"inView\" (arg1, t_start, t_end, arrival) VALUES ('{face', 6.0, 6.0, 100.0)"])
+    kb = kb_at(100, backend)
     assert [a["X"] for a in kb.query("pos(cup, X)^T")] == [4]
     assert kb.query("face(P)^T") == []  # 5 < 100 - 60: dropped on insert
     assert by_pattern(kb)["face(P)"].dropped == 1
+    assert kb.store.count("inView", 1) == 2
     kb.close()
 
 
-def test_program_buffers_are_not_duplicated_on_reopen(tmp_path):
-    path = tmp_path / "r.db"
-    with kb_at(0, path) as kb:
+def test_program_buffers_are_not_duplicated_on_reopen(backend):
+    with kb_at(0, backend) as kb:
         kb.load("tBuffer(face(P), 60).", "f.slr")
         first = [(b.id, b.pattern) for b in kb.buffers()]
-    with kb_at(0, path) as kb:
+        triggers = buffer_triggers(kb)
+    with kb_at(0, backend) as kb:
         assert [(b.id, b.pattern) for b in kb.buffers()] == first
         kb.load("cBuffer(obj(O), 1).", "g.slr")
-    with kb_at(0, path) as kb:
+        kb.add("obj(cup)^1")   # the table and the buffer's triggers on it
+        triggers_after = buffer_triggers(kb)
+    with kb_at(0, backend) as kb:
         assert [b.pattern for b in kb.buffers()] == ["face(P)", "obj(O)"]
+        assert buffer_triggers(kb) == triggers_after > triggers
+        extra = kb.add_buffer("obj2(_)", keep_last=2)
+        kb.add("obj2(cup)^1")
+        assert len(buffer_triggers(kb)) == len(triggers_after) + 2
+        kb.remove_buffer(extra)   # its triggers go with it
+        assert buffer_triggers(kb) == triggers_after
 
 
 # ----------------------------------------------------------------------------- stats and space
@@ -540,11 +599,11 @@ def _decode(value):
 
 
 @pytest.mark.parametrize("how", ["runtime", "declared"])
-def test_a_tbuffer_added_after_the_clock_moved_keeps_the_window_of_the_clock_now(tmp_path, how):
+def test_a_tbuffer_added_after_the_clock_moved_keeps_the_window_of_the_clock_now(backend, how):
     """Without a tBuffer, moving the clock writes nothing (no commit per move); a tBuffer
     added later still starts from the clock's current time, not from the last add's."""
     clock = ManualClock(0.0)
-    with slr_sql.open(tmp_path / "kb.db", clock=clock) as kb:
+    with slr_sql.open(backend, clock=clock) as kb:
         kb.add_many([("seen", (i,), float(i), float(i)) for i in range(100)])
         clock.set(150.0)
         clock.set(200.0)

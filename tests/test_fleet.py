@@ -184,6 +184,44 @@ def test_the_migration_adds_the_robot_column_to_existing_tables(tmp_path):
     assert conn.execute("SELECT seq, robot FROM seen").fetchall() == [(1, None), (2, "r1")]
 
 
+def test_the_migration_makes_sequences_never_reused_keeping_rows_and_buffers(tmp_path):
+    path = tmp_path / "old.db"
+    clock = slr_sql.ManualClock(1000.0)
+    with slr_sql.open(path, robot="r1", clock=clock) as kb:
+        kb.load("tBuffer(seen(_, _), 100).\ncBuffer(battery(_), 2).")
+        kb.add_many(["seen(pallet7, dock)^1000", "seen(pallet8, dock)^1000",
+                     "battery(80)^1000", "battery(79)^1000", "battery(78)^1000"])
+    # the store as schema version 6 wrote it: seq a plain INTEGER PRIMARY KEY
+    conn = sqlite3.connect(path, isolation_level=None)
+    conn.execute("PRAGMA writable_schema = ON")
+    conn.execute("UPDATE sqlite_master SET sql = replace(sql, ' AUTOINCREMENT', '') "
+                 "WHERE type = 'table' AND name IN ('seen', 'battery')")
+    conn.execute("PRAGMA writable_schema = OFF")
+    conn.execute("DELETE FROM sqlite_sequence")
+    conn.execute("DELETE FROM slr_migrations WHERE number = 7")
+    conn.execute("PRAGMA user_version = 6")
+    before = conn.execute("SELECT type, name, tbl_name, sql FROM sqlite_master WHERE type IN "
+                          "('index', 'trigger', 'view') ORDER BY name").fetchall()
+    conn.close()
+    rows = rows_of(path)
+    assert fleet.push(str(path), str(tmp_path / "fleet.db")).shipped == 4
+    with slr_sql.open(path, clock=clock) as kb:     # migrates
+        conn = sqlite3.connect(path)
+        assert all("AUTOINCREMENT" in sql for (sql,) in conn.execute(
+            "SELECT sql FROM sqlite_master WHERE name IN ('seen', 'battery')"))
+        assert conn.execute("SELECT type, name, tbl_name, sql FROM sqlite_master WHERE type "
+                            "IN ('index', 'trigger', 'view') ORDER BY name").fetchall() == before
+        assert conn.execute("SELECT seq FROM battery ORDER BY seq").fetchall() == [(2,), (3,)]
+        conn.close()
+        assert rows_of(path) == rows
+        kb.add("battery(77)^1001")                   # the cBuffer still keeps two
+        assert [a["B"] for a in kb.query("battery(B)^_")] == [78, 77]
+        clock.set(2000.0)
+        kb.add("seen(pallet9, aisle1)^2000")         # the tBuffer prunes both shipped rows
+        assert kb.sql("SELECT seq, arg1 FROM seen")[1] == [(3, "pallet9")]
+    assert fleet.push(str(path), str(tmp_path / "fleet.db")).shipped == 2
+
+
 # -- asking the fleet: SQL == interpreter ---------------------------------------------------
 
 PROGRAM = """
@@ -244,7 +282,7 @@ def test_sql_answers_like_the_interpreter_per_robot(fleet_store, goal, robot):
 def test_origin_and_robot_queries_compile_to_sql(fleet_store):
     with opened(fleet_store) as kb:
         for goal in GOALS[:13]:
-            plan = kb._plan(goal, ())
+            plan = kb.plans.plan(goal, ())
             for robot in (False, True):
                 entry = planner.plan_for(kb, plan, False, robot)
                 assert not isinstance(entry, Fallback), (goal, robot, entry)
@@ -282,8 +320,29 @@ def test_origin_of_something_else_is_an_error(fleet_store):
                 kb.query("origin(R, G)")
         with pytest.raises(slr_sql.SLRError, match="robot's name"):
             kb.query("seen(P, W)^T", robot="")
-        with pytest.raises(slr_sql.SLRError, match="synchronized"):
-            kb.query("seen(P, W)^T", robot="r1", wait=True)
+
+
+def test_a_synchronized_query_restricted_to_one_robot(tmp_path):
+    """wait=True with robot=: answered once the fleet's history is complete up to `at` (the
+    least of the robots' marks), with that robot's events only; CLI `--wait --robot`."""
+    for robot, events in (("r1", ["seen(pallet7, dock)^10", "seen(pallet7, aisle1)^18",
+                                  "fullyUpdated(seen/2)^20"]),
+                          ("r2", ["seen(pallet7, aisle3)^15", "fullyUpdated(seen/2)^25"])):
+        with opened(tmp_path / f"{robot}.db", robot=robot) as kb:
+            kb.add_many(events)
+        fleet.push(str(tmp_path / f"{robot}.db"), str(tmp_path / "fleet.db"))
+    goal = "findall(W, seen(pallet7, W)^_, L)"
+    with opened(tmp_path / "fleet.db") as kb:
+        for sql in (True, False):
+            kb.sql_enabled = sql
+            assert kb.query(goal, at=20, wait=True, robot="r1") == [{"L": ["dock", "aisle1"]}]
+            assert kb.query(goal, at=20, wait=True, robot="r2") == [{"L": ["aisle3"]}]
+            assert kb.query(goal, at=20, wait=True) == [{"L": ["dock", "aisle3", "aisle1"]}]
+            with pytest.raises(slr_sql.SLRTimeout):      # after the store clock's now
+                kb.query(goal, at=5000, wait=True, robot="r2", timeout=0.2)
+    done = slr("query", str(tmp_path / "fleet.db"), goal, "--at", "20", "--wait",
+               "--robot", "r2")
+    assert done.stdout.strip() == "L = [aisle3]"
 
 
 # -- shipping --------------------------------------------------------------------------------
@@ -317,6 +376,26 @@ def test_push_ships_each_event_once_with_complex_events_and_marks(tmp_path):
         == Counter({("pair", 1, None, "pallet7", 10.0, 20.0): 1})
 
 
+def test_a_buffer_that_empties_a_shipped_table_does_not_hide_later_events(tmp_path):
+    """A robot idle for longer than its tBuffer loses every row of a type, the shipped ones
+    included: the events after that have new sequences (never one the fleet holds), so
+    the next push ships them."""
+    clock = slr_sql.ManualClock(1000.0)
+    with slr_sql.open(tmp_path / "r1.db", robot="r1", clock=clock) as kb:
+        kb.load("tBuffer(seen(_, _), 100).")
+        kb.add_many(["seen(pallet7, dock)^1000", "seen(pallet8, dock)^1000"])
+        assert fleet.push(str(tmp_path / "r1.db"), str(tmp_path / "fleet.db")).shipped == 2
+        clock.set(2000.0)
+        kb.add("seen(pallet9, aisle1)^2000")        # prunes both shipped rows first
+        kb.add("seen(pallet7, aisle2)^2001")
+        assert kb.query("seen(P, W)^T") == [{"P": "pallet9", "W": "aisle1", "T": 2000.0},
+                                            {"P": "pallet7", "W": "aisle2", "T": 2001.0}]
+    assert fleet.push(str(tmp_path / "r1.db"), str(tmp_path / "fleet.db")).shipped == 2
+    with opened(tmp_path / "fleet.db") as kb:
+        assert [a["P"] for a in kb.query("origin(r1, seen(P, _)^_)")] == [
+            "pallet7", "pallet8", "pallet9", "pallet7"]
+
+
 def test_push_with_types_and_a_name_for_an_unnamed_store(tmp_path):
     with opened(tmp_path / "robot.db") as kb:
         kb.add_many(["seen(pallet7, dock)^10", "battery(80)^10"])
@@ -328,6 +407,23 @@ def test_push_with_types_and_a_name_for_an_unnamed_store(tmp_path):
     with opened(tmp_path / "fleet.db") as kb:
         assert kb.query("origin(R, seen(P, W)^_)") == [{"R": "r9", "P": "pallet7", "W": "dock"}]
         assert kb.store.event_types() == {("seen", 2): "seen"}
+
+
+def test_a_batch_the_fleet_refuses_stops_the_push_after_what_it_stored(tmp_path):
+    """Batches before the last are stored by a sender thread while the next is read: a
+    failure there stops the push with the fleet's reason, after the batches stored before
+    it, and the next push starts from there (nothing twice)."""
+    with opened(tmp_path / "r1.db", robot="r1") as kb:
+        kb.add_many(["arm(up)^1", "arm(down)^2", "arm(up)^3",
+                     "seen(pallet7, dock)^4", "seen(pallet8, dock)^5"])
+    with opened(tmp_path / "fleet.db") as kb:
+        kb.load(":- event seen/3.")           # the fleet takes seen/3 only
+    with pytest.raises(slr_sql.SLRError, match="seen/3 is declared"):
+        fleet.push(str(tmp_path / "r1.db"), str(tmp_path / "fleet.db"), batch=1)
+    with opened(tmp_path / "fleet.db") as kb:
+        assert [a["A"] for a in kb.query("origin(r1, arm(A)^_)")] == ["up", "down", "up"]
+    report = fleet.push(str(tmp_path / "r1.db"), str(tmp_path / "fleet.db"), types=["arm/1"])
+    assert (report.shipped, report.batches) == (0, 0)
 
 
 def test_cli_push_status_and_query_by_robot(tmp_path):
@@ -555,6 +651,59 @@ def test_a_postgresql_fleet_store_answers_like_the_sqlite_one(fleet_store, postg
     status = json.loads(slr("fleet", "status", url, "--json").stdout)
     assert [(r["robot"], r["shipped"], r["pending"]) for r in status] == [
         ("r1", 4, 0), ("r2", 3, 0), ("r3", 2, 0)]
+
+
+ODD_VALUES = ["pallet7", "it's", "item", "inf", "-inf", "12", "-3.5", "1e5", ".5", "-x",
+              "a\tb", "line\nbreak", "back\\slash", "cr\rlf", "\\N", "", "ünï", 7, -12,
+              0, 2.5, -0.1, 1e300, ["l", 1]]
+
+
+def test_rows_shipped_into_postgresql_are_stored_as_its_own_adds_store_them(
+        postgres_url, tmp_path):
+    """Rows shipped into a PostgreSQL fleet store are converted from SQLite's stored values
+    to PostgreSQL's: every column must hold exactly what an add on that store writes
+    (texts that read as numbers, tabs, newlines, backslashes, floats, compound terms,
+    events without arguments, another robot's rows, a batch partly stored already)."""
+    from slr_sql import shipping
+    from slr_sql.store import EventStore
+    events = [("odd", (v, i), float(i), float(i) + 0.25) for i, v in enumerate(ODD_VALUES)]
+    texts = ['odd(pose([0.1, 2], "s"), 90)^[90, 91]', "tick^1.5", "tick^[2, 3]"]
+    with opened(tmp_path / "r1.db", robot="r1") as kb:
+        kb.add_many(events)
+        kb.add_many(texts)
+    conn = sqlite3.connect(tmp_path / "r1.db")
+    conn.execute("UPDATE odd SET robot = 'r0' WHERE seq = 3")   # a row r1 received from r0
+    conn.commit()
+    conn.close()
+    shipped, added = with_schema(postgres_url, "copied"), with_schema(postgres_url, "added")
+    robot = EventStore(str(tmp_path / "r1.db"))
+    try:
+        rows = robot.fleet_read_after("odd", 2, 0, 1000)
+    finally:
+        robot.close()
+    assert len(rows) == len(ODD_VALUES) + 1
+    with opened(shipped) as kb:    # a batch sent again with more rows: the rest is stored
+        assert shipping.receive(kb, "r1", [("odd", 2, rows[:5])], check=False) == 5
+        assert shipping.receive(kb, "r1", [("odd", 2, rows)], check=False) == len(rows) - 5
+    assert fleet.push(str(tmp_path / "r1.db"), shipped, batch=2).shipped == 2   # the ticks
+    with opened(added, robot="r1") as kb:
+        kb.add_many(events)
+        kb.add_many(texts)
+    import psycopg
+    tables = {}
+    for schema in ("copied", "added"):
+        with psycopg.connect(postgres_url, autocommit=True) as c:
+            c.execute(f'SET search_path = "{schema}"')
+            tables[schema] = (
+                c.execute("SELECT arg1, arg2, t_start, t_end, robot FROM odd ORDER BY t_start"
+                          ).fetchall(),
+                c.execute("SELECT t_start, t_end, robot FROM tick ORDER BY t_start").fetchall())
+    copied, own = tables["copied"], tables["added"]
+    assert copied[1] == own[1]
+    assert [r[:4] for r in copied[0]] == [r[:4] for r in own[0]]
+    assert [r[4] for r in copied[0]] == ["r1"] * 2 + ["r0"] + ["r1"] * (len(rows) - 3)
+    with opened(shipped) as kb, opened(added) as own_kb:
+        assert kb.query("odd(V, I)^T") == own_kb.query("odd(V, I)^T")
 
 
 def test_a_postgresql_restart_mid_stream(postgres_server, postgres_url, tmp_path):

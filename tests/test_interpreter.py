@@ -602,11 +602,11 @@ def test_args_binding_and_plan_reuse(kb):
           args={"Y": [1, 2.5, String("s"), Struct("f", ("a",))]})
     check(kb, "Y = Z", [{"Y": "p(X) :- true", "Z": "p(X) :- true"}], args={"Y": "p(X) :- true"})
     # the plan of one goal text is built once and reused with other bindings
-    assert len(kb._plans) > 0
-    before = dict(kb._plans)
+    assert len(kb.plans.entries) > 0
+    before = dict(kb.plans.entries)
     for x in ("a", "b", "c", "d"):
         kb.query(goal, args={"X": x})
-    assert all(kb._plans[k] is v for k, v in before.items() if k in kb._plans)
+    assert all(kb.plans.entries[k] is v for k, v in before.items() if k in kb.plans.entries)
     # a name that is not a variable of the goal is an error
     with pytest.raises(SLRError):
         kb.query(goal, args={"Nope": 1})

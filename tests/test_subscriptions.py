@@ -61,7 +61,7 @@ def history_read(request, monkeypatch):
     """Both ways a history is read: few events in the window (the end-time index) or many
     (walking the table by seq)."""
     if request.param == "by arrival sequence":
-        monkeypatch.setattr(subscriptions, "FEW_HISTORY", -1)
+        monkeypatch.setattr(subscriptions.hub, "FEW_HISTORY", -1)
     return request.param
 
 
@@ -550,7 +550,7 @@ def test_the_journal_keeps_only_what_subscriptions_still_need(kb):
     hub = kb._subscriptions
     hub._last_lease = hub._last_persist = 0.0     # renew claims and write positions now
     assert hub.drain(DEADLINE)
-    hub._cleanup()
+    hub.cleanup()
     jids = kb.sql(f"SELECT min(jid), count(*) FROM {journal_table('p')}")[1][0]
     assert jids == (40, 61)   # from the answer the slow one took last (not handled yet) on
     assert xs(take(slow, 60)) == list(range(40, 100))
@@ -566,7 +566,7 @@ def test_a_registration_removed_behind_its_back_ends_the_subscription_loudly(tmp
     with slr_sql.open(path) as kb, slr_sql.open(path) as other:
         sub = kb.subscribe("p(X)^T", since=0)
         kb.sql("UPDATE slr_subscriptions SET lease_until = 0", write=True)   # as if not renewed for long
-        other._subscriptions._cleanup()
+        other._subscriptions.cleanup()
         kb._subscriptions._last_lease = kb._subscriptions._last_persist = 0.0
         assert kb._subscriptions.drain(DEADLINE)
         with pytest.raises(SLRError, match="removed from the store"):

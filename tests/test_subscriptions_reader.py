@@ -58,22 +58,21 @@ def test_subscribers_behind_share_one_read_per_chunk(db_path):
         assert hub.drain(DEADLINE)          # every one full (10 answers) and lagging
         gate = threading.Event()
         journal_reads = []
-        read = hub._read
+        read = hub._journal_rows
 
-        def counting_read(sql, params=()):
-            if "ORDER BY jid" in sql:
-                journal_reads.append(params)
-                gate.wait(DEADLINE)         # hold the hub until every consumer made room
-            return read(sql, params)
+        def counting_read(info, after_jid, limit):
+            journal_reads.append((after_jid, limit))
+            gate.wait(DEADLINE)             # hold the hub until every consumer made room
+            return read(info, after_jid, limit)
 
-        hub._read = counting_read
+        hub._journal_rows = counting_read
         try:
             taken = [answers_of(s, 5) for s in subs]   # each makes room for 5 more
             gate.set()
             assert hub.drain(DEADLINE)
         finally:
             gate.set()
-            hub._read = read
+            hub._journal_rows = read
         assert taken == [list(range(1, 6))] * subscribers
         # the first read (whoever made room first) and one read for all the others: not one
         # per subscriber
@@ -88,3 +87,120 @@ def test_an_in_memory_store_has_no_second_connection_and_still_delivers(kb):
     kb.add_many([f"p({i})^{i}" for i in range(1, 21)])
     assert answers_of(sub, 20) == list(range(1, 21))
     sub.close()
+
+
+def test_events_added_while_another_thread_holds_a_transaction_are_read_on_the_hubs_connection(
+        db_path):
+    """The add path wakes the hub while another thread (here a stand-in for the hub's own
+    housekeeping or a second writer) is inside a transaction: the rows are committed, so the
+    hub reads them on its own connection and delivers them without waiting for that
+    transaction."""
+    with slr_sql.open(db_path) as kb:
+        hub = kb._subscriptions
+        hub.cleanup_interval = 1e9
+        sub = kb.subscribe("p(X)^T", since=0)
+        kb.add("p(0)^0")                      # the type's table exists: steady state
+        assert answers_of(sub, 1) == [0]
+        holding, release = threading.Event(), threading.Event()
+
+        def other_writer():
+            with kb.store.transaction():
+                holding.set()
+                release.wait(DEADLINE)
+
+        thread = threading.Thread(target=other_writer)
+
+        def start_the_other_writer(stored):   # runs after the commit, before the hub's listener
+            if not thread.is_alive() and not release.is_set():
+                thread.start()
+                assert holding.wait(DEADLINE)
+
+        kb.add_listeners.insert(0, start_the_other_writer)
+        # the adding thread's later listeners wait for the store, held by the other writer
+        adder = threading.Thread(target=kb.add, args=("p(1)^1",))
+        adder.start()
+        try:
+            assert answers_of(sub, 1) == [1]
+            assert thread.is_alive()          # delivered while the other transaction is open
+        finally:
+            release.set()
+            adder.join()
+            thread.join()
+        kb.add("p(2)^2")
+        assert answers_of(sub, 1) == [2]
+        sub.close()
+
+
+def test_a_subscription_to_a_type_without_events_does_not_hold_up_the_others(db_path):
+    """Every pass looks up the table of a type that has none yet (it may appear from another
+    process): on the hub's connection, so that lookup never waits for a writer's transaction
+    while an event of another type waits to be delivered."""
+    with slr_sql.open(db_path) as kb:
+        hub = kb._subscriptions
+        hub.cleanup_interval = 1e9
+        nothing = kb.subscribe("nothing(X)^T", since=0)   # served first in every pass
+        sub = kb.subscribe("p(X)^T", since=0)
+        kb.add("p(0)^0")
+        assert answers_of(sub, 1) == [0]
+        holding, release = threading.Event(), threading.Event()
+
+        def other_writer():
+            with kb.store.transaction():
+                holding.set()
+                release.wait(DEADLINE)
+
+        thread = threading.Thread(target=other_writer)
+
+        def start_the_other_writer(stored):
+            if not thread.is_alive() and not release.is_set():
+                thread.start()
+                assert holding.wait(DEADLINE)
+
+        kb.add_listeners.insert(0, start_the_other_writer)
+        adder = threading.Thread(target=kb.add, args=("p(1)^1",))
+        adder.start()
+        try:
+            assert answers_of(sub, 1) == [1]
+            assert thread.is_alive()
+        finally:
+            release.set()
+            adder.join()
+            thread.join()
+        kb.add("nothing(a)^2")               # the type appears: delivered as usual
+        assert nothing.get(timeout=DEADLINE)["X"] == "a"
+        sub.close()
+        nothing.close()
+
+
+def test_housekeeping_waits_for_a_busy_store_after_the_deliveries_not_before(db_path):
+    """Writing positions is put off while a writer holds the store: delivery passes go on
+    meanwhile (they used to queue behind that transaction), and the positions are written
+    once the store is free."""
+    with slr_sql.open(db_path) as kb:
+        hub = kb._subscriptions
+        sub = kb.subscribe("p(X)^T", since=0, id="log")
+        kb.add_many([f"p({i})^{i}" for i in range(1, 4)])
+        assert answers_of(sub, 3) == [1, 2, 3]
+        holding, release = threading.Event(), threading.Event()
+
+        def other_writer():
+            with kb.store.transaction():
+                holding.set()
+                release.wait(DEADLINE)
+
+        thread = threading.Thread(target=other_writer)
+        thread.start()
+        try:
+            assert holding.wait(DEADLINE)
+            hub._last_persist = 0.0           # positions due now
+            for _ in range(3):                # whole passes, none waiting for the writer
+                assert hub.drain(DEADLINE / 4)
+            assert thread.is_alive()
+        finally:
+            release.set()
+            thread.join()
+        hub._last_persist = 0.0
+        assert hub.drain(DEADLINE)            # the store is free: written now
+        rows = {r["id"]: r for r in hub.subscriptions()}
+        assert rows["log"]["live_pos"] == 2   # up to the answer before the one in hand
+        sub.close()

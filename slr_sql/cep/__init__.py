@@ -25,8 +25,10 @@ with the completeness of synchronized queries (:mod:`slr_sql.sync`).
 from __future__ import annotations
 
 import dataclasses
+from functools import lru_cache
 from typing import Any
 
+from ..host import Host
 from ..terms import Struct
 from .rules import (IGNORED_FACTS, POLICIES, EventRule, compile_rule, consumption_directive,
                     is_event_rule, is_ignored_fact, order_rules)
@@ -76,7 +78,7 @@ def prepare(rules: list[EventRule], consumption: dict, program: Any) -> list[Eve
     return unique
 
 
-def attach(kb: Any) -> EventRules:
+def attach(kb: Host) -> EventRules:
     """Install event rules on a knowledge base (called by KnowledgeBase.__init__, after the
     synchronizer and the planner): the load listener, the hooks on new tables and on
     completeness, the SQL function ``slr_cep_cmp`` of pushed comparisons, and the rules of
@@ -90,14 +92,15 @@ def attach(kb: Any) -> EventRules:
     kb.load_listeners.append(eng.on_load)
     kb.store.table_created_hooks.append(eng.on_table)
     kb.store.create_function("slr_cep_cmp", 3, _compare)
+    kb.store.create_function("slr_cep_arith", -1, _compare_expressions)
     if eng.sync is not None:
         eng.sync.progress_listeners.append(eng.on_progress)
-    eng._sync_rules()
+    eng.sync_rules()
     eng.on_progress()   # a reopened file: decisions that became possible while it was closed
     return eng
 
 
-def _compare(op: str, a: Any, b: Any) -> int:
+def _compare(op: str, a: Any, b: Any, decoded: bool = False) -> int:
     """``slr_cep_cmp(op, a, b)``: the comparison ``A op B`` of two stored values as Prolog
     evaluates it (big integers, arithmetic atoms such as ``pi``, expressions); an error is
     false."""
@@ -105,7 +108,9 @@ def _compare(op: str, a: Any, b: Any) -> int:
     from ..encoding import decode
 
     try:
-        x, y = evaluate(decode(a)), evaluate(decode(b))
+        if not decoded:
+            a, b = decode(a), decode(b)
+        x, y = evaluate(a), evaluate(b)
         if op == "<":
             return int(x < y)
         if op == ">":
@@ -117,5 +122,36 @@ def _compare(op: str, a: Any, b: Any) -> int:
         if op == "=:=":
             return int(x == y)
         return int(x != y)
+    except Exception:  # a type error in Prolog: the candidate does not match
+        return 0
+
+
+@lru_cache(maxsize=256)
+def _arith_goal(text: str) -> tuple[Any, dict]:
+    from ..parser import parse_term
+
+    return parse_term(text, "<event rule>")
+
+
+def _compare_expressions(text: str, *values: Any) -> int:
+    """``slr_cep_arith(goal, v0, v1, ...)``: the comparison ``goal`` (its variables named
+    ``V0``, ``V1``, ... for the stored values given) as Prolog evaluates it; an error is
+    false. The fallback of a pushed comparison whose operands SQL cannot compute exactly."""
+    from ..encoding import decode
+    from ..terms import Struct, Var, deref
+
+    try:
+        goal, _ = _arith_goal(text)
+        bound = [decode(v) for v in values]
+
+        def put(t: Any) -> Any:
+            t = deref(t)
+            if type(t) is Var:
+                return bound[int(t.name[1:])]
+            if type(t) is Struct:
+                return Struct(t.name, tuple(put(a) for a in t.args))
+            return t
+
+        return _compare(goal.name, put(goal.args[0]), put(goal.args[1]), decoded=True)
     except Exception:  # a type error in Prolog: the candidate does not match
         return 0

@@ -33,11 +33,15 @@ from typing import Any
 
 from ..encoding import Unencodable, decode, encode
 from ..errors import SLRError
+from ..host import Host
 from ..store import DatabaseError, EventBatch, quote_identifier
-from ..terms import Struct, Var, deref, format_term, term_vars
+from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
 from .rules import EventRule
-from .sqlgen import AltSQL
-from .where import MustWait, Residual, describe_error
+from .sqlgen import (AltSQL, anchor_index, complex_copy, complex_read, create_index,
+                     index_name, max_id, max_seq, pending_delete, pending_insert,
+                     pending_of_group, pending_of_rule, pending_row, pending_summary,
+                     pending_wait, provenance_insert, query_plan, rows_by_seq, rule_record)
+from .where import MustWait, Residual, describe_error, plain_value
 
 _first, _second = itemgetter(0), itemgetter(1)
 
@@ -59,7 +63,7 @@ def _type(key: tuple[str, int]) -> str:
     return f"{key[0]}/{key[1]}"
 
 
-def _instantiate(t: Any, bindings: dict) -> Any:
+def _head_value(t: Any, bindings: dict) -> Any:
     """The term with the pattern's variables replaced by their values; None if one is
     unbound."""
     t = deref(t)
@@ -68,7 +72,7 @@ def _instantiate(t: Any, bindings: dict) -> Any:
     if type(t) is Struct:
         args = []
         for a in t.args:
-            v = _instantiate(a, bindings)
+            v = _head_value(a, bindings)
             if v is None:
                 return None
             args.append(v)
@@ -104,6 +108,7 @@ class RuleRuntime:
         self.alts: list[AltSQL] = []
         self.residuals: list[Residual | None] = []
         self.reads_store: list[bool] = []
+        self.plain: list[tuple | None] = []   # per alternative: _plain_plan's plan or None
         self.waits: dict = {}       # (alt, kind, wait key | None) -> earliest time
         self.pmin = _INF            # earliest end of a pending decision
         self.pending = 0
@@ -124,7 +129,7 @@ class RuleRuntime:
         """(Re)build the SQL of every alternative for the tables that exist now."""
         eng = self.eng
         head_args = tuple(self.rule.head.args) if type(self.rule.head) is Struct else ()
-        self.alts, self.residuals, self.reads_store = [], [], []
+        self.alts, self.residuals, self.reads_store, self.plain = [], [], [], []
         for n, alt in enumerate(self.rule.alternatives):
             tables = [eng.table(leaf.key) for leaf in alt.leaves]
             neg_tables = [eng.table(leaf.key) for _, leaf in alt.negations]
@@ -144,14 +149,83 @@ class RuleRuntime:
                              - {self.head_key})
             self.residuals.append(residual)
             self.reads_store.append(reads)
+            self.plain.append(self._plain_plan(sql, residual)
+                              if residual is not None and not reads else None)
         for key in self.rule.input_types():   # their completeness parameters exist
             eng.complete_sql(key, "x")
         for table, column in self.indexes():
             for first, second in (("t_end", "t_start"), ("t_start", "t_end")):
-                name = f"slr_cep_ix__{table}__{column}_{first[2:]}"
-                eng.store.execute(f"CREATE INDEX IF NOT EXISTS {quote_identifier(name)} ON "
-                                  f"{quote_identifier(table)} ({column}, {first}, {second})")
+                name = index_name(table, column, first[2:])
+                eng.store.run_compiled(create_index(name, table,
+                                                           [column, first, second]), {})
+        for name, table, columns in self.anchor_indexes():
+            eng.store.run_compiled(create_index(name, table, columns), {})
         self.generation = eng.generation
+
+    def _plain_plan(self, sql: AltSQL, residual: Residual) -> tuple | None:
+        """How a match of this alternative derives without terms (:meth:`_derive_plain`):
+        the where goal is one builtin of plain values (``pos_multiply``, see
+        :func:`where.plain_value`) reading value columns and binding a head variable, the
+        other head arguments constants. None when the terms' path must run."""
+        eng = self.eng
+        if eng.store.dialect.from_column is not None or residual.unknown or residual.reads:
+            return None
+        shape = residual.plain_function(eng.kb.engine)
+        if shape is None:
+            return None
+        names, out_name, fn = shape
+        base = sql.k + 2
+        by_name = {name: v for v, name in residual.inputs}
+        position = {id(v): base + i for i, v in enumerate(sql.value_vars)}
+        columns = []
+        for name in names:
+            v = by_name.get(name)
+            if v is None or id(v) not in position:
+                return None
+            columns.append(position[id(v)])
+        out_var = next((v for v, name in residual.outputs if name == out_name), None)
+        head = []
+        for a in sql.head_args:
+            a = deref(a)
+            if out_var is not None and a is out_var:
+                head.append(None)
+            elif type(a) is not Var and is_ground(a):
+                try:
+                    head.append(eng.encode(a))
+                except Unencodable:
+                    return None
+            else:
+                return None
+        if None not in head:
+            return None
+        return columns, fn, head
+
+    def _derive_plain(self, n: int, row: tuple, now: float) -> bool | None:
+        """:meth:`_derive_from` for an alternative with a plain plan, on the stored values
+        themselves (no terms); None when the values are not plain (the terms' path
+        decides)."""
+        columns, fn, head = self.plain[n]
+        values = []
+        for i in columns:
+            v = plain_value(row[i])
+            if v is None:
+                return None
+            values.append(v)
+        try:
+            out = fn(values)
+        except Exception:   # (the terms' path raises what the builtin raises, as before)
+            return None
+        if out is None:
+            return None
+        try:
+            encoded = self.eng.encode(out)
+        except Unencodable:
+            return None
+        k = self.alts[n].k
+        self._prov_rows.append((n,) + tuple(row[:k]) + (None,) * (self.width - k)
+                               + (row[k], row[k + 1])
+                               + tuple(encoded if h is None else h for h in head) + (now,))
+        return True
 
     def indexes(self) -> list[tuple[str, str]]:
         """(table, column) of the indexes the delta statements need beyond the event tables'
@@ -179,6 +253,20 @@ class RuleRuntime:
                         break
         return out
 
+    def anchor_indexes(self) -> list[tuple[str, str, list[str]]]:
+        """(name, table, columns) of the indexes the anchors of pushed where goals search
+        (:meth:`AltSQL.anchored`)."""
+        out = []
+        for sql in self.alts:
+            for pos, anchors in sql.anchors.items():
+                table = sql.table_names[pos] if pos < len(sql.table_names) else None
+                for column, _ in anchors:
+                    if table is not None:
+                        name, columns = anchor_index(table, sql.key_column(pos), column)
+                        if (name, table, columns) not in out:
+                            out.append((name, table, columns))
+        return out
+
     def ensure_built(self) -> None:
         if self.generation != self.eng.generation or self._tables_appeared():
             self.build()
@@ -202,7 +290,7 @@ class RuleRuntime:
         eng = self.eng
         self.ensure_built()
         store = eng.store
-        before = store.execute(f"SELECT coalesce(max(id), 0) FROM {self.prov}")[0][0]
+        before = store.run_compiled(max_id(self.prov), {})[0][0]
         changed = False
         fresh_terms = False
         params = eng.params(now)
@@ -290,10 +378,8 @@ class RuleRuntime:
                 float(self.eng.clock.now()))
 
     def _insert_pending(self, rows: list) -> None:
-        self.eng.store.executemany(
-            "INSERT INTO slr_cep_pending (rule, alt, kind, pos, rowids, t_start, t_end, "
-            "wait_type, wait_arity, wait_time, wait_reason, created_at) "
-            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", rows)
+        self.eng.store.run_compiled_many(pending_insert(),
+                                         [pending_row(row) for row in rows])
 
     def _bindings(self, n: int, row: tuple) -> dict:
         alt = self.alts[n]
@@ -304,6 +390,10 @@ class RuleRuntime:
     def _derive_from(self, n: int, row: tuple, now: float) -> bool:
         """Derive the complex events of one match (value columns ``row``); raises MustWait.
         Returns whether any was derived."""
+        if self.plain[n] is not None:
+            done = self._derive_plain(n, row, now)
+            if done is not None:
+                return done
         alt = self.alts[n]
         k = alt.k
         bindings = self._bindings(n, row)
@@ -331,7 +421,7 @@ class RuleRuntime:
                     b[id(v)] = sol[name]
             values = []
             for a in head_args:
-                t = _instantiate(a, b)
+                t = _head_value(a, b)
                 if t is None:
                     break
                 try:
@@ -353,12 +443,10 @@ class RuleRuntime:
     def _write_prov(self) -> None:
         rows, self._prov_rows = self._prov_rows, []
         if rows:
-            cols = (["alt"] + [f"r{p + 1}" for p in range(self.width)]
-                    + ["t_start", "t_end"] + [f"h{i + 1}" for i in range(self.rule.arity)]
-                    + ["detected"])
-            self.eng.store.executemany(
-                f"INSERT INTO {self.prov} ({', '.join(cols)}) VALUES "
-                f"({', '.join('?' * len(cols))})", rows)
+            names = [f"p{i}" for i in range(len(rows[0]))]
+            self.eng.store.run_compiled_many(
+                provenance_insert(self.prov, self.width, self.rule.arity),
+                [dict(zip(names, row)) for row in rows])
 
     # ----------------------------------------------------------------- pending
     def ready_groups(self, now: float) -> list:
@@ -392,9 +480,8 @@ class RuleRuntime:
         base["rule"] = self.key
         per_alt = [dict(base, **alt.params) for alt in self.alts]
         if self.policy == "chronological":
-            rows = self._occurrence_order(store.execute(
-                "SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, wait_arity, "
-                "wait_time FROM slr_cep_pending WHERE rule = ?", (self.key,)))
+            rows = self._occurrence_order(store.run_compiled(pending_of_rule(False),
+                                                             {"rule": self.key}))
             changed = False
             for row in rows:
                 if not self._decide_row(row, now, per_alt):
@@ -425,26 +512,15 @@ class RuleRuntime:
             groups.remove(group)
             changed = True
         if everything:
-            rows = store.execute(
-                "SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, wait_arity, "
-                "wait_time FROM slr_cep_pending WHERE rule = ? ORDER BY t_end, t_start, id",
-                (self.key,))
+            rows = store.run_compiled(pending_of_rule(True), {"rule": self.key})
             for row in rows:
                 changed |= self._decide_row(row, now, per_alt)
             return changed
         for n, kind, wait in groups:
-            if wait is None:
-                rows = store.execute(
-                    "SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, "
-                    "wait_arity, wait_time FROM slr_cep_pending WHERE rule = ? AND alt = ? "
-                    "AND kind = ? AND wait_type IS NULL ORDER BY t_end, t_start, id",
-                    (self.key, n, kind))
-            else:
-                rows = store.execute(
-                    "SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, "
-                    "wait_arity, wait_time FROM slr_cep_pending WHERE rule = ? AND alt = ? "
-                    "AND kind = ? AND wait_type = ? AND wait_arity = ? "
-                    "ORDER BY wait_time, t_end, id", (self.key, n, kind, wait[0], wait[1]))
+            group = {"rule": self.key, "alt": n, "kind": kind}
+            if wait is not None:
+                group.update(wait_type=wait[0], wait_arity=wait[1])
+            rows = store.run_compiled(pending_of_group(wait is not None), group)
             # recent, with Python work: the terminators of a group decide independently of
             # each other, so their candidates are read in one statement per position
             together = (kind == "term" and wait is None and self.policy == "recent"
@@ -505,12 +581,11 @@ class RuleRuntime:
             if n >= len(self.alts) or self.alts[n].tables[pos] is None:
                 continue
             arity = self.alts[n].alt.leaves[pos].arity
-            cols = ", ".join(["seq"] + [f"arg{j + 1}" for j in range(arity)])
             for i in range(0, len(seqs), 500):
                 chunk = seqs[i:i + 500]
-                for r in self.eng.store.execute(
-                        f"SELECT {cols} FROM {self.alts[n].tables[pos]} WHERE seq IN "
-                        f"({', '.join('?' * len(chunk))})", chunk):
+                for r in self.eng.store.run_compiled(
+                        rows_by_seq(self.alts[n].tables[pos], arity, len(chunk)),
+                        {f"s{j}": seq for j, seq in enumerate(chunk)}):
                     args[(n, pos, r[0])] = tuple(_sqlite_key(v) for v in r[1:])
 
         def key(row: tuple) -> tuple:
@@ -547,25 +622,26 @@ class RuleRuntime:
             return False
         if not done:
             if row[7] is not None:
-                store.execute("UPDATE slr_cep_pending SET wait_type = NULL, "
-                              "wait_arity = NULL, wait_time = NULL, wait_reason = NULL "
-                              "WHERE id = ?", (rid,))
+                store.run_compiled(pending_wait(),
+                                   {"wait_type": None, "wait_arity": None, "wait_time": None,
+                                    "wait_reason": None, "id": rid})
             return False
         self._done.append(rid)
         return True
 
     def _park(self, rid: int, wait: MustWait) -> None:
         """Record on pending row ``rid`` what it waits for (a history not complete yet)."""
-        self.eng.store.execute("UPDATE slr_cep_pending SET wait_type = ?, wait_arity = ?, "
-                               "wait_time = ?, wait_reason = ? WHERE id = ?",
-                               (wait.key[0], wait.key[1], wait.time, wait.reason, rid))
+        self.eng.store.run_compiled(pending_wait(),
+                                    {"wait_type": wait.key[0], "wait_arity": wait.key[1],
+                                     "wait_time": wait.time, "wait_reason": wait.reason,
+                                     "id": rid})
 
     def _delete_done(self) -> None:
         done, self._done = self._done, []
         for i in range(0, len(done), 500):
             chunk = done[i:i + 500]
-            self.eng.store.execute(f"DELETE FROM slr_cep_pending WHERE id IN "
-                                   f"({', '.join('?' * len(chunk))})", chunk)
+            self.eng.store.run_compiled(pending_delete(len(chunk)),
+                                        {f"d{j}": rid for j, rid in enumerate(chunk)})
 
     def _decide_match(self, n: int, rowids: list, end: float, now: float,
                       params: list | None = None) -> bool:
@@ -601,7 +677,7 @@ class RuleRuntime:
         for row in rows:
             if self._derive_from(n, row, now):
                 if self.used is not None:
-                    self.eng.store.executemany(
+                    self.eng.store.run_compiled_many(
                         alt.used_insert(),
                         [(alt.table_names[p], row[p]) for p in range(alt.k)])
                 return True
@@ -609,10 +685,7 @@ class RuleRuntime:
 
     def refresh(self) -> None:
         """Re-read the summary of this rule's pending decisions."""
-        rows = self.eng.store.execute(
-            "SELECT alt, kind, wait_type, wait_arity, min(coalesce(wait_time, t_end)), "
-            "min(t_end), count(*) FROM slr_cep_pending WHERE rule = ? "
-            "GROUP BY alt, kind, wait_type, wait_arity", (self.key,))
+        rows = self.eng.store.run_compiled(pending_summary(), {"rule": self.key})
         waits = {}
         pmin = _INF
         count = 0
@@ -634,26 +707,21 @@ class RuleRuntime:
             self.eng.store.declare_type(name, arity)
             table = self.eng.table(self.head_key)
         store = self.eng.store
-        values = [f"h{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
-        cols = [f"arg{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
         # a complex event is the deriving store's: its robot (NULL on an unnamed or fleet
         # store, whatever robots the constituent events came from)
-        copy = (f"INSERT INTO {table} ({', '.join(cols)}, arrival, robot) "
-                f"SELECT {', '.join(values)}, :now, :robot FROM {self.prov} WHERE id > :before "
-                f"ORDER BY id")
         args = {"now": now, "before": before, "robot": store.robot}
         head_table = self.eng.table_name(self.head_key)
         if store.triggers(head_table):
             # a buffer's trigger may refuse rows: the rows stored are those RETURNING gives
-            rows = store.run_compiled(f"{copy} RETURNING {', '.join(cols)}", args)
+            rows = store.run_compiled(complex_copy(table, self.prov, arity, True), args)
             # RETURNING gives an integral REAL as an int: the times as stored (floats)
             rows = [r[:arity] + (float(r[arity]), float(r[arity + 1])) for r in rows]
         else:
             # no trigger: every match is stored as it is; reading the provenance rows back
             # (a rowid range) costs less than RETURNING's buffered copy
-            store.run_compiled(copy, args)
-            rows = store.run_compiled(f"SELECT {', '.join(values)} FROM {self.prov} "
-                                      f"WHERE id > :before ORDER BY id", {"before": before})
+            store.run_compiled(complex_copy(table, self.prov, arity, False), args)
+            rows = store.run_compiled(complex_read(self.prov, arity),
+                                      {"before": before})
         if not rows:
             return []
         self.detections += len(rows)
@@ -669,7 +737,7 @@ class RuleRuntime:
 class EventRules:
     """The event rules of one knowledge base (created by :func:`slr_sql.cep.attach`)."""
 
-    def __init__(self, kb: Any):
+    def __init__(self, kb: Host):
         self.kb = kb
         self.store = kb.store
         # the store's columns: encoded terms as they are (SQLite) or as a server holds them
@@ -678,7 +746,7 @@ class EventRules:
             (lambda v: decode(from_column(v)))
         self.encode: Any = encode if to_column is None else (lambda t: to_column(encode(t)))
         self.clock = kb.clock
-        self.sync = getattr(kb, "_sync", None)
+        self.sync = kb.synchronizer
         self.tracker = self.sync.tracker if self.sync is not None else None
         self.rules: list[RuleRuntime] = []
         self.by_head: dict[tuple[str, int], list[RuleRuntime]] = {}
@@ -695,10 +763,10 @@ class EventRules:
     # ----------------------------------------------------------------- install
     @property
     def active(self) -> bool:
-        self._sync_rules()
+        self.sync_rules()
         return bool(self.rules)
 
-    def _sync_rules(self) -> None:
+    def sync_rules(self) -> None:
         """Follow the kb's declarations (a load replaces them; a failed load restores the
         previous object)."""
         decls = self.kb.declarations
@@ -743,12 +811,10 @@ class EventRules:
                     if self.store.table_for(name, arity) is None:
                         self.store.declare_type(name, arity)
                     rt.create_tables()
-                    self.store.execute(
-                        "INSERT INTO slr_cep_rules (key, head, rule, policy, source, "
-                        "prov_table, installed_at) VALUES (?, ?, ?, ?, ?, ?, ?) "
-                        "ON CONFLICT(key) DO NOTHING",
-                        (rt.key, _type(rt.head_key), rt.rule.text, rt.policy, rt.rule.source,
-                         rt.prov_name, float(self.clock.now())))
+                    self.store.run_compiled(rule_record(), {
+                        "key": rt.key, "head": _type(rt.head_key), "rule": rt.rule.text,
+                        "policy": rt.policy, "source": rt.rule.source,
+                        "prov_table": rt.prov_name, "installed_at": float(self.clock.now())})
                 for rt in runtimes:
                     rt.build()
                     rt.refresh()
@@ -756,9 +822,9 @@ class EventRules:
             self.tracker.derived = self if runtimes else None
         self._wake_timers()
 
-    def on_load(self, kb: Any) -> None:
+    def on_load(self, kb: Host) -> None:
         """Load listener (inside the load's transaction)."""
-        self._sync_rules()
+        self.sync_rules()
 
     def on_table(self, name: str, arity: int, table: str) -> None:
         """A new event table: rules reading that type can now match (rebuild their SQL)."""
@@ -890,7 +956,7 @@ class EventRules:
         table = self.table(key)
         if table is None:
             return 0
-        return self.store.execute(f"SELECT coalesce(max(seq), 0) FROM {table}")[0][0]
+        return self.store.run_compiled(max_seq(table), {})[0][0]
 
     def before_add(self, events: list) -> Any:
         """Inside the add's transaction, before the events are stored: where each type's
@@ -1083,7 +1149,7 @@ class EventRules:
 
     # ----------------------------------------------------------------- inspection
     def infos(self) -> list[dict]:
-        self._sync_rules()
+        self.sync_rules()
         out = []
         for rt in self.rules:
             rule = rt.rule
@@ -1153,7 +1219,7 @@ class EventRules:
                 else:
                     continue
                 lines.extend("      " + line for line in _wrap(sql))
-                lines.extend("      plan: " + step for step in self._plan(alt, sql))
+                lines.extend("      plan: " + step for step in self._query_plan_lines(alt, sql))
         lines.append(f"  {_type(rt.head_key)} is complete up to z once "
                      + ", ".join(_type(t) for t in self.inputs.get(rt.head_key, ()))
                      + " are complete up to z and no pending decision ends at or before z")
@@ -1162,7 +1228,7 @@ class EventRules:
                      + (f" (last: {rt.last_error})" if rt.last_error else ""))
         return lines
 
-    def _plan(self, alt: AltSQL, sql: str) -> list[str]:
+    def _query_plan_lines(self, alt: AltSQL, sql: str) -> list[str]:
         """SQLite's query plan of a statement (how the indexes bound it)."""
         params = self.params(float(self.clock.now()))
         params.update(alt.params)
@@ -1170,8 +1236,7 @@ class EventRules:
         params.update({f"r{p}": 0 for p in range(alt.k)})
         params.update(rule="", t=0)
         try:
-            return [row[3] for row in self.store.run_compiled("EXPLAIN QUERY PLAN " + sql,
-                                                              params)]
+            return [row[3] for row in self.store.run_compiled(query_plan(sql), params)]
         except DatabaseError as exc:  # pragma: no cover - explain must not fail
             return [f"(no plan: {exc})"]
 
@@ -1181,7 +1246,7 @@ class EventRules:
         from ..parser import parse_program, parse_term
         from .rules import compile_rule, is_event_rule, order_rules
 
-        self._sync_rules()
+        self.sync_rules()
         try:
             term, _ = parse_term(goal, "<explain>")
         except SLRError:

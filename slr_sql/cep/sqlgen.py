@@ -34,15 +34,23 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from ..encoding import Unencodable, encode
+from ..store import quote_identifier
 from ..store.dialect import SQLITE
-from ..terms import Struct, Var, deref, is_ground, term_vars
+from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
 from .rules import Alternative, Expr, Leaf
 
-__all__ = ["Ref", "AltSQL", "render"]
+__all__ = ["Ref", "AltSQL", "anchor_index", "index_name", "render"]
 
 _CMP = {"<": "<", ">": ">", "=<": "<=", ">=": ">=", "=:=": "=", "=\\=": "<>"}
 _EQ = {"==": True, "=": True, "\\==": False, "\\=": False}
 _NUMERIC = "IN ('integer', 'real')"
+# Arithmetic pushed into SQL (``T3 - T1 =< 5``): + and - over bound variables and numbers,
+# computed by SQL only where it gives Prolog's value -- integers small enough that no sum
+# of _MAX_LEAVES of them leaves the exact range of a double, finite floats far from
+# overflow; any other value is evaluated by the Python function ``slr_cep_arith``.
+_INT_BOUND = 2 ** 48
+_REAL_BOUND = 1e300
+_MAX_LEAVES = 16
 
 
 @dataclass(frozen=True)
@@ -62,6 +70,27 @@ def render(template: str, aliases: dict[str, str]) -> str:
     'q0_e0.t_end < e1.t_start'
     """
     return template.format_map(aliases)
+
+
+def index_name(table: str, column: str, first: str) -> str:
+    """The name of the index a rule adds on ``table`` (``column``, then ``t_<first>`` and
+    the other time).
+
+    >>> index_name("face", "arg3", "end")
+    'slr_cep_ix__face__arg3_end'
+    """
+    return f"slr_cep_ix__{table}__{column}_{first}"
+
+
+def anchor_index(table: str, key: str | None, column: str) -> tuple[str, list[str]]:
+    """The name and columns of the index an anchor (:meth:`AltSQL.anchored`) searches:
+    the key column first when the position has one.
+
+    >>> anchor_index("face", "arg1", "arg3")
+    ('slr_cep_ix__face__arg1_arg3', ['arg1', 'arg3', 't_end'])
+    """
+    columns = ([key] if key and key != column else []) + [column, "t_end"]
+    return f"slr_cep_ix__{table}__{'_'.join(columns[:-1])}", columns
 
 
 def _expr(e: Expr, dialect: Any = SQLITE) -> str:
@@ -119,6 +148,9 @@ class AltSQL:
     pushed: list = field(default_factory=list)
     head_sql: list | None = None
     dialect: Any = SQLITE     # the SQL printed: store/dialect.py
+    # position -> (column, positions bounding it): a pushed ``X - Y =< C`` gives the row of
+    # Y a lower bound on its data column once X's row is chosen (an index range)
+    anchors: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         alt = self.alt
@@ -309,6 +341,8 @@ class AltSQL:
                 return self._fact(g, table, positions)
         if len(g.args) != 2:
             return None
+        if g.name in _CMP and any(type(deref(a)) is Struct for a in g.args):
+            return self._push_arith(g, positions)
         if g.name in _CMP:
             a, b = self._side(g.args[0]), self._side(g.args[1])
             if a is None or b is None:
@@ -354,6 +388,137 @@ class AltSQL:
                 return None  # two constants: the interpreter's business
             return _Cond(positions, sql if _EQ[g.name] else f"NOT ({sql})")
         return None
+
+    def _arith(self, t: Any, leaves: list, names: dict) -> tuple[str, Any] | None:
+        """An arithmetic expression of + and - over bound variables and numbers: its SQL
+        and the same term with each variable renamed ``V<n>`` (n: its place in ``leaves``,
+        the refs the fallback receives); None if it is anything else."""
+        t = deref(t)
+        if type(t) is not Struct:
+            names[None] = names.get(None, 0) + 1   # leaves met (variables and numbers)
+            if names[None] > _MAX_LEAVES:
+                return None
+        if type(t) is Var:
+            ref = self.refs.get(id(t))
+            if ref is None:
+                return None
+            n = names.get(id(t))
+            if n is None:
+                n = names[id(t)] = len(leaves)
+                leaves.append(ref)
+            return (self.dialect.number(ref.sql) if ref.kind == "data" else ref.sql,
+                    Var(f"V{n}"))
+        if type(t) is int:
+            return (self._param(t), t) if abs(t) <= _INT_BOUND else None
+        if type(t) is float:
+            return (self._param(t), t) if abs(t) <= _REAL_BOUND else None   # (NaN: no)
+        if type(t) is Struct and t.name in ("+", "-") and len(t.args) == 2:
+            a = self._arith(t.args[0], leaves, names)
+            b = self._arith(t.args[1], leaves, names) if a is not None else None
+            if b is None:
+                return None
+            return f"({a[0]} {t.name} {b[0]})", Struct(t.name, (a[1], b[1]))
+        if type(t) is Struct and t.name == "-" and len(t.args) == 1:
+            a = self._arith(t.args[0], leaves, names)
+            return None if a is None else (f"(- {a[0]})", Struct("-", (a[1],)))
+        return None
+
+    def _push_arith(self, g: Struct, positions: frozenset) -> _Cond | None:
+        """A comparison with an arithmetic expression on either side, in SQL where its
+        operands are in the exact range (see _INT_BOUND), ``slr_cep_arith`` otherwise."""
+        if not self.dialect.python_functions:
+            return None   # no fallback for the values out of range: the Python side runs it
+        leaves: list = []
+        names: dict = {}
+        a = self._arith(g.args[0], leaves, names)
+        b = self._arith(g.args[1], leaves, names) if a is not None else None
+        if b is None:
+            return None
+        typeof = self.dialect.typeof
+        guards = []
+        for ref in leaves:
+            if ref.kind == "data":
+                guards.append(f"(({typeof(ref.sql)} = 'integer' AND abs({ref.sql}) <= "
+                              f"{_INT_BOUND}) OR ({typeof(ref.sql)} = 'real' AND "
+                              f"abs({ref.sql}) <= {_REAL_BOUND!r}))")
+            else:
+                guards.append(f"abs({ref.sql}) <= {_REAL_BOUND!r}")
+        text = self._param(format_term(Struct(g.name, (a[1], b[1]))))
+        values = ", ".join(ref.sql for ref in leaves)
+        fallback = f"slr_cep_arith({text}{', ' if values else ''}{values})"
+        core = f"{a[0]} {_CMP[g.name]} {b[0]}"
+        self._anchor(g)
+        if not guards:
+            return _Cond(positions, core)
+        return _Cond(positions, f"(CASE WHEN {' AND '.join(guards)} THEN {core} ELSE "
+                                f"{fallback} END)")
+
+    def _anchor(self, g: Struct) -> None:
+        """``X - Y =< C`` (or ``<``, or ``C >= X - Y``, ``C > X - Y``), Y a data argument of
+        another position than X, C a number: also the loose lower bound ``Y >= X - C -
+        slack`` (a pre-filter the index on Y's column can use; the exact comparison stays).
+        The bound is -inf when X is not a number (its value is Prolog's business), and a
+        stored Y that is not a number is greater than every number in SQLite: it passes."""
+        op, lhs, rhs = g.name, deref(g.args[0]), deref(g.args[1])
+        if op in (">=", ">"):
+            op, lhs, rhs = ("=<" if op == ">=" else "<"), rhs, lhs
+        if op not in ("=<", "<") or type(lhs) is not Struct or lhs.name != "-" \
+                or len(lhs.args) != 2 or type(rhs) not in (int, float):
+            return
+        if not (abs(rhs) <= _INT_BOUND if type(rhs) is int else abs(rhs) <= _REAL_BOUND):
+            return
+        x, y = deref(lhs.args[0]), deref(lhs.args[1])
+        if type(x) is not Var or type(y) is not Var:
+            return
+        rx, ry = self.refs.get(id(x)), self.refs.get(id(y))
+        if rx is None or ry is None or ry.kind != "data" or len(ry.positions) != 1 \
+                or ry.positions & rx.positions or not rx.positions:
+            return
+        if self.dialect.typeof(ry.sql) != f"typeof({ry.sql})":
+            return   # (SQLite's order of values: text after numbers)
+        x_num = (f"{self.dialect.typeof(rx.sql)} {_NUMERIC}" if rx.kind == "data"
+                 else self.dialect.true)
+        c = self._param(float(rhs))
+        bound = (f"(CASE WHEN {x_num} AND abs({rx.sql}) <= {_REAL_BOUND!r} THEN {rx.sql} - "
+                 f"{c} - (abs({rx.sql}) + abs({c})) * 1e-9 - 1e-9 ELSE "
+                 f"{self.dialect.infinity(True)} END)")
+        (pos,) = ry.positions
+        self.conds.append(_Cond(ry.positions | rx.positions, f"{ry.sql} >= {bound}"))
+        column = ry.sql.rsplit(".", 1)[1]
+        self.anchors.setdefault(pos, []).append((column, rx.positions))
+
+    def anchored(self, pos: int, chosen: set) -> bool:
+        """Position ``pos`` has a lower bound given the rows of ``chosen``: a window over
+        both, or an anchor (:meth:`_anchor`)."""
+        for _, _, within in self.alt.windows:
+            if pos in within and chosen & set(within):
+                return True
+        return any(bounding <= chosen for _, bounding in self.anchors.get(pos, ()))
+
+    def _anchor_hint(self, pos: int, chosen: set) -> str:
+        """`` INDEXED BY`` the index of an anchor of ``pos`` (SQLite's planner, without
+        statistics, takes the (key, time) index instead, which reaches the whole history)."""
+        if not self.dialect.index_hints or pos >= len(self.table_names):
+            return ""
+        for column, bounding in self.anchors.get(pos, ()):
+            if bounding <= chosen and self.table_names[pos] is not None:
+                name = anchor_index(self.table_names[pos], self.key_column(pos), column)[0]
+                return f" INDEXED BY {quote_identifier(name)}"
+        return ""
+
+    def key_column(self, pos: int) -> str | None:
+        """``arg1`` when position pos's first argument is tied to another position's or a
+        constant (an equality the anchor's index can use first), else None."""
+        leaf = self.alt.leaves[pos]
+        if not leaf.args:
+            return None
+        a = deref(leaf.args[0])
+        if type(a) is not Var:
+            return "arg1"
+        ref = self.refs.get(id(a))
+        if ref is not None and ref.positions != frozenset((pos,)):
+            return "arg1"
+        return "arg1" if self._others.get(id(a)) else None
 
     def _fact(self, g: Struct, table: str, positions: frozenset) -> _Cond:
         """``p(A..)`` over a predicate made of ground facts, its arguments bound: a row of
@@ -435,12 +600,29 @@ class AltSQL:
         return " CROSS JOIN ".join(f"{self.tables[p]} AS {aliases[f'e{p}']}" for p in order)
 
     def _order_from(self, first: int) -> list[int]:
-        """The join order: the given position first, then outwards by distance."""
-        order = [first]
+        """The join order: the given position first, then outwards by distance -- except
+        that a position an anchor bounds by those already joined comes before the others
+        (its few rows then bound the search of the positions between)."""
+        outwards = [first]
         for d in range(1, self.k):
             for p in (first - d, first + d):
                 if 0 <= p < self.k:
-                    order.append(p)
+                    outwards.append(p)
+        if not self.anchors:
+            return outwards
+        order, rest = [first], outwards[1:]
+
+        def bounded(q: int, placed: set) -> bool:
+            return any(b <= placed for _, b in self.anchors.get(q, ()))
+
+        while rest:
+            placed = set(order)
+            p = next((q for q in rest if bounded(q, placed)), None)
+            if p is None:   # the position whose row bounds another one, first
+                p = next((q for q in rest if any(bounded(r, placed | {q})
+                                                 for r in rest if r != q)), rest[0])
+            order.append(p)
+            rest.remove(p)
         return order
 
     def neg_complete(self, aliases: dict[str, str]) -> str:
@@ -738,6 +920,20 @@ class AltSQL:
                 inner += self._terminator_one(pos, r, aliases)
             if self.negs:
                 inner.append(self.neg_ok(aliases))
+            if not self.anchored(p, chosen) and all(self.anchored(r, chosen) for r in rest):
+                # p's history has no bound but the rest's has (seq with a where over the
+                # times): search from the few rows of the rest, the newest p among their
+                # partners (the same row as the EXISTS form, found from the other side)
+                keys = self._key_order(p, aliases[f"e{p}"], True)
+                froms = " CROSS JOIN ".join(f"{self.tables[r]} AS {aliases[f'e{r}']}"
+                                            f"{self._anchor_hint(r, chosen)}"
+                                            for r in rest + [p])
+                # (implied: p ends no later than the terminator, and starts before it
+                # ends; the (key, start) index then reaches only the rows in between)
+                implied = [f"{aliases[f'e{p}']}.t_start <= {aliases[f'e{pos}']}.t_end"]
+                return (f"SELECT {aliases[f'e{p}']}.seq FROM {froms} WHERE "
+                        f"{self._where(conds + inner + implied)} ORDER BY {', '.join(keys)} "
+                        f"LIMIT 1")
             froms = ", ".join(f"{self.tables[r]} AS {aliases[f'e{r}']}" for r in rest)
             conds.append(f"EXISTS (SELECT 1 FROM {froms} WHERE {self._where(inner)})")
         elif self.negs:
@@ -792,3 +988,196 @@ class AltSQL:
 
     def used_insert(self) -> str:
         return self.dialect.insert_ignore(self.used_table, "tbl, seq", "?, ?")
+
+
+# ---------------------------------------------------------------------------- the runtime's
+# The statements of the rule runtime around the delta statements (slr_sql/cep/runtime.py):
+# provenance rows, pending decisions, the copy of matches into the complex event type's
+# table, the catalog of installed rules. Values are named parameters; tables come quoted.
+
+_PENDING_COLUMNS = ("rule", "alt", "kind", "pos", "rowids", "t_start", "t_end", "wait_type",
+                    "wait_arity", "wait_time", "wait_reason", "created_at")
+_PENDING_READ = ("SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, wait_arity, "
+                 "wait_time FROM slr_cep_pending WHERE rule = :rule")
+
+
+def create_index(name: str, table: str, columns: list[str]) -> str:
+    """An index a rule's statements search (created once, kept with the table).
+
+    >>> create_index("slr_cep_ix__a__arg2_end", "a", ["arg2", "t_end", "t_start"])
+    'CREATE INDEX IF NOT EXISTS "slr_cep_ix__a__arg2_end" ON "a" (arg2, t_end, t_start)'
+    """
+    return (f"CREATE INDEX IF NOT EXISTS {quote_identifier(name)} ON "
+            f"{quote_identifier(table)} ({', '.join(columns)})")
+
+
+def max_id(table: str) -> str:
+    """The greatest ``id`` of a (quoted) provenance table, 0 when empty.
+
+    >>> max_id('"slr_cep_m_x"')
+    'SELECT coalesce(max(id), 0) FROM "slr_cep_m_x"'
+    """
+    return f"SELECT coalesce(max(id), 0) FROM {table}"
+
+
+def max_seq(table: str) -> str:
+    """The greatest ``seq`` of a (quoted) event table, 0 when empty.
+
+    >>> max_seq('"a"')
+    'SELECT coalesce(max(seq), 0) FROM "a"'
+    """
+    return f"SELECT coalesce(max(seq), 0) FROM {table}"
+
+
+def pending_insert() -> str:
+    """One pending decision; its values as the parameters named after the columns.
+
+    >>> pending_insert().split(" VALUES ")[1][:18]
+    '(:rule, :alt, :kin'
+    """
+    return (f"INSERT INTO slr_cep_pending ({', '.join(_PENDING_COLUMNS)}) VALUES "
+            f"({', '.join(':' + c for c in _PENDING_COLUMNS)})")
+
+
+def pending_row(values: tuple) -> dict:
+    """The parameters of :func:`pending_insert` for ``values`` in the columns' order.
+
+    >>> pending_row(("k", 0, "term", 1, "[7]", 1.0, 2.0, None, None, None, None, 3.0))["rowids"]
+    '[7]'
+    """
+    return dict(zip(_PENDING_COLUMNS, values))
+
+
+def provenance_columns(width: int, arity: int) -> list[str]:
+    """The columns a provenance row is written with (:func:`provenance_insert`).
+
+    >>> provenance_columns(2, 1)
+    ['alt', 'r1', 'r2', 't_start', 't_end', 'h1', 'detected']
+    """
+    return (["alt"] + [f"r{p + 1}" for p in range(width)] + ["t_start", "t_end"]
+            + [f"h{i + 1}" for i in range(arity)] + ["detected"])
+
+
+def provenance_insert(prov: str, width: int, arity: int) -> str:
+    """One match found on the Python side into the provenance table; parameters ``:p0``,
+    ``:p1``, ... in :func:`provenance_columns` order.
+
+    >>> provenance_insert('"m"', 1, 0)
+    'INSERT INTO "m" (alt, r1, t_start, t_end, detected) VALUES (:p0, :p1, :p2, :p3, :p4)'
+    """
+    cols = provenance_columns(width, arity)
+    return (f"INSERT INTO {prov} ({', '.join(cols)}) VALUES "
+            f"({', '.join(f':p{i}' for i in range(len(cols)))})")
+
+
+def pending_of_rule(order: bool) -> str:
+    """The pending decisions of rule ``:rule`` (in decision order when ``order``).
+
+    >>> pending_of_rule(True).endswith("WHERE rule = :rule ORDER BY t_end, t_start, id")
+    True
+    """
+    return _PENDING_READ + (" ORDER BY t_end, t_start, id" if order else "")
+
+
+def pending_of_group(waiting: bool) -> str:
+    """The pending decisions of one group: rule ``:rule``, alternative ``:alt``, kind
+    ``:kind``, waiting on nothing or on the type ``:wait_type``/``:wait_arity``.
+
+    >>> "wait_type IS NULL" in pending_of_group(False), "wait_type = :wait_type" in pending_of_group(True)
+    (True, True)
+    """
+    if not waiting:
+        return (_PENDING_READ + " AND alt = :alt AND kind = :kind AND wait_type IS NULL "
+                "ORDER BY t_end, t_start, id")
+    return (_PENDING_READ + " AND alt = :alt AND kind = :kind AND wait_type = :wait_type "
+            "AND wait_arity = :wait_arity ORDER BY wait_time, t_end, id")
+
+
+def rows_by_seq(table: str, arity: int, count: int) -> str:
+    """seq and arguments of the rows of a (quoted) event table whose seq is one of
+    ``:s0`` .. ``:s<count-1>``.
+
+    >>> rows_by_seq('"a"', 1, 2)
+    'SELECT seq, arg1 FROM "a" WHERE seq IN (:s0, :s1)'
+    """
+    cols = ", ".join(["seq"] + [f"arg{j + 1}" for j in range(arity)])
+    return (f"SELECT {cols} FROM {table} WHERE seq IN "
+            f"({', '.join(f':s{i}' for i in range(count))})")
+
+
+def pending_wait() -> str:
+    """Record what pending decision ``:id`` waits for (all NULL: nothing).
+
+    >>> pending_wait().endswith("WHERE id = :id")
+    True
+    """
+    return ("UPDATE slr_cep_pending SET wait_type = :wait_type, wait_arity = :wait_arity, "
+            "wait_time = :wait_time, wait_reason = :wait_reason WHERE id = :id")
+
+
+def pending_delete(count: int) -> str:
+    """Delete the pending decisions ``:d0`` .. ``:d<count-1>``.
+
+    >>> pending_delete(2)
+    'DELETE FROM slr_cep_pending WHERE id IN (:d0, :d1)'
+    """
+    return (f"DELETE FROM slr_cep_pending WHERE id IN "
+            f"({', '.join(f':d{i}' for i in range(count))})")
+
+
+def pending_summary() -> str:
+    """Per group of rule ``:rule``'s pending decisions: the earliest time it waits for, the
+    earliest end and the count.
+
+    >>> pending_summary().endswith("GROUP BY alt, kind, wait_type, wait_arity")
+    True
+    """
+    return ("SELECT alt, kind, wait_type, wait_arity, min(coalesce(wait_time, t_end)), "
+            "min(t_end), count(*) FROM slr_cep_pending WHERE rule = :rule "
+            "GROUP BY alt, kind, wait_type, wait_arity")
+
+
+def complex_copy(table: str, prov: str, arity: int, returning: bool) -> str:
+    """Copy the matches after provenance id ``:before`` into the complex event type's
+    (quoted) table, arrival ``:now``, robot ``:robot``; ``returning``: the rows stored (a
+    buffer's trigger may refuse some).
+
+    >>> complex_copy('"c"', '"m"', 1, False)
+    'INSERT INTO "c" (arg1, t_start, t_end, arrival, robot) SELECT h1, t_start, t_end, :now, :robot FROM "m" WHERE id > :before ORDER BY id'
+    """
+    values = [f"h{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
+    cols = [f"arg{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
+    sql = (f"INSERT INTO {table} ({', '.join(cols)}, arrival, robot) "
+           f"SELECT {', '.join(values)}, :now, :robot FROM {prov} WHERE id > :before "
+           f"ORDER BY id")
+    return sql + f" RETURNING {', '.join(cols)}" if returning else sql
+
+
+def complex_read(prov: str, arity: int) -> str:
+    """The head values and times of the matches after provenance id ``:before``.
+
+    >>> complex_read('"m"', 1)
+    'SELECT h1, t_start, t_end FROM "m" WHERE id > :before ORDER BY id'
+    """
+    values = [f"h{i + 1}" for i in range(arity)] + ["t_start", "t_end"]
+    return f"SELECT {', '.join(values)} FROM {prov} WHERE id > :before ORDER BY id"
+
+
+def rule_record() -> str:
+    """Record an installed rule in the catalog (once per key).
+
+    >>> rule_record().endswith("ON CONFLICT(key) DO NOTHING")
+    True
+    """
+    return ("INSERT INTO slr_cep_rules (key, head, rule, policy, source, prov_table, "
+            "installed_at) VALUES (:key, :head, :rule, :policy, :source, :prov_table, "
+            ":installed_at) ON CONFLICT(key) DO NOTHING")
+
+
+def query_plan(sql: str) -> str:
+    """The statement asking SQLite how it runs ``sql`` (explain).
+
+    >>> query_plan("SELECT 1")
+    'EXPLAIN QUERY PLAN SELECT 1'
+    """
+    return "EXPLAIN QUERY PLAN " + sql

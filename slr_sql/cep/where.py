@@ -13,6 +13,7 @@ time limit) rejects the candidate and is counted on the rule (``kb.event_rules()
 """
 from __future__ import annotations
 
+import json
 import time
 from typing import Any, Callable
 
@@ -21,7 +22,9 @@ from ..errors import SLRError
 from ..store import DatabaseError
 from ..encoding import Unencodable
 from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
-from ..unify import resolve
+from ..unify import resolve, undo, unify
+from ..host import Host
+from ..plans import instantiate
 
 __all__ = ["MustWait", "Residual", "WHERE_TIMEOUT"]
 
@@ -73,6 +76,8 @@ class Residual:
         self.inputs = [(v, f"I{n}") for n, v in enumerate(inputs) if f"I{n}" in present]
         self.outputs = [(v, f"O{n}") for n, v in enumerate(outputs)]
         self._program = None
+        self._calls_of: Any = None   # the program _calls was worked out for
+        self._calls: list | None = None
         self.reads: frozenset = frozenset()
         self.unknown = False
         self.last_engine = ""
@@ -89,7 +94,7 @@ class Residual:
             self._program = program
         return self.reads
 
-    def solve(self, kb: Any, values: dict, at: float,
+    def solve(self, kb: Host, values: dict, at: float,
               complete: Callable[[tuple, float], bool], skip: frozenset = frozenset(),
               use_sql: bool = True) -> list[dict]:
         """The solutions (dicts output name -> ground term) for the input ``values``
@@ -101,7 +106,14 @@ class Residual:
             if not complete(key, at):
                 raise MustWait(key, at, "the where goal's goal set")
         args = {name: values[name] for _, name in self.inputs}
-        plan = kb._plan(self.text, tuple(args))
+        if not use_sql:
+            calls = self.builtin_calls(kb.engine)
+            if calls:
+                solutions = self._call_builtins(kb.engine, calls, args, at)
+                if solutions is not None:
+                    self.last_engine = "builtins"
+                    return solutions
+        plan = kb.plans.plan(self.text, tuple(args))
         deadline = time.monotonic() + WHERE_TIMEOUT
         if kb.sql_enabled and use_sql:
             rows = self._sql(kb, plan, args, at, complete, deadline)
@@ -111,7 +123,90 @@ class Residual:
         self.last_engine = "interpreter"
         return self._interpret(kb, plan, args, at, complete)
 
-    def _sql(self, kb: Any, plan: Any, args: dict, at: float, complete: Callable,
+    def builtin_calls(self, engine: Any) -> list | None:
+        """The goal as a conjunction of calls to deterministic builtins (``pos_multiply``,
+        ``is``-free arithmetic helpers, ...) that no program or library predicate of the same
+        name hides, or None; worked out once per program."""
+        program = engine.program
+        if self._calls_of is not program:
+            from ..engine import CONTROL
+
+            calls: list | None = []
+            stack = [self.goal]
+            while stack and calls is not None:
+                g = deref(stack.pop())
+                if type(g) is Struct and g.name == "," and len(g.args) == 2:
+                    stack += [g.args[1], g.args[0]]
+                    continue
+                key = (g.name, len(g.args)) if type(g) is Struct else None
+                fn = engine.det.get(key) if key is not None else None
+                if fn is None or key in CONTROL or key in program.preds \
+                        or key in engine.library.preds:
+                    calls = None
+                else:
+                    calls.append((key, fn, g.args))
+            self._calls, self._calls_of = calls, program
+        return self._calls
+
+    def plain_function(self, engine: Any) -> tuple[list[str], str, Callable] | None:
+        """The goal as one builtin with a function of plain values (:data:`PLAIN_BUILTINS`):
+        ``(input names, output name, function)``, the function called with the inputs'
+        :func:`plain_value` in that order; None for any other goal."""
+        calls = self.builtin_calls(engine)
+        if not calls or len(calls) != 1 or calls[0][0] not in PLAIN_BUILTINS:
+            return None
+        _, _, (items, out) = calls[0]
+        names = []
+        items = deref(items)
+        while type(items) is Struct and items.name == "." and len(items.args) == 2:
+            v = deref(items.args[0])
+            if type(v) is not Var or not v.name.startswith("I"):
+                return None
+            names.append(v.name)
+            items = deref(items.args[1])
+        out = deref(out)
+        if items != "[]" or type(out) is not Var or not out.name.startswith("O"):
+            return None
+        return names, out.name, PLAIN_BUILTINS[calls[0][0]]
+
+    def _call_builtins(self, engine: Any, calls: list, args: dict,
+                       at: float) -> list | None:
+        """Run :meth:`builtin_calls` straight, as the interpreter would run the conjunction
+        (each call once, left to right, no choice point); its one solution, none, or None
+        when the interpreter must decide (an exception other than an evaluation error)."""
+        from ..engine import PrologThrow
+
+        names: dict = dict(args)
+
+        def put(t: Any) -> Any:
+            t = deref(t)
+            if type(t) is Var:
+                v = names.get(t.name)
+                if v is None:
+                    v = names[t.name] = Var(t.name)
+                return v
+            if type(t) is Struct:
+                return Struct(t.name, tuple(put(a) for a in t.args))
+            return t
+
+        m = _BuiltinMachine(engine)
+        m.at = at   # (the interpreter runs the goal at the match's end)
+        try:
+            for _, fn, call_args in calls:
+                if not fn(m, tuple(put(a) for a in call_args)):
+                    return []
+        except (PrologThrow, MemoryError, RecursionError, AttributeError):
+            return None
+        sol = {}
+        for _, name in self.outputs:
+            t = names.get(name)
+            t = resolve(t) if t is not None else None
+            if t is None or not is_ground(t):
+                return []
+            sol[name] = t
+        return [sol]
+
+    def _sql(self, kb: Host, plan: Any, args: dict, at: float, complete: Callable,
              deadline: float) -> list | None:
         from ..planner import SqlPlan, plan_for
 
@@ -143,9 +238,9 @@ class Residual:
                 out.append(sol)
         return out
 
-    def _interpret(self, kb: Any, plan: Any, args: dict, at: float,
+    def _interpret(self, kb: Host, plan: Any, args: dict, at: float,
                    complete: Callable) -> list:
-        term, frame = kb._instantiate(plan, args, terms=True)   # decoded: terms already
+        term, frame = instantiate(plan, args, terms=True)   # decoded: terms already
         m = kb.engine.machine(at=at, timeout=WHERE_TIMEOUT)
 
         def on_prev(name: str, n: int, t: float) -> None:
@@ -176,6 +271,90 @@ class Residual:
         finally:
             m.abandon(solving)
         return out
+
+
+class _BuiltinMachine:
+    """What a deterministic builtin needs of a machine, for :meth:`Residual.builtin_calls`:
+    a trail to bind on, the time of the match's end, no hooks (such a goal reads no
+    history)."""
+
+    __slots__ = ("engine", "trail", "at", "on_prev", "on_next", "cps", "deadline")
+
+    def __init__(self, engine: Any):
+        self.engine = engine
+        self.trail: list = []
+        self.at = None
+        self.on_prev = None
+        self.on_next = None
+        self.cps: list = []
+        self.deadline = None
+
+    def unify(self, a: Any, b: Any) -> bool:
+        return unify(a, b, self.trail)
+
+    def undo_to(self, mark: int) -> None:
+        undo(self.trail, mark)
+
+    def check_deadline(self) -> None:
+        return None
+
+
+def _plain_pos_multiply(items: list) -> Any:
+    from ..robotlib import pos_multiply_fast
+
+    return pos_multiply_fast(items[0], items[1:]) if items else None
+
+
+# Deterministic builtins with a function of plain values (numbers, lists of numbers,
+# compounds of lists of numbers) that gives the builtin's very result for them (the same
+# floats: the builtin runs the same function on the terms' numbers), or None when the
+# builtin must decide (and raise its error) on the terms.
+PLAIN_BUILTINS: dict[tuple[str, int], Callable[[list], Any]] = {
+    ("pos_multiply", 2): _plain_pos_multiply,
+}
+
+_scan_json = json.scanner.make_scanner(json.JSONDecoder())   # type: ignore[attr-defined]
+
+
+def _numbers(x: Any) -> bool:
+    if type(x) is not list:
+        return False
+    for v in x:
+        if type(v) is not float and type(v) is not int:
+            return False
+    return True
+
+
+def plain_value(value: Any) -> Any:
+    """A stored value (SQLite's column) as a plain value: a number, a list of numbers, or
+    a compound whose arguments are lists of numbers (``pose([..], [..])``, its arguments
+    Python lists); None for anything else (the terms' path decides).
+
+    >>> plain_value('{"pose":[[0.1,0.0,1.2],[0,0,0,1]]}')
+    Struct('pose', ([0.1, 0.0, 1.2], [0, 0, 0, 1]))
+    >>> plain_value("[1.5,2]"), plain_value("cup"), plain_value('{"$atom":"1"}')
+    ([1.5, 2], None, None)
+    """
+    tv = type(value)
+    if tv is int or tv is float:
+        return value
+    if tv is not str or not value or value[0] not in "[{":
+        return None
+    try:
+        data, end = _scan_json(value, 0)
+    except (StopIteration, ValueError):
+        return None
+    if end != len(value):
+        return None
+    if type(data) is list:
+        return data if _numbers(data) else None
+    if type(data) is dict and len(data) == 1:
+        (name, args), = data.items()
+        if name.startswith("$") or type(args) is not list or not args \
+                or not all(_numbers(a) for a in args):
+            return None
+        return Struct(name, tuple(args))
+    return None
 
 
 def describe_error(exc: BaseException) -> str:

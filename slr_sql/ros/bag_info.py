@@ -140,8 +140,7 @@ def bag_info(path: str | Path) -> BagInfo:
         deserialize = reader.typestore.deserialize_cdr if reader.is2 \
             else reader.typestore.deserialize_ros1
         decode = fast_tf.decode_cdr if reader.is2 else fast_tf.decode_ros1
-        standard = fast_tf._matches(reader.typestore.fielddefs,
-                                    fast_tf._ROS2 if reader.is2 else fast_tf._ROS1)
+        standard = fast_tf.standard_tf_types(reader.typestore.fielddefs, reader.is2)
         frames: dict[tuple, FrameEdge] = {}
         for conn, stamp, raw in reader.messages():
             t = stamp * 1e-9

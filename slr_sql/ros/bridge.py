@@ -555,7 +555,7 @@ class Bridge:
                  for m in self.mapping.fully_updated_for(topic)]
         fast = None
         if len(bound) == 1 and not marks and bound[0].entry.where.startswith("built-in") \
-                and fast_tf._matches(fielddefs, fast_tf._ROS2) and topic in TF_TOPICS:
+                and fast_tf.standard_tf_types(fielddefs, ros2=True) and topic in TF_TOPICS:
             fast = functools.partial(fast_tf.decode_cdr, event=bound[0].entry.event)
         sub = _Subscription(topic, msgtype, bound, marks, fast)
         sub.handle = self._node.create_subscription(

@@ -38,7 +38,7 @@ from typing import Any, Callable
 from slr_sql import Atom, SLRError, String, Struct
 
 from ..service.encoding import encode_plain
-from .mapping import PublishEntry, TopicEntry, _publish_entry, _topic_entry, normalize_topic
+from .mapping import PublishEntry, TopicEntry, publish_entry, topic_entry, normalize_topic
 from .protocol import ServiceError, check_keys, number_field, string_field
 
 __all__ = ["Controller", "OPERATIONS", "CONTROL_FACT", "program_name"]
@@ -129,7 +129,7 @@ class Controller:
         pattern = body.get("pattern", body.get("event"))
         if "pattern" in body and "event" in body:
             raise ServiceError('give "pattern" or "event" (the same thing), not both')
-        entry = _publish_entry({"topic": body.get("topic"), "type": body.get("type"),
+        entry = publish_entry({"topic": body.get("topic"), "type": body.get("type"),
                                 "event": pattern, **{k: body[k] for k in ("where", "fields")
                                                      if k in body}},
                                f"subscription {sub_id}")
@@ -243,7 +243,7 @@ class Controller:
                 or topic in self.map_publish:
             raise ServiceError(f"{topic} is an output topic of the bridge")
         specs = spec_mapping if isinstance(spec_mapping, list) else [spec_mapping]
-        entries = [_topic_entry(topic, s, "mapping" if isinstance(spec_mapping, dict)
+        entries = [topic_entry(topic, s, "mapping" if isinstance(spec_mapping, dict)
                                 else f"mapping[{i}]") for i, s in enumerate(specs)]
         previous = self.inputs.get(topic)
         record = _Input(topic, {"topic": topic, "mapping": spec_mapping}, entries)

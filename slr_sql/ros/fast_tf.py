@@ -83,6 +83,17 @@ def _matches(fielddefs: dict, expected: dict) -> bool:
     return True
 
 
+def standard_tf_types(fielddefs: dict, ros2: bool) -> bool:
+    """True when a bag's (or a live graph's) message definitions ``fielddefs`` define the tf
+    types the standard way (ROS 2's, or ROS 1's with ``ros2=False``), so that the direct
+    decoders of this module read them exactly as the general deserializer would.
+
+    >>> standard_tf_types({}, ros2=True)
+    False
+    """
+    return _matches(fielddefs, _ROS2 if ros2 else _ROS1)
+
+
 def compile_for(bound: Any, conn: Any, reader: Any) -> Callable[[Any, float], list] | None:
     """The direct decoder for ``conn`` when ``bound`` is the built-in tf mapping and the bag
     defines the tf types the standard way; else None (use the general path)."""
@@ -90,7 +101,7 @@ def compile_for(bound: Any, conn: Any, reader: Any) -> Callable[[Any, float], li
         return None
     fielddefs = reader.typestore.fielddefs
     decode = decode_cdr if reader.is2 else decode_ros1
-    if not _matches(fielddefs, _ROS2 if reader.is2 else _ROS1):
+    if not standard_tf_types(fielddefs, reader.is2):
         return None
     event = bound.entry.event
     return decode if event == "tf" else partial(decode, event=event)

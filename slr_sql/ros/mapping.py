@@ -415,17 +415,23 @@ def tf_entry(topic: str) -> TopicEntry:
                    "transform.translation.z"],
                   ["transform.rotation.x", "transform.rotation.y", "transform.rotation.z",
                    "transform.rotation.w"]]}]}
-    return _topic_entry(topic, spec, f"built-in {topic}")
+    return topic_entry(topic, spec, f"built-in {topic}")
 
 
 def whole_message_entry(topic: str, why: str) -> TopicEntry:
     """``topic_event_name(topic)(Message)^T`` with the message as a term (``--all``)."""
-    entry = _topic_entry(topic, {"event": topic_event_name(topic), "args": ["$msg"]},
+    entry = topic_entry(topic, {"event": topic_event_name(topic), "args": ["$msg"]},
                          f"{why} {topic}")
     return TopicEntry(**{**entry.__dict__, "whole_message": True})
 
 
-def _topic_entry(topic: str, spec: Any, where: str) -> TopicEntry:
+def topic_entry(topic: str, spec: Any, where: str) -> TopicEntry:
+    """The checked entry of one subscribed topic from its mapping ``spec`` (``where`` names
+    the place in messages); a :class:`MappingError` says what is wrong.
+
+    >>> topic_entry("/odom", {"event": "odom", "args": ["$msg"]}, "mapping").event
+    'odom'
+    """
     if not isinstance(spec, dict):
         raise MappingError(f"{where}: a topic entry is a mapping with the keys "
                            f"{', '.join(_TOPIC_KEYS)}")
@@ -506,13 +512,13 @@ def mapping_from_dict(data: Any, source: str = "<mapping>") -> Mapping:
         specs = spec if isinstance(spec, list) else [spec]
         where = f"topics.{topic}"
         mapping.topics[name] = [
-            _topic_entry(name, s, where if len(specs) == 1 and not isinstance(spec, list)
+            topic_entry(name, s, where if len(specs) == 1 and not isinstance(spec, list)
                          else f"{where}[{i}]")
             for i, s in enumerate(specs)]
     publish = data.get("publish") or []
     if not isinstance(publish, list):
         raise MappingError("publish: expects a list of publish entries")
-    mapping.publish = [_publish_entry(p, f"publish[{i}]") for i, p in enumerate(publish)]
+    mapping.publish = [publish_entry(p, f"publish[{i}]") for i, p in enumerate(publish)]
     fully = data.get("fully_updated") or []
     if not isinstance(fully, list):
         raise MappingError("fully_updated: expects a list of entries")
@@ -571,7 +577,14 @@ def _request_topics(spec: Any) -> RequestTopics:
     return topics
 
 
-def _publish_entry(spec: Any, where: str) -> PublishEntry:
+def publish_entry(spec: Any, where: str) -> PublishEntry:
+    """The checked entry of one published topic (``topic``, ``type``, ``event``, ...) from
+    its mapping ``spec``; a :class:`MappingError` says what is wrong.
+
+    >>> publish_entry({"topic": "/alarm", "type": "std_msgs/msg/String",
+    ...                "event": "alarm"}, "publish").topic
+    '/alarm'
+    """
     if not isinstance(spec, dict):
         raise MappingError(f"{where}: a publish entry is a mapping with the keys "
                            f"{', '.join(_PUBLISH_KEYS)}")

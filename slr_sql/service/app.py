@@ -43,6 +43,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 import slr_sql
 from slr_sql import EventRejected, SLRError, SLRTimeout
 from slr_sql.store.checks import format_event
+from slr_sql.store.read_only import read_only_refusal
 
 from .encoding import (decode_args, decode_arguments, decode_term, dumps, encode_answers,
                        encode_plain, loads)
@@ -1181,30 +1182,13 @@ async def _send_error(websocket: WebSocket, exc: BaseException) -> None:
 
 # -- read-only SQL and stats (run on the thread pool) ------------------------------------------
 
-_READ_KEYWORDS = {"select", "with", "values", "explain"}
-_READ_PRAGMAS = {"table_info", "table_xinfo", "table_list", "index_list", "index_info",
-                 "index_xinfo", "foreign_key_list", "database_list", "page_count", "page_size",
-                 "freelist_count", "user_version", "schema_version", "compile_options",
-                 "function_list", "pragma_list", "collation_list", "integrity_check",
-                 "quick_check", "journal_mode", "encoding"}
-_COMMENTS = re.compile(r"\A(?:\s+|--[^\n]*(?:\n|\Z)|/\*.*?\*/)*", re.S)
-_PRAGMA = re.compile(r"pragma\s+(?:main\.)?(\w+)\s*(?:\(\s*[\w\"'`\[\]. ]*\s*\))?\s*;?\s*\Z",
-                     re.I | re.S)
-
-
 def _read_only_sql(kb: Any, statement: str, params: list, timeout: float) -> tuple:
     """One statement that cannot change the store: the first keyword must read, and the
     store runs it read-only (``kb.sql`` without ``write``); a statement that runs longer
     than ``timeout`` seconds is interrupted."""
-    text = statement[_COMMENTS.match(statement).end():]
-    keyword = re.match(r"\w*", text).group(0).lower()
-    if keyword == "pragma":
-        m = _PRAGMA.match(text)
-        if m is None or m.group(1).lower() not in _READ_PRAGMAS:
-            raise ServiceError("sql over the service is read-only: this PRAGMA is not allowed")
-    elif keyword not in _READ_KEYWORDS:
-        raise ServiceError(f"sql over the service is read-only: {keyword.upper() or 'this'} "
-                           f"statements are not allowed (SELECT, WITH, VALUES, EXPLAIN)")
+    refusal = read_only_refusal(statement, getattr(kb.store.dialect, "name", "sqlite"))
+    if refusal is not None:
+        raise ServiceError(f"sql over the service is read-only: {refusal}")
     try:
         return kb.sql(statement, params, timeout=timeout)
     except SLRTimeout:

@@ -46,7 +46,7 @@ The package, one module per part of that walk:
 * ``builtin_goals``: arithmetic, comparisons, ``=``, ``is`` and det builtins (``slr_det``);
 * ``unify``: unification, patterns on stored lists and compounds, encoded values;
 * ``guards``: the statements that keep Prolog's error order;
-* ``statements``: the statements of the inspection views;
+* ``views``: the SELECT of a predicate's inspection view from its compiled branches;
 * ``model``: :class:`Col`, :class:`ColRef`, :class:`Part`, :class:`State`, :data:`SITES`,
   :class:`Fallback` and the term walks they share.
 """
@@ -55,13 +55,12 @@ from __future__ import annotations
 from .builtin_goals import COMPARISONS, EFFECTS, NO_BIND
 from .compiler import CONTROL_FALLBACK, CONTROL_SQL, Compiler
 from .guards import NUM_ARG, TIME_ARG, guards, unused_checks
-from .statements import fact_view_statement, view_statement
 from .model import (CYCLIC, NUMERIC, SITES, Col, ColRef, Fallback, Part, Site, State, has_col,
                     has_var, quote_ident, resolve, term_free_vars)
+from .views import view_select
 
 __all__ = ["Fallback", "Col", "Compiler", "Part", "SITES", "quote_ident",
            # used by the planner and the modules of this package
            "ColRef", "Site", "State", "resolve", "has_var", "has_col", "term_free_vars",
            "guards", "unused_checks", "NUM_ARG", "TIME_ARG", "NUMERIC", "CYCLIC", "NO_BIND", "EFFECTS",
-           "COMPARISONS", "CONTROL_FALLBACK", "CONTROL_SQL", "view_statement",
-           "fact_view_statement"]
+           "COMPARISONS", "CONTROL_FALLBACK", "CONTROL_SQL", "view_select"]

@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..terms import NIL, Atom, Struct, deref
-from .model import Col, Fallback, Part, _fmt, _shown, resolve
+from .model import Col, Fallback, Part, format_for_message, shown_in_message, resolve
 
 
 class AggregateGoals:
@@ -60,7 +60,7 @@ class AggregateGoals:
                 "count", "sum", "max", "min", "bag", "set"):
             kind, templ = str(spec.name), spec.args[0]
         else:
-            raise Fallback(f"aggregate_all/3 with the spec {_fmt(_shown(spec))}")
+            raise Fallback(f"aggregate_all/3 with the spec {format_for_message(shown_in_message(spec))}")
         if kind in ("max", "min"):
             t0 = deref(templ)
             if type(t0) is Struct and t0.name == "-" and len(t0.args) == 2:

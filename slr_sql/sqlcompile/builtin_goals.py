@@ -12,7 +12,7 @@ import operator
 from typing import Any
 
 from ..terms import Atom, Struct, Var, deref
-from .model import (NUMERIC, SITES, Col, ColRef, Fallback, Site, _fmt, _shown, _site_ids,
+from .model import (NUMERIC, SITES, Col, ColRef, Fallback, Site, format_for_message, shown_in_message, next_site_id,
                     has_col, has_var, resolve, term_free_vars)
 
 
@@ -64,7 +64,7 @@ class BuiltinGoals:
             return self.udf(self.dialect.prolog_number(t.sql)), "num"
         if not has_col(t):
             if has_var(t):
-                raise Fallback(f"unbound variable in the arithmetic expression {_fmt(_shown(t))}")
+                raise Fallback(f"unbound variable in the arithmetic expression {format_for_message(shown_in_message(t))}")
             from ..arith import evaluate
 
             if tt is Atom and t in ("random", "cputime", "realtime"):
@@ -95,7 +95,7 @@ class BuiltinGoals:
                 (sa, va), = subs
                 xa = sa if sa is not None else self.const(va)
                 return self.udf(self.dialect.arith1(self.const(op), xa)), "num"
-        raise Fallback(f"arithmetic expression {_fmt(_shown(t))} has no SQL form")
+        raise Fallback(f"arithmetic expression {format_for_message(shown_in_message(t))} has no SQL form")
 
     def num_sql(self, t: Any) -> str:
         sql, v = self.arith_sql(t)
@@ -188,7 +188,7 @@ class BuiltinGoals:
         inputs = "".join(f", {c.sql}" for c in cols)
         self.dialect.det_call(0, -1, inputs)   # an engine without Python functions refuses
         site = Site(fn, python, templ, len(cols), outs, self.ctx.engine)
-        sid = next(_site_ids)
+        sid = next_site_id()
         SITES[sid] = site
         self.sites.append(site)
         m = st.mark()

@@ -12,10 +12,10 @@ from ..store.dialect import SQLITE
 from ..terms import Atom, Struct, Var, deref
 from .aggregates import AggregateGoals
 from .builtin_goals import BuiltinGoals
-from .control import ControlGoals, _Marker
+from .control import ControlGoals, IfThenMarker
 from .events import EventGoals
 from .guards import unused_checks
-from .model import Col, Fallback, Part, Site, State, _fmt, has_var
+from .model import Col, Fallback, Part, Site, State, format_for_message, has_var
 from .rules import RuleGoals
 from .unify import Unification
 
@@ -155,14 +155,14 @@ class Compiler(Unification, BuiltinGoals, ControlGoals, RuleGoals, EventGoals, A
             raise Fallback("a goal that is an unbound variable (call/N on an unknown goal)")
         if tg is Col:
             raise Fallback("a goal only known at run time (call/N on an unknown goal)")
-        if tg is _Marker:
+        if tg is IfThenMarker:
             return self.marker_sql(g, ctx, nxt, st, emit)
         if tg is Struct:
             name, args = str(g.name), g.args
         elif tg is Atom:
             name, args = str(g), ()
         else:
-            raise Fallback(f"{_fmt(g)} is not callable (type error at run time)")
+            raise Fallback(f"{format_for_message(g)} is not callable (type error at run time)")
         key = (name, len(args))
         ctl = CONTROL_SQL.get(key)
         if ctl is not None:

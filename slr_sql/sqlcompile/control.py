@@ -62,7 +62,7 @@ class ControlGoals:
         info = {"m": m0, "parts": parts, "count": count, "ctx": ctx, "cond": cond}
         if parts:
             st.keys.append("0")
-            marker = _Marker(info)
+            marker = IfThenMarker(info)
             self.solve((cond, ctx, (marker, ctx, (then, ctx, nxt))), st, emit)
             st.restore(m0)
         # else: no solution of C
@@ -79,7 +79,7 @@ class ControlGoals:
             self.solve((other, ctx, nxt), st, emit)
         st.restore(m)
 
-    def marker_sql(self, marker: "_Marker", ctx, nxt, st, emit):
+    def marker_sql(self, marker: "IfThenMarker", ctx, nxt, st, emit):
         info = marker.info
         m0 = info["m"]
         parts = info["parts"]
@@ -106,7 +106,10 @@ class ControlGoals:
             p = sub[0]
             ids = ", ".join(f"{a}.{idc}" for _, a, idc in froms)
             sub_ids = ", ".join(f"{a}.{idc}" for _, a, idc in p.froms)
-            order = (" ORDER BY " + ", ".join(p.keys)) if p.keys else ""
+            # a branch's index among the keys is one constant for all of p's rows; as an
+            # ORDER BY term SQLite would read it as a column number
+            keys = [k for k in p.keys if not k.isdigit()]
+            order = (" ORDER BY " + ", ".join(keys)) if keys else ""
             sql = p.select([sub_ids]) + order + " LIMIT 1"
             st.conds.append(f"{ids} = ({sql})" if len(froms) == 1 else f"({ids}) = ({sql})")
         else:
@@ -152,7 +155,7 @@ class ControlGoals:
         self.solve((rewritten, ctx, nxt), st, emit)
 
 
-class _Marker:
+class IfThenMarker:
     """Pushed after the condition of an if-then-else (see :meth:`Compiler.marker_sql`)."""
 
     __slots__ = ("info",)

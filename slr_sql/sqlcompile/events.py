@@ -12,22 +12,24 @@ Mixed into :class:`slr_sql.sqlcompile.Compiler` (uses ``self.solve``, ``self.uni
 from __future__ import annotations
 
 from ..program import event_key, split_event_atom
-from ..terms import Atom, Struct, Var, deref, list_items
+from ..terms import Atom, Struct, Var, deref, list_items, make_list
 from .model import NUMERIC, Col, Fallback, State
 
 
 def _check_point_stamp(s, e) -> None:
-    """``E^T`` with T a value from a stored column: at run time T may be a list ``[S, E]``,
-    which makes the goal an interval goal (the interpreter splits the stamp when it reaches
-    the goal); SQL would compare the list with a time and fail, so the interpreter answers.
-    (A parameter, ``:name``, and a part taken out of a compound value stay compiled: the
-    time of a call is a number there in practice, and position/2-style rules that take
-    ``E^T`` apart keep their compiled form.)"""
+    """``E^T`` with T a findall list known only at run time: SQL would compare the list
+    with a time, the interpreter splits it into an interval, so the interpreter answers."""
     s = deref(s)
-    if s is deref(e) and type(s) is Col and s.kind not in NUMERIC and s.src is None \
-            and not s.sql.startswith(":"):
-        raise Fallback("an event's time taken from a stored value, which may be an interval "
-                       "[S, E] at run time")
+    if s is deref(e) and type(s) is Col and s.kind not in NUMERIC and s.kind != "any":
+        raise Fallback("an event's time that is a list at run time (an interval [S, E])")
+
+
+def _stamp_may_be_interval(s, e) -> bool:
+    """``E^T`` with T a value known only at run time (a stored column, a parameter, a part
+    of either): T may be a list ``[S, E]`` there, which makes the goal an interval goal
+    (the interpreter splits the stamp when it reaches the goal)."""
+    s = deref(s)
+    return s is deref(e) and type(s) is Col and s.kind == "any"
 
 
 class EventGoals:
@@ -91,7 +93,30 @@ class EventGoals:
             self.missing.add((name, n))
         return table
 
+    def each_stamp(self, ev, st, run) -> None:
+        """Run ``run(ev)`` for the stamps an event goal's time may be: as it is, and, when
+        it is a value known only at run time, also as the interval ``[S, E]`` it may hold
+        there. The two branches exclude each other (a number never is a list), and the
+        branch key keeps Prolog's order either way."""
+        atom, s, e = ev
+        if not _stamp_may_be_interval(s, e):
+            run(ev)
+            return
+        m = st.mark()
+        st.keys.append("0")    # T a number: a point goal (the time match checks the type)
+        run(ev)
+        st.restore(m)
+        m = st.mark()
+        st.keys.append("1")    # T = [S, E]: an interval goal
+        start, end = Var(), Var()
+        if self.unify(s, make_list([start, end]), st):
+            run((atom, start, end))
+        st.restore(m)
+
     def event_sql(self, ev, ctx, nxt, st, emit, origin=None):
+        self.each_stamp(ev, st, lambda ev: self._event_rows(ev, ctx, nxt, st, emit, origin))
+
+    def _event_rows(self, ev, ctx, nxt, st, emit, origin=None):
         atom, s, e = ev
         _check_point_stamp(s, e)
         atom = deref(atom)
@@ -132,10 +157,13 @@ class EventGoals:
         sb = self._sandbox(pattern, table, n, st, origin)
         return (None, None) if sb is None else (self.alias("p"), sb)
 
-    def _prev_next_pattern(self, t):
+    def _prev_next_event(self, t):
         ev = split_event_atom(t)
         if ev is None:
             raise Fallback("prev/next of something that is not an event atom (error at run time)")
+        return ev
+
+    def _prev_next_pattern(self, ev):
         atom, s, e = ev
         _check_point_stamp(s, e)
         atom = deref(atom)
@@ -168,7 +196,11 @@ class EventGoals:
         return (q, conds) if ok else None
 
     def prev_sql(self, args, ctx, nxt, st, emit, origin=None):
-        name, n, pattern = self._prev_next_pattern(args[0])
+        self.each_stamp(self._prev_next_event(args[0]), st,
+                        lambda ev: self._prev(ev, args, nxt, st, emit, origin))
+
+    def _prev(self, ev, args, nxt, st, emit, origin):
+        name, n, pattern = self._prev_next_pattern(ev)
         iv = self._interval(args[1])
         if iv is None:
             if type(deref(args[1])) is Var:
@@ -216,7 +248,11 @@ class EventGoals:
         st.restore(m)
 
     def next_sql(self, args, ctx, nxt, st, emit, origin=None):
-        name, n, pattern = self._prev_next_pattern(args[0])
+        self.each_stamp(self._prev_next_event(args[0]), st,
+                        lambda ev: self._next(ev, args, nxt, st, emit, origin))
+
+    def _next(self, ev, args, nxt, st, emit, origin):
+        name, n, pattern = self._prev_next_pattern(ev)
         if len(args) == 2:
             iv = self._interval(args[1])
             if iv is None:

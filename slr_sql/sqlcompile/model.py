@@ -71,6 +71,15 @@ SITES: "weakref.WeakValueDictionary[int, Site]" = weakref.WeakValueDictionary()
 _site_ids = itertools.count(1)
 
 
+def next_site_id() -> int:
+    """A fresh number for a :class:`Site` (unique in this process, never reused).
+
+    >>> next_site_id() < next_site_id()
+    True
+    """
+    return next(_site_ids)
+
+
 class ColRef:
     """Position ``i`` of a row (answer recipes) or of a function's inputs (sites)."""
 
@@ -186,7 +195,12 @@ def resolve(t: Any) -> Any:
 CYCLIC = "a unification can build a cyclic term (no occurs check)"
 
 
-def _occurs(v: Var, t: Any) -> bool:
+def occurs_in(v: Var, t: Any) -> bool:
+    """True if the variable ``v`` occurs in the term ``t`` (the occurs check).
+
+    >>> X = Var("X"); occurs_in(X, Struct("f", (X,))), occurs_in(X, Atom("a"))
+    (True, False)
+    """
     stack = [t]
     while stack:
         x = deref(stack.pop())
@@ -212,7 +226,12 @@ def has_var(t: Any) -> bool:
     return _contains(t, Var)
 
 
-def _has_float(t: Any) -> bool:
+def has_float(t: Any) -> bool:
+    """True if a float occurs in ``t`` (SQL's 1 = 1.0 is not a Prolog match).
+
+    >>> has_float(Struct("f", (1, 2.0))), has_float(Struct("f", (1,)))
+    (True, False)
+    """
     return _contains(t, float)
 
 
@@ -233,7 +252,12 @@ def term_free_vars(t: Any) -> list:
     return out
 
 
-def _fmt(t: Any) -> str:
+def format_for_message(t: Any) -> str:
+    """A term as Prolog text for a fallback reason; never raises (``repr`` otherwise).
+
+    >>> format_for_message(Struct("f", (Atom("a"), 1)))
+    'f(a,1)'
+    """
     from ..terms import format_term
 
     try:
@@ -242,11 +266,15 @@ def _fmt(t: Any) -> str:
         return repr(t)
 
 
-def _shown(t: Any) -> Any:
-    """A term for messages: Cols shown as '$value'."""
+def shown_in_message(t: Any) -> Any:
+    """A term for messages, stored values (:class:`Col`) shown as ``<stored value>``.
+
+    >>> shown_in_message(Struct("f", (Atom("a"),)))
+    Struct('f', (Atom('a'),))
+    """
     t = deref(t)
     if type(t) is Col:
         return Atom("<stored value>")
     if type(t) is Struct:
-        return Struct(t.name, tuple(_shown(a) for a in t.args))
+        return Struct(t.name, tuple(shown_in_message(a) for a in t.args))
     return t

@@ -10,7 +10,7 @@ from typing import Any
 
 from ..encoding import INT64_MAX, INT64_MIN, Unencodable, encode, encode_json
 from ..terms import Atom, String, Struct, Var, deref, list_items
-from .model import (CYCLIC, NUMERIC, Col, Fallback, State, _fmt, _has_float, _occurs, _shown,
+from .model import (CYCLIC, NUMERIC, Col, Fallback, State, format_for_message, has_float, occurs_in, shown_in_message,
                     has_col, has_var)
 
 
@@ -31,12 +31,12 @@ class Unification:
                 continue
             ta, tb = type(a), type(b)
             if ta is Var:
-                if tb is Struct and _occurs(a, b):
+                if tb is Struct and occurs_in(a, b):
                     raise Fallback(CYCLIC)
                 a.ref = b
                 trail.append(a)
             elif tb is Var:
-                if ta is Struct and _occurs(b, a):
+                if ta is Struct and occurs_in(b, a):
                     raise Fallback(CYCLIC)
                 b.ref = a
                 trail.append(b)
@@ -139,7 +139,7 @@ class Unification:
             if has_var(other):
                 if st is None:
                     raise Fallback(f"matching a stored value against the compound term "
-                                   f"{_fmt(_shown(other))} with unknown parts")
+                                   f"{format_for_message(shown_in_message(other))} with unknown parts")
                 if k in NUMERIC:
                     return False
                 return self.match_sql(col, other, st)
@@ -264,7 +264,7 @@ class Unification:
         """Unify the element at ``path`` with the pattern argument ``arg``."""
         a = deref(arg)
         ta = type(a)
-        if ta is Struct and (has_var(a) or has_col(a) or _has_float(a)):
+        if ta is Struct and (has_var(a) or has_col(a) or has_float(a)):
             return self._match_at(text, path, a, st, depth)
         if ta is Var or ta is Col:
             return self.unify(a, self._elem_col(text, path), st)
@@ -290,7 +290,7 @@ class Unification:
         if type(t) is Col:
             return t.sql
         if has_var(t):
-            raise Fallback(f"{_fmt(_shown(t))} is not ground")
+            raise Fallback(f"{format_for_message(shown_in_message(t))} is not ground")
         if has_col(t):
             return self.json_sql(t, top=True)
         try:

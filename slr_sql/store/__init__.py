@@ -22,8 +22,8 @@ same :class:`EventStore` methods: a ``Database`` (connect, transactions as savep
 migrations of its own, a statement deadline), the table DDL and lookup statements of
 ``tables``/``lookups`` (``INDEXED BY`` becomes plain indexes), the catalog's upserts and
 ``sqlite_master`` queries against its own catalog, and ``space`` mapped to its own
-statistics (or reporting none). Buffer triggers come from slr_sql.buffers as SQL text, so
-that module would need its dialect too.
+statistics (or reporting none). Buffer triggers are printed here per engine
+(:mod:`.buffering`) from the typed pattern tests slr_sql.buffers compiles.
 
 Durability: file databases use ``journal_mode=WAL`` with ``synchronous=FULL``: when
 :meth:`EventStore.add_events` returns, its transaction is in the WAL *and* fsynced, so the
@@ -48,12 +48,15 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
 from ..errors import EventRejected
-from .catalog import BufferTables, Catalog, ProgramText
+from .buffering import (ArgEquals, BufferPlan, BufferTables, JsonArray, JsonEquals, MixedTerm,
+                        PatternMatch, SameTerm)
+from .catalog import Catalog, ProgramText
 from .checks import format_event
 from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, DatabaseError, \
     ReadConnection, run_sql_file
 from .events import Event, EventBatch, EventWriter
 from .fleet import Fleet, check_robot_name
+from .journals import JournalReader, SubscriptionRecord, SubscriptionTables
 from .lookups import EventReader, Row
 from .postgres import PgDatabase, is_postgres_url
 from .schema import migration_scripts
@@ -64,7 +67,9 @@ from .tables import EventTables
 __all__ = ["EventStore", "Event", "EventBatch", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "DatabaseError", "quote_identifier", "sql_literal", "format_event",
            "migration_scripts", "split_sql_script", "run_sql_file", "store_error",
-           "check_robot_name", "ReadConnection"]
+           "check_robot_name", "ReadConnection", "ArgEquals", "BufferPlan", "JsonArray",
+           "JsonEquals", "MixedTerm", "PatternMatch", "SameTerm", "JournalReader",
+           "SubscriptionRecord"]
 
 
 def _doc(part_method: Callable) -> Callable:
@@ -112,6 +117,7 @@ class EventStore:
         self._reader = EventReader(db, self._tables)
         self._catalog = Catalog(db)
         self._buffers = BufferTables(db)
+        self._subscriptions = SubscriptionTables(db)
         self._space = (ServerSpace if is_postgres_url(path) else Space)(db, self._tables)
         try:
             self._fleet = Fleet(db, self._tables, self._writer)
@@ -237,6 +243,25 @@ class EventStore:
     @property
     def in_transaction(self) -> bool:
         return self._db.tx_depth > 0
+
+    @property
+    def in_transaction_here(self) -> bool:
+        """True when the calling thread is inside a transaction of this store; another
+        thread's transaction does not count (``in_transaction`` counts any).
+
+        >>> s = EventStore(None)
+        >>> with s.transaction(): s.in_transaction_here
+        True
+        >>> s.in_transaction_here
+        False
+        """
+        lock = self._db.lock
+        if not lock.acquire(blocking=False):   # another thread holds the store
+            return False
+        try:
+            return self._db.tx_depth > 0
+        finally:
+            lock.release()
 
     # ------------------------------------------------------------------ robots and fleets
 
@@ -433,7 +458,7 @@ class EventStore:
 
     @_doc(Database.data_version)
     def data_version(self) -> int:
-        return self._db.data_version()
+        return self._catalog.data_version()
 
     @_doc(Catalog.program_sources)
     def program_sources(self) -> list[tuple[str, str | None]]:
@@ -505,6 +530,79 @@ class EventStore:
         listen = getattr(self._db, "listen", None)
         return None if listen is None else listen(callback)
 
+    def journal_reader(self, own_connection: bool) -> JournalReader | None:
+        """The reading statements of subscription delivery: on a connection of their own
+        (``own_connection``; None in memory, where there can be none), whose reads never
+        wait for a writer's transaction, or on the store's connection (inside a
+        transaction not committed yet, they see its rows).
+
+        >>> EventStore(None).journal_reader(own_connection=True) is None
+        True
+        """
+        if not own_connection:
+            return JournalReader(lambda sql, params: self._db.execute(sql, params))
+        reader = self._db.open_reader()
+        return None if reader is None else JournalReader(reader.execute, reader.close)
+
+    @_doc(SubscriptionTables.subscription_wanted)
+    def subscription_wanted(self, name: str, arity: int) -> bool:
+        return self._subscriptions.subscription_wanted(name, arity)
+
+    @_doc(SubscriptionTables.subscription_record)
+    def subscription_record(self, sub_id: str) -> SubscriptionRecord | None:
+        return self._subscriptions.subscription_record(sub_id)
+
+    @_doc(SubscriptionTables.insert_subscription)
+    def insert_subscription(self, sub_id: str, durable: bool, pattern: str,
+                            where_goal: str | None, since: float, until: float | None,
+                            type_name: str, type_arity: int, history_top: int,
+                            live_start: int, owner: str, lease_until: float,
+                            created_at: float) -> None:
+        self._subscriptions.insert_subscription(
+            sub_id, durable, pattern, where_goal, since, until, type_name, type_arity,
+            history_top, live_start, owner, lease_until, created_at)
+
+    @_doc(SubscriptionTables.claim_subscription)
+    def claim_subscription(self, sub_id: str, owner: str, lease_until: float) -> None:
+        self._subscriptions.claim_subscription(sub_id, owner, lease_until)
+
+    @_doc(SubscriptionTables.delete_subscription)
+    def delete_subscription(self, sub_id: str, owner: str | None = None) -> bool:
+        return self._subscriptions.delete_subscription(sub_id, owner)
+
+    @_doc(SubscriptionTables.write_subscription_position)
+    def write_subscription_position(self, sub_id: str, owner: str, history_done: int,
+                                    history_pos: int, live_pos: int, finished: bool,
+                                    lease_until: float | None,
+                                    new_owner: str | None) -> None:
+        self._subscriptions.write_subscription_position(
+            sub_id, owner, history_done, history_pos, live_pos, finished, lease_until,
+            new_owner)
+
+    @_doc(SubscriptionTables.renew_subscriptions)
+    def renew_subscriptions(self, owner: str, lease_until: float) -> set[str]:
+        return self._subscriptions.renew_subscriptions(owner, lease_until)
+
+    @_doc(SubscriptionTables.expire_subscriptions)
+    def expire_subscriptions(self, now_wall: float) -> None:
+        self._subscriptions.expire_subscriptions(now_wall)
+
+    @_doc(SubscriptionTables.live_positions)
+    def live_positions(self, name: str, arity: int) -> list[tuple[str, str | None, int]]:
+        return self._subscriptions.live_positions(name, arity)
+
+    @_doc(SubscriptionTables.trim_journal)
+    def trim_journal(self, journal: str, through_jid: int) -> None:
+        self._subscriptions.trim_journal(journal, through_jid)
+
+    @_doc(SubscriptionTables.subscription_rows)
+    def subscription_rows(self) -> list[dict[str, Any]]:
+        return self._subscriptions.subscription_rows()
+
+    @_doc(SubscriptionTables.journal_start)
+    def journal_start(self, table: str, journal: str) -> tuple[int, int]:
+        return self._subscriptions.journal_start(table, journal)
+
     @property
     def notify_channel(self) -> str | None:
         """The channel a server store notifies when events reach a journal (LISTEN to it),
@@ -515,6 +613,14 @@ class EventStore:
     def connect_info(self) -> str | None:
         """The connection string of a server store (for a second, listening connection)."""
         return getattr(self._db, "conninfo", None)
+
+    @_doc(Catalog.fact_view_select)
+    def fact_view_select(self, table: str, arity: int) -> str:
+        return self._catalog.fact_view_select(table, arity)
+
+    @_doc(Catalog.rule_matches)
+    def rule_matches(self, prov: str, width: int) -> list[tuple]:
+        return self._catalog.rule_matches(prov, width)
 
     @_doc(Catalog.replace_views)
     def replace_views(self, views: dict[str, str]) -> list[str]:
@@ -553,17 +659,21 @@ class EventStore:
     def buffer_objects(self, buffer_id: int) -> dict[str, str]:
         return self._buffers.buffer_objects(buffer_id)
 
+    @_doc(BufferTables.buffer_statements)
+    def buffer_statements(self, plan: BufferPlan, table: str) -> dict[str, str]:
+        return self._buffers.buffer_statements(plan, table)
+
     @_doc(BufferTables.install_buffer_objects)
-    def install_buffer_objects(self, buffer_id: int, statements: dict[str, str]) -> bool:
-        return self._buffers.install_buffer_objects(buffer_id, statements)
+    def install_buffer_objects(self, plan: BufferPlan, table: str) -> bool:
+        return self._buffers.install_buffer_objects(plan, table)
 
     @_doc(BufferTables.drop_buffer_objects)
     def drop_buffer_objects(self, buffer_id: int) -> None:
         self._buffers.drop_buffer_objects(buffer_id)
 
-    @_doc(BufferTables.prune)
-    def prune(self, sql: str, buffer_id: int) -> int:
-        return self._buffers.prune(sql, buffer_id)
+    @_doc(BufferTables.apply_buffer)
+    def apply_buffer(self, plan: BufferPlan, table: str, now: float) -> int:
+        return self._buffers.apply_buffer(plan, table, now)
 
     # ------------------------------------------------------------------ space
 
@@ -623,3 +733,7 @@ class EventStore:
     def run_compiled(self, sql: str, params: dict, limit: int | None = None,
                      deadline: float | None = None) -> list[tuple]:
         return self._db.run_compiled(sql, params, limit, deadline)
+
+    @_doc(Database.run_compiled_many)
+    def run_compiled_many(self, sql: str, rows: list) -> None:
+        self._db.run_compiled_many(sql, rows)

@@ -8,7 +8,7 @@
   :meth:`Catalog.meta_raise`, which keeps the larger of the stored and the new value.
 * ``slr_buffers`` / ``slr_counters`` (migrations/0002_buffers.sql): one row per event-history
   buffer with its counters; its schema objects are named ``slr_buf_<id>_*`` (triggers) and
-  ``slr_bix_<id>`` (indexes). slr_sql.buffers decides *what* they are; this runs the SQL.
+  ``slr_bix_<id>`` (indexes); :mod:`.buffering` prints and installs them.
 * ``slr_facts_<arity>_<name>`` (``ord, arg1..argN``) tables and the inspection views of
   derived predicates, written by the SQL compiler (view names kept in ``slr_meta`` under
   ``sql_views``; ``facts/version`` is the program version they were built for). Names are
@@ -22,8 +22,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Iterable
 
-from ..errors import SLRError
-from .connection import Database
+from .connection import Database, DatabaseError
 from .sqltext import RESERVED_PREFIXES, quote_identifier, sql_literal
 
 
@@ -31,7 +30,7 @@ def sql_text_literal(text: str) -> str:
     """A text constant for a statement that cannot take parameters (a function body)."""
     return sql_literal(text)
 
-__all__ = ["Catalog", "BufferTables", "ProgramText", "PROGRAM_VERSION", "PROGRESS_VERSION",
+__all__ = ["Catalog", "ProgramText", "PROGRAM_VERSION", "PROGRESS_VERSION",
            "FACTS_VERSION"]
 
 PROGRAM_VERSION = "version/program"    # bumped with every change of slr_program
@@ -102,6 +101,28 @@ class Catalog:
 
     def __init__(self, db: Database):
         self.db = db
+        # a server: the versions read with the last data_version, for the versions() call
+        # that follows it (one round trip for the change check instead of two)
+        self._read_with_change: tuple[int, int] | None = None
+
+    def data_version(self) -> int:
+        """The connection's change counter (see ``Database.data_version``). On a server the
+        same statement reads the program and progress versions and whether a tBuffer is
+        active, for the :meth:`versions` call that follows a move (they are as fresh as the
+        counter: a later commit moves it again)."""
+        if self.db.dialect.name == "sqlite":
+            return int(self.db.data_version())
+        with self.db.lock:
+            self.db.check_open()
+            counter, program, progress, timed = self.db.conn.execute(
+                "SELECT pg_snapshot_xmax(pg_current_snapshot())::text::bigint, "
+                "(SELECT value FROM slr_meta WHERE key = ?), "
+                "(SELECT value FROM slr_meta WHERE key = ?), "
+                "EXISTS (SELECT 1 FROM slr_buffers WHERE kind = 'tBuffer' "
+                "AND removed_at IS NULL)", (PROGRAM_VERSION, PROGRESS_VERSION)).fetchone()
+            self._read_with_change = (int(program or 0), int(progress or 0))
+            self.db.tbuffers_active = bool(timed)
+            return int(counter)
 
     # ------------------------------------------------------------------ program
 
@@ -138,9 +159,22 @@ class Catalog:
         """
         with self.db.lock:
             self.db.check_open()
-            rows = dict(self.db.conn.execute(
-                "SELECT key, value FROM slr_meta WHERE key IN (?, ?)",
-                (PROGRAM_VERSION, PROGRESS_VERSION)).fetchall())
+            read, self._read_with_change = self._read_with_change, None
+            if read is not None:
+                return read
+            if self.db.dialect.name == "sqlite":
+                rows = dict(self.db.conn.execute(
+                    "SELECT key, value FROM slr_meta WHERE key IN (?, ?)",
+                    (PROGRAM_VERSION, PROGRESS_VERSION)).fetchall())
+            else:
+                # in the same read: whether a tBuffer is active (a server's adds record
+                # "now" only then, see EventWriter.add_events)
+                rows = dict(self.db.conn.execute(
+                    "SELECT key, value FROM slr_meta WHERE key IN (?, ?) UNION ALL "
+                    "SELECT ?, count(*)::text FROM (SELECT 1 FROM slr_buffers WHERE kind = "
+                    "'tBuffer' AND removed_at IS NULL LIMIT 1) AS timed",
+                    (PROGRAM_VERSION, PROGRESS_VERSION, "tbuffers")).fetchall())
+                self.db.tbuffers_active = rows.get("tbuffers") == "1"
         return int(rows.get(PROGRAM_VERSION, 0)), int(rows.get(PROGRESS_VERSION, 0))
 
     def append_program(self, source: str, filename: str | None = None,
@@ -381,6 +415,11 @@ class Catalog:
         out = {}
         with self.db.transaction():
             conn = self.db.conn
+            # the inspection views read these tables: PostgreSQL refuses to drop a table a
+            # view depends on, so they go first and come back over the new tables
+            views = self.db.view_statements(self.meta_get("sql_views", []))
+            for name in views:
+                conn.execute(f"DROP VIEW {quote_identifier(name)}")
             existing = sorted(name for name in self.db.table_names()
                               if name.startswith("slr_facts_"))
             for table in existing:
@@ -401,6 +440,16 @@ class Catalog:
                 conn.executemany(f"INSERT INTO {table} VALUES (?{', ?' * arity})",
                                  [(i,) + tuple(row) for i, row in enumerate(rows)])
                 out[(name, arity)] = table
+            kept = []
+            for name, statement in views.items():
+                try:
+                    with self.db.transaction():   # a savepoint: a view of a table now gone
+                        conn.execute(statement)
+                    kept.append(name)
+                except DatabaseError:
+                    pass
+            if views:
+                self.meta_set("sql_views", kept)
             if version is not None:
                 conn.execute("INSERT INTO slr_meta (key, value) VALUES (?, ?) ON CONFLICT(key) "
                              "DO UPDATE SET value = excluded.value", (FACTS_VERSION, int(version)))
@@ -452,6 +501,23 @@ class Catalog:
                 self.db.conn.execute(
                     f"CREATE TABLE IF NOT EXISTS {used} (tbl TEXT NOT NULL, seq BIGINT NOT "
                     f"NULL, PRIMARY KEY (tbl, seq)){dialect.without_rowid}")
+
+    def rule_matches(self, prov: str, width: int) -> list[tuple]:
+        """What each complex event of an event rule is made of, as its provenance table
+        ``prov`` (quoted, see :meth:`create_rule_tables`) records it: one row per complex
+        event derived, in the order of derivation, of the seqs of its ``width`` events
+        (``r1..r<width>``) and its interval (start, end).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.create_rule_tables('"slr_cep_m_x"', 2, 1)
+        >>> s.rule_matches('"slr_cep_m_x"', 2)
+        []
+        """
+        columns = "".join(f"r{p + 1}, " for p in range(width))
+        with self.db.lock:
+            self.db.check_open()
+            return [tuple(row) for row in self.db.conn.execute(
+                f"SELECT {columns}t_start, t_end FROM {prov} ORDER BY id")]
 
     def create_journal(self, table: str, arity: int, journal: str, trigger: str) -> None:
         """The journal of event table ``table`` (unless it exists): ``journal`` gets a row
@@ -518,6 +584,18 @@ class Catalog:
                                      f"{quote_identifier(trigger + '_f')}()")
             self.db.conn.execute(f"DROP TABLE IF EXISTS {quote_identifier(journal)}")
 
+    def fact_view_select(self, table: str, arity: int) -> str:
+        """The SELECT of the inspection view of a predicate whose clauses are facts, read
+        from its fact table (``table`` quoted, as :meth:`replace_fact_tables` returns it) in
+        clause order: ``arg1..argN``, for :meth:`replace_views`.
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).fact_view_select('"slr_facts_2_color"', 2)
+        'SELECT arg1, arg2 FROM "slr_facts_2_color" ORDER BY ord'
+        """
+        columns = ", ".join(f"arg{i + 1}" for i in range(arity))
+        return f"SELECT {columns} FROM {table} ORDER BY ord"
+
     def replace_views(self, views: dict[str, str]) -> list[str]:
         """Drop the views created last time and create ``{predicate name: select sql}``,
         each named by :meth:`view_name` (a name already used by a table, index or earlier
@@ -542,133 +620,3 @@ class Catalog:
                 taken.add(name.lower())
             self.meta_set("sql_views", created)
         return created
-
-
-class BufferTables:
-    """The rows of ``slr_buffers`` / ``slr_counters`` and each buffer's triggers and indexes.
-
-    >>> from slr_sql.store import EventStore
-    >>> s = EventStore(None); s.insert_buffer("cBuffer", "program", "p(_)", "p", 1, 2.0,
-    ...                                       None, None, "cBuffer(p(_), 2)")
-    1
-    >>> [(row["id"], row["kind"], row["pruned"]) for row in s.buffer_rows()]
-    [(1, 'cBuffer', 0)]
-    """
-
-    def __init__(self, db: Database):
-        self.db = db
-
-    def buffer_rows(self, active_only: bool = True) -> list[dict[str, Any]]:
-        """The rows of ``slr_buffers`` (oldest first) with their counters, as dicts.
-
-        >>> from slr_sql.store import EventStore
-        >>> EventStore(None).buffer_rows()
-        []
-        """
-        where = " WHERE b.removed_at IS NULL" if active_only else ""
-        with self.db.lock:
-            self.db.check_open()
-            cursor = self.db.conn.execute(
-                "SELECT b.id, b.kind, b.source, b.pattern_text, b.type_name, b.type_arity, "
-                "b.amount, b.t1, b.t2, b.origin, b.cutoff, b.created_at, b.removed_at, "
-                "coalesce(c.pruned, 0) AS pruned, coalesce(c.dropped, 0) AS dropped "
-                "FROM slr_buffers b LEFT JOIN slr_counters c ON c.buffer_id = b.id"
-                f"{where} ORDER BY b.id")
-            names = [d[0] for d in cursor.description]
-            return [dict(zip(names, row)) for row in cursor.fetchall()]
-
-    def has_active_buffer(self, kind: str) -> bool:
-        """Whether a buffer of ``kind`` (``"tBuffer"``, ``"cBuffer"``, ...) is active, in any
-        process (one probe of a table of a few rows: asked at every clock move).
-
-        >>> from slr_sql.store import EventStore
-        >>> EventStore(None).has_active_buffer("tBuffer")
-        False
-        """
-        with self.db.lock:
-            self.db.check_open()
-            return self.db.conn.execute(
-                "SELECT 1 FROM slr_buffers WHERE kind = ? AND removed_at IS NULL LIMIT 1",
-                (kind,)).fetchone() is not None
-
-    def insert_buffer(self, kind: str, source: str, pattern_text: str, type_name: str,
-                      type_arity: int, amount: float | None, t1: float | None,
-                      t2: float | None, origin: str) -> int:
-        """Add a row to ``slr_buffers`` (and its counters); returns the new buffer id."""
-        with self.db.transaction():
-            cursor = self.db.conn.execute(
-                "INSERT INTO slr_buffers (kind, source, pattern_text, type_name, type_arity, "
-                "amount, t1, t2, origin, created_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?) "
-                "RETURNING id",
-                (kind, source, pattern_text, type_name, type_arity, amount, t1, t2, origin,
-                 float(self.db.clock.now())))
-            buffer_id = cursor.fetchone()[0]
-            self.db.conn.execute(self.db.dialect.insert_ignore("slr_counters", "buffer_id", "?"),
-                                 (buffer_id,))
-            return buffer_id
-
-    def mark_buffer_removed(self, buffer_id: int) -> None:
-        """Deactivate a buffer (its row and counters stay, for statistics)."""
-        with self.db.transaction():
-            self.db.conn.execute("UPDATE slr_buffers SET removed_at = ? WHERE id = ?",
-                                 (float(self.db.clock.now()), int(buffer_id)))
-
-    def count_buffer(self, buffer_id: int, pruned: int = 0, dropped: int = 0) -> None:
-        """Add to a buffer's counters."""
-        with self.db.transaction():
-            self.db.conn.execute("UPDATE slr_counters SET pruned = pruned + ?, "
-                                 "dropped = dropped + ? WHERE buffer_id = ?",
-                                 (int(pruned), int(dropped), int(buffer_id)))
-
-    def set_buffer_cutoff(self, buffer_id: int, cutoff: float) -> None:
-        """Record the time before which a buffer has dropped events."""
-        with self.db.transaction():
-            self.db.conn.execute("UPDATE slr_buffers SET cutoff = ? WHERE id = ?",
-                                 (float(cutoff), int(buffer_id)))
-
-    def buffer_objects(self, buffer_id: int) -> dict[str, str]:
-        """The triggers and indexes of one buffer: ``{name: sql}``."""
-        if self.db.dialect.name != "sqlite":
-            return {}   # no buffer objects elsewhere yet (install_buffer_objects)
-        with self.db.lock:
-            self.db.check_open()
-            rows = self.db.conn.execute(
-                "SELECT name, sql FROM sqlite_master WHERE type IN ('trigger', 'index') "
-                "AND (name LIKE ? ESCAPE '!' OR name = ?)",
-                (f"slr!_buf!_{int(buffer_id)}!_%", f"slr_bix_{int(buffer_id)}")).fetchall()
-        return {name: sql for name, sql in rows}
-
-    def install_buffer_objects(self, buffer_id: int, statements: dict[str, str]) -> bool:
-        """Make the triggers/indexes of ``buffer_id`` exactly ``statements`` (``{name: CREATE
-        ...}``): objects whose SQL differs are re-created, missing ones created, others
-        dropped. Returns True if anything changed."""
-        if statements and self.db.dialect.name != "sqlite":
-            raise SLRError("buffers (tBuffer, cBuffer, windows) are not available on "
-                           f"{self.db.dialect.name} stores yet: their triggers are SQLite's")
-        with self.db.transaction():
-            existing = self.buffer_objects(buffer_id)
-            changed = False
-            for name, sql in existing.items():
-                if statements.get(name) != sql:
-                    kind = "INDEX" if name.startswith("slr_bix_") else "TRIGGER"
-                    self.db.conn.execute(f"DROP {kind} IF EXISTS {quote_identifier(name)}")
-                    changed = True
-            for name, sql in statements.items():
-                if existing.get(name) != sql:
-                    self.db.conn.execute(sql)
-                    changed = True
-            return changed
-
-    def drop_buffer_objects(self, buffer_id: int) -> None:
-        """Drop every trigger and index of one buffer."""
-        self.install_buffer_objects(buffer_id, {})
-
-    def prune(self, sql: str, buffer_id: int) -> int:
-        """Run one buffer's DELETE statement (generated by slr_sql.buffers; constants in it
-        come from :func:`sql_literal`) and add the deleted rows to its ``pruned`` counter."""
-        with self.db.transaction():
-            deleted = self.db.conn.execute(sql).rowcount
-            if deleted > 0:
-                self.db.conn.execute("UPDATE slr_counters SET pruned = pruned + ? "
-                                     "WHERE buffer_id = ?", (deleted, int(buffer_id)))
-            return max(deleted, 0)

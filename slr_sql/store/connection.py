@@ -38,7 +38,7 @@ from .authorizer import READ_ONLY_RESULT_BYTES, READ_ONLY_VALUE_BYTES, SqlGuard,
 from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
 from .dialect import SQLITE
 from .schema import migrate, migration_scripts
-from .sqltext import busy_error, split_sql_script, store_error
+from .sqltext import bound_parameters, busy_error, split_sql_script, store_error
 
 __all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "run_sql_file", "check_file"]
@@ -375,6 +375,19 @@ class Database:
         with self.lock:
             return {row[0].lower() for row in self.conn.execute("SELECT name FROM sqlite_master")}
 
+    def view_statements(self, names: Iterable[str]) -> dict[str, str]:
+        """``{view name: the statement that creates it}`` of the named views that exist.
+
+        >>> db = Database(None); _ = db.execute("CREATE VIEW answer AS SELECT 42 AS x")
+        >>> db.view_statements(["answer", "nothing"])
+        {'answer': 'CREATE VIEW answer AS SELECT 42 AS x'}
+        """
+        wanted = list(names)
+        with self.lock:
+            rows = self.conn.execute("SELECT name, sql FROM sqlite_master WHERE type = 'view'")
+            found = {name: sql for name, sql in rows}
+        return {name: found[name] for name in wanted if name in found}
+
     @property
     def max_columns(self) -> int:
         """The most columns a table may have (SQLite's compile-time limit)."""
@@ -601,7 +614,7 @@ class Database:
             if write:
                 with self._deadline(deadline, "the SQL statement"):
                     try:
-                        cursor = conn.execute(query, tuple(params))
+                        cursor = conn.execute(query, bound_parameters(params))
                         columns = [d[0] for d in cursor.description] if cursor.description else []
                         return columns, cursor.fetchall()
                     except sqlite3.DatabaseError as exc:
@@ -617,7 +630,7 @@ class Database:
             longest = conn.setlimit(sqlite3.SQLITE_LIMIT_LENGTH, READ_ONLY_VALUE_BYTES)
             try:
                 with self._deadline(deadline, "the SQL statement"):
-                    cursor = conn.execute(query, tuple(params))
+                    cursor = conn.execute(query, bound_parameters(params))
                     columns = [d[0] for d in cursor.description] if cursor.description else []
                     return columns, _bounded_rows(cursor)
             except sqlite3.DatabaseError as exc:
@@ -736,6 +749,24 @@ class Database:
                     return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
                 finally:
                     cursor.close()
+
+    def run_compiled_many(self, sql: str, rows: list) -> None:
+        """Run a compiled writing statement once per row of parameters (dicts for named
+        parameters, tuples for ``?``), in the current transaction.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.run_compiled("CREATE TABLE t (x)", {})
+        []
+        >>> s.run_compiled_many("INSERT INTO t VALUES (:x)", [{"x": 1}, {"x": 2}])
+        >>> s.run_compiled("SELECT sum(x) FROM t", {})
+        [(3,)]
+        """
+        with self.lock:
+            self.check_open()
+            try:
+                self.conn.executemany(sql, rows)
+            except sqlite3.OperationalError as exc:
+                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
 
     @contextmanager
     def _deadline(self, deadline: float | None, what: str) -> Iterator[None]:
@@ -891,3 +922,4 @@ def run_sql_file(path: str | os.PathLike, query: str,
         raise SLRError(f"sql: {text}") from None
     finally:
         conn.close()
+

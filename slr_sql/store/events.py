@@ -123,11 +123,15 @@ class EventWriter:
             if ends is not None:
                 events.ends = ends
             return errors
-        with self.db.transaction():
+        server = self.db.dialect.to_column is not None
+        if server:
             arrival = float(self.db.clock.now())
-            if self.db.dialect.to_column is None:
-                # buffers: "now" for the buffer triggers (SQLite's only: on a
-                # server every writer would wait for the one row's lock)
+            if self.db.tbuffers_active is not False:
+                self._record_now_for_tbuffers(arrival)
+        with self.db.transaction():
+            if not server:
+                arrival = float(self.db.clock.now())
+                # buffers: "now" for the buffer triggers, in the add's transaction
                 self.record_now(arrival)
             for base, chunk in _chunks(events):
                 if not self._insert_uniform(chunk, arrival, ends):
@@ -178,7 +182,7 @@ class EventWriter:
         event_type = self.tables.types.get((name, arity))
         if event_type is None:
             try:
-                event_type = self._type_for_new_event(name, arity)
+                event_type = self.type_for_new_event(name, arity)
             except BadEvent:
                 return False
         to_column = self.db.dialect.to_column
@@ -215,6 +219,7 @@ class EventWriter:
         insert_sql = attrgetter("insert_sql" if with_robot else "insert_unnamed_sql")
         rows: list = []
         append = rows.append
+        by_type: dict[EventType, list] | None = {} if to_column is not None else None
         current_name: Any = None
         current_arity = -1
         current_type: EventType | None = None
@@ -238,34 +243,53 @@ class EventWriter:
                 else:
                     row = (*map(enc, args), start, end, *tail)
                 if arity != current_arity or name != current_name:
-                    if rows:
+                    if rows and by_type is None:
                         executemany(insert_sql(current_type), rows)
                         if ends is not None:
                             _widen_by_rows(ends, current_type, rows, with_robot)
                         rows = []
                         append = rows.append
                     current_type = (isinstance(name, str) and types.get((name, arity))
-                                    or self._type_for_new_event(name, arity))
+                                    or self.type_for_new_event(name, arity))
                     current_name = name
                     current_arity = arity
+                    if by_type is not None:
+                        rows = by_type.setdefault(current_type, [])
+                        append = rows.append
                 append(row)
             except (BadEvent, Unencodable) as exc:
                 error = self._rejection(index, event, exc)
                 if atomic:
                     raise error from None
                 errors.append(error)
-        if rows:
+        if by_type is not None:
+            # a server: one statement per table, each table's rows in their order (what a
+            # table's seq, its triggers and its journal see is the same as run by run;
+            # tables do not see each other's rows), not one round trip per run of a type
+            with self.db.conn.pipeline(max(map(len, by_type.values()), default=0)):
+                for event_type, typed_rows in by_type.items():
+                    executemany(insert_sql(event_type), typed_rows)
+            if ends is not None:
+                for event_type, typed_rows in by_type.items():
+                    _widen_by_rows(ends, event_type, typed_rows, with_robot)
+        elif rows:
             executemany(insert_sql(current_type), rows)
             if ends is not None:
                 _widen_by_rows(ends, current_type, rows, with_robot)
 
-    def _type_for_new_event(self, name: Any, arity: int) -> EventType:
+    def type_for_new_event(self, name: Any, arity: int) -> EventType:
+        """The event type ``name/arity`` an event about to be written goes to, its table
+        created on first sight; :class:`BadEvent` (with the reason) when the name cannot be
+        stored, the arity is too large, or a declaration names other arities."""
         if not isinstance(name, str):
             raise BadEvent(f"event name must be an atom, not {shown(name)}")
         name = str(name)
         problem = text_problem(name)
         if problem:
             raise BadEvent(f"the event name cannot be stored: {problem}")
+        if "\x00" in name and not self.db.dialect.text_holds_nul:
+            raise BadEvent("the event name cannot be stored: PostgreSQL text cannot hold the "
+                           "character U+0000 (an argument can: it is stored escaped)")
         if arity > self.tables.max_arity:
             raise BadEvent(f"too many arguments: {arity} (an event has at most "
                            f"{self.tables.max_arity}, the column limit of SQLite)")
@@ -324,6 +348,20 @@ class EventWriter:
                 return
         with self.db.transaction():
             self.db.conn.execute(sql, (now, now))
+
+    def _record_now_for_tbuffers(self, now: float) -> None:
+        """On a server: record ``now`` before an add, only while a tBuffer is active (its
+        triggers read it), as a statement of its own outside the add's transaction (one row
+        that every writer would otherwise hold locked until its commit). Skipped while the
+        last read of the versions found no tBuffer (``db.tbuffers_active`` False: a knowledge
+        base reads them whenever another connection may have committed)."""
+        if now != now:
+            return
+        with self.db.lock:
+            self.db.check_open()
+            self.db.conn.execute(
+                "UPDATE slr_clock SET now = ? WHERE id = 1 AND now <> ? AND EXISTS (SELECT 1 "
+                "FROM slr_buffers WHERE kind = 'tBuffer' AND removed_at IS NULL)", (now, now))
 
     def recorded_now(self) -> float:
         """The "now" buffer triggers currently use (``-inf`` before the first record).

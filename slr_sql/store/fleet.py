@@ -17,7 +17,7 @@ from typing import Any
 from ..encoding import encode
 from ..errors import SLRError
 from ..terms import Atom
-from .checks import text_problem
+from .checks import BadEvent, text_problem
 from .connection import Database
 from .events import EventWriter
 from .tables import EventTables
@@ -186,7 +186,11 @@ class Fleet:
                 # as an add: the fleet store's clock is the rows' arrival (and its "now")
                 arrival = float(self.db.clock.now())
                 self.writer.record_now(arrival)
-                event_type = self.writer._type_for_new_event(name, arity)
+                try:
+                    event_type = self.writer.type_for_new_event(name, arity)
+                except BadEvent as exc:
+                    raise SLRError(f"the fleet store refused {name}/{arity} of robot "
+                                   f"{robot!r}: {exc}") from None
                 end = 1 + arity + 2
                 dialect = self.db.dialect
                 if dialect.name != "sqlite" and arity:  # rows come as SQLite stores them

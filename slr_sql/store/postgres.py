@@ -32,7 +32,7 @@ from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 from ..errors import SLRBusy, SLRError, SLRServerUnreachable, SLRTimeout
 from .dialect import POSTGRES
 from .schema import postgres_migration_scripts
-from .sqltext import quote_identifier
+from .sqltext import bound_parameters, quote_identifier
 
 __all__ = ["PgDatabase", "PgStatementError", "is_postgres_url", "split_url"]
 
@@ -116,6 +116,10 @@ def _first_line(exc: BaseException) -> str:
     return text.splitlines()[0] if text else type(exc).__name__
 
 
+# Fewer rows go in by executemany, which psycopg pipelines into one round trip; COPY takes
+# two (its start is answered before the data goes), and wins only on many rows.
+_COPY_FROM = 64
+
 # INSERT INTO "table" (columns) VALUES (?, ...): nothing but values, so COPY does the same
 _PLAIN_INSERT = re.compile(r'INSERT INTO ("(?:[^"]|"")+"|[A-Za-z_][A-Za-z0-9_]*) '
                            r'\(([A-Za-z0-9_, ]+)\) VALUES \(\?(?:, \?)*\)\Z')
@@ -160,6 +164,33 @@ class PgConnection:
         # set by PgDatabase: open a new connection, and whether a transaction is open
         self.reopen: Callable[[], Any] | None = None
         self.in_transaction: Callable[[], bool] = lambda: False
+        # a BEGIN not sent yet: it goes with the transaction's first statement, in one
+        # round trip (a transaction that runs nothing sends nothing)
+        self.begin_pending = False
+
+    def begin(self) -> None:
+        """Open a transaction with the next statement."""
+        self.begin_pending = True
+
+    def send_begin(self) -> None:
+        """Send a pending BEGIN now (before a statement that cannot go with it)."""
+        if self.begin_pending:
+            self._alive()
+            self.begin_pending = False
+            self._guard(lambda: self.raw.execute("BEGIN"))
+
+    def _with_begin(self, call: Callable[[], Any]) -> Callable[[], Any]:
+        """``call`` preceded by the pending BEGIN in one pipeline (one round trip)."""
+        if not self.begin_pending:
+            return call
+        self.begin_pending = False
+        raw = self.raw
+
+        def both() -> Any:
+            with raw.pipeline():
+                raw.execute("BEGIN")
+                return call()
+        return both
 
     def _alive(self) -> None:
         """A connection the server dropped (a restart, a terminated backend) is opened
@@ -187,7 +218,11 @@ class PgConnection:
             args = tuple(params) if params else None
         self._alive()
         cursor = self.raw.cursor()
-        self._guard(lambda: cursor.execute(text, args, prepare=None))
+        if self.begin_pending and sql in ("COMMIT", "ROLLBACK"):
+            self.begin_pending = False   # nothing was sent: nothing to end
+            self.last_rowcount = 0
+            return PgCursor(cursor, self)
+        self._guard(self._with_begin(lambda: cursor.execute(text, args, prepare=None)))
         self.last_rowcount = cursor.rowcount
         return PgCursor(cursor, self)
 
@@ -196,7 +231,8 @@ class PgConnection:
         self._alive()
         cursor = self.raw.cursor()
         plain = _PLAIN_INSERT.match(sql)
-        if plain is not None and len(rows) > 1:
+        if plain is not None and len(rows) > _COPY_FROM:
+            self.send_begin()   # (COPY does not go in a pipeline)
             # many rows into one table: COPY (one stream) rather than one INSERT per row
             def copy() -> None:
                 with cursor.copy(f"COPY {plain.group(1)} ({plain.group(2)}) FROM STDIN") as out:
@@ -207,7 +243,35 @@ class PgConnection:
             return PgCursor(cursor, self)
         text = POSTGRES.statement(sql)
         if rows:
-            self._guard(lambda: cursor.executemany(text, rows))
+            self._guard(self._with_begin(lambda: cursor.executemany(text, rows)))
+        self.last_rowcount = cursor.rowcount
+        return PgCursor(cursor, self)
+
+    @contextmanager
+    def pipeline(self, rows: int) -> Iterator[None]:
+        """Send the statements of the block together, in one round trip (psycopg's
+        pipeline mode), when none of them copies: each of at most ``rows`` rows."""
+        if rows > _COPY_FROM:
+            yield
+            return
+        self._alive()
+        psycopg = _psycopg()
+        try:
+            with self.raw.pipeline():
+                if self.begin_pending:
+                    self.begin_pending = False
+                    self.raw.execute("BEGIN")
+                yield
+        except psycopg.Error as exc:
+            raise _error(exc, self.where, self.busy_timeout) from None
+
+    def execute_script(self, sql: str) -> PgCursor:
+        """Run SQL text exactly as written (no parameters: DDL, trigger functions whose
+        bodies hold ``%``, ``?`` or ``:`` of their own); several statements may be given."""
+        self.send_begin()
+        self._alive()
+        cursor = self.raw.cursor()
+        self._guard(lambda: cursor.execute(sql, None, prepare=False))
         self.last_rowcount = cursor.rowcount
         return PgCursor(cursor, self)
 
@@ -219,6 +283,9 @@ class PgConnection:
     def rollback(self) -> None:
         """ROLLBACK, if the connection still works (a dropped connection's transaction is
         rolled back by the server)."""
+        if self.begin_pending:
+            self.begin_pending = False
+            return
         with suppress(_psycopg().Error):
             self.raw.execute("ROLLBACK")
 
@@ -282,6 +349,8 @@ class PgDatabase:
         self.busy_timeout = busy_timeout
         self.notify_channel = f"slr_{schema}"
         self.write_groups: dict[tuple[str, int], int] = {}
+        # whether a tBuffer is active, as of the last read of the versions (None: unknown)
+        self.tbuffers_active: bool | None = None
         try:
             raw = psycopg.connect(conninfo, autocommit=True)
         except psycopg.Error as exc:
@@ -415,6 +484,16 @@ class PgDatabase:
                 "SELECT c.relname FROM pg_class c JOIN pg_namespace n ON n.oid = c.relnamespace "
                 "WHERE n.nspname = current_schema()")}
 
+    def view_statements(self, names: Iterable[str]) -> dict[str, str]:
+        """``{view name: the statement that creates it}`` of the named views of the schema."""
+        wanted = list(names)
+        with self.lock:
+            rows = self.conn.execute(
+                "SELECT viewname, definition FROM pg_views WHERE schemaname = current_schema()")
+            found = {name: select for name, select in rows}
+        return {name: f"CREATE VIEW {quote_identifier(name)} AS {found[name]}"
+                for name in wanted if name in found}
+
     max_columns = 1600
 
     def suspend_streams(self) -> None:
@@ -448,7 +527,7 @@ class PgDatabase:
             conn = self.conn
             if depth == 0:
                 self.suspend_streams()
-                conn.execute("BEGIN")
+                conn.begin()
             else:
                 conn.execute(f"SAVEPOINT slr_sp{depth}")
             self.tx_depth = depth + 1
@@ -486,16 +565,24 @@ class PgDatabase:
         unless ``write``; ``timeout`` seconds as ``statement_timeout``."""
         with self.lock:
             self.check_open()
-            raw = self.conn.raw
             psycopg = _psycopg()
             own = self.tx_depth == 0
+            if not own:
+                self.conn.send_begin()
+            raw = self.conn.raw
             try:
                 if own:
                     raw.execute("BEGIN" if write else "BEGIN READ ONLY")
                 if timeout is not None:
                     raw.execute(f"SET LOCAL statement_timeout = {max(1, int(timeout * 1000))}")
                 cursor = raw.cursor()
-                cursor.execute(query, tuple(params) or None, prepare=False)
+                # the API's placeholders (`?`, `:name`) in psycopg's style, as on SQLite;
+                # without parameters the text goes as written (a `%` stays a `%`)
+                bound = bound_parameters(params)
+                if bound:
+                    cursor.execute(self.dialect.statement(query), bound, prepare=False)
+                else:
+                    cursor.execute(query, None, prepare=False)
                 columns = [d.name for d in cursor.description] if cursor.description else []
                 rows = [tuple(r) for r in cursor.fetchall()] if cursor.description else []
                 if own:
@@ -587,6 +674,12 @@ class PgDatabase:
             if own:
                 self.conn.execute("COMMIT")
             return rows
+
+    def run_compiled_many(self, sql: str, rows: list) -> None:
+        with self.lock:
+            self.check_open()
+            for row in rows:
+                self.conn.execute(sql, row)
 
     def _outer(self, deadline: float | None) -> float | None:
         outer = self.deadline

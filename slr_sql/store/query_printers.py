@@ -126,7 +126,7 @@ class SQLiteQueryPrinter:
 
 
 class PostgresQueryPrinter:
-    """PostgreSQL: typed text values, plpgsql functions of migration ``pg_0008``.
+    """PostgreSQL: typed text values, plpgsql functions of migration ``pg_0009``.
 
     >>> from slr_sql.store.dialect import POSTGRES
     >>> POSTGRES.answer("t0.t_end", "float"), POSTGRES.inner_json("t0.t_end", "float")

@@ -5,7 +5,9 @@ migrations an open applies run in one transaction (all or nothing), whatever the
 numbering; ``PRAGMA user_version`` holds the highest number applied. A database written by a
 newer slr_sql (a higher number than the last script) is refused rather than guessed at.
 A statement naming ``{event_table}`` runs once per event table (``0006_robots.sql`` adds the
-``robot`` column to the tables a store already has).
+``robot`` column to the tables a store already has); a change SQL cannot spell as one statement
+per table runs as a Python step after its script (``0007_sequences.sql`` rebuilds every event
+table with a never-reused ``seq``).
 """
 from __future__ import annotations
 
@@ -80,6 +82,47 @@ def _per_event_table(conn: sqlite3.Connection, statement: str) -> list[str]:
     return [statement.replace("{event_table}", quote_identifier(t)) for t in tables]
 
 
+def _never_reused_sequences(conn: sqlite3.Connection) -> None:
+    """Rebuild every event table whose ``seq`` is a plain ``INTEGER PRIMARY KEY`` with
+    ``AUTOINCREMENT``, keeping its rows (sequences included), indexes and triggers: SQLite
+    cannot add AUTOINCREMENT to a table in place (the documented copy, drop, rename)."""
+    tables = [row[0] for row in conn.execute("SELECT table_name FROM slr_event_types")]
+    for table in tables:
+        row = conn.execute("SELECT sql FROM sqlite_master WHERE type = 'table' AND name = ?",
+                           (table,)).fetchone()
+        if row is None or re.search(r"\bAUTOINCREMENT\b", row[0], re.IGNORECASE):
+            continue
+        info = conn.execute(f"PRAGMA table_info({quote_identifier(table)})").fetchall()
+        columns = [(name, kind, notnull) for _, name, kind, notnull, _, _ in info]
+        if not columns or columns[0][0] != "seq":
+            continue
+        definitions = ["seq INTEGER PRIMARY KEY AUTOINCREMENT"] + [
+            f"{quote_identifier(name)}{' ' + kind if kind else ''}"
+            f"{' NOT NULL' if notnull else ''}" for name, kind, notnull in columns[1:]]
+        names = ", ".join(quote_identifier(name) for name, _, _ in columns)
+        others = conn.execute("SELECT sql FROM sqlite_master WHERE tbl_name = ? AND type IN "
+                              "('index', 'trigger') AND sql IS NOT NULL ORDER BY type, name",
+                              (table,)).fetchall()
+        new = quote_identifier(f"slr_rebuild__{table}")
+        conn.execute(f"CREATE TABLE {new} ({', '.join(definitions)})")
+        conn.execute(f"INSERT INTO {new} ({names}) SELECT {names} FROM "
+                     f"{quote_identifier(table)} ORDER BY seq")
+        conn.execute(f"DROP TABLE {quote_identifier(table)}")
+        # legacy renaming: views and other tables' triggers (a buffer's tick on slr_clock)
+        # name the table, which does not exist between the drop and the rename
+        conn.execute("PRAGMA legacy_alter_table = ON")
+        try:
+            conn.execute(f"ALTER TABLE {new} RENAME TO {quote_identifier(table)}")
+        finally:
+            conn.execute("PRAGMA legacy_alter_table = OFF")
+        for (sql,) in others:
+            conn.execute(sql)
+
+
+# (SQL cannot loop over tables and read their definitions: these steps run after their file)
+_PYTHON_STEPS = {"0007_sequences.sql": _never_reused_sequences}
+
+
 def migrate(conn: sqlite3.Connection, path: str | None,
             scripts: list[tuple[int, str, str]] | None = None) -> None:
     """Apply the migrations ``conn`` has not seen yet (``path`` names the file in errors).
@@ -119,6 +162,9 @@ def migrate(conn: sqlite3.Connection, path: str | None,
                 for statement in split_sql_script(text):
                     for each in _per_event_table(conn, statement):
                         conn.execute(each)
+                step = _PYTHON_STEPS.get(filename)
+                if step is not None:
+                    step(conn)
             except sqlite3.Error as exc:
                 raise SLRError(f"{path}: migration {filename} failed ({exc}); the file is "
                                "left as it was") from None

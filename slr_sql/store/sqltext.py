@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import re
 import sqlite3
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 from ..errors import SLRBusy, SLRError, SLRStoreFull
@@ -179,3 +180,16 @@ def split_sql_script(script: str) -> list[str]:
 def _has_sql(text: str) -> bool:
     stripped = re.sub(r"--[^\n]*|/\*.*?\*/", "", text, flags=re.S)
     return stripped.strip(" \t\r\n;") != ""
+
+
+def bound_parameters(params: Iterable[Any] | Mapping[str, Any]) -> tuple[Any, ...] | dict[str, Any]:
+    """``kb.sql``'s parameters as a driver takes them: a mapping (for ``:name`` placeholders)
+    stays a mapping, anything else becomes a tuple (for ``?``); a mapping must not become
+    the tuple of its keys.
+
+    >>> bound_parameters({"x": 1}), bound_parameters([1, 2])
+    ({'x': 1}, (1, 2))
+    """
+    if isinstance(params, Mapping):
+        return dict(params)
+    return tuple(params)

@@ -4,7 +4,7 @@ A type's table is named after the event when that is a plain SQL identifier (``s
 otherwise a sanitized unique name (``seg__3``, ``ev_my_event``); ``slr_event_types`` holds
 the mapping. Columns::
 
-    seq      INTEGER PRIMARY KEY   -- arrival sequence (the rowid)
+    seq      INTEGER PRIMARY KEY AUTOINCREMENT  -- arrival sequence (the rowid), never reused
     arg1..N                        -- data arguments, encoded by slr_sql.encoding
     t_start  REAL NOT NULL
     t_end    REAL NOT NULL
@@ -100,6 +100,8 @@ class EventTables:
     def lookup(self, name: str, arity: int) -> EventType | None:
         """The type name/arity, or None if it has no table (lock held by the caller)."""
         event_type = self.types.get((name, arity))
+        if event_type is None and "\x00" in name and not self.db.dialect.text_holds_nul:
+            return None   # a name this database cannot hold was never stored
         if event_type is None:
             # another connection (process) may have created it since we last looked
             row = self.db.conn.execute(
@@ -157,7 +159,7 @@ class EventTables:
         arg_columns = "".join(f", arg{i}{dialect.value}" for i in range(1, arity + 1))
         conn = self.db.conn
         real = dialect.real
-        conn.execute(f"CREATE TABLE {event_type.quoted} (seq {dialect.integer_key}{arg_columns}, "
+        conn.execute(f"CREATE TABLE {event_type.quoted} (seq {dialect.sequence_key}{arg_columns}, "
                      f"t_start {real} NOT NULL, t_end {real} NOT NULL, arrival {real} NOT NULL, "
                      "robot TEXT)")
         conn.execute(f"CREATE INDEX {event_type.index_end} ON {event_type.quoted} (t_end, t_start)")

@@ -1,0 +1,11 @@
+-- slr_sql schema, version 7: an event's sequence is never handed out twice (SPEC §10,
+-- docs/fleet.md).
+--
+-- An event table's seq was a plain INTEGER PRIMARY KEY: SQLite gives a new row the greatest
+-- seq + 1, so once a buffer deleted a type's newest rows (a tBuffer emptying the table of
+-- a robot that was idle), the next events took sequences a fleet store already held, and
+-- shipping (idempotent by robot and sequence) skipped them. Every event table is rebuilt
+-- with seq INTEGER PRIMARY KEY AUTOINCREMENT (rows, sequences, indexes and buffer triggers
+-- kept): slr_sql.store.schema runs that step after this file, as SQL has no loop over
+-- tables; tables created from now on have AUTOINCREMENT from the start.
+SELECT 1;

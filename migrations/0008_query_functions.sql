@@ -1,4 +1,0 @@
--- Version 8: nothing to change on SQLite. PostgreSQL's migration 8 installs the functions
--- its compiled queries call (pg_0008_query_functions.sql); SQLite's compiled queries call
--- Python functions that slr_sql registers on each connection (slr_sql/planner.py).
-SELECT 1;

