@@ -46,7 +46,7 @@ def _schema(url: str, prefix: str) -> str:
 
 
 def _plan(kb, goal: str, at=None):
-    return plan_for(kb, kb._plan(goal, ()), at is not None)
+    return plan_for(kb, kb.plans.plan(goal, ()), at is not None)
 
 
 # ------------------------------------------------------------------ the differential contract

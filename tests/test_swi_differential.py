@@ -771,7 +771,7 @@ def check_example(example: tuple, swi: dict[int, dict], where: str | None = None
             theirs = swi[qi]
             if plans is not None:
                 try:
-                    plans.append(plan_for(kb, kb._plan(q, ()), False))
+                    plans.append(plan_for(kb, kb.plans.plan(q, ()), False))
                 except slr_sql.errors.SLRError:
                     pass
             if len(theirs["answers"]) > MAX_ANSWERS:
