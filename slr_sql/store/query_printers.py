@@ -208,7 +208,7 @@ class PostgresQueryPrinter:
         raise Unprintable("matching the parts of a stored list or compound runs in the "
                           "interpreter on PostgreSQL")
 
-    json_part = json_text = json_kind = json_length = json_guard  # type: ignore[assignment]
+    json_part = json_text = json_kind = json_length = json_guard
 
     def json_drop(self, text: str, path: str, removes: str) -> str:
         return self.json_guard(text)
