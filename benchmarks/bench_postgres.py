@@ -15,6 +15,12 @@ database per part is created and dropped there). Parts:
 * writers: 1, 4 and 16 processes adding batches of 10 events for a fixed time, to the
   knowledge base (no rules; then with a seq rule on) and with raw psycopg INSERTs (no
   rules): aggregate events/s (``--writers 0`` skips it).
+* compiled: two rules queried with bound arguments on the same store, as one compiled
+  statement (the query printer of the PostgreSQL dialect) and through the interpreter
+  (``kb.sql_enabled = False``), in alternation: a ``prev`` lookup
+  ``at(O, L, T) :- prev(seg(O, L)^_, T)`` and a join of an object's events
+  ``pair(O, A, B) :- seg(O, _)^A, seg(O, _)^B, B > A, B < A + 25.0`` (p50 of each, and the
+  load average of the machine).
 """
 from __future__ import annotations
 
@@ -185,6 +191,43 @@ def writers(admin: str, counts: list[int], seconds: float) -> list[dict]:
     return out
 
 
+def compiled(admin: str, n: int, lookups: int) -> list[dict]:
+    from slr_sql.planner import plan_for
+    url = database(admin, "bench_compiled")
+    out = []
+    with slr_sql.open(url, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.load("at(O, L, T) :- prev(seg(O, L)^_, T).\n"
+                "pair(O, A, B) :- seg(O, _)^A, seg(O, _)^B, B > A, B < A + 25.0.")
+        for i in range(0, n, 10_000):
+            kb.add_many(events(n)[i:i + 10_000])
+        rnd = random.Random(7)
+        for goal in ("at(O, L, T)", "pair(O, A, B)"):
+            asks = [{"O": f"o{rnd.randrange(OBJECTS)}", "T": rnd.uniform(n * 0.002, n * 0.01)}
+                    for _ in range(lookups)]
+            if goal.startswith("pair"):
+                asks = [{"O": a["O"]} for a in asks]
+            plan = plan_for(kb, kb.plans.plan(goal, tuple(asks[0])), False)
+            assert not hasattr(plan, "reason"), plan.reason   # one compiled statement
+            times: dict[bool, list[float]] = {True: [], False: []}
+            for a in asks[:10]:          # warm both paths
+                for sql in (True, False):
+                    kb.sql_enabled = sql
+                    kb.query(goal, args=a)
+            for a in asks:
+                answers = {}
+                for sql in (True, False):
+                    kb.sql_enabled = sql
+                    start = time.perf_counter()
+                    answers[sql] = kb.query(goal, args=a)
+                    times[sql].append(time.perf_counter() - start)
+                assert answers[True] == answers[False]
+            kb.sql_enabled = True
+            sql50, interp50 = statistics.median(times[True]), statistics.median(times[False])
+            out.append({"goal": goal, "sql_p50_us": sql50 * 1e6,
+                        "interp_p50_us": interp50 * 1e6, "speedup": interp50 / sql50})
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--url", default=None)
@@ -206,6 +249,12 @@ def main() -> None:
             print(f"prev lookup ({args.events} events, {r['lookups']} lookups): kb.query p50 "
                   f"{r['kb_p50_us']:.0f} us, raw psycopg p50 {r['raw_p50_us']:.0f} us, ratio "
                   f"{r['ratio']:.2f}")
+        if "compiled" in parts:
+            load = os.getloadavg()
+            for r in compiled(admin, args.events, args.lookups):
+                print(f"compiled {r['goal']:<14} ({args.events} events): SQL p50 "
+                      f"{r['sql_p50_us']:.0f} us, interpreter p50 {r['interp_p50_us']:.0f} us, "
+                      f"{r['speedup']:.1f}x (load average {load[0]:.1f} {load[1]:.1f})")
         counts = [int(c) for c in args.writers.split(",") if c.strip() and int(c)]
         if counts and "writers" in parts:
             for r in writers(admin, counts, args.seconds):

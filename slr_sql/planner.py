@@ -37,6 +37,7 @@ from .program import Slot, Template, build
 from .sqlcompile import SITES, Col, ColRef, Compiler, Fallback, Part, resolve
 from .errors import SLRBusy
 from .store import DatabaseError
+from .store.dialect import Unprintable
 from .terms import Atom, Struct, Var, deref, from_python, int_text, list_items, make_list, \
     to_python
 
@@ -220,6 +221,7 @@ class _Ctx:
         self.det = kb.engine.det
         self.nondet = kb.engine.nondet
         self.python_preds = kb.engine.python_preds
+        self.dialect = kb.store.dialect
         self.state = state
 
     def event_table(self, name, n):
@@ -369,6 +371,7 @@ class SqlPlan:
         """Bind the parameters (``values``: answer variable name -> term), run the guards,
         then the statement."""
         params = self.params
+        dialect = kb.store.dialect
         if self.arg_params or self.has_at or self.has_robot:
             params = dict(params)
             if self.has_robot:
@@ -384,11 +387,20 @@ class SqlPlan:
             t = type(params[name])
             if t is not int and t is not float:
                 raise TypeError(f"argument :{name} is not a number")  # -> the interpreter
+        to_column = dialect.to_column
+        if to_column is not None and self.arg_params:
+            # (after the checks above, which read the encoded values)
+            for pname in self.arg_params.values():
+                params[pname] = to_column(params[pname])
         for guard in self.guards:
             kb.store.run_compiled(guard, params, None, deadline)
         if self.sql is None:
             return []
-        return kb.store.run_compiled(self.sql, params, limit, deadline)
+        rows = kb.store.run_compiled(self.sql, params, limit, deadline)
+        from_column = dialect.from_column
+        if from_column is not None:   # answer columns are the columns' text there
+            rows = [(row[0],) + tuple([from_column(v) for v in row[1:]]) for row in rows]
+        return rows
 
     def run(self, kb, args, at, limit, deadline=None, robot=None):
         values = {name: from_python(args[name]) for name in self.arg_params}
@@ -538,11 +550,13 @@ def compile_goal(kb, plan, has_at: bool, robot: bool = False) -> SqlPlan:
                 if i is None:
                     i = index[t.sql] = len(cols)
                     cols.append(t.sql)
+                    printed.append(comp.dialect.answer(t.sql, t.kind))
                 return ColRef(i)
             if type(t) is Struct:
                 return Struct(t.name, tuple(recipe(a) for a in t.args))
             return t
 
+        printed: list[str] = []
         values = [(name, resolve(frame[slot])) for name, slot in names]
         free = [id(v) for _, v in values if type(v) is Var]
         recipes = []
@@ -559,10 +573,10 @@ def compile_goal(kb, plan, has_at: bool, robot: bool = False) -> SqlPlan:
         conds = list(st.conds)
         st.branches.append((list(st.froms), list(conds), frozenset(st.live)))
         conds += sqlcompile.unused_checks(st.checks, conds + st.keys + cols)
-        parts.append(Part(list(st.froms), conds, list(st.keys), cols, recipes))
+        parts.append(Part(list(st.froms), conds, list(st.keys), printed, recipes))
 
     comp.compile(goal, emit)
-    guards = sqlcompile.guards(comp.state.raising, comp.state.branches)
+    guards = sqlcompile.guards(comp.state.raising, comp.state.branches, comp.dialect)
     if not parts:
         sql = None
     else:
@@ -626,6 +640,8 @@ def plan_for(kb, plan, has_at: bool, robot: bool = False):
         entry = compile_goal(kb, plan, has_at, robot)
     except Fallback as exc:
         entry = exc
+    except Unprintable as exc:   # this engine's SQL has no exact form of a part of it
+        entry = Fallback(exc.reason)
     except RecursionError:
         entry = Fallback("the goal is nested too deeply to compile")
     except (ValueError, OverflowError) as exc:  # e.g. an integer constant beyond 64 bits
@@ -635,10 +651,10 @@ def plan_for(kb, plan, has_at: bool, robot: bool = False):
 
 
 def compiles_for(store) -> bool:
-    """Whether the SQL compiler's statements run on ``store``: they are printed for SQLite
-    and call Python functions (``slr_j``, the aggregates, ``slr_det``); on another engine
-    the interpreter answers every goal (through the store's indexed lookups)."""
-    return store.dialect.name == "sqlite"
+    """Whether the SQL compiler's statements run on ``store``: its dialect prints them
+    (SQLite and PostgreSQL do; a goal part of which one cannot print exactly, such as a
+    Python function on PostgreSQL, falls back to the interpreter goal by goal)."""
+    return hasattr(store.dialect, "list_of")
 
 
 def try_sql(kb, plan, args, at, limit=None, deadline=None, robot=None):
@@ -764,8 +780,8 @@ def refresh_views(kb) -> list[str]:
         if (name, arity) in facts:
             views.setdefault(name, kb.store.fact_view_select(facts[(name, arity)], arity))
             continue
-        if not compiles_for(kb.store):
-            continue
+        if not compiles_for(kb.store) or not kb.store.dialect.query_functions:
+            continue   # (views of derived predicates: on SQLite only, see docs/postgres.md)
         sql, _reason, miss = view_sql(kb, name, arity)
         missing |= set(miss)
         if sql is not None and name not in views:

@@ -38,6 +38,7 @@ from hypothesis import HealthCheck, assume, given, settings, strategies as st
 
 import slr_sql
 from slr_sql import Atom, SLREvaluationError, SLRTimeout, Struct, Var
+from slr_sql.planner import plan_for
 
 HAVE_SWIPL = shutil.which("swipl") is not None
 CORPUS_PATH = Path(__file__).parent / "golden" / "swi_differential.json"
@@ -751,8 +752,10 @@ def a_(text: str):
 DISCARDED = "discarded"
 
 
-def check_example(example: tuple, swi: dict[int, dict]) -> str | None:
-    """Run one example through slr_sql and compare with SWI-Prolog's results ``swi``.
+def check_example(example: tuple, swi: dict[int, dict], where: str | None = None,
+                  plans: list | None = None) -> str | None:
+    """Run one example through slr_sql (a store at ``where``) and compare with SWI-Prolog's
+    results ``swi``; ``plans`` gets each query's plan (a compiled one or the fallback).
 
     Returns DISCARDED for an example outside the comparison (a cyclic term, too many
     answers, no termination within the limits), else None; a difference fails.
@@ -760,12 +763,17 @@ def check_example(example: tuple, swi: dict[int, dict]) -> str | None:
     program, events, swi_program, queries = example
     if any(r["cyclic"] for r in swi.values()):
         return DISCARDED
-    with slr_sql.open() as kb, watchdog(30, f"program:\n{program}queries: {queries}"):
+    with slr_sql.open(where) as kb, watchdog(30, f"program:\n{program}queries: {queries}"):
         kb.load(program)
         if events:
             assert kb.add_many([("ev", [a_(a), a_(b)], s, e) for a, b, s, e in events]) == []
         for qi, (q, _, names) in enumerate(queries):
             theirs = swi[qi]
+            if plans is not None:
+                try:
+                    plans.append(plan_for(kb, kb.plans.plan(q, ()), False))
+                except slr_sql.errors.SLRError:
+                    pass
             if len(theirs["answers"]) > MAX_ANSWERS:
                 return DISCARDED
             try:

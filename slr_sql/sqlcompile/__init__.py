@@ -27,6 +27,12 @@ the same IEEE doubles. A function that meets something the interpreter would rej
 error, an integer overflow, a non-ground result) raises, and the query is re-run by the
 interpreter, which raises the proper error or answers.
 
+What differs between engines is printed by the store's dialect (its query printers,
+:mod:`slr_sql.store.query_printers`): ``typeof`` above, the JSON functions, the Python
+functions, answer columns. On PostgreSQL the columns hold typed text, so unification is
+text equality there, and a part the engine cannot compute exactly (a Python function)
+raises ``Unprintable``, which makes the goal a fallback like any other.
+
 Whatever the compiler does not handle exactly raises :class:`Fallback` with the reason.
 Handlers are named ``<kind>_sql``.
 

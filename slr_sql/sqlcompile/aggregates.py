@@ -25,14 +25,15 @@ class AggregateGoals:
         else:
             value = Col(self.list_sql(parts), "text")
         m = st.mark()
-        if type(value) is Col and "slr_" in value.sql:
+        if type(value) is Col and self.dialect.may_raise(value.sql):
             st.checks.append(value.sql)
             st.raised(value.sql, len(st.conds), False)
         if self.unify(out, value, st):
             self.solve(nxt, st, emit)
         st.restore(m)
 
-    def ordered_union(self, parts: list[Part], ncols: int) -> str:
+    def union(self, parts: list[Part]) -> tuple[str, list[str]]:
+        """The branches as one UNION ALL (``v0``, keys ``k0..``) and its ordering keys."""
         width = max(len(p.keys) for p in parts)
         selects = []
         for p in parts:
@@ -40,14 +41,14 @@ class AggregateGoals:
             cols += [f"{k} AS k{i}" for i, k in enumerate(p.keys)]
             cols += [f"NULL AS k{i}" for i in range(len(p.keys), width)]
             selects.append(p.select(cols))
-        sql = " UNION ALL ".join(selects)
-        if width:
-            sql += " ORDER BY " + ", ".join(f"k{i}" for i in range(width))
-        return sql
+        return " UNION ALL ".join(selects), [f"k{i}" for i in range(width)]
+
+    def ordered_union(self, parts: list[Part], ncols: int) -> str:
+        union, keys = self.union(parts)
+        return union + (" ORDER BY " + ", ".join(keys) if keys else "")
 
     def list_sql(self, parts: list[Part]) -> str:
-        return (f"(SELECT '[' || coalesce(group_concat(v0, ','), '') || ']' FROM "
-                f"({self.ordered_union(parts, 1)}))")
+        return self.dialect.list_of(*self.union(parts))
 
     def aggregate_sql(self, g, args, ctx, nxt, st, emit):
         self.record_mode(g)
@@ -68,7 +69,7 @@ class AggregateGoals:
             parts = self.sub_parts(goal, ctx, st, lambda s: ["1"])
             value: Any = 0 if not parts else Col(
                 "(SELECT count(*) FROM (" + " UNION ALL ".join(p.select(["1"]) for p in parts)
-                + "))", "int")
+                + ")" + self.dialect.subquery_alias + ")", "int")
         elif kind in ("bag", "set"):
             parts = self.sub_parts(goal, ctx, st, lambda s: [self.json_sql(resolve(templ))])
             if not parts:
@@ -76,8 +77,9 @@ class AggregateGoals:
             elif kind == "bag":
                 value = Col(self.list_sql(parts), "text")
             else:
-                value = Col(self.udf(f"coalesce((SELECT slr_setof(v0) FROM "
-                                     f"({self.ordered_union(parts, 1)})), '[]')"), "text")
+                value = Col(self.udf(f"coalesce("
+                                     f"{self.dialect.aggregate('slr_setof', self.ordered_union(parts, 1))}"
+                                     f", '[]')"), "text")
         else:
             parts = self.sub_parts(goal, ctx, st, lambda s: [self.num_sql(resolve(templ))])
             fn = {"sum": "slr_sum", "max": "slr_max", "min": "slr_min"}[kind]
@@ -87,7 +89,7 @@ class AggregateGoals:
                 else:
                     return  # max/min of nothing fails
             else:
-                sql = f"(SELECT {fn}(v0) FROM ({self.ordered_union(parts, 1)}))"
+                sql = self.dialect.aggregate(fn, self.ordered_union(parts, 1))
                 if kind == "sum":
                     # a Python aggregate over no rows gives NULL; the sum of nothing is 0
                     sql = f"coalesce({sql}, 0)"
@@ -95,7 +97,7 @@ class AggregateGoals:
         m = st.mark()
         if type(value) is Col and kind in ("max", "min"):
             st.conds.append(f"{value.sql} IS NOT NULL")
-        elif type(value) is Col and "slr_" in value.sql:
+        elif type(value) is Col and self.dialect.may_raise(value.sql):
             st.checks.append(value.sql)
             st.raised(value.sql, len(st.conds), False)
         if self.unify(out, value, st):

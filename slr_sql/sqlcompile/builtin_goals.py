@@ -61,7 +61,7 @@ class BuiltinGoals:
                 return t.sql, t.kind
             if t.kind == "text":
                 raise Fallback("arithmetic on a list value")
-            return self.udf(f"slr_num({t.sql})"), "num"
+            return self.udf(self.dialect.prolog_number(t.sql)), "num"
         if not has_col(t):
             if has_var(t):
                 raise Fallback(f"unbound variable in the arithmetic expression {format_for_message(shown_in_message(t))}")
@@ -90,11 +90,11 @@ class BuiltinGoals:
                     return f"({xa} {op} {xb})", "float"
                 xa = sa if sa is not None else self.const(va)
                 xb = sb if sb is not None else self.const(vb)
-                return self.udf(f"slr_ar2({self.const(op)}, {xa}, {xb})"), "num"
+                return self.udf(self.dialect.arith2(self.const(op), xa, xb)), "num"
             if len(subs) == 1 and op in UNARY:
                 (sa, va), = subs
                 xa = sa if sa is not None else self.const(va)
-                return self.udf(f"slr_ar1({self.const(op)}, {xa})"), "num"
+                return self.udf(self.dialect.arith1(self.const(op), xa)), "num"
         raise Fallback(f"arithmetic expression {format_for_message(shown_in_message(t))} has no SQL form")
 
     def num_sql(self, t: Any) -> str:
@@ -145,7 +145,7 @@ class BuiltinGoals:
             sql, v = self.arith_sql(args[1])
             m = st.mark()
             value = v if sql is None else Col(sql, v)
-            if sql is not None and "slr_" in sql:
+            if sql is not None and self.dialect.may_raise(sql):
                 # evaluated where the goal stands (its loop level), as Prolog does, even when
                 # the value is used only later or not at all
                 st.conds.append(f"({sql}) IS NOT NULL")
@@ -185,16 +185,17 @@ class BuiltinGoals:
                 and outs and all(type(deref(a)) is Var for a in args):
             raise Fallback(f"the Python predicate {key[0]}/{key[1]} called with every argument "
                            f"unbound (a non-functional mode)")
+        inputs = "".join(f", {c.sql}" for c in cols)
+        self.dialect.det_call(0, -1, inputs)   # an engine without Python functions refuses
         site = Site(fn, python, templ, len(cols), outs, self.ctx.engine)
         sid = next_site_id()
         SITES[sid] = site
         self.sites.append(site)
-        inputs = "".join(f", {c.sql}" for c in cols)
         m = st.mark()
-        st.conds.append(self.udf(f"slr_det({sid}, -1{inputs}) IS NOT NULL"))
+        st.conds.append(self.udf(f"{self.dialect.det_call(sid, -1, inputs)} IS NOT NULL"))
         ok = True
         for i, v in enumerate(outs):
-            if not self.unify(v, Col(self.udf(f"slr_det({sid}, {i}{inputs})")), st):
+            if not self.unify(v, Col(self.udf(self.dialect.det_call(sid, i, inputs))), st):
                 ok = False
                 break
         if ok:

@@ -8,6 +8,7 @@ import itertools
 from typing import Any, Callable
 
 from ..program import event_key, split_event_atom
+from ..store.dialect import SQLITE
 from ..terms import Atom, Struct, Var, deref
 from .aggregates import AggregateGoals
 from .builtin_goals import BuiltinGoals
@@ -42,6 +43,8 @@ class Compiler(Unification, BuiltinGoals, ControlGoals, RuleGoals, EventGoals, A
 
     def __init__(self, ctx: Any, has_at: bool, literal: bool = False, robot: bool = False):
         self.ctx = ctx
+        # how the engine spells what differs (typeof, JSON, functions): the store's dialect
+        self.dialect = getattr(ctx, "dialect", SQLITE)
         # every event row read must belong to each of these robots (terms unified with the
         # row's robot column): the query's robot (the parameter :robot), when it has one
         self.robot_terms: list[Any] = [Col(":robot", "any")] if robot else []
@@ -83,6 +86,11 @@ class Compiler(Unification, BuiltinGoals, ControlGoals, RuleGoals, EventGoals, A
         self._const[key] = name
         return name
 
+    def stored(self, value: Any) -> str:
+        """A bound parameter holding an encoded value as the engine's columns hold it."""
+        to_column = self.dialect.to_column
+        return self.const(value if to_column is None else to_column(value))
+
     def udf(self, sql: str) -> str:
         self.uses_udf = True
         return sql
@@ -101,7 +109,7 @@ class Compiler(Unification, BuiltinGoals, ControlGoals, RuleGoals, EventGoals, A
 
     # ------------------------------------------------------------------ driver
     def compile(self, goal: Any, emit: Callable[[State], None]) -> None:
-        st = self.state = State()
+        st = self.state = State(self.dialect.may_raise)
         self.solve((goal, (), None), st, emit)
 
     def solve(self, cont, st: State, emit) -> None:

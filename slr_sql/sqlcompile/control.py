@@ -97,7 +97,7 @@ class ControlGoals:
             for v in reversed(trail):
                 v.ref = None
             try:
-                sub = self.sub_parts(info["cond"], info["ctx"], State())
+                sub = self.sub_parts(info["cond"], info["ctx"], State(self.dialect.may_raise))
             finally:
                 for v, ref in saved:
                     v.ref = ref

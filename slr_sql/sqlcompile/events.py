@@ -220,7 +220,7 @@ class EventGoals:
         """Prolog evaluates a prev/next time before it looks at the history (an error even
         when no event matches): one computed through an slr_ function is tested here."""
         for t in times:
-            if t is not None and "slr_" in t:
+            if t is not None and self.dialect.may_raise(t):
                 st.conds.append(f"({t}) IS NOT NULL")
 
     def _prev_rows(self, name, n, pattern, lo, hi, nxt, st, emit, origin=None):

@@ -8,7 +8,9 @@ statement would otherwise never compute.
 from __future__ import annotations
 
 import re
+from typing import Any
 
+from ..store.dialect import SQLITE
 from .model import Part
 
 
@@ -19,7 +21,7 @@ NUM_ARG = re.compile(r"slr_num\(:(a\d+)\)")
 TIME_ARG = re.compile(r"typeof\(:(a\d+)\) IN \('integer', 'real'\)")
 
 
-def guards(raising: list, branches: list) -> list[str]:
+def guards(raising: list, branches: list, dialect: Any = SQLITE) -> list[str]:
     """Statements that evaluate, over exactly the rows Prolog reaches it with, every goal
     that may raise and that a branch's later goals could filter first.
 
@@ -37,7 +39,7 @@ def guards(raising: list, branches: list) -> list[str]:
     error there only costs the interpreter's run)."""
     out = []
     for i, (expr, froms, conds, is_cond, first) in enumerate(raising):
-        if expr.count("slr_") == len(NUM_ARG.findall(expr)):
+        if dialect.raising_calls(expr) == len(NUM_ARG.findall(expr)):
             # only slr_num(:aN), a number bound from Python: it raises for every row or for
             # none, and SqlPlan.run leaves a non-number argument to the interpreter
             continue

@@ -9,6 +9,7 @@ import itertools
 import weakref
 from typing import Any
 
+from ..store.dialect import SQLITE
 from ..terms import Atom, Struct, Var, deref, list_items
 
 
@@ -121,16 +122,18 @@ class _Conds(list):
     __slots__ = ("st",)
 
     def append(self, cond: str) -> None:
-        if "slr_" in cond:
+        if self.st.may_raise(cond):
             self.st.raised(cond, len(self), True)
         list.append(self, cond)
 
 
 class State:
     __slots__ = ("froms", "conds", "keys", "trail", "checks", "raising", "nested", "branches",
-                 "live", "first")
+                 "live", "first", "may_raise")
 
-    def __init__(self):
+    def __init__(self, may_raise: Any = SQLITE.may_raise):
+        # which conditions may raise: a call of a function of the dialect's that can fail
+        self.may_raise = may_raise
         self.froms: list = []
         self.conds: _Conds = _Conds()
         self.conds.st = self

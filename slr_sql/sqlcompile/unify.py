@@ -86,7 +86,7 @@ class Unification:
                 st.conds.append(f"{t.sql} = {col.sql}")
             elif t.kind == "any":
                 # a stored value or an argument from Python: a number of equal value
-                st.conds.append(f"({t.sql} = {col.sql} AND typeof({t.sql}) IN ('integer', 'real'))")
+                st.conds.append(self.dialect.time_equal(t.sql, col.sql))
             else:
                 return False
             return True
@@ -108,21 +108,21 @@ class Unification:
                 return f"{a} = {b}"
             if {k, k2} == {"float", "int"} or ("text" in (k, k2) and (k in NUMERIC or k2 in NUMERIC)):
                 return False
-            return f"({a} = {b} AND typeof({a}) = typeof({b}))"
+            return self.dialect.same_value(a, k, b, k2)
         if to is Atom or to is String:
             if k in NUMERIC:
                 return False
-            return f"{col.sql} = {self.const(encode(other))}"
+            return f"{col.sql} = {self.stored(encode(other))}"
         if to is int:
             if INT64_MIN <= other <= INT64_MAX:
                 if k == "float" or k == "text":
                     return False
                 if k == "int":
                     return f"{col.sql} = {self.const(other)}"
-                return f"({col.sql} = {self.const(other)} AND typeof({col.sql}) = 'integer')"
+                return self.dialect.typed_equal(col.sql, self.stored(other), "integer")
             if k in NUMERIC:
                 return False
-            return f"{col.sql} = {self.const(encode(other))}"
+            return f"{col.sql} = {self.stored(encode(other))}"
         if to is float:
             if other != other:
                 raise Fallback("NaN in a goal")
@@ -130,7 +130,7 @@ class Unification:
                 return False
             if k == "float":
                 return f"{col.sql} = {self.const(other)}"
-            return f"({col.sql} = {self.const(other)} AND typeof({col.sql}) = 'real')"
+            return self.dialect.typed_equal(col.sql, self.stored(other), "real")
         if to is Struct:
             if has_col(other) and not has_var(other):
                 if k in NUMERIC:
@@ -146,7 +146,7 @@ class Unification:
             if k in NUMERIC:
                 return False
             try:
-                return f"{col.sql} = {self.const(encode(other))}"
+                return f"{col.sql} = {self.stored(encode(other))}"
             except Unencodable as exc:
                 raise Fallback(f"constant cannot be encoded: {exc.reason}")
         raise Fallback(f"cannot compare a stored value with {other!r}")
@@ -173,8 +173,7 @@ class Unification:
                     return False
                 text = col.sql
             else:
-                text = (f"(CASE WHEN substr({col.sql}, 1, 1) IN ('[', '{{') "
-                        f"THEN {col.sql} END)")
+                text = self.dialect.json_guard(col.sql)
             path = ("c", "$")
         return self._match_at(text, path, pat, st, 0)
 
@@ -194,12 +193,13 @@ class Unification:
         (SQLite copies the tokens of the encoder's text)."""
         p = self._path_sql(path)
         ps = self._path_sql(self._sub_path(path, '."$string"'))
-        val = f"json_extract({text}, {p})"
-        sql = (f"(CASE json_type({text}, {p}) "
+        d = self.dialect
+        val = d.json_part(text, p)
+        sql = (f"(CASE {d.json_kind(text, p)} "
                f"WHEN 'text' THEN (CASE WHEN substr({val}, 1, 1) IN ('[', '{{', '\"') "
-               f"THEN '{{\"$atom\":' || ({text} -> {p}) || '}}' ELSE {val} END) "
-               f"WHEN 'object' THEN (CASE WHEN json_type({text}, {ps}) = 'text' "
-               f"THEN {text} -> {ps} ELSE {text} -> {p} END) "
+               f"THEN '{{\"$atom\":' || ({d.json_text(text, p)}) || '}}' ELSE {val} END) "
+               f"WHEN 'object' THEN (CASE WHEN {d.json_kind(text, ps)} = 'text' "
+               f"THEN {d.json_text(text, ps)} ELSE {d.json_text(text, p)} END) "
                f"ELSE {val} END)")
         return Col(sql, "any", (text, path))
 
@@ -213,21 +213,21 @@ class Unification:
             n = len(items)
             if type(tail) is Atom and tail == "[]":
                 # a proper list pattern: a JSON array of exactly n elements
-                st.conds.append(f"json_array_length({text}, {p}) = {n}")
+                st.conds.append(f"{self.dialect.json_length(text, p)} = {n}")
                 subs = [(self._sub_path(path, f"[{i}]"), x) for i, x in enumerate(items)]
             else:
                 # [X1..Xn|T]: a stored proper list (JSON array) of n or more elements, T the
                 # rest; or a stored partial list, which is a chain of '.'/2 compounds
                 # {".":[H, T]} (the encoder's canonical form: an array is never a tail).
-                is_arr = f"json_type({text}, {p}) = 'array'"
+                is_arr = f"{self.dialect.json_kind(text, p)} = 'array'"
                 cells = [path]
                 for _ in range(n):
                     cells.append(self._sub_path(cells[-1], '."."[1]'))
                 dot = '."."'
                 chain = " AND ".join(
-                    f"json_array_length({text}, {self._path_sql(self._sub_path(c, dot))}) = 2"
+                    f"{self.dialect.json_length(text, self._path_sql(self._sub_path(c, dot)))} = 2"
                     for c in cells[:n])
-                st.conds.append(f"(CASE WHEN {is_arr} THEN json_array_length({text}, {p}) >= {n} "
+                st.conds.append(f"(CASE WHEN {is_arr} THEN {self.dialect.json_length(text, p)} >= {n} "
                                 f"ELSE ({chain}) END)")
                 for i, x in enumerate(items):
                     in_arr = self._path_sql(self._sub_path(path, f"[{i}]"))
@@ -236,8 +236,8 @@ class Unification:
                                  x))
                 removes = ", ".join(self.const(f"$[{i}]") for i in reversed(range(n)))
                 rest = self._elem_col(text, cells[n]).sql
-                tail_col = Col(f"(CASE WHEN {is_arr} THEN json_remove(json_extract({text}, {p}), "
-                               f"{removes}) ELSE {rest} END)")
+                tail_col = Col(f"(CASE WHEN {is_arr} THEN {self.dialect.json_drop(text, p, removes)} "
+                               f"ELSE {rest} END)")
                 subs.append((None, tail))
         else:
             name = str(pat.name)
@@ -249,8 +249,8 @@ class Unification:
                 raise Fallback(f"matching a stored value against a compound named {name!r} "
                                f"(the name has characters a JSON path cannot hold)")
             key = '."' + name + '"'
-            st.conds.append(f"json_array_length({text}, "
-                            f"{self._path_sql(self._sub_path(path, key))}) = {len(pat.args)}")
+            st.conds.append(f"{self.dialect.json_length(text, self._path_sql(self._sub_path(path, key)))}"
+                            f" = {len(pat.args)}")
             subs = [(self._sub_path(path, f"{key}[{i}]"), a) for i, a in enumerate(pat.args)]
         for sub, arg in subs:
             if sub is None:
@@ -272,15 +272,15 @@ class Unification:
         if ta is float:
             if a != a:
                 raise Fallback("NaN in a goal")
-            st.conds.append(f"(json_extract({text}, {p}) = {self.const(a)} "
-                            f"AND json_type({text}, {p}) = 'real')")
+            st.conds.append(f"({self.dialect.json_part(text, p)} = {self.const(a)} "
+                            f"AND {self.dialect.json_kind(text, p)} = 'real')")
             return True
         # a ground term without floats: its inner JSON text is canonical (one text per term)
         try:
             enc = encode_json(a)
         except Unencodable as exc:
             raise Fallback(f"constant cannot be encoded: {exc.reason}")
-        st.conds.append(f"({text} -> {p}) = {self.const(enc)}")
+        st.conds.append(f"({self.dialect.json_text(text, p)}) = {self.const(enc)}")
         return True
 
     # ------------------------------------------------------------------ values
@@ -294,7 +294,7 @@ class Unification:
         if has_col(t):
             return self.json_sql(t, top=True)
         try:
-            return self.const(encode(t))
+            return self.stored(encode(t))
         except Unencodable as exc:
             raise Fallback(f"constant cannot be encoded: {exc.reason}")
 
@@ -305,8 +305,8 @@ class Unification:
         tt = type(t)
         if tt is Col:
             if t.src is not None:  # an element of stored JSON: its text there is canonical
-                return f"({t.src[0]} -> {self._path_sql(t.src[1])})"
-            return self.udf(f"slr_j({t.sql})")
+                return f"({self.dialect.json_text(t.src[0], self._path_sql(t.src[1]))})"
+            return self.udf(self.dialect.inner_json(t.sql, t.kind))
         if tt is Var:
             raise Fallback(f"a template with the unbound variable {t.name} (findall of "
                            f"non-ground terms)")

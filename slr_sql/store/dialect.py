@@ -28,7 +28,9 @@ import re
 from collections.abc import Callable
 from typing import Any, Protocol
 
-__all__ = ["POSTGRES", "SQLITE", "Dialect", "PostgresDialect", "SQLiteDialect"]
+from .query_printers import PostgresQueryPrinter, SQLiteQueryPrinter, Unprintable
+
+__all__ = ["POSTGRES", "SQLITE", "Dialect", "PostgresDialect", "SQLiteDialect", "Unprintable"]
 
 # A stored text that reads as a number (PostgreSQL columns): integers, and Python's float
 # texts (repr: always a '.', an exponent, or inf).
@@ -53,7 +55,7 @@ class Dialect(Protocol):
     def from_column(self, value: Any) -> Any: ...
 
 
-class SQLiteDialect:
+class SQLiteDialect(SQLiteQueryPrinter):
     """SQLite, the reference: every printer gives the text slr_sql always wrote.
 
     >>> SQLITE.insert_ignore("slr_counters", "buffer_id", "?")
@@ -108,7 +110,7 @@ class SQLiteDialect:
         return f"INSERT OR IGNORE INTO {table} ({columns}) VALUES ({values})"
 
 
-class PostgresDialect:
+class PostgresDialect(PostgresQueryPrinter):
     """PostgreSQL 15 or newer, through psycopg 3 (``%s`` / ``%(name)s`` parameters).
 
     >>> POSTGRES.statement("SELECT a FROM t WHERE b = ? AND c = :c AND d LIKE 'x%'")

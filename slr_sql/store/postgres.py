@@ -637,24 +637,40 @@ class PgDatabase:
         with self.lock:
             self.check_open()
             deadline = self._outer(deadline)
-            if deadline is None:
+            if deadline is None and self.tx_depth == 0:
                 cursor = self.conn.execute(sql, params)
                 return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+            if deadline is None:
+                # inside a transaction: a statement that fails (the query then goes to the
+                # interpreter) must not abort the caller's transaction
+                self.conn.execute("SAVEPOINT slr_compiled")
+                try:
+                    cursor = self.conn.execute(sql, params)
+                    rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+                except BaseException:
+                    self.conn.execute("ROLLBACK TO slr_compiled")
+                    self.conn.execute("RELEASE slr_compiled")
+                    raise
+                self.conn.execute("RELEASE slr_compiled")
+                return rows
             left = deadline - time.monotonic()
             if left <= 0:
                 raise SLRTimeout("query timed out (in its compiled SQL statement)")
             own = self.tx_depth == 0
-            if own:
-                self.conn.execute("BEGIN")
+            self.conn.execute("BEGIN" if own else "SAVEPOINT slr_compiled")
             try:
                 self.conn.execute(f"SET LOCAL statement_timeout = {max(1, int(left * 1000))}")
                 cursor = self.conn.execute(sql, params)
                 rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
                 if not own:
                     self.conn.execute("SET LOCAL statement_timeout = 0")
+                    self.conn.execute("RELEASE slr_compiled")
             except BaseException:
                 if own:
                     self.conn.rollback()
+                else:
+                    self.conn.execute("ROLLBACK TO slr_compiled")
+                    self.conn.execute("RELEASE slr_compiled")
                 raise
             if own:
                 self.conn.execute("COMMIT")

@@ -1,0 +1,224 @@
+"""The printers of the query compiler (:mod:`slr_sql.sqlcompile`): one method per kind of
+node whose SQL differs between engines, mixed into each dialect object.
+
+The compiler decides *what* a goal means (which rows, which conditions, in which order);
+these printers decide how a condition on values, a JSON part of a stored term, an
+arithmetic function or an answer column is spelled. SQLite's printer gives the text the
+compiler always wrote: ``typeof`` carries Prolog's ``1 \\= 1.0``, JSON parts are read with
+``json_extract``, arithmetic and det builtins call Python functions registered on the
+connection. PostgreSQL's columns hold the typed text of
+:meth:`~slr_sql.store.dialect.PostgresDialect.to_column`, so there text equality already is
+Prolog's ``==`` on stored values and no ``typeof`` is needed; what would need a Python
+function inside the server (``slr_det``, Prolog arithmetic beyond comparisons, the
+aggregates, patterns over the parts of stored lists and compounds) raises
+:class:`Unprintable`, and the goal is answered by the interpreter there.
+
+Value kinds (the compiler's ``Col.kind``): ``float`` (times), ``int`` (counts),
+``num`` (arithmetic), ``text`` (JSON lists built by findall), ``any`` (a stored value).
+
+>>> from slr_sql.store.dialect import POSTGRES, SQLITE
+>>> SQLITE.typed_equal("e0.arg1", ":c0", "integer"), POSTGRES.typed_equal("e0.arg1", ":c0", "integer")
+("(e0.arg1 = :c0 AND typeof(e0.arg1) = 'integer')", 'e0.arg1 = :c0')
+>>> POSTGRES.same_value("e0.arg1", "any", "e1.t_end", "float")
+"(slr_typeof(e0.arg1) = 'real' AND slr_number(e0.arg1) = e1.t_end)"
+"""
+from __future__ import annotations
+
+__all__ = ["PostgresQueryPrinter", "SQLiteQueryPrinter", "Unprintable"]
+
+
+class Unprintable(Exception):
+    """A node this engine's SQL cannot express exactly; ``reason`` says why (the query
+    compiler turns it into a fallback to the interpreter, shown by explain)."""
+
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
+
+
+class SQLiteQueryPrinter:
+    """SQLite: the compiler's text as it always was.
+
+    >>> from slr_sql.store.dialect import SQLITE
+    >>> SQLITE.answer("t0.t_end", "float"), SQLITE.inner_json("e0.arg1", "any")
+    ('t0.t_end', 'slr_j(e0.arg1)')
+    """
+
+    # an engine whose statements may call Python functions (slr_det, slr_ar1, ...)
+    query_functions = True
+    # the alias a subquery in FROM needs (none on SQLite)
+    subquery_alias = ""
+
+    def may_raise(self, sql: str) -> bool:
+        """Whether evaluating ``sql`` may raise an error Prolog raises too (arithmetic,
+        builtins: every function slr_sql registers)."""
+        return "slr_" in sql
+
+    def raising_calls(self, sql: str) -> int:
+        """How many calls in ``sql`` may raise."""
+        return sql.count("slr_")
+
+    def typed_equal(self, value: str, const: str, sql_type: str) -> str:
+        """A stored value equals a constant number of SQL type ``integer`` or ``real``."""
+        return f"({value} = {const} AND typeof({value}) = '{sql_type}')"
+
+    def same_value(self, a: str, kind_a: str, b: str, kind_b: str) -> str:
+        """Two run-time values are the same term (``1`` is not ``1.0``)."""
+        return f"({a} = {b} AND typeof({a}) = typeof({b}))"
+
+    def time_equal(self, value: str, time: str) -> str:
+        """A stored value or argument is a number equal to a stored time."""
+        return f"({value} = {time} AND typeof({value}) IN ('integer', 'real'))"
+
+    def prolog_number(self, value: str) -> str:
+        """A stored value as a number in arithmetic (raises on anything else)."""
+        return f"slr_num({value})"
+
+    def arith1(self, op: str, a: str) -> str:
+        return f"slr_ar1({op}, {a})"
+
+    def arith2(self, op: str, a: str, b: str) -> str:
+        return f"slr_ar2({op}, {a}, {b})"
+
+    def det_call(self, site: int, output: int, inputs: str) -> str:
+        """Output ``output`` (-1: success) of the det builtin or Python predicate ``site``."""
+        return f"slr_det({site}, {output}{inputs})"
+
+    def inner_json(self, value: str, kind: str) -> str:
+        """A value's encoding inside JSON (a list element, a compound argument)."""
+        return f"slr_j({value})"
+
+    def answer(self, value: str, kind: str) -> str:
+        """A value as an answer column of the statement."""
+        return value
+
+    def json_guard(self, value: str) -> str:
+        """The value when it is a stored list or compound (JSON text), else NULL."""
+        return f"(CASE WHEN substr({value}, 1, 1) IN ('[', '{{') THEN {value} END)"
+
+    def json_part(self, text: str, path: str) -> str:
+        """The SQL value at ``path`` of JSON ``text`` (a JSON string as its text)."""
+        return f"json_extract({text}, {path})"
+
+    def json_text(self, text: str, path: str) -> str:
+        """The JSON text at ``path``."""
+        return f"{text} -> {path}"
+
+    def json_kind(self, text: str, path: str) -> str:
+        """``'array'``, ``'object'``, ``'text'``, ``'integer'``, ``'real'``... at ``path``."""
+        return f"json_type({text}, {path})"
+
+    def json_length(self, text: str, path: str) -> str:
+        return f"json_array_length({text}, {path})"
+
+    def json_drop(self, text: str, path: str, removes: str) -> str:
+        """The array at ``path`` without the elements at the paths ``removes``."""
+        return f"json_remove(json_extract({text}, {path}), {removes})"
+
+    def list_of(self, union: str, keys: list[str]) -> str:
+        """The JSON list of the ``v0`` of the rows of ``union``, in the order of ``keys``."""
+        order = (" ORDER BY " + ", ".join(keys)) if keys else ""
+        return f"(SELECT '[' || coalesce(group_concat(v0, ','), '') || ']' FROM ({union}{order}))"
+
+    def aggregate(self, fn: str, union: str) -> str:
+        """``slr_sum``/``slr_max``/``slr_min``/``slr_setof`` over ``v0`` of the ordered rows."""
+        return f"(SELECT {fn}(v0) FROM ({union}))"
+
+
+class PostgresQueryPrinter:
+    """PostgreSQL: typed text values, plpgsql functions of migration ``pg_0009``.
+
+    >>> from slr_sql.store.dialect import POSTGRES
+    >>> POSTGRES.answer("t0.t_end", "float"), POSTGRES.inner_json("t0.t_end", "float")
+    ('slr_float_text(t0.t_end)', 'slr_float_json(t0.t_end)')
+    >>> POSTGRES.det_call(1, -1, "")
+    Traceback (most recent call last):
+    ...
+    slr_sql.store.query_printers.Unprintable: a det builtin or a kb.define'd predicate (a Python function) runs in the interpreter on PostgreSQL
+    """
+
+    query_functions = False
+    subquery_alias = " AS s"
+
+    def may_raise(self, sql: str) -> bool:
+        # slr_typeof, slr_number, slr_j and the float printers never raise; slr_num does
+        return "slr_num(" in sql
+
+    def raising_calls(self, sql: str) -> int:
+        return sql.count("slr_num(")
+
+    def typed_equal(self, value: str, const: str, sql_type: str) -> str:
+        # the constant is bound as its column text: the spelling carries the type
+        return f"{value} = {const}"
+
+    def same_value(self, a: str, kind_a: str, b: str, kind_b: str) -> str:
+        if kind_a in ("any", "text") and kind_b in ("any", "text"):
+            return f"{a} = {b}"
+        if kind_a == "num" or kind_b == "num":
+            raise Unprintable("unifying a computed number with another value runs in the "
+                              "interpreter on PostgreSQL")
+        if kind_a in ("float", "int"):
+            a, kind_a, b, kind_b = b, kind_b, a, kind_a
+        if kind_b == "float":
+            return f"(slr_typeof({a}) = 'real' AND slr_number({a}) = {b})"
+        return f"{a} = ({b})::text"
+
+    def time_equal(self, value: str, time: str) -> str:
+        return f"(slr_number({value}) = {time} AND slr_typeof({value}) IN ('integer', 'real'))"
+
+    def prolog_number(self, value: str) -> str:
+        return f"slr_num({value})"
+
+    def arith1(self, op: str, a: str) -> str:
+        raise Unprintable("Prolog arithmetic on stored values (beyond comparisons and float "
+                          "+ - *) runs in the interpreter on PostgreSQL")
+
+    def arith2(self, op: str, a: str, b: str) -> str:
+        return self.arith1(op, a)
+
+    def det_call(self, site: int, output: int, inputs: str) -> str:
+        raise Unprintable("a det builtin or a kb.define'd predicate (a Python function) runs "
+                          "in the interpreter on PostgreSQL")
+
+    def inner_json(self, value: str, kind: str) -> str:
+        if kind == "float":
+            return f"slr_float_json({value})"
+        if kind == "int":
+            return f"({value})::text"
+        if kind == "text":
+            return value
+        if kind == "num":
+            raise Unprintable("a computed number inside a list runs in the interpreter on "
+                              "PostgreSQL")
+        return f"slr_j({value})"
+
+    def answer(self, value: str, kind: str) -> str:
+        # every answer column is the column text (branches of a UNION agree on the type);
+        # the planner reads it back with from_column
+        if kind == "float":
+            return f"slr_float_text({value})"
+        if kind == "int":
+            return f"({value})::text"
+        if kind == "num":
+            raise Unprintable("a computed number as an answer runs in the interpreter on "
+                              "PostgreSQL")
+        return value
+
+    def json_guard(self, value: str) -> str:
+        raise Unprintable("matching the parts of a stored list or compound runs in the "
+                          "interpreter on PostgreSQL")
+
+    json_part = json_text = json_kind = json_length = json_guard
+
+    def json_drop(self, text: str, path: str, removes: str) -> str:
+        return self.json_guard(text)
+
+    def list_of(self, union: str, keys: list[str]) -> str:
+        # the order of an aggregate's input is the aggregate's own ORDER BY
+        order = (" ORDER BY " + ", ".join(keys)) if keys else ""
+        return (f"(SELECT '[' || coalesce(string_agg(v0, ','{order}), '') || ']' "
+                f"FROM ({union}) AS s)")
+
+    def aggregate(self, fn: str, union: str) -> str:
+        raise Unprintable("aggregate_all sum/max/min/set (Python aggregates) run in the "
+                          "interpreter on PostgreSQL")
