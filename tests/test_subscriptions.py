@@ -388,14 +388,16 @@ def test_concurrent_writers_and_slow_and_fast_subscribers_all_see_the_store_orde
 
 
 def test_a_reused_arrival_sequence_is_not_replayed_as_history(kb, history_read):
-    """SQLite reuses the rowid of a deleted last row: the history (seq <= the top at
-    subscription time) must not take the new row, which is live."""
+    """Rows deleted below a subscription's position and a new row after them: the history
+    (seq <= the top at subscription time) must not take the new row, which is live. (An
+    event table's sequence is AUTOINCREMENT: the new row does not reuse a deleted row's
+    sequence, which once made it look like history.)"""
     kb.add_many(["p(1)^1", "p(2)^2", "p(3)^3"])
     sub = kb.subscribe("p(X)^T", since=0, max_queue=1)   # p(1) fills its queue
     assert kb._subscriptions.drain(DEADLINE)
     kb.sql("DELETE FROM p WHERE seq >= 2", write=True)
     kb.add("p(new)^4")
-    assert kb.sql("SELECT seq FROM p WHERE arg1 = 'new'")[1] == [(2,)]
+    assert kb.sql("SELECT seq FROM p WHERE arg1 = 'new'")[1] == [(4,)]
     assert xs(take(sub, 2)) == [1, "new"]
     kb.add("p(sentinel)^5")
     assert xs(take(sub, 1)) == ["sentinel"]

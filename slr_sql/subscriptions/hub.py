@@ -751,14 +751,25 @@ class SubscriptionHub:
         if not (persist_due or cleanup_due):
             return
         lock = self.store.lock
+        # taken without waiting and held for the whole housekeeping: checking that the store
+        # is free and then writing would race a writer that takes it in between
         if lock.acquire(blocking=False):
-            lock.release()
-        else:                         # a writer holds the store: deliver first, write later
-            if self._put_off_since is None:
-                self._put_off_since = now
-            if now - self._put_off_since < self.lease_seconds / 6:
-                return
+            try:
+                self._put_off_since = None
+                self._write_housekeeping(now, persist_due, cleanup_due)
+            finally:
+                lock.release()
+            return
+        # a writer holds the store: deliver first, write later
+        if self._put_off_since is None:
+            self._put_off_since = now
+        if now - self._put_off_since < self.lease_seconds / 6:
+            return
         self._put_off_since = None
+        self._write_housekeeping(now, persist_due, cleanup_due)
+
+    def _write_housekeeping(self, now: float, persist_due: bool, cleanup_due: bool) -> None:
+        """The writes of :meth:`_housekeeping` that are due."""
         if persist_due:
             self._last_persist = now
             with self.lock:
