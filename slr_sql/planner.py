@@ -393,10 +393,10 @@ class SqlPlan:
             for pname in self.arg_params.values():
                 params[pname] = to_column(params[pname])
         for guard in self.guards:
-            kb.store.run_compiled(guard, params, None, deadline)
+            kb.store.run_compiled(guard, params, None, deadline, may_fall_back=True)
         if self.sql is None:
             return []
-        rows = kb.store.run_compiled(self.sql, params, limit, deadline)
+        rows = kb.store.run_compiled(self.sql, params, limit, deadline, may_fall_back=True)
         from_column = dialect.from_column
         if from_column is not None:   # answer columns are the columns' text there
             rows = [(row[0],) + tuple([from_column(v) for v in row[1:]]) for row in rows]

@@ -732,10 +732,12 @@ class Database:
             self.conn.create_aggregate(name, narg, cls)
 
     def run_compiled(self, sql: str, params: dict, limit: int | None = None,
-                     deadline: float | None = None) -> list[tuple]:
+                     deadline: float | None = None, may_fall_back: bool = False) -> list[tuple]:
         """Run a compiled SELECT with named parameters; all rows, or the first ``limit``.
         ``deadline`` (``time.monotonic()``): past it the statement is interrupted and
         :class:`SLRTimeout` raised, as the interpreter does for ``timeout=``.
+        ``may_fall_back``: the caller answers with the interpreter when the statement
+        fails, so a failure must leave the caller's transaction usable (SQLite's does).
 
         >>> from slr_sql.store import EventStore
         >>> EventStore(None).run_compiled("SELECT :a + 1", {"a": 1})

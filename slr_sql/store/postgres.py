@@ -633,11 +633,13 @@ class PgDatabase:
     python_functions = False
 
     def run_compiled(self, sql: str, params: dict, limit: int | None = None,
-                     deadline: float | None = None) -> list[tuple]:
+                     deadline: float | None = None, may_fall_back: bool = False) -> list[tuple]:
         with self.lock:
             self.check_open()
             deadline = self._outer(deadline)
-            if deadline is None and self.tx_depth == 0:
+            if deadline is None and (self.tx_depth == 0 or not may_fall_back):
+                # (an event rule's statement inside the writer's transaction: a failure
+                # fails the add, so no savepoint round trips)
                 cursor = self.conn.execute(sql, params)
                 return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
             if deadline is None:
