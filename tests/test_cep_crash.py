@@ -53,8 +53,7 @@ CHILD = textwrap.dedent("""
     from slr_sql import ManualClock
     events = {events!r}
     clock = ManualClock(events[{start}][2] if {start} < len(events) else 0.0)
-    # synchronous=NORMAL: a process kill loses nothing committed (only power loss could)
-    kb = slr_sql.open({path!r}, clock=clock, synchronous="NORMAL")
+        kb = slr_sql.open({path!r}, clock=clock{options})
     i = {start}
     while i < len(events):
         batch = events[i:i + {batch}]
@@ -73,8 +72,10 @@ CHILD = textwrap.dedent("""
 def run_child(path: Path, start: int, batch: int, kill_after: int | None) -> None:
     events = [ev + (text(ev),) for ev in stream()]
     child = subprocess.Popen(
+        # synchronous=NORMAL: a process kill loses nothing committed (only power loss could)
         [sys.executable, "-c", CHILD.format(repo=str(REPO), path=str(path), start=start,
-                                            batch=batch, events=events)],
+                                            batch=batch, events=events,
+                                            options=', synchronous="NORMAL"')],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=str(REPO))
     acknowledged = 0
     try:

@@ -30,18 +30,26 @@ def _count_tests(path: Path) -> int:
                if isinstance(node, ast.FunctionDef) and node.name.startswith("test"))
 
 
-def test_the_conformance_files_pass_against_a_served_store(tmp_path):
+def run_conformance_files(tmp_path: Path, plugin: str) -> str:
+    """Run SPEC's conformance files in a pytest of their own with ``plugin``; assert every
+    test passed and return the output (the plugin's summary line is in it)."""
     directory = _conformance_dir()
     files = [str(directory / f) for f in FILES]
     expected = sum(_count_tests(Path(f)) for f in files)
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), str(TESTS), env.get("PYTHONPATH", "")])
     result = subprocess.run(
-        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p",
-         "served_open_plugin", "--rootdir", str(tmp_path), "-o", "timeout=120", *files],
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", plugin,
+         "--rootdir", str(tmp_path), "-o", "timeout=120", *files],
         capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
     output = result.stdout + result.stderr
     assert result.returncode == 0, output[-5000:]
     assert re.search(rf"\b{expected} passed\b", output), output[-3000:]
+    return output
+
+
+def test_the_conformance_files_pass_against_a_served_store(tmp_path):
+    output = run_conformance_files(tmp_path, "served_open_plugin")
+    expected = sum(_count_tests(_conformance_dir() / f) for f in FILES)
     opened = int(re.search(r"served stores opened: (\d+)", output).group(1))
     assert opened >= expected, output[-3000:]

@@ -19,44 +19,19 @@ import pytest
 import slr_sql
 from slr_sql import ManualClock, SLRTimeout
 
-from test_cep_crash import RULES, reference, stream, text
+from test_cep_crash import CHILD, RULES, reference, stream, text
 
 REPO = Path(__file__).resolve().parent.parent
 DEADLINE = 60.0  # seconds; each wait ends as soon as its condition holds
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="needs SIGKILL")
-
-# Adds the stream from `start` (the clock 0.25 s after each event, so the decisions of the
-# earlier events become possible) and acknowledges each add on stdout once it has returned.
-CHILD = textwrap.dedent("""
-    import sys
-    sys.path.insert(0, {repo!r})
-    import slr_sql
-    from slr_sql import ManualClock, SLRTimeout
-    events = {events!r}
-    clock = ManualClock(events[{start}][2] if {start} < len(events) else 0.0)
-    kb = slr_sql.open({url!r}, clock=clock)
-    i = {start}
-    while i < len(events):
-        batch = events[i:i + {batch}]
-        clock.set(max(clock.now(), batch[-1][2] + 0.25))
-        if len(batch) == 1:
-            kb.add(batch[0][3])
-        else:
-            assert kb.add_many([e[3] for e in batch], atomic=True) == []
-        i += len(batch)
-        sys.stdout.write("%d\\n" % i)
-        sys.stdout.flush()
-    kb.close()
-""")
-
 
 def _run_child(url: str, start: int, batch: int, kill_after: int | None) -> int:
     """Run the writer from `start`; SIGKILL it after `kill_after` acknowledgements (None: let
     it finish). Returns the position it last acknowledged."""
     events = [ev + (text(ev),) for ev in stream()]
     child = subprocess.Popen(
-        [sys.executable, "-c", CHILD.format(repo=str(REPO), url=url, start=start, batch=batch,
-                                            events=events)],
+        [sys.executable, "-c", CHILD.format(repo=str(REPO), path=url, start=start, batch=batch,
+                                            events=events, options="")],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=str(REPO))
     acknowledged, position = 0, start
     try:
