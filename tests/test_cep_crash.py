@@ -53,7 +53,7 @@ CHILD = textwrap.dedent("""
     from slr_sql import ManualClock
     events = {events!r}
     clock = ManualClock(events[{start}][2] if {start} < len(events) else 0.0)
-        kb = slr_sql.open({path!r}, clock=clock{options})
+    kb = slr_sql.open({path!r}, clock=clock{options})
     i = {start}
     while i < len(events):
         batch = events[i:i + {batch}]
