@@ -167,6 +167,22 @@ def test_a_named_store_keeps_its_name_and_stamps_its_events(tmp_path):
         (None,), ("r1",), ("r1",), ("r1",)]
 
 
+@pytest.mark.parametrize("engine", ["sqlite", "postgres"])
+@pytest.mark.parametrize("name", ["42", "-3.5", "1e5"])
+def test_a_robot_name_that_reads_as_a_number_is_refused_on_both_backends(tmp_path, request,
+                                                                         engine, name):
+    """PostgreSQL stores such an atom tagged, so a robot column could not hold the name as
+    itself there (and a compiled origin/2 would miss it): refused everywhere, in words, so
+    that every robot store can ship to every fleet."""
+    backend = str(tmp_path / "r.db") if engine == "sqlite" else \
+        with_schema(request.getfixturevalue("postgres_url"), f"numeric_{len(name)}")
+    with pytest.raises(slr_sql.SLRError, match="reads as a number"):
+        slr_sql.open(backend, robot=name)
+    with slr_sql.open(backend, robot=name + "x") as kb:       # a word is fine
+        kb.add("seen(p7)^1")
+        assert kb.query("origin(R, seen(P)^_)") == [{"R": name + "x", "P": "p7"}]
+
+
 def test_the_migration_adds_the_robot_column_to_existing_tables(tmp_path):
     path = tmp_path / "old.db"
     conn = sqlite3.connect(path, isolation_level=None)

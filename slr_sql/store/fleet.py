@@ -18,6 +18,7 @@ from ..encoding import encode
 from ..errors import SLRError
 from ..terms import Atom
 from .checks import BadEvent, text_problem
+from .dialect import POSTGRES
 from .connection import Database
 from .events import EventWriter
 from .tables import EventTables
@@ -43,6 +44,12 @@ def check_robot_name(name: Any) -> str:
     if encode(Atom(name)) != name:  # the column holds the atom's stored form: the name itself
         raise SLRError(f"robot name {name!r} reads as a compound term or string when stored; "
                        "name robots with plain words (r1, forklift-2, ...)")
+    if POSTGRES.to_column(name) != name:
+        # a name that reads as a number is stored tagged on PostgreSQL (docs/postgres.md), so
+        # a robot column could not hold it as itself there: refused on every backend, so that
+        # any store may ship to any fleet
+        raise SLRError(f"robot name {name!r} reads as a number when stored; name robots with "
+                       "plain words (r1, forklift-2, ...)")
     return name
 
 
