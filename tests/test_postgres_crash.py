@@ -19,40 +19,16 @@ import pytest
 import slr_sql
 from slr_sql import ManualClock, SLRTimeout
 
-from test_cep_crash import CHILD, RULES, reference, stream, text
+from test_cep_crash import RULES, reference, run_child, stream, text
 
 REPO = Path(__file__).resolve().parent.parent
 DEADLINE = 60.0  # seconds; each wait ends as soon as its condition holds
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="needs SIGKILL")
 
+
 def _run_child(url: str, start: int, batch: int, kill_after: int | None) -> int:
-    """Run the writer from `start`; SIGKILL it after `kill_after` acknowledgements (None: let
-    it finish). Returns the position it last acknowledged."""
-    events = [ev + (text(ev),) for ev in stream()]
-    child = subprocess.Popen(
-        [sys.executable, "-c", CHILD.format(repo=str(REPO), path=url, start=start, batch=batch,
-                                            events=events, options="")],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=str(REPO))
-    acknowledged, position = 0, start
-    try:
-        while kill_after is None or acknowledged < kill_after:
-            line = child.stdout.readline()
-            if not line:
-                break
-            acknowledged += 1
-            position = int(line)
-    finally:
-        if kill_after is not None:
-            os.kill(child.pid, signal.SIGKILL)
-        child.wait(timeout=DEADLINE)
-        err = child.stderr.read()
-        child.stdout.close()
-        child.stderr.close()
-    if kill_after is None:
-        assert child.returncode == 0, err
-    else:
-        assert child.returncode == -signal.SIGKILL, err
-    return position
+    """test_cep_crash's writer on a PostgreSQL store (no SQLite options)."""
+    return run_child(url, start, batch, kill_after, options="")
 
 
 def base_events(kb) -> list:

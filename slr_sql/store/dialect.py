@@ -176,10 +176,10 @@ class PostgresDialect(PostgresQueryPrinter):
         """A value of :func:`slr_sql.encoding.encode` as the text of a PostgreSQL column."""
         tv = type(value)
         if tv is str:
-            if value and (value[0].isdigit() or value[0] in "-.i") and \
-                    (_INT_TEXT.match(value) or _FLOAT_TEXT.match(value)):
-                return '{"$atom":' + json.dumps(value, ensure_ascii=False) + "}"
-            if "\x00" in value:   # PostgreSQL text cannot hold U+0000; JSON escapes it
+            # an atom that would read as a number, and one holding U+0000 (which PostgreSQL
+            # text cannot hold; JSON escapes it), take the tagged JSON form
+            if (value and (value[0].isdigit() or value[0] in "-.i") and
+                    (_INT_TEXT.match(value) or _FLOAT_TEXT.match(value))) or "\x00" in value:
                 return '{"$atom":' + json.dumps(value, ensure_ascii=False) + "}"
             return value
         if tv is int:
