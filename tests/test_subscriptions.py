@@ -551,7 +551,7 @@ def test_the_journal_keeps_only_what_subscriptions_still_need(kb):
     assert xs(take(slow, 40)) == list(range(40))
     hub = kb._subscriptions
     hub._last_lease = hub._last_persist = 0.0     # renew claims and write positions now
-    assert hub.drain(DEADLINE)
+    assert hub.housekeeping_round(DEADLINE)
     hub.cleanup()
     jids = kb.sql(f"SELECT min(jid), count(*) FROM {journal_table('p')}")[1][0]
     assert jids == (40, 61)   # from the answer the slow one took last (not handled yet) on
@@ -570,7 +570,7 @@ def test_a_registration_removed_behind_its_back_ends_the_subscription_loudly(tmp
         kb.sql("UPDATE slr_subscriptions SET lease_until = 0", write=True)   # as if not renewed for long
         other._subscriptions.cleanup()
         kb._subscriptions._last_lease = kb._subscriptions._last_persist = 0.0
-        assert kb._subscriptions.drain(DEADLINE)
+        assert kb._subscriptions.housekeeping_round(DEADLINE)
         with pytest.raises(SLRError, match="removed from the store"):
             sub.get(timeout=DEADLINE)
 

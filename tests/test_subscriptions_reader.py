@@ -173,7 +173,7 @@ def test_a_subscription_to_a_type_without_events_does_not_hold_up_the_others(db_
 
 
 def test_housekeeping_waits_for_a_busy_store_after_the_deliveries_not_before(db_path):
-    """Writing positions is put off while a writer holds the store: delivery passes go on
+    """Writing positions waits while a writer holds the store: delivery passes go on
     meanwhile (they used to queue behind that transaction), and the positions are written
     once the store is free."""
     with slr_sql.open(db_path) as kb:
@@ -200,7 +200,45 @@ def test_housekeeping_waits_for_a_busy_store_after_the_deliveries_not_before(db_
             release.set()
             thread.join()
         hub._last_persist = 0.0
-        assert hub.drain(DEADLINE)            # the store is free: written now
+        assert hub.housekeeping_round(DEADLINE)   # the store is free: written now
         rows = {r["id"]: r for r in hub.subscriptions()}
         assert rows["log"]["live_pos"] == 2   # up to the answer before the one in hand
+        sub.close()
+
+
+def test_housekeeping_that_must_wait_for_a_writer_delays_no_delivery(db_path):
+    """Housekeeping runs on a thread of its own: when its writes are due and must wait for
+    a writer's transaction (here at once: a lease so short that nothing may be put off), a
+    lagging subscriber still catches up meanwhile. On the hub thread, the pass after the
+    first refill waited for the writer, and the deliveries with it."""
+    with slr_sql.open(db_path) as kb:
+        hub = kb._subscriptions
+        hub.cleanup_interval = 1e9
+        sub = kb.subscribe("p(X)^T", since=0, id="log", max_queue=10)
+        kb.add_many([f"p({i})^{i}" for i in range(1, 101)])
+        assert hub.drain(DEADLINE)          # 10 answers queued, the rest left in the journal
+        holding, release = threading.Event(), threading.Event()
+
+        def writer():
+            with kb.store.transaction():
+                holding.set()
+                release.wait(DEADLINE)
+
+        thread = threading.Thread(target=writer)
+        thread.start()
+        try:
+            assert holding.wait(DEADLINE)
+            hub.lease_seconds = 1e-6          # claims to renew now, nothing put off
+            hub._last_persist = 0.0           # positions due now
+            assert answers_of(sub, 40) == list(range(1, 41))
+            assert thread.is_alive()          # the transaction was held all along
+        finally:
+            release.set()
+            thread.join()
+        hub.lease_seconds = 60.0
+        hub._last_persist = hub._last_lease = 0.0
+        assert hub.housekeeping_round(DEADLINE)   # written once the store is free
+        rows = {r["id"]: r for r in hub.subscriptions()}
+        assert rows["log"]["live_pos"] >= 39
+        assert answers_of(sub, 60) == list(range(41, 101))
         sub.close()

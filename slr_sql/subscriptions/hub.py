@@ -7,7 +7,9 @@ condition and window, and queues the answers (:class:`~.queue.Subscription`); su
 behind it (new, lagging) are read together at their own pace, histories by seq. Its reads
 run on a connection of its own (:meth:`slr_sql.store.EventStore.journal_reader`), so they
 never wait for a writer's commit and a lagging subscriber never holds the writer's
-connection. Rows and journals are the registry's (:mod:`.registry`).
+connection. Housekeeping (durable positions, leases, journal trimming: writes on the
+store's connection) runs on a second thread, so it never holds up a delivery either. Rows
+and journals are the registry's (:mod:`.registry`).
 """
 from __future__ import annotations
 
@@ -91,7 +93,15 @@ class SubscriptionHub:
         self._last_persist = 0.0
         self._last_lease = time.monotonic()   # registration writes a fresh lease
         self._last_cleanup = 0.0
-        self._put_off_since: float | None = None   # housekeeping waiting for the store
+        # housekeeping (positions, leases, journal trimming: writes on the store's connection)
+        # runs on a thread of its own, so a write waiting for a writer's commit, or its own
+        # commit, never holds up a delivery pass
+        self._housekeeper: threading.Thread | None = None
+        self._hk_cond = threading.Condition(ordered_lock("subscriptions.hub"))
+        self._hk_asked = False
+        self._hk_started = 0
+        self._hk_done = 0
+        self._hk_last_failure = ""
         self._subscribed_types: set[tuple[str, int]] = set()   # ever, in this process
         self._journaled: set[tuple[str, int]] = set()   # types whose trigger was seen
         self._last_failure = ""
@@ -223,6 +233,10 @@ class SubscriptionHub:
                 self._thread = threading.Thread(target=self._loop, name="slr-subscriptions",
                                                 daemon=True)
                 self._thread.start()
+                self._housekeeper = threading.Thread(target=self._housekeeping_loop,
+                                                     name="slr-subscriptions-housekeeping",
+                                                     daemon=True)
+                self._housekeeper.start()
                 # a server tells when other processes stored events of journaled types
                 self._stop_listening = self.store.listen(self.notify)
             self.cond.notify()
@@ -373,10 +387,13 @@ class SubscriptionHub:
         with self.cond:
             self._closed = True
             self.cond.notify_all()
+        with self._hk_cond:
+            self._hk_cond.notify_all()
         if self._stop_listening is not None:
             self._stop_listening()
-        if self._thread is not None and self._thread is not threading.current_thread():
-            self._thread.join(timeout=10.0)
+        for thread in (self._thread, self._housekeeper):
+            if thread is not None and thread is not threading.current_thread():
+                thread.join(timeout=10.0)
         if self._subscribed_types and not self.store.closed:
             try:
                 self.cleanup()
@@ -424,7 +441,6 @@ class SubscriptionHub:
                 number = self._passes_started
             try:
                 self._pass()
-                self._housekeeping()
             except Exception as exc:  # a busy store, a closing kb: try again on the next tick
                 if self._closed or self.store.closed:
                     return
@@ -736,37 +752,71 @@ class SubscriptionHub:
             resolve_threadsafe(loop, futures)
 
     # -- housekeeping: durable positions, leases, journal trimming --------------------------------
+    def _housekeeping_loop(self) -> None:
+        """The housekeeping thread: a round every ``persist_interval / 2`` seconds at most (or
+        when :meth:`housekeeping_round` asks), beside the delivery passes."""
+        while True:
+            with self._hk_cond:
+                if not self._hk_asked and not self._closed:
+                    self._hk_cond.wait(max(min(self.persist_interval,
+                                               self.cleanup_interval) / 2, 0.001))
+                if self._closed:
+                    return
+                self._hk_asked = False
+                self._hk_started += 1
+                number = self._hk_started
+            try:
+                if self._subs:
+                    self._housekeeping()
+            except Exception as exc:  # a busy store, a closing kb: try again on the next round
+                if self._closed or self.store.closed:
+                    return
+                if str(exc) != self._hk_last_failure:   # once per distinct failure
+                    self._hk_last_failure = str(exc)
+                    log.warning("subscriptions: housekeeping failed (%s: %s); retrying",
+                                type(exc).__name__, exc, exc_info=True)
+            finally:
+                with self._hk_cond:
+                    self._hk_done = number
+                    self._hk_cond.notify_all()
+
+    def housekeeping_round(self, timeout: float | None = None) -> bool:
+        """Wait until a whole housekeeping round has run after this call (tests): the
+        positions, leases and trims due then are written. True if it did within ``timeout``
+        seconds (at once when nothing is subscribed here).
+
+        >>> import slr_sql
+        >>> kb = slr_sql.open(); sub = kb.subscribe("p(X)^T", since=0)
+        >>> kb._subscriptions.housekeeping_round(10)
+        True
+        >>> sub.close(); kb.close()
+        """
+        end = None if timeout is None else time.monotonic() + timeout
+        with self._hk_cond:
+            if self._housekeeper is None:
+                return True
+            want = self._hk_started + 1
+            self._hk_asked = True
+            self._hk_cond.notify_all()
+            while self._hk_done < want and not self._closed:
+                left = None if end is None else end - time.monotonic()
+                if left is not None and left <= 0:
+                    return False
+                self._hk_cond.wait(left)
+        return True
+
     def _housekeeping(self) -> None:
         """Write the positions of durable subscriptions that moved (every persist_interval),
         renew this process's claims (every lease/3), trim journals (every cleanup_interval,
-        when something was delivered). Each is one short write transaction.
-
-        While another thread holds the store (a writer's transaction, fsync included), it
-        is put off to a later pass rather than waited for: the next events are delivered
-        first. Put off for ``lease_seconds / 6`` at most (claims are renewed in time)."""
+        when something was delivered). Each is one short write transaction on the store's
+        connection, on the housekeeping thread: one that waits for a writer's transaction
+        (fsync included), or for its own commit, delays no delivery."""
         now = time.monotonic()
         persist_due = now - self._last_persist >= self.persist_interval
         cleanup_due = now - self._last_cleanup >= self.cleanup_interval and \
             self._passes_done != self._cleaned_at_pass
-        if not (persist_due or cleanup_due):
-            return
-        lock = self.store.lock
-        # taken without waiting and held for the whole housekeeping: checking that the store
-        # is free and then writing would race a writer that takes it in between
-        if lock.acquire(blocking=False):
-            try:
-                self._put_off_since = None
-                self._write_housekeeping(now, persist_due, cleanup_due)
-            finally:
-                lock.release()
-            return
-        # a writer holds the store: deliver first, write later
-        if self._put_off_since is None:
-            self._put_off_since = now
-        if now - self._put_off_since < self.lease_seconds / 6:
-            return
-        self._put_off_since = None
-        self._write_housekeeping(now, persist_due, cleanup_due)
+        if persist_due or cleanup_due:
+            self._write_housekeeping(now, persist_due, cleanup_due)
 
     def _write_housekeeping(self, now: float, persist_due: bool, cleanup_due: bool) -> None:
         """The writes of :meth:`_housekeeping` that are due."""
