@@ -762,3 +762,98 @@ def test_a_postgresql_restart_mid_stream(postgres_server, postgres_url, tmp_path
     assert said.count("unreachable") == said.count("reachable again") == 1, said
     assert "Traceback" not in said
     assert pg_rows(postgres_url, "restart") == rows_of(robot_db)
+
+
+def test_a_postgresql_robot_store_with_writers_in_flight_ships_every_event(postgres_url,
+                                                                           tmp_path):
+    """On a server a sequence is handed out at the insert, not at the commit: a writer holds
+    seq 2 uncommitted while another commits seq 3. The pusher must not move past 2 (the
+    fleet's position would skip it for ever): it waits for the writer in flight, then ships
+    all three, each once."""
+    import threading
+
+    import psycopg
+
+    fleet_db, url = tmp_path / "fleet.db", with_schema(postgres_url, "in_flight")
+    opened(fleet_db).close()
+    with opened(url, robot="r1") as slow, opened(url, robot="r1") as fast:
+        slow.add("seen(a, dock)^1")
+        inside, release = threading.Event(), threading.Event()
+
+        def hold() -> None:
+            with slow.store.transaction():
+                slow.add("seen(b, dock)^2")
+                inside.set()
+                release.wait(DEADLINE)
+
+        holder = threading.Thread(target=hold)
+        holder.start()
+        try:
+            assert inside.wait(DEADLINE)
+            fast.add("seen(c, dock)^3")
+            reports: list = []
+            pusher = threading.Thread(
+                target=lambda: reports.append(fleet.push(url, str(fleet_db))))
+            pusher.start()
+            # until the pusher either finished or has read the rows and asked the server
+            # which writers are in flight (its session's last statement reads pg_locks)
+            deadline = time.monotonic() + DEADLINE
+            with psycopg.connect(postgres_url, autocommit=True) as watch:
+                while pusher.is_alive() and time.monotonic() < deadline:
+                    waiting = watch.execute(
+                        "SELECT count(*) FROM pg_stat_activity WHERE datname = current_database()"
+                        " AND pid <> pg_backend_pid() AND query LIKE '%pg_locks%'").fetchone()[0]
+                    if waiting:
+                        break
+                    pusher.join(0.01)   # a poll with a deadline, not a pause
+            assert pusher.is_alive()     # it waits for the writer in flight
+        finally:
+            release.set()
+            holder.join(DEADLINE)
+        pusher.join(DEADLINE)
+        assert not pusher.is_alive() and reports
+        fleet.push(url, str(fleet_db))                    # a later round adds nothing new
+    got = rows_of(fleet_db)
+    assert sorted(k[3] for k in got) == ["a", "b", "c"] and set(got.values()) == {1}
+
+
+def test_a_pusher_beside_concurrent_postgresql_writers_loses_nothing(postgres_url, tmp_path):
+    """Three writers (a knowledge base each, so a server session each) add single events
+    while a pusher ships round after round: the fleet ends with every event once."""
+    import threading
+
+    fleet_db, url = tmp_path / "fleet.db", with_schema(postgres_url, "concurrent")
+    opened(fleet_db).close()
+    with opened(url, robot="r1") as kb:
+        kb.add("seen(start, dock)^0")
+    done = threading.Event()
+    errors: list = []
+
+    def write(w: int) -> None:
+        try:
+            with opened(url, robot="r1") as kb:
+                for i in range(150):
+                    kb.add(f"seen(w{w}_{i}, dock)^{i + 1}")
+        except BaseException as exc:   # noqa: BLE001 - reported by the test below
+            errors.append(exc)
+
+    def ship() -> None:
+        try:
+            while not done.is_set():
+                fleet.push(url, str(fleet_db))
+        except BaseException as exc:   # noqa: BLE001
+            errors.append(exc)
+
+    writers = [threading.Thread(target=write, args=(w,)) for w in range(3)]
+    pusher = threading.Thread(target=ship)
+    pusher.start()
+    for t in writers:
+        t.start()
+    for t in writers:
+        t.join(DEADLINE)
+    done.set()
+    pusher.join(DEADLINE)
+    assert errors == []
+    fleet.push(url, str(fleet_db))
+    got = rows_of(fleet_db)
+    assert len(got) == 451 and set(got.values()) == {1}
