@@ -361,6 +361,31 @@ def test_a_synchronized_query_restricted_to_one_robot(tmp_path):
     assert done.stdout.strip() == "L = [aisle3]"
 
 
+def test_a_synchronized_query_restricted_to_one_robot_over_the_service(tmp_path):
+    """The same through `slr serve` and `slr_sql.connect` (one interface, local or remote):
+    query(wait=True, robot=), submit(robot=) pending until the history is complete, ask."""
+    import asyncio
+
+    for robot, events in (("r1", ["seen(pallet7, dock)^10", "fullyUpdated(seen/2)^20"]),
+                          ("r2", ["seen(pallet7, aisle3)^15", "fullyUpdated(seen/2)^25"])):
+        with opened(tmp_path / f"{robot}.db", robot=robot) as kb:
+            kb.add_many(events)
+        fleet.push(str(tmp_path / f"{robot}.db"), str(tmp_path / "fleet.db"))
+    goal = "findall(W, seen(pallet7, W)^_, L)"
+    with ServiceProcess(tmp_path / "fleet.db") as server, \
+            slr_sql.connect(server.url) as client:
+        assert client.query(goal, at=20, wait=True, robot="r1") == [{"L": ["dock"]}]
+        pending = client.submit(goal, at=1e12, robot="r2")
+        assert not pending.done()                     # the fleet is complete up to 20 only
+        client.mark_complete("seen/2", 1e12)
+        assert pending.result(timeout=DEADLINE) == [{"L": ["aisle3"]}]
+        assert asyncio.run(client.ask(goal, at=20, robot="r1")) == [{"L": ["dock"]}]
+        with pytest.raises(slr_sql.SLRError, match="robot"):
+            client.submit(goal, at=20, robot="12")   # a name that reads as a number
+        done = slr("query", server.url, goal, "--at", "20", "--wait", "--robot", "r2")
+        assert done.stdout.strip() == "L = [aisle3]"
+
+
 # -- shipping --------------------------------------------------------------------------------
 
 def test_push_ships_each_event_once_with_complex_events_and_marks(tmp_path):
@@ -555,11 +580,13 @@ def test_a_fleet_that_does_not_answer_never_holds_the_robot_up(tmp_path):
                     {"R": "r1", "W": "w7", "T": 7.0}] * 2
                 assert len(client.query("seen(pallet7, W)^T", robot="r1")) == 160
                 assert client.query("seen(pallet7, W)^T", robot="r2") == []
-                with pytest.raises(slr_sql.SLRError, match="synchronized"):
-                    client.query("seen(pallet7, W)^T", wait=True, robot="r1")
+                # synchronized and per robot: the history up to 10 is long complete
+                now = client.query("seen(pallet7, W)^T", at=10, robot="r1")
+                assert now and client.query("seen(pallet7, W)^T", at=10, wait=True,
+                                            robot="r1") == now
                 reply = httpx.post(url + "/query", json={"goal": "seen(P, W)^T", "wait": True,
-                                                         "robot": "r1"}, timeout=30)
-                assert reply.status_code == 400 and "synchronized" in reply.text
+                                                         "at": 10, "robot": "r2"}, timeout=30)
+                assert reply.status_code == 200 and reply.json()["answers"] == []
                 # a malformed shipment is refused with its reason and changes nothing
                 for bad in ([["seen", 2, [[9001, "a", 1.0, 1.0, 1.0, None]]]],   # short
                             [["seen", 2, [[9, "a", "b", 1.0, "x", 1.0, 1.0, None]]]],
