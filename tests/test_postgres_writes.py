@@ -108,3 +108,18 @@ def test_an_add_wider_than_one_statement_goes_in_parts_in_order(postgres_url):
         assert kb.add_many(wide) == []
         assert _column(postgres_url, "SELECT arg1 FROM w ORDER BY seq") == \
             [str(i) for i in range(60)]
+
+
+def test_subscriptions_of_two_types_see_one_statements_rows(postgres_url):
+    """Two tables' rows in one statement (WITH parts): each table's journal trigger runs
+    for its own rows, so a subscription to each type gets its events once, in order."""
+    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
+        kb.add_many([("a", ("k",), 0.0, 0.0), ("b", ("k",), 0.0, 0.0)])
+        subs = {name: kb.subscribe(f"{name}(X)^T", since=0.5) for name in "ab"}
+        batch = [("a" if i % 2 == 0 else "b", (f"k{i}",), 1.0, 1.0) for i in range(10)]
+        kb.add_many(batch)
+        for name, first in (("a", 0), ("b", 1)):
+            got = [subs[name].get(timeout=30)["X"] for _ in range(5)]
+            assert got == [f"k{i}" for i in range(first, 10, 2)]
+        with pytest.raises(SLRError):   # (SLRTimeout: nothing more, nothing twice)
+            subs["a"].get(timeout=0.3)
