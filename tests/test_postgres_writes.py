@@ -86,25 +86,29 @@ def test_rows_deferred_in_a_transaction_are_seen_by_its_next_statement(postgres_
     """Inserts that open a transaction wait for its end only while nothing else runs: the
     transaction's next statement (here a count, inside the same transaction) sees them;
     a rollback sends nothing."""
+    insert = "INSERT INTO p (arg1, t_start, t_end, arrival) VALUES (?, ?, ?, ?)"
     with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
         store = kb.store
         store.add_events([("p", (0,), 0.0, 0.0)])
         with store.transaction():
-            store.add_events([("p", (1,), 1.0, 1.0), ("p", (2,), 2.0, 2.0)])
-            assert store.count("p", 1) == 3
-        assert store.count("p", 1) == 3
+            store.executemany(insert, [("1", 1.0, 1.0, 0.0), ("2", 2.0, 2.0, 0.0)])
+            assert store.execute("SELECT count(*) FROM p") == [(3,)]
+            store.add_events([("p", (3,), 3.0, 3.0)])   # (a savepoint of its own)
+            assert store.count("p", 1) == 4
+        assert store.count("p", 1) == 4
         with pytest.raises(RuntimeError), store.transaction():
-            store.add_events([("p", (3,), 3.0, 3.0)])
+            store.executemany(insert, [("4", 4.0, 4.0, 0.0)])
             raise RuntimeError("changed my mind")
-        assert store.count("p", 1) == 3
-        assert _column(postgres_url, "SELECT arg1 FROM p ORDER BY seq") == ["0", "1", "2"]
+        assert store.count("p", 1) == 4
+        assert _column(postgres_url, "SELECT arg1 FROM p ORDER BY seq") == ["0", "1", "2", "3"]
 
 
 def test_an_add_wider_than_one_statement_goes_in_parts_in_order(postgres_url):
-    """Rows whose parameters would pass the protocol's limit of one statement (here 60
-    events of 1,000 arguments: 60,180 values) go in several statements, in order."""
+    """Rows whose parameters would pass the protocol's limit of one statement (65,535;
+    here 60 events of 1,100 arguments: 66,180 values) go in several statements, in
+    order."""
     with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
-        wide = [("w", tuple([i] + [0] * 999), float(i), float(i)) for i in range(60)]
+        wide = [("w", tuple([i] + [0] * 1099), float(i), float(i)) for i in range(60)]
         assert kb.add_many(wide) == []
         assert _column(postgres_url, "SELECT arg1 FROM w ORDER BY seq") == \
             [str(i) for i in range(60)]
