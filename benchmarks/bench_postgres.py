@@ -179,13 +179,16 @@ print(n)
 
 
 def writers(admin: str, counts: list[int], seconds: float,
-            modes: tuple[str, ...] = ("raw", "kb", "kb+rule")) -> list[dict]:
+            modes: tuple[str, ...] = ("raw", "kb", "kb+rule"), repeat: int = 1) -> list[dict]:
     script = Path(tempfile.mkdtemp()) / "writer.py"
     script.write_text(WRITER)
     code = str(Path(__file__).resolve().parent.parent)
     out = []
-    for mode in modes:
-        for k in counts:
+    # each count's sides back to back (raw, kb, ...), ``repeat`` times in alternation: both
+    # meet the same machine state; the median of each side is reported
+    runs: dict[tuple[str, int], list[float]] = {}
+    for k in counts:
+        for mode in modes * repeat:
             url = database(admin, "bench_writers")
             with slr_sql.open(url) as kb:
                 kb.add_many([("a", ("k",), 0.0, 0.0), ("b", ("k",), 0.0, 0.0)])
@@ -201,7 +204,11 @@ def writers(admin: str, counts: list[int], seconds: float,
                 p.stdin.write("go\n")
                 p.stdin.flush()
             total = sum(int(p.communicate()[0].strip().splitlines()[-1]) for p in procs)
-            out.append({"mode": mode, "writers": k, "events_per_s": total / seconds})
+            runs.setdefault((mode, k), []).append(total / seconds)
+        for mode in modes:
+            each = runs[(mode, k)]
+            out.append({"mode": mode, "writers": k, "events_per_s": statistics.median(each),
+                        "runs": each})
     return out
 
 
@@ -250,6 +257,8 @@ def main() -> None:
     parser.add_argument("--writers", default="1,4,16")
     parser.add_argument("--seconds", type=float, default=5.0)
     parser.add_argument("--parts", default="ingest,prev,writers")
+    parser.add_argument("--repeat", type=int, default=1,
+                        help="writers: runs of each side, in alternation (median reported)")
     parser.add_argument("--modes", default="raw,kb,kb+rule",
                         help="writers' sides: raw (the target's baseline), kb, kb+rule, and "
                              "raw1 (a reference: each batch one multi-row INSERT committing "
@@ -277,9 +286,18 @@ def main() -> None:
         if counts and "writers" in parts:
             load = os.getloadavg()
             print(f"load average before the writers: {load[0]:.1f} {load[1]:.1f}")
-            for r in writers(admin, counts, args.seconds, tuple(args.modes.split(","))):
+            results = writers(admin, counts, args.seconds, tuple(args.modes.split(",")),
+                              args.repeat)
+            raw = {r["writers"]: r["events_per_s"] for r in results if r["mode"] == "raw"}
+            for r in results:
+                ratio = (f" ({r['events_per_s'] / raw[r['writers']]:.2f}x raw)"
+                         if r["writers"] in raw and r["mode"] != "raw" else "")
+                each = ", ".join(f"{v:,.0f}" for v in r["runs"]) if len(r["runs"]) > 1 else ""
                 print(f"writers {r['writers']:>2} {r['mode']:>8}: "
-                      f"{r['events_per_s']:,.0f} events/s")
+                      f"{r['events_per_s']:,.0f} events/s{ratio}"
+                      + (f" [runs: {each}]" if each else ""))
+            load = os.getloadavg()
+            print(f"load average after the writers: {load[0]:.1f} {load[1]:.1f}")
     finally:
         if server is not None:
             server.cleanup()
