@@ -525,7 +525,12 @@ class RuleRuntime:
             # each other, so their candidates are read in one statement per position
             together = (kind == "term" and wait is None and self.policy == "recent"
                         and n < len(self.alts) and self.alts[n].runnable)
-            ready = []
+            if together:
+                ready = self._ready_prefix([row for row in rows if row[0] not in seen],
+                                           (n, kind, wait), now, seen)
+                if ready:
+                    changed |= self._decide_terms(n, ready, now, per_alt[n])
+                continue
             for row in rows:
                 if row[0] in seen:
                     continue
@@ -533,13 +538,34 @@ class RuleRuntime:
                 wt = row[9] if row[7] is not None else row[6]
                 if not self._ready((n, kind, wait), wt, now):
                     break   # the rest of the group needs a later time
-                if together:
-                    ready.append(row)
-                else:
-                    changed |= self._decide_row(row, now, per_alt)
-            if ready:
-                changed |= self._decide_terms(n, ready, now, per_alt[n])
+                changed |= self._decide_row(row, now, per_alt)
         return changed
+
+    def _ready_prefix(self, rows: list, group: tuple, now: float, seen: set) -> list:
+        """The leading rows of ``rows`` (pending terminators waiting on nothing, in
+        ascending end time) that are ready now, up to the first that is not -- as a walk
+        checking each in turn would find them (and ``seen`` gets what it would have seen:
+        those and the first row that is not ready). Readiness only shrinks as the end time
+        grows (a history complete up to z is complete up to any earlier time) and deciding
+        happens after this, so the last row is checked first (usually all are ready) and
+        otherwise the first row not ready is found by bisection: a few checks of the
+        trackers per round instead of one per row."""
+        if not rows:
+            return []
+        end = 6  # t_end: the time a terminator waiting on nothing is decided at
+        if self._ready(group, rows[-1][end], now):
+            k = len(rows)
+        else:
+            lo, hi = 0, len(rows) - 1  # rows[hi] is not ready; rows[:lo] are
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if self._ready(group, rows[mid][end], now):
+                    lo = mid + 1
+                else:
+                    hi = mid
+            k = lo
+        seen.update(row[0] for row in rows[:k + 1])
+        return rows[:k]
 
     def _decide_terms(self, n: int, rows: list, now: float, params: dict) -> bool:
         """Decide pending ``recent`` terminators of alternative ``n`` (pending rows whose
