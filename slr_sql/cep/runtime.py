@@ -29,7 +29,7 @@ import json
 import math
 from itertools import islice, pairwise
 from operator import itemgetter, ne
-from typing import Any
+from typing import Any, Callable
 
 from ..encoding import Unencodable, decode, encode
 from ..errors import SLRError
@@ -45,7 +45,7 @@ from .where import MustWait, Residual, describe_error, plain_value
 
 _first, _second = itemgetter(0), itemgetter(1)
 
-__all__ = ["EventRules", "RuleRuntime"]
+__all__ = ["EventRules", "RuleRuntime", "ready_prefix"]
 
 _INF = math.inf
 
@@ -526,8 +526,8 @@ class RuleRuntime:
             together = (kind == "term" and wait is None and self.policy == "recent"
                         and n < len(self.alts) and self.alts[n].runnable)
             if together:
-                ready = self._ready_prefix([row for row in rows if row[0] not in seen],
-                                           (n, kind, wait), now, seen)
+                ready = ready_prefix([row for row in rows if row[0] not in seen],
+                                     lambda t: self._ready((n, kind, wait), t, now), seen)
                 if ready:
                     changed |= self._decide_terms(n, ready, now, per_alt[n])
                 continue
@@ -540,32 +540,6 @@ class RuleRuntime:
                     break   # the rest of the group needs a later time
                 changed |= self._decide_row(row, now, per_alt)
         return changed
-
-    def _ready_prefix(self, rows: list, group: tuple, now: float, seen: set) -> list:
-        """The leading rows of ``rows`` (pending terminators waiting on nothing, in
-        ascending end time) that are ready now, up to the first that is not -- as a walk
-        checking each in turn would find them (and ``seen`` gets what it would have seen:
-        those and the first row that is not ready). Readiness only shrinks as the end time
-        grows (a history complete up to z is complete up to any earlier time) and deciding
-        happens after this, so the last row is checked first (usually all are ready) and
-        otherwise the first row not ready is found by bisection: a few checks of the
-        trackers per round instead of one per row."""
-        if not rows:
-            return []
-        end = 6  # t_end: the time a terminator waiting on nothing is decided at
-        if self._ready(group, rows[-1][end], now):
-            k = len(rows)
-        else:
-            lo, hi = 0, len(rows) - 1  # rows[hi] is not ready; rows[:lo] are
-            while lo < hi:
-                mid = (lo + hi) // 2
-                if self._ready(group, rows[mid][end], now):
-                    lo = mid + 1
-                else:
-                    hi = mid
-            k = lo
-        seen.update(row[0] for row in rows[:k + 1])
-        return rows[:k]
 
     def _decide_terms(self, n: int, rows: list, now: float, params: dict) -> bool:
         """Decide pending ``recent`` terminators of alternative ``n`` (pending rows whose
@@ -1308,3 +1282,34 @@ def _rule_groups(runtimes: list) -> list[set]:
             types |= g
         groups.append(types)
     return groups
+
+
+def ready_prefix(rows: list, ready: Callable[[float], bool], seen: set) -> list:
+    """The leading rows of ``rows`` (pending rows ``(id, .., t_end at [6], ..)`` in
+    ascending end time) that are ``ready`` at their end, up to the first that is not -- as a
+    walk checking each in turn finds them; ``seen`` gets what that walk sees: those and the
+    first row not ready. Readiness only shrinks as the end time grows (a history complete
+    up to z is complete up to any earlier time), so the last row is checked first (usually
+    all are ready) and otherwise the first row not ready is found by bisection: a few checks
+    of the trackers instead of one per row.
+
+    >>> rows = [(i, None, None, None, None, None, float(i)) for i in range(1, 9)]
+    >>> seen = set(); [r[0] for r in ready_prefix(rows, lambda t: t < 5.5, seen)], sorted(seen)
+    ([1, 2, 3, 4, 5], [1, 2, 3, 4, 5, 6])
+    """
+    if not rows:
+        return []
+    end = 6
+    if ready(rows[-1][end]):
+        k = len(rows)
+    else:
+        lo, hi = 0, len(rows) - 1  # rows[hi] is not ready; rows[:lo] are
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if ready(rows[mid][end]):
+                lo = mid + 1
+            else:
+                hi = mid
+        k = lo
+    seen.update(row[0] for row in rows[:k + 1])
+    return rows[:k]
