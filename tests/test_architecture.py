@@ -26,6 +26,7 @@ LAYERS = {
     "builtins": 3,
     "analysis": 4, "engine": 4, "sqlcompile": 4,
     "plans": 4.5,  # query plans: parsed, cached, instantiated; the prev fast path
+    "sql_functions": 4.6,  # the Python functions SQL calls, listed once (store/functions)
     "host": 4.75,  # the Protocol of what the facade offers the parts it attaches
     "planner": 5,
     "sync": 6, "buffers": 6, "cep": 6, "plot": 6, "subscriptions": 6, "shipping": 6,
