@@ -112,3 +112,20 @@ def test_each_function_is_on_postgresql_or_marked_interpreter_only(postgres_url)
             assert name not in names_on_server, (f"{name} exists on PostgreSQL: mark it "
                                                  "Native.MIGRATION")
     assert any(native is Native.MIGRATION for _, _, native in entries)
+
+
+def test_a_builtin_reading_the_machines_deadline_runs_inside_sql(kb):
+    """term_to_atom reads its machine's deadline: called from SQL it must find one, or the
+    statement fails there and the interpreter runs the whole goal again (the defined
+    predicate before it is then called twice)."""
+    calls = []
+
+    def tick(x, n):
+        calls.append(x)
+        return x, len(calls)
+
+    kb.define("tick", 2, tick)
+    kb.load("q(N, A) :- tick(7, N), term_to_atom(f(N), A).")
+    assert "engine: sql" in kb.explain("q(N, A)")
+    assert kb.query("q(N, A)") == [{"N": 1, "A": slr_sql.Atom("f(1)")}]
+    assert calls == [7]
