@@ -268,6 +268,19 @@ def test_pages_cite_nothing_outside_the_repository(path):
     assert "SPEC" not in text and "§" not in text, path.name
 
 
+_PRIVATE_REACH = re.compile(r"\b(kb|store|sub|engine)\._[a-z]")
+
+
+@pytest.mark.parametrize("path", sorted([*DOCS.glob("*.md"), ROOT / "README.md"]),
+                         ids=lambda p: p.name)
+def test_pages_send_no_user_to_a_private_name(path):
+    """What a page tells users to call is public (``kb._buffers.prune_now()`` was
+    advice once: a rename would break their code without a word)."""
+    found = [line for line in path.read_text(encoding="utf-8").splitlines()
+             if _PRIVATE_REACH.search(line)]
+    assert not found, f"{path.name}: {found}"
+
+
 def test_atoms_and_strings_in_answers_print_as_in_the_docs():
     assert answer_text(Atom("cup1")) == "cup1" and answer_text("outdated") == '"outdated"'
     assert answer_text([Atom("a"), 1]) == "[a,1]"
