@@ -1801,7 +1801,7 @@ class BuiltinMachine:
     >>> from slr_sql.program import Program
     >>> m = BuiltinMachine(Engine(Program(), None))
     >>> y = Var("Y"); DET[("copy_term", 2)](m, (Struct("f", (Var("X"),)), y)), deref(y)
-    (True, Struct('f', (Var('_G1'),)))
+    (True, Struct('f', (Var('_G...'),)))
     """
 
     __slots__ = ("engine", "trail", "at", "on_prev", "on_next", "cps", "deadline")
