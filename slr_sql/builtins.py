@@ -1794,8 +1794,8 @@ def _tf_lookup5(m, a):
 class BuiltinMachine:
     """What a deterministic builtin needs of a machine when it runs outside one (called
     from SQL, or for the builtin goals of an event rule's ``where``): a trail to bind on,
-    a time ``at`` (set by the caller), no hooks (such a goal reads no history) and no
-    deadline of its own.
+    a time ``at`` (set by the caller), no hooks (such a goal reads no history), and the
+    ``deadline`` (``time.monotonic()``, None: none) of the statement or query it runs for.
 
     >>> from slr_sql.engine import Engine
     >>> from slr_sql.program import Program
@@ -1822,7 +1822,7 @@ class BuiltinMachine:
         undo(self.trail, mark)
 
     def check_deadline(self) -> None:
-        return None
+        check_deadline(self.deadline)
 
 
 

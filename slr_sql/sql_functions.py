@@ -39,6 +39,11 @@ from .terms import Struct, Var, deref, list_items, make_list
 __all__ = ["SQL_FUNCTIONS"]
 
 
+def statement_deadline(store: Any) -> float | None:
+    """The deadline of the compiled statement running on ``store`` now (None: no store)."""
+    return None if store is None else store.statement_deadline
+
+
 def _num(v):
     if type(v) is int or type(v) is float:
         return v
@@ -108,6 +113,8 @@ def _det(sid, i, *inputs):
             varmap[id(v)] = Var(v.name)
         args = tuple(_inst(a, values, varmap) for a in site.args)
         m = BuiltinMachine(site.engine)
+        # the timeout= of the statement calling it holds inside a long builtin too
+        m.deadline = statement_deadline(site.engine.events)
         if site.python:
             ok = call_python_pred(m, site.fn, args)
         else:

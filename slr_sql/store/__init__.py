@@ -728,6 +728,17 @@ class EventStore:
     def query_plan(self, sql: str) -> list[str]:
         return self._db.query_plan(sql)
 
+    @property
+    def statement_deadline(self) -> float | None:
+        """The deadline (``time.monotonic()``) of the compiled statement running now on
+        this store, None when none runs or it has none: a Python function called from the
+        statement keeps to it.
+
+        >>> EventStore(None).statement_deadline is None
+        True
+        """
+        return self._db.deadline
+
     @_doc(Database.install_functions)
     def install_functions(self, functions: SqlFunctions) -> None:
         self._db.install_functions(functions)
