@@ -723,9 +723,6 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
     timeout = _finite("--timeout", timeout, minimum=0.0)
     printer = AnswerPrinter(as_json)
     with _open(db, create=False) as kb:
-        if wait and robot is not None and not hasattr(kb, "synchronizer"):
-            raise slr_sql.SLRError("--robot cannot be combined with --wait on a service URL "
-                                   "yet: ask origin(R, Goal) in the goal instead")
         _warn_about(kb, goal)
         if wait:
             if not hasattr(kb, "submit"):
@@ -737,10 +734,8 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
             # processes may add the events and marks it waits for.
             if hasattr(kb, "synchronizer"):
                 kb.synchronizer.watch_external()
-            pending = (kb.submit(goal, at=at, id=f"slr-query-{os.getpid()}", timeout=timeout)
-                       if robot is None else
-                       kb.synchronizer.submit(goal, at=at, id=f"slr-query-{os.getpid()}",
-                                              timeout=timeout, robot=robot))
+            pending = kb.submit(goal, at=at, id=f"slr-query-{os.getpid()}", timeout=timeout,
+                                **({"robot": robot} if robot is not None else {}))
             try:
                 answers = pending.result(timeout=None if timeout is None else timeout + 5.0)
             except concurrent.futures.TimeoutError:

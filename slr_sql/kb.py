@@ -436,13 +436,7 @@ class KnowledgeBase:
         if robot is not None:
             check_robot_name(robot)
         if wait:  # synchronized (SLRTimeout names the incomplete types)
-            if robot is not None:
-                # waits as the unrestricted query does (for the fleet's marks, the least of
-                # every robot's): never early, and the answers are the robot's
-                self._refresh()
-                return self._sync.submit(goal, at=at, args=args, timeout=timeout,
-                                         robot=robot).result()
-            return self.submit(goal, at=at, args=args, timeout=timeout).result()
+            return self.submit(goal, at=at, args=args, timeout=timeout, robot=robot).result()
         if args and limit is None and robot is None:
             key = (goal, tuple(args))
             plan = self._cached_plan(key)
@@ -601,12 +595,15 @@ class KnowledgeBase:
     # -- synchronized queries (the work is in slr_sql/sync.py) -----------------
     def submit(self, goal: str, at: float | None = None, id: str | None = None,
                args: dict | None = None, timeout: float | None = None,
-               callback: Callable[[Any], Any] | None = None) -> PendingQueryAPI:
+               callback: Callable[[Any], Any] | None = None,
+               robot: str | None = None) -> PendingQueryAPI:
         """Synchronized query ⟨goal, at⟩: returns a PendingQuery (a concurrent.futures.Future)
         answered with the answer list as soon as every event type the goal depends on is
         complete up to ``at`` (default: now), and every prev/next it evaluates is complete up
         to its own time. ``timeout`` (seconds) fails it with SLRTimeout; ``callback(pending)``
-        runs when it is done. See docs/synchronization.md.
+        runs when it is done. ``robot`` restricts the goal's events to that robot's, as in
+        :meth:`query`; it waits for the fleet's marks (every robot's), so never early. See
+        docs/synchronization.md.
 
         >>> from slr_sql import ManualClock
         >>> kb = open(clock=ManualClock(0)); kb.add("p(a)^0.5")
@@ -615,18 +612,21 @@ class KnowledgeBase:
         >>> kb.mark_complete("p/1", 1); p.result(timeout=5)
         [{'L': [Atom('a')]}]
         """
+        if robot is not None:
+            check_robot_name(robot)
         self._refresh()
         return self._sync.submit(goal, at=at, id=id, args=args, timeout=timeout,
-                                 callback=callback)
+                                 callback=callback, robot=robot)
 
     async def ask(self, goal: str, at: float | None = None, id: str | None = None,
-                  args: dict | None = None, timeout: float | None = None) -> list[dict[str, Any]]:
+                  args: dict | None = None, timeout: float | None = None,
+                  robot: str | None = None) -> list[dict[str, Any]]:
         """``await kb.ask(goal, at=z)``: :meth:`submit` for asyncio code."""
         import asyncio
 
         from concurrent.futures import Future
 
-        pending = self.submit(goal, at=at, id=id, args=args, timeout=timeout)
+        pending = self.submit(goal, at=at, id=id, args=args, timeout=timeout, robot=robot)
         assert isinstance(pending, Future)   # a PendingQueryAPI here is a Future
         return await asyncio.wrap_future(pending)
 

@@ -431,7 +431,7 @@ def compile_goal(kb, plan, has_at: bool, robot: bool = False) -> SqlPlan:
             cols += [f"{x} AS v{i}" for i, x in enumerate(p.proj)]
             cols += [f"NULL AS v{i}" for i in range(len(p.proj), nv)]
             cols += [f"{k} AS k{i}" for i, k in enumerate(p.keys)]
-            cols += [f"NULL AS k{i}" for i in range(len(p.keys), nk)]
+            cols += [f"{comp.dialect.null_key} AS k{i}" for i in range(len(p.keys), nk)]
             selects.append(p.select(cols))
         sql = "\nUNION ALL\n".join(selects)
         if nk and (len(parts) > 1 or any(p.keys for p in parts)):
@@ -594,15 +594,20 @@ def view_sql(kb, name: str, arity: int):
         comp.compile(goal, emit)
     except Fallback as exc:
         return None, exc.reason, comp.missing
+    except Unprintable as exc:   # this engine's SQL has no exact form of a part of it
+        return None, exc.reason, comp.missing
     except RecursionError:  # as plan_for: a term nested too deeply for the compiler's walks
         return None, "a clause is nested too deeply to compile", comp.missing
     except (ValueError, OverflowError) as exc:  # a constant SQL cannot hold: no view
         return None, str(exc), comp.missing
     if comp.uses_udf:
+        # slr_sql's own SQL functions: on SQLite they exist only inside its connection, on
+        # PostgreSQL they find each other through the store's search_path, which a psql
+        # session does not have
         return None, "uses slr_ functions", comp.missing
     if not parts:
         return None, "no rows", comp.missing
-    return sqlcompile.view_select(parts, arity), None, comp.missing
+    return sqlcompile.view_select(parts, arity, comp.dialect), None, comp.missing
 
 
 def refresh_views(kb) -> list[str]:
@@ -614,8 +619,8 @@ def refresh_views(kb) -> list[str]:
         if (name, arity) in facts:
             views.setdefault(name, kb.store.fact_view_select(facts[(name, arity)], arity))
             continue
-        if not compiles_for(kb.store) or not kb.store.dialect.query_functions:
-            continue   # (views of derived predicates: on SQLite only, see docs/postgres.md)
+        if not compiles_for(kb.store):
+            continue
         sql, _reason, miss = view_sql(kb, name, arity)
         missing |= set(miss)
         if sql is not None and name not in views:

@@ -361,6 +361,31 @@ def test_a_synchronized_query_restricted_to_one_robot(tmp_path):
     assert done.stdout.strip() == "L = [aisle3]"
 
 
+def test_a_synchronized_query_restricted_to_one_robot_over_the_service(tmp_path):
+    """The same through `slr serve` and `slr_sql.connect` (one interface, local or remote):
+    query(wait=True, robot=), submit(robot=) pending until the history is complete, ask."""
+    import asyncio
+
+    for robot, events in (("r1", ["seen(pallet7, dock)^10", "fullyUpdated(seen/2)^20"]),
+                          ("r2", ["seen(pallet7, aisle3)^15", "fullyUpdated(seen/2)^25"])):
+        with opened(tmp_path / f"{robot}.db", robot=robot) as kb:
+            kb.add_many(events)
+        fleet.push(str(tmp_path / f"{robot}.db"), str(tmp_path / "fleet.db"))
+    goal = "findall(W, seen(pallet7, W)^_, L)"
+    with ServiceProcess(tmp_path / "fleet.db") as server, \
+            slr_sql.connect(server.url) as client:
+        assert client.query(goal, at=20, wait=True, robot="r1") == [{"L": ["dock"]}]
+        pending = client.submit(goal, at=1e12, robot="r2")
+        assert not pending.done()                     # the fleet is complete up to 20 only
+        client.mark_complete("seen/2", 1e12)
+        assert pending.result(timeout=DEADLINE) == [{"L": ["aisle3"]}]
+        assert asyncio.run(client.ask(goal, at=20, robot="r1")) == [{"L": ["dock"]}]
+        with pytest.raises(slr_sql.SLRError, match="robot"):
+            client.submit(goal, at=20, robot="12")   # a name that reads as a number
+        done = slr("query", server.url, goal, "--at", "20", "--wait", "--robot", "r2")
+        assert done.stdout.strip() == "L = [aisle3]"
+
+
 # -- shipping --------------------------------------------------------------------------------
 
 def test_push_ships_each_event_once_with_complex_events_and_marks(tmp_path):
@@ -555,11 +580,13 @@ def test_a_fleet_that_does_not_answer_never_holds_the_robot_up(tmp_path):
                     {"R": "r1", "W": "w7", "T": 7.0}] * 2
                 assert len(client.query("seen(pallet7, W)^T", robot="r1")) == 160
                 assert client.query("seen(pallet7, W)^T", robot="r2") == []
-                with pytest.raises(slr_sql.SLRError, match="synchronized"):
-                    client.query("seen(pallet7, W)^T", wait=True, robot="r1")
+                # synchronized and per robot: the history up to 10 is long complete
+                now = client.query("seen(pallet7, W)^T", at=10, robot="r1")
+                assert now and client.query("seen(pallet7, W)^T", at=10, wait=True,
+                                            robot="r1") == now
                 reply = httpx.post(url + "/query", json={"goal": "seen(P, W)^T", "wait": True,
-                                                         "robot": "r1"}, timeout=30)
-                assert reply.status_code == 400 and "synchronized" in reply.text
+                                                         "at": 10, "robot": "r2"}, timeout=30)
+                assert reply.status_code == 200 and reply.json()["answers"] == []
                 # a malformed shipment is refused with its reason and changes nothing
                 for bad in ([["seen", 2, [[9001, "a", 1.0, 1.0, 1.0, None]]]],   # short
                             [["seen", 2, [[9, "a", "b", 1.0, "x", 1.0, 1.0, None]]]],
@@ -762,3 +789,98 @@ def test_a_postgresql_restart_mid_stream(postgres_server, postgres_url, tmp_path
     assert said.count("unreachable") == said.count("reachable again") == 1, said
     assert "Traceback" not in said
     assert pg_rows(postgres_url, "restart") == rows_of(robot_db)
+
+
+def test_a_postgresql_robot_store_with_writers_in_flight_ships_every_event(postgres_url,
+                                                                           tmp_path):
+    """On a server a sequence is handed out at the insert, not at the commit: a writer holds
+    seq 2 uncommitted while another commits seq 3. The pusher must not move past 2 (the
+    fleet's position would skip it for ever): it waits for the writer in flight, then ships
+    all three, each once."""
+    import threading
+
+    import psycopg
+
+    fleet_db, url = tmp_path / "fleet.db", with_schema(postgres_url, "in_flight")
+    opened(fleet_db).close()
+    with opened(url, robot="r1") as slow, opened(url, robot="r1") as fast:
+        slow.add("seen(a, dock)^1")
+        inside, release = threading.Event(), threading.Event()
+
+        def hold() -> None:
+            with slow.store.transaction():
+                slow.add("seen(b, dock)^2")
+                inside.set()
+                release.wait(DEADLINE)
+
+        holder = threading.Thread(target=hold)
+        holder.start()
+        try:
+            assert inside.wait(DEADLINE)
+            fast.add("seen(c, dock)^3")
+            reports: list = []
+            pusher = threading.Thread(
+                target=lambda: reports.append(fleet.push(url, str(fleet_db))))
+            pusher.start()
+            # until the pusher either finished or has read the rows and asked the server
+            # which writers are in flight (its session's last statement reads pg_locks)
+            deadline = time.monotonic() + DEADLINE
+            with psycopg.connect(postgres_url, autocommit=True) as watch:
+                while pusher.is_alive() and time.monotonic() < deadline:
+                    waiting = watch.execute(
+                        "SELECT count(*) FROM pg_stat_activity WHERE datname = current_database()"
+                        " AND pid <> pg_backend_pid() AND query LIKE '%pg_locks%'").fetchone()[0]
+                    if waiting:
+                        break
+                    pusher.join(0.01)   # a poll with a deadline, not a pause
+            assert pusher.is_alive()     # it waits for the writer in flight
+        finally:
+            release.set()
+            holder.join(DEADLINE)
+        pusher.join(DEADLINE)
+        assert not pusher.is_alive() and reports
+        fleet.push(url, str(fleet_db))                    # a later round adds nothing new
+    got = rows_of(fleet_db)
+    assert sorted(k[3] for k in got) == ["a", "b", "c"] and set(got.values()) == {1}
+
+
+def test_a_pusher_beside_concurrent_postgresql_writers_loses_nothing(postgres_url, tmp_path):
+    """Three writers (a knowledge base each, so a server session each) add single events
+    while a pusher ships round after round: the fleet ends with every event once."""
+    import threading
+
+    fleet_db, url = tmp_path / "fleet.db", with_schema(postgres_url, "concurrent")
+    opened(fleet_db).close()
+    with opened(url, robot="r1") as kb:
+        kb.add("seen(start, dock)^0")
+    done = threading.Event()
+    errors: list = []
+
+    def write(w: int) -> None:
+        try:
+            with opened(url, robot="r1") as kb:
+                for i in range(150):
+                    kb.add(f"seen(w{w}_{i}, dock)^{i + 1}")
+        except BaseException as exc:   # noqa: BLE001 - reported by the test below
+            errors.append(exc)
+
+    def ship() -> None:
+        try:
+            while not done.is_set():
+                fleet.push(url, str(fleet_db))
+        except BaseException as exc:   # noqa: BLE001
+            errors.append(exc)
+
+    writers = [threading.Thread(target=write, args=(w,)) for w in range(3)]
+    pusher = threading.Thread(target=ship)
+    pusher.start()
+    for t in writers:
+        t.start()
+    for t in writers:
+        t.join(DEADLINE)
+    done.set()
+    pusher.join(DEADLINE)
+    assert errors == []
+    fleet.push(url, str(fleet_db))
+    got = rows_of(fleet_db)
+    assert len(got) == 451 and set(got.values()) == {1}

@@ -757,11 +757,9 @@ async def _query(svc: "_Service", request: Request) -> Any:
     max_steps = _field(b, "max_steps", int)
     robot = _field(b, "robot", str)
     if _field(b, "wait", bool, default=False):
-        if robot is not None:  # as kb.query(wait=True, robot=...) says it
-            raise SLRError("a synchronized query (wait=true) cannot be restricted to one "
-                           "robot yet: ask origin(R, Goal) inside the goal instead")
         pending = await svc.call(svc.kb.submit, goal, at=at, args=args,
-                                  timeout=_cap(timeout, svc.limits.max_wait))
+                                  timeout=_cap(timeout, svc.limits.max_wait),
+                                  **({"robot": robot} if robot is not None else {}))
         answers = await asyncio.wrap_future(pending)
     else:
         answers = await svc.call(svc.kb.query, goal, at=at, args=args, limit=limit,
@@ -775,7 +773,8 @@ async def _query(svc: "_Service", request: Request) -> Any:
         "a handle to poll. wait= (s) waits for the answer first.",
         body={"goal": ("string", True), "args": ("Args", False),
               "at": ("Number", False), "id": ("string", False),
-              "timeout": ("Number", False), "wait": ("Number", False)},
+              "timeout": ("Number", False), "wait": ("Number", False),
+              "robot": ("string", False)},
         response={"handle": "string", "id": "string", "done": "boolean",
                   "answers": "AnswerList"})
 async def _submit(svc: "_Service", request: Request) -> Any:
@@ -786,12 +785,14 @@ async def _submit(svc: "_Service", request: Request) -> Any:
     qid = _field(b, "id", str)
     timeout = _number(b, "timeout", minimum=0)
     wait = _number(b, "wait", minimum=0) or 0.0
+    robot = _field(b, "robot", str)
     svc._expire()
     if sum(1 for s in svc.submitted.values() if not s.pending.done()) >= svc.limits.max_pending:
         raise ServiceError(f"{svc.limits.max_pending} submitted queries are pending already",
                            kind="Unavailable")
     pending = await svc.call(svc.kb.submit, goal, at=at, id=qid, args=args,
-                              timeout=_cap(timeout, svc.limits.max_wait))
+                              timeout=_cap(timeout, svc.limits.max_wait),
+                              **({"robot": robot} if robot is not None else {}))
     handle = uuid.uuid4().hex
     entry = _Submitted(handle, pending, asyncio.wrap_future(pending))
     pending.add_done_callback(entry.finished)

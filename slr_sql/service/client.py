@@ -281,11 +281,8 @@ class RemoteKnowledgeBase:
               robot: str | None = None) -> list[dict[str, Any]]:
         """Answer ``goal`` on the server (see ``KnowledgeBase.query``); ``timeout`` is
         capped by the server's ``max_query_time``."""
-        if wait and robot is not None:  # as the local knowledge base says it
-            raise SLRError("a synchronized query (wait=True) cannot be restricted to one "
-                           "robot yet: ask origin(R, Goal) inside the goal instead")
         if wait:  # synchronized: long-polls, however long the wait (as kb.query does it)
-            return self.submit(goal, at=at, args=args, timeout=timeout).result()
+            return self.submit(goal, at=at, args=args, timeout=timeout, robot=robot).result()
         body = _goal_body(goal, at, args, timeout)
         if limit is not None:
             body["limit"] = limit
@@ -328,11 +325,14 @@ class RemoteKnowledgeBase:
 
     def submit(self, goal: str, at: float | None = None, id: str | None = None,
                args: dict | None = None, timeout: float | None = None,
-               callback: Callable[[Any], Any] | None = None) -> PendingQueryAPI:
+               callback: Callable[[Any], Any] | None = None,
+               robot: str | None = None) -> PendingQueryAPI:
         """A synchronized query on the server: a Future answered with the answer list."""
         body = _goal_body(goal, at, args, timeout)
         if id is not None:
             body["id"] = str(id)
+        if robot is not None:
+            body["robot"] = robot
         status, reply = self._request("POST", "/submit", body, ok=(200, 202))
         pending = RemotePendingQuery(self, reply["handle"], reply.get("id"), goal, at)
         if callback is not None:
@@ -343,14 +343,14 @@ class RemoteKnowledgeBase:
         return pending
 
     async def ask(self, goal: str, at: float | None = None, id: str | None = None,
-                  args: dict | None = None,
-                  timeout: float | None = None) -> list[dict[str, Any]]:
+                  args: dict | None = None, timeout: float | None = None,
+                  robot: str | None = None) -> list[dict[str, Any]]:
         """``await kb.ask(goal, at=z)``: :meth:`submit` for asyncio code."""
         import asyncio
 
         from concurrent.futures import Future
 
-        pending = self.submit(goal, at=at, id=id, args=args, timeout=timeout)
+        pending = self.submit(goal, at=at, id=id, args=args, timeout=timeout, robot=robot)
         assert isinstance(pending, Future)   # a PendingQueryAPI here is a Future
         return await asyncio.wrap_future(pending)
 

@@ -39,7 +39,7 @@ class AggregateGoals:
         for p in parts:
             cols = [f"{x} AS v{i}" for i, x in enumerate(p.proj)]
             cols += [f"{k} AS k{i}" for i, k in enumerate(p.keys)]
-            cols += [f"NULL AS k{i}" for i in range(len(p.keys), width)]
+            cols += [f"{self.dialect.null_key} AS k{i}" for i in range(len(p.keys), width)]
             selects.append(p.select(cols))
         return " UNION ALL ".join(selects), [f"k{i}" for i in range(width)]
 

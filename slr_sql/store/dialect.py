@@ -51,6 +51,7 @@ class Dialect(Protocol):
     def number(self, expr: str) -> str: ...
     def infinity(self, negative: bool = False) -> str: ...
     def insert_ignore(self, table: str, columns: str, values: str) -> str: ...
+    def writers_in_flight(self) -> str | None: ...
     def to_column(self, value: Any) -> Any: ...
     def from_column(self, value: Any) -> Any: ...
 
@@ -108,6 +109,12 @@ class SQLiteDialect(SQLiteQueryPrinter):
 
     def insert_ignore(self, table: str, columns: str, values: str) -> str:
         return f"INSERT OR IGNORE INTO {table} ({columns}) VALUES ({values})"
+
+    def writers_in_flight(self) -> str | None:
+        """The statement listing the other transactions that may hold uncommitted rows of
+        the table named by its one parameter (None: one writer at a time commits its
+        sequences in order, so a reader's snapshot never has a gap that fills later)."""
+        return None
 
 
 class PostgresDialect(PostgresQueryPrinter):
@@ -167,6 +174,15 @@ class PostgresDialect(PostgresQueryPrinter):
 
     def infinity(self, negative: bool = False) -> str:
         return "'-infinity'::float8" if negative else "'infinity'::float8"
+
+    def writers_in_flight(self) -> str | None:
+        # a sequence is handed out at the insert, not at the commit: seq 11 may be visible
+        # while 10 is still in flight. Every writer of a table holds ROW EXCLUSIVE on it
+        # until its commit; a lock that waited for them (SHARE) would queue new writers
+        # behind it and could close a cycle with the journals' advisory locks
+        return ("SELECT virtualtransaction FROM pg_locks WHERE locktype = 'relation' "
+                "AND relation = CAST(? AS regclass) AND mode = 'RowExclusiveLock' "
+                "AND granted AND pid <> pg_backend_pid()")
 
     def insert_ignore(self, table: str, columns: str, values: str) -> str:
         return f"INSERT INTO {table} ({columns}) VALUES ({values}) ON CONFLICT DO NOTHING"

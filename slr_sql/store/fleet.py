@@ -15,7 +15,7 @@ import time
 from typing import Any
 
 from ..encoding import encode
-from ..errors import SLRError
+from ..errors import SLRBusy, SLRError
 from ..terms import Atom
 from .checks import BadEvent, text_problem
 from .dialect import POSTGRES
@@ -118,17 +118,29 @@ class Fleet:
     def read_after(self, name: str, arity: int, position: int, limit: int) -> list[tuple]:
         """Up to ``limit`` stored rows of name/arity with ``seq > position`` in sequence
         order, as ``(seq, *encoded arguments, start, end, arrival, robot)`` (arrival None when
-        it is not a finite time)."""
+        it is not a finite time). On a server, the read waits for the writers of the table
+        that are in flight (sequences are handed out at the insert, not at the commit), so
+        that a later read from the last seq returned misses nothing."""
         with self.db.lock:
             self.db.check_open()
             event_type = self.tables.lookup(name, arity)
             if event_type is None:
                 return []
             args = "".join(f"arg{i}, " for i in range(1, arity + 1))
-            rows = self.db.conn.execute(
-                f"SELECT seq, {args}t_start, t_end, arrival, robot FROM {event_type.quoted} "
-                "WHERE seq > ? ORDER BY seq LIMIT ?", (position, limit)).fetchall()
             dialect = self.db.dialect
+            select = (f"SELECT seq, {args}t_start, t_end, arrival, robot FROM "
+                      f"{event_type.quoted} WHERE seq > ? ORDER BY seq LIMIT ?")
+            rows = self.db.conn.execute(select, (position, limit)).fetchall()
+            in_flight = dialect.writers_in_flight()
+            if rows and in_flight is not None:
+                # the fleet's position becomes the last seq shipped, so no lower seq may
+                # still be in flight: a writer that inserts after the read above draws a
+                # higher seq than every row it saw, and one in flight then holds its lock
+                # now. Once those are done, the same range read again is final.
+                self._wait_for(in_flight, event_type.quoted)
+                rows = self.db.conn.execute(
+                    select.replace("WHERE seq > ?", "WHERE seq > ? AND seq <= ?"),
+                    (position, rows[-1][0], limit)).fetchall()
             if dialect.name != "sqlite" and arity:  # shipped as SQLite stores them
                 from_column: Any = dialect.from_column
                 rows = [(r[0], *map(from_column, r[1:1 + arity]), *r[1 + arity:]) for r in rows]
@@ -138,6 +150,23 @@ class Fleet:
                 # a StreamClock's arrival before its first event is -inf: not sent (JSON)
                 rows = [r[:at] + (r[at] if _finite(r[at]) else None, r[-1]) for r in rows]
             return rows
+
+    def _wait_for(self, in_flight: str, table: str) -> None:
+        """Until the transactions that hold a writer's lock on ``table`` now are done (the
+        server has no statement that waits for another transaction without also blocking
+        later writers); SLRBusy past the store's busy timeout."""
+        conn = self.db.conn
+        holders = {r[0] for r in conn.execute(in_flight, (table,)).fetchall()}
+        timeout = getattr(self.db, "busy_timeout", 5.0)
+        deadline = time.monotonic() + timeout
+        pause = 0.0005
+        while holders:
+            if time.monotonic() > deadline:
+                raise SLRBusy(f"{self.db.path}: a writer of {table} stayed in flight for more "
+                              f"than {timeout:g} s; the rows after it are shipped later")
+            time.sleep(pause)
+            pause = min(pause * 2, 0.02)
+            holders &= {r[0] for r in conn.execute(in_flight, (table,)).fetchall()}
 
     def backlog(self, name: str, arity: int, position: int) -> tuple[int, float | None]:
         """The number of rows of name/arity after ``position`` and the arrival time of the

@@ -48,6 +48,8 @@ class SQLiteQueryPrinter:
     query_functions = True
     # the alias a subquery in FROM needs (none on SQLite)
     subquery_alias = ""
+    # the NULL that pads a branch's missing order keys in a UNION ALL (keys are numbers)
+    null_key = "NULL"
 
     def may_raise(self, sql: str) -> bool:
         """Whether evaluating ``sql`` may raise an error Prolog raises too (arithmetic,
@@ -139,6 +141,9 @@ class PostgresQueryPrinter:
 
     query_functions = False
     subquery_alias = " AS s"
+    # an untyped NULL in the first branches of a UNION resolves as text, and text does not
+    # meet the integer keys of a later branch
+    null_key = "CAST(NULL AS double precision)"
 
     def may_raise(self, sql: str) -> bool:
         # slr_typeof, slr_number, slr_j and the float printers never raise; slr_num does
