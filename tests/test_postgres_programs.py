@@ -129,3 +129,13 @@ def test_a_postgres_view_reads_from_a_session_without_the_store_search_path(post
     with psycopg.connect(postgres_url) as conn:   # as psql would: search_path "$user", public
         rows = conn.execute('SELECT * FROM slr."teaThing"').fetchall()
     assert rows == [("cup1",)]
+
+
+def test_a_statement_the_client_cannot_send_is_refused_not_a_lost_server(postgres_url):
+    """psycopg raises OperationalError for more parameters than the protocol carries: that
+    is the statement's error (SLRError, not retryable), not an unreachable server (503)."""
+    with slr_sql.open(postgres_url) as kb:
+        with pytest.raises(SLRError, match="cannot be sent") as info:
+            kb.sql("SELECT " + ", ".join(["?"] * 70_000), tuple(range(70_000)))
+        assert not isinstance(info.value, slr_sql.errors.SLRUnavailable)
+        assert kb.sql("SELECT ?", (1,))[1] == [(1,)]
