@@ -32,6 +32,7 @@ from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 from ..errors import SLRBusy, SLRError, SLRServerUnreachable, SLRTimeout, SLRUnavailable
 from ..lockorder import ordered_lock
 from .dialect import POSTGRES
+from .functions import SqlFunctions
 from .schema import postgres_migration_scripts
 from .sqltext import bound_parameters, quote_identifier
 
@@ -468,6 +469,7 @@ class PgDatabase:
         self.rollback_listeners: list[Callable[[], None]] = []
         self.open_streams: weakref.WeakSet = weakref.WeakSet()
         self.deadline: float | None = None
+        self.functions: SqlFunctions | None = None  # install_functions
         self.busy_timeout = busy_timeout
         self.notify_channel = f"slr_{schema}"
         self.write_groups: dict[tuple[str, int], int] = {}
@@ -744,12 +746,12 @@ class PgDatabase:
             rows = self.conn.execute("EXPLAIN " + sql, [None] * sql.count("?")).fetchall()
             return [row[0] for row in rows]
 
-    def create_function(self, name: str, narg: int, fn: Any, deterministic: bool = True) -> None:
-        """Python functions cannot run inside the server: goals that need one run in the
-        interpreter on PostgreSQL (the planner asks :attr:`python_functions`)."""
-
-    def create_aggregate(self, name: str, narg: int, cls: Any) -> None:
-        """See :meth:`create_function`."""
+    def install_functions(self, functions: SqlFunctions) -> None:
+        """Python functions cannot run inside the server: the functions a migration
+        installs there (``Native.MIGRATION``) are called by name, and goals that need one
+        of the others run in the interpreter on PostgreSQL (the planner asks
+        :attr:`python_functions`). Kept only to say what the store was given."""
+        self.functions = functions
 
     python_functions = False
 
