@@ -216,7 +216,9 @@ class EventWriter:
         if self.db.dialect.to_column is not None or len(names) > 64:
             return False
         try:
-            groups: dict[Any, list] = {name: [] for name in names}
+            # in order of first appearance: the tables are written, and the batch's end
+            # spans listed, in the order the event-by-event path would
+            groups: dict[Any, list] = {name: [] for name in dict.fromkeys(map(_first, chunk))}
         except TypeError:  # an unhashable name
             return False
         for event in chunk:
