@@ -582,6 +582,7 @@ def compile_goal(kb, plan, has_at: bool, robot: bool = False) -> SqlPlan:
     else:
         nv = max(len(p.proj) for p in parts)
         nk = max(len(p.keys) for p in parts)
+        keys = sqlcompile.key_columns(parts, comp.dialect)
         selects = []
         for b, p in enumerate(parts):
             off = 1
@@ -596,8 +597,7 @@ def compile_goal(kb, plan, has_at: bool, robot: bool = False) -> SqlPlan:
             cols = [f"{b} AS b"]
             cols += [f"{x} AS v{i}" for i, x in enumerate(p.proj)]
             cols += [f"NULL AS v{i}" for i in range(len(p.proj), nv)]
-            cols += [f"{k} AS k{i}" for i, k in enumerate(p.keys)]
-            cols += [f"{comp.dialect.null_key} AS k{i}" for i in range(len(p.keys), nk)]
+            cols += keys[b]
             selects.append(p.select(cols))
         sql = "\nUNION ALL\n".join(selects)
         if nk and (len(parts) > 1 or any(p.keys for p in parts)):
@@ -773,7 +773,10 @@ def view_sql(kb, name: str, arity: int):
         return None, "uses slr_ functions", comp.missing
     if not parts:
         return None, "no rows", comp.missing
-    return sqlcompile.view_select(parts, arity, comp.dialect), None, comp.missing
+    try:
+        return sqlcompile.view_select(parts, arity, comp.dialect), None, comp.missing
+    except Unprintable as exc:   # the branches' keys cannot share the engine's columns
+        return None, exc.reason, comp.missing
 
 
 def refresh_views(kb) -> list[str]:
