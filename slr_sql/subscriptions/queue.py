@@ -222,12 +222,6 @@ class Subscription:
             raise IllegalTransition(self._state, new)
         self._state = new
 
-    def transition(self, new: SubscriptionState) -> None:
-        """Change the state to ``new`` if :data:`TRANSITIONS` allows it; raises
-        :class:`IllegalTransition` (and keeps the state) otherwise."""
-        with self._lock:
-            self._to(new)
-
     @property
     def closed_from(self) -> SubscriptionState | None:
         """The state it was in when it was closed (None while it is not closed)."""
