@@ -155,3 +155,15 @@ def test_a_program_whose_branches_mix_kinds_loads_with_the_views_the_server_can_
         assert [a["X"] for a in kb.query("stamp(X)")] == [1.0, 2.0, slr_sql.Atom("a")]
         assert [a["X"] for a in kb.query("byRobotOrTime(_, X)")] == [
             slr_sql.Atom("a"), 3, slr_sql.Atom("b")]
+
+
+def test_predicates_whose_names_share_the_first_63_bytes_load_on_both_backends(backend):
+    """PostgreSQL cuts identifiers at 63 bytes: the second predicate's view would take the
+    first one's name, and the server refuses it. The program loads all the same (that
+    predicate has no view there) and answers as on SQLite."""
+    first, second = "p" * 70 + "a", "p" * 70 + "b"
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(0)) as kb:
+        kb.add("seen(a, dock)^1")
+        kb.load(f"{first}(X) :- seen(X, _)^_.\n{second}(X) :- seen(X, dock)^_ ; X = z.\n")
+        assert [a["X"] for a in kb.query(f"{second}(X)")] == ["a", "z"]
+        assert len(_views(kb)) == (2 if not backend.startswith("postgresql") else 1)
