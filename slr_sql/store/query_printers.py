@@ -49,7 +49,7 @@ class SQLiteQueryPrinter:
     # the alias a subquery in FROM needs (none on SQLite)
     subquery_alias = ""
 
-    def key_padding(self, kinds: frozenset) -> str:
+    def key_padding(self, kinds: frozenset[str]) -> str:
         """The NULL that pads a branch's missing order key in a UNION ALL, at a place where
         the branches' keys are of ``kinds`` ("text": a robot's name, "number": the others);
         any mix is fine here (a column takes any value, and keys of different kinds only
@@ -151,7 +151,7 @@ class PostgresQueryPrinter:
     query_functions = False
     subquery_alias = " AS s"
 
-    def key_padding(self, kinds: frozenset) -> str:
+    def key_padding(self, kinds: frozenset[str]) -> str:
         # a UNION column has one type: an untyped NULL in the first branches resolves as
         # text, which does not meet a later branch's number; a NULL typed as a number does
         # not meet a robot's name
