@@ -236,7 +236,9 @@ class _State:
         self.kb = weakref.ref(kb)
         self.facts_program = None
         self.facts: dict = {}
-        self.view_missing: set = set()
+        # the event types whose tables the views of kb's program wait for (None: not known
+        # in this connection, whose program another connection loaded)
+        self.view_missing: set | None = None
         _register(kb.store)
 
     def fact_tables(self, kb) -> dict:
@@ -310,10 +312,16 @@ def attach(kb) -> None:
 
     def on_table(name, arity, table):
         k = ref()
-        if k is not None and (name, arity) in state_of(k).view_missing:
+        if k is None:
+            return
+        st = state_of(k)
+        if st.view_missing is None or (name, arity) in st.view_missing:
             try:
                 k.loader.ensure_current()   # (inside the add's transaction: the stored program)
-                refresh_views(k)
+                if k.program.preds:
+                    refresh_views(k)
+                else:
+                    st.view_missing = set()   # no predicates, no views
             except Exception:
                 pass
     hooks.append(on_table)
@@ -323,6 +331,7 @@ def reloaded(kb) -> None:
     """Reload listener: the program was re-read from the file (another connection changed
     it); its fact tables and views were written by that connection: only choose again the
     predicates an interpreter run calls through SQL."""
+    state_of(kb).view_missing = None   # that connection's views, not known here
     kb.engine.sql_calls = compiled_calls(kb)
 
 

@@ -167,3 +167,18 @@ def test_predicates_whose_names_share_the_first_63_bytes_load_on_both_backends(b
         kb.load(f"{first}(X) :- seen(X, _)^_.\n{second}(X) :- seen(X, dock)^_ ; X = z.\n")
         assert [a["X"] for a in kb.query(f"{second}(X)")] == ["a", "z"]
         assert len(_views(kb)) == (2 if not backend.startswith("postgresql") else 1)
+
+
+def test_a_view_appears_when_another_connection_adds_the_first_event_of_its_type(backend):
+    """A derived predicate over an event type with no table yet has no view; the view is
+    made when the table is, whichever connection (or process) adds that first event, not
+    only the one that loaded the program."""
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(0)) as kb:
+        kb.load("d(X) :- e(X)^_ ; X = none.\nf(X) :- g(X)^_.")
+        assert _views(kb) == ["d"]
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(0)) as writer:
+        writer.add("e(a)^1")
+        assert _views(writer) == ["d"]
+        assert writer.sql('SELECT * FROM "d"')[1] == [("a",), ("none",)]
+        writer.add("g(b)^2")
+        assert _views(writer) == ["d", "f"]
