@@ -14,7 +14,9 @@ database per part is created and dropped there). Parts:
   the statement the store's lookup runs, through raw psycopg on the same table (p50 of each).
 * writers: 1, 4 and 16 processes adding batches of 10 events for a fixed time, to the
   knowledge base (no rules; then with a seq rule on) and with raw psycopg INSERTs (no
-  rules): aggregate events/s (``--writers 0`` skips it).
+  rules; BEGIN, ``executemany``, COMMIT): aggregate events/s (``--writers 0`` skips it).
+  ``--modes raw1,...`` adds a second raw reference: each batch one multi-row INSERT that
+  commits on its own (what the store sends for such a batch).
 * compiled: two rules queried with bound arguments on the same store, as one compiled
   statement (the query printer of the PostgreSQL dialect) and through the interpreter
   (``kb.sql_enabled = False``), in alternation: a ``prev`` lookup
@@ -151,6 +153,17 @@ if mode == "raw":
                 "INSERT INTO a (arg1, t_start, t_end, arrival) VALUES (%s, %s, %s, %s)",
                 [(f"k{who}", time.time(), time.time(), 0.0) for i in range(10)])
         n += 10
+elif mode == "raw1":
+    conn = psycopg.connect(url, autocommit=True)
+    conn.execute("SET search_path = slr")
+    sql = ("INSERT INTO a (arg1, t_start, t_end, arrival) VALUES "
+           + ", ".join(["(%s, %s, %s, %s)"] * 10))
+    sys.stdout.write("ready\n"); sys.stdout.flush(); sys.stdin.readline()
+    end = time.perf_counter() + seconds
+    while time.perf_counter() < end:
+        conn.execute(sql, [v for i in range(10)
+                           for v in (f"k{who}", time.time(), time.time(), 0.0)])
+        n += 10
 else:
     kb = slr_sql.open(url)
     sys.stdout.write("ready\n"); sys.stdout.flush(); sys.stdin.readline()
@@ -165,21 +178,25 @@ print(n)
 """
 
 
-def writers(admin: str, counts: list[int], seconds: float) -> list[dict]:
+def writers(admin: str, counts: list[int], seconds: float,
+            modes: tuple[str, ...] = ("raw", "kb", "kb+rule"), repeat: int = 1) -> list[dict]:
     script = Path(tempfile.mkdtemp()) / "writer.py"
     script.write_text(WRITER)
     code = str(Path(__file__).resolve().parent.parent)
     out = []
-    for mode in ("raw", "kb", "kb+rule"):
-        for k in counts:
+    # each count's sides back to back (raw, kb, ...), ``repeat`` times in alternation: both
+    # meet the same machine state; the median of each side is reported
+    runs: dict[tuple[str, int], list[float]] = {}
+    for k in counts:
+        for mode in modes * repeat:
             url = database(admin, "bench_writers")
             with slr_sql.open(url) as kb:
                 kb.add_many([("a", ("k",), 0.0, 0.0), ("b", ("k",), 0.0, 0.0)])
                 if mode == "kb+rule":
                     kb.load("ab(K) <- a(K) seq b(K) within 5.")
-            procs = [subprocess.Popen([sys.executable, str(script), url,
-                                       "raw" if mode == "raw" else "kb", str(seconds), str(i),
-                                       code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            side = "kb" if mode.startswith("kb") else mode
+            procs = [subprocess.Popen([sys.executable, str(script), url, side, str(seconds),
+                                       str(i), code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                       text=True) for i in range(k)]
             for p in procs:
                 p.stdout.readline()
@@ -187,7 +204,11 @@ def writers(admin: str, counts: list[int], seconds: float) -> list[dict]:
                 p.stdin.write("go\n")
                 p.stdin.flush()
             total = sum(int(p.communicate()[0].strip().splitlines()[-1]) for p in procs)
-            out.append({"mode": mode, "writers": k, "events_per_s": total / seconds})
+            runs.setdefault((mode, k), []).append(total / seconds)
+        for mode in modes:
+            each = runs[(mode, k)]
+            out.append({"mode": mode, "writers": k, "events_per_s": statistics.median(each),
+                        "runs": each})
     return out
 
 
@@ -236,6 +257,12 @@ def main() -> None:
     parser.add_argument("--writers", default="1,4,16")
     parser.add_argument("--seconds", type=float, default=5.0)
     parser.add_argument("--parts", default="ingest,prev,writers")
+    parser.add_argument("--repeat", type=int, default=1,
+                        help="writers: runs of each side, in alternation (median reported)")
+    parser.add_argument("--modes", default="raw,kb,kb+rule",
+                        help="writers' sides: raw (the target's baseline), kb, kb+rule, and "
+                             "raw1 (a reference: each batch one multi-row INSERT committing "
+                             "on its own)")
     args = parser.parse_args()
     admin, server = server_url(args)
     try:
@@ -257,9 +284,20 @@ def main() -> None:
                       f"{r['speedup']:.1f}x (load average {load[0]:.1f} {load[1]:.1f})")
         counts = [int(c) for c in args.writers.split(",") if c.strip() and int(c)]
         if counts and "writers" in parts:
-            for r in writers(admin, counts, args.seconds):
+            load = os.getloadavg()
+            print(f"load average before the writers: {load[0]:.1f} {load[1]:.1f}")
+            results = writers(admin, counts, args.seconds, tuple(args.modes.split(",")),
+                              args.repeat)
+            raw = {r["writers"]: r["events_per_s"] for r in results if r["mode"] == "raw"}
+            for r in results:
+                ratio = (f" ({r['events_per_s'] / raw[r['writers']]:.2f}x raw)"
+                         if r["writers"] in raw and r["mode"] != "raw" else "")
+                each = ", ".join(f"{v:,.0f}" for v in r["runs"]) if len(r["runs"]) > 1 else ""
                 print(f"writers {r['writers']:>2} {r['mode']:>8}: "
-                      f"{r['events_per_s']:,.0f} events/s")
+                      f"{r['events_per_s']:,.0f} events/s{ratio}"
+                      + (f" [runs: {each}]" if each else ""))
+            load = os.getloadavg()
+            print(f"load average after the writers: {load[0]:.1f} {load[1]:.1f}")
     finally:
         if server is not None:
             server.cleanup()

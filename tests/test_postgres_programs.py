@@ -182,3 +182,13 @@ def test_a_view_appears_when_another_connection_adds_the_first_event_of_its_type
         assert writer.sql('SELECT * FROM "d"')[1] == [("a",), ("none",)]
         writer.add("g(b)^2")
         assert _views(writer) == ["d", "f"]
+
+
+def test_a_statement_the_client_cannot_send_is_refused_not_a_lost_server(postgres_url):
+    """psycopg raises OperationalError for more parameters than the protocol carries: that
+    is the statement's error (SLRError, not retryable), not an unreachable server (503)."""
+    with slr_sql.open(postgres_url) as kb:
+        with pytest.raises(SLRError, match="cannot be sent") as info:
+            kb.sql("SELECT " + ", ".join(["?"] * 70_000), tuple(range(70_000)))
+        assert not isinstance(info.value, slr_sql.errors.SLRUnavailable)
+        assert kb.sql("SELECT ?", (1,))[1] == [(1,)]

@@ -29,7 +29,7 @@ from contextlib import contextmanager, suppress
 from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
-from ..errors import SLRBusy, SLRError, SLRServerUnreachable, SLRTimeout
+from ..errors import SLRBusy, SLRError, SLRServerUnreachable, SLRTimeout, SLRUnavailable
 from ..lockorder import ordered_lock
 from .dialect import POSTGRES
 from .schema import postgres_migration_scripts
@@ -93,8 +93,11 @@ def _psycopg() -> Any:
     return psycopg
 
 
-def _error(exc: BaseException, where: str, busy_timeout: float | None = None) -> Exception:
-    """The slr_sql exception for a psycopg error."""
+def _error(exc: BaseException, where: str, busy_timeout: float | None = None,
+           connected: bool = False) -> Exception:
+    """The slr_sql exception for a psycopg error (``connected``: the connection is still
+    up after it, so an error the client raised without a server's code is not a lost
+    server but a refused statement)."""
     psycopg = _psycopg()
     errors = psycopg.errors
     if isinstance(exc, (errors.LockNotAvailable, errors.DeadlockDetected,
@@ -104,6 +107,12 @@ def _error(exc: BaseException, where: str, busy_timeout: float | None = None) ->
     if isinstance(exc, errors.QueryCanceled):
         return SLRTimeout(f"query timed out ({_first_line(exc)})")
     if isinstance(exc, (psycopg.OperationalError, psycopg.InterfaceError)):
+        state = getattr(exc, "sqlstate", None) or ""
+        if state.startswith("53"):   # insufficient resources: disk, memory, connections
+            return SLRUnavailable(f"{where}: the server is short of resources "
+                                  f"({_first_line(exc)})")
+        if connected and not state:  # e.g. more parameters than the protocol carries
+            return SLRError(f"{where}: the statement cannot be sent ({_first_line(exc)})")
         return SLRServerUnreachable(f"{where}: the server is not reachable "
                                     f"({_first_line(exc)})")
     if isinstance(exc, errors.ReadOnlySqlTransaction):
@@ -112,18 +121,51 @@ def _error(exc: BaseException, where: str, busy_timeout: float | None = None) ->
     return PgStatementError(_first_line(exc))
 
 
+def _connected(raw: Any) -> bool:
+    """Whether a psycopg connection is still up (after an error)."""
+    return not raw.closed and not getattr(raw, "broken", False)
+
+
 def _first_line(exc: BaseException) -> str:
     text = str(exc).strip()
     return text.splitlines()[0] if text else type(exc).__name__
 
 
-# Fewer rows go in by executemany, which psycopg pipelines into one round trip; COPY takes
-# two (its start is answered before the data goes), and wins only on many rows.
+# Fewer rows go in as one multi-row INSERT statement; COPY takes two round trips (its start
+# is answered before the data goes), and wins only on many rows.
 _COPY_FROM = 64
+
+# Parameters of one statement at most (the protocol's limit is 65,535): a wider insert is
+# sent in parts.
+_MAX_PARAMS = 30_000
 
 # INSERT INTO "table" (columns) VALUES (?, ...): nothing but values, so COPY does the same
 _PLAIN_INSERT = re.compile(r'INSERT INTO ("(?:[^"]|"")+"|[A-Za-z_][A-Za-z0-9_]*) '
                            r'\(([A-Za-z0-9_, ]+)\) VALUES \(\?(?:, \?)*\)\Z')
+
+
+def _multi_row_insert(table: str, columns: str, width: int, rows: int) -> str:
+    """``INSERT INTO table (columns) VALUES (%s, ...), ...`` for ``rows`` rows (their order
+    is the order of the rows' identity values, as with one INSERT per row).
+
+    >>> _multi_row_insert('"a"', "arg1, t_end", 2, 2)
+    'INSERT INTO "a" (arg1, t_end) VALUES (%s, %s), (%s, %s)'
+    """
+    row = "(" + ", ".join(["%s"] * width) + ")"
+    return f"INSERT INTO {table} ({columns}) VALUES " + ", ".join([row] * rows)
+
+
+class _NoRowsCursor:
+    """The cursor of a statement not sent yet (deferred inserts): no rows, no description."""
+
+    rowcount = -1
+    description = None
+
+    def close(self) -> None:
+        pass
+
+
+_NoRows = _NoRowsCursor()
 
 
 class PgCursor:
@@ -168,17 +210,56 @@ class PgConnection:
         # a BEGIN not sent yet: it goes with the transaction's first statement, in one
         # round trip (a transaction that runs nothing sends nothing)
         self.begin_pending = False
+        # plain inserts of a transaction whose BEGIN is still pending, not sent yet:
+        # ``{(table, columns): rows}`` in the order they came. A transaction that runs
+        # nothing else (an add of a few events without rules) sends them at its COMMIT as
+        # one statement, which commits on its own: one round trip instead of three.
+        self.deferred: dict[tuple[str, str], list[tuple]] = {}
+        self.deferred_params = 0
 
     def begin(self) -> None:
         """Open a transaction with the next statement."""
         self.begin_pending = True
 
     def send_begin(self) -> None:
-        """Send a pending BEGIN now (before a statement that cannot go with it)."""
+        """Send a pending BEGIN now (before a statement that cannot go with it), with the
+        inserts deferred until then."""
+        if self.deferred:
+            self.flush()
         if self.begin_pending:
             self._alive()
             self.begin_pending = False
             self._guard(lambda: self.raw.execute("BEGIN"))
+
+    def flush(self) -> None:
+        """Send the deferred inserts (after the pending BEGIN, in the same round trip):
+        before any other statement of their transaction, which may read their rows."""
+        text, params = self._take_deferred()
+        if text:
+            self._alive()
+            cursor = self.raw.cursor()
+            self._guard(self._with_begin(lambda: cursor.execute(text, params)))
+
+    def _take_deferred(self) -> tuple[str, list]:
+        """The deferred inserts as one statement and its parameters (and none left): one
+        table's rows as one multi-row INSERT, several tables' as data-modifying WITH
+        parts of one statement (tables do not see each other's rows; each table's rows go
+        in their order, in one INSERT)."""
+        deferred = self.deferred
+        if not deferred:
+            return "", []
+        self.deferred = {}
+        self.deferred_params = 0
+        parts = []
+        params: list = []
+        for (table, columns), rows in deferred.items():
+            parts.append(_multi_row_insert(table, columns, len(rows[0]), len(rows)))
+            for row in rows:
+                params += row
+        if len(parts) == 1:
+            return parts[0], params
+        ctes = ", ".join(f"slr_part{i} AS ({part})" for i, part in enumerate(parts[:-1]))
+        return f"WITH {ctes} {parts[-1]}", params
 
     def _with_begin(self, call: Callable[[], Any]) -> Callable[[], Any]:
         """``call`` preceded by the pending BEGIN in one pipeline (one round trip)."""
@@ -209,7 +290,7 @@ class PgConnection:
         try:
             return call()
         except psycopg.Error as exc:
-            raise _error(exc, self.where, self.busy_timeout) from None
+            raise _error(exc, self.where, self.busy_timeout, _connected(self.raw)) from None
 
     def execute(self, sql: str, params: Any = ()) -> PgCursor:
         text = POSTGRES.statement(sql)
@@ -220,18 +301,29 @@ class PgConnection:
         self._alive()
         cursor = self.raw.cursor()
         if self.begin_pending and sql in ("COMMIT", "ROLLBACK"):
-            self.begin_pending = False   # nothing was sent: nothing to end
+            self.begin_pending = False   # no BEGIN was sent: nothing to end
             self.last_rowcount = 0
+            deferred, params = self._take_deferred()
+            if deferred and sql == "COMMIT":
+                # the transaction's only statement: it commits on its own (autocommit), as
+                # durably as a COMMIT, and an error in it stores none of its rows
+                self._guard(lambda: cursor.execute(deferred, params))
             return PgCursor(cursor, self)
+        if self.deferred:
+            self.flush()
         self._guard(self._with_begin(lambda: cursor.execute(text, args, prepare=None)))
         self.last_rowcount = cursor.rowcount
         return PgCursor(cursor, self)
 
     def executemany(self, sql: str, rows: Iterable[Iterable[Any]]) -> PgCursor:
-        rows = [tuple(r) for r in rows]
+        rows = [r if type(r) is tuple else tuple(r) for r in rows]
+        plain = _PLAIN_INSERT.match(sql)
+        if plain is not None and rows and len(rows) <= _COPY_FROM:
+            return self._insert_rows(plain.group(1), plain.group(2), rows)
+        if self.deferred:
+            self.flush()
         self._alive()
         cursor = self.raw.cursor()
-        plain = _PLAIN_INSERT.match(sql)
         if plain is not None and len(rows) > _COPY_FROM:
             self.send_begin()   # (COPY does not go in a pipeline)
             # many rows into one table: COPY (one stream) rather than one INSERT per row
@@ -248,11 +340,38 @@ class PgConnection:
         self.last_rowcount = cursor.rowcount
         return PgCursor(cursor, self)
 
+    def _insert_rows(self, table: str, columns: str, rows: list[tuple]) -> PgCursor:
+        """A few rows into one table: deferred while the transaction's BEGIN is pending
+        (see ``deferred``), else one multi-row INSERT now (one statement, not one per
+        row: the Python work per row is the parameters alone)."""
+        width = len(rows[0])
+        key = (table, columns)
+        if (self.begin_pending and self.deferred_params + width * len(rows) <= _MAX_PARAMS
+                and (key in self.deferred or not any(t == table for t, _ in self.deferred))):
+            self.deferred.setdefault(key, []).extend(rows)
+            self.deferred_params += width * len(rows)
+            self.last_rowcount = len(rows)
+            return PgCursor(_NoRows, self)
+        if self.deferred:
+            self.flush()
+        self._alive()
+        cursor = self.raw.cursor()
+        step = max(1, _MAX_PARAMS // width)
+        for at in range(0, len(rows), step):
+            part = rows[at:at + step]
+            params = [value for row in part for value in row]
+            text = _multi_row_insert(table, columns, width, len(part))
+            self._guard(self._with_begin(lambda: cursor.execute(text, params)))
+        self.last_rowcount = len(rows)
+        return PgCursor(cursor, self)
+
     @contextmanager
     def pipeline(self, rows: int) -> Iterator[None]:
         """Send the statements of the block together, in one round trip (psycopg's
-        pipeline mode), when none of them copies: each of at most ``rows`` rows."""
-        if rows > _COPY_FROM:
+        pipeline mode), when none of them copies: each of at most ``rows`` rows. While
+        the transaction's BEGIN is pending the block's inserts are deferred instead
+        (nothing to pipeline)."""
+        if rows > _COPY_FROM or self.begin_pending:
             yield
             return
         self._alive()
@@ -264,7 +383,7 @@ class PgConnection:
                     self.raw.execute("BEGIN")
                 yield
         except psycopg.Error as exc:
-            raise _error(exc, self.where, self.busy_timeout) from None
+            raise _error(exc, self.where, self.busy_timeout, _connected(self.raw)) from None
 
     def execute_script(self, sql: str) -> PgCursor:
         """Run SQL text exactly as written (no parameters: DDL, trigger functions whose
@@ -284,6 +403,8 @@ class PgConnection:
     def rollback(self) -> None:
         """ROLLBACK, if the connection still works (a dropped connection's transaction is
         rolled back by the server)."""
+        self.deferred = {}
+        self.deferred_params = 0
         if self.begin_pending:
             self.begin_pending = False
             return
@@ -595,7 +716,7 @@ class PgDatabase:
                         raw.execute("ROLLBACK")
                     except psycopg.Error:
                         pass
-                raise _error(exc, self.path, self.busy_timeout) from None
+                raise _error(exc, self.path, self.busy_timeout, _connected(raw)) from None
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
         with self.lock:
