@@ -71,7 +71,9 @@ class _State:
         self.kb = weakref.ref(kb)
         self.facts_program = None
         self.facts: dict = {}
-        self.view_missing: set = set()
+        # the event types whose tables the views of kb's program wait for (None: not known
+        # in this connection, whose program another connection loaded)
+        self.view_missing: set | None = None
 
     def fact_tables(self, kb) -> dict:
         """The fact tables of kb's program. They are written by whoever changes the stored
@@ -144,10 +146,16 @@ def attach(kb) -> None:
 
     def on_table(name, arity, table):
         k = ref()
-        if k is not None and (name, arity) in state_of(k).view_missing:
+        if k is None:
+            return
+        st = state_of(k)
+        if st.view_missing is None or (name, arity) in st.view_missing:
             try:
                 k.loader.ensure_current()   # (inside the add's transaction: the stored program)
-                refresh_views(k)
+                if k.program.preds:
+                    refresh_views(k)
+                else:
+                    st.view_missing = set()   # no predicates, no views
             except Exception:
                 pass
     hooks.append(on_table)
@@ -157,6 +165,7 @@ def reloaded(kb) -> None:
     """Reload listener: the program was re-read from the file (another connection changed
     it); its fact tables and views were written by that connection: only choose again the
     predicates an interpreter run calls through SQL."""
+    state_of(kb).view_missing = None   # that connection's views, not known here
     kb.engine.sql_calls = compiled_calls(kb)
 
 
@@ -416,6 +425,7 @@ def compile_goal(kb, plan, has_at: bool, robot: bool = False) -> SqlPlan:
     else:
         nv = max(len(p.proj) for p in parts)
         nk = max(len(p.keys) for p in parts)
+        keys = sqlcompile.key_columns(parts, comp.dialect)
         selects = []
         for b, p in enumerate(parts):
             off = 1
@@ -430,8 +440,7 @@ def compile_goal(kb, plan, has_at: bool, robot: bool = False) -> SqlPlan:
             cols = [f"{b} AS b"]
             cols += [f"{x} AS v{i}" for i, x in enumerate(p.proj)]
             cols += [f"NULL AS v{i}" for i in range(len(p.proj), nv)]
-            cols += [f"{k} AS k{i}" for i, k in enumerate(p.keys)]
-            cols += [f"{comp.dialect.null_key} AS k{i}" for i in range(len(p.keys), nk)]
+            cols += keys[b]
             selects.append(p.select(cols))
         sql = "\nUNION ALL\n".join(selects)
         if nk and (len(parts) > 1 or any(p.keys for p in parts)):
@@ -607,7 +616,10 @@ def view_sql(kb, name: str, arity: int):
         return None, "uses slr_ functions", comp.missing
     if not parts:
         return None, "no rows", comp.missing
-    return sqlcompile.view_select(parts, arity, comp.dialect), None, comp.missing
+    try:
+        return sqlcompile.view_select(parts, arity, comp.dialect), None, comp.missing
+    except Unprintable as exc:   # the branches' keys cannot share the engine's columns
+        return None, exc.reason, comp.missing
 
 
 def refresh_views(kb) -> list[str]:
