@@ -47,7 +47,8 @@ from .store import (ArgEquals, BufferPlan, JsonArray, JsonEquals, MixedTerm, Pat
 from .store.checks import shown
 from .terms import NIL, Atom, String, Struct, Var, deref, is_ground, list_items
 
-__all__ = ["Pattern", "BufferSpec", "BufferInfo", "analyze", "attach", "conflicts", "KINDS"]
+__all__ = ["Pattern", "BufferSpec", "BufferInfo", "analyze", "attach", "conflicts", "prune_now",
+           "KINDS"]
 
 KINDS = ("tBuffer", "cBuffer", "window")
 
@@ -597,9 +598,26 @@ class BufferManager:
 
     def prune_now(self) -> None:
         """Record the clock's now (running the time-driven pruning) and reclaim space."""
-        self.store.record_now(self.kb.clock.now())
-        if not self.store.in_transaction:
-            self.store.reclaim_space()
+        prune_now(self.kb)
+
+
+def prune_now(kb: Host) -> None:
+    """Remove now the events the tBuffers of ``kb`` let expire by its clock's now, and
+    reclaim their space. A ``ManualClock`` or ``StreamClock`` does this whenever it moves; a
+    ``WallClock`` does not tick, so with it expired events leave at the next add (of any
+    type) and a query made before that may still see them: call this first.
+
+    >>> import slr_sql
+    >>> from slr_sql.buffers import prune_now
+    >>> clock = slr_sql.ManualClock(0.0)
+    >>> kb = slr_sql.open(clock=clock)
+    >>> _ = kb.add_buffer("p(X)^T", keep_seconds=10); kb.add("p(1)^1")
+    >>> prune_now(kb); kb.query("p(X)^T")
+    [{'X': 1, 'T': 1.0}]
+    """
+    kb.store.record_now(kb.clock.now())
+    if not kb.store.in_transaction:
+        kb.store.reclaim_space()
 
 
 def _seconds(value: Any) -> float:

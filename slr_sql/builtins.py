@@ -1791,6 +1791,41 @@ def _tf_lookup5(m, a):
 
 # -- Python-defined predicates ---------------------------------------------------------------------
 
+class BuiltinMachine:
+    """What a deterministic builtin needs of a machine when it runs outside one (called
+    from SQL, or for the builtin goals of an event rule's ``where``): a trail to bind on,
+    a time ``at`` (set by the caller), no hooks (such a goal reads no history), and the
+    ``deadline`` (``time.monotonic()``, None: none) of the statement or query it runs for.
+
+    >>> from slr_sql.engine import Engine
+    >>> from slr_sql.program import Program
+    >>> m = BuiltinMachine(Engine(Program(), None))
+    >>> y = Var("Y"); DET[("copy_term", 2)](m, (Struct("f", (Var("X"),)), y)), deref(y)
+    (True, Struct('f', (Var('_G...'),)))
+    """
+
+    __slots__ = ("engine", "trail", "at", "on_prev", "on_next", "cps", "deadline")
+
+    def __init__(self, engine: Any):
+        self.engine = engine
+        self.trail: list = []
+        self.at = None
+        self.on_prev = None
+        self.on_next = None
+        self.cps: list = []
+        self.deadline = None
+
+    def unify(self, a: Any, b: Any) -> bool:
+        return unify(a, b, self.trail)
+
+    def undo_to(self, mark: int) -> None:
+        undo(self.trail, mark)
+
+    def check_deadline(self) -> None:
+        check_deadline(self.deadline)
+
+
+
 def call_python_pred(m: "Machine", fn: Callable, args: tuple) -> bool:
     """Call a predicate registered with ``kb.define``.
 

@@ -23,8 +23,10 @@ import click
 
 import slr_sql
 
+from .api import KnowledgeBaseAPI
 from .demo import answer_text, value_text
 from .encoding import decode
+from .kb import KnowledgeBase
 from .parser import parse_event_fast
 from .terms import Atom, Struct, list_items
 
@@ -176,7 +178,7 @@ def _missing(db: str) -> bool:
     return not _is_database_url(db) and not os.path.lexists(db)
 
 
-def _open(db: str, create: bool = True) -> Any:
+def _open(db: str, create: bool = True) -> KnowledgeBaseAPI:
     """The knowledge base in DB: a file opened in this process (only commands that add to a
     store may create it), or the URL of a running `slr serve`."""
     if _is_url(db):
@@ -435,7 +437,7 @@ def _reason(exc: Exception) -> str:
     return first
 
 
-def _add_batch(kb: Any, batch: list[tuple[int, Any]], bad: list[tuple[int, str]]) -> int:
+def _add_batch(kb: KnowledgeBaseAPI, batch: list[tuple[int, Any]], bad: list[tuple[int, str]]) -> int:
     """Add a batch in one ``kb.add_many`` transaction; returns how many events were stored.
 
     ``add_many`` stores the good events of a batch and returns the rejected ones (each with
@@ -474,7 +476,7 @@ def _numbered_lines(handle: Iterable[bytes]) -> Iterator[tuple[int, bytes]]:
         yield lineno, line
 
 
-def ingest_file(kb: Any, path: str | Any, progress: Any = None) -> IngestReport:
+def ingest_file(kb: KnowledgeBaseAPI, path: str | Any, progress: Any = None) -> IngestReport:
     """Ingest every event line of ``path`` (a file name, or a binary stream such as
     ``sys.stdin.buffer``) into ``kb`` in batches; bad lines are collected, the rest still goes
     in. ``progress(nbytes)`` is called with the size of each line read."""
@@ -685,7 +687,7 @@ class AnswerPrinter:
             click.echo("false.")
 
 
-def _warn_about(kb: Any, goal: str) -> None:
+def _warn_about(kb: KnowledgeBaseAPI, goal: str) -> None:
     """The library's warnings about a goal (a predicate nobody defined: a typo?) on stderr."""
     if not hasattr(kb, "goal_warnings"):
         return
@@ -798,7 +800,7 @@ def time_text(t: float | None) -> str:
     return f"{t:.2f} ({moment.strftime('%Y-%m-%d %H:%M:%S.%f')[:-3]} UTC)"
 
 
-def _program_infos(kb: Any) -> list[Any]:
+def _program_infos(kb: KnowledgeBaseAPI) -> list[Any]:
     infos = kb.programs()
     return list(infos.values()) if isinstance(infos, dict) else list(infos)
 
@@ -852,7 +854,7 @@ class TypeSummary:
     event_rules: list[str]       # event rules that match it or derive it
 
 
-def describe_types(kb: Any, wanted: Iterable[str] = ()) -> list[TypeSummary]:
+def describe_types(kb: KnowledgeBase, wanted: Iterable[str] = ()) -> list[TypeSummary]:
     """What ``slr describe`` prints: a :class:`TypeSummary` per event type of ``kb`` (or of
     ``wanted``: ``seg`` or ``seg/2``), in name order.
 
@@ -893,8 +895,8 @@ def describe_types(kb: Any, wanted: Iterable[str] = ()) -> list[TypeSummary]:
     for info in kb.buffers():
         try:
             pattern = parse_term(info.pattern, "<buffer>")[0]
-            key = event_key(split_event_atom(pattern)[0] if split_event_atom(pattern)
-                            else pattern)
+            split = split_event_atom(pattern)
+            key = event_key(split[0] if split else pattern)
         except (slr_sql.SLRError, TypeError, ValueError, AttributeError):
             continue
         buffers.setdefault(key, []).append(f"{info.kind}({info.pattern}, {info.amount:g})")
@@ -1101,7 +1103,7 @@ class Shell:
     ``ask`` reads the key a person presses after an answer (None: every answer is printed,
     one per line, for piped input)."""
 
-    def __init__(self, kb: Any, echo: Any = click.echo, echo_err: Any = _err,
+    def __init__(self, kb: KnowledgeBaseAPI, echo: Any = click.echo, echo_err: Any = _err,
                  ask: Any = None):
         self.kb = kb
         self.echo = echo
@@ -1362,7 +1364,7 @@ def _history_path() -> str:
     return os.environ.get("SLR_HISTORY") or os.path.join(os.path.expanduser("~"), ".slr_history")
 
 
-def _completion_words(kb: Any) -> list[str]:
+def _completion_words(kb: KnowledgeBaseAPI) -> list[str]:
     """Predicate and event-type names for tab completion: the program's, the store's event
     types, the shell's commands and the builtins."""
     words = {"assert", "asserta", "assertz", "retract", "listing", "programs", "explain",
@@ -1412,7 +1414,7 @@ def shell(db: str) -> None:
                         yield Completion(name, start_position=-len(word))
 
         session = Shell(kb, ask=click.getchar)
-        prompt = PromptSession(history=FileHistory(_history_path()),
+        prompt: PromptSession[str] = PromptSession(history=FileHistory(_history_path()),
                                completer=PredicateCompleter(), complete_while_typing=False)
         click.echo(f"slr shell on {db} — `help` for commands, Ctrl-C stops a goal, "
                    f"Ctrl-D leaves")

@@ -31,6 +31,8 @@ from typing import Any, Iterable
 import slr_sql
 
 from .store import quote_identifier
+from .api import KnowledgeBaseAPI
+from .kb import KnowledgeBase
 
 __all__ = [
     "ROBOT_PROGRAM", "EVENT_RULES", "TABLE_SWEEP", "DemoQuery", "DemoResult", "scenario_events",
@@ -263,7 +265,7 @@ def open_robot_kb(db_path: str | None = None, clock: Any = None):
     return kb, clock
 
 
-def publish(kb: Any, clock: Any, pubs: Iterable[Publication]) -> None:
+def publish(kb: KnowledgeBaseAPI, clock: Any, pubs: Iterable[Publication]) -> None:
     """Deliver publications in arrival order, moving the manual clock to each arrival."""
     for pub in pubs:
         if pub.arrival > clock.now():
@@ -321,7 +323,7 @@ def demo_queries() -> list[DemoQuery]:
     ]
 
 
-def _plan_line(kb: Any, goal: str) -> str:
+def _plan_line(kb: KnowledgeBaseAPI, goal: str) -> str:
     try:
         plan = kb.explain(goal)
     except Exception as exc:  # the plan is commentary: never let it stop the demo
@@ -371,7 +373,7 @@ def _display_answer(answer: dict[str, Any]) -> list[str]:
     return lines
 
 
-def _synchronized_cups_query(kb: Any, clock: Any, console: Any) -> DemoResult:
+def _synchronized_cups_query(kb: KnowledgeBase, clock: Any, console: Any) -> DemoResult:
     """The cups question asked *before* segmentation and objRec have finished the sweep.
 
     The control component submits ⟨cups, t2⟩ as soon as the head stops at t2; the query
@@ -391,7 +393,7 @@ def _synchronized_cups_query(kb: Any, clock: Any, console: Any) -> DemoResult:
         sync = kb.synchronizer
         if sync is not None:
             sync.drain(timeout=5.0)
-        else:
+        elif isinstance(pending, concurrent.futures.Future):  # a local query's is one
             concurrent.futures.wait([pending], timeout=0.3)
         if pending.done():
             return "answered yet: True"
@@ -514,7 +516,7 @@ def run_demo(console: Any = None, db_path: str | None = None) -> list[DemoResult
             _print_result(console, results[-1])
         else:
             publish(kb, clock, scenario_events())
-        counts = {}
+        counts: dict[str, int] = {}
         for pub in scenario_events():
             counts[pub.component] = counts.get(pub.component, 0) + 1
         console.print("[dim]published: " + ", ".join(f"{c} {n} events" for c, n in counts.items())

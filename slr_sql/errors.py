@@ -123,3 +123,8 @@ class SLRServerUnreachable(SLRUnavailable):
 
 class EventRejected(SLRError):
     """An event that cannot be stored (non-ground, NaN, start > end, wrong arity, ...)."""
+
+    # set by whoever rejects an event of a batch: its position in the batch, and the
+    # event as (name, args, start, end) (absent otherwise: read them with getattr)
+    index: int | None
+    event: tuple[Any, ...] | None

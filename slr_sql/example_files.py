@@ -24,6 +24,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any
 
+from .api import KnowledgeBaseAPI
 from .errors import SLRError
 from .terms import NIL, Atom, Struct, Var, list_items
 
@@ -219,7 +220,7 @@ class CaseResult:
     ok: bool | None                 # None: no expectation to compare with
 
 
-def check_case(kb: Any, case: Case) -> CaseResult:
+def check_case(kb: KnowledgeBaseAPI, case: Case) -> CaseResult:
     """Ask ``case`` on ``kb`` and compare the answers with its expectation: the same
     answers in the same order; an unbound variable the expectation does not name is not
     compared; floats within the case's tolerance.

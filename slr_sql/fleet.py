@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from .errors import SLRError
-from .store import EventStore, check_robot_name
+from .store import EventStore, WriterInFlight, check_robot_name
 
 __all__ = ["FleetTarget", "PushReport", "open_target", "parse_type_spec", "push", "status"]
 
@@ -141,6 +141,7 @@ class _Pusher:
         self.fleet_name = fleet_name
         self.report = PushReport(robot)
         self.outage: str | None = None   # why the fleet is unreachable, while it is
+        self.in_flight: str | None = None   # why the robot's store made a round wait, while so
         # the fleet's positions (asked once per connection), the last contact sent and when
         self.positions: dict | None = None
         self.last_contact: tuple | None = None
@@ -160,6 +161,19 @@ class _Pusher:
             self.report.outages += 1
             self.say(f"fleet {self.fleet_name} unreachable ({reason}); retrying with "
                      "backoff, the robot's store is not affected")
+
+    def store_waits(self, exc: WriterInFlight) -> None:
+        """A round ended waiting for a writer of the robot's own store: say so once, as
+        that store's condition (the fleet stays reachable, its connection kept)."""
+        if self.in_flight is None:
+            self.in_flight = str(exc).splitlines()[0]
+            self.say(f"{self.in_flight}; retrying with backoff")
+
+    def store_ready(self) -> None:
+        """A round ran through: a wait for the robot's store's writers, if any, is over."""
+        if self.in_flight is not None:
+            self.in_flight = None
+            self.say("the robot's store's writers are done; shipping resumed")
 
     def connect(self) -> FleetTarget:
         if self.target is None:
@@ -382,6 +396,11 @@ def _follow(pusher: _Pusher, stop: threading.Event) -> None:
         began = time.monotonic()
         try:
             pusher.round(stop, HEARTBEAT)
+        except WriterInFlight as exc:   # the robot's store, not the fleet: try again later
+            pusher.store_waits(exc)
+            stop.wait(retry)
+            retry = min(retry * 2, RETRY_MAX)
+            continue
         except (SLRError, OSError) as exc:  # unreachable, busy, refused: try again later
             pusher.drop()
             pusher.unreachable(exc)
@@ -389,6 +408,7 @@ def _follow(pusher: _Pusher, stop: threading.Event) -> None:
             retry = min(retry * 2, RETRY_MAX)
             continue
         retry = RETRY_MIN
+        pusher.store_ready()
         gap = began + ROUND_GAP - time.monotonic()
         if gap > 0:
             stop.wait(gap)

@@ -27,6 +27,7 @@ from .parser import parse_event_fast, parse_program, parse_term
 from .loader import ProgramLoader
 from .plans import PlanCache, argument_term, instantiate
 from .plans import python_words as _python_words
+from .sql_functions import SQL_FUNCTIONS
 from .program import BufferDecl, Declarations, Program, split_event_atom, event_key
 from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore, \
     store_error, check_robot_name
@@ -98,6 +99,8 @@ class KnowledgeBase:
         self.store = EventStore(path, self.clock, synchronous=synchronous,
                                 busy_timeout=busy_timeout, adopt=adopt, checkpoint=checkpoint,
                                 cache_mib=cache_mib, robot=robot)
+        # the Python functions compiled statements call, on every connection of the store
+        self.store.install_functions(SQL_FUNCTIONS)
         self.path = self.store.path
         self.engine = Engine(Program(), self.store)
         # the parsed, compiled goals (slr_sql/plans.py); a load or define clears them

@@ -28,184 +28,19 @@ from typing import Any
 from . import sqlcompile
 from json import loads as _json_loads
 
-from .encoding import INT64_MAX, INT64_MIN, Unencodable, decode, encode, encode_json
+from .encoding import Unencodable, decode, encode
 from .encoding import term_from_json
-from json.encoder import encode_basestring as _quote  # C-accelerated; keeps non-ASCII
-from .unify import undo, unify
 from .plans import instantiate
 from .program import Slot, Template, build
-from .sqlcompile import SITES, Col, ColRef, Compiler, Fallback, Part, resolve
+from .sqlcompile import Col, ColRef, Compiler, Fallback, Part, resolve
 from .errors import SLRBusy
 from .store import DatabaseError
 from .store.dialect import Unprintable
-from .terms import Atom, Struct, Var, deref, from_python, int_text, list_items, make_list, \
+from .terms import Atom, Struct, Var, deref, from_python, int_text, make_list, \
     to_python
 
 __all__ = ["SqlPlan", "plan_for", "try_sql", "explain", "attach", "refresh", "Fallback",
            "compile_goal", "CompiledCall", "compiled_calls"]
-
-
-# ---------------------------------------------------------------------- SQL functions
-
-class _UdfMachine:
-    """What a det builtin needs of a Machine when called from SQL."""
-
-    __slots__ = ("engine", "trail", "at", "on_prev", "on_next", "cps")
-
-    def __init__(self, engine):
-        self.engine = engine
-        self.trail: list = []
-        self.at = None
-        self.on_prev = None
-        self.on_next = None
-        self.cps: list = []
-
-    def unify(self, a, b):
-        return unify(a, b, self.trail)
-
-    def undo_to(self, mark):
-        undo(self.trail, mark)
-
-
-def _num(v):
-    if type(v) is int or type(v) is float:
-        return v
-    raise TypeError(f"not a number: {v!r}")
-
-
-def _checked(r):
-    if type(r) is int and not INT64_MIN <= r <= INT64_MAX:
-        raise OverflowError("integer beyond 64 bits")
-    return r
-
-
-def _ar2(op, a, b):
-    from .arith import evaluate
-
-    return _checked(evaluate(Struct(op, (_num(a), _num(b)))))
-
-
-def _ar1(op, a):
-    from .arith import evaluate
-
-    return _checked(evaluate(Struct(op, (_num(a),))))
-
-
-def _j(v):
-    """slr_j: a column value's inner-JSON form, ``encode_json(decode(v))``. A stored list or
-    compound is already in that form (JSON inside and out); an atom is quoted; an integer
-    column is 64-bit. The rest (strings, floats, ``{"$atom":..}``) goes the long way."""
-    tv = type(v)
-    if tv is str:
-        c = v[:1]
-        if c == "[" or (c == "{" and not v.startswith('{"$atom":"')):
-            return v
-        if c and c != "{" and c != '"':
-            return _quote(v)
-    elif tv is int:
-        return str(v)
-    return encode_json(decode(v))
-
-
-def _inst(t, values, varmap):
-    t = deref(t) if type(t) is Var else t
-    tt = type(t)
-    if tt is ColRef:
-        return values[t.i]
-    if tt is Var:
-        v = varmap.get(id(t))
-        if v is None:
-            v = varmap[id(t)] = Var(t.name)
-        return v
-    if tt is Struct:
-        return Struct(t.name, tuple(_inst(a, values, varmap) for a in t.args))
-    return t
-
-
-def _det(sid, i, *inputs):
-    site = SITES[sid]
-    # repr for floats: -0.0 == 0.0, but atom_length/term_to_atom tell them apart
-    key = tuple((float, repr(x)) if type(x) is float else (type(x), x) for x in inputs)
-    last = site.last
-    if last is not None and last[0] == key:
-        result = last[1]
-    else:
-        values = [decode(x) for x in inputs]
-        varmap: dict = {}
-        for v in site.outs:
-            varmap[id(v)] = Var(v.name)
-        args = tuple(_inst(a, values, varmap) for a in site.args)
-        m = _UdfMachine(site.engine)
-        if site.python:
-            from .builtins import call_python_pred
-
-            ok = call_python_pred(m, site.fn, args)
-        else:
-            ok = site.fn(m, args)
-        if not ok:
-            result = None
-        else:
-            result = [encode(resolve(varmap[id(v)])) for v in site.outs]  # raises if unbound
-        site.last = (key, result)
-    if result is None:
-        return None
-    return 1 if i < 0 else result[i]
-
-
-class _Sum:
-    def __init__(self):
-        self.v = 0
-
-    def step(self, x):
-        self.v = self.v + _num(x)
-
-    def finalize(self):
-        return _checked(self.v)
-
-
-class _Max:
-    better = staticmethod(lambda x, v: x > v)
-
-    def __init__(self):
-        self.v = None
-
-    def step(self, x):
-        x = _num(x)
-        if self.v is None or self.better(x, self.v):
-            self.v = x
-
-    def finalize(self):
-        return self.v
-
-
-class _Min(_Max):
-    better = staticmethod(lambda x, v: x < v)
-
-
-class _Setof:
-    def __init__(self):
-        self.items = []
-
-    def step(self, x):
-        self.items.append(x)
-
-    def finalize(self):
-        from .builtins import sorted_unique
-
-        items, _ = list_items(decode("[" + ",".join(self.items) + "]"))
-        return encode(make_list(sorted_unique(items)))
-
-
-def _register(store) -> None:
-    store.create_function("slr_j", 1, _j)
-    store.create_function("slr_num", 1, _num)
-    store.create_function("slr_ar1", 2, _ar1)
-    store.create_function("slr_ar2", 3, _ar2)
-    store.create_function("slr_det", -1, _det)
-    store.create_aggregate("slr_sum", 1, _Sum)
-    store.create_aggregate("slr_max", 1, _Max)
-    store.create_aggregate("slr_min", 1, _Min)
-    store.create_aggregate("slr_setof", 1, _Setof)
 
 
 # ---------------------------------------------------------------------- per-kb state
@@ -236,8 +71,9 @@ class _State:
         self.kb = weakref.ref(kb)
         self.facts_program = None
         self.facts: dict = {}
-        self.view_missing: set = set()
-        _register(kb.store)
+        # the event types whose tables the views of kb's program wait for (None: not known
+        # in this connection, whose program another connection loaded)
+        self.view_missing: set | None = None
 
     def fact_tables(self, kb) -> dict:
         """The fact tables of kb's program. They are written by whoever changes the stored
@@ -310,10 +146,16 @@ def attach(kb) -> None:
 
     def on_table(name, arity, table):
         k = ref()
-        if k is not None and (name, arity) in state_of(k).view_missing:
+        if k is None:
+            return
+        st = state_of(k)
+        if st.view_missing is None or (name, arity) in st.view_missing:
             try:
                 k.loader.ensure_current()   # (inside the add's transaction: the stored program)
-                refresh_views(k)
+                if k.program.preds:
+                    refresh_views(k)
+                else:
+                    st.view_missing = set()   # no predicates, no views
             except Exception:
                 pass
     hooks.append(on_table)
@@ -323,6 +165,7 @@ def reloaded(kb) -> None:
     """Reload listener: the program was re-read from the file (another connection changed
     it); its fact tables and views were written by that connection: only choose again the
     predicates an interpreter run calls through SQL."""
+    state_of(kb).view_missing = None   # that connection's views, not known here
     kb.engine.sql_calls = compiled_calls(kb)
 
 
@@ -582,6 +425,7 @@ def compile_goal(kb, plan, has_at: bool, robot: bool = False) -> SqlPlan:
     else:
         nv = max(len(p.proj) for p in parts)
         nk = max(len(p.keys) for p in parts)
+        keys = sqlcompile.key_columns(parts, comp.dialect)
         selects = []
         for b, p in enumerate(parts):
             off = 1
@@ -596,8 +440,7 @@ def compile_goal(kb, plan, has_at: bool, robot: bool = False) -> SqlPlan:
             cols = [f"{b} AS b"]
             cols += [f"{x} AS v{i}" for i, x in enumerate(p.proj)]
             cols += [f"NULL AS v{i}" for i in range(len(p.proj), nv)]
-            cols += [f"{k} AS k{i}" for i, k in enumerate(p.keys)]
-            cols += [f"{comp.dialect.null_key} AS k{i}" for i in range(len(p.keys), nk)]
+            cols += keys[b]
             selects.append(p.select(cols))
         sql = "\nUNION ALL\n".join(selects)
         if nk and (len(parts) > 1 or any(p.keys for p in parts)):
@@ -773,7 +616,10 @@ def view_sql(kb, name: str, arity: int):
         return None, "uses slr_ functions", comp.missing
     if not parts:
         return None, "no rows", comp.missing
-    return sqlcompile.view_select(parts, arity, comp.dialect), None, comp.missing
+    try:
+        return sqlcompile.view_select(parts, arity, comp.dialect), None, comp.missing
+    except Unprintable as exc:   # the branches' keys cannot share the engine's columns
+        return None, exc.reason, comp.missing
 
 
 def refresh_views(kb) -> list[str]:

@@ -26,6 +26,7 @@ LAYERS = {
     "builtins": 3,
     "analysis": 4, "engine": 4, "sqlcompile": 4,
     "plans": 4.5,  # query plans: parsed, cached, instantiated; the prev fast path
+    "sql_functions": 4.6,  # the Python functions SQL calls, listed once (store/functions)
     "host": 4.75,  # the Protocol of what the facade offers the parts it attaches
     "planner": 5,
     "sync": 6, "buffers": 6, "cep": 6, "plot": 6, "subscriptions": 6, "shipping": 6,
@@ -349,3 +350,43 @@ def test_the_attached_parts_use_only_what_the_host_offers(rel):
                     and isinstance(base.value, ast.Name) and base.value.id == "self"):
                 used.add(node.attr)
     assert used <= offered, f"{rel} uses {sorted(used - offered)} of the kb, not in host.Host"
+
+
+# ------------------------------------------------------------ a typed knowledge base
+# Above the facade (the service, the ROS bridge, the command line, ...) a knowledge base is
+# typed: api.KnowledgeBaseAPI when a local or a remote one will do, kb.KnowledgeBase when
+# the code needs the store in this process. ``kb: Any`` would let a renamed method break
+# them with no error from mypy.
+
+def untyped_knowledge_bases(trees: dict[str, ast.AST]) -> list[str]:
+    """``file:line: function`` of each parameter named ``kb`` annotated ``Any``."""
+    found = []
+    for rel, tree in trees.items():
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+                args = node.args
+                for arg in args.posonlyargs + args.args + args.kwonlyargs:
+                    note = arg.annotation
+                    text = ast.unparse(note) if note is not None else ""
+                    if arg.arg == "kb" and text.strip("'\"") in ("Any", "typing.Any"):
+                        found.append(f"{rel}:{arg.lineno}: {getattr(node, 'name', 'lambda')}")
+    return found
+
+
+def test_no_knowledge_base_above_the_facade_is_typed_any():
+    trees = {str(p.relative_to(PACKAGE)): ast.parse(p.read_text()) for p in MODULES
+             if LAYERS[_family(p)] >= LAYERS["demo"]}
+    assert len(trees) > 20
+    assert untyped_knowledge_bases(trees) == [], (
+        "type kb with slr_sql.api.KnowledgeBaseAPI (or kb.KnowledgeBase where the store "
+        "must be in this process)")
+
+
+@pytest.mark.parametrize("source, found", [
+    ("def f(kb: Any): pass", ["m.py:1: f"]),
+    ("class S:\n    def __init__(self, x, kb: 'Any' = None): pass", ["m.py:2: __init__"]),
+    ("async def g(*, kb: typing.Any): pass", ["m.py:1: g"]),
+    ("def f(kb: KnowledgeBaseAPI, other: Any): pass", []),
+])
+def test_the_untyped_kb_scan_finds_those(source, found):
+    assert untyped_knowledge_bases({"m.py": ast.parse(source)}) == found

@@ -617,3 +617,29 @@ def test_a_tbuffer_added_after_the_clock_moved_keeps_the_window_of_the_clock_now
         assert kb.query("findall(X, seen(X)^_, L)") == [{"L": list(range(190, 200))}]
         clock.set(205.0)
         assert kb.query("findall(X, seen(X)^_, L)") == [{"L": list(range(195, 200))}]
+
+
+class _UntickedClock(slr_sql.clocks.Clock):
+    """A clock that moves without telling its listeners, as a WallClock does."""
+
+    def __init__(self, t: float):
+        super().__init__()
+        self.t = t
+
+    def now(self) -> float:
+        return self.t
+
+
+def test_prune_now_removes_what_expired_on_a_clock_that_does_not_tick():
+    from slr_sql.buffers import prune_now
+
+    clock = _UntickedClock(1.0)
+    with slr_sql.open(clock=clock) as kb:
+        kb.add_buffer("p(X)^T", keep_seconds=10)
+        kb.add_many(["p(1)^1", "p(2)^1"])
+        clock.t = 50.0
+        assert len(kb.query("p(X)^T")) == 2   # expired, but nothing told the buffers yet
+        prune_now(kb)
+        assert kb.query("p(X)^T") == []
+        kb.add("p(3)^49")
+        assert kb.query("p(X)^T") == [{"X": 3, "T": 49.0}]

@@ -8,6 +8,8 @@ insert itself. Either way the listeners see what the table holds, in provenance 
 from __future__ import annotations
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 import slr_sql
 from slr_sql import ManualClock
@@ -40,3 +42,30 @@ def test_listeners_get_the_stored_complex_events(policy, buffer, kept):
         stored = [tuple(format_term(decode(v)) for v in row[:2]) + row[2:] for row in
                   kb.sql("SELECT arg1, arg2, t_start, t_end FROM c ORDER BY seq")[1]]
         assert stored == kept
+
+
+@given(st.lists(st.integers(0, 20), max_size=40), st.integers(-1, 21), st.sets(st.integers(0, 60)))
+def test_the_ready_terminators_are_those_a_walk_finds_with_few_checks(ends, limit, seen_before):
+    # recent terminators of a group are decided up to the first not ready (ascending end
+    # times): the bisection finds the same rows, marks the same rows seen, and asks the
+    # trackers O(log n) times instead of once per row
+    from slr_sql.cep.runtime import ready_prefix
+
+    rows = [(i, 0, "term", 0, "[1]", float(t), float(t)) for i, t in enumerate(sorted(ends))]
+    rows = [row for row in rows if row[0] not in seen_before]
+    walked, walk_seen = [], set(seen_before)
+    for row in rows:
+        walk_seen.add(row[0])
+        if not row[6] <= limit:
+            break
+        walked.append(row)
+    checks = []
+
+    def ready(t: float) -> bool:
+        checks.append(t)
+        return t <= limit
+
+    seen = set(seen_before)
+    assert ready_prefix(rows, ready, seen) == walked
+    assert seen == walk_seen
+    assert len(checks) <= 2 + max(len(rows), 1).bit_length()

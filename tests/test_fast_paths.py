@@ -71,8 +71,9 @@ TIMES = st.one_of(st.floats(allow_nan=True, allow_infinity=True, width=32),
 @given(st.lists(st.tuples(EVENT_ARGS, TIMES, TIMES), max_size=8))
 def test_the_column_insert_stores_and_rejects_as_event_by_event_does(specs):
     events = [("p", args, start, end) for args, start, end in specs]
-    # interleaving a second type makes the batch non-uniform: the event-by-event path
-    mixed = [e for event in events for e in (event, ("marker", (), 0.0, 0.0))]
+    # interleaving a second type whose times are integers (not the column paths' floats):
+    # the event-by-event path
+    mixed = [e for event in events for e in (event, ("marker", (), 0, 0))]
     uniform, each = EventStore(None), EventStore(None)
     errors_uniform = uniform.add_events(events)
     errors_each = each.add_events(mixed)
@@ -257,3 +258,54 @@ def test_the_c_float_text_is_repr_on_random_bit_patterns():
             elif math.isfinite(value):
                 assert "e" in repr(value) or "0.0000" in repr(value), value
     assert used > 400_000  # the C path is taken for nearly every value
+
+
+MIXED_EVENTS = st.lists(st.tuples(st.sampled_from(["p", "q", "r"]), EVENT_ARGS,
+                                  st.floats(-1e6, 1e6), st.floats(0, 10)), max_size=12)
+
+
+@given(MIXED_EVENTS, st.booleans())
+@example([("p", (1, 2), 1.0, 0.0), ("q", (Atom("a"), make_list([1.0])), 0.5, 2.0),
+          ("p", (3, 4), 2.0, 1.0)], False)
+def test_a_batch_of_interleaved_types_stores_as_event_by_event_does(specs, named):
+    # several names in one chunk: each name's events checked and inserted column-wise (one
+    # executemany per table) when all are well-formed; the same rows, order, end spans and
+    # rejections as the event-by-event path (forced here by one event with integer times)
+    from slr_sql.store import EventBatch
+
+    events = [(name, args, start, start + length) for name, args, start, length in specs]
+    forced = events + [("marker", (), 0, 0)]
+    robot = "r1" if named else None
+    column, each = (EventStore(None, slr_sql.ManualClock(5.0), robot=robot) for _ in range(2))
+    batches = EventBatch(events), EventBatch(forced)
+    errors = [column.add_events(batches[0]), each.add_events(batches[1])]
+    assert [(e.index, str(e)) for e in errors[0]] == [(e.index, str(e)) for e in errors[1]]
+    for name in ("p", "q", "r"):
+        table = column.declare_type(name, 2), each.declare_type(name, 2)
+        rows = [store.execute(f'SELECT * FROM "{t}" ORDER BY seq')
+                for store, t in zip((column, each), table)]
+        assert repr(rows[0]) == repr(rows[1])  # repr: 1 and 1.0, 0.0 and -0.0 differ
+    # (as lists: the types in the same order, that of their first event)
+    assert list(batches[0].ends.items()) == [(key, span) for key, span in
+                                             (batches[1].ends or {}).items()
+                                             if key != ("marker", 0)]
+
+
+def test_interleaved_types_take_the_column_path_and_a_bad_event_the_general_one():
+    # the column path is taken for a valid interleaved chunk (one statement per table), and
+    # refuses (storing nothing) a chunk with a bad event, which the general path then rejects
+    store = EventStore(None)
+    writer = store._writer
+    arrival = 1.0
+    good = [("a", (i,), float(i), float(i)) if i % 2 else ("b", (i, "x"), float(i), float(i))
+            for i in range(10)]
+    with store._db.transaction():
+        assert writer._insert_uniform(good, arrival, None) is True
+    assert store.count("a", 1) == 5 and store.count("b", 2) == 5
+    bad = good[:3] + [("a", (math.nan,), 1.0, 1.0)] + good[3:]
+    with store._db.transaction():
+        assert writer._insert_uniform(bad, arrival, None) is False
+    assert store.count("a", 1) == 5 and store.count("b", 2) == 5
+    errors = store.add_events(bad)
+    assert [e.index for e in errors] == [3]
+    assert store.count("a", 1) == 10 and store.count("b", 2) == 10

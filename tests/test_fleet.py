@@ -884,3 +884,127 @@ def test_a_pusher_beside_concurrent_postgresql_writers_loses_nothing(postgres_ur
     fleet.push(url, str(fleet_db))
     got = rows_of(fleet_db)
     assert len(got) == 451 and set(got.values()) == {1}
+
+
+def test_a_writer_that_rolls_back_while_the_pusher_waits(postgres_url, tmp_path):
+    """The writer the pusher waits for rolls back: the pusher goes on at once, ships the
+    rows committed around it (not the rolled-back one), and a later round ships what comes
+    next; every event once."""
+    import threading
+
+    fleet_db, url = tmp_path / "fleet.db", with_schema(postgres_url, "rolled_back")
+    opened(fleet_db).close()
+    with opened(url, robot="r1") as slow, opened(url, robot="r1") as fast:
+        slow.add("seen(a, dock)^1")
+        inside, release = threading.Event(), threading.Event()
+
+        def hold() -> None:
+            try:
+                with slow.store.transaction():
+                    slow.add("seen(b, dock)^2")
+                    inside.set()
+                    release.wait(DEADLINE)
+                    raise KeyError("abandoned")
+            except KeyError:
+                pass
+
+        holder = threading.Thread(target=hold)
+        holder.start()
+        reports: list = []
+        try:
+            assert inside.wait(DEADLINE)
+            fast.add("seen(c, dock)^3")
+            fast.add("other(x)^3")
+            pusher = threading.Thread(
+                target=lambda: reports.append(fleet.push(url, str(fleet_db))))
+            pusher.start()
+            wait_until(lambda: not pusher.is_alive() or _asks_pg_locks(postgres_url),
+                       "the pusher asking for the writers in flight")
+        finally:
+            release.set()
+            holder.join(DEADLINE)
+        pusher.join(DEADLINE)
+        assert not pusher.is_alive() and reports[0].shipped == 3
+        fast.add("seen(d, dock)^4")
+        assert fleet.push(url, str(fleet_db)).shipped == 1
+    got = rows_of(fleet_db)
+    assert sorted(k[3] for k in got) == ["a", "c", "d", "x"] and set(got.values()) == {1}
+
+
+def _asks_pg_locks(url: str) -> bool:
+    import psycopg
+
+    with psycopg.connect(url, autocommit=True) as watch:
+        return bool(watch.execute(
+            "SELECT count(*) FROM pg_stat_activity WHERE datname = current_database() AND "
+            "pid <> pg_backend_pid() AND query LIKE '%pg_locks%'").fetchone()[0])
+
+
+def test_a_lock_holder_that_is_no_writer_of_events_delays_the_push_and_loses_nothing(
+        postgres_url, tmp_path):
+    """A session that holds a writer's lock on an event table without adding events (an
+    UPDATE that changed no row, left in an open transaction) looks like a writer in flight:
+    past the busy timeout the read raises SLRBusy (retryable), nothing moves, and once the
+    session ends the push ships every event once."""
+    import psycopg
+
+    from slr_sql.errors import SLRBusy
+    from slr_sql.store import EventStore
+
+    fleet_db, url = tmp_path / "fleet.db", with_schema(postgres_url, "not_a_writer")
+    opened(fleet_db).close()
+    with opened(url, robot="r1") as kb:
+        kb.add_many(["seen(a, dock)^1", "seen(b, dock)^2"])
+    with psycopg.connect(postgres_url) as other:     # a transaction until the block ends
+        other.execute('SET search_path = "not_a_writer"')
+        other.execute("UPDATE seen SET robot = robot WHERE false")
+        store = EventStore(url, busy_timeout=0.2)
+        try:
+            with pytest.raises(SLRBusy, match="in flight"):
+                store.fleet_read_after("seen", 2, 0, 100)
+        finally:
+            store.close()
+        other.rollback()
+    assert fleet.push(url, str(fleet_db)).shipped == 2
+    assert fleet.push(url, str(fleet_db)).shipped == 0
+    assert sorted(k[3] for k in rows_of(fleet_db)) == ["a", "b"]
+
+
+def test_a_following_pusher_says_the_robot_store_waits_not_that_the_fleet_is_down(
+        postgres_url, tmp_path):
+    """A writer in flight past the robot store's busy timeout ends a following pusher's round
+    with SLRBusy: the pusher says so once, as the robot's store's condition (the fleet is
+    reachable, no outage, its connection kept), retries, and ships everything once the
+    writer is done."""
+    import threading
+
+    import psycopg
+
+    fleet_db, url = tmp_path / "fleet.db", with_schema(postgres_url, "busy_follow")
+    opened(fleet_db).close()
+    with opened(url, robot="r1") as kb:
+        kb.add("seen(a, dock)^1")
+        said: list[str] = []
+        stop = threading.Event()
+        reports: list = []
+        with psycopg.connect(postgres_url) as other:   # a writer's lock, held
+            other.execute('SET search_path = "busy_follow"')
+            other.execute("UPDATE seen SET robot = robot WHERE false")
+            pusher = threading.Thread(target=lambda: reports.append(fleet.push(
+                url, str(fleet_db), follow=True, stop=stop, say=said.append)))
+            pusher.start()
+            try:
+                wait_until(lambda: said, "the pusher saying why it waits")
+            finally:
+                other.rollback()
+            kb.add("seen(b, dock)^2")
+            try:
+                wait_until(lambda: fleet_count(fleet_db) == 2, "both events shipped")
+            finally:
+                stop.set()
+                pusher.join(DEADLINE)
+    assert "in flight" in said[0] and "unreachable" not in said[0], said
+    assert len([s for s in said if "in flight" in s]) == 1 and "resumed" in said[-1], said
+    assert reports[0].outages == 0
+    got = rows_of(fleet_db)
+    assert sorted(k[3] for k in got) == ["a", "b"] and set(got.values()) == {1}

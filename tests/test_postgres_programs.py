@@ -129,3 +129,66 @@ def test_a_postgres_view_reads_from_a_session_without_the_store_search_path(post
     with psycopg.connect(postgres_url) as conn:   # as psql would: search_path "$user", public
         rows = conn.execute('SELECT * FROM slr."teaThing"').fetchall()
     assert rows == [("cup1",)]
+
+
+MIXED_PROGRAM = """
+byRobot(R, X) :- origin(R, seen(X, _)^_) ; X = none.
+byRobotOrTime(R, X) :- origin(R, seen(X, _)^_) ; other(X)^_.
+stamp(X) :- seen(_, _)^X ; X = a.
+"""
+
+
+def test_a_program_whose_branches_mix_kinds_loads_with_the_views_the_server_can_type(backend):
+    """A view's column has one type on PostgreSQL: a robot's name (text) and a time (a
+    number) cannot share an order key, nor a time and a data value an argument. Such a
+    predicate gets no view there (as one that needs slr_sql's functions); the program
+    loads all the same and answers as on SQLite."""
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(0), robot="r1") as kb:
+        kb.add_many(["seen(a, dock)^1", "seen(3, bay)^2", "other(b)^3"])
+        kb.load(MIXED_PROGRAM)
+        on_sqlite = not backend.startswith("postgresql")
+        assert _views(kb) == (["byRobot", "byRobotOrTime", "stamp"] if on_sqlite
+                              else ["byRobot"])
+        assert kb.sql('SELECT * FROM "byRobot"')[1] == (
+            [("r1", "a"), ("r1", 3), (None, "none")] if on_sqlite
+            else [("r1", "a"), ("r1", "3"), (None, "none")])
+        assert [a["X"] for a in kb.query("stamp(X)")] == [1.0, 2.0, slr_sql.Atom("a")]
+        assert [a["X"] for a in kb.query("byRobotOrTime(_, X)")] == [
+            slr_sql.Atom("a"), 3, slr_sql.Atom("b")]
+
+
+def test_predicates_whose_names_share_the_first_63_bytes_load_on_both_backends(backend):
+    """PostgreSQL cuts identifiers at 63 bytes: the second predicate's view would take the
+    first one's name, and the server refuses it. The program loads all the same (that
+    predicate has no view there) and answers as on SQLite."""
+    first, second = "p" * 70 + "a", "p" * 70 + "b"
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(0)) as kb:
+        kb.add("seen(a, dock)^1")
+        kb.load(f"{first}(X) :- seen(X, _)^_.\n{second}(X) :- seen(X, dock)^_ ; X = z.\n")
+        assert [a["X"] for a in kb.query(f"{second}(X)")] == ["a", "z"]
+        assert len(_views(kb)) == (2 if not backend.startswith("postgresql") else 1)
+
+
+def test_a_view_appears_when_another_connection_adds_the_first_event_of_its_type(backend):
+    """A derived predicate over an event type with no table yet has no view; the view is
+    made when the table is, whichever connection (or process) adds that first event, not
+    only the one that loaded the program."""
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(0)) as kb:
+        kb.load("d(X) :- e(X)^_ ; X = none.\nf(X) :- g(X)^_.")
+        assert _views(kb) == ["d"]
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(0)) as writer:
+        writer.add("e(a)^1")
+        assert _views(writer) == ["d"]
+        assert writer.sql('SELECT * FROM "d"')[1] == [("a",), ("none",)]
+        writer.add("g(b)^2")
+        assert _views(writer) == ["d", "f"]
+
+
+def test_a_statement_the_client_cannot_send_is_refused_not_a_lost_server(postgres_url):
+    """psycopg raises OperationalError for more parameters than the protocol carries: that
+    is the statement's error (SLRError, not retryable), not an unreachable server (503)."""
+    with slr_sql.open(postgres_url) as kb:
+        with pytest.raises(SLRError, match="cannot be sent") as info:
+            kb.sql("SELECT " + ", ".join(["?"] * 70_000), tuple(range(70_000)))
+        assert not isinstance(info.value, slr_sql.errors.SLRUnavailable)
+        assert kb.sql("SELECT ?", (1,))[1] == [(1,)]

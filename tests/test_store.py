@@ -529,8 +529,8 @@ def test_added_rows_carry_the_store_robot_and_the_batch_its_end_times(tmp_path, 
     # then differ in width (the batch's end times are read from them)
     store = EventStore(tmp_path / "r.db", robot=robot)
     events = [("seg", ("a", 1), 1.0, 2.0), ("seg", ("b", 2), 0.5, 7.0)]
-    if path == "each":  # a second type in one chunk: not uniform
-        events.append(("other", (3,), 4.0, 4.0))
+    if path == "each":  # a second type with integer times: the event-by-event path
+        events.append(("other", (3,), 4, 4))
     batch = EventBatch(events)
     assert store.add_events(batch) == []
     table = store.declare_type("seg", 2)

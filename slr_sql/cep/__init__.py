@@ -25,7 +25,6 @@ with the completeness of synchronized queries (:mod:`slr_sql.sync`).
 from __future__ import annotations
 
 import dataclasses
-from functools import lru_cache
 from typing import Any
 
 from ..host import Host
@@ -80,10 +79,10 @@ def prepare(rules: list[EventRule], consumption: dict, program: Any) -> list[Eve
 
 def attach(kb: Host) -> EventRules:
     """Install event rules on a knowledge base (called by KnowledgeBase.__init__, after the
-    synchronizer and the planner): the load listener, the hook on new tables, the SQL
-    function ``slr_cep_cmp`` of pushed comparisons, and the rules of the program restored
-    from the file (the event pipeline then makes the decisions that became possible while
-    the file was closed).
+    synchronizer and the planner): the load listener, the hook on new tables, and the rules
+    of the program restored from the file (the event pipeline then makes the decisions that
+    became possible while the file was closed). Their SQL calls ``slr_cep_cmp`` and
+    ``slr_cep_arith`` of :data:`slr_sql.sql_functions.SQL_FUNCTIONS`.
 
     >>> import slr_sql
     >>> kb = slr_sql.open(); kb.load("c <- a seq b."); type(kb._cep).__name__
@@ -92,64 +91,6 @@ def attach(kb: Host) -> EventRules:
     eng = EventRules(kb)
     kb.load_listeners.append(eng.on_load)
     kb.store.table_created_hooks.append(eng.on_table)
-    kb.store.create_function("slr_cep_cmp", 3, _compare)
-    kb.store.create_function("slr_cep_arith", -1, _compare_expressions)
     eng.sync_rules()
     return eng
 
-
-def _compare(op: str, a: Any, b: Any, decoded: bool = False) -> int:
-    """``slr_cep_cmp(op, a, b)``: the comparison ``A op B`` of two stored values as Prolog
-    evaluates it (big integers, arithmetic atoms such as ``pi``, expressions); an error is
-    false."""
-    from ..arith import evaluate
-    from ..encoding import decode
-
-    try:
-        if not decoded:
-            a, b = decode(a), decode(b)
-        x, y = evaluate(a), evaluate(b)
-        if op == "<":
-            return int(x < y)
-        if op == ">":
-            return int(x > y)
-        if op == "=<":
-            return int(x <= y)
-        if op == ">=":
-            return int(x >= y)
-        if op == "=:=":
-            return int(x == y)
-        return int(x != y)
-    except Exception:  # a type error in Prolog: the candidate does not match
-        return 0
-
-
-@lru_cache(maxsize=256)
-def _arith_goal(text: str) -> tuple[Any, dict]:
-    from ..parser import parse_term
-
-    return parse_term(text, "<event rule>")
-
-
-def _compare_expressions(text: str, *values: Any) -> int:
-    """``slr_cep_arith(goal, v0, v1, ...)``: the comparison ``goal`` (its variables named
-    ``V0``, ``V1``, ... for the stored values given) as Prolog evaluates it; an error is
-    false. The fallback of a pushed comparison whose operands SQL cannot compute exactly."""
-    from ..encoding import decode
-    from ..terms import Struct, Var, deref
-
-    try:
-        goal, _ = _arith_goal(text)
-        bound = [decode(v) for v in values]
-
-        def put(t: Any) -> Any:
-            t = deref(t)
-            if type(t) is Var:
-                return bound[int(t.name[1:])]
-            if type(t) is Struct:
-                return Struct(t.name, tuple(put(a) for a in t.args))
-            return t
-
-        return _compare(goal.name, put(goal.args[0]), put(goal.args[1]), decoded=True)
-    except Exception:  # a type error in Prolog: the candidate does not match
-        return 0

@@ -29,7 +29,7 @@ import json
 import math
 from itertools import islice, pairwise
 from operator import itemgetter, ne
-from typing import Any
+from typing import Any, Callable
 
 from ..encoding import Unencodable, decode, encode
 from ..errors import SLRError
@@ -45,7 +45,7 @@ from .where import MustWait, Residual, describe_error, plain_value
 
 _first, _second = itemgetter(0), itemgetter(1)
 
-__all__ = ["EventRules", "RuleRuntime"]
+__all__ = ["EventRules", "RuleRuntime", "ready_prefix"]
 
 _INF = math.inf
 
@@ -525,7 +525,12 @@ class RuleRuntime:
             # each other, so their candidates are read in one statement per position
             together = (kind == "term" and wait is None and self.policy == "recent"
                         and n < len(self.alts) and self.alts[n].runnable)
-            ready = []
+            if together:
+                ready = ready_prefix([row for row in rows if row[0] not in seen],
+                                     lambda t: self._ready((n, kind, wait), t, now), seen)
+                if ready:
+                    changed |= self._decide_terms(n, ready, now, per_alt[n])
+                continue
             for row in rows:
                 if row[0] in seen:
                     continue
@@ -533,12 +538,7 @@ class RuleRuntime:
                 wt = row[9] if row[7] is not None else row[6]
                 if not self._ready((n, kind, wait), wt, now):
                     break   # the rest of the group needs a later time
-                if together:
-                    ready.append(row)
-                else:
-                    changed |= self._decide_row(row, now, per_alt)
-            if ready:
-                changed |= self._decide_terms(n, ready, now, per_alt[n])
+                changed |= self._decide_row(row, now, per_alt)
         return changed
 
     def _decide_terms(self, n: int, rows: list, now: float, params: dict) -> bool:
@@ -1282,3 +1282,34 @@ def _rule_groups(runtimes: list) -> list[set]:
             types |= g
         groups.append(types)
     return groups
+
+
+def ready_prefix(rows: list, ready: Callable[[float], bool], seen: set) -> list:
+    """The leading rows of ``rows`` (pending rows ``(id, .., t_end at [6], ..)`` in
+    ascending end time) that are ``ready`` at their end, up to the first that is not -- as a
+    walk checking each in turn finds them; ``seen`` gets what that walk sees: those and the
+    first row not ready. Readiness only shrinks as the end time grows (a history complete
+    up to z is complete up to any earlier time), so the last row is checked first (usually
+    all are ready) and otherwise the first row not ready is found by bisection: a few checks
+    of the trackers instead of one per row.
+
+    >>> rows = [(i, None, None, None, None, None, float(i)) for i in range(1, 9)]
+    >>> seen = set(); [r[0] for r in ready_prefix(rows, lambda t: t < 5.5, seen)], sorted(seen)
+    ([1, 2, 3, 4, 5], [1, 2, 3, 4, 5, 6])
+    """
+    if not rows:
+        return []
+    end = 6
+    if ready(rows[-1][end]):
+        k = len(rows)
+    else:
+        lo, hi = 0, len(rows) - 1  # rows[hi] is not ready; rows[:lo] are
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if ready(rows[mid][end]):
+                lo = mid + 1
+            else:
+                hi = mid
+        k = lo
+    seen.update(row[0] for row in rows[:k + 1])
+    return rows[:k]

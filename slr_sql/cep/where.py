@@ -18,11 +18,12 @@ import time
 from typing import Any, Callable
 
 from ..analysis import goal_set
+from ..builtins import BuiltinMachine
 from ..errors import SLRError
 from ..store import DatabaseError
 from ..encoding import Unencodable
 from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
-from ..unify import resolve, undo, unify
+from ..unify import resolve
 from ..host import Host
 from ..plans import instantiate
 
@@ -189,7 +190,7 @@ class Residual:
                 return Struct(t.name, tuple(put(a) for a in t.args))
             return t
 
-        m = _BuiltinMachine(engine)
+        m = BuiltinMachine(engine)
         m.at = at   # (the interpreter runs the goal at the match's end)
         try:
             for _, fn, call_args in calls:
@@ -271,32 +272,6 @@ class Residual:
         finally:
             m.abandon(solving)
         return out
-
-
-class _BuiltinMachine:
-    """What a deterministic builtin needs of a machine, for :meth:`Residual.builtin_calls`:
-    a trail to bind on, the time of the match's end, no hooks (such a goal reads no
-    history)."""
-
-    __slots__ = ("engine", "trail", "at", "on_prev", "on_next", "cps", "deadline")
-
-    def __init__(self, engine: Any):
-        self.engine = engine
-        self.trail: list = []
-        self.at = None
-        self.on_prev = None
-        self.on_next = None
-        self.cps: list = []
-        self.deadline = None
-
-    def unify(self, a: Any, b: Any) -> bool:
-        return unify(a, b, self.trail)
-
-    def undo_to(self, mark: int) -> None:
-        undo(self.trail, mark)
-
-    def check_deadline(self) -> None:
-        return None
 
 
 def _plain_pos_multiply(items: list) -> Any:

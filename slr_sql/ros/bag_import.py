@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from slr_sql import SLRError
+from slr_sql.api import KnowledgeBaseAPI
 
 from .mapping import IMPORT_CHECKPOINT, BoundEntry, Mapping, MessageError, normalize_topic
 from . import fast_tf
@@ -141,7 +142,7 @@ def bag_id(reader: Any) -> str:
     return "bag_" + digest[:16]
 
 
-def _checkpoints(kb: Any, bag: str) -> dict[str, int]:
+def _checkpoints(kb: KnowledgeBaseAPI, bag: str) -> dict[str, int]:
     done: dict[str, int] = {}
     for answer in kb.query(f"{IMPORT_CHECKPOINT}(B, Topic, N)^_", args={"B": bag}):
         topic, count = str(answer["Topic"]), answer["N"]
@@ -165,7 +166,7 @@ class _Plan:
         self.deserialize = deserialize
 
 
-def import_bag(kb: Any, path: str | Path, mapping: Mapping | None = None,
+def import_bag(kb: KnowledgeBaseAPI, path: str | Path, mapping: Mapping | None = None,
                all_topics: bool = False,
                progress: Callable[[int, int], None] | None = None,
                batch_size: int = DEFAULT_BATCH) -> ImportReport:
@@ -203,7 +204,7 @@ def import_bag(kb: Any, path: str | Path, mapping: Mapping | None = None,
             pass
 
 
-def _import_export(kb: Any, path: Path, progress: Callable[[int, int], None] | None,
+def _import_export(kb: KnowledgeBaseAPI, path: Path, progress: Callable[[int, int], None] | None,
                    batch_size: int) -> ImportReport:
     """An MCAP file of ``slr export``: its events as they were stored (no mapping: its
     channels name their event types), with the same checkpoints as a bag."""
@@ -304,7 +305,7 @@ class _Batch:
 _END = object()
 
 
-def _import(kb: Any, reader: Any, mapping: Mapping, all_topics: bool,
+def _import(kb: KnowledgeBaseAPI, reader: Any, mapping: Mapping, all_topics: bool,
             progress: Callable[[int, int], None] | None, batch_size: int) -> ImportReport:
     """Reading and decoding run in a second thread while this one stores the previous batch:
     SQLite releases the GIL while it writes, so on a free core both proceed at once. Batches
@@ -355,7 +356,7 @@ def _import(kb: Any, reader: Any, mapping: Mapping, all_topics: bool,
     return report
 
 
-def _store(kb: Any, report: ImportReport, batch: _Batch) -> None:
+def _store(kb: KnowledgeBaseAPI, report: ImportReport, batch: _Batch) -> None:
     events = batch.events + [(IMPORT_CHECKPOINT, (report.bag_id, topic, count), at, at)
                              for topic, count, at in batch.checkpoints]
     for topic, n in batch.per_topic.items():
@@ -392,7 +393,7 @@ def _batches(reader: Any, selected: list, plans: dict, done: dict, report: Impor
 
     # One bag file: read its reader directly (AnyReader merges several bag files through a
     # heap, a cost per message that a single file does not need).
-    readers = getattr(reader, "readers", ())
+    readers: Any = getattr(reader, "readers", ())
     source = (readers[0].messages(connections=selected) if len(readers) == 1
               else reader.messages(connections=selected))
     for conn, stamp, raw in source:

@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from slr_sql import SLRError, Struct
+from slr_sql.api import KnowledgeBaseAPI
 
 from . import fast_tf
 from .foreign_types import stand_in_class
@@ -288,7 +289,7 @@ class Bridge:
     ``log(text)`` receives warnings (a topic that cannot be subscribed, a rejected message).
     """
 
-    def __init__(self, kb: Any, mapping: Mapping, all_topics: bool = False,
+    def __init__(self, kb: KnowledgeBaseAPI, mapping: Mapping, all_topics: bool = False,
                  node_name: str = "slr_bridge", log: Callable[[str], None] | None = None,
                  on_ready: Callable[[str, str], None] | None = None,
                  ros_args: list[str] | None = None, mapping_given: bool = True):
@@ -311,10 +312,11 @@ class Bridge:
         self._answer_feeds: list = []  # the kb subscriptions feeding the MAP's publish entries
         # topics that are never events, even with all_topics (the request protocol's own)
         self.reserved_topics: set[str] = set()
-        self._context = None
-        self._node = None
-        self._executor = None
-        self._typestore = None
+        # rclpy's context, node and executor and the message types, made by start()
+        self._context: Any = None
+        self._node: Any = None
+        self._executor: Any = None
+        self._typestore: Any = None
         self._pending_events: list = []
         self._pending_marks: list = []
         self._pending_messages = 0
@@ -688,8 +690,8 @@ def run_bridge(db: str, mapping: Mapping, all_topics: bool = False,
         kb.close()
         for s, handler in previous.items():
             signal.signal(s, handler)
-    s = bridge.stats
-    echo(f"bridge stopped: {s.events} events from {s.messages} messages"
-         + (f", {s.rejected} rejected" if s.rejected else "")
-         + (f", {s.marks} completeness marks" if s.marks else ""))
+    stats = bridge.stats
+    echo(f"bridge stopped: {stats.events} events from {stats.messages} messages"
+         + (f", {stats.rejected} rejected" if stats.rejected else "")
+         + (f", {stats.marks} completeness marks" if stats.marks else ""))
     return 0

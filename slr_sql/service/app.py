@@ -42,6 +42,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 
 import slr_sql
 from slr_sql import EventRejected, SLRError, SLRTimeout
+from slr_sql.kb import KnowledgeBase
 from slr_sql.store.checks import format_event
 from slr_sql.store.read_only import read_only_refusal
 
@@ -287,7 +288,7 @@ class _Service:
     """State shared by the endpoints: the knowledge base, the token, the limits and the
     submitted queries (handle -> _Submitted)."""
 
-    def __init__(self, kb: Any, token: str | None, limits: Limits):
+    def __init__(self, kb: KnowledgeBase, token: str | None, limits: Limits):
         self.kb = kb
         self.check_token = BearerToken(token)
         self.limits = limits
@@ -365,8 +366,9 @@ class _Service:
         by_method = {e.method: e for e in endpoints}
 
         async def handle(request: Request) -> Response:
-            e = by_method.get(request.method) or by_method.get("GET")
             try:
+                # a route answers only its endpoints' methods (HEAD as GET)
+                e = by_method.get(request.method) or by_method["GET"]
                 if e.auth:
                     self.check_token(request.headers.get("authorization"))
                 result = await e.handler(self, request)
@@ -656,7 +658,9 @@ async def _add_many(svc: "_Service", request: Request) -> Any:
     events = _field(b, "events", list, required=True)
     atomic = _field(b, "atomic", bool, default=False)
     plain = _plain_arguments(request.state.body, events, b.get("atomic"))
-    prepared, positions, rejected = [], [], []
+    prepared: list[Any] = []   # SLR texts and (name, args, start, end) tuples
+    positions: list[int] = []
+    rejected: list[dict[str, Any]] = []
     for i, ev in enumerate(events):
         if plain and type(ev) is dict:
             # the common case inline (what _event_tuple does for it): a plain event with a
@@ -682,13 +686,13 @@ async def _add_many(svc: "_Service", request: Request) -> Any:
                 raise
             rejected.append(_rejection(exc, i))
     kb_rejected = await svc.call(svc.kb.add_many, prepared, atomic=atomic)
-    for exc in kb_rejected or ():
-        index = getattr(exc, "index", None)
+    for refused in kb_rejected or ():
+        index = getattr(refused, "index", None)
         original = positions[index] if isinstance(index, int) and \
             0 <= index < len(positions) else None
         if plain and original is not None and type(events[original]) is dict:
-            exc = _as_decoded(exc, events[original])
-        rejected.append(_rejection(exc, original))
+            refused = _as_decoded(refused, events[original])
+        rejected.append(_rejection(refused, original))
     rejected.sort(key=lambda r: (r["index"] is None, r["index"] or 0))
     return {"accepted": len(events) - len(rejected), "rejected": rejected}
 
@@ -1183,7 +1187,7 @@ async def _send_error(websocket: WebSocket, exc: BaseException) -> None:
 
 # -- read-only SQL and stats (run on the thread pool) ------------------------------------------
 
-def _read_only_sql(kb: Any, statement: str, params: list, timeout: float) -> tuple:
+def _read_only_sql(kb: KnowledgeBase, statement: str, params: list, timeout: float) -> tuple:
     """One statement that cannot change the store: the first keyword must read, and the
     store runs it read-only (``kb.sql`` without ``write``); a statement that runs longer
     than ``timeout`` seconds is interrupted."""
@@ -1202,7 +1206,7 @@ def _read_only_sql(kb: Any, statement: str, params: list, timeout: float) -> tup
         raise ServiceError(message if message.startswith("sql: ") else f"sql: {message}") from None
 
 
-def _stats_of(kb: Any) -> dict:
+def _stats_of(kb: KnowledgeBase) -> dict:
     if hasattr(kb, "stats"):
         return encode_plain(_plain(kb.stats()))
     from slr_sql import buffers as history   # the same figures `slr stats` prints
@@ -1321,7 +1325,7 @@ def _responses(e: _Endpoint) -> dict:
 
 # -- the application -----------------------------------------------------------------------
 
-def create_app(kb: Any, *, token: str | None = None, limits: Limits | None = None) -> Starlette:
+def create_app(kb: KnowledgeBase, *, token: str | None = None, limits: Limits | None = None) -> Starlette:
     """The Starlette application serving ``kb`` (which the caller keeps and closes).
 
     ``token``: when given, every request but ``/health`` and ``/openapi.json`` must carry

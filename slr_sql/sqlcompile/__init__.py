@@ -56,11 +56,11 @@ from .builtin_goals import COMPARISONS, EFFECTS, NO_BIND
 from .compiler import CONTROL_FALLBACK, CONTROL_SQL, Compiler
 from .guards import NUM_ARG, TIME_ARG, guards, unused_checks
 from .model import (CYCLIC, NUMERIC, SITES, Col, ColRef, Fallback, Part, Site, State, has_col,
-                    has_var, quote_ident, resolve, term_free_vars)
+                    has_var, key_columns, quote_ident, resolve, term_free_vars)
 from .views import view_select
 
 __all__ = ["Fallback", "Col", "Compiler", "Part", "SITES", "quote_ident",
            # used by the planner and the modules of this package
            "ColRef", "Site", "State", "resolve", "has_var", "has_col", "term_free_vars",
            "guards", "unused_checks", "NUM_ARG", "TIME_ARG", "NUMERIC", "CYCLIC", "NO_BIND", "EFFECTS",
-           "COMPARISONS", "CONTROL_FALLBACK", "CONTROL_SQL", "view_select"]
+           "COMPARISONS", "CONTROL_FALLBACK", "CONTROL_SQL", "view_select", "key_columns"]

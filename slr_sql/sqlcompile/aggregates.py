@@ -10,7 +10,8 @@ from __future__ import annotations
 from typing import Any
 
 from ..terms import NIL, Atom, Struct, deref
-from .model import Col, Fallback, Part, format_for_message, shown_in_message, resolve
+from .model import (Col, Fallback, Part, format_for_message, key_columns, resolve,
+                    shown_in_message)
 
 
 class AggregateGoals:
@@ -36,10 +37,8 @@ class AggregateGoals:
         """The branches as one UNION ALL (``v0``, keys ``k0..``) and its ordering keys."""
         width = max(len(p.keys) for p in parts)
         selects = []
-        for p in parts:
-            cols = [f"{x} AS v{i}" for i, x in enumerate(p.proj)]
-            cols += [f"{k} AS k{i}" for i, k in enumerate(p.keys)]
-            cols += [f"{self.dialect.null_key} AS k{i}" for i in range(len(p.keys), width)]
+        for p, keys in zip(parts, key_columns(parts, self.dialect)):
+            cols = [f"{x} AS v{i}" for i, x in enumerate(p.proj)] + keys
             selects.append(p.select(cols))
         return " UNION ALL ".join(selects), [f"k{i}" for i in range(width)]
 

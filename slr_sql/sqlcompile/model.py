@@ -115,6 +115,25 @@ class Part:
         return sql
 
 
+def key_columns(parts: list[Part], dialect: Any) -> list[list[str]]:
+    """Each branch's order keys as the columns ``k0..`` of a UNION ALL: a branch with fewer
+    keys pads them with the ``dialect``'s NULL for the kind of keys at that place (a
+    robot's name is text, the other keys numbers), which raises Unprintable where the
+    dialect's columns cannot hold the kinds met there.
+
+    >>> from slr_sql.store.dialect import SQLITE
+    >>> key_columns([Part([], [], ["0", "t0.robot"]), Part([], [], ["1"])], SQLITE)
+    [['0 AS k0', 't0.robot AS k1'], ['1 AS k0', 'NULL AS k1']]
+    """
+    width = max((len(p.keys) for p in parts), default=0)
+    kinds = [frozenset("text" if k.endswith(".robot") else "number"
+                       for p in parts if i < len(p.keys) for k in (p.keys[i],))
+             for i in range(width)]
+    padding = [dialect.key_padding(k) for k in kinds]
+    return [[f"{k} AS k{i}" for i, k in enumerate(p.keys)]
+            + [f"{padding[i]} AS k{i}" for i in range(len(p.keys), width)] for p in parts]
+
+
 class _Conds(list):
     """The WHERE conditions of a branch; one that calls an slr_ function (which may raise
     an error Prolog would raise) is also recorded with its prefix (see Compiler.guards)."""

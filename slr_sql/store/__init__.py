@@ -56,7 +56,8 @@ from .checks import format_event
 from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, DatabaseError, \
     ReadConnection, run_sql_file
 from .events import Event, EventBatch, EventWriter
-from .fleet import Fleet, check_robot_name
+from .fleet import Fleet, WriterInFlight, check_robot_name
+from .functions import SqlFunctions
 from .journals import JournalReader, SubscriptionRecord, SubscriptionTables
 from .lookups import EventReader, Row
 from .postgres import PgDatabase, is_postgres_url
@@ -68,7 +69,7 @@ from .tables import EventTables
 __all__ = ["EventStore", "Event", "EventBatch", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "DatabaseError", "quote_identifier", "sql_literal", "format_event",
            "migration_scripts", "split_sql_script", "run_sql_file", "store_error",
-           "check_robot_name", "ReadConnection", "ArgEquals", "BufferPlan", "JsonArray",
+           "check_robot_name", "WriterInFlight", "ReadConnection", "ArgEquals", "BufferPlan", "JsonArray",
            "JsonEquals", "MixedTerm", "PatternMatch", "SameTerm", "JournalReader",
            "SubscriptionRecord"]
 
@@ -727,13 +728,20 @@ class EventStore:
     def query_plan(self, sql: str) -> list[str]:
         return self._db.query_plan(sql)
 
-    @_doc(Database.create_function)
-    def create_function(self, name: str, narg: int, fn: Any, deterministic: bool = True) -> None:
-        self._db.create_function(name, narg, fn, deterministic)
+    @property
+    def statement_deadline(self) -> float | None:
+        """The deadline (``time.monotonic()``) of the compiled statement running now on
+        this store, None when none runs or it has none: a Python function called from the
+        statement keeps to it.
 
-    @_doc(Database.create_aggregate)
-    def create_aggregate(self, name: str, narg: int, cls: Any) -> None:
-        self._db.create_aggregate(name, narg, cls)
+        >>> EventStore(None).statement_deadline is None
+        True
+        """
+        return self._db.deadline
+
+    @_doc(Database.install_functions)
+    def install_functions(self, functions: SqlFunctions) -> None:
+        self._db.install_functions(functions)
 
     @_doc(Database.run_compiled)
     def run_compiled(self, sql: str, params: dict, limit: int | None = None,

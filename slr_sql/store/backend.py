@@ -23,6 +23,7 @@ from ..errors import EventRejected
 from .buffering import BufferPlan
 from .catalog import ProgramText
 from .events import Event
+from .functions import SqlFunctions
 from .journals import JournalReader, SubscriptionRecord
 from .lookups import Row
 
@@ -295,9 +296,10 @@ class CompiledSQL(Protocol):
 
     def query_plan(self, sql: str) -> list[str]: ...
 
-    def create_function(self, name: str, narg: int, fn: Any, deterministic: bool=True) -> None: ...
+    def install_functions(self, functions: SqlFunctions) -> None: ...
 
-    def create_aggregate(self, name: str, narg: int, cls: Any) -> None: ...
+    @property
+    def statement_deadline(self) -> float | None: ...
 
     def run_compiled(self, sql: str, params: dict[Any, Any], limit: int | None=None, deadline: float | None=None, may_fall_back: bool=False) -> list[tuple[Any, ...]]: ...
 

@@ -599,7 +599,8 @@ class Catalog:
     def replace_views(self, views: dict[str, str]) -> list[str]:
         """Drop the views created last time and create ``{predicate name: select sql}``,
         each named by :meth:`view_name` (a name already used by a table, index or earlier
-        view is skipped). Returns the names created.
+        view is skipped, and so is one PostgreSQL refuses: a column it cannot type, a name
+        that its 63-byte cut makes one taken). Returns the names created.
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None); s.replace_views({"answer": "SELECT 42 AS x", "slr_meta": "SELECT 1"})
@@ -615,7 +616,17 @@ class Catalog:
                 name = self.view_name(predicate)
                 if name.lower() in taken:
                     continue
-                conn.execute(f"CREATE VIEW {quote_identifier(name)} AS {select}")
+                if self.db.dialect.name == "sqlite":
+                    conn.execute(f"CREATE VIEW {quote_identifier(name)} AS {select}")
+                else:
+                    # a column has one type there (a branch's time, a number, and another's
+                    # data value, text, in one argument), names are cut at 63 bytes: a view
+                    # the server refuses is not made (the program loads, its queries answer)
+                    try:
+                        with self.db.transaction():   # a savepoint
+                            conn.execute(f"CREATE VIEW {quote_identifier(name)} AS {select}")
+                    except DatabaseError:
+                        continue
                 created.append(name)
                 taken.add(name.lower())
             self.meta_set("sql_views", created)

@@ -37,6 +37,7 @@ from .authorizer import READ_ONLY_RESULT_BYTES, READ_ONLY_VALUE_BYTES, SqlGuard,
     harden_connection
 from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
 from .dialect import SQLITE
+from .functions import SqlFunctions
 from .schema import migrate, migration_scripts
 from .sqltext import bound_parameters, busy_error, split_sql_script, store_error
 
@@ -251,6 +252,8 @@ class Database:
         # when a transaction begins (see suspend_streams)
         self.open_streams: weakref.WeakSet = weakref.WeakSet()
         self.deadline: float | None = None  # of the compiled statement running now
+        # the Python functions statements may call (install_functions), on every connection
+        self.functions: SqlFunctions | None = None
         self.busy_timeout = busy_timeout
         self._absolute: str | None = None  # set once open (check_identity)
         self._identity: tuple = (None, None, None)
@@ -434,7 +437,8 @@ class Database:
         """A :class:`ReadConnection` to this store's file (None in memory: no other
         connection can reach an in-memory database)."""
         self.check_open()
-        return None if self.path is None else ReadConnection(self.path, self.busy_timeout)
+        return None if self.path is None else \
+            ReadConnection(self.path, self.busy_timeout, functions=self.functions)
 
     def check_open(self) -> None:
         if self.closed:
@@ -703,33 +707,22 @@ class Database:
     # Execution helpers for slr_sql.planner / slr_sql.sqlcompile: application-defined
     # functions and running compiled statements (parameters always bound).
 
-    def create_function(self, name: str, narg: int, fn: Any, deterministic: bool = True) -> None:
-        """Register a scalar function on the store's connection.
+    def install_functions(self, functions: SqlFunctions) -> None:
+        """Register the Python functions statements may call (the one list of them is
+        :data:`slr_sql.sql_functions.SQL_FUNCTIONS`) on the store's connection, and on
+        every reading connection opened from now on.
 
-        >>> from slr_sql.store import EventStore
-        >>> s = EventStore(None); s.create_function("twice", 1, lambda x: 2 * x)
-        >>> s.execute("SELECT twice(21)")
+        >>> from slr_sql.store.functions import Native, SqlFunction, SqlFunctions
+        >>> db = Database(None)
+        >>> db.install_functions(SqlFunctions(
+        ...     (SqlFunction("twice", 1, lambda x: 2 * x, Native.INTERPRETER_ONLY),), ()))
+        >>> db.execute("SELECT twice(21)")
         [(42,)]
         """
         with self.lock:
             self.check_open()
-            self.conn.create_function(name, narg, fn, deterministic=deterministic)
-
-    def create_aggregate(self, name: str, narg: int, cls: Any) -> None:
-        """Register an aggregate function (a class with step/finalize).
-
-        >>> class Count:
-        ...     def __init__(self): self.n = 0
-        ...     def step(self, value): self.n += 1
-        ...     def finalize(self): return self.n
-        >>> from slr_sql.store import EventStore
-        >>> s = EventStore(None); s.create_aggregate("how_many", 1, Count)
-        >>> s.execute("SELECT how_many(x) FROM (SELECT 1 AS x UNION ALL SELECT 2)")
-        [(2,)]
-        """
-        with self.lock:
-            self.check_open()
-            self.conn.create_aggregate(name, narg, cls)
+            self.functions = functions
+            register_functions(self.conn, functions)
 
     def run_compiled(self, sql: str, params: dict, limit: int | None = None,
                      deadline: float | None = None, may_fall_back: bool = False) -> list[tuple]:
@@ -799,6 +792,15 @@ class Database:
                                               20000)
 
 
+def register_functions(conn: sqlite3.Connection, functions: SqlFunctions) -> None:
+    """Register every function and aggregate of ``functions`` on one SQLite connection:
+    the only place slr_sql registers Python functions (tests/test_sql_functions.py)."""
+    for f in functions.functions:
+        conn.create_function(f.name, f.arity, f.fn, deterministic=f.deterministic)
+    for a in functions.aggregates:
+        conn.create_aggregate(a.name, a.arity, a.cls)
+
+
 def _bounded_rows(cursor: sqlite3.Cursor) -> list[tuple]:
     """Every row of a read-only statement, or an SLRError once its strings and blobs add up
     to more than :data:`READ_ONLY_RESULT_BYTES` (a statement repeating a large value over
@@ -853,7 +855,7 @@ class ReadConnection:
     """
 
     def __init__(self, path: str, busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
-                 cache_kib: int = 2048):
+                 cache_kib: int = 2048, functions: SqlFunctions | None = None):
         self.path = path
         self.busy_timeout = busy_timeout
         self.lock = ordered_lock("store.reader")
@@ -864,6 +866,8 @@ class ReadConnection:
             harden_connection(self.conn)
             self.conn.execute("PRAGMA query_only=ON")
             self.conn.execute(f"PRAGMA cache_size=-{int(cache_kib)}")
+            if functions is not None:
+                register_functions(self.conn, functions)
         except sqlite3.Error as exc:
             raise SLRError(f"{path}: cannot open a reading connection ({exc})") from None
 

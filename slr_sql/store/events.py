@@ -2,9 +2,10 @@
 
 Every add first records the store clock's "now" in ``slr_clock`` (the buffer triggers read
 it), then inserts the valid events with ``executemany`` per run of one type; invalid events
-are skipped and reported (or, with ``atomic=True``, abort the whole add). A slice of events
-of one well-formed type takes a fast path that checks whole columns at once
-(:meth:`EventWriter._insert_uniform`); anything else, or any doubt, goes event by event.
+are skipped and reported (or, with ``atomic=True``, abort the whole add). A slice of
+well-formed events takes a fast path that checks whole columns at once, one statement per
+table (:meth:`EventWriter._insert_uniform`, and :meth:`EventWriter._insert_mixed` for
+interleaved types on SQLite); anything else, or any doubt, goes event by event.
 """
 from __future__ import annotations
 
@@ -156,35 +157,100 @@ class EventWriter:
                 return False
             names = set(map(_first, chunk))
             if len(names) != 1:
-                return False
-            (name,) = names
-            argss = list(map(_second, chunk))
-            if not _SEQUENCES.issuperset(map(type, argss)):
-                return False
-            arities = set(map(len, argss))
+                return self._insert_mixed(chunk, names, arrival, ends)
+            checked = self._checked_columns(chunk)
         except (TypeError, IndexError, KeyError):  # not sized, not indexable, unhashable
             return False
-        if len(arities) != 1 or not isinstance(name, str):
+        if checked is None:
             return False
-        (arity,) = arities
-        starts = list(map(_third, chunk))
-        ends_column = list(map(_fourth, chunk))
-        if not (_FLOAT.issuperset(map(type, starts)) and _FLOAT.issuperset(map(type, ends_column))
-                and all(map(_le, starts, ends_column))):  # False at a NaN, too
-            return False
-        latest = max(ends_column)
-        if not (_NEG_INF < min(starts) and latest < _INF):
-            return False
-        try:
-            columns = [encode_column(list(map(itemgetter(i), argss))) for i in range(arity)]
-        except (Unencodable, RecursionError):
-            return False
+        name, arity, columns, starts, ends_column = checked
         event_type = self.tables.types.get((name, arity))
         if event_type is None:
             try:
                 event_type = self.type_for_new_event(name, arity)
             except BadEvent:
                 return False
+        self._insert_columns(event_type, columns, starts, ends_column, arrival)
+        if ends is not None:
+            _widen(ends, (name, arity), min(ends_column), max(ends_column))
+        return True
+
+    def _checked_columns(self, chunk: list) -> tuple[str, int, list, list, list] | None:
+        """``(name, arity, argument columns, starts, ends)`` of ``chunk`` -- events of one
+        name -- when every event is a well-formed 4-tuple of one arity with finite float
+        times, start <= end, and every argument encodes; None otherwise. Nothing is
+        written (no table created)."""
+        name = chunk[0][0]
+        if not isinstance(name, str):
+            return None
+        argss = list(map(_second, chunk))
+        if not _SEQUENCES.issuperset(map(type, argss)):
+            return None
+        arities = set(map(len, argss))
+        if len(arities) != 1:
+            return None
+        (arity,) = arities
+        starts = list(map(_third, chunk))
+        ends_column = list(map(_fourth, chunk))
+        if not (_FLOAT.issuperset(map(type, starts)) and _FLOAT.issuperset(map(type, ends_column))
+                and all(map(_le, starts, ends_column))):  # False at a NaN, too
+            return None
+        if not (_NEG_INF < min(starts) and max(ends_column) < _INF):
+            return None
+        try:
+            columns = [encode_column(list(map(itemgetter(i), argss))) for i in range(arity)]
+        except (Unencodable, RecursionError):
+            return None
+        return name, arity, columns, starts, ends_column
+
+    def _insert_mixed(self, chunk: list, names: set, arrival: float,
+                      ends: dict | None) -> bool:
+        """The fast path for a chunk of several event names (a stream of interleaved
+        types): each name's events are checked column-wise as :meth:`_insert_uniform`
+        checks one type's, and, only when all pass, each table gets one ``executemany`` of
+        its rows in their order. A table's rows, its ``seq`` order, its triggers (buffers,
+        journals: each reads only its own table) see what they see run by run; no table
+        sees another's rows within an add. False (nothing stored) at any doubt: the chunk
+        then goes event by event. SQLite only (a server's batch takes one pipeline in
+        :meth:`_insert_each`)."""
+        if self.db.dialect.to_column is not None or len(names) > 64:
+            return False
+        try:
+            # in order of first appearance: the tables are written, and the batch's end
+            # spans listed, in the order the event-by-event path would
+            groups: dict[Any, list] = {name: [] for name in dict.fromkeys(map(_first, chunk))}
+        except TypeError:  # an unhashable name
+            return False
+        for event in chunk:
+            groups[event[0]].append(event)
+        checked = []
+        for group in groups.values():
+            try:
+                one = self._checked_columns(group)
+            except (TypeError, IndexError, KeyError):  # an event not indexable
+                return False
+            if one is None:
+                return False
+            checked.append(one)
+        prepared = []
+        for name, arity, columns, starts, ends_column in checked:
+            event_type = self.tables.types.get((name, arity))
+            if event_type is None:
+                try:
+                    event_type = self.type_for_new_event(name, arity)
+                except BadEvent:
+                    return False
+            prepared.append((event_type, columns, starts, ends_column))
+        for event_type, columns, starts, ends_column in prepared:
+            self._insert_columns(event_type, columns, starts, ends_column, arrival)
+            if ends is not None:
+                _widen(ends, (event_type.name, event_type.arity), min(ends_column),
+                       max(ends_column))
+        return True
+
+    def _insert_columns(self, event_type: EventType, columns: list, starts: list,
+                        ends_column: list, arrival: float) -> None:
+        """One ``executemany`` of the rows of ``event_type`` given column-wise."""
         to_column = self.db.dialect.to_column
         if to_column is not None:  # a server's typed columns: see store/dialect.py
             columns = [list(map(to_column, column)) for column in columns]
@@ -196,9 +262,6 @@ class EventWriter:
             self.db.conn.executemany(event_type.insert_sql,
                                      zip(*columns, starts, ends_column, repeat(arrival),
                                          repeat(robot)))
-        if ends is not None:
-            _widen(ends, (name, arity), min(ends_column), latest)
-        return True
 
     def _insert_each(self, chunk: list, base: int, arrival: float, atomic: bool,
                      errors: list[EventRejected], ends: dict | None) -> None:

@@ -23,7 +23,7 @@ from .connection import Database
 from .events import EventWriter
 from .tables import EventTables
 
-__all__ = ["Fleet", "check_robot_name"]
+__all__ = ["Fleet", "WriterInFlight", "check_robot_name"]
 
 # (an upsert both engines take)
 _ADD_ROBOT = "INSERT INTO slr_robots (name) VALUES (?) ON CONFLICT (name) DO NOTHING"
@@ -51,6 +51,16 @@ def check_robot_name(name: Any) -> str:
         raise SLRError(f"robot name {name!r} reads as a number when stored; name robots with "
                        "plain words (r1, forklift-2, ...)")
     return name
+
+
+class WriterInFlight(SLRBusy):
+    """A read for shipping waited longer than the store's busy timeout for a transaction
+    that holds a writer's lock on the table (its sequences may lie below the rows read):
+    the robot's own store is busy, not the fleet. Retrying later is safe.
+
+    >>> issubclass(WriterInFlight, SLRBusy)
+    True
+    """
 
 
 class Fleet:
@@ -162,7 +172,7 @@ class Fleet:
         pause = 0.0005
         while holders:
             if time.monotonic() > deadline:
-                raise SLRBusy(f"{self.db.path}: a writer of {table} stayed in flight for more "
+                raise WriterInFlight(f"{self.db.path}: a writer of {table} stayed in flight for more "
                               f"than {timeout:g} s; the rows after it are shipped later")
             time.sleep(pause)
             pause = min(pause * 2, 0.02)

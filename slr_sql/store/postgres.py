@@ -29,9 +29,10 @@ from contextlib import contextmanager, suppress
 from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
-from ..errors import SLRBusy, SLRError, SLRServerUnreachable, SLRTimeout
+from ..errors import SLRBusy, SLRError, SLRServerUnreachable, SLRTimeout, SLRUnavailable
 from ..lockorder import ordered_lock
 from .dialect import POSTGRES
+from .functions import SqlFunctions
 from .schema import postgres_migration_scripts
 from .sqltext import bound_parameters, quote_identifier
 
@@ -93,8 +94,11 @@ def _psycopg() -> Any:
     return psycopg
 
 
-def _error(exc: BaseException, where: str, busy_timeout: float | None = None) -> Exception:
-    """The slr_sql exception for a psycopg error."""
+def _error(exc: BaseException, where: str, busy_timeout: float | None = None,
+           connected: bool = False) -> Exception:
+    """The slr_sql exception for a psycopg error (``connected``: the connection is still
+    up after it, so an error the client raised without a server's code is not a lost
+    server but a refused statement)."""
     psycopg = _psycopg()
     errors = psycopg.errors
     if isinstance(exc, (errors.LockNotAvailable, errors.DeadlockDetected,
@@ -104,12 +108,23 @@ def _error(exc: BaseException, where: str, busy_timeout: float | None = None) ->
     if isinstance(exc, errors.QueryCanceled):
         return SLRTimeout(f"query timed out ({_first_line(exc)})")
     if isinstance(exc, (psycopg.OperationalError, psycopg.InterfaceError)):
+        state = getattr(exc, "sqlstate", None) or ""
+        if state.startswith("53"):   # insufficient resources: disk, memory, connections
+            return SLRUnavailable(f"{where}: the server is short of resources "
+                                  f"({_first_line(exc)})")
+        if connected and not state:  # e.g. more parameters than the protocol carries
+            return SLRError(f"{where}: the statement cannot be sent ({_first_line(exc)})")
         return SLRServerUnreachable(f"{where}: the server is not reachable "
                                     f"({_first_line(exc)})")
     if isinstance(exc, errors.ReadOnlySqlTransaction):
         return SLRError(f"read-only: the statement would change the store "
                         f"({_first_line(exc)}); pass write=True to allow it")
     return PgStatementError(_first_line(exc))
+
+
+def _connected(raw: Any) -> bool:
+    """Whether a psycopg connection is still up (after an error)."""
+    return not raw.closed and not getattr(raw, "broken", False)
 
 
 def _first_line(exc: BaseException) -> str:
@@ -276,7 +291,7 @@ class PgConnection:
         try:
             return call()
         except psycopg.Error as exc:
-            raise _error(exc, self.where, self.busy_timeout) from None
+            raise _error(exc, self.where, self.busy_timeout, _connected(self.raw)) from None
 
     def execute(self, sql: str, params: Any = ()) -> PgCursor:
         text = POSTGRES.statement(sql)
@@ -369,7 +384,7 @@ class PgConnection:
                     self.raw.execute("BEGIN")
                 yield
         except psycopg.Error as exc:
-            raise _error(exc, self.where, self.busy_timeout) from None
+            raise _error(exc, self.where, self.busy_timeout, _connected(self.raw)) from None
 
     def execute_script(self, sql: str) -> PgCursor:
         """Run SQL text exactly as written (no parameters: DDL, trigger functions whose
@@ -454,6 +469,7 @@ class PgDatabase:
         self.rollback_listeners: list[Callable[[], None]] = []
         self.open_streams: weakref.WeakSet = weakref.WeakSet()
         self.deadline: float | None = None
+        self.functions: SqlFunctions | None = None  # install_functions
         self.busy_timeout = busy_timeout
         self.notify_channel = f"slr_{schema}"
         self.write_groups: dict[tuple[str, int], int] = {}
@@ -702,7 +718,7 @@ class PgDatabase:
                         raw.execute("ROLLBACK")
                     except psycopg.Error:
                         pass
-                raise _error(exc, self.path, self.busy_timeout) from None
+                raise _error(exc, self.path, self.busy_timeout, _connected(raw)) from None
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
         with self.lock:
@@ -730,12 +746,12 @@ class PgDatabase:
             rows = self.conn.execute("EXPLAIN " + sql, [None] * sql.count("?")).fetchall()
             return [row[0] for row in rows]
 
-    def create_function(self, name: str, narg: int, fn: Any, deterministic: bool = True) -> None:
-        """Python functions cannot run inside the server: goals that need one run in the
-        interpreter on PostgreSQL (the planner asks :attr:`python_functions`)."""
-
-    def create_aggregate(self, name: str, narg: int, cls: Any) -> None:
-        """See :meth:`create_function`."""
+    def install_functions(self, functions: SqlFunctions) -> None:
+        """Python functions cannot run inside the server: the functions a migration
+        installs there (``Native.MIGRATION``) are called by name, and goals that need one
+        of the others run in the interpreter on PostgreSQL (the planner asks
+        :attr:`python_functions`). Kept only to say what the store was given."""
+        self.functions = functions
 
     python_functions = False
 

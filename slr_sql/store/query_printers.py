@@ -48,8 +48,17 @@ class SQLiteQueryPrinter:
     query_functions = True
     # the alias a subquery in FROM needs (none on SQLite)
     subquery_alias = ""
-    # the NULL that pads a branch's missing order keys in a UNION ALL (keys are numbers)
-    null_key = "NULL"
+
+    def key_padding(self, kinds: frozenset[str]) -> str:
+        """The NULL that pads a branch's missing order key in a UNION ALL, at a place where
+        the branches' keys are of ``kinds`` ("text": a robot's name, "number": the others);
+        any mix is fine here (a column takes any value, and keys of different kinds only
+        meet after an alternative's index has decided).
+
+        >>> SQLiteQueryPrinter().key_padding(frozenset({"text", "number"}))
+        'NULL'
+        """
+        return "NULL"
 
     def may_raise(self, sql: str) -> bool:
         """Whether evaluating ``sql`` may raise an error Prolog raises too (arithmetic,
@@ -141,9 +150,16 @@ class PostgresQueryPrinter:
 
     query_functions = False
     subquery_alias = " AS s"
-    # an untyped NULL in the first branches of a UNION resolves as text, and text does not
-    # meet the integer keys of a later branch
-    null_key = "CAST(NULL AS double precision)"
+
+    def key_padding(self, kinds: frozenset[str]) -> str:
+        # a UNION column has one type: an untyped NULL in the first branches resolves as
+        # text, which does not meet a later branch's number; a NULL typed as a number does
+        # not meet a robot's name
+        if len(kinds) > 1:
+            raise Unprintable("branches ordered by a robot's name and by a number at one "
+                              "place (origin/2 beside other goals) run in the interpreter "
+                              "on PostgreSQL")
+        return "CAST(NULL AS text)" if "text" in kinds else "CAST(NULL AS double precision)"
 
     def may_raise(self, sql: str) -> bool:
         # slr_typeof, slr_number, slr_j and the float printers never raise; slr_num does

@@ -33,7 +33,7 @@ from .queue import HISTORY_PHASE, LIVE_PHASE, Subscription, SubscriptionOverflow
     SubscriptionState, resolve_threadsafe
 from .registry import SubscriptionRegistry, journal_table
 
-__all__ = ["SubscriptionHub", "DEFAULT_MAX_QUEUE", "DEFAULT_MAX_LAG"]
+__all__ = ["SubscriptionHub", "DEFAULT_MAX_QUEUE", "DEFAULT_MAX_LAG", "POLL_INTERVAL"]
 
 log = logging.getLogger("slr_sql.subscriptions")
 

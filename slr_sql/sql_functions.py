@@ -1,0 +1,243 @@
+"""The Python functions SQL statements call, listed once: :data:`SQL_FUNCTIONS`.
+
+The query compiler (:mod:`slr_sql.sqlcompile`, through the store's dialect printers) and the
+event rules' SQL (:mod:`slr_sql.cep.sqlgen`) print calls of these functions; the facade hands
+the list to its store (``store.install_functions``) as it opens it, and the SQLite backend
+registers every entry on each connection it opens. Nothing else registers a function
+(``tests/test_sql_functions.py`` scans for it). On PostgreSQL each entry is either a
+function a migration installs under the same name and number of arguments, or marked
+interpreter only: the dialect then refuses to print it and the goal runs in the
+interpreter (docs/architecture.md).
+
+* ``slr_j``: a stored value's form inside JSON (list elements, compound arguments);
+* ``slr_num``: a stored value as a number in arithmetic (raises on anything else);
+* ``slr_ar1``, ``slr_ar2``: Prolog's arithmetic functions (big integers refused, as the
+  interpreter refuses them in a 64-bit column);
+* ``slr_det``: a det builtin or ``kb.define`` predicate at a call site of the compiler;
+* ``slr_cep_cmp``, ``slr_cep_arith``: an event rule's comparison as Prolog evaluates it;
+* aggregates ``slr_sum``, ``slr_max``, ``slr_min``, ``slr_setof``.
+
+>>> [name for name, arity in SQL_FUNCTIONS.names()][:3]
+['slr_j', 'slr_num', 'slr_ar1']
+>>> from slr_sql.store import EventStore
+>>> store = EventStore(None); store.install_functions(SQL_FUNCTIONS)
+>>> store.sql("SELECT slr_ar2('+', 1, 2), slr_cep_cmp('<', 1, 2)")[1]
+[(3, 1)]
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+from json.encoder import encode_basestring as _quote  # C-accelerated; keeps non-ASCII
+from typing import Any
+
+from .builtins import BuiltinMachine, call_python_pred, sorted_unique
+from .encoding import INT64_MAX, INT64_MIN, decode, encode, encode_json
+from .sqlcompile import SITES, ColRef, resolve
+from .store.functions import Native, SqlAggregate, SqlFunction, SqlFunctions
+from .terms import Struct, Var, deref, list_items, make_list
+
+__all__ = ["SQL_FUNCTIONS"]
+
+
+def statement_deadline(store: Any) -> float | None:
+    """The deadline of the compiled statement running on ``store`` now (None: no store)."""
+    return None if store is None else store.statement_deadline
+
+
+def _num(v):
+    if type(v) is int or type(v) is float:
+        return v
+    raise TypeError(f"not a number: {v!r}")
+
+
+def _checked(r):
+    if type(r) is int and not INT64_MIN <= r <= INT64_MAX:
+        raise OverflowError("integer beyond 64 bits")
+    return r
+
+
+def _ar2(op, a, b):
+    from .arith import evaluate
+
+    return _checked(evaluate(Struct(op, (_num(a), _num(b)))))
+
+
+def _ar1(op, a):
+    from .arith import evaluate
+
+    return _checked(evaluate(Struct(op, (_num(a),))))
+
+
+def _j(v):
+    """slr_j: a column value's inner-JSON form, ``encode_json(decode(v))``. A stored list or
+    compound is already in that form (JSON inside and out); an atom is quoted; an integer
+    column is 64-bit. The rest (strings, floats, ``{"$atom":..}``) goes the long way."""
+    tv = type(v)
+    if tv is str:
+        c = v[:1]
+        if c == "[" or (c == "{" and not v.startswith('{"$atom":"')):
+            return v
+        if c and c != "{" and c != '"':
+            return _quote(v)
+    elif tv is int:
+        return str(v)
+    return encode_json(decode(v))
+
+
+def _inst(t, values, varmap):
+    t = deref(t) if type(t) is Var else t
+    tt = type(t)
+    if tt is ColRef:
+        return values[t.i]
+    if tt is Var:
+        v = varmap.get(id(t))
+        if v is None:
+            v = varmap[id(t)] = Var(t.name)
+        return v
+    if tt is Struct:
+        return Struct(t.name, tuple(_inst(a, values, varmap) for a in t.args))
+    return t
+
+
+def _det(sid, i, *inputs):
+    site = SITES[sid]
+    # repr for floats: -0.0 == 0.0, but atom_length/term_to_atom tell them apart
+    key = tuple((float, repr(x)) if type(x) is float else (type(x), x) for x in inputs)
+    last = site.last
+    if last is not None and last[0] == key:
+        result = last[1]
+    else:
+        values = [decode(x) for x in inputs]
+        varmap: dict = {}
+        for v in site.outs:
+            varmap[id(v)] = Var(v.name)
+        args = tuple(_inst(a, values, varmap) for a in site.args)
+        m = BuiltinMachine(site.engine)
+        # the timeout= of the statement calling it holds inside a long builtin too
+        m.deadline = statement_deadline(site.engine.events)
+        if site.python:
+            ok = call_python_pred(m, site.fn, args)
+        else:
+            ok = site.fn(m, args)
+        if not ok:
+            result = None
+        else:
+            result = [encode(resolve(varmap[id(v)])) for v in site.outs]  # raises if unbound
+        site.last = (key, result)
+    if result is None:
+        return None
+    return 1 if i < 0 else result[i]
+
+
+class _Sum:
+    def __init__(self):
+        self.v = 0
+
+    def step(self, x):
+        self.v = self.v + _num(x)
+
+    def finalize(self):
+        return _checked(self.v)
+
+
+class _Max:
+    better = staticmethod(lambda x, v: x > v)
+
+    def __init__(self):
+        self.v = None
+
+    def step(self, x):
+        x = _num(x)
+        if self.v is None or self.better(x, self.v):
+            self.v = x
+
+    def finalize(self):
+        return self.v
+
+
+class _Min(_Max):
+    better = staticmethod(lambda x, v: x < v)
+
+
+class _Setof:
+    def __init__(self):
+        self.items = []
+
+    def step(self, x):
+        self.items.append(x)
+
+    def finalize(self):
+        items, _ = list_items(decode("[" + ",".join(self.items) + "]"))
+        return encode(make_list(sorted_unique(items)))
+
+
+def _compare(op: str, a: Any, b: Any, decoded: bool = False) -> int:
+    """``slr_cep_cmp(op, a, b)``: the comparison ``A op B`` of two stored values as Prolog
+    evaluates it (big integers, arithmetic atoms such as ``pi``, expressions); an error is
+    false."""
+    from .arith import evaluate
+
+    try:
+        if not decoded:
+            a, b = decode(a), decode(b)
+        x, y = evaluate(a), evaluate(b)
+        if op == "<":
+            return int(x < y)
+        if op == ">":
+            return int(x > y)
+        if op == "=<":
+            return int(x <= y)
+        if op == ">=":
+            return int(x >= y)
+        if op == "=:=":
+            return int(x == y)
+        return int(x != y)
+    except Exception:  # a type error in Prolog: the candidate does not match
+        return 0
+
+
+@lru_cache(maxsize=256)
+def _arith_goal(text: str) -> tuple[Any, dict]:
+    from .parser import parse_term
+
+    return parse_term(text, "<event rule>")
+
+
+def _compare_expressions(text: str, *values: Any) -> int:
+    """``slr_cep_arith(goal, v0, v1, ...)``: the comparison ``goal`` (its variables named
+    ``V0``, ``V1``, ... for the stored values given) as Prolog evaluates it; an error is
+    false. The fallback of a pushed comparison whose operands SQL cannot compute exactly."""
+    try:
+        goal, _ = _arith_goal(text)
+        bound = [decode(v) for v in values]
+
+        def put(t: Any) -> Any:
+            t = deref(t)
+            if type(t) is Var:
+                return bound[int(t.name[1:])]
+            if type(t) is Struct:
+                return Struct(t.name, tuple(put(a) for a in t.args))
+            return t
+
+        return _compare(goal.name, put(goal.args[0]), put(goal.args[1]), decoded=True)
+    except Exception:  # a type error in Prolog: the candidate does not match
+        return 0
+
+
+SQL_FUNCTIONS = SqlFunctions(
+    functions=(
+        SqlFunction("slr_j", 1, _j, Native.MIGRATION),
+        SqlFunction("slr_num", 1, _num, Native.MIGRATION),
+        SqlFunction("slr_ar1", 2, _ar1, Native.INTERPRETER_ONLY),
+        SqlFunction("slr_ar2", 3, _ar2, Native.INTERPRETER_ONLY),
+        SqlFunction("slr_det", -1, _det, Native.INTERPRETER_ONLY),
+        SqlFunction("slr_cep_cmp", 3, _compare, Native.INTERPRETER_ONLY),
+        SqlFunction("slr_cep_arith", -1, _compare_expressions, Native.INTERPRETER_ONLY),
+    ),
+    aggregates=(
+        SqlAggregate("slr_sum", 1, _Sum, Native.INTERPRETER_ONLY),
+        SqlAggregate("slr_max", 1, _Max, Native.INTERPRETER_ONLY),
+        SqlAggregate("slr_min", 1, _Min, Native.INTERPRETER_ONLY),
+        SqlAggregate("slr_setof", 1, _Setof, Native.INTERPRETER_ONLY),
+    ))
+"""Every Python function a statement may call, and every aggregate (see the module)."""
