@@ -164,16 +164,24 @@ class EventWriter:
         if checked is None:
             return False
         name, arity, columns, starts, ends_column = checked
+        event_type = self._type_or_none(name, arity)
+        if event_type is None:
+            return False
+        self._insert_columns(event_type, columns, starts, ends_column, arrival)
+        if ends is not None:
+            _widen(ends, (name, arity), min(ends_column), max(ends_column))
+        return True
+
+    def _type_or_none(self, name: str, arity: int) -> EventType | None:
+        """The table of name/arity, made if new; None when the name is refused (the column
+        path then leaves the chunk to the event-by-event one, which rejects with reasons)."""
         event_type = self.tables.types.get((name, arity))
         if event_type is None:
             try:
                 event_type = self.type_for_new_event(name, arity)
             except BadEvent:
-                return False
-        self._insert_columns(event_type, columns, starts, ends_column, arrival)
-        if ends is not None:
-            _widen(ends, (name, arity), min(ends_column), max(ends_column))
-        return True
+                return None
+        return event_type
 
     def _checked_columns(self, chunk: list) -> tuple[str, int, list, list, list] | None:
         """``(name, arity, argument columns, starts, ends)`` of ``chunk`` -- events of one
@@ -234,12 +242,9 @@ class EventWriter:
             checked.append(one)
         prepared = []
         for name, arity, columns, starts, ends_column in checked:
-            event_type = self.tables.types.get((name, arity))
+            event_type = self._type_or_none(name, arity)
             if event_type is None:
-                try:
-                    event_type = self.type_for_new_event(name, arity)
-                except BadEvent:
-                    return False
+                return False
             prepared.append((event_type, columns, starts, ends_column))
         for event_type, columns, starts, ends_column in prepared:
             self._insert_columns(event_type, columns, starts, ends_column, arrival)
