@@ -192,3 +192,27 @@ def test_a_statement_the_client_cannot_send_is_refused_not_a_lost_server(postgre
             kb.sql("SELECT " + ", ".join(["?"] * 70_000), tuple(range(70_000)))
         assert not isinstance(info.value, slr_sql.errors.SLRUnavailable)
         assert kb.sql("SELECT ?", (1,))[1] == [(1,)]
+
+
+def test_long_event_names_get_tables_on_both_backends(backend):
+    """PostgreSQL cuts names at 63 bytes: an event name of 60 characters gave its table's
+    four indexes one name, and two long names sharing a beginning one table. A long name now
+    gets a table of its own there (cut, with a digest); SQLite keeps the name as it is. The
+    events, an event rule over them and a subscription work alike."""
+    long_a, long_b = "perception_" + "x" * 60 + "_a", "perception_" + "x" * 60 + "_b"
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.load(f"both(X) <- {long_a}(X) seq {long_b}(X).")
+        sub = kb.subscribe(f"{long_b}(X)^T")
+        kb.add_many([f"{long_a}(1)^1", f"{long_b}(1)^2", f"{long_a}(2)^3"])
+        assert kb.query(f"{long_a}(X)^T") == [{"X": 1, "T": 1.0}, {"X": 2, "T": 3.0}]
+        assert kb.query(f"{long_b}(X)^T") == [{"X": 1, "T": 2.0}]
+        assert kb.query("both(X)^[S, E]") == [{"X": 1, "S": 1.0, "E": 2.0}]
+        assert sub.get(timeout=30) == {"X": 1, "T": 2.0}
+        sub.close()
+        _, rows = kb.sql("SELECT name, table_name FROM slr_event_types ORDER BY name")
+        tables = dict(rows)
+        assert len(set(tables.values())) == len(tables)
+        if backend.startswith("postgresql"):
+            assert all(len(t) <= 30 for t in tables.values())
+        else:
+            assert tables[long_a] == long_a

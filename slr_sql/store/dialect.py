@@ -73,6 +73,7 @@ class SQLiteDialect(SQLiteQueryPrinter):
     value = ""               # an untyped column keeps INTEGER / REAL / TEXT as given
     index_hints = True       # INDEXED BY: lookups name the index they must use
     text_holds_nul = True    # a TEXT value may contain U+0000
+    identifier_bytes: int | None = None   # names of any length
     without_rowid = " WITHOUT ROWID"
     pages_streams = False    # a statement's rows are read as needed (sqlite3 steps it)
     to_column: Callable[[Any], Any] | None = None     # identity: no conversion at all
@@ -134,6 +135,7 @@ class PostgresDialect(PostgresQueryPrinter):
     value = " TEXT"
     index_hints = False      # the planner chooses (no INDEXED BY)
     text_holds_nul = False   # text cannot contain U+0000 (values escape it as JSON)
+    identifier_bytes: int | None = 63     # longer names are cut, silently (NAMEDATALEN)
     without_rowid = ""
     pages_streams = True     # psycopg reads a whole result: lookups read growing pages
 

@@ -18,6 +18,7 @@ are read straight from an index, never sorted.
 """
 from __future__ import annotations
 
+import hashlib
 import re
 from typing import Any, Callable
 
@@ -56,6 +57,22 @@ class EventType:
         self.index_start = quote_identifier(f"slr_ix__{table}__start")
         self.index_arg1_end = quote_identifier(f"slr_ix__{table}__a1_end")
         self.index_arg1_start = quote_identifier(f"slr_ix__{table}__a1_start")
+
+
+# the longest table name whose derived names (indexes, journals, the event rules' indexes)
+# fit 63 bytes
+_LONG_TABLE = 30
+
+
+def _shortened(base: str, name: str, arity: int) -> str:
+    """``base`` (ASCII) cut to :data:`_LONG_TABLE` characters, the cut part replaced by a
+    digest of the type, so that two long names that share a beginning get two tables.
+
+    >>> _shortened("a" * 70, "a" * 70, 1)
+    'aaaaaaaaaaaaaaaaa_baf26e4537d9'
+    """
+    digest = hashlib.sha1(f"{name}/{arity}".encode()).hexdigest()[:12]
+    return f"{base[:_LONG_TABLE - 13]}_{digest}"
 
 
 def _index_names(table: str) -> list[str]:
@@ -124,12 +141,14 @@ class EventTables:
         if (SAFE_IDENTIFIER.match(name) and not lowered.startswith(RESERVED_PREFIXES)
                 and lowered not in SQL_KEYWORDS):
             base = name
-            if free(base):
-                return base
         else:
             base = "ev_" + re.sub(r"[^A-Za-z0-9_]", "_", name)
-            if free(base):
-                return base
+        if self.db.dialect.identifier_bytes is not None and len(base) > _LONG_TABLE:
+            # an engine that cuts names (PostgreSQL: 63 bytes) would give the table's four
+            # indexes (slr_ix__<table>__a1_start, ...) and the event rules' ones one name
+            base = _shortened(base, name, arity)
+        if free(base):
+            return base
         candidate = f"{base}__{arity}"
         suffix = 2
         while not free(candidate):
