@@ -216,3 +216,16 @@ def test_long_event_names_get_tables_on_both_backends(backend):
             assert all(len(t) <= 30 for t in tables.values())
         else:
             assert tables[long_a] == long_a
+
+
+def test_long_fact_predicate_names_get_tables_on_both_backends(backend):
+    """Two fact predicates whose table names share their first 63 bytes failed to load on
+    PostgreSQL (it cuts names): each gets a table of its own, and answers as on SQLite."""
+    long_a, long_b = "fact_" + "y" * 60 + "_a", "fact_" + "y" * 60 + "_b"
+    with slr_sql.open(backend) as kb:
+        kb.load(f"{long_a}(1). {long_a}(2). {long_b}(3).\n"
+                f"both(X) :- {long_a}(X) ; {long_b}(X).")
+    with slr_sql.open(backend) as kb:       # a reopened store reads its tables back
+        assert [a["X"] for a in kb.query(f"{long_a}(X)")] == [1, 2]
+        assert [a["X"] for a in kb.query(f"{long_b}(X)")] == [3]
+        assert [a["X"] for a in kb.query("both(X)")] == [1, 2, 3]

@@ -17,6 +17,7 @@
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from dataclasses import dataclass
@@ -365,6 +366,16 @@ class Catalog:
 
     # ------------------------------------------------------------------ fact tables and views
 
+    def _fact_table(self, name: str, arity: int) -> str:
+        """:meth:`fact_table_name`, cut on an engine that cuts names (PostgreSQL, 63 bytes)
+        with a digest of the predicate, so that its index (``slr_facts_ix_...``, 3 longer)
+        and a second long name sharing its beginning get names of their own."""
+        plain = self.fact_table_name(name, arity)
+        if self.db.dialect.identifier_bytes is None or len(plain) <= 60:
+            return plain
+        digest = hashlib.sha1(f"{name}/{arity}".encode()).hexdigest()[:12]
+        return f"{plain[:47]}_{digest}"
+
     @staticmethod
     def fact_table_name(name: str, arity: int) -> str:
         """``slr_facts_<arity>_<name>``, the name spelled so that every Prolog name gets a
@@ -425,7 +436,7 @@ class Catalog:
             for table in existing:
                 conn.execute(f"DROP TABLE {quote_identifier(table)}")
             for (name, arity), rows in tables.items():
-                plain = self.fact_table_name(name, arity)
+                plain = self._fact_table(name, arity)
                 table = quote_identifier(plain)
                 dialect = self.db.dialect
                 cols = "".join(f", arg{i}{dialect.value}" for i in range(1, arity + 1))
@@ -469,7 +480,7 @@ class Catalog:
             present = {name for name in self.db.table_names() if name.startswith("slr_facts_")}
         out = {}
         for name, arity in keys:
-            table = self.fact_table_name(name, arity)
+            table = self._fact_table(name, arity)
             if table in present:
                 out[(name, arity)] = quote_identifier(table)
         return out
