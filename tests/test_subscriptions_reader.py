@@ -4,6 +4,7 @@ shared read are served by one read per chunk, however many they are."""
 from __future__ import annotations
 
 import threading
+from contextlib import contextmanager
 
 import slr_sql
 
@@ -19,6 +20,27 @@ def answers_of(sub, count):
     return out
 
 
+@contextmanager
+def store_held_by_another_writer(kb):
+    """A thread holds the store's transaction (its lock, as a long commit holds it) for the
+    body; yields that thread, released and joined at the end."""
+    holding, release = threading.Event(), threading.Event()
+
+    def writer():
+        with kb.store.transaction():
+            holding.set()
+            release.wait(DEADLINE)
+
+    thread = threading.Thread(target=writer)
+    thread.start()
+    try:
+        assert holding.wait(DEADLINE)
+        yield thread
+    finally:
+        release.set()
+        thread.join()
+
+
 def test_a_lagging_subscriber_catches_up_while_a_writer_holds_the_store(db_path):
     with slr_sql.open(db_path) as kb:
         hub = kb._subscriptions
@@ -26,24 +48,11 @@ def test_a_lagging_subscriber_catches_up_while_a_writer_holds_the_store(db_path)
         sub = kb.subscribe("p(X)^T", since=0, max_queue=10)
         kb.add_many([f"p({i})^{i}" for i in range(1, 101)])
         assert hub.drain(DEADLINE)          # 10 answers queued, the rest left in the journal
-        holding, release = threading.Event(), threading.Event()
-
-        def writer():
-            with kb.store.transaction():    # the store's lock, held as a long commit holds it
-                holding.set()
-                release.wait(DEADLINE)
-
-        thread = threading.Thread(target=writer)
-        thread.start()
-        try:
-            assert holding.wait(DEADLINE)
+        with store_held_by_another_writer(kb) as thread:
             # taking answers makes room; the hub reads on from the journal on its own
             # connection, not waiting for the writer's lock
             assert answers_of(sub, 40) == list(range(1, 41))
             assert thread.is_alive()        # the transaction was held all along
-        finally:
-            release.set()
-            thread.join()
         assert answers_of(sub, 60) == list(range(41, 101))
         sub.close()
 
@@ -181,24 +190,11 @@ def test_housekeeping_waits_for_a_busy_store_after_the_deliveries_not_before(db_
         sub = kb.subscribe("p(X)^T", since=0, id="log")
         kb.add_many([f"p({i})^{i}" for i in range(1, 4)])
         assert answers_of(sub, 3) == [1, 2, 3]
-        holding, release = threading.Event(), threading.Event()
-
-        def other_writer():
-            with kb.store.transaction():
-                holding.set()
-                release.wait(DEADLINE)
-
-        thread = threading.Thread(target=other_writer)
-        thread.start()
-        try:
-            assert holding.wait(DEADLINE)
+        with store_held_by_another_writer(kb) as thread:
             hub._last_persist = 0.0           # positions due now
             for _ in range(3):                # whole passes, none waiting for the writer
                 assert hub.drain(DEADLINE / 4)
             assert thread.is_alive()
-        finally:
-            release.set()
-            thread.join()
         hub._last_persist = 0.0
         assert hub.housekeeping_round(DEADLINE)   # the store is free: written now
         rows = {r["id"]: r for r in hub.subscriptions()}
@@ -217,24 +213,11 @@ def test_housekeeping_that_must_wait_for_a_writer_delays_no_delivery(db_path):
         sub = kb.subscribe("p(X)^T", since=0, id="log", max_queue=10)
         kb.add_many([f"p({i})^{i}" for i in range(1, 101)])
         assert hub.drain(DEADLINE)          # 10 answers queued, the rest left in the journal
-        holding, release = threading.Event(), threading.Event()
-
-        def writer():
-            with kb.store.transaction():
-                holding.set()
-                release.wait(DEADLINE)
-
-        thread = threading.Thread(target=writer)
-        thread.start()
-        try:
-            assert holding.wait(DEADLINE)
+        with store_held_by_another_writer(kb) as thread:
             hub.lease_seconds = 1e-6          # claims to renew now, nothing put off
             hub._last_persist = 0.0           # positions due now
             assert answers_of(sub, 40) == list(range(1, 41))
             assert thread.is_alive()          # the transaction was held all along
-        finally:
-            release.set()
-            thread.join()
         hub.lease_seconds = 60.0
         hub._last_persist = hub._last_lease = 0.0
         assert hub.housekeeping_round(DEADLINE)   # written once the store is free
