@@ -393,10 +393,16 @@ def _typed(rows):
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(rules(), streams(), st.data())
 def test_compiled_detection_equals_the_reference(rule, events, data):
+    equals_the_reference(rule, events, data, may_add_one_by_one=True)
+
+
+def equals_the_reference(rule, events, data, may_add_one_by_one=False):
+    """The rule's complex events over ``events`` in a drawn arrival order, batches and marks
+    (and, if allowed, added one by one) are the reference evaluator's."""
     order = data.draw(st.permutations(range(len(events))), label="arrival order")
     cuts = data.draw(st.lists(st.integers(0, 2 * len(events)), max_size=3), label="batches")
     marks = data.draw(st.booleans(), label="marks")
-    one = data.draw(st.integers(0, 4), label="one by one") == 0
+    one = may_add_one_by_one and data.draw(st.integers(0, 4), label="one by one") == 0
     expected = reference(rule, events)
     got = run(rule, events, order, cuts, marks, one)
     assert _typed(got) == _typed([(tuple(h), s, e) for h, s, e in expected]), rule_text(rule)
@@ -501,12 +507,7 @@ def ab_streams(draw):
 def test_where_run_by_the_interpreter_equals_the_reference(rule, events, data):
     # the where goal is decided per candidate in Python (recent: the terminators ready
     # together are decided from one statement); same complex events as the reference
-    order = data.draw(st.permutations(range(len(events))), label="arrival order")
-    cuts = data.draw(st.lists(st.integers(0, 2 * len(events)), max_size=3), label="batches")
-    marks = data.draw(st.booleans(), label="marks")
-    expected = reference(rule, events)
-    got = run(rule, events, order, cuts, marks, False)
-    assert _typed(got) == _typed([(tuple(h), s, e) for h, s, e in expected]), rule_text(rule)
+    equals_the_reference(rule, events, data)
 
 
 @st.composite
@@ -551,12 +552,7 @@ def arith_streams(draw):
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(arith_rules(), arith_streams(), st.data())
 def test_arithmetic_where_pushed_into_sql_equals_the_reference(rule, events, data):
-    order = data.draw(st.permutations(range(len(events))), label="arrival order")
-    cuts = data.draw(st.lists(st.integers(0, 2 * len(events)), max_size=3), label="batches")
-    marks = data.draw(st.booleans(), label="marks")
-    expected = reference(rule, events)
-    got = run(rule, events, order, cuts, marks, False)
-    assert _typed(got) == _typed([(tuple(h), s, e) for h, s, e in expected]), rule_text(rule)
+    equals_the_reference(rule, events, data)
 
 
 def test_arithmetic_where_is_sql_and_bounds_the_earliest_row():
