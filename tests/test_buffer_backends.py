@@ -20,7 +20,7 @@ from slr_sql.terms import format_term, from_python
 from slr_sql.unify import copy_term, unify
 
 from conftest import postgres_database
-from test_buffers import VALUES, buffer_strategy, time_strategy
+from test_buffers import VALUES, add_buffers, buffer_strategy, time_strategy
 
 RULE = "r(X) <- (p(X, _)) seq (q(X))."
 
@@ -78,13 +78,7 @@ def test_postgres_keeps_and_derives_what_sqlite_does(pg_database, buffers, ops, 
     try:
         for kb in stores:
             kb.load(RULE)
-            for kind, text, amount in buffers:
-                if kind == "tBuffer":
-                    kb.add_buffer(text, keep_seconds=amount)
-                elif kind == "cBuffer":
-                    kb.add_buffer(text, keep_last=amount)
-                else:
-                    kb.add_buffer(text, keep_between=tuple(amount))
+            add_buffers(kb, buffers)
         for step, (op, arg) in enumerate(ops):
             for kb in stores:
                 if op == "tick":

@@ -47,6 +47,17 @@ def open_kb(backend):
         kb.close()
 
 
+def add_buffers(kb, buffers) -> None:
+    """Install ``(kind, pattern text, amount)`` buffers through ``kb.add_buffer``."""
+    for kind, text, amount in buffers:
+        if kind == "tBuffer":
+            kb.add_buffer(text, keep_seconds=amount)
+        elif kind == "cBuffer":
+            kb.add_buffer(text, keep_last=amount)
+        else:
+            kb.add_buffer(text, keep_between=tuple(amount))
+
+
 def buffer_triggers(kb) -> set:
     return {name for name in kb.store.triggers() if name.startswith("slr_buf_")}
 
@@ -543,13 +554,7 @@ def test_stored_events_equal_the_brute_force_model(buffers, ops, runtime, before
 
     def declare():
         if runtime:
-            for kind, text, amount in buffers:
-                if kind == "tBuffer":
-                    kb.add_buffer(text, keep_seconds=amount)
-                elif kind == "cBuffer":
-                    kb.add_buffer(text, keep_last=amount)
-                else:
-                    kb.add_buffer(text, keep_between=tuple(amount))
+            add_buffers(kb, buffers)
         else:
             program = [f"{kind}({text}, {amount})." for kind, text, amount in buffers
                        if kind != "window"]
