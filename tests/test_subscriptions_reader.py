@@ -41,6 +41,37 @@ def store_held_by_another_writer(kb):
         thread.join()
 
 
+@contextmanager
+def another_writer_after_the_commit_of(kb, event):
+    """``kb.add(event)`` in a thread of its own; right after its commit (the first add
+    listener, before the hub's) another thread takes the store's transaction and holds it
+    for the body, so the adding thread's later listeners wait for the store. Yields that
+    other writer's thread."""
+    holding, release = threading.Event(), threading.Event()
+
+    def other_writer():
+        with kb.store.transaction():
+            holding.set()
+            release.wait(DEADLINE)
+
+    thread = threading.Thread(target=other_writer)
+
+    def start_the_other_writer(stored):
+        if not thread.is_alive() and not release.is_set():
+            thread.start()
+            assert holding.wait(DEADLINE)
+
+    kb.add_listeners.insert(0, start_the_other_writer)
+    adder = threading.Thread(target=kb.add, args=(event,))
+    adder.start()
+    try:
+        yield thread
+    finally:
+        release.set()
+        adder.join()
+        thread.join()
+
+
 def test_a_lagging_subscriber_catches_up_while_a_writer_holds_the_store(db_path):
     with slr_sql.open(db_path) as kb:
         hub = kb._subscriptions
@@ -110,31 +141,9 @@ def test_events_added_while_another_thread_holds_a_transaction_are_read_on_the_h
         sub = kb.subscribe("p(X)^T", since=0)
         kb.add("p(0)^0")                      # the type's table exists: steady state
         assert answers_of(sub, 1) == [0]
-        holding, release = threading.Event(), threading.Event()
-
-        def other_writer():
-            with kb.store.transaction():
-                holding.set()
-                release.wait(DEADLINE)
-
-        thread = threading.Thread(target=other_writer)
-
-        def start_the_other_writer(stored):   # runs after the commit, before the hub's listener
-            if not thread.is_alive() and not release.is_set():
-                thread.start()
-                assert holding.wait(DEADLINE)
-
-        kb.add_listeners.insert(0, start_the_other_writer)
-        # the adding thread's later listeners wait for the store, held by the other writer
-        adder = threading.Thread(target=kb.add, args=("p(1)^1",))
-        adder.start()
-        try:
+        with another_writer_after_the_commit_of(kb, "p(1)^1") as thread:
             assert answers_of(sub, 1) == [1]
             assert thread.is_alive()          # delivered while the other transaction is open
-        finally:
-            release.set()
-            adder.join()
-            thread.join()
         kb.add("p(2)^2")
         assert answers_of(sub, 1) == [2]
         sub.close()
@@ -151,30 +160,9 @@ def test_a_subscription_to_a_type_without_events_does_not_hold_up_the_others(db_
         sub = kb.subscribe("p(X)^T", since=0)
         kb.add("p(0)^0")
         assert answers_of(sub, 1) == [0]
-        holding, release = threading.Event(), threading.Event()
-
-        def other_writer():
-            with kb.store.transaction():
-                holding.set()
-                release.wait(DEADLINE)
-
-        thread = threading.Thread(target=other_writer)
-
-        def start_the_other_writer(stored):
-            if not thread.is_alive() and not release.is_set():
-                thread.start()
-                assert holding.wait(DEADLINE)
-
-        kb.add_listeners.insert(0, start_the_other_writer)
-        adder = threading.Thread(target=kb.add, args=("p(1)^1",))
-        adder.start()
-        try:
+        with another_writer_after_the_commit_of(kb, "p(1)^1") as thread:
             assert answers_of(sub, 1) == [1]
             assert thread.is_alive()
-        finally:
-            release.set()
-            adder.join()
-            thread.join()
         kb.add("nothing(a)^2")               # the type appears: delivered as usual
         assert nothing.get(timeout=DEADLINE)["X"] == "a"
         sub.close()
