@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager, nullcontext
 from typing import Any
 
 from ..encoding import encode
@@ -215,7 +217,7 @@ class Fleet:
         robot = check_robot_name(robot)
         if not rows:
             return 0
-        with self.db.transaction():
+        with self._transaction():
             conn = self.db.conn
             row = conn.execute("SELECT position FROM slr_fleet_positions WHERE robot = ? AND "
                                "type_name = ? AND type_arity = ?", (robot, name, arity)).fetchone()
@@ -223,44 +225,73 @@ class Fleet:
             fresh = [r for r in rows if r[0] > position]
             if not fresh:
                 return 0
-            conn.execute(_ADD_ROBOT, (robot,))
-            for other in {r[-1] for r in fresh if r[-1] is not None and r[-1] != robot}:
-                conn.execute(_ADD_ROBOT, (other,))
+            others = {r[-1] for r in fresh if r[-1] is not None and r[-1] != robot}
+            dialect = self.db.dialect
+            server = dialect.to_column is not None
             if store_events is not None:
+                for who in (robot, *others):
+                    conn.execute(_ADD_ROBOT, (who,))
                 self._store_decoded(robot, name, arity, fresh, store_events)
             else:
-                # as an add: the fleet store's clock is the rows' arrival (and its "now")
+                # as an add: the fleet store's clock is the rows' arrival (and its "now"),
+                # recorded as an add records it (on a server only for the tBuffers' triggers)
                 arrival = float(self.db.clock.now())
-                self.writer.record_now(arrival)
+                if not server:
+                    self.writer.record_now(arrival)
+                elif self.db.tbuffers_active is not False:
+                    self.writer._record_now_for_tbuffers(arrival)
                 try:
                     event_type = self.writer.type_for_new_event(name, arity)
                 except BadEvent as exc:
                     raise SLRError(f"the fleet store refused {name}/{arity} of robot "
                                    f"{robot!r}: {exc}") from None
                 end = 1 + arity + 2
-                dialect = self.db.dialect
-                if dialect.name != "sqlite" and arity:  # rows come as SQLite stores them
+                if server and arity:  # rows come as SQLite stores them
                     to_column: Any = dialect.to_column
                     values = [(*map(to_column, r[1:1 + arity]), *r[1 + arity:end]) for r in fresh]
                 else:
                     values = [r[1:end] for r in fresh]
-                conn.executemany(event_type.insert_sql, [
-                    v + (arrival, r[-1] if r[-1] is not None else robot)
-                    for v, r in zip(values, fresh)])
+                values = [v + (arrival, r[-1] if r[-1] is not None else robot)
+                          for v, r in zip(values, fresh)]
+                if server:
+                    # arguments are text, the times numbers: many rows go in binary form
+                    conn.executemany(event_type.insert_sql, values,
+                                     ("text",) * arity + ("float8",) * 3 + ("text",))
+                else:
+                    conn.executemany(event_type.insert_sql, values)
             # the arrival column sits after the arguments and the two times
             latest = max((r[3 + arity] for r in fresh if r[3 + arity] is not None),
                          default=None)
-            conn.execute("INSERT INTO slr_fleet_robots (robot, shipped, last_arrival) "
-                         "VALUES (?, ?, ?) ON CONFLICT (robot) DO UPDATE SET shipped = "
-                         "slr_fleet_robots.shipped + excluded.shipped, last_arrival = CASE "
-                         "WHEN slr_fleet_robots.last_arrival IS NULL OR excluded.last_arrival "
-                         "> slr_fleet_robots.last_arrival THEN excluded.last_arrival ELSE "
-                         "slr_fleet_robots.last_arrival END", (robot, len(fresh), latest))
-            conn.execute("INSERT INTO slr_fleet_positions (robot, type_name, type_arity, "
-                         "position) VALUES (?, ?, ?, ?) ON CONFLICT (robot, type_name, "
-                         "type_arity) DO UPDATE SET position = excluded.position",
-                         (robot, name, arity, fresh[-1][0]))
+            # statements nobody reads an answer of: on a server, sent together (one round
+            # trip, not one each)
+            with conn.pipeline(0) if server else nullcontext():
+                if store_events is None:
+                    for who in (robot, *others):
+                        conn.execute(_ADD_ROBOT, (who,))
+                conn.execute("INSERT INTO slr_fleet_robots (robot, shipped, last_arrival) "
+                             "VALUES (?, ?, ?) ON CONFLICT (robot) DO UPDATE SET shipped = "
+                             "slr_fleet_robots.shipped + excluded.shipped, last_arrival = "
+                             "CASE WHEN slr_fleet_robots.last_arrival IS NULL OR "
+                             "excluded.last_arrival > slr_fleet_robots.last_arrival THEN "
+                             "excluded.last_arrival ELSE slr_fleet_robots.last_arrival END",
+                             (robot, len(fresh), latest))
+                conn.execute("INSERT INTO slr_fleet_positions (robot, type_name, type_arity, "
+                             "position) VALUES (?, ?, ?, ?) ON CONFLICT (robot, type_name, "
+                             "type_arity) DO UPDATE SET position = excluded.position",
+                             (robot, name, arity, fresh[-1][0]))
             return len(fresh)
+
+    @contextmanager
+    def _transaction(self) -> Iterator[None]:
+        """The caller's transaction when one is open (a failure here fails it as a whole),
+        else one of its own: a savepoint would cost a server two round trips per batch and
+        undo nothing that the caller's rollback does not."""
+        with self.db.lock:
+            if self.db.tx_depth:   # (this thread's: a transaction holds the lock throughout)
+                yield
+                return
+            with self.db.transaction():
+                yield
 
     def _store_decoded(self, robot: str, name: str, arity: int, rows: list[tuple],
                        store_events: Any) -> None:

@@ -24,7 +24,7 @@ import threading
 import time
 import weakref
 import zlib
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager, suppress
 from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
@@ -316,7 +316,12 @@ class PgConnection:
         self.last_rowcount = cursor.rowcount
         return PgCursor(cursor, self)
 
-    def executemany(self, sql: str, rows: Iterable[Iterable[Any]]) -> PgCursor:
+    def executemany(self, sql: str, rows: Iterable[Iterable[Any]],
+                    column_types: Sequence[str] | None = None) -> PgCursor:
+        """Run ``sql`` for each of ``rows``. Many rows of a plain INSERT go in by one COPY:
+        in binary form when ``column_types`` names the PostgreSQL type of each column
+        (numbers go as their bytes instead of being printed here and parsed by the
+        server), else as text."""
         rows = [r if type(r) is tuple else tuple(r) for r in rows]
         plain = _PLAIN_INSERT.match(sql)
         if plain is not None and rows and len(rows) <= _COPY_FROM:
@@ -328,8 +333,13 @@ class PgConnection:
         if plain is not None and len(rows) > _COPY_FROM:
             self.send_begin()   # (COPY does not go in a pipeline)
             # many rows into one table: COPY (one stream) rather than one INSERT per row
+            binary = " (FORMAT BINARY)" if column_types is not None else ""
+
             def copy() -> None:
-                with cursor.copy(f"COPY {plain.group(1)} ({plain.group(2)}) FROM STDIN") as out:
+                with cursor.copy(f"COPY {plain.group(1)} ({plain.group(2)}) FROM STDIN"
+                                 f"{binary}") as out:
+                    if column_types is not None:
+                        out.set_types(list(column_types))
                     for row in rows:
                         out.write_row(row)
             self._guard(copy)
