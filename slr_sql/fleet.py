@@ -44,6 +44,8 @@ class FleetTarget(Protocol):
 
     def positions(self, robot: str) -> dict[tuple[str, int], int]: ...
 
+    def prepare(self, batch: tuple) -> tuple: ...
+
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
                 head_arrival: float | None) -> int: ...
 
@@ -60,6 +62,12 @@ class _LocalTarget:
     def positions(self, robot: str) -> dict[tuple[str, int], int]:
         from .shipping import positions
         return positions(self.kb, robot)
+
+    def prepare(self, batch: tuple) -> tuple:
+        """``batch`` with its rows' values as the fleet store's columns hold them (no
+        connection needed: called in the pusher's reading thread)."""
+        from .shipping import prepare
+        return prepare(self.kb, batch)
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
                 head_arrival: float | None) -> int:
@@ -80,6 +88,9 @@ class _RemoteTarget:
 
     def positions(self, robot: str) -> dict[tuple[str, int], int]:
         return self.client.fleet_positions(robot)
+
+    def prepare(self, batch: tuple) -> tuple:
+        return batch
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
                 head_arrival: float | None) -> int:
@@ -212,7 +223,7 @@ class _Pusher:
 
         def record(batch: tuple, stored: int) -> None:
             nonlocal shipped
-            name, arity, rows = batch
+            name, arity, rows = batch[:3]
             positions[(name, arity)] = rows[-1][0]
             shipped += stored
             self.report.shipped += stored
@@ -241,7 +252,9 @@ class _Pusher:
                         if sender is None:
                             sender = _Sender(target, self.robot, record)
                         sender.put(held)
-                    held = (name, arity, rows)
+                    # the batch's own work that needs no connection, done here while the
+                    # sender waits on the fleet for the batch before
+                    held = target.prepare((name, arity, rows))
                     position = rows[-1][0]
                     if len(rows) < self.batch:
                         break

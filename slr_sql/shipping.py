@@ -19,7 +19,7 @@ from typing import Any
 from .errors import SLRError
 from .host import Host
 
-__all__ = ["FLEET_MARK", "positions", "receive"]
+__all__ = ["FLEET_MARK", "positions", "prepare", "receive"]
 
 FLEET_MARK = "fleet/mark/"   # slr_meta prefix: fleet/mark/<robot>/<name>/<arity or *>
 
@@ -39,8 +39,8 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             check: bool = True) -> int:
     """Store one shipment of ``robot`` in the fleet store ``kb``; returns the number of rows
     stored (rows already held are skipped). ``batches``: ``[(name, arity, rows)]`` with rows
-    as :meth:`slr_sql.store.EventStore.fleet_read_after` gives them; ``marks``: ``{"p/1":
-    t}`` (the robot's completeness marks, ``p/*`` for every arity); ``pending``,
+    as :meth:`slr_sql.store.EventStore.fleet_read_after` gives them (or as :func:`prepare`
+    gives a batch); ``marks``: ``{"p/1": t}`` (the robot's completeness marks, ``p/*`` for every arity); ``pending``,
     ``head_arrival``: what the robot still holds unshipped (for ``slr fleet status``).
     ``check=False`` skips checking the shipment's shape (rows this process read from a store).
 
@@ -69,10 +69,12 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             return errors
     stored = 0
     with store.transaction():
-        for name, arity, rows in batches:
+        for batch in batches:
+            name, arity, rows = batch[:3]
             if rows and type(rows[0]) is not tuple:
                 rows = [tuple(r) for r in rows]
-            stored += store.fleet_receive(robot, name, arity, rows, store_events)
+            columns = batch[3] if len(batch) > 3 else None   # (from prepare)
+            stored += store.fleet_receive(robot, name, arity, rows, store_events, columns)
         if marks:
             robots = store.robots()
             for mk, t in marks.items():
@@ -83,6 +85,20 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
         if pending is not None:
             store.fleet_record_contact(robot, int(pending), head_arrival)
     return stored
+
+
+def prepare(kb: Host, batch: tuple) -> tuple:
+    """``batch`` (``(name, arity, rows)``) with the rows' values in the columns' form of the
+    fleet store ``kb`` as a fourth part, for :func:`receive`: the work of a batch that
+    needs no connection, done by a pusher in its reading thread while the batch before
+    is stored.
+
+    >>> import slr_sql
+    >>> prepare(slr_sql.open(), ("seen", 1, [(1, "pallet7", 10.0, 10.0, 3.0, "r1")]))[3]
+    [('pallet7', 10.0, 10.0)]
+    """
+    name, arity, rows = batch
+    return name, arity, rows, kb.store.fleet_column_values(arity, rows)
 
 
 def _check_shipment(batches: Any, marks: Any) -> None:

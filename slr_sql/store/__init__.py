@@ -302,10 +302,14 @@ class EventStore:
     def fleet_positions(self, robot: str) -> dict[tuple[str, int], int]:
         return self._fleet.positions(robot)
 
+    @_doc(Fleet.column_values)
+    def fleet_column_values(self, arity: int, rows: list[tuple]) -> list[tuple]:
+        return self._fleet.column_values(arity, rows)
+
     @_doc(Fleet.receive)
     def fleet_receive(self, robot: str, name: str, arity: int, rows: list[tuple],
-                      store_events: Any = None) -> int:
-        return self._fleet.receive(robot, name, arity, rows, store_events)
+                      store_events: Any = None, columns: list[tuple] | None = None) -> int:
+        return self._fleet.receive(robot, name, arity, rows, store_events, columns)
 
     @_doc(Fleet.record_contact)
     def fleet_record_contact(self, robot: str, pending: int, head_arrival: float | None) -> None:

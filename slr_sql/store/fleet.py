@@ -205,15 +205,32 @@ class Fleet:
                 "SELECT type_name, type_arity, position FROM slr_fleet_positions "
                 "WHERE robot = ?", (robot,))}
 
+    def column_values(self, arity: int, rows: list[tuple]) -> list[tuple]:
+        """Per row of a shipped batch of an arity-``arity`` type (as :meth:`read_after`
+        gives them), its arguments as this store's columns hold them, its start and its
+        end: the part of :meth:`receive`'s work that needs no connection, which a pusher
+        does in the thread that reads its next batch while the one before is stored.
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).fleet_column_values(1, [(7, "pallet7", 1.0, 2.0, 3.0, "r1")])
+        [('pallet7', 1.0, 2.0)]
+        """
+        end = 1 + arity + 2
+        to_column: Any = self.db.dialect.to_column
+        if to_column is not None and arity:   # rows come as SQLite stores them
+            return [(*map(to_column, r[1:1 + arity]), *r[1 + arity:end]) for r in rows]
+        return [r[1:end] for r in rows]
+
     def receive(self, robot: str, name: str, arity: int, rows: list[tuple],
-                store_events: Any = None) -> int:
+                store_events: Any = None, columns: list[tuple] | None = None) -> int:
         """Store a shipped batch of ``robot`` (rows as :meth:`read_after` gives them, one
         type, in sequence order) exactly once: the rows after the robot's position for the
         type go in and the position moves to the last row's sequence, in one transaction
         (which the caller may have opened). ``store_events(events)``, when given, stores
         decoded ``(name, args, start, end)`` events instead of the raw rows (the path that
         runs the fleet's event rules); the rows keep the robot they were stored with
-        (``robot`` when NULL). Returns the number of rows stored."""
+        (``robot`` when NULL). ``columns``: the rows' :meth:`column_values`, when the
+        caller has them already. Returns the number of rows stored."""
         robot = check_robot_name(robot)
         if not rows:
             return 0
@@ -222,7 +239,8 @@ class Fleet:
             row = conn.execute("SELECT position FROM slr_fleet_positions WHERE robot = ? AND "
                                "type_name = ? AND type_arity = ?", (robot, name, arity)).fetchone()
             position = row[0] if row is not None else 0
-            fresh = [r for r in rows if r[0] > position]
+            # (sequences ascend: what the fleet holds already is a head of the batch)
+            fresh = rows if rows[0][0] > position else [r for r in rows if r[0] > position]
             if not fresh:
                 return 0
             others = {r[-1] for r in fresh if r[-1] is not None and r[-1] != robot}
@@ -245,12 +263,10 @@ class Fleet:
                 except BadEvent as exc:
                     raise SLRError(f"the fleet store refused {name}/{arity} of robot "
                                    f"{robot!r}: {exc}") from None
-                end = 1 + arity + 2
-                if server and arity:  # rows come as SQLite stores them
-                    to_column: Any = dialect.to_column
-                    values = [(*map(to_column, r[1:1 + arity]), *r[1 + arity:end]) for r in fresh]
+                if columns is None or len(columns) != len(rows):
+                    values = self.column_values(arity, fresh)
                 else:
-                    values = [r[1:end] for r in fresh]
+                    values = columns[len(rows) - len(fresh):]
                 values = [v + (arrival, r[-1] if r[-1] is not None else robot)
                           for v, r in zip(values, fresh)]
                 if server:
