@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager, nullcontext
+from contextlib import contextmanager
 from typing import Any
 
 from ..encoding import encode
@@ -278,23 +278,22 @@ class Fleet:
             # the arrival column sits after the arguments and the two times
             latest = max((r[3 + arity] for r in fresh if r[3 + arity] is not None),
                          default=None)
-            # statements nobody reads an answer of: on a server, sent together (one round
-            # trip, not one each)
-            with conn.pipeline(0) if server else nullcontext():
-                if store_events is None:
-                    for who in (robot, *others):
-                        conn.execute(_ADD_ROBOT, (who,))
-                conn.execute("INSERT INTO slr_fleet_robots (robot, shipped, last_arrival) "
-                             "VALUES (?, ?, ?) ON CONFLICT (robot) DO UPDATE SET shipped = "
-                             "slr_fleet_robots.shipped + excluded.shipped, last_arrival = "
-                             "CASE WHEN slr_fleet_robots.last_arrival IS NULL OR "
-                             "excluded.last_arrival > slr_fleet_robots.last_arrival THEN "
-                             "excluded.last_arrival ELSE slr_fleet_robots.last_arrival END",
-                             (robot, len(fresh), latest))
-                conn.execute("INSERT INTO slr_fleet_positions (robot, type_name, type_arity, "
-                             "position) VALUES (?, ?, ?, ?) ON CONFLICT (robot, type_name, "
-                             "type_arity) DO UPDATE SET position = excluded.position",
-                             (robot, name, arity, fresh[-1][0]))
+            # statements nobody reads an answer of: on a server they go with the
+            # transaction's next statement or its COMMIT (one round trip, not one each)
+            unanswered = conn.execute_unanswered if server else conn.execute
+            if store_events is None:
+                for who in (robot, *others):
+                    unanswered(_ADD_ROBOT, (who,))
+            unanswered("INSERT INTO slr_fleet_robots (robot, shipped, last_arrival) VALUES "
+                       "(?, ?, ?) ON CONFLICT (robot) DO UPDATE SET shipped = "
+                       "slr_fleet_robots.shipped + excluded.shipped, last_arrival = CASE WHEN "
+                       "slr_fleet_robots.last_arrival IS NULL OR excluded.last_arrival > "
+                       "slr_fleet_robots.last_arrival THEN excluded.last_arrival ELSE "
+                       "slr_fleet_robots.last_arrival END", (robot, len(fresh), latest))
+            unanswered("INSERT INTO slr_fleet_positions (robot, type_name, type_arity, "
+                       "position) VALUES (?, ?, ?, ?) ON CONFLICT (robot, type_name, "
+                       "type_arity) DO UPDATE SET position = excluded.position",
+                       (robot, name, arity, fresh[-1][0]))
             return len(fresh)
 
     @contextmanager

@@ -217,20 +217,34 @@ class PgConnection:
         # one statement, which commits on its own: one round trip instead of three.
         self.deferred: dict[tuple[str, str], list[tuple]] = {}
         self.deferred_params = 0
+        # statements of an open transaction whose answers nobody reads, in order, not sent
+        # yet (execute_unanswered): they go with the next statement that is answered or
+        # ends the transaction, in one pipeline
+        self.unanswered: list[tuple[str, Any]] = []
 
     def begin(self) -> None:
         """Open a transaction with the next statement."""
         self.begin_pending = True
 
     def send_begin(self) -> None:
-        """Send a pending BEGIN now (before a statement that cannot go with it), with the
-        inserts deferred until then."""
+        """Send a pending BEGIN and the unanswered statements now (before a statement that
+        cannot go with them), with the inserts deferred until then."""
         if self.deferred:
             self.flush()
-        if self.begin_pending:
+        if self.begin_pending or self.unanswered:
             self._alive()
-            self.begin_pending = False
-            self._guard(lambda: self.raw.execute("BEGIN"))
+            self._guard(self._with_begin(lambda: None))
+
+    def execute_unanswered(self, sql: str, params: Any = ()) -> None:
+        """Run ``sql``, whose answer nobody reads (an upsert, a row count moved), in the
+        open transaction: it is sent with the transaction's next statement that is
+        answered, or its COMMIT, in one round trip (its failure is that statement's, and
+        fails the transaction as a whole). Outside a transaction, or before its BEGIN went,
+        it runs at once."""
+        if self.begin_pending or not self.in_transaction():
+            self.execute(sql, params)
+            return
+        self.unanswered.append((POSTGRES.statement(sql), tuple(params) if params else None))
 
     def flush(self) -> None:
         """Send the deferred inserts (after the pending BEGIN, in the same round trip):
@@ -263,15 +277,20 @@ class PgConnection:
         return f"WITH {ctes} {parts[-1]}", params
 
     def _with_begin(self, call: Callable[[], Any]) -> Callable[[], Any]:
-        """``call`` preceded by the pending BEGIN in one pipeline (one round trip)."""
-        if not self.begin_pending:
+        """``call`` preceded by the pending BEGIN and the unanswered statements in one
+        pipeline (one round trip)."""
+        if not self.begin_pending and not self.unanswered:
             return call
-        self.begin_pending = False
+        begin, self.begin_pending = self.begin_pending, False
+        unanswered, self.unanswered = self.unanswered, []
         raw = self.raw
 
         def both() -> Any:
             with raw.pipeline():
-                raw.execute("BEGIN")
+                if begin:
+                    raw.execute("BEGIN")
+                for text, args in unanswered:
+                    raw.execute(text, args)
                 return call()
         return both
 
@@ -392,6 +411,9 @@ class PgConnection:
                 if self.begin_pending:
                     self.begin_pending = False
                     self.raw.execute("BEGIN")
+                unanswered, self.unanswered = self.unanswered, []
+                for text, args in unanswered:
+                    self.raw.execute(text, args)
                 yield
         except psycopg.Error as exc:
             raise _error(exc, self.where, self.busy_timeout, _connected(self.raw)) from None
@@ -416,6 +438,7 @@ class PgConnection:
         rolled back by the server)."""
         self.deferred = {}
         self.deferred_params = 0
+        self.unanswered = []
         if self.begin_pending:
             self.begin_pending = False
             return
