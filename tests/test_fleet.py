@@ -749,6 +749,90 @@ def test_rows_shipped_into_postgresql_are_stored_as_its_own_adds_store_them(
         assert kb.query("odd(V, I)^T") == own_kb.query("odd(V, I)^T")
 
 
+@pytest.mark.parametrize("engine", ["sqlite", "postgres"])
+def test_a_shipment_refused_in_its_second_batch_stores_nothing_of_the_first(
+        tmp_path, engine, request):
+    """One shipment is one transaction of the fleet store: a batch refused after another
+    (a type the fleet declares with another arity) leaves neither batch's rows, count or
+    position behind, and the same shipment without the refused batch goes in after."""
+    from slr_sql import shipping
+    if engine == "postgres":
+        where = with_schema(request.getfixturevalue("postgres_url"), "refused_second")
+    else:
+        where = str(tmp_path / "fleet.db")
+    arm = [(i, "up" if i % 2 else "down", float(i), float(i), 0.5, "r1") for i in range(1, 101)]
+    seen = [(1, "pallet7", "dock", 1.0, 1.0, 0.5, "r1")]
+    with opened(where) as kb:
+        kb.load(":- event seen/3.")
+        with pytest.raises(slr_sql.SLRError, match="seen/3 is declared"):
+            shipping.receive(kb, "r1", [("arm", 1, arm), ("seen", 2, seen)], {"arm/1": 100.0},
+                             0, 0.5)
+        assert kb.query("arm(A)^T") == []
+        assert kb.store.fleet_positions("r1") == {}
+        assert kb.store.fleet_contacts() == []
+        assert kb.store.meta_get("fleet/mark/r1/arm/1") is None
+        assert shipping.receive(kb, "r1", [("arm", 1, arm)], {"arm/1": 100.0}, 0, 0.5) == 100
+        assert len(kb.query("arm(A)^T")) == 100
+        assert kb.store.fleet_positions("r1") == {("arm", 1): 100}
+
+
+def test_a_batch_of_many_rows_into_postgresql_is_stored_as_into_a_file(postgres_url, tmp_path):
+    """A batch long enough to go in by COPY (in binary form, its types named): the odd
+    values and times given as integers (as JSON may carry them through `slr serve`) are
+    stored in a PostgreSQL fleet store as in a fleet file, and answer alike."""
+    from slr_sql import shipping
+    rows = []
+    for k in range(4):
+        for i, value in enumerate(ODD_VALUES):
+            seq = k * len(ODD_VALUES) + i + 1
+            start = seq if k % 2 else float(seq)          # integers and floats
+            rows.append([seq, *_stored(value), f"r{k % 2}", start, start, seq / 2,
+                         None if k == 3 else "r1"])
+    assert len(rows) > 64
+    url = with_schema(postgres_url, "many_rows")
+    with opened(url) as pg, opened(tmp_path / "fleet.db") as lite:
+        for kb in (pg, lite):
+            assert shipping.receive(kb, "r1", [["odd", 2, [list(r) for r in rows]]]) == len(rows)
+        goal = "origin(R, odd(V, W)^[S, E])"
+        answers = lite.query(goal)
+        assert len(answers) == len(rows)
+        assert pg.query(goal) == answers
+        assert pg.store.fleet_positions("r1") == lite.store.fleet_positions("r1") == {
+            ("odd", 2): len(rows)}
+
+
+def _stored(value) -> tuple:
+    """``value`` as a robot store's column holds it (what a shipped row carries)."""
+    from slr_sql.encoding import encode
+    from slr_sql.terms import Atom, Struct
+    if isinstance(value, list):
+        return (encode(Struct(".", (Atom(value[0]), value[1]))),)
+    return (encode(Atom(value) if isinstance(value, str) else value),)
+
+
+@pytest.mark.parametrize("engine", ["sqlite", "postgres"])
+def test_a_tbuffer_of_the_fleet_store_keeps_shipped_events_by_the_fleets_clock(
+        tmp_path, engine, request):
+    """A fleet store with a tBuffer: shipped events whose end lies before the fleet's now
+    less the buffer's span are pruned as they arrive, on both backends (the fleet's clock
+    is recorded for the buffer's triggers as an add records it)."""
+    if engine == "postgres":
+        where = with_schema(request.getfixturevalue("postgres_url"), "tbuffer_fleet")
+    else:
+        where = str(tmp_path / "fleet.db")
+    now = time.time()    # the fleet's clock is the wall clock: events far from it either way
+    old, recent = now - 1_000_000.0, now + 1_000_000.0
+    with opened(tmp_path / "r1.db", robot="r1") as kb:
+        kb.add_many([("seen", (f"pallet{i}", "dock"), t, t)
+                     for i, t in enumerate([old, recent] * 40)])
+    with opened(where) as kb:
+        kb.load("tBuffer(seen(_, _), 100).")
+    assert fleet.push(str(tmp_path / "r1.db"), where, batch=50).shipped == 80
+    with opened(where) as kb:
+        kept = kb.query("seen(P, _)^T")
+    assert [a["T"] for a in kept] == [recent] * 40
+
+
 def test_a_postgresql_restart_mid_stream(postgres_server, postgres_url, tmp_path):
     """PostgreSQL stops at once (``pg_ctl -m immediate``: open transactions are lost) and
     starts again while a robot writes and its pusher follows: the pusher says so once,

@@ -127,3 +127,53 @@ def test_subscriptions_of_two_types_see_one_statements_rows(postgres_url):
             assert got == [f"k{i}" for i in range(first, 10, 2)]
         with pytest.raises(SLRError):   # (SLRTimeout: nothing more, nothing twice)
             subs["a"].get(timeout=0.3)
+
+
+def test_a_shipped_batch_into_postgresql_is_five_round_trips(postgres_url):
+    """A batch of many rows shipped into a PostgreSQL fleet store waits for the server five
+    times, whatever its size: the change check, the BEGIN with the robot's position, the
+    COPY (its start is answered before the rows go), its end, and the COMMIT that carries
+    the robot's count and position. The rows, the count and the position are stored."""
+    from slr_sql import shipping
+    rows = [(i, f"pallet{i}", "dock", float(i), float(i), 0.5, "r1") for i in range(1, 201)]
+    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
+        shipping.receive(kb, "r1", [("seen", 2, rows[:100])])   # (the table exists)
+        messages = _traced(kb, lambda: shipping.receive(kb, "r1", [("seen", 2, rows[100:])]))
+        waits = [m for m in messages
+                 if m[0] == "B" and m[1] in ("ReadyForQuery", "CopyInResponse")]
+        assert len(waits) == 5, messages
+        assert kb.store.fleet_positions("r1") == {("seen", 2): 200}
+        assert [(c["robot"], c["shipped"]) for c in kb.store.fleet_contacts()] == [("r1", 200)]
+        assert _column(postgres_url, "SELECT arg1 FROM seen ORDER BY seq") == \
+            [f"pallet{i}" for i in range(1, 201)]
+
+
+def test_a_statement_nobody_reads_goes_with_the_next_and_fails_its_transaction(
+        postgres_url):
+    """``execute_unanswered`` in an open transaction: sent with the next statement, in
+    the same wait (which sees its effect), or with the COMMIT; one the server refuses fails
+    the transaction as a whole, nothing of it stored, and the connection works after."""
+    from slr_sql.store import DatabaseError
+    insert = "INSERT INTO slr_meta (key, value) VALUES (?, ?)"
+    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
+        store, conn = kb.store, kb.store._conn
+        with store.transaction():
+            store.execute("SELECT 1")          # (the BEGIN went)
+
+            def unanswered_then_read():
+                conn.execute_unanswered(insert, ("k1", "1"))
+                assert store.execute("SELECT value FROM slr_meta WHERE key = 'k1'") == \
+                    [("1",)]
+            messages = _traced(kb, unanswered_then_read)
+            assert messages.count(("B", "ReadyForQuery")) == 1, messages
+            conn.execute_unanswered(insert, ("k2", "2"))      # goes with the COMMIT
+        assert _column(postgres_url, "SELECT key FROM slr_meta WHERE key LIKE 'k_' "
+                                     "ORDER BY key") == ["k1", "k2"]
+        with pytest.raises(DatabaseError, match="duplicate key"), store.transaction():
+            store.execute("SELECT 1")
+            conn.execute_unanswered(insert, ("k3", "3"))
+            conn.execute_unanswered(insert, ("k1", "again"))   # refused at the COMMIT
+        assert _column(postgres_url, "SELECT key FROM slr_meta WHERE key LIKE 'k_' "
+                                     "ORDER BY key") == ["k1", "k2"]
+        conn.execute_unanswered(insert, ("k4", "4"))      # no transaction: at once
+        assert _column(postgres_url, "SELECT value FROM slr_meta WHERE key = 'k4'") == ["4"]
