@@ -271,6 +271,8 @@ class Database:
         conn = self.conn
         try:
             self.guard = harden_connection(conn)
+            # the bound parameters one statement may hold (999 in SQLite before 3.32)
+            self.max_parameters = conn.getlimit(sqlite3.SQLITE_LIMIT_VARIABLE_NUMBER)
             # auto_vacuum must be chosen before the first table exists (a no-op afterwards,
             # but one that wants the write lock: only a new file gets it)
             if conn.execute("PRAGMA page_count").fetchone()[0] == 0:

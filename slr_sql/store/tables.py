@@ -33,7 +33,7 @@ class EventType:
     """What the store knows about one event type (cached per name/arity)."""
 
     __slots__ = ("name", "arity", "table", "declared", "insert_sql", "insert_unnamed_sql",
-                 "quoted", "columns",
+                 "quoted", "columns", "_insert_heads", "_multi_row_sql",
                  "index_end", "index_start", "index_arg1_end", "index_arg1_start")
 
     def __init__(self, name: str, arity: int, table: str, declared: bool):
@@ -53,10 +53,30 @@ class EventType:
         unnamed_columns = insert_columns[:-1]
         self.insert_unnamed_sql = (f"INSERT INTO {self.quoted} ({', '.join(unnamed_columns)}) "
                                    f"VALUES ({', '.join('?' * len(unnamed_columns))})")
+        self._insert_heads = {
+            True: (f"INSERT INTO {self.quoted} ({', '.join(insert_columns)}) VALUES ",
+                   f"({', '.join('?' * len(insert_columns))})"),
+            False: (f"INSERT INTO {self.quoted} ({', '.join(unnamed_columns)}) VALUES ",
+                    f"({', '.join('?' * len(unnamed_columns))})")}
+        self._multi_row_sql: dict[tuple[int, bool], str] = {}
         self.index_end = quote_identifier(f"slr_ix__{table}__end")
         self.index_start = quote_identifier(f"slr_ix__{table}__start")
         self.index_arg1_end = quote_identifier(f"slr_ix__{table}__a1_end")
         self.index_arg1_start = quote_identifier(f"slr_ix__{table}__a1_start")
+
+    def insert_rows_sql(self, rows: int, with_robot: bool) -> str:
+        """One INSERT of ``rows`` rows (multi-row VALUES), with the robot column bound or
+        left to its NULL; the texts are kept, as the connection keeps their statements.
+
+        >>> EventType("p", 1, "p", False).insert_rows_sql(2, False)
+        'INSERT INTO "p" (arg1, t_start, t_end, arrival) VALUES (?, ?, ?, ?),(?, ?, ?, ?)'
+        """
+        key = (rows, with_robot)
+        sql = self._multi_row_sql.get(key)
+        if sql is None:
+            head, row = self._insert_heads[with_robot]
+            sql = self._multi_row_sql[key] = head + ",".join([row] * rows)
+        return sql
 
 
 # the longest table name whose derived names (indexes, journals, the event rules' indexes)
