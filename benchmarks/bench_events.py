@@ -28,7 +28,7 @@
   ``synchronous`` and the store's page cache, one transaction per commit of ours that stored
   event rows (the once-only ``slr_meta`` commit has none), the parameters prepared before the
   timing. Both raw forms are run (``executemany``, and multi-row ``INSERT ... VALUES`` in
-  chunks of 500 rows), three times each; the faster form's median CPU time is the floor. The
+  chunks of 500 rows), five times each; the faster form's median CPU time is the floor. The
   first figure leaves the rules' provenance tables out, the second (``+ prov.``) stores
   their rows too. ``1.5x budget the floor takes`` = 1.5 x ETALIS's rate / the floor's: the
   share of the CPU time per event the 1.5x target allows that the durable work alone uses.
@@ -502,7 +502,7 @@ def floor_cpu(run: StoredRun, form: str, with_provenance: bool, synchronous: str
 
 
 def durable_floor(run: StoredRun, with_provenance: bool, synchronous: str,
-                  repeats: int = 3) -> tuple[float, str]:
+                  repeats: int = 5) -> tuple[float, str]:
     """The floor's rate (input events per CPU second) and the raw form that reached it:
     each form ``repeats`` times, the median of each, the faster form's."""
     medians = {form: statistics.median(floor_cpu(run, form, with_provenance, synchronous)
