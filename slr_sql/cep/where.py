@@ -27,6 +27,7 @@ from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
 from ..unify import resolve
 from ..host import Host
 from ..plans import instantiate
+from ..robotlib import pos_multiply_fast
 
 __all__ = ["MustWait", "Residual", "WHERE_TIMEOUT"]
 
@@ -276,8 +277,6 @@ class Residual:
 
 
 def _plain_pos_multiply(items: list) -> Any:
-    from ..robotlib import pos_multiply_fast
-
     return pos_multiply_fast(items[0], items[1:]) if items else None
 
 
