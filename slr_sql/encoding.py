@@ -858,7 +858,13 @@ def decode_answer(value: Any) -> Any:
 
 
 def _decode_top_json(text: str) -> Any:
-    data = json.loads(text)
+    # orjson reads it ~4x faster; what it refuses (a lone surrogate escaped, a nesting past
+    # its limit) json reads. A bare integer in stored text fits 64 bits (the encoder writes
+    # larger ones as {"$int": ...}), so orjson never turns one into a float here.
+    try:
+        data = orjson.loads(text)
+    except orjson.JSONDecodeError:
+        data = json.loads(text)
     if type(data) is str:  # a top-level JSON string is an SLR string
         return String(data)
     return term_from_json(data)
