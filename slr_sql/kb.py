@@ -40,18 +40,23 @@ __all__ = ["KnowledgeBase", "open", "Declarations", "BufferDecl", "ProgramInfo",
 
 
 _TUPLE = frozenset({tuple})
+_ARGS = frozenset({tuple, list})
 _FOUR = {4}
 _first, _second, _fourth = itemgetter(0), itemgetter(1), itemgetter(3)
 
 
-def _all_event_tuples(events: list) -> bool:
-    """True if every item is a ``(name, args, start, end)`` tuple whose ``args`` is a tuple
-    (checked a column at a time, at C speed): such a batch needs no preparing."""
+def _event_tuples(events: list) -> str | None:
+    """"tuples" if every item is a ``(name, args, start, end)`` tuple whose ``args`` is a
+    tuple: such a batch needs no preparing; "lists" if some ``args`` are lists instead (what
+    decoded messages and most robot code give): they need only to become tuples; None
+    otherwise (checked a column at a time, at C speed)."""
     try:
-        return (_TUPLE.issuperset(map(type, events)) and set(map(len, events)) == _FOUR
-                and _TUPLE.issuperset(map(type, map(_second, events))))
+        if not (_TUPLE.issuperset(map(type, events)) and set(map(len, events)) == _FOUR):
+            return None
+        kinds = set(map(type, map(_second, events)))
     except TypeError:
-        return False
+        return None
+    return "tuples" if _TUPLE.issuperset(kinds) else "lists" if _ARGS.issuperset(kinds) else None
 
 
 def _is_time_expression(t: Any) -> bool:
@@ -348,9 +353,14 @@ class KnowledgeBase:
         """
         events = events if type(events) is list else list(events)
         errors: list[EventRejected] = []
-        if _all_event_tuples(events):  # the common bulk case: handed to the store as they are
+        form = _event_tuples(events)
+        if form == "tuples":  # the common bulk case: handed to the store as they are
             # (a copy: listeners must not see the caller's list)
             prepared, positions = EventBatch(events), None
+        elif form == "lists":
+            prepared = EventBatch([(name, args if type(args) is tuple else tuple(args), start, end)
+                                   for name, args, start, end in events])
+            positions = None
         else:
             prepared, positions = self._prepare_events(events, atomic, errors)
         stored_errors = self._add(prepared, atomic=atomic)
