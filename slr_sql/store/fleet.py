@@ -251,13 +251,14 @@ class Fleet:
                     conn.execute(_ADD_ROBOT, (who,))
                 self._store_decoded(robot, name, arity, fresh, store_events)
             else:
-                # as an add: the fleet store's clock is the rows' arrival (and its "now"),
-                # recorded as an add records it (on a server only for the tBuffers' triggers)
+                # as an add: the fleet store's clock is the rows' arrival (and its "now"
+                # for the buffer triggers); on a server, as an add there, only while a
+                # tBuffer may be active (the change check of this receive just read whether
+                # one is): the clock's one row, locked until the commit, would otherwise
+                # make the pushers of every robot wait for each other
                 arrival = float(self.db.clock.now())
-                if not server:
+                if not server or self.db.tbuffers_active is not False:
                     self.writer.record_now(arrival)
-                elif self.db.tbuffers_active is not False:
-                    self.writer._record_now_for_tbuffers(arrival)
                 try:
                     event_type = self.writer.type_for_new_event(name, arity)
                 except BadEvent as exc:
