@@ -44,7 +44,7 @@ class FleetTarget(Protocol):
 
     def positions(self, robot: str) -> dict[tuple[str, int], int]: ...
 
-    def prepare(self, batch: tuple) -> tuple: ...
+    def prepare(self, robot: str, batch: tuple) -> tuple: ...
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
                 head_arrival: float | None) -> int: ...
@@ -63,11 +63,11 @@ class _LocalTarget:
         from .shipping import positions
         return positions(self.kb, robot)
 
-    def prepare(self, batch: tuple) -> tuple:
+    def prepare(self, robot: str, batch: tuple) -> tuple:
         """``batch`` with its rows' values as the fleet store's columns hold them (no
         connection needed: called in the pusher's reading thread)."""
         from .shipping import prepare
-        return prepare(self.kb, batch)
+        return prepare(self.kb, robot, batch)
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
                 head_arrival: float | None) -> int:
@@ -89,7 +89,7 @@ class _RemoteTarget:
     def positions(self, robot: str) -> dict[tuple[str, int], int]:
         return self.client.fleet_positions(robot)
 
-    def prepare(self, batch: tuple) -> tuple:
+    def prepare(self, robot: str, batch: tuple) -> tuple:
         return batch
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
@@ -254,7 +254,7 @@ class _Pusher:
                         sender.put(held)
                     # the batch's own work that needs no connection, done here while the
                     # sender waits on the fleet for the batch before
-                    held = target.prepare((name, arity, rows))
+                    held = target.prepare(self.robot, (name, arity, rows))
                     position = rows[-1][0]
                     if len(rows) < self.batch:
                         break

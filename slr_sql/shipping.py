@@ -87,18 +87,18 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
     return stored
 
 
-def prepare(kb: Host, batch: tuple) -> tuple:
-    """``batch`` (``(name, arity, rows)``) with the rows' values in the columns' form of the
-    fleet store ``kb`` as a fourth part, for :func:`receive`: the work of a batch that
-    needs no connection, done by a pusher in its reading thread while the batch before
-    is stored.
+def prepare(kb: Host, robot: str, batch: tuple) -> tuple:
+    """``batch`` (``(name, arity, rows)``) of ``robot`` with the rows' values in the
+    columns' form of the fleet store ``kb`` as a fourth part, for :func:`receive` of the
+    same robot: the work of a batch that needs no connection, done by a pusher in its
+    reading thread while the batch before is stored.
 
     >>> import slr_sql
-    >>> prepare(slr_sql.open(), ("seen", 1, [(1, "pallet7", 10.0, 10.0, 3.0, "r1")]))[3]
-    [('pallet7', 10.0, 10.0)]
+    >>> prepare(slr_sql.open(), "r1", ("seen", 1, [(1, "pallet7", 10.0, 10.0, 3.0, None)]))[3]
+    [('pallet7', 10.0, 10.0, 'r1')]
     """
     name, arity, rows = batch
-    return name, arity, rows, kb.store.fleet_column_values(arity, rows)
+    return name, arity, rows, kb.store.fleet_column_values(arity, rows, robot)
 
 
 def _check_shipment(batches: Any, marks: Any) -> None:

@@ -303,8 +303,8 @@ class EventStore:
         return self._fleet.positions(robot)
 
     @_doc(Fleet.column_values)
-    def fleet_column_values(self, arity: int, rows: list[tuple]) -> list[tuple]:
-        return self._fleet.column_values(arity, rows)
+    def fleet_column_values(self, arity: int, rows: list[tuple], robot: str) -> list[tuple]:
+        return self._fleet.column_values(arity, rows, robot)
 
     @_doc(Fleet.receive)
     def fleet_receive(self, robot: str, name: str, arity: int, rows: list[tuple],

@@ -48,8 +48,8 @@ class Backend(Protocol):
 
     def fleet_positions(self, robot: str) -> dict[tuple[str, int], int]: ...
 
-    def fleet_column_values(self, arity: int,
-                            rows: list[tuple[Any, ...]]) -> list[tuple[Any, ...]]: ...
+    def fleet_column_values(self, arity: int, rows: list[tuple[Any, ...]],
+                            robot: str) -> list[tuple[Any, ...]]: ...
 
     def fleet_receive(self, robot: str, name: str, arity: int, rows: list[tuple[Any, ...]],
                       store_events: Any = None,

@@ -205,21 +205,27 @@ class Fleet:
                 "SELECT type_name, type_arity, position FROM slr_fleet_positions "
                 "WHERE robot = ?", (robot,))}
 
-    def column_values(self, arity: int, rows: list[tuple]) -> list[tuple]:
-        """Per row of a shipped batch of an arity-``arity`` type (as :meth:`read_after`
-        gives them), its arguments as this store's columns hold them, its start and its
-        end: the part of :meth:`receive`'s work that needs no connection, which a pusher
-        does in the thread that reads its next batch while the one before is stored.
+    def column_values(self, arity: int, rows: list[tuple], robot: str) -> list[tuple]:
+        """Per row of a batch of an arity-``arity`` type that ``robot`` ships (rows as
+        :meth:`read_after` gives them): its arguments as this store's columns hold them,
+        its start, its end and its robot (``robot`` when it has none) -- the columns
+        :meth:`receive` writes but the arrival. The part of its work that needs no
+        connection, which a pusher does in the thread that reads its next batch while the
+        one before is stored.
 
         >>> from slr_sql.store import EventStore
-        >>> EventStore(None).fleet_column_values(1, [(7, "pallet7", 1.0, 2.0, 3.0, "r1")])
-        [('pallet7', 1.0, 2.0)]
+        >>> EventStore(None).fleet_column_values(1, [(7, "pallet7", 1.0, 2.0, 3.0, None)], "r1")
+        [('pallet7', 1.0, 2.0, 'r1')]
         """
-        end = 1 + arity + 2
         to_column: Any = self.db.dialect.to_column
-        if to_column is not None and arity:   # rows come as SQLite stores them
-            return [(*map(to_column, r[1:1 + arity]), *r[1 + arity:end]) for r in rows]
-        return [r[1:end] for r in rows]
+        # column by column: one map per argument instead of a tuple unpacked per row
+        columns: list[Any] = [[r[i] for r in rows] for i in range(1, 1 + arity)]
+        if to_column is not None:   # rows come as SQLite stores them
+            columns = [list(map(to_column, column)) for column in columns]
+        columns.append([r[1 + arity] for r in rows])
+        columns.append([r[2 + arity] for r in rows])
+        columns.append([r[-1] or robot for r in rows])   # (a robot's name is never empty)
+        return list(zip(*columns))
 
     def receive(self, robot: str, name: str, arity: int, rows: list[tuple],
                 store_events: Any = None, columns: list[tuple] | None = None) -> int:
@@ -265,17 +271,20 @@ class Fleet:
                     raise SLRError(f"the fleet store refused {name}/{arity} of robot "
                                    f"{robot!r}: {exc}") from None
                 if columns is None or len(columns) != len(rows):
-                    values = self.column_values(arity, fresh)
-                else:
-                    values = columns[len(rows) - len(fresh):]
-                values = [v + (arrival, r[-1] if r[-1] is not None else robot)
-                          for v, r in zip(values, fresh)]
+                    columns = self.column_values(arity, fresh, robot)
+                elif len(fresh) < len(rows):
+                    columns = columns[len(rows) - len(fresh):]
+                # (the arrival last: one tuple joined per row)
+                arrival_column = (arrival,)
+                values = [v + arrival_column for v in columns]
+                insert = _shipped_insert(event_type.quoted, arity)
                 if server:
-                    # arguments are text, the times numbers: many rows go in binary form
-                    conn.executemany(event_type.insert_sql, values,
-                                     ("text",) * arity + ("float8",) * 3 + ("text",))
+                    # arguments and robot are text, the times numbers: many rows go in
+                    # binary form
+                    conn.executemany(insert, values, ("text",) * arity + ("float8",) * 2
+                                     + ("text", "float8"))
                 else:
-                    conn.executemany(event_type.insert_sql, values)
+                    conn.executemany(insert, values)
             # the arrival column sits after the arguments and the two times
             latest = max((r[3 + arity] for r in fresh if r[3 + arity] is not None),
                          default=None)
@@ -353,6 +362,17 @@ class Fleet:
                 "FROM slr_fleet_robots ORDER BY robot")
             cols = [d[0] for d in cur.description]
             return [dict(zip(cols, r)) for r in cur.fetchall()]
+
+
+def _shipped_insert(table: str, arity: int) -> str:
+    """The INSERT of shipped rows: :meth:`Fleet.column_values` and the arrival.
+
+    >>> _shipped_insert('"seen"', 1)
+    'INSERT INTO "seen" (arg1, t_start, t_end, robot, arrival) VALUES (?, ?, ?, ?, ?)'
+    """
+    columns = [f"arg{i}" for i in range(1, arity + 1)] + ["t_start", "t_end", "robot", "arrival"]
+    return (f"INSERT INTO {table} ({', '.join(columns)}) "
+            f"VALUES ({', '.join('?' * len(columns))})")
 
 
 def _finite(value: Any) -> bool:
