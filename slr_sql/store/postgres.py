@@ -231,9 +231,13 @@ class PgConnection:
         cannot go with them), with the inserts deferred until then."""
         if self.deferred:
             self.flush()
-        if self.begin_pending or self.unanswered:
+        if self.unanswered:
             self._alive()
             self._guard(self._with_begin(lambda: None))
+        elif self.begin_pending:
+            self._alive()
+            self.begin_pending = False
+            self._guard(lambda: self.raw.execute("BEGIN"))
 
     def execute_unanswered(self, sql: str, params: Any = ()) -> None:
         """Run ``sql``, whose answer nobody reads (an upsert, a row count moved), in the
