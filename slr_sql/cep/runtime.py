@@ -40,10 +40,12 @@ from .rules import EventRule
 from .sqlgen import (AltSQL, anchor_index, complex_copy, complex_read, create_index,
                      index_name, max_id, max_seq, pending_delete, pending_insert,
                      pending_of_group, pending_of_rule, pending_row, pending_summary,
-                     pending_wait, provenance_insert, query_plan, rows_by_seq, rule_record)
+                     pending_wait, provenance_insert, query_plan, rows_by_seq, rule_record,
+                     watermarks)
 from .where import MustWait, Residual, describe_error, plain_value
 
 _first, _second = itemgetter(0), itemgetter(1)
+_end_of = itemgetter(3)   # of a derived event (name, args, start, end)
 
 __all__ = ["EventRules", "RuleRuntime", "ready_prefix"]
 
@@ -91,6 +93,19 @@ def _sqlite_key(v: Any) -> tuple:
     return (2, 0, repr(v))
 
 
+class _AddToken:
+    """What :meth:`EventRules.before_add` read for the round of an add: the greatest seq
+    of each added type (``seqs``) and of each complex type a rule reads (``derived``), the
+    greatest provenance id of each rule the add may run (``before``, by runtime), and the
+    events (described by the store as it stores them)."""
+
+    __slots__ = ("seqs", "derived", "before", "events")
+
+    def __init__(self, seqs: dict, derived: dict, before: dict):
+        self.seqs, self.derived, self.before = seqs, derived, before
+        self.events: Any = None
+
+
 class RuleRuntime:
     """One installed event rule: its SQL (per alternative), residual goals, counters and
     the summary of its pending decisions."""
@@ -118,6 +133,8 @@ class RuleRuntime:
         self.generation = -1
         self.eng = eng
         self._prov_rows: list = []   # matches found by the Python side, not yet written
+        self._before: int | None = None   # the provenance id a run's matches come after
+        self._matched = False   # this run ran a statement that may add provenance rows
         self._done: list = []        # pending rows decided, not yet deleted
 
     # ----------------------------------------------------------------- building
@@ -284,13 +301,17 @@ class RuleRuntime:
         return False
 
     # ----------------------------------------------------------------- running
-    def run(self, new_from: dict, dirty: set, now: float, decide: bool) -> list:
+    def run(self, new_from: dict, dirty: set, now: float, decide: bool,
+            ends: dict | None = None, before: int | None = None) -> list:
         """Detection for this rule in the current round; returns the complex events
-        derived, as ``(name, args, start, end)``."""
+        derived, as ``(name, args, start, end)``. ``ends``: per event type with new rows,
+        their earliest and latest end, when known (a terminator statement none of whose
+        rows can qualify is not run); ``before``: the provenance table's greatest id, when
+        the round read it already."""
         eng = self.eng
         self.ensure_built()
         store = eng.store
-        before = store.run_compiled(max_id(self.prov), {})[0][0]
+        self._before, self._matched = before, False
         changed = False
         fresh_terms = False
         params = eng.params(now)
@@ -307,6 +328,7 @@ class RuleRuntime:
             if self.policy == "unrestricted":
                 for pos in positions:
                     if alt.pure and not self.reads_store[n]:
+                        self._before_matches()
                         store.run_compiled(alt.delta_insert(pos, dirty), p2)
                         if alt.negs:
                             store.run_compiled(alt.delta_pending(pos, dirty), p2)
@@ -321,13 +343,28 @@ class RuleRuntime:
                         continue
                     # a terminator is kept even while a partner type has no table: its
                     # partners may still arrive (late) before it is decided
+                    if self.policy == "recent" and alt.runnable:
+                        # the statements of the new terminators complete now and of those
+                        # not complete yet: completeness only shrinks as the end grows, so
+                        # the new rows' earliest and latest ends tell when one of them has
+                        # no row to find (the statement is then not run)
+                        span = ends.get(alt.alt.leaves[pos].key) if ends else None
+                        some_ready = span is None or self._ready((n, "term", None),
+                                                                 span[0], now)
+                        all_ready = span is not None and self._ready((n, "term", None),
+                                                                     span[1], now)
                     if self.policy == "recent" and alt.pure and alt.runnable:
-                        store.run_compiled(alt.recent_insert(pos), p2)
-                        store.run_compiled(alt.term_pending(pos, True), p2)
+                        if some_ready:
+                            self._before_matches()
+                            store.run_compiled(alt.recent_insert(pos), p2)
+                        if not all_ready:
+                            store.run_compiled(alt.term_pending(pos, True), p2)
                     elif self.policy == "recent" and alt.runnable:
                         # independent decisions: those that can be made now, at once
                         pend = []
-                        for seq, end in store.run_compiled(alt.term_ready(pos), p2):
+                        ready = store.run_compiled(alt.term_ready(pos), p2) if some_ready \
+                            else []
+                        for seq, end in ready:
                             try:
                                 self._decide_term(n, pos, seq, end, now, p2, checked=True)
                             except MustWait as w:
@@ -335,7 +372,8 @@ class RuleRuntime:
                                                               end, w))
                         if pend:
                             self._insert_pending(pend)
-                        store.run_compiled(alt.term_pending(pos, True), p2)
+                        if not all_ready:
+                            store.run_compiled(alt.term_pending(pos, True), p2)
                     else:
                         store.run_compiled(alt.term_pending(pos, False), p2)
                         fresh_terms = True
@@ -344,10 +382,18 @@ class RuleRuntime:
             changed |= self.decide(now, everything=fresh_terms and not decide)
         self._write_prov()
         self._delete_done()
-        derived = self.flush(before, now)
+        derived = self.flush(self._before, now) if self._matched else []
         if changed or decide:
             self.refresh()
         return derived
+
+    def _before_matches(self) -> None:
+        """Before a statement that may add provenance rows: the table's greatest id (the
+        flush copies the rows after it), unless known -- a run that adds none reads,
+        copies and reads back nothing."""
+        self._matched = True
+        if self._before is None:
+            self._before = self.eng.store.run_compiled(max_id(self.prov), {})[0][0]
 
     def _candidates(self, n: int, rows: list, now: float) -> bool:
         """unrestricted with Python work: decide each candidate now or keep it pending."""
@@ -443,6 +489,7 @@ class RuleRuntime:
     def _write_prov(self) -> None:
         rows, self._prov_rows = self._prov_rows, []
         if rows:
+            self._before_matches()
             names = [f"p{i}" for i in range(len(rows[0]))]
             self.eng.store.run_compiled_many(
                 provenance_insert(self.prov, self.width, self.rule.arity),
@@ -501,10 +548,12 @@ class RuleRuntime:
                 continue
             p2 = per_alt[n]
             if kind == "term" and self.policy == "recent":
+                self._before_matches()
                 for pos in sorted(alt.alt.terminators):
                     store.run_compiled(alt.pending_recent_insert(pos), p2)
                     store.run_compiled(alt.pending_term_delete(pos), p2)
             elif kind == "match" and self.policy == "unrestricted":
+                self._before_matches()
                 store.run_compiled(alt.pending_match_insert(), p2)
                 store.run_compiled(alt.pending_match_delete(), p2)
             else:
@@ -711,7 +760,7 @@ class RuleRuntime:
         # store, whatever robots the constituent events came from)
         args = {"now": now, "before": before, "robot": store.robot}
         head_table = self.eng.table_name(self.head_key)
-        if store.triggers(head_table):
+        if store.dialect.copies_returning or store.triggers(head_table):
             # a buffer's trigger may refuse rows: the rows stored are those RETURNING gives
             rows = store.run_compiled(complex_copy(table, self.prov, arity, True), args)
             # RETURNING gives an integral REAL as an int: the times as stored (floats)
@@ -961,6 +1010,31 @@ class EventRules:
             return 0
         return self.store.run_compiled(max_seq(table), {})[0][0]
 
+    def _watermarks(self, keys: set) -> _AddToken:
+        """Where the new rows of an add of the types ``keys`` will start, and of the complex
+        types the rules read, and the provenance id after which the matches of each rule
+        the add may run will come: one statement (one round trip to a server) instead of
+        one per type and per rule."""
+        derived = [key for key in self.types & self.leaf_types if key not in keys]
+        types = [key for key in list(keys) + derived if self.table(key) is not None]
+        reach = set(keys)
+        runs = []
+        tables = set()
+        for rt in self.rules:   # (in dependency order: a head feeds the rules after it)
+            if any(k in reach for k in rt.rule.input_types()):
+                reach.add(rt.head_key)
+                if rt.prov not in tables:   # (a rule given twice reads its own, later)
+                    tables.add(rt.prov)
+                    runs.append(rt)
+        values = self.store.run_compiled(
+            watermarks([self.table(key) for key in types], [rt.prov for rt in runs]),
+            {})[0] if types or runs else ()
+        seqs = dict.fromkeys(keys, 0)
+        seqs.update(zip(types, values))
+        return _AddToken({key: seqs[key] for key in keys},
+                         {key: seqs[key] for key in derived},
+                         dict(zip(runs, values[len(types):])))
+
     def before_add(self, events: list) -> Any:
         """Inside the add's transaction, before the events are stored: where each type's
         new rows will start."""
@@ -981,7 +1055,9 @@ class EventRules:
         if not keys:
             return None
         self.store.lock_for_write(keys)   # before the watermarks: see set_write_groups
-        return {key: self._max_seq(key) for key in keys}
+        token = self._watermarks(keys)
+        token.events = events
+        return token
 
     def store_events(self, events: list, atomic: bool) -> list:
         """``store.add_events``, with the events grouped by type first when types alternate
@@ -1042,13 +1118,19 @@ class EventRules:
         the complex events derived."""
         if not token:
             return []
-        return self._round(dict(token), set(token), False)
+        # the stored events' earliest and latest ends per type (store_events describes the
+        # batch it stored; a plain list is not described)
+        ends = getattr(token.events, "ends", None)
+        return self._round(dict(token.seqs), set(token.seqs), False,
+                           dict(ends) if ends is not None else None, token)
 
-    def _round(self, new_from: dict, dirty: set, decide: bool) -> list:
+    def _round(self, new_from: dict, dirty: set, decide: bool, ends: dict | None = None,
+               token: _AddToken | None = None) -> list:
         now = float(self.clock.now())
         for key in self.types & self.leaf_types:
             if key not in new_from:
-                new_from[key] = self._max_seq(key)
+                new_from[key] = token.derived[key] if token is not None \
+                    and key in token.derived else self._max_seq(key)
         derived: list = []
         for rt in self.rules:
             if not decide and not (rt.rule.input_types() and
@@ -1058,13 +1140,19 @@ class EventRules:
                                                    for k in rt.rule.input_types()):
                 continue
             try:
-                out = rt.run(new_from, dirty, now, decide)
+                out = rt.run(new_from, dirty, now, decide, ends,
+                             token.before.get(rt) if token is not None else None)
             except DatabaseError as exc:
                 raise SLRError(f"event rule {rt.rule.text} ({rt.rule.source}): {exc}") \
                     from None
             if out:
                 dirty.add(rt.head_key)
                 derived += out
+                if ends is not None:   # the head's new rows: these (and any added)
+                    lo, hi = min(map(_end_of, out)), max(map(_end_of, out))
+                    known = ends.get(rt.head_key)
+                    ends[rt.head_key] = (lo, hi) if known is None else \
+                        (min(known[0], lo), max(known[1], hi))
         return derived
 
     def ready(self, now: float) -> bool:
