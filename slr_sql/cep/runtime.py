@@ -1167,7 +1167,7 @@ class EventRules:
         own (the event pipeline's decision stage). Returns the complex events derived."""
         with self.store.transaction():
             self.store.lock_for_write(self.types | self.leaf_types)
-            return self._round({}, set(), True)
+            return self._round({}, set(), True, {})   # (no new rows but those derived)
 
     def recheck(self) -> None:
         """Synchronized queries waiting on a complex event type: release those that can go."""
