@@ -217,6 +217,13 @@ class PgConnection:
         # one statement, which commits on its own: one round trip instead of three.
         self.deferred: dict[tuple[str, str], list[tuple]] = {}
         self.deferred_params = 0
+        # advisory locks asked for but not taken yet (lock_later): they go in the round trip
+        # of the transaction's next statement, ahead of it (which then runs holding them)
+        self.pending_locks: list[int] = []
+
+    def lock_later(self, key: int) -> None:
+        """``pg_advisory_xact_lock(key)`` before the next statement, sent with it."""
+        self.pending_locks.append(key)
 
     def begin(self) -> None:
         """Open a transaction with the next statement."""
@@ -227,10 +234,9 @@ class PgConnection:
         inserts deferred until then."""
         if self.deferred:
             self.flush()
-        if self.begin_pending:
+        if self.begin_pending or self.pending_locks:
             self._alive()
-            self.begin_pending = False
-            self._guard(lambda: self.raw.execute("BEGIN"))
+            self._guard(self._with_begin(lambda: None))
 
     def flush(self) -> None:
         """Send the deferred inserts (after the pending BEGIN, in the same round trip):
@@ -263,15 +269,20 @@ class PgConnection:
         return f"WITH {ctes} {parts[-1]}", params
 
     def _with_begin(self, call: Callable[[], Any]) -> Callable[[], Any]:
-        """``call`` preceded by the pending BEGIN in one pipeline (one round trip)."""
-        if not self.begin_pending:
+        """``call`` preceded by the pending BEGIN and advisory locks in one pipeline (one
+        round trip)."""
+        if not self.begin_pending and not self.pending_locks:
             return call
-        self.begin_pending = False
+        begin, self.begin_pending = self.begin_pending, False
+        locks, self.pending_locks = self.pending_locks, []
         raw = self.raw
 
         def both() -> Any:
             with raw.pipeline():
-                raw.execute("BEGIN")
+                if begin:
+                    raw.execute("BEGIN")
+                for key in locks:
+                    raw.execute("SELECT pg_advisory_xact_lock(%s)", (key,))
                 return call()
         return both
 
@@ -301,6 +312,10 @@ class PgConnection:
             args = tuple(params) if params else None
         self._alive()
         cursor = self.raw.cursor()
+        if self.pending_locks and sql == "ROLLBACK":
+            self.pending_locks = []      # (nothing ran that needed them)
+        elif self.pending_locks and sql == "COMMIT":
+            self.send_begin()   # (what the transaction stores is stored under its locks)
         if self.begin_pending and sql in ("COMMIT", "ROLLBACK"):
             self.begin_pending = False   # no BEGIN was sent: nothing to end
             self.last_rowcount = 0
@@ -379,9 +394,9 @@ class PgConnection:
         psycopg = _psycopg()
         try:
             with self.raw.pipeline():
-                if self.begin_pending:
-                    self.begin_pending = False
-                    self.raw.execute("BEGIN")
+                locks, self.pending_locks = self.pending_locks, []
+                for key in locks:
+                    self.raw.execute("SELECT pg_advisory_xact_lock(%s)", (key,))
                 yield
         except psycopg.Error as exc:
             raise _error(exc, self.where, self.busy_timeout, _connected(self.raw)) from None
@@ -406,6 +421,7 @@ class PgConnection:
         rolled back by the server)."""
         self.deferred = {}
         self.deferred_params = 0
+        self.pending_locks = []
         if self.begin_pending:
             self.begin_pending = False
             return
@@ -548,8 +564,8 @@ class PgDatabase:
         if not groups:
             return
         keys = sorted({groups[t] for t in types if t in groups})
-        for key in keys:
-            self.conn.execute("SELECT pg_advisory_xact_lock(?)", (key,))
+        for key in keys:   # (taken with the transaction's next statement, before it)
+            self.conn.lock_later(key)
 
     def open_reader(self) -> PgReadConnection:
         """A read-only connection of its own (a reader that must not queue behind this
