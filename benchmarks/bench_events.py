@@ -20,6 +20,19 @@
   at a time: its rate stands beside ours through ``kb.add_many`` (batches of 1,000) and
   through ``kb.add_event`` (one transaction per event), each with its ratio; ``no rule`` is
   our own ingest of the same events without the rule, the ceiling of the batched rate.
+  The **durable floor** beside ETALIS is the least durable work any engine storing what we
+  store must do for the same run, with raw sqlite3 and no slr_sql code in the timed part: a
+  traced, untimed run of ours gives the rows it stored, commit by commit (input events and
+  detected complex events, values as the store encoded them); they go into tables of the
+  store's schema and indexes (copied from that run's file) on a new file in WAL with the same
+  ``synchronous`` and the store's page cache, one transaction per commit of ours that stored
+  event rows (the once-only ``slr_meta`` commit has none), the parameters prepared before the
+  timing. Both raw forms are run (``executemany``, and multi-row ``INSERT ... VALUES`` in
+  chunks of 500 rows), taking turns, each five times or for half a CPU second if that is
+  more; the faster form's median CPU time is the floor. The first figure leaves the rules'
+  provenance tables out, the second (``+ prov.``) stores their rows too. ``1.5x budget the
+  floor takes`` = 1.5 x ETALIS's rate / the floor's: the share of the CPU time per event the
+  1.5x target allows that the durable work alone uses.
 * **latency** -- from the start of ``kb.add`` of a completing event to its return, when the
   complex event is stored (same transaction): p50 and p99 over 2,000 completing adds.
 * **flat** -- events/s of seq2 (recent) and seq3 (unrestricted, within 5) with 10,000 and
@@ -39,11 +52,14 @@ import math
 import os
 import random
 import shutil
+import sqlite3
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
+from itertools import pairwise
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
@@ -51,6 +67,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import slr_sql  # noqa: E402
 from slr_sql.store import quote_identifier  # noqa: E402
 from slr_sql import ManualClock  # noqa: E402
+from slr_sql.store.connection import CACHE_SIZE_KIB  # noqa: E402
 
 # ----------------------------------------------------------------------------- scenarios
 
@@ -156,6 +173,24 @@ def _program(scenario: str, policy: str) -> str:
     return f":- consumption({policy}).\n{delays}\n{rule}\n"
 
 
+def _feed(kb, clock: ManualClock, evs: list, items: list, batch: int) -> None:
+    """Add the events as a live stream does, in batches (``batch == 1``: one kb.add_event
+    each), and let the clock reach the end: the timed part of :func:`ours`, and the run
+    :func:`stored_run` traces."""
+    # once a batch is added the clock reaches its last occurrence time: everything
+    # before it is complete (max_delay 0); events at that very time may still come in
+    # the next batch (the clock never passes an event that has not arrived yet)
+    if batch == 1:
+        for ev, item in zip(evs, items):
+            clock.set(max(clock.now(), ev[2]))
+            kb.add_event(*item)
+    else:
+        for i in range(0, len(evs), batch):
+            kb.add_many(items[i:i + batch])
+            clock.set(max(clock.now(), evs[min(i + batch, len(evs)) - 1][2]))
+    clock.set(evs[-1][2] + 1.0)   # the last decisions
+
+
 def ours(scenario: str, policy: str, n: int, batch: int, synchronous: str,
          history: int = 0, with_rule: bool = True) -> tuple[float, float, int]:
     """events/s (wall clock, and CPU time of this process) and detections for n events
@@ -186,18 +221,7 @@ def ours(scenario: str, policy: str, n: int, batch: int, synchronous: str,
         before = kb.sql(f"SELECT count(*) FROM {quote_identifier(table)}")[1][0][0] if with_rule else 0
         t0 = time.perf_counter()
         c0 = time.process_time()
-        # once a batch is added the clock reaches its last occurrence time: everything
-        # before it is complete (max_delay 0); events at that very time may still come in
-        # the next batch (the clock never passes an event that has not arrived yet)
-        if batch == 1:
-            for ev, item in zip(evs, items):
-                clock.set(max(clock.now(), ev[2]))
-                kb.add_event(*item)
-        else:
-            for i in range(0, n, batch):
-                kb.add_many(items[i:i + batch])
-                clock.set(max(clock.now(), evs[min(i + batch, n) - 1][2]))
-        clock.set(evs[-1][2] + 1.0)   # the last decisions
+        _feed(kb, clock, evs, items, batch)
         elapsed = time.perf_counter() - t0
         cpu = time.process_time() - c0
         detections = (kb.sql(f"SELECT count(*) FROM {quote_identifier(table)}")[1][0][0] - before
@@ -302,6 +326,220 @@ main :-
         shutil.rmtree(folder, ignore_errors=True)
 
 
+# ----------------------------------------------------------------------------- durable floor
+
+@dataclass
+class StoredRun:
+    """What one run of ours stored durably, commit by commit: the durable floor's input.
+
+    ``transactions`` holds, for each of our commits that stored event rows, the rows it
+    stored per table (in ``seq`` order, values as the store encoded them: integers and
+    floats as they are, compound terms and lists as the store's JSON text)."""
+
+    event_schema: list[str]        # CREATE TABLE and its four indexes, per event table
+    provenance_schema: list[str]   # the rules' provenance tables (no index but the key)
+    columns: dict[str, list[str]]  # table -> the columns an insert fills
+    provenance_tables: set[str]
+    transactions: list[dict[str, list[tuple]]]
+    commits: int                   # every COMMIT of our run, bookkeeping-only ones included
+    inputs: int                    # input events (the rate's numerator)
+
+    def floor_commits(self) -> int:
+        """The floor's commits: those of ours that stored rows in event tables."""
+        return sum(1 for stored in self.transactions if set(stored) - self.provenance_tables)
+
+
+def stored_run(scenario: str, policy: str, n: int, batch: int,
+               synchronous: str) -> StoredRun:
+    """Run ours untimed exactly as :func:`ours` does, and take from it what it stored,
+    commit by commit.
+
+    A second connection reads ``sqlite_sequence`` (and the provenance tables' largest id)
+    whenever the store's connection begins a transaction (its trace callback): between two
+    such reads exactly one transaction committed, so the rows between them are what that
+    commit stored. Commits that store no event rows (the store's bookkeeping: ``slr_meta``
+    once) are counted in ``commits`` but have no transaction of the floor's."""
+    folder = tempfile.mkdtemp(prefix="bench_events_floor_")
+    try:
+        path = os.path.join(folder, "b.db")
+        clock = ManualClock(0.0)
+        kb = slr_sql.open(path, clock=clock, synchronous=synchronous)
+        kb.load(_program(scenario, policy))
+        evs = EVENTS[scenario](n)
+        items = [(name, [_value(a) for a in args], t, t) for name, args, t in evs]
+        watcher = sqlite3.connect(f"file:{path}?mode=ro", uri=True, isolation_level=None)
+        provenance = [name for (name,) in watcher.execute(
+            "SELECT name FROM sqlite_master WHERE type = 'table' AND name LIKE 'slr_cep_m_%'")]
+
+        def high_marks() -> dict[str, int]:
+            marks = dict(watcher.execute("SELECT name, seq FROM sqlite_sequence"))
+            for table in provenance:
+                marks[table] = watcher.execute(
+                    f"SELECT coalesce(max(id), 0) FROM {quote_identifier(table)}").fetchone()[0]
+            return marks
+
+        marks: list[dict[str, int]] = []
+        commits = 0
+
+        def trace(statement: str) -> None:
+            nonlocal commits
+            if statement.startswith("BEGIN"):
+                marks.append(high_marks())
+            elif statement.startswith("COMMIT"):
+                commits += 1
+
+        # the store's own connection, traced in this untimed run only (sqlite3 hands the
+        # callback every statement as it starts)
+        connection = kb.store._db.conn
+        connection.set_trace_callback(trace)
+        _feed(kb, clock, evs, items, batch)
+        connection.set_trace_callback(None)
+        marks.append(high_marks())
+        kb.close()
+
+        event_tables = [(table, arity) for table, arity in watcher.execute(
+            "SELECT table_name, arity FROM slr_event_types")]
+        columns: dict[str, list[str]] = {}
+        event_schema: list[str] = []
+        for table, arity in event_tables:
+            # the table and the store's four indexes, as the store wrote them
+            event_schema += [sql for (sql,) in watcher.execute(
+                "SELECT sql FROM sqlite_master WHERE tbl_name = ? AND (type = 'table' OR "
+                "name LIKE 'slr_ix\\_\\_%' ESCAPE '\\') ORDER BY type = 'index', rowid",
+                (table,))]
+            columns[table] = [f"arg{i}" for i in range(1, arity + 1)] + [
+                "t_start", "t_end", "arrival"]
+            # an unnamed store leaves robot to the column's NULL, and so does the floor
+            assert watcher.execute(f"SELECT count(*) FROM {quote_identifier(table)} "
+                                   "WHERE robot IS NOT NULL").fetchone()[0] == 0
+        provenance_schema = [sql for table in provenance for (sql,) in watcher.execute(
+            "SELECT sql FROM sqlite_master WHERE tbl_name = ? AND sql IS NOT NULL", (table,))]
+        for table in provenance:
+            columns[table] = [name for (_, name, *_) in watcher.execute(
+                f"PRAGMA table_info({quote_identifier(table)})") if name != "id"]
+        key = {table: "seq" for table, _ in event_tables} | {table: "id" for table in provenance}
+        transactions = []
+        for before, after in pairwise(marks):
+            stored = {}
+            for table, column in key.items():
+                low, high = before.get(table, 0), after.get(table, 0)
+                if high > low:
+                    stored[table] = watcher.execute(
+                        f"SELECT {', '.join(columns[table])} FROM {quote_identifier(table)} "
+                        f"WHERE {column} > ? AND {column} <= ? ORDER BY {column}",
+                        (low, high)).fetchall()
+            if stored:
+                transactions.append(stored)
+        watcher.close()
+        return StoredRun(event_schema, provenance_schema, columns, set(provenance),
+                         transactions, commits, len(evs))
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+FLOOR_FORMS = ("executemany", "multi-row VALUES")
+
+
+def _floor_statements(run: StoredRun, form: str, with_provenance: bool,
+                      variable_limit: int) -> list[list[tuple[str, list]]]:
+    """Each transaction's inserts as (SQL, parameters), built before the timing: in the
+    ``executemany`` form one statement per table and its rows; in the ``multi-row VALUES``
+    form ``INSERT ... VALUES (...), (...), ...`` in chunks of at most
+    :data:`FLOOR_CHUNK_ROWS` rows (and the engine's limit of bound parameters), with the
+    parameters already flat."""
+    out = []
+    for stored in run.transactions:
+        statements = []
+        for table, rows in stored.items():
+            if table in run.provenance_tables and not with_provenance:
+                continue
+            columns = run.columns[table]
+            head = f"INSERT INTO {quote_identifier(table)} ({', '.join(columns)}) VALUES "
+            one_row = f"({', '.join('?' * len(columns))})"
+            if form == "executemany":
+                statements.append((head + one_row, rows))
+                continue
+            chunk = max(1, min(FLOOR_CHUNK_ROWS, variable_limit // len(columns)))
+            for i in range(0, len(rows), chunk):
+                part = rows[i:i + chunk]
+                statements.append((head + ", ".join([one_row] * len(part)),
+                                   [value for row in part for value in row]))
+        if statements:
+            out.append(statements)
+    return out
+
+
+# rows per multi-row INSERT: 50..1,000 were alike on seq2, 500 the fastest on equals3 (of 50,
+# 100, 250, 500, 1,000); a commit's rows of one table are rarely more with batches of 1,000
+FLOOR_CHUNK_ROWS = 500
+
+
+def floor_cpu(run: StoredRun, form: str, with_provenance: bool, synchronous: str) -> float:
+    """CPU seconds (``time.process_time``) raw sqlite3 takes to store ``run``'s rows in
+    ``run``'s transactions: a new file in WAL with ``synchronous`` and the store's page
+    cache, tables of the store's schema created before the timing."""
+    folder = tempfile.mkdtemp(prefix="bench_events_floor_")
+    try:
+        connection = sqlite3.connect(os.path.join(folder, "floor.db"), isolation_level=None)
+        connection.execute("PRAGMA journal_mode=WAL")
+        connection.execute(f"PRAGMA synchronous={synchronous}")
+        connection.execute(f"PRAGMA cache_size=-{CACHE_SIZE_KIB}")
+        for sql in run.event_schema + (run.provenance_schema if with_provenance else []):
+            connection.execute(sql)
+        transactions = _floor_statements(
+            run, form, with_provenance,
+            connection.getlimit(sqlite3.SQLITE_LIMIT_VARIABLE_NUMBER))
+        run_many = form == "executemany"
+        start = time.process_time()
+        for statements in transactions:
+            connection.execute("BEGIN IMMEDIATE")
+            for sql, parameters in statements:
+                if run_many:
+                    connection.executemany(sql, parameters)
+                else:
+                    connection.execute(sql, parameters)
+            connection.execute("COMMIT")
+        cpu = time.process_time() - start
+        connection.close()
+        return cpu
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+# CPU seconds each floor variant is measured for at least: one run of seq2 recent is ~35 ms,
+# and single runs of it move by +-20% on a shared machine
+FLOOR_SECONDS = 0.5
+
+
+def durable_floors(run: StoredRun, synchronous: str,
+                   least_repeats: int = 5) -> dict[bool, tuple[float, str]]:
+    """The floor's rate (input events per CPU second) and the raw form that reached it,
+    without the provenance tables (key False) and with them (True): each form run
+    ``least_repeats`` times or for :data:`FLOOR_SECONDS` if that is more (at most 15
+    times), the median of each, the faster form's. The four variants take turns, so that a
+    burst of the machine's load falls on all of them alike."""
+    variants = [(form, with_provenance) for with_provenance in (False, True)
+                for form in FLOOR_FORMS]
+    times: dict[tuple[str, bool], list[float]] = {variant: [] for variant in variants}
+    repeats = least_repeats
+    done = 0
+    while done < repeats:
+        for form, with_provenance in variants:
+            times[(form, with_provenance)].append(
+                floor_cpu(run, form, with_provenance, synchronous))
+        done += 1
+        if done == 1:
+            slowest = max(samples[0] for samples in times.values())
+            repeats = max(least_repeats, min(15, math.ceil(FLOOR_SECONDS / max(slowest, 1e-3))))
+    floors = {}
+    for with_provenance in (False, True):
+        medians = {form: statistics.median(times[(form, with_provenance)])
+                   for form in FLOOR_FORMS}
+        form = min(medians, key=medians.__getitem__)
+        floors[with_provenance] = (run.inputs / max(medians[form], 1e-9), form)
+    return floors
+
+
 # ----------------------------------------------------------------------------- main
 
 def main() -> None:
@@ -329,9 +567,11 @@ def main() -> None:
     if args.part in ("throughput", "all"):
         print("\n| rule | policy | detections (ours / ETALIS) | add_many ev/s (wall / CPU) | "
               "add_many / ETALIS (wall / CPU) | add ev/s (wall / CPU) | add / ETALIS "
-              "(wall / CPU) | ETALIS ev/s (wall / CPU) | no rule ev/s (CPU) | add_many / "
+              "(wall / CPU) | ETALIS ev/s (wall / CPU) | floor ev/s, CPU (tables / + prov.) | "
+              "floor / ETALIS (CPU) | 1.5x budget the floor takes | add_many / floor (CPU) | "
+              "floor form; commits (ours / floor) | no rule ev/s (CPU) | add_many / "
               "no rule (CPU) |")
-        print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+        print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|")
         for scenario in args.rules:
             for policy in args.policies:
                 rate, cpu, det = ours(scenario, policy, args.n, 1000, args.synchronous)
@@ -353,7 +593,21 @@ def main() -> None:
                 else:
                     cells = (f"{det:,} / - | {rate:,.0f} / {cpu:,.0f} | - | "
                              f"{one[0]:,.0f} / {one[1]:,.0f} | - | {e}")
-                print(f"| {scenario} | {policy} | {cells} | {base[1]:,.0f} | "
+                run = stored_run(scenario, policy, args.n, 1000, args.synchronous)
+                floors = durable_floors(run, args.synchronous)
+                (floor, form), (floor_prov, form_prov) = floors[False], floors[True]
+                floor_cells = (f"{floor:,.0f} / {floor_prov:,.0f}")
+                if isinstance(e, tuple):
+                    # the floor's CPU time per event as a share of what the target allows
+                    target_rate = 1.5 * e[1]
+                    floor_cells += (f" | {floor / e[1]:.2f}x / {floor_prov / e[1]:.2f}x | "
+                                    f"{target_rate / floor:.0%} / {target_rate / floor_prov:.0%}")
+                else:
+                    floor_cells += " | - | -"
+                forms = form if form == form_prov else f"{form} / {form_prov}"
+                floor_cells += (f" | {cpu / floor:.2f} / {cpu / floor_prov:.2f} | "
+                                f"{forms}; {run.commits} / {run.floor_commits()}")
+                print(f"| {scenario} | {policy} | {cells} | {floor_cells} | {base[1]:,.0f} | "
                       f"{cpu / base[1]:.2f} |", flush=True)
     if args.part in ("latency", "all"):
         print("\n| synchronous | checkpoint | rule | p50 ms | p99 ms | max ms |")

@@ -26,10 +26,9 @@ import weakref
 from typing import Any
 
 from . import sqlcompile
-from json import loads as _json_loads
 
 from .encoding import Unencodable, decode, encode
-from .encoding import term_from_json
+from .encoding import load_json, term_from_json
 from .plans import instantiate
 from .program import Slot, Template, build
 from .sqlcompile import Col, ColRef, Compiler, Fallback, Part, resolve
@@ -306,7 +305,7 @@ def _value(v):
         if not v or v[0] not in '[{"':
             return Atom(v)
         if v[0] == "[":
-            return _py_list(_json_loads(v))
+            return _py_list(load_json(v))
     return to_python(decode(v))
 
 

@@ -368,6 +368,21 @@ def test_views_readable_with_plain_sqlite3(tmp_path):
     con.close()
 
 
+def test_a_view_keeps_a_stored_integer_where_another_branch_gives_a_time(tmp_path):
+    # a UNION in a view takes its first branch's column affinity: a time's REAL would turn
+    # the other branch's stored 5 into 5.0 (the query itself answers 5)
+    kb = slr_sql.open(tmp_path / "v.db", clock=slr_sql.ManualClock(100.0))
+    kb.load("v(T) :- s(_)^T.\nv(X) :- r(X)^_.\nw(X, T) :- r(X)^T.\nw(T, X) :- s(X)^T.")
+    kb.add_many([("r", (5,), 1.0, 1.0), ("s", (1,), 2.0, 2.0)])
+    assert kb.query("v(X)") == [{"X": 2.0}, {"X": 5}]
+    assert kb.sql("SELECT arg1, typeof(arg1) FROM v")[1] == [(2.0, "real"), (5, "integer")]
+    assert kb.sql("SELECT * FROM w")[1] == [(5, 1.0), (2.0, 1)]
+    kb.close()
+    con = sqlite3.connect(tmp_path / "v.db")
+    assert con.execute("SELECT arg1 FROM v").fetchall() == [(2.0,), (5,)]
+    con.close()
+
+
 def test_a_rule_that_can_build_a_cyclic_term_falls_back_instead_of_looping():
     # r1(X, X) against the head r1(Y, [Y, 2.0]) binds Y = [Y, 2.0]: Prolog (no occurs check)
     # builds a cyclic term; the compiler's walks over bound terms would not end on one.

@@ -13,8 +13,9 @@ time limit) rejects the candidate and is counted on the rule (``kb.event_rules()
 """
 from __future__ import annotations
 
-import json
 import time
+
+import orjson
 from typing import Any, Callable
 
 from ..analysis import goal_set
@@ -26,6 +27,7 @@ from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
 from ..unify import resolve
 from ..host import Host
 from ..plans import instantiate
+from ..robotlib import pos_multiply_fast
 
 __all__ = ["MustWait", "Residual", "WHERE_TIMEOUT"]
 
@@ -275,8 +277,6 @@ class Residual:
 
 
 def _plain_pos_multiply(items: list) -> Any:
-    from ..robotlib import pos_multiply_fast
-
     return pos_multiply_fast(items[0], items[1:]) if items else None
 
 
@@ -288,7 +288,6 @@ PLAIN_BUILTINS: dict[tuple[str, int], Callable[[list], Any]] = {
     ("pos_multiply", 2): _plain_pos_multiply,
 }
 
-_scan_json = json.scanner.make_scanner(json.JSONDecoder())   # type: ignore[attr-defined]
 
 
 def _numbers(x: Any) -> bool:
@@ -316,10 +315,10 @@ def plain_value(value: Any) -> Any:
     if tv is not str or not value or value[0] not in "[{":
         return None
     try:
-        data, end = _scan_json(value, 0)
-    except (StopIteration, ValueError):
-        return None
-    if end != len(value):
+        # (orjson refuses what the store never writes plainly -- NaN, infinities, integers
+        # beyond 64 bits -- and those go to the terms' path; its floats are Python's)
+        data = orjson.loads(value)
+    except ValueError:
         return None
     if type(data) is list:
         return data if _numbers(data) else None

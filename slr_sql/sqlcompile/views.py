@@ -18,14 +18,15 @@ def view_select(parts: list[Part], arity: int, dialect: Any = None) -> str:
     see :func:`key_columns`; SQLite's when none is given), the keys left out of the answer.
 
     >>> print(view_select([Part([], [], ["1"], ["'a'"]), Part([], [], [], ["'b'"])], 1))
-    SELECT arg1 FROM (SELECT 'a' AS arg1, 1 AS k0 UNION ALL SELECT 'b' AS arg1, NULL AS k0 ORDER BY k0)
+    SELECT arg1 FROM (SELECT +('a') AS arg1, 1 AS k0 UNION ALL SELECT +('b') AS arg1, NULL AS k0 ORDER BY k0)
     """
     dialect = SQLITE if dialect is None else dialect
     alias = dialect.subquery_alias
     nk = max(len(p.keys) for p in parts)
     selects = []
     for p, keys in zip(parts, key_columns(parts, dialect)):
-        cols = [f"{x} AS arg{i + 1}" for i, x in enumerate(p.proj)] or ["1 AS ok"]
+        cols = [f"{dialect.view_column(x)} AS arg{i + 1}" for i, x in enumerate(p.proj)] \
+            or ["1 AS ok"]
         selects.append(p.select(cols + keys))
     inner = " UNION ALL ".join(selects)
     if nk:

@@ -60,6 +60,17 @@ class SQLiteQueryPrinter:
         """
         return "NULL"
 
+    def view_column(self, expr: str) -> str:
+        """An answer column of an inspection view: without the affinity of the column it
+        reads (a view's UNION takes its first branch's affinity, and REAL, a time's, would
+        turn another branch's stored integer into a float when the view is read). Unary
+        plus is a no-op on every value.
+
+        >>> SQLiteQueryPrinter().view_column("t0.t_start")
+        '+(t0.t_start)'
+        """
+        return f"+({expr})"
+
     def may_raise(self, sql: str) -> bool:
         """Whether evaluating ``sql`` may raise an error Prolog raises too (arithmetic,
         builtins: every function slr_sql registers)."""
@@ -160,6 +171,10 @@ class PostgresQueryPrinter:
                               "place (origin/2 beside other goals) run in the interpreter "
                               "on PostgreSQL")
         return "CAST(NULL AS text)" if "text" in kinds else "CAST(NULL AS double precision)"
+
+    def view_column(self, expr: str) -> str:
+        # a column is typed: the server refuses a view whose branches disagree (not made)
+        return expr
 
     def may_raise(self, sql: str) -> bool:
         # slr_typeof, slr_number, slr_j and the float printers never raise; slr_num does
