@@ -199,14 +199,15 @@ def _pg_round_trips(kb, call) -> tuple[int, list[str]]:
 
 @pytest.mark.parametrize("policy, added, most", [
     ("recent", "a", 6),          # ends no match: nothing read or copied for the rule
-    ("recent", "b", 8),          # a terminator to keep pending: no search, no copy
-    ("unrestricted", "b", 8),    # a match: found, copied with RETURNING
+    ("recent", "b", 7),          # a terminator to keep pending: no search, no copy
+    ("unrestricted", "b", 7),    # a match: found and copied with RETURNING, together
 ])
 def test_an_add_with_an_event_rule_takes_few_round_trips(postgres_url, policy, added, most):
     """One add of one event on a PostgreSQL store with ``a seq b``: the writer group's lock
     in the round trip of the watermarks, read in one statement, no catalog read for the
     complex type's triggers, no read-back of the copy, nothing for a rule the event cannot
-    end. (The last session's code took 11, 14 and 12.)"""
+    end, and the rule's writes sent with its next read (the copy, the pending summary).
+    (The last session's code took 11, 14 and 12.)"""
     clock = ManualClock(0.0)
     with slr_sql.open(postgres_url, clock=clock) as kb:
         kb.load(_program(policy))
@@ -246,3 +247,22 @@ def test_a_writer_group_held_elsewhere_makes_the_add_busy_and_store_nothing(post
             other.execute("SELECT pg_advisory_unlock(%s)", (key,))
         kb.add("b(1)^2")
         assert kb.query("c(X)^[S, E]") == [{"X": 1, "S": 1.0, "E": 2.0}]
+
+
+def test_a_decision_round_is_four_round_trips(postgres_url):
+    """recent, terminators kept pending at their add (max_delay 0, the clock behind): the
+    clock's move decides them in one transaction whose rule statements -- the decisions
+    into the provenance table, the delete of the decided, the copy with RETURNING, the
+    pending summary -- go in one round trip after the lock and the provenance watermark.
+    (The last session's code took 10.)"""
+    clock = ManualClock(0.0)
+    with slr_sql.open(postgres_url, clock=clock) as kb:
+        kb.load(_program("recent"))
+        for rep in range(6):   # (the driver prepares a statement on its fifth run)
+            t = 10.0 * rep
+            kb.add_many([("a", (rep,), t + 1, t + 1), ("b", (rep,), t + 2, t + 2)])
+            waits, texts = _pg_round_trips(kb, lambda: clock.set(t + 5))
+        assert waits <= 4, texts
+        assert len(_matching(texts, "DELETE FROM slr_cep_pending")) == 1, texts
+        assert sorted((r["X"], r["S"]) for r in kb.query("c(X)^[S, _]")) == \
+            [(rep, 10.0 * rep + 1) for rep in range(6)]

@@ -135,6 +135,7 @@ class RuleRuntime:
         self._prov_rows: list = []   # matches found by the Python side, not yet written
         self._before: int | None = None   # the provenance id a run's matches come after
         self._matched = False   # this run ran a statement that may add provenance rows
+        self._queue: list = []  # statements whose result is not needed, not sent yet
         self._done: list = []        # pending rows decided, not yet deleted
 
     # ----------------------------------------------------------------- building
@@ -310,8 +311,7 @@ class RuleRuntime:
         the round read it already."""
         eng = self.eng
         self.ensure_built()
-        store = eng.store
-        self._before, self._matched = before, False
+        self._before, self._matched, self._queue = before, False, []
         changed = False
         fresh_terms = False
         params = eng.params(now)
@@ -329,12 +329,12 @@ class RuleRuntime:
                 for pos in positions:
                     if alt.pure and not self.reads_store[n]:
                         self._before_matches()
-                        store.run_compiled(alt.delta_insert(pos, dirty), p2)
+                        self._send(alt.delta_insert(pos, dirty), p2)
                         if alt.negs:
-                            store.run_compiled(alt.delta_pending(pos, dirty), p2)
+                            self._send(alt.delta_pending(pos, dirty), p2)
                             changed = True
                     else:
-                        rows = store.run_compiled(alt.delta_select(pos, dirty), p2)
+                        rows = self._ask(alt.delta_select(pos, dirty), p2)
                         if rows:
                             changed |= self._candidates(n, rows, now)
             else:
@@ -356,13 +356,13 @@ class RuleRuntime:
                     if self.policy == "recent" and alt.pure and alt.runnable:
                         if some_ready:
                             self._before_matches()
-                            store.run_compiled(alt.recent_insert(pos), p2)
+                            self._send(alt.recent_insert(pos), p2)
                         if not all_ready:
-                            store.run_compiled(alt.term_pending(pos, True), p2)
+                            self._send(alt.term_pending(pos, True), p2)
                     elif self.policy == "recent" and alt.runnable:
                         # independent decisions: those that can be made now, at once
                         pend = []
-                        ready = store.run_compiled(alt.term_ready(pos), p2) if some_ready \
+                        ready = self._ask(alt.term_ready(pos), p2) if some_ready \
                             else []
                         for seq, end in ready:
                             try:
@@ -373,19 +373,23 @@ class RuleRuntime:
                         if pend:
                             self._insert_pending(pend)
                         if not all_ready:
-                            store.run_compiled(alt.term_pending(pos, True), p2)
+                            self._send(alt.term_pending(pos, True), p2)
                     else:
-                        store.run_compiled(alt.term_pending(pos, False), p2)
+                        self._send(alt.term_pending(pos, False), p2)
                         fresh_terms = True
                     changed = True
         if decide or fresh_terms:
             changed |= self.decide(now, everything=fresh_terms and not decide)
         self._write_prov()
         self._delete_done()
-        derived = self.flush(self._before, now) if self._matched else []
-        if changed or decide:
-            self.refresh()
-        return derived
+        # the copy of the matches and the summary of what is pending: with the writes still
+        # waiting, one call of the store
+        statements, stored = self._copy(self._before, now) if self._matched else ([], None)
+        summary = [(pending_summary(), {"rule": self.key}, False)] if changed or decide else []
+        rows = self._ask_all(statements + summary)   # (nothing to ask: the writes alone)
+        if summary:
+            self._summary(rows[-1])
+        return stored(rows[len(statements) - 1]) if stored is not None else []
 
     def _before_matches(self) -> None:
         """Before a statement that may add provenance rows: the table's greatest id (the
@@ -393,7 +397,7 @@ class RuleRuntime:
         copies and reads back nothing."""
         self._matched = True
         if self._before is None:
-            self._before = self.eng.store.run_compiled(max_id(self.prov), {})[0][0]
+            self._before = self._ask(max_id(self.prov), {})[0][0]
 
     def _candidates(self, n: int, rows: list, now: float) -> bool:
         """unrestricted with Python work: decide each candidate now or keep it pending."""
@@ -424,8 +428,7 @@ class RuleRuntime:
                 float(self.eng.clock.now()))
 
     def _insert_pending(self, rows: list) -> None:
-        self.eng.store.run_compiled_many(pending_insert(),
-                                         [pending_row(row) for row in rows])
+        self._send_many(pending_insert(), [pending_row(row) for row in rows])
 
     def _bindings(self, n: int, row: tuple) -> dict:
         alt = self.alts[n]
@@ -491,9 +494,33 @@ class RuleRuntime:
         if rows:
             self._before_matches()
             names = [f"p{i}" for i in range(len(rows[0]))]
-            self.eng.store.run_compiled_many(
-                provenance_insert(self.prov, self.width, self.rule.arity),
-                [dict(zip(names, row)) for row in rows])
+            self._send_many(provenance_insert(self.prov, self.width, self.rule.arity),
+                            [dict(zip(names, row)) for row in rows])
+
+    # ----------------------------------------------------------------- statements
+    # The statements of a run whose result nothing needs (its writes to the provenance,
+    # pending and used-rows tables) wait in ``_queue`` and go with the next statement whose
+    # rows are needed, in order: on a server, one round trip for them all. Nothing else
+    # reads those tables while they wait (the trackers and where goals read event tables).
+    def _send(self, sql: str, params: dict) -> None:
+        self._queue.append((sql, dict(params), False))   # (the caller reuses its dict)
+
+    def _send_many(self, sql: str, rows: list) -> None:
+        self._queue.append((sql, rows, True))
+
+    def _ask(self, sql: str, params: dict) -> list:
+        """The rows of ``sql``, after the statements waiting."""
+        return self._ask_all([(sql, params, False)])[-1]
+
+    def _ask_all(self, statements: list) -> list:
+        """The rows of each of ``statements`` (``(sql, params, many)``), after the
+        statements waiting, in one call of the store."""
+        batch, self._queue = self._queue + statements, []
+        if not batch:
+            return []
+        if len(batch) == 1 and not batch[0][2]:
+            return [self.eng.store.run_compiled(batch[0][0], batch[0][1])]
+        return self.eng.store.run_compiled_batch(batch)[len(batch) - len(statements):]
 
     # ----------------------------------------------------------------- pending
     def ready_groups(self, now: float) -> list:
@@ -522,12 +549,11 @@ class RuleRuntime:
         """Decide the pending rows that can be decided now. Chronological rules decide in
         occurrence order and stop at the first row that must still wait."""
         eng = self.eng
-        store = eng.store
         base = eng.params(now)
         base["rule"] = self.key
         per_alt = [dict(base, **alt.params) for alt in self.alts]
         if self.policy == "chronological":
-            rows = self._occurrence_order(store.run_compiled(pending_of_rule(False),
+            rows = self._occurrence_order(self._ask(pending_of_rule(False),
                                                              {"rule": self.key}))
             changed = False
             for row in rows:
@@ -550,18 +576,18 @@ class RuleRuntime:
             if kind == "term" and self.policy == "recent":
                 self._before_matches()
                 for pos in sorted(alt.alt.terminators):
-                    store.run_compiled(alt.pending_recent_insert(pos), p2)
-                    store.run_compiled(alt.pending_term_delete(pos), p2)
+                    self._send(alt.pending_recent_insert(pos), p2)
+                    self._send(alt.pending_term_delete(pos), p2)
             elif kind == "match" and self.policy == "unrestricted":
                 self._before_matches()
-                store.run_compiled(alt.pending_match_insert(), p2)
-                store.run_compiled(alt.pending_match_delete(), p2)
+                self._send(alt.pending_match_insert(), p2)
+                self._send(alt.pending_match_delete(), p2)
             else:
                 continue
             groups.remove(group)
             changed = True
         if everything:
-            rows = store.run_compiled(pending_of_rule(True), {"rule": self.key})
+            rows = self._ask(pending_of_rule(True), {"rule": self.key})
             for row in rows:
                 changed |= self._decide_row(row, now, per_alt)
             return changed
@@ -569,7 +595,7 @@ class RuleRuntime:
             group = {"rule": self.key, "alt": n, "kind": kind}
             if wait is not None:
                 group.update(wait_type=wait[0], wait_arity=wait[1])
-            rows = store.run_compiled(pending_of_group(wait is not None), group)
+            rows = self._ask(pending_of_group(wait is not None), group)
             # recent, with Python work: the terminators of a group decide independently of
             # each other, so their candidates are read in one statement per position
             together = (kind == "term" and wait is None and self.policy == "recent"
@@ -597,14 +623,13 @@ class RuleRuntime:
         (:meth:`AltSQL.term_select_many`), then each terminator takes its first candidate
         that derives, in the order of ``rows``."""
         alt = self.alts[n]
-        store = self.eng.store
         changed = False
         for i in range(0, len(rows), 200):
             chunk = [(row, json.loads(row[4])[0]) for row in rows[i:i + 200]]
             candidates: dict = {}
             for pos in sorted({row[3] for row, _ in chunk}):
                 params["ts"] = json.dumps([seq for row, seq in chunk if row[3] == pos])
-                for cand in store.run_compiled(alt.term_select_many(pos), params):
+                for cand in self._ask(alt.term_select_many(pos), params):
                     candidates.setdefault((pos, cand[pos]), []).append(cand)
             for row, seq in chunk:
                 try:
@@ -632,7 +657,7 @@ class RuleRuntime:
             arity = self.alts[n].alt.leaves[pos].arity
             for i in range(0, len(seqs), 500):
                 chunk = seqs[i:i + 500]
-                for r in self.eng.store.run_compiled(
+                for r in self._ask(
                         rows_by_seq(self.alts[n].tables[pos], arity, len(chunk)),
                         {f"s{j}": seq for j, seq in enumerate(chunk)}):
                     args[(n, pos, r[0])] = tuple(_sqlite_key(v) for v in r[1:])
@@ -648,7 +673,6 @@ class RuleRuntime:
         """Decide one pending row; False if it must still wait (its wait is updated).
         ``params``: per alternative, the statement parameters of this round."""
         rid, n, kind, pos, rowids, start, end = row[:7]
-        store = self.eng.store
         if n >= len(self.alts):
             self._done.append(rid)
             return True
@@ -671,7 +695,7 @@ class RuleRuntime:
             return False
         if not done:
             if row[7] is not None:
-                store.run_compiled(pending_wait(),
+                self._send(pending_wait(),
                                    {"wait_type": None, "wait_arity": None, "wait_time": None,
                                     "wait_reason": None, "id": rid})
             return False
@@ -680,7 +704,7 @@ class RuleRuntime:
 
     def _park(self, rid: int, wait: MustWait) -> None:
         """Record on pending row ``rid`` what it waits for (a history not complete yet)."""
-        self.eng.store.run_compiled(pending_wait(),
+        self._send(pending_wait(),
                                     {"wait_type": wait.key[0], "wait_arity": wait.key[1],
                                      "wait_time": wait.time, "wait_reason": wait.reason,
                                      "id": rid})
@@ -689,7 +713,7 @@ class RuleRuntime:
         done, self._done = self._done, []
         for i in range(0, len(done), 500):
             chunk = done[i:i + 500]
-            self.eng.store.run_compiled(pending_delete(len(chunk)),
+            self._send(pending_delete(len(chunk)),
                                         {f"d{j}": rid for j, rid in enumerate(chunk)})
 
     def _decide_match(self, n: int, rowids: list, end: float, now: float,
@@ -702,7 +726,7 @@ class RuleRuntime:
             params.update(alt.params)
         for p, r in enumerate(rowids):
             params[f"r{p}"] = r
-        rows = self.eng.store.run_compiled(alt.match_select(), params)
+        rows = self._ask(alt.match_select(), params)
         if not rows:
             return True  # its events are gone (a buffer pruned them)
         row = rows[0]
@@ -722,11 +746,11 @@ class RuleRuntime:
             params = self.eng.params(now)
             params.update(alt.params)
         params["t"] = rowid
-        rows = self.eng.store.run_compiled(alt.term_select(pos, alt.pure), params)
+        rows = self._ask(alt.term_select(pos, alt.pure), params)
         for row in rows:
             if self._derive_from(n, row, now):
                 if self.used is not None:
-                    self.eng.store.run_compiled_many(
+                    self._send_many(
                         alt.used_insert(),
                         [(alt.table_names[p], row[p]) for p in range(alt.k)])
                 return True
@@ -734,7 +758,11 @@ class RuleRuntime:
 
     def refresh(self) -> None:
         """Re-read the summary of this rule's pending decisions."""
-        rows = self.eng.store.run_compiled(pending_summary(), {"rule": self.key})
+        self._summary(self._ask(pending_summary(), {"rule": self.key}))
+
+    def _summary(self, rows: list) -> None:
+        """Take the summary of this rule's pending decisions from ``rows`` (those of
+        :func:`pending_summary`)."""
         waits = {}
         pmin = _INF
         count = 0
@@ -750,6 +778,12 @@ class RuleRuntime:
         """Copy the matches found in this round (provenance rows after ``before``) into the
         complex event type's table; returns the events stored (a buffer's trigger may refuse
         some), as ``(name, args, start, end)``."""
+        statements, stored = self._copy(before, now)
+        return stored(self._ask_all(statements)[-1])
+
+    def _copy(self, before: int, now: float) -> tuple[list, Callable[[list], list]]:
+        """:meth:`flush` as the statements to run and what turns the rows of the last one
+        into the events stored."""
         name, arity = self.head_key
         table = self.eng.table(self.head_key)
         if table is None:
@@ -760,27 +794,30 @@ class RuleRuntime:
         # store, whatever robots the constituent events came from)
         args = {"now": now, "before": before, "robot": store.robot}
         head_table = self.eng.table_name(self.head_key)
-        if store.dialect.copies_returning or store.triggers(head_table):
+        returning = bool(store.dialect.copies_returning or store.triggers(head_table))
+        if returning:
             # a buffer's trigger may refuse rows: the rows stored are those RETURNING gives
-            rows = store.run_compiled(complex_copy(table, self.prov, arity, True), args)
-            # RETURNING gives an integral REAL as an int: the times as stored (floats)
-            rows = [r[:arity] + (float(r[arity]), float(r[arity + 1])) for r in rows]
+            statements = [(complex_copy(table, self.prov, arity, True), args, False)]
         else:
             # no trigger: every match is stored as it is; reading the provenance rows back
             # (a rowid range) costs less than RETURNING's buffered copy
-            store.run_compiled(complex_copy(table, self.prov, arity, False), args)
-            rows = store.run_compiled(complex_read(self.prov, arity),
-                                      {"before": before})
-        if not rows:
-            return []
-        self.detections += len(rows)
-        dec = self.eng.decode
-        if arity == 0:
-            return [(name, (), r[0], r[1]) for r in rows]
-        if arity == 1:
-            return [(name, (v if type(v) is int or type(v) is float else dec(v),), r[1], r[2])
-                    for r in rows for v in (r[0],)]
-        return [(name, tuple(map(dec, r[:arity])), r[arity], r[arity + 1]) for r in rows]
+            statements = [(complex_copy(table, self.prov, arity, False), args, False),
+                          (complex_read(self.prov, arity), {"before": before}, False)]
+
+        def stored(rows: list) -> list:
+            if returning:   # RETURNING gives an integral REAL as an int: the times as stored
+                rows = [r[:arity] + (float(r[arity]), float(r[arity + 1])) for r in rows]
+            if not rows:
+                return []
+            self.detections += len(rows)
+            dec = self.eng.decode
+            if arity == 0:
+                return [(name, (), r[0], r[1]) for r in rows]
+            if arity == 1:
+                return [(name, (v if type(v) is int or type(v) is float else dec(v),), r[1],
+                         r[2]) for r in rows for v in (r[0],)]
+            return [(name, tuple(map(dec, r[:arity])), r[arity], r[arity + 1]) for r in rows]
+        return statements, stored
 
 
 class EventRules:

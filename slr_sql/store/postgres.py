@@ -331,6 +331,40 @@ class PgConnection:
         self.last_rowcount = cursor.rowcount
         return PgCursor(cursor, self)
 
+    def execute_batch(self, statements: list) -> list[list[tuple]]:
+        """Statements ``(sql, params, many)`` in order, in one pipeline with the pending
+        BEGIN and locks (one round trip); each one's rows ([] for ``many``, whose params
+        are a list of rows)."""
+        if self.deferred:
+            self.flush()
+        self._alive()
+        raw = self.raw
+        cursors: list = []
+        begin, self.begin_pending = self.begin_pending, False
+        locks, self.pending_locks = self.pending_locks, []
+
+        def run() -> None:
+            with raw.pipeline():
+                if begin:
+                    raw.execute("BEGIN")
+                for key in locks:
+                    raw.execute("SELECT pg_advisory_xact_lock(%s)", (key,))
+                for sql, params, many in statements:
+                    cursor = raw.cursor()
+                    text = POSTGRES.statement(sql)
+                    if many:
+                        rows = [r if isinstance(r, dict) else tuple(r) for r in params]
+                        if rows:
+                            cursor.executemany(text, rows)
+                        cursors.append(None)
+                        continue
+                    args = params if isinstance(params, dict) else (tuple(params) or None)
+                    cursor.execute(text, args, prepare=None)
+                    cursors.append(cursor)
+        self._guard(run)
+        return [self._guard(c.fetchall) if c is not None and c.description else []
+                for c in cursors]
+
     def executemany(self, sql: str, rows: Iterable[Iterable[Any]]) -> PgCursor:
         rows = [r if type(r) is tuple else tuple(r) for r in rows]
         plain = _PLAIN_INSERT.match(sql)
@@ -822,6 +856,16 @@ class PgDatabase:
             self.check_open()
             for row in rows:
                 self.conn.execute(sql, row)
+
+    def run_compiled_batch(self, statements: list) -> list[list[tuple]]:
+        """``Database.run_compiled_batch``: the statements in one pipeline (one round trip),
+        unless a deadline bounds them (then one by one, each under it)."""
+        with self.lock:
+            self.check_open()
+            if self._outer(None) is not None:
+                return [self.run_compiled_many(sql, params) or [] if many
+                        else self.run_compiled(sql, params) for sql, params, many in statements]
+            return self.conn.execute_batch(statements)
 
     def _outer(self, deadline: float | None) -> float | None:
         outer = self.deadline
