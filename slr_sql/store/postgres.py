@@ -217,13 +217,36 @@ class PgConnection:
         # one statement, which commits on its own: one round trip instead of three.
         self.deferred: dict[tuple[str, str], list[tuple]] = {}
         self.deferred_params = 0
-        # advisory locks asked for but not taken yet (lock_later): they go in the round trip
-        # of the transaction's next statement, ahead of it (which then runs holding them)
-        self.pending_locks: list[int] = []
+        # statements without a result not sent yet -- advisory locks asked for, savepoints
+        # opened and released (``(text, params)``, psycopg's style): they go in the round
+        # trip of the transaction's next statement, ahead of it
+        self.prelude: list[tuple[str, Any]] = []
 
     def lock_later(self, key: int) -> None:
         """``pg_advisory_xact_lock(key)`` before the next statement, sent with it."""
-        self.pending_locks.append(key)
+        self.prelude.append(("SELECT pg_advisory_xact_lock(%s)", (key,)))
+
+    def savepoint_later(self, name: str) -> None:
+        """``SAVEPOINT name`` before the next statement, sent with it."""
+        self.prelude.append((f"SAVEPOINT {name}", None))
+
+    def release_later(self, name: str) -> None:
+        """``RELEASE name`` before the next statement, sent with it; nothing at all when
+        nothing was sent since the savepoint."""
+        if self.prelude and self.prelude[-1] == (f"SAVEPOINT {name}", None):
+            self.prelude.pop()
+        else:
+            self.prelude.append((f"RELEASE {name}", None))
+
+    def roll_back_to(self, name: str) -> None:
+        """``ROLLBACK TO name`` and ``RELEASE name``; when the savepoint itself is not sent
+        yet, nothing was sent inside it: it and what followed it are dropped instead."""
+        opened = (f"SAVEPOINT {name}", None)
+        if opened in self.prelude:
+            del self.prelude[self.prelude.index(opened):]
+            return
+        self.execute(f"ROLLBACK TO {name}")
+        self.execute(f"RELEASE {name}")
 
     def begin(self) -> None:
         """Open a transaction with the next statement."""
@@ -234,7 +257,7 @@ class PgConnection:
         inserts deferred until then."""
         if self.deferred:
             self.flush()
-        if self.begin_pending or self.pending_locks:
+        if self.begin_pending or self.prelude:
             self._alive()
             self._guard(self._with_begin(lambda: None))
 
@@ -271,18 +294,18 @@ class PgConnection:
     def _with_begin(self, call: Callable[[], Any]) -> Callable[[], Any]:
         """``call`` preceded by the pending BEGIN and advisory locks in one pipeline (one
         round trip)."""
-        if not self.begin_pending and not self.pending_locks:
+        if not self.begin_pending and not self.prelude:
             return call
         begin, self.begin_pending = self.begin_pending, False
-        locks, self.pending_locks = self.pending_locks, []
+        prelude, self.prelude = self.prelude, []
         raw = self.raw
 
         def both() -> Any:
             with raw.pipeline():
                 if begin:
                     raw.execute("BEGIN")
-                for key in locks:
-                    raw.execute("SELECT pg_advisory_xact_lock(%s)", (key,))
+                for text, params in prelude:
+                    raw.execute(text, params)
                 return call()
         return both
 
@@ -312,10 +335,13 @@ class PgConnection:
             args = tuple(params) if params else None
         self._alive()
         cursor = self.raw.cursor()
-        if self.pending_locks and sql == "ROLLBACK":
-            self.pending_locks = []      # (nothing ran that needed them)
-        elif self.pending_locks and sql == "COMMIT":
-            self.send_begin()   # (what the transaction stores is stored under its locks)
+        if self.prelude and sql in ("COMMIT", "ROLLBACK"):
+            # the savepoints end with the transaction; the locks are taken before a COMMIT
+            # (what the transaction stores is stored under them), not before a ROLLBACK
+            self.prelude = [(text, params) for text, params in self.prelude
+                            if sql == "COMMIT" and params is not None]
+            if self.prelude:
+                self.send_begin()
         if self.begin_pending and sql in ("COMMIT", "ROLLBACK"):
             self.begin_pending = False   # no BEGIN was sent: nothing to end
             self.last_rowcount = 0
@@ -341,14 +367,14 @@ class PgConnection:
         raw = self.raw
         cursors: list = []
         begin, self.begin_pending = self.begin_pending, False
-        locks, self.pending_locks = self.pending_locks, []
+        prelude, self.prelude = self.prelude, []
 
         def run() -> None:
             with raw.pipeline():
                 if begin:
                     raw.execute("BEGIN")
-                for key in locks:
-                    raw.execute("SELECT pg_advisory_xact_lock(%s)", (key,))
+                for text, params in prelude:
+                    raw.execute(text, params)
                 for sql, params, many in statements:
                     cursor = raw.cursor()
                     text = POSTGRES.statement(sql)
@@ -396,7 +422,8 @@ class PgConnection:
         row: the Python work per row is the parameters alone)."""
         width = len(rows[0])
         key = (table, columns)
-        if (self.begin_pending and self.deferred_params + width * len(rows) <= _MAX_PARAMS
+        if (self.begin_pending and not self.prelude
+                and self.deferred_params + width * len(rows) <= _MAX_PARAMS
                 and (key in self.deferred or not any(t == table for t, _ in self.deferred))):
             self.deferred.setdefault(key, []).extend(rows)
             self.deferred_params += width * len(rows)
@@ -428,9 +455,9 @@ class PgConnection:
         psycopg = _psycopg()
         try:
             with self.raw.pipeline():
-                locks, self.pending_locks = self.pending_locks, []
-                for key in locks:
-                    self.raw.execute("SELECT pg_advisory_xact_lock(%s)", (key,))
+                prelude, self.prelude = self.prelude, []
+                for text, params in prelude:
+                    self.raw.execute(text, params)
                 yield
         except psycopg.Error as exc:
             raise _error(exc, self.where, self.busy_timeout, _connected(self.raw)) from None
@@ -455,7 +482,7 @@ class PgConnection:
         rolled back by the server)."""
         self.deferred = {}
         self.deferred_params = 0
-        self.pending_locks = []
+        self.prelude = []
         if self.begin_pending:
             self.begin_pending = False
             return
@@ -702,8 +729,8 @@ class PgDatabase:
             if depth == 0:
                 self.suspend_streams()
                 conn.begin()
-            else:
-                conn.execute(f"SAVEPOINT slr_sp{depth}")
+            else:   # (sent with the next statement: a savepoint nothing uses costs nothing)
+                conn.savepoint_later(f"slr_sp{depth}")
             self.tx_depth = depth + 1
             try:
                 yield self
@@ -713,14 +740,16 @@ class PgDatabase:
                     if depth == 0:
                         conn.rollback()
                     else:
-                        conn.execute(f"ROLLBACK TO slr_sp{depth}")
-                        conn.execute(f"RELEASE slr_sp{depth}")
+                        conn.roll_back_to(f"slr_sp{depth}")
                 finally:
                     self._rolled_back()
                 raise
             self.tx_depth = depth
             try:
-                conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
+                if depth == 0:
+                    conn.execute("COMMIT")
+                else:
+                    conn.release_later(f"slr_sp{depth}")
             except BaseException:
                 if depth == 0:
                     conn.rollback()
