@@ -1185,7 +1185,8 @@ class EventRules:
             if out:
                 dirty.add(rt.head_key)
                 derived += out
-                if ends is not None:   # the head's new rows: these (and any added)
+                if ends is not None and rt.head_key in self.leaf_types:
+                    # the head's new rows, for the rules after this one: these (and any added)
                     lo, hi = min(map(_end_of, out)), max(map(_end_of, out))
                     known = ends.get(rt.head_key)
                     ends[rt.head_key] = (lo, hi) if known is None else \
