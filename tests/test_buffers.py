@@ -438,6 +438,21 @@ def test_file_stops_growing_under_a_stream(tmp_path):
     kb.close()
 
 
+def test_an_add_that_freed_little_reads_one_pragma_for_the_space(tmp_path):
+    # the space stage after every add: the free list's length decides alone while it is
+    # short (the page count is read only when there may be pages to give back)
+    kb = slr_sql.open(tmp_path / "s.db", clock=ManualClock(0))
+    kb.add("p(1)^1")
+    seen: list[str] = []
+    kb.store._db.conn.set_trace_callback(seen.append)
+    try:
+        kb.add("p(2)^2")
+    finally:
+        kb.store._db.conn.set_trace_callback(None)
+    assert "PRAGMA freelist_count" in seen and "PRAGMA page_count" not in seen
+    kb.close()
+
+
 # ----------------------------------------------------------------------------- model test
 
 ATOMS = ["a", "b"]

@@ -88,9 +88,12 @@ class Space:
         with self.db.lock:
             self.db.check_open()
             conn = self.db.conn
-            page_count = conn.execute("PRAGMA page_count").fetchone()[0]
+            # (after most adds the free list is short: one read decides)
             free = conn.execute("PRAGMA freelist_count").fetchone()[0]
-            if free <= min_free_pages or free < min_free_fraction * page_count:
+            if free <= min_free_pages:
+                return 0
+            page_count = conn.execute("PRAGMA page_count").fetchone()[0]
+            if free < min_free_fraction * page_count:
                 return 0
             release = free - int(keep_fraction * page_count)
             if release <= 0:
