@@ -321,3 +321,21 @@ def test_savepoints_sent_with_the_next_statement_keep_their_meaning(postgres_url
             other.execute("SET search_path = slr")
             assert [r[0] for r in other.execute("SELECT arg1 FROM p ORDER BY seq")] == \
                 ["0", "1", "3"]
+
+
+def test_rows_deferred_before_a_savepoint_survive_its_rollback(postgres_url):
+    """Rows deferred while the transaction's BEGIN waits, then a nested transaction that
+    writes and fails: the rows go before its SAVEPOINT, so its rollback keeps them."""
+    insert = "INSERT INTO p (arg1, t_start, t_end, arrival) VALUES (?, ?, ?, ?)"
+    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
+        store = kb.store
+        store.add_events([("p", (0,), 0.0, 0.0)])
+        with store.transaction():
+            store.executemany(insert, [("1", 1.0, 1.0, 0.0)])   # (deferred: BEGIN waits)
+            with pytest.raises(RuntimeError), store.transaction():
+                store.add_events([("p", (2,), 2.0, 2.0)])
+                raise RuntimeError("after a write")
+        with psycopg.connect(postgres_url, autocommit=True) as other:
+            other.execute("SET search_path = slr")
+            assert [r[0] for r in other.execute("SELECT arg1 FROM p ORDER BY seq")] == \
+                ["0", "1"]

@@ -267,8 +267,21 @@ class PgConnection:
         text, params = self._take_deferred()
         if text:
             self._alive()
-            cursor = self.raw.cursor()
-            self._guard(self._with_begin(lambda: cursor.execute(text, params)))
+            raw = self.raw
+            cursor = raw.cursor()
+            # the rows were deferred while nothing else waited: what waits now (a lock, a
+            # savepoint) came after them, and goes after them
+            begin, self.begin_pending = self.begin_pending, False
+            prelude, self.prelude = self.prelude, []
+
+            def send() -> None:
+                with raw.pipeline():
+                    if begin:
+                        raw.execute("BEGIN")
+                    cursor.execute(text, params)
+                    for sql, args in prelude:
+                        raw.execute(sql, args)
+            self._guard(send)
 
     def _take_deferred(self) -> tuple[str, list]:
         """The deferred inserts as one statement and its parameters (and none left): one
