@@ -40,10 +40,12 @@ from .rules import EventRule
 from .sqlgen import (AltSQL, anchor_index, complex_copy, complex_read, create_index,
                      index_name, max_id, max_seq, pending_delete, pending_insert,
                      pending_of_group, pending_of_rule, pending_row, pending_summary,
-                     pending_wait, provenance_insert, query_plan, rows_by_seq, rule_record)
+                     pending_wait, provenance_insert, query_plan, rows_by_seq, rule_record,
+                     watermarks)
 from .where import MustWait, Residual, describe_error, plain_value
 
 _first, _second = itemgetter(0), itemgetter(1)
+_end_of = itemgetter(3)   # of a derived event (name, args, start, end)
 
 __all__ = ["EventRules", "RuleRuntime", "ready_prefix"]
 
@@ -91,6 +93,19 @@ def _sqlite_key(v: Any) -> tuple:
     return (2, 0, repr(v))
 
 
+class _AddToken:
+    """What :meth:`EventRules.before_add` read for the round of an add: the greatest seq
+    of each added type (``seqs``) and of each complex type a rule reads (``derived``), the
+    greatest provenance id of each rule the add may run (``before``, by runtime), and the
+    events (described by the store as it stores them)."""
+
+    __slots__ = ("seqs", "derived", "before", "events")
+
+    def __init__(self, seqs: dict, derived: dict, before: dict):
+        self.seqs, self.derived, self.before = seqs, derived, before
+        self.events: Any = None
+
+
 class RuleRuntime:
     """One installed event rule: its SQL (per alternative), residual goals, counters and
     the summary of its pending decisions."""
@@ -118,6 +133,9 @@ class RuleRuntime:
         self.generation = -1
         self.eng = eng
         self._prov_rows: list = []   # matches found by the Python side, not yet written
+        self._before: int | None = None   # the provenance id a run's matches come after
+        self._matched = False   # this run ran a statement that may add provenance rows
+        self._queue: list = []  # statements whose result is not needed, not sent yet
         self._done: list = []        # pending rows decided, not yet deleted
 
     # ----------------------------------------------------------------- building
@@ -284,13 +302,16 @@ class RuleRuntime:
         return False
 
     # ----------------------------------------------------------------- running
-    def run(self, new_from: dict, dirty: set, now: float, decide: bool) -> list:
+    def run(self, new_from: dict, dirty: set, now: float, decide: bool,
+            ends: dict | None = None, before: int | None = None) -> list:
         """Detection for this rule in the current round; returns the complex events
-        derived, as ``(name, args, start, end)``."""
+        derived, as ``(name, args, start, end)``. ``ends``: per event type with new rows,
+        their earliest and latest end, when known (a terminator statement none of whose
+        rows can qualify is not run); ``before``: the provenance table's greatest id, when
+        the round read it already."""
         eng = self.eng
         self.ensure_built()
-        store = eng.store
-        before = store.run_compiled(max_id(self.prov), {})[0][0]
+        self._before, self._matched, self._queue = before, False, []
         changed = False
         fresh_terms = False
         params = eng.params(now)
@@ -307,12 +328,13 @@ class RuleRuntime:
             if self.policy == "unrestricted":
                 for pos in positions:
                     if alt.pure and not self.reads_store[n]:
-                        store.run_compiled(alt.delta_insert(pos, dirty), p2)
+                        self._before_matches()
+                        self._send(alt.delta_insert(pos, dirty), p2)
                         if alt.negs:
-                            store.run_compiled(alt.delta_pending(pos, dirty), p2)
+                            self._send(alt.delta_pending(pos, dirty), p2)
                             changed = True
                     else:
-                        rows = store.run_compiled(alt.delta_select(pos, dirty), p2)
+                        rows = self._ask(alt.delta_select(pos, dirty), p2)
                         if rows:
                             changed |= self._candidates(n, rows, now)
             else:
@@ -321,13 +343,28 @@ class RuleRuntime:
                         continue
                     # a terminator is kept even while a partner type has no table: its
                     # partners may still arrive (late) before it is decided
+                    if self.policy == "recent" and alt.runnable:
+                        # the statements of the new terminators complete now and of those
+                        # not complete yet: completeness only shrinks as the end grows, so
+                        # the new rows' earliest and latest ends tell when one of them has
+                        # no row to find (the statement is then not run)
+                        span = ends.get(alt.alt.leaves[pos].key) if ends else None
+                        some_ready = span is None or self._ready((n, "term", None),
+                                                                 span[0], now)
+                        all_ready = span is not None and self._ready((n, "term", None),
+                                                                     span[1], now)
                     if self.policy == "recent" and alt.pure and alt.runnable:
-                        store.run_compiled(alt.recent_insert(pos), p2)
-                        store.run_compiled(alt.term_pending(pos, True), p2)
+                        if some_ready:
+                            self._before_matches()
+                            self._send(alt.recent_insert(pos), p2)
+                        if not all_ready:
+                            self._send(alt.term_pending(pos, True), p2)
                     elif self.policy == "recent" and alt.runnable:
                         # independent decisions: those that can be made now, at once
                         pend = []
-                        for seq, end in store.run_compiled(alt.term_ready(pos), p2):
+                        ready = self._ask(alt.term_ready(pos), p2) if some_ready \
+                            else []
+                        for seq, end in ready:
                             try:
                                 self._decide_term(n, pos, seq, end, now, p2, checked=True)
                             except MustWait as w:
@@ -335,19 +372,32 @@ class RuleRuntime:
                                                               end, w))
                         if pend:
                             self._insert_pending(pend)
-                        store.run_compiled(alt.term_pending(pos, True), p2)
+                        if not all_ready:
+                            self._send(alt.term_pending(pos, True), p2)
                     else:
-                        store.run_compiled(alt.term_pending(pos, False), p2)
+                        self._send(alt.term_pending(pos, False), p2)
                         fresh_terms = True
                     changed = True
         if decide or fresh_terms:
             changed |= self.decide(now, everything=fresh_terms and not decide)
         self._write_prov()
         self._delete_done()
-        derived = self.flush(before, now)
-        if changed or decide:
-            self.refresh()
-        return derived
+        # the copy of the matches and the summary of what is pending: with the writes still
+        # waiting, one call of the store
+        statements, stored = self._copy(self._before, now) if self._matched else ([], None)
+        summary = [(pending_summary(), {"rule": self.key}, False)] if changed or decide else []
+        rows = self._ask_all(statements + summary)   # (nothing to ask: the writes alone)
+        if summary:
+            self._summary(rows[-1])
+        return stored(rows[len(statements) - 1]) if stored is not None else []
+
+    def _before_matches(self) -> None:
+        """Before a statement that may add provenance rows: the table's greatest id (the
+        flush copies the rows after it), unless known -- a run that adds none reads,
+        copies and reads back nothing."""
+        self._matched = True
+        if self._before is None:
+            self._before = self._ask(max_id(self.prov), {})[0][0]
 
     def _candidates(self, n: int, rows: list, now: float) -> bool:
         """unrestricted with Python work: decide each candidate now or keep it pending."""
@@ -378,8 +428,7 @@ class RuleRuntime:
                 float(self.eng.clock.now()))
 
     def _insert_pending(self, rows: list) -> None:
-        self.eng.store.run_compiled_many(pending_insert(),
-                                         [pending_row(row) for row in rows])
+        self._send_many(pending_insert(), [pending_row(row) for row in rows])
 
     def _bindings(self, n: int, row: tuple) -> dict:
         alt = self.alts[n]
@@ -443,10 +492,35 @@ class RuleRuntime:
     def _write_prov(self) -> None:
         rows, self._prov_rows = self._prov_rows, []
         if rows:
+            self._before_matches()
             names = [f"p{i}" for i in range(len(rows[0]))]
-            self.eng.store.run_compiled_many(
-                provenance_insert(self.prov, self.width, self.rule.arity),
-                [dict(zip(names, row)) for row in rows])
+            self._send_many(provenance_insert(self.prov, self.width, self.rule.arity),
+                            [dict(zip(names, row)) for row in rows])
+
+    # ----------------------------------------------------------------- statements
+    # The statements of a run whose result nothing needs (its writes to the provenance,
+    # pending and used-rows tables) wait in ``_queue`` and go with the next statement whose
+    # rows are needed, in order: on a server, one round trip for them all. Nothing else
+    # reads those tables while they wait (the trackers and where goals read event tables).
+    def _send(self, sql: str, params: dict) -> None:
+        self._queue.append((sql, dict(params), False))   # (the caller reuses its dict)
+
+    def _send_many(self, sql: str, rows: list) -> None:
+        self._queue.append((sql, rows, True))
+
+    def _ask(self, sql: str, params: dict) -> list:
+        """The rows of ``sql``, after the statements waiting."""
+        return self._ask_all([(sql, params, False)])[-1]
+
+    def _ask_all(self, statements: list) -> list:
+        """The rows of each of ``statements`` (``(sql, params, many)``), after the
+        statements waiting, in one call of the store."""
+        batch, self._queue = self._queue + statements, []
+        if not batch:
+            return []
+        if len(batch) == 1 and not batch[0][2]:
+            return [self.eng.store.run_compiled(batch[0][0], batch[0][1])]
+        return self.eng.store.run_compiled_batch(batch)[len(batch) - len(statements):]
 
     # ----------------------------------------------------------------- pending
     def ready_groups(self, now: float) -> list:
@@ -475,12 +549,11 @@ class RuleRuntime:
         """Decide the pending rows that can be decided now. Chronological rules decide in
         occurrence order and stop at the first row that must still wait."""
         eng = self.eng
-        store = eng.store
         base = eng.params(now)
         base["rule"] = self.key
         per_alt = [dict(base, **alt.params) for alt in self.alts]
         if self.policy == "chronological":
-            rows = self._occurrence_order(store.run_compiled(pending_of_rule(False),
+            rows = self._occurrence_order(self._ask(pending_of_rule(False),
                                                              {"rule": self.key}))
             changed = False
             for row in rows:
@@ -501,18 +574,20 @@ class RuleRuntime:
                 continue
             p2 = per_alt[n]
             if kind == "term" and self.policy == "recent":
+                self._before_matches()
                 for pos in sorted(alt.alt.terminators):
-                    store.run_compiled(alt.pending_recent_insert(pos), p2)
-                    store.run_compiled(alt.pending_term_delete(pos), p2)
+                    self._send(alt.pending_recent_insert(pos), p2)
+                    self._send(alt.pending_term_delete(pos), p2)
             elif kind == "match" and self.policy == "unrestricted":
-                store.run_compiled(alt.pending_match_insert(), p2)
-                store.run_compiled(alt.pending_match_delete(), p2)
+                self._before_matches()
+                self._send(alt.pending_match_insert(), p2)
+                self._send(alt.pending_match_delete(), p2)
             else:
                 continue
             groups.remove(group)
             changed = True
         if everything:
-            rows = store.run_compiled(pending_of_rule(True), {"rule": self.key})
+            rows = self._ask(pending_of_rule(True), {"rule": self.key})
             for row in rows:
                 changed |= self._decide_row(row, now, per_alt)
             return changed
@@ -520,7 +595,7 @@ class RuleRuntime:
             group = {"rule": self.key, "alt": n, "kind": kind}
             if wait is not None:
                 group.update(wait_type=wait[0], wait_arity=wait[1])
-            rows = store.run_compiled(pending_of_group(wait is not None), group)
+            rows = self._ask(pending_of_group(wait is not None), group)
             # recent, with Python work: the terminators of a group decide independently of
             # each other, so their candidates are read in one statement per position
             together = (kind == "term" and wait is None and self.policy == "recent"
@@ -548,14 +623,13 @@ class RuleRuntime:
         (:meth:`AltSQL.term_select_many`), then each terminator takes its first candidate
         that derives, in the order of ``rows``."""
         alt = self.alts[n]
-        store = self.eng.store
         changed = False
         for i in range(0, len(rows), 200):
             chunk = [(row, json.loads(row[4])[0]) for row in rows[i:i + 200]]
             candidates: dict = {}
             for pos in sorted({row[3] for row, _ in chunk}):
                 params["ts"] = json.dumps([seq for row, seq in chunk if row[3] == pos])
-                for cand in store.run_compiled(alt.term_select_many(pos), params):
+                for cand in self._ask(alt.term_select_many(pos), params):
                     candidates.setdefault((pos, cand[pos]), []).append(cand)
             for row, seq in chunk:
                 try:
@@ -583,7 +657,7 @@ class RuleRuntime:
             arity = self.alts[n].alt.leaves[pos].arity
             for i in range(0, len(seqs), 500):
                 chunk = seqs[i:i + 500]
-                for r in self.eng.store.run_compiled(
+                for r in self._ask(
                         rows_by_seq(self.alts[n].tables[pos], arity, len(chunk)),
                         {f"s{j}": seq for j, seq in enumerate(chunk)}):
                     args[(n, pos, r[0])] = tuple(_sqlite_key(v) for v in r[1:])
@@ -599,7 +673,6 @@ class RuleRuntime:
         """Decide one pending row; False if it must still wait (its wait is updated).
         ``params``: per alternative, the statement parameters of this round."""
         rid, n, kind, pos, rowids, start, end = row[:7]
-        store = self.eng.store
         if n >= len(self.alts):
             self._done.append(rid)
             return True
@@ -622,7 +695,7 @@ class RuleRuntime:
             return False
         if not done:
             if row[7] is not None:
-                store.run_compiled(pending_wait(),
+                self._send(pending_wait(),
                                    {"wait_type": None, "wait_arity": None, "wait_time": None,
                                     "wait_reason": None, "id": rid})
             return False
@@ -631,7 +704,7 @@ class RuleRuntime:
 
     def _park(self, rid: int, wait: MustWait) -> None:
         """Record on pending row ``rid`` what it waits for (a history not complete yet)."""
-        self.eng.store.run_compiled(pending_wait(),
+        self._send(pending_wait(),
                                     {"wait_type": wait.key[0], "wait_arity": wait.key[1],
                                      "wait_time": wait.time, "wait_reason": wait.reason,
                                      "id": rid})
@@ -640,7 +713,7 @@ class RuleRuntime:
         done, self._done = self._done, []
         for i in range(0, len(done), 500):
             chunk = done[i:i + 500]
-            self.eng.store.run_compiled(pending_delete(len(chunk)),
+            self._send(pending_delete(len(chunk)),
                                         {f"d{j}": rid for j, rid in enumerate(chunk)})
 
     def _decide_match(self, n: int, rowids: list, end: float, now: float,
@@ -653,7 +726,7 @@ class RuleRuntime:
             params.update(alt.params)
         for p, r in enumerate(rowids):
             params[f"r{p}"] = r
-        rows = self.eng.store.run_compiled(alt.match_select(), params)
+        rows = self._ask(alt.match_select(), params)
         if not rows:
             return True  # its events are gone (a buffer pruned them)
         row = rows[0]
@@ -673,11 +746,11 @@ class RuleRuntime:
             params = self.eng.params(now)
             params.update(alt.params)
         params["t"] = rowid
-        rows = self.eng.store.run_compiled(alt.term_select(pos, alt.pure), params)
+        rows = self._ask(alt.term_select(pos, alt.pure), params)
         for row in rows:
             if self._derive_from(n, row, now):
                 if self.used is not None:
-                    self.eng.store.run_compiled_many(
+                    self._send_many(
                         alt.used_insert(),
                         [(alt.table_names[p], row[p]) for p in range(alt.k)])
                 return True
@@ -685,7 +758,11 @@ class RuleRuntime:
 
     def refresh(self) -> None:
         """Re-read the summary of this rule's pending decisions."""
-        rows = self.eng.store.run_compiled(pending_summary(), {"rule": self.key})
+        self._summary(self._ask(pending_summary(), {"rule": self.key}))
+
+    def _summary(self, rows: list) -> None:
+        """Take the summary of this rule's pending decisions from ``rows`` (those of
+        :func:`pending_summary`)."""
         waits = {}
         pmin = _INF
         count = 0
@@ -701,6 +778,12 @@ class RuleRuntime:
         """Copy the matches found in this round (provenance rows after ``before``) into the
         complex event type's table; returns the events stored (a buffer's trigger may refuse
         some), as ``(name, args, start, end)``."""
+        statements, stored = self._copy(before, now)
+        return stored(self._ask_all(statements)[-1])
+
+    def _copy(self, before: int, now: float) -> tuple[list, Callable[[list], list]]:
+        """:meth:`flush` as the statements to run and what turns the rows of the last one
+        into the events stored."""
         name, arity = self.head_key
         table = self.eng.table(self.head_key)
         if table is None:
@@ -711,27 +794,30 @@ class RuleRuntime:
         # store, whatever robots the constituent events came from)
         args = {"now": now, "before": before, "robot": store.robot}
         head_table = self.eng.table_name(self.head_key)
-        if store.triggers(head_table):
+        returning = bool(store.dialect.copies_returning or store.triggers(head_table))
+        if returning:
             # a buffer's trigger may refuse rows: the rows stored are those RETURNING gives
-            rows = store.run_compiled(complex_copy(table, self.prov, arity, True), args)
-            # RETURNING gives an integral REAL as an int: the times as stored (floats)
-            rows = [r[:arity] + (float(r[arity]), float(r[arity + 1])) for r in rows]
+            statements = [(complex_copy(table, self.prov, arity, True), args, False)]
         else:
             # no trigger: every match is stored as it is; reading the provenance rows back
             # (a rowid range) costs less than RETURNING's buffered copy
-            store.run_compiled(complex_copy(table, self.prov, arity, False), args)
-            rows = store.run_compiled(complex_read(self.prov, arity),
-                                      {"before": before})
-        if not rows:
-            return []
-        self.detections += len(rows)
-        dec = self.eng.decode
-        if arity == 0:
-            return [(name, (), r[0], r[1]) for r in rows]
-        if arity == 1:
-            return [(name, (v if type(v) is int or type(v) is float else dec(v),), r[1], r[2])
-                    for r in rows for v in (r[0],)]
-        return [(name, tuple(map(dec, r[:arity])), r[arity], r[arity + 1]) for r in rows]
+            statements = [(complex_copy(table, self.prov, arity, False), args, False),
+                          (complex_read(self.prov, arity), {"before": before}, False)]
+
+        def stored(rows: list) -> list:
+            if returning:   # RETURNING gives an integral REAL as an int: the times as stored
+                rows = [r[:arity] + (float(r[arity]), float(r[arity + 1])) for r in rows]
+            if not rows:
+                return []
+            self.detections += len(rows)
+            dec = self.eng.decode
+            if arity == 0:
+                return [(name, (), r[0], r[1]) for r in rows]
+            if arity == 1:
+                return [(name, (v if type(v) is int or type(v) is float else dec(v),), r[1],
+                         r[2]) for r in rows for v in (r[0],)]
+            return [(name, tuple(map(dec, r[:arity])), r[arity], r[arity + 1]) for r in rows]
+        return statements, stored
 
 
 class EventRules:
@@ -961,6 +1047,31 @@ class EventRules:
             return 0
         return self.store.run_compiled(max_seq(table), {})[0][0]
 
+    def _watermarks(self, keys: set) -> _AddToken:
+        """Where the new rows of an add of the types ``keys`` will start, and of the complex
+        types the rules read, and the provenance id after which the matches of each rule
+        the add may run will come: one statement (one round trip to a server) instead of
+        one per type and per rule."""
+        derived = [key for key in self.types & self.leaf_types if key not in keys]
+        types = [key for key in list(keys) + derived if self.table(key) is not None]
+        reach = set(keys)
+        runs = []
+        tables = set()
+        for rt in self.rules:   # (in dependency order: a head feeds the rules after it)
+            if any(k in reach for k in rt.rule.input_types()):
+                reach.add(rt.head_key)
+                if rt.prov not in tables:   # (a rule given twice reads its own, later)
+                    tables.add(rt.prov)
+                    runs.append(rt)
+        values = self.store.run_compiled(
+            watermarks([self.table(key) for key in types], [rt.prov for rt in runs]),
+            {})[0] if types or runs else ()
+        seqs = dict.fromkeys(keys, 0)
+        seqs.update(zip(types, values))
+        return _AddToken({key: seqs[key] for key in keys},
+                         {key: seqs[key] for key in derived},
+                         dict(zip(runs, values[len(types):])))
+
     def before_add(self, events: list) -> Any:
         """Inside the add's transaction, before the events are stored: where each type's
         new rows will start."""
@@ -981,7 +1092,9 @@ class EventRules:
         if not keys:
             return None
         self.store.lock_for_write(keys)   # before the watermarks: see set_write_groups
-        return {key: self._max_seq(key) for key in keys}
+        token = self._watermarks(keys)
+        token.events = events
+        return token
 
     def store_events(self, events: list, atomic: bool) -> list:
         """``store.add_events``, with the events grouped by type first when types alternate
@@ -1042,13 +1155,19 @@ class EventRules:
         the complex events derived."""
         if not token:
             return []
-        return self._round(dict(token), set(token), False)
+        # the stored events' earliest and latest ends per type (store_events describes the
+        # batch it stored; a plain list is not described)
+        ends = getattr(token.events, "ends", None)
+        return self._round(dict(token.seqs), set(token.seqs), False,
+                           dict(ends) if ends is not None else None, token)
 
-    def _round(self, new_from: dict, dirty: set, decide: bool) -> list:
+    def _round(self, new_from: dict, dirty: set, decide: bool, ends: dict | None = None,
+               token: _AddToken | None = None) -> list:
         now = float(self.clock.now())
         for key in self.types & self.leaf_types:
             if key not in new_from:
-                new_from[key] = self._max_seq(key)
+                new_from[key] = token.derived[key] if token is not None \
+                    and key in token.derived else self._max_seq(key)
         derived: list = []
         for rt in self.rules:
             if not decide and not (rt.rule.input_types() and
@@ -1058,13 +1177,20 @@ class EventRules:
                                                    for k in rt.rule.input_types()):
                 continue
             try:
-                out = rt.run(new_from, dirty, now, decide)
+                out = rt.run(new_from, dirty, now, decide, ends,
+                             token.before.get(rt) if token is not None else None)
             except DatabaseError as exc:
                 raise SLRError(f"event rule {rt.rule.text} ({rt.rule.source}): {exc}") \
                     from None
             if out:
                 dirty.add(rt.head_key)
                 derived += out
+                if ends is not None and rt.head_key in self.leaf_types:
+                    # the head's new rows, for the rules after this one: these (and any added)
+                    lo, hi = min(map(_end_of, out)), max(map(_end_of, out))
+                    known = ends.get(rt.head_key)
+                    ends[rt.head_key] = (lo, hi) if known is None else \
+                        (min(known[0], lo), max(known[1], hi))
         return derived
 
     def ready(self, now: float) -> bool:
@@ -1079,7 +1205,7 @@ class EventRules:
         own (the event pipeline's decision stage). Returns the complex events derived."""
         with self.store.transaction():
             self.store.lock_for_write(self.types | self.leaf_types)
-            return self._round({}, set(), True)
+            return self._round({}, set(), True, {})   # (no new rows but those derived)
 
     def recheck(self) -> None:
         """Synchronized queries waiting on a complex event type: release those that can go."""

@@ -1029,6 +1029,17 @@ def max_seq(table: str) -> str:
     return f"SELECT coalesce(max(seq), 0) FROM {table}"
 
 
+def watermarks(event_tables: list[str], prov_tables: list[str]) -> str:
+    """In one row: the greatest ``seq`` of each (quoted) event table, then the greatest
+    ``id`` of each provenance table (0 when empty).
+
+    >>> watermarks(['"a"'], ['"slr_cep_m_x"'])
+    'SELECT (SELECT coalesce(max(seq), 0) FROM "a"), (SELECT coalesce(max(id), 0) FROM "slr_cep_m_x")'
+    """
+    return "SELECT " + ", ".join([f"({max_seq(t)})" for t in event_tables]
+                                 + [f"({max_id(t)})" for t in prov_tables])
+
+
 def pending_insert() -> str:
     """One pending decision; its values as the parameters named after the columns.
 

@@ -755,3 +755,7 @@ class EventStore:
     @_doc(Database.run_compiled_many)
     def run_compiled_many(self, sql: str, rows: list) -> None:
         self._db.run_compiled_many(sql, rows)
+
+    @_doc(Database.run_compiled_batch)
+    def run_compiled_batch(self, statements: list) -> list[list[tuple]]:
+        return self._db.run_compiled_batch(statements)

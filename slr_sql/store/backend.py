@@ -309,6 +309,8 @@ class CompiledSQL(Protocol):
 
     def run_compiled_many(self, sql: str, rows: list[Any]) -> None: ...
 
+    def run_compiled_batch(self, statements: list[Any]) -> list[list[tuple[Any, ...]]]: ...
+
 
 @runtime_checkable
 class RawStatements(Protocol):

@@ -72,6 +72,9 @@ class SQLiteDialect(SQLiteQueryPrinter):
     real = "REAL"
     value = ""               # an untyped column keeps INTEGER / REAL / TEXT as given
     index_hints = True       # INDEXED BY: lookups name the index they must use
+    # a copy of rows reads them back with RETURNING even when no trigger may refuse one
+    # (here a separate read costs less than RETURNING's buffered copy)
+    copies_returning = False
     text_holds_nul = True    # a TEXT value may contain U+0000
     identifier_bytes: int | None = None   # names of any length
     without_rowid = " WITHOUT ROWID"
@@ -134,6 +137,8 @@ class PostgresDialect(PostgresQueryPrinter):
     real = "DOUBLE PRECISION"
     value = " TEXT"
     index_hints = False      # the planner chooses (no INDEXED BY)
+    # (a catalog read for triggers and a separate read are two more round trips)
+    copies_returning = True
     text_holds_nul = False   # text cannot contain U+0000 (values escape it as JSON)
     identifier_bytes: int | None = 63     # longer names are cut, silently (NAMEDATALEN)
     without_rowid = ""

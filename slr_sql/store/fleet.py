@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from typing import Any
 
 from ..encoding import encode
@@ -240,7 +238,7 @@ class Fleet:
         robot = check_robot_name(robot)
         if not rows:
             return 0
-        with self._transaction():
+        with self.db.transaction():
             conn = self.db.conn
             row = conn.execute("SELECT position FROM slr_fleet_positions WHERE robot = ? AND "
                                "type_name = ? AND type_arity = ?", (robot, name, arity)).fetchone()
@@ -305,18 +303,6 @@ class Fleet:
                        "type_arity) DO UPDATE SET position = excluded.position",
                        (robot, name, arity, fresh[-1][0]))
             return len(fresh)
-
-    @contextmanager
-    def _transaction(self) -> Iterator[None]:
-        """The caller's transaction when one is open (a failure here fails it as a whole),
-        else one of its own: a savepoint would cost a server two round trips per batch and
-        undo nothing that the caller's rollback does not."""
-        with self.db.lock:
-            if self.db.tx_depth:   # (this thread's: a transaction holds the lock throughout)
-                yield
-                return
-            with self.db.transaction():
-                yield
 
     def _store_decoded(self, robot: str, name: str, arity: int, rows: list[tuple],
                        store_events: Any) -> None:

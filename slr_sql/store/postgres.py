@@ -217,38 +217,61 @@ class PgConnection:
         # one statement, which commits on its own: one round trip instead of three.
         self.deferred: dict[tuple[str, str], list[tuple]] = {}
         self.deferred_params = 0
-        # statements of an open transaction whose answers nobody reads, in order, not sent
-        # yet (execute_unanswered): they go with the next statement that is answered or
-        # ends the transaction, in one pipeline
-        self.unanswered: list[tuple[str, Any]] = []
+        # statements without a result not sent yet -- advisory locks asked for, savepoints
+        # opened and released (``(text, params)``, psycopg's style): they go in the round
+        # trip of the transaction's next statement, ahead of it
+        self.prelude: list[tuple[str, Any]] = []
+
+    def lock_later(self, key: int) -> None:
+        """``pg_advisory_xact_lock(key)`` before the next statement, sent with it."""
+        self.prelude.append(("SELECT pg_advisory_xact_lock(%s)", (key,)))
+
+    def savepoint_later(self, name: str) -> None:
+        """``SAVEPOINT name`` before the next statement, sent with it."""
+        self.prelude.append((f"SAVEPOINT {name}", None))
+
+    def release_later(self, name: str) -> None:
+        """``RELEASE name`` before the next statement, sent with it; nothing at all when
+        nothing was sent since the savepoint."""
+        if self.prelude and self.prelude[-1] == (f"SAVEPOINT {name}", None):
+            self.prelude.pop()
+        else:
+            self.prelude.append((f"RELEASE {name}", None))
+
+    def execute_unanswered(self, sql: str, params: Any = ()) -> None:
+        """Run ``sql``, whose answer nobody reads (an upsert, a row count moved), in the
+        open transaction: it goes in the round trip of the transaction's next statement,
+        ahead of it, or with its COMMIT (its failure is that statement's, and fails the
+        transaction as a whole; a rollback drops it unsent). Outside a transaction, or
+        before its BEGIN went, it runs at once."""
+        if self.begin_pending or not self.in_transaction():
+            self.execute(sql, params)
+            return
+        # (parameters never None: what the COMMIT keeps of what waits, see execute)
+        self.prelude.append((POSTGRES.statement(sql), tuple(params)))
+
+    def roll_back_to(self, name: str) -> None:
+        """``ROLLBACK TO name`` and ``RELEASE name``; when the savepoint itself is not sent
+        yet, nothing was sent inside it: it and what followed it are dropped instead."""
+        opened = (f"SAVEPOINT {name}", None)
+        if opened in self.prelude:
+            del self.prelude[self.prelude.index(opened):]
+            return
+        self.execute(f"ROLLBACK TO {name}")
+        self.execute(f"RELEASE {name}")
 
     def begin(self) -> None:
         """Open a transaction with the next statement."""
         self.begin_pending = True
 
     def send_begin(self) -> None:
-        """Send a pending BEGIN and the unanswered statements now (before a statement that
-        cannot go with them), with the inserts deferred until then."""
+        """Send a pending BEGIN now (before a statement that cannot go with it), with the
+        inserts deferred until then."""
         if self.deferred:
             self.flush()
-        if self.unanswered:
+        if self.begin_pending or self.prelude:
             self._alive()
             self._guard(self._with_begin(lambda: None))
-        elif self.begin_pending:
-            self._alive()
-            self.begin_pending = False
-            self._guard(lambda: self.raw.execute("BEGIN"))
-
-    def execute_unanswered(self, sql: str, params: Any = ()) -> None:
-        """Run ``sql``, whose answer nobody reads (an upsert, a row count moved), in the
-        open transaction: it is sent with the transaction's next statement that is
-        answered, or its COMMIT, in one round trip (its failure is that statement's, and
-        fails the transaction as a whole). Outside a transaction, or before its BEGIN went,
-        it runs at once."""
-        if self.begin_pending or not self.in_transaction():
-            self.execute(sql, params)
-            return
-        self.unanswered.append((POSTGRES.statement(sql), tuple(params) if params else None))
 
     def flush(self) -> None:
         """Send the deferred inserts (after the pending BEGIN, in the same round trip):
@@ -256,8 +279,21 @@ class PgConnection:
         text, params = self._take_deferred()
         if text:
             self._alive()
-            cursor = self.raw.cursor()
-            self._guard(self._with_begin(lambda: cursor.execute(text, params)))
+            raw = self.raw
+            cursor = raw.cursor()
+            # the rows were deferred while nothing else waited: what waits now (a lock, a
+            # savepoint) came after them, and goes after them
+            begin, self.begin_pending = self.begin_pending, False
+            prelude, self.prelude = self.prelude, []
+
+            def send() -> None:
+                with raw.pipeline():
+                    if begin:
+                        raw.execute("BEGIN")
+                    cursor.execute(text, params)
+                    for sql, args in prelude:
+                        raw.execute(sql, args)
+            self._guard(send)
 
     def _take_deferred(self) -> tuple[str, list]:
         """The deferred inserts as one statement and its parameters (and none left): one
@@ -281,20 +317,20 @@ class PgConnection:
         return f"WITH {ctes} {parts[-1]}", params
 
     def _with_begin(self, call: Callable[[], Any]) -> Callable[[], Any]:
-        """``call`` preceded by the pending BEGIN and the unanswered statements in one
-        pipeline (one round trip)."""
-        if not self.begin_pending and not self.unanswered:
+        """``call`` preceded by the pending BEGIN and advisory locks in one pipeline (one
+        round trip)."""
+        if not self.begin_pending and not self.prelude:
             return call
         begin, self.begin_pending = self.begin_pending, False
-        unanswered, self.unanswered = self.unanswered, []
+        prelude, self.prelude = self.prelude, []
         raw = self.raw
 
         def both() -> Any:
             with raw.pipeline():
                 if begin:
                     raw.execute("BEGIN")
-                for text, args in unanswered:
-                    raw.execute(text, args)
+                for text, params in prelude:
+                    raw.execute(text, params)
                 return call()
         return both
 
@@ -324,6 +360,14 @@ class PgConnection:
             args = tuple(params) if params else None
         self._alive()
         cursor = self.raw.cursor()
+        if self.prelude and sql in ("COMMIT", "ROLLBACK"):
+            # the savepoints end with the transaction; the locks (and the statements nobody
+            # reads) go before a COMMIT (what the transaction stores is stored under them),
+            # not before a ROLLBACK; with the COMMIT itself once its BEGIN went
+            self.prelude = [(text, params) for text, params in self.prelude
+                            if sql == "COMMIT" and params is not None]
+            if self.prelude and (self.begin_pending or self.deferred):
+                self.send_begin()
         if self.begin_pending and sql in ("COMMIT", "ROLLBACK"):
             self.begin_pending = False   # no BEGIN was sent: nothing to end
             self.last_rowcount = 0
@@ -338,6 +382,40 @@ class PgConnection:
         self._guard(self._with_begin(lambda: cursor.execute(text, args, prepare=None)))
         self.last_rowcount = cursor.rowcount
         return PgCursor(cursor, self)
+
+    def execute_batch(self, statements: list) -> list[list[tuple]]:
+        """Statements ``(sql, params, many)`` in order, in one pipeline with the pending
+        BEGIN and locks (one round trip); each one's rows ([] for ``many``, whose params
+        are a list of rows)."""
+        if self.deferred:
+            self.flush()
+        self._alive()
+        raw = self.raw
+        cursors: list = []
+        begin, self.begin_pending = self.begin_pending, False
+        prelude, self.prelude = self.prelude, []
+
+        def run() -> None:
+            with raw.pipeline():
+                if begin:
+                    raw.execute("BEGIN")
+                for text, params in prelude:
+                    raw.execute(text, params)
+                for sql, params, many in statements:
+                    cursor = raw.cursor()
+                    text = POSTGRES.statement(sql)
+                    if many:
+                        rows = [r if isinstance(r, dict) else tuple(r) for r in params]
+                        if rows:
+                            cursor.executemany(text, rows)
+                        cursors.append(None)
+                        continue
+                    args = params if isinstance(params, dict) else (tuple(params) or None)
+                    cursor.execute(text, args, prepare=None)
+                    cursors.append(cursor)
+        self._guard(run)
+        return [self._guard(c.fetchall) if c is not None and c.description else []
+                for c in cursors]
 
     def executemany(self, sql: str, rows: Iterable[Iterable[Any]],
                     column_types: Sequence[str] | None = None) -> PgCursor:
@@ -380,7 +458,8 @@ class PgConnection:
         row: the Python work per row is the parameters alone)."""
         width = len(rows[0])
         key = (table, columns)
-        if (self.begin_pending and self.deferred_params + width * len(rows) <= _MAX_PARAMS
+        if (self.begin_pending and not self.prelude
+                and self.deferred_params + width * len(rows) <= _MAX_PARAMS
                 and (key in self.deferred or not any(t == table for t, _ in self.deferred))):
             self.deferred.setdefault(key, []).extend(rows)
             self.deferred_params += width * len(rows)
@@ -412,12 +491,9 @@ class PgConnection:
         psycopg = _psycopg()
         try:
             with self.raw.pipeline():
-                if self.begin_pending:
-                    self.begin_pending = False
-                    self.raw.execute("BEGIN")
-                unanswered, self.unanswered = self.unanswered, []
-                for text, args in unanswered:
-                    self.raw.execute(text, args)
+                prelude, self.prelude = self.prelude, []
+                for text, params in prelude:
+                    self.raw.execute(text, params)
                 yield
         except psycopg.Error as exc:
             raise _error(exc, self.where, self.busy_timeout, _connected(self.raw)) from None
@@ -442,7 +518,7 @@ class PgConnection:
         rolled back by the server)."""
         self.deferred = {}
         self.deferred_params = 0
-        self.unanswered = []
+        self.prelude = []
         if self.begin_pending:
             self.begin_pending = False
             return
@@ -585,8 +661,8 @@ class PgDatabase:
         if not groups:
             return
         keys = sorted({groups[t] for t in types if t in groups})
-        for key in keys:
-            self.conn.execute("SELECT pg_advisory_xact_lock(?)", (key,))
+        for key in keys:   # (taken with the transaction's next statement, before it)
+            self.conn.lock_later(key)
 
     def open_reader(self) -> PgReadConnection:
         """A read-only connection of its own (a reader that must not queue behind this
@@ -689,8 +765,8 @@ class PgDatabase:
             if depth == 0:
                 self.suspend_streams()
                 conn.begin()
-            else:
-                conn.execute(f"SAVEPOINT slr_sp{depth}")
+            else:   # (sent with the next statement: a savepoint nothing uses costs nothing)
+                conn.savepoint_later(f"slr_sp{depth}")
             self.tx_depth = depth + 1
             try:
                 yield self
@@ -700,14 +776,16 @@ class PgDatabase:
                     if depth == 0:
                         conn.rollback()
                     else:
-                        conn.execute(f"ROLLBACK TO slr_sp{depth}")
-                        conn.execute(f"RELEASE slr_sp{depth}")
+                        conn.roll_back_to(f"slr_sp{depth}")
                 finally:
                     self._rolled_back()
                 raise
             self.tx_depth = depth
             try:
-                conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
+                if depth == 0:
+                    conn.execute("COMMIT")
+                else:
+                    conn.release_later(f"slr_sp{depth}")
             except BaseException:
                 if depth == 0:
                     conn.rollback()
@@ -843,6 +921,16 @@ class PgDatabase:
             self.check_open()
             for row in rows:
                 self.conn.execute(sql, row)
+
+    def run_compiled_batch(self, statements: list) -> list[list[tuple]]:
+        """``Database.run_compiled_batch``: the statements in one pipeline (one round trip),
+        unless a deadline bounds them (then one by one, each under it)."""
+        with self.lock:
+            self.check_open()
+            if self._outer(None) is not None:
+                return [self.run_compiled_many(sql, params) or [] if many
+                        else self.run_compiled(sql, params) for sql, params, many in statements]
+            return self.conn.execute_batch(statements)
 
     def _outer(self, deadline: float | None) -> float | None:
         outer = self.deadline
