@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import json
 import math
+
+import orjson
 from itertools import islice, pairwise
 from operator import itemgetter, ne
 from typing import Any, Callable
@@ -43,6 +45,10 @@ from .sqlgen import (AltSQL, anchor_index, complex_copy, complex_read, create_in
                      pending_wait, provenance_insert, query_plan, rows_by_seq, rule_record,
                      watermarks)
 from .where import MustWait, Residual, describe_error, plain_value
+
+# the rowids of a pending row: a JSON array of sequence numbers (64-bit integers, which
+# orjson reads exactly, ~5x faster than the json module)
+_rowids = orjson.loads
 
 _first, _second = itemgetter(0), itemgetter(1)
 _end_of = itemgetter(3)   # of a derived event (name, args, start, end)
@@ -625,7 +631,7 @@ class RuleRuntime:
         alt = self.alts[n]
         changed = False
         for i in range(0, len(rows), 200):
-            chunk = [(row, json.loads(row[4])[0]) for row in rows[i:i + 200]]
+            chunk = [(row, _rowids(row[4])[0]) for row in rows[i:i + 200]]
             candidates: dict = {}
             for pos in sorted({row[3] for row, _ in chunk}):
                 params["ts"] = json.dumps([seq for row, seq in chunk if row[3] == pos])
@@ -650,7 +656,7 @@ class RuleRuntime:
         args: dict = {}
         groups: dict = {}
         for row in rows:
-            groups.setdefault((row[1], row[3]), []).append(json.loads(row[4])[0])
+            groups.setdefault((row[1], row[3]), []).append(_rowids(row[4])[0])
         for (n, pos), seqs in groups.items():
             if n >= len(self.alts) or self.alts[n].tables[pos] is None:
                 continue
@@ -663,7 +669,7 @@ class RuleRuntime:
                     args[(n, pos, r[0])] = tuple(_sqlite_key(v) for v in r[1:])
 
         def key(row: tuple) -> tuple:
-            seq = json.loads(row[4])[0]
+            seq = _rowids(row[4])[0]
             return (row[6], row[5], row[1], row[3] if row[3] is not None else -1,
                     args.get((row[1], row[3], seq), ()), seq)
 
@@ -686,9 +692,9 @@ class RuleRuntime:
             return False
         try:
             if kind == "match":
-                done = self._decide_match(n, json.loads(rowids), end, now, params)
+                done = self._decide_match(n, _rowids(rowids), end, now, params)
             else:
-                done = self._decide_term(n, pos, json.loads(rowids)[0], end, now,
+                done = self._decide_term(n, pos, _rowids(rowids)[0], end, now,
                                          params[n] if params else None)
         except MustWait as w:
             self._park(rid, w)
