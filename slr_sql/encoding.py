@@ -94,7 +94,8 @@ else:
         _speedups = None  # a build older (or newer) than this source: not used
 
 __all__ = ["encode", "encode_column", "decode", "decode_answer", "encode_json", "Unencodable",
-           "INT64_MIN", "INT64_MAX", "field_pairs", "column_json", "decode_json", "load_json"]
+           "INT64_MIN", "INT64_MAX", "field_pairs", "column_json", "decode_json", "load_json",
+           "orjson_reads_exactly"]
 
 INT64_MIN = -(2 ** 63)
 INT64_MAX = 2 ** 63 - 1
@@ -851,20 +852,40 @@ def decode_answer(value: Any) -> Any:
     return to_python(decode(value))
 
 
+# an integer of 19 digits or more: orjson keeps integers exact only from -2**63 to 2**64 - 1
+# and reads a longer one as a float, silently; the json module reads it exactly. The store's
+# encoder writes such integers as {"$int": ...}, but text written by another program (plain
+# sqlite3, `slr sql --write`) may hold one bare. (Digits after a decimal point do not count.)
+_LONG_INTEGER = re.compile(r"(?<![\d.])\d{19}")
+
+
+def orjson_reads_exactly(text: str) -> bool:
+    """False when ``text`` may hold an integer that orjson would read as a float (one of 19
+    digits or more), which only the json module reads exactly.
+
+    >>> orjson_reads_exactly('[1, 0.5]'), orjson_reads_exactly('[18446744073709551617]')
+    (True, False)
+    """
+    return _LONG_INTEGER.search(text) is None
+
+
 def load_json(text: str) -> Any:
     """Stored JSON text parsed: by orjson (~4x faster than the json module), or by the json
     module when orjson refuses it (a lone surrogate escaped, a nesting past its limit,
-    1e400). A bare integer in stored text fits 64 bits (the encoder writes larger ones as
-    ``{"$int": ...}``), so orjson never turns one into a float here; anything that is not
-    JSON raises ``ValueError``.
+    1e400) or might read an integer as a float (:func:`orjson_reads_exactly`); anything
+    that is not JSON raises ``ValueError``.
 
     >>> load_json('[0.5, 1, {"$atom": "[x"}]'), load_json('["\\ud800"]')
     ([0.5, 1, {'$atom': '[x'}], ['\ud800'])
+    >>> load_json('[-9223372036854775809]')
+    [-9223372036854775809]
     """
-    try:
-        return orjson.loads(text)
-    except orjson.JSONDecodeError:
-        return json.loads(text)
+    if _LONG_INTEGER.search(text) is None:
+        try:
+            return orjson.loads(text)
+        except orjson.JSONDecodeError:
+            pass
+    return json.loads(text)
 
 
 def _decode_top_json(text: str) -> Any:

@@ -395,3 +395,32 @@ def test_text_orjson_refuses_is_read_by_the_json_module():
 
     assert decode('["\\ud800x", 1]') == make_list([Atom("\ud800x"), 1])
     assert decode("[1e400]") == make_list([math.inf])
+
+
+_BEYOND_64_BITS = st.one_of(st.integers(2 ** 64, 2 ** 80), st.integers(-(2 ** 80), -(2 ** 63) - 1))
+
+
+@given(st.lists(st.one_of(_BEYOND_64_BITS, st.integers(-5, 5), st.floats(-1e3, 1e3)),
+                min_size=1, max_size=4))
+@example([2 ** 64, -(2 ** 63) - 1, 0.5])
+def test_bare_integers_beyond_64_bits_read_as_the_json_module_reads_them(numbers):
+    # text written by another program (plain sqlite3, `slr sql --write`) may hold an integer
+    # bare where the encoder writes {"$int": ...}; orjson reads one beyond 64 bits as a float
+    import json
+
+    from slr_sql.cep.where import plain_value
+    from slr_sql.encoding import decode, decode_answer, load_json, term_from_json
+
+    text = json.dumps(numbers)
+    assert repr(load_json(text)) == repr(json.loads(text))
+    assert repr(decode(text)) == repr(term_from_json(json.loads(text)))
+    assert repr(decode_answer(text)) == repr(numbers)
+    plain = plain_value(text)
+    assert plain is None or repr(plain) == repr(numbers)
+
+
+def test_an_integer_beyond_64_bits_written_by_sql_answers_exactly():
+    with slr_sql.open(None) as kb:
+        kb.add("p([1, 2])^1")
+        kb.sql('UPDATE "p" SET arg1 = ?', ["[18446744073709551617, 2]"], write=True)
+        assert kb.query("p(X)^_") == [{"X": [18446744073709551617, 2]}]

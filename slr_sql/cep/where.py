@@ -22,7 +22,7 @@ from ..analysis import goal_set
 from ..builtins import BuiltinMachine
 from ..errors import SLRError
 from ..store import DatabaseError
-from ..encoding import Unencodable
+from ..encoding import Unencodable, orjson_reads_exactly
 from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
 from ..unify import resolve
 from ..host import Host
@@ -314,9 +314,11 @@ def plain_value(value: Any) -> Any:
         return value
     if tv is not str or not value or value[0] not in "[{":
         return None
+    if not orjson_reads_exactly(value):  # (an integer orjson would read as a float)
+        return None
     try:
-        # (orjson refuses what the store never writes plainly -- NaN, infinities, integers
-        # beyond 64 bits -- and those go to the terms' path; its floats are Python's)
+        # (orjson refuses what the store never writes plainly -- NaN, infinities -- and
+        # those go to the terms' path; its floats are Python's)
         data = orjson.loads(value)
     except ValueError:
         return None
