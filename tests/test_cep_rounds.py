@@ -343,3 +343,17 @@ def test_rows_deferred_before_a_savepoint_survive_its_rollback(postgres_url):
             other.execute("SET search_path = slr")
             assert [r[0] for r in other.execute("SELECT arg1 FROM p ORDER BY seq")] == \
                 ["0", "1"]
+
+
+def test_a_complex_terminator_at_an_in_order_inputs_latest_end_is_decided_as_before():
+    """recent, a hierarchy over in_order types: the new c(1) ends where b's latest event
+    ends, so b is settled there for the terminator statements (an in_order type up to and
+    including its latest end); the skip by the new rows' ends must judge as they do, or the
+    c is neither matched nor kept pending and d(1) is lost."""
+    declarations = "".join(f":- in_order({t}/1).\n:- max_delay({t}/1, 1000).\n" for t in "abe")
+    clock = ManualClock(0.0)
+    with slr_sql.open(clock=clock) as kb:
+        kb.load(f":- consumption(recent).\n{declarations}{HIERARCHY}\n")
+        assert kb.add_many(["e(1)^0.5", "a(1)^1", "a(7)^2", "e(9)^2", "b(1)^2"]) == []
+        assert kb.query("c(X)^[S, E]") == [{"X": 1, "S": 1.0, "E": 2.0}]
+        assert kb.query("d(X)^[S, E]") == [{"X": 1, "S": 0.5, "E": 2.0}]

@@ -355,10 +355,9 @@ class RuleRuntime:
                         # the new rows' earliest and latest ends tell when one of them has
                         # no row to find (the statement is then not run)
                         span = ends.get(alt.alt.leaves[pos].key) if ends else None
-                        some_ready = span is None or self._ready((n, "term", None),
-                                                                 span[0], now)
-                        all_ready = span is not None and self._ready((n, "term", None),
-                                                                     span[1], now)
+                        some_ready = span is None or self._inputs_complete(n, span[0], now)
+                        all_ready = span is not None and self._inputs_complete(n, span[1],
+                                                                               now)
                     if self.policy == "recent" and alt.pure and alt.runnable:
                         if some_ready:
                             self._before_matches()
@@ -550,6 +549,19 @@ class RuleRuntime:
         else:
             keys = [leaf.key for leaf in alt.leaves] + [leaf.key for _, leaf in alt.negations]
         return all(self.eng.settled(key, t, now) for key in keys)
+
+    def _inputs_complete(self, n: int, t: float, now: float) -> bool:
+        """:meth:`AltSQL.inputs_complete` of alternative ``n`` at a terminator's end ``t``,
+        evaluated here: what the terminator statements will find. (Not :meth:`_ready`: for
+        a complex type its SQL takes an in-order input as settled up to and including its
+        latest end, where :meth:`EventRules.complete` stops strictly before it; a run that
+        skipped a statement by the stricter answer would neither match nor keep such a
+        terminator.)"""
+        if n >= len(self.rule.alternatives):
+            return True
+        alt = self.rule.alternatives[n]
+        keys = [leaf.key for leaf in alt.leaves] + [leaf.key for _, leaf in alt.negations]
+        return all(self.eng.settled_as_sql(key, t, now) for key in keys)
 
     def decide(self, now: float, everything: bool = False) -> bool:
         """Decide the pending rows that can be decided now. Chronological rules decide in
@@ -998,6 +1010,17 @@ class EventRules:
             if not tracker.complete(t, z, now):
                 return False
         return z < self.pmin(key)
+
+    def settled_as_sql(self, key: tuple[str, int], z: float, now: float) -> bool:
+        """:meth:`complete_sql` of ``key`` at ``z`` evaluated with the parameters of
+        :meth:`params`: :meth:`settled` for a stored type, and for a complex type its mark,
+        or its inputs settled so and no pending decision ending at or before ``z``."""
+        if key not in self.types:
+            return self.settled(key, z, now)
+        if self.tracker is None or z <= self.tracker.mark(key):
+            return True
+        return (all(self.settled_as_sql(t, z, now) for t in self.inputs[key])
+                and z < self.pmin(key))
 
     def settled(self, key: tuple[str, int], z: float, now: float | None = None) -> bool:
         """Complete up to ``z`` for a cnot (an event strictly inside an interval) or for a
