@@ -15,16 +15,16 @@ what it must.
 """
 from __future__ import annotations
 
-import tempfile
 
 import psycopg
 import pytest
-from psycopg import pq
 
 import slr_sql
 from slr_sql import ManualClock
 from slr_sql.errors import SLRBusy
 from slr_sql.store import DatabaseError
+
+from libpq_trace import traced_messages
 
 SEQ = "c(X) <- a(X) seq b(X)."
 
@@ -169,16 +169,8 @@ def test_a_buffer_another_process_installs_between_two_adds_refuses_complex_even
 def _pg_round_trips(kb, call) -> tuple[int, list[str]]:
     """The waits for the server while ``call()`` runs, and the text of every statement it
     sent (prepared ones looked up by name once it returned)."""
+    messages = traced_messages(kb, call)
     raw = kb.store._conn.raw
-    with tempfile.TemporaryFile("w+") as out:
-        raw.pgconn.trace(out.fileno())
-        raw.pgconn.set_trace_flags(pq.Trace.SUPPRESS_TIMESTAMPS | pq.Trace.REGRESS_MODE)
-        try:
-            call()
-        finally:
-            raw.pgconn.untrace()
-        out.seek(0)
-        messages = [line.split("\t") for line in out.read().splitlines()]
     prepared = {f'"{name}"': text for name, text in
                 raw.execute("SELECT name, statement FROM pg_prepared_statements").fetchall()}
     waits, texts, parsed = 0, [], ""

@@ -9,32 +9,21 @@ runs, an error in them must store nothing, and their order must be their rows' o
 """
 from __future__ import annotations
 
-import tempfile
 
 import psycopg
 import pytest
-from psycopg import pq
 
 import slr_sql
 from slr_sql import ManualClock
 from slr_sql.errors import SLRError
 
+from libpq_trace import traced_messages
+
 
 def _traced(kb, call) -> list[tuple[str, str]]:
     """``(direction, message type)`` of every protocol message of the knowledge base's
     connection while ``call()`` runs (F: sent by the client, B: sent by the server)."""
-    raw = kb.store._conn.raw
-    with tempfile.TemporaryFile("w+") as out:
-        raw.pgconn.trace(out.fileno())
-        raw.pgconn.set_trace_flags(pq.Trace.SUPPRESS_TIMESTAMPS | pq.Trace.REGRESS_MODE)
-        try:
-            call()
-        finally:
-            raw.pgconn.untrace()
-        out.seek(0)
-        lines = out.read().splitlines()
-    return [(fields[0], fields[2]) for fields in (line.split("\t") for line in lines)
-            if len(fields) > 2]
+    return [(fields[0], fields[2]) for fields in traced_messages(kb, call) if len(fields) > 2]
 
 
 def _column(url: str, sql: str) -> list:
