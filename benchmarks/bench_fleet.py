@@ -176,14 +176,15 @@ def postgres_throughput(folder: Path, n: int, batch: int, repeat: int) -> None:
                 raws.append(time.perf_counter() - start)
                 cpu["raw"].append((server_cpu(server.pgdata) - before[0],
                                    time.process_time() - before[1]))
+                serving = server_backends(server.pgdata)
                 slr_sql.open(url + f"&schema=push{k}").close()   # as the raw table: made before
-                time.sleep(0.3)   # (its server process ends, counted before the push's)
+                wait_for_backends(server.pgdata, serving)   # (its CPU counted before the push's)
                 before = server_cpu(server.pgdata), time.process_time()
                 start = time.perf_counter()
                 report = fleet.push(str(robot), url + f"&schema=push{k}", batch=batch)
                 pushes.append(time.perf_counter() - start)
                 client = time.process_time() - before[1]
-                time.sleep(0.3)   # (the push's server process ends and is counted)
+                wait_for_backends(server.pgdata, serving)   # (the push's, ended, are counted)
                 cpu["push"].append((server_cpu(server.pgdata) - before[0], client))
                 assert report.shipped == n, report
         raw, shipped = min(raws), min(pushes)
@@ -237,20 +238,41 @@ def process_cpu(pid: int, ended_children: bool = False) -> float:
     return sum(int(f) for f in used) / os.sysconf("SC_CLK_TCK")
 
 
+def server_backends(pgdata: Path) -> set[int]:
+    """The processes the PostgreSQL server of data folder ``pgdata`` runs now (Linux /proc)."""
+    master = int((Path(pgdata) / "postmaster.pid").read_text().split()[0])
+    out = set()
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                fields = Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()
+            except (OSError, IndexError):  # ended meanwhile
+                continue
+            if int(fields[1]) == master:
+                out.add(int(entry))
+    return out
+
+
+def wait_for_backends(pgdata: Path, serving: set[int], deadline: float = 10.0) -> None:
+    """Wait (at most ``deadline`` s) until the server runs no process beyond ``serving``: the
+    backends of closed connections have ended, so their CPU is in the server's ended
+    children's count."""
+    until = time.monotonic() + deadline
+    while server_backends(pgdata) - serving and time.monotonic() < until:
+        time.sleep(0.01)
+
+
 def server_cpu(pgdata: Path) -> float:
     """CPU seconds the PostgreSQL server of data folder ``pgdata`` has used so far: its
     postmaster, its processes now, and those that ended (connections closed) -- not the
     other servers of a shared machine (Linux /proc)."""
     master = int((Path(pgdata) / "postmaster.pid").read_text().split()[0])
     total = process_cpu(master, ended_children=True)
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                fields = Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()
-                if int(fields[1]) == master:
-                    total += process_cpu(int(entry))
-            except (OSError, IndexError, ValueError):  # ended meanwhile: its parent counts it
-                continue
+    for pid in server_backends(pgdata):
+        try:
+            total += process_cpu(pid)
+        except (OSError, IndexError, ValueError):  # ended meanwhile: its parent counts it
+            continue
     return total
 
 
