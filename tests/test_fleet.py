@@ -14,6 +14,7 @@ import subprocess
 import sys
 import time
 from collections import Counter
+from contextlib import contextmanager
 from pathlib import Path
 
 import httpx
@@ -883,44 +884,21 @@ def test_a_postgresql_robot_store_with_writers_in_flight_ships_every_event(postg
     all three, each once."""
     import threading
 
-    import psycopg
-
     fleet_db, url = tmp_path / "fleet.db", with_schema(postgres_url, "in_flight")
     opened(fleet_db).close()
     with opened(url, robot="r1") as slow, opened(url, robot="r1") as fast:
         slow.add("seen(a, dock)^1")
-        inside, release = threading.Event(), threading.Event()
-
-        def hold() -> None:
-            with slow.store.transaction():
-                slow.add("seen(b, dock)^2")
-                inside.set()
-                release.wait(DEADLINE)
-
-        holder = threading.Thread(target=hold)
-        holder.start()
-        try:
-            assert inside.wait(DEADLINE)
+        reports: list = []
+        with a_write_in_flight(slow, "seen(b, dock)^2", commit=True):
             fast.add("seen(c, dock)^3")
-            reports: list = []
             pusher = threading.Thread(
                 target=lambda: reports.append(fleet.push(url, str(fleet_db))))
             pusher.start()
             # until the pusher either finished or has read the rows and asked the server
             # which writers are in flight (its session's last statement reads pg_locks)
-            deadline = time.monotonic() + DEADLINE
-            with psycopg.connect(postgres_url, autocommit=True) as watch:
-                while pusher.is_alive() and time.monotonic() < deadline:
-                    waiting = watch.execute(
-                        "SELECT count(*) FROM pg_stat_activity WHERE datname = current_database()"
-                        " AND pid <> pg_backend_pid() AND query LIKE '%pg_locks%'").fetchone()[0]
-                    if waiting:
-                        break
-                    pusher.join(0.01)   # a poll with a deadline, not a pause
+            wait_until(lambda: not pusher.is_alive() or _asks_pg_locks(postgres_url),
+                       "the pusher asking for the writers in flight")
             assert pusher.is_alive()     # it waits for the writer in flight
-        finally:
-            release.set()
-            holder.join(DEADLINE)
         pusher.join(DEADLINE)
         assert not pusher.is_alive() and reports
         fleet.push(url, str(fleet_db))                    # a later round adds nothing new
@@ -980,23 +958,8 @@ def test_a_writer_that_rolls_back_while_the_pusher_waits(postgres_url, tmp_path)
     opened(fleet_db).close()
     with opened(url, robot="r1") as slow, opened(url, robot="r1") as fast:
         slow.add("seen(a, dock)^1")
-        inside, release = threading.Event(), threading.Event()
-
-        def hold() -> None:
-            try:
-                with slow.store.transaction():
-                    slow.add("seen(b, dock)^2")
-                    inside.set()
-                    release.wait(DEADLINE)
-                    raise KeyError("abandoned")
-            except KeyError:
-                pass
-
-        holder = threading.Thread(target=hold)
-        holder.start()
         reports: list = []
-        try:
-            assert inside.wait(DEADLINE)
+        with a_write_in_flight(slow, "seen(b, dock)^2", commit=False):
             fast.add("seen(c, dock)^3")
             fast.add("other(x)^3")
             pusher = threading.Thread(
@@ -1004,15 +967,41 @@ def test_a_writer_that_rolls_back_while_the_pusher_waits(postgres_url, tmp_path)
             pusher.start()
             wait_until(lambda: not pusher.is_alive() or _asks_pg_locks(postgres_url),
                        "the pusher asking for the writers in flight")
-        finally:
-            release.set()
-            holder.join(DEADLINE)
         pusher.join(DEADLINE)
         assert not pusher.is_alive() and reports[0].shipped == 3
         fast.add("seen(d, dock)^4")
         assert fleet.push(url, str(fleet_db)).shipped == 1
     got = rows_of(fleet_db)
     assert sorted(k[3] for k in got) == ["a", "c", "d", "x"] and set(got.values()) == {1}
+
+
+@contextmanager
+def a_write_in_flight(kb, event: str, commit: bool):
+    """A thread adds ``event`` inside a transaction of ``kb``'s store and holds it open for
+    the body (its sequence drawn, not committed); then it commits, or rolls back."""
+    import threading
+
+    inside, release = threading.Event(), threading.Event()
+
+    def hold() -> None:
+        try:
+            with kb.store.transaction():
+                kb.add(event)
+                inside.set()
+                release.wait(DEADLINE)
+                if not commit:
+                    raise KeyError("abandoned")
+        except KeyError:
+            pass
+
+    holder = threading.Thread(target=hold)
+    holder.start()
+    try:
+        assert inside.wait(DEADLINE)
+        yield
+    finally:
+        release.set()
+        holder.join(DEADLINE)
 
 
 def _asks_pg_locks(url: str) -> bool:
