@@ -882,7 +882,6 @@ def test_a_postgresql_robot_store_with_writers_in_flight_ships_every_event(postg
     seq 2 uncommitted while another commits seq 3. The pusher must not move past 2 (the
     fleet's position would skip it for ever): it waits for the writer in flight, then ships
     all three, each once."""
-    import threading
 
     fleet_db, url = tmp_path / "fleet.db", with_schema(postgres_url, "in_flight")
     opened(fleet_db).close()
@@ -891,13 +890,7 @@ def test_a_postgresql_robot_store_with_writers_in_flight_ships_every_event(postg
         reports: list = []
         with a_write_in_flight(slow, "seen(b, dock)^2", commit=True):
             fast.add("seen(c, dock)^3")
-            pusher = threading.Thread(
-                target=lambda: reports.append(fleet.push(url, str(fleet_db))))
-            pusher.start()
-            # until the pusher either finished or has read the rows and asked the server
-            # which writers are in flight (its session's last statement reads pg_locks)
-            wait_until(lambda: not pusher.is_alive() or _asks_pg_locks(postgres_url),
-                       "the pusher asking for the writers in flight")
+            pusher = a_pusher_asking_for_writers(url, fleet_db, postgres_url, reports)
             assert pusher.is_alive()     # it waits for the writer in flight
         pusher.join(DEADLINE)
         assert not pusher.is_alive() and reports
@@ -952,7 +945,6 @@ def test_a_writer_that_rolls_back_while_the_pusher_waits(postgres_url, tmp_path)
     """The writer the pusher waits for rolls back: the pusher goes on at once, ships the
     rows committed around it (not the rolled-back one), and a later round ships what comes
     next; every event once."""
-    import threading
 
     fleet_db, url = tmp_path / "fleet.db", with_schema(postgres_url, "rolled_back")
     opened(fleet_db).close()
@@ -962,11 +954,7 @@ def test_a_writer_that_rolls_back_while_the_pusher_waits(postgres_url, tmp_path)
         with a_write_in_flight(slow, "seen(b, dock)^2", commit=False):
             fast.add("seen(c, dock)^3")
             fast.add("other(x)^3")
-            pusher = threading.Thread(
-                target=lambda: reports.append(fleet.push(url, str(fleet_db))))
-            pusher.start()
-            wait_until(lambda: not pusher.is_alive() or _asks_pg_locks(postgres_url),
-                       "the pusher asking for the writers in flight")
+            pusher = a_pusher_asking_for_writers(url, fleet_db, postgres_url, reports)
         pusher.join(DEADLINE)
         assert not pusher.is_alive() and reports[0].shipped == 3
         fast.add("seen(d, dock)^4")
@@ -1002,6 +990,19 @@ def a_write_in_flight(kb, event: str, commit: bool):
     finally:
         release.set()
         holder.join(DEADLINE)
+
+
+def a_pusher_asking_for_writers(url: str, fleet_db, postgres_url: str, reports: list):
+    """A thread pushing ``url`` into ``fleet_db`` (its report appended to ``reports``),
+    returned once it finished or has read the rows and asked the server which writers are in
+    flight (its session's last statement reads pg_locks)."""
+    import threading
+
+    pusher = threading.Thread(target=lambda: reports.append(fleet.push(url, str(fleet_db))))
+    pusher.start()
+    wait_until(lambda: not pusher.is_alive() or _asks_pg_locks(postgres_url),
+               "the pusher asking for the writers in flight")
+    return pusher
 
 
 def _asks_pg_locks(url: str) -> bool:
