@@ -185,37 +185,38 @@ def test_iterator_blocks_until_events_arrive_and_stops_at_close(kb):
 
 
 def test_async_iteration_does_not_block_the_event_loop(kb):
+    # Another task must run while the iteration waits for its first answer; the events are added
+    # only after that task saw the wait still open, so no timing decides the outcome (a blocking
+    # iterator would hold the loop until the adder gives up waiting and adds anyway).
     async def main():
         sub = kb.subscribe("p(X)^T", since=0)
-        ticks = 0
-        stop = asyncio.Event()
+        loop_ran_while_waiting = threading.Event()
+        first = asyncio.create_task(sub.__anext__())
 
-        async def ticker():
-            nonlocal ticks
-            while not stop.is_set():
-                ticks += 1
-                await asyncio.sleep(0)
-
-        tick_task = asyncio.create_task(ticker())
+        async def other_task():
+            await asyncio.sleep(0)
+            if not first.done():
+                loop_ran_while_waiting.set()
 
         def adder():
+            loop_ran_while_waiting.wait(DEADLINE)
             for i in range(20):
                 kb.add(f"p({i})^{i}")
 
         threading.Thread(target=adder).start()
-        got = []
+        other = asyncio.create_task(other_task())
+        got = [(await first)["X"]]
         async for answer in sub:
             got.append(answer["X"])
             if len(got) == 20:
                 break
-        stop.set()
-        await tick_task
+        await other
         sub.close()
-        return got, ticks
+        return got, loop_ran_while_waiting.is_set()
 
-    got, ticks = asyncio.run(asyncio.wait_for(main(), DEADLINE))
+    got, loop_ran = asyncio.run(asyncio.wait_for(main(), DEADLINE))
     assert got == list(range(20))
-    assert ticks > 0
+    assert loop_ran
 
 
 def test_async_iteration_ends_at_until(kb, clock):
