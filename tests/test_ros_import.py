@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import slr_sql
-from slr_sql import Atom, Struct
+from slr_sql import Atom, StreamClock, Struct
 from slr_sql.ros import bag_import, bridge as bridge_module, fast_tf, foreign_types, \
     mapping as mapping_module
 from slr_sql.ros.bag_import import BagError, import_bag
@@ -32,6 +32,9 @@ def _load_example():
 
 
 make_bag = _load_example()
+# The stores that import a bag get a StreamClock, the clock of recorded data (its now is the
+# greatest end time imported): with the default wall clock, messages stamped at the bags'
+# epoch would arrive "months late" and each type would say so with a LearnedDelayWarning.
 FORMATS = ["ros1", "sqlite3", "mcap", "mcap-file"]
 
 
@@ -64,7 +67,7 @@ def all_events(kb, name: str, arity: int) -> list:
 @pytest.mark.parametrize("fmt", FORMATS)
 def test_tf_builtin_mapping_every_format(tmp_path, fmt):
     path = make_bag.write_bag(bag_path(tmp_path, fmt), fmt, tf_items(fmt, 6))
-    with slr_sql.open(tmp_path / "r.db") as kb:
+    with slr_sql.open(tmp_path / "r.db", clock=StreamClock()) as kb:
         report = import_bag(kb, path)
         assert (report.messages, report.events, report.rejected) == (6, 12, [])
         events = all_events(kb, "tf", 3)
@@ -93,7 +96,7 @@ def test_tf_direct_decoder_equals_general_mapping(tmp_path, fmt):
                             "transform.rotation.z", "transform.rotation.w"]]}]}}}
     rows = []
     for mapping in (None, mapping_from_dict(spelled)):
-        with slr_sql.open() as kb:
+        with slr_sql.open(clock=StreamClock()) as kb:
             import_bag(kb, path, mapping)
             rows.append(kb.sql("SELECT arg1, arg2, arg3, t_start, t_end FROM tf ORDER BY rowid")[1])
     assert rows[0] == rows[1] and len(rows[0]) == 10
@@ -175,7 +178,7 @@ def test_custom_map_with_foreach(tmp_path, fmt):
     path = make_bag.write_bag(bag_path(tmp_path, fmt), fmt, robot_items(fmt))
     map_file = tmp_path / "robot.yaml"
     map_file.write_text(ROBOT_MAP)
-    with slr_sql.open() as kb:
+    with slr_sql.open(clock=StreamClock()) as kb:
         report = import_bag(kb, path, load_mapping(map_file))
         seg = all_events(kb, "seg", 3)
         battery = all_events(kb, "battery", 1)
@@ -202,7 +205,7 @@ def kb_strings_are_strings(seg: list) -> bool:
 @pytest.mark.parametrize("fmt", ["sqlite3", "ros1"])
 def test_all_topics_become_events_named_after_the_topic(tmp_path, fmt):
     path = make_bag.write_bag(bag_path(tmp_path, fmt), fmt, robot_items(fmt) + tf_items(fmt, 1))
-    with slr_sql.open() as kb:
+    with slr_sql.open(clock=StreamClock()) as kb:
         report = import_bag(kb, path, all_topics=True)
         status = all_events(kb, "robot_status", 1)
         goal = all_events(kb, "robot_goal", 1)
@@ -232,7 +235,7 @@ def test_whole_messages_keep_their_field_names_in_sql_and_slr(tmp_path, fmt):
     mapping = mapping_from_dict({"topics": {"/detections": [
         {"event": "detection", "foreach": "poses", "args": ["$msg.header", "$item"]},
         {"event": "detections"}]}})
-    with slr_sql.open(db) as kb:
+    with slr_sql.open(db, clock=StreamClock()) as kb:
         import_bag(kb, path, mapping, all_topics=True)
         # SQL reads fields by name (--all: the whole message; templates taking a message too)
         x = kb.sql("SELECT json_extract(arg1, '$.point.x'), json_extract(arg1, '$.header.frame_id'),"
@@ -260,7 +263,7 @@ def test_all_topics_name_clash_is_an_error(tmp_path):
     items = [("/a/b", "std_msgs/msg/Float64", 1.0, {"data": 1.0}),
              ("/a_b", "std_msgs/msg/Float64", 2.0, {"data": 2.0})]
     path = make_bag.write_bag(tmp_path / "clash", "mcap", items)
-    with slr_sql.open() as kb, pytest.raises(slr_sql.SLRError, match="/a/b and /a_b|/a_b and /a/b"):
+    with slr_sql.open(clock=StreamClock()) as kb, pytest.raises(slr_sql.SLRError, match="/a/b and /a_b|/a_b and /a/b"):
         import_bag(kb, path, all_topics=True)
 
 
@@ -278,7 +281,7 @@ def test_pub_sub_xml_is_a_mapping(tmp_path, fmt="mcap"):
     mapping = load_mapping(xml)
     assert [(p.topic, p.msgtype, p.event) for p in mapping.publish] == [
         ("/marker1", "geometry_msgs/msg/PoseStamped", "marker1(Msg)^T")]
-    with slr_sql.open() as kb:
+    with slr_sql.open(clock=StreamClock()) as kb:
         report = import_bag(kb, path, mapping)
         assert len(all_events(kb, "tf", 3)) == 4
         goal = all_events(kb, "robot_goal", 1)
@@ -326,10 +329,10 @@ def test_bad_map_names_the_key(tmp_path, text, key):
 def test_map_checked_against_the_bags_definitions(tmp_path, spec, message):
     path = make_bag.write_bag(tmp_path / "rec", "mcap", robot_items("mcap"))
     mapping = mapping_from_dict({"topics": {"/detections": spec}})
-    with slr_sql.open(tmp_path / "r.db") as kb, pytest.raises(MappingError) as info:
+    with slr_sql.open(tmp_path / "r.db", clock=StreamClock()) as kb, pytest.raises(MappingError) as info:
         import_bag(kb, path, mapping)
     assert message in str(info.value)
-    with slr_sql.open(tmp_path / "r.db") as kb:  # nothing was imported
+    with slr_sql.open(tmp_path / "r.db", clock=StreamClock()) as kb:  # nothing was imported
         assert kb.query("aggregate_all(count, seg(_)^_, N)") == [{"N": 0}]
 
 
@@ -338,7 +341,7 @@ def test_index_paths_and_out_of_range_messages_are_rejected(tmp_path):
              for i in range(4)]
     path = make_bag.write_bag(tmp_path / "rec", "mcap", items)
     mapping = mapping_from_dict({"topics": {"/arr": {"event": "second", "args": ["data[1]"]}}})
-    with slr_sql.open() as kb:
+    with slr_sql.open(clock=StreamClock()) as kb:
         report = import_bag(kb, path, mapping)
         assert all_events(kb, "second", 1) == [((1.0,), 3.0, 3.0), ((1.0,), 4.0, 4.0)]
     assert [(r.topic, r.index) for r in report.rejected] == [("/arr", 1), ("/arr", 2)]
@@ -354,9 +357,9 @@ def test_reimport_adds_nothing(tmp_path, fmt):
     path = make_bag.write_bag(bag_path(tmp_path, fmt), fmt, tf_items(fmt, 30) + robot_items(fmt))
     mapping = mapping_from_dict({"topics": {"/battery": {"event": "battery", "args": ["data"]}}})
     db = tmp_path / "r.db"
-    with slr_sql.open(db) as kb:
+    with slr_sql.open(db, clock=StreamClock()) as kb:
         first = import_bag(kb, path, mapping, batch_size=7)
-    with slr_sql.open(db) as kb:
+    with slr_sql.open(db, clock=StreamClock()) as kb:
         second = import_bag(kb, path, mapping, batch_size=7)
         counts = (kb.query("aggregate_all(count, tf(_,_,_)^_, N)"),
                   kb.query("aggregate_all(count, battery(_)^_, N)"))
@@ -376,9 +379,9 @@ def test_interrupted_import_continues_where_it_stopped(tmp_path):
             raise Interrupted()
 
     db = tmp_path / "r.db"
-    with slr_sql.open(db) as kb, pytest.raises(Interrupted):
+    with slr_sql.open(db, clock=StreamClock()) as kb, pytest.raises(Interrupted):
         import_bag(kb, path, progress=stop_after_two_batches, batch_size=20)
-    with slr_sql.open(db) as kb:
+    with slr_sql.open(db, clock=StreamClock()) as kb:
         # two batches of 20 events (10 messages) each were committed with their checkpoints
         assert kb.query("aggregate_all(count, tf(_,_,_)^_, N)") == [{"N": 40}]
         checkpoint = kb.query("slr_import(B, T, N)^_")
@@ -394,7 +397,7 @@ def test_rejected_events_are_reported_and_the_rest_stored(tmp_path):
              for i in range(5)]
     path = make_bag.write_bag(tmp_path / "rec", "mcap", items)
     mapping = mapping_from_dict({"topics": {"/battery": {"event": "battery", "args": ["data"]}}})
-    with slr_sql.open() as kb:
+    with slr_sql.open(clock=StreamClock()) as kb:
         report = import_bag(kb, path, mapping)
         values = [v[0][0] for v in all_events(kb, "battery", 1)]
         again = import_bag(kb, path, mapping)
@@ -418,7 +421,7 @@ def test_fully_updated_from_a_topic_marks_completeness(tmp_path):
 
 def test_bad_bags_are_errors_in_words(tmp_path):
     (tmp_path / "junk.bag").write_bytes(b"not a bag")
-    with slr_sql.open() as kb:
+    with slr_sql.open(clock=StreamClock()) as kb:
         with pytest.raises(BagError, match="cannot read .*junk.bag"):
             import_bag(kb, tmp_path / "junk.bag")
         with pytest.raises(BagError, match="no such file"):
@@ -431,7 +434,7 @@ def test_bad_bags_are_errors_in_words(tmp_path):
 
 def test_paper_tf_interpolation_on_an_imported_bag(tmp_path):
     path = make_bag.write_bag(tmp_path / "demo", "mcap", make_bag.demo_items("mcap"))
-    with slr_sql.open() as kb:
+    with slr_sql.open(clock=StreamClock()) as kb:
         import_bag(kb, path)
         kb.load_file(EXAMPLES / "tf_rules.slr")
         (answer,) = kb.query("tf(cam, base, TF)^T", args={"T": make_bag.EPOCH + 11.0})
@@ -454,7 +457,7 @@ def test_example_script_and_map_through_the_cli(tmp_path):
                          capture_output=True, text=True, timeout=60, cwd=REPO)
     assert run.returncode == 0, run.stderr
     assert "imported 160 events from 160 messages" in run.stdout
-    with slr_sql.open(db) as kb:
+    with slr_sql.open(db, clock=StreamClock()) as kb:
         assert kb.query("aggregate_all(count, seg(cup1, _)^_, N)") == [{"N": 24}]
         assert kb.query("battery(V)^T", limit=1) == [{"V": 24.0, "T": make_bag.EPOCH + 0.5}]
 
