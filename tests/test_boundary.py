@@ -62,7 +62,7 @@ def test_open_with_a_bad_path_is_an_slr_error(path):
 
 def test_a_damaged_store_is_reported_with_its_path(tmp_path):
     path = tmp_path / "robot.db"
-    with slr_sql.open(path) as kb:
+    with slr_sql.open(path, clock=slr_sql.ManualClock(0.0)) as kb:
         kb.add_many([f"seen(o{i})^{i}" for i in range(2000)])
     size = os.path.getsize(path)
     assert size > 5 * 4096

@@ -9,9 +9,13 @@ import time
 import pytest
 
 import slr_sql
+from slr_sql import ManualClock
 from slr_sql.store.connection import Database
 
 
+# The stores here get a ManualClock: their events are stamped 0, 1, 2... (not wall-clock
+# times, which would make each type's first event "decades late", a LearnedDelayWarning), and
+# no test here waits on the store's time.
 def rows_in_main_file(path) -> int:
     """Rows of table p as the database file alone holds them (``immutable``: the WAL is
     not read), i.e. what has been checkpointed."""
@@ -36,7 +40,7 @@ def checkpointer_threads():
 
 def test_background_checkpoints_reach_the_file_without_close(tmp_path):
     path = tmp_path / "kb.db"
-    kb = slr_sql.open(path, synchronous="NORMAL", checkpoint="background")
+    kb = slr_sql.open(path, synchronous="NORMAL", checkpoint="background", clock=ManualClock(0.0))
     try:
         for i in range(300):  # one transaction each
             kb.add(f"p({i})^{i}")
@@ -82,13 +86,14 @@ def test_the_wal_stays_bounded_while_a_writer_adds(tmp_path):
 
 def test_other_processes_and_a_reopen_see_everything(tmp_path):
     path = tmp_path / "kb.db"
-    with slr_sql.open(path, checkpoint="background") as kb:
+    with slr_sql.open(path, checkpoint="background", clock=ManualClock(0.0)) as kb:
         kb.add_many([f"p({i})^{i}" for i in range(50)])
-        with slr_sql.open(path) as other:  # a second connection, SQLite's own checkpoints
+        # a second connection, SQLite's own checkpoints
+        with slr_sql.open(path, clock=ManualClock(0.0)) as other:
             assert other.query("aggregate_all(count, p(_)^_, N)") == [{"N": 50}]
             other.add("p(50)^50")
         assert kb.query("aggregate_all(count, p(_)^_, N)") == [{"N": 51}]
-    with slr_sql.open(path) as kb:
+    with slr_sql.open(path, clock=ManualClock(0.0)) as kb:
         assert kb.query("aggregate_all(count, p(_)^_, N)") == [{"N": 51}]
 
 
@@ -100,7 +105,7 @@ def test_an_unknown_mode_is_refused(tmp_path, mode):
 
 
 def test_an_in_memory_store_has_no_thread():
-    with slr_sql.open(None, checkpoint="background") as kb:
+    with slr_sql.open(None, checkpoint="background", clock=ManualClock(0.0)) as kb:
         kb.add("p(1)^1")
         assert kb.store._db.checkpointer is None
 

@@ -203,7 +203,7 @@ def test_a_column_encodes_as_its_values_do(values):
 
 
 def test_the_same_bad_tuple_given_twice_is_rejected_at_both_places():
-    with slr_sql.open() as kb:
+    with slr_sql.open(clock=slr_sql.ManualClock(0.0)) as kb:
         bad = ("p", (math.nan,), 1.0, 1.0)
         errors = kb.add_many([bad, ("p", (1,), 1.0, 1.0), bad])
         assert [e.index for e in errors] == [0, 2]
@@ -420,7 +420,7 @@ def test_bare_integers_beyond_64_bits_read_as_the_json_module_reads_them(numbers
 
 
 def test_an_integer_beyond_64_bits_written_by_sql_answers_exactly():
-    with slr_sql.open(None) as kb:
+    with slr_sql.open(None, clock=slr_sql.ManualClock(0.0)) as kb:
         kb.add("p([1, 2])^1")
         kb.sql('UPDATE "p" SET arg1 = ?', ["[18446744073709551617, 2]"], write=True)
         assert kb.query("p(X)^_") == [{"X": [18446744073709551617, 2]}]

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 import slr_sql
-from slr_sql import SLRError
+from slr_sql import ManualClock, SLRError
 from slr_sql.store import EventStore, migration_scripts
 
 SIDE_FILES = ("-wal", "-shm", "-journal")
@@ -39,8 +39,11 @@ def refuse(path: Path, *reason_words: str, **options) -> str:
     return message
 
 
+# The stores here get a ManualClock: their events are stamped 0.0, 1.0 (not wall-clock times,
+# which would make each type's first event "decades late", a LearnedDelayWarning), and no
+# test here waits on time.
 def make_store(path: Path, events: int = 3) -> Path:
-    with slr_sql.open(path) as kb:
+    with slr_sql.open(path, clock=ManualClock(0.0)) as kb:
         kb.load("color(O, C)^T :- prev(obj(O, C)^_, T).")
         kb.add_many([("obj", [f"o{i}", "red"], float(i), float(i)) for i in range(events)])
     return path
@@ -99,28 +102,28 @@ def test_a_foreign_sqlite_file_is_refused_untouched(tmp_path):
 
 def test_adopt_takes_a_foreign_file_over_and_keeps_its_tables(tmp_path):
     path = foreign_sqlite(tmp_path / "shop.db")
-    with slr_sql.open(path, adopt=True) as kb:
+    with slr_sql.open(path, adopt=True, clock=ManualClock(0.0)) as kb:
         kb.add("seen(ada)^1")
         assert kb.sql("SELECT name FROM customers") == (["name"], [("ada",)])
-    with slr_sql.open(path) as kb:  # a store now: no adopt needed
+    with slr_sql.open(path, clock=ManualClock(0.0)) as kb:  # a store now: no adopt needed
         assert kb.query("seen(X)^T") == [{"X": "ada", "T": 1.0}]
 
 
 def test_an_empty_sqlite_file_becomes_a_store(tmp_path):
     path = foreign_sqlite(tmp_path / "empty.db", "PRAGMA page_size = 8192", "VACUUM")
     assert path.stat().st_size > 0
-    with slr_sql.open(path) as kb:
+    with slr_sql.open(path, clock=ManualClock(0.0)) as kb:
         kb.add("p(1)^1")
-    with slr_sql.open(path) as kb:
+    with slr_sql.open(path, clock=ManualClock(0.0)) as kb:
         assert kb.query("p(X)^_") == [{"X": 1}]
 
 
 def test_an_empty_file_becomes_a_store(tmp_path):
     path = tmp_path / "robot.db"
     path.touch()
-    with slr_sql.open(path) as kb:
+    with slr_sql.open(path, clock=ManualClock(0.0)) as kb:
         kb.add("p(1)^1")
-    with slr_sql.open(path) as kb:
+    with slr_sql.open(path, clock=ManualClock(0.0)) as kb:
         assert kb.query("p(X)^_") == [{"X": 1}]
 
 
@@ -225,7 +228,7 @@ def test_a_newer_store_in_wal_mode_is_refused_without_side_files(tmp_path):
 
 def test_a_store_open_in_another_connection_opens_as_usual(tmp_path):
     path = make_store(tmp_path / "robot.db")
-    with slr_sql.open(path) as first:
+    with slr_sql.open(path, clock=ManualClock(0.0)) as first:
         first.add("p(1)^1")
-        with slr_sql.open(path) as second:
+        with slr_sql.open(path, clock=ManualClock(0.0)) as second:
             assert second.query("p(X)^_") == [{"X": 1}]

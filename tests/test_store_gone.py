@@ -9,7 +9,7 @@ import shutil
 import pytest
 
 import slr_sql
-from slr_sql import SLRError, SLRStoreGone
+from slr_sql import ManualClock, SLRError, SLRStoreGone
 
 
 def remove_store(path) -> list[str]:
@@ -21,9 +21,12 @@ def remove_store(path) -> list[str]:
     return removed
 
 
+# The stores here get a ManualClock: their events are stamped 1, 2 (not wall-clock times,
+# which would make each type's first event "decades late", a LearnedDelayWarning), and no
+# test here waits on time.
 @pytest.fixture
 def kb(tmp_path):
-    kb = slr_sql.open(tmp_path / "robot.db")
+    kb = slr_sql.open(tmp_path / "robot.db", clock=ManualClock(0.0))
     kb.add("p(1)^1")
     yield kb
     kb.close()
@@ -49,7 +52,7 @@ def test_writing_after_rm_of_the_store_raises_naming_the_path(kb, tmp_path, writ
 
 def test_a_store_replaced_by_another_file_is_noticed(kb, tmp_path):
     other = tmp_path / "other.db"
-    with slr_sql.open(other) as second:
+    with slr_sql.open(other, clock=ManualClock(0.0)) as second:
         second.add("x(1)^1")
     os.replace(other, tmp_path / "robot.db")
     with pytest.raises(SLRStoreGone, match="robot.db: the store file was deleted or replaced"):
@@ -74,7 +77,7 @@ def test_a_deleted_write_ahead_log_is_noticed(kb, tmp_path):
 
 def test_changing_the_working_directory_is_not_a_replacement(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    with slr_sql.open("robot.db") as kb:
+    with slr_sql.open("robot.db", clock=ManualClock(0.0)) as kb:
         kb.add("p(1)^1")
         elsewhere = tmp_path / "elsewhere"
         elsewhere.mkdir()
