@@ -23,6 +23,13 @@ REPO = Path(__file__).resolve().parent.parent
 TEA = "findall(O, (obj(O, T)^_, usedFor(T, tea)), L)"
 
 
+def opened(path, **options):
+    """A store at ``path`` (None: in memory) with a ManualClock: the events here are stamped
+    1, 2, ... (not wall-clock times, which would make each type's first event "decades
+    late", a LearnedDelayWarning), and no test here waits on the store's time."""
+    return slr_sql.open(path, clock=ManualClock(0.0), **options)
+
+
 def answers(kb, goal):
     """The answers of ``goal`` through the compiled SQL and through the interpreter."""
     out = []
@@ -46,7 +53,7 @@ def python(code: str, *args: str, stdin=None, **popen) -> subprocess.Popen:
 # ------------------------------------------------------------------ programs of other kbs
 
 def test_every_kb_answers_on_the_union_of_the_stored_programs(db_path):
-    a, b = slr_sql.open(db_path), slr_sql.open(db_path)
+    a, b = opened(db_path), opened(db_path)
     try:
         a.load("usedFor(cup, tea). usedFor(pan, tea). usedFor(pot, tea). "
                "usedFor(jar, tea). usedFor(bowl, tea).")
@@ -55,7 +62,7 @@ def test_every_kb_answers_on_the_union_of_the_stored_programs(db_path):
         a.load("x(1).")   # used to rewrite the shared fact tables from a's program alone
         b.add_many(["obj(m1, mug)^1", "obj(c1, cup)^2"])
         expected = [{"L": ["m1", "c1"]}]
-        with slr_sql.open(db_path) as c:
+        with opened(db_path) as c:
             for kb in (a, b, c):
                 assert answers(kb, TEA) == [expected, expected]
     finally:
@@ -64,7 +71,7 @@ def test_every_kb_answers_on_the_union_of_the_stored_programs(db_path):
 
 
 def test_a_program_loaded_by_another_process_is_seen_at_the_next_call(db_path, tmp_path):
-    with slr_sql.open(db_path) as kb:
+    with opened(db_path) as kb:
         kb.add("obj(m1, mug)^1")
         assert kb.query("obj(O, mug)^_") == [{"O": "m1"}]
         program = tmp_path / "tea.slr"
@@ -114,7 +121,7 @@ def test_learned_delays_and_marks_never_go_back(db_path):
         b.add("q(2)^99")          # b sees a delay of 1
         b.mark_complete("p/1", 20.0)
         b.close()
-        with slr_sql.open(db_path, clock=ManualClock(0.0)) as c:
+        with opened(db_path) as c:
             assert c.complete_until("q/1") == -10.0   # now 0 - learned delay 10
             assert c.complete_until("p/1") == 50.0    # the mark
     finally:
@@ -137,7 +144,7 @@ def test_a_stale_writer_cannot_lower_what_is_stored(db_path):
 
 
 def test_one_kbs_load_keeps_the_buffers_of_another(db_path):
-    a, b = slr_sql.open(db_path), slr_sql.open(db_path)
+    a, b = opened(db_path), opened(db_path)
     try:
         a.load("cBuffer(p(_), 2).")
         b.load("q(1).")
@@ -154,7 +161,7 @@ def test_one_kbs_load_keeps_the_buffers_of_another(db_path):
 
 
 def test_fact_tables_follow_the_stored_programs_not_a_stale_copy(db_path):
-    a, b = slr_sql.open(db_path), slr_sql.open(db_path)
+    a, b = opened(db_path), opened(db_path)
     try:
         facts = " ".join(f"f({i})." for i in range(6))
         a.load(facts)
@@ -172,7 +179,7 @@ def test_fact_tables_follow_the_stored_programs_not_a_stale_copy(db_path):
 
 @pytest.fixture(params=["memory", "file"])
 def shared_kb(request, tmp_path):
-    kb = slr_sql.open(None if request.param == "memory" else tmp_path / "robot.db")
+    kb = opened(None if request.param == "memory" else tmp_path / "robot.db")
     try:
         yield kb
     finally:
@@ -233,7 +240,7 @@ def test_a_write_in_one_thread_does_not_break_a_query_in_another(shared_kb, inte
 
 
 def test_threads_adding_and_querying_one_kb_get_no_raw_errors(tmp_path):
-    kb = slr_sql.open(tmp_path / "robot.db")
+    kb = opened(tmp_path / "robot.db")
     errors: list = []
     stop = threading.Event()
 
@@ -307,12 +314,12 @@ def release(child: subprocess.Popen) -> None:
 
 
 def test_open_and_read_while_another_process_holds_the_write_lock(db_path):
-    with slr_sql.open(db_path) as kb:
+    with opened(db_path) as kb:
         kb.load("usedFor(cup, tea). cBuffer(obj(_, _), 5). ready.")
         kb.add("obj(c1, cup)^1")
     child = holding(HOLD_WRITE_LOCK, db_path)
     try:
-        with slr_sql.open(db_path, busy_timeout=0.2) as kb:   # no write needed to open
+        with opened(db_path, busy_timeout=0.2) as kb:   # no write needed to open
             assert answers(kb, TEA) == [[{"L": ["c1"]}]] * 2
             assert kb.query("ready") == [{}]
             with pytest.raises(SLRBusy) as info:
@@ -324,7 +331,7 @@ def test_open_and_read_while_another_process_holds_the_write_lock(db_path):
                 kb.mark_complete("obj/2", 5.0)
     finally:
         release(child)
-    with slr_sql.open(db_path) as kb:
+    with opened(db_path) as kb:
         kb.add("obj(c2, cup)^2")
         assert answers(kb, TEA) == [[{"L": ["c1", "c2"]}]] * 2
 
@@ -339,7 +346,7 @@ def test_busy_timeout_must_be_a_duration(db_path):
 
 
 def test_close_does_not_wait_for_a_reader_in_another_process(db_path):
-    kb = slr_sql.open(db_path, busy_timeout=60)
+    kb = opened(db_path, busy_timeout=60)
     kb.add_many([f"p({i})^{i}" for i in range(1000)])
     child = holding(HOLD_READ_TRANSACTION, db_path)
     try:
@@ -349,5 +356,5 @@ def test_close_does_not_wait_for_a_reader_in_another_process(db_path):
         assert not closer.is_alive(), "close() waited for another process's reader"
     finally:
         release(child)
-    with slr_sql.open(db_path) as again:
+    with opened(db_path) as again:
         assert again.query("findall(X, p(X)^_, L), length(L, N)")[0]["N"] == 1000

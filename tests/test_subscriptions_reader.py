@@ -11,6 +11,14 @@ import slr_sql
 DEADLINE = 30.0
 
 
+def opened(path):
+    """A store at ``path`` (None: in memory) with a ManualClock: the events here are stamped
+    1, 2, ... (not wall-clock times, which would make each type's first event "decades
+    late", a LearnedDelayWarning); every subscription here starts at since=0, and the hub's
+    housekeeping runs on time.monotonic, not on the store's clock."""
+    return slr_sql.open(path, clock=slr_sql.ManualClock(0.0))
+
+
 def answers_of(sub, count):
     out = []
     while len(out) < count:
@@ -73,7 +81,7 @@ def another_writer_after_the_commit_of(kb, event):
 
 
 def test_a_lagging_subscriber_catches_up_while_a_writer_holds_the_store(db_path):
-    with slr_sql.open(db_path) as kb:
+    with opened(db_path) as kb:
         hub = kb._subscriptions
         hub.cleanup_interval = 1e9          # no journal trimming (a write) during the test
         sub = kb.subscribe("p(X)^T", since=0, max_queue=10)
@@ -90,7 +98,7 @@ def test_a_lagging_subscriber_catches_up_while_a_writer_holds_the_store(db_path)
 
 def test_subscribers_behind_share_one_read_per_chunk(db_path):
     subscribers = 20
-    with slr_sql.open(db_path) as kb:
+    with opened(db_path) as kb:
         hub = kb._subscriptions
         hub.cleanup_interval = 1e9
         subs = [kb.subscribe("p(X)^T", since=0, max_queue=10) for _ in range(subscribers)]
@@ -122,11 +130,12 @@ def test_subscribers_behind_share_one_read_per_chunk(db_path):
             s.close()
 
 
-def test_an_in_memory_store_has_no_second_connection_and_still_delivers(kb):
-    sub = kb.subscribe("p(X)^T", since=0, max_queue=4)
-    kb.add_many([f"p({i})^{i}" for i in range(1, 21)])
-    assert answers_of(sub, 20) == list(range(1, 21))
-    sub.close()
+def test_an_in_memory_store_has_no_second_connection_and_still_delivers():
+    with opened(None) as kb:
+        sub = kb.subscribe("p(X)^T", since=0, max_queue=4)
+        kb.add_many([f"p({i})^{i}" for i in range(1, 21)])
+        assert answers_of(sub, 20) == list(range(1, 21))
+        sub.close()
 
 
 def test_events_added_while_another_thread_holds_a_transaction_are_read_on_the_hubs_connection(
@@ -135,7 +144,7 @@ def test_events_added_while_another_thread_holds_a_transaction_are_read_on_the_h
     housekeeping or a second writer) is inside a transaction: the rows are committed, so the
     hub reads them on its own connection and delivers them without waiting for that
     transaction."""
-    with slr_sql.open(db_path) as kb:
+    with opened(db_path) as kb:
         hub = kb._subscriptions
         hub.cleanup_interval = 1e9
         sub = kb.subscribe("p(X)^T", since=0)
@@ -153,7 +162,7 @@ def test_a_subscription_to_a_type_without_events_does_not_hold_up_the_others(db_
     """Every pass looks up the table of a type that has none yet (it may appear from another
     process): on the hub's connection, so that lookup never waits for a writer's transaction
     while an event of another type waits to be delivered."""
-    with slr_sql.open(db_path) as kb:
+    with opened(db_path) as kb:
         hub = kb._subscriptions
         hub.cleanup_interval = 1e9
         nothing = kb.subscribe("nothing(X)^T", since=0)   # served first in every pass
@@ -173,7 +182,7 @@ def test_housekeeping_waits_for_a_busy_store_after_the_deliveries_not_before(db_
     """Writing positions waits while a writer holds the store: delivery passes go on
     meanwhile (they used to queue behind that transaction), and the positions are written
     once the store is free."""
-    with slr_sql.open(db_path) as kb:
+    with opened(db_path) as kb:
         hub = kb._subscriptions
         sub = kb.subscribe("p(X)^T", since=0, id="log")
         kb.add_many([f"p({i})^{i}" for i in range(1, 4)])
@@ -195,7 +204,7 @@ def test_housekeeping_that_must_wait_for_a_writer_delays_no_delivery(db_path):
     a writer's transaction (here at once: a lease so short that nothing may be put off), a
     lagging subscriber still catches up meanwhile. On the hub thread, the pass after the
     first refill waited for the writer, and the deliveries with it."""
-    with slr_sql.open(db_path) as kb:
+    with opened(db_path) as kb:
         hub = kb._subscriptions
         hub.cleanup_interval = 1e9
         sub = kb.subscribe("p(X)^T", since=0, id="log", max_queue=10)
