@@ -108,30 +108,32 @@ def _as_older_versions_wrote(path, count: int, source_count: str | None = None) 
     conn.close()
 
 
+# ManualClock(100.0) as in the fixtures above: events stamped 1, 2 on a wall clock would be
+# "decades late" (a LearnedDelayWarning); no test here waits on the store's time.
 def test_a_runtime_bound_an_older_version_accepted_does_not_break_the_type(tmp_path):
     path = tmp_path / "robot.db"
-    with slr_sql.open(path) as kb:
+    with slr_sql.open(path, clock=slr_sql.ManualClock(100.0)) as kb:
         kb.add_buffer("p(_)", keep_last=3)
         kb.add("p(a)^1")
     _as_older_versions_wrote(path, 3)
-    with slr_sql.open(path) as kb:
+    with slr_sql.open(path, clock=slr_sql.ManualClock(100.0)) as kb:
         kb.add_many([f"p(x{i})^{i + 2}" for i in range(10)])
         kb.add("p(b)^20")
         assert kb.sql("SELECT count(*) FROM p")[1] == [(12,)]
         (info,) = kb.buffers()
         assert info.amount == MAX_KEEP_LAST
-    with slr_sql.open(path) as kb:  # and after a second reopen
+    with slr_sql.open(path, clock=slr_sql.ManualClock(100.0)) as kb:  # and after a second reopen
         kb.add("p(c)^21")
         assert kb.sql("SELECT count(*) FROM p")[1] == [(13,)]
 
 
 def test_a_program_bound_an_older_version_accepted_does_not_break_the_type(tmp_path):
     path = tmp_path / "robot.db"
-    with slr_sql.open(path) as kb:
+    with slr_sql.open(path, clock=slr_sql.ManualClock(100.0)) as kb:
         kb.load("cBuffer(p(_), 3).")
         kb.add("p(a)^1")
     _as_older_versions_wrote(path, 3, source_count="1000000000000000000000000000000")
-    with slr_sql.open(path) as kb:
+    with slr_sql.open(path, clock=slr_sql.ManualClock(100.0)) as kb:
         kb.add_many([f"p(x{i})^{i + 2}" for i in range(10)])
         assert kb.sql("SELECT count(*) FROM p")[1] == [(11,)]
         assert [b.amount for b in kb.buffers()] == [MAX_KEEP_LAST]
@@ -141,7 +143,7 @@ def test_a_failing_trigger_is_not_called_a_damaged_file(tmp_path):
     """What the finding saw: the old trigger failing every add said "if the file is damaged,
     restore it". A statement failing in a healthy file says what failed, not that."""
     path = tmp_path / "robot.db"
-    with slr_sql.open(path) as kb:
+    with slr_sql.open(path, clock=slr_sql.ManualClock(100.0)) as kb:
         kb.add("p(a)^1")
         conn = sqlite3.connect(path)
         conn.execute("CREATE TRIGGER bad BEFORE INSERT ON p BEGIN "
@@ -156,7 +158,7 @@ def test_a_failing_trigger_is_not_called_a_damaged_file(tmp_path):
 
 def test_post_buffers_refuses_out_of_range_bounds_with_400(tmp_path):
     db = tmp_path / "robot.db"
-    with slr_sql.open(db) as kb:
+    with slr_sql.open(db, clock=slr_sql.ManualClock(100.0)) as kb:
         kb.add("p(a)^1")
     with ServiceProcess(db) as server:
         for body, words in (({"pattern": "p(_)", "keep_last": 10 ** 30}, "keep_last is out of range"),

@@ -168,10 +168,12 @@ def test_the_service_answers_503_with_retry_after_on_a_full_disk(tmp_path):
     assert "Traceback" not in errors, errors
 
 
+# A ManualClock where events are stamped 0, 1, ...: on a wall clock they would be "decades
+# late" (a LearnedDelayWarning); nothing here waits on the store's time.
 def test_the_size_limit_of_sqlite_is_store_full_too(tmp_path):
     """SQLITE_FULL without a mount: the connection's page limit. The same words and class,
     and the store takes events again once the limit is raised."""
-    with slr_sql.open(tmp_path / "robot.db") as kb:
+    with slr_sql.open(tmp_path / "robot.db", clock=slr_sql.ManualClock(0.0)) as kb:
         kb.add_many([f"p({i})^{i}" for i in range(10)])
         pages = kb.sql("PRAGMA page_count")[1][0][0]
         kb.sql(f"PRAGMA max_page_count = {pages + 2}", write=True)
@@ -189,7 +191,7 @@ def test_the_size_limit_of_sqlite_is_store_full_too(tmp_path):
 
 def test_a_lock_held_too_long_is_503_with_retry_after(tmp_path):
     db = tmp_path / "robot.db"
-    with slr_sql.open(db) as kb:
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
         kb.add("p(1)^1")
     with ServiceProcess(db) as server:
         holder = sqlite3.connect(db, isolation_level=None)

@@ -22,9 +22,11 @@ async def take(sub, limit: int) -> list:
     return await asyncio.wait_for(sub.next_answers(limit, handled=False), DEADLINE)
 
 
+# Every store here has a ManualClock: events stamped 1, 2 on a wall clock would be "decades
+# late" (a LearnedDelayWarning); the subscriptions start at since=0.
 def test_answers_not_acknowledged_come_again_after_close_and_reopen(tmp_path):
     path = tmp_path / "acks.db"
-    with slr_sql.open(path) as kb:
+    with slr_sql.open(path, clock=ManualClock(0.0)) as kb:
         kb.add_many([f"p({i})^{i}" for i in range(1, 11)])
         sub = kb.subscribe("p(X)^T", since=0, id="acked")
 
@@ -39,14 +41,14 @@ def test_answers_not_acknowledged_come_again_after_close_and_reopen(tmp_path):
         sub.acknowledge(5)
         assert sub.unacknowledged == 3 and sub.position() > before
         sub.close()                          # 6, 7, 8 were never acknowledged
-    with slr_sql.open(path) as kb:
+    with slr_sql.open(path, clock=ManualClock(0.0)) as kb:
         again = kb.subscribe("p(X)^T", since=0, id="acked")
         assert [again.get(timeout=DEADLINE)["X"] for _ in range(5)] == [6, 7, 8, 9, 10]
         again.close(forget=True)
 
 
 def test_the_position_moves_only_with_acknowledgements(tmp_path):
-    with slr_sql.open(tmp_path / "pos.db") as kb:
+    with slr_sql.open(tmp_path / "pos.db", clock=ManualClock(0.0)) as kb:
         kb.add_many([f"p({i})^{i}" for i in range(1, 4)])
         sub = kb.subscribe("p(X)^T", since=0, id="pos")
         start = sub.position()
@@ -62,7 +64,7 @@ def test_the_position_moves_only_with_acknowledgements(tmp_path):
 
 @pytest.mark.parametrize("count", [-1, 3, 1.0, True, "1"])
 def test_acknowledging_what_was_not_taken_is_an_error(count):
-    with slr_sql.open() as kb:
+    with slr_sql.open(clock=ManualClock(0.0)) as kb:
         kb.add_many(["p(1)^1", "p(2)^2"])
         sub = kb.subscribe("p(X)^T", since=0)
         assert xs(asyncio.run(take(sub, 2))) == [1, 2]
