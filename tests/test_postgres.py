@@ -100,11 +100,11 @@ def test_psql_sees_one_table_per_event_type(postgres_url):
 
 def test_schema_from_the_url_and_adopting_a_foreign_one(postgres_url):
     fleet = _schema_url(postgres_url, "fleet")
-    with slr_sql.open(fleet) as kb:
+    with slr_sql.open(fleet, clock=ManualClock(0.0)) as kb:
         kb.add("seen(pallet7, dock)^10")
     with slr_sql.open(postgres_url) as kb:  # schema slr: another store, empty
         assert kb.query("seen(P, W)^_") == []
-    with slr_sql.open(fleet) as kb:
+    with slr_sql.open(fleet, clock=ManualClock(0.0)) as kb:
         assert kb.query("seen(P, W)^_") == [{"P": "pallet7", "W": "dock"}]
     with psycopg.connect(postgres_url, autocommit=True) as conn:
         conn.execute("CREATE SCHEMA theirs")
@@ -115,7 +115,7 @@ def test_schema_from_the_url_and_adopting_a_foreign_one(postgres_url):
     with psycopg.connect(postgres_url) as conn:  # refused: nothing was added
         tables = conn.execute("SELECT tablename FROM pg_tables WHERE schemaname = 'theirs'")
         assert [t for (t,) in tables] == ["orders"]
-    with slr_sql.open(theirs, adopt=True) as kb:
+    with slr_sql.open(theirs, adopt=True, clock=ManualClock(0.0)) as kb:
         kb.add("p(1)^1")
         assert kb.query("p(X)^_") == [{"X": 1}]
 
@@ -124,7 +124,7 @@ def test_postgres_scheme_and_libpq_parameters(postgres_url):
     """``postgres://`` works too, and libpq parameters in the query string pass through."""
     url = re.sub(r"^postgresql://", "postgres://", postgres_url)
     assert "host=" in url  # the embedded server is reached through its socket folder
-    with slr_sql.open(url + "&application_name=slr_test") as kb:
+    with slr_sql.open(url + "&application_name=slr_test", clock=ManualClock(0.0)) as kb:
         kb.add("p(a)^1")
         name = kb.sql("SELECT current_setting('application_name')")[1][0][0]
     assert name == "slr_test"
@@ -147,7 +147,8 @@ def test_reopen_keeps_program_events_and_rules(postgres_url):
 
 
 def test_two_connections_see_each_others_writes(postgres_url):
-    with slr_sql.open(postgres_url) as one, slr_sql.open(postgres_url) as two:
+    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as one, \
+            slr_sql.open(postgres_url, clock=ManualClock(0.0)) as two:
         one.load("seen(X) :- p(X)^_.")
         one.add("p(a)^1")
         assert two.query("seen(X)") == [{"X": "a"}]
@@ -173,7 +174,7 @@ def test_learned_delays_and_marks_only_grow(postgres_url):
 def test_every_failure_is_an_slr_error(postgres_url):
     with pytest.raises(SLRError, match="cannot connect"):
         slr_sql.open("postgresql://nobody@127.0.0.1:1/none?connect_timeout=2")
-    with slr_sql.open(postgres_url) as kb:
+    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
         kb.add("p(a)^1")
         with pytest.raises(SLRError, match="sql: "):
             kb.sql("SELECT no_such_column FROM p")
@@ -188,7 +189,7 @@ def test_every_failure_is_an_slr_error(postgres_url):
 
 
 def test_a_lock_wait_is_slr_busy(postgres_url):
-    with slr_sql.open(postgres_url, busy_timeout=0.3) as kb:
+    with slr_sql.open(postgres_url, busy_timeout=0.3, clock=ManualClock(0.0)) as kb:
         kb.add("p(a)^1")
         with psycopg.connect(postgres_url) as other:
             other.execute("LOCK TABLE slr.p IN ACCESS EXCLUSIVE MODE")
@@ -335,7 +336,8 @@ def test_concurrent_writers_derive_each_complex_event_once(backend, tmp_path):
         p.stdin.write("go\n")
         p.stdin.flush()
     for p in procs:
-        assert p.wait(timeout=120) == 0
+        p.communicate(timeout=120)      # waits, and closes the pipes
+        assert p.returncode == 0
     a = [(f"k{i % 3}", 2.0 * i) for i in range(n)]
     b = [(f"k{i % 3}", 2.0 * i + 0.5) for i in range(n)]
     expected = sorted((k, s, e) for k, s in a for k2, e in b if k == k2 and s < e)
@@ -388,6 +390,7 @@ def test_slr_serve_serves_a_postgres_store(postgres_url):
     finally:
         proc.terminate()
         proc.wait(timeout=30)
+        proc.stdout.close()
 
 
 # ------------------------------------------------------------------ subscriptions
@@ -395,7 +398,8 @@ def test_slr_serve_serves_a_postgres_store(postgres_url):
 def test_a_subscription_is_woken_by_another_connections_add(postgres_url):
     """LISTEN/NOTIFY: an event another connection stores reaches the subscriber at once,
     not at its next poll (the poll is set to a minute here)."""
-    with slr_sql.open(postgres_url) as reader, slr_sql.open(postgres_url) as writer:
+    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as reader, \
+            slr_sql.open(postgres_url, clock=ManualClock(0.0)) as writer:
         reader._subscriptions.poll_interval = 60.0
         sub = reader.subscribe("p(X)^T", since=0)
         writer.add("p(a)^1")
@@ -427,7 +431,7 @@ def test_a_subscription_misses_nothing_while_writers_commit_out_of_order(postgre
     script.write_text(SUB_WRITER)
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parent.parent))
     n = 30
-    with slr_sql.open(postgres_url) as kb:
+    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
         kb.add("p(x, 0, 0)^0")
         sub = kb.subscribe("p(W, I, J)^_", since=0)
         assert sub.get(timeout=10) == {"W": "x", "I": 0, "J": 0}
@@ -441,7 +445,8 @@ def test_a_subscription_misses_nothing_while_writers_commit_out_of_order(postgre
             p.stdin.flush()
         got = [sub.get(timeout=30) for _ in range(3 * n * 3)]
         for p in procs:
-            assert p.wait(timeout=60) == 0
+            p.communicate(timeout=60)   # waits, and closes the pipes
+            assert p.returncode == 0
         seen = [(str(a["W"]), a["I"], a["J"]) for a in got]
         assert sorted(seen) == sorted((w, i, j) for w in "abc" for i in range(n)
                                       for j in range(3))
@@ -452,7 +457,7 @@ def test_a_subscription_misses_nothing_while_writers_commit_out_of_order(postgre
 def test_a_dropped_connection_is_an_slr_error_then_works_again(postgres_url):
     """The server drops the store's connection (as a restart does): the next call is an
     SLRError, the one after works, and nothing acknowledged is lost."""
-    with slr_sql.open(postgres_url) as kb:
+    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
         kb.add("p(1)^1")
         with psycopg.connect(postgres_url, autocommit=True) as admin:
             admin.execute("SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE "
