@@ -60,8 +60,13 @@ def test_same_parameters_defaults_and_return_types(name):
 
 # -- every method, run on both ----------------------------------------------------------------
 
+# The served store's clock is the server's wall clock, so the local one keeps a wall clock too
+# (the same answers to synchronized queries); the events are stamped 1.0 to 9.0, so every type
+# declares its delay (none), or its first event would be "decades late" (a LearnedDelayWarning).
 PROGRAM = """\
 :- max_delay(seen/1, 0).
+:- max_delay(obj/3, 0). :- max_delay(a/1, 0). :- max_delay(b/1, 0).
+:- max_delay(c/1, 0). :- max_delay(sub/1, 0).
 color(O, C)^T :- prev(obj(O, _, C)^_Z, T).
 loop :- loop.
 c(X) <- a(X) seq b(X).

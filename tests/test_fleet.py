@@ -179,7 +179,7 @@ def test_a_robot_name_that_reads_as_a_number_is_refused_on_both_backends(tmp_pat
         with_schema(request.getfixturevalue("postgres_url"), f"numeric_{len(name)}")
     with pytest.raises(slr_sql.SLRError, match="reads as a number"):
         slr_sql.open(backend, robot=name)
-    with slr_sql.open(backend, robot=name + "x") as kb:       # a word is fine
+    with opened(backend, robot=name + "x") as kb:       # a word is fine
         kb.add("seen(p7)^1")
         assert kb.query("origin(R, seen(P)^_)") == [{"R": name + "x", "P": "p7"}]
 

@@ -38,7 +38,7 @@ def test_text_with_u0000_is_a_value_on_both_backends_and_a_name_only_on_sqlite(b
     """PostgreSQL text cannot hold U+0000: an argument holding it is stored escaped (the same
     answers as SQLite), an event *name* holding it is that event's rejection in words there,
     and the batch's other events are stored."""
-    with slr_sql.open(backend) as kb:
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(0.0)) as kb:
         kb.add("p('a\\0\\b')^1")
         kb.load("q('x\\0\\y'). r(X) :- q(X).")
         assert kb.query("p(X)^_") == [{"X": "a\x00b"}]
@@ -57,7 +57,7 @@ def test_text_with_u0000_is_a_value_on_both_backends_and_a_name_only_on_sqlite(b
 def test_sql_takes_question_mark_and_named_parameters_on_both_backends(backend):
     """``kb.sql``'s placeholders are the API's (``?`` with a sequence, ``:name`` with a
     mapping) on either backend; a mapping is never taken for the sequence of its keys."""
-    with slr_sql.open(backend) as kb:
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(0.0)) as kb:
         kb.add_many(["p(a)^1", "p(b)^2", "p(c)^3"])
         _, rows = kb.sql("SELECT arg1 FROM p WHERE t_end >= ? ORDER BY t_end", [2.0])
         assert rows == [("b",), ("c",)]

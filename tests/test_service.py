@@ -77,8 +77,12 @@ def same_value(a, b) -> bool:
 
 
 def program(tag: str) -> str:
+    # the server and `local` keep wall clocks (the same answers to synchronized queries); seg
+    # events stamped 10.0 declare no delay, or the first would be "decades late" (a
+    # LearnedDelayWarning)
     return f"""\
 :- max_delay({tag}obj/3, 1e10).
+:- max_delay({tag}seg/2, 0).
 {tag}color(O, C)^T :- prev({tag}obj(O, _, C)^_Z, T).
 {tag}location(O, L)^T :- prev({tag}seg(O, L)^Z, T), T - Z =< 5, !.
 {tag}location(O, "outdated")^T :- prev({tag}seg(O, _)^Z, T), T - Z > 5, !.

@@ -277,7 +277,7 @@ def test_plain_event_arguments_are_atoms_and_their_rejections_say_so(server, ato
     assert rejection["message"].startswith(f"{tag}o(cup2,[])^[6.0,5.0]: ")
     with slr_sql.connect(server.url) as client:
         (answer,) = client.query(f"{tag}o(O, L)^T")
-    local = slr_sql.open()
+    local = slr_sql.open(clock=slr_sql.ManualClock(0.0))
     local.add(f"{tag}o(cup1, [1, 2.5, x])^1")
     assert answer == local.query(f"{tag}o(O, L)^T")[0] and type(answer["O"]) is slr_sql.Atom
     local.close()

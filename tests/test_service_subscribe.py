@@ -75,7 +75,7 @@ def test_answers_keep_their_terms(remote, tag):
     with remote.subscribe(f"{tag}q(A, S, L, C, N)^T", since=0, until=1) as sub:
         remote.mark_complete(f"{tag}q/5", 1)
         (answer,) = list(sub)
-    local = slr_sql.open()
+    local = slr_sql.open(clock=slr_sql.ManualClock(0.0))
     local.add(f'{tag}q(cup, "a string", [1, 2.5], f(g(x)), 3)^1')
     assert answer == local.query(f"{tag}q(A, S, L, C, N)^T")[0]
     assert answer["A"] == Atom("cup") and type(answer["A"]) is Atom

@@ -51,7 +51,7 @@ def test_the_sqlite_printer_prints_todays_text():
     """Event-rule statements printed for SQLite are the text slr_sql always ran; the
     PostgreSQL printer differs exactly in the engine's spellings."""
     import slr_sql
-    kb = slr_sql.open()
+    kb = slr_sql.open(clock=slr_sql.ManualClock(0.0))
     kb.load("r(X) <- (a(X) seq b(X, 1.0)) within 5 where X > 2.")
     kb.add_many(["a(1)^1", "b(1, 1.0)^2"])
     alt: AltSQL = kb._cep.rules[0].alts[0]

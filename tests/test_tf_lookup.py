@@ -225,7 +225,8 @@ def test_new_edges_and_observations_are_seen_by_the_next_lookup(robot, tmp_path)
     assert len(robot.query("tf_lookup(map, gripper, 2, P)")) == 1
     # another connection writing the same file
     db = tmp_path / "robot.db"
-    with slr_sql.open(db) as kb, slr_sql.open(db) as other:
+    with slr_sql.open(db, clock=ManualClock(100.0)) as kb, \
+            slr_sql.open(db, clock=ManualClock(100.0)) as other:
         kb.add_many([tf_event("tf", "a", "b", 1.0, (1, 0, 0), (0, 0, 0, 1))])
         assert kb.query("tf_lookup(a, c, 1, P)") == []
         other.add_many([tf_event("tf", "b", "c", 1.0, (0, 1, 0), (0, 0, 0, 1))])
