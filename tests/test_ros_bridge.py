@@ -50,8 +50,9 @@ class Lines:
         threading.Thread(target=self._pump, args=(process.stdout,), daemon=True).start()
 
     def _pump(self, stream) -> None:
-        for line in stream:
-            self.lines.put(line.rstrip("\n"))
+        with stream:                    # closed at the end of the output: no ResourceWarning
+            for line in stream:
+                self.lines.put(line.rstrip("\n"))
 
     def wait_for(self, text: str, deadline: float) -> str:
         while True:
@@ -159,6 +160,8 @@ def test_bridge_stores_published_messages_and_stops_cleanly(tmp_path, ros_env, p
             if process is not None and process.poll() is None:
                 process.kill()
                 process.wait()
+            if process is not None and process.stderr is not None:
+                process.stderr.close()
     with slr_sql.open(db) as kb:  # the store is intact after the signal
         answers = kb.query("pose(F, [X, Y])^T")
         delay = kb.sql("SELECT max(arrival - t_end) AS d FROM pose")[1][0][0]
@@ -374,6 +377,8 @@ def test_bridge_tf_without_a_tf2_msgs_package(tmp_path, ros_env):
             if process is not None and process.poll() is None:
                 process.kill()
                 process.wait()
+            if process is not None and process.stderr is not None:
+                process.stderr.close()
     with slr_sql.open(db) as kb:
         static = kb.query("tf_static(base, cam, P)^T")
         moving = kb.query("tf(map, base, pose([X, _, _], _))^T")
@@ -407,6 +412,8 @@ def _bridge_stores_five_published(command: list[str], db: Path, node: str, prefi
             if process is not None and process.poll() is None:
                 process.kill()
                 process.wait()
+            if process is not None and process.stderr is not None:
+                process.stderr.close()
 
 
 def test_bridge_takes_its_map_and_name_as_ros_arguments(tmp_path, ros_env, prefix):

@@ -55,12 +55,14 @@ class Process:
 
     @staticmethod
     def _pump(stream, into: queue.Queue) -> None:
-        for line in stream:
-            into.put(line.rstrip("\n"))
+        with stream:                    # closed at the end of the output: no ResourceWarning
+            for line in stream:
+                into.put(line.rstrip("\n"))
 
     def _pump_err(self) -> None:
-        for line in self.popen.stderr:
-            self.stderr.append(line)
+        with self.popen.stderr:
+            for line in self.popen.stderr:
+                self.stderr.append(line)
 
     def next_line(self, deadline: float) -> str:
         while True:
@@ -92,6 +94,8 @@ class Process:
             except subprocess.TimeoutExpired:
                 self.popen.kill()
                 self.popen.wait()
+        if self.popen.stdin is not None:
+            self.popen.stdin.close()
         return self.popen.returncode
 
 

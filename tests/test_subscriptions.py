@@ -96,10 +96,11 @@ class Lines:
         self.thread.start()
 
     def _read(self) -> None:
-        for line in self.child.stdout:
-            with self.cond:
-                self.lines.append(line.rstrip("\n"))
-                self.cond.notify_all()
+        with self.child.stdout:         # closed at the end of the output: no ResourceWarning
+            for line in self.child.stdout:
+                with self.cond:
+                    self.lines.append(line.rstrip("\n"))
+                    self.cond.notify_all()
         with self.cond:
             self.lines.append(None)
             self.cond.notify_all()
@@ -121,6 +122,12 @@ def start_cli(*args: str) -> tuple[subprocess.Popen, Lines]:
     child = subprocess.Popen([sys.executable, "-m", "slr_sql", *args], stdout=subprocess.PIPE,
                              stderr=subprocess.PIPE, text=True, cwd=str(ROOT), env=_env())
     return child, Lines(child)
+
+
+def errors_of(child: subprocess.Popen) -> str:
+    """What an ended child wrote to stderr; the pipe is closed."""
+    with child.stderr:
+        return child.stderr.read()
 
 
 # -- the three ways to consume --------------------------------------------------------------------
@@ -701,7 +708,9 @@ def test_a_durable_subscription_is_delivered_by_one_process_at_a_time(tmp_path):
                 kb.subscribe("p(X)^T", since=0, id="shared")
     finally:
         child.send_signal(signal.SIGINT)
-        assert child.wait(DEADLINE) == 0
+        code = child.wait(DEADLINE)
+        errors = errors_of(child)
+    assert code == 0, errors
     with slr_sql.open(path) as kb:         # released by the clean exit
         kb.subscribe("p(X)^T", since=0, id="shared").close(forget=True)
 
@@ -719,6 +728,7 @@ def test_a_sigkilled_durable_subscriber_resumes_with_no_gap(tmp_path):
         finally:
             os.kill(child.pid, signal.SIGKILL)
             child.wait(DEADLINE)
+            errors_of(child)
         kb.add_many([f"e({i})^{i}" for i in range(8, 12)])
         sub = kb.subscribe("e(X)^T", since=0, id="k")
         first = sub.get(timeout=DEADLINE)["X"]
@@ -748,7 +758,8 @@ def test_cli_prints_json_lines_and_exits_0_on_a_signal(tmp_path, stop):
         finally:
             child.send_signal(stop)
             code = child.wait(DEADLINE)
-        assert code == 0, child.stderr.read()
+            errors = errors_of(child)
+        assert code == 0, errors
         assert kb.sql("SELECT count(*) FROM slr_subscriptions")[1] == [(0,)]
 
 
@@ -770,7 +781,8 @@ def test_cli_exits_0_when_until_is_complete_by_another_processes_mark(tmp_path):
             if child.poll() is None:
                 child.kill()
                 child.wait()
-        assert code == 0, child.stderr.read()
+            errors = errors_of(child)
+        assert code == 0, errors
 
 
 def test_cli_errors_are_words_and_exit_1(tmp_path):
