@@ -869,6 +869,7 @@ def test_a_postgresql_restart_mid_stream(postgres_server, postgres_url, tmp_path
             if proc.poll() is None:
                 proc.kill()
                 proc.wait()
+        writer.stdout.close()
         log.close()
     said = (tmp_path / "push.log").read_text()
     assert said.count("unreachable") == said.count("reachable again") == 1, said
