@@ -4,6 +4,7 @@
     python benchmarks/bench_events.py --part throughput  # or latency, flat
     python benchmarks/bench_events.py --part throughput --rules equals3 --policies recent --no-one
     ETALIS_DIR=/tmp/etalis python benchmarks/bench_events.py --part throughput
+    ... --part throughput --repeats 5 --round-seconds 2   # more rounds of ours and ETALIS
 
 * **throughput** -- events/s through ``kb.add_many`` (batches of 1,000) and through ``kb.add``
   (one transaction per event), on a file store (``synchronous=FULL`` unless
@@ -20,6 +21,40 @@
   at a time: its rate stands beside ours through ``kb.add_many`` (batches of 1,000) and
   through ``kb.add_event`` (one transaction per event), each with its ratio; ``no rule`` is
   our own ingest of the same events without the rule, the ceiling of the batched rate.
+  **Rounds.** Each row runs ours (``add_many``) and ETALIS (a new ``swipl`` process) in
+  rounds, one right after the other, the order alternating (ours, ETALIS; ETALIS, ours;
+  ...), each round followed by the no-rule run: ``--repeats`` rounds at least (3), more (at
+  most 15) until each engine has run for ``--round-seconds`` CPU seconds in all (1; seq2
+  recent takes ~10 rounds, seq2 unrestricted 3). This machine's speed moves by up to +-50%
+  from minute to minute and single runs of ~0.1 s by +-20% within one, so one run of each
+  engine made ratios that moved 0.66-0.95x between runs of this script; now each round gives
+  a ratio of two runs made under the same load, and the headline is the **median of the
+  per-round ratios** (wall and CPU), with the least and greatest CPU ratio and the number of
+  rounds beside it; the rates shown are the medians of each engine's runs, the floor's
+  share of the budget uses ETALIS's median CPU rate, and the no-rule ratio is again the
+  median of the per-round ratios. The runs are also listed in order under the table.
+  ``kb.add_event`` (not ``--no-one``) runs once, against ETALIS's median.
+  **Cold start, checked (2026-11-27, load 1-4).** Ours: no cost for being the first run in
+  the process (first run's CPU rate / the median of two later ones, 10 new processes of seq2
+  recent: median 1.03, 0.79-1.25; per-batch times of all four seq2/equals3 rows, 4 runs
+  each: the first batch of every run, not only the first run, is 1-4 ms slower, the new
+  store's statements being prepared, which each run pays alike). So no warm-up: a warm-up
+  would hide nothing that is not paid again. What does recur: a full collection of Python's
+  garbage collector (~15 ms, with the run's 10,000 prepared events alive) falls inside about
+  one timed seq2 recent run in three (~+15% on that run); it is left in, as work a Python
+  process does, and the median of the rounds mostly steps around it. ETALIS: its timed loop
+  starts after consult and compile; three passes over the same events in one swipl process
+  (``reset_etalis_state`` between) ran alike -- the first pass's first 1,000 events took as
+  long as the later passes' first 1,000, no garbage collection or stack shift in any pass,
+  first pass / median of the later ones 0.70-1.37 (median 1.04) over 9 processes of
+  equals3 recent -- so no warm-up there either.
+  **CPU time** is the whole process's on both sides, user + system, all threads:
+  ``time.process_time`` for ours, ``process_cputime`` + ``system_time`` for swipl. (Until
+  2026-11-27 ETALIS's was ``statistics(cputime)``, the main thread's user time, which leaves
+  out SWI-Prolog's garbage-collection thread: 8-11% less CPU on seq2 recent, 4-6% on
+  equals3, none on seq2 unrestricted, where nothing is retracted. It is still shown, third in the
+  ETALIS column, to compare with the older tables. Ours includes the system time of its
+  writes, 15-25% of its CPU; ETALIS, in memory, has none.)
   The **durable floor** beside ETALIS is the least durable work any engine storing what we
   store must do for the same run, with raw sqlite3 and no slr_sql code in the timed part: a
   traced, untimed run of ours gives the rows it stored, commit by commit (input events and
@@ -42,8 +77,8 @@
 The clock is a ManualClock that reaches each batch's last occurrence time as the batch is
 added, with ``max_delay 0`` declared: a live stream whose events arrive as they occur, so
 ``recent`` decides at the add (the batch's last instant at the next add). The rates are
-wall clock and CPU time of the measuring process (the machine is shared: CPU time is the
-steadier figure), as ratios against ETALIS measured in the same run.
+wall clock and CPU time of the measuring processes (the machine is shared: CPU time is the
+steadier figure), as ratios against ETALIS measured in the same rounds.
 """
 from __future__ import annotations
 
@@ -294,7 +329,7 @@ def etalis(scenario: str, policy: str, n: int, etalis_dir: str,
     Its CPU time is the process's, user time of every thread (``process_cputime``) plus
     system time, as ``time.process_time`` measures ours: SWI-Prolog's ``cputime`` is the
     calling thread's user time only and leaves out its garbage-collection thread, which
-    reclaims the clauses ETALIS retracts (5-10% more CPU on seq2 and equals3). That
+    reclaims the clauses ETALIS retracts (4-11% more CPU on seq2 recent and equals3). That
     figure is kept as ``cpu_main_thread``, the one the tables before 2026-11-27 03:00 used."""
     swipl = shutil.which("swipl")
     if swipl is None:
