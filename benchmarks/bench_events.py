@@ -330,7 +330,7 @@ def etalis(scenario: str, policy: str, n: int, etalis_dir: str,
     system time, as ``time.process_time`` measures ours: SWI-Prolog's ``cputime`` is the
     calling thread's user time only and leaves out its garbage-collection thread, which
     reclaims the clauses ETALIS retracts (4-11% more CPU on seq2 recent and equals3). That
-    figure is kept as ``cpu_main_thread``, the one the tables before 2026-11-27 03:00 used."""
+    figure is kept as ``cpu_main_thread``, the one the tables before 2026-11-27 02:50 used."""
     swipl = shutil.which("swipl")
     if swipl is None:
         return "no swipl"
