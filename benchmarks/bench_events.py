@@ -33,7 +33,10 @@
   rounds beside it; the rates shown are the medians of each engine's runs, the floor's
   share of the budget uses ETALIS's median CPU rate, and the no-rule ratio is again the
   median of the per-round ratios. The runs are also listed in order under the table.
-  ``kb.add_event`` (not ``--no-one``) runs once, against ETALIS's median.
+  ``kb.add_event`` (not ``--no-one``) runs once, against ETALIS's median. A row whose
+  ETALIS run is long (seq3where on 10,000 events: minutes) costs ``--repeats`` such runs
+  (a failed or timed-out one is not repeated); ``--repeats 1 --round-seconds 0`` gives one
+  run of each engine, as before.
   **Cold start, checked (2026-11-27, load 1-4).** Ours: no cost for being the first run in
   the process (first run's CPU rate / the median of two later ones, 10 new processes of seq2
   recent: median 1.03, 0.79-1.25; per-batch times of all four seq2/equals3 rows, 4 runs
@@ -52,9 +55,9 @@
   ``time.process_time`` for ours, ``process_cputime`` + ``system_time`` for swipl. (Until
   2026-11-27 ETALIS's was ``statistics(cputime)``, the main thread's user time, which leaves
   out SWI-Prolog's garbage-collection thread: 8-11% less CPU on seq2 recent, 4-6% on
-  equals3, none on seq2 unrestricted, where nothing is retracted. It is still shown, third in the
-  ETALIS column, to compare with the older tables. Ours includes the system time of its
-  writes, 15-25% of its CPU; ETALIS, in memory, has none.)
+  equals3, none on seq2 unrestricted, where nothing is retracted. It is still shown, third
+  in the ETALIS column, to compare with the older tables. Ours includes the system time of
+  its writes, 15-25% of its CPU; ETALIS, in memory, has none.)
   The **durable floor** beside ETALIS is the least durable work any engine storing what we
   store must do for the same run, with raw sqlite3 and no slr_sql code in the timed part: a
   traced, untimed run of ours gives the rows it stored, commit by commit (input events and

@@ -5,6 +5,7 @@ rates each column is computed from, and the command line that asks for it."""
 from __future__ import annotations
 
 import argparse
+import doctest
 import importlib.util
 import os
 import re
@@ -140,3 +141,8 @@ def test_fewer_than_one_round_is_refused():
     result = subprocess.run([sys.executable, str(SCRIPT), "--part", "throughput",
                              "--repeats", "0"], capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and "--repeats must be at least 1" in result.stderr
+
+
+def test_the_examples_in_the_benchmark_run(bench):
+    failures, tried = doctest.testmod(bench, verbose=False)
+    assert tried >= 2 and failures == 0
