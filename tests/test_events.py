@@ -10,12 +10,6 @@ import pytest
 import slr_sql
 from slr_sql import ManualClock, SLREvaluationError, SLRError, SLRSyntaxError
 
-# These stores keep the default wall clock while their events are stamped with small times
-# (1.0, 12.31, ...), the language's examples: each type's first event arrives "decades
-# late", so the store caps its learned delay and says so with a LearnedDelayWarning, as it
-# should (tests/test_time_traps.py asserts those warnings). Here they are expected noise.
-pytestmark = pytest.mark.filterwarnings("ignore::slr_sql.clocks.LearnedDelayWarning")
-
 
 def intervals(kb, head="c(X)"):
     """The stored complex events of ``head``: sorted (values..., start, end)."""
@@ -592,6 +586,9 @@ def test_rules_index_the_arguments_their_joins_need(kb):
     assert any("slr_cep_ix__b__arg2_start (arg2=? AND t_start>?)" in p for p in plans)
 
 
+# the docstrings' examples open stores with the default wall clock and small times, for
+# brevity: the warning that says so is expected there (tests/test_doctests.py filters it too)
+@pytest.mark.filterwarnings("ignore::slr_sql.clocks.LearnedDelayWarning")
 def test_doctests_of_the_event_rule_modules():
     import doctest
 

@@ -8,19 +8,15 @@ import pytest
 import slr_sql
 from slr_sql import EventRejected, SLRError
 
-# These stores keep the default wall clock while their events are stamped with small times
-# (1.0, 12.31, ...), the language's examples: each type's first event arrives "decades
-# late", so the store caps its learned delay and says so with a LearnedDelayWarning, as it
-# should (tests/test_time_traps.py asserts those warnings). Here they are expected noise.
-pytestmark = pytest.mark.filterwarnings("ignore::slr_sql.clocks.LearnedDelayWarning")
-
 HUGE = 10 ** 5000
 DIGITS = "9" * 5000
 
 
 @pytest.fixture
 def kb():
-    kb = slr_sql.open()
+    # a ManualClock: events stamped 2.0 on a wall clock would be "decades late" (a
+    # LearnedDelayWarning); nothing here waits on the store's time
+    kb = slr_sql.open(clock=slr_sql.ManualClock(0.0))
     yield kb
     kb.close()
 

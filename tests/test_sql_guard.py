@@ -21,18 +21,14 @@ from service_helpers import ROOT, ServiceProcess
 from test_cli import slr
 from test_cli_errors import fails_in_words
 
-# These stores keep the default wall clock while their events are stamped with small times
-# (1.0, 12.31, ...), the language's examples: each type's first event arrives "decades
-# late", so the store caps its learned delay and says so with a LearnedDelayWarning, as it
-# should (tests/test_time_traps.py asserts those warnings). Here they are expected noise.
-pytestmark = pytest.mark.filterwarnings("ignore::slr_sql.clocks.LearnedDelayWarning")
-
 TOKENIZER = r"fts3_tokenizer\(\) is not allowed"
 
 
 @pytest.fixture
 def kb(tmp_path):
-    kb = slr_sql.open(tmp_path / "robot.db")
+    # a ManualClock: events stamped 1, 2 on a wall clock would be "decades late" (a
+    # LearnedDelayWarning); nothing here waits on the store's time
+    kb = slr_sql.open(tmp_path / "robot.db", clock=slr_sql.ManualClock(0.0))
     kb.add_many(["p(a)^1", "p(b)^2"])
     yield kb
     kb.close()
@@ -211,7 +207,7 @@ def test_slr_sql_refuses_fts3_tokenizer_in_words(kb):
 
 def test_the_service_refuses_fts3_tokenizer_and_stays_up(tmp_path):
     db = tmp_path / "robot.db"
-    with slr_sql.open(db) as kb:
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
         kb.add("p(a)^1")
     with ServiceProcess(db) as server:
         for query in ("SELECT fts3_tokenizer('simple')",
