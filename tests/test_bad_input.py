@@ -11,11 +11,13 @@ from slr_sql import EventRejected, SLRError
 from slr_sql.store import EventStore
 from slr_sql.terms import Atom, String, Struct
 
-# These stores keep the default wall clock while their events are stamped with small times
-# (1.0, 12.31, ...), the language's examples: each type's first event arrives "decades
-# late", so the store caps its learned delay and says so with a LearnedDelayWarning, as it
-# should (tests/test_time_traps.py asserts those warnings). Here they are expected noise.
-pytestmark = pytest.mark.filterwarnings("ignore::slr_sql.clocks.LearnedDelayWarning")
+@pytest.fixture
+def kb():
+    """A fresh in-memory store with a ManualClock: the events here are stamped 1.0, 2.0 (on a
+    wall clock they would be "decades late", a LearnedDelayWarning); nothing here waits on
+    the store's time."""
+    with slr_sql.open(clock=slr_sql.ManualClock(0.0)) as k:
+        yield k
 
 
 def stored(kb, name: str, arity: int) -> list:
@@ -69,7 +71,7 @@ TEXT_WITH_SURROGATES = st.lists(st.one_of(st.characters(), st.integers(0xD800, 0
 
 @given(TEXT_WITH_SURROGATES)
 def test_any_text_is_stored_exactly_or_rejected_for_its_surrogates(text):
-    with slr_sql.open() as kb:
+    with slr_sql.open(clock=slr_sql.ManualClock(0.0)) as kb:
         has_surrogate = any(0xD800 <= ord(c) <= 0xDFFF for c in text)
         for value in (Atom(text), String(text), [Atom(text)], Struct("f", (String(text),))):
             try:
@@ -292,11 +294,12 @@ def test_a_declared_arity_holds_after_reopen_and_in_another_connection(tmp_path)
     """``:- event p/2.`` makes p(1) a wrong-arity mistake: also for the same file opened
     again, and for a knowledge base that was already open when p/2 was declared."""
     path = tmp_path / "robot.db"
-    with slr_sql.open(path) as early, slr_sql.open(path) as kb:
+    clock = slr_sql.ManualClock(0.0)
+    with slr_sql.open(path, clock=clock) as early, slr_sql.open(path, clock=clock) as kb:
         kb.load(":- event p/2.")
         with pytest.raises(EventRejected, match="wrong number of arguments"):
             early.add("p(1)^1")
-    with slr_sql.open(path) as again:
+    with slr_sql.open(path, clock=clock) as again:
         with pytest.raises(EventRejected, match="wrong number of arguments"):
             again.add("p(1)^1")
         again.add("p(1, 2)^1")
