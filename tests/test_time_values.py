@@ -18,11 +18,13 @@ import pytest
 import slr_sql
 from slr_sql import Atom, SLRError, SLREvaluationError, Struct
 
-# These stores keep the default wall clock while their events are stamped with small times
-# (1.0, 12.31, ...), the language's examples: each type's first event arrives "decades
-# late", so the store caps its learned delay and says so with a LearnedDelayWarning, as it
-# should (tests/test_time_traps.py asserts those warnings). Here they are expected noise.
-pytestmark = pytest.mark.filterwarnings("ignore::slr_sql.clocks.LearnedDelayWarning")
+@pytest.fixture
+def kb():
+    """A fresh in-memory store with a ManualClock: the events here are stamped with small
+    times (on a wall clock they would be "decades late", a LearnedDelayWarning); nothing
+    here waits on the store's time."""
+    with slr_sql.open(clock=slr_sql.ManualClock(0.0)) as k:
+        yield k
 
 ENGINES = ["sql", "interpreter", "interpreter+compiled"]
 
