@@ -158,8 +158,8 @@ def test_the_service_answers_503_with_retry_after_on_a_full_disk(tmp_path):
         assert answer.headers["Retry-After"] == "10"
         error = answer.json()["error"]
         assert error["kind"] == "SLRStoreFull" and "the disk is full" in error["message"]
-        remote = slr_sql.connect(url)
-        with pytest.raises(SLRStoreFull):       # the client raises the class the server did
+        with slr_sql.connect(url) as remote, \
+                pytest.raises(SLRStoreFull):    # the client raises the class the server did
             remote.add(f"q({'y' * 4000}, x)^1")
         assert httpx.get(url + "/health", timeout=30).status_code == 200
     finally:

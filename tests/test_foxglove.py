@@ -217,14 +217,14 @@ def test_slr_serve_with_foxglove_shows_what_clients_of_the_service_add(tmp_path)
             deadline = time.monotonic() + DEADLINE
             client.pump(lambda: "/seg/2" in client.channels, deadline)
             client.subscribe("/seg/2")
-            remote = slr_sql.connect(url)
-            # subscribed before the add: the view sends what is stored from now on
-            time_before = time.monotonic()
-            while not client.on("/seg/2"):
-                remote.add(f"seg(cup2, [1.0, 2.0, 3.0])^{2 + time.monotonic() - time_before}")
-                client.pump(lambda: client.on("/seg/2") or time.monotonic() > time_before + 1,
-                            deadline)
+            with slr_sql.connect(url) as remote:
+                # subscribed before the add: the view sends what is stored from now on
                 time_before = time.monotonic()
+                while not client.on("/seg/2"):
+                    remote.add(f"seg(cup2, [1.0, 2.0, 3.0])^{2 + time.monotonic() - time_before}")
+                    client.pump(lambda: client.on("/seg/2") or time.monotonic() > time_before + 1,
+                                deadline)
+                    time_before = time.monotonic()
             (_, message), *_ = client.on("/seg/2")
             assert message["arg1"] == "cup2" and message["arg2"] == [1.0, 2.0, 3.0]
     finally:

@@ -534,8 +534,9 @@ def test_closed_client_and_unreachable_server_are_slr_errors(server):
     with socket.socket() as s:                 # a port nobody listens on
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    with pytest.raises(ServiceError) as info:
-        slr_sql.connect(f"http://127.0.0.1:{port}").query("true")
+    with slr_sql.connect(f"http://127.0.0.1:{port}") as unreachable, \
+            pytest.raises(ServiceError) as info:
+        unreachable.query("true")
     assert info.value.status == 0 and "cannot reach" in str(info.value)
     with pytest.raises(slr_sql.SLRError):
         slr_sql.connect("ftp://example")
