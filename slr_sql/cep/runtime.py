@@ -317,7 +317,8 @@ class RuleRuntime:
         the round read it already."""
         eng = self.eng
         self.ensure_built()
-        self._before, self._matched, self._queue = before, False, []
+        self._before, self._matched = before, False
+        self._forget_unsent()
         changed = False
         fresh_terms = False
         params = eng.params(now)
@@ -395,6 +396,12 @@ class RuleRuntime:
         if summary:
             self._summary(rows[-1])
         return stored(rows[len(statements) - 1]) if stored is not None else []
+
+    def _forget_unsent(self) -> None:
+        """Drop what a run found or wrote but did not send: it belonged to that run's
+        transaction, which an error rolled back (a deferred write refused at a later read
+        leaves the matches found meanwhile here), and must not reach the next one."""
+        self._queue, self._prov_rows, self._done = [], [], []
 
     def _before_matches(self) -> None:
         """Before a statement that may add provenance rows: the table's greatest id (the
@@ -776,6 +783,7 @@ class RuleRuntime:
 
     def refresh(self) -> None:
         """Re-read the summary of this rule's pending decisions."""
+        self._forget_unsent()
         self._summary(self._ask(pending_summary(), {"rule": self.key}))
 
     def _summary(self, rows: list) -> None:
