@@ -64,3 +64,25 @@ def test_a_decision_refused_midway_stores_nothing_and_is_made_once_later(postgre
         assert _derived(kb, "c") == [(1, 1.0, 2.0), (2, 3.0, 4.0)]
         assert other.execute("SELECT count(*) FROM slr_cep_pending").fetchone()[0] == 0
 
+
+def test_a_rule_whose_decisions_were_rolled_back_makes_them_again(postgres_url):
+    """One mark makes two rules' decisions in one round: the first rule decides its
+    terminators, the second's deferred write is refused and the round rolls back. The first
+    rule's pending rows are back, so it must decide them again at the next round (it had
+    taken its pending summary from the rolled-back transaction: nothing pending)."""
+    program = CHRONO + "d(X) <- a(X) seq e(X).\n"
+    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb, _other(postgres_url) as other:
+        kb.load(program)
+        assert kb.add_many(EVENTS + ["e(1)^2", "e(2)^4"]) == []
+        _refuse(other, _used_table(other, "d/1"), "e", 1)
+        kb.mark_complete("b/1", 10)
+        kb.mark_complete("e/1", 10)
+        with pytest.raises(SLRError, match="refuse"):
+            kb.mark_complete("a/1", 10)   # (both rules' terminators become decidable)
+        assert other.execute("SELECT count(*) FROM slr_cep_pending").fetchone()[0] == 4
+        assert other.execute("SELECT count(*) FROM c").fetchone()[0] == 0
+        other.execute(f'ALTER TABLE "{_used_table(other, "d/1")}" DROP CONSTRAINT refuse')
+        kb.mark_complete("a/1", 11)
+        assert _derived(kb, "c") == [(1, 1.0, 2.0), (2, 3.0, 4.0)]
+        assert _derived(kb, "d") == [(1, 1.0, 2.0), (2, 3.0, 4.0)]
+        assert other.execute("SELECT count(*) FROM slr_cep_pending").fetchone()[0] == 0

@@ -871,6 +871,10 @@ class EventRules:
         self._woken: dict = {}     # type -> the time a wake-up was asked for
         self._wake_due = False     # rules installed since the timers were last asked for
         self.closed = False
+        # a rollback may undo what the rules' pending summaries were read after (decisions
+        # made, rows kept pending): they are read again before they are used next
+        self._summaries_stale = False
+        kb.store.rollback_listeners.append(self._rolled_back)
 
     # ----------------------------------------------------------------- install
     @property
@@ -1200,6 +1204,7 @@ class EventRules:
 
     def _round(self, new_from: dict, dirty: set, decide: bool, ends: dict | None = None,
                token: _AddToken | None = None) -> list:
+        self._read_stale_summaries()
         now = float(self.clock.now())
         for key in self.types & self.leaf_types:
             if key not in new_from:
@@ -1230,8 +1235,20 @@ class EventRules:
                         (min(known[0], lo), max(known[1], hi))
         return derived
 
+    def _rolled_back(self) -> None:
+        self._summaries_stale = True
+
+    def _read_stale_summaries(self) -> None:
+        """After a rollback: every rule's summary of its pending decisions read again."""
+        if self._summaries_stale:
+            with self.store.lock:
+                for rt in self.rules:
+                    rt.refresh()
+                self._summaries_stale = False
+
     def ready(self, now: float) -> bool:
         """Can some pending decision be made at ``now`` (its histories are complete)?"""
+        self._read_stale_summaries()
         for rt in self.rules:
             if rt.waits and rt.ready_groups(now):
                 return True

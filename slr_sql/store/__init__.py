@@ -165,6 +165,12 @@ class EventStore:
     def table_created_hooks(self, hooks: list) -> None:
         self._tables.table_created_hooks = hooks
 
+    @property
+    def rollback_listeners(self) -> list:
+        """Called as ``listener()`` after a transaction, or a nested one, rolled back (what
+        a caller learned inside it may be gone)."""
+        return self._db.rollback_listeners
+
     def table_names(self) -> set[str]:
         """Names of every table of the store (event tables, ``slr_*`` tables, journals)."""
         self._db.check_open()
