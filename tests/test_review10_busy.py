@@ -145,3 +145,28 @@ def test_a_rule_decided_in_a_round_another_rule_made_busy_decides_again(postgres
         for head in ("c", "d"):
             assert sorted((r["X"], r["S"], r["E"]) for r in kb.query(f"{head}(X)^[S, E]")) \
                 == [(1, 1.0, 2.0), (2, 3.0, 4.0)]
+
+
+def test_a_rule_statement_cancelled_by_the_server_is_an_slr_error_and_stores_nothing(
+        postgres_url):
+    """The server cancels the rule's copy (``statement_timeout`` of the database, a slow
+    trigger another session put on the complex type's table): an SLRTimeout, nothing of the
+    add stored, and the next add, once the trigger is gone, derives."""
+    from slr_sql.errors import SLRTimeout
+    with _other(postgres_url, autocommit=True) as admin:
+        database = admin.execute("SELECT current_database()").fetchone()[0]
+        admin.execute(f'ALTER DATABASE "{database}" SET statement_timeout = 300')
+    with slr_sql.open(postgres_url, clock=ManualClock(10.0)) as kb:
+        kb.load(_program("unrestricted"))
+        kb.add_many(["a(1)^1", "b(1)^2"])
+        with _other(postgres_url, autocommit=True) as other:
+            other.execute("CREATE FUNCTION slr_test_slow() RETURNS trigger LANGUAGE plpgsql "
+                          "AS $$ BEGIN PERFORM pg_sleep(2); RETURN NEW; END $$")
+            other.execute("CREATE TRIGGER slow BEFORE INSERT ON c "
+                          "FOR EACH ROW EXECUTE FUNCTION slr_test_slow()")
+            with pytest.raises(SLRTimeout):
+                kb.add_many(["a(2)^3", "b(2)^4"])
+            assert _counts(postgres_url) == (1, 1, 1, 0)
+            other.execute("DROP TRIGGER slow ON c")
+        kb.add_many(["a(3)^5", "b(3)^6"])
+        assert _counts(postgres_url) == (2, 2, 2, 0)
