@@ -154,6 +154,7 @@ class EventPipeline:
             self.sync.on_add(stored)
             if marks:   # after the events of the same batch are stored
                 self.sync.apply_marks(marks)
+                self.cep.reread_pending()
             self._settle(run, [stored])   # (even empty: the listeners hear every add)
         finally:
             self._leave(run)
@@ -165,6 +166,7 @@ class EventPipeline:
         try:
             run.stage = "completeness"
             self.sync.mark(event_type, t)
+            self.cep.reread_pending()
             self._settle(run, [])
         finally:
             self._leave(run)

@@ -1238,6 +1238,12 @@ class EventRules:
     def _rolled_back(self) -> None:
         self._summaries_stale = True
 
+    def reread_pending(self) -> None:
+        """Read every rule's summary of its pending decisions again before the next
+        decision: completeness moved by a mark, which may complete the decisions another
+        connection left pending (this one's summaries know only its own)."""
+        self._summaries_stale = True
+
     def _read_stale_summaries(self) -> None:
         """After a rollback: every rule's summary of its pending decisions read again."""
         if self._summaries_stale:
