@@ -2,8 +2,8 @@
 
 Writer processes each own one input type of a ``recent``, ``chronological`` or negated rule and
 add its events out of order, marking their type complete (``kb.mark_complete``) as far as
-they know it is; a decision is made by whichever process moves completeness far enough (a
-writer's add or mark, or the test's final mark). Decisions wait for complete histories, so
+they know it is, and everything at their end; a decision is made by whichever process moves
+completeness far enough (a writer's add or mark), whoever stored the waiting row. Decisions wait for complete histories, so
 the complex events cannot depend on how the writers interleave: they must be, once each,
 those of the naive reference evaluator of tests/test_cep_differential.py over all events.
 """
@@ -40,9 +40,8 @@ with slr_sql.open(url, clock=ManualClock(0.0)) as kb:
         kb.add_many([(name, tuple(a), s2, e2) for a, s2, e2, _ in part])
         done = i + len(part)
         rest = [e2 for _, _, e2, _ in events[done:]]
-        # complete up to just before the earliest end still to come
-        if rest:
-            kb.mark_complete(f"{name}/1", min(rest) - 0.5)
+        # complete up to just before the earliest end still to come (all, at the end)
+        kb.mark_complete(f"{name}/1", min(rest) - 0.5 if rest else 1000.0)
 print("done", flush=True)
 """
 
@@ -96,10 +95,8 @@ def test_writers_of_each_type_decide_each_complex_event_once(postgres_url, tmp_p
     for p in procs:
         assert p.wait(timeout=120) == 0
     with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
-        # (what the writers could not decide yet: their histories complete only now)
-        for name in types:
-            kb.mark_complete(f"{name}/1", 1000.0)
-        got = sorted(((args[0],), s, e) for args, s, e, _ in kb.store.scan("r", 1))
+        # (the last writer's final mark completed every history: it decided the rest)
         assert kb.sql("SELECT count(*) FROM slr_cep_pending")[1] == [(0,)]
+        got = sorted(((args[0],), s, e) for args, s, e, _ in kb.store.scan("r", 1))
     expected = sorted(((h[0],), s, e) for h, s, e in cepdiff.reference(rule, events))
     assert expected and got == expected
