@@ -1248,8 +1248,15 @@ class EventRules:
         """After a rollback: every rule's summary of its pending decisions read again."""
         if self._summaries_stale:
             with self.store.lock:
-                for rt in self.rules:
-                    rt.refresh()
+                rules = self.rules
+                for rt in rules:
+                    rt._forget_unsent()
+                # (one call of the store for them all: one round trip to a server)
+                rows = self.store.run_compiled_batch(
+                    [(pending_summary(), {"rule": rt.key}, False) for rt in rules]) \
+                    if rules else []
+                for rt, summary in zip(rules, rows):
+                    rt._summary(summary)
                 self._summaries_stale = False
 
     def ready(self, now: float) -> bool:
