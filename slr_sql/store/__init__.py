@@ -168,7 +168,20 @@ class EventStore:
     @property
     def rollback_listeners(self) -> list:
         """Called as ``listener()`` after a transaction, or a nested one, rolled back (what
-        a caller learned inside it may be gone)."""
+        a caller learned inside it may be gone).
+
+        >>> s = EventStore(None); heard = []
+        >>> s.rollback_listeners.append(lambda: heard.append("rolled back"))
+        >>> with s.transaction(), s.transaction():
+        ...     s.add_event("p", (1,), 1.0, 1.0)
+        >>> try:
+        ...     with s.transaction():
+        ...         raise ValueError
+        ... except ValueError:
+        ...     pass
+        >>> heard
+        ['rolled back']
+        """
         return self._db.rollback_listeners
 
     def table_names(self) -> set[str]:
