@@ -1245,7 +1245,8 @@ class EventRules:
         self._summaries_stale = True
 
     def _read_stale_summaries(self) -> None:
-        """After a rollback: every rule's summary of its pending decisions read again."""
+        """After a rollback or a mark: every rule's summary of its pending decisions read
+        again."""
         if self._summaries_stale:
             with self.store.lock:
                 rules = self.rules
