@@ -1309,8 +1309,12 @@ class EventRules:
                              f"candidate waits in slr_cep_pending")
             if rt.policy != "unrestricted":
                 terms = ", ".join(str(p) for p in sorted(alt.alt.terminators))
+                through = [_type(k) for k, t in alt.decision.items() if t]
+                before = [_type(k) for k, t in alt.decision.items() if not t]
                 lines.append(f"    {rt.policy}: a row at position {terms} ends a match; it "
-                             f"is decided once every input type is complete up to its end")
+                             f"is decided once every input type is complete up to its end "
+                             f"(through its end: {', '.join(through) or 'none'}; before "
+                             f"it: {', '.join(before) or 'none'})")
             if not alt.runnable:
                 missing = [leaf.text for leaf, t in zip(alt.alt.leaves, alt.tables)
                            if t is None]
@@ -1338,8 +1342,10 @@ class EventRules:
                     continue
                 lines.extend("      " + line for line in _wrap(sql))
                 lines.extend("      plan: " + step for step in self._query_plan_lines(alt, sql))
+        closing = self.closing.get(rt.head_key, ())
         lines.append(f"  {_type(rt.head_key)} is complete up to z once "
-                     + ", ".join(_type(t) for t in self.inputs.get(rt.head_key, ()))
+                     + ", ".join(_type(t) + ("" if t in closing else " (before z)")
+                                 for t in self.inputs.get(rt.head_key, ()))
                      + " are complete up to z and no pending decision ends at or before z")
         lines.append(f"  now: {rt.detections} detections in this session, {rt.pending} "
                      f"pending, {rt.errors} rejected by errors"
