@@ -126,6 +126,9 @@ class RuleRuntime:
         self.used_name = f"slr_cep_u_{rule.key}" if rule.policy == "chronological" else None
         self.used = quote_identifier(self.used_name) if self.used_name else None
         self.width = max(len(alt.leaves) for alt in rule.alternatives)
+        # per alternative: the types a terminator's decision waits for, through its end or
+        # before it (the SQL's and the Python side's one answer)
+        self.decisions = [rule.decision_inputs(n) for n in range(len(rule.alternatives))]
         self.alts: list[AltSQL] = []
         self.residuals: list[Residual | None] = []
         self.reads_store: list[bool] = []
@@ -161,7 +164,7 @@ class RuleRuntime:
             sql = AltSQL(alt, n, tables, neg_tables, head_args, self.policy, eng.complete_sql,
                          used_table=self.used, prov_table=self.prov, table_names=names,
                          fact_table=eng.fact_table, dialect=eng.store.dialect,
-                         decision=self.rule.decision_inputs(n))
+                         decision=self.decisions[n])
             self.alts.append(sql)
             residual = None
             reads = False
@@ -551,7 +554,7 @@ class RuleRuntime:
             return all(complete(leaf.key, t, now, False)
                        for _, leaf in self.rule.alternatives[n].negations)
         return all(complete(key, t, now, through)
-                   for key, through in self.alts[n].decision.items())
+                   for key, through in self.decisions[n].items())
 
     def _inputs_complete(self, n: int, t: float, now: float) -> bool:
         """:meth:`AltSQL.inputs_complete` of alternative ``n`` at a terminator's end ``t``,
@@ -1248,10 +1251,10 @@ class EventRules:
                 if wait is not None:
                     keys = [wait]
                 elif n < len(rt.rule.alternatives):
-                    alt = rt.rule.alternatives[n]
-                    keys = [leaf.key for _, leaf in alt.negations]
-                    if kind == "term":
-                        keys += [leaf.key for leaf in alt.leaves]
+                    # (a term decision: what it waits for, chronological's other
+                    # alternatives' terminators included)
+                    keys = list(rt.decisions[n]) if kind == "term" else \
+                        [leaf.key for _, leaf in rt.rule.alternatives[n].negations]
                 else:
                     keys = []
                 for key in keys:
