@@ -12,6 +12,7 @@ contract), on SQLite and on PostgreSQL.
 from __future__ import annotations
 
 import random
+import threading
 
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
@@ -323,3 +324,34 @@ def test_in_order_streams_with_ties_on_postgresql_derive_the_reference(postgres_
         expected = _typed([(tuple(h), s, e) for h, s, e in reference(rule, events)])
         got = run_in_order(rule, events, True, _fresh_database(postgres_url, f"r{n}"))
         assert _typed(got) == expected, (rule_text(rule), events)
+
+
+class _UntickedClock(slr_sql.clocks.Clock):
+    """A clock that moves without telling its listeners, as a WallClock does: decisions
+    that wait for it are made by the synchronizer's timer."""
+
+    def __init__(self, t: float):
+        super().__init__()
+        self.t = t
+
+    def now(self) -> float:
+        return self.t
+
+
+def test_the_timer_wakes_a_chronological_decision_for_another_alternatives_type(tmp_path):
+    """a(1)^5 waits for k (the other alternative's terminator type) to be complete up to 5:
+    on a clock that moves silently, the timer must be set for k's max_delay, not only for
+    the types of a(1)^5's own alternative, or the decision waits for the next add."""
+    clock = _UntickedClock(5.0)
+    with slr_sql.open(str(tmp_path / "k.db"), clock=clock) as kb:
+        kb.load(":- consumption(chronological).\n:- in_order(a/1). :- in_order(b/1).\n"
+                ":- max_delay(a/1, 1000). :- max_delay(b/1, 1000). :- max_delay(k/1, 0.05).\n"
+                "c(X) <- b(_) seq (a(X) or k(X)).")
+        derived = threading.Event()
+        sub = kb.subscribe("c(X)^[S, E]", since=0.0, callback=lambda answer: derived.set())
+        kb.add_many(["b(0)^1", "a(1)^5", "a(9)^6", "b(0)^6"])
+        assert _rows(kb, "c") == [] and kb.event_rules()[0]["pending"] > 0
+        clock.t = 6.0   # past 5 + max_delay(k): k is complete up to 5, nobody is told
+        assert derived.wait(timeout=20), "the timer did not decide a(1)^5"
+        assert _rows(kb, "c") == [(1, 1.0, 5.0)]
+        sub.close()
