@@ -278,7 +278,7 @@ class EventPipeline:
         """Stage 4: decision rounds until one derives nothing and nothing asked for another;
         each round's complex events go through stage 3 and join ``batches``."""
         cep = self.cep
-        if cep.closed or not cep.rules:
+        if cep.closed or not cep.active:   # (active: the rules of the stored program)
             run.again = False
             return
         while True:

@@ -29,3 +29,18 @@ def test_a_mark_decides_what_another_connection_left_pending(backend, policy):
         marker.mark_complete(waits_for, 10)
         assert marker.query("c(X)^[S, E]") == [{"X": 1, "S": 1.0, "E": 2.0}]
         assert writer.query("c(X)^[S, E]") == [{"X": 1, "S": 1.0, "E": 2.0}]
+
+
+
+def test_a_process_that_only_marks_decides_with_rules_loaded_elsewhere(backend):
+    """The marking process opened the store before another one loaded the rules and never
+    added an event: its marks still run the rules' decisions (it follows the stored
+    program, as every call does)."""
+    with slr_sql.open(backend, clock=ManualClock(0.0)) as marker, \
+            slr_sql.open(backend, clock=ManualClock(0.0)) as writer:
+        assert marker.query("c(X)^[S, E]") == []
+        writer.load(":- consumption(recent).\nc(X) <- a(X) seq b(X).\n")
+        assert writer.add_many(["a(1)^1", "b(1)^2"]) == []
+        marker.mark_complete("a/1", 10)
+        marker.mark_complete("b/1", 10)
+        assert marker.query("c(X)^[S, E]") == [{"X": 1, "S": 1.0, "E": 2.0}]
