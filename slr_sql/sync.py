@@ -494,6 +494,9 @@ class Completeness:
         else:
             self.name_marks[key] = stored
         self.mark_src[key] = source
+        # the marks other processes committed meanwhile: of two marks made at once, each
+        # read at the start of its call, the one committed last sees both and decides
+        self.load()
         return True
 
     def observe(self, events: list, arrival: float) -> set:

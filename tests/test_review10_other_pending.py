@@ -44,3 +44,19 @@ def test_a_process_that_only_marks_decides_with_rules_loaded_elsewhere(backend):
         marker.mark_complete("a/1", 10)
         marker.mark_complete("b/1", 10)
         assert marker.query("c(X)^[S, E]") == [{"X": 1, "S": 1.0, "E": 2.0}]
+
+
+def test_two_marks_at_once_each_before_the_others_commit_still_decide(backend):
+    """Two connections mark the two types a decision waits for at the same time: each read
+    the store's marks when its call began, before the other's mark was committed. Whichever
+    commits last must see both marks and decide (here the second mark runs its stage
+    straight after the first committed, with the view it had before)."""
+    with slr_sql.open(backend, clock=ManualClock(0.0)) as first, \
+            slr_sql.open(backend, clock=ManualClock(0.0)) as second:
+        first.load(":- consumption(recent).\nc(X) <- a(X) seq b(X).\n")
+        assert first.add_many(["a(1)^1", "b(1)^2"]) == []
+        assert second.query("c(X)^[S, E]") == []    # (its view of the marks: none yet)
+        first.mark_complete("a/1", 10)
+        # the second call's own start was before that commit: its stage runs as it would
+        second._pipeline.mark("b/1", 10)
+        assert second.query("c(X)^[S, E]") == [{"X": 1, "S": 1.0, "E": 2.0}]
