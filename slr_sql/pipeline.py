@@ -142,9 +142,16 @@ class EventPipeline:
             run.stage = "store"
             if type(events) is not EventBatch:  # (the store notes each type's end times in it)
                 events = EventBatch(events)
-            errors, derived = self._insert(events, atomic)
-            if atomic and errors:
-                raise errors[0]
+            if marks:   # stored with the events: the batch is stored whole or not at all
+                with self.store.transaction():
+                    errors, derived = self._insert(events, atomic)
+                    if atomic and errors:
+                        raise errors[0]
+                    written = self.sync.store_marks(marks)
+            else:
+                errors, derived = self._insert(events, atomic)
+                if atomic and errors:
+                    raise errors[0]
             run.stored = True
             rejected = {id(e.event) for e in errors if hasattr(e, "event")}
             stored = [ev for ev in events if id(ev) not in rejected] if rejected else events
@@ -152,8 +159,8 @@ class EventPipeline:
                 stored = with_derived(stored, derived)
             run.stage = "completeness"
             self.sync.on_add(stored)
-            if marks:   # after the events of the same batch are stored
-                self.sync.apply_marks(marks)
+            if marks:   # after the events of the same batch are observed
+                self.sync.apply_marks(written)
                 self.cep.reread_pending()
             self._settle(run, [stored])   # (even empty: the listeners hear every add)
         finally:
