@@ -25,6 +25,8 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 import slr_sql
 from slr_sql import ManualClock
+from slr_sql import robotlib
+from slr_sql.cep import where
 from slr_sql.cep.where import plain_value
 from slr_sql.encoding import decode, encode
 from slr_sql.terms import Atom, String, Struct, list_items, make_list
@@ -671,6 +673,64 @@ def test_a_stored_value_reads_plain_as_it_decodes(value):
     else:
         pairs = [(plain, term)]
     assert all(type(x) is type(y) and (x == y or x != x) and str(x) == str(y) for x, y in pairs)
+
+
+def _exact(value):
+    """A reading with its floats as hex text: equal only when bit for bit equal."""
+    if type(value) is float:
+        return float.hex(value)
+    if type(value) in (tuple, list):
+        return [_exact(v) for v in value]
+    return value
+
+
+@given(st.one_of(_STORED_NUMBER, st.lists(_STORED_NUMBER, max_size=4),
+                 st.tuples(st.sampled_from(["pose", "$atom", "p"]),
+                           st.lists(st.lists(_STORED_NUMBER, max_size=5), max_size=3)),
+                 st.builds(lambda t, q: Struct("pose", (t, q)),
+                           st.lists(st.floats(-1e3, 1e3), min_size=3, max_size=3),
+                           st.lists(st.floats(-2, 2), min_size=4, max_size=4)),
+                 st.sampled_from([Atom("cup"), String("[1]"), make_list([1, Atom("a")])])))
+def test_the_readers_of_stored_values_read_what_plain_values_give(value):
+    # pos_multiply on stored values reads its first input and each transform straight from
+    # the stored text (no compound made): the same reading, bit for bit, as the plain
+    # value's, and None (the terms' path) exactly when that one is not plain
+    if type(value) is tuple:
+        value = Struct(value[0], tuple(value[1])) if value[1] else Atom(value[0])
+    text = encode(value)
+    plain = plain_value(text)
+    subject = robotlib.pos_multiply_subject(plain) if plain is not None else None
+    transform = robotlib._transform_of(plain) if plain is not None else None
+    assert _exact(where._read_subject(text)) == _exact(subject)
+    assert _exact(where._read_transform(text)) == _exact(transform)
+
+
+def test_a_pose_stored_again_and_again_is_read_once(monkeypatch):
+    # the where goal runs on the stored values (no terms): each text of a transform column
+    # is read once and its reading remembered; the complex events are the interpreter's
+    reads = []
+    read = where._read_transform
+    monkeypatch.setattr(where, "_read_transform", lambda v: reads.append(v) or read(v))
+    cam = Struct("pose", ([0.1, 0.0, 1.2], [0.0, 0.0, 0.258819045, 0.965925826]))
+    bases = [Struct("pose", ([1.5, 0, 0], [0, 0, 0, 1])),
+             Struct("pose", ([2.25, 0, 0], [0, 0, 0, 1]))]
+
+    def derived(goal):
+        clock = ManualClock(0.0)
+        with slr_sql.open(clock=clock) as kb:
+            kb.load(":- consumption(recent).\npm(L, O) :- pos_multiply(L, O).\n"
+                    f"r(Out) <- cam(A) equals base(B) equals obj(P) where {goal}.")
+            for t in range(6):
+                kb.add_many([("cam", (cam,), t, t), ("base", (bases[t % 2],), t, t),
+                             ("obj", ([t + 0.5, 0.25, -0.4],), t, t)])
+            clock.set(100.0)
+            return kb.sql("SELECT arg1, t_start, t_end FROM r ORDER BY t_end")[1]
+
+    fast = derived("pos_multiply([P, A, B], Out)")
+    assert sorted(reads) == sorted(encode(pose) for pose in [cam] + bases)
+    reads.clear()
+    assert len(fast) == 6 and fast == derived("pm([P, A, B], Out)")
+    assert reads == []   # (the interpreter's path reads no stored text)
 
 
 @settings(max_examples=40, deadline=None,

@@ -44,7 +44,7 @@ from .sqlgen import (AltSQL, anchor_index, complex_copy, complex_read, create_in
                      pending_of_group, pending_of_rule, pending_row, pending_summary,
                      pending_wait, provenance_insert, query_plan, rows_by_seq, rule_record,
                      watermarks)
-from .where import MustWait, Residual, describe_error, plain_value
+from .where import MustWait, Residual, describe_error, remembering
 
 # the rowids of a pending row: a JSON array of sequence numbers (64-bit integers, which
 # orjson reads exactly, ~5x faster than the json module)
@@ -189,15 +189,19 @@ class RuleRuntime:
     def _plain_plan(self, sql: AltSQL, residual: Residual) -> tuple | None:
         """How a match of this alternative derives without terms (:meth:`_derive_plain`):
         the where goal is one builtin of plain values (``pos_multiply``, see
-        :func:`where.plain_value`) reading value columns and binding a head variable, the
-        other head arguments constants. None when the terms' path must run."""
+        :data:`where.PLAIN_BUILTINS`) reading value columns and binding a head variable, the
+        other head arguments constants: ``(columns, their readers, apply, head)``. None
+        when the terms' path must run."""
         eng = self.eng
         if eng.store.dialect.from_column is not None or residual.unknown or residual.reads:
             return None
         shape = residual.plain_function(eng.kb.engine)
         if shape is None:
             return None
-        names, out_name, fn = shape
+        names, out_name, builtin = shape
+        readers = builtin.readers(len(names))
+        if readers is None:
+            return None
         base = sql.k + 2
         by_name = {name: v for v, name in residual.inputs}
         position = {id(v): base + i for i, v in enumerate(sql.value_vars)}
@@ -222,21 +226,23 @@ class RuleRuntime:
                 return None
         if None not in head:
             return None
-        return columns, fn, head
+        # each column's readings remembered: a pose at a fixed frame (a camera on its
+        # mount) is stored again and again with the same text
+        return (list(zip(columns, map(remembering, readers))), builtin.apply, head)
 
     def _derive_plain(self, n: int, row: tuple, now: float) -> bool | None:
         """:meth:`_derive_from` for an alternative with a plain plan, on the stored values
         themselves (no terms); None when the values are not plain (the terms' path
         decides)."""
-        columns, fn, head = self.plain[n]
+        inputs, apply, head = self.plain[n]
         values = []
-        for i in columns:
-            v = plain_value(row[i])
+        for i, read in inputs:
+            v = read(row[i])
             if v is None:
                 return None
             values.append(v)
         try:
-            out = fn(values)
+            out = apply(values)
         except Exception:   # (the terms' path raises what the builtin raises, as before)
             return None
         if out is None:
