@@ -40,11 +40,12 @@ from ..store import DatabaseError, EventBatch, quote_identifier
 from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
 from .rules import EventRule
 from .sqlgen import (AltSQL, anchor_index, complex_copy, complex_read, create_index,
-                     index_name, max_id, max_seq, pending_delete, pending_insert,
+                     index_name, max_id, max_seq, pending_delete, pending_delete_listed,
+                     pending_insert,
                      pending_of_group, pending_of_rule, pending_row, pending_summary,
                      pending_wait, provenance_insert, query_plan, rows_by_seq, rule_record,
                      watermarks)
-from .where import MustWait, Residual, describe_error, remembering
+from .where import MustWait, Residual, describe_error, plain_term, remembering
 
 # the rowids of a pending row: a JSON array of sequence numbers (64-bit integers, which
 # orjson reads exactly, ~5x faster than the json module)
@@ -56,6 +57,7 @@ _end_of = itemgetter(3)   # of a derived event (name, args, start, end)
 __all__ = ["EventRules", "RuleRuntime", "ready_prefix"]
 
 _INF = math.inf
+_UNREAD = object()   # (a value no dict holds)
 
 
 def _fmt(t: float) -> str:
@@ -139,6 +141,9 @@ class RuleRuntime:
         self.generation = -1
         self.eng = eng
         self._prov_rows: list = []   # matches found by the Python side, not yet written
+        # the head values the plain path derived, by their stored text: the complex events
+        # handed on need their terms, made from these rather than decoded from the text
+        self._plain_out: dict = {}
         self._before: int | None = None   # the provenance id a run's matches come after
         self._matched = False   # this run ran a statement that may add provenance rows
         self._queue: list = []  # statements whose result is not needed, not sent yet
@@ -251,6 +256,7 @@ class RuleRuntime:
             encoded = self.eng.encode(out)
         except Unencodable:
             return None
+        self._plain_out[encoded] = out
         k = self.alts[n].k
         self._prov_rows.append((n,) + tuple(row[:k]) + (None,) * (self.width - k)
                                + (row[k], row[k + 1])
@@ -735,10 +741,10 @@ class RuleRuntime:
 
     def _delete_done(self) -> None:
         done, self._done = self._done, []
-        for i in range(0, len(done), 500):
-            chunk = done[i:i + 500]
-            self._send(pending_delete(len(chunk)),
-                                        {f"d{j}": rid for j, rid in enumerate(chunk)})
+        if len(done) == 1:
+            self._send(pending_delete(1), {"d0": done[0]})
+        elif done:   # (their ids as one JSON array: one statement, whatever their count)
+            self._send(pending_delete_listed(self.eng.store.dialect), {"ids": json.dumps(done)})
 
     def _decide_match(self, n: int, rowids: list, end: float, now: float,
                       params: list | None = None) -> bool:
@@ -835,6 +841,13 @@ class RuleRuntime:
                 return []
             self.detections += len(rows)
             dec = self.eng.decode
+            plain, self._plain_out = self._plain_out, {}
+            if plain:   # (the text a value was stored as: a pure function of the value)
+                decoded = dec
+
+                def dec(v: Any) -> Any:
+                    out = plain.get(v, _UNREAD) if type(v) is str else _UNREAD
+                    return decoded(v) if out is _UNREAD else plain_term(out)
             if arity == 0:
                 return [(name, (), r[0], r[1]) for r in rows]
             if arity == 1:

@@ -1136,6 +1136,16 @@ def pending_delete(count: int) -> str:
             f"({', '.join(f':d{i}' for i in range(count))})")
 
 
+def pending_delete_listed(dialect: Any) -> str:
+    """Delete the pending decisions whose ids are in the JSON array ``:ids``.
+
+    >>> from slr_sql.store.dialect import SQLITE
+    >>> pending_delete_listed(SQLITE)
+    'DELETE FROM slr_cep_pending WHERE id IN (SELECT value FROM json_each(:ids))'
+    """
+    return f"DELETE FROM slr_cep_pending WHERE id IN ({dialect.json_integers(':ids')})"
+
+
 def pending_summary() -> str:
     """Per group of rule ``:rule``'s pending decisions: the earliest time it waits for, the
     earliest end and the count.
