@@ -705,16 +705,6 @@ def test_the_readers_of_stored_values_read_what_plain_values_give(value):
     assert _exact(where._read_transform(text)) == _exact(transform)
 
 
-@given(st.one_of(_STORED_NUMBER, st.lists(_STORED_NUMBER, max_size=4),
-                 st.builds(lambda t, q: Struct("pose", (t, q)),
-                           st.lists(_STORED_NUMBER, min_size=3, max_size=3),
-                           st.lists(_STORED_NUMBER, min_size=4, max_size=4))))
-def test_the_term_of_a_plain_value_is_what_its_stored_text_decodes_to(value):
-    # a complex event derived on plain values is handed on as plain_term of the value the
-    # where goal gave, instead of decoding the text stored for it: the same term
-    assert repr(where.plain_term(value)) == repr(decode(encode(value)))
-
-
 def test_a_pose_stored_again_and_again_is_read_once(monkeypatch):
     # the where goal runs on the stored values (no terms): each text of a transform column
     # is read once and its reading remembered; the complex events are the interpreter's
@@ -741,33 +731,6 @@ def test_a_pose_stored_again_and_again_is_read_once(monkeypatch):
     reads.clear()
     assert len(fast) == 6 and fast == derived("pm([P, A, B], Out)")
     assert reads == []   # (the interpreter's path reads no stored text)
-
-
-def test_the_complex_events_of_the_plain_path_are_handed_on_undecoded(monkeypatch):
-    # the events derived on stored values reach the listeners as the terms of the values
-    # the where goal gave, not decoded back from their stored text: the same terms, bit for
-    # bit, as decoding what was stored
-    clock = ManualClock(0.0)
-    with slr_sql.open(clock=clock) as kb:
-        kb.load(":- consumption(recent).\n"
-                "r(Out) <- cam(A) equals obj(P) where pos_multiply([P, A], Out).\n"
-                "s(Q) <- cam(A) equals obj(P) where pos_multiply([A, A], Q).")
-        heard = []
-        kb.add_listeners.append(heard.append)
-        decoded = []
-        decode_text = kb._cep.decode
-        monkeypatch.setattr(kb._cep, "decode", lambda v: decoded.append(v) or decode_text(v))
-        cam = Struct("pose", ([0.1, 0.0, 1.2], [0.0, 0.0, 0.258819045, 0.965925826]))
-        for t in range(5):
-            kb.add_many([("cam", (cam,), t, t), ("obj", ([t + 0.5, -0.0, -0.4],), t, t)])
-        clock.set(100.0)
-        for name in ("r", "s"):
-            got = [(repr(args), start, end) for batch in heard
-                   for ev_name, args, start, end in batch if ev_name == name]
-            stored = kb.sql(f"SELECT arg1, t_start, t_end FROM {name} ORDER BY seq")[1]
-            assert got == [(repr((decode(text),)), start, end) for text, start, end in stored]
-            assert len(got) == 5
-        assert decoded == []
 
 
 @settings(max_examples=40, deadline=None,

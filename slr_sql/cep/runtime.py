@@ -45,7 +45,7 @@ from .sqlgen import (AltSQL, anchor_index, complex_copy, complex_read, create_in
                      pending_of_group, pending_of_rule, pending_row, pending_summary,
                      pending_wait, provenance_insert, query_plan, rows_by_seq, rule_record,
                      watermarks)
-from .where import MustWait, Residual, describe_error, plain_term, remembering
+from .where import MustWait, Residual, describe_error, remembering
 
 # the rowids of a pending row: a JSON array of sequence numbers (64-bit integers, which
 # orjson reads exactly, ~5x faster than the json module)
@@ -57,7 +57,6 @@ _end_of = itemgetter(3)   # of a derived event (name, args, start, end)
 __all__ = ["EventRules", "RuleRuntime", "ready_prefix"]
 
 _INF = math.inf
-_UNREAD = object()   # (a value no dict holds)
 
 
 def _fmt(t: float) -> str:
@@ -141,9 +140,6 @@ class RuleRuntime:
         self.generation = -1
         self.eng = eng
         self._prov_rows: list = []   # matches found by the Python side, not yet written
-        # the head values the plain path derived, by their stored text: the complex events
-        # handed on need their terms, made from these rather than decoded from the text
-        self._plain_out: dict = {}
         self._before: int | None = None   # the provenance id a run's matches come after
         self._matched = False   # this run ran a statement that may add provenance rows
         self._queue: list = []  # statements whose result is not needed, not sent yet
@@ -256,7 +252,6 @@ class RuleRuntime:
             encoded = self.eng.encode(out)
         except Unencodable:
             return None
-        self._plain_out[encoded] = out
         k = self.alts[n].k
         self._prov_rows.append((n,) + tuple(row[:k]) + (None,) * (self.width - k)
                                + (row[k], row[k + 1])
@@ -510,9 +505,7 @@ class RuleRuntime:
         rows, self._prov_rows = self._prov_rows, []
         if rows:
             self._before_matches()
-            names = [f"p{i}" for i in range(len(rows[0]))]
-            self._send_many(provenance_insert(self.prov, self.width, self.rule.arity),
-                            [dict(zip(names, row)) for row in rows])
+            self._send_many(provenance_insert(self.prov, self.width, self.rule.arity), rows)
 
     # ----------------------------------------------------------------- statements
     # The statements of a run whose result nothing needs (its writes to the provenance,
@@ -658,7 +651,8 @@ class RuleRuntime:
             chunk = [(row, _rowids(row[4])[0]) for row in rows[i:i + 200]]
             candidates: dict = {}
             for pos in sorted({row[3] for row, _ in chunk}):
-                params["ts"] = json.dumps([seq for row, seq in chunk if row[3] == pos])
+                params["ts"] = orjson.dumps(
+                    [seq for row, seq in chunk if row[3] == pos]).decode()
                 for cand in self._ask(alt.term_select_many(pos), params):
                     candidates.setdefault((pos, cand[pos]), []).append(cand)
             for row, seq in chunk:
@@ -744,7 +738,8 @@ class RuleRuntime:
         if len(done) == 1:
             self._send(pending_delete(1), {"d0": done[0]})
         elif done:   # (their ids as one JSON array: one statement, whatever their count)
-            self._send(pending_delete_listed(self.eng.store.dialect), {"ids": json.dumps(done)})
+            self._send(pending_delete_listed(self.eng.store.dialect),
+                       {"ids": orjson.dumps(done).decode()})
 
     def _decide_match(self, n: int, rowids: list, end: float, now: float,
                       params: list | None = None) -> bool:
@@ -841,13 +836,6 @@ class RuleRuntime:
                 return []
             self.detections += len(rows)
             dec = self.eng.decode
-            plain, self._plain_out = self._plain_out, {}
-            if plain:   # (the text a value was stored as: a pure function of the value)
-                decoded = dec
-
-                def dec(v: Any) -> Any:
-                    out = plain.get(v, _UNREAD) if type(v) is str else _UNREAD
-                    return decoded(v) if out is _UNREAD else plain_term(out)
             if arity == 0:
                 return [(name, (), r[0], r[1]) for r in rows]
             if arity == 1:

@@ -23,7 +23,7 @@ from ..builtins import BuiltinMachine
 from ..errors import SLRError
 from ..store import DatabaseError
 from ..encoding import Unencodable, orjson_reads_exactly
-from ..terms import Struct, Var, deref, format_term, is_ground, make_list, term_vars
+from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
 from ..unify import resolve
 from ..host import Host
 from ..plans import instantiate
@@ -325,7 +325,7 @@ PLAIN_BUILTINS: dict[tuple[str, int], PlainBuiltin] = {
 _UNREAD = object()
 
 
-def remembering(read: Callable[[Any], Any], size: int = 1024) -> Callable[[Any], Any]:
+def remembering(read: Callable[[Any], Any], size: int = 64) -> Callable[[Any], Any]:
     """``read`` (a pure function of a stored value), remembering its readings of up to
     ``size`` texts: a value that comes again and again (a fixed camera's pose) is read once.
     Numbers are read each time (``1``, ``1.0`` and ``True`` are one key to a dict).
@@ -399,25 +399,6 @@ def plain_value(value: Any) -> Any:
                 return None
         return Struct(name, tuple(args))
     return None
-
-
-def plain_term(value: Any) -> Any:
-    """The term a plain value (what a :data:`PLAIN_BUILTINS` function gives: a number, a
-    list of numbers, a compound of lists of numbers) stands for: what decoding its stored
-    text gives, made without the text.
-
-    >>> from slr_sql.encoding import decode, encode
-    >>> pose = Struct("pose", ([1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]))
-    >>> plain_term(pose) == decode(encode(pose)), format_term(plain_term([1.5, -0.0]))
-    (True, '[1.5,-0.0]')
-    """
-    tv = type(value)
-    if tv is list:
-        return make_list(value)
-    if tv is Struct:
-        return Struct(value.name, tuple(make_list(a) if type(a) is list else a
-                                        for a in value.args))
-    return value
 
 
 def describe_error(exc: BaseException) -> str:
