@@ -32,6 +32,8 @@ __all__ = [
     "apply_transforms",
 ]
 
+_INF = math.inf
+
 #: Above this |dot| between two unit quaternions, slerp falls back to normalized lerp.
 _NLERP_THRESHOLD = 0.9995
 
@@ -312,6 +314,11 @@ def _floats(v: Any, n: int) -> tuple | None:
     tv = type(v)
     if (tv is not list and tv is not tuple) or len(v) != n:
         return None
+    for c in v:
+        if type(c) is not float:
+            break
+    else:   # (floats only, the common case: no conversion)
+        return tuple(v)
     out = []
     for c in v:
         tc = type(c)
@@ -327,7 +334,7 @@ def _floats(v: Any, n: int) -> tuple | None:
 def _unit(x: float, y: float, z: float, w: float) -> tuple | None:
     """quat_normalize's arithmetic on floats; None for a zero or infinite norm."""
     n = math.sqrt(x * x + y * y + z * z + w * w)
-    if not n > 0.0 or math.isinf(n):
+    if not n > 0.0 or n == _INF:
         return None
     return (x / n, y / n, z / n, w / n)
 
@@ -430,9 +437,16 @@ def apply_transforms(subject: tuple, transforms: Sequence[tuple]) -> Any:
     kind, value = subject
     if kind == "point":
         px, py, pz = value
-        for (tx, ty, tz), _, turn in transforms:
-            rx, ry, rz = _rotate_by(turn, px, py, pz)
-            px, py, pz = tx + rx, ty + ry, tz + rz
+        for (tx, ty, tz), _, (x1, y1, z1, w1) in transforms:
+            # _rotate_by inline (the hot loop of a where goal over many matches)
+            a = w1 * px + x1 * 0.0 + y1 * pz - z1 * py
+            b = w1 * py - x1 * pz + y1 * 0.0 + z1 * px
+            c = w1 * pz + x1 * py - y1 * px + z1 * 0.0
+            d = w1 * 0.0 - x1 * px - y1 * py - z1 * pz
+            x2, y2, z2 = -x1, -y1, -z1
+            px, py, pz = (tx + (d * x2 + a * w1 + b * z2 - c * y2),
+                          ty + (d * y2 - a * z2 + b * w1 + c * x2),
+                          tz + (d * z2 + a * y2 - b * x2 + c * w1))
         return [px, py, pz]
     t, q = value
     for (tx, ty, tz), qa, turn in transforms:

@@ -705,6 +705,17 @@ def test_the_readers_of_stored_values_read_what_plain_values_give(value):
     assert _exact(where._read_transform(text)) == _exact(transform)
 
 
+def test_text_with_19_digits_in_a_row_takes_the_terms_path():
+    # an integer of 19 digits may be one orjson reads as a float: the plain readers leave
+    # such text (and, more cautiously, a fraction of 19 digits, never written by the
+    # store) to the terms' path, which decodes it exactly
+    for text in ('[1234567890123456789,0,0]', '[0.1234567890123456789,0.0,0.0]',
+                 '{"pose":[[0.0,0.0,0.0],[0.0,0.0,0.0,1000000000000000000000]]}'):
+        assert plain_value(text) is None
+        assert where._read_subject(text) is None and where._read_transform(text) is None
+    assert plain_value("[0.123456789012345678,0.0,0.0]") == [0.123456789012345678, 0.0, 0.0]
+
+
 def test_a_pose_stored_again_and_again_is_read_once(monkeypatch):
     # the where goal runs on the stored values (no terms): each text of a transform column
     # is read once and its reading remembered; the complex events are the interpreter's
