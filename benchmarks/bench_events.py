@@ -4,6 +4,7 @@
     python benchmarks/bench_events.py --part throughput  # or latency, flat
     python benchmarks/bench_events.py --part throughput --rules equals3 --policies recent --no-one
     ETALIS_DIR=/tmp/etalis python benchmarks/bench_events.py --part throughput
+    ... --part throughput --repeats 5 --round-seconds 2   # more rounds of ours and ETALIS
 
 * **throughput** -- events/s through ``kb.add_many`` (batches of 1,000) and through ``kb.add``
   (one transaction per event), on a file store (``synchronous=FULL`` unless
@@ -20,6 +21,43 @@
   at a time: its rate stands beside ours through ``kb.add_many`` (batches of 1,000) and
   through ``kb.add_event`` (one transaction per event), each with its ratio; ``no rule`` is
   our own ingest of the same events without the rule, the ceiling of the batched rate.
+  **Rounds.** Each row runs ours (``add_many``) and ETALIS (a new ``swipl`` process) in
+  rounds, one right after the other, the order alternating (ours, ETALIS; ETALIS, ours;
+  ...), each round followed by the no-rule run: ``--repeats`` rounds at least (3), more (at
+  most 15) until each engine has run for ``--round-seconds`` CPU seconds in all (1; seq2
+  recent takes ~10 rounds, seq2 unrestricted 3). This machine's speed moves by up to +-50%
+  from minute to minute and single runs of ~0.1 s by +-20% within one, so one run of each
+  engine made ratios that moved 0.66-0.95x between runs of this script; now each round gives
+  a ratio of two runs made under the same load, and the headline is the **median of the
+  per-round ratios** (wall and CPU), with the least and greatest CPU ratio and the number of
+  rounds beside it; the rates shown are the medians of each engine's runs, the floor's
+  share of the budget uses ETALIS's median CPU rate, and the no-rule ratio is again the
+  median of the per-round ratios. The runs are also listed in order under the table.
+  ``kb.add_event`` (not ``--no-one``) runs once, against ETALIS's median. A row whose
+  ETALIS run is long (seq3where on 10,000 events: minutes) costs ``--repeats`` such runs
+  (a failed or timed-out one is not repeated); ``--repeats 1 --round-seconds 0`` gives one
+  run of each engine, as before.
+  **Cold start, checked (2026-11-27, load 1-4).** Ours: no cost for being the first run in
+  the process (first run's CPU rate / the median of two later ones, 10 new processes of seq2
+  recent: median 1.03, 0.79-1.25; per-batch times of all four seq2/equals3 rows, 4 runs
+  each: the first batch of every run, not only the first run, is 1-4 ms slower, the new
+  store's statements being prepared, which each run pays alike). So no warm-up: a warm-up
+  would hide nothing that is not paid again. What does recur: a full collection of Python's
+  garbage collector (~15 ms, with the run's 10,000 prepared events alive) falls inside about
+  one timed seq2 recent run in three (~+15% on that run); it is left in, as work a Python
+  process does, and the median of the rounds mostly steps around it. ETALIS: its timed loop
+  starts after consult and compile; three passes over the same events in one swipl process
+  (``reset_etalis_state`` between) ran alike -- the first pass's first 1,000 events took as
+  long as the later passes' first 1,000, no garbage collection or stack shift in any pass,
+  first pass / median of the later ones 0.70-1.37 (median 1.04) over 9 processes of
+  equals3 recent -- so no warm-up there either.
+  **CPU time** is the whole process's on both sides, user + system, all threads:
+  ``time.process_time`` for ours, ``process_cputime`` + ``system_time`` for swipl. (Until
+  2026-11-27 ETALIS's was ``statistics(cputime)``, the main thread's user time, which leaves
+  out SWI-Prolog's garbage-collection thread: 8-11% less CPU on seq2 recent, 4-6% on
+  equals3, none on seq2 unrestricted, where nothing is retracted. It is still shown, third
+  in the ETALIS column, to compare with the older tables. Ours includes the system time of
+  its writes, 15-25% of its CPU; ETALIS, in memory, has none.)
   The **durable floor** beside ETALIS is the least durable work any engine storing what we
   store must do for the same run, with raw sqlite3 and no slr_sql code in the timed part: a
   traced, untimed run of ours gives the rows it stored, commit by commit (input events and
@@ -42,8 +80,8 @@
 The clock is a ManualClock that reaches each batch's last occurrence time as the batch is
 added, with ``max_delay 0`` declared: a live stream whose events arrive as they occur, so
 ``recent`` decides at the add (the batch's last instant at the next add). The rates are
-wall clock and CPU time of the measuring process (the machine is shared: CPU time is the
-steadier figure), as ratios against ETALIS measured in the same run.
+wall clock and CPU time of the measuring processes (the machine is shared: CPU time is the
+steadier figure), as ratios against ETALIS measured in the same rounds.
 """
 from __future__ import annotations
 
@@ -61,6 +99,7 @@ import time
 from dataclasses import dataclass
 from itertools import pairwise
 from pathlib import Path
+from typing import Callable, NamedTuple
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -277,9 +316,24 @@ softDrink(cola). softDrink(fanta).
 """
 
 
+class EtalisRun(NamedTuple):
+    """One ETALIS run: events/s by wall clock and by CPU time, its detections."""
+
+    wall: float
+    cpu: float              # the whole swipl process, user + system, as ours is measured
+    detections: int
+    cpu_main_thread: float  # the main thread's user time only (statistics(cputime, _))
+
+
 def etalis(scenario: str, policy: str, n: int, etalis_dir: str,
-           timeout: float) -> tuple[float, float, int] | str:
-    """events/s (wall, CPU) and detections of ETALIS for the same events, or why not."""
+           timeout: float) -> EtalisRun | str:
+    """ETALIS's rates and detections for the same events (a new swipl process), or why not.
+
+    Its CPU time is the process's, user time of every thread (``process_cputime``) plus
+    system time, as ``time.process_time`` measures ours: SWI-Prolog's ``cputime`` is the
+    calling thread's user time only and leaves out its garbage-collection thread, which
+    reclaims the clauses ETALIS retracts (4-11% more CPU on seq2 recent and equals3). That
+    figure is kept as ``cpu_main_thread``, the one the tables before 2026-11-27 02:50 used."""
     swipl = shutil.which("swipl")
     if swipl is None:
         return "no swipl"
@@ -304,11 +358,14 @@ main :-
     compile_event_file('{folder}/rules.event'),
     consult('{folder}/events.pl'),
     findall(E-T, ev(E, T), L),
-    statistics(walltime, [T0, _]), statistics(cputime, C0),
+    statistics(walltime, [T0, _]), statistics(cputime, M0),
+    statistics(process_cputime, U0), statistics(system_time, [S0, _]),
     forall(member(E-T, L), event(E, [T, T])),
-    statistics(walltime, [T1, _]), statistics(cputime, C1),
+    statistics(walltime, [T1, _]), statistics(cputime, M1),
+    statistics(process_cputime, U1), statistics(system_time, [S1, _]),
     aggregate_all(count, fired_event({template}, _), N),
-    D is T1 - T0, C is C1 - C0, format("RESULT ~w ~w ~w~n", [D, C, N]).
+    D is T1 - T0, C is U1 - U0 + (S1 - S0) / 1000, M is M1 - M0,
+    format("RESULT ~w ~w ~w ~w~n", [D, C, N, M]).
 """)
         try:
             proc = subprocess.run([swipl, "--traditional", "--stack-limit=4g",
@@ -318,9 +375,9 @@ main :-
             return f"> {timeout:g} s"
         for line in proc.stdout.splitlines():
             if line.startswith("RESULT"):
-                _, ms, cpu, count = line.split()
-                return (n / max(float(ms) / 1000, 1e-9), n / max(float(cpu), 1e-9),
-                        int(count))
+                _, ms, cpu, count, main_thread = line.split()
+                return EtalisRun(n / max(float(ms) / 1000, 1e-9), n / max(float(cpu), 1e-9),
+                                 int(count), n / max(float(main_thread), 1e-9))
         return "failed: " + (proc.stderr.strip().splitlines() or ["?"])[-1]
     finally:
         shutil.rmtree(folder, ignore_errors=True)
@@ -540,7 +597,185 @@ def durable_floors(run: StoredRun, synchronous: str,
     return floors
 
 
+# ----------------------------------------------------------------------------- interleaved runs
+
+Rates = tuple[float, float, int]   # events/s by wall clock, by CPU time; detections
+
+
+@dataclass
+class Pair:
+    """One round of a throughput row: a run of ours and a run of ETALIS, one right after the
+    other (``etalis_first`` says which came first), then the no-rule baseline."""
+
+    ours: Rates
+    etalis: EtalisRun | None       # None: ETALIS not run in this round
+    baseline: Rates
+    etalis_first: bool
+
+
+@dataclass
+class Interleaved:
+    """The rounds of one throughput row, and why ETALIS did not run if it did not."""
+
+    pairs: list[Pair]
+    etalis_failure: str = ""
+
+    def compared(self) -> list[Pair]:
+        """The rounds with an ETALIS run: the pairs the ratios come from."""
+        return [pair for pair in self.pairs if pair.etalis is not None]
+
+
+# the most rounds a throughput row runs to reach its CPU seconds (more if --repeats says so)
+MOST_ROUNDS = 15
+
+
+def interleave(run_ours: Callable[[], Rates], run_etalis: Callable[[], EtalisRun | str],
+               run_baseline: Callable[[], Rates], repeats: int, events: int = 0,
+               least_seconds: float = 0.0) -> Interleaved:
+    """Rounds of ours and ETALIS, taking turns which goes first (ours, ETALIS; ETALIS, ours;
+    ...), each round followed by the no-rule baseline: both engines see the same phases of a
+    machine whose speed drifts, and a drift within a round favours neither side over the
+    rounds. ``repeats`` rounds at least; more, up to :data:`MOST_ROUNDS`, until each engine
+    has run its ``events`` for ``least_seconds`` of CPU time in all (a run of seq2 recent
+    is ~0.1 s, and single runs that short move by 30% or more on a shared machine). Once
+    ETALIS fails (no swipl, a timeout, an error) it is not started again, and ours goes on
+    alone.
+
+    >>> order = []
+    >>> rounds = interleave(lambda: order.append("ours") or (2.0, 2.0, 1),
+    ...                     lambda: order.append("etalis") or EtalisRun(1.0, 1.0, 1, 1.0),
+    ...                     lambda: (4.0, 4.0, 0), repeats=3)
+    >>> order
+    ['ours', 'etalis', 'etalis', 'ours', 'ours', 'etalis']
+    >>> [pair.etalis_first for pair in rounds.pairs]
+    [False, True, False]
+    >>> len(interleave(lambda: (2.0, 2.0, 1), lambda: EtalisRun(1.0, 1.0, 1, 1.0),
+    ...                lambda: (4.0, 4.0, 0), repeats=3, events=1, least_seconds=4.0).pairs)
+    8
+    """
+    rounds = Interleaved([])
+
+    def enough() -> bool:
+        if len(rounds.pairs) < repeats:
+            return False
+        if len(rounds.pairs) >= max(repeats, MOST_ROUNDS):
+            return True
+        mine = sum(events / pair.ours[1] for pair in rounds.pairs)
+        theirs = sum(events / pair.etalis.cpu for pair in rounds.compared()
+                     if pair.etalis is not None)
+        return mine >= least_seconds and (theirs >= least_seconds or bool(rounds.etalis_failure))
+
+    k = 0
+    while not enough():
+        etalis_first = k % 2 == 1
+        reference: EtalisRun | str | None = None
+        if etalis_first and not rounds.etalis_failure:
+            reference = run_etalis()
+        mine = run_ours()
+        if not etalis_first and not rounds.etalis_failure:
+            reference = run_etalis()
+        if isinstance(reference, str):
+            rounds.etalis_failure, reference = reference, None
+        rounds.pairs.append(Pair(mine, reference, run_baseline(), etalis_first))
+        k += 1
+    return rounds
+
+
+def spread(numerators: list[float], denominators: list[float]) -> tuple[float, float, float]:
+    """The median, least and greatest of the ratios of paired figures (``numerators[i] /
+    denominators[i]``): the median of the per-pair ratios, not the ratio of the medians, so
+    that each ratio compares two runs made under the same load.
+
+    >>> spread([100.0, 60.0, 90.0], [50.0, 40.0, 100.0])
+    (1.5, 0.9, 2.0)
+    """
+    ratios = [a / b for a, b in zip(numerators, denominators, strict=True)]
+    return statistics.median(ratios), min(ratios), max(ratios)
+
+
 # ----------------------------------------------------------------------------- main
+
+THROUGHPUT_HEADER = (
+    "| rule | policy | detections (ours / ETALIS) | add_many ev/s, median (wall / CPU) | "
+    "**add_many / ETALIS, median of the pairs (wall / CPU)** | CPU ratio, least–greatest "
+    "(pairs) | "
+    "add ev/s (wall / CPU) | add / ETALIS (wall / CPU) | ETALIS ev/s, median (wall / CPU / "
+    "CPU main thread) | floor ev/s, CPU (tables / + prov.) | floor / ETALIS (CPU) | "
+    "1.5x budget the floor takes | add_many / floor (CPU) | floor form; commits (ours / "
+    "floor) | no rule ev/s (CPU), median | add_many / no rule (CPU), median |")
+
+
+def _counts(values: list[int]) -> str:
+    """Detections of every run of one engine: one number when they agree, as they must."""
+    distinct = sorted(set(values))
+    return f"{distinct[0]:,}" if len(distinct) == 1 else "varied: " + ", ".join(
+        f"{v:,}" for v in values)
+
+
+def throughput_row(scenario: str, policy: str, args: argparse.Namespace,
+                   etalis_dir: str) -> tuple[str, str]:
+    """One row of the throughput table, and the line listing its runs in order."""
+    rounds = interleave(
+        lambda: ours(scenario, policy, args.n, 1000, args.synchronous),
+        lambda: (etalis(scenario, policy, args.n, etalis_dir, args.etalis_timeout)
+                 if etalis_dir else "not run"),
+        lambda: ours(scenario, policy, args.n, 1000, args.synchronous, with_rule=False),
+        args.repeats, args.n, args.round_seconds)
+    one = (ours(scenario, policy, args.n_one, 1, args.synchronous)
+           if not args.no_one else (math.nan, math.nan, 0))
+    one_cells = "-" if args.no_one else f"{one[0]:,.0f} / {one[1]:,.0f}"
+    mine = [pair.ours for pair in rounds.pairs]
+    rate = statistics.median(r[0] for r in mine)
+    cpu = statistics.median(r[1] for r in mine)
+    det = _counts([r[2] for r in mine])
+    pairs = rounds.compared()
+    if pairs:
+        ours_of = [pair.ours for pair in pairs]
+        theirs = [pair.etalis for pair in pairs if pair.etalis is not None]
+        wall_ratio, _, _ = spread([r[0] for r in ours_of], [e.wall for e in theirs])
+        cpu_ratio, least, greatest = spread([r[1] for r in ours_of], [e.cpu for e in theirs])
+        erate = statistics.median(e.wall for e in theirs)
+        ecpu = statistics.median(e.cpu for e in theirs)
+        emain = statistics.median(e.cpu_main_thread for e in theirs)
+        one_ratio = "-" if args.no_one else f"{one[0] / erate:.3f}x / {one[1] / ecpu:.2f}x"
+        cells = (f"{det} / {_counts([e.detections for e in theirs])} | "
+                 f"{rate:,.0f} / {cpu:,.0f} | **{wall_ratio:.2f}x / {cpu_ratio:.2f}x** | "
+                 f"{least:.2f}–{greatest:.2f}x ({len(pairs)}) | {one_cells} | {one_ratio} | "
+                 f"{erate:,.0f} / {ecpu:,.0f} / {emain:,.0f}")
+        if len(pairs) < len(rounds.pairs):
+            cells += f" ({len(pairs)} runs, then {rounds.etalis_failure})"
+    else:
+        cells = (f"{det} / - | {rate:,.0f} / {cpu:,.0f} | - | - | "
+                 f"{one_cells} | - | {rounds.etalis_failure}")
+    run = stored_run(scenario, policy, args.n, 1000, args.synchronous)
+    floors = durable_floors(run, args.synchronous)
+    (floor, form), (floor_prov, form_prov) = floors[False], floors[True]
+    floor_cells = f"{floor:,.0f} / {floor_prov:,.0f}"
+    if pairs:
+        # the floor's CPU time per event as a share of what the target allows
+        target_rate = 1.5 * ecpu
+        floor_cells += (f" | {floor / ecpu:.2f}x / {floor_prov / ecpu:.2f}x | "
+                        f"{target_rate / floor:.0%} / {target_rate / floor_prov:.0%}")
+    else:
+        floor_cells += " | - | -"
+    forms = form if form == form_prov else f"{form} / {form_prov}"
+    floor_cells += (f" | {cpu / floor:.2f} / {cpu / floor_prov:.2f} | "
+                    f"{forms}; {run.commits} / {run.floor_commits()}")
+    base_cpu = statistics.median(pair.baseline[1] for pair in rounds.pairs)
+    base_ratio, _, _ = spread([r[1] for r in mine], [pair.baseline[1] for pair in rounds.pairs])
+    row = (f"| {scenario} | {policy} | {cells} | {floor_cells} | {base_cpu:,.0f} | "
+           f"{base_ratio:.2f} |")
+    steps = []
+    for pair in rounds.pairs:
+        if pair.etalis is None:
+            steps.append(f"ours {pair.ours[1]:,.0f}")
+            continue
+        both = [f"ours {pair.ours[1]:,.0f}", f"ETALIS {pair.etalis.cpu:,.0f}"]
+        if pair.etalis_first:
+            both.reverse()
+        steps.append(f"{' | '.join(both)}: {pair.ours[1] / pair.etalis.cpu:.2f}x")
+    return row, f"* {scenario} {policy}: " + "; ".join(steps)
+
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -556,59 +791,35 @@ def main() -> None:
                     help="throughput: only these rules")
     ap.add_argument("--policies", nargs="*", choices=["recent", "unrestricted"],
                     default=["recent", "unrestricted"], help="throughput: only these policies")
+    ap.add_argument("--repeats", type=int, default=3,
+                    help="throughput: rounds of ours and ETALIS taking turns, at least (the "
+                         "headline is the median of the per-round ratios)")
+    ap.add_argument("--round-seconds", type=float, default=1.0,
+                    help="throughput: more rounds (at most %d) until each engine has run "
+                         "for this many CPU seconds in all; 0: exactly --repeats rounds"
+                         % MOST_ROUNDS)
     ap.add_argument("--no-one", action="store_true",
                     help="throughput: skip the kb.add one-at-a-time runs")
     args = ap.parse_args()
+    if args.repeats < 1:
+        ap.error("--repeats must be at least 1")
     etalis_dir = args.etalis_dir
     if etalis_dir and not (Path(etalis_dir) / "src" / "etalis.P").exists():
         etalis_dir = ""
     print(f"# bench_events  n={args.n}  synchronous={args.synchronous}  "
           f"ETALIS={'yes: ' + etalis_dir if etalis_dir else 'no (set ETALIS_DIR)'}")
     if args.part in ("throughput", "all"):
-        print("\n| rule | policy | detections (ours / ETALIS) | add_many ev/s (wall / CPU) | "
-              "add_many / ETALIS (wall / CPU) | add ev/s (wall / CPU) | add / ETALIS "
-              "(wall / CPU) | ETALIS ev/s (wall / CPU) | floor ev/s, CPU (tables / + prov.) | "
-              "floor / ETALIS (CPU) | 1.5x budget the floor takes | add_many / floor (CPU) | "
-              "floor form; commits (ours / floor) | no rule ev/s (CPU) | add_many / "
-              "no rule (CPU) |")
-        print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|")
+        print("\n" + THROUGHPUT_HEADER)
+        print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|")
+        runs = []
         for scenario in args.rules:
             for policy in args.policies:
-                rate, cpu, det = ours(scenario, policy, args.n, 1000, args.synchronous)
-                one = (ours(scenario, policy, args.n_one, 1, args.synchronous)
-                       if not args.no_one else (math.nan, math.nan, 0))
-                base = ours(scenario, policy, args.n, 1000, args.synchronous,
-                            with_rule=False)
-                if etalis_dir:
-                    e = etalis(scenario, policy, args.n, etalis_dir, args.etalis_timeout)
-                else:
-                    e = "not run"
-                if isinstance(e, tuple):
-                    erate, ecpu, edet = e
-                    cells = (f"{det:,} / {edet:,} | {rate:,.0f} / {cpu:,.0f} | "
-                             f"**{rate / erate:.2f}x / {cpu / ecpu:.2f}x** | "
-                             f"{one[0]:,.0f} / {one[1]:,.0f} | "
-                             f"{one[0] / erate:.3f}x / {one[1] / ecpu:.2f}x | "
-                             f"{erate:,.0f} / {ecpu:,.0f}")
-                else:
-                    cells = (f"{det:,} / - | {rate:,.0f} / {cpu:,.0f} | - | "
-                             f"{one[0]:,.0f} / {one[1]:,.0f} | - | {e}")
-                run = stored_run(scenario, policy, args.n, 1000, args.synchronous)
-                floors = durable_floors(run, args.synchronous)
-                (floor, form), (floor_prov, form_prov) = floors[False], floors[True]
-                floor_cells = (f"{floor:,.0f} / {floor_prov:,.0f}")
-                if isinstance(e, tuple):
-                    # the floor's CPU time per event as a share of what the target allows
-                    target_rate = 1.5 * e[1]
-                    floor_cells += (f" | {floor / e[1]:.2f}x / {floor_prov / e[1]:.2f}x | "
-                                    f"{target_rate / floor:.0%} / {target_rate / floor_prov:.0%}")
-                else:
-                    floor_cells += " | - | -"
-                forms = form if form == form_prov else f"{form} / {form_prov}"
-                floor_cells += (f" | {cpu / floor:.2f} / {cpu / floor_prov:.2f} | "
-                                f"{forms}; {run.commits} / {run.floor_commits()}")
-                print(f"| {scenario} | {policy} | {cells} | {floor_cells} | {base[1]:,.0f} | "
-                      f"{cpu / base[1]:.2f} |", flush=True)
+                row, order = throughput_row(scenario, policy, args, etalis_dir)
+                print(row, flush=True)
+                runs.append(order)
+        print("\nThe runs in order (CPU ev/s, ours | ETALIS and their ratio, round by round):")
+        for order in runs:
+            print(order)
     if args.part in ("latency", "all"):
         print("\n| synchronous | checkpoint | rule | p50 ms | p99 ms | max ms |")
         print("|---|---|---|---:|---:|---:|")

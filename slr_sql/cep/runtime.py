@@ -127,6 +127,9 @@ class RuleRuntime:
         self.used_name = f"slr_cep_u_{rule.key}" if rule.policy == "chronological" else None
         self.used = quote_identifier(self.used_name) if self.used_name else None
         self.width = max(len(alt.leaves) for alt in rule.alternatives)
+        # per alternative: the types a terminator's decision waits for, through its end or
+        # before it (the SQL's and the Python side's one answer)
+        self.decisions = [rule.decision_inputs(n) for n in range(len(rule.alternatives))]
         self.alts: list[AltSQL] = []
         self.residuals: list[Residual | None] = []
         self.reads_store: list[bool] = []
@@ -161,7 +164,8 @@ class RuleRuntime:
             names = [eng.table_name(leaf.key) for leaf in alt.leaves]
             sql = AltSQL(alt, n, tables, neg_tables, head_args, self.policy, eng.complete_sql,
                          used_table=self.used, prov_table=self.prov, table_names=names,
-                         fact_table=eng.fact_table, dialect=eng.store.dialect)
+                         fact_table=eng.fact_table, dialect=eng.store.dialect,
+                         decision=self.decisions[n])
             self.alts.append(sql)
             residual = None
             reads = False
@@ -542,31 +546,26 @@ class RuleRuntime:
         return out
 
     def _ready(self, group: tuple, t: float, now: float) -> bool:
+        """Can the pending rows of ``group`` ending at ``t`` be decided now? The same
+        conditions as the SQL of the decisions (:meth:`EventRules.complete_sql`, with the
+        same parameters), so that Python and SQL never judge a row differently."""
         n, kind, wait = group
         complete = self.eng.complete
         if wait is not None:
             return complete(wait, t, now)
         if n >= len(self.rule.alternatives):
             return True
-        alt = self.rule.alternatives[n]
-        if kind == "match":
-            keys = [leaf.key for _, leaf in alt.negations]
-        else:
-            keys = [leaf.key for leaf in alt.leaves] + [leaf.key for _, leaf in alt.negations]
-        return all(self.eng.settled(key, t, now) for key in keys)
+        if kind == "match":   # a negated event lies strictly inside: before its end
+            return all(complete(leaf.key, t, now, False)
+                       for _, leaf in self.rule.alternatives[n].negations)
+        return all(complete(key, t, now, through)
+                   for key, through in self.decisions[n].items())
 
     def _inputs_complete(self, n: int, t: float, now: float) -> bool:
         """:meth:`AltSQL.inputs_complete` of alternative ``n`` at a terminator's end ``t``,
-        evaluated here: what the terminator statements will find. (Not :meth:`_ready`: for
-        a complex type its SQL takes an in-order input as settled up to and including its
-        latest end, where :meth:`EventRules.complete` stops strictly before it; a run that
-        skipped a statement by the stricter answer would neither match nor keep such a
-        terminator.)"""
-        if n >= len(self.rule.alternatives):
-            return True
-        alt = self.rule.alternatives[n]
-        keys = [leaf.key for leaf in alt.leaves] + [leaf.key for _, leaf in alt.negations]
-        return all(self.eng.settled_as_sql(key, t, now) for key in keys)
+        evaluated here: what the terminator statements will find (a run that skipped a
+        statement by another answer would neither match nor keep such a terminator)."""
+        return self._ready((n, "term", None), t, now)
 
     def decide(self, now: float, everything: bool = False) -> bool:
         """Decide the pending rows that can be decided now. Chronological rules decide in
@@ -864,6 +863,7 @@ class EventRules:
         self.types: frozenset = frozenset()          # complex event types (rule heads)
         self.leaf_types: frozenset = frozenset()     # types read by positive event atoms
         self.inputs: dict = {}                       # head -> types its events are made of
+        self.closing: dict = {}                      # head -> those that may end its events
         self.key_index: dict[tuple[str, int], int] = {}
         self.generation = 0
         self._decls: Any = None
@@ -910,6 +910,8 @@ class EventRules:
                                     for alt in rt.rule.alternatives for leaf in alt.leaves)
         self.inputs = {h: sorted({leaf.key for rt in rts for alt in rt.rule.alternatives
                                   for leaf in alt.leaves}) for h, rts in by_head.items()}
+        self.closing = {h: frozenset().union(*(rt.rule.closing_types() for rt in rts))
+                        for h, rts in by_head.items()}
         self.rules = runtimes
         self.by_head = by_head
         self.generation += 1
@@ -970,15 +972,19 @@ class EventRules:
             n = self.key_index[key] = len(self.key_index)
         return n
 
-    def complete_sql(self, key: tuple[str, int], x: str) -> str:
-        """SQL: the history of ``key`` is settled up to the time ``x`` (an SQL expression)
-        for a cnot or a consumption decision, with the inputs as parameters (:meth:`params`)
-        -- :meth:`settled`, and for complex event types as :meth:`complete`."""
+    def complete_sql(self, key: tuple[str, int], x: str, through: bool = True) -> str:
+        """SQL: the history of ``key`` is complete up to the time ``x`` (an SQL expression),
+        with the inputs as parameters (:meth:`params`) -- :meth:`complete` in SQL. ``through``:
+        every event ending at or before x is in; else only those ending before x (what a
+        cnot or a decision needs of a type none of whose events can end with the match)."""
         n = self._index(key)
         if key in self.types:
-            inner = " AND ".join(f"({self.complete_sql(t, x)})" for t in self.inputs[key])
-            return f"{x} <= :mk{n} OR (({inner or self.store.dialect.true}) AND {x} < :pm{n})"
-        return f"{x} <= :mk{n} OR {x} + :dl{n} < :now OR {x} <= :le{n}"
+            closing = self.closing.get(key, ())
+            inner = " AND ".join(f"({self.complete_sql(t, x, through and t in closing)})"
+                                 for t in self.inputs[key])
+            return (f"{x} <= :mk{n} OR (({inner or self.store.dialect.true}) AND "
+                    f"{x} {'<' if through else '<='} :pm{n})")
+        return f"{x} <= :mk{n} OR {x} + :dl{n} < :now OR {x} {'<' if through else '<='} :le{n}"
 
     def params(self, now: float) -> dict:
         """The parameters of the completeness conditions, now."""
@@ -1000,46 +1006,32 @@ class EventRules:
     def pmin(self, key: tuple[str, int]) -> float:
         return min((rt.pmin for rt in self.by_head.get(key, ())), default=_INF)
 
-    def complete(self, key: tuple[str, int], z: float, now: float | None = None) -> bool:
-        """Is the history of ``key`` complete up to ``z``? For a complex event type: a mark
-        says so, or every type its events are made of is complete up to z and no pending
-        decision ends at or before z."""
+    def complete(self, key: tuple[str, int], z: float, now: float | None = None,
+                 through: bool = True) -> bool:
+        """Is the history of ``key`` complete up to ``z``: through z (no event ending at or
+        before z can still come), or with ``through=False`` before z (none ending before
+        z)? The two differ for an in_order type at the end of its newest event: a later
+        event of it ends there at the earliest, so it is complete before that end, not
+        through it (docs/events.md, "in_order and ties"). For a complex event type: a mark
+        says so, or every type its events are made of is complete up to z (through z for
+        the types whose events may end a match, :meth:`EventRule.closing_types`) and no
+        pending decision ends at or before z (before z: no pending decision ends before
+        z). Exactly :meth:`complete_sql`."""
         tracker = self.tracker
         if tracker is None:
             return True
         if key not in self.types:
-            return tracker.complete(key, z, now)
+            return tracker.complete(key, z, now) or (
+                not through and tracker.in_order(key) and z <= tracker.latest_end(key))
         if z <= tracker.mark(key):
             return True
         if now is None:
             now = float(self.clock.now())
+        closing = self.closing.get(key, ())
         for t in self.inputs[key]:
-            if not tracker.complete(t, z, now):
+            if not self.complete(t, z, now, through and t in closing):
                 return False
-        return z < self.pmin(key)
-
-    def settled_as_sql(self, key: tuple[str, int], z: float, now: float) -> bool:
-        """:meth:`complete_sql` of ``key`` at ``z`` evaluated with the parameters of
-        :meth:`params`: :meth:`settled` for a stored type, and for a complex type its mark,
-        or its inputs settled so and no pending decision ending at or before ``z``."""
-        if key not in self.types:
-            return self.settled(key, z, now)
-        if self.tracker is None or z <= self.tracker.mark(key):
-            return True
-        return (all(self.settled_as_sql(t, z, now) for t in self.inputs[key])
-                and z < self.pmin(key))
-
-    def settled(self, key: tuple[str, int], z: float, now: float | None = None) -> bool:
-        """Complete up to ``z`` for a cnot (an event strictly inside an interval) or for a
-        recent/chronological decision at a terminator ending at ``z``: :meth:`complete`, and
-        an in_order type up to and including the end of its newest event (SPEC §6: a later
-        event of it ends at z at the earliest, which is never strictly inside, nor newer
-        than what ends at z) -- so in-order streams decide as their events arrive."""
-        if self.complete(key, z, now):
-            return True
-        tracker = self.tracker
-        return (tracker is not None and key not in self.types and tracker.in_order(key)
-                and z <= tracker.latest_end(key))
+        return z < self.pmin(key) if through else z <= self.pmin(key)
 
     def horizon(self, key: tuple[str, int], now: float | None = None) -> float:
         tracker = self.tracker
@@ -1266,10 +1258,10 @@ class EventRules:
                 if wait is not None:
                     keys = [wait]
                 elif n < len(rt.rule.alternatives):
-                    alt = rt.rule.alternatives[n]
-                    keys = [leaf.key for _, leaf in alt.negations]
-                    if kind == "term":
-                        keys += [leaf.key for leaf in alt.leaves]
+                    # (a term decision: what it waits for, chronological's other
+                    # alternatives' terminators included)
+                    keys = list(rt.decisions[n]) if kind == "term" else \
+                        [leaf.key for _, leaf in rt.rule.alternatives[n].negations]
                 else:
                     keys = []
                 for key in keys:
@@ -1327,8 +1319,12 @@ class EventRules:
                              f"candidate waits in slr_cep_pending")
             if rt.policy != "unrestricted":
                 terms = ", ".join(str(p) for p in sorted(alt.alt.terminators))
+                through = [_type(k) for k, t in alt.decision.items() if t]
+                before = [_type(k) for k, t in alt.decision.items() if not t]
                 lines.append(f"    {rt.policy}: a row at position {terms} ends a match; it "
-                             f"is decided once every input type is complete up to its end")
+                             f"is decided once every input type is complete up to its end "
+                             f"(through its end: {', '.join(through) or 'none'}; before "
+                             f"it: {', '.join(before) or 'none'})")
             if not alt.runnable:
                 missing = [leaf.text for leaf, t in zip(alt.alt.leaves, alt.tables)
                            if t is None]
@@ -1356,8 +1352,10 @@ class EventRules:
                     continue
                 lines.extend("      " + line for line in _wrap(sql))
                 lines.extend("      plan: " + step for step in self._query_plan_lines(alt, sql))
+        closing = self.closing.get(rt.head_key, ())
         lines.append(f"  {_type(rt.head_key)} is complete up to z once "
-                     + ", ".join(_type(t) for t in self.inputs.get(rt.head_key, ()))
+                     + ", ".join(_type(t) + ("" if t in closing else " (before z)")
+                                 for t in self.inputs.get(rt.head_key, ()))
                      + " are complete up to z and no pending decision ends at or before z")
         lines.append(f"  now: {rt.detections} detections in this session, {rt.pending} "
                      f"pending, {rt.errors} rejected by errors"

@@ -1,0 +1,148 @@
+"""benchmarks/bench_events.py's throughput method: ours and ETALIS in rounds taking turns, the
+headline the median of the per-round ratios. The figures themselves are the benchmark's
+business (benchmarks/README.md); these tests hold the method: the order of the runs, which
+rates each column is computed from, and the command line that asks for it."""
+from __future__ import annotations
+
+import argparse
+import doctest
+import importlib.util
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+SCRIPT = REPO / "benchmarks" / "bench_events.py"
+
+
+@pytest.fixture(scope="module")
+def bench():
+    spec = importlib.util.spec_from_file_location("bench_events_under_test", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module   # its dataclasses look their module up there
+    spec.loader.exec_module(module)
+    yield module
+    del sys.modules[spec.name]
+
+
+@pytest.mark.parametrize("ours, theirs, expected", [
+    # the ratio of the medians would be 90 / 50 = 1.8: each ratio pairs runs made together
+    ([100.0, 60.0, 90.0], [50.0, 40.0, 100.0], (1.5, 0.9, 2.0)),
+    ([3.0, 8.0], [2.0, 4.0], (1.75, 1.5, 2.0)),
+    ([5.0], [4.0], (1.25, 1.25, 1.25)),
+])
+def test_the_headline_is_the_median_of_the_per_round_ratios(bench, ours, theirs, expected):
+    assert bench.spread(ours, theirs) == pytest.approx(expected)
+
+
+def _recording(bench, order, etalis_results):
+    """Run functions that record their calls: ours at 2,000 events per CPU second, the
+    baseline at 4,000, ETALIS's results taken in turn."""
+    results = iter(etalis_results)
+
+    def run_ours():
+        order.append("ours")
+        return (2000.0, 2000.0, 5)
+
+    def run_etalis():
+        order.append("etalis")
+        return next(results)
+
+    def run_baseline():
+        order.append("baseline")
+        return (4000.0, 4000.0, 0)
+
+    return run_ours, run_etalis, run_baseline
+
+
+def test_rounds_take_turns_and_go_on_until_both_engines_ran_long_enough(bench):
+    order: list[str] = []
+    # ETALIS at 1,000 events per CPU second: 1,000 events take it 1 s a round, ours 0.5 s
+    runs = _recording(bench, order, [bench.EtalisRun(1000.0, 1000.0, 5, 1100.0)] * 20)
+    rounds = bench.interleave(*runs, repeats=2, events=1000, least_seconds=3.0)
+    # ours needs six rounds for 3 CPU seconds, ETALIS three: six rounds, order alternating
+    assert order == ["ours", "etalis", "baseline", "etalis", "ours", "baseline"] * 3
+    assert [pair.etalis_first for pair in rounds.pairs] == [False, True] * 3
+    assert len(rounds.compared()) == 6 and rounds.etalis_failure == ""
+
+
+def test_the_rounds_stop_at_the_most_unless_more_are_asked_for(bench):
+    slow = [bench.EtalisRun(1e9, 1e9, 5, 1e9)] * 40   # never reaches its CPU seconds
+    order: list[str] = []
+    assert len(bench.interleave(*_recording(bench, order, slow), repeats=2, events=1,
+                                least_seconds=10.0).pairs) == bench.MOST_ROUNDS
+    order = []
+    assert len(bench.interleave(*_recording(bench, order, slow), repeats=20, events=1,
+                                least_seconds=10.0).pairs) == 20
+
+
+def test_once_etalis_fails_ours_goes_on_alone(bench):
+    order: list[str] = []
+    runs = _recording(bench, order, ["> 60 s"])
+    rounds = bench.interleave(*runs, repeats=3)
+    assert order == ["ours", "etalis", "baseline", "ours", "baseline", "ours", "baseline"]
+    assert rounds.etalis_failure == "> 60 s" and rounds.compared() == []
+    assert len(rounds.pairs) == 3
+
+
+def _cells(row: str) -> list[str]:
+    return [cell.strip() for cell in row.strip().strip("|").split("|")]
+
+
+def test_a_row_compares_real_runs_of_ours_with_the_median_etalis(bench, monkeypatch):
+    """Ours runs for real (200 events of seq2 recent); ETALIS is replaced by three results
+    whose CPU rates are 1, 3 and 2 million events/s: its median, 2 million, is what the
+    floor's columns divide by, and the headline is the median of ours / each of them."""
+    given = iter([bench.EtalisRun(rate, rate, 100, rate * 1.1)
+                  for rate in (1e6, 3e6, 2e6)])
+    monkeypatch.setattr(bench, "etalis", lambda *args: next(given))
+    args = argparse.Namespace(n=200, n_one=0, synchronous="OFF", etalis_timeout=1.0,
+                              repeats=3, round_seconds=0.0, no_one=True)
+    row, order = bench.throughput_row("seq2", "recent", args, etalis_dir="given")
+    cells = dict(zip(_cells(bench.THROUGHPUT_HEADER), _cells(row), strict=True))
+    assert cells["detections (ours / ETALIS)"] == "100 / 100"
+
+    ours = [float(rate.replace(",", "")) for rate in re.findall(r"ours ([\d,]+)", order)]
+    assert len(ours) == 3 and order.index("ours") < order.index("ETALIS")
+    ratios = sorted(rate / etalis for rate, etalis in zip(ours, (1e6, 3e6, 2e6)))
+    headline = cells["**add_many / ETALIS, median of the pairs (wall / CPU)**"]
+    assert headline.endswith(f"/ {ratios[1]:.2f}x**")
+    assert cells["CPU ratio, least–greatest (pairs)"] == f"{ratios[0]:.2f}–{ratios[2]:.2f}x (3)"
+    assert cells["ETALIS ev/s, median (wall / CPU / CPU main thread)"] == \
+        "2,000,000 / 2,000,000 / 2,200,000"
+    floor, floor_prov = (float(f.replace(",", "")) for f in
+                         cells["floor ev/s, CPU (tables / + prov.)"].split(" / "))
+    assert cells["floor / ETALIS (CPU)"] == f"{floor / 2e6:.2f}x / {floor_prov / 2e6:.2f}x"
+    assert cells["1.5x budget the floor takes"] == \
+        f"{1.5 * 2e6 / floor:.0%} / {1.5 * 2e6 / floor_prov:.0%}"
+
+
+def test_the_command_line_runs_the_rounds_it_is_asked_for():
+    environment = {**os.environ, "ETALIS_DIR": ""}
+    result = subprocess.run(
+        [sys.executable, str(SCRIPT), "--part", "throughput", "--rules", "seq2", "--policies",
+         "recent", "--no-one", "--n", "200", "--repeats", "2", "--round-seconds", "0",
+         "--synchronous", "OFF"],
+        capture_output=True, text=True, env=environment, timeout=120, check=True)
+    lines = result.stdout.splitlines()
+    header = next(line for line in lines if line.startswith("| rule |"))
+    assert "median of the pairs" in header and "least–greatest (pairs)" in header
+    row = next(line for line in lines if line.startswith("| seq2 | recent |"))
+    assert len(_cells(row)) == len(_cells(header)) and "not run" in row
+    runs = next(line for line in lines if line.startswith("* seq2 recent:"))
+    assert len(re.findall(r"ours [\d,]+", runs)) == 2
+
+
+def test_fewer_than_one_round_is_refused():
+    result = subprocess.run([sys.executable, str(SCRIPT), "--part", "throughput",
+                             "--repeats", "0"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and "--repeats must be at least 1" in result.stderr
+
+
+def test_the_examples_in_the_benchmark_run(bench):
+    failures, tried = doctest.testmod(bench, verbose=False)
+    assert tried >= 2 and failures == 0
