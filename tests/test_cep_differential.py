@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import itertools
 
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 import slr_sql
 from slr_sql import ManualClock
@@ -742,6 +742,35 @@ def test_a_pose_stored_again_and_again_is_read_once(monkeypatch):
     reads.clear()
     assert len(fast) == 6 and fast == derived("pm([P, A, B], Out)")
     assert reads == []   # (the interpreter's path reads no stored text)
+
+
+@given(st.lists(st.tuples(st.floats(-1e300, 1e300), st.floats(-1e300, 1e300),
+                          st.floats(-1e300, 1e300)), min_size=1, max_size=4))
+@example([(1.5, -0.0, 2.0), (1.7e308, 1.7e308, 0.0), (0.1, 0.2, 0.3)])   # (overflows to inf)
+@settings(max_examples=30, deadline=None)
+def test_the_points_derived_on_stored_values_are_handed_on_as_decoding_gives(points):
+    # the complex events the plain path derives reach the listeners with the terms decoding
+    # their stored text gives, bit for bit, read back by orjson alone (decode not called);
+    # a point that overflows to infinity is decoded as any other value
+    clock = ManualClock(0.0)
+    with slr_sql.open(clock=clock) as kb:
+        kb.load(":- consumption(recent).\n"
+                "r(Out) <- cam(A) equals obj(P) where pos_multiply([P, A], Out).")
+        heard = []
+        kb.add_listeners.append(heard.append)
+        decoded = []
+        decode_text = kb._cep.decode
+        kb._cep.decode = lambda v: decoded.append(v) or decode_text(v)
+        cam = Struct("pose", ([1.7e308, 0.5, -0.0], [0.0, 0.0, 0.0, 2.0]))
+        for t, p in enumerate(points):
+            kb.add_many([("cam", (cam,), t, t), ("obj", (list(p),), t, t)])
+        clock.set(100.0)
+        got = [(repr(args), start, end) for batch in heard
+               for name, args, start, end in batch if name == "r"]
+        stored = kb.sql("SELECT arg1, t_start, t_end FROM r ORDER BY seq")[1]
+        assert got == [(repr((decode(text),)), start, end) for text, start, end in stored]
+        assert len(got) == len(points)
+        assert decoded == [text for text, _, _ in stored if "e999" in text]
 
 
 @settings(max_examples=40, deadline=None,

@@ -37,7 +37,7 @@ from ..encoding import Unencodable, decode, encode
 from ..errors import SLRError
 from ..host import Host
 from ..store import DatabaseError, EventBatch, quote_identifier
-from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
+from ..terms import Struct, Var, deref, format_term, is_ground, make_list, term_vars
 from .rules import EventRule
 from .sqlgen import (AltSQL, anchor_index, complex_copy, complex_read, create_index,
                      index_name, max_id, max_seq, pending_delete, pending_delete_listed,
@@ -57,6 +57,7 @@ _end_of = itemgetter(3)   # of a derived event (name, args, start, end)
 __all__ = ["EventRules", "RuleRuntime", "ready_prefix"]
 
 _INF = math.inf
+_FLOAT = frozenset((float,))
 
 
 def _fmt(t: float) -> str:
@@ -143,6 +144,10 @@ class RuleRuntime:
         self.generation = -1
         self.eng = eng
         self._prov_rows: list = []   # matches found by the Python side, not yet written
+        # the stored texts of the points the plain path derived (lists of finite floats,
+        # written as their reprs): the flush reads them back with orjson alone. Texts,
+        # not the values: strings are no work for Python's garbage collector
+        self._plain_points: set = set()
         self._before: int | None = None   # the provenance id a run's matches come after
         self._matched = False   # this run ran a statement that may add provenance rows
         self._queue: list = []  # statements whose result is not needed, not sent yet
@@ -256,6 +261,9 @@ class RuleRuntime:
             encoded = self.eng.encode(out)
         except Unencodable:
             return None
+        if type(out) is list and _FLOAT.issuperset(map(type, out)) and _INF not in out \
+                and -_INF not in out:   # (a NaN is Unencodable)
+            self._plain_points.add(encoded)
         k = self.alts[n].k
         self._prov_rows.append((n,) + tuple(row[:k]) + (None,) * (self.width - k)
                                + (row[k], row[k + 1])
@@ -835,6 +843,12 @@ class RuleRuntime:
                 return []
             self.detections += len(rows)
             dec = self.eng.decode
+            points, self._plain_points = self._plain_points, set()
+            if points:   # (decode's very terms: the reprs' floats in a list)
+                decode_text = dec
+
+                def dec(v: Any) -> Any:
+                    return make_list(orjson.loads(v)) if v in points else decode_text(v)
             if arity == 0:
                 return [(name, (), r[0], r[1]) for r in rows]
             if arity == 1:
