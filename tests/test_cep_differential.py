@@ -773,6 +773,23 @@ def test_the_points_derived_on_stored_values_are_handed_on_as_decoding_gives(poi
         assert decoded == [text for text, _, _ in stored if "e999" in text]
 
 
+def test_points_a_buffer_refuses_are_not_kept_for_a_later_flush():
+    # a buffer's trigger may refuse every derived point of a round: the texts kept to read
+    # them back go with the round all the same (nothing piles up round after round)
+    clock = ManualClock(0.0)
+    with slr_sql.open(clock=clock) as kb:
+        kb.load(":- consumption(recent).\n"
+                "r(Out) <- cam(A) equals obj(P) where pos_multiply([P, A], Out).")
+        kb.add_buffer("r(_)", keep_between=(1000.0, 2000.0))
+        cam = Struct("pose", ([0.5, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]))
+        for t in range(4):
+            kb.add_many([("cam", (cam,), t, t), ("obj", ([t + 0.5, 0.0, 0.0],), t, t)])
+            clock.set(t + 1.0)
+            assert kb.sql("SELECT count(*) FROM r")[1][0][0] == 0
+            assert [rt._plain_points for rt in kb._cep.rules] == [set()]
+        assert kb.event_rules()[0]["detections"] == 0
+
+
 @settings(max_examples=40, deadline=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(st.lists(st.tuples(_vector(3), _pose(), _pose()), min_size=1, max_size=6),

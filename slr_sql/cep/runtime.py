@@ -41,8 +41,7 @@ from ..terms import Struct, Var, deref, format_term, is_ground, make_list, term_
 from .rules import EventRule
 from .sqlgen import (AltSQL, anchor_index, complex_copy, complex_read, create_index,
                      index_name, max_id, max_seq, pending_delete, pending_delete_listed,
-                     pending_insert,
-                     pending_of_group, pending_of_rule, pending_row, pending_summary,
+                     pending_insert, pending_of_group, pending_of_rule, pending_row, pending_summary,
                      pending_wait, provenance_insert, query_plan, rows_by_seq, rule_record,
                      watermarks)
 from .where import MustWait, Residual, describe_error, remembering
@@ -837,13 +836,13 @@ class RuleRuntime:
                           (complex_read(self.prov, arity), {"before": before}, False)]
 
         def stored(rows: list) -> list:
+            points, self._plain_points = self._plain_points, set()
             if returning:   # RETURNING gives an integral REAL as an int: the times as stored
                 rows = [r[:arity] + (float(r[arity]), float(r[arity + 1])) for r in rows]
             if not rows:
                 return []
             self.detections += len(rows)
             dec = self.eng.decode
-            points, self._plain_points = self._plain_points, set()
             if points:   # (decode's very terms: the reprs' floats in a list)
                 decode_text = dec
 
