@@ -472,15 +472,15 @@ class Completeness:
     # -- updating (the Synchronizer holds its lock) ------------------------------------------
     def set_mark(self, key: Any, t: float, source: str) -> bool:
         """Record a mark (``key`` a (name, n) tuple or a bare name for every arity)."""
+        # (held in memory only once stored: a write that failed, busy, is made again by
+        # the same mark retried)
         if isinstance(key, tuple):
             if t <= self.marks.get(key, -_INF):
                 return False
-            self.marks[key] = t
             mk = f"{key[0]}/{key[1]}"
         else:
             if t <= self.name_marks.get(key, -_INF):
                 return False
-            self.name_marks[key] = t
             mk = f"{key}/*"
         # the store keeps the larger mark (another process may have stored one meanwhile)
         with self.store.transaction():
@@ -494,6 +494,9 @@ class Completeness:
         else:
             self.name_marks[key] = stored
         self.mark_src[key] = source
+        # the marks other processes committed meanwhile: of two marks made at once, each
+        # read at the start of its call, the one committed last sees both and decides
+        self.load()
         return True
 
     def observe(self, events: list, arrival: float) -> set:

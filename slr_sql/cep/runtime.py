@@ -335,7 +335,8 @@ class RuleRuntime:
         the round read it already."""
         eng = self.eng
         self.ensure_built()
-        self._before, self._matched, self._queue = before, False, []
+        self._before, self._matched = before, False
+        self._forget_unsent()
         changed = False
         fresh_terms = False
         params = eng.params(now)
@@ -413,6 +414,12 @@ class RuleRuntime:
         if summary:
             self._summary(rows[-1])
         return stored(rows[len(statements) - 1]) if stored is not None else []
+
+    def _forget_unsent(self) -> None:
+        """Drop what a run found or wrote but did not send: it belonged to that run's
+        transaction, which an error rolled back (a deferred write refused at a later read
+        leaves the matches found meanwhile here), and must not reach the next one."""
+        self._queue, self._prov_rows, self._done = [], [], []
 
     def _before_matches(self) -> None:
         """Before a statement that may add provenance rows: the table's greatest id (the
@@ -789,6 +796,7 @@ class RuleRuntime:
 
     def refresh(self) -> None:
         """Re-read the summary of this rule's pending decisions."""
+        self._forget_unsent()
         self._summary(self._ask(pending_summary(), {"rule": self.key}))
 
     def _summary(self, rows: list) -> None:
@@ -883,6 +891,10 @@ class EventRules:
         self._woken: dict = {}     # type -> the time a wake-up was asked for
         self._wake_due = False     # rules installed since the timers were last asked for
         self.closed = False
+        # a rollback may undo what the rules' pending summaries were read after (decisions
+        # made, rows kept pending): they are read again before they are used next
+        self._summaries_stale = False
+        kb.store.rollback_listeners.append(self._rolled_back)
 
     # ----------------------------------------------------------------- install
     @property
@@ -1204,6 +1216,7 @@ class EventRules:
 
     def _round(self, new_from: dict, dirty: set, decide: bool, ends: dict | None = None,
                token: _AddToken | None = None) -> list:
+        self._read_stale_summaries()
         now = float(self.clock.now())
         for key in self.types & self.leaf_types:
             if key not in new_from:
@@ -1234,8 +1247,34 @@ class EventRules:
                         (min(known[0], lo), max(known[1], hi))
         return derived
 
+    def _rolled_back(self) -> None:
+        self._summaries_stale = True
+
+    def reread_pending(self) -> None:
+        """Read every rule's summary of its pending decisions again before the next
+        decision: completeness moved by a mark, which may complete the decisions another
+        connection left pending (this one's summaries know only its own)."""
+        self._summaries_stale = True
+
+    def _read_stale_summaries(self) -> None:
+        """After a rollback or a mark: every rule's summary of its pending decisions read
+        again."""
+        if self._summaries_stale:
+            with self.store.lock:
+                rules = self.rules
+                for rt in rules:
+                    rt._forget_unsent()
+                # (one call of the store for them all: one round trip to a server)
+                rows = self.store.run_compiled_batch(
+                    [(pending_summary(), {"rule": rt.key}, False) for rt in rules]) \
+                    if rules else []
+                for rt, summary in zip(rules, rows):
+                    rt._summary(summary)
+                self._summaries_stale = False
+
     def ready(self, now: float) -> bool:
         """Can some pending decision be made at ``now`` (its histories are complete)?"""
+        self._read_stale_summaries()
         for rt in self.rules:
             if rt.waits and rt.ready_groups(now):
                 return True
