@@ -389,3 +389,34 @@ def test_a_hierarchy_over_in_order_types_derives_the_same_one_by_one_and_at_once
             return sorted((r["X"], r["S"], r["E"]) for r in kb.query("d(X)^[S, E]"))
 
     assert derived(1) == derived(len(stream))
+
+
+def test_the_decided_rows_of_a_round_are_deleted_by_one_statement(tmp_path):
+    """recent, a where goal run on the Python side: 600 terminators that could not be
+    decided at their add (not complete yet) are decided once the clock passes them, and
+    the pending rows they leave go in one statement, whatever their count."""
+    clock = ManualClock(0.0)
+    with slr_sql.open(str(tmp_path / "s.db"), clock=clock) as kb:
+        kb.load(_program("recent", "c(Y) <- a(X) seq b(X) where succ(X, Y)."))
+        kb.add_many([f"a({i})^{i}" for i in range(600)]
+                    + [f"b({i})^{i + 0.5}" for i in range(600)])
+        assert kb.sql("SELECT count(*) FROM slr_cep_pending")[1][0][0] == 600
+        statements = _sqlite_statements(kb, lambda: clock.set(1000.0))
+        assert len(_matching(statements, "DELETE FROM slr_cep_pending")) == 1, statements
+        assert kb.sql("SELECT count(*) FROM slr_cep_pending")[1][0][0] == 0
+        assert sorted(r["Y"] for r in kb.query("c(Y)^[_, _]")) == list(range(1, 601))
+
+
+def test_a_where_goal_on_postgres_writes_its_matches_and_deletes_its_decided(postgres_url):
+    """PostgreSQL, recent, a where goal run on the Python side: the matches go into the
+    provenance table by position and the decided pending rows by one JSON array of ids, as
+    on SQLite -- the same complex events, nothing left pending."""
+    clock = ManualClock(0.0)
+    with slr_sql.open(postgres_url, clock=clock) as kb:
+        kb.load(_program("recent", "c(Y) <- a(X) seq b(X) where succ(X, Y)."))
+        kb.add_many([f"a({i})^{i}" for i in range(30)] + [f"b({i})^{i + 0.5}" for i in range(30)])
+        assert kb.sql("SELECT count(*) FROM slr_cep_pending")[1][0][0] == 30
+        clock.set(100.0)
+        assert kb.sql("SELECT count(*) FROM slr_cep_pending")[1][0][0] == 0
+        assert sorted((r["Y"], r["S"]) for r in kb.query("c(Y)^[S, _]")) == \
+            [(i + 1, float(i)) for i in range(30)]

@@ -37,14 +37,14 @@ from ..encoding import Unencodable, decode, encode
 from ..errors import SLRError
 from ..host import Host
 from ..store import DatabaseError, EventBatch, quote_identifier
-from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
+from ..terms import Struct, Var, deref, format_term, is_ground, make_list, term_vars
 from .rules import EventRule
 from .sqlgen import (AltSQL, anchor_index, complex_copy, complex_read, create_index,
-                     index_name, max_id, max_seq, pending_delete, pending_insert,
-                     pending_of_group, pending_of_rule, pending_row, pending_summary,
+                     index_name, max_id, max_seq, pending_delete, pending_delete_listed,
+                     pending_insert, pending_of_group, pending_of_rule, pending_row, pending_summary,
                      pending_wait, provenance_insert, query_plan, rows_by_seq, rule_record,
                      watermarks)
-from .where import MustWait, Residual, describe_error, plain_value
+from .where import MustWait, Residual, describe_error, remembering
 
 # the rowids of a pending row: a JSON array of sequence numbers (64-bit integers, which
 # orjson reads exactly, ~5x faster than the json module)
@@ -56,6 +56,7 @@ _end_of = itemgetter(3)   # of a derived event (name, args, start, end)
 __all__ = ["EventRules", "RuleRuntime", "ready_prefix"]
 
 _INF = math.inf
+_FLOAT = frozenset((float,))
 
 
 def _fmt(t: float) -> str:
@@ -142,6 +143,10 @@ class RuleRuntime:
         self.generation = -1
         self.eng = eng
         self._prov_rows: list = []   # matches found by the Python side, not yet written
+        # the stored texts of the points the plain path derived (lists of finite floats,
+        # written as their reprs): the flush reads them back with orjson alone. Texts,
+        # not the values: strings are no work for Python's garbage collector
+        self._plain_points: set = set()
         self._before: int | None = None   # the provenance id a run's matches come after
         self._matched = False   # this run ran a statement that may add provenance rows
         self._queue: list = []  # statements whose result is not needed, not sent yet
@@ -193,15 +198,19 @@ class RuleRuntime:
     def _plain_plan(self, sql: AltSQL, residual: Residual) -> tuple | None:
         """How a match of this alternative derives without terms (:meth:`_derive_plain`):
         the where goal is one builtin of plain values (``pos_multiply``, see
-        :func:`where.plain_value`) reading value columns and binding a head variable, the
-        other head arguments constants. None when the terms' path must run."""
+        :data:`where.PLAIN_BUILTINS`) reading value columns and binding a head variable, the
+        other head arguments constants: ``(columns, their readers, apply, head)``. None
+        when the terms' path must run."""
         eng = self.eng
         if eng.store.dialect.from_column is not None or residual.unknown or residual.reads:
             return None
         shape = residual.plain_function(eng.kb.engine)
         if shape is None:
             return None
-        names, out_name, fn = shape
+        names, out_name, builtin = shape
+        readers = builtin.readers(len(names))
+        if readers is None:
+            return None
         base = sql.k + 2
         by_name = {name: v for v, name in residual.inputs}
         position = {id(v): base + i for i, v in enumerate(sql.value_vars)}
@@ -226,21 +235,23 @@ class RuleRuntime:
                 return None
         if None not in head:
             return None
-        return columns, fn, head
+        # each column's readings remembered: a pose at a fixed frame (a camera on its
+        # mount) is stored again and again with the same text
+        return (list(zip(columns, map(remembering, readers))), builtin.apply, head)
 
     def _derive_plain(self, n: int, row: tuple, now: float) -> bool | None:
         """:meth:`_derive_from` for an alternative with a plain plan, on the stored values
         themselves (no terms); None when the values are not plain (the terms' path
         decides)."""
-        columns, fn, head = self.plain[n]
+        inputs, apply, head = self.plain[n]
         values = []
-        for i in columns:
-            v = plain_value(row[i])
+        for i, read in inputs:
+            v = read(row[i])
             if v is None:
                 return None
             values.append(v)
         try:
-            out = fn(values)
+            out = apply(values)
         except Exception:   # (the terms' path raises what the builtin raises, as before)
             return None
         if out is None:
@@ -249,6 +260,9 @@ class RuleRuntime:
             encoded = self.eng.encode(out)
         except Unencodable:
             return None
+        if type(out) is list and _FLOAT.issuperset(map(type, out)) and _INF not in out \
+                and -_INF not in out:   # (a NaN is Unencodable)
+            self._plain_points.add(encoded)
         k = self.alts[n].k
         self._prov_rows.append((n,) + tuple(row[:k]) + (None,) * (self.width - k)
                                + (row[k], row[k + 1])
@@ -509,9 +523,7 @@ class RuleRuntime:
         rows, self._prov_rows = self._prov_rows, []
         if rows:
             self._before_matches()
-            names = [f"p{i}" for i in range(len(rows[0]))]
-            self._send_many(provenance_insert(self.prov, self.width, self.rule.arity),
-                            [dict(zip(names, row)) for row in rows])
+            self._send_many(provenance_insert(self.prov, self.width, self.rule.arity), rows)
 
     # ----------------------------------------------------------------- statements
     # The statements of a run whose result nothing needs (its writes to the provenance,
@@ -652,7 +664,8 @@ class RuleRuntime:
             chunk = [(row, _rowids(row[4])[0]) for row in rows[i:i + 200]]
             candidates: dict = {}
             for pos in sorted({row[3] for row, _ in chunk}):
-                params["ts"] = json.dumps([seq for row, seq in chunk if row[3] == pos])
+                params["ts"] = orjson.dumps(
+                    [seq for row, seq in chunk if row[3] == pos]).decode()
                 for cand in self._ask(alt.term_select_many(pos), params):
                     candidates.setdefault((pos, cand[pos]), []).append(cand)
             for row, seq in chunk:
@@ -735,10 +748,11 @@ class RuleRuntime:
 
     def _delete_done(self) -> None:
         done, self._done = self._done, []
-        for i in range(0, len(done), 500):
-            chunk = done[i:i + 500]
-            self._send(pending_delete(len(chunk)),
-                                        {f"d{j}": rid for j, rid in enumerate(chunk)})
+        if len(done) == 1:
+            self._send(pending_delete(1), {"d0": done[0]})
+        elif done:   # (their ids as one JSON array: one statement, whatever their count)
+            self._send(pending_delete_listed(self.eng.store.dialect),
+                       {"ids": orjson.dumps(done).decode()})
 
     def _decide_match(self, n: int, rowids: list, end: float, now: float,
                       params: list | None = None) -> bool:
@@ -830,12 +844,18 @@ class RuleRuntime:
                           (complex_read(self.prov, arity), {"before": before}, False)]
 
         def stored(rows: list) -> list:
+            points, self._plain_points = self._plain_points, set()
             if returning:   # RETURNING gives an integral REAL as an int: the times as stored
                 rows = [r[:arity] + (float(r[arity]), float(r[arity + 1])) for r in rows]
             if not rows:
                 return []
             self.detections += len(rows)
             dec = self.eng.decode
+            if points:   # (decode's very terms: the reprs' floats in a list)
+                decode_text = dec
+
+                def dec(v: Any) -> Any:
+                    return make_list(orjson.loads(v)) if v in points else decode_text(v)
             if arity == 0:
                 return [(name, (), r[0], r[1]) for r in rows]
             if arity == 1:

@@ -1076,15 +1076,15 @@ def provenance_columns(width: int, arity: int) -> list[str]:
 
 
 def provenance_insert(prov: str, width: int, arity: int) -> str:
-    """One match found on the Python side into the provenance table; parameters ``:p0``,
-    ``:p1``, ... in :func:`provenance_columns` order.
+    """One match found on the Python side into the provenance table; positional
+    parameters in :func:`provenance_columns` order (a match is a tuple of those values:
+    no dict per match).
 
     >>> provenance_insert('"m"', 1, 0)
-    'INSERT INTO "m" (alt, r1, t_start, t_end, detected) VALUES (:p0, :p1, :p2, :p3, :p4)'
+    'INSERT INTO "m" (alt, r1, t_start, t_end, detected) VALUES (?, ?, ?, ?, ?)'
     """
     cols = provenance_columns(width, arity)
-    return (f"INSERT INTO {prov} ({', '.join(cols)}) VALUES "
-            f"({', '.join(f':p{i}' for i in range(len(cols)))})")
+    return f"INSERT INTO {prov} ({', '.join(cols)}) VALUES ({', '.join('?' * len(cols))})"
 
 
 def pending_of_rule(order: bool) -> str:
@@ -1140,6 +1140,16 @@ def pending_delete(count: int) -> str:
     """
     return (f"DELETE FROM slr_cep_pending WHERE id IN "
             f"({', '.join(f':d{i}' for i in range(count))})")
+
+
+def pending_delete_listed(dialect: Any) -> str:
+    """Delete the pending decisions whose ids are in the JSON array ``:ids``.
+
+    >>> from slr_sql.store.dialect import SQLITE
+    >>> pending_delete_listed(SQLITE)
+    'DELETE FROM slr_cep_pending WHERE id IN (SELECT value FROM json_each(:ids))'
+    """
+    return f"DELETE FROM slr_cep_pending WHERE id IN ({dialect.json_integers(':ids')})"
 
 
 def pending_summary() -> str:
