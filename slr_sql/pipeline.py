@@ -18,7 +18,9 @@ this order:
    are complete now are made, each round in a transaction of its own; the complex events a
    round derives go through stage 3 and the next round runs, until a round derives nothing
    and nothing asked for another one; then synchronized queries waiting on complex event
-   types are re-checked;
+   types are re-checked. After an add, a round that fails (``SLRBusy``, a lost connection)
+   ends the stage without failing the add, whose events are committed: those decisions
+   stay pending for the next add, mark, clock move or timer;
 5. **buffers**: space the buffers' pruning freed is reclaimed;
 6. **wake**: ``kb.add_listeners`` are called and the subscription hub is woken, once per
    batch, in the order the batches were stored (the add's events with the complex events
@@ -68,12 +70,13 @@ class _Run:
     """One pass of the pipeline on one thread: the stage it is in, and whether a request
     for decisions arrived since its decision stage last looked."""
 
-    __slots__ = ("stage", "again", "outer")
+    __slots__ = ("stage", "again", "outer", "stored")
 
     def __init__(self, outer: _Run | None) -> None:
         self.stage = STAGES[0]
         self.again = False
         self.outer = outer   # the run a listener's own add interrupted on this thread
+        self.stored = False  # an add whose events are committed (stage 2 is behind it)
 
 
 def with_derived(stored: Batch, derived: Batch) -> Batch:
@@ -139,17 +142,26 @@ class EventPipeline:
             run.stage = "store"
             if type(events) is not EventBatch:  # (the store notes each type's end times in it)
                 events = EventBatch(events)
-            errors, derived = self._insert(events, atomic)
-            if atomic and errors:
-                raise errors[0]
+            if marks:   # stored with the events: the batch is stored whole or not at all
+                with self.store.transaction():
+                    errors, derived = self._insert(events, atomic)
+                    if atomic and errors:
+                        raise errors[0]
+                    written = self.sync.store_marks(marks)
+            else:
+                errors, derived = self._insert(events, atomic)
+                if atomic and errors:
+                    raise errors[0]
+            run.stored = True
             rejected = {id(e.event) for e in errors if hasattr(e, "event")}
             stored = [ev for ev in events if id(ev) not in rejected] if rejected else events
             if derived:   # the complex events of this add, with its events
                 stored = with_derived(stored, derived)
             run.stage = "completeness"
             self.sync.on_add(stored)
-            if marks:   # after the events of the same batch are stored
-                self.sync.apply_marks(marks)
+            if marks:   # after the events of the same batch are observed
+                self.sync.apply_marks(written)
+                self.cep.reread_pending()
             self._settle(run, [stored])   # (even empty: the listeners hear every add)
         finally:
             self._leave(run)
@@ -161,6 +173,7 @@ class EventPipeline:
         try:
             run.stage = "completeness"
             self.sync.mark(event_type, t)
+            self.cep.reread_pending()
             self._settle(run, [])
         finally:
             self._leave(run)
@@ -272,19 +285,25 @@ class EventPipeline:
         """Stage 4: decision rounds until one derives nothing and nothing asked for another;
         each round's complex events go through stage 3 and join ``batches``."""
         cep = self.cep
-        if cep.closed or not cep.rules:
+        if cep.closed or not cep.active:   # (active: the rules of the stored program)
             run.again = False
             return
         while True:
             run.again = False
-            if not cep.ready(float(cep.clock.now())):
-                cep.wake_timers()
-                cep.recheck()
-                return
             try:
+                if not cep.ready(float(cep.clock.now())):
+                    cep.wake_timers()
+                    cep.recheck()
+                    return
                 derived = cep.decide()
             except SLRError:
                 if self.store.closed:
+                    return
+                if run.stored:
+                    # an add whose events are committed: a round it made possible that
+                    # fails (busy, a lost connection) is not the add's failure -- a retried
+                    # add would store them twice. Its decisions stay pending (rolled back
+                    # whole), made at the next add, mark, clock move or timer.
                     return
                 raise
             if derived:

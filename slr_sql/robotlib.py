@@ -28,8 +28,11 @@ from .terms import Struct
 __all__ = [
     "RobotValueError", "value_kind", "interpolate", "extrapolate", "pos_multiply", "distance",
     "quat_multiply", "quat_conjugate", "quat_normalize", "quat_rotate", "slerp", "make_pose",
-    "pos_multiply_fast", "transform_point",
+    "pos_multiply_fast", "transform_point", "pose_transform", "pos_multiply_subject",
+    "apply_transforms",
 ]
+
+_INF = math.inf
 
 #: Above this |dot| between two unit quaternions, slerp falls back to normalized lerp.
 _NLERP_THRESHOLD = 0.9995
@@ -311,6 +314,11 @@ def _floats(v: Any, n: int) -> tuple | None:
     tv = type(v)
     if (tv is not list and tv is not tuple) or len(v) != n:
         return None
+    for c in v:
+        if type(c) is not float:
+            break
+    else:   # (floats only, the common case: no conversion)
+        return tuple(v)
     out = []
     for c in v:
         tc = type(c)
@@ -326,7 +334,7 @@ def _floats(v: Any, n: int) -> tuple | None:
 def _unit(x: float, y: float, z: float, w: float) -> tuple | None:
     """quat_normalize's arithmetic on floats; None for a zero or infinite norm."""
     n = math.sqrt(x * x + y * y + z * z + w * w)
-    if not n > 0.0 or math.isinf(n):
+    if not n > 0.0 or n == _INF:
         return None
     return (x / n, y / n, z / n, w / n)
 
@@ -337,6 +345,12 @@ def _rotate(q: tuple, px: float, py: float, pz: float) -> tuple:
     q = _unit(*q)
     if q is None:  # cannot happen for a unit quaternion; keep the general path's error
         raise RobotValueError("cannot normalize quaternion")
+    return _rotate_by(q, px, py, pz)
+
+
+def _rotate_by(q: tuple, px: float, py: float, pz: float) -> tuple:
+    """(q·(p, 0))·q* with quat_multiply's operation order, ``q`` as quat_rotate has it
+    (normalized by quat_rotate itself)."""
     x1, y1, z1, w1 = q
     a = w1 * px + x1 * 0.0 + y1 * pz - z1 * py
     b = w1 * py - x1 * pz + y1 * 0.0 + z1 * px
@@ -362,6 +376,93 @@ def _pose_floats(v: Any) -> tuple | None:
     return t, q
 
 
+def pose_transform(translation: Any, rotation: Any) -> tuple | None:
+    """The pose ``pose(translation, rotation)`` (plain lists of numbers) as pos_multiply
+    applies it: ``(translation floats, unit rotation, the rotation as quat_rotate turns by
+    it)`` -- the rotation normalized once, as the transform's own, and once more, as
+    quat_rotate normalizes what it is given. None when the general path must decide.
+    Worked out once, a transform applies to any number of points (:func:`apply_transforms`).
+
+    >>> pose_transform([0, 0, 5], [0, 0, 0, 2])
+    ((0.0, 0.0, 5.0), (0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0))
+    >>> pose_transform([0, 0], [0, 0, 0, 1]) is None
+    True
+    """
+    t = _floats(translation, 3)
+    q = _floats(rotation, 4)
+    if t is None or q is None:
+        return None
+    q = _unit(*q)
+    if q is None:
+        return None
+    turn = _unit(*q)
+    if turn is None:  # (never for a unit quaternion: then the general path raises)
+        return None
+    return t, q, turn
+
+
+def _transform_of(v: Any) -> tuple | None:
+    """:func:`pose_transform` of a plain pose value, else None."""
+    if type(v) is not Struct or v.name != "pose" or len(v.args) != 2:
+        return None
+    return pose_transform(v.args[0], v.args[1])
+
+
+def pos_multiply_subject(p: Any) -> tuple | None:
+    """What pos_multiply moves, ready for :func:`apply_transforms`: ``("point", (x, y, z))``
+    for a plain point, ``("pose", (translation, unit rotation))`` for a plain pose; None
+    when the general path must decide.
+
+    >>> pos_multiply_subject([1, 0, 0])
+    ('point', (1.0, 0.0, 0.0))
+    >>> pos_multiply_subject(Struct("pose", ([1, 2, 3], [0, 0, 0, 2])))
+    ('pose', ((1.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0)))
+    """
+    x = _floats(p, 3)
+    if x is not None:
+        return ("point", x)
+    pose = _pose_floats(p)
+    return None if pose is None else ("pose", pose)
+
+
+def apply_transforms(subject: tuple, transforms: Sequence[tuple]) -> Any:
+    """pos_multiply of a subject (:func:`pos_multiply_subject`) by transforms
+    (:func:`pose_transform`): a point as a list of floats, a pose as ``pose`` of two lists;
+    None when a composed rotation cannot be normalized (the general path raises then).
+
+    >>> apply_transforms(("point", (1.0, 0.0, 0.0)),
+    ...                  [pose_transform([0, 0, 5], [0, 0, 0, 1])])
+    [1.0, 0.0, 5.0]
+    """
+    kind, value = subject
+    if kind == "point":
+        px, py, pz = value
+        for (tx, ty, tz), _, (x1, y1, z1, w1) in transforms:
+            # _rotate_by inline (the hot loop of a where goal over many matches)
+            a = w1 * px + x1 * 0.0 + y1 * pz - z1 * py
+            b = w1 * py - x1 * pz + y1 * 0.0 + z1 * px
+            c = w1 * pz + x1 * py - y1 * px + z1 * 0.0
+            d = w1 * 0.0 - x1 * px - y1 * py - z1 * pz
+            x2, y2, z2 = -x1, -y1, -z1
+            px, py, pz = (tx + (d * x2 + a * w1 + b * z2 - c * y2),
+                          ty + (d * y2 - a * z2 + b * w1 + c * x2),
+                          tz + (d * z2 + a * y2 - b * x2 + c * w1))
+        return [px, py, pz]
+    t, q = value
+    for (tx, ty, tz), qa, turn in transforms:
+        rx, ry, rz = _rotate_by(turn, *t)
+        x1, y1, z1, w1 = qa
+        x2, y2, z2, w2 = q
+        q = _unit(w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                  w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+                  w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+                  w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2)
+        if q is None:
+            return None
+        t = (tx + rx, ty + ry, tz + rz)
+    return Struct("pose", (list(t), list(q)))
+
+
 def pos_multiply_fast(p: Any, transforms: Any) -> Any:
     """pos_multiply's common case (plain numbers in lists or tuples, see above), or None
     when the general path must decide (and raise its error).
@@ -376,29 +477,14 @@ def pos_multiply_fast(p: Any, transforms: Any) -> Any:
         return None
     parts = []
     for a in transforms:
-        part = _pose_floats(a)
+        part = _transform_of(a)
         if part is None:
             return None
         parts.append(part)
-    x = _floats(p, 3)
-    if x is not None:
-        return transform_point(x, parts)
-    pose = _pose_floats(p)
-    if pose is None:
+    subject = pos_multiply_subject(p)
+    if subject is None:
         return None
-    t, q = pose
-    for (tx, ty, tz), qa in parts:
-        rx, ry, rz = _rotate(qa, *t)
-        x1, y1, z1, w1 = qa
-        x2, y2, z2, w2 = q
-        q = _unit(w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                  w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-                  w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-                  w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2)
-        if q is None:
-            return None
-        t = (tx + rx, ty + ry, tz + rz)
-    return Struct("pose", (list(t), list(q)))
+    return apply_transforms(subject, parts)
 
 
 def transform_point(point: tuple, parts: list) -> list[float]:

@@ -472,15 +472,25 @@ class Completeness:
     # -- updating (the Synchronizer holds its lock) ------------------------------------------
     def set_mark(self, key: Any, t: float, source: str) -> bool:
         """Record a mark (``key`` a (name, n) tuple or a bare name for every arity)."""
+        written = self.store_mark(key, t, source)
+        if written is None:
+            return False
+        self.remember_mark(key, *written)
+        return True
+
+    def store_mark(self, key: Any, t: float, source: str) -> tuple[float, str] | None:
+        """Write a mark to the store, in the caller's transaction if one is open; returns
+        the mark stored and its source (another process's, when it stored a larger one), or
+        None when this process knows one at least as late. Memory is left to
+        :meth:`remember_mark`, once the write is committed: a write that failed, busy, is
+        made again by the same mark retried."""
         if isinstance(key, tuple):
             if t <= self.marks.get(key, -_INF):
-                return False
-            self.marks[key] = t
+                return None
             mk = f"{key[0]}/{key[1]}"
         else:
             if t <= self.name_marks.get(key, -_INF):
-                return False
-            self.name_marks[key] = t
+                return None
             mk = f"{key}/*"
         # the store keeps the larger mark (another process may have stored one meanwhile)
         with self.store.transaction():
@@ -489,12 +499,18 @@ class Completeness:
                 self.store.meta_set(f"sync/marksrc/{mk}", source)
             else:
                 source = self.store.meta_get(f"sync/marksrc/{mk}", source)
+        return stored, source
+
+    def remember_mark(self, key: Any, stored: float, source: str) -> None:
+        """A committed mark (:meth:`store_mark`) in memory."""
         if isinstance(key, tuple):
-            self.marks[key] = stored
+            self.marks[key] = max(self.marks.get(key, -_INF), stored)
         else:
-            self.name_marks[key] = stored
+            self.name_marks[key] = max(self.name_marks.get(key, -_INF), stored)
         self.mark_src[key] = source
-        return True
+        # the marks other processes committed meanwhile: of two marks made at once, each
+        # read at the start of its call, the one committed last sees both and decides
+        self.load()
 
     def observe(self, events: list, arrival: float) -> set:
         """Learn delays from stored ``(name, args, start, end)`` events; returns the in_order
@@ -764,21 +780,38 @@ class Synchronizer:
             marks.append((key, t, src))
         return keep, marks, errors
 
-    def apply_marks(self, marks: list) -> None:
-        """The marks taken from an add (completeness stage of the event pipeline)."""
-        if marks:
-            self._apply_marks(marks)
+    def store_marks(self, marks: list) -> list:
+        """Write the marks taken from an add (:meth:`take_marks`) in the transaction that
+        stores its events, so that the batch is stored whole or not at all; returns them
+        for :meth:`apply_marks` after the commit."""
+        return [(key, t, source, self.tracker.store_mark(key, t, source))
+                for key, t, source in marks]
+
+    def apply_marks(self, written: list) -> None:
+        """The marks of an add, as :meth:`store_marks` wrote them (completeness stage of the
+        event pipeline): held in memory, waiting queries they complete released."""
+        released: list = []
+        with self.lock:
+            for key, _t, source, stored in written:
+                if stored is None:
+                    continue
+                self.tracker.remember_mark(key, *stored)
+                released += self._released_by_mark(key)
+        self._schedule_all(released)
+
+    def _released_by_mark(self, key: Any) -> list:
+        keys = [key] if isinstance(key, tuple) else [k for k in list(self._heaps) if k[0] == key]
+        released: list = []
+        for k in keys:
+            released += self._release(k)
+        return released
 
     def _apply_marks(self, marks: list) -> None:
         released: list = []
         with self.lock:
             for key, t, source in marks:
-                if not self.tracker.set_mark(key, t, source):
-                    continue
-                keys = [key] if isinstance(key, tuple) else \
-                    [k for k in list(self._heaps) if k[0] == key]
-                for k in keys:
-                    released += self._release(k)
+                if self.tracker.set_mark(key, t, source):
+                    released += self._released_by_mark(key)
         self._schedule_all(released)
 
     def on_add(self, stored: list) -> None:

@@ -21,10 +21,12 @@ from __future__ import annotations
 
 import itertools
 
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 import slr_sql
 from slr_sql import ManualClock
+from slr_sql import robotlib
+from slr_sql.cep import where
 from slr_sql.cep.where import plain_value
 from slr_sql.encoding import decode, encode
 from slr_sql.terms import Atom, String, Struct, list_items, make_list
@@ -671,6 +673,121 @@ def test_a_stored_value_reads_plain_as_it_decodes(value):
     else:
         pairs = [(plain, term)]
     assert all(type(x) is type(y) and (x == y or x != x) and str(x) == str(y) for x, y in pairs)
+
+
+def _exact(value):
+    """A reading with its floats as hex text: equal only when bit for bit equal."""
+    if type(value) is float:
+        return float.hex(value)
+    if type(value) in (tuple, list):
+        return [_exact(v) for v in value]
+    return value
+
+
+@given(st.one_of(_STORED_NUMBER, st.lists(_STORED_NUMBER, max_size=4),
+                 st.tuples(st.sampled_from(["pose", "$atom", "p"]),
+                           st.lists(st.lists(_STORED_NUMBER, max_size=5), max_size=3)),
+                 st.builds(lambda t, q: Struct("pose", (t, q)),
+                           st.lists(st.floats(-1e3, 1e3), min_size=3, max_size=3),
+                           st.lists(st.floats(-2, 2), min_size=4, max_size=4)),
+                 st.sampled_from([Atom("cup"), String("[1]"), make_list([1, Atom("a")])])))
+def test_the_readers_of_stored_values_read_what_plain_values_give(value):
+    # pos_multiply on stored values reads its first input and each transform straight from
+    # the stored text (no compound made): the same reading, bit for bit, as the plain
+    # value's, and None (the terms' path) exactly when that one is not plain
+    if type(value) is tuple:
+        value = Struct(value[0], tuple(value[1])) if value[1] else Atom(value[0])
+    text = encode(value)
+    plain = plain_value(text)
+    subject = robotlib.pos_multiply_subject(plain) if plain is not None else None
+    transform = robotlib._transform_of(plain) if plain is not None else None
+    assert _exact(where._read_subject(text)) == _exact(subject)
+    assert _exact(where._read_transform(text)) == _exact(transform)
+
+
+def test_text_with_19_digits_in_a_row_takes_the_terms_path():
+    # an integer of 19 digits may be one orjson reads as a float: the plain readers leave
+    # such text (and, more cautiously, a fraction of 19 digits, never written by the
+    # store) to the terms' path, which decodes it exactly
+    for text in ('[1234567890123456789,0,0]', '[0.1234567890123456789,0.0,0.0]',
+                 '{"pose":[[0.0,0.0,0.0],[0.0,0.0,0.0,1000000000000000000000]]}'):
+        assert plain_value(text) is None
+        assert where._read_subject(text) is None and where._read_transform(text) is None
+    assert plain_value("[0.123456789012345678,0.0,0.0]") == [0.123456789012345678, 0.0, 0.0]
+
+
+def test_a_pose_stored_again_and_again_is_read_once(monkeypatch):
+    # the where goal runs on the stored values (no terms): each text of a transform column
+    # is read once and its reading remembered; the complex events are the interpreter's
+    reads = []
+    read = where._read_transform
+    monkeypatch.setattr(where, "_read_transform", lambda v: reads.append(v) or read(v))
+    cam = Struct("pose", ([0.1, 0.0, 1.2], [0.0, 0.0, 0.258819045, 0.965925826]))
+    bases = [Struct("pose", ([1.5, 0, 0], [0, 0, 0, 1])),
+             Struct("pose", ([2.25, 0, 0], [0, 0, 0, 1]))]
+
+    def derived(goal):
+        clock = ManualClock(0.0)
+        with slr_sql.open(clock=clock) as kb:
+            kb.load(":- consumption(recent).\npm(L, O) :- pos_multiply(L, O).\n"
+                    f"r(Out) <- cam(A) equals base(B) equals obj(P) where {goal}.")
+            for t in range(6):
+                kb.add_many([("cam", (cam,), t, t), ("base", (bases[t % 2],), t, t),
+                             ("obj", ([t + 0.5, 0.25, -0.4],), t, t)])
+            clock.set(100.0)
+            return kb.sql("SELECT arg1, t_start, t_end FROM r ORDER BY t_end")[1]
+
+    fast = derived("pos_multiply([P, A, B], Out)")
+    assert sorted(reads) == sorted(encode(pose) for pose in [cam] + bases)
+    reads.clear()
+    assert len(fast) == 6 and fast == derived("pm([P, A, B], Out)")
+    assert reads == []   # (the interpreter's path reads no stored text)
+
+
+@given(st.lists(st.tuples(st.floats(-1e300, 1e300), st.floats(-1e300, 1e300),
+                          st.floats(-1e300, 1e300)), min_size=1, max_size=4))
+@example([(1.5, -0.0, 2.0), (1.7e308, 1.7e308, 0.0), (0.1, 0.2, 0.3)])   # (overflows to inf)
+@settings(max_examples=30, deadline=None)
+def test_the_points_derived_on_stored_values_are_handed_on_as_decoding_gives(points):
+    # the complex events the plain path derives reach the listeners with the terms decoding
+    # their stored text gives, bit for bit, read back by orjson alone (decode not called);
+    # a point that overflows to infinity is decoded as any other value
+    clock = ManualClock(0.0)
+    with slr_sql.open(clock=clock) as kb:
+        kb.load(":- consumption(recent).\n"
+                "r(Out) <- cam(A) equals obj(P) where pos_multiply([P, A], Out).")
+        heard = []
+        kb.add_listeners.append(heard.append)
+        decoded = []
+        decode_text = kb._cep.decode
+        kb._cep.decode = lambda v: decoded.append(v) or decode_text(v)
+        cam = Struct("pose", ([1.7e308, 0.5, -0.0], [0.0, 0.0, 0.0, 2.0]))
+        for t, p in enumerate(points):
+            kb.add_many([("cam", (cam,), t, t), ("obj", (list(p),), t, t)])
+        clock.set(100.0)
+        got = [(repr(args), start, end) for batch in heard
+               for name, args, start, end in batch if name == "r"]
+        stored = kb.sql("SELECT arg1, t_start, t_end FROM r ORDER BY seq")[1]
+        assert got == [(repr((decode(text),)), start, end) for text, start, end in stored]
+        assert len(got) == len(points)
+        assert decoded == [text for text, _, _ in stored if "e999" in text]
+
+
+def test_points_a_buffer_refuses_are_not_kept_for_a_later_flush():
+    # a buffer's trigger may refuse every derived point of a round: the texts kept to read
+    # them back go with the round all the same (nothing piles up round after round)
+    clock = ManualClock(0.0)
+    with slr_sql.open(clock=clock) as kb:
+        kb.load(":- consumption(recent).\n"
+                "r(Out) <- cam(A) equals obj(P) where pos_multiply([P, A], Out).")
+        kb.add_buffer("r(_)", keep_between=(1000.0, 2000.0))
+        cam = Struct("pose", ([0.5, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]))
+        for t in range(4):
+            kb.add_many([("cam", (cam,), t, t), ("obj", ([t + 0.5, 0.0, 0.0],), t, t)])
+            clock.set(t + 1.0)
+            assert kb.sql("SELECT count(*) FROM r")[1][0][0] == 0
+            assert [rt._plain_points for rt in kb._cep.rules] == [set()]
+        assert kb.event_rules()[0]["detections"] == 0
 
 
 @settings(max_examples=40, deadline=None,

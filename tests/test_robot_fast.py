@@ -93,3 +93,32 @@ def test_builtin_malformed_pose_is_the_same_domain_error():
         kb.query("pos_multiply([[1, 2, 3], pose([0, 0, 0], [0, 0, 0, 0])], R)")
     with pytest.raises(slr_sql.SLRError, match="transform #1"):
         kb.query("pos_multiply([[1, 2, 3], pose([0, 0], [0, 0, 0, 1])], R)")
+
+
+def exact(value):
+    """A result's floats as hex text: equal only when bit for bit equal (-0.0 is not 0.0)."""
+    if isinstance(value, Struct):
+        return ("pose", [float.hex(c) for c in value.args[0]],
+                [float.hex(c) for c in value.args[1]])
+    return [float.hex(c) for c in value]
+
+
+@given(st.one_of(point, pose), st.lists(pose, max_size=4))
+def test_transforms_worked_out_once_move_as_pos_multiply_does(p, transforms):
+    # event rules read each stored pose once into a transform (pose_transform) and apply it
+    # to many points: the same floats as the reference, applied once or again
+    parts = [robotlib.pose_transform(*a.args) for a in transforms]
+    subject = robotlib.pos_multiply_subject(p)
+    assert subject is not None and None not in parts
+    got = robotlib.apply_transforms(subject, parts)
+    assert exact(got) == exact(reference_pos_multiply(p, transforms))
+    assert exact(robotlib.apply_transforms(subject, parts)) == exact(got)
+    assert exact(robotlib.pos_multiply_fast(p, transforms)) == exact(got)
+
+
+@pytest.mark.parametrize("translation, rotation", [
+    ([0, 0], [0, 0, 0, 1]), ([0, 0, 0], [0, 0, 0, 0]), ([0, 0, True], [0, 0, 0, 1]),
+    ([0, 0, 0], [0, 0, 0, math.inf]), ("abc", [0, 0, 0, 1]), ([0, 0, 0], None),
+])
+def test_a_transform_that_is_not_plain_is_left_to_the_general_path(translation, rotation):
+    assert robotlib.pose_transform(translation, rotation) is None

@@ -93,6 +93,30 @@ class Alternative:
     goals: list[Any] = field(default_factory=list)
     interval: Interval = (("s", 0), ("e", 0))
     terminators: frozenset = frozenset()   # positions that can end a match (docs/events.md)
+    # positions whose event ends strictly before every match's end: those in the left
+    # operand of a ``seq`` (the rest may end at the terminator's end, tied with it)
+    ends_before: frozenset = frozenset()
+
+    def tied_positions(self) -> frozenset:
+        """The positions whose event may end at the same time as the match's terminator
+        and be another event than it: not in :attr:`ends_before`, and some other position
+        can terminate. A decision for a terminator ending at z must see every event of
+        their types ending at z, not only those ending before z (docs/events.md, "in_order
+        and ties").
+
+        >>> from slr_sql.parser import parse_program
+        >>> def tied(text):
+        ...     alt = compile_rule(parse_program(text)[0]).alternatives[0]
+        ...     return sorted(alt.tied_positions())
+        >>> tied("c(X) <- a(X) seq b(X)."), tied("c(X) <- a(X) and b(X).")
+        ([], [0, 1])
+        >>> tied("c(X) <- (a(X) and b(X)) seq e(X)."), tied("c(X) <- a(X) seq (b(X) par e(X)).")
+        ([], [1, 2])
+        >>> tied("c(X) <- (a(X) seq b(X)) and (e(X) seq f(X)).")
+        [1, 3]
+        """
+        return frozenset(p for p in range(len(self.leaves))
+                         if p not in self.ends_before and self.terminators - {p})
 
     def leaf_vars(self) -> set[int]:
         """ids of the variables a positive event atom binds (arguments and stamps)."""
@@ -131,6 +155,53 @@ class EventRule:
     @property
     def line(self) -> int:
         return self.clause.span.line if self.clause.span is not None else 0
+
+    def decision_inputs(self, n: int) -> dict[tuple[str, int], bool]:
+        """The event types a ``recent`` or ``chronological`` decision for a terminator of
+        alternative ``n`` waits for, each with whether it must be complete *through* the
+        terminator's end z (an event of it ending at z may still change the decision) or
+        only *before* z (every event ending before z is in): through for the types of
+        :meth:`Alternative.tied_positions`, and under ``chronological`` for the terminators
+        of every alternative (one ending at z may come first in occurrence order and take
+        the events this one would use); before for the rest and the negated types (a
+        negated event lies strictly inside).
+
+        >>> from slr_sql.parser import parse_program
+        >>> rule = compile_rule(parse_program("c(X) <- a(X) seq (b(X) and e(X)).")[0])
+        >>> rule.decision_inputs(0)
+        {('a', 1): False, ('b', 1): True, ('e', 1): True}
+        >>> rule = compile_rule(parse_program("c <- a seq b.")[0])
+        >>> rule.decision_inputs(0)
+        {('a', 0): False, ('b', 0): False}
+        >>> rule.policy = "chronological"
+        >>> rule.decision_inputs(0)
+        {('a', 0): False, ('b', 0): True}
+        """
+        alt = self.alternatives[n]
+        tied = alt.tied_positions()
+        out: dict[tuple[str, int], bool] = {}
+        for p, leaf in enumerate(alt.leaves):
+            out[leaf.key] = out.get(leaf.key, False) or p in tied
+        for _, leaf in alt.negations:
+            out.setdefault(leaf.key, False)
+        if self.policy == "chronological":
+            for other in self.alternatives:
+                for t in other.terminators:
+                    out[other.leaves[t].key] = True
+        return out
+
+    def closing_types(self) -> set[tuple[str, int]]:
+        """The event types of positions that may end where a match ends (all but those in
+        a ``seq``'s left part): a complex event of the rule ending at z may still come
+        while one of them is not complete through z; the others need only be complete
+        before z (docs/events.md, "in_order and ties").
+
+        >>> from slr_sql.parser import parse_program
+        >>> sorted(compile_rule(parse_program("c(X) <- a(X) seq b(X).")[0]).closing_types())
+        [('b', 1)]
+        """
+        return {leaf.key for alt in self.alternatives for p, leaf in enumerate(alt.leaves)
+                if p not in alt.ends_before}
 
     def input_types(self) -> list[tuple[str, int]]:
         """Every event type the rule's patterns read (positive atoms, then negated ones)."""
@@ -317,7 +388,13 @@ class _Reader:
                 return interval, terms
             if op == "or":  # pragma: no cover - expanded before
                 raise self.error("internal: or not expanded", p)
+            first = len(self.alt.leaves)
             left, lterms = self.node(p.args[0])
+            if op == "seq":
+                # the left part ends before the right one starts, so before every end of
+                # the operators above (each ends at or after the end of its operands);
+                # every other operator lets its operands end where it ends
+                self.alt.ends_before |= frozenset(range(first, len(self.alt.leaves)))
             right, rterms = self.node(p.args[1])
             (s1, e1), (s2, e2) = left, right
             self.alt.relations.append((op, left, right))

@@ -37,14 +37,14 @@ from ..encoding import Unencodable, decode, encode
 from ..errors import SLRError
 from ..host import Host
 from ..store import DatabaseError, EventBatch, quote_identifier
-from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
+from ..terms import Struct, Var, deref, format_term, is_ground, make_list, term_vars
 from .rules import EventRule
 from .sqlgen import (AltSQL, anchor_index, complex_copy, complex_read, create_index,
-                     index_name, max_id, max_seq, pending_delete, pending_insert,
-                     pending_of_group, pending_of_rule, pending_row, pending_summary,
+                     index_name, max_id, max_seq, pending_delete, pending_delete_listed,
+                     pending_insert, pending_of_group, pending_of_rule, pending_row, pending_summary,
                      pending_wait, provenance_insert, query_plan, rows_by_seq, rule_record,
                      watermarks)
-from .where import MustWait, Residual, describe_error, plain_value
+from .where import MustWait, Residual, describe_error, remembering
 
 # the rowids of a pending row: a JSON array of sequence numbers (64-bit integers, which
 # orjson reads exactly, ~5x faster than the json module)
@@ -56,6 +56,7 @@ _end_of = itemgetter(3)   # of a derived event (name, args, start, end)
 __all__ = ["EventRules", "RuleRuntime", "ready_prefix"]
 
 _INF = math.inf
+_FLOAT = frozenset((float,))
 
 
 def _fmt(t: float) -> str:
@@ -126,6 +127,9 @@ class RuleRuntime:
         self.used_name = f"slr_cep_u_{rule.key}" if rule.policy == "chronological" else None
         self.used = quote_identifier(self.used_name) if self.used_name else None
         self.width = max(len(alt.leaves) for alt in rule.alternatives)
+        # per alternative: the types a terminator's decision waits for, through its end or
+        # before it (the SQL's and the Python side's one answer)
+        self.decisions = [rule.decision_inputs(n) for n in range(len(rule.alternatives))]
         self.alts: list[AltSQL] = []
         self.residuals: list[Residual | None] = []
         self.reads_store: list[bool] = []
@@ -139,6 +143,10 @@ class RuleRuntime:
         self.generation = -1
         self.eng = eng
         self._prov_rows: list = []   # matches found by the Python side, not yet written
+        # the stored texts of the points the plain path derived (lists of finite floats,
+        # written as their reprs): the flush reads them back with orjson alone. Texts,
+        # not the values: strings are no work for Python's garbage collector
+        self._plain_points: set = set()
         self._before: int | None = None   # the provenance id a run's matches come after
         self._matched = False   # this run ran a statement that may add provenance rows
         self._queue: list = []  # statements whose result is not needed, not sent yet
@@ -160,7 +168,8 @@ class RuleRuntime:
             names = [eng.table_name(leaf.key) for leaf in alt.leaves]
             sql = AltSQL(alt, n, tables, neg_tables, head_args, self.policy, eng.complete_sql,
                          used_table=self.used, prov_table=self.prov, table_names=names,
-                         fact_table=eng.fact_table, dialect=eng.store.dialect)
+                         fact_table=eng.fact_table, dialect=eng.store.dialect,
+                         decision=self.decisions[n])
             self.alts.append(sql)
             residual = None
             reads = False
@@ -189,15 +198,19 @@ class RuleRuntime:
     def _plain_plan(self, sql: AltSQL, residual: Residual) -> tuple | None:
         """How a match of this alternative derives without terms (:meth:`_derive_plain`):
         the where goal is one builtin of plain values (``pos_multiply``, see
-        :func:`where.plain_value`) reading value columns and binding a head variable, the
-        other head arguments constants. None when the terms' path must run."""
+        :data:`where.PLAIN_BUILTINS`) reading value columns and binding a head variable, the
+        other head arguments constants: ``(columns, their readers, apply, head)``. None
+        when the terms' path must run."""
         eng = self.eng
         if eng.store.dialect.from_column is not None or residual.unknown or residual.reads:
             return None
         shape = residual.plain_function(eng.kb.engine)
         if shape is None:
             return None
-        names, out_name, fn = shape
+        names, out_name, builtin = shape
+        readers = builtin.readers(len(names))
+        if readers is None:
+            return None
         base = sql.k + 2
         by_name = {name: v for v, name in residual.inputs}
         position = {id(v): base + i for i, v in enumerate(sql.value_vars)}
@@ -222,21 +235,23 @@ class RuleRuntime:
                 return None
         if None not in head:
             return None
-        return columns, fn, head
+        # each column's readings remembered: a pose at a fixed frame (a camera on its
+        # mount) is stored again and again with the same text
+        return (list(zip(columns, map(remembering, readers))), builtin.apply, head)
 
     def _derive_plain(self, n: int, row: tuple, now: float) -> bool | None:
         """:meth:`_derive_from` for an alternative with a plain plan, on the stored values
         themselves (no terms); None when the values are not plain (the terms' path
         decides)."""
-        columns, fn, head = self.plain[n]
+        inputs, apply, head = self.plain[n]
         values = []
-        for i in columns:
-            v = plain_value(row[i])
+        for i, read in inputs:
+            v = read(row[i])
             if v is None:
                 return None
             values.append(v)
         try:
-            out = fn(values)
+            out = apply(values)
         except Exception:   # (the terms' path raises what the builtin raises, as before)
             return None
         if out is None:
@@ -245,6 +260,9 @@ class RuleRuntime:
             encoded = self.eng.encode(out)
         except Unencodable:
             return None
+        if type(out) is list and _FLOAT.issuperset(map(type, out)) and _INF not in out \
+                and -_INF not in out:   # (a NaN is Unencodable)
+            self._plain_points.add(encoded)
         k = self.alts[n].k
         self._prov_rows.append((n,) + tuple(row[:k]) + (None,) * (self.width - k)
                                + (row[k], row[k + 1])
@@ -317,7 +335,8 @@ class RuleRuntime:
         the round read it already."""
         eng = self.eng
         self.ensure_built()
-        self._before, self._matched, self._queue = before, False, []
+        self._before, self._matched = before, False
+        self._forget_unsent()
         changed = False
         fresh_terms = False
         params = eng.params(now)
@@ -395,6 +414,12 @@ class RuleRuntime:
         if summary:
             self._summary(rows[-1])
         return stored(rows[len(statements) - 1]) if stored is not None else []
+
+    def _forget_unsent(self) -> None:
+        """Drop what a run found or wrote but did not send: it belonged to that run's
+        transaction, which an error rolled back (a deferred write refused at a later read
+        leaves the matches found meanwhile here), and must not reach the next one."""
+        self._queue, self._prov_rows, self._done = [], [], []
 
     def _before_matches(self) -> None:
         """Before a statement that may add provenance rows: the table's greatest id (the
@@ -498,9 +523,7 @@ class RuleRuntime:
         rows, self._prov_rows = self._prov_rows, []
         if rows:
             self._before_matches()
-            names = [f"p{i}" for i in range(len(rows[0]))]
-            self._send_many(provenance_insert(self.prov, self.width, self.rule.arity),
-                            [dict(zip(names, row)) for row in rows])
+            self._send_many(provenance_insert(self.prov, self.width, self.rule.arity), rows)
 
     # ----------------------------------------------------------------- statements
     # The statements of a run whose result nothing needs (its writes to the provenance,
@@ -537,31 +560,26 @@ class RuleRuntime:
         return out
 
     def _ready(self, group: tuple, t: float, now: float) -> bool:
+        """Can the pending rows of ``group`` ending at ``t`` be decided now? The same
+        conditions as the SQL of the decisions (:meth:`EventRules.complete_sql`, with the
+        same parameters), so that Python and SQL never judge a row differently."""
         n, kind, wait = group
         complete = self.eng.complete
         if wait is not None:
             return complete(wait, t, now)
         if n >= len(self.rule.alternatives):
             return True
-        alt = self.rule.alternatives[n]
-        if kind == "match":
-            keys = [leaf.key for _, leaf in alt.negations]
-        else:
-            keys = [leaf.key for leaf in alt.leaves] + [leaf.key for _, leaf in alt.negations]
-        return all(self.eng.settled(key, t, now) for key in keys)
+        if kind == "match":   # a negated event lies strictly inside: before its end
+            return all(complete(leaf.key, t, now, False)
+                       for _, leaf in self.rule.alternatives[n].negations)
+        return all(complete(key, t, now, through)
+                   for key, through in self.decisions[n].items())
 
     def _inputs_complete(self, n: int, t: float, now: float) -> bool:
         """:meth:`AltSQL.inputs_complete` of alternative ``n`` at a terminator's end ``t``,
-        evaluated here: what the terminator statements will find. (Not :meth:`_ready`: for
-        a complex type its SQL takes an in-order input as settled up to and including its
-        latest end, where :meth:`EventRules.complete` stops strictly before it; a run that
-        skipped a statement by the stricter answer would neither match nor keep such a
-        terminator.)"""
-        if n >= len(self.rule.alternatives):
-            return True
-        alt = self.rule.alternatives[n]
-        keys = [leaf.key for leaf in alt.leaves] + [leaf.key for _, leaf in alt.negations]
-        return all(self.eng.settled_as_sql(key, t, now) for key in keys)
+        evaluated here: what the terminator statements will find (a run that skipped a
+        statement by another answer would neither match nor keep such a terminator)."""
+        return self._ready((n, "term", None), t, now)
 
     def decide(self, now: float, everything: bool = False) -> bool:
         """Decide the pending rows that can be decided now. Chronological rules decide in
@@ -646,7 +664,8 @@ class RuleRuntime:
             chunk = [(row, _rowids(row[4])[0]) for row in rows[i:i + 200]]
             candidates: dict = {}
             for pos in sorted({row[3] for row, _ in chunk}):
-                params["ts"] = json.dumps([seq for row, seq in chunk if row[3] == pos])
+                params["ts"] = orjson.dumps(
+                    [seq for row, seq in chunk if row[3] == pos]).decode()
                 for cand in self._ask(alt.term_select_many(pos), params):
                     candidates.setdefault((pos, cand[pos]), []).append(cand)
             for row, seq in chunk:
@@ -729,10 +748,11 @@ class RuleRuntime:
 
     def _delete_done(self) -> None:
         done, self._done = self._done, []
-        for i in range(0, len(done), 500):
-            chunk = done[i:i + 500]
-            self._send(pending_delete(len(chunk)),
-                                        {f"d{j}": rid for j, rid in enumerate(chunk)})
+        if len(done) == 1:
+            self._send(pending_delete(1), {"d0": done[0]})
+        elif done:   # (their ids as one JSON array: one statement, whatever their count)
+            self._send(pending_delete_listed(self.eng.store.dialect),
+                       {"ids": orjson.dumps(done).decode()})
 
     def _decide_match(self, n: int, rowids: list, end: float, now: float,
                       params: list | None = None) -> bool:
@@ -776,6 +796,7 @@ class RuleRuntime:
 
     def refresh(self) -> None:
         """Re-read the summary of this rule's pending decisions."""
+        self._forget_unsent()
         self._summary(self._ask(pending_summary(), {"rule": self.key}))
 
     def _summary(self, rows: list) -> None:
@@ -823,12 +844,18 @@ class RuleRuntime:
                           (complex_read(self.prov, arity), {"before": before}, False)]
 
         def stored(rows: list) -> list:
+            points, self._plain_points = self._plain_points, set()
             if returning:   # RETURNING gives an integral REAL as an int: the times as stored
                 rows = [r[:arity] + (float(r[arity]), float(r[arity + 1])) for r in rows]
             if not rows:
                 return []
             self.detections += len(rows)
             dec = self.eng.decode
+            if points:   # (decode's very terms: the reprs' floats in a list)
+                decode_text = dec
+
+                def dec(v: Any) -> Any:
+                    return make_list(orjson.loads(v)) if v in points else decode_text(v)
             if arity == 0:
                 return [(name, (), r[0], r[1]) for r in rows]
             if arity == 1:
@@ -857,12 +884,17 @@ class EventRules:
         self.types: frozenset = frozenset()          # complex event types (rule heads)
         self.leaf_types: frozenset = frozenset()     # types read by positive event atoms
         self.inputs: dict = {}                       # head -> types its events are made of
+        self.closing: dict = {}                      # head -> those that may end its events
         self.key_index: dict[tuple[str, int], int] = {}
         self.generation = 0
         self._decls: Any = None
         self._woken: dict = {}     # type -> the time a wake-up was asked for
         self._wake_due = False     # rules installed since the timers were last asked for
         self.closed = False
+        # a rollback may undo what the rules' pending summaries were read after (decisions
+        # made, rows kept pending): they are read again before they are used next
+        self._summaries_stale = False
+        kb.store.rollback_listeners.append(self._rolled_back)
 
     # ----------------------------------------------------------------- install
     @property
@@ -903,6 +935,8 @@ class EventRules:
                                     for alt in rt.rule.alternatives for leaf in alt.leaves)
         self.inputs = {h: sorted({leaf.key for rt in rts for alt in rt.rule.alternatives
                                   for leaf in alt.leaves}) for h, rts in by_head.items()}
+        self.closing = {h: frozenset().union(*(rt.rule.closing_types() for rt in rts))
+                        for h, rts in by_head.items()}
         self.rules = runtimes
         self.by_head = by_head
         self.generation += 1
@@ -963,15 +997,19 @@ class EventRules:
             n = self.key_index[key] = len(self.key_index)
         return n
 
-    def complete_sql(self, key: tuple[str, int], x: str) -> str:
-        """SQL: the history of ``key`` is settled up to the time ``x`` (an SQL expression)
-        for a cnot or a consumption decision, with the inputs as parameters (:meth:`params`)
-        -- :meth:`settled`, and for complex event types as :meth:`complete`."""
+    def complete_sql(self, key: tuple[str, int], x: str, through: bool = True) -> str:
+        """SQL: the history of ``key`` is complete up to the time ``x`` (an SQL expression),
+        with the inputs as parameters (:meth:`params`) -- :meth:`complete` in SQL. ``through``:
+        every event ending at or before x is in; else only those ending before x (what a
+        cnot or a decision needs of a type none of whose events can end with the match)."""
         n = self._index(key)
         if key in self.types:
-            inner = " AND ".join(f"({self.complete_sql(t, x)})" for t in self.inputs[key])
-            return f"{x} <= :mk{n} OR (({inner or self.store.dialect.true}) AND {x} < :pm{n})"
-        return f"{x} <= :mk{n} OR {x} + :dl{n} < :now OR {x} <= :le{n}"
+            closing = self.closing.get(key, ())
+            inner = " AND ".join(f"({self.complete_sql(t, x, through and t in closing)})"
+                                 for t in self.inputs[key])
+            return (f"{x} <= :mk{n} OR (({inner or self.store.dialect.true}) AND "
+                    f"{x} {'<' if through else '<='} :pm{n})")
+        return f"{x} <= :mk{n} OR {x} + :dl{n} < :now OR {x} {'<' if through else '<='} :le{n}"
 
     def params(self, now: float) -> dict:
         """The parameters of the completeness conditions, now."""
@@ -993,46 +1031,32 @@ class EventRules:
     def pmin(self, key: tuple[str, int]) -> float:
         return min((rt.pmin for rt in self.by_head.get(key, ())), default=_INF)
 
-    def complete(self, key: tuple[str, int], z: float, now: float | None = None) -> bool:
-        """Is the history of ``key`` complete up to ``z``? For a complex event type: a mark
-        says so, or every type its events are made of is complete up to z and no pending
-        decision ends at or before z."""
+    def complete(self, key: tuple[str, int], z: float, now: float | None = None,
+                 through: bool = True) -> bool:
+        """Is the history of ``key`` complete up to ``z``: through z (no event ending at or
+        before z can still come), or with ``through=False`` before z (none ending before
+        z)? The two differ for an in_order type at the end of its newest event: a later
+        event of it ends there at the earliest, so it is complete before that end, not
+        through it (docs/events.md, "in_order and ties"). For a complex event type: a mark
+        says so, or every type its events are made of is complete up to z (through z for
+        the types whose events may end a match, :meth:`EventRule.closing_types`) and no
+        pending decision ends at or before z (before z: no pending decision ends before
+        z). Exactly :meth:`complete_sql`."""
         tracker = self.tracker
         if tracker is None:
             return True
         if key not in self.types:
-            return tracker.complete(key, z, now)
+            return tracker.complete(key, z, now) or (
+                not through and tracker.in_order(key) and z <= tracker.latest_end(key))
         if z <= tracker.mark(key):
             return True
         if now is None:
             now = float(self.clock.now())
+        closing = self.closing.get(key, ())
         for t in self.inputs[key]:
-            if not tracker.complete(t, z, now):
+            if not self.complete(t, z, now, through and t in closing):
                 return False
-        return z < self.pmin(key)
-
-    def settled_as_sql(self, key: tuple[str, int], z: float, now: float) -> bool:
-        """:meth:`complete_sql` of ``key`` at ``z`` evaluated with the parameters of
-        :meth:`params`: :meth:`settled` for a stored type, and for a complex type its mark,
-        or its inputs settled so and no pending decision ending at or before ``z``."""
-        if key not in self.types:
-            return self.settled(key, z, now)
-        if self.tracker is None or z <= self.tracker.mark(key):
-            return True
-        return (all(self.settled_as_sql(t, z, now) for t in self.inputs[key])
-                and z < self.pmin(key))
-
-    def settled(self, key: tuple[str, int], z: float, now: float | None = None) -> bool:
-        """Complete up to ``z`` for a cnot (an event strictly inside an interval) or for a
-        recent/chronological decision at a terminator ending at ``z``: :meth:`complete`, and
-        an in_order type up to and including the end of its newest event (SPEC §6: a later
-        event of it ends at z at the earliest, which is never strictly inside, nor newer
-        than what ends at z) -- so in-order streams decide as their events arrive."""
-        if self.complete(key, z, now):
-            return True
-        tracker = self.tracker
-        return (tracker is not None and key not in self.types and tracker.in_order(key)
-                and z <= tracker.latest_end(key))
+        return z < self.pmin(key) if through else z <= self.pmin(key)
 
     def horizon(self, key: tuple[str, int], now: float | None = None) -> float:
         tracker = self.tracker
@@ -1192,6 +1216,7 @@ class EventRules:
 
     def _round(self, new_from: dict, dirty: set, decide: bool, ends: dict | None = None,
                token: _AddToken | None = None) -> list:
+        self._read_stale_summaries()
         now = float(self.clock.now())
         for key in self.types & self.leaf_types:
             if key not in new_from:
@@ -1222,8 +1247,34 @@ class EventRules:
                         (min(known[0], lo), max(known[1], hi))
         return derived
 
+    def _rolled_back(self) -> None:
+        self._summaries_stale = True
+
+    def reread_pending(self) -> None:
+        """Read every rule's summary of its pending decisions again before the next
+        decision: completeness moved by a mark, which may complete the decisions another
+        connection left pending (this one's summaries know only its own)."""
+        self._summaries_stale = True
+
+    def _read_stale_summaries(self) -> None:
+        """After a rollback or a mark: every rule's summary of its pending decisions read
+        again."""
+        if self._summaries_stale:
+            with self.store.lock:
+                rules = self.rules
+                for rt in rules:
+                    rt._forget_unsent()
+                # (one call of the store for them all: one round trip to a server)
+                rows = self.store.run_compiled_batch(
+                    [(pending_summary(), {"rule": rt.key}, False) for rt in rules]) \
+                    if rules else []
+                for rt, summary in zip(rules, rows):
+                    rt._summary(summary)
+                self._summaries_stale = False
+
     def ready(self, now: float) -> bool:
         """Can some pending decision be made at ``now`` (its histories are complete)?"""
+        self._read_stale_summaries()
         for rt in self.rules:
             if rt.waits and rt.ready_groups(now):
                 return True
@@ -1259,10 +1310,10 @@ class EventRules:
                 if wait is not None:
                     keys = [wait]
                 elif n < len(rt.rule.alternatives):
-                    alt = rt.rule.alternatives[n]
-                    keys = [leaf.key for _, leaf in alt.negations]
-                    if kind == "term":
-                        keys += [leaf.key for leaf in alt.leaves]
+                    # (a term decision: what it waits for, chronological's other
+                    # alternatives' terminators included)
+                    keys = list(rt.decisions[n]) if kind == "term" else \
+                        [leaf.key for _, leaf in rt.rule.alternatives[n].negations]
                 else:
                     keys = []
                 for key in keys:
@@ -1320,8 +1371,12 @@ class EventRules:
                              f"candidate waits in slr_cep_pending")
             if rt.policy != "unrestricted":
                 terms = ", ".join(str(p) for p in sorted(alt.alt.terminators))
+                through = [_type(k) for k, t in alt.decision.items() if t]
+                before = [_type(k) for k, t in alt.decision.items() if not t]
                 lines.append(f"    {rt.policy}: a row at position {terms} ends a match; it "
-                             f"is decided once every input type is complete up to its end")
+                             f"is decided once every input type is complete up to its end "
+                             f"(through its end: {', '.join(through) or 'none'}; before "
+                             f"it: {', '.join(before) or 'none'})")
             if not alt.runnable:
                 missing = [leaf.text for leaf, t in zip(alt.alt.leaves, alt.tables)
                            if t is None]
@@ -1349,8 +1404,10 @@ class EventRules:
                     continue
                 lines.extend("      " + line for line in _wrap(sql))
                 lines.extend("      plan: " + step for step in self._query_plan_lines(alt, sql))
+        closing = self.closing.get(rt.head_key, ())
         lines.append(f"  {_type(rt.head_key)} is complete up to z once "
-                     + ", ".join(_type(t) for t in self.inputs.get(rt.head_key, ()))
+                     + ", ".join(_type(t) + ("" if t in closing else " (before z)")
+                                 for t in self.inputs.get(rt.head_key, ()))
                      + " are complete up to z and no pending decision ends at or before z")
         lines.append(f"  now: {rt.detections} detections in this session, {rt.pending} "
                      f"pending, {rt.errors} rejected by errors"

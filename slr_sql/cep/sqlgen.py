@@ -135,7 +135,9 @@ class AltSQL:
     neg_tables: list
     head_args: tuple
     policy: str
-    complete_sql: Callable[[tuple, str], str]   # (type, end expression) -> SQL condition
+    # (type, end expression, through) -> SQL: the type is complete up to the end -- through
+    # it, or only before it (every event ending earlier is in; docs/events.md)
+    complete_sql: Callable[[tuple, str, bool], str]
     used_table: str | None = None
     prov_table: str = ""
     fact_table: Callable[[tuple], str | None] | None = None  # planner's slr_facts_* tables
@@ -151,6 +153,9 @@ class AltSQL:
     # position -> (column, positions bounding it): a pushed ``X - Y =< C`` gives the row of
     # Y a lower bound on its data column once X's row is chosen (an index range)
     anchors: dict = field(default_factory=dict)
+    # the types a terminator's decision waits for, each with whether through its end
+    # (:meth:`EventRule.decision_inputs`); empty: the alternative's own, before its end
+    decision: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         alt = self.alt
@@ -627,7 +632,8 @@ class AltSQL:
 
     def neg_complete(self, aliases: dict[str, str]) -> str:
         """Every negated type complete up to the end of its interval."""
-        parts = [self.complete_sql(n.key, render(n.end, aliases)) for n in self.negs]
+        # a negated event lies strictly inside: the events ending before the end suffice
+        parts = [self.complete_sql(n.key, render(n.end, aliases), False) for n in self.negs]
         return " AND ".join(f"({p})" for p in parts) or self.dialect.true
 
     def neg_ok(self, aliases: dict[str, str]) -> str:
@@ -635,12 +641,12 @@ class AltSQL:
         return " AND ".join(parts) or self.dialect.true
 
     def inputs_complete(self, end: str) -> str:
-        """Every positive and negated type complete up to ``end`` (a terminator's end)."""
-        keys = []
-        for leaf in self.alt.leaves + [leaf for _, leaf in self.alt.negations]:
-            if leaf.key not in keys:
-                keys.append(leaf.key)
-        return " AND ".join(f"({self.complete_sql(k, end)})" for k in keys) or self.dialect.true
+        """Every type a terminator's decision reads complete up to ``end`` (its end): through
+        it or before it, as :attr:`decision` says."""
+        decision = self.decision or {
+            leaf.key: False for leaf in self.alt.leaves + [n for _, n in self.alt.negations]}
+        return " AND ".join(f"({self.complete_sql(k, end, through)})"
+                            for k, through in decision.items()) or self.dialect.true
 
     def cond_sql(self, aliases: dict[str, str], within: set | None = None,
                  exclude: set | None = None) -> list[str]:
@@ -1070,15 +1076,15 @@ def provenance_columns(width: int, arity: int) -> list[str]:
 
 
 def provenance_insert(prov: str, width: int, arity: int) -> str:
-    """One match found on the Python side into the provenance table; parameters ``:p0``,
-    ``:p1``, ... in :func:`provenance_columns` order.
+    """One match found on the Python side into the provenance table; positional
+    parameters in :func:`provenance_columns` order (a match is a tuple of those values:
+    no dict per match).
 
     >>> provenance_insert('"m"', 1, 0)
-    'INSERT INTO "m" (alt, r1, t_start, t_end, detected) VALUES (:p0, :p1, :p2, :p3, :p4)'
+    'INSERT INTO "m" (alt, r1, t_start, t_end, detected) VALUES (?, ?, ?, ?, ?)'
     """
     cols = provenance_columns(width, arity)
-    return (f"INSERT INTO {prov} ({', '.join(cols)}) VALUES "
-            f"({', '.join(f':p{i}' for i in range(len(cols)))})")
+    return f"INSERT INTO {prov} ({', '.join(cols)}) VALUES ({', '.join('?' * len(cols))})"
 
 
 def pending_of_rule(order: bool) -> str:
@@ -1134,6 +1140,16 @@ def pending_delete(count: int) -> str:
     """
     return (f"DELETE FROM slr_cep_pending WHERE id IN "
             f"({', '.join(f':d{i}' for i in range(count))})")
+
+
+def pending_delete_listed(dialect: Any) -> str:
+    """Delete the pending decisions whose ids are in the JSON array ``:ids``.
+
+    >>> from slr_sql.store.dialect import SQLITE
+    >>> pending_delete_listed(SQLITE)
+    'DELETE FROM slr_cep_pending WHERE id IN (SELECT value FROM json_each(:ids))'
+    """
+    return f"DELETE FROM slr_cep_pending WHERE id IN ({dialect.json_integers(':ids')})"
 
 
 def pending_summary() -> str:

@@ -165,6 +165,25 @@ class EventStore:
     def table_created_hooks(self, hooks: list) -> None:
         self._tables.table_created_hooks = hooks
 
+    @property
+    def rollback_listeners(self) -> list:
+        """Called as ``listener()`` after a transaction, or a nested one, rolled back (what
+        a caller learned inside it may be gone).
+
+        >>> s = EventStore(None); heard = []
+        >>> s.rollback_listeners.append(lambda: heard.append("rolled back"))
+        >>> with s.transaction(), s.transaction():
+        ...     s.add_event("p", (1,), 1.0, 1.0)
+        >>> try:
+        ...     with s.transaction():
+        ...         raise ValueError
+        ... except ValueError:
+        ...     pass
+        >>> heard
+        ['rolled back']
+        """
+        return self._db.rollback_listeners
+
     def table_names(self) -> set[str]:
         """Names of every table of the store (event tables, ``slr_*`` tables, journals)."""
         self._db.check_open()

@@ -254,9 +254,12 @@ class PgConnection:
         """``ROLLBACK TO name`` and ``RELEASE name``; when the savepoint itself is not sent
         yet, nothing was sent inside it: it and what followed it are dropped instead."""
         opened = (f"SAVEPOINT {name}", None)
-        if opened in self.prelude:
-            del self.prelude[self.prelude.index(opened):]
-            return
+        # (the latest of that name: an earlier nested transaction of the same depth,
+        # released with its statements still waiting, may have queued it too)
+        for at in range(len(self.prelude) - 1, -1, -1):
+            if self.prelude[at] == opened:
+                del self.prelude[at:]
+                return
         self.execute(f"ROLLBACK TO {name}")
         self.execute(f"RELEASE {name}")
 
