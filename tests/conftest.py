@@ -23,6 +23,16 @@ settings.register_profile("explore", deadline=None)
 settings.load_profile(__import__("os").environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
+def pytest_configure(config):
+    # The project's own warning fails the test that triggers it: a store whose event times are
+    # not its clock's gets a ManualClock/StreamClock or declares max_delay, and a test about
+    # the warning catches it (tests/test_time_traps.py) or filters it in its module, saying
+    # why. Added here, not in pyproject.toml: resolving the category there imports slr_sql
+    # before this file puts the checkout first on sys.path, and the tests would then run
+    # against an installed copy.
+    config.addinivalue_line("filterwarnings", "error::slr_sql.clocks.LearnedDelayWarning")
+
+
 @pytest.fixture
 def kb():
     """A fresh in-memory knowledge base (no file), closed after the test."""
