@@ -315,6 +315,9 @@ class Completeness:
         self.name_marks: dict[str, float] = {}
         self.mark_src: dict[Any, str] = {}
         self.max_end: dict[tuple[str, int], float] = {}
+        # a newest end first read inside a transaction that then rolled back may be of its
+        # own events (the store's connection sees them): read again from what is stored
+        store.rollback_listeners.append(self.max_end.clear)
         self.arrivals: dict[tuple[str, int], int] = {}
         self._persisted: dict[tuple[str, int], float] = {}   # learned delays as stored
         # event rules (slr_sql.cep): the completeness of complex event types, which follows
