@@ -330,10 +330,16 @@ _UNREAD = object()
 _DIGITS_19 = re.compile("[0-9]{19}")
 
 
+# the longest text whose reading is remembered: a pose's text is ~150 characters
+REMEMBERED_TEXT_CHARS = 1024
+
+
 def remembering(read: Callable[[Any], Any], size: int = 64) -> Callable[[Any], Any]:
     """``read`` (a pure function of a stored value), remembering its readings of up to
     ``size`` texts: a value that comes again and again (a fixed camera's pose) is read once.
-    Numbers are read each time (``1``, ``1.0`` and ``True`` are one key to a dict).
+    Numbers are read each time (``1``, ``1.0`` and ``True`` are one key to a dict), and so
+    are texts longer than :data:`REMEMBERED_TEXT_CHARS` (kept, a few large values of a
+    column would stay in memory as long as the rule).
 
     >>> calls = []
     >>> read = remembering(lambda v: calls.append(v) or len(v))
@@ -343,7 +349,7 @@ def remembering(read: Callable[[Any], Any], size: int = 64) -> Callable[[Any], A
     memo: dict = {}
 
     def read_text(value: Any) -> Any:
-        if type(value) is not str:
+        if type(value) is not str or len(value) > REMEMBERED_TEXT_CHARS:
             return read(value)
         got = memo.get(value, _UNREAD)
         if got is _UNREAD:
