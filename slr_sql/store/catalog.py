@@ -37,6 +37,8 @@ __all__ = ["Catalog", "ProgramText", "PROGRAM_VERSION", "PROGRESS_VERSION",
 PROGRAM_VERSION = "version/program"    # bumped with every change of slr_program
 PROGRESS_VERSION = "version/progress"  # bumped whenever meta_raise raises a value
 FACTS_VERSION = "facts/version"        # the program version the fact tables were built for
+# the advisory lock of meta_raise on a server (b"slr_rais": apart from the writer groups' hashes)
+_RAISE_LOCK = int.from_bytes(b"slr_rais", "big")
 
 # id NULL: the next id, as SQLite's rowid would choose it (spelled out for other engines)
 _INSERT_TEXT = ("INSERT INTO slr_program (id, name, source, filename, loaded_at) VALUES "
@@ -326,6 +328,13 @@ class Catalog:
         with self.db.transaction():
             conn = self.db.conn
             dialect = self.db.dialect
+            if dialect.name != "sqlite":
+                # the writers of growing values take one lock first, held to their commit:
+                # a transaction raising two values (a batch's marks) holds the first's row
+                # and the progress counter while it writes the second, and another writer
+                # of that second value would wait for the counter -- a deadlock. (SQLite
+                # has one writer at a time.)
+                conn.execute("SELECT pg_advisory_xact_lock(?)", (_RAISE_LOCK,))
             # 1e999 (infinity in SQLite's CAST) is out of a PostgreSQL float's range
             text = _number_text(value) if dialect.infinity() == "9e999" or math.isfinite(value) \
                 else json.dumps(value)
