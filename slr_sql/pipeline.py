@@ -9,11 +9,11 @@ this order:
    (they are completeness marks, not events);
 2. **store** (insert and rule rounds): one transaction stores the events and runs the
    event rules' delta statements over the new rows (a batch a count buffer cuts is stored
-   in consecutive rounds of that one transaction); the complex events it derives are
-   stored before it commits;
+   in consecutive rounds of that one transaction); the complex events it derives, and the
+   batch's marks, are stored before it commits (a batch is stored whole or not at all);
 3. **completeness**: the synchronizer learns delays and moves in-order horizons from what
-   was stored, then applies the batch's marks; waiting synchronized queries it completes
-   are released;
+   was stored, then holds the batch's marks in memory; waiting synchronized queries it
+   completes are released;
 4. **decisions until nothing changes**: the event rules' pending decisions whose histories
    are complete now are made, each round in a transaction of its own; the complex events a
    round derives go through stage 3 and the next round runs, until a round derives nothing
