@@ -1234,6 +1234,10 @@ class EventRules:
                 out = rt.run(new_from, dirty, now, decide, ends,
                              token.before.get(rt) if token is not None else None)
             except DatabaseError as exc:
+                # (kept on the rule: after an add, whose events are committed, a failed
+                # decision round is not raised -- its decisions stay pending -- and this
+                # says why, in kb.event_rules())
+                rt.last_error = f"its statements failed, the round rolled back: {exc}"
                 raise SLRError(f"event rule {rt.rule.text} ({rt.rule.source}): {exc}") \
                     from None
             if out:
