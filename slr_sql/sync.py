@@ -486,7 +486,9 @@ class Completeness:
         the mark stored and its source (another process's, when it stored a larger one), or
         None when this process knows one at least as late. Memory is left to
         :meth:`remember_mark`, once the write is committed: a write that failed, busy, is
-        made again by the same mark retried."""
+        made again by the same mark retried. A batch's marks come here inside the store's
+        transaction, without the synchronizer's lock (which comes before the store's):
+        this reads its memory of marks only."""
         if isinstance(key, tuple):
             if t <= self.marks.get(key, -_INF):
                 return None
