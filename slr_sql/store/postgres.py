@@ -101,8 +101,13 @@ def _error(exc: BaseException, where: str, busy_timeout: float | None = None,
     server but a refused statement)."""
     psycopg = _psycopg()
     errors = psycopg.errors
-    if isinstance(exc, (errors.LockNotAvailable, errors.DeadlockDetected,
-                        errors.SerializationFailure)):
+    if isinstance(exc, errors.DeadlockDetected):   # (broken by the server, not waited out)
+        return SLRBusy(f"{where}: two writers waited for each other and the server gave "
+                       f"this one up; retry ({_first_line(exc)})")
+    if isinstance(exc, errors.SerializationFailure):
+        return SLRBusy(f"{where}: refused as a conflicting change of another writer; retry "
+                       f"({_first_line(exc)})")
+    if isinstance(exc, errors.LockNotAvailable):
         waited = f" for more than {busy_timeout:g} s" if busy_timeout is not None else ""
         return SLRBusy(f"{where}: locked by another writer{waited} ({_first_line(exc)})")
     if isinstance(exc, errors.QueryCanceled):
