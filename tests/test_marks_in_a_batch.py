@@ -2,6 +2,10 @@
 ``add_many``) is stored in the transaction of the batch's events: a write of the mark that
 is busy leaves neither stored, so the add is retryable as a whole (retried, it stores each
 event once); a mark stored with them is seen by another process.
+
+On PostgreSQL the meta table alone is held, so only a mark written apart from the events
+could fail after them: that half fails without the change. On SQLite the holder blocks the
+whole file, so that half checks the same outcome without telling the two designs apart.
 """
 from __future__ import annotations
 
