@@ -9,36 +9,14 @@ whole file, so that half checks the same outcome without telling the two designs
 """
 from __future__ import annotations
 
-import sqlite3
-from contextlib import contextmanager
-
-import psycopg
 import pytest
 
 import slr_sql
 from slr_sql import ManualClock
 from slr_sql.errors import SLRBusy
+from store_holders import meta_held
 
 BATCH = ["a(1)^1", "a(2)^2", "fullyUpdated(a/1)^5"]
-
-
-@contextmanager
-def _meta_held(where: str):
-    """Another connection holding the store's meta table (where marks are kept) against
-    writers; on PostgreSQL the event tables stay free."""
-    if where.startswith("postgres"):
-        with psycopg.connect(where) as other:
-            other.execute("LOCK TABLE slr.slr_meta IN SHARE MODE")
-            yield
-            other.rollback()
-    else:
-        other = sqlite3.connect(where, isolation_level=None)
-        other.execute("BEGIN IMMEDIATE")
-        try:
-            yield
-        finally:
-            other.execute("ROLLBACK")
-            other.close()
 
 
 def _stored(kb) -> list:
@@ -50,7 +28,7 @@ def test_a_batch_whose_mark_is_busy_stores_nothing_and_its_retry_stores_once(bac
     with slr_sql.open(backend, clock=ManualClock(0.0), busy_timeout=0.3) as kb:
         kb.load(f":- max_delay(a/1, 100). :- max_delay(b/1, 100).\n{rules}\n")
         kb.add("b(0)^0.5")
-        with _meta_held(backend), pytest.raises(SLRBusy):
+        with meta_held(backend), pytest.raises(SLRBusy):
             kb.add_many(BATCH)
         assert _stored(kb) == []
         assert kb.complete_until("a/1") < 5.0

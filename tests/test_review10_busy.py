@@ -54,19 +54,33 @@ def test_a_copy_into_a_locked_complex_table_is_busy_and_stores_nothing(postgres_
             [(1, 1.0, 2.0), (2, 3.0, 4.0)]
 
 
-@pytest.mark.parametrize("policy", ["recent", "chronological"])
-def test_a_decision_round_meeting_a_locked_pending_table_is_busy_then_decides_once(
-        postgres_url, policy):
+def _pending_table(other: psycopg.Connection) -> str:
+    return "slr_cep_pending"
+
+
+def _used_rows_table(other: psycopg.Connection) -> str:
+    key = other.execute("SELECT key FROM slr_cep_rules").fetchone()[0]
+    return f'"slr_cep_u_{key}"'
+
+
+@pytest.mark.parametrize("policy, locked", [("recent", _pending_table),
+                                            ("chronological", _pending_table),
+                                            ("chronological", _used_rows_table)])
+def test_a_decision_round_meeting_a_locked_table_is_busy_then_decides_once(postgres_url,
+                                                                          policy, locked):
     """Terminators kept pending (the clock behind them); the clock's move decides them, but
-    another session holds ``slr_cep_pending``: the round is SLRBusy and decides nothing;
-    the next move of the clock decides each once."""
+    another session holds a table the round writes: ``slr_cep_pending``, or (chronological)
+    the used-rows table, whose rows from the first decision wait and go with the second
+    decision's read. The round is SLRBusy and stores nothing; the next move of the clock
+    derives each complex event once (the match the busy round had found is not written
+    again)."""
     clock = ManualClock(0.0)
     with slr_sql.open(postgres_url, clock=clock, busy_timeout=0.3) as kb:
         kb.load(_program(policy))
         kb.add_many(["a(1)^1", "b(1)^2", "a(2)^3", "b(2)^4"])
         assert _counts(postgres_url) == (2, 2, 0, 2)
         with _other(postgres_url) as other:
-            other.execute("LOCK TABLE slr_cep_pending IN SHARE MODE")
+            other.execute(f"LOCK TABLE {locked(other)} IN SHARE MODE")
             with pytest.raises(SLRBusy, match="locked"):
                 clock.set(10.0)
             assert _counts(postgres_url) == (2, 2, 0, 2)
@@ -99,28 +113,6 @@ def test_a_connection_lost_inside_the_rules_statements_stores_nothing(postgres_u
         assert _counts(postgres_url) == (2, 2, 2, 0)
         assert sorted((r["X"], r["S"], r["E"]) for r in kb.query("c(X)^[S, E]")) == \
             [(1, 1.0, 2.0), (3, 5.0, 6.0)]
-
-
-def test_a_chronological_round_busy_after_its_first_decision_derives_each_once(postgres_url):
-    """Two chronological terminators decided in one round: the first decision's used rows
-    wait and go with the second decision's read, where another session's lock on the
-    used-rows table makes them SLRBusy. The round stores nothing; the next one derives each
-    complex event once (the match the busy round had found is not written again)."""
-    clock = ManualClock(0.0)
-    with slr_sql.open(postgres_url, clock=clock, busy_timeout=0.3) as kb:
-        kb.load(_program("chronological"))
-        kb.add_many(["a(1)^1", "b(1)^2", "a(2)^3", "b(2)^4"])
-        with _other(postgres_url) as other:
-            key = other.execute("SELECT key FROM slr_cep_rules").fetchone()[0]
-            other.execute(f'LOCK TABLE "slr_cep_u_{key}" IN SHARE MODE')
-            with pytest.raises(SLRBusy, match="locked"):
-                clock.set(10.0)
-            assert _counts(postgres_url) == (2, 2, 0, 2)
-            other.rollback()
-        clock.set(11.0)
-        assert _counts(postgres_url) == (2, 2, 2, 0)
-        assert sorted((r["X"], r["S"], r["E"]) for r in kb.query("c(X)^[S, E]")) == \
-            [(1, 1.0, 2.0), (2, 3.0, 4.0)]
 
 
 def test_a_rule_decided_in_a_round_another_rule_made_busy_decides_again(postgres_url):

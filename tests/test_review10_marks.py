@@ -7,40 +7,19 @@ this process's memory only, where the retry took it as already made and stored n
 """
 from __future__ import annotations
 
-import sqlite3
-from contextlib import contextmanager
-
-import psycopg
 import pytest
 
 import slr_sql
 from slr_sql import ManualClock
 from slr_sql.errors import SLRBusy
-
-
-@contextmanager
-def _store_held(where: str):
-    """Another connection holding the store's meta table against writers."""
-    if where.startswith("postgres"):
-        with psycopg.connect(where) as other:
-            other.execute("LOCK TABLE slr.slr_meta IN SHARE MODE")
-            yield
-            other.rollback()
-    else:
-        other = sqlite3.connect(where, isolation_level=None)
-        other.execute("BEGIN IMMEDIATE")
-        try:
-            yield
-        finally:
-            other.execute("ROLLBACK")
-            other.close()
+from store_holders import meta_held
 
 
 def test_a_busy_mark_is_stored_when_retried(backend):
     with slr_sql.open(backend, clock=ManualClock(0.0), busy_timeout=0.3) as kb:
         kb.load(":- consumption(recent).\nc(X) <- a(X) seq b(X).\n")
         kb.add_many(["a(1)^1", "b(1)^2"])
-        with _store_held(backend), pytest.raises(SLRBusy):
+        with meta_held(backend), pytest.raises(SLRBusy):
             kb.mark_complete("a/1", 10)
         kb.mark_complete("a/1", 10)
         with slr_sql.open(backend, clock=ManualClock(0.0)) as other:

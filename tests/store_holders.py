@@ -1,0 +1,28 @@
+"""Another connection holding a store against writers, for tests of retryable busy writes."""
+from __future__ import annotations
+
+import sqlite3
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import psycopg
+
+
+@contextmanager
+def meta_held(where: str) -> Iterator[None]:
+    """Another connection holding the store's meta table (where marks are kept) against
+    writers while the block runs: on PostgreSQL that table alone (reads go on, the event
+    tables stay free); on SQLite, which locks whole files, the file."""
+    if where.startswith("postgres"):
+        with psycopg.connect(where) as other:
+            other.execute("LOCK TABLE slr.slr_meta IN SHARE MODE")
+            yield
+            other.rollback()
+    else:
+        other = sqlite3.connect(where, isolation_level=None)
+        other.execute("BEGIN IMMEDIATE")
+        try:
+            yield
+        finally:
+            other.execute("ROLLBACK")
+            other.close()
