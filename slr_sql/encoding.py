@@ -855,8 +855,10 @@ def decode_answer(value: Any) -> Any:
 # an integer of 19 digits or more: orjson keeps integers exact only from -2**63 to 2**64 - 1
 # and reads a longer one as a float, silently; the json module reads it exactly. The store's
 # encoder writes such integers as {"$int": ...}, but text written by another program (plain
-# sqlite3, `slr sql --write`) may hold one bare. (Digits after a decimal point do not count.)
-_LONG_INTEGER = re.compile(r"(?<![\d.])\d{19}")
+# sqlite3, `slr sql --write`) may hold one bare. Any 19 digits in a row count, a fraction's
+# too: the store never writes one (repr gives 17 at most), and the json module reads it
+# exactly as well -- so the check is one plain search, the fastest.
+_NINETEEN_DIGITS = re.compile("[0-9]{19}")
 
 
 def orjson_reads_exactly(text: str) -> bool:
@@ -866,7 +868,7 @@ def orjson_reads_exactly(text: str) -> bool:
     >>> orjson_reads_exactly('[1, 0.5]'), orjson_reads_exactly('[18446744073709551617]')
     (True, False)
     """
-    return _LONG_INTEGER.search(text) is None
+    return _NINETEEN_DIGITS.search(text) is None
 
 
 def load_json(text: str) -> Any:
@@ -880,7 +882,7 @@ def load_json(text: str) -> Any:
     >>> load_json('[-9223372036854775809]')
     [-9223372036854775809]
     """
-    if _LONG_INTEGER.search(text) is None:
+    if _NINETEEN_DIGITS.search(text) is None:
         try:
             return orjson.loads(text)
         except orjson.JSONDecodeError:

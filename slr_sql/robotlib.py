@@ -28,7 +28,7 @@ from .terms import Struct
 __all__ = [
     "RobotValueError", "value_kind", "interpolate", "extrapolate", "pos_multiply", "distance",
     "quat_multiply", "quat_conjugate", "quat_normalize", "quat_rotate", "slerp", "make_pose",
-    "pos_multiply_fast", "transform_point", "pose_transform", "pos_multiply_subject",
+    "pos_multiply_fast", "pose_transform", "pos_multiply_subject",
     "apply_transforms",
 ]
 
@@ -485,21 +485,6 @@ def pos_multiply_fast(p: Any, transforms: Any) -> Any:
     if subject is None:
         return None
     return apply_transforms(subject, parts)
-
-
-def transform_point(point: tuple, parts: list) -> list[float]:
-    """The point ``(x, y, z)`` (floats) moved by each transform of ``parts`` in turn, a
-    transform given as ``((tx, ty, tz), unit quaternion)``: pos_multiply's arithmetic for a
-    point, exactly.
-
-    >>> transform_point((1.0, 0.0, 0.0), [((0.0, 0.0, 5.0), (0.0, 0.0, 0.0, 1.0))])
-    [1.0, 0.0, 5.0]
-    """
-    px, py, pz = point
-    for (tx, ty, tz), qa in parts:
-        rx, ry, rz = _rotate(qa, px, py, pz)
-        px, py, pz = tx + rx, ty + ry, tz + rz
-    return [px, py, pz]
 
 
 def distance(p1: Any, p2: Any) -> float:

@@ -13,17 +13,16 @@ time limit) rejects the candidate and is counted on the rule (``kb.event_rules()
 """
 from __future__ import annotations
 
-import re
 import time
+from typing import Any, Callable, NamedTuple
 
 import orjson
-from typing import Any, Callable, NamedTuple
 
 from ..analysis import goal_set
 from ..builtins import BuiltinMachine
 from ..errors import SLRError
 from ..store import DatabaseError
-from ..encoding import Unencodable
+from ..encoding import Unencodable, orjson_reads_exactly
 from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
 from ..unify import resolve
 from ..host import Host
@@ -324,11 +323,6 @@ PLAIN_BUILTINS: dict[tuple[str, int], PlainBuiltin] = {
 }
 
 _UNREAD = object()
-# 19 digits in a row: what encoding.orjson_reads_exactly looks for (an integer orjson would
-# read as a float), found ~2x faster and more often -- also in a fraction of 19 digits,
-# which the store never writes (repr gives 17 at most): such text takes the terms' path
-_DIGITS_19 = re.compile("[0-9]{19}")
-
 
 # the longest text whose reading is remembered: a pose's text is ~150 characters
 REMEMBERED_TEXT_CHARS = 1024
@@ -375,8 +369,8 @@ def _plain_json(value: Any) -> Any:
     text orjson would not read exactly (the terms' path decides)."""
     if type(value) is not str or not value or value[0] not in "[{":
         return None
-    if _DIGITS_19.search(value) is not None:
-        return None   # maybe an integer orjson would read as a float (orjson_reads_exactly)
+    if not orjson_reads_exactly(value):
+        return None   # maybe an integer orjson would read as a float
     try:
         # (orjson refuses what the store never writes plainly -- NaN, infinities -- and
         # those go to the terms' path; its floats are Python's)
