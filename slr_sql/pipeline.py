@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from contextlib import nullcontext
 from operator import itemgetter
 from typing import TYPE_CHECKING, Any
 
@@ -142,16 +143,12 @@ class EventPipeline:
             run.stage = "store"
             if type(events) is not EventBatch:  # (the store notes each type's end times in it)
                 events = EventBatch(events)
-            if marks:   # stored with the events: the batch is stored whole or not at all
-                with self.store.transaction():
-                    errors, derived = self._insert(events, atomic)
-                    if atomic and errors:
-                        raise errors[0]
-                    written = self.sync.store_marks(marks)
-            else:
+            # a batch's marks are stored with its events: the batch whole or not at all
+            with self.store.transaction() if marks else nullcontext():
                 errors, derived = self._insert(events, atomic)
                 if atomic and errors:
                     raise errors[0]
+                written = self.sync.store_marks(marks) if marks else []
             run.stored = True
             rejected = {id(e.event) for e in errors if hasattr(e, "event")}
             stored = [ev for ev in events if id(ev) not in rejected] if rejected else events

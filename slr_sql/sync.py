@@ -473,14 +473,6 @@ class Completeness:
         return "?"
 
     # -- updating (the Synchronizer holds its lock) ------------------------------------------
-    def set_mark(self, key: Any, t: float, source: str) -> bool:
-        """Record a mark (``key`` a (name, n) tuple or a bare name for every arity)."""
-        written = self.store_mark(key, t, source)
-        if written is None:
-            return False
-        self.remember_mark(key, *written)
-        return True
-
     def store_mark(self, key: Any, t: float, source: str) -> tuple[float, str] | None:
         """Write a mark to the store, in the caller's transaction if one is open; returns
         the mark stored and its source (another process's, when it stored a larger one), or
@@ -660,7 +652,9 @@ class Synchronizer:
         key: Any = name if n is None else (name, n)
         if source is None:
             source = f"kb.mark_complete({type_text(key) if n is not None else name!r}, {_fmt(t)})"
-        self._apply_marks([(key, t, source)])
+        with self.lock:   # (held while a mark is written, as while learned delays are)
+            written = self.store_marks([(key, t, source)])
+        self.apply_marks(written)
 
     def complete_until(self, spec: Any) -> float:
         name, n = parse_type(spec)
@@ -786,14 +780,14 @@ class Synchronizer:
         return keep, marks, errors
 
     def store_marks(self, marks: list) -> list:
-        """Write the marks taken from an add (:meth:`take_marks`) in the transaction that
-        stores its events, so that the batch is stored whole or not at all; returns them
-        for :meth:`apply_marks` after the commit."""
+        """Write marks -- those taken from an add (:meth:`take_marks`) in the transaction
+        that stores its events, so that the batch is stored whole or not at all; returns
+        them for :meth:`apply_marks` after the commit."""
         return [(key, t, source, self.tracker.store_mark(key, t, source))
                 for key, t, source in marks]
 
     def apply_marks(self, written: list) -> None:
-        """The marks of an add, as :meth:`store_marks` wrote them (completeness stage of the
+        """Marks as :meth:`store_marks` wrote them (for an add, its completeness stage of the
         event pipeline): held in memory, waiting queries they complete released."""
         released: list = []
         with self.lock:
@@ -810,14 +804,6 @@ class Synchronizer:
         for k in keys:
             released += self._release(k)
         return released
-
-    def _apply_marks(self, marks: list) -> None:
-        released: list = []
-        with self.lock:
-            for key, t, source in marks:
-                if self.tracker.set_mark(key, t, source):
-                    released += self._released_by_mark(key)
-        self._schedule_all(released)
 
     def on_add(self, stored: list) -> None:
         """Events were stored (the event pipeline's completeness stage): learn delays, move

@@ -733,8 +733,8 @@ class RuleRuntime:
         if not done:
             if row[7] is not None:
                 self._send(pending_wait(),
-                                   {"wait_type": None, "wait_arity": None, "wait_time": None,
-                                    "wait_reason": None, "id": rid})
+                           {"wait_type": None, "wait_arity": None, "wait_time": None,
+                            "wait_reason": None, "id": rid})
             return False
         self._done.append(rid)
         return True
@@ -742,9 +742,8 @@ class RuleRuntime:
     def _park(self, rid: int, wait: MustWait) -> None:
         """Record on pending row ``rid`` what it waits for (a history not complete yet)."""
         self._send(pending_wait(),
-                                    {"wait_type": wait.key[0], "wait_arity": wait.key[1],
-                                     "wait_time": wait.time, "wait_reason": wait.reason,
-                                     "id": rid})
+                   {"wait_type": wait.key[0], "wait_arity": wait.key[1],
+                    "wait_time": wait.time, "wait_reason": wait.reason, "id": rid})
 
     def _delete_done(self) -> None:
         done, self._done = self._done, []
@@ -894,7 +893,7 @@ class EventRules:
         # a rollback may undo what the rules' pending summaries were read after (decisions
         # made, rows kept pending): they are read again before they are used next
         self._summaries_stale = False
-        kb.store.rollback_listeners.append(self._rolled_back)
+        kb.store.rollback_listeners.append(self.reread_pending)
 
     # ----------------------------------------------------------------- install
     @property
@@ -1251,13 +1250,11 @@ class EventRules:
                         (min(known[0], lo), max(known[1], hi))
         return derived
 
-    def _rolled_back(self) -> None:
-        self._summaries_stale = True
-
     def reread_pending(self) -> None:
         """Read every rule's summary of its pending decisions again before the next
-        decision: completeness moved by a mark, which may complete the decisions another
-        connection left pending (this one's summaries know only its own)."""
+        decision: after a rollback (what they were read after may be undone), or when a mark
+        moved completeness, which may complete the decisions another connection left pending
+        (this one's summaries know only its own)."""
         self._summaries_stale = True
 
     def _read_stale_summaries(self) -> None:
