@@ -30,6 +30,7 @@ from hypothesis import strategies as st
 import slr_sql
 from slr_sql import ManualClock
 from slr_sql.errors import SLRBusy, SLRError, SLRTimeout
+from writer_processes import start_together
 
 
 def _schema_url(url: str, schema: str) -> str:
@@ -330,11 +331,7 @@ def test_concurrent_writers_derive_each_complex_event_once(backend, tmp_path):
     procs = [subprocess.Popen([sys.executable, str(script), postgres_url, who, str(n)],
                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, text=True)
              for who in ("a", "b")]
-    for p in procs:
-        assert p.stdout.readline().strip() == "ready"
-    for p in procs:
-        p.stdin.write("go\n")
-        p.stdin.flush()
+    start_together(procs)
     for p in procs:
         p.communicate(timeout=120)      # waits, and closes the pipes
         assert p.returncode == 0
@@ -438,11 +435,7 @@ def test_a_subscription_misses_nothing_while_writers_commit_out_of_order(postgre
         procs = [subprocess.Popen([sys.executable, str(script), postgres_url, who, str(n)],
                                   stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env,
                                   text=True) for who in ("a", "b", "c")]
-        for p in procs:
-            assert p.stdout.readline().strip() == "ready"
-        for p in procs:
-            p.stdin.write("go\n")
-            p.stdin.flush()
+        start_together(procs)
         got = [sub.get(timeout=30) for _ in range(3 * n * 3)]
         for p in procs:
             p.communicate(timeout=60)   # waits, and closes the pipes

@@ -22,6 +22,7 @@ import test_cep_differential as cepdiff
 
 import slr_sql
 from slr_sql import ManualClock
+from writer_processes import start_together
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -88,11 +89,7 @@ def test_writers_of_each_type_decide_each_complex_event_once(postgres_url, tmp_p
         procs.append(subprocess.Popen(
             [sys.executable, str(script), postgres_url, name, json.dumps(mine)],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, text=True))
-    for p in procs:
-        assert p.stdout.readline().strip() == "ready"
-    for p in procs:
-        p.stdin.write("go\n")
-        p.stdin.flush()
+    start_together(procs)
     for p in procs:
         assert p.wait(timeout=120) == 0
     with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
