@@ -16,11 +16,15 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from .encoding import decode
 from .errors import SLRError
 from .host import Host
+from .store import check_robot_name
+from .store.checks import text_problem
 
 __all__ = ["FLEET_MARK", "positions", "prepare", "receive"]
 
+_JSON = ("[", "{", '"')     # how a stored text that is JSON starts (slr_sql.encoding)
 FLEET_MARK = "fleet/mark/"   # slr_meta prefix: fleet/mark/<robot>/<name>/<arity or *>
 
 
@@ -57,7 +61,7 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
     """
     store = kb.store
     if check:
-        _check_shipment(batches, marks)
+        _check_shipment(batches, marks, pending, head_arrival)
     kb.loader.refresh()
     cep = kb.event_rule_engine
     store_events = None
@@ -101,10 +105,16 @@ def prepare(kb: Host, robot: str, batch: tuple) -> tuple:
     return name, arity, rows, kb.store.fleet_column_values(arity, rows, robot)
 
 
-def _check_shipment(batches: Any, marks: Any) -> None:
-    """A shipment from the network is checked before anything is stored."""
+def _check_shipment(batches: Any, marks: Any, pending: Any = None,
+                    head_arrival: Any = None) -> None:
+    """A shipment from the network is checked before anything is stored: its rows go into
+    the columns as they come, so a row must be one a store could have written -- every
+    argument text a stored term (a text that starts as JSON and does not read as JSON would
+    make every later query over the type fail), every robot a robot's name -- and the marks
+    must name event types."""
     if not isinstance(batches, list):
         raise SLRError("a shipment's batches are a list of [name, arity, rows]")
+    robots: set = set()    # the robot names checked already
     for batch in batches:
         if not (isinstance(batch, (list, tuple)) and len(batch) == 3
                 and isinstance(batch[0], str) and type(batch[1]) is int and batch[1] >= 0
@@ -123,9 +133,62 @@ def _check_shipment(batches: Any, marks: Any) -> None:
                                "ascending")
             if not all(math.isfinite(v) for v in row[arity + 1:arity + 4] if v is not None):
                 raise SLRError(f"a shipped row of {name}/{arity} has a time that is not finite")
+            for i in range(1, arity + 1):
+                value = row[i]
+                if type(value) is str and not (value.isascii() and value[:1] not in _JSON):
+                    problem = _stored_term_problem(value)
+                    if problem is not None:
+                        raise SLRError(f"a shipped row of {name}/{arity}, seq {row[0]}: "
+                                       f"argument {i} is not a stored term ({problem})")
+            who = row[-1]
+            if who is not None and who not in robots:
+                try:
+                    robots.add(check_robot_name(who))
+                except SLRError as exc:
+                    raise SLRError(f"a shipped row of {name}/{arity}, seq {row[0]}: its robot "
+                                   f"column: {exc}") from None
             last = row[0]
     if marks is not None:
         if not isinstance(marks, dict) or not all(
-                isinstance(k, str) and type(v) in (int, float) and not math.isnan(v)
-                for k, v in marks.items()):
-            raise SLRError("a shipment's marks are {\"name/arity\": time}")
+                isinstance(k, str) and _names_a_type(k) and type(v) in (int, float)
+                and not math.isnan(v) for k, v in marks.items()):
+            raise SLRError("a shipment's marks are {\"name/arity\": time} (name/* for every "
+                           "arity)")
+    if pending is not None and (type(pending) is not int or pending < 0):
+        raise SLRError(f"a shipment's pending is a count of events (>= 0), not {pending!r}")
+    if head_arrival is not None and not (type(head_arrival) in (int, float)
+                                         and math.isfinite(head_arrival)):
+        raise SLRError(f"a shipment's head_arrival is a finite time, not {head_arrival!r}")
+
+
+def _names_a_type(key: str) -> bool:
+    """``p/2`` or ``p/*``: what a completeness mark is kept under.
+
+    >>> _names_a_type("seen/2"), _names_a_type("a/b/*"), _names_a_type("seen"), _names_a_type("p/x")
+    (True, True, False, False)
+    """
+    _, slash, arity = key.rpartition("/")
+    return bool(slash) and (arity == "*" or (arity.isascii() and arity.isdigit()))
+
+
+def _stored_term_problem(value: Any) -> str | None:
+    """Why ``value`` (a shipped argument column) is not a term's stored form, or None.
+    Numbers and atom texts always are; a text that starts with ``[``, ``{`` or ``"`` must read
+    as the JSON of a term.
+
+    >>> _stored_term_problem('["a",1]'), _stored_term_problem("cup1")
+    (None, None)
+    >>> _stored_term_problem("[1,")
+    'it starts as JSON but does not read as a term'
+    """
+    if type(value) is not str:
+        return None
+    problem = text_problem(value)
+    if problem is not None:
+        return problem
+    if value[:1] in _JSON:
+        try:
+            decode(value)
+        except Exception:  # noqa: BLE001 - whatever the reader met, the text is no term
+            return "it starts as JSON but does not read as a term"
+    return None
