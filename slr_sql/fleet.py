@@ -384,6 +384,9 @@ def push(db: str, fleet: str, *, robot: str | None = None,
         if name is None:
             raise SLRError(f"{db} has no robot name: open it with robot=NAME once, or "
                            "push with --robot NAME")
+        if _same_file(db, fleet):
+            raise SLRError(f"{fleet} is the robot's store {db} itself: a robot does not ship "
+                           "to its own store")
         pusher = _Pusher(store, lambda: open_target(fleet, token), name, wanted, batch, say,
                          fleet)
         try:
@@ -396,6 +399,22 @@ def push(db: str, fleet: str, *, robot: str | None = None,
             pusher.drop()
     finally:
         store.close()
+
+
+def _same_file(db: str, fleet: str) -> bool:
+    """Whether the fleet store path ``fleet`` is the file ``db`` (another spelling, a link).
+
+    >>> import os, tempfile; f = os.path.join(tempfile.mkdtemp(), "r.db"); open(f, "w").close()
+    >>> _same_file(f, os.path.join(os.path.dirname(f), ".", "r.db")), _same_file(f, f + "x")
+    (True, False)
+    """
+    import os
+    if "://" in fleet or "://" in db:
+        return False
+    try:
+        return os.path.samefile(db, fleet)
+    except (OSError, ValueError):   # the fleet file does not exist yet: another file
+        return False
 
 
 def _follow(pusher: _Pusher, stop: threading.Event) -> None:

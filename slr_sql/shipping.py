@@ -62,6 +62,13 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
     store = kb.store
     if check:
         _check_shipment(batches, marks, pending, head_arrival)
+    if store.robot is not None and store.robot == robot:
+        # the robot's own store (pushed into itself, or served and pushed to over the
+        # service), or another store shipping under this store's name: each event would be
+        # stored a second time
+        raise SLRError(f"this fleet store is the store of robot {robot!r} itself: a robot "
+                       "does not ship to its own store (name the fleet store otherwise, or "
+                       "leave it unnamed)")
     kb.loader.refresh()
     cep = kb.event_rule_engine
     store_events = None
