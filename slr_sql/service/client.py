@@ -33,13 +33,14 @@ import time
 from concurrent.futures import Future, InvalidStateError
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
-from urllib.parse import quote
+from urllib.parse import quote, urlsplit
 
 from slr_sql import EventRejected, SLRError, SLRTimeout
 from slr_sql.api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 
 from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args,
                        encode_arguments, encode_term, loads)
+from .auth import check_token_text
 from .errors import ServiceError, error_from_body
 
 __all__ = ["connect", "RemoteKnowledgeBase", "RemotePendingQuery", "RemoteSubscription",
@@ -61,6 +62,31 @@ def connect(url: str, token: str | None = None, *, timeout: float = 60.0) -> "Re
     return RemoteKnowledgeBase(url, token=token, timeout=timeout)
 
 
+def _service_url(url: Any, httpx: Any) -> str:
+    """``url`` if it can name an ``slr serve`` (http:// or https://, a host, a port that is a
+    number from 0 to 65535), else an :class:`SLRError` saying what is wrong with it.
+
+    >>> import httpx; _service_url("http://127.0.0.1:8765", httpx)
+    'http://127.0.0.1:8765'
+    >>> _service_url("http://127.0.0.1:port", httpx)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: not a service URL (http://HOST:PORT or https://...): http://127.0.0.1:port (Port could not be cast to integer value as 'port')
+    """
+    shape = "not a service URL (http://HOST:PORT or https://...)"
+    if not isinstance(url, str) or not url.startswith(("http://", "https://")):
+        raise SLRError(f"{shape}: {url}")
+    try:
+        parts = urlsplit(url)
+        parts.port   # (raises for a port that is not a number in range)
+        httpx.URL(url)
+    except (ValueError, httpx.InvalidURL) as exc:
+        raise SLRError(f"{shape}: {url} ({exc})") from None
+    if not parts.hostname:
+        raise SLRError(f"{shape}: {url} (no host)")
+    return url
+
+
 class RemoteKnowledgeBase:
     """A knowledge base served by ``slr serve``; see :func:`connect`."""
 
@@ -70,18 +96,22 @@ class RemoteKnowledgeBase:
         except ImportError:  # pragma: no cover - the service extra is missing
             raise SLRError("slr_sql.connect needs the service extra: "
                            "pip install 'slr_sql[service]'") from None
-        if not url.startswith(("http://", "https://")):
-            raise SLRError(f"not a service URL (http://HOST:PORT or https://...): {url}")
-        self.url = url.rstrip("/")
+        self.url = _service_url(url, httpx).rstrip("/")
         if token is None:
             token = os.environ.get("SLR_TOKEN") or None
+        if token:
+            check_token_text(token)
         self._token = token
         self._headers = {"Content-Type": "application/json"}
         if token:
-            self._headers["Authorization"] = f"Bearer {token}"
+            # the header's bytes (a token beyond ASCII as UTF-8), each byte one character
+            # as HTTP libraries write a header's text (ISO-8859-1)
+            self._headers["Authorization"] = f"Bearer {token}".encode("utf-8").decode("latin-1")
         self.timeout = float(timeout)
         self._httpx = httpx
-        self._http = httpx.Client(base_url=self.url, headers=self._headers,
+        self._http = httpx.Client(base_url=self.url,
+                                  headers={k: v.encode("latin-1")
+                                           for k, v in self._headers.items()},
                                   timeout=httpx.Timeout(self.timeout, connect=10.0),
                                   limits=httpx.Limits(max_connections=None,
                                                       max_keepalive_connections=32))

@@ -1,0 +1,87 @@
+"""Mistyped service URLs and tokens (adversarial review of ``slr_sql.connect`` and the CLI).
+
+A URL whose port is not a number, or an IPv6 address missing its bracket, reached the user as
+httpx's ``InvalidURL`` (the CLI called it "a bug in slr_sql"). A token beyond ASCII, which the
+server takes (compared as UTF-8), reached the user of the client as a ``UnicodeEncodeError``
+and could not be sent by curl either (the server read its UTF-8 bytes as ISO-8859-1); a token
+that no header can carry (a line break, a control character) reached the user as "cannot
+reach slr serve" -- an Unavailable error, which says retry, for a condition that never
+passes -- and a server given one could never be used.
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import httpx
+import pytest
+from service_helpers import ServiceProcess, slr_env
+
+import slr_sql
+from slr_sql import SLRError
+from slr_sql.service.errors import ServiceError
+
+BAD_URLS = ["http://127.0.0.1:port", "http://[::1", "http://127.0.0.1:99999999999"]
+BAD_TOKENS = ["a\nb", "a\x00b", " padded ", "tab\there", "a\x85b"]
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    with ServiceProcess(tmp_path_factory.mktemp("rt11client") / "s.db", "--token", "s3cret") as s:
+        yield s
+
+
+@pytest.mark.parametrize("url", BAD_URLS)
+def test_a_malformed_url_is_an_slr_error_saying_so(url):
+    with pytest.raises(SLRError) as caught:
+        with slr_sql.connect(url) as kb:
+            kb.query("X = 1")
+    assert not (isinstance(caught.value, ServiceError) and caught.value.kind == "Unavailable")
+    assert "URL" in str(caught.value) and url in str(caught.value)
+
+
+@pytest.mark.parametrize("url", BAD_URLS)
+def test_the_cli_says_what_is_wrong_with_a_malformed_url(url):
+    done = subprocess.run([sys.executable, "-m", "slr_sql", "query", url, "X = 1"],
+                          capture_output=True, text=True, env=slr_env(), timeout=60)
+    assert done.returncode == 1
+    assert done.stderr.startswith("error: ") and "URL" in done.stderr
+    assert "bug" not in done.stderr and "InvalidURL" not in done.stderr
+
+
+@pytest.mark.parametrize("token", BAD_TOKENS)
+def test_a_token_that_cannot_travel_in_a_header_is_refused_by_the_client(server, token):
+    with pytest.raises(SLRError, match="token") as caught:
+        with slr_sql.connect(server.url, token=token) as kb:
+            kb.query("X = 1")
+    assert not isinstance(caught.value, ServiceError) or caught.value.kind != "Unavailable"
+    assert server.healthy()
+    with slr_sql.connect(server.url, token="s3cret") as kb:   # the right one still works
+        assert kb.query("X = 1") == [{"X": 1}]
+
+
+@pytest.mark.parametrize("token", ["line\nbreak", " padded "])
+def test_slr_serve_refuses_a_token_no_client_could_send(tmp_path, token):
+    done = subprocess.run([sys.executable, "-m", "slr_sql", "serve", str(tmp_path / "t.db"),
+                           "--port", "0", "--token", token],
+                          capture_output=True, text=True, env=slr_env(), timeout=60)
+    assert done.returncode == 1
+    assert done.stderr.startswith("error: ") and "token" in done.stderr
+    assert "Traceback" not in done.stderr
+
+
+def test_a_token_beyond_ascii_works_from_the_client_curl_and_a_websocket(tmp_path):
+    token = "clé-ü€"
+    with ServiceProcess(tmp_path / "u.db", "--token", token) as served:
+        with slr_sql.connect(served.url, token=token) as kb:
+            kb.add("seen(a)^1")
+            assert kb.query("seen(X)^T") == [{"X": slr_sql.Atom("a"), "T": 1.0}]
+            with kb.subscribe("seen(X)^T", since=0) as sub:
+                assert next(iter(sub))["X"] == slr_sql.Atom("a")
+        with slr_sql.connect(served.url, token="cle-u€") as kb:
+            with pytest.raises(ServiceError, match="valid token"):
+                kb.query("X = 1")
+        # what curl sends for --header "Authorization: Bearer clé-ü€" in a UTF-8 shell
+        answer = httpx.post(served.url + "/query", json={"goal": "X = 1"}, timeout=30,
+                            headers={"Authorization": f"Bearer {token}".encode("utf-8")})
+        assert answer.json() == {"answers": [{"X": 1}]}
