@@ -85,3 +85,73 @@ def test_a_token_beyond_ascii_works_from_the_client_curl_and_a_websocket(tmp_pat
         answer = httpx.post(served.url + "/query", json={"goal": "X = 1"}, timeout=30,
                             headers={"Authorization": f"Bearer {token}".encode("utf-8")})
         assert answer.json() == {"answers": [{"X": 1}]}
+
+
+# -- a URL that answers, but is no slr serve ----------------------------------------------------
+
+@pytest.fixture(params=["{}", '{"answers": 5, "programs": [1], "buffers": {"a": 1}, '
+                              '"stored": "x", "positions": [[1]], "robots": 3, "columns": 1, '
+                              '"rows": 2, "event_rules": 1, "warnings": 1, "explain": 3, '
+                              '"id": "x", "handle": 5, "done": true, "time": "x", '
+                              '"added": "yes", "accepted": "all", "rejected": 7}'],
+                ids=["empty-object", "wrong-types"])
+def not_slr_serve(request):
+    """Another HTTP service (or a proxy) that answers every request 200 with this JSON."""
+    import threading
+    from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+    body = request.param.encode()
+
+    class Handler(BaseHTTPRequestHandler):
+        def answer(self) -> None:
+            self.rfile.read(int(self.headers.get("content-length") or 0))
+            self.send_response(200)
+            self.send_header("Content-Type", "application/json")
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        do_GET = do_POST = do_DELETE = answer
+
+        def log_message(self, *args) -> None:
+            pass
+
+    server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    yield f"http://127.0.0.1:{server.server_address[1]}"
+    server.shutdown()
+    server.server_close()
+    thread.join()
+
+
+CALLS = {
+    "add": lambda kb: kb.add("p(1)^1"),
+    "add_event": lambda kb: kb.add_event("p", [1], start=1.0),
+    "add_many": lambda kb: kb.add_many(["p(1)^1"]),
+    "load": lambda kb: kb.load("q(1)."),
+    "unload": lambda kb: kb.unload("main"),
+    "query": lambda kb: kb.query("X = 1"),
+    "programs": lambda kb: kb.programs(),
+    "event_rules": lambda kb: kb.event_rules(),
+    "buffers": lambda kb: kb.buffers(),
+    "add_buffer": lambda kb: kb.add_buffer("p(_)", keep_last=1),
+    "explain": lambda kb: kb.explain("X = 1"),
+    "goal_warnings": lambda kb: kb.goal_warnings("p(X)"),
+    "sql": lambda kb: kb.sql("SELECT 1"),
+    "complete_until": lambda kb: kb.complete_until("p/1"),
+    "mark_complete": lambda kb: kb.mark_complete("p/1", 5.0),
+    "submit": lambda kb: kb.submit("X = 1").result(timeout=10),
+    "fleet_positions": lambda kb: kb.fleet_positions("r1"),
+    "fleet_receive": lambda kb: kb.fleet_receive("r1", [("p", 1, [(1, "a", 1.0, 1.0, 1.0, None)])]),
+    "fleet_status": lambda kb: kb.fleet_status(),
+    "stats": lambda kb: kb.stats(),
+    "remove_buffer": lambda kb: kb.remove_buffer(1),
+}
+
+
+@pytest.mark.parametrize("call", sorted(CALLS))
+def test_an_answer_that_is_not_slr_serves_is_an_slr_error_never_a_success(not_slr_serve, call):
+    with slr_sql.connect(not_slr_serve) as kb:
+        with pytest.raises(SLRError, match="not what slr serve answers"):
+            CALLS[call](kb)
