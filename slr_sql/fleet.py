@@ -47,7 +47,7 @@ class FleetTarget(Protocol):
     def prepare(self, robot: str, batch: tuple) -> tuple: ...
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
-                head_arrival: float | None) -> int: ...
+                head_arrival: float | None, after: dict | None = None) -> int: ...
 
     def close(self) -> None: ...
 
@@ -70,7 +70,9 @@ class _LocalTarget:
         return prepare(self.kb, robot, batch)
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
-                head_arrival: float | None) -> int:
+                head_arrival: float | None, after: dict | None = None) -> int:
+        # (``after`` is not needed: a store replaced under an open connection is not seen
+        # through it, and a server's restore ends the connection, which asks again)
         from .shipping import receive
         # (rows read from a store by this process: no need to check them as the service does)
         return receive(self.kb, robot, batches, marks, pending, head_arrival, check=False)
@@ -93,8 +95,10 @@ class _RemoteTarget:
         return batch
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
-                head_arrival: float | None) -> int:
-        return self.client.fleet_receive(robot, batches, marks, pending, head_arrival)
+                head_arrival: float | None, after: dict | None = None) -> int:
+        # ``after``: over HTTP a restarted server is reached again without a word, so each
+        # batch says which position it follows and the server checks it still holds it
+        return self.client.fleet_receive(robot, batches, marks, pending, head_arrival, after)
 
     def close(self) -> None:
         self.client.close()
@@ -201,6 +205,19 @@ class _Pusher:
                 pass
 
     def round(self, stop: threading.Event, heartbeat: float | None = None) -> int:
+        """:meth:`ship`; when the fleet store no longer holds a position this pusher was
+        told (restored or replaced behind it, answered 409 Conflict), ask its positions
+        again and ship from there: the rows it lost are shipped again, none is left out."""
+        try:
+            return self.ship(stop, heartbeat)
+        except SLRError as exc:
+            if getattr(exc, "kind", None) != "Conflict":
+                raise
+            self.say(f"fleet {self.fleet_name}: {str(exc).splitlines()[0]}")
+            self.positions = None
+            return self.ship(stop, heartbeat)
+
+    def ship(self, stop: threading.Event, heartbeat: float | None = None) -> int:
         """Ship everything the robot's store holds beyond the fleet's positions (stopping
         early when ``stop`` is set); returns the rows the fleet stored.
 
@@ -220,6 +237,7 @@ class _Pusher:
                  if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)}
         keys = sorted(k for k in heads if self.types is None or k in self.types)
         held: tuple | None = None     # the batch read last, sent once the next one is read
+        held_after: dict | None = None   # the position it was read after
 
         def record(batch: tuple, stored: int) -> None:
             nonlocal shipped
@@ -232,7 +250,8 @@ class _Pusher:
             self.report.per_type[key] = self.report.per_type.get(key, 0) + stored
 
         def send(batch: tuple | None, contact: tuple = (None, None, None)) -> None:
-            stored = target.receive(self.robot, [batch] if batch else [], *contact)
+            stored = target.receive(self.robot, [batch] if batch else [], *contact,
+                                    held_after if batch else None)
             self.reached()
             if batch is not None:
                 record(batch, stored)
@@ -251,10 +270,11 @@ class _Pusher:
                     if held is not None:
                         if sender is None:
                             sender = _Sender(target, self.robot, record)
-                        sender.put(held)
+                        sender.put(held, held_after)
                     # the batch's own work that needs no connection, done here while the
                     # sender waits on the fleet for the batch before
                     held = target.prepare(self.robot, (name, arity, rows))
+                    held_after = {(name, arity): position}
                     position = rows[-1][0]
                     if len(rows) < self.batch:
                         break
@@ -308,8 +328,10 @@ class _Sender:
                 if batch is None:
                     return
                 continue   # after a failure: drain what was queued, send nothing more
+            batch, after = batch
             try:
-                self.record(batch, self.target.receive(self.robot, [batch], None, None, None))
+                self.record(batch, self.target.receive(self.robot, [batch], None, None, None,
+                                                       after))
             except BaseException as exc:  # noqa: BLE001 - raised again in the pusher's thread
                 self.error = exc
 
@@ -317,13 +339,14 @@ class _Sender:
         if self.error is not None:
             raise self.error
 
-    def put(self, batch: tuple) -> None:
-        """Queue ``batch`` (waiting while one is queued already)."""
+    def put(self, batch: tuple, after: dict | None = None) -> None:
+        """Queue ``batch``, read after the positions ``after`` (waiting while one is queued
+        already)."""
         import queue
         while True:
             self._raise()
             try:
-                self.queue.put(batch, timeout=0.05)
+                self.queue.put((batch, after), timeout=0.05)
                 return
             except queue.Full:
                 continue

@@ -22,10 +22,21 @@ from .host import Host
 from .store import check_robot_name
 from .store.checks import text_problem
 
-__all__ = ["FLEET_MARK", "positions", "prepare", "receive"]
+__all__ = ["FLEET_MARK", "FleetBehind", "positions", "prepare", "receive"]
 
 _JSON = ("[", "{", '"')     # how a stored text that is JSON starts (slr_sql.encoding)
 FLEET_MARK = "fleet/mark/"   # slr_meta prefix: fleet/mark/<robot>/<name>/<arity or *>
+
+
+class FleetBehind(SLRError):
+    """A shipment was sent after positions the fleet store no longer holds: the fleet store
+    was restored from a backup or replaced while the pusher kept the positions it had asked
+    for. Storing the shipment would leave the rows in between out for ever; the pusher asks
+    the positions again and ships from there (``slr serve`` answers it 409 Conflict).
+
+    >>> issubclass(FleetBehind, SLRError)
+    True
+    """
 
 
 def positions(kb: Host, robot: str) -> dict[tuple[str, int], int]:
@@ -40,13 +51,16 @@ def positions(kb: Host, robot: str) -> dict[tuple[str, int], int]:
 
 def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             pending: int | None = None, head_arrival: float | None = None, *,
-            check: bool = True) -> int:
+            check: bool = True, after: list | None = None) -> int:
     """Store one shipment of ``robot`` in the fleet store ``kb``; returns the number of rows
     stored (rows already held are skipped). ``batches``: ``[(name, arity, rows)]`` with rows
     as :meth:`slr_sql.store.EventStore.fleet_read_after` gives them (or as :func:`prepare`
     gives a batch); ``marks``: ``{"p/1": t}`` (the robot's completeness marks, ``p/*`` for every arity); ``pending``,
     ``head_arrival``: what the robot still holds unshipped (for ``slr fleet status``).
     ``check=False`` skips checking the shipment's shape (rows this process read from a store).
+    ``after``: ``[(name, arity, position)]``, the positions the sender read the batches after
+    (what it was told the fleet store holds); a position the fleet store holds no longer
+    (restored or replaced since) raises :class:`FleetBehind` and stores nothing.
 
     A robot's mark is kept per robot; the fleet store's own mark of a type is the least mark
     of the robots it knows, once every one of them has marked it (a history of the fleet is
@@ -62,6 +76,7 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
     store = kb.store
     if check:
         _check_shipment(batches, marks, pending, head_arrival)
+        _check_after(after)
     if store.robot is not None and store.robot == robot:
         # the robot's own store (pushed into itself, or served and pushed to over the
         # service), or another store shipping under this store's name: each event would be
@@ -80,6 +95,14 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             return errors
     stored = 0
     with store.transaction():
+        if after:
+            held = store.fleet_positions(robot)
+            for name, arity, position in after:
+                if held.get((name, arity), 0) < position:
+                    raise FleetBehind(
+                        f"the fleet store holds {name}/{arity} of robot {robot!r} up to seq "
+                        f"{held.get((name, arity), 0)}, not {position} as it did: it was "
+                        "restored or replaced; shipping again from what it holds")
         for batch in batches:
             name, arity, rows = batch[:3]
             if rows and type(rows[0]) is not tuple:
@@ -166,6 +189,14 @@ def _check_shipment(batches: Any, marks: Any, pending: Any = None,
     if head_arrival is not None and not (type(head_arrival) in (int, float)
                                          and math.isfinite(head_arrival)):
         raise SLRError(f"a shipment's head_arrival is a finite time, not {head_arrival!r}")
+
+
+def _check_after(after: Any) -> None:
+    if after is not None and not (isinstance(after, list) and all(
+            isinstance(a, (list, tuple)) and len(a) == 3 and isinstance(a[0], str)
+            and type(a[1]) is int and a[1] >= 0 and type(a[2]) is int and a[2] >= 0
+            for a in after)):
+        raise SLRError("a shipment's after is a list of [name, arity, position]")
 
 
 def _names_a_type(key: str) -> bool:

@@ -170,3 +170,80 @@ def test_the_cli_says_why_a_push_into_itself_is_refused(tmp_path):
     assert done.returncode == 1
     assert "itself" in done.stderr and "Traceback" not in done.stderr
     assert seen_rows(db) == 2
+
+
+# -- a fleet store restored or replaced behind a following pusher -------------------------------
+
+def test_a_batch_sent_after_a_position_the_fleet_no_longer_holds_is_a_conflict(server):
+    rows = [[i, f"a{i}", float(i), float(i), float(i), None] for i in range(1, 4)]
+    body = {"robot": "rb", "batches": [["after_t", 1, rows]], "after": [["after_t", 1, 0]]}
+    assert httpx.post(server.url + "/fleet/receive", json=body, timeout=30).json() == {
+        "stored": 3}
+    later = [[i, f"a{i}", float(i), float(i), float(i), None] for i in range(10, 12)]
+    body = {"robot": "rb", "batches": [["after_t", 1, later]], "after": [["after_t", 1, 9]]}
+    answer = httpx.post(server.url + "/fleet/receive", json=body, timeout=30)
+    assert answer.status_code == 409, answer.text
+    assert answer.json()["error"]["kind"] == "Conflict"
+    assert "up to seq 3, not 9" in answer.json()["error"]["message"]
+    positions = httpx.get(server.url + "/fleet/positions", params={"robot": "rb"}, timeout=30)
+    assert positions.json() == {"positions": [["after_t", 1, 3]]}
+    # the client cuts a large batch in requests, each after the one before
+    many = [(i, f"m{i}", float(i), float(i), float(i), None) for i in range(1, 2501)]
+    with slr_sql.connect(server.url) as client:
+        assert client.fleet_receive("rb", [("many_t", 1, many)], after={("many_t", 1): 0}) \
+            == 2500
+        with pytest.raises(SLRError) as caught:
+            client.fleet_receive("rb", [("many_t", 1, [(2600, "x", 1.0, 1.0, 1.0, None)])],
+                                 after={("many_t", 1): 2599})
+        assert getattr(caught.value, "kind", None) == "Conflict"
+
+
+def test_a_fleet_store_replaced_behind_a_following_pusher_gets_every_event(tmp_path):
+    """The fleet's server restarts on an empty (or restored) store at the same URL between
+    two rounds: the pusher, whose HTTP client reconnects without a word, kept the positions
+    it had asked for and shipped only what came after them -- the events before were never
+    shipped to the new store. Now the store answers Conflict and the pusher asks again."""
+    import socket
+    import threading
+    import time
+
+    robot, fleet_db = tmp_path / "r1.db", tmp_path / "fleet.db"
+    with slr_sql.open(robot, robot="r1", clock=slr_sql.ManualClock(100)) as kb:
+        kb.add_many([f"seen(p{i})^{i}" for i in range(10)])
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+
+    def held(url: str) -> int:
+        with slr_sql.connect(url) as client:
+            return len(client.query("seen(X)^T"))
+
+    def wait_for(count: int, url: str) -> None:
+        deadline = time.monotonic() + 60
+        while held(url) != count:
+            assert time.monotonic() < deadline, f"the fleet holds {held(url)}, not {count}"
+            stop.wait(0.05)
+
+    stop = threading.Event()
+    said: list[str] = []
+    server = ServiceProcess(fleet_db, "--port", str(port))
+    pusher = threading.Thread(target=fleet.push, args=(str(robot), server.url),
+                              kwargs={"follow": True, "stop": stop, "say": said.append})
+    pusher.start()
+    try:
+        wait_for(10, server.url)
+        server.stop()
+        for f in tmp_path.glob("fleet.db*"):
+            f.unlink()
+        server = ServiceProcess(fleet_db, "--port", str(port))
+        with slr_sql.open(robot, clock=slr_sql.ManualClock(200)) as kb:
+            kb.add_many([f"seen(p{i})^{i}" for i in range(10, 15)])
+        wait_for(15, server.url)
+    finally:
+        stop.set()
+        pusher.join()
+        server.stop()
+    assert any("restored or replaced" in line for line in said), said
+    with slr_sql.open(fleet_db) as kb:
+        assert sorted(str(a["X"]) for a in kb.query("seen(X)^T")) == sorted(
+            f"p{i}" for i in range(15))

@@ -378,15 +378,25 @@ class RemoteKnowledgeBase:
 
     @_reads_answer
     def fleet_receive(self, robot: str, batches: list, marks: dict | None = None,
-                      pending: int | None = None, head_arrival: float | None = None) -> int:
+                      pending: int | None = None, head_arrival: float | None = None,
+                      after: dict | None = None) -> int:
         """Send one shipment of ``robot`` (see :func:`slr_sql.shipping.receive`); returns
         the rows the server stored. Rows go in requests of at most FLEET_ROWS (each stored
-        exactly once with its position), within the server's body limit."""
+        exactly once with its position), within the server's body limit. ``after``:
+        ``{(name, arity): position}``, the positions the batches were read after (a
+        ``Conflict`` error when the server's store holds less: restored or replaced)."""
         stored = 0
-        pieces: list[list] = [[[n, a, rows[i:i + FLEET_ROWS]]] for n, a, rows in batches
-                              for i in range(0, max(len(rows), 1), FLEET_ROWS)] or [[]]
-        for k, piece in enumerate(pieces):
+        # (piece, the position its rows were read after: the previous piece's last seq)
+        pieces: list[tuple[list, list | None]] = []
+        for n, a, rows in batches:
+            for i in range(0, max(len(rows), 1), FLEET_ROWS):
+                since = None if after is None else                     after.get((n, a), 0) if i == 0 else rows[i - 1][0]
+                pieces.append(([[n, a, rows[i:i + FLEET_ROWS]]],
+                               None if since is None else [[n, a, since]]))
+        for k, (piece, piece_after) in enumerate(pieces or [([], None)]):
             body: dict[str, Any] = {"robot": robot, "batches": piece}
+            if piece_after is not None:
+                body["after"] = piece_after
             if k == len(pieces) - 1:
                 if marks:
                     body["marks"] = marks
