@@ -349,7 +349,9 @@ class EventReader:
                    end_le: bool = False, robot: bool = False) -> str | None:
         """The SQL a lookup runs (for explain output and plan tests). ``kind`` is ``scan``,
         ``prev``, ``at_end``, ``next`` or ``at_start``; ``start_ge``/``end_le`` say whether
-        those optional bounds are given. None if the type has no table.
+        those optional bounds are given. None if the type has no table. Asked in start
+        order (``next``, ``at_start``), it makes sure of the start-ordered indexes as the
+        lookup would, and names them only if they are there.
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None); s.declare_type("p", 1)

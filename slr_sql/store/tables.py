@@ -134,20 +134,30 @@ class EventTables:
         # buffers: called as hook(name, arity, table) inside the transaction that
         # creates a new event type's table (slr_sql.buffers installs its triggers there)
         self.table_created_hooks: list[Callable[[str, int, str], Any]] = []
-        db.rollback_listeners.append(self.reload)  # types created inside were rolled back too
+        # types created inside were rolled back too, and indexes built inside
+        db.rollback_listeners.append(self._rolled_back)
         # The most data arguments an event can have: its table has 5 more columns (seq,
         # t_start, t_end, arrival, robot) and the engine refuses tables wider than its limit.
         self.max_arity = db.max_columns - 5
         self.reload()
 
-    def reload(self) -> None:
-        """Read every type again (others may have created some; a rollback undid some)."""
+    def _rolled_back(self) -> None:
+        self.reload(keep_start_order=False)
+
+    def reload(self, keep_start_order: bool = True) -> None:
+        """Read every type again (others may have created some; a rollback undid some).
+        A type known to have its start-ordered indexes keeps that knowledge (no index is
+        ever dropped), unless ``keep_start_order`` is false: after a rollback, which may
+        have taken back a build."""
+        known = {(t.name, t.arity, t.table) for t in self.types.values() if t.start_order} \
+            if keep_start_order else set()
         types: dict[tuple[str, int], EventType] = {}
         declared: dict[str, set[int]] = {}
         if not self.db.closed:
             for name, arity, table, is_declared in self.db.conn.execute(
                     "SELECT name, arity, table_name, declared FROM slr_event_types"):
-                types[(name, arity)] = EventType(name, arity, table, bool(is_declared))
+                types[(name, arity)] = EventType(name, arity, table, bool(is_declared),
+                                                 True if (name, arity, table) in known else None)
                 if is_declared:
                     declared.setdefault(name, set()).add(arity)
         self.types = types
