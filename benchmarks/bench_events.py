@@ -894,7 +894,7 @@ def main() -> None:
         print("\n| what | ms (wall) | ms (CPU) | CPU / the run's |")
         print("|---|---:|---:|---:|")
         for what, wall, cpu in rows:
-            print(f"| {what} | {wall * 1000:,.1f} | {cpu * 1000:,.1f} | "
+            print(f"| {what} | {wall * 1000:,.3f} | {cpu * 1000:,.3f} | "
                   f"{cpu / run_cpu:.3f} |", flush=True)
     if args.part in ("flat", "all"):
         print("\n| rule | policy | stored before | add_many ev/s (wall / CPU) | detections | "
