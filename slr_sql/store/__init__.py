@@ -365,6 +365,11 @@ class EventStore:
         >>> s.ensure_start_order("c", 0), s.ensure_start_order("d", 0)
         (True, False)
         """
+        # known built: no lock (a compiled statement names no index, so a belief a
+        # rollback in another thread is taking back at this moment costs at most speed)
+        known = self._tables.types.get((name, arity))
+        if known is not None and known.start_order:
+            return True
         with self._db.lock:
             self._db.check_open()
             event_type = self._tables.lookup(name, arity)

@@ -97,6 +97,8 @@ class EventReader:
     def _start_order(self, event_type: EventType) -> bool:
         """Whether the start-ordered indexes of ``event_type`` (or of the type of its name
         now, should a rollback have reloaded the types) may be named: built if need be."""
+        if event_type.start_order:   # (a rollback makes every type it reloads forget)
+            return True
         current = self.tables.lookup(event_type.name, event_type.arity) or event_type
         return self.tables.ensure_start_order(current)
 

@@ -142,6 +142,9 @@ class EventTables:
         self.reload()
 
     def _rolled_back(self) -> None:
+        # (the old objects too: a reader holding one must not trust a build taken back)
+        for event_type in self.types.values():
+            event_type.start_order = None
         self.reload(keep_start_order=False)
 
     def reload(self, keep_start_order: bool = True) -> None:
