@@ -187,7 +187,7 @@ class SqlPlan:
                  time_sites=(), guards=(), has_robot=False, start_ordered=()):
         self.sql = sql
         # event types read in start order: their indexes made sure of before each run (a
-        # complex type's are built on first need; then it is a set lookup per run)
+        # complex type's are built on first need; once built, an attribute read per run)
         self.start_ordered = tuple(sorted(start_ordered))
         self.has_robot = has_robot        # restricted to one robot's events (:robot)
         self.guards = guards              # statements run first: goals that may raise

@@ -237,11 +237,15 @@ class EventTables:
                      f"t_start {real} NOT NULL, t_end {real} NOT NULL, arrival {real} NOT NULL, "
                      "robot TEXT)")
         conn.execute(f"CREATE INDEX {event_type.index_end} ON {event_type.quoted} (t_end, t_start)")
+        if start_order:
+            conn.execute(f"CREATE INDEX {event_type.index_start} ON {event_type.quoted} "
+                         "(t_start, t_end)")
         if arity >= 1:
             conn.execute(f"CREATE INDEX {event_type.index_arg1_end} ON {event_type.quoted} "
                          "(arg1, t_end, t_start)")
-        if start_order:
-            self._create_start_indexes(event_type)
+            if start_order:
+                conn.execute(f"CREATE INDEX {event_type.index_arg1_start} ON "
+                             f"{event_type.quoted} (arg1, t_start, t_end)")
         conn.execute("INSERT INTO slr_event_types (name, arity, table_name, declared) "
                      "VALUES (?, ?, ?, ?)", (name, arity, table, int(declared)))
         self.types[(name, arity)] = event_type
