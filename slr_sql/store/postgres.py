@@ -722,6 +722,13 @@ class PgDatabase:
                 "AND n.nspname = current_schema() AND (%s::text IS NULL OR c.relname = %s)"
                 .replace("%s", "?"), (table, table))}
 
+    def index_names(self, table: str) -> set[str]:
+        """Names of the indexes of ``table`` in the store's schema."""
+        with self.lock:
+            return {row[0] for row in self.conn.execute(
+                "SELECT indexname FROM pg_indexes WHERE schemaname = current_schema() "
+                "AND tablename = ?", (table,))}
+
     def object_names(self) -> set[str]:
         """Lower-cased names of the tables, views, indexes and sequences of the schema."""
         with self.lock:
