@@ -158,7 +158,7 @@ class EventPipeline:
                 errors, derived = self._insert(events, atomic)
                 if atomic and errors:
                     raise errors[0]
-                written = self.sync.store_marks(marks) if marks else []
+                written = self.sync.store_marks(marks) if marks else None
             run.stored = True
             rejected = {id(e.event) for e in errors if hasattr(e, "event")}
             stored = [ev for ev in events if id(ev) not in rejected] if rejected else events
@@ -166,7 +166,7 @@ class EventPipeline:
                 stored = with_derived(stored, derived)
             run.stage = "completeness"
             self.sync.on_add(stored)
-            if marks:   # after the events of the same batch are observed
+            if written is not None:   # after the events of the same batch are observed
                 self.sync.apply_marks(written)
                 self.cep.reread_pending()
             self._settle(run, [stored])   # (even empty: the listeners hear every add)

@@ -35,12 +35,12 @@ import time
 import warnings
 from concurrent.futures import Future, InvalidStateError, ThreadPoolExecutor
 from operator import itemgetter
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, NamedTuple
 
 from .analysis import GoalSet, goal_set
 from .answers import answer_bindings
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning, ManualClock, StreamClock
-from .errors import EventRejected, SLRError, SLRTimeout
+from .errors import EventRejected, SLRError, SLRTimeout, SLRUnavailable
 from .lockorder import ordered_lock
 from .host import Host
 from .plans import instantiate
@@ -293,6 +293,13 @@ def _delay_warning(key: tuple[str, int], observed: float, cap: float, clock: Any
             f"clock's now, so it does not deliver these")
 
 
+class WrittenMarks(NamedTuple):
+    """Marks :meth:`Synchronizer.store_marks` wrote, for :meth:`Synchronizer.apply_marks`
+    once their transaction committed."""
+    marks: list          # (key, time, source, (stored time, its source) or None)
+    seen: dict[str, Any]  # the store's sync/ entries, read once they were written
+
+
 class Completeness:
     """Per event type: max delay (declared or learned), marks, in-order latest end.
 
@@ -356,7 +363,12 @@ class Completeness:
 
     def load(self) -> None:
         """(Re)read learned delays and marks from the store."""
-        for k, v in self.store.meta_items("sync/").items():
+        self.merge(self.store.meta_items("sync/"))
+
+    def merge(self, items: dict[str, Any]) -> None:
+        """Take the learned delays and marks of the store's ``sync/`` entries (read by
+        :meth:`load`, or inside the transaction that wrote marks) where they are later."""
+        for k, v in items.items():
             parts = k.split("/")
             try:
                 if parts[1] == "learned" and len(parts) >= 4:
@@ -505,9 +517,6 @@ class Completeness:
         else:
             self.name_marks[key] = max(self.name_marks.get(key, -_INF), stored)
         self.mark_src[key] = source
-        # the marks other processes committed meanwhile: of two marks made at once, each
-        # read at the start of its call, the one committed last sees both and decides
-        self.load()
 
     def observe(self, events: list, arrival: float) -> set:
         """Learn delays from stored ``(name, args, start, end)`` events; returns the in_order
@@ -542,7 +551,13 @@ class Completeness:
             due = {k: d for k, d in grew.items()
                    if d > persisted.get(k, 0.0) + max(1e-3, 0.01 * persisted.get(k, 0.0))}
             if due:
-                self.flush(due)
+                try:
+                    self.flush(due)
+                except SLRUnavailable:
+                    # the events are committed: an add that raised now would be retried and
+                    # store them twice. The delay stays learned here; a later add that
+                    # learns more, or close, writes it
+                    pass
         arrivals = self.arrivals
         for key in spans:   # every type: tf_lookup waits for an arrival of any type
             arrivals[key] = arrivals.get(key, 0) + 1
@@ -780,22 +795,33 @@ class Synchronizer:
             marks.append((key, t, src))
         return keep, marks, errors
 
-    def store_marks(self, marks: list) -> list:
+    def store_marks(self, marks: list) -> WrittenMarks:
         """Write marks -- those taken from an add (:meth:`take_marks`) in the transaction
         that stores its events, so that the batch is stored whole or not at all; returns
-        them for :meth:`apply_marks` after the commit."""
-        return [(key, t, source, self.tracker.store_mark(key, t, source))
-                for key, t, source in marks]
+        them for :meth:`apply_marks` after the commit, with the store's marks as the same
+        transaction reads them once they are written: of two marks made at once (their raises
+        take turns, :meth:`EventStore.meta_raise`), the one committed last sees both and
+        decides. Read here, not after the commit: a read that failed then would fail a call
+        whose batch is stored, and its retry would store it twice."""
+        with self.store.transaction():
+            written = [(key, t, source, self.tracker.store_mark(key, t, source))
+                       for key, t, source in marks]
+            seen = self.store.meta_items("sync/") \
+                if any(stored is not None for *_, stored in written) else {}
+        return WrittenMarks(written, seen)
 
-    def apply_marks(self, written: list) -> None:
+    def apply_marks(self, written: WrittenMarks) -> None:
         """Marks as :meth:`store_marks` wrote them (for an add, its completeness stage of the
         event pipeline): held in memory, waiting queries they complete released."""
         released: list = []
         with self.lock:
-            for key, _t, source, stored in written:
-                if stored is None:
-                    continue
-                self.tracker.remember_mark(key, *stored)
+            keys = []
+            for key, _t, source, stored in written.marks:
+                if stored is not None:
+                    self.tracker.remember_mark(key, *stored)
+                    keys.append(key)
+            self.tracker.merge(written.seen)
+            for key in keys:
                 released += self._released_by_mark(key)
         self._schedule_all(released)
 

@@ -771,15 +771,40 @@ class AltSQL:
                        f"({t}.t_end, {t}.t_start)")
         return out
 
-    def _key_order(self, p: int, alias: str, descending: bool) -> list[str]:
+    def _key_order(self, p: int, alias: str, descending: bool,
+                   fixed: frozenset[int] = frozenset()) -> list[str]:
         d = " DESC" if descending else ""
         leaf = self.alt.leaves[p]
         # by occurrence, then by the stored values (and their SQL type: 1 before 1.0), so
-        # that only identical events are told apart by their arrival (seq)
+        # that only identical events are told apart by their arrival (seq). An argument the
+        # query's conditions fix (``fixed``) orders nothing: left out, the order is the
+        # (key, end, start) index's own and needs no sort
         keys = [f"{alias}.t_end{d}", f"{alias}.t_start{d}"]
         for j in range(leaf.arity):
-            keys += [f"{alias}.arg{j + 1}{d}", f"{self.dialect.typeof(f'{alias}.arg{j + 1}')}{d}"]
+            if j not in fixed:
+                keys += [f"{alias}.arg{j + 1}{d}",
+                         f"{self.dialect.typeof(f'{alias}.arg{j + 1}')}{d}"]
         return keys + [f"{alias}.seq{d}"]
+
+    def _fixed_args(self, p: int, chosen: set) -> frozenset[int]:
+        """The arguments of position ``p`` whose value and SQL type the conditions of a
+        query that has the rows of ``chosen`` fix: a constant (:meth:`_const_cond`), or a
+        variable that is also a data argument of a chosen row (:meth:`_eq`: the same value
+        and type; equal to a time, only the number is fixed)."""
+        fixed = set()
+        for j, arg in enumerate(self.alt.leaves[p].args):
+            a = deref(arg)
+            if type(a) is not Var:
+                if not term_vars(a):
+                    fixed.add(j)
+                continue
+            if a.name == "_":
+                continue
+            occurrences = [self.refs.get(id(a))] + self._others.get(id(a), [])
+            if any(r is not None and r.kind == "data" and r.positions
+                   and p not in r.positions and r.positions <= chosen for r in occurrences):
+                fixed.add(j)
+        return frozenset(fixed)
 
     def partner_order(self, pos: int) -> list[int]:
         """The order in which the other positions are chosen: right to left under
@@ -930,7 +955,8 @@ class AltSQL:
                 # p's history has no bound but the rest's has (seq with a where over the
                 # times): search from the few rows of the rest, the newest p among their
                 # partners (the same row as the EXISTS form, found from the other side)
-                keys = self._key_order(p, aliases[f"e{p}"], True)
+                keys = self._key_order(p, aliases[f"e{p}"], True,
+                                       self._fixed_args(p, chosen))
                 froms = " CROSS JOIN ".join(f"{self.tables[r]} AS {aliases[f'e{r}']}"
                                             f"{self._anchor_hint(r, chosen)}"
                                             for r in rest + [p])
@@ -944,7 +970,7 @@ class AltSQL:
             conds.append(f"EXISTS (SELECT 1 FROM {froms} WHERE {self._where(inner)})")
         elif self.negs:
             conds.append(self.neg_ok(aliases))
-        keys = self._key_order(p, aliases[f"e{p}"], True)
+        keys = self._key_order(p, aliases[f"e{p}"], True, self._fixed_args(p, chosen))
         return (f"SELECT {aliases[f'e{p}']}.seq FROM {self.tables[p]} AS {aliases[f'e{p}']} "
                 f"WHERE {self._where(conds)} ORDER BY {', '.join(keys)} LIMIT 1")
 

@@ -1,0 +1,41 @@
+"""A learned delay is persisted after the add's events committed: when that write meets
+another session's lock and times out busy, the add has still stored its events, so it
+returns (a retry would store them twice); the delay stays learned in memory and is written
+by a later add or by close.
+"""
+from __future__ import annotations
+
+import psycopg
+
+import slr_sql
+from slr_sql import ManualClock
+
+
+def _other(url: str) -> psycopg.Connection:
+    conn = psycopg.connect(url)
+    conn.execute("SET search_path = slr")
+    return conn
+
+
+def _stored_delay(url: str) -> float | None:
+    with psycopg.connect(url, autocommit=True) as conn:
+        conn.execute("SET search_path = slr")
+        row = conn.execute("SELECT value FROM slr_meta WHERE key = 'sync/learned/a/1'").fetchone()
+    return None if row is None else float(row[0])
+
+
+def test_a_learned_delay_whose_write_is_busy_does_not_fail_the_committed_add(postgres_url):
+    clock = ManualClock(100.0)
+    with slr_sql.open(postgres_url, clock=clock, busy_timeout=0.3) as kb:
+        kb.add_many(["a(1)^99.5"])                       # learns 0.5 s
+        assert _stored_delay(postgres_url) == 0.5
+        with _other(postgres_url) as other:
+            other.execute("LOCK TABLE slr_meta IN SHARE MODE")   # (reads go on, writes wait)
+            assert kb.add_many(["a(2)^98"]) == []        # learns 2 s: its write waits, busy
+            assert kb.store.count("a", 1) == 2           # the events are stored, once
+            assert kb.complete_until("a/1") == 98.0      # (now - the delay learned)
+            assert _stored_delay(postgres_url) == 0.5
+            other.rollback()
+        assert kb.add_many(["a(3)^99.9"]) == []          # learns nothing new: close writes it
+        assert kb.store.count("a", 1) == 3
+    assert _stored_delay(postgres_url) == 2.0
