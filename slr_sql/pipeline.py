@@ -38,7 +38,7 @@ the interrupted run goes on. Other threads run the pipeline side by side; the st
 transactions order their writes.
 
 >>> import slr_sql
->>> kb = slr_sql.open(); kb.load("c(X) <- a(X) seq b(X).")
+>>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); kb.load("c(X) <- a(X) seq b(X).")
 >>> seen = []; kb.add_listeners.append(lambda batch: seen.append([e[0] for e in batch]))
 >>> kb.add_many(["a(1)^1", "b(1)^2"]); seen
 []
@@ -210,7 +210,7 @@ class EventPipeline:
         """The stage this thread's run is in, or None outside the pipeline.
 
         >>> import slr_sql
-        >>> kb = slr_sql.open(); seen = []
+        >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); seen = []
         >>> kb.add_listeners.append(lambda batch: seen.append(kb._pipeline.stage()))
         >>> kb.add("p(1)^1"); seen, kb._pipeline.stage()
         (['wake'], None)
