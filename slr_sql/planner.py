@@ -662,7 +662,8 @@ class CompiledCall:
     that meets at run time something only the interpreter handles exactly.
 
     >>> import slr_sql
-    >>> kb = slr_sql.open(); kb.load("near(A, B) :- at(A, P)^_, at(B, P)^_, A \\== B.")
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.load("near(A, B) :- at(A, P)^_, at(B, P)^_, A \\== B.")
     >>> kb.add_many(["at(r1, k)^1", "at(r2, k)^2"])
     []
     >>> call = kb.engine.sql_calls[("near", 2)]
