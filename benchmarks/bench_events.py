@@ -1,7 +1,7 @@
 """Event rules: detection throughput against ETALIS, latency, and history-size independence.
 
     python benchmarks/bench_events.py                    # everything
-    python benchmarks/bench_events.py --part throughput  # or latency, flat
+    python benchmarks/bench_events.py --part throughput  # or latency, flat, first-need
     python benchmarks/bench_events.py --part throughput --rules equals3 --policies recent --no-one
     ETALIS_DIR=/tmp/etalis python benchmarks/bench_events.py --part throughput
     ... --part throughput --repeats 5 --round-seconds 2   # more rounds of ours and ETALIS
@@ -74,6 +74,11 @@
   1.5x target allows that the durable work alone uses.
 * **latency** -- from the start of ``kb.add`` of a completing event to its return, when the
   complex event is stored (same transaction): p50 and p99 over 2,000 completing adds.
+* **first-need** -- the one-time cost of a complex type's start-ordered indexes, built by
+  the first reader in start order (docs/schema.md): after a seq2 unrestricted run of
+  ``--n`` events, the first and second ``next`` lookup (``next_candidates``) and compiled
+  ``kb.query`` of ``next`` on ``c``, each on its own copy of the file; CPU time also as a
+  share of the run's.
 * **flat** -- events/s of seq2 (recent) and seq3 (unrestricted, within 5) with 10,000 and
   1,000,000 events already stored: the delta statements search from the new rows through
   the indexes, so the history's size should not matter.
@@ -272,6 +277,53 @@ def ours(scenario: str, policy: str, n: int, batch: int, synchronous: str,
                       if with_rule else 0)
         kb.close()
         return n / elapsed, n / max(cpu, 1e-9), detections
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def first_need(n: int, synchronous: str) -> list[tuple[str, float, float]]:
+    """The one-time cost of a complex type's start-ordered indexes (built on first need,
+    docs/schema.md): a seq2 unrestricted run of ``n`` events (10,000: 127,500 complex
+    events), then, each on its own copy of the closed file, a store lookup in start order
+    (``next_candidates``'s first row) and a compiled ``kb.query`` of ``next`` on ``c`` (its
+    plan compiled first, by ``kb.explain``), first call (builds the indexes) and second call
+    (uses them). Returns ``(what, seconds, CPU seconds)`` rows, the run's own first."""
+    folder = tempfile.mkdtemp(prefix="bench_events_")
+    try:
+        clock = ManualClock(0.0)
+        path = os.path.join(folder, "b.db")
+        kb = slr_sql.open(path, clock=clock, synchronous=synchronous)
+        kb.load(_program("seq2", "unrestricted"))
+        evs = seq2_events(n)
+        items = [(name, list(args), t, t) for name, args, t in evs]
+        gc.collect()
+        t0, c0 = time.perf_counter(), time.process_time()
+        _feed(kb, clock, evs, items, 1000)
+        out = [("the run (store events, detect, store c)", time.perf_counter() - t0,
+                time.process_time() - c0)]
+        stored = kb.store.count("c", 1)
+        kb.close()
+        lo, hi = float(n // 2), float(n)
+        goal = f"next(c(X)^[S, E], [{lo}, {hi}])"
+        for what in ("lookup", "query"):
+            copy = os.path.join(folder, f"{what}.db")
+            shutil.copyfile(path, copy)
+            kb = slr_sql.open(copy, clock=ManualClock(float(n) + 1.0), synchronous=synchronous)
+            assert not kb.store.index_names("c") & {"slr_ix__c__start", "slr_ix__c__a1_start"}
+            if what == "query":
+                assert "engine: sql" in kb.explain(goal)
+            for call in ("first", "second"):
+                t0, c0 = time.perf_counter(), time.process_time()
+                if what == "lookup":
+                    found = next(kb.store.next_candidates("c", 1, None, lo, hi))[1]
+                else:
+                    found = kb.query(goal)[0]["S"]
+                out.append((f"{'next_candidates' if what == 'lookup' else 'kb.query next'} "
+                            f"on c ({stored:,} rows), {call} call", time.perf_counter() - t0,
+                            time.process_time() - c0))
+                assert found == lo
+            kb.close()
+        return out
     finally:
         shutil.rmtree(folder, ignore_errors=True)
 
@@ -784,7 +836,8 @@ def throughput_row(scenario: str, policy: str, args: argparse.Namespace,
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--part", choices=["throughput", "latency", "flat", "all"], default="all")
+    ap.add_argument("--part", choices=["throughput", "latency", "flat", "first-need", "all"],
+                    default="all")
     ap.add_argument("--n", type=int, default=10_000, help="events per throughput run")
     ap.add_argument("--n-one", type=int, default=2_000, help="events for kb.add one at a time")
     ap.add_argument("--synchronous", default="FULL")
@@ -835,6 +888,14 @@ def main() -> None:
                     print(f"| {sync} | {checkpoint} | "
                           f"{'seq2 recent' if rule else 'none (baseline)'} | "
                           f"{p50:.3f} | {p99:.3f} | {worst:.3f} |", flush=True)
+    if args.part in ("first-need", "all"):
+        rows = first_need(args.n, args.synchronous)
+        run_cpu = rows[0][2]
+        print("\n| what | ms (wall) | ms (CPU) | CPU / the run's |")
+        print("|---|---:|---:|---:|")
+        for what, wall, cpu in rows:
+            print(f"| {what} | {wall * 1000:,.3f} | {cpu * 1000:,.3f} | "
+                  f"{cpu / run_cpu:.3f} |", flush=True)
     if args.part in ("flat", "all"):
         print("\n| rule | policy | stored before | add_many ev/s (wall / CPU) | detections | "
               "no rule ev/s (wall / CPU) |")

@@ -8,8 +8,8 @@
 """
 from .api import KnowledgeBaseAPI, PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import Clock, ManualClock, StreamClock, WallClock
-from .errors import EventRejected, SLRBusy, SLRError, SLREvaluationError, SLRStoreFull, \
-    SLRServerUnreachable, SLRStoreGone, SLRSyntaxError, SLRTimeout, SLRUnavailable
+from .errors import EventRejected, SLRBusy, SLRCancelled, SLRError, SLREvaluationError, \
+    SLRStoreFull, SLRServerUnreachable, SLRStoreGone, SLRSyntaxError, SLRTimeout, SLRUnavailable
 from .kb import KnowledgeBase, open
 from .terms import Atom, String, Struct, Var
 
@@ -29,7 +29,7 @@ __all__ = [
     "open", "connect", "KnowledgeBase", "KnowledgeBaseAPI", "PendingQueryAPI", "SubscriptionAPI",
     "ProgramInfo", "Clock", "WallClock", "ManualClock", "StreamClock",
     "SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRBusy", "EventRejected",
-    "SLRUnavailable", "SLRStoreFull", "SLRStoreGone", "SLRServerUnreachable",
+    "SLRUnavailable", "SLRStoreFull", "SLRStoreGone", "SLRServerUnreachable", "SLRCancelled",
     "Atom", "String", "Struct", "Var",
 ]
 __version__ = "0.1.0"

@@ -859,7 +859,8 @@ def describe_types(kb: KnowledgeBase, wanted: Iterable[str] = ()) -> list[TypeSu
     ``wanted``: ``seg`` or ``seg/2``), in name order.
 
     >>> import slr_sql
-    >>> kb = slr_sql.open(); kb.load("color(O,C)^T :- prev(obj(O,_,C)^Z, T).")
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.load("color(O,C)^T :- prev(obj(O,_,C)^Z, T).")
     >>> kb.add_many(["obj(cup1, cup, red)^2", "obj(cup1, cup, blue)^5"])
     []
     >>> s = describe_types(kb)[0]; (s.name, s.arity, s.count, s.first, s.last, s.rules)

@@ -4,7 +4,8 @@ from __future__ import annotations
 from typing import Any
 
 __all__ = ["SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRUnavailable",
-           "SLRBusy", "SLRStoreFull", "SLRStoreGone", "EventRejected"]
+           "SLRBusy", "SLRStoreFull", "SLRStoreGone", "SLRServerUnreachable", "SLRCancelled",
+           "EventRejected"]
 
 
 class SLRError(Exception):
@@ -119,6 +120,20 @@ class SLRServerUnreachable(SLRUnavailable):
     """
 
     retry_after = 5
+
+
+class SLRCancelled(SLRUnavailable):
+    """The database server of a ``postgresql://`` store cancelled a statement for another
+    reason than the call's own ``timeout=`` (that one is :class:`SLRTimeout`): another
+    session's ``pg_cancel_backend``, a ``statement_timeout`` an administrator set on the
+    database or role. The message quotes the server's reason. Nothing of the failed call
+    was written (its transaction is rolled back); the same call may succeed when retried.
+
+    >>> issubclass(SLRCancelled, SLRUnavailable), issubclass(SLRCancelled, SLRTimeout)
+    (True, False)
+    """
+
+    reason = ""   # the server's words (``canceling statement due to user request``)
 
 
 class EventRejected(SLRError):

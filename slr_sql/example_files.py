@@ -226,7 +226,7 @@ def check_case(kb: KnowledgeBaseAPI, case: Case) -> CaseResult:
     compared; floats within the case's tolerance.
 
     >>> import slr_sql
-    >>> kb = slr_sql.open(); kb.add("q(a)^1")
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); kb.add("q(a)^1")
     >>> check_case(kb, Case("q(X)^T", 1, expect='[{"X": "a", "T": 1.0}]')).ok
     True
     """

@@ -383,7 +383,8 @@ def push(db: str, fleet: str, *, robot: str | None = None,
 
     >>> import os, tempfile, slr_sql
     >>> folder = tempfile.mkdtemp()
-    >>> with slr_sql.open(os.path.join(folder, "r1.db"), robot="r1") as kb:
+    >>> with slr_sql.open(os.path.join(folder, "r1.db"), robot="r1",
+    ...                   clock=slr_sql.ManualClock(0)) as kb:
     ...     kb.add("seen(pallet7, dock)^10")
     >>> push(os.path.join(folder, "r1.db"), os.path.join(folder, "fleet.db")).shipped
     1

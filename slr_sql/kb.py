@@ -1,7 +1,7 @@
 """The public knowledge-base API (docs/api.md): open, load, add, query, explain.
 
 >>> import slr_sql
->>> kb = slr_sql.open()
+>>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
 >>> kb.load("color(O,C)^T :- prev(obj(O,_,C)^Z, T).")
 >>> kb.add("obj(cup1, cup, red)^2.0")
 >>> kb.query("color(cup1, C)^5")
@@ -317,7 +317,9 @@ class KnowledgeBase:
     def add(self, text: str) -> None:
         """Add one event written in SLR syntax (``p(..)^T`` or ``p(..)^[S,E]``).
 
-        >>> kb = open(); kb.add("seg(cup1, [0.4,0.1,0.9])^12.31"); len(kb.query("seg(O,L)^T"))
+        >>> from slr_sql import ManualClock
+        >>> kb = open(clock=ManualClock(0))
+        >>> kb.add("seg(cup1, [0.4,0.1,0.9])^12.31"); len(kb.query("seg(O,L)^T"))
         1
         """
         if not isinstance(text, str):
@@ -333,7 +335,9 @@ class KnowledgeBase:
     def add_event(self, name: str, args: Iterable[Any], start: float, end: float | None = None) -> None:
         """Add one event from Python values (``str`` is an atom, ``String`` a string).
 
-        >>> kb = open(); kb.add_event("seg", ["cup1", [0.4, 0.1, 0.9]], start=2.0, end=2.0)
+        >>> from slr_sql import ManualClock
+        >>> kb = open(clock=ManualClock(0))
+        >>> kb.add_event("seg", ["cup1", [0.4, 0.1, 0.9]], start=2.0, end=2.0)
         """
         if end is None:
             end = start
@@ -348,7 +352,8 @@ class KnowledgeBase:
         the others are stored; each rejection's ``.index`` and ``.event`` are the position
         and the item in ``events``. With ``atomic=True`` one bad event rejects the whole batch.
 
-        >>> kb = open(); kb.add_many(["p(1)^1", ("p", [2], 2.0, 2.0)])
+        >>> from slr_sql import ManualClock
+        >>> kb = open(clock=ManualClock(0)); kb.add_many(["p(1)^1", ("p", [2], 2.0, 2.0)])
         []
         """
         events = events if type(events) is list else list(events)
@@ -433,7 +438,8 @@ class KnowledgeBase:
         ``robot`` restricts every event goal, prev and next (in rules too) to the events of
         that robot (their ``robot`` column; see docs/fleet.md).
 
-        >>> kb = open(); kb.add_many(["pos(a, 1)^1", "pos(a, 4)^5"])
+        >>> from slr_sql import ManualClock
+        >>> kb = open(clock=ManualClock(0)); kb.add_many(["pos(a, 1)^1", "pos(a, 4)^5"])
         []
         >>> kb.query("prev(pos(a, X)^T, 4)")
         [{'X': 1, 'T': 1.0}]
@@ -547,7 +553,8 @@ class KnowledgeBase:
         (it simply fails, SPEC §2, since its events may not have arrived yet); each warning
         names the nearest known names.
 
-        >>> kb = open(); kb.load("color(O,C)^T :- prev(obj(O,_,C)^Z, T).")
+        >>> from slr_sql import ManualClock
+        >>> kb = open(clock=ManualClock(0)); kb.load("color(O,C)^T :- prev(obj(O,_,C)^Z, T).")
         >>> kb.goal_warnings("colour(cup2, C)^20")
         ['no events or rules of colour/2; did you mean color/2?']
         """
@@ -706,7 +713,8 @@ class KnowledgeBase:
         (:class:`SLRTimeout` past ``timeout`` seconds). ``params``: values for ``?``
         placeholders (a sequence) or for ``:name`` ones (a mapping), on either backend.
 
-        >>> kb = open(); kb.add("p(a)^1"); kb.sql("SELECT arg1, t_end FROM p")
+        >>> from slr_sql import ManualClock
+        >>> kb = open(clock=ManualClock(0)); kb.add("p(a)^1"); kb.sql("SELECT arg1, t_end FROM p")
         (['arg1', 't_end'], [('a', 1.0)])
         >>> kb.sql("SELECT :x + 1 AS y", {"x": 41})
         (['y'], [(42,)])
@@ -735,7 +743,8 @@ class KnowledgeBase:
         intervals as bars, points as ticks, ``values=["speed:1"]`` as lines, complex events
         marked. Options: see :func:`slr_sql.plot.timeline` and docs/plots.md.
 
-        >>> kb = open(); kb.add("move(r1)^[2, 8]")
+        >>> from slr_sql import ManualClock
+        >>> kb = open(clock=ManualClock(0)); kb.add("move(r1)^[2, 8]")
         >>> kb.plot(start=0, end=10, size=(600, 120)).get_size_inches().tolist()
         [6.0, 1.2]
         """
@@ -754,7 +763,8 @@ class KnowledgeBase:
         ones); ``until`` ends it once the type is complete up to it; ``id`` makes it durable
         (a restart resumes after the last answer handled). See docs/subscriptions.md.
 
-        >>> kb = open(); sub = kb.subscribe("p(X)^T", where="X > 1", since=0)
+        >>> from slr_sql import ManualClock
+        >>> kb = open(clock=ManualClock(0)); sub = kb.subscribe("p(X)^T", where="X > 1", since=0)
         >>> kb.add_many(["p(1)^1", "p(2)^2"]); sub.get(timeout=5)
         []
         {'X': 2, 'T': 2.0}

@@ -20,7 +20,10 @@ this order:
    and nothing asked for another one; then synchronized queries waiting on complex event
    types are re-checked. After an add, a round that fails (``SLRBusy``, a lost connection)
    ends the stage without failing the add, whose events are committed: those decisions
-   stay pending for the next add, mark, clock move or timer;
+   stay pending for the next add, mark, clock move or timer. So does a round the
+   synchronizer's timer started (its thread has no caller to raise to). With a wall clock
+   such a failure also asks for a retry timer (:data:`RETRY_DELAYS`), so that the decisions
+   are made without another add; a clock that tells when it moves calls at its next move;
 5. **buffers**: space the buffers' pruning freed is reclaimed;
 6. **wake**: ``kb.add_listeners`` are called and the subscription hub is woken, once per
    batch, in the order the batches were stored (the add's events with the complex events
@@ -35,7 +38,7 @@ the interrupted run goes on. Other threads run the pipeline side by side; the st
 transactions order their writes.
 
 >>> import slr_sql
->>> kb = slr_sql.open(); kb.load("c(X) <- a(X) seq b(X).")
+>>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); kb.load("c(X) <- a(X) seq b(X).")
 >>> seen = []; kb.add_listeners.append(lambda batch: seen.append([e[0] for e in batch]))
 >>> kb.add_many(["a(1)^1", "b(1)^2"]); seen
 []
@@ -58,7 +61,7 @@ if TYPE_CHECKING:
     from .subscriptions import SubscriptionHub
     from .sync import Synchronizer
 
-__all__ = ["EventPipeline", "STAGES", "with_derived"]
+__all__ = ["EventPipeline", "STAGES", "RETRY_DELAYS", "with_derived"]
 
 Batch = list[Any]   # (name, args, start, end) events, or an EventBatch of them
 
@@ -66,18 +69,24 @@ _first, _second, _fourth = itemgetter(0), itemgetter(1), itemgetter(3)
 
 STAGES = ("marks", "store", "completeness", "decisions", "buffers", "wake")
 
+# Seconds of a wall clock after which a decision round that failed and was not raised is
+# tried again: the first, doubled at each failure in a row up to the last (a lock another
+# session holds for a minute costs a round a second, not a busy loop).
+RETRY_DELAYS = (0.05, 1.0)
+
 
 class _Run:
     """One pass of the pipeline on one thread: the stage it is in, and whether a request
     for decisions arrived since its decision stage last looked."""
 
-    __slots__ = ("stage", "again", "outer", "stored")
+    __slots__ = ("stage", "again", "outer", "stored", "timer")
 
-    def __init__(self, outer: _Run | None) -> None:
+    def __init__(self, outer: _Run | None, timer: bool = False) -> None:
         self.stage = STAGES[0]
         self.again = False
         self.outer = outer   # the run a listener's own add interrupted on this thread
         self.stored = False  # an add whose events are committed (stage 2 is behind it)
+        self.timer = timer   # started by the synchronizer's timer thread
 
 
 def with_derived(stored: Batch, derived: Batch) -> Batch:
@@ -130,6 +139,7 @@ class EventPipeline:
         self.listeners = listeners
         # the run under way on each thread (an entry lives only while its run does)
         self._runs: dict[int, _Run] = {}
+        self._retry_delay = 0.0   # the last retry's (0: the last round did not fail)
         sync.progress_hook = self.progress
 
     # -- entries ---------------------------------------------------------------------------
@@ -175,15 +185,16 @@ class EventPipeline:
         finally:
             self._leave(run)
 
-    def progress(self) -> None:
+    def progress(self, timer: bool = False) -> None:
         """Stages 4-6: completeness may have advanced (the clock moved, a timer fired, a
         file was reopened). On a thread already running the pipeline, the request joins
-        that run."""
+        that run. ``timer``: the synchronizer's timer thread calls (a round that fails is
+        not raised, but tried again later)."""
         run = self._runs.get(threading.get_ident())
         if run is not None:
             run.again = True
             return
-        run = self._enter()
+        run = self._enter(timer)
         try:
             self._settle(run, [])
         finally:
@@ -199,7 +210,7 @@ class EventPipeline:
         """The stage this thread's run is in, or None outside the pipeline.
 
         >>> import slr_sql
-        >>> kb = slr_sql.open(); seen = []
+        >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); seen = []
         >>> kb.add_listeners.append(lambda batch: seen.append(kb._pipeline.stage()))
         >>> kb.add("p(1)^1"); seen, kb._pipeline.stage()
         (['wake'], None)
@@ -208,9 +219,9 @@ class EventPipeline:
         return None if run is None else run.stage
 
     # -- stages ----------------------------------------------------------------------------
-    def _enter(self) -> _Run:
+    def _enter(self, timer: bool = False) -> _Run:
         ident = threading.get_ident()
-        run = self._runs[ident] = _Run(self._runs.get(ident))
+        run = self._runs[ident] = _Run(self._runs.get(ident), timer)
         return run
 
     def _leave(self, run: _Run) -> None:
@@ -259,6 +270,13 @@ class EventPipeline:
         events.ends = ends
         return errors, derived
 
+    def _retry_later(self) -> None:
+        """Ask the synchronizer for a retry timer, each failure in a row waiting longer."""
+        first, most = RETRY_DELAYS
+        delay = min(most, self._retry_delay * 2) if self._retry_delay else first
+        self._retry_delay = delay
+        self.sync.wake_after(delay)
+
     def _settle(self, run: _Run, batches: list[Batch]) -> None:
         """Stages 4, 5 and 6; back to 4 when a request for decisions arrived meanwhile."""
         while True:
@@ -289,6 +307,7 @@ class EventPipeline:
             run.again = False
             try:
                 if not cep.ready(float(cep.clock.now())):
+                    self._retry_delay = 0.0
                     cep.wake_timers()
                     cep.recheck()
                     return
@@ -296,13 +315,17 @@ class EventPipeline:
             except SLRError:
                 if self.store.closed:
                     return
-                if run.stored:
+                if run.stored or run.timer:
                     # an add whose events are committed: a round it made possible that
                     # fails (busy, a lost connection) is not the add's failure -- a retried
                     # add would store them twice. Its decisions stay pending (rolled back
-                    # whole), made at the next add, mark, clock move or timer.
+                    # whole), made at the next add, mark, clock move or timer -- and, with
+                    # a wall clock, by the retry asked for here (the timer thread's own
+                    # round, which has no caller to raise to, too).
+                    self._retry_later()
                     return
                 raise
+            self._retry_delay = 0.0
             if derived:
                 run.stage = "completeness"
                 self.sync.on_add(derived)

@@ -184,8 +184,11 @@ class SqlPlan:
     answers."""
 
     def __init__(self, sql, params, arg_params, has_at, recipes, missing, sites, modes, goal,
-                 time_sites=(), guards=(), has_robot=False):
+                 time_sites=(), guards=(), has_robot=False, start_ordered=()):
         self.sql = sql
+        # event types read in start order: their indexes made sure of before each run (a
+        # complex type's are built on first need; once built, an attribute read per run)
+        self.start_ordered = tuple(sorted(start_ordered))
         self.has_robot = has_robot        # restricted to one robot's events (:robot)
         self.guards = guards              # statements run first: goals that may raise
         # arguments from Python the statement uses as numbers: a non-number goes to the
@@ -234,6 +237,8 @@ class SqlPlan:
             # (after the checks above, which read the encoded values)
             for pname in self.arg_params.values():
                 params[pname] = to_column(params[pname])
+        for key in self.start_ordered:
+            kb.store.ensure_start_order(*key)
         for guard in self.guards:
             kb.store.run_compiled(guard, params, None, deadline, may_fall_back=True)
         if self.sql is None:
@@ -446,7 +451,8 @@ def compile_goal(kb, plan, has_at: bool, robot: bool = False) -> SqlPlan:
             sql += "\nORDER BY " + ", ".join(f"k{i}" for i in range(nk))
     return SqlPlan(sql, dict(comp.params), arg_params, has_at,
                    [p.extra for p in parts], frozenset(comp.missing), comp.sites, comp.modes,
-                   plan.text, tuple(dict.fromkeys(comp.time_sites)), guards, robot)
+                   plan.text, tuple(dict.fromkeys(comp.time_sites)), guards, robot,
+                   comp.start_ordered)
 
 
 def _has_ref(t) -> bool:
@@ -656,7 +662,8 @@ class CompiledCall:
     that meets at run time something only the interpreter handles exactly.
 
     >>> import slr_sql
-    >>> kb = slr_sql.open(); kb.load("near(A, B) :- at(A, P)^_, at(B, P)^_, A \\== B.")
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.load("near(A, B) :- at(A, P)^_, at(B, P)^_, A \\== B.")
     >>> kb.add_many(["at(r1, k)^1", "at(r2, k)^2"])
     []
     >>> call = kb.engine.sql_calls[("near", 2)]

@@ -20,7 +20,7 @@ object-oriented API with the Agg canvas: no pyplot, no display, no global backen
 
 >>> import slr_sql
 >>> from slr_sql.plot import timeline
->>> kb = slr_sql.open()
+>>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
 >>> kb.add("move(r1)^[2, 8]"); kb.add("bump(r1)^5")
 >>> fig = timeline(kb, start=0, end=10, size=(600, 200))
 >>> [row.label for row in fig.slr_timeline.rows], fig.get_size_inches().tolist()
@@ -582,7 +582,7 @@ def collect_timeline(source: Any, types: Iterable[str] | str | None = None, *,
     binned, which uses numpy). Arguments as for :func:`timeline`.
 
     >>> import slr_sql
-    >>> kb = slr_sql.open(); kb.add("move(r1)^[2, 8]")
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); kb.add("move(r1)^[2, 8]")
     >>> row = collect_timeline(kb, start=0, end=10).rows[0]
     >>> row.label, row.mode, row.intervals
     ('move/1', 'exact', [(2.0, 8.0)])
@@ -944,7 +944,8 @@ def timeline(source: Any, types: Iterable[str] | str | None = None, *,
     each sample time (``location(cup1, L)^T``).
 
     >>> import slr_sql
-    >>> kb = slr_sql.open(); kb.add("speed(0.5)^1"); kb.add("speed(0.7)^2")
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.add("speed(0.5)^1"); kb.add("speed(0.7)^2")
     >>> fig = timeline(kb, values=["speed:1"], size=(400, 300), dpi=50)
     >>> fig.get_size_inches().tolist(), len(fig.axes)
     ([8.0, 6.0], 2)

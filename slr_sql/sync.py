@@ -597,9 +597,10 @@ class Synchronizer:
         # clocks that tell when they move serve time-driven wake-ups from their listener
         self._clock_driven = isinstance(self.clock, (ManualClock, StreamClock))
         # called (no lock held) when completeness may have advanced outside an add: the
-        # clock moving, a timer of wake_at firing, mark_complete (the event pipeline's
-        # decision stage; an add's own marks and events go through it directly)
-        self.progress_hook: Callable[[], None] | None = None
+        # clock moving, a timer of wake_at or wake_after firing, mark_complete (the event
+        # pipeline's decision stage; an add's own marks and events go through it directly);
+        # its argument says whether the timer thread calls it (no caller to raise to)
+        self.progress_hook: Callable[[bool], None] | None = None
         if hasattr(self.clock, "subscribe"):
             self.clock.subscribe(self._on_clock)
 
@@ -854,10 +855,10 @@ class Synchronizer:
         self._schedule_all(released)
 
     # -- event rules (slr_sql.cep) ---------------------------------------------------------------
-    def _progress(self) -> None:
+    def _progress(self, timer: bool = False) -> None:
         hook = self.progress_hook
         if hook is not None and not self._closed:
-            hook()
+            hook(timer)
 
     def recheck(self, keys: Iterable[tuple[str, int]]) -> None:
         """Release the queries parked on ``keys`` whose condition holds now (complex event
@@ -874,6 +875,14 @@ class Synchronizer:
         with self.cond:
             if not self._closed:
                 self._push_timer(key, self.tracker.deadline(key, z))
+
+    def wake_after(self, seconds: float) -> None:
+        """Tell the progress listeners again ``seconds`` of the clock from now (a decision
+        round that failed busy, tried again). A wall clock only: the next move of a clock
+        that tells when it moves tells them anyway."""
+        with self.cond:
+            if not self._closed and not self._clock_driven:
+                self._push_timer(None, float(self.clock.now()) + seconds)
 
     # -- internals ----------------------------------------------------------------------------
     def _known_types(self) -> set:
@@ -1133,7 +1142,9 @@ class Synchronizer:
         if rerun:
             self._schedule(q)
 
-    def _push_timer(self, key: tuple[str, int], deadline: float) -> None:
+    def _push_timer(self, key: tuple[str, int] | None, deadline: float) -> None:
+        """A timer at the clock's ``deadline``: ``key``'s parked queries are looked at and
+        the progress listeners told (``key`` None: only told)."""
         if deadline == _INF or math.isnan(deadline):
             return
         timers = self._timers
@@ -1180,6 +1191,7 @@ class Synchronizer:
         while timers and timers[0][0] < now:
             keys.add(heapq.heappop(timers)[2])
             self._fired = True
+        keys.discard(None)   # (wake_after's: nothing parked on it)
         out = []
         for key in keys:
             out += self._release(key)
@@ -1228,7 +1240,7 @@ class Synchronizer:
                     self.cond.release()
                     try:
                         if fired:
-                            self._progress()
+                            self._progress(timer=True)
                         self._schedule_all(released)
                         for q in expired:
                             self._set_exception(q, SLRTimeout(

@@ -815,6 +815,14 @@ def _escape(text: str, quote: str) -> str:
     return "".join(out)
 
 
+def _format_float_in_message(x: float) -> str:
+    """A float as a message writes it: NaN and the infinities as the message writes its
+    times (``nan``, ``inf``, ``-inf``), since SWI's ``1.5NaN`` reads as a number with a typo."""
+    if math.isnan(x) or math.isinf(x):
+        return repr(x)
+    return _format_float(x)
+
+
 def _format_float(x: float) -> str:
     """Shortest round-tripping digits, laid out as SWI does (``1.0e+15``, ``0.0001``)."""
     if math.isnan(x):
@@ -869,14 +877,16 @@ class _Writer:
     it is being written: meeting it again inside itself means the term is cyclic.
     """
 
-    __slots__ = ("out", "last", "quoted", "deadline", "limit")
+    __slots__ = ("out", "last", "quoted", "deadline", "limit", "float_text")
 
-    def __init__(self, quoted: bool, deadline: float | None = None, limit: int | None = None):
+    def __init__(self, quoted: bool, deadline: float | None = None, limit: int | None = None,
+                 message: bool = False):
         self.out: list[str] = []
         self.last = ""  # last character written
         self.quoted = quoted
         self.deadline = deadline
         self.limit = limit  # pieces of text after which the writer stops (with "...")
+        self.float_text = _format_float_in_message if message else _format_float
 
     def put(self, s: str) -> None:
         if not s:
@@ -964,7 +974,7 @@ class _Writer:
         elif tt is int:
             self.put(int_text(t))
         elif tt is float:
-            self.put(_format_float(t))
+            self.put(self.float_text(t))
         elif tt is bool:
             self.put("true" if t else "false")
         else:   # lists are written by the caller's loop, never here
@@ -1051,13 +1061,15 @@ class _Writer:
 
 
 def format_term(t: Any, quoted: bool = True, priority: int = 1200,
-                deadline: float | None = None, limit: int | None = None) -> str:
+                deadline: float | None = None, limit: int | None = None,
+                message: bool = False) -> str:
     """Prolog text of a term, like SWI-Prolog's ``writeq`` (``quoted=False``: like ``write``).
 
     A cyclic term is written as SWI-Prolog writes it, ``@(Template, [S_1=Value, ...])``
     (see :func:`factorize_cycles`). ``deadline`` (``time.monotonic()``) stops writing a
     huge term with SLRTimeout; ``limit`` (for messages) cuts the text after about that
-    many tokens with ``...``.
+    many tokens with ``...``; ``message`` writes NaN and the infinities as ``nan``,
+    ``inf``, ``-inf`` (as a message writes an event's times), not as SWI's ``1.5NaN``.
 
     >>> from slr_sql.terms import make_list
     >>> format_term(Struct(":-", (Atom("a"), Struct(",", (Atom("b"), Atom("c"))))))
@@ -1067,10 +1079,10 @@ def format_term(t: Any, quoted: bool = True, priority: int = 1200,
     >>> print(format_term(make_list([Atom("hello world"), String("s"), 1.0], Var("T"))))
     ['hello world',"s",1.0|T]
     """
-    w = _Writer(quoted, deadline, limit)
+    w = _Writer(quoted, deadline, limit, message)
     try:
         w.write(t, priority)
     except _CyclicTerm:
-        w = _Writer(quoted, deadline, limit)
+        w = _Writer(quoted, deadline, limit, message)
         w.write(factorize_cycles(t, deadline), priority)
     return "".join(w.out)

@@ -204,6 +204,31 @@ def test_a_rejected_event_is_named_with_its_arguments(kb, args):
     assert kb.query("findall(X, p(X, _)^_, L)") == [{"L": []}]
 
 
+NAN, INF = float("nan"), float("inf")
+
+
+@pytest.mark.parametrize("event, message", [
+    pytest.param(("p", [NAN], 1.0, 2.0), "p(nan)^[1.0,2.0]: event arguments must not contain NaN",
+                 id="NaN argument"),
+    pytest.param(("p", [[1, NAN]], 2.0, 2.0), "p([1,nan])^2.0: event arguments must not contain NaN",
+                 id="NaN in a list"),
+    pytest.param("p(f(1.5NaN))^2", "p(f(nan))^2.0: event arguments must not contain NaN",
+                 id="NaN written in SLR"),
+    pytest.param(("p", [INF, -INF], 3.0, 2.0), "p(inf,-inf)^[3.0,2.0]: start time 3.0 is after "
+                 "end time 2.0", id="infinite arguments beside a bad time"),
+    pytest.param(("p", [NAN], NAN, 2.0), "p(nan)^[nan,2.0]: event times must be finite "
+                 "(not inf or NaN)", id="NaN argument and time"),
+])
+def test_a_rejection_writes_nan_and_infinity_as_its_times_are_written(kb, event, message):
+    """A rejection writes a NaN or infinite argument as it writes a time (``nan``, ``inf``),
+    not in SWI-Prolog's syntax of its answers (``1.5NaN``, ``1.0Inf``), which reads as a
+    number with a typo."""
+    assert [str(e) for e in kb.add_many([event])] == [message]
+    if type(event) is tuple:
+        assert [str(e) for e in kb.store.add_events([event])] == [message]
+    assert kb.query("findall(X, p(X)^_, L)") == [{"L": []}]
+
+
 @pytest.mark.parametrize("name, written", [("ok", "ok"), ("My Event", "'My Event'"),
                                            ("it's", "'it\\'s'")])
 def test_a_rejected_event_without_arguments_is_named_as_an_atom(kb, name, written):

@@ -27,12 +27,6 @@ from slr_sql.errors import SLREvaluationError, SLRSyntaxError
 from slr_sql.parser import parse_term
 from slr_sql.terms import Atom, String, Struct, Var, format_term, from_python, make_list
 
-# These stores keep the default wall clock while their events are stamped with small times
-# (1.0, 12.31, ...), the language's examples: each type's first event arrives "decades
-# late", so the store caps its learned delay and says so with a LearnedDelayWarning, as it
-# should (tests/test_time_traps.py asserts those warnings). Here they are expected noise.
-pytestmark = pytest.mark.filterwarnings("ignore::slr_sql.clocks.LearnedDelayWarning")
-
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
 LANGUAGE = DOCS / "language.md"
@@ -122,7 +116,9 @@ LANGUAGE_BLOCKS = code_blocks(LANGUAGE, "prolog")
                          ids=[f"language.md:{n}" for n, _ in LANGUAGE_BLOCKS])
 def test_language_blocks_load_and_answer_as_written(line, text):
     events, program, queries = split_block(text)
-    with slr_sql.open() as kb:
+    # (the examples' small times are not the wall clock's: a ManualClock, or each type's
+    # first event would arrive "decades late", a LearnedDelayWarning)
+    with slr_sql.open(clock=slr_sql.ManualClock(0.0)) as kb:
         for event in events:
             kb.add(event)
         kb.load(program, ) if program.strip() else None
@@ -236,7 +232,7 @@ def test_the_sql_page_commands_read_its_example(tmp_path):
     sql_md = DOCS / "sql.md"
     (program,) = [t for _, t in code_blocks(sql_md, "prolog") if "teaThing" in t]
     db = tmp_path / "robot.db"
-    with slr_sql.open(db) as kb:
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
         kb.add("obj(cup1, cup, red)^2")
         kb.add("seg(cup1, [0.4, 0.1, 0.9])^3")
         kb.load(program)

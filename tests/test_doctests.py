@@ -10,12 +10,6 @@ import pytest
 
 import slr_sql
 
-# These stores keep the default wall clock while their events are stamped with small times
-# (1.0, 12.31, ...), the language's examples: each type's first event arrives "decades
-# late", so the store caps its learned delay and says so with a LearnedDelayWarning, as it
-# should (tests/test_time_traps.py asserts those warnings). Here they are expected noise.
-pytestmark = pytest.mark.filterwarnings("ignore::slr_sql.clocks.LearnedDelayWarning")
-
 MODULES = sorted(info.name for info in pkgutil.walk_packages(slr_sql.__path__, "slr_sql.")
                  if info.name != "slr_sql.__main__")
 

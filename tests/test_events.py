@@ -591,9 +591,6 @@ def test_rules_index_the_arguments_their_joins_need(kb):
     assert any("slr_cep_ix__b__arg2_start (arg2=? AND t_start>?)" in p for p in plans)
 
 
-# the docstrings' examples open stores with the default wall clock and small times, for
-# brevity: the warning that says so is expected there (tests/test_doctests.py filters it too)
-@pytest.mark.filterwarnings("ignore::slr_sql.clocks.LearnedDelayWarning")
 def test_doctests_of_the_event_rule_modules():
     import doctest
 

@@ -16,13 +16,25 @@ import slr_sql
 from slr_sql import (Atom, SLRError, SLREvaluationError, SLRSyntaxError, SLRTimeout, String,
                      Struct, Var)
 
-# These stores keep the default wall clock while their events are stamped with small times
-# (1.0, 12.31, ...), the language's examples: each type's first event arrives "decades
-# late", so the store caps its learned delay and says so with a LearnedDelayWarning, as it
-# should (tests/test_time_traps.py asserts those warnings). Here they are expected noise.
-pytestmark = pytest.mark.filterwarnings("ignore::slr_sql.clocks.LearnedDelayWarning")
-
 ANY_VAR = object()  # expected: an unbound variable
+
+
+# The events here are stamped with the language's small example times (1.0, 12.31, ...): the
+# stores get a ManualClock, on which they are not "decades late" (a LearnedDelayWarning on
+# the wall clock); no test here waits on the store's time.
+@pytest.fixture
+def kb():
+    """A fresh in-memory knowledge base with a ManualClock, closed after the test."""
+    with slr_sql.open(clock=slr_sql.ManualClock(0.0)) as k:
+        yield k
+
+
+@pytest.fixture(params=["memory", "file"])
+def any_kb(request, tmp_path):
+    """The same test once on an in-memory and once on an on-disk knowledge base."""
+    where = None if request.param == "memory" else tmp_path / "robot.db"
+    with slr_sql.open(where, clock=slr_sql.ManualClock(0.0)) as k:
+        yield k
 
 
 def same(got, want) -> bool:

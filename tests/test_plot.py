@@ -19,13 +19,21 @@ from slr_sql.plot import (COMPLEX_MARK, collect_timeline, parse_size, parse_valu
                           save_timeline, timeline)
 from slr_sql.store import EventStore
 
-# These stores keep the default wall clock while their events are stamped with small times
-# (1.0, 12.31, ...), the language's examples: each type's first event arrives "decades
-# late", so the store caps its learned delay and says so with a LearnedDelayWarning, as it
-# should (tests/test_time_traps.py asserts those warnings). Here they are expected noise.
-pytestmark = pytest.mark.filterwarnings("ignore::slr_sql.clocks.LearnedDelayWarning")
-
 REPO = Path(__file__).resolve().parent.parent
+
+
+# The events here carry small times (1, 2.5, ...): the stores get a ManualClock, on which they
+# are not "decades late" (a LearnedDelayWarning on the wall clock); a plot's window is given
+# or the events' own, never the clock's.
+def _open(where=None) -> slr_sql.KnowledgeBase:
+    return slr_sql.open(where, clock=slr_sql.ManualClock(0.0))
+
+
+@pytest.fixture
+def kb():
+    """A fresh in-memory knowledge base with a ManualClock, closed after the test."""
+    with _open() as k:
+        yield k
 
 
 # ---------------------------------------------------------------------------------------------
@@ -267,7 +275,7 @@ N_TICKS, N_SPANS = 150_000, 50_000
 @pytest.fixture(scope="module")
 def big_kb():
     """200,000 events between t=2 and t=8: 150k points with a value, 50k short intervals."""
-    k = slr_sql.open()
+    k = _open()
     k.add_many([("tick", [i % 7], 2 + 6 * i / N_TICKS, 2 + 6 * i / N_TICKS)
                 for i in range(N_TICKS)])
     k.add_many([("span", [i], 2 + 6 * i / N_SPANS, 2 + 6 * i / N_SPANS + 1e-3)
@@ -315,7 +323,7 @@ def test_binned_counts_add_up(big_kb):
 def test_binned_coverage_matches_a_direct_count(events, window):
     """Per pixel column: the intervals overlapping it and the points in it, by brute force."""
     lo, hi = window[0] / 2, window[0] / 2 + window[1] / 2
-    with slr_sql.open() as kb:
+    with _open() as kb:
         kb.add_many([("e", [i], s / 2, (s + d) / 2) for i, (s, d) in enumerate(events)])
         drawn = collect_timeline(kb, ["e"], start=lo, end=hi, size=(160, 100), exact_limit=0)
     row = drawn.rows[0]
@@ -403,7 +411,7 @@ def slr(*args: str, code: str | None = None) -> subprocess.CompletedProcess:
 
 @pytest.fixture
 def robot_db(db_path):
-    with slr_sql.open(db_path) as kb:
+    with _open(db_path) as kb:
         kb.add_many(["move(r1)^[2, 8]", "bump(r1)^5", "speed(0.5)^1", "speed(0.9)^4"])
     return db_path
 

@@ -12,13 +12,28 @@ import pytest
 import slr_sql
 from slr_sql import SLRError
 
-# These stores keep the default wall clock while their events are stamped with small times
-# (1.0, 12.31, ...), the language's examples: each type's first event arrives "decades
-# late", so the store caps its learned delay and says so with a LearnedDelayWarning, as it
-# should (tests/test_time_traps.py asserts those warnings). Here they are expected noise.
-pytestmark = pytest.mark.filterwarnings("ignore::slr_sql.clocks.LearnedDelayWarning")
-
 REPO = Path(__file__).resolve().parent.parent
+
+
+# The events here carry small example times (1, 2, ...): the stores get a ManualClock, on
+# which they are not "decades late" (a LearnedDelayWarning on the wall clock); no test here
+# waits on the store's time.
+def _open(where=None) -> slr_sql.KnowledgeBase:
+    return slr_sql.open(where, clock=slr_sql.ManualClock(0.0))
+
+
+@pytest.fixture
+def kb():
+    """A fresh in-memory knowledge base with a ManualClock, closed after the test."""
+    with _open() as k:
+        yield k
+
+
+@pytest.fixture(params=["memory", "file"])
+def any_kb(request, tmp_path):
+    """The same test once on an in-memory and once on an on-disk knowledge base."""
+    with _open(None if request.param == "memory" else tmp_path / "robot.db") as k:
+        yield k
 
 
 def values(kb, goal="p(X)", var="X"):
@@ -264,7 +279,7 @@ def test_a_store_from_before_named_programs_opens_with_its_program_as_main(tmp_p
     conn.execute("CREATE VIEW usedFor AS SELECT arg1, arg2 FROM slr_facts_usedFor_2")
     conn.execute("""INSERT INTO slr_meta VALUES ('sql_views', '["usedFor"]')""")
     conn.close()
-    with slr_sql.open(path) as kb:
+    with _open(path) as kb:
         assert list(kb.programs()) == ["main"]
         kb.add_many(["obj(c1)^1", "obj(c5)^2"])
         assert values(kb, "findall(O, (obj(O)^_, usedFor(O, tea)), L)", "L") == [["c1", "c5"]]

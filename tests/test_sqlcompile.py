@@ -13,20 +13,21 @@ import slr_sql
 from slr_sql.errors import SLREvaluationError, SLRTimeout
 from slr_sql.planner import plan_for
 
-# These stores keep the default wall clock while their events are stamped with small times
-# (1.0, 12.31, ...), the language's examples: each type's first event arrives "decades
-# late", so the store caps its learned delay and says so with a LearnedDelayWarning, as it
-# should (tests/test_time_traps.py asserts those warnings). Here they are expected noise.
-pytestmark = pytest.mark.filterwarnings("ignore::slr_sql.clocks.LearnedDelayWarning")
-
 GOLDEN = Path(__file__).resolve().parent / "golden" / "sql"
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+
+
+def _open(where=None) -> slr_sql.KnowledgeBase:
+    """A store with a ManualClock: the events here carry the language's small example times
+    (1.0, 12.31, ...), "decades late" on the wall clock (a LearnedDelayWarning); nothing here
+    waits on the store's time."""
+    return slr_sql.open(where, clock=slr_sql.ManualClock(0.0))
 
 
 def example_kb(name: str) -> slr_sql.KnowledgeBase:
     text = (EXAMPLES / name).read_text(encoding="utf-8")
     program, _, events = text.partition("%% events")
-    kb = slr_sql.open()
+    kb = _open()
     kb.load(program)
     lines = [ln.strip().rstrip(".") for ln in events.splitlines()
              if ln.strip() and not ln.strip().startswith("%")]
@@ -121,7 +122,7 @@ two(X) :- ( item(X)^_ ; other(X)^_ ) -> true ; X = none.
 
 
 def fallback_kb():
-    kb = slr_sql.open()
+    kb = _open()
     kb.load(PROGRAM)
     kb.add_many(["item(i1)^1", "item(i2)^2", "other(o1)^1.5", "task(p(1))^1",
                  "seg(cup1, [0.5, 0.1, 0.9])^3", "val(abc)^1"])
@@ -190,7 +191,7 @@ def test_fallback_at_run_time_raises_the_interpreters_error():
 
 
 def test_integer_and_float_semantics():
-    kb = slr_sql.open()
+    kb = _open()
     kb.add_many(["n(7)^1", "n(2.0)^2", "n(-7)^3", "n(4)^4"])
     goal = "n(X)^_, Y is X / 2, Z is X * 3, W is X - 0.5"
     assert engine(kb, goal) == "sql"
@@ -206,7 +207,7 @@ def test_integer_and_float_semantics():
 
 
 def test_ties_and_intervals_in_store_order():
-    kb = slr_sql.open()
+    kb = _open()
     kb.add_many(["e(a)^[1,2]", "e(b)^2", "e(c)^[0,2]", "e(d)^2", "e(e)^[1,3]"])
     assert both(kb, "e(X)^[S,E]")[0] == both(kb, "e(X)^[S,E]")[1]
     assert [a["X"] for a in kb.query("e(X)^[S,E]")] == ["c", "a", "b", "d", "e"]
@@ -262,7 +263,7 @@ def typed(answers):
 
 @pytest.mark.parametrize("goal", PATTERN_GOALS)
 def test_compound_patterns_compile_and_match_the_interpreter(goal):
-    kb = slr_sql.open()
+    kb = _open()
     assert kb.add_many(PATTERN_EVENTS) == []
     assert engine(kb, goal) == "sql", kb.explain(goal)
     sql, interp = both(kb, goal)
@@ -270,7 +271,7 @@ def test_compound_patterns_compile_and_match_the_interpreter(goal):
 
 
 def test_compound_pattern_answers():
-    kb = slr_sql.open()
+    kb = _open()
     assert kb.add_many(PATTERN_EVENTS) == []
     explained = kb.explain("v(O, [X, Y, Z])^T")
     assert "engine: sql" in explained and "json_array_length" in explained
@@ -295,7 +296,7 @@ def test_compound_pattern_answers():
 
 
 def test_compound_patterns_on_arguments_from_python_and_lists_of_findall():
-    kb = slr_sql.open()
+    kb = _open()
     assert kb.add_many(PATTERN_EVENTS) == []
     goal = "L = [X|T]"
     for value in (["a", "b"], "cup1", 7, "[x", []):
@@ -308,7 +309,7 @@ def test_compound_patterns_on_arguments_from_python_and_lists_of_findall():
 
 def test_compound_pattern_rule_gets_a_plain_sql_view(tmp_path):
     db = tmp_path / "robot.db"
-    kb = slr_sql.open(db)
+    kb = _open(db)
     kb.load("firstCoord(O, X) :- seg(O, [X|_])^_.\nnamed(O, N) :- seg(O, f(N, _))^_.")
     kb.add_many(["seg(cup1, [0.5, 0.1])^1", "seg(cup2, cup2)^2", "seg(cup3, ['[q', 1])^3",
                  "seg(cup4, f(\"s\", 1))^4"])
@@ -337,7 +338,7 @@ def test_plan_cache_and_args_from_python():
 
 
 def test_new_event_types_invalidate_plans():
-    kb = slr_sql.open()
+    kb = _open()
     kb.load("seen(X) :- late(X)^_.")
     assert kb.query("seen(X)") == []
     kb.add("late(a)^1")
@@ -358,7 +359,7 @@ def test_views_and_fact_tables():
 
 def test_views_readable_with_plain_sqlite3(tmp_path):
     db = tmp_path / "robot.db"
-    kb = slr_sql.open(db)
+    kb = _open(db)
     kb.load("usedFor(cup, tea). usedFor(mug, coffee).\n"
             "teaThing(O) :- obj(O, T, _)^_, usedFor(T, tea).")
     kb.add_many(["obj(cup1, cup, red)^1", "obj(mug1, mug, blue)^2"])
@@ -386,7 +387,7 @@ def test_a_view_keeps_a_stored_integer_where_another_branch_gives_a_time(tmp_pat
 def test_a_rule_that_can_build_a_cyclic_term_falls_back_instead_of_looping():
     # r1(X, X) against the head r1(Y, [Y, 2.0]) binds Y = [Y, 2.0]: Prolog (no occurs check)
     # builds a cyclic term; the compiler's walks over bound terms would not end on one.
-    kb = slr_sql.open()
+    kb = _open()
     kb.load("fb(c, a). fb([], [b]). r1(Y, [Y, 2.0]) :- fb([], Y). r2(Z) :- r1(X, X). "
             "r3(Y) :- r1(Y, W), W = [_, F], F > 1.")
     assert "cyclic term" in engine(kb, "r2(Z)")
@@ -407,7 +408,7 @@ first_link(A, B) :- link(A, B), !.
 
 
 def links_kb():
-    kb = slr_sql.open()
+    kb = _open()
     kb.load(LINKS)
     kb.add_many(["at(r1, k)^1", "at(r2, k)^2", "at(r3, k)^3", "at(r3, j)^4", "at(r4, j)^5",
                  "at(r5, j)^6", "at(r2, j)^7"])
@@ -472,7 +473,7 @@ UNUSED = ("r(O) :- a(O, N)^_, M is N + 1. "
 def test_values_nothing_uses_are_still_computed(goal):
     """SQLite computes an expression only where the statement uses it; Prolog runs `is`
     when it is reached. A type error in a value nothing uses must still be raised."""
-    kb = slr_sql.open()
+    kb = _open()
     kb.load(UNUSED)
     kb.add_many(["a(y, 2)^1", "a(x, foo)^2"])
     assert engine(kb, goal) == "sql"
@@ -481,7 +482,7 @@ def test_values_nothing_uses_are_still_computed(goal):
         with pytest.raises(SLREvaluationError, match="type_error"):
             kb.query(goal)
     kb.sql_enabled = True
-    numbers = slr_sql.open()   # numbers only: the same answers as the interpreter
+    numbers = _open()   # numbers only: the same answers as the interpreter
     numbers.load(UNUSED)
     numbers.add_many(["a(y, 2)^1", "a(x, 3)^2"])
     assert both(numbers, goal) == ([{"O": "y"}, {"O": "x"}],) * 2
@@ -490,7 +491,7 @@ def test_values_nothing_uses_are_still_computed(goal):
 def test_interpreter_calls_compiled_temporal_rules():
     """An event goal p(..)^T of a temporal predicate (stored events, then its rules) is a
     compiled sub-goal too: point ^T and interval ^[S,E] forms, times bound or free."""
-    kb = slr_sql.open()
+    kb = _open()
     src = (Path(__file__).parent.parent / "examples" / "tea.slr").read_text().split("%% events")
     kb.load(src[0])
     kb.add_many([ln.strip().rstrip(".") for ln in src[1].splitlines()
@@ -515,7 +516,7 @@ def test_interpreter_calls_compiled_temporal_rules():
     "heavy(N), !",                                           # a compiled sub-goal
 ])
 def test_timeout_interrupts_a_compiled_statement(goal):
-    kb = slr_sql.open()
+    kb = _open()
     kb.load("heavy(N) :- aggregate_all(count, (a(X)^_, a(Y)^_, a(Z)^_), N).")
     kb.add_many([("a", [i], float(i), float(i)) for i in range(2000)])  # 8e9 triples
     for sql in (True, False):
@@ -559,7 +560,7 @@ def test_an_error_prolog_meets_before_a_later_goal_filters_the_row(goal):
     """Prolog runs goals left to right: `X is A / 0` raises on every row that reaches it,
     even when `A > 100` after it would reject the row; SQLite picks its own order. Guards
     (SqlPlan.guards) make the compiled plan raise the same error (found by review)."""
-    kb = slr_sql.open()
+    kb = _open()
     kb.load(ORDER)
     kb.add_many(["e(5)^1", "f(a)^1", "g(foo)^1", "g(7)^2", "h(9, x)^1"])
     outcomes = []
@@ -578,7 +579,7 @@ def test_an_error_prolog_meets_before_a_later_goal_filters_the_row(goal):
 
 
 def test_guards_only_where_a_later_goal_can_filter_first():
-    kb = slr_sql.open()
+    kb = _open()
     kb.load(ORDER + "q(A, X) :- g(A)^_, X is A + 1. r(A, X) :- g(A)^_, h(A, _)^_, X is A + 1.")
     kb.add_many(["e(1)^1", "f(1)^1", "g(1)^1", "h(1, x)^1"])
     plan = lambda goal: plan_for(kb, kb.plans.plan(goal, ()), False)  # noqa: E731
@@ -597,7 +598,7 @@ def test_guards_only_where_a_later_goal_can_filter_first():
     "a(O, N)^T, findall(O, aggregate_all(sum(N), f(O, N), A), L)",
 ])
 def test_the_sum_of_nothing_is_zero_in_conditions_too(goal):
-    kb = slr_sql.open()
+    kb = _open()
     kb.load("f(x, 1). f(x, 1).")
     kb.add_many(["a(x, 2)^0", "a(y, 3)^1"])
     assert engine(kb, goal) == "sql"
@@ -608,7 +609,7 @@ def test_the_sum_of_nothing_is_zero_in_conditions_too(goal):
 def test_a_query_inside_a_compiled_statement_keeps_the_outer_timeout():
     """A kb.define predicate may query the kb from inside SQL; the inner statement's own
     deadline must not remove the outer one (one progress handler per connection)."""
-    kb = slr_sql.open()
+    kb = _open()
     kb.add_many([("a", [i], float(i), float(i)) for i in range(300)])   # 2.7e7 triples
     kb.define("inner", 2, lambda x, n: (x, kb.query("aggregate_all(count, a(_)^_, N)",
                                                     timeout=30.0)[0]["N"]))
@@ -620,7 +621,7 @@ def test_a_query_inside_a_compiled_statement_keeps_the_outer_timeout():
 
 
 def test_a_set_of_nothing_is_the_empty_list():
-    kb = slr_sql.open()
+    kb = _open()
     kb.add_many(["a(x, 1)^1", "a(y, 2)^2"])
     for goal in ["a(O, N)^T, aggregate_all(set(M), (a(_, M)^S, S > 100), _)",
                  "a(O, N)^T, aggregate_all(set(M), (a(_, M)^S, S > 100), [])"]:
@@ -632,7 +633,7 @@ def test_a_set_of_nothing_is_the_empty_list():
 def test_builtin_results_tell_zero_from_negative_zero_and_big_constants_compile_away():
     """Found by the third review: the builtin call cache took -0.0 and 0.0 for the same
     input; an integer constant beyond 64 bits escaped the compiler as a ValueError."""
-    kb = slr_sql.open()
+    kb = _open()
     kb.add_many(["a(-0.0)^1", "a(0.0)^2", "b(x, 1)^1"])
     for goal in ["a(O)^T, atom_length(O, L)", "a(O)^T, term_to_atom(O, A)"]:
         assert engine(kb, goal) == "sql"

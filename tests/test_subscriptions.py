@@ -27,12 +27,6 @@ from slr_sql import subscriptions
 from slr_sql.subscriptions import SubscriptionOverflow, answer_json, journal_table
 from slr_sql.terms import Atom, String, Struct, make_list, to_python
 
-# These stores keep the default wall clock while their events are stamped with small times
-# (1.0, 12.31, ...), the language's examples: each type's first event arrives "decades
-# late", so the store caps its learned delay and says so with a LearnedDelayWarning, as it
-# should (tests/test_time_traps.py asserts those warnings). Here they are expected noise.
-pytestmark = pytest.mark.filterwarnings("ignore::slr_sql.clocks.LearnedDelayWarning")
-
 ROOT = Path(__file__).resolve().parent.parent
 DEADLINE = 20.0
 
@@ -55,6 +49,13 @@ def ends(sub, timeout: float = DEADLINE) -> bool:
 
 def xs(answers: list[dict], name: str = "X") -> list:
     return [a[name] for a in answers]
+
+
+def _open(where=None, **options) -> slr_sql.KnowledgeBase:
+    """A store with a ManualClock (unless given one): the events here carry small times
+    (1, 2, ...), "decades late" on the wall clock (a LearnedDelayWarning)."""
+    options.setdefault("clock", ManualClock(0.0))
+    return slr_sql.open(where, **options)
 
 
 @pytest.fixture
@@ -357,7 +358,7 @@ def test_no_gap_and_no_duplicate_at_the_seam_with_a_concurrent_writer(tmp_path, 
     """A thread adds 1..N in order while the subscription is made in the middle: the answers
     are exactly 1..N once each, in order (history, then live)."""
     n = 3000
-    with slr_sql.open(tmp_path / "seam.db", synchronous="OFF") as kb:
+    with _open(tmp_path / "seam.db", synchronous="OFF") as kb:
         started = threading.Event()
 
         def writer():
@@ -381,7 +382,7 @@ def test_no_gap_and_no_duplicate_at_the_seam_with_a_concurrent_writer(tmp_path, 
 def test_concurrent_writers_and_slow_and_fast_subscribers_all_see_the_store_order(tmp_path):
     """Two writer threads, subscribers with tiny and large queues: each subscriber gets every
     event once, in the order the store assigned (seq), whether it kept up or lagged."""
-    with slr_sql.open(tmp_path / "w.db", synchronous="OFF") as kb:
+    with _open(tmp_path / "w.db", synchronous="OFF") as kb:
         subs = [kb.subscribe("p(W, I)^T", since=0, max_queue=q) for q in (1, 3, 7, 10_000)]
 
         def writer(name):
@@ -518,7 +519,7 @@ def test_a_consumer_too_far_behind_gets_an_overflow_after_its_queued_answers(kb)
 
 
 def test_a_durable_subscription_resumes_after_an_overflow(tmp_path):
-    with slr_sql.open(tmp_path / "o.db") as kb:
+    with _open(tmp_path / "o.db") as kb:
         sub = kb.subscribe("p(X)^T", since=0, id="slow", max_queue=2, max_lag=5)
         kb.add_many([("p", [i], float(i), float(i)) for i in range(20)])
         got = []
@@ -546,13 +547,13 @@ def test_close_stops_delivery_and_removes_the_registration(kb):
 
 def test_the_journal_exists_only_while_someone_subscribes(tmp_path):
     path = tmp_path / "j.db"
-    with slr_sql.open(path) as kb:
+    with _open(path) as kb:
         kb.add("p(1)^1")
         sub = kb.subscribe("p(X)^T")
         names = {r[0] for r in kb.sql("SELECT name FROM sqlite_master")[1]}
         assert {journal_table("p"), "slr_subt_p"} <= names
         sub.close()
-    with slr_sql.open(path) as kb:
+    with _open(path) as kb:
         names = {r[0] for r in kb.sql("SELECT name FROM sqlite_master")[1]}
         assert not {n for n in names if n.startswith(("slr_subj_", "slr_subt_"))}
 
@@ -579,7 +580,7 @@ def test_a_registration_removed_behind_its_back_ends_the_subscription_loudly(tmp
     """A process that stopped renewing its claim (suspended) loses its registration to
     another process's cleanup; its subscription then ends with an error, not a silent gap."""
     path = tmp_path / "lease.db"
-    with slr_sql.open(path) as kb, slr_sql.open(path) as other:
+    with _open(path) as kb, _open(path) as other:
         sub = kb.subscribe("p(X)^T", since=0)
         kb.sql("UPDATE slr_subscriptions SET lease_until = 0", write=True)   # as if not renewed for long
         other._subscriptions.cleanup()
@@ -591,11 +592,11 @@ def test_a_registration_removed_behind_its_back_ends_the_subscription_loudly(tmp
 
 def test_durable_subscription_resumes_after_a_real_reopen(tmp_path):
     path = tmp_path / "d.db"
-    with slr_sql.open(path) as kb:
+    with _open(path) as kb:
         sub = kb.subscribe("e(X)^T", where="X \\= skip", since=0, id="robot-log")
         kb.add_many(["e(0)^0", "e(skip)^1", "e(1)^2", "e(2)^3"])
         assert xs(take(sub, 2)) == [0, 1]   # 1 taken: handled once the kb closes
-    with slr_sql.open(path) as kb:
+    with _open(path) as kb:
         kb.add("e(3)^4")
         with pytest.raises(SLRError, match="different|exists with"):
             kb.subscribe("e(X)^T", since=0, id="robot-log")
@@ -612,12 +613,12 @@ def test_durable_subscription_resumes_after_a_real_reopen(tmp_path):
 
 def test_durable_subscription_resumes_in_the_middle_of_its_history(tmp_path):
     path = tmp_path / "h.db"
-    with slr_sql.open(path) as kb:
+    with _open(path) as kb:
         kb.add_many([("p", [i], float(i), float(i)) for i in range(100)])
         sub = kb.subscribe("p(X)^T", since=0, id="h", max_queue=10)
         assert xs(take(sub, 30)) == list(range(30))
         kb.add("p(100)^100")
-    with slr_sql.open(path) as kb:
+    with _open(path) as kb:
         sub = kb.subscribe("p(X)^T", since=0, id="h")
         assert xs(take(sub, 71)) == list(range(30, 101))
         sub.close(forget=True)
@@ -625,7 +626,7 @@ def test_durable_subscription_resumes_in_the_middle_of_its_history(tmp_path):
 
 def test_an_answer_taken_but_not_handled_is_delivered_again(tmp_path):
     path = tmp_path / "a.db"
-    with slr_sql.open(path) as kb:
+    with _open(path) as kb:
         sub = kb.subscribe("p(X)^T", since=0, id="a")
         kb.add_many(["p(1)^1", "p(2)^2"])
         with pytest.raises(RuntimeError):
@@ -633,7 +634,7 @@ def test_an_answer_taken_but_not_handled_is_delivered_again(tmp_path):
                 for answer in sub:
                     if answer["X"] == 2:
                         raise RuntimeError("the consumer failed on 2")
-    with slr_sql.open(path) as kb:
+    with _open(path) as kb:
         sub = kb.subscribe("p(X)^T", since=0, id="a")
         assert xs(take(sub, 1)) == [2]
         sub.close(forget=True)
@@ -655,7 +656,7 @@ def test_a_finished_durable_subscription_stays_finished(tmp_path):
 
 
 def test_kb_close_ends_open_subscriptions(tmp_path):
-    kb = slr_sql.open(tmp_path / "c.db")
+    kb = _open(tmp_path / "c.db")
     sub = kb.subscribe("p(X)^T")
     kb.close()
     assert sub.get(timeout=DEADLINE) is None and sub.closed
@@ -677,7 +678,7 @@ def test_events_derived_inside_the_adding_transaction_are_delivered(kb):
 
 def test_events_added_by_another_connection_are_delivered(tmp_path):
     path = tmp_path / "x.db"
-    with slr_sql.open(path) as kb, slr_sql.open(path) as other:
+    with _open(path) as kb, _open(path) as other:
         sub = kb.subscribe("p(X)^T", since=0)
         other.add("p(from_other)^1")
         kb.sql("INSERT INTO p (arg1, t_start, t_end, arrival) VALUES ('by_sql', 2, 2, 0)", write=True)
@@ -686,7 +687,7 @@ def test_events_added_by_another_connection_are_delivered(tmp_path):
 
 def test_events_added_by_another_process_are_delivered(tmp_path):
     path = str(tmp_path / "p.db")
-    with slr_sql.open(path) as kb:
+    with _open(path) as kb:
         kb.add("p(first)^0")
         sub = kb.subscribe("p(X)^T", since=1)
         r = subprocess.run([sys.executable, "-m", "slr_sql", "add", path, "p(a)^1", "p(b)^2"],
@@ -698,12 +699,12 @@ def test_events_added_by_another_process_are_delivered(tmp_path):
 
 def test_a_durable_subscription_is_delivered_by_one_process_at_a_time(tmp_path):
     path = str(tmp_path / "o.db")
-    with slr_sql.open(path) as kb:
+    with _open(path) as kb:
         kb.add("p(1)^1")
     child, lines = start_cli("subscribe", path, "p(X)^T", "--since", "0", "--id", "shared")
     try:
         assert json.loads(lines.wait_for(1)[0])["X"] == 1
-        with slr_sql.open(path) as kb:
+        with _open(path) as kb:
             with pytest.raises(SLRError, match="another process"):
                 kb.subscribe("p(X)^T", since=0, id="shared")
     finally:
@@ -711,13 +712,13 @@ def test_a_durable_subscription_is_delivered_by_one_process_at_a_time(tmp_path):
         code = child.wait(DEADLINE)
         errors = errors_of(child)
     assert code == 0, errors
-    with slr_sql.open(path) as kb:         # released by the clean exit
+    with _open(path) as kb:   # released by the clean exit
         kb.subscribe("p(X)^T", since=0, id="shared").close(forget=True)
 
 
 def test_a_sigkilled_durable_subscriber_resumes_with_no_gap(tmp_path):
     path = str(tmp_path / "k.db")
-    with slr_sql.open(path) as kb:
+    with _open(path) as kb:
         kb.add("e(0)^0")
         child, lines = start_cli("subscribe", path, "e(X)^T", "--since", "0", "--id", "k")
         try:
@@ -744,7 +745,7 @@ def test_a_sigkilled_durable_subscriber_resumes_with_no_gap(tmp_path):
 @pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_cli_prints_json_lines_and_exits_0_on_a_signal(tmp_path, stop):
     path = str(tmp_path / "cli.db")
-    with slr_sql.open(path) as kb:
+    with _open(path) as kb:
         kb.add_many(["face(bob, 70)^1", "face(al, 20)^2"])
         child, lines = start_cli("subscribe", path, "face(F, R)^T", "--where", "R > 60",
                                  "--since", "0")
@@ -766,7 +767,7 @@ def test_cli_prints_json_lines_and_exits_0_on_a_signal(tmp_path, stop):
 def test_cli_exits_0_when_until_is_complete_by_another_processes_mark(tmp_path):
     path = str(tmp_path / "until.db")
     t0 = round(time.time())
-    with slr_sql.open(path) as kb:
+    with _open(path) as kb:
         kb.load(":- max_delay(p/1, 1000).")
         kb.add(f"p(a)^{t0}")
         child, lines = start_cli("subscribe", path, "p(X)^T", "--since", str(t0 - 1),
@@ -787,7 +788,7 @@ def test_cli_exits_0_when_until_is_complete_by_another_processes_mark(tmp_path):
 
 def test_cli_errors_are_words_and_exit_1(tmp_path):
     path = str(tmp_path / "e.db")
-    slr_sql.open(path).close()
+    _open(path).close()
     r = subprocess.run([sys.executable, "-m", "slr_sql", "subscribe", path, "p(X)^T",
                         "--where", "X >"], capture_output=True, text=True, cwd=str(ROOT),
                        env=_env(), timeout=120)

@@ -15,7 +15,7 @@ with the completeness of synchronized queries (:mod:`slr_sql.sync`).
 * :mod:`.runtime` -- rounds, pending decisions, the completeness of complex event types.
 
 >>> import slr_sql
->>> kb = slr_sql.open()
+>>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
 >>> kb.load("c(X) <- a(X) seq b(X).")
 >>> kb.add_many(["a(1)^1", "b(1)^2", "b(2)^3"])
 []

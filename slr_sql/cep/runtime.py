@@ -186,6 +186,9 @@ class RuleRuntime:
                               if residual is not None and not reads else None)
         for key in self.rule.input_types():   # their completeness parameters exist
             eng.complete_sql(key, "x")
+            # a complex type read by a rule may be searched in start order: conservatively,
+            # its start-ordered indexes are there before the rule's statements run
+            eng.store.ensure_start_order(*key)
         for table, column in self.indexes():
             for first, second in (("t_end", "t_start"), ("t_start", "t_end")):
                 name = index_name(table, column, first[2:])
@@ -825,7 +828,8 @@ class RuleRuntime:
         name, arity = self.head_key
         table = self.eng.table(self.head_key)
         if table is None:
-            self.eng.store.declare_type(name, arity)
+            # (start-ordered indexes on first need: see declare_type)
+            self.eng.store.declare_type(name, arity, start_order=False)
             table = self.eng.table(self.head_key)
         store = self.eng.store
         # a complex event is the deriving store's: its robot (NULL on an unnamed or fleet
@@ -947,7 +951,9 @@ class EventRules:
                 for rt in runtimes:
                     name, arity = rt.head_key
                     if self.store.table_for(name, arity) is None:
-                        self.store.declare_type(name, arity)
+                        # a complex type's events come in end order: its start-ordered
+                        # indexes, random inserts, are built when a reader needs them
+                        self.store.declare_type(name, arity, start_order=False)
                     rt.create_tables()
                     self.store.run_compiled(rule_record(), {
                         "key": rt.key, "head": _type(rt.head_key), "rule": rt.rule.text,

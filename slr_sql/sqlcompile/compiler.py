@@ -63,6 +63,10 @@ class Compiler(Unification, BuiltinGoals, ControlGoals, RuleGoals, EventGoals, A
         # ((name, n), upper time SQL) of every prev/next: a synchronized query may run the
         # statement once each history is complete up to its time (slr_sql.sync)
         self.time_sites: list[tuple[tuple[str, int], str]] = []
+        # the event types the statement reads in start order (next's subquery): their
+        # start-ordered indexes are made sure of before it runs (a complex type's are built
+        # on first need, slr_sql.store.tables)
+        self.start_ordered: set[tuple[str, int]] = set()
 
     # ------------------------------------------------------------------ helpers
     def alias(self, prefix: str = "t") -> str:

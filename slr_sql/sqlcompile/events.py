@@ -7,7 +7,8 @@ subquery on the same pattern finds.
 
 Mixed into :class:`slr_sql.sqlcompile.Compiler` (uses ``self.solve``, ``self.unify``,
 ``self.alias``, ``self.time_sql``, ``self.clauses_sql``, ``self.record_mode``; reads
-``self.ctx``, ``self.program``, ``self.has_at``; records ``self.missing``, ``self.time_sites``).
+``self.ctx``, ``self.program``, ``self.has_at``; records ``self.missing``, ``self.time_sites``,
+``self.start_ordered``).
 """
 from __future__ import annotations
 
@@ -281,6 +282,7 @@ class EventGoals:
         qconds.append(f"{q}.t_end <= {hi}")
         sub = (f"(SELECT {q}.t_start FROM {table} AS {q} WHERE {' AND '.join(qconds)} "
                f"ORDER BY {q}.t_start LIMIT 1)")
+        self.start_ordered.add((name, n))
         m = st.mark()
         by_robot = origin is not None and type(deref(origin)) is Var
         st.froms.append((table, p, "seq"))

@@ -194,6 +194,17 @@ class EventStore:
         self._db.check_open()
         return self._db.triggers(table)
 
+    def index_names(self, table: str) -> set[str]:
+        """Names of the indexes of ``table`` (in the database's catalog).
+
+        >>> s = EventStore(None); s.declare_type("seg", 2)
+        'seg'
+        >>> sorted(s.index_names("seg"))
+        ['slr_ix__seg__a1_end', 'slr_ix__seg__a1_start', 'slr_ix__seg__end', 'slr_ix__seg__start']
+        """
+        self._db.check_open()
+        return self._db.index_names(table)
+
     def set_write_groups(self, groups: Iterable[Iterable[tuple[str, int]]]) -> None:
         """Event types whose writers must take turns, in groups (the types one event rule
         reads and derives): :meth:`lock_for_write` of a type waits for every transaction
@@ -341,8 +352,28 @@ class EventStore:
     # ------------------------------------------------------------------ event types
 
     @_doc(EventTables.declare_type)
-    def declare_type(self, name: str, arity: int) -> str:
-        return self._tables.declare_type(name, arity)
+    def declare_type(self, name: str, arity: int, start_order: bool = True) -> str:
+        return self._tables.declare_type(name, arity, start_order)
+
+    def ensure_start_order(self, name: str, arity: int) -> bool:
+        """Build the start-ordered indexes of name/arity if it lacks them (a complex event
+        type, see :meth:`declare_type`); whether they exist now. False also when the type
+        has no table. See :meth:`EventTables.ensure_start_order`.
+
+        >>> s = EventStore(None); s.declare_type("c", 0, start_order=False)
+        'c'
+        >>> s.ensure_start_order("c", 0), s.ensure_start_order("d", 0)
+        (True, False)
+        """
+        # known built: no lock (a compiled statement names no index, so a belief a
+        # rollback in another thread is taking back at this moment costs at most speed)
+        known = self._tables.types.get((name, arity))
+        if known is not None and known.start_order:
+            return True
+        with self._db.lock:
+            self._db.check_open()
+            event_type = self._tables.lookup(name, arity)
+            return event_type is not None and self._tables.ensure_start_order(event_type)
 
     @property
     def max_event_arity(self) -> int:

@@ -138,7 +138,7 @@ def rejection_reason(exc: Exception) -> str:
 def _format_term(term: Any) -> str:
     try:
         from ..terms import MESSAGE_TOKENS, format_term  # the project's printer
-        return format_term(term, limit=MESSAGE_TOKENS)   # (a huge term: its start)
+        return format_term(term, limit=MESSAGE_TOKENS, message=True)  # (huge: its start)
     except Exception:
         return _simple_format(term)
 

@@ -371,6 +371,18 @@ class Database:
                 "WHERE type = 'trigger' AND (? IS NULL OR tbl_name = ?)",
                 (table, table, table, table))}
 
+    def index_names(self, table: str) -> set[str]:
+        """Names of the indexes of ``table`` (as created, not lower-cased).
+
+        >>> db = Database(None); _ = db.execute("CREATE TABLE t (x)")
+        >>> _ = db.execute("CREATE INDEX t_x ON t (x)"); db.index_names("t")
+        {'t_x'}
+        """
+        with self.lock:
+            return {row[0] for row in self.conn.execute(
+                "SELECT name FROM sqlite_master WHERE type = 'index' AND tbl_name = ?",
+                (table,))}
+
     def object_names(self) -> set[str]:
         """Lower-cased names of every table, index, view and trigger of the database.
 

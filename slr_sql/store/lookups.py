@@ -1,7 +1,11 @@
 """Reading events: the indexed lookups behind ``prev``, ``next`` and stream scans.
 
 Every lookup is one ``SELECT ... INDEXED BY`` over an event table (see
-:mod:`slr_sql.store.tables` for the indexes), built once per shape and cached. Ground
+:mod:`slr_sql.store.tables` for the indexes), built once per shape and cached. A lookup in
+start order (``next``, the ties at a start, ``bracket``'s event after ``t``) first makes
+sure the type has its start-ordered indexes (a complex event type gets them on first need,
+:meth:`~slr_sql.store.tables.EventTables.ensure_start_order`); where they cannot be built
+it names no index, as naming a missing one is an error. Ground
 arguments are pushed into the ``WHERE`` clause as bound parameters; rows come back decoded,
 as ``(args, start, end, seq)``, streamed in growing batches so that a caller wanting the
 first row or two does not read the rest.
@@ -9,7 +13,7 @@ first row or two does not read the rest.
 from __future__ import annotations
 
 import sqlite3
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 from ..encoding import Unencodable, decode, encode
 from .catalog import PROGRAM_VERSION, PROGRESS_VERSION
@@ -30,6 +34,10 @@ _RESUME = {
     "next": ("(t_start, t_end, seq) > (?, ?, ?)", lambda s, e, q: (s, e, q)),
     "at_start": ("(t_end, seq) > (?, ?)", lambda s, e, q: (e, q)),
 }
+
+
+# the lookups that read in start order: they need the start-ordered indexes
+_START_KINDS = frozenset({"next", "at_start"})
 
 
 class _OpenStatement:
@@ -86,9 +94,22 @@ class EventReader:
             values.append(value)
         return tuple(positions), values
 
+    def _start_order(self, event_type: EventType) -> bool:
+        """Whether the start-ordered indexes of ``event_type`` (or of the type of its name
+        now, should a rollback have reloaded the types) may be named: built if need be."""
+        if event_type.start_order:   # (a rollback makes every type it reloads forget)
+            return True
+        current = self.tables.lookup(event_type.name, event_type.arity) or event_type
+        return self.tables.ensure_start_order(current)
+
     def _select_sql(self, event_type: EventType, kind: str, positions: tuple[int, ...],
                     flags: tuple[bool, ...], resume: bool = False, robot: bool = False) -> str:
-        key = (event_type.table, kind, positions, flags, resume, robot)
+        """The statement of a lookup (lock held); one in start order names its index only
+        once it is there."""
+        # (built on a server too, whose planner then finds it: the same indexes either way)
+        ordered = kind not in _START_KINDS or self._start_order(event_type)
+        hint = self.db.dialect.index_hints and ordered
+        key = (event_type.table, kind, positions, flags, resume, robot, hint)
         sql = self.sql_cache.get(key)
         if sql is not None:
             return sql
@@ -134,24 +155,26 @@ class EventReader:
         if resume:
             conditions.append(_RESUME[kind][0])
         where = f" WHERE {' AND '.join(conditions)}" if conditions else ""
-        hint = f" INDEXED BY {index}" if self.db.dialect.index_hints else ""
-        sql = (f"SELECT {event_type.columns} FROM {event_type.quoted}{hint}"
+        named = f" INDEXED BY {index}" if hint else ""
+        sql = (f"SELECT {event_type.columns} FROM {event_type.quoted}{named}"
                f"{where} ORDER BY {order}")
         self.sql_cache[key] = sql
         return sql
 
-    def _stream(self, sql: str, params: list, arity: int, kind: str,
-                resume_sql: str) -> Iterator[Row]:
+    def _stream(self, statement_sql: Callable[[bool], str], params: list, arity: int,
+                kind: str) -> Iterator[Row]:
         """Rows decoded lazily, fetched in growing batches; the lock is held per batch only.
         If a transaction suspended the statement between two batches (or a rollback aborted
-        it), the rest is read with ``resume_sql``: the rows after the last one read."""
+        it), the rest is read with ``statement_sql(True)``: the rows after the last one
+        read. The texts are asked for as each statement starts (lock held): a rollback
+        meanwhile may have taken an index a text named."""
         db = self.db
         if db.dialect.pages_streams:
-            yield from self._pages(sql, params, arity, kind, resume_sql)
+            yield from self._pages(statement_sql, params, arity, kind)
             return
         with db.lock:
             db.check_open()
-            statement = _OpenStatement(db.conn.execute(sql, params))
+            statement = _OpenStatement(db.conn.execute(statement_sql(False), params))
             db.open_streams.add(statement)
         key = _RESUME[kind][1]
         last = None
@@ -163,8 +186,9 @@ class EventReader:
                     for attempt in (1, 2):
                         if statement.cursor is None:
                             db.check_open()
-                            statement.cursor = db.conn.execute(sql, params) if last is None \
-                                else db.conn.execute(resume_sql, params + list(
+                            statement.cursor = \
+                                db.conn.execute(statement_sql(False), params) if last is None \
+                                else db.conn.execute(statement_sql(True), params + list(
                                     key(last[arity], last[arity + 1], last[arity + 2])))
                         try:
                             rows = statement.cursor.fetchmany(batch)
@@ -199,8 +223,8 @@ class EventReader:
                 except sqlite3.ProgrammingError:  # the store was closed meanwhile
                     pass
 
-    def _pages(self, sql: str, params: list, arity: int, kind: str,
-               resume_sql: str) -> Iterator[Row]:
+    def _pages(self, statement_sql: Callable[[bool], str], params: list, arity: int,
+               kind: str) -> Iterator[Row]:
         """:meth:`_stream` on a server, whose driver reads a statement's whole result at
         once: growing pages (``LIMIT``), each after the last row of the one before."""
         db = self.db
@@ -212,9 +236,10 @@ class EventReader:
             with db.lock:
                 db.check_open()
                 if last is None:
-                    rows = db.conn.execute(f"{sql} LIMIT {batch}", params).fetchall()
+                    rows = db.conn.execute(f"{statement_sql(False)} LIMIT {batch}",
+                                           params).fetchall()
                 else:
-                    rows = db.conn.execute(f"{resume_sql} LIMIT {batch}", params + list(
+                    rows = db.conn.execute(f"{statement_sql(True)} LIMIT {batch}", params + list(
                         key(last[arity], last[arity + 1], last[arity + 2]))).fetchall()
             for row in rows:
                 yield (tuple([dec(v) for v in row[:arity]]), row[arity], row[arity + 1],
@@ -234,13 +259,13 @@ class EventReader:
             if event_type is None:
                 return iter(())
             positions, values = self._pushdown(event_type, bound)
-            by_robot = robot is not None
-            sql = self._select_sql(event_type, kind, positions, flags, robot=by_robot)
-            resume_sql = self._select_sql(event_type, kind, positions, flags, resume=True,
-                                          robot=by_robot)
+        by_robot = robot is not None
         if by_robot:
             values.append(robot)
-        return self._stream(sql, values + times, arity, kind, resume_sql)
+
+        def statement_sql(resume: bool) -> str:
+            return self._select_sql(event_type, kind, positions, flags, resume, by_robot)
+        return self._stream(statement_sql, values + times, arity, kind)
 
     def scan(self, name: str, arity: int, bound: dict[int, Any] | None = None,
              end_le: float | None = None, robot: str | None = None) -> Iterator[Row]:
@@ -326,7 +351,9 @@ class EventReader:
                    end_le: bool = False, robot: bool = False) -> str | None:
         """The SQL a lookup runs (for explain output and plan tests). ``kind`` is ``scan``,
         ``prev``, ``at_end``, ``next`` or ``at_start``; ``start_ge``/``end_le`` say whether
-        those optional bounds are given. None if the type has no table.
+        those optional bounds are given. None if the type has no table. Asked in start
+        order (``next``, ``at_start``), it makes sure of the start-ordered indexes as the
+        lookup would, and names them only if they are there.
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None); s.declare_type("p", 1)
@@ -479,14 +506,17 @@ class EventReader:
             positions, values = self._pushdown(event_type, bound)
             if len(positions) != len(bound) or 0 not in positions:
                 return None
-            key = (event_type.table, "bracket", positions)
+            # the event after t is read in start order: its index is built on first need
+            ordered = self._start_order(event_type)
+            start_hint = self.db.dialect.index_hints and ordered
+            key = (event_type.table, "bracket", positions, start_hint)
             sql = self.sql_cache.get(key)
             if sql is None:
                 where = " AND ".join(f"arg{p + 1} = ?" for p in positions)
                 cols = event_type.columns
                 hints = self.db.dialect.index_hints
                 by_end = f" INDEXED BY {event_type.index_arg1_end}" if hints else ""
-                by_start = f" INDEXED BY {event_type.index_arg1_start}" if hints else ""
+                by_start = f" INDEXED BY {event_type.index_arg1_start}" if start_hint else ""
                 sql = (f"SELECT 0, * FROM (SELECT {cols} FROM {event_type.quoted}{by_end} "
                        f"WHERE {where} AND t_end <= ? "
                        f"ORDER BY t_end DESC, t_start DESC, seq DESC LIMIT 1) AS before_t "

@@ -18,6 +18,7 @@ statement's ``statement_timeout``; a lock wait longer than ``busy_timeout`` is
 """
 from __future__ import annotations
 
+import math
 import re
 import sqlite3
 import threading
@@ -29,7 +30,8 @@ from contextlib import contextmanager, suppress
 from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
-from ..errors import SLRBusy, SLRError, SLRServerUnreachable, SLRTimeout, SLRUnavailable
+from ..errors import SLRBusy, SLRCancelled, SLRError, SLRServerUnreachable, SLRTimeout, \
+    SLRUnavailable
 from ..lockorder import ordered_lock
 from .dialect import POSTGRES
 from .functions import SqlFunctions
@@ -111,7 +113,12 @@ def _error(exc: BaseException, where: str, busy_timeout: float | None = None,
         waited = f" for more than {busy_timeout:g} s" if busy_timeout is not None else ""
         return SLRBusy(f"{where}: locked by another writer{waited} ({_first_line(exc)})")
     if isinstance(exc, errors.QueryCanceled):
-        return SLRTimeout(f"query timed out ({_first_line(exc)})")
+        # (the call's own timeout= is told apart where it is set: _own_deadline)
+        cancelled = SLRCancelled(f"{where}: the server cancelled the statement "
+                                 f"({_first_line(exc)}); nothing of the call was stored, "
+                                 f"and it may be retried")
+        cancelled.reason = _first_line(exc)
+        return cancelled
     if isinstance(exc, (psycopg.OperationalError, psycopg.InterfaceError)):
         state = getattr(exc, "sqlstate", None) or ""
         if state.startswith("53"):   # insufficient resources: disk, memory, connections
@@ -125,6 +132,22 @@ def _error(exc: BaseException, where: str, busy_timeout: float | None = None,
         return SLRError(f"read-only: the statement would change the store "
                         f"({_first_line(exc)}); pass write=True to allow it")
     return PgStatementError(_first_line(exc))
+
+
+def _own_deadline(exc: BaseException, deadline: float) -> BaseException:
+    """``exc``, or SLRTimeout when it is a cancel of the ``statement_timeout`` set for the
+    call's own ``deadline`` (``time.monotonic()``), now passed. The server's cause (57014)
+    is the same for every cancel, and its text is in the server's language: the time
+    tells them apart, the timeout being rounded up (:func:`_timeout_ms`) so that the
+    server's never fires before the deadline."""
+    if type(exc) is SLRCancelled and time.monotonic() >= deadline:
+        return SLRTimeout(f"query timed out ({exc.reason})")
+    return exc
+
+
+def _timeout_ms(seconds: float) -> int:
+    """``statement_timeout`` (whole milliseconds, at least 1) for ``seconds``, rounded up."""
+    return max(1, math.ceil(seconds * 1000))
 
 
 def _connected(raw: Any) -> bool:
@@ -722,6 +745,13 @@ class PgDatabase:
                 "AND n.nspname = current_schema() AND (%s::text IS NULL OR c.relname = %s)"
                 .replace("%s", "?"), (table, table))}
 
+    def index_names(self, table: str) -> set[str]:
+        """Names of the indexes of ``table`` in the store's schema."""
+        with self.lock:
+            return {row[0] for row in self.conn.execute(
+                "SELECT indexname FROM pg_indexes WHERE schemaname = current_schema() "
+                "AND tablename = ?", (table,))}
+
     def object_names(self) -> set[str]:
         """Lower-cased names of the tables, views, indexes and sequences of the schema."""
         with self.lock:
@@ -817,11 +847,12 @@ class PgDatabase:
             if not own:
                 self.conn.send_begin()
             raw = self.conn.raw
+            deadline = None if timeout is None else time.monotonic() + timeout
             try:
                 if own:
                     raw.execute("BEGIN" if write else "BEGIN READ ONLY")
                 if timeout is not None:
-                    raw.execute(f"SET LOCAL statement_timeout = {max(1, int(timeout * 1000))}")
+                    raw.execute(f"SET LOCAL statement_timeout = {_timeout_ms(timeout)}")
                 cursor = raw.cursor()
                 # the API's placeholders (`?`, `:name`) in psycopg's style, as on SQLite;
                 # without parameters the text goes as written (a `%` stays a `%`)
@@ -841,7 +872,8 @@ class PgDatabase:
                         raw.execute("ROLLBACK")
                     except psycopg.Error:
                         pass
-                raise _error(exc, self.path, self.busy_timeout, _connected(raw)) from None
+                error = _error(exc, self.path, self.busy_timeout, _connected(raw))
+                raise error if deadline is None else _own_deadline(error, deadline) from None
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
         with self.lock:
@@ -907,19 +939,22 @@ class PgDatabase:
             own = self.tx_depth == 0
             self.conn.execute("BEGIN" if own else "SAVEPOINT slr_compiled")
             try:
-                self.conn.execute(f"SET LOCAL statement_timeout = {max(1, int(left * 1000))}")
+                self.conn.execute(f"SET LOCAL statement_timeout = {_timeout_ms(left)}")
                 cursor = self.conn.execute(sql, params)
                 rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
                 if not own:
                     self.conn.execute("SET LOCAL statement_timeout = 0")
                     self.conn.execute("RELEASE slr_compiled")
-            except BaseException:
+            except BaseException as exc:
                 if own:
                     self.conn.rollback()
                 else:
                     self.conn.execute("ROLLBACK TO slr_compiled")
                     self.conn.execute("RELEASE slr_compiled")
-                raise
+                error = _own_deadline(exc, deadline)
+                if error is exc:
+                    raise
+                raise error from None
             if own:
                 self.conn.execute("COMMIT")
             return rows

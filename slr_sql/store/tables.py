@@ -15,6 +15,18 @@ Indexes ``(t_end, t_start)`` and ``(t_start, t_end)``, plus ``(arg1, t_end, t_st
 ``(arg1, t_start, t_end)`` when there is a first argument. Every index entry ends with the
 rowid, so *store order* (``ORDER BY t_end, t_start, seq``) and the reverse order prev needs
 are read straight from an index, never sorted.
+
+*Start order on first need.* The two start-ordered indexes, ``(t_start, t_end)`` and
+``(arg1, t_start, t_end)``, serve only the readers in start order: ``next``, the ties at a
+start, the after-part of ``bracket`` and compiled ``next`` subqueries. A complex event type
+whose table the event-rule engine creates (``declare_type(..., start_order=False)``) gets
+only the two end-ordered ones: its events arrive in end order, so those stay appends at the
+right edge of their B-trees, while a start-ordered entry lands at a random place of the
+index (seq2 unrestricted pairs an old ``a`` with a new ``b``), and these two indexes were
+most of the cost of storing a detection. :meth:`EventTables.ensure_start_order` builds them
+(``CREATE INDEX IF NOT EXISTS``, names as ever) the first time a reader needs them: a
+one-time cost proportional to the table (benchmarks/README.md). Declared types and types an
+added event creates get all four indexes at creation, as do existing tables.
 """
 from __future__ import annotations
 
@@ -23,7 +35,7 @@ import re
 from typing import Any, Callable
 
 from ..errors import SLRError
-from .connection import Database
+from .connection import Database, DatabaseError
 from .sqltext import RESERVED_PREFIXES, SAFE_IDENTIFIER, SQL_KEYWORDS, quote_identifier
 
 __all__ = ["EventType", "EventTables"]
@@ -34,13 +46,20 @@ class EventType:
 
     __slots__ = ("name", "arity", "table", "declared", "insert_sql", "insert_unnamed_sql",
                  "quoted", "columns", "_insert_heads", "_multi_row_sql",
-                 "index_end", "index_start", "index_arg1_end", "index_arg1_start")
+                 "index_end", "index_start", "index_arg1_end", "index_arg1_start",
+                 "start_order")
 
-    def __init__(self, name: str, arity: int, table: str, declared: bool):
+    def __init__(self, name: str, arity: int, table: str, declared: bool,
+                 start_order: bool | None = None):
         self.name = name
         self.arity = arity
         self.table = table
         self.declared = declared
+        # whether the start-ordered indexes exist: True known (built here, or seen in the
+        # catalog), False created without them here, None not looked at yet (a table read
+        # from slr_event_types: another process may have built them). Only a True is
+        # trusted without a look at the catalog; a rollback reloads every type (None).
+        self.start_order = start_order
         self.quoted = quote_identifier(table)
         arg_columns = [f"arg{i}" for i in range(1, arity + 1)]
         self.columns = ", ".join(arg_columns + ["t_start", "t_end", "seq"])
@@ -115,20 +134,33 @@ class EventTables:
         # buffers: called as hook(name, arity, table) inside the transaction that
         # creates a new event type's table (slr_sql.buffers installs its triggers there)
         self.table_created_hooks: list[Callable[[str, int, str], Any]] = []
-        db.rollback_listeners.append(self.reload)  # types created inside were rolled back too
+        # types created inside were rolled back too, and indexes built inside
+        db.rollback_listeners.append(self._rolled_back)
         # The most data arguments an event can have: its table has 5 more columns (seq,
         # t_start, t_end, arrival, robot) and the engine refuses tables wider than its limit.
         self.max_arity = db.max_columns - 5
         self.reload()
 
-    def reload(self) -> None:
-        """Read every type again (others may have created some; a rollback undid some)."""
+    def _rolled_back(self) -> None:
+        # (the old objects too: a reader holding one must not trust a build taken back)
+        for event_type in self.types.values():
+            event_type.start_order = None
+        self.reload(keep_start_order=False)
+
+    def reload(self, keep_start_order: bool = True) -> None:
+        """Read every type again (others may have created some; a rollback undid some).
+        A type known to have its start-ordered indexes keeps that knowledge (no index is
+        ever dropped), unless ``keep_start_order`` is false: after a rollback, which may
+        have taken back a build."""
+        known = {(t.name, t.arity, t.table) for t in self.types.values() if t.start_order} \
+            if keep_start_order else set()
         types: dict[tuple[str, int], EventType] = {}
         declared: dict[str, set[int]] = {}
         if not self.db.closed:
             for name, arity, table, is_declared in self.db.conn.execute(
                     "SELECT name, arity, table_name, declared FROM slr_event_types"):
-                types[(name, arity)] = EventType(name, arity, table, bool(is_declared))
+                types[(name, arity)] = EventType(name, arity, table, bool(is_declared),
+                                                 True if (name, arity, table) in known else None)
                 if is_declared:
                     declared.setdefault(name, set()).add(arity)
         self.types = types
@@ -176,8 +208,11 @@ class EventTables:
             suffix += 1
         return candidate
 
-    def register(self, name: str, arity: int, declared: bool) -> EventType:
-        """Create the table of a new type. Must run inside a write transaction."""
+    def register(self, name: str, arity: int, declared: bool,
+                 start_order: bool = True) -> EventType:
+        """Create the table of a new type. Must run inside a write transaction. Without
+        ``start_order`` the start-ordered indexes are left to :meth:`ensure_start_order`
+        (an existing table is left as it is)."""
         existing = self.lookup(name, arity)
         if existing is None:
             # on a server, another process may be creating it now: take turns, look again
@@ -191,7 +226,7 @@ class EventTables:
                 self.declared_arities.setdefault(name, set()).add(arity)
             return existing
         table = self._choose_table_name(name, arity)
-        event_type = EventType(name, arity, table, declared)
+        event_type = EventType(name, arity, table, declared, start_order)
         dialect = self.db.dialect
         # arg columns have no declared type on SQLite: it keeps INTEGER / REAL / TEXT as given
         # (PostgreSQL: TEXT spelling the type, see store/dialect.py)
@@ -202,13 +237,15 @@ class EventTables:
                      f"t_start {real} NOT NULL, t_end {real} NOT NULL, arrival {real} NOT NULL, "
                      "robot TEXT)")
         conn.execute(f"CREATE INDEX {event_type.index_end} ON {event_type.quoted} (t_end, t_start)")
-        conn.execute(f"CREATE INDEX {event_type.index_start} ON {event_type.quoted} "
-                     "(t_start, t_end)")
+        if start_order:
+            conn.execute(f"CREATE INDEX {event_type.index_start} ON {event_type.quoted} "
+                         "(t_start, t_end)")
         if arity >= 1:
             conn.execute(f"CREATE INDEX {event_type.index_arg1_end} ON {event_type.quoted} "
                          "(arg1, t_end, t_start)")
-            conn.execute(f"CREATE INDEX {event_type.index_arg1_start} ON {event_type.quoted} "
-                         "(arg1, t_start, t_end)")
+            if start_order:
+                conn.execute(f"CREATE INDEX {event_type.index_arg1_start} ON "
+                             f"{event_type.quoted} (arg1, t_start, t_end)")
         conn.execute("INSERT INTO slr_event_types (name, arity, table_name, declared) "
                      "VALUES (?, ?, ?, ?)", (name, arity, table, int(declared)))
         self.types[(name, arity)] = event_type
@@ -218,11 +255,68 @@ class EventTables:
             hook(name, arity, table)
         return event_type
 
-    def declare_type(self, name: str, arity: int) -> str:
+    def _create_start_indexes(self, event_type: EventType) -> None:
+        conn = self.db.conn
+        conn.execute(f"CREATE INDEX IF NOT EXISTS {event_type.index_start} ON "
+                     f"{event_type.quoted} (t_start, t_end)")
+        if event_type.arity >= 1:
+            conn.execute(f"CREATE INDEX IF NOT EXISTS {event_type.index_arg1_start} ON "
+                         f"{event_type.quoted} (arg1, t_start, t_end)")
+
+    def _start_index_names(self, event_type: EventType) -> list[str]:
+        return [f"slr_ix__{event_type.table}__{suffix}"
+                for suffix in (("start", "a1_start") if event_type.arity else ("start",))]
+
+    def ensure_start_order(self, event_type: EventType) -> bool:
+        """Whether ``event_type``'s start-ordered indexes exist, building them first when
+        they do not (lock held by the caller). A type known to have them costs nothing; one
+        not known is looked up in the catalog once (another process may have built them).
+
+        The build (``CREATE INDEX IF NOT EXISTS``, the builders of one table taking turns
+        on a server) runs in a transaction of its own, or as a savepoint of the current
+        one: should that roll back, the reload of the types forgets what was built. Where
+        no index can be built (a read-only statement, a writer holding the lock past the
+        busy timeout), the answer is False and the caller reads without naming the index:
+        slower, never wrong.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); _ = s.declare_type("c", 1, start_order=False)
+        >>> sorted(s.index_names("c"))
+        ['slr_ix__c__a1_end', 'slr_ix__c__end']
+        >>> s.ensure_start_order("c", 1), len(s.index_names("c"))
+        (True, 4)
+        """
+        if event_type.start_order:
+            return True
+        db = self.db
+        wanted = self._start_index_names(event_type)
+        if set(wanted) <= db.index_names(event_type.table):
+            event_type.start_order = True
+            return True
+        try:
+            with db.transaction():
+                # (not the types' lock: a writer may hold it while it waits for this table)
+                db.lock_named(f"start order {event_type.table}")
+                self._create_start_indexes(event_type)
+        except (DatabaseError, SLRError):
+            if db.closed:
+                raise
+            return False
+        # (a rollback of an enclosing transaction reloads the types: this one is gone then)
+        current = self.types.get((event_type.name, event_type.arity))
+        if current is not None:
+            current.start_order = True
+        event_type.start_order = True
+        return True
+
+    def declare_type(self, name: str, arity: int, start_order: bool = True) -> str:
         """Declare event type name/arity (``:- event name/arity.``); returns its table name.
 
         Once a name is declared with some arity, events of that name with an arity that is
         neither declared nor already stored are rejected as a wrong-arity mistake.
+        ``start_order=False`` (the head type of an event rule, created by the event-rule
+        engine): a new table gets its start-ordered indexes only when a reader needs them
+        (:meth:`ensure_start_order`); an existing table is left as it is.
 
         >>> from slr_sql.store import EventStore
         >>> EventStore(None).declare_type("seg", 2)
@@ -234,7 +328,8 @@ class EventTables:
             raise SLRError(f"cannot declare event {name}/{arity}: too many arguments (an "
                            f"event has at most {self.max_arity}, the column limit of SQLite)")
         with self.db.transaction():
-            return self.register(str(name), arity, declared=True).table
+            return self.register(str(name), arity, declared=True,
+                                 start_order=start_order).table
 
     def event_types(self) -> dict[tuple[str, int], str]:
         """Every known event type ``(name, arity)`` -> its table name.

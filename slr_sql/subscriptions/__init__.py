@@ -53,7 +53,7 @@ its public methods (``query``, ``submit``; and the synchronizer's
 ``watch_external``, so that marks other processes write end an ``until``) and the store's.
 
 >>> import slr_sql
->>> kb = slr_sql.open(); sub = kb.subscribe("p(X)^T", since=0)
+>>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); sub = kb.subscribe("p(X)^T", since=0)
 >>> kb.add("p(a)^1"); sub.get(timeout=5), sub.state
 ({'X': Atom('a'), 'T': 1.0}, <SubscriptionState.LIVE: 'live'>)
 >>> sub.close(); kb.close()

@@ -146,7 +146,7 @@ class Subscription:
     (:class:`SubscriptionState`), ``error`` (what ended it, if anything).
 
     >>> import slr_sql
-    >>> kb = slr_sql.open(); sub = kb.subscribe("p(X)^T", since=0)
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); sub = kb.subscribe("p(X)^T", since=0)
     >>> kb.add("p(a)^1"); sub.get(timeout=5)
     {'X': Atom('a'), 'T': 1.0}
     >>> sub.close(); kb.close()
@@ -404,7 +404,7 @@ class Subscription:
         finished only when its consumer handled everything.
 
         >>> import asyncio, slr_sql
-        >>> kb = slr_sql.open(); sub = kb.subscribe("p(X)^T", since=0)
+        >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); sub = kb.subscribe("p(X)^T", since=0)
         >>> rejected = kb.add_many(["p(a)^1", "p(b)^2"])
         >>> asyncio.run(sub.next_answers(10))
         [{'X': Atom('a'), 'T': 1.0}, {'X': Atom('b'), 'T': 2.0}]
@@ -429,7 +429,7 @@ class Subscription:
         subscription delivers them again. Callable from any thread.
 
         >>> import asyncio, slr_sql
-        >>> kb = slr_sql.open(); sub = kb.subscribe("p(X)^T", since=0)
+        >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); sub = kb.subscribe("p(X)^T", since=0)
         >>> rejected = kb.add_many(["p(a)^1", "p(b)^2"])
         >>> len(asyncio.run(sub.next_answers(10, handled=False))), sub.unacknowledged
         (2, 2)

@@ -1,0 +1,124 @@
+"""PostgreSQL: a statement the server cancels for another reason than the call's own
+``timeout=`` (another session's ``pg_cancel_backend``, an administrator's
+``statement_timeout``) is an SLRCancelled -- retryable, nothing of the call stored -- and
+says so; a call that ran out of its own ``timeout=`` is still "query timed out".
+"""
+from __future__ import annotations
+
+import threading
+import time
+
+import psycopg
+import pytest
+
+import slr_sql
+from slr_sql import ManualClock
+from slr_sql.errors import SLRCancelled, SLRTimeout, SLRUnavailable
+
+DEADLINE = 30.0   # seconds a wait for the other session may take before the test fails
+
+# a query compiled to one statement that runs for seconds on 300 events (300 ** 3 rows, none
+# an answer)
+SLOW_GOAL = "p(X)^_, p(Y)^_, p(Z)^_, X > Y, Y > Z, Z > X"
+
+
+def _other(url: str) -> psycopg.Connection:
+    conn = psycopg.connect(url, autocommit=True)
+    conn.execute("SET search_path = slr")
+    return conn
+
+
+def _cancel_when_running(admin: psycopg.Connection, pid: int) -> None:
+    """Cancel backend ``pid``'s statement once it has run for 100 ms (deadline-bounded)."""
+    deadline = time.monotonic() + DEADLINE
+    running = ("SELECT count(*) FROM pg_stat_activity WHERE pid = %s AND state = 'active' "
+               "AND clock_timestamp() - query_start > interval '100 milliseconds'")
+    while not admin.execute(running, (pid,)).fetchone()[0]:
+        assert time.monotonic() < deadline, f"backend {pid} never ran a long statement"
+        time.sleep(0.01)
+    assert admin.execute("SELECT pg_cancel_backend(%s)", (pid,)).fetchone()[0] is True
+
+
+def _cancelled(kb, url: str, call) -> BaseException:
+    """What ``call()`` raises when another session cancels its statement mid-way."""
+    pid = kb.sql("SELECT pg_backend_pid()")[1][0][0]
+    raised: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            call()
+        except BaseException as exc:   # (the test asserts on it)
+            raised.append(exc)
+    thread = threading.Thread(target=run)
+    thread.start()
+    try:
+        with _other(url) as admin:
+            _cancel_when_running(admin, pid)
+    finally:
+        thread.join(DEADLINE)
+    assert not thread.is_alive() and len(raised) == 1, raised
+    return raised[0]
+
+
+@pytest.mark.parametrize("timeout", [None, 60.0], ids=["no timeout", "a timeout not reached"])
+def test_a_statement_another_session_cancels_is_cancelled_not_timed_out(postgres_url, timeout):
+    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
+        error = _cancelled(kb, postgres_url,
+                           lambda: kb.sql("SELECT pg_sleep(60)", timeout=timeout))
+        assert type(error) is SLRCancelled and isinstance(error, SLRUnavailable)
+        assert str(error).endswith(": the server cancelled the statement (canceling statement "
+                                   "due to user request); nothing of the call was stored, and "
+                                   "it may be retried")
+        assert "timed out" not in str(error)
+        assert kb.sql("SELECT 1 AS one") == (["one"], [(1,)])   # the connection goes on
+
+
+def test_an_add_another_session_cancels_stores_nothing_and_may_be_retried(postgres_url):
+    with slr_sql.open(postgres_url, clock=ManualClock(10.0)) as kb:
+        kb.add("p(1)^1")
+        with _other(postgres_url) as other:
+            other.execute("CREATE FUNCTION slr_test_slow() RETURNS trigger LANGUAGE plpgsql "
+                          "AS $$ BEGIN PERFORM pg_sleep(60); RETURN NEW; END $$")
+            other.execute("CREATE TRIGGER slow BEFORE INSERT ON p "
+                          "FOR EACH ROW EXECUTE FUNCTION slr_test_slow()")
+            error = _cancelled(kb, postgres_url, lambda: kb.add_many(["p(2)^2", "p(3)^3"]))
+            assert type(error) is SLRCancelled, error
+            assert "user request" in str(error) and "timed out" not in str(error)
+            assert other.execute("SELECT count(*) FROM p").fetchone()[0] == 1
+            other.execute("DROP TRIGGER slow ON p")
+        kb.add_many(["p(2)^2", "p(3)^3"])   # the same call, retried
+        assert [a["X"] for a in kb.query("p(X)^_")] == [1, 2, 3]
+
+
+def test_the_statement_timeout_of_an_administrator_is_not_the_calls_timeout(postgres_url):
+    with _other(postgres_url) as admin:
+        database = admin.execute("SELECT current_database()").fetchone()[0]
+        admin.execute(f'ALTER DATABASE "{database}" SET statement_timeout = 200')
+    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
+        with pytest.raises(SLRCancelled, match=r": the server cancelled the statement "
+                           r"\(canceling statement due to statement timeout\)"):
+            kb.sql("SELECT pg_sleep(5)")
+        kb.add_many([f"p({i})^{i}" for i in range(300)])
+        with pytest.raises(SLRCancelled, match="due to statement timeout"):
+            kb.query(SLOW_GOAL)
+
+
+def test_a_compiled_query_another_session_cancels_is_cancelled(postgres_url):
+    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
+        kb.add_many([f"p({i})^{i}" for i in range(300)])
+        for timeout in (None, 60.0):
+            error = _cancelled(kb, postgres_url, lambda: kb.query(SLOW_GOAL, timeout=timeout))
+            assert type(error) is SLRCancelled, error
+            assert "user request" in str(error) and "timed out" not in str(error)
+        assert kb.query("p(X)^_, X > 298") == [{"X": 299}]
+
+
+def test_the_calls_own_timeout_still_reads_timed_out(postgres_url):
+    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
+        with pytest.raises(SLRTimeout, match=r"^query timed out \(canceling statement due "
+                           r"to statement timeout\)$"):
+            kb.sql("SELECT pg_sleep(5)", timeout=0.2)
+        kb.add_many([f"p({i})^{i}" for i in range(300)])
+        with pytest.raises(SLRTimeout, match=r"^query timed out \(canceling statement due "
+                           r"to statement timeout\)$"):
+            kb.query(SLOW_GOAL, timeout=0.2)
