@@ -156,6 +156,7 @@ class _Pusher:
         self.fleet_name = fleet_name
         self.report = PushReport(robot)
         self.outage: str | None = None   # why the fleet is unreachable, while it is
+        self.refused = False                # ... and whether it answered with a refusal
         self.in_flight: str | None = None   # why the robot's store made a round wait, while so
         # the fleet's positions (asked once per connection), the last contact sent and when
         self.positions: dict | None = None
@@ -166,16 +167,26 @@ class _Pusher:
         """A request to the fleet succeeded: an outage, if any, is over."""
         if self.outage is not None:
             self.outage = None
-            self.say(f"fleet {self.fleet_name} reachable again; shipping resumed")
+            if self.refused:
+                self.say(f"fleet {self.fleet_name} took the shipment; shipping resumed")
+            else:
+                self.say(f"fleet {self.fleet_name} reachable again; shipping resumed")
 
     def unreachable(self, exc: BaseException) -> None:
-        """A request to the fleet failed: say so if an outage begins."""
+        """A request to the fleet failed: say so if an outage begins -- as an outage when
+        it may pass (no answer, busy, 5xx), as a refusal when the fleet answered no (a bad
+        request: it will not pass by waiting, someone has to look)."""
         if self.outage is None:
             reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             self.outage = reason
+            self.refused = not _may_pass(exc)
             self.report.outages += 1
-            self.say(f"fleet {self.fleet_name} unreachable ({reason}); retrying with "
-                     "backoff, the robot's store is not affected")
+            if self.refused:
+                self.say(f"fleet {self.fleet_name} refused the shipment ({reason}); retrying "
+                         "with backoff, the robot's store is not affected")
+            else:
+                self.say(f"fleet {self.fleet_name} unreachable ({reason}); retrying with "
+                         "backoff, the robot's store is not affected")
 
     def store_waits(self, exc: WriterInFlight) -> None:
         """A round ended waiting for a writer of the robot's own store: say so once, as
@@ -423,6 +434,21 @@ def push(db: str, fleet: str, *, robot: str | None = None,
             pusher.drop()
     finally:
         store.close()
+
+
+def _may_pass(exc: BaseException) -> bool:
+    """Whether a failed request to the fleet may succeed later as it is: no answer, a
+    timeout, a busy or full store, a server error -- not a refusal of the shipment.
+
+    >>> from slr_sql.errors import SLRBusy
+    >>> _may_pass(SLRBusy("locked")), _may_pass(OSError()), _may_pass(SLRError("refused"))
+    (True, True, False)
+    """
+    from .errors import SLRTimeout, SLRUnavailable
+    if isinstance(exc, (OSError, SLRUnavailable, SLRTimeout)):
+        return True
+    status = getattr(exc, "status", None)
+    return isinstance(status, int) and (status == 0 or status >= 500 or status == 408)
 
 
 def _same_file(db: str, fleet: str) -> bool:
