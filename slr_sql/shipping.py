@@ -75,6 +75,7 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
     """
     store = kb.store
     if check:
+        check_robot_name(robot)   # (also for a shipment of marks or a contact alone)
         _check_shipment(batches, marks, pending, head_arrival)
         _check_after(after)
     if store.robot is not None and store.robot == robot:
@@ -110,7 +111,11 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             columns = batch[3] if len(batch) > 3 else None   # (from prepare)
             stored += store.fleet_receive(robot, name, arity, rows, store_events, columns)
         if marks:
-            robots = store.robots()
+            # the robots the fleet knows: those it holds events of, those that made contact
+            # (a robot whose store has marks and no event yet counts from its first mark),
+            # and this one
+            robots = set(store.robots()) | {r["robot"] for r in store.fleet_contacts()}
+            robots.add(robot)
             for mk, t in marks.items():
                 store.meta_raise(f"{FLEET_MARK}{robot}/{mk}", float(t))
                 known = [store.meta_get(f"{FLEET_MARK}{r}/{mk}") for r in robots]

@@ -271,3 +271,61 @@ def test_a_following_pusher_says_the_fleet_refused_not_that_it_is_unreachable(tm
     assert said and "refused the shipment" in said[0] and "itself" in said[0], said
     assert not any("unreachable" in line for line in said), said
     assert seen_rows(db) == 2
+
+
+# -- a robot that ships marks before any event ---------------------------------------------------
+
+def marks_only_store(path, robot: str, until: float, events: int = 0) -> None:
+    with slr_sql.open(path, robot=robot, clock=slr_sql.ManualClock(1000)) as kb:
+        for i in range(events):
+            kb.add(f"seen(x{i})^{i + 1}")
+        kb.mark_complete("seen/1", until)
+
+
+def fleet_mark(path) -> float | None:
+    with slr_sql.open(path) as kb:
+        return kb.store.meta_get("sync/mark/seen/1")
+
+
+@pytest.mark.parametrize("where", ["file", "service"])
+def test_a_robot_that_has_marks_but_no_events_ships_them(tmp_path, where):
+    """A robot store with a completeness mark and no event yet: its push failed with
+    "ValueError: min() arg is an empty sequence (this is a bug in slr_sql)" (and a
+    following pusher died of it). Its mark counts for the fleet's from its first contact:
+    the fleet's history is complete up to the least mark of the robots it knows."""
+    fleet_db = tmp_path / "fleet.db"
+    marks_only_store(tmp_path / "m1.db", "m1", 50.0)
+    marks_only_store(tmp_path / "r2.db", "r2", 100.0, events=2)
+
+    def push(name: str, target: str) -> int:
+        return fleet.push(str(tmp_path / f"{name}.db"), target).shipped
+
+    if where == "file":
+        target = str(fleet_db)
+        assert push("m1", target) == 0
+        assert fleet_mark(fleet_db) == 50.0
+        assert push("r2", target) == 2
+        assert fleet_mark(fleet_db) == 50.0          # m1 is complete up to 50 only
+        marks_only_store(tmp_path / "r2.db", "r2", 120.0)
+        assert push("r2", target) == 0
+        assert fleet_mark(fleet_db) == 50.0
+        marks_only_store(tmp_path / "m1.db", "m1", 70.0)
+        assert push("m1", target) == 0
+        assert fleet_mark(fleet_db) == 70.0
+    else:
+        with ServiceProcess(fleet_db) as served:
+            assert push("m1", served.url) == 0
+            assert push("r2", served.url) == 2
+            marks_only_store(tmp_path / "r2.db", "r2", 120.0)
+            assert push("r2", served.url) == 0
+        assert fleet_mark(fleet_db) == 50.0
+
+
+@pytest.mark.parametrize("robot", ["", "a\x00b", "12", "[r1]"])
+def test_a_contact_without_rows_from_a_robot_that_has_no_name_is_refused(server, robot):
+    answer = httpx.post(server.url + "/fleet/receive", timeout=30, json={
+        "robot": robot, "batches": [], "pending": 3, "marks": {"seen/1": 5.0}})
+    assert answer.status_code == 400, answer.text
+    assert "robot" in answer.json()["error"]["message"]
+    status = httpx.get(server.url + "/fleet/status", timeout=30).json()["robots"]
+    assert robot not in [r["robot"] for r in status]

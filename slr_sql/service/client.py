@@ -393,7 +393,8 @@ class RemoteKnowledgeBase:
                 since = None if after is None else                     after.get((n, a), 0) if i == 0 else rows[i - 1][0]
                 pieces.append(([[n, a, rows[i:i + FLEET_ROWS]]],
                                None if since is None else [[n, a, since]]))
-        for k, (piece, piece_after) in enumerate(pieces or [([], None)]):
+        pieces = pieces or [([], None)]     # (a contact with marks alone: one request)
+        for k, (piece, piece_after) in enumerate(pieces):
             body: dict[str, Any] = {"robot": robot, "batches": piece}
             if piece_after is not None:
                 body["after"] = piece_after
