@@ -155,3 +155,27 @@ def test_an_answer_that_is_not_slr_serves_is_an_slr_error_never_a_success(not_sl
     with slr_sql.connect(not_slr_serve) as kb:
         with pytest.raises(SLRError, match="not what slr serve answers"):
             CALLS[call](kb)
+
+
+@pytest.mark.parametrize("first", ["not json", b"\xff\xfe", "[]", '{"type": "answer"}'])
+def test_a_websocket_peer_that_is_not_slr_serve_is_an_slr_error(first):
+    import threading
+
+    from websockets.sync.server import serve
+
+    def handler(ws) -> None:
+        ws.recv()
+        ws.send(first)
+
+    with serve(handler, "127.0.0.1", 0) as peer:
+        thread = threading.Thread(target=peer.serve_forever, daemon=True)
+        thread.start()
+        url = f"http://127.0.0.1:{peer.socket.getsockname()[1]}"
+        try:
+            with slr_sql.connect(url) as kb:
+                with pytest.raises(ServiceError, match="server sent|unexpected first"):
+                    with kb.subscribe("p(X)^T", since=0) as sub:
+                        list(sub)
+        finally:
+            peer.shutdown()
+            thread.join()

@@ -864,7 +864,12 @@ class RemoteSubscription:
             self._done = True
             raise ServiceError(f"the subscription's connection closed: {exc}",
                                kind="Unavailable", status=0) from None
-        message = loads(data)
+        try:
+            message = loads(data)
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise ServiceError(f"the server sent a message that is not JSON ({exc}): is the "
+                               "URL that of an slr serve?", kind="InternalError",
+                               status=0) from None
         if not isinstance(message, dict):
             raise ServiceError("the server sent a message that is not an object",
                                kind="InternalError", status=0)
