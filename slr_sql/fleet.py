@@ -30,6 +30,7 @@ from .store import EventStore, WriterInFlight, check_robot_name
 __all__ = ["FleetTarget", "PushReport", "open_target", "parse_type_spec", "push", "status"]
 
 BATCH = 5000                 # rows per batch (one fleet transaction)
+MAX_BATCH = 2 ** 31 - 1      # (a count SQLite's LIMIT and every backend take)
 WAKE_MIN, WAKE_MAX = 0.005, 0.25    # s between change checks of the robot store (backoff)
 RETRY_MIN, RETRY_MAX = 0.1, 5.0     # s between attempts while the fleet is unreachable
 HEARTBEAT = 5.0              # s between contacts of a following pusher that has nothing new
@@ -402,8 +403,8 @@ def push(db: str, fleet: str, *, robot: str | None = None,
     >>> push(os.path.join(folder, "r1.db"), os.path.join(folder, "fleet.db")).shipped
     0
     """
-    if type(batch) is not int or batch < 1:
-        raise SLRError(f"batch must be a count of rows (at least 1), not {batch!r}")
+    if type(batch) is not int or not 1 <= batch <= MAX_BATCH:
+        raise SLRError(f"batch must be a count of rows from 1 to {MAX_BATCH}, not {batch!r}")
     say = say if say is not None else (lambda message: None)
     stop = stop if stop is not None else threading.Event()
     wanted = None if types is None else {

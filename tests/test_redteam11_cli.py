@@ -70,3 +70,40 @@ def test_the_library_refuses_too_and_an_mcap_file_is_still_overwritten(tmp_path)
         assert export_mcap(kb.store, out).messages == 2
     assert events_in(db) == 2
     assert out.read_bytes()[:5] == b"\x89MCAP"
+
+
+# -- an empty store path -------------------------------------------------------------------------
+
+@pytest.mark.parametrize("args", [
+    ["add", "", "p(1)^1"],
+    ["ingest", "", "-"],
+    ["fleet", "push", "{robot}", ""],
+], ids=["add", "ingest", "fleet-push-into"])
+def test_an_empty_store_path_is_refused_not_a_store_that_vanishes(tmp_path, args):
+    """SQLite opens "" as a private temporary database deleted on close: `slr add "" EVENT`
+    said "added 1 event" and the event was gone; `slr fleet push DB ""` said it shipped."""
+    robot = tmp_path / "r1.db"
+    with slr_sql.open(robot, robot="r1", clock=slr_sql.ManualClock(100)) as kb:
+        kb.add("seen(p)^10")
+    args = [a.replace("{robot}", str(robot)) for a in args]
+    done = subprocess.run([sys.executable, "-m", "slr_sql", *args], capture_output=True,
+                          text=True, env=slr_env(), timeout=120, input="p(1)^1\n",
+                          cwd=tmp_path)
+    assert done.returncode == 1, done.stdout
+    assert done.stderr.startswith("error: ") and "empty" in done.stderr, done.stderr
+    assert "shipped" not in done.stdout and "added" not in done.stdout
+
+
+def test_the_library_refuses_an_empty_path_too():
+    with pytest.raises(SLRError, match="empty"):
+        slr_sql.open("")
+
+
+def test_a_batch_beyond_any_count_is_refused_in_words(tmp_path):
+    robot = tmp_path / "r1.db"
+    with slr_sql.open(robot, robot="r1", clock=slr_sql.ManualClock(100)) as kb:
+        kb.add("seen(p)^10")
+    done = slr("fleet", "push", str(robot), str(tmp_path / "f.db"), "--batch",
+               "99999999999999999999")
+    assert done.returncode in (1, 2)
+    assert "batch" in done.stderr and "bug" not in done.stderr and "Overflow" not in done.stderr
