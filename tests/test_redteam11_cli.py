@@ -107,3 +107,14 @@ def test_a_batch_beyond_any_count_is_refused_in_words(tmp_path):
                "99999999999999999999")
     assert done.returncode in (1, 2)
     assert "batch" in done.stderr and "bug" not in done.stderr and "Overflow" not in done.stderr
+
+
+@pytest.mark.parametrize("url", ["postgresql://[::1", "postgres://u@[fe80::1/db"])
+def test_a_malformed_postgresql_url_is_said_in_words(url):
+    with pytest.raises(SLRError) as caught:
+        slr_sql.open(url)
+    assert "ValueError" not in str(caught.value) and "URL" in str(caught.value)
+    done = slr("query", url, "X = 1")
+    assert done.returncode == 1
+    assert done.stderr.startswith("error: ") and "URL" in done.stderr
+    assert "ValueError" not in done.stderr and "bug" not in done.stderr
