@@ -179,3 +179,35 @@ def test_a_websocket_peer_that_is_not_slr_serve_is_an_slr_error(first):
         finally:
             peer.shutdown()
             thread.join()
+
+
+def test_sigterm_stops_a_server_whose_synchronized_query_still_waits(tmp_path):
+    """A synchronized query that waits (for an hour: max_wait) held slr serve's graceful
+    shutdown for as long: SIGTERM did not stop it. Requests in flight now get a grace period
+    (SHUTDOWN_GRACE), then the server stops and closes the store."""
+    import signal
+    import threading
+
+    from slr_sql.service.cli import SHUTDOWN_GRACE
+
+    served = ServiceProcess(tmp_path / "w.db")
+    outcome: list = []
+
+    def wait_long() -> None:
+        try:
+            outcome.append(httpx.post(served.url + "/query", timeout=120, json={
+                "goal": "zz(X)^T", "at": 1e15, "wait": True, "timeout": 3000}).status_code)
+        except httpx.HTTPError as exc:
+            outcome.append(type(exc).__name__)
+
+    waiter = threading.Thread(target=wait_long)
+    waiter.start()
+    try:
+        for _ in range(3):      # the waiting request is read and dispatched before these
+            assert served.healthy()
+        served.proc.send_signal(signal.SIGTERM)
+        assert served.proc.wait(timeout=SHUTDOWN_GRACE + 30) == 0
+    finally:
+        served.stop()
+        waiter.join(timeout=60)
+    assert outcome and outcome[0] != 200, outcome
