@@ -211,3 +211,29 @@ def test_sigterm_stops_a_server_whose_synchronized_query_still_waits(tmp_path):
         served.stop()
         waiter.join(timeout=60)
     assert outcome and outcome[0] != 200, outcome
+
+
+def test_a_client_that_leaves_a_synchronized_query_frees_its_place(tmp_path):
+    """A client that leaves while its synchronized query (/query wait=true) waits: the
+    server kept waiting for it (up to max_wait, an hour), holding a place of
+    --max-connections, so that a few such clients made it answer 503 to everyone. The query
+    is now cancelled when its client leaves."""
+    import time
+
+    with ServiceProcess(tmp_path / "l.db", "--max-connections", "2") as served:
+        for _ in range(3):
+            try:                                     # the client gives up and leaves
+                refused = httpx.post(served.url + "/query", timeout=0.5, json={
+                    "goal": "zz(X)^T", "at": 1e15, "wait": True, "timeout": 3000})
+            except httpx.HTTPError:
+                continue
+            assert refused.status_code == 503        # (both places taken already)
+        deadline = time.monotonic() + 30
+        while True:
+            answer = httpx.post(served.url + "/query", json={"goal": "X = 1"}, timeout=30)
+            if answer.status_code == 200:
+                break
+            assert answer.status_code == 503
+            assert time.monotonic() < deadline, "the waits of clients gone hold the server"
+            time.sleep(0.05)
+        assert answer.json() == {"answers": [{"X": 1}]}
