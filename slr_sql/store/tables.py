@@ -294,7 +294,11 @@ class EventTables:
             event_type.start_order = True
             return True
         try:
-            with db.transaction():
+            # (not waiting for another connection's writer: a reader in start order must
+            # not wait the busy timeout on every lookup while a writer holds its lock, and
+            # a builder inside a transaction must not deadlock with one; it reads without
+            # the index, and the next reader tries again)
+            with db.transaction(wait=False):
                 # (not the types' lock: a writer may hold it while it waits for this table)
                 db.lock_named(f"start order {event_type.table}")
                 self._create_start_indexes(event_type)

@@ -1,0 +1,72 @@
+"""Review of the start-ordered indexes built on first need (store/tables.py): a reader in
+start order while another connection writes, and the build inside a transaction."""
+from __future__ import annotations
+
+import sqlite3
+import threading
+
+import psycopg
+
+import slr_sql
+from slr_sql import ManualClock
+
+RULE = ":- consumption(unrestricted).\n:- max_delay(a/1, 0).\n:- max_delay(b/1, 0).\n" \
+       "c(X) <- a(X) seq b(X).\n"
+EVENTS = ["a(1)^1", "b(1)^2", "a(1)^3", "b(1)^4", "a(2)^5", "b(2)^6"]
+
+
+def _opened(location: str, **options) -> slr_sql.KnowledgeBase:
+    kb = slr_sql.open(location, clock=ManualClock(100.0), **options)
+    kb.load(RULE)
+    kb.add_many(EVENTS)
+    return kb
+
+
+def _holding_the_write_lock(location: str):
+    """Another connection writing to c, not committed."""
+    if location.startswith("postgresql"):
+        other = psycopg.connect(location)
+        other.execute("SET search_path = slr")
+        other.execute("LOCK TABLE c IN ROW EXCLUSIVE MODE")
+        return other
+    other = sqlite3.connect(location, isolation_level=None)
+    other.execute("BEGIN IMMEDIATE")
+    return other
+
+
+def _within(deadline: float, call) -> tuple[bool, object]:
+    """Whether ``call`` returned on another thread before ``deadline`` seconds passed (an
+    event, not a pause), and what it returned."""
+    done = threading.Event()
+    out: list = []
+
+    def run():
+        try:
+            out.append(call())
+        finally:
+            done.set()
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    return done.wait(deadline), (out[0] if out else None)
+
+
+def test_a_reader_in_start_order_does_not_wait_for_a_writer(backend):
+    # a writer holding its transaction for long (a bulk import) must not make every next
+    # wait the busy timeout (30 s here) to answer: readers never waited for writers
+    with _opened(backend, busy_timeout=30) as kb:
+        expected = len(list(kb.store.scan("c", 1)))
+        other = _holding_the_write_lock(backend)
+        try:
+            answered, rows = _within(10, lambda: list(
+                kb.store.next_candidates("c", 1, None, 0, 100)))
+            assert answered, "a next lookup waited for another connection's write lock"
+            assert rows is not None and len(rows) == expected
+            answered, answers = _within(10, lambda: kb.query("next(c(X)^[S, E], [0, 10])"))
+            assert answered and answers
+        finally:
+            other.rollback()
+            other.close()
+        assert kb.query("next(c(X)^[S, E], [0, 10])") == answers
+        # the lock gone, the next reader builds them
+        assert kb.store.ensure_start_order("c", 1)
+        assert {"slr_ix__c__start", "slr_ix__c__a1_start"} <= kb.store.index_names("c")
