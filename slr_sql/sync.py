@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import logging
 import math
 import threading
 import time
@@ -50,6 +51,8 @@ from .terms import Atom, Struct, Var, deref
 _first, _second, _fourth = itemgetter(0), itemgetter(1), itemgetter(3)
 
 __all__ = ["Completeness", "PendingQuery", "Wait", "Synchronizer", "attach", "parse_type"]
+
+log = logging.getLogger("slr_sql.sync")
 
 _INF = math.inf
 MARK_NAME = "fullyUpdated"
@@ -860,6 +863,16 @@ class Synchronizer:
         if hook is not None and not self._closed:
             hook(timer)
 
+    def _progress_from_timer(self) -> None:
+        """:meth:`_progress` on the timer thread, which serves every later timer: what the
+        round raises (an add listener's own error; a failed decision round is tried again by
+        the pipeline) has no caller to go to, and is logged instead of ending the thread."""
+        try:
+            self._progress(timer=True)
+        except Exception as exc:   # (no traceback: a listener's text is the user's)
+            log.warning("a round the clock started failed (%s: %s); later timers still run",
+                        type(exc).__name__, exc)
+
     def recheck(self, keys: Iterable[tuple[str, int]]) -> None:
         """Release the queries parked on ``keys`` whose condition holds now (complex event
         types: their completeness moves when the event rules decide, not by a timer)."""
@@ -1240,7 +1253,7 @@ class Synchronizer:
                     self.cond.release()
                     try:
                         if fired:
-                            self._progress(timer=True)
+                            self._progress_from_timer()
                         self._schedule_all(released)
                         for q in expired:
                             self._set_exception(q, SLRTimeout(
