@@ -330,6 +330,8 @@ class Completeness:
         store.rollback_listeners.append(self.max_end.clear)
         self.arrivals: dict[tuple[str, int], int] = {}
         self._persisted: dict[tuple[str, int], float] = {}   # learned delays as stored
+        # learned delays whose write after an add failed (busy): the next add writes them
+        self._unwritten: set[tuple[str, int]] = set()
         # event rules (slr_sql.cep): the completeness of complex event types, which follows
         # from the types their rules read; an object with ``types``, ``complete``,
         # ``horizon``, ``deadline``, ``why`` and ``describe`` (None: no event rules)
@@ -546,21 +548,25 @@ class Completeness:
                 if latest > self.latest_end(key):
                     self.max_end[key] = latest
                 moved.add(key)
-        if grew:
+        if grew or self._unwritten:
             learned.update(grew)
             # persist when it grew by more than 1 ms (or 1 %): a stream whose delay creeps up
             # by float noise must not cost a durable write per event; close() writes the rest
             persisted = self._persisted
             due = {k: d for k, d in grew.items()
                    if d > persisted.get(k, 0.0) + max(1e-3, 0.01 * persisted.get(k, 0.0))}
+            for key in self._unwritten:   # a write that failed before: tried again now
+                due.setdefault(key, learned[key])
             if due:
                 try:
                     self.flush(due)
+                    self._unwritten.clear()
                 except SLRUnavailable:
                     # the events are committed: an add that raised now would be retried and
-                    # store them twice. The delay stays learned here; a later add that
-                    # learns more, or close, writes it
-                    pass
+                    # store them twice. The delay stays learned here; the next add (of any
+                    # type), or close, writes it -- not only one that learns more of it:
+                    # another process must not judge the type complete earlier meanwhile
+                    self._unwritten.update(due)
         arrivals = self.arrivals
         for key in spans:   # every type: tf_lookup waits for an arrival of any type
             arrivals[key] = arrivals.get(key, 0) + 1
