@@ -70,3 +70,34 @@ def test_a_reader_in_start_order_does_not_wait_for_a_writer(backend):
         # the lock gone, the next reader builds them
         assert kb.store.ensure_start_order("c", 1)
         assert {"slr_ix__c__start", "slr_ix__c__a1_start"} <= kb.store.index_names("c")
+
+
+def test_a_build_inside_a_transaction_does_not_wait_and_leaves_its_lock_wait_as_it_was(
+        backend):
+    # a builder inside its own transaction does not wait for another writer either (on a
+    # server, a wait there could deadlock with that writer); the transaction goes on
+    with _opened(backend, busy_timeout=30) as kb:
+        other = _holding_the_write_lock(backend)
+        try:
+            def inside():
+                with kb.store.transaction():
+                    rows = list(kb.store.next_candidates("c", 1, None, 0, 100))
+                    kb.store.add_events([("a", (9,), 50.0, 50.0)])
+                    shown = kb.sql("SHOW lock_timeout")[1][0][0] \
+                        if backend.startswith("postgresql") else None
+                return rows, shown
+            if backend.startswith("postgresql"):
+                answered, out = _within(10, inside)
+                assert answered, "a build inside a transaction waited for another writer"
+                rows, shown = out
+                assert len(rows) == len(list(kb.store.scan("c", 1)))
+                assert shown == "30s"   # (the build's 1 ms does not outlive it)
+        finally:
+            other.rollback()
+            other.close()
+        if not backend.startswith("postgresql"):
+            # SQLite: the transaction itself waits for the writer, then holds the lock
+            rows, _ = inside()
+            assert len(rows) == len(list(kb.store.scan("c", 1)))
+        assert kb.store.count("a", 1) == 4
+        assert kb.store.ensure_start_order("c", 1)
