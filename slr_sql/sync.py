@@ -350,16 +350,17 @@ class Completeness:
         warnings.warn(LearnedDelayWarning(_delay_warning(key, observed, cap, self.clock)),
                       stacklevel=2)
 
-    def flush(self, learned: dict | None = None) -> None:
+    def flush(self, learned: dict | None = None, wait: bool = True) -> None:
         """Persist learned delays (all that grew since the last write by default). The
         store keeps the larger of its value and ours (another process may have learned a
-        larger one meanwhile): we take the stored value back."""
+        larger one meanwhile): we take the stored value back. ``wait=False``: SLRBusy at
+        once when another connection holds a lock the write needs."""
         if learned is None:
             learned = {k: d for k, d in self.learned.items() if d > self._persisted.get(k, 0.0)}
         if not learned:
             return
         stored = {}
-        with self.store.transaction():
+        with self.store.transaction(wait):
             for key, d in learned.items():
                 stored[key] = self.store.meta_raise(f"sync/learned/{key[0]}/{key[1]}", d)
         for key, d in stored.items():
@@ -555,11 +556,12 @@ class Completeness:
             persisted = self._persisted
             due = {k: d for k, d in grew.items()
                    if d > persisted.get(k, 0.0) + max(1e-3, 0.01 * persisted.get(k, 0.0))}
-            for key in self._unwritten:   # a write that failed before: tried again now
-                due.setdefault(key, learned[key])
-            if due:
+            # a write that failed before, tried again now; alone, without waiting for a
+            # lock (an add that learned nothing does not wait the busy timeout for it)
+            retry = {k: learned[k] for k in self._unwritten if k not in due}
+            if due or retry:
                 try:
-                    self.flush(due)
+                    self.flush({**retry, **due}, wait=bool(due))
                     self._unwritten.clear()
                 except SLRUnavailable:
                     # the events are committed: an add that raised now would be retried and
@@ -567,6 +569,7 @@ class Completeness:
                     # type), or close, writes it -- not only one that learns more of it:
                     # another process must not judge the type complete earlier meanwhile
                     self._unwritten.update(due)
+                    self._unwritten.update(retry)
         arrivals = self.arrivals
         for key in spans:   # every type: tf_lookup waits for an arrival of any type
             arrivals[key] = arrivals.get(key, 0) + 1
