@@ -2,6 +2,8 @@
 start order while another connection writes, and the build inside a transaction."""
 from __future__ import annotations
 
+import os
+import re
 import sqlite3
 import threading
 
@@ -101,3 +103,45 @@ def test_a_build_inside_a_transaction_does_not_wait_and_leaves_its_lock_wait_as_
             assert len(rows) == len(list(kb.store.scan("c", 1)))
         assert kb.store.count("a", 1) == 4
         assert kb.store.ensure_start_order("c", 1)
+
+
+ROLE = f"r11_writer_{os.getpid()}"   # (roles are the server's, not one database's)
+
+
+def _non_owner(url: str) -> str:
+    """The URL of a new role that may read and write the store's tables but owns none of
+    them (PostgreSQL: only a table's owner may index it)."""
+    database = url.split("/")[3].split("?")[0]
+    with psycopg.connect(url, autocommit=True) as admin:
+        admin.execute(f"CREATE ROLE {ROLE} LOGIN")
+        admin.execute(f"GRANT ALL ON DATABASE {database} TO {ROLE}")
+        admin.execute(f"GRANT USAGE, CREATE ON SCHEMA slr TO {ROLE}")
+        admin.execute(f"GRANT SELECT, INSERT, UPDATE, DELETE ON ALL TABLES IN SCHEMA slr "
+                      f"TO {ROLE}")
+        admin.execute(f"GRANT USAGE, SELECT, UPDATE ON ALL SEQUENCES IN SCHEMA slr TO {ROLE}")
+    return re.sub(r"://[^@]*@", f"://{ROLE}@", url)
+
+
+def test_a_role_that_may_not_index_the_table_tries_once(postgres_url):
+    # a build refused for good (not the table's owner; on SQLite a read-only file) is not
+    # tried again by every lookup, each a failed transaction whose rollback makes every
+    # type forget what it knew; the owner's build is still found in the catalog
+    with _opened(postgres_url) as owner:
+        expected = [row[:3] for row in owner.store.scan("c", 1)]
+        url = _non_owner(postgres_url)
+        try:
+            with slr_sql.open(url, clock=ManualClock(100.0)) as kb:
+                rollbacks: list = []
+                kb.store.rollback_listeners.append(lambda: rollbacks.append(1))
+                for _ in range(3):
+                    rows = [row[:3] for row in kb.store.next_candidates("c", 1, None, 0, 100)]
+                    assert sorted(rows) == sorted(expected)
+                assert len(rollbacks) == 1     # the one refused build
+                assert not kb.store.ensure_start_order("c", 1)
+                assert owner.store.ensure_start_order("c", 1)
+                assert kb.store.ensure_start_order("c", 1)   # found in the catalog
+                assert len(rollbacks) == 1
+        finally:
+            with psycopg.connect(postgres_url, autocommit=True) as admin:
+                admin.execute(f"DROP OWNED BY {ROLE}")
+                admin.execute(f"DROP ROLE {ROLE}")
