@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import logging
 import math
 import threading
 import time
@@ -50,6 +51,8 @@ from .terms import Atom, Struct, Var, deref
 _first, _second, _fourth = itemgetter(0), itemgetter(1), itemgetter(3)
 
 __all__ = ["Completeness", "PendingQuery", "Wait", "Synchronizer", "attach", "parse_type"]
+
+log = logging.getLogger("slr_sql.sync")
 
 _INF = math.inf
 MARK_NAME = "fullyUpdated"
@@ -327,6 +330,8 @@ class Completeness:
         store.rollback_listeners.append(self.max_end.clear)
         self.arrivals: dict[tuple[str, int], int] = {}
         self._persisted: dict[tuple[str, int], float] = {}   # learned delays as stored
+        # learned delays whose write after an add failed (busy): the next add writes them
+        self._unwritten: set[tuple[str, int]] = set()
         # event rules (slr_sql.cep): the completeness of complex event types, which follows
         # from the types their rules read; an object with ``types``, ``complete``,
         # ``horizon``, ``deadline``, ``why`` and ``describe`` (None: no event rules)
@@ -345,16 +350,17 @@ class Completeness:
         warnings.warn(LearnedDelayWarning(_delay_warning(key, observed, cap, self.clock)),
                       stacklevel=2)
 
-    def flush(self, learned: dict | None = None) -> None:
+    def flush(self, learned: dict | None = None, wait: bool = True) -> None:
         """Persist learned delays (all that grew since the last write by default). The
         store keeps the larger of its value and ours (another process may have learned a
-        larger one meanwhile): we take the stored value back."""
+        larger one meanwhile): we take the stored value back. ``wait=False``: SLRBusy at
+        once when another connection holds a lock the write needs."""
         if learned is None:
             learned = {k: d for k, d in self.learned.items() if d > self._persisted.get(k, 0.0)}
         if not learned:
             return
         stored = {}
-        with self.store.transaction():
+        with self.store.transaction(wait):
             for key, d in learned.items():
                 stored[key] = self.store.meta_raise(f"sync/learned/{key[0]}/{key[1]}", d)
         for key, d in stored.items():
@@ -543,21 +549,27 @@ class Completeness:
                 if latest > self.latest_end(key):
                     self.max_end[key] = latest
                 moved.add(key)
-        if grew:
+        if grew or self._unwritten:
             learned.update(grew)
             # persist when it grew by more than 1 ms (or 1 %): a stream whose delay creeps up
             # by float noise must not cost a durable write per event; close() writes the rest
             persisted = self._persisted
             due = {k: d for k, d in grew.items()
                    if d > persisted.get(k, 0.0) + max(1e-3, 0.01 * persisted.get(k, 0.0))}
-            if due:
+            # a write that failed before, tried again now; alone, without waiting for a
+            # lock (an add that learned nothing does not wait the busy timeout for it)
+            retry = {k: learned[k] for k in self._unwritten if k not in due}
+            if due or retry:
                 try:
-                    self.flush(due)
+                    self.flush({**retry, **due}, wait=bool(due))
+                    self._unwritten.clear()
                 except SLRUnavailable:
                     # the events are committed: an add that raised now would be retried and
-                    # store them twice. The delay stays learned here; a later add that
-                    # learns more, or close, writes it
-                    pass
+                    # store them twice. The delay stays learned here; the next add (of any
+                    # type), or close, writes it -- not only one that learns more of it:
+                    # another process must not judge the type complete earlier meanwhile
+                    self._unwritten.update(due)
+                    self._unwritten.update(retry)
         arrivals = self.arrivals
         for key in spans:   # every type: tf_lookup waits for an arrival of any type
             arrivals[key] = arrivals.get(key, 0) + 1
@@ -859,6 +871,16 @@ class Synchronizer:
         hook = self.progress_hook
         if hook is not None and not self._closed:
             hook(timer)
+
+    def _progress_from_timer(self) -> None:
+        """:meth:`_progress` on the timer thread, which serves every later timer: what the
+        round raises (an add listener's own error; a failed decision round is tried again by
+        the pipeline) has no caller to go to, and is logged instead of ending the thread."""
+        try:
+            self._progress(timer=True)
+        except Exception as exc:   # (no traceback: a listener's text is the user's)
+            log.warning("a round the clock started failed (%s: %s); later timers still run",
+                        type(exc).__name__, exc)
 
     def recheck(self, keys: Iterable[tuple[str, int]]) -> None:
         """Release the queries parked on ``keys`` whose condition holds now (complex event
@@ -1240,7 +1262,7 @@ class Synchronizer:
                     self.cond.release()
                     try:
                         if fired:
-                            self._progress(timer=True)
+                            self._progress_from_timer()
                         self._schedule_all(released)
                         for q in expired:
                             self._set_exception(q, SLRTimeout(

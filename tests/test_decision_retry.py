@@ -67,10 +67,11 @@ def test_a_round_an_add_made_possible_that_fails_busy_is_retried(postgres_url):
 
 
 def test_a_round_the_timer_starts_that_fails_busy_is_retried(postgres_url):
-    """The decision waits for the clock (a and b complete 1 s after their times): the
+    """The decision waits for the clock (a and b complete 2 s after their times): the
     synchronizer's timer starts its round, which meets the pending table locked and fails
     busy on the timer's thread. Once the lock is gone, a retry derives c."""
-    program = (":- consumption(recent).\n:- max_delay(a/1, 1).\n:- max_delay(b/1, 1).\n"
+    # (2 s: the lock below must come before the timer's round even on a loaded machine)
+    program = (":- consumption(recent).\n:- max_delay(a/1, 2).\n:- max_delay(b/1, 2).\n"
                "c(X) <- a(X) seq b(X).\n")
     t = WallClock().now() - 0.1
     with slr_sql.open(postgres_url, busy_timeout=0.2) as kb:

@@ -1,7 +1,7 @@
 """A learned delay is persisted after the add's events committed: when that write meets
 another session's lock and times out busy, the add has still stored its events, so it
 returns (a retry would store them twice); the delay stays learned in memory and is written
-by a later add or by close.
+by the next add or by close.
 """
 from __future__ import annotations
 
@@ -36,6 +36,6 @@ def test_a_learned_delay_whose_write_is_busy_does_not_fail_the_committed_add(pos
             assert kb.complete_until("a/1") == 98.0      # (now - the delay learned)
             assert _stored_delay(postgres_url) == 0.5
             other.rollback()
-        assert kb.add_many(["a(3)^99.9"]) == []          # learns nothing new: close writes it
+        assert kb.add_many(["a(3)^99.9"]) == []          # learns nothing new: writes it (the write failed before)
         assert kb.store.count("a", 1) == 3
     assert _stored_delay(postgres_url) == 2.0

@@ -262,11 +262,13 @@ class EventStore:
         return self._db.closed
 
     @contextmanager
-    def transaction(self) -> Iterator["EventStore"]:
+    def transaction(self, wait: bool = True) -> Iterator["EventStore"]:
         """Run several store calls as one atomic unit (BEGIN IMMEDIATE ... COMMIT).
 
         Re-entrant: nested uses become savepoints, so an inner failure undoes only the inner
-        part. The store lock is held for the whole transaction.
+        part. The store lock is held for the whole transaction. ``wait=False``: a lock
+        another connection holds is not waited for (SLRBusy at once), for work that may be
+        left for later.
 
         >>> s = EventStore(None)
         >>> with s.transaction():
@@ -274,7 +276,7 @@ class EventStore:
         >>> s.event_types(), s.program_sources()
         ({('seg', 2): 'seg'}, [('seg.', None)])
         """
-        with self._db.transaction():
+        with self._db.transaction(wait):
             yield self
 
     @property

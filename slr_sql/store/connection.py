@@ -525,11 +525,13 @@ class Database:
     # ------------------------------------------------------------------ transactions
 
     @contextmanager
-    def transaction(self) -> Iterator["Database"]:
+    def transaction(self, wait: bool = True) -> Iterator["Database"]:
         """Run several statements as one atomic unit (BEGIN IMMEDIATE ... COMMIT).
 
         Re-entrant: nested uses become savepoints, so an inner failure undoes only the inner
-        part. The lock is held for the whole transaction.
+        part. The lock is held for the whole transaction. ``wait=False``: another
+        connection's write transaction is not waited for (SLRBusy at once), for work a
+        reader may leave for later (a nested one holds the lock already).
 
         >>> db = Database(None)
         >>> with db.transaction():
@@ -544,7 +546,7 @@ class Database:
             conn = self.conn
             if depth == 0:
                 self.suspend_streams()
-                self._begin()
+                self._begin(self.busy_timeout if wait else 0.0)
             else:
                 conn.execute(f"SAVEPOINT slr_sp{depth}")
             self.tx_depth = depth + 1
@@ -572,8 +574,8 @@ class Database:
                 self._rolled_back()
                 raise
 
-    def _begin(self) -> None:
-        """``BEGIN IMMEDIATE``, waiting at most ``busy_timeout`` seconds for another
+    def _begin(self, timeout: float) -> None:
+        """``BEGIN IMMEDIATE``, waiting at most ``timeout`` seconds for another
         connection's write transaction. SQLite's own busy handler sleeps longer and longer
         between tries (up to 100 ms), so a process committing back to back keeps the lock
         from the others for seconds; here the lock is tried again every 0.1 to 2 ms (a try
@@ -596,7 +598,7 @@ class Database:
                         raise
                     now = time.monotonic()
                     if deadline is None:
-                        deadline = now + self.busy_timeout
+                        deadline = now + timeout
                     if now >= deadline:
                         raise busy from None
                     time.sleep(min(pause * (0.5 + random.random()), deadline - now))

@@ -798,7 +798,9 @@ class PgDatabase:
     # ------------------------------------------------------------------ transactions
 
     @contextmanager
-    def transaction(self) -> Iterator[PgDatabase]:
+    def transaction(self, wait: bool = True) -> Iterator[PgDatabase]:
+        """(:meth:`Database.transaction`) ``wait=False``: a lock another session holds is
+        not waited for (SLRBusy at once), nested or not: work a reader may leave for later."""
         with self.lock:
             self.check_open()
             depth = self.tx_depth
@@ -810,7 +812,13 @@ class PgDatabase:
                 conn.savepoint_later(f"slr_sp{depth}")
             self.tx_depth = depth + 1
             try:
+                if not wait:
+                    conn.execute("SET LOCAL lock_timeout = 1")
                 yield self
+                if not wait and depth:
+                    # (a SET LOCAL outlives the savepoint's release: the enclosing
+                    # transaction waits as before)
+                    conn.execute(f"SET LOCAL lock_timeout = {int(self.busy_timeout * 1000)}")
             except BaseException:
                 self.tx_depth = depth
                 try:

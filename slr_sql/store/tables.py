@@ -32,9 +32,10 @@ from __future__ import annotations
 
 import hashlib
 import re
+import sqlite3
 from typing import Any, Callable
 
-from ..errors import SLRError
+from ..errors import SLRError, SLRUnavailable
 from .connection import Database, DatabaseError
 from .sqltext import RESERVED_PREFIXES, SAFE_IDENTIFIER, SQL_KEYWORDS, quote_identifier
 
@@ -114,6 +115,24 @@ def _shortened(base: str, name: str, arity: int) -> str:
     return f"{base[:_LONG_TABLE - 13]}_{digest}"
 
 
+# SQLite's refusals of a write that stay until the file is opened otherwise (a busy, full or
+# failing disk may pass: those are tried again)
+_REFUSED_FOR_GOOD = (sqlite3.SQLITE_READONLY, sqlite3.SQLITE_PERM, sqlite3.SQLITE_AUTH)
+
+
+def _refused_for_good(exc: BaseException) -> bool:
+    """Whether a failed build of indexes will fail again (this connection may not write the
+    table's indexes: not the table's owner on a server, a read-only file), not a condition
+    that may pass (busy, the disk full, the server short of resources or gone)."""
+    if isinstance(exc, SLRUnavailable):
+        return False
+    code = getattr(exc, "sqlite_errorcode", None)
+    if code is not None:   # (SQLite's own errors carry their code)
+        return code & 0xFF in _REFUSED_FOR_GOOD
+    # a server's refusal (PgStatementError: not the table's owner) or a read-only SLRError
+    return True
+
+
 def _index_names(table: str) -> list[str]:
     return [f"slr_ix__{table}__{suffix}" for suffix in ("end", "start", "a1_end", "a1_start")]
 
@@ -136,6 +155,9 @@ class EventTables:
         self.table_created_hooks: list[Callable[[str, int, str], Any]] = []
         # types created inside were rolled back too, and indexes built inside
         db.rollback_listeners.append(self._rolled_back)
+        # tables whose start-ordered indexes this connection may not build (refused for
+        # good): looked for in the catalog only, not tried again by every reader
+        self._refused: set[str] = set()
         # The most data arguments an event can have: its table has 5 more columns (seq,
         # t_start, t_end, arrival, robot) and the engine refuses tables wider than its limit.
         self.max_arity = db.max_columns - 5
@@ -275,9 +297,11 @@ class EventTables:
         The build (``CREATE INDEX IF NOT EXISTS``, the builders of one table taking turns
         on a server) runs in a transaction of its own, or as a savepoint of the current
         one: should that roll back, the reload of the types forgets what was built. Where
-        no index can be built (a read-only statement, a writer holding the lock past the
-        busy timeout), the answer is False and the caller reads without naming the index:
-        slower, never wrong.
+        no index can be built, the answer is False and the caller reads without naming the
+        index: slower, never wrong. A build is never waited for (another connection's writer
+        holds the lock: the next reader tries again); one this connection may not make (not
+        the table's owner, a read-only file) is not tried again, only looked for in the
+        catalog.
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None); _ = s.declare_type("c", 1, start_order=False)
@@ -293,14 +317,24 @@ class EventTables:
         if set(wanted) <= db.index_names(event_type.table):
             event_type.start_order = True
             return True
+        if event_type.table in self._refused:
+            return False
         try:
-            with db.transaction():
+            # (not waiting for another connection's writer: a reader in start order must
+            # not wait the busy timeout on every lookup while a writer holds its lock, and
+            # a builder inside a transaction must not deadlock with one; it reads without
+            # the index, and the next reader tries again)
+            with db.transaction(wait=False):
                 # (not the types' lock: a writer may hold it while it waits for this table)
                 db.lock_named(f"start order {event_type.table}")
                 self._create_start_indexes(event_type)
-        except (DatabaseError, SLRError):
+        except (DatabaseError, SLRError) as exc:
             if db.closed:
                 raise
+            if _refused_for_good(exc):
+                # (every try a failed transaction, whose rollback makes every type forget
+                # what it knew: one is enough)
+                self._refused.add(event_type.table)
             return False
         # (a rollback of an enclosing transaction reloads the types: this one is gone then)
         current = self.types.get((event_type.name, event_type.arity))
