@@ -30,6 +30,7 @@ from .store import EventStore, WriterInFlight, check_robot_name
 __all__ = ["FleetTarget", "PushReport", "open_target", "parse_type_spec", "push", "status"]
 
 BATCH = 5000                 # rows per batch (one fleet transaction)
+MAX_BATCH = 2 ** 31 - 1      # (a count SQLite's LIMIT and every backend take)
 WAKE_MIN, WAKE_MAX = 0.005, 0.25    # s between change checks of the robot store (backoff)
 RETRY_MIN, RETRY_MAX = 0.1, 5.0     # s between attempts while the fleet is unreachable
 HEARTBEAT = 5.0              # s between contacts of a following pusher that has nothing new
@@ -47,7 +48,7 @@ class FleetTarget(Protocol):
     def prepare(self, robot: str, batch: tuple) -> tuple: ...
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
-                head_arrival: float | None) -> int: ...
+                head_arrival: float | None, after: dict | None = None) -> int: ...
 
     def close(self) -> None: ...
 
@@ -70,7 +71,9 @@ class _LocalTarget:
         return prepare(self.kb, robot, batch)
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
-                head_arrival: float | None) -> int:
+                head_arrival: float | None, after: dict | None = None) -> int:
+        # (``after`` is not needed: a store replaced under an open connection is not seen
+        # through it, and a server's restore ends the connection, which asks again)
         from .shipping import receive
         # (rows read from a store by this process: no need to check them as the service does)
         return receive(self.kb, robot, batches, marks, pending, head_arrival, check=False)
@@ -93,8 +96,10 @@ class _RemoteTarget:
         return batch
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
-                head_arrival: float | None) -> int:
-        return self.client.fleet_receive(robot, batches, marks, pending, head_arrival)
+                head_arrival: float | None, after: dict | None = None) -> int:
+        # ``after``: over HTTP a restarted server is reached again without a word, so each
+        # batch says which position it follows and the server checks it still holds it
+        return self.client.fleet_receive(robot, batches, marks, pending, head_arrival, after)
 
     def close(self) -> None:
         self.client.close()
@@ -152,6 +157,7 @@ class _Pusher:
         self.fleet_name = fleet_name
         self.report = PushReport(robot)
         self.outage: str | None = None   # why the fleet is unreachable, while it is
+        self.refused = False                # ... and whether it answered with a refusal
         self.in_flight: str | None = None   # why the robot's store made a round wait, while so
         # the fleet's positions (asked once per connection), the last contact sent and when
         self.positions: dict | None = None
@@ -162,16 +168,26 @@ class _Pusher:
         """A request to the fleet succeeded: an outage, if any, is over."""
         if self.outage is not None:
             self.outage = None
-            self.say(f"fleet {self.fleet_name} reachable again; shipping resumed")
+            if self.refused:
+                self.say(f"fleet {self.fleet_name} took the shipment; shipping resumed")
+            else:
+                self.say(f"fleet {self.fleet_name} reachable again; shipping resumed")
 
     def unreachable(self, exc: BaseException) -> None:
-        """A request to the fleet failed: say so if an outage begins."""
+        """A request to the fleet failed: say so if an outage begins -- as an outage when
+        it may pass (no answer, busy, 5xx), as a refusal when the fleet answered no (a bad
+        request: it will not pass by waiting, someone has to look)."""
         if self.outage is None:
             reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             self.outage = reason
+            self.refused = not _may_pass(exc)
             self.report.outages += 1
-            self.say(f"fleet {self.fleet_name} unreachable ({reason}); retrying with "
-                     "backoff, the robot's store is not affected")
+            if self.refused:
+                self.say(f"fleet {self.fleet_name} refused the shipment ({reason}); retrying "
+                         "with backoff, the robot's store is not affected")
+            else:
+                self.say(f"fleet {self.fleet_name} unreachable ({reason}); retrying with "
+                         "backoff, the robot's store is not affected")
 
     def store_waits(self, exc: WriterInFlight) -> None:
         """A round ended waiting for a writer of the robot's own store: say so once, as
@@ -201,6 +217,19 @@ class _Pusher:
                 pass
 
     def round(self, stop: threading.Event, heartbeat: float | None = None) -> int:
+        """:meth:`ship`; when the fleet store no longer holds a position this pusher was
+        told (restored or replaced behind it, answered 409 Conflict), ask its positions
+        again and ship from there: the rows it lost are shipped again, none is left out."""
+        try:
+            return self.ship(stop, heartbeat)
+        except SLRError as exc:
+            if getattr(exc, "kind", None) != "Conflict":
+                raise
+            self.say(f"fleet {self.fleet_name}: {str(exc).splitlines()[0]}")
+            self.positions = None
+            return self.ship(stop, heartbeat)
+
+    def ship(self, stop: threading.Event, heartbeat: float | None = None) -> int:
         """Ship everything the robot's store holds beyond the fleet's positions (stopping
         early when ``stop`` is set); returns the rows the fleet stored.
 
@@ -220,6 +249,7 @@ class _Pusher:
                  if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)}
         keys = sorted(k for k in heads if self.types is None or k in self.types)
         held: tuple | None = None     # the batch read last, sent once the next one is read
+        held_after: dict | None = None   # the position it was read after
 
         def record(batch: tuple, stored: int) -> None:
             nonlocal shipped
@@ -232,7 +262,8 @@ class _Pusher:
             self.report.per_type[key] = self.report.per_type.get(key, 0) + stored
 
         def send(batch: tuple | None, contact: tuple = (None, None, None)) -> None:
-            stored = target.receive(self.robot, [batch] if batch else [], *contact)
+            stored = target.receive(self.robot, [batch] if batch else [], *contact,
+                                    held_after if batch else None)
             self.reached()
             if batch is not None:
                 record(batch, stored)
@@ -251,10 +282,11 @@ class _Pusher:
                     if held is not None:
                         if sender is None:
                             sender = _Sender(target, self.robot, record)
-                        sender.put(held)
+                        sender.put(held, held_after)
                     # the batch's own work that needs no connection, done here while the
                     # sender waits on the fleet for the batch before
                     held = target.prepare(self.robot, (name, arity, rows))
+                    held_after = {(name, arity): position}
                     position = rows[-1][0]
                     if len(rows) < self.batch:
                         break
@@ -308,8 +340,10 @@ class _Sender:
                 if batch is None:
                     return
                 continue   # after a failure: drain what was queued, send nothing more
+            batch, after = batch
             try:
-                self.record(batch, self.target.receive(self.robot, [batch], None, None, None))
+                self.record(batch, self.target.receive(self.robot, [batch], None, None, None,
+                                                       after))
             except BaseException as exc:  # noqa: BLE001 - raised again in the pusher's thread
                 self.error = exc
 
@@ -317,13 +351,14 @@ class _Sender:
         if self.error is not None:
             raise self.error
 
-    def put(self, batch: tuple) -> None:
-        """Queue ``batch`` (waiting while one is queued already)."""
+    def put(self, batch: tuple, after: dict | None = None) -> None:
+        """Queue ``batch``, read after the positions ``after`` (waiting while one is queued
+        already)."""
         import queue
         while True:
             self._raise()
             try:
-                self.queue.put(batch, timeout=0.05)
+                self.queue.put((batch, after), timeout=0.05)
                 return
             except queue.Full:
                 continue
@@ -368,8 +403,8 @@ def push(db: str, fleet: str, *, robot: str | None = None,
     >>> push(os.path.join(folder, "r1.db"), os.path.join(folder, "fleet.db")).shipped
     0
     """
-    if type(batch) is not int or batch < 1:
-        raise SLRError(f"batch must be a count of rows (at least 1), not {batch!r}")
+    if type(batch) is not int or not 1 <= batch <= MAX_BATCH:
+        raise SLRError(f"batch must be a count of rows from 1 to {MAX_BATCH}, not {batch!r}")
     say = say if say is not None else (lambda message: None)
     stop = stop if stop is not None else threading.Event()
     wanted = None if types is None else {
@@ -385,6 +420,9 @@ def push(db: str, fleet: str, *, robot: str | None = None,
         if name is None:
             raise SLRError(f"{db} has no robot name: open it with robot=NAME once, or "
                            "push with --robot NAME")
+        if _same_file(db, fleet):
+            raise SLRError(f"{fleet} is the robot's store {db} itself: a robot does not ship "
+                           "to its own store")
         pusher = _Pusher(store, lambda: open_target(fleet, token), name, wanted, batch, say,
                          fleet)
         try:
@@ -397,6 +435,37 @@ def push(db: str, fleet: str, *, robot: str | None = None,
             pusher.drop()
     finally:
         store.close()
+
+
+def _may_pass(exc: BaseException) -> bool:
+    """Whether a failed request to the fleet may succeed later as it is: no answer, a
+    timeout, a busy or full store, a server error -- not a refusal of the shipment.
+
+    >>> from slr_sql.errors import SLRBusy
+    >>> _may_pass(SLRBusy("locked")), _may_pass(OSError()), _may_pass(SLRError("refused"))
+    (True, True, False)
+    """
+    from .errors import SLRTimeout, SLRUnavailable
+    if isinstance(exc, (OSError, SLRUnavailable, SLRTimeout)):
+        return True
+    status = getattr(exc, "status", None)
+    return isinstance(status, int) and (status == 0 or status >= 500 or status == 408)
+
+
+def _same_file(db: str, fleet: str) -> bool:
+    """Whether the fleet store path ``fleet`` is the file ``db`` (another spelling, a link).
+
+    >>> import os, tempfile; f = os.path.join(tempfile.mkdtemp(), "r.db"); open(f, "w").close()
+    >>> _same_file(f, os.path.join(os.path.dirname(f), ".", "r.db")), _same_file(f, f + "x")
+    (True, False)
+    """
+    import os
+    if "://" in fleet or "://" in db:
+        return False
+    try:
+        return os.path.samefile(db, fleet)
+    except (OSError, ValueError):   # the fleet file does not exist yet: another file
+        return False
 
 
 def _follow(pusher: _Pusher, stop: threading.Event) -> None:

@@ -16,12 +16,27 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from .encoding import decode
 from .errors import SLRError
 from .host import Host
+from .store import check_robot_name
+from .store.checks import text_problem
 
-__all__ = ["FLEET_MARK", "positions", "prepare", "receive"]
+__all__ = ["FLEET_MARK", "FleetBehind", "positions", "prepare", "receive"]
 
+_JSON = ("[", "{", '"')     # how a stored text that is JSON starts (slr_sql.encoding)
 FLEET_MARK = "fleet/mark/"   # slr_meta prefix: fleet/mark/<robot>/<name>/<arity or *>
+
+
+class FleetBehind(SLRError):
+    """A shipment was sent after positions the fleet store no longer holds: the fleet store
+    was restored from a backup or replaced while the pusher kept the positions it had asked
+    for. Storing the shipment would leave the rows in between out for ever; the pusher asks
+    the positions again and ships from there (``slr serve`` answers it 409 Conflict).
+
+    >>> issubclass(FleetBehind, SLRError)
+    True
+    """
 
 
 def positions(kb: Host, robot: str) -> dict[tuple[str, int], int]:
@@ -36,13 +51,16 @@ def positions(kb: Host, robot: str) -> dict[tuple[str, int], int]:
 
 def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             pending: int | None = None, head_arrival: float | None = None, *,
-            check: bool = True) -> int:
+            check: bool = True, after: list | None = None) -> int:
     """Store one shipment of ``robot`` in the fleet store ``kb``; returns the number of rows
     stored (rows already held are skipped). ``batches``: ``[(name, arity, rows)]`` with rows
     as :meth:`slr_sql.store.EventStore.fleet_read_after` gives them (or as :func:`prepare`
     gives a batch); ``marks``: ``{"p/1": t}`` (the robot's completeness marks, ``p/*`` for every arity); ``pending``,
     ``head_arrival``: what the robot still holds unshipped (for ``slr fleet status``).
     ``check=False`` skips checking the shipment's shape (rows this process read from a store).
+    ``after``: ``[(name, arity, position)]``, the positions the sender read the batches after
+    (what it was told the fleet store holds); a position the fleet store holds no longer
+    (restored or replaced since) raises :class:`FleetBehind` and stores nothing.
 
     A robot's mark is kept per robot; the fleet store's own mark of a type is the least mark
     of the robots it knows, once every one of them has marked it (a history of the fleet is
@@ -57,7 +75,16 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
     """
     store = kb.store
     if check:
-        _check_shipment(batches, marks)
+        check_robot_name(robot)   # (also for a shipment of marks or a contact alone)
+        _check_shipment(batches, marks, pending, head_arrival)
+        _check_after(after)
+    if store.robot is not None and store.robot == robot:
+        # the robot's own store (pushed into itself, or served and pushed to over the
+        # service), or another store shipping under this store's name: each event would be
+        # stored a second time
+        raise SLRError(f"this fleet store is the store of robot {robot!r} itself: a robot "
+                       "does not ship to its own store (name the fleet store otherwise, or "
+                       "leave it unnamed)")
     kb.loader.refresh()
     cep = kb.event_rule_engine
     store_events = None
@@ -69,6 +96,14 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             return errors
     stored = 0
     with store.transaction():
+        if after:
+            held = store.fleet_positions(robot)
+            for name, arity, position in after:
+                if held.get((name, arity), 0) < position:
+                    raise FleetBehind(
+                        f"the fleet store holds {name}/{arity} of robot {robot!r} up to seq "
+                        f"{held.get((name, arity), 0)}, not {position} as it did: it was "
+                        "restored or replaced; shipping again from what it holds")
         for batch in batches:
             name, arity, rows = batch[:3]
             if rows and type(rows[0]) is not tuple:
@@ -76,7 +111,11 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             columns = batch[3] if len(batch) > 3 else None   # (from prepare)
             stored += store.fleet_receive(robot, name, arity, rows, store_events, columns)
         if marks:
-            robots = store.robots()
+            # the robots the fleet knows: those it holds events of, those that made contact
+            # (a robot whose store has marks and no event yet counts from its first mark),
+            # and this one
+            robots = set(store.robots()) | {r["robot"] for r in store.fleet_contacts()}
+            robots.add(robot)
             for mk, t in marks.items():
                 store.meta_raise(f"{FLEET_MARK}{robot}/{mk}", float(t))
                 known = [store.meta_get(f"{FLEET_MARK}{r}/{mk}") for r in robots]
@@ -101,10 +140,16 @@ def prepare(kb: Host, robot: str, batch: tuple) -> tuple:
     return name, arity, rows, kb.store.fleet_column_values(arity, rows, robot)
 
 
-def _check_shipment(batches: Any, marks: Any) -> None:
-    """A shipment from the network is checked before anything is stored."""
+def _check_shipment(batches: Any, marks: Any, pending: Any = None,
+                    head_arrival: Any = None) -> None:
+    """A shipment from the network is checked before anything is stored: its rows go into
+    the columns as they come, so a row must be one a store could have written -- every
+    argument text a stored term (a text that starts as JSON and does not read as JSON would
+    make every later query over the type fail), every robot a robot's name -- and the marks
+    must name event types."""
     if not isinstance(batches, list):
         raise SLRError("a shipment's batches are a list of [name, arity, rows]")
+    robots: set = set()    # the robot names checked already
     for batch in batches:
         if not (isinstance(batch, (list, tuple)) and len(batch) == 3
                 and isinstance(batch[0], str) and type(batch[1]) is int and batch[1] >= 0
@@ -123,9 +168,70 @@ def _check_shipment(batches: Any, marks: Any) -> None:
                                "ascending")
             if not all(math.isfinite(v) for v in row[arity + 1:arity + 4] if v is not None):
                 raise SLRError(f"a shipped row of {name}/{arity} has a time that is not finite")
+            for i in range(1, arity + 1):
+                value = row[i]
+                if type(value) is str and not (value.isascii() and value[:1] not in _JSON):
+                    problem = _stored_term_problem(value)
+                    if problem is not None:
+                        raise SLRError(f"a shipped row of {name}/{arity}, seq {row[0]}: "
+                                       f"argument {i} is not a stored term ({problem})")
+            who = row[-1]
+            if who is not None and who not in robots:
+                try:
+                    robots.add(check_robot_name(who))
+                except SLRError as exc:
+                    raise SLRError(f"a shipped row of {name}/{arity}, seq {row[0]}: its robot "
+                                   f"column: {exc}") from None
             last = row[0]
     if marks is not None:
         if not isinstance(marks, dict) or not all(
-                isinstance(k, str) and type(v) in (int, float) and not math.isnan(v)
-                for k, v in marks.items()):
-            raise SLRError("a shipment's marks are {\"name/arity\": time}")
+                isinstance(k, str) and _names_a_type(k) and type(v) in (int, float)
+                and not math.isnan(v) for k, v in marks.items()):
+            raise SLRError("a shipment's marks are {\"name/arity\": time} (name/* for every "
+                           "arity)")
+    if pending is not None and (type(pending) is not int or pending < 0):
+        raise SLRError(f"a shipment's pending is a count of events (>= 0), not {pending!r}")
+    if head_arrival is not None and not (type(head_arrival) in (int, float)
+                                         and math.isfinite(head_arrival)):
+        raise SLRError(f"a shipment's head_arrival is a finite time, not {head_arrival!r}")
+
+
+def _check_after(after: Any) -> None:
+    if after is not None and not (isinstance(after, list) and all(
+            isinstance(a, (list, tuple)) and len(a) == 3 and isinstance(a[0], str)
+            and type(a[1]) is int and a[1] >= 0 and type(a[2]) is int and a[2] >= 0
+            for a in after)):
+        raise SLRError("a shipment's after is a list of [name, arity, position]")
+
+
+def _names_a_type(key: str) -> bool:
+    """``p/2`` or ``p/*``: what a completeness mark is kept under.
+
+    >>> _names_a_type("seen/2"), _names_a_type("a/b/*"), _names_a_type("seen"), _names_a_type("p/x")
+    (True, True, False, False)
+    """
+    _, slash, arity = key.rpartition("/")
+    return bool(slash) and (arity == "*" or (arity.isascii() and arity.isdigit()))
+
+
+def _stored_term_problem(value: Any) -> str | None:
+    """Why ``value`` (a shipped argument column) is not a term's stored form, or None.
+    Numbers and atom texts always are; a text that starts with ``[``, ``{`` or ``"`` must read
+    as the JSON of a term.
+
+    >>> _stored_term_problem('["a",1]'), _stored_term_problem("cup1")
+    (None, None)
+    >>> _stored_term_problem("[1,")
+    'it starts as JSON but does not read as a term'
+    """
+    if type(value) is not str:
+        return None
+    problem = text_problem(value)
+    if problem is not None:
+        return problem
+    if value[:1] in _JSON:
+        try:
+            decode(value)
+        except Exception:  # noqa: BLE001 - whatever the reader met, the text is no term
+            return "it starts as JSON but does not read as a term"
+    return None

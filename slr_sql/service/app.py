@@ -226,6 +226,24 @@ async def _disconnected(receive: Callable) -> None:
         pass
 
 
+async def _unless_the_client_leaves(request: Request, pending: Any) -> Any:
+    """The answer of ``pending`` (a synchronized query of this request, whose body was
+    read); when the client leaves first, the query is cancelled (nobody would read its
+    answer: a wait of up to max_wait would hold a task and a place of --max-connections)
+    and :class:`ClientDisconnect` raised."""
+    waiting = asyncio.wrap_future(pending)
+    leaving = asyncio.ensure_future(_disconnected(request.receive))
+    try:
+        await asyncio.wait({waiting, leaving}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        leaving.cancel()
+    if not waiting.done():
+        waiting.cancel()          # (cancels the query too)
+        pending.cancel()
+        raise ClientDisconnect()
+    return waiting.result()
+
+
 class _AnswerTexts:
     """The JSON text of each delivered answer, made once for every WebSocket subscriber that
     receives the same answer. The subscription hub computes the answers of one pattern,
@@ -760,7 +778,7 @@ async def _query(svc: "_Service", request: Request) -> Any:
         pending = await svc.call(svc.kb.submit, goal, at=at, args=args,
                                   timeout=_cap(timeout, svc.limits.max_wait),
                                   **({"robot": robot} if robot is not None else {}))
-        answers = await asyncio.wrap_future(pending)
+        answers = await _unless_the_client_leaves(request, pending)
     else:
         answers = await svc.call(svc.kb.query, goal, at=at, args=args, limit=limit,
                                   timeout=_cap(timeout, svc.limits.max_query_time),
@@ -957,15 +975,19 @@ async def _fleet_positions(svc: "_Service", request: Request) -> Any:
         "push): batches of [name, arity, rows], its marks, what it holds unshipped.",
         body={"robot": ("string", True), "batches": ("array", True),
               "marks": ("object", False), "pending": ("integer", False),
-              "head_arrival": ("Number", False)},
+              "head_arrival": ("Number", False), "after": ("array", False)},
         response={"stored": "integer"})
 async def _fleet_receive(svc: "_Service", request: Request) -> Any:
-    from slr_sql.shipping import receive
+    from slr_sql.shipping import FleetBehind, receive
     b = await svc.body(request)
     robot = _field(b, "robot", str, required=True)
-    stored = await svc.call(receive, svc.kb, robot, _field(b, "batches", list, required=True),
-                            _field(b, "marks", dict), _field(b, "pending", int),
-                            _number(b, "head_arrival"))
+    try:
+        stored = await svc.call(receive, svc.kb, robot,
+                                _field(b, "batches", list, required=True),
+                                _field(b, "marks", dict), _field(b, "pending", int),
+                                _number(b, "head_arrival"), after=_field(b, "after", list))
+    except FleetBehind as exc:   # the pusher asks the positions again (slr_sql.fleet)
+        raise ServiceError(str(exc), kind="Conflict") from None
     return {"stored": stored}
 
 

@@ -19,18 +19,46 @@ from __future__ import annotations
 
 import hmac
 
+from slr_sql.errors import SLRError
+
 from .errors import ServiceError
 
-__all__ = ["BearerToken"]
+__all__ = ["BearerToken", "check_token_text"]
 
 SCHEME = "bearer "
+
+
+def check_token_text(token: str) -> str:
+    """``token`` if an ``Authorization`` header can carry it whole: no control character (a
+    line break would end the header), no lone surrogate, no space at either end (the server
+    reads the header's value stripped); else an :class:`~slr_sql.SLRError` saying why (without
+    the token, which is a secret). A server given another token could never be reached, and
+    a client could never send it. Text beyond ASCII travels as its UTF-8 bytes.
+
+    >>> check_token_text("s3cret-clé")
+    's3cret-clé'
+    >>> check_token_text("tab" + chr(9) + "in it")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: a token cannot hold a control character (an HTTP header cannot carry it); this one holds '\\t'
+    """
+    bad = next((c for c in token if c < " " or "\x7f" <= c <= "\x9f"
+                or "\ud800" <= c <= "\udfff"), None)
+    if bad is not None:
+        kind = "a lone surrogate" if bad >= "\ud800" else "a control character"
+        raise SLRError(f"a token cannot hold {kind} (an HTTP header cannot carry it); this one "
+                       f"holds {bad!a}")
+    if token != token.strip():
+        raise SLRError("a token has no space at its start or end (the header's value is read "
+                       "without them)")
+    return token
 
 
 class BearerToken:
     """The check of one server's token; ``None`` (or empty): no check."""
 
     def __init__(self, token: str | None):
-        self._token = token.encode("utf-8", "surrogatepass") if token else None
+        self._token = check_token_text(token).encode("utf-8") if token else None
 
     @property
     def required(self) -> bool:
@@ -43,7 +71,14 @@ class BearerToken:
             return
         given = b""
         if header and header[:len(SCHEME)].lower() == SCHEME:
-            given = header[len(SCHEME):].strip().encode("utf-8", "surrogatepass")
+            text = header[len(SCHEME):].strip()
+            try:
+                # the server decodes a header's bytes as ISO-8859-1: these are the bytes the
+                # client sent, which hold a token beyond ASCII as UTF-8
+                text = text.encode("latin-1").decode("utf-8")
+            except UnicodeError:
+                pass        # (not bytes of UTF-8: compared as they are)
+            given = text.encode("utf-8", "surrogatepass")
         if not hmac.compare_digest(given, self._token):
             raise ServiceError("a valid token is required (Authorization: Bearer TOKEN; "
                                "the server's --token or SLR_TOKEN)", kind="Unauthorized")

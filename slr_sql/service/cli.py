@@ -17,6 +17,12 @@ import slr_sql
 
 __all__ = ["serve", "run_server", "is_loopback"]
 
+# Seconds the requests in flight get to finish after SIGINT/SIGTERM; then the server stops
+# anyway. A synchronized query may wait for an hour (max_wait) and a long-poll for 30 s:
+# without a bound they held the shutdown that long. Their clients see the connection close
+# (a condition that passes: they retry against the next server).
+SHUTDOWN_GRACE = 10.0
+
 # Net container allocations between two young collections while serving (Python's default
 # is 700): see prepare_collector_for_serving.
 SERVING_GC_THRESHOLD = 20_000
@@ -169,7 +175,8 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
                                 ws_max_size=limits.max_body, limit_concurrency=max_connections,
                                 timeout_keep_alive=30, ssl_keyfile=ssl_keyfile,
                                 ssl_certfile=ssl_certfile, server_header=False,
-                                ws_per_message_deflate=ws_compression)
+                                ws_per_message_deflate=ws_compression,
+                                timeout_graceful_shutdown=SHUTDOWN_GRACE)
         server = uvicorn.Server(config)
         bound_host, bound_port = sock.getsockname()[:2]
         shown = f"[{bound_host}]" if ":" in bound_host else bound_host

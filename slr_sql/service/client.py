@@ -26,6 +26,7 @@ Both this client and a local knowledge base implement :class:`slr_sql.KnowledgeB
 from __future__ import annotations
 
 import collections
+import functools
 import logging
 import os
 import threading
@@ -33,13 +34,14 @@ import time
 from concurrent.futures import Future, InvalidStateError
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
-from urllib.parse import quote
+from urllib.parse import quote, urlsplit
 
 from slr_sql import EventRejected, SLRError, SLRTimeout
 from slr_sql.api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 
 from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args,
                        encode_arguments, encode_term, loads)
+from .auth import check_token_text
 from .errors import ServiceError, error_from_body
 
 __all__ = ["connect", "RemoteKnowledgeBase", "RemotePendingQuery", "RemoteSubscription",
@@ -61,6 +63,62 @@ def connect(url: str, token: str | None = None, *, timeout: float = 60.0) -> "Re
     return RemoteKnowledgeBase(url, token=token, timeout=timeout)
 
 
+def _reads_answer(method: Callable) -> Callable:
+    """A client method that reads the server's answer: an answer that is not what slr serve
+    answers (another service at the URL, a proxy's page, another version) is a
+    :class:`ServiceError` saying so, never a KeyError or TypeError from reading it, and
+    never taken for a success (an add that stored nothing). Errors raised before the server
+    answered (the arguments) are left as they are."""
+    @functools.wraps(method)
+    def reading(self: "RemoteKnowledgeBase", *args: Any, **kwargs: Any) -> Any:
+        self._answered.path = None
+        try:
+            return method(self, *args, **kwargs)
+        except (KeyError, TypeError, ValueError, AttributeError, IndexError, TermError) as exc:
+            path = getattr(self._answered, "path", None)
+            if path is None:
+                raise
+            what = f"no {exc.args[0]!r}" if isinstance(exc, KeyError) and exc.args else \
+                str(exc).splitlines()[0] if str(exc) else "an unexpected shape"
+            raise ServiceError(f"{path}: the answer of {self.url} is not what slr serve answers "
+                               f"({what}); is the URL that of an slr serve of this version?",
+                               kind="InternalError", status=0) from None
+    return reading
+
+
+def _expect(reply: Any, key: str, kind: type | tuple) -> Any:
+    """``reply[key]`` when it is of ``kind`` (else the error :func:`_reads_answer` words)."""
+    value = reply[key]
+    if not isinstance(value, kind) or (isinstance(value, bool) and kind in (int, float)):
+        raise TypeError(f"{key!r} is {type(value).__name__}")
+    return value
+
+
+def _service_url(url: Any, httpx: Any) -> str:
+    """``url`` if it can name an ``slr serve`` (http:// or https://, a host, a port that is a
+    number from 0 to 65535), else an :class:`SLRError` saying what is wrong with it.
+
+    >>> import httpx; _service_url("http://127.0.0.1:8765", httpx)
+    'http://127.0.0.1:8765'
+    >>> _service_url("http://127.0.0.1:port", httpx)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: not a service URL (http://HOST:PORT or https://...): http://127.0.0.1:port (Port could not be cast to integer value as 'port')
+    """
+    shape = "not a service URL (http://HOST:PORT or https://...)"
+    if not isinstance(url, str) or not url.startswith(("http://", "https://")):
+        raise SLRError(f"{shape}: {url}")
+    try:
+        parts = urlsplit(url)
+        parts.port   # (raises for a port that is not a number in range)
+        httpx.URL(url)
+    except (ValueError, httpx.InvalidURL) as exc:
+        raise SLRError(f"{shape}: {url} ({exc})") from None
+    if not parts.hostname:
+        raise SLRError(f"{shape}: {url} (no host)")
+    return url
+
+
 class RemoteKnowledgeBase:
     """A knowledge base served by ``slr serve``; see :func:`connect`."""
 
@@ -70,22 +128,27 @@ class RemoteKnowledgeBase:
         except ImportError:  # pragma: no cover - the service extra is missing
             raise SLRError("slr_sql.connect needs the service extra: "
                            "pip install 'slr_sql[service]'") from None
-        if not url.startswith(("http://", "https://")):
-            raise SLRError(f"not a service URL (http://HOST:PORT or https://...): {url}")
-        self.url = url.rstrip("/")
+        self.url = _service_url(url, httpx).rstrip("/")
         if token is None:
             token = os.environ.get("SLR_TOKEN") or None
+        if token:
+            check_token_text(token)
         self._token = token
         self._headers = {"Content-Type": "application/json"}
         if token:
-            self._headers["Authorization"] = f"Bearer {token}"
+            # the header's bytes (a token beyond ASCII as UTF-8), each byte one character
+            # as HTTP libraries write a header's text (ISO-8859-1)
+            self._headers["Authorization"] = f"Bearer {token}".encode("utf-8").decode("latin-1")
         self.timeout = float(timeout)
         self._httpx = httpx
-        self._http = httpx.Client(base_url=self.url, headers=self._headers,
+        self._http = httpx.Client(base_url=self.url,
+                                  headers={k: v.encode("latin-1")
+                                           for k, v in self._headers.items()},
                                   timeout=httpx.Timeout(self.timeout, connect=10.0),
                                   limits=httpx.Limits(max_connections=None,
                                                       max_keepalive_connections=32))
         self._limits: dict | None = None
+        self._answered = threading.local()   # .path: the request the last answer was of
         self.subscribe_batch = 256        # answers per WebSocket frame at most (1..1000)
         self._pending: dict[RemotePendingQuery, None] = {}   # waiting, in submission order
         self._lock = threading.Lock()
@@ -125,6 +188,7 @@ class RemoteKnowledgeBase:
                 raise ServiceError(f"{method} {path}: the server's answer is not JSON "
                                    f"(HTTP {response.status_code})", kind="InternalError",
                                    status=response.status_code)
+            self._answered.path = f"{method} {path}"
             return response.status_code, data
         if data is None:
             text = response.text[:200].strip()
@@ -145,7 +209,8 @@ class RemoteKnowledgeBase:
     def limits(self) -> dict:
         """The server's limits (``GET /health``), fetched once."""
         if self._limits is None:
-            self._limits = self.health().get("limits", {})
+            limits = self.health().get("limits")
+            self._limits = limits if isinstance(limits, dict) else {}
         return self._limits
 
     def health(self) -> dict:
@@ -171,15 +236,19 @@ class RemoteKnowledgeBase:
         self.close()
 
     # -- events ---------------------------------------------------------------------------------
+    @_reads_answer
     def add(self, text: str) -> None:
         """Add one event written in SLR syntax (``p(..)^T`` or ``p(..)^[S,E]``)."""
-        self._post("/add", {"event": _text(text, "event")})
+        _expect(self._post("/add", {"event": _text(text, "event")}), "added", int)
 
+    @_reads_answer
     def add_event(self, name: str, args: Iterable[Any], start: float,
                   end: float | None = None) -> None:
         """Add one event from Python values (``str`` is an atom, ``String`` a string)."""
-        self._post("/add_event", _event_object(name, args, start, end, ""))
+        _expect(self._post("/add_event", _event_object(name, args, start, end, "")), "added",
+                int)
 
+    @_reads_answer
     def add_many(self, events: Iterable[Any], atomic: bool = False) -> list[EventRejected]:
         """Add many events (SLR strings or ``(name, args, start, end)`` tuples); returns the
         rejected ones, each with ``.index``. Batches larger than the server's body limit go in
@@ -217,8 +286,9 @@ class RemoteKnowledgeBase:
             return (self._send_events(items[:half], offset, atomic, budget)
                     + self._send_events(items[half:], offset + half, atomic, budget))
         reply = self._request("POST", "/add_many", content=body)[1]
+        _expect(reply, "accepted", int)
         out = []
-        for r in reply.get("rejected", []):
+        for r in _expect(reply, "rejected", list):
             exc = EventRejected(str(r.get("message", "")))
             index = r.get("index")
             exc.index = offset + present[index] if isinstance(index, int) and \
@@ -227,6 +297,7 @@ class RemoteKnowledgeBase:
         return out
 
     # -- program ----------------------------------------------------------------------------------
+    @_reads_answer
     def load(self, text: str, filename: str = "<string>", *, name: str = "main",
              replace: bool = False) -> None:
         """Add program text to the program ``name`` (all or nothing); ``replace=True`` swaps
@@ -236,7 +307,7 @@ class RemoteKnowledgeBase:
             body["filename"] = str(filename)
         if replace:
             body["replace"] = True
-        self._post("/load", body)
+        _expect(self._post("/load", body), "loaded", bool)
 
     def load_file(self, path: str | Path, *, name: str = "main",
                   replace: bool = False) -> None:
@@ -247,14 +318,17 @@ class RemoteKnowledgeBase:
             raise SLRError(f"cannot read {path}: {exc}") from None
         self.load(text, str(path), name=name, replace=replace)
 
+    @_reads_answer
     def unload(self, name: str) -> None:
         """Remove the program loaded under ``name``."""
-        self._post("/unload", {"name": name})
+        _expect(self._post("/unload", {"name": name}), "unloaded", str)
 
+    @_reads_answer
     def programs(self) -> dict[str, ProgramInfo]:
         """The named programs stored in the file, in load order of their first text."""
         out: dict[str, ProgramInfo] = {}
-        for name, info in decode_plain(self._get("/programs")["programs"]).items():
+        for name, info in decode_plain(_expect(self._get("/programs"), "programs",
+                                               dict)).items():
             try:
                 out[name] = ProgramInfo(str(info["name"]), str(info["source"]),
                                         int(info["texts"]), tuple(info["filenames"]),
@@ -264,9 +338,10 @@ class RemoteKnowledgeBase:
                                    kind="InternalError", status=0) from None
         return out
 
+    @_reads_answer
     def event_rules(self) -> list[dict[str, Any]]:
         """The event rules in force on the server, in the order they run."""
-        return decode_plain(self._get("/event_rules")["event_rules"])
+        return decode_plain(_expect(self._get("/event_rules"), "event_rules", list))
 
     def define(self, name: str, arity: int, fn: Callable) -> None:
         """Not available remotely: Python predicates must run in the server's process."""
@@ -275,6 +350,7 @@ class RemoteKnowledgeBase:
                            kind="NotImplemented")
 
     # -- queries --------------------------------------------------------------------------------
+    @_reads_answer
     def query(self, goal: str, at: float | None = None, args: dict | None = None,
               timeout: float | None = None, max_steps: int | None = None,
               limit: int | None = None, wait: bool = False,
@@ -291,24 +367,37 @@ class RemoteKnowledgeBase:
         if robot is not None:
             body["robot"] = robot
         reply = self._post("/query", body, timeout=self._read_timeout(timeout))
-        return decode_answers(reply["answers"])
+        return decode_answers(_expect(reply, "answers", list))
 
     # -- fleets (slr fleet push / status to an `slr serve` fleet store) -------------------------
+    @_reads_answer
     def fleet_positions(self, robot: str) -> dict[tuple[str, int], int]:
         """Per event type, the last sequence of ``robot``'s store the server's store holds."""
         reply = self._request("GET", "/fleet/positions", params={"robot": robot})[1]
-        return {(str(n), int(a)): int(p) for n, a, p in reply["positions"]}
+        return {(str(n), int(a)): int(p) for n, a, p in _expect(reply, "positions", list)}
 
+    @_reads_answer
     def fleet_receive(self, robot: str, batches: list, marks: dict | None = None,
-                      pending: int | None = None, head_arrival: float | None = None) -> int:
+                      pending: int | None = None, head_arrival: float | None = None,
+                      after: dict | None = None) -> int:
         """Send one shipment of ``robot`` (see :func:`slr_sql.shipping.receive`); returns
         the rows the server stored. Rows go in requests of at most FLEET_ROWS (each stored
-        exactly once with its position), within the server's body limit."""
+        exactly once with its position), within the server's body limit. ``after``:
+        ``{(name, arity): position}``, the positions the batches were read after (a
+        ``Conflict`` error when the server's store holds less: restored or replaced)."""
         stored = 0
-        pieces: list[list] = [[[n, a, rows[i:i + FLEET_ROWS]]] for n, a, rows in batches
-                              for i in range(0, max(len(rows), 1), FLEET_ROWS)] or [[]]
-        for k, piece in enumerate(pieces):
+        # (piece, the position its rows were read after: the previous piece's last seq)
+        pieces: list[tuple[list, list | None]] = []
+        for n, a, rows in batches:
+            for i in range(0, max(len(rows), 1), FLEET_ROWS):
+                since = None if after is None else                     after.get((n, a), 0) if i == 0 else rows[i - 1][0]
+                pieces.append(([[n, a, rows[i:i + FLEET_ROWS]]],
+                               None if since is None else [[n, a, since]]))
+        pieces = pieces or [([], None)]     # (a contact with marks alone: one request)
+        for k, (piece, piece_after) in enumerate(pieces):
             body: dict[str, Any] = {"robot": robot, "batches": piece}
+            if piece_after is not None:
+                body["after"] = piece_after
             if k == len(pieces) - 1:
                 if marks:
                     body["marks"] = marks
@@ -316,13 +405,15 @@ class RemoteKnowledgeBase:
                     body["pending"] = pending
                 if head_arrival is not None:
                     body["head_arrival"] = head_arrival
-            stored += int(self._post("/fleet/receive", body)["stored"])
+            stored += _expect(self._post("/fleet/receive", body), "stored", int)
         return stored
 
+    @_reads_answer
     def fleet_status(self) -> list[dict[str, Any]]:
         """Per robot that shipped to the server's store: its contact row."""
-        return list(self._get("/fleet/status")["robots"])
+        return [dict(r) for r in _expect(self._get("/fleet/status"), "robots", list)]
 
+    @_reads_answer
     def submit(self, goal: str, at: float | None = None, id: str | None = None,
                args: dict | None = None, timeout: float | None = None,
                callback: Callable[[Any], Any] | None = None,
@@ -334,7 +425,8 @@ class RemoteKnowledgeBase:
         if robot is not None:
             body["robot"] = robot
         status, reply = self._request("POST", "/submit", body, ok=(200, 202))
-        pending = RemotePendingQuery(self, reply["handle"], reply.get("id"), goal, at)
+        pending = RemotePendingQuery(self, _expect(reply, "handle", str), reply.get("id"),
+                                     goal, at)
         if callback is not None:
             pending.add_done_callback(callback)
         pending._settle(status, reply)
@@ -354,9 +446,10 @@ class RemoteKnowledgeBase:
         assert isinstance(pending, Future)   # a PendingQueryAPI here is a Future
         return await asyncio.wrap_future(pending)
 
+    @_reads_answer
     def explain(self, goal: str) -> str:
         """How ``goal`` would run on the server: which engine, and why."""
-        return self._post("/explain", {"goal": _text(goal, "goal")})["explain"]
+        return _expect(self._post("/explain", {"goal": _text(goal, "goal")}), "explain", str)
 
     def solutions(self, goal: str, at: float | None = None, args: dict | None = None,
                   timeout: float | None = None,
@@ -367,10 +460,12 @@ class RemoteKnowledgeBase:
         ``max_query_time``) or ``query(..., limit=N)``."""
         yield from self.query(goal, at=at, args=args, timeout=timeout, robot=robot)
 
+    @_reads_answer
     def goal_warnings(self, goal: str) -> list[str]:
         """The server's warnings about ``goal`` that do not change its answer (likely typos:
         see ``KnowledgeBase.goal_warnings``)."""
-        return list(self._post("/warnings", {"goal": _text(goal, "goal")})["warnings"])
+        return list(_expect(self._post("/warnings", {"goal": _text(goal, "goal")}),
+                            "warnings", list))
 
     def pending(self) -> list[PendingQueryAPI]:
         """The synchronized queries this client submitted that are still waiting (each
@@ -378,15 +473,19 @@ class RemoteKnowledgeBase:
         with self._lock:
             return [p for p in self._pending if not p.done()]
 
+    @_reads_answer
     def mark_complete(self, event_type: str, t: float) -> None:
         """Declare the history of ``"p/N"`` complete up to ``t``."""
-        self._post("/mark_complete", {"type": event_type, "time": _number(t, "t")})
+        _expect(self._post("/mark_complete", {"type": event_type, "time": _number(t, "t")}),
+                "type", str)
 
+    @_reads_answer
     def complete_until(self, event_type: str) -> float:
         """The time up to which the history of ``"p/N"`` is complete now."""
         return float(decode_plain(self._get("/complete_until", {"type": event_type})["time"]))
 
     # -- buffers --------------------------------------------------------------------------------
+    @_reads_answer
     def add_buffer(self, pattern: str, *, keep_last: int | None = None,
                    keep_seconds: float | None = None,
                    keep_between: tuple[float, float] | None = None) -> int:
@@ -400,15 +499,17 @@ class RemoteKnowledgeBase:
         if keep_between is not None:
             t1, t2 = keep_between
             body["keep_between"] = [_number(t1, "keep_between"), _number(t2, "keep_between")]
-        return int(self._post("/buffers", body)["id"])
+        return _expect(self._post("/buffers", body), "id", int)
 
+    @_reads_answer
     def remove_buffer(self, buffer_id: int) -> None:
         """Remove a runtime buffer (the events it kept stay)."""
-        self._request("DELETE", f"/buffers/{int(buffer_id)}")
+        _expect(self._request("DELETE", f"/buffers/{int(buffer_id)}")[1], "removed", int)
 
+    @_reads_answer
     def buffers(self) -> list:
         """The active buffers with their counters (``BufferInfo`` objects)."""
-        infos = decode_plain(self._get("/buffers")["buffers"])
+        infos = decode_plain(_expect(self._get("/buffers"), "buffers", list))
         try:
             from slr_sql.buffers import BufferInfo
         except ImportError:  # pragma: no cover
@@ -426,6 +527,7 @@ class RemoteKnowledgeBase:
         return out
 
     # -- SQL and stats --------------------------------------------------------------------------
+    @_reads_answer
     def sql(self, query: str, params: Iterable[Any] = (), write: bool = False,
             timeout: float | None = None) -> tuple[list[str], list[tuple]]:
         """Run one read-only SQL statement on the server's store: (column names, rows).
@@ -441,12 +543,16 @@ class RemoteKnowledgeBase:
             body["timeout"] = _number(timeout, "timeout")
         reply = self._post("/sql", body, timeout=self._read_timeout(
             timeout if isinstance(timeout, (int, float)) else None))
-        return list(reply["columns"]), [tuple(row) for row in decode_plain(reply["rows"])]
+        return (list(_expect(reply, "columns", list)),
+                [tuple(row) for row in decode_plain(_expect(reply, "rows", list))])
 
+    @_reads_answer
     def stats(self) -> dict:
         """File size, events per type, buffers and counters; ``["text"]`` is what
         ``slr stats`` prints."""
-        return decode_plain(self._get("/stats"))
+        reply = self._get("/stats")
+        _expect(reply, "text", str)
+        return decode_plain(reply)
 
     def plot(self, types: Iterable[str] | str | None = None, **options: Any) -> Any:
         """A timeline of the server's event histories as a matplotlib Figure (read through
@@ -758,7 +864,12 @@ class RemoteSubscription:
             self._done = True
             raise ServiceError(f"the subscription's connection closed: {exc}",
                                kind="Unavailable", status=0) from None
-        message = loads(data)
+        try:
+            message = loads(data)
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise ServiceError(f"the server sent a message that is not JSON ({exc}): is the "
+                               "URL that of an slr serve?", kind="InternalError",
+                               status=0) from None
         if not isinstance(message, dict):
             raise ServiceError("the server sent a message that is not an object",
                                kind="InternalError", status=0)

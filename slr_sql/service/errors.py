@@ -27,7 +27,7 @@ __all__ = ["ServiceError", "error_body", "error_status", "error_from_body", "ret
 # kind of a ServiceError -> its HTTP status
 STATUS_KINDS = {
     "BadRequest": 400, "Unauthorized": 401, "NotFound": 404, "MethodNotAllowed": 405,
-    "RequestTimeout": 408, "PayloadTooLarge": 413, "InternalError": 500,
+    "RequestTimeout": 408, "Conflict": 409, "PayloadTooLarge": 413, "InternalError": 500,
     "NotImplemented": 501, "Unavailable": 503,
 }
 

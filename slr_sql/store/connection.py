@@ -87,9 +87,10 @@ def check_file(path: str, adopt: bool = False) -> bool:
     is new (no file yet, an empty file, or an SQLite file with nothing in it), False for an
     existing store (or, with ``adopt``, a foreign SQLite file to take over).
 
-    Refused: a directory, a path in a missing directory, a file that is not SQLite, a
-    truncated or damaged file, a store written by a newer slr_sql, and an SQLite file with
-    tables that is not a store (unless ``adopt``). The file is read only through its header
+    Refused: an empty path (SQLite would make it a temporary file, gone on close), a
+    directory, a path in a missing directory, a file that is not SQLite, a truncated or
+    damaged file, a store written by a newer slr_sql, and an SQLite file with tables that is
+    not a store (unless ``adopt``). The file is read only through its header
     and a read-only connection, so a refused file keeps every byte and its mtime.
 
     >>> import tempfile; folder = tempfile.mkdtemp()
@@ -100,6 +101,9 @@ def check_file(path: str, adopt: bool = False) -> bool:
     ...
     slr_sql.errors.SLRError: ...: is a directory, not a store file
     """
+    if path == "":   # (SQLite makes "" a private temporary file, deleted on close)
+        raise SLRError("a store's path is empty: give a file name (or no path for a store "
+                       "in memory)")
     if os.path.isdir(path):
         raise SLRError(f"{path}: is a directory, not a store file")
     folder = os.path.dirname(os.path.abspath(path))

@@ -68,7 +68,10 @@ def split_url(url: str) -> tuple[str, str]:
     >>> split_url("postgresql://u@h:5432/db")[1]
     'slr'
     """
-    parts = urlsplit(url)
+    try:
+        parts = urlsplit(url)
+    except ValueError as exc:       # a bracket of an IPv6 address missing, ...
+        raise SLRError(f"{_shown(url)}: not a PostgreSQL URL ({exc})") from None
     query = parse_qsl(parts.query, keep_blank_values=True)
     schema = "slr"
     kept = []

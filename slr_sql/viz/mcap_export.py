@@ -103,6 +103,7 @@ def export_mcap(store: Any, path: str | Path, start: float | None = None,
     ``start <= end time <= end`` of the chosen ``types`` (all by default) to ``path``."""
     writer_module = _writer_module()
     keys = select_types(store.event_types(), types)
+    _check_overwrite(store, path)
     report = ExportReport(str(path))
     with open(path, "wb") as out:
         writer = writer_module.Writer(out, compression=writer_module.CompressionType.ZSTD)
@@ -166,6 +167,37 @@ def export_mcap(store: Any, path: str | Path, start: float | None = None,
         writer.finish()
         report.messages = count
     return report
+
+
+SQLITE_MAGIC = b"SQLite format 3\x00"
+
+
+def _check_overwrite(store: Any, path: str | Path) -> None:
+    """Refuse (SLRError) to write the MCAP over the store being exported (its file, or the
+    file's WAL or journal; opening it for writing truncates the store) or over any other
+    SQLite database (another store, named where an export was not meant to go)."""
+    import os
+
+    target = Path(path)
+    if not target.exists():
+        return
+    own = getattr(store, "path", None)
+    if own is not None and "://" not in str(own):
+        for suffix in ("", "-wal", "-shm", "-journal"):
+            try:
+                if os.path.samefile(str(own) + suffix, target):
+                    raise SLRError(f"{path} is the store being exported ({own}) itself: "
+                                   "writing the export there would destroy the store")
+            except OSError:      # (that file does not exist)
+                continue
+    try:
+        with open(target, "rb") as existing:
+            head = existing.read(len(SQLITE_MAGIC))
+    except OSError:
+        return                   # (unreadable: writing it says why)
+    if head == SQLITE_MAGIC:
+        raise SLRError(f"{path} is an SQLite database (a store?), not an export: an export is "
+                       "an MCAP file; remove the file first or choose another name")
 
 
 def is_slr_export(path: str | Path) -> bool:

@@ -1,0 +1,239 @@
+"""Mistyped service URLs and tokens (adversarial review of ``slr_sql.connect`` and the CLI).
+
+A URL whose port is not a number, or an IPv6 address missing its bracket, reached the user as
+httpx's ``InvalidURL`` (the CLI called it "a bug in slr_sql"). A token beyond ASCII, which the
+server takes (compared as UTF-8), reached the user of the client as a ``UnicodeEncodeError``
+and could not be sent by curl either (the server read its UTF-8 bytes as ISO-8859-1); a token
+that no header can carry (a line break, a control character) reached the user as "cannot
+reach slr serve" -- an Unavailable error, which says retry, for a condition that never
+passes -- and a server given one could never be used.
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import httpx
+import pytest
+from service_helpers import ServiceProcess, slr_env
+
+import slr_sql
+from slr_sql import SLRError
+from slr_sql.service.errors import ServiceError
+
+BAD_URLS = ["http://127.0.0.1:port", "http://[::1", "http://127.0.0.1:99999999999"]
+BAD_TOKENS = ["a\nb", "a\x00b", " padded ", "tab\there", "a\x85b"]
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    with ServiceProcess(tmp_path_factory.mktemp("rt11client") / "s.db", "--token", "s3cret") as s:
+        yield s
+
+
+@pytest.mark.parametrize("url", BAD_URLS)
+def test_a_malformed_url_is_an_slr_error_saying_so(url):
+    with pytest.raises(SLRError) as caught:
+        with slr_sql.connect(url) as kb:
+            kb.query("X = 1")
+    assert not (isinstance(caught.value, ServiceError) and caught.value.kind == "Unavailable")
+    assert "URL" in str(caught.value) and url in str(caught.value)
+
+
+@pytest.mark.parametrize("url", BAD_URLS)
+def test_the_cli_says_what_is_wrong_with_a_malformed_url(url):
+    done = subprocess.run([sys.executable, "-m", "slr_sql", "query", url, "X = 1"],
+                          capture_output=True, text=True, env=slr_env(), timeout=60)
+    assert done.returncode == 1
+    assert done.stderr.startswith("error: ") and "URL" in done.stderr
+    assert "bug" not in done.stderr and "InvalidURL" not in done.stderr
+
+
+@pytest.mark.parametrize("token", BAD_TOKENS)
+def test_a_token_that_cannot_travel_in_a_header_is_refused_by_the_client(server, token):
+    with pytest.raises(SLRError, match="token") as caught:
+        with slr_sql.connect(server.url, token=token) as kb:
+            kb.query("X = 1")
+    assert not isinstance(caught.value, ServiceError) or caught.value.kind != "Unavailable"
+    assert server.healthy()
+    with slr_sql.connect(server.url, token="s3cret") as kb:   # the right one still works
+        assert kb.query("X = 1") == [{"X": 1}]
+
+
+@pytest.mark.parametrize("token", ["line\nbreak", " padded "])
+def test_slr_serve_refuses_a_token_no_client_could_send(tmp_path, token):
+    done = subprocess.run([sys.executable, "-m", "slr_sql", "serve", str(tmp_path / "t.db"),
+                           "--port", "0", "--token", token],
+                          capture_output=True, text=True, env=slr_env(), timeout=60)
+    assert done.returncode == 1
+    assert done.stderr.startswith("error: ") and "token" in done.stderr
+    assert "Traceback" not in done.stderr
+
+
+def test_a_token_beyond_ascii_works_from_the_client_curl_and_a_websocket(tmp_path):
+    token = "clé-ü€"
+    with ServiceProcess(tmp_path / "u.db", "--token", token) as served:
+        with slr_sql.connect(served.url, token=token) as kb:
+            kb.add("seen(a)^1")
+            assert kb.query("seen(X)^T") == [{"X": slr_sql.Atom("a"), "T": 1.0}]
+            with kb.subscribe("seen(X)^T", since=0) as sub:
+                assert next(iter(sub))["X"] == slr_sql.Atom("a")
+        with slr_sql.connect(served.url, token="cle-u€") as kb:
+            with pytest.raises(ServiceError, match="valid token"):
+                kb.query("X = 1")
+        # what curl sends for --header "Authorization: Bearer clé-ü€" in a UTF-8 shell
+        answer = httpx.post(served.url + "/query", json={"goal": "X = 1"}, timeout=30,
+                            headers={"Authorization": f"Bearer {token}".encode("utf-8")})
+        assert answer.json() == {"answers": [{"X": 1}]}
+
+
+# -- a URL that answers, but is no slr serve ----------------------------------------------------
+
+@pytest.fixture(params=["{}", '{"answers": 5, "programs": [1], "buffers": {"a": 1}, '
+                              '"stored": "x", "positions": [[1]], "robots": 3, "columns": 1, '
+                              '"rows": 2, "event_rules": 1, "warnings": 1, "explain": 3, '
+                              '"id": "x", "handle": 5, "done": true, "time": "x", '
+                              '"added": "yes", "accepted": "all", "rejected": 7}'],
+                ids=["empty-object", "wrong-types"])
+def not_slr_serve(request):
+    """Another HTTP service (or a proxy) that answers every request 200 with this JSON."""
+    import threading
+    from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+    body = request.param.encode()
+
+    class Handler(BaseHTTPRequestHandler):
+        def answer(self) -> None:
+            self.rfile.read(int(self.headers.get("content-length") or 0))
+            self.send_response(200)
+            self.send_header("Content-Type", "application/json")
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        do_GET = do_POST = do_DELETE = answer
+
+        def log_message(self, *args) -> None:
+            pass
+
+    server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    yield f"http://127.0.0.1:{server.server_address[1]}"
+    server.shutdown()
+    server.server_close()
+    thread.join()
+
+
+CALLS = {
+    "add": lambda kb: kb.add("p(1)^1"),
+    "add_event": lambda kb: kb.add_event("p", [1], start=1.0),
+    "add_many": lambda kb: kb.add_many(["p(1)^1"]),
+    "load": lambda kb: kb.load("q(1)."),
+    "unload": lambda kb: kb.unload("main"),
+    "query": lambda kb: kb.query("X = 1"),
+    "programs": lambda kb: kb.programs(),
+    "event_rules": lambda kb: kb.event_rules(),
+    "buffers": lambda kb: kb.buffers(),
+    "add_buffer": lambda kb: kb.add_buffer("p(_)", keep_last=1),
+    "explain": lambda kb: kb.explain("X = 1"),
+    "goal_warnings": lambda kb: kb.goal_warnings("p(X)"),
+    "sql": lambda kb: kb.sql("SELECT 1"),
+    "complete_until": lambda kb: kb.complete_until("p/1"),
+    "mark_complete": lambda kb: kb.mark_complete("p/1", 5.0),
+    "submit": lambda kb: kb.submit("X = 1").result(timeout=10),
+    "fleet_positions": lambda kb: kb.fleet_positions("r1"),
+    "fleet_receive": lambda kb: kb.fleet_receive("r1", [("p", 1, [(1, "a", 1.0, 1.0, 1.0, None)])]),
+    "fleet_status": lambda kb: kb.fleet_status(),
+    "stats": lambda kb: kb.stats(),
+    "remove_buffer": lambda kb: kb.remove_buffer(1),
+}
+
+
+@pytest.mark.parametrize("call", sorted(CALLS))
+def test_an_answer_that_is_not_slr_serves_is_an_slr_error_never_a_success(not_slr_serve, call):
+    with slr_sql.connect(not_slr_serve) as kb:
+        with pytest.raises(SLRError, match="not what slr serve answers"):
+            CALLS[call](kb)
+
+
+@pytest.mark.parametrize("first", ["not json", b"\xff\xfe", "[]", '{"type": "answer"}'])
+def test_a_websocket_peer_that_is_not_slr_serve_is_an_slr_error(first):
+    import threading
+
+    from websockets.sync.server import serve
+
+    def handler(ws) -> None:
+        ws.recv()
+        ws.send(first)
+
+    with serve(handler, "127.0.0.1", 0) as peer:
+        thread = threading.Thread(target=peer.serve_forever, daemon=True)
+        thread.start()
+        url = f"http://127.0.0.1:{peer.socket.getsockname()[1]}"
+        try:
+            with slr_sql.connect(url) as kb:
+                with pytest.raises(ServiceError, match="server sent|unexpected first"):
+                    with kb.subscribe("p(X)^T", since=0) as sub:
+                        list(sub)
+        finally:
+            peer.shutdown()
+            thread.join()
+
+
+def test_sigterm_stops_a_server_whose_synchronized_query_still_waits(tmp_path):
+    """A synchronized query that waits (for an hour: max_wait) held slr serve's graceful
+    shutdown for as long: SIGTERM did not stop it. Requests in flight now get a grace period
+    (SHUTDOWN_GRACE), then the server stops and closes the store."""
+    import signal
+    import threading
+
+    from slr_sql.service.cli import SHUTDOWN_GRACE
+
+    served = ServiceProcess(tmp_path / "w.db")
+    outcome: list = []
+
+    def wait_long() -> None:
+        try:
+            outcome.append(httpx.post(served.url + "/query", timeout=120, json={
+                "goal": "zz(X)^T", "at": 1e15, "wait": True, "timeout": 3000}).status_code)
+        except httpx.HTTPError as exc:
+            outcome.append(type(exc).__name__)
+
+    waiter = threading.Thread(target=wait_long)
+    waiter.start()
+    try:
+        for _ in range(3):      # the waiting request is read and dispatched before these
+            assert served.healthy()
+        served.proc.send_signal(signal.SIGTERM)
+        assert served.proc.wait(timeout=SHUTDOWN_GRACE + 30) == 0
+    finally:
+        served.stop()
+        waiter.join(timeout=60)
+    assert outcome and outcome[0] != 200, outcome
+
+
+def test_a_client_that_leaves_a_synchronized_query_frees_its_place(tmp_path):
+    """A client that leaves while its synchronized query (/query wait=true) waits: the
+    server kept waiting for it (up to max_wait, an hour), holding a place of
+    --max-connections, so that a few such clients made it answer 503 to everyone. The query
+    is now cancelled when its client leaves."""
+    import time
+
+    with ServiceProcess(tmp_path / "l.db", "--max-connections", "2") as served:
+        for _ in range(3):
+            try:                                     # the client gives up and leaves
+                refused = httpx.post(served.url + "/query", timeout=0.5, json={
+                    "goal": "zz(X)^T", "at": 1e15, "wait": True, "timeout": 3000})
+            except httpx.HTTPError:
+                continue
+            assert refused.status_code == 503        # (both places taken already)
+        deadline = time.monotonic() + 30
+        while True:
+            answer = httpx.post(served.url + "/query", json={"goal": "X = 1"}, timeout=30)
+            if answer.status_code == 200:
+                break
+            assert answer.status_code == 503
+            assert time.monotonic() < deadline, "the waits of clients gone hold the server"
+            time.sleep(0.05)
+        assert answer.json() == {"answers": [{"X": 1}]}
