@@ -184,13 +184,13 @@ def test_a_websocket_peer_that_is_not_slr_serve_is_an_slr_error(first):
 def test_sigterm_stops_a_server_whose_synchronized_query_still_waits(tmp_path):
     """A synchronized query that waits (for an hour: max_wait) held slr serve's graceful
     shutdown for as long: SIGTERM did not stop it. Requests in flight now get a grace period
-    (SHUTDOWN_GRACE), then the server stops and closes the store."""
+    (``--shutdown-grace``, 10 s by default; 0.5 s here), then the server stops and closes the
+    store."""
     import signal
     import threading
 
-    from slr_sql.service.cli import SHUTDOWN_GRACE
-
-    served = ServiceProcess(tmp_path / "w.db")
+    grace = 0.5
+    served = ServiceProcess(tmp_path / "w.db", "--shutdown-grace", str(grace))
     outcome: list = []
 
     def wait_long() -> None:
@@ -206,7 +206,7 @@ def test_sigterm_stops_a_server_whose_synchronized_query_still_waits(tmp_path):
         for _ in range(3):      # the waiting request is read and dispatched before these
             assert served.healthy()
         served.proc.send_signal(signal.SIGTERM)
-        assert served.proc.wait(timeout=SHUTDOWN_GRACE + 30) == 0
+        assert served.proc.wait(timeout=grace + 30) == 0
     finally:
         served.stop()
         waiter.join(timeout=60)

@@ -124,7 +124,8 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
                *, limits: Any = None, max_connections: int | None = 1000,
                ssl_keyfile: str | None = None, ssl_certfile: str | None = None,
                log_level: str = "warning", ws_compression: bool = False,
-               cache_mib: float | None = None, foxglove: tuple[str, int] | None = None) -> None:
+               cache_mib: float | None = None, foxglove: tuple[str, int] | None = None,
+               shutdown_grace: float = SHUTDOWN_GRACE) -> None:
     """Open ``db`` and serve it until SIGINT/SIGTERM; then close it.
 
     Refuses (SLRError) to listen on a non-loopback address without a token. Prints
@@ -134,7 +135,9 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
     the store's SQLite page cache (default 64 MiB), the part of the server's memory that
     grows with the store until it is full. ``foxglove``: ``(host, port)`` of a live Foxglove
     view of the store beside the service (:mod:`slr_sql.viz.foxglove_live`; it has no token:
-    keep it on loopback unless the network is yours).
+    keep it on loopback unless the network is yours). ``shutdown_grace``: seconds the
+    requests in flight get after SIGINT/SIGTERM (a synchronized query may wait for an hour)
+    before the server stops anyway.
     """
     token = token or None
     if token is None and not is_loopback(host):
@@ -176,7 +179,7 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
                                 timeout_keep_alive=30, ssl_keyfile=ssl_keyfile,
                                 ssl_certfile=ssl_certfile, server_header=False,
                                 ws_per_message_deflate=ws_compression,
-                                timeout_graceful_shutdown=SHUTDOWN_GRACE)
+                                timeout_graceful_shutdown=shutdown_grace)
         server = uvicorn.Server(config)
         bound_host, bound_port = sock.getsockname()[:2]
         shown = f"[{bound_host}]" if ":" in bound_host else bound_host
@@ -230,10 +233,15 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
               help="Address of the Foxglove view (it has no token).")
 @click.option("--foxglove-port", default=8766, type=click.IntRange(0, 65535), show_default=True,
               help="Port of the Foxglove view.")
+@click.option("--shutdown-grace", default=SHUTDOWN_GRACE, type=click.FloatRange(0.0),
+              show_default=True, metavar="SECONDS",
+              help="On SIGINT/SIGTERM, how long requests in flight (a waiting synchronized "
+                   "query) may finish before the server stops.")
 def serve(db: str, host: str, port: int, token: str | None, max_body: int,
           max_query_time: float, max_wait: float, max_connections: int,
           ssl_keyfile: str | None, ssl_certfile: str | None, ws_compression: bool,
-          cache_mib: float, foxglove: bool, foxglove_host: str, foxglove_port: int) -> None:
+          cache_mib: float, foxglove: bool, foxglove_host: str, foxglove_port: int,
+          shutdown_grace: float) -> None:
     """Serve DB to other processes over HTTP/JSON and WebSocket (docs/service.md).
 
     Clients: slr_sql.connect(URL, token=...) or any slr command with the URL in place of DB.
@@ -247,5 +255,6 @@ def serve(db: str, host: str, port: int, token: str | None, max_body: int,
     run_server(db, host, port, token, limits=limits, max_connections=max_connections,
                ssl_keyfile=ssl_keyfile, ssl_certfile=ssl_certfile,
                ws_compression=ws_compression, cache_mib=cache_mib,
-               foxglove=(foxglove_host, foxglove_port) if foxglove else None)
+               foxglove=(foxglove_host, foxglove_port) if foxglove else None,
+               shutdown_grace=shutdown_grace)
     sys.stdout.flush()
