@@ -859,6 +859,7 @@ def decode_answer(value: Any) -> Any:
 # too: the store never writes one (repr gives 17 at most), and the json module reads it
 # exactly as well -- so the check is one plain search, the fastest.
 _NINETEEN_DIGITS = re.compile("[0-9]{19}")
+_DECIMAL_INTEGER = re.compile(r"-?[0-9]+\Z")   # the digits of {"$int": ...}
 
 
 def orjson_reads_exactly(text: str) -> bool:
@@ -926,5 +927,7 @@ def term_from_json(data: Any) -> Any:
             if key == "$atom":
                 return NIL if val == "[]" else Atom(val)
             if key == "$int":
+                if not _DECIMAL_INTEGER.match(val):   # (int() would take "1_000", " 7 ")
+                    raise ValueError(f'{{"$int": {json.dumps(val)}}}: $int must be decimal digits')
                 return int(val)
     raise ValueError(f"not a stored term encoding: {data!r}")

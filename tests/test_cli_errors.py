@@ -94,6 +94,18 @@ def test_ingest_keeps_every_good_line_and_numbers_the_bad_ones_exactly(db, tmp_p
     assert "UTF-8" in reasons["14"]
 
 
+@pytest.mark.parametrize("digits", ["1e5", "1_000", " 7", "0x10", ""])
+def test_ingest_a_big_integer_that_is_not_decimal_digits_says_so(db, tmp_path, digits):
+    path, _ = ingest_lines(tmp_path, [json.dumps({"name": "p", "args": [{"$int": digits}],
+                                                  "time": 1.0}),
+                                      json.dumps({"name": "p", "args": [{"$int": "-12"}],
+                                                  "time": 2.0})])
+    r = slr("ingest", db, str(path))
+    assert f'bad argument: {{"$int": {json.dumps(digits)}}}: $int must be decimal digits' \
+        in fails_in_words(r)
+    assert "ingested 1 event" in r.stdout and "int()" not in r.stderr
+
+
 def test_ingest_a_binary_file_reports_bad_lines_without_a_traceback(db, tmp_path):
     path = tmp_path / "noise.bin"
     path.write_bytes(random.Random(11).randbytes(4000))
