@@ -308,12 +308,16 @@ class _Pusher:
         # (psycopg, sqlite3 and the network wait without the GIL) while this thread reads
         # batch k + 1 from the robot's store. One batch queued, one in flight.
         sender: _Sender | None = None
+        emptied = []     # types shipped again that the robot holds no row of
         try:
             for name, arity in keys:
                 position = 0 if (name, arity) in again else positions.get((name, arity), 0)
                 while not stop.is_set():
                     rows = self.store.fleet_read_after(name, arity, position, self.batch)
                     if not rows:
+                        if position == 0 and (name, arity) in again \
+                                and positions.get((name, arity), 0) > 0:
+                            emptied.append((name, arity))
                         break
                     if held is not None:
                         if sender is None:
@@ -329,6 +333,11 @@ class _Pusher:
                         break
             if sender is not None:
                 sender.finish()
+            for key in emptied:
+                # the fleet's position goes back to 0, or the next push would take it for
+                # a restore again
+                target.receive(self.robot, [(*key, [])], None, None, None, None, [key])
+                positions[key] = 0
         finally:
             if sender is not None:
                 sender.abandon()

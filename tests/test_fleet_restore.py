@@ -188,3 +188,66 @@ def test_a_buffer_that_empties_a_table_is_not_taken_for_a_restore(tmp_path):
     add(db, events("b", 11, 2), 200.0)
     assert fleet.push(str(db), str(fleet_db)).shipped == 2
     assert sum(fleet_events(fleet_db).values()) == 8
+
+
+def answers(where: str) -> Counter:
+    """The events of a store (any backend) as (name, args..., start, end), counted."""
+    with slr_sql.open(where, clock=slr_sql.ManualClock(1000.0)) as kb:
+        out: Counter = Counter()
+        for a in kb.query("seen(X)^T"):
+            out[("seen", str(a["X"]), a["T"], a["T"])] += 1
+        for a in kb.query("moved(X, Y)^T"):
+            out[("moved", str(a["X"]), str(a["Y"]), a["T"], a["T"])] += 1
+        return out
+
+
+def test_a_postgresql_fleet_store_resyncs_a_restored_robot_with_every_event_once(
+        tmp_path, postgres_url):
+    db, copy = tmp_path / "r1.db", tmp_path / "r1.backup.db"
+    first, lost, after = events("a", 1, 6), events("b", 11, 4), events("c", 21, 2)
+    add(db, first, 100.0)
+    fleet.push(str(db), postgres_url)
+    backup(db, copy)
+    add(db, lost, 200.0)
+    fleet.push(str(db), postgres_url)
+    restore(copy, db)
+    add(db, after, 300.0)
+    with pytest.raises(RobotStoreRestored):
+        fleet.push(str(db), postgres_url)
+    assert fleet.push(str(db), postgres_url, resync=True).shipped == 2
+    assert answers(postgres_url) == expected(first, lost, after)
+    assert fleet.push(str(db), postgres_url).shipped == 0
+
+
+def test_a_postgresql_robot_stores_counters_go_back_only_with_its_sequences(
+        tmp_path, postgres_url):
+    # a PostgreSQL robot store: deleted rows keep the counter (no false refusal); a restore
+    # of an older dump sets the identity sequences back (pg_dump writes their setval)
+    import psycopg
+
+    fleet_db = tmp_path / "fleet.db"
+    with slr_sql.open(postgres_url, robot="r1", clock=slr_sql.ManualClock(100.0)) as kb:
+        for event in events("a", 1, 6):
+            kb.add(event)
+    assert fleet.push(postgres_url, str(fleet_db)).shipped == 6
+    with psycopg.connect(postgres_url, autocommit=True) as c:
+        c.execute("SET search_path = slr")   # (the store's default schema)
+        tables = [t for (t,) in c.execute("SELECT table_name FROM slr_event_types")]
+        for table in tables:
+            c.execute(f'DELETE FROM "{table}"')
+    with slr_sql.open(postgres_url, robot="r1", clock=slr_sql.ManualClock(200.0)) as kb:
+        kb.add("seen(b1)^11")
+    assert fleet.push(postgres_url, str(fleet_db)).shipped == 1
+    with psycopg.connect(postgres_url, autocommit=True) as c:
+        c.execute("SET search_path = slr")
+        for table in tables:   # a dump from when each table held none of these rows
+            c.execute(f'DELETE FROM "{table}"')
+            c.execute("SELECT setval(pg_get_serial_sequence(%s, 'seq'), 1)", (f'"{table}"',))
+    with slr_sql.open(postgres_url, robot="r1", clock=slr_sql.ManualClock(300.0)) as kb:
+        kb.add("seen(c1)^21")
+    with pytest.raises(RobotStoreRestored):
+        fleet.push(postgres_url, str(fleet_db))
+    assert fleet.push(postgres_url, str(fleet_db), resync=True).shipped == 1
+    assert sum(fleet_events(fleet_db).values()) == 8
+    # moved/2, emptied on the robot, is no restore the next push refuses either
+    assert fleet.push(postgres_url, str(fleet_db)).shipped == 0

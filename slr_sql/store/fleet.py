@@ -257,10 +257,14 @@ class Fleet:
         from its first row (the robot's store was restored from an older backup, so its
         sequences no longer match what this store holds): a row is stored unless this store
         holds an identical one of the robot (same arguments, start, end and robot), and
-        the position becomes the batch's last sequence, lower than before as it may be.
+        the position becomes the batch's last sequence, lower than before as it may be
+        (0 for a resync batch without rows: the robot holds none of the type).
         Returns the number of rows stored."""
         robot = check_robot_name(robot)
         if not rows:
+            if resync:   # the robot holds no row of the type: the fleet holds none after 0
+                with self.db.transaction():
+                    self._set_position(robot, name, arity, 0)
             return 0
         with self.db.transaction():
             conn = self.db.conn
