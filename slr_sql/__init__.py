@@ -9,7 +9,8 @@
 from .api import KnowledgeBaseAPI, PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import Clock, ManualClock, StreamClock, WallClock
 from .errors import EventRejected, SLRBusy, SLRCancelled, SLRError, SLREvaluationError, \
-    SLRStoreFull, SLRServerUnreachable, SLRStoreGone, SLRSyntaxError, SLRTimeout, SLRUnavailable
+    SLRStoreFull, SLRServerUnreachable, SLRStoreGone, SLRSubscriptionInUse, SLRSyntaxError, \
+    SLRTimeout, SLRUnavailable
 from .kb import KnowledgeBase, open
 from .terms import Atom, String, Struct, Var
 
@@ -30,6 +31,7 @@ __all__ = [
     "ProgramInfo", "Clock", "WallClock", "ManualClock", "StreamClock",
     "SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRBusy", "EventRejected",
     "SLRUnavailable", "SLRStoreFull", "SLRStoreGone", "SLRServerUnreachable", "SLRCancelled",
+    "SLRSubscriptionInUse",
     "Atom", "String", "Struct", "Var",
 ]
 __version__ = "0.1.0"

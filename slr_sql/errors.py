@@ -136,6 +136,16 @@ class SLRCancelled(SLRUnavailable):
     reason = ""   # the server's words (``canceling statement due to user request``)
 
 
+class SLRSubscriptionInUse(SLRUnavailable):
+    """A durable subscription's id is delivered elsewhere now: open in this process, or held
+    by another process (whose lease has not run out). It may be opened once that one closes,
+    or once a process that died has its lease run out.
+
+    >>> issubclass(SLRSubscriptionInUse, SLRUnavailable)
+    True
+    """
+
+
 class EventRejected(SLRError):
     """An event that cannot be stored (non-ground, NaN, start > end, wrong arity, ...)."""
 

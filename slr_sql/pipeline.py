@@ -312,27 +312,28 @@ class EventPipeline:
                     cep.recheck()
                     return
                 derived = cep.decide()
+                self._retry_delay = 0.0
+                if derived:
+                    run.stage = "completeness"
+                    self.sync.on_add(derived)
+                    run.stage = "decisions"
+                    batches.append(derived)
+                cep.wake_timers()
+                if not derived and not run.again:
+                    cep.recheck()
+                    return
             except SLRError:
                 if self.store.closed:
                     return
                 if run.stored or run.timer:
                     # an add whose events are committed: a round it made possible that
-                    # fails (busy, a lost connection) is not the add's failure -- a retried
-                    # add would store them twice. Its decisions stay pending (rolled back
-                    # whole), made at the next add, mark, clock move or timer -- and, with
-                    # a wall clock, by the retry asked for here (the timer thread's own
-                    # round, which has no caller to raise to, too).
+                    # fails (busy, a lost connection), or the timers and waiting queries'
+                    # reads after it, is not the add's failure -- a retried add would store
+                    # them twice. Its decisions stay pending (rolled back whole), made at the
+                    # next add, mark, clock move or timer -- and, with a wall clock, by the
+                    # retry asked for here (the timer thread's own round, which has no
+                    # caller to raise to, too).
                     self._retry_later()
                     return
                 raise
-            self._retry_delay = 0.0
-            if derived:
-                run.stage = "completeness"
-                self.sync.on_add(derived)
-                run.stage = "decisions"
-                batches.append(derived)
-            cep.wake_timers()
-            if not derived and not run.again:
-                cep.recheck()
-                return
 

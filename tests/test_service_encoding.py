@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from slr_sql import Atom, SLREvaluationError, SLRSyntaxError, SLRTimeout, String, Struct, Var
+from slr_sql import Atom, SLRCancelled, SLREvaluationError, SLRSyntaxError, SLRTimeout, String, Struct, Var
 from slr_sql.service.encoding import (MAX_DEPTH, TermError, decode_answers, decode_args,
                                       decode_plain, decode_term, dumps, encode_answers,
                                       encode_args, encode_plain, encode_term, loads)
@@ -183,6 +183,17 @@ def test_errors_come_back_as_the_same_class_and_text(exc, status):
         assert (back.line, back.column, back.filename) == (2, 6, "robot.slr")
     if isinstance(exc, SLREvaluationError):
         assert same(back.term, exc.term)
+
+
+def test_a_server_side_cancel_travels_with_the_servers_reason():
+    cancelled = SLRCancelled("postgresql://x: the server cancelled the statement (canceling "
+                             "statement due to user request); it may be retried")
+    cancelled.reason = "canceling statement due to user request"
+    body = loads(dumps(error_body(cancelled)))
+    assert body["error"]["status"] == 503
+    back = error_from_body(body, 503)
+    assert type(back) is SLRCancelled and str(back) == str(cancelled)
+    assert back.reason == "canceling statement due to user request"
 
 
 @settings(max_examples=30)

@@ -16,8 +16,8 @@ from __future__ import annotations
 from typing import Any
 
 import slr_sql
-from slr_sql import EventRejected, SLREvaluationError, SLRError, SLRSyntaxError, SLRTimeout, \
-    SLRUnavailable
+from slr_sql import EventRejected, SLRCancelled, SLREvaluationError, SLRError, SLRSyntaxError, \
+    SLRTimeout, SLRUnavailable
 
 from .encoding import TermError, decode_term, encode_term
 
@@ -94,6 +94,8 @@ def error_body(exc: BaseException) -> dict[str, Any]:
     index = getattr(exc, "index", None)
     if isinstance(exc, EventRejected) and isinstance(index, int):
         err["index"] = index
+    if isinstance(exc, SLRCancelled) and exc.reason:
+        err["reason"] = exc.reason   # the database server's words
     return {"error": err}
 
 
@@ -128,6 +130,8 @@ def error_from_body(body: Any, status: int) -> SLRError:
         if exc is not None:
             if isinstance(exc, EventRejected) and isinstance(err.get("index"), int):
                 exc.index = err["index"]
+            if isinstance(exc, SLRCancelled) and isinstance(err.get("reason"), str):
+                exc.reason = err["reason"]
             return exc
     return ServiceError(message, kind=kind, status=status)
 

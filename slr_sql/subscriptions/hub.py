@@ -23,7 +23,7 @@ from typing import Any, Callable
 
 from ..clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning
 from ..encoding import decode
-from ..errors import SLRError
+from ..errors import SLRError, SLRSubscriptionInUse
 from ..lockorder import ordered_lock
 from ..host import Host
 from ..store.checks import shown
@@ -211,7 +211,7 @@ class SubscriptionHub:
         durable = id is not None
         with self.lock:
             if durable and id in self._subs:
-                raise SLRError(f"subscription {id!r} is already open in this process")
+                raise SLRSubscriptionInUse(f"subscription {id!r} is already open in this process")
             sub_id = id if durable else f"~{self.owner}:{next(self._ids)}"
         sub = Subscription(self, matcher, sub_id, durable, since_value, until_value,
                            max_queue, max_lag, callback)
@@ -221,7 +221,7 @@ class SubscriptionHub:
         with self.lock:
             if durable and id in self._subs:   # a concurrent subscribe with the same id
                 self.registry.unclaim(sub)
-                raise SLRError(f"subscription {id!r} is already open in this process")
+                raise SLRSubscriptionInUse(f"subscription {id!r} is already open in this process")
             key = (matcher.pattern, matcher.where)
             sub.matcher = self._matchers.setdefault(key, matcher)
             sub.cohort_key = (sub.matcher, sub.since, sub.until)   # shared answers

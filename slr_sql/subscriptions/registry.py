@@ -12,7 +12,7 @@ import time
 import uuid
 from typing import Any, Iterable
 
-from ..errors import SLRError
+from ..errors import SLRError, SLRSubscriptionInUse
 from ..store.checks import shown
 from .queue import HISTORY_PHASE, LIVE_PHASE, Subscription, SubscriptionState
 
@@ -112,8 +112,8 @@ class SubscriptionRegistry:
                         f"resume it with the same definition, or kb.unsubscribe({sub.id!r}) "
                         f"first")
                 if owner_alive(record.owner, record.lease_until, now_wall, self.owner):
-                    raise SLRError(f"subscription {sub.id!r} is being delivered by another "
-                                   f"process ({record.owner})")
+                    raise SLRSubscriptionInUse(f"subscription {sub.id!r} is being delivered "
+                                               f"by another process ({record.owner})")
                 sub.since = record.since
                 sub.start_at(LIVE_PHASE if record.history_done else HISTORY_PHASE,
                              record.history_top, record.history_pos, record.live_start,
