@@ -27,7 +27,8 @@ from typing import Any, Protocol
 from .errors import SLRError
 from .store import EventStore, WriterInFlight, check_robot_name
 
-__all__ = ["FleetTarget", "PushReport", "open_target", "parse_type_spec", "push", "status"]
+__all__ = ["FleetTarget", "PushReport", "RobotStoreRestored", "open_target", "parse_type_spec",
+           "push", "status"]
 
 BATCH = 5000                 # rows per batch (one fleet transaction)
 MAX_BATCH = 2 ** 31 - 1      # (a count SQLite's LIMIT and every backend take)
@@ -40,6 +41,18 @@ HEARTBEAT = 5.0              # s between contacts of a following pusher that has
 ROUND_GAP = 0.05
 
 
+class RobotStoreRestored(SLRError):
+    """The fleet store holds sequences of the robot's store beyond the last one that store
+    handed out: the robot's store was restored from an older backup (or another store ships
+    under its name), so its new events reuse sequences the fleet holds and would be skipped.
+    Nothing is shipped; ``push(..., resync=True)`` (``slr fleet push --resync``) ships the
+    types again from their first row, the fleet skipping the rows it holds identically.
+
+    >>> issubclass(RobotStoreRestored, SLRError)
+    True
+    """
+
+
 class FleetTarget(Protocol):
     """Where a pusher ships to: a fleet store opened in this process, or `slr serve`."""
 
@@ -48,7 +61,8 @@ class FleetTarget(Protocol):
     def prepare(self, robot: str, batch: tuple) -> tuple: ...
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
-                head_arrival: float | None, after: dict | None = None) -> int: ...
+                head_arrival: float | None, after: dict | None = None,
+                resync: list | None = None) -> int: ...
 
     def close(self) -> None: ...
 
@@ -71,12 +85,14 @@ class _LocalTarget:
         return prepare(self.kb, robot, batch)
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
-                head_arrival: float | None, after: dict | None = None) -> int:
+                head_arrival: float | None, after: dict | None = None,
+                resync: list | None = None) -> int:
         # (``after`` is not needed: a store replaced under an open connection is not seen
         # through it, and a server's restore ends the connection, which asks again)
         from .shipping import receive
         # (rows read from a store by this process: no need to check them as the service does)
-        return receive(self.kb, robot, batches, marks, pending, head_arrival, check=False)
+        return receive(self.kb, robot, batches, marks, pending, head_arrival, check=False,
+                       resync=resync)
 
     def close(self) -> None:
         self.kb.close()
@@ -96,10 +112,12 @@ class _RemoteTarget:
         return batch
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
-                head_arrival: float | None, after: dict | None = None) -> int:
+                head_arrival: float | None, after: dict | None = None,
+                resync: list | None = None) -> int:
         # ``after``: over HTTP a restarted server is reached again without a word, so each
         # batch says which position it follows and the server checks it still holds it
-        return self.client.fleet_receive(robot, batches, marks, pending, head_arrival, after)
+        return self.client.fleet_receive(robot, batches, marks, pending, head_arrival, after,
+                                         resync)
 
     def close(self) -> None:
         self.client.close()
@@ -146,8 +164,11 @@ class PushReport:
 class _Pusher:
     def __init__(self, store: EventStore, target_factory: Callable[[], FleetTarget],
                  robot: str, types: set | None, batch: int, say: Callable[[str], None],
-                 fleet_name: str):
+                 fleet_name: str, resync: bool = False):
         self.store = store
+        # ship every type again from its first row, once (the robot's store was restored)
+        self.resync = resync
+        self.resynced: set = set()
         self.target_factory = target_factory
         self.target: FleetTarget | None = None
         self.robot = robot
@@ -248,8 +269,22 @@ class _Pusher:
         marks = {k[len("sync/mark/"):]: v for k, v in self.store.meta_items("sync/mark/").items()
                  if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)}
         keys = sorted(k for k in heads if self.types is None or k in self.types)
+        again = [k for k in keys if self.resync and k not in self.resynced]
+        counters = self.store.fleet_counters()
+        for key in keys:
+            if key not in again and counters.get(key, 0) < positions.get(key, 0):
+                raise RobotStoreRestored(
+                    f"the fleet {self.fleet_name} holds {key[0]}/{key[1]} of robot "
+                    f"{self.robot!r} up to seq {positions[key]}, but the robot's store has "
+                    f"handed out sequences only up to {counters.get(key, 0)}: the store was "
+                    "restored from an older backup (or another store ships under this "
+                    "robot's name), and its new events reuse sequences the fleet holds. "
+                    "Nothing was shipped; ship again with 'slr fleet push DB FLEET --resync' "
+                    "(each type from its first row, the fleet skipping the rows it holds "
+                    "identically)")
         held: tuple | None = None     # the batch read last, sent once the next one is read
         held_after: dict | None = None   # the position it was read after
+        held_resync: list | None = None  # [(name, arity)] when it ships its type again
 
         def record(batch: tuple, stored: int) -> None:
             nonlocal shipped
@@ -263,7 +298,8 @@ class _Pusher:
 
         def send(batch: tuple | None, contact: tuple = (None, None, None)) -> None:
             stored = target.receive(self.robot, [batch] if batch else [], *contact,
-                                    held_after if batch else None)
+                                    held_after if batch else None,
+                                    held_resync if batch else None)
             self.reached()
             if batch is not None:
                 record(batch, stored)
@@ -272,26 +308,36 @@ class _Pusher:
         # (psycopg, sqlite3 and the network wait without the GIL) while this thread reads
         # batch k + 1 from the robot's store. One batch queued, one in flight.
         sender: _Sender | None = None
+        emptied = []     # types shipped again that the robot holds no row of
         try:
             for name, arity in keys:
-                position = positions.get((name, arity), 0)
+                position = 0 if (name, arity) in again else positions.get((name, arity), 0)
                 while not stop.is_set():
                     rows = self.store.fleet_read_after(name, arity, position, self.batch)
                     if not rows:
+                        if position == 0 and (name, arity) in again \
+                                and positions.get((name, arity), 0) > 0:
+                            emptied.append((name, arity))
                         break
                     if held is not None:
                         if sender is None:
                             sender = _Sender(target, self.robot, record)
-                        sender.put(held, held_after)
+                        sender.put(held, held_after, held_resync)
                     # the batch's own work that needs no connection, done here while the
                     # sender waits on the fleet for the batch before
                     held = target.prepare(self.robot, (name, arity, rows))
                     held_after = {(name, arity): position}
+                    held_resync = [(name, arity)] if (name, arity) in again else None
                     position = rows[-1][0]
                     if len(rows) < self.batch:
                         break
             if sender is not None:
                 sender.finish()
+            for key in emptied:
+                # the fleet's position goes back to 0, or the next push would take it for
+                # a restore again
+                target.receive(self.robot, [(*key, [])], None, None, None, None, [key])
+                positions[key] = 0
         finally:
             if sender is not None:
                 sender.abandon()
@@ -314,6 +360,8 @@ class _Pusher:
             # marks and what is left, with the last batch (after the events they speak of)
             send(held, contact)
             self.last_contact, self.contact_at = contact, now
+        if not stop.is_set():
+            self.resynced.update(again)
         self.report.rounds += 1
         return shipped
 
@@ -340,10 +388,10 @@ class _Sender:
                 if batch is None:
                     return
                 continue   # after a failure: drain what was queued, send nothing more
-            batch, after = batch
+            batch, after, resync = batch
             try:
                 self.record(batch, self.target.receive(self.robot, [batch], None, None, None,
-                                                       after))
+                                                       after, resync))
             except BaseException as exc:  # noqa: BLE001 - raised again in the pusher's thread
                 self.error = exc
 
@@ -351,14 +399,15 @@ class _Sender:
         if self.error is not None:
             raise self.error
 
-    def put(self, batch: tuple, after: dict | None = None) -> None:
+    def put(self, batch: tuple, after: dict | None = None,
+            resync: list | None = None) -> None:
         """Queue ``batch``, read after the positions ``after`` (waiting while one is queued
         already)."""
         import queue
         while True:
             self._raise()
             try:
-                self.queue.put((batch, after), timeout=0.05)
+                self.queue.put((batch, after, resync), timeout=0.05)
                 return
             except queue.Full:
                 continue
@@ -384,14 +433,17 @@ class _Sender:
 def push(db: str, fleet: str, *, robot: str | None = None,
          types: Iterable[str | tuple[str, int]] | None = None, follow: bool = False,
          batch: int = BATCH, stop: threading.Event | None = None,
-         say: Callable[[str], None] | None = None, token: str | None = None) -> PushReport:
+         say: Callable[[str], None] | None = None, token: str | None = None,
+         resync: bool = False) -> PushReport:
     """Ship the events (incoming and complex) and completeness marks of the robot store
     ``db`` to the fleet store ``fleet`` (a store path, a database URL, or the URL of `slr
     serve`), each event once. ``robot``: the name to ship as (default: the store's name;
     a store without one needs it); ``types``: only these event types (``"seen/2"``);
     ``follow``: keep shipping as events arrive until ``stop`` is set (retrying with backoff
     while the fleet is unreachable, ``say`` telling once per outage); ``batch``: rows per
-    fleet transaction.
+    fleet transaction; ``resync``: ship every type again from its first row, the fleet
+    skipping the rows it holds identically (after the robot's store was restored from an
+    older backup, which a push otherwise refuses with :class:`RobotStoreRestored`).
 
     >>> import os, tempfile, slr_sql
     >>> folder = tempfile.mkdtemp()
@@ -424,7 +476,7 @@ def push(db: str, fleet: str, *, robot: str | None = None,
             raise SLRError(f"{fleet} is the robot's store {db} itself: a robot does not ship "
                            "to its own store")
         pusher = _Pusher(store, lambda: open_target(fleet, token), name, wanted, batch, say,
-                         fleet)
+                         fleet, resync)
         try:
             if not follow:
                 pusher.round(stop)
@@ -479,6 +531,8 @@ def _follow(pusher: _Pusher, stop: threading.Event) -> None:
         began = time.monotonic()
         try:
             pusher.round(stop, HEARTBEAT)
+        except RobotStoreRestored:   # waiting would not cure it: it would ship with a hole
+            raise
         except WriterInFlight as exc:   # the robot's store, not the fleet: try again later
             pusher.store_waits(exc)
             stop.wait(retry)
@@ -573,9 +627,12 @@ def click_group() -> Any:
                   help="Ship only this event type (repeatable).")
     @click.option("--batch", type=int, default=BATCH, show_default=True,
                   help="Events per fleet transaction.")
+    @click.option("--resync", is_flag=True,
+                  help="Ship every type again from its first row, the fleet skipping rows "
+                       "it holds identically (after restoring DB from an older backup).")
     @click.pass_context
     def push_command(ctx: click.Context, db: str, fleet: str, robot: str | None,
-                     follow: bool, types: tuple, batch: int) -> None:
+                     follow: bool, types: tuple, batch: int, resync: bool) -> None:
         """Ship DB's events, complex events and completeness marks to FLEET (a store path,
         or the URL of `slr serve`), each once; resumable after a crash of either side."""
         import os
@@ -596,7 +653,7 @@ def click_group() -> Any:
             click.echo(message, err=True)
 
         report = push(db, fleet, robot=robot, types=types or None, follow=follow, batch=batch,
-                      stop=stop, say=say, token=token_of(ctx))
+                      stop=stop, say=say, token=token_of(ctx), resync=resync)
         click.echo(f"robot {report.robot}: shipped {report.shipped} events in "
                    f"{report.batches} batches")
 

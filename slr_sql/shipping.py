@@ -51,7 +51,8 @@ def positions(kb: Host, robot: str) -> dict[tuple[str, int], int]:
 
 def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             pending: int | None = None, head_arrival: float | None = None, *,
-            check: bool = True, after: list | None = None) -> int:
+            check: bool = True, after: list | None = None,
+            resync: list | None = None) -> int:
     """Store one shipment of ``robot`` in the fleet store ``kb``; returns the number of rows
     stored (rows already held are skipped). ``batches``: ``[(name, arity, rows)]`` with rows
     as :meth:`slr_sql.store.EventStore.fleet_read_after` gives them (or as :func:`prepare`
@@ -61,6 +62,9 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
     ``after``: ``[(name, arity, position)]``, the positions the sender read the batches after
     (what it was told the fleet store holds); a position the fleet store holds no longer
     (restored or replaced since) raises :class:`FleetBehind` and stores nothing.
+    ``resync``: ``[(name, arity)]``, types whose batches ship the type again from its first
+    row (``slr fleet push --resync``, after the robot's store was restored from an older
+    backup): a row the fleet store holds identically is skipped, every other one stored.
 
     A robot's mark is kept per robot; the fleet store's own mark of a type is the least mark
     of the robots it knows, once every one of them has marked it (a history of the fleet is
@@ -78,6 +82,11 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
         check_robot_name(robot)   # (also for a shipment of marks or a contact alone)
         _check_shipment(batches, marks, pending, head_arrival)
         _check_after(after)
+        if resync is not None and not (isinstance(resync, list) and all(
+                isinstance(r, (list, tuple)) and len(r) == 2 and isinstance(r[0], str)
+                and type(r[1]) is int for r in resync)):
+            raise SLRError("a shipment's resync is a list of [name, arity]")
+    again = {(r[0], r[1]) for r in resync or ()}
     if store.robot is not None and store.robot == robot:
         # the robot's own store (pushed into itself, or served and pushed to over the
         # service), or another store shipping under this store's name: each event would be
@@ -109,7 +118,8 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             if rows and type(rows[0]) is not tuple:
                 rows = [tuple(r) for r in rows]
             columns = batch[3] if len(batch) > 3 else None   # (from prepare)
-            stored += store.fleet_receive(robot, name, arity, rows, store_events, columns)
+            stored += store.fleet_receive(robot, name, arity, rows, store_events, columns,
+                                          (name, arity) in again)
         if marks:
             # the robots the fleet knows: those it holds events of, those that made contact
             # (a robot whose store has marks and no event yet counts from its first mark),

@@ -975,7 +975,8 @@ async def _fleet_positions(svc: "_Service", request: Request) -> Any:
         "push): batches of [name, arity, rows], its marks, what it holds unshipped.",
         body={"robot": ("string", True), "batches": ("array", True),
               "marks": ("object", False), "pending": ("integer", False),
-              "head_arrival": ("Number", False), "after": ("array", False)},
+              "head_arrival": ("Number", False), "after": ("array", False),
+              "resync": ("array", False)},
         response={"stored": "integer"})
 async def _fleet_receive(svc: "_Service", request: Request) -> Any:
     from slr_sql.shipping import FleetBehind, receive
@@ -985,7 +986,8 @@ async def _fleet_receive(svc: "_Service", request: Request) -> Any:
         stored = await svc.call(receive, svc.kb, robot,
                                 _field(b, "batches", list, required=True),
                                 _field(b, "marks", dict), _field(b, "pending", int),
-                                _number(b, "head_arrival"), after=_field(b, "after", list))
+                                _number(b, "head_arrival"), after=_field(b, "after", list),
+                                resync=_field(b, "resync", list))
     except FleetBehind as exc:   # the pusher asks the positions again (slr_sql.fleet)
         raise ServiceError(str(exc), kind="Conflict") from None
     return {"stored": stored}

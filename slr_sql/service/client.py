@@ -379,7 +379,7 @@ class RemoteKnowledgeBase:
     @_reads_answer
     def fleet_receive(self, robot: str, batches: list, marks: dict | None = None,
                       pending: int | None = None, head_arrival: float | None = None,
-                      after: dict | None = None) -> int:
+                      after: dict | None = None, resync: list | None = None) -> int:
         """Send one shipment of ``robot`` (see :func:`slr_sql.shipping.receive`); returns
         the rows the server stored. Rows go in requests of at most FLEET_ROWS (each stored
         exactly once with its position), within the server's body limit. ``after``:
@@ -398,6 +398,8 @@ class RemoteKnowledgeBase:
             body: dict[str, Any] = {"robot": robot, "batches": piece}
             if piece_after is not None:
                 body["after"] = piece_after
+            if resync:
+                body["resync"] = [list(r) for r in resync]
             if k == len(pieces) - 1:
                 if marks:
                     body["marks"] = marks

@@ -322,6 +322,10 @@ class EventStore:
     def fleet_heads(self) -> dict[tuple[str, int], int]:
         return self._fleet.heads()
 
+    @_doc(Fleet.counters)
+    def fleet_counters(self) -> dict[tuple[str, int], int]:
+        return self._fleet.counters()
+
     @_doc(Fleet.read_after)
     def fleet_read_after(self, name: str, arity: int, position: int, limit: int) -> list[tuple]:
         return self._fleet.read_after(name, arity, position, limit)
@@ -340,8 +344,9 @@ class EventStore:
 
     @_doc(Fleet.receive)
     def fleet_receive(self, robot: str, name: str, arity: int, rows: list[tuple],
-                      store_events: Any = None, columns: list[tuple] | None = None) -> int:
-        return self._fleet.receive(robot, name, arity, rows, store_events, columns)
+                      store_events: Any = None, columns: list[tuple] | None = None,
+                      resync: bool = False) -> int:
+        return self._fleet.receive(robot, name, arity, rows, store_events, columns, resync)
 
     @_doc(Fleet.record_contact)
     def fleet_record_contact(self, robot: str, pending: int, head_arrival: float | None) -> None:

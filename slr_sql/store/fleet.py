@@ -125,6 +125,24 @@ class Fleet:
                 out[key] = row[0] or 0
             return out
 
+    def counters(self) -> dict[tuple[str, int], int]:
+        """Per event type, the last sequence the store handed out (0: none yet): its
+        AUTOINCREMENT counter (``sqlite_sequence``) or identity sequence, which a buffer
+        that empties the table does not lower and a restore from an older backup does."""
+        with self.db.lock:
+            self.db.check_open()
+            self.tables.reload()
+            conn = self.db.conn
+            if self.db.dialect.name == "sqlite":
+                found = dict(conn.execute("SELECT name, seq FROM sqlite_sequence").fetchall())
+                return {key: int(found.get(t.table) or 0) for key, t in self.tables.types.items()}
+            out = {}
+            for key, event_type in self.tables.types.items():
+                row = conn.execute("SELECT pg_sequence_last_value(pg_get_serial_sequence("
+                                   "?, 'seq'))", (event_type.quoted,)).fetchone()
+                out[key] = int(row[0] or 0)
+            return out
+
     def read_after(self, name: str, arity: int, position: int, limit: int) -> list[tuple]:
         """Up to ``limit`` stored rows of name/arity with ``seq > position`` in sequence
         order, as ``(seq, *encoded arguments, start, end, arrival, robot)`` (arrival None when
@@ -226,7 +244,8 @@ class Fleet:
         return list(zip(*columns))
 
     def receive(self, robot: str, name: str, arity: int, rows: list[tuple],
-                store_events: Any = None, columns: list[tuple] | None = None) -> int:
+                store_events: Any = None, columns: list[tuple] | None = None,
+                resync: bool = False) -> int:
         """Store a shipped batch of ``robot`` (rows as :meth:`read_after` gives them, one
         type, in sequence order) exactly once: the rows after the robot's position for the
         type go in and the position moves to the last row's sequence, in one transaction
@@ -234,9 +253,18 @@ class Fleet:
         decoded ``(name, args, start, end)`` events instead of the raw rows (the path that
         runs the fleet's event rules); the rows keep the robot they were stored with
         (``robot`` when NULL). ``columns``: the rows' :meth:`column_values`, when the
-        caller has them already. Returns the number of rows stored."""
+        caller has them already. ``resync``: the batch is part of the type shipped again
+        from its first row (the robot's store was restored from an older backup, so its
+        sequences no longer match what this store holds): a row is stored unless this store
+        holds an identical one of the robot (same arguments, start, end and robot), and
+        the position becomes the batch's last sequence, lower than before as it may be
+        (0 for a resync batch without rows: the robot holds none of the type).
+        Returns the number of rows stored."""
         robot = check_robot_name(robot)
         if not rows:
+            if resync:   # the robot holds no row of the type: the fleet holds none after 0
+                with self.db.transaction():
+                    self._set_position(robot, name, arity, 0)
             return 0
         with self.db.transaction():
             conn = self.db.conn
@@ -244,7 +272,16 @@ class Fleet:
                                "type_name = ? AND type_arity = ?", (robot, name, arity)).fetchone()
             position = row[0] if row is not None else 0
             # (sequences ascend: what the fleet holds already is a head of the batch)
-            fresh = rows if rows[0][0] > position else [r for r in rows if r[0] > position]
+            if resync:
+                position = rows[0][0] - 1
+                held = self._held_identically(name, arity, robot, rows)
+                fresh = [r for r, h in zip(rows, held) if not h]
+                columns = None
+                if not fresh:
+                    self._set_position(robot, name, arity, rows[-1][0])
+                    return 0
+            else:
+                fresh = rows if rows[0][0] > position else [r for r in rows if r[0] > position]
             if not fresh:
                 return 0
             others = {r[-1] for r in fresh if r[-1] is not None and r[-1] != robot}
@@ -298,11 +335,26 @@ class Fleet:
                        "slr_fleet_robots.last_arrival IS NULL OR excluded.last_arrival > "
                        "slr_fleet_robots.last_arrival THEN excluded.last_arrival ELSE "
                        "slr_fleet_robots.last_arrival END", (robot, len(fresh), latest))
-            unanswered("INSERT INTO slr_fleet_positions (robot, type_name, type_arity, "
-                       "position) VALUES (?, ?, ?, ?) ON CONFLICT (robot, type_name, "
-                       "type_arity) DO UPDATE SET position = excluded.position",
-                       (robot, name, arity, fresh[-1][0]))
+            unanswered(_SET_POSITION, (robot, name, arity, rows[-1][0] if resync
+                                       else fresh[-1][0]))
             return len(fresh)
+
+    def _set_position(self, robot: str, name: str, arity: int, position: int) -> None:
+        self.db.conn.execute(_SET_POSITION, (robot, name, arity, position))
+
+    def _held_identically(self, name: str, arity: int, robot: str,
+                          rows: list[tuple]) -> list[bool]:
+        """Per shipped row of ``robot``: whether this store holds a row of name/arity with
+        the same arguments, start, end and robot (a resync's rows shipped before)."""
+        event_type = self.tables.lookup(name, arity)
+        if event_type is None:
+            return [False] * len(rows)
+        columns = [f"arg{i}" for i in range(1, arity + 1)] + ["t_start", "t_end", "robot"]
+        select = (f"SELECT 1 FROM {event_type.quoted} WHERE "
+                  + " AND ".join(f"{c} = ?" for c in columns) + " LIMIT 1")
+        conn = self.db.conn
+        return [conn.execute(select, values).fetchone() is not None
+                for values in self.column_values(arity, rows, robot)]
 
     def _store_decoded(self, robot: str, name: str, arity: int, rows: list[tuple],
                        store_events: Any) -> None:
@@ -348,6 +400,11 @@ class Fleet:
                 "FROM slr_fleet_robots ORDER BY robot")
             cols = [d[0] for d in cur.description]
             return [dict(zip(cols, r)) for r in cur.fetchall()]
+
+
+_SET_POSITION = ("INSERT INTO slr_fleet_positions (robot, type_name, type_arity, position) "
+                 "VALUES (?, ?, ?, ?) ON CONFLICT (robot, type_name, type_arity) DO UPDATE "
+                 "SET position = excluded.position")
 
 
 def _shipped_insert(table: str, arity: int) -> str:
