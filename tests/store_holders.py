@@ -26,3 +26,17 @@ def meta_held(where: str) -> Iterator[None]:
         finally:
             other.execute("ROLLBACK")
             other.close()
+
+
+def table_written(where: str, table: str = "c") -> sqlite3.Connection | psycopg.Connection:
+    """Another connection writing to ``table``, not committed (the caller rolls it back and
+    closes it): on PostgreSQL a ROW EXCLUSIVE lock of that table (a build of its indexes
+    must wait); on SQLite, which locks whole files, an open write transaction."""
+    if where.startswith("postgresql"):
+        other = psycopg.connect(where)
+        other.execute("SET search_path = slr")
+        other.execute(f'LOCK TABLE "{table}" IN ROW EXCLUSIVE MODE')
+        return other
+    lite = sqlite3.connect(where, isolation_level=None)
+    lite.execute("BEGIN IMMEDIATE")
+    return lite

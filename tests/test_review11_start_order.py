@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import os
 import re
-import sqlite3
 import threading
 
 import psycopg
 
 import slr_sql
+from store_holders import table_written
 from slr_sql import ManualClock
 
 RULE = ":- consumption(unrestricted).\n:- max_delay(a/1, 0).\n:- max_delay(b/1, 0).\n" \
@@ -22,18 +22,6 @@ def _opened(location: str, **options) -> slr_sql.KnowledgeBase:
     kb.load(RULE)
     kb.add_many(EVENTS)
     return kb
-
-
-def _holding_the_write_lock(location: str):
-    """Another connection writing to c, not committed."""
-    if location.startswith("postgresql"):
-        other = psycopg.connect(location)
-        other.execute("SET search_path = slr")
-        other.execute("LOCK TABLE c IN ROW EXCLUSIVE MODE")
-        return other
-    other = sqlite3.connect(location, isolation_level=None)
-    other.execute("BEGIN IMMEDIATE")
-    return other
 
 
 def _within(deadline: float, call) -> tuple[bool, object]:
@@ -57,7 +45,7 @@ def test_a_reader_in_start_order_does_not_wait_for_a_writer(backend):
     # wait the busy timeout (30 s here) to answer: readers never waited for writers
     with _opened(backend, busy_timeout=30) as kb:
         expected = len(list(kb.store.scan("c", 1)))
-        other = _holding_the_write_lock(backend)
+        other = table_written(backend)
         try:
             answered, rows = _within(10, lambda: list(
                 kb.store.next_candidates("c", 1, None, 0, 100)))
@@ -79,7 +67,7 @@ def test_a_build_inside_a_transaction_does_not_wait_and_leaves_its_lock_wait_as_
     # a builder inside its own transaction does not wait for another writer either (on a
     # server, a wait there could deadlock with that writer); the transaction goes on
     with _opened(backend, busy_timeout=30) as kb:
-        other = _holding_the_write_lock(backend)
+        other = table_written(backend)
         try:
             def inside():
                 with kb.store.transaction():

@@ -13,15 +13,14 @@ from __future__ import annotations
 
 import json
 import os
-import sqlite3
 import subprocess
 import sys
 from pathlib import Path
 
-import psycopg
 import pytest
 
 import slr_sql
+from store_holders import table_written
 from conftest import postgres_database
 from slr_sql import ManualClock
 
@@ -140,18 +139,6 @@ def _in_another_process(location: str, code: str) -> object:
     return json.loads(done.stdout)
 
 
-def _holding_the_write_lock(location: str):
-    """Another connection writing to c, not committed: a build of c's indexes must wait."""
-    if location.startswith("postgresql"):
-        other = psycopg.connect(location)
-        other.execute("SET search_path = slr")
-        other.execute("LOCK TABLE c IN ROW EXCLUSIVE MODE")
-        return other
-    other = sqlite3.connect(location, isolation_level=None)
-    other.execute("BEGIN IMMEDIATE")
-    return other
-
-
 def test_another_process_builds_them_and_this_one_finds_them_in_the_catalog(backend):
     with _opened(backend, RULE, busy_timeout=0.3) as kb:
         assert _indexes(kb) == END_INDEXES   # created here: known to lack them
@@ -160,7 +147,7 @@ def test_another_process_builds_them_and_this_one_finds_them_in_the_catalog(back
             'print(json.dumps([sorted(n for n in store.index_names("c") if n[:4] == "slr_"),'
             ' len(rows)]))'))
         assert built == [sorted(END_INDEXES | START_INDEXES), kb.store.count("c", 1)]
-        other = _holding_the_write_lock(backend)
+        other = table_written(backend)
         try:
             # a build now would wait for the lock past the busy timeout and give up: found
             # in the catalog instead, the indexes are used at once
@@ -175,7 +162,7 @@ def test_another_process_builds_them_and_this_one_finds_them_in_the_catalog(back
 
 def test_a_reader_that_cannot_build_still_answers(backend, reference):
     with _opened(backend, RULE, busy_timeout=0.3) as kb:
-        other = _holding_the_write_lock(backend)
+        other = table_written(backend)
         try:
             assert _lookups(kb) == _lookups(reference)
             assert _queries(kb) == _queries(reference)
