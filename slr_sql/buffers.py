@@ -37,7 +37,7 @@ from typing import Any, Iterable
 from .clocks import parse_duration
 from .encoding import INT64_MAX, INT64_MIN, Unencodable, encode
 from .unify import copy_term, undo, unify
-from .errors import SLRError
+from .errors import SLRError, SLRUnavailable
 from .lockorder import ordered_lock
 from .host import Host
 from .terms import format_term
@@ -544,7 +544,13 @@ class BufferManager:
         """Events were stored (the event pipeline's buffer stage): reclaim what pruning
         freed."""
         if not self.store.closed and not self.store.in_transaction:
-            self.store.reclaim_space()
+            try:
+                # after the add's commit: a lock another writer holds now must not fail the
+                # add (its retry would store the events twice), nor hold it up; the next
+                # add gives the space back
+                self.store.reclaim_space(wait=False)
+            except SLRUnavailable:
+                pass
 
     # -- runtime policies ------------------------------------------------------------
     def add_runtime(self, pattern: Any, keep_last: Any = None, keep_seconds: Any = None,

@@ -24,7 +24,8 @@ this order:
    synchronizer's timer started (its thread has no caller to raise to). With a wall clock
    such a failure also asks for a retry timer (:data:`RETRY_DELAYS`), so that the decisions
    are made without another add; a clock that tells when it moves calls at its next move;
-5. **buffers**: space the buffers' pruning freed is reclaimed;
+5. **buffers**: space the buffers' pruning freed is reclaimed, without waiting for another
+   writer's lock (a busy reclaim is left to the next add: the add's events are committed);
 6. **wake**: ``kb.add_listeners`` are called and the subscription hub is woken, once per
    batch, in the order the batches were stored (the add's events with the complex events
    its transaction derived, then each decision round's).

@@ -755,8 +755,9 @@ class EventStore:
 
     @_doc(Space.reclaim_space)
     def reclaim_space(self, min_free_pages: int = 2048, min_free_fraction: float = 0.25,
-                      keep_fraction: float = 0.10) -> int:
-        return self._space.reclaim_space(min_free_pages, min_free_fraction, keep_fraction)
+                      keep_fraction: float = 0.10, wait: bool = True) -> int:
+        return self._space.reclaim_space(min_free_pages, min_free_fraction, keep_fraction,
+                                         wait)
 
     @_doc(Space.limit_wal)
     def limit_wal(self, max_bytes: int = 64 * 1024 * 1024) -> None:

@@ -73,11 +73,13 @@ class Space:
                 "file_bytes": file_bytes, "wal_bytes": wal_bytes}
 
     def reclaim_space(self, min_free_pages: int = 2048, min_free_fraction: float = 0.25,
-                      keep_fraction: float = 0.10) -> int:
+                      keep_fraction: float = 0.10, wait: bool = True) -> int:
         """Give free pages back to the file system (``PRAGMA incremental_vacuum``) when the
         free list is large: more than ``min_free_pages`` pages and ``min_free_fraction`` of
         the file. ``keep_fraction`` of the file is left free for the next inserts to reuse.
-        Returns the number of pages released (0 for in-memory stores).
+        Returns the number of pages released (0 for in-memory stores). ``wait=False``: when
+        another connection holds the write lock, SLRBusy at once instead of waiting
+        ``busy_timeout`` (housekeeping that a later call does as well).
 
         >>> from slr_sql.store import EventStore
         >>> EventStore(None).reclaim_space()
@@ -98,8 +100,11 @@ class Space:
             release = free - int(keep_fraction * page_count)
             if release <= 0:
                 return 0
-            with self.db.transaction():
-                conn.execute(f"PRAGMA incremental_vacuum({int(release)})").fetchall()
+            with self.db.transaction(wait):
+                # Python's sqlite3 steps this PRAGMA once (it returns no rows), and each
+                # step gives back one page: one execution per page (~15 µs each)
+                for _ in range(int(release)):
+                    conn.execute("PRAGMA incremental_vacuum(1)")
             after = conn.execute("PRAGMA freelist_count").fetchone()[0]
             if not self.db.tx_depth:
                 conn.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchall()
@@ -137,7 +142,7 @@ class ServerSpace(Space):
                 "free_pages": 0, "file_bytes": file_bytes, "wal_bytes": 0}
 
     def reclaim_space(self, min_free_pages: int = 2048, min_free_fraction: float = 0.25,
-                      keep_fraction: float = 0.10) -> int:
+                      keep_fraction: float = 0.10, wait: bool = True) -> int:
         return 0
 
     def limit_wal(self, max_bytes: int = 64 * 1024 * 1024) -> None:
