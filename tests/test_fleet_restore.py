@@ -173,6 +173,23 @@ def test_a_restored_store_is_refused_in_process_with_nothing_shipped(tmp_path):
     assert sum(fleet_events(fleet_db).values()) == 8
 
 
+def test_a_resync_tells_an_integer_from_the_same_float(tmp_path):
+    """A lost event p(1)^1 and a new p(1.0)^1 are different terms: the resync stores the
+    new one beside the old."""
+    db, copy, fleet_db = tmp_path / "r1.db", tmp_path / "r1.backup.db", tmp_path / "fleet.db"
+    add(db, ["p(0)^0"], 100.0)
+    fleet.push(str(db), str(fleet_db))
+    backup(db, copy)
+    add(db, ["p(1)^1"], 200.0)
+    fleet.push(str(db), str(fleet_db))
+    restore(copy, db)
+    add(db, ["p(1.0)^1"], 300.0)
+    fleet.push(str(db), str(fleet_db), resync=True)
+    with slr_sql.open(str(fleet_db)) as kb:
+        assert sorted((type(r["X"]).__name__, r["X"]) for r in kb.query("p(X)^_")) == \
+            [("float", 1.0), ("int", 0), ("int", 1)]
+
+
 def test_a_buffer_that_empties_a_table_is_not_taken_for_a_restore(tmp_path):
     # the counter, not the greatest stored seq: rows deleted on the robot after shipping
     db, fleet_db = tmp_path / "r1.db", tmp_path / "fleet.db"

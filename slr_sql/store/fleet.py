@@ -349,11 +349,17 @@ class Fleet:
         event_type = self.tables.lookup(name, arity)
         if event_type is None:
             return [False] * len(rows)
-        columns = [f"arg{i}" for i in range(1, arity + 1)] + ["t_start", "t_end", "robot"]
+        # an argument is the same value of the same type (1 is not 1.0): SQLite's columns
+        # keep the type given and compare numbers by value; a server's spell the type
+        typed = self.db.dialect.to_column is None
+        args = [f"arg{i} = ? AND typeof(arg{i}) = typeof(?)" if typed else f"arg{i} = ?"
+                for i in range(1, arity + 1)]
         select = (f"SELECT 1 FROM {event_type.quoted} WHERE "
-                  + " AND ".join(f"{c} = ?" for c in columns) + " LIMIT 1")
+                  + " AND ".join(args + ["t_start = ?", "t_end = ?", "robot = ?"]) + " LIMIT 1")
         conn = self.db.conn
-        return [conn.execute(select, values).fetchone() is not None
+        return [conn.execute(select, [v for value in values[:arity]
+                                      for v in ((value, value) if typed else (value,))]
+                             + list(values[arity:])).fetchone() is not None
                 for values in self.column_values(arity, rows, robot)]
 
     def _store_decoded(self, robot: str, name: str, arity: int, rows: list[tuple],
