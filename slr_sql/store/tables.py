@@ -285,10 +285,6 @@ class EventTables:
             conn.execute(f"CREATE INDEX IF NOT EXISTS {event_type.index_arg1_start} ON "
                          f"{event_type.quoted} (arg1, t_start, t_end)")
 
-    def _start_index_names(self, event_type: EventType) -> list[str]:
-        return [f"slr_ix__{event_type.table}__{suffix}"
-                for suffix in (("start", "a1_start") if event_type.arity else ("start",))]
-
     def ensure_start_order(self, event_type: EventType) -> bool:
         """Whether ``event_type``'s start-ordered indexes exist, building them first when
         they do not (lock held by the caller). A type known to have them costs nothing; one
@@ -313,7 +309,8 @@ class EventTables:
         if event_type.start_order:
             return True
         db = self.db
-        wanted = self._start_index_names(event_type)
+        # (end, start, a1_end, a1_start: a type without arguments has no a1_ ones)
+        wanted = _index_names(event_type.table)[1::2][:2 if event_type.arity else 1]
         if set(wanted) <= db.index_names(event_type.table):
             event_type.start_order = True
             return True
