@@ -525,13 +525,16 @@ class Database:
     # ------------------------------------------------------------------ transactions
 
     @contextmanager
-    def transaction(self, wait: bool = True) -> Iterator["Database"]:
+    def transaction(self, wait: bool = True, listeners: bool = True) -> Iterator["Database"]:
         """Run several statements as one atomic unit (BEGIN IMMEDIATE ... COMMIT).
 
         Re-entrant: nested uses become savepoints, so an inner failure undoes only the inner
         part. The lock is held for the whole transaction. ``wait=False``: another
         connection's write transaction is not waited for (SLRBusy at once), for work a
         reader may leave for later (a nested one holds the lock already).
+        ``listeners=False``: a rollback of this one does not call the rollback listeners,
+        for a block that changes nothing they know of (a build of indexes that may fail):
+        it takes back only itself.
 
         >>> db = Database(None)
         >>> with db.transaction():
@@ -561,7 +564,8 @@ class Database:
                         conn.execute(f"ROLLBACK TO slr_sp{depth}")
                         conn.execute(f"RELEASE slr_sp{depth}")
                 finally:
-                    self._rolled_back()
+                    if listeners:
+                        self._rolled_back()
                 raise
             self.tx_depth = depth
             try:
@@ -571,7 +575,8 @@ class Database:
             except BaseException:
                 if depth == 0 and conn.in_transaction:
                     conn.execute("ROLLBACK")
-                self._rolled_back()
+                if listeners:
+                    self._rolled_back()
                 raise
 
     def _begin(self, timeout: float) -> None:

@@ -798,9 +798,10 @@ class PgDatabase:
     # ------------------------------------------------------------------ transactions
 
     @contextmanager
-    def transaction(self, wait: bool = True) -> Iterator[PgDatabase]:
+    def transaction(self, wait: bool = True, listeners: bool = True) -> Iterator[PgDatabase]:
         """(:meth:`Database.transaction`) ``wait=False``: a lock another session holds is
-        not waited for (SLRBusy at once), nested or not: work a reader may leave for later."""
+        not waited for (SLRBusy at once), nested or not: work a reader may leave for later.
+        ``listeners=False``: a rollback does not call the rollback listeners."""
         with self.lock:
             self.check_open()
             depth = self.tx_depth
@@ -827,7 +828,8 @@ class PgDatabase:
                     else:
                         conn.roll_back_to(f"slr_sp{depth}")
                 finally:
-                    self._rolled_back()
+                    if listeners:
+                        self._rolled_back()
                 raise
             self.tx_depth = depth
             try:
@@ -838,7 +840,8 @@ class PgDatabase:
             except BaseException:
                 if depth == 0:
                     conn.rollback()
-                self._rolled_back()
+                if listeners:
+                    self._rolled_back()
                 raise
 
     def _rolled_back(self) -> None:
