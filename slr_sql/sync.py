@@ -40,7 +40,8 @@ from typing import Any, Callable, Iterable, NamedTuple
 
 from .analysis import GoalSet, goal_set
 from .answers import answer_bindings
-from .clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning, ManualClock, StreamClock
+from .clocks import (DEFAULT_MAX_LEARNED_DELAY, LearnedDelayNotWrittenWarning,
+                     LearnedDelayWarning, ManualClock, StreamClock)
 from .errors import EventRejected, SLRError, SLRTimeout, SLRUnavailable
 from .lockorder import ordered_lock
 from .host import Host
@@ -366,6 +367,29 @@ class Completeness:
         for key, d in stored.items():
             self._persisted[key] = max(self._persisted.get(key, 0.0), d)
             self.learned[key] = max(self.learned.get(key, 0.0), d)
+
+    def flush_at_close(self) -> None:
+        """Write the learned delays not written yet (grown by less than 1 ms, or whose
+        write after an add met a lock), waiting for another session's lock up to the
+        store's busy timeout; those it still cannot write are named in a
+        :class:`~slr_sql.clocks.LearnedDelayNotWrittenWarning`, not dropped in silence."""
+        if self.store.closed:
+            return
+        unwritten = {k: d for k, d in self.learned.items() if d > self._persisted.get(k, 0.0)}
+        try:
+            self.flush(unwritten)
+            self._unwritten.clear()
+        except SLRError as exc:
+            if self.store.closed:
+                return
+            for key, d in sorted(unwritten.items()):
+                name = type_text(key)
+                warnings.warn(LearnedDelayNotWrittenWarning(
+                    f"{name}: the delay learned here ({_fmt(d)} s) was not written when the "
+                    f"knowledge base closed ({exc}); the store keeps "
+                    f"{_fmt(self._persisted.get(key, 0.0))} s, so another process may judge "
+                    f"{name} complete earlier (:- max_delay({name}, {_fmt(d)}). declares "
+                    f"it for good)"), stacklevel=5)
 
     def load(self) -> None:
         """(Re)read learned delays and marks from the store."""
@@ -756,11 +780,8 @@ class Synchronizer:
             self.cond.notify_all()
         if hasattr(self.clock, "unsubscribe"):
             self.clock.unsubscribe(self._on_clock)
-        try:
-            with self.lock:
-                self.tracker.flush()
-        except SLRError:
-            pass  # the store is closed already
+        with self.lock:
+            self.tracker.flush_at_close()
         for q in queries:
             if not q.done():
                 self._set_exception(q, SLRError(f"the knowledge base was closed while query "
