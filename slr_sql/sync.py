@@ -697,6 +697,19 @@ class Synchronizer:
     def mark(self, spec: Any, t: float, source: str | None = None) -> None:
         """Apply a mark: persist it, release the queries it completes (the event pipeline's
         completeness stage: the caller runs the decisions)."""
+        mark = self._mark_of(spec, t, source)
+        with self.lock:   # (held while a mark is written, as while learned delays are)
+            written = self.store_marks([mark])
+        self.apply_marks(written)
+
+    def write_mark(self, spec: Any, t: float, source: str | None = None) -> WrittenMarks:
+        """Write a mark inside the transaction the calling thread holds (the store's lock
+        is taken already: the synchronizer's, ordered before it, is not); the caller applies
+        it (:meth:`apply_marks`) once that committed."""
+        return self.store_marks([self._mark_of(spec, t, source)])
+
+    @staticmethod
+    def _mark_of(spec: Any, t: float, source: str | None) -> tuple[Any, float, str]:
         name, n = parse_type(spec)
         t = float(t)
         if math.isnan(t):
@@ -704,9 +717,7 @@ class Synchronizer:
         key: Any = name if n is None else (name, n)
         if source is None:
             source = f"kb.mark_complete({type_text(key) if n is not None else name!r}, {_fmt(t)})"
-        with self.lock:   # (held while a mark is written, as while learned delays are)
-            written = self.store_marks([(key, t, source)])
-        self.apply_marks(written)
+        return key, t, source
 
     def complete_until(self, spec: Any) -> float:
         name, n = parse_type(spec)

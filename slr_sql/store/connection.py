@@ -252,6 +252,9 @@ class Database:
         self.closed = False
         # called, lock held, after a transaction rolled back (the event-type cache reloads)
         self.rollback_listeners: list[Callable[[], None]] = []
+        # (depth registered at, callback): called once the outermost transaction committed
+        # and let go of the lock; dropped with the (nested) transaction that rolls back
+        self.commit_callbacks: list[tuple[int, Callable[[], None]]] = []
         # streams (event scans read in batches) whose statement may still be open: suspended
         # when a transaction begins (see suspend_streams)
         self.open_streams: weakref.WeakSet = weakref.WeakSet()
@@ -543,6 +546,7 @@ class Database:
         >>> db.execute("SELECT value FROM slr_meta WHERE key = 'a'")
         [('1',)]
         """
+        committed: list[tuple[int, Callable[[], None]]] = []
         with self.lock:
             self.check_open()
             depth = self.tx_depth
@@ -557,6 +561,7 @@ class Database:
                 yield self
             except BaseException:
                 self.tx_depth = depth
+                self._drop_commit_callbacks(depth)
                 try:
                     if depth == 0:
                         conn.execute("ROLLBACK")
@@ -573,11 +578,16 @@ class Database:
                     self.check_identity()  # before anything is acknowledged
                 conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
             except BaseException:
+                self._drop_commit_callbacks(depth)
                 if depth == 0 and conn.in_transaction:
                     conn.execute("ROLLBACK")
                 if listeners:
                     self._rolled_back()
                 raise
+            if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
+                committed, self.commit_callbacks = self.commit_callbacks, []
+        for _depth, callback in committed:
+            callback()
 
     def _begin(self, timeout: float) -> None:
         """``BEGIN IMMEDIATE``, waiting at most ``timeout`` seconds for another
@@ -614,6 +624,29 @@ class Database:
     def _rolled_back(self) -> None:
         for listener in self.rollback_listeners:
             listener()
+
+    def after_commit(self, callback: Callable[[], None]) -> None:
+        """Call ``callback()`` once the outermost transaction this thread is in has
+        committed and let go of the store's lock; never, should the transaction (or the
+        nested one it was asked for in) roll back. Outside a transaction: at once.
+
+        >>> db = Database(None); heard = []
+        >>> with db.transaction():
+        ...     db.after_commit(lambda: heard.append("committed"))
+        ...     heard.append("inside")
+        >>> heard
+        ['inside', 'committed']
+        """
+        with self.lock:
+            if self.tx_depth:
+                self.commit_callbacks.append((self.tx_depth, callback))
+                return
+        callback()
+
+    def _drop_commit_callbacks(self, depth: int) -> None:
+        """Forget the callbacks asked for inside the (nested) transaction at ``depth``."""
+        self.commit_callbacks[:] = [(d, c) for d, c in self.commit_callbacks if d <= depth]
+
 
     # ------------------------------------------------------------------ raw SQL
 
