@@ -355,7 +355,7 @@ class EventPipeline:
         while True:
             run.again = False
             try:
-                if not cep.ready(float(cep.clock.now())):
+                if not cep.ready(float(cep.clock.now()), run.stored):
                     self._retry_delay = 0.0
                     cep.wake_timers()
                     cep.recheck()
