@@ -64,7 +64,9 @@ def test_close_waits_for_the_lock_and_then_writes_the_delay(postgres_url):
             with psycopg.connect(postgres_url, autocommit=True) as watcher:
                 # (each look a round trip to the server, bounded by the deadline)
                 while time.monotonic() < deadline and not watcher.execute(
-                        "SELECT count(*) FROM pg_locks WHERE NOT granted").fetchone()[0]:
+                        "SELECT count(*) FROM pg_locks WHERE NOT granted AND database = "
+                        "(SELECT oid FROM pg_database WHERE datname = current_database())"
+                        ).fetchone()[0]:
                     pass
         finally:
             other.rollback()
