@@ -733,6 +733,9 @@ class PgDatabase:
         self.tx_depth = 0
         self.closed = False
         self.rollback_listeners: list[Callable[[], None]] = []
+        # (depth registered at, callback): called once the outermost transaction committed
+        # and let go of the lock; dropped with the (nested) transaction that rolls back
+        self.commit_callbacks: list[tuple[int, Callable[[], None]]] = []
         self.open_streams: weakref.WeakSet = weakref.WeakSet()
         self.deadline: float | None = None
         self.functions: SqlFunctions | None = None  # install_functions
@@ -919,9 +922,11 @@ class PgDatabase:
     # ------------------------------------------------------------------ transactions
 
     @contextmanager
-    def transaction(self, wait: bool = True) -> Iterator[PgDatabase]:
+    def transaction(self, wait: bool = True, listeners: bool = True) -> Iterator[PgDatabase]:
         """(:meth:`Database.transaction`) ``wait=False``: a lock another session holds is
-        not waited for (SLRBusy at once), nested or not: work a reader may leave for later."""
+        not waited for (SLRBusy at once), nested or not: work a reader may leave for later.
+        ``listeners=False``: a rollback does not call the rollback listeners."""
+        committed: list[tuple[int, Callable[[], None]]] = []
         with self.lock:
             self.check_open()
             depth = self.tx_depth
@@ -942,13 +947,15 @@ class PgDatabase:
                     conn.execute(f"SET LOCAL lock_timeout = {int(self.busy_timeout * 1000)}")
             except BaseException:
                 self.tx_depth = depth
+                self._drop_commit_callbacks(depth)
                 try:
                     if depth == 0:
                         conn.rollback()
                     else:
                         conn.roll_back_to(f"slr_sp{depth}")
                 finally:
-                    self._rolled_back()
+                    if listeners:
+                        self._rolled_back()
                 raise
             self.tx_depth = depth
             try:
@@ -957,14 +964,32 @@ class PgDatabase:
                 else:
                     conn.release_later(f"slr_sp{depth}")
             except BaseException:
+                self._drop_commit_callbacks(depth)
                 if depth == 0:
                     conn.rollback()
-                self._rolled_back()
+                if listeners:
+                    self._rolled_back()
                 raise
+            if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
+                committed, self.commit_callbacks = self.commit_callbacks, []
+        for _depth, callback in committed:
+            callback()
 
     def _rolled_back(self) -> None:
         for listener in self.rollback_listeners:
             listener()
+
+    def after_commit(self, callback: Callable[[], None]) -> None:
+        """(:meth:`Database.after_commit`)"""
+        with self.lock:
+            if self.tx_depth:
+                self.commit_callbacks.append((self.tx_depth, callback))
+                return
+        callback()
+
+    def _drop_commit_callbacks(self, depth: int) -> None:
+        self.commit_callbacks[:] = [(d, c) for d, c in self.commit_callbacks if d <= depth]
+
 
     # ------------------------------------------------------------------ raw SQL
 
