@@ -602,6 +602,28 @@ MOST_ABANDONED = 2
 STOP_GRACE = 0.5
 
 
+def _one_statement(raw: Any, statement: str, bound: Any) -> tuple[list[str], list[tuple]]:
+    """Run the one read-only ``statement`` of a caller on ``raw`` and return ``(column
+    names, rows)``. Sent in a pipeline, so always by the extended protocol, which refuses a
+    second statement in the text (the simple protocol, psycopg's choice without parameters,
+    would run ``COMMIT; SET ...; COMMIT; DELETE ...`` past the READ ONLY transaction)."""
+    cursor = raw.cursor()
+    with raw.pipeline():
+        cursor.execute(statement, bound, prepare=False)
+    columns = [d.name for d in cursor.description] if cursor.description else []
+    rows = [tuple(r) for r in cursor.fetchall()] if cursor.description else []
+    return columns, rows
+
+
+def _leave_nothing(raw: Any) -> None:
+    """End a read-only statement's transaction on ``raw`` so that nothing of it outlives it:
+    ROLLBACK (not COMMIT) takes back the session settings it changed (``SET``,
+    ``set_config``: the read-only default, search_path, how floats print), and the session
+    advisory locks it took are let go (the store's own are transaction locks)."""
+    raw.execute("ROLLBACK")
+    raw.execute("SELECT pg_advisory_unlock_all()")
+
+
 class DetachedStatements:
     """The read-only statements of ``kb.sql`` outside a transaction, each on a connection of
     its own in a thread of its own: the store's connection and lock are never held by them
@@ -658,14 +680,15 @@ class DetachedStatements:
             try:
                 if raw is None:
                     raw = self._connect()
-                with raw.transaction():
+                raw.execute("BEGIN READ ONLY")
+                try:
                     if timeout is not None:
                         raw.execute(f"SET LOCAL statement_timeout = {_timeout_ms(timeout)}")
-                    cursor = raw.cursor()
-                    cursor.execute(statement, bound, prepare=False)
-                    columns = [d.name for d in cursor.description] if cursor.description \
-                        else []
-                    rows = [tuple(r) for r in cursor.fetchall()] if cursor.description else []
+                    columns, rows = _one_statement(raw, statement, bound)
+                finally:
+                    # (the connection is kept for the next statement: see _leave_nothing)
+                    if _connected(raw):
+                        _leave_nothing(raw)
                 outcome["value"] = (columns, rows)
             except psycopg.Error as exc:
                 error = _error(exc, self.where, self.busy_timeout,
@@ -1016,8 +1039,10 @@ class PgDatabase:
             raw = self.conn.raw
             deadline = None if timeout is None else time.monotonic() + timeout
             try:
+                if not write:
+                    return self._read_only(raw, own, query, params, timeout)
                 if own:
-                    raw.execute("BEGIN" if write else "BEGIN READ ONLY")
+                    raw.execute("BEGIN")
                 if timeout is not None:
                     raw.execute(f"SET LOCAL statement_timeout = {_timeout_ms(timeout)}")
                 cursor = raw.cursor()
@@ -1041,6 +1066,31 @@ class PgDatabase:
                         pass
                 error = _error(exc, self.path, self.busy_timeout, _connected(raw))
                 raise error if deadline is None else _own_deadline(error, deadline) from None
+
+    def _read_only(self, raw: Any, own: bool, query: str, params: Iterable[Any],
+                   timeout: float | None) -> tuple[list[str], list[tuple]]:
+        """A read-only statement on the store's own connection (inside a transaction: in
+        a savepoint made read-only, so it may read the transaction's writes but not write,
+        and the rollback to it takes back the settings it changed, its timeout included)."""
+        if own:
+            raw.execute("BEGIN READ ONLY")
+        else:
+            raw.execute("SAVEPOINT slr_read_only")
+            raw.execute("SET LOCAL transaction_read_only = on")
+        try:
+            if timeout is not None:
+                raw.execute(f"SET LOCAL statement_timeout = {_timeout_ms(timeout)}")
+            bound = bound_parameters(params)
+            return _one_statement(raw, self.dialect.statement(query) if bound else query,
+                                  bound or None)
+        finally:
+            if _connected(raw):
+                if own:
+                    _leave_nothing(raw)
+                else:
+                    raw.execute("ROLLBACK TO SAVEPOINT slr_read_only")
+                    raw.execute("RELEASE SAVEPOINT slr_read_only")
+                    raw.execute("SELECT pg_advisory_unlock_all()")
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
         with self.lock:

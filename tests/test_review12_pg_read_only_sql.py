@@ -1,0 +1,61 @@
+"""A read-only kb.sql on PostgreSQL leaves nothing behind on the connection it ran on: a
+session setting it changed (the read-only default, search_path, how floats print) or a
+session lock it took does not reach the next statement, a second statement in the same text
+is refused, and inside a transaction it may still not write."""
+from __future__ import annotations
+
+import psycopg
+import pytest
+
+import slr_sql
+from slr_sql import SLRError
+
+
+@pytest.fixture
+def kb(postgres_url):
+    with slr_sql.open(postgres_url, clock=slr_sql.ManualClock(10.0)) as store:
+        yield store
+
+
+def _tables_named(kb, prefix: str) -> int:
+    return kb.sql("SELECT count(*) FROM pg_tables WHERE tablename LIKE ?", [prefix + "%"])[1][0][0]
+
+
+def test_a_setting_changed_by_one_statement_does_not_reach_the_next(kb):
+    kb.add("seg(cup1)^1")
+    kb.sql("SET default_transaction_read_only = off")
+    with pytest.raises(SLRError, match="read-only"):
+        kb.sql("CREATE TABLE review12_evil(a int)")
+    assert _tables_named(kb, "review12_evil") == 0
+    kb.sql("SET search_path = public")
+    assert kb.sql("SELECT arg1 FROM seg")[1] == [("cup1",)]
+    kb.sql("SELECT set_config('extra_float_digits', '-15', false)")
+    assert kb.sql("SELECT 0.1::float8 + 0.2::float8 AS f")[1] == [(0.1 + 0.2,)]
+
+
+def test_a_second_statement_in_the_same_text_is_refused(kb):
+    with pytest.raises(SLRError):
+        kb.sql("COMMIT; SET default_transaction_read_only = off; COMMIT; "
+               "CREATE TABLE review12_evil2(a int)")
+    with pytest.raises(SLRError, match="read-only"):
+        kb.sql("CREATE TABLE review12_evil2(a int)")
+    assert _tables_named(kb, "review12_evil2") == 0
+
+
+def test_a_session_lock_taken_by_a_read_only_statement_is_let_go(postgres_url):
+    with slr_sql.open(postgres_url, clock=slr_sql.ManualClock(10.0)) as kb:
+        kb.sql("SELECT pg_advisory_lock(424242)")
+        with psycopg.connect(postgres_url, autocommit=True) as other:
+            assert other.execute("SELECT pg_try_advisory_lock(424242)").fetchone()[0] is True
+
+
+def test_inside_a_transaction_a_read_only_statement_writes_nothing(kb):
+    kb.add("seg(cup1)^1")
+    with kb.store.transaction():
+        with pytest.raises(SLRError, match="read-only"):
+            kb.sql("DELETE FROM seg")
+        kb.sql("SET search_path = public")
+        assert kb.sql("SELECT count(*) FROM seg")[1] == [(1,)]
+    assert kb.sql("SELECT count(*) FROM seg")[1] == [(1,)]
+    kb.add("seg(cup2)^2")
+    assert [a["X"] for a in kb.query("seg(X)^T")] == ["cup1", "cup2"]
