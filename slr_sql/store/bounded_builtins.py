@@ -10,6 +10,9 @@ even past the length limit:
   ``glob(pattern, x)``): backtracking, ~1.3 ns per character of ``x`` times characters of
   the pattern (a 1 MB text against a 10,000-character pattern: 18 s);
 * ``instr(x, y)`` and ``replace(x, y, z)``: a compare of ``y`` at each place of ``x``;
+* ``trim``/``ltrim``/``rtrim(x, chars)``: a compare with each character of ``chars`` for
+  each character taken off; ``json_patch(target, patch)``: each key of the patch looked up
+  along the target's keys;
 * ``printf('%.*c', n, 'x')`` (and ``format``): ``n`` steps even when the result is over the
   length limit and comes back NULL (n = 2,000,000,000: 9 s).
 
@@ -49,11 +52,17 @@ from typing import Any
 from .authorizer import SqlGuard
 from .functions import Native, SqlFunction, SqlFunctions
 
-__all__ = ["bounded_builtins", "MOST_WORK"]
+__all__ = ["bounded_builtins", "MOST_WORK", "MOST_TRIM_WORK", "MOST_JSON_PATCH_WORK"]
 
 # The most work one call may do: the product of the lengths (in characters or bytes) of
 # the text searched and of the pattern or needle. LIKE, the slowest, runs this in ~0.35 s.
 MOST_WORK = 1 << 28
+
+# trim/ltrim/rtrim(x, chars): characters taken off times characters of the set (a compare
+# each, ~10 ns: the bound takes ~0.3 s).
+MOST_TRIM_WORK = 1 << 25
+# json_patch(target, patch): (target's length + patch's) times patch's (~30 ps each: ~0.3 s).
+MOST_JSON_PATCH_WORK = 1 << 33
 
 # A printf conversion: flags, width, precision, length modifier, conversion letter.
 _CONVERSION = re.compile(r"%([-+ 0#!,]*)(\*|\d+)?(?:\.(\*|\d+))?(l{0,2})(.)", re.S)
@@ -124,6 +133,43 @@ class _Builtins:
         self.bounded("replace", text, old)
         return self.call("replace", (text, old, new))
 
+    def trim(self, name: str, text: Any, chars: Any) -> Any:
+        """``trim``/``ltrim``/``rtrim(text, chars)``: SQLite compares each character it
+        takes off (and the first it keeps, at each end) with every character of ``chars``,
+        ~10 ns a compare. The run it would take off is measured first (Python's strip,
+        on at most as many characters as the bound lets through)."""
+        if isinstance(text, (str, bytes)) and type(chars) is type(text) and chars:
+            most = MOST_TRIM_WORK // len(chars)   # the longest run the bound lets through
+            run = 0
+            if name != "rtrim":
+                head = text[:most + 1]
+                run += len(head) - len(head.lstrip(chars))
+            if name != "ltrim":
+                tail = text[-(most + 1):]
+                run += len(tail) - len(tail.rstrip(chars))
+            work = (min(run, len(text)) + 2) * len(chars)
+        else:
+            work = _length(text) * _length(chars)
+        self.refuse_over(name, work, MOST_TRIM_WORK, text, chars)
+        return self.call(name, (text, chars))
+
+    def json_patch(self, target: Any, patch: Any) -> Any:
+        """``json_patch(target, patch)``: each key of ``patch`` is looked up along the keys
+        of ``target``, which grows by the keys it did not have (~30 ps per character of
+        the grown target times a character of the patch)."""
+        work = (_length(target) + _length(patch)) * _length(patch)
+        self.refuse_over("json_patch", work, MOST_JSON_PATCH_WORK, target, patch)
+        return self.call("json_patch", (target, patch))
+
+    def refuse_over(self, name: str, work: int, most: int, first: Any, second: Any) -> None:
+        """Refuse a call of ``name`` whose ``work`` is over ``most``."""
+        if work > most:
+            self.guard.denied = (
+                f"{name}() over values of {_length(first):,} and {_length(second):,} "
+                f"characters is refused: one call could run for minutes, and a statement's "
+                f"timeout cannot stop a call midway")
+            raise ValueError(self.guard.denied)
+
     def printf(self, name: str, *args: Any) -> Any:
         if args and isinstance(args[0], str) and self.repeats_past_limit(args[0], args[1:]):
             return None
@@ -162,7 +208,7 @@ def bounded_builtins(caller: sqlite3.Connection, guard: SqlGuard) -> SqlFunction
     >>> from slr_sql.store.authorizer import harden_connection
     >>> conn = sqlite3.connect(":memory:")
     >>> sorted({f.name for f in bounded_builtins(conn, harden_connection(conn)).functions})
-    ['format', 'glob', 'instr', 'like', 'printf', 'replace']
+    ['format', 'glob', 'instr', 'json_patch', 'like', 'ltrim', 'printf', 'replace', 'rtrim', 'trim']
     """
     builtins = _Builtins(caller, guard)
 
@@ -175,9 +221,14 @@ def bounded_builtins(caller: sqlite3.Connection, guard: SqlGuard) -> SqlFunction
     def format_(*args: Any) -> Any:
         return builtins.printf("format", *args)
 
+    def trim(name: str) -> Any:
+        return lambda text, chars: builtins.trim(name, text, chars)
+
     return SqlFunctions((
         function("like", 2, builtins.like), function("like", 3, builtins.like),
         function("glob", 2, builtins.glob), function("instr", 2, builtins.instr),
         function("replace", 3, builtins.replace),
         function("printf", -1, printf), function("format", -1, format_),
+        function("trim", 2, trim("trim")), function("ltrim", 2, trim("ltrim")),
+        function("rtrim", 2, trim("rtrim")), function("json_patch", 2, builtins.json_patch),
     ), ())
