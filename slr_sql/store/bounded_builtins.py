@@ -142,10 +142,10 @@ class _Builtins:
             most = MOST_TRIM_WORK // len(chars)   # the longest run the bound lets through
             run = 0
             if name != "rtrim":
-                head = text[:most + 1]
+                head: Any = text[:most + 1]
                 run += len(head) - len(head.lstrip(chars))
             if name != "ltrim":
-                tail = text[-(most + 1):]
+                tail: Any = text[-(most + 1):]
                 run += len(tail) - len(tail.rstrip(chars))
             work = (min(run, len(text)) + 2) * len(chars)
         else:
