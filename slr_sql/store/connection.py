@@ -587,8 +587,7 @@ class Database:
                 raise
             if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
                 committed, self.commit_callbacks = self.commit_callbacks, []
-        for _depth, callback in committed:
-            callback()
+        run_commit_callbacks(committed)
 
     def _begin(self, timeout: float) -> None:
         """``BEGIN IMMEDIATE``, waiting at most ``timeout`` seconds for another
@@ -865,6 +864,32 @@ class Database:
                 else:
                     conn.set_progress_handler(lambda: 1 if time.monotonic() > outer else 0,
                                               20000)
+
+
+def run_commit_callbacks(callbacks: list[tuple[int, Callable[[], None]]]) -> None:
+    """Call each of ``callbacks`` (``(depth, callback)``, asked for with ``after_commit``)
+    once their transaction committed: every one, even after one raised (each is the rest of
+    an add, mark or clock move of its own: the later ones are still observed, decided and
+    heard), then the first error raised.
+
+    >>> heard = []
+    >>> def fails(): raise KeyError("first")
+    >>> run_commit_callbacks([(1, fails), (1, lambda: heard.append("second"))])
+    Traceback (most recent call last):
+    ...
+    KeyError: 'first'
+    >>> heard
+    ['second']
+    """
+    first: BaseException | None = None
+    for _depth, callback in callbacks:
+        try:
+            callback()
+        except BaseException as exc:   # (raised once the others ran)
+            if first is None:
+                first = exc
+    if first is not None:
+        raise first
 
 
 def harden(conn: sqlite3.Connection) -> SqlGuard:

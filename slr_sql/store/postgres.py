@@ -33,6 +33,7 @@ from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 from ..errors import SLRBusy, SLRCancelled, SLRError, SLRServerUnreachable, SLRTimeout, \
     SLRUnavailable
 from ..lockorder import ordered_lock
+from .connection import run_commit_callbacks
 from .dialect import POSTGRES
 from .functions import SqlFunctions
 from .schema import postgres_migration_scripts
@@ -995,8 +996,7 @@ class PgDatabase:
                 raise
             if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
                 committed, self.commit_callbacks = self.commit_callbacks, []
-        for _depth, callback in committed:
-            callback()
+        run_commit_callbacks(committed)
 
     def _rolled_back(self) -> None:
         for listener in self.rollback_listeners:
