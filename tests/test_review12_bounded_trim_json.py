@@ -78,3 +78,22 @@ def test_the_trims_answer_as_sqlites_own(memory_store, text, chars):
         except sqlite3.Error:
             continue
         assert memory_store.sql(query, [text, chars, text, chars])[1] == expected
+
+
+UNDECODABLE = "SELECT CAST(x'ff41' AS TEXT) LIKE '%A'"
+
+
+@pytest.mark.parametrize("write", [False, True])
+def test_text_that_is_not_utf8_passed_to_a_wrapped_built_in_is_said_in_words(store, write):
+    # (Python reads a function's text arguments as UTF-8: the wrapper is never called)
+    with pytest.raises(SLRError, match="not valid UTF-8.*CAST"):
+        store.sql(UNDECODABLE, write=write)
+    assert store.sql("SELECT CAST(x'ff41' AS BLOB) LIKE '%A'")[1] == \
+        sqlite3.connect(":memory:").execute("SELECT x'ff41' LIKE '%A'").fetchall()
+
+
+def test_the_slr_sql_command_says_it_in_words_too(tmp_path):
+    from slr_sql.store.connection import run_sql_file
+    slr_sql.open(tmp_path / "robot.db").close()
+    with pytest.raises(SLRError, match="not valid UTF-8"):
+        run_sql_file(tmp_path / "robot.db", UNDECODABLE)

@@ -682,6 +682,8 @@ class Database:
                     except sqlite3.DatabaseError as exc:
                         if _refused(str(exc), guard):
                             raise SLRError(f"sql: {guard.denied}") from None
+                        if _FUNCTION_FAILED in str(exc):
+                            raise SLRError(f"sql: {_NOT_UTF8}") from None
                         raise busy_error(exc, self.path, self.busy_timeout) or exc from None
             # query_only refuses every write to a database file; the authorizer refuses what
             # it lets through (pragma assignments such as journal_mode, ATTACH, DETACH) and
@@ -938,6 +940,23 @@ def _refused(text: str, guard: SqlGuard) -> bool:
         "authoriz" in text or "user-defined function raised exception" in text)
 
 
+# A Python function's call fails before it starts when an argument is text that is not
+# valid UTF-8 (Python reads it as str): SQLite then says only "user-defined function raised
+# exception", of a LIKE or trim the user never knew was a Python function.
+_FUNCTION_FAILED = "user-defined function raised exception"
+_NOT_UTF8 = (
+    "a function call failed, most likely on text that is not valid UTF-8: LIKE, GLOB, "
+    "instr, replace, printf, format, trim, ltrim, rtrim, json_patch and slr_sql's own "
+    "functions run through Python on a store connection (their size is checked first: "
+    "slr_sql/store/bounded_builtins.py), which reads text as UTF-8; CAST(x AS BLOB) passes "
+    "the bytes as they are")
+
+
+def _function_failed(text: str) -> str:
+    """The words for an error ``text`` of SQLite: a failed Python function's explained."""
+    return _NOT_UTF8 if _FUNCTION_FAILED in text else text
+
+
 def _read_only_error(exc: sqlite3.DatabaseError, guard: SqlGuard) -> Exception:
     """The error to raise for ``exc``, raised by a read-only statement: the authorizer's
     reason, the read-only refusal, the value limit in words, else ``exc`` itself."""
@@ -955,6 +974,8 @@ def _read_only_error(exc: sqlite3.DatabaseError, guard: SqlGuard) -> Exception:
     if "too big" in text:
         return SLRError(f"sql: a read-only statement may make or read strings and blobs of at "
                         f"most {READ_ONLY_VALUE_BYTES >> 20} MiB ({text})")
+    if _FUNCTION_FAILED in text:
+        return SLRError(f"sql: {_NOT_UTF8}")
     return exc
 
 
@@ -1040,6 +1061,8 @@ def run_sql_file(path: str | os.PathLike, query: str,
         text = str(exc)
         if _refused(text, guard) and guard.denied is not None:
             text = guard.denied
+        else:
+            text = _function_failed(text)
         if not write and "too big" in text:
             text = f"{text} (a read-only statement's values are at most " \
                    f"{READ_ONLY_VALUE_BYTES >> 20} MiB)"
