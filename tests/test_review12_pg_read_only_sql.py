@@ -4,6 +4,8 @@ session lock it took does not reach the next statement, a second statement in th
 is refused, and inside a transaction it may still not write."""
 from __future__ import annotations
 
+import threading
+
 import psycopg
 import pytest
 
@@ -59,3 +61,29 @@ def test_inside_a_transaction_a_read_only_statement_writes_nothing(kb):
     assert kb.sql("SELECT count(*) FROM seg")[1] == [(1,)]
     kb.add("seg(cup2)^2")
     assert [a["X"] for a in kb.query("seg(X)^T")] == ["cup1", "cup2"]
+
+
+def test_read_only_statements_of_many_threads_use_a_bounded_number_of_connections(kb):
+    from slr_sql.store.postgres import MOST_RUNNING
+    # each statement counts the connections to the store's database once it slept
+    query = ("WITH s AS MATERIALIZED (SELECT pg_sleep(0.3)) SELECT (SELECT count(*) FROM "
+             "pg_stat_activity WHERE datname = current_database() AND backend_type = "
+             "'client backend') FROM s")
+    counts: list = []
+    errors: list = []
+    start = threading.Barrier(12)
+
+    def read() -> None:
+        try:
+            start.wait(60)
+            counts.append(kb.sql(query, timeout=60)[1][0][0])
+        except Exception as exc:  # noqa: BLE001 - reported by the assertion below
+            errors.append(exc)
+    threads = [threading.Thread(target=read) for _ in range(12)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(120)
+    assert errors == [] and len(counts) == 12
+    # the store's own connection, and at most MOST_RUNNING of the statements' own
+    assert max(counts) <= 1 + MOST_RUNNING

@@ -599,6 +599,10 @@ class PgReadConnection:
 # before the server looks at statement_timeout (a 6 MB text LIKE a 20,000-character pattern:
 # 258 s past a 0.5 s timeout). Past it, kb.sql answers SLRUnavailable (retryable).
 MOST_ABANDONED = 2
+# The most read-only statements of kb.sql that run on connections of their own at once (the
+# abandoned ones included): more callers wait for one to end, so threads or a service's
+# requests do not open a connection each (the server's max_connections is shared).
+MOST_RUNNING = 4
 # Seconds past its timeout a caller waits for the server to stop the statement itself.
 STOP_GRACE = 0.5
 
@@ -643,6 +647,8 @@ class DetachedStatements:
         self.idle: Any = None          # a psycopg connection ready for the next statement
         self.abandoned = 0
         self.closed = False
+        # a slot per statement running on a connection of its own (MOST_RUNNING at most)
+        self.slots = threading.BoundedSemaphore(MOST_RUNNING)
 
     def _connect(self) -> Any:
         psycopg = _psycopg()
@@ -669,8 +675,18 @@ class DetachedStatements:
                     f"{self.where}: {self.abandoned} earlier SQL statements still run on the "
                     f"server past their timeouts (a built-in over long values runs to its end "
                     f"before the server stops it); try again later")
-            raw, self.idle = self.idle, None
         deadline = None if timeout is None else time.monotonic() + timeout
+        # (waiting for a slot counts against the caller's timeout)
+        if not self.slots.acquire(timeout=timeout):
+            raise SLRTimeout(f"query timed out (waiting {timeout:g} s for one of the "
+                             f"{MOST_RUNNING} connections that run read-only statements)")
+        with self.lock:
+            raw, self.idle = self.idle, None
+            if self.closed:
+                self.slots.release()
+                raise SLRError("the event store is closed")
+        if deadline is not None:   # (what is left of it; a statement_timeout of 0 is none)
+            timeout = max(0.001, deadline - time.monotonic())
         outcome: dict[str, Any] = {}
         finished = threading.Event()
         state = {"abandoned": False}
@@ -708,6 +724,7 @@ class DetachedStatements:
                 if not keep and raw is not None:
                     with suppress(Exception):
                         raw.close()
+                self.slots.release()
                 finished.set()
 
         threading.Thread(target=work, name="slr-sql-statement", daemon=True).start()
