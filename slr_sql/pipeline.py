@@ -241,7 +241,8 @@ class EventPipeline:
             run.again = True
             return
         if self.store.in_transaction_here:
-            self.store.after_commit(lambda: self.progress(timer))
+            # (also after a rollback: it does not take back the clock's move)
+            self.store.after_commit(lambda: self.progress(timer), always=True)
             return
         run = self._enter(timer)
         try:

@@ -34,3 +34,23 @@ def test_a_callback_that_raises_does_not_keep_the_later_ones_from_running(backen
         assert kb.complete_until("e/1") == 5
         assert waiting.result(timeout=30) == [{"L": [7]}]
         assert kb.store.count("b", 1) == 2
+
+
+CNOT = ":- consumption(recent).\n:- max_delay(a/1, 0).\n:- max_delay(b/1, 0).\n" \
+       "c(X) <- a(X) seq b(X) cnot e(X).\n:- max_delay(e/1, 1000).\n"
+
+
+def test_a_clock_move_inside_a_transaction_that_rolls_back_still_decides(backend):
+    # a rollback takes back the transaction's writes, not the clock's move
+    clock = ManualClock(10.0)
+    with slr_sql.open(backend, clock=clock) as kb:
+        kb.load(CNOT)
+        kb.add_many(["a(1)^1", "b(1)^2"])
+        assert kb.event_rules()[0]["pending"] == 1
+        with pytest.raises(KeyError):
+            with kb.store.transaction():
+                with kb.store.transaction():
+                    clock.set(2000.0)
+                raise KeyError("undo")
+        assert kb.event_rules()[0]["pending"] == 0
+        assert [a["X"] for a in kb.query("c(X)^[S, E]")] == [1]

@@ -283,10 +283,11 @@ class EventStore:
     def in_transaction(self) -> bool:
         return self._db.tx_depth > 0
 
-    def after_commit(self, callback: Callable[[], None]) -> None:
+    def after_commit(self, callback: Callable[[], None], always: bool = False) -> None:
         """Call ``callback()`` once the outermost transaction this thread is in committed
         and let go of the store's lock (never, should it or the nested one it was asked for
-        in roll back); outside a transaction at once. The event pipeline runs the stages
+        in roll back; ``always``: once it ended, committed or not, for what a rollback does
+        not take back, such as a clock's move); outside a transaction at once. The event pipeline runs the stages
         after the store of an add made inside a caller's transaction this way.
 
         >>> s = EventStore(None); heard = []
@@ -297,7 +298,7 @@ class EventStore:
         >>> heard
         ['inside', 'committed']
         """
-        self._db.after_commit(callback)
+        self._db.after_commit(callback, always)
 
     @property
     def in_transaction_here(self) -> bool:

@@ -255,7 +255,7 @@ class Database:
         self.rollback_listeners: list[Callable[[], None]] = []
         # (depth registered at, callback): called once the outermost transaction committed
         # and let go of the lock; dropped with the (nested) transaction that rolls back
-        self.commit_callbacks: list[tuple[int, Callable[[], None]]] = []
+        self.commit_callbacks: list[tuple[int, Callable[[], None], bool]] = []
         # streams (event scans read in batches) whose statement may still be open: suspended
         # when a transaction begins (see suspend_streams)
         self.open_streams: weakref.WeakSet = weakref.WeakSet()
@@ -547,46 +547,51 @@ class Database:
         >>> db.execute("SELECT value FROM slr_meta WHERE key = 'a'")
         [('1',)]
         """
-        committed: list[tuple[int, Callable[[], None]]] = []
-        with self.lock:
-            self.check_open()
-            depth = self.tx_depth
-            conn = self.conn
-            if depth == 0:
-                self.suspend_streams()
-                self._begin(self.busy_timeout if wait else 0.0)
-            else:
-                conn.execute(f"SAVEPOINT slr_sp{depth}")
-            self.tx_depth = depth + 1
-            try:
-                yield self
-            except BaseException:
+        committed: list[tuple[int, Callable[[], None], bool]] = []
+        try:
+            with self.lock:
+                self.check_open()
+                depth = self.tx_depth
+                conn = self.conn
+                if depth == 0:
+                    self.suspend_streams()
+                    self._begin(self.busy_timeout if wait else 0.0)
+                else:
+                    conn.execute(f"SAVEPOINT slr_sp{depth}")
+                self.tx_depth = depth + 1
+                try:
+                    yield self
+                except BaseException:
+                    self.tx_depth = depth
+                    committed = drop_commit_callbacks(self.commit_callbacks, depth)
+                    try:
+                        if depth == 0:
+                            conn.execute("ROLLBACK")
+                        else:
+                            conn.execute(f"ROLLBACK TO slr_sp{depth}")
+                            conn.execute(f"RELEASE slr_sp{depth}")
+                    finally:
+                        if listeners:
+                            self._rolled_back()
+                    raise
                 self.tx_depth = depth
-                self._drop_commit_callbacks(depth)
                 try:
                     if depth == 0:
+                        self.check_identity()  # before anything is acknowledged
+                    conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
+                except BaseException:
+                    committed = drop_commit_callbacks(self.commit_callbacks, depth)
+                    if depth == 0 and conn.in_transaction:
                         conn.execute("ROLLBACK")
-                    else:
-                        conn.execute(f"ROLLBACK TO slr_sp{depth}")
-                        conn.execute(f"RELEASE slr_sp{depth}")
-                finally:
                     if listeners:
                         self._rolled_back()
-                raise
-            self.tx_depth = depth
-            try:
-                if depth == 0:
-                    self.check_identity()  # before anything is acknowledged
-                conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
-            except BaseException:
-                self._drop_commit_callbacks(depth)
-                if depth == 0 and conn.in_transaction:
-                    conn.execute("ROLLBACK")
-                if listeners:
-                    self._rolled_back()
-                raise
-            if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
-                committed, self.commit_callbacks = self.commit_callbacks, []
+                    raise
+                if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
+                    committed, self.commit_callbacks = self.commit_callbacks, []
+        except BaseException as exc:
+            if committed:   # (rolled back: what a rollback does not take back)
+                run_after_rollback(committed, exc)
+            raise
         run_commit_callbacks(committed)
 
     def _begin(self, timeout: float) -> None:
@@ -625,7 +630,7 @@ class Database:
         for listener in self.rollback_listeners:
             listener()
 
-    def after_commit(self, callback: Callable[[], None]) -> None:
+    def after_commit(self, callback: Callable[[], None], always: bool = False) -> None:
         """Call ``callback()`` once the outermost transaction this thread is in has
         committed and let go of the store's lock; never, should the transaction (or the
         nested one it was asked for in) roll back. Outside a transaction: at once.
@@ -639,14 +644,9 @@ class Database:
         """
         with self.lock:
             if self.tx_depth:
-                self.commit_callbacks.append((self.tx_depth, callback))
+                self.commit_callbacks.append((self.tx_depth, callback, always))
                 return
         callback()
-
-    def _drop_commit_callbacks(self, depth: int) -> None:
-        """Forget the callbacks asked for inside the (nested) transaction at ``depth``."""
-        self.commit_callbacks[:] = [(d, c) for d, c in self.commit_callbacks if d <= depth]
-
 
     # ------------------------------------------------------------------ raw SQL
 
@@ -868,15 +868,50 @@ class Database:
                                               20000)
 
 
-def run_commit_callbacks(callbacks: list[tuple[int, Callable[[], None]]]) -> None:
-    """Call each of ``callbacks`` (``(depth, callback)``, asked for with ``after_commit``)
+CommitCallbacks = list[tuple[int, Callable[[], None], bool]]
+
+
+def drop_commit_callbacks(callbacks: CommitCallbacks, depth: int) -> CommitCallbacks:
+    """Forget, in ``callbacks``, those asked for inside the (nested) transaction at ``depth``
+    that rolled back, but those asked for ``always``: they move to the enclosing one, and
+    are returned to be run once the outermost one rolled back (depth 0).
+
+    >>> callbacks = [(1, print, False), (2, print, False), (2, print, True)]
+    >>> drop_commit_callbacks(callbacks, 1), callbacks
+    ([], [(1, <built-in function print>, False), (1, <built-in function print>, True)])
+    >>> drop_commit_callbacks(callbacks, 0), callbacks
+    ([(1, <built-in function print>, True)], [])
+    """
+    kept: CommitCallbacks = []
+    due: CommitCallbacks = []
+    for d, callback, always in callbacks:
+        if d <= depth:
+            kept.append((d, callback, always))
+        elif always:
+            (due if depth == 0 else kept).append((max(depth, 1), callback, always))
+    callbacks[:] = kept
+    return due
+
+
+def run_after_rollback(callbacks: CommitCallbacks, error: BaseException) -> None:
+    """Call the ``always`` callbacks of a transaction that rolled back because of ``error``
+    (which goes on being raised: theirs are noted on it)."""
+    for _depth, callback, _always in callbacks:
+        try:
+            callback()
+        except BaseException as exc:   # (the rollback's cause is what the caller hears)
+            error.add_note(f"and after the rollback: {type(exc).__name__}: {exc}")
+
+
+def run_commit_callbacks(callbacks: CommitCallbacks) -> None:
+    """Call each of ``callbacks`` (``(depth, callback, always)``, asked for with ``after_commit``)
     once their transaction committed: every one, even after one raised (each is the rest of
     an add, mark or clock move of its own: the later ones are still observed, decided and
     heard), then the first error raised.
 
     >>> heard = []
     >>> def fails(): raise KeyError("first")
-    >>> run_commit_callbacks([(1, fails), (1, lambda: heard.append("second"))])
+    >>> run_commit_callbacks([(1, fails, False), (1, lambda: heard.append("second"), False)])
     Traceback (most recent call last):
     ...
     KeyError: 'first'
@@ -884,7 +919,7 @@ def run_commit_callbacks(callbacks: list[tuple[int, Callable[[], None]]]) -> Non
     ['second']
     """
     first: BaseException | None = None
-    for _depth, callback in callbacks:
+    for _depth, callback, _always in callbacks:
         try:
             callback()
         except BaseException as exc:   # (raised once the others ran)

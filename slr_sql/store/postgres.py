@@ -33,7 +33,7 @@ from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 from ..errors import SLRBusy, SLRCancelled, SLRError, SLRServerUnreachable, SLRTimeout, \
     SLRUnavailable
 from ..lockorder import ordered_lock
-from .connection import run_commit_callbacks
+from .connection import drop_commit_callbacks, run_after_rollback, run_commit_callbacks
 from .dialect import POSTGRES
 from .functions import SqlFunctions
 from .schema import postgres_migration_scripts
@@ -776,7 +776,7 @@ class PgDatabase:
         self.rollback_listeners: list[Callable[[], None]] = []
         # (depth registered at, callback): called once the outermost transaction committed
         # and let go of the lock; dropped with the (nested) transaction that rolls back
-        self.commit_callbacks: list[tuple[int, Callable[[], None]]] = []
+        self.commit_callbacks: list[tuple[int, Callable[[], None], bool]] = []
         self.open_streams: weakref.WeakSet = weakref.WeakSet()
         self.deadline: float | None = None
         self.functions: SqlFunctions | None = None  # install_functions
@@ -967,69 +967,70 @@ class PgDatabase:
         """(:meth:`Database.transaction`) ``wait=False``: a lock another session holds is
         not waited for (SLRBusy at once), nested or not: work a reader may leave for later.
         ``listeners=False``: a rollback does not call the rollback listeners."""
-        committed: list[tuple[int, Callable[[], None]]] = []
-        with self.lock:
-            self.check_open()
-            depth = self.tx_depth
-            conn = self.conn
-            if depth == 0:
-                self.suspend_streams()
-                conn.begin()
-            else:   # (sent with the next statement: a savepoint nothing uses costs nothing)
-                conn.savepoint_later(f"slr_sp{depth}")
-            self.tx_depth = depth + 1
-            try:
-                if not wait:
-                    conn.execute("SET LOCAL lock_timeout = 1")
-                yield self
-                if not wait and depth:
-                    # (a SET LOCAL outlives the savepoint's release: the enclosing
-                    # transaction waits as before)
-                    conn.execute(f"SET LOCAL lock_timeout = {int(self.busy_timeout * 1000)}")
-            except BaseException:
+        committed: list[tuple[int, Callable[[], None], bool]] = []
+        try:
+            with self.lock:
+                self.check_open()
+                depth = self.tx_depth
+                conn = self.conn
+                if depth == 0:
+                    self.suspend_streams()
+                    conn.begin()
+                else:   # (sent with the next statement: a savepoint nothing uses costs nothing)
+                    conn.savepoint_later(f"slr_sp{depth}")
+                self.tx_depth = depth + 1
+                try:
+                    if not wait:
+                        conn.execute("SET LOCAL lock_timeout = 1")
+                    yield self
+                    if not wait and depth:
+                        # (a SET LOCAL outlives the savepoint's release: the enclosing
+                        # transaction waits as before)
+                        conn.execute(f"SET LOCAL lock_timeout = {int(self.busy_timeout * 1000)}")
+                except BaseException:
+                    self.tx_depth = depth
+                    committed = drop_commit_callbacks(self.commit_callbacks, depth)
+                    try:
+                        if depth == 0:
+                            conn.rollback()
+                        else:
+                            conn.roll_back_to(f"slr_sp{depth}")
+                    finally:
+                        if listeners:
+                            self._rolled_back()
+                    raise
                 self.tx_depth = depth
-                self._drop_commit_callbacks(depth)
                 try:
                     if depth == 0:
-                        conn.rollback()
+                        conn.execute("COMMIT")
                     else:
-                        conn.roll_back_to(f"slr_sp{depth}")
-                finally:
+                        conn.release_later(f"slr_sp{depth}")
+                except BaseException:
+                    committed = drop_commit_callbacks(self.commit_callbacks, depth)
+                    if depth == 0:
+                        conn.rollback()
                     if listeners:
                         self._rolled_back()
-                raise
-            self.tx_depth = depth
-            try:
-                if depth == 0:
-                    conn.execute("COMMIT")
-                else:
-                    conn.release_later(f"slr_sp{depth}")
-            except BaseException:
-                self._drop_commit_callbacks(depth)
-                if depth == 0:
-                    conn.rollback()
-                if listeners:
-                    self._rolled_back()
-                raise
-            if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
-                committed, self.commit_callbacks = self.commit_callbacks, []
+                    raise
+                if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
+                    committed, self.commit_callbacks = self.commit_callbacks, []
+        except BaseException as exc:
+            if committed:   # (rolled back: what a rollback does not take back)
+                run_after_rollback(committed, exc)
+            raise
         run_commit_callbacks(committed)
 
     def _rolled_back(self) -> None:
         for listener in self.rollback_listeners:
             listener()
 
-    def after_commit(self, callback: Callable[[], None]) -> None:
+    def after_commit(self, callback: Callable[[], None], always: bool = False) -> None:
         """(:meth:`Database.after_commit`)"""
         with self.lock:
             if self.tx_depth:
-                self.commit_callbacks.append((self.tx_depth, callback))
+                self.commit_callbacks.append((self.tx_depth, callback, always))
                 return
         callback()
-
-    def _drop_commit_callbacks(self, depth: int) -> None:
-        self.commit_callbacks[:] = [(d, c) for d, c in self.commit_callbacks if d <= depth]
-
 
     # ------------------------------------------------------------------ raw SQL
 
