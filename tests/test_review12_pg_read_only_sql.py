@@ -5,6 +5,7 @@ is refused, and inside a transaction it may still not write."""
 from __future__ import annotations
 
 import threading
+import time
 
 import psycopg
 import pytest
@@ -87,3 +88,16 @@ def test_read_only_statements_of_many_threads_use_a_bounded_number_of_connection
     assert errors == [] and len(counts) == 12
     # the store's own connection, and at most MOST_RUNNING of the statements' own
     assert max(counts) <= 1 + MOST_RUNNING
+
+
+def test_a_kept_connection_the_server_dropped_meanwhile_is_replaced(kb, postgres_server):
+    # (a server restart, idle_session_timeout, an administrator: the next call still answers)
+    pid = kb.sql("SELECT pg_backend_pid()")[1][0][0]
+    with psycopg.connect(postgres_server[1], autocommit=True) as admin:
+        assert admin.execute("SELECT pg_terminate_backend(%s)", (pid,)).fetchone()[0]
+        deadline = time.monotonic() + 30
+        while admin.execute("SELECT count(*) FROM pg_stat_activity WHERE pid = %s",
+                            (pid,)).fetchone()[0]:
+            assert time.monotonic() < deadline, "the backend never ended"
+            time.sleep(0.01)
+    assert kb.sql("SELECT 1 AS one")[1] == [(1,)]

@@ -697,7 +697,19 @@ class DetachedStatements:
             try:
                 if raw is None:
                     raw = self._connect()
-                raw.execute("BEGIN READ ONLY")
+                    raw.execute("BEGIN READ ONLY")
+                else:
+                    try:
+                        raw.execute("BEGIN READ ONLY")
+                    except psycopg.OperationalError:
+                        # the kept connection was dropped while idle (a server restart,
+                        # idle_session_timeout, an administrator): nothing was sent, a new
+                        # one runs the statement
+                        with suppress(Exception):
+                            raw.close()
+                        raw = None
+                        raw = self._connect()
+                        raw.execute("BEGIN READ ONLY")
                 try:
                     if timeout is not None:
                         raw.execute(f"SET LOCAL statement_timeout = {_timeout_ms(timeout)}")
