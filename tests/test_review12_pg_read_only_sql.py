@@ -101,3 +101,12 @@ def test_a_kept_connection_the_server_dropped_meanwhile_is_replaced(kb, postgres
             assert time.monotonic() < deadline, "the backend never ended"
             time.sleep(0.01)
     assert kb.sql("SELECT 1 AS one")[1] == [(1,)]
+
+
+def test_parameter_styles_and_a_percent_sign_still_answer_as_written(kb):
+    assert kb.sql("SELECT '100%' AS p")[1] == [("100%",)]
+    assert kb.sql("SELECT ? AS p, '5%' AS q", ["50%"])[1] == [("50%", "5%")]
+    assert kb.sql("SELECT :a AS p", {"a": 1})[1] == [(1,)]
+    with kb.store.transaction():
+        assert kb.sql("SELECT '100%' AS p")[1] == [("100%",)]
+        assert kb.sql("SELECT ? AS p", ["50%"])[1] == [("50%",)]
