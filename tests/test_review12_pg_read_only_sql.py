@@ -110,3 +110,15 @@ def test_parameter_styles_and_a_percent_sign_still_answer_as_written(kb):
     with kb.store.transaction():
         assert kb.sql("SELECT '100%' AS p")[1] == [("100%",)]
         assert kb.sql("SELECT ? AS p", ["50%"])[1] == [("50%",)]
+
+
+def test_a_timeout_of_one_statement_inside_a_transaction_ends_with_it(kb):
+    # (it was left as the transaction's statement_timeout: its later statements cancelled)
+    before = kb.store.execute("SHOW statement_timeout")
+    with kb.store.transaction():
+        kb.sql("SELECT 1", write=True, timeout=0.05)
+        assert kb.store.execute("SHOW statement_timeout") == before
+        kb.sql("SELECT 1", timeout=0.05)
+        assert kb.store.execute("SHOW statement_timeout") == before
+        kb.add("seg(cup1)^1")
+    assert kb.store.count("seg", 1) == 1

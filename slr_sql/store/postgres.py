@@ -1073,7 +1073,10 @@ class PgDatabase:
                     return self._read_only(raw, own, query, params, timeout)
                 if own:
                     raw.execute("BEGIN")
+                outer_timeout = None
                 if timeout is not None:
+                    if not own:   # (a SET LOCAL lasts to the caller's transaction's end)
+                        outer_timeout = raw.execute("SHOW statement_timeout").fetchone()[0]
                     raw.execute(f"SET LOCAL statement_timeout = {_timeout_ms(timeout)}")
                 cursor = raw.cursor()
                 # the API's placeholders (`?`, `:name`) in psycopg's style, as on SQLite;
@@ -1087,6 +1090,9 @@ class PgDatabase:
                 rows = [tuple(r) for r in cursor.fetchall()] if cursor.description else []
                 if own:
                     raw.execute("COMMIT")
+                elif outer_timeout is not None:
+                    raw.execute("SELECT set_config('statement_timeout', %s, true)",
+                                (outer_timeout,))
                 return columns, rows
             except psycopg.Error as exc:
                 if own:
