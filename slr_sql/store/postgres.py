@@ -625,8 +625,7 @@ def _leave_nothing(raw: Any) -> None:
     ROLLBACK (not COMMIT) takes back the session settings it changed (``SET``,
     ``set_config``: the read-only default, search_path, how floats print), and the session
     advisory locks it took are let go (the store's own are transaction locks)."""
-    raw.execute("ROLLBACK")
-    raw.execute("SELECT pg_advisory_unlock_all()")
+    raw.execute("ROLLBACK; SELECT pg_advisory_unlock_all()")   # (one round trip)
 
 
 class DetachedStatements:
