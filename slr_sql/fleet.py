@@ -62,7 +62,7 @@ class FleetTarget(Protocol):
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
                 head_arrival: float | None, after: dict | None = None,
-                resync: list | None = None) -> int: ...
+                resync: list | None = None, relayed: dict | None = None) -> int: ...
 
     def close(self) -> None: ...
 
@@ -86,13 +86,13 @@ class _LocalTarget:
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
                 head_arrival: float | None, after: dict | None = None,
-                resync: list | None = None) -> int:
+                resync: list | None = None, relayed: dict | None = None) -> int:
         # (``after`` is not needed: a store replaced under an open connection is not seen
         # through it, and a server's restore ends the connection, which asks again)
         from .shipping import receive
         # (rows read from a store by this process: no need to check them as the service does)
         return receive(self.kb, robot, batches, marks, pending, head_arrival, check=False,
-                       resync=resync)
+                       resync=resync, relayed=relayed)
 
     def close(self) -> None:
         self.kb.close()
@@ -113,11 +113,11 @@ class _RemoteTarget:
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
                 head_arrival: float | None, after: dict | None = None,
-                resync: list | None = None) -> int:
+                resync: list | None = None, relayed: dict | None = None) -> int:
         # ``after``: over HTTP a restarted server is reached again without a word, so each
         # batch says which position it follows and the server checks it still holds it
         return self.client.fleet_receive(robot, batches, marks, pending, head_arrival, after,
-                                         resync)
+                                         resync, relayed)
 
     def close(self) -> None:
         self.client.close()
@@ -267,7 +267,8 @@ class _Pusher:
         heads = self.store.fleet_heads()
         shipped = 0
         marks = {k[len("sync/mark/"):]: v for k, v in self.store.meta_items("sync/mark/").items()
-                 if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)}
+                 if _is_mark(v)}
+        relayed = _relayed_marks(self.store, self.robot)
         keys = sorted(k for k in heads if self.types is None or k in self.types)
         again = [k for k in keys if self.resync and k not in self.resynced]
         counters = self.store.fleet_counters()
@@ -296,10 +297,10 @@ class _Pusher:
             key = f"{name}/{arity}"
             self.report.per_type[key] = self.report.per_type.get(key, 0) + stored
 
-        def send(batch: tuple | None, contact: tuple = (None, None, None)) -> None:
-            stored = target.receive(self.robot, [batch] if batch else [], *contact,
+        def send(batch: tuple | None, contact: tuple = (None, None, None, None)) -> None:
+            stored = target.receive(self.robot, [batch] if batch else [], *contact[:3],
                                     held_after if batch else None,
-                                    held_resync if batch else None)
+                                    held_resync if batch else None, contact[3])
             self.reached()
             if batch is not None:
                 record(batch, stored)
@@ -353,7 +354,7 @@ class _Pusher:
             pending += left
             if latest is not None:
                 head_arrival = latest if head_arrival is None else max(head_arrival, latest)
-        contact = (marks or None, pending, head_arrival)
+        contact = (marks or None, pending, head_arrival, relayed or None)
         now = time.monotonic()
         if held is not None or heartbeat is None or contact != self.last_contact \
                 or now - self.contact_at >= heartbeat:
@@ -487,6 +488,39 @@ def push(db: str, fleet: str, *, robot: str | None = None,
             pusher.drop()
     finally:
         store.close()
+
+
+def _is_mark(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) \
+        and math.isfinite(value)
+
+
+def _relayed_marks(store: EventStore, robot: str) -> dict[str, dict[str, float]]:
+    """The marks ``store`` holds of robots other than ``robot`` (``fleet/mark/<r>/p/N``,
+    kept when they shipped to it): ``{r: {"p/N": t}}``, shipped with the store's own so
+    that a fleet store holding their rows, relayed by this one, knows how far each robot's
+    history is complete. A key is read as the mark of the longest name among the robots
+    the store knows that it starts with (a robot's name may hold a ``/``).
+
+    >>> from slr_sql.store import EventStore
+    >>> _relayed_marks(EventStore(None), "hub")
+    {}
+    """
+    from .shipping import FLEET_MARK, _names_a_type
+    items = store.meta_items(FLEET_MARK)
+    if not items:
+        return {}
+    names = set(store.robots()) | {r["robot"] for r in store.fleet_contacts()}
+    names = sorted((n for n in names if n is not None), key=len, reverse=True)
+    out: dict[str, dict[str, float]] = {}
+    for key, value in items.items():
+        rest = key[len(FLEET_MARK):]
+        who = next((n for n in names if rest.startswith(n + "/")
+                    and _names_a_type(rest[len(n) + 1:])), None)
+        if who is None or who == robot or not _is_mark(value):
+            continue
+        out.setdefault(who, {})[rest[len(who) + 1:]] = float(value)
+    return out
 
 
 def _may_pass(exc: BaseException) -> bool:

@@ -976,7 +976,7 @@ async def _fleet_positions(svc: "_Service", request: Request) -> Any:
         body={"robot": ("string", True), "batches": ("array", True),
               "marks": ("object", False), "pending": ("integer", False),
               "head_arrival": ("Number", False), "after": ("array", False),
-              "resync": ("array", False)},
+              "resync": ("array", False), "relayed": ("object", False)},
         response={"stored": "integer"})
 async def _fleet_receive(svc: "_Service", request: Request) -> Any:
     from slr_sql.shipping import FleetBehind, receive
@@ -987,7 +987,8 @@ async def _fleet_receive(svc: "_Service", request: Request) -> Any:
                                 _field(b, "batches", list, required=True),
                                 _field(b, "marks", dict), _field(b, "pending", int),
                                 _number(b, "head_arrival"), after=_field(b, "after", list),
-                                resync=_field(b, "resync", list))
+                                resync=_field(b, "resync", list),
+                                relayed=_field(b, "relayed", dict))
     except FleetBehind as exc:   # the pusher asks the positions again (slr_sql.fleet)
         raise ServiceError(str(exc), kind="Conflict") from None
     return {"stored": stored}
