@@ -473,6 +473,7 @@ def push(db: str, fleet: str, *, robot: str | None = None,
         if name is None:
             raise SLRError(f"{db} has no robot name: open it with robot=NAME once, or "
                            "push with --robot NAME")
+        check_robot_name(name)   # (a store named before a check it would fail existed)
         if _same_file(db, fleet):
             raise SLRError(f"{fleet} is the robot's store {db} itself: a robot does not ship "
                            "to its own store")

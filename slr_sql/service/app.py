@@ -964,9 +964,11 @@ async def _stats(svc: "_Service", request: Request) -> Any:
         query={"robot": ("string", True)}, response={"positions": "array"})
 async def _fleet_positions(svc: "_Service", request: Request) -> Any:
     from slr_sql.shipping import positions
+    from slr_sql.store import check_robot_name
     robot = request.query_params.get("robot")
     if not robot:
         raise SLRError("robot= names the robot")
+    check_robot_name(robot)
     found = await svc.call(positions, svc.kb, robot)
     return {"positions": [[n, a, p] for (n, a), p in sorted(found.items())]}
 
