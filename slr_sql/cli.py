@@ -10,6 +10,7 @@ goal prints in words (``error: unknown procedure nosuch/1``); any other error pr
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -1340,7 +1341,10 @@ class Shell:
                 shown = {k: abbreviated(v) for k, v in answer.items()}
                 self.echo(answer_text(shown) if answer else "true", nl=False)
                 while True:
-                    key = self.ask()
+                    try:
+                        key = self.ask()
+                    except EOFError:   # Ctrl-D: no more answers, as Enter
+                        key = "\x04"
                     if key == "w":
                         self.echo("\n" + answer_text(answer), nl=False)
                         continue
@@ -1419,24 +1423,54 @@ def shell(db: str) -> None:
                                completer=PredicateCompleter(), complete_while_typing=False)
         click.echo(f"slr shell on {db} — `help` for commands, Ctrl-C stops a goal, "
                    f"Ctrl-D leaves")
-        while True:
-            try:
-                # Ctrl-C at the prompt is a key (the terminal is raw); no signal handler of
-                # prompt_toolkit's may outlive the prompt and swallow the Ctrl-C of a goal.
-                line = prompt.prompt(session.prompt, handle_sigint=False)
-            except KeyboardInterrupt:   # at the prompt: drop the line
-                session.interrupt()
-                continue
-            except EOFError:
-                if session.end_of_input():
+        with _eof_key_typed_ahead(sys.stdin):
+            while True:
+                try:
+                    # Ctrl-C at the prompt is a key (the terminal is raw); no signal handler of
+                    # prompt_toolkit's may outlive the prompt and swallow the Ctrl-C of a goal.
+                    line = prompt.prompt(session.prompt, handle_sigint=False)
+                except KeyboardInterrupt:   # at the prompt: drop the line
+                    session.interrupt()
                     continue
-                break
-            try:
-                if not session.feed(line):
+                except EOFError:
+                    if session.end_of_input():
+                        continue
                     break
-            except KeyboardInterrupt:   # during a goal: stop it, keep the shell
-                session.interrupt()
-                click.echo("\n% interrupted")
+                try:
+                    if not session.feed(line):
+                        break
+                except KeyboardInterrupt:   # during a goal: stop it, keep the shell
+                    session.interrupt()
+                    click.echo("\n% interrupted")
+
+
+@contextlib.contextmanager
+def _eof_key_typed_ahead(stream: Any) -> Iterator[None]:
+    """While the shell runs, the terminal's end-of-file key (Ctrl-D) is no special key in
+    cooked mode. The terminal is cooked between two prompts and while a goal runs; a Ctrl-D
+    typed then became an end-of-file mark that the next prompt (raw) read as a NUL byte, and
+    the key was lost. Without the mark it waits as the byte Ctrl-D, read by the next prompt
+    as the key typed ahead: it ends a consult or leaves the shell there."""
+    import termios
+
+    try:
+        fd = stream.fileno()
+        attributes = termios.tcgetattr(fd)
+    except (OSError, ValueError, termios.error):   # not a terminal: nothing to do
+        yield
+        return
+    eof = attributes[6][termios.VEOF]
+    attributes[6][termios.VEOF] = bytes([os.fpathconf(fd, "PC_VDISABLE")])
+    termios.tcsetattr(fd, termios.TCSANOW, attributes)
+    try:
+        yield
+    finally:
+        try:
+            now = termios.tcgetattr(fd)
+            now[6][termios.VEOF] = eof
+            termios.tcsetattr(fd, termios.TCSANOW, now)
+        except termios.error:   # the terminal is gone
+            pass
 
 
 from .ros.cli import ros as _ros  # noqa: E402 - `slr ros` (its extra is imported on use)

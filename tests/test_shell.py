@@ -1,6 +1,7 @@
 """`slr shell`: through a pseudo-terminal (pexpect), Ctrl-C included, and with piped input."""
 from __future__ import annotations
 
+import errno
 import os
 import re
 import sys
@@ -144,6 +145,70 @@ def test_user_consult_in_the_terminal_ends_with_ctrl_d(store):
     child.expect("O = cup1")
     press(child, "\r")
     child.expect(PROMPT)
+    leave(child)
+
+
+def await_reader(fifo: str, child: pexpect.spawn) -> int:
+    """Wait (up to a deadline) until the shell opened the FIFO ``fifo`` for reading; the
+    writing end, opened without blocking (ENXIO: no reader yet)."""
+    deadline = time.monotonic() + 30
+    while True:
+        try:
+            return os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)
+        except OSError as exc:
+            assert exc.errno == errno.ENXIO, exc
+            assert time.monotonic() < deadline, "the shell never opened the file"
+            child.expect([pexpect.TIMEOUT], timeout=0.02)
+
+
+def test_ctrl_d_typed_while_the_shell_is_busy_is_read_at_the_next_prompt(store, tmp_path):
+    """Between two prompts (a goal running, a file loading, a consulted line handled) the
+    terminal is cooked. A Ctrl-D typed there became the terminal's end-of-file mark, which
+    the next prompt (raw) read as a NUL byte: the key was lost and the shell stayed. It is
+    a key typed ahead now, read by the next prompt: at ?- it leaves the shell. (A file read
+    from a FIFO holds the shell between two prompts for as long as the test wants.)"""
+    fifo = str(tmp_path / "rules.pl")
+    os.mkfifo(fifo)
+    child = spawn_shell(store)
+    child.sendline(f"load {fifo}")
+    writer = await_reader(fifo, child)
+    wait_for_terminal(child, raw=False)
+    child.sendeof()                         # typed while the shell reads the file
+    os.write(writer, b"on_table(O) :- seg(O, table)^_.\n")
+    os.close(writer)
+    child.expect("loaded")
+    child.expect(pexpect.EOF)               # read at the next prompt: the shell left
+    child.close()
+    assert child.exitstatus == 0
+
+
+def test_ctrl_d_typed_with_a_consulted_line_ends_the_consult(store):
+    """Ctrl-D sent in one write with the Enter of a consulted line (the prompt still raw as
+    it takes the line): read as a key typed ahead by the next |: prompt, it ends the
+    consult."""
+    child = spawn_shell(store)
+    child.sendline("[user].")
+    child.expect(r"\|:")
+    press(child, "on_table(O) :- seg(O, table)^_.\r\x04")
+    child.expect("consulted into the program 'user'")
+    child.expect(PROMPT)
+    child.sendline("on_table(O).")
+    child.expect("O = cup1")
+    press(child, "\r")
+    child.expect(PROMPT)
+    leave(child)
+
+
+def test_ctrl_d_after_an_answer_stops_the_answers(store):
+    """Ctrl-D at the key after an answer: no more answers, as Enter (it said "error:
+    EOFError (this is a bug in slr_sql ...)")."""
+    child = spawn_shell(store)
+    child.sendline("between(1, 3, X).")
+    child.expect("X = 1")
+    press(child, "\x04")
+    child.expect(r" \.\r\n")
+    child.expect(PROMPT)
+    assert "error" not in child.before
     leave(child)
 
 
