@@ -507,7 +507,7 @@ def _relayed_marks(store: EventStore, robot: str) -> dict[str, dict[str, float]]
     >>> _relayed_marks(EventStore(None), "hub")
     {}
     """
-    from .shipping import FLEET_MARK, _names_a_type
+    from .shipping import FLEET_MARK, names_a_type
     items = store.meta_items(FLEET_MARK)
     if not items:
         return {}
@@ -517,7 +517,7 @@ def _relayed_marks(store: EventStore, robot: str) -> dict[str, dict[str, float]]
     for key, value in items.items():
         rest = key[len(FLEET_MARK):]
         who = next((n for n in names if rest.startswith(n + "/")
-                    and _names_a_type(rest[len(n) + 1:])), None)
+                    and names_a_type(rest[len(n) + 1:])), None)
         if who is None or who == robot or not _is_mark(value):
             continue
         out.setdefault(who, {})[rest[len(who) + 1:]] = float(value)

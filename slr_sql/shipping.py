@@ -22,7 +22,7 @@ from .host import Host
 from .store import check_robot_name
 from .store.checks import text_problem
 
-__all__ = ["FLEET_MARK", "FleetBehind", "positions", "prepare", "receive"]
+__all__ = ["FLEET_MARK", "FleetBehind", "names_a_type", "positions", "prepare", "receive"]
 
 _JSON = ("[", "{", '"')     # how a stored text that is JSON starts (slr_sql.encoding)
 FLEET_MARK = "fleet/mark/"   # slr_meta prefix: fleet/mark/<robot>/<name>/<arity or *>
@@ -205,7 +205,7 @@ def _check_shipment(batches: Any, marks: Any, pending: Any = None,
             last = row[0]
     if marks is not None:
         if not isinstance(marks, dict) or not all(
-                isinstance(k, str) and _names_a_type(k) and type(v) in (int, float)
+                isinstance(k, str) and names_a_type(k) and type(v) in (int, float)
                 and not math.isnan(v) for k, v in marks.items()):
             raise SLRError("a shipment's marks are {\"name/arity\": time} (name/* for every "
                            "arity)")
@@ -221,7 +221,7 @@ def _check_relayed(relayed: Any) -> None:
     if relayed is None:
         return
     if not isinstance(relayed, dict) or not all(
-            isinstance(m, dict) and all(isinstance(k, str) and _names_a_type(k)
+            isinstance(m, dict) and all(isinstance(k, str) and names_a_type(k)
                                         and type(v) in (int, float) and not math.isnan(v)
                                         for k, v in m.items())
             for m in relayed.values()):
@@ -242,10 +242,10 @@ def _check_after(after: Any) -> None:
         raise SLRError("a shipment's after is a list of [name, arity, position]")
 
 
-def _names_a_type(key: str) -> bool:
+def names_a_type(key: str) -> bool:
     """``p/2`` or ``p/*``: what a completeness mark is kept under.
 
-    >>> _names_a_type("seen/2"), _names_a_type("a/b/*"), _names_a_type("seen"), _names_a_type("p/x")
+    >>> names_a_type("seen/2"), names_a_type("a/b/*"), names_a_type("seen"), names_a_type("p/x")
     (True, True, False, False)
     """
     _, slash, arity = key.rpartition("/")
