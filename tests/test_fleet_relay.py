@@ -45,9 +45,11 @@ def test_a_named_store_that_receives_marks_moves_its_own_mark(site):
     assert meta(site / "site.db", "sync/mark/seen/1") == 50.0
 
 
-@pytest.mark.parametrize("where", ["file", "service"])
-def test_marks_of_relayed_robots_reach_the_fleet_store(site, where):
+@pytest.mark.parametrize("where", ["file", "service", "postgres"])
+def test_marks_of_relayed_robots_reach_the_fleet_store(site, where, request):
     fleet_db = site / "fleet.db"
+    if where == "postgres":   # a fleet store on a PostgreSQL server, opened by the pusher
+        fleet_db = request.getfixturevalue("postgres_url")
 
     def relay(target: str) -> int:
         return fleet.push(str(site / "site.db"), target).shipped
@@ -58,7 +60,7 @@ def test_marks_of_relayed_robots_reach_the_fleet_store(site, where):
         fleet.push(str(site / "r1.db"), str(site / "site.db"))
         assert relay(target) == 0
 
-    if where == "file":
+    if where != "service":
         check(str(fleet_db))
     else:
         with ServiceProcess(fleet_db) as served:
