@@ -1567,11 +1567,14 @@ def _eof_key_typed_ahead(stream: Any) -> Iterator[None]:
     try:
         fd = stream.fileno()
         attributes = termios.tcgetattr(fd)
+        disabled = os.fpathconf(fd, "PC_VDISABLE")
     except (OSError, ValueError, termios.error):   # not a terminal: nothing to do
+        disabled = -1
+    if not 0 <= disabled <= 255:   # (or no way to disable a key: left as it is)
         yield
         return
     eof = attributes[6][termios.VEOF]
-    attributes[6][termios.VEOF] = bytes([os.fpathconf(fd, "PC_VDISABLE")])
+    attributes[6][termios.VEOF] = bytes([disabled])
     termios.tcsetattr(fd, termios.TCSANOW, attributes)
     try:
         yield
