@@ -310,10 +310,14 @@ class _Pusher:
         # batch k + 1 from the robot's store. One batch queued, one in flight.
         sender: _Sender | None = None
         emptied = []     # types shipped again that the robot holds no row of
+        cut = False      # stopped before every row was read: the marks wait for the next round
         try:
             for name, arity in keys:
                 position = 0 if (name, arity) in again else positions.get((name, arity), 0)
-                while not stop.is_set():
+                while True:
+                    if stop.is_set():
+                        cut = True
+                        break
                     rows = self.store.fleet_read_after(name, arity, position, self.batch)
                     if not rows:
                         if position == 0 and (name, arity) in again \
@@ -354,7 +358,9 @@ class _Pusher:
             pending += left
             if latest is not None:
                 head_arrival = latest if head_arrival is None else max(head_arrival, latest)
-        contact = (marks or None, pending, head_arrival, relayed or None)
+        # (a round cut short sends no marks: they speak of rows it did not ship)
+        contact = (None if cut else marks or None, pending, head_arrival,
+                   None if cut else relayed or None)
         now = time.monotonic()
         if held is not None or heartbeat is None or contact != self.last_contact \
                 or now - self.contact_at >= heartbeat:

@@ -3,8 +3,11 @@
 everything on to the fleet store. The fleet store holds r1's and r2's rows, so it counts
 them among the robots its mark waits for; the relaying store ships the marks it holds for
 each robot it relays, so the fleet's marks move with theirs. A store's own name is not one
-of the robots its mark waits for: a named site store's mark moves too."""
+of the robots its mark waits for: a named site store's mark moves too. And marks never go
+ahead of the rows they speak of: a push stopped before it read its rows ships none."""
 from __future__ import annotations
+
+import threading
 
 import httpx
 import pytest
@@ -108,3 +111,34 @@ def test_relayed_marks_that_say_nothing_are_refused(server, relayed, words):
     assert words in answer.json()["error"]["message"]
     with slr_sql.open(server.db) as kb:
         assert kb.store.meta_items("fleet/mark/") == {}
+
+
+# -- marks never go ahead of the rows they speak of ------------------------------------------
+
+@pytest.mark.parametrize("relayed", [False, True])
+def test_a_push_stopped_before_its_rows_ships_no_mark(tmp_path, relayed):
+    """A pusher stopped (SIGINT, SIGTERM, ``stop``) before a round read its rows sent the
+    round's contact with the robot's marks anyway: the fleet store took the robot's history
+    as complete up to the mark without holding its events, and a synchronized query there
+    answered early, without them. A round cut short ships its batches and what is left, not
+    the marks; the next push ships them with the rows."""
+    robot_store(tmp_path / "r1.db", "r1", 50.0, ("seen(a)^10", "seen(b)^20"))
+    source = tmp_path / "r1.db"
+    if relayed:   # the same through a site store that relays r1
+        slr_sql.open(tmp_path / "site.db", robot="site").close()
+        fleet.push(str(source), str(tmp_path / "site.db"))
+        source = tmp_path / "site.db"
+    fleet_db = tmp_path / "fleet.db"
+    stopped = threading.Event()
+    stopped.set()
+    assert fleet.push(str(source), str(fleet_db), stop=stopped).shipped == 0
+    with slr_sql.open(fleet_db, clock=slr_sql.ManualClock(0)) as kb:
+        assert kb.store.meta_items("fleet/mark/") == {}
+        assert kb.complete_until("seen/1") < 40
+        with pytest.raises(slr_sql.SLRTimeout):
+            kb.query("seen(X)^T, T =< 40", at=40, wait=True, timeout=0)
+    assert fleet.push(str(source), str(fleet_db)).shipped == 2
+    with slr_sql.open(fleet_db, clock=slr_sql.ManualClock(0)) as kb:
+        assert kb.store.meta_get("fleet/mark/r1/seen/1") == 50.0
+        assert sorted(a["X"] for a in kb.query("seen(X)^T, T =< 40", at=40, wait=True,
+                                              timeout=30)) == ["a", "b"]
