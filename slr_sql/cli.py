@@ -10,6 +10,7 @@ goal prints in words (``error: unknown procedure nosuch/1``); any other error pr
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -1340,7 +1341,10 @@ class Shell:
                 shown = {k: abbreviated(v) for k, v in answer.items()}
                 self.echo(answer_text(shown) if answer else "true", nl=False)
                 while True:
-                    key = self.ask()
+                    try:
+                        key = self.ask()
+                    except EOFError:   # Ctrl-D: no more answers, as Enter
+                        key = "\x04"
                     if key == "w":
                         self.echo("\n" + answer_text(answer), nl=False)
                         continue
@@ -1419,11 +1423,103 @@ def shell(db: str) -> None:
                                completer=PredicateCompleter(), complete_while_typing=False)
         click.echo(f"slr shell on {db} — `help` for commands, Ctrl-C stops a goal, "
                    f"Ctrl-D leaves")
+        with _eof_key_typed_ahead(sys.stdin):
+            interactive(session, prompt)
+
+
+class ShellInterrupts:
+    """Where SIGINT (Ctrl-C in the cooked terminal) goes in the interactive shell.
+
+    The line editor reads Ctrl-C as a key while it owns the terminal (raw), but around that
+    the terminal is cooked: before its prompt is drawn, and after Enter while it takes its
+    prompt down (asyncio.run's own SIGINT handler, installed while the editor's event loop
+    runs, turned a Ctrl-C there into a cancelled prompt: the line typed was dropped without
+    a word). Installed for the whole shell (so asyncio installs none), this handler
+
+    * raises KeyboardInterrupt while a line is handled (the goal stops) and before the
+      editor started (the unfinished line is dropped, as by Ctrl-C at the prompt);
+    * while the editor reads keys (a SIGINT sent with kill), hands it to the editor as its
+      Ctrl-C key (raising inside the editor's event loop would land in one of its tasks);
+    * once the editor took a line, keeps it for that line (:meth:`take`): its goal is
+      interrupted before it starts.
+
+    ``app``: the editor's prompt_toolkit Application.
+
+    >>> gate = ShellInterrupts(app=None); gate.editing(); gate.take()
+    False
+    """
+
+    EDITING = "editing"    # inside the line editor's call, from before its prompt to after
+    RUNNING = "running"    # a line is handled: Ctrl-C stops the goal
+
+    def __init__(self, app: Any):
+        self.app = app
+        self.state = self.EDITING
+        self.started = False       # whether the editor ran for this line
+        self.after_enter = False   # a Ctrl-C came after the editor took the line
+
+    def __call__(self, signum: int, frame: Any) -> None:
+        if self.state == self.RUNNING or not self.started:
+            raise KeyboardInterrupt
+        app = self.app
+        if app.is_running and not app.is_done and app.loop is not None:
+            try:
+                app.loop.call_soon_threadsafe(self._as_key)
+                return
+            except RuntimeError:   # its loop is closing: the line was taken
+                pass
+        self.after_enter = True
+
+    def _as_key(self) -> None:
+        if self.app.is_running and not self.app.is_done:
+            self.app.key_processor.send_sigint()
+        else:   # the line was taken meanwhile: the Ctrl-C is its goal's
+            self.after_enter = True
+
+    def editing(self) -> None:
+        """The line editor is called for the next line (a Ctrl-C kept so far was meant for
+        a goal that has ended)."""
+        self.state = self.EDITING
+        self.started = False
+        self.after_enter = False
+
+    def editor_started(self) -> None:
+        """(The editor's ``pre_run``.)"""
+        self.started = True
+
+    def take(self) -> bool:
+        """From now on a Ctrl-C stops the goal; whether one came after Enter already."""
+        self.state = self.RUNNING
+        came, self.after_enter = self.after_enter, False
+        return came
+
+
+def interactive(session: Shell, prompt: Any, echo: Any = click.echo) -> None:
+    """The shell's loop over a prompt_toolkit ``PromptSession``: a line, then what it says,
+    until ``halt.`` or Ctrl-D. Ctrl-C at the prompt drops the unfinished line; Ctrl-C after
+    Enter (as the prompt is taken down, or read with the Enter as a key typed ahead) stops
+    the goal before it starts; Ctrl-C during a goal stops it.
+
+    >>> from prompt_toolkit import PromptSession
+    >>> from prompt_toolkit.input import create_pipe_input
+    >>> from prompt_toolkit.output import DummyOutput
+    >>> with create_pipe_input() as keys:
+    ...     keys.send_text("X = 1.\\r\\x04")
+    ...     interactive(Shell(slr_sql.open()), PromptSession(input=keys, output=DummyOutput()))
+    X = 1
+    """
+    import signal
+
+    gate = ShellInterrupts(prompt.app)
+    previous = signal.signal(signal.SIGINT, gate)
+    try:
         while True:
+            gate.editing()
             try:
                 # Ctrl-C at the prompt is a key (the terminal is raw); no signal handler of
                 # prompt_toolkit's may outlive the prompt and swallow the Ctrl-C of a goal.
-                line = prompt.prompt(session.prompt, handle_sigint=False)
+                line = prompt.prompt(session.prompt, handle_sigint=False,
+                                     pre_run=gate.editor_started)
             except KeyboardInterrupt:   # at the prompt: drop the line
                 session.interrupt()
                 continue
@@ -1432,11 +1528,63 @@ def shell(db: str) -> None:
                     continue
                 break
             try:
+                came = gate.take()
+                if _ctrl_c_typed_ahead(prompt.app.input) or came:
+                    raise KeyboardInterrupt
                 if not session.feed(line):
                     break
-            except KeyboardInterrupt:   # during a goal: stop it, keep the shell
+                gate.editing()
+            except KeyboardInterrupt:   # during a goal, or before it began: stop it
+                gate.editing()
                 session.interrupt()
-                click.echo("\n% interrupted")
+                echo("\n% interrupted")
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _ctrl_c_typed_ahead(editor_input: Any) -> bool:
+    """Whether the keys the line editor read after Enter (typed ahead, kept for its next
+    prompt) hold a Ctrl-C: it is taken out, with the keys before it (Ctrl-C drops them),
+    and stops the goal of the line just entered."""
+    from prompt_toolkit.input.typeahead import get_typeahead, store_typeahead
+    from prompt_toolkit.keys import Keys
+
+    keys = get_typeahead(editor_input)
+    last = max((i for i, k in enumerate(keys) if k.key == Keys.ControlC), default=None)
+    store_typeahead(editor_input, keys if last is None else keys[last + 1:])
+    return last is not None
+
+
+@contextlib.contextmanager
+def _eof_key_typed_ahead(stream: Any) -> Iterator[None]:
+    """While the shell runs, the terminal's end-of-file key (Ctrl-D) is no special key in
+    cooked mode. The terminal is cooked between two prompts and while a goal runs; a Ctrl-D
+    typed then became an end-of-file mark that the next prompt (raw) read as a NUL byte, and
+    the key was lost. Without the mark it waits as the byte Ctrl-D, read by the next prompt
+    as the key typed ahead: it ends a consult or leaves the shell there."""
+    import termios
+
+    try:
+        fd = stream.fileno()
+        attributes = termios.tcgetattr(fd)
+        disabled = os.fpathconf(fd, "PC_VDISABLE")
+    except (OSError, ValueError, termios.error):   # not a terminal: nothing to do
+        disabled = -1
+    if not 0 <= disabled <= 255:   # (or no way to disable a key: left as it is)
+        yield
+        return
+    eof = attributes[6][termios.VEOF]
+    attributes[6][termios.VEOF] = bytes([disabled])
+    termios.tcsetattr(fd, termios.TCSANOW, attributes)
+    try:
+        yield
+    finally:
+        try:
+            now = termios.tcgetattr(fd)
+            now[6][termios.VEOF] = eof
+            termios.tcsetattr(fd, termios.TCSANOW, now)
+        except termios.error:   # the terminal is gone
+            pass
 
 
 from .ros.cli import ros as _ros  # noqa: E402 - `slr ros` (its extra is imported on use)

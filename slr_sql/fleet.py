@@ -62,7 +62,7 @@ class FleetTarget(Protocol):
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
                 head_arrival: float | None, after: dict | None = None,
-                resync: list | None = None) -> int: ...
+                resync: list | None = None, relayed: dict | None = None) -> int: ...
 
     def close(self) -> None: ...
 
@@ -86,13 +86,13 @@ class _LocalTarget:
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
                 head_arrival: float | None, after: dict | None = None,
-                resync: list | None = None) -> int:
+                resync: list | None = None, relayed: dict | None = None) -> int:
         # (``after`` is not needed: a store replaced under an open connection is not seen
         # through it, and a server's restore ends the connection, which asks again)
         from .shipping import receive
         # (rows read from a store by this process: no need to check them as the service does)
         return receive(self.kb, robot, batches, marks, pending, head_arrival, check=False,
-                       resync=resync)
+                       resync=resync, relayed=relayed)
 
     def close(self) -> None:
         self.kb.close()
@@ -113,11 +113,11 @@ class _RemoteTarget:
 
     def receive(self, robot: str, batches: list, marks: dict | None, pending: int | None,
                 head_arrival: float | None, after: dict | None = None,
-                resync: list | None = None) -> int:
+                resync: list | None = None, relayed: dict | None = None) -> int:
         # ``after``: over HTTP a restarted server is reached again without a word, so each
         # batch says which position it follows and the server checks it still holds it
         return self.client.fleet_receive(robot, batches, marks, pending, head_arrival, after,
-                                         resync)
+                                         resync, relayed)
 
     def close(self) -> None:
         self.client.close()
@@ -267,7 +267,8 @@ class _Pusher:
         heads = self.store.fleet_heads()
         shipped = 0
         marks = {k[len("sync/mark/"):]: v for k, v in self.store.meta_items("sync/mark/").items()
-                 if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)}
+                 if _is_mark(v)}
+        relayed = _relayed_marks(self.store, self.robot)
         keys = sorted(k for k in heads if self.types is None or k in self.types)
         again = [k for k in keys if self.resync and k not in self.resynced]
         counters = self.store.fleet_counters()
@@ -296,10 +297,10 @@ class _Pusher:
             key = f"{name}/{arity}"
             self.report.per_type[key] = self.report.per_type.get(key, 0) + stored
 
-        def send(batch: tuple | None, contact: tuple = (None, None, None)) -> None:
-            stored = target.receive(self.robot, [batch] if batch else [], *contact,
+        def send(batch: tuple | None, contact: tuple = (None, None, None, None)) -> None:
+            stored = target.receive(self.robot, [batch] if batch else [], *contact[:3],
                                     held_after if batch else None,
-                                    held_resync if batch else None)
+                                    held_resync if batch else None, contact[3])
             self.reached()
             if batch is not None:
                 record(batch, stored)
@@ -309,10 +310,14 @@ class _Pusher:
         # batch k + 1 from the robot's store. One batch queued, one in flight.
         sender: _Sender | None = None
         emptied = []     # types shipped again that the robot holds no row of
+        cut = False      # stopped before every row was read: the marks wait for the next round
         try:
             for name, arity in keys:
                 position = 0 if (name, arity) in again else positions.get((name, arity), 0)
-                while not stop.is_set():
+                while True:
+                    if stop.is_set():
+                        cut = True
+                        break
                     rows = self.store.fleet_read_after(name, arity, position, self.batch)
                     if not rows:
                         if position == 0 and (name, arity) in again \
@@ -353,7 +358,9 @@ class _Pusher:
             pending += left
             if latest is not None:
                 head_arrival = latest if head_arrival is None else max(head_arrival, latest)
-        contact = (marks or None, pending, head_arrival)
+        # (a round cut short sends no marks: they speak of rows it did not ship)
+        contact = (None if cut else marks or None, pending, head_arrival,
+                   None if cut else relayed or None)
         now = time.monotonic()
         if held is not None or heartbeat is None or contact != self.last_contact \
                 or now - self.contact_at >= heartbeat:
@@ -472,6 +479,7 @@ def push(db: str, fleet: str, *, robot: str | None = None,
         if name is None:
             raise SLRError(f"{db} has no robot name: open it with robot=NAME once, or "
                            "push with --robot NAME")
+        check_robot_name(name)   # (a store named before a check it would fail existed)
         if _same_file(db, fleet):
             raise SLRError(f"{fleet} is the robot's store {db} itself: a robot does not ship "
                            "to its own store")
@@ -487,6 +495,39 @@ def push(db: str, fleet: str, *, robot: str | None = None,
             pusher.drop()
     finally:
         store.close()
+
+
+def _is_mark(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) \
+        and math.isfinite(value)
+
+
+def _relayed_marks(store: EventStore, robot: str) -> dict[str, dict[str, float]]:
+    """The marks ``store`` holds of robots other than ``robot`` (``fleet/mark/<r>/p/N``,
+    kept when they shipped to it): ``{r: {"p/N": t}}``, shipped with the store's own so
+    that a fleet store holding their rows, relayed by this one, knows how far each robot's
+    history is complete. A key is read as the mark of the longest name among the robots
+    the store knows that it starts with (a robot's name may hold a ``/``).
+
+    >>> from slr_sql.store import EventStore
+    >>> _relayed_marks(EventStore(None), "hub")
+    {}
+    """
+    from .shipping import FLEET_MARK, names_a_type
+    items = store.meta_items(FLEET_MARK)
+    if not items:
+        return {}
+    names = set(store.robots()) | {r["robot"] for r in store.fleet_contacts()}
+    names = sorted((n for n in names if n is not None), key=len, reverse=True)
+    out: dict[str, dict[str, float]] = {}
+    for key, value in items.items():
+        rest = key[len(FLEET_MARK):]
+        who = next((n for n in names if rest.startswith(n + "/")
+                    and names_a_type(rest[len(n) + 1:])), None)
+        if who is None or who == robot or not _is_mark(value):
+            continue
+        out.setdefault(who, {})[rest[len(who) + 1:]] = float(value)
+    return out
 
 
 def _may_pass(exc: BaseException) -> bool:

@@ -22,7 +22,7 @@ from .host import Host
 from .store import check_robot_name
 from .store.checks import text_problem
 
-__all__ = ["FLEET_MARK", "FleetBehind", "positions", "prepare", "receive"]
+__all__ = ["FLEET_MARK", "FleetBehind", "names_a_type", "positions", "prepare", "receive"]
 
 _JSON = ("[", "{", '"')     # how a stored text that is JSON starts (slr_sql.encoding)
 FLEET_MARK = "fleet/mark/"   # slr_meta prefix: fleet/mark/<robot>/<name>/<arity or *>
@@ -52,7 +52,7 @@ def positions(kb: Host, robot: str) -> dict[tuple[str, int], int]:
 def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             pending: int | None = None, head_arrival: float | None = None, *,
             check: bool = True, after: list | None = None,
-            resync: list | None = None) -> int:
+            resync: list | None = None, relayed: dict | None = None) -> int:
     """Store one shipment of ``robot`` in the fleet store ``kb``; returns the number of rows
     stored (rows already held are skipped). ``batches``: ``[(name, arity, rows)]`` with rows
     as :meth:`slr_sql.store.EventStore.fleet_read_after` gives them (or as :func:`prepare`
@@ -65,10 +65,13 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
     ``resync``: ``[(name, arity)]``, types whose batches ship the type again from its first
     row (``slr fleet push --resync``, after the robot's store was restored from an older
     backup): a row the fleet store holds identically is skipped, every other one stored.
+    ``relayed``: ``{robot: {"p/1": t}}``, the marks the sending store holds of other robots
+    (a store that received their shipments and relays their rows), kept as theirs.
 
     A robot's mark is kept per robot; the fleet store's own mark of a type is the least mark
     of the robots it knows, once every one of them has marked it (a history of the fleet is
-    complete up to t when each robot's is).
+    complete up to t when each robot's is). The store's own name is not among them: its
+    own events are complete as far as its own marks say.
 
     >>> import slr_sql
     >>> fleet = slr_sql.open()
@@ -82,6 +85,7 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
         check_robot_name(robot)   # (also for a shipment of marks or a contact alone)
         _check_shipment(batches, marks, pending, head_arrival)
         _check_after(after)
+        _check_relayed(relayed)
         if resync is not None and not (isinstance(resync, list) and all(
                 isinstance(r, (list, tuple)) and len(r) == 2 and isinstance(r[0], str)
                 and type(r[1]) is int for r in resync)):
@@ -120,14 +124,20 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
             columns = batch[3] if len(batch) > 3 else None   # (from prepare)
             stored += store.fleet_receive(robot, name, arity, rows, store_events, columns,
                                           (name, arity) in again)
-        if marks:
-            # the robots the fleet knows: those it holds events of, those that made contact
-            # (a robot whose store has marks and no event yet counts from its first mark),
-            # and this one
+        if marks or relayed:
+            given = {robot: marks or {}, **{r: m for r, m in (relayed or {}).items()
+                                            if r != robot}}
+            for who, its_marks in given.items():
+                for mk, t in its_marks.items():
+                    store.meta_raise(f"{FLEET_MARK}{who}/{mk}", float(t))
+            # the robots the fleet knows: those it holds events of (relayed ones included),
+            # those that made contact (a robot whose store has marks and no event yet counts
+            # from its first mark), and this one -- not the store itself, whose own events
+            # are complete as far as its own marks say (they raise the same mark)
             robots = set(store.robots()) | {r["robot"] for r in store.fleet_contacts()}
             robots.add(robot)
-            for mk, t in marks.items():
-                store.meta_raise(f"{FLEET_MARK}{robot}/{mk}", float(t))
+            robots.discard(store.robot)
+            for mk in sorted({mk for its_marks in given.values() for mk in its_marks}):
                 known = [store.meta_get(f"{FLEET_MARK}{r}/{mk}") for r in robots]
                 if all(v is not None for v in known):
                     store.meta_raise(f"sync/mark/{mk}", min(float(v) for v in known))
@@ -195,7 +205,7 @@ def _check_shipment(batches: Any, marks: Any, pending: Any = None,
             last = row[0]
     if marks is not None:
         if not isinstance(marks, dict) or not all(
-                isinstance(k, str) and _names_a_type(k) and type(v) in (int, float)
+                isinstance(k, str) and names_a_type(k) and type(v) in (int, float)
                 and not math.isnan(v) for k, v in marks.items()):
             raise SLRError("a shipment's marks are {\"name/arity\": time} (name/* for every "
                            "arity)")
@@ -206,6 +216,24 @@ def _check_shipment(batches: Any, marks: Any, pending: Any = None,
         raise SLRError(f"a shipment's head_arrival is a finite time, not {head_arrival!r}")
 
 
+def _check_relayed(relayed: Any) -> None:
+    """``{robot: {"p/N": t}}``: every key a robot's name, every mark one of an event type."""
+    if relayed is None:
+        return
+    if not isinstance(relayed, dict) or not all(
+            isinstance(m, dict) and all(isinstance(k, str) and names_a_type(k)
+                                        and type(v) in (int, float) and not math.isnan(v)
+                                        for k, v in m.items())
+            for m in relayed.values()):
+        raise SLRError("a shipment's relayed marks are {robot: {\"name/arity\": time}} "
+                       "(name/* for every arity)")
+    for who in relayed:
+        try:
+            check_robot_name(who)
+        except SLRError as exc:
+            raise SLRError(f"a shipment's relayed marks: {exc}") from None
+
+
 def _check_after(after: Any) -> None:
     if after is not None and not (isinstance(after, list) and all(
             isinstance(a, (list, tuple)) and len(a) == 3 and isinstance(a[0], str)
@@ -214,10 +242,10 @@ def _check_after(after: Any) -> None:
         raise SLRError("a shipment's after is a list of [name, arity, position]")
 
 
-def _names_a_type(key: str) -> bool:
+def names_a_type(key: str) -> bool:
     """``p/2`` or ``p/*``: what a completeness mark is kept under.
 
-    >>> _names_a_type("seen/2"), _names_a_type("a/b/*"), _names_a_type("seen"), _names_a_type("p/x")
+    >>> names_a_type("seen/2"), names_a_type("a/b/*"), names_a_type("seen"), names_a_type("p/x")
     (True, True, False, False)
     """
     _, slash, arity = key.rpartition("/")

@@ -1,6 +1,7 @@
 """`slr shell`: through a pseudo-terminal (pexpect), Ctrl-C included, and with piped input."""
 from __future__ import annotations
 
+import errno
 import os
 import re
 import sys
@@ -145,6 +146,160 @@ def test_user_consult_in_the_terminal_ends_with_ctrl_d(store):
     press(child, "\r")
     child.expect(PROMPT)
     leave(child)
+
+
+def await_reader(fifo: str, child: pexpect.spawn) -> int:
+    """Wait (up to a deadline) until the shell opened the FIFO ``fifo`` for reading; the
+    writing end, opened without blocking (ENXIO: no reader yet)."""
+    deadline = time.monotonic() + 30
+    while True:
+        try:
+            return os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)
+        except OSError as exc:
+            assert exc.errno == errno.ENXIO, exc
+            assert time.monotonic() < deadline, "the shell never opened the file"
+            child.expect([pexpect.TIMEOUT], timeout=0.02)
+
+
+def test_ctrl_d_typed_while_the_shell_is_busy_is_read_at_the_next_prompt(store, tmp_path):
+    """Between two prompts (a goal running, a file loading, a consulted line handled) the
+    terminal is cooked. A Ctrl-D typed there became the terminal's end-of-file mark, which
+    the next prompt (raw) read as a NUL byte: the key was lost and the shell stayed. It is
+    a key typed ahead now, read by the next prompt: at ?- it leaves the shell. (A file read
+    from a FIFO holds the shell between two prompts for as long as the test wants.)"""
+    fifo = str(tmp_path / "rules.pl")
+    os.mkfifo(fifo)
+    child = spawn_shell(store)
+    child.sendline(f"load {fifo}")
+    writer = await_reader(fifo, child)
+    wait_for_terminal(child, raw=False)
+    child.sendeof()                         # typed while the shell reads the file
+    os.write(writer, b"on_table(O) :- seg(O, table)^_.\n")
+    os.close(writer)
+    child.expect("loaded")
+    child.expect(pexpect.EOF)               # read at the next prompt: the shell left
+    child.close()
+    assert child.exitstatus == 0
+
+
+def test_ctrl_d_typed_with_a_consulted_line_ends_the_consult(store):
+    """Ctrl-D sent in one write with the Enter of a consulted line (the prompt still raw as
+    it takes the line): read as a key typed ahead by the next |: prompt, it ends the
+    consult."""
+    child = spawn_shell(store)
+    child.sendline("[user].")
+    child.expect(r"\|:")
+    press(child, "on_table(O) :- seg(O, table)^_.\r\x04")
+    child.expect("consulted into the program 'user'")
+    child.expect(PROMPT)
+    child.sendline("on_table(O).")
+    child.expect("O = cup1")
+    press(child, "\r")
+    child.expect(PROMPT)
+    leave(child)
+
+
+def test_ctrl_c_typed_with_enter_stops_the_goal_before_it_starts(store):
+    """Enter and Ctrl-C read together (in one write, the terminal still raw): the line
+    editor kept the Ctrl-C as a key typed ahead for its next prompt, and the goal ran on
+    for ever. The Ctrl-C stops the goal before it starts."""
+    child = spawn_shell(store)
+    press(child, "write(ran), nl, between(1, inf, X), X < 0.\r\x03")
+    child.expect("% interrupted")
+    assert "ran" not in child.before.replace("write(ran)", "")
+    child.expect(PROMPT)
+    child.sendline("seg(cup1, L)^T.")       # the shell goes on; no Ctrl-C is left over
+    child.expect(r"L = table, T = 1\.0")
+    press(child, "\r")
+    child.expect(PROMPT)
+    leave(child)
+
+
+def test_ctrl_d_after_an_answer_stops_the_answers(store):
+    """Ctrl-D at the key after an answer: no more answers, as Enter (it said "error:
+    EOFError (this is a bug in slr_sql ...)")."""
+    child = spawn_shell(store)
+    child.sendline("between(1, 3, X).")
+    child.expect("X = 1")
+    press(child, "\x04")
+    child.expect(r" \.\r\n")
+    child.expect(PROMPT)
+    assert "error" not in child.before
+    leave(child)
+
+
+def test_a_ctrl_c_as_the_prompt_is_taken_down_stops_the_goal_before_it_starts(store):
+    """A Ctrl-C after Enter while the line editor takes its prompt down: the terminal is
+    cooked again, so it is a SIGINT, and asyncio.run's own handler (installed while the
+    editor's event loop ran) cancelled the prompt: the line was dropped without a word.
+    The shell's SIGINT handler stays installed across the prompt: the goal is interrupted
+    before it starts. The moment is reached in this process with the real line editor: a
+    task of the editor's that sends the SIGINT when the editor cancels it on its way out."""
+    import asyncio
+    import signal
+
+    from prompt_toolkit import PromptSession
+    from prompt_toolkit.input import create_pipe_input
+    from prompt_toolkit.output import DummyOutput
+
+    import slr_sql
+    from slr_sql.cli import Shell, interactive
+
+    said: list[str] = []
+    with slr_sql.open(store) as kb, create_pipe_input() as keys:
+        prompt: PromptSession = PromptSession(input=keys, output=DummyOutput())
+
+        def ctrl_c_on_the_way_out() -> None:
+            async def wait_then_interrupt() -> None:
+                try:
+                    await asyncio.Event().wait()
+                except asyncio.CancelledError:   # the editor is taking its prompt down
+                    os.kill(os.getpid(), signal.SIGINT)
+                    raise
+            prompt.app.create_background_task(wait_then_interrupt())
+
+        prompt.app.pre_run_callables.append(ctrl_c_on_the_way_out)   # (the first prompt)
+        keys.send_text("seg(O, table)^T.\r")
+        keys.send_text("seg(O, shelf)^T.\r\x04")
+        interactive(Shell(kb, echo=said.append, echo_err=said.append), prompt,
+                    echo=said.append)
+    assert said == ["\n% interrupted", "O = cup2, T = 2.0"]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_sigint_while_a_line_is_edited_drops_the_line_as_ctrl_c_does(store):
+    """A SIGINT sent (kill) while the line editor reads keys reaches it as its Ctrl-C key:
+    the unfinished line is dropped and the shell goes on (raised inside the editor's event
+    loop, it landed in one of the editor's tasks, which printed it)."""
+    import asyncio
+    import signal
+
+    from prompt_toolkit import PromptSession
+    from prompt_toolkit.input import create_pipe_input
+    from prompt_toolkit.output import DummyOutput
+
+    import slr_sql
+    from slr_sql.cli import Shell, interactive
+
+    said: list[str] = []
+    with slr_sql.open(store) as kb, create_pipe_input() as keys:
+        prompt: PromptSession = PromptSession(input=keys, output=DummyOutput())
+
+        def interrupt_once_typed() -> None:
+            async def wait_then_interrupt() -> None:
+                deadline = time.monotonic() + 30
+                while prompt.app.current_buffer.text != "seg(cup":
+                    assert time.monotonic() < deadline, prompt.app.current_buffer.text
+                    await asyncio.sleep(0.01)    # (the editor's loop reads the keys)
+                os.kill(os.getpid(), signal.SIGINT)
+                keys.send_text("seg(O, table)^T.\r\x04")
+            prompt.app.create_background_task(wait_then_interrupt())
+
+        prompt.app.pre_run_callables.append(interrupt_once_typed)
+        keys.send_text("seg(cup")
+        interactive(Shell(kb, echo=said.append, echo_err=said.append), prompt,
+                    echo=said.append)
+    assert said == ["O = cup1, T = 1.0"]
 
 
 def run_piped(db: str, *lines: str):

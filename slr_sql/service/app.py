@@ -964,9 +964,11 @@ async def _stats(svc: "_Service", request: Request) -> Any:
         query={"robot": ("string", True)}, response={"positions": "array"})
 async def _fleet_positions(svc: "_Service", request: Request) -> Any:
     from slr_sql.shipping import positions
+    from slr_sql.store import check_robot_name
     robot = request.query_params.get("robot")
     if not robot:
         raise SLRError("robot= names the robot")
+    check_robot_name(robot)
     found = await svc.call(positions, svc.kb, robot)
     return {"positions": [[n, a, p] for (n, a), p in sorted(found.items())]}
 
@@ -976,7 +978,7 @@ async def _fleet_positions(svc: "_Service", request: Request) -> Any:
         body={"robot": ("string", True), "batches": ("array", True),
               "marks": ("object", False), "pending": ("integer", False),
               "head_arrival": ("Number", False), "after": ("array", False),
-              "resync": ("array", False)},
+              "resync": ("array", False), "relayed": ("object", False)},
         response={"stored": "integer"})
 async def _fleet_receive(svc: "_Service", request: Request) -> Any:
     from slr_sql.shipping import FleetBehind, receive
@@ -987,7 +989,8 @@ async def _fleet_receive(svc: "_Service", request: Request) -> Any:
                                 _field(b, "batches", list, required=True),
                                 _field(b, "marks", dict), _field(b, "pending", int),
                                 _number(b, "head_arrival"), after=_field(b, "after", list),
-                                resync=_field(b, "resync", list))
+                                resync=_field(b, "resync", list),
+                                relayed=_field(b, "relayed", dict))
     except FleetBehind as exc:   # the pusher asks the positions again (slr_sql.fleet)
         raise ServiceError(str(exc), kind="Conflict") from None
     return {"stored": stored}

@@ -379,12 +379,15 @@ class RemoteKnowledgeBase:
     @_reads_answer
     def fleet_receive(self, robot: str, batches: list, marks: dict | None = None,
                       pending: int | None = None, head_arrival: float | None = None,
-                      after: dict | None = None, resync: list | None = None) -> int:
+                      after: dict | None = None, resync: list | None = None,
+                      relayed: dict | None = None) -> int:
         """Send one shipment of ``robot`` (see :func:`slr_sql.shipping.receive`); returns
         the rows the server stored. Rows go in requests of at most FLEET_ROWS (each stored
         exactly once with its position), within the server's body limit. ``after``:
         ``{(name, arity): position}``, the positions the batches were read after (a
-        ``Conflict`` error when the server's store holds less: restored or replaced)."""
+        ``Conflict`` error when the server's store holds less: restored or replaced).
+        ``relayed``: ``{robot: {"p/N": t}}``, the marks of robots whose rows the sender
+        relays."""
         stored = 0
         # (piece, the position its rows were read after: the previous piece's last seq)
         pieces: list[tuple[list, list | None]] = []
@@ -403,6 +406,8 @@ class RemoteKnowledgeBase:
             if k == len(pieces) - 1:
                 if marks:
                     body["marks"] = marks
+                if relayed:
+                    body["relayed"] = relayed
                 if pending is not None:
                     body["pending"] = pending
                 if head_arrival is not None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import time
+import unicodedata
 from typing import Any
 
 from ..encoding import encode
@@ -25,22 +26,42 @@ from .tables import EventTables
 
 __all__ = ["Fleet", "WriterInFlight", "check_robot_name"]
 
+# Unicode categories a robot's name may not hold: characters that are not drawn but change
+# how the text around them is drawn (direction overrides and isolates, the marks U+200E/F,
+# zero-width joiners and spaces, soft hyphens) or where lines break
+_UNSEEN = {"Cc": "a control character", "Cf": "a format character",
+           "Zl": "a line separator", "Zp": "a paragraph separator"}
+
 # (an upsert both engines take)
 _ADD_ROBOT = "INSERT INTO slr_robots (name) VALUES (?) ON CONFLICT (name) DO NOTHING"
 
 
 def check_robot_name(name: Any) -> str:
-    """``name`` if it can name a robot (a non-empty text without control characters), else
-    an :class:`SLRError` saying why.
+    """``name`` if it can name a robot (a non-empty text without control, format or
+    line-separating characters), else an :class:`SLRError` saying why -- the one check of
+    every way a robot's name comes in (naming a store, a push, a shipment, a query).
 
     >>> check_robot_name("r1")
     'r1'
+    >>> check_robot_name("r1\u202eevil")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: robot name 'r1\u202eevil' has U+202E RIGHT-TO-LEFT OVERRIDE at position 3 (a format character: it would change how the name and what follows it read in logs, tables and plots); name robots with plain words (r1, forklift-2, ...)
     """
     if not isinstance(name, str) or not name:
         raise SLRError(f"a robot's name is a non-empty text, not {name!r}")
     problem = text_problem(name)
-    if problem or any(ord(c) < 32 or c == "\x7f" for c in name):
-        raise SLRError(f"robot name {name!r} cannot be stored: {problem or 'a control character'}")
+    if problem:
+        raise SLRError(f"robot name {name!r} cannot be stored: {problem}")
+    for position, char in enumerate(name, 1):
+        kind = _UNSEEN.get(unicodedata.category(char))
+        if kind is not None:
+            label = unicodedata.name(char, "")
+            raise SLRError(
+                f"robot name {name!r} has U+{ord(char):04X}{' ' + label if label else ''} at "
+                f"position {position} ({kind}: it would change how the name and what follows "
+                "it read in logs, tables and plots); name robots with plain words (r1, "
+                "forklift-2, ...)")
     if encode(Atom(name)) != name:  # the column holds the atom's stored form: the name itself
         raise SLRError(f"robot name {name!r} reads as a compound term or string when stored; "
                        "name robots with plain words (r1, forklift-2, ...)")
