@@ -104,11 +104,23 @@ class FoxgloveView:
         self._thread.start()
         return self
 
-    def close(self) -> None:
+    def close(self, wait: float = 2.0) -> None:
+        """Stop following the store and stop the server, waiting at most ``wait`` seconds
+        for the clients to take their close frames. The foxglove-sdk's ``stop()`` waits for
+        every client to take its close frame; a client that never reads (its socket buffers
+        full of messages) would hold it forever, so it runs on a thread of its own and a
+        client still holding it after ``wait`` is left behind, said once on the log (the
+        process may exit; the port is given back when that client goes)."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5.0)
-        self.server.stop()
+        stopping = threading.Thread(target=self.server.stop, name="slr-foxglove-stop",
+                                    daemon=True)
+        stopping.start()
+        stopping.join(wait)
+        if stopping.is_alive():
+            self.log(f"foxglove: a client did not read for {wait:g} s; stopped without "
+                     f"waiting for it")
 
     # -- following the store ---------------------------------------------------------------------
     def _run(self) -> None:
