@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import heapq
 import json
+import os
+import secrets
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
@@ -29,14 +31,19 @@ from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, METADATA
                        event_channel, event_from_message, mark_message, time_ns,
                        transform_message)
 
-__all__ = ["export_mcap", "ExportReport", "McapUnavailable", "is_slr_export", "export_batches",
-           "select_types"]
+__all__ = ["export_mcap", "ExportReport", "McapUnavailable", "ExportRefused", "is_slr_export",
+           "export_batches", "select_types"]
 
 PAGE = 20_000   # rows read per statement
 
 
 class McapUnavailable(SLRError):
     """The mcap package is not installed (``pip install 'slr_sql[mcap]'``)."""
+
+
+class ExportRefused(SLRError):
+    """The output path cannot take an export: the store itself, another SQLite database, a
+    directory. Nothing is written."""
 
 
 @dataclass
@@ -105,68 +112,93 @@ def export_mcap(store: Any, path: str | Path, start: float | None = None,
     keys = select_types(store.event_types(), types)
     _check_overwrite(store, path)
     report = ExportReport(str(path))
-    with open(path, "wb") as out:
-        writer = writer_module.Writer(out, compression=writer_module.CompressionType.ZSTD)
-        writer.start(profile="", library="slr_sql")
-        channels = {}
-        for key in keys:
-            sample = store.raw_rows(key[0], key[1], limit=1)
-            event = event_channel(key[0], key[1], sample[0] if sample else None)
-            schema_id = writer.register_schema(event.schema_name, JSON_SCHEMA_ENCODING,
-                                               json.dumps(event.schema).encode())
-            channels[key] = (event, writer.register_channel(event.topic, "json", schema_id,
-                                                            event.metadata))
-        tf_channels = {}
-        tf_schema = None
-        for key, topic in TF_TOPICS.items():
-            if key in channels:
-                if tf_schema is None:
-                    tf_schema = writer.register_schema(TRANSFORMS_SCHEMA_NAME, JSON_SCHEMA_ENCODING,
-                                                       json.dumps(TRANSFORMS_SCHEMA).encode())
-                tf_channels[key] = writer.register_channel(topic, "json", tf_schema, {})
-        # merge the types' histories by end time (then start, then the type, then seq)
-        streams = [_keyed(_rows(store, key, start, end), key[1], index)
-                   for index, key in enumerate(keys)]
-        add = writer.add_message
-        count = 0
-        info = [(channels[key][0].message, channels[key][1], key[1] + 2, tf_channels.get(key))
-                for key in keys]
-        per_index = [0] * len(keys)
-        merged = heapq.merge(*streams) if len(streams) > 1 else (streams[0] if streams else ())
-        for end_time, _, index, seq, row in merged:
-            message, channel_id, arrival_at, tf = info[index]
-            log_time = time_ns(end_time)
-            publish_time = time_ns(row[arrival_at])
-            seq &= 0xFFFFFFFF
-            add(channel_id, log_time, message(row), publish_time, seq)
-            if tf is not None:
-                data = transform_message([row])
-                if data is not None:
-                    add(tf, log_time, data, publish_time, seq)
-            per_index[index] += 1
-            count += 1
-            if progress is not None and count % 10_000 == 0:
-                progress(count)
-        report.per_type = {key: per_index[i] for i, key in enumerate(keys) if per_index[i]}
-        marks = {k[len("sync/mark/"):]: v for k, v in store.meta_items("sync/mark/").items()}
-        if marks:
-            schema_id = writer.register_schema(MARKS_SCHEMA["title"], JSON_SCHEMA_ENCODING,
-                                               json.dumps(MARKS_SCHEMA).encode())
-            channel_id = writer.register_channel(MARKS_TOPIC, "json", schema_id, {})
-            for type_text, until in sorted(marks.items()):
-                try:
-                    until = float(until)
-                except (TypeError, ValueError):
-                    continue
-                source = store.meta_get("sync/marksrc/" + type_text, "") or ""
-                add(channel_id, time_ns(until), mark_message(type_text, until, str(source)),
-                    time_ns(until))
-        writer.add_metadata("slr_sql", {"from": "" if start is None else repr(float(start)),
-                                        "to": "" if end is None else repr(float(end)),
-                                        "types": ",".join(f"{n}/{a}" for n, a in keys)})
-        writer.finish()
-        report.messages = count
+    # Written beside ``path`` under a name of its own and renamed over it once whole: an
+    # export that stops half way (an error, Ctrl-C, a full disk) leaves no half MCAP file and
+    # an older export of that name as it was.
+    part = _part_path(Path(path))
+    try:
+        with open(part, "xb") as out:
+            _write(writer_module, out, store, keys, start, end, progress, report)
+            out.flush()
+            os.fsync(out.fileno())   # whole on disk before it takes the name
+        os.replace(part, path)
+    except BaseException:
+        try:
+            os.unlink(part)
+        except OSError:
+            pass
+        raise
     return report
+
+
+def _part_path(path: Path) -> Path:
+    """A file name beside ``path`` for the export being written (hidden, unique)."""
+    return path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.part")
+
+
+def _write(writer_module: Any, out: Any, store: Any, keys: list, start: float | None,
+           end: float | None, progress: Callable[[int], None] | None,
+           report: ExportReport) -> None:
+    writer = writer_module.Writer(out, compression=writer_module.CompressionType.ZSTD)
+    writer.start(profile="", library="slr_sql")
+    channels = {}
+    for key in keys:
+        sample = store.raw_rows(key[0], key[1], limit=1)
+        event = event_channel(key[0], key[1], sample[0] if sample else None)
+        schema_id = writer.register_schema(event.schema_name, JSON_SCHEMA_ENCODING,
+                                           json.dumps(event.schema).encode())
+        channels[key] = (event, writer.register_channel(event.topic, "json", schema_id,
+                                                        event.metadata))
+    tf_channels = {}
+    tf_schema = None
+    for key, topic in TF_TOPICS.items():
+        if key in channels:
+            if tf_schema is None:
+                tf_schema = writer.register_schema(TRANSFORMS_SCHEMA_NAME, JSON_SCHEMA_ENCODING,
+                                                   json.dumps(TRANSFORMS_SCHEMA).encode())
+            tf_channels[key] = writer.register_channel(topic, "json", tf_schema, {})
+    # merge the types' histories by end time (then start, then the type, then seq)
+    streams = [_keyed(_rows(store, key, start, end), key[1], index)
+               for index, key in enumerate(keys)]
+    add = writer.add_message
+    count = 0
+    info = [(channels[key][0].message, channels[key][1], key[1] + 2, tf_channels.get(key))
+            for key in keys]
+    per_index = [0] * len(keys)
+    merged = heapq.merge(*streams) if len(streams) > 1 else (streams[0] if streams else ())
+    for end_time, _, index, seq, row in merged:
+        message, channel_id, arrival_at, tf = info[index]
+        log_time = time_ns(end_time)
+        publish_time = time_ns(row[arrival_at])
+        seq &= 0xFFFFFFFF
+        add(channel_id, log_time, message(row), publish_time, seq)
+        if tf is not None:
+            data = transform_message([row])
+            if data is not None:
+                add(tf, log_time, data, publish_time, seq)
+        per_index[index] += 1
+        count += 1
+        if progress is not None and count % 10_000 == 0:
+            progress(count)
+    report.per_type = {key: per_index[i] for i, key in enumerate(keys) if per_index[i]}
+    marks = {k[len("sync/mark/"):]: v for k, v in store.meta_items("sync/mark/").items()}
+    if marks:
+        schema_id = writer.register_schema(MARKS_SCHEMA["title"], JSON_SCHEMA_ENCODING,
+                                           json.dumps(MARKS_SCHEMA).encode())
+        channel_id = writer.register_channel(MARKS_TOPIC, "json", schema_id, {})
+        for type_text, until in sorted(marks.items()):
+            try:
+                until = float(until)
+            except (TypeError, ValueError):
+                continue
+            source = store.meta_get("sync/marksrc/" + type_text, "") or ""
+            add(channel_id, time_ns(until), mark_message(type_text, until, str(source)),
+                time_ns(until))
+    writer.add_metadata("slr_sql", {"from": "" if start is None else repr(float(start)),
+                                    "to": "" if end is None else repr(float(end)),
+                                    "types": ",".join(f"{n}/{a}" for n, a in keys)})
+    writer.finish()
+    report.messages = count
 
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -176,9 +208,10 @@ def _check_overwrite(store: Any, path: str | Path) -> None:
     """Refuse (SLRError) to write the MCAP over the store being exported (its file, or the
     file's WAL or journal; opening it for writing truncates the store) or over any other
     SQLite database (another store, named where an export was not meant to go)."""
-    import os
-
     target = Path(path)
+    if target.is_dir():
+        raise ExportRefused(f"{path} is a directory: an export is an MCAP file; name a file "
+                            f"in it, e.g. {target / 'export.mcap'}")
     if not target.exists():
         return
     own = getattr(store, "path", None)
@@ -186,7 +219,7 @@ def _check_overwrite(store: Any, path: str | Path) -> None:
         for suffix in ("", "-wal", "-shm", "-journal"):
             try:
                 if os.path.samefile(str(own) + suffix, target):
-                    raise SLRError(f"{path} is the store being exported ({own}) itself: "
+                    raise ExportRefused(f"{path} is the store being exported ({own}) itself: "
                                    "writing the export there would destroy the store")
             except OSError:      # (that file does not exist)
                 continue
@@ -196,7 +229,7 @@ def _check_overwrite(store: Any, path: str | Path) -> None:
     except OSError:
         return                   # (unreadable: writing it says why)
     if head == SQLITE_MAGIC:
-        raise SLRError(f"{path} is an SQLite database (a store?), not an export: an export is "
+        raise ExportRefused(f"{path} is an SQLite database (a store?), not an export: an export is "
                        "an MCAP file; remove the file first or choose another name")
 
 

@@ -1,0 +1,88 @@
+"""Red team of ``slr export`` / :func:`export_mcap` (docs/ros.md, "MCAP export"): an export
+that stops half way (a cancel from its progress callback, Ctrl-C, disk full) leaves neither a
+half-written MCAP file nor a destroyed older export; output paths that cannot be an export
+are refused before anything is written."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+import slr_sql
+from slr_sql import ManualClock
+from slr_sql.viz.mcap_export import ExportRefused, export_mcap
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def slr(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "slr_sql", *args], capture_output=True,
+                          text=True, timeout=60, env={**os.environ, "PYTHONPATH": str(REPO)})
+
+
+class Cancelled(Exception):
+    """What a user's progress callback raises to stop an export (a Cancel button)."""
+
+
+def read_messages(path: Path) -> int:
+    with open(path, "rb") as stream:
+        return sum(1 for _ in make_reader(stream).iter_messages())
+
+
+@pytest.mark.parametrize("stop", [Cancelled, KeyboardInterrupt])
+def test_an_export_stopped_half_way_keeps_the_older_export_and_leaves_no_half_file(
+        tmp_path, stop):
+    out = tmp_path / "out.mcap"
+    with slr_sql.open(tmp_path / "r.db", clock=ManualClock(0.0)) as kb:
+        kb.add_many([("p", (i,), float(i), float(i)) for i in range(5)])
+        export_mcap(kb.store, out)
+        before = out.read_bytes()
+        assert read_messages(out) == 5
+        kb.add_many([("p", (i,), float(i), float(i)) for i in range(5, 25_000)])
+        seen = []
+
+        def progress(n: int) -> None:
+            seen.append(n)
+            raise stop()
+
+        with pytest.raises(stop):
+            export_mcap(kb.store, out, progress=progress)
+        assert seen == [10_000]                  # it did stop half way
+    assert out.read_bytes() == before           # the older export is whole
+    leftovers = sorted(p.name for p in tmp_path.iterdir()
+                       if p.name not in ("out.mcap", "r.db", "r.db-wal", "r.db-shm"))
+    assert leftovers == []
+
+
+def test_an_export_into_a_new_file_stopped_half_way_leaves_nothing(tmp_path):
+    out = tmp_path / "new.mcap"
+    with slr_sql.open(tmp_path / "r.db", clock=ManualClock(0.0)) as kb:
+        kb.add_many([("p", (i,), float(i), float(i)) for i in range(12_000)])
+
+        def progress(n: int) -> None:
+            raise Cancelled()
+
+        with pytest.raises(Cancelled):
+            export_mcap(kb.store, out, progress=progress)
+        assert not out.exists()
+        report = export_mcap(kb.store, out)      # and the next export is whole
+    assert report.messages == 12_000 and read_messages(out) == 12_000
+    assert sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith("r.db")) \
+        == ["new.mcap"]
+
+
+def test_a_directory_as_output_is_refused_before_any_work(tmp_path):
+    target = tmp_path / "exports"
+    target.mkdir()
+    with slr_sql.open(tmp_path / "r.db", clock=ManualClock(0.0)) as kb:
+        kb.add_many([("p", (1,), 1.0, 1.0)])
+        with pytest.raises(ExportRefused, match="is a directory"):
+            export_mcap(kb.store, target)
+    assert list(target.iterdir()) == []
+    assert sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith("r.db")) \
+        == ["exports"]
+
