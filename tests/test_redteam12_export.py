@@ -86,3 +86,24 @@ def test_a_directory_as_output_is_refused_before_any_work(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith("r.db")) \
         == ["exports"]
 
+
+
+def test_types_whose_names_hold_a_slash_are_chosen_by_name_and_by_name_arity(tmp_path):
+    """An event type may be named ``'a/b'`` (a quoted atom; ROS topic names make such names):
+    ``a/b`` and ``a/b/1`` name it. The name was cut at its first slash, so neither did
+    (``no event type a/b in the store (it has: a/b/1, ...)``)."""
+    db, out = tmp_path / "r.db", tmp_path / "out.mcap"
+    with slr_sql.open(db, clock=ManualClock(0.0)) as kb:
+        kb.add_many([("a/b", (1,), 1.0, 1.0), ("a", (1, 2), 2.0, 2.0),
+                     ("a/b/c", (), 3.0, 3.0)])
+    for spec, topics in (("a/b", ["/a/b/1"]), ("a/b/1", ["/a/b/1"]), ("a", ["/a/2"]),
+                         ("a/2", ["/a/2"]), ("a/b/c", ["/a/b/c/0"]), ("a/b/c/0", ["/a/b/c/0"])):
+        result = slr("export", str(db), str(out), spec)
+        assert result.returncode == 0, (spec, result.stderr)
+        with open(out, "rb") as stream:
+            channels = make_reader(stream).get_summary().channels.values()
+        assert sorted(c.topic for c in channels) == topics, spec
+    result = slr("export", str(db), str(out), "a/b/2")
+    assert result.returncode == 1
+    assert "error: no event type a/b/2 in the store (it has: a/2, a/b/1, a/b/c/0)" \
+        in result.stderr

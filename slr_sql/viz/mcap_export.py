@@ -68,6 +68,8 @@ def select_types(available: Iterable[tuple[str, int]], wanted: Iterable[str]) ->
 
     >>> select_types([("seg", 2), ("tf", 3), ("seg", 3)], ["seg"])
     [('seg', 2), ('seg', 3)]
+    >>> select_types([("a/b", 1), ("a", 2)], ["a/b/1", "a"])
+    [('a/b', 1), ('a', 2)]
     """
     available = sorted(available)
     wanted = list(wanted)
@@ -75,8 +77,10 @@ def select_types(available: Iterable[tuple[str, int]], wanted: Iterable[str]) ->
         return available
     out: list = []
     for spec in wanted:
-        name, _, arity = spec.partition("/")
-        found = [k for k in available if k[0] == name and (not arity or str(k[1]) == arity)]
+        # ``name/arity`` (cut at the last slash: a name may hold slashes, 'a/b'), or a name
+        name, _, arity = spec.rpartition("/")
+        found = [k for k in available
+                 if k[0] == spec or (arity.isdigit() and k[0] == name and str(k[1]) == arity)]
         if not found:
             raise SLRError(f"no event type {spec} in the store (it has: "
                            f"{', '.join(f'{n}/{a}' for n, a in available) or 'none'})")
