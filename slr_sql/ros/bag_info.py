@@ -39,6 +39,7 @@ class TopicInfo:
     count: int
     first: float | None = None
     last: float | None = None
+    undecodable: int = 0    # messages read for the frames that do not decode (/tf, export)
 
 
 @dataclass
@@ -100,10 +101,14 @@ def _export_info(path: Path) -> BagInfo:
             info.first = t if info.first is None else min(info.first, t)
             info.last = t if info.last is None else max(info.last, t)
             if meta.get(METADATA_EVENT) in ("tf", "tf_static") and meta.get(METADATA_ARITY) == "3":
-                data = json.loads(message.data)
-                edge = frames.setdefault((channel.topic, str(data["arg1"]), str(data["arg2"])),
-                                         FrameEdge(str(data["arg1"]), str(data["arg2"]),
-                                                   channel.topic))
+                try:
+                    data = json.loads(message.data)
+                    parent, child = str(data["arg1"]), str(data["arg2"])
+                except (ValueError, KeyError, TypeError, IndexError):   # not an slr event
+                    info.undecodable += 1
+                    continue
+                edge = frames.setdefault((channel.topic, parent, child),
+                                         FrameEdge(parent, child, channel.topic))
                 edge.count += 1
                 edge.first = t if edge.first is None else min(edge.first, t)
                 edge.last = t if edge.last is None else max(edge.last, t)
@@ -151,13 +156,17 @@ def bag_info(path: str | Path) -> BagInfo:
                 info.last = t
             if conn.id not in tf_conns:
                 continue
-            if standard:
-                transforms = [(args[0], args[1], end) for _, args, _, end in decode(raw, t)]
-            else:
-                msg = deserialize(raw, conn.msgtype)
-                transforms = [(tr.header.frame_id, tr.child_frame_id,
-                               tr.header.stamp.sec + tr.header.stamp.nanosec * 1e-9)
-                              for tr in msg.transforms]
+            try:
+                if standard:
+                    transforms = [(args[0], args[1], end) for _, args, _, end in decode(raw, t)]
+                else:
+                    msg = deserialize(raw, conn.msgtype)
+                    transforms = [(tr.header.frame_id, tr.child_frame_id,
+                                   tr.header.stamp.sec + tr.header.stamp.nanosec * 1e-9)
+                                  for tr in msg.transforms]
+            except Exception:  # noqa: BLE001 - bytes that do not decode: counted, said once
+                info.undecodable += 1
+                continue
             for parent, child, at in transforms:
                 edge = frames.setdefault((info.topic, parent, child),
                                          FrameEdge(str(parent), str(child), info.topic))

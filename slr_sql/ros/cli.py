@@ -161,6 +161,11 @@ def info_command(bag: str, map_only: bool, as_json: bool) -> None:
     except ImportError as exc:
         raise _need_extra("info", exc) from None
     info = bag_info(bag)
+    for t in info.topics:
+        if t.undecodable:
+            click.echo(f"warning: {t.topic}: {t.undecodable} of {t.count} messages do not "
+                       f"decode (left out of the frames below; slr ros import rejects each "
+                       f"with its reason)", err=True)
     if as_json:
         click.echo(info.as_json())
         return

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import heapq
 import json
+import math
 import os
 import secrets
 from dataclasses import dataclass, field
@@ -255,6 +256,20 @@ def is_slr_export(path: str | Path) -> bool:
                                        for c in summary.channels.values())
 
 
+def _mark(path: str | Path, topic: str, n: int, data: bytes) -> tuple[str, float]:
+    """``(type, until)`` of a completeness mark message (:func:`mark_message`)."""
+    try:
+        mark = json.loads(data)
+        until = float(mark["until"])
+        if not isinstance(mark["type"], str) or isinstance(mark["until"], bool) \
+                or math.isnan(until):
+            raise ValueError(f"type {mark['type']!r}, until {mark['until']!r}")
+        return mark["type"], until
+    except (ValueError, KeyError, TypeError, IndexError) as exc:
+        raise SLRError(f"{path}: {topic}: message {n} is not a completeness mark "
+                       f'({{"type": "p/1", "until": 5.0}}): {exc}') from None
+
+
 def export_batches(path: str | Path, done: dict | None = None, batch_size: int = 10_000
                    ) -> Iterator[tuple[list, dict, list]]:
     """The events of an MCAP file :func:`export_mcap` wrote, in file order, in batches:
@@ -287,6 +302,5 @@ def export_batches(path: str | Path, done: dict | None = None, batch_size: int =
                     yield batch, dict(counts), []
                     batch = []
             elif topic == MARKS_TOPIC:
-                mark = json.loads(message.data)
-                marks.append((str(mark["type"]), float(mark["until"])))
+                marks.append(_mark(path, topic, len(marks) + 1, message.data))
     yield batch, dict(counts), marks
