@@ -107,3 +107,22 @@ def test_types_whose_names_hold_a_slash_are_chosen_by_name_and_by_name_arity(tmp
     assert result.returncode == 1
     assert "error: no event type a/b/2 in the store (it has: a/2, a/b/1, a/b/c/0)" \
         in result.stderr
+
+
+def test_an_export_cut_short_is_named_so_by_ros_import_and_ros_info(tmp_path):
+    """A copy of an export cut half way (a full disk, a transfer that stopped) has no summary.
+    It was taken for a ROS bag and refused with "Profile is not ros2"."""
+    db, out, cut = tmp_path / "r.db", tmp_path / "out.mcap", tmp_path / "cut.mcap"
+    with slr_sql.open(db, clock=ManualClock(0.0)) as kb:
+        kb.add_many([("p", (i,), float(i), float(i)) for i in range(50_000)])
+        export_mcap(kb.store, out)
+    data = out.read_bytes()
+    cut.write_bytes(data[:len(data) // 2])
+    for args in (("ros", "import", str(cut), str(tmp_path / "copy.db")),
+                 ("ros", "info", str(cut))):
+        result = slr(*args)
+        assert result.returncode == 1, result
+        assert f"cannot read {cut}: an slr export cut short (no summary at its end" \
+            in result.stderr, result.stderr
+        assert "Traceback" not in result.stderr and "bug" not in result.stderr
+    assert not (tmp_path / "copy.db").exists()     # nothing was created for it

@@ -208,14 +208,9 @@ def _import_export(kb: KnowledgeBaseAPI, path: Path, progress: Callable[[int, in
                    batch_size: int) -> ImportReport:
     """An MCAP file of ``slr export``: its events as they were stored (no mapping: its
     channels name their event types), with the same checkpoints as a bag."""
-    from mcap.reader import make_reader
+    from slr_sql.viz.mcap_export import export_batches, export_summary
 
-    from slr_sql.viz.mcap_export import export_batches
-
-    with open(path, "rb") as stream:
-        summary = make_reader(stream).get_summary()
-    if summary is None:   # is_slr_export read it: only a file changed since has none
-        raise BagError(f"cannot read {path}: the MCAP file has no summary")
+    summary = export_summary(path)   # (ExportCutShort when the file ends early)
     channels = sorted((c.topic, c.metadata.get("slr_event", ""), c.metadata.get("slr_arity", ""),
                        (summary.statistics.channel_message_counts.get(c.id, 0)
                         if summary.statistics else 0))

@@ -86,7 +86,9 @@ def _export_info(path: Path) -> BagInfo:
     from mcap.reader import make_reader
 
     from slr_sql.viz.channels import METADATA_ARITY, METADATA_EVENT
+    from slr_sql.viz.mcap_export import export_summary
 
+    export_summary(path)   # (ExportCutShort when the file ends early)
     topics: dict[str, TopicInfo] = {}
     frames: dict[tuple, FrameEdge] = {}
     with open(path, "rb") as stream:

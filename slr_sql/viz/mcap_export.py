@@ -32,8 +32,8 @@ from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, METADATA
                        event_channel, event_from_message, mark_message, time_ns,
                        transform_message)
 
-__all__ = ["export_mcap", "ExportReport", "McapUnavailable", "ExportRefused", "is_slr_export",
-           "export_batches", "select_types"]
+__all__ = ["export_mcap", "ExportReport", "McapUnavailable", "ExportRefused", "ExportCutShort",
+           "is_slr_export", "export_summary", "export_batches", "select_types"]
 
 PAGE = 20_000   # rows read per statement
 
@@ -45,6 +45,11 @@ class McapUnavailable(SLRError):
 class ExportRefused(SLRError):
     """The output path cannot take an export: the store itself, another SQLite database, a
     directory. Nothing is written."""
+
+
+class ExportCutShort(SLRError):
+    """An MCAP file of ``slr export`` that ends early: it has no summary (the export did not
+    finish, or the file is a partial copy). Nothing is read from it."""
 
 
 @dataclass
@@ -249,11 +254,50 @@ def is_slr_export(path: str | Path) -> bool:
         return False
     try:
         with open(path, "rb") as stream:
-            summary = make_reader(stream).get_summary()
-    except Exception:  # noqa: BLE001 - not an MCAP file we can read: the bag reader decides
+            try:
+                summary = make_reader(stream).get_summary()
+            except Exception:  # noqa: BLE001 - no footer to read: a file cut short?
+                summary = None
+            if summary is None:   # cut short? its first channel says whose it is
+                stream.seek(0)
+                return _first_channel_is_an_event(stream)
+    except OSError:   # unreadable: the bag reader says why
         return False
-    return summary is not None and any(METADATA_EVENT in c.metadata
-                                       for c in summary.channels.values())
+    return any(METADATA_EVENT in c.metadata for c in summary.channels.values())
+
+
+def _first_channel_is_an_event(stream: Any) -> bool:
+    """Whether the first channel record of an MCAP stream (read from its start, as far as
+    it goes) is an slr event channel."""
+    from mcap.records import Channel, Message
+    from mcap.stream_reader import StreamReader
+
+    try:
+        for record in StreamReader(stream).records:
+            if isinstance(record, Channel):
+                return METADATA_EVENT in record.metadata
+            if isinstance(record, Message):
+                return False
+    except Exception:  # noqa: BLE001 - the file ends (or breaks) before a channel
+        return False
+    return False
+
+
+def export_summary(path: str | Path) -> Any:
+    """The summary of an MCAP file of ``slr export`` (:func:`is_slr_export`); raises
+    :class:`ExportCutShort` when the file has none."""
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as stream:
+        try:
+            summary = make_reader(stream).get_summary()
+        except Exception:  # noqa: BLE001 - the end of the file is not a footer
+            summary = None
+    if summary is None:
+        raise ExportCutShort(f"cannot read {path}: an slr export cut short (no summary at its "
+                             f"end: the export did not finish, or the file is a partial copy); "
+                             f"export it again")
+    return summary
 
 
 def _mark(path: str | Path, topic: str, n: int, data: bytes) -> tuple[str, float]:
