@@ -35,6 +35,7 @@ from ..errors import SLRError, SLRStoreGone, SLRTimeout
 from ..lockorder import ordered_lock
 from .authorizer import READ_ONLY_RESULT_BYTES, READ_ONLY_VALUE_BYTES, SqlGuard, \
     harden_connection
+from .bounded_builtins import bounded_builtins
 from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
 from .dialect import SQLITE
 from .functions import SqlFunctions
@@ -172,7 +173,7 @@ def _read_schema(path: str, header: bytes) -> tuple[list[tuple[str, str]], int]:
         try:
             conn = sqlite3.connect(uri, uri=True, isolation_level=None, timeout=30.0)
             try:
-                harden_connection(conn)
+                harden(conn)
                 objects = conn.execute("SELECT type, name FROM sqlite_master").fetchall()
                 version = conn.execute("PRAGMA user_version").fetchone()[0]
                 return objects, version
@@ -274,7 +275,7 @@ class Database:
             raise SLRError(f"{self.path}: cannot open it ({exc})") from None
         conn = self.conn
         try:
-            self.guard = harden_connection(conn)
+            self.guard = harden(conn)
             # the bound parameters one statement may hold (999 in SQLite before 3.32)
             self.max_parameters = conn.getlimit(sqlite3.SQLITE_LIMIT_VARIABLE_NUMBER)
             # auto_vacuum must be chosen before the first table exists (a no-op afterwards,
@@ -642,7 +643,7 @@ class Database:
                         columns = [d[0] for d in cursor.description] if cursor.description else []
                         return columns, cursor.fetchall()
                     except sqlite3.DatabaseError as exc:
-                        if guard.denied is not None and "authoriz" in str(exc):
+                        if _refused(str(exc), guard):
                             raise SLRError(f"sql: {guard.denied}") from None
                         raise busy_error(exc, self.path, self.busy_timeout) or exc from None
             # query_only refuses every write to a database file; the authorizer refuses what
@@ -828,6 +829,14 @@ class Database:
                                               20000)
 
 
+def harden(conn: sqlite3.Connection) -> SqlGuard:
+    """:func:`~slr_sql.store.authorizer.harden_connection` and the wrapped built-ins of
+    :mod:`~slr_sql.store.bounded_builtins`: what every connection of the store gets."""
+    guard = harden_connection(conn)
+    register_functions(conn, bounded_builtins(conn, guard))
+    return guard
+
+
 def register_functions(conn: sqlite3.Connection, functions: SqlFunctions) -> None:
     """Register every function and aggregate of ``functions`` on one SQLite connection:
     the only place slr_sql registers Python functions (tests/test_sql_functions.py)."""
@@ -859,14 +868,24 @@ def _bounded_rows(cursor: sqlite3.Cursor) -> list[tuple]:
         rows.extend(batch)
 
 
+def _refused(text: str, guard: SqlGuard) -> bool:
+    """Whether a statement's error ``text`` is a refusal whose reason ``guard`` holds: the
+    authorizer's, or a wrapped built-in's (:mod:`~slr_sql.store.bounded_builtins`)."""
+    return guard.denied is not None and (
+        "authoriz" in text or "user-defined function raised exception" in text)
+
+
 def _read_only_error(exc: sqlite3.DatabaseError, guard: SqlGuard) -> Exception:
     """The error to raise for ``exc``, raised by a read-only statement: the authorizer's
     reason, the read-only refusal, the value limit in words, else ``exc`` itself."""
     text = str(exc)
-    if "authoriz" in text and guard.denied is not None:
+    if _refused(text, guard):
+        assert guard.denied is not None
         if guard.denied.startswith("read-only"):
             return SLRError(f"{guard.denied}; pass write=True to allow it")
-        return SLRError(f"sql: {guard.denied}")
+        if "too big" not in guard.denied:
+            return SLRError(f"sql: {guard.denied}")
+        text = guard.denied   # a wrapped built-in's value over the limit: said below
     if "readonly" in text or "authoriz" in text:
         return SLRError(f"read-only: the statement would change the store ({text}); pass "
                         f"write=True to allow it")
@@ -899,7 +918,7 @@ class ReadConnection:
         try:
             self.conn = sqlite3.connect(path, check_same_thread=False, isolation_level=None,
                                         timeout=busy_timeout, cached_statements=64)
-            harden_connection(self.conn)
+            harden(self.conn)
             self.conn.execute("PRAGMA query_only=ON")
             self.conn.execute(f"PRAGMA cache_size=-{int(cache_kib)}")
             if functions is not None:
@@ -945,7 +964,7 @@ def run_sql_file(path: str | os.PathLike, query: str,
         conn = sqlite3.connect(uri, uri=True, isolation_level=None)
     except sqlite3.Error as exc:
         raise SLRError(f"sql: {exc}") from None
-    guard = harden_connection(conn)
+    guard = harden(conn)
     try:
         if not write:
             conn.set_authorizer(guard.read_only)
@@ -956,9 +975,9 @@ def run_sql_file(path: str | os.PathLike, query: str,
                          else _bounded_rows(cursor))
     except sqlite3.Error as exc:
         text = str(exc)
-        if guard.denied is not None and "authoriz" in text:
+        if _refused(text, guard) and guard.denied is not None:
             text = guard.denied
-        elif not write and "too big" in text:
+        if not write and "too big" in text:
             text = f"{text} (a read-only statement's values are at most " \
                    f"{READ_ONLY_VALUE_BYTES >> 20} MiB)"
         raise SLRError(f"sql: {text}") from None
