@@ -84,3 +84,67 @@ def test_a_client_that_never_reads_does_not_keep_the_view_from_stopping(tmp_path
         if process.poll() is None:
             process.kill()
             process.communicate()
+
+
+def test_a_client_subscribing_to_tf_static_again_and_again_reads_no_history(tmp_path):
+    """The latched /tf_static message (the last pose of each static edge) was made by reading
+    every stored tf_static row, at each subscription to /tf_static and every 5 s: a store
+    whose /tf_static was published at 10 Hz for a day has 864,000 of them (seconds a read),
+    and any client could make the view do it in a loop. Now the view keeps the last row of
+    each edge as rows arrive: a subscription reads nothing (the view's own connection is
+    traced: no statement on tf_static runs), and the message is the same."""
+    from slr_sql.viz.foxglove_live import FoxgloveView
+    from test_foxglove import pose
+
+    db = tmp_path / "robot.db"
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add_many([("tf_static", ("base", f"cam{i % 3}", pose(float(i))), float(i), float(i))
+                     for i in range(3000)])
+    view_kb = slr_sql.open(db, clock=slr_sql.ManualClock(0.0))
+    statements: list[str] = []
+    view = FoxgloveView(view_kb.store, port=0, static_every=3600.0)
+    view_kb.store._db.conn.set_trace_callback(
+        lambda sql: statements.append(sql) if "tf_static" in sql else None)
+    view.start()
+    try:
+        with FoxgloveClient(view.port) as client:
+            deadline = time.monotonic() + DEADLINE
+            client.pump(lambda: "/tf_static" in client.channels, deadline)
+            channel = client.channels["/tf_static"]["id"]
+            for n in range(1, 6):
+                client.subscriptions[n] = "/tf_static"
+                client.ws.send(json.dumps({"op": "subscribe",
+                                           "subscriptions": [{"id": n, "channelId": channel}]}))
+                client.pump(lambda: len(client.on("/tf_static")) >= n, deadline)
+                client.ws.send(json.dumps({"op": "unsubscribe", "subscriptionIds": [n]}))
+            last = client.on("/tf_static")[-1][1]
+        # a static edge stored later still reaches the next subscriber
+        with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+            kb.add_many([("tf_static", ("base", "cam1", pose(-1.0)), 5000.0, 5000.0)])
+        with FoxgloveClient(view.port) as late:
+            deadline = time.monotonic() + DEADLINE
+            late.pump(lambda: "/tf_static" in late.channels, deadline)
+
+            def has_new_cam1() -> bool:
+                return any(t["child_frame_id"] == "cam1" and t["translation"]["x"] == -1.0
+                           for _, m in late.on("/tf_static") for t in m["transforms"])
+
+            while not has_new_cam1():
+                assert time.monotonic() < deadline, late.on("/tf_static")
+                late.messages.clear()
+                n = len(late.subscriptions) + 1
+                late.subscriptions[n] = "/tf_static"
+                late.ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+                    {"id": n, "channelId": late.channels["/tf_static"]["id"]}]}))
+                late.pump(lambda: bool(late.on("/tf_static")), deadline)
+                late.ws.send(json.dumps({"op": "unsubscribe", "subscriptionIds": [n]}))
+            final = [m for _, m in late.on("/tf_static")][-1]
+    finally:
+        view.close()
+        view_kb.close()
+    assert sorted((t["child_frame_id"], t["translation"]["x"]) for t in last["transforms"]) \
+        == [("cam0", 2997.0), ("cam1", 2998.0), ("cam2", 2999.0)]
+    assert sorted((t["child_frame_id"], t["translation"]["x"]) for t in final["transforms"]) \
+        == [("cam0", 2997.0), ("cam1", -1.0), ("cam2", 2999.0)]
+    full_reads = [s for s in statements if "seq >" not in s and "seq>" not in s]
+    assert full_reads == [], full_reads

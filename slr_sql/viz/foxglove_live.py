@@ -31,6 +31,7 @@ from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, TF_TOPIC
 __all__ = ["FoxgloveView", "FoxgloveUnavailable"]
 
 _MARK_PREFIX = "sync/mark/"
+_TF_STATIC = ("tf_static", 3)
 _MARK_SOURCE = "sync/marksrc/"
 
 
@@ -75,6 +76,9 @@ class FoxgloveView:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._tf: dict[str, Any] = {}
+        # the last row of each tf_static edge (parent, child), kept as rows are read: the
+        # latched /tf_static message is made from it without reading the history again
+        self._static_last: dict[tuple, tuple] = {}
         for key, topic in TF_TOPICS.items():
             self._tf[key[0]] = foxglove.Channel(
                 topic, schema=_schema(TRANSFORMS_SCHEMA_NAME, TRANSFORMS_SCHEMA),
@@ -91,6 +95,7 @@ class FoxgloveView:
 
         # the channels of what is stored now, before any client sees the server
         self._follow(initial=True)
+        self._load_static()
         self.server = foxglove.start_server(name=name, host=host, port=port,
                                             context=self.context, server_listener=Listener())
 
@@ -175,6 +180,8 @@ class FoxgloveView:
             if not rows:
                 continue
             self.seen[key] = rows[-1][-1]
+            if key == _TF_STATIC:
+                self._keep_static(rows)
             if initial:
                 continue
             end = key[1] + 1
@@ -207,11 +214,30 @@ class FoxgloveView:
             self._marks_channel.log(mark_message(type_text, until, str(source)),
                                     log_time=time_ns(time.time()))
 
+    def _load_static(self) -> None:
+        """Read the tf_static rows stored before the view started, once, a page at a time
+        (the rows stored later come through :meth:`_follow`)."""
+        after, upto = 0, self.seen.get(_TF_STATIC, 0)
+        while after < upto:
+            rows = self.store.raw_rows(*_TF_STATIC, after_seq=after, limit=10_000)
+            if not rows:
+                break
+            self._keep_static([row for row in rows if row[-1] <= upto])
+            after = rows[-1][-1]
+
+    def _keep_static(self, rows: list) -> None:
+        """Keep the last row of each edge in store order (end, start, arrival sequence), as
+        tf_lookup takes a static edge's value."""
+        last = self._static_last
+        for row in rows:
+            edge = (row[0], row[1])
+            kept = last.get(edge)
+            if kept is None or (row[4], row[3], row[6]) > (kept[4], kept[3], kept[6]):
+                last[edge] = row
+
     def _send_static(self) -> None:
-        """The last stored value of each tf_static edge, on /tf_static."""
-        last: dict = {}
-        for row in self.store.raw_rows("tf_static", 3):   # few rows: one per edge, mostly
-            last[(row[0], row[1])] = row
+        """The last value of each tf_static edge, on /tf_static."""
+        last = self._static_last
         data = transform_message(list(last.values())) if last else None
         if data is not None:
             self._tf["tf_static"].log(data, log_time=time_ns(time.time()))
