@@ -574,10 +574,13 @@ def _collect_query(source: Any, goal: str, every: float, lo: float, hi: float) -
     every = _check_time("every", every)
     if every is None or every <= 0:
         raise SLRError(f"--every must be a positive number of seconds, not {every!r}")
-    n = int(math.floor((hi - lo) / every + 1e-9)) + 1
-    if n > MAX_SAMPLES:
-        raise SLRError(f"--every {every:g} asks the goal {n} times between {lo:g} and {hi:g}; "
-                       f"at most {MAX_SAMPLES}: a larger --every or a shorter window")
+    steps = (hi - lo) / every + 1e-9   # (inf when every is tiny)
+    samples = math.floor(steps) + 1.0 if math.isfinite(steps) else math.inf
+    if not samples <= MAX_SAMPLES:
+        said = f"{samples:.3g}" if math.isfinite(samples) else "more than 1e+308"
+        raise SLRError(f"--every {every:g} asks the goal {said} times between {lo:g} and "
+                       f"{hi:g}; at most {MAX_SAMPLES}: a larger --every or a shorter window")
+    n = int(samples)
     row = QueryRow(goal, every, n)
     for i in range(n):
         t = lo + i * every

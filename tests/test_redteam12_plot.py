@@ -99,3 +99,29 @@ def test_the_cli_says_why_it_cannot_draw_the_values(tmp_path):
     assert "bug" not in result.stderr and "warning" not in result.stderr
     assert "Traceback" not in result.stderr
     assert not (tmp_path / "x.png").exists()
+
+
+@pytest.mark.parametrize("every", ["1e-300", "5e-324"])
+def test_a_query_row_sampled_too_finely_is_refused_in_words(tmp_path, every):
+    """``--every`` so small that the number of samples is beyond floats raised a raw
+    OverflowError ("cannot convert float infinity to integer ... a bug in slr_sql")."""
+    db = tmp_path / "r.db"
+    with slr_sql.open(db, clock=ManualClock(0.0)) as kb:
+        kb.add_many([("p", (1,), 0.0, 0.0), ("p", (2,), 10.0, 10.0)])
+    result = slr("plot", str(db), "--query", "p(X)^T", "--every", every,
+                 "-o", str(tmp_path / "q.png"))
+    assert result.returncode == 1
+    assert f"error: --every {float(every):g} asks the goal " in result.stderr, result.stderr
+    assert "times between -0.2 and 10.2; at most 5000" in result.stderr
+    assert len(result.stderr) < 200, result.stderr
+    assert "bug" not in result.stderr and "Traceback" not in result.stderr
+
+
+def test_the_number_of_samples_is_said_as_a_number_not_300_digits():
+    with far_store() as kb:
+        kb.add_many([("far", (1,), -1e300, -1e300), ("far", (2,), 1e300, 1e300)])
+        with pytest.raises(slr_sql.SLRError) as caught:
+            kb.plot(query="far(X)^T", every=100.0)
+    message = str(caught.value)
+    assert "asks the goal 2.08e+298 times between" in message, message
+    assert len(message) < 200
