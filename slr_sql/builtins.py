@@ -1763,7 +1763,8 @@ def _tf_lookup(m: "Machine", a: tuple, extrapolate: bool) -> bool:
     if tree is None:
         tree = m.engine.frames = FrameTree()
     try:
-        pose = lookup(store, tree, target, source, t, extrapolate, _tf_hooks(m))
+        pose = lookup(store, tree, target, source, t, extrapolate, _tf_hooks(m),
+                      getattr(m, "check_deadline", None))
     except PoseOverflow:
         raise evaluation_error("float_overflow") from None
     if pose is None:

@@ -50,6 +50,7 @@ __all__ = ["TF", "TF_STATIC", "FrameTree", "Pose", "lookup", "pose_value", "comp
            "invert", "IDENTITY", "TfHooks", "PoseOverflow"]
 
 TF = ("tf", 3)
+_EDGES_BETWEEN_CLOCK_CHECKS = 32   # edges read between two looks at the query's deadline
 TF_STATIC = ("tf_static", 3)
 
 Pose = tuple  # ((x, y, z), (qx, qy, qz, qw)) with a unit quaternion
@@ -299,11 +300,13 @@ def _edge_at(store: Any, key: tuple, parent: Any, child: Any, t: float, extrapol
 
 
 def lookup(store: Any, tree: FrameTree, target: Any, source: Any, t: float,
-           extrapolate: bool = False, hooks: TfHooks | None = None) -> Pose | None:
+           extrapolate: bool = False, hooks: TfHooks | None = None,
+           check_deadline: Callable[[], None] | None = None) -> Pose | None:
     """The pose of frame ``source`` in frame ``target`` at time ``t`` (the transform that
     maps ``source`` coordinates into ``target``'s), or None when the frames are not
     connected or an edge has no value at ``t`` (see the module's text); :class:`PoseOverflow`
-    when the chain's pose is beyond floats."""
+    when the chain's pose is beyond floats. ``check_deadline`` (raising when the query's
+    time is up) is called every few edges: a long chain is one statement per edge."""
     if type(target) is str:
         target = Atom(target)
     if type(source) is str:
@@ -316,7 +319,9 @@ def lookup(store: Any, tree: FrameTree, target: Any, source: Any, t: float,
     result = IDENTITY
     kind = tree.kind
     try:
-        for parent, child, inverse in chain:
+        for i, (parent, child, inverse) in enumerate(chain):
+            if check_deadline is not None and i % _EDGES_BETWEEN_CLOCK_CHECKS == 0:
+                check_deadline()
             step = _edge_at(store, kind[(parent, child)], parent, child, t, extrapolate, hooks)
             if step is None:
                 return None

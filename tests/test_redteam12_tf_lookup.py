@@ -110,3 +110,20 @@ def test_a_quaternion_too_large_or_small_to_square_is_normalized(scale):
 def test_a_zero_quaternion_is_still_not_a_pose():
     with store(("a", "b", 0.0, [1.0, 0.0, 0.0], [0, 0, 0, 0])) as kb:
         assert answer(kb, "tf_lookup(a, b, 0, P)") is None
+
+
+def test_a_lookup_over_a_long_chain_keeps_the_query_timeout():
+    """One tf_lookup reads one edge per frame of its chain: over 10,000 frames that is
+    seconds inside one builtin call, which ran past ``timeout=`` to the end (SPEC §4: never
+    a hang past timeout=). Now the chain walk looks at the query's deadline."""
+    from slr_sql import SLRTimeout
+
+    n = 10_000
+    kb = slr_sql.open(clock=ManualClock(100.0))
+    kb.add_many([("tf", (f"f{i}", f"f{i + 1}", pose([1.0, 0.0, 0.0], [0, 0, 0, 1])), t, t)
+                 for t in (0.0, 2.0) for i in range(n)])
+    with kb:
+        with pytest.raises(SLRTimeout):
+            kb.query(f"tf_lookup(f0, f{n}, 1.0, P)", timeout=0.01)
+        # the frame tree is usable afterwards: a short chain answers
+        assert answer(kb, "tf_lookup(f0, f3, 1.0, P)") == ([3.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
