@@ -126,3 +126,17 @@ def test_an_export_cut_short_is_named_so_by_ros_import_and_ros_info(tmp_path):
             in result.stderr, result.stderr
         assert "Traceback" not in result.stderr and "bug" not in result.stderr
     assert not (tmp_path / "copy.db").exists()     # nothing was created for it
+
+
+def test_a_window_that_ends_before_it_starts_is_refused_not_an_empty_export(tmp_path):
+    """``--from 10 --to 1`` wrote an MCAP file of no events ("exported 0 events") where
+    ``slr plot`` says "empty time window"; now it is refused before anything is written."""
+    db, out = tmp_path / "r.db", tmp_path / "out.mcap"
+    with slr_sql.open(db, clock=ManualClock(0.0)) as kb:
+        kb.add_many([("p", (i,), float(i), float(i)) for i in range(12)])
+    result = slr("export", str(db), str(out), "--from", "10", "--to", "1")
+    assert result.returncode == 1
+    assert "error: empty time window: --from 10 is after --to 1" in result.stderr, result.stderr
+    assert not out.exists()
+    result = slr("export", str(db), str(out), "--from", "5", "--to", "5")   # one instant
+    assert result.returncode == 0 and "exported 1 event to" in result.stdout, result

@@ -119,6 +119,8 @@ def export_mcap(store: Any, path: str | Path, start: float | None = None,
     """Write the events of ``store`` (an :class:`slr_sql.store.EventStore`) with
     ``start <= end time <= end`` of the chosen ``types`` (all by default) to ``path``."""
     writer_module = _writer_module()
+    if start is not None and end is not None and start > end:
+        raise SLRError(f"empty time window: --from {start:g} is after --to {end:g}")
     keys = select_types(store.event_types(), types)
     _check_overwrite(store, path)
     report = ExportReport(str(path))
