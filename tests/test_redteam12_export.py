@@ -140,3 +140,21 @@ def test_a_window_that_ends_before_it_starts_is_refused_not_an_empty_export(tmp_
     assert not out.exists()
     result = slr("export", str(db), str(out), "--from", "5", "--to", "5")   # one instant
     assert result.returncode == 0 and "exported 1 event to" in result.stdout, result
+
+
+def test_a_damaged_export_is_named_so_by_ros_import_and_ros_info(tmp_path):
+    """Bytes of a compressed chunk changed (a bad disk, a bad copy): the reader's zstd or CRC
+    error reached the user raw ("ZstdError: ... (this is a bug in slr_sql ...)")."""
+    db, out = tmp_path / "r.db", tmp_path / "out.mcap"
+    with slr_sql.open(db, clock=ManualClock(0.0)) as kb:
+        kb.add_many([("p", (i,), float(i), float(i)) for i in range(50_000)])
+        export_mcap(kb.store, out)
+    data = bytearray(out.read_bytes())
+    middle = len(data) // 2
+    data[middle:middle + 64] = bytes(b ^ 0x5A for b in data[middle:middle + 64])
+    out.write_bytes(bytes(data))
+    for args in (("ros", "info", str(out)), ("ros", "import", str(out), str(tmp_path / "c.db"))):
+        result = slr(*args)
+        assert result.returncode == 1, result
+        assert f"cannot read {out}: the MCAP file is damaged" in result.stderr, result.stderr
+        assert "Traceback" not in result.stderr and "bug" not in result.stderr

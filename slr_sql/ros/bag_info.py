@@ -83,37 +83,33 @@ class BagInfo:
 
 def _export_info(path: Path) -> BagInfo:
     """The summary of an MCAP file of ``slr export`` (its channels name their event types)."""
-    from mcap.reader import make_reader
-
     from slr_sql.viz.channels import METADATA_ARITY, METADATA_EVENT
-    from slr_sql.viz.mcap_export import export_summary
+    from slr_sql.viz.mcap_export import export_messages, export_summary
 
     export_summary(path)   # (ExportCutShort when the file ends early)
     topics: dict[str, TopicInfo] = {}
     frames: dict[tuple, FrameEdge] = {}
-    with open(path, "rb") as stream:
-        reader = make_reader(stream)
-        for schema, channel, message in reader.iter_messages(log_time_order=False):
-            meta = channel.metadata
-            kind = (f"slr event {meta[METADATA_EVENT]}/{meta[METADATA_ARITY]}"
-                    if METADATA_EVENT in meta else (schema.name if schema else ""))
-            info = topics.setdefault(channel.topic, TopicInfo(channel.topic, kind, 0))
-            t = message.log_time * 1e-9
-            info.count += 1
-            info.first = t if info.first is None else min(info.first, t)
-            info.last = t if info.last is None else max(info.last, t)
-            if meta.get(METADATA_EVENT) in ("tf", "tf_static") and meta.get(METADATA_ARITY) == "3":
-                try:
-                    data = json.loads(message.data)
-                    parent, child = str(data["arg1"]), str(data["arg2"])
-                except (ValueError, KeyError, TypeError, IndexError):   # not an slr event
-                    info.undecodable += 1
-                    continue
-                edge = frames.setdefault((channel.topic, parent, child),
-                                         FrameEdge(parent, child, channel.topic))
-                edge.count += 1
-                edge.first = t if edge.first is None else min(edge.first, t)
-                edge.last = t if edge.last is None else max(edge.last, t)
+    for schema, channel, message in export_messages(path):
+        meta = channel.metadata
+        kind = (f"slr event {meta[METADATA_EVENT]}/{meta[METADATA_ARITY]}"
+                if METADATA_EVENT in meta else (schema.name if schema else ""))
+        info = topics.setdefault(channel.topic, TopicInfo(channel.topic, kind, 0))
+        t = message.log_time * 1e-9
+        info.count += 1
+        info.first = t if info.first is None else min(info.first, t)
+        info.last = t if info.last is None else max(info.last, t)
+        if meta.get(METADATA_EVENT) in ("tf", "tf_static") and meta.get(METADATA_ARITY) == "3":
+            try:
+                data = json.loads(message.data)
+                parent, child = str(data["arg1"]), str(data["arg2"])
+            except (ValueError, KeyError, TypeError, IndexError):   # not an slr event
+                info.undecodable += 1
+                continue
+            edge = frames.setdefault((channel.topic, parent, child),
+                                     FrameEdge(parent, child, channel.topic))
+            edge.count += 1
+            edge.first = t if edge.first is None else min(edge.first, t)
+            edge.last = t if edge.last is None else max(edge.last, t)
     digest = hashlib.sha256(json.dumps(sorted((k, v.count) for k, v in topics.items()))
                             .encode()).hexdigest()
     firsts = [t.first for t in topics.values() if t.first is not None]

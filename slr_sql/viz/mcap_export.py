@@ -33,7 +33,7 @@ from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, METADATA
                        transform_message)
 
 __all__ = ["export_mcap", "ExportReport", "McapUnavailable", "ExportRefused", "ExportCutShort",
-           "is_slr_export", "export_summary", "export_batches", "select_types"]
+           "ExportDamaged", "is_slr_export", "export_messages", "export_summary", "export_batches", "select_types"]
 
 PAGE = 20_000   # rows read per statement
 
@@ -50,6 +50,11 @@ class ExportRefused(SLRError):
 class ExportCutShort(SLRError):
     """An MCAP file of ``slr export`` that ends early: it has no summary (the export did not
     finish, or the file is a partial copy). Nothing is read from it."""
+
+
+class ExportDamaged(SLRError):
+    """An MCAP file of ``slr export`` whose records do not read back (changed bytes: a bad
+    disk, a bad copy): a chunk that does not decompress, a CRC that does not match."""
 
 
 @dataclass
@@ -316,6 +321,26 @@ def _mark(path: str | Path, topic: str, n: int, data: bytes) -> tuple[str, float
                        f'({{"type": "p/1", "until": 5.0}}): {exc}') from None
 
 
+def export_messages(path: str | Path) -> Iterator[tuple[Any, Any, Any]]:
+    """``(schema, channel, message)`` of each message of an MCAP file, in file order;
+    :class:`ExportDamaged` when its records do not read back."""
+    from mcap.reader import make_reader
+
+    read = 0
+    with open(path, "rb") as stream:
+        messages = make_reader(stream).iter_messages(log_time_order=False)
+        while True:
+            try:
+                item = next(messages)
+            except StopIteration:
+                return
+            except Exception as exc:  # noqa: BLE001 - mcap's, zstd's, lz4's own errors
+                raise ExportDamaged(f"cannot read {path}: the MCAP file is damaged after "
+                                    f"{read} messages ({exc or type(exc).__name__})") from None
+            read += 1
+            yield item
+
+
 def export_batches(path: str | Path, done: dict | None = None, batch_size: int = 10_000
                    ) -> Iterator[tuple[list, dict, list]]:
     """The events of an MCAP file :func:`export_mcap` wrote, in file order, in batches:
@@ -323,30 +348,26 @@ def export_batches(path: str | Path, done: dict | None = None, batch_size: int =
     read so far (for checkpoints), ``marks`` the completeness marks ``(type, until)`` (with
     the last batch). ``done`` skips the first so many messages of a topic (an import that
     already took them)."""
-    from mcap.reader import make_reader
-
     done = done or {}
     counts: dict = {}
     batch: list = []
     marks: list = []
-    with open(path, "rb") as stream:
-        reader = make_reader(stream)
-        for _schema, channel, message in reader.iter_messages(log_time_order=False):
-            meta = channel.metadata
-            topic = channel.topic
-            if METADATA_EVENT in meta:
-                n = counts[topic] = counts.get(topic, 0) + 1
-                if n <= done.get(topic, 0):
-                    continue
-                try:
-                    batch.append(event_from_message(meta[METADATA_EVENT],
-                                                    int(meta[METADATA_ARITY]), message.data))
-                except (ValueError, KeyError, TypeError) as exc:
-                    raise SLRError(f"{path}: {topic}: message {n} is not an slr event: "
-                                   f"{exc}") from None
-                if len(batch) >= batch_size:
-                    yield batch, dict(counts), []
-                    batch = []
-            elif topic == MARKS_TOPIC:
-                marks.append(_mark(path, topic, len(marks) + 1, message.data))
+    for _schema, channel, message in export_messages(path):
+        meta = channel.metadata
+        topic = channel.topic
+        if METADATA_EVENT in meta:
+            n = counts[topic] = counts.get(topic, 0) + 1
+            if n <= done.get(topic, 0):
+                continue
+            try:
+                batch.append(event_from_message(meta[METADATA_EVENT],
+                                                int(meta[METADATA_ARITY]), message.data))
+            except (ValueError, KeyError, TypeError) as exc:
+                raise SLRError(f"{path}: {topic}: message {n} is not an slr event: "
+                               f"{exc}") from None
+            if len(batch) >= batch_size:
+                yield batch, dict(counts), []
+                batch = []
+        elif topic == MARKS_TOPIC:
+            marks.append(_mark(path, topic, len(marks) + 1, message.data))
     yield batch, dict(counts), marks
