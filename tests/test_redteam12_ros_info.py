@@ -115,3 +115,67 @@ def test_importing_an_export_with_a_mark_that_is_not_one_says_which(tmp_path, ma
     assert "bug" not in result.stderr and "Traceback" not in result.stderr
     assert "/slr/completeness: message 1 is not a completeness mark" in result.stderr, \
         result.stderr
+
+
+def short_bag(path: Path, count: int, kept: int) -> None:
+    """A rosbag2 (sqlite3) whose metadata counts ``count`` messages on /chat but whose storage
+    holds only the first ``kept`` (rows lost: a damaged db3 repaired by dropping pages, a
+    recording whose last writes never reached the disk)."""
+    import sqlite3
+
+    store = get_typestore(Stores.ROS2_KILTED)
+    String = store.types["std_msgs/msg/String"]
+    with Writer(path, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
+        chat = writer.add_connection("/chat", "std_msgs/msg/String", typestore=store)
+        for i in range(count):
+            writer.write(chat, (i + 1) * 1_000_000_000,
+                         bytes(store.serialize_cdr(String(data=f"m{i}"), "std_msgs/msg/String")))
+    (db3,) = path.glob("*.db3")
+    with sqlite3.connect(db3) as conn:
+        conn.execute("DELETE FROM messages WHERE id > ?", (kept,))
+
+
+def test_an_import_that_reads_fewer_messages_than_the_bag_counts_says_so(tmp_path):
+    """The import read what the storage held and said "imported 60 events from 60
+    messages", exit 0, for a bag that counts 100 messages on the topic: 40 lost in
+    silence."""
+    bag, db = tmp_path / "bag", tmp_path / "r.db"
+    short_bag(bag, 100, 60)
+    result = slr("ros", "import", str(bag), str(db), "--all")
+    assert result.returncode == 1, result
+    assert "Traceback" not in result.stderr and "bug" not in result.stderr
+    assert (f"{bag}: /chat: the bag counts 100 messages, 60 could be read "
+            f"(the bag is damaged or cut short)") in result.stderr, result.stderr
+    assert "imported 60 events from 60 messages" in result.stdout   # what could be read is in
+    info = slr("ros", "info", str(bag))
+    assert info.returncode == 0, info
+    assert "warning: /chat: the bag counts 100 messages, 60 could be read" in info.stderr, \
+        info.stderr
+    data = json.loads(slr("ros", "info", str(bag), "--json").stdout)
+    assert [(t["topic"], t["count"], t["read"]) for t in data["topics"]] == [("/chat", 100, 60)]
+
+
+@pytest.mark.parametrize("where, said", [
+    (0.2, "error: cannot read {bag}: the bag is damaged after"),
+    (0.5, "warning: /chat: the bag counts 20000 messages, 13610 could be read")])
+def test_ros_info_of_a_bag_whose_storage_is_damaged_says_so(tmp_path, where, said):
+    """Changed bytes in an MCAP bag: where a record's length is hit, rosbags' ReaderError
+    reached the user as "error: ReaderError: Truncated record ... (this is a bug in slr_sql
+    ...)"; where a chunk's messages are lost, the summary counted them as if read."""
+    bag = tmp_path / "bag"
+    store = get_typestore(Stores.ROS2_KILTED)
+    String = store.types["std_msgs/msg/String"]
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        chat = writer.add_connection("/chat", "std_msgs/msg/String", typestore=store)
+        for i in range(20_000):
+            writer.write(chat, (i + 1) * 1_000_000_000,
+                         bytes(store.serialize_cdr(String(data=f"m{i}"), "std_msgs/msg/String")))
+    (mcap,) = bag.glob("*.mcap")
+    data = bytearray(mcap.read_bytes())
+    at = int(len(data) * where)
+    data[at:at + 64] = bytes(b ^ 0x5A for b in data[at:at + 64])
+    mcap.write_bytes(bytes(data))
+    result = slr("ros", "info", str(bag))
+    assert "Traceback" not in result.stderr and "bug" not in result.stderr, result.stderr
+    assert said.format(bag=bag) in result.stderr, result.stderr
+    assert result.returncode == (1 if said.startswith("error") else 0)

@@ -89,6 +89,9 @@ class ImportReport:
     topics: dict[str, TopicReport] = field(default_factory=dict)
     unmapped: list[str] = field(default_factory=list)       # topics in the bag left out
     missing: list[str] = field(default_factory=list)        # mapped topics not in the bag
+    # topics of which fewer messages could be read than the bag counts: topic -> (counted,
+    # read); the bag is damaged or cut short
+    short: dict[str, tuple[int, int]] = field(default_factory=dict)
 
 
 def ros1_typestore() -> Any:
@@ -431,6 +434,13 @@ def _batches(reader: Any, selected: list, plans: dict, done: dict, report: Impor
         if len(batch.events) >= batch_size:
             yield close(batch)
             batch = _Batch()
+    counted: dict[str, int] = {}
+    for conn in selected:
+        topic = normalize_topic(conn.topic)
+        counted[topic] = counted.get(topic, 0) + int(conn.msgcount or 0)
+    for topic, n in counted.items():
+        if counts.get(topic, 0) < n:
+            report.short[topic] = (n, counts.get(topic, 0))
     yield close(batch)
 
 

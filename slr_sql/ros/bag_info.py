@@ -18,9 +18,10 @@ import hashlib
 import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 
-from .bag_import import bag_id, open_bag
+from .bag_import import BagError, bag_id, open_bag
 from .mapping import TF_TOPICS, TF_TYPE, TIME_TYPES, normalize_topic, topic_event_name
 
 __all__ = ["TopicInfo", "FrameEdge", "BagInfo", "bag_info", "draft_map"]
@@ -40,6 +41,8 @@ class TopicInfo:
     first: float | None = None
     last: float | None = None
     undecodable: int = 0    # messages read for the frames that do not decode (/tf, export)
+    read: int | None = None  # messages that could be read (the bag's count says how many
+                             # there are; fewer read: the bag is damaged or cut short)
 
 
 @dataclass
@@ -145,9 +148,12 @@ def bag_info(path: str | Path) -> BagInfo:
         decode = fast_tf.decode_cdr if reader.is2 else fast_tf.decode_ros1
         standard = fast_tf.standard_tf_types(reader.typestore.fielddefs, reader.is2)
         frames: dict[tuple, FrameEdge] = {}
-        for conn, stamp, raw in reader.messages():
+        for info in topics.values():
+            info.read = 0
+        for conn, stamp, raw in _messages(reader, path):
             t = stamp * 1e-9
             info = topics[normalize_topic(conn.topic)]
+            info.read = (info.read or 0) + 1
             if info.first is None or t < info.first:
                 info.first = t
             if info.last is None or t > info.last:
@@ -180,6 +186,23 @@ def bag_info(path: str | Path) -> BagInfo:
                        dict(reader.typestore.fielddefs))
     finally:
         reader.close()
+
+
+def _messages(reader: Any, path: str | Path) -> Any:
+    """The bag's messages; :class:`BagError` when its storage does not read back."""
+    messages = reader.messages()
+    read = 0
+    while True:
+        try:
+            item = next(messages)
+        except StopIteration:
+            return
+        except Exception as exc:  # noqa: BLE001 - rosbags' reader errors (damaged storage)
+            reason = " ".join(str(a) for a in exc.args) or type(exc).__name__
+            raise BagError(f"cannot read {path}: the bag is damaged after {read} messages "
+                           f"({reason})") from None
+        read += 1
+        yield item
 
 
 def _leaves(fielddefs: dict, msgtype: str, prefix: str = "", depth: int = 0) -> list[str]:
