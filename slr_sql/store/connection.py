@@ -253,6 +253,9 @@ class Database:
         self.closed = False
         # called, lock held, after a transaction rolled back (the event-type cache reloads)
         self.rollback_listeners: list[Callable[[], None]] = []
+        # (depth registered at, callback): called once the outermost transaction committed
+        # and let go of the lock; dropped with the (nested) transaction that rolls back
+        self.commit_callbacks: list[tuple[int, Callable[[], None]]] = []
         # streams (event scans read in batches) whose statement may still be open: suspended
         # when a transaction begins (see suspend_streams)
         self.open_streams: weakref.WeakSet = weakref.WeakSet()
@@ -526,13 +529,16 @@ class Database:
     # ------------------------------------------------------------------ transactions
 
     @contextmanager
-    def transaction(self, wait: bool = True) -> Iterator["Database"]:
+    def transaction(self, wait: bool = True, listeners: bool = True) -> Iterator["Database"]:
         """Run several statements as one atomic unit (BEGIN IMMEDIATE ... COMMIT).
 
         Re-entrant: nested uses become savepoints, so an inner failure undoes only the inner
         part. The lock is held for the whole transaction. ``wait=False``: another
         connection's write transaction is not waited for (SLRBusy at once), for work a
         reader may leave for later (a nested one holds the lock already).
+        ``listeners=False``: a rollback of this one does not call the rollback listeners,
+        for a block that changes nothing they know of (a build of indexes that may fail):
+        it takes back only itself.
 
         >>> db = Database(None)
         >>> with db.transaction():
@@ -541,6 +547,7 @@ class Database:
         >>> db.execute("SELECT value FROM slr_meta WHERE key = 'a'")
         [('1',)]
         """
+        committed: list[tuple[int, Callable[[], None]]] = []
         with self.lock:
             self.check_open()
             depth = self.tx_depth
@@ -555,6 +562,7 @@ class Database:
                 yield self
             except BaseException:
                 self.tx_depth = depth
+                self._drop_commit_callbacks(depth)
                 try:
                     if depth == 0:
                         conn.execute("ROLLBACK")
@@ -562,7 +570,8 @@ class Database:
                         conn.execute(f"ROLLBACK TO slr_sp{depth}")
                         conn.execute(f"RELEASE slr_sp{depth}")
                 finally:
-                    self._rolled_back()
+                    if listeners:
+                        self._rolled_back()
                 raise
             self.tx_depth = depth
             try:
@@ -570,10 +579,16 @@ class Database:
                     self.check_identity()  # before anything is acknowledged
                 conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
             except BaseException:
+                self._drop_commit_callbacks(depth)
                 if depth == 0 and conn.in_transaction:
                     conn.execute("ROLLBACK")
-                self._rolled_back()
+                if listeners:
+                    self._rolled_back()
                 raise
+            if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
+                committed, self.commit_callbacks = self.commit_callbacks, []
+        for _depth, callback in committed:
+            callback()
 
     def _begin(self, timeout: float) -> None:
         """``BEGIN IMMEDIATE``, waiting at most ``timeout`` seconds for another
@@ -610,6 +625,29 @@ class Database:
     def _rolled_back(self) -> None:
         for listener in self.rollback_listeners:
             listener()
+
+    def after_commit(self, callback: Callable[[], None]) -> None:
+        """Call ``callback()`` once the outermost transaction this thread is in has
+        committed and let go of the store's lock; never, should the transaction (or the
+        nested one it was asked for in) roll back. Outside a transaction: at once.
+
+        >>> db = Database(None); heard = []
+        >>> with db.transaction():
+        ...     db.after_commit(lambda: heard.append("committed"))
+        ...     heard.append("inside")
+        >>> heard
+        ['inside', 'committed']
+        """
+        with self.lock:
+            if self.tx_depth:
+                self.commit_callbacks.append((self.tx_depth, callback))
+                return
+        callback()
+
+    def _drop_commit_callbacks(self, depth: int) -> None:
+        """Forget the callbacks asked for inside the (nested) transaction at ``depth``."""
+        self.commit_callbacks[:] = [(d, c) for d, c in self.commit_callbacks if d <= depth]
+
 
     # ------------------------------------------------------------------ raw SQL
 
