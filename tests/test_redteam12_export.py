@@ -158,3 +158,21 @@ def test_a_damaged_export_is_named_so_by_ros_import_and_ros_info(tmp_path):
         assert result.returncode == 1, result
         assert f"cannot read {out}: the MCAP file is damaged" in result.stderr, result.stderr
         assert "Traceback" not in result.stderr and "bug" not in result.stderr
+
+
+def test_long_atoms_are_not_kept_by_the_channels_text_cache(tmp_path):
+    """The live view and the export keep the JSON text of atoms they have written (frame and
+    object names repeat), up to 65,536 of them -- of any length: a history of distinct long
+    atoms (log lines, file contents mapped to atoms) kept up to 65,536 x their size in the
+    view's memory for as long as it runs. Only short atoms are kept now."""
+    from slr_sql.viz import channels
+
+    with slr_sql.open(tmp_path / "r.db", clock=ManualClock(0.0)) as kb:
+        kb.add_many([("log", (f"{i:06d}" + "x" * 50_000,), float(i), float(i))
+                     for i in range(200)])
+        kb.add_many([("seen", ("cup1",), 1.0, 1.0), ("seen", ("cup1",), 2.0, 2.0)])
+        report = export_mcap(kb.store, tmp_path / "out.mcap")
+    assert report.messages == 202
+    held = sum(len(k) + len(v) for k, v in list(channels._TEXTS.items()))
+    assert held < 1_000_000, held
+    assert "cup1" in channels._TEXTS            # short names are still kept
