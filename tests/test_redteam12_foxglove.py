@@ -148,3 +148,48 @@ def test_a_client_subscribing_to_tf_static_again_and_again_reads_no_history(tmp_
         == [("cam0", 2997.0), ("cam1", -1.0), ("cam2", 2999.0)]
     full_reads = [s for s in statements if "seq >" not in s and "seq>" not in s]
     assert full_reads == [], full_reads
+
+
+def test_one_type_that_cannot_be_read_does_not_stop_the_view_of_the_others(tmp_path):
+    """The view reads the types one after the other in one pass; a type whose rows could
+    not be read (its table dropped by hand: "no such table") ended every pass there, so the
+    types after it were never sent again, and the failure was logged at every change of the
+    store. Now the other types go on and the failure is said once."""
+    import sqlite3
+
+    from slr_sql.viz.foxglove_live import FoxgloveView
+
+    db = tmp_path / "robot.db"
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add_many([("a", (1,), 1.0, 1.0), ("z", (1,), 1.0, 1.0)])
+    view_kb = slr_sql.open(db, clock=slr_sql.ManualClock(0.0))
+    lines: list[str] = []
+    view = FoxgloveView(view_kb.store, port=0, log=lines.append).start()
+    try:
+        with FoxgloveClient(view.port) as client:
+            deadline = time.monotonic() + DEADLINE
+            client.pump(lambda: "/z/1" in client.channels, deadline)
+            client.subscribe("/z/1")
+            with sqlite3.connect(db) as conn:
+                conn.execute('DROP TABLE "a"')
+            with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+                for i in range(2, 7):
+                    kb.add_many([("z", (i,), float(i), float(i))])
+            client.pump(lambda: [m["arg1"] for _, m in client.on("/z/1")] == [2, 3, 4, 5, 6],
+                        deadline)
+            # rows written by hand that are no events (a NULL argument) are left out, the
+            # rows around them are sent
+            with sqlite3.connect(db) as conn:
+                conn.execute('INSERT INTO "z" (arg1, t_start, t_end, arrival) VALUES '
+                             '(NULL, 7.0, 7.0, 0.0), (8, 8.0, 8.0, 0.0), (NULL, 9.0, 9.0, 0.0)')
+            client.pump(lambda: [m["arg1"] for _, m in client.on("/z/1")][-1:] == [8],
+                        deadline)
+    finally:
+        view.close()
+        view_kb.close()
+    about_a = [line for line in lines if "a/1" in line]
+    assert len(about_a) == 1, lines
+    assert "no such table" in about_a[0] and "OperationalError" not in about_a[0]
+    about_z = [line for line in lines if "z/1" in line]
+    assert about_z == ["foxglove: z/1: rows that are not events are left out (NULL is not a "
+                       "stored term)"], lines

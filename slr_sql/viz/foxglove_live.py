@@ -32,6 +32,7 @@ __all__ = ["FoxgloveView", "FoxgloveUnavailable"]
 
 _MARK_PREFIX = "sync/mark/"
 _TF_STATIC = ("tf_static", 3)
+_UNREADABLE = "its rows cannot be read"
 _MARK_SOURCE = "sync/marksrc/"
 
 
@@ -79,6 +80,7 @@ class FoxgloveView:
         # the last row of each tf_static edge (parent, child), kept as rows are read: the
         # latched /tf_static message is made from it without reading the history again
         self._static_last: dict[tuple, tuple] = {}
+        self._troubles: dict[tuple[str, int], str] = {}   # what was said of a type
         for key, topic in TF_TOPICS.items():
             self._tf[key[0]] = foxglove.Channel(
                 topic, schema=_schema(TRANSFORMS_SCHEMA_NAME, TRANSFORMS_SCHEMA),
@@ -176,26 +178,49 @@ class FoxgloveView:
                 # a type seen at start: only what comes later; a new type: all of it
                 self.seen[key] = latest if initial else 0
         for key, (event, channel) in self.channels.items():
-            rows = store.raw_rows(key[0], key[1], after_seq=self.seen[key], limit=10_000)
-            if not rows:
-                continue
-            self.seen[key] = rows[-1][-1]
-            if key == _TF_STATIC:
-                self._keep_static(rows)
-            if initial:
-                continue
-            end = key[1] + 1
-            for row in rows:
-                channel.log(event.message(row), log_time=time_ns(row[end]))
-            self.sent += len(rows)
-            tf = self._tf.get(key[0]) if key[1] == 3 else None
-            if tf is not None:
-                for row in rows:
-                    data = transform_message([row])
-                    if data is not None:
-                        tf.log(data, log_time=time_ns(row[4]))
+            # one type that cannot be read (its table dropped by hand, a row that is no
+            # term) must not stop the others: it is said once, and tried again next time
+            try:
+                self._follow_type(key, event, channel, initial)
+            except Exception as exc:  # noqa: BLE001 - this type's trouble, not the view's
+                self._trouble(key, f"{_UNREADABLE} ({exc})")
+            else:   # readable again: a later failure to read is said again
+                if self._troubles.get(key, "").startswith(_UNREADABLE):
+                    del self._troubles[key]
         if catalog or initial:
             self._send_marks(initial)
+
+    def _follow_type(self, key: tuple[str, int], event: Any, channel: Any,
+                     initial: bool) -> None:
+        rows = self.store.raw_rows(key[0], key[1], after_seq=self.seen[key], limit=10_000)
+        if not rows:
+            return
+        self.seen[key] = rows[-1][-1]
+        if key == _TF_STATIC:
+            self._keep_static(rows)
+        if initial:
+            return
+        end = key[1] + 1
+        for row in rows:
+            try:
+                data = event.message(row)
+            except (ValueError, TypeError) as exc:   # a row written by hand, not a term
+                self._trouble(key, f"rows that are not events are left out ({exc})")
+                continue
+            channel.log(data, log_time=time_ns(row[end]))
+            self.sent += 1
+        tf = self._tf.get(key[0]) if key[1] == 3 else None
+        if tf is not None:
+            for row in rows:
+                data = transform_message([row])
+                if data is not None:
+                    tf.log(data, log_time=time_ns(row[4]))
+
+    def _trouble(self, key: tuple[str, int], text: str) -> None:
+        """Say a type's trouble once (again only once it was gone in between)."""
+        if self._troubles.get(key) != text:
+            self._troubles[key] = text
+            self.log(f"foxglove: {key[0]}/{key[1]}: {text}")
 
     def _send_marks(self, initial: bool) -> None:
         items = self.store.meta_items(_MARK_PREFIX)
