@@ -176,3 +176,22 @@ def test_long_atoms_are_not_kept_by_the_channels_text_cache(tmp_path):
     held = sum(len(k) + len(v) for k, v in list(channels._TEXTS.items()))
     assert held < 1_000_000, held
     assert "cup1" in channels._TEXTS            # short names are still kept
+
+
+def test_a_row_that_is_no_event_stops_the_export_in_words(tmp_path):
+    """A row written by hand with a NULL argument ended the export with "ValueError: NULL is
+    not a stored term (this is a bug in slr_sql ...)"; now the error names the type and the
+    row, and no file is written."""
+    import sqlite3
+
+    db, out = tmp_path / "r.db", tmp_path / "out.mcap"
+    with slr_sql.open(db, clock=ManualClock(0.0)) as kb:
+        kb.add_many([("p", (1,), 1.0, 1.0), ("p", (2,), 2.0, 2.0)])
+    with sqlite3.connect(db) as conn:
+        conn.execute('UPDATE "p" SET arg1 = NULL WHERE seq = 2')
+    result = slr("export", str(db), str(out))
+    assert result.returncode == 1
+    assert "error: p/1: the row of seq 2 is not an event (NULL is not a stored term)" \
+        in result.stderr, result.stderr
+    assert "bug" not in result.stderr and "Traceback" not in result.stderr
+    assert not out.exists()

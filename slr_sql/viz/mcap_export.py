@@ -187,8 +187,14 @@ def _write(writer_module: Any, out: Any, store: Any, keys: list, start: float | 
         message, channel_id, arrival_at, tf = info[index]
         log_time = time_ns(end_time)
         publish_time = time_ns(row[arrival_at])
+        try:
+            data = message(row)
+        except (ValueError, TypeError) as exc:   # a row written by hand, not a term
+            name, arity = keys[index]
+            raise SLRError(f"{name}/{arity}: the row of seq {seq} is not an event ({exc}); "
+                           f"fix or delete it, or leave {name}/{arity} out") from None
         seq &= 0xFFFFFFFF
-        add(channel_id, log_time, message(row), publish_time, seq)
+        add(channel_id, log_time, data, publish_time, seq)
         if tf is not None:
             data = transform_message([row])
             if data is not None:
