@@ -193,3 +193,30 @@ def test_one_type_that_cannot_be_read_does_not_stop_the_view_of_the_others(tmp_p
     about_z = [line for line in lines if "z/1" in line]
     assert about_z == ["foxglove: z/1: rows that are not events are left out (NULL is not a "
                        "stored term)"], lines
+
+
+def test_a_port_in_use_or_a_host_that_does_not_resolve_is_said_in_words(tmp_path):
+    """The foxglove-sdk raises RuntimeError (not OSError) when it cannot bind: the command
+    printed "RuntimeError: FoxgloveError: Failed to bind port ... (this is a bug in
+    slr_sql ...)"."""
+    import socket
+
+    db = tmp_path / "robot.db"
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add_many([("p", (1,), 1.0, 1.0)])
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        for args, said in (
+                (["--port", str(port)],
+                 f"error: cannot listen on 127.0.0.1:{port}: Failed to bind port: Address "
+                 f"already in use"),
+                (["--host", "no-such-host.invalid", "--port", "0"],
+                 "error: cannot listen on no-such-host.invalid:0: Failed to bind port")):
+            result = subprocess.run([sys.executable, "-m", "slr_sql", "foxglove", str(db), *args],
+                                    capture_output=True, text=True, env=env, timeout=DEADLINE)
+            assert result.returncode == 1, result
+            assert said in result.stderr, result.stderr
+            assert "bug" not in result.stderr and "RuntimeError" not in result.stderr

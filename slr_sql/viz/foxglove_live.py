@@ -28,7 +28,7 @@ from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, TF_TOPIC
                        TRANSFORMS_SCHEMA, TRANSFORMS_SCHEMA_NAME, event_channel, mark_message,
                        time_ns, transform_message)
 
-__all__ = ["FoxgloveView", "FoxgloveUnavailable"]
+__all__ = ["FoxgloveView", "FoxgloveUnavailable", "FoxgloveCannotListen"]
 
 _MARK_PREFIX = "sync/mark/"
 _TF_STATIC = ("tf_static", 3)
@@ -38,6 +38,11 @@ _MARK_SOURCE = "sync/marksrc/"
 
 class FoxgloveUnavailable(SLRError):
     """The foxglove-sdk package is not installed (``pip install 'slr_sql[foxglove]'``)."""
+
+
+class FoxgloveCannotListen(SLRError):
+    """The view's server cannot listen: the port is taken, the host does not resolve or is
+    not an address of this machine."""
 
 
 def _schema(name: str, schema: dict) -> Any:
@@ -98,8 +103,13 @@ class FoxgloveView:
         # the channels of what is stored now, before any client sees the server
         self._follow(initial=True)
         self._load_static()
-        self.server = foxglove.start_server(name=name, host=host, port=port,
-                                            context=self.context, server_listener=Listener())
+        try:
+            self.server = foxglove.start_server(name=name, host=host, port=port,
+                                                context=self.context,
+                                                server_listener=Listener())
+        except (RuntimeError, OSError) as exc:   # the SDK's bind errors are RuntimeErrors
+            reason = str(exc).removeprefix("FoxgloveError: ")
+            raise FoxgloveCannotListen(f"cannot listen on {host}:{port}: {reason}") from None
 
     @property
     def port(self) -> int:
