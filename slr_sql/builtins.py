@@ -1752,7 +1752,7 @@ def _tf_hooks(m: "Machine") -> Any:
 
 
 def _tf_lookup(m: "Machine", a: tuple, extrapolate: bool) -> bool:
-    from .frames import FrameTree, lookup
+    from .frames import FrameTree, PoseOverflow, lookup
 
     target, source = _frame(a[0]), _frame(a[1])
     t = _time_value(a[2])
@@ -1762,7 +1762,11 @@ def _tf_lookup(m: "Machine", a: tuple, extrapolate: bool) -> bool:
     tree = m.engine.frames
     if tree is None:
         tree = m.engine.frames = FrameTree()
-    pose = lookup(store, tree, target, source, t, extrapolate, _tf_hooks(m))
+    try:
+        pose = lookup(store, tree, target, source, t, extrapolate, _tf_hooks(m),
+                      getattr(m, "check_deadline", None))
+    except PoseOverflow:
+        raise evaluation_error("float_overflow") from None
     if pose is None:
         return False
     return m.unify(a[3], Struct("pose", (make_list(list(pose[0])), make_list(list(pose[1])))))

@@ -47,9 +47,10 @@ from .lockorder import ordered_lock
 from .terms import Atom, Struct, list_items
 
 __all__ = ["TF", "TF_STATIC", "FrameTree", "Pose", "lookup", "pose_value", "compose",
-           "invert", "IDENTITY", "TfHooks"]
+           "invert", "IDENTITY", "TfHooks", "PoseOverflow"]
 
 TF = ("tf", 3)
+_EDGES_BETWEEN_CLOCK_CHECKS = 32   # edges read between two looks at the query's deadline
 TF_STATIC = ("tf_static", 3)
 
 Pose = tuple  # ((x, y, z), (qx, qy, qz, qw)) with a unit quaternion
@@ -174,10 +175,15 @@ def pose_value(term: Any) -> Pose | None:
             else:
                 return None
         parts.append(values)
-    qx, qy, qz, qw = parts[1]
-    norm = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
-    if not norm > 0.0 or math.isinf(norm):
+    if not all(math.isfinite(v) for v in parts[0] + parts[1]):
+        return None   # tf2 refuses such a transform too
+    # the norm of the quaternion scaled to its largest component: squaring 1e200 (or 1e-200)
+    # overflows (underflows) where the rotation is a valid one
+    scale = max(abs(v) for v in parts[1])
+    if not scale > 0.0:
         return None
+    qx, qy, qz, qw = (v / scale for v in parts[1])
+    norm = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
     return (tuple(parts[0]), (qx / norm, qy / norm, qz / norm, qw / norm))
 
 
@@ -185,6 +191,10 @@ def _rotate(q: tuple, v: tuple) -> tuple:
     """v rotated by the unit quaternion q (q·v·q*, expanded)."""
     qx, qy, qz, qw = q
     vx, vy, vz = v
+    big = max(abs(vx), abs(vy), abs(vz))
+    if big > 1e300:   # 2 q_vec x v would overflow where v rotated does not: rotate v / big
+        x, y, z = _rotate(q, (vx / big, vy / big, vz / big))
+        return (x * big, y * big, z * big)
     # t = 2 q_vec x v; v' = v + qw t + q_vec x t
     tx = 2.0 * (qy * vz - qz * vy)
     ty = 2.0 * (qz * vx - qx * vz)
@@ -224,16 +234,27 @@ def invert(a: Pose) -> Pose:
     return ((-rx, -ry, -rz), inv)
 
 
+def _lerp(a: float, b: float, s: float) -> float:
+    v = a + (b - a) * s
+    if math.isfinite(v):
+        return v
+    return a * (1.0 - s) + b * s   # b - a overflowed (huge values of opposite signs)
+
+
 def _interpolate(t: float, t1: float, p1: Pose, t2: float, p2: Pose) -> Pose:
     s = (t - t1) / (t2 - t1)
     (a, b) = p1[0], p2[0]
     q = slerp(p1[1], p2[1], s)
-    return ((a[0] + (b[0] - a[0]) * s, a[1] + (b[1] - a[1]) * s, a[2] + (b[2] - a[2]) * s),
-            tuple(q))
+    return ((_lerp(a[0], b[0], s), _lerp(a[1], b[1], s), _lerp(a[2], b[2], s)), tuple(q))
 
 
 class _Unusable(Exception):
     """A stored edge value that is not a pose: the lookup fails on it."""
+
+
+class PoseOverflow(ArithmeticError):
+    """The pose of a chain is beyond floats (its edges' poses are finite, their composition
+    is not): ``tf_lookup`` raises ``evaluation_error(float_overflow)``, as ``is`` does."""
 
 
 def _edge_pose(row: Any) -> Pose:
@@ -279,10 +300,13 @@ def _edge_at(store: Any, key: tuple, parent: Any, child: Any, t: float, extrapol
 
 
 def lookup(store: Any, tree: FrameTree, target: Any, source: Any, t: float,
-           extrapolate: bool = False, hooks: TfHooks | None = None) -> Pose | None:
+           extrapolate: bool = False, hooks: TfHooks | None = None,
+           check_deadline: Callable[[], None] | None = None) -> Pose | None:
     """The pose of frame ``source`` in frame ``target`` at time ``t`` (the transform that
     maps ``source`` coordinates into ``target``'s), or None when the frames are not
-    connected or an edge has no value at ``t`` (see the module's text)."""
+    connected or an edge has no value at ``t`` (see the module's text); :class:`PoseOverflow`
+    when the chain's pose is beyond floats. ``check_deadline`` (raising when the query's
+    time is up) is called every few edges: a long chain is one statement per edge."""
     if type(target) is str:
         target = Atom(target)
     if type(source) is str:
@@ -295,11 +319,15 @@ def lookup(store: Any, tree: FrameTree, target: Any, source: Any, t: float,
     result = IDENTITY
     kind = tree.kind
     try:
-        for parent, child, inverse in chain:
+        for i, (parent, child, inverse) in enumerate(chain):
+            if check_deadline is not None and i % _EDGES_BETWEEN_CLOCK_CHECKS == 0:
+                check_deadline()
             step = _edge_at(store, kind[(parent, child)], parent, child, t, extrapolate, hooks)
             if step is None:
                 return None
             result = compose(invert(step) if inverse else step, result)
     except _Unusable:
         return None
+    if not all(math.isfinite(v) for v in result[0] + result[1]):
+        raise PoseOverflow(f"the pose of {source} in {target} at {t!r} is beyond floats")
     return result

@@ -41,13 +41,17 @@ from .store import DatabaseError, quote_identifier
 __all__ = [
     "timeline", "collect_timeline", "draw_timeline", "save_timeline", "parse_value_spec",
     "parse_size", "Timeline", "TypeRow", "ValueSeries", "EventTypeRef", "ValueSpec",
-    "INSTALL_HINT", "DEFAULT_WIDTH", "DEFAULT_DPI",
+    "INSTALL_HINT", "DEFAULT_WIDTH", "DEFAULT_DPI", "UndrawableRange", "MAX_DRAWN",
 ]
 
 INSTALL_HINT = "plots need matplotlib: pip install 'slr_sql[plot]'"
 DEFAULT_WIDTH = 1200         # pixels
 DEFAULT_DPI = 100
 MAX_PIXELS = 20000           # per side: beyond this a PNG is a mistake, not a picture
+# Times and values beyond this magnitude are refused: matplotlib's limits and ticks work on
+# spans and multiples of them, which overflow near the largest float
+MAX_DRAWN = 1e306
+LAST_DATE = 253_402_300_799.0   # 9999-12-31 23:59:59 UTC: the last time a datetime can name
 
 # Colors: intervals blue, points near-black, complex events red, values purple.
 INTERVAL_COLOR = "#1f77b4"
@@ -60,6 +64,11 @@ FONT_PT = 9.0
 BAR_HALF = 0.32              # half the height of an interval bar, in row units
 TICK_HALF = 0.42             # half the height of a point tick
 MAX_LANES = 6                # overlapping intervals of a row are stacked in up to this many lanes
+
+
+class UndrawableRange(SLRError):
+    """Times or values a figure cannot draw: a window too wide, or a magnitude beyond
+    :data:`MAX_DRAWN`."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -317,6 +326,7 @@ def _window(source: Any, types: list[EventTypeRef], start: float | None,
     where the data starts (the window's start when given)."""
     lo, hi = start, end
     first_event = lo
+    edges = [t for t in (lo, hi) if t is not None]   # what the window is made of
     if lo is None or hi is None:
         firsts, lasts = [], []
         for t in types:
@@ -334,6 +344,7 @@ def _window(source: Any, types: list[EventTypeRef], start: float | None,
         if hi is not None and lo is None:
             data_hi = hi
             data_lo = min(data_lo, hi)
+        edges += [data_lo, data_hi]
         span = data_hi - data_lo
         first_event = data_lo if lo is None else lo
         margin = span * 0.02 if span > 0 else max(abs(data_hi) * 0.02, 0.5)
@@ -342,7 +353,10 @@ def _window(source: Any, types: list[EventTypeRef], start: float | None,
     if not lo < hi:
         raise SLRError(f"empty time window: from {lo:g} to {hi:g} (from must be before to)")
     if not math.isfinite(hi - lo):
-        raise SLRError(f"the time window from {lo:g} to {hi:g} is too wide to draw")
+        raise UndrawableRange(f"the time window from {lo:g} to {hi:g} is too wide to draw")
+    if not all(-MAX_DRAWN <= t <= MAX_DRAWN for t in edges):
+        raise UndrawableRange(f"the time window from {lo:g} to {hi:g} is beyond what a plot can "
+                              f"draw (times within ±{MAX_DRAWN:g}); choose one with --from/--to")
     return float(lo), float(hi), float(first_event if first_event is not None else lo)
 
 
@@ -488,7 +502,23 @@ def _collect_series(source: Any, spec: ValueSpec, ref: EventTypeRef, is_complex:
                 else "")
         raise SLRError(f"bad value {spec.text!r}: argument {spec.argument} of {ref.label} has "
                        f"no numeric values between {lo:g} and {hi:g}{seen}{hint}")
+    _check_drawable(series)
     return series
+
+
+def _check_drawable(series: ValueSeries) -> None:
+    """Refuse (:class:`UndrawableRange`) a value line with a value beyond ``MAX_DRAWN``."""
+    near = "near " if series.mode == "binned" else ""
+    columns = [(series.times, series.values), (series.times, series.lows),
+               (series.times, series.highs)]
+    columns += [(times, values) for _, _, times, values in series.lines]
+    for times, values in columns:
+        for t, v in zip(times, values):
+            if not -MAX_DRAWN <= v <= MAX_DRAWN:
+                raise UndrawableRange(
+                    f"bad value {series.spec.text!r}: {v:g} {near}at t={t:g} is beyond what a "
+                    f"plot can draw (values within ±{MAX_DRAWN:g}); choose a window without it "
+                    f"with --from/--to")
 
 
 def _horizontal(width: int, dpi: int, labels: list[str]) -> tuple[float, float]:
@@ -544,10 +574,13 @@ def _collect_query(source: Any, goal: str, every: float, lo: float, hi: float) -
     every = _check_time("every", every)
     if every is None or every <= 0:
         raise SLRError(f"--every must be a positive number of seconds, not {every!r}")
-    n = int(math.floor((hi - lo) / every + 1e-9)) + 1
-    if n > MAX_SAMPLES:
-        raise SLRError(f"--every {every:g} asks the goal {n} times between {lo:g} and {hi:g}; "
-                       f"at most {MAX_SAMPLES}: a larger --every or a shorter window")
+    steps = (hi - lo) / every + 1e-9   # (inf when every is tiny)
+    samples = math.floor(steps) + 1.0 if math.isfinite(steps) else math.inf
+    if not samples <= MAX_SAMPLES:
+        said = f"{samples:.3g}" if math.isfinite(samples) else "more than 1e+308"
+        raise SLRError(f"--every {every:g} asks the goal {said} times between {lo:g} and "
+                       f"{hi:g}; at most {MAX_SAMPLES}: a larger --every or a shorter window")
+    n = int(samples)
     row = QueryRow(goal, every, n)
     for i in range(n):
         t = lo + i * every
@@ -618,7 +651,7 @@ def collect_timeline(source: Any, types: Iterable[str] | str | None = None, *,
     window_types = (chosen if chosen is not None else catalog) + value_types
     lo, hi, first_event = _window(source, window_types, lo, hi)
     if relative is None:
-        relative = lo >= EPOCH_2001
+        relative = EPOCH_2001 <= lo and hi <= LAST_DATE   # Unix time with a calendar date
     origin = float(math.floor(first_event)) if relative else 0.0
 
     candidates = chosen if chosen is not None else catalog
@@ -878,9 +911,13 @@ def _draw(timeline: Timeline) -> Any:
     if timeline.origin:
         import datetime
 
-        since = datetime.datetime.fromtimestamp(timeline.origin, tz=datetime.UTC)
-        axes[-1].set_xlabel(f"time (s) since {since:%Y-%m-%d %H:%M:%S} UTC "
-                            f"({timeline.origin:.0f})", fontsize=FONT_PT)
+        try:
+            since = datetime.datetime.fromtimestamp(timeline.origin, tz=datetime.UTC)
+        except (OverflowError, ValueError, OSError):   # no calendar date: seconds only
+            axes[-1].set_xlabel(f"time (s) since {timeline.origin:.0f}", fontsize=FONT_PT)
+        else:
+            axes[-1].set_xlabel(f"time (s) since {since:%Y-%m-%d %H:%M:%S} UTC "
+                                f"({timeline.origin:.0f})", fontsize=FONT_PT)
     else:
         axes[-1].set_xlabel("time (s)", fontsize=FONT_PT)
 

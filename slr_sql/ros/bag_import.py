@@ -89,6 +89,9 @@ class ImportReport:
     topics: dict[str, TopicReport] = field(default_factory=dict)
     unmapped: list[str] = field(default_factory=list)       # topics in the bag left out
     missing: list[str] = field(default_factory=list)        # mapped topics not in the bag
+    # topics of which fewer messages could be read than the bag counts: topic -> (counted,
+    # read); the bag is damaged or cut short
+    short: dict[str, tuple[int, int]] = field(default_factory=dict)
 
 
 def ros1_typestore() -> Any:
@@ -208,14 +211,9 @@ def _import_export(kb: KnowledgeBaseAPI, path: Path, progress: Callable[[int, in
                    batch_size: int) -> ImportReport:
     """An MCAP file of ``slr export``: its events as they were stored (no mapping: its
     channels name their event types), with the same checkpoints as a bag."""
-    from mcap.reader import make_reader
+    from slr_sql.viz.mcap_export import export_batches, export_summary
 
-    from slr_sql.viz.mcap_export import export_batches
-
-    with open(path, "rb") as stream:
-        summary = make_reader(stream).get_summary()
-    if summary is None:   # is_slr_export read it: only a file changed since has none
-        raise BagError(f"cannot read {path}: the MCAP file has no summary")
+    summary = export_summary(path)   # (ExportCutShort when the file ends early)
     channels = sorted((c.topic, c.metadata.get("slr_event", ""), c.metadata.get("slr_arity", ""),
                        (summary.statistics.channel_message_counts.get(c.id, 0)
                         if summary.statistics else 0))
@@ -436,6 +434,13 @@ def _batches(reader: Any, selected: list, plans: dict, done: dict, report: Impor
         if len(batch.events) >= batch_size:
             yield close(batch)
             batch = _Batch()
+    counted: dict[str, int] = {}
+    for conn in selected:
+        topic = normalize_topic(conn.topic)
+        counted[topic] = counted.get(topic, 0) + int(conn.msgcount or 0)
+    for topic, n in counted.items():
+        if counts.get(topic, 0) < n:
+            report.short[topic] = (n, counts.get(topic, 0))
     yield close(batch)
 
 

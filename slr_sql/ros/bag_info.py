@@ -18,9 +18,10 @@ import hashlib
 import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 
-from .bag_import import bag_id, open_bag
+from .bag_import import BagError, bag_id, open_bag
 from .mapping import TF_TOPICS, TF_TYPE, TIME_TYPES, normalize_topic, topic_event_name
 
 __all__ = ["TopicInfo", "FrameEdge", "BagInfo", "bag_info", "draft_map"]
@@ -39,6 +40,9 @@ class TopicInfo:
     count: int
     first: float | None = None
     last: float | None = None
+    undecodable: int = 0    # messages read for the frames that do not decode (/tf, export)
+    read: int | None = None  # messages that could be read (the bag's count says how many
+                             # there are; fewer read: the bag is damaged or cut short)
 
 
 @dataclass
@@ -82,31 +86,33 @@ class BagInfo:
 
 def _export_info(path: Path) -> BagInfo:
     """The summary of an MCAP file of ``slr export`` (its channels name their event types)."""
-    from mcap.reader import make_reader
-
     from slr_sql.viz.channels import METADATA_ARITY, METADATA_EVENT
+    from slr_sql.viz.mcap_export import export_messages, export_summary
 
+    export_summary(path)   # (ExportCutShort when the file ends early)
     topics: dict[str, TopicInfo] = {}
     frames: dict[tuple, FrameEdge] = {}
-    with open(path, "rb") as stream:
-        reader = make_reader(stream)
-        for schema, channel, message in reader.iter_messages(log_time_order=False):
-            meta = channel.metadata
-            kind = (f"slr event {meta[METADATA_EVENT]}/{meta[METADATA_ARITY]}"
-                    if METADATA_EVENT in meta else (schema.name if schema else ""))
-            info = topics.setdefault(channel.topic, TopicInfo(channel.topic, kind, 0))
-            t = message.log_time * 1e-9
-            info.count += 1
-            info.first = t if info.first is None else min(info.first, t)
-            info.last = t if info.last is None else max(info.last, t)
-            if meta.get(METADATA_EVENT) in ("tf", "tf_static") and meta.get(METADATA_ARITY) == "3":
+    for schema, channel, message in export_messages(path):
+        meta = channel.metadata
+        kind = (f"slr event {meta[METADATA_EVENT]}/{meta[METADATA_ARITY]}"
+                if METADATA_EVENT in meta else (schema.name if schema else ""))
+        info = topics.setdefault(channel.topic, TopicInfo(channel.topic, kind, 0))
+        t = message.log_time * 1e-9
+        info.count += 1
+        info.first = t if info.first is None else min(info.first, t)
+        info.last = t if info.last is None else max(info.last, t)
+        if meta.get(METADATA_EVENT) in ("tf", "tf_static") and meta.get(METADATA_ARITY) == "3":
+            try:
                 data = json.loads(message.data)
-                edge = frames.setdefault((channel.topic, str(data["arg1"]), str(data["arg2"])),
-                                         FrameEdge(str(data["arg1"]), str(data["arg2"]),
-                                                   channel.topic))
-                edge.count += 1
-                edge.first = t if edge.first is None else min(edge.first, t)
-                edge.last = t if edge.last is None else max(edge.last, t)
+                parent, child = str(data["arg1"]), str(data["arg2"])
+            except (ValueError, KeyError, TypeError, IndexError):   # not an slr event
+                info.undecodable += 1
+                continue
+            edge = frames.setdefault((channel.topic, parent, child),
+                                     FrameEdge(parent, child, channel.topic))
+            edge.count += 1
+            edge.first = t if edge.first is None else min(edge.first, t)
+            edge.last = t if edge.last is None else max(edge.last, t)
     digest = hashlib.sha256(json.dumps(sorted((k, v.count) for k, v in topics.items()))
                             .encode()).hexdigest()
     firsts = [t.first for t in topics.values() if t.first is not None]
@@ -142,22 +148,29 @@ def bag_info(path: str | Path) -> BagInfo:
         decode = fast_tf.decode_cdr if reader.is2 else fast_tf.decode_ros1
         standard = fast_tf.standard_tf_types(reader.typestore.fielddefs, reader.is2)
         frames: dict[tuple, FrameEdge] = {}
-        for conn, stamp, raw in reader.messages():
+        for info in topics.values():
+            info.read = 0
+        for conn, stamp, raw in _messages(reader, path):
             t = stamp * 1e-9
             info = topics[normalize_topic(conn.topic)]
+            info.read = (info.read or 0) + 1
             if info.first is None or t < info.first:
                 info.first = t
             if info.last is None or t > info.last:
                 info.last = t
             if conn.id not in tf_conns:
                 continue
-            if standard:
-                transforms = [(args[0], args[1], end) for _, args, _, end in decode(raw, t)]
-            else:
-                msg = deserialize(raw, conn.msgtype)
-                transforms = [(tr.header.frame_id, tr.child_frame_id,
-                               tr.header.stamp.sec + tr.header.stamp.nanosec * 1e-9)
-                              for tr in msg.transforms]
+            try:
+                if standard:
+                    transforms = [(args[0], args[1], end) for _, args, _, end in decode(raw, t)]
+                else:
+                    msg = deserialize(raw, conn.msgtype)
+                    transforms = [(tr.header.frame_id, tr.child_frame_id,
+                                   tr.header.stamp.sec + tr.header.stamp.nanosec * 1e-9)
+                                  for tr in msg.transforms]
+            except Exception:  # noqa: BLE001 - bytes that do not decode: counted, said once
+                info.undecodable += 1
+                continue
             for parent, child, at in transforms:
                 edge = frames.setdefault((info.topic, parent, child),
                                          FrameEdge(str(parent), str(child), info.topic))
@@ -173,6 +186,23 @@ def bag_info(path: str | Path) -> BagInfo:
                        dict(reader.typestore.fielddefs))
     finally:
         reader.close()
+
+
+def _messages(reader: Any, path: str | Path) -> Any:
+    """The bag's messages; :class:`BagError` when its storage does not read back."""
+    messages = reader.messages()
+    read = 0
+    while True:
+        try:
+            item = next(messages)
+        except StopIteration:
+            return
+        except Exception as exc:  # noqa: BLE001 - rosbags' reader errors (damaged storage)
+            reason = " ".join(str(a) for a in exc.args) or type(exc).__name__
+            raise BagError(f"cannot read {path}: the bag is damaged after {read} messages "
+                           f"({reason})") from None
+        read += 1
+        yield item
 
 
 def _leaves(fielddefs: dict, msgtype: str, prefix: str = "", depth: int = 0) -> list[str]:

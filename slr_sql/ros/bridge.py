@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from slr_sql import SLRError, Struct
+from slr_sql.errors import SLRUnavailable
 from slr_sql.api import KnowledgeBaseAPI
 
 from . import fast_tf
@@ -51,6 +52,7 @@ __all__ = ["Bridge", "BridgeError", "PublishError", "run_bridge", "field_value",
 _SYSTEM_TOPICS = frozenset({"/rosout", "/parameter_events"})
 DISCOVERY_PERIOD = 0.2  # seconds between looks at the ROS graph for new publishers
 MAX_BATCH = 1000        # messages stored in one transaction when they queued up
+MAX_HELD = 100_000      # messages held while the store takes no writes; later ones dropped
 
 
 class BridgeError(SLRError):
@@ -268,6 +270,7 @@ class BridgeStats:
     rejected: int = 0
     marks: int = 0
     published: int = 0
+    dropped: int = 0   # messages beyond MAX_HELD while the store took no writes
     subscribed: dict = field(default_factory=dict)  # topic -> message type
 
 
@@ -320,6 +323,8 @@ class Bridge:
         self._pending_events: list = []
         self._pending_marks: list = []
         self._pending_messages = 0
+        # why the store took no writes (SLRBusy, SLRStoreFull, ...) while events are held
+        self._unavailable: SLRUnavailable | None = None
         clock = getattr(kb, "clock", None)
         self._now = clock.now if clock is not None and hasattr(clock, "now") else time.time
 
@@ -412,19 +417,40 @@ class Bridge:
         self._flush()
 
     def _flush(self) -> None:
+        """Store the pending events and marks. When the store takes no writes for a reason
+        that may pass (another process holds its lock past ``busy_timeout``, the disk is
+        full: :class:`SLRUnavailable`), what was not stored stays pending, in order, and is
+        tried again at the next spin; said once when it starts and once when it ends."""
         if not self._pending_messages:
             return
         events, marks = self._pending_events, self._pending_marks
+        messages = self._pending_messages
         self._pending_events, self._pending_marks, self._pending_messages = [], [], 0
-        if events:
-            rejected = self.kb.add_many(events)
-            self.stats.events += len(events) - len(rejected)
-            for error in rejected:
-                self.stats.rejected += 1
-                self.log(f"warning: event rejected: {error}")
-        for event_type, t in marks:
-            self.kb.mark_complete(event_type, t)
-            self.stats.marks += 1
+        try:
+            if events:
+                rejected = self.kb.add_many(events)
+                self.stats.events += len(events) - len(rejected)
+                events = []
+                for error in rejected:
+                    self.stats.rejected += 1
+                    self.log(f"warning: event rejected: {error}")
+            while marks:
+                event_type, t = marks[0]
+                self.kb.mark_complete(event_type, t)
+                marks.pop(0)
+                self.stats.marks += 1
+        except SLRUnavailable as exc:
+            self._pending_events = events + self._pending_events
+            self._pending_marks = marks + self._pending_marks
+            self._pending_messages += messages
+            if self._unavailable is None:
+                self.log(f"warning: the store takes no writes now ({exc}); "
+                         f"{self._pending_messages} message(s) held, stored once it does")
+            self._unavailable = exc
+            return
+        if self._unavailable is not None:
+            self._unavailable = None
+            self.log("the store takes writes again: the held messages are stored")
 
     def _feed(self, entry: PublishEntry) -> Any:
         """Subscribe the MAP's publish entry to the knowledge base: every answer of its
@@ -462,6 +488,11 @@ class Bridge:
                     self._context.try_shutdown()
                 except Exception:  # noqa: BLE001 - already shut down
                     pass
+
+    @property
+    def held(self) -> int:
+        """Messages taken but not stored yet (held while the store takes no writes)."""
+        return self._pending_messages
 
     @property
     def node(self) -> Any:
@@ -571,6 +602,12 @@ class Bridge:
     def _on_message(self, sub: _Subscription, raw: bytes) -> None:
         arrival = float(self._now())
         self.stats.messages += 1
+        if self._unavailable is not None and self._pending_messages >= MAX_HELD:
+            if not self.stats.dropped:
+                self.log(f"warning: {MAX_HELD} messages held while the store takes no writes: "
+                         f"later ones are dropped (counted at the end) until it does")
+            self.stats.dropped += 1
+            return
         try:
             if sub.fast is not None:
                 events = sub.fast(raw, arrival)
@@ -686,6 +723,12 @@ def run_bridge(db: str, mapping: Mapping, all_topics: bool = False,
     finally:
         if server is not None:
             server.close()
+        if bridge.held:
+            try:
+                bridge._flush()   # a last try at what the store did not take yet
+            except SLRError as exc:
+                echo(f"warning: {exc}")
+        held = bridge.held
         bridge.close()
         kb.close()
         for s, handler in previous.items():
@@ -693,5 +736,7 @@ def run_bridge(db: str, mapping: Mapping, all_topics: bool = False,
     stats = bridge.stats
     echo(f"bridge stopped: {stats.events} events from {stats.messages} messages"
          + (f", {stats.rejected} rejected" if stats.rejected else "")
+         + (f", {stats.dropped} dropped while the store took no writes" if stats.dropped else "")
+         + (f", {held} not stored: the store took no writes" if held else "")
          + (f", {stats.marks} completeness marks" if stats.marks else ""))
     return 0

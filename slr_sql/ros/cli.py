@@ -117,7 +117,7 @@ def import_command(bag: str, db_argument: str | None, db_option: str | None,
             _remove_new_store(db)
         raise
     _print_report(report, bag)
-    if report.rejected:
+    if report.rejected or report.short:
         sys.exit(1)
 
 
@@ -139,6 +139,9 @@ def _print_report(report: Any, bag: str) -> None:
     if len(report.rejected) > MAX_REJECTIONS_SHOWN:
         click.echo(f"{bag}: ... and {len(report.rejected) - MAX_REJECTIONS_SHOWN} more rejected "
                    f"messages", err=True)
+    for topic, (counted, read) in sorted(report.short.items()):
+        click.echo(f"{bag}: {topic}: the bag counts {counted} messages, {read} could be read "
+                   f"(the bag is damaged or cut short)", err=True)
     click.echo(f"imported {report.events} event{'s' if report.events != 1 else ''} from "
                f"{report.messages} message{'s' if report.messages != 1 else ''}"
                + (f" ({report.skipped} already imported)" if report.skipped else "")
@@ -161,6 +164,14 @@ def info_command(bag: str, map_only: bool, as_json: bool) -> None:
     except ImportError as exc:
         raise _need_extra("info", exc) from None
     info = bag_info(bag)
+    for t in info.topics:
+        if t.read is not None and t.read < t.count:
+            click.echo(f"warning: {t.topic}: the bag counts {t.count} messages, {t.read} could "
+                       f"be read (the bag is damaged or cut short)", err=True)
+        if t.undecodable:
+            click.echo(f"warning: {t.topic}: {t.undecodable} of {t.count} messages do not "
+                       f"decode (left out of the frames below; slr ros import rejects each "
+                       f"with its reason)", err=True)
     if as_json:
         click.echo(info.as_json())
         return

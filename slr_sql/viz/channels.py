@@ -39,9 +39,12 @@ TF_TOPICS = {("tf", 3): "/tf", ("tf_static", 3): "/tf_static"}
 MARKS_TOPIC = "/slr/completeness"
 
 _JSON_STARTS = frozenset('[{"')
-# the JSON text of atoms seen (frame and object names repeat): bounded, shared, only grows
-# with distinct names; a str key is the stored column value (atoms are stored as themselves)
+# the JSON text of atoms seen (frame and object names repeat): bounded in number and in
+# length, shared, only grows with distinct names; a str key is the stored column value
+# (atoms are stored as themselves)
 _TEXTS: dict[str, str] = {}
+_TEXTS_MAX = 65_536      # atoms kept
+_TEXT_MAX = 256          # characters of an atom kept: names repeat, long texts seldom do
 _INF, _NEG_INF = math.inf, -math.inf
 _float_repr = float.__repr__
 _int_str = int.__repr__
@@ -133,7 +136,7 @@ class EventChannel:
                 text = texts.get(value)   # atoms repeat (names, frames): each once
                 if text is None:
                     text = column_json(value)
-                    if len(texts) < 65_536:
+                    if len(texts) < _TEXTS_MAX and len(value) <= _TEXT_MAX:
                         texts[value] = text
                 parts.append(text)
             elif tv is float and _NEG_INF < value < _INF:
@@ -214,7 +217,7 @@ def _plain_frame(value: Any) -> str | None:
     text = _TEXTS.get(value)
     if text is None:
         text = column_json(value)
-        if len(_TEXTS) < 65_536:
+        if len(_TEXTS) < _TEXTS_MAX and len(value) <= _TEXT_MAX:
             _TEXTS[value] = text
     return text
 

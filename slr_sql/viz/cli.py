@@ -47,6 +47,9 @@ def foxglove_command(db: str, host: str, port: int, poll: float) -> None:
     except OSError as exc:
         kb.close()
         raise slr_sql.SLRError(f"cannot listen on {host}:{port}: {exc}") from None
+    except BaseException:   # FoxgloveCannotListen, ...: said by the caller
+        kb.close()
+        raise
     click.echo(f"foxglove: ws://{host}:{view.port} ({len(view.channels)} event types; "
                f"open it in Foxglove: Open connection -> Foxglove WebSocket)", err=False)
     sys.stdout.flush()

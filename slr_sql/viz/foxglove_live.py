@@ -28,14 +28,21 @@ from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, TF_TOPIC
                        TRANSFORMS_SCHEMA, TRANSFORMS_SCHEMA_NAME, event_channel, mark_message,
                        time_ns, transform_message)
 
-__all__ = ["FoxgloveView", "FoxgloveUnavailable"]
+__all__ = ["FoxgloveView", "FoxgloveUnavailable", "FoxgloveCannotListen"]
 
 _MARK_PREFIX = "sync/mark/"
+_TF_STATIC = ("tf_static", 3)
+_UNREADABLE = "its rows cannot be read"
 _MARK_SOURCE = "sync/marksrc/"
 
 
 class FoxgloveUnavailable(SLRError):
     """The foxglove-sdk package is not installed (``pip install 'slr_sql[foxglove]'``)."""
+
+
+class FoxgloveCannotListen(SLRError):
+    """The view's server cannot listen: the port is taken, the host does not resolve or is
+    not an address of this machine."""
 
 
 def _schema(name: str, schema: dict) -> Any:
@@ -75,6 +82,10 @@ class FoxgloveView:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._tf: dict[str, Any] = {}
+        # the last row of each tf_static edge (parent, child), kept as rows are read: the
+        # latched /tf_static message is made from it without reading the history again
+        self._static_last: dict[tuple, tuple] = {}
+        self._troubles: dict[tuple[str, int], str] = {}   # what was said of a type
         for key, topic in TF_TOPICS.items():
             self._tf[key[0]] = foxglove.Channel(
                 topic, schema=_schema(TRANSFORMS_SCHEMA_NAME, TRANSFORMS_SCHEMA),
@@ -91,8 +102,14 @@ class FoxgloveView:
 
         # the channels of what is stored now, before any client sees the server
         self._follow(initial=True)
-        self.server = foxglove.start_server(name=name, host=host, port=port,
-                                            context=self.context, server_listener=Listener())
+        self._load_static()
+        try:
+            self.server = foxglove.start_server(name=name, host=host, port=port,
+                                                context=self.context,
+                                                server_listener=Listener())
+        except (RuntimeError, OSError) as exc:   # the SDK's bind errors are RuntimeErrors
+            reason = str(exc).removeprefix("FoxgloveError: ")
+            raise FoxgloveCannotListen(f"cannot listen on {host}:{port}: {reason}") from None
 
     @property
     def port(self) -> int:
@@ -104,11 +121,23 @@ class FoxgloveView:
         self._thread.start()
         return self
 
-    def close(self) -> None:
+    def close(self, wait: float = 2.0) -> None:
+        """Stop following the store and stop the server, waiting at most ``wait`` seconds
+        for the clients to take their close frames. The foxglove-sdk's ``stop()`` waits for
+        every client to take its close frame; a client that never reads (its socket buffers
+        full of messages) would hold it forever, so it runs on a thread of its own and a
+        client still holding it after ``wait`` is left behind, said once on the log (the
+        process may exit; the port is given back when that client goes)."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5.0)
-        self.server.stop()
+        stopping = threading.Thread(target=self.server.stop, name="slr-foxglove-stop",
+                                    daemon=True)
+        stopping.start()
+        stopping.join(wait)
+        if stopping.is_alive():
+            self.log(f"foxglove: a client did not read for {wait:g} s; stopped without "
+                     f"waiting for it")
 
     # -- following the store ---------------------------------------------------------------------
     def _run(self) -> None:
@@ -159,24 +188,49 @@ class FoxgloveView:
                 # a type seen at start: only what comes later; a new type: all of it
                 self.seen[key] = latest if initial else 0
         for key, (event, channel) in self.channels.items():
-            rows = store.raw_rows(key[0], key[1], after_seq=self.seen[key], limit=10_000)
-            if not rows:
-                continue
-            self.seen[key] = rows[-1][-1]
-            if initial:
-                continue
-            end = key[1] + 1
-            for row in rows:
-                channel.log(event.message(row), log_time=time_ns(row[end]))
-            self.sent += len(rows)
-            tf = self._tf.get(key[0]) if key[1] == 3 else None
-            if tf is not None:
-                for row in rows:
-                    data = transform_message([row])
-                    if data is not None:
-                        tf.log(data, log_time=time_ns(row[4]))
+            # one type that cannot be read (its table dropped by hand, a row that is no
+            # term) must not stop the others: it is said once, and tried again next time
+            try:
+                self._follow_type(key, event, channel, initial)
+            except Exception as exc:  # noqa: BLE001 - this type's trouble, not the view's
+                self._trouble(key, f"{_UNREADABLE} ({exc})")
+            else:   # readable again: a later failure to read is said again
+                if self._troubles.get(key, "").startswith(_UNREADABLE):
+                    del self._troubles[key]
         if catalog or initial:
             self._send_marks(initial)
+
+    def _follow_type(self, key: tuple[str, int], event: Any, channel: Any,
+                     initial: bool) -> None:
+        rows = self.store.raw_rows(key[0], key[1], after_seq=self.seen[key], limit=10_000)
+        if not rows:
+            return
+        self.seen[key] = rows[-1][-1]
+        if key == _TF_STATIC:
+            self._keep_static(rows)
+        if initial:
+            return
+        end = key[1] + 1
+        for row in rows:
+            try:
+                data = event.message(row)
+            except (ValueError, TypeError) as exc:   # a row written by hand, not a term
+                self._trouble(key, f"rows that are not events are left out ({exc})")
+                continue
+            channel.log(data, log_time=time_ns(row[end]))
+            self.sent += 1
+        tf = self._tf.get(key[0]) if key[1] == 3 else None
+        if tf is not None:
+            for row in rows:
+                data = transform_message([row])
+                if data is not None:
+                    tf.log(data, log_time=time_ns(row[4]))
+
+    def _trouble(self, key: tuple[str, int], text: str) -> None:
+        """Say a type's trouble once (again only once it was gone in between)."""
+        if self._troubles.get(key) != text:
+            self._troubles[key] = text
+            self.log(f"foxglove: {key[0]}/{key[1]}: {text}")
 
     def _send_marks(self, initial: bool) -> None:
         items = self.store.meta_items(_MARK_PREFIX)
@@ -195,11 +249,30 @@ class FoxgloveView:
             self._marks_channel.log(mark_message(type_text, until, str(source)),
                                     log_time=time_ns(time.time()))
 
+    def _load_static(self) -> None:
+        """Read the tf_static rows stored before the view started, once, a page at a time
+        (the rows stored later come through :meth:`_follow`)."""
+        after, upto = 0, self.seen.get(_TF_STATIC, 0)
+        while after < upto:
+            rows = self.store.raw_rows(*_TF_STATIC, after_seq=after, limit=10_000)
+            if not rows:
+                break
+            self._keep_static([row for row in rows if row[-1] <= upto])
+            after = rows[-1][-1]
+
+    def _keep_static(self, rows: list) -> None:
+        """Keep the last row of each edge in store order (end, start, arrival sequence), as
+        tf_lookup takes a static edge's value."""
+        last = self._static_last
+        for row in rows:
+            edge = (row[0], row[1])
+            kept = last.get(edge)
+            if kept is None or (row[4], row[3], row[6]) > (kept[4], kept[3], kept[6]):
+                last[edge] = row
+
     def _send_static(self) -> None:
-        """The last stored value of each tf_static edge, on /tf_static."""
-        last: dict = {}
-        for row in self.store.raw_rows("tf_static", 3):   # few rows: one per edge, mostly
-            last[(row[0], row[1])] = row
+        """The last value of each tf_static edge, on /tf_static."""
+        last = self._static_last
         data = transform_message(list(last.values())) if last else None
         if data is not None:
             self._tf["tf_static"].log(data, log_time=time_ns(time.time()))

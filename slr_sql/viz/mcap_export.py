@@ -19,6 +19,9 @@ from __future__ import annotations
 
 import heapq
 import json
+import math
+import os
+import secrets
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
@@ -29,14 +32,29 @@ from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, METADATA
                        event_channel, event_from_message, mark_message, time_ns,
                        transform_message)
 
-__all__ = ["export_mcap", "ExportReport", "McapUnavailable", "is_slr_export", "export_batches",
-           "select_types"]
+__all__ = ["export_mcap", "ExportReport", "McapUnavailable", "ExportRefused", "ExportCutShort",
+           "ExportDamaged", "is_slr_export", "export_messages", "export_summary", "export_batches", "select_types"]
 
 PAGE = 20_000   # rows read per statement
 
 
 class McapUnavailable(SLRError):
     """The mcap package is not installed (``pip install 'slr_sql[mcap]'``)."""
+
+
+class ExportRefused(SLRError):
+    """The output path cannot take an export: the store itself, another SQLite database, a
+    directory. Nothing is written."""
+
+
+class ExportCutShort(SLRError):
+    """An MCAP file of ``slr export`` that ends early: it has no summary (the export did not
+    finish, or the file is a partial copy). Nothing is read from it."""
+
+
+class ExportDamaged(SLRError):
+    """An MCAP file of ``slr export`` whose records do not read back (changed bytes: a bad
+    disk, a bad copy): a chunk that does not decompress, a CRC that does not match."""
 
 
 @dataclass
@@ -61,6 +79,8 @@ def select_types(available: Iterable[tuple[str, int]], wanted: Iterable[str]) ->
 
     >>> select_types([("seg", 2), ("tf", 3), ("seg", 3)], ["seg"])
     [('seg', 2), ('seg', 3)]
+    >>> select_types([("a/b", 1), ("a", 2)], ["a/b/1", "a"])
+    [('a/b', 1), ('a', 2)]
     """
     available = sorted(available)
     wanted = list(wanted)
@@ -68,8 +88,10 @@ def select_types(available: Iterable[tuple[str, int]], wanted: Iterable[str]) ->
         return available
     out: list = []
     for spec in wanted:
-        name, _, arity = spec.partition("/")
-        found = [k for k in available if k[0] == name and (not arity or str(k[1]) == arity)]
+        # ``name/arity`` (cut at the last slash: a name may hold slashes, 'a/b'), or a name
+        name, _, arity = spec.rpartition("/")
+        found = [k for k in available
+                 if k[0] == spec or (arity.isdigit() and k[0] == name and str(k[1]) == arity)]
         if not found:
             raise SLRError(f"no event type {spec} in the store (it has: "
                            f"{', '.join(f'{n}/{a}' for n, a in available) or 'none'})")
@@ -102,71 +124,104 @@ def export_mcap(store: Any, path: str | Path, start: float | None = None,
     """Write the events of ``store`` (an :class:`slr_sql.store.EventStore`) with
     ``start <= end time <= end`` of the chosen ``types`` (all by default) to ``path``."""
     writer_module = _writer_module()
+    if start is not None and end is not None and start > end:
+        raise SLRError(f"empty time window: --from {start:g} is after --to {end:g}")
     keys = select_types(store.event_types(), types)
     _check_overwrite(store, path)
     report = ExportReport(str(path))
-    with open(path, "wb") as out:
-        writer = writer_module.Writer(out, compression=writer_module.CompressionType.ZSTD)
-        writer.start(profile="", library="slr_sql")
-        channels = {}
-        for key in keys:
-            sample = store.raw_rows(key[0], key[1], limit=1)
-            event = event_channel(key[0], key[1], sample[0] if sample else None)
-            schema_id = writer.register_schema(event.schema_name, JSON_SCHEMA_ENCODING,
-                                               json.dumps(event.schema).encode())
-            channels[key] = (event, writer.register_channel(event.topic, "json", schema_id,
-                                                            event.metadata))
-        tf_channels = {}
-        tf_schema = None
-        for key, topic in TF_TOPICS.items():
-            if key in channels:
-                if tf_schema is None:
-                    tf_schema = writer.register_schema(TRANSFORMS_SCHEMA_NAME, JSON_SCHEMA_ENCODING,
-                                                       json.dumps(TRANSFORMS_SCHEMA).encode())
-                tf_channels[key] = writer.register_channel(topic, "json", tf_schema, {})
-        # merge the types' histories by end time (then start, then the type, then seq)
-        streams = [_keyed(_rows(store, key, start, end), key[1], index)
-                   for index, key in enumerate(keys)]
-        add = writer.add_message
-        count = 0
-        info = [(channels[key][0].message, channels[key][1], key[1] + 2, tf_channels.get(key))
-                for key in keys]
-        per_index = [0] * len(keys)
-        merged = heapq.merge(*streams) if len(streams) > 1 else (streams[0] if streams else ())
-        for end_time, _, index, seq, row in merged:
-            message, channel_id, arrival_at, tf = info[index]
-            log_time = time_ns(end_time)
-            publish_time = time_ns(row[arrival_at])
-            seq &= 0xFFFFFFFF
-            add(channel_id, log_time, message(row), publish_time, seq)
-            if tf is not None:
-                data = transform_message([row])
-                if data is not None:
-                    add(tf, log_time, data, publish_time, seq)
-            per_index[index] += 1
-            count += 1
-            if progress is not None and count % 10_000 == 0:
-                progress(count)
-        report.per_type = {key: per_index[i] for i, key in enumerate(keys) if per_index[i]}
-        marks = {k[len("sync/mark/"):]: v for k, v in store.meta_items("sync/mark/").items()}
-        if marks:
-            schema_id = writer.register_schema(MARKS_SCHEMA["title"], JSON_SCHEMA_ENCODING,
-                                               json.dumps(MARKS_SCHEMA).encode())
-            channel_id = writer.register_channel(MARKS_TOPIC, "json", schema_id, {})
-            for type_text, until in sorted(marks.items()):
-                try:
-                    until = float(until)
-                except (TypeError, ValueError):
-                    continue
-                source = store.meta_get("sync/marksrc/" + type_text, "") or ""
-                add(channel_id, time_ns(until), mark_message(type_text, until, str(source)),
-                    time_ns(until))
-        writer.add_metadata("slr_sql", {"from": "" if start is None else repr(float(start)),
-                                        "to": "" if end is None else repr(float(end)),
-                                        "types": ",".join(f"{n}/{a}" for n, a in keys)})
-        writer.finish()
-        report.messages = count
+    # Written beside ``path`` under a name of its own and renamed over it once whole: an
+    # export that stops half way (an error, Ctrl-C, a full disk) leaves no half MCAP file and
+    # an older export of that name as it was.
+    part = _part_path(Path(path))
+    try:
+        with open(part, "xb") as out:
+            _write(writer_module, out, store, keys, start, end, progress, report)
+            out.flush()
+            os.fsync(out.fileno())   # whole on disk before it takes the name
+        os.replace(part, path)
+    except BaseException:
+        try:
+            os.unlink(part)
+        except OSError:
+            pass
+        raise
     return report
+
+
+def _part_path(path: Path) -> Path:
+    """A file name beside ``path`` for the export being written (hidden, unique)."""
+    return path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.part")
+
+
+def _write(writer_module: Any, out: Any, store: Any, keys: list, start: float | None,
+           end: float | None, progress: Callable[[int], None] | None,
+           report: ExportReport) -> None:
+    writer = writer_module.Writer(out, compression=writer_module.CompressionType.ZSTD)
+    writer.start(profile="", library="slr_sql")
+    channels = {}
+    for key in keys:
+        sample = store.raw_rows(key[0], key[1], limit=1)
+        event = event_channel(key[0], key[1], sample[0] if sample else None)
+        schema_id = writer.register_schema(event.schema_name, JSON_SCHEMA_ENCODING,
+                                           json.dumps(event.schema).encode())
+        channels[key] = (event, writer.register_channel(event.topic, "json", schema_id,
+                                                        event.metadata))
+    tf_channels = {}
+    tf_schema = None
+    for key, topic in TF_TOPICS.items():
+        if key in channels:
+            if tf_schema is None:
+                tf_schema = writer.register_schema(TRANSFORMS_SCHEMA_NAME, JSON_SCHEMA_ENCODING,
+                                                   json.dumps(TRANSFORMS_SCHEMA).encode())
+            tf_channels[key] = writer.register_channel(topic, "json", tf_schema, {})
+    # merge the types' histories by end time (then start, then the type, then seq)
+    streams = [_keyed(_rows(store, key, start, end), key[1], index)
+               for index, key in enumerate(keys)]
+    add = writer.add_message
+    count = 0
+    info = [(channels[key][0].message, channels[key][1], key[1] + 2, tf_channels.get(key))
+            for key in keys]
+    per_index = [0] * len(keys)
+    merged = heapq.merge(*streams) if len(streams) > 1 else (streams[0] if streams else ())
+    for end_time, _, index, seq, row in merged:
+        message, channel_id, arrival_at, tf = info[index]
+        log_time = time_ns(end_time)
+        publish_time = time_ns(row[arrival_at])
+        try:
+            data = message(row)
+        except (ValueError, TypeError) as exc:   # a row written by hand, not a term
+            name, arity = keys[index]
+            raise SLRError(f"{name}/{arity}: the row of seq {seq} is not an event ({exc}); "
+                           f"fix or delete it, or leave {name}/{arity} out") from None
+        seq &= 0xFFFFFFFF
+        add(channel_id, log_time, data, publish_time, seq)
+        if tf is not None:
+            data = transform_message([row])
+            if data is not None:
+                add(tf, log_time, data, publish_time, seq)
+        per_index[index] += 1
+        count += 1
+        if progress is not None and count % 10_000 == 0:
+            progress(count)
+    report.per_type = {key: per_index[i] for i, key in enumerate(keys) if per_index[i]}
+    marks = {k[len("sync/mark/"):]: v for k, v in store.meta_items("sync/mark/").items()}
+    if marks:
+        schema_id = writer.register_schema(MARKS_SCHEMA["title"], JSON_SCHEMA_ENCODING,
+                                           json.dumps(MARKS_SCHEMA).encode())
+        channel_id = writer.register_channel(MARKS_TOPIC, "json", schema_id, {})
+        for type_text, until in sorted(marks.items()):
+            try:
+                until = float(until)
+            except (TypeError, ValueError):
+                continue
+            source = store.meta_get("sync/marksrc/" + type_text, "") or ""
+            add(channel_id, time_ns(until), mark_message(type_text, until, str(source)),
+                time_ns(until))
+    writer.add_metadata("slr_sql", {"from": "" if start is None else repr(float(start)),
+                                    "to": "" if end is None else repr(float(end)),
+                                    "types": ",".join(f"{n}/{a}" for n, a in keys)})
+    writer.finish()
+    report.messages = count
 
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -176,9 +231,10 @@ def _check_overwrite(store: Any, path: str | Path) -> None:
     """Refuse (SLRError) to write the MCAP over the store being exported (its file, or the
     file's WAL or journal; opening it for writing truncates the store) or over any other
     SQLite database (another store, named where an export was not meant to go)."""
-    import os
-
     target = Path(path)
+    if target.is_dir():
+        raise ExportRefused(f"{path} is a directory: an export is an MCAP file; name a file "
+                            f"in it, e.g. {target / 'export.mcap'}")
     if not target.exists():
         return
     own = getattr(store, "path", None)
@@ -186,7 +242,7 @@ def _check_overwrite(store: Any, path: str | Path) -> None:
         for suffix in ("", "-wal", "-shm", "-journal"):
             try:
                 if os.path.samefile(str(own) + suffix, target):
-                    raise SLRError(f"{path} is the store being exported ({own}) itself: "
+                    raise ExportRefused(f"{path} is the store being exported ({own}) itself: "
                                    "writing the export there would destroy the store")
             except OSError:      # (that file does not exist)
                 continue
@@ -196,7 +252,7 @@ def _check_overwrite(store: Any, path: str | Path) -> None:
     except OSError:
         return                   # (unreadable: writing it says why)
     if head == SQLITE_MAGIC:
-        raise SLRError(f"{path} is an SQLite database (a store?), not an export: an export is "
+        raise ExportRefused(f"{path} is an SQLite database (a store?), not an export: an export is "
                        "an MCAP file; remove the file first or choose another name")
 
 
@@ -211,11 +267,84 @@ def is_slr_export(path: str | Path) -> bool:
         return False
     try:
         with open(path, "rb") as stream:
-            summary = make_reader(stream).get_summary()
-    except Exception:  # noqa: BLE001 - not an MCAP file we can read: the bag reader decides
+            try:
+                summary = make_reader(stream).get_summary()
+            except Exception:  # noqa: BLE001 - no footer to read: a file cut short?
+                summary = None
+            if summary is None:   # cut short? its first channel says whose it is
+                stream.seek(0)
+                return _first_channel_is_an_event(stream)
+    except OSError:   # unreadable: the bag reader says why
         return False
-    return summary is not None and any(METADATA_EVENT in c.metadata
-                                       for c in summary.channels.values())
+    return any(METADATA_EVENT in c.metadata for c in summary.channels.values())
+
+
+def _first_channel_is_an_event(stream: Any) -> bool:
+    """Whether the first channel record of an MCAP stream (read from its start, as far as
+    it goes) is an slr event channel."""
+    from mcap.records import Channel, Message
+    from mcap.stream_reader import StreamReader
+
+    try:
+        for record in StreamReader(stream).records:
+            if isinstance(record, Channel):
+                return METADATA_EVENT in record.metadata
+            if isinstance(record, Message):
+                return False
+    except Exception:  # noqa: BLE001 - the file ends (or breaks) before a channel
+        return False
+    return False
+
+
+def export_summary(path: str | Path) -> Any:
+    """The summary of an MCAP file of ``slr export`` (:func:`is_slr_export`); raises
+    :class:`ExportCutShort` when the file has none."""
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as stream:
+        try:
+            summary = make_reader(stream).get_summary()
+        except Exception:  # noqa: BLE001 - the end of the file is not a footer
+            summary = None
+    if summary is None:
+        raise ExportCutShort(f"cannot read {path}: an slr export cut short (no summary at its "
+                             f"end: the export did not finish, or the file is a partial copy); "
+                             f"export it again")
+    return summary
+
+
+def _mark(path: str | Path, topic: str, n: int, data: bytes) -> tuple[str, float]:
+    """``(type, until)`` of a completeness mark message (:func:`mark_message`)."""
+    try:
+        mark = json.loads(data)
+        until = float(mark["until"])
+        if not isinstance(mark["type"], str) or isinstance(mark["until"], bool) \
+                or math.isnan(until):
+            raise ValueError(f"type {mark['type']!r}, until {mark['until']!r}")
+        return mark["type"], until
+    except (ValueError, KeyError, TypeError, IndexError) as exc:
+        raise SLRError(f"{path}: {topic}: message {n} is not a completeness mark "
+                       f'({{"type": "p/1", "until": 5.0}}): {exc}') from None
+
+
+def export_messages(path: str | Path) -> Iterator[tuple[Any, Any, Any]]:
+    """``(schema, channel, message)`` of each message of an MCAP file, in file order;
+    :class:`ExportDamaged` when its records do not read back."""
+    from mcap.reader import make_reader
+
+    read = 0
+    with open(path, "rb") as stream:
+        messages = make_reader(stream).iter_messages(log_time_order=False)
+        while True:
+            try:
+                item = next(messages)
+            except StopIteration:
+                return
+            except Exception as exc:  # noqa: BLE001 - mcap's, zstd's, lz4's own errors
+                raise ExportDamaged(f"cannot read {path}: the MCAP file is damaged after "
+                                    f"{read} messages ({exc or type(exc).__name__})") from None
+            read += 1
+            yield item
 
 
 def export_batches(path: str | Path, done: dict | None = None, batch_size: int = 10_000
@@ -225,31 +354,26 @@ def export_batches(path: str | Path, done: dict | None = None, batch_size: int =
     read so far (for checkpoints), ``marks`` the completeness marks ``(type, until)`` (with
     the last batch). ``done`` skips the first so many messages of a topic (an import that
     already took them)."""
-    from mcap.reader import make_reader
-
     done = done or {}
     counts: dict = {}
     batch: list = []
     marks: list = []
-    with open(path, "rb") as stream:
-        reader = make_reader(stream)
-        for _schema, channel, message in reader.iter_messages(log_time_order=False):
-            meta = channel.metadata
-            topic = channel.topic
-            if METADATA_EVENT in meta:
-                n = counts[topic] = counts.get(topic, 0) + 1
-                if n <= done.get(topic, 0):
-                    continue
-                try:
-                    batch.append(event_from_message(meta[METADATA_EVENT],
-                                                    int(meta[METADATA_ARITY]), message.data))
-                except (ValueError, KeyError, TypeError) as exc:
-                    raise SLRError(f"{path}: {topic}: message {n} is not an slr event: "
-                                   f"{exc}") from None
-                if len(batch) >= batch_size:
-                    yield batch, dict(counts), []
-                    batch = []
-            elif topic == MARKS_TOPIC:
-                mark = json.loads(message.data)
-                marks.append((str(mark["type"]), float(mark["until"])))
+    for _schema, channel, message in export_messages(path):
+        meta = channel.metadata
+        topic = channel.topic
+        if METADATA_EVENT in meta:
+            n = counts[topic] = counts.get(topic, 0) + 1
+            if n <= done.get(topic, 0):
+                continue
+            try:
+                batch.append(event_from_message(meta[METADATA_EVENT],
+                                                int(meta[METADATA_ARITY]), message.data))
+            except (ValueError, KeyError, TypeError) as exc:
+                raise SLRError(f"{path}: {topic}: message {n} is not an slr event: "
+                               f"{exc}") from None
+            if len(batch) >= batch_size:
+                yield batch, dict(counts), []
+                batch = []
+        elif topic == MARKS_TOPIC:
+            marks.append(_mark(path, topic, len(marks) + 1, message.data))
     yield batch, dict(counts), marks

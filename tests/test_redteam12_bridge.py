@@ -1,0 +1,73 @@
+"""Red team of the live ROS 2 bridge (docs/ros.md, "Live bridge"): a store that is busy (another
+process holding its write lock longer than ``busy_timeout``) when messages arrive. The bridge
+stored each burst with one ``kb.add_many``; an SLRBusy from it left ``spin_once`` and stopped
+``slr ros bridge`` with the burst's messages lost. Now the events are held and stored once
+the store takes writes again (a condition that may pass: SLRUnavailable).
+
+A real rclpy publisher node (the test's own), the bridge node in this process, and a real
+second connection to the store file holding its write lock (BEGIN IMMEDIATE), as another
+process would."""
+from __future__ import annotations
+
+import sqlite3
+import time
+
+import slr_sql
+from slr_sql.ros.bridge import Bridge
+from slr_sql.ros.mapping import mapping_from_dict
+import test_ros_bridge
+
+# the ROS bridge tests' fixtures: loopback-only discovery on a random domain, a topic prefix
+# of this run, a real rclpy node of the test
+ros_env, prefix, ros_node = test_ros_bridge.ros_env, test_ros_bridge.prefix, test_ros_bridge.ros_node
+DEADLINE = test_ros_bridge.DEADLINE
+
+
+def test_a_busy_store_holds_the_messages_and_stores_them_once_it_is_free(tmp_path, ros_node,
+                                                                          prefix):
+    from geometry_msgs.msg import PoseStamped
+
+    node, executor = ros_node
+    db = tmp_path / "live.db"
+    mapping = mapping_from_dict({"tf": False, "topics": {f"{prefix}/pose": {
+        "event": "pose", "args": ["header.frame_id", "pose.position.x"]}}})
+    publisher = node.create_publisher(PoseStamped, f"{prefix}/pose", 100)
+    lines: list[str] = []
+    with slr_sql.open(db, busy_timeout=0.2, clock=slr_sql.ManualClock(105.0)) as kb:
+        bridge = Bridge(kb, mapping, node_name="test_bridge", log=lines.append).start()
+        try:
+            deadline = time.monotonic() + DEADLINE
+
+            def spin_until(condition) -> None:
+                while not condition():
+                    assert time.monotonic() < deadline, f"timed out; log {lines}"
+                    bridge.spin_once(0.01)
+                    executor.spin_once(timeout_sec=0.01)
+
+            spin_until(lambda: publisher.get_subscription_count() > 0)
+            holder = sqlite3.connect(db, isolation_level=None)
+            holder.execute("BEGIN IMMEDIATE")          # another writer holds the store
+            try:
+                for i in range(5):
+                    msg = PoseStamped()
+                    msg.header.stamp.sec = 100 + i
+                    msg.header.frame_id = "map"
+                    msg.pose.position.x = float(i)
+                    publisher.publish(msg)
+                spin_until(lambda: bridge.stats.messages == 5 and bridge.held == 5)
+                bridge.spin_once(0.01)                 # and again: still held, no error
+            finally:
+                holder.execute("ROLLBACK")
+                holder.close()
+            spin_until(lambda: bridge.stats.events == 5)
+        finally:
+            bridge.close()
+        answers = kb.query("pose(F, X)^T")
+    assert [(a["F"], a["X"], a["T"]) for a in answers] == \
+        [("map", float(i), 100.0 + i) for i in range(5)]
+    assert bridge.stats.rejected == 0
+    held = [line for line in lines if "takes no writes now" in line]
+    assert len(held) == 1, lines                        # said once, not at every retry
+    assert "locked by another writer" in held[0] and "5 message(s) held" in held[0]
+    assert "Traceback" not in "".join(lines)
+    assert any("stored" in line for line in lines[lines.index(held[0]) + 1:]), lines

@@ -1,0 +1,222 @@
+"""Red team of the live Foxglove view (docs/ros.md, "Foxglove live view"): a client that
+connects, subscribes and then never reads must not keep ``slr foxglove`` from stopping.
+
+The foxglove-sdk's ``WebSocketServer.stop()`` closes each client gracefully: it waits until
+the close frame is written to the client's socket. A client that never reads fills its TCP
+buffers with data messages, the close frame is never taken, and ``stop()`` waits forever: a
+SIGTERM'ed ``slr foxglove`` (or ``slr serve --foxglove``) never exits. Real server process,
+real WebSocket clients (one that reads, one that does not)."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from websockets.sync.client import connect
+
+import slr_sql
+from test_foxglove import DEADLINE, SUBPROTOCOLS, FoxgloveClient
+
+REPO = Path(__file__).resolve().parent.parent
+# enough data that the silent client's socket buffers and the server's backlog fill up
+BIG = "x" * 10_000
+EVENTS = 3_000
+
+
+def silent_client(port: int):
+    """A client that never reads once subscribed (no keepalive pings either, so its own
+    library never closes the connection for it)."""
+    return connect(f"ws://127.0.0.1:{port}", subprotocols=SUBPROTOCOLS, open_timeout=DEADLINE,
+                   ping_interval=None, max_size=None, close_timeout=1.0)
+
+
+def subscribe(ws, topic: str) -> None:
+    channels: dict[str, int] = {}
+    deadline = time.monotonic() + DEADLINE
+    while topic not in channels:
+        assert time.monotonic() < deadline, f"{topic} never advertised"
+        frame = ws.recv(timeout=DEADLINE)
+        if isinstance(frame, str):
+            op = json.loads(frame)
+            if op["op"] == "advertise":
+                channels.update({ch["topic"]: ch["id"] for ch in op["channels"]})
+    ws.send(json.dumps({"op": "subscribe",
+                        "subscriptions": [{"id": 1, "channelId": channels[topic]}]}))
+
+
+def test_a_client_that_never_reads_does_not_keep_the_view_from_stopping(tmp_path):
+    db = tmp_path / "robot.db"
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add_many([("seg", ("cup1", [0.4]), 1.0, 1.0)])
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    process = subprocess.Popen([sys.executable, "-m", "slr_sql", "foxglove", str(db),
+                                "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True, env=env)
+    try:
+        line = process.stdout.readline()
+        assert line.startswith("foxglove: ws://127.0.0.1:"), process.stderr.read()
+        port = int(line.split(":")[3].split()[0])
+        with silent_client(port) as silent, FoxgloveClient(port) as reader:
+            subscribe(silent, "/seg/2")
+            reader.pump(lambda: "/seg/2" in reader.channels, time.monotonic() + DEADLINE)
+            reader.subscribe("/seg/2")
+            with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+                kb.add_many([("seg", (BIG, [float(i)]), 2.0, 2.0) for i in range(EVENTS)])
+                kb.add_many([("seg", ("last", [0.0]), 3.0, 3.0)])
+            # the view has sent everything (to both clients) once the reader has the last one
+            reader.pump(lambda: any(m["arg1"] == "last" for _, m in reader.on("/seg/2")),
+                        time.monotonic() + DEADLINE)
+            process.send_signal(signal.SIGTERM)
+            try:
+                out, err = process.communicate(timeout=DEADLINE)
+            except subprocess.TimeoutExpired:
+                raise AssertionError("slr foxglove did not stop while a client did not "
+                                     "read") from None
+        assert process.returncode == 0, err
+        assert "foxglove: stopped after" in out
+        assert "did not read" in err        # said once, in words
+        assert "Traceback" not in err
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+
+
+def test_a_client_subscribing_to_tf_static_again_and_again_reads_no_history(tmp_path):
+    """The latched /tf_static message (the last pose of each static edge) was made by reading
+    every stored tf_static row, at each subscription to /tf_static and every 5 s: a store
+    whose /tf_static was published at 10 Hz for a day has 864,000 of them (seconds a read),
+    and any client could make the view do it in a loop. Now the view keeps the last row of
+    each edge as rows arrive: a subscription reads nothing (the view's own connection is
+    traced: no statement on tf_static runs), and the message is the same."""
+    from slr_sql.viz.foxglove_live import FoxgloveView
+    from test_foxglove import pose
+
+    db = tmp_path / "robot.db"
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add_many([("tf_static", ("base", f"cam{i % 3}", pose(float(i))), float(i), float(i))
+                     for i in range(3000)])
+    view_kb = slr_sql.open(db, clock=slr_sql.ManualClock(0.0))
+    statements: list[str] = []
+    view = FoxgloveView(view_kb.store, port=0, static_every=3600.0)
+    view_kb.store._db.conn.set_trace_callback(
+        lambda sql: statements.append(sql) if "tf_static" in sql else None)
+    view.start()
+    try:
+        with FoxgloveClient(view.port) as client:
+            deadline = time.monotonic() + DEADLINE
+            client.pump(lambda: "/tf_static" in client.channels, deadline)
+            channel = client.channels["/tf_static"]["id"]
+            for n in range(1, 6):
+                client.subscriptions[n] = "/tf_static"
+                client.ws.send(json.dumps({"op": "subscribe",
+                                           "subscriptions": [{"id": n, "channelId": channel}]}))
+                client.pump(lambda: len(client.on("/tf_static")) >= n, deadline)
+                client.ws.send(json.dumps({"op": "unsubscribe", "subscriptionIds": [n]}))
+            last = client.on("/tf_static")[-1][1]
+        # a static edge stored later still reaches the next subscriber
+        with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+            kb.add_many([("tf_static", ("base", "cam1", pose(-1.0)), 5000.0, 5000.0)])
+        with FoxgloveClient(view.port) as late:
+            deadline = time.monotonic() + DEADLINE
+            late.pump(lambda: "/tf_static" in late.channels, deadline)
+
+            def has_new_cam1() -> bool:
+                return any(t["child_frame_id"] == "cam1" and t["translation"]["x"] == -1.0
+                           for _, m in late.on("/tf_static") for t in m["transforms"])
+
+            while not has_new_cam1():
+                assert time.monotonic() < deadline, late.on("/tf_static")
+                late.messages.clear()
+                n = len(late.subscriptions) + 1
+                late.subscriptions[n] = "/tf_static"
+                late.ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+                    {"id": n, "channelId": late.channels["/tf_static"]["id"]}]}))
+                late.pump(lambda: bool(late.on("/tf_static")), deadline)
+                late.ws.send(json.dumps({"op": "unsubscribe", "subscriptionIds": [n]}))
+            final = [m for _, m in late.on("/tf_static")][-1]
+    finally:
+        view.close()
+        view_kb.close()
+    assert sorted((t["child_frame_id"], t["translation"]["x"]) for t in last["transforms"]) \
+        == [("cam0", 2997.0), ("cam1", 2998.0), ("cam2", 2999.0)]
+    assert sorted((t["child_frame_id"], t["translation"]["x"]) for t in final["transforms"]) \
+        == [("cam0", 2997.0), ("cam1", -1.0), ("cam2", 2999.0)]
+    full_reads = [s for s in statements if "seq >" not in s and "seq>" not in s]
+    assert full_reads == [], full_reads
+
+
+def test_one_type_that_cannot_be_read_does_not_stop_the_view_of_the_others(tmp_path):
+    """The view reads the types one after the other in one pass; a type whose rows could
+    not be read (its table dropped by hand: "no such table") ended every pass there, so the
+    types after it were never sent again, and the failure was logged at every change of the
+    store. Now the other types go on and the failure is said once."""
+    import sqlite3
+
+    from slr_sql.viz.foxglove_live import FoxgloveView
+
+    db = tmp_path / "robot.db"
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add_many([("a", (1,), 1.0, 1.0), ("z", (1,), 1.0, 1.0)])
+    view_kb = slr_sql.open(db, clock=slr_sql.ManualClock(0.0))
+    lines: list[str] = []
+    view = FoxgloveView(view_kb.store, port=0, log=lines.append).start()
+    try:
+        with FoxgloveClient(view.port) as client:
+            deadline = time.monotonic() + DEADLINE
+            client.pump(lambda: "/z/1" in client.channels, deadline)
+            client.subscribe("/z/1")
+            with sqlite3.connect(db) as conn:
+                conn.execute('DROP TABLE "a"')
+            with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+                for i in range(2, 7):
+                    kb.add_many([("z", (i,), float(i), float(i))])
+            client.pump(lambda: [m["arg1"] for _, m in client.on("/z/1")] == [2, 3, 4, 5, 6],
+                        deadline)
+            # rows written by hand that are no events (a NULL argument) are left out, the
+            # rows around them are sent
+            with sqlite3.connect(db) as conn:
+                conn.execute('INSERT INTO "z" (arg1, t_start, t_end, arrival) VALUES '
+                             '(NULL, 7.0, 7.0, 0.0), (8, 8.0, 8.0, 0.0), (NULL, 9.0, 9.0, 0.0)')
+            client.pump(lambda: [m["arg1"] for _, m in client.on("/z/1")][-1:] == [8],
+                        deadline)
+    finally:
+        view.close()
+        view_kb.close()
+    about_a = [line for line in lines if "a/1" in line]
+    assert len(about_a) == 1, lines
+    assert "no such table" in about_a[0] and "OperationalError" not in about_a[0]
+    about_z = [line for line in lines if "z/1" in line]
+    assert about_z == ["foxglove: z/1: rows that are not events are left out (NULL is not a "
+                       "stored term)"], lines
+
+
+def test_a_port_in_use_or_a_host_that_does_not_resolve_is_said_in_words(tmp_path):
+    """The foxglove-sdk raises RuntimeError (not OSError) when it cannot bind: the command
+    printed "RuntimeError: FoxgloveError: Failed to bind port ... (this is a bug in
+    slr_sql ...)"."""
+    import socket
+
+    db = tmp_path / "robot.db"
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add_many([("p", (1,), 1.0, 1.0)])
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        for args, said in (
+                (["--port", str(port)],
+                 f"error: cannot listen on 127.0.0.1:{port}: Failed to bind port: Address "
+                 f"already in use"),
+                (["--host", "no-such-host.invalid", "--port", "0"],
+                 "error: cannot listen on no-such-host.invalid:0: Failed to bind port")):
+            result = subprocess.run([sys.executable, "-m", "slr_sql", "foxglove", str(db), *args],
+                                    capture_output=True, text=True, env=env, timeout=DEADLINE)
+            assert result.returncode == 1, result
+            assert said in result.stderr, result.stderr
+            assert "bug" not in result.stderr and "RuntimeError" not in result.stderr
