@@ -41,12 +41,17 @@ VALUES = ["0", "1", "2", "1.5", "1.0"]
 TIME_CONSTANTS = ["0", "1", "1.5", "2", "2.5", "3", "4", "4.0", "inf"]
 
 # prev/next as SPEC §1 defines them, over the facts N_stored(Args.., Start, End) in store
-# order; a stamp matches a stored time by value ('$tm'), an unbound one gets the stored float
+# order; a stamp matches a stored time by value ('$tm'), an unbound one gets the stored float;
+# event goals see the stream view (end =< Z of view(Z), set by a query asked at Z), prev and
+# next every event
 SWI_LIBRARY = r"""
 '$tm'(T, T0) :- var(T), !, T = T0.
 '$tm'(T, T0) :- number(T), T =:= T0.
-p(K, V, S, E) :- p_stored(K, V, S0, E0), '$tm'(S, S0), '$tm'(E, E0).
-q(K, S, E) :- q_stored(K, S0, E0), '$tm'(S, S0), '$tm'(E, E0).
+p(K, V, S, E) :- p_stored(K, V, S0, E0), view(Z), E0 =< Z, '$tm'(S, S0), '$tm'(E, E0).
+q(K, S, E) :- q_stored(K, S0, E0), view(Z), E0 =< Z, '$tm'(S, S0), '$tm'(E, E0).
+:- dynamic(view/1).
+view(inf).
+viewed(Z, G) :- retractall(view(_)), assertz(view(Z)), call(G).
 p_m(K, V, S, E, S0, E0) :- p_stored(K, V, S0, E0), '$tm'(S, S0), '$tm'(E, E0).
 q_m(K, S, E, S0, E0) :- q_stored(K, S0, E0), '$tm'(S, S0), '$tm'(E, E0).
 prev_p(K, V, S, E, T) :- T1 is T,
@@ -217,16 +222,17 @@ def programs(draw):
                                "cBuffer(q(K), 1).", "tBuffer(p(_, _), 1.5)."]))
     queries = []
     for _ in range(draw(st.integers(1, 3))):
+        at = d.pick([None, None, "0", "1", "1.5", "2", "3"])
         kind = draw(st.integers(0, 4))
         t = d.pick(TIME_CONSTANTS[:-1] + ["T"] if d.chance(10) else TIME_CONSTANTS[:-1])
         if kind == 0:
-            queries.append((f"h(K)^{t}", f"h(K, {t}, {t})"))
+            queries.append((f"h(K)^{t}", f"h(K, {t}, {t})", at))
         elif kind == 1:
-            queries.append((f"findall(K, h(K)^{t}, L)", f"findall(K, h(K, {t}, {t}), L)"))
+            queries.append((f"findall(K, h(K)^{t}, L)", f"findall(K, h(K, {t}, {t}), L)", at))
         elif kind == 2:
-            queries.append((f"g(K, {t})", f"g(K, {t})"))
+            queries.append((f"g(K, {t})", f"g(K, {t})", at))
         else:
-            queries.append(d.body([]))
+            queries.append(d.body([]) + (at,))
     return "\n".join(slr) + "\n", "\n".join(swi) + "\n", events, order, cuts, buffers, queries
 
 
@@ -274,16 +280,19 @@ def fill(where: str | None, program: str, events, order, cuts, buffers):
 
 def swi_program(rules: str, facts: list[str], queries) -> str:
     lines = [":- dynamic(p_stored/4).", ":- dynamic(q_stored/3).", *facts, SWI_LIBRARY, rules]
-    for qi, (q_slr, q_swi) in enumerate(queries):
+    for qi, (q_slr, q_swi, at) in enumerate(queries):
         names = swidiff.var_names(q_slr)
-        lines.append(f"query({qi}, ({q_swi}), [{', '.join(repr(n) for n in names)}], "
+        lines.append(f"query({qi}, viewed({at or 'inf'}, ({q_swi})), [{', '.join(repr(n) for n in names)}], "
                      f"[{', '.join(names)}]).")
     return "\n".join(lines) + "\n"
 
 
-def answers(kb, goal: str, names: list[str], interpreted: bool):
-    """("answers", [...]) or ("error", formal term, the answers before it)."""
-    options = {"max_steps": swidiff.SLR_MAX_STEPS} if interpreted else {}
+def answers(kb, goal: str, names: list[str], interpreted: bool, at: str | None):
+    """("answers", [...]) or ("error", formal term, the answers before it) of ``goal``
+    asked at ``at`` (no stream view: None)."""
+    options: dict = {"max_steps": swidiff.SLR_MAX_STEPS} if interpreted else {}
+    if at is not None:
+        options["at"] = float(at)
     try:
         got = kb.query(goal, limit=swidiff.MAX_ANSWERS + 1, timeout=swidiff.SLR_TIMEOUT,
                        **options)
@@ -324,17 +333,25 @@ def compare(swipl, example_, pg_url: str | None):
                 if any(r["cyclic"] or r["limit"] or len(r["answers"]) > swidiff.MAX_ANSWERS
                        for r in swi.values()):
                     return
-                for qi, (q_slr, _) in enumerate(queries):
+                for qi, (q_slr, _, at) in enumerate(queries):
                     names = swidiff.var_names(q_slr)
                     want = expected(swi[qi], names)
                     context = (f"\nstore: {where.split('?')[0]}\nprogram:\n{program}"
-                               f"buffers: {buffers}\nfacts: {facts}\nquery: {q_slr}")
+                               f"buffers: {buffers}\nfacts: {facts}\nquery: {q_slr} at {at}")
                     with swidiff.watchdog(30, context):
                         for interpreted in (True, False):
-                            got = answers(kb, q_slr, names, interpreted)
+                            got = answers(kb, q_slr, names, interpreted, at)
                             assert got == want, (
                                 f"{'interpreter' if interpreted else 'compiled'}: {got}\n"
                                 f"SWI-Prolog: {want}{context}\n{kb.explain(q_slr)}")
+                        if at is not None and want[0] == "answers":
+                            # the synchronized query at the same time, once complete (for
+                            # ever: a prev up to inf waits for a history complete that far)
+                            for name, arity in TYPES.items():
+                                kb.mark_complete(f"{name}/{arity}", float("inf"))
+                            got = [swidiff.slr_answer(a, names) for a in
+                                   kb.submit(q_slr, at=float(at)).result(timeout=30)]
+                            assert ("answers", got) == want, f"synchronized: {got}{context}"
 
 
 _SCHEMAS = itertools.count()
