@@ -42,56 +42,83 @@ def _same(x, y) -> bool:
     return type(x) is type(y) and x == y
 
 
-def reference(pattern: str, where: str, events: list, order: list[int]) -> list:
-    """The complex events (head values, start, end), sorted."""
+def _key(ev) -> tuple:
+    """Newer is greater: by end, start, then the value (integer before float)."""
+    return (ev[3], ev[2], ev[1][0], type(ev[1][0]) is float)
+
+
+def reference(pattern: str, where: str, events: list, order: list[int],
+              policy: str = "unrestricted") -> list:
+    """The complex events (head values, start, end), sorted. The policy chooses among the
+    matches whose where goal holds (docs/events.md): per terminating b, the newest a
+    (recent), or the oldest a not yet used, terminators in occurrence order (chronological)."""
     arrival = {i: k for k, i in enumerate(order)}
     cs = sorted((ev[3], ev[2], arrival[i], ev) for i, ev in enumerate(events) if ev[0] == "c")
     cs = [ev for _, _, _, ev in cs]   # store order: end, start, arrival
-    matches = []
-    for a in (ev for ev in events if ev[0] == "a"):
-        if pattern == "single":
-            matches.append((a[1][0], a[2], a[3]))
-            continue
-        for b in (ev for ev in events if ev[0] == "b"):
-            if _same(a[1][0], b[1][0]) and a[3] < b[2]:
-                matches.append((a[1][0], a[2], b[3]))
     out = []
-    for x, t, e in matches:
-        if where == "no_prev":
-            if not any(_same(c[1][0], x) and c[3] <= t for c in cs):
-                out.append(((x,), t, e))
-        elif where == "no_prev_point":
-            if not any(_same(c[1][0], x) and c[2] == c[3] and c[3] <= t for c in cs):
-                out.append(((x,), t, e))
-        elif where == "no_next":
-            if not any(_same(c[1][0], x) and t <= c[2] and c[3] <= t + 2 for c in cs):
-                out.append(((x,), t, e))
-        elif where == "count_view":
-            out.append(((x, sum(_same(c[1][0], x) and c[3] <= e for c in cs)), t, e))
-        elif where == "count_prev":
-            points = [c for c in cs if c[2] == c[3] and c[3] <= t]
-            latest = max((c[3] for c in points), default=None)
-            out.append(((x, sum(c[3] == latest for c in points)), t, e))
-        elif where == "first_prev":
-            before = [c for c in cs if c[3] <= t]
-            if before:
-                latest = max(c[3] for c in before)
-                out.append(((x, next(c for c in before if c[3] == latest)[1][0]), t, e))
-        else:   # first_next
-            inside = [c for c in cs if t <= c[2] and c[3] <= e + 1]
-            if inside:
-                first = min(c[2] for c in inside)
-                out.append(((x, next(c for c in inside if c[2] == first)[1][0]), t, e))
+    if pattern == "single":
+        for a in (ev for ev in events if ev[0] == "a"):
+            out += _decide(where, cs, a[1][0], a[2], a[3])
+        return sorted(out, key=repr)
+    a_s = [(i, ev) for i, ev in enumerate(events) if ev[0] == "a"]
+    b_s = sorted(((i, ev) for i, ev in enumerate(events) if ev[0] == "b"),
+                 key=lambda ib: _key(ib[1]))
+    used: set[int] = set()
+    for j, b in b_s:
+        valid = [(i, a, found) for i, a in a_s
+                 if _same(a[1][0], b[1][0]) and a[3] < b[2]
+                 and (found := _decide(where, cs, a[1][0], a[2], b[3]))]
+        if policy == "unrestricted":
+            out += [d for _, _, found in valid for d in found]
+        elif policy == "recent" and valid:
+            out += max(valid, key=lambda v: _key(v[1]))[2]
+        elif policy == "chronological":
+            free = [v for v in valid if v[0] not in used]
+            if free:
+                i, _, found = min(free, key=lambda v: _key(v[1]))
+                used.add(i)
+                out += found
     return sorted(out, key=repr)
 
 
-def rule_text(pattern: str, where: str) -> str:
+def _decide(where: str, cs: list, x, t: float, e: float) -> list:
+    """The complex events of one match: its where goal's one solution, or none."""
+    out = []
+    if where == "no_prev":
+        if not any(_same(c[1][0], x) and c[3] <= t for c in cs):
+            out.append(((x,), t, e))
+    elif where == "no_prev_point":
+        if not any(_same(c[1][0], x) and c[2] == c[3] and c[3] <= t for c in cs):
+            out.append(((x,), t, e))
+    elif where == "no_next":
+        if not any(_same(c[1][0], x) and t <= c[2] and c[3] <= t + 2 for c in cs):
+            out.append(((x,), t, e))
+    elif where == "count_view":
+        out.append(((x, sum(_same(c[1][0], x) and c[3] <= e for c in cs)), t, e))
+    elif where == "count_prev":
+        points = [c for c in cs if c[2] == c[3] and c[3] <= t]
+        latest = max((c[3] for c in points), default=None)
+        out.append(((x, sum(c[3] == latest for c in points)), t, e))
+    elif where == "first_prev":
+        before = [c for c in cs if c[3] <= t]
+        if before:
+            latest = max(c[3] for c in before)
+            out.append(((x, next(c for c in before if c[3] == latest)[1][0]), t, e))
+    else:   # first_next
+        inside = [c for c in cs if t <= c[2] and c[3] <= e + 1]
+        if inside:
+            first = min(c[2] for c in inside)
+            out.append(((x, next(c for c in inside if c[2] == first)[1][0]), t, e))
+    return out
+
+
+def rule_text(pattern: str, where: str, policy: str = "unrestricted") -> str:
     head, goal = WHERES[where]
     if pattern == "single":
         body = "a(X)^[T, E]"
     else:
         body = "a(X)^[T, _] seq b(X)^[_, E]"
-    return f"r({head}) <- {body} where {goal}."
+    return f":- consumption({policy}).\nr({head}) <- {body} where {goal}."
 
 
 def _event_text(ev) -> str:
@@ -100,10 +127,10 @@ def _event_text(ev) -> str:
 
 
 def run(where_: str | None, pattern: str, where: str, events: list, order: list[int],
-        cuts: list[int], marks: bool) -> list:
+        cuts: list[int], marks: bool, policy: str) -> list:
     clock = ManualClock(0.0)
     with slr_sql.open(where_, clock=clock) as kb:
-        kb.load(rule_text(pattern, where))
+        kb.load(rule_text(pattern, where, policy))
         sequence = [events[i] for i in order]
         items = []
         for k, ev in enumerate(sequence):
@@ -136,8 +163,12 @@ def cases(draw):
         events.append((name, (draw(st.sampled_from([0, 1, 1.0])),), s, e))
     order = draw(st.permutations(range(len(events))))
     cuts = draw(st.lists(st.integers(0, 2 * len(events)), max_size=3))
-    return (draw(st.sampled_from(["single", "seq"])), draw(st.sampled_from(sorted(WHERES))),
-            events, order, cuts, draw(st.booleans()))
+    pattern = draw(st.sampled_from(["single", "seq", "seq"]))
+    policy = "unrestricted"
+    if pattern == "seq":
+        policy = draw(st.sampled_from(["unrestricted", "recent", "chronological"]))
+    return (pattern, draw(st.sampled_from(sorted(WHERES))), events, order, cuts,
+            draw(st.booleans()), policy)
 
 
 def _typed(rows):
@@ -145,10 +176,10 @@ def _typed(rows):
 
 
 def check(where_: str | None, case) -> None:
-    pattern, where, events, order, cuts, marks = case
-    got = run(where_, pattern, where, events, order, cuts, marks)
-    want = reference(pattern, where, events, order)
-    assert _typed(got) == _typed(want), rule_text(pattern, where)
+    pattern, where, events, order, cuts, marks, policy = case
+    got = run(where_, pattern, where, events, order, cuts, marks, policy)
+    want = reference(pattern, where, events, order, policy)
+    assert _typed(got) == _typed(want), rule_text(pattern, where, policy)
 
 
 @pytest.fixture(scope="module")
