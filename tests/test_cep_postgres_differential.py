@@ -32,7 +32,7 @@ from slr_sql import ManualClock
 _SCHEMAS = itertools.count()
 # a longer hunt: SLR_DIFF_FACTOR=20 runs each test with twenty times its examples
 FACTOR = int(os.environ.get("SLR_DIFF_FACTOR", "1"))
-SETTINGS = dict(deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
+SETTINGS = dict(deadline=None, suppress_health_check=list(HealthCheck))
 
 
 @pytest.fixture(scope="module")

@@ -189,14 +189,14 @@ def database(postgres_server):
     return postgres_database(postgres_server[1])
 
 
-@settings(max_examples=40 * FACTOR, deadline=None, derandomize=True,
+@settings(max_examples=40 * FACTOR, deadline=None,
           suppress_health_check=list(HealthCheck))
 @given(cases())
 def test_a_where_reading_the_store_equals_the_reference_on_sqlite(case):
     check(None, case)
 
 
-@settings(max_examples=20 * FACTOR, deadline=None, derandomize=True,
+@settings(max_examples=20 * FACTOR, deadline=None,
           suppress_health_check=list(HealthCheck))
 @given(cases())
 def test_a_where_reading_the_store_equals_the_reference_on_postgres(database, case):
