@@ -129,8 +129,10 @@ def _eval_interval(tree, chosen, k, events=()):
 
 
 def _values(args):
-    """Arguments in SQLite's order: by value, then by SQL type (integer before real)."""
-    return tuple((v, "integer" if type(v) is int else "real") for v in args)
+    """Arguments in SQLite's order: numbers by value, then by SQL type (integer before
+    real), before text (atoms)."""
+    return tuple((1, v, "text") if isinstance(v, str)
+                 else (0, v, "integer" if type(v) is int else "real") for v in args)
 
 
 def _operand(x, b):
