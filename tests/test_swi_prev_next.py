@@ -185,7 +185,8 @@ class Drawer:
             return (f"findall({template}, {g[0]}, L)", f"findall({template}, {g[1]}, L)")
         if agg == 1:
             return (f"aggregate_all(count, {g[0]}, N)", f"aggregate_all(count, {g[1]}, N)")
-        return (f"aggregate_all(max(Z), {g[0]}, M)", f"aggregate_all(max(Z), {g[1]}, M)")
+        spec = self.pick(["max(Z)", "max(V)", "min(V)", "sum(V)", "max(V, K)"])
+        return (f"aggregate_all({spec}, {g[0]}, M)", f"aggregate_all({spec}, {g[1]}, M)")
 
     def body(self, bound: list[str]) -> tuple[str, str]:
         parts = [self.goal(bound) for _ in range(self.draw(st.integers(1, 2)))]
