@@ -18,7 +18,7 @@ from .lockorder import ordered_lock
 from .terms import Atom, deref, format_term
 
 __all__ = ["Clock", "WallClock", "ManualClock", "StreamClock", "parse_duration",
-           "DEFAULT_MAX_LEARNED_DELAY", "LearnedDelayWarning"]
+           "DEFAULT_MAX_LEARNED_DELAY", "LearnedDelayWarning", "LearnedDelayNotWrittenWarning"]
 
 
 DEFAULT_MAX_LEARNED_DELAY = 3600.0
@@ -33,6 +33,13 @@ class LearnedDelayWarning(UserWarning):
     """Events arrived much later than their end time: the store's clock and the events'
     times are probably not the same time (a wall clock and simulated or recorded times);
     the learned delay was capped (:data:`DEFAULT_MAX_LEARNED_DELAY`)."""
+
+
+class LearnedDelayNotWrittenWarning(UserWarning):
+    """``close()`` could not write a delay learned here (another session held a lock it
+    needs past the busy timeout, or the connection was lost): the store keeps the smaller
+    delay it had, so another process may judge that type complete earlier than this one
+    did. The message names the type and the delay (``max_delay`` declares it for good)."""
 
 
 class Clock:

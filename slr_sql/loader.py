@@ -65,6 +65,11 @@ class ProgramLoader:
         data_version = store.data_version()
         if data_version == self.seen_data_version:
             return
+        if store.in_transaction_here:
+            # (a call inside a transaction this thread holds, ``kb.store.transaction()``:
+            # the program and progress stay as last read until the next call after it --
+            # their re-read takes locks ordered before the store's, which it holds)
+            return
         program_version, progress_version = store.versions()
         if program_version != self.version:
             with self.load_lock:

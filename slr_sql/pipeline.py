@@ -30,6 +30,15 @@ this order:
    batch, in the order the batches were stored (the add's events with the complex events
    its transaction derived, then each decision round's).
 
+An add, mark or clock move made inside a transaction the calling thread holds
+(``with kb.store.transaction(): kb.add_many(...)``: several adds stored together or not at
+all) runs stages 1 and 2 in that transaction, as a savepoint (a batch that fails is taken
+back alone), and stages 3-6 once the outermost transaction committed and let go of the
+store's lock: the locks ordered before the store's (docs/architecture.md) are never taken
+inside it, listeners and subscribers hear only committed events, and a transaction that
+rolls back leaves nothing to observe. The program is the one this knowledge base last
+read (what other processes loaded since is read at the next call after the commit).
+
 No stage calls back into an earlier one. A request for decisions that arrives while this
 thread is already running the pipeline (a ``StreamClock`` moving while stage 3 observes
 the events, a listener of stage 6 setting a ``ManualClock``) does not start a second run
@@ -146,7 +155,10 @@ class EventPipeline:
     # -- entries ---------------------------------------------------------------------------
     def add(self, events: Batch, atomic: bool) -> list[EventRejected]:
         """Stages 1-6 for a batch of ``(name, args, start, end)`` events; returns the
-        rejected ones (the marks' first), raises the first when ``atomic``."""
+        rejected ones (the marks' first), raises the first when ``atomic``. Inside a
+        transaction this thread holds (``kb.store.transaction()``), stages 1 and 2 run in
+        it (a savepoint) and stages 3-6 once it committed (module docstring)."""
+        inside = self.store.in_transaction_here
         run = self._enter()
         try:
             run.stage = "marks"
@@ -155,28 +167,49 @@ class EventPipeline:
             if type(events) is not EventBatch:  # (the store notes each type's end times in it)
                 events = EventBatch(events)
             # a batch's marks are stored with its events: the batch whole or not at all
-            with self.store.transaction() if marks else nullcontext():
+            with self.store.transaction() if marks or inside else nullcontext():
                 errors, derived = self._insert(events, atomic)
                 if atomic and errors:
                     raise errors[0]
                 written = self.sync.store_marks(marks) if marks else None
-            run.stored = True
             rejected = {id(e.event) for e in errors if hasattr(e, "event")}
             stored = [ev for ev in events if id(ev) not in rejected] if rejected else events
             if derived:   # the complex events of this add, with its events
                 stored = with_derived(stored, derived)
-            run.stage = "completeness"
-            self.sync.on_add(stored)
-            if written is not None:   # after the events of the same batch are observed
-                self.sync.apply_marks(written)
-                self.cep.reread_pending()
-            self._settle(run, [stored])   # (even empty: the listeners hear every add)
+            if inside:
+                self.store.after_commit(lambda: self._committed(stored, written))
+            else:
+                run.stored = True
+                self._observe(run, stored, written)
         finally:
             self._leave(run)
         return mark_errors + errors if mark_errors else errors
 
+    def _observe(self, run: _Run, stored: Batch, written: Any) -> None:
+        """Stages 3-6 of an add whose events (and marks) are committed."""
+        run.stage = "completeness"
+        self.sync.on_add(stored)
+        if written is not None:   # after the events of the same batch are observed
+            self.sync.apply_marks(written)
+            self.cep.reread_pending()
+        self._settle(run, [stored])   # (even empty: the listeners hear every add)
+
+    def _committed(self, stored: Batch, written: Any) -> None:
+        """Stages 3-6 of an add made inside a caller's transaction, once it committed."""
+        run = self._enter()
+        try:
+            run.stored = True
+            self._observe(run, stored, written)
+        finally:
+            self._leave(run)
+
     def mark(self, event_type: Any, t: float) -> None:
-        """Stages 3-6 for ``kb.mark_complete(event_type, t)``."""
+        """Stages 3-6 for ``kb.mark_complete(event_type, t)``. Inside a transaction this
+        thread holds, the mark is written in it and applied once it committed."""
+        if self.store.in_transaction_here:
+            written = self.sync.write_mark(event_type, t)
+            self.store.after_commit(lambda: self._marked(written))
+            return
         run = self._enter()
         try:
             run.stage = "completeness"
@@ -186,14 +219,29 @@ class EventPipeline:
         finally:
             self._leave(run)
 
+    def _marked(self, written: Any) -> None:
+        """Stages 3-6 of a mark written inside a caller's transaction, once it committed."""
+        run = self._enter()
+        try:
+            run.stage = "completeness"
+            self.sync.apply_marks(written)
+            self.cep.reread_pending()
+            self._settle(run, [])
+        finally:
+            self._leave(run)
+
     def progress(self, timer: bool = False) -> None:
         """Stages 4-6: completeness may have advanced (the clock moved, a timer fired, a
         file was reopened). On a thread already running the pipeline, the request joins
-        that run. ``timer``: the synchronizer's timer thread calls (a round that fails is
-        not raised, but tried again later)."""
+        that run; inside a transaction this thread holds, it runs once that committed.
+        ``timer``: the synchronizer's timer thread calls (a round that fails is not raised,
+        but tried again later)."""
         run = self._runs.get(threading.get_ident())
         if run is not None:
             run.again = True
+            return
+        if self.store.in_transaction_here:
+            self.store.after_commit(lambda: self.progress(timer))
             return
         run = self._enter(timer)
         try:
@@ -307,7 +355,7 @@ class EventPipeline:
         while True:
             run.again = False
             try:
-                if not cep.ready(float(cep.clock.now())):
+                if not cep.ready(float(cep.clock.now()), run.stored):
                     self._retry_delay = 0.0
                     cep.wake_timers()
                     cep.recheck()

@@ -40,7 +40,8 @@ from typing import Any, Callable, Iterable, NamedTuple
 
 from .analysis import GoalSet, goal_set
 from .answers import answer_bindings
-from .clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning, ManualClock, StreamClock
+from .clocks import (DEFAULT_MAX_LEARNED_DELAY, LearnedDelayNotWrittenWarning,
+                     LearnedDelayWarning, ManualClock, StreamClock)
 from .errors import EventRejected, SLRError, SLRTimeout, SLRUnavailable
 from .lockorder import ordered_lock
 from .host import Host
@@ -367,6 +368,29 @@ class Completeness:
             self._persisted[key] = max(self._persisted.get(key, 0.0), d)
             self.learned[key] = max(self.learned.get(key, 0.0), d)
 
+    def flush_at_close(self) -> None:
+        """Write the learned delays not written yet (grown by less than 1 ms, or whose
+        write after an add met a lock), waiting for another session's lock up to the
+        store's busy timeout; those it still cannot write are named in a
+        :class:`~slr_sql.clocks.LearnedDelayNotWrittenWarning`, not dropped in silence."""
+        if self.store.closed:
+            return
+        unwritten = {k: d for k, d in self.learned.items() if d > self._persisted.get(k, 0.0)}
+        try:
+            self.flush(unwritten)
+            self._unwritten.clear()
+        except SLRError as exc:
+            if self.store.closed:
+                return
+            for key, d in sorted(unwritten.items()):
+                name = type_text(key)
+                warnings.warn(LearnedDelayNotWrittenWarning(
+                    f"{name}: the delay learned here ({_fmt(d)} s) was not written when the "
+                    f"knowledge base closed ({exc}); the store keeps "
+                    f"{_fmt(self._persisted.get(key, 0.0))} s, so another process may judge "
+                    f"{name} complete earlier (:- max_delay({name}, {_fmt(d)}). declares "
+                    f"it for good)"), stacklevel=5)
+
     def load(self) -> None:
         """(Re)read learned delays and marks from the store."""
         self.merge(self.store.meta_items("sync/"))
@@ -673,6 +697,19 @@ class Synchronizer:
     def mark(self, spec: Any, t: float, source: str | None = None) -> None:
         """Apply a mark: persist it, release the queries it completes (the event pipeline's
         completeness stage: the caller runs the decisions)."""
+        mark = self._mark_of(spec, t, source)
+        with self.lock:   # (held while a mark is written, as while learned delays are)
+            written = self.store_marks([mark])
+        self.apply_marks(written)
+
+    def write_mark(self, spec: Any, t: float, source: str | None = None) -> WrittenMarks:
+        """Write a mark inside the transaction the calling thread holds (the store's lock
+        is taken already: the synchronizer's, ordered before it, is not); the caller applies
+        it (:meth:`apply_marks`) once that committed."""
+        return self.store_marks([self._mark_of(spec, t, source)])
+
+    @staticmethod
+    def _mark_of(spec: Any, t: float, source: str | None) -> tuple[Any, float, str]:
         name, n = parse_type(spec)
         t = float(t)
         if math.isnan(t):
@@ -680,9 +717,7 @@ class Synchronizer:
         key: Any = name if n is None else (name, n)
         if source is None:
             source = f"kb.mark_complete({type_text(key) if n is not None else name!r}, {_fmt(t)})"
-        with self.lock:   # (held while a mark is written, as while learned delays are)
-            written = self.store_marks([(key, t, source)])
-        self.apply_marks(written)
+        return key, t, source
 
     def complete_until(self, spec: Any) -> float:
         name, n = parse_type(spec)
@@ -756,11 +791,8 @@ class Synchronizer:
             self.cond.notify_all()
         if hasattr(self.clock, "unsubscribe"):
             self.clock.unsubscribe(self._on_clock)
-        try:
-            with self.lock:
-                self.tracker.flush()
-        except SLRError:
-            pass  # the store is closed already
+        with self.lock:
+            self.tracker.flush_at_close()
         for q in queries:
             if not q.done():
                 self._set_exception(q, SLRError(f"the knowledge base was closed while query "

@@ -77,7 +77,8 @@ def test_a_round_the_timer_starts_that_fails_busy_is_retried(postgres_url):
     with slr_sql.open(postgres_url, busy_timeout=0.2) as kb:
         kb.load(program)
         seen = _derived_seen(kb)
-        pid = kb.sql("SELECT pg_backend_pid()")[1][0][0]
+        # the store's own connection (a read-only kb.sql runs on one of its own)
+        pid = kb.sql("SELECT pg_backend_pid()", write=True)[1][0][0]
         with _other(postgres_url) as other:
             kb.add_many([f"a(1)^{t - 0.5}", f"b(1)^{t}"])
             other.execute("LOCK TABLE slr_cep_pending IN SHARE MODE")

@@ -39,9 +39,11 @@ def _cancel_when_running(admin: psycopg.Connection, pid: int) -> None:
     assert admin.execute("SELECT pg_cancel_backend(%s)", (pid,)).fetchone()[0] is True
 
 
-def _cancelled(kb, url: str, call) -> BaseException:
-    """What ``call()`` raises when another session cancels its statement mid-way."""
-    pid = kb.sql("SELECT pg_backend_pid()")[1][0][0]
+def _cancelled(kb, url: str, call, detached: bool = False) -> BaseException:
+    """What ``call()`` raises when another session cancels its statement mid-way: a
+    statement of the store's own connection, or (``detached``) a read-only ``kb.sql``, which
+    runs on a connection of its own (kept idle for the next one)."""
+    pid = kb.sql("SELECT pg_backend_pid()", write=not detached)[1][0][0]
     raised: list[BaseException] = []
 
     def run() -> None:
@@ -64,7 +66,8 @@ def _cancelled(kb, url: str, call) -> BaseException:
 def test_a_statement_another_session_cancels_is_cancelled_not_timed_out(postgres_url, timeout):
     with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
         error = _cancelled(kb, postgres_url,
-                           lambda: kb.sql("SELECT pg_sleep(60)", timeout=timeout))
+                           lambda: kb.sql("SELECT pg_sleep(60)", timeout=timeout),
+                           detached=True)
         assert type(error) is SLRCancelled and isinstance(error, SLRUnavailable)
         assert str(error).endswith(": the server cancelled the statement (canceling statement "
                                    "due to user request); nothing of the call was stored, and "

@@ -256,6 +256,11 @@ BIG = b'{"goal": "X = 1", "pad": "' + b"x" * (2 * 1024 * 1024) + b'"}'
     ("POST", "/sql", b'{"query": "PRAGMA user_version = 99"}', 400, "BadRequest"),
     ("POST", "/sql", b'{"query": "SELECT * FROM no_such_table"}', 400, "BadRequest"),
     ("POST", "/sql", b'{"query": "SELECT ?", "params": [[1]]}', 400, "BadRequest"),
+    # a PRAGMA with 20,000 spaces: its check once took hours of CPU with the GIL held
+    ("POST", "/sql", b'{"query": "pragma x' + b" " * 20000 + b'y"}', 400, "BadRequest"),
+    # one call of instr() over 60 MB and 2 MB would hold the store for hours
+    ("POST", "/sql", b'{"query": "SELECT instr(hex(zeroblob(30000000)), hex(zeroblob(1000000)) '
+     b'|| \'1\')"}', 400, "BadRequest"),
     ("GET", "/nowhere", b"", 404, "NotFound"),
     ("GET", "/query", b"", 405, "MethodNotAllowed"),
     ("GET", "/complete_until", b"", 400, "BadRequest"),

@@ -53,9 +53,14 @@ _rowids = orjson.loads
 _first, _second = itemgetter(0), itemgetter(1)
 _end_of = itemgetter(3)   # of a derived event (name, args, start, end)
 
-__all__ = ["EventRules", "RuleRuntime", "ready_prefix"]
+__all__ = ["EventRules", "RuleRuntime", "ready_prefix", "OTHERS_LOOK"]
 
 _INF = math.inf
+
+# Seconds of the store's clock a clock move waits after the last look at whether another
+# connection committed (SQLite's data_version, a few microseconds: a third of what a clock
+# move that decides nothing costs) before it looks again; an add always looks.
+OTHERS_LOOK = 0.1
 _FLOAT = frozenset((float,))
 
 
@@ -898,6 +903,13 @@ class EventRules:
         # made, rows kept pending): they are read again before they are used next
         self._summaries_stale = False
         kb.store.rollback_listeners.append(self.reread_pending)
+        # another process may leave decisions pending and stop: where seeing whether another
+        # connection committed costs no I/O (SQLite's data_version), the summaries are read
+        # again when it moved, so a clock move or an in-order event here decides them too
+        self._watch_others = kb.store.dialect.change_counter_is_local and \
+            kb.store.path is not None
+        self._others_version: int | None = None   # data_version when last looked
+        self._others_looked_at: float | None = None   # and the store clock's time then
 
     # ----------------------------------------------------------------- install
     @property
@@ -1279,8 +1291,23 @@ class EventRules:
                     rt._summary(summary)
                 self._summaries_stale = False
 
-    def ready(self, now: float) -> bool:
-        """Can some pending decision be made at ``now`` (its histories are complete)?"""
+    def _others_committed(self, now: float) -> None:
+        """Mark the summaries stale when another connection committed since the last look
+        (it may have left decisions pending; its own summaries are not ours)."""
+        self._others_looked_at = now
+        version = self.store.data_version()
+        if version != self._others_version:
+            self._others_version = version
+            self._summaries_stale = True
+
+    def ready(self, now: float, added: bool = False) -> bool:
+        """Can some pending decision be made at ``now`` (its histories are complete)?
+        ``added``: after an add (which looks whether another connection committed; a clock
+        move looks once the clock moved on by :data:`OTHERS_LOOK` since the last look)."""
+        if self._watch_others:
+            last = self._others_looked_at
+            if added or last is None or not 0.0 <= now - last < OTHERS_LOOK:
+                self._others_committed(now)
         self._read_stale_summaries()
         for rt in self.rules:
             if rt.waits and rt.ready_groups(now):

@@ -283,6 +283,22 @@ class EventStore:
     def in_transaction(self) -> bool:
         return self._db.tx_depth > 0
 
+    def after_commit(self, callback: Callable[[], None]) -> None:
+        """Call ``callback()`` once the outermost transaction this thread is in committed
+        and let go of the store's lock (never, should it or the nested one it was asked for
+        in roll back); outside a transaction at once. The event pipeline runs the stages
+        after the store of an add made inside a caller's transaction this way.
+
+        >>> s = EventStore(None); heard = []
+        >>> with s.transaction():
+        ...     with s.transaction():
+        ...         s.after_commit(lambda: heard.append("committed"))
+        ...     heard.append("inside")
+        >>> heard
+        ['inside', 'committed']
+        """
+        self._db.after_commit(callback)
+
     @property
     def in_transaction_here(self) -> bool:
         """True when the calling thread is inside a transaction of this store; another

@@ -15,7 +15,7 @@ True
 """
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import AbstractContextManager
 from typing import Any, Protocol, runtime_checkable
 
@@ -179,6 +179,8 @@ class Backend(Protocol):
 
     @property
     def in_transaction_here(self) -> bool: ...
+
+    def after_commit(self, callback: Callable[[], None]) -> None: ...
 
     def declare_type(self, name: str, arity: int, start_order: bool = True) -> str: ...
 

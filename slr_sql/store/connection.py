@@ -35,6 +35,7 @@ from ..errors import SLRError, SLRStoreGone, SLRTimeout
 from ..lockorder import ordered_lock
 from .authorizer import READ_ONLY_RESULT_BYTES, READ_ONLY_VALUE_BYTES, SqlGuard, \
     harden_connection
+from .bounded_builtins import bounded_builtins
 from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
 from .dialect import SQLITE
 from .functions import SqlFunctions
@@ -172,7 +173,7 @@ def _read_schema(path: str, header: bytes) -> tuple[list[tuple[str, str]], int]:
         try:
             conn = sqlite3.connect(uri, uri=True, isolation_level=None, timeout=30.0)
             try:
-                harden_connection(conn)
+                harden(conn)
                 objects = conn.execute("SELECT type, name FROM sqlite_master").fetchall()
                 version = conn.execute("PRAGMA user_version").fetchone()[0]
                 return objects, version
@@ -252,6 +253,9 @@ class Database:
         self.closed = False
         # called, lock held, after a transaction rolled back (the event-type cache reloads)
         self.rollback_listeners: list[Callable[[], None]] = []
+        # (depth registered at, callback): called once the outermost transaction committed
+        # and let go of the lock; dropped with the (nested) transaction that rolls back
+        self.commit_callbacks: list[tuple[int, Callable[[], None]]] = []
         # streams (event scans read in batches) whose statement may still be open: suspended
         # when a transaction begins (see suspend_streams)
         self.open_streams: weakref.WeakSet = weakref.WeakSet()
@@ -274,7 +278,7 @@ class Database:
             raise SLRError(f"{self.path}: cannot open it ({exc})") from None
         conn = self.conn
         try:
-            self.guard = harden_connection(conn)
+            self.guard = harden(conn)
             # the bound parameters one statement may hold (999 in SQLite before 3.32)
             self.max_parameters = conn.getlimit(sqlite3.SQLITE_LIMIT_VARIABLE_NUMBER)
             # auto_vacuum must be chosen before the first table exists (a no-op afterwards,
@@ -525,13 +529,16 @@ class Database:
     # ------------------------------------------------------------------ transactions
 
     @contextmanager
-    def transaction(self, wait: bool = True) -> Iterator["Database"]:
+    def transaction(self, wait: bool = True, listeners: bool = True) -> Iterator["Database"]:
         """Run several statements as one atomic unit (BEGIN IMMEDIATE ... COMMIT).
 
         Re-entrant: nested uses become savepoints, so an inner failure undoes only the inner
         part. The lock is held for the whole transaction. ``wait=False``: another
         connection's write transaction is not waited for (SLRBusy at once), for work a
         reader may leave for later (a nested one holds the lock already).
+        ``listeners=False``: a rollback of this one does not call the rollback listeners,
+        for a block that changes nothing they know of (a build of indexes that may fail):
+        it takes back only itself.
 
         >>> db = Database(None)
         >>> with db.transaction():
@@ -540,6 +547,7 @@ class Database:
         >>> db.execute("SELECT value FROM slr_meta WHERE key = 'a'")
         [('1',)]
         """
+        committed: list[tuple[int, Callable[[], None]]] = []
         with self.lock:
             self.check_open()
             depth = self.tx_depth
@@ -554,6 +562,7 @@ class Database:
                 yield self
             except BaseException:
                 self.tx_depth = depth
+                self._drop_commit_callbacks(depth)
                 try:
                     if depth == 0:
                         conn.execute("ROLLBACK")
@@ -561,7 +570,8 @@ class Database:
                         conn.execute(f"ROLLBACK TO slr_sp{depth}")
                         conn.execute(f"RELEASE slr_sp{depth}")
                 finally:
-                    self._rolled_back()
+                    if listeners:
+                        self._rolled_back()
                 raise
             self.tx_depth = depth
             try:
@@ -569,10 +579,16 @@ class Database:
                     self.check_identity()  # before anything is acknowledged
                 conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
             except BaseException:
+                self._drop_commit_callbacks(depth)
                 if depth == 0 and conn.in_transaction:
                     conn.execute("ROLLBACK")
-                self._rolled_back()
+                if listeners:
+                    self._rolled_back()
                 raise
+            if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
+                committed, self.commit_callbacks = self.commit_callbacks, []
+        for _depth, callback in committed:
+            callback()
 
     def _begin(self, timeout: float) -> None:
         """``BEGIN IMMEDIATE``, waiting at most ``timeout`` seconds for another
@@ -610,6 +626,29 @@ class Database:
         for listener in self.rollback_listeners:
             listener()
 
+    def after_commit(self, callback: Callable[[], None]) -> None:
+        """Call ``callback()`` once the outermost transaction this thread is in has
+        committed and let go of the store's lock; never, should the transaction (or the
+        nested one it was asked for in) roll back. Outside a transaction: at once.
+
+        >>> db = Database(None); heard = []
+        >>> with db.transaction():
+        ...     db.after_commit(lambda: heard.append("committed"))
+        ...     heard.append("inside")
+        >>> heard
+        ['inside', 'committed']
+        """
+        with self.lock:
+            if self.tx_depth:
+                self.commit_callbacks.append((self.tx_depth, callback))
+                return
+        callback()
+
+    def _drop_commit_callbacks(self, depth: int) -> None:
+        """Forget the callbacks asked for inside the (nested) transaction at ``depth``."""
+        self.commit_callbacks[:] = [(d, c) for d, c in self.commit_callbacks if d <= depth]
+
+
     # ------------------------------------------------------------------ raw SQL
 
     def sql(self, query: str, params: Iterable[Any] = (), write: bool = False,
@@ -642,7 +681,7 @@ class Database:
                         columns = [d[0] for d in cursor.description] if cursor.description else []
                         return columns, cursor.fetchall()
                     except sqlite3.DatabaseError as exc:
-                        if guard.denied is not None and "authoriz" in str(exc):
+                        if _refused(str(exc), guard):
                             raise SLRError(f"sql: {guard.denied}") from None
                         raise busy_error(exc, self.path, self.busy_timeout) or exc from None
             # query_only refuses every write to a database file; the authorizer refuses what
@@ -828,6 +867,14 @@ class Database:
                                               20000)
 
 
+def harden(conn: sqlite3.Connection) -> SqlGuard:
+    """:func:`~slr_sql.store.authorizer.harden_connection` and the wrapped built-ins of
+    :mod:`~slr_sql.store.bounded_builtins`: what every connection of the store gets."""
+    guard = harden_connection(conn)
+    register_functions(conn, bounded_builtins(conn, guard))
+    return guard
+
+
 def register_functions(conn: sqlite3.Connection, functions: SqlFunctions) -> None:
     """Register every function and aggregate of ``functions`` on one SQLite connection:
     the only place slr_sql registers Python functions (tests/test_sql_functions.py)."""
@@ -859,14 +906,24 @@ def _bounded_rows(cursor: sqlite3.Cursor) -> list[tuple]:
         rows.extend(batch)
 
 
+def _refused(text: str, guard: SqlGuard) -> bool:
+    """Whether a statement's error ``text`` is a refusal whose reason ``guard`` holds: the
+    authorizer's, or a wrapped built-in's (:mod:`~slr_sql.store.bounded_builtins`)."""
+    return guard.denied is not None and (
+        "authoriz" in text or "user-defined function raised exception" in text)
+
+
 def _read_only_error(exc: sqlite3.DatabaseError, guard: SqlGuard) -> Exception:
     """The error to raise for ``exc``, raised by a read-only statement: the authorizer's
     reason, the read-only refusal, the value limit in words, else ``exc`` itself."""
     text = str(exc)
-    if "authoriz" in text and guard.denied is not None:
+    if _refused(text, guard):
+        assert guard.denied is not None
         if guard.denied.startswith("read-only"):
             return SLRError(f"{guard.denied}; pass write=True to allow it")
-        return SLRError(f"sql: {guard.denied}")
+        if "too big" not in guard.denied:
+            return SLRError(f"sql: {guard.denied}")
+        text = guard.denied   # a wrapped built-in's value over the limit: said below
     if "readonly" in text or "authoriz" in text:
         return SLRError(f"read-only: the statement would change the store ({text}); pass "
                         f"write=True to allow it")
@@ -899,7 +956,7 @@ class ReadConnection:
         try:
             self.conn = sqlite3.connect(path, check_same_thread=False, isolation_level=None,
                                         timeout=busy_timeout, cached_statements=64)
-            harden_connection(self.conn)
+            harden(self.conn)
             self.conn.execute("PRAGMA query_only=ON")
             self.conn.execute(f"PRAGMA cache_size=-{int(cache_kib)}")
             if functions is not None:
@@ -945,7 +1002,7 @@ def run_sql_file(path: str | os.PathLike, query: str,
         conn = sqlite3.connect(uri, uri=True, isolation_level=None)
     except sqlite3.Error as exc:
         raise SLRError(f"sql: {exc}") from None
-    guard = harden_connection(conn)
+    guard = harden(conn)
     try:
         if not write:
             conn.set_authorizer(guard.read_only)
@@ -956,9 +1013,9 @@ def run_sql_file(path: str | os.PathLike, query: str,
                          else _bounded_rows(cursor))
     except sqlite3.Error as exc:
         text = str(exc)
-        if guard.denied is not None and "authoriz" in text:
+        if _refused(text, guard) and guard.denied is not None:
             text = guard.denied
-        elif not write and "too big" in text:
+        if not write and "too big" in text:
             text = f"{text} (a read-only statement's values are at most " \
                    f"{READ_ONLY_VALUE_BYTES >> 20} MiB)"
         raise SLRError(f"sql: {text}") from None

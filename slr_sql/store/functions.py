@@ -36,6 +36,7 @@ class Native(enum.Enum):
 
     MIGRATION = "installed by a pg_NNNN migration, same name and number of arguments"
     INTERPRETER_ONLY = "interpreter only on PostgreSQL: goals needing it are not compiled"
+    BUILTIN = "a wrapper of a SQLite built-in; PostgreSQL has its own (store/bounded_builtins.py)"
 
 
 @dataclass(frozen=True)

@@ -593,6 +593,125 @@ class PgReadConnection:
                 self.conn.close()
 
 
+# The most read-only statements of kb.sql that may still run on the server after their
+# callers gave up at their timeouts: a built-in such as LIKE over long values runs to its end
+# before the server looks at statement_timeout (a 6 MB text LIKE a 20,000-character pattern:
+# 258 s past a 0.5 s timeout). Past it, kb.sql answers SLRUnavailable (retryable).
+MOST_ABANDONED = 2
+# Seconds past its timeout a caller waits for the server to stop the statement itself.
+STOP_GRACE = 0.5
+
+
+class DetachedStatements:
+    """The read-only statements of ``kb.sql`` outside a transaction, each on a connection of
+    its own in a thread of its own: the store's connection and lock are never held by them
+    (a writer goes on while one runs), and a caller with a timeout gets SLRTimeout when the
+    timeout (plus :data:`STOP_GRACE`) has passed even if the server has not stopped the
+    statement yet. The abandoned statement's thread closes its connection when the server
+    is done; at most :data:`MOST_ABANDONED` may be abandoned at once. One idle connection
+    is kept for the next statement."""
+
+    def __init__(self, conninfo: str, schema: str, where: str, busy_timeout: float):
+        self.conninfo = conninfo
+        self.schema = schema
+        self.where = where
+        self.busy_timeout = busy_timeout
+        self.lock = threading.Lock()
+        self.idle: Any = None          # a psycopg connection ready for the next statement
+        self.abandoned = 0
+        self.closed = False
+
+    def _connect(self) -> Any:
+        psycopg = _psycopg()
+        raw = psycopg.connect(self.conninfo, autocommit=True)
+        try:
+            raw.execute("SET default_transaction_read_only = on")
+            raw.execute("SET TIME ZONE 'UTC'")
+            raw.execute(f"SET lock_timeout = {int(self.busy_timeout * 1000)}")
+            raw.execute(f"SET search_path = {quote_identifier(self.schema)}")
+        except BaseException:
+            raw.close()
+            raise
+        return raw
+
+    def run(self, statement: str, bound: Any,
+            timeout: float | None) -> tuple[list[str], list[tuple]]:
+        """Run one read-only ``statement`` (already in psycopg's style; ``bound``: its
+        parameters or None) and return ``(column names, rows)``."""
+        with self.lock:
+            if self.closed:
+                raise SLRError("the event store is closed")
+            if self.abandoned >= MOST_ABANDONED:
+                raise SLRUnavailable(
+                    f"{self.where}: {self.abandoned} earlier SQL statements still run on the "
+                    f"server past their timeouts (a built-in over long values runs to its end "
+                    f"before the server stops it); try again later")
+            raw, self.idle = self.idle, None
+        deadline = None if timeout is None else time.monotonic() + timeout
+        outcome: dict[str, Any] = {}
+        finished = threading.Event()
+        state = {"abandoned": False}
+
+        def work() -> None:
+            nonlocal raw
+            psycopg = _psycopg()
+            try:
+                if raw is None:
+                    raw = self._connect()
+                with raw.transaction():
+                    if timeout is not None:
+                        raw.execute(f"SET LOCAL statement_timeout = {_timeout_ms(timeout)}")
+                    cursor = raw.cursor()
+                    cursor.execute(statement, bound, prepare=False)
+                    columns = [d.name for d in cursor.description] if cursor.description \
+                        else []
+                    rows = [tuple(r) for r in cursor.fetchall()] if cursor.description else []
+                outcome["value"] = (columns, rows)
+            except psycopg.Error as exc:
+                error = _error(exc, self.where, self.busy_timeout,
+                               raw is not None and _connected(raw))
+                outcome["error"] = error if deadline is None else _own_deadline(error, deadline)
+            except BaseException as exc:   # handed to the caller, whatever it is
+                outcome["error"] = exc
+            finally:
+                with self.lock:
+                    if state["abandoned"]:
+                        self.abandoned -= 1
+                    keep = (raw is not None and _connected(raw) and not self.closed
+                            and self.idle is None and "value" in outcome)
+                    if keep:
+                        self.idle = raw
+                if not keep and raw is not None:
+                    with suppress(Exception):
+                        raw.close()
+                finished.set()
+
+        threading.Thread(target=work, name="slr-sql-statement", daemon=True).start()
+        if not finished.wait(None if timeout is None else timeout + STOP_GRACE):
+            with self.lock:
+                if not finished.is_set():
+                    state["abandoned"] = True
+                    self.abandoned += 1
+            if state["abandoned"]:
+                raise SLRTimeout(
+                    f"query timed out (the server had not stopped the statement "
+                    f"{timeout + STOP_GRACE:g} s after it began; it is left to finish on "
+                    f"its own connection)")
+            finished.wait()
+        if "error" in outcome:
+            raise outcome["error"]
+        return outcome["value"]
+
+    def close(self) -> None:
+        """Close the idle connection; a running statement's thread closes its own."""
+        with self.lock:
+            self.closed = True
+            raw, self.idle = self.idle, None
+        if raw is not None:
+            with suppress(Exception):
+                raw.close()
+
+
 class PgDatabase:
     """The connection of one store in a PostgreSQL schema, with its lock, transaction
     depth and clock (the counterpart of :class:`~slr_sql.store.connection.Database`)."""
@@ -614,6 +733,9 @@ class PgDatabase:
         self.tx_depth = 0
         self.closed = False
         self.rollback_listeners: list[Callable[[], None]] = []
+        # (depth registered at, callback): called once the outermost transaction committed
+        # and let go of the lock; dropped with the (nested) transaction that rolls back
+        self.commit_callbacks: list[tuple[int, Callable[[], None]]] = []
         self.open_streams: weakref.WeakSet = weakref.WeakSet()
         self.deadline: float | None = None
         self.functions: SqlFunctions | None = None  # install_functions
@@ -627,6 +749,7 @@ class PgDatabase:
         except psycopg.Error as exc:
             raise SLRError(f"{self.path}: cannot connect ({_first_line(exc)})") from None
         self.conn = PgConnection(raw, self.path, busy_timeout)
+        self.detached = DetachedStatements(conninfo, schema, self.path, busy_timeout)
         try:
             try:
                 raw.execute(f"SET lock_timeout = {int(busy_timeout * 1000)}")
@@ -789,6 +912,7 @@ class PgDatabase:
                     self.tx_depth = 0
                 self.suspend_streams()
             finally:
+                self.detached.close()
                 self.conn.close()
 
     def check_open(self) -> None:
@@ -798,9 +922,11 @@ class PgDatabase:
     # ------------------------------------------------------------------ transactions
 
     @contextmanager
-    def transaction(self, wait: bool = True) -> Iterator[PgDatabase]:
+    def transaction(self, wait: bool = True, listeners: bool = True) -> Iterator[PgDatabase]:
         """(:meth:`Database.transaction`) ``wait=False``: a lock another session holds is
-        not waited for (SLRBusy at once), nested or not: work a reader may leave for later."""
+        not waited for (SLRBusy at once), nested or not: work a reader may leave for later.
+        ``listeners=False``: a rollback does not call the rollback listeners."""
+        committed: list[tuple[int, Callable[[], None]]] = []
         with self.lock:
             self.check_open()
             depth = self.tx_depth
@@ -821,13 +947,15 @@ class PgDatabase:
                     conn.execute(f"SET LOCAL lock_timeout = {int(self.busy_timeout * 1000)}")
             except BaseException:
                 self.tx_depth = depth
+                self._drop_commit_callbacks(depth)
                 try:
                     if depth == 0:
                         conn.rollback()
                     else:
                         conn.roll_back_to(f"slr_sp{depth}")
                 finally:
-                    self._rolled_back()
+                    if listeners:
+                        self._rolled_back()
                 raise
             self.tx_depth = depth
             try:
@@ -836,21 +964,49 @@ class PgDatabase:
                 else:
                     conn.release_later(f"slr_sp{depth}")
             except BaseException:
+                self._drop_commit_callbacks(depth)
                 if depth == 0:
                     conn.rollback()
-                self._rolled_back()
+                if listeners:
+                    self._rolled_back()
                 raise
+            if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
+                committed, self.commit_callbacks = self.commit_callbacks, []
+        for _depth, callback in committed:
+            callback()
 
     def _rolled_back(self) -> None:
         for listener in self.rollback_listeners:
             listener()
+
+    def after_commit(self, callback: Callable[[], None]) -> None:
+        """(:meth:`Database.after_commit`)"""
+        with self.lock:
+            if self.tx_depth:
+                self.commit_callbacks.append((self.tx_depth, callback))
+                return
+        callback()
+
+    def _drop_commit_callbacks(self, depth: int) -> None:
+        self.commit_callbacks[:] = [(d, c) for d, c in self.commit_callbacks if d <= depth]
+
 
     # ------------------------------------------------------------------ raw SQL
 
     def sql(self, query: str, params: Iterable[Any] = (), write: bool = False,
             timeout: float | None = None) -> tuple[list[str], list[tuple]]:
         """Run one statement as given (``slr sql``): read-only (a READ ONLY transaction)
-        unless ``write``; ``timeout`` seconds as ``statement_timeout``."""
+        unless ``write``; ``timeout`` seconds as ``statement_timeout``. A read-only statement
+        outside a transaction runs on a connection of its own (:class:`DetachedStatements`):
+        it never holds the store's lock, and its caller stops waiting at the timeout."""
+        if not write:
+            with self.lock:
+                self.check_open()
+                detached = self.tx_depth == 0
+            if detached:
+                bound = bound_parameters(params)
+                return self.detached.run(
+                    self.dialect.statement(query) if bound else query, bound or None, timeout)
         with self.lock:
             self.check_open()
             psycopg = _psycopg()

@@ -39,7 +39,12 @@ from ..errors import SLRError, SLRUnavailable
 from .connection import Database, DatabaseError
 from .sqltext import RESERVED_PREFIXES, SAFE_IDENTIFIER, SQL_KEYWORDS, quote_identifier
 
-__all__ = ["EventType", "EventTables"]
+__all__ = ["EventType", "EventTables", "START_ORDER_RETRY"]
+
+# Seconds of the store's clock after a start-order build met another session's lock before
+# a reader tries that table's build again (a try is a round trip and a failed savepoint;
+# the readers in between read without the index, as they do while it is being built).
+START_ORDER_RETRY = 0.1
 
 
 class EventType:
@@ -158,6 +163,9 @@ class EventTables:
         # tables whose start-ordered indexes this connection may not build (refused for
         # good): looked for in the catalog only, not tried again by every reader
         self._refused: set[str] = set()
+        # tables whose build last met another session's lock: the store clock's time then
+        # (not tried again until it moved on by START_ORDER_RETRY)
+        self._busy: dict[str, float] = {}
         # The most data arguments an event can have: its table has 5 more columns (seq,
         # t_start, t_end, arrival, robot) and the engine refuses tables wider than its limit.
         self.max_arity = db.max_columns - 5
@@ -295,9 +303,13 @@ class EventTables:
         one: should that roll back, the reload of the types forgets what was built. Where
         no index can be built, the answer is False and the caller reads without naming the
         index: slower, never wrong. A build is never waited for (another connection's writer
-        holds the lock: the next reader tries again); one this connection may not make (not
+        holds the lock: a later reader tries again); one this connection may not make (not
         the table's owner, a read-only file) is not tried again, only looked for in the
-        catalog.
+        catalog. A failed build takes back only itself: the store's rollback listeners are
+        not called (nothing they know of changed). One that met another session's lock is
+        not tried again before the store's clock has moved on by :data:`START_ORDER_RETRY`
+        seconds (on a server a try is a round trip and a 1 ms lock wait): the readers in
+        between read without the index.
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None); _ = s.declare_type("c", 1, start_order=False)
@@ -314,25 +326,33 @@ class EventTables:
         if set(wanted) <= db.index_names(event_type.table):
             event_type.start_order = True
             return True
-        if event_type.table in self._refused:
+        table = event_type.table
+        if table in self._refused:
             return False
+        busy_since = self._busy.get(table)
+        if busy_since is not None and 0.0 <= db.clock.now() - busy_since < START_ORDER_RETRY:
+            return False   # (a clock gone back, or not a number, tries again)
         try:
             # (not waiting for another connection's writer: a reader in start order must
             # not wait the busy timeout on every lookup while a writer holds its lock, and
             # a builder inside a transaction must not deadlock with one; it reads without
-            # the index, and the next reader tries again)
-            with db.transaction(wait=False):
+            # the index, and a reader tries again once the clock moved on. Its rollback
+            # undoes only the build: the listeners -- types forgetting their start order,
+            # the event rules reading their pending summaries again -- are not called)
+            with db.transaction(wait=False, listeners=False):
                 # (not the types' lock: a writer may hold it while it waits for this table)
-                db.lock_named(f"start order {event_type.table}")
+                db.lock_named(f"start order {table}")
                 self._create_start_indexes(event_type)
         except (DatabaseError, SLRError) as exc:
             if db.closed:
                 raise
             if _refused_for_good(exc):
-                # (every try a failed transaction, whose rollback makes every type forget
-                # what it knew: one is enough)
-                self._refused.add(event_type.table)
+                # (a connection that may not build them never will: one try is enough)
+                self._refused.add(table)
+            else:
+                self._busy[table] = db.clock.now()
             return False
+        self._busy.pop(table, None)
         # (a rollback of an enclosing transaction reloads the types: this one is gone then)
         current = self.types.get((event_type.name, event_type.arity))
         if current is not None:

@@ -1,0 +1,105 @@
+"""A read-only kb.sql on PostgreSQL runs on a connection of its own (DetachedStatements in
+slr_sql/store/postgres.py): a statement the server does not stop at its timeout (LIKE over
+long values runs to its end first) neither holds the store for writers nor its caller past
+the timeout, and only a few may be left running at once."""
+from __future__ import annotations
+
+import threading
+import time
+
+import psycopg
+import pytest
+
+import slr_sql
+from slr_sql import SLRTimeout, SLRUnavailable
+from slr_sql.store import postgres as pg_backend
+
+# ~4 s of the server's CPU here (2 ns per character of the text times the pattern's), and
+# no check of statement_timeout until it ends
+LONG_LIKE = "SELECT repeat('0', 2000000) LIKE ('%' || repeat('0', 1000) || '1') AS tag_{}"
+
+
+def _running(admin_url: str, tag: str) -> bool:
+    with psycopg.connect(admin_url, autocommit=True) as conn:
+        return bool(conn.execute(
+            "SELECT count(*) FROM pg_stat_activity WHERE state = 'active' AND query LIKE %s",
+            (f"%AS tag_{tag}%",)).fetchone()[0])
+
+
+def _wait_until_done(admin_url: str, tag: str, seconds: float = 120.0) -> None:
+    """Leave the server idle for the tests after this one (a deadline, polling its state)."""
+    deadline = time.monotonic() + seconds
+    while _running(admin_url, tag):
+        assert time.monotonic() < deadline, "the long statement never ended"
+        time.sleep(0.05)
+
+
+@pytest.fixture
+def kb(postgres_url):
+    with slr_sql.open(postgres_url, clock=slr_sql.ManualClock(10.0)) as store:
+        yield store
+
+
+def test_a_statement_the_server_does_not_stop_leaves_the_store_and_its_caller_free(
+        kb, postgres_server):
+    admin = postgres_server[1]
+    with pytest.raises(SLRTimeout, match="left to finish on its own connection"):
+        kb.sql(LONG_LIKE.format("a"), timeout=0.2)
+    # the caller is back while the server still runs it...
+    assert _running(admin, "a")
+    # ...and the store's own connection serves writers and readers meanwhile
+    kb.add("seg(cup1)^1")
+    assert kb.query("seg(X)^T") == [{"X": "cup1", "T": 1.0}]
+    assert kb.sql("SELECT arg1 FROM seg")[1] == [("cup1",)]
+    _wait_until_done(admin, "a")
+    assert kb.sql("SELECT 1 AS one", timeout=5)[1] == [(1,)]
+
+
+def test_only_a_few_abandoned_statements_may_run_at_once(kb, postgres_server, monkeypatch):
+    admin = postgres_server[1]
+    monkeypatch.setattr(pg_backend, "MOST_ABANDONED", 1)
+    with pytest.raises(SLRTimeout):
+        kb.sql(LONG_LIKE.format("b"), timeout=0.2)
+    with pytest.raises(SLRUnavailable, match="still run on the server past their timeouts"):
+        kb.sql("SELECT 1 AS one")
+    kb.add("seg(cup1)^1")       # writers are not held up
+    _wait_until_done(admin, "b")
+    # the abandoned statement's thread gave its slot back when the server answered
+    deadline = time.monotonic() + 30
+    while True:
+        try:
+            assert kb.sql("SELECT count(*) FROM seg")[1] == [(1,)]
+            break
+        except SLRUnavailable:
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+
+
+def test_inside_a_transaction_a_statement_sees_the_transactions_own_writes(kb):
+    kb.add("seg(cup1)^1")
+    with kb.store.transaction():
+        kb.store.execute("DELETE FROM seg")
+        assert kb.sql("SELECT count(*) FROM seg")[1] == [(0,)]
+    assert kb.sql("SELECT count(*) FROM seg")[1] == [(0,)]
+
+
+def test_read_only_statements_in_many_threads_answer_alike(kb):
+    kb.add_many([("seg", [f"cup{i}"], float(i), float(i)) for i in range(50)])
+    answers: list = []
+
+    def read() -> None:
+        for _ in range(10):
+            answers.append(kb.sql("SELECT count(*) FROM seg WHERE arg1 LIKE 'cup%'",
+                                  timeout=10)[1])
+
+    threads = [threading.Thread(target=read) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert answers == [[(50,)]] * 40
+
+
+def test_a_write_through_read_only_sql_is_still_refused(kb):
+    with pytest.raises(slr_sql.SLRError, match="read-only"):
+        kb.sql("DELETE FROM slr_meta")
