@@ -46,7 +46,7 @@ def _schema(database: str) -> str:
     return database + ("&" if "?" in database else "?") + f"schema=e{next(_SCHEMAS)}"
 
 
-@settings(max_examples=30 * FACTOR, **SETTINGS)
+@settings(max_examples=20 * FACTOR, **SETTINGS)
 @given(cepdiff.rules(), cepdiff.streams(), st.data())
 def test_every_operator_and_policy_on_postgres_equals_the_reference(database, rule, events,
                                                                     data):
@@ -62,7 +62,7 @@ def test_where_run_by_the_interpreter_on_postgres_equals_the_reference(database,
                                  where=_schema(database))
 
 
-@settings(max_examples=15 * FACTOR, **SETTINGS)
+@settings(max_examples=10 * FACTOR, **SETTINGS)
 @given(cepdiff.rules(), cepdiff.streams(), st.data())
 def test_any_arrival_order_on_postgres_gives_the_in_order_complex_events(database, rule,
                                                                          events, data):
@@ -73,7 +73,7 @@ def test_any_arrival_order_on_postgres_gives_the_in_order_complex_events(databas
     assert cepdiff._typed(first) == cepdiff._typed(again), cepdiff.rule_text(rule)
 
 
-@settings(max_examples=15 * FACTOR, **SETTINGS)
+@settings(max_examples=10 * FACTOR, **SETTINGS)
 @given(cepdiff.two_type_rules(), cepdiff.ab_points(), st.data())
 def test_a_batch_on_postgres_derives_what_its_events_derive_one_by_one_with_buffers(
         database, rule, events, data):
@@ -151,7 +151,7 @@ def test_two_writers_on_one_sqlite_file_detect_what_the_reference_detects(tmp_pa
     _shared_equals_the_reference(str(tmp_path_factory.mktemp("w") / "s.db"), case)
 
 
-@settings(max_examples=15 * FACTOR, **SETTINGS)
+@settings(max_examples=10 * FACTOR, **SETTINGS)
 @given(shared_streams())
 def test_two_writers_on_postgres_detect_what_the_reference_detects(database, case):
     _shared_equals_the_reference(_schema(database), case)

@@ -92,7 +92,7 @@ def _answers(kb, goal: str, interpreted: bool, **options) -> list:
         kb.sql_enabled = True
 
 
-@settings(max_examples=15 * FACTOR, deadline=None,
+@settings(max_examples=10 * FACTOR, deadline=None,
           suppress_health_check=list(HealthCheck))
 @given(fleets())
 def test_a_fleet_asked_about_one_robot_answers_as_its_own_store(database, tmp_path_factory,

@@ -35,7 +35,7 @@ from slr_sql import ManualClock, SLREvaluationError
 from slr_sql.terms import format_term
 
 # a longer hunt: SLR_DIFF_EXAMPLES=500 (with HYPOTHESIS_PROFILE=explore for fresh examples)
-EXAMPLES = int(os.environ.get("SLR_DIFF_EXAMPLES", "40"))
+EXAMPLES = int(os.environ.get("SLR_DIFF_EXAMPLES", "25"))
 TYPES = {"p": 2, "q": 1}
 # keys of colliding kinds: an atom that reads as a number or as JSON, a string, 1 and 1.0
 KEYS = ["a", "b", "a", "b", "'1'", '"s"', "1", "1.0", "'[x'"]
