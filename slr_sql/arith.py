@@ -73,7 +73,9 @@ def _div(a, b):
             return a // b
         return a / b
     if b == 0:
-        raise evaluation_error("zero_divisor")
+        # a float zero over zero is no number (SWI-Prolog: undefined), anything else over
+        # zero a division by zero
+        raise evaluation_error("undefined" if a == 0 else "zero_divisor")
     return a / b
 
 

@@ -14,7 +14,7 @@ import math
 import sys
 from typing import Any, Callable, Iterator
 
-from .arith import (evaluate, evaluation_error, instantiation_error, iso_error,
+from .arith import (BINARY, evaluate, evaluation_error, instantiation_error, iso_error,
                     resource_error, type_error)
 from .unify import bound_args, copy_term, unify, undo, unify_event_row
 from .errors import SLRError, SLREvaluationError, SLRSyntaxError
@@ -943,8 +943,25 @@ def _unify_extreme(m, out, items, better) -> bool:
     return best is not None and m.unify(out, best)
 
 
-DET[("max_list", 2)] = lambda m, a: _unify_extreme(m, a[1], _numbers(a[0]), lambda x, y: x > y)
-DET[("min_list", 2)] = lambda m, a: _unify_extreme(m, a[1], _numbers(a[0]), lambda x, y: x < y)
+def _fold_arith(name: str, items: list) -> Any:
+    """The arithmetic max/min of the items, folded left as SWI-Prolog's max_list/2 and
+    aggregate_all(max(X), ..) do (``max(1, 1.0)`` is 1.0, in either order); None if empty."""
+    if not items:
+        return None
+    pick = BINARY[name]
+    value = items[0]
+    for x in items[1:]:
+        value = pick(value, x)
+    return value
+
+
+def _unify_fold(m, out, name: str, items: list) -> bool:
+    value = _fold_arith(name, items)
+    return value is not None and m.unify(out, value)
+
+
+DET[("max_list", 2)] = lambda m, a: _unify_fold(m, a[1], "max", _numbers(a[0]))
+DET[("min_list", 2)] = lambda m, a: _unify_fold(m, a[1], "min", _numbers(a[0]))
 DET[("max_member", 2)] = lambda m, a: _unify_extreme(
     m, a[0], proper_list(a[1]), lambda x, y: compare_terms(x, y) > 0)
 DET[("min_member", 2)] = lambda m, a: _unify_extreme(
@@ -1035,7 +1052,7 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
 
     def take():
         if not args:
-            raise iso_error(Struct("format", (String("not enough arguments"),)))
+            raise iso_error(Struct("format", (Atom("not enough arguments"),)))
         return args.pop(0)
 
     while i < n:
@@ -1222,10 +1239,12 @@ def _aggregate_all(m: "Machine", args, nxt):
     out = args[2]
     if type(spec) is Atom and spec == "count":
         return m.push_collect(NIL, goal, lambda m, r, nxt: nxt if m.unify(out, len(r)) else False, nxt)
+    if type(spec) is Struct and spec.name in ("max", "min") and len(spec.args) == 2:
+        return _aggregate_witness(m, spec, goal, out, nxt)
     if type(spec) is not Struct or len(spec.args) != 1:
         if type(spec) is Var:
             raise instantiation_error()
-        raise _err_domain("aggregate_spec", spec)
+        raise _err_domain("aggregate_template", spec)
     kind = spec.name
     template = spec.args[0]
 
@@ -1253,16 +1272,37 @@ def _aggregate_all(m: "Machine", args, nxt):
                         best = x
                 value = Struct(kind, (deref(best).args[0], deref(best).args[1]))
             else:
-                nums = [evaluate(x) for x in results]
-                value = nums[0]
-                for x in nums[1:]:
-                    if (x > value) if kind == "max" else (x < value):
-                        value = x
+                value = _fold_arith(kind, [evaluate(x) for x in results])
         else:
-            raise _err_domain("aggregate_spec", spec)
+            raise _err_domain("aggregate_template", spec)
         return nxt if m.unify(out, value) else False
 
     return m.push_collect(template, goal, finish, nxt)
+
+
+def _aggregate_witness(m: "Machine", spec: Struct, goal, out, nxt):
+    """``aggregate_all(max(X, W), Goal, max(Max, Witness))`` (and min) as SWI-Prolog's
+    library(aggregate): the first solution whose X is strictly better than every earlier
+    one, X kept as it was found; the first X must be a number."""
+    kind = spec.name
+
+    def finish(m, results, nxt):
+        if not results:
+            return False
+        best = deref(results[0])
+        first = deref(best.args[0])
+        if type(first) is Var:
+            raise instantiation_error()
+        if type(first) not in (int, float):
+            raise type_error("number", first)
+        for r in results[1:]:
+            r = deref(r)
+            a, b = evaluate(r.args[0]), evaluate(best.args[0])
+            if (a > b) if kind == "max" else (a < b):
+                best = r
+        return nxt if m.unify(out, Struct(kind, (best.args[0], best.args[1]))) else False
+
+    return m.push_collect(Struct("w", (spec.args[0], spec.args[1])), goal, finish, nxt)
 
 
 def _bagof(m: "Machine", args, nxt, is_set: bool):
@@ -1874,8 +1914,10 @@ append(ListOfLists, List) :- '$append_all'(ListOfLists, List).
 '$append_all'([L|Ls], As) :- append(L, Ws, As), '$append_all'(Ls, Ws).
 nth0(I, L, E) :- integer(I), !, I >= 0, '$nth_det'(I, L, E).
 nth0(I, L, E) :- var(I), !, '$nth_gen'(L, E, 0, I).
+nth0(I, _, _) :- throw(error(type_error(integer, I), _)).
 nth1(I, L, E) :- integer(I), !, I >= 1, I0 is I-1, '$nth_det'(I0, L, E).
 nth1(I, L, E) :- var(I), !, '$nth_gen'(L, E, 1, I).
+nth1(I, _, _) :- throw(error(type_error(integer, I), _)).
 '$nth_det'(0, [E|_], E) :- !.
 '$nth_det'(I, [_|T], E) :- I1 is I-1, '$nth_det'(I1, T, E).
 '$nth_gen'([E|_], E, B, B).

@@ -30,6 +30,7 @@ from functools import lru_cache
 from json.encoder import encode_basestring as _quote  # C-accelerated; keeps non-ASCII
 from typing import Any
 
+from .arith import BINARY
 from .builtins import BuiltinMachine, call_python_pred, sorted_unique
 from .encoding import INT64_MAX, INT64_MIN, decode, encode, encode_json
 from .sqlcompile import SITES, ColRef, resolve
@@ -141,22 +142,22 @@ class _Sum:
 
 
 class _Max:
-    better = staticmethod(lambda x, v: x > v)
+    # Prolog's max/2 (max(1, 1.0) is 1.0 in either order), folded as aggregate_all does
+    pick = staticmethod(BINARY["max"])
 
     def __init__(self):
         self.v = None
 
     def step(self, x):
         x = _num(x)
-        if self.v is None or self.better(x, self.v):
-            self.v = x
+        self.v = x if self.v is None else self.pick(self.v, x)
 
     def finalize(self):
         return self.v
 
 
 class _Min(_Max):
-    better = staticmethod(lambda x, v: x < v)
+    pick = staticmethod(BINARY["min"])
 
 
 class _Setof:

@@ -129,8 +129,10 @@ def _eval_interval(tree, chosen, k, events=()):
 
 
 def _values(args):
-    """Arguments in SQLite's order: by value, then by SQL type (integer before real)."""
-    return tuple((v, "integer" if type(v) is int else "real") for v in args)
+    """Arguments in SQLite's order: numbers by value, then by SQL type (integer before
+    real), before text (atoms)."""
+    return tuple((1, v, "text") if isinstance(v, str)
+                 else (0, v, "integer" if type(v) is int else "real") for v in args)
 
 
 def _operand(x, b):
@@ -352,11 +354,12 @@ def _event_text(ev):
     return f"{name}({', '.join(repr(a) for a in args)})^{stamp}"
 
 
-def run(rule, events, order, cuts, marks, one_by_one, buffer=""):
+def run(rule, events, order, cuts, marks, one_by_one, buffer="", where=None):
     """Add ``events`` in ``order`` (batches cut at ``cuts``), with completeness marks when
-    ``marks``; then move the clock past everything. Returns the stored complex events."""
+    ``marks``; then move the clock past everything. Returns the stored complex events of
+    a store at ``where`` (in memory by default)."""
     clock = ManualClock(0.0)
-    with slr_sql.open(clock=clock) as kb:
+    with slr_sql.open(where, clock=clock) as kb:
         policy = rule["policy"]
         kb.load(f":- consumption({policy}).\n" + rule_text(rule)
                 + ("\n" + WHERE_PROGRAM if rule.get("interpret") else "") + buffer)
@@ -384,6 +387,10 @@ def run(rule, events, order, cuts, marks, one_by_one, buffer=""):
                     start = cut
         clock.set(100.0)
         arity = len(rule["head"])
+        if where is not None:
+            # (PostgreSQL's columns are typed text: read the values as the store decodes them)
+            return sorted(((tuple(args), s, e) for args, s, e, _ in kb.store.scan("r", arity)),
+                          key=repr)
         cols = ", ".join([f"arg{i + 1}" for i in range(arity)] + ["t_start", "t_end"])
         _, rows = kb.sql(f"SELECT {cols} FROM r")
     return sorted(((tuple(r[:arity]), r[arity], r[arity + 1]) for r in rows), key=repr)
@@ -401,15 +408,16 @@ def test_compiled_detection_equals_the_reference(rule, events, data):
     equals_the_reference(rule, events, data, may_add_one_by_one=True)
 
 
-def equals_the_reference(rule, events, data, may_add_one_by_one=False):
+def equals_the_reference(rule, events, data, may_add_one_by_one=False, where=None):
     """The rule's complex events over ``events`` in a drawn arrival order, batches and marks
-    (and, if allowed, added one by one) are the reference evaluator's."""
+    (and, if allowed, added one by one) are the reference evaluator's, in a store at
+    ``where`` (in memory by default)."""
     order = data.draw(st.permutations(range(len(events))), label="arrival order")
     cuts = data.draw(st.lists(st.integers(0, 2 * len(events)), max_size=3), label="batches")
     marks = data.draw(st.booleans(), label="marks")
     one = may_add_one_by_one and data.draw(st.integers(0, 4), label="one by one") == 0
     expected = reference(rule, events)
-    got = run(rule, events, order, cuts, marks, one)
+    got = run(rule, events, order, cuts, marks, one, where=where)
     assert _typed(got) == _typed([(tuple(h), s, e) for h, s, e in expected]), rule_text(rule)
 
 

@@ -1,0 +1,140 @@
+"""A fleet store asked about one robot answers as that robot's own store (SPEC §10).
+
+tests/test_fleet.py checks queries per robot and origin/2 on one hand-made fleet (SQL ==
+interpreter; PostgreSQL == SQLite on its fixed goals). Here hypothesis draws the robots'
+streams (points and intervals, ties, some events of the fleet's own with no robot), shipped
+in random batches to a fleet store in a SQLite file and to one in a PostgreSQL schema, and
+goals over event goals, prev, next and a rule reading prev. For each goal G and robot r,
+on both fleet stores, compiled and interpreted:
+
+* ``fleet.query(G, robot=r)`` == ``G`` on r's own store (every event goal, prev and next of
+  G, also inside rules, sees r's events only);
+* ``origin(r, G)`` on the fleet == ``G`` on r's store, for G an event goal, prev or next;
+* ``origin(R, G)`` with R unbound == r's answers with ``R = r``, robot by robot in name order;
+* the PostgreSQL fleet's answers to G == the SQLite fleet's.
+"""
+from __future__ import annotations
+
+import itertools
+import os
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+import slr_sql
+from slr_sql import fleet
+
+ROBOTS = ["r1", "r2"]
+PROGRAM = "last_at(P, W)^T :- prev(seen(P, W)^_, T).\nwhere_now(P, W) :- last_at(P, W)^3.\n"
+FACTOR = int(os.environ.get("SLR_DIFF_FACTOR", "1"))   # SLR_DIFF_FACTOR=20: a longer hunt
+_SCHEMAS = itertools.count()
+
+
+@pytest.fixture(scope="module")
+def database(postgres_server):
+    """One database for the module's examples, a schema each."""
+    from conftest import postgres_database
+    return postgres_database(postgres_server[1])
+
+
+def opened(where, **options):
+    return slr_sql.open(where, clock=slr_sql.ManualClock(1000.0), **options)
+
+
+event = st.tuples(st.sampled_from(["pallet7", "pallet8"]), st.sampled_from(["dock", "aisle", 1]),
+                  st.sampled_from([0.0, 1.0, 2.0, 2.0, 3.0]), st.sampled_from([0.0, 0.0, 1.0]))
+
+
+@st.composite
+def goals(draw):
+    """An event goal, prev or next (may go inside origin/2), or any goal (may not)."""
+    p = draw(st.sampled_from(["P", "pallet7"]))
+    stamp = draw(st.sampled_from(["T", "[S, E]"]))
+    atom = f"seen({p}, W)^{stamp}"
+    kind = draw(st.integers(0, 6))
+    t = draw(st.sampled_from(["0", "1.5", "2", "3", "inf"]))
+    a, b = draw(st.sampled_from([("0", "inf"), ("1", "3"), ("2", "2"), ("1.5", "inf")]))
+    if kind == 0:
+        return True, atom
+    if kind == 1:
+        return True, f"prev({atom}, {t})"
+    if kind == 2:
+        return True, f"prev({atom}, [{a}, {b}])"
+    if kind == 3:
+        return True, draw(st.sampled_from([f"next({atom}, [{a}, {b}])", f"next({atom}, {a}, {b})"]))
+    if kind == 4:
+        return False, draw(st.sampled_from([f"last_at({p}, W)^{t}", "where_now(P, W)"]))
+    if kind == 5:
+        return False, f"findall(W-{stamp}, {atom}, L)"
+    return False, "seen(P, W)^T, prev(seen(P, W2)^T2, T)"
+
+
+@st.composite
+def fleets(draw):
+    streams = {r: draw(st.lists(event, max_size=6)) for r in ROBOTS}
+    own = draw(st.lists(event, max_size=2))
+    batch = draw(st.integers(1, 4))
+    return streams, own, batch, draw(st.lists(goals(), min_size=1, max_size=4))
+
+
+def _text(ev) -> str:
+    p, w, s, d = ev
+    return f"seen({p}, {w})^" + (repr(s) if d == 0 else f"[{s!r}, {s + d!r}]")
+
+
+def _answers(kb, goal: str, interpreted: bool, **options) -> list:
+    kb.sql_enabled = not interpreted
+    try:
+        return [{k: (type(v).__name__, v) for k, v in a.items()}
+                for a in kb.query(goal, **options)]
+    finally:
+        kb.sql_enabled = True
+
+
+@settings(max_examples=10 * FACTOR, deadline=None,
+          suppress_health_check=list(HealthCheck))
+@given(fleets())
+def test_a_fleet_asked_about_one_robot_answers_as_its_own_store(database, tmp_path_factory,
+                                                                 case):
+    streams, own_events, batch, queries = case
+    folder: Path = tmp_path_factory.mktemp("fleet")
+    fleets_ = [str(folder / "fleet.db"),
+               database + ("&" if "?" in database else "?") + f"schema=f{next(_SCHEMAS)}"]
+    robots = {}
+    try:
+        for r in ROBOTS:
+            robots[r] = opened(folder / f"{r}.db", robot=r)
+            robots[r].load(PROGRAM)
+            if streams[r]:
+                assert robots[r].add_many([_text(ev) for ev in streams[r]]) == []
+        for where in fleets_:
+            for r in ROBOTS:
+                fleet.push(str(folder / f"{r}.db"), where, batch=batch)
+            with opened(where) as kb:
+                kb.load(PROGRAM)
+                if own_events:
+                    assert kb.add_many([_text(ev) for ev in own_events]) == []
+        answers_of = {}
+        for where in fleets_:
+            with opened(where) as kb:
+                for event_goal, goal in queries:
+                    for interpreted in (False, True):
+                        context = f"{where.split('?')[0]}: {goal} (interpreted: {interpreted})"
+                        answers_of.setdefault(goal, _answers(kb, goal, interpreted))
+                        assert _answers(kb, goal, interpreted) == answers_of[goal], context
+                        for r in ROBOTS:
+                            mine = _answers(robots[r], goal, interpreted)
+                            assert _answers(kb, goal, interpreted, robot=r) == mine, \
+                                f"robot={r} {context}"
+                            if event_goal:
+                                assert _answers(kb, f"origin({r}, {goal})", interpreted) == \
+                                    mine, f"origin({r}, ..) {context}"
+                        if event_goal:
+                            each = [{"R": ("Atom", r), **a} for r in ROBOTS
+                                    for a in _answers(robots[r], goal, interpreted)]
+                            assert _answers(kb, f"origin(R, {goal})", interpreted) == each, \
+                                f"origin(R, ..) {context}"
+    finally:
+        for kb in robots.values():
+            kb.close()
