@@ -13,8 +13,6 @@ SWI-Prolog: the same answers in the same order, or the same ISO error after the 
 """
 from __future__ import annotations
 
-import tempfile
-from pathlib import Path
 
 import pytest
 import test_swi_differential as swidiff
@@ -176,15 +174,8 @@ LEFT_ALONE = {
 
 @pytest.fixture(scope="module")
 def swipl():
-    if not swidiff.HAVE_SWIPL:
-        pytest.fail("swipl (SWI-Prolog) is not installed: this differential test needs it "
-                    "(apt-get install swi-prolog-nox)")
-    with tempfile.TemporaryDirectory(prefix="slr_swi_") as d:
-        s = swidiff.Swipl(Path(d))
-        try:
-            yield s
-        finally:
-            s.close()
+    with swidiff.live_swipl() as s:
+        yield s
 
 
 @pytest.mark.parametrize("goal", GOALS)

@@ -270,6 +270,21 @@ def corpus_example(entry: dict) -> tuple:
     return entry["program"], entry["events"], entry["swi_program"], entry["queries"]
 
 
+@contextlib.contextmanager
+def live_swipl():
+    """A live SWI-Prolog for a module's tests: a failure that says how to install it where
+    it is not (the modules that need a live one have no committed answers to fall back on)."""
+    if not HAVE_SWIPL:
+        pytest.fail("swipl (SWI-Prolog) is not installed: this differential test needs it "
+                    "(apt-get install swi-prolog-nox)")
+    with tempfile.TemporaryDirectory(prefix="slr_swi_") as d:
+        s = Swipl(Path(d))
+        try:
+            yield s
+        finally:
+            s.close()
+
+
 @pytest.fixture(scope="module")
 def swipl():
     """A live SWI-Prolog, or the committed answers where it is not installed."""

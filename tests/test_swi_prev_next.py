@@ -373,15 +373,8 @@ def database(postgres_server):
 
 @pytest.fixture(scope="module")
 def swipl():
-    if not swidiff.HAVE_SWIPL:
-        pytest.fail("swipl (SWI-Prolog) is not installed: this differential test needs it "
-                    "(apt-get install swi-prolog-nox)")
-    with tempfile.TemporaryDirectory(prefix="slr_swi_") as d:
-        s = swidiff.Swipl(Path(d))
-        try:
-            yield s
-        finally:
-            s.close()
+    with swidiff.live_swipl() as s:
+        yield s
 
 
 @settings(max_examples=EXAMPLES, deadline=None,
