@@ -291,12 +291,8 @@ def swipl():
     if not HAVE_SWIPL:
         yield CorpusOracle(CORPUS)
         return
-    with tempfile.TemporaryDirectory(prefix="slr_swi_") as d:
-        s = Swipl(Path(d))
-        try:
-            yield s
-        finally:
-            s.close()
+    with live_swipl() as s:
+        yield s
 
 
 # ---------------------------------------------------------------------------------------------
