@@ -878,8 +878,14 @@ def describe_types(kb: KnowledgeBase, wanted: Iterable[str] = ()) -> list[TypeSu
         types.setdefault(key, store.table_for(*key) or "-")
     chosen = []
     for spec in wanted:
-        name, _, arity = spec.partition("/")
+        # NAME/ARITY splits at the last slash, and only before digits: a type whose name
+        # holds a slash ('a/b') is chosen by a/b/1, or by its whole name a/b
+        name, slash, arity = spec.rpartition("/")
+        if not (slash and arity.isdigit()):
+            name, arity = spec, ""
         found = [k for k in types if k[0] == name and (not arity or str(k[1]) == arity)]
+        if not found and arity:
+            found = [k for k in types if k[0] == spec]
         if not found:
             raise slr_sql.SLRError(f"no event type {spec} in the store (known: "
                                    f"{', '.join(sorted(f'{n}/{a}' for n, a in types)) or 'none'})")

@@ -84,6 +84,15 @@ def test_describe_of_an_unknown_type_names_the_known_ones(store):
     assert r.stderr == "error: no event type seg in the store (known: big/1, obj/3, seen/1)\n"
 
 
+@pytest.mark.parametrize("spec", ["a/b", "a/b/1"])
+def test_describe_chooses_a_type_whose_name_holds_a_slash(tmp_path, spec):
+    db = str(tmp_path / "robot.db")
+    assert slr("add", db, "'a/b'(1)^1", "a(2)^2").returncode == 0
+    r = slr("describe", db, spec)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines()[0].startswith("a/b/1  (table ") and "a/1 " not in r.stdout
+
+
 @pytest.mark.parametrize("command", [["programs"], ["unload", "tea"], ["describe"]])
 def test_reading_commands_need_an_existing_store(tmp_path, command):
     missing = str(tmp_path / "missing.db")
