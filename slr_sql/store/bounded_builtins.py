@@ -107,14 +107,8 @@ class _Builtins:
     def bounded(self, name: str, text: Any, pattern: Any) -> None:
         """Refuse a call of ``name`` whose work (``text``'s length times ``pattern``'s) is
         over :data:`MOST_WORK`."""
-        work = _length(text) * _length(pattern)
-        if work > MOST_WORK:
-            self.guard.denied = (
-                f"{name}() over values of {_length(text):,} and {_length(pattern):,} "
-                f"characters is refused: one call could run for minutes, and a statement's "
-                f"timeout cannot stop a call midway (the two lengths may multiply to at most "
-                f"{MOST_WORK:,})")
-            raise ValueError(self.guard.denied)
+        self.refuse_over(name, _length(text) * _length(pattern), MOST_WORK, text, pattern,
+                         f"the two lengths may multiply to at most {MOST_WORK:,}")
 
     def like(self, pattern: Any, text: Any, *escape: Any) -> Any:
         # (an ESCAPE NULL is a third argument, whose answer is NULL: kept as given)
@@ -161,13 +155,15 @@ class _Builtins:
         self.refuse_over("json_patch", work, MOST_JSON_PATCH_WORK, target, patch)
         return self.call("json_patch", (target, patch))
 
-    def refuse_over(self, name: str, work: int, most: int, first: Any, second: Any) -> None:
-        """Refuse a call of ``name`` whose ``work`` is over ``most``."""
+    def refuse_over(self, name: str, work: int, most: int, first: Any, second: Any,
+                    bound: str = "") -> None:
+        """Refuse a call of ``name`` whose ``work`` is over ``most`` (``bound``: the bound
+        in words, said in parentheses)."""
         if work > most:
             self.guard.denied = (
                 f"{name}() over values of {_length(first):,} and {_length(second):,} "
                 f"characters is refused: one call could run for minutes, and a statement's "
-                f"timeout cannot stop a call midway")
+                f"timeout cannot stop a call midway" + (f" ({bound})" if bound else ""))
             raise ValueError(self.guard.denied)
 
     def printf(self, name: str, *args: Any) -> Any:

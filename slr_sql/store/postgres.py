@@ -33,7 +33,8 @@ from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 from ..errors import SLRBusy, SLRCancelled, SLRError, SLRServerUnreachable, SLRTimeout, \
     SLRUnavailable
 from ..lockorder import ordered_lock
-from .connection import drop_commit_callbacks, run_after_rollback, run_commit_callbacks
+from .connection import Database, drop_commit_callbacks, run_after_rollback, \
+    run_commit_callbacks
 from .dialect import POSTGRES
 from .functions import SqlFunctions
 from .schema import postgres_migration_scripts
@@ -1035,13 +1036,8 @@ class PgDatabase:
         for listener in self.rollback_listeners:
             listener()
 
-    def after_commit(self, callback: Callable[[], None], always: bool = False) -> None:
-        """(:meth:`Database.after_commit`)"""
-        with self.lock:
-            if self.tx_depth:
-                self.commit_callbacks.append((self.tx_depth, callback, always))
-                return
-        callback()
+    # (the same lock, depth and callbacks as SQLite's Database: one implementation)
+    after_commit = Database.after_commit
 
     # ------------------------------------------------------------------ raw SQL
 
