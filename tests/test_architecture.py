@@ -7,6 +7,7 @@ given its layer here, which is the point: placing it is a design decision.
 from __future__ import annotations
 
 import ast
+import functools
 import re
 from pathlib import Path
 
@@ -48,12 +49,19 @@ def _family(path: Path) -> str:
     return path.relative_to(PACKAGE).parts[0].removesuffix(".py")
 
 
+@functools.cache
+def _tree(path: Path) -> ast.Module:
+    """The parsed module at ``path``, parsed once for this file's tests (the package is 2 MB
+    of source; each scan parsing it again took seconds). The scans only read the trees."""
+    return ast.parse(path.read_text())
+
+
 def _imports(path: Path) -> list[tuple[str, int]]:
     """(family imported, line) for every import of another slr_sql module in ``path``."""
     rel = path.relative_to(PACKAGE)
     package_parts = list(rel.parts[:-1])  # the importing module's package inside slr_sql
     found = []
-    for node in ast.walk(ast.parse(path.read_text())):
+    for node in ast.walk(_tree(path)):
         if isinstance(node, ast.ImportFrom):
             if node.level:
                 base = package_parts[: len(package_parts) - (node.level - 1)]
@@ -95,7 +103,7 @@ def test_no_import_cycles_between_modules():
         rel = path.relative_to(PACKAGE)
         package_parts = list(rel.parts[:-1])
         edges = set()
-        for node in ast.walk(ast.parse(path.read_text())):
+        for node in ast.walk(_tree(path)):
             if isinstance(node, ast.ImportFrom) and node.level:
                 base = package_parts[: len(package_parts) - (node.level - 1)]
                 module = base + (node.module.split(".") if node.module else [])
@@ -125,7 +133,7 @@ def test_no_import_cycles_between_modules():
 def test_only_the_store_imports_sqlite3():
     users = []
     for path in MODULES:
-        for node in ast.walk(ast.parse(path.read_text())):
+        for node in ast.walk(_tree(path)):
             names = ([a.name for a in node.names] if isinstance(node, ast.Import)
                      else [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level
                      else [])
@@ -158,6 +166,7 @@ def _docstring_ids(tree: ast.AST) -> set[int]:
     return out
 
 
+@functools.cache   # two tests read it
 def _boundary_counts() -> tuple[dict[str, int], dict[str, int]]:
     """Per module outside the SQL homes: lines with SQL text, raw statement calls."""
     sql: dict[str, set] = {}
@@ -166,7 +175,7 @@ def _boundary_counts() -> tuple[dict[str, int], dict[str, int]]:
         rel = str(path.relative_to(PACKAGE))
         if rel.startswith(SQL_HOMES):
             continue
-        tree = ast.parse(path.read_text())
+        tree = _tree(path)
         skip = _docstring_ids(tree)
         for node in ast.walk(tree):
             text = None
@@ -216,7 +225,7 @@ def _sqlite_only_lines() -> dict[str, int]:
         rel = str(path.relative_to(PACKAGE))
         if rel.startswith("store/"):
             continue
-        tree = ast.parse(path.read_text())
+        tree = _tree(path)
         skip = _docstring_ids(tree)
         for node in ast.walk(tree):
             if isinstance(node, ast.Constant) and isinstance(node.value, str) \
@@ -293,7 +302,7 @@ def private_reaches(trees: dict[str, ast.AST]) -> list[str]:
 
 
 def test_no_module_reaches_a_private_name_of_another():
-    trees = {str(p.relative_to(PACKAGE)): ast.parse(p.read_text()) for p in MODULES}
+    trees = {str(p.relative_to(PACKAGE)): _tree(p) for p in MODULES}
     found = [p for p in private_reaches(trees) if p.split(":")[0] not in PRIVATE_REACHES_ALLOWED]
     assert not found, ("private names reached from another module (make the name public "
                        "and documented, or move the code to its owner):\n" + "\n".join(found))
@@ -374,7 +383,7 @@ def untyped_knowledge_bases(trees: dict[str, ast.AST]) -> list[str]:
 
 
 def test_no_knowledge_base_above_the_facade_is_typed_any():
-    trees = {str(p.relative_to(PACKAGE)): ast.parse(p.read_text()) for p in MODULES
+    trees = {str(p.relative_to(PACKAGE)): _tree(p) for p in MODULES
              if LAYERS[_family(p)] >= LAYERS["demo"]}
     assert len(trees) > 20
     assert untyped_knowledge_bases(trees) == [], (
