@@ -33,6 +33,44 @@ def pytest_configure(config):
     config.addinivalue_line("filterwarnings", "error::slr_sql.clocks.LearnedDelayWarning")
 
 
+# The suite's longest tests (seconds each with `--durations`; most are differential runs of
+# hundreds of examples), started first: pytest-xdist hands tests out in collection order, and
+# a run on 2 cores must not end with one worker in a 20-second test while the other is idle.
+# The other tests keep their order. Keep the list to the longest ~20 (a name that is gone is
+# ignored): `python -m pytest -q -p no:cacheprovider -n 2 --durations=40`.
+STARTED_FIRST = (
+    "tests/test_sql_differential.py::test_sql_equals_interpreter",
+    "tests/test_swi_differential.py::test_same_answers_as_swipl",
+    "tests/test_service_schema.py::test_every_answer_is_one_the_description_lists",
+    "tests/test_limits.py::test_a_term_nested_100k_deep_goes_through_every_part_of_the_engine",
+    "tests/test_postgres_compiled.py::test_the_swi_corpus_answers_alike_on_postgres",
+    "tests/test_conformance_postgres.py::test_the_conformance_files_pass_on_postgresql",
+    "tests/test_postgres_crash.py::test_a_writer_killed_again_and_again_loses_and_repeats_nothing",
+    "tests/test_limits.py::test_long_arithmetic_and_long_bodies",
+    "tests/test_service_cli.py::test_every_db_command_takes_the_url",
+    "tests/test_store.py::test_encode_decode_are_inverse",
+    "tests/test_postgres_crash.py::test_concurrent_writers_killed_together_again_and_again",
+    "tests/test_parser.py::test_fast_event_reader_agrees_with_the_parser",
+    "tests/test_fleet_restore.py::test_a_restored_robot_store_is_refused_then_resynced_with_every_event_once",
+    "tests/test_store.py::test_terms_survive_the_database",
+    "tests/test_interpreter.py::test_million_element_list",
+    "tests/test_conformance_remote.py::test_the_conformance_files_pass_against_a_served_store",
+    "tests/test_postgres_compiled.py::test_compiled_sql_on_postgres_equals_the_interpreter_and_sqlite",
+    "tests/test_disk_full.py::test_a_lock_held_too_long_is_503_with_retry_after",
+    "tests/test_parser.py::test_round_trip",
+    "tests/test_parser.py::test_deep_terms_parse_and_print",
+    "tests/test_review10_differential.py::test_rules_decided_as_the_clock_moves_store_alike_on_both_engines",
+    "tests/test_swi_prev_next.py::test_prev_next_programs_answer_as_swipl_on_both_backends",
+)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(config, items):
+    rank = {name: i for i, name in enumerate(STARTED_FIRST)}
+    # a stable sort: every worker of xdist collects the same order
+    items.sort(key=lambda item: rank.get(item.nodeid.split("[")[0], len(rank)))
+
+
 @pytest.fixture
 def kb():
     """A fresh in-memory knowledge base (no file), closed after the test."""
