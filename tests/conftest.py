@@ -24,6 +24,14 @@ settings.load_profile(__import__("os").environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
 def pytest_configure(config):
+    # The suite starts Python a thousand times or more (the CLI, servers, crash tests): each
+    # imports slr_sql, and with PYTHONDONTWRITEBYTECODE set (as in this project's sandboxes)
+    # each compiled the whole package from source again, 0.3-0.9 s a process. The package
+    # is compiled once here, before any worker starts (that setting stops only the writes
+    # of an import, not a compile asked for; a file already compiled is skipped).
+    if not hasattr(config, "workerinput"):
+        import compileall
+        compileall.compile_dir(REPO / "slr_sql", quiet=2, workers=1)
     # The project's own warning fails the test that triggers it: a store whose event times are
     # not its clock's gets a ManualClock/StreamClock or declares max_delay, and a test about
     # the warning catches it (tests/test_time_traps.py) or filters it in its module, saying
@@ -95,6 +103,21 @@ def file_kb(db_path: Path):
         yield k
     finally:
         k.close()
+
+
+def copy_of_store(prepared: Path, tmp_path: Path, name: str = "robot.db") -> str:
+    """A copy, in ``tmp_path``, of a store file a module prepared once (e.g. with the CLI's
+    ``load`` and ``add``, each a Python process of its own): each test gets the same store,
+    its own to change, without starting those processes again. The files beside the
+    prepared store (its program texts) are copied too."""
+    import shutil
+
+    for item in prepared.parent.iterdir():
+        if item.is_file() and item.name != prepared.name:
+            shutil.copyfile(item, tmp_path / item.name)
+    target = tmp_path / name
+    shutil.copyfile(prepared, target)   # a closed store is one file (no -wal beside it)
+    return str(target)
 
 
 @pytest.fixture(params=["memory", "file"])
