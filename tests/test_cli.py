@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import copy_of_store
 
 import slr_sql
 
@@ -40,15 +41,24 @@ def db(tmp_path) -> str:
     return str(tmp_path / "robot.db")
 
 
-@pytest.fixture
-def loaded_db(tmp_path, db) -> str:
-    program = tmp_path / "robot.slr"
+@pytest.fixture(scope="module")
+def loaded_store(tmp_path_factory) -> Path:
+    """The store of ``loaded_db``, made once for the module by ``slr load`` and ``slr add``."""
+    folder = tmp_path_factory.mktemp("loaded")
+    db = folder / "robot.db"
+    program = folder / "robot.slr"
     program.write_text(PROGRAM, encoding="utf-8")
-    r = slr("load", db, str(program))
+    r = slr("load", str(db), str(program))
     assert r.returncode == 0, r.stderr
-    r = slr("add", db, "obj(cup1, cup, red)^2.0", "obj(cup1, cup, green)^9.0", "seg(cup1, [0.4, 0.1, 0.9])^10")
+    r = slr("add", str(db), "obj(cup1, cup, red)^2.0", "obj(cup1, cup, green)^9.0", "seg(cup1, [0.4, 0.1, 0.9])^10")
     assert r.returncode == 0, r.stderr
     return db
+
+
+@pytest.fixture
+def loaded_db(tmp_path, loaded_store) -> str:
+    """A store holding PROGRAM and three events: the test's own copy of ``loaded_store``."""
+    return copy_of_store(loaded_store, tmp_path)
 
 
 def test_help_lists_every_command():

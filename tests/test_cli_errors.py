@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from conftest import copy_of_store
 from test_cli import ROOT, slr
 
 TRACEBACK = "Traceback (most recent call last)"
@@ -31,11 +32,19 @@ def db(tmp_path) -> str:
     return str(tmp_path / "robot.db")
 
 
-@pytest.fixture
-def stored_db(db) -> str:
-    r = slr("add", db, "obj(cup1, cup, red)^2.0", "obj(cup2, cup, blue)^3.0", "p(4)^1", "p(6)^2")
+@pytest.fixture(scope="module")
+def prepared_store(tmp_path_factory) -> Path:
+    """The store of ``stored_db``, made once for the module by ``slr add``."""
+    db = tmp_path_factory.mktemp("errors") / "robot.db"
+    r = slr("add", str(db), "obj(cup1, cup, red)^2.0", "obj(cup2, cup, blue)^3.0", "p(4)^1", "p(6)^2")
     assert r.returncode == 0, r.stderr
     return db
+
+
+@pytest.fixture
+def stored_db(tmp_path, prepared_store) -> str:
+    """Four events: the test's own copy of ``prepared_store``, at ``db``'s path."""
+    return copy_of_store(prepared_store, tmp_path)
 
 
 # ---------------------------------------------------------------- ingest

@@ -3,8 +3,10 @@ from __future__ import annotations
 
 import datetime
 import re
+from pathlib import Path
 
 import pytest
+from conftest import copy_of_store
 from test_cli import slr
 
 PROGRAM = """\
@@ -15,17 +17,25 @@ cBuffer(obj(O, _, _), 3).
 """
 
 
-@pytest.fixture
-def store(tmp_path) -> str:
-    db = str(tmp_path / "robot.db")
-    (tmp_path / "tea.slr").write_text(PROGRAM, encoding="utf-8")
-    (tmp_path / "other.slr").write_text("p(1).\n", encoding="utf-8")
-    assert slr("load", db, str(tmp_path / "tea.slr"), "--name", "tea").returncode == 0
-    assert slr("load", db, str(tmp_path / "other.slr")).returncode == 0
+@pytest.fixture(scope="module")
+def prepared_store(tmp_path_factory) -> Path:
+    """The store of ``store``, made once for the module by ``slr load`` and ``slr add``."""
+    folder = tmp_path_factory.mktemp("inspect")
+    db = str(folder / "robot.db")
+    (folder / "tea.slr").write_text(PROGRAM, encoding="utf-8")
+    (folder / "other.slr").write_text("p(1).\n", encoding="utf-8")
+    assert slr("load", db, str(folder / "tea.slr"), "--name", "tea").returncode == 0
+    assert slr("load", db, str(folder / "other.slr")).returncode == 0
     r = slr("add", db, "obj(a, cup, [1, 2])^1", "obj(b, cup, red)^4",
             "seen(3)^[1700000000, 1700000002.5]")
     assert r.returncode == 0, r.stderr
-    return db
+    return Path(db)
+
+
+@pytest.fixture
+def store(tmp_path, prepared_store) -> str:
+    """Two named programs and three events: the test's own copy of ``prepared_store``."""
+    return copy_of_store(prepared_store, tmp_path)
 
 
 def test_programs_lists_each_named_program_with_its_file(store):

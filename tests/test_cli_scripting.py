@@ -7,24 +7,34 @@ import io
 import json
 import os
 import sys
+from pathlib import Path
 
 import pexpect
 import pytest
+from conftest import copy_of_store
 from test_cli import ROOT, slr
 
 from slr_sql.service.encoding import decode_answers
 
 
-@pytest.fixture
-def store(tmp_path) -> str:
-    db = str(tmp_path / "robot.db")
-    program = tmp_path / "robot.slr"
+@pytest.fixture(scope="module")
+def prepared_store(tmp_path_factory) -> Path:
+    """The store of ``store``, made once for the module by ``slr load`` and ``slr add``."""
+    folder = tmp_path_factory.mktemp("scripting")
+    db = str(folder / "robot.db")
+    program = folder / "robot.slr"
     program.write_text("color(O, C)^T :- prev(obj(O, _, C)^_Z, T).\n", encoding="utf-8")
     assert slr("load", db, str(program)).returncode == 0
     r = slr("add", db, "obj(cup1, cup, red)^2.0", 'obj(cup2, "a cup", [1, 2.5])^3.0',
             "obj(cup1, cup, green)^9.0")
     assert r.returncode == 0, r.stderr
-    return db
+    return Path(db)
+
+
+@pytest.fixture
+def store(tmp_path, prepared_store) -> str:
+    """A store of a rule and three events: the test's own copy of ``prepared_store``."""
+    return copy_of_store(prepared_store, tmp_path)
 
 
 # -- query --json / --limit ----------------------------------------------------------------

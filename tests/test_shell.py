@@ -7,20 +7,29 @@ import re
 import sys
 import termios
 import time
+from pathlib import Path
 
 import pexpect
 import pytest
+from conftest import copy_of_store
 from test_cli import ROOT, slr
 
 PROMPT = r"\?-"
 
 
-@pytest.fixture
-def store(tmp_path) -> str:
-    db = str(tmp_path / "robot.db")
-    assert slr("add", db, "seg(cup1, table)^1", "seg(cup2, shelf)^2",
+@pytest.fixture(scope="module")
+def prepared_store(tmp_path_factory) -> Path:
+    """The store of ``store``, made once for the module by ``slr add``."""
+    db = tmp_path_factory.mktemp("shell") / "robot.db"
+    assert slr("add", str(db), "seg(cup1, table)^1", "seg(cup2, shelf)^2",
                "gripper_state(open)^1").returncode == 0
     return db
+
+
+@pytest.fixture
+def store(tmp_path, prepared_store) -> str:
+    """Three events: the test's own copy of ``prepared_store``."""
+    return copy_of_store(prepared_store, tmp_path)
 
 
 def spawn_shell(db: str) -> pexpect.spawn:
