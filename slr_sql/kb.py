@@ -22,7 +22,8 @@ from .answers import answer_bindings
 from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .engine import Engine
-from .errors import EventRejected, SLRError, SLRUnavailable
+from .encoding import NullArgument
+from .errors import EventRejected, NotAnEvent, SLRError, SLRUnavailable
 from .parser import parse_event_fast, parse_program, parse_term
 from .loader import ProgramLoader
 from .plans import PlanCache, argument_term, instantiate
@@ -541,6 +542,8 @@ class KnowledgeBase:
                 return
             except SLRError:
                 raise
+            except NullArgument:
+                raise not_an_event(self, "solutions") from None
             except RecursionError:
                 raise SLRError("solutions: the term is nested too deeply") from None
             except Exception as exc:  # the facade's promise (see _boundary)
@@ -815,6 +818,44 @@ def _check_time_option(name: str, value: Any, minimum: float | None = None) -> N
                        f"{'' if minimum is None else f' >= {minimum:g}'}, not {shown(value)}")
 
 
+def not_an_event(kb: KnowledgeBase | None, where: str) -> NotAnEvent:
+    """The error of a goal that read a stored argument that is NULL, naming the first such
+    row of each type (whichever path met it: compiled SQL, the interpreter, prev/next, a
+    buffer's pattern), so every path says the same.
+
+    >>> from slr_sql import ManualClock
+    >>> kb = open(clock=ManualClock(2)); kb.add("p(a)^1")
+    >>> _ = kb.sql("UPDATE p SET arg1 = NULL", write=True)
+    >>> print(not_an_event(kb, "query"))  # doctest: +ELLIPSIS
+    query: p/1: the stored row of seq 1 is not an event: its arg1 is NULL, ...
+    """
+    rows = []
+    if kb is not None:
+        try:
+            rows = kb.store.null_arguments()
+        except Exception:  # noqa: BLE001 - the message without the rows is still the answer
+            rows = []
+    if not rows:
+        return NotAnEvent(f"{where}: a stored event argument is NULL, which is no term (a row "
+                          f"written by hand with `slr sql --write` or another SQLite client); "
+                          f"fix or delete that row")
+    said = "; ".join(f"{name}/{arity}: the stored row of seq {seq} is not an event: its "
+                     f"arg{argument} is NULL, which is no term (written by hand with `slr sql "
+                     f"--write` or another SQLite client); fix or delete it "
+                     f"(DELETE FROM {format_table(table)} WHERE arg{argument} IS NULL)"
+                     for name, arity, table, argument, seq in rows)
+    return NotAnEvent(f"{where}: {said}")
+
+
+def format_table(table: str) -> str:
+    """A table name as SQL text: quoted as an identifier.
+
+    >>> format_table('ev_my"x')
+    '"ev_my""x"'
+    """
+    return '"' + table.replace('"', '""') + '"'
+
+
 def _boundary(method: Callable) -> Callable:
     """The facade's promise, kept at its edge: whatever goes wrong below (a check a layer
     lacks, a Python error inside a user's ``define``d predicate, a damaged file), the caller
@@ -827,6 +868,9 @@ def _boundary(method: Callable) -> Callable:
             return method(*args, **kwargs)
         except SLRError:
             raise
+        except NullArgument:
+            kb = args[0] if args and isinstance(args[0], KnowledgeBase) else None
+            raise not_an_event(kb, where) from None
         except RecursionError:
             raise SLRError(f"{where}: the term is nested too deeply") from None
         except MemoryError:

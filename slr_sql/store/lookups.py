@@ -532,6 +532,35 @@ class EventReader:
                            row[arity + 2], row[arity + 3])
         return out[0], out[1]
 
+    def null_arguments(self) -> list[tuple[str, int, str, int, int]]:
+        """The stored rows that are no events because an argument is NULL (written by hand:
+        the store never writes one): ``(name, arity, table, argument number, seq)``, the
+        first such row of each type. Read only when a goal met one (a scan per type).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a",), 1, 1)])
+        []
+        >>> _ = s.sql('UPDATE p SET arg1 = NULL', write=True); s.null_arguments()
+        [('p', 1, 'p', 1, 1)]
+        """
+        found = []
+        with self.db.lock:
+            self.db.check_open()
+            for event_type in list(self.tables.types.values()):
+                if not event_type.arity:
+                    continue
+                columns = [f"arg{i + 1}" for i in range(event_type.arity)]
+                flags = ", ".join(f"{c} IS NULL" for c in columns)
+                row = self.db.conn.execute(
+                    f"SELECT seq, {flags} FROM {event_type.quoted} "
+                    f"WHERE {' OR '.join(f'{c} IS NULL' for c in columns)} "
+                    f"ORDER BY seq LIMIT 1").fetchone()
+                if row is not None:
+                    argument = next(i for i, flag in enumerate(row[1:], 1) if flag)
+                    found.append((event_type.name, event_type.arity, event_type.table,
+                                  argument, row[0]))
+        return sorted(found)
+
     def distinct_pairs(self, name: str, arity: int, after_seq: int = 0
                        ) -> tuple[list[tuple[Any, Any]], int]:
         """The distinct (first, second) argument pairs of name/arity among the events stored
