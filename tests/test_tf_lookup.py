@@ -357,3 +357,30 @@ def test_tf_lookup_gives_the_same_poses_on_postgresql(postgres_url):
             answers[where] = [pose_of(kb, goal) for goal in goals]
     assert answers[None] == answers[postgres_url]
     assert answers[None][2] == [] and answers[None][0]
+
+
+# -- frame names are names: 1, 1.0 and '1' are three frames ----------------------------------
+
+@pytest.mark.parametrize("backend", ["sqlite", "postgres"])
+def test_frames_named_by_equal_numbers_of_two_types_are_two_frames(backend, request):
+    where = request.getfixturevalue("postgres_url") if backend == "postgres" else None
+    with slr_sql.open(where, clock=ManualClock(100.0)) as kb:
+        # the float's edge is stored between the integer's two observations: a bracket that
+        # took 1 for 1.0 would interpolate across the other frame's
+        kb.add_many([tf_event("tf", "map", 1, 0.0, (1.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf", "map", 1.0, 0.5, (2.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf", "map", 1.0, 1.5, (2.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf", "map", 1, 2.0, (1.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf", "map", "1", 0.0, (3.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf", "map", "1", 2.0, (3.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf_static", "map", 2, 0.0, (4.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf_static", "map", 2.0, 0.0, (5.0, 0.0, 0.0), (0, 0, 0, 1))])
+        x = {goal: [p[0][0] for p in pose_of(kb, goal)] for goal in (
+            "tf_lookup(map, 1, 1, P)", "tf_lookup(map, 1.0, 1, P)", "tf_lookup(map, '1', 1, P)",
+            "tf_lookup(map, 2, 1, P)", "tf_lookup(map, 2.0, 1, P)",
+            "tf_lookup(1.0, 1, 1, P)", "tf_lookup(map, 1.0, 0.25, P)")}
+    assert x == {"tf_lookup(map, 1, 1, P)": [1.0], "tf_lookup(map, 1.0, 1, P)": [2.0],
+                 "tf_lookup(map, '1', 1, P)": [3.0], "tf_lookup(map, 2, 1, P)": [4.0],
+                 "tf_lookup(map, 2.0, 1, P)": [5.0],
+                 "tf_lookup(1.0, 1, 1, P)": [-1.0],   # not the identity: two frames
+                 "tf_lookup(map, 1.0, 0.25, P)": []}  # before 1.0's first observation

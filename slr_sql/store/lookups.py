@@ -15,7 +15,7 @@ from __future__ import annotations
 import sqlite3
 from typing import Any, Callable, Iterator
 
-from ..encoding import Unencodable, decode, encode
+from ..encoding import INT64_MAX, INT64_MIN, Unencodable, decode, encode
 from .catalog import PROGRAM_VERSION, PROGRESS_VERSION
 from .connection import Database
 from .tables import EventTables, EventType
@@ -39,6 +39,15 @@ _RESUME = {
 # the lookups that read in start order: they need the start-ordered indexes
 _START_KINDS = frozenset({"next", "at_start"})
 
+
+def _number_kind(value: Any) -> str | None:
+    """The SQL type (typeof) a number term is stored as; None for other terms (and for
+    integers beyond 64 bits, stored as text)."""
+    if type(value) is float:
+        return "real"
+    if type(value) is int and INT64_MIN <= value <= INT64_MAX:
+        return "integer"
+    return None
 
 class _OpenStatement:
     """The statement of one stream, which a transaction may suspend (close) meanwhile."""
@@ -509,10 +518,17 @@ class EventReader:
             # the event after t is read in start order: its index is built on first need
             ordered = self._start_order(event_type)
             start_hint = self.db.dialect.index_hints and ordered
-            key = (event_type.table, "bracket", positions, start_hint)
+            # SQL's = takes 1 for 1.0; terms (and frame names) do not: a number matches
+            # only a number of its own type
+            kinds = tuple(_number_kind(bound[p]) for p in positions)
+            key = (event_type.table, "bracket", positions, start_hint, kinds)
             sql = self.sql_cache.get(key)
             if sql is None:
-                where = " AND ".join(f"arg{p + 1} = ?" for p in positions)
+                typeof = self.db.dialect.typeof
+                where = " AND ".join(
+                    f"arg{p + 1} = ?" + ("" if kind is None
+                                         else f" AND {typeof(f'arg{p + 1}')} = '{kind}'")
+                    for p, kind in zip(positions, kinds))
                 cols = event_type.columns
                 hints = self.db.dialect.index_hints
                 by_end = f" INDEXED BY {event_type.index_arg1_end}" if hints else ""
@@ -582,10 +598,13 @@ class EventReader:
             top = conn.execute(f"SELECT max(seq) FROM {event_type.quoted}").fetchone()[0] or 0
             if top <= after_seq:
                 return [], top
-            rows = conn.execute(f"SELECT DISTINCT arg1, arg2 FROM {event_type.quoted} "
+            # (DISTINCT takes 1 and 1.0 for one value: their types keep them apart)
+            typeof = self.db.dialect.typeof
+            rows = conn.execute(f"SELECT DISTINCT arg1, arg2, {typeof('arg1')}, "
+                                f"{typeof('arg2')} FROM {event_type.quoted} "
                                 f"WHERE seq > ? AND seq <= ?", (after_seq, top)).fetchall()
         dec = self.decode
-        return [(dec(a), dec(b)) for a, b in rows], top
+        return [(dec(row[0]), dec(row[1])) for row in rows], top
 
     def max_seq(self, name: str, arity: int) -> int:
         """The greatest arrival sequence number stored for name/arity (0 when none): it moves
