@@ -15,7 +15,9 @@ time ``t`` (docs/language.md, "tf_lookup"):
   between the last observation before ``t`` and the first after it (translation linearly,
   rotation by slerp, the robot library's ``interpolate``). Outside its observations the
   lookup fails; with ``extrapolate`` the nearest observation is held instead. Several
-  observations at one time: the last stored counts;
+  observations at one time: the last stored counts. An observation over an interval
+  ``^[T1, T2]`` holds at every time inside it and is its pose at each end for the
+  interpolation outside it (the latest started at or before ``t`` counts while it lasts);
 * **a tf_static edge** (a pair never seen in ``tf``) holds its last stored value at every
   time.
 
@@ -294,7 +296,7 @@ def _edge_at(store: Any, key: tuple, parent: Any, child: Any, t: float, extrapol
     if found is None:
         return None
     before, after = found
-    if before is not None and before[2] == t:
+    if before is not None and before[2] >= t:   # an observation at t, an interval around t
         return _edge_pose(before)
     args = (parent, child)
     if after is not None and hooks is not None and hooks.next is not None:

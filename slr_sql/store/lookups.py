@@ -12,6 +12,7 @@ first row or two does not read the rest.
 """
 from __future__ import annotations
 
+import math
 import sqlite3
 from typing import Any, Callable, Iterator
 
@@ -494,10 +495,11 @@ class EventReader:
     def bracket(self, name: str, arity: int, bound: dict[int, Any], t: float
                 ) -> tuple[Row | None, Row | None] | None:
         """The observations around ``t`` of the events matching ``bound`` (ground values at
-        0-based positions, the first one included): the one with the greatest end ``<= t``
-        and the one with the smallest start ``>= t`` (ties: the last in store order, and the last
-        stored among those starting at that time),
-        in one statement; ``(None, None)`` parts when there are none. None when a bound
+        0-based positions, the first one included): the one with the greatest start ``<= t``
+        (the one that holds at ``t`` when its end is ``>= t``: an observation at ``t``, an
+        interval around it; ties: the greatest end, then the last stored) -- for ``t``
+        infinite, the last in store order -- and the one with the smallest start ``>= t``
+        (ties: the last stored among those starting at that time), in one statement; ``(None, None)`` parts when there are none. None when a bound
         value cannot be pushed into SQL (the caller then takes the general path). Used by
         ``tf_lookup`` (:mod:`slr_sql.frames`) for each edge of a chain.
 
@@ -521,7 +523,9 @@ class EventReader:
             # SQL's = takes 1 for 1.0; terms (and frame names) do not: a number matches
             # only a number of its own type
             kinds = tuple(_number_kind(bound[p]) for p in positions)
-            key = (event_type.table, "bracket", positions, start_hint, kinds)
+            # (before a finite t: the latest start, which holds at t if its end is >= t)
+            by_start_before = math.isfinite(t)
+            key = (event_type.table, "bracket", positions, start_hint, kinds, by_start_before)
             sql = self.sql_cache.get(key)
             if sql is None:
                 typeof = self.db.dialect.typeof
@@ -533,9 +537,12 @@ class EventReader:
                 hints = self.db.dialect.index_hints
                 by_end = f" INDEXED BY {event_type.index_arg1_end}" if hints else ""
                 by_start = f" INDEXED BY {event_type.index_arg1_start}" if start_hint else ""
-                sql = (f"SELECT 0, * FROM (SELECT {cols} FROM {event_type.quoted}{by_end} "
-                       f"WHERE {where} AND t_end <= ? "
-                       f"ORDER BY t_end DESC, t_start DESC, seq DESC LIMIT 1) AS before_t "
+                before = (f"{by_start} WHERE {where} AND t_start <= ? "
+                          f"ORDER BY t_start DESC, t_end DESC, seq DESC" if by_start_before
+                          else f"{by_end} WHERE {where} AND t_end <= ? "
+                          f"ORDER BY t_end DESC, t_start DESC, seq DESC")
+                sql = (f"SELECT 0, * FROM (SELECT {cols} FROM {event_type.quoted}{before}"
+                       f" LIMIT 1) AS before_t "
                        f"UNION ALL SELECT 1, * FROM (SELECT {cols} FROM {event_type.quoted}"
                        f"{by_start} WHERE {where} AND t_start >= ? "
                        f"ORDER BY t_start, seq DESC LIMIT 1) AS after_t")
