@@ -1630,6 +1630,9 @@ main.add_command(_fleet_group())
                    "step, e.g. 'location(cup1, L)^T'.")
 @click.option("--every", type=float, default=None, metavar="S",
               help="Seconds between the times --query asks its goal (default: 1/200 of the window).")
+@click.option("--timeout", type=float, default=None, metavar="S",
+              help="Give up after S seconds of --query asks (all of them together); nothing "
+                   "is written.")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="The image to write: .png, .jpg, .svg or .pdf.")
 @click.option("--size", default=None, metavar="WxH", help="Image size in pixels (default 1200 wide).")
@@ -1638,7 +1641,7 @@ main.add_command(_fleet_group())
 def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None,
          values: tuple[str, ...], complex_types: tuple[str, ...], by: tuple[str, ...],
          lags: bool | None, internal: bool, relative: bool | None, query_goal: str | None,
-         every: float | None, output: str, size: str | None, dpi: int,
+         every: float | None, timeout: float | None, output: str, size: str | None, dpi: int,
          title: str | None) -> None:
     """Draw the event histories of DB as a timeline image: one row per event TYPE (default:
     all but the store's own).
@@ -1654,6 +1657,9 @@ def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None
                                f"no image format; use {', '.join(IMAGE_FORMATS)}")
     if every is not None and query_goal is None:
         raise click.UsageError("--every goes with --query")
+    if timeout is not None and query_goal is None:
+        raise click.UsageError("--timeout goes with --query")
+    timeout = _finite("--timeout", timeout, minimum=0.0)
     _check_existing_store(db)
     dimensions = parse_size(size) if size is not None else None
     with _open(db, create=False) as kb:
@@ -1666,7 +1672,8 @@ def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None
             complex_types=complex_types or None, size=dimensions, dpi=dpi,
             title=os.path.basename(db) if title is None else title, by=by, lags=lags,
             internal=internal, relative=relative,
-            query=None if query_goal is None else strip_full_stop(query_goal), every=every)
+            query=None if query_goal is None else strip_full_stop(query_goal), every=every,
+            timeout=timeout)
     figure = draw_timeline(collected)
     from .plot import save_timeline
 
