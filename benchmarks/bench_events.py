@@ -664,9 +664,9 @@ def hand_written_seq2_recent(n: int, batch: int, synchronous: str) -> Rates:
     The store is made by slr_sql (an event of each type before the rule is loaded, so the
     tables, indexes and provenance table are ours); then raw sqlite3 takes the same events in
     the same transactions as :func:`_feed` makes ours: each batch's ``a`` and ``b`` rows
-    (multi-row ``INSERT``, the arguments as given) in one; in the clock move's, the ``b``\ s
-    whose end the clock has passed are matched -- in memory, per key the ``a``\ s in store
-    order, the latest that ends before the ``b`` starts, found by bisection -- and their
+    (multi-row ``INSERT``, the arguments as given) in one; in the clock move's, the ``b`` events
+    whose end the clock has passed are matched -- in memory, per key the ``a`` events in
+    store order, the latest that ends before the ``b`` starts, found by bisection -- and their
     provenance rows, complex events and the clock are written. What it leaves out is all
     ours does besides: checking and encoding any term, other rules, out-of-order and late
     arrivals, buffers, subscriptions, the durable state another process reads."""
