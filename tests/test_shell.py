@@ -182,6 +182,46 @@ def test_ctrl_d_typed_while_the_shell_is_busy_is_read_at_the_next_prompt(store, 
     assert child.exitstatus == 0
 
 
+def test_a_shell_killed_outright_leaves_the_terminals_keys_as_they_were(store):
+    """The shell changes no setting of the cooked terminal: killed (SIGKILL) while a goal
+    runs, it leaves the end-of-file key Ctrl-D working (it disabled it while it ran, and a
+    kill left it disabled until `reset`)."""
+    import signal
+
+    child = spawn_shell(store)
+    before = termios.tcgetattr(child.child_fd)
+    child.sendline("between(1, inf, X), X < 0.")
+    wait_for_terminal(child, raw=False)
+    os.kill(child.pid, signal.SIGKILL)
+    child.expect(pexpect.EOF)
+    after = termios.tcgetattr(child.child_fd)
+    child.close()
+    assert after[6][termios.VEOF] == before[6][termios.VEOF] == b"\x04"
+    assert after[3] & termios.ICANON
+
+
+def test_lines_and_ctrl_d_typed_while_a_goal_runs_are_read_in_order(store, tmp_path):
+    """Keys typed while the terminal is cooked (a file loading) reach the next prompts in
+    the order typed: a goal's line, then Ctrl-D, read by the prompt after the goal's: it
+    leaves the shell."""
+    fifo = str(tmp_path / "rules.pl")
+    os.mkfifo(fifo)
+    child = spawn_shell(store)
+    child.sendline(f"load {fifo}")
+    writer = await_reader(fifo, child)
+    wait_for_terminal(child, raw=False)
+    child.send("seg(O, shelf)^T.\r")      # typed while the shell reads the file
+    child.sendeof()
+    os.write(writer, b"on_table(O) :- seg(O, table)^_.\n")
+    os.close(writer)
+    child.expect("loaded")
+    child.expect(r"O = cup2, T = 2\.0")
+    press(child, "\r")                      # the key after the answer: no more
+    child.expect(pexpect.EOF)               # the Ctrl-D, read by the next prompt: left
+    child.close()
+    assert child.exitstatus == 0
+
+
 def test_ctrl_d_typed_with_a_consulted_line_ends_the_consult(store):
     """Ctrl-D sent in one write with the Enter of a consulted line (the prompt still raw as
     it takes the line): read as a key typed ahead by the next |: prompt, it ends the
