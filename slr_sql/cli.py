@@ -1441,8 +1441,10 @@ class ShellInterrupts:
     runs, turned a Ctrl-C there into a cancelled prompt: the line typed was dropped without
     a word). Installed for the whole shell (so asyncio installs none), this handler
 
-    * raises KeyboardInterrupt while a line is handled (the goal stops) and before the
-      editor started (the unfinished line is dropped, as by Ctrl-C at the prompt);
+    * raises KeyboardInterrupt while a line is handled (the goal stops);
+    * before the editor started (between two lines: a SIGINT sent with kill), keeps it for
+      the editor, which takes it as its Ctrl-C key once it runs (raised there, it escaped
+      the shell's loop, which had not reached the editor's call);
     * while the editor reads keys (a SIGINT sent with kill), hands it to the editor as its
       Ctrl-C key (raising inside the editor's event loop would land in one of its tasks);
     * once the editor took a line, keeps it for that line (:meth:`take`): its goal is
@@ -1462,10 +1464,14 @@ class ShellInterrupts:
         self.state = self.EDITING
         self.started = False       # whether the editor ran for this line
         self.after_enter = False   # a Ctrl-C came after the editor took the line
+        self.before_editor = False  # a Ctrl-C came before the editor ran: its Ctrl-C key
 
     def __call__(self, signum: int, frame: Any) -> None:
-        if self.state == self.RUNNING or not self.started:
+        if self.state == self.RUNNING:
             raise KeyboardInterrupt
+        if not self.started:
+            self.before_editor = True
+            return
         app = self.app
         if app.is_running and not app.is_done and app.loop is not None:
             try:
@@ -1489,8 +1495,12 @@ class ShellInterrupts:
         self.after_enter = False
 
     def editor_started(self) -> None:
-        """(The editor's ``pre_run``.)"""
+        """(The editor's ``pre_run``.) A Ctrl-C kept from before reaches the editor as its
+        Ctrl-C key, after the keys typed ahead of it."""
         self.started = True
+        if self.before_editor:
+            self.before_editor = False
+            self.app.loop.call_soon(self._as_key)
 
     def take(self) -> bool:
         """From now on a Ctrl-C stops the goal; whether one came after Enter already."""

@@ -342,6 +342,40 @@ def test_a_sigint_while_a_line_is_edited_drops_the_line_as_ctrl_c_does(store):
     assert said == ["O = cup1, T = 1.0"]
 
 
+def test_a_sigint_between_two_lines_reaches_the_next_prompt_as_its_ctrl_c(store):
+    """A SIGINT sent (kill) between two lines, before the line editor runs: it was raised
+    where the shell's loop stood, outside the editor's call, and ended the shell with
+    KeyboardInterrupt. It is kept for the editor, which takes it as its Ctrl-C key: the
+    unfinished goal is dropped and the shell goes on."""
+    import signal
+
+    from prompt_toolkit import PromptSession
+    from prompt_toolkit.input import create_pipe_input
+    from prompt_toolkit.output import DummyOutput
+
+    import slr_sql
+    from slr_sql.cli import Shell, interactive
+
+    said: list[str] = []
+    prompts = []
+    with slr_sql.open(store) as kb, create_pipe_input() as keys:
+        prompt: PromptSession = PromptSession(input=keys, output=DummyOutput())
+        session = Shell(kb, echo=said.append, echo_err=said.append)
+
+        def between_lines() -> None:
+            prompts.append(session.continuing)
+            if len(prompts) == 2:    # an unfinished goal typed: the SIGINT lands here
+                os.kill(os.getpid(), signal.SIGINT)
+            elif len(prompts) == 3:
+                keys.send_text("seg(O, shelf)^T.\r\x04")
+
+        keys.send_text("seg(O,\r")
+        interactive(session, prompt, echo=said.append, before_prompt=between_lines)
+    assert prompts == [False, True, False, False]   # the unfinished goal was dropped
+    assert said == ["O = cup2, T = 2.0"]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 def run_piped(db: str, *lines: str):
     return slr("shell", db, stdin="\n".join(lines) + "\n")
 
