@@ -148,9 +148,10 @@ class SLRSubscriptionInUse(SLRUnavailable):
 
 class NotAnEvent(SLRError):
     """A goal read a stored row that is no event: an argument holds SQL NULL, which no term
-    is stored as (a row written by hand, with ``slr sql --write`` or another SQLite client).
-    The message names the type, the row's ``seq`` and the column; the goal gives no answers
-    rather than answers without that row.
+    is stored as (a row written by hand, by another client of the database), or a
+    hand-written statement (``kb.sql(..., write=True)``) would leave one. The message names
+    the type, the row's ``seq`` and the column; the goal gives no answers rather than
+    answers without that row, the statement changes nothing.
 
     >>> issubclass(NotAnEvent, SLRError)
     True

@@ -13,6 +13,7 @@ from __future__ import annotations
 import functools
 import math
 import numbers
+import re
 import time
 from operator import itemgetter
 from pathlib import Path
@@ -727,7 +728,23 @@ class KnowledgeBase:
         if not isinstance(query, str):
             raise SLRError(f"sql: the statement is text (a str), not a {type(query).__name__}")
         try:
-            return self.store.sql(query, params, write, timeout)
+            named = _rows_written(query, self.store) if write else []
+            if not named:
+                return self.store.sql(query, params, write, timeout)
+            # a NULL argument is no term (docs/schema.md): a write that would leave one in
+            # a row the store did not hold so before changes nothing
+            with self.store.transaction():
+                before = set(self.store.null_arguments(named, every=True))
+                result = self.store.sql(query, params, write, timeout)
+                made = sorted(set(self.store.null_arguments(named, every=True)) - before)
+                if made:
+                    name, arity, _, argument, seq = made[0]
+                    more = f" (and {len(made) - 1} more)" if len(made) > 1 else ""
+                    raise NotAnEvent(
+                        f"sql: the statement would leave a row that is no event: arg{argument} "
+                        f"of {name}/{arity}'s row of seq {seq}{more} would be NULL, which is no "
+                        f"term; nothing was changed")
+            return result
         except DatabaseError as exc:
             reason = store_error(exc, self.store.path)
             if isinstance(reason, SLRUnavailable):  # a full disk, a lock: may pass
@@ -818,6 +835,26 @@ def _check_time_option(name: str, value: Any, minimum: float | None = None) -> N
                        f"{'' if minimum is None else f' >= {minimum:g}'}, not {shown(value)}")
 
 
+_WRITES_ROWS = re.compile(r"\b(?:insert|update|replace)\b", re.IGNORECASE)
+
+
+def _rows_written(statement: str, store: Any) -> list[tuple[str, int]]:
+    """The event types whose rows a hand-written statement may insert or change: those whose
+    table it names, when it inserts, updates or replaces (a DELETE leaves no NULL behind).
+
+    >>> from slr_sql.store import EventStore
+    >>> s = EventStore(None); s.declare_type("p", 1)
+    'p'
+    >>> _rows_written('UPDATE "p" SET arg1 = NULL', s), _rows_written("DELETE FROM p", s)
+    ([('p', 1)], [])
+    """
+    if not _WRITES_ROWS.search(statement):
+        return []
+    text = statement.lower()
+    return [key for key, table in store.event_types().items()
+            if re.search(r"(?<![\w$])" + re.escape(table.lower()) + r"(?![\w$])", text)]
+
+
 def not_an_event(kb: KnowledgeBase | None, where: str) -> NotAnEvent:
     """The error of a goal that read a stored argument that is NULL, naming the first such
     row of each type (whichever path met it: compiled SQL, the interpreter, prev/next, a
@@ -825,7 +862,8 @@ def not_an_event(kb: KnowledgeBase | None, where: str) -> NotAnEvent:
 
     >>> from slr_sql import ManualClock
     >>> kb = open(clock=ManualClock(2)); kb.add("p(a)^1")
-    >>> _ = kb.sql("UPDATE p SET arg1 = NULL", write=True)
+    >>> kb.store.execute("UPDATE p SET arg1 = NULL")   # (as another client: below the door)
+    []
     >>> print(not_an_event(kb, "query"))  # doctest: +ELLIPSIS
     query: p/1: the stored row of seq 1 is not an event: its arg1 is NULL, ...
     """
@@ -837,11 +875,11 @@ def not_an_event(kb: KnowledgeBase | None, where: str) -> NotAnEvent:
             rows = []
     if not rows:
         return NotAnEvent(f"{where}: a stored event argument is NULL, which is no term (a row "
-                          f"written by hand with `slr sql --write` or another SQLite client); "
+                          f"written by hand, by another client of the database); "
                           f"fix or delete that row")
     said = "; ".join(f"{name}/{arity}: the stored row of seq {seq} is not an event: its "
-                     f"arg{argument} is NULL, which is no term (written by hand with `slr sql "
-                     f"--write` or another SQLite client); fix or delete it "
+                     f"arg{argument} is NULL, which is no term (written by hand, by another "
+                     f"client of the database); fix or delete it "
                      f"(DELETE FROM {format_table(table)} WHERE arg{argument} IS NULL)"
                      for name, arity, table, argument, seq in rows)
     return NotAnEvent(f"{where}: {said}")

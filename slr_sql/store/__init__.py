@@ -496,8 +496,9 @@ class EventStore:
         return self._reader.distinct_pairs(name, arity, after_seq)
 
     @_doc(EventReader.null_arguments)
-    def null_arguments(self) -> list[tuple[str, int, str, int, int]]:
-        return self._reader.null_arguments()
+    def null_arguments(self, types: Iterable[tuple[str, int]] | None = None,
+                       every: bool = False) -> list[tuple[str, int, str, int, int]]:
+        return self._reader.null_arguments(types, every)
 
     @_doc(EventReader.max_seq)
     def max_seq(self, name: str, arity: int) -> int:

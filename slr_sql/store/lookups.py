@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 import sqlite3
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, Iterable, Iterator
 
 from ..encoding import INT64_MAX, INT64_MIN, Unencodable, decode, encode
 from .catalog import PROGRAM_VERSION, PROGRESS_VERSION
@@ -555,30 +555,36 @@ class EventReader:
                            row[arity + 2], row[arity + 3])
         return out[0], out[1]
 
-    def null_arguments(self) -> list[tuple[str, int, str, int, int]]:
+    def null_arguments(self, types: Iterable[tuple[str, int]] | None = None,
+                       every: bool = False) -> list[tuple[str, int, str, int, int]]:
         """The stored rows that are no events because an argument is NULL (written by hand:
         the store never writes one): ``(name, arity, table, argument number, seq)``, the
-        first such row of each type. Read only when a goal met one (a scan per type).
+        first such row of each type (``every``: each such row), of every type or of
+        ``types``. Read only when a goal met one or a hand-written statement may have
+        written one (a scan per type).
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None); s.add_events([("p", ("a",), 1, 1)])
         []
-        >>> _ = s.sql('UPDATE p SET arg1 = NULL', write=True); s.null_arguments()
+        >>> s.execute('UPDATE p SET arg1 = NULL'); s.null_arguments()
+        []
         [('p', 1, 'p', 1, 1)]
         """
         found = []
         with self.db.lock:
             self.db.check_open()
+            wanted = None if types is None else set(types)
             for event_type in list(self.tables.types.values()):
-                if not event_type.arity:
+                if not event_type.arity or (
+                        wanted is not None and (event_type.name, event_type.arity) not in wanted):
                     continue
                 columns = [f"arg{i + 1}" for i in range(event_type.arity)]
                 flags = ", ".join(f"{c} IS NULL" for c in columns)
-                row = self.db.conn.execute(
+                rows = self.db.conn.execute(
                     f"SELECT seq, {flags} FROM {event_type.quoted} "
                     f"WHERE {' OR '.join(f'{c} IS NULL' for c in columns)} "
-                    f"ORDER BY seq LIMIT 1").fetchone()
-                if row is not None:
+                    f"ORDER BY seq{'' if every else ' LIMIT 1'}").fetchall()
+                for row in rows:
                     argument = next(i for i, flag in enumerate(row[1:], 1) if flag)
                     found.append((event_type.name, event_type.arity, event_type.table,
                                   argument, row[0]))
