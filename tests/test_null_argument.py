@@ -144,3 +144,19 @@ def test_postgresql_says_it_in_the_same_words(postgres_url):
             kb.sql_enabled = compiled
             expect_not_an_event(kb, "p(X)^T")
             assert kb.query("p(a)^T") == [{"T": 1.0}]
+
+
+def test_the_service_says_it_as_a_bad_request_and_stays_up(tmp_path):
+    from service_helpers import ServiceProcess
+
+    db = tmp_path / "served.db"
+    with slr_sql.open(db, clock=ManualClock(10)) as kb:
+        for event in ("p(a)^1", "p(b)^2"):
+            kb.add(event)
+    null_by_another_client(db, "UPDATE p SET arg1 = NULL WHERE seq = 2")
+    with ServiceProcess(db) as server, slr_sql.connect(server.url) as remote:
+        with pytest.raises(NotAnEvent, match=r"^query: p/1: the stored row of seq 2 is not an "
+                                             r"event: its arg1 is NULL"):
+            remote.query("p(X)^T")
+        assert remote.query("p(a)^T") == [{"T": 1.0}]
+    assert "Traceback" not in server.log.read_text()
