@@ -433,3 +433,36 @@ def test_a_bad_assert_changes_nothing(store):
     r = run_piped(store, "assert((broken(X) :- )).", "listing.")
     assert r.stderr.startswith("<shell>:1:") and "unexpected" in r.stderr
     assert r.stdout.splitlines() == ["% the program 'user' is empty"]
+
+
+def test_a_sigint_as_the_editor_accepts_the_line_stops_its_goal_before_it_starts(store):
+    """A SIGINT sent (kill) while the line editor handles Enter (its validator runs: the
+    line is being accepted) is the goal's: the goal is interrupted before it starts, the
+    shell goes on."""
+    import signal
+
+    from prompt_toolkit import PromptSession
+    from prompt_toolkit.input import create_pipe_input
+    from prompt_toolkit.output import DummyOutput
+    from prompt_toolkit.validation import Validator
+
+    import slr_sql
+    from slr_sql.cli import Shell, interactive
+
+    said: list[str] = []
+    sent = []
+
+    def interrupt_once(text: str) -> bool:
+        if text.startswith("seg(O, table)") and not sent:
+            sent.append(text)
+            os.kill(os.getpid(), signal.SIGINT)
+        return True
+
+    with slr_sql.open(store) as kb, create_pipe_input() as keys:
+        prompt: PromptSession = PromptSession(input=keys, output=DummyOutput(),
+                                              validator=Validator.from_callable(interrupt_once))
+        keys.send_text("seg(O, table)^T.\r")
+        keys.send_text("seg(O, shelf)^T.\r\x04")
+        interactive(Shell(kb, echo=said.append, echo_err=said.append), prompt,
+                    echo=said.append)
+    assert sent and said == ["\n% interrupted", "O = cup2, T = 2.0"]
