@@ -46,7 +46,7 @@ from typing import Any, Callable
 
 from .robotlib import slerp
 from .lockorder import ordered_lock
-from .terms import Atom, Struct, list_items
+from .terms import Atom, String, Struct, list_items
 
 __all__ = ["TF", "TF_STATIC", "FrameTree", "frame_key", "Pose", "lookup", "pose_value", "compose",
            "invert", "IDENTITY", "TfHooks", "PoseOverflow"]
@@ -75,12 +75,18 @@ class TfHooks:
 
 def frame_key(frame: Any) -> Any:
     """A frame name as a key of the tree: frame ids are names, and the terms ``1`` and
-    ``1.0`` (equal in Python and in SQL) name two frames, as ``-0.0`` and ``0.0`` do.
+    ``1.0`` (equal in Python and in SQL) name two frames, as ``-0.0`` and ``0.0`` do, and
+    the atom ``map`` and the string ``"map"`` (equal as Python strings).
 
-    >>> frame_key(1) == frame_key(1.0), frame_key(Atom("map")) == frame_key(Atom("map"))
-    (False, True)
+    >>> frame_key(1) == frame_key(1.0), frame_key(Atom("map")) == frame_key(String("map"))
+    (False, False)
     """
-    return ("float", repr(frame)) if type(frame) is float else frame
+    kind = type(frame)
+    if kind is float:
+        return ("float", repr(frame))
+    if kind is String:
+        return ("string", str(frame))
+    return frame
 
 
 class FrameTree:

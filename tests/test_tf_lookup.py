@@ -15,6 +15,7 @@ from transforms3d import affines, quaternions
 
 import slr_sql
 from slr_sql import ManualClock, SLREvaluationError, Struct
+from slr_sql.terms import String
 
 REPO = Path(__file__).resolve().parent.parent
 S = math.sqrt(0.5)
@@ -374,16 +375,21 @@ def test_frames_named_by_equal_numbers_of_two_types_are_two_frames(backend, requ
                      tf_event("tf", "map", "1", 0.0, (3.0, 0.0, 0.0), (0, 0, 0, 1)),
                      tf_event("tf", "map", "1", 2.0, (3.0, 0.0, 0.0), (0, 0, 0, 1)),
                      tf_event("tf_static", "map", 2, 0.0, (4.0, 0.0, 0.0), (0, 0, 0, 1)),
-                     tf_event("tf_static", "map", 2.0, 0.0, (5.0, 0.0, 0.0), (0, 0, 0, 1))])
+                     tf_event("tf_static", "map", 2.0, 0.0, (5.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf_static", "map", String("1"), 0.0, (6.0, 0.0, 0.0),
+                              (0, 0, 0, 1))])
         x = {goal: [p[0][0] for p in pose_of(kb, goal)] for goal in (
             "tf_lookup(map, 1, 1, P)", "tf_lookup(map, 1.0, 1, P)", "tf_lookup(map, '1', 1, P)",
             "tf_lookup(map, 2, 1, P)", "tf_lookup(map, 2.0, 1, P)",
-            "tf_lookup(1.0, 1, 1, P)", "tf_lookup(map, 1.0, 0.25, P)")}
+            "tf_lookup(1.0, 1, 1, P)", "tf_lookup(map, 1.0, 0.25, P)",
+            'tf_lookup(map, "1", 1, P)', "tf_lookup('1', \"1\", 1, P)")}
     assert x == {"tf_lookup(map, 1, 1, P)": [1.0], "tf_lookup(map, 1.0, 1, P)": [2.0],
                  "tf_lookup(map, '1', 1, P)": [3.0], "tf_lookup(map, 2, 1, P)": [4.0],
                  "tf_lookup(map, 2.0, 1, P)": [5.0],
                  "tf_lookup(1.0, 1, 1, P)": [-1.0],   # not the identity: two frames
-                 "tf_lookup(map, 1.0, 0.25, P)": []}  # before 1.0's first observation
+                 "tf_lookup(map, 1.0, 0.25, P)": [],  # before 1.0's first observation
+                 'tf_lookup(map, "1", 1, P)': [6.0],  # a string names a frame of its own
+                 "tf_lookup('1', \"1\", 1, P)": [3.0]}
 
 
 # -- an observation over an interval holds at every time inside it ----------------------------
