@@ -835,12 +835,13 @@ def _check_time_option(name: str, value: Any, minimum: float | None = None) -> N
                        f"{'' if minimum is None else f' >= {minimum:g}'}, not {shown(value)}")
 
 
-_WRITES_ROWS = re.compile(r"\b(?:insert|update|replace)\b", re.IGNORECASE)
+_WRITES_ROWS = re.compile(r"\b(?:insert|update|replace|merge)\b", re.IGNORECASE)
 
 
 def _rows_written(statement: str, store: Any) -> list[tuple[str, int]]:
     """The event types whose rows a hand-written statement may insert or change: those whose
-    table it names, when it inserts, updates or replaces (a DELETE leaves no NULL behind).
+    table it names, when it inserts, updates, replaces or merges (a DELETE leaves no NULL
+    behind).
 
     >>> from slr_sql.store import EventStore
     >>> s = EventStore(None); s.declare_type("p", 1)

@@ -160,3 +160,12 @@ def test_the_service_says_it_as_a_bad_request_and_stays_up(tmp_path):
             remote.query("p(X)^T")
         assert remote.query("p(a)^T") == [{"T": 1.0}]
     assert "Traceback" not in server.log.read_text()
+
+
+def test_the_door_refuses_a_postgresql_merge_too(postgres_url):
+    with slr_sql.open(postgres_url, clock=ManualClock(10)) as kb:
+        kb.add("p(a)^1")
+        with pytest.raises(NotAnEvent, match=r"^sql: the statement would leave a row"):
+            kb.sql("MERGE INTO p USING (SELECT 1 AS one) AS s ON false WHEN NOT MATCHED THEN "
+                   "INSERT (arg1, t_start, t_end, arrival) VALUES (NULL, 4, 4, 10)", write=True)
+        assert kb.sql("SELECT count(*) FROM p")[1] == [(1,)]
