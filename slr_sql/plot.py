@@ -601,9 +601,9 @@ def _collect_query(source: Any, goal: str, every: float, lo: float, hi: float,
         except SLRTimeout:
             if timeout is None:
                 raise
-            raise SLRTimeout(f"--query {goal}: not asked at all {n} times within the timeout "
-                             f"of {timeout:g} s (asked {i} times, up to T = {t:g}); a larger "
-                             f"--every, a shorter window or a longer --timeout") from None
+            raise SLRTimeout(f"--query {goal}: the timeout of {timeout:g} s ran out at T = "
+                             f"{t:g}, its ask {i + 1} of {n}; a larger --every, a shorter "
+                             f"window or a longer --timeout") from None
         text = None
         if answers:
             shown = [f"{name} = {_term_text(value)}" for name, value in answers[0].items()
