@@ -297,9 +297,12 @@ class StderrLines:
 
 
 def test_slr_serve_logs_the_foxglove_views_start_clients_and_errors_in_words(tmp_path):
+    import sqlite3
+
     db = tmp_path / "served.db"
     with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
         kb.add("seg(cup1, [0.0, 0.0, 0.0])^1")
+        kb.add("a(1)^1")
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     process = subprocess.Popen([sys.executable, "-m", "slr_sql", "serve", str(db), "--port", "0",
                                 "--foxglove", "--foxglove-port", "0"],
@@ -320,6 +323,13 @@ def test_slr_serve_logs_the_foxglove_views_start_clients_and_errors_in_words(tmp
             client.ws.send(json.dumps({"op": "bogus\nINFO:     foxglove: forged"}))
             refused = err.wait_for("bogus")
         assert err.wait_for(f"client {here} left") == f"INFO:     foxglove: client {here} left"
+        # the view's own trouble: a table dropped by hand, met at the next change
+        with sqlite3.connect(db) as conn:
+            conn.execute('DROP TABLE "a"')
+        conn.close()
+        with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+            kb.add("seg(cup2, [0.0, 0.0, 0.0])^2")
+        trouble = err.wait_for("a/1")
     finally:
         process.terminate()
         process.wait(timeout=DEADLINE)
@@ -328,4 +338,6 @@ def test_slr_serve_logs_the_foxglove_views_start_clients_and_errors_in_words(tmp
     assert refused.startswith(f"ERROR:    foxglove: Invalid message from {here}: ")
     assert "bogus\\nINFO:     foxglove: forged" in refused
     assert not any(line.startswith("INFO:     foxglove: forged") for line in err.lines)
+    assert trouble.startswith("WARNING:  foxglove: a/1: its rows cannot be read (no such "
+                              "table"), trouble
     assert not any("Traceback" in line for line in err.lines), err.lines
