@@ -24,7 +24,7 @@ settings.load_profile(__import__("os").environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
 def pytest_configure(config):
-    # The suite starts Python a thousand times or more (the CLI, servers, crash tests): each
+    # The suite starts Python hundreds of times (the CLI, servers, crash tests): each
     # imports slr_sql, and with PYTHONDONTWRITEBYTECODE set (as in this project's sandboxes)
     # each compiled the whole package from source again, 0.3-0.9 s a process. The package
     # is compiled once here, before any worker starts (that setting stops only the writes
