@@ -73,9 +73,9 @@ def _div(a, b):
             return a // b
         return a / b
     if b == 0:
-        # a float zero over zero is no number (SWI-Prolog: undefined), anything else over
-        # zero a division by zero
-        raise evaluation_error("undefined" if a == 0 else "zero_divisor")
+        # a float zero (or NaN) over zero is no number (SWI-Prolog: undefined), anything
+        # else over zero a division by zero
+        raise evaluation_error("undefined" if a == 0 or a != a else "zero_divisor")
     return a / b
 
 
@@ -184,12 +184,24 @@ def _sign(x):
     return math.copysign(1.0, x) if x != 0 else 0.0
 
 
+def _signed(x: int | float) -> tuple:
+    """The order max/min use: by value, and -0.0 below 0 and 0.0 (they are equal by value)."""
+    return (x, math.copysign(1.0, x) if type(x) is float else 1.0)
+
+
 def _minmax(pick_first):
+    # as SWI-Prolog: a NaN gives way to the other number (max(1, nan) is 1), -0.0 is below
+    # the zeros (max(0, -0.0) is 0), and of two equal numbers the float wins
+    # (max(1, 1.0) is 1.0, in either order): max_list/2 and aggregate_all fold with these
     def f(a, b):
-        # compare numerically; on equality SWI returns the float for max(1,1.0)?: keep ISO-ish: b
-        if a == b:
+        if a != a:
+            return b
+        if b != b:
+            return a
+        ka, kb = _signed(a), _signed(b)
+        if ka == kb:
             return b if type(b) is float else a
-        return a if pick_first(a, b) else b
+        return a if pick_first(ka, kb) else b
     return f
 
 
