@@ -1447,7 +1447,10 @@ class ShellInterrupts:
     * while the editor reads keys (a SIGINT sent with kill), hands it to the editor as its
       Ctrl-C key (raising inside the editor's event loop would land in one of its tasks);
     * once the editor took a line, keeps it for that line (:meth:`take`): its goal is
-      interrupted before it starts.
+      interrupted before it starts;
+    * while a Ctrl-C is answered (the goal's stop reported, the line dropped), drops it: it
+      is the same wish as the one answered (Ctrl-C held down sends one after another), and
+      raised there it would leave the shell's loop and end the shell.
 
     ``app``: the editor's prompt_toolkit Application.
 
@@ -1457,6 +1460,7 @@ class ShellInterrupts:
 
     EDITING = "editing"    # inside the line editor's call, from before its prompt to after
     RUNNING = "running"    # a line is handled: Ctrl-C stops the goal
+    ANSWERING = "answering"  # a Ctrl-C is answered (until the editor is called again)
 
     def __init__(self, app: Any):
         self.app = app
@@ -1465,6 +1469,8 @@ class ShellInterrupts:
         self.after_enter = False   # a Ctrl-C came after the editor took the line
 
     def __call__(self, signum: int, frame: Any) -> None:
+        if self.state == self.ANSWERING:
+            return
         if self.state == self.RUNNING or not self.started:
             raise KeyboardInterrupt
         app = self.app
@@ -1493,6 +1499,10 @@ class ShellInterrupts:
         """(The editor's ``pre_run``.)"""
         self.started = True
 
+    def answering(self) -> None:
+        """A Ctrl-C is being answered: another one until the next line is the same one."""
+        self.state = self.ANSWERING
+
     def take(self) -> bool:
         """From now on a Ctrl-C stops the goal; whether one came after Enter already."""
         self.state = self.RUNNING
@@ -1520,13 +1530,14 @@ def interactive(session: Shell, prompt: Any, echo: Any = click.echo) -> None:
     previous = signal.signal(signal.SIGINT, gate)
     try:
         while True:
-            gate.editing()
             try:
+                gate.editing()   # (inside: a Ctrl-C right after it is the prompt's)
                 # Ctrl-C at the prompt is a key (the terminal is raw); no signal handler of
                 # prompt_toolkit's may outlive the prompt and swallow the Ctrl-C of a goal.
                 line = prompt.prompt(session.prompt, handle_sigint=False,
                                      pre_run=gate.editor_started)
             except KeyboardInterrupt:   # at the prompt: drop the line
+                gate.answering()
                 session.interrupt()
                 continue
             except EOFError:
@@ -1536,12 +1547,13 @@ def interactive(session: Shell, prompt: Any, echo: Any = click.echo) -> None:
             try:
                 came = gate.take()
                 if _ctrl_c_typed_ahead(prompt.app.input) or came:
+                    gate.answering()
                     raise KeyboardInterrupt
                 if not session.feed(line):
                     break
                 gate.editing()
             except KeyboardInterrupt:   # during a goal, or before it began: stop it
-                gate.editing()
+                gate.answering()
                 session.interrupt()
                 echo("\n% interrupted")
     finally:

@@ -302,6 +302,54 @@ def test_a_sigint_while_a_line_is_edited_drops_the_line_as_ctrl_c_does(store):
     assert said == ["O = cup1, T = 1.0"]
 
 
+@pytest.mark.parametrize("leaving", ["\x04", "halt.\r"], ids=["ctrl-d", "halt"])
+def test_the_terminal_gets_its_end_of_file_key_back_when_the_shell_leaves(store, leaving):
+    """The shell disables the terminal's end-of-file key while it runs (a Ctrl-D typed
+    between two prompts waits as a key): the terminal it leaves has Ctrl-D as its
+    end-of-file key again, and is cooked, whichever way the user leaves."""
+    child = spawn_shell(store)
+    assert termios.tcgetattr(child.child_fd)[6][termios.VEOF] != b"\x04"
+    press(child, leaving)
+    child.expect(pexpect.EOF)
+    attributes = termios.tcgetattr(child.child_fd)   # (the terminal outlives the shell)
+    child.close()
+    assert child.exitstatus == 0
+    assert attributes[6][termios.VEOF] == b"\x04"
+    assert attributes[3] & termios.ICANON
+
+
+def test_a_second_ctrl_c_while_the_first_is_answered_keeps_the_shell(store):
+    """Ctrl-C held down sends SIGINTs one after another: one that came while the shell
+    reported the goal it stopped (or dropped the line at the prompt) escaped the shell's
+    loop and ended the shell ("Aborted!"). It is the same wish as the first: the shell goes
+    on at its next prompt. (The second SIGINT is sent as the first is reported.)"""
+    import signal
+
+    from prompt_toolkit import PromptSession
+    from prompt_toolkit.input import create_pipe_input
+    from prompt_toolkit.output import DummyOutput
+
+    import slr_sql
+    from slr_sql.cli import Shell, interactive
+
+    said: list[str] = []
+
+    def report(text: str) -> None:
+        said.append(text)
+        if text == "\n% interrupted" and said.count(text) == 1:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    with slr_sql.open(store) as kb, create_pipe_input() as keys:
+        prompt: PromptSession = PromptSession(input=keys, output=DummyOutput())
+        keys.send_text("true.\r\x03seg(O, table)^T.\r\x04")
+        try:
+            interactive(Shell(kb, echo=said.append, echo_err=said.append), prompt,
+                        echo=report)
+        except KeyboardInterrupt:
+            pytest.fail(f"the second Ctrl-C ended the shell after {said}")
+    assert said == ["\n% interrupted", "O = cup1, T = 1.0"]
+
+
 def run_piped(db: str, *lines: str):
     return slr("shell", db, stdin="\n".join(lines) + "\n")
 
