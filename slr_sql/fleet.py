@@ -264,12 +264,18 @@ class _Pusher:
             self.positions = target.positions(self.robot)
             self.reached()
         positions = self.positions
-        heads = self.store.fleet_heads()
-        shipped = 0
+        # the marks before the types: a type whose first row came with its mark after the
+        # types were read would go unshipped this round, and its mark with it
         marks = {k[len("sync/mark/"):]: v for k, v in self.store.meta_items("sync/mark/").items()
                  if _is_mark(v)}
         relayed = _relayed_marks(self.store, self.robot)
+        heads = self.store.fleet_heads()
+        shipped = 0
         keys = sorted(k for k in heads if self.types is None or k in self.types)
+        if self.types is not None:   # (the marks of the types left out speak of rows not shipped)
+            marks = _marks_of(self.types, heads, marks)
+            relayed = {r: m for r, m in ((r, _marks_of(self.types, heads, m))
+                                         for r, m in relayed.items()) if m}
         again = [k for k in keys if self.resync and k not in self.resynced]
         counters = self.store.fleet_counters()
         for key in keys:
@@ -500,6 +506,26 @@ def push(db: str, fleet: str, *, robot: str | None = None,
 def _is_mark(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) \
         and math.isfinite(value)
+
+
+def _marks_of(types: set, held: Iterable[tuple[str, int]], marks: dict[str, Any]) -> dict:
+    """The marks (``{"p/N": t}``) that speak only of ``types``: ``p/N`` of one of them,
+    ``p/*`` when ``types`` hold ``p`` of every arity ``held`` (the types a store holds).
+
+    >>> _marks_of({("p", 1)}, [("p", 1), ("p", 2), ("q", 1)], {"p/1": 5, "p/*": 5, "q/1": 5})
+    {'p/1': 5}
+    """
+    out = {}
+    for key, t in marks.items():
+        name, _, arity = key.rpartition("/")
+        if arity == "*":
+            covered = any(n == name for n, _ in types) and all(
+                (n, a) in types for n, a in held if n == name)
+        else:
+            covered = arity.isdigit() and (name, int(arity)) in types
+        if covered:
+            out[key] = t
+    return out
 
 
 def _relayed_marks(store: EventStore, robot: str) -> dict[str, dict[str, float]]:
