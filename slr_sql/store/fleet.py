@@ -18,7 +18,7 @@ from typing import Any
 from ..encoding import encode
 from ..errors import SLRBusy, SLRError
 from ..terms import Atom
-from .checks import BadEvent, text_problem
+from .checks import BadEvent, shown, text_problem
 from .dialect import POSTGRES
 from .connection import Database
 from .events import EventWriter
@@ -49,27 +49,28 @@ def check_robot_name(name: Any) -> str:
     slr_sql.errors.SLRError: robot name 'r1\u202eevil' has U+202E RIGHT-TO-LEFT OVERRIDE at position 3 (a format character: it would change how the name and what follows it read in logs, tables and plots); name robots with plain words (r1, forklift-2, ...)
     """
     if not isinstance(name, str) or not name:
-        raise SLRError(f"a robot's name is a non-empty text, not {name!r}")
+        raise SLRError(f"a robot's name is a non-empty text, not {shown(name)}")
+    # (the name quoted cut short: a 100 KB name refused must not make a 100 KB message)
     problem = text_problem(name)
     if problem:
-        raise SLRError(f"robot name {name!r} cannot be stored: {problem}")
+        raise SLRError(f"robot name {shown(name)} cannot be stored: {problem}")
     for position, char in enumerate(name, 1):
         kind = _UNSEEN.get(unicodedata.category(char))
         if kind is not None:
             label = unicodedata.name(char, "")
             raise SLRError(
-                f"robot name {name!r} has U+{ord(char):04X}{' ' + label if label else ''} at "
+                f"robot name {shown(name)} has U+{ord(char):04X}{' ' + label if label else ''} at "
                 f"position {position} ({kind}: it would change how the name and what follows "
                 "it read in logs, tables and plots); name robots with plain words (r1, "
                 "forklift-2, ...)")
     if encode(Atom(name)) != name:  # the column holds the atom's stored form: the name itself
-        raise SLRError(f"robot name {name!r} reads as a compound term or string when stored; "
+        raise SLRError(f"robot name {shown(name)} reads as a compound term or string when stored; "
                        "name robots with plain words (r1, forklift-2, ...)")
     if POSTGRES.to_column(name) != name:
         # a name that reads as a number is stored tagged on PostgreSQL (docs/postgres.md), so
         # a robot column could not hold it as itself there: refused on every backend, so that
         # any store may ship to any fleet
-        raise SLRError(f"robot name {name!r} reads as a number when stored; name robots with "
+        raise SLRError(f"robot name {shown(name)} reads as a number when stored; name robots with "
                        "plain words (r1, forklift-2, ...)")
     return name
 
