@@ -1,7 +1,7 @@
 """Event rules: detection throughput against ETALIS, latency, and history-size independence.
 
     python benchmarks/bench_events.py                    # everything
-    python benchmarks/bench_events.py --part throughput  # or latency, flat, first-need
+    python benchmarks/bench_events.py --part throughput  # or ceiling, latency, flat, first-need
     python benchmarks/bench_events.py --part throughput --rules equals3 --policies recent --no-one
     ETALIS_DIR=/tmp/etalis python benchmarks/bench_events.py --part throughput
     ... --part throughput --repeats 5 --round-seconds 2   # more rounds of ours and ETALIS
@@ -79,6 +79,10 @@
   ``--n`` events, the first and second ``next`` lookup (``next_candidates``) and compiled
   ``kb.query`` of ``next`` on ``c``, each on its own copy of the file; CPU time also as a
   share of the run's.
+* **ceiling** -- seq2 recent through an engine written for that rule alone on raw sqlite3
+  (:func:`hand_written_seq2_recent`: same store, rows and transactions as ours, matching in
+  memory), in rounds with ETALIS and ours: how far any engine in Python gets while storing
+  what we store.
 * **flat** -- events/s of seq2 (recent) and seq3 (unrestricted, within 5) with 10,000 and
   1,000,000 events already stored: the delta statements search from the new rows through
   the indexes, so the history's size should not matter.
