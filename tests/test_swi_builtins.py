@@ -182,6 +182,8 @@ LEFT_ALONE = {
     'aggregate_all(max(X-Y), member(X-Y, [1-a, 3-b, 2-c]), M)': "max(X-W) is slr_sql's documented witness form (docs/sql.md); SWI-Prolog evaluates X-W",
     'format(atom(A), "~d", [3.0])': "SWI-Prolog's format_argument_type/2 is its own; slr_sql raises ISO's type_error(integer, 3.0)",
     'aggregate_all(max(X, W), member(X-W, [_-a]), M)': "an unbound first X is ISO's instantiation_error (SWI-Prolog's library raises type_error(number, _) from its number/1 test)",
+    'max_list([a], M)': "SWI-Prolog's fold starts from the first element unevaluated, so a one-element list answers that element whatever it is; slr_sql evaluates every element (type_error(evaluable, a/0), as for [1, a])",
+    'aggregate_all(foo(X), member(X, [1]), N)': "SWI-Prolog reads a compound template as one of aggregation specs (foo(X) binds X to sum(_)); slr_sql takes the templates SPEC lists and refuses others with domain_error(aggregate_template, T)",
     'X is 2 ^ -1': 'ISO: type_error(float, 2) for an integer to a negative integer power (SWI-Prolog gives 0.5 unless its iso flag is set)',
     'X is log(0)': 'ISO: evaluation_error(undefined) (SWI-Prolog 9 says float_overflow)',
 }
