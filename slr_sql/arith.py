@@ -184,11 +184,6 @@ def _sign(x):
     return math.copysign(1.0, x) if x != 0 else 0.0
 
 
-def _signed(x: int | float) -> tuple:
-    """The order max/min use: by value, and -0.0 below 0 and 0.0 (they are equal by value)."""
-    return (x, math.copysign(1.0, x) if type(x) is float else 1.0)
-
-
 def _minmax(pick_first):
     # as SWI-Prolog: a NaN gives way to the other number (max(1, nan) is 1), -0.0 is below
     # the zeros (max(0, -0.0) is 0), and of two equal numbers the float wins
@@ -198,10 +193,13 @@ def _minmax(pick_first):
             return b
         if b != b:
             return a
-        ka, kb = _signed(a), _signed(b)
-        if ka == kb:
+        if a == b:
+            sa = math.copysign(1.0, a) if type(a) is float else 1.0
+            sb = math.copysign(1.0, b) if type(b) is float else 1.0
+            if sa != sb:   # -0.0 and a zero: the sign decides
+                return a if pick_first(sa, sb) else b
             return b if type(b) is float else a
-        return a if pick_first(ka, kb) else b
+        return a if pick_first(a, b) else b
     return f
 
 
