@@ -545,6 +545,10 @@ class EventStore:
     def data_version(self) -> int:
         return self._catalog.data_version()
 
+    @_doc(Database.others_version)
+    def others_version(self) -> int:
+        return self._db.others_version()
+
     @_doc(Catalog.program_sources)
     def program_sources(self) -> list[tuple[str, str | None]]:
         return self._catalog.program_sources()
