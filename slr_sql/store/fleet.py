@@ -38,7 +38,8 @@ _ADD_ROBOT = "INSERT INTO slr_robots (name) VALUES (?) ON CONFLICT (name) DO NOT
 # bringing one robot's rows by two routes at once cannot both pass) and its via returned
 _ADD_ROUTE = ("INSERT INTO slr_fleet_routes (robot, via, shipped) VALUES (?, ?, ?) "
               "ON CONFLICT (robot) DO UPDATE SET shipped = slr_fleet_routes.shipped + "
-              "excluded.shipped RETURNING via")
+              "excluded.shipped")
+_TAKE_ROUTE = _ADD_ROUTE + " RETURNING via"
 
 
 def check_robot_name(name: Any) -> str:
@@ -117,6 +118,9 @@ class Fleet:
         row = db.conn.execute("SELECT value FROM slr_meta WHERE key = 'robot'").fetchone()
         self.robot: str | None = None if row is None else _json_text(row[0])
         writer.robot = self.robot
+        # routes this store committed (robot -> via): a route is never changed nor dropped,
+        # so a batch of a robot along its known route needs no answer about it
+        self._routes: dict[str, str] = {}
 
     def name(self, robot: str) -> None:
         """Name the store's robot (kept in the store). A store has one name for life:
@@ -322,7 +326,7 @@ class Fleet:
                 fresh = rows if rows[0][0] > position else [r for r in rows if r[0] > position]
             if not fresh:
                 return 0
-            self._take_routes(robot, fresh)
+            along = self._take_routes(robot, fresh)
             others = {r[-1] for r in fresh if r[-1] is not None and r[-1] != robot}
             dialect = self.db.dialect
             server = dialect.to_column is not None
@@ -365,6 +369,8 @@ class Fleet:
             # statements nobody reads an answer of: on a server they go with the
             # transaction's next statement or its COMMIT (one round trip, not one each)
             unanswered = conn.execute_unanswered if server else conn.execute
+            for params in along:
+                unanswered(_ADD_ROUTE, params)
             if store_events is None:
                 for who in (robot, *others):
                     unanswered(_ADD_ROBOT, (who,))
@@ -378,18 +384,27 @@ class Fleet:
                                        else fresh[-1][0]))
             return len(fresh)
 
-    def _take_routes(self, robot: str, rows: list[tuple]) -> None:
+    def _take_routes(self, robot: str, rows: list[tuple]) -> list[tuple]:
         """Note that the rows of each robot of ``rows`` come through ``robot`` (the robot
         itself, or a store relaying them), or raise :class:`RouteConflict` when a robot's
-        rows come through another one already (inside the receiving transaction)."""
+        rows come through another one already (inside the receiving transaction). Returns
+        the parameters of :data:`_ADD_ROUTE` for the robots whose route this store
+        committed before (no answer needed: the caller sends them with its last
+        statements)."""
         counts: dict[str, int] = {}
         for r in rows:
             who = r[-1] or robot
             counts[who] = counts.get(who, 0) + 1
         conn = self.db.conn
+        taken = []
+        along = []
         for who in sorted(counts):   # (one order: two shipments never wait on each other)
-            held = conn.execute(_ADD_ROUTE, (who, robot, counts[who])).fetchone()[0]
+            if self._routes.get(who) == robot:
+                along.append((who, robot, counts[who]))
+                continue
+            held = conn.execute(_TAKE_ROUTE, (who, robot, counts[who])).fetchone()[0]
             if held == robot:
+                taken.append(who)
                 continue
             twice = ("would store each of them twice (a fleet store keeps its positions per "
                      f"shipping robot): push {who} to one of the two stores only")
@@ -400,6 +415,10 @@ class Fleet:
                 f"the rows of robot {who!r} reach this store relayed by {held!r}; "
                 + (f"{who} shipping them here directly too " if robot == who
                    else f"{robot!r} relaying them too ") + twice)
+        if taken:
+            routes = self._routes
+            self.db.after_commit(lambda: routes.update(dict.fromkeys(taken, robot)))
+        return along
 
     def _set_position(self, robot: str, name: str, arity: int, position: int) -> None:
         self.db.conn.execute(_SET_POSITION, (robot, name, arity, position))
