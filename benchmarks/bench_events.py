@@ -1,7 +1,7 @@
 """Event rules: detection throughput against ETALIS, latency, and history-size independence.
 
     python benchmarks/bench_events.py                    # everything
-    python benchmarks/bench_events.py --part throughput  # or latency, flat, first-need
+    python benchmarks/bench_events.py --part throughput  # or ceiling, latency, flat, first-need
     python benchmarks/bench_events.py --part throughput --rules equals3 --policies recent --no-one
     ETALIS_DIR=/tmp/etalis python benchmarks/bench_events.py --part throughput
     ... --part throughput --repeats 5 --round-seconds 2   # more rounds of ours and ETALIS
@@ -79,6 +79,10 @@
   ``--n`` events, the first and second ``next`` lookup (``next_candidates``) and compiled
   ``kb.query`` of ``next`` on ``c``, each on its own copy of the file; CPU time also as a
   share of the run's.
+* **ceiling** -- seq2 recent through an engine written for that rule alone on raw sqlite3
+  (:func:`hand_written_seq2_recent`: same store, rows and transactions as ours, matching in
+  memory), in rounds with ETALIS and ours: how far any engine in Python gets while storing
+  what we store.
 * **flat** -- events/s of seq2 (recent) and seq3 (unrestricted, within 5) with 10,000 and
   1,000,000 events already stored: the delta statements search from the new rows through
   the indexes, so the history's size should not matter.
@@ -654,6 +658,105 @@ def durable_floors(run: StoredRun, synchronous: str,
     return floors
 
 
+# ----------------------------------------------------------------------------- hand-written
+
+def hand_written_seq2_recent(n: int, batch: int, synchronous: str) -> Rates:
+    """events/s (wall, CPU) and detections of an engine written for this one rule, seq2
+    under ``recent``, on raw sqlite3: the most an engine in Python can reach while storing
+    what ours stores, with no slr_sql code in the timed part.
+
+    The store is made by slr_sql (an event of each type before the rule is loaded, so the
+    tables, indexes and provenance table are ours); then raw sqlite3 takes the same events in
+    the same transactions as :func:`_feed` makes ours: each batch's ``a`` and ``b`` rows
+    (multi-row ``INSERT``, the arguments as given) in one; in the clock move's, the ``b`` events
+    whose end the clock has passed are matched -- in memory, per key the ``a`` events in
+    store order, the latest that ends before the ``b`` starts, found by bisection -- and their
+    provenance rows, complex events and the clock are written. What it leaves out is all
+    ours does besides: checking and encoding any term, other rules, out-of-order and late
+    arrivals, buffers, subscriptions, the durable state another process reads."""
+    from bisect import bisect_left, insort
+    folder = tempfile.mkdtemp(prefix="bench_events_hand_")
+    try:
+        path = os.path.join(folder, "h.db")
+        kb = slr_sql.open(path, clock=ManualClock(-1.0), synchronous=synchronous)
+        kb.add_many([("a", [-1], -3.0, -3.0), ("b", [-1], -2.0, -2.0)])
+        kb.load(_program("seq2", "recent"))
+        kb.close()
+        connection = sqlite3.connect(path, isolation_level=None)
+        connection.execute(f"PRAGMA synchronous={synchronous}")
+        connection.execute(f"PRAGMA cache_size=-{CACHE_SIZE_KIB}")
+        prov = connection.execute("SELECT name FROM sqlite_master WHERE type = 'table' AND "
+                                  "name LIKE 'slr_cep_m_%'").fetchone()[0]
+        seqs = {name: connection.execute(f"SELECT max(seq) FROM {quote_identifier(name)}")
+                .fetchone()[0] for name in ("a", "b")}
+        evs = seq2_events(n)
+        items = [(name, [_value(a) for a in args], t, t) for name, args, t in evs]
+        inserts = {name: f"INSERT INTO {quote_identifier(name)} (arg1, t_start, t_end, arrival) "
+                   "VALUES " for name in ("a", "b")}
+        insert_prov = (f"INSERT INTO {quote_identifier(prov)} (alt, r1, r2, t_start, t_end, h1, "
+                       "detected) VALUES ")
+        insert_c = "INSERT INTO \"c\" (arg1, t_start, t_end, arrival) VALUES "
+        gc.collect()
+        t0 = time.perf_counter()
+        c0 = time.process_time()
+        latest: dict = {}     # key -> [(t_end, t_start, seq) of its a's], in store order
+        waiting: list = []    # b's not decided: (seq, key, t_start, t_end)
+        now = 0.0
+        detections = 0
+
+        def insert(head: str, rows: list, width: int) -> None:
+            for i in range(0, len(rows), 500):
+                part = rows[i:i + 500]
+                marks = "(" + ", ".join("?" * width) + ")"
+                connection.execute(head + ",".join([marks] * len(part)),
+                                   [x for row in part for x in row])
+
+        def decide(upto: float, everything: bool) -> int:
+            nonlocal waiting
+            found, keep = [], []
+            for seq, key, start, end in waiting:
+                if end < upto or everything:
+                    of_key = latest.get(key, ())
+                    i = bisect_left(of_key, (start,)) - 1   # the last a ending before start
+                    if i >= 0:
+                        a_end, a_start, a_seq = of_key[i]
+                        found.append((0, a_seq, seq, a_start, end, key, now))
+                else:
+                    keep.append((seq, key, start, end))
+            waiting = keep
+            connection.execute("BEGIN IMMEDIATE")
+            connection.execute("UPDATE slr_clock SET now = ? WHERE id = 1", (now,))
+            insert(insert_prov, found, 7)
+            insert(insert_c, [(row[5], row[3], row[4], now) for row in found], 4)
+            connection.execute("COMMIT")
+            return len(found)
+
+        for i in range(0, len(items), batch):
+            rows: dict = {"a": [], "b": []}
+            for name, args, start, end in items[i:i + batch]:
+                rows[name].append((args[0], start, end, now))
+            connection.execute("BEGIN IMMEDIATE")
+            for name in ("a", "b"):
+                insert(inserts[name], rows[name], 4)
+            connection.execute("COMMIT")
+            for key, start, end, _ in rows["a"]:
+                seqs["a"] += 1
+                insort(latest.setdefault(key, []), (end, start, seqs["a"]))
+            for key, start, end, _ in rows["b"]:
+                seqs["b"] += 1
+                waiting.append((seqs["b"], key, start, end))
+            now = max(now, evs[min(i + batch, len(evs)) - 1][2])
+            detections += decide(now, False)
+        now = evs[-1][2] + 1.0
+        detections += decide(now, True)
+        elapsed = time.perf_counter() - t0
+        cpu = time.process_time() - c0
+        connection.close()
+        return n / elapsed, n / max(cpu, 1e-9), detections
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
 # ----------------------------------------------------------------------------- interleaved runs
 
 Rates = tuple[float, float, int]   # events/s by wall clock, by CPU time; detections
@@ -834,9 +937,42 @@ def throughput_row(scenario: str, policy: str, args: argparse.Namespace,
     return row, f"* {scenario} {policy}: " + "; ".join(steps)
 
 
+def ceiling_row(args: argparse.Namespace, etalis_dir: str) -> tuple[str, str]:
+    """The row of the hand-written engine (:func:`hand_written_seq2_recent`): rounds of it
+    and ETALIS taking turns, ours (seq2 recent, ``add_many``) right after each; the medians
+    of the per-round CPU ratios, and the runs in order."""
+    rounds = interleave(
+        lambda: hand_written_seq2_recent(args.n, 1000, args.synchronous),
+        lambda: (etalis("seq2", "recent", args.n, etalis_dir, args.etalis_timeout)
+                 if etalis_dir else "not run"),
+        lambda: ours("seq2", "recent", args.n, 1000, args.synchronous),
+        args.repeats, args.n, args.round_seconds)
+    hand = [pair.ours for pair in rounds.pairs]
+    mine = [pair.baseline for pair in rounds.pairs]
+    cells = [f"{statistics.median(r[1] for r in hand):,.0f}",
+             f"{statistics.median(r[1] for r in mine):,.0f}"]
+    pairs = rounds.compared()
+    if pairs:
+        theirs = [pair.etalis.cpu for pair in pairs if pair.etalis is not None]
+        h, h_least, h_most = spread([pair.ours[1] for pair in pairs], theirs)
+        o, o_least, o_most = spread([pair.baseline[1] for pair in pairs], theirs)
+        cells += [f"{statistics.median(theirs):,.0f}", f"**{h:.2f}x** ({h_least:.2f}–{h_most:.2f}x)",
+                  f"{o:.2f}x ({o_least:.2f}–{o_most:.2f}x)"]
+    else:
+        cells += ["-", "-", f"- ({rounds.etalis_failure})"]
+    share, _, _ = spread([r[1] for r in mine], [r[1] for r in hand])
+    detections = f"{_counts([r[2] for r in hand])} / {_counts([r[2] for r in mine])}"
+    steps = "; ".join(f"hand {pair.ours[1]:,.0f}, ETALIS "
+                      f"{pair.etalis.cpu if pair.etalis else math.nan:,.0f}, ours "
+                      f"{pair.baseline[1]:,.0f}" for pair in rounds.pairs)
+    return (f"| {detections} | " + " | ".join(cells) + f" | {share:.2f} ({len(rounds.pairs)}) |",
+            "* ceiling: " + steps)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--part", choices=["throughput", "latency", "flat", "first-need", "all"],
+    ap.add_argument("--part", choices=["throughput", "ceiling", "latency", "flat", "first-need",
+                                       "all"],
                     default="all")
     ap.add_argument("--n", type=int, default=10_000, help="events per throughput run")
     ap.add_argument("--n-one", type=int, default=2_000, help="events for kb.add one at a time")
@@ -878,6 +1014,14 @@ def main() -> None:
         print("\nThe runs in order (CPU ev/s, ours | ETALIS and their ratio, round by round):")
         for order in runs:
             print(order)
+    if args.part in ("ceiling", "all"):
+        print("\n| seq2 recent: detections (hand-written / ours) | hand-written ev/s (CPU) | "
+              "ours ev/s (CPU) | ETALIS ev/s (CPU) | **hand-written / ETALIS (CPU)**, median "
+              "(least–greatest) | ours / ETALIS, same rounds | ours / hand-written (rounds) |")
+        print("|---:|---:|---:|---:|---:|---:|---:|")
+        row, order = ceiling_row(args, etalis_dir)
+        print(row)
+        print("\nThe runs in order (CPU ev/s):\n" + order, flush=True)
     if args.part in ("latency", "all"):
         print("\n| synchronous | checkpoint | rule | p50 ms | p99 ms | max ms |")
         print("|---|---|---|---:|---:|---:|")

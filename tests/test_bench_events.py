@@ -146,3 +146,25 @@ def test_fewer_than_one_round_is_refused():
 def test_the_examples_in_the_benchmark_run(bench):
     failures, tried = doctest.testmod(bench, verbose=False)
     assert tried >= 2 and failures == 0
+
+
+def test_the_hand_written_engine_detects_what_ours_detects(bench):
+    """The ceiling's engine, written for seq2 recent alone, finds the same complex events as
+    ours on the same events, and stores them as ours does (rows in the complex type's and
+    the provenance table)."""
+    hand = bench.hand_written_seq2_recent(400, 100, "OFF")
+    ours = bench.ours("seq2", "recent", 400, 100, "OFF")
+    assert hand[2] == ours[2] == 200 and hand[1] > 0
+
+
+def test_the_ceiling_row_divides_by_the_median_etalis(bench, monkeypatch):
+    given = iter([bench.EtalisRun(rate, rate, 100, rate) for rate in (1e6, 3e6, 2e6)])
+    monkeypatch.setattr(bench, "etalis", lambda *args: next(given))
+    args = argparse.Namespace(n=200, synchronous="OFF", etalis_timeout=1.0, repeats=3,
+                              round_seconds=0.0)
+    row, order = bench.ceiling_row(args, etalis_dir="given")
+    cells = _cells(row)
+    assert cells[0] == "100 / 100" and cells[3] == "2,000,000"
+    hand = [float(r.replace(",", "")) for r in re.findall(r"hand ([\d,]+)", order)]
+    ratios = sorted(h / e for h, e in zip(hand, (1e6, 3e6, 2e6)))
+    assert cells[4].startswith(f"**{ratios[1]:.2f}x** ({ratios[0]:.2f}–{ratios[2]:.2f}x)")
