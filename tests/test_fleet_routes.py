@@ -134,3 +134,56 @@ def test_status_lists_relayed_robots_with_the_store_they_come_through(robots, wh
         capture_output=True, text=True, env=slr_env(), timeout=60).stdout)
     assert [(r["robot"], r["via"]) for r in listed] == [
         ("r1", "site"), ("r2", "site"), ("r3", None), ("site", None)]
+
+
+def test_a_fleet_store_from_before_routes_knows_its_direct_robots_after_the_upgrade(robots):
+    import sqlite3
+    central = str(robots / "central.db")
+    assert fleet.push(str(robots / "r1.db"), central).shipped == 2
+    # the store as schema version 9 wrote it: no routes
+    conn = sqlite3.connect(central, isolation_level=None)
+    conn.execute("DROP TABLE slr_fleet_routes")
+    conn.execute("DELETE FROM slr_migrations WHERE number >= 10")
+    conn.execute("PRAGMA user_version = 9")
+    conn.close()
+    with pytest.raises(RouteConflict, match="robot 'r1' ships to this store directly"):
+        fleet.push(str(robots / "site.db"), central)      # (migrates first)
+    assert seen(central) == [("r1", "a", 10.0), ("r1", "b", 20.0)]
+
+
+def test_two_routes_taken_at_once_on_postgresql_let_one_through(robots, postgres_url):
+    """Another session takes r1's direct route and has not committed: the site's shipment
+    relaying r1 waits for it, then is refused (not both routes pass)."""
+    import threading
+    import time
+
+    import psycopg
+
+    from slr_sql.store.postgres import split_url
+    central = postgres_url
+    slr_sql.open(central).close()                       # (the schema, migrated)
+    other = psycopg.connect(split_url(central)[0])
+    other.execute("SET search_path = slr")
+    other.execute("INSERT INTO slr_fleet_routes (robot, via) VALUES ('r1', 'r1')")
+    raised: list = []
+
+    def relay() -> None:
+        try:
+            fleet.push(str(robots / "site.db"), central)
+        except SLRError as exc:
+            raised.append(exc)
+    thread = threading.Thread(target=relay)
+    thread.start()
+    try:
+        deadline = time.monotonic() + 60
+        with psycopg.connect(split_url(central)[0], autocommit=True) as watcher:
+            while time.monotonic() < deadline and not watcher.execute(
+                    "SELECT 1 FROM pg_stat_activity WHERE wait_event_type = 'Lock' AND "
+                    "query LIKE '%slr_fleet_routes%'").fetchall():
+                time.sleep(0.01)
+        other.commit()
+    finally:
+        other.close()
+        thread.join(timeout=60)
+    assert len(raised) == 1 and isinstance(raised[0], RouteConflict), raised
+    assert seen(central) == []
