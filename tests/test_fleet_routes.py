@@ -187,3 +187,18 @@ def test_two_routes_taken_at_once_on_postgresql_let_one_through(robots, postgres
         thread.join(timeout=60)
     assert len(raised) == 1 and isinstance(raised[0], RouteConflict), raised
     assert seen(central) == []
+
+
+@pytest.mark.parametrize("where", ["file", "postgres"])
+def test_a_stores_own_rows_relayed_back_to_it_are_refused(tmp_path, where, request):
+    # a cycle: the named fleet store pushes to a site store, which pushes back to it
+    central = _central(tmp_path, where, request)
+    with slr_sql.open(central, robot="central", clock=slr_sql.ManualClock(100)) as kb:
+        kb.add("seen(x)^1")
+    slr_sql.open(tmp_path / "site.db", robot="site").close()
+    assert fleet.push(central, str(tmp_path / "site.db")).shipped == 1
+    with pytest.raises(RouteConflict, match=r"the rows of robot 'central' are this store's "
+                                            r"own; 'site' relaying them back would store "
+                                            r"each of them twice"):
+        fleet.push(str(tmp_path / "site.db"), central)
+    assert seen(central) == [("central", "x", 1.0)]

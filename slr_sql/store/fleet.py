@@ -402,12 +402,17 @@ class Fleet:
             if self._routes.get(who) == robot:
                 along.append((who, robot, counts[who]))
                 continue
+            twice = ("would store each of them twice (a fleet store keeps its positions per "
+                     f"shipping robot): push {who} to one of the two stores only")
+            if who == self.robot:   # (its own rows, shipped back: a cycle)
+                raise RouteConflict(f"the rows of robot {who!r} are this store's own; "
+                                    f"{robot!r} relaying them back would store each of them "
+                                    "twice: a store's rows must not come back to it through "
+                                    "the stores it pushes to")
             held = conn.execute(_TAKE_ROUTE, (who, robot, counts[who])).fetchone()[0]
             if held == robot:
                 taken.append(who)
                 continue
-            twice = ("would store each of them twice (a fleet store keeps its positions per "
-                     f"shipping robot): push {who} to one of the two stores only")
             if held == who:
                 raise RouteConflict(f"robot {who!r} ships to this store directly; {robot!r} "
                                     f"relaying its rows too {twice}")
