@@ -46,10 +46,9 @@ DENIED_FUNCTIONS = {
 
 # Pragmas no statement on a store connection may run, with the reason given.
 DENIED_PRAGMAS = {
-    "case_sensitive_like": "it registers SQLite's own LIKE and GLOB on the connection again, "
-                           "over the store's bounded ones, and one call of those cannot be "
-                           "stopped by a statement's timeout; for a case-sensitive match use "
-                           "GLOB",
+    "case_sensitive_like": "it registers SQLite's own LIKE on the connection again, over "
+                           "the store's bounded one, and one call of that cannot be stopped "
+                           "by a statement's timeout; for a case-sensitive match use GLOB",
 }
 
 # Pragmas that take an argument and only read (also table-valued: pragma_table_info('t')).
