@@ -629,7 +629,10 @@ def status(fleet: str, token: str | None = None, now: float | None = None) -> li
     stored from it), ``pending`` (events its store held unshipped at the last contact),
     ``lag_seconds`` (arrival of its latest event less arrival of the latest shipped, at the
     last contact; 0 when nothing was pending), ``last_contact`` (seconds since the epoch)
-    and ``since_contact`` (seconds), in name order.
+    and ``since_contact`` (seconds), ``via`` None; and per robot whose rows another store
+    relays there: ``shipped`` (its rows stored), ``via`` (the relaying store's robot),
+    ``pending``, ``lag_seconds`` and ``last_contact`` None (its pusher reports to the
+    relaying store); in name order.
 
     >>> import os, tempfile; status(os.path.join(tempfile.mkdtemp(), "f.db"))
     []
@@ -645,14 +648,16 @@ def status(fleet: str, token: str | None = None, now: float | None = None) -> li
             rows = kb.store.fleet_contacts()
     out = []
     for r in rows:
-        lag = 0.0
+        via = r.get("via")   # (a server of an older slr_sql does not say)
+        lag: float | None = None if via is not None else 0.0
         if r["pending"] and r["head_arrival"] is not None:
             lag = max(0.0, r["head_arrival"] - (r["last_arrival"] if r["last_arrival"]
                                                 is not None else r["head_arrival"]))
-        out.append({"robot": r["robot"], "shipped": r["shipped"], "pending": r["pending"],
+        out.append({"robot": r["robot"], "shipped": r["shipped"],
+                    "pending": None if via is not None else r["pending"],
                     "lag_seconds": lag, "last_contact": r["contact_at"],
                     "since_contact": None if r["contact_at"] is None
-                    else max(0.0, now - r["contact_at"])})
+                    else max(0.0, now - r["contact_at"]), "via": via})
     return out
 
 
@@ -729,7 +734,8 @@ def click_group() -> Any:
     @click.option("--json", "as_json", is_flag=True, help="Print a JSON list of robots.")
     @click.pass_context
     def status_command(ctx: click.Context, fleet: str, as_json: bool) -> None:
-        """Per robot: events shipped, lag (events and seconds) and last contact."""
+        """Per robot: events shipped, lag (events and seconds) and last contact; a robot
+        whose rows another store relays here: the store they come through."""
         import json
         import os
 
@@ -745,6 +751,8 @@ def click_group() -> Any:
             return
         header = ("robot", "shipped", "lag events", "lag s", "last contact")
         table = [header] + [
+            (r["robot"], str(r["shipped"]), "-", "-", f"relayed via {r['via']}")
+            if r.get("via") is not None else
             (r["robot"], str(r["shipped"]), str(r["pending"]), f"{r['lag_seconds']:.3f}",
              "never" if r["last_contact"] is None else
              time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(r["last_contact"]))
