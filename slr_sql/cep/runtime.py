@@ -34,9 +34,9 @@ from operator import itemgetter, ne
 from typing import Any, Callable
 
 from ..encoding import Unencodable, decode, encode
-from ..errors import SLRError
+from ..errors import SLRError, SLRUnavailable
 from ..host import Host
-from ..store import DatabaseError, EventBatch, quote_identifier
+from ..store import DatabaseError, EventBatch, quote_identifier, store_error
 from ..terms import Struct, Var, deref, format_term, is_ground, make_list, term_vars
 from .rules import EventRule
 from .sqlgen import (AltSQL, anchor_index, complex_copy, complex_read, create_index,
@@ -93,6 +93,19 @@ def _head_value(t: Any, bindings: dict) -> Any:
             args.append(v)
         return Struct(t.name, tuple(args))
     return t
+
+
+def _may_pass(exc: BaseException, path: str | None) -> bool:
+    """Whether an error a where goal raised is a condition that may pass (SLRUnavailable:
+    a busy or full store, a lost connection, a service a defined predicate asks) rather
+    than an answer of the goal (a type error, a timeout, a goal that cannot run).
+
+    >>> _may_pass(SLRUnavailable("down"), None), _may_pass(SLRError("type_error"), None)
+    (True, False)
+    """
+    if isinstance(exc, SLRUnavailable):
+        return True
+    return isinstance(exc, DatabaseError) and isinstance(store_error(exc, path), SLRUnavailable)
 
 
 def _sqlite_key(v: Any) -> tuple:
@@ -496,6 +509,12 @@ class RuleRuntime:
             except MustWait:
                 raise
             except (SLRError, RecursionError, ValueError, TypeError, DatabaseError) as exc:
+                if _may_pass(exc, self.eng.store.path):
+                    # the goal could not be asked (a service down, the store busy or full):
+                    # rejecting this candidate would derive the next one in its place, a
+                    # decision the moment's trouble made; the round fails instead, and the
+                    # decision is made again (the add is retried, the clock moves again)
+                    raise
                 self.errors += 1
                 self.last_error = describe_error(exc)
                 return False
