@@ -233,7 +233,7 @@ def main(ctx: click.Context, token: str | None) -> None:
 
     DB is the store's file; load, add, ingest, run, demo and serve create it, the other
     commands need an existing store. DB may also be the URL of a running `slr serve`
-    (http://HOST:PORT).
+    (http://HOST:PORT) or of a PostgreSQL store (postgresql://USER@HOST/DB, docs/postgres.md).
     """
     ctx.obj = {"token": token}
     warnings.showwarning = _show_warning
