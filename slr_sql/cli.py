@@ -10,7 +10,6 @@ path or an empty file say ``no such store: PATH``.
 """
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import os
@@ -18,7 +17,7 @@ import re
 import sys
 import warnings
 from dataclasses import dataclass
-from typing import Any, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator
 
 import click
 
@@ -1429,8 +1428,8 @@ def shell(db: str) -> None:
                                completer=PredicateCompleter(), complete_while_typing=False)
         click.echo(f"slr shell on {db} — `help` for commands, Ctrl-C stops a goal, "
                    f"Ctrl-D leaves")
-        with _eof_key_typed_ahead(sys.stdin):
-            interactive(session, prompt)
+        interactive(session, prompt,
+                    before_prompt=lambda: cooked_keys_typed_ahead(sys.stdin, prompt.app.input))
 
 
 class ShellInterrupts:
@@ -1442,8 +1441,10 @@ class ShellInterrupts:
     runs, turned a Ctrl-C there into a cancelled prompt: the line typed was dropped without
     a word). Installed for the whole shell (so asyncio installs none), this handler
 
-    * raises KeyboardInterrupt while a line is handled (the goal stops) and before the
-      editor started (the unfinished line is dropped, as by Ctrl-C at the prompt);
+    * raises KeyboardInterrupt while a line is handled (the goal stops);
+    * before the editor started (between two lines: a SIGINT sent with kill), keeps it for
+      the editor, which takes it as its Ctrl-C key once it runs (raised there, it escaped
+      the shell's loop, which had not reached the editor's call);
     * while the editor reads keys (a SIGINT sent with kill), hands it to the editor as its
       Ctrl-C key (raising inside the editor's event loop would land in one of its tasks);
     * once the editor took a line, keeps it for that line (:meth:`take`): its goal is
@@ -1463,10 +1464,14 @@ class ShellInterrupts:
         self.state = self.EDITING
         self.started = False       # whether the editor ran for this line
         self.after_enter = False   # a Ctrl-C came after the editor took the line
+        self.before_editor = False  # a Ctrl-C came before the editor ran: its Ctrl-C key
 
     def __call__(self, signum: int, frame: Any) -> None:
-        if self.state == self.RUNNING or not self.started:
+        if self.state == self.RUNNING:
             raise KeyboardInterrupt
+        if not self.started:
+            self.before_editor = True
+            return
         app = self.app
         if app.is_running and not app.is_done and app.loop is not None:
             try:
@@ -1490,8 +1495,12 @@ class ShellInterrupts:
         self.after_enter = False
 
     def editor_started(self) -> None:
-        """(The editor's ``pre_run``.)"""
+        """(The editor's ``pre_run``.) A Ctrl-C kept from before reaches the editor as its
+        Ctrl-C key, after the keys typed ahead of it."""
         self.started = True
+        if self.before_editor:
+            self.before_editor = False
+            self.app.loop.call_soon(self._as_key)
 
     def take(self) -> bool:
         """From now on a Ctrl-C stops the goal; whether one came after Enter already."""
@@ -1500,11 +1509,13 @@ class ShellInterrupts:
         return came
 
 
-def interactive(session: Shell, prompt: Any, echo: Any = click.echo) -> None:
+def interactive(session: Shell, prompt: Any, echo: Any = click.echo,
+                before_prompt: Callable[[], None] | None = None) -> None:
     """The shell's loop over a prompt_toolkit ``PromptSession``: a line, then what it says,
     until ``halt.`` or Ctrl-D. Ctrl-C at the prompt drops the unfinished line; Ctrl-C after
     Enter (as the prompt is taken down, or read with the Enter as a key typed ahead) stops
-    the goal before it starts; Ctrl-C during a goal stops it.
+    the goal before it starts; Ctrl-C during a goal stops it. ``before_prompt`` is called
+    before each prompt (the terminal shell: :func:`cooked_keys_typed_ahead`).
 
     >>> from prompt_toolkit import PromptSession
     >>> from prompt_toolkit.input import create_pipe_input
@@ -1521,6 +1532,8 @@ def interactive(session: Shell, prompt: Any, echo: Any = click.echo) -> None:
     try:
         while True:
             gate.editing()
+            if before_prompt is not None:   # (keys typed ahead while the terminal was cooked)
+                before_prompt()
             try:
                 # Ctrl-C at the prompt is a key (the terminal is raw); no signal handler of
                 # prompt_toolkit's may outlive the prompt and swallow the Ctrl-C of a goal.
@@ -1561,36 +1574,52 @@ def _ctrl_c_typed_ahead(editor_input: Any) -> bool:
     return last is not None
 
 
-@contextlib.contextmanager
-def _eof_key_typed_ahead(stream: Any) -> Iterator[None]:
-    """While the shell runs, the terminal's end-of-file key (Ctrl-D) is no special key in
-    cooked mode. The terminal is cooked between two prompts and while a goal runs; a Ctrl-D
-    typed then became an end-of-file mark that the next prompt (raw) read as a NUL byte, and
-    the key was lost. Without the mark it waits as the byte Ctrl-D, read by the next prompt
-    as the key typed ahead: it ends a consult or leaves the shell there."""
+def cooked_keys_typed_ahead(stream: Any, editor_input: Any) -> None:
+    """Hand the keys typed while the terminal was cooked (a goal running, a file loading)
+    to the line editor before it takes the terminal raw, the terminal's end-of-file key
+    (Ctrl-D) among them as the key it is.
+
+    In cooked mode the terminal turns Ctrl-D into an end-of-file mark, which a raw read
+    gives as a NUL byte: the key was lost and the shell stayed. Read now, still cooked, the
+    mark is a read of no bytes, in its place among the lines typed around it; it goes to the
+    editor as Ctrl-D, typed ahead. The terminal's settings are left as they are: a shell
+    killed outright (SIGKILL) leaves no key disabled. (A Ctrl-D typed in the instant between
+    this read and the editor's first is still a NUL byte to it.)
+
+    Nothing happens when ``stream`` is no terminal or is raw already."""
+    import codecs
+    import select
     import termios
+
+    from prompt_toolkit.input.typeahead import get_typeahead, store_typeahead
+    from prompt_toolkit.input.vt100_parser import Vt100Parser
+    from prompt_toolkit.key_binding import KeyPress
+    from prompt_toolkit.keys import Keys
 
     try:
         fd = stream.fileno()
-        attributes = termios.tcgetattr(fd)
-        disabled = os.fpathconf(fd, "PC_VDISABLE")
-    except (OSError, ValueError, termios.error):   # not a terminal: nothing to do
-        disabled = -1
-    if not 0 <= disabled <= 255:   # (or no way to disable a key: left as it is)
-        yield
+        if not termios.tcgetattr(fd)[3] & termios.ICANON:
+            return
+    except (OSError, ValueError, termios.error):   # not a terminal
         return
-    eof = attributes[6][termios.VEOF]
-    attributes[6][termios.VEOF] = bytes([disabled])
-    termios.tcsetattr(fd, termios.TCSANOW, attributes)
-    try:
-        yield
-    finally:
+    keys: list[Any] = []
+    parser = Vt100Parser(keys.append)
+    decoder = codecs.getincrementaldecoder("utf-8")(errors="surrogateescape")
+    for _ in range(1000):   # (each read takes one line or one mark)
         try:
-            now = termios.tcgetattr(fd)
-            now[6][termios.VEOF] = eof
-            termios.tcsetattr(fd, termios.TCSANOW, now)
-        except termios.error:   # the terminal is gone
-            pass
+            if not select.select([fd], [], [], 0)[0]:
+                break
+            data = os.read(fd, 4096)
+        except OSError:
+            break
+        if data:
+            parser.feed(decoder.decode(data))
+        else:   # the end-of-file mark: the Ctrl-D key
+            parser.flush()
+            keys.append(KeyPress(Keys.ControlD, "\x04"))
+    parser.flush()
+    if keys:
+        store_typeahead(editor_input, get_typeahead(editor_input) + keys)
 
 
 from .ros.cli import ros as _ros  # noqa: E402 - `slr ros` (its extra is imported on use)
@@ -1630,6 +1659,9 @@ main.add_command(_fleet_group())
                    "step, e.g. 'location(cup1, L)^T'.")
 @click.option("--every", type=float, default=None, metavar="S",
               help="Seconds between the times --query asks its goal (default: 1/200 of the window).")
+@click.option("--timeout", type=float, default=None, metavar="S",
+              help="Give up after S seconds of --query asks (all of them together); nothing "
+                   "is written.")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="The image to write: .png, .jpg, .svg or .pdf.")
 @click.option("--size", default=None, metavar="WxH", help="Image size in pixels (default 1200 wide).")
@@ -1638,7 +1670,7 @@ main.add_command(_fleet_group())
 def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None,
          values: tuple[str, ...], complex_types: tuple[str, ...], by: tuple[str, ...],
          lags: bool | None, internal: bool, relative: bool | None, query_goal: str | None,
-         every: float | None, output: str, size: str | None, dpi: int,
+         every: float | None, timeout: float | None, output: str, size: str | None, dpi: int,
          title: str | None) -> None:
     """Draw the event histories of DB as a timeline image: one row per event TYPE (default:
     all but the store's own).
@@ -1654,6 +1686,9 @@ def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None
                                f"no image format; use {', '.join(IMAGE_FORMATS)}")
     if every is not None and query_goal is None:
         raise click.UsageError("--every goes with --query")
+    if timeout is not None and query_goal is None:
+        raise click.UsageError("--timeout goes with --query")
+    timeout = _finite("--timeout", timeout, minimum=0.0)
     _check_existing_store(db)
     dimensions = parse_size(size) if size is not None else None
     with _open(db, create=False) as kb:
@@ -1666,7 +1701,8 @@ def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None
             complex_types=complex_types or None, size=dimensions, dpi=dpi,
             title=os.path.basename(db) if title is None else title, by=by, lags=lags,
             internal=internal, relative=relative,
-            query=None if query_goal is None else strip_full_stop(query_goal), every=every)
+            query=None if query_goal is None else strip_full_stop(query_goal), every=every,
+            timeout=timeout)
     figure = draw_timeline(collected)
     from .plot import save_timeline
 

@@ -94,6 +94,7 @@ else:
         _speedups = None  # a build older (or newer) than this source: not used
 
 __all__ = ["encode", "encode_column", "decode", "decode_answer", "encode_json", "Unencodable",
+           "NullArgument",
            "INT64_MIN", "INT64_MAX", "field_pairs", "column_json", "decode_json", "load_json",
            "orjson_reads_exactly"]
 
@@ -102,6 +103,13 @@ INT64_MAX = 2 ** 63 - 1
 
 # First characters that mark a TEXT column value as JSON rather than a bare atom.
 _JSON_STARTS = frozenset('[{"')
+
+
+class NullArgument(ValueError):
+    """A stored argument that is SQL NULL: no term has that stored form (the store never
+    writes one; a row written by hand may hold one). A ValueError, as other column values
+    that are no stored term; the facade turns it into :class:`~slr_sql.errors.NotAnEvent`
+    naming the row."""
 
 
 class Unencodable(ValueError):
@@ -816,7 +824,7 @@ def decode(value: Any) -> Any:
     if tv is int or tv is float:
         return value
     if value is None:
-        raise ValueError("NULL is not a stored term")
+        raise NullArgument("NULL is not a stored term")
     if tv is bytes:
         return decode(value.decode("utf-8"))
     raise ValueError(f"cannot decode column value {value!r}")

@@ -5,7 +5,7 @@ from typing import Any
 
 __all__ = ["SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRUnavailable",
            "SLRBusy", "SLRStoreFull", "SLRStoreGone", "SLRServerUnreachable", "SLRCancelled",
-           "EventRejected"]
+           "EventRejected", "NotAnEvent"]
 
 
 class SLRError(Exception):
@@ -142,6 +142,18 @@ class SLRSubscriptionInUse(SLRUnavailable):
     or once a process that died has its lease run out.
 
     >>> issubclass(SLRSubscriptionInUse, SLRUnavailable)
+    True
+    """
+
+
+class NotAnEvent(SLRError):
+    """A goal read a stored row that is no event: an argument holds SQL NULL, which no term
+    is stored as (a row written by hand, by another client of the database), or a
+    hand-written statement (``kb.sql(..., write=True)``) would leave one. The message names
+    the type, the row's ``seq`` and the column; the goal gives no answers rather than
+    answers without that row, the statement changes nothing.
+
+    >>> issubclass(NotAnEvent, SLRError)
     True
     """
 

@@ -15,7 +15,9 @@ time ``t`` (docs/language.md, "tf_lookup"):
   between the last observation before ``t`` and the first after it (translation linearly,
   rotation by slerp, the robot library's ``interpolate``). Outside its observations the
   lookup fails; with ``extrapolate`` the nearest observation is held instead. Several
-  observations at one time: the last stored counts;
+  observations at one time: the last stored counts. An observation over an interval
+  ``^[T1, T2]`` holds at every time inside it and is its pose at each end for the
+  interpolation outside it (the latest started at or before ``t`` counts while it lasts);
 * **a tf_static edge** (a pair never seen in ``tf``) holds its last stored value at every
   time.
 
@@ -44,9 +46,9 @@ from typing import Any, Callable
 
 from .robotlib import slerp
 from .lockorder import ordered_lock
-from .terms import Atom, Struct, list_items
+from .terms import Atom, String, Struct, list_items
 
-__all__ = ["TF", "TF_STATIC", "FrameTree", "Pose", "lookup", "pose_value", "compose",
+__all__ = ["TF", "TF_STATIC", "FrameTree", "frame_key", "Pose", "lookup", "pose_value", "compose",
            "invert", "IDENTITY", "TfHooks", "PoseOverflow"]
 
 TF = ("tf", 3)
@@ -71,8 +73,25 @@ class TfHooks:
         self.arrival = arrival
 
 
+def frame_key(frame: Any) -> Any:
+    """A frame name as a key of the tree: frame ids are names, and the terms ``1`` and
+    ``1.0`` (equal in Python and in SQL) name two frames, as ``-0.0`` and ``0.0`` do, and
+    the atom ``map`` and the string ``"map"`` (equal as Python strings).
+
+    >>> frame_key(1) == frame_key(1.0), frame_key(Atom("map")) == frame_key(String("map"))
+    (False, False)
+    """
+    kind = type(frame)
+    if kind is float:
+        return ("float", repr(frame))
+    if kind is String:
+        return ("string", str(frame))
+    return frame
+
+
 class FrameTree:
-    """The edges of the stored frame tree, kept up to date incrementally.
+    """The edges of the stored frame tree, kept up to date incrementally (keyed by
+    :func:`frame_key`).
 
     >>> FrameTree().path("a", "a")
     []
@@ -80,8 +99,8 @@ class FrameTree:
 
     def __init__(self) -> None:
         self.seen = {TF: 0, TF_STATIC: 0}      # arrival sequence read up to, per type
-        self.kind: dict[tuple, tuple] = {}      # (parent, child) -> TF or TF_STATIC
-        self.neighbours: dict[Any, list] = {}   # frame -> [(frame, parent, child)]
+        self.kind: dict[tuple, tuple] = {}      # (parent key, child key) -> TF or TF_STATIC
+        self.neighbours: dict[Any, list] = {}   # frame key -> [(frame key, parent, child)]
         self.paths: dict[tuple, list | None] = {}
         self.lock = ordered_lock("frames")   # the threads of one knowledge base share the tree
 
@@ -106,20 +125,22 @@ class FrameTree:
                 self._add(parent, child, key)
 
     def _add(self, parent: Any, child: Any, key: tuple) -> None:
-        pair = (parent, child)
+        parent_key, child_key = frame_key(parent), frame_key(child)
+        pair = (parent_key, child_key)
         old = self.kind.get(pair)
         if old == TF or old == key:
             return
         self.kind[pair] = key   # a pair seen in tf is a tf edge, even if also static
         self.paths.clear()
         if old is None:
-            self.neighbours.setdefault(child, []).append((parent, parent, child))
-            self.neighbours.setdefault(parent, []).append((child, parent, child))
+            self.neighbours.setdefault(child_key, []).append((parent_key, parent, child))
+            self.neighbours.setdefault(parent_key, []).append((child_key, parent, child))
 
     def path(self, target: Any, source: Any) -> list | None:
         """The edges from ``source`` to ``target``: ``[(parent, child, inverse)]`` in the
         order they apply (``inverse``: walked from parent to child); None when the frames
         are not connected."""
+        target, source = frame_key(target), frame_key(source)
         if target == source:
             return []
         key = (target, source)
@@ -145,7 +166,7 @@ class FrameTree:
             frame = target
             while frame != source:
                 before, parent, child = came[frame]
-                result.append((parent, child, parent == before))
+                result.append((parent, child, frame_key(parent) == before))
                 frame = before
             result.reverse()
         self.paths[key] = result
@@ -281,7 +302,7 @@ def _edge_at(store: Any, key: tuple, parent: Any, child: Any, t: float, extrapol
     if found is None:
         return None
     before, after = found
-    if before is not None and before[2] == t:
+    if before is not None and before[2] >= t:   # an observation at t, an interval around t
         return _edge_pose(before)
     args = (parent, child)
     if after is not None and hooks is not None and hooks.next is not None:
@@ -311,7 +332,7 @@ def lookup(store: Any, tree: FrameTree, target: Any, source: Any, t: float,
         target = Atom(target)
     if type(source) is str:
         source = Atom(source)
-    if target == source:
+    if frame_key(target) == frame_key(source):
         return IDENTITY
     chain = tree.chain(store, target, source)
     if chain is None:
@@ -322,7 +343,8 @@ def lookup(store: Any, tree: FrameTree, target: Any, source: Any, t: float,
         for i, (parent, child, inverse) in enumerate(chain):
             if check_deadline is not None and i % _EDGES_BETWEEN_CLOCK_CHECKS == 0:
                 check_deadline()
-            step = _edge_at(store, kind[(parent, child)], parent, child, t, extrapolate, hooks)
+            step = _edge_at(store, kind[(frame_key(parent), frame_key(child))], parent, child,
+                            t, extrapolate, hooks)
             if step is None:
                 return None
             result = compose(invert(step) if inverse else step, result)

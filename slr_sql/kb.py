@@ -13,6 +13,7 @@ from __future__ import annotations
 import functools
 import math
 import numbers
+import re
 import time
 from operator import itemgetter
 from pathlib import Path
@@ -22,7 +23,8 @@ from .answers import answer_bindings
 from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .engine import Engine
-from .errors import EventRejected, SLRError, SLRUnavailable
+from .encoding import NullArgument
+from .errors import EventRejected, NotAnEvent, SLRError, SLRUnavailable
 from .parser import parse_event_fast, parse_program, parse_term
 from .loader import ProgramLoader
 from .plans import PlanCache, argument_term, instantiate
@@ -30,7 +32,7 @@ from .plans import python_words as _python_words
 from .sql_functions import SQL_FUNCTIONS
 from .program import BufferDecl, Declarations, Program, split_event_atom, event_key
 from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore, \
-    store_error, check_robot_name
+    store_error, check_robot_name, quote_identifier
 from .store.checks import event_arguments, shorten, shown, text_problem
 from .terms import Atom, String, Struct, Var, deref
 from .terms import format_atom, format_term
@@ -541,6 +543,8 @@ class KnowledgeBase:
                 return
             except SLRError:
                 raise
+            except NullArgument:
+                raise not_an_event(self, "solutions") from None
             except RecursionError:
                 raise SLRError("solutions: the term is nested too deeply") from None
             except Exception as exc:  # the facade's promise (see _boundary)
@@ -724,7 +728,23 @@ class KnowledgeBase:
         if not isinstance(query, str):
             raise SLRError(f"sql: the statement is text (a str), not a {type(query).__name__}")
         try:
-            return self.store.sql(query, params, write, timeout)
+            named = _rows_written(query, self.store) if write else []
+            if not named:
+                return self.store.sql(query, params, write, timeout)
+            # a NULL argument is no term (docs/schema.md): a write that would leave one in
+            # a row the store did not hold so before changes nothing
+            with self.store.transaction():
+                before = set(self.store.null_arguments(named, every=True))
+                result = self.store.sql(query, params, write, timeout)
+                made = sorted(set(self.store.null_arguments(named, every=True)) - before)
+                if made:
+                    name, arity, _, argument, seq = made[0]
+                    more = f" (and {len(made) - 1} more)" if len(made) > 1 else ""
+                    raise NotAnEvent(
+                        f"sql: the statement would leave a row that is no event: arg{argument} "
+                        f"of {name}/{arity}'s row of seq {seq}{more} would be NULL, which is no "
+                        f"term; nothing was changed")
+            return result
         except DatabaseError as exc:
             reason = store_error(exc, self.store.path)
             if isinstance(reason, SLRUnavailable):  # a full disk, a lock: may pass
@@ -815,6 +835,57 @@ def _check_time_option(name: str, value: Any, minimum: float | None = None) -> N
                        f"{'' if minimum is None else f' >= {minimum:g}'}, not {shown(value)}")
 
 
+_WRITES_ROWS = re.compile(r"\b(?:insert|update|replace|merge)\b", re.IGNORECASE)
+
+
+def _rows_written(statement: str, store: Any) -> list[tuple[str, int]]:
+    """The event types whose rows a hand-written statement may insert or change: those whose
+    table it names, when it inserts, updates, replaces or merges (a DELETE leaves no NULL
+    behind).
+
+    >>> from slr_sql.store import EventStore
+    >>> s = EventStore(None); s.declare_type("p", 1)
+    'p'
+    >>> _rows_written('UPDATE "p" SET arg1 = NULL', s), _rows_written("DELETE FROM p", s)
+    ([('p', 1)], [])
+    """
+    if not _WRITES_ROWS.search(statement):
+        return []
+    text = statement.lower()
+    return [key for key, table in store.event_types().items()
+            if re.search(r"(?<![\w$])" + re.escape(table.lower()) + r"(?![\w$])", text)]
+
+
+def not_an_event(kb: KnowledgeBase | None, where: str) -> NotAnEvent:
+    """The error of a goal that read a stored argument that is NULL, naming the first such
+    row of each type (whichever path met it: compiled SQL, the interpreter, prev/next, a
+    buffer's pattern), so every path says the same.
+
+    >>> from slr_sql import ManualClock
+    >>> kb = open(clock=ManualClock(2)); kb.add("p(a)^1")
+    >>> kb.store.execute("UPDATE p SET arg1 = NULL")   # (as another client: below the door)
+    []
+    >>> print(not_an_event(kb, "query"))  # doctest: +ELLIPSIS
+    query: p/1: the stored row of seq 1 is not an event: its arg1 is NULL, ...
+    """
+    rows = []
+    if kb is not None:
+        try:
+            rows = kb.store.null_arguments()
+        except Exception:  # noqa: BLE001 - the message without the rows is still the answer
+            rows = []
+    if not rows:
+        return NotAnEvent(f"{where}: a stored event argument is NULL, which is no term (a row "
+                          f"written by hand, by another client of the database); "
+                          f"fix or delete that row")
+    said = "; ".join(f"{name}/{arity}: the stored row of seq {seq} is not an event: its "
+                     f"arg{argument} is NULL, which is no term (written by hand, by another "
+                     f"client of the database); fix or delete it "
+                     f"(DELETE FROM {quote_identifier(table)} WHERE arg{argument} IS NULL)"
+                     for name, arity, table, argument, seq in rows)
+    return NotAnEvent(f"{where}: {said}")
+
+
 def _boundary(method: Callable) -> Callable:
     """The facade's promise, kept at its edge: whatever goes wrong below (a check a layer
     lacks, a Python error inside a user's ``define``d predicate, a damaged file), the caller
@@ -827,6 +898,9 @@ def _boundary(method: Callable) -> Callable:
             return method(*args, **kwargs)
         except SLRError:
             raise
+        except NullArgument:
+            kb = args[0] if args and isinstance(args[0], KnowledgeBase) else None
+            raise not_an_event(kb, where) from None
         except RecursionError:
             raise SLRError(f"{where}: the term is nested too deeply") from None
         except MemoryError:

@@ -31,10 +31,11 @@ from __future__ import annotations
 
 import math
 import re
+import time
 from dataclasses import dataclass, field
 from typing import Any, Iterable
 
-from .errors import SLRError
+from .errors import SLRError, SLRTimeout
 from .store.timeline import Statement, TimelineStatements, timeline_statements
 from .store import DatabaseError, quote_identifier
 
@@ -567,8 +568,10 @@ def _term_text(value: Any) -> str:
     return format_term(String(value) if type(value) is str else value)
 
 
-def _collect_query(source: Any, goal: str, every: float, lo: float, hi: float) -> QueryRow:
-    """Ask ``goal`` (with a variable T for the time) at lo, lo + every, ... <= hi."""
+def _collect_query(source: Any, goal: str, every: float, lo: float, hi: float,
+                   timeout: float | None = None) -> QueryRow:
+    """Ask ``goal`` (with a variable T for the time) at lo, lo + every, ... <= hi; all the
+    asks within ``timeout`` seconds together (each one is given the time that is left)."""
     if not callable(getattr(source, "query", None)):
         raise SLRError("a --query plot needs a knowledge base (kb.plot), not a bare store")
     every = _check_time("every", every)
@@ -581,10 +584,26 @@ def _collect_query(source: Any, goal: str, every: float, lo: float, hi: float) -
         raise SLRError(f"--every {every:g} asks the goal {said} times between {lo:g} and "
                        f"{hi:g}; at most {MAX_SAMPLES}: a larger --every or a shorter window")
     n = int(samples)
+    if timeout is not None:
+        timeout = _check_time("timeout", timeout)
+        if timeout is None or timeout < 0:
+            raise SLRError(f"timeout must be a number of seconds >= 0, not {timeout!r}")
+    deadline = None if timeout is None else time.monotonic() + timeout
     row = QueryRow(goal, every, n)
     for i in range(n):
         t = lo + i * every
-        answers = source.query(goal, args={"T": t})
+        left = None if deadline is None else deadline - time.monotonic()
+        try:
+            if left is not None and left <= 0:
+                raise SLRTimeout("no time left")
+            answers = source.query(goal, args={"T": t}, **({} if left is None
+                                                           else {"timeout": left}))
+        except SLRTimeout:
+            if timeout is None:
+                raise
+            raise SLRTimeout(f"--query {goal}: the timeout of {timeout:g} s ran out at T = "
+                             f"{t:g}, its ask {i + 1} of {n}; a larger --every, a shorter "
+                             f"window or a longer --timeout") from None
         text = None
         if answers:
             shown = [f"{name} = {_term_text(value)}" for name, value in answers[0].items()
@@ -610,7 +629,8 @@ def collect_timeline(source: Any, types: Iterable[str] | str | None = None, *,
                      title: str | None = None, exact_limit: int | None = None,
                      by: Iterable[str] | str = (), lags: bool | None = None,
                      internal: bool = False, relative: bool | None = None,
-                     query: str | None = None, every: float | None = None) -> Timeline:
+                     query: str | None = None, every: float | None = None,
+                     timeout: float | None = None) -> Timeline:
     """Read what :func:`timeline` draws, without drawing (no matplotlib needed unless a row is
     binned, which uses numpy). Arguments as for :func:`timeline`.
 
@@ -684,7 +704,7 @@ def collect_timeline(source: Any, types: Iterable[str] | str | None = None, *,
         series.append(_collect_series(source, spec, ref, _type_matches(ref, complex_names),
                                       lo, hi, bins, exact_limit, split=split,
                                       colors=key_colors))
-    queries = [] if query is None else [_collect_query(source, query, every, lo, hi)]
+    queries = [] if query is None else [_collect_query(source, query, every, lo, hi, timeout)]
     height, top, bottom = _vertical(height, dpi, len(rows) + len(queries), len(series),
                                     bool(title))
     return Timeline(lo, hi, width, height, dpi, bins, left, right, top, bottom, rows, series,
@@ -958,7 +978,7 @@ def timeline(source: Any, types: Iterable[str] | str | None = None, *,
              title: str | None = None, exact_limit: int | None = None,
              by: Iterable[str] | str = (), lags: bool | None = None, internal: bool = False,
              relative: bool | None = None, query: str | None = None,
-             every: float | None = None) -> Any:
+             every: float | None = None, timeout: float | None = None) -> Any:
     """A timeline of the event histories in ``source`` as a matplotlib Figure.
 
     ``source`` is anything with ``sql(query, params)`` (a knowledge base or an EventStore).
@@ -978,7 +998,8 @@ def timeline(source: Any, types: Iterable[str] | str | None = None, *,
     ``internal``: also the store's own types (``slr_import/3``). ``relative``: a time axis
     relative to the window's start (default: for epoch-second data). ``query`` with
     ``every``: a row with the goal's answers over time, the goal asked with ``T`` bound to
-    each sample time (``location(cup1, L)^T``).
+    each sample time (``location(cup1, L)^T``); ``timeout``: seconds all those asks may take
+    together (each is given the time left), else :class:`~slr_sql.errors.SLRTimeout`.
 
     >>> import slr_sql
     >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
@@ -992,7 +1013,7 @@ def timeline(source: Any, types: Iterable[str] | str | None = None, *,
     return draw_timeline(collect_timeline(
         source, types, start=start, end=end, values=values, complex_types=complex_types,
         size=size, dpi=dpi, title=title, exact_limit=exact_limit, by=by, lags=lags,
-        internal=internal, relative=relative, query=query, every=every))
+        internal=internal, relative=relative, query=query, every=every, timeout=timeout))
 
 
 IMAGE_FORMATS = {".png": "png", ".jpg": "jpg", ".jpeg": "jpg", ".svg": "svg", ".pdf": "pdf"}

@@ -119,6 +119,8 @@ def server(tmp_path):
             process.kill()
     assert process.returncode == 0, err
     assert "Traceback" not in err
+    # the SDK's log, in words, on stderr: the start (and each client, see the serve test)
+    assert f"foxglove: listening on ws://127.0.0.1:{port}\n" in err, err
 
 
 def test_channels_are_advertised_with_schemas_from_the_arguments(server):
@@ -262,3 +264,80 @@ def test_a_postgresql_store_is_followed_too(postgres_url):
         process.terminate()
         out, err = process.communicate(timeout=DEADLINE)
     assert process.returncode == 0, err
+
+
+class StderrLines:
+    """The lines a process writes on stderr, read on a thread as they come, waited for with
+    a deadline."""
+
+    def __init__(self, process: subprocess.Popen):
+        import threading
+
+        self.lines: list[str] = []
+        self.changed = threading.Condition()
+        self.thread = threading.Thread(target=self._read, args=(process.stderr,), daemon=True)
+        self.thread.start()
+
+    def _read(self, stream) -> None:
+        for line in stream:
+            with self.changed:
+                self.lines.append(line.rstrip("\n"))
+                self.changed.notify_all()
+
+    def wait_for(self, text: str) -> str:
+        deadline = time.monotonic() + DEADLINE
+        with self.changed:
+            while True:
+                for line in self.lines:
+                    if text in line:
+                        return line
+                left = deadline - time.monotonic()
+                assert left > 0, f"no line with {text!r} in {self.lines}"
+                self.changed.wait(left)
+
+
+def test_slr_serve_logs_the_foxglove_views_start_clients_and_errors_in_words(tmp_path):
+    import sqlite3
+
+    db = tmp_path / "served.db"
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add("seg(cup1, [0.0, 0.0, 0.0])^1")
+        kb.add("a(1)^1")
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    process = subprocess.Popen([sys.executable, "-m", "slr_sql", "serve", str(db), "--port", "0",
+                                "--foxglove", "--foxglove-port", "0"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        err = StderrLines(process)
+        fox = process.stdout.readline()
+        assert fox.startswith("slr serve: foxglove on ws://127.0.0.1:"), err.lines
+        port = int(fox.rsplit(":", 1)[1])
+        assert err.wait_for("foxglove: listening on") == \
+            f"INFO:     foxglove: listening on ws://127.0.0.1:{port}"
+        with FoxgloveClient(port) as client:
+            client.pump(lambda: "/seg/2" in client.channels, time.monotonic() + DEADLINE)
+            here = "127.0.0.1:%d" % client.ws.local_address[1]
+            assert err.wait_for(f"client {here} connected") == \
+                f"INFO:     foxglove: client {here} connected"
+            # a stranger's bytes quoted in an error stay on their line
+            client.ws.send(json.dumps({"op": "bogus\nINFO:     foxglove: forged"}))
+            refused = err.wait_for("bogus")
+        assert err.wait_for(f"client {here} left") == f"INFO:     foxglove: client {here} left"
+        # the view's own trouble: a table dropped by hand, met at the next change
+        with sqlite3.connect(db) as conn:
+            conn.execute('DROP TABLE "a"')
+        conn.close()
+        with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+            kb.add("seg(cup2, [0.0, 0.0, 0.0])^2")
+        trouble = err.wait_for("a/1")
+    finally:
+        process.terminate()
+        process.wait(timeout=DEADLINE)
+        err.thread.join(timeout=DEADLINE)
+    assert process.returncode == 0
+    assert refused.startswith(f"ERROR:    foxglove: Invalid message from {here}: ")
+    assert "bogus\\nINFO:     foxglove: forged" in refused
+    assert not any(line.startswith("INFO:     foxglove: forged") for line in err.lines)
+    assert trouble.startswith("WARNING:  foxglove: a/1: its rows cannot be read (no such "
+                              "table"), trouble
+    assert not any("Traceback" in line for line in err.lines), err.lines

@@ -172,3 +172,28 @@ def test_cli_plot_by_and_query(tmp_path):
             "--every", "0.5", "--from", "0", "--to", "5", "-o", str(out))
     assert r.returncode == 0, r.stderr
     assert r.stdout.startswith(f"wrote {out} (1200x") and "3 rows" in r.stdout
+
+
+def test_cli_plot_query_gives_up_after_its_timeout_and_writes_nothing(tmp_path):
+    db = str(tmp_path / "robot.db")
+    program = tmp_path / "p.slr"
+    # the sample at T = 3 never ends (no X below 0 among 1, 2, ...); the others answer at once
+    program.write_text("spin(T) :- T =:= 3, between(1, inf, X), X < 0.\n"
+                       "spin(T) :- T =\\= 3.\n", encoding="utf-8")
+    assert slr("load", db, str(program)).returncode == 0
+    assert slr("add", db, "seg(cup1, table)^2").returncode == 0
+    out = tmp_path / "t.png"
+    r = slr("plot", db, "--query", "spin(T)", "--every", "1", "--from", "0", "--to", "5",
+            "--timeout", "0.3", "-o", str(out))
+    assert r.returncode == 1, (r.stdout, r.stderr)
+    assert "Traceback" not in r.stderr
+    assert r.stderr.startswith("error: --query spin(T): the timeout of 0.3 s ran out at "
+                               "T = 3, its ask 4 of 6; a larger --every"), r.stderr
+    assert not out.exists()
+    # within its timeout the row is drawn as without one
+    r = slr("plot", db, "--query", "spin(T)", "--every", "1", "--from", "3.5", "--to", "5",
+            "--timeout", "60", "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    assert out.exists()
+    r = slr("plot", db, "--timeout", "1", "-o", str(out))
+    assert r.returncode == 2 and "--timeout goes with --query" in r.stderr

@@ -182,6 +182,46 @@ def test_ctrl_d_typed_while_the_shell_is_busy_is_read_at_the_next_prompt(store, 
     assert child.exitstatus == 0
 
 
+def test_a_shell_killed_outright_leaves_the_terminals_keys_as_they_were(store):
+    """The shell changes no setting of the cooked terminal: killed (SIGKILL) while a goal
+    runs, it leaves the end-of-file key Ctrl-D working (it disabled it while it ran, and a
+    kill left it disabled until `reset`)."""
+    import signal
+
+    child = spawn_shell(store)
+    before = termios.tcgetattr(child.child_fd)
+    child.sendline("between(1, inf, X), X < 0.")
+    wait_for_terminal(child, raw=False)
+    os.kill(child.pid, signal.SIGKILL)
+    child.expect(pexpect.EOF)
+    after = termios.tcgetattr(child.child_fd)
+    child.close()
+    assert after[6][termios.VEOF] == before[6][termios.VEOF] == b"\x04"
+    assert after[3] & termios.ICANON
+
+
+def test_lines_and_ctrl_d_typed_while_a_goal_runs_are_read_in_order(store, tmp_path):
+    """Keys typed while the terminal is cooked (a file loading) reach the next prompts in
+    the order typed: a goal's line, then Ctrl-D, read by the prompt after the goal's: it
+    leaves the shell."""
+    fifo = str(tmp_path / "rules.pl")
+    os.mkfifo(fifo)
+    child = spawn_shell(store)
+    child.sendline(f"load {fifo}")
+    writer = await_reader(fifo, child)
+    wait_for_terminal(child, raw=False)
+    child.send("seg(O, shelf)^T.\r")      # typed while the shell reads the file
+    child.sendeof()
+    os.write(writer, b"on_table(O) :- seg(O, table)^_.\n")
+    os.close(writer)
+    child.expect("loaded")
+    child.expect(r"O = cup2, T = 2\.0")
+    press(child, "\r")                      # the key after the answer: no more
+    child.expect(pexpect.EOF)               # the Ctrl-D, read by the next prompt: left
+    child.close()
+    assert child.exitstatus == 0
+
+
 def test_ctrl_d_typed_with_a_consulted_line_ends_the_consult(store):
     """Ctrl-D sent in one write with the Enter of a consulted line (the prompt still raw as
     it takes the line): read as a key typed ahead by the next |: prompt, it ends the
@@ -302,6 +342,40 @@ def test_a_sigint_while_a_line_is_edited_drops_the_line_as_ctrl_c_does(store):
     assert said == ["O = cup1, T = 1.0"]
 
 
+def test_a_sigint_between_two_lines_reaches_the_next_prompt_as_its_ctrl_c(store):
+    """A SIGINT sent (kill) between two lines, before the line editor runs: it was raised
+    where the shell's loop stood, outside the editor's call, and ended the shell with
+    KeyboardInterrupt. It is kept for the editor, which takes it as its Ctrl-C key: the
+    unfinished goal is dropped and the shell goes on."""
+    import signal
+
+    from prompt_toolkit import PromptSession
+    from prompt_toolkit.input import create_pipe_input
+    from prompt_toolkit.output import DummyOutput
+
+    import slr_sql
+    from slr_sql.cli import Shell, interactive
+
+    said: list[str] = []
+    prompts = []
+    with slr_sql.open(store) as kb, create_pipe_input() as keys:
+        prompt: PromptSession = PromptSession(input=keys, output=DummyOutput())
+        session = Shell(kb, echo=said.append, echo_err=said.append)
+
+        def between_lines() -> None:
+            prompts.append(session.continuing)
+            if len(prompts) == 2:    # an unfinished goal typed: the SIGINT lands here
+                os.kill(os.getpid(), signal.SIGINT)
+            elif len(prompts) == 3:
+                keys.send_text("seg(O, shelf)^T.\r\x04")
+
+        keys.send_text("seg(O,\r")
+        interactive(session, prompt, echo=said.append, before_prompt=between_lines)
+    assert prompts == [False, True, False, False]   # the unfinished goal was dropped
+    assert said == ["O = cup2, T = 2.0"]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 def run_piped(db: str, *lines: str):
     return slr("shell", db, stdin="\n".join(lines) + "\n")
 
@@ -359,3 +433,36 @@ def test_a_bad_assert_changes_nothing(store):
     r = run_piped(store, "assert((broken(X) :- )).", "listing.")
     assert r.stderr.startswith("<shell>:1:") and "unexpected" in r.stderr
     assert r.stdout.splitlines() == ["% the program 'user' is empty"]
+
+
+def test_a_sigint_as_the_editor_accepts_the_line_stops_its_goal_before_it_starts(store):
+    """A SIGINT sent (kill) while the line editor handles Enter (its validator runs: the
+    line is being accepted) is the goal's: the goal is interrupted before it starts, the
+    shell goes on."""
+    import signal
+
+    from prompt_toolkit import PromptSession
+    from prompt_toolkit.input import create_pipe_input
+    from prompt_toolkit.output import DummyOutput
+    from prompt_toolkit.validation import Validator
+
+    import slr_sql
+    from slr_sql.cli import Shell, interactive
+
+    said: list[str] = []
+    sent = []
+
+    def interrupt_once(text: str) -> bool:
+        if text.startswith("seg(O, table)") and not sent:
+            sent.append(text)
+            os.kill(os.getpid(), signal.SIGINT)
+        return True
+
+    with slr_sql.open(store) as kb, create_pipe_input() as keys:
+        prompt: PromptSession = PromptSession(input=keys, output=DummyOutput(),
+                                              validator=Validator.from_callable(interrupt_once))
+        keys.send_text("seg(O, table)^T.\r")
+        keys.send_text("seg(O, shelf)^T.\r\x04")
+        interactive(Shell(kb, echo=said.append, echo_err=said.append), prompt,
+                    echo=said.append)
+    assert sent and said == ["\n% interrupted", "O = cup2, T = 2.0"]

@@ -15,6 +15,7 @@ from transforms3d import affines, quaternions
 
 import slr_sql
 from slr_sql import ManualClock, SLREvaluationError, Struct
+from slr_sql.terms import String
 
 REPO = Path(__file__).resolve().parent.parent
 S = math.sqrt(0.5)
@@ -357,3 +358,61 @@ def test_tf_lookup_gives_the_same_poses_on_postgresql(postgres_url):
             answers[where] = [pose_of(kb, goal) for goal in goals]
     assert answers[None] == answers[postgres_url]
     assert answers[None][2] == [] and answers[None][0]
+
+
+# -- frame names are names: 1, 1.0 and '1' are three frames ----------------------------------
+
+@pytest.mark.parametrize("backend", ["sqlite", "postgres"])
+def test_frames_named_by_equal_numbers_of_two_types_are_two_frames(backend, request):
+    where = request.getfixturevalue("postgres_url") if backend == "postgres" else None
+    with slr_sql.open(where, clock=ManualClock(100.0)) as kb:
+        # the float's edge is stored between the integer's two observations: a bracket that
+        # took 1 for 1.0 would interpolate across the other frame's
+        kb.add_many([tf_event("tf", "map", 1, 0.0, (1.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf", "map", 1.0, 0.5, (2.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf", "map", 1.0, 1.5, (2.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf", "map", 1, 2.0, (1.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf", "map", "1", 0.0, (3.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf", "map", "1", 2.0, (3.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf_static", "map", 2, 0.0, (4.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf_static", "map", 2.0, 0.0, (5.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf_static", "map", String("1"), 0.0, (6.0, 0.0, 0.0),
+                              (0, 0, 0, 1))])
+        x = {goal: [p[0][0] for p in pose_of(kb, goal)] for goal in (
+            "tf_lookup(map, 1, 1, P)", "tf_lookup(map, 1.0, 1, P)", "tf_lookup(map, '1', 1, P)",
+            "tf_lookup(map, 2, 1, P)", "tf_lookup(map, 2.0, 1, P)",
+            "tf_lookup(1.0, 1, 1, P)", "tf_lookup(map, 1.0, 0.25, P)",
+            'tf_lookup(map, "1", 1, P)', "tf_lookup('1', \"1\", 1, P)")}
+    assert x == {"tf_lookup(map, 1, 1, P)": [1.0], "tf_lookup(map, 1.0, 1, P)": [2.0],
+                 "tf_lookup(map, '1', 1, P)": [3.0], "tf_lookup(map, 2, 1, P)": [4.0],
+                 "tf_lookup(map, 2.0, 1, P)": [5.0],
+                 "tf_lookup(1.0, 1, 1, P)": [-1.0],   # not the identity: two frames
+                 "tf_lookup(map, 1.0, 0.25, P)": [],  # before 1.0's first observation
+                 'tf_lookup(map, "1", 1, P)': [6.0],  # a string names a frame of its own
+                 "tf_lookup('1', \"1\", 1, P)": [3.0]}
+
+
+# -- an observation over an interval holds at every time inside it ----------------------------
+
+def interval_event(parent, child, start, end, x):
+    return ("tf", (parent, child, Struct("pose", ([x, 0.0, 0.0], [0, 0, 0, 1]))), start, end)
+
+
+@pytest.mark.parametrize("backend", ["sqlite", "postgres"])
+def test_a_transform_over_an_interval_holds_inside_it_and_is_interpolated_from_its_ends(
+        backend, request):
+    where = request.getfixturevalue("postgres_url") if backend == "postgres" else None
+    times = [1, 2, 3.5, 6, 7, 9, 10, 11, 12, 13, 14]
+    with slr_sql.open(where, clock=ManualClock(100.0)) as kb:
+        # base held at x=1 over [2, 6] (a pose stated for a span), then points at 10 and 14,
+        # and a second interval [11, 12] between them
+        kb.add_many([interval_event("map", "base", 2.0, 6.0, 1.0),
+                     interval_event("map", "base", 10.0, 10.0, 3.0),
+                     interval_event("map", "base", 11.0, 12.0, 5.0),
+                     interval_event("map", "base", 14.0, 14.0, 3.0)])
+        x = [[p[0][0] for p in pose_of(kb, f"tf_lookup(map, base, {t}, P)")] for t in times]
+        held = [[p[0][0] for p in pose_of(kb, f"tf_lookup(map, base, {t}, P, extrapolate)")]
+                for t in [1, 4, 15]]
+    # the interval is its pose at each of its ends, and at every time between them
+    assert x == [[], [1.0], [1.0], [1.0], [1.5], [2.5], [3.0], [5.0], [5.0], [4.0], [3.0]]
+    assert held == [[1.0], [1.0], [3.0]]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import gc
 import ipaddress
+import logging
 import signal
 import socket
 import sys
@@ -120,6 +121,28 @@ def _stop_on_signals() -> Any:
             signal.signal(sig, handler)
 
 
+def foxglove_logger() -> logging.Logger:
+    """The log of ``slr serve --foxglove``'s live view (``slr_sql.service.foxglove``): lines
+    on stderr as uvicorn writes its own (``INFO:     foxglove: client 127.0.0.1:40028
+    connected``), at INFO and above: the view's start, clients connecting and leaving, what
+    a client sent that the protocol refuses, a type whose rows cannot be read. Each is one
+    line in words, never a traceback (a client can make some of them happen).
+
+    >>> foxglove_logger().name
+    'slr_sql.service.foxglove'
+    """
+    log = logging.getLogger("slr_sql.service.foxglove")
+    if not log.handlers:
+        from uvicorn.logging import DefaultFormatter
+
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(DefaultFormatter("%(levelprefix)s %(message)s", use_colors=False))
+        log.addHandler(handler)
+        log.setLevel(logging.INFO)
+        log.propagate = False
+    return log
+
+
 def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | None = None,
                *, limits: Any = None, max_connections: int | None = 1000,
                ssl_keyfile: str | None = None, ssl_certfile: str | None = None,
@@ -165,11 +188,14 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
     view = view_kb = None
     try:
         if foxglove is not None:
-            from ..viz.foxglove_live import FoxgloveView
+            from ..viz.foxglove_live import FoxgloveView, forward_sdk_log
 
+            view_log = foxglove_logger()
+            forward_sdk_log(lambda level, text: view_log.log(level, "foxglove: %s", text))
             view_kb = slr_sql.open(db)   # a connection of its own: it reads while others write
             try:
-                view = FoxgloveView(view_kb.store, host=foxglove[0], port=foxglove[1]).start()
+                view = FoxgloveView(view_kb.store, host=foxglove[0], port=foxglove[1],
+                                    log=lambda text: view_log.warning("%s", text)).start()
             except OSError as exc:
                 raise slr_sql.SLRError(f"cannot listen on {foxglove[0]}:{foxglove[1]} for "
                                        f"Foxglove: {exc}") from None

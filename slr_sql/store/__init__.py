@@ -495,6 +495,11 @@ class EventStore:
                        ) -> tuple[list[tuple[Any, Any]], int]:
         return self._reader.distinct_pairs(name, arity, after_seq)
 
+    @_doc(EventReader.null_arguments)
+    def null_arguments(self, types: Iterable[tuple[str, int]] | None = None,
+                       every: bool = False) -> list[tuple[str, int, str, int, int]]:
+        return self._reader.null_arguments(types, every)
+
     @_doc(EventReader.max_seq)
     def max_seq(self, name: str, arity: int) -> int:
         return self._reader.max_seq(name, arity)

@@ -12,10 +12,11 @@ first row or two does not read the rest.
 """
 from __future__ import annotations
 
+import math
 import sqlite3
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, Iterable, Iterator
 
-from ..encoding import Unencodable, decode, encode
+from ..encoding import INT64_MAX, INT64_MIN, Unencodable, decode, encode
 from .catalog import PROGRAM_VERSION, PROGRESS_VERSION
 from .connection import Database
 from .tables import EventTables, EventType
@@ -39,6 +40,15 @@ _RESUME = {
 # the lookups that read in start order: they need the start-ordered indexes
 _START_KINDS = frozenset({"next", "at_start"})
 
+
+def _number_kind(value: Any) -> str | None:
+    """The SQL type (typeof) a number term is stored as; None for other terms (and for
+    integers beyond 64 bits, stored as text)."""
+    if type(value) is float:
+        return "real"
+    if type(value) is int and INT64_MIN <= value <= INT64_MAX:
+        return "integer"
+    return None
 
 class _OpenStatement:
     """The statement of one stream, which a transaction may suspend (close) meanwhile."""
@@ -485,10 +495,11 @@ class EventReader:
     def bracket(self, name: str, arity: int, bound: dict[int, Any], t: float
                 ) -> tuple[Row | None, Row | None] | None:
         """The observations around ``t`` of the events matching ``bound`` (ground values at
-        0-based positions, the first one included): the one with the greatest end ``<= t``
-        and the one with the smallest start ``>= t`` (ties: the last in store order, and the last
-        stored among those starting at that time),
-        in one statement; ``(None, None)`` parts when there are none. None when a bound
+        0-based positions, the first one included): the one with the greatest start ``<= t``
+        (the one that holds at ``t`` when its end is ``>= t``: an observation at ``t``, an
+        interval around it; ties: the greatest end, then the last stored) -- for ``t``
+        infinite, the last in store order -- and the one with the smallest start ``>= t``
+        (ties: the last stored among those starting at that time), in one statement; ``(None, None)`` parts when there are none. None when a bound
         value cannot be pushed into SQL (the caller then takes the general path). Used by
         ``tf_lookup`` (:mod:`slr_sql.frames`) for each edge of a chain.
 
@@ -509,17 +520,29 @@ class EventReader:
             # the event after t is read in start order: its index is built on first need
             ordered = self._start_order(event_type)
             start_hint = self.db.dialect.index_hints and ordered
-            key = (event_type.table, "bracket", positions, start_hint)
+            # SQL's = takes 1 for 1.0; terms (and frame names) do not: a number matches
+            # only a number of its own type
+            kinds = tuple(_number_kind(bound[p]) for p in positions)
+            # (before a finite t: the latest start, which holds at t if its end is >= t)
+            by_start_before = math.isfinite(t)
+            key = (event_type.table, "bracket", positions, start_hint, kinds, by_start_before)
             sql = self.sql_cache.get(key)
             if sql is None:
-                where = " AND ".join(f"arg{p + 1} = ?" for p in positions)
+                typeof = self.db.dialect.typeof
+                where = " AND ".join(
+                    f"arg{p + 1} = ?" + ("" if kind is None
+                                         else f" AND {typeof(f'arg{p + 1}')} = '{kind}'")
+                    for p, kind in zip(positions, kinds))
                 cols = event_type.columns
                 hints = self.db.dialect.index_hints
                 by_end = f" INDEXED BY {event_type.index_arg1_end}" if hints else ""
                 by_start = f" INDEXED BY {event_type.index_arg1_start}" if start_hint else ""
-                sql = (f"SELECT 0, * FROM (SELECT {cols} FROM {event_type.quoted}{by_end} "
-                       f"WHERE {where} AND t_end <= ? "
-                       f"ORDER BY t_end DESC, t_start DESC, seq DESC LIMIT 1) AS before_t "
+                before = (f"{by_start} WHERE {where} AND t_start <= ? "
+                          f"ORDER BY t_start DESC, t_end DESC, seq DESC" if by_start_before
+                          else f"{by_end} WHERE {where} AND t_end <= ? "
+                          f"ORDER BY t_end DESC, t_start DESC, seq DESC")
+                sql = (f"SELECT 0, * FROM (SELECT {cols} FROM {event_type.quoted}{before}"
+                       f" LIMIT 1) AS before_t "
                        f"UNION ALL SELECT 1, * FROM (SELECT {cols} FROM {event_type.quoted}"
                        f"{by_start} WHERE {where} AND t_start >= ? "
                        f"ORDER BY t_start, seq DESC LIMIT 1) AS after_t")
@@ -531,6 +554,41 @@ class EventReader:
             out[row[0]] = (tuple([dec(v) for v in row[1:arity + 1]]), row[arity + 1],
                            row[arity + 2], row[arity + 3])
         return out[0], out[1]
+
+    def null_arguments(self, types: Iterable[tuple[str, int]] | None = None,
+                       every: bool = False) -> list[tuple[str, int, str, int, int]]:
+        """The stored rows that are no events because an argument is NULL (written by hand:
+        the store never writes one): ``(name, arity, table, argument number, seq)``, the
+        first such row of each type (``every``: each such row), of every type or of
+        ``types``. Read only when a goal met one or a hand-written statement may have
+        written one (a scan per type).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.add_events([("p", ("a",), 1, 1)])
+        []
+        >>> s.execute('UPDATE p SET arg1 = NULL'); s.null_arguments()
+        []
+        [('p', 1, 'p', 1, 1)]
+        """
+        found = []
+        with self.db.lock:
+            self.db.check_open()
+            wanted = None if types is None else set(types)
+            for event_type in list(self.tables.types.values()):
+                if not event_type.arity or (
+                        wanted is not None and (event_type.name, event_type.arity) not in wanted):
+                    continue
+                columns = [f"arg{i + 1}" for i in range(event_type.arity)]
+                flags = ", ".join(f"{c} IS NULL" for c in columns)
+                rows = self.db.conn.execute(
+                    f"SELECT seq, {flags} FROM {event_type.quoted} "
+                    f"WHERE {' OR '.join(f'{c} IS NULL' for c in columns)} "
+                    f"ORDER BY seq{'' if every else ' LIMIT 1'}").fetchall()
+                for row in rows:
+                    argument = next(i for i, flag in enumerate(row[1:], 1) if flag)
+                    found.append((event_type.name, event_type.arity, event_type.table,
+                                  argument, row[0]))
+        return sorted(found)
 
     def distinct_pairs(self, name: str, arity: int, after_seq: int = 0
                        ) -> tuple[list[tuple[Any, Any]], int]:
@@ -553,10 +611,13 @@ class EventReader:
             top = conn.execute(f"SELECT max(seq) FROM {event_type.quoted}").fetchone()[0] or 0
             if top <= after_seq:
                 return [], top
-            rows = conn.execute(f"SELECT DISTINCT arg1, arg2 FROM {event_type.quoted} "
+            # (DISTINCT takes 1 and 1.0 for one value: their types keep them apart)
+            typeof = self.db.dialect.typeof
+            rows = conn.execute(f"SELECT DISTINCT arg1, arg2, {typeof('arg1')}, "
+                                f"{typeof('arg2')} FROM {event_type.quoted} "
                                 f"WHERE seq > ? AND seq <= ?", (after_seq, top)).fetchall()
         dec = self.decode
-        return [(dec(a), dec(b)) for a, b in rows], top
+        return [(dec(row[0]), dec(row[1])) for row in rows], top
 
     def max_seq(self, name: str, arity: int) -> int:
         """The greatest arrival sequence number stored for name/arity (0 when none): it moves

@@ -49,8 +49,11 @@ def _store_for_view(db: str) -> tuple:
 def foxglove_command(db: str, host: str, port: int, poll: float) -> None:
     """Serve DB to Foxglove (WebSocket, foxglove.websocket.v1) until SIGINT or SIGTERM:
     every event type a channel, new events live, tf as foxglove.FrameTransforms."""
-    from .foxglove_live import FoxgloveView
+    from .foxglove_live import FoxgloveView, forward_sdk_log
 
+    # the server's start, clients connecting and leaving, what a client sent that the
+    # protocol refuses: one line each on stderr
+    forward_sdk_log(lambda level, text: click.echo(f"foxglove: {text}", err=True))
     kb, store = _store_for_view(db)
     try:
         view = FoxgloveView(store, host=host, port=port, poll=poll,

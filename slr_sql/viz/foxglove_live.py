@@ -19,6 +19,8 @@ the static frames however late it connects.
 """
 from __future__ import annotations
 
+import logging
+import re
 import threading
 import time
 from typing import Any, Callable
@@ -28,7 +30,8 @@ from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, TF_TOPIC
                        TRANSFORMS_SCHEMA, TRANSFORMS_SCHEMA_NAME, event_channel, mark_message,
                        time_ns, transform_message)
 
-__all__ = ["FoxgloveView", "FoxgloveUnavailable", "FoxgloveCannotListen"]
+__all__ = ["FoxgloveView", "FoxgloveUnavailable", "FoxgloveCannotListen", "forward_sdk_log",
+           "log_text"]
 
 _MARK_PREFIX = "sync/mark/"
 _TF_STATIC = ("tf_static", 3)
@@ -43,6 +46,78 @@ class FoxgloveUnavailable(SLRError):
 class FoxgloveCannotListen(SLRError):
     """The view's server cannot listen: the port is taken, the host does not resolve or is
     not an address of this machine."""
+
+
+# the foxglove-sdk's own lines that say what a reader of the log looks for, in words
+_SDK_WORDS = [(re.compile(r"Started server on (\S+)\Z"), "listening on ws://{}"),
+              (re.compile(r"Registered client (\S+)\Z"), "client {} connected"),
+              (re.compile(r"Unregistered client (\S+)\Z"), "client {} left")]
+_SDK_QUIET = re.compile(r"Connection closed by client \S+\Z")   # (said by "left")
+_LOG_TEXT_MAX = 300
+_sdk_log_lock = threading.Lock()
+_sdk_log_handler: logging.Handler | None = None
+
+
+def log_text(text: str) -> str:
+    """``text`` as one log line: control characters and line breaks escaped (a client's
+    bytes quoted in a message cannot start a line of their own), at most 300 characters.
+
+    >>> log_text("bad\\nINFO: forged")
+    'bad\\\\nINFO: forged'
+    """
+    if not text.isprintable():
+        text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    return text if len(text) <= _LOG_TEXT_MAX else text[:_LOG_TEXT_MAX] + "..."
+
+
+def forward_sdk_log(emit: Callable[[int, str], None]) -> None:
+    """Send the foxglove-sdk's log at INFO and above -- the server's start, each client
+    connecting and leaving, what a client sent that the protocol refuses -- to ``emit(level,
+    text)``, each line in words (:func:`log_text`, no traceback). The SDK takes its log level
+    once per process, before its first server: call this before starting a view. A later
+    call replaces ``emit``.
+
+    >>> forward_sdk_log(lambda level, text: None)
+    """
+    global _sdk_log_handler
+    try:
+        import foxglove
+    except ImportError:
+        return   # the view says how to install it
+
+    class Forward(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            try:
+                text = record.getMessage()
+            except Exception:  # noqa: BLE001 - a line that cannot be made is left out
+                return
+            if _SDK_QUIET.match(text):
+                return
+            for pattern, words in _SDK_WORDS:
+                found = pattern.match(text)
+                if found:
+                    text = words.format(found.group(1))
+                    break
+            emit(record.levelno, log_text(text))
+
+    with _sdk_log_lock:
+        sdk_logger = logging.getLogger("foxglove")
+        if _sdk_log_handler is None:
+            # the SDK calls logging.basicConfig when the root logger has no handler: a
+            # placeholder keeps the process's logging as it is
+            root = logging.getLogger()
+            placeholder = logging.NullHandler()
+            root.addHandler(placeholder)
+            try:
+                foxglove.set_log_level("INFO")
+            finally:
+                root.removeHandler(placeholder)
+            sdk_logger.setLevel(logging.INFO)
+            sdk_logger.propagate = False
+        else:
+            sdk_logger.removeHandler(_sdk_log_handler)
+        _sdk_log_handler = Forward()
+        sdk_logger.addHandler(_sdk_log_handler)
 
 
 def _schema(name: str, schema: dict) -> Any:
