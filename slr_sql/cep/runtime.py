@@ -58,8 +58,9 @@ __all__ = ["EventRules", "RuleRuntime", "ready_prefix", "OTHERS_LOOK"]
 _INF = math.inf
 
 # Seconds of the store's clock a clock move waits after the last look at whether another
-# connection committed (SQLite's data_version, a few microseconds: a third of what a clock
-# move that decides nothing costs) before it looks again; an add always looks.
+# connection changed the pending rows (SQLite's data_version, a few microseconds: a third of
+# what a clock move that decides nothing costs; a server's notifications, read from the
+# socket) before it looks again; an add always looks.
 OTHERS_LOOK = 0.1
 _FLOAT = frozenset((float,))
 
@@ -903,12 +904,12 @@ class EventRules:
         # made, rows kept pending): they are read again before they are used next
         self._summaries_stale = False
         kb.store.rollback_listeners.append(self.reread_pending)
-        # another process may leave decisions pending and stop: where seeing whether another
-        # connection committed costs no I/O (SQLite's data_version), the summaries are read
-        # again when it moved, so a clock move or an in-order event here decides them too
-        self._watch_others = kb.store.dialect.change_counter_is_local and \
-            kb.store.path is not None
-        self._others_version: int | None = None   # data_version when last looked
+        # another process may leave decisions pending and stop: seeing whether another
+        # connection changed them costs no I/O (SQLite's data_version; on a server the
+        # notifications the store's connection heard), so the summaries are read again
+        # when it moved, and a clock move or an in-order event here decides them too
+        self._watch_others = kb.store.path is not None
+        self._others_version: int | None = None   # others_version when last looked
         self._others_looked_at: float | None = None   # and the store clock's time then
 
     # ----------------------------------------------------------------- install
@@ -1295,7 +1296,7 @@ class EventRules:
         """Mark the summaries stale when another connection committed since the last look
         (it may have left decisions pending; its own summaries are not ours)."""
         self._others_looked_at = now
-        version = self.store.data_version()
+        version = self.store.others_version()
         if version != self._others_version:
             self._others_version = version
             self._summaries_stale = True
