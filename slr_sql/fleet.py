@@ -675,6 +675,17 @@ def click_group() -> Any:
     def token_of(ctx: click.Context) -> str | None:
         return (ctx.find_root().obj or {}).get("token")
 
+    def refuse_no_store(path: str) -> None:
+        """A store path these commands only read: missing, or an empty file (which SQLite
+        would make a database on the first write), is no store, as for ``slr stats``."""
+        import os
+
+        if not os.path.lexists(path):
+            raise SLRError(f"no such store: {path}")
+        if os.path.isfile(path) and os.path.getsize(path) == 0:
+            raise SLRError(f"no such store: {path} is an empty file (only load, add, ingest, "
+                           f"run, demo and serve create a store)")
+
     @click.group("fleet")
     def fleet_group() -> None:
         """Ship a robot's store to a fleet store, and see what the fleet holds."""
@@ -707,11 +718,9 @@ def click_group() -> Any:
                      follow: bool, types: tuple, batch: int, resync: bool) -> None:
         """Ship DB's events, complex events and completeness marks to FLEET (a store path,
         or the URL of `slr serve`), each once; resumable after a crash of either side."""
-        import os
         import signal
 
-        if not os.path.lexists(db):
-            raise SLRError(f"no such store: {db}")
+        refuse_no_store(db)
         stop = threading.Event()
         if follow:
             def on_signal(signum: int, frame: Any) -> None:
@@ -737,11 +746,9 @@ def click_group() -> Any:
         """Per robot: events shipped, lag (events and seconds) and last contact; a robot
         whose rows another store relays here: the store they come through."""
         import json
-        import os
 
-        if not fleet.startswith(("http://", "https://", "postgresql://", "postgres://")) \
-                and not os.path.lexists(fleet):
-            raise SLRError(f"no such store: {fleet}")
+        if not fleet.startswith(("http://", "https://", "postgresql://", "postgres://")):
+            refuse_no_store(fleet)
         rows = status(fleet, token=token_of(ctx))
         if as_json:
             click.echo(json.dumps(rows, indent=2))
