@@ -73,9 +73,9 @@ def _div(a, b):
             return a // b
         return a / b
     if b == 0:
-        # a float zero over zero is no number (SWI-Prolog: undefined), anything else over
-        # zero a division by zero
-        raise evaluation_error("undefined" if a == 0 else "zero_divisor")
+        # a float zero (or NaN) over zero is no number (SWI-Prolog: undefined), anything
+        # else over zero a division by zero
+        raise evaluation_error("undefined" if a == 0 or a != a else "zero_divisor")
     return a / b
 
 
@@ -185,9 +185,19 @@ def _sign(x):
 
 
 def _minmax(pick_first):
+    # as SWI-Prolog: a NaN gives way to the other number (max(1, nan) is 1), -0.0 is below
+    # the zeros (max(0, -0.0) is 0), and of two equal numbers the float wins
+    # (max(1, 1.0) is 1.0, in either order): max_list/2 and aggregate_all fold with these
     def f(a, b):
-        # compare numerically; on equality SWI returns the float for max(1,1.0)?: keep ISO-ish: b
+        if a != a:
+            return b
+        if b != b:
+            return a
         if a == b:
+            sa = math.copysign(1.0, a) if type(a) is float else 1.0
+            sb = math.copysign(1.0, b) if type(b) is float else 1.0
+            if sa != sb:   # -0.0 and a zero: the sign decides
+                return a if pick_first(sa, sb) else b
             return b if type(b) is float else a
         return a if pick_first(a, b) else b
     return f

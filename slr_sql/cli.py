@@ -5,8 +5,8 @@ API and closes it.  Errors: a :class:`slr_sql.SLRSyntaxError` prints its own tex
 (``file:line:col: message``, the source line and a caret) on stderr; an ISO error raised by a
 goal prints in words (``error: unknown procedure nosuch/1``); any other error prints
 ``error: message``; all exit with status 1, never with a traceback.  Only ``load``, ``add``,
-``ingest`` and ``demo`` create a store; the other commands on a missing path say
-``no such store: PATH``.
+``ingest``, ``run``, ``demo`` and ``serve`` create a store; the other commands on a missing
+path or an empty file say ``no such store: PATH``.
 """
 from __future__ import annotations
 
@@ -198,7 +198,7 @@ def _check_existing_store(db: str, create: bool = False) -> None:
         raise slr_sql.SLRError(f"no such store: {db}")
     if os.path.isfile(db) and os.path.getsize(db) == 0:
         raise slr_sql.SLRError(f"no such store: {db} is an empty file (only load, add, "
-                               f"ingest, demo and serve create a store)")
+                               f"ingest, run, demo and serve create a store)")
 
 
 def _existing_file(path: str) -> str:
@@ -232,7 +232,7 @@ def main(ctx: click.Context, token: str | None) -> None:
 
     DB is the store's file; load, add, ingest, run, demo and serve create it, the other
     commands need an existing store. DB may also be the URL of a running `slr serve`
-    (http://HOST:PORT).
+    (http://HOST:PORT) or of a PostgreSQL store (postgresql://USER@HOST/DB, docs/postgres.md).
     """
     ctx.obj = {"token": token}
     warnings.showwarning = _show_warning

@@ -264,12 +264,18 @@ class _Pusher:
             self.positions = target.positions(self.robot)
             self.reached()
         positions = self.positions
-        heads = self.store.fleet_heads()
-        shipped = 0
+        # the marks before the types: a type whose first row came with its mark after the
+        # types were read would go unshipped this round, and its mark with it
         marks = {k[len("sync/mark/"):]: v for k, v in self.store.meta_items("sync/mark/").items()
                  if _is_mark(v)}
         relayed = _relayed_marks(self.store, self.robot)
+        heads = self.store.fleet_heads()
+        shipped = 0
         keys = sorted(k for k in heads if self.types is None or k in self.types)
+        if self.types is not None:   # (the marks of the types left out speak of rows not shipped)
+            marks = _marks_of(self.types, heads, marks)
+            relayed = {r: m for r, m in ((r, _marks_of(self.types, heads, m))
+                                         for r, m in relayed.items()) if m}
         again = [k for k in keys if self.resync and k not in self.resynced]
         counters = self.store.fleet_counters()
         for key in keys:
@@ -502,6 +508,26 @@ def _is_mark(value: Any) -> bool:
         and math.isfinite(value)
 
 
+def _marks_of(types: set, held: Iterable[tuple[str, int]], marks: dict[str, Any]) -> dict:
+    """The marks (``{"p/N": t}``) that speak only of ``types``: ``p/N`` of one of them,
+    ``p/*`` when ``types`` hold ``p`` of every arity ``held`` (the types a store holds).
+
+    >>> _marks_of({("p", 1)}, [("p", 1), ("p", 2), ("q", 1)], {"p/1": 5, "p/*": 5, "q/1": 5})
+    {'p/1': 5}
+    """
+    out = {}
+    for key, t in marks.items():
+        name, _, arity = key.rpartition("/")
+        if arity == "*":
+            covered = any(n == name for n, _ in types) and all(
+                (n, a) in types for n, a in held if n == name)
+        else:
+            covered = arity.isdigit() and (name, int(arity)) in types
+        if covered:
+            out[key] = t
+    return out
+
+
 def _relayed_marks(store: EventStore, robot: str) -> dict[str, dict[str, float]]:
     """The marks ``store`` holds of robots other than ``robot`` (``fleet/mark/<r>/p/N``,
     kept when they shipped to it): ``{r: {"p/N": t}}``, shipped with the store's own so
@@ -603,7 +629,10 @@ def status(fleet: str, token: str | None = None, now: float | None = None) -> li
     stored from it), ``pending`` (events its store held unshipped at the last contact),
     ``lag_seconds`` (arrival of its latest event less arrival of the latest shipped, at the
     last contact; 0 when nothing was pending), ``last_contact`` (seconds since the epoch)
-    and ``since_contact`` (seconds), in name order.
+    and ``since_contact`` (seconds), ``via`` None; and per robot whose rows another store
+    relays there: ``shipped`` (its rows stored), ``via`` (the relaying store's robot),
+    ``pending``, ``lag_seconds`` and ``last_contact`` None (its pusher reports to the
+    relaying store); in name order.
 
     >>> import os, tempfile; status(os.path.join(tempfile.mkdtemp(), "f.db"))
     []
@@ -619,14 +648,16 @@ def status(fleet: str, token: str | None = None, now: float | None = None) -> li
             rows = kb.store.fleet_contacts()
     out = []
     for r in rows:
-        lag = 0.0
+        via = r.get("via")   # (a server of an older slr_sql does not say)
+        lag: float | None = None if via is not None else 0.0
         if r["pending"] and r["head_arrival"] is not None:
             lag = max(0.0, r["head_arrival"] - (r["last_arrival"] if r["last_arrival"]
                                                 is not None else r["head_arrival"]))
-        out.append({"robot": r["robot"], "shipped": r["shipped"], "pending": r["pending"],
+        out.append({"robot": r["robot"], "shipped": r["shipped"],
+                    "pending": None if via is not None else r["pending"],
                     "lag_seconds": lag, "last_contact": r["contact_at"],
                     "since_contact": None if r["contact_at"] is None
-                    else max(0.0, now - r["contact_at"])})
+                    else max(0.0, now - r["contact_at"]), "via": via})
     return out
 
 
@@ -643,6 +674,17 @@ def click_group() -> Any:
 
     def token_of(ctx: click.Context) -> str | None:
         return (ctx.find_root().obj or {}).get("token")
+
+    def refuse_no_store(path: str) -> None:
+        """A store path these commands only read: missing, or an empty file (which SQLite
+        would make a database on the first write), is no store, as for ``slr stats``."""
+        import os
+
+        if not os.path.lexists(path):
+            raise SLRError(f"no such store: {path}")
+        if os.path.isfile(path) and os.path.getsize(path) == 0:
+            raise SLRError(f"no such store: {path} is an empty file (only load, add, ingest, "
+                           f"run, demo and serve create a store)")
 
     @click.group("fleet")
     def fleet_group() -> None:
@@ -676,11 +718,9 @@ def click_group() -> Any:
                      follow: bool, types: tuple, batch: int, resync: bool) -> None:
         """Ship DB's events, complex events and completeness marks to FLEET (a store path,
         or the URL of `slr serve`), each once; resumable after a crash of either side."""
-        import os
         import signal
 
-        if not os.path.lexists(db):
-            raise SLRError(f"no such store: {db}")
+        refuse_no_store(db)
         stop = threading.Event()
         if follow:
             def on_signal(signum: int, frame: Any) -> None:
@@ -703,13 +743,12 @@ def click_group() -> Any:
     @click.option("--json", "as_json", is_flag=True, help="Print a JSON list of robots.")
     @click.pass_context
     def status_command(ctx: click.Context, fleet: str, as_json: bool) -> None:
-        """Per robot: events shipped, lag (events and seconds) and last contact."""
+        """Per robot: events shipped, lag (events and seconds) and last contact; a robot
+        whose rows another store relays here: the store they come through."""
         import json
-        import os
 
-        if not fleet.startswith(("http://", "https://", "postgresql://", "postgres://")) \
-                and not os.path.lexists(fleet):
-            raise SLRError(f"no such store: {fleet}")
+        if not fleet.startswith(("http://", "https://", "postgresql://", "postgres://")):
+            refuse_no_store(fleet)
         rows = status(fleet, token=token_of(ctx))
         if as_json:
             click.echo(json.dumps(rows, indent=2))
@@ -719,6 +758,8 @@ def click_group() -> Any:
             return
         header = ("robot", "shipped", "lag events", "lag s", "last contact")
         table = [header] + [
+            (r["robot"], str(r["shipped"]), "-", "-", f"relayed via {r['via']}")
+            if r.get("via") is not None else
             (r["robot"], str(r["shipped"]), str(r["pending"]), f"{r['lag_seconds']:.3f}",
              "never" if r["last_contact"] is None else
              time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(r["last_contact"]))

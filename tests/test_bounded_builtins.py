@@ -149,3 +149,35 @@ def test_printf_and_format_answer_as_sqlites_own(memory_store, form, args):
     for name in ("printf", "format"):
         query = f"SELECT {name}({marks})"
         assert _ours(memory_store, query, (form, *args)) == _plain(query, (form, *args))
+
+
+# -- PRAGMA case_sensitive_like would put SQLite's own LIKE back ---------------------------
+
+# over the bound (20,001 x 20,001 > 2^28) yet quick for SQLite's own LIKE (~0.5 s): the
+# test shows the bound, not a long run
+_OVER_THE_BOUND = "SELECT hex(zeroblob(10000)) || 'a' LIKE ('%' || hex(zeroblob(10000)))"
+
+
+@pytest.mark.parametrize("pragma", ["PRAGMA case_sensitive_like = 1",
+                                    "PRAGMA case_sensitive_like=off",
+                                    "pragma main.CASE_SENSITIVE_LIKE = true"])
+def test_case_sensitive_like_is_refused_and_like_stays_bounded(store, pragma):
+    # the pragma re-registers SQLite's LIKE on the connection, over the bounded one
+    with pytest.raises(SLRError, match=r"^sql: PRAGMA case_sensitive_like is not allowed "
+                                       r"\(.*LIKE.*timeout"):
+        store.sql(pragma, write=True)
+    with pytest.raises(SLRError, match=rf"like\(\) over values of .*{REFUSED}"):
+        store.sql(_OVER_THE_BOUND, write=True)
+    with pytest.raises(SLRError, match=rf"like\(\) over values of .*{REFUSED}"):
+        store.sql(_OVER_THE_BOUND)
+    # LIKE keeps SQLite's default (ASCII letters match either case), and the store goes on
+    assert store.sql("SELECT 'Cup1' LIKE 'cup%'", write=True)[1] == [(1,)]
+    store.add("seg(cup2)^2")
+    assert len(store.query("seg(X)^T")) == 2
+
+
+def test_case_sensitive_like_is_refused_read_only_and_on_a_connection_of_its_own(store):
+    with pytest.raises(SLRError, match="case_sensitive_like"):
+        store.sql("PRAGMA case_sensitive_like = 1")
+    with pytest.raises(SLRError, match=r"PRAGMA case_sensitive_like is not allowed"):
+        run_sql_file(store.store.path, "PRAGMA case_sensitive_like = 1", write=True)

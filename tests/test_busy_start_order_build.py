@@ -2,13 +2,14 @@
 ``lock_timeout`` runs out) rolls back only itself: the store's rollback listeners are not
 called (the types keep what they knew, the event rules do not read their pending summaries
 again), and while the table is busy the build is not tried again at every lookup, only once
-the store's clock has moved on by ``START_ORDER_RETRY`` seconds."""
+the store's clock has moved on by ``START_ORDER_RETRY`` seconds, or ``START_ORDER_RETRY_LOOKUPS``
+lookups skipped it (a clock that never moves still gets the build)."""
 from __future__ import annotations
 
 import slr_sql
 from libpq_trace import traced_messages
 from slr_sql import ManualClock
-from slr_sql.store.tables import START_ORDER_RETRY
+from slr_sql.store.tables import START_ORDER_RETRY, START_ORDER_RETRY_LOOKUPS
 from store_holders import table_written
 
 RULE = ":- consumption(unrestricted).\n:- max_delay(a/1, 0).\n:- max_delay(b/1, 0).\n" \
@@ -92,3 +93,43 @@ def test_a_busy_build_inside_a_transaction_leaves_the_transaction_and_rules_as_t
         kb.mark_complete("e/1", 10)
         assert [r["pending"] for r in kb.event_rules()] == [0]
         assert heard == []
+
+
+def _build_statements(kb, backend: str, call) -> int:
+    """How many CREATE INDEX statements ``kb``'s connection ran while ``call()`` ran."""
+    if backend.startswith("postgres"):
+        return _sent(traced_messages(kb, call), "CREATE INDEX IF NOT EXISTS")
+    statements: list[str] = []
+    kb.store._db.conn.set_trace_callback(statements.append)
+    try:
+        call()
+    finally:
+        kb.store._db.conn.set_trace_callback(None)
+    return sum("CREATE INDEX IF NOT EXISTS" in s for s in statements)
+
+
+def test_a_clock_that_never_moves_still_gets_the_build_after_enough_lookups(backend):
+    # a ManualClock that stands still: the build is tried again by the
+    # START_ORDER_RETRY_LOOKUPS-th lookup after the busy one, whatever the clock says
+    with slr_sql.open(backend, clock=ManualClock(10.0), busy_timeout=30) as kb:
+        kb.load(RULE)
+        kb.add_many(EVENTS)
+        expected = sorted(row[:3] for row in kb.store.scan("c", 1))
+        other = table_written(backend)
+        try:
+            assert sorted(row[:3] for row in kb.store.next_candidates("c", 1, None, 0, 100)) \
+                == expected
+        finally:
+            other.rollback()
+            other.close()
+
+        def skipped_lookups():
+            for _ in range(START_ORDER_RETRY_LOOKUPS - 1):
+                assert not kb.store.ensure_start_order("c", 1)
+        # the lookups in between do not try (the lock is free by now: they do not know)
+        assert _build_statements(kb, backend, skipped_lookups) == 0
+        assert _build_statements(kb, backend, lambda: kb.store.ensure_start_order("c", 1)) > 0
+        assert kb.store.ensure_start_order("c", 1)
+        assert {"slr_ix__c__start", "slr_ix__c__a1_start"} <= kb.store.index_names("c")
+        assert sorted(row[:3] for row in kb.store.next_candidates("c", 1, None, 0, 100)) \
+            == expected

@@ -48,6 +48,22 @@ def test_an_empty_file_does_not_become_a_store(tmp_path, command):
     assert empty.stat().st_size == 0 and sorted(os.listdir(tmp_path)) == ["empty.db"]
 
 
+@pytest.mark.parametrize("before, after", [(["export"], ["out.mcap"]),
+                                           (["foxglove"], ["--port", "0"]),
+                                           (["fleet", "status"], []),
+                                           (["fleet", "push"], ["fleet.db"])])
+def test_the_views_and_the_fleet_do_not_make_an_empty_file_a_store(tmp_path, before, after):
+    """README: only the commands that add to a store create one; export, foxglove and the
+    fleet's status and push read DB (FLEET) and refuse an empty file, as stats does."""
+    empty = tmp_path / "empty.db"
+    empty.write_bytes(b"")
+    r = slr(*before, str(empty), *[str(tmp_path / a) if a.endswith((".mcap", ".db")) else a
+                                   for a in after], timeout=30)
+    assert r.returncode == 1, r.stdout
+    assert r.stderr.startswith(f"error: no such store: {empty} is an empty file"), r.stderr
+    assert empty.stat().st_size == 0 and sorted(os.listdir(tmp_path)) == ["empty.db"]
+
+
 def test_an_empty_file_becomes_a_store_where_events_are_added(tmp_path):
     empty = tmp_path / "empty.db"
     empty.write_bytes(b"")

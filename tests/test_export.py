@@ -146,3 +146,25 @@ def test_round_trip_of_random_events(tmp_path_factory, events):
         kb.load(DECLARED)
         import_bag(kb, tmp / "a.mcap")
         assert everything(kb) == before
+
+
+def _messages(path: Path) -> list:
+    with open(path, "rb") as stream:
+        return [(c.topic, m.log_time, json.loads(m.data))
+                for _, c, m in make_reader(stream).iter_messages(log_time_order=True)]
+
+
+def test_an_export_of_a_postgresql_store_is_the_export_of_the_same_sqlite_store(
+        tmp_path, postgres_url):
+    """docs/ros.md: `slr export` takes a postgresql:// URL too. Its reads had `WHERE 1`, which
+    PostgreSQL refuses (a WHERE needs a boolean): every export of a server store failed."""
+    with robot_store(tmp_path / "r.db") as kb:
+        export_mcap(kb.store, tmp_path / "sqlite.mcap")
+    with robot_store(postgres_url) as kb:
+        report = export_mcap(kb.store, tmp_path / "postgres.mcap")
+    assert report.messages == 7
+    assert _messages(tmp_path / "postgres.mcap") == _messages(tmp_path / "sqlite.mcap")
+    out = slr("export", postgres_url, str(tmp_path / "cli.mcap"), "seg")
+    assert out.returncode == 0, out.stderr
+    assert [m for m in _messages(tmp_path / "cli.mcap") if m[0] == "/seg/2"] == \
+        [m for m in _messages(tmp_path / "sqlite.mcap") if m[0] == "/seg/2"]

@@ -142,3 +142,33 @@ def test_a_push_stopped_before_its_rows_ships_no_mark(tmp_path, relayed):
         assert kb.store.meta_get("fleet/mark/r1/seen/1") == 50.0
         assert sorted(a["X"] for a in kb.query("seen(X)^T, T =< 40", at=40, wait=True,
                                               timeout=30)) == ["a", "b"]
+
+
+@pytest.mark.parametrize("relayed", [False, True])
+def test_a_push_of_some_types_ships_no_mark_of_the_others(tmp_path, relayed):
+    """``push(types=...)`` ships the rows of those types only: the marks of the other types
+    (the robot's own, the relayed robots', and ``p/*`` ones that speak of a type left out)
+    speak of rows it did not ship, and the fleet store took those histories as complete
+    without holding them (a synchronized query there answered early, without them)."""
+    with slr_sql.open(tmp_path / "r1.db", robot="r1", clock=slr_sql.ManualClock(1000)) as kb:
+        kb.add_many(["seen(a)^10", "lost(b)^20", "part(c)^30", "part(c, d)^30"])
+        for mark in ("seen/1", "lost/1", "part"):   # (part: every arity, part/*)
+            kb.mark_complete(mark, 50.0)
+    source = tmp_path / "r1.db"
+    if relayed:   # the same through a site store that relays r1 (every type of it)
+        slr_sql.open(tmp_path / "site.db", robot="site").close()
+        fleet.push(str(source), str(tmp_path / "site.db"))
+        source = tmp_path / "site.db"
+    fleet_db = tmp_path / "fleet.db"
+    assert fleet.push(str(source), str(fleet_db), types=["seen/1", "part/1"]).shipped == 2
+    with slr_sql.open(fleet_db, clock=slr_sql.ManualClock(0)) as kb:
+        assert kb.store.meta_get("fleet/mark/r1/seen/1") == 50.0
+        assert sorted(kb.store.meta_items("fleet/mark/r1/")) == ["fleet/mark/r1/seen/1"]
+        with pytest.raises(slr_sql.SLRTimeout):
+            kb.query("lost(X)^T, T =< 40", at=40, wait=True, timeout=0)
+    assert fleet.push(str(source), str(fleet_db)).shipped == 2   # lost/1, part/2
+    with slr_sql.open(fleet_db, clock=slr_sql.ManualClock(0)) as kb:
+        assert kb.store.meta_get("fleet/mark/r1/lost/1") == 50.0
+        assert kb.store.meta_get("fleet/mark/r1/part/*") == 50.0
+        assert [a["X"] for a in kb.query("lost(X)^T, T =< 40", at=40, wait=True,
+                                         timeout=30)] == ["b"]

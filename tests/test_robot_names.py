@@ -154,3 +154,22 @@ def test_the_service_refuses_it_in_a_question_too(server, ask):
                             json={"goal": "seen(X)^T", "robot": "r1\u202e"})
     assert answer.status_code == 400, answer.text
     assert "U+202E RIGHT-TO-LEFT OVERRIDE at position 3" in answer.json()["error"]["message"]
+
+
+@pytest.mark.parametrize("name", [
+    "r" * 100_000 + "\u202e",       # refused for a character
+    "1" * 100_000,                  # refused for reading as a number
+    "r\ud800" + "r" * 100_000,      # refused as text that is not Unicode
+    ["r"] * 100_000,                # no text at all
+], ids=["format-character", "number", "surrogate", "no-text"])
+def test_a_long_name_refused_makes_a_short_error(server, name):
+    """The service's answer (and a log line) quotes the name refused: a 100 KB name made a
+    100 KB error message, shown whole to whoever reads the answer or the log."""
+    with pytest.raises(SLRError) as refused:
+        check_robot_name(name)
+    assert len(str(refused.value)) < 500, str(refused.value)[:200]
+    if isinstance(name, str) and "\ud800" not in name:
+        answer = httpx.post(server.url + "/query", timeout=30,
+                            json={"goal": "seen(X)^T", "robot": name})
+        assert answer.status_code == 400, answer.text[:200]
+        assert len(answer.json()["error"]["message"]) < 500

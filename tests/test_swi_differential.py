@@ -812,6 +812,13 @@ def check_example(example: tuple, swi: dict[int, dict], where: str | None = None
                     assert prefix == expected, context
                 with pytest.raises(SLREvaluationError):  # and no answer more before it
                     kb.query(q, max_steps=SLR_MAX_STEPS, limit=len(expected) + 1)
+                # the compiled SQL plan (run without a step limit) raises the same error
+                try:
+                    fast = [slr_answer(a, names) for a in
+                            kb.query(q, timeout=SLR_TIMEOUT, limit=MAX_ANSWERS + 1)]
+                except SLREvaluationError as exc:
+                    fast = canonical_error(exc.term)
+                assert fast == error, f"compiled path differs: {fast}{context}\n{kb.explain(q)}"
             else:
                 assert error is None, f"slr_sql raised {error}, SWI did not{context}"
                 assert ours == expected, context

@@ -391,6 +391,28 @@ def swipl():
     [("p", ("a", "1"), 1.0, 1.0), ("p", ("a", "1.0"), 1.0, 1.0), ("p", ("a", "0"), 1.0, 1.0)],
     [0, 1, 2], [], [], [("g(K, 3)", "g(K, 3)", None), ("aggregate_all(min(V), p(a, V)^_, M)",
                         "aggregate_all_(min(V), p(a, V, Z_, Z_), M)", None)]))
+@example((   # -0.0 is below 0 and 0.0 in Prolog's max/2 and min/2 (min gives -0.0, in any order)
+    "",
+    "",
+    [("p", ("a", "0.0"), 1.0, 1.0), ("p", ("a", "-0.0"), 1.0, 1.0), ("p", ("a", "0"), 1.0, 1.0)],
+    [0, 1, 2], [], [], [("aggregate_all(min(V), p(a, V)^_, M)",
+                         "aggregate_all_(min(V), p(a, V, Z_, Z_), M)", None),
+                        ("aggregate_all(max(V), p(a, V)^_, M)",
+                         "aggregate_all_(max(V), p(a, V, Z_, Z_), M)", None),
+                        ("findall(V, p(a, V)^_, L), min_list(L, M), max_list(L, N)",
+                         "findall(V, p(a, V, Z_, Z_), L), min_list(L, M), max_list(L, N)",
+                         None)]))
+@example((   # 0.0 / 0 is undefined, a float index of nth0 a type error, max(V, W)'s witness
+    "",
+    "",
+    [("p", ("b", "1"), 1.0, 1.0), ("p", ("a", "0.0"), 2.0, 2.0), ("p", ("c", "1.0"), 3.0, 3.0)],
+    [0, 1, 2], [], [], [("p(K, V)^_, X is V / 0", "p(K, V, Z_, Z_), X is V / 0", None),
+                        ("p(K, V)^_, nth0(V, [x, y], E)", "p(K, V, Z_, Z_), nth0(V, [x, y], E)",
+                         None),
+                        ("aggregate_all(max(V, K), p(K, V)^_, M)",
+                         "aggregate_all_(max(V, K), p(K, V, Z_, Z_), M)", None),
+                        ("aggregate_all(min(V, K), p(K, V)^_, M)",
+                         "aggregate_all_(min(V, K), p(K, V, Z_, Z_), M)", None)]))
 def test_prev_next_programs_answer_as_swipl_on_both_backends(swipl, database, example_):
     url = database + ("&" if "?" in database else "?") + f"schema=pn{next(_SCHEMAS)}"
     compare(swipl, example_, url)

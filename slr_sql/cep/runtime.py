@@ -34,9 +34,9 @@ from operator import itemgetter, ne
 from typing import Any, Callable
 
 from ..encoding import Unencodable, decode, encode
-from ..errors import SLRError
+from ..errors import SLRError, SLRUnavailable
 from ..host import Host
-from ..store import DatabaseError, EventBatch, quote_identifier
+from ..store import DatabaseError, EventBatch, quote_identifier, store_error
 from ..terms import Struct, Var, deref, format_term, is_ground, make_list, term_vars
 from .rules import EventRule
 from .sqlgen import (AltSQL, anchor_index, complex_copy, complex_read, create_index,
@@ -58,8 +58,9 @@ __all__ = ["EventRules", "RuleRuntime", "ready_prefix", "OTHERS_LOOK"]
 _INF = math.inf
 
 # Seconds of the store's clock a clock move waits after the last look at whether another
-# connection committed (SQLite's data_version, a few microseconds: a third of what a clock
-# move that decides nothing costs) before it looks again; an add always looks.
+# connection changed the pending rows (SQLite's data_version, a few microseconds: a third of
+# what a clock move that decides nothing costs; a server's notifications, read from the
+# socket) before it looks again; an add always looks.
 OTHERS_LOOK = 0.1
 _FLOAT = frozenset((float,))
 
@@ -92,6 +93,19 @@ def _head_value(t: Any, bindings: dict) -> Any:
             args.append(v)
         return Struct(t.name, tuple(args))
     return t
+
+
+def _may_pass(exc: BaseException, path: str | None) -> bool:
+    """Whether an error a where goal raised is a condition that may pass (SLRUnavailable:
+    a busy or full store, a lost connection, a service a defined predicate asks) rather
+    than an answer of the goal (a type error, a timeout, a goal that cannot run).
+
+    >>> _may_pass(SLRUnavailable("down"), None), _may_pass(SLRError("type_error"), None)
+    (True, False)
+    """
+    if isinstance(exc, SLRUnavailable):
+        return True
+    return isinstance(exc, DatabaseError) and isinstance(store_error(exc, path), SLRUnavailable)
 
 
 def _sqlite_key(v: Any) -> tuple:
@@ -495,6 +509,12 @@ class RuleRuntime:
             except MustWait:
                 raise
             except (SLRError, RecursionError, ValueError, TypeError, DatabaseError) as exc:
+                if _may_pass(exc, self.eng.store.path):
+                    # the goal could not be asked (a service down, the store busy or full):
+                    # rejecting this candidate would derive the next one in its place, a
+                    # decision the moment's trouble made; the round fails instead, and the
+                    # decision is made again (the add is retried, the clock moves again)
+                    raise
                 self.errors += 1
                 self.last_error = describe_error(exc)
                 return False
@@ -903,12 +923,12 @@ class EventRules:
         # made, rows kept pending): they are read again before they are used next
         self._summaries_stale = False
         kb.store.rollback_listeners.append(self.reread_pending)
-        # another process may leave decisions pending and stop: where seeing whether another
-        # connection committed costs no I/O (SQLite's data_version), the summaries are read
-        # again when it moved, so a clock move or an in-order event here decides them too
-        self._watch_others = kb.store.dialect.change_counter_is_local and \
-            kb.store.path is not None
-        self._others_version: int | None = None   # data_version when last looked
+        # another process may leave decisions pending and stop: seeing whether another
+        # connection changed them costs no I/O (SQLite's data_version; on a server the
+        # notifications the store's connection heard), so the summaries are read again
+        # when it moved, and a clock move or an in-order event here decides them too
+        self._watch_others = kb.store.path is not None
+        self._others_version: int | None = None   # others_version when last looked
         self._others_looked_at: float | None = None   # and the store clock's time then
 
     # ----------------------------------------------------------------- install
@@ -1295,7 +1315,7 @@ class EventRules:
         """Mark the summaries stale when another connection committed since the last look
         (it may have left decisions pending; its own summaries are not ours)."""
         self._others_looked_at = now
-        version = self.store.data_version()
+        version = self.store.others_version()
         if version != self._others_version:
             self._others_version = version
             self._summaries_stale = True

@@ -56,7 +56,7 @@ from .checks import format_event
 from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, DatabaseError, \
     ReadConnection, run_sql_file
 from .events import Event, EventBatch, EventWriter
-from .fleet import Fleet, WriterInFlight, check_robot_name
+from .fleet import Fleet, RouteConflict, WriterInFlight, check_robot_name
 from .functions import SqlFunctions
 from .journals import JournalReader, SubscriptionRecord, SubscriptionTables
 from .lookups import EventReader, Row
@@ -69,7 +69,7 @@ from .tables import EventTables
 __all__ = ["EventStore", "Event", "EventBatch", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "DatabaseError", "quote_identifier", "sql_literal", "format_event",
            "migration_scripts", "split_sql_script", "run_sql_file", "store_error",
-           "check_robot_name", "WriterInFlight", "ReadConnection", "ArgEquals", "BufferPlan", "JsonArray",
+           "check_robot_name", "RouteConflict", "WriterInFlight", "ReadConnection", "ArgEquals", "BufferPlan", "JsonArray",
            "JsonEquals", "MixedTerm", "PatternMatch", "SameTerm", "JournalReader",
            "SubscriptionRecord"]
 
@@ -549,6 +549,10 @@ class EventStore:
     @_doc(Database.data_version)
     def data_version(self) -> int:
         return self._catalog.data_version()
+
+    @_doc(Database.others_version)
+    def others_version(self) -> int:
+        return self._db.others_version()
 
     @_doc(Catalog.program_sources)
     def program_sources(self) -> list[tuple[str, str | None]]:

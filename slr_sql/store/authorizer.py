@@ -1,8 +1,9 @@
 """What a statement on a store connection may do: SQLite's authorizer and its own switches.
 
 Every connection the store opens gets :func:`harden_connection`: the SQLite functions in
-:data:`DENIED_FUNCTIONS` are refused in every statement (the store's own SQL never calls
-them; a user's ``kb.sql(..., write=True)`` may not either), and SQLite's
+:data:`DENIED_FUNCTIONS` and the pragmas in :data:`DENIED_PRAGMAS` are refused in every
+statement (the store's own SQL never calls them; a user's ``kb.sql(..., write=True)`` may not
+either), and SQLite's
 ``SQLITE_DBCONFIG_ENABLE_FTS3_TOKENIZER`` switch is turned off where Python lets it be
 reached safely (:func:`fts3_tokenizer_switch_off`). A *read-only* statement (``kb.sql``
 without ``write``, ``slr sql``, the service's ``/sql``) runs under the stricter
@@ -32,7 +33,7 @@ import sys
 from typing import Any
 
 __all__ = ["SqlGuard", "harden_connection", "fts3_tokenizer_switch_off", "DENIED_FUNCTIONS",
-           "READING_PRAGMAS", "ACTING_PRAGMAS", "READ_ONLY_VALUE_BYTES", "READ_ONLY_RESULT_BYTES"]
+           "DENIED_PRAGMAS", "READING_PRAGMAS", "ACTING_PRAGMAS", "READ_ONLY_VALUE_BYTES", "READ_ONLY_RESULT_BYTES"]
 
 # Functions no statement on a store connection may call, with the reason given.
 DENIED_FUNCTIONS = {
@@ -41,6 +42,13 @@ DENIED_FUNCTIONS = {
     "load_extension": "it loads native code into the process",
     "rtreenode": "a debugging function that decodes any blob as an R*Tree node",
     "rtreedepth": "a debugging function that decodes any blob as an R*Tree node",
+}
+
+# Pragmas no statement on a store connection may run, with the reason given.
+DENIED_PRAGMAS = {
+    "case_sensitive_like": "it registers SQLite's own LIKE on the connection again, over "
+                           "the store's bounded one, and one call of that cannot be stopped "
+                           "by a statement's timeout; for a case-sensitive match use GLOB",
 }
 
 # Pragmas that take an argument and only read (also table-valued: pragma_table_info('t')).
@@ -74,11 +82,17 @@ class SqlGuard:
         self.denied: str | None = None
 
     def always(self, action: int, arg1: Any, arg2: Any, _db: Any, _trigger: Any) -> int:
-        """Every statement: no function of :data:`DENIED_FUNCTIONS`."""
+        """Every statement: no function of :data:`DENIED_FUNCTIONS`, no pragma of
+        :data:`DENIED_PRAGMAS` (refused before SQLite acts on it)."""
         if action == _FUNCTION and isinstance(arg2, str):
             reason = DENIED_FUNCTIONS.get(arg2.lower())
             if reason is not None:
                 self.denied = f"{arg2.lower()}() is not allowed ({reason})"
+                return _DENY
+        elif action == _PRAGMA and isinstance(arg1, str):
+            reason = DENIED_PRAGMAS.get(arg1.lower())
+            if reason is not None:
+                self.denied = f"PRAGMA {arg1.lower()} is not allowed ({reason})"
                 return _DENY
         return _OK
 
@@ -91,6 +105,8 @@ class SqlGuard:
             return _DENY
         if action == _PRAGMA:
             name = str(arg1).lower()
+            if name in DENIED_PRAGMAS:
+                return self.always(action, arg1, arg2, db, trigger)
             if name in ACTING_PRAGMAS or (arg2 is not None and name not in READING_PRAGMAS):
                 self.denied = f"read-only: PRAGMA {name} with an argument, or one that acts, " \
                               "would change the store or its settings"

@@ -4,9 +4,10 @@
 lookups for prev/next and scans, programs, meta keys, fact tables and views, buffers' rows,
 space, transactions, change detection, raw SQL for ``slr sql``). :class:`CompiledSQL` is
 what the two compilers of rules to SQL need (running their statements, Python functions
-where the engine has them, plans). :class:`RawStatements` is the escape hatch the modules on
-``tests/test_architecture.py``'s allow-list still use; it shrinks as their SQL moves behind
-store methods. :class:`~slr_sql.store.EventStore` implements all three on SQLite and on
+where the engine has them, plans). :class:`RawStatements` runs statements of any text on the
+store's connection: no module of the package calls it (``tests/test_architecture.py``
+forbids it outside the store; its allow-list is empty), the tests and doctests do, to write
+as another client of the database would. :class:`~slr_sql.store.EventStore` implements all three on SQLite and on
 PostgreSQL (``slr_sql.open("postgresql://...")``); tests/test_store_backend.py checks it.
 
 >>> from slr_sql.store import EventStore
@@ -73,6 +74,8 @@ class Backend(Protocol):
                        after_seq: int = 0) -> tuple[list[tuple[Any, Any]], int]: ...
 
     def max_seq(self, name: str, arity: int) -> int: ...
+
+    def null_arguments(self, types: Iterable[tuple[str, int]] | None=None, every: bool=False) -> list[tuple[str, int, str, int, int]]: ...
 
     def create_journal(self, table: str, arity: int, journal: str, trigger: str) -> None: ...
 
@@ -239,6 +242,8 @@ class Backend(Protocol):
 
     def data_version(self) -> int: ...
 
+    def others_version(self) -> int: ...
+
     def program_sources(self) -> list[tuple[str, str | None]]: ...
 
     def replace_program(self, sources: Iterable[tuple[str, str | None]]) -> None: ...
@@ -326,7 +331,8 @@ class CompiledSQL(Protocol):
 
 @runtime_checkable
 class RawStatements(Protocol):
-    """Raw statements for the modules still on the architecture test's allow-list."""
+    """Statements of any text on the store's connection: for tests writing as another client
+    of the database would (no module of the package calls them)."""
 
     def execute(self, sql: str, params: Iterable[Any]=()) -> list[tuple[Any, ...]]: ...
 

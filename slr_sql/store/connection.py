@@ -347,6 +347,16 @@ class Database:
             self.check_open()
             return self.conn.execute("PRAGMA data_version").fetchone()[0]
 
+    def others_version(self) -> int:
+        """A number that moves when another connection may have changed the event rules'
+        pending rows, read without I/O: on SQLite :meth:`data_version` (any commit of
+        another connection moves it).
+
+        >>> db = Database(None); db.others_version() == db.others_version()
+        True
+        """
+        return self.data_version()
+
     def table_names(self) -> set[str]:
         """Names of the tables of the database.
 

@@ -45,7 +45,6 @@ class Dialect(Protocol):
     name: str
     paramstyle: str
     text_holds_nul: bool
-    change_counter_is_local: bool
 
     def statement(self, sql: str) -> str: ...
     def typeof(self, expr: str) -> str: ...
@@ -86,9 +85,6 @@ class SQLiteDialect(SQLiteQueryPrinter):
     true = "1"
     false = "0"
     python_functions = True  # statements may call Python functions (create_function)
-    # whether data_version() (another connection committed?) costs no I/O when nothing
-    # changed: SQLite's PRAGMA reads a counter of the shared memory; a server's is a round trip
-    change_counter_is_local = True
 
     def statement(self, sql: str) -> str:
         return sql
@@ -164,7 +160,6 @@ class PostgresDialect(PostgresQueryPrinter):
     true = "TRUE"
     false = "FALSE"
     python_functions = False
-    change_counter_is_local = False
 
     def scalar(self, name: str) -> str:
         return {"max": "GREATEST", "min": "LEAST"}.get(name, name)

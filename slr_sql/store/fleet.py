@@ -18,13 +18,13 @@ from typing import Any
 from ..encoding import encode
 from ..errors import SLRBusy, SLRError
 from ..terms import Atom
-from .checks import BadEvent, text_problem
+from .checks import BadEvent, shown, text_problem
 from .dialect import POSTGRES
 from .connection import Database
 from .events import EventWriter
 from .tables import EventTables
 
-__all__ = ["Fleet", "WriterInFlight", "check_robot_name"]
+__all__ = ["Fleet", "RouteConflict", "WriterInFlight", "check_robot_name"]
 
 # Unicode categories a robot's name may not hold: characters that are not drawn but change
 # how the text around them is drawn (direction overrides and isolates, the marks U+200E/F,
@@ -34,6 +34,12 @@ _UNSEEN = {"Cc": "a control character", "Cf": "a format character",
 
 # (an upsert both engines take)
 _ADD_ROBOT = "INSERT INTO slr_robots (name) VALUES (?) ON CONFLICT (name) DO NOTHING"
+# a robot's route: the row is taken (locked on a server until the commit, so two shipments
+# bringing one robot's rows by two routes at once cannot both pass) and its via returned
+_ADD_ROUTE = ("INSERT INTO slr_fleet_routes (robot, via, shipped) VALUES (?, ?, ?) "
+              "ON CONFLICT (robot) DO UPDATE SET shipped = slr_fleet_routes.shipped + "
+              "excluded.shipped")
+_TAKE_ROUTE = _ADD_ROUTE + " RETURNING via"
 
 
 def check_robot_name(name: Any) -> str:
@@ -49,27 +55,28 @@ def check_robot_name(name: Any) -> str:
     slr_sql.errors.SLRError: robot name 'r1\u202eevil' has U+202E RIGHT-TO-LEFT OVERRIDE at position 3 (a format character: it would change how the name and what follows it read in logs, tables and plots); name robots with plain words (r1, forklift-2, ...)
     """
     if not isinstance(name, str) or not name:
-        raise SLRError(f"a robot's name is a non-empty text, not {name!r}")
+        raise SLRError(f"a robot's name is a non-empty text, not {shown(name)}")
+    # (the name quoted cut short: a 100 KB name refused must not make a 100 KB message)
     problem = text_problem(name)
     if problem:
-        raise SLRError(f"robot name {name!r} cannot be stored: {problem}")
+        raise SLRError(f"robot name {shown(name)} cannot be stored: {problem}")
     for position, char in enumerate(name, 1):
         kind = _UNSEEN.get(unicodedata.category(char))
         if kind is not None:
             label = unicodedata.name(char, "")
             raise SLRError(
-                f"robot name {name!r} has U+{ord(char):04X}{' ' + label if label else ''} at "
+                f"robot name {shown(name)} has U+{ord(char):04X}{' ' + label if label else ''} at "
                 f"position {position} ({kind}: it would change how the name and what follows "
                 "it read in logs, tables and plots); name robots with plain words (r1, "
                 "forklift-2, ...)")
     if encode(Atom(name)) != name:  # the column holds the atom's stored form: the name itself
-        raise SLRError(f"robot name {name!r} reads as a compound term or string when stored; "
+        raise SLRError(f"robot name {shown(name)} reads as a compound term or string when stored; "
                        "name robots with plain words (r1, forklift-2, ...)")
     if POSTGRES.to_column(name) != name:
         # a name that reads as a number is stored tagged on PostgreSQL (docs/postgres.md), so
         # a robot column could not hold it as itself there: refused on every backend, so that
         # any store may ship to any fleet
-        raise SLRError(f"robot name {name!r} reads as a number when stored; name robots with "
+        raise SLRError(f"robot name {shown(name)} reads as a number when stored; name robots with "
                        "plain words (r1, forklift-2, ...)")
     return name
 
@@ -84,9 +91,21 @@ class WriterInFlight(SLRBusy):
     """
 
 
+class RouteConflict(SLRError):
+    """A shipment brings rows of a robot whose rows reach the fleet store through another
+    shipping robot already (a robot pushing both to the fleet store and to a site store that
+    relays to it; two site stores relaying one robot): the fleet store keeps its positions
+    per shipping robot, so it would store each row twice. Nothing of the shipment is stored.
+
+    >>> issubclass(RouteConflict, SLRError)
+    True
+    """
+
+
 class Fleet:
     """The robot name of a store and the shipping tables (``slr_robots``,
-    ``slr_fleet_positions``, ``slr_fleet_robots``, migration 0006).
+    ``slr_fleet_positions``, ``slr_fleet_robots``, migration 0006; ``slr_fleet_routes``,
+    migration 0010).
 
     >>> from slr_sql.store import EventStore
     >>> s = EventStore(None, robot="r1"); s.robot, s.robots()
@@ -100,6 +119,9 @@ class Fleet:
         row = db.conn.execute("SELECT value FROM slr_meta WHERE key = 'robot'").fetchone()
         self.robot: str | None = None if row is None else _json_text(row[0])
         writer.robot = self.robot
+        # routes this store committed (robot -> via): a route is never changed nor dropped,
+        # so a batch of a robot along its known route needs no answer about it
+        self._routes: dict[str, str] = {}
 
     def name(self, robot: str) -> None:
         """Name the store's robot (kept in the store). A store has one name for life:
@@ -305,6 +327,7 @@ class Fleet:
                 fresh = rows if rows[0][0] > position else [r for r in rows if r[0] > position]
             if not fresh:
                 return 0
+            along = self._take_routes(robot, fresh)
             others = {r[-1] for r in fresh if r[-1] is not None and r[-1] != robot}
             dialect = self.db.dialect
             server = dialect.to_column is not None
@@ -347,6 +370,8 @@ class Fleet:
             # statements nobody reads an answer of: on a server they go with the
             # transaction's next statement or its COMMIT (one round trip, not one each)
             unanswered = conn.execute_unanswered if server else conn.execute
+            for params in along:
+                unanswered(_ADD_ROUTE, params)
             if store_events is None:
                 for who in (robot, *others):
                     unanswered(_ADD_ROBOT, (who,))
@@ -359,6 +384,47 @@ class Fleet:
             unanswered(_SET_POSITION, (robot, name, arity, rows[-1][0] if resync
                                        else fresh[-1][0]))
             return len(fresh)
+
+    def _take_routes(self, robot: str, rows: list[tuple]) -> list[tuple]:
+        """Note that the rows of each robot of ``rows`` come through ``robot`` (the robot
+        itself, or a store relaying them), or raise :class:`RouteConflict` when a robot's
+        rows come through another one already (inside the receiving transaction). Returns
+        the parameters of :data:`_ADD_ROUTE` for the robots whose route this store
+        committed before (no answer needed: the caller sends them with its last
+        statements)."""
+        counts: dict[str, int] = {}
+        for r in rows:
+            who = r[-1] or robot
+            counts[who] = counts.get(who, 0) + 1
+        conn = self.db.conn
+        taken = []
+        along = []
+        for who in sorted(counts):   # (one order: two shipments never wait on each other)
+            if self._routes.get(who) == robot:
+                along.append((who, robot, counts[who]))
+                continue
+            twice = ("would store each of them twice (a fleet store keeps its positions per "
+                     f"shipping robot): push {who} to one of the two stores only")
+            if who == self.robot:   # (its own rows, shipped back: a cycle)
+                raise RouteConflict(f"the rows of robot {who!r} are this store's own; "
+                                    f"{robot!r} relaying them back would store each of them "
+                                    "twice: a store's rows must not come back to it through "
+                                    "the stores it pushes to")
+            held = conn.execute(_TAKE_ROUTE, (who, robot, counts[who])).fetchone()[0]
+            if held == robot:
+                taken.append(who)
+                continue
+            if held == who:
+                raise RouteConflict(f"robot {who!r} ships to this store directly; {robot!r} "
+                                    f"relaying its rows too {twice}")
+            raise RouteConflict(
+                f"the rows of robot {who!r} reach this store relayed by {held!r}; "
+                + (f"{who} shipping them here directly too " if robot == who
+                   else f"{robot!r} relaying them too ") + twice)
+        if taken:
+            routes = self._routes
+            self.db.after_commit(lambda: routes.update(dict.fromkeys(taken, robot)))
+        return along
 
     def _set_position(self, robot: str, name: str, arity: int, position: int) -> None:
         self.db.conn.execute(_SET_POSITION, (robot, name, arity, position))
@@ -419,14 +485,28 @@ class Fleet:
                 (robot, pending, head_arrival, time.time()))
 
     def contacts(self) -> list[dict[str, Any]]:
-        """Per robot that shipped: its ``slr_fleet_robots`` row as a dict, in name order."""
+        """Per robot that shipped: its ``slr_fleet_robots`` row as a dict, and per robot whose
+        rows another store relays here (``slr_fleet_routes``): the rows stored of it, no
+        contact; ``via`` is the relaying store's robot (None for a robot shipping here
+        itself); in name order."""
         with self.db.lock:
             self.db.check_open()
-            cur = self.db.conn.execute(
+            conn = self.db.conn
+            cur = conn.execute(
                 "SELECT robot, shipped, last_arrival, pending, head_arrival, contact_at "
                 "FROM slr_fleet_robots ORDER BY robot")
             cols = [d[0] for d in cur.description]
-            return [dict(zip(cols, r)) for r in cur.fetchall()]
+            rows = {r[0]: {**dict(zip(cols, r)), "via": None} for r in cur.fetchall()}
+            for who, via, shipped in conn.execute(
+                    "SELECT robot, via, shipped FROM slr_fleet_routes WHERE via <> robot"):
+                known = rows.get(who)
+                if known is not None:   # (it made contact itself, shipping no row)
+                    known.update(via=via, shipped=shipped)
+                    continue
+                rows[who] = {"robot": who, "shipped": shipped, "last_arrival": None,
+                             "pending": None, "head_arrival": None, "contact_at": None,
+                             "via": via}
+            return [rows[who] for who in sorted(rows)]
 
 
 _SET_POSITION = ("INSERT INTO slr_fleet_positions (robot, type_name, type_arity, position) "

@@ -672,9 +672,11 @@ class EventReader:
                 if after_key is not None:
                     conditions.append("(t_end, t_start, seq) > (?, ?, ?)")
                     params += [float(after_key[0]), float(after_key[1]), int(after_key[2])]
-                where = " AND ".join(conditions) or "1"
+                # no condition: no WHERE (PostgreSQL refuses `WHERE 1`: it needs a boolean)
+                where = " AND ".join(conditions)
                 order = "t_end, t_start, seq"
-            sql = f"SELECT {columns} FROM {event_type.quoted} WHERE {where} ORDER BY {order}"
+            sql = (f"SELECT {columns} FROM {event_type.quoted}"
+                   + (f" WHERE {where}" if where else "") + f" ORDER BY {order}")
             if limit is not None:
                 sql += " LIMIT ?"
                 params.append(int(limit))

@@ -40,9 +40,13 @@ from .functions import SqlFunctions
 from .schema import postgres_migration_scripts
 from .sqltext import bound_parameters, quote_identifier
 
-__all__ = ["PgDatabase", "PgStatementError", "is_postgres_url", "split_url"]
+__all__ = ["PgDatabase", "PgStatementError", "is_postgres_url", "split_url", "PENDING_CHANNEL"]
 
 _STORE_TABLES = frozenset({"slr_meta", "slr_program", "slr_event_types"})
+
+# The channel the event rules' pending rows notify when a statement inserts or updates some
+# (payload: the store's schema; migration pg_0011_pending_notify.sql)
+PENDING_CHANNEL = "slr_pending"
 
 
 class PgStatementError(sqlite3.DatabaseError):
@@ -794,6 +798,8 @@ class PgDatabase:
         self.functions: SqlFunctions | None = None  # install_functions
         self.busy_timeout = busy_timeout
         self.notify_channel = f"slr_{schema}"
+        # notifications heard of other sessions' changes of the pending rows (others_version)
+        self.others_pending = 0
         self.write_groups: dict[tuple[str, int], int] = {}
         # whether a tBuffer is active, as of the last read of the versions (None: unknown)
         self.tbuffers_active: bool | None = None
@@ -809,12 +815,16 @@ class PgDatabase:
                 raw.execute("SET TIME ZONE 'UTC'")
                 migrate_postgres(self, schema, adopt)
                 raw.execute(f"SET search_path = {quote_identifier(schema)}")
+                self._listen_for_pending(raw)
 
                 def reopen() -> Any:
                     again = psycopg.connect(conninfo, autocommit=True)
                     again.execute(f"SET lock_timeout = {int(busy_timeout * 1000)}")
                     again.execute("SET TIME ZONE 'UTC'")
                     again.execute(f"SET search_path = {quote_identifier(schema)}")
+                    self._listen_for_pending(again)
+                    # (what was notified while no connection listened is unknown)
+                    self.others_pending += 1
                     return again
                 self.conn.reopen = reopen
                 self.conn.in_transaction = lambda: self.tx_depth > 0
@@ -842,6 +852,37 @@ class PgDatabase:
             self.check_open()
             return int(self.conn.execute(
                 "SELECT pg_snapshot_xmax(pg_current_snapshot())::text::bigint").fetchone()[0])
+
+    def _listen_for_pending(self, raw: Any) -> None:
+        """LISTEN on ``raw`` (the store's connection) to the pending rows' channel: psycopg
+        hands what it reads during a statement to :meth:`_heard`, and
+        :meth:`others_version` reads what came while the connection was idle."""
+        raw.add_notify_handler(self._heard)
+        raw.execute(f"LISTEN {PENDING_CHANNEL}")
+
+    def _heard(self, notify: Any) -> None:
+        if notify.channel == PENDING_CHANNEL and notify.payload == self.schema \
+                and notify.pid != self.conn.raw.info.backend_pid:
+            self.others_pending += 1
+
+    def others_version(self) -> int:
+        """A number that moves when another session inserted or updated the event rules'
+        pending rows (they notify, pg_0011_pending_notify.sql): what the store's
+        connection heard, read from its socket without a round trip. A connection lost
+        and opened again moves it (what was said meanwhile is unknown)."""
+        with self.lock:
+            self.check_open()
+            raw = self.conn.raw
+            if raw.closed:
+                return self.others_pending + 1
+            pgconn = raw.pgconn
+            try:
+                pgconn.consume_input()
+                while (notify := pgconn.notifies()) is not None:
+                    pgconn.notify_handler(notify)
+            except _psycopg().Error:
+                return self.others_pending + 1   # (the next statement opens it again)
+            return self.others_pending
 
     def table_names(self) -> set[str]:
         """Names of the tables of the store's schema."""

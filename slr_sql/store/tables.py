@@ -39,12 +39,15 @@ from ..errors import SLRError, SLRUnavailable
 from .connection import Database, DatabaseError
 from .sqltext import RESERVED_PREFIXES, SAFE_IDENTIFIER, SQL_KEYWORDS, quote_identifier
 
-__all__ = ["EventType", "EventTables", "START_ORDER_RETRY"]
+__all__ = ["EventType", "EventTables", "START_ORDER_RETRY", "START_ORDER_RETRY_LOOKUPS"]
 
 # Seconds of the store's clock after a start-order build met another session's lock before
 # a reader tries that table's build again (a try is a round trip and a failed savepoint;
 # the readers in between read without the index, as they do while it is being built).
 START_ORDER_RETRY = 0.1
+# ... or after this many lookups of the table skipped the build, whatever the clock says (a
+# ManualClock that never moves, a clock that stands still: one try per this many lookups)
+START_ORDER_RETRY_LOOKUPS = 100
 
 
 class EventType:
@@ -163,9 +166,10 @@ class EventTables:
         # tables whose start-ordered indexes this connection may not build (refused for
         # good): looked for in the catalog only, not tried again by every reader
         self._refused: set[str] = set()
-        # tables whose build last met another session's lock: the store clock's time then
-        # (not tried again until it moved on by START_ORDER_RETRY)
-        self._busy: dict[str, float] = {}
+        # tables whose build last met another session's lock: the store clock's time then,
+        # and the lookups that skipped the build since (not tried again until the clock
+        # moved on by START_ORDER_RETRY, or START_ORDER_RETRY_LOOKUPS lookups skipped it)
+        self._busy: dict[str, tuple[float, int]] = {}
         # The most data arguments an event can have: its table has 5 more columns (seq,
         # t_start, t_end, arrival, robot) and the engine refuses tables wider than its limit.
         self.max_arity = db.max_columns - 5
@@ -308,8 +312,9 @@ class EventTables:
         catalog. A failed build takes back only itself: the store's rollback listeners are
         not called (nothing they know of changed). One that met another session's lock is
         not tried again before the store's clock has moved on by :data:`START_ORDER_RETRY`
-        seconds (on a server a try is a round trip and a 1 ms lock wait): the readers in
-        between read without the index.
+        seconds, or :data:`START_ORDER_RETRY_LOOKUPS` lookups skipped it (on a server a try
+        is a round trip and a 1 ms lock wait): the readers in between read without the
+        index, and a clock that never moves still gets the build.
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None); _ = s.declare_type("c", 1, start_order=False)
@@ -329,9 +334,14 @@ class EventTables:
         table = event_type.table
         if table in self._refused:
             return False
-        busy_since = self._busy.get(table)
-        if busy_since is not None and 0.0 <= db.clock.now() - busy_since < START_ORDER_RETRY:
-            return False   # (a clock gone back, or not a number, tries again)
+        busy = self._busy.get(table)
+        if busy is not None:
+            busy_since, skipped = busy
+            if 0.0 <= db.clock.now() - busy_since < START_ORDER_RETRY \
+                    and skipped + 1 < START_ORDER_RETRY_LOOKUPS:
+                # (a clock gone back, or not a number, tries again)
+                self._busy[table] = (busy_since, skipped + 1)
+                return False
         try:
             # (not waiting for another connection's writer: a reader in start order must
             # not wait the busy timeout on every lookup while a writer holds its lock, and
@@ -350,7 +360,7 @@ class EventTables:
                 # (a connection that may not build them never will: one try is enough)
                 self._refused.add(table)
             else:
-                self._busy[table] = db.clock.now()
+                self._busy[table] = (db.clock.now(), 0)
             return False
         self._busy.pop(table, None)
         # (a rollback of an enclosing transaction reloads the types: this one is gone then)

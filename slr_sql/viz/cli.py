@@ -16,13 +16,24 @@ import slr_sql
 __all__ = ["foxglove_command", "export_command"]
 
 
+def _refuse_no_store(db: str) -> None:
+    """The views only read: a missing path, or an empty file (which SQLite would make a
+    database on the first write), is no store, as for ``slr stats``."""
+    import os
+
+    if "://" in db:
+        return
+    if not os.path.exists(db):
+        raise slr_sql.SLRError(f"no such store: {db}")
+    if os.path.isfile(db) and os.path.getsize(db) == 0:
+        raise slr_sql.SLRError(f"no such store: {db} is an empty file (only load, add, "
+                               f"ingest, run, demo and serve create a store)")
+
+
 def _store_for_view(db: str) -> tuple:
     """A knowledge base on ``db`` (migrations, refusal of non-stores) and the store the view
     follows from its thread."""
-    import os
-
-    if "://" not in db and not os.path.exists(db):
-        raise slr_sql.SLRError(f"no such store: {db}")
+    _refuse_no_store(db)
     kb = slr_sql.open(db)
     return kb, kb.store
 
@@ -85,15 +96,13 @@ def export_command(db: str, file: str, types: tuple[str, ...], start: float | No
     """Write the events of DB to FILE (MCAP; Foxglove opens it, `slr ros import` reads it
     back): every event type, or the TYPEs given (name/arity, or name for every arity)."""
     import math
-    import os
 
     from .mcap_export import export_mcap
 
     for option, value in (("--from", start), ("--to", end)):
         if value is not None and not math.isfinite(value):
             raise slr_sql.SLRError(f"{option} must be a finite number of seconds")
-    if "://" not in db and not os.path.exists(db):
-        raise slr_sql.SLRError(f"no such store: {db}")
+    _refuse_no_store(db)
     with slr_sql.open(db) as kb:
         try:
             report = export_mcap(kb.store, file, start, end, types)
