@@ -140,7 +140,7 @@ def any_kb(request, tmp_path: Path):
 # there, because on a virtual disk CREATE DATABASE (a copy of template1, 7 MB) costs ~0.25 s
 # and the folder of a session's few hundred databases took tens of seconds to remove; in
 # memory a database costs ~0.03 s. Dropping each test's database at its end and a small
-# max_wal_size keep the folder at a few hundred MB, so a run that is killed (and cannot
+# max_wal_size (128MB: not below min_wal_size's 80MB) keep the folder at a few hundred MB, so a run that is killed (and cannot
 # remove it) leaves little memory behind. The server is stopped with an immediate shutdown
 # (nothing of it is kept, so nothing needs its shutdown checkpoint).
 
@@ -190,7 +190,7 @@ def start_throwaway_postgres(prefix: str, *, tuned: bool = True):
             # a database per test writes a few MB each: no fsync, and checkpoints often
             # enough that the write-ahead log stays small
             for setting in ("fsync = off", "synchronous_commit = off",
-                            "full_page_writes = off", "max_wal_size = '64MB'"):
+                            "full_page_writes = off", "max_wal_size = '128MB'"):
                 conn.execute(f"ALTER SYSTEM SET {setting}")
             conn.execute("SELECT pg_reload_conf()")
     except BaseException:
