@@ -140,9 +140,10 @@ def any_kb(request, tmp_path: Path):
 # there, because on a virtual disk CREATE DATABASE (a copy of template1, 7 MB) costs ~0.25 s
 # and the folder of a session's few hundred databases took tens of seconds to remove; in
 # memory a database costs ~0.03 s. Dropping each test's database at its end and a small
-# max_wal_size (128MB: not below min_wal_size's 80MB) keep the folder at a few hundred MB, so a run that is killed (and cannot
-# remove it) leaves little memory behind. The server is stopped with an immediate shutdown
-# (nothing of it is kept, so nothing needs its shutdown checkpoint).
+# max_wal_size (128MB: not below min_wal_size's 80MB) keep the folder at a few hundred MB,
+# so a run that is killed (and cannot remove it) leaves little memory behind. The server is
+# stopped with an immediate shutdown (nothing of it is kept, so nothing needs its shutdown
+# checkpoint).
 
 _IN_MEMORY = Path("/dev/shm")
 _IN_MEMORY_ROOM = 4 << 30   # bytes free there before a data folder goes to memory
