@@ -28,6 +28,7 @@ from .demo import answer_text, value_text
 from .encoding import decode
 from .kb import KnowledgeBase
 from .parser import parse_event_fast
+from .store import refuse_no_store
 from .terms import Atom, Struct, list_items
 
 __all__ = ["main", "parse_event_line", "ingest_file", "IngestReport", "strip_full_stop"]
@@ -168,16 +169,6 @@ def _is_url(db: str) -> bool:
     return db.startswith(("http://", "https://"))
 
 
-def _is_database_url(db: str) -> bool:
-    """A store on a database server (``postgresql://...``): no file to look for."""
-    return db.startswith(("postgresql://", "postgres://"))
-
-
-def _missing(db: str) -> bool:
-    """No store file at ``db`` (a server URL is never missing here: opening it says)."""
-    return not _is_database_url(db) and not os.path.lexists(db)
-
-
 def _open(db: str, create: bool = True) -> KnowledgeBaseAPI:
     """The knowledge base in DB: a file opened in this process (only commands that add to a
     store may create it), or the URL of a running `slr serve`."""
@@ -192,13 +183,8 @@ def _open(db: str, create: bool = True) -> KnowledgeBaseAPI:
 def _check_existing_store(db: str, create: bool = False) -> None:
     """Commands that do not add to a store never create one: neither from a missing path nor
     from an empty file (SQLite would make an empty file a database on the first write)."""
-    if create or _is_database_url(db):
-        return
-    if _missing(db):
-        raise slr_sql.SLRError(f"no such store: {db}")
-    if os.path.isfile(db) and os.path.getsize(db) == 0:
-        raise slr_sql.SLRError(f"no such store: {db} is an empty file (only load, add, "
-                               f"ingest, run, demo and serve create a store)")
+    if not create:
+        refuse_no_store(db)
 
 
 def _existing_file(path: str) -> str:

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from .errors import SLRError
-from .store import EventStore, WriterInFlight, check_robot_name
+from .store import EventStore, WriterInFlight, check_robot_name, refuse_no_store
 
 __all__ = ["FleetTarget", "PushReport", "RobotStoreRestored", "open_target", "parse_type_spec",
            "push", "status"]
@@ -674,17 +674,6 @@ def click_group() -> Any:
 
     def token_of(ctx: click.Context) -> str | None:
         return (ctx.find_root().obj or {}).get("token")
-
-    def refuse_no_store(path: str) -> None:
-        """A store path these commands only read: missing, or an empty file (which SQLite
-        would make a database on the first write), is no store, as for ``slr stats``."""
-        import os
-
-        if not os.path.lexists(path):
-            raise SLRError(f"no such store: {path}")
-        if os.path.isfile(path) and os.path.getsize(path) == 0:
-            raise SLRError(f"no such store: {path} is an empty file (only load, add, ingest, "
-                           f"run, demo and serve create a store)")
 
     @click.group("fleet")
     def fleet_group() -> None:

@@ -54,7 +54,7 @@ from .buffering import (ArgEquals, BufferPlan, BufferTables, JsonArray, JsonEqua
 from .catalog import Catalog, ProgramText
 from .checks import format_event
 from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, DatabaseError, \
-    ReadConnection, run_sql_file
+    ReadConnection, refuse_no_store, run_sql_file
 from .events import Event, EventBatch, EventWriter
 from .fleet import Fleet, RouteConflict, WriterInFlight, check_robot_name
 from .functions import SqlFunctions
@@ -68,7 +68,7 @@ from .tables import EventTables
 
 __all__ = ["EventStore", "Event", "EventBatch", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "DatabaseError", "quote_identifier", "sql_literal", "format_event",
-           "migration_scripts", "split_sql_script", "run_sql_file", "store_error",
+           "migration_scripts", "split_sql_script", "run_sql_file", "refuse_no_store", "store_error",
            "check_robot_name", "RouteConflict", "WriterInFlight", "ReadConnection", "ArgEquals", "BufferPlan", "JsonArray",
            "JsonEquals", "MixedTerm", "PatternMatch", "SameTerm", "JournalReader",
            "SubscriptionRecord"]

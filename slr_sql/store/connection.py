@@ -43,7 +43,7 @@ from .schema import migrate, migration_scripts
 from .sqltext import bound_parameters, busy_error, split_sql_script, store_error
 
 __all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
-           "run_sql_file", "check_file"]
+           "run_sql_file", "check_file", "refuse_no_store"]
 
 # The base class of the errors the database raises while running a statement (a missing
 # table, a syntax error, a constraint, an interrupted statement...). Callers outside the
@@ -197,6 +197,26 @@ def _read_schema(path: str, header: bytes) -> tuple[list[tuple[str, str]], int]:
             raise reason
         raise SLRError(f"{path}: cannot read it ({error})")
     raise SLRError(f"{path}: the file is damaged ({error})")
+
+
+def refuse_no_store(path: str) -> None:
+    """Refuse, before a command that only reads opens it (which would create it), a store
+    path that holds no store: a missing path, or an empty file (SQLite would make it a
+    database on the first write). A PostgreSQL URL is left to opening it.
+
+    >>> refuse_no_store("postgresql://u@h/db")
+    >>> refuse_no_store("nowhere.db")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: no such store: nowhere.db
+    """
+    if path.startswith(("postgresql://", "postgres://")):
+        return
+    if not os.path.lexists(path):
+        raise SLRError(f"no such store: {path}")
+    if os.path.isfile(path) and os.path.getsize(path) == 0:
+        raise SLRError(f"no such store: {path} is an empty file (only load, add, ingest, run, "
+                       "demo and serve create a store)")
 
 
 def _check_length(path: str, header: bytes, size: int) -> None:

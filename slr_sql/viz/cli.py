@@ -13,27 +13,15 @@ import click
 
 import slr_sql
 
+from ..store import refuse_no_store
+
 __all__ = ["foxglove_command", "export_command"]
-
-
-def _refuse_no_store(db: str) -> None:
-    """The views only read: a missing path, or an empty file (which SQLite would make a
-    database on the first write), is no store, as for ``slr stats``."""
-    import os
-
-    if "://" in db:
-        return
-    if not os.path.exists(db):
-        raise slr_sql.SLRError(f"no such store: {db}")
-    if os.path.isfile(db) and os.path.getsize(db) == 0:
-        raise slr_sql.SLRError(f"no such store: {db} is an empty file (only load, add, "
-                               f"ingest, run, demo and serve create a store)")
 
 
 def _store_for_view(db: str) -> tuple:
     """A knowledge base on ``db`` (migrations, refusal of non-stores) and the store the view
     follows from its thread."""
-    _refuse_no_store(db)
+    refuse_no_store(db)
     kb = slr_sql.open(db)
     return kb, kb.store
 
@@ -102,7 +90,7 @@ def export_command(db: str, file: str, types: tuple[str, ...], start: float | No
     for option, value in (("--from", start), ("--to", end)):
         if value is not None and not math.isfinite(value):
             raise slr_sql.SLRError(f"{option} must be a finite number of seconds")
-    _refuse_no_store(db)
+    refuse_no_store(db)
     with slr_sql.open(db) as kb:
         try:
             report = export_mcap(kb.store, file, start, end, types)

@@ -1,0 +1,35 @@
+"""The commands that only read a store refuse a path that holds none (missing, or an empty
+file SQLite would turn into a database) with one check and one message, and take a
+PostgreSQL URL as every command taking DB does (docs/postgres.md): `slr fleet push URL
+FLEET` ships a robot store that lives on a server."""
+from __future__ import annotations
+
+import pytest
+
+import slr_sql
+from slr_sql import ManualClock
+from test_cli import slr
+from test_fleet_routes import seen
+
+
+def test_fleet_push_ships_a_robot_store_on_postgresql(tmp_path, postgres_url):
+    with slr_sql.open(postgres_url, robot="r1", clock=ManualClock(1000)) as kb:
+        kb.add_many(["seen(a)^10", "seen(b)^20"])
+    fleet_db = str(tmp_path / "fleet.db")
+    done = slr("fleet", "push", postgres_url, fleet_db)
+    assert done.returncode == 0, done.stderr
+    assert seen(fleet_db) == [("r1", "a", 10.0), ("r1", "b", 20.0)]
+
+
+@pytest.mark.parametrize("command", [
+    ["stats", "{db}"], ["export", "{db}", "{out}"], ["fleet", "push", "{db}", "{out}"],
+    ["fleet", "status", "{db}"]])
+def test_a_reading_command_says_an_empty_file_is_no_store_in_the_same_words(tmp_path, command):
+    db = tmp_path / "robot.db"
+    db.write_bytes(b"")
+    out = tmp_path / "out.mcap"
+    done = slr(*[part.format(db=db, out=out) for part in command])
+    assert done.returncode == 1, (done.stdout, done.stderr)
+    assert done.stderr == (f"error: no such store: {db} is an empty file (only load, add, "
+                           f"ingest, run, demo and serve create a store)\n")
+    assert not out.exists() and db.stat().st_size == 0
