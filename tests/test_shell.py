@@ -461,7 +461,8 @@ def test_a_bad_assert_changes_nothing(store):
     assert r.stdout.splitlines() == ["% the program 'user' is empty"]
 
 
-def test_a_sigint_as_the_editor_accepts_the_line_stops_its_goal_before_it_starts(store):
+def test_a_sigint_as_the_editor_accepts_the_line_stops_its_goal_before_it_starts(
+        store, signals_land_in_the_shell):
     """A SIGINT sent (kill) while the line editor handles Enter (its validator runs: the
     line is being accepted) is the goal's: the goal is interrupted before it starts, the
     shell goes on."""
