@@ -32,7 +32,7 @@ from .plans import python_words as _python_words
 from .sql_functions import SQL_FUNCTIONS
 from .program import BufferDecl, Declarations, Program, split_event_atom, event_key
 from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore, \
-    store_error, check_robot_name, quote_identifier
+    store_error, check_robot_name, null_argument_text
 from .store.checks import event_arguments, shorten, shown, text_problem
 from .terms import Atom, String, Struct, Var, deref
 from .terms import format_atom, format_term
@@ -878,11 +878,7 @@ def not_an_event(kb: KnowledgeBase | None, where: str) -> NotAnEvent:
         return NotAnEvent(f"{where}: a stored event argument is NULL, which is no term (a row "
                           f"written by hand, by another client of the database); "
                           f"fix or delete that row")
-    said = "; ".join(f"{name}/{arity}: the stored row of seq {seq} is not an event: its "
-                     f"arg{argument} is NULL, which is no term (written by hand, by another "
-                     f"client of the database); fix or delete it "
-                     f"(DELETE FROM {quote_identifier(table)} WHERE arg{argument} IS NULL)"
-                     for name, arity, table, argument, seq in rows)
+    said = "; ".join(null_argument_text(*row) for row in rows)
     return NotAnEvent(f"{where}: {said}")
 
 

@@ -59,7 +59,7 @@ from .events import Event, EventBatch, EventWriter
 from .fleet import Fleet, RouteConflict, WriterInFlight, check_robot_name
 from .functions import SqlFunctions
 from .journals import JournalReader, SubscriptionRecord, SubscriptionTables
-from .lookups import EventReader, Row
+from .lookups import EventReader, Row, null_argument_text
 from .postgres import PgDatabase, is_postgres_url
 from .schema import migration_scripts
 from .space import ServerSpace, Space
@@ -70,7 +70,7 @@ __all__ = ["EventStore", "Event", "EventBatch", "Row", "ProgramText", "CACHE_SIZ
            "DatabaseError", "quote_identifier", "sql_literal", "format_event",
            "migration_scripts", "split_sql_script", "run_sql_file", "refuse_no_store", "store_error",
            "check_robot_name", "RouteConflict", "WriterInFlight", "ReadConnection", "ArgEquals", "BufferPlan", "JsonArray",
-           "JsonEquals", "MixedTerm", "PatternMatch", "SameTerm", "JournalReader",
+           "JsonEquals", "MixedTerm", "PatternMatch", "SameTerm", "JournalReader", "null_argument_text",
            "SubscriptionRecord"]
 
 

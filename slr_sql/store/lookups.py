@@ -19,9 +19,10 @@ from typing import Any, Callable, Iterable, Iterator
 from ..encoding import INT64_MAX, INT64_MIN, Unencodable, decode, encode
 from .catalog import PROGRAM_VERSION, PROGRESS_VERSION
 from .connection import Database
+from .sqltext import quote_identifier
 from .tables import EventTables, EventType
 
-__all__ = ["Row", "EventReader"]
+__all__ = ["Row", "EventReader", "null_argument_text"]
 
 Row = tuple[Any, ...]    # (args: tuple[term, ...], start: float, end: float, seq: int)
 
@@ -49,6 +50,19 @@ def _number_kind(value: Any) -> str | None:
     if type(value) is int and INT64_MIN <= value <= INT64_MAX:
         return "integer"
     return None
+
+def null_argument_text(name: str, arity: int, table: str, argument: int, seq: int) -> str:
+    """A stored row whose argument ``argument`` is NULL, in words: what it is and the
+    statement that removes it (the facade's and the subscriptions' NotAnEvent say the same).
+
+    >>> print(null_argument_text("p", 1, "p", 1, 2))  # doctest: +ELLIPSIS
+    p/1: the stored row of seq 2 is not an event: its arg1 is NULL, ... WHERE arg1 IS NULL)
+    """
+    return (f"{name}/{arity}: the stored row of seq {seq} is not an event: its arg{argument} "
+            f"is NULL, which is no term (written by hand, by another client of the database); "
+            f"fix or delete it (DELETE FROM {quote_identifier(table)} WHERE arg{argument} IS "
+            f"NULL)")
+
 
 class _OpenStatement:
     """The statement of one stream, which a transaction may suspend (close) meanwhile."""

@@ -22,10 +22,11 @@ import warnings
 from typing import Any, Callable
 
 from ..clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning
-from ..encoding import decode
-from ..errors import SLRError, SLRSubscriptionInUse
+from ..encoding import NullArgument, decode
+from ..errors import NotAnEvent, SLRError, SLRSubscriptionInUse
 from ..lockorder import ordered_lock
 from ..host import Host
+from ..store import null_argument_text
 from ..store.checks import shown
 from ..terms import format_atom
 from .matching import Matcher, time_arg
@@ -52,12 +53,20 @@ _HISTORY = SubscriptionState.HISTORY
 class _TypeInfo:
     """The table and journal of one subscribed event type."""
 
-    __slots__ = ("table", "journal", "arity")
+    __slots__ = ("table", "journal", "name", "arity")
 
-    def __init__(self, table: str, arity: int):
+    def __init__(self, table: str, key: tuple[str, int]):
         self.table = table
         self.journal = journal_table(table)
-        self.arity = arity
+        self.name, self.arity = key
+
+    def no_event(self, seq: int, values: Any) -> NotAnEvent:
+        """The end of a subscription that met the stored row ``seq`` whose ``values`` (its
+        arguments as stored) hold a NULL: no event (docs/schema.md), refused in the words a
+        goal that reads it gets."""
+        argument = next((i for i, v in enumerate(values, 1) if v is None), 1)
+        return NotAnEvent("subscribe: " + null_argument_text(self.name, self.arity, self.table,
+                                                             argument, seq))
 
 
 class SubscriptionHub:
@@ -217,7 +226,7 @@ class SubscriptionHub:
                            max_queue, max_lag, callback)
         table = self.registry.register(sub)
         if table is not None:
-            self._types.setdefault(sub.key, _TypeInfo(table, sub.key[1]))
+            self._types.setdefault(sub.key, _TypeInfo(table, sub.key))
         with self.lock:
             if durable and id in self._subs:   # a concurrent subscribe with the same id
                 self.registry.unclaim(sub)
@@ -303,7 +312,7 @@ class SubscriptionHub:
             table = self._reads().event_table(*key)
             if table is None:
                 return None
-            info = self._types[key] = _TypeInfo(table, key[1])
+            info = self._types[key] = _TypeInfo(table, key)
         return info
 
     def _watch_until(self, sub: Subscription) -> None:
@@ -552,8 +561,21 @@ class SubscriptionHub:
         subscription in one batch; one whose queue fills up falls behind (lagging) at the
         first answer it cannot take."""
         arity = key[1]
-        events = [(row[0], tuple([self._decode(v) for v in row[2:2 + arity]]), row[2 + arity],
-                   row[3 + arity]) for row in rows]
+        decode = self._decode
+        try:
+            events = [(row[0], tuple([decode(v) for v in row[2:2 + arity]]), row[2 + arity],
+                       row[3 + arity]) for row in rows]
+        except NullArgument:
+            # a row that is no event (another client wrote it): in its place the error that
+            # ends the subscriptions that meet it
+            info = self._types[key]
+            events = []
+            for row in rows:
+                try:
+                    args: Any = tuple([decode(v) for v in row[2:2 + arity]])
+                except NullArgument:
+                    args = info.no_event(row[1], row[2:2 + arity])
+                events.append((row[0], args, row[2 + arity], row[3 + arity]))
         first_jid, last_jid = events[0][0], events[-1][0]
         cohorts: dict = {}
         for s in group:
@@ -598,6 +620,8 @@ class SubscriptionHub:
         for jid, args, start, end in events:
             if end < since or end > until:
                 continue
+            if type(args) is NotAnEvent:
+                return items, args, jid, []
             answer = m.match_or_error(args, start, end)
             if answer is None:
                 continue
@@ -627,8 +651,12 @@ class SubscriptionHub:
             batch = []
             error = None
             for row in rows:
-                answer = m.match_or_error(tuple([self._decode(v) for v in row[1:1 + arity]]),
-                                          row[1 + arity], row[2 + arity])
+                try:
+                    args = tuple([self._decode(v) for v in row[1:1 + arity]])
+                except NullArgument:
+                    error = info.no_event(row[0], row[1:1 + arity])
+                    break
+                answer = m.match_or_error(args, row[1 + arity], row[2 + arity])
                 if answer is None:
                     continue
                 if type(answer) is not dict:
