@@ -30,6 +30,17 @@ def as_version_9(url: str) -> None:
         conn.execute("DELETE FROM slr_migrations WHERE number >= 10")
 
 
+def hears_what_another_process_leaves_pending(kb, url: str) -> None:
+    """Another process adds events that leave a decision pending: ``kb`` hears of it, and
+    its clock moving on decides it."""
+    before = kb.store.others_version()
+    _add_in_another_process(url, ["a(1)^1", "b(1)^2"])
+    _heard_of_it(kb, before)
+    assert kb.store.others_version() != before
+    kb.clock.set(8.0)
+    assert _c(kb) == [(1, 1.0, 2.0)]
+
+
 def test_a_version_9_fleet_store_on_postgresql_keeps_its_direct_routes(tmp_path,
                                                                         postgres_url):
     r1 = robot_store(tmp_path / "r1.db", "r1", ("seen(a)^10", "seen(b)^20"))
@@ -54,12 +65,7 @@ def test_a_version_9_store_on_postgresql_hears_other_sessions_after_the_upgrade(
     as_version_9(postgres_url)
     with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:   # (migrates)
         kb.clock.advance(1)
-        before = kb.store.others_version()
-        _add_in_another_process(postgres_url, ["a(1)^1", "b(1)^2"])
-        _heard_of_it(kb, before)
-        assert kb.store.others_version() != before
-        kb.clock.set(8.0)
-        assert _c(kb) == [(1, 1.0, 2.0)]
+        hears_what_another_process_leaves_pending(kb, postgres_url)
 
 
 def test_a_connection_opened_again_hears_other_sessions(postgres_url, postgres_server):
@@ -78,9 +84,4 @@ def test_a_connection_opened_again_hears_other_sessions(postgres_url, postgres_s
                 continue
         assert kb.store._conn.raw.info.backend_pid != lost
         kb.clock.advance(1)                  # (the rules look: what they missed is read)
-        before = kb.store.others_version()
-        _add_in_another_process(postgres_url, ["a(1)^1", "b(1)^2"])
-        _heard_of_it(kb, before)
-        assert kb.store.others_version() != before
-        kb.clock.set(8.0)
-        assert _c(kb) == [(1, 1.0, 2.0)]
+        hears_what_another_process_leaves_pending(kb, postgres_url)
