@@ -509,11 +509,13 @@ class EventReader:
     def bracket(self, name: str, arity: int, bound: dict[int, Any], t: float
                 ) -> tuple[Row | None, Row | None] | None:
         """The observations around ``t`` of the events matching ``bound`` (ground values at
-        0-based positions, the first one included): the one with the greatest start ``<= t``
-        (the one that holds at ``t`` when its end is ``>= t``: an observation at ``t``, an
-        interval around it; ties: the greatest end, then the last stored) -- for ``t``
-        infinite, the last in store order -- and the one with the smallest start ``>= t``
-        (ties: the last stored among those starting at that time), in one statement; ``(None, None)`` parts when there are none. None when a bound
+        0-based positions, the first one included): before ``t``, the one with the greatest
+        start ``<= t`` when it holds at ``t`` (its end ``>= t``: an observation at ``t``, an
+        interval around it; ties: the greatest end, then the last stored), else the one with
+        the greatest end ``<= t`` (ties: the greatest start, then the last stored), which the
+        interpolation starts from -- for ``t`` infinite, the last in store order -- and the
+        one with the smallest start ``>= t`` (ties: the last stored among those starting at
+        that time), in one statement; ``(None, None)`` parts when there are none. None when a bound
         value cannot be pushed into SQL (the caller then takes the general path). Used by
         ``tf_lookup`` (:mod:`slr_sql.frames`) for each edge of a chain.
 
@@ -560,13 +562,24 @@ class EventReader:
                        f"UNION ALL SELECT 1, * FROM (SELECT {cols} FROM {event_type.quoted}"
                        f"{by_start} WHERE {where} AND t_start >= ? "
                        f"ORDER BY t_start, seq DESC LIMIT 1) AS after_t")
+                if by_start_before:
+                    # (the latest started may have ended before an interval that started
+                    # earlier and lasted longer: the interpolation starts at the latest end)
+                    sql += (f" UNION ALL SELECT 2, * FROM (SELECT {cols} FROM "
+                            f"{event_type.quoted}{by_end} WHERE {where} AND t_end <= ? "
+                            f"ORDER BY t_end DESC, t_start DESC, seq DESC LIMIT 1) AS ended_t")
                 self.sql_cache[key] = sql
-            rows = self.db.conn.execute(sql, values + [float(t)] + values + [float(t)]).fetchall()
-        out: list = [None, None]
+            params = values + [float(t)] + values + [float(t)]
+            if by_start_before:
+                params += values + [float(t)]
+            rows = self.db.conn.execute(sql, params).fetchall()
+        out: list = [None, None, None]
         dec = self.decode
         for row in rows:
             out[row[0]] = (tuple([dec(v) for v in row[1:arity + 1]]), row[arity + 1],
                            row[arity + 2], row[arity + 3])
+        if by_start_before and out[0] is not None and out[0][2] < t:   # (not holding at t)
+            out[0] = out[2]
         return out[0], out[1]
 
     def null_arguments(self, types: Iterable[tuple[str, int]] | None = None,
