@@ -573,13 +573,15 @@ class EventReader:
             if by_start_before:
                 params += values + [float(t)]
             rows = self.db.conn.execute(sql, params).fetchall()
-        out: list = [None, None, None]
-        dec = self.decode
+        found: list = [None, None, None]
         for row in rows:
-            out[row[0]] = (tuple([dec(v) for v in row[1:arity + 1]]), row[arity + 1],
-                           row[arity + 2], row[arity + 3])
-        if by_start_before and out[0] is not None and out[0][2] < t:   # (not holding at t)
-            out[0] = out[2]
+            found[row[0]] = row
+        if by_start_before and found[0] is not None and found[0][arity + 2] < t:
+            found[0] = found[2]   # (the latest started does not hold at t)
+        dec = self.decode
+        out = [None if row is None else (tuple([dec(v) for v in row[1:arity + 1]]),
+                                         row[arity + 1], row[arity + 2], row[arity + 3])
+               for row in found[:2]]
         return out[0], out[1]
 
     def null_arguments(self, types: Iterable[tuple[str, int]] | None = None,
