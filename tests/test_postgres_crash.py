@@ -161,7 +161,15 @@ WRITER = textwrap.dedent("""
     kb = slr_sql.open({url!r})
     i, failures = 0, 0
     deadline = time.monotonic() + {deadline}
+    paused = False
     while i < {n} and time.monotonic() < deadline:
+        if i == {pause_at} and not paused:
+            # the server is stopped while the writer waits here: on a fast disk (or in
+            # memory) it would otherwise finish every add before the stop took effect
+            paused = True
+            sys.stdout.write("paused %d\\n" % i)
+            sys.stdout.flush()
+            sys.stdin.readline()
         try:
             kb.add("w(%d)^%d" % (i, i + 1))
         except SLRError as e:
@@ -204,15 +212,19 @@ def _pg_ctl(server, *args: str) -> None:
 def test_a_server_restart_mid_stream_is_an_slr_error_then_writing_goes_on(own_server, tmp_path):
     """The database server is stopped (fast shutdown) while a writer adds events and started
     again: the writer's adds fail with an SLRError while it is down (no raw psycopg error,
-    no crash), then succeed again on the same store; every acknowledged event is stored."""
+    no crash), then succeed again on the same store; every acknowledged event is stored.
+    (The writer waits after its 50th add until the server is down, its store connection
+    still open: the stop comes between two of its adds, not after its last.)"""
     server, admin = own_server
     with psycopg.connect(admin, autocommit=True) as conn:
         conn.execute('CREATE DATABASE "restart"')
     url = re.sub(r"/postgres(\?|$)", r"/restart\1", admin, count=1)
     n = 400
     child = subprocess.Popen(
-        [sys.executable, "-c", WRITER.format(repo=str(REPO), url=url, n=n, deadline=DEADLINE)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=str(REPO))
+        [sys.executable, "-c", WRITER.format(repo=str(REPO), url=url, n=n, deadline=DEADLINE,
+                                             pause_at=50)],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        cwd=str(REPO))
     acknowledged: list[int] = []
     errors: list[str] = []
     stopped = restarted = False
@@ -227,10 +239,12 @@ def test_a_server_restart_mid_stream_is_an_slr_error_then_writing_goes_on(own_se
                 errors.append(value.strip())
             elif word == "done":
                 break
-            if not stopped and len(acknowledged) >= 50:
+            elif word == "paused":
                 _pg_ctl(server, "-m", "fast", "stop")
                 stopped = True
-            elif stopped and not restarted and errors:
+                child.stdin.write("go\n")
+                child.stdin.flush()
+            if stopped and not restarted and errors:
                 server.ensure_postgres_running()   # the same data folder and socket
                 assert server.get_uri() == admin
                 restarted = True
@@ -240,6 +254,7 @@ def test_a_server_restart_mid_stream_is_an_slr_error_then_writing_goes_on(own_se
             child.kill()
             child.wait()
         stderr = child.stderr.read()
+        child.stdin.close()
         child.stdout.close()
         child.stderr.close()
     assert stopped and restarted and errors

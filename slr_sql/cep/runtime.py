@@ -1190,21 +1190,23 @@ class EventRules:
         """``store.add_events``, with the events grouped by type first when types alternate
         (a stream of a, b, a, b costs one insert statement per event otherwise). Grouping is
         stable, so each type's events keep their arrival order -- the order of their rows --
-        and the rejected events keep their index in the batch."""
+        and the rejected events keep their index in the batch. The add joins the round's
+        transaction (the pipeline's, which any error leaves through) with no savepoint of
+        its own."""
         store = self.store
         if atomic or len(events) < 16:
-            return store.add_events(events, atomic=atomic)
+            return store.add_events(events, atomic=atomic, join=True)
         try:   # (column-wise: no loop in Python over a big batch)
             keys = list(zip(map(_first, events), map(len, map(_second, events))))
         except (TypeError, IndexError, KeyError):
-            return store.add_events(events, atomic=atomic)
+            return store.add_events(events, atomic=atomic, join=True)
         switches = 1 + sum(map(ne, keys, islice(keys, 1, None)))
         if switches * 4 < len(events):
-            return store.add_events(events, atomic=atomic)
+            return store.add_events(events, atomic=atomic, join=True)
         rank = {key: i for i, key in enumerate(dict.fromkeys(keys))}
         order = sorted(range(len(events)), key=list(map(rank.__getitem__, keys)).__getitem__)
         grouped = EventBatch(map(events.__getitem__, order))
-        errors = store.add_events(grouped, atomic=atomic)
+        errors = store.add_events(grouped, atomic=atomic, join=True)
         if type(events) is EventBatch:
             events.ends = grouped.ends   # (the same events: the same end times per type)
         for error in errors:

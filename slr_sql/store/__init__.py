@@ -424,8 +424,9 @@ class EventStore:
     # ------------------------------------------------------------------ adding events
 
     @_doc(EventWriter.add_events)
-    def add_events(self, events: Iterable[Event], atomic: bool = False) -> list[EventRejected]:
-        return self._writer.add_events(events, atomic)
+    def add_events(self, events: Iterable[Event], atomic: bool = False, *,
+                   join: bool = False) -> list[EventRejected]:
+        return self._writer.add_events(events, atomic, join=join)
 
     @_doc(EventWriter.add_event)
     def add_event(self, name: str, args: Iterable[Any], start: float, end: float) -> None:

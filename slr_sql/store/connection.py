@@ -559,7 +559,8 @@ class Database:
     # ------------------------------------------------------------------ transactions
 
     @contextmanager
-    def transaction(self, wait: bool = True, listeners: bool = True) -> Iterator["Database"]:
+    def transaction(self, wait: bool = True, listeners: bool = True,
+                    join: bool = False) -> Iterator["Database"]:
         """Run several statements as one atomic unit (BEGIN IMMEDIATE ... COMMIT).
 
         Re-entrant: nested uses become savepoints, so an inner failure undoes only the inner
@@ -568,7 +569,10 @@ class Database:
         reader may leave for later (a nested one holds the lock already).
         ``listeners=False``: a rollback of this one does not call the rollback listeners,
         for a block that changes nothing they know of (a build of indexes that may fail):
-        it takes back only itself.
+        it takes back only itself. ``join=True``: inside a transaction of this thread, the
+        block joins it with no savepoint of its own, for a caller that lets every error
+        through to the enclosing level, which takes the whole back (a savepoint makes SQLite
+        keep the pages the block changes, for a rollback to it that would never come).
 
         >>> db = Database(None)
         >>> with db.transaction():
@@ -577,6 +581,12 @@ class Database:
         >>> db.execute("SELECT value FROM slr_meta WHERE key = 'a'")
         [('1',)]
         """
+        if join:
+            with self.lock:
+                # (the lock is held for a whole transaction: one open now is this thread's)
+                if self.tx_depth:
+                    yield self
+                    return
         committed: list[tuple[int, Callable[[], None], bool]] = []
         try:
             with self.lock:

@@ -1016,10 +1016,18 @@ class PgDatabase:
     # ------------------------------------------------------------------ transactions
 
     @contextmanager
-    def transaction(self, wait: bool = True, listeners: bool = True) -> Iterator[PgDatabase]:
+    def transaction(self, wait: bool = True, listeners: bool = True,
+                    join: bool = False) -> Iterator[PgDatabase]:
         """(:meth:`Database.transaction`) ``wait=False``: a lock another session holds is
         not waited for (SLRBusy at once), nested or not: work a reader may leave for later.
-        ``listeners=False``: a rollback does not call the rollback listeners."""
+        ``listeners=False``: a rollback does not call the rollback listeners. ``join``: in a
+        transaction of this thread, no savepoint of its own (see Database.transaction)."""
+        if join:
+            with self.lock:
+                # (the lock is held for a whole transaction: one open now is this thread's)
+                if self.tx_depth:
+                    yield self
+                    return
         committed: list[tuple[int, Callable[[], None], bool]] = []
         try:
             with self.lock:
