@@ -102,6 +102,9 @@ def _may_pass(exc: BaseException, path: str | None) -> bool:
 
     >>> _may_pass(SLRUnavailable("down"), None), _may_pass(SLRError("type_error"), None)
     (True, False)
+    >>> import sqlite3
+    >>> _may_pass(sqlite3.OperationalError("database is locked"), "robot.db")
+    True
     """
     if isinstance(exc, SLRUnavailable):
         return True
@@ -514,6 +517,8 @@ class RuleRuntime:
                     # rejecting this candidate would derive the next one in its place, a
                     # decision the moment's trouble made; the round fails instead, and the
                     # decision is made again (the add is retried, the clock moves again)
+                    if isinstance(exc, DatabaseError):
+                        raise store_error(exc, self.eng.store.path) from None
                     raise
                 self.errors += 1
                 self.last_error = describe_error(exc)

@@ -857,12 +857,15 @@ class PgDatabase:
         """LISTEN on ``raw`` (the store's connection) to the pending rows' channel: psycopg
         hands what it reads during a statement to :meth:`_heard`, and
         :meth:`others_version` reads what came while the connection was idle."""
-        raw.add_notify_handler(self._heard)
+        # (the connection's own session, read now: while a dropped connection is replaced,
+        # the store's may be the old one, whose pid cannot be read once closed)
+        own = raw.info.backend_pid
+        raw.add_notify_handler(lambda notify: self._heard(notify, own))
         raw.execute(f"LISTEN {PENDING_CHANNEL}")
 
-    def _heard(self, notify: Any) -> None:
+    def _heard(self, notify: Any, own: int) -> None:
         if notify.channel == PENDING_CHANNEL and notify.payload == self.schema \
-                and notify.pid != self.conn.raw.info.backend_pid:
+                and notify.pid != own:
             self.others_pending += 1
 
     def others_version(self) -> int:
