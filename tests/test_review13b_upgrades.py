@@ -85,3 +85,25 @@ def test_a_connection_opened_again_hears_other_sessions(postgres_url, postgres_s
         assert kb.store._conn.raw.info.backend_pid != lost
         kb.clock.advance(1)                  # (the rules look: what they missed is read)
         hears_what_another_process_leaves_pending(kb, postgres_url)
+
+
+def _listening(kb) -> list:
+    """The channels the store's own connection LISTENs to (asked on that connection)."""
+    raw = kb.store._db.conn.raw
+    return [row[0] for row in raw.execute("SELECT pg_listening_channels()").fetchall()]
+
+
+def test_a_store_without_event_rules_never_listens(postgres_url):
+    """A listener that reads nothing holds every other session's notifications in the
+    server's queue: a store that never looks at other sessions' pending rows (no event rules:
+    a reader, a dashboard) does not LISTEN; one with event rules does from its first look."""
+    with slr_sql.open(postgres_url, clock=ManualClock(10.0)) as reader:
+        reader.add_many(["a(1)^1", "b(1)^2"])
+        assert reader.query("a(X)^T") == [{"X": 1, "T": 1.0}]
+        reader.clock.advance(1)
+        assert _listening(reader) == []
+        with slr_sql.open(postgres_url, clock=ManualClock(10.0)) as detector:
+            detector.load(BY_DELAY)
+            detector.add_many(["a(2)^3"])        # an add looks, after its commit
+            assert _listening(detector) == ["slr_pending"]
+        assert _listening(reader) == []

@@ -800,6 +800,9 @@ class PgDatabase:
         self.notify_channel = f"slr_{schema}"
         # notifications heard of other sessions' changes of the pending rows (others_version)
         self.others_pending = 0
+        # whether the store's connection LISTENs to them: from the first look on (a store
+        # that never looks, having no event rules, leaves the server's queue alone)
+        self.listening = False
         self.write_groups: dict[tuple[str, int], int] = {}
         # whether a tBuffer is active, as of the last read of the versions (None: unknown)
         self.tbuffers_active: bool | None = None
@@ -815,14 +818,14 @@ class PgDatabase:
                 raw.execute("SET TIME ZONE 'UTC'")
                 migrate_postgres(self, schema, adopt)
                 raw.execute(f"SET search_path = {quote_identifier(schema)}")
-                self._listen_for_pending(raw)
 
                 def reopen() -> Any:
                     again = psycopg.connect(conninfo, autocommit=True)
                     again.execute(f"SET lock_timeout = {int(busy_timeout * 1000)}")
                     again.execute("SET TIME ZONE 'UTC'")
                     again.execute(f"SET search_path = {quote_identifier(schema)}")
-                    self._listen_for_pending(again)
+                    if self.listening:
+                        self._listen_for_pending(again)
                     # (what was notified while no connection listened is unknown)
                     self.others_pending += 1
                     return again
@@ -872,12 +875,27 @@ class PgDatabase:
         """A number that moves when another session inserted or updated the event rules'
         pending rows (they notify, pg_0011_pending_notify.sql): what the store's
         connection heard, read from its socket without a round trip. A connection lost
-        and opened again moves it (what was said meanwhile is unknown)."""
+        and opened again moves it (what was said meanwhile is unknown).
+
+        The connection LISTENs from the first look made outside a transaction on (a LISTEN
+        in one is heard only from its commit); until then every look moves the number, so
+        the caller reads what is pending itself. A store that never looks (no event rules)
+        never listens: a listener that reads nothing would hold the notifications of every
+        other session in the server's queue (docs/postgres.md)."""
         with self.lock:
             self.check_open()
             raw = self.conn.raw
             if raw.closed:
                 return self.others_pending + 1
+            if not self.listening:
+                self.others_pending += 1
+                if self.tx_depth == 0:
+                    try:
+                        self._listen_for_pending(raw)
+                    except _psycopg().Error:
+                        return self.others_pending   # (the next statement opens it again)
+                    self.listening = True
+                return self.others_pending
             pgconn = raw.pgconn
             try:
                 pgconn.consume_input()
