@@ -2,7 +2,7 @@
 
 tests/test_cep_differential.py holds the reference evaluator and runs its comparisons on
 SQLite in memory; tests/test_postgres.py runs the plain operator rules on the server in two
-batches, and tests/test_review10_differential.py compares the server with SQLite. Here the
+batches, and tests/test_cep_postgres_clock_differential.py compares the server with SQLite. Here the
 rest of that differential contract runs on the server itself, each example in a schema of
 its own database:
 
