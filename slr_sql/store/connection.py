@@ -581,12 +581,9 @@ class Database:
         >>> db.execute("SELECT value FROM slr_meta WHERE key = 'a'")
         [('1',)]
         """
-        if join:
-            with self.lock:
-                # (the lock is held for a whole transaction: one open now is this thread's)
-                if self.tx_depth:
-                    yield self
-                    return
+        if join and in_own_transaction(self):
+            yield self
+            return
         committed: list[tuple[int, Callable[[], None], bool]] = []
         try:
             with self.lock:
@@ -909,6 +906,23 @@ class Database:
 
 
 CommitCallbacks = list[tuple[int, Callable[[], None], bool]]
+
+
+def in_own_transaction(db: Any) -> bool:
+    """Whether the calling thread is inside a transaction of ``db`` (a Database or a
+    PgDatabase): the lock is held for a whole transaction, so once this thread holds it, one
+    open is this thread's (another thread's would have kept it from the lock until done).
+    What ``transaction(join=True)`` asks before joining instead of opening a savepoint.
+
+    >>> db = Database(None)
+    >>> with db.transaction():
+    ...     in_own_transaction(db)
+    True
+    >>> in_own_transaction(db)
+    False
+    """
+    with db.lock:
+        return bool(db.tx_depth)
 
 
 def drop_commit_callbacks(callbacks: CommitCallbacks, depth: int) -> CommitCallbacks:

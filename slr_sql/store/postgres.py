@@ -33,7 +33,7 @@ from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 from ..errors import SLRBusy, SLRCancelled, SLRError, SLRServerUnreachable, SLRTimeout, \
     SLRUnavailable
 from ..lockorder import ordered_lock
-from .connection import Database, drop_commit_callbacks, run_after_rollback, \
+from .connection import Database, drop_commit_callbacks, in_own_transaction, run_after_rollback, \
     run_commit_callbacks
 from .dialect import POSTGRES
 from .functions import SqlFunctions
@@ -1043,12 +1043,9 @@ class PgDatabase:
         not waited for (SLRBusy at once), nested or not: work a reader may leave for later.
         ``listeners=False``: a rollback does not call the rollback listeners. ``join``: in a
         transaction of this thread, no savepoint of its own (see Database.transaction)."""
-        if join:
-            with self.lock:
-                # (the lock is held for a whole transaction: one open now is this thread's)
-                if self.tx_depth:
-                    yield self
-                    return
+        if join and in_own_transaction(self):
+            yield self
+            return
         committed: list[tuple[int, Callable[[], None], bool]] = []
         try:
             with self.lock:
