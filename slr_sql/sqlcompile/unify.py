@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..encoding import INT64_MAX, INT64_MIN, Unencodable, encode, encode_json
-from ..terms import Atom, String, Struct, Var, deref, list_items
+from ..terms import Atom, String, Struct, Var, deref, list_items, same_float
 from .model import (CYCLIC, NUMERIC, Col, Fallback, State, format_for_message, has_float, occurs_in, shown_in_message,
                     has_col, has_var)
 
@@ -52,9 +52,10 @@ class Unification:
                 if tb is not Struct or a.name != b.name or len(a.args) != len(b.args):
                     return False
                 stack.extend(zip(a.args, b.args))
+            elif ta is float and tb is float:
+                if not same_float(a, b):
+                    return False
             elif ta is not tb or a != b:
-                if ta is float and tb is float and a != a and b != b:
-                    continue
                 return False
         return True
 
