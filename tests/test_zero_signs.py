@@ -1,0 +1,137 @@
+"""-0.0 and 0.0 in stored events, on SQLite and PostgreSQL, against SWI-Prolog.
+
+SWI-Prolog tells the floats -0.0 and 0.0 apart as terms (``-0.0 = 0.0`` fails, ``-0.0 @<
+0.0``) and not as numbers (``-0.0 =:= 0.0``); docs/semantics.md, "Terms". SQLite's ``=``
+and grouping take one for the other; PostgreSQL keeps the values as text ('-0.0' and
+'0.0' differ). Each example runs on a SQLite file and a PostgreSQL schema, through the
+compiled SQL and through the interpreter, and must give SWI-Prolog's answers in the same
+order (tests/test_swi_prev_next.py's comparison); the goals on plain terms are in
+tests/test_swi_builtins.py.
+"""
+from __future__ import annotations
+
+import itertools
+
+import pytest
+import test_swi_prev_next as swipn
+
+import slr_sql
+from slr_sql import ManualClock
+
+# arguments of both signs and kinds: a key (p's first, q's only argument) and a value
+EVENTS = [("p", ("a", "0.0"), 1.0, 1.0), ("p", ("a", "-0.0"), 2.0, 2.0),
+          ("p", ("a", "0.0"), 3.0, 3.0), ("p", ("a", "0"), 3.5, 3.5),
+          ("p", ("-0.0", "1"), 1.5, 1.5), ("p", ("0.0", "1"), 2.5, 2.5),
+          ("p", ("-0.0", "-0.0"), 4.0, 4.0), ("q", ("-0.0",), 1.0, 1.0),
+          ("q", ("0.0",), 2.0, 2.0), ("q", ("0",), 2.0, 2.0)]
+
+RULES = ("h(K)^T :- prev(q(K)^Z, T), p(K, V)^_.\n",
+         "h(K, T, T) :- prev_q(K, Z, Z, T), p(K, V, _, _).\n")
+PLAIN = ("g(K, T) :- prev(p(K, -0.0)^Z, T).\n", "g(K, T) :- prev_p(K, -0.0, Z, Z, T).\n")
+
+
+def query(slr: str, swi: str | None = None, at: str | None = None) -> tuple:
+    return (slr, swi if swi is not None else slr, at)
+
+
+def ev(slr: str) -> tuple:
+    """An event goal query ``p(..)^Z`` (SWI-Prolog: ``p(.., Z, Z)``)."""
+    name, rest = slr.split("(", 1)
+    args, stamp = rest.rsplit(")^", 1)
+    return query(slr, f"{name}({args}, {stamp}, {stamp})")
+
+
+QUERIES = {
+    "event goals": [ev("p(a, -0.0)^T"), ev("p(a, 0.0)^T"), ev("p(K, -0.0)^T"),
+                    ev("p(-0.0, V)^T"), ev("p(0.0, V)^T"), ev("q(-0.0)^T"), ev("q(0.0)^T")],
+    "prev and next": [
+        query("prev(p(a, -0.0)^Z, 3)", "prev_p(a, -0.0, Z, Z, 3)"),
+        query("prev(p(a, 0.0)^Z, 2.5)", "prev_p(a, 0.0, Z, Z, 2.5)"),
+        query("prev(p(-0.0, V)^Z, 3)", "prev_p(-0.0, V, Z, Z, 3)"),
+        query("prev(q(0.0)^Z, inf)", "prev_q(0.0, Z, Z, inf)"),
+        query("next(p(a, -0.0)^Z, [0, inf])", "next_p(a, -0.0, Z, Z, 0, inf)"),
+        query("next(p(a, 0.0)^Z, 1.5, inf)", "next_p(a, 0.0, Z, Z, 1.5, inf)"),
+        query("next(p(0.0, V)^Z, [0, inf])", "next_p(0.0, V, Z, Z, 0, inf)")],
+    "joins": [
+        query("q(K)^Z, p(K, V)^Y", "q(K, Z, Z), p(K, V, Y, Y)"),
+        query("p(K, V)^Y, q(V)^Z", "p(K, V, Y, Y), q(V, Z, Z)"),
+        query("p(a, V)^Y, p(K, W)^Z, V = W", "p(a, V, Y, Y), p(K, W, Z, Z), V = W"),
+        query("p(a, V)^Y, p(K, W)^Z, V == W", "p(a, V, Y, Y), p(K, W, Z, Z), V == W"),
+        query("q(K)^Z, \\+ p(K, _)^_", "q(K, Z, Z), \\+ p(K, _, _, _)"),
+        query("p(a, V)^Y, X is V * -1, q(X)^Z", "p(a, V, Y, Y), X is V * -1, q(X, Z, Z)")],
+    "tests and collections": [
+        query("p(a, V)^Y, V == -0.0", "p(a, V, Y, Y), V == -0.0"),
+        query("p(a, V)^Y, V = 0.0", "p(a, V, Y, Y), V = 0.0"),
+        query("p(a, V)^Y, V =:= 0", "p(a, V, Y, Y), V =:= 0"),
+        query("p(a, V)^Y, V @< 0.0", "p(a, V, Y, Y), V @< 0.0"),
+        query("findall(V, p(a, V)^_, L), sort(L, S), msort(L, M)",
+              "findall(V, p(a, V, _, _), L), sort(L, S), msort(L, M)"),
+        query("findall(K, q(K)^_, L), sort(0, @>=, L, S)",
+              "findall(K, q(K, _, _), L), sort(0, @>=, L, S)"),
+        query("setof(V-Z, p(a, V)^Z, L)", "setof(V-Z, p(a, V, Z, Z), L)"),
+        query("bagof(Z, p(K, V)^Z, L)", "bagof(Z, p(K, V, Z, Z), L)"),
+        query("aggregate_all(count, p(a, -0.0)^_, N)", "aggregate_all(count, p(a, -0.0, _, _), N)"),
+        query("aggregate_all(set(K), q(K)^_, S)", "aggregate_all(set(K), q(K, _, _), S)")],
+    "rules": [query("h(K)^T", "h(K, T, T)"), query("h(-0.0)^3", "h(-0.0, 3, 3)"),
+              query("h(0.0)^3", "h(0.0, 3, 3)"), query("g(K, 5)"), query("g(-0.0, 5)"),
+              query("findall(K-T, h(K)^T, L)", "findall(K-T, h(K, T, T), L)")],
+}
+
+_SCHEMAS = itertools.count()
+
+
+@pytest.fixture(scope="module")
+def database(postgres_server):
+    """One database for the module's examples, a schema each."""
+    from conftest import postgres_database
+    return postgres_database(postgres_server[1])
+
+
+@pytest.fixture(scope="module")
+def swipl():
+    with swipn.swidiff.live_swipl() as s:
+        yield s
+
+
+@pytest.mark.parametrize("group", sorted(QUERIES))
+def test_zero_signs_answer_as_swipl_on_both_backends(swipl, database, group):
+    url = database + ("&" if "?" in database else "?") + f"schema=zs{next(_SCHEMAS)}"
+    example = (RULES[0] + PLAIN[0], RULES[1] + PLAIN[1], EVENTS, list(range(len(EVENTS))),
+               [4], [], QUERIES[group])
+    swipn.compare(swipl, example, url)
+
+
+# goals with arguments bound from Python (kb.query(goal, args=...)): a single prev takes the
+# bound lookup, whose SQL finds the other zero first on SQLite
+BOUND = [("prev(p(K, V)^Z, T)", {"K": -0.0, "T": 10.0}), ("prev(p(K, V)^Z, T)", {"K": 0.0, "T": 10.0}),
+         ("prev(p(K, V)^Z, T)", {"K": "a", "V": -0.0, "T": 10.0}),
+         ("prev(p(K, V)^Z, T)", {"K": "a", "V": 0.0, "T": 10.0}),
+         ("prev(p(a, V)^Z, T)", {"V": -0.0, "T": 3.0}), ("p(K, V)^Z", {"K": -0.0}),
+         ("h(K)^T", {"K": 0.0, "T": 3.0}), ("next(p(K, V)^Z, [0, inf])", {"K": "a", "V": -0.0})]
+
+
+def _swi_goal(goal: str, args: dict) -> str:
+    """The SWI-Prolog query of ``goal`` with ``args`` bound first (event goals and prev/next
+    as tests/test_swi_prev_next.py writes them)."""
+    texts = {"prev(p(K, V)^Z, T)": "prev_p(K, V, Z, Z, T)", "prev(p(a, V)^Z, T)":
+             "prev_p(a, V, Z, Z, T)", "p(K, V)^Z": "p(K, V, Z, Z)", "h(K)^T": "h(K, T, T)",
+             "next(p(K, V)^Z, [0, inf])": "next_p(K, V, Z, Z, 0, inf)"}
+    binds = [f"{name} = {value!r}" if type(value) is float else f"{name} = {value}"
+             for name, value in args.items()]
+    return ", ".join(binds + [texts[goal]])
+
+
+@pytest.mark.parametrize("place", ["sqlite", "postgres"])
+def test_arguments_bound_from_python_match_their_own_zero(swipl, database, place, tmp_path):
+    where = str(tmp_path / "s.db") if place == "sqlite" else \
+        database + ("&" if "?" in database else "?") + f"schema=zs{next(_SCHEMAS)}"
+    with swipn.fill(where, RULES[0], EVENTS, list(range(len(EVENTS))), [], []) as kb:
+        queries = [(goal, _swi_goal(goal, args), None) for goal, args in BOUND]
+        swi = swipl.run(swipn.swi_program(RULES[1], swipn.stored_facts(kb), queries))
+        for qi, (goal, args) in enumerate(BOUND):
+            names = list(dict.fromkeys(swipn.swidiff.var_names(goal) + list(args)))
+            want = swipn.expected(swi[qi], names)
+            for options in ({}, {"max_steps": swipn.swidiff.SLR_MAX_STEPS}):
+                got = [swipn.swidiff.slr_answer(a, names)
+                       for a in kb.query(goal, args=args, **options)]
+                assert ("answers", got) == want, (goal, args, options)
