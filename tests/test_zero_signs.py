@@ -135,3 +135,30 @@ def test_arguments_bound_from_python_match_their_own_zero(swipl, database, place
                 got = [swipn.swidiff.slr_answer(a, names)
                        for a in kb.query(goal, args=args, **options)]
                 assert ("answers", got) == want, (goal, args, options)
+
+
+# event rules: a join on a variable, a constant pattern argument, both zeros of each
+CEP_EVENTS = [("a", (-0.0,), 1.0, 1.0), ("a", (0.0,), 2.0, 2.0), ("b", (0.0,), 3.0, 3.0),
+              ("b", (-0.0,), 4.0, 4.0), ("a", (0,), 4.5, 4.5), ("b", (0,), 5.0, 5.0)]
+CEP_RULES = [
+    ("seq", ("leaf", "a", ("X",)), ("leaf", "b", ("X",))),
+    ("seq", ("leaf", "a", (-0.0,)), ("leaf", "b", ("Y",))),
+    ("and", ("leaf", "b", (-0.0,)), ("leaf", "a", ("X",))),
+]
+
+
+@pytest.mark.parametrize("place", ["sqlite", "postgres"])
+@pytest.mark.parametrize("policy", ["unrestricted", "recent", "chronological"])
+@pytest.mark.parametrize("pattern", CEP_RULES, ids=["join", "constant", "and"])
+def test_event_rules_tell_the_zeros_apart_as_the_reference(database, place, policy, pattern):
+    import test_cep_differential as cepdiff
+
+    rule = {"pattern": pattern, "head": sorted(cepdiff._vars(pattern)), "where": [],
+            "cnot": None, "within": None, "policy": policy}
+    expected = [(tuple(h), s, e) for h, s, e in cepdiff.reference(rule, CEP_EVENTS)]
+    for order in (list(range(len(CEP_EVENTS))), list(reversed(range(len(CEP_EVENTS))))):
+        where = None if place == "sqlite" else \
+            database + ("&" if "?" in database else "?") + f"schema=zs{next(_SCHEMAS)}"
+        got = cepdiff.run(rule, CEP_EVENTS, order, [], False, False, where=where)
+        assert sorted(cepdiff._typed(got)) == sorted(cepdiff._typed(expected)), \
+            (cepdiff.rule_text(rule), order)
