@@ -797,6 +797,11 @@ class EventStore:
             timeout: float | None = None) -> tuple[list[str], list[tuple]]:
         return self._db.sql(query, params, write, timeout)
 
+    @_doc(Database.sql_write)
+    def sql_write(self, query: str, params: Iterable[Any] = (), timeout: float | None = None
+                  ) -> tuple[list[str], list[tuple], set[str]]:
+        return self._db.sql_write(query, params, timeout)
+
     @_doc(Database.execute)
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
         return self._db.execute(sql, params)

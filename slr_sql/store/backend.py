@@ -304,6 +304,8 @@ class Backend(Protocol):
 
     def sql(self, query: str, params: Iterable[Any]=(), write: bool=False, timeout: float | None=None) -> tuple[list[str], list[tuple[Any, ...]]]: ...
 
+    def sql_write(self, query: str, params: Iterable[Any]=(), timeout: float | None=None) -> tuple[list[str], list[tuple[Any, ...]], set[str]]: ...
+
 
 @runtime_checkable
 class CompiledSQL(Protocol):

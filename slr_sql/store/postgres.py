@@ -1114,14 +1114,16 @@ class PgDatabase:
         unless ``write``; ``timeout`` seconds as ``statement_timeout``. A read-only statement
         outside a transaction runs on a connection of its own (:class:`DetachedStatements`):
         it never holds the store's lock, and its caller stops waiting at the timeout."""
-        if not write:
-            with self.lock:
-                self.check_open()
-                detached = self.tx_depth == 0
-            if detached:
-                bound = bound_parameters(params)
-                return self.detached.run(
-                    self.dialect.statement(query) if bound else query, bound or None, timeout)
+        if write:
+            columns, rows, _ = self.sql_write(query, params, timeout)
+            return columns, rows
+        with self.lock:
+            self.check_open()
+            detached = self.tx_depth == 0
+        if detached:
+            bound = bound_parameters(params)
+            return self.detached.run(
+                self.dialect.statement(query) if bound else query, bound or None, timeout)
         with self.lock:
             self.check_open()
             psycopg = _psycopg()
@@ -1131,10 +1133,30 @@ class PgDatabase:
             raw = self.conn.raw
             deadline = None if timeout is None else time.monotonic() + timeout
             try:
-                if not write:
-                    return self._read_only(raw, own, query, params, timeout)
+                return self._read_only(raw, own, query, params, timeout)
+            except psycopg.Error as exc:
+                error = _error(exc, self.path, self.busy_timeout, _connected(raw))
+                raise error if deadline is None else _own_deadline(error, deadline) from None
+
+    def sql_write(self, query: str, params: Iterable[Any] = (), timeout: float | None = None
+                  ) -> tuple[list[str], list[tuple], set[str]]:
+        """Run one statement as ``sql(..., write=True)`` does, and say which tables of the
+        store's schema it inserted rows into or updated: those whose row counters of the
+        transaction (``pg_stat_xact_user_tables``) moved, so rows written by a trigger, a
+        rule or a function count, whatever the statement's spelling (all the schema's
+        tables when the server keeps no counters, ``track_counts = off``)."""
+        with self.lock:
+            self.check_open()
+            psycopg = _psycopg()
+            own = self.tx_depth == 0
+            if not own:
+                self.conn.send_begin()
+            raw = self.conn.raw
+            deadline = None if timeout is None else time.monotonic() + timeout
+            try:
                 if own:
                     raw.execute("BEGIN")
+                before = self._rows_written_so_far(raw)
                 outer_timeout = None
                 if timeout is not None:
                     if not own:   # (a SET LOCAL lasts to the caller's transaction's end)
@@ -1150,12 +1172,15 @@ class PgDatabase:
                     cursor.execute(query, None, prepare=False)
                 columns = [d.name for d in cursor.description] if cursor.description else []
                 rows = [tuple(r) for r in cursor.fetchall()] if cursor.description else []
+                after = self._rows_written_so_far(raw)
+                written = {table for table, count in after.items()
+                           if count is None or count != before.get(table)}
                 if own:
                     raw.execute("COMMIT")
                 elif outer_timeout is not None:
                     raw.execute("SELECT set_config('statement_timeout', %s, true)",
                                 (outer_timeout,))
-                return columns, rows
+                return columns, rows, written
             except psycopg.Error as exc:
                 if own:
                     try:
@@ -1164,6 +1189,15 @@ class PgDatabase:
                         pass
                 error = _error(exc, self.path, self.busy_timeout, _connected(raw))
                 raise error if deadline is None else _own_deadline(error, deadline) from None
+
+    def _rows_written_so_far(self, raw: Any) -> dict[str, int | None]:
+        """Each table of the store's schema -> the rows inserted and updated in it by this
+        transaction so far (None for every table when the server keeps no such counters)."""
+        counted = raw.execute("SELECT current_setting('track_counts')::boolean").fetchone()[0]
+        rows = raw.execute(
+            "SELECT relname, n_tup_ins + n_tup_upd FROM pg_stat_xact_user_tables "
+            "WHERE schemaname = %s", (self.schema,)).fetchall()
+        return {name: count if counted else None for name, count in rows}
 
     def _read_only(self, raw: Any, own: bool, query: str, params: Iterable[Any],
                    timeout: float | None) -> tuple[list[str], list[tuple]]:
