@@ -47,6 +47,9 @@ _STORE_TABLES = frozenset({"slr_meta", "slr_program", "slr_event_types"})
 # The channel the event rules' pending rows notify when a statement inserts or updates some
 # (payload: the store's schema; migration pg_0011_pending_notify.sql)
 PENDING_CHANNEL = "slr_pending"
+# How often the connection of an idle store that listens reads its socket on its own
+# (seconds): the server then moves the store's place in its notification queue on
+DRAIN_PERIOD = 0.5
 
 
 class PgStatementError(sqlite3.DatabaseError):
@@ -232,6 +235,20 @@ class PgCursor:
 
     def close(self) -> None:
         self._cursor.close()
+
+
+def _read_notifications(raw: Any) -> None:
+    """Hand what the connection's socket holds (notifications of an idle connection) to
+    psycopg's handlers, without a round trip."""
+    pgconn = raw.pgconn
+    for _ in range(64):   # (a flood is read in rounds; the rest at the next call)
+        pgconn.consume_input()
+        read = 0
+        while (notify := pgconn.notifies()) is not None:
+            pgconn.notify_handler(notify)
+            read += 1
+        if not read:
+            return
 
 
 class PgConnection:
@@ -803,6 +820,8 @@ class PgDatabase:
         # whether the store's connection LISTENs to them: from the first look on (a store
         # that never looks, having no event rules, leaves the server's queue alone)
         self.listening = False
+        # set to stop the thread that drains the listening connection (_start_draining)
+        self.draining = threading.Event()
         self.write_groups: dict[tuple[str, int], int] = {}
         # whether a tBuffer is active, as of the last read of the versions (None: unknown)
         self.tbuffers_active: bool | None = None
@@ -895,15 +914,42 @@ class PgDatabase:
                     except _psycopg().Error:
                         return self.others_pending   # (the next statement opens it again)
                     self.listening = True
+                    self._start_draining()
                 return self.others_pending
-            pgconn = raw.pgconn
             try:
-                pgconn.consume_input()
-                while (notify := pgconn.notifies()) is not None:
-                    pgconn.notify_handler(notify)
+                _read_notifications(raw)
             except _psycopg().Error:
                 return self.others_pending + 1   # (the next statement opens it again)
             return self.others_pending
+
+    def _start_draining(self) -> None:
+        """A daemon thread reads the listening connection's socket every
+        :data:`DRAIN_PERIOD` seconds while the store's lock is free. The server sends a
+        listening session's notifications to its socket as they come: were nobody to read
+        them while the store makes no call, the socket's buffers would fill, the session
+        would stop reading the server's queue, and every later notification of every
+        session would be kept there for it (a full queue fails the notifying commits).
+        It never waits for the lock (a store at work reads its socket itself) and holds a
+        weak reference: a store dropped without close() ends it too."""
+        stop = self.draining
+        store = weakref.ref(self)
+
+        def drain() -> None:
+            while not stop.wait(DRAIN_PERIOD):
+                db = store()
+                if db is None:
+                    return
+                if db.lock.acquire(blocking=False):
+                    try:
+                        raw = db.conn.raw
+                        if not db.closed and db.tx_depth == 0 and not raw.closed:
+                            with suppress(_psycopg().Error):   # (the next statement says it)
+                                _read_notifications(raw)
+                    finally:
+                        db.lock.release()
+                del db
+
+        threading.Thread(target=drain, name="slr-pg-drain", daemon=True).start()
 
     def table_names(self) -> set[str]:
         """Names of the tables of the store's schema."""
@@ -1017,6 +1063,7 @@ class PgDatabase:
             stream.suspend()
 
     def close(self) -> None:
+        self.draining.set()
         with self.lock:
             if self.closed:
                 return
