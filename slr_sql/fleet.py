@@ -697,7 +697,8 @@ def click_group() -> Any:
     @fleet_group.command("push")
     @click.argument("db", type=click.Path(dir_okay=False))
     @click.argument("fleet")
-    @click.option("--robot", default=None, help="Ship as this robot (default: the store's name).")
+    @click.option("--robot", default=None, help="Ship as this robot (default: the store's name); names a store that "
+                       "has none.")
     @click.option("--follow", is_flag=True,
                   help="Keep shipping as events arrive, until SIGINT/SIGTERM.")
     @click.option("--type", "types", multiple=True, metavar="NAME/N",
