@@ -258,3 +258,15 @@ def test_a_write_beside_rows_that_were_no_events_already_goes_through_once(
                                              r"is no event: arg1 of p/1's row of seq 1 "):
             kb.sql("UPDATE p SET arg1 = NULL WHERE seq = 1", write=True)
         assert kb.sql("SELECT arg1 FROM p WHERE seq = 1")[1] == [("a",)]
+
+
+def test_without_the_servers_row_counters_every_table_counts_as_written(postgres_url):
+    # (track_counts = off: pg_stat_xact_user_tables stays still, so the door reads them all)
+    with slr_sql.open(postgres_url, clock=ManualClock(10)) as kb:
+        for event in ("p(a)^1", "p(b)^2"):
+            kb.add(event)
+        for statement in TRIGGER["postgres"]:
+            kb.sql(statement, write=True)
+        kb.store.execute("SET track_counts = off")
+        refused_unchanged(kb, "INSERT INTO notes VALUES (1)", 3)
+        kb.sql("INSERT INTO notes SELECT 2 WHERE false", write=True)   # (writes no NULL)

@@ -1240,11 +1240,11 @@ class PgDatabase:
     def _rows_written_so_far(self, raw: Any) -> dict[str, int | None]:
         """Each table of the store's schema -> the rows inserted and updated in it by this
         transaction so far (None for every table when the server keeps no such counters)."""
-        counted = raw.execute("SELECT current_setting('track_counts')::boolean").fetchone()[0]
         rows = raw.execute(
-            "SELECT relname, n_tup_ins + n_tup_upd FROM pg_stat_xact_user_tables "
+            "SELECT relname, CASE WHEN current_setting('track_counts')::boolean "
+            "THEN n_tup_ins + n_tup_upd END FROM pg_stat_xact_user_tables "
             "WHERE schemaname = %s", (self.schema,)).fetchall()
-        return {name: count if counted else None for name, count in rows}
+        return dict(rows)
 
     def _read_only(self, raw: Any, own: bool, query: str, params: Iterable[Any],
                    timeout: float | None) -> tuple[list[str], list[tuple]]:
