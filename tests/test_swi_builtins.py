@@ -222,3 +222,35 @@ def test_a_goal_left_alone_still_differs_from_swipl(swipl, goal):
     example = swidiff.builtin_example(goal)
     with pytest.raises(AssertionError):
         swidiff.check_example(example, swipl.run(example[2]))
+
+
+# The same order over stored events, on both of slr_sql's paths (compiled SQL folds with its
+# ordered aggregates, the interpreter as it collects): the error SWI-Prolog raises for the
+# same solutions given as a list. (stored: p(1)^1, p(foo)^2, q(bar)^3)
+OVER_EVENTS = {
+    "aggregate_all(max(X), (p(X)^_ ; q(Y)^_, X is Y + 1), M)":
+        "aggregate_all(max(X), (member(X, [1, foo]) ; member(Y, [bar]), X is Y + 1), M)",
+    "aggregate_all(sum(X), (q(Y)^_, X is Y + 1 ; p(X)^_), M)":
+        "aggregate_all(sum(X), (member(Y, [bar]), X is Y + 1 ; member(X, [1, foo])), M)",
+    "aggregate_all(min(X, W), (p(X)^W ; q(Y)^W, X is Y + 1), M)":
+        "aggregate_all(min(X, W), (member(X-W, [1-1.0, foo-2.0]) ; member(Y-W, [bar-3.0]), "
+        "X is Y + 1), M)",
+}
+
+
+@pytest.mark.parametrize("goal", sorted(OVER_EVENTS))
+def test_over_stored_events_the_first_bad_solution_raises_as_in_swipl(swipl, goal):
+    import slr_sql
+    from slr_sql.errors import SLREvaluationError
+
+    example = swidiff.builtin_example(OVER_EVENTS[goal])
+    theirs = swipl.run(example[2])[0]
+    assert theirs["error"] is not None
+    with slr_sql.open(clock=slr_sql.ManualClock(10)) as kb:
+        kb.add_many(["p(1)^1", "p(foo)^2", "q(bar)^3"])
+        for compiled in (True, False):
+            kb.sql_enabled = compiled
+            with pytest.raises(SLREvaluationError) as raised:
+                kb.query(goal)
+            assert swidiff.canonical_error(raised.value.term) == \
+                swidiff.from_swi(theirs["error"], {}), (compiled, raised.value.term)
