@@ -746,11 +746,26 @@ class KnowledgeBase:
                    ) -> tuple[list[str], list[tuple]]:
         """``sql(..., write=True)``: a NULL argument is no term (docs/schema.md), so a
         statement that would leave one in a row not so before changes nothing. The store
-        says which tables the statement wrote (its triggers' and functions' writes included,
-        whatever its spelling), and only those are read for such rows; when they hold some,
-        the run is taken back, the rows there before it are read, and it runs once more."""
+        says which tables the statement writes (its triggers' and functions' writes
+        included, whatever its spelling), and only those are read for such rows: before
+        and after it when the store can tell before it runs (SQLite; a statement that
+        writes no event table then runs as given, outside a transaction of the check:
+        ``VACUUM``); else after it, and when they hold some, the run is taken back, the
+        rows there before it are read, and it runs once more."""
         store = self.store
         types = {table.lower(): key for key, table in store.event_types().items()}
+        ahead = store.tables_to_write(query, params)
+        if ahead is not None:
+            named = sorted({types[t.lower()] for t in ahead if t.lower() in types})
+            if not named:
+                return store.sql(query, params, True, timeout)
+            with store.transaction():
+                before = set(store.null_arguments(named, every=True))
+                columns, rows, _ = store.sql_write(query, params, timeout)
+                made = sorted(set(store.null_arguments(named, every=True)) - before)
+                if made:
+                    raise _no_event_left(made)
+            return columns, rows
 
         def run() -> tuple[tuple[list[str], list[tuple]], list[tuple[str, int, str, int, int]]]:
             columns, rows, written = store.sql_write(query, params, timeout)

@@ -270,3 +270,13 @@ def test_without_the_servers_row_counters_every_table_counts_as_written(postgres
         kb.store.execute("SET track_counts = off")
         refused_unchanged(kb, "INSERT INTO notes VALUES (1)", 3)
         kb.sql("INSERT INTO notes SELECT 2 WHERE false", write=True)   # (writes no NULL)
+
+
+def test_a_sqlite_statement_that_writes_no_event_table_runs_outside_a_transaction(tmp_path):
+    # SQLite tells what a statement writes by compiling it (EXPLAIN): one that writes no
+    # event table runs as given, so one that cannot run in a transaction still runs
+    with slr_sql.open(tmp_path / "k.db", clock=ManualClock(10)) as kb:
+        kb.add("p(a)^1")
+        assert kb.sql("VACUUM", write=True) == ([], [])
+        assert kb.sql("PRAGMA wal_checkpoint(TRUNCATE)", write=True)[1] == [(0, 0, 0)]
+        assert kb.query("p(X)^_") == [{"X": Atom("a")}]

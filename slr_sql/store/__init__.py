@@ -797,6 +797,10 @@ class EventStore:
             timeout: float | None = None) -> tuple[list[str], list[tuple]]:
         return self._db.sql(query, params, write, timeout)
 
+    @_doc(Database.tables_to_write)
+    def tables_to_write(self, query: str, params: Iterable[Any] = ()) -> set[str] | None:
+        return self._db.tables_to_write(query, params)
+
     @_doc(Database.sql_write)
     def sql_write(self, query: str, params: Iterable[Any] = (), timeout: float | None = None
                   ) -> tuple[list[str], list[tuple], set[str]]:

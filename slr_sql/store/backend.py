@@ -306,6 +306,8 @@ class Backend(Protocol):
 
     def sql_write(self, query: str, params: Iterable[Any]=(), timeout: float | None=None) -> tuple[list[str], list[tuple[Any, ...]], set[str]]: ...
 
+    def tables_to_write(self, query: str, params: Iterable[Any]=()) -> set[str] | None: ...
+
 
 @runtime_checkable
 class CompiledSQL(Protocol):

@@ -749,6 +749,31 @@ class Database:
             return self._write(query, params,
                                None if timeout is None else time.monotonic() + timeout)
 
+    def tables_to_write(self, query: str, params: Iterable[Any] = ()) -> set[str] | None:
+        """The tables of the store a statement would insert rows into or update, those its
+        triggers would write included, told by compiling it (``EXPLAIN``: nothing runs);
+        None when it cannot be compiled so (its own run says why).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.declare_type("p", 1)
+        'p'
+        >>> s.tables_to_write("UPDATE [P] SET arg1 = ?", (1,)), s.tables_to_write("VACUUM")
+        ({'p'}, set())
+        """
+        with self.lock:
+            self.check_open()
+            conn, guard = self.conn, self.guard
+            guard.written = set()
+            conn.set_authorizer(guard.writing)
+            try:
+                conn.execute(f"EXPLAIN {query}", bound_parameters(params)).close()
+                return guard.written
+            except (sqlite3.Error, OverflowError, TypeError, ValueError):
+                return None
+            finally:
+                guard.denied = None
+                conn.set_authorizer(guard.always)
+
     def _write(self, query: str, params: Iterable[Any], deadline: float | None
                ) -> tuple[list[str], list[tuple], set[str]]:
         conn, guard = self.conn, self.guard

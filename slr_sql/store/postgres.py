@@ -1237,6 +1237,11 @@ class PgDatabase:
                 error = _error(exc, self.path, self.busy_timeout, _connected(raw))
                 raise error if deadline is None else _own_deadline(error, deadline) from None
 
+    def tables_to_write(self, query: str, params: Iterable[Any] = ()) -> set[str] | None:
+        """None: what a statement writes is known only once it ran (its triggers and
+        functions are the server's), from :meth:`sql_write`."""
+        return None
+
     def _rows_written_so_far(self, raw: Any) -> dict[str, int | None]:
         """Each table of the store's schema -> the rows inserted and updated in it by this
         transaction so far (None for every table when the server keeps no such counters)."""
