@@ -51,6 +51,32 @@ def _number_kind(value: Any) -> str | None:
         return "integer"
     return None
 
+def _exact(value: Any) -> tuple:
+    """A stored value as a key that tells what SQL's = does not: 1 from 1.0, -0.0 from 0.0."""
+    if type(value) is float:
+        return (float, repr(value))
+    return (type(value), value)
+
+
+def _zero_signs(bound: dict[int, Any], positions: tuple[int, ...]) -> tuple[tuple[int, float], ...]:
+    """The bound float zeros among ``positions``, with their signs (1.0 or -1.0)."""
+    return tuple((p, math.copysign(1.0, bound[p])) for p in positions
+                 if type(bound[p]) is float and bound[p] == 0.0)
+
+
+def _first_of_signs(cursor: Any, signs: tuple[tuple[int, float], ...]) -> Any:
+    """The first row of ``cursor`` (``(probe, arg1, ...)``) whose zeros at the positions of
+    ``signs`` have those signs; None when none has. The cursor is closed (its statement
+    stops there)."""
+    try:
+        for row in cursor:
+            if all(math.copysign(1.0, row[p + 1]) == sign for p, sign in signs):
+                return row
+        return None
+    finally:
+        cursor.close()
+
+
 def _earliest_holding_start(t: float, longest: float) -> float:
     """The earliest start of an event that lasts at most ``longest`` and holds at ``t``,
     a few units in the last place early (``t - longest`` is rounded, as ``longest`` was):
@@ -555,8 +581,12 @@ class EventReader:
             # order from t back to t - longest; else the latest ended)
             holding = math.isfinite(t)
             key = (event_type.table, "bracket", positions, start_hint, kinds, holding)
-            sql = self.sql_cache.get(key)
-            if sql is None:
+            # (SQL's = takes -0.0 for 0.0: each probe is then run on its own and read on to
+            # the first row whose zeros have the bound ones' signs)
+            signs = () if self.db.dialect.zero_signs_in_sql else _zero_signs(bound, positions)
+            probes = 3 if holding else 2
+            union = self.sql_cache.get(key)
+            if union is None:
                 typeof = self.db.dialect.typeof
                 where = " AND ".join(
                     f"arg{p + 1} = ?" + ("" if kind is None
@@ -571,26 +601,27 @@ class EventReader:
                 before = (f"{by_start} WHERE {where} AND t_start <= ? AND t_start >= ? "
                           f"AND t_end >= ? ORDER BY t_start DESC, t_end DESC, seq DESC"
                           if holding else ended)
-                sql = (f"SELECT 0, * FROM (SELECT {cols} FROM {event_type.quoted}{before}"
-                       f" LIMIT 1) AS before_t "
-                       f"UNION ALL SELECT 1, * FROM (SELECT {cols} FROM {event_type.quoted}"
-                       f"{by_start} WHERE {where} AND t_start >= ? "
-                       f"ORDER BY t_start, seq DESC LIMIT 1) AS after_t")
-                if holding:
-                    # (when none holds at t, the interpolation starts at the latest end)
-                    sql += (f" UNION ALL SELECT 2, * FROM (SELECT {cols} FROM "
-                            f"{event_type.quoted}{ended} LIMIT 1) AS ended_t")
-                self.sql_cache[key] = sql
+                # (when none holds at t, the interpolation starts at the latest end)
+                each = [f"SELECT {n}, {cols} FROM {event_type.quoted}{probe}" for n, probe in
+                        enumerate([before, f"{by_start} WHERE {where} AND t_start >= ? "
+                                           f"ORDER BY t_start, seq DESC", ended][:probes])]
+                for n, probe in enumerate(each):
+                    self.sql_cache[key + (n,)] = probe
+                union = self.sql_cache[key] = " UNION ALL ".join(
+                    f"SELECT * FROM ({probe} LIMIT 1) AS probe_{n}"
+                    for n, probe in enumerate(each))
             t = float(t)
-            if holding:
-                params = values + [t, _earliest_holding_start(t, longest), t]
-                params += values + [t] + values + [t]
+            params = [values + [t, _earliest_holding_start(t, longest), t] if holding
+                      else values + [t], values + [t], values + [t]][:probes]
+            found: list = [None, None, None]
+            if signs:
+                for n, args in enumerate(params):
+                    found[n] = _first_of_signs(
+                        self.db.conn.execute(self.sql_cache[key + (n,)], args), signs)
             else:
-                params = values + [t] + values + [t]
-            rows = self.db.conn.execute(sql, params).fetchall()
-        found: list = [None, None, None]
-        for row in rows:
-            found[row[0]] = row
+                for row in self.db.conn.execute(
+                        union, [v for args in params for v in args]).fetchall():
+                    found[row[0]] = row
         if holding and found[0] is None:
             found[0] = found[2]   # (none holds at t)
         dec = self.decode
@@ -659,14 +690,27 @@ class EventReader:
             # (grouping takes 1 and 1.0 for one value: their types keep them apart.) The
             # duration is halved in SQL, where 1e308 - -1e308 would overflow (an error on
             # PostgreSQL), and doubled here; an empty or reversed span counts 0
-            typeof = self.db.dialect.typeof
+            dialect = self.db.dialect
+            typeof = dialect.typeof
+            groups = f"arg1, arg2, {typeof('arg1')}, {typeof('arg2')}"
+            if not dialect.zero_signs_in_sql:
+                # (grouping takes -0.0 for 0.0 too, two frame names: each row with a zero
+                # is a group of its own, merged below by the values' signs)
+                groups += (f", CASE WHEN ({typeof('arg1')} = 'real' AND arg1 = 0) OR "
+                           f"({typeof('arg2')} = 'real' AND arg2 = 0) THEN seq END")
             rows = conn.execute(
                 f"SELECT arg1, arg2, max(CASE WHEN t_end > t_start THEN t_end / 2 - t_start / 2 "
                 f"ELSE 0 END) FROM {event_type.quoted} WHERE seq > ? AND seq <= ? "
-                f"GROUP BY arg1, arg2, {typeof('arg1')}, {typeof('arg2')}",
-                (after_seq, top)).fetchall()
+                f"GROUP BY {groups}", (after_seq, top)).fetchall()
         dec = self.decode
-        return [(dec(row[0]), dec(row[1]), 2.0 * float(row[2])) for row in rows], top
+        pairs: dict[tuple, tuple[Any, Any, float]] = {}
+        for first, second, half in rows:
+            key = (_exact(first), _exact(second))
+            longest = 2.0 * float(half)
+            known = pairs.get(key)
+            if known is None or known[2] < longest:
+                pairs[key] = (dec(first), dec(second), longest)
+        return list(pairs.values()), top
 
     def max_seq(self, name: str, arity: int) -> int:
         """The greatest arrival sequence number stored for name/arity (0 when none): it moves
