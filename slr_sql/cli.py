@@ -1418,7 +1418,7 @@ def shell(db: str) -> None:
         ended_by: int | None = None
         try:
             interactive(session, prompt, before_prompt=lambda: cooked_keys_typed_ahead(
-                sys.stdin, prompt.app.input))
+                sys.stdin, prompt.app.input), on_terminate=terminal.silence_if_hung_up)
         except ShellTerminated as exc:
             ended_by = exc.signum
         finally:
@@ -1457,6 +1457,28 @@ class TerminalModes:
             self.modes: list | None = termios.tcgetattr(self.fd)
         except (OSError, ValueError, AttributeError, termios.error):   # not a terminal
             self.fd = self.modes = None
+        # the outputs that write to a terminal (stdout, stderr)
+        self.outputs = [fd for fd in (1, 2) if os.isatty(fd)]
+
+    def silence_if_hung_up(self) -> None:
+        """When the terminal hung up (a read gives end of file, a write fails with EIO), point
+        the outputs that wrote to it at /dev/null: what the shell still says on its way out
+        (the line editor's last redraw) goes nowhere instead of failing."""
+        import termios
+
+        if self.fd is None:
+            return
+        try:
+            termios.tcgetattr(self.fd)
+            return
+        except (OSError, termios.error):
+            pass
+        nowhere = os.open(os.devnull, os.O_WRONLY)
+        try:
+            for fd in self.outputs:
+                os.dup2(nowhere, fd)
+        finally:
+            os.close(nowhere)
 
     def restore(self) -> None:
         import termios
@@ -1594,12 +1616,16 @@ class ShellInterrupts:
 
 
 def interactive(session: Shell, prompt: Any, echo: Any = click.echo,
-                before_prompt: Callable[[], None] | None = None) -> None:
+                before_prompt: Callable[[], None] | None = None,
+                on_terminate: Callable[[], None] | None = None) -> None:
     """The shell's loop over a prompt_toolkit ``PromptSession``: a line, then what it says,
     until ``halt.`` or Ctrl-D. Ctrl-C at the prompt drops the unfinished line; Ctrl-C after
     Enter (as the prompt is taken down, or read with the Enter as a key typed ahead) stops
     the goal before it starts; Ctrl-C during a goal stops it. ``before_prompt`` is called
-    before each prompt (the terminal shell: :func:`cooked_keys_typed_ahead`).
+    before each prompt (the terminal shell: :func:`cooked_keys_typed_ahead`). SIGTERM and
+    SIGHUP end the loop with :class:`ShellTerminated` (see :class:`ShellInterrupts`), after
+    ``on_terminate`` is called in the handler (the terminal shell: the outputs silenced when
+    the terminal hung up).
 
     >>> from prompt_toolkit import PromptSession
     >>> from prompt_toolkit.input import create_pipe_input
@@ -1612,9 +1638,15 @@ def interactive(session: Shell, prompt: Any, echo: Any = click.echo,
     import signal
 
     gate = ShellInterrupts(prompt.app)
+
+    def terminate(signum: int, frame: Any) -> None:
+        if on_terminate is not None:
+            on_terminate()
+        gate.terminate(signum, frame)
+
     previous = {signal.SIGINT: signal.signal(signal.SIGINT, gate)}
     for signum in (signal.SIGTERM, signal.SIGHUP):
-        previous[signum] = signal.signal(signum, gate.terminate)
+        previous[signum] = signal.signal(signum, terminate)
     try:
         while True:
             gate.editing()
@@ -1645,6 +1677,7 @@ def interactive(session: Shell, prompt: Any, echo: Any = click.echo,
                 gate.editing()
                 session.interrupt()
                 echo("\n% interrupted")
+        gate.check_terminated()   # (a hung-up terminal also ends the editor: end of file)
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)

@@ -80,3 +80,36 @@ def test_a_terminated_shell_gives_the_terminal_back_cooked(store, signum, where)
     # the store was closed cleanly: it opens and answers
     done = slr("query", store, "seg(O, L)^T")
     assert done.returncode == 0 and "cup2" in done.stdout, done.stderr
+
+
+HUNG_UP_SHELL = textwrap.dedent("""
+    import os, sys
+    errors = os.open(sys.argv[2], os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
+    os.dup2(errors, 2)              # stderr outlives the terminal: the test reads it
+    os.execv(sys.executable, [sys.executable, "-m", "slr_sql", "shell", sys.argv[1]])
+""")
+
+
+def test_a_shell_whose_terminal_hangs_up_ends_quietly_by_sighup(store, tmp_path):
+    """The terminal itself goes away (its window closed, the ssh connection lost): the
+    kernel sends SIGHUP, and every write to the terminal fails. The shell ends by SIGHUP with
+    its store closed, and says nothing on its stderr (prompt_toolkit's last redraw failed on
+    the dead terminal: a traceback and exit status 1)."""
+    errors = tmp_path / "stderr.txt"
+    env = dict(os.environ, PYTHONPATH=str(ROOT), SLR_HISTORY=os.devnull, TERM="xterm",
+               PROMPT_TOOLKIT_NO_CPR="1")
+    child = pexpect.spawn(sys.executable, ["-c", HUNG_UP_SHELL, store, str(errors)], env=env,
+                          cwd=str(ROOT), encoding="utf-8", timeout=60, dimensions=(40, 160))
+    child.expect("Ctrl-D leaves")
+    child.expect(PROMPT)
+    wait_for_terminal(child, raw=True)
+    child.send("seg(O, ")
+    os.close(child.child_fd)         # the terminal hangs up
+    child.child_fd = -1
+    _, status = os.waitpid(child.pid, 0)
+    child.closed, child.terminated = True, True
+    assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGHUP, status
+    assert errors.read_text() == ""
+    assert not os.path.exists(store + "-wal")    # closed: its log checkpointed and removed
+    done = slr("query", store, "seg(O, L)^T")
+    assert done.returncode == 0 and "cup2" in done.stdout, done.stderr
