@@ -406,8 +406,10 @@ class RuleRuntime:
                         if some_ready:
                             self._before_matches()
                             self._send(alt.recent_insert(pos), p2)
-                        if not all_ready:
+                        if not all_ready and some_ready:
                             self._send(alt.term_pending(pos, True), p2)
+                        elif not all_ready:   # (a live stream's add: none is complete yet)
+                            self._send(alt.term_span(pos), p2)
                     elif self.policy == "recent" and alt.runnable:
                         # independent decisions: those that can be made now, at once
                         pend = []
@@ -434,7 +436,8 @@ class RuleRuntime:
         # the copy of the matches and the summary of what is pending: with the writes still
         # waiting, one call of the store
         statements, stored = self._copy(self._before, now) if self._matched else ([], None)
-        summary = [(pending_summary(), {"rule": self.key}, False)] if changed or decide else []
+        summary = [(pending_summary(self.eng.store.dialect), {"rule": self.key}, False)] \
+            if changed or decide else []
         rows = self._ask_all(statements + summary)   # (nothing to ask: the writes alone)
         if summary:
             self._summary(rows[-1])
@@ -647,6 +650,12 @@ class RuleRuntime:
                 for pos in sorted(alt.alt.terminators):
                     self._send(alt.pending_recent_insert(pos), p2)
                     self._send(alt.pending_term_delete(pos), p2)
+            elif kind == "span" and self.policy == "recent":
+                self._before_matches()
+                for pos in sorted(alt.alt.terminators):
+                    self._send(alt.span_recent_insert(pos), p2)
+                    self._send(alt.span_split(pos), p2)
+                    self._send(alt.span_delete(pos), p2)
             elif kind == "match" and self.policy == "unrestricted":
                 self._before_matches()
                 self._send(alt.pending_match_insert(), p2)
@@ -829,7 +838,7 @@ class RuleRuntime:
     def refresh(self) -> None:
         """Re-read the summary of this rule's pending decisions."""
         self._forget_unsent()
-        self._summary(self._ask(pending_summary(), {"rule": self.key}))
+        self._summary(self._ask(pending_summary(self.eng.store.dialect), {"rule": self.key}))
 
     def _summary(self, rows: list) -> None:
         """Take the summary of this rule's pending decisions from ``rows`` (those of
@@ -1312,7 +1321,8 @@ class EventRules:
                     rt._forget_unsent()
                 # (one call of the store for them all: one round trip to a server)
                 rows = self.store.run_compiled_batch(
-                    [(pending_summary(), {"rule": rt.key}, False) for rt in rules]) \
+                    [(pending_summary(self.store.dialect), {"rule": rt.key}, False)
+                     for rt in rules]) \
                     if rules else []
                 for rt, summary in zip(rules, rows):
                     rt._summary(summary)
@@ -1373,7 +1383,7 @@ class EventRules:
                 elif n < len(rt.rule.alternatives):
                     # (a term decision: what it waits for, chronological's other
                     # alternatives' terminators included)
-                    keys = list(rt.decisions[n]) if kind == "term" else \
+                    keys = list(rt.decisions[n]) if kind in ("term", "span") else \
                         [leaf.key for _, leaf in rt.rule.alternatives[n].negations]
                 else:
                     keys = []
