@@ -29,14 +29,14 @@ import json
 import math
 
 import orjson
-from itertools import islice, pairwise
-from operator import itemgetter, ne
+from itertools import pairwise
+from operator import itemgetter
 from typing import Any, Callable
 
 from ..encoding import Unencodable, decode, encode
 from ..errors import SLRError, SLRUnavailable
 from ..host import Host
-from ..store import DatabaseError, EventBatch, quote_identifier, store_error
+from ..store import DatabaseError, quote_identifier, store_error
 from ..terms import Struct, Var, deref, format_term, is_ground, make_list, term_vars
 from .rules import EventRule
 from .sqlgen import (AltSQL, anchor_index, complex_copy, complex_read, create_index,
@@ -1201,32 +1201,11 @@ class EventRules:
         return token
 
     def store_events(self, events: list, atomic: bool) -> list:
-        """``store.add_events``, with the events grouped by type first when types alternate
-        (a stream of a, b, a, b costs one insert statement per event otherwise). Grouping is
-        stable, so each type's events keep their arrival order -- the order of their rows --
-        and the rejected events keep their index in the batch. The add joins the round's
-        transaction (the pipeline's, which any error leaves through) with no savepoint of
-        its own."""
-        store = self.store
-        if atomic or len(events) < 16:
-            return store.add_events(events, atomic=atomic, join=True)
-        try:   # (column-wise: no loop in Python over a big batch)
-            keys = list(zip(map(_first, events), map(len, map(_second, events))))
-        except (TypeError, IndexError, KeyError):
-            return store.add_events(events, atomic=atomic, join=True)
-        switches = 1 + sum(map(ne, keys, islice(keys, 1, None)))
-        if switches * 4 < len(events):
-            return store.add_events(events, atomic=atomic, join=True)
-        rank = {key: i for i, key in enumerate(dict.fromkeys(keys))}
-        order = sorted(range(len(events)), key=list(map(rank.__getitem__, keys)).__getitem__)
-        grouped = EventBatch(map(events.__getitem__, order))
-        errors = store.add_events(grouped, atomic=atomic, join=True)
-        if type(events) is EventBatch:
-            events.ends = grouped.ends   # (the same events: the same end times per type)
-        for error in errors:
-            if getattr(error, "index", None) is not None:
-                error.index = order[error.index]
-        return sorted(errors, key=lambda e: getattr(e, "index", 0))
+        """``store.add_events``, joining the round's transaction (the pipeline's, which any
+        error leaves through) with no savepoint of its own. (The store takes an
+        interleaved stream -- a, b, a, b -- one insert per type, each type's rows in their
+        order: no grouping is needed here.)"""
+        return self.store.add_events(events, atomic=atomic, join=True)
 
     def rounds(self, events: list) -> list[tuple[int, int]]:
         """Where a batch must be cut into rounds so that it derives what its events added one
