@@ -43,6 +43,7 @@ other threads left open (they resume after it, from where they were).
 """
 from __future__ import annotations
 
+import math
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
@@ -487,13 +488,13 @@ class EventStore:
         return self._reader.latest_rows(name, arity, positions, values, t, point)
 
     @_doc(EventReader.bracket)
-    def bracket(self, name: str, arity: int, bound: dict[int, Any], t: float
-                ) -> tuple[Row | None, Row | None] | None:
-        return self._reader.bracket(name, arity, bound, t)
+    def bracket(self, name: str, arity: int, bound: dict[int, Any], t: float,
+                longest: float = math.inf) -> tuple[Row | None, Row | None] | None:
+        return self._reader.bracket(name, arity, bound, t, longest)
 
     @_doc(EventReader.distinct_pairs)
     def distinct_pairs(self, name: str, arity: int, after_seq: int = 0
-                       ) -> tuple[list[tuple[Any, Any]], int]:
+                       ) -> tuple[list[tuple[Any, Any, float]], int]:
         return self._reader.distinct_pairs(name, arity, after_seq)
 
     @_doc(EventReader.null_arguments)
