@@ -162,3 +162,29 @@ def test_event_rules_tell_the_zeros_apart_as_the_reference(database, place, poli
         got = cepdiff.run(rule, CEP_EVENTS, order, [], False, False, where=where)
         assert sorted(cepdiff._typed(got)) == sorted(cepdiff._typed(expected)), \
             (cepdiff.rule_text(rule), order)
+
+
+# facts and rules of a program (no events): clause indexing, the facts' SQL tables, joins
+PROGRAM = """f(0.0, a).
+f(-0.0, b).
+f(0, c).
+f(X, d) :- X = -0.0.
+g(-0.0).
+g(0.0).
+g(0.0).
+same(X) :- f(X, _), g(X).
+"""
+PROGRAM_GOALS = ["f(-0.0, Y)", "f(0.0, Y)", "f(X, Y), g(X)", "same(X)", "g(X), f(X, Y)",
+                 "setof(X-Y, f(X, Y), L)", "findall(X, g(X), L), sort(L, S), length(S, N)",
+                 "aggregate_all(count, g(-0.0), N)", "f(X, b), X == -0.0", "\\+ f(-0.0, a)",
+                 "bagof(Y, f(X, Y), L)"]
+
+
+@pytest.mark.parametrize("goal", PROGRAM_GOALS)
+def test_program_facts_and_rules_answer_as_swipl(swipl, goal):
+    swidiff = swipn.swidiff
+    names = swidiff.var_names(goal)
+    swi_program = PROGRAM + (f"query(0, ({goal}), [{', '.join(repr(n) for n in names)}], "
+                             f"[{', '.join(names)}]).\n")
+    example = (PROGRAM, [], swi_program, [(goal, goal, names)])
+    assert swidiff.check_example(example, swipl.run(swi_program)) is not swidiff.DISCARDED
