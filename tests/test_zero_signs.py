@@ -196,3 +196,14 @@ def test_program_facts_and_rules_answer_as_swipl(swipl, goal):
                              f"[{', '.join(names)}]).\n")
     example = (PROGRAM, [], swi_program, [(goal, goal, names)])
     assert swidiff.check_example(example, swipl.run(swi_program)) is not swidiff.DISCARDED
+
+
+def test_a_rule_with_a_zero_constant_gets_no_inspection_view(tmp_path):
+    """A view is read outside slr_sql's connection, where no function shows a zero's sign:
+    a rule that needs one gets no view (docs/sql.md), the others keep theirs."""
+    with slr_sql.open(str(tmp_path / "s.db"), clock=ManualClock(0)) as kb:
+        kb.add_many(["p(-0.0, 1)^1", "p(0.0, 2)^2", "p(1.5, 3)^3"])
+        kb.load("z(Y) :- p(-0.0, Y)^_.\nw(Y) :- p(1.5, Y)^_.")
+        _, rows = kb.sql("SELECT name FROM sqlite_master WHERE type = 'view' ORDER BY name")
+        assert [r[0] for r in rows] == ["w"]
+        assert kb.query("z(Y)") == kb.query("z(Y)", max_steps=1000) == [{"Y": 1}]
