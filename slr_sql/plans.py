@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 from .answers import answer_bindings
 from .encoding import Unencodable, decode_answer, encode
@@ -223,7 +223,7 @@ class BoundPrev:
             return None
         terms = []
         values = []
-        checks = []
+        checks: list[tuple[int, type, Any]] = []
         for i, source in enumerate(self.sources):
             v = source[1] if type(source) is tuple else args[source]
             tv = type(v)
@@ -249,7 +249,7 @@ class BoundPrev:
             for row in rows:
                 x = row[position]
                 if type(x) is not kind or (kind is float and not value
-                                           and not same_float(x, value)):
+                                           and not same_float(cast(float, x), value)):
                     return None   # SQL's 1 = 1.0 (on SQLite -0.0 = 0.0): not a Prolog match
         bound = [to_python(term) for term in terms]
         fields = self.fields
