@@ -188,3 +188,13 @@ def test_clock_moves_between_batches_give_the_reference(rule, events, data):
     got = run_with_clock_moves(rule, events, order, cuts,
                                lambda times: data.draw(st.sampled_from(times), label="clock"))
     assert _typed(got) == _typed([(tuple(h), s, e) for h, s, e in expected]), rule_text(rule)
+
+
+def test_explain_shows_how_a_span_is_decided(tmp_path):
+    with slr_sql.open(str(tmp_path / "x.db"), clock=ManualClock(0.0)) as kb:
+        kb.load(SEQ2)
+        kb.add_many(BATCH)
+        text = kb.explain("c(X)")
+    assert "SQL deciding the spans of position 1 kept in slr_cep_pending" in text
+    # (the span's terminators are read by their seq range, not one by one)
+    assert "SEARCH e1 USING INTEGER PRIMARY KEY (rowid>? AND rowid<?)" in text

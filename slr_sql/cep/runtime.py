@@ -1447,6 +1447,14 @@ class EventRules:
                         sql = alt.recent_insert(pos)
                         lines.append(f"    SQL when position {pos} ({alt.alt.leaves[pos].text}) "
                                      f"has new rows (terminators complete now):")
+                        lines.extend("      " + line for line in _wrap(sql))
+                        lines.extend("      plan: " + step
+                                     for step in self._query_plan_lines(alt, sql))
+                        # (an add none of whose terminators is complete keeps them as a span)
+                        sql = alt.span_recent_insert(pos)
+                        lines.append(f"    SQL deciding the spans of position {pos} kept in "
+                                     f"slr_cep_pending (an add's terminators, none complete "
+                                     f"then), once complete:")
                     else:
                         sql = alt.term_select(pos, alt.pure)
                         lines.append(f"    SQL deciding a terminator :t at position {pos}:")
