@@ -50,10 +50,13 @@ def _rule(kb) -> dict:
     return rule
 
 
-@pytest.mark.parametrize("seconds_per_look", [0.0, 2.0], ids=["idle", "1000x-slower"])
+@pytest.mark.parametrize("seconds_per_look, backstop", [
+    (0.0, None), (2.0, None), (100.0, 1e9)], ids=["idle", "1000x-slower", "no-backstop"])
 def test_a_goal_over_the_step_budget_is_rejected_whatever_the_machine_speed(
-        backend, monkeypatch, seconds_per_look):
+        backend, monkeypatch, seconds_per_look, backstop):
     monkeypatch.setattr(where, "WHERE_MAX_STEPS", 40_960)
+    if backstop is not None:
+        monkeypatch.setattr(where, "WHERE_BACKSTOP", backstop)
     monkeypatch.setattr(engine, "time", MachineSpeed(seconds_per_look))
     with slr_sql.open(backend, clock=ManualClock(100.0)) as kb:
         kb.load(":- consumption(recent).\n" + PROGRAM
@@ -66,6 +69,22 @@ def test_a_goal_over_the_step_budget_is_rejected_whatever_the_machine_speed(
         rule = _rule(kb)
         assert rule["errors"] == 1
         assert rule["last_error"] == "step limit of 40960 inference steps exceeded"
+
+
+def test_the_wall_clock_backstop_rejects_like_the_budget_and_never_fails_the_add(tmp_path,
+                                                                            monkeypatch):
+    # a machine so slow (100 s a look) that the 60 s backstop comes before the budget: the
+    # one machine-dependent limit rejects its candidates, as the budget does; it does not
+    # refuse the add as a condition that may pass would (that would hold every later
+    # decision back behind a goal that may never end)
+    monkeypatch.setattr(engine, "time", MachineSpeed(100.0))
+    with slr_sql.open(str(tmp_path / "r.db"), clock=ManualClock(100.0)) as kb:
+        kb.load(PROGRAM + "r(X) <- a(X) seq b(_) where spin(X).\n")
+        kb.add_many(["a(3000)^1", "a(5)^2", "b(0)^3"])
+        assert [a["X"] for a in kb.query("r(X)^[_, _]")] == [5]   # under 2048 steps: no look
+        rule = _rule(kb)
+        assert rule["errors"] == 1 and rule["last_error"].startswith("query timed out after 60.0 s")
+        assert len(kb.query("b(X)^_")) == 1
 
 
 def test_a_goal_just_under_the_step_budget_derives_and_one_step_over_is_rejected(tmp_path,
