@@ -901,6 +901,11 @@ class Database:
         >>> from slr_sql.store import EventStore
         >>> EventStore(None).run_compiled("SELECT :a + 1", {"a": 1})
         [(2,)]
+        >>> EventStore(None).run_compiled("WITH RECURSIVE r(n) AS (SELECT 1 UNION ALL "
+        ...                               "SELECT n + 1 FROM r) SELECT count(*) FROM r", {},
+        ...                               instructions=100_000)   # endless: stopped by count
+        Traceback (most recent call last):
+        slr_sql.errors.SLRTimeout: query ran out of its budget of 100000 SQLite instructions (in its compiled SQL statement)
         """
         with self.lock:
             self.check_open()
