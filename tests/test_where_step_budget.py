@@ -87,6 +87,20 @@ def test_the_wall_clock_backstop_rejects_like_the_budget_and_never_fails_the_add
         assert len(kb.query("b(X)^_")) == 1
 
 
+def test_a_builtin_looping_inside_one_step_meets_the_backstop_when_called_directly(
+        tmp_path, monkeypatch):
+    # numlist/3 builds its list inside one step, so no step budget sees it; a where goal
+    # of deterministic builtins is called directly, without the interpreter, and still has
+    # the backstop (here already past, as a long enough loop finds it on any machine)
+    monkeypatch.setattr(where, "WHERE_BACKSTOP", -1.0)
+    with slr_sql.open(str(tmp_path / "r.db"), clock=ManualClock(100.0)) as kb:
+        kb.load("c(X) <- a(X) where numlist(1, X, _).\n")
+        kb.add_many(["a(5)^1", "a(100000)^2"])
+        assert [a["X"] for a in kb.query("c(X)^_")] == [5]   # too short a loop to look
+        rule = _rule(kb)
+        assert rule["errors"] == 1 and "timed out" in rule["last_error"]
+
+
 def test_a_goal_just_under_the_step_budget_derives_and_one_step_over_is_rejected(tmp_path,
                                                                             monkeypatch):
     budget = 10_240

@@ -217,6 +217,9 @@ class Residual:
 
         m = BuiltinMachine(engine)
         m.at = at   # (the interpreter runs the goal at the match's end)
+        # a builtin's own loop (numlist/3 building millions of cells) counts no steps: the
+        # backstop bounds it, as in the interpreter
+        m.deadline = time.monotonic() + WHERE_BACKSTOP
         try:
             for _, fn, call_args in calls:
                 if not fn(m, tuple(put(a) for a in call_args)):
