@@ -956,8 +956,10 @@ class Database:
         """Interrupt the statements run inside past ``deadline`` (``time.monotonic()``), or
         past ``instructions`` virtual machine instructions, with :class:`SLRTimeout`. A
         statement run from inside another (a ``kb.define`` predicate querying the kb from
-        SQL) keeps the outer deadline, and its instructions count against the outer budget:
-        the handler is per connection. Call with the lock held."""
+        SQL) keeps the outer deadline, and without a budget of its own its instructions count
+        against the outer budget: the handler is per connection (one with its own budget or
+        an earlier deadline has its own handler while it runs, and the outer's is put back).
+        Call with the lock held."""
         conn = self.conn
         outer, outer_handler = self.deadline, self.progress
         if deadline is None or (outer is not None and outer <= deadline):
