@@ -45,16 +45,20 @@ __all__ = ["MustWait", "Residual", "WHERE_MAX_STEPS", "WHERE_SQL_INSTRUCTIONS",
 
 # Inference steps of one evaluation of a where goal in the interpreter (counted as
 # kb.query's max_steps, checked every 2048 steps): about what 5 s of the interpreter buys
-# (measured with two cores under load: 1.7 million steps of a recursive loop with arithmetic,
-# 2.7 million of event goals, 4.5 million of findall/length, 9.7 million of between/3).
-WHERE_MAX_STEPS = 4_000_000
-# SQLite virtual machine instructions of each statement of a where goal's compiled SQL:
-# about what 5 s of SQLite buys (measured likewise: 44 million instructions of a recursive
-# CTE, 375 million of a plain join, 44 million of JSON functions per row).
-WHERE_SQL_INSTRUCTIONS = 200_000_000
+# (benchmarks/bench_where_budget.py, two cores under load 4-5: 1.0-1.7 million steps of a
+# recursive loop with arithmetic, 2.0-2.7 million of event goals, 1.9-4.5 million of
+# findall/length, 5.6-9.7 million of between/3).
+WHERE_MAX_STEPS = 2_000_000
+# SQLite virtual machine instructions of each statement of a where goal's compiled SQL: what
+# 1.5-2.5 s of plain SQLite work buys and ~10 s of JSON functions on every row, the slowest
+# kind (5 s buy, measured likewise: 200-270 million instructions of a recursive CTE, 300-375
+# million of a plain join, 44-48 million of JSON functions per row), so that the slowest
+# statement spends its budget in about the time the slowest interpreter work spends its own.
+WHERE_SQL_INSTRUCTIONS = 100_000_000
 # Seconds of wall clock, only against work the budgets do not count (a builtin looping
-# inside one step, a Python function called from SQL) and PostgreSQL's statements: 4,000,000
-# of the slowest steps above take ~12 s.
+# inside one step, a Python function called from SQL) and PostgreSQL's statements: the
+# slowest work above spends either budget in ~10 s, so a machine ~6 times slower still
+# meets the budget first.
 WHERE_BACKSTOP = 60.0
 
 
