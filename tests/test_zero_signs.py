@@ -207,3 +207,32 @@ def test_a_rule_with_a_zero_constant_gets_no_inspection_view(tmp_path):
         _, rows = kb.sql("SELECT name FROM sqlite_master WHERE type = 'view' ORDER BY name")
         assert [r[0] for r in rows] == ["w"]
         assert kb.query("z(Y)") == kb.query("z(Y)", max_steps=1000) == [{"Y": 1}]
+
+
+SUBSCRIBED = {"p(-0.0, X)^T": "p(-0.0, X, T, T)", "p(0.0, X)^T": "p(0.0, X, T, T)",
+              "p(X, X)^T": "p(X, X, T, T)", "p(X, -0.0)^T": "p(X, -0.0, T, T)"}
+
+
+@pytest.mark.parametrize("place", ["sqlite", "postgres"])
+@pytest.mark.parametrize("pattern", sorted(SUBSCRIBED))
+def test_subscriptions_deliver_what_swipl_finds(swipl, database, place, pattern, tmp_path):
+    """A subscription matches by Prolog unification, each zero its own events, in store
+    order; a last event ``p(.., end)`` closes the stream (no waiting for silence)."""
+    where = str(tmp_path / "s.db") if place == "sqlite" else \
+        database + ("&" if "?" in database else "?") + f"schema=zs{next(_SCHEMAS)}"
+    with slr_sql.open(where, clock=ManualClock(0)) as kb:
+        sub = kb.subscribe(pattern, since=0)
+        try:
+            assert kb.add_many([swipn.event_text(e) for e in EVENTS]) == []
+            facts = swipn.stored_facts(kb)
+            kb.add(pattern.replace("X", "end").replace("^T", "^9"))
+            got = []
+            while True:
+                item = sub.get(timeout=30)
+                if item["X"] == "end":
+                    break
+                got.append(swipn.swidiff.slr_answer(item, ["X", "T"]))
+        finally:
+            sub.close()
+    swi = swipl.run(swipn.swi_program("", facts, [(pattern, SUBSCRIBED[pattern], None)]))
+    assert ("answers", got) == swipn.expected(swi[0], ["X", "T"])
