@@ -11,6 +11,7 @@ tests/test_swi_builtins.py.
 from __future__ import annotations
 
 import itertools
+import math
 
 import pytest
 import test_swi_prev_next as swipn
@@ -236,3 +237,22 @@ def test_subscriptions_deliver_what_swipl_finds(swipl, database, place, pattern,
             sub.close()
     swi = swipl.run(swipn.swi_program("", facts, [(pattern, SUBSCRIBED[pattern], None)]))
     assert ("answers", got) == swipn.expected(swi[0], ["X", "T"])
+
+
+@pytest.mark.parametrize("place", ["sqlite", "postgres"])
+def test_an_event_time_of_minus_zero_is_stored_as_zero_on_both_backends(database, place,
+                                                                        tmp_path):
+    """A time is a point of the store's clock, not a term: -0.0 is stored as 0.0 (SQLite's
+    REAL column keeps no sign of a zero; PostgreSQL's double precision would), by the
+    column-wise path, the event-by-event path and an integer-typed time alike."""
+    where = str(tmp_path / "t.db") if place == "sqlite" else \
+        database + ("&" if "?" in database else "?") + f"schema=zs{next(_SCHEMAS)}"
+    with slr_sql.open(where, clock=slr_sql.ManualClock(5.0)) as kb:
+        kb.add_many([("p", (1,), -0.0, -0.0), ("p", (2,), -0.0, 1.0)])   # column-wise
+        kb.add_many([("p", (3,), -0.0, -0.0), ("p", (4, 4), -0.0, -0.0)])  # two arities
+        kb.add_event("p", [5], start=-0.0, end=-0.0)
+        kb.add("p(6)^[-0.0, -0.0]")
+        got = sorted((r["X"], r["S"], r["E"]) for r in kb.query("p(X)^[S, E]"))
+        assert got == [(1, 0.0, 0.0), (2, 0.0, 1.0), (3, 0.0, 0.0), (5, 0.0, 0.0),
+                       (6, 0.0, 0.0)]
+        assert all(math.copysign(1.0, t) == 1.0 for _, s, e in got for t in (s, e))
