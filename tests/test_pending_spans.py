@@ -198,3 +198,24 @@ def test_explain_shows_how_a_span_is_decided(tmp_path):
     assert "SQL deciding the spans of position 1 kept in slr_cep_pending" in text
     # (the span's terminators are read by their seq range, not one by one)
     assert "SEARCH e1 USING INTEGER PRIMARY KEY (rowid>? AND rowid<?)" in text
+
+
+def test_a_span_whose_rule_needs_python_now_decides_every_terminator(where):
+    """The program changes what the rule's where goal calls (stored facts, pushed into the
+    SQL, become a rule): the rule's text and key stay, its alternative needs the Python
+    side now, and the spans it kept are decided one terminator at a time -- every one of
+    them, those not complete yet kept as terminators of their own."""
+    rule = SEQ2.replace("b(X).", "b(X) where ok(X).")
+    clock = ManualClock(0.0)
+    with slr_sql.open(where, clock=clock) as kb:
+        kb.load(rule + "ok(0). ok(1). ok(2).\n")
+        kb.add_many(BATCH)
+        assert _pending(kb) == [("span", [1, 5, 5])]
+        kb.load(rule + "ok(X) :- X >= 0, X < 3.\n")
+        clock.set(6.5)
+        assert _c(kb) == _ending_before(6.5)
+        assert sorted(_pending(kb)) == [("term", [4]), ("term", [5])]
+        assert _pending_count(kb) == 2
+        clock.set(100.0)
+        assert _pending(kb) == []
+        assert _c(kb) == EXPECTED
