@@ -260,6 +260,22 @@ def test_the_door_refuses_a_null_a_postgresql_function_writes(postgres_url):
         assert kb.query("p(X)^_") == [{"X": Atom("a")}]
 
 
+def test_the_door_refuses_a_null_a_deferred_postgresql_trigger_writes(postgres_url):
+    """A constraint trigger deferred to the commit writes after the statement: it runs
+    before the door reads what the statement wrote, so its NULL is refused too."""
+    with slr_sql.open(postgres_url, clock=ManualClock(10)) as kb:
+        for event in ("p(a)^1", "p(b)^2"):
+            kb.add(event)
+        kb.sql("CREATE TABLE notes (n int)", write=True)
+        kb.sql("CREATE FUNCTION spoil() RETURNS trigger LANGUAGE plpgsql AS "
+               "$$ BEGIN UPDATE p SET arg1 = NULL WHERE seq = 2; RETURN NULL; END $$",
+               write=True)
+        kb.sql("CREATE CONSTRAINT TRIGGER spoiler AFTER INSERT ON notes DEFERRABLE "
+               "INITIALLY DEFERRED FOR EACH ROW EXECUTE FUNCTION spoil()", write=True)
+        refused_unchanged(kb, "INSERT INTO notes VALUES (1)", 2)
+        assert kb.sql("SELECT count(*) FROM notes")[1] == [(0,)]
+
+
 @pytest.mark.parametrize("backend_kind", ["sqlite", "postgres"])
 def test_a_write_beside_rows_that_were_no_events_already_goes_through_once(
         backend_kind, request, tmp_path):
