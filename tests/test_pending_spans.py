@@ -10,6 +10,7 @@ crash) decides like any other.
 """
 from __future__ import annotations
 
+import itertools
 import json
 import sqlite3
 import subprocess
@@ -22,8 +23,8 @@ import slr_sql
 from slr_sql import ManualClock
 from slr_sql.store.schema import migrate, migration_scripts
 
-from test_cep_differential import (_event_text, _typed, ab_points, reference, rule_text, rules,
-                                   streams, two_type_rules)
+from test_cep_differential import (_event_text, _typed, _vars, ab_points, patterns, reference,
+                                   rule_text, rules, streams, two_type_rules)
 
 SEQ2 = (":- consumption(recent).\n:- max_delay(a/1, 0).\n:- max_delay(b/1, 0).\n"
         "c(X) <- a(X) seq b(X).\n")
@@ -188,6 +189,77 @@ def test_clock_moves_between_batches_give_the_reference(rule, events, data):
     got = run_with_clock_moves(rule, events, order, cuts,
                                lambda times: data.draw(st.sampled_from(times), label="clock"))
     assert _typed(got) == _typed([(tuple(h), s, e) for h, s, e in expected]), rule_text(rule)
+
+
+_SCHEMAS = itertools.count()
+
+
+@pytest.fixture(scope="module")
+def database(postgres_server):
+    """One database for the module's PostgreSQL examples, a schema each."""
+    from conftest import postgres_database
+    return postgres_database(postgres_server[1])
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=list(HealthCheck))
+@given(st.one_of(two_type_rules().map(lambda rule: dict(rule, policy="recent")),
+                 rules().filter(lambda rule: rule["policy"] == "recent")),
+       st.one_of(ab_points(), streams()), st.data())
+def test_clock_moves_between_batches_on_postgres_give_the_reference(database, rule, events,
+                                                                   data):
+    order = data.draw(st.permutations(range(len(events))), label="arrival order")
+    cuts = data.draw(st.lists(st.integers(0, len(events)), max_size=4), label="batches")
+    schema = database + ("&" if "?" in database else "?") + f"schema=s{next(_SCHEMAS)}"
+    got = run_with_clock_moves(rule, events, order, cuts,
+                               lambda times: data.draw(st.sampled_from(times), label="clock"),
+                               where=schema)
+    expected = reference(rule, events)
+    assert _typed(got) == _typed([(tuple(h), s, e) for h, s, e in expected]), rule_text(rule)
+
+
+@st.composite
+def recent_rules_with_or(draw):
+    """recent rules of several alternatives (``or``), each with its own terminators (the
+    reference evaluator's recent takes no ``or``)."""
+    pattern = draw(patterns(allow_or=True))
+    if pattern[0] != "or":
+        pattern = ("or", pattern, draw(patterns(depth=1, allow_or=True)))
+    bound = sorted(_vars(pattern))
+    where = []
+    if bound and draw(st.booleans()):
+        where.append((draw(st.sampled_from(["<", ">", "=<", ">="])),
+                      draw(st.sampled_from(bound)), draw(st.sampled_from(bound + [0, 1]))))
+    return {"pattern": pattern, "head": [v for v in bound if draw(st.booleans())],
+            "where": where, "cnot": None, "within": draw(st.sampled_from([None, 2])),
+            "policy": "recent"}
+
+
+def _all_at_once(rule, events) -> list:
+    """The complex events of ``events`` added in one batch in end order, the clock past
+    them all (every terminator decided in the add: no span)."""
+    with slr_sql.open(None, clock=ManualClock(100.0)) as kb:
+        delays = "".join(f":- max_delay({name}/{arity}, 0).\n"
+                         for name, arity in (("a", 1), ("b", 1), ("c", 1), ("d", 2)))
+        kb.load(f":- consumption(recent).\n{delays}" + rule_text(rule))
+        assert kb.add_many([_event_text(ev) for ev in
+                            sorted(events, key=lambda ev: (ev[3], ev[2]))]) == []
+        arity = len(rule["head"])
+        rows = kb.store.scan("r", arity) if kb.store.table_for("r", arity) else []
+        return sorted(((tuple(args), s, e) for args, s, e, _ in rows), key=repr)
+
+
+@settings(max_examples=60, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@given(recent_rules_with_or(), streams(), st.data())
+def test_spans_of_several_alternatives_give_what_one_batch_gives(rule, events, data):
+    """Each alternative keeps spans of its own terminators; decided whole, in part or not
+    at all by the clock moves between batches in any arrival order, they derive what the
+    events added at once, in order, with the clock past them derive."""
+    order = data.draw(st.permutations(range(len(events))), label="arrival order")
+    cuts = data.draw(st.lists(st.integers(0, len(events)), max_size=4), label="batches")
+    got = run_with_clock_moves(rule, events, order, cuts,
+                               lambda times: data.draw(st.sampled_from(times), label="clock"))
+    assert _typed(got) == _typed(_all_at_once(rule, events)), rule_text(rule)
 
 
 def test_explain_shows_how_a_span_is_decided(tmp_path):
