@@ -884,7 +884,7 @@ class RuleRuntime:
         for n, kind, wtype, warity, t, tend, c in rows:
             waits[(n, kind, (wtype, warity) if wtype is not None else None)] = t
             pmin = min(pmin, tend)
-            count += c
+            count += int(c)   # (a sum on PostgreSQL is a numeric: a Decimal)
         self.waits = waits
         self.pmin = pmin
         self.pending = count
