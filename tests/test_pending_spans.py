@@ -152,6 +152,24 @@ def test_a_version_11_store_keeps_its_pending_rows(tmp_path):
     conn.close()
 
 
+def test_a_version_11_store_with_a_view_of_its_pending_rows_is_upgraded(tmp_path):
+    """A view of ``slr_cep_pending`` (one of the user's) names the table migration 12 drops
+    and makes again: the upgrade keeps it, reading the new table."""
+    path = str(tmp_path / "v11view.db")
+    conn = sqlite3.connect(path, isolation_level=None)
+    migrate(conn, path, [s for s in migration_scripts() if s[0] <= 11])
+    conn.execute("INSERT INTO slr_cep_pending (rule, alt, kind, pos, rowids, t_start, t_end) "
+                 "VALUES ('k', 0, 'term', 1, '[7]', 1.0, 2.0)")
+    conn.execute("CREATE VIEW waiting AS SELECT rule, kind, rowids FROM slr_cep_pending")
+    conn.close()
+    with slr_sql.open(path) as kb:
+        assert kb.store.schema_version() == 12
+        assert kb.sql("SELECT * FROM waiting")[1] == [("k", "term", "[7]")]
+        kb.sql("INSERT INTO slr_cep_pending (rule, alt, kind, rowids, t_start, t_end) "
+               "VALUES ('k', 0, 'span', '[1, 2, 2]', 1.0, 2.0)", write=True)
+        assert sorted(kb.sql("SELECT kind FROM waiting")[1]) == [("span",), ("term",)]
+
+
 def run_with_clock_moves(rule, events, order, cuts, moves, where=None):
     """Add ``events`` in ``order``, in batches cut at ``cuts``; after each batch the clock
     moves to the time ``moves`` picks among the batch's ends (less a half) and just before
