@@ -1318,7 +1318,10 @@ class PgDatabase:
     python_functions = False
 
     def run_compiled(self, sql: str, params: dict, limit: int | None = None,
-                     deadline: float | None = None, may_fall_back: bool = False) -> list[tuple]:
+                     deadline: float | None = None, may_fall_back: bool = False,
+                     instructions: int | None = None) -> list[tuple]:
+        # (``instructions``: PostgreSQL counts none a client could bound; the deadline,
+        # statement_timeout, is its only limit)
         with self.lock:
             self.check_open()
             deadline = self._outer(deadline)
