@@ -940,6 +940,21 @@ class AltSQL:
                 f"{self._span_join(pos)} WHERE {self._where(conds)}")
         return sql
 
+    def span_terms(self, pos: int) -> str:
+        """The terminators of one pending span at ``pos`` (its first and last seq
+        ``:first``, ``:last``): their seq, start and end, in decision order -- a span
+        decided one terminator at a time (its alternative no longer all SQL)."""
+        key = ("span_terms", pos)
+        sql = self._cache.get(key)
+        if sql is None:
+            a = self.aliases()
+            t = a[f"e{pos}"]
+            conds = [f"{t}.seq BETWEEN :first AND :last"] + self.cond_sql(a, within={pos})
+            sql = self._cache[key] = (
+                f"SELECT {t}.seq, {t}.t_start, {t}.t_end FROM {self.tables[pos]} AS {t} "
+                f"WHERE {self._where(conds)} ORDER BY {t}.t_end, {t}.t_start, {t}.seq")
+        return sql
+
     def _span_conditions(self, pos: int) -> list[str]:
         """The pending spans at ``pos`` whose earliest terminator can be decided now."""
         return ["p.rule = :rule", f"p.alt = {self.index}", "p.kind = 'span'", f"p.pos = {pos}",
