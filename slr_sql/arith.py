@@ -11,7 +11,7 @@ from typing import Any
 from .terms import MAX_INTEGER_BITS, Atom, Struct, Var, deref, String
 from .errors import SLREvaluationError
 
-__all__ = ["evaluate", "type_error", "instantiation_error", "evaluation_error", "iso_error",
+__all__ = ["evaluate", "apply_binary", "type_error", "instantiation_error", "evaluation_error", "iso_error",
            "resource_error"]
 
 
@@ -61,8 +61,30 @@ def _int_power(a: int, b: int) -> int:
 
 def _int_required(x: Any) -> int:
     if type(x) is not int:
+        if type(x) is float:
+            _finite(x)   # SWI-Prolog: an infinite or NaN operand is its error, not a type's
         raise type_error("integer", x)
     return x
+
+
+def _finite(x: float) -> float:
+    """A float operand or result as SWI-Prolog's check_float() with its default flags
+    (float_overflow=error, float_undefined=error): an infinity is
+    ``evaluation_error(float_overflow)``, a NaN ``evaluation_error(undefined)``."""
+    if x - x != 0.0:   # inf - inf and nan - nan are NaN; any finite x - x is 0.0
+        raise evaluation_error("undefined" if x != x else "float_overflow")
+    return x
+
+
+def _float_args(f):
+    """A float function of SWI-Prolog's: each float operand is checked (left first) before
+    it is applied (sin(inf) is float_overflow, not undefined; exp(-inf) too)."""
+    def g(*args):
+        for a in args:
+            if type(a) is float:
+                _finite(a)
+        return f(*args)
+    return g
 
 
 def _div(a, b):
@@ -72,10 +94,22 @@ def _div(a, b):
         if a % b == 0:
             return a // b
         return a / b
+    if type(b) is float and b - b != 0.0:
+        if b == b:
+            # over an infinity (SWI-Prolog): an integer is the integer 0, a zero takes the
+            # divisor's sign; inf / inf is undefined (the result's check)
+            if type(a) is int:
+                return 0
+            return math.copysign(0.0, b) if a == 0 else a / b
+        if type(a) is float:
+            _finite(a)   # inf / nan: the infinity's overflow first
+        raise evaluation_error("undefined")
     if b == 0:
-        # a float zero (or NaN) over zero is no number (SWI-Prolog: undefined), anything
-        # else over zero a division by zero
-        raise evaluation_error("undefined" if a == 0 or a != a else "zero_divisor")
+        if type(a) is float:
+            _finite(a)
+        # a zero over zero is no number (SWI-Prolog: undefined), anything else over zero
+        # a division by zero
+        raise evaluation_error("undefined" if a == 0 else "zero_divisor")
     return a / b
 
 
@@ -118,6 +152,24 @@ def _pow_star(a, b):
         if a == 0:
             raise evaluation_error("zero_divisor")
         return float(a) ** b
+    return _pow_float(a, b)
+
+
+def _pow_float(a, b):
+    """a ** b (and a ^ b) when one of them is a float, as SWI-Prolog 9 (prefer_rationals
+    false): anything to the power zero and the integer 1 to any power are the integer 1;
+    else both operands are checked (left first: inf ** nan is float_overflow) and so is the
+    result."""
+    if b == 0 or (type(a) is int and a == 1):
+        return 1
+    if type(a) is int and a == 0 and b == b:
+        if b < 0:
+            raise evaluation_error("zero_divisor")
+        return 0
+    if type(a) is float:
+        _finite(a)
+    if type(b) is float:
+        _finite(b)
     try:
         return float(a) ** float(b)
     except ZeroDivisionError:
@@ -133,16 +185,9 @@ def _pow_caret(a, b):
                 raise evaluation_error("zero_divisor")
             raise type_error("float", a)
         return _int_power(a, b)
-    try:
-        return float(a) ** float(b)
-    except ZeroDivisionError:
-        raise evaluation_error("zero_divisor")
+    return _pow_float(a, b)
 
 
-def _float_check(x: float) -> float:
-    if x != x:
-        raise evaluation_error("undefined")
-    return x
 
 
 def _sqrt(a):
@@ -152,8 +197,11 @@ def _sqrt(a):
 
 
 def _log(a):
-    if a <= 0:
+    if a < 0:
         raise evaluation_error("undefined")
+    if a == 0:
+        # SWI-Prolog 9: log(0) is -inf, an overflow (ISO would say undefined)
+        raise evaluation_error("float_overflow")
     return math.log(a)
 
 
@@ -164,16 +212,16 @@ def _log2(b, x):
 def _to_int(f, x):
     if type(x) is int:
         return x
-    if math.isinf(x) or math.isnan(x):
-        raise evaluation_error("undefined")
+    if x - x != 0.0:
+        return x   # SWI-Prolog: an infinity or NaN stays itself (truncate(inf) is inf)
     return int(f(x))
 
 
 def _round(x):
     if type(x) is int:
         return x
-    if math.isinf(x) or math.isnan(x):
-        raise evaluation_error("undefined")
+    if x - x != 0.0:
+        return x
     # Prolog rounds half away from zero, Python's round() to even
     return int(math.floor(x + 0.5)) if x >= 0 else -int(math.floor(-x + 0.5))
 
@@ -181,6 +229,8 @@ def _round(x):
 def _sign(x):
     if type(x) is int:
         return (x > 0) - (x < 0)
+    if x != x:
+        return x
     return math.copysign(1.0, x) if x != 0 else 0.0
 
 
@@ -194,6 +244,11 @@ def _minmax(pick_first):
         if b != b:
             return a
         if a == b:
+            # SWI-Prolog makes floats of the two (checked: max(inf, inf) is float_overflow)
+            if type(a) is float:
+                _finite(a)
+            if type(b) is float:
+                _finite(b)
             sa = math.copysign(1.0, a) if type(a) is float else 1.0
             sb = math.copysign(1.0, b) if type(b) is float else 1.0
             if sa != sb:   # -0.0 and a zero: the sign decides
@@ -201,6 +256,21 @@ def _minmax(pick_first):
             return b if type(b) is float else a
         return a if pick_first(a, b) else b
     return f
+
+
+def _copysign(a, b):
+    # SWI-Prolog: an integer magnitude stays an integer (copysign(1, -0.0) is -1)
+    if type(a) is int:
+        return -abs(a) if math.copysign(1.0, b) < 0 else abs(a)
+    return math.copysign(a, b)
+
+
+def _fractional_part(a):
+    if type(a) is float and a - a != 0.0:
+        if a != a:
+            raise evaluation_error("undefined")
+        return math.copysign(0.0, a)   # SWI-Prolog: the fraction of an infinity is 0.0
+    return a - math.trunc(a)
 
 
 def _shift_l(a, b):
@@ -227,10 +297,10 @@ BINARY = {
     "max": _minmax(lambda a, b: a > b),
     "**": _pow_star,
     "^": _pow_caret,
-    "atan2": lambda a, b: math.atan2(a, b),
-    "atan": lambda a, b: math.atan2(a, b),
-    "copysign": lambda a, b: math.copysign(a, b),
-    "log": _log2,
+    "atan2": _float_args(math.atan2),
+    "atan": _float_args(math.atan2),
+    "copysign": _copysign,
+    "log": _float_args(_log2),
     ">>": _shift_r,
     "<<": _shift_l,
     "/\\": lambda a, b: _int_required(a) & _int_required(b),
@@ -244,24 +314,25 @@ UNARY = {
     "+": lambda a: a,
     "abs": abs,
     "sign": _sign,
-    "sqrt": _sqrt,
-    "sin": math.sin,
-    "cos": math.cos,
-    "tan": math.tan,
-    "asin": math.asin,
-    "acos": math.acos,
-    "atan": math.atan,
-    "exp": math.exp,
-    "log": _log,
-    "log2": lambda a: _log(a) / math.log(2),
+    "sqrt": _float_args(_sqrt),
+    "sin": _float_args(math.sin),
+    "cos": _float_args(math.cos),
+    "tan": _float_args(math.tan),
+    "asin": _float_args(math.asin),
+    "acos": _float_args(math.acos),
+    "atan": _float_args(math.atan),
+    "exp": _float_args(math.exp),
+    "log": _float_args(_log),
+    "log2": _float_args(lambda a: _log(a) / math.log(2)),
     "floor": lambda a: _to_int(math.floor, a),
     "ceiling": lambda a: _to_int(math.ceil, a),
     "round": _round,
     "truncate": lambda a: _to_int(math.trunc, a),
     "integer": _round,
-    "float": float,
-    "float_integer_part": lambda a: float(math.trunc(a)),
-    "float_fractional_part": lambda a: a - math.trunc(a),
+    "float": _float_args(float),
+    "float_integer_part": _float_args(
+        lambda a: a if type(a) is int else math.copysign(float(math.trunc(a)), a)),
+    "float_fractional_part": _fractional_part,
     "\\": lambda a: ~_int_required(a),
     "msb": lambda a: _int_required(a).bit_length() - 1,
     "succ": lambda a: _int_required(a) + 1,
@@ -312,11 +383,11 @@ def evaluate(t: Any, _depth: int = 0) -> int | float:
                     # right argument first, as SWI-Prolog: it decides which error is
                     # raised when both arguments are faulty ((1/0) + Y: instantiation_error)
                     b = evaluate(args[1], _depth + 1)
-                    return _checked(f(evaluate(args[0], _depth + 1), b))
+                    return _checked(f(evaluate(args[0], _depth + 1), b), name, 2)
             elif n == 1:
                 f = UNARY.get(name)
                 if f is not None:
-                    return _checked(f(evaluate(args[0], _depth + 1)))
+                    return _checked(f(evaluate(args[0], _depth + 1)), name, 1)
         except (OverflowError,) as exc:
             raise evaluation_error("float_overflow") from exc
         except (ValueError, ZeroDivisionError) as exc:
@@ -325,14 +396,46 @@ def evaluate(t: Any, _depth: int = 0) -> int | float:
     return _atomic_value(t, tt)
 
 
-def _checked(r: Any) -> Any:
-    """An operation's result: NaN is undefined; an integer beyond MAX_INTEGER_BITS (one that
-    grew slowly, by + or -) is a resource error."""
-    if type(r) is float:
-        return _float_check(r)
-    if type(r) is int and r.bit_length() > MAX_INTEGER_BITS:
-        raise _too_big()
+# The functions whose float result SWI-Prolog passes on unchecked: they make no new
+# infinity or NaN of finite operands, so -inf, abs(nan), max(inf, 1), truncate(inf) are
+# answers, while inf + 1, sqrt(inf), float(inf) raise their errors.
+UNCHECKED = frozenset([("-", 1), ("+", 1), ("abs", 1), ("sign", 1), ("floor", 1),
+                       ("ceiling", 1), ("round", 1), ("truncate", 1), ("integer", 1),
+                       ("float_fractional_part", 1), ("min", 2), ("max", 2), ("copysign", 2)])
+
+
+def _checked(r: Any, name: str, n: int) -> Any:
+    """An operation's result: an infinity is float_overflow and a NaN undefined (but for
+    the UNCHECKED functions); an integer beyond MAX_INTEGER_BITS (one that grew slowly, by
+    + or -) is a resource error."""
+    tr = type(r)
+    if tr is float:
+        if r - r != 0.0 and (name, n) not in UNCHECKED:
+            _finite(r)
+        return r
+    if tr is int:
+        if r.bit_length() > MAX_INTEGER_BITS:
+            raise _too_big()
+        return r
+    if tr is complex:   # a negative number to a fractional power
+        raise evaluation_error("undefined")
     return r
+
+
+def apply_binary(name: str, a: int | float, b: int | float) -> int | float:
+    """The binary function ``name`` of two numbers as ``is`` applies it, its result checked
+    (the folds of sum_list/2 and aggregate_all/3: ``S is S0 + X``, ``M is max(M0, X)``).
+
+    >>> apply_binary("max", 1, 1.0)
+    1.0
+    >>> apply_binary("+", 1.0e308, 1.0e308)
+    Traceback (most recent call last):
+    slr_sql.errors.SLREvaluationError: error(evaluation_error(float_overflow),_)
+    """
+    try:
+        return _checked(BINARY[name](a, b), name, 2)
+    except OverflowError as exc:
+        raise evaluation_error("float_overflow") from exc
 
 
 def _other_compound(t: Struct, depth: int) -> int | float:
@@ -399,9 +502,9 @@ def _evaluate_deep(t: Any) -> int | float:
                 if x.n == 2:
                     b = values.pop()
                     a = values.pop()
-                    values.append(_checked(x.f(a, b)))
+                    values.append(_checked(x.f(a, b), x.term.name, 2))
                 else:
-                    values.append(_checked(x.f(values.pop())))
+                    values.append(_checked(x.f(values.pop()), x.term.name, 1))
             except OverflowError as exc:
                 raise evaluation_error("float_overflow") from exc
             except (ValueError, ZeroDivisionError) as exc:

@@ -14,7 +14,7 @@ import math
 import sys
 from typing import Any, Callable, Iterator
 
-from .arith import (BINARY, evaluate, evaluation_error, instantiation_error, iso_error,
+from .arith import (apply_binary, evaluate, evaluation_error, instantiation_error, iso_error,
                     resource_error, type_error)
 from .unify import bound_args, copy_term, unify, undo, unify_event_row
 from .errors import SLRError, SLREvaluationError, SLRSyntaxError
@@ -925,7 +925,7 @@ def _numbers(t: Any) -> list:
 def _sum_list(m, a):
     total: Any = 0
     for x in _numbers(a[0]):
-        total = total + x
+        total = apply_binary("+", total, x)   # Y is Y0 + X: inf + 1 is float_overflow
     return m.unify(a[1], total)
 
 
@@ -953,10 +953,9 @@ def _fold_arith(name: str, items: list) -> Any:
     aggregate_all(max(X), ..) do (``max(1, 1.0)`` is 1.0, in either order); None if empty."""
     if not items:
         return None
-    pick = BINARY[name]
     value = items[0]
     for x in items[1:]:
-        value = pick(value, x)
+        value = apply_binary(name, value, x)
     return value
 
 
@@ -1281,7 +1280,7 @@ def _aggregate_arith(m: "Machine", kind: str, template, goal, out, nxt):
 
     def each(found) -> None:
         if kind == "sum":
-            state[0] = state[0] + evaluate(found)
+            state[0] = apply_binary("+", state[0], evaluate(found))
         elif witness:
             if not state:
                 state.append(found)
@@ -1291,7 +1290,9 @@ def _aggregate_arith(m: "Machine", kind: str, template, goal, out, nxt):
                 state[0] = found
         else:
             value = evaluate(found)
-            state[:] = [BINARY[kind](state[0], value) if state else value]
+            # the first solution is max(X, X), as SWI-Prolog's State = state(X) starts:
+            # max(inf, inf) is float_overflow, so a lone inf is too
+            state[:] = [apply_binary(kind, state[0] if state else value, value)]
 
     def finish(m, results, nxt):
         if not state:

@@ -33,7 +33,7 @@ from math import copysign
 from json.encoder import encode_basestring as _quote  # C-accelerated; keeps non-ASCII
 from typing import Any
 
-from .arith import BINARY
+from .arith import apply_binary
 from .builtins import BuiltinMachine, call_python_pred, sorted_unique
 from .encoding import INT64_MAX, INT64_MIN, decode, encode, encode_json
 from .sqlcompile import SITES, ColRef, resolve
@@ -144,29 +144,30 @@ class _Sum:
         self.v = 0
 
     def step(self, x):
-        self.v = self.v + _num(x)
+        self.v = apply_binary("+", self.v, _num(x))
 
     def finalize(self):
         return _checked(self.v)
 
 
 class _Max:
-    # Prolog's max/2 (max(1, 1.0) is 1.0 in either order), folded as aggregate_all does
-    pick = staticmethod(BINARY["max"])
+    # Prolog's max/2 (max(1, 1.0) is 1.0 in either order), folded as aggregate_all does,
+    # from max(X, X) for the first X (max(inf, inf) is float_overflow)
+    name = "max"
 
     def __init__(self):
         self.v = None
 
     def step(self, x):
         x = _num(x)
-        self.v = x if self.v is None else self.pick(self.v, x)
+        self.v = apply_binary(self.name, x if self.v is None else self.v, x)
 
     def finalize(self):
         return self.v
 
 
 class _Min(_Max):
-    pick = staticmethod(BINARY["min"])
+    name = "min"
 
 
 class _Setof:
