@@ -5,6 +5,7 @@ modules of this package), and hands every branch it completes to the caller's ``
 from __future__ import annotations
 
 import itertools
+import math
 from typing import Any, Callable
 
 from ..program import event_key, split_event_atom
@@ -74,9 +75,12 @@ class Compiler(Unification, BuiltinGoals, ControlGoals, RuleGoals, EventGoals, A
 
     def const(self, value: Any) -> str:
         """A bound parameter (or, for views, a literal) holding an SQL value."""
-        key = (type(value), value)
-        if type(value) is float and value != value:
-            raise Fallback("NaN constant")
+        key: tuple = (type(value), value)
+        if type(value) is float:
+            if value != value:
+                raise Fallback("NaN constant")
+            # -0.0 == 0.0 (and hashes alike): the sign keeps the two parameters apart
+            key = (float, value, math.copysign(1.0, value))
         name = self._const.get(key)
         if name is not None:
             return name
