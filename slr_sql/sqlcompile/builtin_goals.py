@@ -50,18 +50,32 @@ class BuiltinGoals:
     # ------------------------------------------------------------------ arithmetic
     def arith_sql(self, t: Any):
         """(sql, kind) of an arithmetic expression, or ('const', value) when constant."""
+        sql, v, native = self._arith(t)
+        return (self._finite(sql) if native else sql), v
+
+    def _finite(self, sql: str) -> str:
+        """SQL's own float arithmetic checked as Prolog checks it (float_overflow)."""
+        import math
+
+        return self.dialect.finite_float(
+            sql, self.udf(self.dialect.arith1(self.const("float"), self.const(math.inf))))
+
+    def _arith(self, t: Any):
+        """(sql, kind, native): native when ``sql`` is SQL's own float ``+ - *``, whose
+        overflow the caller checks once for the whole native part (an infinity or NaN stays
+        one through + - *, and only an overflow makes one of finite operands)."""
         t = deref(t)
         tt = type(t)
         if tt is int or tt is float:
-            return None, t
+            return None, t, False
         if tt is Var:
             raise Fallback(f"the unbound variable {t.name} in arithmetic (instantiation error)")
         if tt is Col:
             if t.kind in NUMERIC:
-                return t.sql, t.kind
+                return t.sql, t.kind, False
             if t.kind == "text":
                 raise Fallback("arithmetic on a list value")
-            return self.udf(self.dialect.prolog_number(t.sql)), "num"
+            return self.udf(self.dialect.prolog_number(t.sql)), "num", False
         if not has_col(t):
             if has_var(t):
                 raise Fallback(f"unbound variable in the arithmetic expression {format_for_message(shown_in_message(t))}")
@@ -73,29 +87,34 @@ class BuiltinGoals:
                                     for a in _atoms(t)):
                 raise Fallback("a non-deterministic arithmetic function")
             try:
-                return None, evaluate(t)
+                return None, evaluate(t), False
             except Exception as exc:
                 raise Fallback(f"arithmetic error: {exc}")
         if tt is Struct and len(t.args) in (1, 2):
             from ..arith import BINARY, UNARY
 
             op = str(t.name)
-            subs = [self.arith_sql(a) for a in t.args]
+            subs = [self._arith(a) for a in t.args]
             if len(subs) == 2 and op in BINARY:
-                (sa, va), (sb, vb) = subs
+                (sa, va, na), (sb, vb, nb) = subs
                 if op in ("+", "-", "*") and _floatish(sa, va) and _floatish(sb, vb) \
                         and (_is_float(sa, va) or _is_float(sb, vb)):
                     xa = sa if sa is not None else self.const(float(va))
                     xb = sb if sb is not None else self.const(float(vb))
-                    return f"({xa} {op} {xb})", "float"
-                xa = sa if sa is not None else self.const(va)
-                xb = sb if sb is not None else self.const(vb)
-                return self.udf(self.dialect.arith2(self.const(op), xa, xb)), "num"
+                    return f"({xa} {op} {xb})", "float", True
+                xa = self._operand(sa, va, na)
+                xb = self._operand(sb, vb, nb)
+                return self.udf(self.dialect.arith2(self.const(op), xa, xb)), "num", False
             if len(subs) == 1 and op in UNARY:
-                (sa, va), = subs
-                xa = sa if sa is not None else self.const(va)
-                return self.udf(self.dialect.arith1(self.const(op), xa)), "num"
+                (sa, va, na), = subs
+                xa = self._operand(sa, va, na)
+                return self.udf(self.dialect.arith1(self.const(op), xa)), "num", False
         raise Fallback(f"arithmetic expression {format_for_message(shown_in_message(t))} has no SQL form")
+
+    def _operand(self, sql, v, native: bool) -> str:
+        if sql is None:
+            return self.const(v)
+        return self._finite(sql) if native else sql
 
     def num_sql(self, t: Any) -> str:
         sql, v = self.arith_sql(t)
@@ -142,10 +161,12 @@ class BuiltinGoals:
             st.restore(m)
             return
         if key == ("is", 2):
-            sql, v = self.arith_sql(args[1])
+            sql, v, native = self._arith(args[1])
+            if native:
+                sql = self._finite(sql)
             m = st.mark()
             value = v if sql is None else Col(sql, v)
-            if sql is not None and self.dialect.may_raise(sql):
+            if sql is not None and (native or self.dialect.may_raise(sql)):
                 # evaluated where the goal stands (its loop level), as Prolog does, even when
                 # the value is used only later or not at all
                 st.conds.append(f"({sql}) IS NOT NULL")

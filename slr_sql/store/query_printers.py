@@ -123,6 +123,17 @@ class SQLiteQueryPrinter:
     def arith2(self, op: str, a: str, b: str) -> str:
         return f"slr_ar2({op}, {a}, {b})"
 
+    def finite_float(self, value: str, overflow: str) -> str:
+        """A float computed by SQL's own ``+ - *`` of finite floats, raising where Prolog
+        raises float_overflow: SQLite's arithmetic overflows to an infinity (or a NaN,
+        which it reads as NULL), so any other value runs ``overflow`` (a call that raises).
+
+        >>> SQLiteQueryPrinter().finite_float("(t0.t_start * :c0)", "slr_ar1(:c1, :c2)")
+        'CASE WHEN abs((t0.t_start * :c0)) <= 1.7976931348623157e308 THEN (t0.t_start * :c0) ELSE slr_ar1(:c1, :c2) END'
+        """
+        return (f"CASE WHEN abs({value}) <= 1.7976931348623157e308 THEN {value} "
+                f"ELSE {overflow} END")
+
     def det_call(self, site: int, output: int, inputs: str) -> str:
         """Output ``output`` (-1: success) of the det builtin or Python predicate ``site``."""
         return f"slr_det({site}, {output}{inputs})"
@@ -239,6 +250,11 @@ class PostgresQueryPrinter:
 
     def arith2(self, op: str, a: str, b: str) -> str:
         return self.arith1(op, a)
+
+    def finite_float(self, value: str, overflow: str) -> str:
+        # double precision arithmetic raises its own overflow error (the interpreter then
+        # answers); its operands here are finite (times, finite constants)
+        return value
 
     def det_call(self, site: int, output: int, inputs: str) -> str:
         raise Unprintable("a det builtin or a kb.define'd predicate (a Python function) runs "
