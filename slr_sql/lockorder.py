@@ -20,7 +20,7 @@ debug mode it returns a plain ``threading.Lock`` / ``RLock``: no cost.
 >>> with store, sync: pass
 Traceback (most recent call last):
 ...
-slr_sql.lockorder.LockOrderViolation: took a sync lock while holding a store lock (the order is subscriptions.pass, kb.load, sync, frames, store, buffers, subscriptions.hub, subscription, store.reader, clock.listeners, parser)
+slr_sql.lockorder.LockOrderViolation: took a sync lock while holding a store lock (the order is kb.load, sync, frames, store, buffers, subscriptions.hub, subscription, store.reader, clock.listeners, parser)
 >>> del os.environ["SLR_DEBUG_LOCKS"]; clear_violations()
 """
 from __future__ import annotations
@@ -35,7 +35,6 @@ __all__ = ["LOCK_ORDER", "LockOrderViolation", "OrderedLock", "ordered_lock", "d
 
 # outermost first: a thread holding one of these may take only the ones after it
 LOCK_ORDER = (
-    "subscriptions.pass",  # SubscriptionHub: one delivery pass at a time (it may query)
     "kb.load",             # KnowledgeBase: load / unload / re-reading the program
     "sync",                # Synchronizer: waiting queries, timers, completeness (its Condition)
     "frames",              # FrameTree: the frame tree, refreshed from the store's transforms

@@ -91,9 +91,6 @@ class SubscriptionHub:
         self.cleanup_interval = CLEANUP_INTERVAL
         self._subs: dict[str, Subscription] = {}
         self._by_type: dict[tuple[str, int], list[Subscription]] = {}
-        # a copy of _by_type made under the lock at each change and never changed: what a pass
-        # serves, read without the lock (a thread that just added never waits for it)
-        self._by_type_view: dict[tuple[str, int], list[Subscription]] = {}
         self._type_pos: dict[tuple[str, int], int] = {}
         self._types: dict[tuple[str, int], _TypeInfo] = {}
         self._matchers: dict[tuple[str, str | None], Matcher] = {}
@@ -128,10 +125,7 @@ class SubscriptionHub:
         self._store_reads = self.store.journal_reader(own_connection=False)
         self._max_jids: dict[str, int] = {}   # per type and pass: max(jid) of each journal
         self._through_store = False
-        self._pass_reads: Any = self._store_reads   # the reads of the pass under way
-        # one delivery pass at a time, on the hub thread or on a thread that just committed
-        # an add (which delivers its own events: one thread hop fewer, see on_add)
-        self._pass_lock = ordered_lock("subscriptions.pass")
+        self._pass_through_store = False
 
     @property
     def lease_seconds(self) -> float:
@@ -153,50 +147,21 @@ class SubscriptionHub:
             self.cond.notify()
 
     def on_add(self, stored: list) -> None:
-        """Events were stored (the event pipeline's wake stage): deliver them if some are of
-        subscribed types. Committed, and no other pass under way: this thread runs the
-        shared read itself (:meth:`_deliver_here`), so the events reach the consumers
-        without waiting for the hub thread to be scheduled (on a busy machine, the wait of
-        the tail); otherwise, and for what the shared read leaves (histories, lagging
-        subscriptions, ends, types with a subscription whose ``where`` condition is a query
-        per event), the hub thread is woken. The adding thread only matches and queues:
-        it never waits for a consumer (a full queue makes its subscription lag)."""
-        keys = self._by_type_view
-        if not keys or not stored:
+        """Events were stored (the event pipeline's wake stage): wake the hub if some are of
+        subscribed types."""
+        if not self._by_type or not stored:
             return
+        keys = self._by_type
         for ev in stored:
             try:
                 if (ev[0], len(ev[1])) in keys:
                     # only the adding thread's own transaction hides the rows from the hub's
                     # connection; another thread's (the hub's housekeeping, another writer)
                     # does not, and reading through the store would queue behind it
-                    inside = self.store.in_transaction_here
-                    if inside or not self._deliver_here():
-                        self.notify(through_store=inside)
+                    self.notify(through_store=self.store.in_transaction_here)
                     return
             except (TypeError, IndexError):
                 continue
-
-    def _deliver_here(self) -> bool:
-        """The shared read of every subscribed type, on this thread, if no pass is under way
-        (never waits for one: then the hub thread delivers). True if it ran and left
-        nothing to the hub thread; a failure is left to the hub thread's next pass, never
-        raised to the adding thread (its events are committed)."""
-        if self._closed or not self._pass_lock.acquire(blocking=False):
-            return False
-        try:
-            own = self._own_reads
-            self._pass_reads = self._store_reads if own is None else own
-            left = False
-            for key, subs in self._snapshot().items():
-                left = self._serve_type(key, subs, shared_only=True) or left
-            return not left
-        except Exception as exc:   # the hub thread's pass tries again, and logs it
-            log.debug("subscriptions: delivering on the adding thread failed (%s: %s)",
-                      type(exc).__name__, exc)
-            return False
-        finally:
-            self._pass_lock.release()
 
     def on_table_created(self, name: str, arity: int, table: str) -> None:
         """Store hook, inside the transaction creating an event table: journal it from its
@@ -271,7 +236,6 @@ class SubscriptionHub:
             sub.cohort_key = (sub.matcher, sub.since, sub.until)   # shared answers
             self._subs[sub.id] = sub
             self._by_type.setdefault(sub.key, []).append(sub)
-            self._publish_by_type()
             self._subscribed_types.add(sub.key)
             self._dirty = True
             if self._thread is None:
@@ -393,7 +357,6 @@ class SubscriptionHub:
                 if not subs:
                     self._by_type.pop(sub.key, None)
                     self._type_pos.pop(sub.key, None)
-                self._publish_by_type()
                 key = (sub.matcher.pattern, sub.matcher.where)
                 if self._matchers.get(key) is sub.matcher and not any(
                         s.matcher is sub.matcher for s in subs):
@@ -449,7 +412,8 @@ class SubscriptionHub:
     # -- the hub thread ------------------------------------------------------------------------
     def _reads(self) -> Any:
         """The reads of this pass: on the hub's own connection when it has one."""
-        return self._pass_reads
+        own = self._own_reads
+        return self._store_reads if own is None or self._pass_through_store else own
 
     def _journal_rows(self, info: _TypeInfo, after_jid: int, limit: int) -> list[tuple]:
         return self._reads().journal_rows(info.journal, info.arity, after_jid, limit)
@@ -467,8 +431,7 @@ class SubscriptionHub:
         try:
             self._run_passes()
         finally:
-            with self._pass_lock:     # (not while a thread that added delivers with it)
-                reads, self._own_reads = self._own_reads, None
+            reads, self._own_reads = self._own_reads, None
             if reads is not None:
                 reads.close()
 
@@ -480,17 +443,13 @@ class SubscriptionHub:
                 if self._closed:
                     return
                 self._dirty = False
-                through_store, self._through_store = self._through_store, False
+                self._pass_through_store, self._through_store = self._through_store, False
                 if not self._subs:
                     continue
                 self._passes_started += 1
                 number = self._passes_started
             try:
-                with self._pass_lock:
-                    own = self._own_reads
-                    self._pass_reads = self._store_reads if own is None or through_store \
-                        else own
-                    self._pass()
+                self._pass()
             except Exception as exc:  # a busy store, a closing kb: try again on the next tick
                 if self._closed or self.store.closed:
                     return
@@ -521,12 +480,9 @@ class SubscriptionHub:
                 self.cond.wait(left)
         return True
 
-    def _publish_by_type(self) -> None:
-        """(the lock held) Copy ``_by_type`` for the passes, which read it without the lock."""
-        self._by_type_view = {key: list(subs) for key, subs in self._by_type.items()}
-
     def _snapshot(self) -> dict[tuple[str, int], list[Subscription]]:
-        return self._by_type_view
+        with self.lock:
+            return {key: list(subs) for key, subs in self._by_type.items()}
 
     def _pass(self) -> None:
         for key, subs in self._snapshot().items():
@@ -537,19 +493,13 @@ class SubscriptionHub:
                     raise
                 # every subscription of the type closed meanwhile (its journal may be gone)
 
-    def _serve_type(self, key: tuple[str, int], subs: list[Subscription],
-                    shared_only: bool = False) -> bool:
+    def _serve_type(self, key: tuple[str, int], subs: list[Subscription]) -> None:
         """One round for the subscriptions of one event type: the shared read of the journal
         for those that keep up, then each one that reads at its own pace (history, lagging),
-        then the ends (``until`` reached, too far behind). ``shared_only``: the shared read
-        alone; True when something else is left to do (for the hub thread)."""
-        if shared_only and any(s.matcher.where is not None for s in subs):
-            return True    # a condition is a query per event: not on the adding thread
+        then the ends (``until`` reached, too far behind)."""
         info = self._type_info(key)
         touched: set = set()
         self._max_jids.clear()
-        if info is None and shared_only:
-            return True
         if info is None:   # no event of this type yet: nothing to read; until may still end it
             ending = [s for s in subs if s.until_reached and not s.is_over]
             # looked up again after reading the flags: events stored (creating the table) before
@@ -560,10 +510,10 @@ class SubscriptionHub:
                     s.end(completed=True)
                     touched.add(s)
                 self._wake(touched)
-                return False
+                return
             info = self._type_info(key)
             if info is None:
-                return False
+                return
         self._check_journal(key, info)
         for s in subs:
             if s.until_reached and s.end_jid is None:
@@ -593,9 +543,6 @@ class SubscriptionHub:
             if not state.running or (state is live and pos is not None and s.scanned >= pos
                                      and not s.until_reached):
                 continue                 # served by the shared read: nothing else to do
-            if shared_only:
-                self._wake(touched)
-                return True
             rest.append(s)
             if state is _HISTORY:
                 self._serve_history(info, s, touched)
@@ -606,7 +553,6 @@ class SubscriptionHub:
         for s in rest:
             self._check_end(key, info, s, touched)
         self._wake(touched)
-        return False
 
     def _deliver_rows(self, key: tuple[str, int], rows: list, group: list[Subscription],
                       touched: set, own_pace: bool = False) -> None:
