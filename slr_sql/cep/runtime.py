@@ -29,14 +29,14 @@ import json
 import math
 
 import orjson
-from itertools import islice, pairwise
-from operator import itemgetter, ne
+from itertools import pairwise
+from operator import itemgetter
 from typing import Any, Callable
 
 from ..encoding import Unencodable, decode, encode
 from ..errors import SLRError, SLRUnavailable
 from ..host import Host
-from ..store import DatabaseError, EventBatch, quote_identifier, store_error
+from ..store import DatabaseError, quote_identifier, store_error
 from ..terms import Struct, Var, deref, format_term, is_ground, make_list, term_vars
 from .rules import EventRule
 from .sqlgen import (AltSQL, anchor_index, complex_copy, complex_read, create_index,
@@ -406,8 +406,10 @@ class RuleRuntime:
                         if some_ready:
                             self._before_matches()
                             self._send(alt.recent_insert(pos), p2)
-                        if not all_ready:
+                        if not all_ready and some_ready:
                             self._send(alt.term_pending(pos, True), p2)
+                        elif not all_ready:   # (a live stream's add: none is complete yet)
+                            self._send(alt.term_span(pos), p2)
                     elif self.policy == "recent" and alt.runnable:
                         # independent decisions: those that can be made now, at once
                         pend = []
@@ -434,7 +436,8 @@ class RuleRuntime:
         # the copy of the matches and the summary of what is pending: with the writes still
         # waiting, one call of the store
         statements, stored = self._copy(self._before, now) if self._matched else ([], None)
-        summary = [(pending_summary(), {"rule": self.key}, False)] if changed or decide else []
+        summary = [(pending_summary(self.eng.store.dialect), {"rule": self.key}, False)] \
+            if changed or decide else []
         rows = self._ask_all(statements + summary)   # (nothing to ask: the writes alone)
         if summary:
             self._summary(rows[-1])
@@ -647,6 +650,12 @@ class RuleRuntime:
                 for pos in sorted(alt.alt.terminators):
                     self._send(alt.pending_recent_insert(pos), p2)
                     self._send(alt.pending_term_delete(pos), p2)
+            elif kind == "span" and self.policy == "recent":
+                self._before_matches()
+                for pos in sorted(alt.alt.terminators):
+                    self._send(alt.span_recent_insert(pos), p2)
+                    self._send(alt.span_split(pos), p2)
+                    self._send(alt.span_delete(pos), p2)
             elif kind == "match" and self.policy == "unrestricted":
                 self._before_matches()
                 self._send(alt.pending_match_insert(), p2)
@@ -829,7 +838,7 @@ class RuleRuntime:
     def refresh(self) -> None:
         """Re-read the summary of this rule's pending decisions."""
         self._forget_unsent()
-        self._summary(self._ask(pending_summary(), {"rule": self.key}))
+        self._summary(self._ask(pending_summary(self.eng.store.dialect), {"rule": self.key}))
 
     def _summary(self, rows: list) -> None:
         """Take the summary of this rule's pending decisions from ``rows`` (those of
@@ -1192,32 +1201,11 @@ class EventRules:
         return token
 
     def store_events(self, events: list, atomic: bool) -> list:
-        """``store.add_events``, with the events grouped by type first when types alternate
-        (a stream of a, b, a, b costs one insert statement per event otherwise). Grouping is
-        stable, so each type's events keep their arrival order -- the order of their rows --
-        and the rejected events keep their index in the batch. The add joins the round's
-        transaction (the pipeline's, which any error leaves through) with no savepoint of
-        its own."""
-        store = self.store
-        if atomic or len(events) < 16:
-            return store.add_events(events, atomic=atomic, join=True)
-        try:   # (column-wise: no loop in Python over a big batch)
-            keys = list(zip(map(_first, events), map(len, map(_second, events))))
-        except (TypeError, IndexError, KeyError):
-            return store.add_events(events, atomic=atomic, join=True)
-        switches = 1 + sum(map(ne, keys, islice(keys, 1, None)))
-        if switches * 4 < len(events):
-            return store.add_events(events, atomic=atomic, join=True)
-        rank = {key: i for i, key in enumerate(dict.fromkeys(keys))}
-        order = sorted(range(len(events)), key=list(map(rank.__getitem__, keys)).__getitem__)
-        grouped = EventBatch(map(events.__getitem__, order))
-        errors = store.add_events(grouped, atomic=atomic, join=True)
-        if type(events) is EventBatch:
-            events.ends = grouped.ends   # (the same events: the same end times per type)
-        for error in errors:
-            if getattr(error, "index", None) is not None:
-                error.index = order[error.index]
-        return sorted(errors, key=lambda e: getattr(e, "index", 0))
+        """``store.add_events``, joining the round's transaction (the pipeline's, which any
+        error leaves through) with no savepoint of its own. (The store takes an
+        interleaved stream -- a, b, a, b -- one insert per type, each type's rows in their
+        order: no grouping is needed here.)"""
+        return self.store.add_events(events, atomic=atomic, join=True)
 
     def rounds(self, events: list) -> list[tuple[int, int]]:
         """Where a batch must be cut into rounds so that it derives what its events added one
@@ -1312,7 +1300,8 @@ class EventRules:
                     rt._forget_unsent()
                 # (one call of the store for them all: one round trip to a server)
                 rows = self.store.run_compiled_batch(
-                    [(pending_summary(), {"rule": rt.key}, False) for rt in rules]) \
+                    [(pending_summary(self.store.dialect), {"rule": rt.key}, False)
+                     for rt in rules]) \
                     if rules else []
                 for rt, summary in zip(rules, rows):
                     rt._summary(summary)
@@ -1373,7 +1362,7 @@ class EventRules:
                 elif n < len(rt.rule.alternatives):
                     # (a term decision: what it waits for, chronological's other
                     # alternatives' terminators included)
-                    keys = list(rt.decisions[n]) if kind == "term" else \
+                    keys = list(rt.decisions[n]) if kind in ("term", "span") else \
                         [leaf.key for _, leaf in rt.rule.alternatives[n].negations]
                 else:
                     keys = []
@@ -1458,6 +1447,14 @@ class EventRules:
                         sql = alt.recent_insert(pos)
                         lines.append(f"    SQL when position {pos} ({alt.alt.leaves[pos].text}) "
                                      f"has new rows (terminators complete now):")
+                        lines.extend("      " + line for line in _wrap(sql))
+                        lines.extend("      plan: " + step
+                                     for step in self._query_plan_lines(alt, sql))
+                        # (an add none of whose terminators is complete keeps them as a span)
+                        sql = alt.span_recent_insert(pos)
+                        lines.append(f"    SQL deciding the spans of position {pos} kept in "
+                                     f"slr_cep_pending (an add's terminators, none complete "
+                                     f"then), once complete:")
                     else:
                         sql = alt.term_select(pos, alt.pure)
                         lines.append(f"    SQL deciding a terminator :t at position {pos}:")

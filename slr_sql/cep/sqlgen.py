@@ -877,6 +877,74 @@ class AltSQL:
             sql = self._cache[key] = self._recent_insert(pos, pending=True)
         return sql
 
+    def term_span(self, pos: int) -> str:
+        """The new rows at terminator position ``pos``, none complete yet, kept as one
+        pending span: ``rowids`` their first and last seq and their count, ``t_start``
+        their latest end, ``t_end`` their earliest (the time the first of them can be
+        decided). A span holds no row of another transaction: the writers of a rule's
+        types take turns (SQLite's one writer; PostgreSQL's lock of their write group),
+        so the new rows are the only ones in between."""
+        key = ("term_span", pos)
+        sql = self._cache.get(key)
+        if sql is None:
+            a = self.aliases()
+            t = a[f"e{pos}"]
+            conds = [f"{t}.seq > :w{pos}"] + self.cond_sql(a, within={pos})
+            sql = self._cache[key] = (
+                "INSERT INTO slr_cep_pending (rule, alt, kind, pos, rowids, t_start, t_end, "
+                f"created_at) SELECT :rule, {self.index}, 'span', {pos}, "
+                f"{self.dialect.json_array(f'min({t}.seq), max({t}.seq), count(*)')}, "
+                f"max({t}.t_end), min({t}.t_end), :now FROM {self.tables[pos]} AS {t} "
+                f"WHERE {self._where(conds)} HAVING count(*) > 0")
+        return sql
+
+    def _span_join(self, pos: int) -> str:
+        """FROM the pending spans at ``pos`` joined with their terminators."""
+        t = f"e{pos}"
+        d = self.dialect
+        return (f"slr_cep_pending AS p JOIN {self.tables[pos]} AS {t} ON {t}.seq BETWEEN "
+                f"{d.json_integer('p.rowids', 0)} AND {d.json_integer('p.rowids', 1)}")
+
+    def span_recent_insert(self, pos: int) -> str:
+        """:meth:`recent_insert` for the terminators of the pending spans at ``pos`` whose
+        inputs are complete now (one statement for all of them)."""
+        key = ("span_recent_insert", pos)
+        sql = self._cache.get(key)
+        if sql is None:
+            sql = self._cache[key] = self._recent_insert(pos, span=True)
+        return sql
+
+    def span_split(self, pos: int) -> str:
+        """The terminators that must still wait, of the spans at ``pos`` decided now in
+        part (their earliest end complete, their latest not), as pending terminators of
+        their own."""
+        key = ("span_split", pos)
+        sql = self._cache.get(key)
+        if sql is None:
+            a = self.aliases()
+            t = a[f"e{pos}"]
+            conds = (self._span_conditions(pos)
+                     + [f"NOT ({self.inputs_complete('p.t_start')})",
+                        f"NOT ({self.inputs_complete(f'{t}.t_end')})"]
+                     + self.cond_sql(a, within={pos}))
+            sql = self._cache[key] = (
+                "INSERT INTO slr_cep_pending (rule, alt, kind, pos, rowids, t_start, t_end, "
+                f"created_at) SELECT :rule, {self.index}, 'term', {pos}, "
+                f"{self.dialect.json_array(f'{t}.seq')}, {t}.t_start, {t}.t_end, :now FROM "
+                f"{self._span_join(pos)} WHERE {self._where(conds)}")
+        return sql
+
+    def _span_conditions(self, pos: int) -> list[str]:
+        """The pending spans at ``pos`` whose earliest terminator can be decided now."""
+        return ["p.rule = :rule", f"p.alt = {self.index}", "p.kind = 'span'", f"p.pos = {pos}",
+                self.inputs_complete("p.t_end")]
+
+    def span_delete(self, pos: int) -> str:
+        """Delete the spans at ``pos`` decided now (whole, or the rest split off)."""
+        return ("DELETE FROM slr_cep_pending WHERE rule = :rule AND alt = "
+                f"{self.index} AND kind = 'span' AND pos = {pos} AND "
+                f"{self.inputs_complete('slr_cep_pending.t_end')}")
+
     def pending_term_delete(self, pos: int) -> str:
         """Delete the pending terminators at ``pos`` whose inputs are complete now."""
         return ("DELETE FROM slr_cep_pending WHERE rule = :rule AND alt = "
@@ -904,11 +972,12 @@ class AltSQL:
         return (f"DELETE FROM slr_cep_pending WHERE id IN (SELECT p.id FROM "
                 f"{self._pending_join(a)} AND {self.neg_complete(a)})")
 
-    def _recent_insert(self, pos: int, pending: bool = False) -> str:
+    def _recent_insert(self, pos: int, pending: bool = False, span: bool = False) -> str:
         """recent, pure: for every new terminator at ``pos`` whose inputs are complete up to
         its end, the match with the newest partners, chosen by nested correlated
         sub-queries (each partner: the newest for which the remaining partners exist).
-        ``pending``: the terminators kept in slr_cep_pending instead of the new rows."""
+        ``pending``: the terminators kept in slr_cep_pending instead of the new rows;
+        ``span``: those of the spans kept there."""
         t = "e%d" % pos
         top = self.aliases()
         chosen = {pos}
@@ -921,7 +990,10 @@ class AltSQL:
             chosen = chosen | {p}
         own = self.cond_sql(top, within={pos})
         conds = [self.inputs_complete(f"{t}.t_end")] + own
-        if pending:
+        if span:
+            source = self._span_join(pos)
+            conds = self._span_conditions(pos) + conds
+        elif pending:
             source = (f"slr_cep_pending AS p JOIN {self.tables[pos]} AS {t} ON {t}.seq = "
                       f"{self.dialect.json_integer('p.rowids', 0)}")
             conds = ["p.rule = :rule", f"p.alt = {self.index}", "p.kind = 'term'",
@@ -1178,16 +1250,18 @@ def pending_delete_listed(dialect: Any) -> str:
     return f"DELETE FROM slr_cep_pending WHERE id IN ({dialect.json_integers(':ids')})"
 
 
-def pending_summary() -> str:
+def pending_summary(dialect: Any) -> str:
     """Per group of rule ``:rule``'s pending decisions: the earliest time it waits for, the
-    earliest end and the count.
+    earliest end and the count of decisions (a span counts its terminators).
 
-    >>> pending_summary().endswith("GROUP BY alt, kind, wait_type, wait_arity")
+    >>> from slr_sql.store.dialect import SQLITE
+    >>> pending_summary(SQLITE).endswith("GROUP BY alt, kind, wait_type, wait_arity")
     True
     """
     return ("SELECT alt, kind, wait_type, wait_arity, min(coalesce(wait_time, t_end)), "
-            "min(t_end), count(*) FROM slr_cep_pending WHERE rule = :rule "
-            "GROUP BY alt, kind, wait_type, wait_arity")
+            "min(t_end), sum(CASE WHEN kind = 'span' THEN "
+            f"{dialect.json_integer('rowids', 2)} ELSE 1 END) FROM slr_cep_pending "
+            "WHERE rule = :rule GROUP BY alt, kind, wait_type, wait_arity")
 
 
 def complex_copy(table: str, prov: str, arity: int, returning: bool) -> str:

@@ -303,8 +303,8 @@ class EventWriter:
 
     def _insert_each(self, chunk: list, base: int, arrival: float, atomic: bool,
                      errors: list[EventRejected], ends: dict | None) -> None:
-        """Check, encode and insert the events of ``chunk`` one by one (runs of one type
-        go in together); a bad event is rejected with its reason and index
+        """Check, encode and insert the events of ``chunk`` one by one (each type's rows go
+        in together, in their order); a bad event is rejected with its reason and index
         (``base`` + its place in the chunk), or raised when ``atomic``. The end times of
         what it stored widen ``ends`` (when not None)."""
         enc: Any = encode
@@ -320,7 +320,10 @@ class EventWriter:
         insert_sql = attrgetter("insert_sql" if with_robot else "insert_unnamed_sql")
         rows: list = []
         append = rows.append
-        by_type: dict[EventType, list] | None = {} if to_column is not None else None
+        # each type's rows, in their order: what a table's seq, its triggers and its journal
+        # see is the same as run by run (tables do not see each other's rows), and an
+        # interleaved stream (a, b, a, b) takes one insert per type, not one per event
+        by_type: dict[EventType, list] = {}
         current_name: Any = None
         current_arity = -1
         current_type: EventType | None = None
@@ -344,41 +347,29 @@ class EventWriter:
                 else:
                     row = (*map(enc, args), start, end, *tail)
                 if arity != current_arity or name != current_name:
-                    if rows and by_type is None:
-                        self._insert_rows(current_type, list(chain.from_iterable(rows)),
-                                          len(rows), with_robot)
-                        if ends is not None:
-                            _widen_by_rows(ends, current_type, rows, with_robot)
-                        rows = []
-                        append = rows.append
                     current_type = (isinstance(name, str) and types.get((name, arity))
                                     or self.type_for_new_event(name, arity))
                     current_name = name
                     current_arity = arity
-                    if by_type is not None:
-                        rows = by_type.setdefault(current_type, [])
-                        append = rows.append
+                    append = by_type.setdefault(current_type, []).append
                 append(row)
             except (BadEvent, Unencodable) as exc:
                 error = self._rejection(index, event, exc)
                 if atomic:
                     raise error from None
                 errors.append(error)
-        if by_type is not None:
-            # a server: one statement per table, each table's rows in their order (what a
-            # table's seq, its triggers and its journal see is the same as run by run;
-            # tables do not see each other's rows), not one round trip per run of a type
+        if to_column is not None:
+            # a server: one statement per table in one pipeline, not a round trip per type
             with self.db.conn.pipeline(max(map(len, by_type.values()), default=0)):
                 for event_type, typed_rows in by_type.items():
                     executemany(insert_sql(event_type), typed_rows)
-            if ends is not None:
-                for event_type, typed_rows in by_type.items():
-                    _widen_by_rows(ends, event_type, typed_rows, with_robot)
-        elif rows:
-            self._insert_rows(current_type, list(chain.from_iterable(rows)), len(rows),
-                              with_robot)
-            if ends is not None:
-                _widen_by_rows(ends, current_type, rows, with_robot)
+        else:
+            for event_type, typed_rows in by_type.items():
+                self._insert_rows(event_type, list(chain.from_iterable(typed_rows)),
+                                  len(typed_rows), with_robot)
+        if ends is not None:
+            for event_type, typed_rows in by_type.items():
+                _widen_by_rows(ends, event_type, typed_rows, with_robot)
 
     def type_for_new_event(self, name: Any, arity: int) -> EventType:
         """The event type ``name/arity`` an event about to be written goes to, its table

@@ -1,0 +1,200 @@
+"""A ``recent`` rule keeps an add's terminators, none complete yet, as one pending span.
+
+A live stream's batch arrives before the clock passes it: every new terminator must wait.
+They are kept as one row of ``slr_cep_pending`` of kind ``span`` (first and last seq and
+their count), not one row each; the clock's move decides them with one statement, and a
+move that completes only the earlier ones keeps the later ones as terminators of their own.
+The answers are the reference evaluator's whatever the batches and clock moves, on SQLite
+and PostgreSQL, and a span is a pending decision another process (or the next open after a
+crash) decides like any other.
+"""
+from __future__ import annotations
+
+import json
+import sqlite3
+import subprocess
+import sys
+
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+import slr_sql
+from slr_sql import ManualClock
+from slr_sql.store.schema import migrate, migration_scripts
+
+from test_cep_differential import (_event_text, _typed, ab_points, reference, rule_text, rules,
+                                   streams, two_type_rules)
+
+SEQ2 = (":- consumption(recent).\n:- max_delay(a/1, 0).\n:- max_delay(b/1, 0).\n"
+        "c(X) <- a(X) seq b(X).\n")
+BATCH = [f"{'a' if i % 2 == 0 else 'b'}({(i // 2) % 3})^{i + 1}" for i in range(10)]
+# c(K) for each b(K)^t: the newest a(K) before it (every b follows its own a)
+EXPECTED = sorted(((i // 2) % 3, float(i), float(i + 1)) for i in range(1, 10, 2))
+
+
+def _ending_before(t: float) -> list:
+    return [c for c in EXPECTED if c[2] < t]
+
+
+def _pending(kb) -> list:
+    """(kind, rowids) of the store's pending rows, in id order."""
+    return [(kind, json.loads(rowids)) for kind, rowids in
+            kb.sql("SELECT kind, rowids FROM slr_cep_pending ORDER BY id")[1]]
+
+
+def _c(kb) -> list:
+    return sorted((r["X"], r["S"], r["E"]) for r in kb.query("c(X)^[S, E]"))
+
+
+def _pending_count(kb) -> int:
+    return sum(info["pending"] for info in kb.event_rules())
+
+
+@pytest.fixture(params=["sqlite", "postgres"])
+def where(request, tmp_path):
+    if request.param == "sqlite":
+        return str(tmp_path / "spans.db")
+    return request.getfixturevalue("postgres_url")
+
+
+def test_a_live_batch_keeps_its_terminators_as_one_span(where):
+    clock = ManualClock(0.0)
+    with slr_sql.open(where, clock=clock) as kb:
+        kb.load(SEQ2)
+        kb.add_many(BATCH)
+        assert _pending(kb) == [("span", [1, 5, 5])]   # b's seqs 1..5, five terminators
+        assert _pending_count(kb) == 5
+        clock.set(100.0)
+        assert _pending(kb) == []
+        assert _c(kb) == EXPECTED
+
+
+def test_a_span_decided_in_part_keeps_the_rest_as_terminators(where):
+    clock = ManualClock(0.0)
+    with slr_sql.open(where, clock=clock) as kb:
+        kb.load(SEQ2)
+        kb.add_many(BATCH)
+        clock.set(6.5)   # b^2, b^4, b^6 complete (their a's before them); b^8, b^10 not
+        assert _c(kb) == _ending_before(6.5)
+        assert _pending(kb) == [("term", [4]), ("term", [5])]
+        assert _pending_count(kb) == 2
+        kb.add_many(["a(1)^11", "b(1)^12"])   # a later batch: a span of its own
+        assert _pending(kb) == [("term", [4]), ("term", [5]), ("span", [6, 6, 1])]
+        clock.set(100.0)
+        assert _pending(kb) == []
+        assert _c(kb) == sorted(EXPECTED + [(1, 11.0, 12.0)])
+
+
+def test_an_add_with_a_complete_terminator_keeps_the_others_one_by_one(where):
+    """A late batch: some terminators complete at once (decided in the add), the others
+    kept one by one (a span would hold decided rows)."""
+    clock = ManualClock(4.5)
+    with slr_sql.open(where, clock=clock) as kb:
+        kb.load(SEQ2)
+        kb.add_many(["a(0)^1", "b(0)^2", "a(1)^3", "b(1)^4", "a(2)^5", "b(2)^6"])
+        assert _c(kb) == [(0, 1.0, 2.0), (1, 3.0, 4.0)]
+        assert _pending(kb) == [("term", [3])]
+        clock.set(10.0)
+        assert _c(kb) == [(0, 1.0, 2.0), (1, 3.0, 4.0), (2, 5.0, 6.0)]
+
+
+def test_another_process_decides_a_span_a_killed_process_left(tmp_path):
+    """The process that stored the span dies before its clock moves; the next store opened
+    on the file, with a clock past the span, decides it."""
+    path = str(tmp_path / "left.db")
+    script = ("import os, sys, slr_sql\n"
+              "kb = slr_sql.open(sys.argv[1], clock=slr_sql.ManualClock(0.0))\n"
+              f"kb.load({SEQ2!r})\n"
+              f"kb.add_many({BATCH!r})\n"
+              "os._exit(0)\n")   # (no close: as a crash leaves it)
+    subprocess.run([sys.executable, "-c", script, path], check=True, timeout=60)
+    clock = ManualClock(0.0)
+    with slr_sql.open(path, clock=clock) as kb:
+        kb.load(SEQ2)
+        assert _pending(kb) == [("span", [1, 5, 5])]
+        clock.set(100.0)
+        assert _pending(kb) == []
+        assert _c(kb) == EXPECTED
+
+
+def test_a_version_11_store_keeps_its_pending_rows(tmp_path):
+    """Migration 12 makes ``slr_cep_pending`` again (SQLite cannot change a CHECK in place):
+    the rows pending before are kept as they were, and kind ``span`` is admitted."""
+    path = str(tmp_path / "v11.db")
+    conn = sqlite3.connect(path, isolation_level=None)
+    migrate(conn, path, [s for s in migration_scripts() if s[0] <= 11])
+    row = ("k", 0, "term", 1, "[7]", 1.0, 2.0, "a", 1, 3.0, "why", 0.5)
+    conn.execute("INSERT INTO slr_cep_pending (rule, alt, kind, pos, rowids, t_start, t_end, "
+                 "wait_type, wait_arity, wait_time, wait_reason, created_at) "
+                 "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", row)
+    with pytest.raises(sqlite3.IntegrityError):
+        conn.execute("INSERT INTO slr_cep_pending (rule, alt, kind, rowids, t_start, t_end) "
+                     "VALUES ('k', 0, 'span', '[1, 2, 2]', 1.0, 2.0)")
+    conn.close()
+    with slr_sql.open(path) as kb:
+        assert kb.store.schema_version() == 12
+    conn = sqlite3.connect(path, isolation_level=None)
+    assert conn.execute("SELECT rule, alt, kind, pos, rowids, t_start, t_end, wait_type, "
+                        "wait_arity, wait_time, wait_reason, created_at "
+                        "FROM slr_cep_pending").fetchall() == [row]
+    conn.execute("INSERT INTO slr_cep_pending (rule, alt, kind, rowids, t_start, t_end) "
+                 "VALUES ('k', 0, 'span', '[1, 2, 2]', 1.0, 2.0)")
+    with pytest.raises(sqlite3.IntegrityError):
+        conn.execute("INSERT INTO slr_cep_pending (rule, alt, kind, rowids, t_start, t_end) "
+                     "VALUES ('k', 0, 'other', '[1]', 1.0, 2.0)")
+    assert [r[1] for r in conn.execute("PRAGMA index_list(slr_cep_pending)")] == \
+        ["slr_cep_pending_by_rule"]
+    conn.close()
+
+
+def run_with_clock_moves(rule, events, order, cuts, moves, where=None):
+    """Add ``events`` in ``order``, in batches cut at ``cuts``; after each batch the clock
+    moves to the time ``moves`` picks among the batch's ends (less a half) and just before
+    the earliest end still to come -- never past an event that has not arrived (max_delay
+    0) -- and at the end past everything."""
+    sequence = [events[i] for i in order]
+    clock = ManualClock(0.0)
+    with slr_sql.open(where, clock=clock) as kb:
+        delays = "".join(f":- max_delay({name}/{arity}, 0).\n"
+                         for name, arity in (("a", 1), ("b", 1), ("c", 1), ("d", 2)))
+        kb.load(f":- consumption({rule['policy']}).\n{delays}" + rule_text(rule))
+        start = 0
+        for cut in sorted(set(cuts)) + [len(sequence)]:
+            if start < cut <= len(sequence):
+                batch, start = sequence[start:cut], cut
+                assert kb.add_many([_event_text(ev) for ev in batch]) == []
+                bound = min((ev[3] for ev in sequence[start:]), default=100.0) - 0.25
+                times = sorted({ev[3] - 0.5 for ev in batch} | {bound})
+                times = [t for t in times if clock.now() <= t <= bound]
+                if times:
+                    clock.set(moves(times))
+        clock.set(100.0)
+        arity = len(rule["head"])
+        rows = kb.store.scan("r", arity) if kb.store.table_for("r", arity) else []
+        return sorted(((tuple(args), s, e) for args, s, e, _ in rows), key=repr)
+
+
+@settings(max_examples=80, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@given(st.one_of(two_type_rules().map(lambda rule: dict(rule, policy="recent")),
+                 rules().filter(lambda rule: rule["policy"] == "recent")),
+       st.one_of(ab_points(), streams()), st.data())
+def test_clock_moves_between_batches_give_the_reference(rule, events, data):
+    """Spans decided whole, in part, or not at all by each clock move, in any arrival
+    order: the complex events are the reference evaluator's."""
+    order = data.draw(st.permutations(range(len(events))), label="arrival order")
+    cuts = data.draw(st.lists(st.integers(0, len(events)), max_size=4), label="batches")
+    expected = reference(rule, events)
+    got = run_with_clock_moves(rule, events, order, cuts,
+                               lambda times: data.draw(st.sampled_from(times), label="clock"))
+    assert _typed(got) == _typed([(tuple(h), s, e) for h, s, e in expected]), rule_text(rule)
+
+
+def test_explain_shows_how_a_span_is_decided(tmp_path):
+    with slr_sql.open(str(tmp_path / "x.db"), clock=ManualClock(0.0)) as kb:
+        kb.load(SEQ2)
+        kb.add_many(BATCH)
+        text = kb.explain("c(X)")
+    assert "SQL deciding the spans of position 1 kept in slr_cep_pending" in text
+    # (the span's terminators are read by their seq range, not one by one)
+    assert "SEARCH e1 USING INTEGER PRIMARY KEY (rowid>? AND rowid<?)" in text
