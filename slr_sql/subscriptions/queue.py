@@ -503,13 +503,24 @@ class Subscription:
                 taken = None
             else:
                 before = len(queue) >> 1
-                taken = []
-                if handled:
+                if before <= limit and queue[-2] is not None:
+                    # all of it and no end (an end is always the last pair: nothing is queued
+                    # after it): taken in one go, as a frame of the service typically is
+                    items = list(queue)
+                    queue.clear()
+                    taken = items[1::2]
+                    if handled:
+                        self._in_flight = items[0]   # the batch is in the consumer's hands
+                    else:
+                        self._unacked.extend(items[0::2])
+                elif handled:
+                    taken = []
                     self._in_flight = queue[0]   # the batch is in the consumer's hands
                     while queue and len(taken) < limit and queue[0] is not None:
                         queue.popleft()
                         taken.append(queue.popleft())
                 else:
+                    taken = []
                     unacked = self._unacked
                     while queue and len(taken) < limit and queue[0] is not None:
                         unacked.append(queue.popleft())
