@@ -1247,32 +1247,16 @@ def _aggregate_all(m: "Machine", args, nxt):
         raise _err_domain("aggregate_template", spec)
     kind = spec.name
     template = spec.args[0]
+    if kind in ("sum", "max", "min"):
+        return _aggregate_arith(m, kind, template, goal, out, nxt)
 
     def finish(m, results, nxt):
         if kind == "count":
             value = len(results)
-        elif kind == "sum":
-            value = 0
-            for x in results:
-                value = value + evaluate(x)
         elif kind == "bag":
             value = make_list(results)
         elif kind == "set":
             value = make_list(_dedup(sorted(results, key=_cmp_key)))
-        elif kind in ("max", "min"):
-            if not results:
-                return False
-            t0 = deref(template)
-            if type(t0) is Struct and t0.name == "-" and len(t0.args) == 2:
-                # max(X-W): the witness of the best value
-                best = results[0]
-                for x in results[1:]:
-                    a, b = evaluate(deref(x).args[0]), evaluate(deref(best).args[0])
-                    if (a > b) if kind == "max" else (a < b):
-                        best = x
-                value = Struct(kind, (deref(best).args[0], deref(best).args[1]))
-            else:
-                value = _fold_arith(kind, [evaluate(x) for x in results])
         else:
             raise _err_domain("aggregate_template", spec)
         return nxt if m.unify(out, value) else False
@@ -1280,29 +1264,71 @@ def _aggregate_all(m: "Machine", args, nxt):
     return m.push_collect(template, goal, finish, nxt)
 
 
+def _aggregate_arith(m: "Machine", kind: str, template, goal, out, nxt):
+    """``aggregate_all(sum(X) | max(X) | min(X), ..)`` as SWI-Prolog's library(aggregate):
+    each solution is evaluated as it comes (``S is S0 + X``, ``M is max(M0, X)``), so a
+    solution that is no number raises its error there, before any error a later solution
+    of the goal would throw. ``max(X-W)``/``min(X-W)``: the witness form (docs/sql.md),
+    the first solution whose X is strictly better, X compared as it comes."""
+    t0 = deref(template)
+    witness = kind != "sum" and type(t0) is Struct and t0.name == "-" and len(t0.args) == 2
+    state: list = [0] if kind == "sum" else []   # the sum; or the best so far
+
+    def each(found) -> None:
+        if kind == "sum":
+            state[0] = state[0] + evaluate(found)
+        elif witness:
+            if not state:
+                state.append(found)
+                return
+            a, b = evaluate(deref(found).args[0]), evaluate(deref(state[0]).args[0])
+            if (a > b) if kind == "max" else (a < b):
+                state[0] = found
+        else:
+            value = evaluate(found)
+            state[:] = [BINARY[kind](state[0], value) if state else value]
+
+    def finish(m, results, nxt):
+        if not state:
+            return False
+        if witness:
+            best = deref(state[0])
+            value = Struct(kind, (best.args[0], best.args[1]))
+        else:
+            value = state[0]
+        return nxt if m.unify(out, value) else False
+
+    return m.push_collect(template, goal, finish, nxt, each)
+
+
 def _aggregate_witness(m: "Machine", spec: Struct, goal, out, nxt):
     """``aggregate_all(max(X, W), Goal, max(Max, Witness))`` (and min) as SWI-Prolog's
     library(aggregate): the first solution whose X is strictly better than every earlier
-    one, X kept as it was found; the first X must be a number."""
+    one, X kept as it was found; the first X must be a number. Each solution is compared as
+    it comes, so its error comes before any a later solution of the goal would throw."""
     kind = spec.name
+    best: list = []
+
+    def each(found) -> None:
+        found = deref(found)
+        if not best:
+            first = deref(found.args[0])
+            if type(first) is Var:
+                raise instantiation_error()
+            if type(first) not in (int, float):
+                raise type_error("number", first)
+            best.append(found)
+            return
+        a, b = evaluate(found.args[0]), evaluate(best[0].args[0])
+        if (a > b) if kind == "max" else (a < b):
+            best[0] = found
 
     def finish(m, results, nxt):
-        if not results:
+        if not best:
             return False
-        best = deref(results[0])
-        first = deref(best.args[0])
-        if type(first) is Var:
-            raise instantiation_error()
-        if type(first) not in (int, float):
-            raise type_error("number", first)
-        for r in results[1:]:
-            r = deref(r)
-            a, b = evaluate(r.args[0]), evaluate(best.args[0])
-            if (a > b) if kind == "max" else (a < b):
-                best = r
-        return nxt if m.unify(out, Struct(kind, (best.args[0], best.args[1]))) else False
+        return nxt if m.unify(out, Struct(kind, (best[0].args[0], best[0].args[1]))) else False
 
-    return m.push_collect(Struct("w", (spec.args[0], spec.args[1])), goal, finish, nxt)
+    return m.push_collect(Struct("w", (spec.args[0], spec.args[1])), goal, finish, nxt, each)
 
 
 def _bagof(m: "Machine", args, nxt, is_set: bool):

@@ -1414,8 +1414,92 @@ def shell(db: str) -> None:
                                completer=PredicateCompleter(), complete_while_typing=False)
         click.echo(f"slr shell on {db} — `help` for commands, Ctrl-C stops a goal, "
                    f"Ctrl-D leaves")
-        interactive(session, prompt,
-                    before_prompt=lambda: cooked_keys_typed_ahead(sys.stdin, prompt.app.input))
+        terminal = TerminalModes(sys.stdin)
+        ended_by: int | None = None
+        try:
+            interactive(session, prompt, before_prompt=lambda: cooked_keys_typed_ahead(
+                sys.stdin, prompt.app.input), on_terminate=terminal.silence_if_hung_up)
+        except ShellTerminated as exc:
+            ended_by = exc.signum
+        finally:
+            terminal.restore()
+    if ended_by is not None:   # the store is closed: end as the signal's default would
+        _die_of(ended_by)
+
+
+class ShellTerminated(BaseException):
+    """SIGTERM or SIGHUP reached the interactive shell (a BaseException, as
+    KeyboardInterrupt: no ``except Exception`` of a goal's may keep it). The shell gives the
+    terminal back, closes the store and ends as killed by ``signum``.
+
+    >>> ShellTerminated(15).signum
+    15
+    """
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+class TerminalModes:
+    """The modes of the terminal ``stream`` is (if it is one) when made, set again by
+    :meth:`restore`: a shell ended by a signal while its line editor or the wait for a key
+    held the terminal raw gives it back cooked, whether or not its parent resets it.
+
+    >>> import io; TerminalModes(io.StringIO()).restore()   # no terminal: nothing to do
+    """
+
+    def __init__(self, stream: Any):
+        import termios
+
+        try:
+            self.fd: int | None = stream.fileno()
+            self.modes: list | None = termios.tcgetattr(self.fd)
+        except (OSError, ValueError, AttributeError, termios.error):   # not a terminal
+            self.fd = self.modes = None
+        # the outputs that write to a terminal (stdout, stderr)
+        self.outputs = [fd for fd in (1, 2) if os.isatty(fd)]
+
+    def silence_if_hung_up(self) -> None:
+        """When the terminal hung up (a read gives end of file, a write fails with EIO), point
+        the outputs that wrote to it at /dev/null: what the shell still says on its way out
+        (the line editor's last redraw) goes nowhere instead of failing."""
+        import termios
+
+        if self.fd is None:
+            return
+        try:
+            termios.tcgetattr(self.fd)
+            return
+        except (OSError, termios.error):
+            pass
+        nowhere = os.open(os.devnull, os.O_WRONLY)
+        try:
+            for fd in self.outputs:
+                os.dup2(nowhere, fd)
+        finally:
+            os.close(nowhere)
+
+    def restore(self) -> None:
+        import termios
+
+        if self.fd is None or self.modes is None:
+            return
+        try:
+            termios.tcsetattr(self.fd, termios.TCSADRAIN, self.modes)
+        except (OSError, termios.error):   # hung up (SIGHUP): no terminal to give back
+            pass
+
+
+def _die_of(signum: int) -> None:
+    """End this process as killed by ``signum`` (its default action), so that its parent
+    learns why (a shell prints "Terminated", a supervisor sees the signal)."""
+    import signal
+
+    sys.stdout.flush()
+    signal.signal(signum, signal.SIG_DFL)
+    os.kill(os.getpid(), signum)
+    sys.exit(128 + signum)   # (a signal whose default does not end the process)
 
 
 class ShellInterrupts:
@@ -1436,6 +1520,12 @@ class ShellInterrupts:
     * once the editor took a line, keeps it for that line (:meth:`take`): its goal is
       interrupted before it starts.
 
+    SIGTERM and SIGHUP (:meth:`terminate`) end the shell (:class:`ShellTerminated`): while the
+    editor reads keys it is asked to exit with it, so that it first gives the terminal back
+    as it found it (raised inside its event loop it would land in one of its tasks); before
+    it started, it gets the request once it runs; otherwise (a goal, the wait for the key
+    after an answer, whose raw mode ends as the exception leaves it) it is raised at once.
+
     ``app``: the editor's prompt_toolkit Application.
 
     >>> gate = ShellInterrupts(app=None); gate.editing(); gate.take()
@@ -1451,6 +1541,7 @@ class ShellInterrupts:
         self.started = False       # whether the editor ran for this line
         self.after_enter = False   # a Ctrl-C came after the editor took the line
         self.before_editor = False  # a Ctrl-C came before the editor ran: its Ctrl-C key
+        self.terminated: int | None = None   # SIGTERM/SIGHUP came: the shell ends
 
     def __call__(self, signum: int, frame: Any) -> None:
         if self.state == self.RUNNING:
@@ -1466,6 +1557,32 @@ class ShellInterrupts:
             except RuntimeError:   # its loop is closing: the line was taken
                 pass
         self.after_enter = True
+
+    def terminate(self, signum: int, frame: Any) -> None:
+        """The SIGTERM and SIGHUP handler: the shell ends (see the class's text)."""
+        self.terminated = signum
+        if self.state == self.RUNNING:
+            raise ShellTerminated(signum)
+        if not self.started:
+            return   # (editor_started asks the editor to exit; the loop checks, too)
+        app = self.app
+        if app.is_running and not app.is_done and app.loop is not None:
+            try:
+                app.loop.call_soon_threadsafe(self._exit_editor)
+                return
+            except RuntimeError:   # its loop is closing: the line was taken
+                pass
+        raise ShellTerminated(signum)
+
+    def _exit_editor(self) -> None:
+        if self.terminated is not None and self.app.is_running and not self.app.is_done:
+            self.app.exit(exception=ShellTerminated(self.terminated))
+        # (else the line was taken meanwhile: the loop raises before handling it)
+
+    def check_terminated(self) -> None:
+        """Raise :class:`ShellTerminated` if SIGTERM or SIGHUP came."""
+        if self.terminated is not None:
+            raise ShellTerminated(self.terminated)
 
     def _as_key(self) -> None:
         if self.app.is_running and not self.app.is_done:
@@ -1484,6 +1601,9 @@ class ShellInterrupts:
         """(The editor's ``pre_run``.) A Ctrl-C kept from before reaches the editor as its
         Ctrl-C key, after the keys typed ahead of it."""
         self.started = True
+        if self.terminated is not None:
+            self.app.loop.call_soon(self._exit_editor)
+            return
         if self.before_editor:
             self.before_editor = False
             self.app.loop.call_soon(self._as_key)
@@ -1496,12 +1616,16 @@ class ShellInterrupts:
 
 
 def interactive(session: Shell, prompt: Any, echo: Any = click.echo,
-                before_prompt: Callable[[], None] | None = None) -> None:
+                before_prompt: Callable[[], None] | None = None,
+                on_terminate: Callable[[], None] | None = None) -> None:
     """The shell's loop over a prompt_toolkit ``PromptSession``: a line, then what it says,
     until ``halt.`` or Ctrl-D. Ctrl-C at the prompt drops the unfinished line; Ctrl-C after
     Enter (as the prompt is taken down, or read with the Enter as a key typed ahead) stops
     the goal before it starts; Ctrl-C during a goal stops it. ``before_prompt`` is called
-    before each prompt (the terminal shell: :func:`cooked_keys_typed_ahead`).
+    before each prompt (the terminal shell: :func:`cooked_keys_typed_ahead`). SIGTERM and
+    SIGHUP end the loop with :class:`ShellTerminated` (see :class:`ShellInterrupts`), after
+    ``on_terminate`` is called in the handler (the terminal shell: the outputs silenced when
+    the terminal hung up).
 
     >>> from prompt_toolkit import PromptSession
     >>> from prompt_toolkit.input import create_pipe_input
@@ -1514,10 +1638,19 @@ def interactive(session: Shell, prompt: Any, echo: Any = click.echo,
     import signal
 
     gate = ShellInterrupts(prompt.app)
-    previous = signal.signal(signal.SIGINT, gate)
+
+    def terminate(signum: int, frame: Any) -> None:
+        if on_terminate is not None:
+            on_terminate()
+        gate.terminate(signum, frame)
+
+    previous = {signal.SIGINT: signal.signal(signal.SIGINT, gate)}
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        previous[signum] = signal.signal(signum, terminate)
     try:
         while True:
             gate.editing()
+            gate.check_terminated()
             if before_prompt is not None:   # (keys typed ahead while the terminal was cooked)
                 before_prompt()
             try:
@@ -1532,6 +1665,7 @@ def interactive(session: Shell, prompt: Any, echo: Any = click.echo,
                 if session.end_of_input():
                     continue
                 break
+            gate.check_terminated()   # (it came as the editor took the line)
             try:
                 came = gate.take()
                 if _ctrl_c_typed_ahead(prompt.app.input) or came:
@@ -1543,8 +1677,10 @@ def interactive(session: Shell, prompt: Any, echo: Any = click.echo,
                 gate.editing()
                 session.interrupt()
                 echo("\n% interrupted")
+        gate.check_terminated()   # (a hung-up terminal also ends the editor: end of file)
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 def _ctrl_c_typed_ahead(editor_input: Any) -> bool:

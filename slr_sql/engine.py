@@ -460,8 +460,11 @@ class Machine:
             del self.cps[goal.data:]
             return False
         if op == S_COLLECT:
-            template, results = goal.data
-            results.append(copy_term(template, deadline=self.deadline))
+            template, results, each = goal.data
+            found = copy_term(template, deadline=self.deadline)
+            results.append(found)
+            if each is not None:
+                each(found)
             return False
         if op == S_RULES:
             pred, args = goal.data
@@ -479,12 +482,15 @@ class Machine:
             return nxt
         raise AssertionError(op)
 
-    def push_collect(self, template: Any, goal: Any, finish: Callable, nxt):
-        """Run ``goal`` to exhaustion collecting copies of ``template``, then ``finish``."""
+    def push_collect(self, template: Any, goal: Any, finish: Callable, nxt,
+                     each: Callable[[Any], None] | None = None):
+        """Run ``goal`` to exhaustion collecting copies of ``template``, then ``finish``;
+        ``each`` sees every copy as it is found (an error it raises stops the goal there, as
+        SWI-Prolog's aggregate_all(max(X), ..) evaluating each solution as it comes)."""
         results: list = []
         height = len(self.cps)
         self.cps.append([K_COLLECT, len(self.trail), nxt, results, finish, None])
-        return (goal, height + 1, (Special(S_COLLECT, (template, results)), 0, None))
+        return (goal, height + 1, (Special(S_COLLECT, (template, results, each)), 0, None))
 
     def _handle_throw(self, ball: Any, original: SLREvaluationError | None = None):
         ball = copy_term(ball, deadline=self.deadline)

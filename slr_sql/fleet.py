@@ -451,7 +451,7 @@ def push(db: str, fleet: str, *, robot: str | None = None,
     """Ship the events (incoming and complex) and completeness marks of the robot store
     ``db`` to the fleet store ``fleet`` (a store path, a database URL, or the URL of `slr
     serve`), each event once. ``robot``: the name to ship as (default: the store's name;
-    a store without one needs it); ``types``: only these event types (``"seen/2"``);
+    a store without one needs it, and is named so by the push); ``types``: only these event types (``"seen/2"``);
     ``follow``: keep shipping as events arrive until ``stop`` is set (retrying with backoff
     while the fleet is unreachable, ``say`` telling once per outage); ``batch``: rows per
     fleet transaction; ``resync``: ship every type again from its first row, the fleet
@@ -481,6 +481,11 @@ def push(db: str, fleet: str, *, robot: str | None = None,
             check_robot_name(robot)
             if name is not None and name != robot:
                 raise SLRError(f"{db} is the store of robot {name!r}, not {robot!r}")
+            if name is None:
+                # shipped as the robot, the store is the robot's from now on (as `slr fleet
+                # name`): it ships as no other, and knows the robot's rows relayed back to
+                # it for its own (a cycle, refused); its new events carry the name
+                store.name_robot(robot)
             name = robot
         if name is None:
             raise SLRError(f"{db} has no robot name: open it with robot=NAME once, or "
@@ -692,7 +697,8 @@ def click_group() -> Any:
     @fleet_group.command("push")
     @click.argument("db", type=click.Path(dir_okay=False))
     @click.argument("fleet")
-    @click.option("--robot", default=None, help="Ship as this robot (default: the store's name).")
+    @click.option("--robot", default=None, help="Ship as this robot (default: the store's name); names a store that "
+                       "has none.")
     @click.option("--follow", is_flag=True,
                   help="Keep shipping as events arrive, until SIGINT/SIGTERM.")
     @click.option("--type", "types", multiple=True, metavar="NAME/N",

@@ -17,7 +17,9 @@ time ``t`` (docs/language.md, "tf_lookup"):
   lookup fails; with ``extrapolate`` the nearest observation is held instead. Several
   observations at one time: the last stored counts. An observation over an interval
   ``^[T1, T2]`` holds at every time inside it and is its pose at each end for the
-  interpolation outside it (the latest started at or before ``t`` counts while it lasts);
+  interpolation outside it. Of the observations holding at ``t`` the one that started last
+  counts (a point inside an interval counts at its time only); when none holds, the
+  interpolation starts from the one that ended last before ``t``;
 * **a tf_static edge** (a pair never seen in ``tf``) holds its last stored value at every
   time.
 
@@ -100,6 +102,8 @@ class FrameTree:
     def __init__(self) -> None:
         self.seen = {TF: 0, TF_STATIC: 0}      # arrival sequence read up to, per type
         self.kind: dict[tuple, tuple] = {}      # (parent key, child key) -> TF or TF_STATIC
+        # (parent key, child key) -> the longest duration of its tf observations (0: points)
+        self.longest: dict[tuple, float] = {}
         self.neighbours: dict[Any, list] = {}   # frame key -> [(frame key, parent, child)]
         self.paths: dict[tuple, list | None] = {}
         self.lock = ordered_lock("frames")   # the threads of one knowledge base share the tree
@@ -117,16 +121,19 @@ class FrameTree:
             if top < self.seen[key]:  # the newest events were deleted: read all again
                 self.seen = {TF: 0, TF_STATIC: 0}
                 self.kind.clear()
+                self.longest.clear()
                 self.neighbours.clear()
                 self.paths.clear()
                 return self.refresh(store)
             self.seen[key] = top
-            for parent, child in pairs:
-                self._add(parent, child, key)
+            for parent, child, longest in pairs:
+                self._add(parent, child, key, longest)
 
-    def _add(self, parent: Any, child: Any, key: tuple) -> None:
+    def _add(self, parent: Any, child: Any, key: tuple, longest: float = 0.0) -> None:
         parent_key, child_key = frame_key(parent), frame_key(child)
         pair = (parent_key, child_key)
+        if key == TF and longest > self.longest.get(pair, 0.0):
+            self.longest[pair] = longest
         old = self.kind.get(pair)
         if old == TF or old == key:
             return
@@ -286,7 +293,7 @@ def _edge_pose(row: Any) -> Pose:
 
 
 def _edge_at(store: Any, key: tuple, parent: Any, child: Any, t: float, extrapolate: bool,
-             hooks: TfHooks | None) -> Pose | None:
+             hooks: TfHooks | None, longest: float = math.inf) -> Pose | None:
     name, arity = key
     bound = {0: parent, 1: child}
     if key == TF_STATIC:
@@ -298,7 +305,7 @@ def _edge_at(store: Any, key: tuple, parent: Any, child: Any, t: float, extrapol
         return _edge_pose(found[0])
     if hooks is not None and hooks.prev is not None:
         hooks.prev(key, t)
-    found = store.bracket(name, arity, bound, t)
+    found = store.bracket(name, arity, bound, t, longest)
     if found is None:
         return None
     before, after = found
@@ -338,13 +345,14 @@ def lookup(store: Any, tree: FrameTree, target: Any, source: Any, t: float,
     if chain is None:
         return None
     result = IDENTITY
-    kind = tree.kind
+    kind, longest = tree.kind, tree.longest
     try:
         for i, (parent, child, inverse) in enumerate(chain):
             if check_deadline is not None and i % _EDGES_BETWEEN_CLOCK_CHECKS == 0:
                 check_deadline()
-            step = _edge_at(store, kind[(frame_key(parent), frame_key(child))], parent, child,
-                            t, extrapolate, hooks)
+            pair = (frame_key(parent), frame_key(child))
+            step = _edge_at(store, kind[pair], parent, child, t, extrapolate, hooks,
+                            longest.get(pair, 0.0))
             if step is None:
                 return None
             result = compose(invert(step) if inverse else step, result)

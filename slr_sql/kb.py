@@ -13,7 +13,6 @@ from __future__ import annotations
 import functools
 import math
 import numbers
-import re
 import time
 from operator import itemgetter
 from pathlib import Path
@@ -728,23 +727,9 @@ class KnowledgeBase:
         if not isinstance(query, str):
             raise SLRError(f"sql: the statement is text (a str), not a {type(query).__name__}")
         try:
-            named = _rows_written(query, self.store) if write else []
-            if not named:
-                return self.store.sql(query, params, write, timeout)
-            # a NULL argument is no term (docs/schema.md): a write that would leave one in
-            # a row the store did not hold so before changes nothing
-            with self.store.transaction():
-                before = set(self.store.null_arguments(named, every=True))
-                result = self.store.sql(query, params, write, timeout)
-                made = sorted(set(self.store.null_arguments(named, every=True)) - before)
-                if made:
-                    name, arity, _, argument, seq = made[0]
-                    more = f" (and {len(made) - 1} more)" if len(made) > 1 else ""
-                    raise NotAnEvent(
-                        f"sql: the statement would leave a row that is no event: arg{argument} "
-                        f"of {name}/{arity}'s row of seq {seq}{more} would be NULL, which is no "
-                        f"term; nothing was changed")
-            return result
+            if not write:
+                return self.store.sql(query, params, False, timeout)
+            return self._sql_write(query, params, timeout)
         except DatabaseError as exc:
             reason = store_error(exc, self.store.path)
             if isinstance(reason, SLRUnavailable):  # a full disk, a lock: may pass
@@ -756,6 +741,56 @@ class KnowledgeBase:
         except (OverflowError, TypeError, ValueError) as exc:  # a parameter SQLite cannot take
             raise SLRError(f"sql: a parameter cannot be bound: {_python_words(exc)} "
                            f"(parameters are None, int of 64 bits, float, str or bytes)") from None
+
+    def _sql_write(self, query: str, params: Iterable[Any], timeout: float | None
+                   ) -> tuple[list[str], list[tuple]]:
+        """``sql(..., write=True)``: a NULL argument is no term (docs/schema.md), so a
+        statement that would leave one in a row not so before changes nothing. The store
+        says which tables the statement writes (its triggers' and functions' writes
+        included, whatever its spelling), and only those are read for such rows: before
+        and after it when the store can tell before it runs (SQLite; a statement that
+        writes no event table then runs as given, outside a transaction of the check:
+        ``VACUUM``); else after it, and when they hold some, the run is taken back, the
+        rows there before it are read, and it runs once more."""
+        store = self.store
+        types = {table.lower(): key for key, table in store.event_types().items()}
+        ahead = store.tables_to_write(query, params)
+        if ahead is not None:
+            named = sorted({types[t.lower()] for t in ahead if t.lower() in types})
+            if not named:
+                return store.sql(query, params, True, timeout)
+            with store.transaction():
+                before = set(store.null_arguments(named, every=True))
+                columns, rows, _ = store.sql_write(query, params, timeout)
+                made = sorted(set(store.null_arguments(named, every=True)) - before)
+                if made:
+                    raise _no_event_left(made)
+            return columns, rows
+
+        def run() -> tuple[tuple[list[str], list[tuple]], list[tuple[str, int, str, int, int]]]:
+            columns, rows, written = store.sql_write(query, params, timeout)
+            named = sorted({types[t.lower()] for t in written if t.lower() in types})
+            left = store.null_arguments(named, every=True) if named else []
+            return (columns, rows), left
+
+        with store.transaction():
+            try:
+                with store.transaction():
+                    result, left = run()
+                    if left:
+                        raise _LeftNoEvent(left)
+                return result
+            except _LeftNoEvent as first:
+                # (taken back: the rows that were no events before it are those left now)
+                before = set(store.null_arguments(every=True))
+                made = sorted(set(first.left) - before)
+                if made:
+                    raise _no_event_left(made) from None
+                result, left = run()
+                made = sorted(set(left) - before)
+                if made:
+                    raise _no_event_left(made) from None
+                return result
 
     # -- plots ----------------------------------------------------------------------------
     def plot(self, types: Iterable[str] | str | None = None, **options: Any) -> Any:
@@ -835,25 +870,21 @@ def _check_time_option(name: str, value: Any, minimum: float | None = None) -> N
                        f"{'' if minimum is None else f' >= {minimum:g}'}, not {shown(value)}")
 
 
-_WRITES_ROWS = re.compile(r"\b(?:insert|update|replace|merge)\b", re.IGNORECASE)
+class _LeftNoEvent(Exception):
+    """A hand-written statement's run left rows that are no events in the tables it wrote
+    (raised to take that run back)."""
+
+    def __init__(self, left: list[tuple[str, int, str, int, int]]) -> None:
+        super().__init__()
+        self.left = left
 
 
-def _rows_written(statement: str, store: Any) -> list[tuple[str, int]]:
-    """The event types whose rows a hand-written statement may insert or change: those whose
-    table it names, when it inserts, updates, replaces or merges (a DELETE leaves no NULL
-    behind).
-
-    >>> from slr_sql.store import EventStore
-    >>> s = EventStore(None); s.declare_type("p", 1)
-    'p'
-    >>> _rows_written('UPDATE "p" SET arg1 = NULL', s), _rows_written("DELETE FROM p", s)
-    ([('p', 1)], [])
-    """
-    if not _WRITES_ROWS.search(statement):
-        return []
-    text = statement.lower()
-    return [key for key, table in store.event_types().items()
-            if re.search(r"(?<![\w$])" + re.escape(table.lower()) + r"(?![\w$])", text)]
+def _no_event_left(made: list[tuple[str, int, str, int, int]]) -> NotAnEvent:
+    name, arity, _, argument, seq = made[0]
+    more = f" (and {len(made) - 1} more)" if len(made) > 1 else ""
+    return NotAnEvent(f"sql: the statement would leave a row that is no event: arg{argument} "
+                      f"of {name}/{arity}'s row of seq {seq}{more} would be NULL, which is no "
+                      f"term; nothing was changed")
 
 
 def not_an_event(kb: KnowledgeBase | None, where: str) -> NotAnEvent:

@@ -71,3 +71,63 @@ def test_a_busy_store_holds_the_messages_and_stores_them_once_it_is_free(tmp_pat
     assert "locked by another writer" in held[0] and "5 message(s) held" in held[0]
     assert "Traceback" not in "".join(lines)
     assert any("stored" in line for line in lines[lines.index(held[0]) + 1:]), lines
+
+
+def test_held_counts_only_the_messages_whose_marks_are_still_unstored(postgres_url, ros_node,
+                                                                       prefix):
+    """A flush that stores its events but not its completeness marks (PostgreSQL: the event
+    table takes writes, the meta table where marks live is locked) holds only the messages
+    with a mark still to store: the pose messages are stored, the mark message is held."""
+    import psycopg
+    from geometry_msgs.msg import PoseStamped
+    from std_msgs.msg import Header
+
+    node, executor = ros_node
+    mapping = mapping_from_dict({"tf": False, "topics": {f"{prefix}/pose": {
+        "event": "pose", "args": ["header.frame_id", "pose.position.x"]}},
+        "fully_updated": [{"topic": f"{prefix}/done", "types": ["pose/2"]}]})
+    poses = node.create_publisher(PoseStamped, f"{prefix}/pose", 100)
+    done = node.create_publisher(Header, f"{prefix}/done", 10)
+    lines: list[str] = []
+    with slr_sql.open(postgres_url, busy_timeout=0.2, clock=slr_sql.ManualClock(105.0)) as kb:
+        kb.add("pose(map, -1.0)^99")          # the pose table exists before it is locked
+        bridge = Bridge(kb, mapping, node_name="test_bridge", log=lines.append).start()
+        try:
+            deadline = time.monotonic() + DEADLINE
+
+            def spin_until(condition) -> None:
+                while not condition():
+                    assert time.monotonic() < deadline, f"timed out; log {lines}"
+                    bridge.spin_once(0.01)
+                    executor.spin_once(timeout_sec=0.01)
+
+            spin_until(lambda: poses.get_subscription_count() > 0
+                       and done.get_subscription_count() > 0)
+            with psycopg.connect(postgres_url) as meta, psycopg.connect(postgres_url) as table:
+                meta.execute("LOCK TABLE slr.slr_meta IN SHARE MODE")     # marks wait
+                table.execute("LOCK TABLE slr.pose IN SHARE MODE")        # and events too
+                for i in range(3):
+                    msg = PoseStamped()
+                    msg.header.stamp.sec = 100 + i
+                    msg.header.frame_id = "map"
+                    msg.pose.position.x = float(i)
+                    poses.publish(msg)
+                mark = Header()
+                mark.stamp.sec = 103
+                done.publish(mark)
+                spin_until(lambda: bridge.stats.messages == 4 and bridge.held == 4)
+                table.rollback()                  # the events are taken, the mark is not
+                spin_until(lambda: bridge.stats.events == 3)
+                assert bridge.held == 1 and bridge.stats.marks == 0
+                bridge.spin_once(0.01)            # tried again: the mark still waits
+                assert bridge.held == 1
+                meta.rollback()
+            spin_until(lambda: bridge.stats.marks == 1)
+            assert bridge.held == 0
+        finally:
+            bridge.close()
+        assert kb.complete_until("pose/2") == 103.0
+        answers = kb.query("pose(map, X)^T, T >= 100")
+    assert [(a["X"], a["T"]) for a in answers] == [(float(i), 100.0 + i) for i in range(3)]
+    said = [line for line in lines if "takes no writes now" in line]
+    assert len(said) == 1 and "4 message(s) held" in said[0], lines

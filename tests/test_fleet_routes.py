@@ -202,3 +202,44 @@ def test_a_stores_own_rows_relayed_back_to_it_are_refused(tmp_path, where, reque
                                             r"each of them twice"):
         fleet.push(str(tmp_path / "site.db"), central)
     assert seen(central) == [("central", "x", 1.0)]
+
+
+def slr_cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "slr_sql", *args], env=slr_env(),
+                          capture_output=True, text=True, timeout=120)
+
+
+@pytest.mark.parametrize("where", ["file", "postgres"])
+def test_pushing_an_unnamed_store_as_a_robot_names_it_so_a_cycle_through_it_is_refused(
+        tmp_path, where, request):
+    # an unnamed fleet store (its events have no robot) is pushed with --robot central:
+    # from then on it is central's store, as `slr fleet name` would make it
+    central = _central(tmp_path, where, request)
+    with slr_sql.open(central, clock=slr_sql.ManualClock(100)) as kb:
+        kb.add("seen(x)^1")
+    site = str(tmp_path / "site.db")
+    slr_sql.open(site, robot="site").close()
+    pushed = slr_cli("fleet", "push", central, site, "--robot", "central")
+    assert pushed.returncode == 0, pushed.stderr
+    assert "robot central: shipped 1 events" in pushed.stdout
+    with slr_sql.open(central, clock=slr_sql.ManualClock(100)) as kb:
+        assert kb.store.robot == "central"
+        kb.add("seen(y)^2")     # its new events carry the name (those before it: none)
+        assert kb.query("origin(R, seen(X)^_)") == [
+            {"R": slr_sql.Atom("central"), "X": slr_sql.Atom("y")}]
+    # the site pushing back brings central's own rows: a cycle, refused, nothing stored
+    back = slr_cli("fleet", "push", site, central)
+    assert back.returncode == 1
+    assert "the rows of robot 'central' are this store's own; 'site' relaying them back " \
+           "would store each of them twice" in back.stderr, back.stderr
+    assert "Traceback" not in back.stderr
+    with slr_sql.open(central, clock=slr_sql.ManualClock(100)) as kb:
+        assert [a["X"] for a in kb.query("seen(X)^_")] == [slr_sql.Atom("x"),
+                                                          slr_sql.Atom("y")]
+    # and it ships as central only
+    other = slr_cli("fleet", "push", central, site, "--robot", "other")
+    assert other.returncode == 1
+    assert "is the store of robot 'central', not 'other'" in other.stderr, other.stderr
+    again = slr_cli("fleet", "push", central, site)
+    assert again.returncode == 0, again.stderr
+    assert "robot central: shipped 1 events" in again.stdout

@@ -341,3 +341,32 @@ def test_slr_serve_logs_the_foxglove_views_start_clients_and_errors_in_words(tmp
     assert trouble.startswith("WARNING:  foxglove: a/1: its rows cannot be read (no such "
                               "table"), trouble
     assert not any("Traceback" in line for line in err.lines), err.lines
+
+
+def test_static_frames_named_by_equal_numbers_are_sent_apart(tmp_path):
+    """Frames are names (docs/language.md, tf_lookup): 1 and 1.0, -0.0 and 0.0 are four
+    frames, each with a static edge to base; the view kept the last value of each static
+    edge by the raw values, where 1 == 1.0 and -0.0 == 0.0, and sent two of the four."""
+    db = tmp_path / "frames.db"
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add_many([("tf_static", ("base", frame, pose(x)), 0.0, 0.0)
+                     for frame, x in ((1, 1.0), (1.0, 2.0), (-0.0, 3.0), (0.0, 4.0))])
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    process = subprocess.Popen([sys.executable, "-m", "slr_sql", "foxglove", str(db), "--port",
+                                "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               env=env)
+    try:
+        line = process.stdout.readline()
+        assert line.startswith("foxglove: ws://127.0.0.1:"), process.stderr.read()
+        port = int(line.split(":")[3].split()[0])
+        deadline = time.monotonic() + DEADLINE
+        with FoxgloveClient(port) as client:
+            client.pump(lambda: "/tf_static" in client.channels, deadline)
+            client.subscribe("/tf_static")
+            client.pump(lambda: client.on("/tf_static"), deadline)
+            (_, static), *_ = client.on("/tf_static")
+    finally:
+        process.terminate()
+        process.communicate(timeout=DEADLINE)
+    sent = sorted((t["child_frame_id"], t["translation"]["x"]) for t in static["transforms"])
+    assert sent == [("-0.0", 3.0), ("0.0", 4.0), ("1", 1.0), ("1.0", 2.0)]

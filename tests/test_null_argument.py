@@ -169,3 +169,114 @@ def test_the_door_refuses_a_postgresql_merge_too(postgres_url):
             kb.sql("MERGE INTO p USING (SELECT 1 AS one) AS s ON false WHEN NOT MATCHED THEN "
                    "INSERT (arg1, t_start, t_end, arrival) VALUES (NULL, 4, 4, 10)", write=True)
         assert kb.sql("SELECT count(*) FROM p")[1] == [(1,)]
+
+
+# The door does not read the statement's text: the store says which tables a statement
+# wrote (SQLite's authorizer while it compiles the statement and its triggers; PostgreSQL's
+# row counters of the transaction), so a write by a trigger, by a function, or through a
+# name spelled another way is checked like a plain one.
+TRIGGER = {
+    "sqlite": ["CREATE TABLE notes (x)",
+               "CREATE TRIGGER notes_p AFTER INSERT ON notes BEGIN "
+               "INSERT INTO p (arg1, t_start, t_end, arrival) VALUES (NULL, 4, 4, 10); END"],
+    "postgres": ["CREATE TABLE notes (x int)",
+                 "CREATE FUNCTION notes_p() RETURNS trigger LANGUAGE plpgsql AS $$ BEGIN "
+                 "INSERT INTO p (arg1, t_start, t_end, arrival) VALUES (NULL, 4, 4, 10); "
+                 "RETURN NULL; END $$",
+                 "CREATE TRIGGER notes_p AFTER INSERT ON notes FOR EACH ROW "
+                 "EXECUTE FUNCTION notes_p()"],
+}
+SPELLED_OTHERWISE = {
+    "sqlite": ['UPDATE "main"."P" SET arg1 = NULL WHERE seq = 2',
+               "UPDATE [p] SET arg1 = NULL WHERE seq = 2"],
+    "postgres": ['UPDATE U&"\\0070" SET arg1 = NULL WHERE seq = 2',
+                 'UPDATE U&"!0070" UESCAPE \'!\' SET arg1 = NULL WHERE seq = 2'],
+}
+
+
+def opened_with_p(backend_kind, request, tmp_path):
+    where = (request.getfixturevalue("postgres_url") if backend_kind == "postgres"
+             else str(tmp_path / "k.db"))
+    kb = slr_sql.open(where, clock=ManualClock(10))
+    for event in ("p(a)^1", "p(b)^2"):
+        kb.add(event)
+    return kb
+
+
+def refused_unchanged(kb, statement: str, seq: int) -> None:
+    rows = kb.sql("SELECT * FROM p ORDER BY seq")[1]
+    with pytest.raises(NotAnEvent, match=rf"^sql: the statement would leave a row that is no "
+                                         rf"event: arg1 of p/1's row of seq {seq} would be NULL"):
+        kb.sql(statement, write=True)
+    assert kb.sql("SELECT * FROM p ORDER BY seq")[1] == rows
+    assert [a["X"] for a in kb.query("p(X)^_")] == [Atom("a"), Atom("b")]
+
+
+@pytest.mark.parametrize("backend_kind", ["sqlite", "postgres"])
+def test_the_door_refuses_a_null_a_trigger_would_write(backend_kind, request, tmp_path):
+    with opened_with_p(backend_kind, request, tmp_path) as kb:
+        for statement in TRIGGER[backend_kind]:
+            kb.sql(statement, write=True)
+        # the statement names no event table; its trigger writes one
+        refused_unchanged(kb, "INSERT INTO notes VALUES (1)", 3)
+        assert kb.sql("SELECT count(*) FROM notes")[1] == [(0,)]
+        # also when the statement ran before (SQLite keeps it compiled)
+        refused_unchanged(kb, "INSERT INTO notes VALUES (1)", 3 if backend_kind == "sqlite"
+                          else 4)   # (a PostgreSQL sequence does not go back)
+
+
+@pytest.mark.parametrize("backend_kind", ["sqlite", "postgres"])
+def test_the_door_refuses_a_null_through_a_table_name_spelled_otherwise(
+        backend_kind, request, tmp_path):
+    with opened_with_p(backend_kind, request, tmp_path) as kb:
+        for statement in SPELLED_OTHERWISE[backend_kind]:
+            refused_unchanged(kb, statement, 2)
+
+
+def test_the_door_refuses_a_null_a_postgresql_function_writes(postgres_url):
+    with slr_sql.open(postgres_url, clock=ManualClock(10)) as kb:
+        kb.add("p(a)^1")
+        kb.sql("CREATE FUNCTION spoil() RETURNS int LANGUAGE sql AS "
+               "$$ UPDATE p SET arg1 = NULL RETURNING 1 $$", write=True)
+        with pytest.raises(NotAnEvent, match=r"^sql: the statement would leave a row"):
+            kb.sql("SELECT spoil()", write=True)
+        assert kb.query("p(X)^_") == [{"X": Atom("a")}]
+
+
+@pytest.mark.parametrize("backend_kind", ["sqlite", "postgres"])
+def test_a_write_beside_rows_that_were_no_events_already_goes_through_once(
+        backend_kind, request, tmp_path):
+    with opened_with_p(backend_kind, request, tmp_path) as kb:
+        kb.store.execute("UPDATE p SET arg1 = NULL WHERE seq = 2")   # (below the door)
+        # the table it writes holds a row that is no event: the run is taken back, the
+        # rows there before read, and it runs again; its effect is there once
+        kb.sql("INSERT INTO p (arg1, t_start, t_end, arrival) VALUES ('d', 4, 4, 10)",
+               write=True)
+        assert kb.sql("SELECT count(*) FROM p WHERE arg1 = 'd'")[1] == [(1,)]
+        kb.sql("UPDATE p SET t_end = t_end WHERE seq = 2", write=True)   # (stays as it was)
+        with pytest.raises(NotAnEvent, match=r"^sql: the statement would leave a row that "
+                                             r"is no event: arg1 of p/1's row of seq 1 "):
+            kb.sql("UPDATE p SET arg1 = NULL WHERE seq = 1", write=True)
+        assert kb.sql("SELECT arg1 FROM p WHERE seq = 1")[1] == [("a",)]
+
+
+def test_without_the_servers_row_counters_every_table_counts_as_written(postgres_url):
+    # (track_counts = off: pg_stat_xact_user_tables stays still, so the door reads them all)
+    with slr_sql.open(postgres_url, clock=ManualClock(10)) as kb:
+        for event in ("p(a)^1", "p(b)^2"):
+            kb.add(event)
+        for statement in TRIGGER["postgres"]:
+            kb.sql(statement, write=True)
+        kb.store.execute("SET track_counts = off")
+        refused_unchanged(kb, "INSERT INTO notes VALUES (1)", 3)
+        kb.sql("INSERT INTO notes SELECT 2 WHERE false", write=True)   # (writes no NULL)
+
+
+def test_a_sqlite_statement_that_writes_no_event_table_runs_outside_a_transaction(tmp_path):
+    # SQLite tells what a statement writes by compiling it (EXPLAIN): one that writes no
+    # event table runs as given, so one that cannot run in a transaction still runs
+    with slr_sql.open(tmp_path / "k.db", clock=ManualClock(10)) as kb:
+        kb.add("p(a)^1")
+        assert kb.sql("VACUUM", write=True) == ([], [])
+        assert kb.sql("PRAGMA wal_checkpoint(TRUNCATE)", write=True)[1] == [(0, 0, 0)]
+        assert kb.query("p(X)^_") == [{"X": Atom("a")}]

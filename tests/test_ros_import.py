@@ -35,6 +35,8 @@ make_bag = _load_example()
 # The stores that import a bag get a StreamClock, the clock of recorded data (its now is the
 # greatest end time imported): with the default wall clock, messages stamped at the bags'
 # epoch would arrive "months late" and each type would say so with a LearnedDelayWarning.
+# (`slr ros import` itself moves a ManualClock along the bag's record times and learns no
+# delays: tests/test_ros_import_clock.py.)
 FORMATS = ["ros1", "sqlite3", "mcap", "mcap-file"]
 
 

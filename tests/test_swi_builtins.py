@@ -46,6 +46,20 @@ GOALS = [
     'aggregate_all(max(X, Y), member(X-Y, [1-a, 3-b, 3-c]), M)',
     'aggregate_all(min(X, Y), member(X-Y, [1-a, 3-b, 1-c]), M)',
     'aggregate_all(sum(X), member(X, [1, a]), S)',
+    # a solution that is no number raises its error as it comes: before a later solution's
+    # own error (SWI-Prolog evaluates each: S is S0 + X, M is max(M0, X), X > Max0)
+    'aggregate_all(max(X), (member(X, [1, foo]) ; throw(later)), M)',
+    'aggregate_all(min(X), (member(X, [1, foo]) ; throw(later)), M)',
+    'aggregate_all(sum(X), (member(X, [1, foo]) ; throw(later)), M)',
+    'aggregate_all(max(X), (member(X, [foo]) ; throw(later)), M)',
+    'aggregate_all(max(X), (member(X, [1, _]) ; throw(later)), M)',
+    'aggregate_all(min(X), (member(X, [2, foo, bar]) ; X is 1 / 0), M)',
+    'aggregate_all(sum(X), (member(X, [1, 2 + a]) ; X is foo + 1), M)',
+    'aggregate_all(max(X, W), (member(X-W, [1-a, foo-b]) ; throw(later)), M)',
+    'aggregate_all(min(X, W), (member(X-W, [foo-a]) ; throw(later)), M)',
+    'aggregate_all(max(X), (member(X, [1, 2]) ; throw(later)), M)',
+    'aggregate_all(sum(X), (member(X, [1, 2]) ; X is 1 / 0), M)',
+    'aggregate_all(count, (member(X, [1, foo]) ; throw(later)), M)',
     'aggregate_all(count, fail, N)',
     'aggregate_all(foo, true, N)',
     'sum_list([1, 2.5, 3], S)',
@@ -208,3 +222,35 @@ def test_a_goal_left_alone_still_differs_from_swipl(swipl, goal):
     example = swidiff.builtin_example(goal)
     with pytest.raises(AssertionError):
         swidiff.check_example(example, swipl.run(example[2]))
+
+
+# The same order over stored events, on both of slr_sql's paths (compiled SQL folds with its
+# ordered aggregates, the interpreter as it collects): the error SWI-Prolog raises for the
+# same solutions given as a list. (stored: p(1)^1, p(foo)^2, q(bar)^3)
+OVER_EVENTS = {
+    "aggregate_all(max(X), (p(X)^_ ; q(Y)^_, X is Y + 1), M)":
+        "aggregate_all(max(X), (member(X, [1, foo]) ; member(Y, [bar]), X is Y + 1), M)",
+    "aggregate_all(sum(X), (q(Y)^_, X is Y + 1 ; p(X)^_), M)":
+        "aggregate_all(sum(X), (member(Y, [bar]), X is Y + 1 ; member(X, [1, foo])), M)",
+    "aggregate_all(min(X, W), (p(X)^W ; q(Y)^W, X is Y + 1), M)":
+        "aggregate_all(min(X, W), (member(X-W, [1-1.0, foo-2.0]) ; member(Y-W, [bar-3.0]), "
+        "X is Y + 1), M)",
+}
+
+
+@pytest.mark.parametrize("goal", sorted(OVER_EVENTS))
+def test_over_stored_events_the_first_bad_solution_raises_as_in_swipl(swipl, goal):
+    import slr_sql
+    from slr_sql.errors import SLREvaluationError
+
+    example = swidiff.builtin_example(OVER_EVENTS[goal])
+    theirs = swipl.run(example[2])[0]
+    assert theirs["error"] is not None
+    with slr_sql.open(clock=slr_sql.ManualClock(10)) as kb:
+        kb.add_many(["p(1)^1", "p(foo)^2", "q(bar)^3"])
+        for compiled in (True, False):
+            kb.sql_enabled = compiled
+            with pytest.raises(SLREvaluationError) as raised:
+                kb.query(goal)
+            assert swidiff.canonical_error(raised.value.term) == \
+                swidiff.from_swi(theirs["error"], {}), (compiled, raised.value.term)

@@ -416,3 +416,34 @@ def test_a_transform_over_an_interval_holds_inside_it_and_is_interpolated_from_i
     # the interval is its pose at each of its ends, and at every time between them
     assert x == [[], [1.0], [1.0], [1.0], [1.5], [2.5], [3.0], [5.0], [5.0], [4.0], [3.0]]
     assert held == [[1.0], [1.0], [3.0]]
+
+
+# -- -0.0 and 0.0 are two frames, in the frame list as in the lookup -------------------------
+
+@pytest.mark.parametrize("backend", ["sqlite", "postgres"])
+def test_frames_named_minus_zero_and_zero_are_two_frames_in_the_frame_list_too(backend,
+                                                                               request):
+    where = request.getfixturevalue("postgres_url") if backend == "postgres" else None
+    with slr_sql.open(where, clock=ManualClock(100.0)) as kb:
+        # the two edges' observations interleave: a bracket that took -0.0 for 0.0 would
+        # interpolate across the other frame's
+        kb.add_many([tf_event("tf", -0.0, "b", 0.0, (1.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf", 0.0, "b", 1.0, (5.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf", -0.0, "b", 2.0, (3.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf", 0.0, "b", 3.0, (7.0, 0.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf_static", "c", 0.0, 0.0, (0.0, 2.0, 0.0), (0, 0, 0, 1)),
+                     tf_event("tf_static", "c", -0.0, 0.0, (0.0, 4.0, 0.0), (0, 0, 0, 1))])
+        pairs, _ = kb.store.distinct_pairs("tf", 3)
+        statics, _ = kb.store.distinct_pairs("tf_static", 3)
+        listed = sorted(repr(parent) for parent, child, _ in pairs)
+        listed_static = sorted(repr(child) for parent, child, _ in statics)
+        x = {goal: [p[0][:2] for p in pose_of(kb, goal)] for goal in (
+            "tf_lookup(-0.0, b, 1, P)", "tf_lookup(0.0, b, 2, P)",
+            "tf_lookup(-0.0, 0.0, 2, P)", "tf_lookup(c, -0.0, 5, P)",
+            "tf_lookup(c, 0.0, 5, P)")}
+    assert listed == ["-0.0", "0.0"] and listed_static == ["-0.0", "0.0"]
+    assert x == {"tf_lookup(-0.0, b, 1, P)": [[2.0, 0.0]],    # from 1 at 0 to 3 at 2
+                 "tf_lookup(0.0, b, 2, P)": [[6.0, 0.0]],     # from 5 at 1 to 7 at 3
+                 "tf_lookup(-0.0, 0.0, 2, P)": [[-3.0, 0.0]],  # b in -0.0 (3), 0.0 in b (-6)
+                 "tf_lookup(c, -0.0, 5, P)": [[0.0, 4.0]],
+                 "tf_lookup(c, 0.0, 5, P)": [[0.0, 2.0]]}

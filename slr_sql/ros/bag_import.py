@@ -30,13 +30,14 @@ from __future__ import annotations
 import gc
 import hashlib
 import json
+import math
 import queue
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from slr_sql import SLRError
+from slr_sql import ManualClock, SLRError
 from slr_sql.api import KnowledgeBaseAPI
 
 from .mapping import IMPORT_CHECKPOINT, BoundEntry, Mapping, MessageError, normalize_topic
@@ -172,11 +173,18 @@ class _Plan:
 def import_bag(kb: KnowledgeBaseAPI, path: str | Path, mapping: Mapping | None = None,
                all_topics: bool = False,
                progress: Callable[[int, int], None] | None = None,
-               batch_size: int = DEFAULT_BATCH) -> ImportReport:
+               batch_size: int = DEFAULT_BATCH, clock: ManualClock | None = None
+               ) -> ImportReport:
     """Import the bag at ``path`` into ``kb`` as events, by ``mapping`` (default: the
     built-in /tf and /tf_static mapping only); ``all_topics`` adds every other topic as an
     event named after the topic with the message as a term. ``progress(done, total)`` is
     called after each batch with message counts. Importing the same bag again adds nothing.
+
+    ``clock``: the ManualClock ``kb`` was opened with, moved (forward only) to each batch's
+    last record time before the batch is stored (for an export of ``slr export``: its
+    greatest end time), so that the events arrive in the recording's own time, as
+    ``slr ros import`` does (it also opens the store with ``max_learned_delay=0``: a batch's
+    arrival is no message's latency, so the import learns no delays).
 
     >>> import slr_sql, tempfile, os
     >>> from slr_sql.ros.bag_import import import_bag
@@ -189,7 +197,7 @@ def import_bag(kb: KnowledgeBaseAPI, path: str | Path, mapping: Mapping | None =
     from slr_sql.viz.mcap_export import is_slr_export
 
     if is_slr_export(path):
-        return _import_export(kb, Path(path), progress, max(1, int(batch_size)))
+        return _import_export(kb, Path(path), progress, max(1, int(batch_size)), clock)
     reader = open_bag(path)
     # A batch is tens of thousands of young objects without cycles; the cyclic collector
     # would walk them again and again while they wait for add_many (measured: 10-30 % of
@@ -197,7 +205,8 @@ def import_bag(kb: KnowledgeBaseAPI, path: str | Path, mapping: Mapping | None =
     collecting = gc.isenabled()
     gc.disable()
     try:
-        return _import(kb, reader, mapping, all_topics, progress, max(1, int(batch_size)))
+        return _import(kb, reader, mapping, all_topics, progress, max(1, int(batch_size)),
+                       clock)
     finally:
         if collecting:
             gc.enable()
@@ -207,8 +216,14 @@ def import_bag(kb: KnowledgeBaseAPI, path: str | Path, mapping: Mapping | None =
             pass
 
 
+def _follow(clock: ManualClock | None, t: float) -> None:
+    """Move ``clock`` forward to ``t`` (the time the batch about to be stored was recorded)."""
+    if clock is not None and math.isfinite(t) and t > clock.now():
+        clock.set(t)
+
+
 def _import_export(kb: KnowledgeBaseAPI, path: Path, progress: Callable[[int, int], None] | None,
-                   batch_size: int) -> ImportReport:
+                   batch_size: int, clock: ManualClock | None) -> ImportReport:
     """An MCAP file of ``slr export``: its events as they were stored (no mapping: its
     channels name their event types), with the same checkpoints as a bag."""
     from slr_sql.viz.mcap_export import export_batches, export_summary
@@ -234,6 +249,8 @@ def _import_export(kb: KnowledgeBaseAPI, path: Path, progress: Callable[[int, in
     for events, counts, marks in export_batches(path, done, batch_size):
         checkpoints = [(IMPORT_CHECKPOINT, (report.bag_id, topic, n), 0.0, 0.0)
                        for topic, n in counts.items() if n > stored.get(topic, 0)]
+        if events:
+            _follow(clock, max(float(event[3]) for event in events))
         rejected = kb.add_many(events + checkpoints) if events or checkpoints else []
         if rejected:
             raise SLRError(f"{path}: the store refused events of the export: {rejected[0]}")
@@ -298,13 +315,15 @@ class _Batch:
     rejected: list = field(default_factory=list)  # messages the mapping could not convert
     per_topic: dict = field(default_factory=dict)  # topic -> events in this batch
     read: int = 0                                 # messages read so far (for progress)
+    recorded: float = -math.inf                   # the latest record time read into it
 
 
 _END = object()
 
 
 def _import(kb: KnowledgeBaseAPI, reader: Any, mapping: Mapping, all_topics: bool,
-            progress: Callable[[int, int], None] | None, batch_size: int) -> ImportReport:
+            progress: Callable[[int, int], None] | None, batch_size: int,
+            clock: ManualClock | None) -> ImportReport:
     """Reading and decoding run in a second thread while this one stores the previous batch:
     SQLite releases the GIL while it writes, so on a free core both proceed at once. Batches
     are stored in order, each with its checkpoints, by the calling thread only."""
@@ -345,6 +364,7 @@ def _import(kb: KnowledgeBaseAPI, reader: Any, mapping: Mapping, all_topics: boo
                 break
             if isinstance(item, BaseException):
                 raise item
+            _follow(clock, item.recorded)
             _store(kb, report, item)
             if progress is not None:
                 progress(item.read, total)
@@ -382,10 +402,12 @@ def _batches(reader: Any, selected: list, plans: dict, done: dict, report: Impor
     touched: dict[str, None] = {}
     batch = _Batch()
     read = 0
+    latest = -math.inf   # the latest record time read (a bag's messages are in its order)
 
     def close(b: _Batch) -> _Batch:
         b.checkpoints = [(t, counts[t], last_time[t]) for t in touched]
         b.read = read
+        b.recorded = latest
         touched.clear()
         return b
 
@@ -402,6 +424,8 @@ def _batches(reader: Any, selected: list, plans: dict, done: dict, report: Impor
         read += 1
         topic_report = report.topics[topic]
         record = stamp * 1e-9
+        if record > latest:
+            latest = record
         if index <= done.get(topic, 0):
             report.skipped += 1
             topic_report.skipped += 1

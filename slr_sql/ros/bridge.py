@@ -320,9 +320,15 @@ class Bridge:
         self._node: Any = None
         self._executor: Any = None
         self._typestore: Any = None
+        # What is taken but not stored yet: the events of the messages taken since the last
+        # add_many that succeeded (``_pending_messages`` of them), and the marks still to
+        # store, one list per message that has any, in order. A message is held while its
+        # events or any of its marks are not stored; ``_marked_pending`` of the mark lists
+        # (the last ones) belong to messages whose events are not stored either.
         self._pending_events: list = []
-        self._pending_marks: list = []
         self._pending_messages = 0
+        self._pending_marks: list[list] = []
+        self._marked_pending = 0
         # why the store took no writes (SLRBusy, SLRStoreFull, ...) while events are held
         self._unavailable: SLRUnavailable | None = None
         clock = getattr(kb, "clock", None)
@@ -420,32 +426,40 @@ class Bridge:
         """Store the pending events and marks. When the store takes no writes for a reason
         that may pass (another process holds its lock past ``busy_timeout``, the disk is
         full: :class:`SLRUnavailable`), what was not stored stays pending, in order, and is
-        tried again at the next spin; said once when it starts and once when it ends."""
-        if not self._pending_messages:
+        tried again at the next spin; said once when it starts and once when it ends. The
+        events go first, in one ``add_many``, then the marks one by one: a flush can store
+        the events and not (all) the marks, and then holds only the messages whose marks
+        are not all stored."""
+        if not self._pending_messages and not self._pending_marks:
             return
-        events, marks = self._pending_events, self._pending_marks
-        messages = self._pending_messages
-        self._pending_events, self._pending_marks, self._pending_messages = [], [], 0
+        events, messages = self._pending_events, self._pending_messages
+        marks, marked_pending = self._pending_marks, self._marked_pending
+        self._pending_events, self._pending_messages = [], 0
+        self._pending_marks, self._marked_pending = [], 0
         try:
             if events:
                 rejected = self.kb.add_many(events)
                 self.stats.events += len(events) - len(rejected)
-                events = []
                 for error in rejected:
                     self.stats.rejected += 1
                     self.log(f"warning: event rejected: {error}")
+            events, messages, marked_pending = [], 0, 0
             while marks:
-                event_type, t = marks[0]
-                self.kb.mark_complete(event_type, t)
+                message_marks = marks[0]
+                while message_marks:
+                    event_type, t = message_marks[0]
+                    self.kb.mark_complete(event_type, t)
+                    message_marks.pop(0)
+                    self.stats.marks += 1
                 marks.pop(0)
-                self.stats.marks += 1
         except SLRUnavailable as exc:
             self._pending_events = events + self._pending_events
-            self._pending_marks = marks + self._pending_marks
             self._pending_messages += messages
+            self._pending_marks = marks + self._pending_marks
+            self._marked_pending += marked_pending
             if self._unavailable is None:
                 self.log(f"warning: the store takes no writes now ({exc}); "
-                         f"{self._pending_messages} message(s) held, stored once it does")
+                         f"{self.held} message(s) held, stored once it does")
             self._unavailable = exc
             return
         if self._unavailable is not None:
@@ -491,8 +505,10 @@ class Bridge:
 
     @property
     def held(self) -> int:
-        """Messages taken but not stored yet (held while the store takes no writes)."""
-        return self._pending_messages
+        """Messages taken but not stored yet (held while the store takes no writes): those
+        whose events are not stored, and those whose events are stored but not all of
+        their completeness marks."""
+        return self._pending_messages + len(self._pending_marks) - self._marked_pending
 
     @property
     def node(self) -> Any:
@@ -602,7 +618,7 @@ class Bridge:
     def _on_message(self, sub: _Subscription, raw: bytes) -> None:
         arrival = float(self._now())
         self.stats.messages += 1
-        if self._unavailable is not None and self._pending_messages >= MAX_HELD:
+        if self._unavailable is not None and self.held >= MAX_HELD:
             if not self.stats.dropped:
                 self.log(f"warning: {MAX_HELD} messages held while the store takes no writes: "
                          f"later ones are dropped (counted at the end) until it does")
@@ -624,8 +640,10 @@ class Bridge:
             self.log(f"warning: {sub.topic}: message rejected: {exc}")
             return
         self._pending_events += events
-        self._pending_marks += marks
         self._pending_messages += 1
+        if marks:
+            self._pending_marks.append(marks)
+            self._marked_pending += 1
 
     # -- publishing -----------------------------------------------------------------------
     def add_publisher(self, entry: PublishEntry) -> None:

@@ -96,7 +96,12 @@ def import_command(bag: str, db_argument: str | None, db_option: str | None,
     created = not os.path.lexists(db)
     started = False  # whether the import read its first message (events may be stored)
     try:
-        with slr_sql.open(db) as kb, Progress(
+        # A recording's events are old: the store's clock follows the bag's record times
+        # (each batch arrives when its last message was recorded), and the import learns
+        # no delays (a batch's arrival is no message's latency; the wall clock made every
+        # type months late, a LearnedDelayWarning each and the capped delay learned)
+        clock = slr_sql.ManualClock(0.0)
+        with slr_sql.open(db, clock=clock, max_learned_delay=0.0) as kb, Progress(
                 TextColumn("[progress.description]{task.description}"), BarColumn(),
                 MofNCompleteColumn(), TimeRemainingColumn(), console=console,
                 transient=True) as bar:
@@ -109,7 +114,7 @@ def import_command(bag: str, db_argument: str | None, db_option: str | None,
                 bar.update(task, completed=done, total=total)
 
             report = import_bag(kb, bag, mapping, all_topics=all_topics, progress=progress,
-                                batch_size=batch_size or DEFAULT_BATCH)
+                                batch_size=batch_size or DEFAULT_BATCH, clock=clock)
     except Exception:
         # A MAP that does not fit the bag, a bag that cannot be read: no empty store is left
         # behind. A store that got events keeps them (a later run continues the import).

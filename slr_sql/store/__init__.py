@@ -43,6 +43,7 @@ other threads left open (they resume after it, from where they were).
 """
 from __future__ import annotations
 
+import math
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
@@ -487,13 +488,13 @@ class EventStore:
         return self._reader.latest_rows(name, arity, positions, values, t, point)
 
     @_doc(EventReader.bracket)
-    def bracket(self, name: str, arity: int, bound: dict[int, Any], t: float
-                ) -> tuple[Row | None, Row | None] | None:
-        return self._reader.bracket(name, arity, bound, t)
+    def bracket(self, name: str, arity: int, bound: dict[int, Any], t: float,
+                longest: float = math.inf) -> tuple[Row | None, Row | None] | None:
+        return self._reader.bracket(name, arity, bound, t, longest)
 
     @_doc(EventReader.distinct_pairs)
     def distinct_pairs(self, name: str, arity: int, after_seq: int = 0
-                       ) -> tuple[list[tuple[Any, Any]], int]:
+                       ) -> tuple[list[tuple[Any, Any, float]], int]:
         return self._reader.distinct_pairs(name, arity, after_seq)
 
     @_doc(EventReader.null_arguments)
@@ -796,6 +797,15 @@ class EventStore:
     def sql(self, query: str, params: Iterable[Any] = (), write: bool = False,
             timeout: float | None = None) -> tuple[list[str], list[tuple]]:
         return self._db.sql(query, params, write, timeout)
+
+    @_doc(Database.tables_to_write)
+    def tables_to_write(self, query: str, params: Iterable[Any] = ()) -> set[str] | None:
+        return self._db.tables_to_write(query, params)
+
+    @_doc(Database.sql_write)
+    def sql_write(self, query: str, params: Iterable[Any] = (), timeout: float | None = None
+                  ) -> tuple[list[str], list[tuple], set[str]]:
+        return self._db.sql_write(query, params, timeout)
 
     @_doc(Database.execute)
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:

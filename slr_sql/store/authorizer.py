@@ -71,6 +71,7 @@ _OK, _DENY = sqlite3.SQLITE_OK, sqlite3.SQLITE_DENY
 _FUNCTION = sqlite3.SQLITE_FUNCTION
 _PRAGMA = sqlite3.SQLITE_PRAGMA
 _ATTACHING = frozenset({sqlite3.SQLITE_ATTACH, sqlite3.SQLITE_DETACH})
+_WRITING_ROWS = frozenset({sqlite3.SQLITE_INSERT, sqlite3.SQLITE_UPDATE})
 _FTS3_TOKENIZER_SWITCH = 1004  # SQLITE_DBCONFIG_ENABLE_FTS3_TOKENIZER
 
 
@@ -80,6 +81,8 @@ class SqlGuard:
 
     def __init__(self) -> None:
         self.denied: str | None = None
+        # the main database's tables a statement inserts into or updates (see ``writing``)
+        self.written: set[str] = set()
 
     def always(self, action: int, arg1: Any, arg2: Any, _db: Any, _trigger: Any) -> int:
         """Every statement: no function of :data:`DENIED_FUNCTIONS`, no pragma of
@@ -95,6 +98,15 @@ class SqlGuard:
                 self.denied = f"PRAGMA {arg1.lower()} is not allowed ({reason})"
                 return _DENY
         return _OK
+
+    def writing(self, action: int, arg1: Any, arg2: Any, db: Any, trigger: Any) -> int:
+        """A hand-written statement that may write: :meth:`always`, and the tables of the
+        main database it inserts rows into or updates noted in ``written``. SQLite asks
+        while it compiles the statement, its triggers' statements included (SQLite codes
+        them into it), so what is noted does not depend on how the statement spells a name."""
+        if action in _WRITING_ROWS and db == "main" and isinstance(arg1, str):
+            self.written.add(arg1)
+        return self.always(action, arg1, arg2, db, trigger)
 
     def read_only(self, action: int, arg1: Any, arg2: Any, db: Any, trigger: Any) -> int:
         """A read-only statement: :meth:`always`, and no ATTACH, DETACH (nor ``VACUUM

@@ -711,17 +711,8 @@ class Database:
             guard = self.guard
             guard.denied = None
             if write:
-                with self._deadline(deadline, "the SQL statement"):
-                    try:
-                        cursor = conn.execute(query, bound_parameters(params))
-                        columns = [d[0] for d in cursor.description] if cursor.description else []
-                        return columns, cursor.fetchall()
-                    except sqlite3.DatabaseError as exc:
-                        if _refused(str(exc), guard):
-                            raise SLRError(f"sql: {guard.denied}") from None
-                        if _FUNCTION_FAILED in str(exc):
-                            raise SLRError(f"sql: {_NOT_UTF8}") from None
-                        raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+                columns, rows, _ = self._write(query, params, deadline)
+                return columns, rows
             # query_only refuses every write to a database file; the authorizer refuses what
             # it lets through (pragma assignments such as journal_mode, ATTACH, DETACH) and
             # the functions no statement may call; the length limit turns a memory bomb
@@ -740,6 +731,70 @@ class Database:
                 conn.setlimit(sqlite3.SQLITE_LIMIT_LENGTH, longest)
                 conn.set_authorizer(guard.always)
                 conn.execute("PRAGMA query_only = 0")
+
+    def sql_write(self, query: str, params: Iterable[Any] = (), timeout: float | None = None
+                  ) -> tuple[list[str], list[tuple], set[str]]:
+        """Run one statement as ``sql(..., write=True)`` does, and say which tables of the
+        store it inserted rows into or updated, those its triggers wrote included (SQLite's
+        authorizer names them while it compiles the statement, whatever the spelling).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.declare_type("p", 1)
+        'p'
+        >>> s.sql_write('INSERT INTO "P" (arg1, t_start, t_end, arrival) VALUES (1, 1, 1, 1)')
+        ([], [], {'p'})
+        """
+        with self.lock:
+            self.check_open()
+            return self._write(query, params,
+                               None if timeout is None else time.monotonic() + timeout)
+
+    def tables_to_write(self, query: str, params: Iterable[Any] = ()) -> set[str] | None:
+        """The tables of the store a statement would insert rows into or update, those its
+        triggers would write included, told by compiling it (``EXPLAIN``: nothing runs);
+        None when it cannot be compiled so (its own run says why).
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.declare_type("p", 1)
+        'p'
+        >>> s.tables_to_write("UPDATE [P] SET arg1 = ?", (1,)), s.tables_to_write("VACUUM")
+        ({'p'}, set())
+        """
+        with self.lock:
+            self.check_open()
+            conn, guard = self.conn, self.guard
+            guard.written = set()
+            conn.set_authorizer(guard.writing)
+            try:
+                conn.execute(f"EXPLAIN {query}", bound_parameters(params)).close()
+                return guard.written
+            except (sqlite3.Error, OverflowError, TypeError, ValueError):
+                return None
+            finally:
+                guard.denied = None
+                conn.set_authorizer(guard.always)
+
+    def _write(self, query: str, params: Iterable[Any], deadline: float | None
+               ) -> tuple[list[str], list[tuple], set[str]]:
+        conn, guard = self.conn, self.guard
+        guard.denied = None
+        guard.written = set()
+        # (setting an authorizer expires the connection's prepared statements: a statement
+        # run before is compiled again, so the authorizer sees it and its triggers)
+        conn.set_authorizer(guard.writing)
+        try:
+            with self._deadline(deadline, "the SQL statement"):
+                cursor = conn.execute(query, bound_parameters(params))
+                columns = [d[0] for d in cursor.description] if cursor.description else []
+                return columns, cursor.fetchall(), guard.written
+        except sqlite3.DatabaseError as exc:
+            if _refused(str(exc), guard):
+                raise SLRError(f"sql: {guard.denied}") from None
+            if _FUNCTION_FAILED in str(exc):
+                raise SLRError(f"sql: {_NOT_UTF8}") from None
+            raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+        finally:
+            conn.set_authorizer(guard.always)
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
         """Execute one statement for another slr_sql module (triggers, buffer pruning, ...)

@@ -51,6 +51,41 @@ def _number_kind(value: Any) -> str | None:
         return "integer"
     return None
 
+def _exact(value: Any) -> tuple:
+    """A stored value as a key that tells what SQL's = does not: 1 from 1.0, -0.0 from 0.0."""
+    if type(value) is float:
+        return (float, repr(value))
+    return (type(value), value)
+
+
+def _zero_signs(bound: dict[int, Any], positions: tuple[int, ...]) -> tuple[tuple[int, float], ...]:
+    """The bound float zeros among ``positions``, with their signs (1.0 or -1.0)."""
+    return tuple((p, math.copysign(1.0, bound[p])) for p in positions
+                 if type(bound[p]) is float and bound[p] == 0.0)
+
+
+def _first_of_signs(cursor: Any, signs: tuple[tuple[int, float], ...]) -> Any:
+    """The first row of ``cursor`` (``(probe, arg1, ...)``) whose zeros at the positions of
+    ``signs`` have those signs; None when none has. The cursor is closed (its statement
+    stops there)."""
+    try:
+        for row in cursor:
+            if all(math.copysign(1.0, row[p + 1]) == sign for p, sign in signs):
+                return row
+        return None
+    finally:
+        cursor.close()
+
+
+def _earliest_holding_start(t: float, longest: float) -> float:
+    """The earliest start of an event that lasts at most ``longest`` and holds at ``t``,
+    a few units in the last place early (``t - longest`` is rounded, as ``longest`` was):
+    reading a little more is harmless, missing one is not."""
+    if not longest > 0.0:
+        return t
+    return t - longest - 4.0 * math.ulp(max(abs(t), longest))
+
+
 def null_argument_text(name: str, arity: int, table: str, argument: int, seq: int) -> str:
     """A stored row whose argument ``argument`` is NULL, in words: what it is and the
     statement that removes it (the facade's and the subscriptions' NotAnEvent say the same).
@@ -506,18 +541,21 @@ class EventReader:
             return self.db.conn.execute(
                 f"SELECT max(t_end) FROM {event_type.quoted}").fetchone()[0]
 
-    def bracket(self, name: str, arity: int, bound: dict[int, Any], t: float
-                ) -> tuple[Row | None, Row | None] | None:
+    def bracket(self, name: str, arity: int, bound: dict[int, Any], t: float,
+                longest: float = math.inf) -> tuple[Row | None, Row | None] | None:
         """The observations around ``t`` of the events matching ``bound`` (ground values at
-        0-based positions, the first one included): before ``t``, the one with the greatest
-        start ``<= t`` when it holds at ``t`` (its end ``>= t``: an observation at ``t``, an
-        interval around it; ties: the greatest end, then the last stored), else the one with
-        the greatest end ``<= t`` (ties: the greatest start, then the last stored), which the
-        interpolation starts from -- for ``t`` infinite, the last in store order -- and the
-        one with the smallest start ``>= t`` (ties: the last stored among those starting at
-        that time), in one statement; ``(None, None)`` parts when there are none. None when a bound
-        value cannot be pushed into SQL (the caller then takes the general path). Used by
-        ``tf_lookup`` (:mod:`slr_sql.frames`) for each edge of a chain.
+        0-based positions, the first one included): before ``t``, of those that hold at ``t``
+        (start ``<= t <= `` end: an observation at ``t``, an interval around it) the one that
+        started last (ties: the greatest end, then the last stored); when none holds, the
+        one with the greatest end ``<= t`` (ties: the greatest start, then the last stored),
+        which the interpolation starts from -- for ``t`` infinite, the last in store order;
+        and the one with the smallest start ``>= t`` (ties: the last stored among those
+        starting at that time), in one statement; ``(None, None)`` parts when there are
+        none. ``longest``: no matching event lasts longer (end - start) than that, so those
+        holding at ``t`` started at ``t - longest`` or later (0: points only, the probe
+        reads those at ``t``). None when a bound value cannot be pushed into SQL (the caller
+        then takes the general path). Used by ``tf_lookup`` (:mod:`slr_sql.frames`) for each
+        edge of a chain.
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None); s.add_events([("p", ("a", 1), 1, 1), ("p", ("a", 2), 3, 3)])
@@ -539,11 +577,16 @@ class EventReader:
             # SQL's = takes 1 for 1.0; terms (and frame names) do not: a number matches
             # only a number of its own type
             kinds = tuple(_number_kind(bound[p]) for p in positions)
-            # (before a finite t: the latest start, which holds at t if its end is >= t)
-            by_start_before = math.isfinite(t)
-            key = (event_type.table, "bracket", positions, start_hint, kinds, by_start_before)
-            sql = self.sql_cache.get(key)
-            if sql is None:
+            # (before a finite t: the latest started of those holding at t, read in start
+            # order from t back to t - longest; else the latest ended)
+            holding = math.isfinite(t)
+            key = (event_type.table, "bracket", positions, start_hint, kinds, holding)
+            # (SQL's = takes -0.0 for 0.0: each probe is then run on its own and read on to
+            # the first row whose zeros have the bound ones' signs)
+            signs = () if self.db.dialect.zero_signs_in_sql else _zero_signs(bound, positions)
+            probes = 3 if holding else 2
+            union = self.sql_cache.get(key)
+            if union is None:
                 typeof = self.db.dialect.typeof
                 where = " AND ".join(
                     f"arg{p + 1} = ?" + ("" if kind is None
@@ -553,31 +596,34 @@ class EventReader:
                 hints = self.db.dialect.index_hints
                 by_end = f" INDEXED BY {event_type.index_arg1_end}" if hints else ""
                 by_start = f" INDEXED BY {event_type.index_arg1_start}" if start_hint else ""
-                before = (f"{by_start} WHERE {where} AND t_start <= ? "
-                          f"ORDER BY t_start DESC, t_end DESC, seq DESC" if by_start_before
-                          else f"{by_end} WHERE {where} AND t_end <= ? "
-                          f"ORDER BY t_end DESC, t_start DESC, seq DESC")
-                sql = (f"SELECT 0, * FROM (SELECT {cols} FROM {event_type.quoted}{before}"
-                       f" LIMIT 1) AS before_t "
-                       f"UNION ALL SELECT 1, * FROM (SELECT {cols} FROM {event_type.quoted}"
-                       f"{by_start} WHERE {where} AND t_start >= ? "
-                       f"ORDER BY t_start, seq DESC LIMIT 1) AS after_t")
-                if by_start_before:
-                    # (the latest started may have ended before an interval that started
-                    # earlier and lasted longer: the interpolation starts at the latest end)
-                    sql += (f" UNION ALL SELECT 2, * FROM (SELECT {cols} FROM "
-                            f"{event_type.quoted}{by_end} WHERE {where} AND t_end <= ? "
-                            f"ORDER BY t_end DESC, t_start DESC, seq DESC LIMIT 1) AS ended_t")
-                self.sql_cache[key] = sql
-            params = values + [float(t)] + values + [float(t)]
-            if by_start_before:
-                params += values + [float(t)]
-            rows = self.db.conn.execute(sql, params).fetchall()
-        found: list = [None, None, None]
-        for row in rows:
-            found[row[0]] = row
-        if by_start_before and found[0] is not None and found[0][arity + 2] < t:
-            found[0] = found[2]   # (the latest started does not hold at t)
+                ended = (f"{by_end} WHERE {where} AND t_end <= ? "
+                         f"ORDER BY t_end DESC, t_start DESC, seq DESC")
+                before = (f"{by_start} WHERE {where} AND t_start <= ? AND t_start >= ? "
+                          f"AND t_end >= ? ORDER BY t_start DESC, t_end DESC, seq DESC"
+                          if holding else ended)
+                # (when none holds at t, the interpolation starts at the latest end)
+                each = [f"SELECT {n}, {cols} FROM {event_type.quoted}{probe}" for n, probe in
+                        enumerate([before, f"{by_start} WHERE {where} AND t_start >= ? "
+                                           f"ORDER BY t_start, seq DESC", ended][:probes])]
+                for n, probe in enumerate(each):
+                    self.sql_cache[key + (n,)] = probe
+                union = self.sql_cache[key] = " UNION ALL ".join(
+                    f"SELECT * FROM ({probe} LIMIT 1) AS probe_{n}"
+                    for n, probe in enumerate(each))
+            t = float(t)
+            params = [values + [t, _earliest_holding_start(t, longest), t] if holding
+                      else values + [t], values + [t], values + [t]][:probes]
+            found: list = [None, None, None]
+            if signs:
+                for n, args in enumerate(params):
+                    found[n] = _first_of_signs(
+                        self.db.conn.execute(self.sql_cache[key + (n,)], args), signs)
+            else:
+                for row in self.db.conn.execute(
+                        union, [v for args in params for v in args]).fetchall():
+                    found[row[0]] = row
+        if holding and found[0] is None:
+            found[0] = found[2]   # (none holds at t)
         dec = self.decode
         out = [None if row is None else (tuple([dec(v) for v in row[1:arity + 1]]),
                                          row[arity + 1], row[arity + 2], row[arity + 3])
@@ -620,16 +666,17 @@ class EventReader:
         return sorted(found)
 
     def distinct_pairs(self, name: str, arity: int, after_seq: int = 0
-                       ) -> tuple[list[tuple[Any, Any]], int]:
+                       ) -> tuple[list[tuple[Any, Any, float]], int]:
         """The distinct (first, second) argument pairs of name/arity among the events stored
-        after arrival sequence ``after_seq``, and the greatest sequence number now (so that a
-        caller keeping the pairs reads only what is new next time).
+        after arrival sequence ``after_seq``, each with the longest duration (end - start,
+        0 for points) of its events among those, and the greatest sequence number now (so
+        that a caller keeping the pairs reads only what is new next time).
 
         >>> from slr_sql.store import EventStore
-        >>> s = EventStore(None); s.add_events([("p", ("a", "b"), 1, 1), ("p", ("a", "b"), 2, 2)])
+        >>> s = EventStore(None); s.add_events([("p", ("a", "b"), 1, 1), ("p", ("a", "b"), 2, 5)])
         []
         >>> s.distinct_pairs("p", 2)
-        ([(Atom('a'), Atom('b'))], 2)
+        ([(Atom('a'), Atom('b'), 3.0)], 2)
         """
         with self.db.lock:
             self.db.check_open()
@@ -640,13 +687,30 @@ class EventReader:
             top = conn.execute(f"SELECT max(seq) FROM {event_type.quoted}").fetchone()[0] or 0
             if top <= after_seq:
                 return [], top
-            # (DISTINCT takes 1 and 1.0 for one value: their types keep them apart)
-            typeof = self.db.dialect.typeof
-            rows = conn.execute(f"SELECT DISTINCT arg1, arg2, {typeof('arg1')}, "
-                                f"{typeof('arg2')} FROM {event_type.quoted} "
-                                f"WHERE seq > ? AND seq <= ?", (after_seq, top)).fetchall()
+            # (grouping takes 1 and 1.0 for one value: their types keep them apart.) The
+            # duration is halved in SQL, where 1e308 - -1e308 would overflow (an error on
+            # PostgreSQL), and doubled here; an empty or reversed span counts 0
+            dialect = self.db.dialect
+            typeof = dialect.typeof
+            groups = f"arg1, arg2, {typeof('arg1')}, {typeof('arg2')}"
+            if not dialect.zero_signs_in_sql:
+                # (grouping takes -0.0 for 0.0 too, two frame names: each row with a zero
+                # is a group of its own, merged below by the values' signs)
+                groups += (f", CASE WHEN ({typeof('arg1')} = 'real' AND arg1 = 0) OR "
+                           f"({typeof('arg2')} = 'real' AND arg2 = 0) THEN seq END")
+            rows = conn.execute(
+                f"SELECT arg1, arg2, max(CASE WHEN t_end > t_start THEN t_end / 2 - t_start / 2 "
+                f"ELSE 0 END) FROM {event_type.quoted} WHERE seq > ? AND seq <= ? "
+                f"GROUP BY {groups}", (after_seq, top)).fetchall()
         dec = self.decode
-        return [(dec(row[0]), dec(row[1])) for row in rows], top
+        pairs: dict[tuple, tuple[Any, Any, float]] = {}
+        for first, second, half in rows:
+            key = (_exact(first), _exact(second))
+            longest = 2.0 * float(half)
+            known = pairs.get(key)
+            if known is None or known[2] < longest:
+                pairs[key] = (dec(first), dec(second), longest)
+        return list(pairs.values()), top
 
     def max_seq(self, name: str, arity: int) -> int:
         """The greatest arrival sequence number stored for name/arity (0 when none): it moves

@@ -47,6 +47,9 @@ _STORE_TABLES = frozenset({"slr_meta", "slr_program", "slr_event_types"})
 # The channel the event rules' pending rows notify when a statement inserts or updates some
 # (payload: the store's schema; migration pg_0011_pending_notify.sql)
 PENDING_CHANNEL = "slr_pending"
+# How often the connection of an idle store that listens reads its socket on its own
+# (seconds): the server then moves the store's place in its notification queue on
+DRAIN_PERIOD = 0.5
 
 
 class PgStatementError(sqlite3.DatabaseError):
@@ -232,6 +235,20 @@ class PgCursor:
 
     def close(self) -> None:
         self._cursor.close()
+
+
+def _read_notifications(raw: Any) -> None:
+    """Hand what the connection's socket holds (notifications of an idle connection) to
+    psycopg's handlers, without a round trip."""
+    pgconn = raw.pgconn
+    for _ in range(64):   # (a flood is read in rounds; the rest at the next call)
+        pgconn.consume_input()
+        read = 0
+        while (notify := pgconn.notifies()) is not None:
+            pgconn.notify_handler(notify)
+            read += 1
+        if not read:
+            return
 
 
 class PgConnection:
@@ -803,6 +820,8 @@ class PgDatabase:
         # whether the store's connection LISTENs to them: from the first look on (a store
         # that never looks, having no event rules, leaves the server's queue alone)
         self.listening = False
+        # set to stop the thread that drains the listening connection (_start_draining)
+        self.draining = threading.Event()
         self.write_groups: dict[tuple[str, int], int] = {}
         # whether a tBuffer is active, as of the last read of the versions (None: unknown)
         self.tbuffers_active: bool | None = None
@@ -895,15 +914,42 @@ class PgDatabase:
                     except _psycopg().Error:
                         return self.others_pending   # (the next statement opens it again)
                     self.listening = True
+                    self._start_draining()
                 return self.others_pending
-            pgconn = raw.pgconn
             try:
-                pgconn.consume_input()
-                while (notify := pgconn.notifies()) is not None:
-                    pgconn.notify_handler(notify)
+                _read_notifications(raw)
             except _psycopg().Error:
                 return self.others_pending + 1   # (the next statement opens it again)
             return self.others_pending
+
+    def _start_draining(self) -> None:
+        """A daemon thread reads the listening connection's socket every
+        :data:`DRAIN_PERIOD` seconds while the store's lock is free. The server sends a
+        listening session's notifications to its socket as they come: were nobody to read
+        them while the store makes no call, the socket's buffers would fill, the session
+        would stop reading the server's queue, and every later notification of every
+        session would be kept there for it (a full queue fails the notifying commits).
+        It never waits for the lock (a store at work reads its socket itself) and holds a
+        weak reference: a store dropped without close() ends it too."""
+        stop = self.draining
+        store = weakref.ref(self)
+
+        def drain() -> None:
+            while not stop.wait(DRAIN_PERIOD):
+                db = store()
+                if db is None:
+                    return
+                if db.lock.acquire(blocking=False):
+                    try:
+                        raw = db.conn.raw
+                        if not db.closed and db.tx_depth == 0 and not raw.closed:
+                            with suppress(_psycopg().Error):   # (the next statement says it)
+                                _read_notifications(raw)
+                    finally:
+                        db.lock.release()
+                del db
+
+        threading.Thread(target=drain, name="slr-pg-drain", daemon=True).start()
 
     def table_names(self) -> set[str]:
         """Names of the tables of the store's schema."""
@@ -1017,6 +1063,7 @@ class PgDatabase:
             stream.suspend()
 
     def close(self) -> None:
+        self.draining.set()
         with self.lock:
             if self.closed:
                 return
@@ -1114,14 +1161,16 @@ class PgDatabase:
         unless ``write``; ``timeout`` seconds as ``statement_timeout``. A read-only statement
         outside a transaction runs on a connection of its own (:class:`DetachedStatements`):
         it never holds the store's lock, and its caller stops waiting at the timeout."""
-        if not write:
-            with self.lock:
-                self.check_open()
-                detached = self.tx_depth == 0
-            if detached:
-                bound = bound_parameters(params)
-                return self.detached.run(
-                    self.dialect.statement(query) if bound else query, bound or None, timeout)
+        if write:
+            columns, rows, _ = self.sql_write(query, params, timeout)
+            return columns, rows
+        with self.lock:
+            self.check_open()
+            detached = self.tx_depth == 0
+        if detached:
+            bound = bound_parameters(params)
+            return self.detached.run(
+                self.dialect.statement(query) if bound else query, bound or None, timeout)
         with self.lock:
             self.check_open()
             psycopg = _psycopg()
@@ -1131,10 +1180,30 @@ class PgDatabase:
             raw = self.conn.raw
             deadline = None if timeout is None else time.monotonic() + timeout
             try:
-                if not write:
-                    return self._read_only(raw, own, query, params, timeout)
+                return self._read_only(raw, own, query, params, timeout)
+            except psycopg.Error as exc:
+                error = _error(exc, self.path, self.busy_timeout, _connected(raw))
+                raise error if deadline is None else _own_deadline(error, deadline) from None
+
+    def sql_write(self, query: str, params: Iterable[Any] = (), timeout: float | None = None
+                  ) -> tuple[list[str], list[tuple], set[str]]:
+        """Run one statement as ``sql(..., write=True)`` does, and say which tables of the
+        store's schema it inserted rows into or updated: those whose row counters of the
+        transaction (``pg_stat_xact_user_tables``) moved, so rows written by a trigger, a
+        rule or a function count, whatever the statement's spelling (all the schema's
+        tables when the server keeps no counters, ``track_counts = off``)."""
+        with self.lock:
+            self.check_open()
+            psycopg = _psycopg()
+            own = self.tx_depth == 0
+            if not own:
+                self.conn.send_begin()
+            raw = self.conn.raw
+            deadline = None if timeout is None else time.monotonic() + timeout
+            try:
                 if own:
                     raw.execute("BEGIN")
+                before = self._rows_written_so_far(raw)
                 outer_timeout = None
                 if timeout is not None:
                     if not own:   # (a SET LOCAL lasts to the caller's transaction's end)
@@ -1150,12 +1219,15 @@ class PgDatabase:
                     cursor.execute(query, None, prepare=False)
                 columns = [d.name for d in cursor.description] if cursor.description else []
                 rows = [tuple(r) for r in cursor.fetchall()] if cursor.description else []
+                after = self._rows_written_so_far(raw)
+                written = {table for table, count in after.items()
+                           if count is None or count != before.get(table)}
                 if own:
                     raw.execute("COMMIT")
                 elif outer_timeout is not None:
                     raw.execute("SELECT set_config('statement_timeout', %s, true)",
                                 (outer_timeout,))
-                return columns, rows
+                return columns, rows, written
             except psycopg.Error as exc:
                 if own:
                     try:
@@ -1164,6 +1236,20 @@ class PgDatabase:
                         pass
                 error = _error(exc, self.path, self.busy_timeout, _connected(raw))
                 raise error if deadline is None else _own_deadline(error, deadline) from None
+
+    def tables_to_write(self, query: str, params: Iterable[Any] = ()) -> set[str] | None:
+        """None: what a statement writes is known only once it ran (its triggers and
+        functions are the server's), from :meth:`sql_write`."""
+        return None
+
+    def _rows_written_so_far(self, raw: Any) -> dict[str, int | None]:
+        """Each table of the store's schema -> the rows inserted and updated in it by this
+        transaction so far (None for every table when the server keeps no such counters)."""
+        rows = raw.execute(
+            "SELECT relname, CASE WHEN current_setting('track_counts')::boolean "
+            "THEN n_tup_ins + n_tup_upd END FROM pg_stat_xact_user_tables "
+            "WHERE schemaname = %s", (self.schema,)).fetchall()
+        return dict(rows)
 
     def _read_only(self, raw: Any, own: bool, query: str, params: Iterable[Any],
                    timeout: float | None) -> tuple[list[str], list[tuple]]:

@@ -26,6 +26,7 @@ import time
 from typing import Any, Callable
 
 from ..errors import SLRError
+from ..frames import frame_key
 from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, TF_TOPICS,
                        TRANSFORMS_SCHEMA, TRANSFORMS_SCHEMA_NAME, event_channel, mark_message,
                        time_ns, transform_message)
@@ -337,10 +338,11 @@ class FoxgloveView:
 
     def _keep_static(self, rows: list) -> None:
         """Keep the last row of each edge in store order (end, start, arrival sequence), as
-        tf_lookup takes a static edge's value."""
+        tf_lookup takes a static edge's value; edges keyed as tf_lookup keys frames (1 and
+        1.0, -0.0 and 0.0 are equal as values, not as names)."""
         last = self._static_last
         for row in rows:
-            edge = (row[0], row[1])
+            edge = (frame_key(row[0]), frame_key(row[1]))
             kept = last.get(edge)
             if kept is None or (row[4], row[3], row[6]) > (kept[4], kept[3], kept[6]):
                 last[edge] = row
