@@ -24,5 +24,10 @@ INSERT INTO slr_cep_pending_v12 (id, rule, alt, kind, pos, rowids, t_start, t_en
     SELECT id, rule, alt, kind, pos, rowids, t_start, t_end, wait_type, wait_arity, wait_time,
            wait_reason, created_at FROM slr_cep_pending;
 DROP TABLE slr_cep_pending;
+-- (legacy renaming: a view or another table's trigger naming slr_cep_pending -- one of
+-- yours -- would fail the rename, the name not existing between the drop and the rename,
+-- as migration 0007 found; it names the new table once renamed)
+PRAGMA legacy_alter_table = ON;
 ALTER TABLE slr_cep_pending_v12 RENAME TO slr_cep_pending;
+PRAGMA legacy_alter_table = OFF;
 CREATE INDEX slr_cep_pending_by_rule ON slr_cep_pending (rule, t_end, t_start);

@@ -21,7 +21,7 @@ from .errors import SLRError, SLREvaluationError, SLRSyntaxError
 from .program import Program, split_event_atom, event_key
 from .terms import (CONS, NODES_BETWEEN_CLOCK_CHECKS, Atom, NIL, String, Struct, Var, check_deadline,
                     deref, from_python, int_text,
-                    is_ground, list_items, make_list, term_vars, to_python)
+                    is_ground, list_items, make_list, same_float, term_vars, to_python)
 
 DET: dict[tuple[str, int], Callable[["Machine", tuple], bool]] = {}
 NONDET: dict[tuple[str, int], Callable[["Machine", tuple], Iterator[None]]] = {}
@@ -111,6 +111,11 @@ def compare_terms(a: Any, b: Any) -> int:
                 if a == b:
                     if type(a) is not type(b):
                         return -1 if type(a) is float else 1
+                    if type(a) is float and not a:
+                        # -0.0 before 0.0 (SWI-Prolog): equal numbers, two terms
+                        sa, sb = math.copysign(1.0, a), math.copysign(1.0, b)
+                        if sa != sb:
+                            return -1 if sa < sb else 1
                 else:
                     return -1 if a < b else 1
             elif ra == 3 or ra == 2:
@@ -1396,7 +1401,12 @@ def _variant(a: Any, b: Any, deadline: float | None = None) -> bool:
                 continue
             seen.add(key)
             stack.extend(zip(x.args, y.args))
-        elif type(x) is not type(y) or x != y:
+        elif type(x) is not type(y):
+            return False
+        elif type(x) is float:
+            if not same_float(x, y):
+                return False
+        elif x != y:
             return False
     return True
 

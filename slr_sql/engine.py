@@ -15,6 +15,7 @@ so they need no nested interpreter either.
 from __future__ import annotations
 
 import time
+from math import copysign
 from typing import Any, Callable, Iterator
 
 from .arith import instantiation_error, iso_error, resource_error, type_error
@@ -577,6 +578,8 @@ def _unify_head(head: tuple, args: tuple, frame: list, trail: list) -> bool:
             else:
                 if type(a) is not tp or (a != p if tp is not Struct else not unify(p, a, trail)):
                     return False
+                if tp is float and not p and copysign(1.0, a) != copysign(1.0, p):
+                    return False  # -0.0 and 0.0: equal numbers, two terms
     return True
 
 

@@ -476,17 +476,12 @@ def push(db: str, fleet: str, *, robot: str | None = None,
         t if isinstance(t, tuple) else parse_type_spec(t) for t in types}
     store = EventStore(db)
     try:
-        name = store.robot
+        named = store.robot
         if robot is not None:
             check_robot_name(robot)
-            if name is not None and name != robot:
-                raise SLRError(f"{db} is the store of robot {name!r}, not {robot!r}")
-            if name is None:
-                # shipped as the robot, the store is the robot's from now on (as `slr fleet
-                # name`): it ships as no other, and knows the robot's rows relayed back to
-                # it for its own (a cycle, refused); its new events carry the name
-                store.name_robot(robot)
-            name = robot
+            if named is not None and named != robot:
+                raise SLRError(f"{db} is the store of robot {named!r}, not {robot!r}")
+        name = robot if robot is not None else named
         if name is None:
             raise SLRError(f"{db} has no robot name: open it with robot=NAME once, or "
                            "push with --robot NAME")
@@ -494,6 +489,12 @@ def push(db: str, fleet: str, *, robot: str | None = None,
         if _same_file(db, fleet):
             raise SLRError(f"{fleet} is the robot's store {db} itself: a robot does not ship "
                            "to its own store")
+        if named is None:
+            # shipped as the robot, the store is the robot's from now on (as `slr fleet
+            # name`): it ships as no other, and knows the robot's rows relayed back to it for
+            # its own (a cycle, refused); its new events carry the name. (After the checks:
+            # a push refused names nothing.)
+            store.name_robot(name)
         pusher = _Pusher(store, lambda: open_target(fleet, token), name, wanted, batch, say,
                          fleet, resync)
         try:

@@ -212,7 +212,8 @@ class SqlPlan:
     def stale(self, store) -> bool:
         return any(store.event_table_sql(n, a) is not None for n, a in self.missing)
 
-    def _rows(self, kb, values: dict, at, limit, deadline, robot=None) -> list:
+    def _rows(self, kb, values: dict, at, limit, deadline, robot=None,
+              instructions=None) -> list:
         """Bind the parameters (``values``: answer variable name -> term), run the guards,
         then the statement."""
         params = self.params
@@ -240,10 +241,12 @@ class SqlPlan:
         for key in self.start_ordered:
             kb.store.ensure_start_order(*key)
         for guard in self.guards:
-            kb.store.run_compiled(guard, params, None, deadline, may_fall_back=True)
+            kb.store.run_compiled(guard, params, None, deadline, may_fall_back=True,
+                                  instructions=instructions)
         if self.sql is None:
             return []
-        rows = kb.store.run_compiled(self.sql, params, limit, deadline, may_fall_back=True)
+        rows = kb.store.run_compiled(self.sql, params, limit, deadline, may_fall_back=True,
+                                     instructions=instructions)
         from_column = dialect.from_column
         if from_column is not None:   # answer columns are the columns' text there
             rows = [(row[0],) + tuple([from_column(v) for v in row[1:]]) for row in rows]
@@ -281,13 +284,14 @@ class SqlPlan:
             out.append((key, t))
         return out
 
-    def term_rows(self, kb, bound: dict, at, deadline=None) -> list:
+    def term_rows(self, kb, bound: dict, at, deadline=None, instructions=None) -> list:
         """The answers as terms, for an interpreter that called the goal: per row, the
         ``(name, term)`` pairs of the answer variables that are bound (fresh variables for
-        the unbound parts of non-ground answers, shared within the row)."""
+        the unbound parts of non-ground answers, shared within the row). ``instructions``:
+        each statement's budget of SQLite instructions (``run_compiled``)."""
         recipes = self.recipes
         out = []
-        for row in self._rows(kb, bound, at, None, deadline):
+        for row in self._rows(kb, bound, at, None, deadline, instructions=instructions):
             varmap: dict = {}
             vals = []
             for name, how, data in recipes[row[0]]:

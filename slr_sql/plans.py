@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 from .answers import answer_bindings
 from .encoding import Unencodable, decode_answer, encode
@@ -28,7 +28,7 @@ from .parser import parse_term
 from .program import Slot, Template, build, compile_clause
 from .store import EventStore
 from .store.checks import shown
-from .terms import Atom, String, Struct, Var, deref, from_python, to_python
+from .terms import Atom, String, Struct, Var, deref, from_python, same_float, to_python
 
 __all__ = ["Plan", "PlanCache", "PrevLookup", "BoundPrev", "instantiate", "argument_term",
            "python_words"]
@@ -142,7 +142,9 @@ class PrevLookup:
         answers = []
         for values, start, end, _seq in rows:
             for i, v in bound.items():
-                if type(values[i]) is not type(v):
+                # (SQL's = takes 1 for 1.0, and on SQLite -0.0 for 0.0: not Prolog matches)
+                if type(values[i]) is not type(v) or (type(v) is float and not v
+                                                      and not same_float(values[i], v)):
                     return None
             f = list(frame)
             for i, slot in free:
@@ -221,7 +223,7 @@ class BoundPrev:
             return None
         terms = []
         values = []
-        checks = []
+        checks: list[tuple[int, type, Any]] = []
         for i, source in enumerate(self.sources):
             v = source[1] if type(source) is tuple else args[source]
             tv = type(v)
@@ -230,9 +232,9 @@ class BoundPrev:
             elif tv is float:
                 if v != v:
                     return None
-                checks.append((self.positions[i], float))
+                checks.append((self.positions[i], float, v))
             elif tv is int:
-                checks.append((self.positions[i], int))
+                checks.append((self.positions[i], int, v))
             elif tv is not Atom and tv is not String:
                 return None
             try:
@@ -243,10 +245,12 @@ class BoundPrev:
         rows = store.latest_rows(self.name, self.arity, self.positions, values, t, self.point)
         if not rows:
             return [], None
-        for position, kind in checks:
+        for position, kind, value in checks:
             for row in rows:
-                if type(row[position]) is not kind:
-                    return None   # SQL's 1 = 1.0: not a Prolog match
+                x = row[position]
+                if type(x) is not kind or (kind is float and not value
+                                           and not same_float(cast(float, x), value)):
+                    return None   # SQL's 1 = 1.0 (on SQLite -0.0 = 0.0): not a Prolog match
         bound = [to_python(term) for term in terms]
         fields = self.fields
         answers = []

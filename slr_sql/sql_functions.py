@@ -15,6 +15,8 @@ interpreter (docs/architecture.md).
   interpreter refuses them in a 64-bit column);
 * ``slr_det``: a det builtin or ``kb.define`` predicate at a call site of the compiler;
 * ``slr_cep_cmp``, ``slr_cep_arith``: an event rule's comparison as Prolog evaluates it;
+* ``slr_sign_bit``: whether a float's sign bit is set (on SQLite, whose ``=`` takes -0.0
+  for 0.0);
 * aggregates ``slr_sum``, ``slr_max``, ``slr_min``, ``slr_setof``.
 
 >>> [name for name, arity in SQL_FUNCTIONS.names()][:3]
@@ -27,6 +29,7 @@ interpreter (docs/architecture.md).
 from __future__ import annotations
 
 from functools import lru_cache
+from math import copysign
 from json.encoder import encode_basestring as _quote  # C-accelerated; keeps non-ASCII
 from typing import Any
 
@@ -128,6 +131,12 @@ def _det(sid, i, *inputs):
     if result is None:
         return None
     return 1 if i < 0 else result[i]
+
+
+def _sign_bit(v):
+    """slr_sign_bit: 1 for a float whose sign bit is set (-0.0 among them), else 0; SQL's
+    ``=`` takes -0.0 for 0.0 and no SQLite built-in shows a zero's sign."""
+    return 1 if type(v) is float and copysign(1.0, v) < 0.0 else 0
 
 
 class _Sum:
@@ -234,6 +243,8 @@ SQL_FUNCTIONS = SqlFunctions(
         SqlFunction("slr_det", -1, _det, Native.INTERPRETER_ONLY),
         SqlFunction("slr_cep_cmp", 3, _compare, Native.INTERPRETER_ONLY),
         SqlFunction("slr_cep_arith", -1, _compare_expressions, Native.INTERPRETER_ONLY),
+        # (PostgreSQL's typed texts tell -0.0 from 0.0: its printers never call it)
+        SqlFunction("slr_sign_bit", 1, _sign_bit, Native.INTERPRETER_ONLY),
     ),
     aggregates=(
         SqlAggregate("slr_sum", 1, _Sum, Native.INTERPRETER_ONLY),

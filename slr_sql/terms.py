@@ -292,11 +292,24 @@ def term_equal(a: Any, b: Any) -> bool:
         elif tx is Var:
             return False
         elif tx is float:
-            if not (x == y or (math.isnan(x) and math.isnan(y))):
+            if not same_float(x, y):
                 return False
         elif x != y:
             return False
     return True
+
+
+def same_float(x: float, y: float) -> bool:
+    """Whether two floats are one term, as SWI-Prolog has it: equal and of one sign (``-0.0``
+    is not ``0.0``, though Python's ``==`` says they are equal and hashes them alike), or both
+    NaN. Arithmetic comparison (``=:=``) stays numeric.
+
+    >>> same_float(-0.0, 0.0), same_float(0.0, 0.0), same_float(float("nan"), float("nan"))
+    (False, True, True)
+    """
+    if x == y:
+        return bool(x) or math.copysign(1.0, x) == math.copysign(1.0, y)
+    return x != x and y != y
 
 
 def make_list(items: Iterable[Any], tail: Any = NIL) -> Any:

@@ -6,6 +6,7 @@ buffers and the SQL planner (they sit below all of them, so none has to import a
 """
 from __future__ import annotations
 
+from math import copysign
 from typing import Any
 
 from .terms import (CONS, NODES_BETWEEN_CLOCK_CHECKS, Atom, String, Struct, Var, check_deadline,
@@ -80,6 +81,8 @@ def unify(a: Any, b: Any, trail: list, deadline: float | None = None) -> bool:
                     pass
                 else:
                     return False
+            elif ta is float and not a and copysign(1.0, a) != copysign(1.0, b):
+                return False  # -0.0 and 0.0 are equal numbers but two terms (SWI-Prolog)
         if not stack:
             return True
         a, b = stack.pop()
@@ -146,6 +149,8 @@ def _unify_remembering(a: Any, b: Any, stack: list, trail: list,
             elif ta is not tb or a != b:
                 if not (ta is float and tb is float and a != a and b != b):
                     return False
+            elif ta is float and not a and copysign(1.0, a) != copysign(1.0, b):
+                return False
         if not stack:
             return True
         a, b = stack.pop()

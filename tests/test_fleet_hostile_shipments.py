@@ -148,6 +148,7 @@ def test_an_unnamed_store_pushed_into_itself_as_a_robot_is_refused(tmp_path):
         fleet.push(str(db), str(db), robot="r1")
     with slr_sql.open(db) as kb:
         assert len(kb.query("seen(X, Y)^T")) == 1
+        assert kb.store.robot is None   # (a push refused does not name the store either)
 
 
 def test_a_fleet_store_refuses_a_shipment_of_its_own_robot(tmp_path):

@@ -233,6 +233,23 @@ def test_the_door_refuses_a_null_through_a_table_name_spelled_otherwise(
             refused_unchanged(kb, statement, 2)
 
 
+def test_the_door_refuses_a_null_written_through_another_name_of_the_store_file(tmp_path):
+    """``ATTACH`` of the store's own file names its tables again (``o.p``): a write through
+    that name is one of the store's, checked as such -- it changes nothing (it waits for
+    the check's own transaction, which holds the file's write lock) instead of running
+    unchecked and leaving a NULL argument."""
+    db = tmp_path / "k.db"
+    with slr_sql.open(db, clock=ManualClock(10), busy_timeout=0.2) as kb:
+        for event in ("p(a)^1", "p(b)^2"):
+            kb.add(event)
+        kb.sql(f"ATTACH DATABASE '{db}' AS o", write=True)
+        with pytest.raises(slr_sql.SLRError):
+            kb.sql("UPDATE o.p SET arg1 = NULL WHERE seq = 2", write=True)
+        kb.sql("DETACH DATABASE o", write=True)
+        assert kb.sql("SELECT arg1 FROM p ORDER BY seq")[1] == [("a",), ("b",)]
+        assert [a["X"] for a in kb.query("p(X)^_")] == [Atom("a"), Atom("b")]
+
+
 def test_the_door_refuses_a_null_a_postgresql_function_writes(postgres_url):
     with slr_sql.open(postgres_url, clock=ManualClock(10)) as kb:
         kb.add("p(a)^1")
@@ -241,6 +258,22 @@ def test_the_door_refuses_a_null_a_postgresql_function_writes(postgres_url):
         with pytest.raises(NotAnEvent, match=r"^sql: the statement would leave a row"):
             kb.sql("SELECT spoil()", write=True)
         assert kb.query("p(X)^_") == [{"X": Atom("a")}]
+
+
+def test_the_door_refuses_a_null_a_deferred_postgresql_trigger_writes(postgres_url):
+    """A constraint trigger deferred to the commit writes after the statement: it runs
+    before the door reads what the statement wrote, so its NULL is refused too."""
+    with slr_sql.open(postgres_url, clock=ManualClock(10)) as kb:
+        for event in ("p(a)^1", "p(b)^2"):
+            kb.add(event)
+        kb.sql("CREATE TABLE notes (n int)", write=True)
+        kb.sql("CREATE FUNCTION spoil() RETURNS trigger LANGUAGE plpgsql AS "
+               "$$ BEGIN UPDATE p SET arg1 = NULL WHERE seq = 2; RETURN NULL; END $$",
+               write=True)
+        kb.sql("CREATE CONSTRAINT TRIGGER spoiler AFTER INSERT ON notes DEFERRABLE "
+               "INITIALLY DEFERRED FOR EACH ROW EXECUTE FUNCTION spoil()", write=True)
+        refused_unchanged(kb, "INSERT INTO notes VALUES (1)", 2)
+        assert kb.sql("SELECT count(*) FROM notes")[1] == [(0,)]
 
 
 @pytest.mark.parametrize("backend_kind", ["sqlite", "postgres"])

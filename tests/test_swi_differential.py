@@ -376,7 +376,7 @@ def canonical_error(term) -> tuple:
 
 ATOMS = ["a", "b", "c"]
 INTS = [0, 1, 2, 3]
-FLOATS = [0.5, 1.5, 2.0]
+FLOATS = [0.5, 1.5, 2.0, 0.0, -0.0]  # -0.0 and 0.0: equal numbers, two terms
 STRINGS = ['"s"']
 TIMES = [1.0, 2.0, 3.0]
 # times written in goals: floats, and integers, which match the stored float times by value
@@ -755,7 +755,7 @@ def a_(text: str):
     """A generated constant as the Python value add_many takes."""
     if text.startswith('"'):
         return slr_sql.String(text[1:-1])
-    if text[0].isdigit():
+    if text[0].isdigit() or (text[0] == "-" and text[1:2].isdigit()):
         return float(text) if "." in text else int(text)
     return text
 

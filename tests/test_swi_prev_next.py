@@ -37,9 +37,11 @@ from slr_sql.terms import format_term
 # a longer hunt: SLR_DIFF_EXAMPLES=500 (with HYPOTHESIS_PROFILE=explore for fresh examples)
 EXAMPLES = int(os.environ.get("SLR_DIFF_EXAMPLES", "25"))
 TYPES = {"p": 2, "q": 1}
-# keys of colliding kinds: an atom that reads as a number or as JSON, a string, 1 and 1.0
+# keys of colliding kinds: an atom that reads as a number or as JSON, a string, 1 and 1.0;
+# values also -0.0 and 0.0 (equal numbers, two terms; not keys: a cBuffer on SQLite keys
+# them as one, docs/buffers.md)
 KEYS = ["a", "b", "a", "b", "'1'", '"s"', "1", "1.0", "'[x'"]
-VALUES = ["0", "1", "2", "1.5", "1.0", "0", "1", "2", "'1'"]
+VALUES = ["0", "1", "2", "1.5", "1.0", "0", "1", "2", "'1'", "-0.0", "0.0"]
 TIME_CONSTANTS = ["0", "1", "1.5", "2", "2.5", "3", "4", "4.0", "inf"]
 
 # prev/next as SPEC §1 defines them, over the facts N_stored(Args.., Start, End) in store

@@ -763,6 +763,8 @@ class RuleRuntime:
             return False
         if row[7] is not None and not self.eng.complete((row[7], row[8]), row[9], now):
             return False
+        if kind == "span":
+            return self._decide_span(row, now, params)
         try:
             if kind == "match":
                 done = self._decide_match(n, _rowids(rowids), end, now, params)
@@ -778,6 +780,39 @@ class RuleRuntime:
                            {"wait_type": None, "wait_arity": None, "wait_time": None,
                             "wait_reason": None, "id": rid})
             return False
+        self._done.append(rid)
+        return True
+
+    def _decide_span(self, row: tuple, now: float, params: list | None) -> bool:
+        """Decide a pending span one terminator at a time: those complete now are decided,
+        the others (and those whose goal must wait) kept as terminators of their own, and
+        the span deleted. (A span's alternative was all SQL when it was stored; a program
+        that changed what its where goal calls makes it need the Python side, and the
+        decision of all the rule's pending rows reads the spans with the others: the span
+        statements would never see it, and deciding its first terminator alone would
+        lose the rest.)"""
+        rid, n, _, pos, rowids, _, end = row[:7]
+        if not self._ready((n, "term", None), end, now):
+            return False
+        alt = self.alts[n]
+        if params:
+            p2 = dict(params[n])
+        else:
+            p2 = self.eng.params(now)
+            p2.update(alt.params)
+        first, last = _rowids(rowids)[:2]
+        p2.update(first=first, last=last)
+        pend = []
+        for seq, start, t_end in self._ask(alt.span_terms(pos), p2):
+            if not self._ready((n, "term", None), t_end, now):
+                pend.append(self._pending_row(n, "term", pos, [seq], start, t_end, None))
+                continue
+            try:
+                self._decide_term(n, pos, seq, t_end, now, dict(p2), checked=True)
+            except MustWait as w:
+                pend.append(self._pending_row(n, "term", pos, [seq], start, t_end, w))
+        if pend:
+            self._insert_pending(pend)
         self._done.append(rid)
         return True
 
@@ -849,7 +884,7 @@ class RuleRuntime:
         for n, kind, wtype, warity, t, tend, c in rows:
             waits[(n, kind, (wtype, warity) if wtype is not None else None)] = t
             pmin = min(pmin, tend)
-            count += c
+            count += int(c)   # (a sum on PostgreSQL is a numeric: a Decimal)
         self.waits = waits
         self.pmin = pmin
         self.pending = count

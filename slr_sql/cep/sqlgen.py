@@ -30,6 +30,7 @@ Values only ever appear as named parameters.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -222,7 +223,10 @@ class AltSQL:
         if type(value) is int and type(encoded) is int:
             return f"({ref.sql} = {p} AND {typeof(ref.sql)} = 'integer')"
         if type(value) is float:
-            return f"({ref.sql} = {p} AND {typeof(ref.sql)} = 'real')"
+            # (-0.0 and 0.0 are two terms; SQLite's = takes one for the other)
+            sign = None if value else self.dialect.zero_sign(ref.sql, math.copysign(1.0, value) < 0)
+            return f"({ref.sql} = {p} AND {typeof(ref.sql)} = 'real'" + \
+                (f" AND {sign})" if sign else ")")
         return f"{ref.sql} = {p}"
 
     def _stored(self, encoded: Any) -> Any:
@@ -235,7 +239,9 @@ class AltSQL:
         if a.kind == "time" and b.kind == "time":
             return f"{a.sql} = {b.sql}"
         if a.kind == "data" and b.kind == "data":
-            return f"({a.sql} = {b.sql} AND {typeof(a.sql)} = {typeof(b.sql)})"
+            sign = self.dialect.same_zero_sign(a.sql, b.sql)
+            return f"({a.sql} = {b.sql} AND {typeof(a.sql)} = {typeof(b.sql)}" + \
+                (f" AND {sign})" if sign else ")")
         d, t = (a, b) if a.kind == "data" else (b, a)
         # times match by value (a time 5.0 and a data argument 5 are the same instant)
         return f"({self.dialect.number(d.sql)} = {t.sql} AND {typeof(d.sql)} {_NUMERIC})"
@@ -932,6 +938,21 @@ class AltSQL:
                 f"created_at) SELECT :rule, {self.index}, 'term', {pos}, "
                 f"{self.dialect.json_array(f'{t}.seq')}, {t}.t_start, {t}.t_end, :now FROM "
                 f"{self._span_join(pos)} WHERE {self._where(conds)}")
+        return sql
+
+    def span_terms(self, pos: int) -> str:
+        """The terminators of one pending span at ``pos`` (its first and last seq
+        ``:first``, ``:last``): their seq, start and end, in decision order -- a span
+        decided one terminator at a time (its alternative no longer all SQL)."""
+        key = ("span_terms", pos)
+        sql = self._cache.get(key)
+        if sql is None:
+            a = self.aliases()
+            t = a[f"e{pos}"]
+            conds = [f"{t}.seq BETWEEN :first AND :last"] + self.cond_sql(a, within={pos})
+            sql = self._cache[key] = (
+                f"SELECT {t}.seq, {t}.t_start, {t}.t_end FROM {self.tables[pos]} AS {t} "
+                f"WHERE {self._where(conds)} ORDER BY {t}.t_end, {t}.t_start, {t}.seq")
         return sql
 
     def _span_conditions(self, pos: int) -> list[str]:

@@ -8,8 +8,19 @@ prev/next must read a complete history (the interpreter's hooks stop the run at 
 that does not). When a history is not complete yet, :class:`MustWait` says which and up to
 when; the candidate is kept and tried again once it is.
 
-Each solution gives one complex event; an error raised by G (a type error in arithmetic, a
-time limit) rejects the candidate and is counted on the rule (``kb.event_rules()``).
+Each solution gives one complex event; an error raised by G (a type error in arithmetic, its
+step budget spent) rejects the candidate and is counted on the rule (``kb.event_rules()``).
+
+G's limit is a budget of work, not of time, so that a decision never depends on how fast or
+busy the machine is (the same events and program derive the same complex events on every
+machine, in every arrival order, on both backends): :data:`WHERE_MAX_STEPS` inference steps
+in the interpreter. A compiled SQL statement has :data:`WHERE_SQL_INSTRUCTIONS` virtual
+machine instructions on SQLite; a statement that runs out of them (or, on PostgreSQL, which
+counts nothing a client could bound, of the backstop's time) decides nothing: the
+interpreter then runs G under its step budget and decides. :data:`WHERE_BACKSTOP` seconds of
+wall clock stay as a backstop against work no budget counts (one builtin call that loops
+inside one step): far beyond what the budgets take, it is the only part that depends on the
+machine.
 """
 from __future__ import annotations
 
@@ -20,7 +31,7 @@ import orjson
 
 from ..analysis import goal_set
 from ..builtins import BuiltinMachine
-from ..errors import SLRError
+from ..errors import SLRError, SLRTimeout
 from ..store import DatabaseError
 from ..encoding import Unencodable, orjson_reads_exactly
 from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
@@ -29,9 +40,26 @@ from ..host import Host
 from ..plans import instantiate
 from ..robotlib import apply_transforms, pos_multiply_subject, pose_transform
 
-__all__ = ["MustWait", "Residual", "WHERE_TIMEOUT"]
+__all__ = ["MustWait", "Residual", "WHERE_MAX_STEPS", "WHERE_SQL_INSTRUCTIONS",
+           "WHERE_BACKSTOP"]
 
-WHERE_TIMEOUT = 5.0   # seconds for one evaluation of a where goal
+# Inference steps of one evaluation of a where goal in the interpreter (counted as
+# kb.query's max_steps, checked every 2048 steps): about what 5 s of the interpreter buys
+# (benchmarks/bench_where_budget.py, two cores under load 4-5: 1.0-1.7 million steps of a
+# recursive loop with arithmetic, 2.0-2.7 million of event goals, 1.9-4.5 million of
+# findall/length, 5.6-9.7 million of between/3).
+WHERE_MAX_STEPS = 2_000_000
+# SQLite virtual machine instructions of each statement of a where goal's compiled SQL: what
+# 1.5-2.5 s of plain SQLite work buys and ~10 s of JSON functions on every row, the slowest
+# kind (5 s buy, measured likewise: 200-270 million instructions of a recursive CTE, 300-375
+# million of a plain join, 44-48 million of JSON functions per row), so that the slowest
+# statement spends its budget in about the time the slowest interpreter work spends its own.
+WHERE_SQL_INSTRUCTIONS = 100_000_000
+# Seconds of wall clock, only against work the budgets do not count (a builtin looping
+# inside one step, a Python function called from SQL) and PostgreSQL's statements: the
+# slowest work above spends either budget in ~10 s, so a machine ~6 times slower still
+# meets the budget first.
+WHERE_BACKSTOP = 60.0
 
 
 class MustWait(Exception):
@@ -117,9 +145,8 @@ class Residual:
                     self.last_engine = "builtins"
                     return solutions
         plan = kb.plans.plan(self.text, tuple(args))
-        deadline = time.monotonic() + WHERE_TIMEOUT
         if kb.sql_enabled and use_sql:
-            rows = self._sql(kb, plan, args, at, complete, deadline)
+            rows = self._sql(kb, plan, args, at, complete)
             if rows is not None:
                 self.last_engine = "sql"
                 return rows
@@ -194,6 +221,9 @@ class Residual:
 
         m = BuiltinMachine(engine)
         m.at = at   # (the interpreter runs the goal at the match's end)
+        # a builtin's own loop (numlist/3 building millions of cells) counts no steps: the
+        # backstop bounds it, as in the interpreter
+        m.deadline = time.monotonic() + WHERE_BACKSTOP
         try:
             for _, fn, call_args in calls:
                 if not fn(m, tuple(put(a) for a in call_args)):
@@ -209,8 +239,8 @@ class Residual:
             sol[name] = t
         return [sol]
 
-    def _sql(self, kb: Host, plan: Any, args: dict, at: float, complete: Callable,
-             deadline: float) -> list | None:
+    def _sql(self, kb: Host, plan: Any, args: dict, at: float,
+             complete: Callable) -> list | None:
         from ..planner import SqlPlan, plan_for
 
         entry = plan_for(kb, plan, True)
@@ -225,7 +255,12 @@ class Residual:
             if not complete(key, float(t)):
                 raise MustWait(key, float(t), "prev/next of the where goal")
         try:
-            rows = entry.term_rows(kb, args, at, deadline)
+            rows = entry.term_rows(kb, args, at, time.monotonic() + WHERE_BACKSTOP,
+                                   WHERE_SQL_INSTRUCTIONS)
+        except SLRTimeout:
+            # out of its instructions (or, on PostgreSQL, of the backstop's time): how long
+            # SQL takes decides nothing, the interpreter's step budget does
+            return None
         except (DatabaseError, Unencodable, ValueError, TypeError, KeyError, OverflowError):
             return None   # something only the interpreter does exactly
         out = []
@@ -244,7 +279,7 @@ class Residual:
     def _interpret(self, kb: Host, plan: Any, args: dict, at: float,
                    complete: Callable) -> list:
         term, frame = instantiate(plan, args, terms=True)   # decoded: terms already
-        m = kb.engine.machine(at=at, timeout=WHERE_TIMEOUT)
+        m = kb.engine.machine(at=at, timeout=WHERE_BACKSTOP, max_steps=WHERE_MAX_STEPS)
 
         def on_prev(name: str, n: int, t: float) -> None:
             if not complete((name, n), float(t)):

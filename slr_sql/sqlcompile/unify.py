@@ -6,10 +6,11 @@ Mixed into :class:`slr_sql.sqlcompile.Compiler` (uses ``self.const`` and ``self.
 """
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from ..encoding import INT64_MAX, INT64_MIN, Unencodable, encode, encode_json
-from ..terms import Atom, String, Struct, Var, deref, list_items
+from ..terms import Atom, String, Struct, Var, deref, list_items, same_float
 from .model import (CYCLIC, NUMERIC, Col, Fallback, State, format_for_message, has_float, occurs_in, shown_in_message,
                     has_col, has_var)
 
@@ -52,9 +53,10 @@ class Unification:
                 if tb is not Struct or a.name != b.name or len(a.args) != len(b.args):
                     return False
                 stack.extend(zip(a.args, b.args))
+            elif ta is float and tb is float:
+                if not same_float(a, b):
+                    return False
             elif ta is not tb or a != b:
-                if ta is float and tb is float and a != a and b != b:
-                    continue
                 return False
         return True
 
@@ -108,7 +110,11 @@ class Unification:
                 return f"{a} = {b}"
             if {k, k2} == {"float", "int"} or ("text" in (k, k2) and (k in NUMERIC or k2 in NUMERIC)):
                 return False
-            return self.dialect.same_value(a, k, b, k2)
+            cond = self.dialect.same_value(a, k, b, k2)
+            sign = None if self.literal else self.dialect.same_zero_sign(a, b)
+            # (an inspection view, read outside slr_sql's connection, has no slr_sign_bit:
+            # its joins take -0.0 for 0.0 as SQL does, docs/sql.md)
+            return cond if sign is None else f"({cond} AND {sign})"
         if to is Atom or to is String:
             if k in NUMERIC:
                 return False
@@ -130,7 +136,8 @@ class Unification:
                 return False
             if k == "float":
                 return f"{col.sql} = {self.const(other)}"
-            return self.dialect.typed_equal(col.sql, self.stored(other), "real")
+            cond = self.dialect.typed_equal(col.sql, self.stored(other), "real")
+            return cond if other else self._with_zero_sign(cond, col.sql, other)
         if to is Struct:
             if has_col(other) and not has_var(other):
                 if k in NUMERIC:
@@ -150,6 +157,13 @@ class Unification:
             except Unencodable as exc:
                 raise Fallback(f"constant cannot be encoded: {exc.reason}")
         raise Fallback(f"cannot compare a stored value with {other!r}")
+
+    def _with_zero_sign(self, cond: str, value: str, zero: float) -> str:
+        """``cond`` (``value`` equals the float ``zero``) and the zero's sign: -0.0 and
+        0.0 are two terms, one number to SQL's ``=`` on SQLite."""
+        sign = self.dialect.zero_sign(value, math.copysign(1.0, zero) < 0.0)
+        # (udf: an inspection view, read outside slr_sql's connection, cannot call it)
+        return cond if sign is None else f"({cond} AND {self.udf(sign)})"
 
     # ------------------------------------------------------------------ compound patterns
     # A stored list or compound is JSON text (slr_sql.encoding); a pattern such as [X,Y|T]
@@ -272,8 +286,10 @@ class Unification:
         if ta is float:
             if a != a:
                 raise Fallback("NaN in a goal")
-            st.conds.append(f"({self.dialect.json_part(text, p)} = {self.const(a)} "
-                            f"AND {self.dialect.json_kind(text, p)} = 'real')")
+            cond = (f"({self.dialect.json_part(text, p)} = {self.const(a)} "
+                    f"AND {self.dialect.json_kind(text, p)} = 'real')")
+            st.conds.append(cond if a else self._with_zero_sign(
+                cond, self.dialect.json_part(text, p), a))
             return True
         # a ground term without floats: its inner JSON text is canonical (one text per term)
         try:

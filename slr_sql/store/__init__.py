@@ -844,8 +844,10 @@ class EventStore:
 
     @_doc(Database.run_compiled)
     def run_compiled(self, sql: str, params: dict, limit: int | None = None,
-                     deadline: float | None = None, may_fall_back: bool = False) -> list[tuple]:
-        return self._db.run_compiled(sql, params, limit, deadline, may_fall_back)
+                     deadline: float | None = None, may_fall_back: bool = False,
+                     instructions: int | None = None) -> list[tuple]:
+        return self._db.run_compiled(sql, params, limit, deadline, may_fall_back,
+                                     instructions)
 
     @_doc(Database.run_compiled_many)
     def run_compiled_many(self, sql: str, rows: list) -> None:

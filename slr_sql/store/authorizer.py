@@ -81,7 +81,7 @@ class SqlGuard:
 
     def __init__(self) -> None:
         self.denied: str | None = None
-        # the main database's tables a statement inserts into or updates (see ``writing``)
+        # the tables a statement inserts into or updates, but temporary ones (``writing``)
         self.written: set[str] = set()
 
     def always(self, action: int, arg1: Any, arg2: Any, _db: Any, _trigger: Any) -> int:
@@ -100,12 +100,13 @@ class SqlGuard:
         return _OK
 
     def writing(self, action: int, arg1: Any, arg2: Any, db: Any, trigger: Any) -> int:
-        """A hand-written statement that may write: :meth:`always`, and the tables of the
-        main database it inserts rows into or updates noted in ``written``. SQLite asks
+        """A hand-written statement that may write: :meth:`always`, and the tables it inserts
+        rows into or updates noted in ``written`` -- by name, whatever database holds them
+        but ``temp``: another name ATTACHed to the store's own file writes its tables. SQLite asks
         while it compiles the statement, its triggers' statements included (SQLite codes
         them into it), so what is noted does not depend on how the statement spells a name."""
-        if action in _WRITING_ROWS and db == "main" and isinstance(arg1, str):
-            self.written.add(arg1)
+        if action in _WRITING_ROWS and db != "temp" and isinstance(arg1, str):
+            self.written.add(arg1)   # (an attached alias of the store's own file included)
         return self.always(action, arg1, arg2, db, trigger)
 
     def read_only(self, action: int, arg1: Any, arg2: Any, db: Any, trigger: Any) -> int:

@@ -116,7 +116,7 @@ def check_times(start: Any, end: Any) -> tuple[float, float]:
         raise BadEvent("event times must be finite (not inf or NaN)")
     if start > end:
         raise BadEvent(f"start time {start!r} is after end time {end!r}")
-    return start, end
+    return start + 0.0, end + 0.0   # (a time -0.0 is the time 0.0: see store_time)
 
 
 def rejection_reason(exc: Exception) -> str:

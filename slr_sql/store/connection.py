@@ -57,6 +57,10 @@ CACHE_SIZE_KIB = 65536  # PRAGMA cache_size of the store's connection (64 MiB)
 # enough for any ordinary transaction of another writer (milliseconds) and a checkpoint,
 # short enough that a process stuck holding the lock is reported rather than waited for.
 DEFAULT_BUSY_TIMEOUT = 5.0
+# How often (virtual machine instructions) an instruction budget's progress handler counts:
+# ~15 us between calls at SQLite's ~70 million instructions a second, so the Python call
+# costs ~1 % of a statement's time
+INSTRUCTIONS_PER_CHECK = 1000
 
 
 def _check_busy_timeout(value: Any) -> float:
@@ -280,6 +284,9 @@ class Database:
         # when a transaction begins (see suspend_streams)
         self.open_streams: weakref.WeakSet = weakref.WeakSet()
         self.deadline: float | None = None  # of the compiled statement running now
+        # (handler, every n instructions) of the statement running now: what _deadline
+        # puts back when an inner statement's own limit ends
+        self.progress: tuple[Callable[[], int], int] | None = None
         # the Python functions statements may call (install_functions), on every connection
         self.functions: SqlFunctions | None = None
         self.busy_timeout = busy_timeout
@@ -877,20 +884,32 @@ class Database:
             register_functions(self.conn, functions)
 
     def run_compiled(self, sql: str, params: dict, limit: int | None = None,
-                     deadline: float | None = None, may_fall_back: bool = False) -> list[tuple]:
+                     deadline: float | None = None, may_fall_back: bool = False,
+                     instructions: int | None = None) -> list[tuple]:
         """Run a compiled SELECT with named parameters; all rows, or the first ``limit``.
         ``deadline`` (``time.monotonic()``): past it the statement is interrupted and
         :class:`SLRTimeout` raised, as the interpreter does for ``timeout=``.
+        ``instructions``: a budget of SQLite virtual machine instructions, counted by the
+        progress handler every :data:`INSTRUCTIONS_PER_CHECK`; past it the statement is
+        interrupted with :class:`SLRTimeout` too. The count depends on the statement and
+        the data, never on the machine's speed (what ``max_steps`` is to the interpreter),
+        exact to within one :data:`INSTRUCTIONS_PER_CHECK` (SQLite counts a cached
+        statement's intervals on from where its previous run left off).
         ``may_fall_back``: the caller answers with the interpreter when the statement
         fails, so a failure must leave the caller's transaction usable (SQLite's does).
 
         >>> from slr_sql.store import EventStore
         >>> EventStore(None).run_compiled("SELECT :a + 1", {"a": 1})
         [(2,)]
+        >>> EventStore(None).run_compiled("WITH RECURSIVE r(n) AS (SELECT 1 UNION ALL "
+        ...                               "SELECT n + 1 FROM r) SELECT count(*) FROM r", {},
+        ...                               instructions=100_000)   # endless: stopped by count
+        Traceback (most recent call last):
+        slr_sql.errors.SLRTimeout: query ran out of its budget of 100000 SQLite instructions (in its compiled SQL statement)
         """
         with self.lock:
             self.check_open()
-            with self._deadline(deadline, "its compiled SQL statement"):
+            with self._deadline(deadline, "its compiled SQL statement", instructions):
                 cursor = self.conn.execute(sql, params)
                 try:
                     return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
@@ -932,32 +951,52 @@ class Database:
                 else self.run_compiled(sql, params) for sql, params, many in statements]
 
     @contextmanager
-    def _deadline(self, deadline: float | None, what: str) -> Iterator[None]:
-        """Interrupt the statements run inside past ``deadline`` (``time.monotonic()``) with
-        :class:`SLRTimeout`. A statement run from inside another (a ``kb.define`` predicate
-        querying the kb from SQL) keeps the outer deadline: the handler is per connection.
+    def _deadline(self, deadline: float | None, what: str,
+                  instructions: int | None = None) -> Iterator[None]:
+        """Interrupt the statements run inside past ``deadline`` (``time.monotonic()``), or
+        past ``instructions`` virtual machine instructions, with :class:`SLRTimeout`. A
+        statement run from inside another (a ``kb.define`` predicate querying the kb from
+        SQL) keeps the outer deadline, and without a budget of its own its instructions count
+        against the outer budget: the handler is per connection (one with its own budget or
+        an earlier deadline has its own handler while it runs, and the outer's is put back).
         Call with the lock held."""
         conn = self.conn
-        outer = self.deadline
+        outer, outer_handler = self.deadline, self.progress
         if deadline is None or (outer is not None and outer <= deadline):
             deadline = outer
-        if deadline is not outer:
-            self.deadline = deadline
-            conn.set_progress_handler(lambda: 1 if time.monotonic() > deadline else 0, 20000)
+        checks = [0]
+        allowed = -1 if instructions is None else max(1, instructions // INSTRUCTIONS_PER_CHECK)
+        handler: tuple[Callable[[], int], int] | None = outer_handler
+        if instructions is not None:
+            def out_of_budget() -> int:
+                checks[0] += 1
+                if checks[0] > allowed:
+                    return 1
+                return 1 if deadline is not None and time.monotonic() > deadline else 0
+
+            handler = (out_of_budget, INSTRUCTIONS_PER_CHECK)
+        elif deadline is not outer:
+            handler = (lambda: 1 if time.monotonic() > deadline else 0, 20000)
+        if handler is not outer_handler and handler is not None:
+            self.deadline, self.progress = deadline, handler
+            conn.set_progress_handler(handler[0], handler[1])
         try:
             yield
         except sqlite3.OperationalError as exc:
-            if deadline is not None and time.monotonic() > deadline and "interrupt" in str(exc):
-                raise SLRTimeout(f"query timed out (in {what})") from None
+            if "interrupt" in str(exc):
+                if checks[0] > allowed >= 0:
+                    raise SLRTimeout(f"query ran out of its budget of {instructions} SQLite "
+                                     f"instructions (in {what})") from None
+                if deadline is not None and time.monotonic() > deadline:
+                    raise SLRTimeout(f"query timed out (in {what})") from None
             raise busy_error(exc, self.path, self.busy_timeout) or exc from None
         finally:
-            if deadline is not outer:
-                self.deadline = outer
-                if outer is None:
+            if handler is not outer_handler:
+                self.deadline, self.progress = outer, outer_handler
+                if outer_handler is None:
                     conn.set_progress_handler(None, 0)
                 else:
-                    conn.set_progress_handler(lambda: 1 if time.monotonic() > outer else 0,
-                                              20000)
+                    conn.set_progress_handler(outer_handler[0], outer_handler[1])
 
 
 CommitCallbacks = list[tuple[int, Callable[[], None], bool]]

@@ -213,6 +213,12 @@ class EventWriter:
             return None
         if not (_NEG_INF < min(starts) and max(ends_column) < _INF):
             return None
+        # a time -0.0 is stored as 0.0 on every backend (SQLite's REAL column keeps no sign
+        # of a zero, PostgreSQL's would): x + 0.0 is x but for -0.0
+        if 0.0 in starts:
+            starts = [t + 0.0 for t in starts]
+        if 0.0 in ends_column:
+            ends_column = [t + 0.0 for t in ends_column]
         try:
             columns = [encode_column(list(map(itemgetter(i), argss))) for i in range(arity)]
         except (Unencodable, RecursionError):
@@ -340,6 +346,8 @@ class EventWriter:
                 if not (type(start) is float and type(end) is float
                         and _NEG_INF < start <= end < _INF):
                     start, end = check_times(start, end)
+                elif start == 0.0 or end == 0.0:   # (-0.0: stored as 0.0, see above)
+                    start, end = start + 0.0, end + 0.0
                 if arity == 1:
                     row = (enc(args[0]), start, end, *tail)
                 elif arity == 2:

@@ -1191,7 +1191,10 @@ class PgDatabase:
         store's schema it inserted rows into or updated: those whose row counters of the
         transaction (``pg_stat_xact_user_tables``) moved, so rows written by a trigger, a
         rule or a function count, whatever the statement's spelling (all the schema's
-        tables when the server keeps no counters, ``track_counts = off``)."""
+        tables when the server keeps no counters, ``track_counts = off``). The deferred
+        constraint triggers run before the counters are read (``SET CONSTRAINTS ALL
+        IMMEDIATE``: in a transaction of the caller's, its deferrable constraints are
+        immediate from then on)."""
         with self.lock:
             self.check_open()
             psycopg = _psycopg()
@@ -1219,6 +1222,9 @@ class PgDatabase:
                     cursor.execute(query, None, prepare=False)
                 columns = [d.name for d in cursor.description] if cursor.description else []
                 rows = [tuple(r) for r in cursor.fetchall()] if cursor.description else []
+                # (a deferred constraint trigger would write at the commit, after the
+                # counters are read: it runs now, and its writes count as the statement's)
+                raw.execute("SET CONSTRAINTS ALL IMMEDIATE")
                 after = self._rows_written_so_far(raw)
                 written = {table for table, count in after.items()
                            if count is None or count != before.get(table)}
@@ -1312,7 +1318,10 @@ class PgDatabase:
     python_functions = False
 
     def run_compiled(self, sql: str, params: dict, limit: int | None = None,
-                     deadline: float | None = None, may_fall_back: bool = False) -> list[tuple]:
+                     deadline: float | None = None, may_fall_back: bool = False,
+                     instructions: int | None = None) -> list[tuple]:
+        # (``instructions``: PostgreSQL counts none a client could bound; the deadline,
+        # statement_timeout, is its only limit)
         with self.lock:
             self.check_open()
             deadline = self._outer(deadline)

@@ -73,12 +73,12 @@ class SQLiteQueryPrinter:
 
     def may_raise(self, sql: str) -> bool:
         """Whether evaluating ``sql`` may raise an error Prolog raises too (arithmetic,
-        builtins: every function slr_sql registers)."""
-        return "slr_" in sql
+        builtins: every function slr_sql registers but slr_sign_bit)."""
+        return self.raising_calls(sql) > 0
 
     def raising_calls(self, sql: str) -> int:
         """How many calls in ``sql`` may raise."""
-        return sql.count("slr_")
+        return sql.count("slr_") - sql.count("slr_sign_bit(")
 
     def typed_equal(self, value: str, const: str, sql_type: str) -> str:
         """A stored value equals a constant number of SQL type ``integer`` or ``real``."""
@@ -87,6 +87,27 @@ class SQLiteQueryPrinter:
     def same_value(self, a: str, kind_a: str, b: str, kind_b: str) -> str:
         """Two run-time values are the same term (``1`` is not ``1.0``)."""
         return f"({a} = {b} AND typeof({a}) = typeof({b}))"
+
+    # -0.0 and 0.0 are two terms, but one value to SQLite's = and grouping, and no built-in
+    # shows a zero's sign (without the optional math functions): slr_sign_bit does, called
+    # for zeros only
+    def zero_sign(self, value: str, negative: bool) -> str | None:
+        """The condition that ``value``, equal to a float zero, has the sign of ``-0.0``
+        (``negative``) or of ``0.0``; None where ``=`` on stored values tells them apart.
+
+        >>> SQLiteQueryPrinter().zero_sign("t0.arg1", True)
+        'slr_sign_bit(t0.arg1) = 1'
+        """
+        return f"slr_sign_bit({value}) = {1 if negative else 0}"
+
+    def same_zero_sign(self, a: str, b: str) -> str | None:
+        """The condition that two equal values, when zeros, have one sign (added to
+        :meth:`same_value`); None where ``=`` tells -0.0 from 0.0 already.
+
+        >>> SQLiteQueryPrinter().same_zero_sign("t0.arg1", "t1.arg1")
+        '(t0.arg1 <> 0 OR slr_sign_bit(t0.arg1) = slr_sign_bit(t1.arg1))'
+        """
+        return f"({a} <> 0 OR slr_sign_bit({a}) = slr_sign_bit({b}))"
 
     def time_equal(self, value: str, time: str) -> str:
         """A stored value or argument is a number equal to a stored time."""
@@ -201,6 +222,13 @@ class PostgresQueryPrinter:
 
     def time_equal(self, value: str, time: str) -> str:
         return f"(slr_number({value}) = {time} AND slr_typeof({value}) IN ('integer', 'real'))"
+
+    def zero_sign(self, value: str, negative: bool) -> str | None:
+        # a stored value's text carries the sign ('-0.0' is not '0.0')
+        return None
+
+    def same_zero_sign(self, a: str, b: str) -> str | None:
+        return None
 
     def prolog_number(self, value: str) -> str:
         return f"slr_num({value})"
