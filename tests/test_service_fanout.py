@@ -203,6 +203,37 @@ def test_a_cancelled_wait_leaves_no_waiter_and_the_next_wait_is_woken(kb):
     sub.close()
 
 
+@pytest.mark.parametrize("take", ["async for", "next_answers"])
+def test_a_cancelled_waiter_does_not_take_away_the_later_waiters_wake(kb, take):
+    """Two coroutines wait on one subscription (the later one's wait replaces the first's);
+    cancelling the first leaves the second waiting, and the next answer wakes it."""
+    kb.add("p(0)^0")
+    sub = kb.subscribe("p(X)^T", since=0.5)
+    drained(kb)
+
+    async def one() -> list:
+        if take == "async for":
+            return [await sub.__anext__()]
+        return await sub.next_answers(10)
+
+    async def run() -> list:
+        first = asyncio.ensure_future(one())
+        while sub._async_waiter is None:
+            await asyncio.sleep(0)
+        mine = sub._async_waiter
+        second = asyncio.ensure_future(one())
+        while sub._async_waiter is mine:
+            await asyncio.sleep(0)
+        first.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await first
+        assert sub._async_waiter is not None      # the second still waits
+        await asyncio.get_running_loop().run_in_executor(None, kb.add, "p(5)^5")
+        return await asyncio.wait_for(second, DEADLINE)
+    assert [a["X"] for a in asyncio.run(run())] == [5]
+    sub.close()
+
+
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
     db = tmp_path_factory.mktemp("service_fanout") / "fanout.db"

@@ -378,16 +378,17 @@ class Subscription:
         with self._lock:
             if (not self._unacked if acks else self._queue) or self._state is S.CLOSED:
                 return
-            self._async_waiter = (loop, future)
+            self._async_waiter = waiter = (loop, future)
         try:
             await future
         finally:
-            self._forget_waiter(self._async_waiter)
+            self._forget_waiter(waiter)
 
     def _forget_waiter(self, waiter: tuple | None) -> None:
-        """After an async wait: take back ``waiter`` if nothing woke it (a cancelled wait).
-        Only the waiting coroutine sets it and every other change clears it, so once it is
-        seen gone (the common case: the hub's wake took it) it stays gone: no lock then."""
+        """After an async wait: take back ``waiter`` (this wait's own) if nothing woke it (a
+        cancelled wait). Only this wait ever sets it and every other change replaces or clears
+        it, so once it is seen gone (the common case: the hub's wake took it) it stays gone:
+        no lock then."""
         if waiter is None or self._async_waiter is not waiter:
             return
         with self._lock:
