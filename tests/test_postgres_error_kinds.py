@@ -146,6 +146,8 @@ def test_a_lock_held_by_another_session_is_busy_for_sql_add_and_query(kb, shared
                 kb.sql("UPDATE p SET robot = NULL WHERE false OR seq = 0", write=True)
             with pytest.raises(SLRBusy):
                 kb.add("p(3)^3")
+            with pytest.raises(SLRBusy):             # reads wait for the lock too
+                kb.query("p(X)^_", timeout=20)
             with pytest.raises(SLRBusy):
                 kb.sql("LOCK TABLE p IN SHARE MODE", write=True)
         finally:
