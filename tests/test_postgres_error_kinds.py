@@ -14,6 +14,7 @@ import queue
 import subprocess
 import sys
 import threading
+import time
 
 import httpx
 import psycopg
@@ -23,9 +24,11 @@ import pytest
 import slr_sql
 from slr_sql import ManualClock
 from slr_sql.errors import SLRBusy, SLRError, SLRServerUnreachable, SLRTimeout, SLRUnavailable
+from slr_sql.store.postgres import PgStatementError, _error
 
 from conftest import drop_postgres_database, postgres_database
-from slr_sql.store.postgres import PgStatementError, _error
+
+DEADLINE = 30.0   # seconds a wait for the other session may take before the test fails
 
 
 @pytest.fixture(scope="module")
@@ -153,6 +156,67 @@ def test_a_lock_held_by_another_session_is_busy_for_sql_add_and_query(kb, shared
         finally:
             other.execute("ROLLBACK")
     assert {"X": 3} not in kb.query("p(X)^_")
+    _still_works(kb)
+
+
+def test_a_deadlock_the_server_breaks_is_busy(kb, shared_url):
+    """A real deadlock (40P01): the store's statement holds lock B and waits for A, held by
+    another session that waits for B. The store's session checks for deadlocks first (its
+    deadlock_timeout is 10 ms, the other's the default second), so its statement is the
+    one the server gives up."""
+    got_b = "SELECT count(*) FROM pg_locks WHERE locktype = 'advisory' AND classid = 4242 " \
+            "AND objid = 2 AND objsubid = 2 AND granted"
+    with _other(shared_url) as other, _other(shared_url) as watcher:
+        other.execute("BEGIN")
+        other.execute("SELECT pg_advisory_xact_lock(4242, 1)")
+        waited: list[BaseException] = []
+
+        def take_b_when_held() -> None:
+            deadline = time.monotonic() + DEADLINE
+            while not watcher.execute(got_b).fetchone()[0]:
+                if time.monotonic() > deadline:
+                    return
+                time.sleep(0.005)
+            try:
+                other.execute("SELECT pg_advisory_xact_lock(4242, 2)")
+            except psycopg.Error as exc:   # (the test asserts it did not happen)
+                waited.append(exc)
+        thread = threading.Thread(target=take_b_when_held)
+        thread.start()
+        try:
+            with pytest.raises(SLRBusy) as caught:
+                kb.sql(f"""DO $$ DECLARE deadline timestamptz := clock_timestamp()
+                                                  + interval '{DEADLINE} seconds';
+                BEGIN
+                  PERFORM set_config('deadlock_timeout', '10ms', true);
+                  PERFORM pg_advisory_xact_lock(4242, 2);
+                  WHILE NOT EXISTS (SELECT 1 FROM pg_locks WHERE locktype = 'advisory'
+                                    AND classid = 4242 AND objid = 2 AND objsubid = 2
+                                    AND NOT granted) LOOP
+                    IF clock_timestamp() > deadline THEN RAISE 'the other never waited'; END IF;
+                    PERFORM pg_sleep(0.005);
+                  END LOOP;
+                  PERFORM pg_advisory_xact_lock(4242, 1);
+                END $$""", write=True)
+            assert "waited for each other" in str(caught.value)
+        finally:
+            thread.join(DEADLINE)
+            other.execute("ROLLBACK")
+        assert not waited
+    _still_works(kb)
+
+
+def test_a_statement_past_a_configured_limit_is_unavailable(kb):
+    """Class 53 (here 53400: a sort's temporary file past ``temp_file_limit``): the
+    server's resources or limits, a condition that may pass."""
+    with pytest.raises(SLRUnavailable) as caught:
+        kb.sql("""DO $$ BEGIN
+                 PERFORM set_config('work_mem', '64kB', true);
+                 PERFORM set_config('temp_file_limit', '64kB', true);
+                 PERFORM count(*) FROM (SELECT md5(g::text) FROM generate_series(1, 100000) g
+                                        ORDER BY 1 OFFSET 0) s;
+               END $$""", write=True)
+    assert type(caught.value) is SLRUnavailable and "temp_file_limit" in str(caught.value)
     _still_works(kb)
 
 
