@@ -303,6 +303,12 @@ def test_the_service_answers_a_refused_statement_with_400_not_503(postgres_url):
      SLRServerUnreachable),
     (psycopg.errors.TooManyConnections("too many clients already"), False, SLRUnavailable),
     (psycopg.errors.UndefinedTable("relation x does not exist"), False, SLRServerUnreachable),
+    # (FATAL: the server ends the session; psycopg's class is InternalError)
+    (psycopg.errors.IdleInTransactionSessionTimeout("terminating connection due to "
+                                                    "idle-in-transaction timeout"), False,
+     SLRServerUnreachable),
+    (psycopg.errors.ProgrammingError("the query has 1 placeholder but 2 parameters were "
+                                     "passed"), None, PgStatementError),
 ])
 def test_what_an_error_is_when_the_connection_is_or_is_not_known(error, connected, kind):
     """A connect that fails for good (a wrong password) is no server to wait for; one whose
