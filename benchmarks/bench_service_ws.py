@@ -7,7 +7,9 @@ against the same fan-out in process (``kb.subscribe``) in the same run; and a me
   HTTP in batches of ``--batch-events`` (10) paced to ``--rate`` (1,000) events/s. Latency of
   one delivery = the time its answer's frame is received minus the time the HTTP
   ``add_many`` holding the event was answered (0 when the frame came first; both read
-  ``time.monotonic``, one clock for every process on Linux), over the first
+  ``time.monotonic``, one clock for every process on Linux), and also from when that
+  ``add_many`` was made (the HTTP request's hops and the commit included: a server that
+  answers ``add_many`` later cannot make its deliveries look sooner), over the first
   ``--latency-seconds`` (20). Every subscriber must receive every event, once, in order
   (counted over the whole run).
 * **soak** — the same run lasts ``--minutes`` (10); the server's RSS (``/proc/PID/status``)
@@ -86,11 +88,12 @@ def slope_per_min(samples: list[tuple[float, float]]) -> float:
 
 
 def produce(add_many, rate: float, batch: int, seconds: float, answered: list,
-            stop_latency_at: float) -> tuple[int, float]:
+            stop_latency_at: float, requested: list | None = None) -> tuple[int, float]:
     """Call ``add_many`` with batches of ``batch`` events ``e(I)^I`` paced to ``rate``
-    events/s for ``seconds``; ``answered[I]`` = when the call holding event I returned
-    (only up to ``stop_latency_at``). Returns the number of events sent and the rate
-    achieved (below ``rate`` when a call takes longer than its share of the period)."""
+    events/s for ``seconds``; ``answered[I]`` = when the call holding event I returned,
+    ``requested[I]`` = when it was made (only up to ``stop_latency_at``). Returns the number
+    of events sent and the rate achieved (below ``rate`` when a call takes longer than its
+    share of the period)."""
     period = batch / rate
     start = time.monotonic()
     i = 0
@@ -102,10 +105,14 @@ def produce(add_many, rate: float, batch: int, seconds: float, answered: list,
             break
         if due > now:
             time.sleep(due - now)
-        add_many([f"e({j})^{j + 1}" for j in range(i, i + batch)])
+        events = [f"e({j})^{j + 1}" for j in range(i, i + batch)]
+        made = time.monotonic()
+        add_many(events)
         done = time.monotonic()
         if done < stop_latency_at:
             answered.extend([done] * batch)
+            if requested is not None:
+                requested.extend([made] * batch)
         i += batch
         k += 1
     return i, i / (time.monotonic() - start)
@@ -221,8 +228,9 @@ def run_service(args, tmp: Path) -> dict:
         sampler.start()
         load_start = os.getloadavg()
         cpu_start, cpu_t0 = cpu_seconds(proc.pid), time.monotonic()
+        requested: list[float] = []
         sent, achieved = produce(client.add_many, args.rate, args.batch_events, seconds, answered,
-                       latency_end)
+                                 latency_end, requested)
         server_cpu = (cpu_seconds(proc.pid) - cpu_start) / (time.monotonic() - cpu_t0)
         # every event must arrive: wait (bounded) for the stragglers
         time.sleep(2.0)
@@ -234,16 +242,20 @@ def run_service(args, tmp: Path) -> dict:
         counts, bad, times = parent.recv()
         sub_proc.join(30)
         lat = []
+        from_request = []       # frame received - add_many request made (the HTTP hops too)
         for mine in times:
             for i, t in enumerate(mine):
                 if i < len(answered):
                     lat.append(max(0.0, t - answered[i]))
+                    from_request.append(t - requested[i])
         rss = [r for _, r in samples]
         client.close()
         return {"sent": sent, "achieved": achieved, "complete": sum(c == sent for c in counts),
                 "min_count": min(counts), "out_of_order": sum(bad),
                 "p50_ms": 1000 * pct(lat, 50), "p99_ms": 1000 * pct(lat, 99),
                 "max_ms": 1000 * max(lat) if lat else float("nan"), "latencies": len(lat),
+                "request_p50_ms": 1000 * pct(from_request, 50),
+                "request_p99_ms": 1000 * pct(from_request, 99),
                 "rss_first": rss[0], "rss_last": rss[-1], "rss_max": max(rss),
                 "rss_slope_mb_per_min": slope_per_min(samples[len(samples) // 10:]),
                 "rss_samples": len(samples), "load_start": load_start,
@@ -339,7 +351,9 @@ def run(args) -> None:
               f"{remote['min_count']}, out of order {remote['out_of_order']}); latency over the "
               f"first {args.latency_seconds:g} s ({remote['latencies']} deliveries): p50 "
               f"{remote['p50_ms']:.2f} ms, p99 {remote['p99_ms']:.2f} ms, max "
-              f"{remote['max_ms']:.1f} ms", flush=True)
+              f"{remote['max_ms']:.1f} ms; from the add_many request made: p50 "
+              f"{remote['request_p50_ms']:.2f} ms, p99 {remote['request_p99_ms']:.2f} ms",
+              flush=True)
         print(f"server CPU while producing: {remote['server_cpu']:.2f} s per second "
               f"({remote['server_cpu'] / remote['achieved'] * 1e6:.0f} µs per event, "
               f"{remote['server_cpu'] / remote['achieved'] / args.subscribers * 1e6:.2f} µs "

@@ -151,6 +151,89 @@ def test_answer_texts_encode_each_answer_once():
     assert len(texts._texts) <= 4                    # bounded
 
 
+def test_answer_texts_join_a_batch_once_for_all_the_subscribers_that_take_it(kb):
+    """The subscribers of one pattern take the same batch one after the other: its texts
+    are joined once; each frame still carries its subscriber's own sequence number, and a
+    batch that differs (another count, another answer inside) is joined anew."""
+    kb.add("p(0)^0")
+    subs = [kb.subscribe("p(X)^T", since=0.5) for _ in range(5)]
+    drained(kb)
+    kb.add_many([f"p({i})^{i}" for i in range(1, 6)])
+    drained(kb)
+    texts = _AnswerTexts()
+
+    async def take(s, limit) -> list:
+        return await s.next_answers(limit, copy=False)
+    batches = [asyncio.run(take(s, 10)) for s in subs]
+    frames = [texts.frame(1 + k, b) for k, b in enumerate(batches)]
+    assert texts.joined == 1 and texts.encoded == 5
+    for k, frame in enumerate(frames):
+        assert json.loads(frame) == {"type": "answers", "seq": 1 + k,
+                                     "answers": [{"X": i, "T": float(i)} for i in range(1, 6)]}
+    whole = batches[0]
+    shorter = whole[:1] + whole[2:]           # the same first and last, one fewer
+    other_middle = whole[:2] + [dict(whole[2], X=99)] + whole[3:]   # as many, another inside
+    for batch in (shorter, other_middle, whole):
+        assert json.loads(texts.frame(1, batch))["answers"] == \
+            [{"X": a["X"], "T": a["T"]} for a in batch]
+    assert texts.joined == 4
+    for s in subs:
+        s.close()
+
+
+def test_a_cancelled_wait_leaves_no_waiter_and_the_next_wait_is_woken(kb):
+    kb.add("p(0)^0")
+    sub = kb.subscribe("p(X)^T", since=0.5)
+    drained(kb)
+
+    async def cancel_then_take() -> list:
+        waiting = asyncio.ensure_future(sub.next_answers(10))
+        while sub._async_waiter is None:          # registered: it waits for the hub
+            await asyncio.sleep(0)
+        waiting.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await waiting
+        assert sub._async_waiter is None
+        taking = asyncio.ensure_future(sub.next_answers(10))
+        while sub._async_waiter is None:
+            await asyncio.sleep(0)
+        await asyncio.get_running_loop().run_in_executor(None, kb.add, "p(7)^7")
+        return await asyncio.wait_for(taking, DEADLINE)
+    assert [a["X"] for a in asyncio.run(cancel_then_take())] == [7]
+    sub.close()
+
+
+@pytest.mark.parametrize("take", ["async for", "next_answers"])
+def test_a_cancelled_waiter_does_not_take_away_the_later_waiters_wake(kb, take):
+    """Two coroutines wait on one subscription (the later one's wait replaces the first's);
+    cancelling the first leaves the second waiting, and the next answer wakes it."""
+    kb.add("p(0)^0")
+    sub = kb.subscribe("p(X)^T", since=0.5)
+    drained(kb)
+
+    async def one() -> list:
+        if take == "async for":
+            return [await sub.__anext__()]
+        return await sub.next_answers(10)
+
+    async def run() -> list:
+        first = asyncio.ensure_future(one())
+        while sub._async_waiter is None:
+            await asyncio.sleep(0)
+        mine = sub._async_waiter
+        second = asyncio.ensure_future(one())
+        while sub._async_waiter is mine:
+            await asyncio.sleep(0)
+        first.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await first
+        assert sub._async_waiter is not None      # the second still waits
+        await asyncio.get_running_loop().run_in_executor(None, kb.add, "p(5)^5")
+        return await asyncio.wait_for(second, DEADLINE)
+    assert [a["X"] for a in asyncio.run(run())] == [5]
+    sub.close()
+
+
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
     db = tmp_path_factory.mktemp("service_fanout") / "fanout.db"

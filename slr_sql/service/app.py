@@ -264,6 +264,11 @@ class _AnswerTexts:
         self.size = size
         self._texts: dict[int, tuple[dict, str]] = {}
         self.encoded = 0                  # answers encoded (the rest came from the cache)
+        # the answers of the last frame of several and their joined texts: the subscribers of
+        # one pattern, condition and window are woken together and most take the same batch
+        self._last: tuple[int, dict, dict, dict] | None = None
+        self._last_body = ""
+        self.joined = 0                   # frames of several answers whose texts were joined
 
     def text(self, answer: dict) -> str:
         hit = self._texts.get(id(answer))
@@ -278,11 +283,23 @@ class _AnswerTexts:
 
     def frame(self, seq: int, answers: list[dict]) -> str:
         """An ``answer`` frame (one answer) or an ``answers`` frame, numbered from ``seq``."""
-        if len(answers) == 1:
+        n = len(answers)
+        if n == 1:
             return f'{{"type":"answer","seq":{seq},"answer":{self.text(answers[0])}}}'
-        text = self.text
-        return (f'{{"type":"answers","seq":{seq},"answers":['
-                f'{",".join([text(a) for a in answers])}]}}')
+        first, middle, last = answers[0], answers[n >> 1], answers[-1]
+        cached = self._last
+        # the same first, middle and last dict and as many: the same answers (a dict is made
+        # for one event and one pattern, condition and window, whose subscriptions queue
+        # every answer in journal order); the entry holds the dicts, so no id is reused
+        if cached is not None and cached[0] == n and cached[1] is first and \
+                cached[2] is middle and cached[3] is last:
+            body = self._last_body
+        else:
+            text = self.text
+            body = ",".join([text(a) for a in answers])
+            self._last, self._last_body = (n, first, middle, last), body
+            self.joined += 1
+        return f'{{"type":"answers","seq":{seq},"answers":[{body}]}}'
 
 
 # -- the route table (routes and the OpenAPI description come from it) ------------------------

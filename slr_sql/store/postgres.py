@@ -109,12 +109,31 @@ def _psycopg() -> Any:
 
 
 def _error(exc: BaseException, where: str, busy_timeout: float | None = None,
-           connected: bool = False) -> Exception:
-    """The slr_sql exception for a psycopg error (``connected``: the connection is still
-    up after it, so an error the client raised without a server's code is not a lost
-    server but a refused statement)."""
+           connected: bool | None = None) -> Exception:
+    """The slr_sql exception for a psycopg error, by what happened rather than by psycopg's
+    class (which makes an invalid savepoint name or a function without RETURN an
+    ``OperationalError``, as it does a lost server). ``connected``: the connection is still
+    up after the error (None: not known; then an error with an SQLSTATE other than one the
+    server ends a session with is an answer of the server, so its connection is up). In
+    this order:
+
+    * a deadlock (40P01), a serialization conflict (40001), a lock wait past
+      ``busy_timeout`` (55P03): :class:`SLRBusy`;
+    * a cancel (57014): :class:`SLRCancelled` (the call's own timeout is told apart by the
+      caller: :func:`_own_deadline`);
+    * the server short of resources (class 53: disk, memory, connections):
+      :class:`SLRUnavailable`;
+    * the connection refused for good (class 28: authentication; 3D000: no such database;
+      57P04: the database was dropped): a plain :class:`SLRError`;
+    * the connection gone (closed, broken, never made; the server ends a session with
+      08xxx or 57P01..57P05, as it does a restart): :class:`SLRServerUnreachable`;
+    * anything else on a live connection is the statement's: a :class:`PgStatementError`
+      with the server's words (an error the client raised without an SQLSTATE, such as
+      more parameters than the protocol carries, a plain :class:`SLRError`).
+    """
     psycopg = _psycopg()
     errors = psycopg.errors
+    state = getattr(exc, "sqlstate", None) or ""
     if isinstance(exc, errors.DeadlockDetected):   # (broken by the server, not waited out)
         return SLRBusy(f"{where}: two writers waited for each other and the server gave "
                        f"this one up; retry ({_first_line(exc)})")
@@ -131,19 +150,31 @@ def _error(exc: BaseException, where: str, busy_timeout: float | None = None,
                                  f"and it may be retried")
         cancelled.reason = _first_line(exc)
         return cancelled
-    if isinstance(exc, (psycopg.OperationalError, psycopg.InterfaceError)):
-        state = getattr(exc, "sqlstate", None) or ""
-        if state.startswith("53"):   # insufficient resources: disk, memory, connections
-            return SLRUnavailable(f"{where}: the server is short of resources "
-                                  f"({_first_line(exc)})")
-        if connected and not state:  # e.g. more parameters than the protocol carries
-            return SLRError(f"{where}: the statement cannot be sent ({_first_line(exc)})")
+    if state.startswith("53"):   # insufficient resources: disk, memory, connections
+        return SLRUnavailable(f"{where}: the server is short of resources "
+                              f"({_first_line(exc)})")
+    if connected is None:
+        connected = not (state.startswith("08") or state in _SESSION_ENDED or (
+            not state and isinstance(exc, (psycopg.OperationalError, psycopg.InterfaceError))))
+    if not connected:
+        if state.startswith("28") or state in ("3D000", "57P04"):   # (no retry helps)
+            return SLRError(f"{where}: the server refused the connection "
+                            f"({_first_line(exc)})")
         return SLRServerUnreachable(f"{where}: the server is not reachable "
                                     f"({_first_line(exc)})")
+    if isinstance(exc, (psycopg.OperationalError, psycopg.InterfaceError)) and not state:
+        # e.g. more parameters than the protocol carries: refused before it was sent
+        return SLRError(f"{where}: the statement cannot be sent ({_first_line(exc)})")
     if isinstance(exc, errors.ReadOnlySqlTransaction):
         return SLRError(f"read-only: the statement would change the store "
                         f"({_first_line(exc)}); pass write=True to allow it")
     return PgStatementError(_first_line(exc))
+
+
+# SQLSTATEs (besides class 08) the server ends a session with: an administrator's or a
+# shutdown's termination, a crash of another backend, a server still starting, the
+# session idle too long
+_SESSION_ENDED = frozenset({"57P01", "57P02", "57P03", "57P05"})
 
 
 def _own_deadline(exc: BaseException, deadline: float) -> BaseException:
@@ -400,7 +431,7 @@ class PgConnection:
             try:
                 self.raw = self.reopen()
             except _psycopg().Error as exc:
-                raise _error(exc, self.where, self.busy_timeout) from None
+                raise _error(exc, self.where, self.busy_timeout, False) from None
 
     def _guard(self, call: Callable[[], Any]) -> Any:
         psycopg = _psycopg()
@@ -851,7 +882,7 @@ class PgDatabase:
                 self.conn.reopen = reopen
                 self.conn.in_transaction = lambda: self.tx_depth > 0
             except psycopg.Error as exc:
-                raise _error(exc, self.path, busy_timeout) from None
+                raise _error(exc, self.path, busy_timeout, _connected(raw)) from None
         except BaseException:
             self.conn.close()
             raise
@@ -1440,4 +1471,4 @@ def migrate_postgres(db: Any, schema: str, adopt: bool = False) -> None:
             db.conn.rollback()
             raise
     except psycopg.Error as exc:
-        raise _error(exc, db.path, db.busy_timeout) from None
+        raise _error(exc, db.path, db.busy_timeout, _connected(raw)) from None

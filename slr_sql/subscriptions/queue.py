@@ -378,13 +378,22 @@ class Subscription:
         with self._lock:
             if (not self._unacked if acks else self._queue) or self._state is S.CLOSED:
                 return
-            self._async_waiter = (loop, future)
+            self._async_waiter = waiter = (loop, future)
         try:
             await future
         finally:
-            with self._lock:
-                if self._async_waiter is not None and self._async_waiter[1] is future:
-                    self._async_waiter = None
+            self._forget_waiter(waiter)
+
+    def _forget_waiter(self, waiter: tuple | None) -> None:
+        """After an async wait: take back ``waiter`` (this wait's own) if nothing woke it (a
+        cancelled wait). Only this wait ever sets it and every other change replaces or clears
+        it, so once it is seen gone (the common case: the hub's wake took it) it stays gone:
+        no lock then."""
+        if waiter is None or self._async_waiter is not waiter:
+            return
+        with self._lock:
+            if self._async_waiter is waiter:
+                self._async_waiter = None
 
     async def next_answers(self, limit: int, copy: bool = True,
                            handled: bool = True) -> list[dict]:
@@ -412,14 +421,26 @@ class Subscription:
         """
         self._check_pull()
         while True:
-            got = self._take_batch(limit, handled)
+            waiter = None
+            if not self._queue:   # (a hint, checked again under the lock): wait, most likely
+                loop = asyncio.get_running_loop()
+                waiter = (loop, loop.create_future())
+            got = self._take_batch(limit, handled, waiter)
             if type(got) is _End:
                 if got.error is not None:
                     raise got.error
                 return []
             if got:
                 return [dict(a) for a in got] if copy else got
-            await self._wait_async(acks=got is None)
+            if waiter is not None and got is not None:
+                # registered by _take_batch under the lock that found the queue empty: one
+                # lock for looking and waiting (per frame of the service, per wake)
+                try:
+                    await waiter[1]
+                finally:
+                    self._forget_waiter(waiter)
+            else:
+                await self._wait_async(acks=got is None)
 
     def acknowledge(self, count: int) -> None:
         """Mark the first ``count`` answers taken with ``next_answers(handled=False)`` and
@@ -455,18 +476,25 @@ class Subscription:
         if waiter is not None:               # an end waits for the acknowledgements
             resolve_threadsafe(waiter[0], [waiter[1]])
 
-    def _take_batch(self, limit: int, handled: bool = True) -> Any:
+    def _take_batch(self, limit: int, handled: bool = True,
+                    waiter: tuple | None = None) -> Any:
         """Up to ``limit`` queued answers (the shared dicts), never waiting: ``[]`` when none is
         queued, the _End when it is next (never after answers taken in the same call, so
         those are handled before the end closes the subscription). One lock for the batch.
         ``handled=False``: the batch goes to the unacknowledged answers (the previous one
-        is not marked handled), and an end waits for them to be acknowledged (None then)."""
+        is not marked handled), and an end waits for them to be acknowledged (None then).
+        ``waiter`` ``(loop, future)``: registered, when ``[]`` is returned, as the waiter the
+        hub resolves once something is queued."""
         with self._lock:
             if handled:
                 self._in_flight = None       # the consumer is back: the previous batch is done
             queue = self._queue
             if not queue:
-                return _End(self.error) if self._state is S.CLOSED else []
+                if self._state is S.CLOSED:
+                    return _End(self.error)
+                if waiter is not None:
+                    self._async_waiter = waiter
+                return []
             if queue[0] is None and not handled and self._unacked:
                 return None                  # the end after the acknowledgements
             if queue[0] is None:              # the end marker
@@ -476,13 +504,24 @@ class Subscription:
                 taken = None
             else:
                 before = len(queue) >> 1
-                taken = []
-                if handled:
+                if before <= limit and queue[-2] is not None:
+                    # all of it and no end (an end is always the last pair: nothing is queued
+                    # after it): taken in one go, as a frame of the service typically is
+                    items = list(queue)
+                    queue.clear()
+                    taken = items[1::2]
+                    if handled:
+                        self._in_flight = items[0]   # the batch is in the consumer's hands
+                    else:
+                        self._unacked.extend(items[0::2])
+                elif handled:
+                    taken = []
                     self._in_flight = queue[0]   # the batch is in the consumer's hands
                     while queue and len(taken) < limit and queue[0] is not None:
                         queue.popleft()
                         taken.append(queue.popleft())
                 else:
+                    taken = []
                     unacked = self._unacked
                     while queue and len(taken) < limit and queue[0] is not None:
                         unacked.append(queue.popleft())
