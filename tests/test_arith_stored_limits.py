@@ -114,3 +114,23 @@ def test_stored_values_compute_as_in_swipl(swipl, kb, goal):
     answers, error = outcome(kb, goal, names)
     assert (error, answers if error is None else None) == \
         (expected[1], expected[0] if expected[1] is None else None), kb.explain(goal)
+
+
+# prev/next (no SWI-Prolog builtins): a time bound that overflows raises as `is` would, on
+# the compiled path as in the interpreter (SQLite's own arithmetic made it an infinity: the
+# window reached the end of time)
+WINDOW_GOALS = [
+    "r(_)^T, next(r(X)^Z, [T, T * 0.6e308])",
+    "r(_)^T, prev(r(X)^Z, T * 0.6e308)",
+    "aggregate_all(count, (r(_)^T, next(r(X)^Z, [T, T * 0.6e308])), N)",
+]
+
+
+@pytest.mark.parametrize("goal", WINDOW_GOALS)
+def test_an_overflowing_time_bound_raises_on_both_paths(kb, goal):
+    names = ["X", "Z", "T", "N"]
+    kb.sql_enabled = False
+    interpreted = outcome(kb, goal, names)
+    assert interpreted[1] is not None   # the third event's bound, 1.8e308, overflows
+    kb.sql_enabled = True
+    assert outcome(kb, goal, names)[1] == interpreted[1], kb.explain(goal)
