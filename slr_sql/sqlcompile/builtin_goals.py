@@ -55,10 +55,7 @@ class BuiltinGoals:
 
     def _finite(self, sql: str) -> str:
         """SQL's own float arithmetic checked as Prolog checks it (float_overflow)."""
-        import math
-
-        return self.dialect.finite_float(
-            sql, self.udf(self.dialect.arith1(self.const("float"), self.const(math.inf))))
+        return self.dialect.finite_float(sql)
 
     def _arith(self, t: Any):
         """(sql, kind, native): native when ``sql`` is SQL's own float ``+ - *``, whose
@@ -125,8 +122,13 @@ class BuiltinGoals:
         return sql
 
     def time_sql(self, t: Any) -> str:
-        """A time argument of prev/next: float(evaluate(t))."""
-        sql, v = self.arith_sql(t)
+        """A time argument of prev/next: float(evaluate(t)). SQL's own float arithmetic is
+        left unchecked here (it is used inside the history's subqueries): its overflow check
+        is ``self.finite_checks[sql]``, which the goal tests where it stands."""
+        sql, v, native = self._arith(t)
+        if native:
+            self.finite_checks[sql] = self._finite(sql)
+            return sql
         if sql is None:
             try:
                 f = float(v)

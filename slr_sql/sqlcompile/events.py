@@ -221,7 +221,12 @@ class EventGoals:
         """Prolog evaluates a prev/next time before it looks at the history (an error even
         when no event matches): one computed through an slr_ function is tested here."""
         for t in times:
-            if t is not None and self.dialect.may_raise(t):
+            if t is None:
+                continue
+            checked = self.finite_checks.get(t)
+            if checked is not None:
+                st.conds.append(f"({checked}) IS NOT NULL")
+            elif self.dialect.may_raise(t):
                 st.conds.append(f"({t}) IS NOT NULL")
 
     def _prev_rows(self, name, n, pattern, lo, hi, nxt, st, emit, origin=None):

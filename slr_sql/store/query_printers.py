@@ -123,16 +123,19 @@ class SQLiteQueryPrinter:
     def arith2(self, op: str, a: str, b: str) -> str:
         return f"slr_ar2({op}, {a}, {b})"
 
-    def finite_float(self, value: str, overflow: str) -> str:
-        """A float computed by SQL's own ``+ - *`` of finite floats, raising where Prolog
-        raises float_overflow: SQLite's arithmetic overflows to an infinity (or a NaN,
-        which it reads as NULL), so any other value runs ``overflow`` (a call that raises).
+    def finite_float(self, value: str) -> str:
+        """A float computed by SQL's own ``+ - *`` of finite floats, failing the statement
+        where Prolog raises float_overflow (the interpreter then answers, and raises it):
+        SQLite's arithmetic overflows to an infinity (or a NaN, which it reads as NULL), so
+        any other value takes ``abs`` of the smallest integer, SQLite's own integer overflow
+        error. A built-in rather than an ``slr_`` function: no Python call, and no guard
+        statement (docs/semantics.md, "Values", says what that leaves).
 
-        >>> SQLiteQueryPrinter().finite_float("(t0.t_start * :c0)", "slr_ar1(:c1, :c2)")
-        'CASE WHEN abs((t0.t_start * :c0)) <= 1.7976931348623157e308 THEN (t0.t_start * :c0) ELSE slr_ar1(:c1, :c2) END'
+        >>> SQLiteQueryPrinter().finite_float("(t0.t_start * :c0)")
+        'CASE WHEN abs((t0.t_start * :c0)) <= 1.7976931348623157e308 THEN (t0.t_start * :c0) ELSE abs(-9223372036854775807 - 1) END'
         """
         return (f"CASE WHEN abs({value}) <= 1.7976931348623157e308 THEN {value} "
-                f"ELSE {overflow} END")
+                f"ELSE abs(-9223372036854775807 - 1) END")
 
     def det_call(self, site: int, output: int, inputs: str) -> str:
         """Output ``output`` (-1: success) of the det builtin or Python predicate ``site``."""
@@ -251,7 +254,7 @@ class PostgresQueryPrinter:
     def arith2(self, op: str, a: str, b: str) -> str:
         return self.arith1(op, a)
 
-    def finite_float(self, value: str, overflow: str) -> str:
+    def finite_float(self, value: str) -> str:
         # double precision arithmetic raises its own overflow error (the interpreter then
         # answers); its operands here are finite (times, finite constants)
         return value
