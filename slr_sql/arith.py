@@ -170,6 +170,8 @@ def _pow_float(a, b):
         _finite(a)
     if type(b) is float:
         _finite(b)
+    if a < 0 and b != int(b):
+        raise evaluation_error("undefined")   # C's pow: a negative number to a fraction
     try:
         return float(a) ** float(b)
     except ZeroDivisionError:
@@ -270,6 +272,8 @@ def _fractional_part(a):
         if a != a:
             raise evaluation_error("undefined")
         return math.copysign(0.0, a)   # SWI-Prolog: the fraction of an infinity is 0.0
+    if type(a) is float:
+        return math.modf(a)[0]   # the fraction keeps the sign (-1.0e308's is -0.0)
     return a - math.trunc(a)
 
 

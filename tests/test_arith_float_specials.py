@@ -1,0 +1,95 @@
+"""Every arithmetic function slr_sql evaluates, on infinities, NaN and overflowing operands,
+against a live SWI-Prolog (its default flags: float_overflow=error, float_zero_div=error,
+float_undefined=error): the same number, or the same evaluation error.
+
+One SWI-Prolog process evaluates the whole grid (each operator on every combination of
+operands of which one is special); a function SWI-Prolog does not evaluate (its
+``type_error(evaluable, F/N)``) is left out of the comparison, as is an answer beyond what a
+float or a 64-bit integer holds.
+"""
+from __future__ import annotations
+
+import subprocess
+
+import pytest
+import test_swi_differential as swidiff
+
+from slr_sql.arith import BINARY, UNARY, evaluate
+from slr_sql.errors import SLREvaluationError
+from slr_sql.parser import parse_term
+from slr_sql.terms import format_term
+
+SPECIAL = ["inf", "-inf", "nan", "1.0e308", "-1.0e308"]
+PLAIN = ["0", "1", "-2", "0.0", "-0.0", "2.5", "0.5"]
+
+
+def expressions() -> list[tuple[str, int, str]]:
+    """(function, arity, expression text) of the grid."""
+    out = []
+    for op in sorted(UNARY):
+        out.extend((op, 1, f"{op}({v})") for v in SPECIAL)
+    for op in sorted(BINARY):
+        for a in SPECIAL + PLAIN:
+            for b in SPECIAL + PLAIN:
+                if a in SPECIAL or b in SPECIAL:
+                    text = f"{op}({a}, {b})" if op.isalnum() else f"({a}) {op} ({b})"
+                    out.append((op, 2, text))
+    return out
+
+
+GRID = expressions()
+FUNCTIONS = sorted({(op, n) for op, n, _ in GRID})
+
+
+DRIVER = """
+show(E) :-
+    catch(( X is E,
+            ( float(X), X =\\= X -> format('nan~n')
+            ; integer(X), abs(X) > 9223372036854775807 -> format('big~n')
+            ; format('~q~n', [X]) ) ),
+          error(Err, _),
+          ( Err = type_error(evaluable, _) -> format('not_evaluable~n')
+          ; format('error ~q~n', [Err]) )).
+:- initialization(main, main).
+main :- read(Es), forall(member(E, Es), show(E)).
+"""
+
+
+def ours(text: str) -> str:
+    term, _ = parse_term(text, "<test>")
+    try:
+        x = evaluate(term)
+    except SLREvaluationError as exc:
+        return "error " + format_term(exc.term.args[0], quoted=True)
+    if type(x) is float and x != x:
+        return "nan"
+    if type(x) is int and abs(x) > 9223372036854775807:
+        return "big"
+    return format_term(x, quoted=True)
+
+
+@pytest.fixture(scope="module")
+def swi_results(tmp_path_factory) -> dict[str, str]:
+    if not swidiff.HAVE_SWIPL:
+        pytest.fail("swipl (SWI-Prolog) is not installed: this differential test needs it "
+                    "(apt-get install swi-prolog-nox)")
+    exprs = [text for _, _, text in GRID]
+    driver = tmp_path_factory.mktemp("specials") / "driver.pl"
+    driver.write_text(DRIVER, encoding="utf-8")
+    run = subprocess.run(["swipl", str(driver)], input="[" + ",\n".join(exprs) + "].\n",
+                         capture_output=True, text=True, timeout=120, check=True)
+    lines = run.stdout.splitlines()
+    assert len(lines) == len(exprs), run.stderr
+    return dict(zip(exprs, lines))
+
+
+def test_the_grid_covers_every_function():
+    assert FUNCTIONS == sorted([(op, 1) for op in UNARY] + [(op, 2) for op in BINARY])
+
+
+@pytest.mark.parametrize("op,arity", FUNCTIONS, ids=[f"{op}/{n}" for op, n in FUNCTIONS])
+def test_a_function_on_special_floats_answers_as_swipl(swi_results, op, arity):
+    mine = [text for f, n, text in GRID if (f, n) == (op, arity)]
+    diffs = [(e, swi_results[e], ours(e)) for e in mine
+             if swi_results[e] != "not_evaluable" and swi_results[e] != ours(e)]
+    assert diffs == []
