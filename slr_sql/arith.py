@@ -207,10 +207,6 @@ def _log(a):
     return math.log(a)
 
 
-def _log2(b, x):
-    return _log(x) / _log(b)
-
-
 def _to_int(f, x):
     if type(x) is int:
         return x
@@ -279,13 +275,23 @@ def _fractional_part(a):
 
 def _shift_l(a, b):
     a, b = _int_required(a), _int_required(b)
-    if a and b > 0 and a.bit_length() + b > MAX_INTEGER_BITS:
+    if b < 0:
+        return a >> -b   # SWI-Prolog: a negative shift goes the other way
+    if a and a.bit_length() + b > MAX_INTEGER_BITS:
         raise _too_big()
     return a << b
 
 
 def _shift_r(a, b):
-    return _int_required(a) >> _int_required(b)
+    a, b = _int_required(a), _int_required(b)
+    return _shift_l(a, -b) if b < 0 else a >> b
+
+
+def _msb(a):
+    a = _int_required(a)
+    if a < 1:
+        raise iso_error(Struct("domain_error", (Atom("not_less_than_one"), a)))
+    return a.bit_length() - 1
 
 
 BINARY = {
@@ -304,7 +310,6 @@ BINARY = {
     "atan2": _float_args(math.atan2),
     "atan": _float_args(math.atan2),
     "copysign": _copysign,
-    "log": _float_args(_log2),
     ">>": _shift_r,
     "<<": _shift_l,
     "/\\": lambda a, b: _int_required(a) & _int_required(b),
@@ -327,7 +332,6 @@ UNARY = {
     "atan": _float_args(math.atan),
     "exp": _float_args(math.exp),
     "log": _float_args(_log),
-    "log2": _float_args(lambda a: _log(a) / math.log(2)),
     "floor": lambda a: _to_int(math.floor, a),
     "ceiling": lambda a: _to_int(math.ceil, a),
     "round": _round,
@@ -338,8 +342,7 @@ UNARY = {
         lambda a: a if type(a) is int else math.copysign(float(math.trunc(a)), a)),
     "float_fractional_part": _fractional_part,
     "\\": lambda a: ~_int_required(a),
-    "msb": lambda a: _int_required(a).bit_length() - 1,
-    "succ": lambda a: _int_required(a) + 1,
+    "msb": _msb,
 }
 
 CONSTANTS = {
