@@ -109,3 +109,21 @@ def test_info_of_an_slr_export(tmp_path):
     assert [(e.parent, e.child, e.count, e.first, e.last) for e in info.frames] == \
         [("map", "base", 2, 1.0, 2.0)]
     assert "without a MAP" in draft_map(info)
+
+
+def test_info_of_an_slr_export_names_frames_as_tf_lookup_does(tmp_path):
+    """An exported tf event's frames are terms: an atom is shown as it is, a string as
+    "map" and a number as its text, so the frames tf_lookup keeps apart stay apart (a
+    string was shown as the export's JSON object, {'$string': 'map'})."""
+    from slr_sql import ManualClock, String, Struct
+    from slr_sql.viz.mcap_export import export_mcap
+
+    pose = Struct("pose", ([0.0, 0, 0], [0.0, 0, 0, 1]))
+    with slr_sql.open(tmp_path / "r.db", clock=ManualClock(10.0)) as kb:
+        kb.add_many([("tf", (String("map"), "base", pose), 1.0, 1.0),
+                     ("tf", ("map", "base", pose), 2.0, 2.0),
+                     ("tf", ("base", 1.0, pose), 3.0, 3.0)])
+        export_mcap(kb.store, tmp_path / "out.mcap")
+    info = bag_info(tmp_path / "out.mcap")
+    assert sorted((e.parent, e.child, e.count) for e in info.frames) == \
+        [('"map"', "base", 1), ("base", "1.0", 1), ("map", "base", 1)]

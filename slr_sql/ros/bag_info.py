@@ -20,7 +20,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-
+from ..errors import SLRError
+from ..terms import Atom, format_term
 from .bag_import import BagError, bag_id, open_bag
 from .mapping import TF_TOPICS, TF_TYPE, TIME_TYPES, normalize_topic, topic_event_name
 
@@ -84,9 +85,21 @@ class BagInfo:
         return json.dumps(data, indent=2)
 
 
+def _frame_text(term: Any) -> str:
+    """A frame of an exported ``tf`` event as text: an atom as it is, any other term as
+    written (a string ``"map"``, a number ``1.0``).
+
+    >>> from slr_sql.terms import Atom, String
+    >>> _frame_text(Atom("map")), _frame_text(String("map")), _frame_text(1.0)
+    ('map', '"map"', '1.0')
+    """
+    return str(term) if type(term) is Atom else format_term(term)
+
+
 def _export_info(path: Path) -> BagInfo:
     """The summary of an MCAP file of ``slr export`` (its channels name their event types)."""
     from slr_sql.viz.channels import METADATA_ARITY, METADATA_EVENT
+    from slr_sql.viz.channels import event_from_message
     from slr_sql.viz.mcap_export import export_messages, export_summary
 
     export_summary(path)   # (ExportCutShort when the file ends early)
@@ -103,11 +116,13 @@ def _export_info(path: Path) -> BagInfo:
         info.last = t if info.last is None else max(info.last, t)
         if meta.get(METADATA_EVENT) in ("tf", "tf_static") and meta.get(METADATA_ARITY) == "3":
             try:
-                data = json.loads(message.data)
-                parent, child = str(data["arg1"]), str(data["arg2"])
-            except (ValueError, KeyError, TypeError, IndexError):   # not an slr event
+                _, (parent_term, child_term, _), _, _ = event_from_message("tf", 3, message.data)
+            except (ValueError, KeyError, TypeError, IndexError, SLRError):   # not an slr event
                 info.undecodable += 1
                 continue
+            # (as tf_lookup and the live view name frames: an atom as it is, a string or a
+            # number as its term text, so "map" and map stay two frames)
+            parent, child = _frame_text(parent_term), _frame_text(child_term)
             edge = frames.setdefault((channel.topic, parent, child),
                                      FrameEdge(parent, child, channel.topic))
             edge.count += 1
