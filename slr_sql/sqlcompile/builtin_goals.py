@@ -47,6 +47,9 @@ CONSTANT_COMPARISONS = {"<": operator.lt, ">": operator.gt, "=<": operator.le,
 class BuiltinGoals:
     """Arithmetic expressions, comparisons, ``=``, ``is`` and deterministic builtins."""
 
+    dialect: Any
+    finite_checks: dict[str, str]
+
     # ------------------------------------------------------------------ arithmetic
     def arith_sql(self, t: Any):
         """(sql, kind) of an arithmetic expression, or ('const', value) when constant."""

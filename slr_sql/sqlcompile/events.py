@@ -36,6 +36,8 @@ def _stamp_may_be_interval(s, e) -> bool:
 class EventGoals:
     """Handlers of event goals (``^``), prev/2 and next/2,3."""
 
+    finite_checks: dict[str, str]
+
     def origin_sql(self, args, ctx, nxt, st, emit):
         """origin(R, Goal): Goal's rows restricted to robot R (rows of unnamed events have
         none); with R unbound, R is the row's robot and the robots come in name order (the
