@@ -795,11 +795,7 @@ class RuleRuntime:
         if not self._ready((n, "term", None), end, now):
             return False
         alt = self.alts[n]
-        if params:
-            p2 = dict(params[n])
-        else:
-            p2 = self.eng.params(now)
-            p2.update(alt.params)
+        p2 = self._params_of(n, now, params)
         first, last = _rowids(rowids)[:2]
         p2.update(first=first, last=last)
         pend = []
@@ -815,6 +811,15 @@ class RuleRuntime:
             self._insert_pending(pend)
         self._done.append(rid)
         return True
+
+    def _params_of(self, n: int, now: float, params: list | None) -> dict:
+        """Alternative ``n``'s statement parameters: a copy of this round's (``params``, per
+        alternative), or made now."""
+        if params:
+            return dict(params[n])
+        made = self.eng.params(now)
+        made.update(self.alts[n].params)
+        return made
 
     def _park(self, rid: int, wait: MustWait) -> None:
         """Record on pending row ``rid`` what it waits for (a history not complete yet)."""
@@ -833,11 +838,7 @@ class RuleRuntime:
     def _decide_match(self, n: int, rowids: list, end: float, now: float,
                       params: list | None = None) -> bool:
         alt = self.alts[n]
-        if params:
-            params = dict(params[n])
-        else:
-            params = self.eng.params(now)
-            params.update(alt.params)
+        params = self._params_of(n, now, params)
         for p, r in enumerate(rowids):
             params[f"r{p}"] = r
         rows = self._ask(alt.match_select(), params)
