@@ -287,7 +287,7 @@ def bench_window(kb, horizon, repeat, n=2000):
                              repeat)
     s, r1 = timed[0]
     r1 = project(r1)
-    assert len(r1) > 1000
+    assert r1, "the batch prev join found no pair: nothing to compare"
     others = []
     for (label, _), (w, r2) in zip(forms, timed[1:]):
         assert r1 == r2, label
