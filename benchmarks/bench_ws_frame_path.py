@@ -48,16 +48,19 @@ async def consume(k):
         texts.frame(seq + 1, answers)
         seq += len(answers)
         counts[k] += len(answers)
+started = threading.Event()
 async def main():
     start = time.thread_time()
-    await asyncio.gather(*[consume(k) for k in range(n)])
+    tasks = [asyncio.ensure_future(consume(k)) for k in range(n)]
+    asyncio.get_running_loop().call_soon(started.set)   # (after each consumer's first step)
+    await asyncio.gather(*tasks)
     cpu[0] = time.thread_time() - start
 loop_thread = threading.Thread(target=lambda: asyncio.run(main()))
 loop_thread.start()
-time.sleep(0.5)
+started.wait(60)
 for b in range(batches):
     kb.add_many([f"e({j})^{j + 1}" for j in range(b * 10, b * 10 + 10)])
-    time.sleep(0.002)
+    time.sleep(0.002)   # (the stream's rate: 10 events every 2 ms, as a live producer)
 loop_thread.join(120)
 print(json.dumps({"us_per_event": cpu[0] / total * 1e6, "complete": min(counts) == total}))
 for sub in subs:

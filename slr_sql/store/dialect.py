@@ -80,9 +80,6 @@ class SQLiteDialect(SQLiteQueryPrinter):
     identifier_bytes: int | None = None   # names of any length
     without_rowid = " WITHOUT ROWID"
     pages_streams = False    # a statement's rows are read as needed (sqlite3 steps it)
-    # a REAL column keeps -0.0, but SQL's = and grouping take it for 0.0 (and no built-in
-    # shows the sign without the optional math functions): callers tell them apart in Python
-    zero_signs_in_sql = False
     to_column: Callable[[Any], Any] | None = None     # identity: no conversion at all
     from_column: Callable[[Any], Any] | None = None
 
@@ -147,7 +144,6 @@ class PostgresDialect(PostgresQueryPrinter):
     identifier_bytes: int | None = 63     # longer names are cut, silently (NAMEDATALEN)
     without_rowid = ""
     pages_streams = True     # psycopg reads a whole result: lookups read growing pages
-    zero_signs_in_sql = True  # the texts '-0.0' and '0.0' differ
 
     def __init__(self) -> None:
         self._printed: dict[str, str] = {}

@@ -1204,17 +1204,27 @@ class PgDatabase:
                 self.dialect.statement(query) if bound else query, bound or None, timeout)
         with self.lock:
             self.check_open()
-            psycopg = _psycopg()
-            own = self.tx_depth == 0
-            if not own:
-                self.conn.send_begin()
-            raw = self.conn.raw
-            deadline = None if timeout is None else time.monotonic() + timeout
+            own, raw, deadline = self._raw_statement(timeout)
             try:
                 return self._read_only(raw, own, query, params, timeout)
-            except psycopg.Error as exc:
-                error = _error(exc, self.path, self.busy_timeout, _connected(raw))
-                raise error if deadline is None else _own_deadline(error, deadline) from None
+            except _psycopg().Error as exc:
+                raise self._raw_statement_error(exc, raw, deadline) from None
+
+    def _raw_statement(self, timeout: float | None) -> tuple[bool, Any, float | None]:
+        """For one statement of :meth:`sql` on the store's connection (the lock held):
+        whether it is a transaction of its own (else the caller's transaction is begun
+        first), the raw connection, and the deadline of ``timeout``."""
+        own = self.tx_depth == 0
+        if not own:
+            self.conn.send_begin()
+        return own, self.conn.raw, None if timeout is None else time.monotonic() + timeout
+
+    def _raw_statement_error(self, exc: Exception, raw: Any, deadline: float | None
+                             ) -> Exception:
+        """The slr_sql error for a statement of :meth:`sql` that failed (past its own
+        deadline: its timeout's)."""
+        error = _error(exc, self.path, self.busy_timeout, _connected(raw))
+        return error if deadline is None else _own_deadline(error, deadline)
 
     def sql_write(self, query: str, params: Iterable[Any] = (), timeout: float | None = None
                   ) -> tuple[list[str], list[tuple], set[str]]:
@@ -1229,11 +1239,7 @@ class PgDatabase:
         with self.lock:
             self.check_open()
             psycopg = _psycopg()
-            own = self.tx_depth == 0
-            if not own:
-                self.conn.send_begin()
-            raw = self.conn.raw
-            deadline = None if timeout is None else time.monotonic() + timeout
+            own, raw, deadline = self._raw_statement(timeout)
             try:
                 if own:
                     raw.execute("BEGIN")
@@ -1271,8 +1277,7 @@ class PgDatabase:
                         raw.execute("ROLLBACK")
                     except psycopg.Error:
                         pass
-                error = _error(exc, self.path, self.busy_timeout, _connected(raw))
-                raise error if deadline is None else _own_deadline(error, deadline) from None
+                raise self._raw_statement_error(exc, raw, deadline) from None
 
     def tables_to_write(self, query: str, params: Iterable[Any] = ()) -> set[str] | None:
         """None: what a statement writes is known only once it ran (its triggers and

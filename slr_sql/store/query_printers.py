@@ -90,7 +90,9 @@ class SQLiteQueryPrinter:
 
     # -0.0 and 0.0 are two terms, but one value to SQLite's = and grouping, and no built-in
     # shows a zero's sign (without the optional math functions): slr_sign_bit does, called
-    # for zeros only
+    # for zeros only; a lookup run without it tells them apart in Python
+    zero_signs_in_sql = False
+
     def zero_sign(self, value: str, negative: bool) -> str | None:
         """The condition that ``value``, equal to a float zero, has the sign of ``-0.0``
         (``negative``) or of ``0.0``; None where ``=`` on stored values tells them apart.
@@ -237,8 +239,9 @@ class PostgresQueryPrinter:
     def time_equal(self, value: str, time: str) -> str:
         return f"(slr_number({value}) = {time} AND slr_typeof({value}) IN ('integer', 'real'))"
 
+    zero_signs_in_sql = True   # a stored value's text carries the sign ('-0.0' is not '0.0')
+
     def zero_sign(self, value: str, negative: bool) -> str | None:
-        # a stored value's text carries the sign ('-0.0' is not '0.0')
         return None
 
     def same_zero_sign(self, a: str, b: str) -> str | None:
