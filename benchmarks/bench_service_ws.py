@@ -191,8 +191,10 @@ def run_service(args, tmp: Path) -> dict:
     command = [sys.executable, "-m", "slr_sql", "serve", str(db), "--port", "0"]
     if args.cache_kib:     # the same server with another SQLite page cache bound
         command += ["--cache-mib", str(args.cache_kib / 1024)]
+    # cwd: `python -m` puts the working directory first on sys.path, ahead of PYTHONPATH; run
+    # from a checkout, the server would import that checkout's slr_sql, not --server-code's
     proc = subprocess.Popen(command, stdout=subprocess.PIPE,
-                            stderr=open(tmp / "server.log", "wb"), env=env)
+                            stderr=open(tmp / "server.log", "wb"), env=env, cwd=tmp)
     url = proc.stdout.readline().decode().strip().rsplit(" on ", 1)[1]
     try:
         client = slr_sql.connect(url)

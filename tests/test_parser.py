@@ -9,6 +9,7 @@ and review the diff.
 """
 from __future__ import annotations
 
+import gc
 import json
 import math
 import os
@@ -419,6 +420,24 @@ def test_fast_event_reader_is_used_for_common_events():
     assert parse_event_fast("tick^[1, 2.5]") == ("tick", (), 1.0, 2.5)
     for outside in ["p('A')^1", 'p("s")^1', "p(a-b)^1", "p(X)^1", "p(1)^-1", "p(1)^1.", "p(0'a)^1"]:
         assert parse_event_fast(outside) is None, outside
+
+
+def test_fast_event_reader_leaves_no_cyclic_garbage():
+    """Every kb.add / add_many of event texts reads them here: garbage that only the cyclic
+    collector frees would make a server's young collections big and frequent (pauses)."""
+    texts = ["e(12)^13", "seg(cup1, [0.4, [0.1]], f(a, b))^[1, 2.5]", "tick^1", "p('A')^1",
+             "p(1)^-1", "p(a, b"]
+    gc.collect()
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        for _ in range(20):
+            for text in texts:
+                parse_event_fast(text)
+        assert gc.collect() == 0
+    finally:
+        if enabled:
+            gc.enable()
 
 
 @pytest.mark.parametrize("text,printed", [
