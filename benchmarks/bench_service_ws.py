@@ -24,6 +24,7 @@ Run by hand::
     python benchmarks/bench_service_ws.py --minutes 3
     python benchmarks/bench_service_ws.py --minutes 1 --burn 1    # beside a competing CPU load
     python benchmarks/bench_service_ws.py --minutes 1 --server-code /tmp/old   # earlier server
+    python benchmarks/bench_service_ws.py --minutes 1 --gc-trace   # the server's collections
 
 ``--burn N`` starts N processes spinning on a core (``python -c "while 1: pass"``) for the whole
 run and stops them at its end; the load averages at start and end are printed with the
@@ -185,10 +186,47 @@ def ws_subscribers(url: str, n: int, batch: int, ready, conn) -> None:
     conn.send((counts, bad, times))
 
 
+# ``--gc-trace``: `slr serve` started through this prelude, which records each collection of
+# the cyclic garbage collector (gc.callbacks: generation, wall time, objects collected) and
+# writes them out when the server exits (it exits normally on SIGTERM)
+GC_TRACE_PRELUDE = r"""
+import atexit, gc, json, runpy, sys, time
+_out, _rec, _start = sys.argv.pop(1), [], [0.0]
+def _collection(phase, info):
+    if phase == "start":
+        _start[0] = time.perf_counter()
+    else:
+        _rec.append((time.monotonic(), info["generation"], time.perf_counter() - _start[0],
+                     info["collected"]))
+gc.callbacks.append(_collection)
+def _write():
+    with open(_out, "w") as f:
+        json.dump(_rec, f)
+atexit.register(_write)
+sys.argv[0] = "slr"
+runpy.run_module("slr_sql", run_name="__main__", alter_sys=True)
+"""
+
+
+def gc_summary(records: list, start: float, end: float) -> str:
+    """The server's collections between ``start`` and ``end`` (monotonic), per generation:
+    how many, objects collected, total and longest pause (wall time)."""
+    parts = []
+    for gen in (0, 1, 2):
+        mine = [r for r in records if start <= r[0] <= end and r[1] == gen]
+        pauses = [r[2] for r in mine]
+        parts.append(f"gen{gen} {len(mine)} ({sum(r[3] for r in mine)} objects collected, "
+                     f"{1000 * sum(pauses):.1f} ms, longest {1000 * max(pauses, default=0):.2f} ms)")
+    return ", ".join(parts)
+
+
 def run_service(args, tmp: Path) -> dict:
     db = tmp / "ws.db"
     env = dict(os.environ, PYTHONPATH=str(args.server_code or ROOT))
     command = [sys.executable, "-m", "slr_sql", "serve", str(db), "--port", "0"]
+    gc_log = tmp / "gc.json"
+    if args.gc_trace:
+        command[1:3] = ["-c", GC_TRACE_PRELUDE, str(gc_log)]
     if args.cache_kib:     # the same server with another SQLite page cache bound
         command += ["--cache-mib", str(args.cache_kib / 1024)]
     # cwd: `python -m` puts the working directory first on sys.path, ahead of PYTHONPATH; run
@@ -233,7 +271,8 @@ def run_service(args, tmp: Path) -> dict:
         requested: list[float] = []
         sent, achieved = produce(client.add_many, args.rate, args.batch_events, seconds, answered,
                                  latency_end, requested)
-        server_cpu = (cpu_seconds(proc.pid) - cpu_start) / (time.monotonic() - cpu_t0)
+        produced_at = time.monotonic()
+        server_cpu = (cpu_seconds(proc.pid) - cpu_start) / (produced_at - cpu_t0)
         # every event must arrive: wait (bounded) for the stragglers
         time.sleep(2.0)
         stop.set()
@@ -252,20 +291,24 @@ def run_service(args, tmp: Path) -> dict:
                     from_request.append(t - requested[i])
         rss = [r for _, r in samples]
         client.close()
-        return {"sent": sent, "achieved": achieved, "complete": sum(c == sent for c in counts),
-                "min_count": min(counts), "out_of_order": sum(bad),
-                "p50_ms": 1000 * pct(lat, 50), "p99_ms": 1000 * pct(lat, 99),
-                "max_ms": 1000 * max(lat) if lat else float("nan"), "latencies": len(lat),
-                "request_p50_ms": 1000 * pct(from_request, 50),
-                "request_p99_ms": 1000 * pct(from_request, 99),
-                "rss_first": rss[0], "rss_last": rss[-1], "rss_max": max(rss),
-                "rss_slope_mb_per_min": slope_per_min(samples[len(samples) // 10:]),
-                "rss_samples": len(samples), "load_start": load_start,
-                "file_first": sizes[0], "file_last": sizes[-1], "server_cpu": server_cpu,
-                "load_end": os.getloadavg()}
+        result = {"sent": sent, "achieved": achieved, "complete": sum(c == sent for c in counts),
+                  "min_count": min(counts), "out_of_order": sum(bad),
+                  "p50_ms": 1000 * pct(lat, 50), "p99_ms": 1000 * pct(lat, 99),
+                  "max_ms": 1000 * max(lat) if lat else float("nan"), "latencies": len(lat),
+                  "request_p50_ms": 1000 * pct(from_request, 50),
+                  "request_p99_ms": 1000 * pct(from_request, 99),
+                  "rss_first": rss[0], "rss_last": rss[-1], "rss_max": max(rss),
+                  "rss_slope_mb_per_min": slope_per_min(samples[len(samples) // 10:]),
+                  "rss_samples": len(samples), "load_start": load_start,
+                  "file_first": sizes[0], "file_last": sizes[-1], "server_cpu": server_cpu,
+                  "load_end": os.getloadavg()}
     finally:
         proc.terminate()
         proc.wait(30)
+    if args.gc_trace:
+        records = json.loads(gc_log.read_text()) if gc_log.exists() else []
+        result["gc"] = gc_summary(records, cpu_t0, produced_at)
+    return result
 
 
 # -- the same fan-out in process -------------------------------------------------------------
@@ -320,6 +363,8 @@ def main() -> None:
                     help="run the server with this SQLite page cache (KiB; default: the "
                          "store's own, 64 MiB)")
     ap.add_argument("--trace", action="store_true", help="print each RSS sample")
+    ap.add_argument("--gc-trace", action="store_true",
+                    help="record the server's garbage collections (gc.callbacks) while producing")
     ap.add_argument("--burn", type=int, default=0,
                     help="processes spinning on a core beside the run (a competing CPU load)")
     ap.add_argument("--server-code", help="run `slr serve` from this checkout (before/after)")
@@ -366,6 +411,8 @@ def run(args) -> None:
               f"MB/min ({remote['rss_samples']} samples, first 10% left out of the slope); "
               f"store file + WAL {remote['file_first']:.1f} -> {remote['file_last']:.1f} MB"
               + (f" (page cache bound {args.cache_kib} KiB)" if args.cache_kib else ""))
+        if "gc" in remote:
+            print(f"server garbage collections while producing: {remote['gc']}")
         print("load average (1, 5, 15 min): start %.2f %.2f %.2f, end %.2f %.2f %.2f"
               % (*remote["load_start"], *remote["load_end"]))
 
