@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import gc
 import json
 import math
 import multiprocessing as mp
@@ -173,6 +174,13 @@ def ws_subscribers(url: str, n: int, batch: int, ready, conn) -> None:
         go = [0]
         tasks = [asyncio.create_task(one(k, started, go)) for k in range(n)]
         await started.wait()
+        # the collector as `slr serve` sets it up (its start-up heap frozen, a young collection
+        # after 20,000 net allocations): with Python's defaults this process ran ~10 young
+        # and a full collection every ~10 s, the full ones up to 60 ms on a busy machine,
+        # every subscriber's receive paused meanwhile (--gc-trace's figures are the server's)
+        gc.collect()
+        gc.freeze()
+        gc.set_threshold(20_000, *gc.get_threshold()[1:])
         ready.set()
         latency_window[0] = (await asyncio.get_running_loop().run_in_executor(
             None, conn.recv))[0]
