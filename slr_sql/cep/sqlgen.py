@@ -889,19 +889,31 @@ class AltSQL:
         their latest end, ``t_end`` their earliest (the time the first of them can be
         decided). A span holds no row of another transaction: the writers of a rule's
         types take turns (SQLite's one writer; PostgreSQL's lock of their write group),
-        so the new rows are the only ones in between."""
+        and the span is kept only when the type's new rows (all of them, whatever the
+        position's own conditions) are one run of seqs -- checked in this statement, so on
+        what it sees. A write that takes no turn (another client's insert, or
+        ``kb.sql(..., write=True)``, on PostgreSQL) may draw a seq while the add runs and
+        commit after this statement: the seq is then missing here, and the rows are kept
+        one by one instead, as :meth:`term_pending` keeps them, never to decide a row no
+        add stored."""
         key = ("term_span", pos)
         sql = self._cache.get(key)
         if sql is None:
             a = self.aliases()
             t = a[f"e{pos}"]
-            conds = [f"{t}.seq > :w{pos}"] + self.cond_sql(a, within={pos})
+            conds = self._where([f"{t}.seq > :w{pos}"] + self.cond_sql(a, within={pos}))
+            table = f"{self.tables[pos]} AS {t}"
+            run = (f"(SELECT count(*) = max(n.seq) - min(n.seq) + 1 FROM {self.tables[pos]} "
+                   f"AS n WHERE n.seq > :w{pos})")
             sql = self._cache[key] = (
                 "INSERT INTO slr_cep_pending (rule, alt, kind, pos, rowids, t_start, t_end, "
                 f"created_at) SELECT :rule, {self.index}, 'span', {pos}, "
                 f"{self.dialect.json_array(f'min({t}.seq), max({t}.seq), count(*)')}, "
-                f"max({t}.t_end), min({t}.t_end), :now FROM {self.tables[pos]} AS {t} "
-                f"WHERE {self._where(conds)} HAVING count(*) > 0")
+                f"max({t}.t_end), min({t}.t_end), :now FROM {table} WHERE {conds} "
+                f"HAVING count(*) > 0 AND {run} UNION ALL "
+                f"SELECT :rule, {self.index}, 'term', {pos}, "
+                f"{self.dialect.json_array(f'{t}.seq')}, {t}.t_start, {t}.t_end, :now "
+                f"FROM {table} WHERE {conds} AND NOT {run}")
         return sql
 
     def _span_join(self, pos: int) -> str:
