@@ -1879,8 +1879,6 @@ def subscribe(db: str, pattern: str, where: str | None, since: str, until: float
             while not stop.is_set():
                 try:
                     answer = sub.get(timeout=0.2)
-                except slr_sql.SLRStatementTimeout:
-                    raise   # (the server's limit, met again by every later wait)
                 except slr_sql.SLRTimeout:
                     continue
                 if answer is None:       # until reached
