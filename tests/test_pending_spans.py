@@ -16,6 +16,7 @@ import json
 import sqlite3
 import subprocess
 import sys
+from contextlib import suppress
 
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
@@ -384,6 +385,76 @@ def test_a_row_another_client_commits_inside_a_live_batchs_seqs_is_no_terminator
                       "VALUES (?, 1, 5.5, 5.5, 1.0)", (gap[0],))
         finally:
             other.close()
+        clock.set(100.0)
+        assert _pending(kb) == []
+        got = sorted(((tuple(args), s, e) for args, s, e, _ in kb.store.scan("r", 1)),
+                     key=repr)
+    expected = reference(SEQ2_RULE, FIRST + LIVE)
+    assert _typed(got) == _typed([(tuple(h), s, e) for h, s, e in expected])
+
+
+def test_a_row_another_session_inserts_while_a_live_batch_goes_in_is_no_terminator(
+        postgres_url):
+    """The race itself, on PostgreSQL: another session inserts a row of the terminator's
+    type while the add's insert is half way (the add is held there by a trigger waiting for
+    a lock the test holds), so its seq falls between the add's, and it commits only after
+    the add. The add's terminators are kept one by one, and the other session's row is
+    never decided: the complex events are the reference evaluator's over the events
+    added."""
+    import threading
+    import time
+
+    import psycopg
+
+    clock = ManualClock(0.0)
+    with slr_sql.open(postgres_url, clock=clock) as kb:
+        kb.load(":- max_delay(a/1, 0).\n:- max_delay(b/1, 0).\n:- consumption(recent).\n"
+                + rule_text(SEQ2_RULE))
+        kb.add_many([_event_text(ev) for ev in FIRST])
+        clock.set(1.0)
+        with psycopg.connect(postgres_url, autocommit=True) as other, \
+                psycopg.connect(postgres_url, autocommit=True) as watcher:
+            other.execute("SET search_path = slr")
+            other.execute("CREATE FUNCTION wait_for_the_test() RETURNS trigger "
+                          "LANGUAGE plpgsql AS $$ BEGIN PERFORM pg_advisory_xact_lock_shared("
+                          "7707); RETURN NEW; END $$")
+            other.execute("CREATE TRIGGER wait_for_the_test BEFORE INSERT ON b FOR EACH ROW "
+                          "WHEN (NEW.t_end = 6.0) EXECUTE FUNCTION wait_for_the_test()")
+            other.execute("SELECT pg_advisory_lock(7707)")
+            failed: list[BaseException] = []
+
+            def add() -> None:
+                try:
+                    kb.add_many([_event_text(ev) for ev in LIVE])
+                except BaseException as exc:   # (asserted below)
+                    failed.append(exc)
+            adding = threading.Thread(target=add)
+            adding.start()
+            try:
+                deadline = time.monotonic() + 30
+                while not watcher.execute(
+                        "SELECT count(*) FROM pg_locks WHERE locktype = 'advisory' "
+                        "AND objid = 7707 AND NOT granted").fetchone()[0]:
+                    assert time.monotonic() < deadline, "the add never reached the trigger"
+                    assert adding.is_alive(), failed
+                    time.sleep(0.005)
+                other.execute("BEGIN")
+                other.execute("INSERT INTO b (arg1, t_start, t_end, arrival) "
+                              "VALUES (1, 5.5, 5.5, 1.0)")   # its seq: drawn now
+                other.execute("SELECT pg_advisory_unlock(7707)")
+                adding.join(30)
+                assert not adding.is_alive() and not failed, failed
+                other.execute("COMMIT")   # after the add's commit
+            finally:
+                with suppress(psycopg.Error):
+                    other.execute("ROLLBACK")
+                other.execute("SELECT pg_advisory_unlock_all()")
+                adding.join(30)
+            seqs = [seq for (seq,) in other.execute("SELECT seq FROM b WHERE t_end <> 5.5 "
+                                                    "ORDER BY seq").fetchall()]
+            (foreign,) = other.execute("SELECT seq FROM b WHERE t_end = 5.5").fetchone()
+            assert seqs[1] < foreign < seqs[-1], (seqs, foreign)
+            assert _pending(kb) == [("term", [seq]) for seq in seqs[1:]]
         clock.set(100.0)
         assert _pending(kb) == []
         got = sorted(((tuple(args), s, e) for args, s, e, _ in kb.store.scan("r", 1)),
