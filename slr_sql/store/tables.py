@@ -131,14 +131,18 @@ _REFUSED_FOR_GOOD = (sqlite3.SQLITE_READONLY, sqlite3.SQLITE_PERM, sqlite3.SQLIT
 
 # a search's bound columns in a step of EXPLAIN QUERY PLAN: "... INDEX x (arg1=? AND t_end<?)"
 _SEARCH_BOUNDS = re.compile(r"^SEARCH .* \(([^()]*)\)$")
-_RANGE = re.compile(r"^(\w+)(?:<|>|<=|>=)\?$")
+_RANGE = re.compile(r"^(\w+)(<|>|<=|>=)\?$")
+_TIMES = frozenset({"t_start", "t_end"})
 
 
 def plan_cost(steps: list[str]) -> tuple[int, int, int]:
     """How costly a plan's steps read, to compare two plans of one statement: its full
     scans (an automatic index, which a run builds by reading the whole table, is one), then
     its sorts (temporary B-trees), then, fewer being worse, what its searches bind: four
-    for each column bound by ``=``, three for one bounded on both sides, two on one side.
+    for each column bound by ``=``, three for one bounded on both sides, two on one side --
+    but one for a time bounded only from above: times grow with the store, so ``t_end < ?``
+    reads the whole history before it (a ``cnot``'s ``t_start > S AND t_end < E``, read
+    again at each check), ``t_start > ?`` only what came after.
 
     >>> plan_cost(["SEARCH e1 USING INDEX i (arg1=? AND t_start>?)", "SCAN e0"])
     (1, 0, -6)
@@ -146,6 +150,9 @@ def plan_cost(steps: list[str]) -> tuple[int, int, int]:
     (0, 0, -7)
     >>> plan_cost(["SEARCH e0 USING INDEX e (t_end=? AND t_start=?)"])
     (0, 0, -8)
+    >>> plan_cost(["SEARCH n0 USING INDEX e (t_end<?)"]) > plan_cost(
+    ...     ["SEARCH n0 USING INDEX s (t_start>?)"])
+    True
     """
     scans = sorts = bound = 0
     for step in steps:
@@ -156,14 +163,15 @@ def plan_cost(steps: list[str]) -> tuple[int, int, int]:
             sorts += 1
         match = _SEARCH_BOUNDS.match(step)
         if match:
-            ranges: dict[str, int] = {}
+            ranges: dict[str, set[str]] = {}
             for term in match.group(1).split(" AND "):
                 ranged = _RANGE.match(term)
                 if ranged is None:
                     bound += 4   # (=, IN, rowid=)
                 else:
-                    ranges[ranged.group(1)] = ranges.get(ranged.group(1), 0) + 1
-            bound += sum(3 if sides > 1 else 2 for sides in ranges.values())
+                    ranges.setdefault(ranged.group(1), set()).add(ranged.group(2)[0])
+            bound += sum(3 if len(sides) > 1 else 1 if sides == {"<"} and column in _TIMES
+                         else 2 for column, sides in ranges.items())
     return scans, sorts, -bound
 
 
