@@ -341,3 +341,21 @@ def test_a_negation_over_a_long_history_searches_it_from_the_interval_start(tmp_
     assert found == sorted((r["S"], r["E"]) for r in kb.query("c^[S, E]")) \
         == [(42.0, 43.0), (45.0, 46.0)]
     kb.close()
+
+
+def test_a_compiled_query_whose_build_a_rollback_took_back_builds_it_again(tmp_path):
+    """A compiled query's first run inside a transaction that rolls back (a caller's, or
+    the add a ``where`` goal runs in) built the start-ordered indexes its plan uses, and the
+    rollback took them back: its next run asks again, not reading without them for good."""
+    kb = slr_sql.open(str(tmp_path / "q.db"), clock=ManualClock(100.0))
+    kb.add_many(["p(1)^[1, 3]", "p(2)^[2, 5]", "q(1)^[1, 4]", "q(2)^[2, 2.5]", "q(3)^[2, 9]"])
+    goal = "p(X)^[S, E1], q(Y)^[S, E2]"
+    with pytest.raises(RuntimeError):
+        with kb.store.transaction():
+            answers = kb.query(goal)
+            assert _start_indexes(kb, "q") == {"slr_ix__q__start", "slr_ix__q__a1_start"}
+            raise RuntimeError("undo")
+    assert _start_indexes(kb, "q") == set()
+    assert kb.query(goal) == answers and len(answers) == 3
+    assert _start_indexes(kb, "q") == {"slr_ix__q__start", "slr_ix__q__a1_start"}
+    kb.close()
