@@ -379,3 +379,31 @@ def test_a_table_of_the_users_own_that_the_copy_cannot_make_leaves_the_planner_a
     assert kb.query(goal) == answers and len(answers) == 3
     assert kb.sql("SELECT body FROM notes WHERE notes MATCH 'late'")[1] == [("q is late",)]
     kb.close()
+
+
+def test_a_build_taken_back_by_the_outer_rollback_after_an_inner_one_is_made_again(tmp_path):
+    """A build inside a transaction, then a nested part of it rolled back (the build
+    stays), statements built again finding the index there, then the whole transaction
+    rolled back (the build goes): the statements are built again after that rollback too,
+    and their index with them."""
+    kb = _opened(str(tmp_path / "r.db"), RULE)
+    kb.load(":- event y/1.\n:- max_delay(y/1, 0).\n:- max_delay(w/1, 0).\n"
+            "v(X) <- y(X) seq w(X).")
+    kb.add_many(["w(0)^101"])
+    wanted = {"slr_ix__w__start", "slr_ix__w__a1_start"}
+    with pytest.raises(RuntimeError):
+        with kb.store.transaction():
+            kb.add_many(["y(1)^102", "w(1)^103"])   # a new y: its w's found by start
+            assert _start_indexes(kb, "w") == wanted
+            with pytest.raises(ValueError):
+                with kb.store.transaction():        # a nested part rolled back
+                    raise ValueError("inner")
+            kb.add_many(["y(2)^104", "w(2)^105"])   # statements built again: index there
+            assert _start_indexes(kb, "w") == wanted
+            raise RuntimeError("undo")
+    assert _start_indexes(kb, "w") == set()
+    kb.add_many(["y(3)^106", "w(3)^107"])
+    assert _start_indexes(kb, "w") == wanted
+    kb.clock.set(200.0)
+    assert [r["X"] for r in kb.query("v(X)^[S, E]")] == [3]
+    kb.close()

@@ -229,8 +229,11 @@ class EventTables:
 
     def _rolled_back(self) -> None:
         if self._built_inside:
-            self._built_inside = False
             self.builds_undone += 1
+            # (a nested part rolled back may leave a build of the enclosing transaction
+            # standing, which the outer rollback takes back: counted again then)
+            if not self.db.tx_depth:
+                self._built_inside = False
         # (the old objects too: a reader holding one must not trust a build taken back)
         for event_type in self.types.values():
             event_type.start_order = None
