@@ -49,6 +49,11 @@ _INSERT_CHUNK = 20_000  # events checked and inserted together: bounds memory on
 # executions of a one-row statement (binding and stepping a statement is per execution); the
 # sizes are powers of two so that a few statement texts, kept prepared, serve every batch
 _ROWS_PER_INSERT = 512
+# from this many rows of one type on, one executemany of the one-row statement: on a long run
+# SQLite steps it ~5-7% faster than the multi-row statements of the same rows (100,000
+# events: 0.53 against 0.57 s CPU), and the rows need no flat list; shorter runs (an add of
+# a few hundred events, the event rules' batches) keep the multi-row statements
+_EXECUTEMANY_ROWS = 4096
 _FOUR = {4}
 _FLOAT = frozenset({float})
 _SEQUENCES = frozenset({tuple, list})
@@ -279,8 +284,7 @@ class EventWriter:
                 rows = zip(*columns, starts, ends_column, repeat(arrival))
             else:
                 rows = zip(*columns, starts, ends_column, repeat(arrival), repeat(robot))
-            self._insert_rows(event_type, list(chain.from_iterable(rows)), len(starts),
-                              robot is not None)
+            self._insert_rows(event_type, rows, len(starts), robot is not None)
         elif robot is None:
             self.db.conn.executemany(event_type.insert_unnamed_sql,
                                      zip(*columns, starts, ends_column, repeat(arrival)))
@@ -289,12 +293,18 @@ class EventWriter:
                                      zip(*columns, starts, ends_column, repeat(arrival),
                                          repeat(robot)))
 
-    def _insert_rows(self, event_type: EventType, values: list, count: int,
+    def _insert_rows(self, event_type: EventType, rows: Iterable[tuple], count: int,
                      with_robot: bool) -> None:
-        """Insert ``count`` rows given as one flat list of their ``values`` (SQLite), in
-        their order, with multi-row INSERTs of power-of-two sizes."""
+        """Insert the ``count`` ``rows`` (SQLite), in their order: with multi-row INSERTs
+        of power-of-two sizes, or, from :data:`_EXECUTEMANY_ROWS` rows on, one
+        ``executemany`` of the one-row statement."""
         if not count:
             return
+        if count >= _EXECUTEMANY_ROWS:
+            self.db.conn.executemany(event_type.insert_sql if with_robot
+                                     else event_type.insert_unnamed_sql, rows)
+            return
+        values = list(chain.from_iterable(rows))
         width = len(values) // count
         execute = self.db.conn.execute
         most = _ROWS_PER_INSERT
@@ -373,8 +383,7 @@ class EventWriter:
                     executemany(insert_sql(event_type), typed_rows)
         else:
             for event_type, typed_rows in by_type.items():
-                self._insert_rows(event_type, list(chain.from_iterable(typed_rows)),
-                                  len(typed_rows), with_robot)
+                self._insert_rows(event_type, typed_rows, len(typed_rows), with_robot)
         if ends is not None:
             for event_type, typed_rows in by_type.items():
                 _widen_by_rows(ends, event_type, typed_rows, with_robot)
