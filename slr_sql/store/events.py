@@ -312,10 +312,10 @@ class EventWriter:
             most //= 2
         done = 0
         while done < count:
-            rows = min(most, 1 << ((count - done).bit_length() - 1))
-            execute(event_type.insert_rows_sql(rows, with_robot),
-                    values[done * width:(done + rows) * width])
-            done += rows
+            size = min(most, 1 << ((count - done).bit_length() - 1))
+            execute(event_type.insert_rows_sql(size, with_robot),
+                    values[done * width:(done + size) * width])
+            done += size
 
     def _insert_each(self, chunk: list, base: int, arrival: float, atomic: bool,
                      errors: list[EventRejected], ends: dict | None) -> None:
