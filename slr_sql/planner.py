@@ -184,11 +184,14 @@ class SqlPlan:
     answers."""
 
     def __init__(self, sql, params, arg_params, has_at, recipes, missing, sites, modes, goal,
-                 time_sites=(), guards=(), has_robot=False, start_ordered=()):
+                 time_sites=(), guards=(), has_robot=False, start_ordered=(), read_types=()):
         self.sql = sql
-        # event types read in start order: their indexes made sure of before each run (a
-        # complex type's are built on first need; once built, an attribute read per run)
+        # event types read in start order: their indexes made sure of before each run
+        # (built on first need; once built, an attribute read per run)
         self.start_ordered = tuple(sorted(start_ordered))
+        # the event types it reads: before the first run, the start-ordered indexes its
+        # plan would use are built (None once done)
+        self.read_types: tuple | None = tuple(sorted(read_types)) or None
         self.has_robot = has_robot        # restricted to one robot's events (:robot)
         self.guards = guards              # statements run first: goals that may raise
         # arguments from Python the statement uses as numbers: a non-number goes to the
@@ -240,6 +243,12 @@ class SqlPlan:
                 params[pname] = to_column(params[pname])
         for key in self.start_ordered:
             kb.store.ensure_start_order(*key)
+        if self.read_types is not None:
+            for sql in (self.sql, *self.guards):
+                if sql is not None:
+                    # (where the planner cannot be asked, only next's types, above)
+                    kb.store.prepare_start_order(sql, self.read_types, build_if_unsure=False)
+            self.read_types = None
         for guard in self.guards:
             kb.store.run_compiled(guard, params, None, deadline, may_fall_back=True,
                                   instructions=instructions)
@@ -456,7 +465,7 @@ def compile_goal(kb, plan, has_at: bool, robot: bool = False) -> SqlPlan:
     return SqlPlan(sql, dict(comp.params), arg_params, has_at,
                    [p.extra for p in parts], frozenset(comp.missing), comp.sites, comp.modes,
                    plan.text, tuple(dict.fromkeys(comp.time_sites)), guards, robot,
-                   comp.start_ordered)
+                   comp.start_ordered, comp.read_types)
 
 
 def _has_ref(t) -> bool:

@@ -330,8 +330,11 @@ def _window(source: Any, types: list[EventTypeRef], start: float | None,
     edges = [t for t in (lo, hi) if t is not None]   # what the window is made of
     if lo is None or hi is None:
         firsts, lasts = [], []
+        store = getattr(source, "store", None)
         for t in types:
             table = quote_identifier(t.table)
+            if store is not None:   # (a local store: its earliest start read from an index)
+                store.ensure_start_order(t.name, t.arity)
             first = _rows(source, _statements(source).time_span_first(table))[0][0]
             last = _rows(source, _statements(source).time_span_last(table))[0][0]
             if first is not None:

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import json
 import math
+from functools import partial
 
 import orjson
 from itertools import pairwise
@@ -186,12 +187,16 @@ class RuleRuntime:
         self.alts, self.residuals, self.reads_store, self.plain = [], [], [], []
         for n, alt in enumerate(self.rule.alternatives):
             tables = [eng.table(leaf.key) for leaf in alt.leaves]
+            read_types = ({leaf.key for leaf in alt.leaves}
+                          | {leaf.key for _, leaf in alt.negations})
             neg_tables = [eng.table(leaf.key) for _, leaf in alt.negations]
             names = [eng.table_name(leaf.key) for leaf in alt.leaves]
             sql = AltSQL(alt, n, tables, neg_tables, head_args, self.policy, eng.complete_sql,
                          used_table=self.used, prov_table=self.prov, table_names=names,
                          fact_table=eng.fact_table, dialect=eng.store.dialect,
-                         decision=self.decisions[n])
+                         decision=self.decisions[n],
+                         on_statement=partial(eng.store.prepare_start_order,
+                                              types=read_types))
             self.alts.append(sql)
             residual = None
             reads = False
@@ -208,9 +213,6 @@ class RuleRuntime:
                               if residual is not None and not reads else None)
         for key in self.rule.input_types():   # their completeness parameters exist
             eng.complete_sql(key, "x")
-            # a complex type read by a rule may be searched in start order: conservatively,
-            # its start-ordered indexes are there before the rule's statements run
-            eng.store.ensure_start_order(*key)
         for table, column in self.indexes():
             for first, second in (("t_end", "t_start"), ("t_start", "t_end")):
                 name = index_name(table, column, first[2:])
@@ -973,6 +975,10 @@ class EventRules:
         # made, rows kept pending): they are read again before they are used next
         self._summaries_stale = False
         kb.store.rollback_listeners.append(self.reread_pending)
+        # and it may take back a start-ordered index a new statement's first run built:
+        # the statements are built again (and their indexes asked for) when next used
+        self._builds_undone = kb.store.start_order_builds_undone
+        kb.store.rollback_listeners.append(self._forget_statements)
         # another process may leave decisions pending and stop: seeing whether another
         # connection changed them costs no I/O (SQLite's data_version; on a server the
         # notifications the store's connection heard), so the summaries are read again
@@ -1325,6 +1331,17 @@ class EventRules:
         moved completeness, which may complete the decisions another connection left pending
         (this one's summaries know only its own)."""
         self._summaries_stale = True
+
+    def _forget_statements(self) -> None:
+        """After a rollback that may have taken back a start-ordered index: every
+        alternative's statements built again when next used."""
+        undone = self.store.start_order_builds_undone
+        if undone == self._builds_undone:
+            return
+        self._builds_undone = undone
+        for rt in self.rules:
+            for alt in rt.alts:
+                alt.forget_statements()
 
     def _read_stale_summaries(self) -> None:
         """After a rollback or a mark: every rule's summary of its pending decisions read

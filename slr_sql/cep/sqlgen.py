@@ -122,6 +122,20 @@ class _Neg:
     end: str                 # the interval end the completeness condition is about
 
 
+class _Statements(dict):
+    """An alternative's statements by what they are for; each new one is shown to
+    ``on_statement`` once, as it is stored."""
+
+    def __init__(self, on_statement: Callable[[str], None] | None) -> None:
+        super().__init__()
+        self.on_statement = on_statement
+
+    def __setitem__(self, key: Any, sql: str) -> None:
+        if self.on_statement is not None:
+            self.on_statement(sql)
+        super().__setitem__(key, sql)
+
+
 @dataclass
 class AltSQL:
     """The SQL pieces of one alternative, and the statements built from them.
@@ -157,11 +171,14 @@ class AltSQL:
     # the types a terminator's decision waits for, each with whether through its end
     # (:meth:`EventRule.decision_inputs`); empty: the alternative's own, before its end
     decision: dict = field(default_factory=dict)
+    # called with each statement the first time it is built, before it runs (the store
+    # builds the start-ordered indexes its plan would use)
+    on_statement: Callable[[str], None] | None = None
 
     def __post_init__(self) -> None:
         alt = self.alt
         self._table_names: dict = {}
-        self._cache: dict = {}
+        self._cache: dict = _Statements(self.on_statement)
         self._others: dict = {}   # variable -> its later occurrences in positive atoms
         self.k = len(alt.leaves)
         self.S = _expr(alt.interval[0], self.dialect)
@@ -692,6 +709,11 @@ class AltSQL:
         return conds
 
     # ---------------------------------------------------------------- statements
+    def forget_statements(self) -> None:
+        """Build every statement again when next asked for (and show it to
+        ``on_statement`` again): after a rollback, which may have taken back an index."""
+        self._cache.clear()
+
     def delta_insert(self, pos: int, dirty: set) -> str:
         key = ("delta_insert", pos, tuple(self.alt.leaves[j].key in dirty for j in range(pos)))
         sql = self._cache.get(key)

@@ -68,6 +68,7 @@ class Compiler(Unification, BuiltinGoals, ControlGoals, RuleGoals, EventGoals, A
         # start-ordered indexes are made sure of before it runs (a complex type's are built
         # on first need, slr_sql.store.tables)
         self.start_ordered: set[tuple[str, int]] = set()
+        self.read_types: set[tuple[str, int]] = set()   # the event types whose tables it reads
         # a prev/next time computed by SQL's own float arithmetic -> it checked for overflow
         self.finite_checks: dict[str, str] = {}
 

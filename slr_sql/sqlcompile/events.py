@@ -8,7 +8,7 @@ subquery on the same pattern finds.
 Mixed into :class:`slr_sql.sqlcompile.Compiler` (uses ``self.solve``, ``self.unify``,
 ``self.alias``, ``self.time_sql``, ``self.clauses_sql``, ``self.record_mode``; reads
 ``self.ctx``, ``self.program``, ``self.has_at``; records ``self.missing``, ``self.time_sites``,
-``self.start_ordered``).
+``self.start_ordered``, ``self.read_types``).
 """
 from __future__ import annotations
 
@@ -94,6 +94,8 @@ class EventGoals:
         table = self.ctx.event_table(name, n)
         if table is None:
             self.missing.add((name, n))
+        else:
+            self.read_types.add((name, n))
         return table
 
     def each_stamp(self, ev, st, run) -> None:

@@ -201,7 +201,7 @@ class EventStore:
         >>> s = EventStore(None); s.declare_type("seg", 2)
         'seg'
         >>> sorted(s.index_names("seg"))
-        ['slr_ix__seg__a1_end', 'slr_ix__seg__a1_start', 'slr_ix__seg__end', 'slr_ix__seg__start']
+        ['slr_ix__seg__a1_end', 'slr_ix__seg__end']
         """
         self._db.check_open()
         return self._db.index_names(table)
@@ -377,15 +377,15 @@ class EventStore:
     # ------------------------------------------------------------------ event types
 
     @_doc(EventTables.declare_type)
-    def declare_type(self, name: str, arity: int, start_order: bool = True) -> str:
+    def declare_type(self, name: str, arity: int, start_order: bool = False) -> str:
         return self._tables.declare_type(name, arity, start_order)
 
     def ensure_start_order(self, name: str, arity: int) -> bool:
-        """Build the start-ordered indexes of name/arity if it lacks them (a complex event
-        type, see :meth:`declare_type`); whether they exist now. False also when the type
+        """Build the start-ordered indexes of name/arity if it lacks them (see
+        :meth:`declare_type`); whether they exist now. False also when the type
         has no table. See :meth:`EventTables.ensure_start_order`.
 
-        >>> s = EventStore(None); s.declare_type("c", 0, start_order=False)
+        >>> s = EventStore(None); s.declare_type("c", 0)
         'c'
         >>> s.ensure_start_order("c", 0), s.ensure_start_order("d", 0)
         (True, False)
@@ -399,6 +399,41 @@ class EventStore:
             self._db.check_open()
             event_type = self._tables.lookup(name, arity)
             return event_type is not None and self._tables.ensure_start_order(event_type)
+
+    @property
+    def start_order_builds_undone(self) -> int:
+        """How many rollbacks may have taken back a start-ordered index built inside the
+        transaction (who prepared statements since asks again when it moved)."""
+        return self._tables.builds_undone
+
+    def prepare_start_order(self, sql: str, types: Iterable[tuple[str, int]],
+                            build_if_unsure: bool = True) -> None:
+        """Before a statement first runs: build the start-ordered indexes it would use of
+        the event types ``types`` (those of them whose tables it names) -- the ones SQLite's
+        planner would take (:meth:`EventTables.start_orders_wanted`); where the backend
+        cannot say (PostgreSQL), all of them if ``build_if_unsure``, else none.
+
+        >>> s = EventStore(None); _ = s.declare_type("b", 1)
+        >>> s.prepare_start_order('SELECT seq FROM "b" WHERE arg1 = :k AND t_end > :t', [("b", 1)])
+        >>> len(s.index_names("b"))
+        2
+        >>> s.prepare_start_order('SELECT seq FROM "b" WHERE arg1 = :k AND t_start > :t', [("b", 1)])
+        >>> len(s.index_names("b"))
+        4
+        """
+        known = self._tables.types
+        types = [key for key in types if key in known and not known[key].start_order
+                 and known[key].quoted in sql]
+        if not types:
+            return
+        with self._db.lock:
+            self._db.check_open()
+            wanted = self._tables.start_orders_wanted(sql)
+        if wanted is None:
+            wanted = set(types) if build_if_unsure else set()
+        for key in types:
+            if key in wanted:
+                self.ensure_start_order(*key)
 
     @property
     def max_event_arity(self) -> int:
@@ -720,7 +755,11 @@ class EventStore:
 
     @_doc(Catalog.replace_views)
     def replace_views(self, views: dict[str, str]) -> list[str]:
-        return self._catalog.replace_views(views)
+        made = self._catalog.replace_views(views)
+        # (read by other programs, which cannot build what their plans would use)
+        for select in views.values():
+            self.prepare_start_order(select, list(self._tables.types), build_if_unsure=False)
+        return made
 
     # ------------------------------------------------------------------ buffers
 

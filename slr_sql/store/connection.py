@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import os
 import random
+import re
 import sqlite3
 import stat
 import time
@@ -289,6 +290,9 @@ class Database:
         self.progress: tuple[Callable[[], int], int] | None = None
         # the Python functions statements may call (install_functions), on every connection
         self.functions: SqlFunctions | None = None
+        # (schema version, in-memory copy of the schema, extra indexes made in it):
+        # planned_indexes asks its planner
+        self._planning: tuple[int, sqlite3.Connection, set[str]] | None = None
         self.busy_timeout = busy_timeout
         self._absolute: str | None = None  # set once open (check_identity)
         self._identity: tuple = (None, None, None)
@@ -428,6 +432,58 @@ class Database:
                 "SELECT name FROM sqlite_master WHERE type = 'index' AND tbl_name = ?",
                 (table,))}
 
+    def planned_indexes(self, sql: str, extra: Iterable[str] = ()) -> set[str] | None:
+        """The indexes SQLite's planner would use for ``sql`` if the indexes the ``extra``
+        ``CREATE INDEX`` statements make existed too; None if the plan cannot be asked.
+
+        Asked of an empty in-memory copy of the schema (its tables and indexes, with this
+        connection's SQL functions): the copy is all the planner reads, as no statistics
+        are gathered (``ANALYZE`` is never run), so an index is judged without being built.
+        The copy is made again when the schema changed.
+
+        >>> db = Database(None); _ = db.execute("CREATE TABLE t (x, y)")
+        >>> sql = "SELECT * FROM t WHERE x = :v"
+        >>> db.planned_indexes(sql), db.planned_indexes(sql, ["CREATE INDEX t_x ON t (x)"])
+        (set(), {'t_x'})
+        """
+        with self.lock:
+            self.check_open()
+            try:
+                copy, made = self._planning_copy()
+                for statement in extra:
+                    if statement not in made:   # (kept: the catalog has not changed)
+                        copy.execute(statement)
+                        made.add(statement)
+                plan = copy.execute("EXPLAIN QUERY PLAN " + sql, _AnyParameters()).fetchall()
+            except (sqlite3.Error, ValueError, TypeError):
+                return None
+        return {m.group(1) for row in plan for m in _PLANNED_INDEX.finditer(str(row[-1]))}
+
+    def _planning_copy(self) -> tuple[sqlite3.Connection, set[str]]:
+        """The in-memory copy of the schema :meth:`planned_indexes` asks, with the extra
+        indexes made in it since (lock held)."""
+        version = self.conn.execute("PRAGMA schema_version").fetchone()[0]
+        if self._planning is not None and self._planning[0] == version:
+            return self._planning[1], self._planning[2]
+        if self._planning is not None:
+            self._planning[1].close()
+            self._planning = None
+        copy = sqlite3.connect(":memory:", check_same_thread=False, isolation_level=None)
+        harden(copy)
+        if self.functions is not None:
+            register_functions(copy, self.functions)
+        rows = self.conn.execute(
+            "SELECT type, name, sql FROM sqlite_master WHERE sql IS NOT NULL AND type IN "
+            "('table', 'index') UNION ALL SELECT type, name, sql FROM sqlite_temp_master "
+            "WHERE sql IS NOT NULL AND type IN ('table', 'index') "
+            "ORDER BY 1 DESC").fetchall()   # tables before their indexes
+        for _kind, name, statement in rows:
+            if not name.lower().startswith("sqlite_"):
+                copy.execute(statement)
+        made: set[str] = set()
+        self._planning = (version, copy, made)
+        return copy, made
+
     def object_names(self) -> set[str]:
         """Lower-cased names of every table, index, view and trigger of the database.
 
@@ -475,6 +531,9 @@ class Database:
             self.closed = True
             if self.checkpointer is not None:
                 self.checkpointer.stop()
+            if self._planning is not None:
+                self._planning[1].close()
+                self._planning = None
             if self._absolute is not None:
                 now = self._identities()
                 if now[0] != self._identity[0]:  # replaced: leave the new file's side alone
@@ -1127,6 +1186,16 @@ def _refused(text: str, guard: SqlGuard) -> bool:
 # valid UTF-8 (Python reads it as str): SQLite then says only "user-defined function raised
 # exception", of a LIKE or trim the user never knew was a Python function.
 _FUNCTION_FAILED = "user-defined function raised exception"
+
+# an index a step of EXPLAIN QUERY PLAN reads ("SEARCH e1 USING INDEX x (arg1=?)")
+_PLANNED_INDEX = re.compile(r"USING (?:COVERING )?INDEX (\S+)")
+
+
+class _AnyParameters(dict):
+    """Named parameters for a statement that is only planned: each one NULL."""
+
+    def __missing__(self, key: str) -> None:
+        return None
 _NOT_UTF8 = (
     "a function call failed, most likely on text that is not valid UTF-8: LIKE, GLOB, "
     "instr, replace, printf, format, trim, ltrim, rtrim, json_patch and slr_sql's own "

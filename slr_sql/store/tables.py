@@ -18,15 +18,16 @@ are read straight from an index, never sorted.
 
 *Start order on first need.* The two start-ordered indexes, ``(t_start, t_end)`` and
 ``(arg1, t_start, t_end)``, serve only the readers in start order: ``next``, the ties at a
-start, the after-part of ``bracket`` and compiled ``next`` subqueries. A complex event type
-whose table the event-rule engine creates (``declare_type(..., start_order=False)``) gets
-only the two end-ordered ones: its events arrive in end order, so those stay appends at the
-right edge of their B-trees, while a start-ordered entry lands at a random place of the
-index (seq2 unrestricted pairs an old ``a`` with a new ``b``), and these two indexes were
-most of the cost of storing a detection. :meth:`EventTables.ensure_start_order` builds them
-(``CREATE INDEX IF NOT EXISTS``, names as ever) the first time a reader needs them: a
-one-time cost proportional to the table (benchmarks/README.md). Declared types and types an
-added event creates get all four indexes at creation, as do existing tables.
+start, the after-part of ``bracket``, compiled ``next`` subqueries and the statements whose
+plan would use them. A new table gets only the two end-ordered ones: events arrive roughly in
+end order, so those stay appends at the right edge of their B-trees, while each
+start-ordered entry is a B-tree of its own to write (two of a row's five; seq2 pairs an old
+``a`` with a new ``b`` and lands its start entries at random places), and storing an event
+with them cost 20-25% more CPU (benchmarks/README.md). :meth:`EventTables.ensure_start_order`
+builds them (``CREATE INDEX IF NOT EXISTS``, names as ever) the first time a reader needs
+them: a one-time cost proportional to the table. Which statements need them is asked of
+SQLite's planner (:meth:`EventTables.start_orders_wanted`); existing tables keep the indexes
+they have.
 """
 from __future__ import annotations
 
@@ -170,16 +171,27 @@ class EventTables:
         # and the lookups that skipped the build since (not tried again until the clock
         # moved on by START_ORDER_RETRY, or START_ORDER_RETRY_LOOKUPS lookups skipped it)
         self._busy: dict[str, tuple[float, int]] = {}
+        # start-ordered indexes were built inside a transaction not committed yet; and how
+        # many rollbacks may have taken such a build back (who built statements after a
+        # build, knowing the index there, asks again when it moved)
+        self._built_inside = False
+        self.builds_undone = 0
         # The most data arguments an event can have: its table has 5 more columns (seq,
         # t_start, t_end, arrival, robot) and the engine refuses tables wider than its limit.
         self.max_arity = db.max_columns - 5
         self.reload()
 
     def _rolled_back(self) -> None:
+        if self._built_inside:
+            self._built_inside = False
+            self.builds_undone += 1
         # (the old objects too: a reader holding one must not trust a build taken back)
         for event_type in self.types.values():
             event_type.start_order = None
         self.reload(keep_start_order=False)
+
+    def _kept(self) -> None:
+        self._built_inside = False
 
     def reload(self, keep_start_order: bool = True) -> None:
         """Read every type again (others may have created some; a rollback undid some).
@@ -243,10 +255,10 @@ class EventTables:
         return candidate
 
     def register(self, name: str, arity: int, declared: bool,
-                 start_order: bool = True) -> EventType:
-        """Create the table of a new type. Must run inside a write transaction. Without
-        ``start_order`` the start-ordered indexes are left to :meth:`ensure_start_order`
-        (an existing table is left as it is)."""
+                 start_order: bool = False) -> EventType:
+        """Create the table of a new type. Must run inside a write transaction. Its
+        start-ordered indexes are left to :meth:`ensure_start_order`, unless
+        ``start_order`` (an existing table is left as it is)."""
         existing = self.lookup(name, arity)
         if existing is None:
             # on a server, another process may be creating it now: take turns, look again
@@ -363,6 +375,9 @@ class EventTables:
                 self._busy[table] = (db.clock.now(), 0)
             return False
         self._busy.pop(table, None)
+        if db.tx_depth:   # (inside the caller's transaction: it may still roll back)
+            self._built_inside = True
+            db.after_commit(self._kept)
         # (a rollback of an enclosing transaction reloads the types: this one is gone then)
         current = self.types.get((event_type.name, event_type.arity))
         if current is not None:
@@ -370,14 +385,45 @@ class EventTables:
         event_type.start_order = True
         return True
 
-    def declare_type(self, name: str, arity: int, start_order: bool = True) -> str:
+    def start_orders_wanted(self, sql: str) -> set[tuple[str, int]] | None:
+        """The event types read by ``sql`` (their tables named in it) whose start-ordered
+        indexes the planner would use, were they there; None where the backend cannot say
+        (PostgreSQL: the caller builds them for every type the statement reads). A type
+        known to have them is not asked about.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); _ = s.declare_type("b", 1)
+        >>> tables = s._tables
+        >>> tables.start_orders_wanted('SELECT seq FROM "b" WHERE arg1 = :k AND t_start > :t')
+        {('b', 1)}
+        >>> tables.start_orders_wanted('SELECT seq FROM "b" WHERE arg1 = :k AND t_end > :t')
+        set()
+        """
+        lacking = [t for t in self.types.values() if not t.start_order and t.quoted in sql]
+        if not lacking:
+            return set()
+        extra, owner = [], {}
+        for event_type in lacking:
+            extra.append(f"CREATE INDEX IF NOT EXISTS {event_type.index_start} ON "
+                         f"{event_type.quoted} (t_start, t_end)")
+            owner[event_type.index_start.strip('"')] = event_type
+            if event_type.arity >= 1:
+                extra.append(f"CREATE INDEX IF NOT EXISTS {event_type.index_arg1_start} ON "
+                             f"{event_type.quoted} (arg1, t_start, t_end)")
+                owner[event_type.index_arg1_start.strip('"')] = event_type
+        used = self.db.planned_indexes(sql, extra)
+        if used is None:
+            return None
+        return {(owner[name].name, owner[name].arity) for name in used if name in owner}
+
+    def declare_type(self, name: str, arity: int, start_order: bool = False) -> str:
         """Declare event type name/arity (``:- event name/arity.``); returns its table name.
 
         Once a name is declared with some arity, events of that name with an arity that is
         neither declared nor already stored are rejected as a wrong-arity mistake.
-        ``start_order=False`` (the head type of an event rule, created by the event-rule
-        engine): a new table gets its start-ordered indexes only when a reader needs them
-        (:meth:`ensure_start_order`); an existing table is left as it is.
+        A new table gets its start-ordered indexes when a reader first needs them
+        (:meth:`ensure_start_order`), or at once with ``start_order=True``; an existing
+        table is left as it is.
 
         >>> from slr_sql.store import EventStore
         >>> EventStore(None).declare_type("seg", 2)
