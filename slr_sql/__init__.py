@@ -9,8 +9,8 @@
 from .api import KnowledgeBaseAPI, PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import Clock, ManualClock, StreamClock, WallClock
 from .errors import EventRejected, NotAnEvent, SLRBusy, SLRCancelled, SLRError, SLREvaluationError, \
-    SLRStoreFull, SLRServerUnreachable, SLRStoreGone, SLRSubscriptionInUse, SLRSyntaxError, \
-    SLRTimeout, SLRUnavailable
+    SLRStatementTimeout, SLRStoreFull, SLRServerUnreachable, SLRStoreGone, SLRSubscriptionInUse, \
+    SLRSyntaxError, SLRTimeout, SLRUnavailable
 from .kb import KnowledgeBase, open
 from .terms import Atom, String, Struct, Var
 
@@ -31,7 +31,7 @@ __all__ = [
     "ProgramInfo", "Clock", "WallClock", "ManualClock", "StreamClock",
     "SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRBusy", "EventRejected",
     "SLRUnavailable", "SLRStoreFull", "SLRStoreGone", "SLRServerUnreachable", "SLRCancelled",
-    "SLRSubscriptionInUse", "NotAnEvent",
+    "SLRStatementTimeout", "SLRSubscriptionInUse", "NotAnEvent",
     "Atom", "String", "Struct", "Var",
 ]
 __version__ = "0.1.0"

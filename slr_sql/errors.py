@@ -5,7 +5,7 @@ from typing import Any
 
 __all__ = ["SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRUnavailable",
            "SLRBusy", "SLRStoreFull", "SLRStoreGone", "SLRServerUnreachable", "SLRCancelled",
-           "EventRejected", "NotAnEvent"]
+           "SLRStatementTimeout", "EventRejected", "NotAnEvent"]
 
 
 class SLRError(Exception):
@@ -122,12 +122,32 @@ class SLRServerUnreachable(SLRUnavailable):
     retry_after = 5
 
 
+class SLRStatementTimeout(SLRTimeout):
+    """The database server of a ``postgresql://`` store cancelled a statement at its own
+    ``statement_timeout`` setting (one an administrator set for the server, the database
+    or the role, or a ``SET`` of the session), not at the call's ``timeout=``: the same
+    call would run as long again and meet it again, so it is no condition to retry
+    (unlike :class:`SLRCancelled`). A call's own ``timeout=`` replaces the setting for
+    that call; otherwise the setting must be raised. The message names the setting and
+    quotes the server's words. Nothing of the failed call was written.
+
+    >>> issubclass(SLRStatementTimeout, SLRTimeout), issubclass(SLRStatementTimeout,
+    ...                                                         SLRUnavailable)
+    (True, False)
+    """
+
+    reason = ""   # the server's words (``canceling statement due to statement timeout``)
+
+
 class SLRCancelled(SLRUnavailable):
     """The database server of a ``postgresql://`` store cancelled a statement for another
-    reason than the call's own ``timeout=`` (that one is :class:`SLRTimeout`): another
-    session's ``pg_cancel_backend``, a ``statement_timeout`` an administrator set on the
-    database or role. The message quotes the server's reason. Nothing of the failed call
-    was written (its transaction is rolled back); the same call may succeed when retried.
+    reason than a timeout (the call's own ``timeout=`` is :class:`SLRTimeout`, the server's
+    ``statement_timeout`` :class:`SLRStatementTimeout`): another session's
+    ``pg_cancel_backend``, an administrator's cancel. The message quotes the server's
+    reason. Nothing of the failed call was written (its transaction is rolled back); the
+    same call may succeed when retried. (A server that speaks another language than
+    English gives its reasons in that language: a cancel at its ``statement_timeout`` is
+    then told from another only by the words, and is an SLRCancelled too.)
 
     >>> issubclass(SLRCancelled, SLRUnavailable), issubclass(SLRCancelled, SLRTimeout)
     (True, False)

@@ -15,6 +15,8 @@ if str(REPO) not in sys.path:  # run from a checkout without installing the pack
 
 import slr_sql  # noqa: E402
 from hypothesis import settings  # noqa: E402
+# (a hook of this conftest's: an xdist worker's last collections made cheap)
+from xdist_worker_exit import pytest_sessionfinish  # noqa: E402, F401
 
 # CI must not be flaky: every hypothesis test replays the same examples on every run (a failure
 # found locally with HYPOTHESIS_PROFILE=explore is added to the test as an @example).

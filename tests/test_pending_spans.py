@@ -6,7 +6,8 @@ their count), not one row each; the clock's move decides them with one statement
 move that completes only the earlier ones keeps the later ones as terminators of their own.
 The answers are the reference evaluator's whatever the batches and clock moves, on SQLite
 and PostgreSQL, and a span is a pending decision another process (or the next open after a
-crash) decides like any other.
+crash) decides like any other. A span covers only rows its add stored: a row another client
+commits later with a seq drawn while the add ran is never decided with it.
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import json
 import sqlite3
 import subprocess
 import sys
+from contextlib import suppress
 
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
@@ -313,3 +315,149 @@ def test_a_span_whose_rule_needs_python_now_decides_every_terminator(where):
         clock.set(100.0)
         assert _pending(kb) == []
         assert _c(kb) == EXPECTED
+
+
+SEQ2_RULE = {"pattern": ("seq", ("leaf", "a", ["X"]), ("leaf", "b", ["X"])), "head": ["X"],
+             "where": [], "cnot": None, "within": None, "policy": "recent"}
+FIRST = [("a", (2,), 0.5, 0.5), ("b", (2,), 0.75, 0.75)]
+LIVE = [("a" if i % 2 == 0 else "b", ((i // 2) % 3,), float(i + 1), float(i + 1))
+        for i in range(10)]
+
+
+class ForeignClient:
+    """Another client of the store's database, writing its tables directly (no write group,
+    no rule run): sqlite3 on the file, psycopg on the server."""
+
+    def __init__(self, where: str) -> None:
+        self.postgres = where.startswith("postgresql")
+        if self.postgres:
+            import psycopg
+            self.conn = psycopg.connect(where, autocommit=True)
+            self.conn.execute("SET search_path = slr")   # (the store's schema)
+        else:
+            self.conn = sqlite3.connect(where, isolation_level=None, timeout=30)
+
+    def run(self, sql: str, params: tuple = ()) -> list:
+        cur = self.conn.execute(sql.replace("?", "%s") if self.postgres else sql, params)
+        return cur.fetchall() if cur.description else []
+
+    def draw_a_seq_before(self, t_end: float) -> None:
+        """The b row ending at ``t_end`` gets its seq after another one drawn first -- what
+        an insert of another client running at that moment does: the add's seqs are then
+        not one run, and the one drawn is free for a row committed later."""
+        if self.postgres:
+            self.run("CREATE FUNCTION draw_a_seq() RETURNS trigger LANGUAGE plpgsql AS $$ "
+                     "BEGIN PERFORM nextval(pg_get_serial_sequence('b', 'seq')); "
+                     "RETURN NEW; END $$")
+            self.run("CREATE TRIGGER draw_a_seq BEFORE INSERT ON b FOR EACH ROW WHEN "
+                     f"(NEW.t_end = {t_end!r}) EXECUTE FUNCTION draw_a_seq()")
+        else:   # (AUTOINCREMENT hands a seq out once: a row put in and taken out draws it)
+            self.run(f"CREATE TRIGGER draw_a_seq BEFORE INSERT ON b WHEN NEW.t_end = {t_end!r} "
+                     "BEGIN INSERT INTO b (arg1, t_start, t_end, arrival) "
+                     "VALUES (NULL, -1.0, -1.0, 0.0); DELETE FROM b WHERE t_end = -1.0; END")
+
+    def close(self) -> None:
+        self.conn.close()
+
+
+def test_a_row_another_client_commits_inside_a_live_batchs_seqs_is_no_terminator(where):
+    """A row of the terminator's type that another client commits after the add, with a seq
+    drawn while the add ran (so inside the range of the add's seqs), is no new row of any
+    add: it is never decided as a terminator, so the complex events are the reference
+    evaluator's over the events added -- a span covers only the rows its add stored."""
+    clock = ManualClock(0.0)
+    with slr_sql.open(where, clock=clock) as kb:
+        kb.load(":- max_delay(a/1, 0).\n:- max_delay(b/1, 0).\n:- consumption(recent).\n"
+                + rule_text(SEQ2_RULE))
+        kb.add_many([_event_text(ev) for ev in FIRST])   # (makes the types' tables)
+        clock.set(1.0)
+        other = ForeignClient(where)
+        try:
+            other.draw_a_seq_before(6.0)
+            assert kb.add_many([_event_text(ev) for ev in LIVE]) == []
+            seqs = [seq for (seq,) in other.run("SELECT seq FROM b ORDER BY seq")]
+            gap = [s for s in range(seqs[0], seqs[-1]) if s not in seqs]
+            assert len(gap) == 1 and seqs[1] < gap[0] < seqs[-1], seqs
+            # (the add's terminators, their seqs not one run, are kept one by one)
+            assert _pending(kb) == [("term", [seq]) for seq in seqs[1:]]
+            # b(1) at 5.5: the newest a(1) before it is a(1)^3 -- were it decided
+            other.run("INSERT INTO b (seq, arg1, t_start, t_end, arrival) "
+                      "VALUES (?, 1, 5.5, 5.5, 1.0)", (gap[0],))
+        finally:
+            other.close()
+        clock.set(100.0)
+        assert _pending(kb) == []
+        got = sorted(((tuple(args), s, e) for args, s, e, _ in kb.store.scan("r", 1)),
+                     key=repr)
+    expected = reference(SEQ2_RULE, FIRST + LIVE)
+    assert _typed(got) == _typed([(tuple(h), s, e) for h, s, e in expected])
+
+
+def test_a_row_another_session_inserts_while_a_live_batch_goes_in_is_no_terminator(
+        postgres_url):
+    """The race itself, on PostgreSQL: another session inserts a row of the terminator's
+    type while the add's insert is half way (the add is held there by a trigger waiting for
+    a lock the test holds), so its seq falls between the add's, and it commits only after
+    the add. The add's terminators are kept one by one, and the other session's row is
+    never decided: the complex events are the reference evaluator's over the events
+    added."""
+    import threading
+    import time
+
+    import psycopg
+
+    clock = ManualClock(0.0)
+    with slr_sql.open(postgres_url, clock=clock) as kb:
+        kb.load(":- max_delay(a/1, 0).\n:- max_delay(b/1, 0).\n:- consumption(recent).\n"
+                + rule_text(SEQ2_RULE))
+        kb.add_many([_event_text(ev) for ev in FIRST])
+        clock.set(1.0)
+        with psycopg.connect(postgres_url, autocommit=True) as other, \
+                psycopg.connect(postgres_url, autocommit=True) as watcher:
+            other.execute("SET search_path = slr")
+            other.execute("CREATE FUNCTION wait_for_the_test() RETURNS trigger "
+                          "LANGUAGE plpgsql AS $$ BEGIN PERFORM pg_advisory_xact_lock_shared("
+                          "7707); RETURN NEW; END $$")
+            other.execute("CREATE TRIGGER wait_for_the_test BEFORE INSERT ON b FOR EACH ROW "
+                          "WHEN (NEW.t_end = 6.0) EXECUTE FUNCTION wait_for_the_test()")
+            other.execute("SELECT pg_advisory_lock(7707)")
+            failed: list[BaseException] = []
+
+            def add() -> None:
+                try:
+                    kb.add_many([_event_text(ev) for ev in LIVE])
+                except BaseException as exc:   # (asserted below)
+                    failed.append(exc)
+            adding = threading.Thread(target=add)
+            adding.start()
+            try:
+                deadline = time.monotonic() + 30
+                while not watcher.execute(
+                        "SELECT count(*) FROM pg_locks WHERE locktype = 'advisory' "
+                        "AND objid = 7707 AND NOT granted").fetchone()[0]:
+                    assert time.monotonic() < deadline, "the add never reached the trigger"
+                    assert adding.is_alive(), failed
+                    time.sleep(0.005)
+                other.execute("BEGIN")
+                other.execute("INSERT INTO b (arg1, t_start, t_end, arrival) "
+                              "VALUES (1, 5.5, 5.5, 1.0)")   # its seq: drawn now
+                other.execute("SELECT pg_advisory_unlock(7707)")
+                adding.join(30)
+                assert not adding.is_alive() and not failed, failed
+                other.execute("COMMIT")   # after the add's commit
+            finally:
+                with suppress(psycopg.Error):
+                    other.execute("ROLLBACK")
+                other.execute("SELECT pg_advisory_unlock_all()")
+                adding.join(30)
+            seqs = [seq for (seq,) in other.execute("SELECT seq FROM b WHERE t_end <> 5.5 "
+                                                    "ORDER BY seq").fetchall()]
+            (foreign,) = other.execute("SELECT seq FROM b WHERE t_end = 5.5").fetchone()
+            assert seqs[1] < foreign < seqs[-1], (seqs, foreign)
+            assert _pending(kb) == [("term", [seq]) for seq in seqs[1:]]
+        clock.set(100.0)
+        assert _pending(kb) == []
+        got = sorted(((tuple(args), s, e) for args, s, e, _ in kb.store.scan("r", 1)),
+                     key=repr)
+    expected = reference(SEQ2_RULE, FIRST + LIVE)
+    assert _typed(got) == _typed([(tuple(h), s, e) for h, s, e in expected])

@@ -1,7 +1,8 @@
-"""PostgreSQL: a statement the server cancels for another reason than the call's own
-``timeout=`` (another session's ``pg_cancel_backend``, an administrator's
-``statement_timeout``) is an SLRCancelled -- retryable, nothing of the call stored -- and
-says so; a call that ran out of its own ``timeout=`` is still "query timed out".
+"""PostgreSQL: a statement the server cancels for another reason than a timeout (another
+session's ``pg_cancel_backend``) is an SLRCancelled -- retryable, nothing of the call stored
+-- and says so; one it cancels at its own ``statement_timeout`` (an administrator's) is an
+SLRStatementTimeout, a timeout a retry would meet again; a call that ran out of its own
+``timeout=`` is still "query timed out".
 """
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import pytest
 
 import slr_sql
 from slr_sql import ManualClock
-from slr_sql.errors import SLRCancelled, SLRTimeout, SLRUnavailable
+from slr_sql.errors import SLRCancelled, SLRStatementTimeout, SLRTimeout, SLRUnavailable
 
 DEADLINE = 30.0   # seconds a wait for the other session may take before the test fails
 
@@ -93,17 +94,61 @@ def test_an_add_another_session_cancels_stores_nothing_and_may_be_retried(postgr
         assert [a["X"] for a in kb.query("p(X)^_")] == [1, 2, 3]
 
 
+def _statement_timeout(error: BaseException) -> None:
+    """``error`` is the server's statement_timeout: a timeout (408 over the service), no
+    condition to retry, naming the setting and quoting the server's words."""
+    assert type(error) is SLRStatementTimeout, repr(error)
+    assert isinstance(error, SLRTimeout) and not isinstance(error, SLRUnavailable)
+    assert ": the server cancelled the statement at its statement_timeout setting (canceling " \
+           "statement due to statement timeout)" in str(error), str(error)
+    assert "a retry meets it again" in str(error) and "query timed out" not in str(error)
+    assert error.reason == "canceling statement due to statement timeout"
+
+
 def test_the_statement_timeout_of_an_administrator_is_not_the_calls_timeout(postgres_url):
+    """The database's statement_timeout cancels the statement: a retry would run as long
+    and meet it again, so the call fails with SLRStatementTimeout (not the retryable
+    SLRCancelled), on every path -- a read-only and a writing kb.sql, a compiled query, an
+    add -- and a call's own timeout= replaces it for that call."""
     with _other(postgres_url) as admin:
         database = admin.execute("SELECT current_database()").fetchone()[0]
         admin.execute(f'ALTER DATABASE "{database}" SET statement_timeout = 200')
     with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
-        with pytest.raises(SLRCancelled, match=r": the server cancelled the statement "
-                           r"\(canceling statement due to statement timeout\)"):
-            kb.sql("SELECT pg_sleep(5)")
+        for write in (False, True):
+            with pytest.raises(SLRStatementTimeout) as caught:
+                kb.sql("SELECT pg_sleep(5)", write=write)
+            _statement_timeout(caught.value)
         kb.add_many([f"p({i})^{i}" for i in range(300)])
-        with pytest.raises(SLRCancelled, match="due to statement timeout"):
+        with pytest.raises(SLRStatementTimeout) as caught:
             kb.query(SLOW_GOAL)
+        _statement_timeout(caught.value)
+        # the call's own timeout= (longer than the administrator's) is the statement's
+        slept = "SELECT 1 AS slept FROM pg_sleep(0.4)"
+        assert kb.sql(slept, timeout=30) == (["slept"], [(1,)])
+        assert kb.sql(slept, write=True, timeout=30) == (["slept"], [(1,)])
+        with _other(postgres_url) as other:
+            other.execute("CREATE FUNCTION slr_test_slow() RETURNS trigger LANGUAGE plpgsql "
+                          "AS $$ BEGIN PERFORM pg_sleep(5); RETURN NEW; END $$")
+            other.execute("CREATE TRIGGER slow BEFORE INSERT ON p "
+                          "FOR EACH ROW EXECUTE FUNCTION slr_test_slow()")
+            with pytest.raises(SLRStatementTimeout) as caught:
+                kb.add("p(1000)^1000")
+            _statement_timeout(caught.value)
+            assert other.execute("SELECT count(*) FROM p").fetchone()[0] == 300
+            other.execute("DROP TRIGGER slow ON p")
+        kb.add("p(1000)^1000")
+        assert kb.query("p(X)^_, X > 299") == [{"X": 1000}]
+
+
+def test_the_server_statement_timeout_crosses_the_service_as_itself():
+    from slr_sql.service.errors import error_body, error_from_body, retry_after
+    error = SLRStatementTimeout("postgresql://db: the server cancelled the statement at its "
+                                "statement_timeout setting")
+    body = error_body(error)
+    assert body["error"]["kind"] == "SLRStatementTimeout"
+    assert body["error"]["status"] == 408 and retry_after(error) is None
+    again = error_from_body(body, 408)
+    assert type(again) is SLRStatementTimeout and str(again) == str(error)
 
 
 def test_a_compiled_query_another_session_cancels_is_cancelled(postgres_url):

@@ -3,7 +3,8 @@
 psycopg reports many plain refusals of a statement as ``OperationalError`` (SQLSTATE classes
 08, 27, 28, 2F, 38, 39, 3B, 40, 53-58, F0, HV): an invalid savepoint name, a function without
 RETURN, too many arguments. Only a connection the server ended is ``SLRServerUnreachable``
-(retryable, 503); a lock or serialization conflict is ``SLRBusy``; a lack of resources
+(retryable, 503); a lock or serialization conflict, or an object another session uses, is
+``SLRBusy``; a lack of resources
 (class 53) is ``SLRUnavailable``; the call's own ``timeout=`` is ``SLRTimeout``; anything else
 is a plain, non-retryable ``SLRError`` with the server's words, and the store goes on.
 """
@@ -102,7 +103,7 @@ OPERATIONAL = sorted(c.sqlstate for c in vars(psycopg.errors).values()
 
 
 def _expected(state: str) -> type:
-    if state in ("40001", "40P01", "55P03"):
+    if state in ("40001", "40P01", "55P03", "55006"):
         return SLRBusy
     if state == "57014":
         return slr_sql.SLRCancelled
@@ -157,6 +158,30 @@ def test_a_lock_held_by_another_session_is_busy_for_sql_add_and_query(kb, shared
             other.execute("ROLLBACK")
     assert {"X": 3} not in kb.query("p(X)^_")
     _still_works(kb)
+
+
+def test_an_object_another_session_uses_is_busy_until_it_lets_go(kb, postgres_server):
+    """55006 (object_in_use): here a database another session is connected to, which
+    cannot be renamed meanwhile. A condition that passes when the other session goes: the
+    same call, retried then, succeeds."""
+    scratch = postgres_database(postgres_server[1])
+    name = psycopg.conninfo.conninfo_to_dict(scratch)["dbname"]
+    rename = f'ALTER DATABASE "{name}" RENAME TO "{name}_moved"'
+    try:
+        with psycopg.connect(scratch, autocommit=True):
+            with pytest.raises(SLRBusy) as caught:
+                kb.sql(rename, write=True)
+            assert "in use by another session; retry" in str(caught.value)
+            assert "being accessed by other users" in str(caught.value)
+            _still_works(kb)
+        kb.sql(rename, write=True)
+        moved = kb.sql("SELECT datname FROM pg_database WHERE datname LIKE ?",
+                       [name + "%"])[1]
+        assert moved == [(name + "_moved",)]
+    finally:
+        with psycopg.connect(postgres_server[1], autocommit=True) as admin:
+            for db in (name, name + "_moved"):
+                admin.execute(f'DROP DATABASE IF EXISTS "{db}" WITH (FORCE)')
 
 
 def test_a_deadlock_the_server_breaks_is_busy(kb, shared_url):

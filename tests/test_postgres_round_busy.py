@@ -144,10 +144,10 @@ def test_a_rule_decided_in_a_round_another_rule_made_busy_decides_again(postgres
 def test_a_rule_statement_cancelled_by_the_server_is_an_slr_error_and_stores_nothing(
         postgres_url):
     """The server cancels the rule's copy (``statement_timeout`` of the database, a slow
-    trigger another session put on the complex type's table): an SLRCancelled (not the
-    call's own timeout, so not an SLRTimeout), nothing of the add stored, and the next add,
-    once the trigger is gone, derives."""
-    from slr_sql.errors import SLRCancelled
+    trigger another session put on the complex type's table): an SLRStatementTimeout (the
+    server's setting, not the call's own timeout, and no condition a retry would pass),
+    nothing of the add stored, and the next add, once the trigger is gone, derives."""
+    from slr_sql.errors import SLRStatementTimeout
     with _other(postgres_url, autocommit=True) as admin:
         database = admin.execute("SELECT current_database()").fetchone()[0]
         admin.execute(f'ALTER DATABASE "{database}" SET statement_timeout = 300')
@@ -159,7 +159,7 @@ def test_a_rule_statement_cancelled_by_the_server_is_an_slr_error_and_stores_not
                           "AS $$ BEGIN PERFORM pg_sleep(2); RETURN NEW; END $$")
             other.execute("CREATE TRIGGER slow BEFORE INSERT ON c "
                           "FOR EACH ROW EXECUTE FUNCTION slr_test_slow()")
-            with pytest.raises(SLRCancelled, match="due to statement timeout"):
+            with pytest.raises(SLRStatementTimeout, match="due to statement timeout"):
                 kb.add_many(["a(2)^3", "b(2)^4"])
             assert _counts(postgres_url) == (1, 1, 1, 0)
             other.execute("DROP TRIGGER slow ON c")

@@ -911,19 +911,40 @@ class AltSQL:
         their latest end, ``t_end`` their earliest (the time the first of them can be
         decided). A span holds no row of another transaction: the writers of a rule's
         types take turns (SQLite's one writer; PostgreSQL's lock of their write group),
-        so the new rows are the only ones in between."""
+        and the span is kept only when the type's new rows (all of them, whatever the
+        position's own conditions) are one run of seqs -- checked in this statement, so on
+        what it sees. A write that takes no turn (another client's insert, or
+        ``kb.sql(..., write=True)``, on PostgreSQL) may draw a seq while the add runs and
+        commit after this statement: the seq is then missing here, and the rows are kept
+        one by one instead, as :meth:`term_pending` keeps them, never to decide a row no
+        add stored."""
         key = ("term_span", pos)
         sql = self._cache.get(key)
         if sql is None:
             a = self.aliases()
             t = a[f"e{pos}"]
-            conds = [f"{t}.seq > :w{pos}"] + self.cond_sql(a, within={pos})
+            own = [c for c in self.cond_sql(a, within={pos}) if c]
+
+            def kept(expr: str) -> str:   # (the position's own conditions, if any)
+                return f"CASE WHEN {self._where(own)} THEN {expr} END" if own else expr
+            # one pass over the type's new rows (all of them: whether their seqs are one
+            # run; and those of the position: the span), read by both branches
+            new_rows = (f"WITH s AS (SELECT count(*) AS total, min({t}.seq) AS lowest, "
+                        f"max({t}.seq) AS highest, min({kept(f'{t}.seq')}) AS first_seq, "
+                        f"max({kept(f'{t}.seq')}) AS last_seq, count({kept('1')}) AS n, "
+                        f"max({kept(f'{t}.t_end')}) AS latest, "
+                        f"min({kept(f'{t}.t_end')}) AS earliest "
+                        f"FROM {self.tables[pos]} AS {t} WHERE {t}.seq > :w{pos}) ")
+            run = "s.total = s.highest - s.lowest + 1"
             sql = self._cache[key] = (
                 "INSERT INTO slr_cep_pending (rule, alt, kind, pos, rowids, t_start, t_end, "
-                f"created_at) SELECT :rule, {self.index}, 'span', {pos}, "
-                f"{self.dialect.json_array(f'min({t}.seq), max({t}.seq), count(*)')}, "
-                f"max({t}.t_end), min({t}.t_end), :now FROM {self.tables[pos]} AS {t} "
-                f"WHERE {self._where(conds)} HAVING count(*) > 0")
+                f"created_at) {new_rows}SELECT :rule, {self.index}, 'span', {pos}, "
+                f"{self.dialect.json_array('s.first_seq, s.last_seq, s.n')}, s.latest, s.earliest, "
+                f":now FROM s WHERE s.n > 0 AND {run} UNION ALL "
+                f"SELECT :rule, {self.index}, 'term', {pos}, "
+                f"{self.dialect.json_array(f'{t}.seq')}, {t}.t_start, {t}.t_end, :now "
+                f"FROM s CROSS JOIN {self.tables[pos]} AS {t} WHERE NOT ({run}) AND "
+                f"{self._where([f'{t}.seq > :w{pos}'] + own)}")
         return sql
 
     def _span_join(self, pos: int) -> str:

@@ -30,7 +30,8 @@ from contextlib import contextmanager, suppress
 from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
-from ..errors import SLRBusy, SLRCancelled, SLRError, SLRServerUnreachable, SLRTimeout, \
+from ..errors import SLRBusy, SLRCancelled, SLRError, SLRServerUnreachable, SLRStatementTimeout, \
+    SLRTimeout, \
     SLRUnavailable
 from ..lockorder import ordered_lock
 from .connection import Database, drop_commit_callbacks, in_own_transaction, run_after_rollback, \
@@ -118,8 +119,11 @@ def _error(exc: BaseException, where: str, busy_timeout: float | None = None,
     this order:
 
     * a deadlock (40P01), a serialization conflict (40001), a lock wait past
-      ``busy_timeout`` (55P03): :class:`SLRBusy`;
-    * a cancel (57014): :class:`SLRCancelled` (the call's own timeout is told apart by the
+      ``busy_timeout`` (55P03), an object in use by another session (55006: a database
+      another session is connected to): :class:`SLRBusy`;
+    * a cancel (57014) at the session's ``statement_timeout`` (the server's words say so):
+      :class:`SLRStatementTimeout`, not retryable; any other cancel: :class:`SLRCancelled`
+      (the call's own timeout, a ``statement_timeout`` set for it, is told apart by the
       caller: :func:`_own_deadline`);
     * the server short of resources (class 53: disk, memory, connections):
       :class:`SLRUnavailable`;
@@ -143,6 +147,19 @@ def _error(exc: BaseException, where: str, busy_timeout: float | None = None,
     if isinstance(exc, errors.LockNotAvailable):
         waited = f" for more than {busy_timeout:g} s" if busy_timeout is not None else ""
         return SLRBusy(f"{where}: locked by another writer{waited} ({_first_line(exc)})")
+    if isinstance(exc, errors.ObjectInUse):
+        return SLRBusy(f"{where}: in use by another session; retry ({_first_line(exc)})")
+    if isinstance(exc, errors.QueryCanceled) and _at_statement_timeout(exc):
+        # (the call's own timeout= is told apart where it is set: _own_deadline)
+        timed_out = SLRStatementTimeout(
+            f"{where}: the server cancelled the statement at its statement_timeout setting "
+            f"({_first_line(exc)}): a limit set for the server, the database or the role, "
+            f"not the call's timeout=, so a retry meets it again; nothing of the call was "
+            f"stored. A call's own timeout= replaces the setting for that call; otherwise "
+            f"the setting must be raised (SHOW statement_timeout; ALTER ROLE ... SET "
+            f"statement_timeout)")
+        timed_out.reason = _first_line(exc)
+        return timed_out
     if isinstance(exc, errors.QueryCanceled):
         # (the call's own timeout= is told apart where it is set: _own_deadline)
         cancelled = SLRCancelled(f"{where}: the server cancelled the statement "
@@ -177,13 +194,30 @@ def _error(exc: BaseException, where: str, busy_timeout: float | None = None,
 _SESSION_ENDED = frozenset({"57P01", "57P02", "57P03", "57P05"})
 
 
+# The server's words for a cancel at its statement_timeout (postgres.c, ProcessInterrupts),
+# in English; another cancel says "due to user request" (pg_cancel_backend, a client's
+# cancel). A server speaking another language (lc_messages) says neither: its cancels are
+# all SLRCancelled, as they were.
+_STATEMENT_TIMEOUT_WORDS = "canceling statement due to statement timeout"
+
+
+def _at_statement_timeout(exc: BaseException) -> bool:
+    """Whether a cancel (57014) came from the session's ``statement_timeout``, by the
+    server's words (its primary message; SQLSTATE and severity are the same for every
+    cancel)."""
+    diag = getattr(exc, "diag", None)
+    words = getattr(diag, "message_primary", None) or str(exc)
+    return words.strip().startswith(_STATEMENT_TIMEOUT_WORDS)
+
+
 def _own_deadline(exc: BaseException, deadline: float) -> BaseException:
     """``exc``, or SLRTimeout when it is a cancel of the ``statement_timeout`` set for the
-    call's own ``deadline`` (``time.monotonic()``), now passed. The server's cause (57014)
-    is the same for every cancel, and its text is in the server's language: the time
+    call's own ``deadline`` (``time.monotonic()``), now passed. The server's words are the
+    same for that cancel and one at a ``statement_timeout`` an administrator set: the time
     tells them apart, the timeout being rounded up (:func:`_timeout_ms`) so that the
-    server's never fires before the deadline."""
-    if type(exc) is SLRCancelled and time.monotonic() >= deadline:
+    server's never fires before the deadline (and while the call's own is set, it is the
+    transaction's, replacing the administrator's)."""
+    if isinstance(exc, (SLRCancelled, SLRStatementTimeout)) and time.monotonic() >= deadline:
         return SLRTimeout(f"query timed out ({exc.reason})")
     return exc
 
