@@ -369,33 +369,6 @@ def test_a_run_of_one_type_goes_in_with_a_few_multi_row_inserts_in_its_order(pat
     assert robots == [(robot,)]
 
 
-@pytest.mark.parametrize("path", ["columns", "event by event"])
-@pytest.mark.parametrize("robot", [None, "r1"])
-def test_a_long_run_of_one_type_goes_in_with_one_row_executions_in_its_order(path, robot):
-    # from _EXECUTEMANY_ROWS rows of a type on, SQLite steps one prepared one-row statement
-    # faster than the multi-row ones (a bulk ingest): every traced insert holds one row, the
-    # rows keep their order in seq, the robot column is bound or left NULL as before
-    from slr_sql.store.events import _EXECUTEMANY_ROWS
-
-    store = EventStore(None, slr_sql.ManualClock(5.0), robot=robot)
-    count = _EXECUTEMANY_ROWS
-    events = [("p", (i, f"x{i}"), float(i), float(i)) for i in range(count)]
-    if path == "event by event":
-        events.insert(500, ("p", (math.nan, "y"), 1.0, 1.0))
-    inserts: list[str] = []
-    store._db.conn.set_trace_callback(
-        lambda sql: inserts.append(sql) if sql.startswith('INSERT INTO "p"') else None)
-    try:
-        errors = store.add_events(events)
-    finally:
-        store._db.conn.set_trace_callback(None)
-    assert [e.index for e in errors] == ([500] if path == "event by event" else [])
-    assert len(inserts) == count and not any("),(" in sql for sql in inserts)
-    assert [args for args, *_ in store.scan("p", 2)] == [(i, f"x{i}") for i in range(count)]
-    robots = store._db.conn.execute('SELECT DISTINCT robot FROM "p"').fetchall()
-    assert robots == [(robot,)]
-
-
 @given(st.one_of(VECTORS, st.lists(VECTORS, min_size=1, max_size=3).map(
     lambda lists: Struct("pose", tuple(lists)))))
 @example([2 ** 63 - 1, -(2 ** 63), 2 ** 63, 1e16, -0.0])

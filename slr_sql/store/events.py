@@ -49,11 +49,6 @@ _INSERT_CHUNK = 20_000  # events checked and inserted together: bounds memory on
 # executions of a one-row statement (binding and stepping a statement is per execution); the
 # sizes are powers of two so that a few statement texts, kept prepared, serve every batch
 _ROWS_PER_INSERT = 512
-# from this many rows of one type on, one executemany of the one-row statement: on a long run
-# SQLite steps it ~5-7% faster than the multi-row statements of the same rows (100,000
-# events: 0.53 against 0.57 s CPU), and the rows need no flat list; shorter runs (an add of
-# a few hundred events, the event rules' batches) keep the multi-row statements
-_EXECUTEMANY_ROWS = 4096
 _FOUR = {4}
 _FLOAT = frozenset({float})
 _SEQUENCES = frozenset({tuple, list})
@@ -321,14 +316,10 @@ class EventWriter:
 
     def _insert_rows(self, event_type: EventType, rows: Iterable[tuple], count: int,
                      with_robot: bool) -> None:
-        """Insert the ``count`` ``rows`` (SQLite), in their order: with multi-row INSERTs
-        of power-of-two sizes, or, from :data:`_EXECUTEMANY_ROWS` rows on, one
-        ``executemany`` of the one-row statement."""
+        """Insert the ``count`` ``rows`` (SQLite), in their order, with multi-row INSERTs
+        of power-of-two sizes (an ``executemany`` of the one-row statement was ~5% faster
+        on a bulk ingest while a table had four indexes, ~2% slower with two)."""
         if not count:
-            return
-        if count >= _EXECUTEMANY_ROWS:
-            self.db.conn.executemany(event_type.insert_sql if with_robot
-                                     else event_type.insert_unnamed_sql, rows)
             return
         values = list(chain.from_iterable(rows))
         width = len(values) // count
