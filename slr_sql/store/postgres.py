@@ -1097,7 +1097,8 @@ class PgDatabase:
                 "AND n.nspname = current_schema() AND (%s::text IS NULL OR c.relname = %s)"
                 .replace("%s", "?"), (table, table))}
 
-    def planned_indexes(self, sql: str, extra: Iterable[str] = ()) -> set[str] | None:
+    def hypothetical_plan(self, sql: str, extra: dict[str, str],
+                          without: Iterable[str] = ()) -> list[str] | None:
         """None: PostgreSQL's planner weighs the tables' statistics, so a plan asked of an
         empty copy of the schema would say nothing of the plan on the data (the callers
         build what a statement may use, conservatively)."""
