@@ -407,3 +407,31 @@ def test_a_build_taken_back_by_the_outer_rollback_after_an_inner_one_is_made_aga
     kb.clock.set(200.0)
     assert [r["X"] for r in kb.query("v(X)^[S, E]")] == [3]
     kb.close()
+
+
+def test_a_schema_a_rollback_took_back_is_not_taken_for_a_later_one(tmp_path):
+    """SQLite's schema_version goes back with a rollback, and the next two changes bring it
+    to the number it had inside the rolled-back transaction: the planner's copy of the
+    schema made in there (with w's start-ordered indexes, which the rollback took) is not
+    the schema then, and w's statements, built again, still get their indexes."""
+    kb = _opened(str(tmp_path / "v.db"), RULE)
+    kb.add_many(["z(1)^1"])
+    kb.load(":- event y/1.\n:- max_delay(y/1, 0).\n:- max_delay(w/1, 0).\n"
+            "v(X) <- y(X) seq w(X).")
+    kb.add_many(["w(0)^101"])
+    wanted = {"slr_ix__w__start", "slr_ix__w__a1_start"}
+    version = kb.sql("PRAGMA schema_version")[1][0][0]
+    with pytest.raises(RuntimeError):
+        with kb.store.transaction():
+            kb.add_many(["y(1)^102", "w(1)^103"])   # w's two indexes: the version + 2
+            assert _start_indexes(kb, "w") == wanted
+            inside = kb.sql("PRAGMA schema_version")[1][0][0]
+            raise RuntimeError("undo")
+    assert _start_indexes(kb, "w") == set()
+    assert kb.store.ensure_start_order("z", 1)     # two other indexes: the same number
+    assert kb.sql("PRAGMA schema_version")[1][0][0] == inside == version + 2
+    kb.add_many(["y(2)^104", "w(2)^105"])
+    assert _start_indexes(kb, "w") == wanted
+    kb.clock.set(200.0)
+    assert [r["X"] for r in kb.query("v(X)^[S, E]")] == [2]
+    kb.close()

@@ -440,8 +440,9 @@ class Database:
         Asked of an empty in-memory copy of the schema (its tables and indexes, with this
         connection's SQL functions): the copy is all the planner reads, as no statistics
         are gathered (``ANALYZE`` is never run), so an index is judged without being built.
-        The copy is made again when the schema changed; the extra indexes stay in it until
-        then, or until left out.
+        The copy is made again when the schema changed, and after a rollback (which takes
+        the schema's version back); the extra indexes stay in it until then, or until left
+        out.
 
         >>> db = Database(None); _ = db.execute("CREATE TABLE t (x, y)")
         >>> sql, x = "SELECT * FROM t WHERE x = :v", {"t_x": "CREATE INDEX t_x ON t (x)"}
@@ -469,6 +470,13 @@ class Database:
                 return None
         return [str(row[-1]) for row in plan]
 
+    def _forget_planning_copy(self) -> None:
+        """Before a rollback: the schema's version goes back with it, and the next changes
+        may bring it to a number a copy made inside had, of another schema (lock held)."""
+        if self._planning is not None:
+            self._planning[1].close()
+            self._planning = None
+
     def _planning_copy(self) -> tuple[sqlite3.Connection, dict[str, str], set[str]]:
         """The in-memory copy of the schema :meth:`hypothetical_plan` asks, the extra
         indexes made in it since (name -> statement), and the catalog's index names (lock
@@ -476,9 +484,7 @@ class Database:
         version = self.conn.execute("PRAGMA schema_version").fetchone()[0]
         if self._planning is not None and self._planning[0] == version:
             return self._planning[1], self._planning[2], self._planning[3]
-        if self._planning is not None:
-            self._planning[1].close()
-            self._planning = None
+        self._forget_planning_copy()
         # (no statement cache: an EXPLAIN's rows are made when it is prepared, so a cached
         # one would answer for the indexes there were then)
         copy = sqlite3.connect(":memory:", check_same_thread=False, isolation_level=None,
@@ -554,9 +560,7 @@ class Database:
             self.closed = True
             if self.checkpointer is not None:
                 self.checkpointer.stop()
-            if self._planning is not None:
-                self._planning[1].close()
-                self._planning = None
+            self._forget_planning_copy()
             if self._absolute is not None:
                 now = self._identities()
                 if now[0] != self._identity[0]:  # replaced: leave the new file's side alone
@@ -691,6 +695,7 @@ class Database:
                     self.tx_depth = depth
                     committed = drop_commit_callbacks(self.commit_callbacks, depth)
                     try:
+                        self._forget_planning_copy()
                         if depth == 0:
                             conn.execute("ROLLBACK")
                         else:
@@ -707,6 +712,7 @@ class Database:
                     conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
                 except BaseException:
                     committed = drop_commit_callbacks(self.commit_callbacks, depth)
+                    self._forget_planning_copy()
                     if depth == 0 and conn.in_transaction:
                         conn.execute("ROLLBACK")
                     if listeners:
