@@ -720,6 +720,8 @@ class Database:
                     raise
                 if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
                     committed, self.commit_callbacks = self.commit_callbacks, []
+                elif depth:   # (released into the enclosing one: its callbacks now)
+                    merge_commit_callbacks(self.commit_callbacks, depth)
         except BaseException as exc:
             if committed:   # (rolled back: what a rollback does not take back)
                 run_after_rollback(committed, exc)
@@ -1105,6 +1107,18 @@ def in_own_transaction(db: Any) -> bool:
     """
     with db.lock:
         return bool(db.tx_depth)
+
+
+def merge_commit_callbacks(callbacks: CommitCallbacks, depth: int) -> None:
+    """Hand, in ``callbacks``, those asked for inside the nested transaction released into
+    the one at ``depth`` (>= 1) over to that one: a later nested transaction at the same
+    depth that rolls back must not take them back with its own.
+
+    >>> callbacks = [(1, print, False), (2, print, False)]
+    >>> merge_commit_callbacks(callbacks, 1); callbacks
+    [(1, <built-in function print>, False), (1, <built-in function print>, False)]
+    """
+    callbacks[:] = [(min(d, depth), callback, always) for d, callback, always in callbacks]
 
 
 def drop_commit_callbacks(callbacks: CommitCallbacks, depth: int) -> CommitCallbacks:

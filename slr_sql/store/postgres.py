@@ -34,7 +34,8 @@ from ..errors import SLRBusy, SLRCancelled, SLRError, SLRServerUnreachable, SLRS
     SLRTimeout, \
     SLRUnavailable
 from ..lockorder import ordered_lock
-from .connection import Database, drop_commit_callbacks, in_own_transaction, run_after_rollback, \
+from .connection import Database, drop_commit_callbacks, in_own_transaction, \
+    merge_commit_callbacks, run_after_rollback, \
     run_commit_callbacks
 from .dialect import POSTGRES
 from .functions import SqlFunctions
@@ -1226,6 +1227,8 @@ class PgDatabase:
                     raise
                 if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
                     committed, self.commit_callbacks = self.commit_callbacks, []
+                elif depth:   # (released into the enclosing one: its callbacks now)
+                    merge_commit_callbacks(self.commit_callbacks, depth)
         except BaseException as exc:
             if committed:   # (rolled back: what a rollback does not take back)
                 run_after_rollback(committed, exc)
