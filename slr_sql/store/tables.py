@@ -175,6 +175,30 @@ def plan_cost(steps: list[str]) -> tuple[int, int, int]:
     return scans, sorts, -bound
 
 
+_POINT = re.compile(r"\b(\w+)\.t_start = \1\.t_end\b")
+
+
+def start_compared(sql: str, quoted: str) -> bool:
+    """Whether ``sql`` compares the start time of the table ``quoted`` (one of its aliases'
+    ``t_start`` after the statement's first ``FROM``, not in what it selects: a condition, a
+    join, a subquery's order): where no planner can be asked, what its start-ordered
+    indexes may serve.
+
+    >>> start_compared('SELECT f(t1.t_start) AS v1 FROM "q" AS t1 WHERE t1.t_end > :c0',
+    ...                '"q"')
+    False
+    >>> start_compared('SELECT 1 FROM "p" AS t0 CROSS JOIN "q" AS t1 '
+    ...                'WHERE t0.t_start = t1.t_start', '"q"')
+    True
+    >>> start_compared('SELECT 1 FROM "q" AS t0 WHERE t0.t_start = t0.t_end', '"q"')
+    False
+    """
+    # (a point event's own start = end is no search)
+    body = _POINT.sub("", sql.partition(" FROM ")[2])
+    return any(re.search(rf"\b{re.escape(alias)}\.t_start\b", body)
+               for alias in re.findall(re.escape(quoted) + r" AS (\w+)", sql))
+
+
 def _refused_for_good(exc: BaseException) -> bool:
     """Whether a failed build of indexes will fail again (this connection may not write the
     table's indexes: not the table's owner on a server, a read-only file), not a condition
