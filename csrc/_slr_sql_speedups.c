@@ -18,6 +18,15 @@
  *   split_flat(data, lengths)
  *       orjson's bytes of that flat list cut back into one JSON array per value, with the
  *       same None rows and None column as split_rows.
+ *   event_columns(chunk)
+ *       (name, arity, argument columns, starts, ends) of a list of (name, args, start, end)
+ *       tuples of one name (an exact str) and one arity (args exact tuples or lists), with
+ *       finite float times, start <= end, each -0.0 time given as 0.0: the checks of
+ *       store/events.py's _checked_columns in one pass; None at anything else (the Python
+ *       checks then decide: they accept more, and say what is wrong);
+ *   event_form(events)
+ *       "tuples" if every item of the list is a 4-tuple whose args is a tuple, "lists" if
+ *       some args are lists instead, None otherwise: kb.py's _event_tuples in one pass.
  *
  * `data` is orjson's output: its JSON syntax is trusted, every byte is checked. All are
  * pure functions of their arguments (the byte table is constant). The Python versions stay
@@ -381,6 +390,118 @@ decline:
     Py_RETURN_NONE;
 }
 
+/* A float 0.0 for the -0.0 times event_columns meets (an event time -0.0 is stored as 0.0). */
+static PyObject *positive_zero = NULL;
+
+/* event_columns(chunk) -> (name, arity, columns, starts, ends) | None: see the top. No
+ * Python code runs inside the loop (exact types only), so the chunk cannot change under it. */
+static PyObject *
+event_columns(PyObject *Py_UNUSED(module), PyObject *chunk)
+{
+    Py_ssize_t n, i, k, arity;
+    PyObject *first, *name, *args, *columns = NULL, *starts = NULL, *ends = NULL, *result;
+    if (!PyList_CheckExact(chunk) || (n = PyList_GET_SIZE(chunk)) == 0)
+        Py_RETURN_NONE;
+    first = PyList_GET_ITEM(chunk, 0);
+    if (!PyTuple_CheckExact(first) || PyTuple_GET_SIZE(first) != 4)
+        Py_RETURN_NONE;
+    name = PyTuple_GET_ITEM(first, 0);
+    args = PyTuple_GET_ITEM(first, 1);
+    if (!PyUnicode_CheckExact(name))
+        Py_RETURN_NONE;
+    if (PyTuple_CheckExact(args))
+        arity = PyTuple_GET_SIZE(args);
+    else if (PyList_CheckExact(args))
+        arity = PyList_GET_SIZE(args);
+    else
+        Py_RETURN_NONE;
+    if ((columns = PyList_New(arity)) == NULL)
+        return NULL;
+    for (k = 0; k < arity; k++) {
+        PyObject *column = PyList_New(n);
+        if (column == NULL)
+            goto error;
+        PyList_SET_ITEM(columns, k, column);
+    }
+    if ((starts = PyList_New(n)) == NULL || (ends = PyList_New(n)) == NULL)
+        goto error;
+    for (i = 0; i < n; i++) {
+        PyObject *event = PyList_GET_ITEM(chunk, i), *other, *start, *end;
+        PyObject **items;
+        double s, e;
+        if (!PyTuple_CheckExact(event) || PyTuple_GET_SIZE(event) != 4)
+            goto decline;
+        other = PyTuple_GET_ITEM(event, 0);
+        if (other != name && (!PyUnicode_CheckExact(other)
+                              || PyUnicode_Compare(other, name) != 0))
+            goto decline;  /* (two exact str: no error to clear) */
+        args = PyTuple_GET_ITEM(event, 1);
+        if (PyTuple_CheckExact(args) && PyTuple_GET_SIZE(args) == arity)
+            items = &PyTuple_GET_ITEM(args, 0);
+        else if (PyList_CheckExact(args) && PyList_GET_SIZE(args) == arity)
+            items = PySequence_Fast_ITEMS(args);
+        else
+            goto decline;
+        start = PyTuple_GET_ITEM(event, 2);
+        end = PyTuple_GET_ITEM(event, 3);
+        if (!PyFloat_CheckExact(start) || !PyFloat_CheckExact(end))
+            goto decline;
+        s = PyFloat_AS_DOUBLE(start);
+        e = PyFloat_AS_DOUBLE(end);
+        if (!(isfinite(s) && isfinite(e) && s <= e))
+            goto decline;  /* (false at a NaN, too) */
+        if (s == 0.0)
+            start = positive_zero;
+        if (e == 0.0)
+            end = positive_zero;
+        for (k = 0; k < arity; k++) {
+            Py_INCREF(items[k]);
+            PyList_SET_ITEM(PyList_GET_ITEM(columns, k), i, items[k]);
+        }
+        Py_INCREF(start);
+        PyList_SET_ITEM(starts, i, start);
+        Py_INCREF(end);
+        PyList_SET_ITEM(ends, i, end);
+    }
+    result = Py_BuildValue("(OnOOO)", name, arity, columns, starts, ends);
+    Py_DECREF(columns);
+    Py_DECREF(starts);
+    Py_DECREF(ends);
+    return result;
+decline:
+    Py_DECREF(columns);  /* (lists free the items set so far; the others are NULL) */
+    Py_DECREF(starts);
+    Py_DECREF(ends);
+    Py_RETURN_NONE;
+error:
+    Py_XDECREF(columns);
+    Py_XDECREF(starts);
+    Py_XDECREF(ends);
+    return NULL;
+}
+
+/* event_form(events) -> "tuples" | "lists" | None: see the top. */
+static PyObject *
+event_form(PyObject *Py_UNUSED(module), PyObject *events)
+{
+    Py_ssize_t n, i;
+    int lists = 0;
+    if (!PyList_CheckExact(events) || (n = PyList_GET_SIZE(events)) == 0)
+        Py_RETURN_NONE;
+    for (i = 0; i < n; i++) {
+        PyObject *event = PyList_GET_ITEM(events, i), *args;
+        if (!PyTuple_CheckExact(event) || PyTuple_GET_SIZE(event) != 4)
+            Py_RETURN_NONE;
+        args = PyTuple_GET_ITEM(event, 1);
+        if (PyTuple_CheckExact(args))
+            continue;
+        if (!PyList_CheckExact(args))
+            Py_RETURN_NONE;
+        lists = 1;
+    }
+    return PyUnicode_FromString(lists ? "lists" : "tuples");
+}
+
 static PyMethodDef methods[] = {
     {"number_rows", (PyCFunction)number_rows, METH_O,
      "number_rows(values) -> bool\n\n"
@@ -394,6 +515,12 @@ static PyMethodDef methods[] = {
     {"split_rows", (PyCFunction)(void (*)(void))split_rows, METH_FASTCALL,
      "split_rows(data, count) -> list | None\n\n"
      "The texts of the count JSON arrays of numbers in data (None for rows to write again)."},
+    {"event_columns", (PyCFunction)event_columns, METH_O,
+     "event_columns(chunk) -> (name, arity, columns, starts, ends) | None\n\n"
+     "The argument columns and times of events of one name and arity, checked."},
+    {"event_form", (PyCFunction)event_form, METH_O,
+     "event_form(events) -> 'tuples' | 'lists' | None\n\n"
+     "Whether every event is a 4-tuple with tuple (or list) arguments."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -412,6 +539,8 @@ PyInit__slr_sql_speedups(void)
 {
     PyObject *m;
     fill_byte_kinds();
+    if (positive_zero == NULL && (positive_zero = PyFloat_FromDouble(0.0)) == NULL)
+        return NULL;
     m = PyModule_Create(&module);
     if (m != NULL && PyModule_AddIntConstant(m, "LOOPS_VERSION", LOOPS_VERSION) < 0) {
         Py_DECREF(m);

@@ -73,7 +73,7 @@ from itertools import chain
 from operator import itemgetter
 from operator import le as _le
 from json.encoder import encode_basestring as _quote  # C-accelerated; keeps non-ASCII
-from typing import Any
+from typing import Any, Callable
 
 import orjson
 
@@ -92,6 +92,13 @@ else:
         _speedups = None
     if getattr(_speedups, "LOOPS_VERSION", None) != _LOOPS_VERSION:
         _speedups = None  # a build older (or newer) than this source: not used
+# Two of its loops walk a batch of events rather than terms: the shape checks of a bulk add
+# (store/events.py's column path, kb.add_many's form of the batch) in one pass. None
+# without the C loops or with a build from before them: the Python checks then decide,
+# with the same outcome.
+event_columns_loop: Callable[[list], tuple | None] | None = \
+    getattr(_speedups, "event_columns", None)
+event_form_loop: Callable[[list], str | None] | None = getattr(_speedups, "event_form", None)
 
 __all__ = ["encode", "encode_column", "decode", "decode_answer", "encode_json", "Unencodable",
            "NullArgument",

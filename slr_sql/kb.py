@@ -22,7 +22,7 @@ from .answers import answer_bindings
 from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .engine import Engine
-from .encoding import NullArgument
+from .encoding import NullArgument, event_form_loop
 from .errors import EventRejected, NotAnEvent, SLRError, SLRUnavailable
 from .parser import parse_event_fast, parse_program, parse_term
 from .loader import ProgramLoader
@@ -50,7 +50,15 @@ def _event_tuples(events: list) -> str | None:
     """"tuples" if every item is a ``(name, args, start, end)`` tuple whose ``args`` is a
     tuple: such a batch needs no preparing; "lists" if some ``args`` are lists instead (what
     decoded messages and most robot code give): they need only to become tuples; None
-    otherwise (checked a column at a time, at C speed)."""
+    otherwise (checked in one pass of the C loop ``event_form_loop``, or a column at a time
+    by :func:`_event_form_by_columns`, which answers the same)."""
+    if event_form_loop is not None:
+        return event_form_loop(events)
+    return _event_form_by_columns(events)
+
+
+def _event_form_by_columns(events: list) -> str | None:
+    """:func:`_event_tuples` without the C loops: a column at a time, at C speed."""
     try:
         if not (_TUPLE.issuperset(map(type, events)) and set(map(len, events)) == _FOUR):
             return None

@@ -190,8 +190,10 @@ class SqlPlan:
         # (built on first need; once built, an attribute read per run)
         self.start_ordered = tuple(sorted(start_ordered))
         # the event types it reads: before the first run, the start-ordered indexes its
-        # plan would use are built (None once done)
-        self.read_types: tuple | None = tuple(sorted(read_types)) or None
+        # plan would use are built; again after a rollback that may have taken a build
+        # back (the store's count of those when last done, None before)
+        self.read_types = tuple(sorted(read_types))
+        self.prepared_at: int | None = None
         self.has_robot = has_robot        # restricted to one robot's events (:robot)
         self.guards = guards              # statements run first: goals that may raise
         # arguments from Python the statement uses as numbers: a non-number goes to the
@@ -243,12 +245,13 @@ class SqlPlan:
                 params[pname] = to_column(params[pname])
         for key in self.start_ordered:
             kb.store.ensure_start_order(*key)
-        if self.read_types is not None:
+        undone = kb.store.start_order_builds_undone
+        if self.read_types and self.prepared_at != undone:
             for sql in (self.sql, *self.guards):
                 if sql is not None:
                     # (where the planner cannot be asked, only next's types, above)
                     kb.store.prepare_start_order(sql, self.read_types, build_if_unsure=False)
-            self.read_types = None
+            self.prepared_at = undone
         for guard in self.guards:
             kb.store.run_compiled(guard, params, None, deadline, may_fall_back=True,
                                   instructions=instructions)

@@ -54,3 +54,26 @@ def test_a_clock_move_inside_a_transaction_that_rolls_back_still_decides(backend
                 raise KeyError("undo")
         assert kb.event_rules()[0]["pending"] == 0
         assert [a["X"] for a in kb.query("c(X)^[S, E]")] == [1]
+
+
+def test_an_add_in_a_nested_part_is_heard_though_a_later_nested_part_rolled_back(backend):
+    """A nested transaction that committed into its enclosing one hands its callbacks to
+    it: a later nested part that rolls back takes back its own only, and the add made in
+    the first is heard, released and waited for once the whole committed."""
+    with slr_sql.open(backend, clock=ManualClock(10.0)) as kb:
+        kb.load(RULE)
+        heard: list = []
+        kb.add_listeners.append(lambda batch: heard.append(sorted(e[0] for e in batch)))
+        waiting = kb.submit("findall(X, e(X)^_, L)", at=5)
+        with kb.store.transaction():
+            with kb.store.transaction():
+                kb.add_many(["a(1)^1", "b(1)^2", "e(7)^1"])
+                kb.mark_complete("e/1", 5)
+            with pytest.raises(ValueError):
+                with kb.store.transaction():
+                    kb.add_many(["a(9)^3"])
+                    raise ValueError("this part only")
+        assert heard == [["a", "b", "c", "e"]]
+        assert kb.complete_until("e/1") == 5
+        assert waiting.result(timeout=30) == [{"L": [7]}]
+        assert kb.store.count("a", 1) == 1

@@ -292,3 +292,92 @@ def test_a_cyclic_list_made_by_hand_lets_a_signal_stop_the_walk():
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, previous)
+
+
+# -- the loops over a batch of events (store/events.py's column path, kb.add_many's form) --
+
+def test_the_built_accelerator_has_the_event_loops():
+    # a build from before them still encodes, but every bulk add would check its events in
+    # Python: rebuild (python setup.py build_ext --inplace)
+    if speedups is not None:
+        assert encoding.event_columns_loop is speedups.event_columns
+        assert encoding.event_form_loop is speedups.event_form
+
+
+_TIMES = st.one_of(st.floats(-1e3, 1e3), st.sampled_from([-0.0, 0.0, math.inf, -math.inf,
+                                                          math.nan]), st.integers(-3, 3))
+_ARGS = st.lists(st.one_of(st.integers(-3, 3), st.text(max_size=2)), max_size=3)
+_EXACT_EVENT = st.tuples(st.sampled_from(["p", "q"]),
+                         st.one_of(_ARGS, _ARGS.map(tuple)), _TIMES, _TIMES)
+
+
+def _python_split(chunk):
+    from slr_sql.store.events import _split_columns
+
+    try:
+        if set(map(len, chunk)) != {4} or len(set(map(lambda e: e[0], chunk))) != 1:
+            return None
+        return _split_columns(chunk)
+    except (TypeError, IndexError, KeyError):
+        return None
+
+
+@needs_c
+@given(st.lists(_EXACT_EVENT, min_size=1, max_size=8))
+@example([("p", (1,), -0.0, 0.0), ("p", [2], -1.0, -0.0)])
+@example([("p", (), 1.0, 1.0), ("p", (), 0.5, math.inf)])
+def test_event_columns_splits_exactly_the_chunks_the_python_checks_accept(chunk):
+    # events of exact types: the C loop declines a chunk exactly when the Python checks
+    # refuse it, and splits the others into the same columns (-0.0 times given as 0.0)
+    split = speedups.event_columns(chunk)
+    assert repr(split) == repr(_python_split(chunk))
+
+
+class Name(str):
+    pass
+
+
+@needs_c
+@pytest.mark.parametrize("chunk", [
+    [["p", (1,), 1.0, 1.0]],                                 # an event that is a list
+    [("p", (1,), 1.0, 1.0), ["p", (2,), 2.0, 2.0]],
+    [(Name("p"), (1,), 1.0, 1.0)],                           # a str subclass as the name
+    [("p", (1,), 1.0, 1.0), (Name("p"), (2,), 2.0, 2.0)],
+    [("p", Vector([1]), 1.0, 1.0)],                          # a list subclass as arguments
+    [("p", (1,), 1.0, 1.0, "extra")],
+    [(1, (1,), 1.0, 1.0)],                                   # not a name at all
+    [("p", 1, 1.0, 1.0)],
+    [("p", (1,), 1.0, 1.0), ("p", (1, 2), 2.0, 2.0)],        # two arities
+    [("p", (1,), 1.0, 1.0), ("q", (1,), 2.0, 2.0)],          # two names
+    [("p", (1,), 1.0, 2.0), ("p", (1,), 2.0, 1.0)],          # start after end
+])
+def test_event_columns_declines_what_it_does_not_know_and_the_python_checks_decide(chunk):
+    assert speedups.event_columns(chunk) is None
+    assert speedups.event_columns(tuple(chunk)) is None   # (only a list is walked)
+
+
+@needs_c
+def test_event_columns_gives_the_columns_of_a_bulk_chunk():
+    chunk = [("seg", (Atom(f"o{i}"), make_list([i, 0.5])), float(i), float(i) + 1)
+             for i in range(1000)]
+    name, arity, columns, starts, ends = speedups.event_columns(chunk)
+    assert (name, arity) == ("seg", 2)
+    assert columns == [[e[1][0] for e in chunk], [e[1][1] for e in chunk]]
+    assert starts == [e[2] for e in chunk] and ends == [e[3] for e in chunk]
+    assert speedups.event_columns([]) is None
+
+
+_ANY_EVENT = st.one_of(_EXACT_EVENT, _EXACT_EVENT.map(list),
+                       st.tuples(st.just("p"), st.sampled_from([1, None, Vector([1])]),
+                                 _TIMES, _TIMES),
+                       st.tuples(st.just("p"), _ARGS), st.just("p(1)^1"))
+
+
+@needs_c
+@given(st.lists(_ANY_EVENT, max_size=6))
+@example([("p", (1,), 1.0, 1.0), ("p", [1], 1.0, 1.0)])
+@example([("p", (1,), 1.0, 1.0), ["p", (1,), 1.0, 1.0]])
+def test_event_form_answers_as_the_column_checks_do(events):
+    from slr_sql.kb import _event_form_by_columns
+
+    assert speedups.event_form(events) == _event_form_by_columns(events)

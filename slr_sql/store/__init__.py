@@ -65,7 +65,7 @@ from .postgres import PgDatabase, is_postgres_url
 from .schema import migration_scripts
 from .space import ServerSpace, Space
 from .sqltext import quote_identifier, split_sql_script, sql_literal, store_error
-from .tables import EventTables
+from .tables import EventTables, start_compared
 
 __all__ = ["EventStore", "Event", "EventBatch", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "DatabaseError", "quote_identifier", "sql_literal", "format_event",
@@ -411,7 +411,8 @@ class EventStore:
         """Before a statement first runs: build the start-ordered indexes it would use of
         the event types ``types`` (those of them whose tables it names) -- the ones SQLite's
         planner would take (:meth:`EventTables.start_orders_wanted`); where the backend
-        cannot say (PostgreSQL), all of them if ``build_if_unsure``, else none.
+        cannot say (PostgreSQL), all of them if ``build_if_unsure``, else those whose start
+        time it compares (:func:`~slr_sql.store.tables.start_compared`).
 
         >>> s = EventStore(None); _ = s.declare_type("b", 1)
         >>> s.prepare_start_order('SELECT seq FROM "b" WHERE arg1 = :k AND t_end > :t', [("b", 1)])
@@ -430,7 +431,8 @@ class EventStore:
             self._db.check_open()
             wanted = self._tables.start_orders_wanted(sql)
         if wanted is None:
-            wanted = set(types) if build_if_unsure else set()
+            wanted = set(types) if build_if_unsure else {
+                key for key in types if start_compared(sql, known[key].quoted)}
         for key in types:
             if key in wanted:
                 self.ensure_start_order(*key)

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import os
 import random
-import re
 import sqlite3
 import stat
 import time
@@ -41,7 +40,7 @@ from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
 from .dialect import SQLITE
 from .functions import SqlFunctions
 from .schema import migrate, migration_scripts
-from .sqltext import bound_parameters, busy_error, split_sql_script, store_error
+from .sqltext import bound_parameters, busy_error, quote_identifier, split_sql_script, store_error
 
 __all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "run_sql_file", "check_file", "refuse_no_store"]
@@ -290,9 +289,9 @@ class Database:
         self.progress: tuple[Callable[[], int], int] | None = None
         # the Python functions statements may call (install_functions), on every connection
         self.functions: SqlFunctions | None = None
-        # (schema version, in-memory copy of the schema, extra indexes made in it):
-        # planned_indexes asks its planner
-        self._planning: tuple[int, sqlite3.Connection, set[str]] | None = None
+        # (schema version, in-memory copy of the schema, extra indexes made in it, the
+        # catalog's indexes): hypothetical_plan asks its planner
+        self._planning: tuple[int, sqlite3.Connection, dict[str, str], set[str]] | None = None
         self.busy_timeout = busy_timeout
         self._absolute: str | None = None  # set once open (check_identity)
         self._identity: tuple = (None, None, None)
@@ -432,43 +431,64 @@ class Database:
                 "SELECT name FROM sqlite_master WHERE type = 'index' AND tbl_name = ?",
                 (table,))}
 
-    def planned_indexes(self, sql: str, extra: Iterable[str] = ()) -> set[str] | None:
-        """The indexes SQLite's planner would use for ``sql`` if the indexes the ``extra``
-        ``CREATE INDEX`` statements make existed too; None if the plan cannot be asked.
+    def hypothetical_plan(self, sql: str, extra: dict[str, str],
+                          without: Iterable[str] = ()) -> list[str] | None:
+        """The steps of SQLite's plan for ``sql`` (``EXPLAIN QUERY PLAN``'s lines) as if the
+        indexes ``extra`` (name -> its ``CREATE INDEX``) existed too, but not those of them
+        named in ``without``; None if the plan cannot be asked.
 
         Asked of an empty in-memory copy of the schema (its tables and indexes, with this
         connection's SQL functions): the copy is all the planner reads, as no statistics
         are gathered (``ANALYZE`` is never run), so an index is judged without being built.
-        The copy is made again when the schema changed.
+        The copy is made again when the schema changed, and after a rollback (which takes
+        the schema's version back); the extra indexes stay in it until then, or until left
+        out.
 
         >>> db = Database(None); _ = db.execute("CREATE TABLE t (x, y)")
-        >>> sql = "SELECT * FROM t WHERE x = :v"
-        >>> db.planned_indexes(sql), db.planned_indexes(sql, ["CREATE INDEX t_x ON t (x)"])
-        (set(), {'t_x'})
+        >>> sql, x = "SELECT * FROM t WHERE x = :v", {"t_x": "CREATE INDEX t_x ON t (x)"}
+        >>> db.hypothetical_plan(sql, {}), db.hypothetical_plan(sql, x)
+        (['SCAN t'], ['SEARCH t USING INDEX t_x (x=?)'])
+        >>> db.hypothetical_plan(sql, x, without=["t_x"])
+        ['SCAN t']
         """
         with self.lock:
             self.check_open()
             try:
-                copy, made = self._planning_copy()
-                for statement in extra:
-                    if statement not in made:   # (kept: the catalog has not changed)
+                copy, made, catalog = self._planning_copy()
+                left_out = set(without)
+                for name, statement in extra.items():
+                    if name in catalog:
+                        continue
+                    if name in left_out:
+                        if made.pop(name, None) is not None:
+                            copy.execute(f"DROP INDEX {quote_identifier(name)}")
+                    elif name not in made:
                         copy.execute(statement)
-                        made.add(statement)
+                        made[name] = statement
                 plan = copy.execute("EXPLAIN QUERY PLAN " + sql, _AnyParameters()).fetchall()
             except (sqlite3.Error, ValueError, TypeError):
                 return None
-        return {m.group(1) for row in plan for m in _PLANNED_INDEX.finditer(str(row[-1]))}
+        return [str(row[-1]) for row in plan]
 
-    def _planning_copy(self) -> tuple[sqlite3.Connection, set[str]]:
-        """The in-memory copy of the schema :meth:`planned_indexes` asks, with the extra
-        indexes made in it since (lock held)."""
-        version = self.conn.execute("PRAGMA schema_version").fetchone()[0]
-        if self._planning is not None and self._planning[0] == version:
-            return self._planning[1], self._planning[2]
+    def _forget_planning_copy(self) -> None:
+        """Before a rollback: the schema's version goes back with it, and the next changes
+        may bring it to a number a copy made inside had, of another schema (lock held)."""
         if self._planning is not None:
             self._planning[1].close()
             self._planning = None
-        copy = sqlite3.connect(":memory:", check_same_thread=False, isolation_level=None)
+
+    def _planning_copy(self) -> tuple[sqlite3.Connection, dict[str, str], set[str]]:
+        """The in-memory copy of the schema :meth:`hypothetical_plan` asks, the extra
+        indexes made in it since (name -> statement), and the catalog's index names (lock
+        held)."""
+        version = self.conn.execute("PRAGMA schema_version").fetchone()[0]
+        if self._planning is not None and self._planning[0] == version:
+            return self._planning[1], self._planning[2], self._planning[3]
+        self._forget_planning_copy()
+        # (no statement cache: an EXPLAIN's rows are made when it is prepared, so a cached
+        # one would answer for the indexes there were then)
+        copy = sqlite3.connect(":memory:", check_same_thread=False, isolation_level=None,
+                               cached_statements=0)
         harden(copy)
         if self.functions is not None:
             register_functions(copy, self.functions)
@@ -477,12 +497,21 @@ class Database:
             "('table', 'index') UNION ALL SELECT type, name, sql FROM sqlite_temp_master "
             "WHERE sql IS NOT NULL AND type IN ('table', 'index') "
             "ORDER BY 1 DESC").fetchall()   # tables before their indexes
-        for _kind, name, statement in rows:
+        catalog = set()
+        for kind, name, statement in rows:
             if not name.lower().startswith("sqlite_"):
-                copy.execute(statement)
-        made: set[str] = set()
-        self._planning = (version, copy, made)
-        return copy, made
+                try:
+                    copy.execute(statement)
+                except sqlite3.Error:
+                    # (one that cannot be made again as it stands: a virtual table's shadow
+                    # tables, made with it already; a module or collation not here) -- left
+                    # out: only a statement reading it cannot be planned
+                    continue
+                if kind == "index":
+                    catalog.add(name)
+        made: dict[str, str] = {}
+        self._planning = (version, copy, made, catalog)
+        return copy, made, catalog
 
     def object_names(self) -> set[str]:
         """Lower-cased names of every table, index, view and trigger of the database.
@@ -531,9 +560,7 @@ class Database:
             self.closed = True
             if self.checkpointer is not None:
                 self.checkpointer.stop()
-            if self._planning is not None:
-                self._planning[1].close()
-                self._planning = None
+            self._forget_planning_copy()
             if self._absolute is not None:
                 now = self._identities()
                 if now[0] != self._identity[0]:  # replaced: leave the new file's side alone
@@ -668,6 +695,7 @@ class Database:
                     self.tx_depth = depth
                     committed = drop_commit_callbacks(self.commit_callbacks, depth)
                     try:
+                        self._forget_planning_copy()
                         if depth == 0:
                             conn.execute("ROLLBACK")
                         else:
@@ -684,6 +712,7 @@ class Database:
                     conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
                 except BaseException:
                     committed = drop_commit_callbacks(self.commit_callbacks, depth)
+                    self._forget_planning_copy()
                     if depth == 0 and conn.in_transaction:
                         conn.execute("ROLLBACK")
                     if listeners:
@@ -691,6 +720,8 @@ class Database:
                     raise
                 if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
                     committed, self.commit_callbacks = self.commit_callbacks, []
+                elif depth:   # (released into the enclosing one: its callbacks now)
+                    merge_commit_callbacks(self.commit_callbacks, depth)
         except BaseException as exc:
             if committed:   # (rolled back: what a rollback does not take back)
                 run_after_rollback(committed, exc)
@@ -1078,6 +1109,18 @@ def in_own_transaction(db: Any) -> bool:
         return bool(db.tx_depth)
 
 
+def merge_commit_callbacks(callbacks: CommitCallbacks, depth: int) -> None:
+    """Hand, in ``callbacks``, those asked for inside the nested transaction released into
+    the one at ``depth`` (>= 1) over to that one: a later nested transaction at the same
+    depth that rolls back must not take them back with its own.
+
+    >>> callbacks = [(1, print, False), (2, print, False)]
+    >>> merge_commit_callbacks(callbacks, 1); callbacks
+    [(1, <built-in function print>, False), (1, <built-in function print>, False)]
+    """
+    callbacks[:] = [(min(d, depth), callback, always) for d, callback, always in callbacks]
+
+
 def drop_commit_callbacks(callbacks: CommitCallbacks, depth: int) -> CommitCallbacks:
     """Forget, in ``callbacks``, those asked for inside the (nested) transaction at ``depth``
     that rolled back, but those asked for ``always``: they move to the enclosing one, and
@@ -1186,10 +1229,6 @@ def _refused(text: str, guard: SqlGuard) -> bool:
 # valid UTF-8 (Python reads it as str): SQLite then says only "user-defined function raised
 # exception", of a LIKE or trim the user never knew was a Python function.
 _FUNCTION_FAILED = "user-defined function raised exception"
-
-# an index a step of EXPLAIN QUERY PLAN reads ("SEARCH e1 USING INDEX x (arg1=?)")
-_PLANNED_INDEX = re.compile(r"USING (?:COVERING )?INDEX (\S+)")
-
 
 class _AnyParameters(dict):
     """Named parameters for a statement that is only planned: each one NULL."""

@@ -14,7 +14,7 @@ from itertools import chain, islice, repeat
 from operator import attrgetter, itemgetter, le as _le
 from typing import Any, Iterable, Iterator
 
-from ..encoding import Unencodable, encode, encode_column
+from ..encoding import Unencodable, encode, encode_column, event_columns_loop
 from ..errors import EventRejected
 from .checks import BadEvent, arguments_problem, check_times, format_event, \
     rejection_reason, shown, text_problem
@@ -69,6 +69,51 @@ def _chunks(events: Iterable[Event]) -> Iterator[tuple[int, list]]:
             return
         yield base, chunk
         base += len(chunk)
+
+
+def _split_columns(chunk: list) -> tuple[str, int, list, list, list] | None:
+    """``(name, arity, argument columns, starts, ends)`` of ``chunk`` -- events of one name
+    -- when every event is a 4-tuple of one arity, its arguments a tuple or list, with
+    finite float times, start <= end (a time -0.0 given as 0.0); None otherwise. What the
+    C loop ``event_columns_loop`` gives in one pass (for a list of exact tuples and an exact
+    str name; it declines the rest, which this decides)."""
+    name = chunk[0][0]
+    if not isinstance(name, str):
+        return None
+    argss = list(map(_second, chunk))
+    if not _SEQUENCES.issuperset(map(type, argss)):
+        return None
+    arities = set(map(len, argss))
+    if len(arities) != 1:
+        return None
+    (arity,) = arities
+    starts = list(map(_third, chunk))
+    ends_column = list(map(_fourth, chunk))
+    if not (_FLOAT.issuperset(map(type, starts)) and _FLOAT.issuperset(map(type, ends_column))
+            and all(map(_le, starts, ends_column))):  # False at a NaN, too
+        return None
+    if not (_NEG_INF < min(starts) and max(ends_column) < _INF):
+        return None
+    # a time -0.0 is stored as 0.0 on every backend (SQLite's REAL column keeps no sign
+    # of a zero, PostgreSQL's would): x + 0.0 is x but for -0.0
+    if 0.0 in starts:
+        starts = [t + 0.0 for t in starts]
+    if 0.0 in ends_column:
+        ends_column = [t + 0.0 for t in ends_column]
+    return name, arity, [list(map(itemgetter(i), argss)) for i in range(arity)], starts, \
+        ends_column
+
+
+def _encoded_columns(split: tuple[str, int, list, list, list]
+                     ) -> tuple[str, int, list, list, list] | None:
+    """``split`` (:func:`_split_columns`) with its argument columns encoded; None when an
+    argument has no stored form."""
+    name, arity, columns, starts, ends_column = split
+    try:
+        columns = [encode_column(column) for column in columns]
+    except (Unencodable, RecursionError):
+        return None
+    return name, arity, columns, starts, ends_column
 
 
 def _widen(ends: dict, key: tuple, earliest: float, latest: float) -> None:
@@ -156,17 +201,22 @@ class EventWriter:
         :meth:`_insert_each` to check event by event and say what is wrong. The end times
         of what it stored widen ``ends`` (when not None).
 
-        The checks run over whole columns (``set(map(type, ...))``, ``min``/``max``), so
-        the only Python work per event is encoding its arguments: a recording of one event
-        type goes in at close to the speed of a plain ``executemany``.
+        The checks run over whole columns (``set(map(type, ...))``, ``min``/``max``), or
+        in one pass of the C loop (``event_columns_loop``, which declines what it does not
+        know for these checks to decide), so the only Python work per event is encoding its
+        arguments: a recording of one event type goes in at close to the speed of a plain
+        ``executemany``.
         """
+        split = None if event_columns_loop is None else event_columns_loop(chunk)
         try:
-            if set(map(len, chunk)) != _FOUR:
-                return False
-            names = set(map(_first, chunk))
-            if len(names) != 1:
-                return self._insert_mixed(chunk, names, arrival, ends)
-            checked = self._checked_columns(chunk)
+            if split is None:
+                if set(map(len, chunk)) != _FOUR:
+                    return False
+                names = set(map(_first, chunk))
+                if len(names) != 1:
+                    return self._insert_mixed(chunk, names, arrival, ends)
+                split = _split_columns(chunk)
+            checked = None if split is None else _encoded_columns(split)
         except (TypeError, IndexError, KeyError):  # not sized, not indexable, unhashable
             return False
         if checked is None:
@@ -192,38 +242,14 @@ class EventWriter:
         return event_type
 
     def _checked_columns(self, chunk: list) -> tuple[str, int, list, list, list] | None:
-        """``(name, arity, argument columns, starts, ends)`` of ``chunk`` -- events of one
-        name -- when every event is a well-formed 4-tuple of one arity with finite float
-        times, start <= end, and every argument encodes; None otherwise. Nothing is
+        """``(name, arity, encoded argument columns, starts, ends)`` of ``chunk`` -- events
+        of one name -- when every event is a well-formed 4-tuple of one arity with finite
+        float times, start <= end, and every argument encodes; None otherwise. Nothing is
         written (no table created)."""
-        name = chunk[0][0]
-        if not isinstance(name, str):
-            return None
-        argss = list(map(_second, chunk))
-        if not _SEQUENCES.issuperset(map(type, argss)):
-            return None
-        arities = set(map(len, argss))
-        if len(arities) != 1:
-            return None
-        (arity,) = arities
-        starts = list(map(_third, chunk))
-        ends_column = list(map(_fourth, chunk))
-        if not (_FLOAT.issuperset(map(type, starts)) and _FLOAT.issuperset(map(type, ends_column))
-                and all(map(_le, starts, ends_column))):  # False at a NaN, too
-            return None
-        if not (_NEG_INF < min(starts) and max(ends_column) < _INF):
-            return None
-        # a time -0.0 is stored as 0.0 on every backend (SQLite's REAL column keeps no sign
-        # of a zero, PostgreSQL's would): x + 0.0 is x but for -0.0
-        if 0.0 in starts:
-            starts = [t + 0.0 for t in starts]
-        if 0.0 in ends_column:
-            ends_column = [t + 0.0 for t in ends_column]
-        try:
-            columns = [encode_column(list(map(itemgetter(i), argss))) for i in range(arity)]
-        except (Unencodable, RecursionError):
-            return None
-        return name, arity, columns, starts, ends_column
+        split = None if event_columns_loop is None else event_columns_loop(chunk)
+        if split is None:
+            split = _split_columns(chunk)
+        return None if split is None else _encoded_columns(split)
 
     def _insert_mixed(self, chunk: list, names: set, arrival: float,
                       ends: dict | None) -> bool:
@@ -279,8 +305,7 @@ class EventWriter:
                 rows = zip(*columns, starts, ends_column, repeat(arrival))
             else:
                 rows = zip(*columns, starts, ends_column, repeat(arrival), repeat(robot))
-            self._insert_rows(event_type, list(chain.from_iterable(rows)), len(starts),
-                              robot is not None)
+            self._insert_rows(event_type, rows, len(starts), robot is not None)
         elif robot is None:
             self.db.conn.executemany(event_type.insert_unnamed_sql,
                                      zip(*columns, starts, ends_column, repeat(arrival)))
@@ -289,12 +314,14 @@ class EventWriter:
                                      zip(*columns, starts, ends_column, repeat(arrival),
                                          repeat(robot)))
 
-    def _insert_rows(self, event_type: EventType, values: list, count: int,
+    def _insert_rows(self, event_type: EventType, rows: Iterable[tuple], count: int,
                      with_robot: bool) -> None:
-        """Insert ``count`` rows given as one flat list of their ``values`` (SQLite), in
-        their order, with multi-row INSERTs of power-of-two sizes."""
+        """Insert the ``count`` ``rows`` (SQLite), in their order, with multi-row INSERTs
+        of power-of-two sizes (an ``executemany`` of the one-row statement was ~5% faster
+        on a bulk ingest while a table had four indexes, ~2% slower with two)."""
         if not count:
             return
+        values = list(chain.from_iterable(rows))
         width = len(values) // count
         execute = self.db.conn.execute
         most = _ROWS_PER_INSERT
@@ -302,10 +329,10 @@ class EventWriter:
             most //= 2
         done = 0
         while done < count:
-            rows = min(most, 1 << ((count - done).bit_length() - 1))
-            execute(event_type.insert_rows_sql(rows, with_robot),
-                    values[done * width:(done + rows) * width])
-            done += rows
+            size = min(most, 1 << ((count - done).bit_length() - 1))
+            execute(event_type.insert_rows_sql(size, with_robot),
+                    values[done * width:(done + size) * width])
+            done += size
 
     def _insert_each(self, chunk: list, base: int, arrival: float, atomic: bool,
                      errors: list[EventRejected], ends: dict | None) -> None:
@@ -373,8 +400,7 @@ class EventWriter:
                     executemany(insert_sql(event_type), typed_rows)
         else:
             for event_type, typed_rows in by_type.items():
-                self._insert_rows(event_type, list(chain.from_iterable(typed_rows)),
-                                  len(typed_rows), with_robot)
+                self._insert_rows(event_type, typed_rows, len(typed_rows), with_robot)
         if ends is not None:
             for event_type, typed_rows in by_type.items():
                 _widen_by_rows(ends, event_type, typed_rows, with_robot)

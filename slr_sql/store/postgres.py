@@ -34,7 +34,8 @@ from ..errors import SLRBusy, SLRCancelled, SLRError, SLRServerUnreachable, SLRS
     SLRTimeout, \
     SLRUnavailable
 from ..lockorder import ordered_lock
-from .connection import Database, drop_commit_callbacks, in_own_transaction, run_after_rollback, \
+from .connection import Database, drop_commit_callbacks, in_own_transaction, \
+    merge_commit_callbacks, run_after_rollback, \
     run_commit_callbacks
 from .dialect import POSTGRES
 from .functions import SqlFunctions
@@ -120,7 +121,8 @@ def _error(exc: BaseException, where: str, busy_timeout: float | None = None,
 
     * a deadlock (40P01), a serialization conflict (40001), a lock wait past
       ``busy_timeout`` (55P03), an object in use by another session (55006: a database
-      another session is connected to): :class:`SLRBusy`;
+      another session is connected to; not the session's own use of it, such as a table
+      its own open query reads, which a retry meets again): :class:`SLRBusy`;
     * a cancel (57014) at the session's ``statement_timeout`` (the server's words say so):
       :class:`SLRStatementTimeout`, not retryable; any other cancel: :class:`SLRCancelled`
       (the call's own timeout, a ``statement_timeout`` set for it, is told apart by the
@@ -147,7 +149,7 @@ def _error(exc: BaseException, where: str, busy_timeout: float | None = None,
     if isinstance(exc, errors.LockNotAvailable):
         waited = f" for more than {busy_timeout:g} s" if busy_timeout is not None else ""
         return SLRBusy(f"{where}: locked by another writer{waited} ({_first_line(exc)})")
-    if isinstance(exc, errors.ObjectInUse):
+    if isinstance(exc, errors.ObjectInUse) and not _in_this_session(exc):
         return SLRBusy(f"{where}: in use by another session; retry ({_first_line(exc)})")
     if isinstance(exc, errors.QueryCanceled) and _at_statement_timeout(exc):
         # (the call's own timeout= is told apart where it is set: _own_deadline)
@@ -199,6 +201,19 @@ _SESSION_ENDED = frozenset({"57P01", "57P02", "57P03", "57P05"})
 # cancel). A server speaking another language (lc_messages) says neither: its cancels are
 # all SLRCancelled, as they were.
 _STATEMENT_TIMEOUT_WORDS = "canceling statement due to statement timeout"
+
+
+# The server's words for a 55006 of the session itself (tablecmds.c CheckTableNotInUse, the
+# current database): nothing another session holds, so a retry meets it again. In another
+# language they are not told apart: SLRBusy, as every 55006.
+_OWN_USE_WORDS = ("in this session", "pending trigger events", "currently open database")
+
+
+def _in_this_session(exc: BaseException) -> bool:
+    """Whether an object-in-use error (55006) is about the session's own use of it."""
+    diag = getattr(exc, "diag", None)
+    words = getattr(diag, "message_primary", None) or str(exc)
+    return any(own in words for own in _OWN_USE_WORDS)
 
 
 def _at_statement_timeout(exc: BaseException) -> bool:
@@ -1097,7 +1112,8 @@ class PgDatabase:
                 "AND n.nspname = current_schema() AND (%s::text IS NULL OR c.relname = %s)"
                 .replace("%s", "?"), (table, table))}
 
-    def planned_indexes(self, sql: str, extra: Iterable[str] = ()) -> set[str] | None:
+    def hypothetical_plan(self, sql: str, extra: dict[str, str],
+                          without: Iterable[str] = ()) -> list[str] | None:
         """None: PostgreSQL's planner weighs the tables' statistics, so a plan asked of an
         empty copy of the schema would say nothing of the plan on the data (the callers
         build what a statement may use, conservatively)."""
@@ -1211,6 +1227,8 @@ class PgDatabase:
                     raise
                 if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
                     committed, self.commit_callbacks = self.commit_callbacks, []
+                elif depth:   # (released into the enclosing one: its callbacks now)
+                    merge_commit_callbacks(self.commit_callbacks, depth)
         except BaseException as exc:
             if committed:   # (rolled back: what a rollback does not take back)
                 run_after_rollback(committed, exc)

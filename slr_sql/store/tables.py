@@ -129,6 +129,76 @@ def _shortened(base: str, name: str, arity: int) -> str:
 _REFUSED_FOR_GOOD = (sqlite3.SQLITE_READONLY, sqlite3.SQLITE_PERM, sqlite3.SQLITE_AUTH)
 
 
+# a search's bound columns in a step of EXPLAIN QUERY PLAN: "... INDEX x (arg1=? AND t_end<?)"
+_SEARCH_BOUNDS = re.compile(r"^SEARCH .* \(([^()]*)\)$")
+_RANGE = re.compile(r"^(\w+)(<|>|<=|>=)\?$")
+_TIMES = frozenset({"t_start", "t_end"})
+
+
+def plan_cost(steps: list[str]) -> tuple[int, int, int]:
+    """How costly a plan's steps read, to compare two plans of one statement: its full
+    scans (an automatic index, which a run builds by reading the whole table, is one), then
+    its sorts (temporary B-trees), then, fewer being worse, what its searches bind: four
+    for each column bound by ``=``, three for one bounded on both sides, two on one side --
+    but one for a time bounded only from above: times grow with the store, so ``t_end < ?``
+    reads the whole history before it (a ``cnot``'s ``t_start > S AND t_end < E``, read
+    again at each check), ``t_start > ?`` only what came after.
+
+    >>> plan_cost(["SEARCH e1 USING INDEX i (arg1=? AND t_start>?)", "SCAN e0"])
+    (1, 0, -6)
+    >>> plan_cost(["SEARCH e0 USING INDEX s (t_start=? AND t_end>? AND t_end<?)"])
+    (0, 0, -7)
+    >>> plan_cost(["SEARCH e0 USING INDEX e (t_end=? AND t_start=?)"])
+    (0, 0, -8)
+    >>> plan_cost(["SEARCH n0 USING INDEX e (t_end<?)"]) > plan_cost(
+    ...     ["SEARCH n0 USING INDEX s (t_start>?)"])
+    True
+    """
+    scans = sorts = bound = 0
+    for step in steps:
+        if "AUTOMATIC" in step or (step.startswith("SCAN ")
+                                   and not step.startswith("SCAN CONSTANT ROW")):
+            scans += 1
+        if "USE TEMP B-TREE" in step:
+            sorts += 1
+        match = _SEARCH_BOUNDS.match(step)
+        if match:
+            ranges: dict[str, set[str]] = {}
+            for term in match.group(1).split(" AND "):
+                ranged = _RANGE.match(term)
+                if ranged is None:
+                    bound += 4   # (=, IN, rowid=)
+                else:
+                    ranges.setdefault(ranged.group(1), set()).add(ranged.group(2)[0])
+            bound += sum(3 if len(sides) > 1 else 1 if sides == {"<"} and column in _TIMES
+                         else 2 for column, sides in ranges.items())
+    return scans, sorts, -bound
+
+
+_POINT = re.compile(r"\b(\w+)\.t_start = \1\.t_end\b")
+
+
+def start_compared(sql: str, quoted: str) -> bool:
+    """Whether ``sql`` compares the start time of the table ``quoted`` (one of its aliases'
+    ``t_start`` after the statement's first ``FROM``, not in what it selects: a condition, a
+    join, a subquery's order): where no planner can be asked, what its start-ordered
+    indexes may serve.
+
+    >>> start_compared('SELECT f(t1.t_start) AS v1 FROM "q" AS t1 WHERE t1.t_end > :c0',
+    ...                '"q"')
+    False
+    >>> start_compared('SELECT 1 FROM "p" AS t0 CROSS JOIN "q" AS t1 '
+    ...                'WHERE t0.t_start = t1.t_start', '"q"')
+    True
+    >>> start_compared('SELECT 1 FROM "q" AS t0 WHERE t0.t_start = t0.t_end', '"q"')
+    False
+    """
+    # (a point event's own start = end is no search)
+    body = _POINT.sub("", sql.partition(" FROM ")[2])
+    return any(re.search(rf"\b{re.escape(alias)}\.t_start\b", body)
+               for alias in re.findall(re.escape(quoted) + r" AS (\w+)", sql))
+
+
 def _refused_for_good(exc: BaseException) -> bool:
     """Whether a failed build of indexes will fail again (this connection may not write the
     table's indexes: not the table's owner on a server, a read-only file), not a condition
@@ -183,8 +253,11 @@ class EventTables:
 
     def _rolled_back(self) -> None:
         if self._built_inside:
-            self._built_inside = False
             self.builds_undone += 1
+            # (a nested part rolled back may leave a build of the enclosing transaction
+            # standing, which the outer rollback takes back: counted again then)
+            if not self.db.tx_depth:
+                self._built_inside = False
         # (the old objects too: a reader holding one must not trust a build taken back)
         for event_type in self.types.values():
             event_type.start_order = None
@@ -387,34 +460,51 @@ class EventTables:
 
     def start_orders_wanted(self, sql: str) -> set[tuple[str, int]] | None:
         """The event types read by ``sql`` (their tables named in it) whose start-ordered
-        indexes the planner would use, were they there; None where the backend cannot say
-        (PostgreSQL: the caller builds them for every type the statement reads). A type
-        known to have them is not asked about.
+        indexes make its plan better; None where the backend cannot say (PostgreSQL: the
+        caller decides). A type known to have them is not asked about.
+
+        SQLite's planner is asked for the plan with every missing start-ordered index there
+        (:meth:`Database.hypothetical_plan`); a type whose indexes that plan uses is asked
+        about again without them: wanted only if the plan is then worse (:func:`plan_cost`:
+        a full scan or a sort more, or fewer columns bound by its searches). So ``t_start =
+        ? AND t_end = ?`` wants none (the end order binds both), ``arg1 = ? AND t_start > ?``
+        does.
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None); _ = s.declare_type("b", 1)
         >>> tables = s._tables
         >>> tables.start_orders_wanted('SELECT seq FROM "b" WHERE arg1 = :k AND t_start > :t')
         {('b', 1)}
-        >>> tables.start_orders_wanted('SELECT seq FROM "b" WHERE arg1 = :k AND t_end > :t')
+        >>> tables.start_orders_wanted('SELECT seq FROM "b" WHERE t_start = :s AND t_end = :e')
         set()
         """
         lacking = [t for t in self.types.values() if not t.start_order and t.quoted in sql]
         if not lacking:
             return set()
-        extra, owner = [], {}
+        extra: dict[str, str] = {}
+        own: dict[tuple[str, int], list[str]] = {}
         for event_type in lacking:
-            extra.append(f"CREATE INDEX IF NOT EXISTS {event_type.index_start} ON "
-                         f"{event_type.quoted} (t_start, t_end)")
-            owner[event_type.index_start.strip('"')] = event_type
-            if event_type.arity >= 1:
-                extra.append(f"CREATE INDEX IF NOT EXISTS {event_type.index_arg1_start} ON "
-                             f"{event_type.quoted} (arg1, t_start, t_end)")
-                owner[event_type.index_arg1_start.strip('"')] = event_type
-        used = self.db.planned_indexes(sql, extra)
-        if used is None:
+            names = own[(event_type.name, event_type.arity)] = []
+            for index, columns in ((event_type.index_start, "t_start, t_end"),
+                                   (event_type.index_arg1_start, "arg1, t_start, t_end")):
+                if columns.startswith("arg1") and event_type.arity < 1:
+                    continue
+                name = index.strip('"')
+                extra[name] = (f"CREATE INDEX IF NOT EXISTS {index} ON {event_type.quoted} "
+                               f"({columns})")
+                names.append(name)
+        steps = self.db.hypothetical_plan(sql, extra)
+        if steps is None:
             return None
-        return {(owner[name].name, owner[name].arity) for name in used if name in owner}
+        used = " ".join(steps)
+        wanted = set()
+        for key, names in own.items():
+            if not any(f" {name} " in f"{used} " for name in names):
+                continue
+            without = self.db.hypothetical_plan(sql, extra, without=names)
+            if without is None or plan_cost(without) > plan_cost(steps):
+                wanted.add(key)
+        return wanted
 
     def declare_type(self, name: str, arity: int, start_order: bool = False) -> str:
         """Declare event type name/arity (``:- event name/arity.``); returns its table name.
