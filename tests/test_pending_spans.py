@@ -49,6 +49,16 @@ def _c(kb) -> list:
     return sorted((r["X"], r["S"], r["E"]) for r in kb.query("c(X)^[S, E]"))
 
 
+def _decided_as_the_reference(kb, clock) -> None:
+    """Once the clock passed every event, nothing is pending and r/1 holds exactly what
+    the reference evaluator derives from FIRST + LIVE (the foreign row is no terminator)."""
+    clock.set(100.0)
+    assert _pending(kb) == []
+    got = sorted(((tuple(args), s, e) for args, s, e, _ in kb.store.scan("r", 1)), key=repr)
+    expected = reference(SEQ2_RULE, FIRST + LIVE)
+    assert _typed(got) == _typed([(tuple(h), s, e) for h, s, e in expected])
+
+
 def _pending_count(kb) -> int:
     counts = [info["pending"] for info in kb.event_rules()]
     # (an int on both backends: PostgreSQL's sum of a span's counts is a numeric, which the
@@ -385,12 +395,7 @@ def test_a_row_another_client_commits_inside_a_live_batchs_seqs_is_no_terminator
                       "VALUES (?, 1, 5.5, 5.5, 1.0)", (gap[0],))
         finally:
             other.close()
-        clock.set(100.0)
-        assert _pending(kb) == []
-        got = sorted(((tuple(args), s, e) for args, s, e, _ in kb.store.scan("r", 1)),
-                     key=repr)
-    expected = reference(SEQ2_RULE, FIRST + LIVE)
-    assert _typed(got) == _typed([(tuple(h), s, e) for h, s, e in expected])
+        _decided_as_the_reference(kb, clock)
 
 
 def test_a_row_another_session_inserts_while_a_live_batch_goes_in_is_no_terminator(
@@ -455,9 +460,4 @@ def test_a_row_another_session_inserts_while_a_live_batch_goes_in_is_no_terminat
             (foreign,) = other.execute("SELECT seq FROM b WHERE t_end = 5.5").fetchone()
             assert seqs[1] < foreign < seqs[-1], (seqs, foreign)
             assert _pending(kb) == [("term", [seq]) for seq in seqs[1:]]
-        clock.set(100.0)
-        assert _pending(kb) == []
-        got = sorted(((tuple(args), s, e) for args, s, e, _ in kb.store.scan("r", 1)),
-                     key=repr)
-    expected = reference(SEQ2_RULE, FIRST + LIVE)
-    assert _typed(got) == _typed([(tuple(h), s, e) for h, s, e in expected])
+        _decided_as_the_reference(kb, clock)
