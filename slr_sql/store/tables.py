@@ -93,6 +93,15 @@ class EventType:
         self.index_arg1_end = quote_identifier(f"slr_ix__{table}__a1_end")
         self.index_arg1_start = quote_identifier(f"slr_ix__{table}__a1_start")
 
+    def start_index_statements(self) -> dict[str, str]:
+        """The start-ordered indexes' names and ``CREATE INDEX IF NOT EXISTS`` statements
+        (no ``(arg1, ...)`` one for a type without arguments)."""
+        made = {self.index_start: "t_start, t_end"}
+        if self.arity >= 1:
+            made[self.index_arg1_start] = "arg1, t_start, t_end"
+        return {index.strip('"'): f"CREATE INDEX IF NOT EXISTS {index} ON {self.quoted} "
+                                  f"({columns})" for index, columns in made.items()}
+
     def insert_rows_sql(self, rows: int, with_robot: bool) -> str:
         """One INSERT of ``rows`` rows (multi-row VALUES), with the robot column bound or
         left to its NULL; the texts are kept, as the connection keeps their statements.
@@ -356,15 +365,11 @@ class EventTables:
                      f"t_start {real} NOT NULL, t_end {real} NOT NULL, arrival {real} NOT NULL, "
                      "robot TEXT)")
         conn.execute(f"CREATE INDEX {event_type.index_end} ON {event_type.quoted} (t_end, t_start)")
-        if start_order:
-            conn.execute(f"CREATE INDEX {event_type.index_start} ON {event_type.quoted} "
-                         "(t_start, t_end)")
         if arity >= 1:
             conn.execute(f"CREATE INDEX {event_type.index_arg1_end} ON {event_type.quoted} "
                          "(arg1, t_end, t_start)")
-            if start_order:
-                conn.execute(f"CREATE INDEX {event_type.index_arg1_start} ON "
-                             f"{event_type.quoted} (arg1, t_start, t_end)")
+        if start_order:
+            self._create_start_indexes(event_type)
         conn.execute("INSERT INTO slr_event_types (name, arity, table_name, declared) "
                      "VALUES (?, ?, ?, ?)", (name, arity, table, int(declared)))
         self.types[(name, arity)] = event_type
@@ -375,12 +380,8 @@ class EventTables:
         return event_type
 
     def _create_start_indexes(self, event_type: EventType) -> None:
-        conn = self.db.conn
-        conn.execute(f"CREATE INDEX IF NOT EXISTS {event_type.index_start} ON "
-                     f"{event_type.quoted} (t_start, t_end)")
-        if event_type.arity >= 1:
-            conn.execute(f"CREATE INDEX IF NOT EXISTS {event_type.index_arg1_start} ON "
-                         f"{event_type.quoted} (arg1, t_start, t_end)")
+        for statement in event_type.start_index_statements().values():
+            self.db.conn.execute(statement)
 
     def ensure_start_order(self, event_type: EventType) -> bool:
         """Whether ``event_type``'s start-ordered indexes exist, building them first when
@@ -484,15 +485,9 @@ class EventTables:
         extra: dict[str, str] = {}
         own: dict[tuple[str, int], list[str]] = {}
         for event_type in lacking:
-            names = own[(event_type.name, event_type.arity)] = []
-            for index, columns in ((event_type.index_start, "t_start, t_end"),
-                                   (event_type.index_arg1_start, "arg1, t_start, t_end")):
-                if columns.startswith("arg1") and event_type.arity < 1:
-                    continue
-                name = index.strip('"')
-                extra[name] = (f"CREATE INDEX IF NOT EXISTS {index} ON {event_type.quoted} "
-                               f"({columns})")
-                names.append(name)
+            statements = event_type.start_index_statements()
+            extra.update(statements)
+            own[(event_type.name, event_type.arity)] = list(statements)
         steps = self.db.hypothetical_plan(sql, extra)
         if steps is None:
             return None
