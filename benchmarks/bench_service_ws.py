@@ -278,12 +278,16 @@ def run_service(args, tmp: Path) -> dict:
         # the server's main thread runs the event loop: every frame's send, every request
         loop_start = cpu_seconds(proc.pid, proc.pid)
         cpu_start, cpu_t0 = cpu_seconds(proc.pid), time.monotonic()
+        subscribers_start = cpu_seconds(sub_proc.pid)
+        producer_start = time.process_time()
         requested: list[float] = []
         sent, achieved = produce(client.add_many, args.rate, args.batch_events, seconds, answered,
                                  latency_end, requested)
         produced_at = time.monotonic()
         server_cpu = (cpu_seconds(proc.pid) - cpu_start) / (produced_at - cpu_t0)
         loop_cpu = (cpu_seconds(proc.pid, proc.pid) - loop_start) / (produced_at - cpu_t0)
+        subscribers_cpu = (cpu_seconds(sub_proc.pid) - subscribers_start) / (produced_at - cpu_t0)
+        producer_cpu = (time.process_time() - producer_start) / (produced_at - cpu_t0)
         # every event must arrive: wait (bounded) for the stragglers
         time.sleep(2.0)
         stop.set()
@@ -312,7 +316,8 @@ def run_service(args, tmp: Path) -> dict:
                   "rss_slope_mb_per_min": slope_per_min(samples[len(samples) // 10:]),
                   "rss_samples": len(samples), "load_start": load_start,
                   "file_first": sizes[0], "file_last": sizes[-1], "server_cpu": server_cpu,
-                  "loop_cpu": loop_cpu,
+                  "loop_cpu": loop_cpu, "subscribers_cpu": subscribers_cpu,
+                  "producer_cpu": producer_cpu,
                   "load_end": os.getloadavg()}
     finally:
         proc.terminate()
@@ -417,7 +422,8 @@ def run(args) -> None:
               f"({remote['server_cpu'] / remote['achieved'] * 1e6:.0f} µs per event, "
               f"{remote['server_cpu'] / remote['achieved'] / args.subscribers * 1e6:.2f} µs "
               f"per delivery); its event loop thread {remote['loop_cpu'] / remote['achieved'] * 1e6:.0f} "
-              f"µs per event")
+              f"µs per event; the subscribers' process {remote['subscribers_cpu'] / remote['achieved'] * 1e6:.0f} "
+              f"µs per event, the producer {remote['producer_cpu'] / remote['achieved'] * 1e6:.0f} µs per event")
         print(f"p99 ratio service / in process: {remote['p99_ms'] / local['p99_ms']:.1f}x")
         print(f"server RSS: first {remote['rss_first']:.1f} MB, last {remote['rss_last']:.1f} "
               f"MB, max {remote['rss_max']:.1f} MB, slope {remote['rss_slope_mb_per_min']:+.2f} "
