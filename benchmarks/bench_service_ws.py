@@ -3,7 +3,9 @@ against the same fan-out in process (``kb.subscribe``) in the same run; and a me
 
 * **service** — ``slr serve`` on a temporary file store (a real process). ``--subscribers``
   (100) WebSocket subscriptions to ``e(I)^T`` (``batch`` answers per frame at most) run on
-  one asyncio loop in a child process. The producer (this process) sends ``add_many`` over
+  one asyncio loop in a child process, with the ``websockets`` library's client or
+  (``--client raw``) a minimal one of a few µs per frame, what a subscriber in C++, Rust or
+  a browser costs. The producer (this process) sends ``add_many`` over
   HTTP in batches of ``--batch-events`` (10) paced to ``--rate`` (1,000) events/s. Latency of
   one delivery = the time its answer's frame is received minus the time the HTTP
   ``add_many`` holding the event was answered (0 when the frame came first; both read
@@ -25,6 +27,7 @@ Run by hand::
     python benchmarks/bench_service_ws.py --minutes 1 --burn 1    # beside a competing CPU load
     python benchmarks/bench_service_ws.py --minutes 1 --server-code /tmp/old   # earlier server
     python benchmarks/bench_service_ws.py --minutes 1 --gc-trace   # the server's collections
+    python benchmarks/bench_service_ws.py --minutes 1 --client raw   # lighter subscribers
 
 ``--burn N`` starts N processes spinning on a core (``python -c "while 1: pass"``) for the whole
 run and stops them at its end; the load averages at start and end are printed with the
@@ -194,6 +197,158 @@ def ws_subscribers(url: str, n: int, batch: int, ready, conn) -> None:
     conn.send((counts, bad, times))
 
 
+def ws_subscribers_raw(url: str, n: int, batch: int, ready, conn) -> None:
+    """``--client raw``: the same subscribers, checks and clock as :func:`ws_subscribers`, with
+    a minimal WebSocket client (RFC 6455: the upgrade request, masked client frames, unmasked
+    server frames, pings answered) on ``asyncio.Protocol`` instead of the ``websockets``
+    library's. The library's client costs ~40 µs of Python per frame; at 100 subscribers ×
+    100 frames/s that is ~0.4 of a core of the two the run shares with the server, so beside
+    a competing load the subscribers' own CPU shows up as the server's latency. This client
+    is what a subscriber in C++, Rust or a browser costs: a few µs per frame. The frame
+    reading is the benchmark's only: slr_sql's own client (slr_sql.connect) keeps the
+    library."""
+    import base64
+    import struct
+    from urllib.parse import urlsplit
+    from orjson import loads
+
+    parts = urlsplit(url)
+    latency_window = [0.0]
+    counts = [0] * n
+    bad = [0] * n
+    times: list[list[float]] = [[] for _ in range(n)]
+
+    def client_frame(opcode: int, payload: bytes) -> bytes:
+        mask = os.urandom(4)
+        length = len(payload)
+        head = bytes([0x80 | opcode])
+        if length < 126:
+            head += bytes([0x80 | length])
+        elif length < 65536:
+            head += bytes([0x80 | 126]) + struct.pack("!H", length)
+        else:
+            head += bytes([0x80 | 127]) + struct.pack("!Q", length)
+        masked = bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
+        return head + mask + masked
+
+    class Subscriber(asyncio.Protocol):
+        def __init__(self, k: int, subscribed: asyncio.Future, ended: asyncio.Future) -> None:
+            self.k = k
+            self.buffer = bytearray()
+            self.upgraded = False
+            self.subscribed = subscribed
+            self.ended = ended
+            self.expect = 0
+            self.transport: asyncio.Transport | None = None
+
+        def connection_made(self, transport) -> None:
+            self.transport = transport
+            key = base64.b64encode(os.urandom(16)).decode()
+            transport.write((f"GET {parts.path} HTTP/1.1\r\nHost: {parts.netloc}\r\n"
+                             f"Upgrade: websocket\r\nConnection: Upgrade\r\n"
+                             f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n")
+                            .encode())
+
+        def data_received(self, data: bytes) -> None:
+            now = time.monotonic()
+            buffer = self.buffer
+            buffer += data
+            if not self.upgraded:
+                end = buffer.find(b"\r\n\r\n")
+                if end < 0:
+                    return
+                if not buffer.startswith(b"HTTP/1.1 101"):
+                    raise RuntimeError(f"the server refused the upgrade: {bytes(buffer[:80])!r}")
+                del buffer[:end + 4]
+                self.upgraded = True
+                self.transport.write(client_frame(1, json.dumps(
+                    {"op": "subscribe", "pattern": "e(I)^T", "since": 0.5,
+                     "batch": batch}).encode()))
+            position = 0
+            size = len(buffer)
+            while size - position >= 2:
+                opcode = buffer[position] & 0x0F
+                length = buffer[position + 1] & 0x7F
+                start = position + 2
+                if length == 126:
+                    if size - start < 2:
+                        break
+                    length = struct.unpack_from("!H", buffer, start)[0]
+                    start += 2
+                elif length == 127:
+                    if size - start < 8:
+                        break
+                    length = struct.unpack_from("!Q", buffer, start)[0]
+                    start += 8
+                if size - start < length:
+                    break
+                payload = bytes(buffer[start:start + length])
+                position = start + length
+                if opcode == 9:                       # ping: pong with the same payload
+                    self.transport.write(client_frame(10, payload))
+                elif opcode == 1:
+                    self.message(loads(payload), now)
+                elif opcode == 8:
+                    self.finish()
+            del buffer[:position]
+
+        def message(self, msg: dict, now: float) -> None:
+            if not self.subscribed.done():
+                self.subscribed.set_result(None)       # the "subscribed" message
+                return
+            kind = msg["type"]
+            answers = msg["answers"] if kind == "answers" else [msg["answer"]] \
+                if kind == "answer" else None
+            if answers is None:
+                self.finish()
+                return
+            k = self.k
+            numbers = [a["I"] for a in answers]
+            n_answers = len(numbers)
+            expect = self.expect
+            if numbers[0] == expect and numbers[-1] == expect + n_answers - 1 and \
+                    numbers == list(range(expect, expect + n_answers)):
+                self.expect = expect + n_answers
+            else:
+                for i in numbers:
+                    if i != self.expect:
+                        bad[k] += 1
+                    self.expect = i + 1
+            counts[k] += n_answers
+            if now < latency_window[0]:
+                times[k].extend([now] * n_answers)
+
+        def finish(self) -> None:
+            if not self.ended.done():
+                self.ended.set_result(None)
+
+        def connection_lost(self, exc) -> None:
+            self.finish()
+
+    async def main() -> None:
+        loop = asyncio.get_running_loop()
+        subscribed = [loop.create_future() for _ in range(n)]
+        ended = [loop.create_future() for _ in range(n)]
+        transports = []
+        for k in range(n):
+            transport, _ = await loop.create_connection(
+                lambda k=k: Subscriber(k, subscribed[k], ended[k]), parts.hostname, parts.port)
+            transports.append(transport)
+        await asyncio.gather(*subscribed)
+        gc.collect()                     # the collector as in ws_subscribers (and `slr serve`)
+        gc.freeze()
+        gc.set_threshold(20_000, *gc.get_threshold()[1:])
+        ready.set()
+        latency_window[0] = (await loop.run_in_executor(None, conn.recv))[0]
+        await loop.run_in_executor(None, conn.poll, None)
+        for transport in transports:
+            transport.close()
+
+    asyncio.run(main())
+    conn.recv()                            # the "stop" message
+    conn.send((counts, bad, times))
+
+
 # ``--gc-trace``: `slr serve` started through this prelude, which records each collection of
 # the cyclic garbage collector (gc.callbacks: generation, wall time, objects collected) and
 # writes them out when the server exits (it exits normally on SIGTERM)
@@ -248,7 +403,7 @@ def run_service(args, tmp: Path) -> dict:
         ctx = mp.get_context("spawn")
         ready = ctx.Event()
         parent, child = ctx.Pipe()
-        sub_proc = ctx.Process(target=ws_subscribers,
+        sub_proc = ctx.Process(target=ws_subscribers_raw if args.client == "raw" else ws_subscribers,
                                args=(url.replace("http", "ws") + "/subscribe",
                                      args.subscribers, args.frame_batch, ready, child))
         sub_proc.start()
@@ -384,6 +539,9 @@ def main() -> None:
                     help="record the server's garbage collections (gc.callbacks) while producing")
     ap.add_argument("--burn", type=int, default=0,
                     help="processes spinning on a core beside the run (a competing CPU load)")
+    ap.add_argument("--client", choices=("websockets", "raw"), default="websockets",
+                    help="the subscribers' WebSocket client: the websockets library's, or a "
+                         "minimal one (a few µs per frame)")
     ap.add_argument("--server-code", help="run `slr serve` from this checkout (before/after)")
     ap.add_argument("--no-in-process", action="store_true",
                     help="skip the in-process baseline (a soak of the server alone)")
