@@ -1,11 +1,12 @@
 """Exceptions, named after the condition they report."""
 from __future__ import annotations
 
+import logging
 from typing import Any
 
 __all__ = ["SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRUnavailable",
            "SLRBusy", "SLRStoreFull", "SLRStoreGone", "SLRServerUnreachable", "SLRCancelled",
-           "SLRStatementTimeout", "EventRejected", "NotAnEvent"]
+           "SLRStatementTimeout", "EventRejected", "NotAnEvent", "log_failure"]
 
 
 class SLRError(Exception):
@@ -185,3 +186,36 @@ class EventRejected(SLRError):
     # event as (name, args, start, end) (absent otherwise: read them with getattr)
     index: int | None
     event: tuple[Any, ...] | None
+
+
+def log_failure(logger: logging.Logger, what: str, exc: BaseException, then: str = "") -> None:
+    """Log that ``what`` failed with ``exc`` (``then``: what happens next, e.g. "retrying").
+
+    An :class:`SLRError` is an expected failure (the store busy past ``busy_timeout``, its
+    disk full, a statement timeout, the store closing or gone): any client can bring it
+    about (a long transaction, a flood of events, a dropped connection), and its message
+    says what happened, so it is one WARNING line without a traceback, which would only
+    bury the lines around it. Anything else is a bug of this package: an ERROR with its
+    traceback, which is what whoever fixes it needs.
+
+    >>> import io
+    >>> out = io.StringIO(); log = logging.getLogger("slr_sql.example")
+    >>> handler = logging.StreamHandler(out); log.addHandler(handler)
+    >>> log_failure(log, "a delivery pass", SLRBusy("the store is busy"), "retrying")
+    >>> try:
+    ...     {}["a bug"]
+    ... except KeyError as exc:
+    ...     log_failure(log, "housekeeping", exc)
+    >>> log.removeHandler(handler); print(out.getvalue())
+    a delivery pass failed (SLRBusy: the store is busy); retrying
+    housekeeping failed (KeyError: 'a bug')
+    Traceback (most recent call last):
+    ...
+    KeyError: 'a bug'
+    """
+    tail = f"; {then}" if then else ""
+    if isinstance(exc, SLRError):
+        logger.warning("%s failed (%s: %s)%s", what, type(exc).__name__, exc, tail)
+    else:
+        logger.error("%s failed (%s: %s)%s", what, type(exc).__name__, exc, tail,
+                     exc_info=exc)

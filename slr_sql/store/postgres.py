@@ -1193,13 +1193,17 @@ class PgDatabase:
                     conn.savepoint_later(f"slr_sp{depth}")
                 self.tx_depth = depth + 1
                 try:
+                    outer = None
                     if not wait:
+                        if depth:
+                            # a SET LOCAL outlives the savepoint's release: the setting the
+                            # enclosing transaction had (busy_timeout, 1 ms in one that does
+                            # not wait either, its own) is put back before the release
+                            outer = conn.execute("SHOW lock_timeout").fetchone()[0]
                         conn.execute("SET LOCAL lock_timeout = 1")
                     yield self
-                    if not wait and depth:
-                        # (a SET LOCAL outlives the savepoint's release: the enclosing
-                        # transaction waits as before)
-                        conn.execute(f"SET LOCAL lock_timeout = {int(self.busy_timeout * 1000)}")
+                    if outer is not None:
+                        conn.execute("SELECT set_config('lock_timeout', ?, true)", (outer,))
                 except BaseException:
                     self.tx_depth = depth
                     committed = drop_commit_callbacks(self.commit_callbacks, depth)
@@ -1441,13 +1445,23 @@ class PgDatabase:
             if left <= 0:
                 raise SLRTimeout("query timed out (in its compiled SQL statement)")
             own = self.tx_depth == 0
-            self.conn.execute("BEGIN" if own else "SAVEPOINT slr_compiled")
+            outer = None
+            if own:
+                self.conn.execute("BEGIN")
+            else:
+                # in the caller's transaction a SET LOCAL outlasts the savepoint's release,
+                # to the transaction's end: the setting in force before (an administrator's,
+                # the session's, the transaction's) is read here and put back before the
+                # release (read in the savepoint's round trip)
+                self.conn.savepoint_later("slr_compiled")
+                outer = self.conn.execute("SHOW statement_timeout").fetchone()[0]
             try:
                 self.conn.execute(f"SET LOCAL statement_timeout = {_timeout_ms(left)}")
                 cursor = self.conn.execute(sql, params)
                 rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
                 if not own:
-                    self.conn.execute("SET LOCAL statement_timeout = 0")
+                    self.conn.execute("SELECT set_config('statement_timeout', ?, true)",
+                                      (outer,))
                     self.conn.execute("RELEASE slr_compiled")
             except BaseException as exc:
                 if own:

@@ -23,7 +23,7 @@ from typing import Any, Callable
 
 from ..clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning
 from ..encoding import NullArgument, decode
-from ..errors import NotAnEvent, SLRError, SLRSubscriptionInUse
+from ..errors import NotAnEvent, SLRError, SLRSubscriptionInUse, log_failure
 from ..lockorder import ordered_lock
 from ..host import Host
 from ..store import null_argument_text
@@ -455,8 +455,7 @@ class SubscriptionHub:
                     return
                 if str(exc) != self._last_failure:   # once per distinct failure, not per tick
                     self._last_failure = str(exc)
-                    log.warning("subscriptions: a delivery pass failed (%s: %s); retrying",
-                                type(exc).__name__, exc, exc_info=True)
+                    log_failure(log, "subscriptions: a delivery pass", exc, "retrying")
             finally:
                 with self.cond:
                     self._passes_done = number
@@ -801,8 +800,7 @@ class SubscriptionHub:
                     return
                 if str(exc) != self._hk_last_failure:   # once per distinct failure
                     self._hk_last_failure = str(exc)
-                    log.warning("subscriptions: housekeeping failed (%s: %s); retrying",
-                                type(exc).__name__, exc, exc_info=True)
+                    log_failure(log, "subscriptions: housekeeping", exc, "retrying")
             finally:
                 with self._hk_cond:
                     self._hk_done = number
