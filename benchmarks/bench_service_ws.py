@@ -4,8 +4,9 @@ against the same fan-out in process (``kb.subscribe``) in the same run; and a me
 * **service** — ``slr serve`` on a temporary file store (a real process). ``--subscribers``
   (100) WebSocket subscriptions to ``e(I)^T`` (``batch`` answers per frame at most) run on
   one asyncio loop in a child process, with the ``websockets`` library's client or
-  (``--client raw``) a minimal one of a few µs per frame, what a subscriber in C++, Rust or
-  a browser costs. The producer (this process) sends ``add_many`` over
+  (``--client raw``) a minimal one (the process's CPU per frame, the kernel's receive
+  included: ~22 µs against the library's ~43 µs on the 2-core machine of
+  benchmarks/README.md). The producer (this process) sends ``add_many`` over
   HTTP in batches of ``--batch-events`` (10) paced to ``--rate`` (1,000) events/s. Latency of
   one delivery = the time its answer's frame is received minus the time the HTTP
   ``add_many`` holding the event was answered (0 when the frame came first; both read
@@ -201,12 +202,11 @@ def ws_subscribers_raw(url: str, n: int, batch: int, ready, conn) -> None:
     """``--client raw``: the same subscribers, checks and clock as :func:`ws_subscribers`, with
     a minimal WebSocket client (RFC 6455: the upgrade request, masked client frames, unmasked
     server frames, pings answered) on ``asyncio.Protocol`` instead of the ``websockets``
-    library's. The library's client costs ~40 µs of Python per frame; at 100 subscribers ×
-    100 frames/s that is ~0.4 of a core of the two the run shares with the server, so beside
-    a competing load the subscribers' own CPU shows up as the server's latency. This client
-    is what a subscriber in C++, Rust or a browser costs: a few µs per frame. The frame
-    reading is the benchmark's only: slr_sql's own client (slr_sql.connect) keeps the
-    library."""
+    library's. The subscribers' process then costs ~22 µs per frame (the kernel's receive
+    included) instead of ~43 µs: at 100 subscribers × 100 frames/s, ~0.2 of a core less of
+    the two the run shares with the server, where beside a competing load the subscribers'
+    own CPU shows up as the server's latency. The frame reading is the benchmark's only:
+    slr_sql's own client (slr_sql.connect) keeps the library."""
     import base64
     import struct
     from urllib.parse import urlsplit
