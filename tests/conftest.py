@@ -76,6 +76,18 @@ STARTED_FIRST = (
 
 
 @pytest.hookimpl(trylast=True)
+def pytest_make_parametrize_id(config, val, argname):
+    """A long text or bytes value of a parametrized test is named by its size and a digest,
+    not spelled out: pytest keeps the current test's id in the environment
+    (PYTEST_CURRENT_TEST), and an id of 2 MB made every program a test started then fail
+    with "Argument list too long" (tests/test_store_reads.py checks the ids)."""
+    if isinstance(val, (str, bytes)) and len(val) > 200:
+        import hashlib
+        data = val.encode("utf-8", "surrogatepass") if isinstance(val, str) else val
+        return f"{argname}-{len(val)}-long-{hashlib.sha1(data).hexdigest()[:8]}"
+    return None
+
+
 def pytest_collection_modifyitems(config, items):
     rank = {name: i for i, name in enumerate(STARTED_FIRST)}
     # a stable sort: every worker of xdist collects the same order
