@@ -663,6 +663,16 @@ class PgConnection:
             self.raw.execute("ROLLBACK")
 
 
+def _lock_timeout_ms(busy_timeout: float) -> int:
+    """``lock_timeout`` in milliseconds for ``busy_timeout`` seconds: at least 1, since 0
+    means no limit to the server.
+
+    >>> _lock_timeout_ms(0.3), _lock_timeout_ms(0)
+    (300, 1)
+    """
+    return max(1, int(busy_timeout * 1000))
+
+
 class PgReadConnection:
     """A read-only connection of its own to a store's schema (see
     :meth:`PgDatabase.open_reader`): each statement sees what was committed when it
@@ -674,9 +684,18 @@ class PgReadConnection:
         self.closed = False
         try:
             raw = psycopg.connect(conninfo, autocommit=True)
+        except psycopg.Error as exc:
+            raise SLRError(f"{where}: cannot open a reading connection "
+                           f"({_first_line(exc)})") from None
+        try:
             raw.execute("SET default_transaction_read_only = on")
+            # a lock of another session (LOCK TABLE, an ALTER TABLE not committed yet) is
+            # waited for busy_timeout at most, then SLRBusy (55P03), as on the store's own
+            # connection; without it a read would wait as long as the lock is held
+            raw.execute(f"SET lock_timeout = {_lock_timeout_ms(busy_timeout)}")
             raw.execute(f"SET search_path = {quote_identifier(schema)}")
         except psycopg.Error as exc:
+            raw.close()
             raise SLRError(f"{where}: cannot open a reading connection "
                            f"({_first_line(exc)})") from None
         self.conn = PgConnection(raw, where, busy_timeout)
