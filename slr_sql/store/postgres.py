@@ -663,14 +663,19 @@ class PgConnection:
             self.raw.execute("ROLLBACK")
 
 
-def _lock_timeout_ms(busy_timeout: float) -> int:
-    """``lock_timeout`` in milliseconds for ``busy_timeout`` seconds: at least 1, since 0
-    means no limit to the server.
+# The greatest lock_timeout (ms) the server takes: an int setting
+_MOST_LOCK_TIMEOUT_MS = 2 ** 31 - 1
 
-    >>> _lock_timeout_ms(0.3), _lock_timeout_ms(0)
-    (300, 1)
+
+def _lock_timeout_ms(busy_timeout: float) -> int:
+    """``lock_timeout`` in milliseconds for ``busy_timeout`` seconds (checked: a number
+    >= 0): at least 1, since 0 means no limit to the server, and at most what the server
+    takes (~24 days).
+
+    >>> _lock_timeout_ms(0.3), _lock_timeout_ms(0), _lock_timeout_ms(1e30)
+    (300, 1, 2147483647)
     """
-    return max(1, int(busy_timeout * 1000))
+    return min(max(1, int(busy_timeout * 1000)), _MOST_LOCK_TIMEOUT_MS)
 
 
 class PgReadConnection:
@@ -776,7 +781,7 @@ class DetachedStatements:
         try:
             raw.execute("SET default_transaction_read_only = on")
             raw.execute("SET TIME ZONE 'UTC'")
-            raw.execute(f"SET lock_timeout = {int(self.busy_timeout * 1000)}")
+            raw.execute(f"SET lock_timeout = {_lock_timeout_ms(self.busy_timeout)}")
             raw.execute(f"SET search_path = {quote_identifier(self.schema)}")
         except BaseException:
             raw.close()
@@ -894,7 +899,8 @@ class PgDatabase:
 
     def __init__(self, url: str, clock: Any = None, busy_timeout: float = 5.0,
                  adopt: bool = False):
-        from .connection import WallClock
+        from .connection import WallClock, _check_busy_timeout
+        busy_timeout = _check_busy_timeout(busy_timeout)
         psycopg = _psycopg()
         conninfo, schema = split_url(url)
         self.url = url
@@ -932,14 +938,14 @@ class PgDatabase:
         self.detached = DetachedStatements(conninfo, schema, self.path, busy_timeout)
         try:
             try:
-                raw.execute(f"SET lock_timeout = {int(busy_timeout * 1000)}")
+                raw.execute(f"SET lock_timeout = {_lock_timeout_ms(busy_timeout)}")
                 raw.execute("SET TIME ZONE 'UTC'")
                 migrate_postgres(self, schema, adopt)
                 raw.execute(f"SET search_path = {quote_identifier(schema)}")
 
                 def reopen() -> Any:
                     again = psycopg.connect(conninfo, autocommit=True)
-                    again.execute(f"SET lock_timeout = {int(busy_timeout * 1000)}")
+                    again.execute(f"SET lock_timeout = {_lock_timeout_ms(busy_timeout)}")
                     again.execute("SET TIME ZONE 'UTC'")
                     again.execute(f"SET search_path = {quote_identifier(schema)}")
                     if self.listening:
