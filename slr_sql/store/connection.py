@@ -43,7 +43,7 @@ from .schema import migrate, migration_scripts
 from .sqltext import bound_parameters, busy_error, quote_identifier, split_sql_script, store_error
 
 __all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
-           "run_sql_file", "check_file", "refuse_no_store"]
+           "run_sql_file", "check_file", "refuse_no_store", "check_busy_timeout"]
 
 # The base class of the errors the database raises while running a statement (a missing
 # table, a syntax error, a constraint, an interrupted statement...). Callers outside the
@@ -63,7 +63,17 @@ DEFAULT_BUSY_TIMEOUT = 5.0
 INSTRUCTIONS_PER_CHECK = 1000
 
 
-def _check_busy_timeout(value: Any) -> float:
+def check_busy_timeout(value: Any) -> float:
+    """``value`` as a ``busy_timeout`` (seconds, a number >= 0 and finite), else an
+    :class:`SLRError` naming it; the same words for every backend.
+
+    >>> check_busy_timeout(2)
+    2.0
+    >>> check_busy_timeout(float("inf"))
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: busy_timeout must be a number of seconds >= 0, not inf
+    """
     if isinstance(value, bool) or not isinstance(value, (int, float)) or \
             not 0 <= value < float("inf"):
         raise SLRError(f"busy_timeout must be a number of seconds >= 0, not {value!r}")
@@ -259,7 +269,7 @@ class Database:
                  adopt: bool = False, checkpoint: str = "auto",
                  checkpoint_interval: float = CHECKPOINT_INTERVAL,
                  cache_mib: float = CACHE_SIZE_KIB / 1024):
-        busy_timeout = _check_busy_timeout(busy_timeout)
+        busy_timeout = check_busy_timeout(busy_timeout)
         if isinstance(cache_mib, bool) or not isinstance(cache_mib, (int, float)) \
                 or not 0.0625 <= cache_mib <= 1 << 20:
             raise ValueError(f"cache_mib must be a number of MiB from 0.0625 to 1048576, "

@@ -899,8 +899,8 @@ class PgDatabase:
 
     def __init__(self, url: str, clock: Any = None, busy_timeout: float = 5.0,
                  adopt: bool = False):
-        from .connection import WallClock, _check_busy_timeout
-        busy_timeout = _check_busy_timeout(busy_timeout)
+        from .connection import WallClock, check_busy_timeout
+        busy_timeout = check_busy_timeout(busy_timeout)
         psycopg = _psycopg()
         conninfo, schema = split_url(url)
         self.url = url
