@@ -171,3 +171,50 @@ def test_a_reader_opened_after_a_chdir_reads_the_store(tmp_path, monkeypatch):
         assert not os.path.exists(tmp_path / "b" / "s.db")
     finally:
         store.close()
+
+
+def test_a_pass_reading_through_the_stores_connection_logs_a_dropped_journal_as_one_line(
+        tmp_path, caplog):
+    """The pass after events added inside a transaction reads through the store's own
+    connection (which waits for its commit): the same words, one WARNING line."""
+    path = str(tmp_path / "s.db")
+    with slr_sql.open(path, clock=ManualClock(0.0)) as kb, \
+            caplog.at_level(logging.WARNING, logger="slr_sql"):
+        hub = kb._subscriptions
+        hub.poll_interval = 3600.0
+        sub = kb.subscribe("p(X)^T", since=0)
+        kb.add("p(1)^1")
+        assert sub.get(timeout=DEADLINE)["X"] == 1
+        assert hub.drain(DEADLINE)
+        raw = sqlite3.connect(path, isolation_level=None)
+        try:
+            raw.execute("DROP TABLE slr_subj_p")
+        finally:
+            raw.close()
+        hub.notify(through_store=True)    # the next pass reads through the store's connection
+        assert hub.drain(DEADLINE)
+        assert not [r for r in caplog.records if r.levelno >= logging.ERROR], caplog.text
+        [record] = [r for r in caplog.records if "delivery pass failed" in r.getMessage()]
+        assert record.levelno == logging.WARNING and record.exc_info is None
+        assert f"SLRError: {path}: the store failed (no such table: slr_subj_p)" in \
+            record.getMessage()
+        sub.close()
+
+
+def test_a_journal_read_through_the_stores_connection_is_an_slr_error(tmp_path):
+    path = str(tmp_path / "s.db")
+    store = _store_with_journal(path)
+    try:
+        reads = store.journal_reader(own_connection=False)
+        raw = sqlite3.connect(path, isolation_level=None)
+        try:
+            raw.execute("DROP TABLE slr_subj_p")
+        finally:
+            raw.close()
+        exc = _failure(lambda: reads.max_jid("slr_subj_p"))
+        assert str(exc) == f"{path}: the store failed (no such table: slr_subj_p)"
+        for suffix in ("", "-wal", "-shm"):
+            os.remove(path + suffix)
+        assert isinstance(_failure(lambda: reads.max_jid("slr_subj_p")), SLRStoreGone)
+    finally:
+        store.close()
