@@ -43,7 +43,7 @@ from .schema import migrate, migration_scripts
 from .sqltext import bound_parameters, busy_error, quote_identifier, split_sql_script, store_error
 
 __all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
-           "run_sql_file", "check_file", "refuse_no_store"]
+           "run_sql_file", "check_file", "refuse_no_store", "check_busy_timeout"]
 
 # The base class of the errors the database raises while running a statement (a missing
 # table, a syntax error, a constraint, an interrupted statement...). Callers outside the
@@ -63,7 +63,17 @@ DEFAULT_BUSY_TIMEOUT = 5.0
 INSTRUCTIONS_PER_CHECK = 1000
 
 
-def _check_busy_timeout(value: Any) -> float:
+def check_busy_timeout(value: Any) -> float:
+    """``value`` as a ``busy_timeout`` (seconds, a number >= 0 and finite), else an
+    :class:`SLRError` naming it; the same words for every backend.
+
+    >>> check_busy_timeout(2)
+    2.0
+    >>> check_busy_timeout(float("inf"))
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: busy_timeout must be a number of seconds >= 0, not inf
+    """
     if isinstance(value, bool) or not isinstance(value, (int, float)) or \
             not 0 <= value < float("inf"):
         raise SLRError(f"busy_timeout must be a number of seconds >= 0, not {value!r}")
@@ -259,7 +269,7 @@ class Database:
                  adopt: bool = False, checkpoint: str = "auto",
                  checkpoint_interval: float = CHECKPOINT_INTERVAL,
                  cache_mib: float = CACHE_SIZE_KIB / 1024):
-        busy_timeout = _check_busy_timeout(busy_timeout)
+        busy_timeout = check_busy_timeout(busy_timeout)
         if isinstance(cache_mib, bool) or not isinstance(cache_mib, (int, float)) \
                 or not 0.0625 <= cache_mib <= 1 << 20:
             raise ValueError(f"cache_mib must be a number of MiB from 0.0625 to 1048576, "
@@ -583,7 +593,8 @@ class Database:
         connection can reach an in-memory database)."""
         self.check_open()
         return None if self.path is None else \
-            ReadConnection(self.path, self.busy_timeout, functions=self.functions)
+            ReadConnection(self._absolute or self.path, self.busy_timeout,
+                           functions=self.functions, identity=self._identity[0])
 
     def check_open(self) -> None:
         if self.closed:
@@ -1285,31 +1296,66 @@ class ReadConnection:
     """
 
     def __init__(self, path: str, busy_timeout: float = DEFAULT_BUSY_TIMEOUT,
-                 cache_kib: int = 2048, functions: SqlFunctions | None = None):
+                 cache_kib: int = 2048, functions: SqlFunctions | None = None,
+                 identity: tuple[int, int] | None = None):
         self.path = path
         self.busy_timeout = busy_timeout
         self.lock = ordered_lock("store.reader")
         self.closed = False
+        # (device, inode) of the store's file: another file at the path is not the store
+        self._identity = identity or self._file_identity()
         try:
-            self.conn = sqlite3.connect(path, check_same_thread=False, isolation_level=None,
+            # mode=rw: a store file deleted meanwhile is not made again, empty, at its path
+            self.conn = sqlite3.connect(_ro_uri(path)[:-len("ro")] + "rw", uri=True,
+                                        check_same_thread=False, isolation_level=None,
                                         timeout=busy_timeout, cached_statements=64)
+        except sqlite3.Error as exc:
+            raise self._error(exc) from None
+        try:
             harden(self.conn)
             self.conn.execute("PRAGMA query_only=ON")
             self.conn.execute(f"PRAGMA cache_size=-{int(cache_kib)}")
             if functions is not None:
                 register_functions(self.conn, functions)
         except sqlite3.Error as exc:
-            raise SLRError(f"{path}: cannot open a reading connection ({exc})") from None
+            self.conn.close()
+            raise self._error(exc) from None
+        if self._file_identity() != self._identity:
+            self.conn.close()
+            raise self._gone("nothing was read")
+
+    def _file_identity(self) -> tuple[int, int] | None:
+        try:
+            info = os.stat(self.path)
+        except OSError:
+            return None
+        return info.st_dev, info.st_ino
+
+    def _gone(self, outcome: str) -> SLRStoreGone:
+        return SLRStoreGone(f"{self.path}: the store file was deleted or replaced while open "
+                            f"(by another program?); {outcome}. Restore the file, or close "
+                            f"this knowledge base and open the path again")
+
+    def _error(self, exc: sqlite3.Error) -> SLRError:
+        """The SLRError for ``exc``: :class:`SLRStoreGone` when the store's file is no
+        longer at the path (another program deleted, moved or replaced it: what the error
+        says is about that), else :func:`store_error`'s words (busy, full, damaged, ...)."""
+        now = self._file_identity()
+        if now is None or (self._identity is not None and now != self._identity):
+            return self._gone(f"nothing was read ({exc})")
+        return store_error(exc, self.path, self.busy_timeout, "nothing was read")
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
-        """Run one reading statement and return its rows."""
+        """Run one reading statement and return its rows. Every failure of the database
+        is an :class:`SLRError` named after it (:func:`store_error`): SLRBusy,
+        SLRStoreFull, SLRStoreGone, a damaged file, a table another connection dropped."""
         with self.lock:
             if self.closed:
                 raise SLRError("the event store is closed")
             try:
                 return self.conn.execute(sql, tuple(params)).fetchall()
-            except sqlite3.OperationalError as exc:
-                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+            except sqlite3.Error as exc:
+                raise self._error(exc) from None
 
     def close(self) -> None:
         """Close the connection (idempotent)."""

@@ -663,6 +663,21 @@ class PgConnection:
             self.raw.execute("ROLLBACK")
 
 
+# The greatest lock_timeout (ms) the server takes: an int setting
+_MOST_LOCK_TIMEOUT_MS = 2 ** 31 - 1
+
+
+def _lock_timeout_ms(busy_timeout: float) -> int:
+    """``lock_timeout`` in milliseconds for ``busy_timeout`` seconds (checked: a number
+    >= 0): at least 1, since 0 means no limit to the server, and at most what the server
+    takes (~24 days).
+
+    >>> _lock_timeout_ms(0.3), _lock_timeout_ms(0), _lock_timeout_ms(1e30)
+    (300, 1, 2147483647)
+    """
+    return min(max(1, int(busy_timeout * 1000)), _MOST_LOCK_TIMEOUT_MS)
+
+
 class PgReadConnection:
     """A read-only connection of its own to a store's schema (see
     :meth:`PgDatabase.open_reader`): each statement sees what was committed when it
@@ -674,9 +689,18 @@ class PgReadConnection:
         self.closed = False
         try:
             raw = psycopg.connect(conninfo, autocommit=True)
+        except psycopg.Error as exc:
+            raise SLRError(f"{where}: cannot open a reading connection "
+                           f"({_first_line(exc)})") from None
+        try:
             raw.execute("SET default_transaction_read_only = on")
+            # a lock of another session (LOCK TABLE, an ALTER TABLE not committed yet) is
+            # waited for busy_timeout at most, then SLRBusy (55P03), as on the store's own
+            # connection; without it a read would wait as long as the lock is held
+            raw.execute(f"SET lock_timeout = {_lock_timeout_ms(busy_timeout)}")
             raw.execute(f"SET search_path = {quote_identifier(schema)}")
         except psycopg.Error as exc:
+            raw.close()
             raise SLRError(f"{where}: cannot open a reading connection "
                            f"({_first_line(exc)})") from None
         self.conn = PgConnection(raw, where, busy_timeout)
@@ -757,7 +781,7 @@ class DetachedStatements:
         try:
             raw.execute("SET default_transaction_read_only = on")
             raw.execute("SET TIME ZONE 'UTC'")
-            raw.execute(f"SET lock_timeout = {int(self.busy_timeout * 1000)}")
+            raw.execute(f"SET lock_timeout = {_lock_timeout_ms(self.busy_timeout)}")
             raw.execute(f"SET search_path = {quote_identifier(self.schema)}")
         except BaseException:
             raw.close()
@@ -875,7 +899,8 @@ class PgDatabase:
 
     def __init__(self, url: str, clock: Any = None, busy_timeout: float = 5.0,
                  adopt: bool = False):
-        from .connection import WallClock
+        from .connection import WallClock, check_busy_timeout
+        busy_timeout = check_busy_timeout(busy_timeout)
         psycopg = _psycopg()
         conninfo, schema = split_url(url)
         self.url = url
@@ -913,14 +938,14 @@ class PgDatabase:
         self.detached = DetachedStatements(conninfo, schema, self.path, busy_timeout)
         try:
             try:
-                raw.execute(f"SET lock_timeout = {int(busy_timeout * 1000)}")
+                raw.execute(f"SET lock_timeout = {_lock_timeout_ms(busy_timeout)}")
                 raw.execute("SET TIME ZONE 'UTC'")
                 migrate_postgres(self, schema, adopt)
                 raw.execute(f"SET search_path = {quote_identifier(schema)}")
 
                 def reopen() -> Any:
                     again = psycopg.connect(conninfo, autocommit=True)
-                    again.execute(f"SET lock_timeout = {int(busy_timeout * 1000)}")
+                    again.execute(f"SET lock_timeout = {_lock_timeout_ms(busy_timeout)}")
                     again.execute("SET TIME ZONE 'UTC'")
                     again.execute(f"SET search_path = {quote_identifier(schema)}")
                     if self.listening:

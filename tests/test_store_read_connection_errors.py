@@ -1,0 +1,220 @@
+"""A store's read connections (:class:`ReadConnection`: the subscription hub's journal reads)
+turn every failure of SQLite into an SLRError named after the condition, as the store's
+own connection does (``store_error``): a journal another connection dropped, a file
+overwritten with garbage (damaged, not a database), the store file deleted. No
+``sqlite3.Error`` reaches the caller, and the hub logs such a failed pass as one line.
+
+Every condition is real: another ``sqlite3`` connection drops the table, the file's bytes
+are overwritten on disk, the file is removed."""
+from __future__ import annotations
+
+import logging
+import os
+import sqlite3
+
+import pytest
+
+import slr_sql
+from slr_sql import ManualClock
+from slr_sql.errors import SLRError, SLRStoreGone
+from slr_sql.store import EventStore
+
+DEADLINE = 30.0
+
+
+def _store_with_journal(path: str) -> EventStore:
+    store = EventStore(path)
+    store.add_event("p", ("a",), 1, 1)
+    store.create_journal("p", 1, "slr_subj_p", "slr_subt_p")
+    store.add_event("p", ("b",), 2, 2)
+    return store
+
+
+def _failure(call) -> SLRError:
+    with pytest.raises(Exception) as caught:
+        call()
+    exc = caught.value
+    assert isinstance(exc, SLRError), f"{type(exc).__name__}: {exc}"
+    assert not isinstance(exc, sqlite3.Error)
+    assert exc.__cause__ is None and (exc.__context__ is None or exc.__suppress_context__)
+    return exc
+
+
+def test_a_journal_dropped_by_another_connection_is_an_slr_error(tmp_path):
+    path = str(tmp_path / "s.db")
+    store = _store_with_journal(path)
+    reads = store.journal_reader(own_connection=True)
+    try:
+        # read once: the reader holds the statement prepared when the table goes
+        assert reads.journal_rows("slr_subj_p", 1, 0, 10) == [(1, 2, "b", 2.0, 2.0)]
+        raw = sqlite3.connect(path, isolation_level=None)
+        try:
+            raw.execute("DROP TABLE slr_subj_p")
+        finally:
+            raw.close()
+        exc = _failure(lambda: reads.journal_rows("slr_subj_p", 1, 0, 10))
+        assert type(exc) is SLRError
+        assert str(exc) == f"{path}: the store failed (no such table: slr_subj_p)"
+        assert reads.event_table("p", 1) is not None   # the connection itself still reads
+    finally:
+        reads.close()
+        store.close()
+
+
+def test_pages_overwritten_with_garbage_are_a_damaged_file(tmp_path):
+    path = str(tmp_path / "s.db")
+    store = EventStore(path)
+    for i in range(200):
+        store.add_event("p", (f"x{i}" * 20,), i, i)
+    store.close()                       # checkpointed: every page is in the file
+    reader = EventStore(path)
+    conn = reader.open_reader()
+    try:
+        assert conn.execute("SELECT count(*) FROM p") == [(200,)]
+        with open(path, "r+b") as f:    # the same file (inode), its pages garbage
+            f.seek(4096)
+            f.write(b"\x0d" * (os.path.getsize(path) - 4096))
+        exc = _failure(lambda: conn.execute("SELECT * FROM p"))
+        assert type(exc) is SLRError
+        assert str(exc).startswith(f"{path}: the file is damaged (database disk image is "
+                                   f"malformed)")
+    finally:
+        conn.close()
+        reader.close()
+
+
+def test_a_file_that_became_no_database_is_a_damaged_file(tmp_path):
+    path = str(tmp_path / "s.db")
+    store = _store_with_journal(path)
+    conn = store.open_reader()
+    try:
+        assert conn.execute("SELECT count(*) FROM slr_subj_p") == [(1,)]
+        store.close()
+        with open(path, "r+b") as f:    # the whole file, header included
+            f.write(b"\xff" * os.path.getsize(path))
+        exc = _failure(lambda: conn.execute("SELECT count(*) FROM p"))
+        assert type(exc) is SLRError and "the file is damaged" in str(exc)
+        # a reader opened on it now: the same words, at its open
+        exc = _failure(lambda: slr_sql.store.ReadConnection(path))
+        assert type(exc) is SLRError and "the file is damaged" in str(exc)
+    finally:
+        conn.close()
+
+
+def test_a_reader_opened_after_the_store_file_was_deleted_is_store_gone(tmp_path):
+    path = str(tmp_path / "s.db")
+    store = _store_with_journal(path)
+    try:
+        for suffix in ("", "-wal", "-shm"):
+            os.remove(path + suffix)
+        exc = _failure(lambda: store.journal_reader(own_connection=True))
+        assert isinstance(exc, SLRStoreGone)
+        assert str(exc).startswith(f"{path}: the store file was deleted or replaced while open")
+        assert not os.path.exists(path)   # no empty file made at the store's path
+    finally:
+        store.close()
+
+
+def test_a_reader_opened_after_the_store_file_was_replaced_is_store_gone(tmp_path):
+    path = str(tmp_path / "s.db")
+    store = _store_with_journal(path)
+    other = str(tmp_path / "other.db")
+    _store_with_journal(other).close()
+    try:
+        os.replace(other, path)
+        exc = _failure(store.open_reader)
+        assert isinstance(exc, SLRStoreGone)
+    finally:
+        store.close()
+
+
+def test_the_hub_logs_a_read_of_a_dropped_journal_as_one_line(tmp_path, caplog):
+    path = str(tmp_path / "s.db")
+    with slr_sql.open(path, clock=ManualClock(0.0)) as kb, \
+            caplog.at_level(logging.WARNING, logger="slr_sql"):
+        hub = kb._subscriptions
+        hub.poll_interval = 3600.0        # a pass runs when asked for, not on a timer
+        sub = kb.subscribe("p(X)^T", since=0)
+        kb.add("p(1)^1")
+        assert sub.get(timeout=DEADLINE)["X"] == 1
+        raw = sqlite3.connect(path, isolation_level=None)
+        try:
+            raw.execute("DROP TABLE slr_subj_p")
+        finally:
+            raw.close()
+        assert hub.drain(DEADLINE)
+        records = [r for r in caplog.records if "delivery pass failed" in r.getMessage()]
+        assert len(records) == 1, caplog.text
+        [record] = records
+        assert record.levelno == logging.WARNING
+        assert record.exc_info is None and "Traceback" not in caplog.text
+        assert "\n" not in caplog.handler.format(record)
+        assert "SLRError" in record.getMessage()
+        assert "no such table: slr_subj_p" in record.getMessage()
+        sub.close()
+
+
+def test_a_reader_opened_after_a_chdir_reads_the_store(tmp_path, monkeypatch):
+    """A store opened by a relative path: its reader opens the file the store has open, not
+    the path in the working directory of now (no empty file made there, no error)."""
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    monkeypatch.chdir(tmp_path / "a")
+    store = _store_with_journal("s.db")
+    try:
+        monkeypatch.chdir(tmp_path / "b")
+        reads = store.journal_reader(own_connection=True)
+        try:
+            assert reads.journal_rows("slr_subj_p", 1, 0, 10) == [(1, 2, "b", 2.0, 2.0)]
+        finally:
+            reads.close()
+        assert not os.path.exists(tmp_path / "b" / "s.db")
+    finally:
+        store.close()
+
+
+def test_a_pass_reading_through_the_stores_connection_logs_a_dropped_journal_as_one_line(
+        tmp_path, caplog):
+    """The pass after events added inside a transaction reads through the store's own
+    connection (which waits for its commit): the same words, one WARNING line."""
+    path = str(tmp_path / "s.db")
+    with slr_sql.open(path, clock=ManualClock(0.0)) as kb, \
+            caplog.at_level(logging.WARNING, logger="slr_sql"):
+        hub = kb._subscriptions
+        hub.poll_interval = 3600.0
+        sub = kb.subscribe("p(X)^T", since=0)
+        kb.add("p(1)^1")
+        assert sub.get(timeout=DEADLINE)["X"] == 1
+        assert hub.drain(DEADLINE)
+        raw = sqlite3.connect(path, isolation_level=None)
+        try:
+            raw.execute("DROP TABLE slr_subj_p")
+        finally:
+            raw.close()
+        hub.notify(through_store=True)    # the next pass reads through the store's connection
+        assert hub.drain(DEADLINE)
+        assert not [r for r in caplog.records if r.levelno >= logging.ERROR], caplog.text
+        [record] = [r for r in caplog.records if "delivery pass failed" in r.getMessage()]
+        assert record.levelno == logging.WARNING and record.exc_info is None
+        assert f"SLRError: {path}: the store failed (no such table: slr_subj_p)" in \
+            record.getMessage()
+        sub.close()
+
+
+def test_a_journal_read_through_the_stores_connection_is_an_slr_error(tmp_path):
+    path = str(tmp_path / "s.db")
+    store = _store_with_journal(path)
+    try:
+        reads = store.journal_reader(own_connection=False)
+        raw = sqlite3.connect(path, isolation_level=None)
+        try:
+            raw.execute("DROP TABLE slr_subj_p")
+        finally:
+            raw.close()
+        exc = _failure(lambda: reads.max_jid("slr_subj_p"))
+        assert str(exc) == f"{path}: the store failed (no such table: slr_subj_p)"
+        for suffix in ("", "-wal", "-shm"):
+            os.remove(path + suffix)
+        assert isinstance(_failure(lambda: reads.max_jid("slr_subj_p")), SLRStoreGone)
+    finally:
+        store.close()
