@@ -357,8 +357,11 @@ class _Service:
                                        kind="PayloadTooLarge")
                 chunks.append(chunk)
         try:
-            await asyncio.wait_for(read(), self.limits.body_timeout)
-        except asyncio.TimeoutError:
+            # (a timeout of this task: wait_for would run read() as a task of its own, a
+            # cost of every request)
+            async with asyncio.timeout(self.limits.body_timeout):
+                await read()
+        except TimeoutError:
             raise ServiceError(f"the request body did not arrive within "
                                f"{self.limits.body_timeout:g} s", kind="RequestTimeout") from None
         data = b"".join(chunks)
