@@ -26,6 +26,10 @@ START_DEADLINE = 30.0
 
 def slr_env(extra: dict | None = None) -> dict:
     env = dict(os.environ)
+    # the current test's id, which a long parametrized id makes longer than the kernel takes
+    # for one string of a new program's environment (Argument list too long): a module's
+    # server started in the setup of such a test would not start (conftest.server_environment)
+    env.pop("PYTEST_CURRENT_TEST", None)
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     env.pop("SLR_TOKEN", None)
     env["COLUMNS"] = "200"

@@ -467,6 +467,50 @@ def test_a_killed_server_loses_no_answered_write(tmp_path):
 
 # -- vanishing and slow clients --------------------------------------------------------------
 
+SHORT_BODY_TIMEOUT_SERVER = r"""
+import sys
+from slr_sql.service.app import Limits
+from slr_sql.service.cli import run_server
+run_server(sys.argv[1], port=0, limits=Limits(body_timeout=0.5))
+"""
+
+
+def test_a_body_that_does_not_arrive_in_time_is_a_408_and_the_server_serves_on(tmp_path):
+    """A request whose body stops short of its Content-Length gets 408 RequestTimeout once
+    ``body_timeout`` has passed (0.5 s here), and the server serves the next request."""
+    import subprocess
+    import sys
+
+    from service_helpers import slr_env
+    proc = subprocess.Popen([sys.executable, "-c", SHORT_BODY_TIMEOUT_SERVER,
+                             str(tmp_path / "body.db")], stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, env=slr_env())
+    try:
+        url = proc.stdout.readline().decode().strip().rsplit(" on ", 1)[1]
+        host, port = url.rsplit("//", 1)[1].rsplit(":", 1)
+        with socket.create_connection((host, int(port)), timeout=30) as half:
+            half.sendall(b"POST /add HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+                         b"Content-Length: 100\r\n\r\n{\"event\": \"")
+            answer = b""
+            while b"\r\n\r\n" not in answer or not answer.rstrip().endswith(b"}"):
+                chunk = half.recv(4096)
+                if not chunk:
+                    break
+                answer += chunk
+        head, _, body = answer.partition(b"\r\n\r\n")
+        assert head.startswith(b"HTTP/1.1 408")
+        error = json.loads(body)["error"]
+        assert error["kind"] == "RequestTimeout" and "did not arrive within 0.5 s" in \
+            error["message"]
+        with slr_sql.connect(url) as remote:
+            remote.add("served(1)^1")
+            assert remote.query("served(X)^_") == [{"X": 1}]
+    finally:
+        proc.terminate()
+        proc.wait(30)
+        proc.stdout.close()
+
+
 def test_vanishing_and_slow_clients_do_not_take_the_server_down(server, remote, tag):
     host, port = server.url.rsplit("//", 1)[1].rsplit(":", 1)
     idle = [socket.create_connection((host, int(port))) for _ in range(30)]

@@ -55,6 +55,53 @@ def test_next_answers_takes_what_is_queued_in_order_up_to_the_limit(kb):
     sub.close()
 
 
+def test_a_batch_that_empties_the_queue_registers_the_next_calls_wait(kb):
+    """Taking the batch that empties the queue registers, under the same lock, the wait of the
+    next call (one lock per frame of the service): an answer queued while the consumer is
+    away is taken by the next call at once, and one queued while it waits wakes it."""
+    kb.add("p(0)^0")
+    sub = kb.subscribe("p(X)^T", since=0.5)
+    drained(kb)
+
+    async def take() -> tuple:
+        loop = asyncio.get_running_loop()
+        await loop.run_in_executor(None, kb.add_many, ["p(1)^1", "p(2)^2"])
+        await loop.run_in_executor(None, drained, kb)
+        first = await sub.next_answers(10)
+        registered = sub._async_waiter is not None
+        await loop.run_in_executor(None, kb.add, "p(3)^3")     # queued while it is away
+        await loop.run_in_executor(None, drained, kb)
+        second = await asyncio.wait_for(sub.next_answers(10), DEADLINE)
+        waiting = asyncio.ensure_future(sub.next_answers(10))
+        while sub._async_waiter is None or sub._queue:
+            await asyncio.sleep(0)
+        await asyncio.sleep(0)                                  # (it waits now)
+        await loop.run_in_executor(None, kb.add, "p(4)^4")     # queued while it waits
+        third = await asyncio.wait_for(waiting, DEADLINE)
+        return registered, [[a["X"] for a in b] for b in (first, second, third)]
+    registered, batches = asyncio.run(take())
+    assert registered
+    assert batches == [[1, 2], [3], [4]]
+    sub.close()
+
+
+def test_a_wait_left_registered_on_a_closed_loop_is_not_waited_on(kb):
+    """The wait a batch registered belongs to its loop: a call on another loop (the first
+    closed) registers its own, and the next answer wakes it."""
+    sub = kb.subscribe("p(X)^T", since=0)
+    kb.add("p(1)^1")
+    drained(kb)
+    assert [a["X"] for a in asyncio.run(sub.next_answers(10))] == [1]
+
+    async def wait_for_the_next() -> list:
+        waiting = asyncio.ensure_future(sub.next_answers(10))
+        await asyncio.sleep(0)
+        await asyncio.get_running_loop().run_in_executor(None, kb.add, "p(2)^2")
+        return await asyncio.wait_for(waiting, DEADLINE)
+    assert [a["X"] for a in asyncio.run(wait_for_the_next())] == [2]
+    sub.close()
+
+
 def test_shared_answers_are_the_same_dicts_and_copies_are_not(kb):
     kb.add("p(0)^0")                  # the type exists: every subscription starts live
     subs = [kb.subscribe("p(X)^T", since=0.5) for _ in range(3)]

@@ -178,6 +178,45 @@ def test_clients_that_vanish_or_stop_reading_do_not_stop_the_others(server, remo
             c.stdin.close()
 
 
+def test_a_client_killed_while_its_sends_are_held_back_ends_quietly(tmp_path):
+    """A client that stopped reading holds back its own subscription's sends (the server
+    waits for its socket to drain); killed, it is found gone by that send or by the server's
+    read, whichever comes first: its subscription ends without a word in the server's log
+    (no error, no traceback), and the server serves on."""
+    with ServiceProcess(tmp_path / "held_back.db") as server:
+        with slr_sql.connect(server.url) as remote:
+            complete_only_as_marked(remote, "big/2")
+            remote.add('big(-1, "")^0')
+            client = subprocess.Popen([sys.executable, "-c", VANISHING_CLIENT,
+                                       server.url.replace("http", "ws") + "/subscribe",
+                                       "big(I, S)^T"],
+                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                      env=slr_env())
+            try:
+                assert client.stdout.readline().strip() == b"subscribed"
+                with remote.subscribe("big(I, S)^T", since=0, until=3000) as sub:
+                    got: list = []
+                    reader = consume(sub, got)
+                    payload = "x" * 400              # enough to fill the stalled socket
+                    for start in range(0, 3000, 100):
+                        remote.add_many([f'big({i}, "{payload}")^{i}' for i in
+                                         range(start, start + 100)])
+                    remote.mark_complete("big/2", 3000)
+                    reader.join(DEADLINE)            # everything went out to the reader
+                    assert [a["I"] for a in got] == list(range(-1, 3000))
+                    client.kill()
+                    client.wait(DEADLINE)
+                    remote.add_many(['big(3000, "")^3000'])
+                    assert server.healthy()
+            finally:
+                client.kill()
+                client.wait(DEADLINE)
+                client.stdout.close()
+                client.stdin.close()
+    log = server.log.read_text()
+    assert "Traceback" not in log and "error" not in log.lower(), log
+
+
 def test_durable_subscription_resumes_after_the_server_is_killed(tmp_path):
     db = tmp_path / "durable.db"
     pattern, n = "d(I)^T", 60

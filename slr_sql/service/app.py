@@ -38,6 +38,7 @@ from starlette.exceptions import HTTPException
 from starlette.requests import ClientDisconnect, Request
 from starlette.responses import Response
 from starlette.routing import Route, WebSocketRoute
+from starlette.types import Receive, Scope, Send
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 import slr_sql
@@ -357,8 +358,11 @@ class _Service:
                                        kind="PayloadTooLarge")
                 chunks.append(chunk)
         try:
-            await asyncio.wait_for(read(), self.limits.body_timeout)
-        except asyncio.TimeoutError:
+            # (a timeout of this task: wait_for would run read() as a task of its own, a
+            # cost of every request)
+            async with asyncio.timeout(self.limits.body_timeout):
+                await read()
+        except TimeoutError:
             raise ServiceError(f"the request body did not arrive within "
                                f"{self.limits.body_timeout:g} s", kind="RequestTimeout") from None
         data = b"".join(chunks)
@@ -395,7 +399,9 @@ class _Service:
         for path, endpoints in routes.items():
             out.append(Route(path, self._dispatch(endpoints),
                              methods=[e.method for e in endpoints]))
-        out.append(WebSocketRoute("/subscribe", self.subscribe))
+        # an ASGI app, not a function: its delivery loop sends each frame without starlette's
+        # WebSocket layers
+        out.append(WebSocketRoute("/subscribe", _SubscribeEndpoint(self)))
         return out
 
     def _dispatch(self, endpoints: list[_Endpoint]) -> Callable:
@@ -471,9 +477,12 @@ class _Service:
             del self.submitted[handle]
 
     # -- subscriptions over WebSocket --------------------------------------------------------
-    async def subscribe(self, websocket: WebSocket) -> None:
+    async def subscribe(self, websocket: WebSocket, send: Send) -> None:
         """``/subscribe``: see docs/service.md, "Subscriptions". One subscription per
         connection; answers are delivered in order with a sequence number.
+
+        ``send`` is the connection's ASGI send (``websocket``'s own): the answer frames go
+        through it directly, the other messages through ``websocket``.
 
         The subscription is consumed with ``async for`` on the event loop (the knowledge
         base's hub thread wakes it through ``call_soon_threadsafe``), so a subscriber costs
@@ -519,7 +528,10 @@ class _Service:
                     break
                 if acks is not None:
                     acks.sent = seq + len(answers)   # before the send: an ack may come back
-                await websocket.send_text(texts.frame(seq + 1, answers))
+                try:
+                    await send({"type": "websocket.send", "text": texts.frame(seq + 1, answers)})
+                except OSError:       # the client is gone (what starlette's send_text raises)
+                    raise WebSocketDisconnect(1006) from None
                 seq += len(answers)
             if acks is not None and acks.error is not None:
                 await _send_error(websocket, acks.error)
@@ -1228,6 +1240,24 @@ async def _send_error(websocket: WebSocket, exc: BaseException) -> None:
         await websocket.close(4000 + body["error"]["status"])
     except Exception:  # the client is gone already
         pass
+
+
+class _SubscribeEndpoint:
+    """``/subscribe`` as an ASGI app (:meth:`_Service.subscribe`), which starlette calls with
+    the send of the server (through its exception middleware's thin wrapper) rather than
+    through the layers of its WebSocket session: each answer frame is one call of it.
+
+    The subscription is served by a task of its own, which this app awaits (a cancellation
+    reaches it, and what it raises comes out here): a frame's wake-up then resumes that task's
+    two coroutines, not the dozen of the middleware and routing that called this one, which
+    every resumption (a frame each) would otherwise pass through, in and out."""
+
+    def __init__(self, service: _Service):
+        self.service = service
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        await asyncio.ensure_future(self.service.subscribe(WebSocket(scope, receive, send),
+                                                           send))
 
 
 # -- read-only SQL and stats (run on the thread pool) ------------------------------------------

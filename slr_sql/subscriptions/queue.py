@@ -186,6 +186,9 @@ class Subscription:
         self._unacked: collections.deque = collections.deque()
         self._thread_waiting = 0
         self._async_waiter: tuple[Any, Any] | None = None
+        # the waiter registered by the batch that emptied the queue, for next_answers' next
+        # call to wait on (it is no longer the one when another wait replaced it)
+        self._next_waiter: tuple[Any, Any] | None = None
         self._final_position: tuple[int, int] | None = None   # set by close()
         self._thread: threading.Thread | None = None
         # positions (the hub thread moves them, under the lock together with the queue)
@@ -420,11 +423,19 @@ class Subscription:
         >>> sub.close(); kb.close()
         """
         self._check_pull()
+        loop = asyncio.get_running_loop()
+        waiter, self._next_waiter = self._next_waiter, None
+        if waiter is not None and waiter is self._async_waiter and waiter[0] is loop and \
+                not self._queue:
+            # registered by the last call's batch, which emptied the queue, and still nobody
+            # else's: what is queued from then on resolves it, so this wait takes no lock
+            # (one lock per frame of the service: taking the batch)
+            try:
+                await waiter[1]
+            finally:
+                self._forget_waiter(waiter)
         while True:
-            waiter = None
-            if not self._queue:   # (a hint, checked again under the lock): wait, most likely
-                loop = asyncio.get_running_loop()
-                waiter = (loop, loop.create_future())
+            waiter = (loop, loop.create_future())
             got = self._take_batch(limit, handled, waiter)
             if type(got) is _End:
                 if got.error is not None:
@@ -432,15 +443,15 @@ class Subscription:
                 return []
             if got:
                 return [dict(a) for a in got] if copy else got
-            if waiter is not None and got is not None:
+            if got is None:
+                await self._wait_async(acks=True)
+            else:
                 # registered by _take_batch under the lock that found the queue empty: one
-                # lock for looking and waiting (per frame of the service, per wake)
+                # lock for looking and waiting
                 try:
                     await waiter[1]
                 finally:
                     self._forget_waiter(waiter)
-            else:
-                await self._wait_async(acks=got is None)
 
     def acknowledge(self, count: int) -> None:
         """Mark the first ``count`` answers taken with ``next_answers(handled=False)`` and
@@ -483,8 +494,8 @@ class Subscription:
         those are handled before the end closes the subscription). One lock for the batch.
         ``handled=False``: the batch goes to the unacknowledged answers (the previous one
         is not marked handled), and an end waits for them to be acknowledged (None then).
-        ``waiter`` ``(loop, future)``: registered, when ``[]`` is returned, as the waiter the
-        hub resolves once something is queued."""
+        ``waiter`` ``(loop, future)``: registered, when ``[]`` is returned or the batch taken
+        empties the queue, as the waiter the hub resolves once something is queued."""
         with self._lock:
             if handled:
                 self._in_flight = None       # the consumer is back: the previous batch is done
@@ -510,6 +521,8 @@ class Subscription:
                     items = list(queue)
                     queue.clear()
                     taken = items[1::2]
+                    if waiter is not None:       # what comes next wakes the next call
+                        self._async_waiter = self._next_waiter = waiter
                     if handled:
                         self._in_flight = items[0]   # the batch is in the consumer's hands
                     else:
