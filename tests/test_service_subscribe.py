@@ -250,3 +250,39 @@ def test_durable_subscription_resumes_after_the_server_is_killed(tmp_path):
     assert resumed and resumed[0] <= received[-1] + 1
     assert resumed == list(range(resumed[0], n + 1))
     assert set(received) | set(resumed) == set(range(1, n + 1))
+
+
+def test_a_client_gone_before_the_handshake_is_accepted_leaves_no_error(tmp_path, caplog):
+    """A client that closes its connection between its upgrade request and the server's
+    accept: uvicorn's send of the accept raises ClientDisconnected. Nobody is left to answer,
+    so /subscribe ends quietly: no "internal error" line with a traceback in the server's
+    log (any client can do this). The app is called as uvicorn calls it, with uvicorn's own
+    exception for the vanished peer."""
+    import asyncio
+    import logging
+
+    from uvicorn.protocols.utils import ClientDisconnected
+
+    from slr_sql.service.app import create_app
+
+    kb = slr_sql.open(tmp_path / "gone.db")
+    sent: list[dict] = []
+
+    async def receive() -> dict:
+        return {"type": "websocket.connect"}
+
+    async def send(message: dict) -> None:
+        sent.append(message)
+        raise ClientDisconnected()
+
+    scope = {"type": "websocket", "path": "/subscribe", "raw_path": b"/subscribe",
+             "query_string": b"", "headers": [], "scheme": "ws", "server": ("127.0.0.1", 80),
+             "client": ("127.0.0.1", 5000), "root_path": "", "subprotocols": [],
+             "asgi": {"version": "3.0"}}
+    try:
+        with caplog.at_level(logging.DEBUG, logger="slr_sql"):
+            asyncio.run(create_app(kb)(scope, receive, send))
+    finally:
+        kb.close()
+    assert [m["type"] for m in sent] == ["websocket.accept"]
+    assert [r for r in caplog.records if r.levelno >= logging.WARNING or r.exc_info] == []

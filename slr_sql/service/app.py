@@ -489,7 +489,10 @@ class _Service:
         no thread. Each send awaits the socket's drain: a slow client holds back only its
         own subscription, whose bounded queue (``subscribe_queue``) then makes it read the
         store at its own pace and, too far behind, end with an overflow error."""
-        await websocket.accept()
+        try:
+            await websocket.accept()
+        except OSError:     # the client left during the handshake: nobody to answer
+            return
         sub = None
         watcher = None
         closing: list = []
