@@ -7,14 +7,13 @@ The lock is real: another psycopg session holds a table in a transaction left op
 wait has a deadline, and the lock is let go in a ``finally``."""
 from __future__ import annotations
 
-import threading
-
 import psycopg
 import pytest
 
 import slr_sql
 from slr_sql import ManualClock
 from slr_sql.errors import SLRBusy, SLRError
+from test_postgres_reader_busy import _in_a_thread
 
 DEADLINE = 30.0
 
@@ -22,26 +21,18 @@ DEADLINE = 30.0
 def _outcome_within_deadline(url: str, table: str, mode: str, call) -> dict:
     """Run ``call`` in a thread while another session holds ``table`` in ``mode``; the
     outcome (``value`` or ``error``), asserting the call ended within the deadline."""
-    box: dict = {}
-
-    def run():
-        try:
-            box["value"] = call()
-        except BaseException as exc:   # noqa: BLE001 - handed to the test
-            box["error"] = exc
-
     other = psycopg.connect(url)
-    thread = threading.Thread(target=run, daemon=True)
+    thread = None
     try:
         other.execute("SET search_path = slr")
         other.execute(f"LOCK TABLE {table} IN {mode} MODE")
-        thread.start()
+        thread, box = _in_a_thread(call)
         thread.join(DEADLINE)
         assert not thread.is_alive(), "the call waited for the lock past its deadline"
     finally:
         other.rollback()
         other.close()
-        if thread.ident is not None:   # started
+        if thread is not None:
             thread.join(DEADLINE)
     return box
 
