@@ -312,6 +312,8 @@ def test_a_ctrl_c_as_the_prompt_is_taken_down_stops_the_goal_before_it_starts(st
     from slr_sql.cli import Shell, interactive
 
     said: list[str] = []
+    # (whatever this worker had: SIG_IGN when the suite was started in the background)
+    signal_before = signal.getsignal(signal.SIGINT)
     with slr_sql.open(store) as kb, create_pipe_input() as keys:
         prompt: PromptSession = PromptSession(input=keys, output=DummyOutput())
 
@@ -330,7 +332,7 @@ def test_a_ctrl_c_as_the_prompt_is_taken_down_stops_the_goal_before_it_starts(st
         interactive(Shell(kb, echo=said.append, echo_err=said.append), prompt,
                     echo=said.append)
     assert said == ["\n% interrupted", "O = cup2, T = 2.0"]
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert signal.getsignal(signal.SIGINT) is signal_before   # the shell's handler is gone
 
 
 def test_a_sigint_while_a_line_is_edited_drops_the_line_as_ctrl_c_does(store, signals_land_in_the_shell):
@@ -383,6 +385,8 @@ def test_a_sigint_between_two_lines_reaches_the_next_prompt_as_its_ctrl_c(store,
     from slr_sql.cli import Shell, interactive
 
     said: list[str] = []
+    # (whatever this worker had: SIG_IGN when the suite was started in the background)
+    signal_before = signal.getsignal(signal.SIGINT)
     prompts = []
     with slr_sql.open(store) as kb, create_pipe_input() as keys:
         prompt: PromptSession = PromptSession(input=keys, output=DummyOutput())
@@ -399,7 +403,7 @@ def test_a_sigint_between_two_lines_reaches_the_next_prompt_as_its_ctrl_c(store,
         interactive(session, prompt, echo=said.append, before_prompt=between_lines)
     assert prompts == [False, True, False, False]   # the unfinished goal was dropped
     assert said == ["O = cup2, T = 2.0"]
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert signal.getsignal(signal.SIGINT) is signal_before   # the shell's handler is gone
 
 
 def run_piped(db: str, *lines: str):
