@@ -11,6 +11,7 @@ import psycopg
 import pytest
 
 import slr_sql
+from slr_sql.store import quote_identifier  # (an identifier cannot be bound)
 from slr_sql import ManualClock
 from slr_sql.errors import SLRBusy, SLRError
 from test_postgres_reader_busy import _in_a_thread
@@ -25,7 +26,7 @@ def _outcome_within_deadline(url: str, table: str, mode: str, call) -> dict:
     thread = None
     try:
         other.execute("SET search_path = slr")
-        other.execute(f"LOCK TABLE {table} IN {mode} MODE")
+        other.execute(f"LOCK TABLE {quote_identifier(table)} IN {mode} MODE")
         thread, box = _in_a_thread(call)
         thread.join(DEADLINE)
         assert not thread.is_alive(), "the call waited for the lock past its deadline"
@@ -53,9 +54,9 @@ def test_busy_timeout_0_makes_a_read_meeting_a_lock_busy_at_once(postgres_url):
         kb.add("p(1)^1")
         table = kb.store.table_for("p", 1)
         box = _outcome_within_deadline(postgres_url, table, "ACCESS EXCLUSIVE",
-                                       lambda: kb.sql(f"SELECT count(*) FROM {table}"))
+                                       lambda: kb.sql(f"SELECT count(*) FROM {quote_identifier(table)}"))
         assert isinstance(box.get("error"), SLRBusy), repr(box)
-        assert kb.sql(f"SELECT count(*) FROM {table}")[1] == [(1,)]
+        assert kb.sql(f"SELECT count(*) FROM {quote_identifier(table)}")[1] == [(1,)]
 
 
 @pytest.mark.parametrize("value", [float("inf"), float("nan"), -1, "5", True],

@@ -14,6 +14,7 @@ import psycopg
 import pytest
 
 import slr_sql
+from slr_sql.store import quote_identifier  # (an identifier cannot be bound)
 from slr_sql import ManualClock
 from slr_sql.errors import SLRBusy
 
@@ -26,7 +27,7 @@ class _Locked:
     def __init__(self, url: str, table: str):
         self.conn = psycopg.connect(url)
         self.conn.execute("SET search_path = slr")
-        self.conn.execute(f"LOCK TABLE {table} IN ACCESS EXCLUSIVE MODE")
+        self.conn.execute(f"LOCK TABLE {quote_identifier(table)} IN ACCESS EXCLUSIVE MODE")
 
     def release(self) -> None:
         self.conn.rollback()

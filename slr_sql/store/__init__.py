@@ -48,7 +48,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
-from ..errors import EventRejected, SLRError
+from ..errors import EventRejected
 from ..lockorder import held_here
 from .buffering import (ArgEquals, BufferPlan, BufferTables, JsonArray, JsonEquals, MixedTerm,
                         PatternMatch, SameTerm)
@@ -678,16 +678,12 @@ class EventStore:
             def execute(sql: str, params: tuple) -> list[tuple]:
                 # as the reader's own connection says them: a failure on the hub's thread
                 # is an SLRError named after it (a journal another connection dropped, a
-                # damaged file, the file deleted), never a raw sqlite3 error
+                # damaged file, the file deleted), never a raw sqlite3 error (SQLite's only:
+                # PostgreSQL's connection says its own)
                 try:
                     return db.execute(sql, params)
                 except DatabaseError as exc:
-                    error = store_error(exc, db.path, db.busy_timeout, "nothing was read")
-                    try:   # the file deleted or replaced (SLRStoreGone): that is the cause
-                        getattr(db, "check_identity", lambda: None)()
-                    except SLRError as gone:
-                        error = gone
-                    raise error from None
+                    raise db.read_error(exc) from None
 
             return JournalReader(execute)
         reader = self._db.open_reader()

@@ -90,10 +90,36 @@ _SQLITE_MAGIC = b"SQLite format 3\x00"
 _STORE_TABLES = frozenset({"slr_meta", "slr_program", "slr_event_types"})
 
 
-def _ro_uri(path: str) -> str:
-    """A read-only ``file:`` URI for ``path`` (``%``, ``?`` and ``#`` escaped)."""
+def _file_uri(path: str, mode: str = "ro") -> str:
+    """A ``file:`` URI for ``path`` opened in ``mode`` (``ro``, or ``rw``: never made anew)
+    (``%``, ``?`` and ``#`` escaped)."""
     quoted = os.path.abspath(path).replace("%", "%25").replace("?", "%3f").replace("#", "%23")
-    return f"file:{quoted}?mode=ro"
+    return f"file:{quoted}?mode={mode}"
+
+
+def _file_identity(name: str) -> tuple[int, int] | None:
+    """``(device, inode)`` of the file ``name``, None when there is none."""
+    try:
+        info = os.stat(name)
+    except OSError:
+        return None
+    return info.st_dev, info.st_ino
+
+
+def _store_gone(path: Any, what: str, outcome: str) -> SLRStoreGone:
+    return SLRStoreGone(f"{path}: {what} while open (by another program?); {outcome}. "
+                        f"Restore the file, or close this knowledge base and open the path "
+                        f"again")
+
+
+def _read_error(exc: sqlite3.Error, path: Any, busy_timeout: float, moved: bool) -> SLRError:
+    """The SLRError of a failed read: :class:`SLRStoreGone` when the store's file is no
+    longer the one at the path (``moved``: what the error says is about that), else
+    :func:`store_error`'s words (busy, full, damaged, a table dropped)."""
+    if moved:
+        return _store_gone(path, "the store file was deleted or replaced",
+                           f"nothing was read ({exc})")
+    return store_error(exc, path, busy_timeout, "nothing was read")
 
 
 def check_file(path: str, adopt: bool = False) -> bool:
@@ -183,7 +209,7 @@ def _read_schema(path: str, header: bytes) -> tuple[list[tuple[str, str]], int]:
     error: Exception | None = None
     for _attempt in range(3):
         immutable = wal_mode and not os.path.exists(path + "-wal")
-        uri = _ro_uri(path) + ("&immutable=1" if immutable else "")
+        uri = _file_uri(path) + ("&immutable=1" if immutable else "")
         try:
             conn = sqlite3.connect(uri, uri=True, isolation_level=None, timeout=30.0)
             try:
@@ -603,15 +629,8 @@ class Database:
     def _identities(self, shm: bool = True) -> tuple:
         """``(device, inode)`` of the file, its write-ahead log and (unless not ``shm``) its
         shared-memory file (None where missing)."""
-        found: list[tuple[int, int] | None] = []
         names = (str(self._absolute), f"{self._absolute}-wal", f"{self._absolute}-shm")
-        for name in names if shm else names[:2]:
-            try:
-                info = os.stat(name)
-                found.append((info.st_dev, info.st_ino))
-            except OSError:
-                found.append(None)
-        return tuple(found)
+        return tuple(_file_identity(name) for name in (names if shm else names[:2]))
 
     def check_identity(self) -> None:
         """Raise :class:`SLRStoreGone` naming the path if the file open is no longer the one
@@ -644,9 +663,19 @@ class Database:
         else:  # a log that appeared since the open: that is its identity from now on
             self._identity = (main, now[1], shm if shm is not None else self._identities()[2])
             return
-        raise SLRStoreGone(f"{self.path}: {what} while open (by another program?); nothing of "
-                           f"this call was stored. Restore the file, or close this knowledge "
-                           f"base and open the path again")
+        raise _store_gone(self.path, what, "nothing of this call was stored")
+
+    def read_error(self, exc: sqlite3.Error) -> SLRError:
+        """The SLRError of a read of this connection that failed with ``exc`` (what the
+        store's own reading connections say, :class:`ReadConnection`).
+
+        >>> db = Database(None)
+        >>> db.read_error(sqlite3.OperationalError("no such table: p"))
+        SLRError(':memory:: the store failed (no such table: p)')
+        """
+        moved = self._absolute is not None and \
+            _file_identity(self._absolute) != self._identity[0]
+        return _read_error(exc, self.path, self.busy_timeout, moved)
 
     def _remove_own_side_files(self, now: tuple) -> None:
         """Remove the ``-wal`` and ``-shm`` at the path that are this connection's own (same
@@ -1303,10 +1332,10 @@ class ReadConnection:
         self.lock = ordered_lock("store.reader")
         self.closed = False
         # (device, inode) of the store's file: another file at the path is not the store
-        self._identity = identity or self._file_identity()
+        self._identity = identity or _file_identity(path)
         try:
             # mode=rw: a store file deleted meanwhile is not made again, empty, at its path
-            self.conn = sqlite3.connect(_ro_uri(path)[:-len("ro")] + "rw", uri=True,
+            self.conn = sqlite3.connect(_file_uri(path, "rw"), uri=True,
                                         check_same_thread=False, isolation_level=None,
                                         timeout=busy_timeout, cached_statements=64)
         except sqlite3.Error as exc:
@@ -1320,30 +1349,14 @@ class ReadConnection:
         except sqlite3.Error as exc:
             self.conn.close()
             raise self._error(exc) from None
-        if self._file_identity() != self._identity:
+        if _file_identity(path) != self._identity:
             self.conn.close()
-            raise self._gone("nothing was read")
-
-    def _file_identity(self) -> tuple[int, int] | None:
-        try:
-            info = os.stat(self.path)
-        except OSError:
-            return None
-        return info.st_dev, info.st_ino
-
-    def _gone(self, outcome: str) -> SLRStoreGone:
-        return SLRStoreGone(f"{self.path}: the store file was deleted or replaced while open "
-                            f"(by another program?); {outcome}. Restore the file, or close "
-                            f"this knowledge base and open the path again")
+            raise _store_gone(path, "the store file was deleted or replaced", "nothing was read")
 
     def _error(self, exc: sqlite3.Error) -> SLRError:
-        """The SLRError for ``exc``: :class:`SLRStoreGone` when the store's file is no
-        longer at the path (another program deleted, moved or replaced it: what the error
-        says is about that), else :func:`store_error`'s words (busy, full, damaged, ...)."""
-        now = self._file_identity()
-        if now is None or (self._identity is not None and now != self._identity):
-            return self._gone(f"nothing was read ({exc})")
-        return store_error(exc, self.path, self.busy_timeout, "nothing was read")
+        now = _file_identity(self.path)
+        return _read_error(exc, self.path, self.busy_timeout,
+                           now is None or (self._identity is not None and now != self._identity))
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
         """Run one reading statement and return its rows. Every failure of the database
@@ -1380,7 +1393,7 @@ def run_sql_file(path: str | os.PathLike, query: str,
     path = os.fspath(path)
     if not os.path.exists(path):
         raise SLRError(f"no such store: {path}")
-    uri = _ro_uri(path)[:-len("ro")] + ("rw" if write else "ro")
+    uri = _file_uri(path, "rw" if write else "ro")
     try:
         conn = sqlite3.connect(uri, uri=True, isolation_level=None)
     except sqlite3.Error as exc:
