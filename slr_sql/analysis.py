@@ -125,11 +125,12 @@ def _as_term(t: Any) -> Any:
 
 
 def goal_refs(goal: Any, program: Program | None = None, library: Program | None = None,
-              meta: dict | None = None) -> _Refs:
+              meta: dict | None = None, visited: set | None = None) -> _Refs:
     """The nodes, stored event types and variable calls of one goal term (not transitive).
 
     ``meta`` maps predicate keys to their meta-arguments ``{(index, extra_args)}`` (see
-    :func:`analyze`); ``program``/``library`` tell user predicates from builtins.
+    :func:`analyze`); ``program``/``library`` tell user predicates from builtins. Every
+    ``(name, arity)`` the goal calls is added to ``visited`` when given.
 
     >>> from slr_sql.parser import parse_term
     >>> r = goal_refs(parse_term("(seg(O,P)^T, \\\\+ prev(obj(O,_)^Z, T))")[0])
@@ -160,6 +161,8 @@ def goal_refs(goal: Any, program: Program | None = None, library: Program | None
         if extra:
             args = args + tuple(Var() for _ in range(extra))
         key = (name, len(args))
+        if visited is not None:
+            visited.add(key)
         if key == ("^", 2):
             ev = split_event_atom(Struct("^", args))
             if ev is None:          # V^Goal (bagof/setof or plain): the goal is called
@@ -216,17 +219,16 @@ class Analysis:
         self.unknown: dict[Node, list[str]] = {}
         self._build()
 
-    def _clauses(self):
-        """(node, head args, body) for every clause of the library and the program."""
-        for prog in (self.library, self.program):
-            for key, pred in prog.preds.items():
-                node = Node("pred", *key)
-                for c in pred.clauses:
-                    yield node, c
-            for key, pred in prog.temporal.items():
-                node = Node("event", *key)
-                for c in pred.clauses:
-                    yield node, c
+    def _clauses(self, prog: Program) -> list[tuple[Node, tuple, Any]]:
+        """(node, head args, body) for every clause of ``prog``."""
+        out = []
+        for key, pred in prog.preds.items():
+            node = Node("pred", *key)
+            out.extend((node, *self._head_body(c)) for c in pred.clauses)
+        for key, pred in prog.temporal.items():
+            node = Node("event", *key)
+            out.extend((node, *self._head_body(c)) for c in pred.clauses)
+        return out
 
     @staticmethod
     def _head_body(c: Any) -> tuple[tuple, Any]:
@@ -241,16 +243,32 @@ class Analysis:
             return (tuple(head.args) if type(head) is Struct else ()), src.body
         return tuple(_as_term(a) for a in c.head), [_as_term(g) for g in c.body]
 
-    def _body_refs(self, body: Any) -> _Refs:
+    def _body_refs(self, body: Any, visited: set | None = None) -> _Refs:
         if isinstance(body, list):
             goal: Any = Atom("true")
             for g in reversed(body):
                 goal = g if goal == "true" else Struct(",", (g, goal))
             body = goal
-        return goal_refs(body, self.program, self.library, self.meta)
+        return goal_refs(body, self.program, self.library, self.meta, visited)
 
     def _build(self) -> None:
-        clauses = [(node, *self._head_body(c)) for node, c in self._clauses()]
+        # The library is the same for every program: its part of the graph is computed once
+        # and copied, unless the program defines a predicate the library calls (then a
+        # library clause's calls, and the meta-arguments they follow, depend on the program).
+        part = _library_part(self.library) if self.program is not self.library else None
+        if part is not None and part.visited.isdisjoint(self.program.preds):
+            self.meta = {k: set(v) for k, v in part.meta.items()}
+            self.edges = {k: set(v) for k, v in part.edges.items()}
+            self.stored = {k: set(v) for k, v in part.stored.items()}
+            self.unknown = {k: list(v) for k, v in part.unknown.items()}
+            self._add_clauses(self._clauses(self.program))
+        else:
+            self._add_clauses(self._clauses(self.library) + self._clauses(self.program))
+        for key in self.program.temporal:
+            self.stored.setdefault(Node("event", *key), set()).add(key)
+
+    def _add_clauses(self, clauses: list[tuple[Node, tuple, Any]],
+                     visited: set | None = None) -> None:
         # meta-arguments, to a fixpoint: call(G, ..) with G a head argument
         changed = True
         while changed:
@@ -258,7 +276,7 @@ class Analysis:
             for node, head, body in clauses:
                 if node.kind != "pred":
                     continue
-                refs = self._body_refs(body)
+                refs = self._body_refs(body, visited)
                 for var, extra in refs.var_calls:
                     for i, h in enumerate(head):
                         if deref(h) is var:
@@ -267,7 +285,7 @@ class Analysis:
                                 spec.add((i, extra))
                                 changed = True
         for node, head, body in clauses:
-            refs = self._body_refs(body)
+            refs = self._body_refs(body, visited)
             self.edges.setdefault(node, set()).update(refs.nodes)
             stored = self.stored.setdefault(node, set())
             stored.update(refs.stored)
@@ -280,8 +298,6 @@ class Analysis:
                     reasons.append(f"{node} calls the variable goal {var}")
             if reasons:
                 self.unknown.setdefault(node, []).extend(reasons)
-        for key in self.program.temporal:
-            self.stored.setdefault(Node("event", *key), set()).add(key)
 
     def event_types(self) -> set[tuple[str, int]]:
         """Every event type the program mentions (event goals, prev/next, temporal heads)."""
@@ -292,6 +308,32 @@ class Analysis:
 
 
 _CACHE: "weakref.WeakKeyDictionary[Program, Analysis]" = weakref.WeakKeyDictionary()
+
+
+class _LibraryPart:
+    """The library's own part of every program's graph (its clauses analysed with no user
+    program), and ``visited``: every (name, arity) its clauses call."""
+
+    __slots__ = ("meta", "edges", "stored", "unknown", "visited")
+
+    def __init__(self, library: Program):
+        alone = Analysis.__new__(Analysis)
+        alone.program, alone.library = Program(), library
+        alone.meta, alone.edges, alone.stored, alone.unknown = {}, {}, {}, {}
+        self.visited: set[tuple[str, int]] = set()
+        alone._add_clauses(alone._clauses(library), self.visited)
+        self.meta, self.edges = alone.meta, alone.edges
+        self.stored, self.unknown = alone.stored, alone.unknown
+
+
+_LIBRARY_PARTS: "weakref.WeakKeyDictionary[Program, _LibraryPart]" = weakref.WeakKeyDictionary()
+
+
+def _library_part(library: Program) -> _LibraryPart:
+    part = _LIBRARY_PARTS.get(library)
+    if part is None:
+        part = _LIBRARY_PARTS[library] = _LibraryPart(library)
+    return part
 
 
 def analyze(program: Program, library: Program | None = None) -> Analysis:

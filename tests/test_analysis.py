@@ -1,7 +1,10 @@
 """slr_sql.analysis: dependency graph, goal sets, meta-predicates, recursion."""
 from __future__ import annotations
 
-from slr_sql.analysis import Node, analyze, dependency_graph, goal_set, recursive_predicates, sccs
+import pytest
+
+from slr_sql.analysis import (Analysis, Node, analyze, dependency_graph, goal_set,
+                               recursive_predicates, sccs)
 from slr_sql.demo import CUPS_ON_TABLE1, ROBOT_PROGRAM
 from slr_sql.parser import parse_program
 from slr_sql.program import Program
@@ -102,3 +105,42 @@ def test_sccs_orders_callees_first():
     comps = sccs({"a": ["b"], "b": ["c", "a"], "c": ["c"], "d": []})
     assert comps.index(["c"]) < next(i for i, c in enumerate(comps) if set(c) == {"a", "b"})
     assert ["d"] in comps
+
+
+# The library's part of the graph is computed once per process and copied into each program's
+# analysis; the reference computes the library's clauses and the program's together, as one
+# program with no library: every field must come out the same, also for programs that define a
+# predicate the library calls (append/3, maplist/2) or call library meta-predicates.
+@pytest.mark.parametrize("text", [
+    "",
+    "p(X) :- q(X)^T, X > 1.\nr(X) :- p(X).",
+    "seen(O) :- seg(O, _)^_. all(Os) :- maplist(seen, Os).",
+    "p(G) :- call(G, 1). q :- p(r). r(_).",
+    "ok(L) :- foldl(add, L, 0, S), S > 2. add(X, A, B) :- B is A + X.",
+    "append(X, Y, Z) :- call(X, Y, Z). use(L) :- append(L, [a], _).",
+    "maplist(G, L) :- w(G, L). w(_, _) :- seg(_, _)^_.",
+    "bad(G) :- G. worse :- prev(E, 3), call(E).",
+    ROBOT_PROGRAM,
+])
+def test_each_program_shares_the_library_part_computed_once(text):
+    from slr_sql.builtins import LIBRARY_SOURCE
+
+    alone = Program()
+    for clause in parse_program(LIBRARY_SOURCE + "\n" + text):
+        if clause.head is not None:
+            alone.add_clause(clause)
+    reference = Analysis(alone, Program())
+    for _ in range(2):          # the first builds the library's part, the second copies it
+        got = Analysis(program(text))
+        assert got.meta == reference.meta
+        assert got.edges == reference.edges and list(got.edges) == list(reference.edges)
+        assert got.stored == reference.stored
+        assert got.unknown == reference.unknown
+
+
+def test_a_programs_analysis_does_not_change_the_next_ones():
+    first = analyze(program("p(G) :- call(G, 1). q :- p(r). r(_). maplist(G, L) :- w(G, L). w(_, _)."))
+    assert Node("pred", "w", 2) in first.edges[Node("pred", "maplist", 2)]
+    second = analyze(program("x."))
+    assert Node("pred", "w", 2) not in second.edges[Node("pred", "maplist", 2)]
+    assert ("p", 1) not in second.meta

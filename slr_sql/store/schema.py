@@ -11,6 +11,7 @@ table with a never-reused ``seq``).
 """
 from __future__ import annotations
 
+import functools
 import importlib.resources
 import re
 import sqlite3
@@ -45,13 +46,39 @@ def migration_scripts() -> list[tuple[int, str, str]]:
     >>> migration_scripts()[0][:2]
     (1, '0001_initial.sql')
     """
+    return _scripts(r"(\d+)_.*\.sql\Z")
+
+
+# Every store opened reads the migrations: their text is kept per file, read again only when
+# the folder's listing or a file's size or modification time changes.
+_SCRIPT_TEXTS: dict[tuple[str, int, int], str] = {}
+
+
+def _scripts(pattern: str) -> list[tuple[int, str, str]]:
     scripts = []
     for entry in _migrations_dir().iterdir():
-        match = re.match(r"(\d+)_.*\.sql\Z", entry.name)
+        match = re.match(pattern, entry.name)
         if match:
-            scripts.append((int(match.group(1)), entry.name, entry.read_text(encoding="utf-8")))
+            scripts.append((int(match.group(1)), entry.name, _script_text(entry)))
     scripts.sort()
     return scripts
+
+
+def _script_text(entry: Any) -> str:
+    try:
+        info = entry.stat()
+    except (AttributeError, OSError):   # a resource that is not a file: read it every time
+        return str(entry.read_text(encoding="utf-8"))
+    key = (str(entry), info.st_size, info.st_mtime_ns)
+    text = _SCRIPT_TEXTS.get(key)
+    if text is None:
+        text = _SCRIPT_TEXTS[key] = entry.read_text(encoding="utf-8")
+    return text
+
+
+@functools.lru_cache(maxsize=128)
+def _statements(text: str) -> tuple[str, ...]:
+    return tuple(split_sql_script(text))
 
 
 def applied_migrations(conn: sqlite3.Connection,
@@ -159,7 +186,7 @@ def migrate(conn: sqlite3.Connection, path: str | None,
             if number in applied:
                 continue
             try:
-                for statement in split_sql_script(text):
+                for statement in _statements(text):
                     for each in _per_event_table(conn, statement):
                         conn.execute(each)
                 step = _PYTHON_STEPS.get(filename)
@@ -190,10 +217,4 @@ def postgres_migration_scripts() -> list[tuple[int, str, str]]:
     >>> [n for n, _, _ in postgres_migration_scripts()] == [n for n, _, _ in migration_scripts()]
     True
     """
-    scripts = []
-    for entry in _migrations_dir().iterdir():
-        match = re.match(r"pg_(\d+)_.*\.sql\Z", entry.name)
-        if match:
-            scripts.append((int(match.group(1)), entry.name, entry.read_text(encoding="utf-8")))
-    scripts.sort()
-    return scripts
+    return _scripts(r"pg_(\d+)_.*\.sql\Z")
