@@ -19,8 +19,10 @@ import pytest
 
 import slr_sql
 from slr_sql import SLRError, SLRStoreFull, SLRUnavailable
+from slr_sql.store import EventStore
 
 from service_helpers import ROOT, ServiceProcess, slr_env
+from test_store_read_connection_errors import _failure
 
 # Run by the child inside the namespace: fill() writes a file until the disk is full,
 # free() removes it, files() lists the directory with sizes.
@@ -187,6 +189,71 @@ def test_the_size_limit_of_sqlite_is_store_full_too(tmp_path):
         kb.sql("PRAGMA max_page_count = 1073741823", write=True)
         kb.add_many([f"q({'y' * 4000}, {i})^{i}" for i in range(20)])
         assert kb.sql("SELECT count(*) FROM q")[1] == [(20,)]
+
+
+def test_the_stores_statements_at_its_size_limit_are_store_full(tmp_path):
+    """The statements the store runs for the parts above (the subscription hub, the event
+    rules, buffers) on its own connection, outside the knowledge base's boundary: each
+    raises SLRStoreFull in words, not sqlite3's error, and the store goes on once the limit
+    is raised."""
+    path = str(tmp_path / "robot.db")
+    store = EventStore(path)
+    try:
+        store.execute("CREATE TABLE notes (body)")
+        pages = store.execute("PRAGMA page_count")[0][0]
+        store.execute(f"PRAGMA max_page_count = {pages}")
+        body = b"x" * 100_000
+        insert = "INSERT INTO notes VALUES (:body)"
+        calls = {
+            "execute": lambda: store.execute("INSERT INTO notes VALUES (?)", (body,)),
+            "executemany": lambda: store.executemany("INSERT INTO notes VALUES (?)", [(body,)]),
+            "executescript": lambda: store.executescript(
+                "INSERT INTO notes VALUES (zeroblob(100000));"),
+            "run_compiled": lambda: store.run_compiled(insert, {"body": body}),
+            "run_compiled_many": lambda: store.run_compiled_many(insert, [{"body": body}]),
+            "run_compiled_batch": lambda: store.run_compiled_batch(
+                [(insert, [{"body": body}], True)]),
+        }
+        for name, call in calls.items():
+            exc = _failure(call)
+            assert isinstance(exc, SLRStoreFull), (name, exc)
+            assert str(exc).startswith(f"{path}: the disk is full"), (name, exc)
+        store.execute("PRAGMA max_page_count = 1073741823")
+        store.execute("INSERT INTO notes VALUES (?)", (body,))
+        assert store.execute("SELECT count(*) FROM notes") == [(1,)]
+    finally:
+        store.close()
+
+
+def test_the_hubs_housekeeping_on_a_full_disk_is_one_line(tmp_path):
+    """The subscription hub's housekeeping writes on the store's connection, on a thread of
+    its own (no knowledge base call around it): a commit the full disk refuses is logged as
+    one WARNING line naming SLRStoreFull, and the next round once there is space writes."""
+    out = on_full_disk(tmp_path, """
+        import io, logging
+        lines = io.StringIO()
+        logging.getLogger("slr_sql").addHandler(logging.StreamHandler(lines))
+        kb = slr_sql.open(path, clock=slr_sql.ManualClock(0.0))
+        hub = kb._subscriptions
+        sub = kb.subscribe("p(X)^T", since=0, id="log")
+        kb.add_many(["p(1)^1", "p(2)^2"])
+        got = [sub.get(timeout=30)["X"] for _ in range(2)]
+        fill()
+        hub._last_persist = hub._last_lease = 0.0   # a position and a lease are due: a write
+        full = hub.housekeeping_round(30)
+        free()
+        hub._last_persist = hub._last_lease = 0.0
+        again = hub.housekeeping_round(30)
+        kb.add("p(3)^3")
+        got.append(sub.get(timeout=30)["X"])
+        sub.close()
+        kb.close()
+        print(json.dumps({"got": got, "rounds": [full, again], "log": lines.getvalue()}))
+    """)
+    assert out["got"] == [1, 2, 3] and out["rounds"] == [True, True], out
+    [line] = [line for line in out["log"].splitlines() if "housekeeping failed" in line]
+    assert "SLRStoreFull" in line and "robot.db: the disk is full" in line, out["log"]
+    assert "Traceback" not in out["log"], out["log"]
 
 
 def test_a_lock_held_too_long_is_503_with_retry_after(tmp_path):

@@ -50,6 +50,20 @@ def test_writing_after_rm_of_the_store_raises_naming_the_path(kb, tmp_path, writ
         kb.add("p(3)^3")
 
 
+def test_a_statement_failing_on_a_deleted_store_says_store_gone(kb, tmp_path):
+    """A statement the store runs for the parts above outside a transaction (no commit
+    checks the file) that fails on the file (here at its page limit) once the file was
+    deleted: what the failure is about is a file no longer the store, and it says so."""
+    store = kb.store
+    store.execute("CREATE TABLE notes (body)")
+    store.execute(f"PRAGMA max_page_count = {store.execute('PRAGMA page_count')[0][0]}")
+    remove_store(tmp_path / "robot.db")
+    with pytest.raises(SLRStoreGone, match="robot.db: the store file was deleted or replaced "
+                                           "while open") as caught:
+        store.execute("INSERT INTO notes VALUES (?)", (b"x" * 100_000,))
+    assert "disk is full" not in str(caught.value)
+
+
 def test_a_store_replaced_by_another_file_is_noticed(kb, tmp_path):
     other = tmp_path / "other.db"
     with slr_sql.open(other, clock=ManualClock(0.0)) as second:

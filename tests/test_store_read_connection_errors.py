@@ -2,7 +2,8 @@
 turn every failure of SQLite into an SLRError named after the condition, as the store's
 own connection does (``store_error``): a journal another connection dropped, a file
 overwritten with garbage (damaged, not a database), the store file deleted. No
-``sqlite3.Error`` reaches the caller, and the hub logs such a failed pass as one line.
+``sqlite3.Error`` reaches the caller, and the hub logs such a failed pass as one line. The
+store's own connection says a damaged file in the same words (``Database.failure``).
 
 Every condition is real: another ``sqlite3`` connection drops the table, the file's bytes
 are overwritten on disk, the file is removed."""
@@ -61,7 +62,10 @@ def test_a_journal_dropped_by_another_connection_is_an_slr_error(tmp_path):
         store.close()
 
 
-def test_pages_overwritten_with_garbage_are_a_damaged_file(tmp_path):
+@pytest.mark.parametrize("through", ["reader", "execute", "run_compiled"])
+def test_pages_overwritten_with_garbage_are_a_damaged_file(tmp_path, through):
+    """On a reading connection, and on the store's own: its statements for the parts
+    above (``execute``, a compiled query's ``run_compiled``) say it in the same words."""
     path = str(tmp_path / "s.db")
     store = EventStore(path)
     for i in range(200):
@@ -69,12 +73,14 @@ def test_pages_overwritten_with_garbage_are_a_damaged_file(tmp_path):
     store.close()                       # checkpointed: every page is in the file
     reader = EventStore(path)
     conn = reader.open_reader()
+    run = {"reader": conn.execute, "execute": reader.execute,
+           "run_compiled": lambda sql: reader.run_compiled(sql, {})}[through]
     try:
-        assert conn.execute("SELECT count(*) FROM p") == [(200,)]
+        assert run("SELECT count(*) FROM p") == [(200,)]
         with open(path, "r+b") as f:    # the same file (inode), its pages garbage
             f.seek(4096)
             f.write(b"\x0d" * (os.path.getsize(path) - 4096))
-        exc = _failure(lambda: conn.execute("SELECT * FROM p"))
+        exc = _failure(lambda: run("SELECT * FROM p"))
         assert type(exc) is SLRError
         assert str(exc).startswith(f"{path}: the file is damaged (database disk image is "
                                    f"malformed)")
@@ -99,6 +105,25 @@ def test_a_file_that_became_no_database_is_a_damaged_file(tmp_path):
         assert type(exc) is SLRError and "the file is damaged" in str(exc)
     finally:
         conn.close()
+
+
+def test_the_stores_own_reads_of_a_file_that_became_no_database_say_damaged(tmp_path):
+    """The store's connection (the reads of the subscription hub's housekeeping: the tables,
+    a journal's positions) once the file's bytes are garbage and its cached pages dropped."""
+    path = str(tmp_path / "s.db")
+    _store_with_journal(path).close()
+    store = EventStore(path)
+    try:
+        with open(path, "r+b") as f:    # the whole file, header included
+            f.write(b"\xff" * os.path.getsize(path))
+        store.execute("PRAGMA shrink_memory")   # the next read reads the file
+        for call in (store.table_names, lambda: store.execute("SELECT count(*) FROM p"),
+                     lambda: store.live_positions("p", 1)):
+            exc = _failure(call)
+            assert type(exc) is SLRError
+            assert str(exc).startswith(f"{path}: the file is damaged (file is not a database)")
+    finally:
+        store.close()
 
 
 def test_a_reader_opened_after_the_store_file_was_deleted_is_store_gone(tmp_path):

@@ -122,6 +122,17 @@ def _read_error(exc: sqlite3.Error, path: Any, busy_timeout: float, moved: bool)
     return store_error(exc, path, busy_timeout, "nothing was read")
 
 
+# SQLite's primary result codes that are about the store's file or its disk, not about the
+# statement: what a statement of the store's connection meets is said in words
+# (Database.failure); any other code is the statement's own (a missing table, a constraint,
+# a Python function that raised) and stays a DatabaseError for the callers that answer it
+# (the planner hands such a statement over to the interpreter)
+_FILE_CONDITIONS = frozenset({sqlite3.SQLITE_BUSY, sqlite3.SQLITE_READONLY, sqlite3.SQLITE_PERM,
+                              sqlite3.SQLITE_IOERR, sqlite3.SQLITE_CORRUPT, sqlite3.SQLITE_FULL,
+                              sqlite3.SQLITE_CANTOPEN, sqlite3.SQLITE_PROTOCOL,
+                              sqlite3.SQLITE_NOLFS, sqlite3.SQLITE_NOTADB})
+
+
 def check_file(path: str, adopt: bool = False) -> bool:
     """Refuse, before anything is written, a ``path`` that is not (and may not become) a
     store: an :class:`SLRError` naming the path and the reason. Returns True when the store
@@ -430,8 +441,11 @@ class Database:
         True
         """
         with self.lock:
-            return {row[0] for row in self.conn.execute(
-                "SELECT name FROM sqlite_master WHERE type = 'table'")}
+            try:
+                return {row[0] for row in self.conn.execute(
+                    "SELECT name FROM sqlite_master WHERE type = 'table'")}
+            except sqlite3.Error as exc:   # (the hub's housekeeping reads it too)
+                raise self.failure(exc) from None
 
     def set_write_groups(self, groups: Iterable[Iterable[tuple[str, int]]]) -> None:
         """Writers take turns on SQLite already (``BEGIN IMMEDIATE``): nothing to keep."""
@@ -677,6 +691,33 @@ class Database:
             _file_identity(self._absolute) != self._identity[0]
         return _read_error(exc, self.path, self.busy_timeout, moved)
 
+    def failure(self, exc: sqlite3.Error) -> Exception:
+        """What a statement of this connection that failed with ``exc`` raises: for an error
+        about the file or its disk, an :class:`SLRError` in words -- :class:`SLRStoreGone`
+        when the file open is no longer the one at the path (:meth:`check_identity`), else
+        :func:`store_error`'s (SLRBusy, SLRStoreFull, a damaged file, an I/O error, a
+        read-only file); else ``exc`` itself, the statement's own error, which callers
+        catch as :data:`DatabaseError` (a compiled statement handed over to the
+        interpreter, a view that cannot be made).
+
+        >>> db = Database(None)
+        >>> db.failure(sqlite3.OperationalError("no such table: p"))
+        OperationalError('no such table: p')
+        >>> db.failure(sqlite3.OperationalError("database or disk is full"))
+        SLRStoreFull(':memory:: the disk is full (or the store reached its size limit; database or disk is full); nothing of this call was written: free space and retry')
+        """
+        code = getattr(exc, "sqlite_errorcode", None)
+        if code is None:   # (a driver that does not say: by the words)
+            return store_error(exc, self.path, self.busy_timeout) if \
+                "database is locked" in str(exc) or "disk is full" in str(exc) else exc
+        if code & 0xFF not in _FILE_CONDITIONS:
+            return exc
+        try:
+            self.check_identity()
+        except SLRStoreGone as gone:
+            return gone
+        return store_error(exc, self.path, self.busy_timeout)
+
     def _remove_own_side_files(self, now: tuple) -> None:
         """Remove the ``-wal`` and ``-shm`` at the path that are this connection's own (same
         inode as when opened) once the file beside them is another one."""
@@ -723,11 +764,14 @@ class Database:
                 self.check_open()
                 depth = self.tx_depth
                 conn = self.conn
-                if depth == 0:
-                    self.suspend_streams()
-                    self._begin(self.busy_timeout if wait else 0.0)
-                else:
-                    conn.execute(f"SAVEPOINT slr_sp{depth}")
+                try:
+                    if depth == 0:
+                        self.suspend_streams()
+                        self._begin(self.busy_timeout if wait else 0.0)
+                    else:
+                        conn.execute(f"SAVEPOINT slr_sp{depth}")
+                except sqlite3.Error as exc:
+                    raise self.failure(exc) from None
                 self.tx_depth = depth + 1
                 try:
                     yield self
@@ -736,7 +780,9 @@ class Database:
                     committed = drop_commit_callbacks(self.commit_callbacks, depth)
                     try:
                         self._forget_planning_copy()
-                        if depth == 0:
+                        if not conn.in_transaction:
+                            pass   # SQLite rolled it all back itself (a full disk, an I/O error)
+                        elif depth == 0:
                             conn.execute("ROLLBACK")
                         else:
                             conn.execute(f"ROLLBACK TO slr_sp{depth}")
@@ -750,13 +796,15 @@ class Database:
                     if depth == 0:
                         self.check_identity()  # before anything is acknowledged
                     conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
-                except BaseException:
+                except BaseException as exc:
                     committed = drop_commit_callbacks(self.commit_callbacks, depth)
                     self._forget_planning_copy()
                     if depth == 0 and conn.in_transaction:
                         conn.execute("ROLLBACK")
                     if listeners:
                         self._rolled_back()
+                    if isinstance(exc, sqlite3.Error):   # (a full disk meets the commit)
+                        raise self.failure(exc) from None
                     raise
                 if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
                     committed, self.commit_callbacks = self.commit_callbacks, []
@@ -945,8 +993,8 @@ class Database:
             self.check_open()
             try:
                 return self.conn.execute(sql, tuple(params)).fetchall()
-            except sqlite3.OperationalError as exc:
-                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+            except sqlite3.Error as exc:
+                raise self.failure(exc) from None
 
     def executemany(self, sql: str, rows: Iterable[Iterable[Any]]) -> None:
         """``executemany`` for other slr_sql modules.
@@ -956,7 +1004,10 @@ class Database:
         """
         with self.lock:
             self.check_open()
-            self.conn.executemany(sql, rows)
+            try:
+                self.conn.executemany(sql, rows)
+            except sqlite3.Error as exc:
+                raise self.failure(exc) from None
 
     def executescript(self, script: str) -> None:
         """Run several statements (e.g. ``CREATE TRIGGER`` ... ``END;``) in one transaction.
@@ -967,7 +1018,10 @@ class Database:
         """
         with self.transaction():
             for statement in split_sql_script(script):
-                self.conn.execute(statement)
+                try:
+                    self.conn.execute(statement)
+                except sqlite3.Error as exc:
+                    raise self.failure(exc) from None
 
     def changes(self) -> int:
         """Rows changed by the last statement (``changes()``).
@@ -1039,12 +1093,15 @@ class Database:
         """
         with self.lock:
             self.check_open()
-            with self._deadline(deadline, "its compiled SQL statement", instructions):
-                cursor = self.conn.execute(sql, params)
-                try:
-                    return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
-                finally:
-                    cursor.close()
+            try:
+                with self._deadline(deadline, "its compiled SQL statement", instructions):
+                    cursor = self.conn.execute(sql, params)
+                    try:
+                        return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+                    finally:
+                        cursor.close()
+            except sqlite3.Error as exc:
+                raise self.failure(exc) from None
 
     def run_compiled_many(self, sql: str, rows: list) -> None:
         """Run a compiled writing statement once per row of parameters (dicts for named
@@ -1061,8 +1118,8 @@ class Database:
             self.check_open()
             try:
                 self.conn.executemany(sql, rows)
-            except sqlite3.OperationalError as exc:
-                raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+            except sqlite3.Error as exc:
+                raise self.failure(exc) from None
 
     def run_compiled_batch(self, statements: list) -> list[list[tuple]]:
         """Run compiled statements in order, in the current transaction: each a ``(sql,
