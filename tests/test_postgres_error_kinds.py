@@ -25,7 +25,7 @@ import pytest
 import slr_sql
 from slr_sql import ManualClock
 from slr_sql.errors import SLRBusy, SLRError, SLRServerUnreachable, SLRTimeout, SLRUnavailable
-from slr_sql.store.postgres import PgStatementError, _error
+from slr_sql.store.postgres import PgReadConnection, PgStatementError, _error
 
 from conftest import drop_postgres_database, postgres_database
 
@@ -288,6 +288,27 @@ def test_a_connection_the_server_ends_is_unreachable_then_works_again(postgres_u
         with pytest.raises(SLRServerUnreachable):
             kb.sql("SELECT 1", write=True)
         _still_works(kb)
+
+
+def test_a_reading_connection_the_server_does_not_take_is_unreachable(postgres_server,
+                                                                     postgres_url):
+    """The subscription hub's reads open a connection of their own: one the server does not
+    take (the database closed to new connections) or that nobody answers (a port nobody
+    listens on) is SLRServerUnreachable, as the store's own connection opened again is."""
+    name = psycopg.conninfo.conninfo_to_dict(postgres_url)["dbname"]
+    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb, \
+            psycopg.connect(postgres_server[1], autocommit=True) as admin:
+        admin.execute(f'ALTER DATABASE "{name}" ALLOW_CONNECTIONS false')
+        try:
+            with pytest.raises(SLRServerUnreachable, match="cannot open a reading connection: "
+                                                           "the server is not reachable"):
+                kb.store.journal_reader(own_connection=True)
+        finally:
+            admin.execute(f'ALTER DATABASE "{name}" ALLOW_CONNECTIONS true')
+        kb.store.journal_reader(own_connection=True).close()   # taken again
+    with pytest.raises(SLRServerUnreachable, match="cannot open a reading connection"):
+        PgReadConnection("postgresql://nobody@127.0.0.1:1/none?connect_timeout=2", "slr",
+                         "127.0.0.1:1", 1.0)
 
 
 # ------------------------------------------------------------------ the service

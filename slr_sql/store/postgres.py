@@ -687,11 +687,13 @@ class PgReadConnection:
         psycopg = _psycopg()
         self.lock = ordered_lock("store.reader")
         self.closed = False
+        # a failure is classified as the store's own connection's when it is opened again
+        # (PgConnection._alive): a server that does not answer is SLRServerUnreachable
+        opening = f"{where}: cannot open a reading connection"
         try:
             raw = psycopg.connect(conninfo, autocommit=True)
         except psycopg.Error as exc:
-            raise SLRError(f"{where}: cannot open a reading connection "
-                           f"({_first_line(exc)})") from None
+            raise _error(exc, opening, busy_timeout, False) from None
         try:
             raw.execute("SET default_transaction_read_only = on")
             # a lock of another session (LOCK TABLE, an ALTER TABLE not committed yet) is
@@ -700,9 +702,10 @@ class PgReadConnection:
             raw.execute(f"SET lock_timeout = {_lock_timeout_ms(busy_timeout)}")
             raw.execute(f"SET search_path = {quote_identifier(schema)}")
         except psycopg.Error as exc:
+            reason = _error(exc, opening, busy_timeout, _connected(raw))
             raw.close()
-            raise SLRError(f"{where}: cannot open a reading connection "
-                           f"({_first_line(exc)})") from None
+            raise reason if isinstance(reason, SLRError) else \
+                SLRError(f"{opening} ({_first_line(exc)})") from None
         self.conn = PgConnection(raw, where, busy_timeout)
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
