@@ -16,7 +16,9 @@ whole interface: a facade over small parts that share one :class:`~.connection.D
 * :mod:`.sqltext` -- quoting identifiers and literals, splitting SQL scripts.
 
 Callers outside the package catch :data:`DatabaseError` (the base of the errors a statement
-raises) and never import ``sqlite3``. The SQL dialect lives here and in slr_sql.sqlcompile
+raises: its own, such as a missing table or a constraint) and never import ``sqlite3``; what
+is about the file or its disk (busy, full, damaged, gone) is an :class:`~slr_sql.SLRError`
+already (``Database.failure``). The SQL dialect lives here and in slr_sql.sqlcompile
 only, so a second backend (PostgreSQL, for fleets) would sit beside this package with the
 same :class:`EventStore` methods: a ``Database`` (connect, transactions as savepoints,
 migrations of its own, a statement deadline), the table DDL and lookup statements of

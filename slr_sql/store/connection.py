@@ -46,8 +46,9 @@ __all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEF
            "run_sql_file", "check_file", "refuse_no_store", "check_busy_timeout"]
 
 # The base class of the errors the database raises while running a statement (a missing
-# table, a syntax error, a constraint, an interrupted statement...). Callers outside the
-# store catch this name, never sqlite3's.
+# table, a syntax error, a constraint, an interrupted statement...; a condition of the file
+# or disk is an SLRError instead: Database.failure). Callers outside the store catch this
+# name, never sqlite3's.
 # (the PostgreSQL backend's PgStatementError derives from it)
 DatabaseError = sqlite3.Error
 
