@@ -6,14 +6,13 @@ from __future__ import annotations
 import math
 import sqlite3
 
-import httpx
 import pytest
 
 import slr_sql
 from slr_sql import SLRError
 from slr_sql.buffers import MAX_KEEP_LAST
 
-from service_helpers import ServiceProcess
+from service_helpers import HTTP, ServiceProcess
 
 
 @pytest.fixture
@@ -164,9 +163,9 @@ def test_post_buffers_refuses_out_of_range_bounds_with_400(tmp_path):
         for body, words in (({"pattern": "p(_)", "keep_last": 10 ** 30}, "keep_last is out of range"),
                             ({"pattern": "p(_)", "keep_between": [0, 10 ** 400]},
                              "out of range")):
-            r = httpx.post(server.url + "/buffers", json=body, timeout=30)
+            r = HTTP.post(server.url + "/buffers", json=body, timeout=30)
             assert r.status_code == 400, r.text
             assert words in r.json()["error"]["message"], r.text
-        assert httpx.get(server.url + "/buffers", timeout=30).json()["buffers"] == []
-        r = httpx.post(server.url + "/add", json={"event": "p(b)^2"}, timeout=30)
+        assert HTTP.get(server.url + "/buffers", timeout=30).json()["buffers"] == []
+        r = HTTP.post(server.url + "/add", json={"event": "p(b)^2"}, timeout=30)
         assert r.status_code == 200, r.text

@@ -15,7 +15,7 @@ import sys
 
 import httpx
 import pytest
-from service_helpers import ServiceProcess, slr_env
+from service_helpers import HTTP, ServiceProcess, slr_env
 
 import slr_sql
 from slr_sql import SLRError
@@ -82,8 +82,8 @@ def test_a_token_beyond_ascii_works_from_the_client_curl_and_a_websocket(tmp_pat
             with pytest.raises(ServiceError, match="valid token"):
                 kb.query("X = 1")
         # what curl sends for --header "Authorization: Bearer clé-ü€" in a UTF-8 shell
-        answer = httpx.post(served.url + "/query", json={"goal": "X = 1"}, timeout=30,
-                            headers={"Authorization": f"Bearer {token}".encode("utf-8")})
+        answer = HTTP.post(served.url + "/query", json={"goal": "X = 1"}, timeout=30,
+                           headers={"Authorization": f"Bearer {token}".encode("utf-8")})
         assert answer.json() == {"answers": [{"X": 1}]}
 
 
@@ -195,7 +195,7 @@ def test_sigterm_stops_a_server_whose_synchronized_query_still_waits(tmp_path):
 
     def wait_long() -> None:
         try:
-            outcome.append(httpx.post(served.url + "/query", timeout=120, json={
+            outcome.append(HTTP.post(served.url + "/query", timeout=120, json={
                 "goal": "zz(X)^T", "at": 1e15, "wait": True, "timeout": 3000}).status_code)
         except httpx.HTTPError as exc:
             outcome.append(type(exc).__name__)
@@ -223,14 +223,14 @@ def test_a_client_that_leaves_a_synchronized_query_frees_its_place(tmp_path):
     with ServiceProcess(tmp_path / "l.db", "--max-connections", "2") as served:
         for _ in range(3):
             try:                                     # the client gives up and leaves
-                refused = httpx.post(served.url + "/query", timeout=0.5, json={
+                refused = HTTP.post(served.url + "/query", timeout=0.5, json={
                     "goal": "zz(X)^T", "at": 1e15, "wait": True, "timeout": 3000})
             except httpx.HTTPError:
                 continue
             assert refused.status_code == 503        # (both places taken already)
         deadline = time.monotonic() + 30
         while True:
-            answer = httpx.post(served.url + "/query", json={"goal": "X = 1"}, timeout=30)
+            answer = HTTP.post(served.url + "/query", json={"goal": "X = 1"}, timeout=30)
             if answer.status_code == 200:
                 break
             assert answer.status_code == 503

@@ -14,14 +14,13 @@ import subprocess
 import sys
 import textwrap
 
-import httpx
 import pytest
 
 import slr_sql
 from slr_sql import SLRError, SLRStoreFull, SLRUnavailable
 from slr_sql.store import EventStore
 
-from service_helpers import ROOT, ServiceProcess, slr_env
+from service_helpers import HTTP, ROOT, ServiceProcess, slr_env
 from test_store_read_connection_errors import _failure
 
 # Run by the child inside the namespace: fill() writes a file until the disk is full,
@@ -146,14 +145,14 @@ def test_the_service_answers_503_with_retry_after_on_a_full_disk(tmp_path):
                             start_new_session=True)
     try:
         url = proc.stdout.readline().strip().rsplit(" on ", 1)[1]
-        assert httpx.post(url + "/add", json={"event": "p(1)^1"}, timeout=30).status_code == 200
+        assert HTTP.post(url + "/add", json={"event": "p(1)^1"}, timeout=30).status_code == 200
         proc.stdin.write("fill\n")
         proc.stdin.flush()
         assert proc.stdout.readline().strip() == "filled"
         answer = None
         for i in range(400):
-            answer = httpx.post(url + "/add", json={"event": f"q({'y' * 4000}, {i})^{i}"},
-                                timeout=30)
+            answer = HTTP.post(url + "/add", json={"event": f"q({'y' * 4000}, {i})^{i}"},
+                               timeout=30)
             if answer.status_code != 200:
                 break
         assert answer.status_code == 503, answer.text
@@ -163,7 +162,7 @@ def test_the_service_answers_503_with_retry_after_on_a_full_disk(tmp_path):
         with slr_sql.connect(url) as remote, \
                 pytest.raises(SLRStoreFull):    # the client raises the class the server did
             remote.add(f"q({'y' * 4000}, x)^1")
-        assert httpx.get(url + "/health", timeout=30).status_code == 200
+        assert HTTP.get(url + "/health", timeout=30).status_code == 200
     finally:
         os.killpg(proc.pid, signal.SIGTERM)   # the shell and the server it started
         _, errors = proc.communicate(timeout=30)
@@ -264,15 +263,15 @@ def test_a_lock_held_too_long_is_503_with_retry_after(tmp_path):
         holder = sqlite3.connect(db, isolation_level=None)
         holder.execute("BEGIN IMMEDIATE")
         try:
-            answer = httpx.post(server.url + "/add", json={"event": "p(2)^2"}, timeout=60)
+            answer = HTTP.post(server.url + "/add", json={"event": "p(2)^2"}, timeout=60)
         finally:
             holder.execute("ROLLBACK")
             holder.close()
         assert answer.status_code == 503, answer.text
         assert answer.headers["Retry-After"] == "1"
         assert answer.json()["error"]["kind"] == "SLRBusy"
-        assert httpx.post(server.url + "/add", json={"event": "p(2)^2"},
-                          timeout=30).status_code == 200
+        assert HTTP.post(server.url + "/add", json={"event": "p(2)^2"},
+                         timeout=30).status_code == 200
 
 
 def test_unavailable_conditions_are_one_family():

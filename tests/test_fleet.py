@@ -15,9 +15,8 @@ from collections import Counter
 from contextlib import contextmanager
 from pathlib import Path
 
-import httpx
 import pytest
-from service_helpers import ServiceProcess, slr_env
+from service_helpers import HTTP, ServiceProcess, slr_env
 
 import slr_sql
 from slr_sql import fleet, planner
@@ -570,7 +569,7 @@ def test_a_fleet_that_does_not_answer_never_holds_the_robot_up(tmp_path):
                 now = client.query("seen(pallet7, W)^T", at=10, robot="r1")
                 assert now and client.query("seen(pallet7, W)^T", at=10, wait=True,
                                             robot="r1") == now
-                reply = httpx.post(url + "/query", json={"goal": "seen(P, W)^T", "wait": True,
+                reply = HTTP.post(url + "/query", json={"goal": "seen(P, W)^T", "wait": True,
                                                          "at": 10, "robot": "r2"}, timeout=30)
                 assert reply.status_code == 200 and reply.json()["answers"] == []
                 # a malformed shipment is refused with its reason and changes nothing
@@ -578,8 +577,8 @@ def test_a_fleet_that_does_not_answer_never_holds_the_robot_up(tmp_path):
                             [["seen", 2, [[9, "a", "b", 1.0, "x", 1.0, 1.0, None]]]],
                             [["seen", 2, [[9, "a", "b", 1.0, 1.0, 1.0, None],
                                           [8, "a", "b", 1.0, 1.0, 1.0, None]]]], "x"):
-                    reply = httpx.post(url + "/fleet/receive",
-                                       json={"robot": "r1", "batches": bad}, timeout=30)
+                    reply = HTTP.post(url + "/fleet/receive",
+                                      json={"robot": "r1", "batches": bad}, timeout=30)
                     assert reply.status_code == 400, reply.text
                     assert any(w in reply.text for w in ("shipment", "shipped row", "batches"))
                 status = client.fleet_status()

@@ -12,9 +12,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
-import httpx
 import pytest
-from service_helpers import ServiceProcess, slr_env
+from service_helpers import HTTP, ServiceProcess, slr_env
 
 import slr_sql
 from slr_sql import fleet
@@ -51,7 +50,7 @@ def test_a_shipped_row_the_store_could_not_have_written_is_refused_and_nothing_s
     type_name = f"t_{request.node.callspec.id.replace('-', '_')}"
     good = [1, "fine", 0.5, 0.5, 0.5, None]
     bad = [2, *bad[1:]]
-    answer = httpx.post(server.url + "/fleet/receive", timeout=30, json={
+    answer = HTTP.post(server.url + "/fleet/receive", timeout=30, json={
         "robot": "rx", "batches": [["ok_first", 1, [good]], [type_name, 1, [bad]]]})
     assert answer.status_code == 400, answer.text
     error = answer.json()["error"]
@@ -59,13 +58,13 @@ def test_a_shipped_row_the_store_could_not_have_written_is_refused_and_nothing_s
     assert words.replace("seq 1", "seq 2") in error["message"]
     assert "Error:" not in error["message"] and "Traceback" not in error["message"]
     # nothing of the shipment is stored, and the fleet store still answers over the type
-    positions = httpx.get(server.url + "/fleet/positions", params={"robot": "rx"}, timeout=30)
+    positions = HTTP.get(server.url + "/fleet/positions", params={"robot": "rx"}, timeout=30)
     assert positions.json() == {"positions": []}
     for goal in (f"{type_name}(X)^T", "ok_first(X)^T"):
-        assert httpx.post(server.url + "/query", json={"goal": goal},
-                          timeout=30).json() == {"answers": []}
-    robots = httpx.post(server.url + "/query", json={"goal": "origin(R, ok_first(X)^T)"},
-                        timeout=30)
+        assert HTTP.post(server.url + "/query", json={"goal": goal},
+                         timeout=30).json() == {"answers": []}
+    robots = HTTP.post(server.url + "/query", json={"goal": "origin(R, ok_first(X)^T)"},
+                       timeout=30)
     assert robots.json() == {"answers": []}
     assert server.healthy()
 
@@ -78,7 +77,7 @@ def test_every_stored_form_of_a_term_still_ships(server):
             '{"$type":"geometry_msgs/msg/Point","x":1.0,"y":2.0,"z":0.5}', "plain", 7, 2.5]
     rows = [[i + 1, a, float(i), float(i), float(i), "r9" if i == 0 else None]
             for i, a in enumerate(args)]
-    answer = httpx.post(server.url + "/fleet/receive", timeout=30, json={
+    answer = HTTP.post(server.url + "/fleet/receive", timeout=30, json={
         "robot": "rgood", "batches": [["forms", 1, rows]], "marks": {"forms/1": 3.0,
                                                                        "forms/*": 2.0}})
     assert answer.json() == {"stored": len(args)}, answer.text
@@ -98,10 +97,10 @@ def test_every_stored_form_of_a_term_still_ships(server):
 def test_a_shipment_whose_marks_or_contact_say_nothing_is_refused(server, extra, words):
     body = {"robot": "rm", "batches": [["m_type", 1, [[1, "a", 1.0, 1.0, 1.0, None]]]],
             **extra}
-    answer = httpx.post(server.url + "/fleet/receive", json=body, timeout=30)
+    answer = HTTP.post(server.url + "/fleet/receive", json=body, timeout=30)
     assert answer.status_code == 400, answer.text
     assert words in answer.json()["error"]["message"]
-    positions = httpx.get(server.url + "/fleet/positions", params={"robot": "rm"}, timeout=30)
+    positions = HTTP.get(server.url + "/fleet/positions", params={"robot": "rm"}, timeout=30)
     assert positions.json() == {"positions": []}
 
 
@@ -178,15 +177,15 @@ def test_the_cli_says_why_a_push_into_itself_is_refused(tmp_path):
 def test_a_batch_sent_after_a_position_the_fleet_no_longer_holds_is_a_conflict(server):
     rows = [[i, f"a{i}", float(i), float(i), float(i), None] for i in range(1, 4)]
     body = {"robot": "rb", "batches": [["after_t", 1, rows]], "after": [["after_t", 1, 0]]}
-    assert httpx.post(server.url + "/fleet/receive", json=body, timeout=30).json() == {
+    assert HTTP.post(server.url + "/fleet/receive", json=body, timeout=30).json() == {
         "stored": 3}
     later = [[i, f"a{i}", float(i), float(i), float(i), None] for i in range(10, 12)]
     body = {"robot": "rb", "batches": [["after_t", 1, later]], "after": [["after_t", 1, 9]]}
-    answer = httpx.post(server.url + "/fleet/receive", json=body, timeout=30)
+    answer = HTTP.post(server.url + "/fleet/receive", json=body, timeout=30)
     assert answer.status_code == 409, answer.text
     assert answer.json()["error"]["kind"] == "Conflict"
     assert "up to seq 3, not 9" in answer.json()["error"]["message"]
-    positions = httpx.get(server.url + "/fleet/positions", params={"robot": "rb"}, timeout=30)
+    positions = HTTP.get(server.url + "/fleet/positions", params={"robot": "rb"}, timeout=30)
     assert positions.json() == {"positions": [["after_t", 1, 3]]}
     # the client cuts a large batch in requests, each after the one before
     many = [(i, f"m{i}", float(i), float(i), float(i), None) for i in range(1, 2501)]
@@ -324,9 +323,9 @@ def test_a_robot_that_has_marks_but_no_events_ships_them(tmp_path, where):
 
 @pytest.mark.parametrize("robot", ["", "a\x00b", "12", "[r1]"])
 def test_a_contact_without_rows_from_a_robot_that_has_no_name_is_refused(server, robot):
-    answer = httpx.post(server.url + "/fleet/receive", timeout=30, json={
+    answer = HTTP.post(server.url + "/fleet/receive", timeout=30, json={
         "robot": robot, "batches": [], "pending": 3, "marks": {"seen/1": 5.0}})
     assert answer.status_code == 400, answer.text
     assert "robot" in answer.json()["error"]["message"]
-    status = httpx.get(server.url + "/fleet/status", timeout=30).json()["robots"]
+    status = HTTP.get(server.url + "/fleet/status", timeout=30).json()["robots"]
     assert robot not in [r["robot"] for r in status]

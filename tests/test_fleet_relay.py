@@ -9,9 +9,8 @@ from __future__ import annotations
 
 import threading
 
-import httpx
 import pytest
-from service_helpers import ServiceProcess
+from service_helpers import HTTP, ServiceProcess
 
 import slr_sql
 from slr_sql import fleet
@@ -105,7 +104,7 @@ def server(tmp_path_factory):
     ({"r1": {"seen/1": "soon"}}, "relayed"),
 ])
 def test_relayed_marks_that_say_nothing_are_refused(server, relayed, words):
-    answer = httpx.post(server.url + "/fleet/receive", timeout=30, json={
+    answer = HTTP.post(server.url + "/fleet/receive", timeout=30, json={
         "robot": "hub", "batches": [], "relayed": relayed})
     assert answer.status_code == 400, answer.text
     assert words in answer.json()["error"]["message"]

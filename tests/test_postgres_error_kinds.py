@@ -17,7 +17,6 @@ import sys
 import threading
 import time
 
-import httpx
 import psycopg
 import psycopg.errors
 import pytest
@@ -28,6 +27,7 @@ from slr_sql.errors import SLRBusy, SLRError, SLRServerUnreachable, SLRTimeout, 
 from slr_sql.store.postgres import PgReadConnection, PgStatementError, _error
 
 from conftest import drop_postgres_database, postgres_database
+from service_helpers import HTTP
 
 DEADLINE = 30.0   # seconds a wait for the other session may take before the test fails
 
@@ -324,15 +324,15 @@ def test_the_service_answers_a_refused_statement_with_400_not_503(postgres_url):
         first = lines.get(timeout=60).decode()
         assert " on http" in first, first
         url = first.strip().rsplit(" on ", 1)[1]
-        refused = httpx.post(url + "/sql", json={
+        refused = HTTP.post(url + "/sql", json={
             "query": "SELECT concat(" + ", ".join(["1"] * 101) + ")", "params": []},
             timeout=30)
         assert refused.status_code == 400, refused.text
         assert "retry-after" not in refused.headers
         assert refused.json()["error"]["kind"] == "BadRequest"
         assert "100 arguments" in refused.json()["error"]["message"]
-        assert httpx.post(url + "/sql", json={"query": "SELECT 1", "params": []},
-                          timeout=30).status_code == 200
+        assert HTTP.post(url + "/sql", json={"query": "SELECT 1", "params": []},
+                         timeout=30).status_code == 200
     finally:
         proc.terminate()
         proc.wait(timeout=30)

@@ -14,9 +14,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-import httpx
 import pytest
-from service_helpers import ServiceProcess, slr_env
+from service_helpers import HTTP, ServiceProcess, slr_env
 
 import slr_sql
 from slr_sql import fleet
@@ -134,7 +133,7 @@ BAD_SHIPMENTS = [
 
 @pytest.mark.parametrize("shipment", BAD_SHIPMENTS)
 def test_a_shipment_naming_it_is_a_400_and_stores_nothing(server, shipment):
-    answer = httpx.post(server.url + "/fleet/receive", json=shipment, timeout=30)
+    answer = HTTP.post(server.url + "/fleet/receive", json=shipment, timeout=30)
     assert answer.status_code == 400, answer.text
     message = answer.json()["error"]["message"]
     assert "robot name" in message and " at position " in message
@@ -147,11 +146,11 @@ def test_a_shipment_naming_it_is_a_400_and_stores_nothing(server, shipment):
 @pytest.mark.parametrize("ask", ["positions", "query"])
 def test_the_service_refuses_it_in_a_question_too(server, ask):
     if ask == "positions":
-        answer = httpx.get(server.url + "/fleet/positions", params={"robot": "r1\u202e"},
-                           timeout=30)
+        answer = HTTP.get(server.url + "/fleet/positions", params={"robot": "r1\u202e"},
+                          timeout=30)
     else:
-        answer = httpx.post(server.url + "/query", timeout=30,
-                            json={"goal": "seen(X)^T", "robot": "r1\u202e"})
+        answer = HTTP.post(server.url + "/query", timeout=30,
+                           json={"goal": "seen(X)^T", "robot": "r1\u202e"})
     assert answer.status_code == 400, answer.text
     assert "U+202E RIGHT-TO-LEFT OVERRIDE at position 3" in answer.json()["error"]["message"]
 
@@ -169,7 +168,7 @@ def test_a_long_name_refused_makes_a_short_error(server, name):
         check_robot_name(name)
     assert len(str(refused.value)) < 500, str(refused.value)[:200]
     if isinstance(name, str) and "\ud800" not in name:
-        answer = httpx.post(server.url + "/query", timeout=30,
-                            json={"goal": "seen(X)^T", "robot": name})
+        answer = HTTP.post(server.url + "/query", timeout=30,
+                           json={"goal": "seen(X)^T", "robot": name})
         assert answer.status_code == 400, answer.text[:200]
         assert len(answer.json()["error"]["message"]) < 500

@@ -16,7 +16,7 @@ import slr_sql
 from slr_sql import Atom, SLREvaluationError, SLRSyntaxError, SLRTimeout, String, Struct
 from slr_sql.service.errors import ServiceError
 
-from service_helpers import ServiceProcess, complete_only_as_marked, same
+from service_helpers import HTTP, ServiceProcess, complete_only_as_marked, same
 
 _tags = itertools.count()
 
@@ -145,10 +145,10 @@ def test_every_endpoint_gives_what_a_local_knowledge_base_gives(local, remote, t
 
 
 def test_health_and_openapi_describe_the_routes(server):
-    health = httpx.get(server.url + "/health").json()
+    health = HTTP.get(server.url + "/health").json()
     assert health["status"] == "ok" and health["version"] == slr_sql.__version__
     assert health["limits"]["max_query_time"] == 1.0
-    spec = httpx.get(server.url + "/openapi.json").json()
+    spec = HTTP.get(server.url + "/openapi.json").json()
     assert spec["openapi"].startswith("3.")
     expected = {"/health", "/openapi.json", "/add", "/add_event", "/add_many", "/load",
                 "/unload", "/programs", "/query", "/submit", "/submit/{handle}", "/explain",
@@ -187,7 +187,7 @@ def test_syntax_errors_carry_line_and_column(local, remote, tag):
         remote.query("X = 1,\n  foo(")
     assert (info.value.line, info.value.column) == (2, 7)
     assert "^" in str(info.value)
-    body = httpx.post(remote.url + "/query", json={"goal": "X = 1,\n  foo("}).json()
+    body = HTTP.post(remote.url + "/query", json={"goal": "X = 1,\n  foo("}).json()
     assert body["error"]["kind"] == "SLRSyntaxError"
     assert (body["error"]["line"], body["error"]["column"]) == (2, 7)
 
@@ -204,7 +204,7 @@ def test_query_time_is_bounded_by_the_server(remote, tag):
         remote.query(f"{tag}loop")          # no timeout=: the server's --max-query-time 1
     with pytest.raises(SLRTimeout):
         remote.query(f"{tag}loop", timeout=0.2)
-    response = httpx.post(remote.url + "/query", json={"goal": f"{tag}loop", "timeout": 0.1})
+    response = HTTP.post(remote.url + "/query", json={"goal": f"{tag}loop", "timeout": 0.1})
     assert response.status_code == 408 and response.json()["error"]["kind"] == "SLRTimeout"
 
 
@@ -267,7 +267,7 @@ BIG = b'{"goal": "X = 1", "pad": "' + b"x" * (2 * 1024 * 1024) + b'"}'
 ])
 def test_bad_requests_get_documented_errors_and_the_server_stays_up(server, method, path,
                                                                      content, status, kind):
-    response = httpx.request(method, server.url + path, content=content, timeout=30)
+    response = HTTP.request(method, server.url + path, content=content, timeout=30)
     assert response.status_code == status, response.text
     error = response.json()["error"]
     assert error["kind"] == kind and error["status"] == status and error["message"]
@@ -310,7 +310,7 @@ def test_submitted_query_waits_until_another_client_completes_the_history(server
 
     waiting = remote.submit(f"{tag}seen(X)^T", at=1e9)
     assert waiting.cancel() and waiting.cancelled()
-    assert httpx.get(f"{server.url}/submit/{waiting.handle}").status_code == 404
+    assert HTTP.get(f"{server.url}/submit/{waiting.handle}").status_code == 404
 
     timed_out = remote.submit(f"{tag}seen(X)^T", at=1e9, timeout=0.3)
     with pytest.raises(SLRTimeout):
@@ -323,10 +323,10 @@ def test_a_synchronized_query_in_one_request(server, remote, tag):
     complete_only_as_marked(remote, f"{tag}seen/1")
     remote.add(f"{tag}seen(a)^1")
     remote.mark_complete(f"{tag}seen/1", 5)
-    response = httpx.post(server.url + "/query", json={"goal": f"{tag}seen(X)^T", "at": 5,
+    response = HTTP.post(server.url + "/query", json={"goal": f"{tag}seen(X)^T", "at": 5,
                                                       "wait": True}, timeout=30)
     assert response.json() == {"answers": [{"X": "a", "T": 1.0}]}
-    response = httpx.post(server.url + "/query", json={"goal": f"{tag}seen(X)^T", "at": 1e9,
+    response = HTTP.post(server.url + "/query", json={"goal": f"{tag}seen(X)^T", "at": 1e9,
                                                       "wait": True, "timeout": 0.2}, timeout=30)
     assert response.status_code == 408 and response.json()["error"]["kind"] == "SLRTimeout"
 
@@ -336,7 +336,7 @@ def test_a_long_poll_cut_off_by_its_client_leaves_the_query_answerable(server, r
     remote.add(f"{tag}late(y)^1")
     pending = remote.submit(f"{tag}late(X)^T", at=20)
     with pytest.raises(httpx.ReadTimeout):
-        httpx.get(f"{server.url}/submit/{pending.handle}", params={"wait": 30}, timeout=0.3)
+        HTTP.get(f"{server.url}/submit/{pending.handle}", params={"wait": 30}, timeout=0.3)
     remote.add(f"{tag}late(z)^15")
     remote.mark_complete(f"{tag}late/1", 20)
     assert pending.result(timeout=20) == [{"X": Atom("y"), "T": 1.0}, {"X": Atom("z"), "T": 15.0}]
@@ -348,7 +348,7 @@ def test_a_long_poll_cut_off_by_its_client_leaves_the_query_answerable(server, r
 def test_a_token_is_required_and_checked(tmp_path, monkeypatch, how):
     args, env = (("--token", "s3cret"), None) if how == "option" else ((), {"SLR_TOKEN": "s3cret"})
     with ServiceProcess(tmp_path / "secure.db", *args, env=env) as server:
-        assert httpx.get(server.url + "/health").status_code == 200
+        assert HTTP.get(server.url + "/health").status_code == 200
         # a missing, wrong, shorter or longer token (the comparison is of the whole token,
         # not of a prefix), the token without its scheme, a token with a NUL appended
         for headers in ({}, {"Authorization": "Bearer wrong"}, {"Authorization": "s3cret"},
@@ -357,12 +357,12 @@ def test_a_token_is_required_and_checked(tmp_path, monkeypatch, how):
                         {"Authorization": "Bearer s3cret s3cret"},
                         {"Authorization": "Basic s3cret"},
                         {"Authorization": "Bearer S3CRET"}):
-            response = httpx.post(server.url + "/query", json={"goal": "true"}, headers=headers)
+            response = HTTP.post(server.url + "/query", json={"goal": "true"}, headers=headers)
             assert response.status_code == 401
             assert response.json()["error"]["kind"] == "Unauthorized"
             assert response.headers["www-authenticate"].startswith("Bearer")
-        ok = httpx.post(server.url + "/query", json={"goal": "true"},
-                        headers={"Authorization": "Bearer s3cret"})
+        ok = HTTP.post(server.url + "/query", json={"goal": "true"},
+                       headers={"Authorization": "Bearer s3cret"})
         assert ok.json() == {"answers": [{}]}
 
         with slr_sql.connect(server.url, token="s3cret") as kb:

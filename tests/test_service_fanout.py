@@ -21,7 +21,7 @@ from slr_sql import ManualClock, SLRError
 from slr_sql.service.app import _AnswerTexts
 from slr_sql.service.encoding import dumps, loads
 
-from service_helpers import ServiceProcess, complete_only_as_marked
+from service_helpers import HTTP, ServiceProcess, complete_only_as_marked
 
 _tags = itertools.count()
 DEADLINE = 30.0
@@ -394,13 +394,12 @@ def test_a_stray_non_finite_float_is_never_written():
 
 @pytest.mark.parametrize("atomic", [None, False])
 def test_plain_event_arguments_are_atoms_and_their_rejections_say_so(server, atomic):
-    import httpx
     tag = f"a{next(_tags)}_"
     events = [{"name": f"{tag}o", "args": ["cup1", [1, 2.5, "x"]], "start": 1.0},
               {"name": f"{tag}o", "args": ["cup2", []], "start": 6.0, "end": 5.0}]
     body = {"events": events} if atomic is None else {"events": events, "atomic": atomic}
-    reply = httpx.post(server.url + "/add_many", content=json.dumps(body),
-                       headers={"Content-Type": "application/json"}, timeout=DEADLINE).json()
+    reply = HTTP.post(server.url + "/add_many", content=json.dumps(body),
+                      headers={"Content-Type": "application/json"}, timeout=DEADLINE).json()
     assert reply["accepted"] == 1
     (rejection,) = reply["rejected"]
     assert rejection["index"] == 1

@@ -13,7 +13,7 @@ import httpx
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from service_helpers import ServiceProcess
+from service_helpers import HTTP, ServiceProcess
 
 TOKEN = "s3cret"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
@@ -32,7 +32,7 @@ def server(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def spec(server):
-    return httpx.get(server.url + "/openapi.json").json()
+    return HTTP.get(server.url + "/openapi.json").json()
 
 
 def _resolve(schema: dict, spec: dict) -> dict:
@@ -135,7 +135,7 @@ def test_every_answer_is_one_the_description_lists(server, spec):
         kwargs = {"params": params, "headers": AUTH if auth else {}}
         if body is not None:
             kwargs["json"] = body
-        response = httpx.request(method, server.url + url, timeout=30, **kwargs)
+        response = HTTP.request(method, server.url + url, timeout=30, **kwargs)
         status = response.status_code
         statuses_seen.add(status)
         operations_seen.add((path, method))
@@ -210,8 +210,8 @@ def test_a_malformed_chunked_body_gets_a_clean_400_and_one_log_line(tmp_path):
         assert server.healthy()
         # every request above was answered and its connection closed; the log is written by
         # the server before it closes: a request after them finds every line there
-        assert httpx.post(server.url + "/query", json={"goal": "true"},
-                          headers=AUTH).json() == {"answers": [{}]}
+        assert HTTP.post(server.url + "/query", json={"goal": "true"},
+                         headers=AUTH).json() == {"answers": [{}]}
         deadline = time.monotonic() + 10
         while server.log.read_text().count("Invalid HTTP request") < rounds * len(MALFORMED):
             assert time.monotonic() < deadline, server.log.read_text()

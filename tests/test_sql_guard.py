@@ -10,14 +10,13 @@ import subprocess
 import sys
 import textwrap
 
-import httpx
 import pytest
 
 import slr_sql
 from slr_sql import SLRError
 from slr_sql.store import run_sql_file
 
-from service_helpers import ROOT, ServiceProcess
+from service_helpers import HTTP, ROOT, ServiceProcess
 from test_cli import slr
 from test_cli_errors import fails_in_words
 
@@ -213,13 +212,13 @@ def test_the_service_refuses_fts3_tokenizer_and_stays_up(tmp_path):
         for query in ("SELECT fts3_tokenizer('simple')",
                       "SELECT fts3_tokenizer('simple', x'4141414141414141')",
                       "SELECT length(randomblob(2000000000))"):
-            r = httpx.post(server.url + "/sql", json={"query": query}, timeout=30)
+            r = HTTP.post(server.url + "/sql", json={"query": query}, timeout=30)
             assert r.status_code == 400, r.text
             assert r.json()["error"]["message"].startswith("sql: "), r.text
-        r = httpx.post(server.url + "/sql", json={"query": "SELECT fts3_tokenizer(?, ?)",
+        r = HTTP.post(server.url + "/sql", json={"query": "SELECT fts3_tokenizer(?, ?)",
                                                   "params": ["simple", "AAAAAAAA"]},
                        timeout=30)
         assert r.status_code == 400, r.text
-        r = httpx.post(server.url + "/sql", json={"query": "SELECT count(*) AS n FROM p"},
-                       timeout=30)
+        r = HTTP.post(server.url + "/sql", json={"query": "SELECT count(*) AS n FROM p"},
+                      timeout=30)
         assert r.status_code == 200 and server.healthy(), r.text
