@@ -2015,16 +2015,37 @@ _LIBRARY: Program | None = None
 
 
 def library_program() -> Program:
-    """The Prolog-defined part of the builtins, parsed once per process."""
+    """The Prolog-defined part of the builtins, built once per process.
+
+    >>> ("member", 2) in library_program().preds
+    True
+    """
     global _LIBRARY
     if _LIBRARY is None:
-        from .parser import parse_program
-
         prog = Program()
-        for clause in parse_program(LIBRARY_SOURCE, "<library>"):
+        for clause in library_clauses():
             prog.add_clause(clause)
         _LIBRARY = prog
     return _LIBRARY
+
+
+def library_clauses(source: str = LIBRARY_SOURCE) -> list:
+    """The clauses of the library's Prolog ``source``: built by the generated
+    :mod:`slr_sql.library_terms` when it was made from this very text (parsing it is ~20-35 ms
+    of every process that opens a store), else parsed.
+
+    >>> str(library_clauses()[0].head), len(library_clauses("p(1).")) == 1
+    ('member(X,[Y|Ys])', True)
+    """
+    import hashlib
+
+    from . import library_terms
+
+    if hashlib.sha256(source.encode("utf-8")).hexdigest() == library_terms.SOURCE_SHA256:
+        return library_terms.clauses(source)
+    from .parser import parse_program
+
+    return parse_program(source, "<library>")
 
 
 BUILTIN_NAMES = set(DET) | set(NONDET)

@@ -23,8 +23,10 @@ LAYERS = {
     "api": 1,  # the KnowledgeBaseAPI protocol: typing only (errors for EventRejected)
     "unify": 1, "arith": 1, "encoding": 1, "program": 1, "parser": 1,
     "robotlib": 1, "clocks": 1, "answers": 1,
+    "library_terms": 1,  # generated: the library's clauses as Python (terms only)
     "store": 2, "frames": 2,
     "builtins": 3,
+    "library_generate": 3.5,  # writes library_terms from builtins' Prolog text
     "analysis": 4, "engine": 4, "sqlcompile": 4,
     "plans": 4.5,  # query plans: parsed, cached, instantiated; the prev fast path
     "sql_functions": 4.6,  # the Python functions SQL calls, listed once (store/functions)
