@@ -128,3 +128,13 @@ def test_slr_parses_the_same_whichever_lark_is_importable(block, what):
     # the run really had another `lark` (none, or the stand-in without lark 1.x's API)
     assert without["lark"] != with_lark["lark"]
     assert without["lark"] == "None" if what == "none" else "module 'lark'" in without["lark"]
+
+
+def test_parsing_never_imports_the_regex_module():
+    """lark's standalone parser imports the third-party ``regex`` where installed (for Unicode
+    categories, which slr.lark does not use): ~15 ms of every process that parses."""
+    probe = subprocess.run([sys.executable, "-c", "import sys, slr_sql\n"
+                            "slr_sql.open().load('p(X) :- q(X).')\n"
+                            "print('regex' in sys.modules)"],
+                           capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert probe.stdout.strip() == "False", probe.stderr
