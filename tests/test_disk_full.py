@@ -227,13 +227,16 @@ def test_the_stores_statements_at_its_size_limit_are_store_full(tmp_path):
 def test_the_hubs_housekeeping_on_a_full_disk_is_one_line(tmp_path):
     """The subscription hub's housekeeping writes on the store's connection, on a thread of
     its own (no knowledge base call around it): a commit the full disk refuses is logged as
-    one WARNING line naming SLRStoreFull, and the next round once there is space writes."""
+    one WARNING line naming SLRStoreFull, and the next round once there is space writes:
+    the position the refused commit did not store is still due (no lease renewal then,
+    which would write every position anyway)."""
     out = on_full_disk(tmp_path, """
-        import io, logging
+        import io, logging, time
         lines = io.StringIO()
         logging.getLogger("slr_sql").addHandler(logging.StreamHandler(lines))
         kb = slr_sql.open(path, clock=slr_sql.ManualClock(0.0))
         hub = kb._subscriptions
+        hub.persist_interval = hub.cleanup_interval = 3600.0   # rounds only when asked
         sub = kb.subscribe("p(X)^T", since=0, id="log")
         kb.add_many(["p(1)^1", "p(2)^2"])
         got = [sub.get(timeout=30)["X"] for _ in range(2)]
@@ -241,15 +244,20 @@ def test_the_hubs_housekeeping_on_a_full_disk_is_one_line(tmp_path):
         hub._last_persist = hub._last_lease = 0.0   # a position and a lease are due: a write
         full = hub.housekeeping_round(30)
         free()
-        hub._last_persist = hub._last_lease = 0.0
+        hub._last_persist, hub._last_lease = 0.0, time.monotonic()   # a position only
         again = hub.housekeeping_round(30)
+        [row] = [r for r in hub.subscriptions() if r["id"] == "log"]
+        stored = [row["history_done"], row["live_pos"]]
         kb.add("p(3)^3")
         got.append(sub.get(timeout=30)["X"])
         sub.close()
         kb.close()
-        print(json.dumps({"got": got, "rounds": [full, again], "log": lines.getvalue()}))
+        print(json.dumps({"got": got, "rounds": [full, again], "log": lines.getvalue(),
+                          "stored": stored}))
     """)
     assert out["got"] == [1, 2, 3] and out["rounds"] == [True, True], out
+    # the first answer was handled (taking the second says so): the position past it
+    assert out["stored"] == [1, 1], out
     [line] = [line for line in out["log"].splitlines() if "housekeeping failed" in line]
     assert "SLRStoreFull" in line and "robot.db: the disk is full" in line, out["log"]
     assert "Traceback" not in out["log"], out["log"]

@@ -38,7 +38,10 @@ def kb(tmp_path):
     lambda kb: kb.add_event("p", [2], 2, 2),
     lambda kb: kb.load("r(1)."),
     lambda kb: kb.add_buffer("p(_)", keep_last=3),
-], ids=["add", "add_many", "add_event", "load", "add_buffer"])
+    # a table of no event type: kb.sql runs it outside a transaction, no COMMIT checks
+    lambda kb: kb.sql("CREATE TABLE notes (body)", write=True),
+    lambda kb: kb.sql("UPDATE slr_meta SET value = value", write=True),
+], ids=["add", "add_many", "add_event", "load", "add_buffer", "sql_create", "sql_update"])
 def test_writing_after_rm_of_the_store_raises_naming_the_path(kb, tmp_path, write):
     assert "robot.db" in remove_store(tmp_path / "robot.db")
     with pytest.raises(SLRStoreGone) as caught:

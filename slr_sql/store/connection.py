@@ -962,6 +962,8 @@ class Database:
 
     def _write(self, query: str, params: Iterable[Any], deadline: float | None
                ) -> tuple[list[str], list[tuple], set[str]]:
+        if not self.tx_depth:   # (autocommit: no COMMIT of ours checks the file)
+            self.check_identity()
         conn, guard = self.conn, self.guard
         guard.denied = None
         guard.written = set()

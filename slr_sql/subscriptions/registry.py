@@ -5,6 +5,7 @@ when none does). Every statement is a method of the store (:mod:`slr_sql.store.j
 """
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import socket
@@ -56,6 +57,10 @@ def owner_alive(owner: str | None, lease_until: float | None, now_wall: float,
         except (PermissionError, OSError):
             return True
     return True
+
+
+def _note_persisted(sub: Subscription, position: tuple[int, int]) -> None:
+    sub.persisted = position
 
 
 class SubscriptionRegistry:
@@ -182,7 +187,9 @@ class SubscriptionRegistry:
             for s, position in todo:
                 if s.state is not SubscriptionState.CLOSED:
                     self.write_position(s)
-                    s.persisted = position
+                    # noted once stored: a commit that fails (a full disk) leaves the
+                    # position due, to be written on the next round
+                    self.store.after_commit(functools.partial(_note_persisted, s, position))
             if renew:
                 mine = self.store.renew_subscriptions(self.owner,
                                                       time.time() + self.lease_seconds)
