@@ -18,4 +18,4 @@ def test_the_startup_benchmark_prints_both_ratios():
                      r"command +(\d+) ms CPU \(raw +(\d+) ms: +([\d.]+)x\)", done.stdout)
     assert line, done.stdout
     ours_open, raw_open, _, ours_cmd, raw_cmd, _ = map(float, line.groups())
-    assert ours_open > 0 and raw_open > 0 and ours_cmd > raw_cmd > 0
+    assert min(ours_open, raw_open, ours_cmd, raw_cmd) > 0   # figures, not a time limit
