@@ -19,7 +19,9 @@ What differs from a local knowledge base:
 * ``subscribe(max_queue=)`` is capped by the server's ``subscribe_queue``; answers travel
   in frames of up to ``subscribe_batch`` answers (an attribute of the client, 256).
 * Failures to reach the server are :class:`~slr_sql.service.errors.ServiceError` (an
-  SLRError) with ``status`` 0.
+  SLRError) with ``status`` 0; ``kind`` is ``"CertificateNotTrusted"`` for an https:// server
+  whose certificate the client refuses (it trusts ``$SSL_CERT_FILE`` and ``$SSL_CERT_DIR``,
+  else certifi's bundle; docs/service.md, TLS).
 
 Both this client and a local knowledge base implement :class:`slr_sql.KnowledgeBaseAPI`.
 """
@@ -29,6 +31,7 @@ import collections
 import functools
 import logging
 import os
+import ssl
 import threading
 import time
 from concurrent.futures import Future, InvalidStateError
@@ -119,6 +122,52 @@ def _service_url(url: Any, httpx: Any) -> str:
     return url
 
 
+def _tls_context() -> "ssl.SSLContext":
+    """The TLS context of a client of an https:// URL, for its requests (httpx) and its
+    subscriptions (websockets): on their own, httpx trusted ``$SSL_CERT_FILE`` or else
+    certifi's bundle, websockets the system's CAs. It trusts the CAs of ``$SSL_CERT_FILE``
+    (a PEM file) and ``$SSL_CERT_DIR`` (a folder named by ``openssl rehash``), both when both
+    are set, as OpenSSL does; with neither, certifi's bundle (httpx's default).
+
+    >>> _tls_context().verify_mode == ssl.CERT_REQUIRED
+    True
+    """
+    cafile = os.environ.get("SSL_CERT_FILE") or None
+    capath = os.environ.get("SSL_CERT_DIR") or None
+    if cafile is None and capath is None:
+        import certifi
+        return ssl.create_default_context(cafile=certifi.where())
+    try:
+        return ssl.create_default_context(cafile=cafile, capath=capath)
+    except (OSError, ssl.SSLError) as exc:
+        named = " and ".join(f"{name}={value}" for name, value in
+                             (("SSL_CERT_FILE", cafile), ("SSL_CERT_DIR", capath)) if value)
+        raise SLRError(f"cannot read the CA certificates of {named}: "
+                       f"{exc.strerror or exc}") from None
+
+
+def _refused_certificate(exc: BaseException | None) -> "ssl.SSLCertVerificationError | None":
+    """The refusal of the server's certificate that ``exc`` is or was raised from, if any."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, ssl.SSLCertVerificationError):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
+def _not_trusted(url: str, refused: "ssl.SSLCertVerificationError") -> ServiceError:
+    """A certificate this client refuses: a ServiceError with status 0 like every failure to
+    reach the server, but not ``Unavailable`` (which says the same call may succeed later):
+    no retry makes it pass, only trusting the CA (or a certificate for the URL's host)."""
+    reason = str(refused.verify_message or refused.reason or refused).rstrip(".")
+    hint = "it names another host" if refused.verify_code in (62, 64) else \
+        "give the CA that signed it in $SSL_CERT_FILE or $SSL_CERT_DIR"   # 62, 64: a mismatch
+    return ServiceError(f"the TLS certificate of {url} is not trusted ({reason}): {hint}",
+                        kind="CertificateNotTrusted", status=0)
+
+
 class RemoteKnowledgeBase:
     """A knowledge base served by ``slr serve``; see :func:`connect`."""
 
@@ -141,12 +190,13 @@ class RemoteKnowledgeBase:
             self._headers["Authorization"] = f"Bearer {token}".encode("utf-8").decode("latin-1")
         self.timeout = float(timeout)
         self._httpx = httpx
+        # TLS only for https://: for http:// the client would still load the CA bundle
+        # (~50-70 ms of CPU per connect). One context for requests and subscriptions alike.
+        self._tls = _tls_context() if self.url.startswith("https://") else None
         self._http = httpx.Client(base_url=self.url,
                                   headers={k: v.encode("latin-1")
                                            for k, v in self._headers.items()},
-                                  # TLS only for https://: for http:// the client would
-                                  # still load the CA bundle (~50-70 ms of CPU per connect)
-                                  verify=self.url.startswith("https://"),
+                                  verify=self._tls or False,
                                   timeout=httpx.Timeout(self.timeout, connect=10.0),
                                   limits=httpx.Limits(max_connections=None,
                                                       max_keepalive_connections=32))
@@ -178,6 +228,9 @@ class RemoteKnowledgeBase:
                                f"{timeout if timeout is not None else self.timeout:g} s",
                                kind="RequestTimeout", status=0) from None
         except httpx.HTTPError as exc:
+            refused = _refused_certificate(exc)
+            if refused is not None:
+                raise _not_trusted(self.url, refused) from None
             raise ServiceError(f"cannot reach slr serve at {self.url}: {exc}",
                                kind="Unavailable", status=0) from None
         except RuntimeError as exc:  # the client was closed by another thread
@@ -797,9 +850,12 @@ class RemoteSubscription:
         try:
             # entered as a context manager (what websockets >= 17 asks); closed by close()
             self._ws = ws_connect(url, additional_headers=headers, open_timeout=client.timeout,
-                                  max_size=None).__enter__()
+                                  max_size=None, ssl=client._tls).__enter__()
             self._ws.send(dumps(request).decode("utf-8"))
         except (OSError, WebSocketException) as exc:
+            refused = _refused_certificate(exc)
+            if refused is not None:
+                raise _not_trusted(client.url, refused) from None
             raise ServiceError(f"cannot subscribe at {url}: {exc}", kind="Unavailable",
                                status=0) from None
         first = self._receive()
