@@ -39,7 +39,7 @@ from .bounded_builtins import bounded_builtins
 from .checkpointer import CHECKPOINT_INTERVAL, CHECKPOINT_MODES, WalCheckpointer
 from .dialect import SQLITE
 from .functions import SqlFunctions
-from .schema import migrate, migration_scripts
+from .schema import migrate, migrate_new_memory_store, migration_scripts
 from .sqltext import bound_parameters, busy_error, quote_identifier, split_sql_script, store_error
 
 __all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
@@ -370,7 +370,10 @@ class Database:
             # Every event type has four indexes; SQLite's default 2 MiB page cache makes large
             # ingests spill and re-read index pages constantly. The cache grows only as used.
             conn.execute(f"PRAGMA cache_size=-{int(cache_mib * 1024)}")
-            migrate(conn, self.path)
+            if self.path is None:
+                migrate_new_memory_store(conn)
+            else:
+                migrate(conn, self.path)
             # an existing store is in WAL already (switching again would want a lock); an
             # adopted file is switched only once its migrations succeeded
             if self.path is not None and not new and \

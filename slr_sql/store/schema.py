@@ -15,13 +15,14 @@ import functools
 import importlib.resources
 import re
 import sqlite3
+import threading
 from pathlib import Path
 from typing import Any
 
 from ..errors import SLRError
 from .sqltext import busy_error, quote_identifier, split_sql_script
 
-__all__ = ["migration_scripts", "migrate", "applied_migrations"]
+__all__ = ["migration_scripts", "migrate", "migrate_new_memory_store", "applied_migrations"]
 
 
 def _migrations_dir() -> Any:
@@ -208,6 +209,39 @@ def migrate(conn: sqlite3.Connection, path: str | None,
         if conn.in_transaction:
             conn.execute("ROLLBACK")
         raise
+
+
+# A new in-memory store gets its schema as a copy of the pages (SQLite's backup API) of one
+# migrated earlier in this process from the same scripts: replaying the migrations (a table
+# rebuilt and renamed among them) was ~5 ms of every in-memory open, the copy ~0.2 ms.
+_MEMORY_TEMPLATES: dict[tuple, sqlite3.Connection] = {}
+_MEMORY_TEMPLATES_LOCK = threading.Lock()   # one backup of a template at a time
+
+
+def migrate_new_memory_store(conn: sqlite3.Connection) -> None:
+    """Give the new, empty in-memory database ``conn`` the schema :func:`migrate` gives it
+    (the same pages: tables, rows, ``user_version``; ``slr_migrations.applied_at`` is when
+    this process first migrated one).
+
+    >>> conn = sqlite3.connect(":memory:", isolation_level=None)
+    >>> migrate_new_memory_store(conn)
+    >>> conn.execute("PRAGMA user_version").fetchone()[0] == migration_scripts()[-1][0]
+    True
+    """
+    scripts = migration_scripts()
+    key = tuple(scripts)
+    with _MEMORY_TEMPLATES_LOCK:
+        template = _MEMORY_TEMPLATES.get(key)
+        if template is not None:
+            template.backup(conn)
+            return
+    migrate(conn, None, scripts)
+    with _MEMORY_TEMPLATES_LOCK:
+        if key not in _MEMORY_TEMPLATES:
+            template = sqlite3.connect(":memory:", check_same_thread=False,
+                                       isolation_level=None)
+            conn.backup(template)
+            _MEMORY_TEMPLATES[key] = template
 
 
 def postgres_migration_scripts() -> list[tuple[int, str, str]]:
