@@ -15,7 +15,6 @@ States::
 """
 from __future__ import annotations
 
-import asyncio
 import collections
 import enum
 import logging
@@ -376,6 +375,8 @@ class Subscription:
         """Wait on the running loop until something is queued or the subscription closed (the
         hub resolves the future through ``call_soon_threadsafe``, once per loop per pass);
         ``acks``: until every answer taken was acknowledged, or closed."""
+        import asyncio   # (here: a process that never awaits a subscription need not load it)
+
         loop = asyncio.get_running_loop()
         future = loop.create_future()
         with self._lock:
@@ -423,6 +424,8 @@ class Subscription:
         >>> sub.close(); kb.close()
         """
         self._check_pull()
+        import asyncio   # (see _wait_async)
+
         loop = asyncio.get_running_loop()
         waiter, self._next_waiter = self._next_waiter, None
         if waiter is not None and waiter is self._async_waiter and waiter[0] is loop and \
