@@ -18,6 +18,8 @@ from slr_sql.store import quote_identifier  # (an identifier cannot be bound)
 from slr_sql import ManualClock
 from slr_sql.errors import SLRBusy
 
+from hub_helpers import hub_with_one_delivery
+
 DEADLINE = 30.0
 
 
@@ -80,13 +82,7 @@ def test_a_journal_read_meeting_another_sessions_lock_is_busy(postgres_url, busy
 
 def test_the_hub_meeting_a_locked_journal_logs_busy_and_delivers_once_it_is_free(
         postgres_url, caplog):
-    with slr_sql.open(postgres_url, clock=ManualClock(0.0), busy_timeout=0.3) as kb, \
-            caplog.at_level(logging.WARNING, logger="slr_sql"):
-        hub = kb._subscriptions
-        hub.poll_interval = 3600.0        # a pass runs when asked for, not on a timer
-        sub = kb.subscribe("p(X)^T", since=0)
-        kb.add("p(1)^1")
-        assert sub.get(timeout=DEADLINE)["X"] == 1
+    with hub_with_one_delivery(postgres_url, caplog, busy_timeout=0.3) as (kb, hub, sub):
         assert hub.drain(DEADLINE)
         journal = f"slr_subj_{kb.store.table_for('p', 1)}"
         locked = _Locked(postgres_url, journal)

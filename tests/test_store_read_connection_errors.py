@@ -16,9 +16,10 @@ import sqlite3
 import pytest
 
 import slr_sql
-from slr_sql import ManualClock
 from slr_sql.errors import SLRError, SLRStoreGone
 from slr_sql.store import EventStore
+
+from hub_helpers import hub_with_one_delivery
 
 DEADLINE = 30.0
 
@@ -155,13 +156,7 @@ def test_a_reader_opened_after_the_store_file_was_replaced_is_store_gone(tmp_pat
 
 def test_the_hub_logs_a_read_of_a_dropped_journal_as_one_line(tmp_path, caplog):
     path = str(tmp_path / "s.db")
-    with slr_sql.open(path, clock=ManualClock(0.0)) as kb, \
-            caplog.at_level(logging.WARNING, logger="slr_sql"):
-        hub = kb._subscriptions
-        hub.poll_interval = 3600.0        # a pass runs when asked for, not on a timer
-        sub = kb.subscribe("p(X)^T", since=0)
-        kb.add("p(1)^1")
-        assert sub.get(timeout=DEADLINE)["X"] == 1
+    with hub_with_one_delivery(path, caplog) as (kb, hub, sub):
         raw = sqlite3.connect(path, isolation_level=None)
         try:
             raw.execute("DROP TABLE slr_subj_p")
@@ -203,13 +198,7 @@ def test_a_pass_reading_through_the_stores_connection_logs_a_dropped_journal_as_
     """The pass after events added inside a transaction reads through the store's own
     connection (which waits for its commit): the same words, one WARNING line."""
     path = str(tmp_path / "s.db")
-    with slr_sql.open(path, clock=ManualClock(0.0)) as kb, \
-            caplog.at_level(logging.WARNING, logger="slr_sql"):
-        hub = kb._subscriptions
-        hub.poll_interval = 3600.0
-        sub = kb.subscribe("p(X)^T", since=0)
-        kb.add("p(1)^1")
-        assert sub.get(timeout=DEADLINE)["X"] == 1
+    with hub_with_one_delivery(path, caplog) as (kb, hub, sub):
         assert hub.drain(DEADLINE)
         raw = sqlite3.connect(path, isolation_level=None)
         try:
