@@ -52,6 +52,7 @@ from .encoding import (decode_args, decode_arguments, decode_term, dumps, encode
                        encode_plain, loads)
 from .auth import BearerToken
 from .errors import ServiceError, error_body, retry_after
+from .fanout import FRAMES_EXTENSION, GONE, FanOut, FrameChannel
 
 __all__ = ["create_app", "Limits", "API_VERSION"]
 
@@ -331,6 +332,7 @@ class _Service:
         self.limits = limits
         self.submitted: dict[str, _Submitted] = {}
         self.answer_texts = _AnswerTexts()
+        self.fanout: FanOut | None = None
         self.endpoints = _ENDPOINTS
 
     # -- plumbing -----------------------------------------------------------------------------
@@ -513,6 +515,16 @@ class _Service:
                 subscribed["ack_window"] = acks.bound
             await websocket.send_text(dumps(subscribed).decode("utf-8"))
             watcher = asyncio.create_task(self._watch_client(websocket, sub, closing, acks))
+            channel = _frame_channel(websocket.scope) if acks is None else None
+            if channel is not None:
+                # delivered with the loop's other subscribers, frames written as framed once
+                delivery = self._fanout().start(sub, channel, batch)
+                if await delivery.finished == GONE:
+                    raise WebSocketDisconnect(1006)
+                if not closing:
+                    await websocket.send_text('{"type":"end"}')
+                    await websocket.close(1000)
+                return
             texts = self.answer_texts
             seq = 0
             while True:
@@ -553,6 +565,12 @@ class _Service:
                 await self._close_subscription(sub)
             elif closing:
                 await closing[0]
+
+    def _fanout(self) -> FanOut:
+        fanout = self.fanout
+        if fanout is None or fanout.loop is not asyncio.get_running_loop():
+            fanout = self.fanout = FanOut(asyncio.get_running_loop(), self.answer_texts.frame)
+        return fanout
 
     async def _watch_client(self, websocket: WebSocket, sub: Any, closing: list,
                             acks: "_Acks | None" = None) -> None:
@@ -1243,6 +1261,12 @@ async def _send_error(websocket: WebSocket, exc: BaseException) -> None:
         await websocket.close(4000 + body["error"]["status"])
     except Exception:  # the client is gone already
         pass
+
+
+def _frame_channel(scope: Scope) -> FrameChannel | None:
+    """The connection's frame channel, when the server offers one (``slr serve`` does)."""
+    offered = (scope.get("extensions") or {}).get(FRAMES_EXTENSION)
+    return offered.get("channel") if isinstance(offered, dict) else None
 
 
 class _SubscribeEndpoint:

@@ -174,6 +174,7 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
         import uvicorn
 
         from .app import Limits, create_app
+        from .ws_protocol import SubscriberWebSocketProtocol
     except ImportError as exc:
         raise slr_sql.SLRError(f"slr serve needs the service extra ({exc.name} is missing): "
                                f"pip install 'slr_sql[service]'") from None
@@ -205,6 +206,7 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
                                 timeout_keep_alive=30, ssl_keyfile=ssl_keyfile,
                                 ssl_certfile=ssl_certfile, server_header=False,
                                 ws_per_message_deflate=ws_compression,
+                                ws=SubscriberWebSocketProtocol,
                                 timeout_graceful_shutdown=shutdown_grace)
         server = uvicorn.Server(config)
         bound_host, bound_port = sock.getsockname()[:2]

@@ -456,6 +456,46 @@ class Subscription:
                 finally:
                     self._forget_waiter(waiter)
 
+    def take_answers(self, limit: int, waker: tuple[Any, Any]) -> list[dict] | None:
+        """The answers queued now, ``limit`` at most, in order, never waiting: the shared
+        dicts, as ``next_answers(copy=False)`` returns them (the caller must not change
+        them); ``None`` once the subscription has ended; raises the error that ended it after
+        the answers queued before it. Taking a batch marks the previous one handled.
+
+        ``waker`` is ``(loop, obj)``: when ``[]`` is returned or the batch taken empties the
+        queue, the hub calls ``obj.set_result(None)`` on ``loop`` (unless ``obj.done()``)
+        once something more is queued or the subscription ends — how the service delivers
+        every caught-up WebSocket subscriber of a pass in one callback of its loop instead
+        of resuming one coroutine each.
+
+        >>> import asyncio, slr_sql
+        >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); sub = kb.subscribe("p(X)^T", since=0)
+        >>> rejected = kb.add_many(["p(a)^1"])
+        >>> class Waker:
+        ...     def done(self): return False
+        ...     def set_result(self, _): print("more")
+        >>> loop = asyncio.new_event_loop()
+        >>> sub.take_answers(10, (loop, Waker()))
+        [{'X': Atom('a'), 'T': 1.0}]
+        >>> sub.close(); loop.run_until_complete(asyncio.sleep(0)); loop.close(); kb.close()
+        more
+        """
+        self._check_pull()
+        got = self._take_batch(limit, True, waker)
+        if type(got) is _End:
+            if got.error is not None:
+                raise got.error
+            return None
+        return got
+
+    @property
+    def end_queued(self) -> bool:
+        """The subscription's end is next in its queue (read without the lock: only the
+        consumer takes from the queue, and an end queued after this read wakes the waker
+        that the last take registered)."""
+        queue = self._queue
+        return bool(queue) and queue[0] is None
+
     def acknowledge(self, count: int) -> None:
         """Mark the first ``count`` answers taken with ``next_answers(handled=False)`` and
         not acknowledged yet handled, in order: the position of a durable subscription moves

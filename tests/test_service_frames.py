@@ -1,0 +1,179 @@
+"""Answer frames written as framed once (service/fanout.py, service/ws_protocol.py): the
+frame format against the ``websockets`` reader; the ``slr.websocket.frames`` extension of
+``slr serve``'s WebSocket protocol on a real uvicorn server (offered without compression
+only); and a subscriber that stops reading until the server's socket buffer is full, then
+reads on, over a real ``slr serve`` with the frame channel and, with ``--ws-compression``,
+through ASGI sends."""
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from websockets.frames import Frame, Opcode
+from websockets.streams import StreamReader
+
+import slr_sql
+from slr_sql.service.fanout import FRAMES_EXTENSION, text_frame
+from service_helpers import ServiceProcess, complete_only_as_marked, slr_env
+
+DEADLINE = 30.0
+
+
+def _read_frame(data: bytes) -> Frame:
+    reader = StreamReader()
+    reader.feed_data(data)
+    reader.feed_eof()
+    parser = Frame.parse(reader.read_exact, mask=False)
+    try:
+        next(parser)
+    except StopIteration as stop:
+        return stop.value
+    raise AssertionError("the frame is incomplete")
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.one_of(st.text(max_size=200),
+                 st.integers(0, 70_000).map(lambda n: "é" * (n // 2) + "x" * (n % 2)),
+                 st.sampled_from([125, 126, 127, 65535, 65536, 65537]).map(lambda n: "a" * n)))
+def test_a_text_frame_reads_back_as_its_text(text):
+    frame = _read_frame(text_frame(text.encode()))
+    assert frame.opcode is Opcode.TEXT and frame.fin
+    assert frame.data.decode() == text
+
+
+# -- the extension on a real uvicorn server -------------------------------------------------------
+
+def _serve(app, deflate: bool):
+    """A real uvicorn server with slr serve's WebSocket protocol, on a thread; (url, stop)."""
+    import uvicorn
+
+    from slr_sql.service.ws_protocol import SubscriberWebSocketProtocol
+
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))
+    config = uvicorn.Config(app, ws=SubscriberWebSocketProtocol, lifespan="off",
+                            log_level="warning", ws_per_message_deflate=deflate)
+    server = uvicorn.Server(config)
+    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
+    thread.start()
+
+    def stop() -> None:
+        server.should_exit = True
+        thread.join(DEADLINE)
+        sock.close()
+    return f"ws://127.0.0.1:{sock.getsockname()[1]}/", stop, server
+
+
+@pytest.mark.parametrize("deflate", [False, True])
+def test_the_frame_channel_is_offered_without_compression_and_writes_whole_frames(deflate):
+    seen: dict = {}
+
+    async def app(scope, receive, send):
+        assert scope["type"] == "websocket"
+        await receive()
+        await send({"type": "websocket.accept"})
+        offered = scope["extensions"].get(FRAMES_EXTENSION)
+        seen["offered"] = offered is not None
+        if offered is not None:
+            channel = offered["channel"]
+            seen["open"], seen["paused"] = channel.open, channel.paused
+            assert channel.write(text_frame('{"n":1}'.encode()))
+            assert channel.write(text_frame(("y" * 70_000).encode()))
+        else:
+            await send({"type": "websocket.send", "text": '{"n":1}'})
+            await send({"type": "websocket.send", "text": "y" * 70_000})
+        await send({"type": "websocket.close", "code": 1000})
+        if offered is not None:
+            seen["open_after_close"] = offered["channel"].open
+            seen["written_after_close"] = offered["channel"].write(text_frame(b"{}"))
+
+    url, stop, server = _serve(app, deflate)
+    try:
+        from websockets.sync.client import connect
+
+        assert _started(server)
+        with connect(url, compression="deflate" if deflate else None) as ws:
+            assert ws.recv(DEADLINE) == '{"n":1}'
+            assert ws.recv(DEADLINE) == "y" * 70_000
+    finally:
+        stop()
+    assert seen["offered"] is (not deflate)
+    if not deflate:
+        assert seen["open"] and not seen["paused"]
+        assert not seen["open_after_close"] and not seen["written_after_close"]
+
+
+def _started(server) -> bool:
+    """Wait (until the deadline) for the server thread to listen."""
+    ready = threading.Event()
+    deadline = time.monotonic() + DEADLINE
+    while not server.started and time.monotonic() < deadline:
+        ready.wait(0.01)
+    return bool(server.started)
+
+
+# -- a subscriber that stalls, then reads on ----------------------------------------------------
+
+STALLING_CLIENT = r"""
+import json, sys
+from websockets.sync.client import connect
+url, pattern, until, compression = sys.argv[1], sys.argv[2], float(sys.argv[3]), sys.argv[4]
+with connect(url, compression=compression or None, max_queue=4) as ws:
+    ws.send(json.dumps({"op": "subscribe", "pattern": pattern, "since": 0, "until": until}))
+    print(json.loads(ws.recv())["type"], flush=True)
+    sys.stdin.readline()             # stalled until the test has added everything
+    got, seq = [], 1
+    while True:
+        frame = json.loads(ws.recv(60))
+        if frame["type"] == "end":
+            break
+        answers = frame["answers"] if frame["type"] == "answers" else [frame["answer"]]
+        assert frame["seq"] == seq, (frame["seq"], seq)
+        seq += len(answers)
+        got.extend(a["I"] for a in answers)
+    print(json.dumps(got), flush=True)
+"""
+
+
+@pytest.mark.parametrize("compression", ["", "deflate"])
+def test_a_subscriber_that_stalls_until_the_socket_is_full_then_reads_gets_everything(
+        tmp_path, compression):
+    """The server's socket buffer fills (6 MB of answers the client does not read): its
+    frames wait for the drain, its queue overflows into the store, and once it reads it
+    gets every answer once, in order, numbered without a gap, then its end. Without
+    compression the frames go through the frame channel, with it through ASGI sends."""
+    args = ("--ws-compression",) if compression else ()
+    with ServiceProcess(tmp_path / "stall.db", *args) as server:
+        with slr_sql.connect(server.url) as remote:
+            complete_only_as_marked(remote, "big/2")
+            client = subprocess.Popen(
+                [sys.executable, "-c", STALLING_CLIENT, server.url.replace("http", "ws") +
+                 "/subscribe", "big(I, S)^T", "3000", compression],
+                stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=slr_env())
+            try:
+                assert client.stdout.readline().strip() == b"subscribed"
+                payload = "x" * 2000
+                for start in range(0, 3000, 100):
+                    remote.add_many([f'big({i}, "{payload}")^{i}' for i in
+                                     range(start, start + 100)])
+                remote.mark_complete("big/2", 3000)
+                with slr_sql.connect(server.url) as other:    # the others are served meanwhile
+                    assert other.query("big(2999, _)^T") == [{"T": 2999.0}]
+                client.stdin.write(b"go\n")
+                client.stdin.flush()
+                out, _ = client.communicate(timeout=120)
+                assert client.returncode == 0
+                assert json.loads(out.splitlines()[-1]) == list(range(3000))
+            finally:
+                client.kill()
+                client.wait(DEADLINE)
+    log = server.log.read_text()
+    assert "Traceback" not in log, log
+
