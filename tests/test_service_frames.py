@@ -6,6 +6,7 @@ reads on, over a real ``slr serve`` with the frame channel and, with ``--ws-comp
 through ASGI sends."""
 from __future__ import annotations
 
+import asyncio
 import json
 import socket
 import subprocess
@@ -177,3 +178,63 @@ def test_a_subscriber_that_stalls_until_the_socket_is_full_then_reads_gets_every
     log = server.log.read_text()
     assert "Traceback" not in log, log
 
+
+
+# -- one callback for the loop's subscribers -------------------------------------------------------
+
+class _Socket:
+    """The frames a connection was given (the socket side of a FrameChannel, in memory)."""
+
+    def __init__(self, broken: bool = False):
+        self.frames: list[bytes] = []
+        self.broken = broken
+        self.on_drain = None
+        self.paused = False
+        self.open = True
+
+    def write(self, frame: bytes) -> bool:
+        if self.broken:
+            raise RuntimeError("the transport refused the write")
+        self.frames.append(frame)
+        return True
+
+
+def _run_until(loop, done, what: str) -> None:
+    async def wait() -> None:
+        deadline = loop.time() + DEADLINE
+        while not done():
+            assert loop.time() < deadline, what
+            await asyncio.sleep(0.005)
+    loop.run_until_complete(wait())
+
+
+def test_a_delivery_that_fails_ends_alone_and_the_others_of_its_callback_go_on():
+    """Two subscribers woken by one pass: the first one's write raises; it ends with that
+    error (its coroutine sends it), and the second still gets its frame in the same round."""
+    from slr_sql.service.fanout import FanOut
+
+    kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    loop = asyncio.new_event_loop()
+    try:
+        fanout = FanOut(loop, lambda seq, answers: json.dumps(
+            {"seq": seq, "I": [a["I"] for a in answers]}))
+        broken, good = _Socket(broken=True), _Socket()
+        first = fanout.start(kb.subscribe("p(I)^T", since=0), broken, 10)
+        second = fanout.start(kb.subscribe("p(I)^T", since=0), good, 10)
+        _run_until(loop, lambda: True, "started")
+        kb.add_many(["p(1)^1", "p(2)^2"])
+        _run_until(loop, lambda: good.frames and first.finished.done(), "delivered")
+        with pytest.raises(RuntimeError, match="refused"):
+            first.finished.result()
+        assert [json.loads(_read_frame(f).data) for f in good.frames] == [
+            {"seq": 1, "I": [1, 2]}]
+        kb.add("p(3)^3")
+        _run_until(loop, lambda: len(good.frames) == 2, "the next pass")
+        assert json.loads(_read_frame(good.frames[1]).data) == {"seq": 3, "I": [3]}
+        assert not second.finished.done()
+        second.sub.close()
+        _run_until(loop, second.finished.done, "ended")
+        assert second.finished.result() is None
+    finally:
+        loop.close()
+        kb.close()

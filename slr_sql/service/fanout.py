@@ -152,7 +152,10 @@ class FanOut:
         self._scheduled = False
         ready, self._ready = self._ready, []
         for delivery in ready:
-            delivery.pump()
+            try:
+                delivery.pump()
+            except Exception as exc:  # noqa: BLE001 - one connection's failure ends only it
+                delivery._finish(error=exc)
 
     def frame(self, seq: int, answers: list[dict]) -> bytes:
         """The framed bytes of an answer frame; the subscribers of one pattern that are at the
