@@ -1458,6 +1458,8 @@ class EventRules:
     # ----------------------------------------------------------------- inspection
     def infos(self) -> list[dict]:
         self.sync_rules()
+        # (after a rolled-back round the counts in memory may be those it took back)
+        self._read_stale_summaries()
         out = []
         for rt in self.rules:
             rule = rt.rule
