@@ -224,6 +224,64 @@ def test_the_stores_statements_at_its_size_limit_are_store_full(tmp_path):
         store.close()
 
 
+# An event rule whose decisions wait until b/1 is complete: the add of the mark that completes
+# it commits, and the decision round after it -- whose failure the add does not raise (its
+# events are stored) -- derives c(X), a row as large as X
+CHRONO = ":- consumption(chronological).\nc(X) <- a(X) seq b(X).\n"
+
+
+def test_a_decision_round_at_the_size_limit_says_why_on_its_rule(tmp_path):
+    """The round's insert meets the page limit: SLRStoreFull from the store's statement.
+    The rule's ``last_error`` says so (it did for a statement's own error only), the
+    decision stays pending, and is made once there is room."""
+    with slr_sql.open(tmp_path / "robot.db", clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.load(CHRONO)
+        big = "x" * 100_000
+        assert kb.add_many([f"a('{big}')^1", f"b('{big}')^2", "fullyUpdated(a/1)^10"]) == []
+        pages = kb.sql("PRAGMA page_count")[1][0][0]
+        kb.sql(f"PRAGMA max_page_count = {pages + 3}", write=True)   # room for the mark only
+        assert kb.add_many(["fullyUpdated(b/1)^10"]) == []
+        [rule] = kb.event_rules()
+        assert rule["pending"] == 1 and rule["last_error"] == \
+            f"the round rolled back: {tmp_path / 'robot.db'}: the disk is full (or the store " \
+            f"reached its size limit; database or disk is full); nothing of this call was " \
+            f"written: free space and retry"
+        kb.sql("PRAGMA max_page_count = 1073741823", write=True)
+        kb.mark_complete("b/1", 11)
+        assert len(kb.query("c(X)^[S, E]")) == 1 and kb.event_rules()[0]["pending"] == 0
+
+
+def test_a_decision_round_whose_commit_the_full_disk_refuses_says_why_on_its_rule(tmp_path):
+    """On a full disk the round's rows go to the write-ahead log at its commit: the commit is
+    refused (SLRStoreFull), and the rules that decided in the round say so. The disk keeps
+    room for the mark's own commit (a file removed after the disk was filled), not for
+    c(X)."""
+    out = on_full_disk(tmp_path, f"""
+        kb = slr_sql.open(path, clock=slr_sql.ManualClock(0.0))
+        kb.load({CHRONO!r})
+        big = "x" * 400_000
+        kb.add_many([f"a('{{big}}')^1", f"b('{{big}}')^2", "fullyUpdated(a/1)^10"])
+        with open(os.path.join(folder, "reserve"), "wb") as f:
+            f.write(b"r" * 131072)
+        fill()
+        os.remove(os.path.join(folder, "reserve"))
+        added = attempt(lambda: kb.add_many(["fullyUpdated(b/1)^10"]))
+        [rule] = kb.event_rules()
+        pending = kb.sql("SELECT count(*) FROM slr_cep_pending")[1][0][0]
+        free()
+        kb.mark_complete("b/1", 11)
+        derived = len(kb.query("c(X)^[S, E]"))
+        kb.close()
+        print(json.dumps({{"added": added, "pending": [rule["pending"], pending],
+                          "last_error": rule["last_error"], "derived": derived}}))
+    """, size="4m")
+    # (pending: as kb.event_rules() says it, as the table holds it)
+    assert out["added"] == ["ok", []] and out["pending"] == [1, 1], out
+    assert out["last_error"].startswith("the round rolled back: ") and \
+        "robot.db: the disk is full" in out["last_error"], out
+    assert out["derived"] == 1, out
+
+
 def test_the_hubs_housekeeping_on_a_full_disk_is_one_line(tmp_path):
     """The subscription hub's housekeeping writes on the store's connection, on a thread of
     its own (no knowledge base call around it): a commit the full disk refuses is logged as

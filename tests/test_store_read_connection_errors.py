@@ -18,6 +18,7 @@ import pytest
 import slr_sql
 from slr_sql.errors import SLRError, SLRStoreGone
 from slr_sql.store import EventStore
+from slr_sql.store.connection import Database
 
 from hub_helpers import hub_with_one_delivery
 
@@ -125,6 +126,61 @@ def test_the_stores_own_reads_of_a_file_that_became_no_database_say_damaged(tmp_
             assert str(exc).startswith(f"{path}: the file is damaged (file is not a database)")
     finally:
         store.close()
+
+
+# Every public method of the store's connection that runs a statement: each says a condition
+# of the file (damaged, no longer the store) as an SLRError, in execute's words
+READS = {
+    "data_version": lambda db: db.data_version(),
+    "schema_version": lambda db: db.schema_version(),
+    "table_names": lambda db: db.table_names(),
+    "triggers": lambda db: db.triggers("p"),
+    "index_names": lambda db: db.index_names("p"),
+    "object_names": lambda db: db.object_names(),
+    "view_statements": lambda db: db.view_statements(["v"]),
+    "sql": lambda db: db.sql("SELECT count(*) FROM p"),
+    "sql_write": lambda db: db.sql_write("DELETE FROM p WHERE arg1 = ?", ("none",)),
+}
+
+
+@pytest.mark.parametrize("afterwards", ["damaged", "replaced"])
+@pytest.mark.parametrize("read", READS.values(), ids=READS.keys())
+def test_each_statement_of_the_stores_connection_says_the_files_condition(
+        tmp_path, read, afterwards):
+    """The file's bytes turned to garbage under the open connection (its cached pages
+    dropped): a damaged file; and once another store took its place at the path as well,
+    SLRStoreGone (the file open is no longer the store)."""
+    path = str(tmp_path / "s.db")
+    _store_with_journal(path).close()
+    db = Database(path)
+    try:
+        read(db)   # (works: the file is sound)
+        with open(path, "r+b") as f:    # the whole file, header included
+            f.write(b"\xff" * os.path.getsize(path))
+        db.execute("PRAGMA shrink_memory")   # the next read reads the file
+        if afterwards == "replaced":
+            other = str(tmp_path / "other.db")
+            _store_with_journal(other).close()
+            os.replace(other, path)
+        exc = _failure(lambda: read(db))
+        if afterwards == "damaged":
+            assert type(exc) is SLRError
+            assert str(exc).startswith(f"{path}: the file is damaged (file is not a database)")
+        else:
+            assert isinstance(exc, SLRStoreGone)
+            assert str(exc).startswith(f"{path}: the store file was deleted or replaced while "
+                                       f"open")
+    finally:
+        db.close()
+
+
+@pytest.mark.parametrize("read", [*READS.values(), lambda db: db.changes(),
+                                  lambda db: db.query_plan("SELECT * FROM p")],
+                         ids=[*READS.keys(), "changes", "query_plan"])
+def test_each_statement_of_a_closed_store_says_it_is_closed(tmp_path, read):
+    db = Database(str(tmp_path / "s.db"))
+    db.close()
+    assert str(_failure(lambda: read(db))) == "the event store is closed"
 
 
 def test_a_reader_opened_after_the_store_file_was_deleted_is_store_gone(tmp_path):

@@ -1289,7 +1289,10 @@ class EventRules:
                            dict(ends) if ends is not None else None, token)
 
     def _round(self, new_from: dict, dirty: set, decide: bool, ends: dict | None = None,
-               token: _AddToken | None = None) -> list:
+               token: _AddToken | None = None, ran: list | None = None) -> list:
+        """One round of the rules: each whose input changed (``dirty``), or with decisions
+        pending when ``decide``, derives what it can; their rows join the transaction
+        around. ``ran``: the rules that ran are appended to it."""
         self._read_stale_summaries()
         now = float(self.clock.now())
         for key in self.types & self.leaf_types:
@@ -1304,13 +1307,20 @@ class EventRules:
             if decide and not rt.waits and not any(k in dirty
                                                    for k in rt.rule.input_types()):
                 continue
+            if ran is not None:
+                ran.append(rt)
             try:
                 out = rt.run(new_from, dirty, now, decide, ends,
                              token.before.get(rt) if token is not None else None)
-            except DatabaseError as exc:
+            except (DatabaseError, SLRError) as exc:
                 # (kept on the rule: after an add, whose events are committed, a failed
                 # decision round is not raised -- its decisions stay pending -- and this
                 # says why, in kb.event_rules())
+                if not isinstance(exc, DatabaseError):
+                    # the store's words for its file (the disk full, the store busy or gone),
+                    # or a where goal that could not be asked: raised as they are (retryable)
+                    rt.last_error = f"the round rolled back: {describe_error(exc)}"
+                    raise
                 rt.last_error = f"its statements failed, the round rolled back: {exc}"
                 raise SLRError(f"event rule {rt.rule.text} ({rt.rule.source}): {exc}") \
                     from None
@@ -1386,9 +1396,24 @@ class EventRules:
     def decide(self) -> list:
         """One round of the pending decisions that can be made now, in a transaction of its
         own (the event pipeline's decision stage). Returns the complex events derived."""
-        with self.store.transaction():
-            self.store.lock_for_write(self.types | self.leaf_types)
-            return self._round({}, set(), True, {})   # (no new rows but those derived)
+        ran: list[RuleRuntime] = []
+        derived: list | None = None
+        try:
+            with self.store.transaction():
+                self.store.lock_for_write(self.types | self.leaf_types)
+                # (no new rows but those derived)
+                derived = self._round({}, set(), True, {}, ran=ran)
+        except SLRError as exc:
+            if derived is not None:
+                # the round's statements ran and its commit was refused (a full disk meets
+                # the write-ahead log only now): the rules that decided in it say why, as
+                # when their statements fail (kb.event_rules(); the caller after an add
+                # does not raise it)
+                why = f"the round rolled back: {describe_error(exc)}"
+                for rt in ran:
+                    rt.last_error = why
+            raise
+        return derived
 
     def recheck(self) -> None:
         """Synchronized queries waiting on a complex event type: release those that can go."""
@@ -1433,6 +1458,8 @@ class EventRules:
     # ----------------------------------------------------------------- inspection
     def infos(self) -> list[dict]:
         self.sync_rules()
+        # (after a rolled-back round the counts in memory may be those it took back)
+        self._read_stale_summaries()
         out = []
         for rt in self.rules:
             rule = rt.rule

@@ -18,10 +18,12 @@ What differs from a local knowledge base:
 * ``pending()`` lists the queries this client submitted that are still waiting.
 * ``subscribe(max_queue=)`` is capped by the server's ``subscribe_queue``; answers travel
   in frames of up to ``subscribe_batch`` answers (an attribute of the client, 256).
-* Failures to reach the server are :class:`~slr_sql.service.errors.ServiceError` (an
-  SLRError) with ``status`` 0; ``kind`` is ``"CertificateNotTrusted"`` for an https:// server
-  whose certificate the client refuses (it trusts ``$SSL_CERT_FILE`` and ``$SSL_CERT_DIR``,
-  else certifi's bundle; docs/service.md, TLS).
+* Failures to reach the server, and its 503 answers that no slr_sql class names, are
+  :class:`~slr_sql.service.errors.ServiceUnavailable`: a ``ServiceError`` (``kind``
+  ``"Unavailable"``, ``status`` 0 when no answer came) and an :class:`~slr_sql.SLRUnavailable`
+  (retry later), for requests and subscriptions alike. An https:// server whose certificate
+  the client refuses is a ``ServiceError`` of ``kind`` ``"CertificateNotTrusted"`` (it trusts
+  ``$SSL_CERT_FILE`` and ``$SSL_CERT_DIR``, else certifi's bundle; docs/service.md, TLS).
 
 Both this client and a local knowledge base implement :class:`slr_sql.KnowledgeBaseAPI`.
 """
@@ -45,7 +47,7 @@ from slr_sql.api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args,
                        encode_arguments, encode_term, loads)
 from .auth import check_token_text
-from .errors import ServiceError, error_from_body
+from .errors import ServiceError, ServiceUnavailable, error_from_body
 
 __all__ = ["connect", "RemoteKnowledgeBase", "RemotePendingQuery", "RemoteSubscription",
            "RemoteWait"]
@@ -168,6 +170,22 @@ def _not_trusted(url: str, refused: "ssl.SSLCertVerificationError") -> ServiceEr
                         kind="CertificateNotTrusted", status=0)
 
 
+def _not_subscribed(url: str, exc: BaseException) -> ServiceError:
+    """The error of a WebSocket to ``url`` that could not be opened (``exc``): a
+    :class:`ServiceUnavailable` when no server answered or it answered 503, as for a request;
+    another HTTP status refusing the handshake (a server that is no slr serve, a proxy) is a
+    :class:`ServiceError` with that status, which a retry would meet again.
+
+    >>> print(_not_subscribed("ws://127.0.0.1:1/subscribe", ConnectionRefusedError(111, "refused")))
+    cannot subscribe at ws://127.0.0.1:1/subscribe: [Errno 111] refused
+    """
+    status = getattr(getattr(exc, "response", None), "status_code", None)
+    message = f"cannot subscribe at {url}: {exc}"
+    if isinstance(status, int) and status != 503:
+        return ServiceError(message, kind="BadRequest", status=status)
+    return ServiceUnavailable(message, status=status or 0)
+
+
 class RemoteKnowledgeBase:
     """A knowledge base served by ``slr serve``; see :func:`connect`."""
 
@@ -194,7 +212,7 @@ class RemoteKnowledgeBase:
         # (~50-70 ms of CPU per connect). One context for requests and subscriptions alike.
         self._tls = _tls_context() if self.url.startswith("https://") else None
         self._http = httpx.Client(base_url=self.url,
-                                  headers={k: v.encode("latin-1")
+                                  headers={k.encode("latin-1"): v.encode("latin-1")
                                            for k, v in self._headers.items()},
                                   verify=self._tls or False,
                                   timeout=httpx.Timeout(self.timeout, connect=10.0),
@@ -231,8 +249,8 @@ class RemoteKnowledgeBase:
             refused = _refused_certificate(exc)
             if refused is not None:
                 raise _not_trusted(self.url, refused) from None
-            raise ServiceError(f"cannot reach slr serve at {self.url}: {exc}",
-                               kind="Unavailable", status=0) from None
+            raise ServiceUnavailable(f"cannot reach slr serve at {self.url}: {exc}",
+                                     status=0) from None
         except RuntimeError as exc:  # the client was closed by another thread
             raise SLRError(f"the connection to {self.url} is closed ({exc})") from None
         try:
@@ -246,11 +264,13 @@ class RemoteKnowledgeBase:
                                    status=response.status_code)
             self._answered.path = f"{method} {path}"
             return response.status_code, data
-        if data is None:
+        if data is None:   # (not the server's words: a proxy's, or the server's own limit)
             text = response.text[:200].strip()
-            raise ServiceError(f"HTTP {response.status_code} from {self.url}{path}"
-                               + (f": {text}" if text else ""),
-                               kind="BadRequest", status=response.status_code)
+            message = f"HTTP {response.status_code} from {self.url}{path}" + \
+                (f": {text}" if text else "")
+            if response.status_code == 503:   # (beyond --max-connections: may pass)
+                raise ServiceUnavailable(message, 503)
+            raise ServiceError(message, kind="BadRequest", status=response.status_code)
         raise error_from_body(data, response.status_code)
 
     def _post(self, path: str, body: dict, timeout: float | None = None) -> dict:
@@ -333,7 +353,7 @@ class RemoteKnowledgeBase:
         present = [i for i, item in enumerate(items) if item is not None]
         if not present:
             return []
-        request = {"events": [items[i] for i in present]}
+        request: dict[str, Any] = {"events": [items[i] for i in present]}
         if atomic:                  # absent is false (and keeps the body free of booleans)
             request["atomic"] = True
         body = dumps(request)
@@ -856,8 +876,7 @@ class RemoteSubscription:
             refused = _refused_certificate(exc)
             if refused is not None:
                 raise _not_trusted(client.url, refused) from None
-            raise ServiceError(f"cannot subscribe at {url}: {exc}", kind="Unavailable",
-                               status=0) from None
+            raise _not_subscribed(url, exc) from None
         first = self._receive()
         if first.get("type") != "subscribed":
             self.close()
@@ -928,8 +947,8 @@ class RemoteSubscription:
             if self._done:             # close() was called (maybe from another thread)
                 return {"type": "end"}
             self._done = True
-            raise ServiceError(f"the subscription's connection closed: {exc}",
-                               kind="Unavailable", status=0) from None
+            raise ServiceUnavailable(f"the subscription's connection closed: {exc}",
+                                     status=0) from None
         try:
             message = loads(data)
         except (ValueError, UnicodeDecodeError) as exc:

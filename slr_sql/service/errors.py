@@ -21,8 +21,8 @@ from slr_sql import EventRejected, SLRCancelled, SLREvaluationError, SLRError, S
 
 from .encoding import TermError, decode_term, encode_term
 
-__all__ = ["ServiceError", "error_body", "error_status", "error_from_body", "retry_after",
-           "STATUS_KINDS"]
+__all__ = ["ServiceError", "ServiceUnavailable", "error_body", "error_status", "error_from_body",
+           "retry_after", "STATUS_KINDS"]
 
 # kind of a ServiceError -> its HTTP status
 STATUS_KINDS = {
@@ -45,6 +45,27 @@ class ServiceError(SLRError):
         self.kind = kind
         self.status = STATUS_KINDS.get(kind, 400) if status is None else status
         super().__init__(message)
+
+
+class ServiceUnavailable(ServiceError, SLRUnavailable):
+    """The service cannot answer now, a condition that may pass: no server listens at the
+    URL (or the connection failed or broke), or it answered 503 (too many connections or
+    pending queries; the store busy or full when no slr_sql class says which). Both a
+    :class:`ServiceError` (``kind`` ``"Unavailable"``, ``status`` 503, or 0 when no answer
+    came) and an :class:`~slr_sql.SLRUnavailable`, so a caller retrying on the latter
+    retries a server that is down too. A refused connection or a 503 wrote nothing; a
+    connection that broke after the request was sent leaves its outcome to the server (a
+    retried add may be stored twice, never lost). ``kind``: another name when a 503 said
+    one this client has no class for.
+
+    >>> from slr_sql import SLRUnavailable
+    >>> e = ServiceUnavailable("cannot reach slr serve at http://127.0.0.1:1", status=0)
+    >>> isinstance(e, SLRUnavailable), e.kind, e.status
+    (True, 'Unavailable', 0)
+    """
+
+    def __init__(self, message: str, status: int | None = None, kind: str = "Unavailable"):
+        super().__init__(message, kind=kind, status=503 if status is None else status)
 
 
 def error_status(exc: BaseException) -> int:
@@ -102,11 +123,16 @@ def error_body(exc: BaseException) -> dict[str, Any]:
 def error_from_body(body: Any, status: int) -> SLRError:
     """The exception an error response stands for, of the class the server raised when it is
     an slr_sql error class (``SLRSyntaxError`` with its line and column, ...), else a
-    :class:`ServiceError`."""
+    :class:`ServiceError` (a :class:`ServiceUnavailable` for a 503).
+
+    >>> type(error_from_body({"error": {"kind": "Unavailable", "message": "x"}}, 503)).__name__
+    'ServiceUnavailable'
+    """
     err = body.get("error") if isinstance(body, dict) else None
     if not isinstance(err, dict):
-        return ServiceError(f"HTTP {status} without an error description", kind="BadRequest",
-                            status=status)
+        message = f"HTTP {status} without an error description"
+        return ServiceUnavailable(message, status) if status == 503 else \
+            ServiceError(message, kind="BadRequest", status=status)
     kind = str(err.get("kind", "SLRError"))
     message = str(err.get("message", ""))
     if kind == "SLRSyntaxError":
@@ -133,6 +159,8 @@ def error_from_body(body: Any, status: int) -> SLRError:
             if isinstance(exc, SLRCancelled) and isinstance(err.get("reason"), str):
                 exc.reason = err["reason"]
             return exc
+    if kind == "Unavailable" or status == 503:
+        return ServiceUnavailable(message, status, kind)
     return ServiceError(message, kind=kind, status=status)
 
 

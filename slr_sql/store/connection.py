@@ -413,8 +413,7 @@ class Database:
         >>> EventStore(None).schema_version() >= 1
         True
         """
-        with self.lock:
-            return self.conn.execute("PRAGMA user_version").fetchone()[0]
+        return self.execute("PRAGMA user_version")[0][0]
 
     def data_version(self) -> int:
         """``PRAGMA data_version``: a number that changes when another connection (another
@@ -424,9 +423,7 @@ class Database:
         >>> db = Database(None); db.data_version() == db.data_version()
         True
         """
-        with self.lock:
-            self.check_open()
-            return self.conn.execute("PRAGMA data_version").fetchone()[0]
+        return self.execute("PRAGMA data_version")[0][0]
 
     def others_version(self) -> int:
         """A number that moves when another connection may have changed the event rules'
@@ -444,12 +441,8 @@ class Database:
         >>> "slr_meta" in Database(None).table_names()
         True
         """
-        with self.lock:
-            try:
-                return {row[0] for row in self.conn.execute(
-                    "SELECT name FROM sqlite_master WHERE type = 'table'")}
-            except sqlite3.Error as exc:   # (the hub's housekeeping reads it too)
-                raise self.failure(exc) from None
+        return {row[0] for row in self.execute(
+            "SELECT name FROM sqlite_master WHERE type = 'table'")}
 
     def set_write_groups(self, groups: Iterable[Iterable[tuple[str, int]]]) -> None:
         """Writers take turns on SQLite already (``BEGIN IMMEDIATE``): nothing to keep."""
@@ -466,12 +459,11 @@ class Database:
         >>> Database(None).triggers("slr_clock")
         {'slr_clock_back'}
         """
-        with self.lock:
-            return {row[0] for row in self.conn.execute(
-                "SELECT name FROM sqlite_master WHERE type = 'trigger' AND "
-                "(? IS NULL OR tbl_name = ?) UNION ALL SELECT name FROM sqlite_temp_master "
-                "WHERE type = 'trigger' AND (? IS NULL OR tbl_name = ?)",
-                (table, table, table, table))}
+        return {row[0] for row in self.execute(
+            "SELECT name FROM sqlite_master WHERE type = 'trigger' AND "
+            "(? IS NULL OR tbl_name = ?) UNION ALL SELECT name FROM sqlite_temp_master "
+            "WHERE type = 'trigger' AND (? IS NULL OR tbl_name = ?)",
+            (table, table, table, table))}
 
     def index_names(self, table: str) -> set[str]:
         """Names of the indexes of ``table`` (as created, not lower-cased).
@@ -480,10 +472,8 @@ class Database:
         >>> _ = db.execute("CREATE INDEX t_x ON t (x)"); db.index_names("t")
         {'t_x'}
         """
-        with self.lock:
-            return {row[0] for row in self.conn.execute(
-                "SELECT name FROM sqlite_master WHERE type = 'index' AND tbl_name = ?",
-                (table,))}
+        return {row[0] for row in self.execute(
+            "SELECT name FROM sqlite_master WHERE type = 'index' AND tbl_name = ?", (table,))}
 
     def hypothetical_plan(self, sql: str, extra: dict[str, str],
                           without: Iterable[str] = ()) -> list[str] | None:
@@ -573,8 +563,7 @@ class Database:
         >>> "slr_meta" in Database(None).object_names()
         True
         """
-        with self.lock:
-            return {row[0].lower() for row in self.conn.execute("SELECT name FROM sqlite_master")}
+        return {row[0].lower() for row in self.execute("SELECT name FROM sqlite_master")}
 
     def view_statements(self, names: Iterable[str]) -> dict[str, str]:
         """``{view name: the statement that creates it}`` of the named views that exist.
@@ -583,11 +572,8 @@ class Database:
         >>> db.view_statements(["answer", "nothing"])
         {'answer': 'CREATE VIEW answer AS SELECT 42 AS x'}
         """
-        wanted = list(names)
-        with self.lock:
-            rows = self.conn.execute("SELECT name, sql FROM sqlite_master WHERE type = 'view'")
-            found = {name: sql for name, sql in rows}
-        return {name: found[name] for name in wanted if name in found}
+        found = dict(self.execute("SELECT name, sql FROM sqlite_master WHERE type = 'view'"))
+        return {name: found[name] for name in names if name in found}
 
     @property
     def max_columns(self) -> int:
@@ -881,8 +867,9 @@ class Database:
         """Run one SQL statement as given (for ``slr sql``) and return ``(column names,
         rows)``. Read-only unless ``write``: a statement that would change the store (an
         INSERT, a DROP, a pragma assignment, an ATTACH) raises an :class:`SLRError` starting
-        with ``read-only``; other failures raise :data:`DatabaseError`. The connection's
-        SQL functions are there, so compiled statements (``kb.explain``) run as printed.
+        with ``read-only``; a condition of the file or its disk :meth:`failure`'s SLRError;
+        the statement's own errors raise :data:`DatabaseError`. The connection's SQL
+        functions are there, so compiled statements (``kb.explain``) run as printed.
         ``timeout`` (seconds): a longer statement is interrupted with :class:`SLRTimeout`.
 
         >>> from slr_sql.store import EventStore
@@ -915,7 +902,8 @@ class Database:
                     columns = [d[0] for d in cursor.description] if cursor.description else []
                     return columns, _bounded_rows(cursor)
             except sqlite3.DatabaseError as exc:
-                raise _read_only_error(exc, guard) from None
+                reason = _read_only_error(exc, guard)
+                raise (self.failure(exc) if reason is exc else reason) from None
             finally:
                 conn.setlimit(sqlite3.SQLITE_LIMIT_LENGTH, longest)
                 conn.set_authorizer(guard.always)
@@ -983,13 +971,16 @@ class Database:
                 raise SLRError(f"sql: {guard.denied}") from None
             if _FUNCTION_FAILED in str(exc):
                 raise SLRError(f"sql: {_NOT_UTF8}") from None
-            raise busy_error(exc, self.path, self.busy_timeout) or exc from None
+            raise self.failure(exc) from None
         finally:
             conn.set_authorizer(guard.always)
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
         """Execute one statement for another slr_sql module (triggers, buffer pruning, ...)
-        and return its rows. Inside :meth:`transaction` it is part of the transaction.
+        and return its rows. Inside :meth:`transaction` it is part of the transaction. A
+        condition of the file or its disk raises :meth:`failure`'s SLRError, a statement's own
+        error a :data:`DatabaseError`: the one path of this class's reads of the catalog
+        (:meth:`table_names`, :meth:`data_version`, ...) too.
 
         >>> from slr_sql.store import EventStore
         >>> EventStore(None).execute("SELECT ? + 1", (1,))
@@ -1037,8 +1028,7 @@ class Database:
         >>> s.changes()
         1
         """
-        with self.lock:
-            return self.conn.execute("SELECT changes()").fetchone()[0]
+        return self.execute("SELECT changes()")[0][0]
 
     def query_plan(self, sql: str) -> list[str]:
         """SQLite's ``EXPLAIN QUERY PLAN`` lines for a statement (parameters bound to NULL).
@@ -1047,10 +1037,8 @@ class Database:
         >>> EventStore(None).query_plan("SELECT * FROM slr_meta WHERE key = ?")
         ['SEARCH slr_meta USING INDEX sqlite_autoindex_slr_meta_1 (key=?)']
         """
-        with self.lock:
-            self.check_open()
-            cursor = self.conn.execute("EXPLAIN QUERY PLAN " + sql, [None] * sql.count("?"))
-            return [row[3] for row in cursor.fetchall()]
+        return [row[3] for row in self.execute("EXPLAIN QUERY PLAN " + sql,
+                                                [None] * sql.count("?"))]
 
     # ------------------------------------------------------------------ compiled queries
     # Execution helpers for slr_sql.planner / slr_sql.sqlcompile: application-defined
