@@ -31,3 +31,15 @@ def test_every_subscriber_gets_every_event_in_order(client, tmp_path):
     assert sent >= 1000 and complete == 3 and min_count == sent and out_of_order == 0
     assert deliveries > 0          # the clock of each frame was read
     assert re.search(r"the subscribers' process \d+ µs per event", run.stdout)
+
+
+def test_bench_ws_frame_path_runs_both_deliveries_to_the_end():
+    """bench_ws_frame_path.py: the fan-out (this checkout) against the coroutines (the same
+    checkout as --code), every subscriber complete in both (the script asserts it)."""
+    out = subprocess.run([sys.executable, str(REPO / "benchmarks" / "bench_ws_frame_path.py"),
+                          "--subscribers", "4", "--batches", "20", "--repeat", "1",
+                          "--code", str(REPO)],
+                         capture_output=True, text=True, timeout=300, cwd=REPO)
+    assert out.returncode == 0, out.stderr
+    assert "this checkout (fanout): loop thread CPU" in out.stdout
+    assert "(coroutines):" in out.stdout and "ratio of the bests" in out.stdout
