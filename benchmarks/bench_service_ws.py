@@ -459,6 +459,14 @@ def run_service(args, tmp: Path) -> dict:
                 if i < len(answered):
                     lat.append(max(0.0, t - answered[i]))
                     from_request.append(t - requested[i])
+        # where the tail comes from: an event's first delivery late (everything waited: the
+        # commit, the hub, the loop, a stall) or its last far after its first (the fan-out's
+        # length, the subscribers' process working through the burst)
+        firsts, spreads = [], []
+        for i in range(min(len(answered), min((len(m) for m in times), default=0))):
+            got = [mine[i] for mine in times]
+            firsts.append(max(0.0, min(got) - answered[i]))
+            spreads.append(max(got) - min(got))
         rss = [r for _, r in samples]
         client.close()
         result = {"sent": sent, "achieved": achieved, "complete": sum(c == sent for c in counts),
@@ -467,6 +475,8 @@ def run_service(args, tmp: Path) -> dict:
                   "max_ms": 1000 * max(lat) if lat else float("nan"), "latencies": len(lat),
                   "request_p50_ms": 1000 * pct(from_request, 50),
                   "request_p99_ms": 1000 * pct(from_request, 99),
+                  "first_p99_ms": 1000 * pct(firsts, 99), "spread_p50_ms": 1000 * pct(spreads, 50),
+                  "spread_p99_ms": 1000 * pct(spreads, 99),
                   "rss_first": rss[0], "rss_last": rss[-1], "rss_max": max(rss),
                   "rss_slope_mb_per_min": slope_per_min(samples[len(samples) // 10:]),
                   "rss_samples": len(samples), "load_start": load_start,
@@ -576,6 +586,9 @@ def run(args) -> None:
               f"{remote['max_ms']:.1f} ms; from the add_many request made: p50 "
               f"{remote['request_p50_ms']:.2f} ms, p99 {remote['request_p99_ms']:.2f} ms",
               flush=True)
+        print(f"tail: an event's first delivery p99 {remote['first_p99_ms']:.2f} ms after its "
+              f"answer; from its first to its last subscriber p50 {remote['spread_p50_ms']:.2f} "
+              f"ms, p99 {remote['spread_p99_ms']:.2f} ms", flush=True)
         print(f"server CPU while producing: {remote['server_cpu']:.2f} s per second "
               f"({remote['server_cpu'] / remote['achieved'] * 1e6:.0f} µs per event, "
               f"{remote['server_cpu'] / remote['achieved'] / args.subscribers * 1e6:.2f} µs "
