@@ -171,6 +171,57 @@ def test_the_end_and_the_ending_error_come_after_the_answers_queued_before_them(
     assert got[-1] == "SubscriptionOverflow" and got[:-1] == list(range(1, len(got)))
 
 
+class _Marker:
+    """A waker that is no future (what the service's fan-out gives take_answers)."""
+
+    def done(self) -> bool:
+        return False
+
+    def set_result(self, _) -> None:
+        pass
+
+
+def test_take_answers_says_take_again_when_the_end_is_behind_and_a_close_meanwhile_ends(kb):
+    """A batch followed by the subscription's end registers no waker (nothing will wake
+    it): waits_with says take again, and a close() landing between the two takes (the
+    client's, from another thread) leaves the next take ending, not waiting forever."""
+    sub = kb.subscribe("p(X)^T", since=0, until=3)
+    kb.add_many(["p(1)^1", "p(2)^2"])
+    kb.mark_complete("p/1", 3)
+    drained(kb)
+    loop = asyncio.new_event_loop()
+    try:
+        waker = (loop, _Marker())
+        assert [a["X"] for a in sub.take_answers(10, waker)] == [1, 2]
+        assert not sub.waits_with(waker)
+        sub.close()
+        assert sub.take_answers(10, waker) is None
+        assert sub.take_answers(10, waker) is None
+    finally:
+        loop.close()
+
+
+def test_next_answers_after_take_answers_waits_on_its_own_future(kb):
+    """take_answers leaves no waiter for next_answers to await (the fan-out's wakers are
+    not awaitable): the two mix on one subscription."""
+    sub = kb.subscribe("p(X)^T", since=0)
+    kb.add("p(1)^1")
+    drained(kb)
+    loop = asyncio.new_event_loop()
+    try:
+        assert [a["X"] for a in sub.take_answers(10, (loop, _Marker()))] == [1]
+
+        async def then_next() -> list:
+            task = asyncio.ensure_future(sub.next_answers(10))
+            await asyncio.sleep(0)               # it waits: nothing is queued
+            await loop.run_in_executor(None, kb.add, "p(2)^2")
+            return await asyncio.wait_for(task, DEADLINE)
+        assert [a["X"] for a in loop.run_until_complete(then_next())] == [2]
+    finally:
+        sub.close()
+        loop.close()
+
+
 def test_a_patterns_matcher_lives_as_long_as_its_subscriptions(kb):
     hub = kb._subscriptions
     subs = [kb.subscribe(f"p{i % 3}(X)^T", where="X > 1") for i in range(6)]

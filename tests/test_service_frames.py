@@ -72,8 +72,12 @@ def _serve(app, deflate: bool):
     return f"ws://127.0.0.1:{sock.getsockname()[1]}/", stop, server
 
 
-@pytest.mark.parametrize("deflate", [False, True])
-def test_the_frame_channel_is_offered_without_compression_and_writes_whole_frames(deflate):
+@pytest.mark.parametrize("deflate, asked, offered", [
+    (False, False, True), (True, True, False), (True, False, True)])
+def test_the_frame_channel_is_offered_without_compression_and_writes_whole_frames(
+        deflate, asked, offered):
+    """Offered unless the connection negotiated compression (the server allows it and the
+    client asked for it): then each connection compresses its own frames."""
     seen: dict = {}
 
     async def app(scope, receive, send):
@@ -100,13 +104,13 @@ def test_the_frame_channel_is_offered_without_compression_and_writes_whole_frame
         from websockets.sync.client import connect
 
         assert _started(server)
-        with connect(url, compression="deflate" if deflate else None) as ws:
+        with connect(url, compression="deflate" if asked else None) as ws:
             assert ws.recv(DEADLINE) == '{"n":1}'
             assert ws.recv(DEADLINE) == "y" * 70_000
     finally:
         stop()
-    assert seen["offered"] is (not deflate)
-    if not deflate:
+    assert seen["offered"] is offered
+    if offered:
         assert seen["open"] and not seen["paused"]
         assert not seen["open_after_close"] and not seen["written_after_close"]
 
@@ -237,4 +241,63 @@ def test_a_delivery_that_fails_ends_alone_and_the_others_of_its_callback_go_on()
         assert second.finished.result() is None
     finally:
         loop.close()
+        kb.close()
+
+
+def test_a_finished_delivery_leaves_nothing_for_the_cyclic_collector(tmp_path):
+    """With the collector off, subscribers delivered through the frame channel, then gone
+    (a close message, a dropped connection): their connections, deliveries and
+    subscriptions are freed by reference counting, as on the coroutine path — at 100
+    subscribers coming and going, what the collector would otherwise walk in one pause."""
+    import gc
+
+    from websockets.sync.client import connect
+
+    from slr_sql.service.app import create_app
+    from slr_sql.service.fanout import Delivery
+    from slr_sql.service.ws_protocol import SubscriberWebSocketProtocol
+    from slr_sql.subscriptions.queue import Subscription
+
+    kb = slr_sql.open(tmp_path / "garbage.db", clock=slr_sql.ManualClock(0))
+    url, stop, server = _serve(create_app(kb), deflate=False)
+
+    def alive() -> dict:
+        counts = {"connections": 0, "deliveries": 0, "subscriptions": 0}
+        for o in gc.get_objects():
+            if type(o) is SubscriberWebSocketProtocol:
+                counts["connections"] += 1
+            elif type(o) is Delivery:
+                counts["deliveries"] += 1
+            elif type(o) is Subscription:
+                counts["subscriptions"] += 1
+        return counts
+
+    try:
+        assert _started(server)
+        gc.collect()
+        gc.disable()
+        for round, leave in enumerate(("close message", "dropped")):
+            with connect(url + "subscribe") as ws:
+                pattern = f"p{round}(X)^T"
+                ws.send(json.dumps({"op": "subscribe", "pattern": pattern, "since": 0}))
+                assert json.loads(ws.recv(DEADLINE))["type"] == "subscribed"
+                kb.add_many([f"p{round}(1)^1", f"p{round}(2)^2"])
+                got: list = []
+                while len(got) < 2:
+                    frame = json.loads(ws.recv(DEADLINE))
+                    assert frame["seq"] == len(got) + 1
+                    got += frame["answers"] if frame["type"] == "answers" else [frame["answer"]]
+                assert [a["X"] for a in got] == [1, 2]
+                assert alive()["deliveries"] == 1      # (delivered by the frame channel)
+                if leave == "close message":
+                    ws.send('{"op": "close"}')
+            ready = threading.Event()
+            deadline = time.monotonic() + DEADLINE
+            while alive() != {"connections": 0, "deliveries": 0, "subscriptions": 0} and \
+                    time.monotonic() < deadline:
+                ready.wait(0.02)
+            assert alive() == {"connections": 0, "deliveries": 0, "subscriptions": 0}, leave
+    finally:
+        gc.enable()
+        stop()
         kb.close()

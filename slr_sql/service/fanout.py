@@ -78,6 +78,9 @@ class Delivery:
     def _finish(self, outcome: Any = None, error: BaseException | None = None) -> None:
         self._over = True
         self.channel.on_drain = None
+        # (nothing of the connection or the subscription stays reachable from the other:
+        # reference counting frees both, as it does the coroutine path's)
+        self.sub = self.channel = _ENDED
         if self.finished.done():     # its coroutine was cancelled (the server stops)
             return
         if error is not None:
@@ -86,7 +89,9 @@ class Delivery:
             self.finished.set_result(outcome)
 
     def pump(self) -> None:
-        """Write every frame this subscriber can take now (on the loop's thread)."""
+        """Write every frame this subscriber can take now (on the loop's thread): until its
+        queue is empty (its waker then registered), its socket's buffer is full (the drain
+        marks it again), or it ended."""
         self._marked = False
         if self._over:
             return
@@ -96,7 +101,7 @@ class Delivery:
             if not channel.open:
                 self._finish(GONE)
                 return
-            if channel.paused:          # on_drain marks it again
+            if channel.paused:
                 return
             try:
                 answers = sub.take_answers(self.batch, waker)
@@ -113,15 +118,39 @@ class Delivery:
             if not channel.write(fanout.frame(seq, answers)):
                 self._finish(GONE)
                 return
-            if len(answers) < self.batch:
-                # the batch emptied the queue (the waker is registered), unless an end
-                # follows it: one more take finds that end
-                if not sub.end_queued:
-                    return
+            if len(answers) < self.batch and sub.waits_with(waker):
+                return                  # the batch emptied the queue; what comes next wakes it
+
+
+class _Ended:
+    """What a finished delivery holds instead of its subscription and channel."""
+
+    on_drain = None
+    open = False
+
+
+_ENDED: Any = _Ended()
 
 
 class FanOut:
-    """The WebSocket subscribers delivered on one event loop (see the module)."""
+    """The WebSocket subscribers delivered on one event loop (see the module).
+
+    >>> import asyncio, slr_sql
+    >>> class Socket:                       # a connection's frame channel, in memory
+    ...     on_drain, paused, open, frames = None, False, True, []
+    ...     def write(self, frame): self.frames.append(frame); return True
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); loop = asyncio.new_event_loop()
+    >>> fanout = FanOut(loop, lambda seq, answers: f'{{"seq":{seq},"n":{len(answers)}}}')
+    >>> socket = Socket(); delivery = fanout.start(kb.subscribe("p(X)^T", since=0), socket, 256)
+    >>> rejected = kb.add_many(["p(a)^1", "p(b)^2"])
+    >>> async def written():
+    ...     while not socket.frames: await asyncio.sleep(0.001)
+    >>> loop.run_until_complete(written()); socket.frames
+    [b'\\x81\\x0f{"seq":1,"n":2}']
+    >>> delivery.sub.close(); loop.run_until_complete(delivery.finished) is None
+    True
+    >>> loop.close(); kb.close()
+    """
 
     def __init__(self, loop: asyncio.AbstractEventLoop,
                  frame_text: Callable[[int, list[dict]], str]):
@@ -140,6 +169,8 @@ class FanOut:
         return delivery
 
     def mark(self, delivery: Delivery) -> None:
+        """``delivery`` may take answers: pump it in this loop's next flush (one callback for
+        every delivery marked meanwhile). On the loop's thread."""
         if delivery._marked or delivery._over:
             return
         delivery._marked = True

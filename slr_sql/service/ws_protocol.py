@@ -6,12 +6,13 @@ Why: at 100 subscribers to one pattern every answer frame goes out 100 times wit
 bytes; through ASGI each send is a coroutine chain, a UTF-8 encoding and a framing of its own
 (~10 µs of the event loop per frame on the 2-core machine of benchmarks/README.md, against the
 socket's own ~15). A server-to-client frame is never masked (RFC 6455 §5.1), so one framing
-serves every connection. The extension is offered only where that holds: no per-message
-compression was negotiated (``--ws-compression`` off). An app run by another server finds no
-extension and sends through ASGI as before.
+serves every connection. The extension is offered only where that holds: the connection
+negotiated no per-message compression (``--ws-compression`` and a client asking for it).
+An app run by another server finds no extension and sends through ASGI as before.
 """
 from __future__ import annotations
 
+import weakref
 from typing import Any, Callable
 
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
@@ -21,44 +22,53 @@ from .fanout import FRAMES_EXTENSION
 
 class SocketFrameChannel:
     """What the ``slr.websocket.frames`` extension hands the app for one connection: write
-    a whole frame, know whether the socket's buffer is full, and be told when it drained.
+    a whole frame, know whether the socket's buffer is full, and be told when it drained
+    (``on_drain``, also called when the connection is lost).
 
     ``write`` returns False (and writes nothing) once the connection is closing or closed:
-    the caller stops delivering there, as a failed ASGI send would make it."""
+    the caller stops delivering there, as a failed ASGI send would make it. The channel
+    holds its connection weakly: the connection's scope holds the channel, and a cycle
+    would leave both to the cyclic collector."""
 
     __slots__ = ("_protocol", "on_drain")
 
     def __init__(self, protocol: "SubscriberWebSocketProtocol"):
-        self._protocol = protocol
+        self._protocol = weakref.ref(protocol)
         self.on_drain: Callable[[], None] | None = None
 
     @property
     def paused(self) -> bool:
         """The transport's buffer is above its high-water mark: wait for ``on_drain``."""
-        return not self._protocol.writable.is_set()
+        p = self._protocol()
+        return p is not None and not p.writable.is_set()
 
     @property
     def open(self) -> bool:
-        p = self._protocol
-        return not (p.disconnected or p.close_sent or p.transport.is_closing())
+        """Frames may still be written."""
+        p = self._protocol()
+        return p is not None and not (p.disconnected or p.close_sent or
+                                      p.transport.is_closing())
 
     def write(self, frame: bytes) -> bool:
-        p = self._protocol
-        if p.disconnected or p.close_sent or p.transport.is_closing():
+        """Write one whole frame (:func:`~slr_sql.service.fanout.text_frame`); False if
+        the connection is closing or closed."""
+        p = self._protocol()
+        if p is None or p.disconnected or p.close_sent or p.transport.is_closing():
             return False
         p.transport.write(frame)
         return True
 
 
 class SubscriberWebSocketProtocol(WebSocketsSansIOProtocol):
-    """uvicorn's sans-I/O WebSocket protocol (what its ``ws="auto"`` picks here) plus the
+    """uvicorn's sans-I/O WebSocket protocol (what its ``ws="auto"`` picks since 0.50) plus the
     ``slr.websocket.frames`` extension in each connection's scope (see the module)."""
 
     def handle_connect(self, event: Any) -> None:
         super().handle_connect(event)
         scope = getattr(self, "scope", None)
-        if scope is not None and not self.conn.extensions and \
-                not self.config.ws_per_message_deflate:
+        # (the handshake accepted, and no compression negotiated: a frame framed once is
+        # what the client reads; with compression each connection compresses its own)
+        if scope is not None and not self.conn.extensions and _tracks_flow(self):
             self.frame_channel = SocketFrameChannel(self)
             scope["extensions"][FRAMES_EXTENSION] = {"channel": self.frame_channel}
 
@@ -73,3 +83,10 @@ class SubscriberWebSocketProtocol(WebSocketsSansIOProtocol):
         channel: SocketFrameChannel | None = getattr(self, "frame_channel", None)
         if channel is not None and channel.on_drain is not None:
             channel.on_drain()       # a delivery parked on a full buffer learns it is gone
+
+
+def _tracks_flow(protocol: WebSocketsSansIOProtocol) -> bool:
+    """The protocol keeps what the channel reads (its connection state and flow control:
+    uvicorn 0.52.1 on, the floor pyproject.toml sets); without it the app sends through
+    ASGI."""
+    return all(hasattr(protocol, name) for name in ("writable", "disconnected", "close_sent"))

@@ -463,38 +463,47 @@ class Subscription:
         the answers queued before it. Taking a batch marks the previous one handled.
 
         ``waker`` is ``(loop, obj)``: when ``[]`` is returned or the batch taken empties the
-        queue, the hub calls ``obj.set_result(None)`` on ``loop`` (unless ``obj.done()``)
-        once something more is queued or the subscription ends — how the service delivers
-        every caught-up WebSocket subscriber of a pass in one callback of its loop instead
-        of resuming one coroutine each.
+        queue, it is registered, and the hub calls ``obj.set_result(None)`` on ``loop``
+        (unless ``obj.done()``) once something more is queued or the subscription ends; when
+        :meth:`waits_with` then says it is not registered, something is queued behind the
+        batch (answers beyond ``limit``, or the end): take again. This is how the service
+        delivers every caught-up WebSocket subscriber of a pass in one callback of its loop
+        instead of resuming one coroutine each.
 
         >>> import asyncio, slr_sql
         >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); sub = kb.subscribe("p(X)^T", since=0)
+        >>> loop = asyncio.new_event_loop(); waker = (loop, loop.create_future())
+        >>> sub.take_answers(10, waker), sub.waits_with(waker)     # nothing queued yet
+        ([], True)
         >>> rejected = kb.add_many(["p(a)^1"])
-        >>> class Waker:
-        ...     def done(self): return False
-        ...     def set_result(self, _): print("more")
-        >>> loop = asyncio.new_event_loop()
-        >>> sub.take_answers(10, (loop, Waker()))
-        [{'X': Atom('a'), 'T': 1.0}]
-        >>> sub.close(); loop.run_until_complete(asyncio.sleep(0)); loop.close(); kb.close()
-        more
+        >>> loop.run_until_complete(waker[1])     # the hub queued the answer and woke it
+        >>> waker = (loop, loop.create_future())
+        >>> sub.take_answers(10, waker), sub.waits_with(waker)
+        ([{'X': Atom('a'), 'T': 1.0}], True)
+        >>> sub.close(); loop.close(); kb.close()
         """
         self._check_pull()
-        got = self._take_batch(limit, True, waker)
+        got = self._take_batch(limit, True, waker, remember=False)
         if type(got) is _End:
             if got.error is not None:
                 raise got.error
             return None
         return got
 
-    @property
-    def end_queued(self) -> bool:
-        """The subscription's end is next in its queue (read without the lock: only the
-        consumer takes from the queue, and an end queued after this read wakes the waker
-        that the last take registered)."""
-        queue = self._queue
-        return bool(queue) and queue[0] is None
+    def waits_with(self, waker: tuple[Any, Any]) -> bool:
+        """``waker`` (given to the last :meth:`take_answers`) is registered and nothing has
+        woken it yet: the queue was empty after that take, and what is queued next wakes it.
+        False: the take left something queued (take again), or the hub or ``close()`` has
+        woken the waker since (it runs on its loop, and a take then finds what woke it).
+
+        >>> import asyncio, slr_sql
+        >>> kb = slr_sql.open(); sub = kb.subscribe("p(X)^T")
+        >>> loop = asyncio.new_event_loop(); waker = (loop, loop.create_future())
+        >>> sub.waits_with(waker), sub.take_answers(10, waker), sub.waits_with(waker)
+        (False, [], True)
+        >>> sub.close(); loop.close(); kb.close()
+        """
+        return self._async_waiter is waker
 
     def acknowledge(self, count: int) -> None:
         """Mark the first ``count`` answers taken with ``next_answers(handled=False)`` and
@@ -531,14 +540,15 @@ class Subscription:
             resolve_threadsafe(waiter[0], [waiter[1]])
 
     def _take_batch(self, limit: int, handled: bool = True,
-                    waiter: tuple | None = None) -> Any:
+                    waiter: tuple | None = None, remember: bool = True) -> Any:
         """Up to ``limit`` queued answers (the shared dicts), never waiting: ``[]`` when none is
         queued, the _End when it is next (never after answers taken in the same call, so
         those are handled before the end closes the subscription). One lock for the batch.
         ``handled=False``: the batch goes to the unacknowledged answers (the previous one
         is not marked handled), and an end waits for them to be acknowledged (None then).
         ``waiter`` ``(loop, future)``: registered, when ``[]`` is returned or the batch taken
-        empties the queue, as the waiter the hub resolves once something is queued."""
+        empties the queue, as the waiter the hub resolves once something is queued
+        (``remember``: also as the one the next ``next_answers`` awaits)."""
         with self._lock:
             if handled:
                 self._in_flight = None       # the consumer is back: the previous batch is done
@@ -565,7 +575,9 @@ class Subscription:
                     queue.clear()
                     taken = items[1::2]
                     if waiter is not None:       # what comes next wakes the next call
-                        self._async_waiter = self._next_waiter = waiter
+                        self._async_waiter = waiter
+                        if remember:             # (next_answers awaits it next time)
+                            self._next_waiter = waiter
                     if handled:
                         self._in_flight = items[0]   # the batch is in the consumer's hands
                     else:
@@ -656,6 +668,7 @@ class Subscription:
                 self._to(S.CLOSED)
             self._cond.notify_all()
             waiter, self._async_waiter = self._async_waiter, None
+            self._next_waiter = None     # (it may hold its consumer, which holds this)
         if waiter is not None:
             resolve_threadsafe(waiter[0], [waiter[1]])
         self._hub.release(self, forget)
