@@ -321,9 +321,10 @@ class EventWriter:
         on a bulk ingest while a table had four indexes, ~2% slower with two)."""
         if not count:
             return
-        values = list(chain.from_iterable(rows))
+        # (a tuple: its slices are the statements' parameters as they are, not copied again)
+        values = tuple(chain.from_iterable(rows))
         width = len(values) // count
-        execute = self.db.conn.execute
+        execute = self.db.execute
         most = _ROWS_PER_INSERT
         while most > 1 and most * width > self.db.max_parameters:
             most //= 2
@@ -471,11 +472,10 @@ class EventWriter:
         sql = "UPDATE slr_clock SET now = ? WHERE id = 1 AND now <> ?"
         with self.db.lock:
             if self.db.tx_depth:  # inside add_events: part of its transaction
-                self.db.check_open()
-                self.db.conn.execute(sql, (now, now))
+                self.db.execute(sql, (now, now))
                 return
         with self.db.transaction():
-            self.db.conn.execute(sql, (now, now))
+            self.db.execute(sql, (now, now))
 
     def _record_now_for_tbuffers(self, now: float) -> None:
         """On a server: record ``now`` before an add, only while a tBuffer is active (its
@@ -485,11 +485,9 @@ class EventWriter:
         base reads them whenever another connection may have committed)."""
         if now != now:
             return
-        with self.db.lock:
-            self.db.check_open()
-            self.db.conn.execute(
-                "UPDATE slr_clock SET now = ? WHERE id = 1 AND now <> ? AND EXISTS (SELECT 1 "
-                "FROM slr_buffers WHERE kind = 'tBuffer' AND removed_at IS NULL)", (now, now))
+        self.db.execute(
+            "UPDATE slr_clock SET now = ? WHERE id = 1 AND now <> ? AND EXISTS (SELECT 1 "
+            "FROM slr_buffers WHERE kind = 'tBuffer' AND removed_at IS NULL)", (now, now))
 
     def recorded_now(self) -> float:
         """The "now" buffer triggers currently use (``-inf`` before the first record).
@@ -498,6 +496,4 @@ class EventWriter:
         >>> EventStore(None).recorded_now()
         -inf
         """
-        with self.db.lock:
-            self.db.check_open()
-            return self.db.conn.execute("SELECT now FROM slr_clock WHERE id = 1").fetchone()[0]
+        return self.db.execute("SELECT now FROM slr_clock WHERE id = 1")[0][0]

@@ -1196,6 +1196,12 @@ class PgDatabase:
         if self.closed:
             raise SLRError("the event store is closed")
 
+    def failure(self, exc: BaseException) -> BaseException:
+        """What a statement that failed with ``exc`` raises (see ``Database.failure``):
+        ``exc`` itself, as the connection said it -- the server's conditions in words
+        already (:func:`_error`), a statement's own error a :class:`PgStatementError`."""
+        return exc
+
     # ------------------------------------------------------------------ transactions
 
     @contextmanager
