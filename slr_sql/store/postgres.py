@@ -663,6 +663,16 @@ class PgConnection:
             self.raw.execute("ROLLBACK")
 
 
+def _read_error(exc: BaseException, where: str) -> SLRError:
+    """The SLRError of a read that failed with ``exc``: itself when it is one (the server's
+    conditions), else the statement's own error named after it, in SQLite's words.
+
+    >>> _read_error(PgStatementError('relation "j" does not exist'), "db")
+    SLRError('db: the store failed (relation "j" does not exist)')
+    """
+    return exc if isinstance(exc, SLRError) else SLRError(f"{where}: the store failed ({exc})")
+
+
 # The greatest lock_timeout (ms) the server takes: an int setting
 _MOST_LOCK_TIMEOUT_MS = 2 ** 31 - 1
 
@@ -709,11 +719,17 @@ class PgReadConnection:
         self.conn = PgConnection(raw, where, busy_timeout)
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
-        """Run one reading statement and return its rows."""
+        """Run one reading statement and return its rows. Every failure is an
+        :class:`SLRError`, as a SQLite store's reading connection says it: the server's
+        conditions in the connection's words, a statement's own error (a journal another
+        session dropped) named after it."""
         with self.lock:
             if self.closed:
                 raise SLRError("the event store is closed")
-            return self.conn.execute(sql, tuple(params)).fetchall()
+            try:
+                return self.conn.execute(sql, tuple(params)).fetchall()
+            except PgStatementError as exc:
+                raise _read_error(exc, self.conn.where) from None
 
     def close(self) -> None:
         """Close the connection (idempotent)."""
@@ -1183,6 +1199,11 @@ class PgDatabase:
     def check_open(self) -> None:
         if self.closed:
             raise SLRError("the event store is closed")
+
+    def read_error(self, exc: BaseException) -> SLRError:
+        """The SLRError of a read of this connection that failed with ``exc`` (what the
+        store's reading connections say, :class:`PgReadConnection`)."""
+        return _read_error(exc, self.path)
 
     def failure(self, exc: BaseException) -> BaseException:
         """What a statement that failed with ``exc`` raises (see ``Database.failure``):
