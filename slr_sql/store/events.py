@@ -10,6 +10,7 @@ interleaved types on SQLite); anything else, or any doubt, goes event by event.
 from __future__ import annotations
 
 import math
+import sqlite3
 from itertools import chain, islice, repeat
 from operator import attrgetter, itemgetter, le as _le
 from typing import Any, Iterable, Iterator
@@ -321,19 +322,21 @@ class EventWriter:
         on a bulk ingest while a table had four indexes, ~2% slower with two)."""
         if not count:
             return
-        # (a tuple: its slices are the statements' parameters as they are, not copied again)
-        values = tuple(chain.from_iterable(rows))
+        values = list(chain.from_iterable(rows))
         width = len(values) // count
-        execute = self.db.execute
+        execute = self.db.conn.execute
         most = _ROWS_PER_INSERT
         while most > 1 and most * width > self.db.max_parameters:
             most //= 2
         done = 0
-        while done < count:
-            size = min(most, 1 << ((count - done).bit_length() - 1))
-            execute(event_type.insert_rows_sql(size, with_robot),
-                    values[done * width:(done + size) * width])
-            done += size
+        try:   # (every add: execute's mapping, in the add's transaction, which holds the lock)
+            while done < count:
+                size = min(most, 1 << ((count - done).bit_length() - 1))
+                execute(event_type.insert_rows_sql(size, with_robot),
+                        values[done * width:(done + size) * width])
+                done += size
+        except sqlite3.Error as exc:
+            raise self.db.failure(exc) from None
 
     def _insert_each(self, chunk: list, base: int, arrival: float, atomic: bool,
                      errors: list[EventRejected], ends: dict | None) -> None:
@@ -472,7 +475,11 @@ class EventWriter:
         sql = "UPDATE slr_clock SET now = ? WHERE id = 1 AND now <> ?"
         with self.db.lock:
             if self.db.tx_depth:  # inside add_events: part of its transaction
-                self.db.execute(sql, (now, now))
+                self.db.check_open()
+                try:   # (every add: execute's mapping, the lock held already)
+                    self.db.conn.execute(sql, (now, now))
+                except sqlite3.Error as exc:
+                    raise self.db.failure(exc) from None
                 return
         with self.db.transaction():
             self.db.execute(sql, (now, now))
