@@ -680,8 +680,8 @@ class EventStore:
             def execute(sql: str, params: tuple) -> list[tuple]:
                 # as the reader's own connection says them: a failure on the hub's thread
                 # is an SLRError named after it (a journal another connection dropped, a
-                # damaged file, the file deleted), never a raw sqlite3 error (SQLite's only:
-                # PostgreSQL's connection says its own)
+                # damaged file, the file deleted), never a raw sqlite3 error nor a server's
+                # PgStatementError (the server's conditions its connection says already)
                 try:
                     return db.execute(sql, params)
                 except DatabaseError as exc:

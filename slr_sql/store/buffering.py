@@ -512,6 +512,11 @@ class PostgresBufferPrinter:
 SQLITE_BUFFERS = SQLiteBufferPrinter()
 POSTGRES_BUFFERS = PostgresBufferPrinter()
 
+# the keys of BufferTables.buffer_rows' dicts: the columns it reads, in order
+_BUFFER_COLUMNS = ("id", "kind", "source", "pattern_text", "type_name", "type_arity", "amount",
+                   "t1", "t2", "origin", "cutoff", "created_at", "removed_at", "pruned",
+                   "dropped")
+
 
 # ----------------------------------------------------------------------------- the tables
 
@@ -540,14 +545,13 @@ class BufferTables:
         where = " WHERE b.removed_at IS NULL" if active_only else ""
         with self.db.lock:
             self.db.check_open()
-            cursor = self.db.conn.execute(
+            rows = self.db.execute(
                 "SELECT b.id, b.kind, b.source, b.pattern_text, b.type_name, b.type_arity, "
                 "b.amount, b.t1, b.t2, b.origin, b.cutoff, b.created_at, b.removed_at, "
                 "coalesce(c.pruned, 0) AS pruned, coalesce(c.dropped, 0) AS dropped "
                 "FROM slr_buffers b LEFT JOIN slr_counters c ON c.buffer_id = b.id"
                 f"{where} ORDER BY b.id")
-            names = [d[0] for d in cursor.description]
-            return [dict(zip(names, row)) for row in cursor.fetchall()]
+        return [dict(zip(_BUFFER_COLUMNS, row)) for row in rows]
 
     def has_active_buffer(self, kind: str) -> bool:
         """Whether a buffer of ``kind`` (``"tBuffer"``, ``"cBuffer"``, ...) is active, in any
@@ -559,48 +563,47 @@ class BufferTables:
         """
         with self.db.lock:
             self.db.check_open()
-            return self.db.conn.execute(
+            return bool(self.db.execute(
                 "SELECT 1 FROM slr_buffers WHERE kind = ? AND removed_at IS NULL LIMIT 1",
-                (kind,)).fetchone() is not None
+                (kind,)))
 
     def insert_buffer(self, kind: str, source: str, pattern_text: str, type_name: str,
                       type_arity: int, amount: float | None, t1: float | None,
                       t2: float | None, origin: str) -> int:
         """Add a row to ``slr_buffers`` (and its counters); returns the new buffer id."""
         with self.db.transaction():
-            cursor = self.db.conn.execute(
+            buffer_id = int(self.db.execute(
                 "INSERT INTO slr_buffers (kind, source, pattern_text, type_name, type_arity, "
                 "amount, t1, t2, origin, created_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?) "
                 "RETURNING id",
                 (kind, source, pattern_text, type_name, type_arity, amount, t1, t2, origin,
-                 float(self.db.clock.now())))
-            buffer_id = int(cursor.fetchone()[0])
+                 float(self.db.clock.now())))[0][0])
             if kind == "tBuffer" and hasattr(self.db, "tbuffers_active"):
                 self.db.tbuffers_active = True
-            self.db.conn.execute(self.db.dialect.insert_ignore("slr_counters", "buffer_id", "?"),
-                                 (buffer_id,))
+            self.db.execute(self.db.dialect.insert_ignore("slr_counters", "buffer_id", "?"),
+                            (buffer_id,))
             return buffer_id
 
     def mark_buffer_removed(self, buffer_id: int) -> None:
         """Deactivate a buffer (its row and counters stay, for statistics)."""
         with self.db.transaction():
-            self.db.conn.execute("UPDATE slr_buffers SET removed_at = ? WHERE id = ?",
-                                 (float(self.db.clock.now()), int(buffer_id)))
+            self.db.execute("UPDATE slr_buffers SET removed_at = ? WHERE id = ?",
+                            (float(self.db.clock.now()), int(buffer_id)))
             if hasattr(self.db, "tbuffers_active"):
                 self.db.tbuffers_active = None   # (others may remain: the next add asks)
 
     def count_buffer(self, buffer_id: int, pruned: int = 0, dropped: int = 0) -> None:
         """Add to a buffer's counters."""
         with self.db.transaction():
-            self.db.conn.execute("UPDATE slr_counters SET pruned = pruned + ?, "
-                                 "dropped = dropped + ? WHERE buffer_id = ?",
-                                 (int(pruned), int(dropped), int(buffer_id)))
+            self.db.execute("UPDATE slr_counters SET pruned = pruned + ?, "
+                            "dropped = dropped + ? WHERE buffer_id = ?",
+                            (int(pruned), int(dropped), int(buffer_id)))
 
     def set_buffer_cutoff(self, buffer_id: int, cutoff: float) -> None:
         """Record the time before which a buffer has dropped events."""
         with self.db.transaction():
-            self.db.conn.execute("UPDATE slr_buffers SET cutoff = ? WHERE id = ?",
-                                 (float(cutoff), int(buffer_id)))
+            self.db.execute("UPDATE slr_buffers SET cutoff = ? WHERE id = ?",
+                            (float(cutoff), int(buffer_id)))
 
     def buffer_statements(self, plan: BufferPlan, table: str) -> dict[str, str]:
         """What :meth:`install_buffer_objects` creates for ``plan`` over ``table``, by name."""
@@ -612,14 +615,14 @@ class BufferTables:
         with self.db.lock:
             self.db.check_open()
             if self.printer is SQLITE_BUFFERS:
-                rows = self.db.conn.execute(
+                rows = self.db.execute(
                     "SELECT name, sql FROM sqlite_master WHERE type IN ('trigger', 'index') "
                     "AND (name LIKE ? ESCAPE '!' OR name = ?)",
-                    (f"slr!_buf!_{bid}!_%", f"slr_bix_{bid}")).fetchall()
+                    (f"slr!_buf!_{bid}!_%", f"slr_bix_{bid}"))
             else:
                 # the statements are kept as the comments of the function (whose trigger
                 # must exist too) and of the index
-                rows = self.db.conn.execute(
+                rows = self.db.execute(
                     "SELECT p.proname, obj_description(p.oid, 'pg_proc') FROM pg_proc p "
                     "JOIN pg_namespace s ON s.oid = p.pronamespace "
                     "JOIN pg_trigger t ON t.tgfoid = p.oid AND t.tgname = p.proname "
@@ -627,7 +630,7 @@ class BufferTables:
                     "UNION ALL SELECT c.relname, obj_description(c.oid, 'pg_class') "
                     "FROM pg_class c JOIN pg_namespace s ON s.oid = c.relnamespace "
                     "WHERE s.nspname = current_schema() AND c.relkind = 'i' AND c.relname = ?",
-                    (f"slr\\_buf\\_{bid}\\_%", f"slr_bix_{bid}")).fetchall()
+                    (f"slr\\_buf\\_{bid}\\_%", f"slr_bix_{bid}"))
         return {name: sql for name, sql in rows}
 
     def install_buffer_objects(self, plan: BufferPlan, table: str) -> bool:
@@ -651,22 +654,22 @@ class BufferTables:
                 if statements.get(name) != sql:
                     q = quote_identifier(name)
                     if name.startswith("slr_bix_"):
-                        self.db.conn.execute(f"DROP INDEX IF EXISTS {q}")
+                        self.db.execute(f"DROP INDEX IF EXISTS {q}")
                     elif sqlite:
-                        self.db.conn.execute(f"DROP TRIGGER IF EXISTS {q}")
+                        self.db.execute(f"DROP TRIGGER IF EXISTS {q}")
                     else:
-                        self.db.conn.execute(f"DROP FUNCTION IF EXISTS {q}() CASCADE")
+                        self.db.execute(f"DROP FUNCTION IF EXISTS {q}() CASCADE")
                     changed = True
             for name, sql in statements.items():
                 if existing.get(name) == sql:
                     continue
                 if sqlite:
-                    self.db.conn.execute(sql)
+                    self.db.execute(sql)
                 else:
                     q = quote_identifier(name)
                     kind = "INDEX" if name.startswith("slr_bix_") else "FUNCTION"
                     if kind == "FUNCTION":   # a half-made object of an older version
-                        self.db.conn.execute(f"DROP FUNCTION IF EXISTS {q}() CASCADE")
+                        self.db.execute(f"DROP FUNCTION IF EXISTS {q}() CASCADE")
                     self.db.conn.execute_script(sql)
                     self.db.conn.execute_script(
                         f"COMMENT ON {kind} {q}{'()' if kind == 'FUNCTION' else ''} IS "
@@ -681,10 +684,12 @@ class BufferTables:
         if sql is None:
             return 0
         with self.db.transaction():
-            run = self.db.conn.execute if self.printer is SQLITE_BUFFERS else \
-                self.db.conn.execute_script   # the text as printed (no parameters)
-            deleted = int(run(sql).rowcount)
+            if self.printer is SQLITE_BUFFERS:
+                self.db.execute(sql)
+                deleted = self.db.changes()
+            else:   # the text as printed (no parameters)
+                deleted = int(self.db.conn.execute_script(sql).rowcount)
             if deleted > 0:
-                self.db.conn.execute("UPDATE slr_counters SET pruned = pruned + ? "
-                                     "WHERE buffer_id = ?", (deleted, int(plan.id)))
+                self.db.execute("UPDATE slr_counters SET pruned = pruned + ? "
+                                "WHERE buffer_id = ?", (deleted, int(plan.id)))
             return max(deleted, 0)

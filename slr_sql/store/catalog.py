@@ -116,13 +116,12 @@ class Catalog:
         if self.db.dialect.name == "sqlite":
             return int(self.db.data_version())
         with self.db.lock:
-            self.db.check_open()
-            counter, program, progress, timed = self.db.conn.execute(
+            [(counter, program, progress, timed)] = self.db.execute(
                 "SELECT pg_snapshot_xmax(pg_current_snapshot())::text::bigint, "
                 "(SELECT value FROM slr_meta WHERE key = ?), "
                 "(SELECT value FROM slr_meta WHERE key = ?), "
                 "EXISTS (SELECT 1 FROM slr_buffers WHERE kind = 'tBuffer' "
-                "AND removed_at IS NULL)", (PROGRAM_VERSION, PROGRESS_VERSION)).fetchone()
+                "AND removed_at IS NULL)", (PROGRAM_VERSION, PROGRESS_VERSION))
             self._read_with_change = (int(program or 0), int(progress or 0))
             self.db.tbuffers_active = bool(timed)
             return int(counter)
@@ -131,14 +130,14 @@ class Catalog:
 
     def _bump(self, key: str) -> int:
         """Add one to the counter ``key`` (in the caller's transaction); returns the new value."""
-        conn = self.db.conn
-        conn.execute("INSERT INTO slr_meta (key, value) VALUES (?, '1') ON CONFLICT(key) "
-                     "DO UPDATE SET value = CAST(slr_meta.value AS INTEGER) + 1", (key,))
-        return int(conn.execute("SELECT value FROM slr_meta WHERE key = ?", (key,)).fetchone()[0])
+        execute = self.db.execute
+        execute("INSERT INTO slr_meta (key, value) VALUES (?, '1') ON CONFLICT(key) "
+                "DO UPDATE SET value = CAST(slr_meta.value AS INTEGER) + 1", (key,))
+        return int(execute("SELECT value FROM slr_meta WHERE key = ?", (key,))[0][0])
 
     def _counter(self, key: str) -> int:
-        row = self.db.conn.execute("SELECT value FROM slr_meta WHERE key = ?", (key,)).fetchone()
-        return 0 if row is None else int(row[0])
+        rows = self.db.execute("SELECT value FROM slr_meta WHERE key = ?", (key,))
+        return int(rows[0][0]) if rows else 0
 
     def program_version(self) -> int:
         """How many times the stored program changed (0 for a store never loaded).
@@ -166,17 +165,17 @@ class Catalog:
             if read is not None:
                 return read
             if self.db.dialect.name == "sqlite":
-                rows = dict(self.db.conn.execute(
+                rows = dict(self.db.execute(
                     "SELECT key, value FROM slr_meta WHERE key IN (?, ?)",
-                    (PROGRAM_VERSION, PROGRESS_VERSION)).fetchall())
+                    (PROGRAM_VERSION, PROGRESS_VERSION)))
             else:
                 # in the same read: whether a tBuffer is active (a server's adds record
                 # "now" only then, see EventWriter.add_events)
-                rows = dict(self.db.conn.execute(
+                rows = dict(self.db.execute(
                     "SELECT key, value FROM slr_meta WHERE key IN (?, ?) UNION ALL "
                     "SELECT ?, count(*)::text FROM (SELECT 1 FROM slr_buffers WHERE kind = "
                     "'tBuffer' AND removed_at IS NULL LIMIT 1) AS timed",
-                    (PROGRAM_VERSION, PROGRESS_VERSION, "tbuffers")).fetchall())
+                    (PROGRAM_VERSION, PROGRESS_VERSION, "tbuffers")))
                 self.db.tbuffers_active = rows.get("tbuffers") == "1"
         return int(rows.get(PROGRAM_VERSION, 0)), int(rows.get(PROGRESS_VERSION, 0))
 
@@ -192,9 +191,8 @@ class Catalog:
         """
         with self.db.transaction():
             self.db.lock_named("program")
-            cursor = self.db.conn.execute(_INSERT_TEXT, (None, str(name), source, filename,
-                                                         float(self.db.clock.now())))
-            text_id = cursor.fetchone()[0]
+            text_id = self.db.execute(_INSERT_TEXT, (None, str(name), source, filename,
+                                                     float(self.db.clock.now())))[0][0]
             self._bump(PROGRAM_VERSION)
             return text_id
 
@@ -210,13 +208,12 @@ class Catalog:
         """
         with self.db.transaction():
             self.db.lock_named("program")
-            conn = self.db.conn
-            first = conn.execute("SELECT min(id) FROM slr_program WHERE name = ?",
-                                 (str(name),)).fetchone()[0]
-            conn.execute("DELETE FROM slr_program WHERE name = ?", (str(name),))
-            cursor = conn.execute(_INSERT_TEXT, (first, str(name), source, filename,
-                                                 float(self.db.clock.now())))
-            text_id = cursor.fetchone()[0]
+            execute = self.db.execute
+            first = execute("SELECT min(id) FROM slr_program WHERE name = ?",
+                            (str(name),))[0][0]
+            execute("DELETE FROM slr_program WHERE name = ?", (str(name),))
+            text_id = execute(_INSERT_TEXT, (first, str(name), source, filename,
+                                             float(self.db.clock.now())))[0][0]
             self._bump(PROGRAM_VERSION)
             return text_id
 
@@ -230,11 +227,11 @@ class Catalog:
         """
         with self.db.transaction():
             self.db.lock_named("program")
-            removed = self.db.conn.execute("DELETE FROM slr_program WHERE name = ?",
-                                           (str(name),)).rowcount
-            if removed > 0:
+            removed = len(self.db.execute("DELETE FROM slr_program WHERE name = ? "
+                                          "RETURNING id", (str(name),)))
+            if removed:
                 self._bump(PROGRAM_VERSION)
-            return max(removed, 0)
+            return removed
 
     def program_texts(self) -> list[ProgramText]:
         """Every stored program text, in load order.
@@ -245,7 +242,7 @@ class Catalog:
         """
         with self.db.lock:
             self.db.check_open()
-            return [ProgramText(*row) for row in self.db.conn.execute(
+            return [ProgramText(*row) for row in self.db.execute(
                 "SELECT id, name, source, filename, loaded_at FROM slr_program ORDER BY id")]
 
     def program_sources(self) -> list[tuple[str, str | None]]:
@@ -269,10 +266,10 @@ class Catalog:
         """
         with self.db.transaction():
             self.db.lock_named("program")
-            self.db.conn.execute("DELETE FROM slr_program")
+            self.db.execute("DELETE FROM slr_program")
             now = float(self.db.clock.now())
             for source, filename in sources:
-                self.db.conn.execute(_INSERT_TEXT, (None, "main", source, filename, now))
+                self.db.execute(_INSERT_TEXT, (None, "main", source, filename, now))
             self._bump(PROGRAM_VERSION)
 
     # ------------------------------------------------------------------ meta keys
@@ -286,9 +283,8 @@ class Catalog:
         """
         with self.db.lock:
             self.db.check_open()
-            row = self.db.conn.execute("SELECT value FROM slr_meta WHERE key = ?",
-                                       (key,)).fetchone()
-        return default if row is None else json.loads(row[0])
+            rows = self.db.execute("SELECT value FROM slr_meta WHERE key = ?", (key,))
+        return json.loads(rows[0][0]) if rows else default
 
     def meta_set(self, key: str, value: Any) -> None:
         """Persist a JSON-serializable value under ``key`` (replacing any previous one).
@@ -299,9 +295,9 @@ class Catalog:
         """
         text = json.dumps(value)
         with self.db.transaction():
-            self.db.conn.execute("INSERT INTO slr_meta (key, value) VALUES (?, ?) "
-                                 "ON CONFLICT(key) DO UPDATE SET value = excluded.value",
-                                 (key, text))
+            self.db.execute("INSERT INTO slr_meta (key, value) VALUES (?, ?) "
+                            "ON CONFLICT(key) DO UPDATE SET value = excluded.value",
+                            (key, text))
 
     def meta_raise(self, key: str, value: float) -> float:
         """Store the number ``value`` under ``key`` unless the stored number is already as
@@ -321,12 +317,11 @@ class Catalog:
             # every writer of the type would wait for the others' commits. Read first.
             with self.db.lock:
                 self.db.check_open()
-                row = self.db.conn.execute("SELECT value FROM slr_meta WHERE key = ?",
-                                           (key,)).fetchone()
-            if row is not None and float(json.loads(row[0])) >= value:
-                return float(json.loads(row[0]))
+                rows = self.db.execute("SELECT value FROM slr_meta WHERE key = ?", (key,))
+            if rows and float(json.loads(rows[0][0])) >= value:
+                return float(json.loads(rows[0][0]))
         with self.db.transaction():
-            conn = self.db.conn
+            execute = self.db.execute
             dialect = self.db.dialect
             if dialect.name != "sqlite":
                 # the writers of growing values take one lock first, held to their commit:
@@ -334,19 +329,19 @@ class Catalog:
                 # and the progress counter while it writes the second, and another writer
                 # of that second value would wait for the counter -- a deadlock. (SQLite
                 # has one writer at a time.)
-                conn.execute("SELECT pg_advisory_xact_lock(?)", (_RAISE_LOCK,))
+                execute("SELECT pg_advisory_xact_lock(?)", (_RAISE_LOCK,))
             # 1e999 (infinity in SQLite's CAST) is out of a PostgreSQL float's range
             text = _number_text(value) if dialect.infinity() == "9e999" or math.isfinite(value) \
                 else json.dumps(value)
-            changed = conn.execute(
+            # (a row comes back when the value was written: inserted, or raised)
+            changed = execute(
                 "INSERT INTO slr_meta (key, value) VALUES (?, ?) ON CONFLICT(key) DO "
                 "UPDATE SET value = excluded.value "
-                f"WHERE {_stored_number(dialect)} < CAST(excluded.value AS {dialect.real})",
-                (key, text)).rowcount
-            if changed > 0:
+                f"WHERE {_stored_number(dialect)} < CAST(excluded.value AS {dialect.real}) "
+                "RETURNING 1", (key, text))
+            if changed:
                 self._bump(PROGRESS_VERSION)
-            stored = conn.execute("SELECT value FROM slr_meta WHERE key = ?",
-                                  (key,)).fetchone()[0]
+            stored = execute("SELECT value FROM slr_meta WHERE key = ?", (key,))[0][0]
         return float(json.loads(stored))
 
     def meta_delete(self, key: str) -> None:
@@ -357,7 +352,7 @@ class Catalog:
         0
         """
         with self.db.transaction():
-            self.db.conn.execute("DELETE FROM slr_meta WHERE key = ?", (key,))
+            self.db.execute("DELETE FROM slr_meta WHERE key = ?", (key,))
 
     def meta_items(self, prefix: str = "") -> dict[str, Any]:
         """Every ``slr_meta`` entry whose key starts with ``prefix``.
@@ -368,9 +363,9 @@ class Catalog:
         """
         with self.db.lock:
             self.db.check_open()
-            rows = self.db.conn.execute(
+            rows = self.db.execute(
                 "SELECT key, value FROM slr_meta WHERE substr(key, 1, ?) = ? ORDER BY key",
-                (len(prefix), prefix)).fetchall()
+                (len(prefix), prefix))
         return {key: json.loads(value) for key, value in rows}
 
     # ------------------------------------------------------------------ fact tables and views
@@ -434,45 +429,45 @@ class Catalog:
         """
         out = {}
         with self.db.transaction():
-            conn = self.db.conn
+            execute = self.db.execute
             # the inspection views read these tables: PostgreSQL refuses to drop a table a
             # view depends on, so they go first and come back over the new tables
             views = self.db.view_statements(self.meta_get("sql_views", []))
             for name in views:
-                conn.execute(f"DROP VIEW {quote_identifier(name)}")
+                execute(f"DROP VIEW {quote_identifier(name)}")
             existing = sorted(name for name in self.db.table_names()
                               if name.startswith("slr_facts_"))
             for table in existing:
-                conn.execute(f"DROP TABLE {quote_identifier(table)}")
+                execute(f"DROP TABLE {quote_identifier(table)}")
             for (name, arity), rows in tables.items():
                 plain = self._fact_table(name, arity)
                 table = quote_identifier(plain)
                 dialect = self.db.dialect
                 cols = "".join(f", arg{i}{dialect.value}" for i in range(1, arity + 1))
-                conn.execute(f"CREATE TABLE {table} (ord BIGINT PRIMARY KEY{cols})"
-                             if dialect.to_column else
-                             f"CREATE TABLE {table} (ord INTEGER PRIMARY KEY{cols})")
+                execute(f"CREATE TABLE {table} (ord BIGINT PRIMARY KEY{cols})"
+                        if dialect.to_column else
+                        f"CREATE TABLE {table} (ord INTEGER PRIMARY KEY{cols})")
                 if dialect.to_column is not None:
                     rows = [tuple(map(dialect.to_column, row)) for row in rows]
                 if arity:
                     index = quote_identifier("slr_facts_ix_" + plain[len("slr_facts_"):])
-                    conn.execute(f"CREATE INDEX {index} ON {table} (arg1)")
-                conn.executemany(f"INSERT INTO {table} VALUES (?{', ?' * arity})",
-                                 [(i,) + tuple(row) for i, row in enumerate(rows)])
+                    execute(f"CREATE INDEX {index} ON {table} (arg1)")
+                self.db.executemany(f"INSERT INTO {table} VALUES (?{', ?' * arity})",
+                                    [(i,) + tuple(row) for i, row in enumerate(rows)])
                 out[(name, arity)] = table
             kept = []
             for name, statement in views.items():
                 try:
                     with self.db.transaction():   # a savepoint: a view of a table now gone
-                        conn.execute(statement)
+                        execute(statement)
                     kept.append(name)
                 except DatabaseError:
                     pass
             if views:
                 self.meta_set("sql_views", kept)
             if version is not None:
-                conn.execute("INSERT INTO slr_meta (key, value) VALUES (?, ?) ON CONFLICT(key) "
-                             "DO UPDATE SET value = excluded.value", (FACTS_VERSION, int(version)))
+                execute("INSERT INTO slr_meta (key, value) VALUES (?, ?) ON CONFLICT(key) "
+                        "DO UPDATE SET value = excluded.value", (FACTS_VERSION, int(version)))
         return out
 
     def fact_tables_for(self, keys: Iterable[tuple[str, int]]) -> dict:
@@ -516,9 +511,9 @@ class Catalog:
         cols += [f"detected {real} NOT NULL"]
         with self.db.transaction():
             self.db.lock_named("program")   # two processes installing the same rule
-            self.db.conn.execute(f"CREATE TABLE IF NOT EXISTS {prov} ({', '.join(cols)})")
+            self.db.execute(f"CREATE TABLE IF NOT EXISTS {prov} ({', '.join(cols)})")
             if used:
-                self.db.conn.execute(
+                self.db.execute(
                     f"CREATE TABLE IF NOT EXISTS {used} (tbl TEXT NOT NULL, seq BIGINT NOT "
                     f"NULL, PRIMARY KEY (tbl, seq)){dialect.without_rowid}")
 
@@ -536,7 +531,7 @@ class Catalog:
         columns = "".join(f"r{p + 1}, " for p in range(width))
         with self.db.lock:
             self.db.check_open()
-            return [tuple(row) for row in self.db.conn.execute(
+            return [tuple(row) for row in self.db.execute(
                 f"SELECT {columns}t_start, t_end FROM {prov} ORDER BY id")]
 
     def create_journal(self, table: str, arity: int, journal: str, trigger: str) -> None:
@@ -561,20 +556,20 @@ class Catalog:
         real = dialect.real
         key = ("jid INTEGER PRIMARY KEY AUTOINCREMENT" if dialect.name == "sqlite"
                else "jid BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY")
-        conn = self.db.conn
+        execute = self.db.execute
         with self.db.transaction():
-            conn.execute(f"CREATE TABLE IF NOT EXISTS {j} ({key}, seq BIGINT NOT NULL{typed}, "
+            execute(f"CREATE TABLE IF NOT EXISTS {j} ({key}, seq BIGINT NOT NULL{typed}, "
                          f"t_start {real} NOT NULL, t_end {real} NOT NULL, "
                          f"arrival {real} NOT NULL)" if dialect.name != "sqlite" else
                          f"CREATE TABLE IF NOT EXISTS {j} ({key}, seq INTEGER NOT NULL{cols}, "
                          f"t_start REAL NOT NULL, t_end REAL NOT NULL, arrival REAL NOT NULL)")
-            conn.execute(f"CREATE INDEX IF NOT EXISTS {quote_identifier(journal + '__seq')} "
-                         f"ON {j} (seq)")
+            execute(f"CREATE INDEX IF NOT EXISTS {quote_identifier(journal + '__seq')} "
+                    f"ON {j} (seq)")
             if dialect.name == "sqlite":
                 new = "".join(f", NEW.{a}" for a in args)
-                conn.execute(f"CREATE TRIGGER IF NOT EXISTS {name} AFTER INSERT ON {t} BEGIN "
-                             f"INSERT INTO {j} (seq{cols}, t_start, t_end, arrival) VALUES "
-                             f"(NEW.seq{new}, NEW.t_start, NEW.t_end, NEW.arrival); END")
+                execute(f"CREATE TRIGGER IF NOT EXISTS {name} AFTER INSERT ON {t} BEGIN "
+                        f"INSERT INTO {j} (seq{cols}, t_start, t_end, arrival) VALUES "
+                        f"(NEW.seq{new}, NEW.t_start, NEW.t_end, NEW.arrival); END")
                 return
             self.db.lock_named("journals")
             if trigger in self.db.triggers(table):
@@ -582,27 +577,26 @@ class Catalog:
             function = quote_identifier(trigger + "_f")
             lock = sql_text_literal(f"{self.db.schema}:journal:{table}")
             channel = sql_text_literal(self.db.notify_channel)
-            conn.execute(
+            execute(
                 f"CREATE OR REPLACE FUNCTION {function}() RETURNS trigger LANGUAGE plpgsql AS "
                 f"$slr$ BEGIN PERFORM pg_advisory_xact_lock(hashtext({lock})); "
                 f"INSERT INTO {j} (seq{cols}, t_start, t_end, arrival) SELECT seq{cols}, "
                 f"t_start, t_end, arrival FROM slr_new_rows ORDER BY seq; "
                 f"PERFORM pg_notify({channel}, {sql_text_literal(table)}); RETURN NULL; "
                 f"END $slr$")
-            conn.execute(f"CREATE TRIGGER {name} AFTER INSERT ON {t} REFERENCING NEW TABLE "
-                         f"AS slr_new_rows FOR EACH STATEMENT EXECUTE FUNCTION {function}()")
+            execute(f"CREATE TRIGGER {name} AFTER INSERT ON {t} REFERENCING NEW TABLE "
+                    f"AS slr_new_rows FOR EACH STATEMENT EXECUTE FUNCTION {function}()")
 
     def drop_journal(self, table: str, journal: str, trigger: str) -> None:
         """Drop the journal of ``table`` and its trigger (if they exist)."""
         with self.db.transaction():
             if self.db.dialect.name == "sqlite":
-                self.db.conn.execute(f"DROP TRIGGER IF EXISTS {quote_identifier(trigger)}")
+                self.db.execute(f"DROP TRIGGER IF EXISTS {quote_identifier(trigger)}")
             else:
-                self.db.conn.execute(f"DROP TRIGGER IF EXISTS {quote_identifier(trigger)} ON "
-                                     f"{quote_identifier(table)}")
-                self.db.conn.execute(f"DROP FUNCTION IF EXISTS "
-                                     f"{quote_identifier(trigger + '_f')}()")
-            self.db.conn.execute(f"DROP TABLE IF EXISTS {quote_identifier(journal)}")
+                self.db.execute(f"DROP TRIGGER IF EXISTS {quote_identifier(trigger)} ON "
+                                f"{quote_identifier(table)}")
+                self.db.execute(f"DROP FUNCTION IF EXISTS {quote_identifier(trigger + '_f')}()")
+            self.db.execute(f"DROP TABLE IF EXISTS {quote_identifier(journal)}")
 
     def fact_view_select(self, table: str, arity: int) -> str:
         """The SELECT of the inspection view of a predicate whose clauses are facts, read
@@ -628,23 +622,23 @@ class Catalog:
         """
         created = []
         with self.db.transaction():
-            conn = self.db.conn
+            execute = self.db.execute
             for name in self.meta_get("sql_views", []):
-                conn.execute(f"DROP VIEW IF EXISTS {quote_identifier(name)}")
+                execute(f"DROP VIEW IF EXISTS {quote_identifier(name)}")
             taken = self.db.object_names()
             for predicate, select in views.items():
                 name = self.view_name(predicate)
                 if name.lower() in taken:
                     continue
                 if self.db.dialect.name == "sqlite":
-                    conn.execute(f"CREATE VIEW {quote_identifier(name)} AS {select}")
+                    execute(f"CREATE VIEW {quote_identifier(name)} AS {select}")
                 else:
                     # a column has one type there (a branch's time, a number, and another's
                     # data value, text, in one argument), names are cut at 63 bytes: a view
                     # the server refuses is not made (the program loads, its queries answer)
                     try:
                         with self.db.transaction():   # a savepoint
-                            conn.execute(f"CREATE VIEW {quote_identifier(name)} AS {select}")
+                            execute(f"CREATE VIEW {quote_identifier(name)} AS {select}")
                     except DatabaseError:
                         continue
                 created.append(name)

@@ -2,8 +2,11 @@
 
 :class:`Database` is the object every part of an :class:`~slr_sql.store.EventStore` shares:
 the connection, the lock that serializes it, the transaction depth and the clock. The parts
-run their statements through ``db.conn`` while holding ``db.lock`` (or inside
-:meth:`Database.transaction`, which holds it).
+run their statements through :meth:`Database.execute` (and ``executemany``), inside
+:meth:`Database.transaction` when they write, so that a condition of the file or its disk is
+an SLRError in words (:meth:`Database.failure`) on every path, a background thread's too; a
+stream that reads its rows as they come (an event scan) hands what it meets to
+:meth:`Database.failure` itself.
 
 Durability: file databases use ``journal_mode=WAL`` with ``synchronous=FULL``: when a
 transaction commits it is in the WAL *and* fsynced, so it survives a process kill and a
@@ -987,9 +990,11 @@ class Database:
         [(2,)]
         """
         with self.lock:
-            self.check_open()
+            if self.closed:   # (check_open, inline: the parts' lookups run through here)
+                raise SLRError("the event store is closed")
             try:
-                return self.conn.execute(sql, tuple(params)).fetchall()
+                return self.conn.execute(
+                    sql, params if type(params) is tuple else tuple(params)).fetchall()
             except sqlite3.Error as exc:
                 raise self.failure(exc) from None
 

@@ -10,6 +10,7 @@ interleaved types on SQLite); anything else, or any doubt, goes event by event.
 from __future__ import annotations
 
 import math
+import sqlite3
 from itertools import chain, islice, repeat
 from operator import attrgetter, itemgetter, le as _le
 from typing import Any, Iterable, Iterator
@@ -328,11 +329,14 @@ class EventWriter:
         while most > 1 and most * width > self.db.max_parameters:
             most //= 2
         done = 0
-        while done < count:
-            size = min(most, 1 << ((count - done).bit_length() - 1))
-            execute(event_type.insert_rows_sql(size, with_robot),
-                    values[done * width:(done + size) * width])
-            done += size
+        try:   # (every add: execute's mapping, in the add's transaction, which holds the lock)
+            while done < count:
+                size = min(most, 1 << ((count - done).bit_length() - 1))
+                execute(event_type.insert_rows_sql(size, with_robot),
+                        values[done * width:(done + size) * width])
+                done += size
+        except sqlite3.Error as exc:
+            raise self.db.failure(exc) from None
 
     def _insert_each(self, chunk: list, base: int, arrival: float, atomic: bool,
                      errors: list[EventRejected], ends: dict | None) -> None:
@@ -472,10 +476,13 @@ class EventWriter:
         with self.db.lock:
             if self.db.tx_depth:  # inside add_events: part of its transaction
                 self.db.check_open()
-                self.db.conn.execute(sql, (now, now))
+                try:   # (every add: execute's mapping, the lock held already)
+                    self.db.conn.execute(sql, (now, now))
+                except sqlite3.Error as exc:
+                    raise self.db.failure(exc) from None
                 return
         with self.db.transaction():
-            self.db.conn.execute(sql, (now, now))
+            self.db.execute(sql, (now, now))
 
     def _record_now_for_tbuffers(self, now: float) -> None:
         """On a server: record ``now`` before an add, only while a tBuffer is active (its
@@ -485,11 +492,9 @@ class EventWriter:
         base reads them whenever another connection may have committed)."""
         if now != now:
             return
-        with self.db.lock:
-            self.db.check_open()
-            self.db.conn.execute(
-                "UPDATE slr_clock SET now = ? WHERE id = 1 AND now <> ? AND EXISTS (SELECT 1 "
-                "FROM slr_buffers WHERE kind = 'tBuffer' AND removed_at IS NULL)", (now, now))
+        self.db.execute(
+            "UPDATE slr_clock SET now = ? WHERE id = 1 AND now <> ? AND EXISTS (SELECT 1 "
+            "FROM slr_buffers WHERE kind = 'tBuffer' AND removed_at IS NULL)", (now, now))
 
     def recorded_now(self) -> float:
         """The "now" buffer triggers currently use (``-inf`` before the first record).
@@ -498,6 +503,4 @@ class EventWriter:
         >>> EventStore(None).recorded_now()
         -inf
         """
-        with self.db.lock:
-            self.db.check_open()
-            return self.db.conn.execute("SELECT now FROM slr_clock WHERE id = 1").fetchone()[0]
+        return self.db.execute("SELECT now FROM slr_clock WHERE id = 1")[0][0]

@@ -116,8 +116,8 @@ class Fleet:
         self.db = db
         self.tables = tables
         self.writer = writer
-        row = db.conn.execute("SELECT value FROM slr_meta WHERE key = 'robot'").fetchone()
-        self.robot: str | None = None if row is None else _json_text(row[0])
+        rows = db.execute("SELECT value FROM slr_meta WHERE key = 'robot'")
+        self.robot: str | None = _json_text(rows[0][0]) if rows else None
         writer.robot = self.robot
         # routes this store committed (robot -> via): a route is never changed nor dropped,
         # so a batch of a robot along its known route needs no answer about it
@@ -135,15 +135,14 @@ class Fleet:
                            f"{self.robot!r}, not {robot!r}")
         import json
         with self.db.transaction():
-            row = self.db.conn.execute(
-                "SELECT value FROM slr_meta WHERE key = 'robot'").fetchone()
-            if row is not None and _json_text(row[0]) != robot:  # another process named it
+            rows = self.db.execute("SELECT value FROM slr_meta WHERE key = 'robot'")
+            if rows and _json_text(rows[0][0]) != robot:  # another process named it
                 raise SLRError(f"{self.db.path or ':memory:'} is the store of robot "
-                               f"{_json_text(row[0])!r}, not {robot!r}")
-            self.db.conn.execute("INSERT INTO slr_meta (key, value) VALUES ('robot', ?) "
-                                 "ON CONFLICT (key) DO UPDATE SET value = excluded.value",
-                                 (json.dumps(robot),))
-            self.db.conn.execute(_ADD_ROBOT, (robot,))
+                               f"{_json_text(rows[0][0])!r}, not {robot!r}")
+            self.db.execute("INSERT INTO slr_meta (key, value) VALUES ('robot', ?) "
+                            "ON CONFLICT (key) DO UPDATE SET value = excluded.value",
+                            (json.dumps(robot),))
+            self.db.execute(_ADD_ROBOT, (robot,))
         self.robot = robot
         self.writer.robot = robot
 
@@ -152,7 +151,7 @@ class Fleet:
         shipped to it), in name order."""
         with self.db.lock:
             self.db.check_open()
-            return [r[0] for r in self.db.conn.execute("SELECT name FROM slr_robots ORDER BY name")]
+            return [r[0] for r in self.db.execute("SELECT name FROM slr_robots ORDER BY name")]
 
     # ------------------------------------------------------------------ the robot's side
 
@@ -163,9 +162,8 @@ class Fleet:
             self.tables.reload()
             out = {}
             for key, event_type in self.tables.types.items():
-                row = self.db.conn.execute(
-                    f"SELECT max(seq) FROM {event_type.quoted}").fetchone()
-                out[key] = row[0] or 0
+                out[key] = self.db.execute(
+                    f"SELECT max(seq) FROM {event_type.quoted}")[0][0] or 0
             return out
 
     def counters(self) -> dict[tuple[str, int], int]:
@@ -175,15 +173,15 @@ class Fleet:
         with self.db.lock:
             self.db.check_open()
             self.tables.reload()
-            conn = self.db.conn
+            execute = self.db.execute
             if self.db.dialect.name == "sqlite":
-                found = dict(conn.execute("SELECT name, seq FROM sqlite_sequence").fetchall())
+                found = dict(execute("SELECT name, seq FROM sqlite_sequence"))
                 return {key: int(found.get(t.table) or 0) for key, t in self.tables.types.items()}
             out = {}
             for key, event_type in self.tables.types.items():
-                row = conn.execute("SELECT pg_sequence_last_value(pg_get_serial_sequence("
-                                   "?, 'seq'))", (event_type.quoted,)).fetchone()
-                out[key] = int(row[0] or 0)
+                [(last,)] = execute("SELECT pg_sequence_last_value(pg_get_serial_sequence("
+                                    "?, 'seq'))", (event_type.quoted,))
+                out[key] = int(last or 0)
             return out
 
     def read_after(self, name: str, arity: int, position: int, limit: int) -> list[tuple]:
@@ -201,7 +199,7 @@ class Fleet:
             dialect = self.db.dialect
             select = (f"SELECT seq, {args}t_start, t_end, arrival, robot FROM "
                       f"{event_type.quoted} WHERE seq > ? ORDER BY seq LIMIT ?")
-            rows = self.db.conn.execute(select, (position, limit)).fetchall()
+            rows = self.db.execute(select, (position, limit))
             in_flight = dialect.writers_in_flight()
             if rows and in_flight is not None:
                 # the fleet's position becomes the last seq shipped, so no lower seq may
@@ -209,9 +207,9 @@ class Fleet:
                 # higher seq than every row it saw, and one in flight then holds its lock
                 # now. Once those are done, the same range read again is final.
                 self._wait_for(in_flight, event_type.quoted)
-                rows = self.db.conn.execute(
+                rows = self.db.execute(
                     select.replace("WHERE seq > ?", "WHERE seq > ? AND seq <= ?"),
-                    (position, rows[-1][0], limit)).fetchall()
+                    (position, rows[-1][0], limit))
             if dialect.name != "sqlite" and arity:  # shipped as SQLite stores them
                 from_column: Any = dialect.from_column
                 rows = [(r[0], *map(from_column, r[1:1 + arity]), *r[1 + arity:]) for r in rows]
@@ -226,8 +224,8 @@ class Fleet:
         """Until the transactions that hold a writer's lock on ``table`` now are done (the
         server has no statement that waits for another transaction without also blocking
         later writers); SLRBusy past the store's busy timeout."""
-        conn = self.db.conn
-        holders = {r[0] for r in conn.execute(in_flight, (table,)).fetchall()}
+        execute = self.db.execute
+        holders = {r[0] for r in execute(in_flight, (table,))}
         timeout = getattr(self.db, "busy_timeout", 5.0)
         deadline = time.monotonic() + timeout
         pause = 0.0005
@@ -237,7 +235,7 @@ class Fleet:
                               f"than {timeout:g} s; the rows after it are shipped later")
             time.sleep(pause)
             pause = min(pause * 2, 0.02)
-            holders &= {r[0] for r in conn.execute(in_flight, (table,)).fetchall()}
+            holders &= {r[0] for r in execute(in_flight, (table,))}
 
     def backlog(self, name: str, arity: int, position: int) -> tuple[int, float | None]:
         """The number of rows of name/arity after ``position`` and the arrival time of the
@@ -247,11 +245,11 @@ class Fleet:
             event_type = self.tables.lookup(name, arity)
             if event_type is None:
                 return 0, None
-            left = self.db.conn.execute(f"SELECT count(*) FROM {event_type.quoted} "
-                                        "WHERE seq > ?", (position,)).fetchone()[0]
-            row = self.db.conn.execute(f"SELECT arrival FROM {event_type.quoted} "
-                                       "ORDER BY seq DESC LIMIT 1").fetchone()
-            return left, row[0] if row is not None and _finite(row[0]) else None
+            left = self.db.execute(f"SELECT count(*) FROM {event_type.quoted} "
+                                   "WHERE seq > ?", (position,))[0][0]
+            latest = self.db.execute(f"SELECT arrival FROM {event_type.quoted} "
+                                     "ORDER BY seq DESC LIMIT 1")
+            return left, latest[0][0] if latest and _finite(latest[0][0]) else None
 
     # ------------------------------------------------------------------ the fleet's side
 
@@ -260,7 +258,7 @@ class Fleet:
         robot's store) stored."""
         with self.db.lock:
             self.db.check_open()
-            return {(n, a): p for n, a, p in self.db.conn.execute(
+            return {(n, a): p for n, a, p in self.db.execute(
                 "SELECT type_name, type_arity, position FROM slr_fleet_positions "
                 "WHERE robot = ?", (robot,))}
 
@@ -310,10 +308,10 @@ class Fleet:
                     self._set_position(robot, name, arity, 0)
             return 0
         with self.db.transaction():
-            conn = self.db.conn
-            row = conn.execute("SELECT position FROM slr_fleet_positions WHERE robot = ? AND "
-                               "type_name = ? AND type_arity = ?", (robot, name, arity)).fetchone()
-            position = row[0] if row is not None else 0
+            conn = self.db.conn   # (a server's connection: its own statements, below)
+            held_at = self.db.execute("SELECT position FROM slr_fleet_positions WHERE robot = ? "
+                                      "AND type_name = ? AND type_arity = ?", (robot, name, arity))
+            position = held_at[0][0] if held_at else 0
             # (sequences ascend: what the fleet holds already is a head of the batch)
             if resync:
                 position = rows[0][0] - 1
@@ -333,7 +331,7 @@ class Fleet:
             server = dialect.to_column is not None
             if store_events is not None:
                 for who in (robot, *others):
-                    conn.execute(_ADD_ROBOT, (who,))
+                    self.db.execute(_ADD_ROBOT, (who,))
                 self._store_decoded(robot, name, arity, fresh, store_events)
             else:
                 # as an add: the fleet store's clock is the rows' arrival (and its "now"
@@ -363,13 +361,13 @@ class Fleet:
                     conn.executemany(insert, values, ("text",) * arity + ("float8",) * 2
                                      + ("text", "float8"))
                 else:
-                    conn.executemany(insert, values)
+                    self.db.executemany(insert, values)
             # the arrival column sits after the arguments and the two times
             latest = max((r[3 + arity] for r in fresh if r[3 + arity] is not None),
                          default=None)
             # statements nobody reads an answer of: on a server they go with the
             # transaction's next statement or its COMMIT (one round trip, not one each)
-            unanswered = conn.execute_unanswered if server else conn.execute
+            unanswered = conn.execute_unanswered if server else self.db.execute
             for params in along:
                 unanswered(_ADD_ROUTE, params)
             if store_events is None:
@@ -396,7 +394,7 @@ class Fleet:
         for r in rows:
             who = r[-1] or robot
             counts[who] = counts.get(who, 0) + 1
-        conn = self.db.conn
+        execute = self.db.execute
         taken = []
         along = []
         for who in sorted(counts):   # (one order: two shipments never wait on each other)
@@ -410,7 +408,7 @@ class Fleet:
                                     f"{robot!r} relaying them back would store each of them "
                                     "twice: a store's rows must not come back to it through "
                                     "the stores it pushes to")
-            held = conn.execute(_TAKE_ROUTE, (who, robot, counts[who])).fetchone()[0]
+            held = execute(_TAKE_ROUTE, (who, robot, counts[who]))[0][0]
             if held == robot:
                 taken.append(who)
                 continue
@@ -427,7 +425,7 @@ class Fleet:
         return along
 
     def _set_position(self, robot: str, name: str, arity: int, position: int) -> None:
-        self.db.conn.execute(_SET_POSITION, (robot, name, arity, position))
+        self.db.execute(_SET_POSITION, (robot, name, arity, position))
 
     def _held_identically(self, name: str, arity: int, robot: str,
                           rows: list[tuple]) -> list[bool]:
@@ -443,10 +441,10 @@ class Fleet:
                 for i in range(1, arity + 1)]
         select = (f"SELECT 1 FROM {event_type.quoted} WHERE "
                   + " AND ".join(args + ["t_start = ?", "t_end = ?", "robot = ?"]) + " LIMIT 1")
-        conn = self.db.conn
-        return [conn.execute(select, [v for value in values[:arity]
+        execute = self.db.execute
+        return [bool(execute(select, [v for value in values[:arity]
                                       for v in ((value, value) if typed else (value,))]
-                             + list(values[arity:])).fetchone() is not None
+                             + list(values[arity:])))
                 for values in self.column_values(arity, rows, robot)]
 
     def _store_decoded(self, robot: str, name: str, arity: int, rows: list[tuple],
@@ -477,7 +475,7 @@ class Fleet:
         """Note what ``robot``'s pusher reported at a contact (for ``slr fleet status``):
         the events its store holds that are not shipped yet and the arrival of its latest."""
         with self.db.transaction():
-            self.db.conn.execute(
+            self.db.execute(
                 "INSERT INTO slr_fleet_robots (robot, pending, head_arrival, contact_at) "
                 "VALUES (?, ?, ?, ?) ON CONFLICT (robot) DO UPDATE SET pending = "
                 "excluded.pending, head_arrival = coalesce(excluded.head_arrival, "
@@ -491,13 +489,10 @@ class Fleet:
         itself); in name order."""
         with self.db.lock:
             self.db.check_open()
-            conn = self.db.conn
-            cur = conn.execute(
-                "SELECT robot, shipped, last_arrival, pending, head_arrival, contact_at "
-                "FROM slr_fleet_robots ORDER BY robot")
-            cols = [d[0] for d in cur.description]
-            rows = {r[0]: {**dict(zip(cols, r)), "via": None} for r in cur.fetchall()}
-            for who, via, shipped in conn.execute(
+            cols = ["robot", "shipped", "last_arrival", "pending", "head_arrival", "contact_at"]
+            rows = {r[0]: {**dict(zip(cols, r)), "via": None} for r in self.db.execute(
+                f"SELECT {', '.join(cols)} FROM slr_fleet_robots ORDER BY robot")}
+            for who, via, shipped in self.db.execute(
                     "SELECT robot, via, shipped FROM slr_fleet_routes WHERE via <> robot"):
                 known = rows.get(who)
                 if known is not None:   # (it made contact itself, shipping no row)

@@ -233,7 +233,10 @@ class EventReader:
             return
         with db.lock:
             db.check_open()
-            statement = _OpenStatement(db.conn.execute(statement_sql(False), params))
+            try:
+                statement = _OpenStatement(db.conn.execute(statement_sql(False), params))
+            except sqlite3.Error as exc:   # (rows read as they come: not through execute)
+                raise db.failure(exc) from None
             db.open_streams.add(statement)
         key = _RESUME[kind][1]
         last = None
@@ -245,17 +248,20 @@ class EventReader:
                     for attempt in (1, 2):
                         if statement.cursor is None:
                             db.check_open()
-                            statement.cursor = \
-                                db.conn.execute(statement_sql(False), params) if last is None \
-                                else db.conn.execute(statement_sql(True), params + list(
-                                    key(last[arity], last[arity + 1], last[arity + 2])))
                         try:
+                            if statement.cursor is None:
+                                statement.cursor = \
+                                    db.conn.execute(statement_sql(False), params) \
+                                    if last is None else \
+                                    db.conn.execute(statement_sql(True), params + list(
+                                        key(last[arity], last[arity + 1], last[arity + 2])))
                             rows = statement.cursor.fetchmany(batch)
                             break
-                        except sqlite3.OperationalError as exc:  # "abort due to ROLLBACK"
+                        except sqlite3.Error as exc:
+                            # "abort due to ROLLBACK": read again after the last row
                             if attempt == 2 or getattr(exc, "sqlite_errorcode", 0) & 0xFF \
                                     != sqlite3.SQLITE_ABORT:
-                                raise
+                                raise db.failure(exc) from None
                             statement.cursor = None
                 if not rows:
                     return
@@ -295,11 +301,10 @@ class EventReader:
             with db.lock:
                 db.check_open()
                 if last is None:
-                    rows = db.conn.execute(f"{statement_sql(False)} LIMIT {batch}",
-                                           params).fetchall()
+                    rows = db.execute(f"{statement_sql(False)} LIMIT {batch}", params)
                 else:
-                    rows = db.conn.execute(f"{statement_sql(True)} LIMIT {batch}", params + list(
-                        key(last[arity], last[arity + 1], last[arity + 2]))).fetchall()
+                    rows = db.execute(f"{statement_sql(True)} LIMIT {batch}", params + list(
+                        key(last[arity], last[arity + 1], last[arity + 2])))
             for row in rows:
                 yield (tuple([dec(v) for v in row[:arity]]), row[arity], row[arity + 1],
                        row[arity + 2])
@@ -504,8 +509,11 @@ class EventReader:
                    f"(SELECT t_end FROM {event_type.quoted} WHERE {where}t_end <= ? "
                    f"ORDER BY t_end DESC LIMIT 1) ORDER BY t_start, seq")
             self.sql_cache[key] = sql
-        rows = db.conn.execute(sql, (PROGRAM_VERSION, PROGRESS_VERSION, *values, *values,
-                                     float(t))).fetchall()
+        try:   # (the prev lookup: execute's mapping without its lock and check, made above)
+            rows = db.conn.execute(sql, (PROGRAM_VERSION, PROGRESS_VERSION, *values, *values,
+                                         float(t))).fetchall()
+        except sqlite3.Error as exc:
+            raise db.failure(exc) from None
         from_column = db.dialect.from_column
         if from_column is None:
             return rows
@@ -524,7 +532,7 @@ class EventReader:
             event_type = self.tables.lookup(name, arity)
             if event_type is None:
                 return 0
-            return self.db.conn.execute(f"SELECT count(*) FROM {event_type.quoted}").fetchone()[0]
+            return self.db.execute(f"SELECT count(*) FROM {event_type.quoted}")[0][0]
 
     def max_end(self, name: str, arity: int) -> float | None:
         """The greatest end time stored for name/arity, or None.
@@ -538,8 +546,7 @@ class EventReader:
             event_type = self.tables.lookup(name, arity)
             if event_type is None:
                 return None
-            return self.db.conn.execute(
-                f"SELECT max(t_end) FROM {event_type.quoted}").fetchone()[0]
+            return self.db.execute(f"SELECT max(t_end) FROM {event_type.quoted}")[0][0]
 
     def bracket(self, name: str, arity: int, bound: dict[int, Any], t: float,
                 longest: float = math.inf) -> tuple[Row | None, Row | None] | None:
@@ -616,11 +623,13 @@ class EventReader:
             found: list = [None, None, None]
             if signs:
                 for n, args in enumerate(params):
-                    found[n] = _first_of_signs(
-                        self.db.conn.execute(self.sql_cache[key + (n,)], args), signs)
+                    try:   # (read on to the first row of the signs: not through execute)
+                        found[n] = _first_of_signs(
+                            self.db.conn.execute(self.sql_cache[key + (n,)], args), signs)
+                    except sqlite3.Error as exc:
+                        raise self.db.failure(exc) from None
             else:
-                for row in self.db.conn.execute(
-                        union, [v for args in params for v in args]).fetchall():
+                for row in self.db.execute(union, [v for args in params for v in args]):
                     found[row[0]] = row
         if holding and found[0] is None:
             found[0] = found[2]   # (none holds at t)
@@ -655,10 +664,10 @@ class EventReader:
                     continue
                 columns = [f"arg{i + 1}" for i in range(event_type.arity)]
                 flags = ", ".join(f"{c} IS NULL" for c in columns)
-                rows = self.db.conn.execute(
+                rows = self.db.execute(
                     f"SELECT seq, {flags} FROM {event_type.quoted} "
                     f"WHERE {' OR '.join(f'{c} IS NULL' for c in columns)} "
-                    f"ORDER BY seq{'' if every else ' LIMIT 1'}").fetchall()
+                    f"ORDER BY seq{'' if every else ' LIMIT 1'}")
                 for row in rows:
                     argument = next(i for i, flag in enumerate(row[1:], 1) if flag)
                     found.append((event_type.name, event_type.arity, event_type.table,
@@ -683,8 +692,8 @@ class EventReader:
             event_type = self.tables.lookup(name, arity)
             if event_type is None or arity < 2:
                 return [], 0
-            conn = self.db.conn
-            top = conn.execute(f"SELECT max(seq) FROM {event_type.quoted}").fetchone()[0] or 0
+            execute = self.db.execute
+            top = execute(f"SELECT max(seq) FROM {event_type.quoted}")[0][0] or 0
             if top <= after_seq:
                 return [], top
             # (grouping takes 1 and 1.0 for one value: their types keep them apart.) The
@@ -698,10 +707,10 @@ class EventReader:
                 # is a group of its own, merged below by the values' signs)
                 groups += (f", CASE WHEN ({typeof('arg1')} = 'real' AND arg1 = 0) OR "
                            f"({typeof('arg2')} = 'real' AND arg2 = 0) THEN seq END")
-            rows = conn.execute(
+            rows = execute(
                 f"SELECT arg1, arg2, max(CASE WHEN t_end > t_start THEN t_end / 2 - t_start / 2 "
                 f"ELSE 0 END) FROM {event_type.quoted} WHERE seq > ? AND seq <= ? "
-                f"GROUP BY {groups}", (after_seq, top)).fetchall()
+                f"GROUP BY {groups}", (after_seq, top))
         dec = self.decode
         pairs: dict[tuple, tuple[Any, Any, float]] = {}
         for first, second, half in rows:
@@ -725,8 +734,7 @@ class EventReader:
             event_type = self.tables.lookup(name, arity)
             if event_type is None:
                 return 0
-            return self.db.conn.execute(
-                f"SELECT max(seq) FROM {event_type.quoted}").fetchone()[0] or 0
+            return self.db.execute(f"SELECT max(seq) FROM {event_type.quoted}")[0][0] or 0
 
     def raw_rows(self, name: str, arity: int, *, after_seq: int | None = None,
                  end_from: float | None = None, end_to: float | None = None,
@@ -773,7 +781,7 @@ class EventReader:
             if limit is not None:
                 sql += " LIMIT ?"
                 params.append(int(limit))
-            rows = self.db.conn.execute(sql, params).fetchall()
+            rows = self.db.execute(sql, params)
         from_column = self.db.dialect.from_column
         if from_column is not None:   # a server's typed columns: as SQLite stores them
             rows = [tuple([from_column(v) for v in row[:arity]]) + tuple(row[arity:])

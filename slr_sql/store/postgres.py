@@ -663,6 +663,16 @@ class PgConnection:
             self.raw.execute("ROLLBACK")
 
 
+def _read_error(exc: BaseException, where: str) -> SLRError:
+    """The SLRError of a read that failed with ``exc``: itself when it is one (the server's
+    conditions), else the statement's own error named after it, in SQLite's words.
+
+    >>> _read_error(PgStatementError('relation "j" does not exist'), "db")
+    SLRError('db: the store failed (relation "j" does not exist)')
+    """
+    return exc if isinstance(exc, SLRError) else SLRError(f"{where}: the store failed ({exc})")
+
+
 # The greatest lock_timeout (ms) the server takes: an int setting
 _MOST_LOCK_TIMEOUT_MS = 2 ** 31 - 1
 
@@ -709,11 +719,17 @@ class PgReadConnection:
         self.conn = PgConnection(raw, where, busy_timeout)
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
-        """Run one reading statement and return its rows."""
+        """Run one reading statement and return its rows. Every failure is an
+        :class:`SLRError`, as a SQLite store's reading connection says it: the server's
+        conditions in the connection's words, a statement's own error (a journal another
+        session dropped) named after it."""
         with self.lock:
             if self.closed:
                 raise SLRError("the event store is closed")
-            return self.conn.execute(sql, tuple(params)).fetchall()
+            try:
+                return self.conn.execute(sql, tuple(params)).fetchall()
+            except PgStatementError as exc:
+                raise _read_error(exc, self.conn.where) from None
 
     def close(self) -> None:
         """Close the connection (idempotent)."""
@@ -967,21 +983,15 @@ class PgDatabase:
     # ------------------------------------------------------------------ lifecycle
 
     def schema_version(self) -> int:
-        with self.lock:
-            self.check_open()
-            row = self.conn.execute("SELECT coalesce(max(number), 0) FROM slr_migrations"
-                                    ).fetchone()
-            return int(row[0])
+        return int(self.execute("SELECT coalesce(max(number), 0) FROM slr_migrations")[0][0])
 
     def data_version(self) -> int:
         """A number that moves when any connection may have committed a change: the next
         transaction id of the server (``pg_snapshot_xmax``), which every writing
         transaction advances and no read does. It moves for other databases' writes too:
         a false alarm costs the caller one cheap re-check, never a missed change."""
-        with self.lock:
-            self.check_open()
-            return int(self.conn.execute(
-                "SELECT pg_snapshot_xmax(pg_current_snapshot())::text::bigint").fetchone()[0])
+        return int(self.execute(
+            "SELECT pg_snapshot_xmax(pg_current_snapshot())::text::bigint")[0][0])
 
     def _listen_for_pending(self, raw: Any) -> None:
         """LISTEN on ``raw`` (the store's connection) to the pending rows' channel: psycopg
@@ -1060,10 +1070,10 @@ class PgDatabase:
         threading.Thread(target=drain, name="slr-pg-drain", daemon=True).start()
 
     def table_names(self) -> set[str]:
-        """Names of the tables of the store's schema."""
-        with self.lock:
-            return {row[0] for row in self.conn.execute(
-                "SELECT tablename FROM pg_tables WHERE schemaname = current_schema()")}
+        """Names of the tables of the store's schema (all of the catalog's reads run through
+        :meth:`execute`: a closed store says so, and opens no connection again)."""
+        return {row[0] for row in self.execute(
+            "SELECT tablename FROM pg_tables WHERE schemaname = current_schema()")}
 
     def set_write_groups(self, groups: Iterable[Iterable[tuple[str, int]]]) -> None:
         """Each type of a group gets the group's advisory lock key: a number derived from
@@ -1133,12 +1143,11 @@ class PgDatabase:
 
     def triggers(self, table: str | None = None) -> set[str]:
         """Names of the triggers of the store's schema (on ``table`` only, when given)."""
-        with self.lock:
-            return {row[0] for row in self.conn.execute(
-                "SELECT t.tgname FROM pg_trigger t JOIN pg_class c ON c.oid = t.tgrelid "
-                "JOIN pg_namespace n ON n.oid = c.relnamespace WHERE NOT t.tgisinternal "
-                "AND n.nspname = current_schema() AND (%s::text IS NULL OR c.relname = %s)"
-                .replace("%s", "?"), (table, table))}
+        return {row[0] for row in self.execute(
+            "SELECT t.tgname FROM pg_trigger t JOIN pg_class c ON c.oid = t.tgrelid "
+            "JOIN pg_namespace n ON n.oid = c.relnamespace WHERE NOT t.tgisinternal "
+            "AND n.nspname = current_schema() AND (?::text IS NULL OR c.relname = ?)",
+            (table, table))}
 
     def hypothetical_plan(self, sql: str, extra: dict[str, str],
                           without: Iterable[str] = ()) -> list[str] | None:
@@ -1149,27 +1158,22 @@ class PgDatabase:
 
     def index_names(self, table: str) -> set[str]:
         """Names of the indexes of ``table`` in the store's schema."""
-        with self.lock:
-            return {row[0] for row in self.conn.execute(
-                "SELECT indexname FROM pg_indexes WHERE schemaname = current_schema() "
-                "AND tablename = ?", (table,))}
+        return {row[0] for row in self.execute(
+            "SELECT indexname FROM pg_indexes WHERE schemaname = current_schema() "
+            "AND tablename = ?", (table,))}
 
     def object_names(self) -> set[str]:
         """Lower-cased names of the tables, views, indexes and sequences of the schema."""
-        with self.lock:
-            return {row[0].lower() for row in self.conn.execute(
-                "SELECT c.relname FROM pg_class c JOIN pg_namespace n ON n.oid = c.relnamespace "
-                "WHERE n.nspname = current_schema()")}
+        return {row[0].lower() for row in self.execute(
+            "SELECT c.relname FROM pg_class c JOIN pg_namespace n ON n.oid = c.relnamespace "
+            "WHERE n.nspname = current_schema()")}
 
     def view_statements(self, names: Iterable[str]) -> dict[str, str]:
         """``{view name: the statement that creates it}`` of the named views of the schema."""
-        wanted = list(names)
-        with self.lock:
-            rows = self.conn.execute(
-                "SELECT viewname, definition FROM pg_views WHERE schemaname = current_schema()")
-            found = {name: select for name, select in rows}
+        found = dict(self.execute(
+            "SELECT viewname, definition FROM pg_views WHERE schemaname = current_schema()"))
         return {name: f"CREATE VIEW {quote_identifier(name)} AS {found[name]}"
-                for name in wanted if name in found}
+                for name in names if name in found}
 
     max_columns = 1600
 
@@ -1195,6 +1199,17 @@ class PgDatabase:
     def check_open(self) -> None:
         if self.closed:
             raise SLRError("the event store is closed")
+
+    def read_error(self, exc: BaseException) -> SLRError:
+        """The SLRError of a read of this connection that failed with ``exc`` (what the
+        store's reading connections say, :class:`PgReadConnection`)."""
+        return _read_error(exc, self.path)
+
+    def failure(self, exc: BaseException) -> BaseException:
+        """What a statement that failed with ``exc`` raises (see ``Database.failure``):
+        ``exc`` itself, as the connection said it -- the server's conditions in words
+        already (:func:`_error`), a statement's own error a :class:`PgStatementError`."""
+        return exc
 
     # ------------------------------------------------------------------ transactions
 
@@ -1426,6 +1441,7 @@ class PgDatabase:
 
     def changes(self) -> int:
         with self.lock:
+            self.check_open()
             return max(0, self.conn.last_rowcount)
 
     def query_plan(self, sql: str) -> list[str]:

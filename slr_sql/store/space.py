@@ -39,8 +39,8 @@ class Space:
             self.db.check_open()
             out = {}
             for key, table in sorted(self.tables.event_types().items()):
-                out[key] = self.db.conn.execute(
-                    f"SELECT count(*) FROM {quote_identifier(table)}").fetchone()[0]
+                out[key] = self.db.execute(
+                    f"SELECT count(*) FROM {quote_identifier(table)}")[0][0]
             return out
 
     def space_stats(self) -> dict[str, Any]:
@@ -53,10 +53,10 @@ class Space:
         path = self.db.path
         with self.db.lock:
             self.db.check_open()
-            conn = self.db.conn
-            page_size = conn.execute("PRAGMA page_size").fetchone()[0]
-            page_count = conn.execute("PRAGMA page_count").fetchone()[0]
-            free = conn.execute("PRAGMA freelist_count").fetchone()[0]
+            execute = self.db.execute
+            page_size = execute("PRAGMA page_size")[0][0]
+            page_count = execute("PRAGMA page_count")[0][0]
+            free = execute("PRAGMA freelist_count")[0][0]
         file_bytes = wal_bytes = 0
         if path is not None:
             try:
@@ -89,25 +89,24 @@ class Space:
             return 0
         with self.db.lock:
             self.db.check_open()
-            conn = self.db.conn
+            execute = self.db.execute
             # (after most adds the free list is short: one read decides)
-            free = conn.execute("PRAGMA freelist_count").fetchone()[0]
+            free = execute("PRAGMA freelist_count")[0][0]
             if free <= min_free_pages:
                 return 0
-            page_count = conn.execute("PRAGMA page_count").fetchone()[0]
+            page_count = execute("PRAGMA page_count")[0][0]
             if free < min_free_fraction * page_count:
                 return 0
             release = free - int(keep_fraction * page_count)
             if release <= 0:
                 return 0
             with self.db.transaction(wait):
-                # Python's sqlite3 steps this PRAGMA once (it returns no rows), and each
-                # step gives back one page: one execution per page (~15 µs each)
+                # each execution gives back one page (~15 µs each)
                 for _ in range(int(release)):
-                    conn.execute("PRAGMA incremental_vacuum(1)")
-            after = conn.execute("PRAGMA freelist_count").fetchone()[0]
+                    execute("PRAGMA incremental_vacuum(1)")
+            after = execute("PRAGMA freelist_count")[0][0]
             if not self.db.tx_depth:
-                conn.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchall()
+                execute("PRAGMA wal_checkpoint(PASSIVE)")
             return max(free - after, 0)
 
     def limit_wal(self, max_bytes: int = 64 * 1024 * 1024) -> None:
@@ -121,7 +120,7 @@ class Space:
             return
         with self.db.lock:
             self.db.check_open()
-            self.db.conn.execute(f"PRAGMA journal_size_limit = {int(max_bytes)}").fetchall()
+            self.db.execute(f"PRAGMA journal_size_limit = {int(max_bytes)}")
 
 
 class ServerSpace(Space):
@@ -132,11 +131,11 @@ class ServerSpace(Space):
     def space_stats(self) -> dict[str, Any]:
         with self.db.lock:
             self.db.check_open()
-            size = self.db.conn.execute(
+            [size] = self.db.execute(
                 "SELECT coalesce(sum(pg_total_relation_size(c.oid)), 0)::bigint, "
                 "current_setting('block_size')::int FROM pg_class c JOIN pg_namespace n "
                 "ON n.oid = c.relnamespace WHERE n.nspname = current_schema() "
-                "AND c.relkind IN ('r', 'm')").fetchone()
+                "AND c.relkind IN ('r', 'm')")
         file_bytes, page_size = int(size[0]), int(size[1])
         return {"page_size": page_size, "page_count": file_bytes // page_size,
                 "free_pages": 0, "file_bytes": file_bytes, "wal_bytes": 0}

@@ -214,8 +214,12 @@ def _refused_for_good(exc: BaseException) -> bool:
     that may pass (busy, the disk full, the server short of resources or gone)."""
     if isinstance(exc, SLRUnavailable):
         return False
+    # (SQLite's own errors carry their code; the SLRError Database.failure said one in
+    # words is raised while handling it)
     code = getattr(exc, "sqlite_errorcode", None)
-    if code is not None:   # (SQLite's own errors carry their code)
+    if code is None and isinstance(exc, SLRError):
+        code = getattr(exc.__context__, "sqlite_errorcode", None)
+    if code is not None:
         return code & 0xFF in _REFUSED_FOR_GOOD
     # a server's refusal (PgStatementError: not the table's owner) or a read-only SLRError
     return True
@@ -285,7 +289,7 @@ class EventTables:
         types: dict[tuple[str, int], EventType] = {}
         declared: dict[str, set[int]] = {}
         if not self.db.closed:
-            for name, arity, table, is_declared in self.db.conn.execute(
+            for name, arity, table, is_declared in self.db.execute(
                     "SELECT name, arity, table_name, declared FROM slr_event_types"):
                 types[(name, arity)] = EventType(name, arity, table, bool(is_declared),
                                                  True if (name, arity, table) in known else None)
@@ -301,10 +305,11 @@ class EventTables:
             return None   # a name this database cannot hold was never stored
         if event_type is None:
             # another connection (process) may have created it since we last looked
-            row = self.db.conn.execute(
+            rows = self.db.execute(
                 "SELECT table_name, declared FROM slr_event_types WHERE name = ? AND arity = ?",
-                (str(name), arity)).fetchone()
-            if row is not None:
+                (str(name), arity))
+            if rows:
+                row = rows[0]
                 event_type = EventType(str(name), arity, row[0], bool(row[1]))
                 self.types[(str(name), arity)] = event_type
                 if row[1]:
@@ -348,8 +353,8 @@ class EventTables:
             existing = self.lookup(name, arity)
         if existing is not None:
             if declared and not existing.declared:
-                self.db.conn.execute("UPDATE slr_event_types SET declared = 1 "
-                                     "WHERE name = ? AND arity = ?", (name, arity))
+                self.db.execute("UPDATE slr_event_types SET declared = 1 "
+                                "WHERE name = ? AND arity = ?", (name, arity))
                 existing.declared = True
                 self.declared_arities.setdefault(name, set()).add(arity)
             return existing
@@ -359,19 +364,19 @@ class EventTables:
         # arg columns have no declared type on SQLite: it keeps INTEGER / REAL / TEXT as given
         # (PostgreSQL: TEXT spelling the type, see store/dialect.py)
         arg_columns = "".join(f", arg{i}{dialect.value}" for i in range(1, arity + 1))
-        conn = self.db.conn
+        execute = self.db.execute
         real = dialect.real
-        conn.execute(f"CREATE TABLE {event_type.quoted} (seq {dialect.sequence_key}{arg_columns}, "
-                     f"t_start {real} NOT NULL, t_end {real} NOT NULL, arrival {real} NOT NULL, "
-                     "robot TEXT)")
-        conn.execute(f"CREATE INDEX {event_type.index_end} ON {event_type.quoted} (t_end, t_start)")
+        execute(f"CREATE TABLE {event_type.quoted} (seq {dialect.sequence_key}{arg_columns}, "
+                f"t_start {real} NOT NULL, t_end {real} NOT NULL, arrival {real} NOT NULL, "
+                "robot TEXT)")
+        execute(f"CREATE INDEX {event_type.index_end} ON {event_type.quoted} (t_end, t_start)")
         if arity >= 1:
-            conn.execute(f"CREATE INDEX {event_type.index_arg1_end} ON {event_type.quoted} "
-                         "(arg1, t_end, t_start)")
+            execute(f"CREATE INDEX {event_type.index_arg1_end} ON {event_type.quoted} "
+                    "(arg1, t_end, t_start)")
         if start_order:
             self._create_start_indexes(event_type)
-        conn.execute("INSERT INTO slr_event_types (name, arity, table_name, declared) "
-                     "VALUES (?, ?, ?, ?)", (name, arity, table, int(declared)))
+        execute("INSERT INTO slr_event_types (name, arity, table_name, declared) "
+                "VALUES (?, ?, ?, ?)", (name, arity, table, int(declared)))
         self.types[(name, arity)] = event_type
         if declared:
             self.declared_arities.setdefault(name, set()).add(arity)
@@ -381,7 +386,7 @@ class EventTables:
 
     def _create_start_indexes(self, event_type: EventType) -> None:
         for statement in event_type.start_index_statements().values():
-            self.db.conn.execute(statement)
+            self.db.execute(statement)
 
     def ensure_start_order(self, event_type: EventType) -> bool:
         """Whether ``event_type``'s start-ordered indexes exist, building them first when
