@@ -42,10 +42,11 @@ from .analysis import GoalSet, goal_set
 from .answers import answer_bindings
 from .clocks import (DEFAULT_MAX_LEARNED_DELAY, LearnedDelayNotWrittenWarning,
                      LearnedDelayWarning, ManualClock, StreamClock)
-from .errors import EventRejected, SLRError, SLRTimeout, SLRUnavailable
+from .errors import EventRejected, SLRError, SLRTimeout, SLRUnavailable, log_failure
 from .lockorder import ordered_lock
 from .host import Host
 from .plans import instantiate
+from .store import DatabaseError, store_error
 from .store.checks import BadEvent, check_times
 from .terms import Atom, Struct, Var, deref
 
@@ -757,8 +758,20 @@ class Synchronizer:
         version = self._read_data_version()
         if version is None or version == self._data_version:
             return []
+        try:
+            released = self._reread()
+        except (SLRError, DatabaseError) as exc:
+            # (the store busy or damaged, its tables changed under it by another process:
+            # the timer thread has no caller to raise to, serves every later timer, and
+            # reads again at the next poll)
+            if isinstance(exc, DatabaseError):
+                exc = store_error(exc, getattr(self.store, "path", None),
+                                  outcome="nothing was read")
+            log_failure(log, "re-reading what other processes wrote to the store", exc,
+                        then="read again at the next poll")
+            return []
         self._data_version = version
-        return self._reread()
+        return released
 
     def _reread(self) -> list:
         tracker = self.tracker
