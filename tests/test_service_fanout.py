@@ -10,6 +10,7 @@ import contextlib
 import itertools
 import json
 import math
+import time
 
 import pytest
 from hypothesis import given, settings
@@ -18,6 +19,7 @@ from websockets.sync.client import connect as ws_connect
 
 import slr_sql
 from slr_sql import ManualClock, SLRError
+from slr_sql.subscriptions import SubscriptionState
 from slr_sql.service.app import _AnswerTexts
 from slr_sql.service.encoding import dumps, loads
 
@@ -188,7 +190,10 @@ def test_take_answers_says_take_again_when_the_end_is_behind_and_a_close_meanwhi
     sub = kb.subscribe("p(X)^T", since=0, until=3)
     kb.add_many(["p(1)^1", "p(2)^2"])
     kb.mark_complete("p/1", 3)
-    drained(kb)
+    deadline = time.monotonic() + DEADLINE
+    while sub.state is not SubscriptionState.ENDED:      # the end queued behind the answers
+        assert time.monotonic() < deadline
+        drained(kb)
     loop = asyncio.new_event_loop()
     try:
         waker = (loop, _Marker())
