@@ -11,6 +11,8 @@ draws the same examples as before.
 >>> from hypothesis import strategies as st
 >>> sampled(["a", "b"]) is sampled(["a", "b"]), sampled([0.0]) is sampled([-0.0])
 (True, False)
+>>> sampled(("a", "b")) is sampled(["a", "b"])
+False
 >>> integers(0, 3) is integers(0, 3)
 True
 """
@@ -33,11 +35,15 @@ def once(key: Any, build: Callable[[], Any]) -> Any:
     return strategy
 
 
-def sampled(options: list) -> Any:
-    """``st.sampled_from(options)`` (a list), built once per distinct ``options``: told apart
-    by type and repr, so that 0.0 and -0.0, or 1 and 1.0, stay different options."""
-    return once(("sampled", tuple((type(o), repr(o)) for o in options)),
-                lambda: st.sampled_from(list(options)))
+def sampled(options: list | tuple) -> Any:
+    """``st.sampled_from(options)``, built once per distinct ``options`` (a list or a tuple,
+    built from a copy of the same type; anything else is built at each call): the options
+    told apart by type and repr, so that 0.0 and -0.0, or 1 and 1.0, stay different."""
+    kind = type(options)
+    if kind is not list and kind is not tuple:
+        return st.sampled_from(options)
+    return once(("sampled", kind, tuple((type(o), repr(o)) for o in options)),
+                lambda: st.sampled_from(kind(options)))
 
 
 def integers(low: int, high: int) -> Any:
