@@ -27,6 +27,13 @@ settings.load_profile(__import__("os").environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
 def pytest_configure(config):
+    # pytest rewrites each test module's asserts when it imports it (~5 s of CPU for the
+    # suite's modules in each xdist worker) and keeps the rewritten code in __pycache__, but
+    # not with PYTHONDONTWRITEBYTECODE set (as in this project's sandboxes), so that every
+    # worker of every run rewrote every module. Written, the workers of a run share the
+    # work (one reads what the other wrote: pytest writes each file whole, with a rename)
+    # and a later run in the same checkout rewrites only what changed.
+    sys.dont_write_bytecode = False
     # The suite starts Python hundreds of times (the CLI, servers, crash tests): each
     # imports slr_sql, and with PYTHONDONTWRITEBYTECODE set (as in this project's sandboxes)
     # each compiled the whole package from source again, 0.3-0.9 s a process. The package
