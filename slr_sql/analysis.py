@@ -307,9 +307,6 @@ class Analysis:
         return out
 
 
-_CACHE: "weakref.WeakKeyDictionary[Program, Analysis]" = weakref.WeakKeyDictionary()
-
-
 class _LibraryPart:
     """The library's own part of every program's graph (its clauses analysed with no user
     program), and ``visited``: every (name, arity) its clauses call."""
@@ -338,16 +335,17 @@ def _library_part(library: Program) -> _LibraryPart:
 
 def analyze(program: Program, library: Program | None = None) -> Analysis:
     """The (cached) :class:`Analysis` of ``program``. Programs are replaced, not mutated, on
-    load (``KnowledgeBase.load`` builds a new Program), so the cache is keyed by the object.
+    load (``KnowledgeBase.load`` builds a new Program), so the cache is kept on the object
+    (``program.analysis_cache``) and goes with it.
 
-    >>> a = analyze(Program()); ("maplist", 2) in a.meta
-    True
+    >>> p = Program(); a = analyze(p); ("maplist", 2) in a.meta, analyze(p) is a
+    (True, True)
     """
     if library is not None:
         return Analysis(program, library)
-    a = _CACHE.get(program)
+    a = program.analysis_cache
     if a is None:
-        a = _CACHE[program] = Analysis(program)
+        a = program.analysis_cache = Analysis(program)
     return a
 
 

@@ -305,6 +305,10 @@ class Program:
         self.temporal: dict[tuple[str, int], Predicate] = {}
         self.dynamic: set[tuple[str, int]] = set()
         self.clauses: list[Clause] = []
+        # analysis.analyze's result for this program, kept here so that it goes with the
+        # program (an analysis refers to its program: a cache keyed weakly by the program
+        # kept both alive for as long as the process)
+        self.analysis_cache: Any = None
 
     def copy(self) -> "Program":
         p = Program()

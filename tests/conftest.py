@@ -26,6 +26,22 @@ settings.register_profile("explore", deadline=None)
 settings.load_profile(__import__("os").environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
+@pytest.hookimpl(hookwrapper=True)
+def pytest_collection(session):
+    # pytest rewrites each test module's asserts when it imports it (~5 s of CPU for the
+    # suite's modules in each xdist worker) and keeps the rewritten code in __pycache__, but
+    # not with PYTHONDONTWRITEBYTECODE set (as in this project's sandboxes): every run
+    # rewrote every module again. Written (during the collection only, which imports the
+    # test modules), a later run in the same checkout rewrites only what changed; pytest
+    # writes each file whole, with a rename, so two workers may write the same one.
+    before = sys.dont_write_bytecode
+    sys.dont_write_bytecode = False
+    try:
+        yield
+    finally:
+        sys.dont_write_bytecode = before
+
+
 def pytest_configure(config):
     # The suite starts Python hundreds of times (the CLI, servers, crash tests): each
     # imports slr_sql, and with PYTHONDONTWRITEBYTECODE set (as in this project's sandboxes)

@@ -144,3 +144,28 @@ def test_a_programs_analysis_does_not_change_the_next_ones():
     second = analyze(program("x."))
     assert Node("pred", "w", 2) not in second.edges[Node("pred", "maplist", 2)]
     assert ("p", 1) not in second.meta
+
+
+def test_a_programs_analysis_goes_with_the_program():
+    """analyze() caches its result: a cache that held the analysis (which refers to its
+    program) kept every program analysed since the process started alive, and a server that
+    loads program after program, or the suite's workers, grew without end."""
+    import gc
+    import weakref
+
+    import slr_sql
+
+    p = program("p(X) :- q(X)^T, X > 1.")
+    a = analyze(p)
+    assert analyze(p) is a                       # cached
+    gone = weakref.ref(p), weakref.ref(a)
+    del p, a
+    gc.collect()
+    assert [ref() for ref in gone] == [None, None]
+    with slr_sql.open() as kb:                   # a store's programs, loaded and replaced
+        kb.load("r(X) :- s(X).\ns(1).")
+        assert kb.query("r(X)") == [{"X": 1}]
+        held = weakref.ref(kb.engine.program)
+        kb.load("t(2).")
+    gc.collect()
+    assert held() is None

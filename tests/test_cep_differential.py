@@ -22,6 +22,7 @@ from __future__ import annotations
 import itertools
 
 from hypothesis import HealthCheck, example, given, settings, strategies as st
+from strategy_helpers import BOOLEANS, integers, sampled
 
 import slr_sql
 from slr_sql import ManualClock
@@ -286,20 +287,20 @@ arg = st.sampled_from(["X", "X", "Y", "_", 0, 1, -0.0])
 
 @st.composite
 def leaves(draw):
-    name = draw(st.sampled_from(["a", "a", "b", "b", "d"]))
+    name = draw(sampled(["a", "a", "b", "b", "d"]))
     return ("leaf", name, tuple(draw(arg) for _ in range(TYPES[name])))
 
 
 @st.composite
 def patterns(draw, depth=2, allow_or=True):
-    if depth == 0 or draw(st.integers(0, 3)) == 0:
+    if depth == 0 or draw(integers(0, 3)) == 0:
         return draw(leaves())
     ops = BINARY + (["or"] if allow_or else [])
-    op = draw(st.sampled_from(ops))
+    op = draw(sampled(ops))
     left = draw(patterns(depth=depth - 1, allow_or=allow_or))
-    if depth == 2 and draw(st.integers(0, 3)) == 0:
+    if depth == 2 and draw(integers(0, 3)) == 0:
         # a cnot on the left part only, its variable maybe bound only by the right part
-        left = ("cnot", left, ("leaf", "c", (draw(st.sampled_from(["X", "Y", "_", 1])),)))
+        left = ("cnot", left, ("leaf", "c", (draw(sampled(["X", "Y", "_", 1])),)))
     return (op, left, draw(patterns(depth=depth - 1, allow_or=allow_or)))
 
 
@@ -315,34 +316,34 @@ def _vars(tree):
 
 @st.composite
 def rules(draw):
-    policy = draw(st.sampled_from(["unrestricted", "unrestricted", "recent", "chronological"]))
+    policy = draw(sampled(["unrestricted", "unrestricted", "recent", "chronological"]))
     pattern = draw(patterns(allow_or=policy == "unrestricted"))
     if pattern[0] == "leaf":
         pattern = ("seq", pattern, draw(leaves()))
     bound = sorted(_vars(pattern))
-    head = [v for v in bound if draw(st.booleans())]
+    head = [v for v in bound if draw(BOOLEANS)]
     where = []
-    if bound and draw(st.booleans()):
-        v = draw(st.sampled_from(bound))
-        other = draw(st.sampled_from(bound + [0, 1]))
-        where.append((draw(st.sampled_from(["<", ">", "=<", ">="])), v, other))
+    if bound and draw(BOOLEANS):
+        v = draw(sampled(bound))
+        other = draw(sampled(bound + [0, 1]))
+        where.append((draw(sampled(["<", ">", "=<", ">="])), v, other))
     cnot = None
-    if draw(st.integers(0, 3)) == 0:
-        cnot = ("c", (draw(st.sampled_from(bound + ["_"])),))
-    within = draw(st.sampled_from([None, None, 2, 4]))
+    if draw(integers(0, 3)) == 0:
+        cnot = ("c", (draw(sampled(bound + ["_"])),))
+    within = draw(sampled([None, None, 2, 4]))
     return {"pattern": pattern, "head": head, "where": where, "cnot": cnot,
             "within": within, "policy": policy}
 
 
 @st.composite
 def streams(draw):
-    n = draw(st.integers(1, 9))
+    n = draw(integers(1, 9))
     out = []
     for _ in range(n):
-        name = draw(st.sampled_from(["a", "b", "c", "d"]))
-        args = tuple(draw(st.sampled_from([0, 1, 1.0, 0.0, -0.0])) for _ in range(TYPES[name]))
-        s = float(draw(st.integers(0, 6)))
-        e = s + float(draw(st.sampled_from([0, 0, 1, 2])))
+        name = draw(sampled(["a", "b", "c", "d"]))
+        args = tuple(draw(sampled([0, 1, 1.0, 0.0, -0.0])) for _ in range(TYPES[name]))
+        s = float(draw(integers(0, 6)))
+        e = s + float(draw(sampled([0, 0, 1, 2])))
         out.append((name, args, s, e))
     return out
 
@@ -437,24 +438,24 @@ def test_any_arrival_order_gives_the_in_order_complex_events(rule, events, data)
 @st.composite
 def two_type_rules(draw):
     """A rule over a/1 and b/1 (the buffered types of the test below), any policy."""
-    left = ("leaf", "a", (draw(st.sampled_from(["X", "_", 1])),))
-    right = ("leaf", "b", (draw(st.sampled_from(["X", "X", "_"])),))
-    if draw(st.booleans()):
+    left = ("leaf", "a", (draw(sampled(["X", "_", 1])),))
+    right = ("leaf", "b", (draw(sampled(["X", "X", "_"])),))
+    if draw(BOOLEANS):
         left, right = right, left
-    pattern = (draw(st.sampled_from(["seq", "seq", "and", "par", "during"])), left, right)
+    pattern = (draw(sampled(["seq", "seq", "and", "par", "during"])), left, right)
     return {"pattern": pattern, "head": sorted(_vars(pattern)), "where": [], "cnot": None,
-            "within": draw(st.sampled_from([None, None, 3])),
-            "policy": draw(st.sampled_from(["unrestricted", "unrestricted", "recent",
+            "within": draw(sampled([None, None, 3])),
+            "policy": draw(sampled(["unrestricted", "unrestricted", "recent",
                                             "chronological"]))}
 
 
 @st.composite
 def ab_points(draw):
     out = []
-    for _ in range(draw(st.integers(3, 9))):
-        s = float(draw(st.integers(0, 6)))
-        out.append((draw(st.sampled_from(["a", "b"])), (draw(st.sampled_from([0, 1])),),
-                    s, s + float(draw(st.sampled_from([0, 0, 1])))))
+    for _ in range(draw(integers(3, 9))):
+        s = float(draw(integers(0, 6)))
+        out.append((draw(sampled(["a", "b"])), (draw(sampled([0, 1])),),
+                    s, s + float(draw(sampled([0, 0, 1])))))
     return out
 
 
@@ -490,18 +491,18 @@ def test_the_issue_example_batch_and_one_by_one():
 def where_rules(draw):
     """Two or three atoms over a/1 and b/1 with distinct variables, compared in the where
     goal through rules (decided per candidate in Python)."""
-    names = [draw(st.sampled_from(["a", "b"])) for _ in range(draw(st.integers(2, 3)))]
+    names = [draw(sampled(["a", "b"])) for _ in range(draw(integers(2, 3)))]
     leaves_ = [("leaf", name, (var,)) for name, var in zip(names, ["X", "Y", "Z"])]
     pattern = leaves_[0]
     for leaf in leaves_[1:]:
-        pattern = (draw(st.sampled_from(["seq", "and", "seq", "during", "par"])), pattern, leaf)
+        pattern = (draw(sampled(["seq", "and", "seq", "during", "par"])), pattern, leaf)
     bound = sorted(_vars(pattern))
-    where = [(draw(st.sampled_from(["<", ">", "=<", ">="])), draw(st.sampled_from(bound)),
-              draw(st.sampled_from(bound + [1])))
-             for _ in range(draw(st.integers(1, 2)))]
-    return {"pattern": pattern, "head": [v for v in bound if draw(st.booleans())],
-            "where": where, "cnot": None, "within": draw(st.sampled_from([None, 3])),
-            "policy": draw(st.sampled_from(["recent", "recent", "unrestricted",
+    where = [(draw(sampled(["<", ">", "=<", ">="])), draw(sampled(bound)),
+              draw(sampled(bound + [1])))
+             for _ in range(draw(integers(1, 2)))]
+    return {"pattern": pattern, "head": [v for v in bound if draw(BOOLEANS)],
+            "where": where, "cnot": None, "within": draw(sampled([None, 3])),
+            "policy": draw(sampled(["recent", "recent", "unrestricted",
                                             "chronological"])),
             "interpret": True}
 
@@ -509,10 +510,10 @@ def where_rules(draw):
 @st.composite
 def ab_streams(draw):
     out = []
-    for _ in range(draw(st.integers(2, 10))):
-        s = float(draw(st.integers(0, 6)))
-        out.append((draw(st.sampled_from(["a", "b"])), (draw(st.sampled_from([0, 1, 2, 1.0])),),
-                    s, s + float(draw(st.sampled_from([0, 0, 1, 3])))))
+    for _ in range(draw(integers(2, 10))):
+        s = float(draw(integers(0, 6)))
+        out.append((draw(sampled(["a", "b"])), (draw(sampled([0, 1, 2, 1.0])),),
+                    s, s + float(draw(sampled([0, 0, 1, 3])))))
     return out
 
 
@@ -530,24 +531,24 @@ def arith_rules(draw):
     """Two or three atoms over a/1 and b/1 with distinct variables and where goals of + and -
     (pushed into SQL: ``Z - X =< C`` also bounds X's row, and under recent the middle
     partner is then searched from X's few rows)."""
-    names = [draw(st.sampled_from(["a", "b"])) for _ in range(draw(st.integers(2, 3)))]
+    names = [draw(sampled(["a", "b"])) for _ in range(draw(integers(2, 3)))]
     variables = ["X", "Y", "Z"][:len(names)]
     pattern = ("leaf", names[0], ("X",))
     for name, var in zip(names[1:], variables[1:]):
-        pattern = (draw(st.sampled_from(["seq", "seq", "and", "during"])), pattern,
+        pattern = (draw(sampled(["seq", "seq", "and", "during"])), pattern,
                    ("leaf", name, (var,)))
     constant = st.sampled_from([0, 1, 2, -1, 1.5])
-    first = (variables[-1], "X") if draw(st.booleans()) else ("X", variables[-1])
-    where = [(draw(st.sampled_from(["=<", "<"])), ("-",) + first, draw(constant))]
-    if draw(st.booleans()):
-        where = [(draw(st.sampled_from([">=", ">"])), draw(constant), ("-",) + first)]
-    if draw(st.booleans()):
-        x, y = draw(st.sampled_from(variables)), draw(st.sampled_from(variables + [1]))
-        where.append((draw(st.sampled_from(["<", ">", "=<", ">=", "=:=", "=\\="])),
-                      (draw(st.sampled_from(["+", "-"])), x, y), draw(constant)))
-    return {"pattern": pattern, "head": [v for v in variables if draw(st.booleans())],
-            "where": where, "cnot": None, "within": draw(st.sampled_from([None, None, 3])),
-            "policy": draw(st.sampled_from(["recent", "recent", "unrestricted",
+    first = (variables[-1], "X") if draw(BOOLEANS) else ("X", variables[-1])
+    where = [(draw(sampled(["=<", "<"])), ("-",) + first, draw(constant))]
+    if draw(BOOLEANS):
+        where = [(draw(sampled([">=", ">"])), draw(constant), ("-",) + first)]
+    if draw(BOOLEANS):
+        x, y = draw(sampled(variables)), draw(sampled(variables + [1]))
+        where.append((draw(sampled(["<", ">", "=<", ">=", "=:=", "=\\="])),
+                      (draw(sampled(["+", "-"])), x, y), draw(constant)))
+    return {"pattern": pattern, "head": [v for v in variables if draw(BOOLEANS)],
+            "where": where, "cnot": None, "within": draw(sampled([None, None, 3])),
+            "policy": draw(sampled(["recent", "recent", "unrestricted",
                                             "chronological"]))}
 
 
@@ -555,11 +556,11 @@ def arith_rules(draw):
 def arith_streams(draw):
     # 2**60: beyond the range SQL computes exactly (the Python fallback decides)
     out = []
-    for _ in range(draw(st.integers(2, 10))):
-        s = float(draw(st.integers(0, 6)))
-        value = draw(st.sampled_from([0, 1, 2, 3, 1.0, 2.5, 2 ** 60, -(2 ** 60)]))
-        out.append((draw(st.sampled_from(["a", "b"])), (value,),
-                    s, s + float(draw(st.sampled_from([0, 0, 1, 3])))))
+    for _ in range(draw(integers(2, 10))):
+        s = float(draw(integers(0, 6)))
+        value = draw(sampled([0, 1, 2, 3, 1.0, 2.5, 2 ** 60, -(2 ** 60)]))
+        out.append((draw(sampled(["a", "b"])), (value,),
+                    s, s + float(draw(sampled([0, 0, 1, 3])))))
     return out
 
 
@@ -636,15 +637,15 @@ _number = st.one_of(st.integers(-3, 3), st.floats(-10, 10).map(lambda x: round(x
 
 @st.composite
 def _vector(draw, n):
-    if draw(st.integers(0, 9)) == 0:   # not a plain vector: the terms' path decides
-        return draw(st.sampled_from(["cup", "[a, 1, 2]", "[1, 2]", "p(1, 2, 3)"]))
+    if draw(integers(0, 9)) == 0:   # not a plain vector: the terms' path decides
+        return draw(sampled(["cup", "[a, 1, 2]", "[1, 2]", "p(1, 2, 3)"]))
     return "[" + ", ".join(repr(draw(_number)) for _ in range(n)) + "]"
 
 
 @st.composite
 def _pose(draw):
-    if draw(st.integers(0, 9)) == 0:
-        return draw(st.sampled_from(["pose([1, 2], [0, 0, 0, 1])", "pose([0, 0, 0], [0, 0, 0, 0])",
+    if draw(integers(0, 9)) == 0:
+        return draw(sampled(["pose([1, 2], [0, 0, 0, 1])", "pose([0, 0, 0], [0, 0, 0, 0])",
                                      "[1, 2, 3]", "q(1)"]))
     return f"pose({draw(_vector(3))}, {draw(_vector(4))})"
 

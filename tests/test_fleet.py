@@ -1030,15 +1030,19 @@ def test_a_lock_holder_that_is_no_writer_of_events_delays_the_push_and_loses_not
 
 
 def test_a_following_pusher_says_the_robot_store_waits_not_that_the_fleet_is_down(
-        postgres_url, tmp_path):
+        postgres_url, tmp_path, monkeypatch):
     """A writer in flight past the robot store's busy timeout ends a following pusher's round
     with SLRBusy: the pusher says so once, as the robot's store's condition (the fleet is
     reachable, no outage, its connection kept), retries, and ships everything once the
     writer is done."""
+    import functools
     import threading
 
     import psycopg
 
+    # the pusher opens the robot's store with a busy timeout of 0.5 s, not the default 5 s
+    # that this test would otherwise wait out in full before the pusher says anything
+    monkeypatch.setattr(fleet, "EventStore", functools.partial(fleet.EventStore, busy_timeout=0.5))
     fleet_db, url = tmp_path / "fleet.db", with_schema(postgres_url, "busy_follow")
     opened(fleet_db).close()
     with opened(url, robot="r1") as kb:

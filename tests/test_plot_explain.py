@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from matplotlib.colors import to_rgb
+from conftest import copy_of_store
 from test_cli import slr
 from test_plot import blue, inside_columns, pixel, render, row_band, runs
 
@@ -141,20 +142,26 @@ def test_a_rules_answers_over_time_are_a_row_of_colored_runs(kb, tmp_path):
     assert fig.axes[0].get_yticklabels()[1].get_text() == "location(cup1, L)^T"
 
 
+@pytest.fixture(scope="module")
+def moved_store(tmp_path_factory):
+    """A store holding one event, made once for the module by ``slr add`` (a process)."""
+    db = tmp_path_factory.mktemp("moved") / "robot.db"
+    assert slr("add", str(db), "move(r1)^[2, 8]").returncode == 0
+    return db
+
+
 @pytest.mark.parametrize("suffix, magic", [(".png", b"\x89PNG"), (".jpg", b"\xff\xd8\xff"),
                                            (".svg", b"<?xml"), (".pdf", b"%PDF")])
-def test_the_suffix_says_the_format(tmp_path, suffix, magic):
-    db = str(tmp_path / "robot.db")
-    assert slr("add", db, "move(r1)^[2, 8]").returncode == 0
+def test_the_suffix_says_the_format(tmp_path, moved_store, suffix, magic):
+    db = copy_of_store(moved_store, tmp_path)
     out = tmp_path / f"timeline{suffix}"
     r = slr("plot", db, "-o", str(out))
     assert r.returncode == 0, r.stderr
     assert out.read_bytes().startswith(magic)
 
 
-def test_an_unknown_suffix_is_refused_and_nothing_is_written(tmp_path):
-    db = str(tmp_path / "robot.db")
-    assert slr("add", db, "move(r1)^[2, 8]").returncode == 0
+def test_an_unknown_suffix_is_refused_and_nothing_is_written(tmp_path, moved_store):
+    db = copy_of_store(moved_store, tmp_path)
     r = slr("plot", db, "-o", str(tmp_path / "timeline.gif"))
     assert r.returncode == 1
     assert r.stderr.startswith("error: cannot write ") and ".gif names no image format" in r.stderr

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
+from strategy_helpers import BOOLEANS, integers, once, sampled
 
 import slr_sql
 from slr_sql.errors import SLREvaluationError, SLRError
@@ -55,38 +56,44 @@ TVARS = ["T", "S"]
 
 
 def o_arg(draw):
-    return draw(st.sampled_from(OVARS + OVARS + ATOMS + ["_"]))
+    return draw(sampled(OVARS + OVARS + ATOMS + ["_"]))
 
 
 def p_arg(draw):
-    return draw(st.sampled_from(PATTERNS + PVARS + ["_", "[x|y]", "g(x, 1)", "[]"]))
+    return draw(sampled(PATTERNS + PVARS + ["_", "[x|y]", "g(x, 1)", "[]"]))
 
 
 def n_arg(draw):
-    return draw(st.sampled_from(NVARS + NVARS + NUMS + ["_"] + ODD[:2]))
+    return draw(sampled(NVARS + NVARS + NUMS + ["_"] + ODD[:2]))
 
 
 def t_arg(draw):
     # integer times match the stored float times by value (``a(..)^2`` finds an event added
     # at 2.0); so do integers bound at run time (S, T from data arguments or arithmetic)
-    return draw(st.sampled_from(TVARS + ["_", "[S,T]", "[_,T]", "2.0", "1.5", "2", "1",
+    return draw(sampled(TVARS + ["_", "[S,T]", "[_,T]", "2.0", "1.5", "2", "1",
                                          "[1, T]", "[S, 2]"]))
 
 
 def num_expr(draw):
     # E (a part of a stored list/compound: often not a number) makes type errors, which
     # the compiled statement must raise even where the result is not used (State.checks)
-    a = draw(st.sampled_from(NVARS + TVARS + ["1", "2", "0.5", "E"]))
-    op = draw(st.sampled_from(["", "+ 1", "- 1", "* 2", "/ 2", "// 2", "mod 2", "+ 0.5"]))
+    a = draw(sampled(NVARS + TVARS + ["1", "2", "0.5", "E"]))
+    op = draw(sampled(["", "+ 1", "- 1", "* 2", "/ 2", "// 2", "mod 2", "+ 0.5"]))
     return f"{a} {op}".strip()
 
 
 def time_expr(draw):
-    return draw(st.sampled_from(TVARS + ["2", "1.5", "3.0", "inf", "T + 1", "S - 0.5"]))
+    return draw(sampled(TVARS + ["2", "1.5", "3.0", "inf", "T + 1", "S - 0.5"]))
+
+
+def goal(depth, rules, trules):
+    """A goal of at most ``depth`` nested levels (a strategy built once per distinct
+    arguments: tests/strategy_helpers.py)."""
+    return once(("goal", depth, tuple(rules), trules), lambda: _goal(depth, list(rules), trules))
 
 
 @st.composite
-def goal(draw, depth, rules, trules):
+def _goal(draw, depth, rules, trules):
     kinds = ["event", "event", "fact", "cmp", "eq", "is", "prev", "next", "pattern"]
     if rules:
         kinds += ["rule", "rule"]
@@ -95,43 +102,43 @@ def goal(draw, depth, rules, trules):
     if depth > 0:
         kinds += ["not", "or", "ite", "findall", "agg", "conj",
                   "not_or", "not_or", "not_ite", "not_not"]
-    kind = draw(st.sampled_from(kinds))
+    kind = draw(sampled(kinds))
     if kind == "event":
-        name = draw(st.sampled_from(["a", "a", "b"]))
+        name = draw(sampled(["a", "a", "b"]))
         if name == "a":
             return f"a({o_arg(draw)}, {n_arg(draw)})^{t_arg(draw)}"
         return f"b({o_arg(draw)})^{t_arg(draw)}"
     if kind == "pattern":
-        form = draw(st.sampled_from(["event", "event", "eq", "same"]))
+        form = draw(sampled(["event", "event", "eq", "same"]))
         if form == "event":
             return f"c({o_arg(draw)}, {p_arg(draw)})^{t_arg(draw)}"
         if form == "eq":
-            return f"V = {draw(st.sampled_from(V_PATTERNS))}"
-        return f"{draw(st.sampled_from(['E', 'F']))} {draw(st.sampled_from(['=', '==']))} " \
-               f"{draw(st.sampled_from(['E', 'F', 'x', '1', '[y|z]', '0.0']))}"
+            return f"V = {draw(sampled(V_PATTERNS))}"
+        return f"{draw(sampled(['E', 'F']))} {draw(sampled(['=', '==']))} " \
+               f"{draw(sampled(['E', 'F', 'x', '1', '[y|z]', '0.0']))}"
     if kind == "fact":
         return f"f({o_arg(draw)}, {n_arg(draw)})"
     if kind == "cmp":
-        op = draw(st.sampled_from(["<", ">", "=<", ">=", "=:=", "=\\="]))
+        op = draw(sampled(["<", ">", "=<", ">=", "=:=", "=\\="]))
         return f"{num_expr(draw)} {op} {num_expr(draw)}"
     if kind == "eq":
-        left = draw(st.sampled_from(OVARS + NVARS))
-        right = draw(st.sampled_from(OVARS + NVARS + ATOMS + NUMS + ODD))
-        op = draw(st.sampled_from(["=", "=", "\\==", "=="]))
+        left = draw(sampled(OVARS + NVARS))
+        right = draw(sampled(OVARS + NVARS + ATOMS + NUMS + ODD))
+        op = draw(sampled(["=", "=", "\\==", "=="]))
         return f"{left} {op} {right}"
     if kind == "is":
-        return f"{draw(st.sampled_from(NVARS))} is {num_expr(draw)}"
+        return f"{draw(sampled(NVARS))} is {num_expr(draw)}"
     if kind == "prev":
-        return f"prev(a({o_arg(draw)}, {n_arg(draw)})^{draw(st.sampled_from(['_Z', 'T', 'S', '2']))}, " \
-               f"{draw(st.sampled_from([time_expr(draw), '[' + time_expr(draw) + ', ' + time_expr(draw) + ']']))})"
+        return f"prev(a({o_arg(draw)}, {n_arg(draw)})^{draw(sampled(['_Z', 'T', 'S', '2']))}, " \
+               f"{draw(sampled([time_expr(draw), '[' + time_expr(draw) + ', ' + time_expr(draw) + ']']))})"
     if kind == "next":
-        return f"next(a({o_arg(draw)}, {n_arg(draw)})^{draw(st.sampled_from(['_Z', 'T', 'S', '[1, T]']))}, " \
+        return f"next(a({o_arg(draw)}, {n_arg(draw)})^{draw(sampled(['_Z', 'T', 'S', '[1, T]']))}, " \
                f"[{time_expr(draw)}, {time_expr(draw)}])"
     if kind == "rule":
-        name, arity = draw(st.sampled_from(rules))
+        name, arity = draw(sampled(rules))
         return f"{name}({o_arg(draw)}, {n_arg(draw)})"
     if kind == "trule":
-        return f"tr({o_arg(draw)})^{draw(st.sampled_from(TVARS + ['2.0', '_', '1']))}"
+        return f"tr({o_arg(draw)})^{draw(sampled(TVARS + ['2.0', '_', '1']))}"
     sub = lambda: draw(goal(depth - 1, rules, trules))  # noqa: E731
     if kind == "not":
         return f"\\+ ({sub()})"
@@ -142,7 +149,7 @@ def goal(draw, depth, rules, trules):
     if kind == "not_ite":
         return f"\\+ ({sub()} -> {sub()} ; {sub()})"
     if kind == "not_not":
-        return draw(st.sampled_from([f"\\+ \\+ ({sub()})", f"\\+ ({sub()}, \\+ {sub()})"]))
+        return draw(sampled([f"\\+ \\+ ({sub()})", f"\\+ ({sub()}, \\+ {sub()})"]))
     if kind == "or":
         return f"({sub()} ; {sub()})"
     if kind == "ite":
@@ -150,16 +157,22 @@ def goal(draw, depth, rules, trules):
     if kind == "conj":
         return f"({sub()}, {sub()})"
     if kind == "findall":
-        templ = draw(st.sampled_from(["O", "N", "O-N", "[O,T]", "x", "E"]))
+        templ = draw(sampled(["O", "N", "O-N", "[O,T]", "x", "E"]))
         return f"findall({templ}, ({sub()}), L)"
-    spec = draw(st.sampled_from(["count", "sum(N)", "max(N)", "min(T)", "bag(O)", "set(N)"]))
+    spec = draw(sampled(["count", "sum(N)", "max(N)", "min(T)", "bag(O)", "set(N)"]))
     return f"aggregate_all({spec}, ({sub()}), A)"
 
 
+def body(rules, trules, max_goals=3):
+    """A rule's or query's body (a strategy built once per distinct arguments)."""
+    return once(("body", tuple(rules), trules, max_goals),
+                lambda: _body(list(rules), trules, max_goals))
+
+
 @st.composite
-def body(draw, rules, trules, max_goals=3):
-    n = draw(st.integers(0, max_goals - 1))
-    first = draw(st.sampled_from(["a(O, N)^T", "a(O, N)^[S,T]", "f(O, N)", "b(O)^T, f(O, N)",
+def _body(draw, rules, trules, max_goals):
+    n = draw(integers(0, max_goals - 1))
+    first = draw(sampled(["a(O, N)^T", "a(O, N)^[S,T]", "f(O, N)", "b(O)^T, f(O, N)",
                                   "a(O, N)^T, f(P, M)", "c(O, V)^T", "c(O, [E|F])^T",
                                   # a time bound by data (an int, a float, an atom...) at run time
                                   "a(O, N)^N", "f(O, N), b(P)^N", "a(O, N)^[1, M]"]
@@ -170,43 +183,43 @@ def body(draw, rules, trules, max_goals=3):
 @st.composite
 def program(draw):
     lines = []
-    nfacts = draw(st.integers(0, 7))
+    nfacts = draw(integers(0, 7))
     for _ in range(nfacts):
-        lines.append(f"f({draw(st.sampled_from(ATOMS))}, {draw(st.sampled_from(NUMS + ODD[:2]))}).")
+        lines.append(f"f({draw(sampled(ATOMS))}, {draw(sampled(NUMS + ODD[:2]))}).")
     rules = []
-    for i in range(draw(st.integers(0, 3))):
+    for i in range(draw(integers(0, 3))):
         name = f"r{i}"
-        for _ in range(draw(st.integers(1, 2))):
-            head = f"{name}({draw(st.sampled_from(OVARS + ATOMS))}, {draw(st.sampled_from(NVARS + NUMS[:2]))})"
+        for _ in range(draw(integers(1, 2))):
+            head = f"{name}({draw(sampled(OVARS + ATOMS))}, {draw(sampled(NVARS + NUMS[:2]))})"
             lines.append(f"{head} :- {draw(body(rules, False, 2))}.")
         rules.append((name, 2))
-    trules = draw(st.booleans())
+    trules = draw(BOOLEANS)
     if trules:
         lines.append(f"tr(O)^T :- {draw(body(rules, False, 2))}.")
     events = []
-    for _ in range(draw(st.integers(0, 11))):
-        s = draw(st.sampled_from(TIMES))
-        e = draw(st.sampled_from([s, s, s + 0.5, s + 1.0]))
+    for _ in range(draw(integers(0, 11))):
+        s = draw(sampled(TIMES))
+        e = draw(sampled([s, s, s + 0.5, s + 1.0]))
         stamp = f"{s}" if s == e else f"[{s},{e}]"
-        if draw(st.integers(0, 3)) == 0:
-            events.append(f"c({draw(st.sampled_from(ATOMS))}, "
-                          f"{draw(st.sampled_from(VALUES))})^{stamp}")
-        elif draw(st.booleans()):
-            events.append(f"a({draw(st.sampled_from(ATOMS))}, "
-                          f"{draw(st.sampled_from(NUMS + ODD))})^{stamp}")
+        if draw(integers(0, 3)) == 0:
+            events.append(f"c({draw(sampled(ATOMS))}, "
+                          f"{draw(sampled(VALUES))})^{stamp}")
+        elif draw(BOOLEANS):
+            events.append(f"a({draw(sampled(ATOMS))}, "
+                          f"{draw(sampled(NUMS + ODD))})^{stamp}")
         else:
-            events.append(f"b({draw(st.sampled_from(ATOMS + ODD[:1]))})^{stamp}")
-    if draw(st.booleans()):
+            events.append(f"b({draw(sampled(ATOMS + ODD[:1]))})^{stamp}")
+    if draw(BOOLEANS):
         events.append("tr(x)^1.0")
     queries = [draw(body(rules, trules)) for _ in range(2)]
-    if rules and draw(st.booleans()):
+    if rules and draw(BOOLEANS):
         # a cut keeps the query itself in the interpreter, which then calls the rules it
         # reaches through SQL (planner.CompiledCall): those answers must be the same too
-        rule = draw(st.sampled_from([r for r, _ in rules]))
-        cut = draw(st.sampled_from(CUTS))
+        rule = draw(sampled([r for r, _ in rules]))
+        cut = draw(sampled(CUTS))
         queries[1] = f"{rule}(O, N), {queries[1]}, {cut}"
 
-    at = draw(st.sampled_from([None, None, 1.5, 2.0]))
+    at = draw(sampled([None, None, 1.5, 2.0]))
     return "\n".join(lines), events, queries, at
 
 

@@ -35,6 +35,7 @@ from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, assume, given, settings, strategies as st
+from strategy_helpers import BOOLEANS, integers, sampled
 
 import slr_sql
 from slr_sql import Atom, SLREvaluationError, SLRTimeout, Struct, Var
@@ -402,13 +403,13 @@ class Gen:
         return f"{prefix}{self.counter}"
 
     def pick(self, xs):
-        return self.draw(st.sampled_from(xs))
+        return self.draw(sampled(xs))
 
     def chance(self, p: float) -> bool:
-        return self.draw(st.integers(0, 99)) < int(p * 100)
+        return self.draw(integers(0, 99)) < int(p * 100)
 
     def constant(self) -> str:
-        kind = self.draw(st.integers(0, 9))
+        kind = self.draw(integers(0, 9))
         if kind < 4:
             return self.pick(ATOMS)
         if kind < 8:
@@ -421,7 +422,7 @@ class Gen:
         return self.pick(self.vars)
 
     def term(self, depth: int = 0) -> str:
-        kind = self.draw(st.integers(0, 9))
+        kind = self.draw(integers(0, 9))
         if kind < 5:
             return self.var()
         if kind < 8 or depth > 0:
@@ -431,13 +432,13 @@ class Gen:
         return self.list_term(depth + 1)
 
     def list_term(self, depth: int = 1) -> str:
-        items = [self.term(depth) for _ in range(self.draw(st.integers(0, 3)))]
+        items = [self.term(depth) for _ in range(self.draw(integers(0, 3)))]
         if items and self.chance(0.15):
             return f"[{', '.join(items)}|{self.var()}]"
         return f"[{', '.join(items)}]"
 
     def expr(self, depth: int = 0) -> str:
-        kind = self.draw(st.integers(0, 9))
+        kind = self.draw(integers(0, 9))
         if depth >= 2 or kind < 3:
             return str(self.pick(INTS + [5, 7]))
         if kind < 4:
@@ -453,7 +454,7 @@ class Gen:
     def call_pred(self) -> tuple:
         name, arity = self.pick(self.preds)
         if name == "ev":
-            stamp = self.draw(st.integers(0, 3))
+            stamp = self.draw(integers(0, 3))
             if stamp == 0:
                 t = f"[{self.var()}, {self.var()}]"
             elif stamp == 1:
@@ -466,7 +467,7 @@ class Gen:
         return ("lit", name, tuple(self.term() for _ in range(arity)))
 
     def leaf(self) -> tuple:
-        kind = self.draw(st.integers(0, 19))
+        kind = self.draw(integers(0, 19))
         if kind < 7 and self.preds:
             return self.call_pred()
         if kind < 8:
@@ -502,11 +503,11 @@ class Gen:
     def goal(self, depth: int = 0) -> tuple:
         if depth >= 3:
             return self.leaf()
-        kind = self.draw(st.integers(0, 24))
+        kind = self.draw(integers(0, 24))
         if kind < 11:
             return self.leaf()
         if kind < 14:
-            return ("conj", [self.goal(depth + 1) for _ in range(self.draw(st.integers(2, 3)))])
+            return ("conj", [self.goal(depth + 1) for _ in range(self.draw(integers(2, 3)))])
         if kind < 15:
             return ("not", self.goal(depth + 1))
         if kind < 17:
@@ -527,7 +528,7 @@ class Gen:
         return ("forall", self.goal(depth + 1), self.goal(depth + 1))
 
     def body(self) -> tuple:
-        return ("conj", [self.goal() for _ in range(self.draw(st.integers(1, 3)))])
+        return ("conj", [self.goal() for _ in range(self.draw(integers(1, 3)))])
 
 
 def render(g: tuple, swi: bool) -> str:
@@ -592,7 +593,7 @@ def examples(draw):
     swi: list[str] = []
     # facts
     for name, arity in (("fa", 1), ("fb", 2)):
-        n = draw(st.integers(1, 4))
+        n = draw(integers(1, 4))
         for _ in range(n):
             fact = f"{name}({', '.join(g.constant() for _ in range(arity))})."
             slr.append(fact)
@@ -607,7 +608,7 @@ def examples(draw):
     # fails) after unifying the data arguments, as slr_sql does. The temporal rules follow
     # as further clauses of ev/4, unified as Prolog clauses (only stored times go by value).
     events = []
-    for _ in range(draw(st.integers(0, 4))):
+    for _ in range(draw(integers(0, 4))):
         s = g.pick(TIMES)
         e = g.pick([t for t in TIMES if t >= s])
         events.append((g.constant(), g.constant(), s, e))
@@ -620,7 +621,7 @@ def examples(draw):
     swi.append("'$tm'(T, T0) :- number(T), T =:= T0.")
     swi.append("ev(A, B, S, E) :- ev_stored(A, B, S0, E0), '$tm'(S, S0), '$tm'(E, E0).")
     g.preds.append(("ev", 2))
-    if draw(st.booleans()):
+    if draw(BOOLEANS):
         # a temporal rule: answers after the stored events
         head_args = (g.var(), g.var())
         stamp = g.pick(["T", "[S, T]"])
@@ -631,9 +632,9 @@ def examples(draw):
         slr.append(text_slr)
         swi.append(text_swi)
     # stratified rules r1, r2, r3: each calls only earlier predicates
-    for i in range(1, draw(st.integers(1, 3)) + 1):
-        arity = draw(st.integers(1, 2))
-        for _ in range(draw(st.integers(1, 3))):
+    for i in range(1, draw(integers(1, 3)) + 1):
+        arity = draw(integers(1, 2))
+        for _ in range(draw(integers(1, 3))):
             head = f"r{i}({', '.join(g.term() if g.chance(0.3) else g.var() for _ in range(arity))})"
             body = g.body()
             slr.append(f"{head} :- {render(body, False)}.")
@@ -641,11 +642,11 @@ def examples(draw):
         g.preds.append((f"r{i}", arity))
     # queries
     queries = []
-    for qi in range(draw(st.integers(1, 3))):
-        if draw(st.integers(0, 2)) == 0:
-            goal = ("conj", [g.goal(1) for _ in range(draw(st.integers(1, 2)))])
+    for qi in range(draw(integers(1, 3))):
+        if draw(integers(0, 2)) == 0:
+            goal = ("conj", [g.goal(1) for _ in range(draw(integers(1, 2)))])
         else:
-            goal = g.call_pred() if draw(st.integers(0, 3)) else g.goal(0)
+            goal = g.call_pred() if draw(integers(0, 3)) else g.goal(0)
         q_slr, q_swi = render(goal, False), render(goal, True)
         names = var_names(q_slr)
         queries.append((q_slr, q_swi, names))
