@@ -110,6 +110,18 @@ def pytest_collection_modifyitems(config, items):
     items.sort(key=lambda item: rank.get(item.nodeid.split("[")[0], len(rank)))
 
 
+def pytest_collection_finish(session):
+    # What the collection made (every test module, its items and parameters: ~250,000 objects
+    # for the whole suite) lives until the session ends; frozen (gc.freeze), the full garbage
+    # collections of the run no longer traverse it each time: with the whole suite collected,
+    # running tests/test_[ab]*.py spent 5.8 s in garbage collections, 3.0 s with it frozen.
+    # Its garbage is collected first (frozen, it would never be).
+    import gc
+
+    gc.collect()
+    gc.freeze()
+
+
 @pytest.fixture
 def kb():
     """A fresh in-memory knowledge base (no file), closed after the test."""
