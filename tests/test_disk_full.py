@@ -21,7 +21,7 @@ from slr_sql import SLRError, SLRStoreFull, SLRUnavailable
 from slr_sql.store import EventStore
 
 from service_helpers import HTTP, ROOT, ServiceProcess, slr_env
-from test_store_read_connection_errors import _failure
+from store_conditions import slr_failure
 
 # Run by the child inside the namespace: fill() writes a file until the disk is full,
 # free() removes it, files() lists the directory with sizes.
@@ -214,7 +214,7 @@ def test_the_stores_statements_at_its_size_limit_are_store_full(tmp_path):
                 [(insert, [{"body": body}], True)]),
         }
         for name, call in calls.items():
-            exc = _failure(call)
+            exc = slr_failure(call)
             assert isinstance(exc, SLRStoreFull), (name, exc)
             assert str(exc).startswith(f"{path}: the disk is full"), (name, exc)
         store.execute("PRAGMA max_page_count = 1073741823")

@@ -10,17 +10,16 @@ store's file put in the store's place."""
 from __future__ import annotations
 
 import logging
-import os
 
 import pytest
 
 import slr_sql
 from slr_sql import ManualClock
-from slr_sql.errors import SLRError, SLRStoreFull, SLRStoreGone
+from slr_sql.errors import SLRStoreFull
 from slr_sql.store import EventStore
 
 from hub_helpers import hub_with_one_delivery
-from test_store_read_connection_errors import _failure
+from store_conditions import file_condition, slr_failure
 
 DEADLINE = 30.0
 NO_LIMIT = 1073741823   # SQLite's default max_page_count
@@ -84,23 +83,7 @@ def test_each_read_of_the_stores_parts_says_the_files_condition(tmp_path, read, 
     _store(path).close()
     store = EventStore(path)
     try:
-        read(store)   # (works: the file is sound)
-        with open(path, "r+b") as f:    # the whole file, header included
-            f.write(b"\xff" * os.path.getsize(path))
-        store.execute("PRAGMA shrink_memory")   # the next read reads the file
-        if afterwards == "replaced":
-            other = str(tmp_path / "other.db")
-            EventStore(other).close()
-            os.replace(other, path)
-        exc = _failure(lambda: read(store))
-        if afterwards == "damaged":
-            assert type(exc) is SLRError
-            # (not a database; or, where the header was read before, a malformed page)
-            assert str(exc).startswith(f"{path}: the file is damaged (")
-        else:
-            assert isinstance(exc, SLRStoreGone)
-            assert str(exc).startswith(f"{path}: the store file was deleted or replaced while "
-                                       f"open")
+        file_condition(path, store, read, afterwards, _store)
     finally:
         store.close()
 
@@ -127,7 +110,7 @@ def test_each_write_of_the_stores_parts_at_its_size_limit_is_store_full(tmp_path
     try:
         assert store.execute("PRAGMA freelist_count") == [(0,)]   # (no page to reuse)
         store.execute(f"PRAGMA max_page_count = {store.execute('PRAGMA page_count')[0][0]}")
-        exc = _failure(lambda: write(store))
+        exc = slr_failure(lambda: write(store))
         assert isinstance(exc, SLRStoreFull)
         assert str(exc).startswith(f"{path}: the disk is full (or the store reached its size "
                                    f"limit")

@@ -21,6 +21,7 @@ from slr_sql.store import EventStore
 from slr_sql.store.connection import Database
 
 from hub_helpers import hub_with_one_delivery
+from store_conditions import file_condition, slr_failure
 
 DEADLINE = 30.0
 
@@ -31,16 +32,6 @@ def _store_with_journal(path: str) -> EventStore:
     store.create_journal("p", 1, "slr_subj_p", "slr_subt_p")
     store.add_event("p", ("b",), 2, 2)
     return store
-
-
-def _failure(call) -> SLRError:
-    with pytest.raises(Exception) as caught:
-        call()
-    exc = caught.value
-    assert isinstance(exc, SLRError), f"{type(exc).__name__}: {exc}"
-    assert not isinstance(exc, sqlite3.Error)
-    assert exc.__cause__ is None and (exc.__context__ is None or exc.__suppress_context__)
-    return exc
 
 
 def test_a_journal_dropped_by_another_connection_is_an_slr_error(tmp_path):
@@ -55,7 +46,7 @@ def test_a_journal_dropped_by_another_connection_is_an_slr_error(tmp_path):
             raw.execute("DROP TABLE slr_subj_p")
         finally:
             raw.close()
-        exc = _failure(lambda: reads.journal_rows("slr_subj_p", 1, 0, 10))
+        exc = slr_failure(lambda: reads.journal_rows("slr_subj_p", 1, 0, 10))
         assert type(exc) is SLRError
         assert str(exc) == f"{path}: the store failed (no such table: slr_subj_p)"
         assert reads.event_table("p", 1) is not None   # the connection itself still reads
@@ -82,7 +73,7 @@ def test_pages_overwritten_with_garbage_are_a_damaged_file(tmp_path, through):
         with open(path, "r+b") as f:    # the same file (inode), its pages garbage
             f.seek(4096)
             f.write(b"\x0d" * (os.path.getsize(path) - 4096))
-        exc = _failure(lambda: run("SELECT * FROM p"))
+        exc = slr_failure(lambda: run("SELECT * FROM p"))
         assert type(exc) is SLRError
         assert str(exc).startswith(f"{path}: the file is damaged (database disk image is "
                                    f"malformed)")
@@ -100,10 +91,10 @@ def test_a_file_that_became_no_database_is_a_damaged_file(tmp_path):
         store.close()
         with open(path, "r+b") as f:    # the whole file, header included
             f.write(b"\xff" * os.path.getsize(path))
-        exc = _failure(lambda: conn.execute("SELECT count(*) FROM p"))
+        exc = slr_failure(lambda: conn.execute("SELECT count(*) FROM p"))
         assert type(exc) is SLRError and "the file is damaged" in str(exc)
         # a reader opened on it now: the same words, at its open
-        exc = _failure(lambda: slr_sql.store.ReadConnection(path))
+        exc = slr_failure(lambda: slr_sql.store.ReadConnection(path))
         assert type(exc) is SLRError and "the file is damaged" in str(exc)
     finally:
         conn.close()
@@ -121,7 +112,7 @@ def test_the_stores_own_reads_of_a_file_that_became_no_database_say_damaged(tmp_
         store.execute("PRAGMA shrink_memory")   # the next read reads the file
         for call in (store.table_names, lambda: store.execute("SELECT count(*) FROM p"),
                      lambda: store.live_positions("p", 1)):
-            exc = _failure(call)
+            exc = slr_failure(call)
             assert type(exc) is SLRError
             assert str(exc).startswith(f"{path}: the file is damaged (file is not a database)")
     finally:
@@ -154,22 +145,9 @@ def test_each_statement_of_the_stores_connection_says_the_files_condition(
     _store_with_journal(path).close()
     db = Database(path)
     try:
-        read(db)   # (works: the file is sound)
-        with open(path, "r+b") as f:    # the whole file, header included
-            f.write(b"\xff" * os.path.getsize(path))
-        db.execute("PRAGMA shrink_memory")   # the next read reads the file
-        if afterwards == "replaced":
-            other = str(tmp_path / "other.db")
-            _store_with_journal(other).close()
-            os.replace(other, path)
-        exc = _failure(lambda: read(db))
+        exc = file_condition(path, db, read, afterwards, _store_with_journal)
         if afterwards == "damaged":
-            assert type(exc) is SLRError
-            assert str(exc).startswith(f"{path}: the file is damaged (file is not a database)")
-        else:
-            assert isinstance(exc, SLRStoreGone)
-            assert str(exc).startswith(f"{path}: the store file was deleted or replaced while "
-                                       f"open")
+            assert "(file is not a database)" in str(exc)
     finally:
         db.close()
 
@@ -180,7 +158,7 @@ def test_each_statement_of_the_stores_connection_says_the_files_condition(
 def test_each_statement_of_a_closed_store_says_it_is_closed(tmp_path, read):
     db = Database(str(tmp_path / "s.db"))
     db.close()
-    assert str(_failure(lambda: read(db))) == "the event store is closed"
+    assert str(slr_failure(lambda: read(db))) == "the event store is closed"
 
 
 def test_a_reader_opened_after_the_store_file_was_deleted_is_store_gone(tmp_path):
@@ -189,7 +167,7 @@ def test_a_reader_opened_after_the_store_file_was_deleted_is_store_gone(tmp_path
     try:
         for suffix in ("", "-wal", "-shm"):
             os.remove(path + suffix)
-        exc = _failure(lambda: store.journal_reader(own_connection=True))
+        exc = slr_failure(lambda: store.journal_reader(own_connection=True))
         assert isinstance(exc, SLRStoreGone)
         assert str(exc).startswith(f"{path}: the store file was deleted or replaced while open")
         assert not os.path.exists(path)   # no empty file made at the store's path
@@ -204,7 +182,7 @@ def test_a_reader_opened_after_the_store_file_was_replaced_is_store_gone(tmp_pat
     _store_with_journal(other).close()
     try:
         os.replace(other, path)
-        exc = _failure(store.open_reader)
+        exc = slr_failure(store.open_reader)
         assert isinstance(exc, SLRStoreGone)
     finally:
         store.close()
@@ -281,10 +259,10 @@ def test_a_journal_read_through_the_stores_connection_is_an_slr_error(tmp_path):
             raw.execute("DROP TABLE slr_subj_p")
         finally:
             raw.close()
-        exc = _failure(lambda: reads.max_jid("slr_subj_p"))
+        exc = slr_failure(lambda: reads.max_jid("slr_subj_p"))
         assert str(exc) == f"{path}: the store failed (no such table: slr_subj_p)"
         for suffix in ("", "-wal", "-shm"):
             os.remove(path + suffix)
-        assert isinstance(_failure(lambda: reads.max_jid("slr_subj_p")), SLRStoreGone)
+        assert isinstance(slr_failure(lambda: reads.max_jid("slr_subj_p")), SLRStoreGone)
     finally:
         store.close()
