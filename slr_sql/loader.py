@@ -190,6 +190,7 @@ class ProgramLoader:
                 decls.in_order.update(_indicators(args[0]))
             elif name == "dynamic" and len(args) == 1:
                 program.dynamic.update(_indicators(args[0]))
+                program.analysis_cache = None      # (what it said of the program changed)
             elif name in ("discontiguous", "use_module", "ensure_loaded", "set_prolog_flag",
                           "module"):
                 pass  # accepted for compatibility with Prolog sources; nothing to do here

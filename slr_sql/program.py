@@ -319,6 +319,9 @@ class Program:
         return p
 
     def add_clause(self, clause: Clause) -> None:
+        # (a program is built text by text, and a rule's where goal may have it analysed
+        # half-built: what was analysed then no longer describes it)
+        self.analysis_cache = None
         head = deref(clause.head)
         ev = split_event_atom(head)
         if ev is not None:

@@ -630,6 +630,7 @@ class Synchronizer:
         # while `slr query DB G --wait` waits): SQLite cannot notify us, so while queries are
         # pending the timer thread checks PRAGMA data_version every `external_poll` seconds.
         self.external_poll: float | None = None
+        self._external_failure: str | None = None   # the re-read's failure, said once
         self._data_version: int | None = None
         # clocks that tell when they move serve time-driven wake-ups from their listener
         self._clock_driven = isinstance(self.clock, (ManualClock, StreamClock))
@@ -758,26 +759,36 @@ class Synchronizer:
         version = self._read_data_version()
         if version is None or version == self._data_version:
             return []
+        released: list = []
         try:
-            released = self._reread()
+            self._reread(released)
         except (SLRError, DatabaseError) as exc:
             # (the store busy or damaged, its tables changed under it by another process:
-            # the timer thread has no caller to raise to, serves every later timer, and
-            # reads again at the next poll)
+            # the timer thread has no caller to raise to and serves every later timer; the
+            # queries released before the failure go on, the others stay parked, and the
+            # next poll reads again -- said once, not at every poll)
             if isinstance(exc, DatabaseError):
                 exc = store_error(exc, getattr(self.store, "path", None),
                                   outcome="nothing was read")
-            log_failure(log, "re-reading what other processes wrote to the store", exc,
-                        then="read again at the next poll")
-            return []
+            if str(exc) != self._external_failure:
+                self._external_failure = str(exc)
+                log_failure(log, "re-reading what other processes wrote to the store", exc,
+                            then="read again at every poll until it reads")
+            return released
+        if self._external_failure is not None:
+            self._external_failure = None
+            log.warning("re-reading what other processes wrote to the store works again")
         self._data_version = version
         return released
 
-    def _reread(self) -> list:
+    def _reread(self, out: list | None = None) -> list:
+        """Reload what the store says of completeness and release the queries it completes,
+        appended to ``out`` (so that those released before a failing read are not lost)."""
         tracker = self.tracker
         tracker.load()
         tracker.max_end.clear()
-        out: list = []
+        if out is None:
+            out = []
         for key in list(self._heaps) + list(self._arrival_waits):
             if tracker.in_order(key):
                 tracker.arrivals[key] = tracker.arrivals.get(key, 0) + 1

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import pytest
 
+import slr_sql
+
 from slr_sql.analysis import (Analysis, Node, analyze, dependency_graph, goal_set,
                                recursive_predicates, sccs)
 from slr_sql.demo import CUPS_ON_TABLE1, ROBOT_PROGRAM
@@ -169,3 +171,19 @@ def test_a_programs_analysis_goes_with_the_program():
         kb.load("t(2).")
     gc.collect()
     assert held() is None
+
+
+def test_a_program_rebuilt_text_by_text_is_analysed_whole():
+    """Replacing a text rebuilds the program from every stored text in turn; an event rule's
+    where goal has the half-built program analysed on the way: the analysis the queries use
+    must still know the clauses of the texts added after it."""
+    kb = slr_sql.open()
+    try:
+        kb.load("c(X) <- a(X) seq b(X) where ok(X).\nok(_).\n", name="one")
+        kb.load("r(X) :- s(X)^T.\n", name="two")
+        kb.load("c(X) <- a(X) seq b(X) where ok(X).\nok(_).\n", name="one", replace=True)
+        program = kb.engine.program
+        assert sorted(goal_set(program, "r(X)")) == [("s", 1)]
+        assert sorted(goal_set(program, "r(X)")) == sorted(goal_set(program.copy(), "r(X)"))
+    finally:
+        kb.close()
