@@ -1340,7 +1340,6 @@ def attach(kb: Host) -> Synchronizer:
 
 def _try_run(kb: Host, entry: Any, q: PendingQuery) -> list | None:
     from .encoding import Unencodable
-    from .store import DatabaseError
 
     try:
         return entry.run(kb, q.args or {}, q.at, None, q._deadline)

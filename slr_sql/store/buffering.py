@@ -512,10 +512,11 @@ class PostgresBufferPrinter:
 SQLITE_BUFFERS = SQLiteBufferPrinter()
 POSTGRES_BUFFERS = PostgresBufferPrinter()
 
-# the keys of BufferTables.buffer_rows' dicts: the columns it reads, in order
-_BUFFER_COLUMNS = ("id", "kind", "source", "pattern_text", "type_name", "type_arity", "amount",
-                   "t1", "t2", "origin", "cutoff", "created_at", "removed_at", "pruned",
-                   "dropped")
+# what BufferTables.buffer_rows reads: each dict's keys, in order, and the columns they are
+_BUFFER_KEYS = ("id", "kind", "source", "pattern_text", "type_name", "type_arity", "amount",
+                "t1", "t2", "origin", "cutoff", "created_at", "removed_at", "pruned", "dropped")
+_BUFFER_COLUMNS = ", ".join([f"b.{key}" for key in _BUFFER_KEYS[:-2]] +
+                            ["coalesce(c.pruned, 0)", "coalesce(c.dropped, 0)"])
 
 
 # ----------------------------------------------------------------------------- the tables
@@ -543,15 +544,10 @@ class BufferTables:
         []
         """
         where = " WHERE b.removed_at IS NULL" if active_only else ""
-        with self.db.lock:
-            self.db.check_open()
-            rows = self.db.execute(
-                "SELECT b.id, b.kind, b.source, b.pattern_text, b.type_name, b.type_arity, "
-                "b.amount, b.t1, b.t2, b.origin, b.cutoff, b.created_at, b.removed_at, "
-                "coalesce(c.pruned, 0) AS pruned, coalesce(c.dropped, 0) AS dropped "
-                "FROM slr_buffers b LEFT JOIN slr_counters c ON c.buffer_id = b.id"
-                f"{where} ORDER BY b.id")
-        return [dict(zip(_BUFFER_COLUMNS, row)) for row in rows]
+        rows = self.db.execute(
+            f"SELECT {_BUFFER_COLUMNS} FROM slr_buffers b LEFT JOIN slr_counters c "
+            f"ON c.buffer_id = b.id{where} ORDER BY b.id")
+        return [dict(zip(_BUFFER_KEYS, row)) for row in rows]
 
     def has_active_buffer(self, kind: str) -> bool:
         """Whether a buffer of ``kind`` (``"tBuffer"``, ``"cBuffer"``, ...) is active, in any
@@ -561,11 +557,9 @@ class BufferTables:
         >>> EventStore(None).has_active_buffer("tBuffer")
         False
         """
-        with self.db.lock:
-            self.db.check_open()
-            return bool(self.db.execute(
-                "SELECT 1 FROM slr_buffers WHERE kind = ? AND removed_at IS NULL LIMIT 1",
-                (kind,)))
+        return bool(self.db.execute(
+            "SELECT 1 FROM slr_buffers WHERE kind = ? AND removed_at IS NULL LIMIT 1",
+            (kind,)))
 
     def insert_buffer(self, kind: str, source: str, pattern_text: str, type_name: str,
                       type_arity: int, amount: float | None, t1: float | None,

@@ -240,10 +240,8 @@ class Catalog:
         >>> s = EventStore(None); _ = s.append_program("p(1).", "a.slr", "tea"); s.program_texts()[0].name
         'tea'
         """
-        with self.db.lock:
-            self.db.check_open()
-            return [ProgramText(*row) for row in self.db.execute(
-                "SELECT id, name, source, filename, loaded_at FROM slr_program ORDER BY id")]
+        return [ProgramText(*row) for row in self.db.execute(
+            "SELECT id, name, source, filename, loaded_at FROM slr_program ORDER BY id")]
 
     def program_sources(self) -> list[tuple[str, str | None]]:
         """Every persisted program text with its file name, in load order.
@@ -281,9 +279,7 @@ class Catalog:
         >>> s = EventStore(None); s.meta_set("delay/seg/2", 0.5); s.meta_get("delay/seg/2")
         0.5
         """
-        with self.db.lock:
-            self.db.check_open()
-            rows = self.db.execute("SELECT value FROM slr_meta WHERE key = ?", (key,))
+        rows = self.db.execute("SELECT value FROM slr_meta WHERE key = ?", (key,))
         return json.loads(rows[0][0]) if rows else default
 
     def meta_set(self, key: str, value: Any) -> None:
@@ -315,9 +311,7 @@ class Catalog:
         if self.db.dialect.name != "sqlite":
             # a server locks the row an upsert meets even when its WHERE keeps the value:
             # every writer of the type would wait for the others' commits. Read first.
-            with self.db.lock:
-                self.db.check_open()
-                rows = self.db.execute("SELECT value FROM slr_meta WHERE key = ?", (key,))
+            rows = self.db.execute("SELECT value FROM slr_meta WHERE key = ?", (key,))
             if rows and float(json.loads(rows[0][0])) >= value:
                 return float(json.loads(rows[0][0]))
         with self.db.transaction():
@@ -361,11 +355,9 @@ class Catalog:
         >>> s = EventStore(None); s.meta_set("delay/a", 1); s.meta_items("delay/")
         {'delay/a': 1}
         """
-        with self.db.lock:
-            self.db.check_open()
-            rows = self.db.execute(
-                "SELECT key, value FROM slr_meta WHERE substr(key, 1, ?) = ? ORDER BY key",
-                (len(prefix), prefix))
+        rows = self.db.execute(
+            "SELECT key, value FROM slr_meta WHERE substr(key, 1, ?) = ? ORDER BY key",
+            (len(prefix), prefix))
         return {key: json.loads(value) for key, value in rows}
 
     # ------------------------------------------------------------------ fact tables and views
@@ -529,10 +521,8 @@ class Catalog:
         []
         """
         columns = "".join(f"r{p + 1}, " for p in range(width))
-        with self.db.lock:
-            self.db.check_open()
-            return [tuple(row) for row in self.db.execute(
-                f"SELECT {columns}t_start, t_end FROM {prov} ORDER BY id")]
+        return [tuple(row) for row in self.db.execute(
+            f"SELECT {columns}t_start, t_end FROM {prov} ORDER BY id")]
 
     def create_journal(self, table: str, arity: int, journal: str, trigger: str) -> None:
         """The journal of event table ``table`` (unless it exists): ``journal`` gets a row

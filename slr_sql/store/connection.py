@@ -990,8 +990,7 @@ class Database:
         [(2,)]
         """
         with self.lock:
-            if self.closed:   # (check_open, inline: the parts' lookups run through here)
-                raise SLRError("the event store is closed")
+            self.check_open()
             try:
                 return self.conn.execute(
                     sql, params if type(params) is tuple else tuple(params)).fetchall()

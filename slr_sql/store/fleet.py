@@ -149,9 +149,7 @@ class Fleet:
     def robots(self) -> list[str]:
         """The robots whose events the store holds (its own name, and every robot that
         shipped to it), in name order."""
-        with self.db.lock:
-            self.db.check_open()
-            return [r[0] for r in self.db.execute("SELECT name FROM slr_robots ORDER BY name")]
+        return [r[0] for r in self.db.execute("SELECT name FROM slr_robots ORDER BY name")]
 
     # ------------------------------------------------------------------ the robot's side
 
@@ -256,11 +254,9 @@ class Fleet:
     def positions(self, robot: str) -> dict[tuple[str, int], int]:
         """What the fleet store holds of ``robot``: per event type, the last sequence (in the
         robot's store) stored."""
-        with self.db.lock:
-            self.db.check_open()
-            return {(n, a): p for n, a, p in self.db.execute(
-                "SELECT type_name, type_arity, position FROM slr_fleet_positions "
-                "WHERE robot = ?", (robot,))}
+        return {(n, a): p for n, a, p in self.db.execute(
+            "SELECT type_name, type_arity, position FROM slr_fleet_positions "
+            "WHERE robot = ?", (robot,))}
 
     def column_values(self, arity: int, rows: list[tuple], robot: str) -> list[tuple]:
         """Per row of a batch of an arity-``arity`` type that ``robot`` ships (rows as
