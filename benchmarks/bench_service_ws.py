@@ -79,6 +79,14 @@ def cpu_seconds(pid: int, thread: int | None = None) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def machine_ticks() -> tuple[int, int]:
+    """(busy, total) clock ticks of every core so far (/proc/stat's first line; idle and
+    iowait are not busy)."""
+    with open("/proc/stat") as f:
+        ticks = [int(x) for x in f.readline().split()[1:]]
+    return sum(ticks) - ticks[3] - ticks[4], sum(ticks)
+
+
 def file_mb(db: Path) -> float:
     return sum(os.path.getsize(p) for p in (db, Path(f"{db}-wal")) if p.exists()) / 2 ** 20
 
@@ -435,6 +443,8 @@ def run_service(args, tmp: Path) -> dict:
         cpu_start, cpu_t0 = cpu_seconds(proc.pid), time.monotonic()
         subscribers_start = cpu_seconds(sub_proc.pid)
         producer_start = time.process_time()
+        burn_start = sum(cpu_seconds(pid) for pid in args.burn_pids)
+        machine_start = machine_ticks()
         requested: list[float] = []
         sent, achieved = produce(client.add_many, args.rate, args.batch_events, seconds, answered,
                                  latency_end, requested)
@@ -443,6 +453,12 @@ def run_service(args, tmp: Path) -> dict:
         loop_cpu = (cpu_seconds(proc.pid, proc.pid) - loop_start) / (produced_at - cpu_t0)
         subscribers_cpu = (cpu_seconds(sub_proc.pid) - subscribers_start) / (produced_at - cpu_t0)
         producer_cpu = (time.process_time() - producer_start) / (produced_at - cpu_t0)
+        burn_cpu = (sum(cpu_seconds(pid) for pid in args.burn_pids) - burn_start) / \
+            (produced_at - cpu_t0)
+        machine_end = machine_ticks()
+        # the cores' busy share while producing: near 1, every runnable thread queues
+        machine_busy = (machine_end[0] - machine_start[0]) / max(1, machine_end[1] -
+                                                                  machine_start[1])
         # every event must arrive: wait (bounded) for the stragglers
         time.sleep(2.0)
         stop.set()
@@ -482,7 +498,8 @@ def run_service(args, tmp: Path) -> dict:
                   "rss_samples": len(samples), "load_start": load_start,
                   "file_first": sizes[0], "file_last": sizes[-1], "server_cpu": server_cpu,
                   "loop_cpu": loop_cpu, "subscribers_cpu": subscribers_cpu,
-                  "producer_cpu": producer_cpu,
+                  "producer_cpu": producer_cpu, "burn_cpu": burn_cpu,
+                  "machine_busy": machine_busy,
                   "load_end": os.getloadavg()}
     finally:
         proc.terminate()
@@ -558,6 +575,7 @@ def main() -> None:
     args = ap.parse_args()
     burners = [subprocess.Popen([sys.executable, "-c", "while 1: pass"])
                for _ in range(args.burn)]
+    args.burn_pids = [burner.pid for burner in burners]
     try:
         run(args)
     finally:
@@ -595,6 +613,9 @@ def run(args) -> None:
               f"per delivery); its event loop thread {remote['loop_cpu'] / remote['achieved'] * 1e6:.0f} "
               f"µs per event; the subscribers' process {remote['subscribers_cpu'] / remote['achieved'] * 1e6:.0f} "
               f"µs per event, the producer {remote['producer_cpu'] / remote['achieved'] * 1e6:.0f} µs per event")
+        print(f"the cores while producing: {100 * remote['machine_busy']:.0f}% busy of "
+              f"{os.cpu_count()}" + (f"; the competing load took {remote['burn_cpu']:.2f} of a "
+                                    f"core" if args.burn else ""))
         print(f"p99 ratio service / in process: {remote['p99_ms'] / local['p99_ms']:.1f}x")
         print(f"server RSS: first {remote['rss_first']:.1f} MB, last {remote['rss_last']:.1f} "
               f"MB, max {remote['rss_max']:.1f} MB, slope {remote['rss_slope_mb_per_min']:+.2f} "
