@@ -48,6 +48,7 @@ from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_ar
                        encode_arguments, encode_term, loads)
 from .auth import check_token_text
 from .errors import ServiceError, ServiceUnavailable, error_from_body
+from .http_pool import AnswerLost, AnswerTimeout, HttpPool, RequestNotSent
 
 __all__ = ["connect", "RemoteKnowledgeBase", "RemotePendingQuery", "RemoteSubscription",
            "RemoteWait"]
@@ -125,11 +126,11 @@ def _service_url(url: Any, httpx: Any) -> str:
 
 
 def _tls_context() -> "ssl.SSLContext":
-    """The TLS context of a client of an https:// URL, for its requests (httpx) and its
-    subscriptions (websockets): on their own, httpx trusted ``$SSL_CERT_FILE`` or else
-    certifi's bundle, websockets the system's CAs. It trusts the CAs of ``$SSL_CERT_FILE``
-    (a PEM file) and ``$SSL_CERT_DIR`` (a folder named by ``openssl rehash``), both when both
-    are set, as OpenSSL does; with neither, certifi's bundle (httpx's default).
+    """The TLS context of a client of an https:// URL, for its requests (its connection
+    pool) and its subscriptions (websockets), so that both trust the same CAs: the CAs of
+    ``$SSL_CERT_FILE`` (a PEM file) and ``$SSL_CERT_DIR`` (a folder named by ``openssl
+    rehash``), both when both are set, as OpenSSL does; with neither, certifi's bundle (what
+    the client trusted when httpx made its requests).
 
     >>> _tls_context().verify_mode == ssl.CERT_REQUIRED
     True
@@ -207,17 +208,11 @@ class RemoteKnowledgeBase:
             # as HTTP libraries write a header's text (ISO-8859-1)
             self._headers["Authorization"] = f"Bearer {token}".encode("utf-8").decode("latin-1")
         self.timeout = float(timeout)
-        self._httpx = httpx
         # TLS only for https://: for http:// the client would still load the CA bundle
         # (~50-70 ms of CPU per connect). One context for requests and subscriptions alike.
         self._tls = _tls_context() if self.url.startswith("https://") else None
-        self._http = httpx.Client(base_url=self.url,
-                                  headers={k.encode("latin-1"): v.encode("latin-1")
-                                           for k, v in self._headers.items()},
-                                  verify=self._tls or False,
-                                  timeout=httpx.Timeout(self.timeout, connect=10.0),
-                                  limits=httpx.Limits(max_connections=None,
-                                                      max_keepalive_connections=32))
+        self._pool = HttpPool(self.url, self._headers, tls=self._tls, timeout=self.timeout,
+                              connect_timeout=10.0)
         self._limits: dict | None = None
         self._answered = threading.local()   # .path: the request the last answer was of
         self.subscribe_batch = 256        # answers per WebSocket frame at most (1..1000)
@@ -234,18 +229,15 @@ class RemoteKnowledgeBase:
                  ok: tuple = (200,), content: bytes | None = None) -> tuple[int, Any]:
         if self.closed:
             raise SLRError("the connection to the knowledge base is closed")
-        httpx = self._httpx
         if body is not None:
             content = dumps(body)
         try:
-            response = self._http.request(
-                method, path, content=content, params=params,
-                timeout=None if timeout is None else httpx.Timeout(timeout, connect=10.0))
-        except httpx.TimeoutException:
+            response = self._pool.request(method, path, content, params=params, timeout=timeout)
+        except AnswerTimeout:
             raise ServiceError(f"no answer from {self.url} within "
                                f"{timeout if timeout is not None else self.timeout:g} s",
                                kind="RequestTimeout", status=0) from None
-        except httpx.HTTPError as exc:
+        except (RequestNotSent, AnswerLost) as exc:
             refused = _refused_certificate(exc)
             if refused is not None:
                 raise _not_trusted(self.url, refused) from None
@@ -257,21 +249,21 @@ class RemoteKnowledgeBase:
             data = loads(response.content) if response.content else None
         except (ValueError, UnicodeDecodeError):
             data = None
-        if response.status_code in ok:
+        if response.status in ok:
             if not isinstance(data, dict):
                 raise ServiceError(f"{method} {path}: the server's answer is not JSON "
-                                   f"(HTTP {response.status_code})", kind="InternalError",
-                                   status=response.status_code)
+                                   f"(HTTP {response.status})", kind="InternalError",
+                                   status=response.status)
             self._answered.path = f"{method} {path}"
-            return response.status_code, data
+            return response.status, data
         if data is None:   # (not the server's words: a proxy's, or the server's own limit)
             text = response.text[:200].strip()
-            message = f"HTTP {response.status_code} from {self.url}{path}" + \
+            message = f"HTTP {response.status} from {self.url}{path}" + \
                 (f": {text}" if text else "")
-            if response.status_code == 503:   # (beyond --max-connections: may pass)
+            if response.status == 503:   # (beyond --max-connections: may pass)
                 raise ServiceUnavailable(message, 503)
-            raise ServiceError(message, kind="BadRequest", status=response.status_code)
-        raise error_from_body(data, response.status_code)
+            raise ServiceError(message, kind="BadRequest", status=response.status)
+        raise error_from_body(data, response.status)
 
     def _post(self, path: str, body: dict, timeout: float | None = None) -> dict:
         return self._request("POST", path, body, timeout=timeout)[1]
@@ -303,7 +295,7 @@ class RemoteKnowledgeBase:
             pending = list(self._pending)
         for p in pending:
             p._fail(SLRError("the connection to the knowledge base was closed"))
-        self._http.close()
+        self._pool.close()
 
     def __enter__(self) -> "RemoteKnowledgeBase":
         return self
