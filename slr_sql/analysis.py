@@ -211,13 +211,27 @@ class Analysis:
         if library is None:
             from .builtins import library_program
             library = library_program()
-        self.program = program
+        self.program = program        # (held weakly: see the property)
         self.library = library
         self.meta: dict[tuple[str, int], set[tuple[int, int]]] = {}
         self.edges: dict[Node, set[Node]] = {}
         self.stored: dict[Node, set[tuple[str, int]]] = {}
         self.unknown: dict[Node, list[str]] = {}
         self._build()
+
+    @property
+    def program(self) -> Program:
+        """The program analysed. The program keeps its analysis (``analysis_cache``), so the
+        analysis refers to it weakly: a replaced program is freed by reference counting,
+        not left to the cyclic collector (which `slr serve` runs rarely)."""
+        program = self._program()
+        if program is None:
+            raise ReferenceError("the analysed program is gone")
+        return program
+
+    @program.setter
+    def program(self, program: Program) -> None:
+        self._program = weakref.ref(program)
 
     def _clauses(self, prog: Program) -> list[tuple[Node, tuple, Any]]:
         """(node, head args, body) for every clause of ``prog``."""
@@ -315,7 +329,8 @@ class _LibraryPart:
 
     def __init__(self, library: Program):
         alone = Analysis.__new__(Analysis)
-        alone.program, alone.library = Program(), library
+        empty = Program()      # (alive while analysed: the analysis holds it weakly)
+        alone.program, alone.library = empty, library
         alone.meta, alone.edges, alone.stored, alone.unknown = {}, {}, {}, {}
         self.visited: set[tuple[str, int]] = set()
         alone._add_clauses(alone._clauses(library), self.visited)

@@ -173,6 +173,26 @@ def test_a_programs_analysis_goes_with_the_program():
     assert held() is None
 
 
+def test_a_replaced_program_is_freed_by_reference_counting_alone():
+    """The analysis kept on a program refers to it weakly: no cycle, so a program a server
+    replaces is freed at once, not when the cyclic collector next runs a full pass."""
+    import gc
+    import weakref
+
+    gc.disable()
+    try:
+        p = program("p(X) :- q(X)^T, X > 1.")
+        a = analyze(p)
+        assert a.program is p
+        gone = weakref.ref(p), weakref.ref(a)
+        del p
+        assert [ref() for ref in gone] == [None, a]       # (no collection ran)
+        with pytest.raises(ReferenceError):
+            a.program
+    finally:
+        gc.enable()
+
+
 def test_a_program_rebuilt_text_by_text_is_analysed_whole():
     """Replacing a text rebuilds the program from every stored text in turn; an event rule's
     where goal has the half-built program analysed on the way: the analysis the queries use
