@@ -22,7 +22,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 from .errors import SLRError
 from .store import EventStore, WriterInFlight, check_robot_name, refuse_no_store
@@ -51,6 +51,19 @@ class RobotStoreRestored(SLRError):
     >>> issubclass(RobotStoreRestored, SLRError)
     True
     """
+
+
+class _StoreUnreadable(Exception):
+    """A read of the robot's own store failed (the file damaged, busy past its timeout, a disk
+    error): told apart from the fleet's failures, which drop the connection to the fleet.
+    ``error`` is the store's SLRError."""
+
+    def __init__(self, error: SLRError):
+        super().__init__(str(error))
+        self.error = error
+
+
+_T = TypeVar("_T")
 
 
 class FleetTarget(Protocol):
@@ -180,6 +193,7 @@ class _Pusher:
         self.outage: str | None = None   # why the fleet is unreachable, while it is
         self.refused = False                # ... and whether it answered with a refusal
         self.in_flight: str | None = None   # why the robot's store made a round wait, while so
+        self.unreadable: str | None = None  # why the robot's store cannot be read, while so
         # the fleet's positions (asked once per connection), the last contact sent and when
         self.positions: dict | None = None
         self.last_contact: tuple | None = None
@@ -218,10 +232,32 @@ class _Pusher:
             self.say(f"{self.in_flight}; retrying with backoff")
 
     def store_ready(self) -> None:
-        """A round ran through: a wait for the robot's store's writers, if any, is over."""
+        """A round ran through: a wait for the robot's store's writers, or a failure to read
+        it, if any, is over."""
         if self.in_flight is not None:
             self.in_flight = None
             self.say("the robot's store's writers are done; shipping resumed")
+        if self.unreadable is not None:
+            self.unreadable = None
+            self.say("the robot's store reads again; shipping resumed")
+
+    def read(self, call: Callable[..., _T], *args: Any) -> _T:
+        """``call(*args)``, a read of the robot's store: its failure is raised as
+        :class:`_StoreUnreadable` (a writer in flight as it is: a wait of its own)."""
+        try:
+            return call(*args)
+        except WriterInFlight:
+            raise
+        except SLRError as exc:
+            raise _StoreUnreadable(exc) from None
+
+    def store_fails(self, exc: SLRError) -> None:
+        """A read of the robot's store failed: say so once while it fails for one reason
+        (the connection to the fleet is kept)."""
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        if self.unreadable != reason:
+            self.unreadable = reason
+            self.say(f"the robot's store cannot be read ({reason}); retrying with backoff")
 
     def connect(self) -> FleetTarget:
         if self.target is None:
@@ -266,10 +302,11 @@ class _Pusher:
         positions = self.positions
         # the marks before the types: a type whose first row came with its mark after the
         # types were read would go unshipped this round, and its mark with it
-        marks = {k[len("sync/mark/"):]: v for k, v in self.store.meta_items("sync/mark/").items()
-                 if _is_mark(v)}
-        relayed = _relayed_marks(self.store, self.robot)
-        heads = self.store.fleet_heads()
+        read = self.read
+        marks = {k[len("sync/mark/"):]: v
+                 for k, v in read(self.store.meta_items, "sync/mark/").items() if _is_mark(v)}
+        relayed = read(_relayed_marks, self.store, self.robot)
+        heads = read(self.store.fleet_heads)
         shipped = 0
         keys = sorted(k for k in heads if self.types is None or k in self.types)
         if self.types is not None:   # (the marks of the types left out speak of rows not shipped)
@@ -277,7 +314,7 @@ class _Pusher:
             relayed = {r: m for r, m in ((r, _marks_of(self.types, heads, m))
                                          for r, m in relayed.items()) if m}
         again = [k for k in keys if self.resync and k not in self.resynced]
-        counters = self.store.fleet_counters()
+        counters = read(self.store.fleet_counters)
         for key in keys:
             if key not in again and counters.get(key, 0) < positions.get(key, 0):
                 raise RobotStoreRestored(
@@ -324,7 +361,7 @@ class _Pusher:
                     if stop.is_set():
                         cut = True
                         break
-                    rows = self.store.fleet_read_after(name, arity, position, self.batch)
+                    rows = read(self.store.fleet_read_after, name, arity, position, self.batch)
                     if not rows:
                         if position == 0 and (name, arity) in again \
                                 and positions.get((name, arity), 0) > 0:
@@ -360,7 +397,7 @@ class _Pusher:
             position = positions.get((name, arity), 0)
             if held is not None and held[:2] == (name, arity):
                 position = held[2][-1][0]
-            left, latest = self.store.fleet_backlog(name, arity, position)
+            left, latest = read(self.store.fleet_backlog, name, arity, position)
             pending += left
             if latest is not None:
                 head_arrival = latest if head_arrival is None else max(head_arrival, latest)
@@ -499,7 +536,10 @@ def push(db: str, fleet: str, *, robot: str | None = None,
                          fleet, resync)
         try:
             if not follow:
-                pusher.round(stop)
+                try:
+                    pusher.round(stop)
+                except _StoreUnreadable as exc:
+                    raise exc.error from None
                 return pusher.report
             _follow(pusher, stop)
             return pusher.report
@@ -595,19 +635,25 @@ def _same_file(db: str, fleet: str) -> bool:
 
 def _follow(pusher: _Pusher, stop: threading.Event) -> None:
     """Rounds until ``stop``: after a round that left nothing, wait for the robot's store to
-    change (its data_version, read with a backoff); while the fleet is unreachable, retry
-    with a backoff, saying so once per outage."""
+    change (its data_version, read with a backoff); while the fleet is unreachable, or the
+    robot's store cannot be read (damaged, replaced, busy, for a while), retry with a
+    backoff, saying so once per outage."""
     store = pusher.store
     retry = RETRY_MIN
     while not stop.is_set():
-        seen = store.data_version()
         began = time.monotonic()
         try:
+            seen = pusher.read(store.data_version)
             pusher.round(stop, HEARTBEAT)
         except RobotStoreRestored:   # waiting would not cure it: it would ship with a hole
             raise
         except WriterInFlight as exc:   # the robot's store, not the fleet: try again later
             pusher.store_waits(exc)
+            stop.wait(retry)
+            retry = min(retry * 2, RETRY_MAX)
+            continue
+        except _StoreUnreadable as exc:   # the same, and the fleet connection is kept
+            pusher.store_fails(exc.error)
             stop.wait(retry)
             retry = min(retry * 2, RETRY_MAX)
             continue
@@ -624,8 +670,12 @@ def _follow(pusher: _Pusher, stop: threading.Event) -> None:
             stop.wait(gap)
         wait = WAKE_MIN
         beat = time.monotonic() + HEARTBEAT   # an idle robot's contact stays fresh too
-        while not stop.is_set() and store.data_version() == seen \
-                and time.monotonic() < beat:
+        while not stop.is_set() and time.monotonic() < beat:
+            try:
+                if store.data_version() != seen:
+                    break
+            except SLRError:
+                break   # (the round reads it again, and says why if it still fails)
             stop.wait(wait)
             wait = min(wait * 2, WAKE_MAX)
 

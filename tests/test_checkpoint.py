@@ -2,6 +2,7 @@
 file, SQLite's own checkpoint (inside a commit) is off, durability and sharing are unchanged."""
 from __future__ import annotations
 
+import logging
 import sqlite3
 import threading
 import time
@@ -10,6 +11,7 @@ import pytest
 
 import slr_sql
 from slr_sql import ManualClock
+from slr_sql.store.checkpointer import WalCheckpointer
 from slr_sql.store.connection import Database
 
 
@@ -120,3 +122,53 @@ def test_the_page_cache_bound_is_an_option(tmp_path):
     for bad in (0, -1, "64", True):
         with pytest.raises(slr_sql.SLRError, match="cache_mib"):
             slr_sql.open(tmp_path / "kb.db", cache_mib=bad)
+
+
+def test_a_damaged_file_is_said_once_and_so_is_its_end(tmp_path, caplog):
+    """The checkpointer meets a store file that is no database any more (its bytes turned to
+    garbage before its first run read the schema): one WARNING line naming the store, without
+    traceback, however many runs fail; once the file is restored from a copy, one line that
+    it works again, and the thread checkpoints on."""
+    path = tmp_path / "kb.db"
+    with slr_sql.open(path, clock=ManualClock(0.0)) as kb:
+        kb.add_many([f"p({i})^{i}" for i in range(50)])
+    copy = path.read_bytes()          # (checkpointed whole at close: the file alone holds it)
+    path.write_bytes(b"\xff" * len(copy))
+    failed = "checkpointing the write-ahead log failed (SLRError: " \
+             f"{path}: the file is damaged (file is not a database); restore it from a copy)"
+    with caplog.at_level(logging.WARNING, logger="slr_sql.store"):
+        checkpointer = WalCheckpointer(str(path), interval=0.01)
+        try:
+            wait_for(lambda: checkpointer.failed >= 3)
+            assert caplog.text.count(failed) == 1, caplog.text
+            path.write_bytes(copy)
+            wait_for(lambda: checkpointer.runs >= 2)
+            assert checkpointer._thread.is_alive()
+        finally:
+            checkpointer.stop()
+    assert caplog.text.count(f"{path}: checkpointing the write-ahead log works again") == 1
+    assert caplog.text.count(failed) == 1 and "Traceback" not in caplog.text
+    assert [r.levelno for r in caplog.records if r.name == "slr_sql.store"] == \
+        [logging.WARNING, logging.WARNING]
+    with slr_sql.open(path, clock=ManualClock(0.0)) as kb:
+        assert kb.query("aggregate_all(count, p(_)^_, N)") == [{"N": 50}]
+
+
+def test_another_connections_lock_is_waited_out_quietly(tmp_path, caplog):
+    path = tmp_path / "kb.db"
+    with slr_sql.open(path, clock=ManualClock(0.0)) as kb:
+        kb.add_many([f"p({i})^{i}" for i in range(50)])
+    holder = sqlite3.connect(path, isolation_level=None)
+    holder.execute("PRAGMA locking_mode=EXCLUSIVE")
+    holder.execute("BEGIN EXCLUSIVE")   # (held to its end: every checkpoint meets the lock)
+    with caplog.at_level(logging.DEBUG, logger="slr_sql.store"):
+        checkpointer = WalCheckpointer(str(path), interval=0.01)
+        try:
+            wait_for(lambda: checkpointer.locked >= 3)
+            holder.execute("COMMIT")
+            holder.close()
+            wait_for(lambda: checkpointer.runs >= 1)
+        finally:
+            checkpointer.stop()
+    assert checkpointer.failed == 0
+    assert not [r for r in caplog.records if r.name == "slr_sql.store"]

@@ -325,6 +325,9 @@ class Database:
         self.clock = clock if clock is not None else WallClock()
         self.lock = ordered_lock("store", reentrant=True)
         self.tx_depth = 0
+        # what ended the open transaction before its end (SQLite rolled it back itself, a
+        # rollback to a savepoint failed; None when unknown): _transaction_ended
+        self.ended: list[BaseException | None] = []
         self.closed = False
         # called, lock held, after a transaction rolled back (the event-type cache reloads)
         self.rollback_listeners: list[Callable[[], None]] = []
@@ -610,8 +613,13 @@ class Database:
                     self._remove_own_side_files(now)
             try:
                 if self.tx_depth:
-                    self.conn.execute("ROLLBACK")
                     self.tx_depth = 0
+                    self.ended = []
+                    if self.conn.in_transaction:
+                        try:
+                            self.conn.execute("ROLLBACK")
+                        except sqlite3.Error:
+                            pass   # (closing rolls back what is left anyway)
                 self.suspend_streams()  # iterators still open: they fail when read again
                 if self.path is not None:
                     try:
@@ -699,6 +707,8 @@ class Database:
         >>> db.failure(sqlite3.OperationalError("database or disk is full"))
         SLRStoreFull(':memory:: the disk is full (or the store reached its size limit; database or disk is full); nothing of this call was written: free space and retry')
         """
+        if self.tx_depth and not self.conn.in_transaction:
+            self._transaction_ended(exc)   # (SQLite rolled it all back: a full disk, I/O)
         code = getattr(exc, "sqlite_errorcode", None)
         if code is None:   # (a driver that does not say: by the words)
             return store_error(exc, self.path, self.busy_timeout) if \
@@ -741,6 +751,12 @@ class Database:
         through to the enclosing level, which takes the whole back (a savepoint makes SQLite
         keep the pages the block changes, for a rollback to it that would never come).
 
+        A level that ends with an error raises that error, whatever its rollback meets. A
+        transaction SQLite rolls back itself while levels are open (a statement met a full
+        disk, an I/O error), or that a statement ends, goes on as one begun again, and each
+        of its levels that ends normally raises an SLRError saying it was rolled back:
+        nothing of it is kept, nothing after it commits on its own.
+
         >>> db = Database(None)
         >>> with db.transaction():
         ...     db.execute("INSERT INTO slr_meta VALUES ('a', '1')")
@@ -762,6 +778,8 @@ class Database:
                         self.suspend_streams()
                         self._begin(self.busy_timeout if wait else 0.0)
                     else:
+                        if not conn.in_transaction:   # (ended unseen: see _transaction_ended)
+                            self._transaction_ended(None)
                         conn.execute(f"SAVEPOINT slr_sp{depth}")
                 except sqlite3.Error as exc:
                     raise self.failure(exc) from None
@@ -773,27 +791,25 @@ class Database:
                     committed = drop_commit_callbacks(self.commit_callbacks, depth)
                     try:
                         self._forget_planning_copy()
-                        if not conn.in_transaction:
-                            pass   # SQLite rolled it all back itself (a full disk, an I/O error)
-                        elif depth == 0:
-                            conn.execute("ROLLBACK")
-                        else:
-                            conn.execute(f"ROLLBACK TO slr_sp{depth}")
-                            conn.execute(f"RELEASE slr_sp{depth}")
+                        self._roll_back(depth)
                     finally:
                         if listeners:
                             self._rolled_back()
                     raise
                 self.tx_depth = depth
                 try:
+                    if not conn.in_transaction:   # (ended unseen: a statement ended it)
+                        self._transaction_ended(None)
+                    if self.ended:
+                        raise self._ended_error(depth)
                     if depth == 0:
                         self.check_identity()  # before anything is acknowledged
                     conn.execute("COMMIT" if depth == 0 else f"RELEASE slr_sp{depth}")
                 except BaseException as exc:
                     committed = drop_commit_callbacks(self.commit_callbacks, depth)
                     self._forget_planning_copy()
-                    if depth == 0 and conn.in_transaction:
-                        conn.execute("ROLLBACK")
+                    if depth == 0 or self.ended:
+                        self._roll_back(depth)
                     if listeners:
                         self._rolled_back()
                     if isinstance(exc, sqlite3.Error):   # (a full disk meets the commit)
@@ -808,6 +824,66 @@ class Database:
                 run_after_rollback(committed, exc)
             raise
         run_commit_callbacks(committed)
+
+    def _roll_back(self, depth: int) -> None:
+        """Take back the transaction level ``depth`` that is ending with an error (lock
+        held): ``ROLLBACK`` of the whole at depth 0, else ``ROLLBACK TO`` its savepoint. It
+        never raises: the error that ends the level is what its caller must hear. A
+        transaction SQLite already rolled back itself (a full disk, an I/O error) is not
+        rolled back again; a savepoint that cannot be rolled back to ends the whole
+        transaction (:meth:`_transaction_ended`: what it changed must not be committed with
+        the rest)."""
+        conn = self.conn
+        try:
+            if depth == 0:
+                self.ended = []
+                if conn.in_transaction:
+                    conn.execute("ROLLBACK")
+                return
+            if not conn.in_transaction:   # (ended unseen: nothing of this level is left)
+                self._transaction_ended(None)
+                return
+            conn.execute(f"ROLLBACK TO slr_sp{depth}")
+            conn.execute(f"RELEASE slr_sp{depth}")
+        except sqlite3.Error as exc:
+            if depth:
+                self._transaction_ended(exc)
+            # (at depth 0 a ROLLBACK that fails leaves nothing to keep: SQLite rolls back
+            # what it cannot commit, and the next BEGIN starts afresh)
+
+    def _transaction_ended(self, reason: BaseException | None) -> None:
+        """The open transaction ended before its levels did (lock held): SQLite rolls a
+        transaction back itself when a statement meets a full disk, an I/O error or an
+        interrupt, a hand-written statement may end it, and a rollback to a savepoint
+        that failed leaves that part in it. The statements its levels still run must not
+        commit one by one, nor the part be kept with the rest: the whole is rolled back
+        and a transaction begun again, with the savepoints of the open levels, so that
+        their statements and rollbacks go on inside it; each level that ends without an
+        error raises :meth:`_ended_error` instead (nothing of the transaction is kept),
+        and the outermost level's end forgets ``reason``."""
+        if not self.ended:
+            self.ended = [reason]
+        conn = self.conn
+        try:
+            if conn.in_transaction:
+                conn.execute("ROLLBACK")
+            conn.execute("BEGIN")
+            for level in range(1, self.tx_depth):
+                conn.execute(f"SAVEPOINT slr_sp{level}")
+        except sqlite3.Error:
+            pass   # (each level's end then finds no transaction, and says so)
+
+    def _ended_error(self, depth: int) -> SLRError:
+        """What a level of a transaction that ended before it (:meth:`_transaction_ended`)
+        raises as it ends without an error of its own."""
+        reason = self.ended[0] if self.ended else None
+        outcome = "the transaction was rolled back, nothing of it was written" if depth == 0 \
+            else "the transaction is rolled back, nothing of it will be written"
+        if isinstance(reason, sqlite3.Error):
+            error = store_error(reason, self.path, self.busy_timeout, outcome)
+            return error if outcome in str(error) else type(error)(f"{error}; {outcome}")
+        return SLRError(f"{self.path or ':memory:'}: the transaction ended before its end "
+                        f"(a statement ended it); {outcome}")
 
     def _begin(self, timeout: float) -> None:
         """``BEGIN IMMEDIATE``, waiting at most ``timeout`` seconds for another
@@ -842,8 +918,15 @@ class Database:
             conn.execute(f"PRAGMA busy_timeout = {int(self.busy_timeout * 1000)}")
 
     def _rolled_back(self) -> None:
+        """Call the rollback listeners (lock held), as a transaction level ends with an
+        error, which its caller must hear: a listener that reads the store again and meets
+        the store's own condition (the file damaged, the server gone: that error's cause,
+        most likely) does not hide it, and the next listener still runs."""
         for listener in self.rollback_listeners:
-            listener()
+            try:
+                listener()
+            except (SLRError, DatabaseError):
+                continue
 
     def after_commit(self, callback: Callable[[], None], always: bool = False) -> None:
         """Call ``callback()`` once the outermost transaction this thread is in has
@@ -1168,6 +1251,8 @@ class Database:
         try:
             yield
         except sqlite3.OperationalError as exc:
+            if self.tx_depth and not conn.in_transaction:
+                self._transaction_ended(exc)   # (an interrupted write rolls it all back)
             if "interrupt" in str(exc):
                 if checks[0] > allowed >= 0:
                     raise SLRTimeout(f"query ran out of its budget of {instructions} SQLite "

@@ -34,7 +34,7 @@ from ..errors import SLRBusy, SLRCancelled, SLRError, SLRServerUnreachable, SLRS
     SLRTimeout, \
     SLRUnavailable
 from ..lockorder import ordered_lock
-from .connection import Database, drop_commit_callbacks, in_own_transaction, \
+from .connection import Database, DatabaseError, drop_commit_callbacks, in_own_transaction, \
     merge_commit_callbacks, run_after_rollback, \
     run_commit_callbacks
 from .dialect import POSTGRES
@@ -495,8 +495,12 @@ class PgConnection:
             args: Any = params
         else:
             args = tuple(params) if params else None
-        self._alive()
-        cursor = self.raw.cursor()
+        if sql != "COMMIT" or self.begin_pending:
+            # (a COMMIT whose BEGIN went, on a connection the server dropped: the server
+            # rolled the transaction back; one opened again would "commit" nothing and say
+            # nothing -- the transaction fails)
+            self._alive()
+        cursor = self._guard(self.raw.cursor)
         if self.prelude and sql in ("COMMIT", "ROLLBACK"):
             # the savepoints end with the transaction; the locks (and the statements nobody
             # reads) go before a COMMIT (what the transaction stores is stored under them),
@@ -1255,6 +1259,11 @@ class PgDatabase:
                             conn.rollback()
                         else:
                             conn.roll_back_to(f"slr_sp{depth}")
+                    except (SLRError, DatabaseError):
+                        # (the connection lost, the server's transaction is gone with it:
+                        # the enclosing levels' statements and COMMIT fail; the error that
+                        # ends this level is what its caller must hear)
+                        pass
                     finally:
                         if listeners:
                             self._rolled_back()
@@ -1282,11 +1291,8 @@ class PgDatabase:
             raise
         run_commit_callbacks(committed)
 
-    def _rolled_back(self) -> None:
-        for listener in self.rollback_listeners:
-            listener()
-
     # (the same lock, depth and callbacks as SQLite's Database: one implementation)
+    _rolled_back = Database._rolled_back
     after_commit = Database.after_commit
 
     # ------------------------------------------------------------------ raw SQL
