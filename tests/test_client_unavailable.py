@@ -94,3 +94,120 @@ def test_a_subscription_whose_server_was_killed_is_unavailable(tmp_path):
             sub.close()
     finally:
         server.stop()
+
+
+# -- Retry-After ----------------------------------------------------------------------------------
+
+class _Answering503:
+    """A real HTTP server on a thread that answers every request 503 with ``headers`` and
+    ``body`` (what a proxy, a load balancer or another version of slr serve may say)."""
+
+    def __init__(self, headers: dict, body: bytes):
+        import http.server
+        import threading
+
+        outer = self
+        self.requests = 0
+
+        class Handler(http.server.BaseHTTPRequestHandler):
+            protocol_version = "HTTP/1.1"      # (what a WebSocket handshake's answer needs)
+
+            def _answer(self) -> None:
+                self.rfile.read(int(self.headers.get("Content-Length") or 0))
+                outer.requests += 1
+                self.send_response(503)
+                for name, value in headers.items():
+                    self.send_header(name, value)
+                self.send_header("Content-Length", str(len(body)))
+                self.end_headers()
+                self.wfile.write(body)
+
+            do_GET = do_POST = _answer
+
+            def log_message(self, *args) -> None:
+                pass
+
+        self.server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.url = f"http://127.0.0.1:{self.server.server_address[1]}"
+        self.thread = threading.Thread(target=self.server.serve_forever,
+                                       kwargs={"poll_interval": 0.01}, daemon=True)
+        self.thread.start()
+
+    def __enter__(self) -> "_Answering503":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.server.shutdown()
+        self.server.server_close()
+        self.thread.join(DEADLINE)
+
+
+def _http_date(seconds_from_now: float) -> str:
+    from email.utils import formatdate
+    return formatdate(time.time() + seconds_from_now, usegmt=True)
+
+
+_UNAVAILABLE = b'{"error": {"kind": "Unavailable", "status": 503, "message": "try later"}}'
+_BUSY = b'{"error": {"kind": "SLRBusy", "status": 503, "message": "robot.db is locked"}}'
+_FULL = b'{"error": {"kind": "SLRStoreFull", "status": 503, "message": "the disk is full"}}'
+
+
+@pytest.mark.parametrize("retry_after, body, cls, expected", [
+    ("7", _UNAVAILABLE, "ServiceUnavailable", (7, 7)),
+    ("120", b"Service Unavailable", "ServiceUnavailable", (120, 120)),   # not JSON: a proxy
+    (lambda: _http_date(100), _UNAVAILABLE, "ServiceUnavailable", (95, 100)),
+    ("4", _BUSY, "SLRBusy", (4, 4)),
+    ("soon", _UNAVAILABLE, "ServiceUnavailable", (1, 1)),      # garbage: the class default
+    (None, _UNAVAILABLE, "ServiceUnavailable", (1, 1)),        # absent: the class default
+    ("1.5", _FULL, "SLRStoreFull", (10, 10)),
+    ("-3", b"", "ServiceUnavailable", (1, 1)),
+], ids=["seconds", "seconds-plain-text", "http-date", "slr-class", "garbage", "absent",
+        "garbage-slr-class", "negative-empty-body"])
+def test_the_client_error_of_a_503_carries_the_servers_retry_after(retry_after, body, cls,
+                                                                   expected):
+    """Seconds or an HTTP date; absent or not readable: the class's own default."""
+    value = retry_after() if callable(retry_after) else retry_after
+    with _Answering503({} if value is None else {"Retry-After": value}, body) as server, \
+            slr_sql.connect(server.url) as kb:
+        with pytest.raises(SLRUnavailable) as caught:
+            kb.add("p(1)^1")
+    exc = caught.value
+    assert type(exc).__name__ == cls, repr(exc)
+    assert expected[0] <= exc.retry_after <= expected[1], exc.retry_after
+
+
+def test_a_subscription_refused_with_503_carries_the_retry_after_too():
+    with _Answering503({"Retry-After": "9"}, _UNAVAILABLE) as server, \
+            slr_sql.connect(server.url) as kb:
+        exc = _unavailable(lambda: kb.subscribe("p(X)^T"))
+    assert exc.status == 503 and exc.retry_after == 9
+
+
+def test_a_following_fleet_pusher_waits_what_the_fleets_retry_after_says(tmp_path):
+    """A fleet that answers 503 with Retry-After: 3 (a backoff would wait 0.1 s first) and
+    one asking for an hour (the pusher waits its own most, 5 s)."""
+    import threading
+
+    from slr_sql import fleet
+
+    class Stop(threading.Event):
+        """The pusher's stop event: records each wait it asks for, and stops at the first."""
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.waits: list = []
+
+        def wait(self, timeout=None) -> bool:
+            self.waits.append(timeout)
+            self.set()
+            return True
+
+    robot = tmp_path / "r1.db"
+    with slr_sql.open(robot, robot="r1", clock=slr_sql.ManualClock(0)) as kb:
+        kb.add("seen(pallet7, dock)^1")
+    for told, waited in (("3", 3.0), ("3600", fleet.RETRY_MAX)):
+        with _Answering503({"Retry-After": told}, _UNAVAILABLE) as server:
+            stop, said = Stop(), []
+            fleet.push(str(robot), server.url, follow=True, stop=stop, say=said.append)
+        assert stop.waits == [waited], (stop.waits, said)
+        assert server.requests >= 1 and "unreachable (try later)" in said[0], said

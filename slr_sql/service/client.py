@@ -41,13 +41,13 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 from urllib.parse import quote, urlsplit
 
-from slr_sql import EventRejected, SLRError, SLRTimeout
+from slr_sql import EventRejected, SLRError, SLRTimeout, SLRUnavailable
 from slr_sql.api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 
 from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args,
                        encode_arguments, encode_term, loads)
 from .auth import check_token_text
-from .errors import ServiceError, ServiceUnavailable, error_from_body
+from .errors import ServiceError, ServiceUnavailable, error_from_body, parse_retry_after
 
 __all__ = ["connect", "RemoteKnowledgeBase", "RemotePendingQuery", "RemoteSubscription",
            "RemoteWait"]
@@ -179,11 +179,14 @@ def _not_subscribed(url: str, exc: BaseException) -> ServiceError:
     >>> print(_not_subscribed("ws://127.0.0.1:1/subscribe", ConnectionRefusedError(111, "refused")))
     cannot subscribe at ws://127.0.0.1:1/subscribe: [Errno 111] refused
     """
-    status = getattr(getattr(exc, "response", None), "status_code", None)
+    response = getattr(exc, "response", None)
+    status = getattr(response, "status_code", None)
     message = f"cannot subscribe at {url}: {exc}"
     if isinstance(status, int) and status != 503:
         return ServiceError(message, kind="BadRequest", status=status)
-    return ServiceUnavailable(message, status=status or 0)
+    headers = getattr(response, "headers", None)
+    told = parse_retry_after(headers.get("Retry-After")) if headers is not None else None
+    return ServiceUnavailable(message, status=status or 0, retry_after=told)
 
 
 class RemoteKnowledgeBase:
@@ -269,9 +272,15 @@ class RemoteKnowledgeBase:
             message = f"HTTP {response.status_code} from {self.url}{path}" + \
                 (f": {text}" if text else "")
             if response.status_code == 503:   # (beyond --max-connections: may pass)
-                raise ServiceUnavailable(message, 503)
+                raise ServiceUnavailable(message, 503, retry_after=parse_retry_after(
+                    response.headers.get("retry-after")))
             raise ServiceError(message, kind="BadRequest", status=response.status_code)
-        raise error_from_body(data, response.status_code)
+        error = error_from_body(data, response.status_code)
+        if response.status_code == 503 and isinstance(error, SLRUnavailable):
+            told = parse_retry_after(response.headers.get("retry-after"))
+            if told is not None:          # (else the class's default wait)
+                error.retry_after = told
+        raise error
 
     def _post(self, path: str, body: dict, timeout: float | None = None) -> dict:
         return self._request("POST", path, body, timeout=timeout)[1]

@@ -13,6 +13,9 @@ exception class by the client.
 """
 from __future__ import annotations
 
+import time
+from datetime import timezone
+from email.utils import parsedate_to_datetime
 from typing import Any
 
 import slr_sql
@@ -22,7 +25,7 @@ from slr_sql import EventRejected, SLRCancelled, SLREvaluationError, SLRError, S
 from .encoding import TermError, decode_term, encode_term
 
 __all__ = ["ServiceError", "ServiceUnavailable", "error_body", "error_status", "error_from_body",
-           "retry_after", "STATUS_KINDS"]
+           "retry_after", "parse_retry_after", "STATUS_KINDS"]
 
 # kind of a ServiceError -> its HTTP status
 STATUS_KINDS = {
@@ -58,14 +61,20 @@ class ServiceUnavailable(ServiceError, SLRUnavailable):
     retried add may be stored twice, never lost). ``kind``: another name when a 503 said
     one this client has no class for.
 
+    ``retry_after``: the seconds the server's ``Retry-After`` asked to wait, else the
+    class's default (1).
+
     >>> from slr_sql import SLRUnavailable
     >>> e = ServiceUnavailable("cannot reach slr serve at http://127.0.0.1:1", status=0)
-    >>> isinstance(e, SLRUnavailable), e.kind, e.status
-    (True, 'Unavailable', 0)
+    >>> isinstance(e, SLRUnavailable), e.kind, e.status, e.retry_after
+    (True, 'Unavailable', 0, 1)
     """
 
-    def __init__(self, message: str, status: int | None = None, kind: str = "Unavailable"):
+    def __init__(self, message: str, status: int | None = None, kind: str = "Unavailable",
+                 retry_after: float | None = None):
         super().__init__(message, kind=kind, status=503 if status is None else status)
+        if retry_after is not None:
+            self.retry_after = retry_after
 
 
 def error_status(exc: BaseException) -> int:
@@ -89,6 +98,38 @@ def retry_after(exc: BaseException) -> int | None:
     if error_status(exc) != 503:
         return None
     return max(1, int(getattr(exc, "retry_after", 1)))
+
+
+MAX_RETRY_AFTER = 86400   # seconds: a longer Retry-After is read as this (a day)
+
+
+def parse_retry_after(value: Any, now: float | None = None) -> float | None:
+    """The seconds a ``Retry-After`` header's ``value`` asks to wait: delay-seconds
+    (``"10"``), or an HTTP date (the seconds from ``now``, default the time now, to it; 0
+    once past); at most a day. None when ``value`` is absent or neither (a client keeps
+    its class's default then).
+
+    >>> parse_retry_after("10"), parse_retry_after(" 3 "), parse_retry_after(None)
+    (10, 3, None)
+    >>> parse_retry_after("Wed, 21 Oct 2015 07:28:30 GMT", now=1445412480.0)
+    30.0
+    >>> parse_retry_after("soon"), parse_retry_after("-5"), parse_retry_after("1.5")
+    (None, None, None)
+    """
+    if not isinstance(value, str):
+        return None
+    text = value.strip()
+    if text.isascii() and text.isdigit():
+        digits = text.lstrip("0") or "0"
+        return min(int(digits), MAX_RETRY_AFTER) if len(digits) <= 12 else MAX_RETRY_AFTER
+    try:
+        when = parsedate_to_datetime(text)
+        if when.tzinfo is None:          # ("-0000": a time in UTC, its zone unsaid)
+            when = when.replace(tzinfo=timezone.utc)
+        seconds = when.timestamp() - (time.time() if now is None else now)
+    except (TypeError, ValueError, IndexError, OverflowError, OSError):
+        return None
+    return max(0.0, min(seconds, float(MAX_RETRY_AFTER)))
 
 
 def error_body(exc: BaseException) -> dict[str, Any]:
