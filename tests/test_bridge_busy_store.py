@@ -131,3 +131,46 @@ def test_held_counts_only_the_messages_whose_marks_are_still_unstored(postgres_u
     assert [(a["X"], a["T"]) for a in answers] == [(float(i), 100.0 + i) for i in range(3)]
     said = [line for line in lines if "takes no writes now" in line]
     assert len(said) == 1 and "4 message(s) held" in said[0], lines
+
+
+def test_events_whose_adds_answer_was_lost_are_not_sent_again(ros_node, prefix):
+    """A bridge storing into a served knowledge base whose server reads the add and dies
+    without answering (a real TCP server of the test): the events may be stored, so they are
+    not sent again (each would be stored twice), said and counted; nothing stays held."""
+    from geometry_msgs.msg import PoseStamped
+    from service_helpers import DroppingServer
+
+    node, executor = ros_node
+    mapping = mapping_from_dict({"tf": False, "topics": {f"{prefix}/pose": {
+        "event": "pose", "args": ["header.frame_id", "pose.position.x"]}}})
+    publisher = node.create_publisher(PoseStamped, f"{prefix}/pose", 100)
+    lines: list[str] = []
+    with DroppingServer() as server, slr_sql.connect(server.url) as kb:
+        bridge = Bridge(kb, mapping, node_name="test_bridge", log=lines.append).start()
+        try:
+            deadline = time.monotonic() + DEADLINE
+
+            def spin_until(condition) -> None:
+                while not condition():
+                    assert time.monotonic() < deadline, f"timed out; log {lines}"
+                    bridge.spin_once(0.01)
+                    executor.spin_once(timeout_sec=0.01)
+
+            spin_until(lambda: publisher.get_subscription_count() > 0)
+            for i in range(3):
+                msg = PoseStamped()
+                msg.header.stamp.sec = 100 + i
+                msg.header.frame_id = "map"
+                msg.pose.position.x = float(i)
+                publisher.publish(msg)
+            spin_until(lambda: bridge.stats.messages == 3 and bridge.stats.uncertain == 3)
+            sent = server.dropped
+            for _ in range(5):                    # later spins send nothing again
+                bridge.spin_once(0.01)
+        finally:
+            bridge.close()
+    assert 1 <= sent <= 3 and server.dropped == sent, (sent, server.dropped)
+    assert bridge.held == 0 and bridge.stats.events == 0
+    lost = [line for line in lines if "may or may not be stored" in line]
+    assert lost and all("not sent again" in line for line in lost), lines
+    assert "Traceback" not in "".join(lines)

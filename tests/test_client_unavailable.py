@@ -211,3 +211,42 @@ def test_a_following_fleet_pusher_waits_what_the_fleets_retry_after_says(tmp_pat
             fleet.push(str(robot), server.url, follow=True, stop=stop, say=said.append)
         assert stop.waits == [waited], (stop.waits, said)
         assert server.requests >= 1 and "unreachable (try later)" in said[0], said
+
+
+# -- a connection that broke after the request was sent -----------------------------------------
+
+def test_an_add_whose_connection_broke_after_it_was_sent_has_an_unknown_outcome():
+    """The server read the whole add and closed without answering (it died): it may have
+    stored it, so the error is no SLRUnavailable (which would tell a caller to send it
+    again) but a ServiceOutcomeUnknown saying so. A query that met the same fate changed
+    nothing: that one is a ServiceUnavailable, safe to retry."""
+    from slr_sql.service.errors import ServiceOutcomeUnknown
+    from service_helpers import DroppingServer
+
+    with DroppingServer() as server, slr_sql.connect(server.url) as kb:
+        for write in (lambda: kb.add("p(1)^1"), lambda: kb.add_many(["p(1)^1", "p(2)^2"]),
+                      lambda: kb.mark_complete("p/1", 5), lambda: kb.load("q(1).")):
+            with pytest.raises(ServiceOutcomeUnknown) as caught:
+                write()
+            exc = caught.value
+            assert not isinstance(exc, SLRUnavailable), repr(exc)
+            assert exc.kind == "OutcomeUnknown" and exc.status == 0
+            assert "may or may not have applied it" in str(exc), str(exc)
+        assert server.dropped == 4
+        exc = _unavailable(lambda: kb.query("p(X)^T"))
+        assert exc.status == 0 and server.dropped == 5
+
+
+def test_an_add_many_split_in_requests_says_which_events_no_request_carried():
+    """Above the server's body limit add_many sends several requests: the first one's
+    connection breaks, so its events may be stored and the later ones were never sent."""
+    from slr_sql.service.errors import ServiceOutcomeUnknown
+    from service_helpers import DroppingServer
+
+    with DroppingServer(b'{"status": "ok", "limits": {"max_body": 2048}}') as server, \
+            slr_sql.connect(server.url) as kb:
+        with pytest.raises(ServiceOutcomeUnknown) as caught:
+            kb.add_many([f"p({'x' * 100}, {i})^{i}" for i in range(40)])
+    assert server.dropped == 1
+    unsent = caught.value.unsent_from
+    assert isinstance(unsent, int) and 0 < unsent < 40, unsent

@@ -21,7 +21,10 @@ What differs from a local knowledge base:
 * Failures to reach the server, and its 503 answers that no slr_sql class names, are
   :class:`~slr_sql.service.errors.ServiceUnavailable`: a ``ServiceError`` (``kind``
   ``"Unavailable"``, ``status`` 0 when no answer came) and an :class:`~slr_sql.SLRUnavailable`
-  (retry later), for requests and subscriptions alike. An https:// server whose certificate
+  (retry later), for requests and subscriptions alike. But a connection that broke after a
+  request that may change the store (an add, a load, a mark) was sent in full is a
+  :class:`~slr_sql.service.errors.ServiceOutcomeUnknown`: no SLRUnavailable, since the
+  server may have applied it. An https:// server whose certificate
   the client refuses is a ``ServiceError`` of ``kind`` ``"CertificateNotTrusted"`` (it trusts
   ``$SSL_CERT_FILE`` and ``$SSL_CERT_DIR``, else certifi's bundle; docs/service.md, TLS).
 
@@ -47,7 +50,8 @@ from slr_sql.api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args,
                        encode_arguments, encode_term, loads)
 from .auth import check_token_text
-from .errors import ServiceError, ServiceUnavailable, error_from_body, parse_retry_after
+from .errors import (ServiceError, ServiceOutcomeUnknown, ServiceUnavailable, error_from_body,
+                     parse_retry_after)
 
 __all__ = ["connect", "RemoteKnowledgeBase", "RemotePendingQuery", "RemoteSubscription",
            "RemoteWait"]
@@ -55,6 +59,10 @@ __all__ = ["connect", "RemoteKnowledgeBase", "RemotePendingQuery", "RemoteSubscr
 log = logging.getLogger("slr_sql.service.client")
 
 POLL_WAIT = 25.0          # seconds one long-poll asks the server to wait
+# the POSTs that change nothing in the store (every GET changes nothing either): a connection
+# that broke after one was sent leaves nothing to doubt, so it is a ServiceUnavailable
+# (retry at will); a POST or DELETE not listed may have been applied (ServiceOutcomeUnknown)
+_CHANGES_NOTHING = frozenset({"/query", "/explain", "/warnings", "/sql", "/submit"})
 DEFAULT_MAX_BODY = 1 << 20
 FLEET_ROWS = 1000         # shipped rows per request (well within the default body limit)
 
@@ -240,9 +248,16 @@ class RemoteKnowledgeBase:
         httpx = self._httpx
         if body is not None:
             content = dumps(body)
+        sent: list[bool] = []       # (a request that may change the store: sent in full?)
+        extensions = None
+        if method != "GET" and path not in _CHANGES_NOTHING:
+            def trace(event: str, info: Any) -> None:
+                if event.endswith(".send_request_body.complete"):
+                    sent.append(True)
+            extensions = {"trace": trace}
         try:
             response = self._http.request(
-                method, path, content=content, params=params,
+                method, path, content=content, params=params, extensions=extensions,
                 timeout=None if timeout is None else httpx.Timeout(timeout, connect=10.0))
         except httpx.TimeoutException:
             raise ServiceError(f"no answer from {self.url} within "
@@ -252,6 +267,11 @@ class RemoteKnowledgeBase:
             refused = _refused_certificate(exc)
             if refused is not None:
                 raise _not_trusted(self.url, refused) from None
+            if sent:
+                raise ServiceOutcomeUnknown(
+                    f"{method} {path}: the connection to {self.url} broke after the request "
+                    f"was sent, before its answer ({exc}): the server may or may not have "
+                    f"applied it (sending it again may apply it twice)") from None
             raise ServiceUnavailable(f"cannot reach slr serve at {self.url}: {exc}",
                                      status=0) from None
         except RuntimeError as exc:  # the client was closed by another thread
@@ -352,13 +372,19 @@ class RemoteKnowledgeBase:
                 rejected.append(_rejected(exc, i))
                 items.append(None)          # a hole keeps the indexes of the others
         budget = int(self.limits().get("max_body", DEFAULT_MAX_BODY)) - 1024
-        rejected += self._send_events(items, 0, atomic, budget)
+        carried = [0]    # the items the requests sent so far carry: those before this index
+        try:
+            rejected += self._send_events(items, 0, atomic, budget, carried)
+        except ServiceOutcomeUnknown as exc:
+            exc.unsent_from = carried[0]
+            raise
         rejected.sort(key=lambda e: e.index if isinstance(e.index, int) else len(items))
         return rejected
 
-    def _send_events(self, items: list, offset: int, atomic: bool,
-                     budget: int) -> list[EventRejected]:
-        """POST /add_many for ``items`` (None: a hole), halving what does not fit."""
+    def _send_events(self, items: list, offset: int, atomic: bool, budget: int,
+                     carried: list[int]) -> list[EventRejected]:
+        """POST /add_many for ``items`` (None: a hole), halving what does not fit;
+        ``carried[0]``: the end of what the requests sent so far carry."""
         present = [i for i, item in enumerate(items) if item is not None]
         if not present:
             return []
@@ -368,8 +394,9 @@ class RemoteKnowledgeBase:
         body = dumps(request)
         if len(body) > budget and not atomic and len(present) > 1:
             half = len(items) // 2
-            return (self._send_events(items[:half], offset, atomic, budget)
-                    + self._send_events(items[half:], offset + half, atomic, budget))
+            return (self._send_events(items[:half], offset, atomic, budget, carried)
+                    + self._send_events(items[half:], offset + half, atomic, budget, carried))
+        carried[0] = offset + len(items)
         reply = self._request("POST", "/add_many", content=body)[1]
         _expect(reply, "accepted", int)
         out = []

@@ -24,7 +24,7 @@ from slr_sql import EventRejected, SLRCancelled, SLREvaluationError, SLRError, S
 
 from .encoding import TermError, decode_term, encode_term
 
-__all__ = ["ServiceError", "ServiceUnavailable", "error_body", "error_status", "error_from_body",
+__all__ = ["ServiceError", "ServiceUnavailable", "ServiceOutcomeUnknown", "error_body", "error_status", "error_from_body",
            "retry_after", "parse_retry_after", "STATUS_KINDS"]
 
 # kind of a ServiceError -> its HTTP status
@@ -56,10 +56,10 @@ class ServiceUnavailable(ServiceError, SLRUnavailable):
     pending queries; the store busy or full when no slr_sql class says which). Both a
     :class:`ServiceError` (``kind`` ``"Unavailable"``, ``status`` 503, or 0 when no answer
     came) and an :class:`~slr_sql.SLRUnavailable`, so a caller retrying on the latter
-    retries a server that is down too. A refused connection or a 503 wrote nothing; a
-    connection that broke after the request was sent leaves its outcome to the server (a
-    retried add may be stored twice, never lost). ``kind``: another name when a 503 said
-    one this client has no class for.
+    retries a server that is down too. A refused connection or a 503 wrote nothing, nor
+    did a request that changes nothing; a request that may change the store and was sent
+    in full before the connection broke is a :class:`ServiceOutcomeUnknown` instead.
+    ``kind``: another name when a 503 said one this client has no class for.
 
     ``retry_after``: the seconds the server's ``Retry-After`` asked to wait, else the
     class's default (1).
@@ -75,6 +75,33 @@ class ServiceUnavailable(ServiceError, SLRUnavailable):
         super().__init__(message, kind=kind, status=503 if status is None else status)
         if retry_after is not None:
             self.retry_after = retry_after
+
+
+class ServiceOutcomeUnknown(ServiceError):
+    """A request that may change the store (an add, a load, a mark, ...) was sent in full,
+    and the connection broke before its answer came (the server was killed, a network
+    failure): the server may or may not have applied it. ``kind`` ``"OutcomeUnknown"``,
+    ``status`` 0. Unlike :class:`ServiceUnavailable` it is no
+    :class:`~slr_sql.SLRUnavailable`, whose promise is that nothing was written: sending
+    the same add again may store it twice. Read what the store holds first, or send again
+    only what a second copy does not change (a completeness mark, a fleet shipment, whose
+    rows the fleet stores once). A request that changes nothing (a query) gets a
+    ServiceUnavailable instead: retrying it is safe.
+
+    ``unsent_from``: for an ``add_many`` sent as several requests, the index of the first
+    event no request carried (those before it up to the broken request's first are
+    stored); None otherwise.
+
+    >>> from slr_sql import SLRUnavailable
+    >>> e = ServiceOutcomeUnknown("POST /add: no answer")
+    >>> e.kind, e.status, isinstance(e, SLRUnavailable)
+    ('OutcomeUnknown', 0, False)
+    """
+
+    unsent_from: int | None = None
+
+    def __init__(self, message: str):
+        super().__init__(message, kind="OutcomeUnknown", status=0)
 
 
 def error_status(exc: BaseException) -> int:
