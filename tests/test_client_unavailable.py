@@ -8,6 +8,7 @@ WebSocket handshake refused with 403) is not SLRUnavailable.
 Every server here is a real ``slr serve`` process."""
 from __future__ import annotations
 
+import json
 import socket
 import time
 
@@ -250,3 +251,85 @@ def test_an_add_many_split_in_requests_says_which_events_no_request_carried():
     assert server.dropped == 1
     unsent = caught.value.unsent_from
     assert isinstance(unsent, int) and 0 < unsent < 40, unsent
+
+
+# -- the server's 503s: one SLRUnavailable class each, its status and Retry-After from it ---------
+
+MAX_PENDING_SERVER = r"""
+import sys
+from slr_sql.service.app import Limits
+from slr_sql.service.cli import run_server
+run_server(sys.argv[1], port=0, limits=Limits(max_pending=1))
+"""
+
+
+def test_a_submit_beyond_max_pending_is_503_unavailable_with_retry_after(tmp_path):
+    import subprocess
+    import sys
+
+    from service_helpers import HTTP, slr_env
+    from slr_sql.service.errors import ServiceUnavailable
+
+    proc = subprocess.Popen([sys.executable, "-c", MAX_PENDING_SERVER,
+                             str(tmp_path / "pending.db")], stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, env=slr_env())
+    try:
+        url = proc.stdout.readline().decode().strip().rsplit(" on ", 1)[1]
+        first = HTTP.post(url + "/submit", json={"goal": "p(X)^T", "at": 1e11}, timeout=30)
+        assert first.status_code == 202, first.text           # waits: the one allowed
+        second = HTTP.post(url + "/submit", json={"goal": "q(X)^T", "at": 1e11}, timeout=30)
+        assert second.status_code == 503 and second.headers["Retry-After"] == "1"
+        assert second.json()["error"]["kind"] == "Unavailable"
+        with slr_sql.connect(url) as kb:
+            with pytest.raises(ServiceUnavailable) as caught:
+                kb.submit("q(X)^T", at=1e11)
+        assert caught.value.status == 503 and caught.value.retry_after == 1
+        assert "1 submitted queries are pending already" in str(caught.value)
+    finally:
+        proc.terminate()
+        proc.wait(DEADLINE)
+        proc.stdout.close()
+
+
+def _real_sqlite_error(tmp_path, kind: str):
+    """The error SQLite itself raises: a write lock another connection holds, or a file at
+    its page limit."""
+    import sqlite3
+
+    db = str(tmp_path / f"{kind}.db")
+    holder = sqlite3.connect(db, isolation_level=None)
+    holder.execute("CREATE TABLE t (x)")
+    other = sqlite3.connect(db, isolation_level=None, timeout=0)
+    try:
+        if kind == "locked":
+            holder.execute("BEGIN IMMEDIATE")
+            other.execute("BEGIN IMMEDIATE")
+        else:
+            other.execute("PRAGMA max_page_count = 2")
+            other.execute("INSERT INTO t VALUES (zeroblob(100000))")
+    except sqlite3.OperationalError as exc:
+        return exc
+    finally:
+        other.close()
+        holder.close()
+    raise AssertionError("SQLite raised nothing")
+
+
+@pytest.mark.parametrize("kind, cls, wait", [("locked", "SLRBusy", "1"),
+                                             ("full", "SLRStoreFull", "10")])
+def test_a_raw_sqlite_busy_or_full_error_is_answered_as_the_stores_own_class(tmp_path, kind,
+                                                                             cls, wait):
+    """What the server answers for a SQLite error no layer turned into an SLRError (the
+    store does for its own calls): the class the store raises for the same condition, with
+    its status and Retry-After, and the client raises that class."""
+    from slr_sql.service.app import _classify, _error_response
+
+    response = _error_response(_classify(_real_sqlite_error(tmp_path, kind)))
+    assert response.status_code == 503 and response.headers["Retry-After"] == wait
+    body = json.loads(response.body)
+    assert body["error"]["kind"] == cls and body["error"]["status"] == 503
+    with _Answering503({"Retry-After": response.headers["Retry-After"]},
+                       response.body) as server, slr_sql.connect(server.url) as kb:
+        with pytest.raises(SLRUnavailable) as caught:
+            kb.add("p(1)^1")
+    assert type(caught.value).__name__ == cls and caught.value.retry_after == int(wait)
