@@ -144,12 +144,17 @@ def complete_only_as_marked(kb, *types: str) -> None:
 class DroppingServer:
     """A real TCP server (a thread) standing for an ``slr serve`` that dies once a request
     that writes has reached it: it answers ``GET`` with ``get_body`` (JSON, 200), and reads
-    every other request in full (headers and body) and closes the connection without a word.
-    ``dropped`` counts those; ``received`` is set at the first."""
+    every other request in full (headers and body) and closes the connection without a word
+    -- but where ``script`` says ``a`` (one letter per such request, in order: ``a`` answer
+    with ``post_body``, ``d`` drop; beyond it, drop). ``dropped`` counts those it closed on;
+    ``received`` is set at the first."""
 
-    def __init__(self, get_body: bytes = b'{"status": "ok", "limits": {}}'):
+    def __init__(self, get_body: bytes = b'{"status": "ok", "limits": {}}',
+                 script: str = "", post_body: bytes = b'{}'):
         import socket as socket_module
         self.get_body = get_body
+        self.script = list(script)
+        self.post_body = post_body
         self.dropped = 0
         self.received = threading.Event()
         self._listener = socket_module.create_server(("127.0.0.1", 0))
@@ -184,10 +189,12 @@ class DroppingServer:
             if not chunk:
                 return
             body += chunk
-        if head.startswith(b"GET "):
+        answer = self.get_body if head.startswith(b"GET ") else \
+            self.post_body if (self.script.pop(0) if self.script else "d") == "a" else None
+        if answer is not None:
             conn.sendall(b"HTTP/1.1 200 OK\r\nContent-Type: application/json\r\n"
                          b"Connection: close\r\nContent-Length: %d\r\n\r\n%s"
-                         % (len(self.get_body), self.get_body))
+                         % (len(answer), answer))
             return
         self.dropped += 1
         self.received.set()          # (then the connection closes unanswered)

@@ -239,18 +239,20 @@ def test_an_add_whose_connection_broke_after_it_was_sent_has_an_unknown_outcome(
 
 
 def test_an_add_many_split_in_requests_says_which_events_no_request_carried():
-    """Above the server's body limit add_many sends several requests: the first one's
-    connection breaks, so its events may be stored and the later ones were never sent."""
+    """Above the server's body limit add_many sends several requests: the first is
+    answered, the second one's connection breaks, so its events may be stored, those of
+    the first are, and the later ones were never sent."""
     from slr_sql.service.errors import ServiceOutcomeUnknown
     from service_helpers import DroppingServer
 
-    with DroppingServer(b'{"status": "ok", "limits": {"max_body": 2048}}') as server, \
+    with DroppingServer(b'{"status": "ok", "limits": {"max_body": 2048}}', script="a",
+                        post_body=b'{"accepted": 5, "rejected": []}') as server, \
             slr_sql.connect(server.url) as kb:
         with pytest.raises(ServiceOutcomeUnknown) as caught:
             kb.add_many([f"p({'x' * 100}, {i})^{i}" for i in range(40)])
     assert server.dropped == 1
-    unsent = caught.value.unsent_from
-    assert isinstance(unsent, int) and 0 < unsent < 40, unsent
+    first, end = caught.value.carried
+    assert 0 < first < end < 40, caught.value.carried
 
 
 # -- the server's 503s: one SLRUnavailable class each, its status and Retry-After from it ---------

@@ -437,7 +437,8 @@ class Bridge:
         sent (:class:`~slr_sql.service.errors.ServiceOutcomeUnknown`) may or may not have
         stored its events: they are not sent again (a second copy of each would be stored),
         said with their number and counted in ``stats.uncertain``; the events no request
-        carried yet stay pending (as one message). A mark is sent again (a second one
+        carried yet (an add_many above the server's body limit is sent in several) stay
+        pending (as one message). A mark is sent again (a second one
         changes nothing)."""
         if not self._pending_messages and not self._pending_marks:
             return
@@ -482,14 +483,16 @@ class Bridge:
             self.log("the store takes writes again: the held messages are stored")
 
     def _answer_lost(self, events: list, exc: ServiceOutcomeUnknown) -> list:
-        """An add_many of ``events`` whose answer was lost: the events its requests carried
-        are not sent again (said, and counted); returns those it did not send yet."""
-        unsent = exc.unsent_from if isinstance(exc.unsent_from, int) and \
-            0 <= exc.unsent_from <= len(events) else len(events)
-        self.stats.uncertain += unsent
-        self.log(f"warning: {exc}; {unsent} event(s) may or may not be stored: not sent "
-                 f"again, so that none is stored twice")
-        return events[unsent:]
+        """An add_many of ``events`` whose answer was lost: the events of the request that
+        broke are not sent again (said, and counted); those of the requests answered before
+        it count as stored; returns those no request carried."""
+        first, end = exc.carried if exc.carried is not None and \
+            0 <= exc.carried[0] <= exc.carried[1] <= len(events) else (0, len(events))
+        self.stats.events += first
+        self.stats.uncertain += end - first
+        self.log(f"warning: {exc}; {end - first} event(s) may or may not be stored: not "
+                 f"sent again, so that none is stored twice")
+        return events[end:]
 
     def _feed(self, entry: PublishEntry) -> Any:
         """Subscribe the MAP's publish entry to the knowledge base: every answer of its

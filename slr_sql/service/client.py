@@ -372,11 +372,11 @@ class RemoteKnowledgeBase:
                 rejected.append(_rejected(exc, i))
                 items.append(None)          # a hole keeps the indexes of the others
         budget = int(self.limits().get("max_body", DEFAULT_MAX_BODY)) - 1024
-        carried = [0]    # the items the requests sent so far carry: those before this index
+        carried = [0, 0]    # the items [first, end) of the request in flight
         try:
             rejected += self._send_events(items, 0, atomic, budget, carried)
         except ServiceOutcomeUnknown as exc:
-            exc.unsent_from = carried[0]
+            exc.carried = (carried[0], carried[1])
             raise
         rejected.sort(key=lambda e: e.index if isinstance(e.index, int) else len(items))
         return rejected
@@ -384,7 +384,7 @@ class RemoteKnowledgeBase:
     def _send_events(self, items: list, offset: int, atomic: bool, budget: int,
                      carried: list[int]) -> list[EventRejected]:
         """POST /add_many for ``items`` (None: a hole), halving what does not fit;
-        ``carried[0]``: the end of what the requests sent so far carry."""
+        ``carried``: set to the [first, end) indexes of the items of each request sent."""
         present = [i for i, item in enumerate(items) if item is not None]
         if not present:
             return []
@@ -396,7 +396,7 @@ class RemoteKnowledgeBase:
             half = len(items) // 2
             return (self._send_events(items[:half], offset, atomic, budget, carried)
                     + self._send_events(items[half:], offset + half, atomic, budget, carried))
-        carried[0] = offset + len(items)
+        carried[:] = offset, offset + len(items)
         reply = self._request("POST", "/add_many", content=body)[1]
         _expect(reply, "accepted", int)
         out = []

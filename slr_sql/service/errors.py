@@ -88,9 +88,10 @@ class ServiceOutcomeUnknown(ServiceError):
     rows the fleet stores once). A request that changes nothing (a query) gets a
     ServiceUnavailable instead: retrying it is safe.
 
-    ``unsent_from``: for an ``add_many`` sent as several requests, the index of the first
-    event no request carried (those before it up to the broken request's first are
-    stored); None otherwise.
+    ``carried``: for an ``add_many`` (sent in several requests above the server's body
+    limit), the indexes ``(first, end)`` of the events the broken request carried: those
+    before ``first`` were stored (or rejected), those from ``end`` on never sent; None for
+    other calls.
 
     >>> from slr_sql import SLRUnavailable
     >>> e = ServiceOutcomeUnknown("POST /add: no answer")
@@ -98,7 +99,7 @@ class ServiceOutcomeUnknown(ServiceError):
     ('OutcomeUnknown', 0, False)
     """
 
-    unsent_from: int | None = None
+    carried: tuple[int, int] | None = None
 
     def __init__(self, message: str):
         super().__init__(message, kind="OutcomeUnknown", status=0)
