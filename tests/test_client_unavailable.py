@@ -3,9 +3,14 @@ full store is: nobody listening at the URL, a 503 of the server (beyond ``--max-
 a subscription whose connection broke. Code that catches SLRUnavailable to retry used to miss
 them (a ``ServiceError`` of kind ``Unavailable`` only). The error is still a
 :class:`ServiceError` with its ``kind`` and ``status``; a refusal a retry would meet again (a
-WebSocket handshake refused with 403) is not SLRUnavailable.
+WebSocket handshake refused with 403) is not SLRUnavailable. The error of a 503 carries the
+answer's ``Retry-After`` as ``retry_after``, which a following fleet pusher waits. A request
+that may change the store, sent in full before the connection broke, is no SLRUnavailable
+but a ``ServiceOutcomeUnknown`` (it may have been applied).
 
-Every server here is a real ``slr serve`` process."""
+The servers here are real ``slr serve`` processes, or real HTTP / TCP servers of the test
+on a thread where a test needs an answer slr serve never gives (a proxy's 503 with its own
+Retry-After, a server that dies once it has read a request)."""
 from __future__ import annotations
 
 import json
