@@ -69,7 +69,7 @@ class SLRUnavailable(SLRError):
     (True, True)
     """
 
-    retry_after = 1
+    retry_after: float = 1
 
 
 class SLRBusy(SLRUnavailable):

@@ -617,6 +617,22 @@ def _may_pass(exc: BaseException) -> bool:
     return isinstance(status, int) and (status == 0 or status >= 500 or status == 408)
 
 
+def _retry_wait(exc: BaseException, backoff: float) -> float:
+    """Seconds to wait after a failed request to the fleet before the next: the backoff, or
+    the wait the failure asks for when longer (an SLRUnavailable's ``retry_after``: what the
+    fleet server's ``Retry-After`` said, else its class's default), at most RETRY_MAX.
+
+    >>> from slr_sql.errors import SLRStoreFull
+    >>> _retry_wait(SLRStoreFull("full"), 0.1), _retry_wait(OSError(), 0.4)
+    (5.0, 0.4)
+    """
+    from .errors import SLRUnavailable
+    told = getattr(exc, "retry_after", None) if isinstance(exc, SLRUnavailable) else None
+    if isinstance(told, (int, float)) and told > backoff:
+        return min(float(told), RETRY_MAX)
+    return backoff
+
+
 def _same_file(db: str, fleet: str) -> bool:
     """Whether the fleet store path ``fleet`` is the file ``db`` (another spelling, a link).
 
@@ -660,7 +676,7 @@ def _follow(pusher: _Pusher, stop: threading.Event) -> None:
         except (SLRError, OSError) as exc:  # unreachable, busy, refused: try again later
             pusher.drop()
             pusher.unreachable(exc)
-            stop.wait(retry)
+            stop.wait(_retry_wait(exc, retry))
             retry = min(retry * 2, RETRY_MAX)
             continue
         retry = RETRY_MIN

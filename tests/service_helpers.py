@@ -139,3 +139,74 @@ def complete_only_as_marked(kb, *types: str) -> None:
     arrived ~1.8e9 s late, and their types as complete up to now - max_learned_delay."""
     kb.load(" ".join(f":- max_delay({t}, 1e10)." for t in types),
             name="delays-" + "-".join(types))
+
+
+class DroppingServer:
+    """A real TCP server (a thread) standing for an ``slr serve`` that dies once a request
+    that writes has reached it: it answers ``GET`` with ``get_body`` (JSON, 200), and reads
+    every other request in full (headers and body) and closes the connection without a word
+    -- but where ``script`` says ``a`` (one letter per such request, in order: ``a`` answer
+    with ``post_body``, ``d`` drop; beyond it, drop). ``dropped`` counts those it closed on;
+    ``received`` is set at the first."""
+
+    def __init__(self, get_body: bytes = b'{"status": "ok", "limits": {}}',
+                 script: str = "", post_body: bytes = b'{}'):
+        import socket as socket_module
+        self.get_body = get_body
+        self.script = list(script)
+        self.post_body = post_body
+        self.dropped = 0
+        self.received = threading.Event()
+        self._listener = socket_module.create_server(("127.0.0.1", 0))
+        self.url = f"http://127.0.0.1:{self._listener.getsockname()[1]}"
+        self._thread = threading.Thread(target=self._serve, daemon=True)
+        self._thread.start()
+
+    def _serve(self) -> None:
+        while True:
+            try:
+                conn, _ = self._listener.accept()
+            except OSError:          # closed: the test is over
+                return
+            with conn:
+                self._one(conn)
+
+    def _one(self, conn) -> None:
+        data = b""
+        while b"\r\n\r\n" not in data:
+            chunk = conn.recv(65536)
+            if not chunk:
+                return
+            data += chunk
+        head, _, body = data.partition(b"\r\n\r\n")
+        length = 0
+        for line in head.split(b"\r\n")[1:]:
+            name, _, value = line.partition(b":")
+            if name.strip().lower() == b"content-length":
+                length = int(value)
+        while len(body) < length:
+            chunk = conn.recv(65536)
+            if not chunk:
+                return
+            body += chunk
+        answer = self.get_body if head.startswith(b"GET ") else \
+            self.post_body if (self.script.pop(0) if self.script else "d") == "a" else None
+        if answer is not None:
+            conn.sendall(b"HTTP/1.1 200 OK\r\nContent-Type: application/json\r\n"
+                         b"Connection: close\r\nContent-Length: %d\r\n\r\n%s"
+                         % (len(answer), answer))
+            return
+        self.dropped += 1
+        self.received.set()          # (then the connection closes unanswered)
+
+    def __enter__(self) -> "DroppingServer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        import socket as socket_module
+        try:
+            self._listener.shutdown(socket_module.SHUT_RDWR)   # (wakes the accept)
+        except OSError:
+            pass
+        self._listener.close()
+        self._thread.join(START_DEADLINE)

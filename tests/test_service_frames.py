@@ -244,6 +244,52 @@ def test_a_delivery_that_fails_ends_alone_and_the_others_of_its_callback_go_on()
         kb.close()
 
 
+class _Interrupted(_Socket):
+    """A connection whose first write is interrupted (Ctrl-C while the frame is written)."""
+
+    interrupted = False
+
+    def write(self, frame: bytes) -> bool:
+        if not self.interrupted:
+            self.interrupted = True
+            raise KeyboardInterrupt
+        return super().write(frame)
+
+
+def test_a_base_exception_in_one_delivery_leaves_the_others_of_its_callback_delivered():
+    """Three subscribers woken by one pass; the second one's write is interrupted by a
+    KeyboardInterrupt, which stops the loop. The third was marked for the same callback:
+    it is delivered once the loop runs again (it stayed marked, and no later wake would
+    have queued it again), and so are the next answers of all three."""
+    from slr_sql.service.fanout import FanOut
+
+    kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    loop = asyncio.new_event_loop()
+    try:
+        fanout = FanOut(loop, lambda seq, answers: json.dumps(
+            {"seq": seq, "I": [a["I"] for a in answers]}))
+        sockets = [_Socket(), _Interrupted(), _Socket()]
+        deliveries = [fanout.start(kb.subscribe("p(I)^T", since=0), s, 10) for s in sockets]
+        _run_until(loop, lambda: True, "started")
+        kb.add_many(["p(1)^1", "p(2)^2"])
+        assert kb._subscriptions.drain(DEADLINE)   # all three woken before the loop runs
+        with pytest.raises(KeyboardInterrupt):
+            _run_until(loop, lambda: False, "interrupted")
+        first, interrupted, third = sockets
+        _run_until(loop, lambda: third.frames, "the third delivered after the interrupt")
+        assert [json.loads(_read_frame(f).data) for f in first.frames + third.frames] == [
+            {"seq": 1, "I": [1, 2]}] * 2
+        kb.add("p(3)^3")
+        _run_until(loop, lambda: len(first.frames) == len(third.frames) == 2, "the next pass")
+        assert json.loads(_read_frame(third.frames[1]).data) == {"seq": 3, "I": [3]}
+        for delivery in deliveries:
+            delivery.sub.close()
+        _run_until(loop, lambda: all(d.finished.done() for d in deliveries), "ended")
+    finally:
+        loop.close()
+        kb.close()
+
+
 def test_a_finished_delivery_leaves_nothing_for_the_cyclic_collector(tmp_path):
     """With the collector off, subscribers delivered through the frame channel, then gone
     (a close message, a dropped connection): their connections, deliveries and

@@ -40,6 +40,7 @@ from typing import Any, Callable
 from slr_sql import SLRError, Struct
 from slr_sql.errors import SLRUnavailable
 from slr_sql.api import KnowledgeBaseAPI
+from slr_sql.service.errors import ServiceOutcomeUnknown
 
 from . import fast_tf
 from .foreign_types import stand_in_class
@@ -271,6 +272,7 @@ class BridgeStats:
     marks: int = 0
     published: int = 0
     dropped: int = 0   # messages beyond MAX_HELD while the store took no writes
+    uncertain: int = 0  # events whose add's answer was lost (a served store): not sent again
     subscribed: dict = field(default_factory=dict)  # topic -> message type
 
 
@@ -330,7 +332,7 @@ class Bridge:
         self._pending_marks: list[list] = []
         self._marked_pending = 0
         # why the store took no writes (SLRBusy, SLRStoreFull, ...) while events are held
-        self._unavailable: SLRUnavailable | None = None
+        self._unavailable: SLRError | None = None
         clock = getattr(kb, "clock", None)
         self._now = clock.now if clock is not None and hasattr(clock, "now") else time.time
 
@@ -429,7 +431,15 @@ class Bridge:
         tried again at the next spin; said once when it starts and once when it ends. The
         events go first, in one ``add_many``, then the marks one by one: a flush can store
         the events and not (all) the marks, and then holds only the messages whose marks
-        are not all stored."""
+        are not all stored.
+
+        A knowledge base served by ``slr serve`` whose connection broke after an add was
+        sent (:class:`~slr_sql.service.errors.ServiceOutcomeUnknown`) may or may not have
+        stored its events: they are not sent again (a second copy of each would be stored),
+        said with their number and counted in ``stats.uncertain``; the events no request
+        carried yet (an add_many above the server's body limit is sent in several) stay
+        pending (as one message). A mark is sent again (a second one
+        changes nothing)."""
         if not self._pending_messages and not self._pending_marks:
             return
         events, messages = self._pending_events, self._pending_messages
@@ -438,7 +448,13 @@ class Bridge:
         self._pending_marks, self._marked_pending = [], 0
         try:
             if events:
-                rejected = self.kb.add_many(events)
+                try:
+                    rejected = self.kb.add_many(events)
+                except ServiceOutcomeUnknown as exc:
+                    events, messages = self._answer_lost(events, exc), 1
+                    if events:   # held, and the marks with them (never before their events)
+                        raise
+                    rejected = []
                 self.stats.events += len(events) - len(rejected)
                 for error in rejected:
                     self.stats.rejected += 1
@@ -452,7 +468,7 @@ class Bridge:
                     message_marks.pop(0)
                     self.stats.marks += 1
                 marks.pop(0)
-        except SLRUnavailable as exc:
+        except (SLRUnavailable, ServiceOutcomeUnknown) as exc:   # (the latter: of a mark)
             self._pending_events = events + self._pending_events
             self._pending_messages += messages
             self._pending_marks = marks + self._pending_marks
@@ -465,6 +481,18 @@ class Bridge:
         if self._unavailable is not None:
             self._unavailable = None
             self.log("the store takes writes again: the held messages are stored")
+
+    def _answer_lost(self, events: list, exc: ServiceOutcomeUnknown) -> list:
+        """An add_many of ``events`` whose answer was lost: the events of the request that
+        broke are not sent again (said, and counted); those of the requests answered before
+        it count as stored; returns those no request carried."""
+        first, end = exc.carried if exc.carried is not None and \
+            0 <= exc.carried[0] <= exc.carried[1] <= len(events) else (0, len(events))
+        self.stats.events += first
+        self.stats.uncertain += end - first
+        self.log(f"warning: {exc}; {end - first} event(s) may or may not be stored: not "
+                 f"sent again, so that none is stored twice")
+        return events[end:]
 
     def _feed(self, entry: PublishEntry) -> Any:
         """Subscribe the MAP's publish entry to the knowledge base: every answer of its
@@ -756,5 +784,7 @@ def run_bridge(db: str, mapping: Mapping, all_topics: bool = False,
          + (f", {stats.rejected} rejected" if stats.rejected else "")
          + (f", {stats.dropped} dropped while the store took no writes" if stats.dropped else "")
          + (f", {held} not stored: the store took no writes" if held else "")
+         + (f", {stats.uncertain} events of adds whose answer was lost" if stats.uncertain
+            else "")
          + (f", {stats.marks} completeness marks" if stats.marks else ""))
     return 0

@@ -36,7 +36,8 @@ import traceback
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable
 
-from slr_sql import SLRError
+from slr_sql import SLRBusy, SLRError
+from slr_sql.service.errors import ServiceUnavailable
 
 from .control import Controller
 from .mapping import RequestTopics
@@ -115,14 +116,14 @@ class RequestServer:
             request = parse_query(body)
             with self._lock:
                 if self._in_flight >= self._max_in_flight:
-                    raise ServiceError(f"{self._max_in_flight} queries are being answered "
-                                       f"already; try again later", kind="Unavailable")
+                    raise ServiceUnavailable(f"{self._max_in_flight} queries are being "
+                                             f"answered already; try again later")
                 self._in_flight += 1
             try:
                 self._pool.submit(self._run, token, request)
             except RuntimeError:  # the pool is shut down: the bridge is stopping
                 self._done()
-                raise ServiceError("the bridge is stopping", kind="Unavailable") from None
+                raise ServiceUnavailable("the bridge is stopping") from None
         except Exception as exc:  # noqa: BLE001 - every failure is a reply, never a crash
             self._publish(self._answer, self._error(getattr(exc, "token", token), exc))
 
@@ -150,8 +151,8 @@ class RequestServer:
         with self._lock:
             self._pending.discard(pending)
         if pending.cancelled():
-            reply = self._error(token, ServiceError("the query was cancelled: the bridge is "
-                                                    "stopping", kind="Unavailable"))
+            reply = self._error(token, ServiceUnavailable("the query was cancelled: the "
+                                                          "bridge is stopping"))
         else:
             exc = pending.exception()
             reply = self._error(token, exc) if exc is not None \
@@ -192,7 +193,7 @@ class RequestServer:
                 exc = ServiceError(f"bad request: {reason}")
             elif type(exc).__module__ == "sqlite3" and ("locked" in str(exc) or
                                                          "busy" in str(exc)):
-                exc = ServiceError(f"the store is busy: {exc}", kind="Unavailable")
+                exc = SLRBusy(f"the store is busy: {exc}")
             else:  # a bug: say so in the reply, keep the traceback in the log
                 self.log("error: request failed:\n" + "".join(
                     traceback.format_exception(type(exc), exc, exc.__traceback__)))

@@ -42,7 +42,7 @@ from starlette.types import Receive, Scope, Send
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 import slr_sql
-from slr_sql import EventRejected, SLRError, SLRTimeout
+from slr_sql import EventRejected, SLRBusy, SLRError, SLRStoreFull, SLRTimeout
 from slr_sql.errors import log_failure
 from slr_sql.kb import KnowledgeBase
 from slr_sql.store.checks import format_event
@@ -51,7 +51,7 @@ from slr_sql.store.read_only import read_only_refusal
 from .encoding import (decode_args, decode_arguments, decode_term, dumps, encode_answers,
                        encode_plain, loads)
 from .auth import BearerToken
-from .errors import ServiceError, error_body, retry_after
+from .errors import ServiceError, ServiceUnavailable, error_body, retry_after
 from .fanout import FRAMES_EXTENSION, GONE, FanOut, FrameChannel
 
 __all__ = ["create_app", "Limits", "API_VERSION"]
@@ -96,15 +96,16 @@ def _error_response(exc: BaseException) -> Response:
 def _classify(exc: BaseException) -> BaseException:
     """Exceptions that escape the knowledge base without being SLRErrors become the error
     the client sees: input it could not take is the request's fault (400), a locked or busy
-    file is 503, anything else an internal error (500, logged with its traceback)."""
+    file, or a full disk, the SLRUnavailable class the store raises for it (503 with its
+    Retry-After), anything else an internal error (500, logged with its traceback)."""
     if isinstance(exc, SLRError):
         return exc
     if type(exc).__module__ == "sqlite3":
         text = str(exc)
         if "locked" in text or "busy" in text:
-            return ServiceError(f"the store is busy: {text}", kind="Unavailable")
+            return SLRBusy(f"the store is busy: {text}")
         if "disk is full" in text:
-            return ServiceError(f"the store is full: {text}", kind="Unavailable")
+            return SLRStoreFull(f"the store is full: {text}")
         log.error("SQLite error", exc_info=exc)
         return exc
     if isinstance(exc, (TypeError, ValueError, UnicodeError, OverflowError, RecursionError,
@@ -857,8 +858,8 @@ async def _submit(svc: "_Service", request: Request) -> Any:
     robot = _field(b, "robot", str)
     svc._expire()
     if sum(1 for s in svc.submitted.values() if not s.pending.done()) >= svc.limits.max_pending:
-        raise ServiceError(f"{svc.limits.max_pending} submitted queries are pending already",
-                           kind="Unavailable")
+        raise ServiceUnavailable(f"{svc.limits.max_pending} submitted queries are pending "
+                                 f"already")
     pending = await svc.call(svc.kb.submit, goal, at=at, id=qid, args=args,
                               timeout=_cap(timeout, svc.limits.max_wait),
                               **({"robot": robot} if robot is not None else {}))

@@ -21,7 +21,10 @@ What differs from a local knowledge base:
 * Failures to reach the server, and its 503 answers that no slr_sql class names, are
   :class:`~slr_sql.service.errors.ServiceUnavailable`: a ``ServiceError`` (``kind``
   ``"Unavailable"``, ``status`` 0 when no answer came) and an :class:`~slr_sql.SLRUnavailable`
-  (retry later), for requests and subscriptions alike. An https:// server whose certificate
+  (retry later), for requests and subscriptions alike. But a connection that broke after a
+  request that may change the store (an add, a load, a mark) was sent in full is a
+  :class:`~slr_sql.service.errors.ServiceOutcomeUnknown`: no SLRUnavailable, since the
+  server may have applied it. An https:// server whose certificate
   the client refuses is a ``ServiceError`` of ``kind`` ``"CertificateNotTrusted"`` (it trusts
   ``$SSL_CERT_FILE`` and ``$SSL_CERT_DIR``, else certifi's bundle; docs/service.md, TLS).
 
@@ -41,13 +44,14 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 from urllib.parse import quote, urlsplit
 
-from slr_sql import EventRejected, SLRError, SLRTimeout
+from slr_sql import EventRejected, SLRError, SLRTimeout, SLRUnavailable
 from slr_sql.api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 
 from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args,
                        encode_arguments, encode_term, loads)
 from .auth import check_token_text
-from .errors import ServiceError, ServiceUnavailable, error_from_body
+from .errors import (ServiceError, ServiceOutcomeUnknown, ServiceUnavailable, error_from_body,
+                     parse_retry_after)
 from .http_pool import AnswerLost, AnswerTimeout, HttpPool, RequestNotSent
 
 __all__ = ["connect", "RemoteKnowledgeBase", "RemotePendingQuery", "RemoteSubscription",
@@ -56,6 +60,10 @@ __all__ = ["connect", "RemoteKnowledgeBase", "RemotePendingQuery", "RemoteSubscr
 log = logging.getLogger("slr_sql.service.client")
 
 POLL_WAIT = 25.0          # seconds one long-poll asks the server to wait
+# the POSTs that change nothing in the store (every GET changes nothing either): a connection
+# that broke after one was sent leaves nothing to doubt, so it is a ServiceUnavailable
+# (retry at will); a POST or DELETE not listed may have been applied (ServiceOutcomeUnknown)
+_CHANGES_NOTHING = frozenset({"/query", "/explain", "/warnings", "/sql", "/submit"})
 DEFAULT_MAX_BODY = 1 << 20
 FLEET_ROWS = 1000         # shipped rows per request (well within the default body limit)
 
@@ -180,11 +188,14 @@ def _not_subscribed(url: str, exc: BaseException) -> ServiceError:
     >>> print(_not_subscribed("ws://127.0.0.1:1/subscribe", ConnectionRefusedError(111, "refused")))
     cannot subscribe at ws://127.0.0.1:1/subscribe: [Errno 111] refused
     """
-    status = getattr(getattr(exc, "response", None), "status_code", None)
+    response = getattr(exc, "response", None)
+    status = getattr(response, "status_code", None)
     message = f"cannot subscribe at {url}: {exc}"
     if isinstance(status, int) and status != 503:
         return ServiceError(message, kind="BadRequest", status=status)
-    return ServiceUnavailable(message, status=status or 0)
+    headers = getattr(response, "headers", None)
+    told = parse_retry_after(headers.get("Retry-After")) if headers is not None else None
+    return ServiceUnavailable(message, status=status or 0, retry_after=told)
 
 
 class RemoteKnowledgeBase:
@@ -241,6 +252,12 @@ class RemoteKnowledgeBase:
             refused = _refused_certificate(exc)
             if refused is not None:
                 raise _not_trusted(self.url, refused) from None
+            if isinstance(exc, AnswerLost) and method != "GET" and \
+                    path not in _CHANGES_NOTHING:   # (sent whole, and it may change the store)
+                raise ServiceOutcomeUnknown(
+                    f"{method} {path}: the connection to {self.url} broke after the request "
+                    f"was sent, before its answer ({exc}): the server may or may not have "
+                    f"applied it (sending it again may apply it twice)") from None
             raise ServiceUnavailable(f"cannot reach slr serve at {self.url}: {exc}",
                                      status=0) from None
         except RuntimeError as exc:  # the client was closed by another thread
@@ -261,9 +278,15 @@ class RemoteKnowledgeBase:
             message = f"HTTP {response.status} from {self.url}{path}" + \
                 (f": {text}" if text else "")
             if response.status == 503:   # (beyond --max-connections: may pass)
-                raise ServiceUnavailable(message, 503)
+                raise ServiceUnavailable(message, 503, retry_after=parse_retry_after(
+                    response.headers.get("retry-after")))
             raise ServiceError(message, kind="BadRequest", status=response.status)
-        raise error_from_body(data, response.status)
+        error = error_from_body(data, response.status)
+        if response.status == 503 and isinstance(error, SLRUnavailable):
+            told = parse_retry_after(response.headers.get("retry-after"))
+            if told is not None:          # (else the class's default wait)
+                error.retry_after = told
+        raise error
 
     def _post(self, path: str, body: dict, timeout: float | None = None) -> dict:
         return self._request("POST", path, body, timeout=timeout)[1]
@@ -335,13 +358,19 @@ class RemoteKnowledgeBase:
                 rejected.append(_rejected(exc, i))
                 items.append(None)          # a hole keeps the indexes of the others
         budget = int(self.limits().get("max_body", DEFAULT_MAX_BODY)) - 1024
-        rejected += self._send_events(items, 0, atomic, budget)
+        carried = [0, 0]    # the items [first, end) of the request in flight
+        try:
+            rejected += self._send_events(items, 0, atomic, budget, carried)
+        except ServiceOutcomeUnknown as exc:
+            exc.carried = (carried[0], carried[1])
+            raise
         rejected.sort(key=lambda e: e.index if isinstance(e.index, int) else len(items))
         return rejected
 
-    def _send_events(self, items: list, offset: int, atomic: bool,
-                     budget: int) -> list[EventRejected]:
-        """POST /add_many for ``items`` (None: a hole), halving what does not fit."""
+    def _send_events(self, items: list, offset: int, atomic: bool, budget: int,
+                     carried: list[int]) -> list[EventRejected]:
+        """POST /add_many for ``items`` (None: a hole), halving what does not fit;
+        ``carried``: set to the [first, end) indexes of the items of each request sent."""
         present = [i for i, item in enumerate(items) if item is not None]
         if not present:
             return []
@@ -351,8 +380,9 @@ class RemoteKnowledgeBase:
         body = dumps(request)
         if len(body) > budget and not atomic and len(present) > 1:
             half = len(items) // 2
-            return (self._send_events(items[:half], offset, atomic, budget)
-                    + self._send_events(items[half:], offset + half, atomic, budget))
+            return (self._send_events(items[:half], offset, atomic, budget, carried)
+                    + self._send_events(items[half:], offset + half, atomic, budget, carried))
+        carried[:] = offset, offset + len(items)
         reply = self._request("POST", "/add_many", content=body)[1]
         _expect(reply, "accepted", int)
         out = []

@@ -13,6 +13,9 @@ exception class by the client.
 """
 from __future__ import annotations
 
+import time
+from datetime import timezone
+from email.utils import parsedate_to_datetime
 from typing import Any
 
 import slr_sql
@@ -21,8 +24,8 @@ from slr_sql import EventRejected, SLRCancelled, SLREvaluationError, SLRError, S
 
 from .encoding import TermError, decode_term, encode_term
 
-__all__ = ["ServiceError", "ServiceUnavailable", "error_body", "error_status", "error_from_body",
-           "retry_after", "STATUS_KINDS"]
+__all__ = ["ServiceError", "ServiceUnavailable", "ServiceOutcomeUnknown", "error_body", "error_status", "error_from_body",
+           "retry_after", "parse_retry_after", "STATUS_KINDS"]
 
 # kind of a ServiceError -> its HTTP status
 STATUS_KINDS = {
@@ -53,19 +56,53 @@ class ServiceUnavailable(ServiceError, SLRUnavailable):
     pending queries; the store busy or full when no slr_sql class says which). Both a
     :class:`ServiceError` (``kind`` ``"Unavailable"``, ``status`` 503, or 0 when no answer
     came) and an :class:`~slr_sql.SLRUnavailable`, so a caller retrying on the latter
-    retries a server that is down too. A refused connection or a 503 wrote nothing; a
-    connection that broke after the request was sent leaves its outcome to the server (a
-    retried add may be stored twice, never lost). ``kind``: another name when a 503 said
-    one this client has no class for.
+    retries a server that is down too. A refused connection or a 503 wrote nothing, nor
+    did a request that changes nothing; a request that may change the store and was sent
+    in full before the connection broke is a :class:`ServiceOutcomeUnknown` instead.
+    ``kind``: another name when a 503 said one this client has no class for.
+
+    ``retry_after``: the seconds the server's ``Retry-After`` asked to wait, else the
+    class's default (1).
 
     >>> from slr_sql import SLRUnavailable
     >>> e = ServiceUnavailable("cannot reach slr serve at http://127.0.0.1:1", status=0)
-    >>> isinstance(e, SLRUnavailable), e.kind, e.status
-    (True, 'Unavailable', 0)
+    >>> isinstance(e, SLRUnavailable), e.kind, e.status, e.retry_after
+    (True, 'Unavailable', 0, 1)
     """
 
-    def __init__(self, message: str, status: int | None = None, kind: str = "Unavailable"):
+    def __init__(self, message: str, status: int | None = None, kind: str = "Unavailable",
+                 retry_after: float | None = None):
         super().__init__(message, kind=kind, status=503 if status is None else status)
+        if retry_after is not None:
+            self.retry_after = retry_after
+
+
+class ServiceOutcomeUnknown(ServiceError):
+    """A request that may change the store (an add, a load, a mark, ...) was sent in full,
+    and the connection broke before its answer came (the server was killed, a network
+    failure): the server may or may not have applied it. ``kind`` ``"OutcomeUnknown"``,
+    ``status`` 0. Unlike :class:`ServiceUnavailable` it is no
+    :class:`~slr_sql.SLRUnavailable`, whose promise is that nothing was written: sending
+    the same add again may store it twice. Read what the store holds first, or send again
+    only what a second copy does not change (a completeness mark, a fleet shipment, whose
+    rows the fleet stores once). A request that changes nothing (a query) gets a
+    ServiceUnavailable instead: retrying it is safe.
+
+    ``carried``: for an ``add_many`` (sent in several requests above the server's body
+    limit), the indexes ``(first, end)`` of the events the broken request carried: those
+    before ``first`` were stored (or rejected), those from ``end`` on never sent; None for
+    other calls.
+
+    >>> from slr_sql import SLRUnavailable
+    >>> e = ServiceOutcomeUnknown("POST /add: no answer")
+    >>> e.kind, e.status, isinstance(e, SLRUnavailable)
+    ('OutcomeUnknown', 0, False)
+    """
+
+    carried: tuple[int, int] | None = None
+
+    def __init__(self, message: str):
+        super().__init__(message, kind="OutcomeUnknown", status=0)
 
 
 def error_status(exc: BaseException) -> int:
@@ -89,6 +126,38 @@ def retry_after(exc: BaseException) -> int | None:
     if error_status(exc) != 503:
         return None
     return max(1, int(getattr(exc, "retry_after", 1)))
+
+
+MAX_RETRY_AFTER = 86400   # seconds: a longer Retry-After is read as this (a day)
+
+
+def parse_retry_after(value: Any, now: float | None = None) -> float | None:
+    """The seconds a ``Retry-After`` header's ``value`` asks to wait: delay-seconds
+    (``"10"``), or an HTTP date (the seconds from ``now``, default the time now, to it; 0
+    once past); at most a day. None when ``value`` is absent or neither (a client keeps
+    its class's default then).
+
+    >>> parse_retry_after("10"), parse_retry_after(" 3 "), parse_retry_after(None)
+    (10, 3, None)
+    >>> parse_retry_after("Wed, 21 Oct 2015 07:28:30 GMT", now=1445412480.0)
+    30.0
+    >>> parse_retry_after("soon"), parse_retry_after("-5"), parse_retry_after("1.5")
+    (None, None, None)
+    """
+    if not isinstance(value, str):
+        return None
+    text = value.strip()
+    if text.isascii() and text.isdigit():
+        digits = text.lstrip("0") or "0"
+        return min(int(digits), MAX_RETRY_AFTER) if len(digits) <= 12 else MAX_RETRY_AFTER
+    try:
+        when = parsedate_to_datetime(text)
+        if when.tzinfo is None:          # ("-0000": a time in UTC, its zone unsaid)
+            when = when.replace(tzinfo=timezone.utc)
+        seconds = when.timestamp() - (time.time() if now is None else now)
+    except (TypeError, ValueError, IndexError, OverflowError, OSError):
+        return None
+    return max(0.0, min(seconds, float(MAX_RETRY_AFTER)))
 
 
 def error_body(exc: BaseException) -> dict[str, Any]:

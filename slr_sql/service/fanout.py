@@ -187,6 +187,16 @@ class FanOut:
                 delivery.pump()
             except Exception as exc:  # noqa: BLE001 - one connection's failure ends only it
                 delivery._finish(error=exc)
+            except BaseException:
+                # (a KeyboardInterrupt, a cancel) the ones after it are still marked, so no
+                # wake of the hub would queue them again: they go to the next flush
+                rest = ready[ready.index(delivery) + 1:]
+                if rest:
+                    self._ready[:0] = rest
+                    if not self._scheduled:
+                        self._scheduled = True
+                        self.loop.call_soon(self._flush)
+                raise
 
     def frame(self, seq: int, answers: list[dict]) -> bytes:
         """The framed bytes of an answer frame; the subscribers of one pattern that are at the
