@@ -6,15 +6,18 @@ line (waiting on a queue, with a deadline), then wait for ``/health`` in a deadl
 """
 from __future__ import annotations
 
+import contextlib
+import math
 import os
 import queue
 import signal
+import socket
 import subprocess
 import sys
 import threading
 import time
-import math
 from pathlib import Path
+from typing import Iterator
 
 import httpx
 
@@ -210,3 +213,27 @@ class DroppingServer:
             pass
         self._listener.close()
         self._thread.join(START_DEADLINE)
+
+
+@contextlib.contextmanager
+def listener_with_full_queue() -> Iterator[int]:
+    """The port of a listening socket whose accept queue is full: the kernel drops the next
+    connection attempt, so connecting to it times out (nothing reaches a server)."""
+    with socket.socket() as listener:
+        listener.bind(("127.0.0.1", 0))
+        listener.listen(0)         # one connection queued at most (Linux)
+        port = listener.getsockname()[1]
+        queued = []
+        try:
+            while True:
+                s = socket.socket()
+                queued.append(s)
+                s.settimeout(0.3)
+                s.connect(("127.0.0.1", port))
+        except OSError:
+            pass
+        try:
+            yield port
+        finally:
+            for s in queued:
+                s.close()

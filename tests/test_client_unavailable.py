@@ -23,7 +23,7 @@ import slr_sql
 from slr_sql import SLRUnavailable
 from slr_sql.service.errors import ServiceError
 
-from service_helpers import ServiceProcess
+from service_helpers import ServiceProcess, listener_with_full_queue
 
 DEADLINE = 30.0
 
@@ -340,3 +340,12 @@ def test_a_raw_sqlite_busy_or_full_error_is_answered_as_the_stores_own_class(tmp
         with pytest.raises(SLRUnavailable) as caught:
             kb.add("p(1)^1")
     assert type(caught.value).__name__ == cls and caught.value.retry_after == int(wait)
+
+
+def test_a_server_that_accepts_no_connection_in_time_is_unavailable():
+    # connecting times out and nothing reached the server: a retry is safe
+    with listener_with_full_queue() as port:
+        kb = slr_sql.connect(f"http://127.0.0.1:{port}", timeout=0.3)
+        exc = _unavailable(lambda: kb.add("p(a)^1"))
+        assert exc.status == 0 and "no connection within 0.3 s" in str(exc)
+        kb.close()

@@ -13,6 +13,8 @@ from typing import Iterator
 import pytest
 import trustme
 
+from service_helpers import listener_with_full_queue
+
 from slr_sql.service import http_pool
 from slr_sql.service.http_pool import AnswerLost, AnswerTimeout, HttpPool, RequestNotSent
 
@@ -211,3 +213,11 @@ def test_nobody_listening_is_a_request_not_sent() -> None:
         port = placeholder.getsockname()[1]      # a port that is free once this closes
     with pytest.raises(RequestNotSent, match="refused"):
         HttpPool(f"http://127.0.0.1:{port}", headers={}).request("GET", "/health")
+
+
+def test_no_connection_within_the_connect_timeout_is_an_answer_timeout_before_sending() -> None:
+    with listener_with_full_queue() as port:
+        with pytest.raises(AnswerTimeout) as raised:
+            HttpPool(f"http://127.0.0.1:{port}", headers={}, connect_timeout=0.3).request(
+                "GET", "/health")
+        assert not raised.value.sent

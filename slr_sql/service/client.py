@@ -223,7 +223,7 @@ class RemoteKnowledgeBase:
         # (~50-70 ms of CPU per connect). One context for requests and subscriptions alike.
         self._tls = _tls_context() if self.url.startswith("https://") else None
         self._pool = HttpPool(self.url, self._headers, tls=self._tls, timeout=self.timeout,
-                              connect_timeout=10.0)
+                              connect_timeout=min(10.0, self.timeout))
         self._limits: dict | None = None
         self._answered = threading.local()   # .path: the request the last answer was of
         self.subscribe_batch = 256        # answers per WebSocket frame at most (1..1000)
@@ -244,7 +244,10 @@ class RemoteKnowledgeBase:
             content = dumps(body)
         try:
             response = self._pool.request(method, path, content, params=params, timeout=timeout)
-        except AnswerTimeout:
+        except AnswerTimeout as exc:
+            if not exc.sent:      # (no connection in time: nothing reached the server)
+                raise ServiceUnavailable(f"cannot reach slr serve at {self.url}: {exc}",
+                                         status=0) from None
             raise ServiceError(f"no answer from {self.url} within "
                                f"{timeout if timeout is not None else self.timeout:g} s",
                                kind="RequestTimeout", status=0) from None
