@@ -21,6 +21,7 @@ import slr_sql
 from slr_sql import SLRError
 from slr_sql.service.errors import ServiceError
 
+DEADLINE = 30.0
 BAD_URLS = ["http://127.0.0.1:port", "http://[::1", "http://127.0.0.1:99999999999"]
 BAD_TOKENS = ["a\nb", "a\x00b", " padded ", "tab\there", "a\x85b"]
 
@@ -240,3 +241,41 @@ def test_a_client_that_leaves_a_synchronized_query_frees_its_place(tmp_path):
             assert time.monotonic() < deadline, "the waits of clients gone hold the server"
             time.sleep(0.05)
         assert answer.json() == {"answers": [{"X": 1}]}
+
+
+@pytest.mark.parametrize("url", ["http://user:pw@127.0.0.1:8765", "https://me@robot:8443"])
+def test_a_user_or_password_in_the_url_is_refused_not_dropped(url):
+    with pytest.raises(SLRError, match="user or password in the URL is not sent") as caught:
+        slr_sql.connect(url)
+    assert "pw" not in str(caught.value)          # (the password is not shown either)
+
+
+@pytest.mark.parametrize("timeout", [0, -1, float("nan"), float("inf"), "soon"])
+def test_a_timeout_that_is_no_positive_number_is_refused(server, timeout):
+    with pytest.raises(SLRError, match="timeout must be a positive number"):
+        slr_sql.connect(server.url, token="s3cret", timeout=timeout)
+
+
+def test_a_prefix_beyond_ascii_and_a_parameter_no_url_carries_are_slr_errors(server):
+    with slr_sql.connect(server.url + "/é kb", token="s3cret") as kb:
+        with pytest.raises(ServiceError) as caught:     # (slr serve has no such prefix)
+            kb.health()
+        assert caught.value.status == 404
+    with slr_sql.connect(server.url, token="s3cret") as kb:
+        with pytest.raises(ServiceError) as caught:
+            kb.complete_until("p\ud800/1")
+        assert caught.value.kind == "BadRequest" and caught.value.status == 0
+
+
+def test_the_client_goes_straight_to_the_url_whatever_the_proxy_variables_say(
+        server, monkeypatch):
+    for name in ("HTTP_PROXY", "http_proxy", "HTTPS_PROXY", "https_proxy", "ALL_PROXY",
+                 "all_proxy"):
+        monkeypatch.setenv(name, "http://127.0.0.1:9")       # nobody listens there
+    monkeypatch.delenv("NO_PROXY", raising=False)
+    monkeypatch.delenv("no_proxy", raising=False)
+    with slr_sql.connect(server.url, token="s3cret") as kb:
+        kb.add("proxied(a)^1")
+        assert kb.query("proxied(X)^T") == [{"X": slr_sql.Atom("a"), "T": 1.0}]
+        with kb.subscribe("proxied(X)^T", since=0) as sub:
+            assert sub.get(timeout=DEADLINE)["X"] == slr_sql.Atom("a")

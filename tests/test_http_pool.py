@@ -221,3 +221,56 @@ def test_no_connection_within_the_connect_timeout_is_an_answer_timeout_before_se
             HttpPool(f"http://127.0.0.1:{port}", headers={}, connect_timeout=0.3).request(
                 "GET", "/health")
         assert not raised.value.sent
+
+
+def test_a_prefix_with_spaces_or_beyond_ascii_is_percent_encoded(echo: CountingServer) -> None:
+    pool = HttpPool(url_of(echo) + "/my kb/é/already%20encoded", headers={})
+    assert pool.request("GET", "/health").content == \
+        b"GET /my%20kb/%C3%A9/already%20encoded/health "
+    with pytest.raises(http_pool.RequestInvalid):      # nothing sent, and no retry helps
+        pool.request("GET", "/x", params={"type": "p\ud800/1"})
+    pool.close()
+
+
+def test_port_0_is_port_0_not_the_schemes_default() -> None:
+    assert HttpPool("http://127.0.0.1:0", headers={}).port == 0
+    assert HttpPool("https://127.0.0.1:0/x", headers={}).port == 0
+    with pytest.raises(RequestNotSent):
+        HttpPool("http://127.0.0.1:0", headers={}).request("GET", "/health")
+
+
+def test_an_answer_sent_before_the_server_stopped_reading_the_body_is_the_outcome() -> None:
+    # a proxy refusing a body too large: it answers after the head and closes unread
+    with socket.create_server(("127.0.0.1", 0)) as listener:
+        def refuse() -> None:
+            conn, _ = listener.accept()
+            with conn:
+                data = b""
+                while b"\r\n\r\n" not in data:
+                    data += conn.recv(65536)
+                conn.sendall(b"HTTP/1.1 413 Payload Too Large\r\nContent-Length: 8\r\n"
+                             b"Connection: close\r\n\r\ntoo big!")
+        thread = threading.Thread(target=refuse, daemon=True)
+        thread.start()
+        pool = HttpPool(f"http://127.0.0.1:{listener.getsockname()[1]}", headers={})
+        answer = pool.request("POST", "/add_many", b"x" * (16 << 20))
+        thread.join(30)
+    assert (answer.status, answer.content) == (413, b"too big!")
+
+
+def test_connections_idle_too_long_are_closed_when_another_is_kept(
+        echo: CountingServer, monkeypatch: pytest.MonkeyPatch) -> None:
+    pool = HttpPool(url_of(echo), headers={})
+    first, second = pool._connection(), pool._connection()
+    pool._keep(first)
+    monkeypatch.setattr(http_pool, "IDLE_SECONDS", 0.0)
+    pool._keep(second)            # first has idled "too long": closed now, not left half-open
+    assert [conn for conn, _ in pool._idle] == [second] and first.sock is None
+    pool.close()
+
+
+@pytest.mark.parametrize("seconds, socket_timeout", [
+    (5.0, 5.0), (float("inf"), None), (0.0, 0.001), (-60.0, 0.001), (float("nan"), 0.001)])
+def test_a_timeout_never_makes_the_socket_non_blocking(seconds: float,
+                                                       socket_timeout: float | None) -> None:
+    assert http_pool._socket_timeout(seconds) == socket_timeout

@@ -35,6 +35,7 @@ from __future__ import annotations
 import collections
 import functools
 import logging
+import math
 import os
 import ssl
 import threading
@@ -52,7 +53,7 @@ from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_ar
 from .auth import check_token_text
 from .errors import (ServiceError, ServiceOutcomeUnknown, ServiceUnavailable, error_from_body,
                      parse_retry_after)
-from .http_pool import AnswerLost, AnswerTimeout, HttpPool, RequestNotSent
+from .http_pool import AnswerLost, AnswerTimeout, HttpPool, RequestInvalid, RequestNotSent
 
 __all__ = ["connect", "RemoteKnowledgeBase", "RemotePendingQuery", "RemoteSubscription",
            "RemoteWait"]
@@ -130,6 +131,11 @@ def _service_url(url: Any, httpx: Any) -> str:
         raise SLRError(f"{shape}: {url} ({exc})") from None
     if not parts.hostname:
         raise SLRError(f"{shape}: {url} (no host)")
+    if parts.username is not None or parts.password is not None:
+        # (they would not be sent: the service's credential is a token)
+        raise SLRError(f"{shape}: {parts.scheme}://...@{parts.hostname} (a user or password "
+                       f"in the URL is not sent; give the server's token as token= or "
+                       f"$SLR_TOKEN)")
     return url
 
 
@@ -218,7 +224,12 @@ class RemoteKnowledgeBase:
             # the header's bytes (a token beyond ASCII as UTF-8), each byte one character
             # as HTTP libraries write a header's text (ISO-8859-1)
             self._headers["Authorization"] = f"Bearer {token}".encode("utf-8").decode("latin-1")
-        self.timeout = float(timeout)
+        try:
+            self.timeout = float(timeout)
+        except (TypeError, ValueError):
+            self.timeout = math.nan
+        if not 0 < self.timeout < math.inf:
+            raise SLRError(f"timeout must be a positive number of seconds, not {timeout!r}")
         # TLS only for https://: for http:// the client would still load the CA bundle
         # (~50-70 ms of CPU per connect). One context for requests and subscriptions alike.
         self._tls = _tls_context() if self.url.startswith("https://") else None
@@ -263,6 +274,8 @@ class RemoteKnowledgeBase:
                     f"applied it (sending it again may apply it twice)") from None
             raise ServiceUnavailable(f"cannot reach slr serve at {self.url}: {exc}",
                                      status=0) from None
+        except RequestInvalid as exc:
+            raise ServiceError(f"{method} {path}: {exc}", kind="BadRequest", status=0) from None
         except RuntimeError as exc:  # the client was closed by another thread
             raise SLRError(f"the connection to {self.url} is closed ({exc})") from None
         try:
@@ -894,8 +907,9 @@ class RemoteSubscription:
         self.acks_sent = 0          # acknowledgement messages sent (they are batched)
         try:
             # entered as a context manager (what websockets >= 17 asks); closed by close()
+            # (proxy=None: straight to the URL, as the client's requests go)
             self._ws = ws_connect(url, additional_headers=headers, open_timeout=client.timeout,
-                                  max_size=None, ssl=client._tls).__enter__()
+                                  max_size=None, ssl=client._tls, proxy=None).__enter__()
             self._ws.send(dumps(request).decode("utf-8"))
         except (OSError, WebSocketException) as exc:
             refused = _refused_certificate(exc)

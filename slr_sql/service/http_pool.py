@@ -13,14 +13,16 @@ what they say about the request — never sent (safe to retry), or sent with its
 from __future__ import annotations
 
 import http.client
+import math
 import socket
 import ssl
 import threading
 import time
 from typing import NamedTuple
-from urllib.parse import urlencode, urlsplit
+from urllib.parse import quote, urlencode, urlsplit
 
-__all__ = ["HttpPool", "HttpAnswer", "RequestNotSent", "AnswerLost", "AnswerTimeout"]
+__all__ = ["HttpPool", "HttpAnswer", "RequestNotSent", "AnswerLost", "AnswerTimeout",
+           "RequestInvalid"]
 
 # `slr serve` closes a keep-alive connection idle for 30 s (uvicorn's timeout_keep_alive);
 # one idle for longer than this is closed here instead of raced against the server's close
@@ -35,6 +37,11 @@ class RequestNotSent(OSError):
 class AnswerLost(OSError):
     """The request was sent whole, then the connection failed before a whole answer: the
     server may or may not have carried it out."""
+
+
+class RequestInvalid(ValueError):
+    """The request cannot be written as HTTP (a character a URL cannot carry): nothing was
+    sent, and sending it again would fail the same way."""
 
 
 class AnswerTimeout(OSError):
@@ -82,8 +89,11 @@ class HttpPool:
         parts = urlsplit(url)
         self.https = parts.scheme == "https"
         self.host = parts.hostname or ""
-        self.port = parts.port or (443 if self.https else 80)
-        self.prefix = parts.path.rstrip("/")
+        # (port 0 is a port: connecting to it is refused, as it should be, not port 80)
+        self.port = parts.port if parts.port is not None else (443 if self.https else 80)
+        # percent-encoded as a browser would (a space, UTF-8 beyond ASCII); what is already
+        # encoded stays as it is
+        self.prefix = quote(parts.path.rstrip("/"), safe="/%:@!$&'()*+,;=~")
         self.headers = dict(headers)
         self.tls = tls
         self.timeout = timeout
@@ -130,22 +140,36 @@ class HttpPool:
         return self._new_connection()
 
     def _keep(self, conn: http.client.HTTPConnection) -> None:
+        now = time.monotonic()
+        expired = []
         with self._lock:
-            if not self.closed and len(self._idle) < self.max_idle:
-                self._idle.append((conn, time.monotonic()))
-                return
-        conn.close()
+            # the newest is reused first: close those idle too long (the server closes them
+            # anyway), so that none sits half-closed in the list
+            while self._idle and now - self._idle[0][1] >= IDLE_SECONDS:
+                expired.append(self._idle.pop(0)[0])
+            kept = not self.closed and len(self._idle) < self.max_idle
+            if kept:
+                self._idle.append((conn, now))
+        for old in expired:
+            old.close()
+        if not kept:
+            conn.close()
 
     # -- requests -------------------------------------------------------------------------------
     def request(self, method: str, path: str, content: bytes | None = None, *,
                 params: dict[str, object] | None = None, timeout: float | None = None) -> HttpAnswer:
         """Send one request and read its whole answer (any status). Raises
-        :class:`RequestNotSent`, :class:`AnswerLost`, :class:`AnswerTimeout`, or
-        ``RuntimeError`` once the pool is closed."""
-        target = self.prefix + path + (f"?{urlencode(params)}" if params else "")
+        :class:`RequestNotSent`, :class:`AnswerLost`, :class:`AnswerTimeout`,
+        :class:`RequestInvalid`, or ``RuntimeError`` once the pool is closed."""
+        try:
+            target = self.prefix + quote(path, safe="/%:@!$&'()*+,;=~") + \
+                (f"?{urlencode(params)}" if params else "")
+            target.encode("ascii")
+        except (UnicodeError, TypeError) as exc:
+            raise RequestInvalid(f"the request's path cannot be sent: {exc}") from None
         conn = self._connection()
         assert conn.sock is not None
-        conn.sock.settimeout(self.timeout if timeout is None else timeout)
+        conn.sock.settimeout(_socket_timeout(self.timeout if timeout is None else timeout))
         headers = self.headers if content is None else \
             {**self.headers, "Content-Length": str(len(content))}
         try:
@@ -153,8 +177,16 @@ class HttpPool:
         except TimeoutError:
             conn.close()
             raise RequestNotSent("the request could not be written in time") from None
-        except OSError as exc:
+        except (http.client.HTTPException, ValueError) as exc:   # (a header it refuses)
             conn.close()
+            raise RequestInvalid(f"the request cannot be sent: {exc}") from None
+        except OSError as exc:
+            # the server may have answered before it closed (a 413 or 401 of a proxy that
+            # does not read the body it refuses): that answer, if whole, is the outcome
+            answer = _early_answer(conn)
+            conn.close()
+            if answer is not None:
+                return answer
             raise RequestNotSent(str(exc)) from exc
         try:
             response = conn.getresponse()
@@ -179,6 +211,25 @@ class HttpPool:
             idle, self._idle = self._idle, []
         for conn, _ in idle:
             conn.close()
+
+
+def _socket_timeout(seconds: float) -> float | None:
+    """A socket's timeout for ``seconds``: none for infinity, never 0 (which would make the
+    socket non-blocking) nor negative."""
+    if math.isinf(seconds) and seconds > 0:
+        return None
+    if not seconds > 0:      # (0, negative, NaN)
+        return 0.001
+    return seconds
+
+
+def _early_answer(conn: http.client.HTTPConnection) -> HttpAnswer | None:
+    """The whole answer a server sent before it stopped reading the request, if any."""
+    try:
+        response = conn.getresponse()
+        return HttpAnswer(response.status, response.headers, response.read())
+    except (OSError, http.client.HTTPException, ValueError):
+        return None
 
 
 def _dropped(conn: http.client.HTTPConnection) -> bool:
