@@ -971,7 +971,7 @@ class Database:
             self.check_open()
             conn = self.conn
             guard = self.guard
-            guard.denied = None
+            guard.begin_statement()
             if write:
                 columns, rows, _ = self._write(query, params, deadline)
                 return columns, rows
@@ -1015,7 +1015,9 @@ class Database:
     def tables_to_write(self, query: str, params: Iterable[Any] = ()) -> set[str] | None:
         """The tables of the store a statement would insert rows into or update, those its
         triggers would write included, told by compiling it (``EXPLAIN``: nothing runs);
-        None when it cannot be compiled so (its own run says why).
+        None when it cannot be compiled so (its own run says why). A statement the store
+        refuses (:meth:`SqlGuard.writing`: a BEGIN, a COMMIT, ...) raises its SLRError here,
+        before any transaction of the check is begun.
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None); s.declare_type("p", 1)
@@ -1026,12 +1028,16 @@ class Database:
         with self.lock:
             self.check_open()
             conn, guard = self.conn, self.guard
-            guard.written = set()
+            guard.begin_statement()
             conn.set_authorizer(guard.writing)
             try:
                 conn.execute(f"EXPLAIN {query}", bound_parameters(params)).close()
                 return guard.written
-            except (sqlite3.Error, OverflowError, TypeError, ValueError):
+            except sqlite3.Error as exc:
+                if _refused(str(exc), guard):
+                    raise SLRError(f"sql: {guard.denied}") from None
+                return None
+            except (OverflowError, TypeError, ValueError):
                 return None
             finally:
                 guard.denied = None
@@ -1042,8 +1048,7 @@ class Database:
         if not self.tx_depth:   # (autocommit: no COMMIT of ours checks the file)
             self.check_identity()
         conn, guard = self.conn, self.guard
-        guard.denied = None
-        guard.written = set()
+        guard.begin_statement()
         # (setting an authorizer expires the connection's prepared statements: a statement
         # run before is compiled again, so the authorizer sees it and its triggers)
         conn.set_authorizer(guard.writing)
