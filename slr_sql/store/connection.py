@@ -44,6 +44,7 @@ from .dialect import SQLITE
 from .functions import SqlFunctions
 from .schema import migrate, migrate_new_memory_store, migration_scripts
 from .sqltext import bound_parameters, busy_error, quote_identifier, split_sql_script, store_error
+from .sqltext import file_identity as _file_identity, file_uri as _file_uri
 
 __all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "run_sql_file", "check_file", "refuse_no_store", "check_busy_timeout"]
@@ -92,22 +93,6 @@ class WallClock:
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 # Tables every store has (the first migration creates them).
 _STORE_TABLES = frozenset({"slr_meta", "slr_program", "slr_event_types"})
-
-
-def _file_uri(path: str, mode: str = "ro") -> str:
-    """A ``file:`` URI for ``path`` opened in ``mode`` (``ro``, or ``rw``: never made anew)
-    (``%``, ``?`` and ``#`` escaped)."""
-    quoted = os.path.abspath(path).replace("%", "%25").replace("?", "%3f").replace("#", "%23")
-    return f"file:{quoted}?mode={mode}"
-
-
-def _file_identity(name: str) -> tuple[int, int] | None:
-    """``(device, inode)`` of the file ``name``, None when there is none."""
-    try:
-        info = os.stat(name)
-    except OSError:
-        return None
-    return info.st_dev, info.st_ino
 
 
 def _store_gone(path: Any, what: str, outcome: str) -> SLRStoreGone:
@@ -385,10 +370,10 @@ class Database:
             if self.path is not None and not new and \
                     conn.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
                 conn.execute("PRAGMA journal_mode=WAL")
-            if checkpoint == "background" and self.path is not None:
+            background = checkpoint == "background" and self.path is not None
+            if background:
                 # see store/checkpointer.py: no commit waits for a checkpoint's fsync
                 conn.execute("PRAGMA wal_autocheckpoint=0")
-                self.checkpointer = WalCheckpointer(self.path, checkpoint_interval)
         except BaseException as exc:
             conn.close()
             for name in created:
@@ -409,6 +394,9 @@ class Database:
         # commit is acknowledged; the path made absolute now (a later chdir changes nothing)
         self._absolute = None if self.path is None else os.path.abspath(self.path)
         self._identity = (None, None, None) if self.path is None else self._identities()
+        if background:   # (it checkpoints this file, and no other one put at the path)
+            self.checkpointer = WalCheckpointer(self.path, checkpoint_interval,
+                                                identity=self._identity[0])
 
     # ------------------------------------------------------------------ lifecycle
 
