@@ -941,7 +941,10 @@ class Database:
         """Run one SQL statement as given (for ``slr sql``) and return ``(column names,
         rows)``. Read-only unless ``write``: a statement that would change the store (an
         INSERT, a DROP, a pragma assignment, an ATTACH) raises an :class:`SLRError` starting
-        with ``read-only``; a condition of the file or its disk :meth:`failure`'s SLRError;
+        with ``read-only``; written or not, a transaction-control statement (BEGIN, COMMIT,
+        SAVEPOINT, ...: the connection's transactions are the store's) and an assignment of
+        a pragma the store's transactions rely on raise an SLRError saying so
+        (:meth:`SqlGuard.hand_written`, :meth:`SqlGuard.writing`); a condition of the file or its disk :meth:`failure`'s SLRError;
         the statement's own errors raise :data:`DatabaseError`. The connection's SQL
         functions are there, so compiled statements (``kb.explain``) run as printed.
         ``timeout`` (seconds): a longer statement is interrupted with :class:`SLRTimeout`.
