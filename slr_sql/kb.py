@@ -722,13 +722,20 @@ class KnowledgeBase:
         """Run one SQL statement on the store's database; returns (column names, rows).
         Read-only unless ``write=True``; every failure is an :class:`SLRError`
         (:class:`SLRTimeout` past ``timeout`` seconds). ``params``: values for ``?``
-        placeholders (a sequence) or for ``:name`` ones (a mapping), on either backend.
+        placeholders (a sequence) or for ``:name`` ones (a mapping), on either backend. A
+        transaction-control statement (BEGIN, COMMIT, ROLLBACK, SAVEPOINT, RELEASE, ...) is
+        refused before it runs, written or not: the store begins and ends its own
+        transactions (several statements together: ``with kb.store.transaction():``).
 
         >>> from slr_sql import ManualClock
         >>> kb = open(clock=ManualClock(0)); kb.add("p(a)^1"); kb.sql("SELECT arg1, t_end FROM p")
         (['arg1', 't_end'], [('a', 1.0)])
         >>> kb.sql("SELECT :x + 1 AS y", {"x": 41})
         (['y'], [(42,)])
+        >>> kb.sql("COMMIT", write=True)
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: sql: COMMIT is not allowed: the store begins and ends its own transactions (...)
         """
         from .store import DatabaseError
 

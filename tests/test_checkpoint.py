@@ -3,6 +3,7 @@ file, SQLite's own checkpoint (inside a commit) is off, durability and sharing a
 from __future__ import annotations
 
 import logging
+import os
 import sqlite3
 import threading
 import time
@@ -172,3 +173,77 @@ def test_another_connections_lock_is_waited_out_quietly(tmp_path, caplog):
             checkpointer.stop()
     assert checkpointer.failed == 0
     assert not [r for r in caplog.records if r.name == "slr_sql.store"]
+
+
+def test_a_store_file_moved_away_is_not_made_again_and_is_said_once(tmp_path, caplog):
+    """The store's file moved away while the store is open (before the thread's connection
+    opened it): the thread does not make an empty database at the path (sqlite3.connect
+    would), says so in one WARNING line without traceback however many runs find it
+    missing, and checkpoints again once the file is back."""
+    path = tmp_path / "kb.db"
+    with slr_sql.open(path, clock=ManualClock(0.0)) as kb:
+        kb.add_many([f"p({i})^{i}" for i in range(50)])
+    identity = (path.stat().st_dev, path.stat().st_ino)
+    moved = tmp_path / "elsewhere.db"
+    path.rename(moved)
+    missing = f"checkpointing the write-ahead log failed (SLRStoreGone: {path}: the store's " \
+              f"file is no longer at its path (deleted or moved away) while the store is " \
+              f"open; nothing was copied); tried again every 0.01 s"
+    with caplog.at_level(logging.WARNING, logger="slr_sql.store"):
+        checkpointer = WalCheckpointer(str(path), interval=0.01, identity=identity)
+        try:
+            wait_for(lambda: checkpointer.failed >= 3 or checkpointer.runs)
+            assert not path.exists() and not (tmp_path / "kb.db-wal").exists()
+            assert checkpointer.runs == 0
+            assert caplog.text.count(missing) == 1, caplog.text
+            moved.rename(path)
+            wait_for(lambda: checkpointer.runs >= 2)
+            assert checkpointer._thread.is_alive()
+        finally:
+            checkpointer.stop()
+    assert caplog.text.count(f"{path}: checkpointing the write-ahead log works again") == 1
+    assert "Traceback" not in caplog.text
+    assert [r.levelno for r in caplog.records if r.name == "slr_sql.store"] == \
+        [logging.WARNING, logging.WARNING]
+
+
+def test_another_file_put_at_the_path_is_left_alone_and_said_once(tmp_path, caplog):
+    """The store's file replaced by another one while the store is open: the thread stops
+    checkpointing (the store's own file, now elsewhere, no longer is the store anyone opening
+    the path reads) and says so once; the other file is not touched; once the store's file is
+    back, it checkpoints again."""
+    path = tmp_path / "kb.db"
+    other = tmp_path / "other.db"
+    with slr_sql.open(other, clock=ManualClock(0.0)) as kb:
+        kb.add("q(1)^1")
+    db = Database(path, synchronous="NORMAL", checkpoint="background", checkpoint_interval=0.01)
+    replaced = f"checkpointing the write-ahead log failed (SLRStoreGone: {path}: another " \
+               f"file is at the store's path (the store's was replaced) while the store is " \
+               f"open; nothing was copied); tried again every 0.01 s"
+    try:
+        db.conn.execute("CREATE TABLE t (x)")
+        wait_for(lambda: db.checkpointer.runs >= 2)
+        aside = tmp_path / "kb-aside.db"
+        with caplog.at_level(logging.WARNING, logger="slr_sql.store"):
+            os.link(path, aside)     # (the store's file kept aside, the other put in its
+            os.replace(other, path)  # place at once: never missing in between)
+            their_bytes = path.read_bytes()
+            failed, runs = db.checkpointer.failed, db.checkpointer.runs
+            wait_for(lambda: db.checkpointer.failed >= failed + 3 or
+                     db.checkpointer.runs >= runs + 3)
+            assert db.checkpointer.runs <= runs + 1   # (one run may have been under way)
+            runs = db.checkpointer.runs
+            wait_for(lambda: db.checkpointer.failed >= failed + 6)
+            assert db.checkpointer.runs == runs   # (none of the store's file meanwhile)
+            assert path.read_bytes() == their_bytes
+            assert caplog.text.count(replaced) == 1, caplog.text
+            os.replace(aside, path)
+            wait_for(lambda: db.checkpointer.runs >= runs + 2)
+            assert db.checkpointer._thread.is_alive()
+        assert caplog.text.count(f"{path}: checkpointing the write-ahead log works again") == 1
+        assert "Traceback" not in caplog.text
+        assert [r.levelno for r in caplog.records if r.name == "slr_sql.store"] == \
+            [logging.WARNING, logging.WARNING]
+    finally:
+        db.close()
+    assert path.read_bytes() != their_bytes   # (the store's file is back)

@@ -113,8 +113,9 @@ def test_the_fts3_tokenizer_switch_of_sqlite_is_off_too(kb):
     ("ATTACH 'other.db' AS other", "read-only: the statement would write a database file"),
     ("VACUUM", "read-only: the statement would write a database file"),
     ("PRAGMA writable_schema = ON", "read-only: PRAGMA writable_schema"),
-    ("PRAGMA query_only = 0", "read-only: PRAGMA query_only"),
-    ("PRAGMA journal_mode = DELETE", "read-only: PRAGMA journal_mode"),
+    # (not even with write=True: tests/test_sql_transaction_control.py)
+    ("PRAGMA query_only = 0", "PRAGMA query_only with an argument is not allowed"),
+    ("PRAGMA journal_mode = DELETE", "PRAGMA journal_mode with an argument is not allowed"),
     ("PRAGMA wal_checkpoint", "read-only: PRAGMA wal_checkpoint"),
     ("PRAGMA main.wal_checkpoint(TRUNCATE)", "read-only: PRAGMA wal_checkpoint"),
     ("PRAGMA optimize", "read-only: PRAGMA optimize"),

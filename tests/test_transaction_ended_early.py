@@ -103,21 +103,21 @@ def test_the_bodys_own_error_is_what_the_caller_hears(store):
 
 
 def test_a_statement_that_ends_the_transaction_is_said_in_words(tmp_path):
-    """A hand-written ``ROLLBACK`` inside a transaction (``kb.sql(..., write=True)``): the
-    levels open end with an SLRError, not sqlite3's "no such savepoint" / "cannot commit",
-    and what the transaction wrote afterwards is not kept."""
+    """A ``ROLLBACK`` inside a transaction, run by a module of slr_sql on the store's
+    connection (a user's is refused: tests/test_sql_transaction_control.py): the levels
+    open end with an SLRError, not sqlite3's "no such savepoint" / "cannot commit", and what
+    the transaction wrote afterwards is not kept."""
     with slr_sql.open(tmp_path / "robot.db", clock=slr_sql.ManualClock(0.0)) as kb:
         kb.add("p(1)^1")
 
         def transaction():
             with kb.store.transaction():
                 kb.add("p(2)^2")
-                kb.sql("ROLLBACK", write=True)
+                kb.store.execute("ROLLBACK")
                 kb.add("p(3)^3")
 
         exc = slr_failure(transaction)
         assert type(exc) is SLRError
-        # (kb.sql's own level inside the transaction is the first to end, and says so)
         assert str(exc) == f"{tmp_path / 'robot.db'}: the transaction ended before its end " \
                            f"(a statement ended it); the transaction is rolled back, nothing " \
                            f"of it will be written"

@@ -3,7 +3,9 @@
 Every connection the store opens gets :func:`harden_connection`: the SQLite functions in
 :data:`DENIED_FUNCTIONS` and the pragmas in :data:`DENIED_PRAGMAS` are refused in every
 statement (the store's own SQL never calls them; a user's ``kb.sql(..., write=True)`` may not
-either), and SQLite's
+either). A statement a user hands the store, written or read-only, may not begin or end a
+transaction (:meth:`SqlGuard.hand_written`: the store's connection's transactions are the
+store's), nor assign a pragma of :data:`STORE_SETTING_PRAGMAS`. SQLite's
 ``SQLITE_DBCONFIG_ENABLE_FTS3_TOKENIZER`` switch is turned off where Python lets it be
 reached safely (:func:`fts3_tokenizer_switch_off`). A *read-only* statement (``kb.sql``
 without ``write``, ``slr sql``, the service's ``/sql``) runs under the stricter
@@ -33,7 +35,8 @@ import sys
 from typing import Any
 
 __all__ = ["SqlGuard", "harden_connection", "fts3_tokenizer_switch_off", "DENIED_FUNCTIONS",
-           "DENIED_PRAGMAS", "READING_PRAGMAS", "ACTING_PRAGMAS", "READ_ONLY_VALUE_BYTES", "READ_ONLY_RESULT_BYTES"]
+           "DENIED_PRAGMAS", "READING_PRAGMAS", "ACTING_PRAGMAS", "STORE_SETTING_PRAGMAS",
+           "READ_ONLY_VALUE_BYTES", "READ_ONLY_RESULT_BYTES", "transaction_control_refusal"]
 
 # Functions no statement on a store connection may call, with the reason given.
 DENIED_FUNCTIONS = {
@@ -49,6 +52,16 @@ DENIED_PRAGMAS = {
     "case_sensitive_like": "it registers SQLite's own LIKE on the connection again, over "
                            "the store's bounded one, and one call of that cannot be stopped "
                            "by a statement's timeout; for a case-sensitive match use GLOB",
+}
+
+# Pragmas whose assignment changes how the store's own transactions work, refused in a
+# hand-written statement even with ``write=True``, with the reason given.
+STORE_SETTING_PRAGMAS = {
+    "query_only": "every later write of the store would fail",
+    "locking_mode": "in EXCLUSIVE mode the store's connection would keep the file locked "
+                    "after each of its transactions, shutting out every other process",
+    "journal_mode": "the store's transactions are journaled in its WAL, which its readers in "
+                    "other processes and its checkpointer rely on",
 }
 
 # Pragmas that take an argument and only read (also table-valued: pragma_table_info('t')).
@@ -71,8 +84,26 @@ _OK, _DENY = sqlite3.SQLITE_OK, sqlite3.SQLITE_DENY
 _FUNCTION = sqlite3.SQLITE_FUNCTION
 _PRAGMA = sqlite3.SQLITE_PRAGMA
 _ATTACHING = frozenset({sqlite3.SQLITE_ATTACH, sqlite3.SQLITE_DETACH})
+_TRANSACTION, _SAVEPOINT = sqlite3.SQLITE_TRANSACTION, sqlite3.SQLITE_SAVEPOINT
+# the statement SQLite's authorizer means by (action, its first argument)
+_TRANSACTION_STATEMENTS = {
+    (_TRANSACTION, "BEGIN"): "BEGIN", (_TRANSACTION, "COMMIT"): "COMMIT",
+    (_TRANSACTION, "ROLLBACK"): "ROLLBACK", (_SAVEPOINT, "BEGIN"): "SAVEPOINT",
+    (_SAVEPOINT, "RELEASE"): "RELEASE", (_SAVEPOINT, "ROLLBACK"): "ROLLBACK TO"}
 _WRITING_ROWS = frozenset({sqlite3.SQLITE_INSERT, sqlite3.SQLITE_UPDATE})
 _FTS3_TOKENIZER_SWITCH = 1004  # SQLITE_DBCONFIG_ENABLE_FTS3_TOKENIZER
+
+
+def transaction_control_refusal(statement: str) -> str:
+    """Why a hand-written transaction-control statement (``statement``: its keyword) is
+    refused, on either backend.
+
+    >>> transaction_control_refusal("COMMIT")
+    'COMMIT is not allowed: the store begins and ends its own transactions (several statements stored together or not at all: with kb.store.transaction(): ...)'
+    """
+    return (f"{statement} is not allowed: the store begins and ends its own transactions "
+            f"(several statements stored together or not at all: with kb.store.transaction(): "
+            f"...)")
 
 
 class SqlGuard:
@@ -83,6 +114,14 @@ class SqlGuard:
         self.denied: str | None = None
         # the tables a statement inserts into or updates, but temporary ones (``writing``)
         self.written: set[str] = set()
+        # whether the statement attached a database (``hand_written``)
+        self.attached = False
+
+    def begin_statement(self) -> None:
+        """Forget what the previous hand-written statement was refused or wrote."""
+        self.denied = None
+        self.written = set()
+        self.attached = False
 
     def always(self, action: int, arg1: Any, arg2: Any, _db: Any, _trigger: Any) -> int:
         """Every statement: no function of :data:`DENIED_FUNCTIONS`, no pragma of
@@ -99,18 +138,50 @@ class SqlGuard:
                 return _DENY
         return _OK
 
+    def hand_written(self, action: int, arg1: Any, arg2: Any, db: Any, trigger: Any) -> int:
+        """Any statement a user hands the store: :meth:`always`, and no transaction control
+        (BEGIN, COMMIT, END, ROLLBACK, SAVEPOINT, RELEASE): it runs on the store's own
+        connection, whose transactions the store begins and ends (a BEGIN would leave the
+        connection in a transaction the store knows nothing of, a COMMIT or RELEASE would end
+        the store's own transaction or level halfway). A VACUUM is no transaction
+        control: it compiles to nothing the authorizer hears, and as it runs it attaches
+        its target and then begins and ends a transaction of its own, which is let be (a
+        statement that attaches is never one that begins a transaction: a BEGIN compiles
+        to its transaction action alone)."""
+        if action in _ATTACHING:
+            self.attached = True
+        elif (action == _TRANSACTION or action == _SAVEPOINT) and not self.attached:
+            self.denied = transaction_control_refusal(
+                _TRANSACTION_STATEMENTS.get((action, str(arg1).upper()),
+                                            "a transaction-control statement"))
+            return _DENY
+        return self.always(action, arg1, arg2, db, trigger)
+
     def writing(self, action: int, arg1: Any, arg2: Any, db: Any, trigger: Any) -> int:
-        """A hand-written statement that may write: :meth:`always`, and the tables it inserts
+        """A hand-written statement that may write: :meth:`hand_written`, no assignment of a
+        pragma of :data:`STORE_SETTING_PRAGMAS`, and the tables it inserts
         rows into or updates noted in ``written`` -- by name, whatever database holds them
         but ``temp``: another name ATTACHed to the store's own file writes its tables. SQLite asks
         while it compiles the statement, its triggers' statements included (SQLite codes
         them into it), so what is noted does not depend on how the statement spells a name."""
         if action in _WRITING_ROWS and db != "temp" and isinstance(arg1, str):
             self.written.add(arg1)   # (an attached alias of the store's own file included)
-        return self.always(action, arg1, arg2, db, trigger)
+        elif action == _PRAGMA and arg2 is not None and self._store_setting(str(arg1)):
+            return _DENY
+        return self.hand_written(action, arg1, arg2, db, trigger)
+
+    def _store_setting(self, pragma: str) -> bool:
+        """Whether ``pragma``, given an argument, is one of :data:`STORE_SETTING_PRAGMAS`
+        (then ``denied`` says why it is refused)."""
+        name = pragma.lower()
+        reason = STORE_SETTING_PRAGMAS.get(name)
+        if reason is None:
+            return False
+        self.denied = f"PRAGMA {name} with an argument is not allowed ({reason})"
+        return True
 
     def read_only(self, action: int, arg1: Any, arg2: Any, db: Any, trigger: Any) -> int:
-        """A read-only statement: :meth:`always`, and no ATTACH, DETACH (nor ``VACUUM
+        """A read-only statement: :meth:`hand_written`, and no ATTACH, DETACH (nor ``VACUUM
         INTO``, which attaches its target), no pragma assignment, no acting pragma."""
         if action in _ATTACHING:
             self.denied = "read-only: the statement would write a database file (ATTACH, " \
@@ -120,12 +191,14 @@ class SqlGuard:
             name = str(arg1).lower()
             if name in DENIED_PRAGMAS:
                 return self.always(action, arg1, arg2, db, trigger)
+            if arg2 is not None and self._store_setting(name):
+                return _DENY   # (not even with write=True: said so)
             if name in ACTING_PRAGMAS or (arg2 is not None and name not in READING_PRAGMAS):
                 self.denied = f"read-only: PRAGMA {name} with an argument, or one that acts, " \
                               "would change the store or its settings"
                 return _DENY
             return _OK
-        return self.always(action, arg1, arg2, db, trigger)
+        return self.hand_written(action, arg1, arg2, db, trigger)
 
 
 def harden_connection(conn: sqlite3.Connection) -> SqlGuard:

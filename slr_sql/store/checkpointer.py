@@ -24,12 +24,13 @@ budget use it (``slr ros bridge``, ``slr serve``); short scripts keep SQLite's d
 from __future__ import annotations
 
 import logging
+import os
 import sqlite3
 import threading
 
-from ..errors import log_failure
+from ..errors import SLRError, SLRStoreGone, log_failure
 from .authorizer import harden_connection
-from .sqltext import busy_error, store_error
+from .sqltext import busy_error, file_identity, file_uri, store_error
 
 __all__ = ["WalCheckpointer", "CHECKPOINT_MODES", "CHECKPOINT_INTERVAL"]
 
@@ -44,14 +45,20 @@ class WalCheckpointer:
     :meth:`stop`. ``runs`` counts the checkpoints run, ``complete`` those that copied the
     whole log (what the log held when it started), ``locked`` those that met another
     connection's lock, ``failed`` those that failed for another reason, ``ran`` is set after
-    each run.
+    each run. ``identity``: ``(device, inode)`` of the file the store opened (by default,
+    the file at ``path`` now).
 
     Another connection's lock (its checkpoint, an exclusive lock) is waited out quietly: the
-    next run copies the log. Any other failure (the file damaged, the disk full or failing)
-    is logged on ``slr_sql.store`` as one WARNING line naming the store, once while it lasts,
-    and its end too; the thread goes on trying at every interval."""
+    next run copies the log. Any other failure (the file damaged, the disk full or failing,
+    the store's file gone from its path or another file there) is logged on
+    ``slr_sql.store`` as one WARNING line naming the store, once while it lasts, and its end
+    too; the thread goes on trying at every interval. Each run first compares the file at the
+    path with the store's (a ``stat``): a file deleted or moved away is not made again,
+    empty, by the thread's connection (it opens the path with ``mode=rw``), and another file
+    put in its place is left alone."""
 
-    def __init__(self, path: str, interval: float = CHECKPOINT_INTERVAL):
+    def __init__(self, path: str, interval: float = CHECKPOINT_INTERVAL,
+                 identity: tuple[int, int] | None = None):
         self.path = path
         self.interval = interval
         self.runs = 0
@@ -59,34 +66,34 @@ class WalCheckpointer:
         self.locked = 0
         self.failed = 0
         self.ran = threading.Event()
+        # the path made absolute now (a later chdir changes nothing)
+        self._absolute = os.path.abspath(path)
+        self._identity = identity if identity is not None else file_identity(self._absolute)
         self._stopping = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f"slr-checkpoint {path}",
                                         daemon=True)
         self._thread.start()
 
     def _run(self) -> None:
+        conn: sqlite3.Connection | None = None
+        failing: str | None = None   # what the failing runs meet, said once
         try:
-            conn = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None,
-                                   timeout=0)
-        except sqlite3.Error:
-            return  # the writer's own connection still checkpoints on close
-        try:
-            harden_connection(conn)
-            sized = False
-            failing: str | None = None   # what the failing runs meet, said once
             while not self._stopping.wait(self.interval):
                 try:
-                    if not sized:   # (it reads the schema: a run's failure, if it fails)
-                        conn.execute("PRAGMA cache_size=-256")  # the copy reads the log
-                        sized = True
+                    gone = self._not_the_store()
+                    if gone is not None:
+                        raise gone
+                    if conn is None:
+                        conn = self._connect()
                     busy, log, copied = conn.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchone()
-                except sqlite3.Error as exc:
+                except (sqlite3.Error, SLRError) as exc:
                     if busy_error(exc, self.path) is not None or \
                             getattr(exc, "sqlite_errorcode", 0) & 0xFF == sqlite3.SQLITE_LOCKED:
                         self.locked += 1   # (another checkpoint running: the next run copies)
                         continue
                     self.failed += 1
-                    failure = store_error(exc, self.path, outcome="nothing was copied")
+                    failure = exc if isinstance(exc, SLRError) else \
+                        store_error(exc, self.path, outcome="nothing was copied")
                     if str(failure) != failing:
                         failing = str(failure)
                         log_failure(_log, "checkpointing the write-ahead log", failure,
@@ -100,7 +107,36 @@ class WalCheckpointer:
                     self.complete += 1
                 self.ran.set()
         finally:
+            if conn is not None:
+                conn.close()
+
+    def _not_the_store(self) -> SLRStoreGone | None:
+        """Why the file at the path is not the store's (deleted or moved away, or another
+        file there), else None."""
+        now = file_identity(self._absolute)
+        if now == self._identity:
+            return None
+        what = "the store's file is no longer at its path (deleted or moved away)" \
+            if now is None else "another file is at the store's path (the store's was replaced)"
+        return SLRStoreGone(f"{self.path}: {what} while the store is open; nothing was copied")
+
+    def _connect(self) -> sqlite3.Connection:
+        """The thread's connection to the store's file: opened with ``mode=rw`` (a missing
+        file is an error, not made anew), then checked to be the store's file (the path may
+        have been replaced between the run's check and the open). Its cache size is set here,
+        which reads the schema: a damaged file is this run's failure."""
+        conn = sqlite3.connect(file_uri(self._absolute, "rw"), uri=True,
+                               check_same_thread=False, isolation_level=None, timeout=0)
+        try:
+            harden_connection(conn)
+            conn.execute("PRAGMA cache_size=-256")  # the copy reads the log
+            gone = self._not_the_store()
+            if gone is not None:
+                raise gone
+        except BaseException:
             conn.close()
+            raise
+        return conn
 
     def stop(self) -> None:
         """End the thread (waits for a checkpoint in progress to finish). Idempotent."""

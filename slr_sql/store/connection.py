@@ -44,6 +44,7 @@ from .dialect import SQLITE
 from .functions import SqlFunctions
 from .schema import migrate, migrate_new_memory_store, migration_scripts
 from .sqltext import bound_parameters, busy_error, quote_identifier, split_sql_script, store_error
+from .sqltext import file_identity as _file_identity, file_uri as _file_uri
 
 __all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "run_sql_file", "check_file", "refuse_no_store", "check_busy_timeout"]
@@ -92,22 +93,6 @@ class WallClock:
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 # Tables every store has (the first migration creates them).
 _STORE_TABLES = frozenset({"slr_meta", "slr_program", "slr_event_types"})
-
-
-def _file_uri(path: str, mode: str = "ro") -> str:
-    """A ``file:`` URI for ``path`` opened in ``mode`` (``ro``, or ``rw``: never made anew)
-    (``%``, ``?`` and ``#`` escaped)."""
-    quoted = os.path.abspath(path).replace("%", "%25").replace("?", "%3f").replace("#", "%23")
-    return f"file:{quoted}?mode={mode}"
-
-
-def _file_identity(name: str) -> tuple[int, int] | None:
-    """``(device, inode)`` of the file ``name``, None when there is none."""
-    try:
-        info = os.stat(name)
-    except OSError:
-        return None
-    return info.st_dev, info.st_ino
 
 
 def _store_gone(path: Any, what: str, outcome: str) -> SLRStoreGone:
@@ -385,10 +370,10 @@ class Database:
             if self.path is not None and not new and \
                     conn.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
                 conn.execute("PRAGMA journal_mode=WAL")
-            if checkpoint == "background" and self.path is not None:
+            background = checkpoint == "background" and self.path is not None
+            if background:
                 # see store/checkpointer.py: no commit waits for a checkpoint's fsync
                 conn.execute("PRAGMA wal_autocheckpoint=0")
-                self.checkpointer = WalCheckpointer(self.path, checkpoint_interval)
         except BaseException as exc:
             conn.close()
             for name in created:
@@ -409,6 +394,9 @@ class Database:
         # commit is acknowledged; the path made absolute now (a later chdir changes nothing)
         self._absolute = None if self.path is None else os.path.abspath(self.path)
         self._identity = (None, None, None) if self.path is None else self._identities()
+        if background:   # (it checkpoints this file, and no other one put at the path)
+            self.checkpointer = WalCheckpointer(self.path, checkpoint_interval,
+                                                identity=self._identity[0])
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -953,7 +941,10 @@ class Database:
         """Run one SQL statement as given (for ``slr sql``) and return ``(column names,
         rows)``. Read-only unless ``write``: a statement that would change the store (an
         INSERT, a DROP, a pragma assignment, an ATTACH) raises an :class:`SLRError` starting
-        with ``read-only``; a condition of the file or its disk :meth:`failure`'s SLRError;
+        with ``read-only``; written or not, a transaction-control statement (BEGIN, COMMIT,
+        SAVEPOINT, ...: the connection's transactions are the store's) and an assignment of
+        a pragma the store's transactions rely on raise an SLRError saying so
+        (:meth:`SqlGuard.hand_written`, :meth:`SqlGuard.writing`); a condition of the file or its disk :meth:`failure`'s SLRError;
         the statement's own errors raise :data:`DatabaseError`. The connection's SQL
         functions are there, so compiled statements (``kb.explain``) run as printed.
         ``timeout`` (seconds): a longer statement is interrupted with :class:`SLRTimeout`.
@@ -971,7 +962,7 @@ class Database:
             self.check_open()
             conn = self.conn
             guard = self.guard
-            guard.denied = None
+            guard.begin_statement()
             if write:
                 columns, rows, _ = self._write(query, params, deadline)
                 return columns, rows
@@ -1015,7 +1006,9 @@ class Database:
     def tables_to_write(self, query: str, params: Iterable[Any] = ()) -> set[str] | None:
         """The tables of the store a statement would insert rows into or update, those its
         triggers would write included, told by compiling it (``EXPLAIN``: nothing runs);
-        None when it cannot be compiled so (its own run says why).
+        None when it cannot be compiled so (its own run says why). A statement the store
+        refuses (:meth:`SqlGuard.writing`: a BEGIN, a COMMIT, ...) raises its SLRError here,
+        before any transaction of the check is begun.
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None); s.declare_type("p", 1)
@@ -1026,12 +1019,16 @@ class Database:
         with self.lock:
             self.check_open()
             conn, guard = self.conn, self.guard
-            guard.written = set()
+            guard.begin_statement()
             conn.set_authorizer(guard.writing)
             try:
                 conn.execute(f"EXPLAIN {query}", bound_parameters(params)).close()
                 return guard.written
-            except (sqlite3.Error, OverflowError, TypeError, ValueError):
+            except sqlite3.Error as exc:
+                if _refused(str(exc), guard):
+                    raise SLRError(f"sql: {guard.denied}") from None
+                return None
+            except (OverflowError, TypeError, ValueError):
                 return None
             finally:
                 guard.denied = None
@@ -1042,8 +1039,7 @@ class Database:
         if not self.tx_depth:   # (autocommit: no COMMIT of ours checks the file)
             self.check_identity()
         conn, guard = self.conn, self.guard
-        guard.denied = None
-        guard.written = set()
+        guard.begin_statement()
         # (setting an authorizer expires the connection's prepared statements: a statement
         # run before is compiled again, so the authorizer sees it and its triggers)
         conn.set_authorizer(guard.writing)

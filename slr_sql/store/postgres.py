@@ -37,6 +37,7 @@ from ..lockorder import ordered_lock
 from .connection import Database, DatabaseError, drop_commit_callbacks, in_own_transaction, \
     merge_commit_callbacks, run_after_rollback, \
     run_commit_callbacks
+from .authorizer import transaction_control_refusal
 from .dialect import POSTGRES
 from .functions import SqlFunctions
 from .schema import postgres_migration_scripts
@@ -756,6 +757,59 @@ MOST_RUNNING = 4
 STOP_GRACE = 0.5
 
 
+# A transaction-control statement, by its first keywords (PostgreSQL's "Transaction
+# Control" commands: COMMIT PREPARED and ROLLBACK PREPARED start as COMMIT and ROLLBACK)
+_TRANSACTION_CONTROL = re.compile(
+    r"(BEGIN|START(?:\s+TRANSACTION)?|COMMIT|END|ROLLBACK|ABORT|SAVEPOINT|RELEASE"
+    r"|PREPARE\s+TRANSACTION|SET\s+TRANSACTION|SET\s+SESSION\s+CHARACTERISTICS)\b", re.I | re.A)
+_WORD = re.compile(r"\w+", re.A)
+_LINE_END = re.compile(r"[\n\r]")
+
+
+def _transaction_control(statement: str) -> str | None:
+    """The keywords of ``statement`` when it is a transaction-control statement (which the
+    store refuses in a hand-written statement: its connection's transactions are the
+    store's), else None. Comments before it are skipped as the server skips them, block
+    comments nested, and a line comment ends at ``\\n`` or ``\\r``; whatever the server takes
+    for layout, ``str.isspace`` takes too (a misreading could only refuse more, never let a
+    transaction-control statement through).
+
+    >>> _transaction_control("/* a /* nested */ comment */ -- a line\\r  commit work")
+    'COMMIT'
+    >>> _transaction_control("SET TRANSACTION READ ONLY"), _transaction_control("SELECT 1")
+    ('SET TRANSACTION', None)
+    """
+    at, n = 0, len(statement)
+    while at < n:
+        if statement[at].isspace():
+            at += 1
+        elif statement.startswith("--", at):   # (to the end of the line, \n or \r)
+            end = _LINE_END.search(statement, at)
+            at = n if end is None else end.end()
+        elif statement.startswith("/*", at):
+            depth, at = 1, at + 2
+            while at < n and depth:
+                if statement.startswith("/*", at):
+                    depth, at = depth + 1, at + 2
+                elif statement.startswith("*/", at):
+                    depth, at = depth - 1, at + 2
+                else:
+                    at += 1
+        else:
+            break
+    found = _TRANSACTION_CONTROL.match(statement, at)
+    if found is None:
+        return None
+    return " ".join(_WORD.findall(found.group(1))).upper()
+
+
+def _refuse_transaction_control(statement: str) -> None:
+    """Raise the SLRError of a hand-written transaction-control ``statement``."""
+    keywords = _transaction_control(statement)
+    if keywords is not None:
+        raise SLRError(f"sql: {transaction_control_refusal(keywords)}")
+
+
 def _one_statement(raw: Any, statement: str, bound: Any) -> tuple[list[str], list[tuple]]:
     """Run the one read-only ``statement`` of a caller on ``raw`` and return ``(column
     names, rows)``. Sent in a pipeline, so always by the extended protocol, which refuses a
@@ -1302,7 +1356,9 @@ class PgDatabase:
         """Run one statement as given (``slr sql``): read-only (a READ ONLY transaction)
         unless ``write``; ``timeout`` seconds as ``statement_timeout``. A read-only statement
         outside a transaction runs on a connection of its own (:class:`DetachedStatements`):
-        it never holds the store's lock, and its caller stops waiting at the timeout."""
+        it never holds the store's lock, and its caller stops waiting at the timeout. A
+        transaction-control statement (BEGIN, COMMIT, ...) is refused, written or not."""
+        _refuse_transaction_control(query)
         if write:
             columns, rows, _ = self.sql_write(query, params, timeout)
             return columns, rows
@@ -1346,7 +1402,11 @@ class PgDatabase:
         tables when the server keeps no counters, ``track_counts = off``). The deferred
         constraint triggers run before the counters are read (``SET CONSTRAINTS ALL
         IMMEDIATE``: in a transaction of the caller's, its deferrable constraints are
-        immediate from then on)."""
+        immediate from then on). The statement is sent alone, by the extended protocol (a
+        second statement in the text is refused by the server), and a transaction-control
+        statement is refused before anything is sent: the store's connection's transactions
+        are the store's."""
+        _refuse_transaction_control(query)
         with self.lock:
             self.check_open()
             psycopg = _psycopg()
@@ -1364,10 +1424,11 @@ class PgDatabase:
                 # the API's placeholders (`?`, `:name`) in psycopg's style, as on SQLite;
                 # without parameters the text goes as written (a `%` stays a `%`)
                 bound = bound_parameters(params)
-                if bound:
-                    cursor.execute(self.dialect.statement(query), bound, prepare=False)
-                else:
-                    cursor.execute(query, None, prepare=False)
+                with raw.pipeline():   # (the extended protocol: this one statement only)
+                    if bound:
+                        cursor.execute(self.dialect.statement(query), bound, prepare=False)
+                    else:
+                        cursor.execute(query, None, prepare=False)
                 columns = [d.name for d in cursor.description] if cursor.description else []
                 rows = [tuple(r) for r in cursor.fetchall()] if cursor.description else []
                 # (a deferred constraint trigger would write at the commit, after the
@@ -1392,7 +1453,9 @@ class PgDatabase:
 
     def tables_to_write(self, query: str, params: Iterable[Any] = ()) -> set[str] | None:
         """None: what a statement writes is known only once it ran (its triggers and
-        functions are the server's), from :meth:`sql_write`."""
+        functions are the server's), from :meth:`sql_write`. A transaction-control statement
+        is refused here, before the check's transaction is begun."""
+        _refuse_transaction_control(query)
         return None
 
     def _rows_written_so_far(self, raw: Any) -> dict[str, int | None]:

@@ -1,4 +1,5 @@
-"""SQL text for SQLite: quoting identifiers and constants, splitting scripts, safe table names.
+"""SQL text for SQLite: quoting identifiers and constants, splitting scripts, safe table names,
+the ``file:`` URI of a store and the identity of its file.
 
 Every identifier the store writes into SQL goes through :func:`quote_identifier`; values are
 bound parameters, except in ``CREATE TRIGGER`` bodies (which cannot have parameters), where
@@ -7,6 +8,7 @@ bound parameters, except in ``CREATE TRIGGER`` bodies (which cannot have paramet
 from __future__ import annotations
 
 import math
+import os
 import re
 import sqlite3
 from collections.abc import Iterable, Mapping
@@ -15,7 +17,8 @@ from typing import Any
 from ..errors import SLRBusy, SLRError, SLRStoreFull
 
 __all__ = ["quote_identifier", "sql_literal", "split_sql_script", "SAFE_IDENTIFIER",
-           "RESERVED_PREFIXES", "SQL_KEYWORDS", "busy_error", "store_error", "disk_is_full"]
+           "RESERVED_PREFIXES", "SQL_KEYWORDS", "busy_error", "store_error", "disk_is_full",
+           "file_uri", "file_identity"]
 
 SAFE_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 RESERVED_PREFIXES = ("slr_", "sqlite_")
@@ -104,6 +107,30 @@ def store_error(exc: BaseException, path: str | None, timeout: float | None = No
     if code == sqlite3.SQLITE_IOERR:
         return SLRError(f"{where}: the disk failed to read or write the store ({text})")
     return SLRError(f"{where}: the store failed ({text})")
+
+
+def file_uri(path: str, mode: str = "ro") -> str:
+    """A ``file:`` URI for ``path`` opened in ``mode`` (``ro``, or ``rw``: never made anew)
+    (``%``, ``?`` and ``#`` escaped).
+
+    >>> file_uri("/data/50%/robot?#1.db", "rw")
+    'file:/data/50%25/robot%3f%231.db?mode=rw'
+    """
+    quoted = os.path.abspath(path).replace("%", "%25").replace("?", "%3f").replace("#", "%23")
+    return f"file:{quoted}?mode={mode}"
+
+
+def file_identity(name: str) -> tuple[int, int] | None:
+    """``(device, inode)`` of the file ``name``, None when there is none.
+
+    >>> file_identity("/no/such/file") is None
+    True
+    """
+    try:
+        info = os.stat(name)
+    except OSError:
+        return None
+    return info.st_dev, info.st_ino
 
 
 def quote_identifier(name: str) -> str:

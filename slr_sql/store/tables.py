@@ -259,6 +259,8 @@ class EventTables:
         # build, knowing the index there, asks again when it moved)
         self._built_inside = False
         self.builds_undone = 0
+        # the types could not be read again after a rollback: read at the next use
+        self._stale = False
         # The most data arguments an event can have: its table has 5 more columns (seq,
         # t_start, t_end, arrival, robot) and the engine refuses tables wider than its limit.
         self.max_arity = db.max_columns - 5
@@ -274,7 +276,21 @@ class EventTables:
         # (the old objects too: a reader holding one must not trust a build taken back)
         for event_type in self.types.values():
             event_type.start_order = None
-        self.reload(keep_start_order=False)
+        try:
+            self.reload(keep_start_order=False)
+        except BaseException:
+            # (the store unreadable now: a server that ended the connection and none to be
+            # had, a damaged file) the cache may hold a type the rollback took back: every
+            # type is read again at the next use under the lock (lookup, declared_types,
+            # event_types); what a reader without the lock sees in the meantime trusts no
+            # start-ordered index (reset above)
+            self._stale = True
+            raise
+
+    def _fresh(self) -> None:
+        """Read the types again if a rollback could not (lock held by the caller)."""
+        if self._stale:
+            self.reload(keep_start_order=False)
 
     def _kept(self) -> None:
         self._built_inside = False
@@ -297,9 +313,12 @@ class EventTables:
                     declared.setdefault(name, set()).add(arity)
         self.types = types
         self.declared_arities = declared
+        self._stale = False
 
     def lookup(self, name: str, arity: int) -> EventType | None:
         """The type name/arity, or None if it has no table (lock held by the caller)."""
+        if self._stale:   # (inline: every add looks its type up)
+            self._fresh()
         event_type = self.types.get((name, arity))
         if event_type is None and "\x00" in name and not self.db.dialect.text_holds_nul:
             return None   # a name this database cannot hold was never stored
@@ -540,6 +559,8 @@ class EventTables:
             self.db.check_open()
             if not self.db.tx_depth:
                 self.reload()  # pick up types other processes created
+            else:
+                self._fresh()
             return {key: t.table for key, t in self.types.items()}
 
     def declared_types(self) -> set[tuple[str, int]]:
@@ -552,6 +573,7 @@ class EventTables:
         """
         with self.db.lock:
             self.db.check_open()
+            self._fresh()
             return {key for key, t in self.types.items() if t.declared}
 
     def table_for(self, name: str, arity: int) -> str | None:
