@@ -14,8 +14,8 @@ import time
 
 import slr_sql
 from slr_sql.ros.bridge import Bridge
-from slr_sql.ros.mapping import mapping_from_dict
 import test_ros_bridge
+from bridge_helpers import pose_topic, publish_poses, spinner
 
 # the ROS bridge tests' fixtures: loopback-only discovery on a random domain, a topic prefix
 # of this run, a real rclpy node of the test
@@ -25,35 +25,20 @@ DEADLINE = test_ros_bridge.DEADLINE
 
 def test_a_busy_store_holds_the_messages_and_stores_them_once_it_is_free(tmp_path, ros_node,
                                                                           prefix):
-    from geometry_msgs.msg import PoseStamped
-
     node, executor = ros_node
     db = tmp_path / "live.db"
-    mapping = mapping_from_dict({"tf": False, "topics": {f"{prefix}/pose": {
-        "event": "pose", "args": ["header.frame_id", "pose.position.x"]}}})
-    publisher = node.create_publisher(PoseStamped, f"{prefix}/pose", 100)
+    mapping, publisher = pose_topic(node, prefix)
     lines: list[str] = []
     with slr_sql.open(db, busy_timeout=0.2, clock=slr_sql.ManualClock(105.0)) as kb:
         bridge = Bridge(kb, mapping, node_name="test_bridge", log=lines.append).start()
         try:
-            deadline = time.monotonic() + DEADLINE
-
-            def spin_until(condition) -> None:
-                while not condition():
-                    assert time.monotonic() < deadline, f"timed out; log {lines}"
-                    bridge.spin_once(0.01)
-                    executor.spin_once(timeout_sec=0.01)
+            spin_until = spinner(bridge, executor, lambda: f"log {lines}")
 
             spin_until(lambda: publisher.get_subscription_count() > 0)
             holder = sqlite3.connect(db, isolation_level=None)
             holder.execute("BEGIN IMMEDIATE")          # another writer holds the store
             try:
-                for i in range(5):
-                    msg = PoseStamped()
-                    msg.header.stamp.sec = 100 + i
-                    msg.header.frame_id = "map"
-                    msg.pose.position.x = float(i)
-                    publisher.publish(msg)
+                publish_poses(publisher, 5)
                 spin_until(lambda: bridge.stats.messages == 5 and bridge.held == 5)
                 bridge.spin_once(0.01)                 # and again: still held, no error
             finally:
@@ -79,39 +64,25 @@ def test_held_counts_only_the_messages_whose_marks_are_still_unstored(postgres_u
     table takes writes, the meta table where marks live is locked) holds only the messages
     with a mark still to store: the pose messages are stored, the mark message is held."""
     import psycopg
-    from geometry_msgs.msg import PoseStamped
     from std_msgs.msg import Header
 
     node, executor = ros_node
-    mapping = mapping_from_dict({"tf": False, "topics": {f"{prefix}/pose": {
-        "event": "pose", "args": ["header.frame_id", "pose.position.x"]}},
-        "fully_updated": [{"topic": f"{prefix}/done", "types": ["pose/2"]}]})
-    poses = node.create_publisher(PoseStamped, f"{prefix}/pose", 100)
+    mapping, poses = pose_topic(
+        node, prefix, fully_updated=[{"topic": f"{prefix}/done", "types": ["pose/2"]}])
     done = node.create_publisher(Header, f"{prefix}/done", 10)
     lines: list[str] = []
     with slr_sql.open(postgres_url, busy_timeout=0.2, clock=slr_sql.ManualClock(105.0)) as kb:
         kb.add("pose(map, -1.0)^99")          # the pose table exists before it is locked
         bridge = Bridge(kb, mapping, node_name="test_bridge", log=lines.append).start()
         try:
-            deadline = time.monotonic() + DEADLINE
-
-            def spin_until(condition) -> None:
-                while not condition():
-                    assert time.monotonic() < deadline, f"timed out; log {lines}"
-                    bridge.spin_once(0.01)
-                    executor.spin_once(timeout_sec=0.01)
+            spin_until = spinner(bridge, executor, lambda: f"log {lines}")
 
             spin_until(lambda: poses.get_subscription_count() > 0
                        and done.get_subscription_count() > 0)
             with psycopg.connect(postgres_url) as meta, psycopg.connect(postgres_url) as table:
                 meta.execute("LOCK TABLE slr.slr_meta IN SHARE MODE")     # marks wait
                 table.execute("LOCK TABLE slr.pose IN SHARE MODE")        # and events too
-                for i in range(3):
-                    msg = PoseStamped()
-                    msg.header.stamp.sec = 100 + i
-                    msg.header.frame_id = "map"
-                    msg.pose.position.x = float(i)
-                    poses.publish(msg)
+                publish_poses(poses, 3)
                 mark = Header()
                 mark.stamp.sec = 103
                 done.publish(mark)
@@ -137,32 +108,18 @@ def test_events_whose_adds_answer_was_lost_are_not_sent_again(ros_node, prefix):
     """A bridge storing into a served knowledge base whose server reads the add and dies
     without answering (a real TCP server of the test): the events may be stored, so they are
     not sent again (each would be stored twice), said and counted; nothing stays held."""
-    from geometry_msgs.msg import PoseStamped
     from service_helpers import DroppingServer
 
     node, executor = ros_node
-    mapping = mapping_from_dict({"tf": False, "topics": {f"{prefix}/pose": {
-        "event": "pose", "args": ["header.frame_id", "pose.position.x"]}}})
-    publisher = node.create_publisher(PoseStamped, f"{prefix}/pose", 100)
+    mapping, publisher = pose_topic(node, prefix)
     lines: list[str] = []
     with DroppingServer() as server, slr_sql.connect(server.url) as kb:
         bridge = Bridge(kb, mapping, node_name="test_bridge", log=lines.append).start()
         try:
-            deadline = time.monotonic() + DEADLINE
-
-            def spin_until(condition) -> None:
-                while not condition():
-                    assert time.monotonic() < deadline, f"timed out; log {lines}"
-                    bridge.spin_once(0.01)
-                    executor.spin_once(timeout_sec=0.01)
+            spin_until = spinner(bridge, executor, lambda: f"log {lines}")
 
             spin_until(lambda: publisher.get_subscription_count() > 0)
-            for i in range(3):
-                msg = PoseStamped()
-                msg.header.stamp.sec = 100 + i
-                msg.header.frame_id = "map"
-                msg.pose.position.x = float(i)
-                publisher.publish(msg)
+            publish_poses(publisher, 3)
             spin_until(lambda: bridge.stats.messages == 3 and bridge.stats.uncertain == 3)
             sent = server.dropped
             for _ in range(5):                    # later spins send nothing again
@@ -181,13 +138,10 @@ def test_of_an_add_many_in_several_requests_only_the_broken_ones_events_are_not_
     """A burst above the served store's body limit goes in several requests: the first is
     answered, the second's answer is lost, the rest were never sent. Only the second's
     events are given up (maybe stored); the rest are held and stored at the next spin."""
-    from geometry_msgs.msg import PoseStamped
     from service_helpers import DroppingServer
 
     node, executor = ros_node
-    mapping = mapping_from_dict({"tf": False, "topics": {f"{prefix}/pose": {
-        "event": "pose", "args": ["header.frame_id", "pose.position.x"]}}})
-    publisher = node.create_publisher(PoseStamped, f"{prefix}/pose", 100)
+    mapping, publisher = pose_topic(node, prefix)
     lines: list[str] = []
     limits = b'{"status": "ok", "limits": {"max_body": 2048}}'
     with DroppingServer(limits, script="ad" + "a" * 40,
@@ -196,16 +150,9 @@ def test_of_an_add_many_in_several_requests_only_the_broken_ones_events_are_not_
         bridge = Bridge(kb, mapping, node_name="test_bridge", log=lines.append).start()
         try:
             deadline = time.monotonic() + DEADLINE
-            while publisher.get_subscription_count() == 0:
-                assert time.monotonic() < deadline
-                bridge.spin_once(0.01)
-                executor.spin_once(timeout_sec=0.01)
-            for i in range(60):
-                msg = PoseStamped()
-                msg.header.stamp.sec = 100 + i
-                msg.header.frame_id = "map"
-                msg.pose.position.x = float(i)
-                publisher.publish(msg)
+            spinner(bridge, executor, lambda: f"log {lines}")(
+                lambda: publisher.get_subscription_count() > 0)
+            publish_poses(publisher, 60)
             # all 60 taken before the first flush (spin_once stores what arrived so far)
             while bridge.stats.messages < 60:
                 assert time.monotonic() < deadline, (bridge.stats, lines)

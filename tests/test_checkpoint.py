@@ -138,21 +138,36 @@ def test_a_damaged_file_is_said_once_and_so_is_its_end(tmp_path, caplog):
     failed = "checkpointing the write-ahead log failed (SLRError: " \
              f"{path}: the file is damaged (file is not a database); restore it from a copy)"
     with caplog.at_level(logging.WARNING, logger="slr_sql.store"):
-        checkpointer = WalCheckpointer(str(path), interval=0.01)
-        try:
-            wait_for(lambda: checkpointer.failed >= 3)
-            assert caplog.text.count(failed) == 1, caplog.text
-            path.write_bytes(copy)
-            wait_for(lambda: checkpointer.runs >= 2)
-            assert checkpointer._thread.is_alive()
-        finally:
-            checkpointer.stop()
-    assert caplog.text.count(f"{path}: checkpointing the write-ahead log works again") == 1
-    assert caplog.text.count(failed) == 1 and "Traceback" not in caplog.text
-    assert [r.levelno for r in caplog.records if r.name == "slr_sql.store"] == \
-        [logging.WARNING, logging.WARNING]
+        failing_until_cured(WalCheckpointer(str(path), interval=0.01), caplog, path, failed,
+                            cure=lambda: path.write_bytes(copy))
+    assert caplog.text.count(failed) == 1
     with slr_sql.open(path, clock=ManualClock(0.0)) as kb:
         assert kb.query("aggregate_all(count, p(_)^_, N)") == [{"N": 50}]
+
+
+def failing_until_cured(checkpointer, caplog, path, said: str, cure,
+                        meanwhile=lambda: True) -> None:
+    """Runs of ``checkpointer`` fail (none succeeds, ``said`` logged once, ``meanwhile()``
+    holds) until ``cure()``; then it checkpoints again, alive, and says so once."""
+    try:
+        wait_for(lambda: checkpointer.failed >= 3 or checkpointer.runs)
+        assert checkpointer.runs == 0 and meanwhile()
+        assert caplog.text.count(said) == 1, caplog.text
+        cure()
+        wait_for(lambda: checkpointer.runs >= 2)
+        assert checkpointer._thread.is_alive()
+    finally:
+        checkpointer.stop()
+    said_once_then_recovered(caplog, path)
+
+
+def said_once_then_recovered(caplog, path) -> None:
+    """The checkpointer's log of one episode: a WARNING when it began, one when it ended
+    ("works again"), nothing else, and never a traceback."""
+    assert caplog.text.count(f"{path}: checkpointing the write-ahead log works again") == 1
+    assert "Traceback" not in caplog.text
+    assert [r.levelno for r in caplog.records if r.name == "slr_sql.store"] == \
+        [logging.WARNING, logging.WARNING]
 
 
 def test_another_connections_lock_is_waited_out_quietly(tmp_path, caplog):
@@ -190,21 +205,10 @@ def test_a_store_file_moved_away_is_not_made_again_and_is_said_once(tmp_path, ca
               f"file is no longer at its path (deleted or moved away) while the store is " \
               f"open; nothing was copied); tried again every 0.01 s"
     with caplog.at_level(logging.WARNING, logger="slr_sql.store"):
-        checkpointer = WalCheckpointer(str(path), interval=0.01, identity=identity)
-        try:
-            wait_for(lambda: checkpointer.failed >= 3 or checkpointer.runs)
-            assert not path.exists() and not (tmp_path / "kb.db-wal").exists()
-            assert checkpointer.runs == 0
-            assert caplog.text.count(missing) == 1, caplog.text
-            moved.rename(path)
-            wait_for(lambda: checkpointer.runs >= 2)
-            assert checkpointer._thread.is_alive()
-        finally:
-            checkpointer.stop()
-    assert caplog.text.count(f"{path}: checkpointing the write-ahead log works again") == 1
-    assert "Traceback" not in caplog.text
-    assert [r.levelno for r in caplog.records if r.name == "slr_sql.store"] == \
-        [logging.WARNING, logging.WARNING]
+        failing_until_cured(WalCheckpointer(str(path), interval=0.01, identity=identity),
+                            caplog, path, missing, cure=lambda: moved.rename(path),
+                            meanwhile=lambda: not path.exists() and
+                            not (tmp_path / "kb.db-wal").exists())
 
 
 def test_another_file_put_at_the_path_is_left_alone_and_said_once(tmp_path, caplog):
@@ -240,10 +244,7 @@ def test_another_file_put_at_the_path_is_left_alone_and_said_once(tmp_path, capl
             os.replace(aside, path)
             wait_for(lambda: db.checkpointer.runs >= runs + 2)
             assert db.checkpointer._thread.is_alive()
-        assert caplog.text.count(f"{path}: checkpointing the write-ahead log works again") == 1
-        assert "Traceback" not in caplog.text
-        assert [r.levelno for r in caplog.records if r.name == "slr_sql.store"] == \
-            [logging.WARNING, logging.WARNING]
+        said_once_then_recovered(caplog, path)
     finally:
         db.close()
     assert path.read_bytes() != their_bytes   # (the store's file is back)

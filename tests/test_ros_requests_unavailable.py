@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import sqlite3
-import time
 
 import pytest
 
@@ -22,6 +21,7 @@ from slr_sql.ros.mapping import Mapping, RequestTopics
 from slr_sql.ros.requests import RequestServer
 from slr_sql.service.errors import ServiceUnavailable, error_from_body
 import test_ros_bridge
+from bridge_helpers import spinner
 
 ros_env, prefix, ros_node = test_ros_bridge.ros_env, test_ros_bridge.prefix, test_ros_bridge.ros_node
 DEADLINE = test_ros_bridge.DEADLINE
@@ -44,13 +44,7 @@ def requests(tmp_path, ros_node, prefix):
     bridge = Bridge(kb, Mapping(tf=False), node_name="test_requests_bridge",
                     log=lines.append).start()
     servers: list[RequestServer] = []
-    deadline = time.monotonic() + DEADLINE
-
-    def spin_until(condition) -> None:
-        while not condition():
-            assert time.monotonic() < deadline, f"timed out; replies {replies}, log {lines}"
-            bridge.spin_once(0.01)
-            executor.spin_once(timeout_sec=0.01)
+    spin_until = spinner(bridge, executor, lambda: f"replies {replies}, log {lines}")
 
     def start(**options) -> RequestServer:
         server = RequestServer(bridge, topics, **options).start()
