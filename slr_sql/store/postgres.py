@@ -475,9 +475,12 @@ class PgConnection:
     def _alive(self) -> None:
         """A connection the server dropped (a restart, a terminated backend) is opened
         again before the next statement outside a transaction: the failed statement was an
-        SLRError, the next one works. Inside a transaction it stays an error (what the
-        transaction did is gone: it must fail as a whole)."""
-        if self.raw.closed and self.reopen is not None and not self.in_transaction():
+        SLRError, the next one works. So it is in a transaction that has sent nothing yet
+        (its BEGIN pending: what waits to go with it, locks, savepoints, deferred rows,
+        goes on the new connection). Inside a transaction whose BEGIN went it stays an
+        error (what the transaction did is gone: it must fail as a whole)."""
+        if self.raw.closed and self.reopen is not None and (
+                self.begin_pending or not self.in_transaction()):
             try:
                 self.raw = self.reopen()
             except _psycopg().Error as exc:
