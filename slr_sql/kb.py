@@ -725,7 +725,12 @@ class KnowledgeBase:
         placeholders (a sequence) or for ``:name`` ones (a mapping), on either backend. A
         transaction-control statement (BEGIN, COMMIT, ROLLBACK, SAVEPOINT, RELEASE, ...) is
         refused before it runs, written or not: the store begins and ends its own
-        transactions (several statements together: ``with kb.store.transaction():``).
+        transactions (several statements together: ``with kb.store.transaction():``). So is
+        a change of the store's connection's settings, which would last for every later
+        statement of the store: on SQLite an assignment of a pragma the store sets itself
+        (synchronous, busy_timeout, foreign_keys, ...); on PostgreSQL, with ``write=True``,
+        a SET or RESET, and a statement that changed a setting or the role all the same
+        (set_config) is rolled back and refused.
 
         >>> from slr_sql import ManualClock
         >>> kb = open(clock=ManualClock(0)); kb.add("p(a)^1"); kb.sql("SELECT arg1, t_end FROM p")
@@ -736,6 +741,10 @@ class KnowledgeBase:
         Traceback (most recent call last):
         ...
         slr_sql.errors.SLRError: sql: COMMIT is not allowed: the store begins and ends its own transactions (...)
+        >>> kb.sql("PRAGMA synchronous = OFF", write=True)
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: sql: PRAGMA synchronous with an argument is not allowed (...)
         """
         from .store import DatabaseError
 

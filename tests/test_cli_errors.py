@@ -218,10 +218,14 @@ def test_add_all_good_still_says_added(db):
 
 def test_sql_is_read_only_unless_write(stored_db):
     fails_in_words(slr("sql", stored_db, "DROP TABLE obj"), "read-only", "--write")
-    fails_in_words(slr("sql", stored_db, "PRAGMA user_version = 7"), "read-only")
-    # (the store's journal is its own: not even with --write)
+    fails_in_words(slr("sql", stored_db, "PRAGMA max_page_count = 1000000"), "read-only")
+    # (the store's journal, durability and migration number are its own: not even with --write)
     fails_in_words(slr("sql", stored_db, "--write", "PRAGMA journal_mode = DELETE"),
                    "PRAGMA journal_mode with an argument is not allowed")
+    fails_in_words(slr("sql", stored_db, "--write", "PRAGMA synchronous = OFF"),
+                   "PRAGMA synchronous with an argument is not allowed")
+    fails_in_words(slr("sql", stored_db, "PRAGMA user_version = 7"),
+                   "PRAGMA user_version with an argument is not allowed")
     fails_in_words(slr("sql", stored_db, "ATTACH 'other.db' AS other"), "read-only")
     q = slr("query", stored_db, "findall(O, obj(O, _, _)^_, L)")
     assert q.stdout.strip() == "L = [cup1,cup2]"

@@ -73,7 +73,7 @@ def test_the_write_tried_again_does_not_hold_up_an_add_that_learned_nothing(post
             other.execute("SET search_path = slr")
             other.execute("LOCK TABLE slr_meta IN SHARE MODE")
             assert kb.add_many(["a(2)^98"]) == []        # learns 2 s: its write fails busy
-            kb.sql("SET lock_timeout = 30000", write=True)
+            kb.store.execute("SET lock_timeout = 30000")   # (the session: not kb.sql's to set)
             done = threading.Event()
 
             def add():

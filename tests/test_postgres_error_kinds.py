@@ -69,11 +69,11 @@ def _non_retryable(exc: BaseException) -> bool:
 # words of the server's message).
 # (3B001, a RELEASE or ROLLBACK TO of no savepoint, no longer reaches the server: the store
 # refuses a hand-written transaction-control statement itself, as a plain SLRError:
-# tests/test_sql_transaction_control.py)
+# tests/test_sql_transaction_control.py; nor a SET, tests/test_postgres_write_sql_settings.py)
 REFUSED = [
     ("55000", ["CREATE SEQUENCE IF NOT EXISTS probe_seq"], "SELECT currval('probe_seq')",
      "currval"),
-    ("55P02", [], "SET shared_buffers = '1MB'", "shared_buffers"),
+    ("55P02", [], "SELECT set_config('shared_buffers', '1MB', false)", "shared_buffers"),
     ("54011", [], "CREATE TEMP TABLE wide (" + ", ".join(f"c{i} int" for i in range(1601)) + ")",
      "1600"),
     ("54023", [], "SELECT concat(" + ", ".join(["1"] * 101) + ")", "100 arguments"),

@@ -138,3 +138,41 @@ def test_sqlite_vacuum_still_runs(tmp_path):
         kb.add("p(b)^2")
     assert stored(path) == ["a", "b"]
     assert stored(str(tmp_path / "copy.db")) == ["a"]
+
+
+# the pragmas the store sets on its connection itself, as it opens, around its BEGIN, in
+# its migrations (slr_sql/store/connection.py, schema.py)
+STORE_SET = ["synchronous", "busy_timeout", "foreign_keys", "cache_size", "wal_autocheckpoint",
+             "auto_vacuum", "user_version", "legacy_alter_table"]
+ASSIGNMENTS = ["synchronous = OFF", "main.synchronous = NORMAL", "synchronous(0)",
+               "busy_timeout = 0", "foreign_keys = OFF", "cache_size = -2000",
+               "wal_autocheckpoint = 1000", "auto_vacuum = NONE", "user_version = 1",
+               "legacy_alter_table = ON"]
+
+
+def test_sqlite_pragmas_the_store_sets_itself_are_refused_and_kept(tmp_path):
+    """An assignment of a pragma the store sets on its connection would last for every later
+    statement of the store (synchronous = OFF: an add that returned would no longer be on
+    disk, docs/schema.md "Durability"): refused in words before it runs, even with
+    write=True, and each setting is as the store made it; reading them is allowed, and a
+    pragma the store leaves alone can still be set."""
+    path = str(tmp_path / "robot.db")
+    with slr_sql.open(path, clock=slr_sql.ManualClock(10.0), checkpoint="background") as kb:
+        kb.add("p(a)^1")
+        settings = {name: kb.sql(f"PRAGMA {name}")[1] for name in STORE_SET}
+        assert settings["synchronous"] == [(2,)] and settings["foreign_keys"] == [(1,)]
+        assert settings["wal_autocheckpoint"] == [(0,)] and settings["auto_vacuum"] == [(2,)]
+        for pragma in ASSIGNMENTS:
+            name = pragma.split()[0].split("(")[0].split(".")[-1]
+            for write in (True, False):
+                with pytest.raises(SLRError, match=rf"^sql: PRAGMA {name} with an argument "
+                                                   r"is not allowed \(.+\)$"):
+                    kb.sql(f"PRAGMA {pragma}", write=write)
+            with kb.store.transaction():
+                with pytest.raises(SLRError, match=rf"PRAGMA {name} with an argument"):
+                    kb.sql(f"PRAGMA {pragma}", write=True)
+        assert {name: kb.sql(f"PRAGMA {name}", write=True)[1] for name in STORE_SET} == settings
+        kb.add("p(b)^2")
+        kb.sql("PRAGMA journal_size_limit = 1048576", write=True)
+        assert kb.sql("PRAGMA max_page_count = 1073741823", write=True)[1] == [(1073741823,)]
+    assert stored(path) == ["a", "b"]

@@ -5,7 +5,8 @@ Every connection the store opens gets :func:`harden_connection`: the SQLite func
 statement (the store's own SQL never calls them; a user's ``kb.sql(..., write=True)`` may not
 either). A statement a user hands the store, written or read-only, may not begin or end a
 transaction (:meth:`SqlGuard.hand_written`: the store's connection's transactions are the
-store's), nor assign a pragma of :data:`STORE_SETTING_PRAGMAS`. SQLite's
+store's), nor assign a pragma of :data:`STORE_SETTING_PRAGMAS` (those the store sets on its
+connection itself: ``synchronous``, ``busy_timeout``, ``foreign_keys``, ...). SQLite's
 ``SQLITE_DBCONFIG_ENABLE_FTS3_TOKENIZER`` switch is turned off where Python lets it be
 reached safely (:func:`fts3_tokenizer_switch_off`). A *read-only* statement (``kb.sql``
 without ``write``, ``slr sql``, the service's ``/sql``) runs under the stricter
@@ -54,14 +55,32 @@ DENIED_PRAGMAS = {
                            "by a statement's timeout; for a case-sensitive match use GLOB",
 }
 
-# Pragmas whose assignment changes how the store's own transactions work, refused in a
-# hand-written statement even with ``write=True``, with the reason given.
+# Pragmas the store sets on its connection itself (at open, around its transactions, in its
+# migrations), or whose assignment changes how its transactions work: an assignment in a
+# hand-written statement is refused even with ``write=True`` (it would last for every later
+# statement of the store), with the reason given. Reading them is allowed.
 STORE_SETTING_PRAGMAS = {
     "query_only": "every later write of the store would fail",
     "locking_mode": "in EXCLUSIVE mode the store's connection would keep the file locked "
                     "after each of its transactions, shutting out every other process",
     "journal_mode": "the store's transactions are journaled in its WAL, which its readers in "
                     "other processes and its checkpointer rely on",
+    "synchronous": "the store sets it as it opens (slr_sql.open(..., synchronous=...), FULL "
+                   "by default: an add that returned is on disk, which a lower setting would "
+                   "quietly undo for every later add)",
+    "busy_timeout": "the store sets it as it opens (slr_sql.open(..., busy_timeout=...)) and "
+                    "around each of its transactions' BEGIN",
+    "foreign_keys": "the store turns it on as it opens: its tables' references are checked "
+                    "on every write",
+    "cache_size": "the store sets it as it opens (slr_sql.open(..., cache_mib=...))",
+    "wal_autocheckpoint": "the store sets it as it opens (slr_sql.open(..., checkpoint=...)): "
+                          "checkpoints are either SQLite's, inside a commit, or the store's "
+                          "background thread's",
+    "auto_vacuum": "the store's file is made with auto_vacuum=INCREMENTAL, which its "
+                   "reclaiming of free pages relies on",
+    "user_version": "it is the number of the store's last migration, which the store's "
+                    "opening reads to know which migrations to apply",
+    "legacy_alter_table": "the store's migrations set it themselves",
 }
 
 # Pragmas that take an argument and only read (also table-valued: pragma_table_info('t')).

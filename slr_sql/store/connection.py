@@ -943,7 +943,7 @@ class Database:
         INSERT, a DROP, a pragma assignment, an ATTACH) raises an :class:`SLRError` starting
         with ``read-only``; written or not, a transaction-control statement (BEGIN, COMMIT,
         SAVEPOINT, ...: the connection's transactions are the store's) and an assignment of
-        a pragma the store's transactions rely on raise an SLRError saying so
+        a pragma the store sets itself (synchronous, busy_timeout, ...) raise an SLRError saying so
         (:meth:`SqlGuard.hand_written`, :meth:`SqlGuard.writing`); a condition of the file or its disk :meth:`failure`'s SLRError;
         the statement's own errors raise :data:`DatabaseError`. The connection's SQL
         functions are there, so compiled statements (``kb.explain``) run as printed.

@@ -475,9 +475,12 @@ class PgConnection:
     def _alive(self) -> None:
         """A connection the server dropped (a restart, a terminated backend) is opened
         again before the next statement outside a transaction: the failed statement was an
-        SLRError, the next one works. Inside a transaction it stays an error (what the
-        transaction did is gone: it must fail as a whole)."""
-        if self.raw.closed and self.reopen is not None and not self.in_transaction():
+        SLRError, the next one works. So it is in a transaction that has sent nothing yet
+        (its BEGIN pending: what waits to go with it, locks, savepoints, deferred rows,
+        goes on the new connection). Inside a transaction whose BEGIN went it stays an
+        error (what the transaction did is gone: it must fail as a whole)."""
+        if self.raw.closed and self.reopen is not None and (
+                self.begin_pending or not self.in_transaction()):
             try:
                 self.raw = self.reopen()
             except _psycopg().Error as exc:
@@ -779,6 +782,15 @@ def _transaction_control(statement: str) -> str | None:
     >>> _transaction_control("SET TRANSACTION READ ONLY"), _transaction_control("SELECT 1")
     ('SET TRANSACTION', None)
     """
+    found = _TRANSACTION_CONTROL.match(statement, _first_word(statement))
+    if found is None:
+        return None
+    return " ".join(_WORD.findall(found.group(1))).upper()
+
+
+def _first_word(statement: str) -> int:
+    """Where ``statement``'s first word begins: past the layout and comments before it, as
+    :func:`_transaction_control` says."""
     at, n = 0, len(statement)
     while at < n:
         if statement[at].isspace():
@@ -797,10 +809,7 @@ def _transaction_control(statement: str) -> str | None:
                     at += 1
         else:
             break
-    found = _TRANSACTION_CONTROL.match(statement, at)
-    if found is None:
-        return None
-    return " ".join(_WORD.findall(found.group(1))).upper()
+    return at
 
 
 def _refuse_transaction_control(statement: str) -> None:
@@ -808,6 +817,65 @@ def _refuse_transaction_control(statement: str) -> None:
     keywords = _transaction_control(statement)
     if keywords is not None:
         raise SLRError(f"sql: {transaction_control_refusal(keywords)}")
+
+
+# A statement that changes a setting of the session by its first keywords (SET CONSTRAINTS
+# is the transaction's constraint timing, no setting; SET TRANSACTION and SET SESSION
+# CHARACTERISTICS are transaction control)
+_SETTING = re.compile(r"(?:RESET|SET(?!\s+CONSTRAINTS\b))\b", re.I | re.A)
+
+# What a statement with write=True may not change on the store's connection: every setting a
+# session may set (contexts user and superuser: SET, SET LOCAL, RESET, set_config() however
+# called, a function's body included), and the role and session user (SET ROLE, SET SESSION
+# AUTHORIZATION), read in the statement's transaction before and after it: the users, and a
+# digest of the settings named (their names, read once: pg_settings itself costs the server
+# ~1 ms a read, these ~0.15 ms). The digest is read only while the users are those given
+# (None: any): another role may not be allowed to read some of the settings.
+_SETTING_NAMES = ("SELECT string_agg(name, ',' ORDER BY name) FROM pg_settings "
+                  "WHERE context IN ('user', 'superuser')")
+_SESSION_STATE = ("SELECT current_user || '/' || session_user, CASE WHEN %(users)s::text IS "
+                  "NULL OR current_user || '/' || session_user = %(users)s::text THEN (SELECT "
+                  "md5(string_agg(coalesce(current_setting(n, true), ''), ',' ORDER BY i)) "
+                  "FROM unnest(string_to_array(%(names)s, ',')) WITH ORDINALITY AS s(n, i)) "
+                  "END")
+_SESSION_SETTINGS = ("SELECT name, setting FROM pg_settings "
+                     "WHERE context IN ('user', 'superuser') "
+                     "UNION ALL SELECT 'role', current_user::text "
+                     "UNION ALL SELECT 'session_authorization', session_user::text")
+# Each table of a schema (the parameter) -> the rows inserted and updated in it by this
+# transaction so far (None for every table when the server keeps no such counters)
+_ROWS_WRITTEN = ("SELECT relname, CASE WHEN current_setting('track_counts')::boolean "
+                 "THEN n_tup_ins + n_tup_upd END FROM pg_stat_xact_user_tables "
+                 "WHERE schemaname = %s")
+_SETTING_REFUSAL = ("a setting of the store's own connection would last for every later "
+                    "statement of the store (its search_path, role, timeouts, durability, "
+                    "how values print); a setting for every session of a role or database: "
+                    "ALTER ROLE ... SET, ALTER DATABASE ... SET")
+
+
+def _refuse_setting(statement: str) -> None:
+    """Raise the SLRError of a hand-written written statement that is a ``SET`` or ``RESET``
+    (of a setting, the role, the session authorization; ``LOCAL`` or not)."""
+    found = _SETTING.match(statement, _first_word(statement))
+    if found is not None:
+        raise SLRError(f"sql: {found.group(0).upper()} is not allowed with write=True: "
+                       f"{_SETTING_REFUSAL}")
+
+
+def _settings_taken_back(raw: Any, own: bool) -> str:
+    """Roll back a written statement that changed the session's settings (``own``: its own
+    transaction; else to the savepoint ``slr_sql_write`` before it, released) and name what
+    it had changed (``''`` when that cannot be told: a setting hidden from the role it
+    set)."""
+    after = dict(raw.execute(_SESSION_SETTINGS).fetchall())
+    if own:
+        raw.execute("ROLLBACK")
+    else:
+        raw.execute("ROLLBACK TO SAVEPOINT slr_sql_write")
+        raw.execute("RELEASE SAVEPOINT slr_sql_write")
+    before = dict(raw.execute(_SESSION_SETTINGS).fetchall())
+    return ", ".join(sorted(name for name, setting in after.items()
+                            if name in before and before[name] != setting))
 
 
 def _one_statement(raw: Any, statement: str, bound: Any) -> tuple[list[str], list[tuple]]:
@@ -1007,6 +1075,8 @@ class PgDatabase:
         self.write_groups: dict[tuple[str, int], int] = {}
         # whether a tBuffer is active, as of the last read of the versions (None: unknown)
         self.tbuffers_active: bool | None = None
+        # the settings a written statement may not change (sql_write), read at its first
+        self.setting_names: str | None = None
         try:
             raw = psycopg.connect(conninfo, autocommit=True)
         except psycopg.Error as exc:
@@ -1357,7 +1427,8 @@ class PgDatabase:
         unless ``write``; ``timeout`` seconds as ``statement_timeout``. A read-only statement
         outside a transaction runs on a connection of its own (:class:`DetachedStatements`):
         it never holds the store's lock, and its caller stops waiting at the timeout. A
-        transaction-control statement (BEGIN, COMMIT, ...) is refused, written or not."""
+        transaction-control statement (BEGIN, COMMIT, ...) is refused, written or not; a
+        written one may not change a setting of the session (:meth:`sql_write`)."""
         _refuse_transaction_control(query)
         if write:
             columns, rows, _ = self.sql_write(query, params, timeout)
@@ -1405,21 +1476,33 @@ class PgDatabase:
         immediate from then on). The statement is sent alone, by the extended protocol (a
         second statement in the text is refused by the server), and a transaction-control
         statement is refused before anything is sent: the store's connection's transactions
-        are the store's."""
+        are the store's. So is a ``SET`` or ``RESET``; a statement that changed a setting of
+        the session all the same (``set_config``, in a function or a ``DO`` block), or the
+        role, is rolled back (in a transaction of the caller's, to a savepoint before it)
+        and refused: the store's connection's settings are the store's."""
         _refuse_transaction_control(query)
+        _refuse_setting(query)
         with self.lock:
             self.check_open()
             psycopg = _psycopg()
             own, raw, deadline = self._raw_statement(timeout)
             try:
-                if own:
-                    raw.execute("BEGIN")
-                before = self._rows_written_so_far(raw)
-                outer_timeout = None
-                if timeout is not None:
-                    if not own:   # (a SET LOCAL lasts to the caller's transaction's end)
-                        outer_timeout = raw.execute("SHOW statement_timeout").fetchone()[0]
-                    raw.execute(f"SET LOCAL statement_timeout = {_timeout_ms(timeout)}")
+                if self.setting_names is None:
+                    self.setting_names = raw.execute(_SETTING_NAMES).fetchone()[0] or ""
+                state = {"users": None, "names": self.setting_names}
+                with raw.pipeline():   # (one round trip)
+                    raw.execute("BEGIN" if own else "SAVEPOINT slr_sql_write")
+                    # (a SET LOCAL lasts to the caller's transaction's end: put back after)
+                    shown = raw.execute("SHOW statement_timeout") \
+                        if timeout is not None and not own else None
+                    if timeout is not None:
+                        raw.execute(f"SET LOCAL statement_timeout = {_timeout_ms(timeout)}")
+                    counted = raw.execute(_ROWS_WRITTEN, (self.schema,))
+                    marked = raw.execute(_SESSION_STATE, state)
+                outer_timeout = None if shown is None else shown.fetchone()[0]
+                before = dict(counted.fetchall())
+                session = marked.fetchone()
+                state["users"] = session[0]
                 cursor = raw.cursor()
                 # the API's placeholders (`?`, `:name`) in psycopg's style, as on SQLite;
                 # without parameters the text goes as written (a `%` stays a `%`)
@@ -1431,17 +1514,29 @@ class PgDatabase:
                         cursor.execute(query, None, prepare=False)
                 columns = [d.name for d in cursor.description] if cursor.description else []
                 rows = [tuple(r) for r in cursor.fetchall()] if cursor.description else []
-                # (a deferred constraint trigger would write at the commit, after the
-                # counters are read: it runs now, and its writes count as the statement's)
-                raw.execute("SET CONSTRAINTS ALL IMMEDIATE")
-                after = self._rows_written_so_far(raw)
+                with raw.pipeline():
+                    # (a deferred constraint trigger would write at the commit, after the
+                    # counters are read: it runs now, and its writes count as the statement's)
+                    raw.execute("SET CONSTRAINTS ALL IMMEDIATE")
+                    counted = raw.execute(_ROWS_WRITTEN, (self.schema,))
+                    marked = raw.execute(_SESSION_STATE, state)
+                after = dict(counted.fetchall())
+                if marked.fetchone() != session:
+                    changed = _settings_taken_back(raw, own)
+                    raise SLRError(
+                        f"sql: the statement changed {changed or 'a setting'} of the session, "
+                        f"which is not allowed with write=True: {_SETTING_REFUSAL}; it was "
+                        f"rolled back, nothing of it was written")
                 written = {table for table, count in after.items()
                            if count is None or count != before.get(table)}
                 if own:
                     raw.execute("COMMIT")
-                elif outer_timeout is not None:
-                    raw.execute("SELECT set_config('statement_timeout', %s, true)",
-                                (outer_timeout,))
+                else:
+                    with raw.pipeline():
+                        raw.execute("RELEASE SAVEPOINT slr_sql_write")
+                        if outer_timeout is not None:
+                            raw.execute("SELECT set_config('statement_timeout', %s, true)",
+                                        (outer_timeout,))
                 return columns, rows, written
             except psycopg.Error as exc:
                 if own:
@@ -1454,18 +1549,11 @@ class PgDatabase:
     def tables_to_write(self, query: str, params: Iterable[Any] = ()) -> set[str] | None:
         """None: what a statement writes is known only once it ran (its triggers and
         functions are the server's), from :meth:`sql_write`. A transaction-control statement
-        is refused here, before the check's transaction is begun."""
+        and a ``SET`` or ``RESET`` are refused here, before the check's transaction is
+        begun."""
         _refuse_transaction_control(query)
+        _refuse_setting(query)
         return None
-
-    def _rows_written_so_far(self, raw: Any) -> dict[str, int | None]:
-        """Each table of the store's schema -> the rows inserted and updated in it by this
-        transaction so far (None for every table when the server keeps no such counters)."""
-        rows = raw.execute(
-            "SELECT relname, CASE WHEN current_setting('track_counts')::boolean "
-            "THEN n_tup_ins + n_tup_upd END FROM pg_stat_xact_user_tables "
-            "WHERE schemaname = %s", (self.schema,)).fetchall()
-        return dict(rows)
 
     def _read_only(self, raw: Any, own: bool, query: str, params: Iterable[Any],
                    timeout: float | None) -> tuple[list[str], list[tuple]]:
