@@ -150,6 +150,25 @@ ASSIGNMENTS = ["synchronous = OFF", "main.synchronous = NORMAL", "synchronous(0)
                "legacy_alter_table = ON"]
 
 
+@pytest.mark.parametrize("pragma", ["writable_schema = ON", "schema_version = 7",
+                                    "ignore_check_constraints = ON"])
+def test_sqlite_pragmas_that_can_damage_the_store_are_refused(tmp_path, pragma):
+    """writable_schema lets a statement rewrite the schema table itself, schema_version is
+    SQLite's own (an assignment can damage the file), ignore_check_constraints drops the
+    store's tables' CHECKs: refused in words even with write=True, nothing changed."""
+    path = str(tmp_path / "robot.db")
+    with slr_sql.open(path, clock=slr_sql.ManualClock(10.0)) as kb:
+        kb.add("p(a)^1")
+        name = pragma.split()[0]
+        before = kb.sql(f"PRAGMA {name}")[1]
+        with pytest.raises(SLRError, match=rf"^sql: PRAGMA {name} with an argument is not "
+                                           r"allowed \(.+\)$"):
+            kb.sql(f"PRAGMA {pragma}", write=True)
+        assert kb.sql(f"PRAGMA {name}")[1] == before
+        kb.add("p(b)^2")
+    assert stored(path) == ["a", "b"]
+
+
 def test_sqlite_pragmas_the_store_sets_itself_are_refused_and_kept(tmp_path):
     """An assignment of a pragma the store sets on its connection would last for every later
     statement of the store (synchronous = OFF: an add that returned would no longer be on

@@ -56,7 +56,8 @@ DENIED_PRAGMAS = {
 }
 
 # Pragmas the store sets on its connection itself (at open, around its transactions, in its
-# migrations), or whose assignment changes how its transactions work: an assignment in a
+# migrations), or whose assignment changes how its transactions work or can damage its file
+# or its rows' guarantees: an assignment in a
 # hand-written statement is refused even with ``write=True`` (it would last for every later
 # statement of the store), with the reason given. Reading them is allowed.
 STORE_SETTING_PRAGMAS = {
@@ -81,6 +82,13 @@ STORE_SETTING_PRAGMAS = {
     "user_version": "it is the number of the store's last migration, which the store's "
                     "opening reads to know which migrations to apply",
     "legacy_alter_table": "the store's migrations set it themselves",
+    # (and those whose assignment can damage the store's file or the rows' guarantees)
+    "writable_schema": "it lets a statement rewrite the schema table itself, which can leave "
+                       "the store's file damaged so that no connection opens it again",
+    "schema_version": "SQLite keeps it itself; an assignment can damage the store's file "
+                      "(other connections go on with a schema they no longer read)",
+    "ignore_check_constraints": "the store's tables' CHECK constraints keep its rows "
+                                "well-formed (its event rules' state, its buffers)",
 }
 
 # Pragmas that take an argument and only read (also table-valued: pragma_table_info('t')).
