@@ -112,8 +112,9 @@ def test_the_fts3_tokenizer_switch_of_sqlite_is_off_too(kb):
     ("SELECT rtreedepth(x'0000')", "rtreedepth() is not allowed"),
     ("ATTACH 'other.db' AS other", "read-only: the statement would write a database file"),
     ("VACUUM", "read-only: the statement would write a database file"),
-    ("PRAGMA writable_schema = ON", "read-only: PRAGMA writable_schema"),
+    ("PRAGMA max_page_count = 10", "read-only: PRAGMA max_page_count"),
     # (not even with write=True: tests/test_sql_transaction_control.py)
+    ("PRAGMA writable_schema = ON", "PRAGMA writable_schema with an argument is not allowed"),
     ("PRAGMA query_only = 0", "PRAGMA query_only with an argument is not allowed"),
     ("PRAGMA journal_mode = DELETE", "PRAGMA journal_mode with an argument is not allowed"),
     ("PRAGMA wal_checkpoint", "read-only: PRAGMA wal_checkpoint"),
@@ -191,8 +192,8 @@ def test_the_guard_holds_on_the_separate_connection_of_run_sql_file(kb):
         run_sql_file(path, "SELECT fts3_tokenizer('simple')")
     with pytest.raises(SLRError, match=TOKENIZER):
         run_sql_file(path, "SELECT fts3_tokenizer('simple')", write=True)
-    with pytest.raises(SLRError, match="^sql: read-only: PRAGMA writable_schema"):
-        run_sql_file(path, "PRAGMA writable_schema = ON")
+    with pytest.raises(SLRError, match="^sql: read-only: PRAGMA max_page_count"):
+        run_sql_file(path, "PRAGMA max_page_count = 10")
     assert run_sql_file(path, "SELECT count(*) FROM p")[1] == [(2,)]
 
 
