@@ -718,7 +718,7 @@ class PgReadConnection:
             # waited for busy_timeout at most, then SLRBusy (55P03), as on the store's own
             # connection; without it a read would wait as long as the lock is held
             raw.execute(f"SET lock_timeout = {_lock_timeout_ms(busy_timeout)}")
-            raw.execute(f"SET search_path = {quote_identifier(schema)}")
+            raw.execute(_search_path(schema))
         except psycopg.Error as exc:
             reason = _error(exc, opening, busy_timeout, _connected(raw))
             raw.close()
@@ -786,6 +786,18 @@ def _transaction_control(statement: str) -> str | None:
     if found is None:
         return None
     return " ".join(_WORD.findall(found.group(1))).upper()
+
+
+def _search_path(schema: str) -> str:
+    """The ``SET search_path`` of a connection of the store: its schema, then ``pg_temp``
+    named last. Unnamed, the session's temporary schema is searched first, and a temporary
+    table a written statement made (``CREATE TEMP TABLE p (x int)``) would hide the store's
+    table of the same name from every later statement of the connection.
+
+    >>> _search_path('slr')
+    'SET search_path = "slr", pg_temp'
+    """
+    return f"SET search_path = {quote_identifier(schema)}, pg_temp"
 
 
 def _first_word(statement: str) -> int:
@@ -927,7 +939,7 @@ class DetachedStatements:
             raw.execute("SET default_transaction_read_only = on")
             raw.execute("SET TIME ZONE 'UTC'")
             raw.execute(f"SET lock_timeout = {_lock_timeout_ms(self.busy_timeout)}")
-            raw.execute(f"SET search_path = {quote_identifier(self.schema)}")
+            raw.execute(_search_path(self.schema))
         except BaseException:
             raw.close()
             raise
@@ -1088,13 +1100,13 @@ class PgDatabase:
                 raw.execute(f"SET lock_timeout = {_lock_timeout_ms(busy_timeout)}")
                 raw.execute("SET TIME ZONE 'UTC'")
                 migrate_postgres(self, schema, adopt)
-                raw.execute(f"SET search_path = {quote_identifier(schema)}")
+                raw.execute(_search_path(schema))
 
                 def reopen() -> Any:
                     again = psycopg.connect(conninfo, autocommit=True)
                     again.execute(f"SET lock_timeout = {_lock_timeout_ms(busy_timeout)}")
                     again.execute("SET TIME ZONE 'UTC'")
-                    again.execute(f"SET search_path = {quote_identifier(schema)}")
+                    again.execute(_search_path(schema))
                     if self.listening:
                         self._listen_for_pending(again)
                     # (what was notified while no connection listened is unknown)
@@ -1717,7 +1729,7 @@ def migrate_postgres(db: Any, schema: str, adopt: bool = False) -> None:
         try:
             raw.execute("SELECT pg_advisory_xact_lock(hashtext(%s))", ("slr_migrate:" + schema,))
             raw.execute(f"CREATE SCHEMA IF NOT EXISTS {quoted}")
-            raw.execute(f"SET LOCAL search_path = {quoted}")
+            raw.execute(f"SET LOCAL search_path = {quoted}, pg_temp")
             tables = {row[0] for row in raw.execute(
                 "SELECT tablename FROM pg_tables WHERE schemaname = %s", (schema,))}
             if tables and not _STORE_TABLES.issubset(tables) and not adopt:
