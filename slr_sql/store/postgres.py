@@ -1089,6 +1089,9 @@ class PgDatabase:
         self.tbuffers_active: bool | None = None
         # the settings a written statement may not change (sql_write), read at its first
         self.setting_names: str | None = None
+        # a written statement failed in the caller's transaction, which it left aborted: the
+        # session advisory locks it may have taken are let go at the transaction's end
+        self.session_locks_left = False
         try:
             raw = psycopg.connect(conninfo, autocommit=True)
         except psycopg.Error as exc:
@@ -1401,6 +1404,8 @@ class PgDatabase:
                         # ends this level is what its caller must hear)
                         pass
                     finally:
+                        if depth == 0:
+                            self._let_go_of_session_locks()
                         if listeners:
                             self._rolled_back()
                     raise
@@ -1417,6 +1422,9 @@ class PgDatabase:
                     if listeners:
                         self._rolled_back()
                     raise
+                finally:
+                    if depth == 0:
+                        self._let_go_of_session_locks()
                 if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
                     committed, self.commit_callbacks = self.commit_callbacks, []
                 elif depth:   # (released into the enclosing one: its callbacks now)
@@ -1426,6 +1434,14 @@ class PgDatabase:
                 run_after_rollback(committed, exc)
             raise
         run_commit_callbacks(committed)
+
+    def _let_go_of_session_locks(self) -> None:
+        """After a transaction in which a written statement failed: ``pg_advisory_unlock_all``
+        (the lock held, outside any transaction; a lost connection's locks went with it)."""
+        if self.session_locks_left:
+            self.session_locks_left = False
+            with suppress(_psycopg().Error):
+                self.conn.raw.execute("SELECT pg_advisory_unlock_all()")
 
     # (the same lock, depth and callbacks as SQLite's Database: one implementation)
     _rolled_back = Database._rolled_back
@@ -1491,7 +1507,9 @@ class PgDatabase:
         are the store's. So is a ``SET`` or ``RESET``; a statement that changed a setting of
         the session all the same (``set_config``, in a function or a ``DO`` block), or the
         role, is rolled back (in a transaction of the caller's, to a savepoint before it)
-        and refused: the store's connection's settings are the store's."""
+        and refused: the store's connection's settings are the store's. The session advisory
+        locks it took are let go after it (in a caller's transaction it failed in, at that
+        transaction's end), as after a read-only statement."""
         _refuse_transaction_control(query)
         _refuse_setting(query)
         with self.lock:
@@ -1535,27 +1553,34 @@ class PgDatabase:
                 after = dict(counted.fetchall())
                 if marked.fetchone() != session:
                     changed = _settings_taken_back(raw, own)
+                    raw.execute("SELECT pg_advisory_unlock_all()")
                     raise SLRError(
                         f"sql: the statement changed {changed or 'a setting'} of the session, "
                         f"which is not allowed with write=True: {_SETTING_REFUSAL}; it was "
                         f"rolled back, nothing of it was written")
                 written = {table for table, count in after.items()
                            if count is None or count != before.get(table)}
+                # a session advisory lock the statement took would be held as long as the
+                # store's connection (the store's own are transaction locks): let go, as after
+                # a read-only statement
                 if own:
-                    raw.execute("COMMIT")
+                    raw.execute("COMMIT; SELECT pg_advisory_unlock_all()")   # (one round trip)
                 else:
                     with raw.pipeline():
                         raw.execute("RELEASE SAVEPOINT slr_sql_write")
                         if outer_timeout is not None:
                             raw.execute("SELECT set_config('statement_timeout', %s, true)",
                                         (outer_timeout,))
+                        raw.execute("SELECT pg_advisory_unlock_all()")
                 return columns, rows, written
             except psycopg.Error as exc:
                 if own:
                     try:
-                        raw.execute("ROLLBACK")
+                        _leave_nothing(raw)
                     except psycopg.Error:
                         pass
+                else:   # (the caller's transaction is aborted: let go at its end)
+                    self.session_locks_left = True
                 raise self._raw_statement_error(exc, raw, deadline) from None
 
     def tables_to_write(self, query: str, params: Iterable[Any] = ()) -> set[str] | None:
