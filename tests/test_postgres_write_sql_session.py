@@ -26,8 +26,9 @@ def events(kb) -> list:
 
 @pytest.mark.parametrize("in_transaction", [False, True])
 def test_a_temporary_table_does_not_hide_the_stores_table(kb, postgres_url, in_transaction):
+    # (q: a type the store has no table of yet)
     statements = ["CREATE TEMP TABLE p (x int)", "CREATE TEMPORARY TABLE slr_event_types (x int)",
-                  "INSERT INTO pg_temp.p VALUES (7)"]
+                  "CREATE TEMP TABLE q (x int)", "INSERT INTO pg_temp.p VALUES (7)"]
     if in_transaction:
         with kb.store.transaction():
             for statement in statements:
