@@ -718,7 +718,7 @@ class PgReadConnection:
             # waited for busy_timeout at most, then SLRBusy (55P03), as on the store's own
             # connection; without it a read would wait as long as the lock is held
             raw.execute(f"SET lock_timeout = {_lock_timeout_ms(busy_timeout)}")
-            raw.execute(f"SET search_path = {quote_identifier(schema)}")
+            raw.execute(_search_path(schema))
         except psycopg.Error as exc:
             reason = _error(exc, opening, busy_timeout, _connected(raw))
             raw.close()
@@ -786,6 +786,18 @@ def _transaction_control(statement: str) -> str | None:
     if found is None:
         return None
     return " ".join(_WORD.findall(found.group(1))).upper()
+
+
+def _search_path(schema: str) -> str:
+    """The ``SET search_path`` of a connection of the store: its schema, then ``pg_temp``
+    named last. Unnamed, the session's temporary schema is searched first, and a temporary
+    table a written statement made (``CREATE TEMP TABLE p (x int)``) would hide the store's
+    table of the same name from every later statement of the connection.
+
+    >>> _search_path('slr')
+    'SET search_path = "slr", pg_temp'
+    """
+    return f"SET search_path = {quote_identifier(schema)}, pg_temp"
 
 
 def _first_word(statement: str) -> int:
@@ -927,7 +939,7 @@ class DetachedStatements:
             raw.execute("SET default_transaction_read_only = on")
             raw.execute("SET TIME ZONE 'UTC'")
             raw.execute(f"SET lock_timeout = {_lock_timeout_ms(self.busy_timeout)}")
-            raw.execute(f"SET search_path = {quote_identifier(self.schema)}")
+            raw.execute(_search_path(self.schema))
         except BaseException:
             raw.close()
             raise
@@ -1077,6 +1089,9 @@ class PgDatabase:
         self.tbuffers_active: bool | None = None
         # the settings a written statement may not change (sql_write), read at its first
         self.setting_names: str | None = None
+        # a written statement failed in the caller's transaction, which it left aborted: the
+        # session advisory locks it may have taken are let go at the transaction's end
+        self.session_locks_left = False
         try:
             raw = psycopg.connect(conninfo, autocommit=True)
         except psycopg.Error as exc:
@@ -1088,13 +1103,13 @@ class PgDatabase:
                 raw.execute(f"SET lock_timeout = {_lock_timeout_ms(busy_timeout)}")
                 raw.execute("SET TIME ZONE 'UTC'")
                 migrate_postgres(self, schema, adopt)
-                raw.execute(f"SET search_path = {quote_identifier(schema)}")
+                raw.execute(_search_path(schema))
 
                 def reopen() -> Any:
                     again = psycopg.connect(conninfo, autocommit=True)
                     again.execute(f"SET lock_timeout = {_lock_timeout_ms(busy_timeout)}")
                     again.execute("SET TIME ZONE 'UTC'")
-                    again.execute(f"SET search_path = {quote_identifier(schema)}")
+                    again.execute(_search_path(schema))
                     if self.listening:
                         self._listen_for_pending(again)
                     # (what was notified while no connection listened is unknown)
@@ -1389,6 +1404,8 @@ class PgDatabase:
                         # ends this level is what its caller must hear)
                         pass
                     finally:
+                        if depth == 0:
+                            self._let_go_of_session_locks()
                         if listeners:
                             self._rolled_back()
                     raise
@@ -1405,6 +1422,9 @@ class PgDatabase:
                     if listeners:
                         self._rolled_back()
                     raise
+                finally:
+                    if depth == 0:
+                        self._let_go_of_session_locks()
                 if depth == 0 and self.commit_callbacks:   # (taken under the lock: ours)
                     committed, self.commit_callbacks = self.commit_callbacks, []
                 elif depth:   # (released into the enclosing one: its callbacks now)
@@ -1414,6 +1434,14 @@ class PgDatabase:
                 run_after_rollback(committed, exc)
             raise
         run_commit_callbacks(committed)
+
+    def _let_go_of_session_locks(self) -> None:
+        """After a transaction in which a written statement failed: ``pg_advisory_unlock_all``
+        (the lock held, outside any transaction; a lost connection's locks went with it)."""
+        if self.session_locks_left:
+            self.session_locks_left = False
+            with suppress(_psycopg().Error):
+                self.conn.raw.execute("SELECT pg_advisory_unlock_all()")
 
     # (the same lock, depth and callbacks as SQLite's Database: one implementation)
     _rolled_back = Database._rolled_back
@@ -1479,7 +1507,9 @@ class PgDatabase:
         are the store's. So is a ``SET`` or ``RESET``; a statement that changed a setting of
         the session all the same (``set_config``, in a function or a ``DO`` block), or the
         role, is rolled back (in a transaction of the caller's, to a savepoint before it)
-        and refused: the store's connection's settings are the store's."""
+        and refused: the store's connection's settings are the store's. The session advisory
+        locks it took are let go after it (in a caller's transaction it failed in, at that
+        transaction's end), as after a read-only statement."""
         _refuse_transaction_control(query)
         _refuse_setting(query)
         with self.lock:
@@ -1523,27 +1553,34 @@ class PgDatabase:
                 after = dict(counted.fetchall())
                 if marked.fetchone() != session:
                     changed = _settings_taken_back(raw, own)
+                    raw.execute("SELECT pg_advisory_unlock_all()")
                     raise SLRError(
                         f"sql: the statement changed {changed or 'a setting'} of the session, "
                         f"which is not allowed with write=True: {_SETTING_REFUSAL}; it was "
                         f"rolled back, nothing of it was written")
                 written = {table for table, count in after.items()
                            if count is None or count != before.get(table)}
+                # a session advisory lock the statement took would be held as long as the
+                # store's connection (the store's own are transaction locks): let go, as after
+                # a read-only statement
                 if own:
-                    raw.execute("COMMIT")
+                    raw.execute("COMMIT; SELECT pg_advisory_unlock_all()")   # (one round trip)
                 else:
                     with raw.pipeline():
                         raw.execute("RELEASE SAVEPOINT slr_sql_write")
                         if outer_timeout is not None:
                             raw.execute("SELECT set_config('statement_timeout', %s, true)",
                                         (outer_timeout,))
+                        raw.execute("SELECT pg_advisory_unlock_all()")
                 return columns, rows, written
             except psycopg.Error as exc:
                 if own:
                     try:
-                        raw.execute("ROLLBACK")
+                        _leave_nothing(raw)
                     except psycopg.Error:
                         pass
+                else:   # (the caller's transaction is aborted: let go at its end)
+                    self.session_locks_left = True
                 raise self._raw_statement_error(exc, raw, deadline) from None
 
     def tables_to_write(self, query: str, params: Iterable[Any] = ()) -> set[str] | None:
@@ -1717,7 +1754,7 @@ def migrate_postgres(db: Any, schema: str, adopt: bool = False) -> None:
         try:
             raw.execute("SELECT pg_advisory_xact_lock(hashtext(%s))", ("slr_migrate:" + schema,))
             raw.execute(f"CREATE SCHEMA IF NOT EXISTS {quoted}")
-            raw.execute(f"SET LOCAL search_path = {quoted}")
+            raw.execute(f"SET LOCAL search_path = {quoted}, pg_temp")
             tables = {row[0] for row in raw.execute(
                 "SELECT tablename FROM pg_tables WHERE schemaname = %s", (schema,))}
             if tables and not _STORE_TABLES.issubset(tables) and not adopt:
