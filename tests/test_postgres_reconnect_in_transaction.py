@@ -6,19 +6,18 @@ transaction until a read outside one reconnected). A transaction whose BEGIN wen
 the connection was lost is never carried on, on a new one: it fails as a whole."""
 from __future__ import annotations
 
-import psycopg
 import pytest
 
 import slr_sql
 from slr_sql import ManualClock, SLRServerUnreachable
 
+from pg_sessions import store_and_backend, terminate
+
 
 def _end_the_stores_connection(kb, url: str) -> None:
     """Terminate the store's session, and let the store find its connection closed (the
     statement that finds it fails; nothing of a transaction was sent on it)."""
-    pid = kb.sql("SELECT pg_backend_pid()", write=True)[1][0][0]
-    with psycopg.connect(url, autocommit=True) as admin:
-        admin.execute("SELECT pg_terminate_backend(%s, 10000)", (pid,))
+    terminate(url, kb.sql("SELECT pg_backend_pid()", write=True)[1][0][0])
     with pytest.raises(SLRServerUnreachable):
         kb.store.data_version()
     assert kb.store._db.conn.raw.closed
@@ -47,15 +46,12 @@ def test_a_transaction_that_sent_nothing_opens_the_connection_again(postgres_url
 
 
 def test_a_transaction_whose_begin_went_fails_as_a_whole(postgres_url):
-    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
-        kb.add("p(0)^0")
-        pid = kb.sql("SELECT pg_backend_pid()", write=True)[1][0][0]
+    with store_and_backend(postgres_url) as (kb, pid):
         with pytest.raises(SLRServerUnreachable):
             with kb.store.transaction():
                 kb.add("p(1)^1")
                 kb.store.count("p", 1)          # (sent: the BEGIN went)
-                with psycopg.connect(postgres_url, autocommit=True) as admin:
-                    admin.execute("SELECT pg_terminate_backend(%s, 10000)", (pid,))
+                terminate(postgres_url, pid)
                 with pytest.raises(SLRServerUnreachable):
                     kb.store.data_version()     # found closed
                 kb.add("p(2)^2")                # not on a new connection

@@ -4,16 +4,11 @@ error its caller hears is the body's own, not the rollback's; and an enclosing l
 goes on never commits on a connection opened again (the transaction is gone: it fails)."""
 from __future__ import annotations
 
-import psycopg
 import pytest
 
-import slr_sql
-from slr_sql import ManualClock, SLRError, SLRUnavailable
+from slr_sql import SLRError, SLRUnavailable
 
-
-def _terminate(url: str, pid: int) -> None:
-    with psycopg.connect(url, autocommit=True) as admin:
-        admin.execute("SELECT pg_terminate_backend(%s, 10000)", (pid,))
+from pg_sessions import store_and_backend, terminate
 
 
 def _count(kb) -> int:
@@ -21,31 +16,27 @@ def _count(kb) -> int:
 
 
 def test_the_bodys_error_survives_a_rollback_that_cannot_be_sent(postgres_url):
-    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
-        kb.add("p(0)^0")
-        pid = kb.sql("SELECT pg_backend_pid()", write=True)[1][0][0]
+    with store_and_backend(postgres_url) as (kb, pid):
         with pytest.raises(SLRError) as caught:
             with kb.store.transaction():
                 kb.add("p(1)^1")
                 with kb.store.transaction():
                     kb.add("p(2)^2")
-                    _terminate(postgres_url, pid)
+                    terminate(postgres_url, pid)
                     raise SLRError("the body's own reason")
         assert str(caught.value) == "the body's own reason"
         assert _count(kb) == 1
 
 
 def test_an_enclosing_level_that_goes_on_does_not_commit_on_a_new_connection(postgres_url):
-    with slr_sql.open(postgres_url, clock=ManualClock(0.0)) as kb:
-        kb.add("p(0)^0")
-        pid = kb.sql("SELECT pg_backend_pid()", write=True)[1][0][0]
+    with store_and_backend(postgres_url) as (kb, pid):
         with pytest.raises(SLRUnavailable):
             with kb.store.transaction():
                 kb.add("p(1)^1")
                 try:
                     with kb.store.transaction():
                         kb.add("p(2)^2")
-                        _terminate(postgres_url, pid)
+                        terminate(postgres_url, pid)
                         raise SLRError("the body's own reason")
                 except SLRError:
                     pass
