@@ -36,8 +36,8 @@ import traceback
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable
 
-from slr_sql import SLRBusy, SLRError
-from slr_sql.service.errors import ServiceUnavailable
+from slr_sql import SLRError
+from slr_sql.service.errors import ServiceUnavailable, store_condition
 
 from .control import Controller
 from .mapping import RequestTopics
@@ -191,9 +191,8 @@ class RequestServer:
                                 RecursionError, ArithmeticError)):
                 reason = "too deeply nested" if isinstance(exc, RecursionError) else str(exc)
                 exc = ServiceError(f"bad request: {reason}")
-            elif type(exc).__module__ == "sqlite3" and ("locked" in str(exc) or
-                                                         "busy" in str(exc)):
-                exc = SLRBusy(f"the store is busy: {exc}")
+            elif (condition := store_condition(exc)) is not None:
+                exc = condition
             else:  # a bug: say so in the reply, keep the traceback in the log
                 self.log("error: request failed:\n" + "".join(
                     traceback.format_exception(type(exc), exc, exc.__traceback__)))

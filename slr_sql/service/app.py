@@ -42,7 +42,7 @@ from starlette.types import Receive, Scope, Send
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 import slr_sql
-from slr_sql import EventRejected, SLRBusy, SLRError, SLRStoreFull, SLRTimeout
+from slr_sql import EventRejected, SLRError, SLRTimeout
 from slr_sql.errors import log_failure
 from slr_sql.kb import KnowledgeBase
 from slr_sql.store.checks import format_event
@@ -51,7 +51,7 @@ from slr_sql.store.read_only import read_only_refusal
 from .encoding import (decode_args, decode_arguments, decode_term, dumps, encode_answers,
                        encode_plain, loads)
 from .auth import BearerToken
-from .errors import ServiceError, ServiceUnavailable, error_body, retry_after
+from .errors import ServiceError, ServiceUnavailable, error_body, retry_after, store_condition
 from .fanout import FRAMES_EXTENSION, GONE, FanOut, FrameChannel
 
 __all__ = ["create_app", "Limits", "API_VERSION"]
@@ -100,12 +100,10 @@ def _classify(exc: BaseException) -> BaseException:
     Retry-After), anything else an internal error (500, logged with its traceback)."""
     if isinstance(exc, SLRError):
         return exc
+    condition = store_condition(exc)
+    if condition is not None:
+        return condition
     if type(exc).__module__ == "sqlite3":
-        text = str(exc)
-        if "locked" in text or "busy" in text:
-            return SLRBusy(f"the store is busy: {text}")
-        if "disk is full" in text:
-            return SLRStoreFull(f"the store is full: {text}")
         log.error("SQLite error", exc_info=exc)
         return exc
     if isinstance(exc, (TypeError, ValueError, UnicodeError, OverflowError, RecursionError,

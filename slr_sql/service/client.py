@@ -289,19 +289,19 @@ class RemoteKnowledgeBase:
                                    status=response.status)
             self._answered.path = f"{method} {path}"
             return response.status, data
+        # (a 503's wait, if it says one: else the class's default)
+        told = parse_retry_after(response.headers.get("retry-after")) \
+            if response.status == 503 else None
         if data is None:   # (not the server's words: a proxy's, or the server's own limit)
             text = response.text[:200].strip()
             message = f"HTTP {response.status} from {self.url}{path}" + \
                 (f": {text}" if text else "")
             if response.status == 503:   # (beyond --max-connections: may pass)
-                raise ServiceUnavailable(message, 503, retry_after=parse_retry_after(
-                    response.headers.get("retry-after")))
+                raise ServiceUnavailable(message, 503, retry_after=told)
             raise ServiceError(message, kind="BadRequest", status=response.status)
         error = error_from_body(data, response.status)
-        if response.status == 503 and isinstance(error, SLRUnavailable):
-            told = parse_retry_after(response.headers.get("retry-after"))
-            if told is not None:          # (else the class's default wait)
-                error.retry_after = told
+        if told is not None and isinstance(error, SLRUnavailable):
+            error.retry_after = told
         raise error
 
     def _post(self, path: str, body: dict, timeout: float | None = None) -> dict:

@@ -24,8 +24,9 @@ from slr_sql import EventRejected, SLRCancelled, SLREvaluationError, SLRError, S
 
 from .encoding import TermError, decode_term, encode_term
 
-__all__ = ["ServiceError", "ServiceUnavailable", "ServiceOutcomeUnknown", "error_body", "error_status", "error_from_body",
-           "retry_after", "parse_retry_after", "STATUS_KINDS"]
+__all__ = ["ServiceError", "ServiceUnavailable", "ServiceOutcomeUnknown", "error_body",
+           "error_status", "error_from_body", "retry_after", "parse_retry_after",
+           "store_condition", "STATUS_KINDS"]
 
 # kind of a ServiceError -> its HTTP status
 STATUS_KINDS = {
@@ -126,6 +127,27 @@ def retry_after(exc: BaseException) -> int | None:
     if error_status(exc) != 503:
         return None
     return max(1, int(getattr(exc, "retry_after", 1)))
+
+
+def store_condition(exc: BaseException) -> SLRError | None:
+    """The SLRUnavailable class of a raw sqlite3 error that says the store is busy (locked)
+    or its disk full, for an answer that may pass (503 with its ``Retry-After``); None for
+    any other exception.
+
+    >>> import sqlite3
+    >>> type(store_condition(sqlite3.OperationalError("database is locked"))).__name__
+    'SLRBusy'
+    >>> store_condition(ValueError("database is locked")) is None
+    True
+    """
+    if type(exc).__module__ != "sqlite3":
+        return None
+    text = str(exc)
+    if "locked" in text or "busy" in text:
+        return slr_sql.SLRBusy(f"the store is busy: {text}")
+    if "disk is full" in text:
+        return slr_sql.SLRStoreFull(f"the store is full: {text}")
+    return None
 
 
 MAX_RETRY_AFTER = 86400   # seconds: a longer Retry-After is read as this (a day)

@@ -788,16 +788,16 @@ def _transaction_control(statement: str) -> str | None:
     return " ".join(_WORD.findall(found.group(1))).upper()
 
 
-def _search_path(schema: str) -> str:
+def _search_path(schema: str, local: bool = False) -> str:
     """The ``SET search_path`` of a connection of the store: its schema, then ``pg_temp``
     named last. Unnamed, the session's temporary schema is searched first, and a temporary
     table a written statement made (``CREATE TEMP TABLE p (x int)``) would hide the store's
     table of the same name from every later statement of the connection.
 
-    >>> _search_path('slr')
-    'SET search_path = "slr", pg_temp'
+    >>> _search_path('slr'), _search_path('slr', local=True)
+    ('SET search_path = "slr", pg_temp', 'SET LOCAL search_path = "slr", pg_temp')
     """
-    return f"SET search_path = {quote_identifier(schema)}, pg_temp"
+    return f"SET{' LOCAL' if local else ''} search_path = {quote_identifier(schema)}, pg_temp"
 
 
 def _first_word(statement: str) -> int:
@@ -1754,7 +1754,7 @@ def migrate_postgres(db: Any, schema: str, adopt: bool = False) -> None:
         try:
             raw.execute("SELECT pg_advisory_xact_lock(hashtext(%s))", ("slr_migrate:" + schema,))
             raw.execute(f"CREATE SCHEMA IF NOT EXISTS {quoted}")
-            raw.execute(f"SET LOCAL search_path = {quoted}, pg_temp")
+            raw.execute(_search_path(schema, local=True))
             tables = {row[0] for row in raw.execute(
                 "SELECT tablename FROM pg_tables WHERE schemaname = %s", (schema,))}
             if tables and not _STORE_TABLES.issubset(tables) and not adopt:
