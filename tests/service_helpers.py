@@ -149,8 +149,8 @@ class DroppingServer:
     that writes has reached it: it answers ``GET`` with ``get_body`` (JSON, 200), and reads
     every other request in full (headers and body) and closes the connection without a word
     -- but where ``script`` says ``a`` (one letter per such request, in order: ``a`` answer
-    with ``post_body``, ``d`` drop; beyond it, drop). ``dropped`` counts those it closed on;
-    ``received`` is set at the first."""
+    with ``post_body``, ``d`` drop, ``s`` say nothing until the client closes; beyond it,
+    drop). ``dropped`` counts those it left unanswered; ``received`` is set at the first."""
 
     def __init__(self, get_body: bytes = b'{"status": "ok", "limits": {}}',
                  script: str = "", post_body: bytes = b'{}'):
@@ -192,8 +192,18 @@ class DroppingServer:
             if not chunk:
                 return
             body += chunk
+        step = "a" if head.startswith(b"GET ") else (self.script.pop(0) if self.script else "d")
         answer = self.get_body if head.startswith(b"GET ") else \
-            self.post_body if (self.script.pop(0) if self.script else "d") == "a" else None
+            self.post_body if step == "a" else None
+        if step == "s":
+            self.dropped += 1
+            self.received.set()
+            try:
+                while conn.recv(65536):      # (until the client gives up and closes)
+                    pass
+            except OSError:
+                pass
+            return
         if answer is not None:
             conn.sendall(b"HTTP/1.1 200 OK\r\nContent-Type: application/json\r\n"
                          b"Connection: close\r\nContent-Length: %d\r\n\r\n%s"

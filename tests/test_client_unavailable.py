@@ -243,6 +243,27 @@ def test_an_add_whose_connection_broke_after_it_was_sent_has_an_unknown_outcome(
         assert exc.status == 0 and server.dropped == 5
 
 
+def test_an_add_the_server_never_answered_in_time_has_an_unknown_outcome_a_query_a_timeout():
+    """The server read the whole request and said nothing within the client's timeout: an
+    add may be under way there (ServiceOutcomeUnknown, no SLRUnavailable); a query that
+    timed out changed nothing (a RequestTimeout)."""
+    from slr_sql.service.errors import ServiceOutcomeUnknown
+    from service_helpers import DroppingServer
+
+    with DroppingServer(script="ss") as server, \
+            slr_sql.connect(server.url, timeout=0.3) as kb:
+        with pytest.raises(ServiceOutcomeUnknown) as caught:
+            kb.add("p(1)^1")
+        assert not isinstance(caught.value, SLRUnavailable)
+        assert "no answer" in str(caught.value) and "within 0.3 s" in str(caught.value) and \
+            "may or may not have applied it" in str(caught.value), str(caught.value)
+        with pytest.raises(ServiceError) as caught:
+            kb.query("p(X)^T")
+        assert caught.value.kind == "RequestTimeout" and caught.value.status == 0
+        assert not isinstance(caught.value, (ServiceOutcomeUnknown, SLRUnavailable))
+        assert server.dropped == 2
+
+
 def test_an_add_many_split_in_requests_says_which_events_no_request_carried():
     """Above the server's body limit add_many sends several requests: the first is
     answered, the second one's connection breaks, so its events may be stored, those of

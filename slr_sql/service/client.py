@@ -22,7 +22,8 @@ What differs from a local knowledge base:
   :class:`~slr_sql.service.errors.ServiceUnavailable`: a ``ServiceError`` (``kind``
   ``"Unavailable"``, ``status`` 0 when no answer came) and an :class:`~slr_sql.SLRUnavailable`
   (retry later), for requests and subscriptions alike. But a connection that broke after a
-  request that may change the store (an add, a load, a mark) was sent in full is a
+  request that may change the store (an add, a load, a mark) was sent in full, or that
+  got no answer within the timeout once sent, is a
   :class:`~slr_sql.service.errors.ServiceOutcomeUnknown`: no SLRUnavailable, since the
   server may have applied it. An https:// server whose certificate
   the client refuses is a ``ServiceError`` of ``kind`` ``"CertificateNotTrusted"`` (it trusts
@@ -259,8 +260,14 @@ class RemoteKnowledgeBase:
             if not exc.sent:      # (no connection in time: nothing reached the server)
                 raise ServiceUnavailable(f"cannot reach slr serve at {self.url}: {exc}",
                                          status=0) from None
-            raise ServiceError(f"no answer from {self.url} within "
-                               f"{timeout if timeout is not None else self.timeout:g} s",
+            waited = timeout if timeout is not None else self.timeout
+            if method != "GET" and path not in _CHANGES_NOTHING:
+                # (sent whole: the server may be applying it right now)
+                raise ServiceOutcomeUnknown(
+                    f"{method} {path}: no answer from {self.url} within {waited:g} s after the "
+                    f"request was sent: the server may or may not have applied it (sending "
+                    f"it again may apply it twice)") from None
+            raise ServiceError(f"no answer from {self.url} within {waited:g} s",
                                kind="RequestTimeout", status=0) from None
         except (RequestNotSent, AnswerLost) as exc:
             refused = _refused_certificate(exc)
