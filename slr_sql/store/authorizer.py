@@ -5,7 +5,9 @@ Every connection the store opens gets :func:`harden_connection`: the SQLite func
 statement (the store's own SQL never calls them; a user's ``kb.sql(..., write=True)`` may not
 either). A statement a user hands the store, written or read-only, may not begin or end a
 transaction (:meth:`SqlGuard.hand_written`: the store's connection's transactions are the
-store's), nor assign a pragma of :data:`STORE_SETTING_PRAGMAS` (those the store sets on its
+store's), nor create a temporary table, view, trigger or index (it would outlast the
+statement on the store's connection, where an unqualified name is read in ``temp`` first),
+nor assign a pragma of :data:`STORE_SETTING_PRAGMAS` (those the store sets on its
 connection itself: ``synchronous``, ``busy_timeout``, ``foreign_keys``, ...). SQLite's
 ``SQLITE_DBCONFIG_ENABLE_FTS3_TOKENIZER`` switch is turned off where Python lets it be
 reached safely (:func:`fts3_tokenizer_switch_off`). A *read-only* statement (``kb.sql``
@@ -37,7 +39,8 @@ from typing import Any
 
 __all__ = ["SqlGuard", "harden_connection", "fts3_tokenizer_switch_off", "DENIED_FUNCTIONS",
            "DENIED_PRAGMAS", "READING_PRAGMAS", "ACTING_PRAGMAS", "STORE_SETTING_PRAGMAS",
-           "READ_ONLY_VALUE_BYTES", "READ_ONLY_RESULT_BYTES", "transaction_control_refusal"]
+           "READ_ONLY_VALUE_BYTES", "READ_ONLY_RESULT_BYTES", "transaction_control_refusal",
+           "TEMPORARY_OBJECT_REFUSAL"]
 
 # Functions no statement on a store connection may call, with the reason given.
 DENIED_FUNCTIONS = {
@@ -118,6 +121,16 @@ _TRANSACTION_STATEMENTS = {
     (_TRANSACTION, "ROLLBACK"): "ROLLBACK", (_SAVEPOINT, "BEGIN"): "SAVEPOINT",
     (_SAVEPOINT, "RELEASE"): "RELEASE", (_SAVEPOINT, "ROLLBACK"): "ROLLBACK TO"}
 _WRITING_ROWS = frozenset({sqlite3.SQLITE_INSERT, sqlite3.SQLITE_UPDATE})
+_INSERT = sqlite3.SQLITE_INSERT
+# creating a temporary object: announced as such, as the plain action in database "temp"
+# (``CREATE TABLE temp.t``), or only by the row it writes into the temp schema's table
+# (``CREATE TRIGGER temp.t ON main_table`` is announced as a trigger of "main")
+_CREATING_TEMP = frozenset({sqlite3.SQLITE_CREATE_TEMP_TABLE, sqlite3.SQLITE_CREATE_TEMP_VIEW,
+                            sqlite3.SQLITE_CREATE_TEMP_TRIGGER, sqlite3.SQLITE_CREATE_TEMP_INDEX})
+_CREATING_IN_TEMP = frozenset({sqlite3.SQLITE_CREATE_TABLE, sqlite3.SQLITE_CREATE_VIEW,
+                               sqlite3.SQLITE_CREATE_TRIGGER, sqlite3.SQLITE_CREATE_INDEX,
+                               sqlite3.SQLITE_INSERT})
+_TEMP_SCHEMA_TABLES = frozenset({"sqlite_temp_master", "sqlite_temp_schema"})
 _FTS3_TOKENIZER_SWITCH = 1004  # SQLITE_DBCONFIG_ENABLE_FTS3_TOKENIZER
 
 
@@ -131,6 +144,15 @@ def transaction_control_refusal(statement: str) -> str:
     return (f"{statement} is not allowed: the store begins and ends its own transactions "
             f"(several statements stored together or not at all: with kb.store.transaction(): "
             f"...)")
+
+
+# why a hand-written statement may not create a temporary object on a SQLite store
+TEMPORARY_OBJECT_REFUSAL = (
+    "a temporary table, view, trigger or index is not allowed: it would outlast the statement "
+    "on the store's own connection, where SQLite reads an unqualified name in the temp schema "
+    "first (a temporary table named as an event table would take that type's reads and adds, "
+    "lost at close; a temporary trigger would run inside the store's own writes). Create a "
+    "table in the store's file instead (write=True), or use a WITH clause")
 
 
 class SqlGuard:
@@ -177,6 +199,10 @@ class SqlGuard:
         to its transaction action alone)."""
         if action in _ATTACHING:
             self.attached = True
+        elif action in _CREATING_TEMP or (db == "temp" and action in _CREATING_IN_TEMP and (
+                action != _INSERT or arg1 in _TEMP_SCHEMA_TABLES)):
+            self.denied = TEMPORARY_OBJECT_REFUSAL
+            return _DENY
         elif (action == _TRANSACTION or action == _SAVEPOINT) and not self.attached:
             self.denied = transaction_control_refusal(
                 _TRANSACTION_STATEMENTS.get((action, str(arg1).upper()),
