@@ -14,6 +14,7 @@ import json
 import math
 import os
 import shutil
+import string
 import subprocess
 from pathlib import Path
 
@@ -380,7 +381,10 @@ def test_deeply_nested_operators_print():
 
 # ------------------------------------------------------------------ the fast event reader
 
-simple_atoms = st.from_regex(r"[a-z][A-Za-z0-9_]{0,6}", fullmatch=True)
+# the strings of [a-z][A-Za-z0-9_]{0,6}, built (st.from_regex of that pattern drew the same
+# strings at three times the cost: a third of this test's time)
+simple_atoms = st.builds(lambda head, tail: head + tail, st.sampled_from(string.ascii_lowercase),
+                         st.text(string.ascii_letters + string.digits + "_", max_size=6))
 simple_numbers = st.one_of(st.integers(-10**20, 10**20),
                            st.floats(allow_nan=False, allow_infinity=False))
 simple_terms = st.recursive(

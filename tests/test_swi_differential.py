@@ -46,6 +46,15 @@ CORPUS_PATH = Path(__file__).parent / "golden" / "swi_differential.json"
 
 SLR_MAX_STEPS = 60_000
 SWI_INFERENCE_LIMIT = 3_000_000
+# SWI-Prolog's stacks (its default is 1 GB). A query that recurses without end fills them
+# before it reaches the inference limit, and near 1 GB each garbage collection scans the whole
+# stack: one such generated example took 5 s to run out of inferences (and its occurs-check
+# run another second), under 1 s with this limit, where it runs out of stack instead. Either
+# way slr_sql runs out of SLR_MAX_STEPS on it and the example is discarded; a query slr_sql
+# answers within SLR_MAX_STEPS recurses at most that deep, a few MB of SWI-Prolog's stacks,
+# so no comparison that is made depends on this limit (one that did would fail: SWI-Prolog's
+# resource error is not slr_sql's answer).
+SWI_STACK_LIMIT = "64m"
 SLR_TIMEOUT = 5.0  # seconds; a query that runs out of steps or time is discarded
 MAX_ANSWERS = 200  # a query with more answers is discarded (both sides stop after one more)
 
@@ -172,7 +181,8 @@ class Swipl:
 
     def _start(self) -> None:
         self.stderr = open(self.workdir / "swipl.stderr", "ab")
-        self.proc = subprocess.Popen([self.exe, "-q", str(self.driver)],
+        self.proc = subprocess.Popen([self.exe, f"--stack-limit={SWI_STACK_LIMIT}", "-q",
+                                      str(self.driver)],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                      stderr=self.stderr, text=True, cwd=str(self.workdir))
 
