@@ -63,31 +63,37 @@ def pytest_configure(config):
 # The suite's longest tests (seconds each with `--durations`; most are differential runs of
 # hundreds of examples), started first: pytest-xdist hands tests out in collection order, and
 # a run on 2 cores must not end with one worker in a 20-second test while the other is idle.
-# The other tests keep their order. Keep the list to the longest ~20 (a name that is gone is
+# The other tests keep their order. Keep the list to those of over ~4 s (a name that is gone is
 # ignored): `python -m pytest -q -p no:cacheprovider -n 2 --durations=40`.
 STARTED_FIRST = (
     "tests/test_sql_differential.py::test_sql_equals_interpreter",
-    "tests/test_limits.py::test_a_term_nested_100k_deep_goes_through_every_part_of_the_engine",
-    "tests/test_bench_events.py::test_a_row_compares_real_runs_of_ours_with_the_median_etalis",
     "tests/test_swi_differential.py::test_same_answers_as_swipl",
-    "tests/test_service_schema.py::test_every_answer_is_one_the_description_lists",
     "tests/test_interpreter.py::test_million_element_list",
+    "tests/test_limits.py::test_a_term_nested_100k_deep_goes_through_every_part_of_the_engine",
+    "tests/test_foxglove_silent_client.py::test_a_client_that_never_reads_does_not_keep_the_view_from_stopping",
     "tests/test_limits.py::test_long_arithmetic_and_long_bodies",
     "tests/test_interpreter.py::test_deep_non_tail_recursion",
-    "tests/test_bench_events.py::test_the_ceiling_row_divides_by_the_median_etalis",
-    "tests/test_conformance_postgres.py::test_the_conformance_files_pass_on_postgresql",
-    "tests/test_postgres_compiled.py::test_the_swi_corpus_answers_alike_on_postgres",
-    "tests/test_swi_prev_next.py::test_prev_next_programs_answer_as_swipl_on_both_backends",
+    "tests/test_parser.py::test_million_element_list",
+    "tests/test_fleet.py::test_a_postgresql_restart_mid_stream",
+    "tests/test_buffer_backends.py::test_postgres_keeps_and_derives_what_sqlite_does",
     "tests/test_conformance_remote.py::test_the_conformance_files_pass_against_a_served_store",
-    "tests/test_fleet_differential.py::test_a_fleet_asked_about_one_robot_answers_as_its_own_store",
-    "tests/test_postgres_crash.py::test_a_writer_killed_again_and_again_loses_and_repeats_nothing",
-    "tests/test_service_cli.py::test_every_db_command_takes_the_url",
-    "tests/test_postgres_compiled.py::test_compiled_sql_on_postgres_equals_the_interpreter_and_sqlite",
-    "tests/test_limits.py::test_building_a_long_list_stops_when_the_time_is_up",
-    "tests/test_bench_events.py::test_the_hand_written_engine_detects_what_ours_detects",
-    "tests/test_cep_differential.py::test_arithmetic_where_pushed_into_sql_equals_the_reference",
+    "tests/test_postgres_compiled.py::test_the_swi_corpus_answers_alike_on_postgres",
     "tests/test_disk_full.py::test_a_lock_held_too_long_is_503_with_retry_after",
+    "tests/test_service_cli.py::test_every_db_command_takes_the_url",
+    "tests/test_postgres.py::test_sql_corpus_answers_alike_on_postgres",
+    "tests/test_fleet_restore.py::test_a_restored_robot_store_is_refused_then_resynced_with_every_event_once",
+    "tests/test_conformance_postgres.py::test_the_conformance_files_pass_on_postgresql",
     "tests/test_postgres_crash.py::test_concurrent_writers_killed_together_again_and_again",
+    "tests/test_postgres_idle_listener.py::test_an_idle_store_with_event_rules_does_not_hold_the_notification_queue",
+    "tests/test_ros_bridge.py::test_bridge_stores_published_messages_and_stops_cleanly",
+    "tests/test_postgres.py::test_the_command_line_takes_a_postgres_url",
+    "tests/test_ros_bridge.py::test_bridge_takes_its_map_and_name_as_ros_arguments",
+    "tests/test_postgres_error_kinds.py::test_an_object_another_session_uses_is_busy_until_it_lets_go",
+    "tests/test_buffers.py::test_stored_events_equal_the_brute_force_model",
+    "tests/test_postgres_crash.py::test_a_writer_killed_again_and_again_loses_and_repeats_nothing",
+    "tests/test_postgres_compiled.py::test_compiled_sql_on_postgres_equals_the_interpreter_and_sqlite",
+    "tests/test_swi_prev_next.py::test_prev_next_programs_answer_as_swipl_on_both_backends",
+    "tests/test_xdist_worker_exit.py::test_a_workers_last_collections_traverse_none_of_its_sessions_objects",
 )
 
 

@@ -3,6 +3,7 @@ MCAP files), the built-in tf mapping, MAP files, --all, pub_sub.xml, resuming, t
 from __future__ import annotations
 
 import doctest
+import functools
 import importlib.util
 import math
 import os
@@ -104,6 +105,13 @@ def test_tf_direct_decoder_equals_general_mapping(tmp_path, fmt):
     assert rows[0] == rows[1] and len(rows[0]) == 10
 
 
+@functools.cache
+def shared_typestore(fmt: str):
+    """rosbags' type store for ``fmt``, made once: a new one generates its message classes
+    and serializers again (nine tenths of the test below when each example made two)."""
+    return make_bag.typestore(fmt)
+
+
 @settings(max_examples=40)
 @given(st.lists(st.tuples(st.text(min_size=0, max_size=6), st.text(min_size=1, max_size=6),
                           st.lists(st.floats(allow_nan=False, allow_infinity=False, width=64),
@@ -113,7 +121,7 @@ def test_tf_direct_decoder_equals_general_mapping(tmp_path, fmt):
 def test_tf_direct_decoder_matches_rosbags(transforms):
     """Random TFMessages serialized by rosbags (CDR and ROS 1) decode to the same values."""
     for fmt in ("cdr", "ros1"):
-        store = make_bag.typestore("ros1" if fmt == "ros1" else "mcap")
+        store = shared_typestore("ros1" if fmt == "ros1" else "mcap")
         values = {"transforms": [
             {"header": {"stamp": {"sec": sec, "nanosec": ns}, "frame_id": parent,
                         **({"seq": 7} if fmt == "ros1" else {})},
