@@ -53,9 +53,9 @@ def test_the_tokenizer_attack_no_longer_crashes_the_process(tmp_path):
                 kb.sql(statement)
             except slr_sql.SLRError as exc:
                 print("refused:", exc)
-        kb.sql("CREATE VIRTUAL TABLE temp.notes USING fts3(body)", write=True)
-        kb.sql("INSERT INTO temp.notes VALUES ('the gripper slipped')", write=True)
-        print(kb.sql("SELECT body FROM temp.notes WHERE body MATCH 'gripper'")[1])
+        kb.sql("CREATE VIRTUAL TABLE notes USING fts3(body)", write=True)
+        kb.sql("INSERT INTO notes VALUES ('the gripper slipped')", write=True)
+        print(kb.sql("SELECT body FROM notes WHERE body MATCH 'gripper'")[1])
     """)
     r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                        cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=60)

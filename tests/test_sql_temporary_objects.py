@@ -51,6 +51,16 @@ def test_a_temporary_object_is_refused_and_the_store_reads_and_adds_as_before(
         assert [a["X"] for a in again.query("p(X)^T")] == ["a", "b"]
 
 
+def test_a_temporary_virtual_table_is_refused_in_the_same_words(kb):
+    # (refused inside the virtual table's own statements: SQLite says only that its
+    # constructor failed, and the reason is the guard's)
+    with pytest.raises(SLRError) as caught:
+        kb.sql("CREATE VIRTUAL TABLE temp.p USING fts3(arg1)", write=True)
+    assert REFUSED in str(caught.value), str(caught.value)
+    assert kb.sql("SELECT count(*) FROM temp.sqlite_master")[1] == [(0,)]
+    assert [a["X"] for a in kb.query("p(X)^T")] == ["a"]
+
+
 def test_objects_in_the_stores_file_are_still_created(kb):
     kb.sql("CREATE TABLE mine(a)", write=True)
     kb.sql("CREATE VIEW mine_v AS SELECT a FROM mine", write=True)

@@ -1398,7 +1398,8 @@ def _refused(text: str, guard: SqlGuard) -> bool:
     """Whether a statement's error ``text`` is a refusal whose reason ``guard`` holds: the
     authorizer's, or a wrapped built-in's (:mod:`~slr_sql.store.bounded_builtins`)."""
     return guard.denied is not None and (
-        "authoriz" in text or "user-defined function raised exception" in text)
+        "authoriz" in text or "user-defined function raised exception" in text or
+        "vtable constructor failed" in text)   # (refused in a virtual table's own statements)
 
 
 # A Python function's call fails before it starts when an argument is text that is not
