@@ -192,25 +192,24 @@ class DroppingServer:
             if not chunk:
                 return
             body += chunk
-        step = "a" if head.startswith(b"GET ") else (self.script.pop(0) if self.script else "d")
-        answer = self.get_body if head.startswith(b"GET ") else \
-            self.post_body if step == "a" else None
-        if step == "s":
-            self.dropped += 1
-            self.received.set()
-            try:
-                while conn.recv(65536):      # (until the client gives up and closes)
-                    pass
-            except OSError:
-                pass
-            return
+        if head.startswith(b"GET "):
+            answer: bytes | None = self.get_body
+        else:
+            step = self.script.pop(0) if self.script else "d"
+            answer = self.post_body if step == "a" else None
         if answer is not None:
             conn.sendall(b"HTTP/1.1 200 OK\r\nContent-Type: application/json\r\n"
                          b"Connection: close\r\nContent-Length: %d\r\n\r\n%s"
                          % (len(answer), answer))
             return
         self.dropped += 1
-        self.received.set()          # (then the connection closes unanswered)
+        self.received.set()          # (then the connection closes unanswered, or for "s"
+        if step == "s":              # stays silent until the client gives up and closes)
+            try:
+                while conn.recv(65536):
+                    pass
+            except OSError:
+                pass
 
     def __enter__(self) -> "DroppingServer":
         return self

@@ -127,9 +127,8 @@ _INSERT = sqlite3.SQLITE_INSERT
 # (``CREATE TRIGGER temp.t ON main_table`` is announced as a trigger of "main")
 _CREATING_TEMP = frozenset({sqlite3.SQLITE_CREATE_TEMP_TABLE, sqlite3.SQLITE_CREATE_TEMP_VIEW,
                             sqlite3.SQLITE_CREATE_TEMP_TRIGGER, sqlite3.SQLITE_CREATE_TEMP_INDEX})
-_CREATING_IN_TEMP = frozenset({sqlite3.SQLITE_CREATE_TABLE, sqlite3.SQLITE_CREATE_VIEW,
-                               sqlite3.SQLITE_CREATE_TRIGGER, sqlite3.SQLITE_CREATE_INDEX,
-                               sqlite3.SQLITE_INSERT})
+_CREATING = frozenset({sqlite3.SQLITE_CREATE_TABLE, sqlite3.SQLITE_CREATE_VIEW,
+                       sqlite3.SQLITE_CREATE_TRIGGER, sqlite3.SQLITE_CREATE_INDEX})
 _TEMP_SCHEMA_TABLES = frozenset({"sqlite_temp_master", "sqlite_temp_schema"})
 _FTS3_TOKENIZER_SWITCH = 1004  # SQLITE_DBCONFIG_ENABLE_FTS3_TOKENIZER
 
@@ -199,8 +198,8 @@ class SqlGuard:
         to its transaction action alone)."""
         if action in _ATTACHING:
             self.attached = True
-        elif action in _CREATING_TEMP or (db == "temp" and action in _CREATING_IN_TEMP and (
-                action != _INSERT or arg1 in _TEMP_SCHEMA_TABLES)):
+        elif action in _CREATING_TEMP or db == "temp" and (
+                action in _CREATING or action == _INSERT and arg1 in _TEMP_SCHEMA_TABLES):
             self.denied = TEMPORARY_OBJECT_REFUSAL
             return _DENY
         elif (action == _TRANSACTION or action == _SAVEPOINT) and not self.attached:
