@@ -64,6 +64,36 @@ def pct(xs: list[float], p: float) -> float:
     return xs[min(len(xs) - 1, int(p / 100 * len(xs)))]
 
 
+def delivery_latencies(times: list[list[float]], firsts: list[int | None],
+                       answered: list[float], requested: list[float]) -> tuple[list, ...]:
+    """From subscriber k's receive times ``times[k]`` (``times[k][j]``: when event
+    ``firsts[k] + j`` arrived; recording starts with whichever frame first arrives inside the
+    window, not necessarily event 0's): each delivery's latency after its ``add_many`` was
+    answered (0 if the frame came first) and after it was requested; per event received by
+    every subscriber, its first delivery's lateness and the spread from its first to its last.
+
+    >>> delivery_latencies([[1.5, 2.5], [2.75]], [1, 2],      # the second began at event 2
+    ...                    [0.0, 1.0, 2.0], [0.0, 0.5, 1.5])
+    ([0.5, 0.5, 0.75], [1.0, 1.0, 1.25], [0.5], [0.25])
+    """
+    received = [{first + j: t for j, t in enumerate(mine)}
+                for mine, first in zip(times, firsts) if first is not None]
+    lat, from_request = [], []
+    for mine in received:
+        for i, t in mine.items():
+            if 0 <= i < len(answered):
+                lat.append(max(0.0, t - answered[i]))
+                from_request.append(t - requested[i])
+    firsts_late, spreads = [], []
+    for i in range(len(answered)):
+        got = [mine[i] for mine in received if i in mine]
+        if not got or len(got) < len(times):
+            continue          # not recorded by every subscriber
+        firsts_late.append(max(0.0, min(got) - answered[i]))
+        spreads.append(max(got) - min(got))
+    return lat, from_request, firsts_late, spreads
+
+
 def rss_mb(pid: int) -> float:
     with open(f"/proc/{pid}/status") as f:
         for line in f:
@@ -143,6 +173,9 @@ def ws_subscribers(url: str, n: int, batch: int, ready, conn) -> None:
     counts = [0] * n
     bad = [0] * n
     times: list[list[float]] = [[] for _ in range(n)]
+    # the event number of each subscriber's first recorded receive time: the window opens
+    # while frames may already arrive, so a list's first entry need not be event 0's
+    firsts: list[int | None] = [None] * n
 
     async def one(k: int, started: asyncio.Event, go: list) -> None:
         async with connect(url, max_size=None) as ws:
@@ -179,6 +212,8 @@ def ws_subscribers(url: str, n: int, batch: int, ready, conn) -> None:
                         expect = i + 1
                 counts[k] += n_answers
                 if now < latency_window[0]:
+                    if firsts[k] is None:
+                        firsts[k] = numbers[0]
                     mine.extend([now] * n_answers)
 
     async def main() -> None:
@@ -203,7 +238,7 @@ def ws_subscribers(url: str, n: int, batch: int, ready, conn) -> None:
 
     asyncio.run(main())
     conn.recv()                            # the "stop" message
-    conn.send((counts, bad, times))
+    conn.send((counts, bad, times, firsts))
 
 
 def ws_subscribers_raw(url: str, n: int, batch: int, ready, conn) -> None:
@@ -225,6 +260,7 @@ def ws_subscribers_raw(url: str, n: int, batch: int, ready, conn) -> None:
     counts = [0] * n
     bad = [0] * n
     times: list[list[float]] = [[] for _ in range(n)]
+    firsts: list[int | None] = [None] * n      # as in ws_subscribers
 
     def client_frame(opcode: int, payload: bytes) -> bytes:
         mask = os.urandom(4)
@@ -324,6 +360,8 @@ def ws_subscribers_raw(url: str, n: int, batch: int, ready, conn) -> None:
                     self.expect = i + 1
             counts[k] += n_answers
             if now < latency_window[0]:
+                if firsts[k] is None:
+                    firsts[k] = numbers[0]
                 times[k].extend([now] * n_answers)
 
         def finish(self) -> None:
@@ -354,7 +392,7 @@ def ws_subscribers_raw(url: str, n: int, batch: int, ready, conn) -> None:
 
     asyncio.run(main())
     conn.recv()                            # the "stop" message
-    conn.send((counts, bad, times))
+    conn.send((counts, bad, times, firsts))
 
 
 # ``--gc-trace``: `slr serve` started through this prelude, which records each collection of
@@ -395,6 +433,8 @@ def run_service(args, tmp: Path) -> dict:
     db = tmp / "ws.db"
     env = dict(os.environ, PYTHONPATH=str(args.server_code or ROOT))
     command = [sys.executable, "-m", "slr_sql", "serve", str(db), "--port", "0"]
+    if args.floor_server:       # the least any server could do: what the rest leaves
+        command = [sys.executable, str(ROOT / "benchmarks" / "floor_ws_server.py"), "--port", "0"]
     gc_log = tmp / "gc.json"
     if args.gc_trace:
         command[1:3] = ["-c", GC_TRACE_PRELUDE, str(gc_log)]
@@ -466,23 +506,10 @@ def run_service(args, tmp: Path) -> dict:
         samples.append((time.monotonic() - t0, rss_mb(proc.pid)))
         sizes.append(file_mb(db))
         parent.send("stop")
-        counts, bad, times = parent.recv()
+        counts, bad, times, firsts = parent.recv()
         sub_proc.join(30)
-        lat = []
-        from_request = []       # frame received - add_many request made (the HTTP hops too)
-        for mine in times:
-            for i, t in enumerate(mine):
-                if i < len(answered):
-                    lat.append(max(0.0, t - answered[i]))
-                    from_request.append(t - requested[i])
-        # where the tail comes from: an event's first delivery late (everything waited: the
-        # commit, the hub, the loop, a stall) or its last far after its first (the fan-out's
-        # length, the subscribers' process working through the burst)
-        firsts, spreads = [], []
-        for i in range(min(len(answered), min((len(m) for m in times), default=0))):
-            got = [mine[i] for mine in times]
-            firsts.append(max(0.0, min(got) - answered[i]))
-            spreads.append(max(got) - min(got))
+        lat, from_request, firsts_late, spreads = delivery_latencies(times, firsts, answered,
+                                                                     requested)
         rss = [r for _, r in samples]
         client.close()
         result = {"sent": sent, "achieved": achieved, "complete": sum(c == sent for c in counts),
@@ -491,7 +518,7 @@ def run_service(args, tmp: Path) -> dict:
                   "max_ms": 1000 * max(lat) if lat else float("nan"), "latencies": len(lat),
                   "request_p50_ms": 1000 * pct(from_request, 50),
                   "request_p99_ms": 1000 * pct(from_request, 99),
-                  "first_p99_ms": 1000 * pct(firsts, 99), "spread_p50_ms": 1000 * pct(spreads, 50),
+                  "first_p99_ms": 1000 * pct(firsts_late, 99), "spread_p50_ms": 1000 * pct(spreads, 50),
                   "spread_p99_ms": 1000 * pct(spreads, 99),
                   "rss_first": rss[0], "rss_last": rss[-1], "rss_max": max(rss),
                   "rss_slope_mb_per_min": slope_per_min(samples[len(samples) // 10:]),
@@ -569,6 +596,10 @@ def main() -> None:
     ap.add_argument("--client", choices=("websockets", "raw"), default="websockets",
                     help="the subscribers' WebSocket client: the websockets library's, or a "
                          "minimal one (a few µs per frame)")
+    ap.add_argument("--floor-server", action="store_true",
+                    help="serve with benchmarks/floor_ws_server.py (no store: one loop writing "
+                         "each batch's frame to every subscriber), not `slr serve`: the floor "
+                         "the rest of the machine leaves for any server")
     ap.add_argument("--server-code", help="run `slr serve` from this checkout (before/after)")
     ap.add_argument("--no-in-process", action="store_true",
                     help="skip the in-process baseline (a soak of the server alone)")

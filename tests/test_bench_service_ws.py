@@ -4,6 +4,7 @@ library's and the minimal one of ``--client raw``, against a real ``slr serve``.
 figures themselves are the benchmark's business (benchmarks/README.md)."""
 from __future__ import annotations
 
+import importlib.util
 import re
 import subprocess
 import sys
@@ -15,12 +16,15 @@ REPO = Path(__file__).resolve().parent.parent
 SCRIPT = REPO / "benchmarks" / "bench_service_ws.py"
 
 
-@pytest.mark.parametrize("client", ["raw", "websockets"])
-def test_every_subscriber_gets_every_event_in_order(client, tmp_path):
+@pytest.mark.parametrize("client,server", [("raw", "slr"), ("websockets", "slr"),
+                                           ("raw", "floor")])
+def test_every_subscriber_gets_every_event_in_order(client, server, tmp_path):
+    """Against ``slr serve``, and against the floor server (benchmarks/floor_ws_server.py)
+    that speaks the same protocol with no store behind it."""
     run = subprocess.run(
         [sys.executable, str(SCRIPT), "--subscribers", "3", "--minutes", "0.02",
          "--latency-seconds", "0.5", "--sample-seconds", "0.5", "--no-in-process",
-         "--client", client],
+         "--client", client] + (["--floor-server"] if server == "floor" else []),
         capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert run.returncode == 0, run.stderr
     found = re.search(r"service    : 3 WebSocket subscribers, (\d+) events .*: (\d+) complete "
@@ -31,6 +35,29 @@ def test_every_subscriber_gets_every_event_in_order(client, tmp_path):
     assert sent >= 1000 and complete == 3 and min_count == sent and out_of_order == 0
     assert deliveries > 0          # the clock of each frame was read
     assert re.search(r"the subscribers' process \d+ µs per event", run.stdout)
+
+
+def _bench_module():
+    spec = importlib.util.spec_from_file_location("bench_service_ws", SCRIPT)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_subscriber_that_began_recording_late_is_compared_with_its_own_events():
+    """The latency window opens while frames may already arrive: a subscriber whose first
+    recorded frame held events 10-19 is compared with when *those* were answered, not with
+    events 0-9's answer (which made every one of its latencies a batch period too long)."""
+    bench = _bench_module()
+    answered = [float(i // 10) for i in range(30)]          # batch b answered at b seconds
+    requested = [a - 0.5 for a in answered]
+    on_time = [float(i // 10) + 0.001 for i in range(30)]   # each frame 1 ms after its answer
+    lat, from_request, firsts, spreads = bench.delivery_latencies(
+        [on_time, on_time[10:]], [0, 10], answered, requested)
+    assert max(lat) == pytest.approx(0.001) and len(lat) == 50
+    assert max(from_request) == pytest.approx(0.501)
+    assert len(firsts) == 20 and max(spreads) == 0.0    # events 10-29: both recorded them
 
 
 def test_bench_ws_frame_path_runs_both_deliveries_to_the_end():
