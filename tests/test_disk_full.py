@@ -322,10 +322,11 @@ def test_the_hubs_housekeeping_on_a_full_disk_is_one_line(tmp_path):
 
 
 def test_a_lock_held_too_long_is_503_with_retry_after(tmp_path):
+    """Held longer than ``slr serve --busy-timeout`` (0.5 s here; 5 s by default)."""
     db = tmp_path / "robot.db"
     with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
         kb.add("p(1)^1")
-    with ServiceProcess(db) as server:
+    with ServiceProcess(db, "--busy-timeout", "0.5") as server:
         holder = sqlite3.connect(db, isolation_level=None)
         holder.execute("BEGIN IMMEDIATE")
         try:
@@ -336,6 +337,7 @@ def test_a_lock_held_too_long_is_503_with_retry_after(tmp_path):
         assert answer.status_code == 503, answer.text
         assert answer.headers["Retry-After"] == "1"
         assert answer.json()["error"]["kind"] == "SLRBusy"
+        assert "0.5 s" in answer.json()["error"]["message"], answer.text
         assert HTTP.post(server.url + "/add", json={"event": "p(2)^2"},
                          timeout=30).status_code == 200
 

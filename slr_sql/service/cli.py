@@ -17,6 +17,8 @@ import click
 
 import slr_sql
 
+from ..store import DEFAULT_BUSY_TIMEOUT
+
 __all__ = ["serve", "run_server", "is_loopback"]
 
 # Seconds the requests in flight get to finish after SIGINT/SIGTERM; then the server stops
@@ -149,7 +151,8 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
                ssl_keyfile: str | None = None, ssl_certfile: str | None = None,
                log_level: str = "warning", ws_compression: bool = False,
                cache_mib: float | None = None, foxglove: tuple[str, int] | None = None,
-               shutdown_grace: float = SHUTDOWN_GRACE) -> None:
+               shutdown_grace: float = SHUTDOWN_GRACE,
+               busy_timeout: float | None = None) -> None:
     """Open ``db`` and serve it until SIGINT/SIGTERM; then close it.
 
     Refuses (SLRError) to listen on a non-loopback address without a token. Prints
@@ -161,7 +164,9 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
     view of the store beside the service (:mod:`slr_sql.viz.foxglove_live`; it has no token:
     keep it on loopback unless the network is yours). ``shutdown_grace``: seconds the
     requests in flight get after SIGINT/SIGTERM (a synchronized query may wait for an hour)
-    before the server stops anyway.
+    before the server stops anyway. ``busy_timeout``: seconds a write waits for another
+    process's write lock before its request is answered 503 (retryable; default
+    :data:`~slr_sql.store.DEFAULT_BUSY_TIMEOUT`).
     """
     token = token or None
     if token is None and not is_loopback(host):
@@ -186,7 +191,9 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
     limits = limits or Limits()
     sock = _listen(host, port)
     try:
-        options = {} if cache_mib is None else {"cache_mib": cache_mib}
+        options: dict[str, Any] = {} if cache_mib is None else {"cache_mib": cache_mib}
+        if busy_timeout is not None:
+            options["busy_timeout"] = busy_timeout
         kb = slr_sql.open(db, checkpoint="background", **options)  # no add waits for a checkpoint
     except BaseException:
         sock.close()
@@ -271,11 +278,15 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
               show_default=True, metavar="SECONDS",
               help="On SIGINT/SIGTERM, how long requests in flight (a waiting synchronized "
                    "query) may finish before the server stops.")
+@click.option("--busy-timeout", default=DEFAULT_BUSY_TIMEOUT, type=click.FloatRange(0.0),
+              show_default=True, metavar="SECONDS",
+              help="How long a write waits for another process's write lock on DB before "
+                   "its request is answered 503 with Retry-After.")
 def serve(db: str, host: str, port: int, token: str | None, max_body: int,
           max_query_time: float, max_wait: float, max_connections: int,
           ssl_keyfile: str | None, ssl_certfile: str | None, ws_compression: bool,
           cache_mib: float, foxglove: bool, foxglove_host: str, foxglove_port: int,
-          shutdown_grace: float) -> None:
+          shutdown_grace: float, busy_timeout: float) -> None:
     """Serve DB to other processes over HTTP/JSON and WebSocket (docs/service.md).
 
     Clients: slr_sql.connect(URL, token=...) or any slr command with the URL in place of DB.
@@ -290,5 +301,5 @@ def serve(db: str, host: str, port: int, token: str | None, max_body: int,
                ssl_keyfile=ssl_keyfile, ssl_certfile=ssl_certfile,
                ws_compression=ws_compression, cache_mib=cache_mib,
                foxglove=(foxglove_host, foxglove_port) if foxglove else None,
-               shutdown_grace=shutdown_grace)
+               shutdown_grace=shutdown_grace, busy_timeout=busy_timeout)
     sys.stdout.flush()
