@@ -434,7 +434,8 @@ def run_service(args, tmp: Path) -> dict:
     env = dict(os.environ, PYTHONPATH=str(args.server_code or ROOT))
     command = [sys.executable, "-m", "slr_sql", "serve", str(db), "--port", "0"]
     if args.floor_server:       # the least any server could do: what the rest leaves
-        command = [sys.executable, str(ROOT / "benchmarks" / "floor_ws_server.py"), "--port", "0"]
+        command = [sys.executable, str(ROOT / "benchmarks" / "floor_ws_server.py"), "--port", "0",
+                   "--work-us", str(args.floor_work_us)]
     gc_log = tmp / "gc.json"
     if args.gc_trace:
         command[1:3] = ["-c", GC_TRACE_PRELUDE, str(gc_log)]
@@ -600,6 +601,8 @@ def main() -> None:
                     help="serve with benchmarks/floor_ws_server.py (no store: one loop writing "
                          "each batch's frame to every subscriber), not `slr serve`: the floor "
                          "the rest of the machine leaves for any server")
+    ap.add_argument("--floor-work-us", type=float, default=0.0,
+                    help="with --floor-server: CPU it spends per event (µs), a costlier server")
     ap.add_argument("--server-code", help="run `slr serve` from this checkout (before/after)")
     ap.add_argument("--no-in-process", action="store_true",
                     help="skip the in-process baseline (a soak of the server alone)")

@@ -25,6 +25,7 @@ import hashlib
 import json
 import re
 import struct
+import time
 
 from orjson import dumps, loads
 
@@ -42,8 +43,17 @@ def text_frame(payload: bytes) -> bytes:
 
 
 class Hub:
-    def __init__(self) -> None:
+    def __init__(self, work_us: float = 0.0) -> None:
         self.subscribers: list[Connection] = []
+        self.work_us = work_us
+
+    def work(self, events: int) -> None:
+        """Spend ``work_us`` of CPU per event (``--work-us``): a server that costs that much
+        more than the floor, to find the cost at which a run's tail crosses its bound."""
+        if self.work_us:
+            end = time.thread_time() + events * self.work_us / 1e6
+            while time.thread_time() < end:
+                pass
 
     def publish(self, events: list) -> None:
         parsed = []
@@ -120,6 +130,7 @@ class Connection(asyncio.Protocol):
                 reply = dumps({"added": 1})
             else:
                 reply = dumps({"status": "ok"})
+            self.hub.work(len(events))        # (as a store's commit: before the answer)
             self.transport.write(b"HTTP/1.1 200 OK\r\nContent-Type: application/json\r\n"
                                  b"Content-Length: %d\r\n\r\n%s" % (len(reply), reply))
             if events:
@@ -153,8 +164,8 @@ class Connection(asyncio.Protocol):
                 return
 
 
-async def serve(host: str, port: int) -> None:
-    hub = Hub()
+async def serve(host: str, port: int, work_us: float) -> None:
+    hub = Hub(work_us)
     server = await asyncio.get_running_loop().create_server(lambda: Connection(hub), host, port)
     bound = server.sockets[0].getsockname()[1]
     print(f"floor: - on http://{host}:{bound}", flush=True)
@@ -165,9 +176,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--host", default="127.0.0.1")
     ap.add_argument("--port", type=int, default=0)
+    ap.add_argument("--work-us", type=float, default=0.0,
+                    help="CPU to spend per event (µs) before answering an add: a costlier server")
     args = ap.parse_args()
     try:
-        asyncio.run(serve(args.host, args.port))
+        asyncio.run(serve(args.host, args.port, args.work_us))
     except KeyboardInterrupt:
         pass
 
