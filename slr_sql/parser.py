@@ -862,6 +862,48 @@ _FAST_TOKEN = re.compile(r"""\s*(?:
     )""", re.VERBOSE)
 
 
+# The flattest events -- atoms and numbers as arguments, or flat lists of them, the shape of
+# nearly every recorded event (seg(cup1,[0.4,0.1,0.9])^12.31) -- are checked by one regular
+# expression of the same tokens and then split, without the scanner's loop of one match per
+# token (~3-6x faster); whatever it does not match goes to the scanner below.
+_FLAT_ITEM = (r"(?:-?\d+\.\d+(?:[eE][+-]?\d+)?|-?\d+(?![\d.'xob_eE])"
+              r"|[a-z][A-Za-z0-9_]*)")
+_FLAT_ARG = rf"\s*(?:{_FLAT_ITEM}|\[\s*(?:{_FLAT_ITEM}\s*(?:,\s*{_FLAT_ITEM}\s*)*)?\])\s*"
+_FLAT_NUMBER = r"-?\d+\.\d+(?:[eE][+-]?\d+)?|-?\d+(?![\d.'xob_eE])"
+_FLAT_EVENT = re.compile(
+    rf"\s*([a-z][A-Za-z0-9_]*)(?:\(({_FLAT_ARG}(?:,{_FLAT_ARG})*)\))?\s*\^\s*"
+    rf"(?:(?!-)({_FLAT_NUMBER})|\[\s*({_FLAT_NUMBER})\s*,\s*({_FLAT_NUMBER})\s*\])\s*\Z")
+_FLAT_PIECE = re.compile(r"-?\d+\.\d+(?:[eE][+-]?\d+)?|-?\d+|[a-z][A-Za-z0-9_]*|\[|\]")
+
+
+def _flat_event(text: str) -> tuple | None:
+    """``parse_event_fast`` for the flattest events (see above), else None."""
+    m = _FLAT_EVENT.match(text)
+    if m is None:
+        return None
+    name, inside, at, start, stop = m.groups()
+    args: list = []
+    if inside is not None:
+        items: list | None = None      # the open list's items
+        pieces = _FLAT_PIECE.findall(inside) if "[" in inside else inside.split(",")
+        for piece in pieces:
+            piece = piece.strip()
+            first = piece[0]
+            if first == "[":
+                items = []
+                continue
+            if first == "]":
+                args.append(make_list(items) if items else NIL)
+                items = None
+                continue
+            value = Atom(piece) if "a" <= first <= "z" else \
+                float(piece) if "." in piece else int(piece)
+            (args if items is None else items).append(value)
+    if at is not None:
+        return (name, tuple(args), float(at), float(at))
+    return (name, tuple(args), float(start), float(stop))
+
+
 class _NotFast(Exception):
     pass
 
@@ -878,6 +920,14 @@ def parse_event_fast(text: str) -> tuple | None:
     >>> parse_event_fast("p('A')^1") is None
     True
     """
+    flat = _flat_event(text)
+    if flat is not None:
+        return flat
+    return _scanned_event(text)
+
+
+def _scanned_event(text: str) -> tuple | None:
+    """``parse_event_fast`` by the token scanner: nested terms, the rest of the subset."""
     tokens: list[tuple[str, str]] = []
     pos = 0
     end = len(text)

@@ -426,6 +426,51 @@ def test_fast_event_reader_is_used_for_common_events():
         assert parse_event_fast(outside) is None, outside
 
 
+_SPACE = st.sampled_from(["", "", " ", "  ", "\t", "\n"])
+_PIECE = st.sampled_from([
+    "a", "cup1", "x_Y9", "e", "eB", "A", "_", "'q'", "0", "7", "-3", "007", "12.5", "-0.25",
+    "1.5e3", "2.0E-2", "1e5", "1.", ".5", "0x1f", "1_000", "0'a", "-", "+1", "[]", "[", "]",
+    ",", "(", ")", "f(", "^", "|", ".", "\"s\""])
+
+
+@st.composite
+def _event_texts(draw):
+    """Texts around the fast readers' shapes: well-formed flat events (with lists, spaces,
+    both kinds of times) and, mixed in, pieces that make them something else."""
+    def item() -> str:
+        if draw(st.booleans()):
+            return draw(_PIECE)
+        inner = draw(st.lists(st.sampled_from(["1", "-2.5", "b", "3.0e1", "[]", "c"]),
+                              max_size=3))
+        return "[" + ",".join(draw(_SPACE) + x + draw(_SPACE) for x in inner) + "]"
+    name = draw(st.sampled_from(["e", "seg", "p_1", "tick", "X", "a b"]))
+    args = [draw(_SPACE) + item() + draw(_SPACE) for _ in range(draw(st.integers(0, 4)))]
+    head = name + ("(" + ",".join(args) + ")" if args or draw(st.booleans()) else "")
+    times = draw(st.sampled_from(["1", "12.31", "-4", "0", "1e3", "[1, 2.5]", "[-1,0]",
+                                  "[ 3 ,4 ]", "[1]", "x"]))
+    return draw(_SPACE) + head + draw(_SPACE) + "^" + draw(_SPACE) + times + draw(_SPACE)
+
+
+@settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow])
+@given(_event_texts())
+def test_the_flat_event_reader_reads_as_the_token_scanner(text):
+    """The one-expression reader of the flattest events returns what the token scanner
+    returns for the same text: the same name, terms, types and times, or nothing."""
+    from slr_sql.parser import _scanned_event
+    assert repr(parse_event_fast(text)) == repr(_scanned_event(text)), text
+
+
+def test_the_flat_event_reader_takes_the_common_shapes():
+    from slr_sql.parser import _flat_event
+    assert _flat_event("seg(cup1, [0.4,0.1,0.9])^12.31") == (
+        "seg", (Atom("cup1"), make_list([0.4, 0.1, 0.9])), 12.31, 12.31)
+    assert _flat_event(" pose( r1 , -2 , [ ] )^[10, 10.5] ") == (
+        "pose", (Atom("r1"), -2, NIL), 10.0, 10.5)
+    assert type(_flat_event("e(7)^1")[1][0]) is int      # an integer stays one
+    for nested in ["p(f(a))^1", "p([[1]])^1", "p(1)^-1", "p(1e5)^1", "p('a')^1"]:
+        assert _flat_event(nested) is None, nested
+
+
 def test_fast_event_reader_leaves_no_cyclic_garbage():
     """Every kb.add / add_many of event texts reads them here: garbage that only the cyclic
     collector frees would make a server's young collections big and frequent (pauses)."""
