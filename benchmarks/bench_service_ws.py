@@ -435,7 +435,8 @@ def run_service(args, tmp: Path) -> dict:
     command = [sys.executable, "-m", "slr_sql", "serve", str(db), "--port", "0"]
     if args.floor_server:       # the least any server could do: what the rest leaves
         command = [sys.executable, str(ROOT / "benchmarks" / "floor_ws_server.py"), "--port", "0",
-                   "--work-us", str(args.floor_work_us)]
+                   "--work-us", str(args.floor_work_us)] + \
+            (["--work-thread"] if args.floor_work_thread else [])
     gc_log = tmp / "gc.json"
     if args.gc_trace:
         command[1:3] = ["-c", GC_TRACE_PRELUDE, str(gc_log)]
@@ -603,6 +604,8 @@ def main() -> None:
                          "the rest of the machine leaves for any server")
     ap.add_argument("--floor-work-us", type=float, default=0.0,
                     help="with --floor-server: CPU it spends per event (µs), a costlier server")
+    ap.add_argument("--floor-work-thread", action="store_true",
+                    help="with --floor-work-us: spend it on a worker thread (two hops per add)")
     ap.add_argument("--server-code", help="run `slr serve` from this checkout (before/after)")
     ap.add_argument("--no-in-process", action="store_true",
                     help="skip the in-process baseline (a soak of the server alone)")

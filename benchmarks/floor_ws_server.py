@@ -43,9 +43,10 @@ def text_frame(payload: bytes) -> bytes:
 
 
 class Hub:
-    def __init__(self, work_us: float = 0.0) -> None:
+    def __init__(self, work_us: float = 0.0, work_thread: bool = False) -> None:
         self.subscribers: list[Connection] = []
         self.work_us = work_us
+        self.work_thread = work_thread   # the work on a thread of its own, as a store's writes
 
     def work(self, events: int) -> None:
         """Spend ``work_us`` of CPU per event (``--work-us``): a server that costs that much
@@ -130,11 +131,22 @@ class Connection(asyncio.Protocol):
                 reply = dumps({"added": 1})
             else:
                 reply = dumps({"status": "ok"})
+            if self.hub.work_thread and events:
+                # as `slr serve`: the work on another thread, the answer and the frames back
+                # on the loop's (two hops per add)
+                done = asyncio.get_running_loop().run_in_executor(None, self.hub.work,
+                                                                   len(events))
+                done.add_done_callback(lambda _, reply=reply, events=events:
+                                       self.answer(reply, events))
+                continue
             self.hub.work(len(events))        # (as a store's commit: before the answer)
-            self.transport.write(b"HTTP/1.1 200 OK\r\nContent-Type: application/json\r\n"
-                                 b"Content-Length: %d\r\n\r\n%s" % (len(reply), reply))
-            if events:
-                self.hub.publish(events)
+            self.answer(reply, events)
+
+    def answer(self, reply: bytes, events: list) -> None:
+        self.transport.write(b"HTTP/1.1 200 OK\r\nContent-Type: application/json\r\n"
+                             b"Content-Length: %d\r\n\r\n%s" % (len(reply), reply))
+        if events:
+            self.hub.publish(events)
 
     def frames(self) -> None:
         buffer = self.buffer
@@ -164,8 +176,8 @@ class Connection(asyncio.Protocol):
                 return
 
 
-async def serve(host: str, port: int, work_us: float) -> None:
-    hub = Hub(work_us)
+async def serve(host: str, port: int, work_us: float, work_thread: bool) -> None:
+    hub = Hub(work_us, work_thread)
     server = await asyncio.get_running_loop().create_server(lambda: Connection(hub), host, port)
     bound = server.sockets[0].getsockname()[1]
     print(f"floor: - on http://{host}:{bound}", flush=True)
@@ -178,9 +190,11 @@ def main() -> None:
     ap.add_argument("--port", type=int, default=0)
     ap.add_argument("--work-us", type=float, default=0.0,
                     help="CPU to spend per event (µs) before answering an add: a costlier server")
+    ap.add_argument("--work-thread", action="store_true",
+                    help="do that work on a worker thread, as a store's writes are")
     args = ap.parse_args()
     try:
-        asyncio.run(serve(args.host, args.port, args.work_us))
+        asyncio.run(serve(args.host, args.port, args.work_us, args.work_thread))
     except KeyboardInterrupt:
         pass
 

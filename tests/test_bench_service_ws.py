@@ -14,6 +14,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parent.parent
 SCRIPT = REPO / "benchmarks" / "bench_service_ws.py"
+FLOOR = ["--floor-server", "--floor-work-us", "20", "--floor-work-thread"]
 
 
 @pytest.mark.parametrize("client,server", [("raw", "slr"), ("websockets", "slr"),
@@ -24,8 +25,7 @@ def test_every_subscriber_gets_every_event_in_order(client, server, tmp_path):
     run = subprocess.run(
         [sys.executable, str(SCRIPT), "--subscribers", "3", "--minutes", "0.02",
          "--latency-seconds", "0.5", "--sample-seconds", "0.5", "--no-in-process",
-         "--client", client] + (["--floor-server", "--floor-work-us", "20"] if server == "floor"
-                                else []),
+         "--client", client] + FLOOR * (server == "floor"),
         capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert run.returncode == 0, run.stderr
     found = re.search(r"service    : 3 WebSocket subscribers, (\d+) events .*: (\d+) complete "
