@@ -24,7 +24,7 @@ import click
 import slr_sql
 
 from .api import KnowledgeBaseAPI
-from .demo import answer_text, value_text
+from .answers import answer_text, value_text
 from .encoding import decode
 from .kb import KnowledgeBase
 from .parser import parse_event_fast

@@ -18,7 +18,7 @@ NOT_ON_IMPORT = (
     "psycopg", "httpx", "certifi", "rclpy", "rosbags", "yaml", "mcap", "uvicorn", "starlette",
     "rich", "prompt_toolkit", "matplotlib", "sqlite_utils", "socket",
     "slr_sql.service.app", "slr_sql.service.client", "slr_sql.service.cli", "slr_sql.fleet",
-    "slr_sql.ros.cli", "slr_sql.viz.cli", "slr_sql.plot",
+    "slr_sql.ros.cli", "slr_sql.viz.cli", "slr_sql.plot", "slr_sql.demo",
     "slr_sql.grammar.slr_parser",   # (the parser's tables: imported by the first parse)
 )
 
