@@ -20,6 +20,7 @@ NOT_ON_IMPORT = (
     "slr_sql.service.app", "slr_sql.service.client", "slr_sql.service.cli", "slr_sql.fleet",
     "slr_sql.ros.cli", "slr_sql.viz.cli", "slr_sql.plot", "slr_sql.demo",
     "slr_sql.grammar.slr_parser",   # (the parser's tables: imported by the first parse)
+    "slr_sql.store.postgres",       # (by the first store opened on a postgresql:// URL)
 )
 
 
