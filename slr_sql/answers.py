@@ -1,4 +1,5 @@
-"""Answers as callers see them: the bindings of a query's named variables, in Python values.
+"""Answers as callers see them: the bindings of a query's named variables, in Python values,
+and their text as the Prolog top level prints it (``slr query``, ``slr shell``, ``slr demo``).
 
 >>> from slr_sql.terms import Var
 >>> X = Var("X"); X.ref = 1; answer_bindings([("X", 0)], [X])
@@ -6,11 +7,13 @@
 """
 from __future__ import annotations
 
+import math
+import re
 from typing import Any
 
 from .terms import Var, deref, to_python
 
-__all__ = ["answer_bindings"]
+__all__ = ["answer_bindings", "value_text", "answer_text"]
 
 
 def answer_bindings(names: list, frame: list, deadline: float | None = None) -> dict[str, Any]:
@@ -25,3 +28,102 @@ def answer_bindings(names: list, frame: list, deadline: float | None = None) -> 
             continue
         answer[name] = to_python(v, deadline)
     return answer
+
+
+_SOLO_ATOMS = {"[]", "{}", "!", ";", ","}
+_PLAIN_ATOM = re.compile(r"[a-z][A-Za-z0-9_]*\Z")
+_SYMBOL_ATOM = re.compile(r"[+\-*/\\^<>=~:.?@#&$]+\Z")
+
+
+def _atom_text(name: str) -> str:
+    if _PLAIN_ATOM.match(name) or _SYMBOL_ATOM.match(name) or name in _SOLO_ATOMS:
+        return name
+    escaped = name.replace("\\", "\\\\").replace("'", "\\'").replace("\n", "\\n")
+    return f"'{escaped}'"
+
+
+def _string_text(text: str) -> str:
+    escaped = text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
+    return f'"{escaped}"'
+
+
+def _number_text(x: float | int, digits: int | None = None) -> str:
+    if isinstance(x, float):
+        if math.isinf(x):
+            return "inf" if x > 0 else "-inf"
+        if math.isnan(x):
+            return "nan"
+        if digits is not None:
+            return repr(round(x, digits) + 0.0)  # + 0.0 turns -0.0 into 0.0
+    return repr(x)
+
+
+def _as_engine_term(value: Any) -> Any:
+    """Turn a returned answer value back into an engine term, so the printer can quote it.
+
+    Returned strings are plain ``str`` (atoms are :class:`slr_sql.Atom`), so a plain ``str``
+    goes back to a Prolog string, not to an atom as ``from_python`` would make it.
+    """
+    from .terms import Atom, String, Struct, Var, make_list
+
+    if isinstance(value, Atom) or isinstance(value, Var):
+        return value
+    if isinstance(value, str):
+        return String(value)
+    if isinstance(value, (list, tuple)):
+        return make_list([_as_engine_term(v) for v in value])
+    if isinstance(value, Struct):
+        return Struct(value.name, tuple(_as_engine_term(a) for a in value.args))
+    return value
+
+
+def value_text(value: Any, digits: int | None = None) -> str:
+    """Prolog text of one answer value: atoms quoted when needed, strings in double quotes.
+    ``digits`` rounds floats for display (the demo); by default they print exactly.
+
+    >>> from slr_sql.terms import Atom
+    >>> value_text(Atom("cup1")), value_text("never-observed"), value_text([1, 2.5])
+    ('cup1', '"never-observed"', '[1,2.5]')
+    """
+    from .terms import Atom, Struct, Var
+
+    if isinstance(value, bool):  # bool is an int subclass; never produced, but be exact
+        return "true" if value else "false"
+    if isinstance(value, Atom):
+        return _atom_text(str(value))
+    if isinstance(value, str):
+        return _string_text(value)
+    if isinstance(value, (int, float)):
+        return _number_text(value, digits)
+    if isinstance(value, (list, tuple)):
+        return "[" + ",".join(value_text(v, digits) for v in value) + "]"
+    if isinstance(value, Var):
+        return str(value)
+    if isinstance(value, Struct) and digits is not None:
+        args = ",".join(value_text(a, digits) for a in value.args)
+        if str(value.name) == "-" and len(value.args) == 2:
+            return value_text(value.args[0], digits) + "-" + value_text(value.args[1], digits)
+        return f"{_atom_text(str(value.name))}({args})"
+    if isinstance(value, Struct):
+        # Lists and strings nested in a compound must print as Prolog, so rebuild the engine
+        # term and let the project's printer (operators, quoting) render it.
+        try:
+            return str(_as_engine_term(value))
+        except Exception:  # printer not available: plain functional notation is still valid
+            return f"{_atom_text(str(value.name))}(" + ",".join(value_text(a) for a in value.args) + ")"
+    return str(value)
+
+
+def answer_text(answer: dict[str, Any]) -> str:
+    """One answer as the Prolog top level prints it, on one line: ``X = a, Y = [1,2]``.
+
+    An answer without variables (a goal that just succeeds) is ``true``.
+    """
+    from .terms import Var
+
+    # X = Y answers {'X': Var('Y'), 'Y': Var('Y')}; like Prolog, do not print "Y = Y".
+    shown = [(name, value) for name, value in answer.items()
+             if not (isinstance(value, Var) and str(value) == name)]
+    if not shown:
+        return "true"
+    return ", ".join(f"{name} = {value_text(value)}" for name, value in shown)

@@ -24,7 +24,7 @@ import click
 import slr_sql
 
 from .api import KnowledgeBaseAPI
-from .demo import answer_text, value_text
+from .answers import answer_text, value_text
 from .encoding import decode
 from .kb import KnowledgeBase
 from .parser import parse_event_fast
@@ -127,7 +127,23 @@ def one_liner(command: click.Command) -> str:
 
 class SLRGroup(click.Group):
     """Turns every error into the CLI's error contract (words, exit 1) instead of a
-    traceback; click's own usage errors and exits pass through."""
+    traceback; click's own usage errors and exits pass through.
+
+    The commands in :data:`LAZY_COMMANDS` are imported when first asked for: by name, by
+    ``--help`` (which lists every command) or by a name that is none (click's "Did you mean"
+    picks from every command)."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted({*self.commands, *LAZY_COMMANDS})
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        if cmd_name not in self.commands:
+            for name in [cmd_name] if cmd_name in LAZY_COMMANDS else list(LAZY_COMMANDS):
+                if name not in self.commands:
+                    command = LAZY_COMMANDS[name]()
+                    _whole_one_liners(command)
+                    self.add_command(command, name)
+        return super().get_command(ctx, cmd_name)
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         rows = []
@@ -1744,14 +1760,42 @@ def cooked_keys_typed_ahead(stream: Any, editor_input: Any) -> None:
         store_typeahead(editor_input, get_typeahead(editor_input) + keys)
 
 
-from .ros.cli import ros as _ros  # noqa: E402 - `slr ros` (its extra is imported on use)
-main.add_command(_ros)
-from .viz.cli import export_command as _export, foxglove_command as _foxglove  # noqa: E402
-main.add_command(_foxglove)
-main.add_command(_export)
+def _ros_command() -> click.Command:
+    from .ros.cli import ros  # `slr ros` (its extra is imported on use)
 
-from .fleet import click_group as _fleet_group  # noqa: E402 - `slr fleet push|status`
-main.add_command(_fleet_group())
+    return ros
+
+
+def _foxglove_command() -> click.Command:
+    from .viz.cli import foxglove_command
+
+    return foxglove_command
+
+
+def _export_command() -> click.Command:
+    from .viz.cli import export_command
+
+    return export_command
+
+
+def _fleet_command() -> click.Command:
+    from .fleet import click_group  # `slr fleet push|status`
+
+    return click_group()  # type: ignore[no-any-return]
+
+
+def _serve_command() -> click.Command:
+    from .service.cli import serve  # its body imports uvicorn when run
+
+    return serve
+
+
+# The commands defined in other modules, by name, each imported when first asked for (see
+# SLRGroup): together their modules cost every other command ~8 ms of imports.
+LAZY_COMMANDS: dict[str, Callable[[], click.Command]] = {
+    "ros": _ros_command, "foxglove": _foxglove_command, "export": _export_command,
+    "fleet": _fleet_command, "serve": _serve_command,
+}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1914,22 +1958,18 @@ def stats(db: str) -> None:
         click.echo(format_stats(store, db))
 
 
-from .service.cli import serve  # noqa: E402  (slr serve; its body imports uvicorn when run)
-
-main.add_command(serve)
-
-
-def _whole_one_liners(group: click.Group) -> None:
-    """Every subcommand of every group (``slr ros``, ``slr fleet``, ...) lists with its first
-    sentence whole in its group's --help, as the top-level commands do."""
-    for command in group.commands.values():
-        if not command.short_help:
-            command.short_help = one_liner(command)
-        if isinstance(command, click.Group):
-            _whole_one_liners(command)
+def _whole_one_liners(command: click.Command) -> None:
+    """A command and every subcommand of a group (``slr ros``, ``slr fleet``, ...) list with
+    their first sentence whole in their group's --help, as the top-level commands do."""
+    if not command.short_help:
+        command.short_help = one_liner(command)
+    if isinstance(command, click.Group):
+        for subcommand in command.commands.values():
+            _whole_one_liners(subcommand)
 
 
-_whole_one_liners(main)   # (last: after every command was added)
+for _command in main.commands.values():   # (last: after every command was added; the lazy
+    _whole_one_liners(_command)            # ones when SLRGroup loads them)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -17,19 +17,19 @@ observed, and which objects can be used for tea.  Everything runs through the pu
 (``slr_sql.open``, ``kb.load``, ``kb.add_many``, ``kb.query``, ``kb.explain``) so the demo
 doubles as a worked example of it.
 
-This module also holds the answer formatting the CLI shares (:func:`value_text`,
-:func:`answer_text`), because the demo prints answers exactly like ``slr query`` does.
+The demo prints answers exactly like ``slr query`` does: with :func:`value_text` and
+:func:`answer_text` of :mod:`slr_sql.answers`, which this module still offers.
 """
 from __future__ import annotations
 
 import concurrent.futures
 import math
-import re
 from dataclasses import dataclass, field
 from typing import Any, Iterable
 
 import slr_sql
 
+from .answers import answer_text, value_text
 from .store import quote_identifier
 from .api import KnowledgeBaseAPI
 from .kb import KnowledgeBase
@@ -38,108 +38,6 @@ __all__ = [
     "ROBOT_PROGRAM", "EVENT_RULES", "TABLE_SWEEP", "DemoQuery", "DemoResult", "scenario_events",
     "open_robot_kb", "demo_queries", "run_demo", "value_text", "answer_text",
 ]
-
-# --------------------------------------------------------------------------------------------
-# Answer formatting (shared with the CLI)
-# --------------------------------------------------------------------------------------------
-
-_SOLO_ATOMS = {"[]", "{}", "!", ";", ","}
-_PLAIN_ATOM = re.compile(r"[a-z][A-Za-z0-9_]*\Z")
-_SYMBOL_ATOM = re.compile(r"[+\-*/\\^<>=~:.?@#&$]+\Z")
-
-
-def _atom_text(name: str) -> str:
-    if _PLAIN_ATOM.match(name) or _SYMBOL_ATOM.match(name) or name in _SOLO_ATOMS:
-        return name
-    escaped = name.replace("\\", "\\\\").replace("'", "\\'").replace("\n", "\\n")
-    return f"'{escaped}'"
-
-
-def _string_text(text: str) -> str:
-    escaped = text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
-    return f'"{escaped}"'
-
-
-def _number_text(x: float | int, digits: int | None = None) -> str:
-    if isinstance(x, float):
-        if math.isinf(x):
-            return "inf" if x > 0 else "-inf"
-        if math.isnan(x):
-            return "nan"
-        if digits is not None:
-            return repr(round(x, digits) + 0.0)  # + 0.0 turns -0.0 into 0.0
-    return repr(x)
-
-
-def _as_engine_term(value: Any) -> Any:
-    """Turn a returned answer value back into an engine term, so the printer can quote it.
-
-    Returned strings are plain ``str`` (atoms are :class:`slr_sql.Atom`), so a plain ``str``
-    goes back to a Prolog string, not to an atom as ``from_python`` would make it.
-    """
-    from .terms import Atom, String, Struct, Var, make_list
-
-    if isinstance(value, Atom) or isinstance(value, Var):
-        return value
-    if isinstance(value, str):
-        return String(value)
-    if isinstance(value, (list, tuple)):
-        return make_list([_as_engine_term(v) for v in value])
-    if isinstance(value, Struct):
-        return Struct(value.name, tuple(_as_engine_term(a) for a in value.args))
-    return value
-
-
-def value_text(value: Any, digits: int | None = None) -> str:
-    """Prolog text of one answer value: atoms quoted when needed, strings in double quotes.
-    ``digits`` rounds floats for display (the demo); by default they print exactly.
-
-    >>> value_text(slr_sql.Atom("cup1")), value_text("never-observed"), value_text([1, 2.5])
-    ('cup1', '"never-observed"', '[1,2.5]')
-    """
-    from .terms import Atom, Struct, Var
-
-    if isinstance(value, bool):  # bool is an int subclass; never produced, but be exact
-        return "true" if value else "false"
-    if isinstance(value, Atom):
-        return _atom_text(str(value))
-    if isinstance(value, str):
-        return _string_text(value)
-    if isinstance(value, (int, float)):
-        return _number_text(value, digits)
-    if isinstance(value, (list, tuple)):
-        return "[" + ",".join(value_text(v, digits) for v in value) + "]"
-    if isinstance(value, Var):
-        return str(value)
-    if isinstance(value, Struct) and digits is not None:
-        args = ",".join(value_text(a, digits) for a in value.args)
-        if str(value.name) == "-" and len(value.args) == 2:
-            return value_text(value.args[0], digits) + "-" + value_text(value.args[1], digits)
-        return f"{_atom_text(str(value.name))}({args})"
-    if isinstance(value, Struct):
-        # Lists and strings nested in a compound must print as Prolog, so rebuild the engine
-        # term and let the project's printer (operators, quoting) render it.
-        try:
-            return str(_as_engine_term(value))
-        except Exception:  # printer not available: plain functional notation is still valid
-            return f"{_atom_text(str(value.name))}(" + ",".join(value_text(a) for a in value.args) + ")"
-    return str(value)
-
-
-def answer_text(answer: dict[str, Any]) -> str:
-    """One answer as the Prolog top level prints it, on one line: ``X = a, Y = [1,2]``.
-
-    An answer without variables (a goal that just succeeds) is ``true``.
-    """
-    from .terms import Var
-
-    # X = Y answers {'X': Var('Y'), 'Y': Var('Y')}; like Prolog, do not print "Y = Y".
-    shown = [(name, value) for name, value in answer.items()
-             if not (isinstance(value, Var) and str(value) == name)]
-    if not shown:
-        return "true"
-    return ", ".join(f"{name} = {value_text(value)}" for name, value in shown)
-
 
 # --------------------------------------------------------------------------------------------
 # The scenario

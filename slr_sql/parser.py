@@ -22,14 +22,10 @@ import gc
 import re
 import threading
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-# The LALR parser is a module generated from grammar/slr.lark by lark's standalone tool
-# (grammar/__init__.py says how): it needs no `lark` at run time, so it works whichever
-# `lark` an environment has -- lark-parser 0.12 (which ROS 2's rosidl parser installs into
-# the same `lark/` directory) or none.
-from .grammar.slr_parser import (Lark, Lark_StandAlone, Token, Transformer, UnexpectedCharacters,
-                                 UnexpectedInput, UnexpectedToken)
+if TYPE_CHECKING:
+    from .grammar.slr_parser import Lark
 
 from .errors import SLRSyntaxError
 from .lockorder import ordered_lock
@@ -52,6 +48,20 @@ _GOAL_OPS = frozenset((":-", "?-", ",", ";", "|", "->", "*->", "\\+"))
 _CONTROL = frozenset((",", ";", "|", "->", "*->", "\\+"))
 
 _state = threading.local()
+
+
+class _NotLoaded(Exception):
+    """Stands for lark's classes below until :func:`_parser` imports the parser's module:
+    nothing is one, nothing raises it."""
+
+
+# Bound to the parser module's classes by _load_parser (before the first parse). The module
+# is imported then, not with this one: ~12 ms (its tables) that the processes which parse
+# nothing -- most `slr` commands on a store without rules -- no longer pay.
+Token: Any = _NotLoaded
+UnexpectedInput: Any = _NotLoaded
+UnexpectedCharacters: Any = _NotLoaded
+UnexpectedToken: Any = _NotLoaded
 
 
 class _Fail(Exception):
@@ -365,8 +375,9 @@ class _Resolver:
 
 
 # ----------------------------------------------------------------------- transformer
-class _Builder(Transformer):
-    """Inline LALR callbacks: build terms while parsing (no parse tree is materialised).
+class _Callbacks:
+    """Inline LALR callbacks: build terms while parsing (no parse tree is materialised);
+    lark's ``Transformer`` is added as a base by :func:`_load_parser`.
 
     ``fitems``/``aitems``/``litems`` collect one sequence item per step (tokens become
     items here); the enclosing rule resolves the sequence with :class:`_Resolver`.
@@ -581,8 +592,26 @@ def _parser() -> Lark:
                 # inside an unclosed bracket as the symbol atom `.` (END is not acceptable
                 # there), moving the error to the end of the file.
                 # (generated with: -s program -s query -l basic, no placeholders)
-                _LARK = Lark_StandAlone(transformer=_Builder())
+                _LARK = _load_parser()
     return _LARK
+
+
+def _load_parser() -> Lark:
+    global Token, UnexpectedInput, UnexpectedCharacters, UnexpectedToken
+    # The LALR parser is a module generated from grammar/slr.lark by lark's standalone tool
+    # (grammar/__init__.py says how): it needs no `lark` at run time, so it works whichever
+    # `lark` an environment has -- lark-parser 0.12 (which ROS 2's rosidl parser installs
+    # into the same `lark/` directory) or none.
+    from .grammar import slr_parser
+
+    Token, UnexpectedInput = slr_parser.Token, slr_parser.UnexpectedInput
+    UnexpectedCharacters, UnexpectedToken = (slr_parser.UnexpectedCharacters,
+                                             slr_parser.UnexpectedToken)
+
+    class _Builder(_Callbacks, slr_parser.Transformer):
+        pass
+
+    return slr_parser.Lark_StandAlone(transformer=_Builder())
 
 
 # Typical mistakes, matched against the parser state of the error by lark's

@@ -5,19 +5,20 @@ from __future__ import annotations
 import contextlib
 import gc
 import importlib.util
-import ipaddress
 import logging
 import signal
-import socket
 import sys
 import threading
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
 import slr_sql
 
 from ..store import DEFAULT_BUSY_TIMEOUT
+
+if TYPE_CHECKING:
+    import socket
 
 __all__ = ["serve", "run_server", "is_loopback"]
 
@@ -61,6 +62,11 @@ def is_loopback(host: str) -> bool:
     >>> is_loopback("127.0.0.1"), is_loopback("::1"), is_loopback("0.0.0.0"), is_loopback("")
     (True, True, False, False)
     """
+    # socket and ipaddress are imported here and in _listen, where used: every `slr` command
+    # imports this module (its `serve` is on the group), and socket costs ~5 ms to import
+    import ipaddress
+    import socket
+
     host = host.strip().strip("[]")
     if not host:
         return False      # "" binds every interface
@@ -80,6 +86,8 @@ def is_loopback(host: str) -> bool:
 
 def _listen(host: str, port: int) -> socket.socket:
     """A listening socket on host:port (port 0: any free port)."""
+    import socket
+
     try:
         infos = socket.getaddrinfo(host or None, port, type=socket.SOCK_STREAM,
                                    flags=socket.AI_PASSIVE)

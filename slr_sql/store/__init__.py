@@ -57,13 +57,12 @@ from .buffering import (ArgEquals, BufferPlan, BufferTables, JsonArray, JsonEqua
 from .catalog import Catalog, ProgramText
 from .checks import format_event
 from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, DatabaseError, \
-    ReadConnection, refuse_no_store, run_sql_file
+    ReadConnection, is_postgres_url, refuse_no_store, run_sql_file
 from .events import Event, EventBatch, EventWriter
 from .fleet import Fleet, RouteConflict, WriterInFlight, check_robot_name
 from .functions import SqlFunctions
 from .journals import JournalReader, SubscriptionRecord, SubscriptionTables
 from .lookups import EventReader, Row, null_argument_text
-from .postgres import PgDatabase, is_postgres_url
 from .schema import migration_scripts
 from .space import ServerSpace, Space
 from .sqltext import quote_identifier, split_sql_script, sql_literal, store_error
@@ -112,6 +111,9 @@ class EventStore:
             check_robot_name(robot)
         db: Any
         if is_postgres_url(path):
+            # imported here: ~2 ms of every process that opens a store, most of them SQLite's
+            from .postgres import PgDatabase
+
             db = PgDatabase(str(path), clock, busy_timeout=busy_timeout, adopt=adopt)
         else:
             db = Database(path, clock, synchronous, busy_timeout, adopt, checkpoint,

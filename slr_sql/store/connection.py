@@ -47,7 +47,7 @@ from .sqltext import bound_parameters, busy_error, quote_identifier, split_sql_s
 from .sqltext import file_identity as _file_identity, file_uri as _file_uri
 
 __all__ = ["Database", "DatabaseError", "ReadConnection", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
-           "run_sql_file", "check_file", "refuse_no_store", "check_busy_timeout"]
+           "run_sql_file", "check_file", "refuse_no_store", "check_busy_timeout", "is_postgres_url"]
 
 # The base class of the errors the database raises while running a statement (a missing
 # table, a syntax error, a constraint, an interrupted statement...; a condition of the file
@@ -237,6 +237,15 @@ def _read_schema(path: str, header: bytes) -> tuple[list[tuple[str, str]], int]:
             raise reason
         raise SLRError(f"{path}: cannot read it ({error})")
     raise SLRError(f"{path}: the file is damaged ({error})")
+
+
+def is_postgres_url(where: Any) -> bool:
+    """True for ``postgresql://...`` and ``postgres://...``.
+
+    >>> is_postgres_url("postgres://u@h/db"), is_postgres_url("robot.db")
+    (True, False)
+    """
+    return isinstance(where, str) and where.startswith(("postgresql://", "postgres://"))
 
 
 def refuse_no_store(path: str) -> None:

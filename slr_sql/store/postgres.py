@@ -35,7 +35,7 @@ from ..errors import SLRBusy, SLRCancelled, SLRError, SLRServerUnreachable, SLRS
     SLRUnavailable
 from ..lockorder import ordered_lock
 from .connection import Database, DatabaseError, drop_commit_callbacks, in_own_transaction, \
-    merge_commit_callbacks, run_after_rollback, \
+    is_postgres_url, merge_commit_callbacks, run_after_rollback, \
     run_commit_callbacks
 from .authorizer import transaction_control_refusal
 from .dialect import POSTGRES
@@ -61,15 +61,6 @@ class PgStatementError(sqlite3.DatabaseError):
     It derives from ``sqlite3.DatabaseError`` only so that the store's one
     :data:`~slr_sql.store.DatabaseError` (which the layers above catch, and which is
     ``sqlite3.Error``) covers both engines without a tuple in every ``except``."""
-
-
-def is_postgres_url(where: Any) -> bool:
-    """True for ``postgresql://...`` and ``postgres://...``.
-
-    >>> is_postgres_url("postgres://u@h/db"), is_postgres_url("robot.db")
-    (True, False)
-    """
-    return isinstance(where, str) and where.startswith(("postgresql://", "postgres://"))
 
 
 def split_url(url: str) -> tuple[str, str]:
