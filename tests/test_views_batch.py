@@ -119,3 +119,23 @@ def test_a_failing_batch_of_new_types_changes_no_view(places):
         with pytest.raises(EventRejected):
             kb.add_many(["e1(a)^2", "e2(a)^3", "r3(x, y)^2", "a(1)^[3, 2]"], atomic=True)
         assert _schema(kb) == before
+
+
+def test_a_load_declaring_new_types_makes_the_views_once(places, monkeypatch):
+    """A load's declared types and its event rules' complex types are one batch: the views
+    are made by the load (and once more for complex types made after them), and are those
+    of the program over all its tables."""
+    made = []
+    refresh = planner.refresh_views
+    monkeypatch.setattr(planner, "refresh_views", lambda kb: made.append(1) or refresh(kb))
+    one, two = places
+    declared = ":- event e0/1, e1/1, e2/1, a/1.\n"
+    with slr_sql.open(one, clock=slr_sql.ManualClock(10.0)) as kb:
+        made.clear()
+        kb.load(declared + PROGRAM)
+        assert len(made) == 1
+        loaded = _schema(kb)
+    with slr_sql.open(two, clock=slr_sql.ManualClock(10.0)) as kb:
+        kb.load(declared)   # the tables first, then the program over them
+        kb.load(PROGRAM)
+        assert _schema(kb) == loaded
