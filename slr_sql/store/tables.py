@@ -348,8 +348,10 @@ class EventTables:
     def _choose_table_name(self, name: str, arity: int) -> str:
         base = self._table_base(name, arity)
         if self._batch_new and self.batch_names:
-            lowered_base = base.lower()   # (every candidate below starts with base)
-            if any(claimed.startswith(lowered_base)
+            # (the candidates below: base, base__<arity>, base__<arity>_<n>)
+            lowered = base.lower()
+            longer = lowered + "__"
+            if any(claimed == lowered or claimed.startswith(longer)
                    for names in self.batch_names for claimed in names()):
                 self._run_batch_hooks()
         taken = self.db.object_names()
@@ -383,7 +385,14 @@ class EventTables:
     def begin_batch(self) -> None:
         """Start a batch of table creations (lock held, inside the transaction that makes
         them; batches nest): :attr:`tables_created_hooks` run once, at the outermost
-        :meth:`end_batch` that is given ``ok``."""
+        :meth:`end_batch` that is given ``ok``.
+
+        >>> tables = EventTables(Database(None)); seen = []
+        >>> tables.tables_created_hooks.append(seen.append)
+        >>> tables.begin_batch(); _ = tables.declare_type("a", 1); tables.end_batch(False)
+        >>> seen   # (a batch that failed: its caller rolls its tables back)
+        []
+        """
         self._batch_depth += 1
 
     def end_batch(self, ok: bool) -> None:
