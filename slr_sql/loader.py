@@ -284,16 +284,19 @@ class ProgramLoader:
         everything is as before."""
         old = (self.program, self.declarations, self.version, dict(self._parsed))
         try:
-            text_id = write()
-            if parsed is not None:
-                self._parsed[text_id] = parsed
-            declared = self.store.declared_types()
-            for type_name, arity in sorted(decls.event_types - declared):
-                self.store.declare_type(type_name, arity)
-            self.program, self.declarations = program, decls
-            self.version = self.store.program_version()
-            for listener in self.host.load_listeners:
-                listener(self.host)
+            # the tables declared here and by the listeners (event rules' complex types):
+            # the views are made again once more at the end if one of them is read
+            with self.store.table_batch():
+                text_id = write()
+                if parsed is not None:
+                    self._parsed[text_id] = parsed
+                declared = self.store.declared_types()
+                for type_name, arity in sorted(decls.event_types - declared):
+                    self.store.declare_type(type_name, arity)
+                self.program, self.declarations = program, decls
+                self.version = self.store.program_version()
+                for listener in self.host.load_listeners:
+                    listener(self.host)
         except BaseException:
             self.program, self.declarations, self.version, self._parsed = old
             raise

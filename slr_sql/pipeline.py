@@ -286,7 +286,8 @@ class EventPipeline:
         cep = self.cep
         if not (cep.active and events):
             return self.store.add_events(events, atomic=atomic), []
-        with self.store.transaction():
+        # the tables the batch and its complex events make: the views made again once
+        with self.store.transaction(), self.store.table_batch():
             rounds = cep.rounds(events)
             if len(rounds) == 1:
                 token = cep.before_add(events)

@@ -73,6 +73,9 @@ class _State:
         # the event types whose tables the views of kb's program wait for (None: not known
         # in this connection, whose program another connection loaded)
         self.view_missing: set | None = None
+        # the (lower case) names views of a program may take, and that program
+        self.view_names: set = set()
+        self.view_names_program = None
 
     def fact_tables(self, kb) -> dict:
         """The fact tables of kb's program. They are written by whoever changes the stored
@@ -140,15 +143,16 @@ def attach(kb) -> None:
     kb.engine.sql_calls = compiled_calls(kb)   # the program restored from the file
     kb.load_listeners.append(refresh)
     kb.reload_listeners.append(reloaded)
-    hooks = kb.store.table_created_hooks
     ref = weakref.ref(kb)
 
-    def on_table(name, arity, table):
+    def on_tables(new):
+        # once per batch of new tables (an add of several new types), in its transaction
         k = ref()
         if k is None:
             return
         st = state_of(k)
-        if st.view_missing is None or (name, arity) in st.view_missing:
+        missing = st.view_missing
+        if missing is None or any((name, arity) in missing for name, arity, _ in new):
             try:
                 k.loader.ensure_current()   # (inside the add's transaction: the stored program)
                 if k.program.preds:
@@ -157,7 +161,23 @@ def attach(kb) -> None:
                     st.view_missing = set()   # no predicates, no views
             except Exception:
                 pass
-    hooks.append(on_table)
+
+    def view_names():
+        # the names the views of the program in force may take (a new table named one of
+        # them while a refresh is pending is named after it: as without batches)
+        k = ref()
+        if k is None:
+            return ()
+        st = state_of(k)
+        program = k.program
+        if st.view_names_program is not program:
+            view_name = k.store.view_name
+            st.view_names = {view_name(name).lower() for name, _ in program.preds}
+            st.view_names_program = program
+        return st.view_names
+
+    kb.store.tables_created_hooks.append(on_tables)
+    kb.store.batch_names.append(view_names)
 
 
 def reloaded(kb) -> None:

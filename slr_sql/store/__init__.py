@@ -171,6 +171,44 @@ class EventStore:
         self._tables.table_created_hooks = hooks
 
     @property
+    def tables_created_hooks(self) -> list:
+        """Called as ``hook([(name, arity, table), ...])`` once per batch of new event
+        tables (an add, a :meth:`table_batch`), inside its transaction after the batch's
+        work; a table made outside a batch is a batch of its own (slr_sql.planner makes its
+        views again there)."""
+        return self._tables.tables_created_hooks
+
+    @property
+    def batch_names(self) -> list:
+        """Callables giving the names (lower case) the :attr:`tables_created_hooks` may
+        create objects with: a new table whose name could be one of them is named after
+        the batch's pending hooks ran, as if they had run at every table."""
+        return self._tables.batch_names
+
+    @contextmanager
+    def table_batch(self) -> Iterator[None]:
+        """The new tables made inside are one batch for :attr:`tables_created_hooks`
+        (run as it ends, unless it raises); used inside a transaction.
+
+        >>> s = EventStore(None); seen = []; s.tables_created_hooks.append(seen.append)
+        >>> with s.transaction(), s.table_batch():
+        ...     _ = s.add_events([("a", (1,), 1.0, 1.0)]); _ = s.declare_type("b", 0)
+        ...     print(seen)
+        []
+        >>> seen
+        [[('a', 1, 'a'), ('b', 0, 'b')]]
+        """
+        tables = self._tables
+        with self._db.lock:
+            tables.begin_batch()
+            ok = False
+            try:
+                yield
+                ok = True
+            finally:
+                tables.end_batch(ok)
+
+    @property
     def rollback_listeners(self) -> list:
         """Called as ``listener()`` after a transaction, or a nested one, rolled back (what
         a caller learned inside it may be gone).

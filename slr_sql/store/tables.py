@@ -34,7 +34,7 @@ from __future__ import annotations
 import hashlib
 import re
 import sqlite3
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 from ..errors import SLRError, SLRUnavailable
 from .connection import Database, DatabaseError
@@ -245,6 +245,16 @@ class EventTables:
         # buffers: called as hook(name, arity, table) inside the transaction that
         # creates a new event type's table (slr_sql.buffers installs its triggers there)
         self.table_created_hooks: list[Callable[[str, int, str], Any]] = []
+        # the planner's views: called as hook([(name, arity, table), ...]) once per batch
+        # of new tables (begin_batch .. end_batch: an add), inside its transaction after
+        # the batch's work; a table made outside a batch is a batch of its own. And the
+        # names (lower case) such a hook may give to what it creates: a new table whose
+        # name could be one of them is named after the pending hooks ran, as it would be
+        # had they run at each table
+        self.tables_created_hooks: list[Callable[[list[tuple[str, int, str]]], Any]] = []
+        self.batch_names: list[Callable[[], Iterable[str]]] = []
+        self._batch_depth = 0
+        self._batch_new: list[tuple[str, int, str]] = []
         # types created inside were rolled back too, and indexes built inside
         db.rollback_listeners.append(self._rolled_back)
         # tables whose start-ordered indexes this connection may not build (refused for
@@ -336,11 +346,30 @@ class EventTables:
         return event_type
 
     def _choose_table_name(self, name: str, arity: int) -> str:
+        base = self._table_base(name, arity)
+        if self._batch_new and self.batch_names:
+            # (the candidates below: base, base__<arity>, base__<arity>_<n>)
+            lowered = base.lower()
+            longer = lowered + "__"
+            if any(claimed == lowered or claimed.startswith(longer)
+                   for names in self.batch_names for claimed in names()):
+                self._run_batch_hooks()
         taken = self.db.object_names()
 
         def free(candidate: str) -> bool:
             return all(n.lower() not in taken for n in [candidate] + _index_names(candidate))
 
+        if free(base):
+            return base
+        candidate = f"{base}__{arity}"
+        suffix = 2
+        while not free(candidate):
+            candidate = f"{base}__{arity}_{suffix}"
+            suffix += 1
+        return candidate
+
+    def _table_base(self, name: str, arity: int) -> str:
+        """The first name tried for the table of name/arity."""
         lowered = name.lower()
         if (SAFE_IDENTIFIER.match(name) and not lowered.startswith(RESERVED_PREFIXES)
                 and lowered not in SQL_KEYWORDS):
@@ -351,14 +380,46 @@ class EventTables:
             # an engine that cuts names (PostgreSQL: 63 bytes) would give the table's four
             # indexes (slr_ix__<table>__a1_start, ...) and the event rules' ones one name
             base = _shortened(base, name, arity)
-        if free(base):
-            return base
-        candidate = f"{base}__{arity}"
-        suffix = 2
-        while not free(candidate):
-            candidate = f"{base}__{arity}_{suffix}"
-            suffix += 1
-        return candidate
+        return base
+
+    def begin_batch(self) -> None:
+        """Start a batch of table creations (lock held, inside the transaction that makes
+        them; batches nest): :attr:`tables_created_hooks` run once, at the outermost
+        :meth:`end_batch` that is given ``ok``.
+
+        >>> tables = EventTables(Database(None)); seen = []
+        >>> tables.tables_created_hooks.append(seen.append)
+        >>> tables.begin_batch(); _ = tables.declare_type("a", 1); tables.end_batch(False)
+        >>> seen   # (a batch that failed: its caller rolls its tables back)
+        []
+        """
+        self._batch_depth += 1
+
+    def end_batch(self, ok: bool) -> None:
+        """End a batch begun by :meth:`begin_batch`; ``ok``: its work is done (not
+        failing), so the outermost runs the hooks for the tables it made, in the same
+        transaction (a failing batch's are taken back with it).
+
+        >>> tables = EventTables(Database(None)); seen = []
+        >>> tables.tables_created_hooks.append(seen.append)
+        >>> tables.begin_batch(); _ = tables.declare_type("a", 1); _ = tables.declare_type("b", 0)
+        >>> seen
+        []
+        >>> tables.end_batch(True); seen
+        [[('a', 1, 'a'), ('b', 0, 'b')]]
+        """
+        try:
+            if ok and self._batch_depth == 1 and self._batch_new:
+                self._run_batch_hooks()
+        finally:
+            self._batch_depth -= 1
+            if not self._batch_depth:
+                self._batch_new = []
+
+    def _run_batch_hooks(self) -> None:
+        new, self._batch_new = self._batch_new, []
+        for hook in self.tables_created_hooks:  # the planner's views
+            hook(new)
 
     def register(self, name: str, arity: int, declared: bool,
                  start_order: bool = False) -> EventType:
@@ -401,6 +462,10 @@ class EventTables:
             self.declared_arities.setdefault(name, set()).add(arity)
         for hook in self.table_created_hooks:  # buffers
             hook(name, arity, table)
+        if self.tables_created_hooks:
+            self._batch_new.append((name, arity, table))
+            if not self._batch_depth:
+                self._run_batch_hooks()
         return event_type
 
     def _create_start_indexes(self, event_type: EventType) -> None:
