@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from typing import Any, cast
 
 from .answers import answer_bindings
-from .encoding import Unencodable, decode_answer, encode
+from .encoding import JSON_STARTS, Unencodable, decode_answer, encode
 from .errors import SLRError
 from .parser import parse_term
 from .program import Slot, Template, build, compile_clause
@@ -249,6 +249,12 @@ class BoundPrev:
             v = source[1] if type(source) is tuple else args[source]
             tv = type(v)
             if tv is str:
+                if v.isascii() and v[:1] not in JSON_STARTS:
+                    # stored as it is (what encode(Atom(v)) gives); made an atom only if
+                    # an answer shows it
+                    values.append(v)
+                    terms.append(v)
+                    continue
                 v = Atom(v)
             elif tv is float:
                 if v != v:
@@ -276,7 +282,11 @@ class BoundPrev:
         if self.given:
             base = base.copy()
             for name, k in self.given:
-                base[name] = to_python(terms[k]) if k >= 0 else t
+                if k < 0:
+                    base[name] = t
+                else:
+                    term = terms[k]
+                    base[name] = Atom(term) if type(term) is str else to_python(term)
         decoded, columns = self.decoded, self.columns
         answers = []
         for row in rows:
