@@ -131,3 +131,19 @@ def test_another_connections_mark_is_seen_when_nothing_matches(db_path):
         other.mark_complete("s/1", 10)
         assert kb.query(goal, args={"A": "zz", "T": 5}) == []
         assert pending.result(timeout=10) == [{"X": "b", "Z": 1.0}]
+
+
+def test_bound_prev_on_each_backend_equals_the_interpreter(backend):
+    """On PostgreSQL the lookup's rows come back in its typed columns and are converted to
+    the stored form (the dialect's from_column) before they are decoded."""
+    events = [(Atom("cup"), make_list([0.1, 2, -3.5]), 1, 0), (Atom("cup"), 1, 2, 0),
+              (Atom("[x"), String("s"), 2, 0), (1, Struct(Atom("f"), (1, Atom("x"))), 3, 0),
+              (1.0, Atom("[]"), 4, 1)]
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add_many([("p", (k, v), s, s + d) for k, v, s, d in events])
+        for key in ("cup", "[x", 1, 1.0, "none"):
+            for goal in ("prev(p(A, B)^Z, T)", "prev(p(A, B)^[S, E], T)"):
+                args = {"A": key, "T": 9}
+                want = reference(kb, goal, args)
+                for _ in range(2):   # the plan's first use, then the cached plan
+                    assert answered(kb, goal, args) == want, (goal, key)
