@@ -4,6 +4,14 @@
     python benchmarks/bench_query.py --sizes 10000
     python benchmarks/bench_query.py --sizes 100000 --before /tmp/old   # before/after, one run
 
+    python benchmarks/bench_query.py --sizes 100000 --cpu-before /tmp/old      # CPU, paired
+
+``--cpu-before DIR``: process CPU per lookup of kb.query, this code against the checkout
+``DIR``, each in a worker process on a file of the same events that it built itself, in
+chunks of 2,000 lookups in alternation (A B, B A, ...; ``--rounds`` pairs): the two sides of a
+pair ran within a second of each other, so the ratio per pair holds up on a loaded machine
+where wall latency does not.
+
 ``--before DIR``: a checkout of earlier code (e.g. ``git archive COMMIT | tar -x -C DIR``)
 measured in a child process on a file of the same events that it built itself, in alternation
 with this code (rounds of
@@ -22,6 +30,7 @@ import os
 import subprocess
 import random
 import sqlite3
+import statistics
 import sys
 import tempfile
 import time
@@ -114,7 +123,79 @@ def compare(args) -> None:
                 f"{r['api_p50'] / r['raw_p50']:.2f}" for r in new), flush=True)
 
 
+CHUNK = 2000
+
+
+def cpu_worker(path: Path, n: int) -> None:
+    """The worker of --cpu-before: after "ready", one chunk of CHUNK lookups per line read,
+    answered with the process CPU per lookup (µs)."""
+    if not path.exists():
+        build(path, n)
+    rng = random.Random(1)
+    probes = [(f"o{rng.randrange(OBJECTS)}", rng.uniform(0, n * 0.01)) for _ in range(CHUNK)]
+    goal = "prev(seg(O, L)^Z, T)"
+    with slr_sql.open(str(path)) as kb:
+        query = kb.query
+        for obj, t in probes:   # warm: the plan, the page cache
+            query(goal, args={"O": obj, "T": t})
+        print("ready", flush=True)
+        for _ in sys.stdin:
+            c0 = time.process_time()
+            for obj, t in probes:
+                query(goal, args={"O": obj, "T": t})
+            print(f"{(time.process_time() - c0) / CHUNK * 1e6:.3f}", flush=True)
+
+
+def cpu_paired(args) -> None:
+    """This code and the code of ``--cpu-before`` in worker processes, chunks in alternation."""
+    def start(code: str, path: Path, n: int) -> subprocess.Popen:
+        worker = subprocess.Popen(
+            [sys.executable, __file__, "--code", code, "--cpu-worker", str(path), str(n)],
+            env=dict(os.environ, PYTHONPATH=code), stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE, text=True)
+        assert worker.stdin is not None and worker.stdout is not None
+        if worker.stdout.readline().strip() != "ready":
+            raise SystemExit(f"the worker of {code} did not start")
+        return worker
+
+    def chunk(worker: subprocess.Popen) -> float:
+        assert worker.stdin is not None and worker.stdout is not None
+        worker.stdin.write("go\n")
+        worker.stdin.flush()
+        return float(worker.stdout.readline())
+
+    this = str(Path(__file__).resolve().parent.parent)
+    print(f"{'events':>10} | {'before CPU/lookup':>24} | {'after CPU/lookup':>24} | "
+          f"after/before per pair")
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in args.sizes:
+            old = start(args.cpu_before, Path(tmp) / f"q{n}-before.db", n)
+            new = start(this, Path(tmp) / f"q{n}.db", n)
+            before, after = [], []
+            for i in range(args.rounds):
+                if i % 2:
+                    after.append(chunk(new))
+                    before.append(chunk(old))
+                else:
+                    before.append(chunk(old))
+                    after.append(chunk(new))
+            for worker in (old, new):
+                assert worker.stdin is not None
+                worker.stdin.close()
+                worker.wait()
+            ratios = sorted(a / b for a, b in zip(after, before))
+            q = len(ratios) // 4
+            print(f"{n:>10} | min {min(before):5.1f} median {statistics.median(before):5.1f} µs | "
+                  f"min {min(after):5.1f} median {statistics.median(after):5.1f} µs | "
+                  f"median {statistics.median(ratios):.3f} "
+                  f"(quartiles {ratios[q]:.3f}-{ratios[-1 - q]:.3f})", flush=True)
+
+
 def main() -> None:
+    if "--cpu-worker" in sys.argv:   # a worker process of --cpu-before
+        i = sys.argv.index("--cpu-worker")
+        cpu_worker(Path(sys.argv[i + 1]), int(sys.argv[i + 2]))
+        return
     if "--measure" in sys.argv:   # the child process of --before
         i = sys.argv.index("--measure")
         path, n, reps = Path(sys.argv[i + 1]), int(sys.argv[i + 2]), int(sys.argv[i + 3])
@@ -125,10 +206,16 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--sizes", type=int, nargs="*", default=[10_000, 100_000, 1_000_000])
     ap.add_argument("--before", help="a checkout of earlier code to compare with, same run")
-    ap.add_argument("--rounds", type=int, default=3, help="--before: alternations per size")
+    ap.add_argument("--cpu-before", help="a checkout of earlier code: process CPU per lookup, "
+                                         "paired chunks in alternation")
+    ap.add_argument("--rounds", type=int, default=3,
+                    help="--before: alternations per size; --cpu-before: pairs of chunks")
     ap.add_argument("--reps", type=int, default=3000, help="lookups per measurement")
     ap.add_argument("--code", help="(internal) the checkout to import slr_sql from")
     args = ap.parse_args()
+    if args.cpu_before:
+        cpu_paired(args)
+        return
     if args.before:
         compare(args)
         return

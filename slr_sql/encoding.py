@@ -103,13 +103,13 @@ event_form_loop: Callable[[list], str | None] | None = getattr(_speedups, "event
 __all__ = ["encode", "encode_column", "decode", "decode_answer", "encode_json", "Unencodable",
            "NullArgument",
            "INT64_MIN", "INT64_MAX", "field_pairs", "column_json", "decode_json", "load_json",
-           "orjson_reads_exactly"]
+           "orjson_reads_exactly", "JSON_STARTS"]
 
 INT64_MIN = -(2 ** 63)
 INT64_MAX = 2 ** 63 - 1
 
 # First characters that mark a TEXT column value as JSON rather than a bare atom.
-_JSON_STARTS = frozenset('[{"')
+JSON_STARTS = _JSON_STARTS = frozenset('[{"')
 
 
 class NullArgument(ValueError):

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from typing import Any, cast
 
 from .answers import answer_bindings
-from .encoding import Unencodable, decode_answer, encode
+from .encoding import JSON_STARTS, Unencodable, decode_answer, encode
 from .errors import SLRError
 from .parser import parse_term
 from .program import Slot, Template, build, compile_clause
@@ -165,13 +165,35 @@ class BoundPrev:
     unification in between. Anything unusual in a call (a value of another type, a number
     stored as another type) returns None and the caller takes :meth:`PrevLookup.run`'s
     path, so answers never differ.
+
+    What each answer variable shows is sorted out here, once, rather than per row: the row's
+    argument columns to decode, its time columns, and the values of the call (a bound
+    argument, the time) set before the rows are read.
+
+    >>> from slr_sql.store import EventStore
+    >>> store = EventStore(None); store.add_events([("p", ("a", 1), 2.0, 2.0)])
+    []
+    >>> plan = PlanCache().plan("prev(p(A, X)^Z, T)", ("A", "T"))
+    >>> plan.bound_lookup.answer(store, {"A": "a", "T": 3.0})[0]
+    [{'A': Atom('a'), 'X': 1, 'Z': 2.0, 'T': 3.0}]
     """
 
-    __slots__ = ("name", "arity", "point", "time", "positions", "sources", "fields")
+    __slots__ = ("name", "arity", "point", "time", "positions", "sources", "template",
+                 "decoded", "columns", "given")
 
-    def __init__(self, name, arity, point, time, positions, sources, fields):
+    def __init__(self, name: str, arity: int, point: bool, time: Any,
+                 sources: tuple[tuple[int, Any], ...], template: dict[str, Any],
+                 decoded: tuple[tuple[str, int], ...], columns: tuple[tuple[str, int], ...],
+                 given: tuple[tuple[str, int], ...]):
         self.name, self.arity, self.point, self.time = name, arity, point, time
-        self.positions, self.sources, self.fields = positions, sources, fields
+        # the bound argument positions, in increasing order, and where each value comes
+        # from: ("const", term) of the goal text, or the name of an args entry
+        self.positions = tuple(position for position, _ in sources)
+        self.sources = sources
+        self.template = template   # the answer variables in order, none set (dict.fromkeys)
+        self.decoded = decoded     # (name, column): a row's argument, decoded
+        self.columns = columns     # (name, column): a row's time, as it is
+        self.given = given         # (name, k): the k-th bound value, or the time (k = -1)
 
     @classmethod
     def prepare(cls, lookup: PrevLookup, bind_slots: dict[str, int],
@@ -185,34 +207,33 @@ class BoundPrev:
             time = by_slot[lookup.time]
         else:
             return None   # an unbound time: the general path raises the instantiation error
-        positions, sources, column = [], [], {}
+        sources: list[tuple[int, Any]] = []
+        column = {}
         for i, a in enumerate(lookup.args):
             if type(a) is tuple:
-                positions.append(i)
-                sources.append(("const", a[1]))
+                sources.append((i, ("const", a[1])))
             elif a in by_slot:
-                positions.append(i)
-                sources.append(by_slot[a])
+                sources.append((i, by_slot[a]))
             else:
                 column[a] = i
+        positions = [position for position, _ in sources]
         stamp = {lookup.stamp[0]: lookup.arity + 1} if lookup.point else {
             lookup.stamp[0]: lookup.arity, lookup.stamp[1]: lookup.arity + 1}
-        # each answer variable: (name, 0 = a row's argument column, 1 = a row's time column,
-        # 2 = a bound argument value, 3 = the time bound by args; index)
-        fields = []
+        decoded, columns, given = [], [], []
         for name, slot in names:
             if slot in column:
-                fields.append((name, 0, column[slot]))
+                decoded.append((name, column[slot]))
             elif slot in stamp:
-                fields.append((name, 1, stamp[slot]))
+                columns.append((name, stamp[slot]))
             elif slot == lookup.time:
-                fields.append((name, 3, 0))
+                given.append((name, -1))
             elif slot in lookup.args:
-                fields.append((name, 2, positions.index(lookup.args.index(slot))))
+                given.append((name, positions.index(lookup.args.index(slot))))
             else:
                 return None
-        return cls(lookup.name, lookup.arity, lookup.point, time, tuple(positions),
-                   tuple(sources), tuple(fields))
+        return cls(lookup.name, lookup.arity, lookup.point, time, tuple(sources),
+                   dict.fromkeys(name for name, _ in names), tuple(decoded), tuple(columns),
+                   tuple(given))
 
     def answer(self, store: EventStore, args: dict) -> tuple[list, tuple | None] | None:
         """The answers and the (program, progress) versions read with them (None when
@@ -224,17 +245,23 @@ class BoundPrev:
         terms = []
         values = []
         checks: list[tuple[int, type, Any]] = []
-        for i, source in enumerate(self.sources):
+        for position, source in self.sources:
             v = source[1] if type(source) is tuple else args[source]
             tv = type(v)
             if tv is str:
+                if v.isascii() and v[:1] not in JSON_STARTS:
+                    # stored as it is (what encode(Atom(v)) gives); made an atom only if
+                    # an answer shows it
+                    values.append(v)
+                    terms.append(v)
+                    continue
                 v = Atom(v)
             elif tv is float:
                 if v != v:
                     return None
-                checks.append((self.positions[i], float, v))
+                checks.append((position, float, v))
             elif tv is int:
-                checks.append((self.positions[i], int, v))
+                checks.append((position, int, v))
             elif tv is not Atom and tv is not String:
                 return None
             try:
@@ -251,14 +278,23 @@ class BoundPrev:
                 if type(x) is not kind or (kind is float and not value
                                            and not same_float(cast(float, x), value)):
                     return None   # SQL's 1 = 1.0 (on SQLite -0.0 = 0.0): not a Prolog match
-        bound = [to_python(term) for term in terms]
-        fields = self.fields
+        base = self.template
+        if self.given:
+            base = base.copy()
+            for name, k in self.given:
+                if k < 0:
+                    base[name] = t
+                else:
+                    term = terms[k]
+                    base[name] = Atom(term) if type(term) is str else to_python(term)
+        decoded, columns = self.decoded, self.columns
         answers = []
         for row in rows:
-            answer = {}
-            for name, kind, i in fields:
-                answer[name] = decode_answer(row[i]) if kind == 0 else row[i] if kind == 1 \
-                    else bound[i] if kind == 2 else t
+            answer = base.copy()
+            for name, i in decoded:
+                answer[name] = decode_answer(row[i])
+            for name, i in columns:
+                answer[name] = row[i]
             answers.append(answer)
         return answers, rows[0][-2:]
 

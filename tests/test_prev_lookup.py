@@ -14,7 +14,7 @@ from slr_sql.terms import Atom, String, Struct, make_list, to_python
 
 # argument values chosen to collide: 1 and 1.0 (equal in SQL, not in Prolog), atoms that look
 # like the JSON of other terms, strings and atoms of one text, the empty list and its atom
-KEYS = [Atom("cup"), Atom("[x"), Atom('{"a":1}'), Atom("[]"), Atom(""), String("cup"),
+KEYS = [Atom("cup"), Atom("café"), Atom("[x"), Atom('{"a":1}'), Atom("[]"), Atom(""), String("cup"),
         String("[x"), 1, 1.0, 2, -0.0, 2 ** 63 - 1, 2 ** 70, 1e300]
 VALUES = KEYS + [make_list([0.1, 2, -3.5]), make_list([]), make_list([1, Atom("a")]),
                  make_list([make_list([1.0])]), Struct(Atom("f"), (1, Atom("x"))),
@@ -24,7 +24,7 @@ EVENTS = st.lists(st.tuples(st.sampled_from(KEYS), st.sampled_from(VALUES),
                             st.integers(0, 6), st.integers(0, 2)), max_size=25)
 # what a caller hands over in args: Python values of every kind the lookup treats itself,
 # and some it leaves to the general path (lists, None, booleans, NaN)
-ARGS = st.sampled_from(["cup", "[x", '{"a":1}', "[]", "", String("cup"), String("[x"),
+ARGS = st.sampled_from(["cup", "café", "[x", '{"a":1}', "[]", "", String("cup"), String("[x"),
                         Atom("cup"), 1, 1.0, 2, -0.0, 2 ** 63 - 1, 2 ** 70, 1e300,
                         [1], None, True, float("nan")])
 TIMES = st.sampled_from([0, 1, 2.5, 3, 6, 9.0, -1])
@@ -131,3 +131,19 @@ def test_another_connections_mark_is_seen_when_nothing_matches(db_path):
         other.mark_complete("s/1", 10)
         assert kb.query(goal, args={"A": "zz", "T": 5}) == []
         assert pending.result(timeout=10) == [{"X": "b", "Z": 1.0}]
+
+
+def test_bound_prev_on_each_backend_equals_the_interpreter(backend):
+    """On PostgreSQL the lookup's rows come back in its typed columns and are converted to
+    the stored form (the dialect's from_column) before they are decoded."""
+    events = [(Atom("cup"), make_list([0.1, 2, -3.5]), 1, 0), (Atom("cup"), 1, 2, 0),
+              (Atom("[x"), String("s"), 2, 0), (1, Struct(Atom("f"), (1, Atom("x"))), 3, 0),
+              (1.0, Atom("[]"), 4, 1)]
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add_many([("p", (k, v), s, s + d) for k, v, s, d in events])
+        for key in ("cup", "[x", 1, 1.0, "none"):
+            for goal in ("prev(p(A, B)^Z, T)", "prev(p(A, B)^[S, E], T)"):
+                args = {"A": key, "T": 9}
+                want = reference(kb, goal, args)
+                for _ in range(2):   # the plan's first use, then the cached plan
+                    assert answered(kb, goal, args) == want, (goal, key)

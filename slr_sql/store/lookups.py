@@ -480,43 +480,66 @@ class EventReader:
         """
         db = self.db
         with db.lock:
-            db.check_open()
+            if db.closed:   # (check_open's error; tested inline, as this call is frequent)
+                db.check_open()
             event_type = self.tables.lookup(name, arity)
             if event_type is None:
                 return []
             if self.to_column is not None:   # a server's columns (store/dialect.py)
                 values = [self.to_column(v) for v in values]
-            return self._latest_rows(event_type, positions, values, t, point)
+            # (_latest_rows written out: the robot's most frequent question, one call less)
+            sql = self.sql_cache.get((event_type.table, "latest", positions, point))
+            if sql is None:
+                sql = self._latest_sql(event_type, positions, point)
+            try:   # (execute's mapping without its lock and check, made above)
+                rows = db.conn.execute(sql, (PROGRAM_VERSION, PROGRESS_VERSION, *values,
+                                             *values, float(t))).fetchall()
+            except sqlite3.Error as exc:
+                raise db.failure(exc) from None
+            if db.dialect.from_column is None:
+                return rows
+            return self._from_columns(rows, arity)
 
     def _latest_rows(self, event_type: EventType, positions: tuple[int, ...], values: list,
                      t: float, point: bool) -> list[tuple]:
         """:meth:`latest_rows` with ``values`` in the stored form (lock held); the rows'
         arguments as :func:`~slr_sql.encoding.decode` reads them."""
         db = self.db
-        arity = event_type.arity
-        key = (event_type.table, "latest", positions, point)
-        sql = self.sql_cache.get(key)
+        sql = self.sql_cache.get((event_type.table, "latest", positions, point))
         if sql is None:
-            where = " AND ".join([f"arg{p + 1} = ?" for p in positions]
-                                 + (["t_start = t_end"] if point else []))
-            where = (where + " AND ") if where else ""
-            columns = ", ".join([f"arg{i + 1}" for i in range(arity)]
-                                + ["t_start", "t_end", "seq"]
-                                + ["(SELECT value FROM slr_meta WHERE key = ?)"] * 2)
-            # ORDER BY ... LIMIT 1 rather than max(): max() with the extra start = end
-            # filter is an aggregate over every row of the key, LIMIT 1 stops at the first
-            sql = (f"SELECT {columns} FROM {event_type.quoted} WHERE {where}t_end = "
-                   f"(SELECT t_end FROM {event_type.quoted} WHERE {where}t_end <= ? "
-                   f"ORDER BY t_end DESC LIMIT 1) ORDER BY t_start, seq")
-            self.sql_cache[key] = sql
-        try:   # (the prev lookup: execute's mapping without its lock and check, made above)
+            sql = self._latest_sql(event_type, positions, point)
+        try:
             rows = db.conn.execute(sql, (PROGRAM_VERSION, PROGRESS_VERSION, *values, *values,
                                          float(t))).fetchall()
         except sqlite3.Error as exc:
             raise db.failure(exc) from None
-        from_column = db.dialect.from_column
-        if from_column is None:
+        if db.dialect.from_column is None:
             return rows
+        return self._from_columns(rows, event_type.arity)
+
+    def _latest_sql(self, event_type: EventType, positions: tuple[int, ...],
+                    point: bool) -> str:
+        """The statement of :meth:`_latest_rows`, built now and cached (lock held)."""
+        arity = event_type.arity
+        where = " AND ".join([f"arg{p + 1} = ?" for p in positions]
+                             + (["t_start = t_end"] if point else []))
+        where = (where + " AND ") if where else ""
+        columns = ", ".join([f"arg{i + 1}" for i in range(arity)]
+                            + ["t_start", "t_end", "seq"]
+                            + ["(SELECT value FROM slr_meta WHERE key = ?)"] * 2)
+        # ORDER BY ... LIMIT 1 rather than max(): max() with the extra start = end
+        # filter is an aggregate over every row of the key, LIMIT 1 stops at the first
+        sql = (f"SELECT {columns} FROM {event_type.quoted} WHERE {where}t_end = "
+               f"(SELECT t_end FROM {event_type.quoted} WHERE {where}t_end <= ? "
+               f"ORDER BY t_end DESC LIMIT 1) ORDER BY t_start, seq")
+        self.sql_cache[(event_type.table, "latest", positions, point)] = sql
+        return sql
+
+    def _from_columns(self, rows: list[tuple], arity: int) -> list[tuple]:
+        """Raw rows of a server's columns with their arguments as the store encodes them
+        (the dialect's ``from_column``)."""
+        from_column = self.db.dialect.from_column
+        assert from_column is not None
         return [tuple([from_column(v) for v in row[:arity]]) + tuple(row[arity:])
                 for row in rows]
 
