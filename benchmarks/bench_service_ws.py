@@ -64,30 +64,30 @@ def pct(xs: list[float], p: float) -> float:
     return xs[min(len(xs) - 1, int(p / 100 * len(xs)))]
 
 
-def delivery_latencies(times: list[list[float]], firsts: list[int | None],
-                       answered: list[float], requested: list[float]) -> tuple[list, ...]:
-    """From subscriber k's receive times ``times[k]`` (``times[k][j]``: when event
-    ``firsts[k] + j`` arrived; recording starts with whichever frame first arrives inside the
-    window, not necessarily event 0's): each delivery's latency after its ``add_many`` was
-    answered (0 if the frame came first) and after it was requested; per event received by
-    every subscriber, its first delivery's lateness and the spread from its first to its last.
+def delivery_latencies(frames: list[list[tuple]], answered: list[float],
+                       requested: list[float]) -> tuple[list, ...]:
+    """From the frames each subscriber recorded inside the latency window, ``frames[k]``:
+    ``(events, when)`` with the event numbers of the frame's answers (recording starts with
+    whichever frame first arrives inside the window, not necessarily event 0's): each
+    delivery's latency after its ``add_many`` was answered (0 if the frame came first) and
+    after it was requested; per event received by every subscriber, its first delivery's
+    lateness and the spread from its first to its last.
 
-    >>> delivery_latencies([[1.5, 2.5], [2.75]], [1, 2],      # the second began at event 2
+    >>> delivery_latencies([[([1], 1.5), ([2], 2.5)], [([2], 2.75)]],  # the second began at 2
     ...                    [0.0, 1.0, 2.0], [0.0, 0.5, 1.5])
     ([0.5, 0.5, 0.75], [1.0, 1.0, 1.25], [0.5], [0.25])
     """
-    received = [{first + j: t for j, t in enumerate(mine)}
-                for mine, first in zip(times, firsts) if first is not None]
+    received = [{i: when for events, when in mine for i in events} for mine in frames]
     lat, from_request = [], []
-    for mine in received:
-        for i, t in mine.items():
+    for got_by in received:
+        for i, t in got_by.items():
             if 0 <= i < len(answered):
                 lat.append(max(0.0, t - answered[i]))
                 from_request.append(t - requested[i])
     firsts_late, spreads = [], []
     for i in range(len(answered)):
-        got = [mine[i] for mine in received if i in mine]
-        if not got or len(got) < len(times):
+        got = [got_by[i] for got_by in received if i in got_by]
+        if not got or len(got) < len(frames):
             continue          # not recorded by every subscriber
         firsts_late.append(max(0.0, min(got) - answered[i]))
         spreads.append(max(got) - min(got))
@@ -172,10 +172,9 @@ def ws_subscribers(url: str, n: int, batch: int, ready, conn) -> None:
     latency_window = [0.0]                # until when receive times are kept (sent later)
     counts = [0] * n
     bad = [0] * n
-    times: list[list[float]] = [[] for _ in range(n)]
-    # the event number of each subscriber's first recorded receive time: the window opens
-    # while frames may already arrive, so a list's first entry need not be event 0's
-    firsts: list[int | None] = [None] * n
+    # per subscriber, (the frame's event numbers, when it arrived) of each frame received
+    # inside the window: it opens while frames may already arrive
+    times: list[list[tuple]] = [[] for _ in range(n)]
 
     async def one(k: int, started: asyncio.Event, go: list) -> None:
         async with connect(url, max_size=None) as ws:
@@ -212,9 +211,7 @@ def ws_subscribers(url: str, n: int, batch: int, ready, conn) -> None:
                         expect = i + 1
                 counts[k] += n_answers
                 if now < latency_window[0]:
-                    if firsts[k] is None:
-                        firsts[k] = numbers[0]
-                    mine.extend([now] * n_answers)
+                    mine.append((numbers, now))
 
     async def main() -> None:
         started = asyncio.Event()
@@ -238,7 +235,7 @@ def ws_subscribers(url: str, n: int, batch: int, ready, conn) -> None:
 
     asyncio.run(main())
     conn.recv()                            # the "stop" message
-    conn.send((counts, bad, times, firsts))
+    conn.send((counts, bad, times))
 
 
 def ws_subscribers_raw(url: str, n: int, batch: int, ready, conn) -> None:
@@ -259,8 +256,7 @@ def ws_subscribers_raw(url: str, n: int, batch: int, ready, conn) -> None:
     latency_window = [0.0]
     counts = [0] * n
     bad = [0] * n
-    times: list[list[float]] = [[] for _ in range(n)]
-    firsts: list[int | None] = [None] * n      # as in ws_subscribers
+    times: list[list[tuple]] = [[] for _ in range(n)]     # as in ws_subscribers
 
     def client_frame(opcode: int, payload: bytes) -> bytes:
         mask = os.urandom(4)
@@ -360,9 +356,7 @@ def ws_subscribers_raw(url: str, n: int, batch: int, ready, conn) -> None:
                     self.expect = i + 1
             counts[k] += n_answers
             if now < latency_window[0]:
-                if firsts[k] is None:
-                    firsts[k] = numbers[0]
-                times[k].extend([now] * n_answers)
+                times[k].append((numbers, now))
 
         def finish(self) -> None:
             if not self.ended.done():
@@ -392,7 +386,7 @@ def ws_subscribers_raw(url: str, n: int, batch: int, ready, conn) -> None:
 
     asyncio.run(main())
     conn.recv()                            # the "stop" message
-    conn.send((counts, bad, times, firsts))
+    conn.send((counts, bad, times))
 
 
 # ``--gc-trace``: `slr serve` started through this prelude, which records each collection of
@@ -508,9 +502,9 @@ def run_service(args, tmp: Path) -> dict:
         samples.append((time.monotonic() - t0, rss_mb(proc.pid)))
         sizes.append(file_mb(db))
         parent.send("stop")
-        counts, bad, times, firsts = parent.recv()
+        counts, bad, times = parent.recv()
         sub_proc.join(30)
-        lat, from_request, firsts_late, spreads = delivery_latencies(times, firsts, answered,
+        lat, from_request, firsts_late, spreads = delivery_latencies(times, answered,
                                                                      requested)
         rss = [r for _, r in samples]
         client.close()
@@ -610,6 +604,11 @@ def main() -> None:
     ap.add_argument("--no-in-process", action="store_true",
                     help="skip the in-process baseline (a soak of the server alone)")
     args = ap.parse_args()
+    if args.floor_server and (args.gc_trace or args.cache_kib or args.server_code):
+        ap.error("--floor-server is no slr serve: --gc-trace, --cache-kib and --server-code "
+                 "do not apply to it")
+    if (args.floor_work_us or args.floor_work_thread) and not args.floor_server:
+        ap.error("--floor-work-us and --floor-work-thread go with --floor-server")
     burners = [subprocess.Popen([sys.executable, "-c", "while 1: pass"])
                for _ in range(args.burn)]
     args.burn_pids = [burner.pid for burner in burners]

@@ -62,17 +62,24 @@ class Hub:
             m = EVENT.match(text)
             if m is not None:
                 parsed.append((int(m.group(1)), float(m.group(2))))
-        made: dict[tuple[float, int], tuple[bytes, int]] = {}
+        made: dict[tuple[float, int, int], tuple[list[bytes], int]] = {}
         for sub in self.subscribers:
-            key = (sub.since, sub.seq)
+            key = (sub.since, sub.seq, sub.batch)
             got = made.get(key)
             if got is None:
+                # as slr serve: at most `batch` answers a frame, one alone as an "answer"
                 answers = [{"I": i, "T": t} for i, t in parsed if t > sub.since]
-                got = made[key] = (text_frame(dumps({"type": "answers", "seq": sub.seq + 1,
-                                                     "answers": answers})), len(answers))
-            if got[1]:
-                sub.seq += got[1]
-                sub.transport.write(got[0])
+                frames = []
+                for k in range(0, len(answers), sub.batch):
+                    part = answers[k:k + sub.batch]
+                    frames.append(text_frame(dumps(
+                        {"type": "answer", "seq": sub.seq + k + 1, "answer": part[0]}
+                        if len(part) == 1 else
+                        {"type": "answers", "seq": sub.seq + k + 1, "answers": part})))
+                got = made[key] = (frames, len(answers))
+            sub.seq += got[1]
+            for frame in got[0]:
+                sub.transport.write(frame)
 
 
 class Connection(asyncio.Protocol):
@@ -81,6 +88,7 @@ class Connection(asyncio.Protocol):
         self.buffer = bytearray()
         self.websocket = False
         self.since = float("-inf")
+        self.batch = 256
         self.seq = 0
         self.transport: asyncio.Transport
 
@@ -166,6 +174,7 @@ class Connection(asyncio.Protocol):
             if opcode == 1:
                 request = json.loads(payload)
                 self.since = float(request.get("since", float("-inf")))
+                self.batch = max(1, int(request.get("batch", 256)))
                 self.transport.write(text_frame(dumps({"type": "subscribed",
                                                        "id": str(id(self))})))
                 self.hub.subscribers.append(self)

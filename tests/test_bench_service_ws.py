@@ -49,16 +49,17 @@ def _bench_module():
 def test_a_subscriber_that_began_recording_late_is_compared_with_its_own_events():
     """The latency window opens while frames may already arrive: a subscriber whose first
     recorded frame held events 10-19 is compared with when *those* were answered, not with
-    events 0-9's answer (which made every one of its latencies a batch period too long)."""
+    events 0-9's answer (which made every one of its latencies a batch period too long); and
+    a frame after a lost one is booked as the events it holds."""
     bench = _bench_module()
     answered = [float(i // 10) for i in range(30)]          # batch b answered at b seconds
     requested = [a - 0.5 for a in answered]
-    on_time = [float(i // 10) + 0.001 for i in range(30)]   # each frame 1 ms after its answer
+    frames = [(list(range(b * 10, b * 10 + 10)), b + 0.001) for b in range(3)]  # 1 ms late
     lat, from_request, firsts, spreads = bench.delivery_latencies(
-        [on_time, on_time[10:]], [0, 10], answered, requested)
-    assert max(lat) == pytest.approx(0.001) and len(lat) == 50
+        [frames, frames[1:], [frames[0], frames[2]]], answered, requested)
+    assert max(lat) == pytest.approx(0.001) and len(lat) == 70
     assert max(from_request) == pytest.approx(0.501)
-    assert len(firsts) == 20 and max(spreads) == 0.0    # events 10-29: both recorded them
+    assert len(firsts) == 10 and max(spreads) == 0.0    # events 20-29: all three have them
 
 
 def test_bench_ws_frame_path_runs_both_deliveries_to_the_end():

@@ -172,8 +172,8 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
     view of the store beside the service (:mod:`slr_sql.viz.foxglove_live`; it has no token:
     keep it on loopback unless the network is yours). ``shutdown_grace``: seconds the
     requests in flight get after SIGINT/SIGTERM (a synchronized query may wait for an hour)
-    before the server stops anyway. ``busy_timeout``: seconds a write waits for another
-    process's write lock before its request is answered 503 (retryable; default
+    before the server stops anyway. ``busy_timeout``: seconds a request waits for another
+    process's lock before it is answered 503 (retryable; default
     :data:`~slr_sql.store.DEFAULT_BUSY_TIMEOUT`).
     """
     token = token or None
@@ -288,8 +288,8 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
                    "query) may finish before the server stops.")
 @click.option("--busy-timeout", default=DEFAULT_BUSY_TIMEOUT, type=click.FloatRange(0.0),
               show_default=True, metavar="SECONDS",
-              help="How long a write waits for another process's write lock on DB before "
-                   "its request is answered 503 with Retry-After.")
+              help="How long a request waits for another process's lock on DB before it is "
+                   "answered 503 with Retry-After.")
 def serve(db: str, host: str, port: int, token: str | None, max_body: int,
           max_query_time: float, max_wait: float, max_connections: int,
           ssl_keyfile: str | None, ssl_certfile: str | None, ws_compression: bool,
