@@ -19,6 +19,7 @@ may parse at once.
 from __future__ import annotations
 
 import gc
+import math
 import re
 import threading
 from pathlib import Path
@@ -927,6 +928,8 @@ def _flat_event(text: str) -> tuple | None:
                 continue
             value = Atom(piece) if "a" <= first <= "z" else \
                 float(piece) if "." in piece else int(piece)
+            if type(value) is float and math.isinf(value):
+                return None        # the parser's "float overflow", not an infinite argument
             (args if items is None else items).append(value)
     if at is not None:
         return (name, tuple(args), float(at), float(at))
@@ -989,7 +992,10 @@ def _scanned_event(text: str) -> tuple | None:
         k, v = peek()
         if k == "float":
             i += 1
-            return float(v)
+            value = float(v)
+            if math.isinf(value):
+                raise _NotFast    # the parser's "float overflow", not an infinite argument
+            return value
         if k == "int":
             i += 1
             return int(v)

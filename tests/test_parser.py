@@ -471,6 +471,16 @@ def test_the_flat_event_reader_takes_the_common_shapes():
         assert _flat_event(nested) is None, nested
 
 
+@pytest.mark.parametrize("text", ["p(1.5e400)^1", "p(a, [1.0e999])^1", "p(f(-1.0e999))^1"])
+def test_an_argument_beyond_the_largest_float_is_the_parsers_overflow(text):
+    """Both fast readers leave such a text to the parser, which says why (an event added as
+    text is read as a program's term is: not as an infinite argument)."""
+    from slr_sql.parser import _flat_event, _scanned_event
+    assert _flat_event(text) is None and _scanned_event(text) is None
+    with pytest.raises(SLRSyntaxError, match="float overflow"):
+        parse_term(text)
+
+
 def test_fast_event_reader_leaves_no_cyclic_garbage():
     """Every kb.add / add_many of event texts reads them here: garbage that only the cyclic
     collector frees would make a server's young collections big and frequent (pauses)."""
