@@ -198,15 +198,8 @@ class EventStore:
         >>> seen
         [[('a', 1, 'a'), ('b', 0, 'b')]]
         """
-        tables = self._tables
-        with self._db.lock:
-            tables.begin_batch()
-            ok = False
-            try:
-                yield
-                ok = True
-            finally:
-                tables.end_batch(ok)
+        with self._db.lock, self._tables.batch():
+            yield
 
     @property
     def rollback_listeners(self) -> list:

@@ -189,16 +189,10 @@ class EventWriter:
                 # buffers: "now" for the buffer triggers, in the add's transaction
                 self.record_now(arrival)
             # (the views are made again once for all the tables the add makes)
-            tables = self.tables
-            tables.begin_batch()
-            ok = False
-            try:
+            with self.tables.batch():
                 for base, chunk in _chunks(events):
                     if not self._insert_uniform(chunk, arrival, ends):
                         self._insert_each(chunk, base, arrival, atomic, errors, ends)
-                ok = True
-            finally:
-                tables.end_batch(ok)
         if ends is not None:
             events.ends = ends
         return errors

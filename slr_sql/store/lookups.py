@@ -487,18 +487,7 @@ class EventReader:
                 return []
             if self.to_column is not None:   # a server's columns (store/dialect.py)
                 values = [self.to_column(v) for v in values]
-            # (_latest_rows written out: the robot's most frequent question, one call less)
-            sql = self.sql_cache.get((event_type.table, "latest", positions, point))
-            if sql is None:
-                sql = self._latest_sql(event_type, positions, point)
-            try:   # (execute's mapping without its lock and check, made above)
-                rows = db.conn.execute(sql, (PROGRAM_VERSION, PROGRESS_VERSION, *values,
-                                             *values, float(t))).fetchall()
-            except sqlite3.Error as exc:
-                raise db.failure(exc) from None
-            if db.dialect.from_column is None:
-                return rows
-            return self._from_columns(rows, arity)
+            return self._latest_rows(event_type, positions, values, t, point)
 
     def _latest_rows(self, event_type: EventType, positions: tuple[int, ...], values: list,
                      t: float, point: bool) -> list[tuple]:
@@ -508,7 +497,7 @@ class EventReader:
         sql = self.sql_cache.get((event_type.table, "latest", positions, point))
         if sql is None:
             sql = self._latest_sql(event_type, positions, point)
-        try:
+        try:   # (the prev lookup: execute's mapping without its lock and check, made above)
             rows = db.conn.execute(sql, (PROGRAM_VERSION, PROGRESS_VERSION, *values, *values,
                                          float(t))).fetchall()
         except sqlite3.Error as exc:

@@ -34,7 +34,8 @@ from __future__ import annotations
 import hashlib
 import re
 import sqlite3
-from typing import Any, Callable, Iterable
+from contextlib import contextmanager
+from typing import Any, Callable, Iterable, Iterator
 
 from ..errors import SLRError, SLRUnavailable
 from .connection import Database, DatabaseError
@@ -246,7 +247,7 @@ class EventTables:
         # creates a new event type's table (slr_sql.buffers installs its triggers there)
         self.table_created_hooks: list[Callable[[str, int, str], Any]] = []
         # the planner's views: called as hook([(name, arity, table), ...]) once per batch
-        # of new tables (begin_batch .. end_batch: an add), inside its transaction after
+        # of new tables (batch(): an add), inside its transaction after
         # the batch's work; a table made outside a batch is a batch of its own. And the
         # names (lower case) such a hook may give to what it creates: a new table whose
         # name could be one of them is named after the pending hooks ran, as it would be
@@ -382,39 +383,34 @@ class EventTables:
             base = _shortened(base, name, arity)
         return base
 
-    def begin_batch(self) -> None:
-        """Start a batch of table creations (lock held, inside the transaction that makes
-        them; batches nest): :attr:`tables_created_hooks` run once, at the outermost
-        :meth:`end_batch` that is given ``ok``.
+    @contextmanager
+    def batch(self) -> Iterator[None]:
+        """The tables made inside are one batch (lock held, inside the transaction that
+        makes them; batches nest): :attr:`tables_created_hooks` run once, as the outermost
+        ends without an error, in the same transaction (a failing batch's tables are taken
+        back with it).
 
         >>> tables = EventTables(Database(None)); seen = []
         >>> tables.tables_created_hooks.append(seen.append)
-        >>> tables.begin_batch(); _ = tables.declare_type("a", 1); tables.end_batch(False)
-        >>> seen   # (a batch that failed: its caller rolls its tables back)
+        >>> with tables.batch():
+        ...     _ = tables.declare_type("a", 1); _ = tables.declare_type("b", 0); print(seen)
         []
-        """
-        self._batch_depth += 1
-
-    def end_batch(self, ok: bool) -> None:
-        """End a batch begun by :meth:`begin_batch`; ``ok``: its work is done (not
-        failing), so the outermost runs the hooks for the tables it made, in the same
-        transaction (a failing batch's are taken back with it).
-
-        >>> tables = EventTables(Database(None)); seen = []
-        >>> tables.tables_created_hooks.append(seen.append)
-        >>> tables.begin_batch(); _ = tables.declare_type("a", 1); _ = tables.declare_type("b", 0)
         >>> seen
-        []
-        >>> tables.end_batch(True); seen
         [[('a', 1, 'a'), ('b', 0, 'b')]]
         """
+        self._batch_depth += 1
+        ok = False
         try:
-            if ok and self._batch_depth == 1 and self._batch_new:
-                self._run_batch_hooks()
+            yield
+            ok = True
         finally:
-            self._batch_depth -= 1
-            if not self._batch_depth:
-                self._batch_new = []
+            try:
+                if ok and self._batch_depth == 1 and self._batch_new:
+                    self._run_batch_hooks()
+            finally:
+                self._batch_depth -= 1
+                if not self._batch_depth:
+                    self._batch_new = []
 
     def _run_batch_hooks(self) -> None:
         new, self._batch_new = self._batch_new, []
