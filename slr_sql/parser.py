@@ -883,11 +883,16 @@ def parse_term(text: str, filename: str = "<query>") -> tuple[Any, dict[str, Var
 # the full parser costs ~80 us an event, which dominates ingesting a long recording. Anything else (quoted atoms, strings,
 # operators, variables, other number syntaxes) falls back to the full parser, so the fast
 # path only ever accepts text that the parser reads the same way.
-_FAST_TOKEN = re.compile(r"""\s*(?:
-      (?P<float>-?\d+\.\d+(?:[eE][+-]?\d+)?)
-    | (?P<int>-?\d+)(?![\d.'xob_eE])
-    | (?P<functor>[a-z][A-Za-z0-9_]*)\(
-    | (?P<atom>[a-z][A-Za-z0-9_]*)
+# the tokens both fast readers take: a float needs a dot; an int followed by what would make
+# it another number syntax (0'a, 0x1f, 1_000, 1e5, 1.) is none
+_FAST_FLOAT = r"-?\d+\.\d+(?:[eE][+-]?\d+)?"
+_FAST_INT = r"-?\d+(?![\d.'xob_eE])"
+_FAST_ATOM = r"[a-z][A-Za-z0-9_]*"
+_FAST_TOKEN = re.compile(rf"""\s*(?:
+      (?P<float>{_FAST_FLOAT})
+    | (?P<int>{_FAST_INT})
+    | (?P<functor>{_FAST_ATOM})\(
+    | (?P<atom>{_FAST_ATOM})
     | (?P<punct>[\[\](),^])
     )""", re.VERBOSE)
 
@@ -896,14 +901,14 @@ _FAST_TOKEN = re.compile(r"""\s*(?:
 # nearly every recorded event (seg(cup1,[0.4,0.1,0.9])^12.31) -- are checked by one regular
 # expression of the same tokens and then split, without the scanner's loop of one match per
 # token (~3-6x faster); whatever it does not match goes to the scanner below.
-_FLAT_ITEM = (r"(?:-?\d+\.\d+(?:[eE][+-]?\d+)?|-?\d+(?![\d.'xob_eE])"
-              r"|[a-z][A-Za-z0-9_]*)")
+_FLAT_NUMBER = rf"{_FAST_FLOAT}|{_FAST_INT}"
+_FLAT_ITEM = rf"(?:{_FLAT_NUMBER}|{_FAST_ATOM})"
 _FLAT_ARG = rf"\s*(?:{_FLAT_ITEM}|\[\s*(?:{_FLAT_ITEM}\s*(?:,\s*{_FLAT_ITEM}\s*)*)?\])\s*"
-_FLAT_NUMBER = r"-?\d+\.\d+(?:[eE][+-]?\d+)?|-?\d+(?![\d.'xob_eE])"
 _FLAT_EVENT = re.compile(
-    rf"\s*([a-z][A-Za-z0-9_]*)(?:\(({_FLAT_ARG}(?:,{_FLAT_ARG})*)\))?\s*\^\s*"
+    rf"\s*({_FAST_ATOM})(?:\(({_FLAT_ARG}(?:,{_FLAT_ARG})*)\))?\s*\^\s*"
     rf"(?:(?!-)({_FLAT_NUMBER})|\[\s*({_FLAT_NUMBER})\s*,\s*({_FLAT_NUMBER})\s*\])\s*\Z")
-_FLAT_PIECE = re.compile(r"-?\d+\.\d+(?:[eE][+-]?\d+)?|-?\d+|[a-z][A-Za-z0-9_]*|\[|\]")
+# (the pieces of arguments _FLAT_EVENT matched: an int needs no look-ahead there)
+_FLAT_PIECE = re.compile(rf"{_FAST_FLOAT}|-?\d+|{_FAST_ATOM}|\[|\]")
 
 
 def _flat_event(text: str) -> tuple | None:
