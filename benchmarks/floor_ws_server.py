@@ -25,21 +25,17 @@ import hashlib
 import json
 import re
 import struct
+import sys
 import time
+from pathlib import Path
 
 from orjson import dumps, loads
 
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from slr_sql.service.fanout import text_frame  # noqa: E402  (slr serve's own framing)
+
 GUID = b"258EAFA5-E914-47DA-95CA-C5AB0DC85B11"
 EVENT = re.compile(r"^e\((-?\d+)\)\^(-?[\d.]+)$")
-
-
-def text_frame(payload: bytes) -> bytes:
-    n = len(payload)
-    if n < 126:
-        return bytes((0x81, n)) + payload
-    if n < 65536:
-        return bytes((0x81, 126)) + struct.pack("!H", n) + payload
-    return bytes((0x81, 127)) + struct.pack("!Q", n) + payload
 
 
 class Hub:
