@@ -194,7 +194,13 @@ def _duration_value(text: str, pos: int) -> int | float:
     return value
 
 
-_NUMBER = re.compile(r"\s*-?[0-9]+(?:\.[0-9]+)?(?:[eE][0-9]+)?\s*\Z")
+# Layout as SWI-Prolog reads it (and slr.lark's _LAYOUT): whitespace except U+001C..U+001F and
+# U+0085, which SWI refuses as illegal characters and Python's `\s`, str.isspace and float() take
+_L = r"[^\S\x1c-\x1f\x85]"
+_LAYOUT_CHARS = "\t\n\v\f\r \xa0\u1680\u2000\u2001\u2002\u2003\u2004\u2005\u2006\u2007\u2008" \
+    "\u2009\u200a\u2028\u2029\u202f\u205f\u3000"     # the same characters
+
+_NUMBER = re.compile(rf"{_L}*-?[0-9]+(?:\.[0-9]+)?(?:[eE][0-9]+)?{_L}*\Z")
 
 
 def _numlist_value(text: str, pos: int) -> Any:
@@ -669,7 +675,7 @@ def _next_token_pos(text: str, pos: int) -> int:
     n = len(text)
     while pos < n:
         ch = text[pos]
-        if ch.isspace():
+        if ch in _LAYOUT_CHARS:
             pos += 1
         elif ch == "%":
             nl = text.find("\n", pos)
@@ -888,7 +894,7 @@ def parse_term(text: str, filename: str = "<query>") -> tuple[Any, dict[str, Var
 _FAST_FLOAT = r"-?\d+\.\d+(?:[eE][+-]?\d+)?"
 _FAST_INT = r"-?\d+(?![\d.'xob_eE])"
 _FAST_ATOM = r"[a-z][A-Za-z0-9_]*"
-_FAST_TOKEN = re.compile(rf"""\s*(?:
+_FAST_TOKEN = re.compile(rf"""{_L}*(?:
       (?P<float>{_FAST_FLOAT})
     | (?P<int>{_FAST_INT})
     | (?P<functor>{_FAST_ATOM})\(
@@ -903,10 +909,10 @@ _FAST_TOKEN = re.compile(rf"""\s*(?:
 # token (~3-6x faster); whatever it does not match goes to the scanner below.
 _FLAT_NUMBER = rf"{_FAST_FLOAT}|{_FAST_INT}"
 _FLAT_ITEM = rf"(?:{_FLAT_NUMBER}|{_FAST_ATOM})"
-_FLAT_ARG = rf"\s*(?:{_FLAT_ITEM}|\[\s*(?:{_FLAT_ITEM}\s*(?:,\s*{_FLAT_ITEM}\s*)*)?\])\s*"
+_FLAT_ARG = rf"{_L}*(?:{_FLAT_ITEM}|\[{_L}*(?:{_FLAT_ITEM}{_L}*(?:,{_L}*{_FLAT_ITEM}{_L}*)*)?\]){_L}*"
 _FLAT_EVENT = re.compile(
-    rf"\s*({_FAST_ATOM})(?:\(({_FLAT_ARG}(?:,{_FLAT_ARG})*)\))?\s*\^\s*"
-    rf"(?:(?!-)({_FLAT_NUMBER})|\[\s*({_FLAT_NUMBER})\s*,\s*({_FLAT_NUMBER})\s*\])\s*\Z")
+    rf"{_L}*({_FAST_ATOM})(?:\(({_FLAT_ARG}(?:,{_FLAT_ARG})*)\))?{_L}*\^{_L}*"
+    rf"(?:(?!-)({_FLAT_NUMBER})|\[{_L}*({_FLAT_NUMBER}){_L}*,{_L}*({_FLAT_NUMBER}){_L}*\]){_L}*\Z")
 # (the pieces of arguments _FLAT_EVENT matched: an int needs no look-ahead there)
 _FLAT_PIECE = re.compile(rf"{_FAST_FLOAT}|-?\d+|{_FAST_ATOM}|\[|\]")
 
@@ -971,7 +977,7 @@ def _scanned_event(text: str) -> tuple | None:
     while pos < end:
         m = _FAST_TOKEN.match(text, pos)
         if m is None or m.end() == pos:
-            if text[pos:].strip() == "":
+            if text[pos:].strip(_LAYOUT_CHARS) == "":
                 break
             return None
         pos = m.end()

@@ -13,6 +13,7 @@ import gc
 import json
 import math
 import os
+import re
 import shutil
 import string
 import subprocess
@@ -22,6 +23,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+import slr_sql
 from slr_sql.errors import SLRSyntaxError
 from slr_sql.parser import parse_event_fast, parse_program, parse_term
 from slr_sql.terms import INFIX_OPS, PREFIX_OPS, format_atom, format_term
@@ -632,3 +634,72 @@ def test_a_large_quoted_atom_costs_memory_proportional_to_its_size(quote):
         tracemalloc.stop()
     assert len(term.args[1]) == 3 * (n // 4) + n // 2
     assert peak < 40 * n, f"peak {peak / 1e6:.0f} MB for a {n / 1e6:.0f} MB atom"
+
+
+# ------------------------------------------------------------------ layout characters
+# Python's `\s`, str.isspace and float() take every one of these for whitespace; SWI-Prolog 9
+# reads U+001C..U+001F and U+0085 as illegal characters, the rest as layout.
+WHITESPACE = [c for c in map(chr, range(0x3001)) if c.isspace()]   # (U+3000 is the last)
+SWI_ILLEGAL = {"\x1c", "\x1d", "\x1e", "\x1f", "\x85"}
+
+
+def _laid_out(char: str) -> dict[str, str]:
+    """Texts with ``char`` where layout may stand, for each reader."""
+    return {"flat event": f"{char}p({char}-3{char},{char}[1.5{char},{char}a{char}]{char}){char}^"
+                          f"{char}[{char}1{char},{char}2{char}]{char}",
+            "nested event": f"p({char}f({char}a{char}){char}){char}^{char}1{char}",
+            "program": f"{char}p(-3{char}).{char}q([1.5{char}, 2]).{char}r(1){char}:-{char}true.",
+            "query": f"{char}p(X){char},{char}q(Y){char}"}
+
+
+@pytest.mark.parametrize("char", WHITESPACE, ids=lambda c: f"U+{ord(c):04X}")
+def test_layout_is_what_swi_prolog_reads_as_layout(char):
+    """Every reader (both fast event readers, the parser of events, programs and queries)
+    takes a whitespace character as layout exactly where SWI-Prolog does, and refuses the
+    others with a syntax error at the character, as the parser refuses any stray character."""
+    texts = _laid_out(char)
+    kb = slr_sql.open(clock=slr_sql.ManualClock(100))
+    try:
+        if char in SWI_ILLEGAL:
+            for reader, text in texts.items():
+                if reader.endswith("event"):
+                    assert parse_event_fast(text) is None, reader
+                    call = kb.add
+                else:
+                    call = kb.load if reader == "program" else kb.query
+                with pytest.raises(SLRSyntaxError, match=re.escape(f"unexpected character {char!r}")):
+                    call(text)
+            assert kb.query("p(X)^[S, E]") == kb.query("p(X, Y)^[S, E]") == []   # none stored
+            with pytest.raises(slr_sql.SLRError, match="existence_error"):
+                kb.query("q(X)")                                                # none loaded
+            return
+        spaced = _laid_out(" ")
+        for reader in ("flat event", "nested event"):
+            assert parse_event_fast(texts[reader]) == parse_event_fast(spaced[reader]) \
+                is not None, reader
+            kb.add(texts[reader])
+        kb.load(texts["program"])
+        assert kb.query(texts["query"]) == [{"X": -3, "Y": [1.5, 2]}]
+        assert kb.query("p(X, Y)^[S, E]") == [{"X": -3, "Y": [1.5, slr_sql.Atom("a")], "S": 1.0,
+                                                 "E": 2.0}]
+        assert kb.query("p(X)^T") == [{"X": slr_sql.Struct("f", (slr_sql.Atom("a"),)), "T": 1.0}]
+    finally:
+        kb.close()
+
+
+def test_swi_prolog_refuses_those_characters_and_no_other_whitespace(tmp_path):
+    """The table above is SWI-Prolog's (where ``swipl`` is installed it is asked), and the
+    parser's layout characters are the same whitespace less those."""
+    from slr_sql.parser import _LAYOUT_CHARS
+    assert set(_LAYOUT_CHARS) == set(WHITESPACE) - SWI_ILLEGAL
+    assert all(not chr(c).isspace() for c in range(0x3001, 0x110000))
+    if shutil.which("swipl"):
+        codes = ",".join(str(ord(c)) for c in WHITESPACE)
+        goal = (f"forall(member(C,[{codes}]), (atom_codes(A, [0'p, 0'(, 0'1, C, 0')]), "
+                "catch((term_string(_, A), R = ok), _, R = illegal), "
+                "format('~w ~w~n', [C, R]))), halt")
+        out = subprocess.run([shutil.which("swipl"), "-g", goal], capture_output=True,
+                             text=True, timeout=60).stdout.split()
+        verdicts = dict(zip(out[::2], out[1::2]))
+        assert {chr(int(c)) for c, v in verdicts.items() if v == "illegal"} == SWI_ILLEGAL
+        assert len(verdicts) == len(WHITESPACE)
