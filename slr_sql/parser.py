@@ -237,7 +237,16 @@ def _functor_name(tok: str, pos: int) -> str:
     name = tok[:-1]
     if name[0] == "'":
         return _quoted_text(name, pos)
+    if _capital(name):        # a variable before `(`, as `Foo(a)`
+        raise _Fail("operator expected", pos + len(name))
     return name
+
+
+def _capital(name: str) -> bool:
+    """A name that SWI-Prolog reads as a variable though the grammar's VAR (``[A-Z_]``)
+    does not: one that begins with a non-ASCII capital letter (``Émile``, ``Ωx``, ``Ⅻ``;
+    str.isupper: SWI's uppercase, which leaves a titlecase ``ǅ`` to the atoms)."""
+    return name[0] > "\x7f" and name[0].isupper()
 
 
 # -------------------------------------------------------------------------- resolver
@@ -506,6 +515,8 @@ def _item(c: Any) -> tuple:
     if type(c) is not Token:
         return c
     t = c.type
+    if t == "NAME" and _capital(c.value):
+        t = "VAR"
     if t == "NAME" or t == "SYM" or t == "COMMA" or t == "BAR":
         return (_NAME, c.value, c)
     if t == "VAR":

@@ -703,3 +703,56 @@ def test_swi_prolog_refuses_those_characters_and_no_other_whitespace(tmp_path):
         verdicts = dict(zip(out[::2], out[1::2]))
         assert {chr(int(c)) for c, v in verdicts.items() if v == "illegal"} == SWI_ILLEGAL
         assert len(verdicts) == len(WHITESPACE)
+
+
+# ------------------------------------------------------------- non-ASCII capitals
+# What SWI-Prolog 9 reads for `X = <text>`: a name that begins with a capital letter of any
+# script is a variable (and cannot stand before `(`), a titlecase letter (U+01C5) or a small
+# one begins an atom.
+CAPITALS = {"Émile": "var", "Ωmega": "var", "ℕat": "var", "Ⅻ": "var", "Ø": "var",
+            "émile": "atom", "ωmega": "atom", "ǅa": "atom", "x٣": "atom", "ⅻ": "atom",
+            "Émile(a)": "syntax", "Foo(a)": "syntax", "émile(a)": "compound"}
+
+
+def _kind(term: object) -> str:
+    return {Var: "var", Atom: "atom", Struct: "compound"}[type(term)]
+
+
+@pytest.mark.parametrize("text", CAPITALS)
+def test_a_name_with_a_capital_of_any_script_is_a_variable(text):
+    if CAPITALS[text] == "syntax":
+        with pytest.raises(SLRSyntaxError, match="operator expected"):
+            parse_term(f"X = {text}")
+        return
+    term, names = parse_term(f"X = f({text}, {text})")
+    first, second = term.args[1].args
+    assert _kind(first) == CAPITALS[text]
+    if CAPITALS[text] == "var":
+        assert first is second and text in names     # one variable, named as written
+        # an atom of that name is written quoted, so that it reads back as the atom
+        assert parse_term(format_atom(text))[0] == Atom(text)
+
+
+def test_the_capitals_table_is_swi_prologs(tmp_path):
+    """The parser reads each text of the table as the table says, and so does SWI-Prolog
+    where ``swipl`` is installed (CI installs it)."""
+    def ours(text: str) -> str:
+        try:
+            return _kind(parse_term(f"X = {text}")[0].args[1])
+        except SLRSyntaxError:
+            return "syntax"
+    assert {text: ours(text) for text in CAPITALS} == CAPITALS
+    if not shutil.which("swipl"):
+        return
+    script = tmp_path / "kinds.pl"
+    script.write_text(
+        ":- initialization(main, main).\n"
+        "main :- read_line_to_string(user_input, L), ( L == end_of_file -> true ;\n"
+        "  catch(( term_string(T, L), T = (_ = V),\n"
+        "    ( var(V) -> K = var ; atom(V) -> K = atom ; K = compound ) ),\n"
+        "    _, K = syntax),\n"
+        "  format('~w~n', [K]), main ).\n", encoding="utf-8")
+    proc = subprocess.run([shutil.which("swipl"), str(script)],
+                          input="".join(f"X = {t}\n" for t in CAPITALS), capture_output=True,
+                          text=True, encoding="utf-8", timeout=60)
+    assert dict(zip(CAPITALS, proc.stdout.split())) == CAPITALS, proc.stderr
