@@ -22,6 +22,7 @@ import gc
 import math
 import re
 import threading
+import unicodedata
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -148,11 +149,23 @@ def _int_value(text: str, pos: int) -> int:
         if len(ch) != 1:  # `0'\` followed by a newline
             raise _Fail("incomplete character code 0'", pos)
         return ord(ch)
+    if "_" in text or " " in text:
+        text = _GROUP_GAP.sub("", text)     # digit groups: 1_000_000, 1 000 000
     if text[:2] in ("0x", "0o", "0b"):
         base = {"x": 16, "o": 8, "b": 2}[text[1]]
         digits = text[2:]
         return _checked_int(digits, base, len(digits) * (base.bit_length() - 1), pos)
+    if not text.isascii():
+        _one_script(text, pos)
     return _checked_int(text, 10, int(len(text) * 3.33), pos)
+
+
+def _one_script(number: str, pos: int) -> None:
+    """Refuse a number whose digits are of two scripts (``1٣``): SWI-Prolog reads digits of
+    any script, one script a number, where Python's int() and float() mix them."""
+    zeros = {ord(c) - unicodedata.decimal(c) for c in number if c.isdecimal()}
+    if len(zeros) > 1:
+        raise _Fail("illegal number (its digits are of two scripts)", pos)
 
 
 def _checked_int(digits: str, base: int, approx_bits: int, pos: int) -> int:
@@ -171,6 +184,8 @@ def _float_value(text: str, pos: int) -> float:
         return float("inf")
     if text.endswith("NaN"):
         return float("nan")
+    if not text.isascii():
+        _one_script(text, pos)
     value = float(text)
     if value == _INF:  # 1.0e400: as SWI-Prolog (float_overflow=error), not infinity
         raise _Fail("float overflow (the number is beyond the largest float)", pos)
@@ -199,6 +214,9 @@ def _duration_value(text: str, pos: int) -> int | float:
 _L = r"[^\S\x1c-\x1f\x85]"
 _LAYOUT_CHARS = "\t\n\v\f\r \xa0\u1680\u2000\u2001\u2002\u2003\u2004\u2005\u2006\u2007\u2008" \
     "\u2009\u200a\u2028\u2029\u202f\u205f\u3000"     # the same characters
+
+# what separates digit groups in an integer (slr.lark's _GROUP_GAP, or one space)
+_GROUP_GAP = re.compile(rf"_(?:/\*[\s\S]*?\*/|%[^\n]*|{_L})*| ")
 
 _NUMBER = re.compile(rf"{_L}*-?[0-9]+(?:\.[0-9]+)?(?:[eE][0-9]+)?{_L}*\Z")
 
@@ -901,9 +919,10 @@ def parse_term(text: str, filename: str = "<query>") -> tuple[Any, dict[str, Var
 # operators, variables, other number syntaxes) falls back to the full parser, so the fast
 # path only ever accepts text that the parser reads the same way.
 # the tokens both fast readers take: a float needs a dot; an int followed by what would make
-# it another number syntax (0'a, 0x1f, 1_000, 1e5, 1.) is none
-_FAST_FLOAT = r"-?\d+\.\d+(?:[eE][+-]?\d+)?"
-_FAST_INT = r"-?\d+(?![\d.'xob_eE])"
+# it another number syntax (0'a, 0x1f, 1_000, 1e5, 1.) is none; digits of other scripts go to
+# the parser, which refuses a number mixing two (int() and float() take any mix)
+_FAST_FLOAT = r"-?[0-9]+\.[0-9]+(?:[eE][+-]?[0-9]+)?"
+_FAST_INT = r"-?[0-9]+(?![\d.'xob_eE])"
 _FAST_ATOM = r"[a-z][A-Za-z0-9_]*"
 _FAST_TOKEN = re.compile(rf"""{_L}*(?:
       (?P<float>{_FAST_FLOAT})
@@ -925,7 +944,7 @@ _FLAT_EVENT = re.compile(
     rf"{_L}*({_FAST_ATOM})(?:\(({_FLAT_ARG}(?:,{_FLAT_ARG})*)\))?{_L}*\^{_L}*"
     rf"(?:(?!-)({_FLAT_NUMBER})|\[{_L}*({_FLAT_NUMBER}){_L}*,{_L}*({_FLAT_NUMBER}){_L}*\]){_L}*\Z")
 # (the pieces of arguments _FLAT_EVENT matched: an int needs no look-ahead there)
-_FLAT_PIECE = re.compile(rf"{_FAST_FLOAT}|-?\d+|{_FAST_ATOM}|\[|\]")
+_FLAT_PIECE = re.compile(rf"{_FAST_FLOAT}|-?[0-9]+|{_FAST_ATOM}|\[|\]")
 
 
 def _flat_event(text: str) -> tuple | None:
