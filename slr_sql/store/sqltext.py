@@ -21,7 +21,12 @@ __all__ = ["quote_identifier", "sql_literal", "split_sql_script", "SAFE_IDENTIFI
            "file_uri", "file_identity"]
 
 SAFE_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
-RESERVED_PREFIXES = ("slr_", "sqlite_")
+# Names a table or view of the store may not have, on either engine: slr_sql's own, and the
+# engines' catalogs'. PostgreSQL searches pg_catalog before the store's schema (putting it
+# later would let a table named ``text`` take over the type ``text`` in every cast), so a
+# table named like a catalog relation (every one starts ``pg_``) would never be reached by
+# an unqualified name: its inserts went to pg_catalog.pg_class, a DROP VIEW to a system view.
+RESERVED_PREFIXES = ("slr_", "sqlite_", "pg_")
 # SQLite keywords: an event named like one gets a sanitized table name, so that
 # ``SELECT * FROM <table>`` works without quoting for every table we create.
 SQL_KEYWORDS = frozenset("""
