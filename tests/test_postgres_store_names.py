@@ -1,14 +1,98 @@
-"""The names the store gives its tables and views are never ``pg_catalog``'s: PostgreSQL
-searches ``pg_catalog`` first (always, before the store's schema), and every relation there
-starts ``pg_``. An event type or predicate named ``pg_...`` gets a table or view of another
-name (``ev_pg_class``, ``v_pg_views``), on SQLite too; named as the catalog's, its events were
+"""PostgreSQL: the store's statements reach its own objects, whatever else the search path
+holds. The store's connections search ``pg_catalog`` (always, first), then the store's
+schema, then ``pg_temp`` (named last).
+
+So a name the store gives must not be one of ``pg_catalog``'s (every relation there starts
+``pg_``): an event type or predicate named ``pg_...`` gets a table or view of another name
+(``ev_pg_class``, ``v_pg_views``), on SQLite too; named as the catalog's, its events were
 refused (``INSERT INTO "pg_class"`` went to the catalog) and a reload of its program dropped
-the catalog's view when the store's role was a superuser (docs/schema.md, docs/sql.md)."""
+the catalog's view when the store's role was a superuser.
+
+And where the store names one of its objects that may be missing (a journal another process
+dropped, a view a user dropped), it names it with its schema: unqualified, the name would
+reach on to a temporary table or view a ``kb.sql(..., write=True)`` made on the store's
+connection (``DROP TABLE IF EXISTS`` dropped it, a trim emptied it, a read answered its
+rows, ``DROP VIEW IF EXISTS`` failed on a temporary table) (docs/sql.md, docs/schema.md)."""
 from __future__ import annotations
 
 import pytest
 
 import slr_sql
+from slr_sql import SLRError
+from slr_sql.store import DatabaseError
+
+
+@pytest.fixture
+def kb(postgres_url):
+    with slr_sql.open(postgres_url, clock=slr_sql.ManualClock(10.0)) as kb:
+        kb.add("p(a)^1")
+        yield kb
+
+
+def temporary(kb, name: str) -> list:
+    """The rows of the temporary table or view ``name`` on the store's connection."""
+    return kb.sql(f'SELECT * FROM pg_temp."{name}" ORDER BY 1', write=True)[1]
+
+
+def test_a_temporary_table_named_as_a_journal_another_process_dropped_is_left_alone(
+        kb, postgres_url):
+    table = kb.store.table_for("p", 1)
+    journal, trigger = f"slr_subj_{table}", f"slr_subt_{table}"
+    kb.store.create_journal(table, 1, journal, trigger)
+    kb.add("p(b)^2")
+    # another process drops the journal (its trim: no subscription wants p/1 any more)
+    with slr_sql.open(postgres_url, clock=slr_sql.ManualClock(10.0)) as other:
+        other.store.drop_journal(table, journal, trigger)
+    kb.sql(f'CREATE TEMP TABLE "{journal}" (jid bigint, seq bigint, arg1 text, '
+           f't_start float8, t_end float8)', write=True)
+    kb.sql(f"INSERT INTO pg_temp.\"{journal}\" VALUES (1, 1, 'mine', 0, 0)", write=True)
+    # this process's trim, with the journal it listed before the other's drop (the store's
+    # own error, as without a temporary table; the trim's caller says it)
+    with pytest.raises(DatabaseError, match="does not exist"):
+        kb.store.trim_journal(journal, 10)
+    with pytest.raises(SLRError, match="does not exist"):
+        kb.store.journal_reader(own_connection=False).journal_rows(journal, 1, 0, 10)
+    with pytest.raises(SLRError, match="does not exist"):
+        kb.store.journal_reader(own_connection=True).max_jid(journal)
+    kb.store.drop_journal(table, journal, trigger)
+    assert temporary(kb, journal) == [(1, 1, "mine", 0.0, 0.0)]
+    # the store goes on: a new journal is the store's, the temporary table stays the user's
+    kb.store.create_journal(table, 1, journal, trigger)
+    kb.add("p(c)^3")
+    assert kb.store.journal_reader(own_connection=False).journal_rows(journal, 1, 0, 10) \
+        == [(1, 3, "c", 3.0, 3.0)]
+    assert temporary(kb, journal) == [(1, 1, "mine", 0.0, 0.0)]
+
+
+@pytest.mark.parametrize("made", [
+    "CREATE TEMP VIEW colour AS SELECT 'mine'::text AS arg1",
+    "CREATE TEMP TABLE colour AS SELECT 'mine'::text AS arg1",
+])
+def test_a_temporary_object_named_as_a_dropped_view_survives_the_next_load(kb, made):
+    kb.load("colour(red).")
+    assert kb.sql("SELECT arg1 FROM colour")[1] == [("red",)]
+    kb.sql("DROP VIEW colour", write=True)
+    kb.sql(made, write=True)
+    kb.load("colour(blue).", replace=True)
+    assert temporary(kb, "colour") == [("mine",)]
+    # (a read-only statement runs on a connection of its own: no temporary object there)
+    assert kb.sql("SELECT arg1 FROM colour")[1] == [("blue",)]
+    assert [a["X"] for a in kb.query("colour(X)")] == ["blue"]
+
+
+def test_a_temporary_index_named_as_a_buffers_index_survives_the_buffers_removal(kb):
+    # (a guard: the store drops a buffer's objects it has just listed in its schema, under
+    # its lock, so the search order alone finds its own index first)
+    kb.add("face(ann, 1)^2")
+    buffer = kb.add_buffer("face(P, _)", keep_last=1)
+    index = f"slr_bix_{buffer}"
+    kb.sql("CREATE TEMP TABLE mine (x int)", write=True)
+    kb.sql(f'CREATE INDEX "{index}" ON pg_temp.mine (x)', write=True)
+    kb.remove_buffer(buffer)
+    assert kb.sql("SELECT to_regclass(?)::text", (f"pg_temp.{index}",), write=True)[1] \
+        == [(index,)]
+    assert kb.sql("SELECT count(*) FROM pg_indexes WHERE indexname = ? "
+                  "AND schemaname = current_schema()", (index,))[1] == [(0,)]
 
 
 @pytest.mark.parametrize("name", ["pg_class", "pg_settings", "pg_robot"])

@@ -646,7 +646,10 @@ class BufferTables:
             changed = False
             for name, sql in existing.items():
                 if statements.get(name) != sql:
-                    q = quote_identifier(name)
+                    # with the schema on PostgreSQL, as every name of a buffer's object
+                    # here: the name alone reaches on to a temporary object of the session
+                    # once the store's is gone
+                    q = self.db.qualified(name)
                     if name.startswith("slr_bix_"):
                         self.db.execute(f"DROP INDEX IF EXISTS {q}")
                     elif sqlite:
@@ -660,7 +663,7 @@ class BufferTables:
                 if sqlite:
                     self.db.execute(sql)
                 else:
-                    q = quote_identifier(name)
+                    q = self.db.qualified(name)
                     kind = "INDEX" if name.startswith("slr_bix_") else "FUNCTION"
                     if kind == "FUNCTION":   # a half-made object of an older version
                         self.db.execute(f"DROP FUNCTION IF EXISTS {q}() CASCADE")

@@ -426,11 +426,11 @@ class Catalog:
             # view depends on, so they go first and come back over the new tables
             views = self.db.view_statements(self.meta_get("sql_views", []))
             for name in views:
-                execute(f"DROP VIEW {quote_identifier(name)}")
+                execute(f"DROP VIEW {self.db.qualified(name)}")
             existing = sorted(name for name in self.db.table_names()
                               if name.startswith("slr_facts_"))
             for table in existing:
-                execute(f"DROP TABLE {quote_identifier(table)}")
+                execute(f"DROP TABLE {self.db.qualified(table)}")
             for (name, arity), rows in tables.items():
                 plain = self._fact_table(name, arity)
                 table = quote_identifier(plain)
@@ -579,14 +579,17 @@ class Catalog:
 
     def drop_journal(self, table: str, journal: str, trigger: str) -> None:
         """Drop the journal of ``table`` and its trigger (if they exist)."""
+        # named with the schema (db.qualified): another process may have dropped them
+        # already, and the name alone would then reach a temporary table of this session's
+        qualified = self.db.qualified
         with self.db.transaction():
             if self.db.dialect.name == "sqlite":
-                self.db.execute(f"DROP TRIGGER IF EXISTS {quote_identifier(trigger)}")
+                self.db.execute(f"DROP TRIGGER IF EXISTS {qualified(trigger)}")
             else:
                 self.db.execute(f"DROP TRIGGER IF EXISTS {quote_identifier(trigger)} ON "
-                                f"{quote_identifier(table)}")
-                self.db.execute(f"DROP FUNCTION IF EXISTS {quote_identifier(trigger + '_f')}()")
-            self.db.execute(f"DROP TABLE IF EXISTS {quote_identifier(journal)}")
+                                f"{qualified(table)}")
+                self.db.execute(f"DROP FUNCTION IF EXISTS {qualified(trigger + '_f')}()")
+            self.db.execute(f"DROP TABLE IF EXISTS {qualified(journal)}")
 
     def fact_view_select(self, table: str, arity: int) -> str:
         """The SELECT of the inspection view of a predicate whose clauses are facts, read
@@ -613,8 +616,9 @@ class Catalog:
         created = []
         with self.db.transaction():
             execute = self.db.execute
+            # (with the schema: a view a user dropped leaves its name to a temporary one)
             for name in self.meta_get("sql_views", []):
-                execute(f"DROP VIEW IF EXISTS {quote_identifier(name)}")
+                execute(f"DROP VIEW IF EXISTS {self.db.qualified(name)}")
             taken = self.db.object_names()
             for predicate, select in views.items():
                 name = self.view_name(predicate)

@@ -16,7 +16,7 @@ from typing import Any
 
 from ..errors import SLRBusy, SLRError, SLRStoreFull
 
-__all__ = ["quote_identifier", "sql_literal", "split_sql_script", "SAFE_IDENTIFIER",
+__all__ = ["quote_identifier", "qualified_identifier", "sql_literal", "split_sql_script", "SAFE_IDENTIFIER",
            "RESERVED_PREFIXES", "SQL_KEYWORDS", "busy_error", "store_error", "disk_is_full",
            "file_uri", "file_identity"]
 
@@ -145,6 +145,17 @@ def quote_identifier(name: str) -> str:
     "a""b"
     """
     return '"' + name.replace('"', '""') + '"'
+
+
+def qualified_identifier(schema: str | None, name: str) -> str:
+    """``name`` quoted, after its quoted ``schema`` when there is one (PostgreSQL).
+
+    >>> print(qualified_identifier("slr", "slr_subj_p"), qualified_identifier(None, "p"))
+    "slr"."slr_subj_p" "p"
+    """
+    if schema is None:
+        return quote_identifier(name)
+    return f"{quote_identifier(schema)}.{quote_identifier(name)}"
 
 
 def sql_literal(value: Any) -> str:
