@@ -15,6 +15,7 @@ connection (``DROP TABLE IF EXISTS`` dropped it, a trim emptied it, a read answe
 rows, ``DROP VIEW IF EXISTS`` failed on a temporary table) (docs/sql.md, docs/schema.md)."""
 from __future__ import annotations
 
+import psycopg
 import pytest
 
 import slr_sql
@@ -62,6 +63,26 @@ def test_a_temporary_table_named_as_a_journal_another_process_dropped_is_left_al
     assert kb.store.journal_reader(own_connection=False).journal_rows(journal, 1, 0, 10) \
         == [(1, 3, "c", 3.0, 3.0)]
     assert temporary(kb, journal) == [(1, 1, "mine", 0.0, 0.0)]
+
+
+@pytest.mark.parametrize("temporary_journal", [False, True])
+def test_another_clients_insert_reaches_the_journal_whatever_its_search_path(
+        kb, postgres_url, temporary_journal):
+    # another client of the database, with the server's default search path ("$user",
+    # public: pg_temp searched first, the store's schema not at all), writes an event
+    sub = kb.subscribe("p(X)^T", since=0)
+    assert sub.get(timeout=10) == {"X": "a", "T": 1.0}
+    journal = f"slr_subj_{kb.store.table_for('p', 1)}"
+    with psycopg.connect(postgres_url, autocommit=True) as other:
+        if temporary_journal:
+            other.execute(f'CREATE TEMP TABLE "{journal}" (LIKE slr."{journal}")')
+        other.execute("INSERT INTO slr.p (arg1, t_start, t_end, arrival) "
+                      "VALUES ('b', 2, 2, 2)")
+        if temporary_journal:
+            assert other.execute(f'SELECT count(*) FROM pg_temp."{journal}"').fetchone() \
+                == (0,)
+    assert sub.get(timeout=10) == {"X": "b", "T": 2.0}
+    sub.close()
 
 
 @pytest.mark.parametrize("made", [

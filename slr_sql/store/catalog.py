@@ -567,11 +567,16 @@ class Catalog:
             function = quote_identifier(trigger + "_f")
             lock = sql_text_literal(f"{self.db.schema}:journal:{table}")
             channel = sql_text_literal(self.db.notify_channel)
+            # the body runs with the search path of the session that inserts, which may be
+            # another client's (its own schemas, pg_temp first): the journal is named with
+            # the store's schema, or that insert failed, or filled a temporary table of the
+            # journal's name and the subscribers never saw its events
             execute(
                 f"CREATE OR REPLACE FUNCTION {function}() RETURNS trigger LANGUAGE plpgsql AS "
                 f"$slr$ BEGIN PERFORM pg_advisory_xact_lock(hashtext({lock})); "
-                f"INSERT INTO {j} (seq{cols}, t_start, t_end, arrival) SELECT seq{cols}, "
-                f"t_start, t_end, arrival FROM slr_new_rows ORDER BY seq; "
+                f"INSERT INTO {self.db.qualified(journal)} (seq{cols}, t_start, t_end, "
+                f"arrival) SELECT seq{cols}, t_start, t_end, arrival FROM slr_new_rows "
+                f"ORDER BY seq; "
                 f"PERFORM pg_notify({channel}, {sql_text_literal(table)}); RETURN NULL; "
                 f"END $slr$")
             execute(f"CREATE TRIGGER {name} AFTER INSERT ON {t} REFERENCING NEW TABLE "
