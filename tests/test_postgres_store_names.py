@@ -16,6 +16,7 @@ rows, ``DROP VIEW IF EXISTS`` failed on a temporary table) (docs/sql.md, docs/sc
 from __future__ import annotations
 
 import psycopg
+import psycopg.sql
 import pytest
 
 import slr_sql
@@ -83,6 +84,56 @@ def test_another_clients_insert_reaches_the_journal_whatever_its_search_path(
                 == (0,)
     assert sub.get(timeout=10) == {"X": "b", "T": 2.0}
     sub.close()
+
+
+@pytest.mark.parametrize("temporary_tables", [False, True])
+def test_another_clients_insert_is_buffered_whatever_its_search_path(
+        kb, postgres_url, temporary_tables):
+    # docs/buffers.md: rows another tool inserts run the buffer's triggers too
+    kb.add("p(b)^2")
+    buffer = kb.add_buffer("p(_)", keep_last=2)
+    with psycopg.connect(postgres_url, autocommit=True) as other:
+        if temporary_tables:
+            for table in ("p", "slr_counters"):
+                other.execute(f"CREATE TEMP TABLE {table} AS SELECT * FROM slr.{table}")
+        other.execute("INSERT INTO slr.p (arg1, t_start, t_end, arrival) "
+                      "VALUES ('c', 3, 3, 3)")
+        if temporary_tables:
+            assert other.execute("SELECT arg1 FROM pg_temp.p ORDER BY seq").fetchall() \
+                == [("a",), ("b",)]
+            assert other.execute("SELECT pruned FROM pg_temp.slr_counters").fetchall() \
+                == [(0,)]
+    assert [a["X"] for a in kb.query("p(X)^_")] == ["b", "c"]
+    assert kb.sql("SELECT pruned FROM slr_counters WHERE buffer_id = ?", (buffer,))[1] \
+        == [(1,)]
+
+
+def test_a_buffers_functions_made_by_an_older_version_get_the_stores_search_path(
+        postgres_url):
+    with slr_sql.open(postgres_url, clock=slr_sql.ManualClock(10.0)) as kb:
+        kb.add("p(a)^1")
+        kb.add_buffer("p(_)", keep_last=2)
+    # as an older slr_sql left them: no search path of their own, their statements as the
+    # comments (what a reopen compares)
+    with psycopg.connect(postgres_url, autocommit=True) as other:
+        functions = other.execute(
+            "SELECT p.proname, obj_description(p.oid, 'pg_proc') FROM pg_proc p JOIN "
+            "pg_namespace n ON n.oid = p.pronamespace WHERE n.nspname = 'slr' "
+            "AND p.proname LIKE 'slr\\_buf\\_%'").fetchall()
+        assert functions
+        for name, statement in functions:
+            older = statement.replace(' SET search_path = "slr", pg_temp', "")
+            assert older != statement
+            other.execute(f'ALTER FUNCTION slr."{name}"() RESET search_path')
+            other.execute(f"COMMENT ON FUNCTION slr.\"{name}\"() IS "
+                          f"{psycopg.sql.quote(older)}")
+    with slr_sql.open(postgres_url, clock=slr_sql.ManualClock(10.0)):
+        pass
+    with psycopg.connect(postgres_url, autocommit=True) as other:
+        assert other.execute(
+            "SELECT DISTINCT p.proconfig FROM pg_proc p JOIN pg_namespace n ON "
+            "n.oid = p.pronamespace WHERE n.nspname = 'slr' AND p.proname LIKE "
+            "'slr\\_buf\\_%'").fetchall() == [(['search_path=slr, pg_temp'],)]
 
 
 @pytest.mark.parametrize("made", [
