@@ -720,9 +720,10 @@ class EventStore:
                 except DatabaseError as exc:
                     raise db.read_error(exc) from None
 
-            return JournalReader(execute)
+            return JournalReader(execute, qualified=db.qualified)
         reader = self._db.open_reader()
-        return None if reader is None else JournalReader(reader.execute, reader.close)
+        return None if reader is None else \
+            JournalReader(reader.execute, reader.close, self._db.qualified)
 
     @_doc(SubscriptionTables.subscription_wanted)
     def subscription_wanted(self, name: str, arity: int) -> bool:

@@ -345,6 +345,11 @@ class PostgresBufferPrinter:
 
     name = "postgresql"
 
+    def __init__(self, schema: str | None = None):
+        # the store's schema: each trigger function runs with the search path of the
+        # store's connections (None: the caller's, for printing alone)
+        self.schema = schema
+
     @staticmethod
     def path(path: Path) -> str:
         return sql_literal("{" + ",".join(f'"{p}"' for p in path) + "}")
@@ -400,18 +405,33 @@ class PostgresBufferPrinter:
                 parts.append(f"{vtype} = {self.vtype('NEW.', place)}")
         return " AND ".join(parts) if parts else "TRUE"
 
-    @staticmethod
-    def _trigger(name: str, table: str, timing: str, when: str | None, body: str,
+    def _trigger(self, name: str, table: str, timing: str, when: str | None, body: str,
                  declare: str = "") -> str:
         """A trigger function and its trigger, both named ``name`` (so dropping the function
-        drops the trigger too)."""
+        drops the trigger too).
+
+        >>> print(PostgresBufferPrinter("slr")._trigger("f", '"p"', "AFTER INSERT", None,
+        ...                                             "  RETURN NULL;"))
+        CREATE FUNCTION "f"() RETURNS trigger LANGUAGE plpgsql SET search_path = "slr", pg_temp AS $slr$
+        BEGIN
+          RETURN NULL;
+        END $slr$;
+        CREATE TRIGGER "f" AFTER INSERT ON "p" FOR EACH ROW EXECUTE FUNCTION "f"()
+        """
         q = quote_identifier(name)
         when_clause = f"\nWHEN ({when})" if when else ""
         tag, n = "$slr$", 0
         while tag in body:   # a pattern constant holding the quote's own tag
             n += 1
             tag = f"$slr{n}$"
-        return (f"CREATE FUNCTION {q}() RETURNS trigger LANGUAGE plpgsql AS {tag}\n"
+        # a function runs with the search path of the session that inserts, which may be
+        # another tool's (docs/buffers.md: its rows are buffered too), without the store's
+        # schema or with pg_temp first: the body's unqualified names (the event table,
+        # slr_counters, slr_clock, slr_json) and the count buffer's lock key
+        # (current_schema()) are then read as on the store's connections
+        path = "" if self.schema is None else \
+            f" SET search_path = {quote_identifier(self.schema)}, pg_temp"
+        return (f"CREATE FUNCTION {q}() RETURNS trigger LANGUAGE plpgsql{path} AS {tag}\n"
                 f"{declare}BEGIN\n{body}\nEND {tag};\n"
                 f"CREATE TRIGGER {q} {timing} ON {table} FOR EACH ROW{when_clause} "
                 f"EXECUTE FUNCTION {q}()")
@@ -534,7 +554,8 @@ class BufferTables:
 
     def __init__(self, db: Any):
         self.db = db
-        self.printer = SQLITE_BUFFERS if db.dialect.name == "sqlite" else POSTGRES_BUFFERS
+        self.printer: SQLiteBufferPrinter | PostgresBufferPrinter = \
+            SQLITE_BUFFERS if db.dialect.name == "sqlite" else PostgresBufferPrinter(db.schema)
 
     def buffer_rows(self, active_only: bool = True) -> list[dict[str, Any]]:
         """The rows of ``slr_buffers`` (oldest first) with their counters, as dicts.
@@ -646,7 +667,10 @@ class BufferTables:
             changed = False
             for name, sql in existing.items():
                 if statements.get(name) != sql:
-                    q = quote_identifier(name)
+                    # with the schema on PostgreSQL, as every name of a buffer's object
+                    # here: the name alone reaches on to a temporary object of the session
+                    # once the store's is gone
+                    q = self.db.qualified(name)
                     if name.startswith("slr_bix_"):
                         self.db.execute(f"DROP INDEX IF EXISTS {q}")
                     elif sqlite:
@@ -660,7 +684,7 @@ class BufferTables:
                 if sqlite:
                     self.db.execute(sql)
                 else:
-                    q = quote_identifier(name)
+                    q = self.db.qualified(name)
                     kind = "INDEX" if name.startswith("slr_bix_") else "FUNCTION"
                     if kind == "FUNCTION":   # a half-made object of an older version
                         self.db.execute(f"DROP FUNCTION IF EXISTS {q}() CASCADE")

@@ -426,11 +426,11 @@ class Catalog:
             # view depends on, so they go first and come back over the new tables
             views = self.db.view_statements(self.meta_get("sql_views", []))
             for name in views:
-                execute(f"DROP VIEW {quote_identifier(name)}")
+                execute(f"DROP VIEW {self.db.qualified(name)}")
             existing = sorted(name for name in self.db.table_names()
                               if name.startswith("slr_facts_"))
             for table in existing:
-                execute(f"DROP TABLE {quote_identifier(table)}")
+                execute(f"DROP TABLE {self.db.qualified(table)}")
             for (name, arity), rows in tables.items():
                 plain = self._fact_table(name, arity)
                 table = quote_identifier(plain)
@@ -567,11 +567,16 @@ class Catalog:
             function = quote_identifier(trigger + "_f")
             lock = sql_text_literal(f"{self.db.schema}:journal:{table}")
             channel = sql_text_literal(self.db.notify_channel)
+            # the body runs with the search path of the session that inserts, which may be
+            # another client's (its own schemas, pg_temp first): the journal is named with
+            # the store's schema, or that insert failed, or filled a temporary table of the
+            # journal's name and the subscribers never saw its events
             execute(
                 f"CREATE OR REPLACE FUNCTION {function}() RETURNS trigger LANGUAGE plpgsql AS "
                 f"$slr$ BEGIN PERFORM pg_advisory_xact_lock(hashtext({lock})); "
-                f"INSERT INTO {j} (seq{cols}, t_start, t_end, arrival) SELECT seq{cols}, "
-                f"t_start, t_end, arrival FROM slr_new_rows ORDER BY seq; "
+                f"INSERT INTO {self.db.qualified(journal)} (seq{cols}, t_start, t_end, "
+                f"arrival) SELECT seq{cols}, t_start, t_end, arrival FROM slr_new_rows "
+                f"ORDER BY seq; "
                 f"PERFORM pg_notify({channel}, {sql_text_literal(table)}); RETURN NULL; "
                 f"END $slr$")
             execute(f"CREATE TRIGGER {name} AFTER INSERT ON {t} REFERENCING NEW TABLE "
@@ -579,14 +584,17 @@ class Catalog:
 
     def drop_journal(self, table: str, journal: str, trigger: str) -> None:
         """Drop the journal of ``table`` and its trigger (if they exist)."""
+        # named with the schema (db.qualified): another process may have dropped them
+        # already, and the name alone would then reach a temporary table of this session's
+        qualified = self.db.qualified
         with self.db.transaction():
             if self.db.dialect.name == "sqlite":
-                self.db.execute(f"DROP TRIGGER IF EXISTS {quote_identifier(trigger)}")
+                self.db.execute(f"DROP TRIGGER IF EXISTS {qualified(trigger)}")
             else:
                 self.db.execute(f"DROP TRIGGER IF EXISTS {quote_identifier(trigger)} ON "
-                                f"{quote_identifier(table)}")
-                self.db.execute(f"DROP FUNCTION IF EXISTS {quote_identifier(trigger + '_f')}()")
-            self.db.execute(f"DROP TABLE IF EXISTS {quote_identifier(journal)}")
+                                f"{qualified(table)}")
+                self.db.execute(f"DROP FUNCTION IF EXISTS {qualified(trigger + '_f')}()")
+            self.db.execute(f"DROP TABLE IF EXISTS {qualified(journal)}")
 
     def fact_view_select(self, table: str, arity: int) -> str:
         """The SELECT of the inspection view of a predicate whose clauses are facts, read
@@ -613,8 +621,9 @@ class Catalog:
         created = []
         with self.db.transaction():
             execute = self.db.execute
+            # (with the schema: a view a user dropped leaves its name to a temporary one)
             for name in self.meta_get("sql_views", []):
-                execute(f"DROP VIEW IF EXISTS {quote_identifier(name)}")
+                execute(f"DROP VIEW IF EXISTS {self.db.qualified(name)}")
             taken = self.db.object_names()
             for predicate, select in views.items():
                 name = self.view_name(predicate)

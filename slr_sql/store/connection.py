@@ -560,6 +560,16 @@ class Database:
         self._planning = (version, copy, made, catalog)
         return copy, made, catalog
 
+    def qualified(self, name: str) -> str:
+        """The store's object ``name`` as its statements name it where it may be missing
+        (dropped by another process or a user): quoted. A temporary object cannot be made on
+        the store's connection (the authorizer), so none can answer for it.
+
+        >>> Database(None).qualified("slr_subj_p")
+        '"slr_subj_p"'
+        """
+        return quote_identifier(name)
+
     def object_names(self) -> set[str]:
         """Lower-cased names of every table, index, view and trigger of the database.
 

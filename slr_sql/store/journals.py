@@ -136,7 +136,9 @@ class SubscriptionTables:
     def trim_journal(self, journal: str, through_jid: int) -> None:
         """Delete the rows of ``journal`` up to ``through_jid`` (every subscription is past
         them)."""
-        self._run(f"DELETE FROM {quote_identifier(journal)} WHERE jid <= ?", (through_jid,))
+        # (with the schema, as every statement here names a journal: another process may
+        # have dropped it, and the name alone would reach a temporary table of the session)
+        self._run(f"DELETE FROM {self.db.qualified(journal)} WHERE jid <= ?", (through_jid,))
 
     def subscription_rows(self) -> list[dict[str, Any]]:
         """Every registered subscription, as dicts, by id."""
@@ -146,9 +148,9 @@ class SubscriptionTables:
     def journal_start(self, table: str, journal: str) -> tuple[int, int]:
         """``(greatest seq of table, greatest jid of journal)``, 0 when empty: where a new
         subscription's history ends and its live events begin."""
-        top = self._run(f"SELECT coalesce(max(seq), 0) FROM {quote_identifier(table)}")[0][0]
+        top = self._run(f"SELECT coalesce(max(seq), 0) FROM {self.db.qualified(table)}")[0][0]
         start = self._run(f"SELECT coalesce(max(jid), 0) FROM "
-                          f"{quote_identifier(journal)}")[0][0]
+                          f"{self.db.qualified(journal)}")[0][0]
         return top, start
 
 
@@ -161,8 +163,9 @@ class _Statements(NamedTuple):
 
 
 @functools.lru_cache(maxsize=1024)
-def _statements(table: str, journal: str, arity: int) -> _Statements:
-    t, j = quote_identifier(table), quote_identifier(journal)
+def _statements(t: str, j: str, arity: int) -> _Statements:
+    """The statements of table ``t`` and journal ``j`` (named as :meth:`Database.qualified`
+    names them)."""
     cols = "".join(f", arg{i}" for i in range(1, arity + 1))
     tcols = "".join(f", t.arg{i}" for i in range(1, arity + 1))
     history = (
@@ -188,15 +191,20 @@ class JournalReader:
     :meth:`EventStore.journal_reader`."""
 
     def __init__(self, execute: Callable[[str, tuple], list[tuple]],
-                 close: Callable[[], None] | None = None):
+                 close: Callable[[], None] | None = None,
+                 qualified: Callable[[str], str] = quote_identifier):
         self._execute = execute
         self._close = close
+        # how a table or journal is named: with the store's schema on PostgreSQL
+        # (Database.qualified)
+        self._name = qualified
 
     def journal_rows(self, journal: str, arity: int, after_jid: int,
                      limit: int) -> list[tuple]:
         """``(jid, seq, arg1.., t_start, t_end)`` of the journal rows after ``after_jid``,
         in jid order, ``limit`` at most."""
-        return self._execute(_statements("", journal, arity).journal, (after_jid, limit))
+        return self._execute(_statements("", self._name(journal), arity).journal,
+                             (after_jid, limit))
 
     def history_rows(self, table: str, journal: str, arity: int, after_seq: int,
                      top_seq: int, since: float, until: float, live_start: int, limit: int,
@@ -205,13 +213,13 @@ class JournalReader:
         top_seq`` ending in [since, until], in seq order, ``limit`` at most, leaving out the
         rows the journal holds after ``live_start`` (delivered live). ``by_end``: walk the
         end-time index (few rows in the window) rather than the table by seq."""
-        s = _statements(table, journal, arity)
+        s = _statements(self._name(table), self._name(journal), arity)
         return self._execute(s.history_by_end if by_end else s.history,
                              (after_seq, top_seq, since, until, live_start, limit))
 
     def window_count(self, table: str, since: float, until: float, cap: int) -> int:
         """How many rows of ``table`` end in [since, until], counted up to ``cap`` at most."""
-        return self._execute(_statements(table, "", 0).window_count,
+        return self._execute(_statements(self._name(table), "", 0).window_count,
                              (since, until, max(cap, 0)))[0][0]
 
     def event_table(self, name: str, arity: int) -> str | None:
@@ -222,7 +230,7 @@ class JournalReader:
 
     def max_jid(self, journal: str) -> int:
         """The greatest jid of ``journal`` (0 when empty)."""
-        return self._execute(_statements("", journal, 0).max_jid, ())[0][0] or 0
+        return self._execute(_statements("", self._name(journal), 0).max_jid, ())[0][0] or 0
 
     def close(self) -> None:
         """Close the connection when it is the reader's own (idempotent)."""

@@ -41,7 +41,7 @@ from .authorizer import transaction_control_refusal
 from .dialect import POSTGRES
 from .functions import SqlFunctions
 from .schema import postgres_migration_scripts
-from .sqltext import bound_parameters, quote_identifier
+from .sqltext import bound_parameters, qualified_identifier, quote_identifier
 
 __all__ = ["PgDatabase", "PgStatementError", "is_postgres_url", "split_url", "PENDING_CHANNEL"]
 
@@ -1295,6 +1295,14 @@ class PgDatabase:
         return {row[0] for row in self.execute(
             "SELECT indexname FROM pg_indexes WHERE schemaname = current_schema() "
             "AND tablename = ?", (table,))}
+
+    def qualified(self, name: str) -> str:
+        """The store's object ``name`` with its schema, as the store's statements name an
+        object that may be missing (a journal another process dropped, a view a user
+        dropped). Unqualified, the search path would go on past the schema to ``pg_temp``,
+        and ``DROP TABLE IF EXISTS`` would drop, a ``DELETE`` empty, a read answer, a
+        temporary object of the same name a written ``kb.sql`` statement made."""
+        return qualified_identifier(self.schema, name)
 
     def object_names(self) -> set[str]:
         """Lower-cased names of the tables, views, indexes and sequences of the schema."""

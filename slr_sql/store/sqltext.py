@@ -16,12 +16,17 @@ from typing import Any
 
 from ..errors import SLRBusy, SLRError, SLRStoreFull
 
-__all__ = ["quote_identifier", "sql_literal", "split_sql_script", "SAFE_IDENTIFIER",
+__all__ = ["quote_identifier", "qualified_identifier", "sql_literal", "split_sql_script", "SAFE_IDENTIFIER",
            "RESERVED_PREFIXES", "SQL_KEYWORDS", "busy_error", "store_error", "disk_is_full",
            "file_uri", "file_identity"]
 
 SAFE_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
-RESERVED_PREFIXES = ("slr_", "sqlite_")
+# Names a table or view of the store may not have, on either engine: slr_sql's own, and the
+# engines' catalogs'. PostgreSQL searches pg_catalog before the store's schema (putting it
+# later would let a table named ``text`` take over the type ``text`` in every cast), so a
+# table named like a catalog relation (every one starts ``pg_``) would never be reached by
+# an unqualified name: its inserts went to pg_catalog.pg_class, a DROP VIEW to a system view.
+RESERVED_PREFIXES = ("slr_", "sqlite_", "pg_")
 # SQLite keywords: an event named like one gets a sanitized table name, so that
 # ``SELECT * FROM <table>`` works without quoting for every table we create.
 SQL_KEYWORDS = frozenset("""
@@ -140,6 +145,17 @@ def quote_identifier(name: str) -> str:
     "a""b"
     """
     return '"' + name.replace('"', '""') + '"'
+
+
+def qualified_identifier(schema: str | None, name: str) -> str:
+    """``name`` quoted, after its quoted ``schema`` when there is one (PostgreSQL).
+
+    >>> print(qualified_identifier("slr", "slr_subj_p"), qualified_identifier(None, "p"))
+    "slr"."slr_subj_p" "p"
+    """
+    if schema is None:
+        return quote_identifier(name)
+    return f"{quote_identifier(schema)}.{quote_identifier(name)}"
 
 
 def sql_literal(value: Any) -> str:
