@@ -57,6 +57,11 @@ class SubscriptionState(enum.Enum):
     FINISHED = "finished"  # the consumer took the end
     CLOSED = "closed"      # close(): nothing more is queued or taken
 
+    # a member is equal only to itself, so its identity is its hash: Enum's own hash (of its
+    # name, in Python) made each test of a state against a set, done by the hub and the
+    # consumer for every batch of every subscription, a function call
+    __hash__ = object.__hash__
+
     @property
     def running(self) -> bool:
         """The hub still queues answers for it."""
