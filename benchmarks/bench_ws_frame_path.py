@@ -61,6 +61,8 @@ class Sink:
     open = True
     def write(self, frame):
         return True
+    def writer(self):
+        return self.write
 started = threading.Event()
 async def main():
     start = time.thread_time()
