@@ -208,7 +208,7 @@ class _AnswerOnce:
             return
         failed: list[BaseException] = []
 
-        async def send_once(message: dict) -> None:
+        async def send_once(message: Any) -> None:
             if failed:
                 return
             try:
@@ -253,8 +253,9 @@ def _direct_routes(routes: list) -> dict[tuple[str, str], Callable]:
             continue
         for method in route.methods or ():
             scope = {"type": "http", "path": route.path, "root_path": "", "method": method}
-            first = next((r for r in routes if r.matches(scope)[0] is Match.FULL), None)
-            if first is route:
+            first = next((i for i, r in enumerate(routes) if r.matches(scope)[0] is Match.FULL),
+                         None)
+            if first is not None and routes[first] is route:
                 table[(method, route.path)] = route.endpoint
     return table
 
