@@ -7,7 +7,7 @@ batch and framing it once, written to a frame channel without a socket; ``--path
 coroutines``: a coroutine per subscriber, ``next_answers(256, copy=False)`` then the frame's
 JSON text by the service's ``_AnswerTexts`` (the way for clients that acknowledge, with
 ``--ws-compression``, and of the code before the fan-out). The figure is the CPU time of the
-loop's thread per event (``time.thread_time``), which a shared machine disturbs far less than
+loop's thread per event (``time.thread_time``; the hub thread's is printed too), which a shared machine disturbs far less than
 latency; the kernel's ``send`` is left out, and for the coroutines the WebSocket layers
 (starlette, uvicorn, websockets) too (bench_service_ws.py and bench_ws_paired.py have them).
 
@@ -61,6 +61,8 @@ class Sink:
     open = True
     def write(self, frame):
         return True
+    def writer(self):
+        return self.write
 started = threading.Event()
 async def main():
     start = time.thread_time()
@@ -82,11 +84,16 @@ async def main():
 loop_thread = threading.Thread(target=lambda: asyncio.run(main()))
 loop_thread.start()
 started.wait(60)
+hub = next(t for t in threading.enumerate() if t.name == "slr-subscriptions")
+hub_clock = time.pthread_getcpuclockid(hub.ident)
+hub_start = time.clock_gettime(hub_clock)
 for b in range(batches):
     kb.add_many([f"e({j})^{j + 1}" for j in range(b * 10, b * 10 + 10)])
     time.sleep(0.002)   # (the stream's rate: 10 events every 2 ms, as a live producer)
 loop_thread.join(120)
-print(json.dumps({"us_per_event": cpu[0] / total * 1e6, "complete": min(counts) == total}))
+hub_cpu = time.clock_gettime(hub_clock) - hub_start
+print(json.dumps({"us_per_event": cpu[0] / total * 1e6, "complete": min(counts) == total,
+                  "hub_us_per_event": hub_cpu / total * 1e6}))
 for sub in subs:
     sub.close()
 kb.close()
@@ -117,19 +124,26 @@ def main() -> None:
     print("load average at start: %.2f %.2f %.2f" % os.getloadavg())
     mine: list[float] = []
     theirs: list[float] = []
+    hubs: dict[str, list[float]] = {"mine": [], "theirs": []}
     for _ in range(args.repeat):
         r = measure(ROOT, args.subscribers, args.batches, args.path)
         assert r["complete"], "a subscriber missed events"
         mine.append(r["us_per_event"])
+        hubs["mine"].append(r["hub_us_per_event"])
         if args.code:
             r = measure(Path(args.code), args.subscribers, args.batches, args.code_path)
             assert r["complete"], "a subscriber missed events"
             theirs.append(r["us_per_event"])
+            hubs["theirs"].append(r["hub_us_per_event"])
     print(f"this checkout ({args.path}): loop thread CPU {', '.join(f'{x:.1f}' for x in mine)} µs per event "
           f"({args.subscribers} subscribers, best {min(mine):.1f})")
     if theirs:
         print(f"{args.code} ({args.code_path}): {', '.join(f'{x:.1f}' for x in theirs)} µs per event (best "
               f"{min(theirs):.1f}); ratio of the bests {min(mine) / min(theirs):.2f}")
+    print("the hub thread's CPU (its delivery passes): this checkout "
+          + ", ".join(f"{x:.1f}" for x in hubs["mine"]) + " µs per event"
+          + ("; " + args.code + " " + ", ".join(f"{x:.1f}" for x in hubs["theirs"])
+             if hubs["theirs"] else ""))
     print("load average at end: %.2f %.2f %.2f" % os.getloadavg())
 
 

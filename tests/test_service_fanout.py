@@ -206,6 +206,32 @@ def test_take_answers_says_take_again_when_the_end_is_behind_and_a_close_meanwhi
         loop.close()
 
 
+def test_a_whole_batch_offered_hands_its_waiting_async_consumer_over_at_once(kb):
+    """The hub's shared read queues a batch and takes the waiting async consumer's waker
+    under the same lock (``offer_all(..., loops)``): its future goes to ``loops`` for the
+    pass to resolve, it is no longer registered, and the wake after it finds nothing to do.
+    Without ``loops`` the waker stays for :meth:`Subscription.wake`."""
+    sub = kb.subscribe("p(X)^T", since=0)
+    drained(kb)
+    loop = asyncio.new_event_loop()
+    try:
+        waker = (loop, loop.create_future())
+        assert sub.take_answers(10, waker) == [] and sub.waits_with(waker)
+        answer = {"X": 1, "T": 1.0}
+        assert sub.offer_all([10**9, answer], 1, 10**9)          # (no loops: left for wake)
+        assert sub.waits_with(waker)
+        assert sub.take_answers(10, waker) == [answer]
+        loops: dict = {}
+        assert sub.offer_all([10**9 + 1, answer], 1, 10**9 + 1, loops)
+        assert loops == {loop: [waker[1]]} and not sub.waits_with(waker)
+        woken: dict = {}
+        sub.wake(woken)
+        assert woken == {}
+    finally:
+        loop.close()
+    sub.close()
+
+
 def test_next_answers_after_take_answers_waits_on_its_own_future(kb):
     """take_answers leaves no waiter for next_answers to await (the fan-out's wakers are
     not awaitable): the two mix on one subscription."""

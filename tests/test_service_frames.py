@@ -90,7 +90,12 @@ def test_the_frame_channel_is_offered_without_compression_and_writes_whole_frame
             channel = offered["channel"]
             seen["open"], seen["paused"] = channel.open, channel.paused
             assert channel.write(text_frame('{"n":1}'.encode()))
-            assert channel.write(text_frame(("y" * 70_000).encode()))
+            write = channel.writer()         # the fan-out's one call per frame
+            write(text_frame(("y" * 70_000).encode()))
+            protocol = channel._protocol()   # (what the transport calls above its mark)
+            protocol.pause_writing()
+            seen["writer_paused"], seen["paused_then"] = channel.writer(), channel.paused
+            protocol.resume_writing()
         else:
             await send({"type": "websocket.send", "text": '{"n":1}'})
             await send({"type": "websocket.send", "text": "y" * 70_000})
@@ -98,6 +103,7 @@ def test_the_frame_channel_is_offered_without_compression_and_writes_whole_frame
         if offered is not None:
             seen["open_after_close"] = offered["channel"].open
             seen["written_after_close"] = offered["channel"].write(text_frame(b"{}"))
+            seen["writer_after_close"] = offered["channel"].writer()
 
     url, stop, server = _serve(app, deflate)
     try:
@@ -113,6 +119,8 @@ def test_the_frame_channel_is_offered_without_compression_and_writes_whole_frame
     if offered:
         assert seen["open"] and not seen["paused"]
         assert not seen["open_after_close"] and not seen["written_after_close"]
+        assert seen["writer_paused"] is None and seen["paused_then"]
+        assert seen["writer_after_close"] is False
 
 
 def _started(server) -> bool:
@@ -201,6 +209,9 @@ class _Socket:
             raise RuntimeError("the transport refused the write")
         self.frames.append(frame)
         return True
+
+    def writer(self):
+        return False if not self.open else None if self.paused else self.write
 
 
 def _run_until(loop, done, what: str) -> None:

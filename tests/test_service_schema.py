@@ -219,3 +219,26 @@ def test_a_malformed_chunked_body_gets_a_clean_400_and_one_log_line(tmp_path):
     lines = [line for line in server.log.read_text().splitlines() if line.strip()]
     assert len(lines) == rounds * len(MALFORMED), lines
     assert all("Invalid HTTP request received." in line for line in lines), lines
+
+
+def test_each_operation_without_parameters_goes_straight_to_its_endpoint(spec):
+    """The routes without path parameters are served without starlette's routing (the app
+    looks the exact method and path up): the table holds every such operation of the
+    description (HEAD with GET) and only those, each to the endpoint the router picks."""
+    import slr_sql
+    from starlette.routing import Match
+    from slr_sql.service.app import _direct_routes, create_app
+
+    with slr_sql.open() as kb:
+        app = create_app(kb)
+        direct = _direct_routes(app.routes)
+    expected = set()
+    for path, ops in spec["paths"].items():
+        if "{" not in path and path != "/subscribe":    # (a WebSocket's: not HTTP)
+            expected |= {(m.upper(), path) for m in ops}
+            expected |= {("HEAD", path)} if "get" in ops else set()
+    assert set(direct) == expected and ("POST", "/add_many") in direct
+    for (method, path), endpoint in direct.items():
+        scope = {"type": "http", "path": path, "root_path": "", "method": method}
+        assert next(r for r in app.routes
+                    if r.matches(scope)[0] is Match.FULL).endpoint is endpoint

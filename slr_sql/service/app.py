@@ -37,7 +37,7 @@ from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException
 from starlette.requests import ClientDisconnect, Request
 from starlette.responses import Response
-from starlette.routing import Route, WebSocketRoute
+from starlette.routing import Match, Route, WebSocketRoute
 from starlette.types import Receive, Scope, Send
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
@@ -186,7 +186,9 @@ def _plain(value: Any) -> Any:
 
 
 class _AnswerOnce:
-    """ASGI middleware: an answer that can no longer be sent is dropped without a word.
+    """ASGI middleware: an answer that can no longer be sent is dropped without a word; and a
+    request for a route without parameters goes straight to its endpoint (``direct``: see
+    :func:`_direct_routes`).
 
     When the HTTP server finds a request body malformed (a broken chunked encoding, say), it
     answers 400 itself and closes the connection while the endpoint may be running already
@@ -196,8 +198,9 @@ class _AnswerOnce:
     is dropped (a debug line), and the middleware waits (briefly) until the server has seen
     the connection close, so that it does not report an unfinished response either."""
 
-    def __init__(self, app: Any):
+    def __init__(self, app: Any, direct: dict | None = None):
         self.app = app
+        self.direct = direct or {}
 
     async def __call__(self, scope: dict, receive: Callable, send: Callable) -> None:
         if scope["type"] != "http":
@@ -205,7 +208,7 @@ class _AnswerOnce:
             return
         failed: list[BaseException] = []
 
-        async def send_once(message: dict) -> None:
+        async def send_once(message: Any) -> None:
             if failed:
                 return
             try:
@@ -215,12 +218,46 @@ class _AnswerOnce:
                 log.debug("an answer to %s %s could not be sent (%s): the connection is "
                           "closed", scope.get("method"), scope.get("path"), type(exc).__name__)
 
-        await self.app(scope, receive, send_once)
+        endpoint = None if scope.get("root_path") else \
+            self.direct.get((scope["method"], scope["path"]))
+        if endpoint is None:
+            await self.app(scope, receive, send_once)
+        else:
+            response = await endpoint(Request(scope, receive, send_once))
+            await response(scope, receive, send_once)
         if failed:
             try:
                 await asyncio.wait_for(_disconnected(receive), 5.0)
             except (TimeoutError, asyncio.TimeoutError, Exception):  # noqa: BLE001
                 pass        # the server closes the connection on its own
+
+
+def _direct_routes(routes: list) -> dict[tuple[str, str], Callable]:
+    """``(method, path)`` -> endpoint, for each route without parameters and each of its
+    methods, where starlette's router would pick that route (the first that matches): the
+    request can skip the routing and starlette's exception layers (five coroutines, and a
+    match against every route before it). Only for the service's own endpoints
+    (:meth:`_Service._dispatch`), which turn every Exception into the service's JSON error
+    themselves, as those layers would have; a method a route does not take, an unknown path
+    or a redirect still go the whole way.
+
+    >>> async def endpoint(request): ...
+    >>> table = _direct_routes([Route("/a/{x}", endpoint), Route("/a/b", endpoint,
+    ...                         methods=["POST"]), Route("/c", endpoint)])
+    >>> sorted(table)
+    [('GET', '/c'), ('HEAD', '/c'), ('POST', '/a/b')]
+    """
+    table: dict[tuple[str, str], Callable] = {}
+    for route in routes:
+        if type(route) is not Route or route.param_convertors:
+            continue
+        for method in route.methods or ():
+            scope = {"type": "http", "path": route.path, "root_path": "", "method": method}
+            first = next((i for i, r in enumerate(routes) if r.matches(scope)[0] is Match.FULL),
+                         None)
+            if first is not None and routes[first] is route:
+                table[(method, route.path)] = route.endpoint
+    return table
 
 
 async def _disconnected(receive: Callable) -> None:
@@ -1456,8 +1493,9 @@ def create_app(kb: KnowledgeBase, *, token: str | None = None, limits: Limits | 
         log.error("internal error", exc_info=exc)
         return _error_response(exc)
 
-    app = Starlette(routes=service.starlette_routes(),
-                    middleware=[Middleware(_AnswerOnce)],
+    routes = service.starlette_routes()
+    app = Starlette(routes=routes,
+                    middleware=[Middleware(_AnswerOnce, direct=_direct_routes(routes))],
                     exception_handlers={HTTPException: http_error, Exception: internal_error})
     app.state.service = service
     return app

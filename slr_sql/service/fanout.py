@@ -35,6 +35,10 @@ class FrameChannel(Protocol):
 
     def write(self, frame: bytes) -> bool: ...
 
+    def writer(self) -> Callable[[bytes], object] | bool | None:
+        """False once the connection is closing or closed, None while ``paused``, else a
+        function that writes one whole frame now (until the loop runs something else)."""
+
 
 def text_frame(payload: bytes) -> bytes:
     """One unmasked, final WebSocket text frame (RFC 6455 §5.2) holding ``payload`` (UTF-8):
@@ -98,10 +102,11 @@ class Delivery:
         channel, sub, fanout = self.channel, self.sub, self._fanout
         waker = (fanout.loop, self)
         while True:
-            if not channel.open:
+            write = channel.writer()
+            if write is None:
+                return                  # its buffer is full: the drain marks it again
+            if write is False:
                 self._finish(GONE)
-                return
-            if channel.paused:
                 return
             try:
                 answers = sub.take_answers(self.batch, waker)
@@ -115,9 +120,7 @@ class Delivery:
                 return                  # the waker is registered: the hub marks it again
             seq = self.seq + 1
             self.seq += len(answers)
-            if not channel.write(fanout.frame(seq, answers)):
-                self._finish(GONE)
-                return
+            write(fanout.frame(seq, answers))     # (the take left the connection as it was)
             if len(answers) < self.batch and sub.waits_with(waker):
                 return                  # the batch emptied the queue; what comes next wakes it
 
@@ -139,6 +142,7 @@ class FanOut:
     >>> class Socket:                       # a connection's frame channel, in memory
     ...     on_drain, paused, open, frames = None, False, True, []
     ...     def write(self, frame): self.frames.append(frame); return True
+    ...     def writer(self): return self.write
     >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); loop = asyncio.new_event_loop()
     >>> fanout = FanOut(loop, lambda seq, answers: f'{{"seq":{seq},"n":{len(answers)}}}')
     >>> socket = Socket(); delivery = fanout.start(kb.subscribe("p(X)^T", since=0), socket, 256)

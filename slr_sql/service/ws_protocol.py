@@ -49,6 +49,22 @@ class SocketFrameChannel:
         return p is not None and not (p.disconnected or p.close_sent or
                                       p.transport.is_closing())
 
+    def writer(self) -> Callable[[bytes], object] | bool | None:
+        """All three checks of a frame's write in one call: False once the connection is
+        closing or closed, None while the buffer is full (wait for ``on_drain``), else the
+        transport's own write, valid until the loop runs something else (nothing but the
+        loop's thread changes the connection). The fan-out asks this once per frame: the
+        properties and :meth:`write` would each look the connection up again."""
+        p = self._protocol()
+        if p is None or p.disconnected or p.close_sent:
+            return False
+        transport = p.transport
+        if transport.is_closing():
+            return False
+        if not p.writable.is_set():
+            return None
+        return transport.write
+
     def write(self, frame: bytes) -> bool:
         """Write one whole frame (:func:`~slr_sql.service.fanout.text_frame`); False if
         the connection is closing or closed."""

@@ -498,6 +498,7 @@ class SubscriptionHub:
         then the ends (``until`` reached, too far behind)."""
         info = self._type_info(key)
         touched: set = set()
+        loops: dict = {}    # the shared read's async consumers, woken with the touched ones
         self._max_jids.clear()
         if info is None:   # no event of this type yet: nothing to read; until may still end it
             ending = [s for s in subs if s.until_reached and not s.is_over]
@@ -527,14 +528,14 @@ class SubscriptionHub:
                 rows = self._journal_rows(info, pos, CHUNK)
                 if not rows:
                     break
-                self._deliver_rows(key, rows, group, touched)
+                self._deliver_rows(key, rows, group, touched, loops=loops)
                 pos = rows[-1][0]
                 self._type_pos[key] = pos
                 if len(rows) < CHUNK:
                     break
                 group = [s for s in group if s.state is live]
-                self._wake(touched)     # a long backlog: let consumers start
-                touched = set()
+                self._wake(touched, loops)     # a long backlog: let consumers start
+                touched, loops = set(), {}
         rest = []
         behind = []
         for s in subs:
@@ -551,14 +552,15 @@ class SubscriptionHub:
             self._serve_behind(key, info, behind, touched)
         for s in rest:
             self._check_end(key, info, s, touched)
-        self._wake(touched)
+        self._wake(touched, loops)
 
     def _deliver_rows(self, key: tuple[str, int], rows: list, group: list[Subscription],
-                      touched: set, own_pace: bool = False) -> None:
+                      touched: set, own_pace: bool = False, loops: dict | None = None) -> None:
         """Match journal rows ``(jid, seq, args.., start, end)`` for ``group``: the answers of
         each distinct (pattern, condition, since, until) are computed once, then given to each
         subscription in one batch; one whose queue fills up falls behind (lagging) at the
-        first answer it cannot take."""
+        first answer it cannot take. ``loops``: the async consumers of the batches queued
+        whole are handed over there (:meth:`Subscription.offer_all`), for :meth:`_wake`."""
         arity = key[1]
         decode = self._decode
         try:
@@ -586,7 +588,7 @@ class SubscriptionHub:
                 cohort = cohorts[s.cohort_key] = self._cohort(s, events)
             items, error, error_jid, flat = cohort
             if scanned < first_jid and error is None and s.offer_all(flat, len(items),
-                                                                      last_jid):
+                                                                      last_jid, loops):
                 if items:                # the common case: every answer of the batch fits
                     touched.add(s)
                 continue
@@ -769,10 +771,12 @@ class SubscriptionHub:
                 self.registry.ensure_journal(info.table, key[1])
         self._journaled.add(key)
 
-    def _wake(self, touched: set) -> None:
-        if not touched:
+    def _wake(self, touched: set, loops: dict | None = None) -> None:
+        """Wake the consumers of ``touched`` and resolve the async ones handed over already
+        (``loops``: futures per loop): one call into each loop."""
+        if not touched and not loops:
             return
-        loops: dict = {}
+        loops = {} if loops is None else loops
         for s in touched:
             s.wake(loops)
         for loop, futures in loops.items():

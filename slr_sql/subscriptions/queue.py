@@ -57,6 +57,11 @@ class SubscriptionState(enum.Enum):
     FINISHED = "finished"  # the consumer took the end
     CLOSED = "closed"      # close(): nothing more is queued or taken
 
+    # a member is equal only to itself, so its identity is its hash: Enum's own hash (of its
+    # name, in Python) made each test of a state against a set, done by the hub and the
+    # consumer for every batch of every subscription, a function call
+    __hash__ = object.__hash__
+
     @property
     def running(self) -> bool:
         """The hub still queues answers for it."""
@@ -704,15 +709,26 @@ class Subscription:
         """How many more answers its queue takes now (read without the lock: a hint)."""
         return self.max_queue - (len(self._queue) >> 1)
 
-    def offer_all(self, flat: list, count: int, last_jid: int) -> bool:
+    def offer_all(self, flat: list, count: int, last_jid: int, loops: dict | None = None) -> bool:
         """Queue ``count`` answers (``flat``: ``[jid, answer, ...]``) and pass the journal up to
-        ``last_jid``, if all of them fit and it is running; False (nothing done) otherwise."""
+        ``last_jid``, if all of them fit and it is running; False (nothing done) otherwise.
+        ``loops``: when answers were queued, an async consumer waiting for them is handed
+        over there (its future appended to ``loops[its loop]``, for the caller to resolve as
+        :meth:`wake` would have collected it): one lock for queueing and waking."""
         with self._lock:
             queue = self._queue
             if self._state not in _RUNNING or (len(queue) >> 1) + count > self.max_queue:
                 return False
             queue.extend(flat)
             self.scanned = last_jid
+            waiter = self._async_waiter
+            if waiter is not None and count and loops is not None:
+                self._async_waiter = None
+                futures = loops.get(waiter[0])
+                if futures is None:
+                    loops[waiter[0]] = [waiter[1]]
+                else:
+                    futures.append(waiter[1])
             return True
 
     def offer_batch(self, phase: int, batch: list, end_pos: int) -> bool:
