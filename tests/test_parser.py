@@ -809,3 +809,65 @@ def test_the_numbers_table_is_swi_prologs(tmp_path):
     kb.close()
     if shutil.which("swipl"):
         assert dict(zip(NUMBERS, _swi_reads(list(NUMBERS), tmp_path))) == NUMBERS
+
+
+# ------------------------------------------------------------------ name characters
+# What SWI-Prolog 9 reads for `X = <text>` (slr_sql/unichars.py): a name goes on with Unicode
+# ID_Continue characters -- marks (`é` written `e` + U+0301), connector punctuation -- and not
+# with `²`; non-ASCII symbols glue into symbol atoms; `²` and `½` are atoms alone, as `!` is.
+NAME_CHARS = {"x²": "syntax", "a²b": "syntax", "½a": "syntax", "X²": "syntax", "_²": "syntax",
+              "²": "atom", "½": "atom", "x\u0301": "atom", "e\u0301cole": "atom",
+              "a\u0903b": "atom", "a‿b": "atom", "x℘": "atom", "℘": "atom", "Ω\u0301": "var",
+              "→": "atom", "+→": "atom", "≤≥": "atom", "a→b": "syntax", "a·b": "syntax",
+              "f(≤, ≥)": "compound", "²(a)": "compound", "∀x": "syntax", "x\U0001d7d8": "atom",
+              "\U00010400x": "var", "\U00010428x": "atom", "\U0001f600": "atom"}
+
+
+@pytest.mark.parametrize("text", NAME_CHARS)
+def test_names_and_symbols_of_any_script_read_as_swi_prolog_reads_them(text):
+    if NAME_CHARS[text] == "syntax":
+        with pytest.raises(SLRSyntaxError):
+            parse_term(f"X = {text}")
+        return
+    value = parse_term(f"X = {text}")[0].args[1]
+    assert _kind(value) == NAME_CHARS[text]
+    if NAME_CHARS[text] == "atom":
+        assert value == Atom(text)                # one token, all of the text
+        assert parse_term(format_atom(text))[0] == Atom(text)
+
+
+def test_the_name_chars_table_is_swi_prologs(tmp_path):
+    """The grammar's character classes are unichars.py's: a name goes on with every character
+    of ID_CONTINUE, a symbol atom with every one of SYMBOL, each SOLO one is an atom alone (the
+    first and last character of each range of each class); SWI-Prolog reads the table as it
+    says where ``swipl`` is installed."""
+    from slr_sql import unichars
+
+    def ends(cls: str) -> list[str]:
+        return [c for k, c in enumerate(cls) if c != "-" and "-" not in cls[k - 1:k]] + \
+            [cls[k + 1] for k, c in enumerate(cls) if c == "-"]
+
+    for c in ends(unichars.ID_CONTINUE):
+        assert parse_term(f"x{c}")[0] == Atom(f"x{c}"), hex(ord(c))
+    for c in ends(unichars.ID_START):
+        assert type(parse_term(f"{c}x")[0]) is (Var if c.isupper() else Atom), hex(ord(c))
+    for c in ends(unichars.SYMBOL):
+        assert parse_term(f"+{c}")[0] == Atom(f"+{c}"), hex(ord(c))
+    for c in ends(unichars.SOLO):
+        assert parse_term(c)[0] == Atom(c), hex(ord(c))
+        with pytest.raises(SLRSyntaxError):
+            parse_term(c + c)
+    if not shutil.which("swipl"):
+        return
+    script = tmp_path / "kinds.pl"
+    script.write_text(
+        ":- initialization(main, main).\n"
+        "main :- read_term(user_input, L, []), ( L == end_of_file -> true ;\n"
+        "  catch(( term_string(T, L), T = (_ = V),\n"
+        "    ( var(V) -> K = var ; atom(V) -> K = atom ; K = compound ) ),\n"
+        "    _, K = syntax),\n"
+        "  format('~w~n', [K]), main ).\n", encoding="utf-8")
+    proc = subprocess.run([shutil.which("swipl"), str(script)],
+                          input="".join(format_atom(f"X = {t}") + ".\n" for t in NAME_CHARS),
+                          capture_output=True, text=True, encoding="utf-8", timeout=60)
+    assert dict(zip(NAME_CHARS, proc.stdout.split())) == NAME_CHARS, proc.stderr
