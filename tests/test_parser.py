@@ -871,3 +871,31 @@ def test_the_name_chars_table_is_swi_prologs(tmp_path):
                           input="".join(format_atom(f"X = {t}") + ".\n" for t in NAME_CHARS),
                           capture_output=True, text=True, encoding="utf-8", timeout=60)
     assert dict(zip(NAME_CHARS, proc.stdout.split())) == NAME_CHARS, proc.stderr
+
+
+# ------------------------------------------------------------------ writeq of atoms
+# How SWI-Prolog 9's writeq writes an atom: unquoted when it reads back as the same atom -- a
+# name of any script that does not begin with a capital, a run of symbol characters, a solo
+# character of Latin-1 -- and with control, format and separator characters escaped.
+WRITEQ = {"ǅa": "ǅa", "ᾈ1": "ᾈ1", "中1": "中1", "ア_": "ア_", "é": "é", "x\u0301": "x\u0301",
+          "²": "²", "½": "½", "→": "→", "+→": "+→", "≤≥": "≤≥", "Émile": "'Émile'",
+          "Ⅻ": "'Ⅻ'", "a²": "'a²'", "௰": "'௰'", "\U0001f600": "\U0001f600",
+          "a\u2028b": "'a\\x2028\\b'", "a\ufeff": "'a\\xFEFF\\'", "a\xadb": "'a\\xAD\\b'",
+          "a\xa0b": "'a\\xA0\\b'", "\x85": "'\\x85\\'", "\x7f": "'\\x7F\\'", "a\u200db": "'a\\x200D\\b'"}
+
+
+@pytest.mark.parametrize("atom", WRITEQ)
+def test_atoms_are_written_as_swi_prologs_writeq_writes_them(atom):
+    assert format_atom(atom) == WRITEQ[atom]
+    assert parse_term(WRITEQ[atom])[0] == Atom(atom)
+
+
+def test_the_writeq_table_is_swi_prologs():
+    """Where ``swipl`` is installed it writes each atom of the table as the table says."""
+    if not shutil.which("swipl"):
+        return
+    codes = ",".join("[" + ",".join(str(ord(c)) for c in a) + "]" for a in WRITEQ)
+    goal = (f"forall(member(C, [{codes}]), (atom_codes(A, C), writeq(A), nl)), halt")
+    out = subprocess.run([shutil.which("swipl"), "-g", goal], capture_output=True,
+                         text=True, encoding="utf-8", timeout=60).stdout
+    assert dict(zip(WRITEQ, out.splitlines())) == WRITEQ
