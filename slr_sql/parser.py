@@ -133,6 +133,22 @@ def _escape_at(body: str, j: int, base: int) -> tuple[str, int]:
             raise _Fail(f"illegal character code {body[j:end]} (not a Unicode character)",
                         base + j)
         return chr(code), end
+    if c == "u" or c == "U":      # \uXXXX, \UXXXXXXXX: exactly 4 or 8 hexadecimal digits
+        end = j + (6 if c == "u" else 10)
+        digits = body[j + 2:end]
+        if len(digits) != end - j - 2 or not _HEX_DIGITS.issuperset(digits):
+            raise _Fail(f"illegal \\{c} escape (\\{c} takes {end - j - 2} hexadecimal digits)",
+                        base + j)
+        code = int(digits, 16)
+        if code > 0x10FFFF or 0xD800 <= code <= 0xDFFF:
+            raise _Fail(f"illegal character code {body[j:end]} (not a Unicode character)",
+                        base + j)
+        return chr(code), end
+    if c == "c":                  # \c: skip the layout that follows
+        k = j + 2
+        while k < n and body[k] in _LAYOUT_CHARS:
+            k += 1
+        return "", k
     if c in _ESC:
         return _ESC[c], j + 2
     raise _Fail(f"undefined escape sequence '\\{c}'", base + j)
@@ -183,6 +199,9 @@ def _float_value(text: str, pos: int) -> float:
     if text.endswith("Inf"):
         return float("inf")
     if text.endswith("NaN"):
+        # SWI-Prolog writes NaN as 1.5NaN and reads a mantissa strictly between 1 and 2
+        if not 1.0 < float(text[:-3]) < 2.0:
+            raise _Fail(f"illegal NaN {text} (a NaN is written 1.5NaN)", pos)
         return float("nan")
     if not text.isascii():
         _one_script(text, pos)

@@ -899,3 +899,33 @@ def test_the_writeq_table_is_swi_prologs():
     out = subprocess.run([shutil.which("swipl"), "-g", goal], capture_output=True,
                          text=True, encoding="utf-8", timeout=60).stdout
     assert dict(zip(WRITEQ, out.splitlines())) == WRITEQ
+
+
+# --------------------------------------------------------- \u \U \c escapes, Inf and NaN
+# What SWI-Prolog 9 reads for `X = <text>` (writeq of X, or a syntax error): the escapes
+# \uXXXX, \UXXXXXXXX and \c (which skips the layout after it); 1.0Inf and 1.5NaN take no
+# exponent, and a NaN's mantissa lies strictly between 1 and 2.
+ESCAPES_AND_FLOATS = {
+    "'\\u00e9t\\u00E9'": "été", "\"\\U0001F600\"": '"\U0001f600"', "0'\\u00e9": "233",
+    "'a\\c   b'": "ab", "\"a\\c\\tb\"": '"a\\tb"', "'a\\c'": "a", "'\\u00e'": "syntax",
+    "'\\U1F600'": "syntax", "'\\uD800'": "syntax", "'\\U00110000'": "syntax",
+    "1.0Inf": "1.0Inf", "2.0Inf": "1.0Inf", "0.0Inf": "1.0Inf", "1.5NaN": "1.5NaN",
+    "1.25NaN": "1.5NaN", "1.0e10Inf": "syntax", "1.5e0NaN": "syntax", "2.5NaN": "syntax",
+    "0.5NaN": "syntax", "1.0NaN": "syntax", "22.2NaN": "syntax", "1.0e10": "10000000000.0"}
+
+
+@pytest.mark.parametrize("text", ESCAPES_AND_FLOATS)
+def test_escapes_and_special_floats_read_as_swi_prolog_reads_them(text):
+    if ESCAPES_AND_FLOATS[text] == "syntax":
+        with pytest.raises(SLRSyntaxError):
+            parse_term(f"X = {text}")
+    else:
+        assert format_term(parse_term(f"X = {text}")[0].args[1]) == ESCAPES_AND_FLOATS[text]
+
+
+def test_the_escapes_and_floats_table_is_swi_prologs(tmp_path):
+    """Where ``swipl`` is installed (CI installs it) it reads the table as it says."""
+    if shutil.which("swipl"):
+        got = _swi_reads(list(ESCAPES_AND_FLOATS), tmp_path)
+        assert dict(zip(ESCAPES_AND_FLOATS, got)) == ESCAPES_AND_FLOATS
+
