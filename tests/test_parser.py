@@ -929,3 +929,29 @@ def test_the_escapes_and_floats_table_is_swi_prologs(tmp_path):
         got = _swi_reads(list(ESCAPES_AND_FLOATS), tmp_path)
         assert dict(zip(ESCAPES_AND_FLOATS, got)) == ESCAPES_AND_FLOATS
 
+
+# ------------------------------------------------------------------ operator priorities
+# Texts SWI-Prolog 9 reads as the same term as the bracketed text beside them (its operator
+# table: xor is 400 yfx, := 800 xfx, =@= and \=@= 700 xfx).
+SAME_TERMS = {"1 + 2 xor 3": "1 + (2 xor 3)", "2 xor 3 * 4": "(2 xor 3) * 4",
+              "a := b = c": "a := (b = c)", "a =@= b + 1": "=@=(a, b + 1)",
+              "a \\=@= f(x)": "\\=@=(a, f(x))", "(=@=)": "'=@='", "\\+ a =@= b": "\\+ (a =@= b)"}
+
+
+@pytest.mark.parametrize("text", SAME_TERMS)
+def test_operators_have_swi_prologs_priorities(text):
+    assert parse_term(text)[0] == parse_term(SAME_TERMS[text])[0]
+    term = parse_term(text)[0]
+    assert parse_term(format_term(term))[0] == term
+
+
+def test_the_operator_table_is_swi_prologs():
+    """Where ``swipl`` is installed, it reads each pair of the table as one term."""
+    if not shutil.which("swipl"):
+        return
+    pairs = ",".join(f"{format_atom(a)}-{format_atom(b)}" for a, b in SAME_TERMS.items())
+    goal = (f"forall(member(A-B, [{pairs}]), (term_to_atom(T, A), term_to_atom(U, B), "
+            "(T == U -> writeln(same) ; writeln(differ)))), halt")
+    out = subprocess.run([shutil.which("swipl"), "-g", goal], capture_output=True,
+                         text=True, encoding="utf-8", timeout=60).stdout.split()
+    assert out == ["same"] * len(SAME_TERMS)
