@@ -116,8 +116,11 @@ def _escape_at(body: str, j: int, base: int) -> tuple[str, int]:
     """
     n = len(body)
     c = body[j + 1]  # the lexer only ends a token after a complete escape
-    if c == "\n":  # `\` newline: line continuation
-        return "", j + 2
+    if c == "\n":  # `\` newline: line continuation, and SWI skips the layout that follows
+        k = j + 2     # on that line too (deprecated there, for \c, but still read so)
+        while k < n and body[k] in _LAYOUT_CHARS and body[k] != "\n":
+            k += 1
+        return "", k
     if c == "x" or c in _OCT_DIGITS:
         digits = _HEX_DIGITS if c == "x" else _OCT_DIGITS
         start = j + 2 if c == "x" else j + 1

@@ -1077,10 +1077,12 @@ class _Writer:
 
     def _prefix_end(self, mark: int, name: str) -> None:
         """After a prefix operator's argument (written from ``mark`` on): separate it where
-        `- (a,b)` is -((a,b)) but `-(a,b)` is -(a,b), and `- 1` is -(1) but `-1` is -1."""
+        `- (a,b)` is -((a,b)) but `-(a,b)` is -(a,b), `- 1` is -(1) but `-1` is -1, and
+        `- {a}` is -({a}) but `-{a}` a dict to SWI-Prolog (a syntax error)."""
         first = self.out[mark][0] if mark < len(self.out) else ""
         if first != " " and (
-                first == "(" or (name == "-" and first.isdigit()) or name[0].isalpha()):
+                first == "(" or first == "{" or (name == "-" and first.isdigit())
+                or name[0].isalpha()):
             self.out.insert(mark, " ")
 
     def _list_rest(self, t: Any, todo: list, gray: set) -> None:
