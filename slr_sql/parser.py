@@ -785,6 +785,8 @@ def _expected_text(expected: set[str]) -> str:
         return "expected a term"
     if "END" in expected:
         return "expected an operator or '.'"
+    if expected == {"$END"}:     # a query (one term) goes on after its final '.'
+        return "expected the end of the text after '.'"
     names = [_CLOSERS.get(x, x.lower()) for x in sorted(expected)]
     return "expected " + " or ".join(f"'{n}'" if len(n) == 1 else n for n in names)
 

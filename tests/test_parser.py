@@ -978,3 +978,10 @@ def test_the_written_back_table_is_swi_prologs(tmp_path):
     if shutil.which("swipl"):
         got = _swi_reads(list(WRITTEN_BACK) + list(WRITTEN_BACK.values()), tmp_path)
         assert got == list(WRITTEN_BACK.values()) + list(WRITTEN_BACK.values())
+
+
+def test_a_query_that_goes_on_after_its_full_stop_says_so():
+    """The parser's name of the end of the text ($END) is not shown to a user."""
+    for text in ("X = 0. 3", "p(a). q(b)"):
+        with pytest.raises(SLRSyntaxError, match=r"expected the end of the text after '\.'"):
+            parse_term(text)
