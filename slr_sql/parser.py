@@ -357,9 +357,12 @@ class _Resolver:
                     if name == "-" and nk == _NUM and nxt[2].start_pos == tok.end_pos:
                         self.i = i + 2
                         left, lp = -nxt[1], 0
-                    # A prefix operator followed by an infix operator is an atom: `- = a`.
-                    elif pre is not None and not (nk == _NAME and nxt[1] in INFIX_OPS
-                                                  and nxt[1] not in PREFIX_OPS):
+                    # A prefix operator followed by an infix operator is an atom: `- = a`;
+                    # unless that operator ends the sequence and fits as the prefix
+                    # operator's operand, as SWI reads `(- ^)`, `[\+ is]` (not `(- =)`).
+                    elif pre is not None and not (
+                            nk == _NAME and nxt[1] in INFIX_OPS and nxt[1] not in PREFIX_OPS
+                            and (i + 2 < n or INFIX_OPS[nxt[1]][0] > pre[1])):
                         p, ap = pre
                         if p > maxp:
                             raise _Fail(f"operator priority clash at '{name}'", tok.start_pos)

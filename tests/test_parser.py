@@ -985,3 +985,29 @@ def test_a_query_that_goes_on_after_its_full_stop_says_so():
     for text in ("X = 0. 3", "p(a). q(b)"):
         with pytest.raises(SLRSyntaxError, match=r"expected the end of the text after '\.'"):
             parse_term(text)
+
+
+# ------------------------------------------------- a prefix operator before an operator atom
+# What SWI-Prolog 9 reads for `X = <text>` (writeq, or a syntax error): a prefix operator
+# followed by an infix operator that ends the term takes it as its operand when it fits.
+PREFIX_BEFORE_OP = {"(- ^)": "- (^)", "[- ^]": "[- (^)]", "f(- ^, a)": "f(- (^),a)",
+                    "(\\+ is)": "\\+ (is)", "[\\+ is, a]": "[\\+ (is),a]", "- ^": "- (^)",
+                    "(- =)": "syntax", "(- mod)": "syntax"}
+
+
+@pytest.mark.parametrize("text", PREFIX_BEFORE_OP)
+def test_a_prefix_operator_takes_a_final_operator_atom_as_swi_prolog_does(text):
+    if PREFIX_BEFORE_OP[text] == "syntax":
+        with pytest.raises(SLRSyntaxError):
+            parse_term(f"X = {text}")
+    else:
+        term = parse_term(f"X = {text}")[0].args[1]
+        assert format_term(term) == PREFIX_BEFORE_OP[text]
+        assert parse_term(PREFIX_BEFORE_OP[text])[0] == term
+
+
+def test_the_prefix_before_op_table_is_swi_prologs(tmp_path):
+    """Where ``swipl`` is installed it reads the table's texts as it says."""
+    if shutil.which("swipl"):
+        got = _swi_reads(list(PREFIX_BEFORE_OP), tmp_path)
+        assert dict(zip(PREFIX_BEFORE_OP, got)) == PREFIX_BEFORE_OP
