@@ -170,6 +170,12 @@ def _int_value(text: str, pos: int) -> int:
         return ord(ch)
     if "_" in text or " " in text:
         text = _GROUP_GAP.sub("", text)     # digit groups: 1_000_000, 1 000 000
+    if "'" in text:                         # R'digits: radix R, 2..36
+        radix, _, digits = text.partition("'")
+        base = int(radix)
+        if any(int(d, 36) >= base for d in digits):
+            raise _Fail(f"illegal number {text} (a digit beyond radix {base})", pos)
+        return _checked_int(digits, base, len(digits) * base.bit_length(), pos)
     if text[:2] in ("0x", "0o", "0b"):
         base = {"x": 16, "o": 8, "b": 2}[text[1]]
         digits = text[2:]

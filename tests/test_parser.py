@@ -1011,3 +1011,27 @@ def test_the_prefix_before_op_table_is_swi_prologs(tmp_path):
     if shutil.which("swipl"):
         got = _swi_reads(list(PREFIX_BEFORE_OP), tmp_path)
         assert dict(zip(PREFIX_BEFORE_OP, got)) == PREFIX_BEFORE_OP
+
+
+# ------------------------------------------------------------------------ radix integers
+# What SWI-Prolog 9 reads for `X = <text>` (writeq, or a syntax error): R'digits is an integer
+# in radix R (2 to 36), in digit groups too.
+RADIX = {"16'FF": "255", "16'ff": "255", "2'101": "5", "36'zz": "1295", "02'11": "3",
+         "10'12": "12", "16'FF_FF": "65535", "[16'ff, 8'17]": "[255,15]", "37'1": "syntax",
+         "1'1": "syntax", "2'102": "syntax", "16'1g": "syntax", "2'": "syntax"}
+
+
+@pytest.mark.parametrize("text", RADIX)
+def test_radix_integers_read_as_swi_prolog_reads_them(text):
+    if RADIX[text] == "syntax":
+        with pytest.raises(SLRSyntaxError):
+            parse_term(f"X = {text}")
+    else:
+        assert format_term(parse_term(f"X = {text}")[0].args[1]) == RADIX[text]
+    assert parse_event_fast(f"p({text})^1") is None        # left to the parser
+
+
+def test_the_radix_table_is_swi_prologs(tmp_path):
+    """Where ``swipl`` is installed it reads the table's texts as it says."""
+    if shutil.which("swipl"):
+        assert dict(zip(RADIX, _swi_reads(list(RADIX), tmp_path))) == RADIX
