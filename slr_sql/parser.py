@@ -116,8 +116,11 @@ def _escape_at(body: str, j: int, base: int) -> tuple[str, int]:
     """
     n = len(body)
     c = body[j + 1]  # the lexer only ends a token after a complete escape
-    if c == "\n":  # `\` newline: line continuation
-        return "", j + 2
+    if c == "\n":  # `\` newline: line continuation, and SWI skips the layout that follows
+        k = j + 2     # on that line too (deprecated there, for \c, but still read so)
+        while k < n and body[k] in _LAYOUT_CHARS and body[k] != "\n":
+            k += 1
+        return "", k
     if c == "x" or c in _OCT_DIGITS:
         digits = _HEX_DIGITS if c == "x" else _OCT_DIGITS
         start = j + 2 if c == "x" else j + 1
@@ -133,6 +136,22 @@ def _escape_at(body: str, j: int, base: int) -> tuple[str, int]:
             raise _Fail(f"illegal character code {body[j:end]} (not a Unicode character)",
                         base + j)
         return chr(code), end
+    if c == "u" or c == "U":      # \uXXXX, \UXXXXXXXX: exactly 4 or 8 hexadecimal digits
+        end = j + (6 if c == "u" else 10)
+        digits = body[j + 2:end]
+        if len(digits) != end - j - 2 or not _HEX_DIGITS.issuperset(digits):
+            raise _Fail(f"illegal \\{c} escape (\\{c} takes {end - j - 2} hexadecimal digits)",
+                        base + j)
+        code = int(digits, 16)
+        if code > 0x10FFFF or 0xD800 <= code <= 0xDFFF:
+            raise _Fail(f"illegal character code {body[j:end]} (not a Unicode character)",
+                        base + j)
+        return chr(code), end
+    if c == "c":                  # \c: skip the layout that follows
+        k = j + 2
+        while k < n and body[k] in _LAYOUT_CHARS:
+            k += 1
+        return "", k
     if c in _ESC:
         return _ESC[c], j + 2
     raise _Fail(f"undefined escape sequence '\\{c}'", base + j)
@@ -151,6 +170,12 @@ def _int_value(text: str, pos: int) -> int:
         return ord(ch)
     if "_" in text or " " in text:
         text = _GROUP_GAP.sub("", text)     # digit groups: 1_000_000, 1 000 000
+    if "'" in text:                         # R'digits: radix R, 2..36
+        radix, _, digits = text.partition("'")
+        base = int(radix)
+        if any(int(d, 36) >= base for d in digits):
+            raise _Fail(f"illegal number {text} (a digit beyond radix {base})", pos)
+        return _checked_int(digits, base, len(digits) * base.bit_length(), pos)
     if text[:2] in ("0x", "0o", "0b"):
         base = {"x": 16, "o": 8, "b": 2}[text[1]]
         digits = text[2:]
@@ -183,6 +208,9 @@ def _float_value(text: str, pos: int) -> float:
     if text.endswith("Inf"):
         return float("inf")
     if text.endswith("NaN"):
+        # SWI-Prolog writes NaN as 1.5NaN and reads a mantissa strictly between 1 and 2
+        if not 1.0 < float(text[:-3]) < 2.0:
+            raise _Fail(f"illegal NaN {text} (a NaN is written 1.5NaN)", pos)
         return float("nan")
     if not text.isascii():
         _one_script(text, pos)
@@ -335,9 +363,12 @@ class _Resolver:
                     if name == "-" and nk == _NUM and nxt[2].start_pos == tok.end_pos:
                         self.i = i + 2
                         left, lp = -nxt[1], 0
-                    # A prefix operator followed by an infix operator is an atom: `- = a`.
-                    elif pre is not None and not (nk == _NAME and nxt[1] in INFIX_OPS
-                                                  and nxt[1] not in PREFIX_OPS):
+                    # A prefix operator followed by an infix operator is an atom: `- = a`;
+                    # unless that operator ends the sequence and fits as the prefix
+                    # operator's operand, as SWI reads `(- ^)`, `[\+ is]` (not `(- =)`).
+                    elif pre is not None and not (
+                            nk == _NAME and nxt[1] in INFIX_OPS and nxt[1] not in PREFIX_OPS
+                            and (i + 2 < n or INFIX_OPS[nxt[1]][0] > pre[1])):
                         p, ap = pre
                         if p > maxp:
                             raise _Fail(f"operator priority clash at '{name}'", tok.start_pos)
@@ -763,6 +794,8 @@ def _expected_text(expected: set[str]) -> str:
         return "expected a term"
     if "END" in expected:
         return "expected an operator or '.'"
+    if expected == {"$END"}:     # a query (one term) goes on after its final '.'
+        return "expected the end of the text after '.'"
     names = [_CLOSERS.get(x, x.lower()) for x in sorted(expected)]
     return "expected " + " or ".join(f"'{n}'" if len(n) == 1 else n for n in names)
 

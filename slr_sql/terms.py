@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import Any, Iterable
 
 from .errors import SLRTimeout
+from .unichars import ESCAPED, ID_CONTINUE, ID_START, SYMBOL
 
 __all__ = [
     "Atom", "String", "Struct", "Var", "NIL", "TRUE", "CONS",
@@ -754,13 +755,13 @@ OPERATORS: tuple[tuple[int, str, tuple[str, ...]], ...] = (
                    "during", "During", "DURING", "starts", "Starts", "STARTS", "finishes",
                    "Finishes", "FINISHES")),
     (1000, "xfy", (",",)),
-    (990, "xfx", (":=",)),
     (900, "fy", ("\\+",)),
+    (800, "xfx", (":=",)),
     (700, "xfx", ("=", "\\=", "==", "\\==", "@<", "@>", "@=<", "@>=", "=..", "is", "=:=",
-                  "=\\=", "<", ">", "=<", ">=", ">:<", ":<", "as")),
+                  "=\\=", "<", ">", "=<", ">=", ">:<", ":<", "as", "=@=", "\\=@=")),
     (600, "xfy", (":",)),
-    (500, "yfx", ("+", "-", "/\\", "\\/", "xor")),
-    (400, "yfx", ("*", "/", "//", "mod", "rem", "<<", ">>", "div", "rdiv")),
+    (500, "yfx", ("+", "-", "/\\", "\\/")),
+    (400, "yfx", ("*", "/", "//", "mod", "rem", "<<", ">>", "div", "rdiv", "xor")),
     (200, "xfx", ("**",)),
     (200, "xfy", ("^",)),
     (200, "fy", ("-", "+", "\\")),
@@ -784,14 +785,42 @@ for _p, _type, _names in OPERATORS:
             PREFIX_OPS[_n] = (_p, _p - 1)
 
 _SYMBOL_CHARS = frozenset("#$&*+-./:<=>?@^~\\")
-_LETTER_ATOM = re.compile(r"[^\W\d_A-Z]\w*\Z")
-_SYMBOL_ATOM = re.compile(r"[#$&*+\-./:<=>?@^~\\]+\Z")
-_SOLO = frozenset(("[]", "{}", "!", ";"))
-# As SWI-Prolog's writeq: letter escapes where they exist, other control characters
-# (C0, DEL, C1) as `\xHH\`.
+
+
+def _char_class(ascii_part: str, chars: str) -> str:
+    """A regex matching one character of ``ascii_part`` or of unichars' class ``chars``,
+    its astral ranges behind a look-ahead: a class with astral ranges makes the regex engine
+    try each of them on every character it refuses."""
+    bmp, astral = [], []
+    k = 0
+    while k < len(chars):
+        a = b = chars[k]
+        if chars[k + 1:k + 2] == "-":
+            b = chars[k + 2]
+            k += 2
+        k += 1
+        if a <= "\uffff":
+            bmp.append(a + "-" + min(b, "\uffff"))
+        if b > "\uffff":
+            astral.append(max(a, "\U00010000") + "-" + b)
+    return f"(?:[{ascii_part}{''.join(bmp)}]|(?=[\U00010000-\U0010ffff])[{''.join(astral)}])"
+
+
+# As SWI-Prolog's writeq (slr_sql/unichars.py): an atom is written unquoted when it is a name
+# (that does not begin with a capital), a run of symbol characters, or a solo character.
+_LETTER_ATOM = re.compile(_char_class("a-z", ID_START) + _char_class("a-zA-Z0-9_", ID_CONTINUE)
+                          + r"*\Z")
+_ASCII_LETTER_ATOM = re.compile(r"[a-z][a-zA-Z0-9_]*\Z")
+_SYMBOL_ATOM = re.compile(_char_class(r"#$&*+\-./:<=>?@^~\\", SYMBOL) + r"+\Z")
+_SYMBOL_CHAR = re.compile(_char_class("", SYMBOL))
+# (SWI writes these solo characters of Latin-1 unquoted and quotes the other SOLO ones)
+_SOLO = frozenset(("[]", "{}", "!", ";", "\xad", "\xb2", "\xb3", "\xb9", "\xbc", "\xbd", "\xbe"))
+# As SWI-Prolog's writeq: letter escapes where they exist, other control, format, separator,
+# private-use and unassigned characters as `\xHH\`.
 _ESCAPES = {"\\": "\\\\", "\n": "\\n", "\t": "\\t", "\r": "\\r", "\a": "\\a", "\b": "\\b",
             "\f": "\\f", "\v": "\\v"}
-_NEEDS_ESCAPE = re.compile(r"[\\'\"\x00-\x1f\x7f-\x9f]")
+_ESCAPED = re.compile(_char_class("\x00-\x1f\x7f", ESCAPED))
+_NEEDS_ESCAPE = re.compile("[\\\\'\"]|" + _ESCAPED.pattern)
 _ARG_PRIORITY = 999  # arguments and list elements, as writeq prints them
 
 
@@ -803,9 +832,9 @@ def format_atom(name: str, quoted: bool = True) -> str:
     """
     if not quoted or name in _SOLO:
         return name
-    if _LETTER_ATOM.match(name):
-        # A non-ASCII capital would read as a variable in SWI; quote it to be portable.
-        if name[0] < "\x80" or name[0].islower():
+    ascii = name.isascii()
+    if _ASCII_LETTER_ATOM.match(name) if ascii else _LETTER_ATOM.match(name):
+        if ascii or not name[0].isupper():     # (a non-ASCII capital begins a variable)
             return name
     elif _SYMBOL_ATOM.match(name) and not name.startswith("/*") and name != ".":
         return name
@@ -821,7 +850,7 @@ def _escape(text: str, quote: str) -> str:
             out.append("\\" + quote)
         elif ch in _ESCAPES:
             out.append(_ESCAPES[ch])
-        elif ch < " " or "\x7f" <= ch <= "\x9f":
+        elif _ESCAPED.match(ch):
             out.append(f"\\x{ord(ch):X}\\")
         else:
             out.append(ch)
@@ -905,7 +934,8 @@ class _Writer:
         if not s:
             return
         a, b = self.last, s[0]
-        if a and ((a in _SYMBOL_CHARS and b in _SYMBOL_CHARS)
+        if a and ((a in _SYMBOL_CHARS or (a > "\x7f" and _SYMBOL_CHAR.match(a)))
+                  and (b in _SYMBOL_CHARS or (b > "\x7f" and _SYMBOL_CHAR.match(b)))
                   or ((a.isalnum() or a == "_") and (b.isalnum() or b == "_"))
                   or (a == "," and b == "|")):
             self.out.append(" ")
@@ -1047,10 +1077,12 @@ class _Writer:
 
     def _prefix_end(self, mark: int, name: str) -> None:
         """After a prefix operator's argument (written from ``mark`` on): separate it where
-        `- (a,b)` is -((a,b)) but `-(a,b)` is -(a,b), and `- 1` is -(1) but `-1` is -1."""
+        `- (a,b)` is -((a,b)) but `-(a,b)` is -(a,b), `- 1` is -(1) but `-1` is -1, and
+        `- {a}` is -({a}) but `-{a}` a dict to SWI-Prolog (a syntax error)."""
         first = self.out[mark][0] if mark < len(self.out) else ""
         if first != " " and (
-                first == "(" or (name == "-" and first.isdigit()) or name[0].isalpha()):
+                first == "(" or first == "{" or (name == "-" and first.isdigit())
+                or name[0].isalpha()):
             self.out.insert(mark, " ")
 
     def _list_rest(self, t: Any, todo: list, gray: set) -> None:

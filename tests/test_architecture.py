@@ -19,6 +19,7 @@ PACKAGE = Path(__file__).resolve().parent.parent / "slr_sql"
 # modules of its own family (the same subpackage). Mirrors the table in docs/architecture.md.
 LAYERS = {
     "errors": -1, "terms": 0, "grammar": 0,  # grammar/: the generated parser, self-contained
+    "unichars": -1,  # which characters are which to SWI-Prolog's reader (data only)
     "lockorder": 0,  # the order of the locks, checked in debug mode (SLR_DEBUG_LOCKS=1)
     "api": 1,  # the KnowledgeBaseAPI protocol: typing only (errors for EventRejected)
     "unify": 1, "arith": 1, "encoding": 1, "program": 1, "parser": 1,

@@ -809,3 +809,229 @@ def test_the_numbers_table_is_swi_prologs(tmp_path):
     kb.close()
     if shutil.which("swipl"):
         assert dict(zip(NUMBERS, _swi_reads(list(NUMBERS), tmp_path))) == NUMBERS
+
+
+# ------------------------------------------------------------------ name characters
+# What SWI-Prolog 9 reads for `X = <text>` (slr_sql/unichars.py): a name goes on with Unicode
+# ID_Continue characters -- marks (`é` written `e` + U+0301), connector punctuation -- and not
+# with `²`; non-ASCII symbols glue into symbol atoms; `²` and `½` are atoms alone, as `!` is.
+NAME_CHARS = {"x²": "syntax", "a²b": "syntax", "½a": "syntax", "X²": "syntax", "_²": "syntax",
+              "²": "atom", "½": "atom", "x\u0301": "atom", "e\u0301cole": "atom",
+              "a\u0903b": "atom", "a‿b": "atom", "x℘": "atom", "℘": "atom", "Ω\u0301": "var",
+              "→": "atom", "+→": "atom", "≤≥": "atom", "a→b": "syntax", "a·b": "syntax",
+              "f(≤, ≥)": "compound", "²(a)": "compound", "∀x": "syntax", "x\U0001d7d8": "atom",
+              "\U00010400x": "var", "\U00010428x": "atom", "\U0001f600": "atom"}
+
+
+@pytest.mark.parametrize("text", NAME_CHARS)
+def test_names_and_symbols_of_any_script_read_as_swi_prolog_reads_them(text):
+    if NAME_CHARS[text] == "syntax":
+        with pytest.raises(SLRSyntaxError):
+            parse_term(f"X = {text}")
+        return
+    value = parse_term(f"X = {text}")[0].args[1]
+    assert _kind(value) == NAME_CHARS[text]
+    if NAME_CHARS[text] == "atom":
+        assert value == Atom(text)                # one token, all of the text
+        assert parse_term(format_atom(text))[0] == Atom(text)
+
+
+def test_the_name_chars_table_is_swi_prologs(tmp_path):
+    """The grammar's character classes are unichars.py's: a name goes on with every character
+    of ID_CONTINUE, a symbol atom with every one of SYMBOL, each SOLO one is an atom alone (the
+    first and last character of each range of each class); SWI-Prolog reads the table as it
+    says where ``swipl`` is installed."""
+    from slr_sql import unichars
+
+    def ends(cls: str) -> list[str]:
+        return [c for k, c in enumerate(cls) if c != "-" and "-" not in cls[k - 1:k]] + \
+            [cls[k + 1] for k, c in enumerate(cls) if c == "-"]
+
+    for c in ends(unichars.ID_CONTINUE):
+        assert parse_term(f"x{c}")[0] == Atom(f"x{c}"), hex(ord(c))
+    for c in ends(unichars.ID_START):
+        assert type(parse_term(f"{c}x")[0]) is (Var if c.isupper() else Atom), hex(ord(c))
+    for c in ends(unichars.SYMBOL):
+        assert parse_term(f"+{c}")[0] == Atom(f"+{c}"), hex(ord(c))
+    for c in ends(unichars.SOLO):
+        assert parse_term(c)[0] == Atom(c), hex(ord(c))
+        with pytest.raises(SLRSyntaxError):
+            parse_term(c + c)
+    if not shutil.which("swipl"):
+        return
+    script = tmp_path / "kinds.pl"
+    script.write_text(
+        ":- initialization(main, main).\n"
+        "main :- read_term(user_input, L, []), ( L == end_of_file -> true ;\n"
+        "  catch(( term_string(T, L), T = (_ = V),\n"
+        "    ( var(V) -> K = var ; atom(V) -> K = atom ; K = compound ) ),\n"
+        "    _, K = syntax),\n"
+        "  format('~w~n', [K]), main ).\n", encoding="utf-8")
+    proc = subprocess.run([shutil.which("swipl"), str(script)],
+                          input="".join(format_atom(f"X = {t}") + ".\n" for t in NAME_CHARS),
+                          capture_output=True, text=True, encoding="utf-8", timeout=60)
+    assert dict(zip(NAME_CHARS, proc.stdout.split())) == NAME_CHARS, proc.stderr
+
+
+# ------------------------------------------------------------------ writeq of atoms
+# How SWI-Prolog 9's writeq writes an atom: unquoted when it reads back as the same atom -- a
+# name of any script that does not begin with a capital, a run of symbol characters, a solo
+# character of Latin-1 -- and with control, format and separator characters escaped.
+WRITEQ = {"ǅa": "ǅa", "ᾈ1": "ᾈ1", "中1": "中1", "ア_": "ア_", "é": "é", "x\u0301": "x\u0301",
+          "²": "²", "½": "½", "→": "→", "+→": "+→", "≤≥": "≤≥", "Émile": "'Émile'",
+          "Ⅻ": "'Ⅻ'", "a²": "'a²'", "௰": "'௰'", "\U0001f600": "\U0001f600",
+          "a\u2028b": "'a\\x2028\\b'", "a\ufeff": "'a\\xFEFF\\'", "a\xadb": "'a\\xAD\\b'",
+          "a\xa0b": "'a\\xA0\\b'", "\x85": "'\\x85\\'", "\x7f": "'\\x7F\\'", "a\u200db": "'a\\x200D\\b'"}
+
+
+@pytest.mark.parametrize("atom", WRITEQ)
+def test_atoms_are_written_as_swi_prologs_writeq_writes_them(atom):
+    assert format_atom(atom) == WRITEQ[atom]
+    assert parse_term(WRITEQ[atom])[0] == Atom(atom)
+
+
+def test_the_writeq_table_is_swi_prologs():
+    """Where ``swipl`` is installed it writes each atom of the table as the table says."""
+    if not shutil.which("swipl"):
+        return
+    codes = ",".join("[" + ",".join(str(ord(c)) for c in a) + "]" for a in WRITEQ)
+    goal = (f"forall(member(C, [{codes}]), (atom_codes(A, C), writeq(A), nl)), halt")
+    out = subprocess.run([shutil.which("swipl"), "-g", goal], capture_output=True,
+                         text=True, encoding="utf-8", timeout=60).stdout
+    assert dict(zip(WRITEQ, out.splitlines())) == WRITEQ
+
+
+# --------------------------------------------------------- \u \U \c escapes, Inf and NaN
+# What SWI-Prolog 9 reads for `X = <text>` (writeq of X, or a syntax error): the escapes
+# \uXXXX, \UXXXXXXXX and \c (which skips the layout after it); 1.0Inf and 1.5NaN take no
+# exponent, and a NaN's mantissa lies strictly between 1 and 2.
+ESCAPES_AND_FLOATS = {
+    "'\\u00e9t\\u00E9'": "été", "\"\\U0001F600\"": '"\U0001f600"', "0'\\u00e9": "233",
+    "'a\\c   b'": "ab", "\"a\\c\\tb\"": '"a\\tb"', "'a\\c'": "a", "'\\u00e'": "syntax",
+    "'\\U1F600'": "syntax", "'\\uD800'": "syntax", "'\\U00110000'": "syntax",
+    "1.0Inf": "1.0Inf", "2.0Inf": "1.0Inf", "0.0Inf": "1.0Inf", "1.5NaN": "1.5NaN",
+    "1.25NaN": "1.5NaN", "1.0e10Inf": "syntax", "1.5e0NaN": "syntax", "2.5NaN": "syntax",
+    "0.5NaN": "syntax", "1.0NaN": "syntax", "22.2NaN": "syntax", "1.0e10": "10000000000.0"}
+
+
+@pytest.mark.parametrize("text", ESCAPES_AND_FLOATS)
+def test_escapes_and_special_floats_read_as_swi_prolog_reads_them(text):
+    if ESCAPES_AND_FLOATS[text] == "syntax":
+        with pytest.raises(SLRSyntaxError):
+            parse_term(f"X = {text}")
+    else:
+        assert format_term(parse_term(f"X = {text}")[0].args[1]) == ESCAPES_AND_FLOATS[text]
+
+
+def test_the_escapes_and_floats_table_is_swi_prologs(tmp_path):
+    """Where ``swipl`` is installed (CI installs it) it reads the table as it says."""
+    if shutil.which("swipl"):
+        got = _swi_reads(list(ESCAPES_AND_FLOATS), tmp_path)
+        assert dict(zip(ESCAPES_AND_FLOATS, got)) == ESCAPES_AND_FLOATS
+
+
+# ------------------------------------------------------------------ operator priorities
+# Texts SWI-Prolog 9 reads as the same term as the bracketed text beside them (its operator
+# table: xor is 400 yfx, := 800 xfx, =@= and \=@= 700 xfx).
+SAME_TERMS = {"1 + 2 xor 3": "1 + (2 xor 3)", "2 xor 3 * 4": "(2 xor 3) * 4",
+              "a := b = c": "a := (b = c)", "a =@= b + 1": "=@=(a, b + 1)",
+              "a \\=@= f(x)": "\\=@=(a, f(x))", "(=@=)": "'=@='", "\\+ a =@= b": "\\+ (a =@= b)"}
+
+
+@pytest.mark.parametrize("text", SAME_TERMS)
+def test_operators_have_swi_prologs_priorities(text):
+    assert parse_term(text)[0] == parse_term(SAME_TERMS[text])[0]
+    term = parse_term(text)[0]
+    assert parse_term(format_term(term))[0] == term
+
+
+def test_the_operator_table_is_swi_prologs():
+    """Where ``swipl`` is installed, it reads each pair of the table as one term."""
+    if not shutil.which("swipl"):
+        return
+    pairs = ",".join(f"{format_atom(a)}-{format_atom(b)}" for a, b in SAME_TERMS.items())
+    goal = (f"forall(member(A-B, [{pairs}]), (term_to_atom(T, A), term_to_atom(U, B), "
+            "(T == U -> writeln(same) ; writeln(differ)))), halt")
+    out = subprocess.run([shutil.which("swipl"), "-g", goal], capture_output=True,
+                         text=True, encoding="utf-8", timeout=60).stdout.split()
+    assert out == ["same"] * len(SAME_TERMS)
+
+
+# ------------------------------------------------------- prefix operators before braces
+# What SWI-Prolog 9 reads and writes (writeq) for `X = <text>`: a prefix operator is written
+# apart from a brace (`-{a}` is a dict to SWI, a syntax error), and a backslash-newline in
+# quoted text also skips the layout that follows on the next line.
+WRITTEN_BACK = {"- {a}": "- {a}", "f(\\+ {})": "f(\\+ {})", "- {}": "- {}",
+                "[- {a, b}]": "[- {a,b}]", "'a\\\n   b'": "ab", "\"a\\\n\tb\"": '"ab"'}
+
+
+@pytest.mark.parametrize("text", WRITTEN_BACK)
+def test_terms_are_written_so_that_swi_prolog_reads_them_back(text):
+    term = parse_term(f"X = {text}")[0].args[1]
+    assert format_term(term) == WRITTEN_BACK[text]
+    assert parse_term(WRITTEN_BACK[text])[0] == term
+
+
+def test_the_written_back_table_is_swi_prologs(tmp_path):
+    """Where ``swipl`` is installed it reads and writes the table's texts as it says, and
+    reads the written texts back as the same terms."""
+    if shutil.which("swipl"):
+        got = _swi_reads(list(WRITTEN_BACK) + list(WRITTEN_BACK.values()), tmp_path)
+        assert got == list(WRITTEN_BACK.values()) + list(WRITTEN_BACK.values())
+
+
+def test_a_query_that_goes_on_after_its_full_stop_says_so():
+    """The parser's name of the end of the text ($END) is not shown to a user."""
+    for text in ("X = 0. 3", "p(a). q(b)"):
+        with pytest.raises(SLRSyntaxError, match=r"expected the end of the text after '\.'"):
+            parse_term(text)
+
+
+# ------------------------------------------------- a prefix operator before an operator atom
+# What SWI-Prolog 9 reads for `X = <text>` (writeq, or a syntax error): a prefix operator
+# followed by an infix operator that ends the term takes it as its operand when it fits.
+PREFIX_BEFORE_OP = {"(- ^)": "- (^)", "[- ^]": "[- (^)]", "f(- ^, a)": "f(- (^),a)",
+                    "(\\+ is)": "\\+ (is)", "[\\+ is, a]": "[\\+ (is),a]", "- ^": "- (^)",
+                    "(- =)": "syntax", "(- mod)": "syntax"}
+
+
+@pytest.mark.parametrize("text", PREFIX_BEFORE_OP)
+def test_a_prefix_operator_takes_a_final_operator_atom_as_swi_prolog_does(text):
+    if PREFIX_BEFORE_OP[text] == "syntax":
+        with pytest.raises(SLRSyntaxError):
+            parse_term(f"X = {text}")
+    else:
+        term = parse_term(f"X = {text}")[0].args[1]
+        assert format_term(term) == PREFIX_BEFORE_OP[text]
+        assert parse_term(PREFIX_BEFORE_OP[text])[0] == term
+
+
+def test_the_prefix_before_op_table_is_swi_prologs(tmp_path):
+    """Where ``swipl`` is installed it reads the table's texts as it says."""
+    if shutil.which("swipl"):
+        got = _swi_reads(list(PREFIX_BEFORE_OP), tmp_path)
+        assert dict(zip(PREFIX_BEFORE_OP, got)) == PREFIX_BEFORE_OP
+
+
+# ------------------------------------------------------------------------ radix integers
+# What SWI-Prolog 9 reads for `X = <text>` (writeq, or a syntax error): R'digits is an integer
+# in radix R (2 to 36), in digit groups too.
+RADIX = {"16'FF": "255", "16'ff": "255", "2'101": "5", "36'zz": "1295", "02'11": "3",
+         "10'12": "12", "16'FF_FF": "65535", "[16'ff, 8'17]": "[255,15]", "37'1": "syntax",
+         "1'1": "syntax", "2'102": "syntax", "16'1g": "syntax", "2'": "syntax"}
+
+
+@pytest.mark.parametrize("text", RADIX)
+def test_radix_integers_read_as_swi_prolog_reads_them(text):
+    if RADIX[text] == "syntax":
+        with pytest.raises(SLRSyntaxError):
+            parse_term(f"X = {text}")
+    else:
+        assert format_term(parse_term(f"X = {text}")[0].args[1]) == RADIX[text]
+    assert parse_event_fast(f"p({text})^1") is None        # left to the parser
+
+
+def test_the_radix_table_is_swi_prologs(tmp_path):
+    """Where ``swipl`` is installed it reads the table's texts as it says."""
+    if shutil.which("swipl"):
+        assert dict(zip(RADIX, _swi_reads(list(RADIX), tmp_path))) == RADIX
