@@ -870,10 +870,13 @@ def decode_answer(value: Any) -> Any:
 # an integer of 19 digits or more: orjson keeps integers exact only from -2**63 to 2**64 - 1
 # and reads a longer one as a float, silently; the json module reads it exactly. The store's
 # encoder writes such integers as {"$int": ...}, but text written by another program (plain
-# sqlite3, `slr sql --write`) may hold one bare. Any 19 digits in a row count, a fraction's
-# too: the store never writes one (repr gives 17 at most), and the json module reads it
-# exactly as well -- so the check is one plain search, the fastest.
+# sqlite3, `slr sql --write`) may hold one bare. Fractions do not count: orjson rounds a
+# fraction of any length as the json module does, and the store writes fractions of 19
+# digits and more (repr(0.00014271126099703728): three zeros, then 17 digits). A first
+# plain search of 19 digits in a row keeps the common text on the fastest check; only text
+# that has them is searched again for a run that is no fraction (not after a point).
 _NINETEEN_DIGITS = re.compile("[0-9]{19}")
+_NINETEEN_DIGITS_NOT_A_FRACTION = re.compile(r"(?<![.0-9])[0-9]{19}")
 _DECIMAL_INTEGER = re.compile(r"-?[0-9]+\Z")   # the digits of {"$int": ...}
 
 
@@ -883,8 +886,11 @@ def orjson_reads_exactly(text: str) -> bool:
 
     >>> orjson_reads_exactly('[1, 0.5]'), orjson_reads_exactly('[18446744073709551617]')
     (True, False)
+    >>> orjson_reads_exactly('[0.00014271126099703728]')
+    True
     """
-    return _NINETEEN_DIGITS.search(text) is None
+    return (_NINETEEN_DIGITS.search(text) is None
+            or _NINETEEN_DIGITS_NOT_A_FRACTION.search(text) is None)
 
 
 def load_json(text: str) -> Any:
@@ -898,7 +904,8 @@ def load_json(text: str) -> Any:
     >>> load_json('[-9223372036854775809]')
     [-9223372036854775809]
     """
-    if _NINETEEN_DIGITS.search(text) is None:
+    if (_NINETEEN_DIGITS.search(text) is None
+            or _NINETEEN_DIGITS_NOT_A_FRACTION.search(text) is None):   # (inlined: hot)
         try:
             return orjson.loads(text)
         except orjson.JSONDecodeError:

@@ -20,6 +20,7 @@ so any arrival permutation gives the same complex events as in-order arrival.
 from __future__ import annotations
 
 import itertools
+import json
 
 from hypothesis import HealthCheck, example, given, settings, strategies as st
 from strategy_helpers import BOOLEANS, integers, sampled
@@ -718,13 +719,17 @@ def test_the_readers_of_stored_values_read_what_plain_values_give(value):
 
 def test_text_with_19_digits_in_a_row_takes_the_terms_path():
     # an integer of 19 digits may be one orjson reads as a float: the plain readers leave
-    # such text (and, more cautiously, a fraction of 19 digits, never written by the
-    # store) to the terms' path, which decodes it exactly
-    for text in ('[1234567890123456789,0,0]', '[0.1234567890123456789,0.0,0.0]',
+    # such text to the terms' path, which decodes it exactly; a fraction of 19 digits and
+    # more (which the store writes: repr(0.00014271126099703728)) orjson rounds as the json
+    # module does, so it is read plainly
+    for text in ('[1234567890123456789,0,0]', '[-1234567890123456789,0.5,0]',
                  '{"pose":[[0.0,0.0,0.0],[0.0,0.0,0.0,1000000000000000000000]]}'):
         assert plain_value(text) is None
         assert where._read_subject(text) is None and where._read_transform(text) is None
-    assert plain_value("[0.123456789012345678,0.0,0.0]") == [0.123456789012345678, 0.0, 0.0]
+    for text in ("[0.123456789012345678,0.0,0.0]", "[0.1234567890123456789,0.0,0.0]",
+                 "[0.0,0.0,0.00014271126099703728]"):
+        assert (_exact(plain_value(text)) == _exact(json.loads(text))
+                == _exact(list_items(decode(text))[0]))
 
 
 def test_a_pose_stored_again_and_again_is_read_once(monkeypatch):
@@ -758,6 +763,7 @@ def test_a_pose_stored_again_and_again_is_read_once(monkeypatch):
 @given(st.lists(st.tuples(st.floats(-1e300, 1e300), st.floats(-1e300, 1e300),
                           st.floats(-1e300, 1e300)), min_size=1, max_size=4))
 @example([(1.5, -0.0, 2.0), (1.7e308, 1.7e308, 0.0), (0.1, 0.2, 0.3)])   # (overflows to inf)
+@example([(0.0, 0.0, 0.00014271126099703728)])   # (a fraction of 20 digits, read plainly)
 @settings(max_examples=30, deadline=None)
 def test_the_points_derived_on_stored_values_are_handed_on_as_decoding_gives(points):
     # the complex events the plain path derives reach the listeners with the terms decoding
