@@ -228,6 +228,8 @@ def _duration_value(text: str, pos: int) -> int | float:
     while not text[i - 1].isdigit():
         i -= 1
     num, unit = text[:i], text[i:]
+    if not num.isascii():
+        _one_script(num, pos)
     scale = _UNITS[unit]
     if "." not in num and type(scale) is int:
         return _checked_int(num, 10, int(len(num) * 3.33), pos) * scale

@@ -817,6 +817,9 @@ def test_the_numbers_table_is_swi_prologs(tmp_path):
                                      {"X": 1000, "Y": 2000, "T": 1500.0}]
     with pytest.raises(SLRSyntaxError, match="two scripts"):
         kb.add("p(1٣)^1")
+    with pytest.raises(SLRSyntaxError, match="two scripts"):     # a duration too
+        kb.load(":- max_delay(p/2, 1٣ms).")
+    assert parse_term("X = ٣ms")[0].args[1] == 0.003
     kb.close()
     if shutil.which("swipl"):
         assert dict(zip(NUMBERS, _swi_reads(list(NUMBERS), tmp_path))) == NUMBERS
