@@ -132,21 +132,14 @@ def _escape_at(body: str, j: int, base: int) -> tuple[str, int]:
         end = k + 1 if k < n and body[k] == "\\" else k
         text = body[start:k].lstrip("0") or "0"
         code = int(text, 16 if c == "x" else 8) if len(text) <= 8 else -1
-        if not 0 <= code <= 0x10FFFF or 0xD800 <= code <= 0xDFFF:
-            raise _Fail(f"illegal character code {body[j:end]} (not a Unicode character)",
-                        base + j)
-        return chr(code), end
+        return _code_char(code, body[j:end], base + j), end
     if c == "u" or c == "U":      # \uXXXX, \UXXXXXXXX: exactly 4 or 8 hexadecimal digits
         end = j + (6 if c == "u" else 10)
         digits = body[j + 2:end]
         if len(digits) != end - j - 2 or not _HEX_DIGITS.issuperset(digits):
             raise _Fail(f"illegal \\{c} escape (\\{c} takes {end - j - 2} hexadecimal digits)",
                         base + j)
-        code = int(digits, 16)
-        if code > 0x10FFFF or 0xD800 <= code <= 0xDFFF:
-            raise _Fail(f"illegal character code {body[j:end]} (not a Unicode character)",
-                        base + j)
-        return chr(code), end
+        return _code_char(int(digits, 16), body[j:end], base + j), end
     if c == "c":                  # \c: skip the layout that follows
         k = j + 2
         while k < n and body[k] in _LAYOUT_CHARS:
@@ -155,6 +148,13 @@ def _escape_at(body: str, j: int, base: int) -> tuple[str, int]:
     if c in _ESC:
         return _ESC[c], j + 2
     raise _Fail(f"undefined escape sequence '\\{c}'", base + j)
+
+
+def _code_char(code: int, escape: str, pos: int) -> str:
+    """The character of an escape's code, which must name a Unicode character."""
+    if not 0 <= code <= 0x10FFFF or 0xD800 <= code <= 0xDFFF:
+        raise _Fail(f"illegal character code {escape} (not a Unicode character)", pos)
+    return chr(code)
 
 
 def _int_value(text: str, pos: int) -> int:

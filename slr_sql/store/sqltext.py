@@ -16,8 +16,8 @@ from typing import Any
 
 from ..errors import SLRBusy, SLRError, SLRStoreFull
 
-__all__ = ["quote_identifier", "qualified_identifier", "sql_literal", "split_sql_script", "SAFE_IDENTIFIER",
-           "RESERVED_PREFIXES", "SQL_KEYWORDS", "busy_error", "store_error", "disk_is_full",
+__all__ = ["quote_identifier", "qualified_identifier", "sql_literal", "split_sql_script",
+           "SAFE_IDENTIFIER", "RESERVED_PREFIXES", "SQL_KEYWORDS", "busy_error", "store_error", "disk_is_full",
            "file_uri", "file_identity"]
 
 SAFE_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")

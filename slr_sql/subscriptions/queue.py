@@ -724,11 +724,7 @@ class Subscription:
             waiter = self._async_waiter
             if waiter is not None and count and loops is not None:
                 self._async_waiter = None
-                futures = loops.get(waiter[0])
-                if futures is None:
-                    loops[waiter[0]] = [waiter[1]]
-                else:
-                    futures.append(waiter[1])
+                loops.setdefault(waiter[0], []).append(waiter[1])
             return True
 
     def offer_batch(self, phase: int, batch: list, end_pos: int) -> bool:
