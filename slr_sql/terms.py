@@ -807,20 +807,36 @@ def _char_class(ascii_part: str, chars: str) -> str:
 
 
 # As SWI-Prolog's writeq (slr_sql/unichars.py): an atom is written unquoted when it is a name
-# (that does not begin with a capital), a run of symbol characters, or a solo character.
-_LETTER_ATOM = re.compile(_char_class("a-z", ID_START) + _char_class("a-zA-Z0-9_", ID_CONTINUE)
-                          + r"*\Z")
+# (that does not begin with a capital), a run of symbol characters, or a solo character. The
+# regexes of unichars' classes take ~25 ms to compile: ASCII text, all most processes ever
+# write, is matched by small ones, and the large ones are compiled by the first text they serve.
 _ASCII_LETTER_ATOM = re.compile(r"[a-z][a-zA-Z0-9_]*\Z")
-_SYMBOL_ATOM = re.compile(_char_class(r"#$&*+\-./:<=>?@^~\\", SYMBOL) + r"+\Z")
-_SYMBOL_CHAR = re.compile(_char_class("", SYMBOL))
+_ASCII_SYMBOL_ATOM = re.compile(r"[#$&*+\-./:<=>?@^~\\]+\Z")
+_ASCII_NEEDS_ESCAPE = re.compile("[\\\\'\"\x00-\x1f\x7f]")
+
+
+@functools.cache
+def _unicode_pattern(name: str) -> re.Pattern[str]:
+    """The regex ``name`` of the writer's Unicode classes, compiled once, when first needed."""
+    if name == "letter atom":
+        return re.compile(_char_class("a-z", ID_START) + _char_class("a-zA-Z0-9_", ID_CONTINUE)
+                          + r"*\Z")
+    if name == "symbol atom":
+        return re.compile(_char_class(r"#$&*+\-./:<=>?@^~\\", SYMBOL) + r"+\Z")
+    if name == "symbol char":
+        return re.compile(_char_class("", SYMBOL))
+    if name == "escaped":
+        return re.compile(_char_class("\x00-\x1f\x7f", ESCAPED))
+    assert name == "needs escape", name
+    return re.compile("[\\\\'\"]|" + _unicode_pattern("escaped").pattern)
+
+
 # (SWI writes these solo characters of Latin-1 unquoted and quotes the other SOLO ones)
 _SOLO = frozenset(("[]", "{}", "!", ";", "\xad", "\xb2", "\xb3", "\xb9", "\xbc", "\xbd", "\xbe"))
 # As SWI-Prolog's writeq: letter escapes where they exist, other control, format, separator,
 # private-use and unassigned characters as `\xHH\`.
 _ESCAPES = {"\\": "\\\\", "\n": "\\n", "\t": "\\t", "\r": "\\r", "\a": "\\a", "\b": "\\b",
             "\f": "\\f", "\v": "\\v"}
-_ESCAPED = re.compile(_char_class("\x00-\x1f\x7f", ESCAPED))
-_NEEDS_ESCAPE = re.compile("[\\\\'\"]|" + _ESCAPED.pattern)
 _ARG_PRIORITY = 999  # arguments and list elements, as writeq prints them
 
 
@@ -833,16 +849,18 @@ def format_atom(name: str, quoted: bool = True) -> str:
     if not quoted or name in _SOLO:
         return name
     ascii = name.isascii()
-    if _ASCII_LETTER_ATOM.match(name) if ascii else _LETTER_ATOM.match(name):
+    if _ASCII_LETTER_ATOM.match(name) if ascii else _unicode_pattern("letter atom").match(name):
         if ascii or not name[0].isupper():     # (a non-ASCII capital begins a variable)
             return name
-    elif _SYMBOL_ATOM.match(name) and not name.startswith("/*") and name != ".":
+    elif (_ASCII_SYMBOL_ATOM.match(name) if ascii else _unicode_pattern("symbol atom").match(name)) \
+            and not name.startswith("/*") and name != ".":
         return name
     return "'" + _escape(name, "'") + "'"
 
 
 def _escape(text: str, quote: str) -> str:
-    if not _NEEDS_ESCAPE.search(text):
+    ascii = text.isascii()
+    if not (_ASCII_NEEDS_ESCAPE if ascii else _unicode_pattern("needs escape")).search(text):
         return text
     out = []
     for ch in text:
@@ -850,7 +868,7 @@ def _escape(text: str, quote: str) -> str:
             out.append("\\" + quote)
         elif ch in _ESCAPES:
             out.append(_ESCAPES[ch])
-        elif _ESCAPED.match(ch):
+        elif ch < " " or ch == "\x7f" or (not ascii and _unicode_pattern("escaped").match(ch)):
             out.append(f"\\x{ord(ch):X}\\")
         else:
             out.append(ch)
@@ -934,8 +952,9 @@ class _Writer:
         if not s:
             return
         a, b = self.last, s[0]
-        if a and ((a in _SYMBOL_CHARS or (a > "\x7f" and _SYMBOL_CHAR.match(a)))
-                  and (b in _SYMBOL_CHARS or (b > "\x7f" and _SYMBOL_CHAR.match(b)))
+        if a and ((a in _SYMBOL_CHARS or (a > "\x7f" and _unicode_pattern("symbol char").match(a)))
+                  and (b in _SYMBOL_CHARS
+                       or (b > "\x7f" and _unicode_pattern("symbol char").match(b)))
                   or ((a.isalnum() or a == "_") and (b.isalnum() or b == "_"))
                   or (a == "," and b == "|")):
             self.out.append(" ")

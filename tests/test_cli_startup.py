@@ -40,6 +40,30 @@ def test_importing_the_cli_imports_no_extra_and_no_other_commands_module():
                   if name.split(".")[0] in NOT_ON_IMPORT or name in NOT_ON_IMPORT) == []
 
 
+
+def test_writing_ascii_terms_compiles_none_of_the_unicode_classes():
+    # The writer's regexes of every script's letters and symbols take ~25 ms to compile: a
+    # command that writes ASCII (all most commands write) compiles none of them; the first
+    # non-ASCII atom compiles what it needs, and is written as SWI-Prolog writes it.
+    code = ("import json, re; compiled = []; real = re.compile; "
+            "re.compile = lambda p, f=0: compiled.append(len(str(p))) or real(p, f); "
+            "import slr_sql.cli; from slr_sql.terms import format_term, Struct, Atom; "
+            "ascii = format_term(Struct('f', (Atom('cup1'), Atom('a b'), Atom('=..'), "
+            "Atom('it\\'s'), Atom('tab\\t')))); before = max(compiled); "
+            "other = format_term(Struct('f', (Atom('\u00e9t\u00e9'), Atom('\u2192'), "
+            "Atom('\u00c9mile'), Atom('a\u2028b')))); "
+            "print(json.dumps([ascii, before, other, max(compiled)]))")
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=ROOT, env=env, timeout=60)
+    assert done.returncode == 0, done.stderr
+    ascii, before, other, longest = json.loads(done.stdout)
+    assert ascii == "f(cup1,'a b',=..,'it\\'s','tab\\t')"
+    assert before < 2000                  # (no class compiled on import or writing ASCII)
+    assert other == "f(\u00e9t\u00e9,\u2192,'\u00c9mile','a\\x2028\\b')"
+    assert longest > 4000                 # (the first non-ASCII atom compiled the classes)
+
+
 def test_the_commands_imported_on_use_list_run_and_are_suggested_like_the_others():
     from slr_sql.cli import LAZY_COMMANDS, main
 
