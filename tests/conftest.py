@@ -60,6 +60,19 @@ def pytest_configure(config):
     config.addinivalue_line("filterwarnings", "error::slr_sql.clocks.LearnedDelayWarning")
 
 
+
+def pytest_xdist_auto_num_workers(config):
+    # `-n auto` (the README's command): one worker more than the cores. A third of a worker's
+    # time goes to waiting, not computing: on child processes (`slr` commands, servers, swipl,
+    # ROS nodes), on the suite's PostgreSQL server, on timeouts PostgreSQL itself holds (a
+    # rename of a database in use waits 5 s before it refuses). With two workers on two cores
+    # the cores stood idle ~25% of the run; a third worker fills that time
+    # (docs/testing.md, "A suite that fits in CI's 10 minutes", has the figures).
+    import os
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return (cores or 1) + 1
+
 # The suite's longest tests (seconds each with `--durations`; most are differential runs of
 # hundreds of examples), started first: pytest-xdist hands tests out in collection order, and
 # a run on 2 cores must not end with one worker in a 20-second test while the other is idle.
