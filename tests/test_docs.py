@@ -192,8 +192,8 @@ def test_the_buffer_example_loads_as_one_program():
 # ------------------------------------------------------------------------ README.md
 def run_python_block(text: str, env: dict, where: str) -> int:
     """Run a block statement by statement; a one-line expression followed by a comment
-    that starts with ``[`` or ``{`` must evaluate to a value whose repr is that text.
-    Returns how many results were checked."""
+    that starts with ``[`` or ``{`` must evaluate to a value whose repr is that text, and a
+    statement commented ``raises slr_sql.X`` must raise X. Returns how many were checked."""
     comments = {}
     lines = text.splitlines()
     for tok in tokenize.generate_tokens(io.StringIO(text).readline):
@@ -206,7 +206,12 @@ def run_python_block(text: str, env: dict, where: str) -> int:
         if not expected and below in comments and lines[below - 1].lstrip().startswith("#"):
             expected = comments[below]
         source = ast.get_source_segment(text, node)
-        if (isinstance(node, ast.Expr) and node.lineno == node.end_lineno
+        raises = re.match(r"raises (slr_sql\.\w+)", expected)
+        if raises:   # `kb.query("...", timeout=0.5)   # raises slr_sql.SLRTimeout`
+            with pytest.raises(eval(raises.group(1), env)):
+                exec(compile(ast.Module([node], []), where, "exec"), env)
+            checked += 1
+        elif (isinstance(node, ast.Expr) and node.lineno == node.end_lineno
                 and expected[:1] in ("[", "{")):
             value = eval(compile(ast.Expression(node.value), where, "eval"), env)
             assert shows(repr(value), balanced_prefix(expected)), f"{where}: {source}"
@@ -333,6 +338,20 @@ def test_the_synchronized_query_example_runs_as_written(tmp_path, monkeypatch):
 def test_the_subscription_condition_example_runs_as_written(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert run_page_blocks(page_block("subscriptions.md", "size(cup1, small)")) == 1
+
+
+@pytest.mark.filterwarnings("error::slr_sql.clocks.LearnedDelayWarning")
+def test_the_python_api_examples_run_as_written(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "robot.slr").write_text("holds(gripper, nothing).\n", encoding="utf-8")
+    # the store of the page's "tests and simulation" line: the examples' times are small
+    env: dict = {}
+    exec('import slr_sql\nclock = slr_sql.ManualClock(0.0)\n'
+         'kb = slr_sql.open("sim.db", clock=clock)', env)
+    blocks = [page_block("api.md", marker) for marker in (
+        'kb.load_file("robot.slr")', "kb.define(", 'kb.add("obj(cup1', "kb.solutions(",
+        'kb.submit("findall(W', "relFace(F) <-", 'kb.sql("SELECT', "b(2) :- .")]
+    assert run_page_blocks(*blocks, env=env) == 11
 
 
 def test_the_client_example_runs_against_slr_serve(tmp_path):
