@@ -354,6 +354,16 @@ def test_the_python_api_examples_run_as_written(tmp_path, monkeypatch):
     assert run_page_blocks(*blocks, env=env) == 11
 
 
+def test_the_runtime_buffer_examples_run_as_written(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    env: dict = {}
+    exec('import slr_sql\nkb = slr_sql.open("robot.db")', env)   # a live robot's store
+    blocks = [page_block("buffers.md", marker) for marker in ("kb.add_buffer(", "prune_now(kb)")]
+    assert run_page_blocks(*blocks, env=env) == 1
+    with slr_sql.open(tmp_path / "robot.db") as kb:
+        assert [b.kind for b in kb.buffers()] == ["cBuffer", "tBuffer"]   # the window went
+
+
 def test_the_client_example_runs_against_slr_serve(tmp_path):
     from service_helpers import ServiceProcess, slr_env
     where, text = page_block("service.md", "slr_sql.connect(")
