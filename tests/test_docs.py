@@ -8,6 +8,7 @@
 * docs/sql.md: the sqlite-utils commands exist in the installed sqlite-utils and read the
   store of the page's example; the ``sqlite3`` examples print what the page shows.
 * docs/semantics.md: its ``prolog`` blocks, as language.md's.
+* docs/schema.md: the internal tables have the columns its table lists.
 * docs/events.md, docs/synchronization.md, docs/subscriptions.md, docs/service.md: their
   self-contained Python examples run in a fresh folder (the client's against a real
   ``slr serve``), and each result they show (``...`` standing for a part left out) is what
@@ -379,6 +380,19 @@ def test_the_client_example_runs_against_slr_serve(tmp_path):
                               capture_output=True, text=True, env=slr_env(), cwd=tmp_path,
                               timeout=120)
         assert done.returncode == 0 and done.stdout.splitlines() == ["C = red"], done.stderr
+
+
+# ------------------------------------------------------------------- docs/schema.md
+def test_the_schema_page_names_the_columns_a_store_has(tmp_path):
+    """Each internal table of the page's table has exactly the columns it lists, in order."""
+    rows = re.findall(r"^\| `(slr_[a-z_]+)` \| `([^|]+)`", (DOCS / "schema.md").read_text(
+        encoding="utf-8"), flags=re.M)
+    assert len(rows) >= 9
+    with slr_sql.open(tmp_path / "robot.db") as kb:
+        for table, columns in rows:
+            listed = [c.split()[0] for c in columns.partition("`")[0].split(",")]
+            _, got = kb.sql("SELECT name FROM pragma_table_info(?)", [table])
+            assert [name for (name,) in got] == listed, table
 
 
 # ---------------------------------------------------------------- pages stand alone
