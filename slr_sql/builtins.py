@@ -231,6 +231,14 @@ def _between(m, a):
         i += 1
 
 
+
+@nondet("repeat", 0)
+def _repeat(m, a):
+    # ISO's repeat/0: succeeds again on every backtrack. The engine counts each retry as a
+    # step, so `repeat, fail` ends at the query's max_steps or timeout like any endless loop.
+    while True:
+        yield None
+
 # -- type checks -------------------------------------------------------------------------------
 
 def _typecheck(name, test):

@@ -491,6 +491,10 @@ def test_endless_loop_stops(kb):
         kb.query("loop2(a)", max_steps=20000)
     with pytest.raises(SLRTimeout):
         kb.query("between(1, inf, X), fail", max_steps=20000)
+    with pytest.raises(SLRTimeout):
+        kb.query("repeat, fail", max_steps=20000)
+    with pytest.raises(SLRTimeout):
+        kb.query("repeat, fail", timeout=0.2)
     assert issubclass(SLRTimeout, SLRError)
     # the knowledge base is still usable afterwards
     check(kb, "X = 1", [{"X": 1}])
