@@ -565,7 +565,7 @@ def explain(kb, plan, at=None) -> list[str]:
     if type(entry) is Fallback:
         lines = ["engine: interpreter (top-down SLDNF over the event store)",
                  f"reason: {entry.reason}"]
-        subs = _compiled_subgoals(kb, plan)
+        subs = _compiled_subgoals(kb, plan, at is not None)
         if subs:
             lines.append("compiled sub-goals (SQL when called with ground or fresh-variable "
                          "arguments): " + ", ".join(subs))
@@ -598,8 +598,11 @@ def _parameter_text(value) -> str:
     return repr(value)
 
 
-def _compiled_subgoals(kb, plan) -> list[str]:
-    """The predicates with a CompiledCall that an interpreter run of ``plan`` may reach."""
+def _compiled_subgoals(kb, plan, has_at: bool) -> list[str]:
+    """The predicates with a CompiledCall that an interpreter run of ``plan`` may reach and
+    that compile when called with every argument fresh or every one ground (one whose body
+    the compiler cannot take in either, as a ``repeat``, always runs its clauses: not
+    listed)."""
     calls = kb.engine.sql_calls
     if not calls or not kb.sql_enabled:
         return []
@@ -612,9 +615,17 @@ def _compiled_subgoals(kb, plan) -> list[str]:
     out = []
     for n in nodes:
         key = (n.name, n.arity) if n.kind == "pred" else ("^", n.name, n.arity)
-        if key in calls:
+        call = calls.get(key)
+        if call is not None and any(_compiles(kb, call, bound, has_at) for bound in (False, True)):
             out.append(str(n))
     return sorted(out)
+
+
+def _compiles(kb, call: CompiledCall, bound: bool, has_at: bool) -> bool:
+    """Whether ``call`` compiles with all its arguments ground (``bound``) or all fresh."""
+    width = call.arity + (1 if call.event else 0)
+    text = call._goal(tuple(range(width)) if bound else (), width)
+    return type(plan_for(kb, kb.plans.plan(*text), has_at)) is not Fallback
 
 
 # ---------------------------------------------------------------------- views

@@ -436,6 +436,18 @@ def test_interpreter_calls_compiled_sub_goals(goal):
     assert call.answered == before  # switched off: the interpreter ran the clauses
 
 
+
+def test_explain_lists_only_the_sub_goals_that_compile():
+    # first_link/2 (a cut) and a rule with repeat/0 run their clauses whatever the call's
+    # arguments: explain names link/2, which SQL answers, and not them
+    kb = links_kb()
+    kb.load(LINKS + "again(A, B) :- link(A, B), repeat, !.\n")
+    for goal in ("first_link(A, B)", "again(r1, B)"):
+        lines = kb.explain(goal).splitlines()
+        (listed,) = [line for line in lines if line.startswith("compiled sub-goals")]
+        assert listed.split(": ", 1)[1] == "link/2", lines
+    assert kb.query("again(r1, B)") == [{"B": slr_sql.Atom("r2")}]
+
 def test_compiled_sub_goal_modes_and_instances():
     kb = links_kb()
     call = kb.engine.sql_calls[("link", 2)]
