@@ -232,10 +232,11 @@ def _between(m, a):
 
 
 
-@nondet("repeat", 0)
+@nondet("$repeat", 0)
 def _repeat(m, a):
-    # ISO's repeat/0: succeeds again on every backtrack. The engine counts each retry as a
-    # step, so `repeat, fail` ends at the query's max_steps or timeout like any endless loop.
+    # ISO's repeat/0 (the library's repeat calls it): succeeds again on every backtrack. The
+    # engine counts each retry as a step, so `repeat, fail` ends at the query's max_steps or
+    # timeout like any endless loop.
     while True:
         yield None
 
@@ -345,6 +346,11 @@ def _univ(m, a):
 @det("copy_term", 2)
 def _copy_term(m, a):
     return m.unify(a[1], copy_term(a[0], deadline=m.deadline))
+
+
+@det("$term_variables", 2)
+def _term_variables(m, a):
+    return m.unify(a[1], make_list(term_vars(a[0], m.deadline)))
 
 
 # -- atoms and strings -------------------------------------------------------------------------------
@@ -2017,6 +2023,8 @@ flatten(List, Flat) :- '$flatten'(List, [], Flat0), !, Flat = Flat0.
 '$flatten'([], Tl, Tl) :- !.
 '$flatten'([Hd|Tl], Tail, List) :- !, '$flatten'(Hd, FlatHeadTail, List), '$flatten'(Tl, Tail, FlatHeadTail).
 '$flatten'(NonList, Tl, [NonList|Tl]).
+repeat :- '$repeat'.
+term_variables(Term, Vars) :- '$term_variables'(Term, Vars).
 """
 
 _LIBRARY: Program | None = None

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from .terms import Atom as A, Clause, Span, String, Struct as S, Var
 
-SOURCE_SHA256 = '8fccbdd41e7ed0663555b8a6b470e2eb7950fd4265b0f3c6ede0e721b07dab18'
+SOURCE_SHA256 = '1453879cd56fdb93cf7e58dcc62af3f4b036c458fad0e31e555a4a7ce0c44c20'
 
 
 def clauses(source: str) -> list[Clause]:
@@ -149,4 +149,8 @@ def clauses(source: str) -> list[Clause]:
     out.append(Clause(S(A('$flatten'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (A('!'), S(A(','), (S(A('$flatten'), (v[0], v[4], v[3])), S(A('$flatten'), (v[1], v[2], v[4])))))), Span('<library>', 68, 1, 68, 110), (('Hd', v[0]), ('Tl', v[1]), ('Tail', v[2]), ('List', v[3]), ('FlatHeadTail', v[4]), ), source[3242:3351]))
     v = [Var('NonList'), Var('Tl')]
     out.append(Clause(S(A('$flatten'), (v[0], v[1], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 69, 1, 69, 39), (('NonList', v[0]), ('Tl', v[1]), ), source[3352:3390]))
+    v = []
+    out.append(Clause(A('repeat'), A('$repeat'), Span('<library>', 70, 1, 70, 21), (), source[3391:3411]))
+    v = [Var('Term'), Var('Vars')]
+    out.append(Clause(S(A('term_variables'), (v[0], v[1])), S(A('$term_variables'), (v[0], v[1])), Span('<library>', 71, 1, 71, 61), (('Term', v[0]), ('Vars', v[1]), ), source[3412:3472]))
     return out

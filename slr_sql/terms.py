@@ -385,9 +385,14 @@ def is_callable(t: Any) -> bool:
     return type(t) is Struct or type(t) is Atom
 
 
-def term_vars(t: Any) -> list[Var]:
+def term_vars(t: Any, deadline: float | None = None) -> list[Var]:
     """Unbound variables of a term, depth-first left to right, each once (finite on cyclic
-    terms)."""
+    terms; a walk of a huge term looks at ``deadline`` every few thousand compounds).
+
+    >>> x, y = Var("X"), Var("Y")
+    >>> [v.name for v in term_vars(Struct("f", (y, Struct("g", (x, y)), 1)))]
+    ['Y', 'X']
+    """
     seen: set[int] = set()
     out: list[Var] = []
     stack = [t]
@@ -409,6 +414,8 @@ def term_vars(t: Any) -> list[Var]:
                 if id(x) in seen:
                     continue
                 seen.add(id(x))
+                if budget % NODES_BETWEEN_CLOCK_CHECKS == 0:
+                    check_deadline(deadline)
             stack.extend(reversed(x.args))
     return out
 

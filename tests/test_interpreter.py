@@ -483,6 +483,14 @@ def test_million_element_list(kb):   # its speed: benchmarks/bench_big_terms.py
           [{"N": 1000000, "X": 1000000, "S": 500000500000, "F": 1, "Max": 1000000}])
 
 
+
+def test_a_program_may_define_its_own_repeat_and_term_variables(kb):
+    # both are library predicates, as member/2 is: a program written before slr_sql had them
+    # (or a store that holds one) keeps its own definition, which wins over the library's
+    kb.load("repeat. term_variables(_, none).")
+    assert kb.query("findall(x, repeat, L)") == [{"L": [Atom("x")]}]
+    assert kb.query("term_variables(f(X), V)") == [{"V": Atom("none")}]
+
 def test_endless_loop_stops(kb):
     kb.load("loop :- loop. loop2(X) :- loop2(f(X)).")
     with pytest.raises(SLRTimeout):   # how soon it gives up: benchmarks/bench_big_terms.py
