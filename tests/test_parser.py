@@ -773,7 +773,8 @@ NUMBERS = {"1_000_000": "1000000", "1 000 000": "1000000", "1_ 000": "1000",
            "f(1 2)": "f(12)", "٣٤": "34", "١ ٢": "12", "١٢.٥": "12.5", "٣.٥e٢": "350.0",
            "1  000": "syntax", "1__000": "syntax", "1_000_": "syntax", "1 _000": "syntax",
            "1\t000": "syntax", "0x1 F": "syntax", "1 000e3": "syntax", "1٣": "syntax",
-           "1 ٣": "syntax", "٣e2": "syntax", "١٢.٥e3": "syntax", "1.5e٣": "syntax"}
+           "1 ٣": "syntax", "٣e2": "syntax", "١٢.٥e3": "syntax", "1.5e٣": "syntax",
+           "1_/* a */ 2": "12", "1_/* a */ b */2": "syntax", "1_/*/*/**/2": "syntax"}
 
 
 def _swi_reads(texts: list[str], tmp_path: Path) -> list[str]:

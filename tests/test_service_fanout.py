@@ -232,6 +232,49 @@ def test_a_whole_batch_offered_hands_its_waiting_async_consumer_over_at_once(kb)
     sub.close()
 
 
+def test_a_consumer_handed_over_is_woken_when_the_rest_of_its_pass_fails(kb):
+    """The shared read hands a waiting async consumer over to the pass (``offer_all``'s
+    ``loops``): it is no longer registered with its subscription, so only that pass can wake
+    it. A failure later in the same pass (the store busy for the read of a subscriber behind,
+    retried on the next tick) must not drop it: the consumer would wait for ever, whatever
+    is queued after, and close() would not reach it either."""
+    hub = kb._subscriptions
+    sub = kb.subscribe("p(X)^T", since=0)
+    behind = kb.subscribe("p(X)^T", since=0, max_queue=1)
+    kb.add_many(["p(1)^1", "p(2)^2"])
+    drained(kb)
+    assert behind.state is SubscriptionState.LAGGING     # read apart from the shared read
+    loop = asyncio.new_event_loop()
+    read = hub._journal_rows
+    reads: list = []
+
+    def busy_for_the_one_behind(info, after_jid, limit):
+        if after_jid == behind_at:
+            reads.append(after_jid)
+            raise SLRError("the store is busy (injected)")
+        return read(info, after_jid, limit)
+    try:
+        assert [a["X"] for a in sub.take_answers(10, (loop, loop.create_future()))] == [1, 2]
+        waker = (loop, loop.create_future())
+        assert sub.take_answers(10, waker) == [] and sub.waits_with(waker)
+        behind_at = behind.scanned
+        hub._journal_rows = busy_for_the_one_behind
+        try:
+            # room for one more: the passes from now on read for it after the shared read
+            assert [a["X"] for a in behind.take_answers(10, (loop, loop.create_future()))] == [1]
+            kb.add_many(["p(3)^3"])
+            drained(kb)
+        finally:
+            hub._journal_rows = read
+        assert reads                    # a pass failed after its shared read queued p(3)
+        loop.run_until_complete(asyncio.wait_for(asyncio.shield(waker[1]), DEADLINE))
+        assert [a["X"] for a in sub.take_answers(10, waker)] == [3]
+    finally:
+        loop.close()
+    sub.close()
+    behind.close()
+
+
 def test_next_answers_after_take_answers_waits_on_its_own_future(kb):
     """take_answers leaves no waiter for next_answers to await (the fan-out's wakers are
     not awaitable): the two mix on one subscription."""

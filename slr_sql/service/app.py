@@ -34,6 +34,7 @@ from typing import Any, Awaitable, Callable
 from starlette.applications import Starlette
 from starlette.middleware import Middleware
 from starlette.concurrency import run_in_threadpool
+from starlette.convertors import Convertor, register_url_convertor
 from starlette.exceptions import HTTPException
 from starlette.requests import ClientDisconnect, Request
 from starlette.responses import Response
@@ -358,6 +359,24 @@ class _Endpoint:
 _ROUTE_PARAM = re.compile(r"\{(\w+)(?::\w+)?\}")
 
 
+class _IdConvertor(Convertor):
+    """A path's integer id (``{name:slr_id}``), as starlette's ``int`` but of 64 digits at most.
+    The router converts a parameter while it matches the path, before any endpoint or token
+    check; int() refuses more than 4,300 digits, and that exception would reach the client
+    as a 500 and the log as a traceback. A longer path is no route (404)."""
+
+    regex = "[0-9]{1,64}"
+
+    def convert(self, value: str) -> int:
+        return int(value)
+
+    def to_string(self, value: int) -> str:
+        return str(value)
+
+
+register_url_convertor("slr_id", _IdConvertor())
+
+
 class _Service:
     """State shared by the endpoints: the knowledge base, the token, the limits and the
     submitted queries (handle -> _Submitted)."""
@@ -673,7 +692,7 @@ class _Service:
                                   f"{path.replace('/', '_').replace('{', '').replace('}', '')}",
                                   "responses": _responses(e)}
             params = [{"name": name, "in": "path", "required": True,
-                       "schema": {"type": "integer" if ":int" in e.path else "string"}}
+                       "schema": {"type": "integer" if ":slr_id}" in e.path else "string"}}
                       for name in _ROUTE_PARAM.findall(e.path)]
             params += [{"name": name, "in": "query", "required": req, "schema": _ref(kind)}
                        for name, (kind, req) in (e.query or {}).items()]
@@ -996,7 +1015,7 @@ async def _add_buffer(svc: "_Service", request: Request) -> Any:
     return {"id": buffer_id}
 
 
-@_route("DELETE", "/buffers/{buffer_id:int}", "Remove a runtime buffer "
+@_route("DELETE", "/buffers/{buffer_id:slr_id}", "Remove a runtime buffer "
         "(kb.remove_buffer); the events it kept stay.",
         response={"removed": "integer"})
 async def _remove_buffer(svc: "_Service", request: Request) -> Any:

@@ -496,9 +496,21 @@ class SubscriptionHub:
         """One round for the subscriptions of one event type: the shared read of the journal
         for those that keep up, then each one that reads at its own pace (history, lagging),
         then the ends (``until`` reached, too far behind)."""
-        info = self._type_info(key)
         touched: set = set()
         loops: dict = {}    # the shared read's async consumers, woken with the touched ones
+        try:
+            self._serve_type_into(key, subs, touched, loops)
+        finally:
+            # also when a read fails half-way (a busy store: the pass is retried): what was
+            # queued is not read again, and a consumer handed over to ``loops`` is no longer
+            # registered with its subscription, so nothing else would ever wake it
+            self._wake(touched, loops)
+
+    def _serve_type_into(self, key: tuple[str, int], subs: list[Subscription], touched: set,
+                         loops: dict) -> None:
+        """:meth:`_serve_type`'s round; the consumers to wake are collected in ``touched``
+        and ``loops``."""
+        info = self._type_info(key)
         self._max_jids.clear()
         if info is None:   # no event of this type yet: nothing to read; until may still end it
             ending = [s for s in subs if s.until_reached and not s.is_over]
@@ -509,7 +521,6 @@ class SubscriptionHub:
                     s.go_live()
                     s.end(completed=True)
                     touched.add(s)
-                self._wake(touched)
                 return
             info = self._type_info(key)
             if info is None:
@@ -535,7 +546,8 @@ class SubscriptionHub:
                     break
                 group = [s for s in group if s.state is live]
                 self._wake(touched, loops)     # a long backlog: let consumers start
-                touched, loops = set(), {}
+                touched.clear()
+                loops.clear()
         rest = []
         behind = []
         for s in subs:
@@ -552,7 +564,6 @@ class SubscriptionHub:
             self._serve_behind(key, info, behind, touched)
         for s in rest:
             self._check_end(key, info, s, touched)
-        self._wake(touched, loops)
 
     def _deliver_rows(self, key: tuple[str, int], rows: list, group: list[Subscription],
                       touched: set, own_pace: bool = False, loops: dict | None = None) -> None:
