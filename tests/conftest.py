@@ -70,6 +70,8 @@ def pytest_xdist_auto_num_workers(config):
     # (docs/testing.md, "A suite that fits in CI's 10 minutes", has the figures).
     import os
 
+    if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS"):
+        return None    # (xdist's own variable still chooses, through its default hook)
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return (cores or 1) + 1
 
