@@ -622,7 +622,8 @@ def _compiled_subgoals(kb, plan, has_at: bool) -> list[str]:
 
 
 def _compiles(kb, call: CompiledCall, bound: bool, has_at: bool) -> bool:
-    """Whether ``call`` compiles with all its arguments ground (``bound``) or all fresh."""
+    """Whether ``call`` compiles with all its arguments ground (``bound``) or all fresh (not
+    through the call's ``plans``, which hold the modes an interpreter run called it with)."""
     width = call.arity + (1 if call.event else 0)
     text = call._goal(tuple(range(width)) if bound else (), width)
     return type(plan_for(kb, kb.plans.plan(*text), has_at)) is not Fallback

@@ -122,7 +122,9 @@ def split_events(text: str) -> list[str]:
     for ch in text:
         depth += (ch in "([{") - (ch in ")]}")
         if ch.isspace() and depth == 0:
-            events, current = events + [current] if current else events, ""
+            if current:
+                events.append(current)
+            current = ""
         else:
             current += ch
     return events + [current] if current else events
