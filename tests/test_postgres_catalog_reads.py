@@ -23,15 +23,28 @@ READS = {**{name: read for name, read in SQLITE_READS.items() if not name.starts
          "query_plan": lambda db: db.query_plan("SELECT * FROM slr_meta")}
 
 
+PROBE = "slr-test-probe"
+
+
+def _probe(url: str) -> psycopg.Connection:
+    """A connection of this test's own, named so that the counts leave it out: a probe's
+    backend stays in pg_stat_activity a moment after the probe closed, and the next probe
+    counted it as if a read of the closed store had opened a session."""
+    return psycopg.connect(url, autocommit=True, application_name=PROBE)
+
+
 def _sessions(url: str) -> int:
-    """The sessions connected to the database of ``url`` (this one's not counted)."""
-    with psycopg.connect(url, autocommit=True) as conn:
+    """The clients connected to the database of ``url``, the test's probes not counted (nor
+    the server's own workers: an autovacuum worker visits the database when it will)."""
+    with _probe(url) as conn:
         return conn.execute("SELECT count(*) FROM pg_stat_activity WHERE datname = "
-                            "current_database() AND pid <> pg_backend_pid()").fetchone()[0]
+                            "current_database() AND backend_type = 'client backend' "
+                            "AND application_name <> %s",
+                            (PROBE,)).fetchone()[0]
 
 
 def _session_alive(url: str, pid: int) -> bool:
-    with psycopg.connect(url, autocommit=True) as conn:
+    with _probe(url) as conn:
         return conn.execute("SELECT count(*) FROM pg_stat_activity WHERE pid = %s",
                             (pid,)).fetchone()[0] > 0
 
