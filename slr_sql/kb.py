@@ -191,7 +191,12 @@ class KnowledgeBase:
     # -- lifecycle ----------------------------------------------------------------------
     def close(self) -> None:
         """Close the store. It never waits for another process (the checkpoint of the WAL
-        on close is ``PASSIVE``: what a reader still needs stays in the WAL)."""
+        on close is ``PASSIVE``: what a reader still needs stays in the WAL).
+
+        >>> kb = open(); kb.close(); kb.query("true")
+        Traceback (most recent call last):
+        slr_sql.errors.SLRError: the event store is closed
+        """
         if getattr(self, "_subscriptions", None) is not None:  # positions, threads
             self._subscriptions.close()
         if getattr(self, "_cep", None) is not None:
@@ -264,7 +269,17 @@ class KnowledgeBase:
         return out
 
     def load_file(self, path: str | Path, *, name: str = "main", replace: bool = False) -> None:
-        """Load a program file (see :meth:`load`)."""
+        """Load a program file (see :meth:`load`).
+
+        >>> import pathlib, tempfile
+        >>> rules = pathlib.Path(tempfile.mkdtemp()) / "rules.slr"
+        >>> _ = rules.write_text("big(X) :- size(X, S)^_, S > 2.")
+        >>> from slr_sql import StreamClock
+        >>> kb = open(clock=StreamClock()); kb.load_file(rules); kb.add("size(box, 3)^1")
+        >>> kb.query("big(X)")
+        [{'X': Atom('box')}]
+        >>> kb.close()
+        """
         path = Path(path)
         try:
             text = path.read_text(encoding="utf-8")
@@ -649,7 +664,15 @@ class KnowledgeBase:
     async def ask(self, goal: str, at: float | None = None, id: str | None = None,
                   args: dict | None = None, timeout: float | None = None,
                   robot: str | None = None) -> list[dict[str, Any]]:
-        """``await kb.ask(goal, at=z)``: :meth:`submit` for asyncio code."""
+        """``await kb.ask(goal, at=z)``: :meth:`submit` for asyncio code.
+
+        >>> import asyncio
+        >>> from slr_sql import ManualClock
+        >>> kb = open(clock=ManualClock(0)); kb.add("p(1)^1"); kb.mark_complete("p/1", 1)
+        >>> asyncio.run(kb.ask("p(X)^T", at=1))
+        [{'X': 1, 'T': 1.0}]
+        >>> kb.close()
+        """
         import asyncio
 
         from concurrent.futures import Future
@@ -660,7 +683,14 @@ class KnowledgeBase:
 
     def mark_complete(self, event_type: str, t: float) -> None:
         """Declare the history of ``"p/N"`` (or ``"p"``: every arity) complete up to ``t``
-        (persisted), like a ``fullyUpdated(p/N)^t`` event."""
+        (persisted), like a ``fullyUpdated(p/N)^t`` event.
+
+        >>> from slr_sql import ManualClock
+        >>> kb = open(clock=ManualClock(0)); kb.mark_complete("p/1", 10)
+        >>> kb.complete_until("p/1")
+        10.0
+        >>> kb.close()
+        """
         _check_event_type("mark_complete", event_type)
         if isinstance(t, bool) or not isinstance(t, numbers.Real):  # (numpy numbers are Real)
             raise SLRError(f"mark_complete: t must be a number of seconds, not {shown(t)}")
@@ -675,14 +705,29 @@ class KnowledgeBase:
 
     def complete_until(self, event_type: str) -> float:
         """The time up to which the history of ``"p/N"`` is complete now: the greatest of
-        now − max_delay, the latest mark, and (in_order types) the latest end received."""
+        now − max_delay, the latest mark, and (in_order types) the latest end received.
+
+        >>> from slr_sql import ManualClock
+        >>> kb = open(clock=ManualClock(20)); kb.load(":- max_delay(p/1, 5)."); kb.complete_until("p/1")
+        15.0
+        >>> kb.close()
+        """
         _check_event_type("complete_until", event_type)
         self._refresh()
         return self._sync.complete_until(event_type)
 
     def pending(self) -> list[PendingQueryAPI]:
         """The waiting synchronized queries; each PendingQuery's ``waiting_for`` lists the
-        event types and times it waits for."""
+        event types and times it waits for.
+
+        >>> from slr_sql import ManualClock
+        >>> kb = open(clock=ManualClock(0)); waiting = kb.submit("p(X)^T", at=5)
+        >>> [p.goal for p in kb.pending()]
+        ['p(X)^T']
+        >>> kb.mark_complete("p/1", 5); waiting.result(timeout=5), kb.pending()
+        ([], [])
+        >>> kb.close()
+        """
         return self._sync.pending()
 
     # -- history buffers (the work is in slr_sql/buffers.py) --------------------
@@ -702,7 +747,13 @@ class KnowledgeBase:
                                          keep_seconds=keep_seconds, keep_between=keep_between)
 
     def remove_buffer(self, buffer_id: int) -> None:
-        """Remove a runtime buffer (the events it kept stay)."""
+        """Remove a runtime buffer (the events it kept stay).
+
+        >>> kb = open(); buffer = kb.add_buffer("p(_)", keep_last=1); kb.remove_buffer(buffer)
+        >>> kb.buffers()
+        []
+        >>> kb.close()
+        """
         if type(buffer_id) is not int:
             raise SLRError(f"remove_buffer: a buffer id is an integer (kb.buffers() lists "
                            f"them), not {shown(buffer_id)}")
@@ -712,7 +763,16 @@ class KnowledgeBase:
         self._buffers.remove_runtime(buffer_id)
 
     def buffers(self) -> list:
-        """The active buffers (program and runtime) with their counters."""
+        """The active buffers (program and runtime) with their counters.
+
+        >>> from slr_sql import StreamClock
+        >>> kb = open(clock=StreamClock()); _ = kb.add_buffer("p(_)", keep_last=1)
+        >>> kb.add_many(["p(a)^1", "p(b)^2"])
+        []
+        >>> [(info.pattern, info.pruned) for info in kb.buffers()]
+        [('p(_)', 1)]
+        >>> kb.close()
+        """
         self._refresh()
         return self._buffers.infos()
 
@@ -854,7 +914,13 @@ class KnowledgeBase:
                                              max_lag=max_lag)
 
     def unsubscribe(self, id: str) -> None:
-        """Remove the durable subscription ``id`` and its position (closing it if open)."""
+        """Remove the durable subscription ``id`` and its position (closing it if open).
+
+        >>> kb = open(); sub = kb.subscribe("p(X)^T", id="watcher"); kb.unsubscribe("watcher")
+        >>> sub.closed
+        True
+        >>> kb.close()
+        """
         self._subscriptions.unsubscribe(id)
 
 

@@ -46,3 +46,19 @@ def test_examples_are_valid_python_without_escape_warnings():
                         if "escape" in str(exc):
                             bad.append(f"{test.name}: {example.source.strip()} ({exc})")
     assert not bad, "\n".join(bad)
+
+
+def test_every_public_function_and_method_of_the_api_has_an_example():
+    """The package's functions and the knowledge base's methods each show one runnable
+    example (run by the test above), so a reader sees a call that works."""
+    import inspect
+
+    from slr_sql.kb import KnowledgeBase
+
+    public = {name: getattr(slr_sql, name) for name in slr_sql.__all__
+              if inspect.isfunction(getattr(slr_sql, name))}
+    public.update({f"KnowledgeBase.{name}": member for name, member in vars(KnowledgeBase).items()
+                   if not name.startswith("_") and inspect.isfunction(member)})
+    assert len(public) > 20
+    without = sorted(name for name, member in public.items() if ">>>" not in (member.__doc__ or ""))
+    assert without == []
