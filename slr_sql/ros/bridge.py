@@ -740,11 +740,13 @@ def run_bridge(db: str, mapping: Mapping, all_topics: bool = False,
     def request_stop(signum: int, frame: Any) -> None:
         stop.set()
 
-    previous = {s: signal.signal(s, request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
     kb = slr_sql.open(db, synchronous=synchronous, checkpoint="background")
     bridge = Bridge(kb, mapping, all_topics=all_topics, node_name=node_name,
                     on_ready=lambda topic, msgtype: echo(f"subscribed {topic} ({msgtype})"),
                     ros_args=ros_args, mapping_given=mapping_given)
+    # only now, right before the try whose finally restores them: a store that fails to
+    # open must leave the caller's handlers (Ctrl-C) as they were
+    previous = {s: signal.signal(s, request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
     server = None
     try:
         bridge.start()
