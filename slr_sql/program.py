@@ -251,8 +251,7 @@ def compile_clause(head_args: tuple, body: Any, source: Clause | None = None) ->
 def split_event_atom(t: Any) -> tuple[Any, Any, Any] | None:
     """``p(..)^T`` -> (p(..), T, T); ``p(..)^[S,E]`` -> (p(..), S, E); else None.
 
-    >>> from slr_sql.terms import Var
-    >>> from slr_sql.terms import make_list
+    >>> from slr_sql.terms import Var, make_list
     >>> S, E = Var("S"), Var("E"); p = Struct("seen", (Atom("cup1"),))
     >>> split_event_atom(Struct("^", (p, S)))
     (Struct('seen', (Atom('cup1'),)), Var('S'), Var('S'))
