@@ -19,7 +19,13 @@ __all__ = ["answer_bindings", "value_text", "answer_text"]
 def answer_bindings(names: list, frame: list, deadline: float | None = None) -> dict[str, Any]:
     """Bindings of the named variables, as SWI-Prolog's toplevel shows them: a variable left
     unbound is omitted unless it is shared with another named variable (``X = Y``).
-    ``deadline`` (the query's, ``time.monotonic()``) also bounds converting a huge answer."""
+    ``deadline`` (the query's, ``time.monotonic()``) also bounds converting a huge answer.
+
+    >>> from slr_sql.terms import Var
+    >>> X, Y, Z = Var("X"), Var("Y"), Var("Z"); X.ref = 1; Y.ref = Z
+    >>> answer_bindings([("X", 0), ("Y", 1), ("Z", 2), ("W", 3)], [X, Y, Z, Var("W")])
+    {'X': 1, 'Y': Var('Z'), 'Z': Var('Z')}
+    """
     values = [(name, deref(frame[slot])) for name, slot in names]
     free = [id(v) for _, v in values if type(v) is Var]
     answer = {}
@@ -118,6 +124,9 @@ def answer_text(answer: dict[str, Any]) -> str:
     """One answer as the Prolog top level prints it, on one line: ``X = a, Y = [1,2]``.
 
     An answer without variables (a goal that just succeeds) is ``true``.
+
+    >>> answer_text({"X": 1, "L": [1, 2]}), answer_text({})
+    ('X = 1, L = [1,2]', 'true')
     """
     from .terms import Var
 

@@ -16,6 +16,13 @@ __all__ = ["evaluate", "apply_binary", "type_error", "instantiation_error", "eva
 
 
 def iso_error(formal: Any, context: Any = None) -> SLREvaluationError:
+    """The ISO error ``error(Formal, Context)`` as an exception to raise; the context is left
+    unbound unless given.
+
+    >>> from slr_sql.terms import Atom
+    >>> str(iso_error(Atom("instantiation_error")))
+    'error(instantiation_error,_)'
+    """
     term = Struct("error", (formal, context if context is not None else Var("_")))
     from .terms import MESSAGE_TOKENS, format_term
 
@@ -23,19 +30,40 @@ def iso_error(formal: Any, context: Any = None) -> SLREvaluationError:
 
 
 def instantiation_error() -> SLREvaluationError:
+    """ISO ``instantiation_error``: an argument is unbound where a value is needed.
+
+    >>> str(instantiation_error())
+    'error(instantiation_error,_)'
+    """
     return iso_error(Atom("instantiation_error"))
 
 
 def type_error(kind: str, culprit: Any) -> SLREvaluationError:
+    """ISO ``type_error(Kind, Culprit)``: ``culprit`` is not of the expected kind.
+
+    >>> from slr_sql.terms import Atom
+    >>> str(type_error("evaluable", Atom("foo")))
+    'error(type_error(evaluable,foo),_)'
+    """
     return iso_error(Struct("type_error", (Atom(kind), culprit)))
 
 
 def evaluation_error(what: str) -> SLREvaluationError:
+    """ISO ``evaluation_error(What)``: an arithmetic operation is undefined (``zero_divisor``,
+    ``undefined`` ...).
+
+    >>> str(evaluation_error("zero_divisor"))
+    'error(evaluation_error(zero_divisor),_)'
+    """
     return iso_error(Struct("evaluation_error", (Atom(what),)))
 
 
 def resource_error(what: str) -> SLREvaluationError:
-    """ISO ``resource_error(What)``: a computation would exceed a limit (memory, integer size)."""
+    """ISO ``resource_error(What)``: a computation would exceed a limit (memory, integer size).
+
+    >>> str(resource_error("memory"))
+    'error(resource_error(memory),_)'
+    """
     return iso_error(Struct("resource_error", (Atom(what),)))
 
 
@@ -555,4 +583,9 @@ _SWAP = _Swap()
 
 
 def compare_num(a: int | float, b: int | float) -> int:
+    """Standard order of two numbers as -1, 0 or 1 (by value: ``1`` and ``1.0`` compare equal).
+
+    >>> compare_num(1, 2.5), compare_num(3, 3.0), compare_num(2, -1)
+    (-1, 0, 1)
+    """
     return (a > b) - (a < b)

@@ -214,7 +214,14 @@ def analyze(pattern: Any) -> Pattern:
 
 
 def unifiable(a: Any, b: Any) -> bool:
-    """Whether two patterns unify (on renamed copies; nothing stays bound)."""
+    """Whether two patterns unify (on renamed copies; nothing stays bound).
+
+    >>> from slr_sql.parser import parse_term
+    >>> unifiable(parse_term("pos(r1, X)")[0], parse_term("pos(R, 2)")[0])
+    True
+    >>> unifiable(parse_term("pos(r1, X)")[0], parse_term("pos(r2, X)")[0])
+    False
+    """
     trail: list = []
     try:
         return unify(copy_term(a), copy_term(b), trail)
@@ -311,7 +318,15 @@ def check_seconds(value: Any, what: str = "keep_seconds") -> float:
 
 
 def check_time(value: Any, what: str) -> float:
-    """A window bound: a number (``-inf``/``inf`` allowed), else an SLRError in words."""
+    """A window bound: a number (``-inf``/``inf`` allowed), else an SLRError in words.
+
+    >>> check_time(3, "the start"), check_time("-inf", "the start")
+    (3.0, -inf)
+    >>> check_time("soon", "the start")
+    Traceback (most recent call last):
+        ...
+    slr_sql.errors.SLRError: the start must be a number, not 'soon'
+    """
     if isinstance(value, str):
         try:
             value = float(value)
@@ -378,7 +393,16 @@ class BufferInfo:
 
 def conflicts(specs: list[BufferSpec]) -> None:
     """Raise SLRError for the first two buffers whose patterns unify (SLR paper: an event
-    matching both would be kept by one buffer and pruned by the other)."""
+    matching both would be kept by one buffer and pruned by the other).
+
+    >>> from slr_sql.parser import parse_term
+    >>> keep3 = BufferSpec("cBuffer", analyze(parse_term("pos(r1, X)")[0]), 3, origin="a.slr:1")
+    >>> keep10s = BufferSpec("tBuffer", analyze(parse_term("pos(R, 2)")[0]), 10, origin="a.slr:2")
+    >>> conflicts([keep3, keep10s])
+    Traceback (most recent call last):
+        ...
+    slr_sql.errors.SLRError: conflicting buffers: cBuffer(pos(r1,X), 3) at a.slr:1 and tBuffer(pos(R,2), 10) at a.slr:2 have unifiable patterns ...
+    """
     for i, a in enumerate(specs):
         for b in specs[i + 1:]:
             if (a.pattern.name, a.pattern.arity) != (b.pattern.name, b.pattern.arity):
@@ -393,7 +417,13 @@ def conflicts(specs: list[BufferSpec]) -> None:
 # ----------------------------------------------------------------------------- plans
 
 def plan(spec: BufferSpec) -> BufferPlan:
-    """What the store installs for an active buffer (its triggers are the store's)."""
+    """What the store installs for an active buffer (its triggers are the store's).
+
+    >>> from slr_sql.parser import parse_term
+    >>> p = plan(BufferSpec("cBuffer", analyze(parse_term("pos(r1, X)")[0]), 3))
+    >>> p.kind, p.amount, p.match.keys  # the last 3 events per value of X (argument 2)
+    ('cBuffer', 3, ((2, None),))
+    """
     amount = _lenient_amount("cBuffer", spec.amount) if spec.kind == "cBuffer" else spec.amount
     return BufferPlan(int(spec.id or 0), spec.kind, spec.pattern.match, amount, spec.t1, spec.t2)
 
@@ -635,7 +665,14 @@ def _seconds(value: Any) -> float:
 def attach(kb: Host) -> BufferManager:
     """Install buffer management on a knowledge base (called by KnowledgeBase.__init__):
     the load listener (conflict check, triggers created in the load's transaction), the
-    table-creation hook, the clock listener and the space reclaimer."""
+    table-creation hook, the clock listener and the space reclaimer.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))  # its __init__ calls attach(kb)
+    >>> _ = kb.add_buffer("pos(R, _)", keep_last=1)
+    >>> [spec.label for spec in kb._buffers.active()]
+    ['keep_last(pos(R,_), 1)']
+    """
     manager = BufferManager(kb)
     kb.load_listeners.append(manager.on_load)
     kb.store.table_created_hooks.append(manager.on_table_created)
@@ -655,13 +692,34 @@ def attach(kb: Host) -> BufferManager:
 
 
 def stats(store: Any) -> dict[str, Any]:
-    """Counters and sizes for ``slr stats``: space, rows per type, buffers (all, removed too)."""
+    """Counters and sizes for ``slr stats``: space, rows per type, buffers (all, removed too).
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); kb.load("cBuffer(pos(R, _), 1).")
+    >>> kb.add_many(["pos(r1, 1)^1", "pos(r1, 2)^2"])
+    []
+    >>> s = stats(kb.store); s["rows"], [(b["pattern_text"], b["pruned"]) for b in s["buffers"]]
+    ({('pos', 2): 1}, [('pos(R,_)', 1)])
+    """
     return {"space": store.space_stats(), "rows": store.table_rows(),
             "buffers": store.buffer_rows(active_only=False), "now": store.recorded_now()}
 
 
 def format_stats(store: Any, path: str = "") -> str:
-    """The text ``slr stats DB`` prints."""
+    """The text ``slr stats DB`` prints.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); kb.load("cBuffer(pos(R, _), 1).")
+    >>> kb.add_many(["pos(r1, 1)^1", "pos(r1, 2)^2"])
+    []
+    >>> print(format_stats(kb.store, "robot.db"))
+    file robot.db: ... bytes (... MiB) = ... bytes database + 0 bytes WAL; ... pages of ... bytes, 0 free
+    buffer clock (now): 0
+    events stored: 1 now (+ 1 pruned by buffers)
+      pos/2: 1 stored, 1 pruned
+    buffers: 1 active; dropped late/outside: 0; pruned: 1
+      #1 cBuffer pos(R,_) last 1 [program, <string>:1]: pruned 1, dropped 0
+    """
     data = stats(store)
     space = data["space"]
     total = space["file_bytes"] + space["wal_bytes"]

@@ -174,7 +174,11 @@ class SLRGroup(click.Group):
 
 def strip_full_stop(text: str) -> str:
     """``"color(cup1,C)^5."`` -> ``"color(cup1,C)^5"``: goals are accepted with or without the
-    Prolog full stop, but a trailing ``..`` (as in ``=..``) is not a full stop."""
+    Prolog full stop, but a trailing ``..`` (as in ``=..``) is not a full stop.
+
+    >>> strip_full_stop("color(cup1,C)^5. "), strip_full_stop("X =.. [f,1]"), strip_full_stop("T = ..")
+    ('color(cup1,C)^5', 'X =.. [f,1]', 'T = ..')
+    """
     text = text.strip()
     if text.endswith(".") and not text.endswith(".."):
         text = text[:-1].rstrip()
@@ -390,6 +394,13 @@ def parse_event_line(line: str) -> str | tuple | None:
     ``"time"`` for a point event; arguments in the store's JSON encoding); anything else is SLR event text such as
     ``seg(cup1,[0.4,0.1,0.9])^12.31`` (a final full stop is allowed).
     Raises :class:`BadLine` for JSON that is not an event; SLR text is checked by the store.
+
+    >>> parse_event_line("bump(r1)^12.31.")
+    ('bump', (Atom('r1'),), 12.31, 12.31)
+    >>> parse_event_line('{"name": "speed", "args": ["r1", 0.5], "time": 3}')
+    ('speed', [Atom('r1'), 0.5], 3.0, 3.0)
+    >>> parse_event_line("% a comment") is None
+    True
     """
     text = line.strip()
     if not text or text.startswith("%") or text.startswith("#"):
@@ -479,9 +490,19 @@ def _numbered_lines(handle: Iterable[bytes]) -> Iterator[tuple[int, bytes]]:
 
 
 def ingest_file(kb: KnowledgeBaseAPI, path: str | Any, progress: Any = None) -> IngestReport:
-    """Ingest every event line of ``path`` (a file name, or a binary stream such as
+    r"""Ingest every event line of ``path`` (a file name, or a binary stream such as
     ``sys.stdin.buffer``) into ``kb`` in batches; bad lines are collected, the rest still goes
-    in. ``progress(nbytes)`` is called with the size of each line read."""
+    in. ``progress(nbytes)`` is called with the size of each line read.
+
+    >>> import pathlib, tempfile
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "events.txt"
+    >>> _ = path.write_text('pos(r1, 1)^1\n{"name": "pos", "args": ["r1", 2], "time": 2}\npos(r1\n')
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> report = ingest_file(kb, str(path)); report.added, report.bad
+    (2, [(3, "unexpected end of text (unbalanced parenthesis: missing ')' for the '(' at line 1, column 4) (column 7)")])
+    >>> kb.query("pos(r1, X)^T")
+    [{'X': 1, 'T': 1.0}, {'X': 2, 'T': 2.0}]
+    """
     bad: list[tuple[int, str]] = []
     added = 0
     batch: list[tuple[int, Any]] = []
@@ -654,7 +675,15 @@ def run(file: str, db: str | None, quiet: bool) -> None:
 
 def answer_lines(answers: list[dict[str, Any]]) -> list[str]:
     """One line per answer, ``X = a, Y = [1,2]``; ``true.`` for an answer without
-    variables and ``false.`` when there is no answer, as the Prolog top level says."""
+    variables and ``false.`` when there is no answer, as the Prolog top level says.
+
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); kb.add_many(["pos(r1, 1)^1", "pos(r1, [a,b])^2"])
+    []
+    >>> answer_lines(kb.query("pos(R, X)^T"))
+    ['R = r1, X = 1, T = 1.0', 'R = r1, X = [a,b], T = 2.0']
+    >>> answer_lines(kb.query("true")), answer_lines(kb.query("pos(r2, X)^T"))
+    (['true.'], ['false.'])
+    """
     if not answers:
         return ["false."]
     return [answer_text(a) if a else "true." for a in answers]
@@ -975,6 +1004,16 @@ def run_sql(db: str, statement: str, write: bool = False) -> tuple[list[str], li
     Through ``kb.sql``, so the store's ``slr_`` SQL functions (which the statements printed by
     ``slr explain`` call) are there; read-only unless ``write``, so a mistyped UPDATE or DROP
     cannot damage the store.
+
+    >>> import pathlib, tempfile
+    >>> db = str(pathlib.Path(tempfile.mkdtemp()) / "robot.db")
+    >>> kb = slr_sql.open(db, clock=slr_sql.ManualClock(0)); kb.add("pos(r1, 1)^1"); kb.close()
+    >>> run_sql(db, "SELECT arg1, arg2, t_end FROM pos")
+    (['arg1', 'arg2', 't_end'], [('r1', 1, 1.0)])
+    >>> run_sql(db, "DELETE FROM pos")
+    Traceback (most recent call last):
+        ...
+    slr_sql.errors.SLRError: read-only: the statement would change the store (attempt to write a readonly database); `slr sql --write` allows it
     """
     with _open(db, create=False) as kb:
         if _is_url(db):
@@ -1713,7 +1752,7 @@ def _ctrl_c_typed_ahead(editor_input: Any) -> bool:
 
 
 def cooked_keys_typed_ahead(stream: Any, editor_input: Any) -> None:
-    """Hand the keys typed while the terminal was cooked (a goal running, a file loading)
+    r"""Hand the keys typed while the terminal was cooked (a goal running, a file loading)
     to the line editor before it takes the terminal raw, the terminal's end-of-file key
     (Ctrl-D) among them as the key it is.
 
@@ -1724,7 +1763,19 @@ def cooked_keys_typed_ahead(stream: Any, editor_input: Any) -> None:
     killed outright (SIGKILL) leaves no key disabled. (A Ctrl-D typed in the instant between
     this read and the editor's first is still a NUL byte to it.)
 
-    Nothing happens when ``stream`` is no terminal or is raw already."""
+    Nothing happens when ``stream`` is no terminal or is raw already.
+
+    >>> import os, types
+    >>> from prompt_toolkit.input.typeahead import get_typeahead
+    >>> typist, terminal = os.openpty()   # a terminal in its cooked (line) mode
+    >>> _ = os.write(typist, b"p(X).\n\x04")  # a goal and Ctrl-D, typed while a goal ran
+    >>> editor_input = types.SimpleNamespace(typeahead_hash=lambda: "shell")
+    >>> with os.fdopen(terminal, "rb", buffering=0) as stream:
+    ...     cooked_keys_typed_ahead(stream, editor_input)
+    >>> [key.key for key in get_typeahead(editor_input)][-3:]
+    ['.', <Keys.ControlJ: 'c-j'>, <Keys.ControlD: 'c-d'>]
+    >>> os.close(typist)
+    """
     import codecs
     import select
     import termios

@@ -132,6 +132,11 @@ def scenario_events() -> list[Publication]:
     ahead of and 1.2 m above the base.  The base drives along world x at 0.2 m/s from x=1.0
     (t=10) to x=1.4 (t=12), stops publishing for a while, and is seen again at x=1.7 (t=15).
     Segmentation reports each segment 0.3 s after its image; objRec 0.8 s after.
+
+    >>> pubs = scenario_events(); len(pubs)
+    20
+    >>> [(p.component, p.name, p.args[0], p.time, p.arrival) for p in pubs if p.args[0] == "cup1"]
+    [('segmentation', 'seg', 'cup1', 10.5, 10.8), ('objRec', 'obj', 'cup1', 10.5, 11.3)]
     """
     pubs: list[Publication] = []
     for i, t in enumerate([10.0, 11.0, 12.0, 13.0, 14.0, 15.0]):
@@ -156,7 +161,14 @@ def scenario_events() -> list[Publication]:
 
 
 def open_robot_kb(db_path: str | None = None, clock: Any = None):
-    """Open a store with the robot program loaded; returns ``(kb, clock)``."""
+    """Open a store with the robot program loaded; returns ``(kb, clock)``.
+
+    >>> kb, clock = open_robot_kb(); clock.now()
+    0.0
+    >>> kb.query("usedFor(cup, U)")
+    [{'U': Atom('tea')}, {'U': Atom('coffee')}]
+    >>> kb.close()
+    """
     clock = clock if clock is not None else slr_sql.ManualClock(0.0)
     kb = slr_sql.open(db_path, clock=clock)
     kb.load(ROBOT_PROGRAM)
@@ -164,7 +176,13 @@ def open_robot_kb(db_path: str | None = None, clock: Any = None):
 
 
 def publish(kb: KnowledgeBaseAPI, clock: Any, pubs: Iterable[Publication]) -> None:
-    """Deliver publications in arrival order, moving the manual clock to each arrival."""
+    """Deliver publications in arrival order, moving the manual clock to each arrival.
+
+    >>> kb, clock = open_robot_kb(); publish(kb, clock, scenario_events())
+    >>> clock.now(), kb.query("color(cup2, C)^20")
+    (15.01, [{'C': Atom('blue')}])
+    >>> kb.close()
+    """
     for pub in pubs:
         if pub.arrival > clock.now():
             clock.set(pub.arrival)
@@ -200,6 +218,16 @@ CUPS_ON_TABLE1 = DemoQuery(
 
 
 def demo_queries() -> list[DemoQuery]:
+    """The demo's questions after the synchronized one: each a goal, its time and why it answers
+    so.
+
+    >>> q = demo_queries()[1]; q.title, q.goal
+    ('What color is cup2?', 'color(cup2, C)^20')
+    >>> kb, clock = open_robot_kb(); publish(kb, clock, scenario_events())
+    >>> kb.query(q.goal, at=q.at)
+    [{'C': Atom('blue')}]
+    >>> kb.close()
+    """
     t2 = TABLE_SWEEP[1]
     return [
         CUPS_ON_TABLE1,
@@ -398,7 +426,18 @@ def _event_rules_scene(console: Any, db_path: str | None = None) -> list[DemoRes
 
 
 def run_demo(console: Any = None, db_path: str | None = None) -> list[DemoResult]:
-    """Play the scenario and print every question with its answers; returns the results."""
+    """Play the scenario and print every question with its answers; returns the results.
+
+    It takes half a second: the example asks one of its questions as it asks them, over the
+    published scenario (``slr demo`` prints them all).
+
+    >>> kb, clock = open_robot_kb(); publish(kb, clock, scenario_events())
+    >>> question = demo_queries()[2]; question.title
+    'Where is cup1 (camera frame) at t=13?'
+    >>> kb.query(question.goal, at=question.at)
+    [{'L': [0.8, 0.1, -0.4]}]
+    >>> kb.close()
+    """
     if console is None:
         from rich.console import Console
 

@@ -56,7 +56,21 @@ class Example:
 
 
 def parse_example(text: str, filename: str = "<example>") -> Example:
-    """The parts of an example file (see the module's text)."""
+    """The parts of an example file (see the module's text).
+
+    >>> example = parse_example('''color(O, C)^T :- prev(obj(O, _, C)^Z, T).
+    ... %% events
+    ... obj(cup1, cup, red)^2.0.
+    ... %% query: color(cup1, C)^5
+    ... %% expect: [{"C": "red"}]
+    ... %% query: color(cup1, C)^1
+    ... %% at: 1
+    ... %% expect: []''')
+    >>> example.program.strip(), example.events, example.event_lines
+    ('color(O, C)^T :- prev(obj(O, _, C)^Z, T).', ['obj(cup1, cup, red)^2.0'], [3])
+    >>> [(case.goal, case.line, case.at, case.expect) for case in example.cases]
+    [('color(cup1, C)^5', 4, None, '[{"C": "red"}]'), ('color(cup1, C)^1', 6, 1.0, '[]')]
+    """
     program: list[str] = []
     example = Example("")
     in_events = False

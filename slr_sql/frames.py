@@ -334,7 +334,18 @@ def lookup(store: Any, tree: FrameTree, target: Any, source: Any, t: float,
     maps ``source`` coordinates into ``target``'s), or None when the frames are not
     connected or an edge has no value at ``t`` (see the module's text); :class:`PoseOverflow`
     when the chain's pose is beyond floats. ``check_deadline`` (raising when the query's
-    time is up) is called every few edges: a long chain is one statement per edge."""
+    time is up) is called every few edges: a long chain is one statement per edge.
+
+    >>> from slr_sql.store import EventStore
+    >>> s = EventStore(None)
+    >>> s.add_events([("tf", ("map", "base", Struct("pose", ([1.0, 2.0, 0.0], [0.0, 0.0, 0.0, 1.0]))),
+    ...                0.0, 0.0)])
+    []
+    >>> lookup(s, FrameTree(), "map", "base", 0.0)   # the pose of base in map
+    ((1.0, 2.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+    >>> lookup(s, FrameTree(), "map", "base", 5.0), lookup(s, FrameTree(), "map", "base", 5.0, extrapolate=True)
+    (None, ((1.0, 2.0, 0.0), (0.0, 0.0, 0.0, 1.0)))
+    """
     if type(target) is str:
         target = Atom(target)
     if type(source) is str:

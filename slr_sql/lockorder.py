@@ -61,7 +61,15 @@ class LockOrderViolation(RuntimeError):
 
 def debug_locks() -> bool:
     """Is the lock order checked for locks made now? ``SLR_DEBUG_LOCKS=1``, or ``-X dev``
-    unless ``SLR_DEBUG_LOCKS=0``."""
+    unless ``SLR_DEBUG_LOCKS=0``.
+
+    >>> import os
+    >>> from unittest import mock
+    >>> with mock.patch.dict(os.environ, SLR_DEBUG_LOCKS="1"): debug_locks()
+    True
+    >>> with mock.patch.dict(os.environ, SLR_DEBUG_LOCKS="0"): debug_locks()
+    False
+    """
     flag = os.environ.get("SLR_DEBUG_LOCKS", "")
     if flag:
         return flag not in ("0", "false", "no")
@@ -69,13 +77,39 @@ def debug_locks() -> bool:
 
 
 def violations() -> list[str]:
-    """The violations seen in this process (debug mode), oldest first."""
+    """The violations seen in this process (debug mode), oldest first.
+
+    >>> import os
+    >>> from unittest import mock
+    >>> with mock.patch.dict(os.environ, SLR_DEBUG_LOCKS="1"):  # checked locks, as in debug mode
+    ...     store, sync = ordered_lock("store", reentrant=True), ordered_lock("sync", reentrant=True)
+    >>> clear_violations()
+    >>> try:
+    ...     with store, sync: pass  # sync after store: out of order
+    ... except LockOrderViolation: pass
+    >>> violations()
+    ['MainThread: took a sync lock while holding a store lock ...']
+    >>> clear_violations()
+    """
     with _violations_lock:
         return list(_violations)
 
 
 def clear_violations() -> None:
-    """Forget the violations and the nesting seen so far."""
+    """Forget the violations and the nesting seen so far.
+
+    >>> import os
+    >>> from unittest import mock
+    >>> with mock.patch.dict(os.environ, SLR_DEBUG_LOCKS="1"):  # checked locks, as in debug mode
+    ...     store, sync = ordered_lock("store", reentrant=True), ordered_lock("sync", reentrant=True)
+    >>> try:
+    ...     with store, sync: pass  # out of order
+    ... except LockOrderViolation: pass
+    >>> len(violations()) > 0
+    True
+    >>> clear_violations(); violations()
+    []
+    """
     with _violations_lock:
         _violations.clear()
         _edges.clear()

@@ -110,7 +110,17 @@ class _State:
 
 
 def fact_rows(program) -> dict:
-    """``{(name, arity): [encoded rows]}`` for every predicate made of ground facts only."""
+    """``{(name, arity): [encoded rows]}`` for every predicate made of ground facts only.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.load("color(cup1, red). in_kitchen(R) :- at(R, kitchen)^_.")
+    >>> kb.add_many(["at(r1, kitchen)^1", "at(r2, hall)^2"])
+    []
+
+    >>> fact_rows(kb.program)  # in_kitchen/1 has a rule: not a fact table
+    {('color', 2): [('cup1', 'red')]}
+    """
     out = {}
     for key, pred in program.preds.items():
         if not pred.clauses or key[1] == 0:
@@ -131,6 +141,17 @@ def fact_rows(program) -> dict:
 
 
 def state_of(kb) -> _State:
+    """The planner's state of ``kb`` (its fact tables and views), made on first use.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.load("color(cup1, red). in_kitchen(R) :- at(R, kitchen)^_.")
+    >>> kb.add_many(["at(r1, kitchen)^1", "at(r2, hall)^2"])
+    []
+
+    >>> st = state_of(kb); st is state_of(kb), sorted(st.facts)
+    (True, [('color', 2)])
+    """
     st = kb.attached_state.get("planner")
     if st is None:
         st = kb.attached_state["planner"] = _State(kb)
@@ -138,7 +159,19 @@ def state_of(kb) -> _State:
 
 
 def attach(kb) -> None:
-    """Install the SQL side on a knowledge base: functions, fact tables and views on load."""
+    """Install the SQL side on a knowledge base: functions, fact tables and views on load.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.load("color(cup1, red). in_kitchen(R) :- at(R, kitchen)^_.")
+    >>> kb.add_many(["at(r1, kitchen)^1", "at(r2, hall)^2"])
+    []
+
+    >>> sorted(kb.engine.sql_calls)  # open() called attach(kb): in_kitchen/1 is called through SQL
+    [('in_kitchen', 1)]
+    >>> kb.store.execute("SELECT * FROM in_kitchen")  # and the load made its view
+    [('r1',)]
+    """
     state_of(kb)
     kb.engine.sql_calls = compiled_calls(kb)   # the program restored from the file
     kb.load_listeners.append(refresh)
@@ -183,14 +216,36 @@ def attach(kb) -> None:
 def reloaded(kb) -> None:
     """Reload listener: the program was re-read from the file (another connection changed
     it); its fact tables and views were written by that connection: only choose again the
-    predicates an interpreter run calls through SQL."""
+    predicates an interpreter run calls through SQL.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.load("color(cup1, red). in_kitchen(R) :- at(R, kitchen)^_.")
+    >>> kb.add_many(["at(r1, kitchen)^1", "at(r2, hall)^2"])
+    []
+
+    >>> kb.engine.sql_calls = {}; reloaded(kb); sorted(kb.engine.sql_calls)
+    [('in_kitchen', 1)]
+    """
     state_of(kb).view_missing = None   # that connection's views, not known here
     kb.engine.sql_calls = compiled_calls(kb)
 
 
 def refresh(kb) -> None:
     """Load listener: materialize the fact tables, rebuild the views (in the load
-    transaction) and choose the predicates an interpreter run calls through SQL."""
+    transaction) and choose the predicates an interpreter run calls through SQL.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.load("color(cup1, red). in_kitchen(R) :- at(R, kitchen)^_.")
+    >>> kb.add_many(["at(r1, kitchen)^1", "at(r2, hall)^2"])
+    []
+
+    >>> kb.engine.sql_calls = {}; refresh(kb); sorted(kb.engine.sql_calls)
+    [('in_kitchen', 1)]
+    >>> kb.store.execute("SELECT * FROM color")
+    [('cup1', 'red')]
+    """
     st = state_of(kb)
     st.materialize(kb)
     refresh_views(kb)
@@ -406,7 +461,18 @@ def _conj(goals: list) -> Any:
 
 def compile_goal(kb, plan, has_at: bool, robot: bool = False) -> SqlPlan:
     """Compile a parsed query plan (kb._plan) to SQL; raises :class:`Fallback`. ``robot``:
-    every event row read must be the robot's of the parameter ``:robot``."""
+    every event row read must be the robot's of the parameter ``:robot``.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.load("color(cup1, red). in_kitchen(R) :- at(R, kitchen)^_.")
+    >>> kb.add_many(["at(r1, kitchen)^1", "at(r2, hall)^2"])
+    []
+
+    >>> sql_plan = compile_goal(kb, kb.plans.plan("in_kitchen(R)", ()), False)
+    >>> sql_plan.run(kb, {}, None, None, None, None)
+    [{'R': Atom('r1')}]
+    """
     ctx = _Ctx(kb, state_of(kb))
     comp = Compiler(ctx, has_at, robot=robot)
     frame: list = [None] * plan.compiled.nslots
@@ -511,7 +577,20 @@ def _shift(t, off):
 
 
 def plan_for(kb, plan, has_at: bool, robot: bool = False):
-    """The cached SqlPlan for a parsed query plan, or the Fallback explaining why none."""
+    """The cached SqlPlan for a parsed query plan, or the Fallback explaining why none.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.load("color(cup1, red). in_kitchen(R) :- at(R, kitchen)^_.")
+    >>> kb.add_many(["at(r1, kitchen)^1", "at(r2, hall)^2"])
+    []
+
+    >>> plan = kb.plans.plan("in_kitchen(R)", ())
+    >>> type(plan_for(kb, plan, False)).__name__, plan_for(kb, plan, False) is plan_for(kb, plan, False)
+    ('SqlPlan', True)
+    >>> plan_for(kb, kb.plans.plan("between(1, inf, X)", ()), False).reason
+    'the builtin between/3 has no SQL form'
+    """
     cache = getattr(plan, "sql_plans", None)
     if cache is None:
         cache = plan.sql_plans = {}
@@ -537,14 +616,34 @@ def plan_for(kb, plan, has_at: bool, robot: bool = False):
 def compiles_for(store) -> bool:
     """Whether the SQL compiler's statements run on ``store``: its dialect prints them
     (SQLite and PostgreSQL do; a goal part of which one cannot print exactly, such as a
-    Python function on PostgreSQL, falls back to the interpreter goal by goal)."""
+    Python function on PostgreSQL, falls back to the interpreter goal by goal).
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.load("color(cup1, red). in_kitchen(R) :- at(R, kitchen)^_.")
+    >>> kb.add_many(["at(r1, kitchen)^1", "at(r2, hall)^2"])
+    []
+
+    >>> compiles_for(kb.store)
+    True
+    """
     return hasattr(store.dialect, "list_of")
 
 
 def try_sql(kb, plan, args, at, limit=None, deadline=None, robot=None):
     """Answers through SQL, or None when the interpreter must answer. Past ``deadline``
     (``time.monotonic()``) the statement stops with SLRTimeout. ``robot``: only that
-    robot's events."""
+    robot's events.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.load("color(cup1, red). in_kitchen(R) :- at(R, kitchen)^_.")
+    >>> kb.add_many(["at(r1, kitchen)^1", "at(r2, hall)^2"])
+    []
+
+    >>> try_sql(kb, kb.plans.plan("in_kitchen(R)", ()), {}, None)
+    [{'R': Atom('r1')}]
+    """
     if not getattr(kb, "sql_enabled", True) or not compiles_for(kb.store):
         return None
     entry = plan_for(kb, plan, at is not None, robot is not None)
@@ -560,7 +659,19 @@ def try_sql(kb, plan, args, at, limit=None, deadline=None, robot=None):
 
 
 def explain(kb, plan, at=None) -> list[str]:
-    """Lines describing how a goal runs: the SQL with its parameters, or the fallback."""
+    """Lines describing how a goal runs: the SQL with its parameters, or the fallback.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.load("color(cup1, red). in_kitchen(R) :- at(R, kitchen)^_.")
+    >>> kb.add_many(["at(r1, kitchen)^1", "at(r2, hall)^2"])
+    []
+
+    >>> for line in explain(kb, kb.plans.plan("in_kitchen(R)", ()))[:3]: print(line)
+    engine: sql (one prepared statement; rows decoded into answers)
+    modes (+ bound, - free when the goal is reached):
+      in_kitchen(-)
+    """
     entry = plan_for(kb, plan, at is not None)
     if type(entry) is Fallback:
         lines = ["engine: interpreter (top-down SLDNF over the event store)",
@@ -633,7 +744,20 @@ def _compiles(kb, call: CompiledCall, bound: bool, has_at: bool) -> bool:
 
 def view_sql(kb, name: str, arity: int):
     """The SELECT of the inspection view of name/arity (arg1..argN, encoded values), or
-    (None, reason)."""
+    (None, reason).
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.load("color(cup1, red). in_kitchen(R) :- at(R, kitchen)^_.")
+    >>> kb.add_many(["at(r1, kitchen)^1", "at(r2, hall)^2"])
+    []
+
+    >>> sql, reason, missing = view_sql(kb, "in_kitchen", 1); reason
+    >>> print(sql)
+    SELECT arg1 FROM (SELECT +(t0.arg1) AS arg1, ... FROM "at" AS t0 WHERE t0.arg2 = 'kitchen' ...)
+    >>> view_sql(kb, "nowhere", 0)[:2]
+    (None, 'unknown predicate nowhere/0 (existence error at run time)')
+    """
     ctx = _Ctx(kb, state_of(kb))
     comp = Compiler(ctx, False, literal=True)
     xs = [Var(f"A{i + 1}") for i in range(arity)]
@@ -676,6 +800,20 @@ def view_sql(kb, name: str, arity: int):
 
 
 def refresh_views(kb) -> list[str]:
+    """Replace the store's inspection views (one per predicate name: a fact table's rows or a
+    rule's SELECT) by those of the loaded program; the names of the views.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.load("color(cup1, red). in_kitchen(R) :- at(R, kitchen)^_.")
+    >>> kb.add_many(["at(r1, kitchen)^1", "at(r2, hall)^2"])
+    []
+
+    >>> refresh_views(kb)
+    ['color', 'in_kitchen']
+    >>> kb.store.execute("SELECT * FROM in_kitchen")
+    [('r1',)]
+    """
     st = state_of(kb)
     views = {}
     missing: set = set()
@@ -782,7 +920,17 @@ def compiled_calls(kb) -> dict:
     """``{(name, arity): CompiledCall}`` for the derived predicates worth calling through SQL
     from the interpreter: not recursive, with at least one rule, and reading events (directly
     or through the rules they call). Plain fact predicates stay in the interpreter, whose
-    first-argument index answers them faster than a statement would."""
+    first-argument index answers them faster than a statement would.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.load("color(cup1, red). in_kitchen(R) :- at(R, kitchen)^_.")
+    >>> kb.add_many(["at(r1, kitchen)^1", "at(r2, hall)^2"])
+    []
+
+    >>> sorted(compiled_calls(kb))   # color/2 (facts only) stays in the interpreter
+    [('in_kitchen', 1)]
+    """
     from .analysis import Node, analyze, reachable, recursive_predicates
 
     if not compiles_for(kb.store):

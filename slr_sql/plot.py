@@ -273,7 +273,13 @@ def _rows(source: Any, statement: Statement) -> list[tuple]:
 
 
 def store_types(source: Any) -> list[EventTypeRef]:
-    """Every event type in the store's catalog (``slr_event_types``), by name and arity."""
+    """Every event type in the store's catalog (``slr_event_types``), by name and arity.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); kb.add("move(r1)^[2, 8]"); kb.add("bump(r1)^5")
+    >>> [(ref.name, ref.arity) for ref in store_types(kb)]
+    [('bump', 1), ('move', 1)]
+    """
     rows = _rows(source, _statements(source).event_types())
     return [EventTypeRef(str(name), int(arity), str(table)) for name, arity, table in rows]
 
@@ -859,7 +865,14 @@ def _draw_series(ax: Any, series: ValueSeries, timeline: Timeline) -> None:
 def draw_timeline(timeline: Timeline) -> Any:
     """The matplotlib Figure of a :class:`Timeline` (Agg canvas; never a window).
     Epoch-second data (``timeline.origin`` set) is drawn on a relative axis: seconds since
-    the origin, which the axis label names as a UTC time."""
+    the origin, which the axis label names as a UTC time.
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); kb.add("move(r1)^[2, 8]"); kb.add("bump(r1)^5")
+    >>> fig = draw_timeline(collect_timeline(kb, start=0, end=10))
+    >>> [label.get_text() for label in fig.axes[0].get_yticklabels()]
+    ['bump/1', 'move/1']
+    """
     drawn = timeline
     if timeline.origin:
         timeline = _shifted(timeline, timeline.origin)
@@ -1024,7 +1037,19 @@ IMAGE_FORMATS = {".png": "png", ".jpg": "jpg", ".jpeg": "jpg", ".svg": "svg", ".
 
 def save_timeline(figure: Any, path: str) -> None:
     """Write a timeline figure at its own size and dpi (``slr plot -o``) in the format its
-    suffix names: .png, .jpg/.jpeg, .svg or .pdf; any other suffix is refused."""
+    suffix names: .png, .jpg/.jpeg, .svg or .pdf; any other suffix is refused.
+
+    >>> import pathlib, tempfile, slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); kb.add("move(r1)^[2, 8]")
+    >>> fig = draw_timeline(collect_timeline(kb, start=0, end=10))
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "moves.svg"
+    >>> save_timeline(fig, str(path)); path.read_text()[:5]
+    '<?xml'
+    >>> save_timeline(fig, "moves.gif")
+    Traceback (most recent call last):
+        ...
+    slr_sql.errors.SLRError: cannot write moves.gif: the suffix .gif names no image format; use .png, .jpg, .jpeg, .svg, .pdf
+    """
     import os
 
     suffix = os.path.splitext(str(path))[1].lower()

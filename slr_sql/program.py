@@ -63,7 +63,14 @@ MAX_RECURSIVE_NEST = 200
 
 
 def build(t: Any, frame: list) -> Any:
-    """Instantiate a compiled term with the variables of ``frame`` (fresh Vars on demand)."""
+    """Instantiate a compiled term with the variables of ``frame`` (fresh Vars on demand).
+
+    >>> from slr_sql.terms import Var
+    >>> X = Var("X"); c = compile_clause((Struct("f", (X, X, 1)),), Atom("true"))
+    >>> frame = [None] * c.nslots; t = build(c.head[0], frame)
+    >>> t, t.args[0] is t.args[1] is frame[0]
+    (Struct('f', (Var('X'), Var('X'), 1)), True)
+    """
     tt = type(t)
     if tt is Slot:
         v = frame[t.index]
@@ -193,7 +200,11 @@ class _Assemble:
 
 
 def first_arg_key(t: Any) -> Any:
-    """Key for first-argument indexing, or None for a variable."""
+    """Key for first-argument indexing, or None for a variable.
+
+    >>> first_arg_key(Atom("cup1")), first_arg_key(Struct("p", (1, 2))), first_arg_key(Slot(0, "X"))
+    ((<class 'slr_sql.terms.Atom'>, Atom('cup1')), (<class 'slr_sql.terms.Struct'>, Atom('p'), 2), None)
+    """
     tt = type(t)
     if tt is Slot or tt is Var:
         return None
@@ -203,6 +214,12 @@ def first_arg_key(t: Any) -> Any:
 
 
 def flatten_conjunction(body: Any) -> list:
+    """The goals of a conjunction ``(A, B, C)`` as a list, left to right (nested conjunctions
+    flattened).
+
+    >>> [str(g) for g in flatten_conjunction(Struct(",", (Atom("a"), Struct(",", (Atom("b"), Atom("c"))))))]
+    ['a', 'b', 'c']
+    """
     goals = []
     stack = [body]
     while stack:
@@ -232,7 +249,15 @@ def compile_clause(head_args: tuple, body: Any, source: Clause | None = None) ->
 
 
 def split_event_atom(t: Any) -> tuple[Any, Any, Any] | None:
-    """``p(..)^T`` -> (p(..), T, T); ``p(..)^[S,E]`` -> (p(..), S, E); else None."""
+    """``p(..)^T`` -> (p(..), T, T); ``p(..)^[S,E]`` -> (p(..), S, E); else None.
+
+    >>> from slr_sql.terms import Var, make_list
+    >>> S, E = Var("S"), Var("E"); p = Struct("seen", (Atom("cup1"),))
+    >>> split_event_atom(Struct("^", (p, S)))
+    (Struct('seen', (Atom('cup1'),)), Var('S'), Var('S'))
+    >>> split_event_atom(Struct("^", (p, make_list([S, E])))), split_event_atom(p)
+    ((Struct('seen', (Atom('cup1'),)), Var('S'), Var('E')), None)
+    """
     t = deref(t)
     if type(t) is not Struct or t.name != "^" or len(t.args) != 2:
         return None
@@ -249,6 +274,11 @@ def split_event_atom(t: Any) -> tuple[Any, Any, Any] | None:
 
 
 def event_key(atom: Any) -> tuple[str, int]:
+    """The event type of an event atom, as (name, arity).
+
+    >>> event_key(Struct("location", (Atom("cup1"), Atom("table")))), event_key(Atom("tick"))
+    (('location', 2), ('tick', 0))
+    """
     if type(atom) is Struct:
         return str(atom.name), len(atom.args)
     return str(atom), 0

@@ -44,7 +44,12 @@ __all__ = ["SQL_FUNCTIONS"]
 
 
 def statement_deadline(store: Any) -> float | None:
-    """The deadline of the compiled statement running on ``store`` now (None: no store)."""
+    """The deadline of the compiled statement running on ``store`` now (None: no store).
+
+    >>> from slr_sql.store import EventStore
+    >>> statement_deadline(None), statement_deadline(EventStore(None))  # no statement running
+    (None, None)
+    """
     return None if store is None else store.statement_deadline
 
 

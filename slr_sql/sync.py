@@ -103,6 +103,11 @@ def _dur(d: float) -> str:
 
 
 def type_text(key: tuple[str, int]) -> str:
+    """An event type key as Prolog writes its indicator, for messages.
+
+    >>> type_text(("location", 2))
+    'location/2'
+    """
     return f"{key[0]}/{key[1]}"
 
 
@@ -155,7 +160,7 @@ class Wait:
         self.reason = reason
         self.kind = kind
         self.since = since                 # clock time when the wait began
-        self.since_wall = time_mono()      # time.monotonic() then
+        self.since_wall = _time_mono()      # time.monotonic() then
         self.released_at: float | None = None
         self.released_wall: float | None = None
         self.released_by: str | None = None
@@ -182,7 +187,7 @@ class Wait:
         return f"Wait({self.type}, {_fmt(self.time)}, {self.reason!r})"
 
 
-def time_mono() -> float:
+def _time_mono() -> float:
     return time.monotonic()
 
 
@@ -1332,7 +1337,17 @@ class Synchronizer:
 
 
 def attach(kb: Host) -> Synchronizer:
-    """Create the synchronizer of ``kb`` (the event pipeline calls it for adds and marks)."""
+    """Create the synchronizer of ``kb`` (the event pipeline calls it for adds and marks).
+
+    >>> import slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))  # its __init__ calls attach(kb)
+    >>> q = kb._sync.submit("findall(X, step(X)^_, L)", at=5)  # as kb.submit: waits for step/1
+    >>> q.done()
+    False
+    >>> kb.add("step(a)^3"); kb.mark_complete("step/1", 5); q.result(timeout=5)
+    [{'L': [Atom('a')]}]
+    >>> kb.close()
+    """
     sync = Synchronizer(kb)
     kb.progress_listeners.append(sync.on_progress)
     return sync

@@ -222,7 +222,11 @@ CONS = Atom(".")
 
 
 def indicator(term: Any) -> tuple[str, int]:
-    """Name and arity of a callable term."""
+    """Name and arity of a callable term.
+
+    >>> "%s/%d" % indicator(Struct("location", (Atom("cup1"), Atom("table")))), indicator(Atom("halt"))
+    ('location/2', ('halt', 0))
+    """
     if type(term) is Struct:
         return term.name, len(term.args)
     return str(term), 0
@@ -249,7 +253,12 @@ def check_deadline(deadline: float | None) -> None:
 
 
 def deref(t: Any) -> Any:
-    """Follow variable bindings to the representative term (iterative)."""
+    """Follow variable bindings to the representative term (iterative).
+
+    >>> X, Y = Var("X"), Var("Y"); X.ref = Y; Y.ref = Atom("cup1")
+    >>> deref(X), deref(Var("Z"))
+    (Atom('cup1'), Var('Z'))
+    """
     while type(t) is Var:
         r = t.ref
         if r is None:
@@ -260,7 +269,12 @@ def deref(t: Any) -> Any:
 
 def term_equal(a: Any, b: Any) -> bool:
     """Structural identity (``==``) after dereferencing: iterative (no recursion limit on
-    deep or long terms), and finite on cyclic terms (compared as rational trees)."""
+    deep or long terms), and finite on cyclic terms (compared as rational trees).
+
+    >>> X = Var("X"); X.ref = 1
+    >>> term_equal(Struct("f", (X,)), Struct("f", (1,))), term_equal(Var("A"), Var("B"))
+    (True, False)
+    """
     stack = [(a, b)]
     seen = None  # pairs of compounds reached through a binding, already being compared
     while stack:
@@ -354,7 +368,11 @@ def list_items(t: Any) -> tuple[list, Any]:
 
 
 def is_ground(t: Any) -> bool:
-    """True when the term has no unbound variable (finite on cyclic terms)."""
+    """True when the term has no unbound variable (finite on cyclic terms).
+
+    >>> is_ground(Struct("f", (Atom("a"), 1))), is_ground(Struct("f", (Var("X"),)))
+    (True, False)
+    """
     stack = [t]
     seen = None  # compounds reached through a binding and already walked (cycles)
     budget = NODES_BETWEEN_CLOCK_CHECKS
@@ -381,6 +399,11 @@ def is_ground(t: Any) -> bool:
 
 
 def is_callable(t: Any) -> bool:
+    """True for an atom or a compound term (after dereferencing), what ``call/1`` accepts.
+
+    >>> is_callable(Atom("true")), is_callable(Struct("f", (1,))), is_callable(1), is_callable(Var("G"))
+    (True, True, False, False)
+    """
     t = deref(t)
     return type(t) is Struct or type(t) is Atom
 

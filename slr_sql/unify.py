@@ -157,7 +157,14 @@ def _unify_remembering(a: Any, b: Any, stack: list, trail: list,
 
 
 def undo(trail: list, mark: int) -> None:
-    """Unbind every variable bound since the trail had ``mark`` entries."""
+    """Unbind every variable bound since the trail had ``mark`` entries.
+
+    >>> X = Var("X"); trail = []; mark = len(trail)
+    >>> unify(X, 1, trail), X.ref
+    (True, 1)
+    >>> undo(trail, mark); X.ref is None
+    True
+    """
     while len(trail) > mark:
         trail.pop().ref = None
 
@@ -361,6 +368,13 @@ def _copy_keeping_vars(t: Any) -> Any:
 
 
 def unify_tuple(xs: tuple, ys: tuple, trail: list) -> bool:
+    """Unify two argument tuples position by position (of the same length), recording bindings
+    on ``trail``; False at the first mismatch (the caller undoes the trail).
+
+    >>> X = Var("X"); trail = []
+    >>> unify_tuple((X, 2), (1, 2), trail), X.ref, unify_tuple((1,), (2,), trail)
+    (True, 1, False)
+    """
     for x, y in zip(xs, ys):
         if not unify(x, y, trail):
             return False
@@ -403,7 +417,12 @@ def unify_event_row(args: tuple, start_term: Any, end_term: Any, values, start: 
 
 
 def bound_args(args: tuple) -> dict:
-    """Argument positions whose value is atomic or ground, to push into SQL."""
+    """Argument positions whose value is atomic or ground, to push into SQL.
+
+    >>> from slr_sql.terms import Atom
+    >>> bound_args((Atom("cup1"), Var("L"), Struct("p", (1, 2)), Struct("p", (Var("X"), 2))))
+    {0: Atom('cup1'), 2: Struct('p', (1, 2))}
+    """
     bound = {}
     for i, a in enumerate(args):
         a = deref(a)

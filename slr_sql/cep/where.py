@@ -442,7 +442,11 @@ def plain_value(value: Any) -> Any:
 
 
 def describe_error(exc: BaseException) -> str:
-    """A one-line reason for a rejected candidate."""
+    """A one-line reason for a rejected candidate.
+
+    >>> describe_error(SLRError("X is not a number")), describe_error(ValueError("bad"))
+    ('X is not a number', 'ValueError: bad')
+    """
     if isinstance(exc, SLRError):
         return str(exc).splitlines()[0]
     return f"{type(exc).__name__}: {exc}"

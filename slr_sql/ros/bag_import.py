@@ -113,7 +113,28 @@ def open_bag(path: str | Path) -> Any:
     """An opened ``rosbags`` AnyReader on a rosbag1 file (``.bag``), a rosbag2 directory
     (sqlite3 or MCAP storage), or a single ``.mcap`` / ``.db3`` file. Bags without stored
     message definitions decode with the standard types (ROS 2 Kilted, or ROS 1 Noetic plus
-    tf2_msgs)."""
+    tf2_msgs).
+
+    >>> import pathlib, struct, tempfile
+    >>> from rosbags.rosbag1 import Writer
+    >>> from slr_sql.ros.bag_import import ros1_typestore
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "rec.bag"; types = ros1_typestore()
+    >>> with Writer(path) as writer:   # three map->base transforms and a status, ROS 1 serialized
+    ...     tf = writer.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=types)
+    ...     status = writer.add_connection("/robot/status", "std_msgs/msg/String", typestore=types)
+    ...     for i in range(3):
+    ...         writer.write(tf, (50 + i) * 10**9, struct.pack("<IIIII3sI4s7d", 1, i, 50 + i, 0,
+    ...                      3, b"map", 4, b"base", 0.5 * i, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))
+    ...     writer.write(status, 51 * 10**9, struct.pack("<I2s", 2, b"ok"))
+
+    >>> reader = open_bag(path); [(c.topic, c.msgtype, c.msgcount) for c in reader.connections]
+    [('/tf', 'tf2_msgs/msg/TFMessage', 3), ('/robot/status', 'std_msgs/msg/String', 1)]
+    >>> reader.close()
+    >>> open_bag(path.with_name("missing.bag"))
+    Traceback (most recent call last):
+        ...
+    slr_sql.ros.bag_import.BagError: cannot read .../missing.bag: no such file or directory
+    """
     try:
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
@@ -134,7 +155,24 @@ def open_bag(path: str | Path) -> Any:
 
 def bag_id(reader: Any) -> str:
     """A short id of a bag computed from its contents (topics, types, message counts, first
-    and last record time): the same recording has the same id wherever it lies."""
+    and last record time): the same recording has the same id wherever it lies.
+
+    >>> import pathlib, struct, tempfile
+    >>> from rosbags.rosbag1 import Writer
+    >>> from slr_sql.ros.bag_import import ros1_typestore
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "rec.bag"; types = ros1_typestore()
+    >>> with Writer(path) as writer:   # three map->base transforms and a status, ROS 1 serialized
+    ...     tf = writer.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=types)
+    ...     status = writer.add_connection("/robot/status", "std_msgs/msg/String", typestore=types)
+    ...     for i in range(3):
+    ...         writer.write(tf, (50 + i) * 10**9, struct.pack("<IIIII3sI4s7d", 1, i, 50 + i, 0,
+    ...                      3, b"map", 4, b"base", 0.5 * i, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))
+    ...     writer.write(status, 51 * 10**9, struct.pack("<I2s", 2, b"ok"))
+
+    >>> reader = open_bag(path); bag_id(reader)
+    'bag_197ecfcf09c51814'
+    >>> reader.close()
+    """
     summary = {
         "topics": sorted((name, info.msgtype or "", info.msgcount)
                          for name, info in reader.topics.items()),

@@ -141,7 +141,27 @@ def _export_info(path: Path) -> BagInfo:
 
 def bag_info(path: str | Path) -> BagInfo:
     """Read the bag at ``path`` (any format ``slr ros import`` reads, an ``slr export`` MCAP
-    file too) and summarize it."""
+    file too) and summarize it.
+
+    >>> import pathlib, struct, tempfile
+    >>> from rosbags.rosbag1 import Writer
+    >>> from slr_sql.ros.bag_import import ros1_typestore
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "rec.bag"; types = ros1_typestore()
+    >>> with Writer(path) as writer:   # three map->base transforms and a status, ROS 1 serialized
+    ...     tf = writer.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=types)
+    ...     status = writer.add_connection("/robot/status", "std_msgs/msg/String", typestore=types)
+    ...     for i in range(3):
+    ...         writer.write(tf, (50 + i) * 10**9, struct.pack("<IIIII3sI4s7d", 1, i, 50 + i, 0,
+    ...                      3, b"map", 4, b"base", 0.5 * i, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))
+    ...     writer.write(status, 51 * 10**9, struct.pack("<I2s", 2, b"ok"))
+
+    >>> info = bag_info(path); info.count, info.start
+    (4, 50.0)
+    >>> [(t.topic, t.count, t.first, t.last) for t in info.topics]
+    [('/robot/status', 1, 51.0, 51.0), ('/tf', 3, 50.0, 52.0)]
+    >>> [(f.parent, f.child, f.count) for f in info.frames]
+    [('map', 'base', 3)]
+    """
     from slr_sql.viz.mcap_export import is_slr_export
 
     from . import fast_tf
@@ -259,7 +279,34 @@ def draft_map(info: BagInfo) -> str:
     """A MAP (YAML) for every topic of ``info`` except /tf and /tf_static (the built-in
     mapping takes them): an event named after the topic whose arguments are the message's
     leaf fields (at most :data:`MAX_DRAFT_ARGS`; a message with more, or with none, is taken
-    whole as ``$msg``), timed by ``header.stamp`` when the message has one."""
+    whole as ``$msg``), timed by ``header.stamp`` when the message has one.
+
+    >>> import pathlib, struct, tempfile
+    >>> from rosbags.rosbag1 import Writer
+    >>> from slr_sql.ros.bag_import import ros1_typestore
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "rec.bag"; types = ros1_typestore()
+    >>> with Writer(path) as writer:   # three map->base transforms and a status, ROS 1 serialized
+    ...     tf = writer.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=types)
+    ...     status = writer.add_connection("/robot/status", "std_msgs/msg/String", typestore=types)
+    ...     for i in range(3):
+    ...         writer.write(tf, (50 + i) * 10**9, struct.pack("<IIIII3sI4s7d", 1, i, 50 + i, 0,
+    ...                      3, b"map", 4, b"base", 0.5 * i, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))
+    ...     writer.write(status, 51 * 10**9, struct.pack("<I2s", 2, b"ok"))
+
+    >>> print(draft_map(bag_info(path)))
+    # Draft MAP for .../rec.bag (bag_197ecfcf09c51814), written by `slr ros info`.
+    ...
+    version: 1
+    topics:
+      "/robot/status":
+        # 1 messages, 51.000 .. 51.000
+        event: robot_status
+        type: std_msgs/msg/String
+        args:
+          - "data"
+        time: record
+    <BLANKLINE>
+    """
     if info.export:
         return (f"# {info.path} is an MCAP file of `slr export`: its channels name their event\n"
                 f"# types, so `slr ros import` reads it without a MAP.\nversion: 1\ntopics: {{}}\n")

@@ -226,7 +226,15 @@ def _fill_from_term(msg: Any, term: Any, path: str) -> None:
 
 
 def build_message(entry: PublishEntry, cls: Any, answer: dict) -> Any:
-    """The rclpy message of ``entry`` for one answer."""
+    """The rclpy message of ``entry`` for one answer.
+
+    >>> from slr_sql import Atom
+    >>> from slr_sql.ros.mapping import mapping_from_dict
+    >>> entry = mapping_from_dict({"topics": {}, "publish": [{"topic": "/alerts",
+    ...     "type": "std_msgs/msg/String", "event": "alert(Text)", "fields": {"data": "Text"}}]}).publish[0]
+    >>> build_message(entry, message_class(entry.msgtype), {"Text": Atom("battery low"), "T": 3.0})
+    std_msgs.msg.String(data='battery low')
+    """
     msg = cls()
     if entry.fields is None:
         values = [v for k, v in answer.items() if k not in ("T", "S", "E")] or list(answer.values())
@@ -730,7 +738,17 @@ def run_bridge(db: str, mapping: Mapping, all_topics: bool = False,
                mapping_given: bool = True) -> int:
     """Open the store at ``db``, run the bridge until SIGINT or SIGTERM, then close the node
     and the store; returns the exit status (0). ``ros_args``: ROS command-line arguments
-    (parameters ``map`` and ``all_topics``, remappings; see :class:`Bridge`)."""
+    (parameters ``map`` and ``all_topics``, remappings; see :class:`Bridge`).
+
+    It runs until stopped (``slr ros bridge DB`` calls it); a store it cannot open is an error
+    before anything starts:
+
+    >>> from slr_sql.ros.mapping import mapping_from_dict
+    >>> run_bridge("/no/such/dir/robot.db", mapping_from_dict({"topics": {}}))
+    Traceback (most recent call last):
+        ...
+    slr_sql.errors.SLRError: /no/such/dir/robot.db: no such directory: /no/such/dir
+    """
     import slr_sql
 
     echo = echo or (lambda text: print(text, flush=True))
@@ -740,11 +758,13 @@ def run_bridge(db: str, mapping: Mapping, all_topics: bool = False,
     def request_stop(signum: int, frame: Any) -> None:
         stop.set()
 
-    previous = {s: signal.signal(s, request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
     kb = slr_sql.open(db, synchronous=synchronous, checkpoint="background")
     bridge = Bridge(kb, mapping, all_topics=all_topics, node_name=node_name,
                     on_ready=lambda topic, msgtype: echo(f"subscribed {topic} ({msgtype})"),
                     ros_args=ros_args, mapping_given=mapping_given)
+    # only now, right before the try whose finally restores them: a store that fails to
+    # open must leave the caller's handlers (Ctrl-C) as they were
+    previous = {s: signal.signal(s, request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
     server = None
     try:
         bridge.start()

@@ -96,7 +96,18 @@ def standard_tf_types(fielddefs: dict, ros2: bool) -> bool:
 
 def compile_for(bound: Any, conn: Any, reader: Any) -> Callable[[Any, float], list] | None:
     """The direct decoder for ``conn`` when ``bound`` is the built-in tf mapping and the bag
-    defines the tf types the standard way; else None (use the general path)."""
+    defines the tf types the standard way; else None (use the general path).
+
+    >>> from types import SimpleNamespace
+    >>> from slr_sql.ros.bag_import import ros1_typestore
+    >>> from slr_sql.ros.mapping import TF_TYPE, mapping_from_dict, tf_entry
+    >>> bag = SimpleNamespace(typestore=ros1_typestore(), is2=False)  # a ROS 1 bag's reader
+    >>> builtin = tf_entry("/tf_static").bind(TF_TYPE, bag.typestore.fielddefs)
+    >>> compile_for(builtin, SimpleNamespace(msgtype=TF_TYPE), bag).func is decode_ros1
+    True
+    >>> own = mapping_from_dict({"topics": {"/tf": {"event": "mytf", "args": ["$msg"]}}})
+    >>> compile_for(own.entries_for("/tf")[0].bind(TF_TYPE, None), SimpleNamespace(msgtype=TF_TYPE), bag)
+    """
     if not bound.entry.where.startswith("built-in") or conn.msgtype != _TF:
         return None
     fielddefs = reader.typestore.fielddefs
@@ -110,7 +121,14 @@ def compile_for(bound: Any, conn: Any, reader: Any) -> Callable[[Any, float], li
 def decode_cdr(raw: Any, record: float, event: str = "tf") -> list:
     """The tf events of one CDR-serialized TFMessage (``record`` is unused: tf events take
     the header stamp of each transform); ``event`` names them (``tf_static`` for
-    /tf_static)."""
+    /tf_static).
+
+    >>> import struct
+    >>> raw = struct.pack("<4sIiII4sI5s3x7d", bytes.fromhex("00010000"), 1, 12, 500000000,
+    ...                   4, b"map", 5, b"base", 1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+    >>> decode_cdr(raw, 0.0, event="tf_static")
+    [('tf_static', ('map', 'base', Struct('pose', ([1.0, 2.0, 0.0], [0.0, 0.0, 0.0, 1.0]))), 12.5, 12.5)]
+    """
     little = raw[1] == 1
     u32, time_len, length, pose = _U32[little], _TIME_LEN[little], _LEN[little], _POSE[little]
     (count,) = u32.unpack_from(raw, 4)
@@ -137,7 +155,14 @@ def decode_cdr(raw: Any, record: float, event: str = "tf") -> list:
 
 
 def decode_ros1(raw: Any, record: float, event: str = "tf") -> list:
-    """The tf events of one ROS 1-serialized TFMessage."""
+    """The tf events of one ROS 1-serialized TFMessage.
+
+    >>> import struct
+    >>> raw = struct.pack("<IIIII3sI4s7d", 1, 0, 12, 500000000, 3, b"map", 4, b"base",
+    ...                   1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+    >>> decode_ros1(raw, 0.0)
+    [('tf', ('map', 'base', Struct('pose', ([1.0, 2.0, 0.0], [0.0, 0.0, 0.0, 1.0]))), 12.5, 12.5)]
+    """
     (count,) = _ROS1_LEN.unpack_from(raw, 0)
     pos = 4
     out = []

@@ -76,7 +76,13 @@ def _capsule_api() -> Any:
 def stand_in_class(msgtype: str, typestore: Any) -> Any | None:
     """A message class usable with ``create_subscription(..., raw=True)`` and for publishing
     serialized bytes on a topic of ``msgtype`` (``pkg/msg/Name``), whose definition
-    ``typestore`` (a rosbags type store) knows; None when this cannot be done here."""
+    ``typestore`` (a rosbags type store) knows; None when this cannot be done here.
+
+    >>> stand_in_class("not a type", None) is None   # no pkg/msg/Name: nothing to stand in
+    True
+    >>> stand_in_class("robot_msgs/msg/Battery", None) is None   # a type no type store defines
+    True
+    """
     if msgtype in _MADE:
         return _MADE[msgtype]
     pkg, sep, name = msgtype.partition("/msg/")

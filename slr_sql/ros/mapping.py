@@ -419,7 +419,12 @@ def tf_entry(topic: str) -> TopicEntry:
 
 
 def whole_message_entry(topic: str, why: str) -> TopicEntry:
-    """``topic_event_name(topic)(Message)^T`` with the message as a term (``--all``)."""
+    """``topic_event_name(topic)(Message)^T`` with the message as a term (``--all``).
+
+    >>> entry = whole_message_entry("/robot/status", "--all")
+    >>> entry.event, [a.value.text for a in entry.args], entry.whole_message, entry.where
+    ('robot_status', ['$msg'], True, '--all /robot/status')
+    """
     entry = topic_entry(topic, {"event": topic_event_name(topic), "args": ["$msg"]},
                          f"{why} {topic}")
     return TopicEntry(**{**entry.__dict__, "whole_message": True})

@@ -84,7 +84,14 @@ def _with_token(exc: ServiceError, token: Any) -> ServiceError:
 
 def check_keys(body: dict, allowed: tuple, what: str) -> None:
     """Refuse keys a request of this kind does not have (a misspelt ``"gaol"`` is an error,
-    not a silently ignored field)."""
+    not a silently ignored field).
+
+    >>> check_keys({"goal": "p(X)", "at": 5}, ("goal", "at", "token"), "query")
+    >>> check_keys({"gaol": "p(X)"}, ("goal", "at", "token"), "query")
+    Traceback (most recent call last):
+        ...
+    slr_sql.service.errors.ServiceError: query: unknown key 'gaol' (expected one of goal, at, token)
+    """
     for key in body:
         if key not in allowed:
             raise ServiceError(f"{what}: unknown key {key!r} (expected one of "
@@ -92,7 +99,15 @@ def check_keys(body: dict, allowed: tuple, what: str) -> None:
 
 
 def number_field(body: dict, name: str, *, minimum: float | None = None) -> float | None:
-    """A JSON number, or a tagged float (``{"$float": "inf"}``), as float; None if absent."""
+    """A JSON number, or a tagged float (``{"$float": "inf"}``), as float; None if absent.
+
+    >>> number_field({"at": 5}, "at"), number_field({"at": {"$float": "inf"}}, "at"), number_field({}, "at")
+    (5.0, inf, None)
+    >>> number_field({"timeout": -1}, "timeout", minimum=0)
+    Traceback (most recent call last):
+        ...
+    slr_sql.service.errors.ServiceError: "timeout" must be a number >= 0
+    """
     value = body.get(name)
     if value is None:
         return None
@@ -111,7 +126,15 @@ def number_field(body: dict, name: str, *, minimum: float | None = None) -> floa
 
 
 def string_field(body: dict, name: str, *, required: bool = False) -> str | None:
-    """A non-empty JSON string (None if absent and not required)."""
+    """A non-empty JSON string (None if absent and not required).
+
+    >>> string_field({"goal": "p(X)"}, "goal"), string_field({}, "id")
+    ('p(X)', None)
+    >>> string_field({}, "goal", required=True)
+    Traceback (most recent call last):
+        ...
+    slr_sql.service.errors.ServiceError: "goal" is required
+    """
     value = body.get(name)
     if value is None:
         if required:
@@ -147,22 +170,39 @@ def parse_query(body: dict) -> QueryRequest:
 
 
 def answers_reply(token: Any, answers: list[dict]) -> dict:
-    """``{"token": ..., "answers": [...]}``: the answers in the service's term encoding."""
+    """``{"token": ..., "answers": [...]}``: the answers in the service's term encoding.
+
+    >>> from slr_sql import Atom, String
+    >>> dumps_reply(answers_reply(7, [{"X": Atom("cup1"), "S": String("hi"), "T": 1.0}]))
+    '{"token":7,"answers":[{"X":"cup1","S":{"$string":"hi"},"T":1.0}]}'
+    """
     return {"token": token, "answers": encode_answers(answers)}
 
 
 def error_reply(token: Any, exc: BaseException, **extra: Any) -> dict:
     """``{"token": ..., "error": {"kind", "status", "message", ...}}``: the service's error
-    object (a syntax error has ``line`` and ``column``). ``extra`` keys come before it."""
+    object (a syntax error has ``line`` and ``column``). ``extra`` keys come before it.
+
+    >>> error_reply("t1", SLRError("no such program: tea"), id="q1")
+    {'token': 't1', 'id': 'q1', 'error': {'kind': 'SLRError', 'status': 400, 'message': 'no such program: tea'}}
+    """
     return {"token": token, **extra, **error_body(exc)}
 
 
 def dumps_reply(reply: dict) -> str:
-    """The reply as the text of a ``std_msgs/String``."""
+    """The reply as the text of a ``std_msgs/String``.
+
+    >>> dumps_reply({"token": 7, "answers": [{"X": 1.5}]})
+    '{"token":7,"answers":[{"X":1.5}]}'
+    """
     return dumps(reply).decode("utf-8")
 
 
 def is_client_error(exc: BaseException) -> bool:
     """True for failures that are the request's fault or the knowledge base's refusal (an
-    SLRError), False for a bug."""
+    SLRError), False for a bug.
+
+    >>> is_client_error(SLRError("unknown key 'gaol'")), is_client_error(KeyError("goal"))
+    (True, False)
+    """
     return isinstance(exc, SLRError)

@@ -175,6 +175,14 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
     before the server stops anyway. ``busy_timeout``: seconds a request waits for another
     process's lock before it is answered 503 (retryable; default
     :data:`~slr_sql.store.DEFAULT_BUSY_TIMEOUT`).
+
+    A server runs until it is stopped (``slr serve DB`` calls this); what it refuses, it
+    refuses before it opens anything:
+
+    >>> run_server("robot.db", host="0.0.0.0")
+    Traceback (most recent call last):
+        ...
+    slr_sql.errors.SLRError: refusing to serve on 0.0.0.0 without a token: anyone who can reach it could read and change the store. Give --token TOKEN (or set SLR_TOKEN), or bind to 127.0.0.1
     """
     token = token or None
     if token is None and not is_loopback(host):

@@ -196,7 +196,11 @@ def encode_answers(answers: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def encode_args(args: dict[str, Any] | None) -> dict[str, Any] | None:
-    """``args`` of a query (``str`` is an atom, as for ``kb.query``) -> JSON-ready."""
+    """``args`` of a query (``str`` is an atom, as for ``kb.query``) -> JSON-ready.
+
+    >>> encode_args({"O": "cup1", "L": [0.4, 0.1], "S": String("hi")})
+    {'O': 'cup1', 'L': [0.4, 0.1], 'S': {'$string': 'hi'}}
+    """
     if args is None:
         return None
     if not isinstance(args, dict):
@@ -336,7 +340,11 @@ def decode_answers(objs: Any) -> list[dict[str, Any]]:
 
 
 def decode_args(obj: Any) -> dict[str, Any] | None:
-    """The ``args`` object of a request -> ``{name: term}`` (strings as ``String``)."""
+    """The ``args`` object of a request -> ``{name: term}`` (strings as ``String``).
+
+    >>> decode_args({"O": "cup1", "S": {"$string": "hi"}, "F": {"f": [1, {"$var": "X"}]}})
+    {'O': Atom('cup1'), 'S': String('hi'), 'F': Struct('f', (1, Var('X')))}
+    """
     if obj is None:
         return None
     if type(obj) is not dict:
@@ -376,7 +384,13 @@ def encode_plain(value: Any) -> Any:
 
 
 def decode_plain(obj: Any) -> Any:
-    """The inverse of :func:`encode_plain` (tuples come back as lists)."""
+    r"""The inverse of :func:`encode_plain` (tuples come back as lists).
+
+    >>> obj = encode_plain({"a": (1, float("inf")), "b": b"\x00\x01"}); obj
+    {'a': [1, {'$float': 'inf'}], 'b': {'$bytes': '0001'}}
+    >>> decode_plain(obj)
+    {'a': [1, inf], 'b': b'\x00\x01'}
+    """
     if type(obj) is list:
         return [decode_plain(v) for v in obj]
     if type(obj) is dict:

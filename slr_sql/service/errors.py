@@ -107,7 +107,12 @@ class ServiceOutcomeUnknown(ServiceError):
 
 
 def error_status(exc: BaseException) -> int:
-    """The HTTP status an exception is answered with."""
+    """The HTTP status an exception is answered with.
+
+    >>> from slr_sql import SLRTimeout, SLRBusy
+    >>> error_status(SLRError("bad goal")), error_status(SLRTimeout("slow")), error_status(SLRBusy("locked"))
+    (400, 408, 503)
+    """
     if isinstance(exc, ServiceError):
         return exc.status
     if isinstance(exc, SLRTimeout):
@@ -183,7 +188,13 @@ def parse_retry_after(value: Any, now: float | None = None) -> float | None:
 
 
 def error_body(exc: BaseException) -> dict[str, Any]:
-    """The JSON body of an error response for ``exc``."""
+    """The JSON body of an error response for ``exc``.
+
+    >>> error_body(SLRError("no such program: tea"))
+    {'error': {'kind': 'SLRError', 'status': 400, 'message': 'no such program: tea'}}
+    >>> error_body(KeyError("secret"))   # an unexpected error: no detail to the client
+    {'error': {'kind': 'InternalError', 'status': 500, 'message': 'internal error (KeyError); the server log has the details'}}
+    """
     if isinstance(exc, ServiceError):
         kind = exc.kind
     elif isinstance(exc, SLRError):

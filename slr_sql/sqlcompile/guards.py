@@ -36,7 +36,15 @@ def guards(raising: list, branches: list, dialect: Any = SQLITE) -> list[str]:
     ``branches``: (froms, conds) of every branch, before the forced checks; the goals of a
     findall or ``\\+`` subquery are checked over the rows of the goals before it joined with
     the subquery's own (for ``\\+``, which stops at its first solution, a superset: an
-    error there only costs the interpreter's run)."""
+    error there only costs the interpreter's run).
+
+    >>> froms = [("ev_p", "t0", None)]
+    >>> raising = [("slr_div(t0.arg1, 0)", froms, ["t0.robot = 1"], False, False)]
+    >>> guards(raising, [(froms, ["t0.robot = 1", "t0.arg1 > 100"], [0])])
+    ['SELECT count(slr_div(t0.arg1, 0)) FROM ev_p AS t0 WHERE t0.robot = 1']
+    >>> guards(raising, [(froms, ["t0.robot = 1"], [0])])  # the branch's last goal: none
+    []
+    """
     out = []
     for i, (expr, froms, conds, is_cond, first) in enumerate(raising):
         if dialect.raising_calls(expr) == len(NUM_ARG.findall(expr)):
@@ -92,5 +100,9 @@ def _filtered_first(froms: list, nf: int, later: list, key: str) -> bool:
 
 
 def unused_checks(checks: list, used: list) -> list[str]:
-    """Conditions forcing the evaluation of the ``checks`` no used SQL text contains."""
+    """Conditions forcing the evaluation of the ``checks`` no used SQL text contains.
+
+    >>> unused_checks(["slr_div(t0.arg1, 0)", "t0.arg2"], ["t0.arg2 > 3"])
+    ['(slr_div(t0.arg1, 0)) IS NOT NULL']
+    """
     return [f"({c}) IS NOT NULL" for c in checks if not any(c in u for u in used)]

@@ -47,6 +47,11 @@ NUMERIC = frozenset(("float", "int", "num"))
 
 
 def quote_ident(name: str) -> str:
+    """An SQL identifier quoted (double quotes, an inner one doubled), safe for any name.
+
+    >>> quote_ident("location/2"), quote_ident('a"b')
+    ('"location/2"', '"a""b"')
+    """
     return '"' + name.replace('"', '""') + '"'
 
 
@@ -195,7 +200,12 @@ class State:
 
 
 def resolve(t: Any) -> Any:
-    """The term with bound variables replaced by their values (Cols and free Vars kept)."""
+    """The term with bound variables replaced by their values (Cols and free Vars kept).
+
+    >>> X, Y = Var("X"), Var("Y"); X.ref = 1
+    >>> resolve(Struct("f", (X, Y, Col("t0.arg1", "any"))))
+    Struct('f', (1, Var('Y'), Col('t0.arg1', 'any')))
+    """
     t = deref(t)
     if type(t) is Struct:
         if t.name == "." and len(t.args) == 2:
@@ -242,6 +252,13 @@ def _contains(t: Any, kind: type) -> bool:
 
 
 def has_var(t: Any) -> bool:
+    """True when the term (after dereferencing) still contains an unbound variable.
+
+    >>> X = Var("X"); has_var(Struct("f", (X,))), has_var(Struct("f", (Col("t0.arg1", "any"),)))
+    (True, False)
+    >>> X.ref = 1; has_var(Struct("f", (X,)))
+    False
+    """
     return _contains(t, Var)
 
 
@@ -255,10 +272,21 @@ def has_float(t: Any) -> bool:
 
 
 def has_col(t: Any) -> bool:
+    """True when the term contains a :class:`Col`, a value known only when the statement runs.
+
+    >>> has_col(Struct("f", (Col("t0.arg1", "any"),))), has_col(Struct("f", (1,)))
+    (True, False)
+    """
     return _contains(t, Col)
 
 
 def term_free_vars(t: Any) -> list:
+    """The unbound variables of a term, each once, in left-to-right order.
+
+    >>> X, Y = Var("X"), Var("Y")
+    >>> term_free_vars(Struct("f", (Y, Struct("g", (X, Y)), 1)))
+    [Var('Y'), Var('X')]
+    """
     out, seen, stack = [], set(), [t]
     while stack:
         x = deref(stack.pop())

@@ -255,7 +255,18 @@ class SqlGuard:
 
 def harden_connection(conn: sqlite3.Connection) -> SqlGuard:
     """Install the store's authorizer on ``conn`` and turn the FTS3 tokenizer switch off;
-    returns the guard (whose ``denied`` says why a statement was refused)."""
+    returns the guard (whose ``denied`` says why a statement was refused).
+
+    >>> conn = sqlite3.connect(":memory:"); guard = harden_connection(conn)
+    >>> conn.execute("SELECT load_extension('evil.so')")
+    Traceback (most recent call last):
+        ...
+    sqlite3.OperationalError: not authorized to use function: load_extension
+    >>> guard.denied
+    'load_extension() is not allowed (it loads native code into the process)'
+    >>> conn.execute("SELECT 1 + 1").fetchall()
+    [(2,)]
+    """
     guard = SqlGuard()
     conn.set_authorizer(guard.always)
     fts3_tokenizer_switch_off(conn)
@@ -273,6 +284,14 @@ def fts3_tokenizer_switch_off(conn: sqlite3.Connection) -> bool:
 
     (SQLite still accepts an address passed as a bound parameter with the switch off, so
     the authorizer is the defence; the switch is the second line.)
+
+    >>> conn = sqlite3.connect(":memory:")
+    >>> fts3_tokenizer_switch_off(conn)
+    True
+    >>> conn.execute("SELECT fts3_tokenizer('simple', zeroblob(8))")
+    Traceback (most recent call last):
+        ...
+    sqlite3.OperationalError: fts3tokenize disabled
     """
     setconfig = getattr(conn, "setconfig", None)
     if setconfig is not None:  # Python >= 3.12

@@ -28,7 +28,11 @@ from .sqltext import RESERVED_PREFIXES, quote_identifier, sql_literal
 
 
 def sql_text_literal(text: str) -> str:
-    """A text constant for a statement that cannot take parameters (a function body)."""
+    """A text constant for a statement that cannot take parameters (a function body).
+
+    >>> sql_text_literal("it's"), sql_text_literal("cup1")
+    ("'it''s'", "'cup1'")
+    """
     return sql_literal(text)
 
 __all__ = ["Catalog", "ProgramText", "PROGRAM_VERSION", "PROGRESS_VERSION",

@@ -1340,7 +1340,15 @@ def drop_commit_callbacks(callbacks: CommitCallbacks, depth: int) -> CommitCallb
 
 def run_after_rollback(callbacks: CommitCallbacks, error: BaseException) -> None:
     """Call the ``always`` callbacks of a transaction that rolled back because of ``error``
-    (which goes on being raised: theirs are noted on it)."""
+    (which goes on being raised: theirs are noted on it).
+
+    >>> def fails(): raise ValueError("cache gone")
+    >>> error = KeyError("the rollback's cause")
+    >>> run_after_rollback([(1, lambda: print("undone"), True), (1, fails, True)], error)
+    undone
+    >>> error.__notes__
+    ['and after the rollback: ValueError: cache gone']
+    """
     for _depth, callback, _always in callbacks:
         try:
             callback()
@@ -1376,7 +1384,16 @@ def run_commit_callbacks(callbacks: CommitCallbacks) -> None:
 
 def harden(conn: sqlite3.Connection) -> SqlGuard:
     """:func:`~slr_sql.store.authorizer.harden_connection` and the wrapped built-ins of
-    :mod:`~slr_sql.store.bounded_builtins`: what every connection of the store gets."""
+    :mod:`~slr_sql.store.bounded_builtins`: what every connection of the store gets.
+
+    >>> conn = sqlite3.connect(":memory:"); guard = harden(conn)
+    >>> conn.execute("SELECT printf('%.*c', 2000000000, 'x')").fetchall()  # at once, not in 9 s
+    [(None,)]
+    >>> conn.execute("SELECT load_extension('evil.so')")
+    Traceback (most recent call last):
+        ...
+    sqlite3.OperationalError: not authorized to use function: load_extension
+    """
     guard = harden_connection(conn)
     register_functions(conn, bounded_builtins(conn, guard))
     return guard
@@ -1384,7 +1401,14 @@ def harden(conn: sqlite3.Connection) -> SqlGuard:
 
 def register_functions(conn: sqlite3.Connection, functions: SqlFunctions) -> None:
     """Register every function and aggregate of ``functions`` on one SQLite connection:
-    the only place slr_sql registers Python functions (tests/test_sql_functions.py)."""
+    the only place slr_sql registers Python functions (tests/test_sql_functions.py).
+
+    >>> from slr_sql.store.functions import Native, SqlFunction
+    >>> twice = SqlFunction("twice", 1, lambda x: 2 * x, on_postgres=Native.INTERPRETER_ONLY)
+    >>> conn = sqlite3.connect(":memory:"); register_functions(conn, SqlFunctions((twice,), ()))
+    >>> conn.execute("SELECT twice(21)").fetchall()
+    [(42,)]
+    """
     for f in functions.functions:
         conn.create_function(f.name, f.arity, f.fn, deterministic=f.deterministic)
     for a in functions.aggregates:

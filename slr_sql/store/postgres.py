@@ -1093,7 +1093,7 @@ class PgDatabase:
             try:
                 raw.execute(f"SET lock_timeout = {_lock_timeout_ms(busy_timeout)}")
                 raw.execute("SET TIME ZONE 'UTC'")
-                migrate_postgres(self, schema, adopt)
+                _migrate_postgres(self, schema, adopt)
                 raw.execute(_search_path(schema))
 
                 def reopen() -> Any:
@@ -1737,7 +1737,7 @@ class PgDatabase:
         return deadline
 
 
-def migrate_postgres(db: Any, schema: str, adopt: bool = False) -> None:
+def _migrate_postgres(db: Any, schema: str, adopt: bool = False) -> None:
     """Create or update the store in PostgreSQL schema ``schema`` through ``db.conn``
     (a :class:`~slr_sql.store.postgres.PgConnection`): the ``pg_NNNN`` scripts not applied
     yet, in one transaction, under an advisory lock (two processes opening a new store at

@@ -73,7 +73,12 @@ def _primary_code(exc: BaseException) -> int | None:
 def disk_is_full(path: str | None) -> bool:
     """Is the file system holding ``path`` out of space (less than 64 KiB left for this
     user)? Asked after an I/O error, whose code alone does not say (a failed ``-shm`` or
-    ``-wal`` extension is ``SQLITE_IOERR``)."""
+    ``-wal`` extension is ``SQLITE_IOERR``).
+
+    >>> import tempfile
+    >>> disk_is_full(tempfile.gettempdir() + "/robot.db"), disk_is_full(None)
+    (False, False)
+    """
     if path is None:
         return False
     import os

@@ -125,7 +125,16 @@ class _End:
 
 
 def resolve_threadsafe(loop: Any, futures: list) -> None:
-    """Resolve asyncio ``futures`` of ``loop`` from another thread (nothing if it closed)."""
+    """Resolve asyncio ``futures`` of ``loop`` from another thread (nothing if it closed).
+
+    >>> import asyncio, threading
+    >>> loop = asyncio.new_event_loop(); waiting = loop.create_future()
+    >>> worker = threading.Thread(target=resolve_threadsafe, args=(loop, [waiting]))
+    >>> worker.start(); worker.join()
+    >>> loop.run_until_complete(waiting), waiting.done()
+    (None, True)
+    >>> loop.close(); resolve_threadsafe(loop, [loop.create_future()])  # closed: nothing happens
+    """
     try:
         loop.call_soon_threadsafe(_resolve, futures)
     except RuntimeError:  # the loop is closed: nobody waits any more

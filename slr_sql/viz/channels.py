@@ -152,7 +152,12 @@ class EventChannel:
 
 
 def event_channel(name: str, arity: int, sample: tuple | None = None) -> EventChannel:
-    """The channel of name/arity; ``sample`` (a stored row) gives the arguments' kinds."""
+    """The channel of name/arity; ``sample`` (a stored row) gives the arguments' kinds.
+
+    >>> ch = event_channel("seg", 2, ("cup1", "[0.4,0.1]"))
+    >>> ch.topic, ch.schema["title"], ch.schema["properties"]["arg2"], ch.metadata
+    ('/seg/2', 'slr.seg/2', {'type': 'array'}, {'slr_event': 'seg', 'slr_arity': '2'})
+    """
     props: dict = {}
     for i in range(arity):
         props[f"arg{i + 1}"] = _kind_schema(sample[i]) if sample is not None else {}
@@ -166,7 +171,13 @@ def event_channel(name: str, arity: int, sample: tuple | None = None) -> EventCh
 
 
 def event_from_message(name: str, arity: int, data: bytes | str) -> tuple:
-    """The event ``(name, args, start, end)`` of a message :meth:`EventChannel.message` wrote."""
+    """The event ``(name, args, start, end)`` of a message :meth:`EventChannel.message` wrote.
+
+    >>> from slr_sql.terms import format_term
+    >>> name, args, start, end = event_from_message("seg", 2, b'{"arg1":"cup1","arg2":[0.4,0.1],"start":1.5,"end":2.0,"arrival":2.5}')
+    >>> name, [format_term(a) for a in args], start, end
+    ('seg', ['cup1', '[0.4,0.1]'], 1.5, 2.0)
+    """
     obj = json.loads(data)
     args = tuple(decode_json(obj[f"arg{i + 1}"]) for i in range(arity))
     return (name, args, float(obj["start"]), float(obj["end"]))
@@ -248,6 +259,10 @@ def _one_transform(row: tuple) -> bytes | None:
 
 
 def mark_message(type_text: str, until: float, source: str) -> bytes:
-    """A completeness mark message."""
+    """A completeness mark message.
+
+    >>> mark_message("seg/2", 2.0, "kb.mark_complete")
+    b'{"type":"seg/2","until":2.0,"source":"kb.mark_complete"}'
+    """
     return json.dumps({"type": type_text, "until": until, "source": source},
                       separators=(",", ":")).encode()

@@ -122,7 +122,16 @@ def export_mcap(store: Any, path: str | Path, start: float | None = None,
                 end: float | None = None, types: Iterable[str] = (),
                 progress: Callable[[int], None] | None = None) -> ExportReport:
     """Write the events of ``store`` (an :class:`slr_sql.store.EventStore`) with
-    ``start <= end time <= end`` of the chosen ``types`` (all by default) to ``path``."""
+    ``start <= end time <= end`` of the chosen ``types`` (all by default) to ``path``.
+
+    >>> import pathlib, tempfile, slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.add_many(["seg(cup1, [0.4, 0.1])^1.5", "seg(cup2, [0.9, 0.2])^2", "bump(r1)^3"])
+    []
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "run.mcap"
+    >>> report = export_mcap(kb.store, path, start=1.8); report.messages, report.per_type
+    (2, {('bump', 1): 1, ('seg', 2): 1})
+    """
     writer_module = _writer_module()
     if start is not None and end is not None and start > end:
         raise SLRError(f"empty time window: --from {start:g} is after --to {end:g}")
@@ -257,7 +266,18 @@ def _check_overwrite(store: Any, path: str | Path) -> None:
 
 
 def is_slr_export(path: str | Path) -> bool:
-    """True when ``path`` is an MCAP file with at least one slr event channel."""
+    """True when ``path`` is an MCAP file with at least one slr event channel.
+
+    >>> import pathlib, tempfile, slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.add_many(["seg(cup1, [0.4, 0.1])^1.5", "seg(cup2, [0.9, 0.2])^2", "bump(r1)^3"])
+    []
+    >>> kb.mark_complete("seg/2", 2)
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "run.mcap"; _ = export_mcap(kb.store, path)
+
+    >>> is_slr_export(path), is_slr_export(path.with_name("other.mcap"))
+    (True, False)
+    """
     path = Path(path)
     if not path.is_file() or path.suffix != ".mcap":
         return False
@@ -298,7 +318,19 @@ def _first_channel_is_an_event(stream: Any) -> bool:
 
 def export_summary(path: str | Path) -> Any:
     """The summary of an MCAP file of ``slr export`` (:func:`is_slr_export`); raises
-    :class:`ExportCutShort` when the file has none."""
+    :class:`ExportCutShort` when the file has none.
+
+    >>> import pathlib, tempfile, slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.add_many(["seg(cup1, [0.4, 0.1])^1.5", "seg(cup2, [0.9, 0.2])^2", "bump(r1)^3"])
+    []
+    >>> kb.mark_complete("seg/2", 2)
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "run.mcap"; _ = export_mcap(kb.store, path)
+
+    >>> summary = export_summary(path)
+    >>> sorted(c.topic for c in summary.channels.values()), summary.statistics.message_count
+    (['/bump/1', '/seg/2', '/slr/completeness'], 4)
+    """
     from mcap.reader import make_reader
 
     with open(path, "rb") as stream:
@@ -329,7 +361,22 @@ def _mark(path: str | Path, topic: str, n: int, data: bytes) -> tuple[str, float
 
 def export_messages(path: str | Path) -> Iterator[tuple[Any, Any, Any]]:
     """``(schema, channel, message)`` of each message of an MCAP file, in file order;
-    :class:`ExportDamaged` when its records do not read back."""
+    :class:`ExportDamaged` when its records do not read back.
+
+    >>> import pathlib, tempfile, slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.add_many(["seg(cup1, [0.4, 0.1])^1.5", "seg(cup2, [0.9, 0.2])^2", "bump(r1)^3"])
+    []
+    >>> kb.mark_complete("seg/2", 2)
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "run.mcap"; _ = export_mcap(kb.store, path)
+
+    >>> for _schema, channel, message in export_messages(path):
+    ...     print(channel.topic, message.log_time, message.data.decode())
+    /seg/2 1500000000 {"arg1":"cup1","arg2":[0.4,0.1],"start":1.5,"end":1.5,"arrival":0.0}
+    /seg/2 2000000000 {"arg1":"cup2","arg2":[0.9,0.2],"start":2.0,"end":2.0,"arrival":0.0}
+    /bump/1 3000000000 {"arg1":"r1","start":3.0,"end":3.0,"arrival":0.0}
+    /slr/completeness 2000000000 {"type":"seg/2","until":2.0,"source":"kb.mark_complete('seg/2', 2)"}
+    """
     from mcap.reader import make_reader
 
     read = 0
@@ -353,7 +400,19 @@ def export_batches(path: str | Path, done: dict | None = None, batch_size: int =
     ``(events, counts, marks)`` -- ``counts`` maps each topic to the number of its messages
     read so far (for checkpoints), ``marks`` the completeness marks ``(type, until)`` (with
     the last batch). ``done`` skips the first so many messages of a topic (an import that
-    already took them)."""
+    already took them).
+
+    >>> import pathlib, tempfile, slr_sql
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+    >>> kb.add_many(["seg(cup1, [0.4, 0.1])^1.5", "seg(cup2, [0.9, 0.2])^2", "bump(r1)^3"])
+    []
+    >>> kb.mark_complete("seg/2", 2)
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "run.mcap"; _ = export_mcap(kb.store, path)
+
+    >>> for events, counts, marks in export_batches(path, done={"/seg/2": 1}):  # seg: 1 taken
+    ...     print([(name, len(args), end) for name, args, start, end in events], counts, marks)
+    [('seg', 2, 2.0), ('bump', 1, 3.0)] {'/seg/2': 2, '/bump/1': 1} [('seg/2', 2.0)]
+    """
     done = done or {}
     counts: dict = {}
     batch: list = []
