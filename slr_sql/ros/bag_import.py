@@ -44,7 +44,8 @@ from .mapping import IMPORT_CHECKPOINT, BoundEntry, Mapping, MessageError, norma
 from . import fast_tf
 
 __all__ = ["import_bag", "ImportReport", "Rejection", "BagError", "open_bag", "bag_id",
-           "ros1_typestore", "TF_MESSAGE_MSGDEF", "DEFAULT_BATCH"]
+           "ros1_typestore", "TF_MESSAGE_MSGDEF", "DEFAULT_BATCH", "read_messages",
+           "reader_reason"]
 
 DEFAULT_BATCH = 10_000  # events per add_many (one transaction, one fsync)
 
@@ -127,9 +128,59 @@ def open_bag(path: str | Path) -> Any:
         reader = AnyReader([path], default_typestore=default)
         reader.open()
     except Exception as exc:  # rosbags raises its own errors, OSError, and a few bare ones
-        reason = " ".join(str(a) for a in exc.args) or type(exc).__name__
-        raise BagError(f"cannot read {path}: {reason}") from None
+        raise BagError(f"cannot read {path}: {reader_reason(exc)}") from None
     return reader
+
+
+_REASON_MAX = 200
+
+
+def reader_reason(exc: BaseException) -> str:
+    """What a bag reader's error says of the bag, in words: its own message, or for the bare
+    errors a damaged file makes it raise (a failed assert, an unknown record kind, a size
+    beyond memory, bytes that are no UTF-8) what they mean; at most 200 characters.
+
+    >>> reader_reason(AssertionError())
+    "a record that fails the reader's own check"
+    >>> reader_reason(UnicodeDecodeError("utf-8", b"ab?", 2, 3, "invalid start byte"))
+    'text that is not UTF-8 (byte 2 of a 3-byte field)'
+    """
+    if isinstance(exc, UnicodeDecodeError):
+        return f"text that is not UTF-8 (byte {exc.start} of a {len(exc.object)}-byte field)"
+    if isinstance(exc, (MemoryError, OverflowError)):
+        return "a record whose size is beyond memory"
+    if isinstance(exc, AssertionError):
+        return "a record that fails the reader's own check"
+    if isinstance(exc, KeyError):
+        return f"a record of a kind the reader does not know ({_short(repr(exc.args[0]))})" \
+            if exc.args else "a record of a kind the reader does not know"
+    text = " ".join(str(a) for a in exc.args) or type(exc).__name__
+    return _short(text)
+
+
+def _short(text: str) -> str:
+    return text if len(text) <= _REASON_MAX else text[:_REASON_MAX] + "..."
+
+
+def read_messages(messages: Any, path: str | Path) -> Any:
+    """The items of a bag reader's ``messages`` iterator; :class:`BagError` (saying how many
+    were read) when the storage does not read back: a damaged file makes the readers raise
+    their own errors and bare ones (AssertionError, KeyError, sqlite3's DatabaseError, ...).
+
+    >>> list(read_messages(iter([1, 2]), "x.bag"))
+    [1, 2]
+    """
+    read = 0
+    while True:
+        try:
+            item = next(messages)
+        except StopIteration:
+            return
+        except Exception as exc:  # noqa: BLE001 - the reader's errors (damaged storage)
+            raise BagError(f"cannot read {path}: the bag is damaged after {read} messages "
+                           f"({reader_reason(exc)})") from None
+        read += 1
+        yield item
 
 
 def bag_id(reader: Any) -> str:
@@ -206,7 +257,7 @@ def import_bag(kb: KnowledgeBaseAPI, path: str | Path, mapping: Mapping | None =
     gc.disable()
     try:
         return _import(kb, reader, mapping, all_topics, progress, max(1, int(batch_size)),
-                       clock)
+                       clock, path)
     finally:
         if collecting:
             gc.enable()
@@ -323,7 +374,7 @@ _END = object()
 
 def _import(kb: KnowledgeBaseAPI, reader: Any, mapping: Mapping, all_topics: bool,
             progress: Callable[[int, int], None] | None, batch_size: int,
-            clock: ManualClock | None) -> ImportReport:
+            clock: ManualClock | None, path: str | Path) -> ImportReport:
     """Reading and decoding run in a second thread while this one stores the previous batch:
     SQLite releases the GIL while it writes, so on a free core both proceed at once. Batches
     are stored in order, each with its checkpoints, by the calling thread only."""
@@ -348,7 +399,7 @@ def _import(kb: KnowledgeBaseAPI, reader: Any, mapping: Mapping, all_topics: boo
 
     def produce() -> None:
         try:
-            for batch in _batches(reader, selected, plans, done, report, batch_size):
+            for batch in _batches(reader, selected, plans, done, report, batch_size, path):
                 if not hand(batch):
                     return
             hand(_END)
@@ -394,7 +445,7 @@ def _store(kb: KnowledgeBaseAPI, report: ImportReport, batch: _Batch) -> None:
 
 
 def _batches(reader: Any, selected: list, plans: dict, done: dict, report: ImportReport,
-             batch_size: int) -> Any:
+             batch_size: int, path: str | Path) -> Any:
     """Read, decode and map the selected messages; yields :class:`_Batch` es of about
     ``batch_size`` events (the last one possibly with none, to carry checkpoints)."""
     counts: dict[str, int] = {}
@@ -416,7 +467,7 @@ def _batches(reader: Any, selected: list, plans: dict, done: dict, report: Impor
     readers: Any = getattr(reader, "readers", ())
     source = (readers[0].messages(connections=selected) if len(readers) == 1
               else reader.messages(connections=selected))
-    for conn, stamp, raw in source:
+    for conn, stamp, raw in read_messages(source, path):
         plan = plans[conn.id]
         topic = plan.topic
         index = counts.get(topic, 0) + 1

@@ -22,7 +22,7 @@ from typing import Any
 
 from ..errors import SLRError
 from ..terms import Atom, format_term
-from .bag_import import BagError, bag_id, open_bag
+from .bag_import import bag_id, open_bag, read_messages
 from .mapping import TF_TOPICS, TF_TYPE, TIME_TYPES, normalize_topic, topic_event_name
 
 __all__ = ["TopicInfo", "FrameEdge", "BagInfo", "bag_info", "draft_map"]
@@ -205,19 +205,7 @@ def bag_info(path: str | Path) -> BagInfo:
 
 def _messages(reader: Any, path: str | Path) -> Any:
     """The bag's messages; :class:`BagError` when its storage does not read back."""
-    messages = reader.messages()
-    read = 0
-    while True:
-        try:
-            item = next(messages)
-        except StopIteration:
-            return
-        except Exception as exc:  # noqa: BLE001 - rosbags' reader errors (damaged storage)
-            reason = " ".join(str(a) for a in exc.args) or type(exc).__name__
-            raise BagError(f"cannot read {path}: the bag is damaged after {read} messages "
-                           f"({reason})") from None
-        read += 1
-        yield item
+    return read_messages(reader.messages(), path)
 
 
 def _leaves(fielddefs: dict, msgtype: str, prefix: str = "", depth: int = 0) -> list[str]:
