@@ -277,18 +277,22 @@ def _import_export(kb: KnowledgeBaseAPI, path: Path, progress: Callable[[int, in
                    batch_size: int, clock: ManualClock | None) -> ImportReport:
     """An MCAP file of ``slr export``: its events as they were stored (no mapping: its
     channels name their event types), with the same checkpoints as a bag."""
+    from slr_sql.viz.channels import channel_type
     from slr_sql.viz.mcap_export import export_batches, export_summary
 
     summary = export_summary(path)   # (ExportCutShort when the file ends early)
+    # every channel's event type before any event is stored: a channel whose metadata
+    # names none (a file written elsewhere) stops the import with nothing stored
+    types = {c.id: channel_type(path, c.topic, c.metadata) for c in summary.channels.values()}
     channels = sorted((c.topic, c.metadata.get("slr_event", ""), c.metadata.get("slr_arity", ""),
                        (summary.statistics.channel_message_counts.get(c.id, 0)
-                        if summary.statistics else 0))
+                        if summary.statistics else 0), types[c.id] is not None)
                       for c in summary.channels.values())
-    digest = hashlib.sha256(json.dumps(channels).encode()).hexdigest()
+    digest = hashlib.sha256(json.dumps([c[:4] for c in channels]).encode()).hexdigest()
     report = ImportReport("export_" + digest[:16])
-    total = sum(c[3] for c in channels if c[1])
-    for topic, event, arity, count in channels:
-        if event:
+    total = sum(c[3] for c in channels if c[4])
+    for topic, event, arity, count, is_event in channels:
+        if is_event:
             report.topics[topic] = TopicReport(f"{event}/{arity}", "slr event (JSON)")
     done = _checkpoints(kb, report.bag_id)
     for topic, n in done.items():

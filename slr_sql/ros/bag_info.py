@@ -107,7 +107,9 @@ def _export_info(path: Path) -> BagInfo:
     frames: dict[tuple, FrameEdge] = {}
     for schema, channel, message in export_messages(path):
         meta = channel.metadata
-        kind = (f"slr event {meta[METADATA_EVENT]}/{meta[METADATA_ARITY]}"
+        # (a channel written elsewhere may lack its arity: the import refuses it, the
+        # summary shows it)
+        kind = (f"slr event {meta[METADATA_EVENT]}/{meta.get(METADATA_ARITY, '?')[:20]}"
                 if METADATA_EVENT in meta else (schema.name if schema else ""))
         info = topics.setdefault(channel.topic, TopicInfo(channel.topic, kind, 0))
         t = message.log_time * 1e-9
@@ -117,7 +119,8 @@ def _export_info(path: Path) -> BagInfo:
         if meta.get(METADATA_EVENT) in ("tf", "tf_static") and meta.get(METADATA_ARITY) == "3":
             try:
                 _, (parent_term, child_term, _), _, _ = event_from_message("tf", 3, message.data)
-            except (ValueError, KeyError, TypeError, IndexError, SLRError):   # not an slr event
+            except (ValueError, KeyError, TypeError, IndexError, RecursionError,
+                    SLRError):   # not an slr event
                 info.undecodable += 1
                 continue
             # (as tf_lookup and the live view name frames: an atom as it is, a string or a
