@@ -137,3 +137,42 @@ def test_a_message_definition_that_is_no_utf8_is_said_in_few_words(tmp_path):
     for args in (["ros", "info", str(bag)], ["ros", "import", str(bag), str(tmp_path / "x.db")]):
         line = one_error_line(slr(*args))
         assert "not UTF-8" in line and "=====" not in line and len(line) < 300, line
+
+
+def test_a_message_whose_text_is_no_utf8_is_rejected_in_few_words(tmp_path):
+    """A /tf message whose frame name holds a byte that is no UTF-8: its rejection printed
+    the whole message's bytes (``utf-8 b'map\\x00\\x05...' 0 1 invalid start byte``); a
+    message of a megabyte made a line of megabytes, 20 times."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_KILTED)
+    types = store.types
+    big = "f" * 100_000
+
+    def tf(parent: str, child: str) -> bytes:
+        msg = types["tf2_msgs/msg/TFMessage"](transforms=[
+            types["geometry_msgs/msg/TransformStamped"](
+                header=types["std_msgs/msg/Header"](
+                    stamp=types["builtin_interfaces/msg/Time"](sec=1, nanosec=0),
+                    frame_id=parent),
+                child_frame_id=child,
+                transform=types["geometry_msgs/msg/Transform"](
+                    translation=types["geometry_msgs/msg/Vector3"](x=1.0, y=0.0, z=0.0),
+                    rotation=types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0,
+                                                                   w=1.0)))])
+        return bytes(store.serialize_cdr(msg, "tf2_msgs/msg/TFMessage"))
+
+    bag = tmp_path / "bag"
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
+        connection = writer.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=store)
+        writer.write(connection, 1_000_000_000, tf("m\u00e9p" + big, "base").replace(
+            "m\u00e9p".encode(), b"m\xffp"))
+        writer.write(connection, 2_000_000_000, tf("map", "base"))
+    result = slr("ros", "import", str(bag), str(tmp_path / "r.db"))
+    assert result.returncode == 1, result.stderr
+    assert "Traceback" not in result.stderr and "bug" not in result.stderr
+    (line,) = [line for line in result.stderr.splitlines() if "/tf message 1" in line]
+    assert "not UTF-8" in line and len(line) < 400, line[:500]
+    assert "imported 2 events from 2 messages, 1 rejected" not in result.stdout
+    assert "imported 1 event from 2 messages, 1 rejected" in result.stdout, result.stdout

@@ -524,5 +524,7 @@ def _batches(reader: Any, selected: list, plans: dict, done: dict, report: Impor
 
 
 def _reason(exc: BaseException) -> str:
+    if isinstance(exc, UnicodeDecodeError):   # (its args hold the field's bytes, all of them)
+        return reader_reason(exc)
     text = " ".join(str(a) for a in exc.args) if exc.args else ""
-    return text or type(exc).__name__
+    return _short(text) if text else type(exc).__name__
