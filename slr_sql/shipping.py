@@ -127,6 +127,8 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
         if marks or relayed:
             given = {robot: marks or {}, **{r: m for r, m in (relayed or {}).items()
                                             if r != robot}}
+            if len(given) > 1:
+                _check_relayed_routes(store, robot, given)
             for who, its_marks in given.items():
                 for mk, t in its_marks.items():
                     store.meta_raise(f"{FLEET_MARK}{who}/{mk}", float(t))
@@ -246,6 +248,23 @@ def _check_relayed(relayed: Any) -> None:
             check_robot_name(who)
         except SLRError as exc:
             raise SLRError(f"a shipment's relayed marks: {exc}") from None
+
+
+def _check_relayed_routes(store: Any, robot: str, given: dict) -> None:
+    """Refuse marks ``robot`` relays of a robot whose rows reach this store directly or
+    through another store: its marks are that robot's (or that store's) to give, and one
+    raised here would move the fleet's mark past events still on their way. (Marks of a
+    robot this store does not know yet go in: a relayed robot may have marks and no
+    events.)"""
+    from .store.fleet import RouteConflict
+
+    routes = {r["robot"]: r["via"] or r["robot"] for r in store.fleet_contacts()}
+    for who in given:
+        via = routes.get(who)
+        if who != robot and via is not None and via != robot:
+            how = "directly" if via == who else f"relayed by {via!r}"
+            raise RouteConflict(f"the marks of robot {who!r} cannot come from {robot!r}: its "
+                                f"rows reach this store {how}, so its marks come that way too")
 
 
 def _check_after(after: Any) -> None:

@@ -95,3 +95,54 @@ def test_postgresql_refuses_them_alike(postgres_url, forged, words):
         assert fleet.store.fleet_positions("r1") == {}
         assert fleet.store.fleet_contacts() == []
         assert fleet.query("f_first(X)^T") == []
+
+
+# -- marks of another robot ------------------------------------------------------------------
+
+def seen(seq: int, arg: str) -> tuple:
+    return (seq, arg, 1.0, 1.0, 1.0, None)
+
+
+@pytest.mark.parametrize("where", ["file", "postgres"])
+def test_a_robot_cannot_move_the_marks_of_a_robot_that_does_not_come_through_it(
+        tmp_path, where, request):
+    """``relayed`` carries the marks a relaying store holds of the robots whose rows it
+    relays. A robot sending marks of another robot whose rows reach the fleet store directly
+    (or through a third store) moved that robot's mark, and with it the fleet's: r1 saying
+    r2's seen/1 is complete up to 1e9 made the fleet's seen/1 complete up to r1's 100 while
+    r2 had said 5 (a synchronized query answered before r2's events came). Now it is
+    refused and nothing of the shipment is stored; marks of a robot the fleet does not know
+    yet, or of one relayed through the sender, still go in."""
+    where = (request.getfixturevalue("postgres_url") if where == "postgres"
+             else str(tmp_path / "fleet.db"))
+    with slr_sql.open(where) as fleet:
+        receive(fleet, "r2", [("seen", 1, [seen(1, "a")])], {"seen/1": 5.0})
+        receive(fleet, "r3", [("seen", 1, [(1, "c", 1.0, 1.0, 1.0, "r4")])],
+                relayed={"r4": {"seen/1": 5.0}})
+        receive(fleet, "r1", [("seen", 1, [seen(1, "b")])], {"seen/1": 100.0})
+        assert fleet.store.meta_get("sync/mark/seen/1") == 5.0
+        for forged in ({"r2": {"seen/1": 1e9}}, {"r4": {"seen/1": 1e9}}):
+            with pytest.raises(SLRError, match="marks of robot"):
+                receive(fleet, "r1", [("seen", 1, [seen(2, "b2")])], {"seen/1": 200.0},
+                        relayed=forged)
+            assert fleet.store.meta_get("sync/mark/seen/1") == 5.0
+            assert fleet.store.meta_get("fleet/mark/r1/seen/1") == 100.0
+            assert fleet.store.fleet_positions("r1") == {("seen", 1): 1}
+        assert fleet.store.meta_get("fleet/mark/r2/seen/1") == 5.0
+        assert fleet.store.meta_get("fleet/mark/r4/seen/1") == 5.0
+        # a robot relayed through the sender, and one the fleet does not know yet
+        receive(fleet, "r3", [], relayed={"r4": {"seen/1": 7.0}, "r5": {"seen/1": 9.0}})
+        assert fleet.store.meta_get("fleet/mark/r4/seen/1") == 7.0
+        assert fleet.store.meta_get("fleet/mark/r5/seen/1") == 9.0
+
+
+def test_the_service_refuses_it_in_words(server):
+    url = server.url + "/fleet/receive"
+    assert HTTP.post(url, timeout=30, json={"robot": "mdirect", "batches": [
+        ["m_seen", 1, [row(seq=1)]]], "marks": {"m_seen/1": 5.0}}).status_code == 200
+    answer = HTTP.post(url, timeout=30, json={"robot": "mforger", "batches": [
+        ["m_seen", 1, [row(seq=1)]]], "relayed": {"mdirect": {"m_seen/1": 1e9}}})
+    assert answer.status_code == 400, answer.text
+    assert "marks of robot 'mdirect'" in answer.json()["error"]["message"]
+    assert HTTP.get(server.url + "/fleet/positions", params={"robot": "mforger"},
+                    timeout=30).json() == {"positions": []}
