@@ -93,3 +93,16 @@ def test_ros_info_counts_a_message_nested_too_deeply_as_one_that_does_not_decode
     assert any("map" in line and "base" in line for line in result.stdout.splitlines())
     line = one_error_line(slr("ros", "import", str(path), str(tmp_path / "x.db")))
     assert "/tf/3: message 1 is not an slr event" in line, line
+
+
+def test_a_message_with_an_integer_of_5000_digits_is_said_in_words(tmp_path):
+    """Python's JSON reader refuses integers of more than 4,300 digits with advice for a
+    programmer ("use sys.set_int_max_str_digits() to increase the limit"), which the import
+    passed on; and a message's reason quoted whole."""
+    path = tmp_path / "digits.mcap"
+    crafted(path, {"slr_event": "p", "slr_arity": "1"},
+            [b'{"arg1":' + b"9" * 5000 + b',"start":1,"end":1,"arrival":1}'])
+    line = one_error_line(slr("ros", "import", str(path), str(tmp_path / "x.db")))
+    assert "/p/1: message 1 is not an slr event: an integer of more than 4300 digits" in line, \
+        line
+    assert "sys.set_int_max_str_digits" not in line

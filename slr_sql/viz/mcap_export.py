@@ -368,7 +368,10 @@ def export_batches(path: str | Path, done: dict | None = None, batch_size: int =
             try:
                 batch.append(event_from_message(*event_type, message.data))
             except (ValueError, KeyError, TypeError, RecursionError) as exc:
-                reason = "nested too deeply" if isinstance(exc, RecursionError) else exc
+                reason = ("nested too deeply" if isinstance(exc, RecursionError)
+                          # (Python's words for it are advice to a programmer)
+                          else "an integer of more than 4300 digits"
+                          if "int_max_str_digits" in str(exc) else str(exc)[:200])
                 raise SLRError(f"{path}: {topic}: message {n} is not an slr event: "
                                f"{reason}") from None
             if len(batch) >= batch_size:
