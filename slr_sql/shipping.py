@@ -16,11 +16,11 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from .encoding import decode
+from .encoding import INT64_MAX, INT64_MIN, decode
 from .errors import SLRError
 from .host import Host
 from .store import check_robot_name
-from .store.checks import text_problem
+from .store.checks import shown, text_problem
 
 __all__ = ["FLEET_MARK", "FleetBehind", "names_a_type", "positions", "prepare", "receive"]
 
@@ -127,6 +127,8 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
         if marks or relayed:
             given = {robot: marks or {}, **{r: m for r, m in (relayed or {}).items()
                                             if r != robot}}
+            if len(given) > 1:
+                _check_relayed_routes(store, robot, given)
             for who, its_marks in given.items():
                 for mk, t in its_marks.items():
                     store.meta_raise(f"{FLEET_MARK}{who}/{mk}", float(t))
@@ -170,13 +172,17 @@ def _check_shipment(batches: Any, marks: Any, pending: Any = None,
     if not isinstance(batches, list):
         raise SLRError("a shipment's batches are a list of [name, arity, rows]")
     robots: set = set()    # the robot names checked already
+    # per type, the last sequence of the batches before: a type's rows in two batches of
+    # one shipment ascend across them too (rows below the position the first batch moved
+    # to would be taken as held, and skipped)
+    lasts: dict[tuple[str, int], int] = {}
     for batch in batches:
         if not (isinstance(batch, (list, tuple)) and len(batch) == 3
                 and isinstance(batch[0], str) and type(batch[1]) is int and batch[1] >= 0
                 and isinstance(batch[2], list)):
             raise SLRError("a shipment's batch is [name, arity, rows]")
         name, arity, rows = batch
-        last = 0
+        last = lasts.get((name, arity), 0)
         for row in rows:
             if not (isinstance(row, (list, tuple)) and len(row) == arity + 5
                     and type(row[0]) is int and row[0] > last
@@ -186,8 +192,15 @@ def _check_shipment(batches: Any, marks: Any, pending: Any = None,
                 raise SLRError(f"a shipped row of {name}/{arity} is [seq, arg1..arg{arity}, "
                                "start, end, arrival or null, robot or null] with sequences "
                                "ascending")
+            if not all(INT64_MIN <= v <= INT64_MAX for v in row if type(v) is int):
+                # (no store holds one: its columns' integers stop there, as PostgreSQL's)
+                raise SLRError(f"a shipped row of {name}/{arity}, seq {shown(row[0])}: an "
+                               "integer beyond 64 bits, which no store holds")
             if not all(math.isfinite(v) for v in row[arity + 1:arity + 4] if v is not None):
                 raise SLRError(f"a shipped row of {name}/{arity} has a time that is not finite")
+            if row[arity + 1] > row[arity + 2]:
+                raise SLRError(f"a shipped row of {name}/{arity}, seq {row[0]}: the event "
+                               f"starts after it ends ({row[arity + 1]!r} > {row[arity + 2]!r})")
             for i in range(1, arity + 1):
                 value = row[i]
                 if type(value) is str and not (value.isascii() and value[:1] not in _JSON):
@@ -203,17 +216,20 @@ def _check_shipment(batches: Any, marks: Any, pending: Any = None,
                     raise SLRError(f"a shipped row of {name}/{arity}, seq {row[0]}: its robot "
                                    f"column: {exc}") from None
             last = row[0]
+        lasts[(name, arity)] = last
     if marks is not None:
         if not isinstance(marks, dict) or not all(
                 isinstance(k, str) and names_a_type(k) and type(v) in (int, float)
                 and not math.isnan(v) for k, v in marks.items()):
             raise SLRError("a shipment's marks are {\"name/arity\": time} (name/* for every "
                            "arity)")
-    if pending is not None and (type(pending) is not int or pending < 0):
-        raise SLRError(f"a shipment's pending is a count of events (>= 0), not {pending!r}")
-    if head_arrival is not None and not (type(head_arrival) in (int, float)
-                                         and math.isfinite(head_arrival)):
-        raise SLRError(f"a shipment's head_arrival is a finite time, not {head_arrival!r}")
+    if pending is not None and (type(pending) is not int or not 0 <= pending <= INT64_MAX):
+        raise SLRError(f"a shipment's pending is a count of events (>= 0, 64 bits), not "
+                       f"{shown(pending)}")
+    if head_arrival is not None and not (
+            type(head_arrival) is float and math.isfinite(head_arrival)
+            or type(head_arrival) is int and INT64_MIN <= head_arrival <= INT64_MAX):
+        raise SLRError(f"a shipment's head_arrival is a finite time, not {shown(head_arrival)}")
 
 
 def _check_relayed(relayed: Any) -> None:
@@ -232,6 +248,23 @@ def _check_relayed(relayed: Any) -> None:
             check_robot_name(who)
         except SLRError as exc:
             raise SLRError(f"a shipment's relayed marks: {exc}") from None
+
+
+def _check_relayed_routes(store: Any, robot: str, given: dict) -> None:
+    """Refuse marks ``robot`` relays of a robot whose rows reach this store directly or
+    through another store: its marks are that robot's (or that store's) to give, and one
+    raised here would move the fleet's mark past events still on their way. (Marks of a
+    robot this store does not know yet go in: a relayed robot may have marks and no
+    events.)"""
+    from .store.fleet import RouteConflict
+
+    routes = {r["robot"]: r["via"] or r["robot"] for r in store.fleet_contacts()}
+    for who in given:
+        via = routes.get(who)
+        if who != robot and via is not None and via != robot:
+            how = "directly" if via == who else f"relayed by {via!r}"
+            raise RouteConflict(f"the marks of robot {who!r} cannot come from {robot!r}: its "
+                                f"rows reach this store {how}, so its marks come that way too")
 
 
 def _check_after(after: Any) -> None:

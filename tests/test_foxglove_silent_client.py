@@ -220,3 +220,62 @@ def test_a_port_in_use_or_a_host_that_does_not_resolve_is_said_in_words(tmp_path
             assert result.returncode == 1, result
             assert said in result.stderr, result.stderr
             assert "bug" not in result.stderr and "RuntimeError" not in result.stderr
+
+
+def test_a_client_subscribing_to_tf_static_in_a_loop_does_not_flood_the_others(tmp_path):
+    """Each subscription to /tf_static made the view send the latched message (every static
+    edge) to every subscriber of /tf_static at its next pass: one client subscribing and
+    unsubscribing in a loop kept the view's thread busy building it, sent the others one
+    every few milliseconds (here ~250 in 1.6 s; with 2,000 edges, messages of 200 KB) and made
+    their live events late (60 ms instead of 3). Now it is sent at most every STATIC_GAP
+    seconds when asked, whoever asks; a late subscriber still gets it."""
+    from slr_sql.viz import foxglove_live
+    from slr_sql.viz.foxglove_live import FoxgloveView
+    from test_foxglove import pose
+
+    gap = 0.25   # (foxglove_live.STATIC_GAP, checked last)
+    db = tmp_path / "robot.db"
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add_many([("tf_static", ("base", f"cam{i}", pose(float(i))), 0.0, 0.0)
+                     for i in range(50)] + [("seg", ("a", 1), 0.0, 0.0)])
+    view_kb = slr_sql.open(db, clock=slr_sql.ManualClock(0.0))
+    view = FoxgloveView(view_kb.store, port=0, static_every=3600.0).start()
+    try:
+        with FoxgloveClient(view.port) as victim, FoxgloveClient(view.port) as hammer:
+            deadline = time.monotonic() + DEADLINE
+            for client in (victim, hammer):
+                client.pump(lambda c=client: "/tf_static" in c.channels
+                            and "/seg/2" in c.channels, deadline)
+            victim.subscribe("/tf_static", "/seg/2")
+            victim.pump(lambda: bool(victim.on("/tf_static")), deadline)
+            began = time.monotonic()
+            channel = hammer.channels["/tf_static"]["id"]
+            # one second of subscribing and unsubscribing, as fast as this client can
+            hammering = began + 1.0
+            n = 0
+            while time.monotonic() < hammering:
+                n += 1
+                hammer.subscriptions[n] = "/tf_static"
+                hammer.ws.send(json.dumps({"op": "subscribe",
+                                           "subscriptions": [{"id": n, "channelId": channel}]}))
+                hammer.ws.send(json.dumps({"op": "unsubscribe", "subscriptionIds": [n]}))
+            # an event stored after the last subscription: once the victim has it, the view
+            # has passed over every subscription
+            with slr_sql.open(db, clock=slr_sql.ManualClock(1.0)) as kb:
+                kb.add_many([("seg", ("b", 2), 1.0, 1.0)])
+            victim.pump(lambda: len(victim.on("/seg/2")) >= 1, deadline)
+            victim.read_for(gap * 2)   # (a send asked for in the last gap)
+            elapsed = time.monotonic() - began
+            static = len(victim.on("/tf_static")) - 1
+            # a late subscriber still gets the latched message
+            hammer.subscriptions[n + 1] = "/tf_static"
+            hammer.ws.send(json.dumps({"op": "subscribe",
+                                       "subscriptions": [{"id": n + 1, "channelId": channel}]}))
+            hammer.messages.clear()
+            hammer.pump(lambda: bool(hammer.on("/tf_static")), deadline)
+    finally:
+        view.close()
+        view_kb.close()
+    assert 1 <= static <= elapsed / gap + 2, (static, elapsed)
+    assert len(hammer.on("/tf_static")[-1][1]["transforms"]) == 50
+    assert foxglove_live.STATIC_GAP == gap

@@ -44,7 +44,8 @@ from .mapping import IMPORT_CHECKPOINT, BoundEntry, Mapping, MessageError, norma
 from . import fast_tf
 
 __all__ = ["import_bag", "ImportReport", "Rejection", "BagError", "open_bag", "bag_id",
-           "ros1_typestore", "TF_MESSAGE_MSGDEF", "DEFAULT_BATCH"]
+           "ros1_typestore", "TF_MESSAGE_MSGDEF", "DEFAULT_BATCH", "read_messages",
+           "reader_reason"]
 
 DEFAULT_BATCH = 10_000  # events per add_many (one transaction, one fsync)
 
@@ -148,9 +149,59 @@ def open_bag(path: str | Path) -> Any:
         reader = AnyReader([path], default_typestore=default)
         reader.open()
     except Exception as exc:  # rosbags raises its own errors, OSError, and a few bare ones
-        reason = " ".join(str(a) for a in exc.args) or type(exc).__name__
-        raise BagError(f"cannot read {path}: {reason}") from None
+        raise BagError(f"cannot read {path}: {reader_reason(exc)}") from None
     return reader
+
+
+_REASON_MAX = 200
+
+
+def reader_reason(exc: BaseException) -> str:
+    """What a bag reader's error says of the bag, in words: its own message, or for the bare
+    errors a damaged file makes it raise (a failed assert, an unknown record kind, a size
+    beyond memory, bytes that are no UTF-8) what they mean; at most 200 characters.
+
+    >>> reader_reason(AssertionError())
+    "a record that fails the reader's own check"
+    >>> reader_reason(UnicodeDecodeError("utf-8", b"ab?", 2, 3, "invalid start byte"))
+    'text that is not UTF-8 (byte 2 of a 3-byte field)'
+    """
+    if isinstance(exc, UnicodeDecodeError):
+        return f"text that is not UTF-8 (byte {exc.start} of a {len(exc.object)}-byte field)"
+    if isinstance(exc, (MemoryError, OverflowError)):
+        return "a record whose size is beyond memory"
+    if isinstance(exc, AssertionError):
+        return "a record that fails the reader's own check"
+    if isinstance(exc, KeyError):
+        return f"a record of a kind the reader does not know ({_short(repr(exc.args[0]))})" \
+            if exc.args else "a record of a kind the reader does not know"
+    text = " ".join(str(a) for a in exc.args) or type(exc).__name__
+    return _short(text)
+
+
+def _short(text: str) -> str:
+    return text if len(text) <= _REASON_MAX else text[:_REASON_MAX] + "..."
+
+
+def read_messages(messages: Any, path: str | Path) -> Any:
+    """The items of a bag reader's ``messages`` iterator; :class:`BagError` (saying how many
+    were read) when the storage does not read back: a damaged file makes the readers raise
+    their own errors and bare ones (AssertionError, KeyError, sqlite3's DatabaseError, ...).
+
+    >>> list(read_messages(iter([1, 2]), "x.bag"))
+    [1, 2]
+    """
+    read = 0
+    while True:
+        try:
+            item = next(messages)
+        except StopIteration:
+            return
+        except Exception as exc:  # noqa: BLE001 - the reader's errors (damaged storage)
+            raise BagError(f"cannot read {path}: the bag is damaged after {read} messages "
+                           f"({reader_reason(exc)})") from None
+        read += 1
+        yield item
 
 
 def bag_id(reader: Any) -> str:
@@ -244,7 +295,7 @@ def import_bag(kb: KnowledgeBaseAPI, path: str | Path, mapping: Mapping | None =
     gc.disable()
     try:
         return _import(kb, reader, mapping, all_topics, progress, max(1, int(batch_size)),
-                       clock)
+                       clock, path)
     finally:
         if collecting:
             gc.enable()
@@ -264,18 +315,22 @@ def _import_export(kb: KnowledgeBaseAPI, path: Path, progress: Callable[[int, in
                    batch_size: int, clock: ManualClock | None) -> ImportReport:
     """An MCAP file of ``slr export``: its events as they were stored (no mapping: its
     channels name their event types), with the same checkpoints as a bag."""
+    from slr_sql.viz.channels import channel_type
     from slr_sql.viz.mcap_export import export_batches, export_summary
 
     summary = export_summary(path)   # (ExportCutShort when the file ends early)
+    # every channel's event type before any event is stored: a channel whose metadata
+    # names none (a file written elsewhere) stops the import with nothing stored
+    types = {c.id: channel_type(path, c.topic, c.metadata) for c in summary.channels.values()}
     channels = sorted((c.topic, c.metadata.get("slr_event", ""), c.metadata.get("slr_arity", ""),
                        (summary.statistics.channel_message_counts.get(c.id, 0)
-                        if summary.statistics else 0))
+                        if summary.statistics else 0), types[c.id] is not None)
                       for c in summary.channels.values())
-    digest = hashlib.sha256(json.dumps(channels).encode()).hexdigest()
+    digest = hashlib.sha256(json.dumps([c[:4] for c in channels]).encode()).hexdigest()
     report = ImportReport("export_" + digest[:16])
-    total = sum(c[3] for c in channels if c[1])
-    for topic, event, arity, count in channels:
-        if event:
+    total = sum(c[3] for c in channels if c[4])
+    for topic, event, arity, count, is_event in channels:
+        if is_event:
             report.topics[topic] = TopicReport(f"{event}/{arity}", "slr event (JSON)")
     done = _checkpoints(kb, report.bag_id)
     for topic, n in done.items():
@@ -361,7 +416,7 @@ _END = object()
 
 def _import(kb: KnowledgeBaseAPI, reader: Any, mapping: Mapping, all_topics: bool,
             progress: Callable[[int, int], None] | None, batch_size: int,
-            clock: ManualClock | None) -> ImportReport:
+            clock: ManualClock | None, path: str | Path) -> ImportReport:
     """Reading and decoding run in a second thread while this one stores the previous batch:
     SQLite releases the GIL while it writes, so on a free core both proceed at once. Batches
     are stored in order, each with its checkpoints, by the calling thread only."""
@@ -386,7 +441,7 @@ def _import(kb: KnowledgeBaseAPI, reader: Any, mapping: Mapping, all_topics: boo
 
     def produce() -> None:
         try:
-            for batch in _batches(reader, selected, plans, done, report, batch_size):
+            for batch in _batches(reader, selected, plans, done, report, batch_size, path):
                 if not hand(batch):
                     return
             hand(_END)
@@ -432,7 +487,7 @@ def _store(kb: KnowledgeBaseAPI, report: ImportReport, batch: _Batch) -> None:
 
 
 def _batches(reader: Any, selected: list, plans: dict, done: dict, report: ImportReport,
-             batch_size: int) -> Any:
+             batch_size: int, path: str | Path) -> Any:
     """Read, decode and map the selected messages; yields :class:`_Batch` es of about
     ``batch_size`` events (the last one possibly with none, to carry checkpoints)."""
     counts: dict[str, int] = {}
@@ -454,7 +509,7 @@ def _batches(reader: Any, selected: list, plans: dict, done: dict, report: Impor
     readers: Any = getattr(reader, "readers", ())
     source = (readers[0].messages(connections=selected) if len(readers) == 1
               else reader.messages(connections=selected))
-    for conn, stamp, raw in source:
+    for conn, stamp, raw in read_messages(source, path):
         plan = plans[conn.id]
         topic = plan.topic
         index = counts.get(topic, 0) + 1
@@ -507,5 +562,7 @@ def _batches(reader: Any, selected: list, plans: dict, done: dict, report: Impor
 
 
 def _reason(exc: BaseException) -> str:
+    if isinstance(exc, UnicodeDecodeError):   # (its args hold the field's bytes, all of them)
+        return reader_reason(exc)
     text = " ".join(str(a) for a in exc.args) if exc.args else ""
-    return text or type(exc).__name__
+    return _short(text) if text else type(exc).__name__

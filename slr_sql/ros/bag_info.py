@@ -22,7 +22,7 @@ from typing import Any
 
 from ..errors import SLRError
 from ..terms import Atom, format_term
-from .bag_import import BagError, bag_id, open_bag
+from .bag_import import bag_id, open_bag, read_messages
 from .mapping import TF_TOPICS, TF_TYPE, TIME_TYPES, normalize_topic, topic_event_name
 
 __all__ = ["TopicInfo", "FrameEdge", "BagInfo", "bag_info", "draft_map"]
@@ -107,7 +107,9 @@ def _export_info(path: Path) -> BagInfo:
     frames: dict[tuple, FrameEdge] = {}
     for schema, channel, message in export_messages(path):
         meta = channel.metadata
-        kind = (f"slr event {meta[METADATA_EVENT]}/{meta[METADATA_ARITY]}"
+        # (a channel written elsewhere may lack its arity: the import refuses it, the
+        # summary shows it)
+        kind = (f"slr event {meta[METADATA_EVENT]}/{meta.get(METADATA_ARITY, '?')[:20]}"
                 if METADATA_EVENT in meta else (schema.name if schema else ""))
         info = topics.setdefault(channel.topic, TopicInfo(channel.topic, kind, 0))
         t = message.log_time * 1e-9
@@ -117,7 +119,8 @@ def _export_info(path: Path) -> BagInfo:
         if meta.get(METADATA_EVENT) in ("tf", "tf_static") and meta.get(METADATA_ARITY) == "3":
             try:
                 _, (parent_term, child_term, _), _, _ = event_from_message("tf", 3, message.data)
-            except (ValueError, KeyError, TypeError, IndexError, SLRError):   # not an slr event
+            except (ValueError, KeyError, TypeError, IndexError, RecursionError,
+                    SLRError):   # not an slr event
                 info.undecodable += 1
                 continue
             # (as tf_lookup and the live view name frames: an atom as it is, a string or a
@@ -225,19 +228,7 @@ def bag_info(path: str | Path) -> BagInfo:
 
 def _messages(reader: Any, path: str | Path) -> Any:
     """The bag's messages; :class:`BagError` when its storage does not read back."""
-    messages = reader.messages()
-    read = 0
-    while True:
-        try:
-            item = next(messages)
-        except StopIteration:
-            return
-        except Exception as exc:  # noqa: BLE001 - rosbags' reader errors (damaged storage)
-            reason = " ".join(str(a) for a in exc.args) or type(exc).__name__
-            raise BagError(f"cannot read {path}: the bag is damaged after {read} messages "
-                           f"({reason})") from None
-        read += 1
-        yield item
+    return read_messages(reader.messages(), path)
 
 
 def _leaves(fielddefs: dict, msgtype: str, prefix: str = "", depth: int = 0) -> list[str]:

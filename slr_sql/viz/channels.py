@@ -24,12 +24,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..encoding import column_json, decode, decode_json
+from ..errors import SLRError
 from ..terms import Atom, format_term
 
 __all__ = ["EventChannel", "event_channel", "event_from_message", "TRANSFORMS_SCHEMA",
            "TRANSFORMS_SCHEMA_NAME", "MARKS_TOPIC", "MARKS_SCHEMA", "transform_message",
            "mark_message", "time_ns", "TF_TOPICS", "METADATA_EVENT", "METADATA_ARITY",
-           "JSON_SCHEMA_ENCODING"]
+           "JSON_SCHEMA_ENCODING", "channel_type"]
 
 METADATA_EVENT = "slr_event"       # channel metadata: the event name
 METADATA_ARITY = "slr_arity"       # channel metadata: its arity (a decimal string)
@@ -168,6 +169,31 @@ def event_channel(name: str, arity: int, sample: tuple | None = None) -> EventCh
               "required": list(props)}
     return EventChannel(name, arity, f"/{name}/{arity}", schema,
                         {METADATA_EVENT: name, METADATA_ARITY: str(arity)})
+
+
+def channel_type(path: Any, topic: str, metadata: dict) -> tuple[str, int] | None:
+    """The event type ``(name, arity)`` a channel of the MCAP file ``path`` names in its
+    metadata (:data:`METADATA_EVENT`, :data:`METADATA_ARITY`, as :func:`event_channel`
+    writes them), None for a channel of no event; an :class:`SLRError` naming the channel
+    when its arity is no count of arguments (a file written elsewhere).
+
+    >>> channel_type("a.mcap", "/seg/2", {"slr_event": "seg", "slr_arity": "2"})
+    ('seg', 2)
+    >>> channel_type("a.mcap", "/p", {"slr_event": "p", "slr_arity": "-3"})
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: cannot read a.mcap: channel /p: its slr_arity '-3' is no count of arguments
+    """
+    if METADATA_EVENT not in metadata:
+        return None
+    text = metadata.get(METADATA_ARITY)
+    # (an arity is at most a few thousand: a text of 5,000 digits is no arity either)
+    if not (isinstance(text, str) and text.isascii() and text.isdigit() and len(text) <= 9):
+        shown = "missing" if text is None else repr(text if len(text) <= 40
+                                                    else text[:40] + "...")
+        raise SLRError(f"cannot read {path}: channel {topic}: its {METADATA_ARITY} {shown} is "
+                       "no count of arguments")
+    return str(metadata[METADATA_EVENT]), int(text)
 
 
 def event_from_message(name: str, arity: int, data: bytes | str) -> tuple:

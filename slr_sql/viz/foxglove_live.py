@@ -13,9 +13,10 @@ of its own:
 * completeness marks that moved go to ``/slr/completeness``.
 
 Only events stored after the view started are sent, except the static transforms: the last
-one of each edge is sent again whenever a client subscribes to ``/tf_static`` (and every
-``static_every`` seconds), as ROS's latched ``/tf_static`` would, so the 3D panel knows
-the static frames however late it connects.
+one of each edge is sent again when a client subscribes to ``/tf_static`` (at most every
+:data:`STATIC_GAP` seconds, however many subscribe; and every ``static_every`` seconds), as
+ROS's latched ``/tf_static`` would, so the 3D panel knows the static frames however late it
+connects.
 """
 from __future__ import annotations
 
@@ -38,6 +39,7 @@ _MARK_PREFIX = "sync/mark/"
 _TF_STATIC = ("tf_static", 3)
 _UNREADABLE = "its rows cannot be read"
 _MARK_SOURCE = "sync/marksrc/"
+STATIC_GAP = 0.25   # seconds: the least time between two latched /tf_static messages asked for
 
 
 class FoxgloveUnavailable(SLRError):
@@ -219,6 +221,7 @@ class FoxgloveView:
     def _run(self) -> None:
         version = None
         next_static = 0.0
+        next_static_asked = 0.0
         next_catalog = 0.0
         while not self._stop.is_set():
             try:
@@ -235,9 +238,15 @@ class FoxgloveView:
                 elif now >= next_catalog and next_catalog:
                     next_catalog = 0.0
                     self._follow(catalog=True)
-                if self._static_due.is_set() or now >= next_static:
+                # a subscription to /tf_static asks for the latched message, but at most
+                # every STATIC_GAP seconds: each one goes to every subscriber, and a client
+                # subscribing in a loop made the view build and send it at every pass (a
+                # core busy, every client's live events late, megabytes a second to each)
+                if (self._static_due.is_set() and now >= next_static_asked) \
+                        or now >= next_static:
                     self._static_due.clear()
                     next_static = now + self.static_every
+                    next_static_asked = now + STATIC_GAP
                     self._send_static()
             except Exception as exc:  # noqa: BLE001 - a bad moment of the store: try again
                 self.log(f"foxglove: {type(exc).__name__}: {exc}")

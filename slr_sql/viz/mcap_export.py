@@ -27,9 +27,9 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
 from ..errors import SLRError
-from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, METADATA_ARITY,
-                       METADATA_EVENT, TF_TOPICS, TRANSFORMS_SCHEMA, TRANSFORMS_SCHEMA_NAME,
-                       event_channel, event_from_message, mark_message, time_ns,
+from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, METADATA_EVENT,
+                       TF_TOPICS, TRANSFORMS_SCHEMA, TRANSFORMS_SCHEMA_NAME,
+                       channel_type, event_channel, event_from_message, mark_message, time_ns,
                        transform_message)
 
 __all__ = ["export_mcap", "ExportReport", "McapUnavailable", "ExportRefused", "ExportCutShort",
@@ -418,18 +418,21 @@ def export_batches(path: str | Path, done: dict | None = None, batch_size: int =
     batch: list = []
     marks: list = []
     for _schema, channel, message in export_messages(path):
-        meta = channel.metadata
         topic = channel.topic
-        if METADATA_EVENT in meta:
+        event_type = channel_type(path, topic, channel.metadata)
+        if event_type is not None:
             n = counts[topic] = counts.get(topic, 0) + 1
             if n <= done.get(topic, 0):
                 continue
             try:
-                batch.append(event_from_message(meta[METADATA_EVENT],
-                                                int(meta[METADATA_ARITY]), message.data))
-            except (ValueError, KeyError, TypeError) as exc:
+                batch.append(event_from_message(*event_type, message.data))
+            except (ValueError, KeyError, TypeError, RecursionError) as exc:
+                reason = ("nested too deeply" if isinstance(exc, RecursionError)
+                          # (Python's words for it are advice to a programmer)
+                          else "an integer of more than 4300 digits"
+                          if "int_max_str_digits" in str(exc) else str(exc)[:200])
                 raise SLRError(f"{path}: {topic}: message {n} is not an slr event: "
-                               f"{exc}") from None
+                               f"{reason}") from None
             if len(batch) >= batch_size:
                 yield batch, dict(counts), []
                 batch = []
