@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from .terms import Atom as A, Clause, Span, String, Struct as S, Var
 
-SOURCE_SHA256 = '1453879cd56fdb93cf7e58dcc62af3f4b036c458fad0e31e555a4a7ce0c44c20'
+SOURCE_SHA256 = '30d6b98646d9e11e29ba28a2fb11ef0d6cd60fe247073fc64335aa9551d69229'
 
 
 def clauses(source: str) -> list[Clause]:
@@ -153,4 +153,136 @@ def clauses(source: str) -> list[Clause]:
     out.append(Clause(A('repeat'), A('$repeat'), Span('<library>', 70, 1, 70, 21), (), source[3391:3411]))
     v = [Var('Term'), Var('Vars')]
     out.append(Clause(S(A('term_variables'), (v[0], v[1])), S(A('$term_variables'), (v[0], v[1])), Span('<library>', 71, 1, 71, 61), (('Term', v[0]), ('Vars', v[1]), ), source[3412:3472]))
+    v = [Var('P'), Var('L'), Var('Sorted'), Var('N'), Var('Tail'), Var('_'), Var('Sorted1'), Var('_'), Var('_')]
+    out.append(Clause(S(A('predsort'), (v[0], v[1], v[2])), S(A(','), (S(A('$skip_list'), (v[3], v[1], v[4])), S(A(';'), (S(A('->'), (S(A('=='), (v[4], A('[]'))), S(A(','), (S(A('$predsort'), (v[0], v[3], v[1], v[5], v[6])), S(A('='), (v[2], v[6])))))), S(A(';'), (S(A('->'), (S(A('var'), (v[4],)), S(A('throw'), (S(A('error'), (A('instantiation_error'), v[7])),)))), S(A('throw'), (S(A('error'), (S(A('type_error'), (A('list'), v[1])), v[8])),)))))))), Span('<library>', 72, 1, 72, 213), (('P', v[0]), ('L', v[1]), ('Sorted', v[2]), ('N', v[3]), ('Tail', v[4]), ('Sorted1', v[6]), ), source[3473:3685]))
+    v = [Var('P'), Var('X1'), Var('X2'), Var('L'), Var('R'), Var('Delta')]
+    out.append(Clause(S(A('$predsort'), (v[0], 2, S(A('.'), (v[1], S(A('.'), (v[2], v[3])))), v[3], v[4])), S(A(','), (A('!'), S(A(','), (S(A('call'), (v[0], v[5], v[1], v[2])), S(A('$predsort2'), (v[5], v[1], v[2], v[4])))))), Span('<library>', 73, 1, 73, 98), (('P', v[0]), ('X1', v[1]), ('X2', v[2]), ('L', v[3]), ('R', v[4]), ('Delta', v[5]), ), source[3686:3783]))
+    v = [Var('_'), Var('X'), Var('L')]
+    out.append(Clause(S(A('$predsort'), (v[0], 1, S(A('.'), (v[1], v[2])), v[2], S(A('.'), (v[1], A('[]'))))), A('!'), Span('<library>', 74, 1, 74, 39), (('X', v[1]), ('L', v[2]), ), source[3784:3822]))
+    v = [Var('_'), Var('L')]
+    out.append(Clause(S(A('$predsort'), (v[0], 0, v[1], v[1], A('[]'))), A('!'), Span('<library>', 75, 1, 75, 34), (('L', v[1]), ), source[3823:3856]))
+    v = [Var('P'), Var('N'), Var('L1'), Var('L3'), Var('R'), Var('N1'), Var('N2'), Var('L2'), Var('R1'), Var('R2')]
+    out.append(Clause(S(A('$predsort'), (v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('is'), (v[5], S(A('//'), (v[1], 2)))), S(A(','), (S(A('plus'), (v[5], v[6], v[1])), S(A(','), (S(A('$predsort'), (v[0], v[5], v[2], v[7], v[8])), S(A(','), (S(A('$predsort'), (v[0], v[6], v[7], v[3], v[9])), S(A('$predmerge'), (v[0], v[8], v[9], v[4])))))))))), Span('<library>', 76, 1, 76, 155), (('P', v[0]), ('N', v[1]), ('L1', v[2]), ('L3', v[3]), ('R', v[4]), ('N1', v[5]), ('N2', v[6]), ('L2', v[7]), ('R1', v[8]), ('R2', v[9]), ), source[3857:4011]))
+    v = [Var('X1'), Var('X2')]
+    out.append(Clause(S(A('$predsort2'), (A('<'), v[0], v[1], S(A('.'), (v[0], S(A('.'), (v[1], A('[]'))))))), A('true'), Span('<library>', 77, 1, 77, 37), (('X1', v[0]), ('X2', v[1]), ), source[4012:4048]))
+    v = [Var('X1'), Var('_')]
+    out.append(Clause(S(A('$predsort2'), (A('='), v[0], v[1], S(A('.'), (v[0], A('[]'))))), A('true'), Span('<library>', 78, 1, 78, 32), (('X1', v[0]), ), source[4049:4080]))
+    v = [Var('X1'), Var('X2')]
+    out.append(Clause(S(A('$predsort2'), (A('>'), v[0], v[1], S(A('.'), (v[1], S(A('.'), (v[0], A('[]'))))))), A('true'), Span('<library>', 79, 1, 79, 37), (('X1', v[0]), ('X2', v[1]), ), source[4081:4117]))
+    v = [Var('_'), Var('R')]
+    out.append(Clause(S(A('$predmerge'), (v[0], A('[]'), v[1], v[1])), A('!'), Span('<library>', 80, 1, 80, 32), (('R', v[1]), ), source[4118:4149]))
+    v = [Var('_'), Var('R')]
+    out.append(Clause(S(A('$predmerge'), (v[0], v[1], A('[]'), v[1])), A('!'), Span('<library>', 81, 1, 81, 32), (('R', v[1]), ), source[4150:4181]))
+    v = [Var('P'), Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Result'), Var('Delta')]
+    out.append(Clause(S(A('$predmerge'), (v[0], S(A('.'), (v[1], v[2])), S(A('.'), (v[3], v[4])), v[5])), S(A(','), (S(A('call'), (v[0], v[6], v[1], v[3])), S(A(','), (A('!'), S(A('$predmerge_'), (v[6], v[0], v[1], v[3], v[2], v[4], v[5])))))), Span('<library>', 82, 1, 82, 121), (('P', v[0]), ('H1', v[1]), ('T1', v[2]), ('H2', v[3]), ('T2', v[4]), ('Result', v[5]), ('Delta', v[6]), ), source[4182:4302]))
+    v = [Var('P'), Var('H1'), Var('H2'), Var('T1'), Var('T2'), Var('R')]
+    out.append(Clause(S(A('$predmerge_'), (A('>'), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[2], v[5])))), S(A('$predmerge'), (v[0], S(A('.'), (v[1], v[3])), v[4], v[5])), Span('<library>', 83, 1, 83, 82), (('P', v[0]), ('H1', v[1]), ('H2', v[2]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[4303:4384]))
+    v = [Var('P'), Var('H1'), Var('_'), Var('T1'), Var('T2'), Var('R')]
+    out.append(Clause(S(A('$predmerge_'), (A('='), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[1], v[5])))), S(A('$predmerge'), (v[0], v[3], v[4], v[5])), Span('<library>', 84, 1, 84, 76), (('P', v[0]), ('H1', v[1]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[4385:4460]))
+    v = [Var('P'), Var('H1'), Var('H2'), Var('T1'), Var('T2'), Var('R')]
+    out.append(Clause(S(A('$predmerge_'), (A('<'), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[1], v[5])))), S(A('$predmerge'), (v[0], v[3], S(A('.'), (v[2], v[4])), v[5])), Span('<library>', 85, 1, 85, 82), (('P', v[0]), ('H1', v[1]), ('H2', v[2]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[4461:4542]))
+    v = [Var('List'), Var('Set')]
+    out.append(Clause(S(A('list_to_ord_set'), (v[0], v[1])), S(A('sort'), (v[0], v[1])), Span('<library>', 86, 1, 86, 47), (('List', v[0]), ('Set', v[1]), ), source[4543:4589]))
+    v = [Var('Sets'), Var('Union'), Var('_'), Var('_'), Var('N'), Var('_')]
+    out.append(Clause(S(A('ord_union'), (v[0], v[1])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[1], A('[]'))))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[2], v[3])))))), S(A(','), (S(A('length'), (v[0], v[4])), S(A('$ord_union_all'), (v[4], v[0], v[1], A('[]'))))))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_union'), (v[0], v[1])))))), v[5])),)))))), Span('<library>', 87, 1, 87, 224), (('Sets', v[0]), ('Union', v[1]), ('N', v[4]), ), source[4590:4813]))
+    v = [Var('N'), Var('Sets0'), Var('Union'), Var('Sets'), Var('Set1'), Var('Set2'), Var('A'), Var('Z'), Var('X'), Var('Sets1'), Var('Y')]
+    out.append(Clause(S(A('$ord_union_all'), (v[0], v[1], v[2], v[3])), S(A(';'), (S(A('->'), (S(A('=:='), (v[0], 1)), S(A('='), (v[1], S(A('.'), (v[2], v[3])))))), S(A(';'), (S(A('->'), (S(A('=:='), (v[0], 2)), S(A(','), (S(A('='), (v[1], S(A('.'), (v[4], S(A('.'), (v[5], v[3])))))), S(A('$ord_union'), (v[4], v[5], v[2])))))), S(A(','), (S(A('is'), (v[6], S(A('>>'), (v[0], 1)))), S(A(','), (S(A('is'), (v[7], S(A('-'), (v[0], v[6])))), S(A(','), (S(A('$ord_union_all'), (v[6], v[1], v[8], v[9])), S(A(','), (S(A('$ord_union_all'), (v[7], v[9], v[10], v[3])), S(A('$ord_union'), (v[8], v[10], v[2])))))))))))))), Span('<library>', 88, 1, 88, 280), (('N', v[0]), ('Sets0', v[1]), ('Union', v[2]), ('Sets', v[3]), ('Set1', v[4]), ('Set2', v[5]), ('A', v[6]), ('Z', v[7]), ('X', v[8]), ('Sets1', v[9]), ('Y', v[10]), ), source[4814:5093]))
+    v = [Var('Set1'), Var('Set2'), Var('Union')]
+    out.append(Clause(S(A('ord_union'), (v[0], v[1], v[2])), S(A('$ord_union'), (v[0], v[1], v[2])), Span('<library>', 89, 1, 89, 65), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ), source[5094:5158]))
+    v = [Var('Set1'), Var('Set2'), Var('Union'), Var('H1'), Var('T1'), Var('_')]
+    out.append(Clause(S(A('$ord_union'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[2], v[1])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[3], v[4])))))), S(A('$ord_union2'), (v[1], v[3], v[4], v[2])))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_union'), (v[0], v[1], v[2])))))), v[5])),)))))), Span('<library>', 90, 1, 90, 224), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ('H1', v[3]), ('T1', v[4]), ), source[5159:5382]))
+    v = [Var('L2'), Var('H1'), Var('T1'), Var('Union'), Var('H2'), Var('T2'), Var('Order'), Var('_')]
+    out.append(Clause(S(A('$ord_union2'), (v[0], v[1], v[2], v[3])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[3], S(A('.'), (v[1], v[2])))))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[4], v[5])))))), S(A(','), (S(A('compare'), (v[6], v[1], v[4])), S(A('$ord_union3'), (v[6], v[1], v[2], v[4], v[5], v[3])))))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('union2'), (v[0], v[1], v[2], v[3])))))), v[7])),)))))), Span('<library>', 91, 1, 91, 252), (('L2', v[0]), ('H1', v[1]), ('T1', v[2]), ('Union', v[3]), ('H2', v[4]), ('T2', v[5]), ('Order', v[6]), ), source[5383:5634]))
+    v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Union'), Var('Union0')]
+    out.append(Clause(S(A('$ord_union3'), (A('<'), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[0], v[5])))), S(A('$ord_union2'), (v[1], v[2], v[3], v[5])))), Span('<library>', 92, 1, 92, 101), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[5635:5735]))
+    v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Union'), Var('Union0')]
+    out.append(Clause(S(A('$ord_union3'), (A('='), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[0], v[5])))), S(A('$ord_union'), (v[1], v[3], v[5])))), Span('<library>', 93, 1, 93, 95), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[5736:5830]))
+    v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Union'), Var('Union0')]
+    out.append(Clause(S(A('$ord_union3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[2], v[5])))), S(A('$ord_union2'), (v[3], v[0], v[1], v[5])))), Span('<library>', 94, 1, 94, 101), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[5831:5931]))
+    v = [Var('Set'), Var('Delete'), Var('Remaining')]
+    out.append(Clause(S(A('ord_subtract'), (v[0], v[1], v[2])), S(A('$ord_subtract'), (v[0], v[1], v[2])), Span('<library>', 95, 1, 95, 81), (('Set', v[0]), ('Delete', v[1]), ('Remaining', v[2]), ), source[5932:6012]))
+    v = [Var('L1'), Var('L2'), Var('Diff'), Var('H1'), Var('T1'), Var('_')]
+    out.append(Clause(S(A('$ord_subtract'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[2], A('[]'))))), S(A(';'), (S(A('->'), (S(A('=='), (v[1], A('[]'))), S(A('='), (v[2], v[0])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[3], v[4])))))), S(A('$ord_diff21'), (v[1], v[3], v[4], v[2])))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_subtract'), (v[0], v[1], v[2])))))), v[5])),)))))))), Span('<library>', 96, 1, 96, 232), (('L1', v[0]), ('L2', v[1]), ('Diff', v[2]), ('H1', v[3]), ('T1', v[4]), ), source[6013:6244]))
+    v = [Var('H1'), Var('T1')]
+    out.append(Clause(S(A('$ord_diff21'), (A('[]'), v[0], v[1], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 97, 1, 97, 36), (('H1', v[0]), ('T1', v[1]), ), source[6245:6280]))
+    v = [Var('H2'), Var('T2'), Var('H1'), Var('T1'), Var('Diff'), Var('Order')]
+    out.append(Clause(S(A('$ord_diff21'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[2], v[0])), S(A('$ord_diff3'), (v[5], v[2], v[3], v[0], v[1], v[4])))), Span('<library>', 98, 1, 98, 107), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Diff', v[4]), ('Order', v[5]), ), source[6281:6387]))
+    v = [Var('_'), Var('_')]
+    out.append(Clause(S(A('$ord_diff12'), (A('[]'), v[0], v[1], A('[]'))), A('true'), Span('<library>', 99, 1, 99, 29), (), source[6388:6416]))
+    v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Diff'), Var('Order')]
+    out.append(Clause(S(A('$ord_diff12'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[0], v[2])), S(A('$ord_diff3'), (v[5], v[0], v[1], v[2], v[3], v[4])))), Span('<library>', 100, 1, 100, 107), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Diff', v[4]), ('Order', v[5]), ), source[6417:6523]))
+    v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Diff')]
+    out.append(Clause(S(A('$ord_diff3'), (A('<'), v[0], v[1], v[2], v[3], S(A('.'), (v[0], v[4])))), S(A('$ord_diff12'), (v[1], v[2], v[3], v[4])), Span('<library>', 101, 1, 101, 81), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Diff', v[4]), ), source[6524:6604]))
+    v = [Var('_'), Var('T1'), Var('_'), Var('T2'), Var('Diff')]
+    out.append(Clause(S(A('$ord_diff3'), (A('='), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_subtract'), (v[1], v[3], v[4])), Span('<library>', 102, 1, 102, 72), (('T1', v[1]), ('T2', v[3]), ('Diff', v[4]), ), source[6605:6676]))
+    v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Diff')]
+    out.append(Clause(S(A('$ord_diff3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_diff21'), (v[3], v[0], v[1], v[4])), Span('<library>', 103, 1, 103, 75), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Diff', v[4]), ), source[6677:6751]))
+    v = [Var('Item'), Var('Set')]
+    out.append(Clause(S(A('ord_memberchk'), (v[0], v[1])), S(A('$ord_memberchk'), (v[0], v[1])), Span('<library>', 104, 1, 104, 57), (('Item', v[0]), ('Set', v[1]), ), source[6752:6808]))
+    v = [Var('Item'), Var('X1'), Var('X2'), Var('X3'), Var('X4'), Var('Xs'), Var('R4'), Var('R2')]
+    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], S(A('.'), (v[2], S(A('.'), (v[3], S(A('.'), (v[4], v[5])))))))))), S(A(','), (A('!'), S(A(','), (S(A('compare'), (v[6], v[0], v[4])), S(A(';'), (S(A('->'), (S(A('='), (v[6], A('>'))), S(A('$ord_memberchk'), (v[0], v[5])))), S(A(';'), (S(A('->'), (S(A('='), (v[6], A('<'))), S(A(','), (S(A('compare'), (v[7], v[0], v[2])), S(A(';'), (S(A('->'), (S(A('='), (v[7], A('>'))), S(A('=='), (v[0], v[3])))), S(A(';'), (S(A('->'), (S(A('='), (v[7], A('<'))), S(A('=='), (v[0], v[1])))), A('true'))))))))), A('true'))))))))), Span('<library>', 105, 1, 105, 220), (('Item', v[0]), ('X1', v[1]), ('X2', v[2]), ('X3', v[3]), ('X4', v[4]), ('Xs', v[5]), ('R4', v[6]), ('R2', v[7]), ), source[6809:7028]))
+    v = [Var('Item'), Var('X1'), Var('X2'), Var('Xs'), Var('R2')]
+    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], S(A('.'), (v[2], v[3])))))), S(A(','), (A('!'), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A(';'), (S(A('->'), (S(A('='), (v[4], A('>'))), S(A('$ord_memberchk'), (v[0], v[3])))), S(A(';'), (S(A('->'), (S(A('='), (v[4], A('<'))), S(A('=='), (v[0], v[1])))), A('true'))))))))), Span('<library>', 106, 1, 106, 141), (('Item', v[0]), ('X1', v[1]), ('X2', v[2]), ('Xs', v[3]), ('R2', v[4]), ), source[7029:7169]))
+    v = [Var('Item'), Var('X1')]
+    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], A('[]'))))), S(A('=='), (v[0], v[1])), Span('<library>', 107, 1, 107, 44), (('Item', v[0]), ('X1', v[1]), ), source[7170:7213]))
+    v = [Var('Set1'), Var('Set2'), Var('Intersection')]
+    out.append(Clause(S(A('ord_intersection'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[2], A('[]'))), S(A('\\+'), (S(A('$ord_intersect'), (v[0], v[1])),)))), S(A('$ord_intersection'), (v[0], v[1], v[2])))), Span('<library>', 108, 1, 108, 153), (('Set1', v[0]), ('Set2', v[1]), ('Intersection', v[2]), ), source[7214:7366]))
+    v = [Var('H1'), Var('T1'), Var('L2')]
+    out.append(Clause(S(A('$ord_intersect'), (S(A('.'), (v[0], v[1])), v[2])), S(A('$ord_intersect_'), (v[2], v[0], v[1])), Span('<library>', 109, 1, 109, 64), (('H1', v[0]), ('T1', v[1]), ('L2', v[2]), ), source[7367:7430]))
+    v = [Var('H2'), Var('T2'), Var('H1'), Var('T1'), Var('Order')]
+    out.append(Clause(S(A('$ord_intersect_'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[2], v[0])), S(A('$ord_intersect__'), (v[4], v[2], v[3], v[0], v[1])))), Span('<library>', 110, 1, 110, 105), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Order', v[4]), ), source[7431:7535]))
+    v = [Var('_'), Var('T1'), Var('H2'), Var('T2')]
+    out.append(Clause(S(A('$ord_intersect__'), (A('<'), v[0], v[1], v[2], v[3])), S(A('$ord_intersect_'), (v[1], v[2], v[3])), Span('<library>', 111, 1, 111, 73), (('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ), source[7536:7608]))
+    v = [Var('_'), Var('_'), Var('_'), Var('_')]
+    out.append(Clause(S(A('$ord_intersect__'), (A('='), v[0], v[1], v[2], v[3])), A('true'), Span('<library>', 112, 1, 112, 37), (), source[7609:7645]))
+    v = [Var('H1'), Var('T1'), Var('_'), Var('T2')]
+    out.append(Clause(S(A('$ord_intersect__'), (A('>'), v[0], v[1], v[2], v[3])), S(A('$ord_intersect_'), (v[3], v[0], v[1])), Span('<library>', 113, 1, 113, 73), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ), source[7646:7718]))
+    v = [Var('_')]
+    out.append(Clause(S(A('$ord_intersection'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 114, 1, 114, 32), (), source[7719:7750]))
+    v = [Var('H1'), Var('T1'), Var('L2'), Var('Int')]
+    out.append(Clause(S(A('$ord_intersection'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A('$ord_isect2'), (v[2], v[0], v[1], v[3])), Span('<library>', 115, 1, 115, 73), (('H1', v[0]), ('T1', v[1]), ('L2', v[2]), ('Int', v[3]), ), source[7751:7823]))
+    v = [Var('_'), Var('_')]
+    out.append(Clause(S(A('$ord_isect2'), (A('[]'), v[0], v[1], A('[]'))), A('true'), Span('<library>', 116, 1, 116, 29), (), source[7824:7852]))
+    v = [Var('H2'), Var('T2'), Var('H1'), Var('T1'), Var('Int'), Var('Order')]
+    out.append(Clause(S(A('$ord_isect2'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[2], v[0])), S(A('$ord_isect3'), (v[5], v[2], v[3], v[0], v[1], v[4])))), Span('<library>', 117, 1, 117, 106), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Int', v[4]), ('Order', v[5]), ), source[7853:7958]))
+    v = [Var('_'), Var('T1'), Var('H2'), Var('T2'), Var('Int')]
+    out.append(Clause(S(A('$ord_isect3'), (A('<'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_isect2'), (v[1], v[2], v[3], v[4])), Span('<library>', 118, 1, 118, 74), (('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Int', v[4]), ), source[7959:8032]))
+    v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Int')]
+    out.append(Clause(S(A('$ord_isect3'), (A('='), v[0], v[1], v[2], v[3], S(A('.'), (v[0], v[4])))), S(A('$ord_intersection'), (v[1], v[3], v[4])), Span('<library>', 119, 1, 119, 81), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Int', v[4]), ), source[8033:8113]))
+    v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Int')]
+    out.append(Clause(S(A('$ord_isect3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_isect2'), (v[3], v[0], v[1], v[4])), Span('<library>', 120, 1, 120, 74), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Int', v[4]), ), source[8114:8187]))
+    v = [Var('Sub'), Var('Super')]
+    out.append(Clause(S(A('ord_subset'), (v[0], v[1])), S(A('$ord_subset'), (v[0], v[1])), Span('<library>', 121, 1, 121, 53), (('Sub', v[0]), ('Super', v[1]), ), source[8188:8240]))
+    v = [Var('_')]
+    out.append(Clause(S(A('$ord_subset'), (A('[]'), v[0])), A('true'), Span('<library>', 122, 1, 122, 22), (), source[8241:8262]))
+    v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Order')]
+    out.append(Clause(S(A('$ord_subset'), (S(A('.'), (v[0], v[1])), S(A('.'), (v[2], v[3])))), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_subset_'), (v[4], v[0], v[1], v[3])))), Span('<library>', 123, 1, 123, 94), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Order', v[4]), ), source[8263:8356]))
+    v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Order')]
+    out.append(Clause(S(A('$ord_subset_'), (A('>'), v[0], v[1], S(A('.'), (v[2], v[3])))), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_subset_'), (v[4], v[0], v[1], v[3])))), Span('<library>', 124, 1, 124, 99), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Order', v[4]), ), source[8357:8455]))
+    v = [Var('_'), Var('T1'), Var('T2')]
+    out.append(Clause(S(A('$ord_subset_'), (A('='), v[0], v[1], v[2])), S(A('$ord_subset'), (v[1], v[2])), Span('<library>', 125, 1, 125, 57), (('T1', v[1]), ('T2', v[2]), ), source[8456:8512]))
+    v = [Var('Set'), Var('El'), Var('Add')]
+    out.append(Clause(S(A('ord_add_element'), (v[0], v[1], v[2])), S(A('$ord_add_element'), (v[0], v[1], v[2])), Span('<library>', 126, 1, 126, 67), (('Set', v[0]), ('El', v[1]), ('Add', v[2]), ), source[8513:8579]))
+    v = [Var('El')]
+    out.append(Clause(S(A('$ord_add_element'), (A('[]'), v[0], S(A('.'), (v[0], A('[]'))))), A('true'), Span('<library>', 127, 1, 127, 34), (('El', v[0]), ), source[8580:8613]))
+    v = [Var('H'), Var('T'), Var('El'), Var('Add'), Var('Order')]
+    out.append(Clause(S(A('$ord_add_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_addel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 128, 1, 128, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Add', v[3]), ('Order', v[4]), ), source[8614:8710]))
+    v = [Var('H'), Var('T'), Var('El'), Var('Add')]
+    out.append(Clause(S(A('$ord_addel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_add_element'), (v[1], v[2], v[3])), Span('<library>', 129, 1, 129, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Add', v[3]), ), source[8711:8782]))
+    v = [Var('H'), Var('T'), Var('_')]
+    out.append(Clause(S(A('$ord_addel'), (A('='), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 130, 1, 130, 35), (('H', v[0]), ('T', v[1]), ), source[8783:8817]))
+    v = [Var('H'), Var('T'), Var('El')]
+    out.append(Clause(S(A('$ord_addel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[2], S(A('.'), (v[0], v[1])))))), A('true'), Span('<library>', 131, 1, 131, 40), (('H', v[0]), ('T', v[1]), ('El', v[2]), ), source[8818:8857]))
+    v = [Var('Set'), Var('El'), Var('Del')]
+    out.append(Clause(S(A('ord_del_element'), (v[0], v[1], v[2])), S(A('$ord_del_element'), (v[0], v[1], v[2])), Span('<library>', 132, 1, 132, 67), (('Set', v[0]), ('El', v[1]), ('Del', v[2]), ), source[8858:8924]))
+    v = [Var('_')]
+    out.append(Clause(S(A('$ord_del_element'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 133, 1, 133, 31), (), source[8925:8955]))
+    v = [Var('H'), Var('T'), Var('El'), Var('Del'), Var('Order')]
+    out.append(Clause(S(A('$ord_del_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_delel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 134, 1, 134, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ('Order', v[4]), ), source[8956:9052]))
+    v = [Var('H'), Var('T'), Var('El'), Var('Del')]
+    out.append(Clause(S(A('$ord_delel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_del_element'), (v[1], v[2], v[3])), Span('<library>', 135, 1, 135, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ), source[9053:9124]))
+    v = [Var('_'), Var('T'), Var('_')]
+    out.append(Clause(S(A('$ord_delel'), (A('='), v[0], v[1], v[2], v[1])), A('true'), Span('<library>', 136, 1, 136, 31), (('T', v[1]), ), source[9125:9155]))
+    v = [Var('H'), Var('T'), Var('_')]
+    out.append(Clause(S(A('$ord_delel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 137, 1, 137, 35), (('H', v[0]), ('T', v[1]), ), source[9156:9190]))
     return out

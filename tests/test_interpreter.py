@@ -491,6 +491,39 @@ def test_a_program_may_define_its_own_repeat_and_term_variables(kb):
     assert kb.query("findall(x, repeat, L)") == [{"L": [Atom("x")]}]
     assert kb.query("term_variables(f(X), V)") == [{"V": Atom("none")}]
 
+def test_a_program_may_define_its_own_ordsets_and_predsort(kb):
+    # library predicates, as in SWI-Prolog's library(ordsets) and library(sort): a program's
+    # own definition wins for its callers, while the library's other predicates keep calling
+    # the library's own (ord_union/2 merges with the library's ord_union/3)
+    kb.load("ord_union(_, _, mine). predsort(_, _, mine).")
+    assert kb.query("ord_union([a], [b], U)") == [{"U": Atom("mine")}]
+    assert kb.query("predsort(compare, [b, a], L)") == [{"L": Atom("mine")}]
+    assert kb.query("ord_union([[b], [a]], U)") == [{"U": [Atom("a"), Atom("b")]}]
+    assert kb.query("ord_subtract([a, b], [a], D)") == [{"D": [Atom("b")]}]
+
+
+def test_the_new_library_predicates_run_in_a_rule_over_stored_events(kb):
+    # neither compiled SQL nor the interpreter's compiled sub-goals may stumble on them: the
+    # rule answers the same with and without SQL
+    kb.load("""
+        by_time(O, _-T1, _-T2) :- compare(O, T1, T2).
+        seen_sorted(L) :- findall(O-T, seen(O)^T, Ps), predsort(by_time, Ps, L).
+        seen_set(S) :- findall(O, seen(O)^_, Os), list_to_ord_set(Os, S0), ord_union(S0, [zz], S1),
+            ord_subtract(S1, [b], S2), ord_del_element(S2, zz, S3), ord_add_element(S3, a, S).
+        short_names(N) :- seen(O)^_, sub_string(O, 0, 1, _, N), unify_with_occurs_check(N, _),
+            char_type(x, alpha).
+    """)
+    kb.add_many(["seen(c)^3", "seen(b)^1", "seen(c)^2"])
+    for sql in (True, False):
+        kb.sql_enabled = sql
+        assert kb.query("seen_sorted(L)") == [
+            {"L": [Struct("-", (Atom("b"), 1.0)), Struct("-", (Atom("c"), 2.0)),
+                   Struct("-", (Atom("c"), 3.0))]}], sql
+        assert kb.query("seen_set(S)") == [{"S": [Atom("a"), Atom("c")]}], sql
+        assert kb.query("short_names(N)") == [{"N": "b"}, {"N": "c"}, {"N": "c"}], sql
+        assert kb.query("ord_memberchk(c, [a, b, c]), \\+ ord_subset([d], [a])") == [{}], sql
+
+
 def test_endless_loop_stops(kb):
     kb.load("loop :- loop. loop2(X) :- loop2(f(X)).")
     with pytest.raises(SLRTimeout):   # how soon it gives up: benchmarks/bench_big_terms.py
