@@ -381,7 +381,7 @@ def _occurs(v: Var, t: Any, deadline: float | None) -> bool:
     return False
 
 
-@det("unify_with_occurs_check", 2)
+@det("$unify_with_occurs_check", 2)
 def _unify_with_occurs_check(m, a):
     """ISO 8.2.2: unify, failing where a variable would be bound to a term it occurs in."""
     mark = len(m.trail)
@@ -681,7 +681,7 @@ def _sub_atom(m, a):
     return _sub_text(m, a, Atom, "atom")
 
 
-@nondet("sub_string", 5)
+@nondet("$sub_string", 5)
 def _sub_string(m, a):
     """sub_string/5 as SWI-Prolog's: any text (atom, string, number) in, strings out."""
     return _sub_text(m, a, String, "string")
@@ -958,13 +958,13 @@ def _char_type(m, a, codes: bool):
         m.undo_to(mark)
 
 
-@nondet("char_type", 2)
+@nondet("$char_type", 2)
 def _char_type2(m, a):
     """char_type(Char, Type) as SWI-Prolog's (docs/language.md: where it asks for Char)."""
     return _char_type(m, a, False)
 
 
-@nondet("code_type", 2)
+@nondet("$code_type", 2)
 def _code_type2(m, a):
     """code_type(Code, Type): char_type/2 with codes for characters."""
     return _char_type(m, a, True)
@@ -2361,6 +2361,10 @@ predsort(P, L, Sorted) :- '$skip_list'(N, L, Tail), ( Tail == [] -> '$predsort'(
 '$predmerge_'('>', P, H1, H2, T1, T2, [H2|R]) :- '$predmerge'(P, [H1|T1], T2, R).
 '$predmerge_'('=', P, H1, _, T1, T2, [H1|R]) :- '$predmerge'(P, T1, T2, R).
 '$predmerge_'('<', P, H1, H2, T1, T2, [H1|R]) :- '$predmerge'(P, T1, [H2|T2], R).
+sub_string(String, Before, Length, After, Sub) :- '$sub_string'(String, Before, Length, After, Sub).
+char_type(Char, Type) :- '$char_type'(Char, Type).
+code_type(Code, Type) :- '$code_type'(Code, Type).
+unify_with_occurs_check(X, Y) :- '$unify_with_occurs_check'(X, Y).
 list_to_ord_set(List, Set) :- sort(List, Set).
 ord_union(Sets, Union) :- ( Sets == [] -> Union = [] ; nonvar(Sets), Sets = [_|_] -> length(Sets, N), '$ord_union_all'(N, Sets, Union, []) ; throw(error(existence_error(matching_rule, ordsets:ord_union(Sets, Union)), _)) ).
 '$ord_union_all'(N, Sets0, Union, Sets) :- ( N =:= 1 -> Sets0 = [Union|Sets] ; N =:= 2 -> Sets0 = [Set1, Set2|Sets], '$ord_union'(Set1, Set2, Union) ; A is N >> 1, Z is N - A, '$ord_union_all'(A, Sets0, X, Sets1), '$ord_union_all'(Z, Sets1, Y, Sets), '$ord_union'(X, Y, Union) ).

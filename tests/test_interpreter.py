@@ -491,12 +491,18 @@ def test_a_program_may_define_its_own_repeat_and_term_variables(kb):
     assert kb.query("findall(x, repeat, L)") == [{"L": [Atom("x")]}]
     assert kb.query("term_variables(f(X), V)") == [{"V": Atom("none")}]
 
-def test_a_program_may_define_its_own_ordsets_and_predsort(kb):
+def test_a_program_may_define_its_own_ordsets_predsort_and_text_predicates(kb):
     # library predicates, as in SWI-Prolog's library(ordsets) and library(sort): a program's
     # own definition wins for its callers, while the library's other predicates keep calling
     # the library's own (ord_union/2 merges with the library's ord_union/3)
-    kb.load("ord_union(_, _, mine). predsort(_, _, mine).")
+    kb.load("ord_union(_, _, mine). predsort(_, _, mine). sub_string(_, _, _, _, mine). "
+            "char_type(_, mine). code_type(_, mine). unify_with_occurs_check(_, mine).")
     assert kb.query("ord_union([a], [b], U)") == [{"U": Atom("mine")}]
+    # and so are the builtins added with them (a store whose program defined one of them
+    # before slr_sql had it keeps opening, with its definition, as term_variables/2's does)
+    assert kb.query("sub_string(a, B, L, A, S), char_type(a, T), code_type(0'a, T), "
+                    "unify_with_occurs_check(X, U)") == [
+        {"S": Atom("mine"), "T": Atom("mine"), "U": Atom("mine")}]
     assert kb.query("predsort(compare, [b, a], L)") == [{"L": Atom("mine")}]
     assert kb.query("ord_union([[b], [a]], U)") == [{"U": [Atom("a"), Atom("b")]}]
     assert kb.query("ord_subtract([a, b], [a], D)") == [{"D": [Atom("b")]}]
