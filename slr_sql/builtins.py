@@ -827,6 +827,7 @@ _CHAR_OF_ARG: dict[tuple[str, int], Callable[[int], Any]] = {
     ("to_lower", 1): _lower_of, ("to_upper", 1): _upper_of,
     ("digit", 1): lambda w: 48 + w if 0 <= w <= 9 else None,
     ("xdigit", 1): lambda w: (48 + w if w <= 9 else 87 + w) if 0 <= w <= 15 else None,
+    ("paren", 1): lambda c: {41: 40, 93: 91, 125: 123}.get(c),
 }
 # classes whose characters SWI-Prolog enumerates from a small set, exactly this one
 _CHARS_OF_TYPE: dict[tuple[str, int], Any] = {
@@ -837,8 +838,11 @@ _CHARS_OF_TYPE: dict[tuple[str, int], Any] = {
 
 
 def _code_of(t: Any) -> Any:
-    """The code of a character argument: a one-character atom or string, or a code."""
+    """The code of a character argument: a one-character atom or string, or a code;
+    ``end_of_file`` (or -1) is -1."""
     tt = type(t)
+    if tt is Atom and t == "end_of_file":
+        return -1
     if (tt is Atom or tt is String) and len(t) == 1 and t != "[]":
         return ord(t)
     if tt is int:
@@ -930,6 +934,10 @@ def _char_type(m, a, codes: bool):
     if type(t) is Var:
         raise instantiation_error()
     key = (name, arity)
+    if key == ("end_of_file", 0):
+        if m.unify(x, -1 if codes else Atom("end_of_file")):
+            yield None
+        return
     arg = deref(args[0]) if arity else None
     if arity and type(arg) is not Var:
         back = _CHAR_OF_ARG.get(key)
