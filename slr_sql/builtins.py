@@ -362,6 +362,85 @@ def _skip_list(m, a):
     return m.unify(a[0], len(items)) and m.unify(a[2], tail)
 
 
+def _ord_merge(op: str, xs: list, ys: list, m) -> list:
+    """The ordered-set operation ``op`` of two proper lists, as library(ordsets)' clauses
+    compute it (the same comparisons in the same order), in one pass."""
+    out: list = []
+    i = j = 0
+    nx, ny = len(xs), len(ys)
+    clock = _CELLS_PER_DEADLINE_CHECK
+    while i < nx and j < ny:
+        clock -= 1
+        if not clock:
+            clock = _CELLS_PER_DEADLINE_CHECK
+            m.check_deadline()
+        c = compare_terms(xs[i], ys[j])
+        if c < 0:
+            if op != "intersection":
+                out.append(xs[i])
+            i += 1
+        elif c > 0:
+            if op == "union":
+                out.append(ys[j])
+            j += 1
+        else:
+            if op != "subtract":
+                out.append(xs[i])
+            i += 1
+            j += 1
+    if op != "intersection":
+        out.extend(xs[i:])
+    if op == "union":
+        out.extend(ys[j:])
+    return out
+
+
+def _ord_memberchk(item: Any, xs: list) -> bool:
+    """library(ordsets)' ord_memberchk/2 on a proper list: its comparisons, four at a time."""
+    i, n = 0, len(xs)
+    while n - i >= 4:
+        r4 = compare_terms(item, xs[i + 3])
+        if r4 > 0:
+            i += 4
+            continue
+        if r4 == 0:
+            return True
+        r2 = compare_terms(item, xs[i + 1])
+        if r2 > 0:
+            return compare_terms(item, xs[i + 2]) == 0
+        return r2 == 0 or compare_terms(item, xs[i]) == 0
+    if n - i >= 2:
+        r2 = compare_terms(item, xs[i + 1])
+        if r2 > 0:
+            return n - i == 3 and compare_terms(item, xs[i + 2]) == 0
+        return r2 == 0 or compare_terms(item, xs[i]) == 0
+    return n - i == 1 and compare_terms(item, xs[i]) == 0
+
+
+def _proper(t: Any) -> list | None:
+    items, tail = list_items(t)
+    return items if type(tail) is Atom and tail == "[]" else None
+
+
+@det("$ord_fast", 4)
+def _ord_fast(m, a):
+    # '$ord_fast'(Op, A, B, Out): the ordered-set operation in one pass where it answers as
+    # the library's clauses would: proper lists in, and (union, subtract, intersection) an
+    # Out that is unbound and in neither list, so binding it cannot change a comparison.
+    # Fails where it does not apply: the library's clauses run then.
+    op = str(deref(a[0]))
+    if op == "memberchk":
+        ys = _proper(a[2])
+        return ys is not None and m.unify(a[3], Atom("true" if _ord_memberchk(a[1], ys) else "false"))
+    out = deref(a[3])
+    if type(out) is not Var:
+        return False
+    xs, ys = _proper(a[1]), _proper(a[2])
+    if xs is None or ys is None or _occurs(out, Struct("-", (a[1], a[2])), m.deadline):
+        return False
+    return m.unify(out, make_list(_ord_merge(op, xs, ys, m)))
+
+
 def _occurs(v: Var, t: Any, deadline: float | None) -> bool:
     """Whether the unbound variable ``v`` occurs in ``t`` (each shared compound walked once)."""
     stack = [t]
@@ -2375,14 +2454,15 @@ code_type(Code, Type) :- '$code_type'(Code, Type).
 unify_with_occurs_check(X, Y) :- '$unify_with_occurs_check'(X, Y).
 list_to_ord_set(List, Set) :- sort(List, Set).
 ord_union(Sets, Union) :- ( Sets == [] -> Union = [] ; nonvar(Sets), Sets = [_|_] -> length(Sets, N), '$ord_union_all'(N, Sets, Union, []) ; throw(error(existence_error(matching_rule, ordsets:ord_union(Sets, Union)), _)) ).
-'$ord_union_all'(N, Sets0, Union, Sets) :- ( N =:= 1 -> Sets0 = [Union|Sets] ; N =:= 2 -> Sets0 = [Set1, Set2|Sets], '$ord_union'(Set1, Set2, Union) ; A is N >> 1, Z is N - A, '$ord_union_all'(A, Sets0, X, Sets1), '$ord_union_all'(Z, Sets1, Y, Sets), '$ord_union'(X, Y, Union) ).
-ord_union(Set1, Set2, Union) :- '$ord_union'(Set1, Set2, Union).
+'$ord_union_all'(N, Sets0, Union, Sets) :- ( N =:= 1 -> Sets0 = [Union|Sets] ; N =:= 2 -> Sets0 = [Set1, Set2|Sets], '$ord_union_f'(Set1, Set2, Union) ; A is N >> 1, Z is N - A, '$ord_union_all'(A, Sets0, X, Sets1), '$ord_union_all'(Z, Sets1, Y, Sets), '$ord_union_f'(X, Y, Union) ).
+ord_union(Set1, Set2, Union) :- '$ord_union_f'(Set1, Set2, Union).
+'$ord_union_f'(Set1, Set2, Union) :- ( '$ord_fast'(union, Set1, Set2, Union) -> true ; '$ord_union'(Set1, Set2, Union) ).
 '$ord_union'(Set1, Set2, Union) :- ( Set1 == [] -> Union = Set2 ; nonvar(Set1), Set1 = [H1|T1] -> '$ord_union2'(Set2, H1, T1, Union) ; throw(error(existence_error(matching_rule, ordsets:ord_union(Set1, Set2, Union)), _)) ).
 '$ord_union2'(L2, H1, T1, Union) :- ( L2 == [] -> Union = [H1|T1] ; nonvar(L2), L2 = [H2|T2] -> compare(Order, H1, H2), '$ord_union3'(Order, H1, T1, H2, T2, Union) ; throw(error(existence_error(matching_rule, ordsets:union2(L2, H1, T1, Union)), _)) ).
 '$ord_union3'('<', H1, T1, H2, T2, Union) :- Union = [H1|Union0], '$ord_union2'(T1, H2, T2, Union0).
 '$ord_union3'('=', H1, T1, _, T2, Union) :- Union = [H1|Union0], '$ord_union'(T1, T2, Union0).
 '$ord_union3'('>', H1, T1, H2, T2, Union) :- Union = [H2|Union0], '$ord_union2'(T2, H1, T1, Union0).
-ord_subtract(Set, Delete, Remaining) :- '$ord_subtract'(Set, Delete, Remaining).
+ord_subtract(Set, Delete, Remaining) :- ( '$ord_fast'(subtract, Set, Delete, Remaining) -> true ; '$ord_subtract'(Set, Delete, Remaining) ).
 '$ord_subtract'(L1, L2, Diff) :- ( L1 == [] -> Diff = [] ; L2 == [] -> Diff = L1 ; nonvar(L1), L1 = [H1|T1] -> '$ord_diff21'(L2, H1, T1, Diff) ; throw(error(existence_error(matching_rule, ordsets:ord_subtract(L1, L2, Diff)), _)) ).
 '$ord_diff21'([], H1, T1, [H1|T1]).
 '$ord_diff21'([H2|T2], H1, T1, Diff) :- compare(Order, H1, H2), '$ord_diff3'(Order, H1, T1, H2, T2, Diff).
@@ -2391,11 +2471,11 @@ ord_subtract(Set, Delete, Remaining) :- '$ord_subtract'(Set, Delete, Remaining).
 '$ord_diff3'('<', H1, T1, H2, T2, [H1|Diff]) :- '$ord_diff12'(T1, H2, T2, Diff).
 '$ord_diff3'('=', _, T1, _, T2, Diff) :- '$ord_subtract'(T1, T2, Diff).
 '$ord_diff3'('>', H1, T1, _, T2, Diff) :- '$ord_diff21'(T2, H1, T1, Diff).
-ord_memberchk(Item, Set) :- '$ord_memberchk'(Item, Set).
+ord_memberchk(Item, Set) :- ( '$ord_fast'(memberchk, Item, Set, In) -> In == true ; '$ord_memberchk'(Item, Set) ).
 '$ord_memberchk'(Item, [X1, X2, X3, X4|Xs]) :- !, compare(R4, Item, X4), ( R4 = '>' -> '$ord_memberchk'(Item, Xs) ; R4 = '<' -> compare(R2, Item, X2), ( R2 = '>' -> Item == X3 ; R2 = '<' -> Item == X1 ; true ) ; true ).
 '$ord_memberchk'(Item, [X1, X2|Xs]) :- !, compare(R2, Item, X2), ( R2 = '>' -> '$ord_memberchk'(Item, Xs) ; R2 = '<' -> Item == X1 ; true ).
 '$ord_memberchk'(Item, [X1]) :- Item == X1.
-ord_intersection(Set1, Set2, Intersection) :- ( Intersection == [] -> \+ '$ord_intersect'(Set1, Set2) ; '$ord_intersection'(Set1, Set2, Intersection) ).
+ord_intersection(Set1, Set2, Intersection) :- ( Intersection == [] -> \+ '$ord_intersect'(Set1, Set2) ; '$ord_fast'(intersection, Set1, Set2, Intersection) -> true ; '$ord_intersection'(Set1, Set2, Intersection) ).
 '$ord_intersect'([H1|T1], L2) :- '$ord_intersect_'(L2, H1, T1).
 '$ord_intersect_'([H2|T2], H1, T1) :- compare(Order, H1, H2), '$ord_intersect__'(Order, H1, T1, H2, T2).
 '$ord_intersect__'('<', _, T1, H2, T2) :- '$ord_intersect_'(T1, H2, T2).

@@ -508,6 +508,18 @@ def test_a_program_may_define_its_own_ordsets_predsort_and_text_predicates(kb):
     assert kb.query("ord_subtract([a, b], [a], D)") == [{"D": [Atom("b")]}]
 
 
+def test_ordered_sets_of_proper_lists_are_merged_in_one_step(kb):
+    # ord_union/3, ord_subtract/3, ord_intersection/3 and ord_memberchk/2 of proper lists (and
+    # an unbound result) take one pass in Python, not an inference per element
+    kb.load("""
+        sizes(NU, ND, NI) :- numlist(1, 5000, A), numlist(2500, 7500, B), ord_union(A, B, U),
+            ord_subtract(A, B, D), ord_intersection(A, B, I), ord_memberchk(4999, A),
+            \\+ ord_memberchk(0, B), ord_union([A, B], U2), U2 == U,
+            length(U, NU), length(D, ND), length(I, NI).
+    """)
+    assert kb.query("sizes(NU, ND, NI)", max_steps=200) == [{"NU": 7500, "ND": 2499, "NI": 2501}]
+
+
 def test_the_new_library_predicates_run_in_a_rule_over_stored_events(kb):
     # neither compiled SQL nor the interpreter's compiled sub-goals may stumble on them: the
     # rule answers the same with and without SQL
