@@ -939,12 +939,13 @@ def _char_class_value(m, out: Any, kind: str, value: Any, codes: bool) -> bool:
     return m.unify(out, value)
 
 
-def _same_code(t: Any, value: int) -> bool:
-    """Whether a bound argument names the code ``value`` (a character or a code)."""
-    tt = type(t)
-    if (tt is Atom or tt is String) and len(t) == 1:
-        return ord(t) == value
-    return tt is int and t == value
+def _arg_code(t: Any) -> int:
+    """The code of a class's bound argument (``upper(a)``, ``digit(5)``): end_of_file is
+    none."""
+    c = _code_of(t)
+    if c == -1:
+        raise type_error("character", t)
+    return c
 
 
 def _char_type_check(m, c: int, name: str, arity: int, args: tuple, codes: bool) -> bool:
@@ -963,16 +964,12 @@ def _char_type_check(m, c: int, name: str, arity: int, args: tuple, codes: bool)
     arg = deref(args[0])
     if type(arg) is Var:
         return _char_class_value(m, arg, kind, value, codes)
-    if kind == _WEIGHT:
-        return type(arg) is int and arg == value
-    if _same_code(arg, value):
+    w = _arg_code(arg)   # a character or a code (a weight too), else SWI-Prolog's error
+    if w == value:
         return True
     # to_lower(U) also holds where c is U's lower case (to_lower('A') of 'a', of 'A' itself)
     back = {"to_lower": _lower_of, "to_upper": _upper_of}.get(name)
-    if back is not None and (type(arg) is int or type(arg) in (Atom, String) and len(arg) == 1):
-        w = _code_of(arg)
-        return w != -1 and back(w) == c
-    return False
+    return back is not None and back(w) == c
 
 
 def _char_type(m, a, codes: bool):
@@ -1022,9 +1019,7 @@ def _char_type(m, a, codes: bool):
         back = _CHAR_OF_ARG.get(key)
         if back is None:
             raise instantiation_error()
-        w = _code_of(arg)
-        if w == -1:   # end_of_file is no character
-            raise type_error("character", arg)
+        w = _arg_code(arg)
         if key in (("digit", 1), ("xdigit", 1)) and type(arg) is not int:
             return   # a character is no weight
         c = back(w)
