@@ -975,6 +975,7 @@ def _char_type_check(m, c: int, name: str, arity: int, args: tuple, codes: bool)
 def _char_type(m, a, codes: bool):
     x = deref(a[0])
     t = deref(a[1])
+    c = _code_of(x) if type(x) is not Var else None   # as SWI-Prolog: the character first
     if type(t) is not Var and not (type(t) is Atom and t != "[]" or type(t) is Struct):
         raise type_error("char_type", t)
     if type(t) is Struct:
@@ -983,8 +984,7 @@ def _char_type(m, a, codes: bool):
         name, arity, args = str(t), 0, ()
     if type(t) is not Var and (name, arity) not in _CHAR_TYPE and (name, arity) != ("end_of_file", 0):
         raise type_error("char_type", t)
-    if type(x) is not Var:
-        c = _code_of(x)
+    if c is not None:
         if type(t) is not Var:
             if _char_type_check(m, c, name, arity, args, codes):
                 yield None
