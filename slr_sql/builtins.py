@@ -12,6 +12,7 @@ import functools
 import gc
 import math
 import sys
+import unicodedata as _ud
 from typing import Any, Callable, Iterator
 
 from .arith import (apply_binary, evaluate, evaluation_error, instantiation_error, iso_error,
@@ -353,6 +354,149 @@ def _term_variables(m, a):
     return m.unify(a[1], make_list(term_vars(a[0], m.deadline)))
 
 
+@det("$skip_list", 3)
+def _skip_list(m, a):
+    # SWI-Prolog's '$skip_list'(Length, List, Tail): the cells of List before Tail, the first
+    # thing that is no list cell (unbound, [], another term; a cell again on a cyclic list)
+    items, tail = list_items(a[1])
+    return m.unify(a[0], len(items)) and m.unify(a[2], tail)
+
+
+def _ord_merge(op: str, xs: list, ys: list, m) -> list:
+    """The ordered-set operation ``op`` of two proper lists, as library(ordsets)' clauses
+    compute it (the same comparisons in the same order), in one pass."""
+    out: list = []
+    i = j = 0
+    nx, ny = len(xs), len(ys)
+    clock = _CELLS_PER_DEADLINE_CHECK
+    while i < nx and j < ny:
+        clock -= 1
+        if not clock:
+            clock = _CELLS_PER_DEADLINE_CHECK
+            m.check_deadline()
+        c = compare_terms(xs[i], ys[j])
+        if c < 0:
+            if op != "intersection":
+                out.append(xs[i])
+            i += 1
+        elif c > 0:
+            if op == "union":
+                out.append(ys[j])
+            j += 1
+        else:
+            if op != "subtract":
+                out.append(xs[i])
+            i += 1
+            j += 1
+    if op != "intersection":
+        out.extend(xs[i:])
+    if op == "union":
+        out.extend(ys[j:])
+    return out
+
+
+def _ord_memberchk(item: Any, xs: list) -> bool:
+    """library(ordsets)' ord_memberchk/2 on a proper list: its comparisons, four at a time."""
+    i, n = 0, len(xs)
+    while n - i >= 4:
+        r4 = compare_terms(item, xs[i + 3])
+        if r4 > 0:
+            i += 4
+            continue
+        if r4 == 0:
+            return True
+        r2 = compare_terms(item, xs[i + 1])
+        if r2 > 0:
+            return compare_terms(item, xs[i + 2]) == 0
+        return r2 == 0 or compare_terms(item, xs[i]) == 0
+    if n - i >= 2:
+        r2 = compare_terms(item, xs[i + 1])
+        if r2 > 0:
+            return n - i == 3 and compare_terms(item, xs[i + 2]) == 0
+        return r2 == 0 or compare_terms(item, xs[i]) == 0
+    return n - i == 1 and compare_terms(item, xs[i]) == 0
+
+
+def _proper(t: Any) -> list | None:
+    items, tail = list_items(t)
+    return items if type(tail) is Atom and tail == "[]" else None
+
+
+@det("$ord_fast", 4)
+def _ord_fast(m, a):
+    # '$ord_fast'(Op, A, B, Out): the ordered-set operation in one pass where it answers as
+    # the library's clauses would: proper lists in, and (union, subtract, intersection) an
+    # Out that is unbound and in neither list, so binding it cannot change a comparison.
+    # Fails where it does not apply: the library's clauses run then.
+    op = str(deref(a[0]))
+    if op == "memberchk":
+        ys = _proper(a[2])
+        return ys is not None and m.unify(a[3], Atom("true" if _ord_memberchk(a[1], ys) else "false"))
+    out = deref(a[3])
+    if type(out) is not Var:
+        return False
+    xs, ys = _proper(a[1]), _proper(a[2])
+    if xs is None or ys is None or _occurs(out, Struct("-", (a[1], a[2])), m.deadline):
+        return False
+    return m.unify(out, make_list(_ord_merge(op, xs, ys, m)))
+
+
+def _occurs(v: Var, t: Any, deadline: float | None) -> bool:
+    """Whether the unbound variable ``v`` occurs in ``t`` (each shared compound walked once)."""
+    stack = [t]
+    seen: set[int] = set()
+    clock = NODES_BETWEEN_CLOCK_CHECKS
+    while stack:
+        x = deref(stack.pop())
+        if x is v:
+            return True
+        if type(x) is Struct and id(x) not in seen:
+            seen.add(id(x))
+            clock -= 1
+            if not clock:
+                clock = NODES_BETWEEN_CLOCK_CHECKS
+                check_deadline(deadline)
+            stack.extend(x.args)
+    return False
+
+
+@det("$unify_with_occurs_check", 2)
+def _unify_with_occurs_check(m, a):
+    """ISO 8.2.2: unify, failing where a variable would be bound to a term it occurs in."""
+    mark = len(m.trail)
+    stack = [(a[0], a[1])]
+    # pairs of compounds already unified: shared (and cyclic) terms are walked as graphs
+    seen: set[tuple[int, int]] = set()
+    clock = NODES_BETWEEN_CLOCK_CHECKS
+    while stack:
+        x, y = stack.pop()
+        x, y = deref(x), deref(y)
+        if x is y:
+            continue
+        clock -= 1
+        if not clock:
+            clock = NODES_BETWEEN_CLOCK_CHECKS
+            check_deadline(m.deadline)
+        if type(x) is Var or type(y) is Var:
+            v, t = (x, y) if type(x) is Var else (y, x)
+            if type(t) is not Var and _occurs(v, t, m.deadline):
+                m.undo_to(mark)
+                return False
+            m.unify(v, t)
+        elif type(x) is Struct and type(y) is Struct:
+            if x.name != y.name or len(x.args) != len(y.args):
+                m.undo_to(mark)
+                return False
+            key = (id(x), id(y))
+            if key not in seen:
+                seen.add(key)
+                stack.extend(zip(reversed(x.args), reversed(y.args)))
+        elif not m.unify(x, y):
+            m.undo_to(mark)
+            return False
+    return True
+
+
 # -- atoms and strings -------------------------------------------------------------------------------
 
 def text_of(t: Any, what: str = "atomic") -> str:
@@ -613,7 +757,17 @@ def _upcase(m, a):
 
 @nondet("sub_atom", 5)
 def _sub_atom(m, a):
-    s = _atom_text(a[0], "atom")
+    return _sub_text(m, a, Atom, "atom")
+
+
+@nondet("$sub_string", 5)
+def _sub_string(m, a):
+    """sub_string/5 as SWI-Prolog's: any text (atom, string, number) in, strings out."""
+    return _sub_text(m, a, String, "string")
+
+
+def _sub_text(m, a, make: Callable[[str], Any], what: str):
+    s = _atom_text(a[0], what, what)
     bounds = []
     for k in (1, 2, 3):
         v = _length_argument(a[k])
@@ -623,7 +777,7 @@ def _sub_atom(m, a):
     sub = deref(a[4])
     n = len(s)
     if type(sub) is not Var:
-        t = _atom_text(sub, "atom")
+        t = _atom_text(sub, what, what)
         start = s.find(t)
         while start >= 0:
             mark = len(m.trail)
@@ -643,9 +797,259 @@ def _sub_atom(m, a):
         for length in lengths:
             mark = len(m.trail)
             if m.unify(a[1], b) and m.unify(a[2], length) and m.unify(a[3], n - b - length) \
-                    and m.unify(sub, Atom(s[b:b + length])):
+                    and m.unify(sub, make(s[b:b + length])):
                 yield None
             m.undo_to(mark)
+
+
+# -- char_type/2, code_type/2 ------------------------------------------------------------------
+# SWI-Prolog's character classes, in the order it enumerates them for a given character (csymf
+# twice, as SWI-Prolog 9 lists it). Each test takes a code and gives None (not of the class),
+# True (a class without argument) or the argument: a code ("char": a character for
+# char_type/2, a code for code_type/2) or a weight (an integer for both). ASCII is as
+# SWI-Prolog's; beyond it the classes come from Unicode's categories (SWI-Prolog asks the C
+# library's locale tables, which differ at some characters).
+
+# iswspace() of the C library: the 21 characters SWI-Prolog enumerates for space
+_SPACES = (9, 10, 11, 12, 13, 32, 0x1680, 0x2000, 0x2001, 0x2002, 0x2003, 0x2004, 0x2005,
+           0x2006, 0x2008, 0x2009, 0x200A, 0x2028, 0x2029, 0x205F, 0x3000)
+_SPACE_SET = frozenset(_SPACES)
+_PROLOG_SYMBOLS = frozenset(map(ord, "#$&*+-./:<=>?@\\^~"))
+
+
+def _cat(c: int) -> str:
+    return _ud.category(chr(c))
+
+
+def _is_alnum(c: int) -> bool:
+    cat = _cat(c)
+    return cat[0] == "L" or cat == "Nd"
+
+
+def _is_alpha(c: int) -> bool:   # iswalpha: letters, and the digits beyond ASCII's
+    cat = _cat(c)
+    return cat[0] == "L" or (cat == "Nd" and c > 127)
+
+
+def _is_cntrl(c: int) -> bool:
+    return _cat(c) == "Cc" or c in (0x2028, 0x2029)
+
+
+def _is_print(c: int) -> bool:
+    return not _is_cntrl(c) and _cat(c) not in ("Cn", "Cs", "Co")
+
+
+def _is_graph(c: int) -> bool:
+    return _is_print(c) and c not in _SPACE_SET
+
+
+def _upper_of(c: int) -> int:
+    u = chr(c).upper()
+    return ord(u) if len(u) == 1 else c
+
+
+def _lower_of(c: int) -> int:
+    u = chr(c).lower()
+    return ord(u) if len(u) == 1 else c
+
+
+def _xdigit(c: int) -> Any:
+    if 48 <= c <= 57:
+        return c - 48
+    if 97 <= c <= 102 or 65 <= c <= 70:
+        return (c | 32) - 87
+    return None
+
+
+_CHAR, _WEIGHT = "char", "weight"
+# (name, arity, test, kind of the argument)
+_CHAR_TYPES: list[tuple[str, int, Callable[[int], Any], str]] = [
+    ("alnum", 0, _is_alnum, ""),
+    ("alpha", 0, _is_alpha, ""),
+    ("csym", 0, lambda c: _is_alnum(c) or c == 95, ""),
+    ("csymf", 0, lambda c: _is_alpha(c) or c == 95, ""),
+    ("prolog_var_start", 0, lambda c: _cat(c) in ("Lu", "Lt") or c == 95, ""),
+    ("prolog_atom_start", 0, lambda c: _cat(c)[0] == "L" and _cat(c) not in ("Lu", "Lt"), ""),
+    ("prolog_identifier_continue", 0, lambda c: _is_alnum(c) or c == 95, ""),
+    ("prolog_symbol", 0,
+     lambda c: c in _PROLOG_SYMBOLS if c < 128 else _cat(c)[0] == "S", ""),
+    ("decimal", 0, lambda c: _cat(c) == "Nd", ""),
+    ("decimal", 1, lambda c: _ud.decimal(chr(c)) if _cat(c) == "Nd" else None, _WEIGHT),
+    ("csymf", 0, lambda c: _is_alpha(c) or c == 95, ""),
+    ("ascii", 0, lambda c: c < 128, ""),
+    ("white", 0, lambda c: c in (9, 32), ""),
+    ("cntrl", 0, _is_cntrl, ""),
+    ("digit", 0, lambda c: 48 <= c <= 57, ""),
+    ("print", 0, _is_print, ""),
+    ("space", 0, lambda c: c in _SPACE_SET, ""),
+    ("end_of_line", 0, lambda c: 10 <= c <= 13, ""),
+    ("newline", 0, lambda c: c == 10, ""),
+    ("graph", 0, _is_graph, ""),
+    ("lower", 0, lambda c: _cat(c) == "Ll", ""),
+    ("lower", 1, lambda c: _upper_of(c) if _cat(c) == "Ll" else None, _CHAR),
+    ("upper", 0, lambda c: _cat(c) == "Lu", ""),
+    ("upper", 1, lambda c: _lower_of(c) if _cat(c) == "Lu" else None, _CHAR),
+    ("punct", 0, lambda c: _is_graph(c) and not _is_alnum(c), ""),
+    ("period", 0, lambda c: c in (33, 46, 63), ""),
+    ("quote", 0, lambda c: c in (34, 39, 96), ""),
+    ("to_lower", 1, _upper_of, _CHAR),
+    ("to_upper", 1, _lower_of, _CHAR),
+    ("paren", 1, lambda c: {40: 41, 91: 93, 123: 125}.get(c), _CHAR),
+    ("digit", 1, lambda c: c - 48 if 48 <= c <= 57 else None, _WEIGHT),
+    ("xdigit", 1, _xdigit, _WEIGHT),
+]
+_CHAR_TYPE = {(name, arity): (test, kind) for name, arity, test, kind in _CHAR_TYPES}
+# the character of an argument, where the class gives one back (upper(a) is 'A'); a type
+# left out here is enumerated over all of Unicode by SWI-Prolog (an instantiation error here)
+_CHAR_OF_ARG: dict[tuple[str, int], Callable[[int], Any]] = {
+    ("upper", 1): _upper_of, ("lower", 1): _lower_of,
+    ("to_lower", 1): _lower_of, ("to_upper", 1): _upper_of,
+    ("digit", 1): lambda w: 48 + w if 0 <= w <= 9 else None,
+    ("xdigit", 1): lambda w: (48 + w if w <= 9 else 87 + w) if 0 <= w <= 15 else None,
+    ("paren", 1): lambda c: {41: 40, 93: 91, 125: 123}.get(c),
+}
+# classes whose characters SWI-Prolog enumerates from a small set, exactly this one
+_CHARS_OF_TYPE: dict[tuple[str, int], Any] = {
+    ("digit", 0): range(48, 58), ("digit", 1): range(48, 58), ("white", 0): (9, 32),
+    ("end_of_line", 0): range(10, 14), ("newline", 0): (10,), ("space", 0): _SPACES,
+    ("ascii", 0): range(128),
+}
+
+
+def _code_of(t: Any) -> Any:
+    """The code of a character argument: a one-character atom or string, or a code;
+    ``end_of_file`` (or -1) is -1."""
+    tt = type(t)
+    if tt is Atom and t == "end_of_file":
+        return -1
+    if (tt is Atom or tt is String) and len(t) == 1 and t != "[]":
+        return ord(t)
+    if tt is int:
+        if t < -1:
+            raise type_error("character", t)
+        if t > 0x10FFFF:
+            raise _err_domain("character", t)
+        return t
+    raise type_error("character", t)
+
+
+def _char_class_value(m, out: Any, kind: str, value: Any, codes: bool) -> bool:
+    if kind == _CHAR and not codes:
+        return m.unify(out, Atom(chr(value)))
+    return m.unify(out, value)
+
+
+def _arg_code(t: Any) -> int:
+    """The code of a class's bound argument (``upper(a)``, ``digit(5)``): end_of_file is
+    none."""
+    c = _code_of(t)
+    if c == -1:
+        raise type_error("character", t)
+    return c
+
+
+def _char_type_check(m, c: int, name: str, arity: int, args: tuple, codes: bool) -> bool:
+    """Whether the code ``c`` is of the class name/arity (binding its argument)."""
+    if c == -1:
+        return name == "end_of_file" and arity == 0
+    entry = _CHAR_TYPE.get((name, arity))
+    if entry is None:
+        return False
+    test, kind = entry
+    value = test(c)
+    if value is None or value is False:
+        return False
+    if arity == 0:
+        return True
+    arg = deref(args[0])
+    if type(arg) is Var:
+        return _char_class_value(m, arg, kind, value, codes)
+    w = _arg_code(arg)   # a character or a code (a weight too), else SWI-Prolog's error
+    if w == value:
+        return True
+    # to_lower(U) also holds where c is U's lower case (to_lower('A') of 'a', of 'A' itself)
+    back = {"to_lower": _lower_of, "to_upper": _upper_of}.get(name)
+    return back is not None and back(w) == c
+
+
+def _char_type(m, a, codes: bool):
+    x = deref(a[0])
+    t = deref(a[1])
+    c = _code_of(x) if type(x) is not Var else None   # as SWI-Prolog: the character first
+    if type(t) is not Var and not (type(t) is Atom and t != "[]" or type(t) is Struct):
+        raise type_error("char_type", t)
+    if type(t) is Struct:
+        name, arity, args = str(t.name), len(t.args), t.args
+    elif type(t) is Atom:
+        name, arity, args = str(t), 0, ()
+    if type(t) is not Var and (name, arity) not in _CHAR_TYPE and (name, arity) != ("end_of_file", 0):
+        raise type_error("char_type", t)
+    if c is not None:
+        if type(t) is not Var:
+            if _char_type_check(m, c, name, arity, args, codes):
+                yield None
+            return
+        if c == -1:
+            if m.unify(t, Atom("end_of_file")):
+                yield None
+            return
+        for tname, tarity, test, kind in _CHAR_TYPES:
+            value = test(c)
+            if value is None or value is False:
+                continue
+            mark = len(m.trail)
+            if tarity == 0:
+                ok = m.unify(t, Atom(tname))
+            else:
+                out = Var()
+                ok = m.unify(t, Struct(tname, (out,))) and _char_class_value(m, out, kind, value, codes)
+            if ok:
+                yield None
+            m.undo_to(mark)
+        return
+    if type(t) is Var:
+        raise instantiation_error()
+    key = (name, arity)
+    if key == ("end_of_file", 0):
+        if m.unify(x, -1 if codes else Atom("end_of_file")):
+            yield None
+        return
+    arg = deref(args[0]) if arity else None
+    if arity and type(arg) is not Var:
+        back = _CHAR_OF_ARG.get(key)
+        if back is None:
+            raise instantiation_error()
+        w = _arg_code(arg)
+        if key in (("digit", 1), ("xdigit", 1)) and type(arg) is not int:
+            return   # a character is no weight
+        c = back(w)
+        if c is not None and _char_type_check(m, c, name, arity, args, codes):
+            if m.unify(x, c if codes else Atom(chr(c))):
+                yield None
+        return
+    chars = _CHARS_OF_TYPE.get(key)
+    if chars is None:
+        # SWI-Prolog enumerates every Unicode character of the class, from its C library's
+        # tables; slr_sql asks for the character instead
+        raise instantiation_error()
+    for c in chars:
+        mark = len(m.trail)
+        if _char_type_check(m, c, name, arity, args, codes) \
+                and m.unify(x, c if codes else Atom(chr(c))):
+            yield None
+        m.undo_to(mark)
+
+
+@nondet("$char_type", 2)
+def _char_type2(m, a):
+    """char_type(Char, Type) as SWI-Prolog's (docs/language.md: where it asks for Char)."""
+    return _char_type(m, a, False)
+
+
+@nondet("$code_type", 2)
+def _code_type2(m, a):
+    """code_type(Code, Type): char_type/2 with codes for characters."""
+    return _char_type(m, a, True)
 
 
 @nondet("string_concat", 3)
@@ -2025,6 +2429,77 @@ flatten(List, Flat) :- '$flatten'(List, [], Flat0), !, Flat = Flat0.
 '$flatten'(NonList, Tl, [NonList|Tl]).
 repeat :- '$repeat'.
 term_variables(Term, Vars) :- '$term_variables'(Term, Vars).
+predsort(P, L, Sorted) :- '$skip_list'(N, L, Tail), ( Tail == [] -> '$predsort'(P, N, L, _, Sorted1), Sorted = Sorted1 ; var(Tail) -> throw(error(instantiation_error, _)) ; throw(error(type_error(list, L), _)) ).
+'$predsort'(P, 2, [X1, X2|L], L, R) :- !, call(P, Delta, X1, X2), '$predsort2'(Delta, X1, X2, R).
+'$predsort'(_, 1, [X|L], L, [X]) :- !.
+'$predsort'(_, 0, L, L, []) :- !.
+'$predsort'(P, N, L1, L3, R) :- N1 is N // 2, plus(N1, N2, N), '$predsort'(P, N1, L1, L2, R1), '$predsort'(P, N2, L2, L3, R2), '$predmerge'(P, R1, R2, R).
+'$predsort2'('<', X1, X2, [X1, X2]).
+'$predsort2'('=', X1, _, [X1]).
+'$predsort2'('>', X1, X2, [X2, X1]).
+'$predmerge'(_, [], R, R) :- !.
+'$predmerge'(_, R, [], R) :- !.
+'$predmerge'(P, [H1|T1], [H2|T2], Result) :- call(P, Delta, H1, H2), !, '$predmerge_'(Delta, P, H1, H2, T1, T2, Result).
+'$predmerge_'('>', P, H1, H2, T1, T2, [H2|R]) :- '$predmerge'(P, [H1|T1], T2, R).
+'$predmerge_'('=', P, H1, _, T1, T2, [H1|R]) :- '$predmerge'(P, T1, T2, R).
+'$predmerge_'('<', P, H1, H2, T1, T2, [H1|R]) :- '$predmerge'(P, T1, [H2|T2], R).
+sub_string(String, Before, Length, After, Sub) :- '$sub_string'(String, Before, Length, After, Sub).
+char_type(Char, Type) :- '$char_type'(Char, Type).
+code_type(Code, Type) :- '$code_type'(Code, Type).
+unify_with_occurs_check(X, Y) :- '$unify_with_occurs_check'(X, Y).
+list_to_ord_set(List, Set) :- sort(List, Set).
+ord_union(Sets, Union) :- ( Sets == [] -> Union = [] ; nonvar(Sets), Sets = [_|_] -> length(Sets, N), '$ord_union_all'(N, Sets, Union, []) ; throw(error(existence_error(matching_rule, ordsets:ord_union(Sets, Union)), _)) ).
+'$ord_union_all'(N, Sets0, Union, Sets) :- ( N =:= 1 -> Sets0 = [Union|Sets] ; N =:= 2 -> Sets0 = [Set1, Set2|Sets], '$ord_union_f'(Set1, Set2, Union) ; A is N >> 1, Z is N - A, '$ord_union_all'(A, Sets0, X, Sets1), '$ord_union_all'(Z, Sets1, Y, Sets), '$ord_union_f'(X, Y, Union) ).
+ord_union(Set1, Set2, Union) :- '$ord_union_f'(Set1, Set2, Union).
+'$ord_union_f'(Set1, Set2, Union) :- ( '$ord_fast'(union, Set1, Set2, Union) -> true ; '$ord_union'(Set1, Set2, Union) ).
+'$ord_union'(Set1, Set2, Union) :- ( Set1 == [] -> Union = Set2 ; nonvar(Set1), Set1 = [H1|T1] -> '$ord_union2'(Set2, H1, T1, Union) ; throw(error(existence_error(matching_rule, ordsets:ord_union(Set1, Set2, Union)), _)) ).
+'$ord_union2'(L2, H1, T1, Union) :- ( L2 == [] -> Union = [H1|T1] ; nonvar(L2), L2 = [H2|T2] -> compare(Order, H1, H2), '$ord_union3'(Order, H1, T1, H2, T2, Union) ; throw(error(existence_error(matching_rule, ordsets:union2(L2, H1, T1, Union)), _)) ).
+'$ord_union3'('<', H1, T1, H2, T2, Union) :- Union = [H1|Union0], '$ord_union2'(T1, H2, T2, Union0).
+'$ord_union3'('=', H1, T1, _, T2, Union) :- Union = [H1|Union0], '$ord_union'(T1, T2, Union0).
+'$ord_union3'('>', H1, T1, H2, T2, Union) :- Union = [H2|Union0], '$ord_union2'(T2, H1, T1, Union0).
+ord_subtract(Set, Delete, Remaining) :- ( '$ord_fast'(subtract, Set, Delete, Remaining) -> true ; '$ord_subtract'(Set, Delete, Remaining) ).
+'$ord_subtract'(L1, L2, Diff) :- ( L1 == [] -> Diff = [] ; L2 == [] -> Diff = L1 ; nonvar(L1), L1 = [H1|T1] -> '$ord_diff21'(L2, H1, T1, Diff) ; throw(error(existence_error(matching_rule, ordsets:ord_subtract(L1, L2, Diff)), _)) ).
+'$ord_diff21'([], H1, T1, [H1|T1]).
+'$ord_diff21'([H2|T2], H1, T1, Diff) :- compare(Order, H1, H2), '$ord_diff3'(Order, H1, T1, H2, T2, Diff).
+'$ord_diff12'([], _, _, []).
+'$ord_diff12'([H1|T1], H2, T2, Diff) :- compare(Order, H1, H2), '$ord_diff3'(Order, H1, T1, H2, T2, Diff).
+'$ord_diff3'('<', H1, T1, H2, T2, [H1|Diff]) :- '$ord_diff12'(T1, H2, T2, Diff).
+'$ord_diff3'('=', _, T1, _, T2, Diff) :- '$ord_subtract'(T1, T2, Diff).
+'$ord_diff3'('>', H1, T1, _, T2, Diff) :- '$ord_diff21'(T2, H1, T1, Diff).
+ord_memberchk(Item, Set) :- ( '$ord_fast'(memberchk, Item, Set, In) -> In == true ; '$ord_memberchk'(Item, Set) ).
+'$ord_memberchk'(Item, [X1, X2, X3, X4|Xs]) :- !, compare(R4, Item, X4), ( R4 = '>' -> '$ord_memberchk'(Item, Xs) ; R4 = '<' -> compare(R2, Item, X2), ( R2 = '>' -> Item == X3 ; R2 = '<' -> Item == X1 ; true ) ; true ).
+'$ord_memberchk'(Item, [X1, X2|Xs]) :- !, compare(R2, Item, X2), ( R2 = '>' -> '$ord_memberchk'(Item, Xs) ; R2 = '<' -> Item == X1 ; true ).
+'$ord_memberchk'(Item, [X1]) :- Item == X1.
+ord_intersection(Set1, Set2, Intersection) :- ( Intersection == [] -> \+ '$ord_intersect'(Set1, Set2) ; '$ord_fast'(intersection, Set1, Set2, Intersection) -> true ; '$ord_intersection'(Set1, Set2, Intersection) ).
+'$ord_intersect'([H1|T1], L2) :- '$ord_intersect_'(L2, H1, T1).
+'$ord_intersect_'([H2|T2], H1, T1) :- compare(Order, H1, H2), '$ord_intersect__'(Order, H1, T1, H2, T2).
+'$ord_intersect__'('<', _, T1, H2, T2) :- '$ord_intersect_'(T1, H2, T2).
+'$ord_intersect__'('=', _, _, _, _).
+'$ord_intersect__'('>', H1, T1, _, T2) :- '$ord_intersect_'(T2, H1, T1).
+'$ord_intersection'([], _, []).
+'$ord_intersection'([H1|T1], L2, Int) :- '$ord_isect2'(L2, H1, T1, Int).
+'$ord_isect2'([], _, _, []).
+'$ord_isect2'([H2|T2], H1, T1, Int) :- compare(Order, H1, H2), '$ord_isect3'(Order, H1, T1, H2, T2, Int).
+'$ord_isect3'('<', _, T1, H2, T2, Int) :- '$ord_isect2'(T1, H2, T2, Int).
+'$ord_isect3'('=', H1, T1, _, T2, [H1|Int]) :- '$ord_intersection'(T1, T2, Int).
+'$ord_isect3'('>', H1, T1, _, T2, Int) :- '$ord_isect2'(T2, H1, T1, Int).
+ord_subset(Sub, Super) :- '$ord_subset'(Sub, Super).
+'$ord_subset'([], _).
+'$ord_subset'([H1|T1], [H2|T2]) :- compare(Order, H1, H2), '$ord_subset_'(Order, H1, T1, T2).
+'$ord_subset_'('>', H1, T1, [H2|T2]) :- compare(Order, H1, H2), '$ord_subset_'(Order, H1, T1, T2).
+'$ord_subset_'('=', _, T1, T2) :- '$ord_subset'(T1, T2).
+ord_add_element(Set, El, Add) :- '$ord_add_element'(Set, El, Add).
+'$ord_add_element'([], El, [El]).
+'$ord_add_element'([H|T], El, Add) :- compare(Order, H, El), '$ord_addel'(Order, H, T, El, Add).
+'$ord_addel'('<', H, T, El, [H|Add]) :- '$ord_add_element'(T, El, Add).
+'$ord_addel'('=', H, T, _, [H|T]).
+'$ord_addel'('>', H, T, El, [El, H|T]).
+ord_del_element(Set, El, Del) :- '$ord_del_element'(Set, El, Del).
+'$ord_del_element'([], _, []).
+'$ord_del_element'([H|T], El, Del) :- compare(Order, H, El), '$ord_delel'(Order, H, T, El, Del).
+'$ord_delel'('<', H, T, El, [H|Del]) :- '$ord_del_element'(T, El, Del).
+'$ord_delel'('=', _, T, _, T).
+'$ord_delel'('>', H, T, _, [H|T]).
 """
 
 _LIBRARY: Program | None = None

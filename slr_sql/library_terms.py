@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from .terms import Atom as A, Clause, Span, String, Struct as S, Var
 
-SOURCE_SHA256 = '1453879cd56fdb93cf7e58dcc62af3f4b036c458fad0e31e555a4a7ce0c44c20'
+SOURCE_SHA256 = '37cdfb4aa33bdf060dfea5d11d5f9464d15774be9cbc5c11b4ea8aa16caddbc8'
 
 
 def clauses(source: str) -> list[Clause]:
@@ -153,4 +153,146 @@ def clauses(source: str) -> list[Clause]:
     out.append(Clause(A('repeat'), A('$repeat'), Span('<library>', 70, 1, 70, 21), (), source[3391:3411]))
     v = [Var('Term'), Var('Vars')]
     out.append(Clause(S(A('term_variables'), (v[0], v[1])), S(A('$term_variables'), (v[0], v[1])), Span('<library>', 71, 1, 71, 61), (('Term', v[0]), ('Vars', v[1]), ), source[3412:3472]))
+    v = [Var('P'), Var('L'), Var('Sorted'), Var('N'), Var('Tail'), Var('_'), Var('Sorted1'), Var('_'), Var('_')]
+    out.append(Clause(S(A('predsort'), (v[0], v[1], v[2])), S(A(','), (S(A('$skip_list'), (v[3], v[1], v[4])), S(A(';'), (S(A('->'), (S(A('=='), (v[4], A('[]'))), S(A(','), (S(A('$predsort'), (v[0], v[3], v[1], v[5], v[6])), S(A('='), (v[2], v[6])))))), S(A(';'), (S(A('->'), (S(A('var'), (v[4],)), S(A('throw'), (S(A('error'), (A('instantiation_error'), v[7])),)))), S(A('throw'), (S(A('error'), (S(A('type_error'), (A('list'), v[1])), v[8])),)))))))), Span('<library>', 72, 1, 72, 213), (('P', v[0]), ('L', v[1]), ('Sorted', v[2]), ('N', v[3]), ('Tail', v[4]), ('Sorted1', v[6]), ), source[3473:3685]))
+    v = [Var('P'), Var('X1'), Var('X2'), Var('L'), Var('R'), Var('Delta')]
+    out.append(Clause(S(A('$predsort'), (v[0], 2, S(A('.'), (v[1], S(A('.'), (v[2], v[3])))), v[3], v[4])), S(A(','), (A('!'), S(A(','), (S(A('call'), (v[0], v[5], v[1], v[2])), S(A('$predsort2'), (v[5], v[1], v[2], v[4])))))), Span('<library>', 73, 1, 73, 98), (('P', v[0]), ('X1', v[1]), ('X2', v[2]), ('L', v[3]), ('R', v[4]), ('Delta', v[5]), ), source[3686:3783]))
+    v = [Var('_'), Var('X'), Var('L')]
+    out.append(Clause(S(A('$predsort'), (v[0], 1, S(A('.'), (v[1], v[2])), v[2], S(A('.'), (v[1], A('[]'))))), A('!'), Span('<library>', 74, 1, 74, 39), (('X', v[1]), ('L', v[2]), ), source[3784:3822]))
+    v = [Var('_'), Var('L')]
+    out.append(Clause(S(A('$predsort'), (v[0], 0, v[1], v[1], A('[]'))), A('!'), Span('<library>', 75, 1, 75, 34), (('L', v[1]), ), source[3823:3856]))
+    v = [Var('P'), Var('N'), Var('L1'), Var('L3'), Var('R'), Var('N1'), Var('N2'), Var('L2'), Var('R1'), Var('R2')]
+    out.append(Clause(S(A('$predsort'), (v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('is'), (v[5], S(A('//'), (v[1], 2)))), S(A(','), (S(A('plus'), (v[5], v[6], v[1])), S(A(','), (S(A('$predsort'), (v[0], v[5], v[2], v[7], v[8])), S(A(','), (S(A('$predsort'), (v[0], v[6], v[7], v[3], v[9])), S(A('$predmerge'), (v[0], v[8], v[9], v[4])))))))))), Span('<library>', 76, 1, 76, 155), (('P', v[0]), ('N', v[1]), ('L1', v[2]), ('L3', v[3]), ('R', v[4]), ('N1', v[5]), ('N2', v[6]), ('L2', v[7]), ('R1', v[8]), ('R2', v[9]), ), source[3857:4011]))
+    v = [Var('X1'), Var('X2')]
+    out.append(Clause(S(A('$predsort2'), (A('<'), v[0], v[1], S(A('.'), (v[0], S(A('.'), (v[1], A('[]'))))))), A('true'), Span('<library>', 77, 1, 77, 37), (('X1', v[0]), ('X2', v[1]), ), source[4012:4048]))
+    v = [Var('X1'), Var('_')]
+    out.append(Clause(S(A('$predsort2'), (A('='), v[0], v[1], S(A('.'), (v[0], A('[]'))))), A('true'), Span('<library>', 78, 1, 78, 32), (('X1', v[0]), ), source[4049:4080]))
+    v = [Var('X1'), Var('X2')]
+    out.append(Clause(S(A('$predsort2'), (A('>'), v[0], v[1], S(A('.'), (v[1], S(A('.'), (v[0], A('[]'))))))), A('true'), Span('<library>', 79, 1, 79, 37), (('X1', v[0]), ('X2', v[1]), ), source[4081:4117]))
+    v = [Var('_'), Var('R')]
+    out.append(Clause(S(A('$predmerge'), (v[0], A('[]'), v[1], v[1])), A('!'), Span('<library>', 80, 1, 80, 32), (('R', v[1]), ), source[4118:4149]))
+    v = [Var('_'), Var('R')]
+    out.append(Clause(S(A('$predmerge'), (v[0], v[1], A('[]'), v[1])), A('!'), Span('<library>', 81, 1, 81, 32), (('R', v[1]), ), source[4150:4181]))
+    v = [Var('P'), Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Result'), Var('Delta')]
+    out.append(Clause(S(A('$predmerge'), (v[0], S(A('.'), (v[1], v[2])), S(A('.'), (v[3], v[4])), v[5])), S(A(','), (S(A('call'), (v[0], v[6], v[1], v[3])), S(A(','), (A('!'), S(A('$predmerge_'), (v[6], v[0], v[1], v[3], v[2], v[4], v[5])))))), Span('<library>', 82, 1, 82, 121), (('P', v[0]), ('H1', v[1]), ('T1', v[2]), ('H2', v[3]), ('T2', v[4]), ('Result', v[5]), ('Delta', v[6]), ), source[4182:4302]))
+    v = [Var('P'), Var('H1'), Var('H2'), Var('T1'), Var('T2'), Var('R')]
+    out.append(Clause(S(A('$predmerge_'), (A('>'), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[2], v[5])))), S(A('$predmerge'), (v[0], S(A('.'), (v[1], v[3])), v[4], v[5])), Span('<library>', 83, 1, 83, 82), (('P', v[0]), ('H1', v[1]), ('H2', v[2]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[4303:4384]))
+    v = [Var('P'), Var('H1'), Var('_'), Var('T1'), Var('T2'), Var('R')]
+    out.append(Clause(S(A('$predmerge_'), (A('='), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[1], v[5])))), S(A('$predmerge'), (v[0], v[3], v[4], v[5])), Span('<library>', 84, 1, 84, 76), (('P', v[0]), ('H1', v[1]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[4385:4460]))
+    v = [Var('P'), Var('H1'), Var('H2'), Var('T1'), Var('T2'), Var('R')]
+    out.append(Clause(S(A('$predmerge_'), (A('<'), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[1], v[5])))), S(A('$predmerge'), (v[0], v[3], S(A('.'), (v[2], v[4])), v[5])), Span('<library>', 85, 1, 85, 82), (('P', v[0]), ('H1', v[1]), ('H2', v[2]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[4461:4542]))
+    v = [Var('String'), Var('Before'), Var('Length'), Var('After'), Var('Sub')]
+    out.append(Clause(S(A('sub_string'), (v[0], v[1], v[2], v[3], v[4])), S(A('$sub_string'), (v[0], v[1], v[2], v[3], v[4])), Span('<library>', 86, 1, 86, 101), (('String', v[0]), ('Before', v[1]), ('Length', v[2]), ('After', v[3]), ('Sub', v[4]), ), source[4543:4643]))
+    v = [Var('Char'), Var('Type')]
+    out.append(Clause(S(A('char_type'), (v[0], v[1])), S(A('$char_type'), (v[0], v[1])), Span('<library>', 87, 1, 87, 51), (('Char', v[0]), ('Type', v[1]), ), source[4644:4694]))
+    v = [Var('Code'), Var('Type')]
+    out.append(Clause(S(A('code_type'), (v[0], v[1])), S(A('$code_type'), (v[0], v[1])), Span('<library>', 88, 1, 88, 51), (('Code', v[0]), ('Type', v[1]), ), source[4695:4745]))
+    v = [Var('X'), Var('Y')]
+    out.append(Clause(S(A('unify_with_occurs_check'), (v[0], v[1])), S(A('$unify_with_occurs_check'), (v[0], v[1])), Span('<library>', 89, 1, 89, 67), (('X', v[0]), ('Y', v[1]), ), source[4746:4812]))
+    v = [Var('List'), Var('Set')]
+    out.append(Clause(S(A('list_to_ord_set'), (v[0], v[1])), S(A('sort'), (v[0], v[1])), Span('<library>', 90, 1, 90, 47), (('List', v[0]), ('Set', v[1]), ), source[4813:4859]))
+    v = [Var('Sets'), Var('Union'), Var('_'), Var('_'), Var('N'), Var('_')]
+    out.append(Clause(S(A('ord_union'), (v[0], v[1])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[1], A('[]'))))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[2], v[3])))))), S(A(','), (S(A('length'), (v[0], v[4])), S(A('$ord_union_all'), (v[4], v[0], v[1], A('[]'))))))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_union'), (v[0], v[1])))))), v[5])),)))))), Span('<library>', 91, 1, 91, 224), (('Sets', v[0]), ('Union', v[1]), ('N', v[4]), ), source[4860:5083]))
+    v = [Var('N'), Var('Sets0'), Var('Union'), Var('Sets'), Var('Set1'), Var('Set2'), Var('A'), Var('Z'), Var('X'), Var('Sets1'), Var('Y')]
+    out.append(Clause(S(A('$ord_union_all'), (v[0], v[1], v[2], v[3])), S(A(';'), (S(A('->'), (S(A('=:='), (v[0], 1)), S(A('='), (v[1], S(A('.'), (v[2], v[3])))))), S(A(';'), (S(A('->'), (S(A('=:='), (v[0], 2)), S(A(','), (S(A('='), (v[1], S(A('.'), (v[4], S(A('.'), (v[5], v[3])))))), S(A('$ord_union_f'), (v[4], v[5], v[2])))))), S(A(','), (S(A('is'), (v[6], S(A('>>'), (v[0], 1)))), S(A(','), (S(A('is'), (v[7], S(A('-'), (v[0], v[6])))), S(A(','), (S(A('$ord_union_all'), (v[6], v[1], v[8], v[9])), S(A(','), (S(A('$ord_union_all'), (v[7], v[9], v[10], v[3])), S(A('$ord_union_f'), (v[8], v[10], v[2])))))))))))))), Span('<library>', 92, 1, 92, 284), (('N', v[0]), ('Sets0', v[1]), ('Union', v[2]), ('Sets', v[3]), ('Set1', v[4]), ('Set2', v[5]), ('A', v[6]), ('Z', v[7]), ('X', v[8]), ('Sets1', v[9]), ('Y', v[10]), ), source[5084:5367]))
+    v = [Var('Set1'), Var('Set2'), Var('Union')]
+    out.append(Clause(S(A('ord_union'), (v[0], v[1], v[2])), S(A('$ord_union_f'), (v[0], v[1], v[2])), Span('<library>', 93, 1, 93, 67), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ), source[5368:5434]))
+    v = [Var('Set1'), Var('Set2'), Var('Union')]
+    out.append(Clause(S(A('$ord_union_f'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('union'), v[0], v[1], v[2])), A('true'))), S(A('$ord_union'), (v[0], v[1], v[2])))), Span('<library>', 94, 1, 94, 122), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ), source[5435:5556]))
+    v = [Var('Set1'), Var('Set2'), Var('Union'), Var('H1'), Var('T1'), Var('_')]
+    out.append(Clause(S(A('$ord_union'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[2], v[1])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[3], v[4])))))), S(A('$ord_union2'), (v[1], v[3], v[4], v[2])))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_union'), (v[0], v[1], v[2])))))), v[5])),)))))), Span('<library>', 95, 1, 95, 224), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ('H1', v[3]), ('T1', v[4]), ), source[5557:5780]))
+    v = [Var('L2'), Var('H1'), Var('T1'), Var('Union'), Var('H2'), Var('T2'), Var('Order'), Var('_')]
+    out.append(Clause(S(A('$ord_union2'), (v[0], v[1], v[2], v[3])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[3], S(A('.'), (v[1], v[2])))))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[4], v[5])))))), S(A(','), (S(A('compare'), (v[6], v[1], v[4])), S(A('$ord_union3'), (v[6], v[1], v[2], v[4], v[5], v[3])))))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('union2'), (v[0], v[1], v[2], v[3])))))), v[7])),)))))), Span('<library>', 96, 1, 96, 252), (('L2', v[0]), ('H1', v[1]), ('T1', v[2]), ('Union', v[3]), ('H2', v[4]), ('T2', v[5]), ('Order', v[6]), ), source[5781:6032]))
+    v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Union'), Var('Union0')]
+    out.append(Clause(S(A('$ord_union3'), (A('<'), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[0], v[5])))), S(A('$ord_union2'), (v[1], v[2], v[3], v[5])))), Span('<library>', 97, 1, 97, 101), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[6033:6133]))
+    v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Union'), Var('Union0')]
+    out.append(Clause(S(A('$ord_union3'), (A('='), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[0], v[5])))), S(A('$ord_union'), (v[1], v[3], v[5])))), Span('<library>', 98, 1, 98, 95), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[6134:6228]))
+    v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Union'), Var('Union0')]
+    out.append(Clause(S(A('$ord_union3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[2], v[5])))), S(A('$ord_union2'), (v[3], v[0], v[1], v[5])))), Span('<library>', 99, 1, 99, 101), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[6229:6329]))
+    v = [Var('Set'), Var('Delete'), Var('Remaining')]
+    out.append(Clause(S(A('ord_subtract'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('subtract'), v[0], v[1], v[2])), A('true'))), S(A('$ord_subtract'), (v[0], v[1], v[2])))), Span('<library>', 100, 1, 100, 141), (('Set', v[0]), ('Delete', v[1]), ('Remaining', v[2]), ), source[6330:6470]))
+    v = [Var('L1'), Var('L2'), Var('Diff'), Var('H1'), Var('T1'), Var('_')]
+    out.append(Clause(S(A('$ord_subtract'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[2], A('[]'))))), S(A(';'), (S(A('->'), (S(A('=='), (v[1], A('[]'))), S(A('='), (v[2], v[0])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[3], v[4])))))), S(A('$ord_diff21'), (v[1], v[3], v[4], v[2])))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_subtract'), (v[0], v[1], v[2])))))), v[5])),)))))))), Span('<library>', 101, 1, 101, 232), (('L1', v[0]), ('L2', v[1]), ('Diff', v[2]), ('H1', v[3]), ('T1', v[4]), ), source[6471:6702]))
+    v = [Var('H1'), Var('T1')]
+    out.append(Clause(S(A('$ord_diff21'), (A('[]'), v[0], v[1], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 102, 1, 102, 36), (('H1', v[0]), ('T1', v[1]), ), source[6703:6738]))
+    v = [Var('H2'), Var('T2'), Var('H1'), Var('T1'), Var('Diff'), Var('Order')]
+    out.append(Clause(S(A('$ord_diff21'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[2], v[0])), S(A('$ord_diff3'), (v[5], v[2], v[3], v[0], v[1], v[4])))), Span('<library>', 103, 1, 103, 107), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Diff', v[4]), ('Order', v[5]), ), source[6739:6845]))
+    v = [Var('_'), Var('_')]
+    out.append(Clause(S(A('$ord_diff12'), (A('[]'), v[0], v[1], A('[]'))), A('true'), Span('<library>', 104, 1, 104, 29), (), source[6846:6874]))
+    v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Diff'), Var('Order')]
+    out.append(Clause(S(A('$ord_diff12'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[0], v[2])), S(A('$ord_diff3'), (v[5], v[0], v[1], v[2], v[3], v[4])))), Span('<library>', 105, 1, 105, 107), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Diff', v[4]), ('Order', v[5]), ), source[6875:6981]))
+    v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Diff')]
+    out.append(Clause(S(A('$ord_diff3'), (A('<'), v[0], v[1], v[2], v[3], S(A('.'), (v[0], v[4])))), S(A('$ord_diff12'), (v[1], v[2], v[3], v[4])), Span('<library>', 106, 1, 106, 81), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Diff', v[4]), ), source[6982:7062]))
+    v = [Var('_'), Var('T1'), Var('_'), Var('T2'), Var('Diff')]
+    out.append(Clause(S(A('$ord_diff3'), (A('='), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_subtract'), (v[1], v[3], v[4])), Span('<library>', 107, 1, 107, 72), (('T1', v[1]), ('T2', v[3]), ('Diff', v[4]), ), source[7063:7134]))
+    v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Diff')]
+    out.append(Clause(S(A('$ord_diff3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_diff21'), (v[3], v[0], v[1], v[4])), Span('<library>', 108, 1, 108, 75), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Diff', v[4]), ), source[7135:7209]))
+    v = [Var('Item'), Var('Set'), Var('In')]
+    out.append(Clause(S(A('ord_memberchk'), (v[0], v[1])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('memberchk'), v[0], v[1], v[2])), S(A('=='), (v[2], A('true'))))), S(A('$ord_memberchk'), (v[0], v[1])))), Span('<library>', 109, 1, 109, 115), (('Item', v[0]), ('Set', v[1]), ('In', v[2]), ), source[7210:7324]))
+    v = [Var('Item'), Var('X1'), Var('X2'), Var('X3'), Var('X4'), Var('Xs'), Var('R4'), Var('R2')]
+    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], S(A('.'), (v[2], S(A('.'), (v[3], S(A('.'), (v[4], v[5])))))))))), S(A(','), (A('!'), S(A(','), (S(A('compare'), (v[6], v[0], v[4])), S(A(';'), (S(A('->'), (S(A('='), (v[6], A('>'))), S(A('$ord_memberchk'), (v[0], v[5])))), S(A(';'), (S(A('->'), (S(A('='), (v[6], A('<'))), S(A(','), (S(A('compare'), (v[7], v[0], v[2])), S(A(';'), (S(A('->'), (S(A('='), (v[7], A('>'))), S(A('=='), (v[0], v[3])))), S(A(';'), (S(A('->'), (S(A('='), (v[7], A('<'))), S(A('=='), (v[0], v[1])))), A('true'))))))))), A('true'))))))))), Span('<library>', 110, 1, 110, 220), (('Item', v[0]), ('X1', v[1]), ('X2', v[2]), ('X3', v[3]), ('X4', v[4]), ('Xs', v[5]), ('R4', v[6]), ('R2', v[7]), ), source[7325:7544]))
+    v = [Var('Item'), Var('X1'), Var('X2'), Var('Xs'), Var('R2')]
+    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], S(A('.'), (v[2], v[3])))))), S(A(','), (A('!'), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A(';'), (S(A('->'), (S(A('='), (v[4], A('>'))), S(A('$ord_memberchk'), (v[0], v[3])))), S(A(';'), (S(A('->'), (S(A('='), (v[4], A('<'))), S(A('=='), (v[0], v[1])))), A('true'))))))))), Span('<library>', 111, 1, 111, 141), (('Item', v[0]), ('X1', v[1]), ('X2', v[2]), ('Xs', v[3]), ('R2', v[4]), ), source[7545:7685]))
+    v = [Var('Item'), Var('X1')]
+    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], A('[]'))))), S(A('=='), (v[0], v[1])), Span('<library>', 112, 1, 112, 44), (('Item', v[0]), ('X1', v[1]), ), source[7686:7729]))
+    v = [Var('Set1'), Var('Set2'), Var('Intersection')]
+    out.append(Clause(S(A('ord_intersection'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[2], A('[]'))), S(A('\\+'), (S(A('$ord_intersect'), (v[0], v[1])),)))), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('intersection'), v[0], v[1], v[2])), A('true'))), S(A('$ord_intersection'), (v[0], v[1], v[2])))))), Span('<library>', 113, 1, 113, 215), (('Set1', v[0]), ('Set2', v[1]), ('Intersection', v[2]), ), source[7730:7944]))
+    v = [Var('H1'), Var('T1'), Var('L2')]
+    out.append(Clause(S(A('$ord_intersect'), (S(A('.'), (v[0], v[1])), v[2])), S(A('$ord_intersect_'), (v[2], v[0], v[1])), Span('<library>', 114, 1, 114, 64), (('H1', v[0]), ('T1', v[1]), ('L2', v[2]), ), source[7945:8008]))
+    v = [Var('H2'), Var('T2'), Var('H1'), Var('T1'), Var('Order')]
+    out.append(Clause(S(A('$ord_intersect_'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[2], v[0])), S(A('$ord_intersect__'), (v[4], v[2], v[3], v[0], v[1])))), Span('<library>', 115, 1, 115, 105), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Order', v[4]), ), source[8009:8113]))
+    v = [Var('_'), Var('T1'), Var('H2'), Var('T2')]
+    out.append(Clause(S(A('$ord_intersect__'), (A('<'), v[0], v[1], v[2], v[3])), S(A('$ord_intersect_'), (v[1], v[2], v[3])), Span('<library>', 116, 1, 116, 73), (('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ), source[8114:8186]))
+    v = [Var('_'), Var('_'), Var('_'), Var('_')]
+    out.append(Clause(S(A('$ord_intersect__'), (A('='), v[0], v[1], v[2], v[3])), A('true'), Span('<library>', 117, 1, 117, 37), (), source[8187:8223]))
+    v = [Var('H1'), Var('T1'), Var('_'), Var('T2')]
+    out.append(Clause(S(A('$ord_intersect__'), (A('>'), v[0], v[1], v[2], v[3])), S(A('$ord_intersect_'), (v[3], v[0], v[1])), Span('<library>', 118, 1, 118, 73), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ), source[8224:8296]))
+    v = [Var('_')]
+    out.append(Clause(S(A('$ord_intersection'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 119, 1, 119, 32), (), source[8297:8328]))
+    v = [Var('H1'), Var('T1'), Var('L2'), Var('Int')]
+    out.append(Clause(S(A('$ord_intersection'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A('$ord_isect2'), (v[2], v[0], v[1], v[3])), Span('<library>', 120, 1, 120, 73), (('H1', v[0]), ('T1', v[1]), ('L2', v[2]), ('Int', v[3]), ), source[8329:8401]))
+    v = [Var('_'), Var('_')]
+    out.append(Clause(S(A('$ord_isect2'), (A('[]'), v[0], v[1], A('[]'))), A('true'), Span('<library>', 121, 1, 121, 29), (), source[8402:8430]))
+    v = [Var('H2'), Var('T2'), Var('H1'), Var('T1'), Var('Int'), Var('Order')]
+    out.append(Clause(S(A('$ord_isect2'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[2], v[0])), S(A('$ord_isect3'), (v[5], v[2], v[3], v[0], v[1], v[4])))), Span('<library>', 122, 1, 122, 106), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Int', v[4]), ('Order', v[5]), ), source[8431:8536]))
+    v = [Var('_'), Var('T1'), Var('H2'), Var('T2'), Var('Int')]
+    out.append(Clause(S(A('$ord_isect3'), (A('<'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_isect2'), (v[1], v[2], v[3], v[4])), Span('<library>', 123, 1, 123, 74), (('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Int', v[4]), ), source[8537:8610]))
+    v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Int')]
+    out.append(Clause(S(A('$ord_isect3'), (A('='), v[0], v[1], v[2], v[3], S(A('.'), (v[0], v[4])))), S(A('$ord_intersection'), (v[1], v[3], v[4])), Span('<library>', 124, 1, 124, 81), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Int', v[4]), ), source[8611:8691]))
+    v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Int')]
+    out.append(Clause(S(A('$ord_isect3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_isect2'), (v[3], v[0], v[1], v[4])), Span('<library>', 125, 1, 125, 74), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Int', v[4]), ), source[8692:8765]))
+    v = [Var('Sub'), Var('Super')]
+    out.append(Clause(S(A('ord_subset'), (v[0], v[1])), S(A('$ord_subset'), (v[0], v[1])), Span('<library>', 126, 1, 126, 53), (('Sub', v[0]), ('Super', v[1]), ), source[8766:8818]))
+    v = [Var('_')]
+    out.append(Clause(S(A('$ord_subset'), (A('[]'), v[0])), A('true'), Span('<library>', 127, 1, 127, 22), (), source[8819:8840]))
+    v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Order')]
+    out.append(Clause(S(A('$ord_subset'), (S(A('.'), (v[0], v[1])), S(A('.'), (v[2], v[3])))), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_subset_'), (v[4], v[0], v[1], v[3])))), Span('<library>', 128, 1, 128, 94), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Order', v[4]), ), source[8841:8934]))
+    v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Order')]
+    out.append(Clause(S(A('$ord_subset_'), (A('>'), v[0], v[1], S(A('.'), (v[2], v[3])))), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_subset_'), (v[4], v[0], v[1], v[3])))), Span('<library>', 129, 1, 129, 99), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Order', v[4]), ), source[8935:9033]))
+    v = [Var('_'), Var('T1'), Var('T2')]
+    out.append(Clause(S(A('$ord_subset_'), (A('='), v[0], v[1], v[2])), S(A('$ord_subset'), (v[1], v[2])), Span('<library>', 130, 1, 130, 57), (('T1', v[1]), ('T2', v[2]), ), source[9034:9090]))
+    v = [Var('Set'), Var('El'), Var('Add')]
+    out.append(Clause(S(A('ord_add_element'), (v[0], v[1], v[2])), S(A('$ord_add_element'), (v[0], v[1], v[2])), Span('<library>', 131, 1, 131, 67), (('Set', v[0]), ('El', v[1]), ('Add', v[2]), ), source[9091:9157]))
+    v = [Var('El')]
+    out.append(Clause(S(A('$ord_add_element'), (A('[]'), v[0], S(A('.'), (v[0], A('[]'))))), A('true'), Span('<library>', 132, 1, 132, 34), (('El', v[0]), ), source[9158:9191]))
+    v = [Var('H'), Var('T'), Var('El'), Var('Add'), Var('Order')]
+    out.append(Clause(S(A('$ord_add_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_addel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 133, 1, 133, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Add', v[3]), ('Order', v[4]), ), source[9192:9288]))
+    v = [Var('H'), Var('T'), Var('El'), Var('Add')]
+    out.append(Clause(S(A('$ord_addel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_add_element'), (v[1], v[2], v[3])), Span('<library>', 134, 1, 134, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Add', v[3]), ), source[9289:9360]))
+    v = [Var('H'), Var('T'), Var('_')]
+    out.append(Clause(S(A('$ord_addel'), (A('='), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 135, 1, 135, 35), (('H', v[0]), ('T', v[1]), ), source[9361:9395]))
+    v = [Var('H'), Var('T'), Var('El')]
+    out.append(Clause(S(A('$ord_addel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[2], S(A('.'), (v[0], v[1])))))), A('true'), Span('<library>', 136, 1, 136, 40), (('H', v[0]), ('T', v[1]), ('El', v[2]), ), source[9396:9435]))
+    v = [Var('Set'), Var('El'), Var('Del')]
+    out.append(Clause(S(A('ord_del_element'), (v[0], v[1], v[2])), S(A('$ord_del_element'), (v[0], v[1], v[2])), Span('<library>', 137, 1, 137, 67), (('Set', v[0]), ('El', v[1]), ('Del', v[2]), ), source[9436:9502]))
+    v = [Var('_')]
+    out.append(Clause(S(A('$ord_del_element'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 138, 1, 138, 31), (), source[9503:9533]))
+    v = [Var('H'), Var('T'), Var('El'), Var('Del'), Var('Order')]
+    out.append(Clause(S(A('$ord_del_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_delel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 139, 1, 139, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ('Order', v[4]), ), source[9534:9630]))
+    v = [Var('H'), Var('T'), Var('El'), Var('Del')]
+    out.append(Clause(S(A('$ord_delel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_del_element'), (v[1], v[2], v[3])), Span('<library>', 140, 1, 140, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ), source[9631:9702]))
+    v = [Var('_'), Var('T'), Var('_')]
+    out.append(Clause(S(A('$ord_delel'), (A('='), v[0], v[1], v[2], v[1])), A('true'), Span('<library>', 141, 1, 141, 31), (('T', v[1]), ), source[9703:9733]))
+    v = [Var('H'), Var('T'), Var('_')]
+    out.append(Clause(S(A('$ord_delel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 142, 1, 142, 35), (('H', v[0]), ('T', v[1]), ), source[9734:9768]))
     return out
