@@ -29,6 +29,16 @@ NONDET: dict[tuple[str, int], Callable[["Machine", tuple], Iterator[None]]] = {}
 
 
 def det(name: str, arity: int):
+    """Register the decorated function as the deterministic builtin ``name/arity``: it
+    takes the machine and the goal's arguments and returns whether the goal succeeded.
+
+    >>> @det("$always", 0)
+    ... def _always(m, a):
+    ...     return True
+    >>> DET[("$always", 0)] is _always
+    True
+    >>> del DET[("$always", 0)]
+    """
     def deco(f):
         DET[(name, arity)] = f
         return f
@@ -36,6 +46,18 @@ def det(name: str, arity: int):
 
 
 def nondet(name: str, arity: int):
+    """Register the decorated generator as the nondeterministic builtin ``name/arity``:
+    each value it yields is one solution (bindings made before the yield), backtracking
+    resumes it.
+
+    >>> @nondet("$twice", 0)
+    ... def _twice(m, a):
+    ...     yield None
+    ...     yield None
+    >>> NONDET[("$twice", 0)] is _twice
+    True
+    >>> del NONDET[("$twice", 0)]
+    """
     def deco(f):
         NONDET[(name, arity)] = f
         return f
@@ -500,6 +522,13 @@ def _unify_with_occurs_check(m, a):
 # -- atoms and strings -------------------------------------------------------------------------------
 
 def text_of(t: Any, what: str = "atomic") -> str:
+    """The text of an atomic term, or of a list of characters or codes, as the text
+    builtins (atom_length/2, sub_atom/5, ...) read their arguments; an unbound term is an
+    instantiation error.
+
+    >>> text_of(Atom("cup")), text_of(12), text_of(2.5), text_of(make_list([104, 105]))
+    ('cup', '12', '2.5', 'hi')
+    """
     t = deref(t)
     tt = type(t)
     if tt is Var:
@@ -1175,6 +1204,15 @@ def _split_any(s: str, seps: str) -> list[str]:
 # -- lists -----------------------------------------------------------------------------------------
 
 def proper_list(t: Any) -> list:
+    """The items of a proper list; a partial list is an instantiation error, anything
+    else a type error (``list``).
+
+    >>> proper_list(make_list([1, 2]))
+    [1, 2]
+    >>> proper_list(Atom("a"))
+    Traceback (most recent call last):
+    slr_sql.errors.SLREvaluationError: error(type_error(list,a),_)
+    """
     items, tail = list_items(t)
     if type(tail) is Var:
         raise instantiation_error()
@@ -1635,6 +1673,15 @@ def _strip_carets(goal: Any) -> tuple[Any, list]:
 
 
 def collector(m: "Machine", key, args, nxt):
+    """Start the all-solutions builtin ``key`` (findall/3,4, forall/2, aggregate_all/3,
+    bagof/3, setof/3) on the machine ``m``; ``nxt`` is the continuation after it.
+
+    >>> from slr_sql.engine import Engine
+    >>> m = Engine(Program()).machine(); x, found = Var("X"), Var("L")
+    >>> goal = Struct("findall", (x, Struct("member", (x, make_list([1, 2]))), found))
+    >>> [str(found) for _ in m.solve(goal)]
+    ['[1,2]']
+    """
     name, arity = key
     if name in ("findall", "findAll") and arity == 3:
         def finish(m, results, nxt, out=args[2]):
@@ -1869,7 +1916,14 @@ def _event_pattern(t: Any, op: str):
 
 def matching_rows(m: "Machine", pattern: tuple, rows) -> Iterator[tuple]:
     """Rows of ``rows`` that match ``pattern`` (data arguments + (start, end); the stored
-    times by value, see :func:`slr_sql.unify.match_time`), tested, bindings undone."""
+    times by value, see :func:`slr_sql.unify.match_time`), tested, bindings undone.
+
+    >>> from slr_sql.engine import Engine
+    >>> m = BuiltinMachine(Engine(Program(), None))
+    >>> rows = [((Atom("a"),), 1.0, 1.0), ((Atom("b"),), 2.0, 2.0)]
+    >>> [row[0] for row in matching_rows(m, (Atom("b"), Var("S"), Var("E")), rows)]
+    [(Atom('b'),)]
+    """
     trail = m.trail
     args, s, e = pattern[:-2], pattern[-2], pattern[-1]
     for row in rows:
@@ -1966,7 +2020,14 @@ def _next3(m, a):
 
 def origin_goal(goal: Any) -> Any:
     """The goal of ``origin(R, Goal)`` if it is an event goal, prev/2, next/2 or next/3;
-    raises the ISO error otherwise."""
+    raises the ISO error otherwise.
+
+    >>> str(origin_goal(Struct("prev", (Struct("^", (Struct("seen", (Var("X"),)), Var("T"))), 5))))
+    'prev(seen(X)^T,5)'
+    >>> origin_goal(Atom("true"))
+    Traceback (most recent call last):
+    slr_sql.errors.SLREvaluationError: error(type_error(event_goal,true),_)
+    """
     g = deref(goal)
     if type(g) is Var:
         raise instantiation_error()
@@ -2331,6 +2392,11 @@ def call_python_pred(m: "Machine", fn: Callable, args: tuple) -> bool:
     ``fn`` gets the arguments as Python values (unbound ones as :class:`Var`) and returns
     ``True``/``False``/``None`` (succeed/fail/fail), a tuple/list with one value per argument
     (unified with the arguments), or a dict ``{position: value}`` (0-based positions).
+
+    >>> from slr_sql.engine import Engine
+    >>> m = BuiltinMachine(Engine(Program(), None)); total = Var("T")
+    >>> call_python_pred(m, lambda a, b, _: {2: a + b}, (1, 2, total)), deref(total)
+    (True, 3)
     """
     values = [to_python(x) for x in args]
     try:
