@@ -237,6 +237,8 @@ def _kind(sql, v) -> str:
         return v
     if type(v) is float:
         return "float"
+    if -2 ** 53 <= v <= 2 ** 53:
+        return "small"
     return "int" if INT64_MIN <= v <= INT64_MAX else "bignum"
 
 

@@ -121,8 +121,9 @@ class SQLiteQueryPrinter:
 
     def comparison(self, op: str, a: str, kind_a: str, b: str, kind_b: str) -> str:
         """``a op b`` for an arithmetic comparison of two numbers of the kinds ``float``
-        (a double), ``int`` (an integer within 64 bits), ``bignum`` (a larger integer
-        constant) or ``num`` (a stored value, :meth:`prolog_number`), exact as Python's
+        (a double), ``small`` (an integer constant of at most 2**53), ``int`` (another
+        integer within 64 bits), ``bignum`` (a larger integer constant) or ``num`` (a stored
+        value, :meth:`prolog_number`), exact as Python's
         comparison of an integer and a float is: SQLite compares an INTEGER and a REAL
         exactly already.
 
@@ -280,8 +281,9 @@ class PostgresQueryPrinter:
         # slr_num reads a float's text as a NUMERIC, the shortest decimal that reads back
         # as the float, which is not its value beyond 2**53 (2.0**60 is 1152921504606847000
         # there): a float's exact value instead, as Python compares it with an integer
-        return (f"(CASE WHEN slr_typeof({value}) = 'real' "
-                f"THEN {_exact(f'CAST({value} AS double precision)')} "
+        # (an integer's text read here, not in the plpgsql slr_num: no call for a number)
+        return (f"(CASE slr_typeof({value}) WHEN 'integer' THEN CAST({value} AS numeric) "
+                f"WHEN 'real' THEN {_exact(f'CAST({value} AS double precision)')} "
                 f"ELSE slr_num({value}) END)")
 
     def comparison(self, op: str, a: str, kind_a: str, b: str, kind_b: str) -> str:
@@ -292,9 +294,11 @@ class PostgresQueryPrinter:
             # (_exact gives a double beyond 2**63 as its shortest decimal)
             raise Unprintable("comparing a float with an integer beyond 64 bits runs in the "
                               "interpreter on PostgreSQL")
-        if kind_a == "float" and kind_b != "float":
+        # (an integer constant of at most 2**53 is a double exactly: ``T > 5`` stays a
+        # comparison of doubles, as fast as before)
+        if kind_a == "float" and kind_b not in ("float", "small"):
             a = _exact(a)
-        elif kind_b == "float" and kind_a != "float":
+        elif kind_b == "float" and kind_a not in ("float", "small"):
             b = _exact(b)
         return f"{a} {op} {b}"
 
