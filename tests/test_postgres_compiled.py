@@ -322,3 +322,26 @@ def test_a_float_and_an_integer_beyond_64_bits_are_compared_by_the_interpreter(p
         assert "beyond 64 bits" in _plan(kb, goal).reason
         assert [str(a["A"]) for a in kb.query(goal)] == ["a", "b"]
         assert not hasattr(_plan(kb, "v(A, X)^_, X < 9223372036854775807"), "reason")
+
+
+@pytest.mark.parametrize("goal, expected", [
+    ("a(O, N)^_, prev(w(P)^T, N)", [("x", "q"), ("y", "p"), ("z", "p")]),
+    ("a(O, N)^_, next(w(P)^T, [N, inf])", [("x", "q"), ("y", "p"), ("z", "p")]),
+    ("a(O, N)^_, next(w(P)^T, [0, N])", [("x", "r"), ("y", "r"), ("z", "r")]),
+])
+def test_a_time_from_an_integer_is_its_float_in_compiled_prev_and_next(postgres_url, tmp_path,
+                                                                      goal, expected):
+    """prev/next take float(N) of an integer time, as the interpreter does: 2**53 + 3 is
+    2.0**53 + 4 and 2**53 + 1 is 2.0**53 (SQLite compared the stored times with the integer
+    itself; found by comparing the backends)."""
+    events = ["w(r)^1", "w(p)^9007199254740992", "w(q)^9007199254740996",
+              "a(x, 9007199254740995)^1", "a(y, 9007199254740993)^2", "a(z, 9007199254740992)^3"]
+    for where in (str(tmp_path / "robot.db"), postgres_url):
+        with slr_sql.open(where, clock=ManualClock(100.0)) as kb:
+            kb.add_many(events)
+            entry = _plan(kb, goal)
+            assert not hasattr(entry, "reason"), kb.explain(goal)
+            compiled = entry.run(kb, {}, None, None)
+            kb.sql_enabled = False
+            assert compiled == kb.query(goal), where
+            assert [(str(a["O"]), str(a["P"])) for a in compiled] == expected, (where, compiled)

@@ -141,6 +141,10 @@ class BuiltinGoals:
             if f != f:
                 raise Fallback("NaN time")
             return self.const(f)
+        if v != "float":
+            # float(N) as the interpreter takes it: 2**53 + 3 is the time 2.0**53 + 4, and
+            # SQL would compare the integer with the stored times exactly
+            return f"CAST({sql} AS {self.dialect.real})"
         return sql
 
     # ------------------------------------------------------------------ builtins
