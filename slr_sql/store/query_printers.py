@@ -123,9 +123,8 @@ class SQLiteQueryPrinter:
         """``a op b`` for an arithmetic comparison of two numbers of the kinds ``float``
         (a double), ``small`` (an integer constant of at most 2**53), ``int`` (another
         integer within 64 bits), ``bignum`` (a larger integer constant) or ``num`` (a stored
-        value, :meth:`prolog_number`), exact as Python's
-        comparison of an integer and a float is: SQLite compares an INTEGER and a REAL
-        exactly already.
+        value, :meth:`prolog_number`), exact as Python's comparison of an integer and a
+        float is: SQLite compares an INTEGER and a REAL exactly already.
 
         >>> SQLiteQueryPrinter().comparison("<", "t0.t_end", "float", ":c0", "int")
         't0.t_end < :c0'
