@@ -271,3 +271,77 @@ def test_branches_ordered_by_a_robot_name_run_or_are_interpreted_on_postgres(pos
             assert [sqldiff.run(kb, g, None, False) for g in goals] == answers[where]
     assert answers[postgres_url] == answers[str(tmp_path / "robot.db")]
     assert len(answers[postgres_url][0][1]) == 3 and answers[postgres_url][3][1] != []
+
+
+# ------------------------------------------------------------------ integers and floats
+
+# A float beyond 2**53 and an integer near it: Python (the interpreter) and SQLite compare
+# them exactly; the server read a float's text as the NUMERIC of its shortest decimal
+# (2.0**60 as 1152921504606847000) and turned an integer meeting a double into a double
+# (2**53 + 1 =:= 2.0**53), so compiled statements answered otherwise.
+EXACT_EVENTS = ["v(a, 9007199254740993)^1", "v(b, 9007199254740992.0)^2",
+                "v(c, 1152921504606846977)^3", "v(d, 1.152921504606847e+18)^4",
+                "v(e, 0.30000000000000004)^5", "v(f, -1.5)^6", "w(x)^9007199254740992"]
+EXACT_GOALS = {   # goal: the (A, B) of its answers, in order
+    "v(A, X)^_, v(B, Y)^_, X < Y": [("a", "c"), ("a", "d"), ("b", "a"), ("b", "c"), ("b", "d"),
+                                    ("d", "c"), ("e", "a"), ("e", "b"), ("e", "c"), ("e", "d"),
+                                    ("f", "a"), ("f", "b"), ("f", "c"), ("f", "d"), ("f", "e")],
+    "v(A, X)^_, v(B, Y)^_, X =:= Y": [(n, n) for n in "abcdef"],
+    "v(A, X)^_, X >= 1152921504606846977, B = 0": [("c", "0")],
+    "v(A, X)^_, X =:= 1152921504606847000, B = 0": [],
+    "v(A, X)^_, X > 9007199254740992.0, B = 0": [("a", "0"), ("c", "0"), ("d", "0")],
+    "v(A, X)^_, X < 0.3, B = 0": [("f", "0")],
+    "w(A)^T, T < 9007199254740993, B = 0": [("x", "0")],
+    "w(A)^T, T =:= 9007199254740993, B = 0": [],
+    "w(B)^T, v(A, X)^_, X =:= T": [("b", "x")],
+    "w(B)^T, v(A, X)^_, X > T, X < 1.0e18": [("a", "x")],
+    "aggregate_all(count, v(_, _)^_, A), A > 5.999999999999999, B = 0": [("6", "0")],
+}
+
+
+def test_integers_and_floats_compare_exactly_on_both_backends(postgres_url, tmp_path):
+    """Each goal runs as one statement on both backends and answers as the interpreter."""
+    for where in (postgres_url, str(tmp_path / "robot.db")):
+        with slr_sql.open(where, clock=ManualClock(100.0)) as kb:
+            kb.add_many(EXACT_EVENTS)
+            for goal, expected in EXACT_GOALS.items():
+                entry = _plan(kb, goal)
+                assert not hasattr(entry, "reason"), kb.explain(goal)
+                compiled = entry.run(kb, {}, None, None)    # the statement itself
+                kb.sql_enabled = False
+                assert compiled == kb.query(goal), (where, goal)
+                kb.sql_enabled = True
+                assert [(str(a["A"]), str(a["B"])) for a in compiled] == expected, \
+                    (where, goal, compiled)
+
+
+def test_a_float_and_an_integer_beyond_64_bits_are_compared_by_the_interpreter(postgres_url):
+    with slr_sql.open(postgres_url, clock=ManualClock(100.0)) as kb:
+        kb.add_many(["v(a, 9.223372036854776e18)^1", "v(b, 1)^2"])
+        goal = "v(A, X)^_, X < 9223372036854775809"
+        assert "beyond 64 bits" in _plan(kb, goal).reason
+        assert [str(a["A"]) for a in kb.query(goal)] == ["a", "b"]
+        assert not hasattr(_plan(kb, "v(A, X)^_, X < 9223372036854775807"), "reason")
+
+
+@pytest.mark.parametrize("goal, expected", [
+    ("a(O, N)^_, prev(w(P)^T, N)", [("x", "q"), ("y", "p"), ("z", "p")]),
+    ("a(O, N)^_, next(w(P)^T, [N, inf])", [("x", "q"), ("y", "p"), ("z", "p")]),
+    ("a(O, N)^_, next(w(P)^T, [0, N])", [("x", "r"), ("y", "r"), ("z", "r")]),
+])
+def test_a_time_from_an_integer_is_its_float_in_compiled_prev_and_next(postgres_url, tmp_path,
+                                                                      goal, expected):
+    """prev/next take float(N) of an integer time, as the interpreter does: 2**53 + 3 is
+    2.0**53 + 4 and 2**53 + 1 is 2.0**53 (SQLite compared the stored times with the integer
+    itself; found by comparing the backends)."""
+    events = ["w(r)^1", "w(p)^9007199254740992", "w(q)^9007199254740996",
+              "a(x, 9007199254740995)^1", "a(y, 9007199254740993)^2", "a(z, 9007199254740992)^3"]
+    for where in (str(tmp_path / "robot.db"), postgres_url):
+        with slr_sql.open(where, clock=ManualClock(100.0)) as kb:
+            kb.add_many(events)
+            entry = _plan(kb, goal)
+            assert not hasattr(entry, "reason"), kb.explain(goal)
+            compiled = entry.run(kb, {}, None, None)
+            kb.sql_enabled = False
+            assert compiled == kb.query(goal), where
+            assert [(str(a["O"]), str(a["P"])) for a in compiled] == expected, (where, compiled)

@@ -11,6 +11,7 @@ import math
 import operator
 from typing import Any
 
+from ..encoding import INT64_MAX, INT64_MIN
 from ..terms import Atom, Struct, Var, deref
 from .model import (NUMERIC, SITES, Col, ColRef, Fallback, Site, format_for_message, shown_in_message, next_site_id,
                     has_col, has_var, resolve, term_free_vars)
@@ -140,6 +141,10 @@ class BuiltinGoals:
             if f != f:
                 raise Fallback("NaN time")
             return self.const(f)
+        if v != "float":
+            # float(N) as the interpreter takes it: 2**53 + 3 is the time 2.0**53 + 4, and
+            # SQL would compare the integer with the stored times exactly
+            return f"CAST({sql} AS {self.dialect.real})"
         return sql
 
     # ------------------------------------------------------------------ builtins
@@ -161,7 +166,8 @@ class BuiltinGoals:
             xa = a_sql if a_sql is not None else self.num_sql(a_v)
             xb = b_sql if b_sql is not None else self.num_sql(b_v)
             m = st.mark()
-            st.conds.append(f"{xa} {COMPARISONS[name]} {xb}")
+            st.conds.append(self.dialect.comparison(COMPARISONS[name], xa, _kind(a_sql, a_v),
+                                                    xb, _kind(b_sql, b_v)))
             self.solve(nxt, st, emit)
             st.restore(m)
             return
@@ -227,6 +233,17 @@ class BuiltinGoals:
         if ok:
             self.solve(nxt, st, emit)
         st.restore(m)
+
+
+def _kind(sql, v) -> str:
+    """The kind of a comparison's operand (:meth:`arith_sql`'s pair) for the dialect."""
+    if sql is not None:
+        return v
+    if type(v) is float:
+        return "float"
+    if -2 ** 53 <= v <= 2 ** 53:
+        return "small"
+    return "int" if INT64_MIN <= v <= INT64_MAX else "bignum"
 
 
 def _floatish(sql, v) -> bool:

@@ -119,6 +119,18 @@ class SQLiteQueryPrinter:
         """A stored value as a number in arithmetic (raises on anything else)."""
         return f"slr_num({value})"
 
+    def comparison(self, op: str, a: str, kind_a: str, b: str, kind_b: str) -> str:
+        """``a op b`` for an arithmetic comparison of two numbers of the kinds ``float``
+        (a double), ``small`` (an integer constant of at most 2**53), ``int`` (another
+        integer within 64 bits), ``bignum`` (a larger integer constant) or ``num`` (a stored
+        value, :meth:`prolog_number`), exact as Python's comparison of an integer and a
+        float is: SQLite compares an INTEGER and a REAL exactly already.
+
+        >>> SQLiteQueryPrinter().comparison("<", "t0.t_end", "float", ":c0", "int")
+        't0.t_end < :c0'
+        """
+        return f"{a} {op} {b}"
+
     def arith1(self, op: str, a: str) -> str:
         return f"slr_ar1({op}, {a})"
 
@@ -182,6 +194,23 @@ class SQLiteQueryPrinter:
     def aggregate(self, fn: str, union: str) -> str:
         """``slr_sum``/``slr_max``/``slr_min``/``slr_setof`` over ``v0`` of the ordered rows."""
         return f"(SELECT {fn}(v0) FROM ({union}))"
+
+
+def _exact(value: str) -> str:
+    """A double ``value`` as a NUMERIC that compares with integers (and other doubles so
+    written) as the double's exact value does: its integral part exactly (a bigint), plus
+    the shortest decimal of its fraction (the fraction's decimal has the fraction's sign
+    and stays within (-1, 1), and the shortest decimals of doubles are in their order).
+    Beyond 2**63 (and for the infinities) the shortest decimal, exact against any integer
+    within 64 bits.
+
+    >>> _exact("t0.t_end")[:60]
+    'CASE WHEN abs(t0.t_end) < 9223372036854775807 THEN CAST(CAST'
+    """
+    return (f"CASE WHEN abs({value}) < 9223372036854775807 "
+            f"THEN CAST(CAST(trunc({value}) AS bigint) AS numeric) "
+            f"+ CAST(CAST({value} - trunc({value}) AS text) AS numeric) "
+            f"ELSE CAST(CAST({value} AS text) AS numeric) END")
 
 
 class PostgresQueryPrinter:
@@ -248,7 +277,29 @@ class PostgresQueryPrinter:
         return None
 
     def prolog_number(self, value: str) -> str:
-        return f"slr_num({value})"
+        # slr_num reads a float's text as a NUMERIC, the shortest decimal that reads back
+        # as the float, which is not its value beyond 2**53 (2.0**60 is 1152921504606847000
+        # there): a float's exact value instead, as Python compares it with an integer
+        # (an integer's text read here, not in the plpgsql slr_num: no call for a number)
+        return (f"(CASE slr_typeof({value}) WHEN 'integer' THEN CAST({value} AS numeric) "
+                f"WHEN 'real' THEN {_exact(f'CAST({value} AS double precision)')} "
+                f"ELSE slr_num({value}) END)")
+
+    def comparison(self, op: str, a: str, kind_a: str, b: str, kind_b: str) -> str:
+        # a double meets an integer or a stored value as a NUMERIC (the server would turn
+        # the NUMERIC into a double: 2**53 + 1 =:= 2.0**53); two doubles compare as doubles
+        kinds = (kind_a, kind_b)
+        if "bignum" in kinds and ("float" in kinds or "num" in kinds):
+            # (_exact gives a double beyond 2**63 as its shortest decimal)
+            raise Unprintable("comparing a float with an integer beyond 64 bits runs in the "
+                              "interpreter on PostgreSQL")
+        # (an integer constant of at most 2**53 is a double exactly: ``T > 5`` stays a
+        # comparison of doubles, as fast as before)
+        if kind_a == "float" and kind_b not in ("float", "small"):
+            a = _exact(a)
+        elif kind_b == "float" and kind_a not in ("float", "small"):
+            b = _exact(b)
+        return f"{a} {op} {b}"
 
     def arith1(self, op: str, a: str) -> str:
         raise Unprintable("Prolog arithmetic on stored values (beyond comparisons and float "
