@@ -591,17 +591,6 @@ def test_rules_index_the_arguments_their_joins_need(kb):
     assert any("slr_cep_ix__b__arg2_start (arg2=? AND t_start>?)" in p for p in plans)
 
 
-def test_doctests_of_the_event_rule_modules():
-    import doctest
-
-    from slr_sql import cep
-    from slr_sql.cep import rules, runtime, sqlgen, where
-
-    for module in (cep, rules, sqlgen, where, runtime):
-        failures, _ = doctest.testmod(module, verbose=False)
-        assert failures == 0, module.__name__
-
-
 def test_subscriptions_deliver_complex_events_and_end_on_their_completeness(kb, clock):
     kb.load("""
         :- max_delay(a/1, 1). :- max_delay(b/1, 1). :- max_delay(c/1, 1).

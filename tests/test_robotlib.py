@@ -1,14 +1,12 @@
 """Tests for slr_sql.robotlib: interpolation, pose composition and distances."""
 from __future__ import annotations
 
-import doctest
 import math
 
 import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
-from slr_sql import robotlib
 from slr_sql.robotlib import (
     RobotValueError, distance, extrapolate, interpolate, make_pose, pos_multiply,
     quat_multiply, quat_normalize, quat_rotate, slerp, value_kind,
@@ -66,15 +64,8 @@ def pose(draw):
 # ---------------------------------------------------------------- doctests
 
 
-def test_doctests():
-    failures, tried = doctest.testmod(robotlib, verbose=False)
-    assert tried > 0 and failures == 0
-
-
-def test_every_public_function_has_example():
-    for name in robotlib.__all__:
-        doc = getattr(robotlib, name).__doc__
-        assert doc and ">>>" in doc, name
+# (the examples run, and each public function has one: tests/test_doctests.py, for every
+# module of the package)
 
 
 # ---------------------------------------------------------------- quaternions

@@ -2,7 +2,6 @@
 MCAP files), the built-in tf mapping, MAP files, --all, pub_sub.xml, resuming, the CLI."""
 from __future__ import annotations
 
-import doctest
 import functools
 import importlib.util
 import math
@@ -16,8 +15,7 @@ from hypothesis import given, settings, strategies as st
 
 import slr_sql
 from slr_sql import Atom, StreamClock, Struct
-from slr_sql.ros import bag_import, bridge as bridge_module, fast_tf, foreign_types, \
-    mapping as mapping_module
+from slr_sql.ros import fast_tf
 from slr_sql.ros.bag_import import BagError, import_bag
 from slr_sql.ros.mapping import MappingError, load_mapping, mapping_from_dict
 
@@ -527,11 +525,6 @@ def test_cli_without_the_extra_says_what_to_install(tmp_path):
     assert not (tmp_path / "r.db").exists()
 
 
-@pytest.mark.parametrize("module", [mapping_module, fast_tf, bag_import, bridge_module,
-                                    foreign_types])
-def test_doctests(module):
-    failures, tried = doctest.testmod(module, verbose=False)
-    assert tried > 0 and failures == 0
 
 
 def test_import_uses_only_the_public_api():

@@ -6,7 +6,6 @@ checked through its file; waits are deadline loops. Output subscriptions need kb
 with it they are driven for real, without it the error reply is checked."""
 from __future__ import annotations
 
-import doctest
 import itertools
 import json
 import os
@@ -25,9 +24,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import slr_sql
-from slr_sql.ros import control as control_module
-from slr_sql.ros import protocol as protocol_module
-from slr_sql.ros import requests as requests_module
 from slr_sql.ros.control import program_name
 from slr_sql.ros.mapping import mapping_from_dict
 from slr_sql.ros.protocol import parse_query, read_request
@@ -567,12 +563,6 @@ def test_query_requests_read_back(body):
         assert encode_answers([request.args]) == [body["args"]]
     with pytest.raises(ServiceError):
         parse_query({**read, "limit": 0})
-
-
-@pytest.mark.parametrize("module", [protocol_module, control_module, requests_module])
-def test_doctests(module):
-    failures, tried = doctest.testmod(module, verbose=False)
-    assert tried > 0 and failures == 0
 
 
 JSON = st.recursive(
