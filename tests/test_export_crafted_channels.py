@@ -23,6 +23,8 @@ from mcap.writer import Writer as McapWriter
 
 import slr_sql
 
+from test_ros_import_damaged_bags import one_error_line
+
 REPO = Path(__file__).resolve().parent.parent
 GOOD = b'{"arg1":"a","start":1.0,"end":1.0,"arrival":1.0}'
 
@@ -46,14 +48,6 @@ def crafted(path: Path, metadata: dict, messages: list[bytes], topic: str = "/p/
         for i, data in enumerate(messages):
             writer.add_message(channel, (i + 2) * 1_000_000_000, data, 0, i)
         writer.finish()
-
-
-def one_error_line(result: subprocess.CompletedProcess) -> str:
-    assert result.returncode == 1, (result.stdout, result.stderr)
-    assert "Traceback" not in result.stderr and "bug" not in result.stderr, result.stderr
-    lines = [line for line in result.stderr.splitlines() if line.strip()]
-    assert len(lines) == 1, lines
-    return lines[0]
 
 
 @pytest.mark.parametrize("metadata", [
