@@ -417,9 +417,12 @@ def export_batches(path: str | Path, done: dict | None = None, batch_size: int =
     counts: dict = {}
     batch: list = []
     marks: list = []
+    types: dict[int, tuple[str, int] | None] = {}   # each channel's event type, read once
     for _schema, channel, message in export_messages(path):
         topic = channel.topic
-        event_type = channel_type(path, topic, channel.metadata)
+        if channel.id not in types:
+            types[channel.id] = channel_type(path, topic, channel.metadata)
+        event_type = types[channel.id]
         if event_type is not None:
             n = counts[topic] = counts.get(topic, 0) + 1
             if n <= done.get(topic, 0):
