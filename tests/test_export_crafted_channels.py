@@ -100,3 +100,42 @@ def test_a_message_with_an_integer_of_5000_digits_is_said_in_words(tmp_path):
     assert "/p/1: message 1 is not an slr event: an integer of more than 4300 digits" in line, \
         line
     assert "sys.set_int_max_str_digits" not in line
+
+
+@pytest.mark.parametrize("message, reason", [
+    pytest.param(b'{"arg1":"a","start":true,"end":true,"arrival":1}',
+                 "its start time true is no number", id="true"),
+    pytest.param(b'{"arg1":"a","start":"1.5","end":2,"arrival":1}',
+                 'its start time "1.5" is no number', id="text"),
+    pytest.param(b'{"arg1":"a","start":1,"end":[2],"arrival":1}',
+                 "its end time [2] is no number", id="list"),
+    pytest.param(b'{"arg1":"a","start":' + b"9" * 400 + b',"end":1,"arrival":1}',
+                 "its start time is an integer beyond any float", id="400-digits"),
+    pytest.param(b'[1, 2]', "it is no JSON object", id="array"),
+    pytest.param(b'{"start":1,"end":1}', "it has no arg1", id="no-argument"),
+    pytest.param(b'{"arg1":"a","start":1,"arrival":1}', "it has no end", id="no-end"),
+])
+def test_a_message_whose_times_are_no_numbers_is_refused_in_words(tmp_path, message, reason):
+    """Times were read with float(): JSON ``true`` was stored as 1.0 and ``"1.5"`` as 1.5,
+    times the export never had; an integer of 400 digits stopped the import with
+    "OverflowError ... (this is a bug in slr_sql)"; a missing key was said as ``'end'``."""
+    path = tmp_path / "times.mcap"
+    crafted(path, {"slr_event": "p", "slr_arity": "1"}, [message])
+    db = tmp_path / "robot.db"
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add("keep(me)^1")
+    before = hashlib.sha256(db.read_bytes()).hexdigest()
+    line = one_error_line(slr("ros", "import", str(path), str(db)))
+    assert line.endswith(f"/p/1: message 1 is not an slr event: {reason}"), line
+    assert hashlib.sha256(db.read_bytes()).hexdigest() == before
+
+
+def test_ros_info_counts_a_transform_whose_time_is_beyond_any_float_as_undecodable(tmp_path):
+    path = tmp_path / "tf.mcap"
+    crafted(path, {"slr_event": "tf", "slr_arity": "3"},
+            [b'{"arg1":"map","arg2":"base","arg3":[0,0,0],"start":' + b"9" * 400
+             + b',"end":1,"arrival":1}'], topic="/tf")
+    info = slr("ros", "info", str(path))
+    assert info.returncode == 0, info.stderr
+    assert "bug" not in info.stderr and "Traceback" not in info.stderr
+    assert "warning: /tf: 1 of 1 messages do not decode" in info.stderr, info.stderr

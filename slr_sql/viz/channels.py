@@ -205,8 +205,30 @@ def event_from_message(name: str, arity: int, data: bytes | str) -> tuple:
     ('seg', ['cup1', '[0.4,0.1]'], 1.5, 2.0)
     """
     obj = json.loads(data)
-    args = tuple(decode_json(obj[f"arg{i + 1}"]) for i in range(arity))
-    return (name, args, float(obj["start"]), float(obj["end"]))
+    if type(obj) is not dict:
+        raise ValueError("it is no JSON object")
+    keys = [f"arg{i + 1}" for i in range(arity)]
+    missing = [key for key in (*keys, "start", "end") if key not in obj]
+    if missing:
+        raise ValueError(f"it has no {', '.join(missing[:3])}")
+    args = tuple(decode_json(obj[key]) for key in keys)
+    return (name, args, _seconds(obj, "start"), _seconds(obj, "end"))
+
+
+def _seconds(obj: dict, key: str) -> float:
+    """A message's ``start`` or ``end``: a JSON number, nothing that merely converts to one
+    (``true`` or ``"1.5"`` would be stored as a time the export never had)."""
+    value = obj[key]
+    if type(value) is float:
+        return value
+    if type(value) is int:
+        try:
+            return float(value)
+        except OverflowError:
+            raise ValueError(f"its {key} time is an integer beyond any float") from None
+    shown = json.dumps(value)
+    raise ValueError(f"its {key} time {shown if len(shown) <= 40 else shown[:40] + '...'} "
+                     "is no number")
 
 
 def _frame(value: Any) -> str:
