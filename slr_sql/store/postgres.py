@@ -28,7 +28,7 @@ import zlib
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager, suppress
 from typing import Any
-from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
+from urllib.parse import parse_qsl, urlencode, urlsplit
 
 from ..errors import SLRBusy, SLRCancelled, SLRError, SLRServerUnreachable, SLRStatementTimeout, \
     SLRTimeout, \
@@ -85,12 +85,20 @@ def split_url(url: str) -> tuple[str, str]:
             kept.append((key, value))
     if not schema or "\x00" in schema:
         raise SLRError(f"{_shown(url)}: schema= must name a PostgreSQL schema")
-    return urlunsplit(("postgresql", parts.netloc, parts.path, urlencode(kept), "")), schema
+    # (written out rather than urlunsplit, which drops the "//" of a URL with no host --
+    # postgresql:///db, the local server's socket -- and libpq reads no URL in the rest)
+    query = urlencode(kept)
+    return f"postgresql://{parts.netloc}{parts.path}{'?' if query else ''}{query}", schema
 
 
 def _shown(url: str) -> str:
-    """The URL without a password (for messages)."""
-    return re.sub(r"(://[^:/@]*):[^@]*@", r"\1:***@", url)
+    """The URL without a password, given before the host or as a parameter (for messages).
+
+    >>> _shown("postgresql://robot:s3cret@db/fleet?sslpassword=k3y&schema=a")
+    'postgresql://robot:***@db/fleet?sslpassword=***&schema=a'
+    """
+    url = re.sub(r"(://[^:/@]*):[^@]*@", r"\1:***@", url)
+    return re.sub(r"([?&](?:ssl)?password=)[^&#]*", r"\1***", url, flags=re.IGNORECASE)
 
 
 def _psycopg() -> Any:

@@ -1,0 +1,62 @@
+"""PostgreSQL URLs as libpq users write them (docs/postgres.md): the local server's socket
+with no host before the path (``postgresql:///db?host=DIR``), and a password given as a
+parameter, which no message may show."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+from urllib.parse import parse_qsl, urlsplit
+
+import pytest
+
+import slr_sql
+from slr_sql.store.postgres import split_url
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def without_host_part(url: str) -> str:
+    """``postgresql://user:@/db?host=DIR`` as ``postgresql:///db?host=DIR&user=user``."""
+    parts = urlsplit(url)
+    query = dict(parse_qsl(parts.query))
+    query["user"] = parts.username or "postgres"
+    return f"postgresql://{parts.path}?" + "&".join(f"{k}={v}" for k, v in query.items())
+
+
+def test_a_url_with_no_host_before_the_path_opens_the_store(postgres_url):
+    """urlunsplit wrote ``postgresql:/db?host=...`` (one slash), which libpq does not read
+    as a URL: "invalid connection option"."""
+    url = without_host_part(postgres_url)
+    assert url.startswith("postgresql:///slr_test_"), url
+    with slr_sql.open(url, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add("seen(cup1)^1")
+    with slr_sql.open(postgres_url) as kb:
+        assert kb.query("seen(X)^T") == [{"X": slr_sql.Atom("cup1"), "T": 1.0}]
+
+
+@pytest.mark.parametrize("url, conninfo", [
+    ("postgresql:///db?host=/run/pg&schema=fleet", "postgresql:///db?host=%2Frun%2Fpg"),
+    ("postgres://u@/db?host=/tmp", "postgresql://u@/db?host=%2Ftmp"),
+    ("postgresql://h:5433/db", "postgresql://h:5433/db"),
+    ("postgresql://", "postgresql://"),
+])
+def test_split_url_keeps_the_two_slashes(url, conninfo):
+    assert split_url(url)[0] == conninfo
+
+
+@pytest.mark.parametrize("secret_part", [
+    "password=Hunter2secret", "sslpassword=Hunter2secret", "PASSWORD=Hunter2secret"])
+def test_a_password_given_as_a_parameter_is_not_shown(tmp_path, secret_part):
+    url = f"postgresql:///nowhere?host={tmp_path}&{secret_part}"
+    with pytest.raises(slr_sql.SLRError) as caught:
+        slr_sql.open(url)
+    assert "Hunter2secret" not in str(caught.value)
+    assert "***" in str(caught.value)
+    result = subprocess.run([sys.executable, "-m", "slr_sql", "query", url, "p(X)"],
+                            capture_output=True, text=True, timeout=120,
+                            env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert result.returncode != 0
+    assert "Hunter2secret" not in result.stderr + result.stdout
+    assert "cannot connect" in result.stderr, result.stderr
