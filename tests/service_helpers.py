@@ -51,9 +51,10 @@ HTTP = httpx.Client(verify=False, limits=httpx.Limits(max_keepalive_connections=
 class ServiceProcess:
     """``with ServiceProcess(db, "--token", "t") as server: server.url``"""
 
-    def __init__(self, db: Path | str, *args: str, env: dict | None = None):
+    def __init__(self, db: Path | str, *args: str, env: dict | None = None,
+                 log: Path | None = None):
         self.db = str(db)
-        self.log = Path(str(db) + ".server.log")
+        self.log = log or Path(str(db) + ".server.log")   # log=: for a PostgreSQL URL
         self._log_handle = open(self.log, "wb")
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "slr_sql", "serve", self.db, "--port", "0", *args],
@@ -70,6 +71,7 @@ class ServiceProcess:
         if " on http" not in first:
             self.stop()
             raise RuntimeError(f"slr serve failed: {first!r} {self.log.read_text()}")
+        self.first_line = first
         self.url = first.strip().rsplit(" on ", 1)[1]
         self.wait_healthy()
 

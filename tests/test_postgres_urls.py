@@ -60,3 +60,18 @@ def test_a_password_given_as_a_parameter_is_not_shown(tmp_path, secret_part):
     assert result.returncode != 0
     assert "Hunter2secret" not in result.stderr + result.stdout
     assert "cannot connect" in result.stderr, result.stderr
+
+
+def test_slr_serve_does_not_print_the_password_of_its_store(postgres_url, tmp_path):
+    """``slr serve: DB on http://...`` printed DB as given, password and all, on the
+    standard output a service manager keeps in its log."""
+    from service_helpers import ServiceProcess
+
+    url = without_host_part(postgres_url) + "&password=Hunter2secret"
+    with ServiceProcess(url, log=tmp_path / "server.log") as server:
+        assert server.first_line.startswith("slr serve: postgresql:///slr_test_"), \
+            server.first_line
+        assert "password=***" in server.first_line, server.first_line
+        assert "Hunter2secret" not in server.first_line
+        assert server.healthy()
+    assert "Hunter2secret" not in server.log.read_text()

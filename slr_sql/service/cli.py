@@ -244,7 +244,8 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
         prepare_collector_for_serving()
         if view is not None:
             print(f"slr serve: foxglove on ws://{foxglove[0]}:{view.port}", flush=True)
-        print(f"slr serve: {db} on {scheme}://{shown}:{bound_port}", flush=True)
+        # (kb.path: a PostgreSQL URL without its password, as every message shows it)
+        print(f"slr serve: {kb.path or db} on {scheme}://{shown}:{bound_port}", flush=True)
         with _stop_on_signals():
             server.run(sockets=[sock])
     except _Stop:
