@@ -28,7 +28,7 @@ from .answers import answer_text, value_text
 from .encoding import decode
 from .kb import KnowledgeBase
 from .parser import parse_event_fast
-from .store import refuse_no_store
+from .store import refuse_no_store, shown_location
 from .terms import Atom, Struct, list_items
 
 __all__ = ["main", "parse_event_line", "ingest_file", "IngestReport", "strip_full_stop"]
@@ -309,8 +309,8 @@ def _warn_event_like_facts(file: str, db: str) -> None:
         _err(f"  to load its rules and add the events after '%% events' into a new store: "
              f"slr run {file} --db NEW.db")
     else:
-        _err(f"  to add such lines as events: slr add {db} 'EVENT' ..., or one per line "
-             f"with slr ingest {db} FILE")
+        _err(f"  to add such lines as events: slr add {shown_location(db)} 'EVENT' ..., or one per line "
+             f"with slr ingest {shown_location(db)} FILE")
 
 
 @main.command()
@@ -626,7 +626,7 @@ def run(file: str, db: str | None, quiet: bool) -> None:
         raise slr_sql.SLRError(f"{file}: not an example file (not UTF-8 text)") from None
     example = parse_example(text, file)
     if db is not None and os.path.exists(db) and os.path.getsize(db) > 0:
-        raise slr_sql.SLRError(f"{db} exists; slr run wants a fresh store (remove it first)")
+        raise slr_sql.SLRError(f"{shown_location(db)} exists; slr run wants a fresh store (remove it first)")
     # The events are a recording: time stands still at 0, so no buffer prunes them and
     # every query sees the file's events however long ago their times are.
     with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
@@ -1467,7 +1467,7 @@ def shell(db: str) -> None:
         session = Shell(kb, ask=click.getchar)
         prompt: PromptSession[str] = PromptSession(history=FileHistory(_history_path()),
                                completer=PredicateCompleter(), complete_while_typing=False)
-        click.echo(f"slr shell on {db} — `help` for commands, Ctrl-C stops a goal, "
+        click.echo(f"slr shell on {shown_location(db)} — `help` for commands, Ctrl-C stops a goal, "
                    f"Ctrl-D leaves")
         terminal = TerminalModes(sys.stdin)
         ended_by: int | None = None

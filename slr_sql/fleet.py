@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
 
 from .errors import SLRError
-from .store import EventStore, WriterInFlight, check_robot_name, refuse_no_store
+from .store import EventStore, WriterInFlight, check_robot_name, refuse_no_store, shown_location
 
 __all__ = ["FleetTarget", "PushReport", "RobotStoreRestored", "open_target", "parse_type_spec",
            "push", "status"]
@@ -517,14 +517,14 @@ def push(db: str, fleet: str, *, robot: str | None = None,
         if robot is not None:
             check_robot_name(robot)
             if named is not None and named != robot:
-                raise SLRError(f"{db} is the store of robot {named!r}, not {robot!r}")
+                raise SLRError(f"{shown_location(db)} is the store of robot {named!r}, not {robot!r}")
         name = robot if robot is not None else named
         if name is None:
-            raise SLRError(f"{db} has no robot name: open it with robot=NAME once, or "
+            raise SLRError(f"{shown_location(db)} has no robot name: open it with robot=NAME once, or "
                            "push with --robot NAME")
         check_robot_name(name)   # (a store named before a check it would fail existed)
         if _same_file(db, fleet):
-            raise SLRError(f"{fleet} is the robot's store {db} itself: a robot does not ship "
+            raise SLRError(f"{shown_location(fleet)} is the robot's store {shown_location(db)} itself: a robot does not ship "
                            "to its own store")
         if named is None:
             # shipped as the robot, the store is the robot's from now on (as `slr fleet
@@ -759,7 +759,7 @@ def click_group() -> Any:
         events from now on carry the name; ``slr_sql.open(DB, robot=NAME)`` does the same."""
         with EventStore(db, robot=robot):
             pass
-        click.echo(f"{db} is the store of robot {robot}")
+        click.echo(f"{shown_location(db)} is the store of robot {robot}")
 
     @fleet_group.command("push")
     @click.argument("db", type=click.Path(dir_okay=False))
@@ -789,7 +789,7 @@ def click_group() -> Any:
                 stop.set()
             signal.signal(signal.SIGINT, on_signal)
             signal.signal(signal.SIGTERM, on_signal)
-            click.echo(f"following {db}: shipping to {fleet} (SIGINT or SIGTERM stops)",
+            click.echo(f"following {shown_location(db)}: shipping to {shown_location(fleet)} (SIGINT or SIGTERM stops)",
                        err=True)
 
         def say(message: str) -> None:

@@ -75,3 +75,17 @@ def test_slr_serve_does_not_print_the_password_of_its_store(postgres_url, tmp_pa
         assert "Hunter2secret" not in server.first_line
         assert server.healthy()
     assert "Hunter2secret" not in server.log.read_text()
+
+
+def test_slr_fleet_push_names_a_robot_store_on_postgresql_without_its_password(
+        postgres_url, tmp_path):
+    url = without_host_part(postgres_url) + "&password=Hunter2secret"
+    with slr_sql.open(url, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add("seen(cup1)^1")
+    result = subprocess.run(
+        [sys.executable, "-m", "slr_sql", "fleet", "push", url, str(tmp_path / "fleet.db")],
+        capture_output=True, text=True, timeout=120, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert result.returncode == 1, result.stderr
+    assert "has no robot name" in result.stderr, result.stderr
+    assert "password=***" in result.stderr, result.stderr
+    assert "Hunter2secret" not in result.stderr + result.stdout

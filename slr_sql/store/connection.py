@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import os
 import random
+import re
 import sqlite3
 import stat
 import time
@@ -246,6 +247,22 @@ def is_postgres_url(where: Any) -> bool:
     (True, False)
     """
     return isinstance(where, str) and where.startswith(("postgresql://", "postgres://"))
+
+
+def shown_location(where: Any) -> str:
+    """A store's path or URL as messages show it: a PostgreSQL URL without its password,
+    given before the host or as a parameter.
+
+    >>> shown_location("postgresql://robot:s3cret@db/fleet?sslpassword=k3y&schema=a")
+    'postgresql://robot:***@db/fleet?sslpassword=***&schema=a'
+    >>> shown_location("robot.db")
+    'robot.db'
+    """
+    text = str(where)
+    if not is_postgres_url(text):
+        return text
+    text = re.sub(r"(://[^:/@]*):[^@]*@", r"\1:***@", text)
+    return re.sub(r"([?&](?:ssl)?password=)[^&#]*", r"\1***", text, flags=re.IGNORECASE)
 
 
 def refuse_no_store(path: str) -> None:

@@ -36,7 +36,7 @@ from ..errors import SLRBusy, SLRCancelled, SLRError, SLRServerUnreachable, SLRS
 from ..lockorder import ordered_lock
 from .connection import Database, DatabaseError, drop_commit_callbacks, in_own_transaction, \
     is_postgres_url, merge_commit_callbacks, run_after_rollback, \
-    run_commit_callbacks
+    run_commit_callbacks, shown_location
 from .authorizer import transaction_control_refusal
 from .dialect import POSTGRES
 from .functions import SqlFunctions
@@ -74,7 +74,7 @@ def split_url(url: str) -> tuple[str, str]:
     try:
         parts = urlsplit(url)
     except ValueError as exc:       # a bracket of an IPv6 address missing, ...
-        raise SLRError(f"{_shown(url)}: not a PostgreSQL URL ({exc})") from None
+        raise SLRError(f"{shown_location(url)}: not a PostgreSQL URL ({exc})") from None
     query = parse_qsl(parts.query, keep_blank_values=True)
     schema = "slr"
     kept = []
@@ -84,21 +84,11 @@ def split_url(url: str) -> tuple[str, str]:
         else:
             kept.append((key, value))
     if not schema or "\x00" in schema:
-        raise SLRError(f"{_shown(url)}: schema= must name a PostgreSQL schema")
+        raise SLRError(f"{shown_location(url)}: schema= must name a PostgreSQL schema")
     # (written out rather than urlunsplit, which drops the "//" of a URL with no host --
     # postgresql:///db, the local server's socket -- and libpq reads no URL in the rest)
     query = urlencode(kept)
     return f"postgresql://{parts.netloc}{parts.path}{'?' if query else ''}{query}", schema
-
-
-def _shown(url: str) -> str:
-    """The URL without a password, given before the host or as a parameter (for messages).
-
-    >>> _shown("postgresql://robot:s3cret@db/fleet?sslpassword=k3y&schema=a")
-    'postgresql://robot:***@db/fleet?sslpassword=***&schema=a'
-    """
-    url = re.sub(r"(://[^:/@]*):[^@]*@", r"\1:***@", url)
-    return re.sub(r"([?&](?:ssl)?password=)[^&#]*", r"\1***", url, flags=re.IGNORECASE)
 
 
 def _psycopg() -> Any:
@@ -1061,7 +1051,7 @@ class PgDatabase:
         conninfo, schema = split_url(url)
         self.url = url
         self.conninfo = conninfo
-        self.path = _shown(url)
+        self.path = shown_location(url)
         self.schema = schema
         self.clock = clock if clock is not None else WallClock()
         self.lock = ordered_lock("store", reentrant=True)
