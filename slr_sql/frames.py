@@ -199,7 +199,10 @@ def pose_value(term: Any) -> Pose | None:
             if type(x) is float:
                 values.append(x)
             elif type(x) is int:
-                values.append(float(x))
+                try:
+                    values.append(float(x))
+                except OverflowError:
+                    return None   # beyond any float: no transform, as an infinite one
             else:
                 return None
         parts.append(values)

@@ -40,10 +40,12 @@ def assert_finite_unit(result) -> None:
     assert math.isclose(sum(c * c for c in q), 1.0, rel_tol=1e-12), result
 
 
-@pytest.mark.parametrize("bad", [math.inf, -math.inf])
+@pytest.mark.parametrize("bad", [math.inf, -math.inf, 10 ** 400, -(10 ** 400)],
+                         ids=["inf", "-inf", "int-beyond-floats", "-int-beyond-floats"])
 def test_a_stored_transform_with_an_infinite_coordinate_is_not_a_pose(bad):
     """tf2 refuses such a transform; here the lookup over it fails, both ways (it answered
-    [-inf, ..] one way and [nan, nan, nan] the other)."""
+    [-inf, ..] one way and [nan, nan, nan] the other; an integer beyond any float stopped
+    the query with "OverflowError: int too large to convert to float")."""
     with store(("a", "b", 0.0, [bad, 0.0, 0.0], [0, 0, 0, 1]),
                ("a", "b", 2.0, [1.0, 0.0, 0.0], [0, 0, 0, 1]),
                ("c", "d", 0.0, [0.0, 0.0, 0.0], [0, 0, bad, 1])) as kb:

@@ -255,8 +255,8 @@ def transform_message(rows: list) -> bytes | None:
                 continue
             (x, y, z), (qx, qy, qz, qw) = json.loads(row[2])["pose"]
             values = [float(v) for v in (x, y, z, qx, qy, qz, qw)]
-        except (TypeError, ValueError, KeyError, AttributeError):
-            continue
+        except (TypeError, ValueError, KeyError, AttributeError, OverflowError):
+            continue     # (OverflowError: an integer beyond any float)
         if not all(math.isfinite(v) for v in values):
             continue
         ns = time_ns(row[4])
@@ -287,7 +287,8 @@ _NUMBER_CHARS = frozenset("0123456789.-+eE")
 def _one_transform(row: tuple) -> bytes | None:
     """transform_message of one row in its common form (plain frame names, a pose of finite
     numbers), written from the stored text directly (the encoder wrote each number's
-    shortest text); None for anything else (the general path decides)."""
+    shortest text, at most 24 characters for a float); None for anything else (the general
+    path decides: an integer of 400 digits is no float)."""
     parent, child, pose = _plain_frame(row[0]), _plain_frame(row[1]), row[2]
     if parent is None or child is None or type(pose) is not str \
             or not pose.startswith('{"pose":[[') or not pose.endswith("]]}"):
@@ -296,7 +297,7 @@ def _one_transform(row: tuple) -> bytes | None:
     if len(halves) != 2:
         return None
     t, q = halves[0].split(","), halves[1].split(",")
-    if len(t) != 3 or len(q) != 4 or "e999" in pose \
+    if len(t) != 3 or len(q) != 4 or "e999" in pose or max(map(len, t + q)) > 24 \
             or not _NUMBER_CHARS.issuperset(halves[0].replace(",", "") + halves[1].replace(",", "")):
         return None
     ns = time_ns(row[4])

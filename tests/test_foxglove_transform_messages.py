@@ -1,0 +1,34 @@
+"""``foxglove.FrameTransforms`` messages of stored tf rows (slr_sql/viz/channels.py), which
+the live view sends and ``slr export`` writes: a transform whose numbers are no finite
+floats is left out, whether the message is written from the stored text (one row) or
+decoded (several rows)."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from slr_sql.viz.channels import transform_message
+
+GOOD = ("map", "base", '{"pose":[[1.0,2.0,3.0],[0.0,0.0,0.0,1.0]]}', 2.5, 2.5, 3.0, 1)
+HUGE = str(10 ** 400)
+
+
+@pytest.mark.parametrize("pose", [
+    f'{{"pose":[[{HUGE},0,0],[0,0,0,1]]}}',
+    f'{{"pose":[[1,0,0],[0,0,0,-{HUGE}]]}}',
+    '{"pose":[[9e999,0,0],[0,0,0,1]]}',
+])
+def test_a_transform_beyond_any_float_is_left_out(pose):
+    """One row was written as it was stored (a message with a number of 400 digits);
+    two rows stopped the view with "OverflowError: int too large to convert to float"."""
+    bad = ("map", "cam", pose, 1.0, 1.0, 1.0, 2)
+    assert transform_message([bad]) is None
+    message = json.loads(transform_message([bad, GOOD]))
+    assert [t["child_frame_id"] for t in message["transforms"]] == ["base"]
+    assert message["transforms"][0]["translation"] == {"x": 1.0, "y": 2.0, "z": 3.0}
+
+
+def test_a_row_of_plain_numbers_is_still_written_from_its_text():
+    message = json.loads(transform_message([GOOD]))
+    assert message["transforms"][0]["rotation"] == {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
