@@ -11,7 +11,7 @@ import math
 import re
 from typing import Any
 
-from .terms import Var, deref, to_python
+from .terms import Var, deref, int_text, to_python
 
 __all__ = ["answer_bindings", "value_text", "answer_text"]
 
@@ -61,7 +61,8 @@ def _number_text(x: float | int, digits: int | None = None) -> str:
             return "nan"
         if digits is not None:
             return repr(round(x, digits) + 0.0)  # + 0.0 turns -0.0 into 0.0
-    return repr(x)
+        return repr(x)
+    return int_text(x)   # (repr refuses an integer of more than 4,300 digits)
 
 
 def _as_engine_term(value: Any) -> Any:

@@ -1496,7 +1496,21 @@ DET[("writeq", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], True, m.deadl
 DET[("write_canonical", 1)] = DET[("writeq", 1)]
 DET[("writeln", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], deadline=m.deadline) + "\n"), True)[1]
 DET[("nl", 0)] = lambda m, a: (_out(m).write("\n"), True)[1]
-DET[("tab", 1)] = lambda m, a: (_out(m).write(" " * evaluate(a[0])), True)[1]
+
+
+def _tab(m: "Machine", a: list) -> bool:
+    """tab(N): N spaces, N an integer expression (none for N < 0); as SWI-Prolog, a float
+    is type_error(integer_expression) and a count beyond 64 bits evaluation_error(int_overflow)."""
+    n = evaluate(a[0])
+    if type(n) is not int:
+        raise type_error("integer_expression", n)
+    if n > sys.maxsize:
+        raise evaluation_error("int_overflow")
+    _out(m).write(" " * n)
+    return True
+
+
+DET[("tab", 1)] = _tab
 
 
 def format_text(fmt: str, args: list, deadline: float | None = None) -> str:

@@ -109,6 +109,14 @@ GOALS = [
     'member(X, [a|b])',
     'format(atom(A), "~w-~a", [x, y])',
     'format(atom(A), "~d", [3])',
+    # tab/1's count: a float, a count beyond 64 bits (TypeError and OverflowError were
+    # raised as "bugs"), a negative one (no spaces)
+    'tab(1.5)',
+    'X is 10**5000, tab(X)',
+    'tab(-2)',
+    # an integer beyond Python's 4,300-digit str() limit, as text
+    'X is 10**5000, atom_length(X, L), Y is X mod 7',
+    'X is -(10**5000), number_codes(X, C), length(C, N)',
     'format(atom(A), "~q", [\'A b\'])',
     'format(atom(A), "~a", [1])',
     'format(atom(A), "~w and ~w", [x])',

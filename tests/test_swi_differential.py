@@ -40,6 +40,7 @@ from strategy_helpers import BOOLEANS, integers, sampled
 import slr_sql
 from slr_sql import Atom, SLREvaluationError, SLRTimeout, Struct, Var
 from slr_sql.planner import plan_for
+from slr_sql.terms import int_from_text
 
 HAVE_SWIPL = shutil.which("swipl") is not None
 CORPUS_PATH = Path(__file__).parent / "golden" / "swi_differential.json"
@@ -319,7 +320,7 @@ def from_swi(j: dict, varmap: dict) -> tuple:
     if "v" in j:
         return ("v", varmap.setdefault(("swi", j["v"]), len(varmap)))
     if "i" in j:
-        return ("i", int(j["i"]))
+        return ("i", int_from_text(j["i"]))   # (int() stops at 4,300 digits)
     if "f" in j:
         return ("f", repr(float(j["f"])))
     if "l" in j:

@@ -57,6 +57,7 @@ from typing import Any
 import orjson
 
 from slr_sql import Atom, SLRError, String, Struct, Var
+from slr_sql.terms import MAX_INTEGER_BITS, int_from_text, int_text
 
 __all__ = ["TermError", "encode_term", "decode_term", "encode_arguments", "decode_arguments",
            "encode_answers", "decode_answers",
@@ -137,10 +138,7 @@ def _encode(value: Any, plain_str: str, where: str, depth: int) -> Any:
     if tv is int:
         if INT64_MIN <= value <= INT64_MAX:
             return value
-        try:
-            return {"$int": str(value)}
-        except ValueError:  # beyond Python's int/str conversion limit
-            raise TermError("integer too large to send", where) from None
+        return {"$int": int_text(value)}   # (str() refuses more than 4,300 digits)
     if tv is float:
         if math.isfinite(value):
             return value
@@ -307,10 +305,13 @@ def _decode_special(key: str, value: Any, strings: type, variables: dict | None,
     if key == "$int":
         if not _INTEGER.match(value):
             raise TermError(f"$int must be decimal digits, not {value!r}", where)
-        try:
-            return int(value)
-        except ValueError:
-            raise TermError("$int: integer too large", where) from None
+        # (the length first: converting a megabyte of digits would hold the request)
+        number = (int_from_text(value) if len(value) <= MAX_INTEGER_BITS * 0.302 + 2
+                  else None)
+        if number is None or number.bit_length() > MAX_INTEGER_BITS:
+            raise TermError(f"$int: integer too large (more than {MAX_INTEGER_BITS} bits)",
+                            where)
+        return number
     if key == "$var":
         if variables is None:
             return Var(value)
