@@ -38,6 +38,7 @@ from typing import Any, Iterable
 from .errors import SLRError, SLRTimeout
 from .store.timeline import Statement, TimelineStatements, timeline_statements
 from .store import DatabaseError, quote_identifier
+from .store.checks import shown
 
 __all__ = [
     "timeline", "collect_timeline", "draw_timeline", "save_timeline", "parse_value_spec",
@@ -244,9 +245,11 @@ def _check_time(what: str, value: Any) -> float | None:
     try:
         number = float(value)
     except (TypeError, ValueError):
-        raise SLRError(f"{what} must be a number, not {value!r}") from None
+        raise SLRError(f"{what} must be a number, not {shown(value)}") from None
+    except OverflowError:    # an integer beyond any float
+        number = math.inf
     if not math.isfinite(number):
-        raise SLRError(f"{what} must be a finite number, not {value!r}")
+        raise SLRError(f"{what} must be a finite number, not {shown(value)}")
     return number
 
 

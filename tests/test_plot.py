@@ -363,6 +363,9 @@ def test_binned_coverage_matches_a_direct_count(events, window):
     ({"start": 5, "end": 3}, r"empty time window: from 5 to 3"),
     ({"start": 5, "end": 5}, r"empty time window"),
     ({"start": float("nan")}, r"from must be a finite number"),
+    # (an integer beyond any float raised OverflowError; one of 5,001 digits is described)
+    ({"start": 10 ** 400}, r"from must be a finite number, not 1000.*\(401 characters\)"),
+    ({"end": 10 ** 5000}, r"to must be a finite number, not an integer of about 5001 digits"),
     ({"end": "soon"}, r"to must be a number"),
     ({"start": -1e308, "end": 1e308}, r"too wide to draw"),
     ({"size": (5, 100)}, r"width must be a whole number of pixels"),

@@ -459,3 +459,32 @@ def test_the_launch_file_runs_a_bridge_that_stores_what_is_published(tmp_path, r
     assert argv[0] == "slr"
     _bridge_stores_five_published([sys.executable, "-m", "slr_sql", *argv[1:]], db,
                                   "launched_bridge", prefix, ros_env)
+
+
+def test_an_answer_beyond_floats_is_refused_and_the_feed_goes_on(tmp_path, ros_node, prefix):
+    """An integer beyond any float in a float64 field raised OverflowError out of the
+    subscription's callback (logged as a bug, not the one-line refusal of a
+    PublishError); the answers after it still reach the topic."""
+    from std_msgs.msg import Float64
+
+    node, executor = ros_node
+    mapping = mapping_from_dict({"tf": False, "publish": [
+        {"topic": f"{prefix}/level", "type": "std_msgs/msg/Float64", "event": "level(V)^T",
+         "fields": {"data": "V"}}]})
+    levels: list = []
+    logged: list = []
+    node.create_subscription(Float64, f"{prefix}/level", levels.append, 10)
+    with slr_sql.open(tmp_path / "r.db", clock=slr_sql.ManualClock(1.0)) as kb:
+        bridge = Bridge(kb, mapping, node_name="test_bridge_huge", log=logged.append).start()
+        try:
+            (level,) = bridge.mapping.publish
+            deadline = time.monotonic() + DEADLINE
+            _spin_until(bridge, node, executor,
+                        lambda: bridge._publishers[level.topic].get_subscription_count() > 0,
+                        deadline)
+            kb.add_many([("level", (10 ** 400,), 2.0, 2.0), ("level", (2.5,), 3.0, 3.0)])
+            _spin_until(bridge, node, executor, lambda: levels, deadline)
+        finally:
+            bridge.close()
+    assert [m.data for m in levels] == [2.5], logged
+    assert any("is beyond any double" in line for line in logged), logged

@@ -548,6 +548,13 @@ def test_requests_section_of_the_map():
         mapping_from_dict({"topics": {"/slr/control": {"event": "c"}}})
 
 
+@pytest.mark.parametrize("seconds", [10 ** 400, float("inf"), 0, -1, True, "5"])
+def test_a_request_limit_that_is_no_positive_number_of_seconds_is_refused(seconds):
+    """An integer beyond any float raised OverflowError out of math.isfinite."""
+    with pytest.raises(slr_sql.SLRError, match="requests.max_wait: expects a positive number"):
+        mapping_from_dict({"requests": {"max_wait": seconds}})
+
+
 @pytest.mark.parametrize("body", [
     {"token": "a", "goal": "p(X)"},
     {"token": 7, "goal": "p(X)", "at": 1, "wait": True, "timeout": {"$float": "inf"}},

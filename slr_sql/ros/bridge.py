@@ -41,6 +41,8 @@ from slr_sql import SLRError, Struct
 from slr_sql.errors import SLRUnavailable
 from slr_sql.api import KnowledgeBaseAPI
 from slr_sql.service.errors import ServiceOutcomeUnknown
+from slr_sql.store.checks import shown
+from slr_sql.terms import int_text
 
 from . import fast_tf
 from .foreign_types import stand_in_class
@@ -122,29 +124,33 @@ def field_value(value: Any, ftype: str, path: str) -> Any:
     element = _element_type(ftype)
     if element is not None:
         if not isinstance(value, list):
-            raise PublishError(f"{path}: expects a list for {ftype}, not {value!r}")
+            raise PublishError(f"{path}: expects a list for {ftype}, not {shown(value)}")
         return [field_value(v, element, f"{path}[{i}]") for i, v in enumerate(value)]
     base = ftype.split("<")[0]
     if base == "boolean":
         if value in ("true", "false") or isinstance(value, bool):
             return value is True or value == "true"
-        raise PublishError(f"{path}: expects true or false, not {value!r}")
+        raise PublishError(f"{path}: expects true or false, not {shown(value)}")
     if base in _INT_TYPES:
         if isinstance(value, int) and not isinstance(value, bool):
             return value
-        raise PublishError(f"{path}: expects an integer for {ftype}, not {value!r}")
+        raise PublishError(f"{path}: expects an integer for {ftype}, not {shown(value)}")
     if base in _FLOAT_TYPES:
         if isinstance(value, (int, float)) and not isinstance(value, bool):
-            return float(value)
-        raise PublishError(f"{path}: expects a number for {ftype}, not {value!r}")
+            try:
+                return float(value)
+            except OverflowError:
+                raise PublishError(f"{path}: {shown(value)} is beyond any {ftype}") from None
+        raise PublishError(f"{path}: expects a number for {ftype}, not {shown(value)}")
     if base in ("string", "wstring"):
         if isinstance(value, str):
             return str(value)
-        if isinstance(value, (int, float)):
-            return str(value)
-        return str(value)  # a compound or list: its Prolog text
+        if type(value) is int:
+            return int_text(value)   # (str() refuses more than 4,300 digits)
+        return str(value)  # a float, a compound or a list: its Prolog text
     if base in _TIME_TYPES:
-        if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
+        if isinstance(value, (int, float)) and not isinstance(value, bool) \
+                and abs(value) < 2 ** 62:   # (isfinite raises on an integer beyond floats)
             sec = math.floor(value)
             nanosec = int(round((value - sec) * 1e9))
             if nanosec >= 1_000_000_000:
@@ -152,11 +158,11 @@ def field_value(value: Any, ftype: str, path: str) -> Any:
             return {"sec": int(sec), "nanosec": nanosec}
         if isinstance(value, Struct) and len(value.args) == 2:
             return {"sec": value.args[0], "nanosec": value.args[1]}
-        raise PublishError(f"{path}: expects a time in seconds, not {value!r}")
+        raise PublishError(f"{path}: expects a time in seconds, not {shown(value)}")
     if "/" in ftype:  # a nested message: a compound named by its type, fields in order
         if isinstance(value, Struct):
             return ("struct", normalize_type(ftype), value)
-        raise PublishError(f"{path}: expects a {ftype} message as a term, not {value!r}")
+        raise PublishError(f"{path}: expects a {ftype} message as a term, not {shown(value)}")
     raise PublishError(f"{path}: unsupported field type {ftype}")
 
 
@@ -407,7 +413,7 @@ class Bridge:
         if "map" in names:
             value = node.get_parameter("map").value
             if not isinstance(value, str) or not value:
-                raise BridgeError(f"ROS parameter map: a MAP file name, not {value!r}")
+                raise BridgeError(f"ROS parameter map: a MAP file name, not {shown(value)}")
             if not self.mapping_given:
                 from .mapping import load_mapping
 
@@ -415,7 +421,7 @@ class Bridge:
         if "all_topics" in names:
             value = node.get_parameter("all_topics").value
             if not isinstance(value, bool):
-                raise BridgeError(f"ROS parameter all_topics: true or false, not {value!r}")
+                raise BridgeError(f"ROS parameter all_topics: true or false, not {shown(value)}")
             self.all_topics = self.all_topics or value
 
     def spin_once(self, timeout: float = 0.1) -> None:

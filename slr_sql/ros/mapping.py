@@ -571,10 +571,13 @@ def _request_topics(spec: Any) -> RequestTopics:
     for key in ("max_query_time", "max_wait"):
         if key in spec:
             number = spec[key]
-            if isinstance(number, bool) or not isinstance(number, (int, float)) \
-                    or not number > 0 or not math.isfinite(number):
+            try:
+                seconds = float(number) if type(number) in (int, float) else math.nan
+            except OverflowError:      # an integer beyond any float
+                seconds = math.inf
+            if not 0 < seconds < math.inf:
                 raise MappingError(f"requests.{key}: expects a positive number of seconds")
-            values[key] = float(number)
+            values[key] = seconds
     topics = RequestTopics(**values)
     names = topics.topics()
     if len(set(names)) != len(names):
