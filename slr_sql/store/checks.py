@@ -174,6 +174,8 @@ def format_event(name: Any, args: Any, start: Any, end: Any) -> str:
 
     >>> format_event("seg", (Atom("a"), 1), 2.0, 2.0)
     'seg(a,1)^2.0'
+    >>> format_event("note", (10 ** 300,), 4.0, 4.0)[-30:]
+    '00000... (307 characters)^4.0'
     """
     if not isinstance(name, str):  # not a name at all: the reason shows what it is
         name, args = "event", ()
@@ -186,6 +188,7 @@ def format_event(name: Any, args: Any, start: Any, end: Any) -> str:
             head = shorten(f"{name}{tuple(args)!r}")
         except Exception:  # an integer of more digits than Python prints
             head = f"{name}(...)"
+    head = shorten(head, 200)   # (a rejection of a 20 MB atom need not repeat it)
     if start == end:
         return f"{head}^{shown(start)}"
     return f"{head}^[{shown(start)},{shown(end)}]"
