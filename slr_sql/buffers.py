@@ -720,13 +720,22 @@ def format_stats(store: Any, path: str = "") -> str:
     buffers: 1 active; dropped late/outside: 0; pruned: 1
       #1 cBuffer pos(R,_) last 1 [program, <string>:1]: pruned 1, dropped 0
     """
+    from .store import is_postgres_url, shown_location
+
     data = stats(store)
     space = data["space"]
     total = space["file_bytes"] + space["wal_bytes"]
-    lines = [f"file {path}: {total} bytes ({total / 1048576:.2f} MiB) = "
-             f"{space['file_bytes']} bytes database + {space['wal_bytes']} bytes WAL; "
-             f"{space['page_count']} pages of {space['page_size']} bytes, "
-             f"{space['free_pages']} free"]
+    if is_postgres_url(path):
+        # (the server's files and WAL are shared by every database on it: what is the
+        # store's own is its schema's tables with their indexes)
+        lines = [f"store {shown_location(path)}: {total} bytes ({total / 1048576:.2f} MiB) "
+                 f"in its schema's tables and indexes ({space['page_count']} pages of "
+                 f"{space['page_size']} bytes)"]
+    else:
+        lines = [f"file {path}: {total} bytes ({total / 1048576:.2f} MiB) = "
+                 f"{space['file_bytes']} bytes database + {space['wal_bytes']} bytes WAL; "
+                 f"{space['page_count']} pages of {space['page_size']} bytes, "
+                 f"{space['free_pages']} free"]
     now = data["now"]
     lines.append(f"buffer clock (now): {_num(now) if now > -math.inf else 'not recorded yet'}")
     rows = data["rows"]

@@ -89,3 +89,21 @@ def test_slr_fleet_push_names_a_robot_store_on_postgresql_without_its_password(
     assert "has no robot name" in result.stderr, result.stderr
     assert "password=***" in result.stderr, result.stderr
     assert "Hunter2secret" not in result.stderr + result.stdout
+
+
+def test_slr_stats_of_a_postgresql_store_says_what_its_space_is_without_the_password(
+        postgres_url):
+    """It printed ``file postgresql://...?password=...: N bytes = N bytes database + 0 bytes
+    WAL``: the URL as given, and a file and a WAL the store does not have."""
+    url = without_host_part(postgres_url) + "&password=Hunter2secret"
+    with slr_sql.open(url, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add("seen(cup1)^1")
+    result = subprocess.run([sys.executable, "-m", "slr_sql", "stats", url],
+                            capture_output=True, text=True, timeout=120,
+                            env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert result.returncode == 0, result.stderr
+    first = result.stdout.splitlines()[0]
+    assert first.startswith("store postgresql:///slr_test_") and "password=***" in first, first
+    assert "in its schema's tables and indexes" in first and "WAL" not in first, first
+    assert "Hunter2secret" not in result.stdout + result.stderr
+    assert "  seen/1: 1 stored" in result.stdout
