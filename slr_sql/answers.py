@@ -11,7 +11,7 @@ import math
 import re
 from typing import Any
 
-from .terms import Var, deref, int_text, to_python
+from .terms import Var, _escape, deref, int_text, to_python
 
 __all__ = ["answer_bindings", "value_text", "answer_text"]
 
@@ -44,13 +44,12 @@ _SYMBOL_ATOM = re.compile(r"[+\-*/\\^<>=~:.?@#&$]+\Z")
 def _atom_text(name: str) -> str:
     if _PLAIN_ATOM.match(name) or _SYMBOL_ATOM.match(name) or name in _SOLO_ATOMS:
         return name
-    escaped = name.replace("\\", "\\\\").replace("'", "\\'").replace("\n", "\\n")
-    return f"'{escaped}'"
+    # (escaped as writeq escapes: a control or bidi character never reaches the terminal)
+    return "'" + _escape(name, "'") + "'"
 
 
 def _string_text(text: str) -> str:
-    escaped = text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
-    return f'"{escaped}"'
+    return '"' + _escape(text, '"') + '"'
 
 
 def _number_text(x: float | int, digits: int | None = None) -> str:

@@ -40,6 +40,7 @@ from .unify import copy_term, undo, unify
 from .errors import SLRError, SLRUnavailable
 from .lockorder import ordered_lock
 from .host import Host
+from .printable import printable_name, printable_text
 from .terms import format_term
 from .program import event_key, split_event_atom
 from .store import (ArgEquals, BufferPlan, JsonArray, JsonEquals, MixedTerm, PatternMatch,
@@ -732,7 +733,7 @@ def format_stats(store: Any, path: str = "") -> str:
                  f"in its schema's tables and indexes ({space['page_count']} pages of "
                  f"{space['page_size']} bytes)"]
     else:
-        lines = [f"file {path}: {total} bytes ({total / 1048576:.2f} MiB) = "
+        lines = [f"file {printable_name(path)}: {total} bytes ({total / 1048576:.2f} MiB) = "
                  f"{space['file_bytes']} bytes database + {space['wal_bytes']} bytes WAL; "
                  f"{space['page_count']} pages of {space['page_size']} bytes, "
                  f"{space['free_pages']} free"]
@@ -747,7 +748,7 @@ def format_stats(store: Any, path: str = "") -> str:
                  f"(+ {sum(pruned_by_type.values())} pruned by buffers)")
     for (name, arity), count in rows.items():
         extra = pruned_by_type.get((name, arity), 0)
-        lines.append(f"  {name}/{arity}: {count} stored" + (f", {extra} pruned" if extra else ""))
+        lines.append(f"  {printable_name(name)}/{arity}: {count} stored" + (f", {extra} pruned" if extra else ""))
     buffers = data["buffers"]
     lines.append(f"buffers: {sum(1 for b in buffers if b['removed_at'] is None)} active"
                  f"; dropped late/outside: {sum(b['dropped'] for b in buffers)}"
@@ -760,7 +761,7 @@ def format_stats(store: Any, path: str = "") -> str:
         else:
             amount = f"{_num(b['amount'])}s"
         state = "" if b["removed_at"] is None else " (removed)"
-        lines.append(f"  #{b['id']} {b['kind']} {b['pattern_text']} {amount} "
-                     f"[{b['source']}, {b['origin']}]{state}: "
-                     f"pruned {b['pruned']}, dropped {b['dropped']}")
+        lines.append(printable_text(f"  #{b['id']} {b['kind']} {b['pattern_text']} {amount} "
+                                    f"[{b['source']}, {b['origin']}]{state}: "
+                                    f"pruned {b['pruned']}, dropped {b['dropped']}"))
     return "\n".join(lines)

@@ -28,6 +28,7 @@ from .answers import answer_text, value_text
 from .encoding import decode
 from .kb import KnowledgeBase
 from .parser import parse_event_fast
+from .printable import printable_name, printable_text
 from .store import refuse_no_store, shown_location
 from .terms import Atom, Struct, list_items
 
@@ -38,7 +39,8 @@ PROGRESS_MIN_BYTES = 256_000  # files smaller than this ingest without a progres
 
 
 def _err(message: str) -> None:
-    click.echo(message, err=True)
+    # messages quote names from stores, files and requests: escaped, never raw (printable.py)
+    click.echo(printable_text(message), err=True)
 
 
 def _iso_words(term: Any) -> str | None:
@@ -284,7 +286,7 @@ def load(db: str, file: str, name: str, replace: bool) -> None:
     _existing_file(file)
     with _open(db) as kb:
         kb.load_file(file, name=name, replace=replace)
-    click.echo(f"{'replaced' if replace else 'loaded'} {file} as program {name!r}")
+    click.echo(f"{'replaced' if replace else 'loaded'} {printable_name(file)} as program {name!r}")
     _warn_event_like_facts(file, db)
 
 
@@ -638,8 +640,9 @@ def run(file: str, db: str | None, quiet: bool) -> None:
                      and 0 <= index < len(example.event_lines) else 0)
             _err(f"{file}:{where}: event rejected: {error_words(rejection)}")
         if not quiet:
-            click.echo(f"% {file}: {len(example.events) - len(rejected)} events, "
-                       f"{len(example.cases)} quer{'y' if len(example.cases) == 1 else 'ies'}")
+            click.echo(printable_text(
+                f"% {file}: {len(example.events) - len(rejected)} events, "
+                f"{len(example.cases)} quer{'y' if len(example.cases) == 1 else 'ies'}"))
         failed = 0
         for case in example.cases:
             view = "" if case.at is None else f"  (at {case.at:g})"
@@ -647,19 +650,19 @@ def run(file: str, db: str | None, quiet: bool) -> None:
                 result = check_case(kb, case)
             except slr_sql.SLRError as exc:
                 failed += 1
-                click.echo(f"ERROR {file}:{case.line}: ?- {case.goal}.{view}\n"
-                           f"      {error_words(exc)}")
+                click.echo(printable_text(f"ERROR {file}:{case.line}: ?- {case.goal}.{view}\n"
+                                          f"      {error_words(exc)}"))
                 continue
             lines = answer_lines(result.answers)
             if result.ok is False:
                 failed += 1
-                click.echo(f"FAIL  {file}:{case.line}: ?- {case.goal}.{view}")
-                click.echo(f"      expected {case.expect}")
+                click.echo(printable_text(f"FAIL  {file}:{case.line}: ?- {case.goal}.{view}"))
+                click.echo(printable_text(f"      expected {case.expect}"))
                 for line in lines:
                     click.echo(f"      got      {line}")
             elif not quiet:
                 mark = "ok   " if result.ok else "     "
-                click.echo(f"{mark} ?- {case.goal}.{view}")
+                click.echo(printable_text(f"{mark} ?- {case.goal}.{view}"))
                 for line in lines:
                     click.echo(f"        {line}")
     compared = sum(1 for c in example.cases if c.expect is not None)
@@ -804,7 +807,7 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
 def explain(db: str, goal: str) -> None:
     """Show how GOAL would run: compiled to SQL or interpreted, and why."""
     with _open(db, create=False) as kb:
-        click.echo(kb.explain(strip_full_stop(goal)))
+        click.echo(printable_text(kb.explain(strip_full_stop(goal))))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -850,13 +853,13 @@ def programs(db: str, source: bool) -> None:
     if not infos:
         click.echo("no programs")
     for info in infos:
-        files = ", ".join(dict.fromkeys(_info_field(info, "filenames") or ()))
+        files = ", ".join(map(printable_name, dict.fromkeys(_info_field(info, "filenames") or ())))
         texts = _info_field(info, "texts") or 0
-        click.echo(f"{_info_field(info, 'name')}: {texts} text{'s' if texts != 1 else ''}"
+        click.echo(f"{printable_name(_info_field(info, 'name'))}: {texts} text{'s' if texts != 1 else ''}"
                    f" from {files or '<string>'}, loaded {time_text(_info_field(info, 'loaded_at'))}")
         if source:
             for line in (_info_field(info, "source") or "").splitlines():
-                click.echo(f"    {line}")
+                click.echo(f"    {printable_text(line)}")
 
 
 @main.command()
@@ -980,7 +983,7 @@ def describe(db: str, types: tuple[str, ...], show_all: bool) -> None:
     if not summaries:
         click.echo("no event types")
     for s in summaries:
-        click.echo(f"{s.name}/{s.arity}  (table {s.table})")
+        click.echo(f"{printable_name(s.name)}/{s.arity}  (table {s.table})")
         click.echo(f"  events:      {s.count}")
         if s.count:
             click.echo(f"  end times:   {time_text(s.first)} .. {time_text(s.last)}")
@@ -989,9 +992,9 @@ def describe(db: str, types: tuple[str, ...], show_all: bool) -> None:
         for label, items in (("rules:", s.rules), ("buffers:", s.buffers),
                              ("event rules:", s.event_rules)):
             if items:
-                click.echo(f"  {label:<12} {items[0]}")
+                click.echo(f"  {label:<12} {printable_text(items[0])}")
                 for item in items[1:]:
-                    click.echo(f"  {'':<12} {item}")
+                    click.echo(f"  {'':<12} {printable_text(item)}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1065,11 +1068,14 @@ def write_rows(columns: list[str], rows: Iterable[tuple], fmt: str, out: Any = N
         from rich.console import Console
         from rich.table import Table
 
-        table = Table(*columns, show_lines=False)
+        # (the box table is for reading: its cells escaped as names are; csv, tsv and json
+        # keep the values exact, each format escaping what its own rules say)
+        table = Table(*map(printable_text, columns), show_lines=False)
         for row in rows:
-            table.add_row(*("NULL" if v is None else str(v) for v in row))
+            table.add_row(*("NULL" if v is None else printable_text(v) for v in row))
         # Into a pipe the table is not cut to the terminal's width.
-        Console(file=out, highlight=False, width=None if out.isatty() else 500).print(table)
+        Console(file=out, highlight=False, markup=False,
+                width=None if out.isatty() else 500).print(table)
 
 
 @main.command()
@@ -1154,8 +1160,9 @@ class Shell:
     def __init__(self, kb: KnowledgeBaseAPI, echo: Any = click.echo, echo_err: Any = _err,
                  ask: Any = None):
         self.kb = kb
-        self.echo = echo
-        self.echo_err = echo_err
+        # everything the shell prints may quote the store's names, a file's lines: escaped
+        self.echo = lambda text="", **how: echo(printable_text(text), **how)
+        self.echo_err = lambda text="", **how: echo_err(printable_text(text), **how)
         self.ask = ask
         self.at: float | None = None
         self.pending: list[str] = []
@@ -1467,7 +1474,7 @@ def shell(db: str) -> None:
         session = Shell(kb, ask=click.getchar)
         prompt: PromptSession[str] = PromptSession(history=FileHistory(_history_path()),
                                completer=PredicateCompleter(), complete_while_typing=False)
-        click.echo(f"slr shell on {shown_location(db)} — `help` for commands, Ctrl-C stops a goal, "
+        click.echo(f"slr shell on {printable_name(shown_location(db))} — `help` for commands, Ctrl-C stops a goal, "
                    f"Ctrl-D leaves")
         terminal = TerminalModes(sys.stdin)
         ended_by: int | None = None
@@ -1926,7 +1933,7 @@ def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None
     save_timeline(figure, output)
     drawn = figure.slr_timeline
     n_rows = len(drawn.rows) + len(drawn.queries)
-    click.echo(f"wrote {output} ({drawn.width}x{drawn.height} px, {n_rows} "
+    click.echo(f"wrote {printable_name(output)} ({drawn.width}x{drawn.height} px, {n_rows} "
                f"row{'s' if n_rows != 1 else ''}"
                + (f", {len(drawn.series)} value line{'s' if len(drawn.series) != 1 else ''}"
                   if drawn.series else "") + ")")
@@ -2002,7 +2009,7 @@ def stats(db: str) -> None:
 
     if _is_url(db):
         with _open(db) as kb:
-            click.echo(kb.stats()["text"])
+            click.echo(printable_text(kb.stats()["text"]))   # (the server's text: its names)
         return
     _check_existing_store(db)
     with EventStore(db) as store:

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
 
 from .errors import SLRError
+from .printable import printable_name, printable_text
 from .store import EventStore, WriterInFlight, check_robot_name, refuse_no_store, shown_location
 
 __all__ = ["FleetTarget", "PushReport", "RobotStoreRestored", "open_target", "parse_type_spec",
@@ -759,7 +760,7 @@ def click_group() -> Any:
         events from now on carry the name; ``slr_sql.open(DB, robot=NAME)`` does the same."""
         with EventStore(db, robot=robot):
             pass
-        click.echo(f"{shown_location(db)} is the store of robot {robot}")
+        click.echo(f"{printable_name(shown_location(db))} is the store of robot {printable_name(robot)}")
 
     @fleet_group.command("push")
     @click.argument("db", type=click.Path(dir_okay=False))
@@ -789,15 +790,16 @@ def click_group() -> Any:
                 stop.set()
             signal.signal(signal.SIGINT, on_signal)
             signal.signal(signal.SIGTERM, on_signal)
-            click.echo(f"following {shown_location(db)}: shipping to {shown_location(fleet)} (SIGINT or SIGTERM stops)",
+            click.echo(f"following {printable_name(shown_location(db))}: shipping to "
+                       f"{printable_name(shown_location(fleet))} (SIGINT or SIGTERM stops)",
                        err=True)
 
         def say(message: str) -> None:
-            click.echo(message, err=True)
+            click.echo(printable_text(message), err=True)
 
         report = push(db, fleet, robot=robot, types=types or None, follow=follow, batch=batch,
                       stop=stop, say=say, token=token_of(ctx), resync=resync)
-        click.echo(f"robot {report.robot}: shipped {report.shipped} events in "
+        click.echo(f"robot {printable_name(report.robot)}: shipped {report.shipped} events in "
                    f"{report.batches} batches")
 
     @fleet_group.command("status")
@@ -820,9 +822,11 @@ def click_group() -> Any:
             return
         header = ("robot", "shipped", "lag events", "lag s", "last contact")
         table = [header] + [
-            (r["robot"], str(r["shipped"]), "-", "-", f"relayed via {r['via']}")
+            # (names checked when they came in; a fleet file edited by hand may hold others)
+            (printable_name(r["robot"]), str(r["shipped"]), "-", "-",
+             f"relayed via {printable_name(r['via'])}")
             if r.get("via") is not None else
-            (r["robot"], str(r["shipped"]), str(r["pending"]), f"{r['lag_seconds']:.3f}",
+            (printable_name(r["robot"]), str(r["shipped"]), str(r["pending"]), f"{r['lag_seconds']:.3f}",
              "never" if r["last_contact"] is None else
              time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(r["last_contact"]))
              + f" UTC ({r['since_contact']:.0f} s ago)")

@@ -16,6 +16,7 @@ import click
 
 import slr_sql
 
+from ..printable import printable_name, printable_text
 from . import EXTRA_HINT
 
 __all__ = ["ros"]
@@ -133,25 +134,29 @@ def _print_report(report: Any, bag: str) -> None:
     if report.topics:
         table = Table("topic", "type", "event", "messages", "events", "already imported")
         for topic, t in sorted(report.topics.items()):
-            table.add_row(topic, t.msgtype, t.event, str(t.messages), str(t.events), str(t.skipped))
-        Console(highlight=False, width=None if sys.stdout.isatty() else 200).print(table)
+            table.add_row(printable_name(topic), printable_name(t.msgtype), printable_name(t.event),
+                          str(t.messages), str(t.events), str(t.skipped))
+        # (markup off: a topic named "[red]..." is printed as it is, not styled)
+        Console(highlight=False, markup=False,
+                width=None if sys.stdout.isatty() else 200).print(table)
     if report.unmapped:
-        click.echo(f"not imported (no mapping; --all imports them): {', '.join(report.unmapped)}")
+        click.echo("not imported (no mapping; --all imports them): "
+                   + ", ".join(map(printable_name, report.unmapped)))
     if report.missing:
-        click.echo(f"mapped but not in the bag: {', '.join(report.missing)}")
+        click.echo(f"mapped but not in the bag: {', '.join(map(printable_name, report.missing))}")
     for rejection in report.rejected[:MAX_REJECTIONS_SHOWN]:
-        click.echo(f"{bag}: {rejection}", err=True)
+        click.echo(printable_text(f"{bag}: {rejection}"), err=True)
     if len(report.rejected) > MAX_REJECTIONS_SHOWN:
-        click.echo(f"{bag}: ... and {len(report.rejected) - MAX_REJECTIONS_SHOWN} more rejected "
+        click.echo(f"{printable_name(bag)}: ... and {len(report.rejected) - MAX_REJECTIONS_SHOWN} more rejected "
                    f"messages", err=True)
     for topic, (counted, read) in sorted(report.short.items()):
-        click.echo(f"{bag}: {topic}: the bag counts {counted} messages, {read} could be read "
+        click.echo(f"{printable_name(bag)}: {printable_name(topic)}: the bag counts {counted} messages, {read} could be read "
                    f"(the bag is damaged or cut short)", err=True)
     click.echo(f"imported {report.events} event{'s' if report.events != 1 else ''} from "
                f"{report.messages} message{'s' if report.messages != 1 else ''}"
                + (f" ({report.skipped} already imported)" if report.skipped else "")
                + (f", {len(report.rejected)} rejected" if report.rejected else "")
-               + f" [{report.bag_id}]")
+               + f" [{printable_name(report.bag_id)}]")
 
 
 @ros.command("info")
@@ -171,10 +176,10 @@ def info_command(bag: str, map_only: bool, as_json: bool) -> None:
     info = bag_info(bag)
     for t in info.topics:
         if t.read is not None and t.read < t.count:
-            click.echo(f"warning: {t.topic}: the bag counts {t.count} messages, {t.read} could "
+            click.echo(f"warning: {printable_name(t.topic)}: the bag counts {t.count} messages, {t.read} could "
                        f"be read (the bag is damaged or cut short)", err=True)
         if t.undecodable:
-            click.echo(f"warning: {t.topic}: {t.undecodable} of {t.count} messages do not "
+            click.echo(f"warning: {printable_name(t.topic)}: {t.undecodable} of {t.count} messages do not "
                        f"decode (left out of the frames below; slr ros import rejects each "
                        f"with its reason)", err=True)
     if as_json:
@@ -186,22 +191,25 @@ def info_command(bag: str, map_only: bool, as_json: bool) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    console = Console(highlight=False, width=None if sys.stdout.isatty() else 200)
+    # (markup off: a topic named "[red]..." is printed as it is, not styled)
+    console = Console(highlight=False, markup=False, width=None if sys.stdout.isatty() else 200)
 
     def when(t: float | None) -> str:
         return "" if t is None else f"{t:.3f}"
 
-    click.echo(f"bag:       {info.path} [{info.bag_id}]")
+    click.echo(f"bag:       {printable_name(info.path)} [{printable_name(info.bag_id)}]")
     click.echo(f"messages:  {info.count}")
     click.echo(f"time span: {when(info.start)} .. {when(info.end)} ({info.duration:.3f} s)")
     table = Table("topic", "type", "messages", "first", "last")
     for t in info.topics:
-        table.add_row(t.topic, t.msgtype, str(t.count), when(t.first), when(t.last))
+        table.add_row(printable_name(t.topic), printable_name(t.msgtype), str(t.count),
+                      when(t.first), when(t.last))
     console.print(table)
     if info.frames:
         frames = Table("topic", "parent", "child", "transforms", "first stamp", "last stamp")
         for e in info.frames:
-            frames.add_row(e.topic, e.parent, e.child, str(e.count), when(e.first), when(e.last))
+            frames.add_row(printable_name(e.topic), printable_name(e.parent), printable_name(e.child),
+                           str(e.count), when(e.first), when(e.last))
         console.print(frames)
     else:
         click.echo("no transforms in /tf or /tf_static")

@@ -13,6 +13,7 @@ import click
 
 import slr_sql
 
+from ..printable import printable_name
 from ..store import refuse_no_store
 
 __all__ = ["foxglove_command", "export_command"]
@@ -97,6 +98,6 @@ def export_command(db: str, file: str, types: tuple[str, ...], start: float | No
         except OSError as exc:
             raise slr_sql.SLRError(f"cannot write {file}: {exc.strerror or exc}") from None
     for (name, arity), n in sorted(report.per_type.items()):
-        click.echo(f"{name}/{arity}: {n}")
+        click.echo(f"{printable_name(name)}/{arity}: {n}")
     click.echo(f"exported {report.messages} event{'s' if report.messages != 1 else ''} "
-               f"to {file}")
+               f"to {printable_name(file)}")

@@ -1,0 +1,100 @@
+r"""Text a stranger controls, made safe to print on a terminal or to write in a log.
+
+Names come from places the user does not control: event type names and argument atoms of a
+store, channel and topic names of a bag or an MCAP file, program names, file paths, a
+request's fields. A character in them that a terminal does not draw as itself (ESC starting
+an escape sequence, CR returning to the start of the line, the C1 controls, a bidi override
+such as U+202E reversing what follows) could rewrite the screen or a log line.
+
+The one rule (docs/printed_text.md): a character that
+SWI-Prolog's ``writeq`` escapes -- C0 and C1 controls, DEL, format characters (bidi
+overrides and isolates, zero-width characters), line and paragraph separators, private-use
+and unassigned code points -- is never printed as itself but as writeq's escape (``\x1B\``,
+``\r``, ``\x202E\``).
+
+* :func:`printable_name`: a name holding such a character is printed as writeq prints the
+  atom, quoted (``'ev\x1B\[31m'``), so that it reads back as the same atom; any other name is
+  printed as it is.
+* :func:`printable_text`: a message or a source line gets the escapes in place, its line
+  breaks kept.
+* :func:`log_text`: one log line: line breaks escaped too, and cut to :data:`LOG_TEXT_LIMIT`
+  characters.
+
+>>> printable_name("cup1"), printable_name("ev\x1b[31mil"), printable_name("r1\u202eevil")
+('cup1', "'ev\\x1B\\[31mil'", "'r1\\x202E\\evil'")
+>>> print(printable_text("no such file: a\rb\nnext line"))
+no such file: a\rb
+next line
+"""
+from __future__ import annotations
+
+from typing import Any
+
+from .terms import _ASCII_NEEDS_ESCAPE, _ESCAPES, _escape, _unicode_pattern
+
+__all__ = ["printable_name", "printable_text", "log_text", "LOG_TEXT_LIMIT"]
+
+LOG_TEXT_LIMIT = 200   # characters of stranger-supplied text in one log line
+
+
+def _undrawn(ch: str) -> bool:
+    """Whether writeq escapes ``ch`` as a character a terminal does not draw as itself."""
+    if ch.isascii():
+        return ch < " " or ch == "\x7f"
+    return _unicode_pattern("escaped").match(ch) is not None
+
+
+def _has_undrawn(text: str) -> bool:
+    if text.isascii():
+        # (the pattern also matches quotes and the backslash: look closer only then)
+        return bool(_ASCII_NEEDS_ESCAPE.search(text)) and any(map(_undrawn, text))
+    return _unicode_pattern("escaped").search(text) is not None
+
+
+def _escape_undrawn(text: str, keep: str = "") -> str:
+    if not _has_undrawn(text):
+        return text
+    return "".join(ch if ch in keep or not _undrawn(ch)
+                   else _ESCAPES.get(ch) or f"\\x{ord(ch):X}\\" for ch in text)
+
+
+def printable_name(name: Any) -> str:
+    r"""``name`` as it is when a terminal draws each of its characters, else quoted and
+    escaped as SWI-Prolog's ``writeq`` prints the atom.
+
+    >>> printable_name("/camera/image"), printable_name("a\nb"), printable_name("caf\u00e9")
+    ('/camera/image', "'a\\nb'", 'café')
+    """
+    name = str(name)
+    if not _has_undrawn(name):
+        return name
+    return "'" + _escape(name, "'") + "'"
+
+
+def printable_text(text: Any) -> str:
+    r"""``text`` with each character a terminal does not draw as itself written as writeq's
+    escape, its line breaks (``\n``) kept: for messages and source lines.
+
+    >>> printable_text("unknown event type: x\x1b]0;owned\x07")
+    'unknown event type: x\\x1B\\]0;owned\\a'
+    """
+    return _escape_undrawn(str(text), keep="\n")
+
+
+def log_text(value: Any, limit: int = LOG_TEXT_LIMIT) -> str:
+    r"""``value`` (its ``str``; an exception: its type and message) on one log line: every
+    character a terminal does not draw escaped as in :func:`printable_text`, line breaks
+    included, and cut after ``limit`` characters, the count of those left out said.
+
+    >>> log_text("bad\ninput")
+    'bad\\ninput'
+    >>> log_text(ValueError("x" * 300), limit=20)
+    'ValueError: xxxxxxxx... (292 more characters)'
+    """
+    if isinstance(value, BaseException):
+        message = str(value)
+        value = type(value).__name__ + (f": {message}" if message else "")
+    text = _escape_undrawn(str(value))
+    if len(text) > limit:
+        return f"{text[:limit]}... ({len(text) - limit} more characters)"
+    return text
