@@ -11,7 +11,7 @@ import math
 import re
 from typing import Any
 
-from .terms import Var, _escape, deref, int_text, to_python
+from .terms import Var, deref, int_text, quoted_text, to_python
 
 __all__ = ["answer_bindings", "value_text", "answer_text"]
 
@@ -45,11 +45,11 @@ def _atom_text(name: str) -> str:
     if _PLAIN_ATOM.match(name) or _SYMBOL_ATOM.match(name) or name in _SOLO_ATOMS:
         return name
     # (escaped as writeq escapes: a control or bidi character never reaches the terminal)
-    return "'" + _escape(name, "'") + "'"
+    return quoted_text(name, "'")
 
 
 def _string_text(text: str) -> str:
-    return '"' + _escape(text, '"') + '"'
+    return quoted_text(text, '"')
 
 
 def _number_text(x: float | int, digits: int | None = None) -> str:

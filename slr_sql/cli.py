@@ -28,7 +28,7 @@ from .answers import answer_text, value_text
 from .encoding import decode
 from .kb import KnowledgeBase
 from .parser import parse_event_fast
-from .printable import printable_name, printable_text
+from .printable import printable_name, printable_syntax_error, printable_text
 from .store import refuse_no_store, shown_location
 from .terms import Atom, Struct, list_items
 
@@ -161,7 +161,7 @@ class SLRGroup(click.Group):
         try:
             return super().invoke(ctx)
         except slr_sql.SLRSyntaxError as exc:
-            _err(str(exc))
+            _err(printable_syntax_error(exc))
             ctx.exit(1)
         except (click.exceptions.ClickException, click.exceptions.Exit,
                 click.exceptions.Abort):
@@ -332,7 +332,7 @@ def add(db: str, events: tuple[str, ...]) -> None:
                 kb.add(strip_full_stop(event))
             except slr_sql.SLRSyntaxError as exc:
                 rejected.append(number)
-                _err(f"error: event {number} rejected:\n{exc}")
+                _err(f"error: event {number} rejected:\n{printable_syntax_error(exc)}")
             except slr_sql.SLRError as exc:
                 rejected.append(number)
                 _err(f"error: event {number} rejected: {error_words(exc)}")
@@ -1227,7 +1227,7 @@ class Shell:
         try:
             action()
         except slr_sql.SLRSyntaxError as exc:
-            self.echo_err(str(exc))
+            self.echo_err(printable_syntax_error(exc))
         except (ValueError, OSError) as exc:
             self.echo_err(f"error: {exc}")
         except RecursionError:

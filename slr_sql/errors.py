@@ -14,7 +14,7 @@ class SLRError(Exception):
 
 
 class SLRSyntaxError(SLRError):
-    r"""Program or goal text that does not parse.
+    """Program or goal text that does not parse.
 
     ``str()`` is ``file:line:col: message`` followed by the source line and a caret.
 
@@ -23,10 +23,6 @@ class SLRSyntaxError(SLRError):
     <string>:1:6: operator expected
         a(1) b.
              ^
-    >>> print(SLRSyntaxError("operator expected", 1, 4, "a\rb c"))   # CR escaped, caret moved
-    <string>:1:4: operator expected
-        a\rb c
-            ^
     """
 
     def __init__(self, message: str, line: int = 0, column: int = 0,
@@ -39,16 +35,11 @@ class SLRSyntaxError(SLRError):
         super().__init__(self._render())
 
     def _render(self) -> str:
-        from .printable import printable_text
-
-        # The text quoted may be a stranger's (a file, a request): its control and bidi
-        # characters escaped, the caret still under the column it points at.
-        head = printable_text(f"{self.filename}:{self.line}:{self.column}: {self.message}")
+        head = f"{self.filename}:{self.line}:{self.column}: {self.message}"
         if not self.source_line:
             return head
-        before = printable_text(self.source_line[:max(self.column, 1) - 1])
-        caret = " " * len(before) + "^"
-        return f"{head}\n    {printable_text(self.source_line)}\n    {caret}"
+        caret = " " * (max(self.column, 1) - 1) + "^"
+        return f"{head}\n    {self.source_line}\n    {caret}"
 
     def __str__(self) -> str:
         return self._render()

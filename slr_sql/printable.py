@@ -30,32 +30,26 @@ from __future__ import annotations
 
 from typing import Any
 
-from .terms import _ASCII_NEEDS_ESCAPE, _ESCAPES, _escape, _unicode_pattern
+from .errors import SLRSyntaxError
+from .terms import char_escape, quoted_text, undrawn_character
 
-__all__ = ["printable_name", "printable_text", "log_text", "LOG_TEXT_LIMIT"]
+__all__ = ["printable_name", "printable_text", "printable_syntax_error", "log_text",
+           "LOG_TEXT_LIMIT"]
 
 LOG_TEXT_LIMIT = 200   # characters of stranger-supplied text in one log line
 
 
-def _undrawn(ch: str) -> bool:
-    """Whether writeq escapes ``ch`` as a character a terminal does not draw as itself."""
-    if ch.isascii():
-        return ch < " " or ch == "\x7f"
-    return _unicode_pattern("escaped").match(ch) is not None
-
-
 def _has_undrawn(text: str) -> bool:
-    if text.isascii():
-        # (the pattern also matches quotes and the backslash: look closer only then)
-        return bool(_ASCII_NEEDS_ESCAPE.search(text)) and any(map(_undrawn, text))
-    return _unicode_pattern("escaped").search(text) is not None
+    if text.isascii() and text.isprintable():   # (the common case, without the large regex)
+        return False
+    return undrawn_character().search(text) is not None
 
 
 def _escape_undrawn(text: str, keep: str = "") -> str:
     if not _has_undrawn(text):
         return text
-    return "".join(ch if ch in keep or not _undrawn(ch)
-                   else _ESCAPES.get(ch) or f"\\x{ord(ch):X}\\" for ch in text)
+    undrawn = undrawn_character()
+    return "".join(ch if ch in keep or not undrawn.match(ch) else char_escape(ch) for ch in text)
 
 
 def printable_name(name: Any) -> str:
@@ -66,9 +60,7 @@ def printable_name(name: Any) -> str:
     ('/camera/image', "'a\\nb'", 'café')
     """
     name = str(name)
-    if not _has_undrawn(name):
-        return name
-    return "'" + _escape(name, "'") + "'"
+    return quoted_text(name, "'") if _has_undrawn(name) else name
 
 
 def printable_text(text: Any) -> str:
@@ -79,6 +71,24 @@ def printable_text(text: Any) -> str:
     'unknown event type: x\\x1B\\]0;owned\\a'
     """
     return _escape_undrawn(str(text), keep="\n")
+
+
+def printable_syntax_error(exc: SLRSyntaxError) -> str:
+    r"""A syntax error as the CLI prints it (``file:line:col: message``, the line, a caret),
+    the line's characters escaped as :func:`printable_text` does and the caret still under
+    the column it points at.
+
+    >>> print(printable_syntax_error(SLRSyntaxError("operator expected", 1, 4, "a\rb c")))
+    <string>:1:4: operator expected
+        a\rb c
+            ^
+    """
+    head = printable_text(f"{exc.filename}:{exc.line}:{exc.column}: {exc.message}")
+    if not exc.source_line:
+        return head
+    before = _escape_undrawn(exc.source_line[:max(exc.column, 1) - 1])
+    return (f"{head}\n    {_escape_undrawn(exc.source_line)}\n"
+            f"    {' ' * len(before)}^")
 
 
 def log_text(value: Any, limit: int = LOG_TEXT_LIMIT) -> str:

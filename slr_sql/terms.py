@@ -29,7 +29,7 @@ __all__ = [
     "Atom", "String", "Struct", "Var", "NIL", "TRUE", "CONS",
     "deref", "make_list", "list_items", "is_ground", "is_callable", "from_python",
     "to_python", "term_vars", "Span", "Clause", "indicator",
-    "format_term", "format_atom", "INFIX_OPS", "PREFIX_OPS", "OPERATORS",
+    "format_term", "format_atom", "quoted_text", "undrawn_character", "char_escape", "INFIX_OPS", "PREFIX_OPS", "OPERATORS",
     "MAX_INTEGER_BITS", "int_text", "int_from_text", "factorize_cycles",
 ]
 
@@ -888,6 +888,38 @@ def format_atom(name: str, quoted: bool = True) -> str:
     return "'" + _escape(name, "'") + "'"
 
 
+def quoted_text(text: str, quote: str = "'") -> str:
+    r"""``text`` between ``quote`` characters as ``writeq`` writes a quoted atom (``'``) or
+    string (``"``): the quote and the backslash escaped, and each character a terminal does
+    not draw as itself (:func:`undrawn_character`) as its escape.
+
+    >>> print(quoted_text("it's\x1b[2J"), quoted_text('say "hi"\n', '"'))
+    'it\'s\x1B\[2J' "say \"hi\"\n"
+    """
+    return quote + _escape(text, quote) + quote
+
+
+def undrawn_character() -> re.Pattern[str]:
+    r"""The regex of one character ``writeq`` escapes because a terminal does not draw it as
+    itself: C0 and C1 controls, DEL, format characters (bidi overrides, zero-width ones),
+    line and paragraph separators, private-use and unassigned code points.
+
+    >>> [bool(undrawn_character().match(c)) for c in "\x1b\r\x9b\u202e\u2028aé"]
+    [True, True, True, True, True, False, False]
+    """
+    return _unicode_pattern("escaped")
+
+
+def char_escape(ch: str) -> str:
+    r"""``writeq``'s escape of one character it escapes: a letter escape where there is one
+    (``\n``, ``\r``), else ``\xHH\``.
+
+    >>> print(char_escape("\r"), char_escape("\x1b"), char_escape("\u202e"))
+    \r \x1B\ \x202E\
+    """
+    return _ESCAPES.get(ch) or f"\\x{ord(ch):X}\\"
+
+
 def _escape(text: str, quote: str) -> str:
     ascii = text.isascii()
     if not (_ASCII_NEEDS_ESCAPE if ascii else _unicode_pattern("needs escape")).search(text):
@@ -899,7 +931,7 @@ def _escape(text: str, quote: str) -> str:
         elif ch in _ESCAPES:
             out.append(_ESCAPES[ch])
         elif ch < " " or ch == "\x7f" or (not ascii and _unicode_pattern("escaped").match(ch)):
-            out.append(f"\\x{ord(ch):X}\\")
+            out.append(char_escape(ch))
         else:
             out.append(ch)
     return "".join(out)

@@ -24,6 +24,8 @@ LAYERS = {
     "api": 1,  # the KnowledgeBaseAPI protocol: typing only (errors for EventRejected)
     "unify": 1, "arith": 1, "encoding": 1, "program": 1, "parser": 1,
     "robotlib": 1, "clocks": 1, "answers": 1,
+    "printable": 1,  # text a stranger controls, made safe to print (terms' writeq escapes)
+    "log_throttle": 1.5,  # log lines a stranger can cause, bounded (printable, clocks)
     "library_terms": 1,  # generated: the library's clauses as Python (terms only)
     "store": 2, "frames": 2,
     "builtins": 3,
