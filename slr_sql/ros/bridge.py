@@ -39,6 +39,7 @@ from typing import Any, Callable
 
 from slr_sql import SLRError, Struct
 from slr_sql.errors import SLRUnavailable
+from slr_sql.log_throttle import ThrottledLog
 from slr_sql.api import KnowledgeBaseAPI
 from slr_sql.service.errors import ServiceOutcomeUnknown
 from slr_sql.store.checks import shown
@@ -322,6 +323,9 @@ class Bridge:
         self.all_topics = all_topics
         self.node_name = node_name
         self.log = log or (lambda text: print(text, file=sys.stderr, flush=True))
+        # the lines any publisher's messages make, one per message: each one safe, bounded
+        # line, and at most BURST of a kind a minute (docs/printed_text.md)
+        self.message_log = ThrottledLog(self.log)
         self.on_ready = on_ready
         self.stats = BridgeStats()
         self._subs: dict[str, _Subscription] = {}
@@ -472,7 +476,7 @@ class Bridge:
                 self.stats.events += len(events) - len(rejected)
                 for error in rejected:
                     self.stats.rejected += 1
-                    self.log(f"warning: event rejected: {error}")
+                    self.message_log(f"warning: event rejected: {error}")
             events, messages, marked_pending = [], 0, 0
             while marks:
                 message_marks = marks[0]
@@ -679,7 +683,7 @@ class Bridge:
                          for e in bound.events(msg, arrival) for t in types]
         except Exception as exc:  # noqa: BLE001 - a message that does not decode or map
             self.stats.rejected += 1
-            self.log(f"warning: {sub.topic}: message rejected: {exc}")
+            self.message_log(f"warning: {sub.topic}: message rejected: {exc}")
             return
         self._pending_events += events
         self._pending_messages += 1

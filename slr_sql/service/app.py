@@ -45,6 +45,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 import slr_sql
 from slr_sql import EventRejected, SLRError, SLRTimeout
 from slr_sql.errors import log_failure
+from slr_sql.printable import log_text
 from slr_sql.kb import KnowledgeBase
 from slr_sql.store.checks import format_event
 from slr_sql.store.read_only import read_only_refusal
@@ -109,7 +110,8 @@ def _classify(exc: BaseException) -> BaseException:
         return exc
     if isinstance(exc, (TypeError, ValueError, UnicodeError, OverflowError, RecursionError,
                         ArithmeticError)):
-        log.warning("input the knowledge base did not take: %r", exc)
+        # (one line, its text escaped and bounded: the input is a client's)
+        log.warning("input the knowledge base did not take: %s", log_text(exc))
         reason = "too deeply nested" if isinstance(exc, RecursionError) else str(exc)
         return ServiceError(f"bad request: {reason}", kind="BadRequest")
     log.error("internal error", exc_info=exc)

@@ -15,6 +15,7 @@ import click
 
 import slr_sql
 
+from ..log_throttle import ThrottledLogFilter
 from ..store import DEFAULT_BUSY_TIMEOUT
 
 if TYPE_CHECKING:
@@ -154,6 +155,27 @@ def foxglove_logger() -> logging.Logger:
     return log
 
 
+# the loggers whose lines a client can cause: uvicorn's about bytes that are no HTTP or no
+# UTF-8 and about too many connections, the service's about input it refused, the live view's
+STRANGER_LOGGERS = ("uvicorn.error", "slr_sql.service", "slr_sql.service.foxglove")
+
+
+def throttle_stranger_logs(clock: Any = None) -> None:
+    """Make each line of :data:`STRANGER_LOGGERS` one safe line of bounded length, without
+    the traceback of a client's bytes, and at most :data:`~slr_sql.log_throttle.BURST` lines
+    of a kind a minute (:class:`~slr_sql.log_throttle.ThrottledLogFilter`); once per
+    process.
+
+    >>> throttle_stranger_logs(); throttle_stranger_logs()
+    >>> sum(isinstance(f, ThrottledLogFilter) for f in logging.getLogger("uvicorn.error").filters)
+    1
+    """
+    for name in STRANGER_LOGGERS:
+        logger = logging.getLogger(name)
+        if not any(isinstance(f, ThrottledLogFilter) for f in logger.filters):
+            logger.addFilter(ThrottledLogFilter(clock))
+
+
 def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | None = None,
                *, limits: Any = None, max_connections: int | None = 1000,
                ssl_keyfile: str | None = None, ssl_certfile: str | None = None,
@@ -238,6 +260,7 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
                                 loop="asyncio",   # what the WebSocket protocol is tested on
                                 timeout_graceful_shutdown=shutdown_grace)
         server = uvicorn.Server(config)
+        throttle_stranger_logs()   # (after uvicorn.Config, which sets up uvicorn's loggers)
         bound_host, bound_port = sock.getsockname()[:2]
         shown = f"[{bound_host}]" if ":" in bound_host else bound_host
         scheme = "https" if ssl_certfile else "http"

@@ -28,12 +28,13 @@ from typing import Any, Callable
 
 from ..errors import SLRError
 from ..frames import frame_key
+from ..log_throttle import LogThrottle, ThrottledLog, line_kind, with_left_out
+from ..printable import log_text
 from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, TF_TOPICS,
                        TRANSFORMS_SCHEMA, TRANSFORMS_SCHEMA_NAME, event_channel, mark_message,
                        time_ns, transform_message)
 
-__all__ = ["FoxgloveView", "FoxgloveUnavailable", "FoxgloveCannotListen", "forward_sdk_log",
-           "log_text"]
+__all__ = ["FoxgloveView", "FoxgloveUnavailable", "FoxgloveCannotListen", "forward_sdk_log"]
 
 _MARK_PREFIX = "sync/mark/"
 _TF_STATIC = ("tf_static", 3)
@@ -56,29 +57,18 @@ _SDK_WORDS = [(re.compile(r"Started server on (\S+)\Z"), "listening on ws://{}")
               (re.compile(r"Registered client (\S+)\Z"), "client {} connected"),
               (re.compile(r"Unregistered client (\S+)\Z"), "client {} left")]
 _SDK_QUIET = re.compile(r"Connection closed by client \S+\Z")   # (said by "left")
-_LOG_TEXT_MAX = 300
 _sdk_log_lock = threading.Lock()
 _sdk_log_handler: logging.Handler | None = None
-
-
-def log_text(text: str) -> str:
-    """``text`` as one log line: control characters and line breaks escaped (a client's
-    bytes quoted in a message cannot start a line of their own), at most 300 characters.
-
-    >>> log_text("bad\\nINFO: forged")
-    'bad\\\\nINFO: forged'
-    """
-    if not text.isprintable():
-        text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
-    return text if len(text) <= _LOG_TEXT_MAX else text[:_LOG_TEXT_MAX] + "..."
 
 
 def forward_sdk_log(emit: Callable[[int, str], None]) -> None:
     """Send the foxglove-sdk's log at INFO and above -- the server's start, each client
     connecting and leaving, what a client sent that the protocol refuses -- to ``emit(level,
-    text)``, each line in words (:func:`log_text`, no traceback). The SDK takes its log level
-    once per process, before its first server: call this before starting a view. A later
-    call replaces ``emit``.
+    text)``, each line in words (:func:`~slr_sql.printable.log_text`, no traceback), a kind
+    of line (a client connecting, leaving) at most :data:`~slr_sql.log_throttle.BURST` times
+    a minute, the next one let through saying how many were left out (a client that connects
+    and leaves in a loop). The SDK takes its log level once per process, before its first
+    server: call this before starting a view. A later call replaces ``emit``.
 
     >>> forward_sdk_log(lambda level, text: None)
     """
@@ -87,6 +77,8 @@ def forward_sdk_log(emit: Callable[[int, str], None]) -> None:
         import foxglove
     except ImportError:
         return   # the view says how to install it
+
+    throttle = LogThrottle()
 
     class Forward(logging.Handler):
         def emit(self, record: logging.LogRecord) -> None:
@@ -101,7 +93,9 @@ def forward_sdk_log(emit: Callable[[int, str], None]) -> None:
                 if found:
                     text = words.format(found.group(1))
                     break
-            emit(record.levelno, log_text(text))
+            left_out = throttle.admit((record.levelno, line_kind(text)))
+            if left_out is not None:
+                emit(record.levelno, with_left_out(log_text(text), left_out))
 
     with _sdk_log_lock:
         sdk_logger = logging.getLogger("foxglove")
@@ -150,7 +144,8 @@ class FoxgloveView:
         self.store = store
         self.poll = poll
         self.static_every = static_every
-        self.log = log or (lambda text: None)
+        # (a store's names are in some lines, and a broken store would say so at every poll)
+        self.log = ThrottledLog(log or (lambda text: None))
         self.context = foxglove.Context()
         self.channels: dict[tuple[str, int], Any] = {}   # event type -> (EventChannel, Channel)
         self.seen: dict[tuple[str, int], int] = {}       # event type -> arrival sequence read
