@@ -1423,20 +1423,34 @@ def _history_path() -> str:
 
 
 def _completion_words(kb: KnowledgeBaseAPI) -> list[str]:
-    """Predicate and event-type names for tab completion: the program's, the store's event
-    types, the shell's commands and the builtins."""
+    """Predicate and event-type names for tab completion: the program's and the library's
+    predicates (member, maplist, ...), the control constructs (findall, forall, ...), the
+    store's event types, the shell's commands and the builtins -- never an internal helper,
+    whose name begins with ``$`` (``'$skip_list'``, ``'$nth_gen'``): no one calls it by name.
+
+    >>> import slr_sql
+    >>> words = _completion_words(slr_sql.open(clock=slr_sql.ManualClock(0)))
+    >>> {"member", "maplist", "findall", "atom_length"} <= set(words)
+    True
+    >>> [w for w in words if w.startswith("$")], "nth_gen" in words
+    ([], False)
+    """
+    from .builtins import BUILTIN_NAMES
+    from .engine import CONTROL
+
     words = {"assert", "asserta", "assertz", "retract", "listing", "programs", "explain",
              "load", "add", "help", "halt", "prev", "next"}
-    program = getattr(getattr(kb, "engine", None), "program", None)
-    if program is not None:
-        words |= {name for name, _ in list(program.preds) + list(program.temporal)
-                  if not name.startswith("$")}
+    engine = getattr(kb, "engine", None)
+    for program in (getattr(engine, "program", None), getattr(engine, "library", None)):
+        if program is not None:
+            words |= {name for name, _ in list(program.preds) + list(program.temporal)}
     store = getattr(kb, "store", None)
     if store is not None:
         words |= {name for name, _ in store.event_types()}
-    from .builtins import BUILTIN_NAMES
-    words |= {name for name, _ in BUILTIN_NAMES}
-    return sorted(w for w in words if re.fullmatch(r"[a-z][A-Za-z0-9_]*", w))
+    words |= {name for name, _ in BUILTIN_NAMES} | {name for name, _ in CONTROL}
+    # (a name that needs quotes is not completed: it is typed with its quotes)
+    return sorted(w for w in words if not w.startswith("$")
+                  and re.fullmatch(r"[a-z][A-Za-z0-9_]*", w))
 
 
 @main.command()

@@ -14,6 +14,9 @@ import pytest
 from conftest import copy_of_store
 from test_cli import ROOT, slr
 
+import slr_sql
+from slr_sql.cli import _completion_words
+
 PROMPT = r"\?-"
 
 
@@ -152,6 +155,31 @@ def test_tab_completes_predicate_and_event_type_names(store):
     press(child, "\r")
     child.expect(PROMPT)
     leave(child)
+
+
+def test_tab_completes_library_predicates_and_never_an_internal_helper(store):
+    """The library's predicates and the control constructs are completed too; its internal
+    helpers, named with a leading $ ('$nth_gen', '$ord_union'), are not."""
+    child = spawn_shell(store)
+    child.send("mapl")
+    child.send("\t")
+    child.expect("ist")
+    child.sendline("(succ, [1, 2], L).")
+    child.expect(re.escape("L = [2,3]"))
+    press(child, "\r")
+    child.expect(PROMPT)
+    child.send("aggregate_al")      # a control construct
+    child.send("\t")
+    child.expect("l")
+    child.sendline("(count, member(_, [a, b]), N).")
+    child.expect("N = 2")
+    press(child, "\r")
+    child.expect(PROMPT)
+    leave(child)
+    with slr_sql.open(store, clock=slr_sql.ManualClock(0)) as kb:
+        words = _completion_words(kb)
+    assert {"member", "nth0", "ord_union", "findall", "forall"} <= set(words)
+    assert not [w for w in words if w.startswith("$") or w in ("nth_gen", "ord_union2")]
 
 
 def test_user_consult_in_the_terminal_ends_with_ctrl_d(store):
