@@ -131,3 +131,17 @@ def test_warnings_of_the_plot_library_are_escaped(hostile_store, tmp_path):
     # matplotlib warns that the font has no glyph for ESC, quoting the character
     out = printed(slr("plot", str(hostile_store), "-o", str(tmp_path / "p.png")))
     assert "wrote " in out
+
+
+def test_fleet_status_quotes_a_robot_name_a_fleet_file_edited_by_hand_holds(tmp_path):
+    import sqlite3
+
+    robot, fleet = tmp_path / "robot.db", tmp_path / "fleet.db"
+    with slr_sql.open(robot, robot="r1", clock=slr_sql.ManualClock(100)) as kb:
+        kb.add("seen(a)^1")
+    assert slr("fleet", "push", str(robot), str(fleet)).returncode == 0
+    with sqlite3.connect(fleet) as conn:    # a name no way in takes (check_robot_name)
+        conn.execute("UPDATE slr_fleet_robots SET robot = ?", ("r" + HOSTILE,))
+    conn.close()
+    out = printed(slr("fleet", "status", str(fleet)))
+    assert f"'r{SHOWN}'" in out
