@@ -15,8 +15,8 @@ and unassigned code points -- is never printed as itself but as writeq's escape 
 * :func:`printable_name`: a name holding such a character is printed as writeq prints the
   atom, quoted (``'ev\x1B\[31m'``), so that it reads back as the same atom; any other name is
   printed as it is.
-* :func:`printable_text`: a message or a source line gets the escapes in place, its line
-  breaks kept.
+* :func:`printable_text`: a message or a program's text gets the escapes in place, its
+  line breaks and tabs kept (they move the cursor only where a reader expects).
 * :func:`log_text`: one log line: line breaks escaped too, and cut to :data:`LOG_TEXT_LIMIT`
   characters.
 
@@ -65,18 +65,18 @@ def printable_name(name: Any) -> str:
 
 def printable_text(text: Any) -> str:
     r"""``text`` with each character a terminal does not draw as itself written as writeq's
-    escape, its line breaks (``\n``) kept: for messages and source lines.
+    escape, its line breaks and tabs kept: for messages and program text.
 
     >>> printable_text("unknown event type: x\x1b]0;owned\x07")
     'unknown event type: x\\x1B\\]0;owned\\a'
     """
-    return _escape_undrawn(str(text), keep="\n")
+    return _escape_undrawn(str(text), keep="\n\t")
 
 
 def printable_syntax_error(exc: SLRSyntaxError) -> str:
     r"""A syntax error as the CLI prints it (``file:line:col: message``, the line, a caret),
-    the line's characters escaped as :func:`printable_text` does and the caret still under
-    the column it points at.
+    the line's characters escaped as :func:`printable_text` does (a tab too: the caret
+    counts characters) and the caret still under the column it points at.
 
     >>> print(printable_syntax_error(SLRSyntaxError("operator expected", 1, 4, "a\rb c")))
     <string>:1:4: operator expected
