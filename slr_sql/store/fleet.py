@@ -24,13 +24,18 @@ from .connection import Database
 from .events import EventWriter
 from .tables import EventTables
 
-__all__ = ["Fleet", "RouteConflict", "WriterInFlight", "check_robot_name"]
+__all__ = ["Fleet", "ROBOT_NAME_MAX", "RouteConflict", "WriterInFlight", "check_robot_name"]
 
 # Unicode categories a robot's name may not hold: characters that are not drawn but change
 # how the text around them is drawn (direction overrides and isolates, the marks U+200E/F,
 # zero-width joiners and spaces, soft hyphens) or where lines break
 _UNSEEN = {"Cc": "a control character", "Cf": "a format character",
            "Zl": "a line separator", "Zp": "a paragraph separator"}
+# characters of a robot's name at most: a name is a key of rows, marks, routes and positions
+# and is shown in tables and logs (a 500,000-character name was stored, and a PostgreSQL
+# index refuses a key of more than about 2,700 bytes); 255 characters of any script stay
+# within that (at most 4 bytes each)
+ROBOT_NAME_MAX = 255
 
 # (an upsert both engines take)
 _ADD_ROBOT = "INSERT INTO slr_robots (name) VALUES (?) ON CONFLICT (name) DO NOTHING"
@@ -43,9 +48,10 @@ _TAKE_ROUTE = _ADD_ROUTE + " RETURNING via"
 
 
 def check_robot_name(name: Any) -> str:
-    """``name`` if it can name a robot (a non-empty text without control, format or
-    line-separating characters), else an :class:`SLRError` saying why -- the one check of
-    every way a robot's name comes in (naming a store, a push, a shipment, a query).
+    """``name`` if it can name a robot (a non-empty text of at most :data:`ROBOT_NAME_MAX`
+    characters, without control, format or line-separating characters), else an
+    :class:`SLRError` saying why -- the one check of every way a robot's name comes in
+    (naming a store, a push, a shipment, a query).
 
     >>> check_robot_name("r1")
     'r1'
@@ -56,6 +62,9 @@ def check_robot_name(name: Any) -> str:
     """
     if not isinstance(name, str) or not name:
         raise SLRError(f"a robot's name is a non-empty text, not {shown(name)}")
+    if len(name) > ROBOT_NAME_MAX:   # (first: the checks below read every character)
+        raise SLRError(f"robot name {shown(name)} is longer than {ROBOT_NAME_MAX} characters; "
+                       "name robots with plain words (r1, forklift-2, ...)")
     # (the name quoted cut short: a 100 KB name refused must not make a 100 KB message)
     problem = text_problem(name)
     if problem:
