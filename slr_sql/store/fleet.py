@@ -24,7 +24,8 @@ from .connection import Database
 from .events import EventWriter
 from .tables import EventTables
 
-__all__ = ["Fleet", "ROBOT_NAME_MAX", "RouteConflict", "WriterInFlight", "check_robot_name"]
+__all__ = ["Fleet", "ROBOT_NAME_MAX", "RouteConflict", "ShipmentConflict", "WriterInFlight",
+           "check_robot_name"]
 
 # Unicode categories a robot's name may not hold: characters that are not drawn but change
 # how the text around them is drawn (direction overrides and isolates, the marks U+200E/F,
@@ -107,6 +108,18 @@ class RouteConflict(SLRError):
     per shipping robot, so it would store each row twice. Nothing of the shipment is stored.
 
     >>> issubclass(RouteConflict, SLRError)
+    True
+    """
+
+
+class ShipmentConflict(SLRError):
+    """A shipment sends again a sequence of a robot that the fleet store holds already
+    (at or below its position for the type), with content the fleet store holds no row of
+    the robot with: two stores ship as one robot, or the robot's store was replaced. Its
+    rows would be skipped as held and lost without a word; nothing of the shipment is
+    stored. Rows sent again as they are held are skipped (stored once).
+
+    >>> issubclass(ShipmentConflict, SLRError)
     True
     """
 
@@ -326,8 +339,14 @@ class Fleet:
                 if not fresh:
                     self._set_position(robot, name, arity, rows[-1][0])
                     return 0
+            elif rows[0][0] > position:
+                fresh = rows
             else:
-                fresh = rows if rows[0][0] > position else [r for r in rows if r[0] > position]
+                fresh = [r for r in rows if r[0] > position]
+                # rows sent again must be held as they are sent: else another store ships
+                # as this robot (or its store was replaced) and they would be lost unsaid
+                self._refuse_other_content(robot, name, arity, position,
+                                           rows[:len(rows) - len(fresh)])
             if not fresh:
                 return 0
             along = self._take_routes(robot, fresh)
@@ -429,6 +448,22 @@ class Fleet:
             self.db.after_commit(lambda: routes.update(dict.fromkeys(taken, robot)))
         return along
 
+    def _refuse_other_content(self, robot: str, name: str, arity: int, position: int,
+                              rows: list[tuple]) -> None:
+        """Raise :class:`ShipmentConflict` unless this store holds each of ``rows`` (rows
+        of ``robot`` at or below its ``position`` for name/arity, sent again) identically.
+        This store keeps no robot's sequence per row: a row is compared with every row of
+        its robot (same arguments, start and end)."""
+        for values, held in zip(rows, self._held_identically(name, arity, robot, rows)):
+            if not held:
+                raise ShipmentConflict(
+                    f"robot {robot!r} shipped {name}/{arity} seq {values[0]} again (this store "
+                    f"holds {name}/{arity} of {robot!r} up to seq {position}) with other "
+                    f"content: it holds no event {shown(_shipped_event(name, arity, values))} "
+                    f"of robot {values[-1] or robot!r}; two stores ship as {robot!r}, or its "
+                    "store was replaced (after a restore from a backup, push with --resync); "
+                    "nothing of the shipment is stored")
+
     def _set_position(self, robot: str, name: str, arity: int, position: int) -> None:
         self.db.execute(_SET_POSITION, (robot, name, arity, position))
 
@@ -523,6 +558,16 @@ def _shipped_insert(table: str, arity: int) -> str:
     columns = [f"arg{i}" for i in range(1, arity + 1)] + ["t_start", "t_end", "robot", "arrival"]
     return (f"INSERT INTO {table} ({', '.join(columns)}) "
             f"VALUES ({', '.join('?' * len(columns))})")
+
+
+def _shipped_event(name: str, arity: int, row: tuple) -> str:
+    """A shipped row as an event's text for a message (arguments in their stored form).
+
+    >>> _shipped_event("seen", 1, (2, "pallet7", 1.0, 2.0, 3.0, None))
+    'seen(pallet7)^[1.0, 2.0]'
+    """
+    args = ", ".join(str(v) for v in row[1:1 + arity])
+    return f"{name}({args})^[{row[1 + arity]!r}, {row[2 + arity]!r}]"
 
 
 def _finite(value: Any) -> bool:
