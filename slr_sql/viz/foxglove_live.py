@@ -33,13 +33,23 @@ from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, TF_TOPIC
                        time_ns, transform_message)
 
 __all__ = ["FoxgloveView", "FoxgloveUnavailable", "FoxgloveCannotListen", "forward_sdk_log",
-           "log_text"]
+           "log_text", "BACKLOG_BYTES", "BACKLOG_MESSAGES", "MESSAGE_MAX_BYTES"]
 
 _MARK_PREFIX = "sync/mark/"
 _TF_STATIC = ("tf_static", 3)
 _UNREADABLE = "its rows cannot be read"
 _MARK_SOURCE = "sync/marksrc/"
 STATIC_GAP = 0.25   # seconds: the least time between two latched /tf_static messages asked for
+# What the view's server holds for one client that reads too slowly: the foxglove-sdk queues
+# at most BACKLOG_MESSAGES messages per client (dropping the oldest beyond), whatever their
+# size, so the view sends no message larger than MESSAGE_MAX_BYTES: a client holds at most
+# BACKLOG_BYTES (64 MiB) of messages, where 1,024 messages of an event type with megabyte
+# arguments held a gigabyte per slow client
+BACKLOG_MESSAGES = 1024
+MESSAGE_MAX_BYTES = 64 * 1024
+BACKLOG_BYTES = BACKLOG_MESSAGES * MESSAGE_MAX_BYTES
+_TOO_LARGE = (f"messages larger than {MESSAGE_MAX_BYTES:,} bytes are left out (the view's "
+              f"limit, so that a slow client holds at most {BACKLOG_BYTES >> 20} MiB)")
 
 
 class FoxgloveUnavailable(SLRError):
@@ -164,6 +174,7 @@ class FoxgloveView:
         # latched /tf_static message is made from it without reading the history again
         self._static_last: dict[tuple, tuple] = {}
         self._troubles: dict[tuple[str, int], str] = {}   # what was said of a type
+        self._too_large: set[str] = set()   # topics whose messages too large were said
         for key, topic in TF_TOPICS.items():
             self._tf[key[0]] = foxglove.Channel(
                 topic, schema=_schema(TRANSFORMS_SCHEMA_NAME, TRANSFORMS_SCHEMA),
@@ -184,7 +195,8 @@ class FoxgloveView:
         try:
             self.server = foxglove.start_server(name=name, host=host, port=port,
                                                 context=self.context,
-                                                server_listener=Listener())
+                                                server_listener=Listener(),
+                                                message_backlog_size=BACKLOG_MESSAGES)
         except (RuntimeError, OSError) as exc:   # the SDK's bind errors are RuntimeErrors
             reason = str(exc).removeprefix("FoxgloveError: ")
             raise FoxgloveCannotListen(f"cannot listen on {host}:{port}: {reason}") from None
@@ -302,14 +314,28 @@ class FoxgloveView:
             except (ValueError, TypeError) as exc:   # a row written by hand, not a term
                 self._trouble(key, f"rows that are not events are left out ({exc})")
                 continue
+            if len(data) > MESSAGE_MAX_BYTES:
+                self._left_out(event.topic)
+                continue
             channel.log(data, log_time=time_ns(row[end]))
             self.sent += 1
         tf = self._tf.get(key[0]) if key[1] == 3 else None
         if tf is not None:
             for row in rows:
                 data = transform_message([row])
-                if data is not None:
-                    tf.log(data, log_time=time_ns(row[4]))
+                if data is None:
+                    continue
+                if len(data) > MESSAGE_MAX_BYTES:
+                    self._left_out(TF_TOPICS[key])
+                    continue
+                tf.log(data, log_time=time_ns(row[4]))
+
+    def _left_out(self, topic: str) -> None:
+        """Say once per topic that its messages larger than MESSAGE_MAX_BYTES are left
+        out (a type may hold a few such events among many that are sent)."""
+        if topic not in self._too_large:
+            self._too_large.add(topic)
+            self.log(f"foxglove: {topic}: {_TOO_LARGE}")
 
     def _trouble(self, key: tuple[str, int], text: str) -> None:
         """Say a type's trouble once (again only once it was gone in between)."""
@@ -331,8 +357,11 @@ class FoxgloveView:
             if initial:
                 continue
             source = self.store.meta_get(_MARK_SOURCE + type_text, "") or ""
-            self._marks_channel.log(mark_message(type_text, until, str(source)),
-                                    log_time=time_ns(time.time()))
+            data = mark_message(type_text, until, str(source))
+            if len(data) > MESSAGE_MAX_BYTES:
+                self._left_out(MARKS_TOPIC)
+                continue
+            self._marks_channel.log(data, log_time=time_ns(time.time()))
 
     def _load_static(self) -> None:
         """Read the tf_static rows stored before the view started, once, a page at a time
@@ -357,8 +386,21 @@ class FoxgloveView:
                 last[edge] = row
 
     def _send_static(self) -> None:
-        """The last value of each tf_static edge, on /tf_static."""
-        last = self._static_last
-        data = transform_message(list(last.values())) if last else None
-        if data is not None:
-            self._tf["tf_static"].log(data, log_time=time_ns(time.time()))
+        """The last value of each tf_static edge, on /tf_static: in one message, or in
+        several of at most MESSAGE_MAX_BYTES each when the edges make a larger one (each
+        message's transforms are latched apart, as those of ROS's several /tf_static
+        publishers are)."""
+        log_time = time_ns(time.time())
+        parts = [list(self._static_last.values())] if self._static_last else []
+        while parts:
+            rows = parts.pop()
+            data = transform_message(rows)
+            if data is None:
+                continue
+            if len(data) <= MESSAGE_MAX_BYTES:
+                self._tf["tf_static"].log(data, log_time=log_time)
+            elif len(rows) > 1:
+                half = len(rows) // 2
+                parts += [rows[half:], rows[:half]]   # (the first half sent first)
+            else:   # (an edge whose frame names alone are larger)
+                self._left_out(TF_TOPICS[_TF_STATIC])
