@@ -99,3 +99,14 @@ def test_the_service_refuses_it_in_words(tmp_path):
                              timeout=30).json()
         assert positions == {"positions": [["seen", 1, 3]]}
         assert server.healthy()
+
+
+def test_a_fleet_store_running_event_rules_compares_them_alike(fleet_store):
+    """With event rules loaded the fleet store stores shipped events decoded (its rules run
+    over them): rows sent again are compared with what that path stored."""
+    fleet_store.load("twice(X) <- seen(X) seq seen(X).")
+    rows = [row(4, "d", 4.0), row(5, '["a",1,2.5]', 5.0), row(6, 7, 6.0), row(7, 2.5, 7.0)]
+    assert receive(fleet_store, "r1", [("seen", 1, rows)]) == 4
+    assert receive(fleet_store, "r1", [("seen", 1, rows)]) == 0
+    with pytest.raises(ShipmentConflict, match="seq 6 again"):
+        receive(fleet_store, "r1", [("seen", 1, [row(6, 7.0, 6.0)])])
