@@ -297,7 +297,7 @@ def test_a_slow_client_of_large_messages_holds_at_most_the_backlog_bytes(tmp_pat
 
     db = tmp_path / "robot.db"
     with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
-        kb.add_many([("camera", ("x",), 1.0, 1.0), ("last", ("x",), 1.0, 1.0)])
+        kb.add_many([("camera", ("x",), 1.0, 1.0)])
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     process = subprocess.Popen([sys.executable, "-m", "slr_sql", "foxglove", str(db),
                                 "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -308,16 +308,25 @@ def test_a_slow_client_of_large_messages_holds_at_most_the_backlog_bytes(tmp_pat
         port = int(line.split(":")[3].split()[0])
         with silent_client(port) as silent, FoxgloveClient(port) as reader:
             subscribe(silent, "/camera/1")
-            reader.pump(lambda: "/last/1" in reader.channels, time.monotonic() + DEADLINE)
-            reader.subscribe("/camera/1", "/last/1")
+            reader.pump(lambda: "/camera/1" in reader.channels, time.monotonic() + DEADLINE)
+            reader.subscribe("/camera/1")
+            # both subscriptions are in place once both clients have an event stored now
+            with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+                kb.add_many([("camera", ("probe",), 1.5, 1.5)])
+            reader.pump(lambda: bool(reader.on("/camera/1")), time.monotonic() + DEADLINE)
+            reader.messages.clear()
+            while not isinstance(frame := silent.recv(timeout=DEADLINE), bytes):
+                pass
+            assert json.loads(frame[13:])["arg1"] == "probe"
             with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
                 for i in range(100):
                     kb.add_many([("camera", (f"{i:03d}" + "p" * 1_000_000,), 2.0, 2.0)])
                 # messages up to the limit still go
                 kb.add_many([("camera", (f"{i}" + "s" * 60_000,), 3.0, 3.0) for i in range(5)])
-                kb.add_many([("last", ("done",), 4.0, 4.0)])
-            # the view has logged every message (to both clients) once the reader has the last
-            reader.pump(lambda: bool(reader.on("/last/1")), time.monotonic() + DEADLINE)
+            # the view has logged every message (to both clients at once) when the reader has
+            # the last
+            reader.pump(lambda: any(m["arg1"].startswith("4s") for _, m in reader.on("/camera/1")),
+                        time.monotonic() + DEADLINE)
             read = sorted(len(m["arg1"]) for _, m in reader.on("/camera/1"))
             # what the server held for the silent client, read now, up to its newest message
             held, newest = 0, None
