@@ -379,3 +379,38 @@ def test_static_frames_too_many_for_one_message_come_in_several(tmp_path):
         view.close()
         view_kb.close()
     assert len(sizes) >= 3 and max(sizes) <= MESSAGE_MAX, sizes
+
+
+def test_a_burst_of_more_than_two_pages_is_sent_without_waiting_for_another_change(tmp_path):
+    """The view reads 10,000 rows of a type per pass, and passed again only at a change of
+    the store (and once 50 ms after one): of 25,000 events stored at once it sent 20,000,
+    and the last 5,000 waited for the store's next change, for ever on a store that no
+    longer changes. Now a full page makes another pass."""
+    from slr_sql.viz import foxglove_live
+    from slr_sql.viz.foxglove_live import FoxgloveView
+
+    db = tmp_path / "robot.db"
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add_many([("p", (0,), 0.0, 0.0)])
+    view_kb = slr_sql.open(db, clock=slr_sql.ManualClock(0.0))
+    view = FoxgloveView(view_kb.store, port=0).start()
+    try:
+        with FoxgloveClient(view.port) as client:
+            deadline = time.monotonic() + DEADLINE
+            client.pump(lambda: "/p/1" in client.channels, deadline)
+            client.subscribe("/p/1")
+            probe = 0
+            while not client.on("/p/1"):   # (until the subscription is in place)
+                probe -= 1
+                with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+                    kb.add_many([("p", (probe,), 0.5, 0.5)])
+                client.read_for(0.2)
+            with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+                kb.add_many([("p", (i,), 1.0, 1.0) for i in range(1, 25_001)])
+            # (a client slower than the view may lose older ones, never the newest, which
+            # comes last)
+            client.pump(lambda: client.messages[-1][2]["arg1"] == 25_000, deadline)
+    finally:
+        view.close()
+        view_kb.close()
+    assert foxglove_live.PAGE_ROWS == 10_000

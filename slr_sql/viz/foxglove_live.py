@@ -40,6 +40,7 @@ _TF_STATIC = ("tf_static", 3)
 _UNREADABLE = "its rows cannot be read"
 _MARK_SOURCE = "sync/marksrc/"
 STATIC_GAP = 0.25   # seconds: the least time between two latched /tf_static messages asked for
+PAGE_ROWS = 10_000  # rows of one type read in one pass; a full page makes another pass
 # What the view's server holds for one client that reads too slowly: the foxglove-sdk queues
 # at most BACKLOG_MESSAGES messages per client (dropping the oldest beyond), whatever their
 # size, so the view sends no message larger than MESSAGE_MAX_BYTES: a client holds at most
@@ -246,10 +247,14 @@ class FoxgloveView:
                     catalog = now >= next_catalog
                     if catalog:
                         next_catalog = now + 0.05
-                    self._follow(catalog=catalog)
+                    more = self._follow(catalog=catalog)
                 elif now >= next_catalog and next_catalog:
                     next_catalog = 0.0
-                    self._follow(catalog=True)
+                    more = self._follow(catalog=True)
+                else:
+                    more = False
+                if more:   # a page was full: the rows after it, at the next pass (they
+                    version = None   # waited for the store's next change, maybe for ever)
                 # a subscription to /tf_static asks for the latched message, but at most
                 # every STATIC_GAP seconds: each one goes to every subscriber, and a client
                 # subscribing in a loop made the view build and send it at every pass (a
@@ -274,8 +279,11 @@ class FoxgloveView:
         self.channels[key] = (event, channel)
         return self.channels[key]
 
-    def _follow(self, initial: bool = False, catalog: bool = True) -> None:
+    def _follow(self, initial: bool = False, catalog: bool = True) -> bool:
+        """Read and send what the store holds beyond what was read; whether a type may
+        hold more (its page was full)."""
         store = self.store
+        more = False
         for key in (store.event_types() if catalog or initial else ()):
             if key not in self.channels:
                 latest = store.max_seq(*key)
@@ -288,7 +296,7 @@ class FoxgloveView:
             # one type that cannot be read (its table dropped by hand, a row that is no
             # term) must not stop the others: it is said once, and tried again next time
             try:
-                self._follow_type(key, event, channel, initial)
+                more = self._follow_type(key, event, channel, initial) or more
             except Exception as exc:  # noqa: BLE001 - this type's trouble, not the view's
                 self._trouble(key, f"{_UNREADABLE} ({exc})")
             else:   # readable again: a later failure to read is said again
@@ -296,17 +304,20 @@ class FoxgloveView:
                     del self._troubles[key]
         if catalog or initial:
             self._send_marks(initial)
+        return more
 
     def _follow_type(self, key: tuple[str, int], event: Any, channel: Any,
-                     initial: bool) -> None:
-        rows = self.store.raw_rows(key[0], key[1], after_seq=self.seen[key], limit=10_000)
+                     initial: bool) -> bool:
+        """Send a page of a type's rows beyond those read; whether the page was full."""
+        rows = self.store.raw_rows(key[0], key[1], after_seq=self.seen[key], limit=PAGE_ROWS)
         if not rows:
-            return
+            return False
         self.seen[key] = rows[-1][-1]
+        full = len(rows) == PAGE_ROWS
         if key == _TF_STATIC:
             self._keep_static(rows)
         if initial:
-            return
+            return full
         end = key[1] + 1
         for row in rows:
             try:
@@ -329,6 +340,7 @@ class FoxgloveView:
                     self._left_out(TF_TOPICS[key])
                     continue
                 tf.log(data, log_time=time_ns(row[4]))
+        return full
 
     def _left_out(self, topic: str) -> None:
         """Say once per topic that its messages larger than MESSAGE_MAX_BYTES are left
