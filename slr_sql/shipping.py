@@ -127,8 +127,9 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
         if marks or relayed:
             given = {robot: marks or {}, **{r: m for r, m in (relayed or {}).items()
                                             if r != robot}}
-            if len(given) > 1:
-                _check_relayed_routes(store, robot, given)
+            # (the robot's own marks too, sent with no rows or with rows the route check
+            # of the rows did not see: held already, or none)
+            _check_mark_routes(store, robot, given)
             for who, its_marks in given.items():
                 for mk, t in its_marks.items():
                     store.meta_raise(f"{FLEET_MARK}{who}/{mk}", float(t))
@@ -250,21 +251,27 @@ def _check_relayed(relayed: Any) -> None:
             raise SLRError(f"a shipment's relayed marks: {exc}") from None
 
 
-def _check_relayed_routes(store: Any, robot: str, given: dict) -> None:
-    """Refuse marks ``robot`` relays of a robot whose rows reach this store directly or
-    through another store: its marks are that robot's (or that store's) to give, and one
-    raised here would move the fleet's mark past events still on their way. (Marks of a
-    robot this store does not know yet go in: a relayed robot may have marks and no
-    events.)"""
+def _check_mark_routes(store: Any, robot: str, given: dict) -> None:
+    """Refuse marks that ``robot`` sends of a robot whose rows reach this store by another
+    route: marks it relays of a robot shipping here directly or relayed by another store,
+    and its own marks when its rows come relayed by a store (sent by the robot itself, or
+    by anyone in its name): those marks are the route's to give, and one raised here would
+    move the fleet's mark past events still on their way. (Marks of a robot this store
+    does not know yet go in: a robot may have marks and no events.)"""
     from .store.fleet import RouteConflict
 
     routes = {r["robot"]: r["via"] or r["robot"] for r in store.fleet_contacts()}
     for who in given:
         via = routes.get(who)
-        if who != robot and via is not None and via != robot:
-            how = "directly" if via == who else f"relayed by {via!r}"
-            raise RouteConflict(f"the marks of robot {who!r} cannot come from {robot!r}: its "
-                                f"rows reach this store {how}, so its marks come that way too")
+        if via is None or via == robot:
+            continue
+        if who == robot:
+            raise RouteConflict(f"the marks of robot {who!r} cannot come from it directly: "
+                                f"its rows reach this store relayed by {via!r}, so its marks "
+                                "come that way too")
+        how = "directly" if via == who else f"relayed by {via!r}"
+        raise RouteConflict(f"the marks of robot {who!r} cannot come from {robot!r}: its "
+                            f"rows reach this store {how}, so its marks come that way too")
 
 
 def _check_after(after: Any) -> None:

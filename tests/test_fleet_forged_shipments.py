@@ -17,6 +17,7 @@ from service_helpers import HTTP, ServiceProcess
 
 import slr_sql
 from slr_sql.errors import SLRError
+from slr_sql import fleet
 from slr_sql.shipping import receive
 
 BIG = 2 ** 63   # one past the largest 64-bit integer
@@ -146,3 +147,95 @@ def test_the_service_refuses_it_in_words(server):
     assert "marks of robot 'mdirect'" in answer.json()["error"]["message"]
     assert HTTP.get(server.url + "/fleet/positions", params={"robot": "mforger"},
                     timeout=30).json() == {"positions": []}
+
+
+# -- marks alone, sent directly --------------------------------------------------------------
+
+TOKEN = "fleet-token-shared-by-every-robot"
+
+
+@pytest.fixture
+def relayed_fleet(tmp_path):
+    """A fleet server (one token for every robot) to which a site store relays r2: r2
+    pushes to the site, the site pushes on. The site's own mark of seen/1 is 100, r2's 5:
+    the fleet's is 5, waiting for r2."""
+    site, r2 = str(tmp_path / "site.db"), str(tmp_path / "r2.db")
+    with slr_sql.open(r2, robot="r2", clock=slr_sql.ManualClock(10.0)) as kb:
+        kb.add("seen(a)^1")
+        kb.mark_complete("seen/1", 5.0)
+    fleet.push(r2, site)
+    with slr_sql.open(site, robot="site", clock=slr_sql.ManualClock(10.0)) as kb:
+        kb.mark_complete("seen/1", 100.0)   # (the site's own events are complete to 100)
+    with ServiceProcess(tmp_path / "fleet.db", "--token", TOKEN) as server:
+        fleet.push(site, server.url, token=TOKEN)
+        assert fleet_mark(server) == 5.0
+        yield server, tmp_path
+
+
+def fleet_mark(server) -> float | None:
+    """The fleet store's own mark of seen/1 (the least of its robots')."""
+    with slr_sql.open(server.db) as kb:
+        return kb.store.meta_get("sync/mark/seen/1")
+
+
+def test_a_robot_relayed_by_a_site_cannot_send_its_marks_alone_directly(relayed_fleet):
+    """The route check applied to marks relayed by another store, not to a robot's own
+    marks sent with no rows: r2, whose rows reach the fleet relayed by the site, pushed
+    a store that held only marks (a second store of r2, a robot restarted on an empty
+    store pointed at the fleet) straight to the fleet with the shared token, and r2's mark
+    and the fleet's moved to 100 while r2's events after 5 were still at the site: a
+    synchronized query answered without them. Now it is refused as a route conflict and
+    nothing of the shipment is stored."""
+    server, tmp_path = relayed_fleet
+    marks_only = str(tmp_path / "r2-marks-only.db")
+    with slr_sql.open(marks_only, robot="r2", clock=slr_sql.ManualClock(10.0)) as kb:
+        kb.mark_complete("seen/1", 1e9)
+    with pytest.raises(SLRError, match="the marks of robot 'r2' cannot come from it "
+                                       "directly: its rows reach this store relayed by "
+                                       "'site'"):
+        fleet.push(marks_only, server.url, token=TOKEN)
+    assert fleet_mark(server) == 5.0
+    with slr_sql.open(server.db) as kb:
+        assert kb.store.meta_get("fleet/mark/r2/seen/1") == 5.0
+        assert [(r["robot"], r["via"]) for r in kb.store.fleet_contacts()] == [
+            ("r2", "site"), ("site", None)]
+
+
+def test_a_robot_cannot_send_marks_alone_as_another_robot_relayed_by_a_site(relayed_fleet):
+    """The same over the wire: any robot holding the fleet's token sending marks alone in
+    r2's name (no rows, no pending) moved r2's mark."""
+    server, _ = relayed_fleet
+    answer = HTTP.post(server.url + "/fleet/receive", timeout=30,
+                       headers={"Authorization": f"Bearer {TOKEN}"},
+                       json={"robot": "r2", "batches": [], "marks": {"seen/1": 1e9}})
+    assert answer.status_code == 400, answer.text
+    assert answer.json()["error"]["kind"] == "RouteConflict"
+    assert "the marks of robot 'r2' cannot come from it directly" in \
+        answer.json()["error"]["message"]
+    assert fleet_mark(server) == 5.0
+    # the site's own marks still go in, and r2's relayed by it
+    with slr_sql.connect(server.url, token=TOKEN) as client:
+        assert client.fleet_receive("site", [], {"seen/1": 200.0}, None, None,
+                                    relayed={"r2": {"seen/1": 7.0}}) == 0
+    assert fleet_mark(server) == 7.0
+
+
+@pytest.mark.parametrize("where", ["file", "postgres"])
+def test_marks_alone_follow_the_route_of_the_robots_rows_on_either_backend(
+        tmp_path, where, request):
+    where = (request.getfixturevalue("postgres_url") if where == "postgres"
+             else str(tmp_path / "fleet.db"))
+    with slr_sql.open(where) as fleet_store:
+        receive(fleet_store, "site", [("seen", 1, [(1, "a", 1.0, 1.0, 1.0, "r2")])],
+                {"seen/1": 100.0}, relayed={"r2": {"seen/1": 5.0}})
+        receive(fleet_store, "r1", [("seen", 1, [seen(1, "b")])], {"seen/1": 100.0})
+        assert fleet_store.store.meta_get("sync/mark/seen/1") == 5.0
+        with pytest.raises(SLRError, match="cannot come from it directly"):
+            receive(fleet_store, "r2", [], {"seen/1": 1e9}, pending=0)
+        assert fleet_store.store.meta_get("fleet/mark/r2/seen/1") == 5.0
+        assert fleet_store.store.meta_get("sync/mark/seen/1") == 5.0
+        assert "r2" not in {r["robot"] for r in fleet_store.store.fleet_contacts()
+                            if r["contact_at"] is not None}
+        # a robot shipping directly still sends its marks alone
+        receive(fleet_store, "r1", [], {"seen/1": 150.0})
+        assert fleet_store.store.meta_get("fleet/mark/r1/seen/1") == 150.0

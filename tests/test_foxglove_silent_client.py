@@ -279,3 +279,138 @@ def test_a_client_subscribing_to_tf_static_in_a_loop_does_not_flood_the_others(t
     assert 1 <= static <= elapsed / gap + 2, (static, elapsed)
     assert len(hammer.on("/tf_static")[-1][1]["transforms"]) == 50
     assert foxglove_live.STATIC_GAP == gap
+
+
+MESSAGE_MAX = 64 * 1024   # (foxglove_live.MESSAGE_MAX_BYTES, checked last)
+BACKLOG = 1024 * MESSAGE_MAX
+
+
+def test_a_slow_client_of_large_messages_holds_at_most_the_backlog_bytes(tmp_path):
+    """The foxglove-sdk queues up to 1,024 messages per client that does not keep up,
+    whatever their size: a client subscribed to a type with megabyte arguments (a camera
+    topic imported with `slr ros import --all`) that did not read held a megabyte per
+    message, here 100 MB, up to a gigabyte per client. Now no message larger than 64 KiB
+    is sent (said once on the log, per topic), so a slow client holds at most 64 MiB. What
+    the server held for the client is what the client receives once it reads: its queue
+    and the sockets' buffers."""
+    from slr_sql.viz import foxglove_live
+
+    db = tmp_path / "robot.db"
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add_many([("camera", ("x",), 1.0, 1.0)])
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    process = subprocess.Popen([sys.executable, "-m", "slr_sql", "foxglove", str(db),
+                                "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True, env=env)
+    try:
+        line = process.stdout.readline()
+        assert line.startswith("foxglove: ws://127.0.0.1:"), process.stderr.read()
+        port = int(line.split(":")[3].split()[0])
+        with silent_client(port) as silent, FoxgloveClient(port) as reader:
+            subscribe(silent, "/camera/1")
+            reader.pump(lambda: "/camera/1" in reader.channels, time.monotonic() + DEADLINE)
+            reader.subscribe("/camera/1")
+            # both subscriptions are in place once both clients have an event stored now
+            with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+                kb.add_many([("camera", ("probe",), 1.5, 1.5)])
+            reader.pump(lambda: bool(reader.on("/camera/1")), time.monotonic() + DEADLINE)
+            reader.messages.clear()
+            while not isinstance(frame := silent.recv(timeout=DEADLINE), bytes):
+                pass
+            assert json.loads(frame[13:])["arg1"] == "probe"
+            with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+                for i in range(100):
+                    kb.add_many([("camera", (f"{i:03d}" + "p" * 1_000_000,), 2.0, 2.0)])
+                # messages up to the limit still go
+                kb.add_many([("camera", (f"{i}" + "s" * 60_000,), 3.0, 3.0) for i in range(5)])
+            # the view has logged every message (to both clients at once) when the reader has
+            # the last
+            reader.pump(lambda: any(m["arg1"].startswith("4s") for _, m in reader.on("/camera/1")),
+                        time.monotonic() + DEADLINE)
+            read = sorted(len(m["arg1"]) for _, m in reader.on("/camera/1"))
+            # what the server held for the silent client, read now, up to its newest message
+            held, newest = 0, None
+            deadline = time.monotonic() + DEADLINE
+            while newest != "4" + "s" * 60_000:
+                frame = silent.recv(timeout=max(0.0, deadline - time.monotonic()))
+                if isinstance(frame, bytes):
+                    held += len(frame)
+                    newest = json.loads(frame[13:])["arg1"]
+        process.send_signal(signal.SIGTERM)
+        out, err = process.communicate(timeout=DEADLINE)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    assert held < BACKLOG, f"{held / 2 ** 20:.0f} MiB held for one client"
+    assert read == [60_001] * 5
+    assert process.returncode == 0, err
+    too_large = [line for line in err.splitlines() if "larger than" in line]
+    assert too_large == ["foxglove: /camera/1: messages larger than 65,536 bytes are left out "
+                         "(the view's limit, so that a slow client holds at most 64 MiB)"], err
+    assert (foxglove_live.MESSAGE_MAX_BYTES, foxglove_live.BACKLOG_BYTES) == (MESSAGE_MAX,
+                                                                             BACKLOG)
+
+
+def test_static_frames_too_many_for_one_message_come_in_several(tmp_path):
+    """The latched /tf_static message holds every static edge: 600 edges with long frame
+    names made one message of 190 KB. It comes in messages of at most 64 KiB now, every
+    edge in one of them."""
+    from slr_sql.viz.foxglove_live import FoxgloveView
+    from test_foxglove import pose
+
+    db = tmp_path / "robot.db"
+    children = {f"camera_{i:03d}_" + "c" * 150 for i in range(600)}
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add_many([("tf_static", ("base", child, pose(1.0)), 0.0, 0.0) for child in children])
+    view_kb = slr_sql.open(db, clock=slr_sql.ManualClock(0.0))
+    view = FoxgloveView(view_kb.store, port=0, static_every=3600.0).start()
+    sizes: list[int] = []
+    try:
+        with FoxgloveClient(view.port) as client:
+            deadline = time.monotonic() + DEADLINE
+            client.pump(lambda: "/tf_static" in client.channels, deadline)
+            client.subscribe("/tf_static")
+            client.pump(lambda: {t["child_frame_id"] for _, m in client.on("/tf_static")
+                                 for t in m["transforms"]} == children, deadline)
+            sizes = [len(json.dumps(m, separators=(",", ":")))
+                     for _, m in client.on("/tf_static")]
+    finally:
+        view.close()
+        view_kb.close()
+    assert len(sizes) >= 3 and max(sizes) <= MESSAGE_MAX, sizes
+
+
+def test_a_burst_of_more_than_two_pages_is_sent_without_waiting_for_another_change(tmp_path):
+    """The view reads 10,000 rows of a type per pass, and passed again only at a change of
+    the store (and once 50 ms after one): of 25,000 events stored at once it sent 20,000,
+    and the last 5,000 waited for the store's next change, for ever on a store that no
+    longer changes. Now a full page makes another pass."""
+    from slr_sql.viz import foxglove_live
+    from slr_sql.viz.foxglove_live import FoxgloveView
+
+    db = tmp_path / "robot.db"
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add_many([("p", (0,), 0.0, 0.0)])
+    view_kb = slr_sql.open(db, clock=slr_sql.ManualClock(0.0))
+    view = FoxgloveView(view_kb.store, port=0).start()
+    try:
+        with FoxgloveClient(view.port) as client:
+            deadline = time.monotonic() + DEADLINE
+            client.pump(lambda: "/p/1" in client.channels, deadline)
+            client.subscribe("/p/1")
+            probe = 0
+            while not client.on("/p/1"):   # (until the subscription is in place)
+                probe -= 1
+                with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+                    kb.add_many([("p", (probe,), 0.5, 0.5)])
+                client.read_for(0.2)
+            with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+                kb.add_many([("p", (i,), 1.0, 1.0) for i in range(1, 25_001)])
+            # (a client slower than the view may lose older ones, never the newest, which
+            # comes last)
+            client.pump(lambda: client.messages[-1][2]["arg1"] == 25_000, deadline)
+    finally:
+        view.close()
+        view_kb.close()
+    assert foxglove_live.PAGE_ROWS == 10_000

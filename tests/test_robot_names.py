@@ -156,11 +156,14 @@ def test_the_service_refuses_it_in_a_question_too(server, ask):
 
 
 @pytest.mark.parametrize("name", [
-    "r" * 100_000 + "\u202e",       # refused for a character
-    "1" * 100_000,                  # refused for reading as a number
-    "r\ud800" + "r" * 100_000,      # refused as text that is not Unicode
+    "r" * 100_000 + "\u202e",       # (each refused for its length now, before its
+    "1" * 100_000,                  # character, its reading as a number, its lone
+    "r\ud800" + "r" * 100_000,      # surrogate)
     ["r"] * 100_000,                # no text at all
-], ids=["format-character", "number", "surrogate", "no-text"])
+    "r" * 254 + "\u202e",           # the longest refused for a character
+    "1" * 255,                      # ... for reading as a number
+], ids=["format-character", "number", "surrogate", "no-text", "format-character-255",
+        "number-255"])
 def test_a_long_name_refused_makes_a_short_error(server, name):
     """The service's answer (and a log line) quotes the name refused: a 100 KB name made a
     100 KB error message, shown whole to whoever reads the answer or the log."""
@@ -172,3 +175,72 @@ def test_a_long_name_refused_makes_a_short_error(server, name):
                            json={"goal": "seen(X)^T", "robot": name})
         assert answer.status_code == 400, answer.text[:200]
         assert len(answer.json()["error"]["message"]) < 500
+
+
+# -- a name's length ---------------------------------------------------------------------------
+
+LONG = "r" * 500_000
+
+
+def test_a_name_of_at_most_255_characters_of_any_script_is_a_name():
+    assert check_robot_name("r" * 255) == "r" * 255
+    assert check_robot_name("ロ" * 255) == "ロ" * 255   # (765 bytes of UTF-8)
+    with pytest.raises(SLRError, match="is longer than 255 characters"):
+        check_robot_name("r" * 256)
+
+
+def test_naming_a_store_with_a_name_too_long_names_nothing(tmp_path):
+    db = tmp_path / "r.db"
+    with pytest.raises(SLRError, match="is longer than 255 characters"):
+        slr_sql.open(db, robot=LONG)
+    with slr_sql.open(db) as kb:
+        assert kb.store.robot is None and kb.store.robots() == []
+
+
+@pytest.mark.parametrize("shipment", [
+    pytest.param({"robot": LONG, "batches": [["seen", 1, [[1, "a", 1.0, 1.0, 1.0, None]]]],
+                  "marks": {"seen/1": 5.0}, "pending": 0}, id="shipping-robot"),
+    pytest.param({"robot": "r1", "batches": [["seen", 1, [[1, "a", 1.0, 1.0, 1.0, LONG]]]]},
+                 id="row-robot"),
+    pytest.param({"robot": LONG, "batches": [], "marks": {"seen/1": 5.0}}, id="marks-alone"),
+    pytest.param({"robot": "hub", "batches": [], "relayed": {LONG: {"seen/1": 5.0}}},
+                 id="relayed-marks"),
+])
+def test_a_shipment_naming_a_robot_of_500_000_characters_is_a_400_and_stores_nothing(
+        server, shipment):
+    """A robot's name had no length limit: a shipment as a robot of 500,000 characters was
+    stored (its rows, its marks under a 500 KB key, its contact), and `slr fleet status`
+    printed the name whole."""
+    answer = HTTP.post(server.url + "/fleet/receive", json=shipment, timeout=60)
+    assert answer.status_code == 400, answer.text[:200]
+    message = answer.json()["error"]["message"]
+    assert "is longer than 255 characters" in message and len(message) < 500, message[:300]
+    with slr_sql.open(server.db) as kb:
+        assert kb.store.robots() == [] and kb.store.fleet_contacts() == []
+        assert kb.store.meta_items("fleet/mark/") == {}
+        assert "seen" not in {name for name, _ in kb.store.event_types()}
+
+
+def test_postgresql_refuses_it_alike_and_takes_255_characters(postgres_url):
+    from slr_sql.shipping import receive
+
+    with slr_sql.open(postgres_url) as kb:
+        with pytest.raises(SLRError, match="is longer than 255 characters"):
+            receive(kb, LONG, [("seen", 1, [(1, "a", 1.0, 1.0, 1.0, None)])], {"seen/1": 5.0},
+                    pending=0)
+        assert kb.store.robots() == [] and kb.store.fleet_contacts() == []
+        assert kb.store.meta_items("fleet/mark/") == {}
+        longest = "ロ" * 255
+        assert receive(kb, longest, [("seen", 1, [(1, "a", 1.0, 1.0, 1.0, None)])],
+                       {"seen/1": 5.0}, pending=0) == 1
+        assert kb.query("origin(R, seen(X)^T)", robot=longest)[0]["R"] == slr_sql.Atom(longest)
+
+
+def test_the_cli_refuses_a_name_too_long_in_words(tmp_path):
+    db = str(tmp_path / "r.db")
+    assert slr("add", db, "seen(a)^1").returncode == 0
+    done = slr("fleet", "push", db, str(tmp_path / "fleet.db"), "--robot", "r" * 300)
+    assert done.returncode == 1, done.stdout
+    assert "is longer than 255 characters" in done.stderr and "Traceback" not in done.stderr
+    assert len(done.stderr) < 500
+    assert not (tmp_path / "fleet.db").exists()

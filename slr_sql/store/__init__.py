@@ -59,7 +59,8 @@ from .checks import format_event
 from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, DatabaseError, \
     ReadConnection, is_postgres_url, refuse_no_store, run_sql_file, shown_location
 from .events import Event, EventBatch, EventWriter
-from .fleet import Fleet, RouteConflict, WriterInFlight, check_robot_name
+from .fleet import ROBOT_NAME_MAX, Fleet, RouteConflict, ShipmentConflict, WriterInFlight, \
+    check_robot_name
 from .functions import SqlFunctions
 from .journals import JournalReader, SubscriptionRecord, SubscriptionTables
 from .lookups import EventReader, Row, null_argument_text
@@ -71,7 +72,7 @@ from .tables import EventTables, start_compared
 __all__ = ["EventStore", "Event", "EventBatch", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "DatabaseError", "quote_identifier", "sql_literal", "format_event",
            "migration_scripts", "split_sql_script", "run_sql_file", "refuse_no_store", "shown_location", "store_error",
-           "check_robot_name", "RouteConflict", "WriterInFlight", "ReadConnection", "ArgEquals", "BufferPlan", "JsonArray",
+           "check_robot_name", "ROBOT_NAME_MAX", "RouteConflict", "ShipmentConflict", "WriterInFlight", "ReadConnection", "ArgEquals", "BufferPlan", "JsonArray",
            "JsonEquals", "MixedTerm", "PatternMatch", "SameTerm", "JournalReader", "null_argument_text",
            "SubscriptionRecord"]
 

@@ -24,13 +24,19 @@ from .connection import Database
 from .events import EventWriter
 from .tables import EventTables
 
-__all__ = ["Fleet", "RouteConflict", "WriterInFlight", "check_robot_name"]
+__all__ = ["Fleet", "ROBOT_NAME_MAX", "RouteConflict", "ShipmentConflict", "WriterInFlight",
+           "check_robot_name"]
 
 # Unicode categories a robot's name may not hold: characters that are not drawn but change
 # how the text around them is drawn (direction overrides and isolates, the marks U+200E/F,
 # zero-width joiners and spaces, soft hyphens) or where lines break
 _UNSEEN = {"Cc": "a control character", "Cf": "a format character",
            "Zl": "a line separator", "Zp": "a paragraph separator"}
+# characters of a robot's name at most: a name is a key of rows, marks, routes and positions
+# and is shown in tables and logs (a 500,000-character name was stored, and a PostgreSQL
+# index refuses a key of more than about 2,700 bytes); 255 characters of any script stay
+# within that (at most 4 bytes each)
+ROBOT_NAME_MAX = 255
 
 # (an upsert both engines take)
 _ADD_ROBOT = "INSERT INTO slr_robots (name) VALUES (?) ON CONFLICT (name) DO NOTHING"
@@ -43,9 +49,10 @@ _TAKE_ROUTE = _ADD_ROUTE + " RETURNING via"
 
 
 def check_robot_name(name: Any) -> str:
-    """``name`` if it can name a robot (a non-empty text without control, format or
-    line-separating characters), else an :class:`SLRError` saying why -- the one check of
-    every way a robot's name comes in (naming a store, a push, a shipment, a query).
+    """``name`` if it can name a robot (a non-empty text of at most :data:`ROBOT_NAME_MAX`
+    characters, without control, format or line-separating characters), else an
+    :class:`SLRError` saying why -- the one check of every way a robot's name comes in
+    (naming a store, a push, a shipment, a query).
 
     >>> check_robot_name("r1")
     'r1'
@@ -56,6 +63,9 @@ def check_robot_name(name: Any) -> str:
     """
     if not isinstance(name, str) or not name:
         raise SLRError(f"a robot's name is a non-empty text, not {shown(name)}")
+    if len(name) > ROBOT_NAME_MAX:   # (first: the checks below read every character)
+        raise SLRError(f"robot name {shown(name)} is longer than {ROBOT_NAME_MAX} characters; "
+                       "name robots with plain words (r1, forklift-2, ...)")
     # (the name quoted cut short: a 100 KB name refused must not make a 100 KB message)
     problem = text_problem(name)
     if problem:
@@ -98,6 +108,18 @@ class RouteConflict(SLRError):
     per shipping robot, so it would store each row twice. Nothing of the shipment is stored.
 
     >>> issubclass(RouteConflict, SLRError)
+    True
+    """
+
+
+class ShipmentConflict(SLRError):
+    """A shipment sends again a sequence of a robot that the fleet store holds already
+    (at or below its position for the type), with content the fleet store holds no row of
+    the robot with: two stores ship as one robot, or the robot's store was replaced. Its
+    rows would be skipped as held and lost without a word; nothing of the shipment is
+    stored. Rows sent again as they are held are skipped (stored once).
+
+    >>> issubclass(ShipmentConflict, SLRError)
     True
     """
 
@@ -317,8 +339,14 @@ class Fleet:
                 if not fresh:
                     self._set_position(robot, name, arity, rows[-1][0])
                     return 0
+            elif rows[0][0] > position:
+                fresh = rows
             else:
-                fresh = rows if rows[0][0] > position else [r for r in rows if r[0] > position]
+                fresh = [r for r in rows if r[0] > position]
+                # rows sent again must be held as they are sent: else another store ships
+                # as this robot (or its store was replaced) and they would be lost unsaid
+                self._refuse_other_content(robot, name, arity, position,
+                                           rows[:len(rows) - len(fresh)])
             if not fresh:
                 return 0
             along = self._take_routes(robot, fresh)
@@ -420,6 +448,22 @@ class Fleet:
             self.db.after_commit(lambda: routes.update(dict.fromkeys(taken, robot)))
         return along
 
+    def _refuse_other_content(self, robot: str, name: str, arity: int, position: int,
+                              rows: list[tuple]) -> None:
+        """Raise :class:`ShipmentConflict` unless this store holds each of ``rows`` (rows
+        of ``robot`` at or below its ``position`` for name/arity, sent again) identically.
+        This store keeps no robot's sequence per row: a row is compared with every row of
+        its robot (same arguments, start and end)."""
+        for values, held in zip(rows, self._held_identically(name, arity, robot, rows)):
+            if not held:
+                raise ShipmentConflict(
+                    f"robot {robot!r} shipped {name}/{arity} seq {values[0]} again (this store "
+                    f"holds {name}/{arity} of {robot!r} up to seq {position}) with other "
+                    f"content: it holds no event {shown(_shipped_event(name, arity, values))} "
+                    f"of robot {values[-1] or robot!r}; two stores ship as {robot!r}, or its "
+                    "store was replaced (after a restore from a backup, push with --resync); "
+                    "nothing of the shipment is stored")
+
     def _set_position(self, robot: str, name: str, arity: int, position: int) -> None:
         self.db.execute(_SET_POSITION, (robot, name, arity, position))
 
@@ -514,6 +558,16 @@ def _shipped_insert(table: str, arity: int) -> str:
     columns = [f"arg{i}" for i in range(1, arity + 1)] + ["t_start", "t_end", "robot", "arrival"]
     return (f"INSERT INTO {table} ({', '.join(columns)}) "
             f"VALUES ({', '.join('?' * len(columns))})")
+
+
+def _shipped_event(name: str, arity: int, row: tuple) -> str:
+    """A shipped row as an event's text for a message (arguments in their stored form).
+
+    >>> _shipped_event("seen", 1, (2, "pallet7", 1.0, 2.0, 3.0, None))
+    'seen(pallet7)^[1.0, 2.0]'
+    """
+    args = ", ".join(str(v) for v in row[1:1 + arity])
+    return f"{name}({args})^[{row[1 + arity]!r}, {row[2 + arity]!r}]"
 
 
 def _finite(value: Any) -> bool:

@@ -34,13 +34,25 @@ from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, TF_TOPIC
                        TRANSFORMS_SCHEMA, TRANSFORMS_SCHEMA_NAME, event_channel, mark_message,
                        time_ns, transform_message)
 
-__all__ = ["FoxgloveView", "FoxgloveUnavailable", "FoxgloveCannotListen", "forward_sdk_log"]
+__all__ = ["FoxgloveView", "FoxgloveUnavailable", "FoxgloveCannotListen", "forward_sdk_log",
+           "BACKLOG_BYTES", "BACKLOG_MESSAGES", "MESSAGE_MAX_BYTES"]
 
 _MARK_PREFIX = "sync/mark/"
 _TF_STATIC = ("tf_static", 3)
 _UNREADABLE = "its rows cannot be read"
 _MARK_SOURCE = "sync/marksrc/"
 STATIC_GAP = 0.25   # seconds: the least time between two latched /tf_static messages asked for
+PAGE_ROWS = 10_000  # rows of one type read in one pass; a full page makes another pass
+# What the view's server holds for one client that reads too slowly: the foxglove-sdk queues
+# at most BACKLOG_MESSAGES messages per client (dropping the oldest beyond), whatever their
+# size, so the view sends no message larger than MESSAGE_MAX_BYTES: a client holds at most
+# BACKLOG_BYTES (64 MiB) of messages, where 1,024 messages of an event type with megabyte
+# arguments held a gigabyte per slow client
+BACKLOG_MESSAGES = 1024
+MESSAGE_MAX_BYTES = 64 * 1024
+BACKLOG_BYTES = BACKLOG_MESSAGES * MESSAGE_MAX_BYTES
+_TOO_LARGE = (f"messages larger than {MESSAGE_MAX_BYTES:,} bytes are left out (the view's "
+              f"limit, so that a slow client holds at most {BACKLOG_BYTES >> 20} MiB)")
 
 
 class FoxgloveUnavailable(SLRError):
@@ -159,6 +171,7 @@ class FoxgloveView:
         # latched /tf_static message is made from it without reading the history again
         self._static_last: dict[tuple, tuple] = {}
         self._troubles: dict[tuple[str, int], str] = {}   # what was said of a type
+        self._too_large: set[str] = set()   # topics whose messages too large were said
         for key, topic in TF_TOPICS.items():
             self._tf[key[0]] = foxglove.Channel(
                 topic, schema=_schema(TRANSFORMS_SCHEMA_NAME, TRANSFORMS_SCHEMA),
@@ -179,7 +192,8 @@ class FoxgloveView:
         try:
             self.server = foxglove.start_server(name=name, host=host, port=port,
                                                 context=self.context,
-                                                server_listener=Listener())
+                                                server_listener=Listener(),
+                                                message_backlog_size=BACKLOG_MESSAGES)
         except (RuntimeError, OSError) as exc:   # the SDK's bind errors are RuntimeErrors
             reason = str(exc).removeprefix("FoxgloveError: ")
             raise FoxgloveCannotListen(f"cannot listen on {host}:{port}: {reason}") from None
@@ -229,10 +243,14 @@ class FoxgloveView:
                     catalog = now >= next_catalog
                     if catalog:
                         next_catalog = now + 0.05
-                    self._follow(catalog=catalog)
+                    more = self._follow(catalog=catalog)
                 elif now >= next_catalog and next_catalog:
                     next_catalog = 0.0
-                    self._follow(catalog=True)
+                    more = self._follow(catalog=True)
+                else:
+                    more = False
+                if more:   # a page was full: the rows after it, at the next pass (they
+                    version = None   # waited for the store's next change, maybe for ever)
                 # a subscription to /tf_static asks for the latched message, but at most
                 # every STATIC_GAP seconds: each one goes to every subscriber, and a client
                 # subscribing in a loop made the view build and send it at every pass (a
@@ -257,8 +275,11 @@ class FoxgloveView:
         self.channels[key] = (event, channel)
         return self.channels[key]
 
-    def _follow(self, initial: bool = False, catalog: bool = True) -> None:
+    def _follow(self, initial: bool = False, catalog: bool = True) -> bool:
+        """Read and send what the store holds beyond what was read; whether a type may
+        hold more (its page was full)."""
         store = self.store
+        more = False
         for key in (store.event_types() if catalog or initial else ()):
             if key not in self.channels:
                 latest = store.max_seq(*key)
@@ -271,7 +292,7 @@ class FoxgloveView:
             # one type that cannot be read (its table dropped by hand, a row that is no
             # term) must not stop the others: it is said once, and tried again next time
             try:
-                self._follow_type(key, event, channel, initial)
+                more = self._follow_type(key, event, channel, initial) or more
             except Exception as exc:  # noqa: BLE001 - this type's trouble, not the view's
                 self._trouble(key, f"{_UNREADABLE} ({exc})")
             else:   # readable again: a later failure to read is said again
@@ -279,17 +300,20 @@ class FoxgloveView:
                     del self._troubles[key]
         if catalog or initial:
             self._send_marks(initial)
+        return more
 
     def _follow_type(self, key: tuple[str, int], event: Any, channel: Any,
-                     initial: bool) -> None:
-        rows = self.store.raw_rows(key[0], key[1], after_seq=self.seen[key], limit=10_000)
+                     initial: bool) -> bool:
+        """Send a page of a type's rows beyond those read; whether the page was full."""
+        rows = self.store.raw_rows(key[0], key[1], after_seq=self.seen[key], limit=PAGE_ROWS)
         if not rows:
-            return
+            return False
         self.seen[key] = rows[-1][-1]
+        full = len(rows) == PAGE_ROWS
         if key == _TF_STATIC:
             self._keep_static(rows)
         if initial:
-            return
+            return full
         end = key[1] + 1
         for row in rows:
             try:
@@ -297,14 +321,29 @@ class FoxgloveView:
             except (ValueError, TypeError) as exc:   # a row written by hand, not a term
                 self._trouble(key, f"rows that are not events are left out ({exc})")
                 continue
+            if len(data) > MESSAGE_MAX_BYTES:
+                self._left_out(event.topic)
+                continue
             channel.log(data, log_time=time_ns(row[end]))
             self.sent += 1
         tf = self._tf.get(key[0]) if key[1] == 3 else None
         if tf is not None:
             for row in rows:
                 data = transform_message([row])
-                if data is not None:
-                    tf.log(data, log_time=time_ns(row[4]))
+                if data is None:
+                    continue
+                if len(data) > MESSAGE_MAX_BYTES:
+                    self._left_out(TF_TOPICS[key])
+                    continue
+                tf.log(data, log_time=time_ns(row[4]))
+        return full
+
+    def _left_out(self, topic: str) -> None:
+        """Say once per topic that its messages larger than MESSAGE_MAX_BYTES are left
+        out (a type may hold a few such events among many that are sent)."""
+        if topic not in self._too_large:
+            self._too_large.add(topic)
+            self.log(f"foxglove: {topic}: {_TOO_LARGE}")
 
     def _trouble(self, key: tuple[str, int], text: str) -> None:
         """Say a type's trouble once (again only once it was gone in between)."""
@@ -326,8 +365,11 @@ class FoxgloveView:
             if initial:
                 continue
             source = self.store.meta_get(_MARK_SOURCE + type_text, "") or ""
-            self._marks_channel.log(mark_message(type_text, until, str(source)),
-                                    log_time=time_ns(time.time()))
+            data = mark_message(type_text, until, str(source))
+            if len(data) > MESSAGE_MAX_BYTES:
+                self._left_out(MARKS_TOPIC)
+                continue
+            self._marks_channel.log(data, log_time=time_ns(time.time()))
 
     def _load_static(self) -> None:
         """Read the tf_static rows stored before the view started, once, a page at a time
@@ -352,8 +394,21 @@ class FoxgloveView:
                 last[edge] = row
 
     def _send_static(self) -> None:
-        """The last value of each tf_static edge, on /tf_static."""
-        last = self._static_last
-        data = transform_message(list(last.values())) if last else None
-        if data is not None:
-            self._tf["tf_static"].log(data, log_time=time_ns(time.time()))
+        """The last value of each tf_static edge, on /tf_static: in one message, or in
+        several of at most MESSAGE_MAX_BYTES each when the edges make a larger one (each
+        message's transforms are latched apart, as those of ROS's several /tf_static
+        publishers are)."""
+        log_time = time_ns(time.time())
+        parts = [list(self._static_last.values())] if self._static_last else []
+        while parts:
+            rows = parts.pop()
+            data = transform_message(rows)
+            if data is None:
+                continue
+            if len(data) <= MESSAGE_MAX_BYTES:
+                self._tf["tf_static"].log(data, log_time=log_time)
+            elif len(rows) > 1:
+                half = len(rows) // 2
+                parts += [rows[half:], rows[:half]]   # (the first half sent first)
+            else:   # (an edge whose frame names alone are larger)
+                self._left_out(TF_TOPICS[_TF_STATIC])
