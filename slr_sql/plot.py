@@ -38,7 +38,7 @@ from typing import Any, Iterable
 from .errors import SLRError, SLRTimeout
 from .store.timeline import Statement, TimelineStatements, timeline_statements
 from .store import DatabaseError, quote_identifier
-from .store.checks import shown
+from .printable import shown
 
 __all__ = [
     "timeline", "collect_timeline", "draw_timeline", "save_timeline", "parse_value_spec",

@@ -28,13 +28,14 @@ next line
 """
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from .errors import SLRSyntaxError
 from .terms import char_escape, quoted_text, undrawn_character
 
 __all__ = ["printable_name", "printable_text", "printable_syntax_error", "log_text",
-           "LOG_TEXT_LIMIT"]
+           "LOG_TEXT_LIMIT", "shorten", "shown"]
 
 LOG_TEXT_LIMIT = 200   # characters of stranger-supplied text in one log line
 
@@ -108,3 +109,30 @@ def log_text(value: Any, limit: int = LOG_TEXT_LIMIT) -> str:
     if len(text) > limit:
         return f"{text[:limit]}... ({len(text) - limit} more characters)"
     return text
+
+
+def shorten(text: str, limit: int = 80) -> str:
+    """``text`` cut to about ``limit`` characters for a message (a 10 MB argument must not
+    make a 10 MB error).
+
+    >>> shorten("x" * 100, 10)
+    'xxxxxxxxxx... (100 characters)'
+    """
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
+
+
+def shown(value: Any, limit: int = 80) -> str:
+    """``repr(value)`` for a message, cut to about ``limit`` characters, and never an error:
+    an integer of more digits than Python prints (10**5000) is described by its size.
+
+    >>> shown(10 ** 5000), shown(("p", 10 ** 5000))
+    ('an integer of about 5001 digits', 'a tuple holding an integer too long to print')
+    """
+    if type(value) is int and value.bit_length() > 14000:
+        return f"an integer of about {int(value.bit_length() * math.log10(2)) + 1} digits"
+    try:
+        return shorten(repr(value), limit)
+    except ValueError:  # an integer inside with more digits than Python converts
+        return f"a {type(value).__name__} holding an integer too long to print"
+    except Exception:  # noqa: BLE001 - a value whose repr fails says only its type
+        return f"a {type(value).__name__}"

@@ -42,7 +42,7 @@ from slr_sql.errors import SLRUnavailable
 from slr_sql.log_throttle import ThrottledLog
 from slr_sql.api import KnowledgeBaseAPI
 from slr_sql.service.errors import ServiceOutcomeUnknown
-from slr_sql.store.checks import shown
+from slr_sql.printable import shown
 from slr_sql.terms import int_text
 
 from . import fast_tf
