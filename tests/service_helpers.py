@@ -49,11 +49,14 @@ HTTP = httpx.Client(verify=False, limits=httpx.Limits(max_keepalive_connections=
 
 
 class ServiceProcess:
-    """``with ServiceProcess(db, "--token", "t") as server: server.url``"""
+    """``with ServiceProcess(db, "--token", "t") as server: server.url``; ``log``: where the
+    server's stderr goes (default: beside the file, ``DB.server.log``; give it for a
+    PostgreSQL URL)."""
 
-    def __init__(self, db: Path | str, *args: str, env: dict | None = None):
+    def __init__(self, db: Path | str, *args: str, env: dict | None = None,
+                 log: Path | None = None):
         self.db = str(db)
-        self.log = Path(str(db) + ".server.log")
+        self.log = Path(str(db) + ".server.log") if log is None else Path(log)
         self._log_handle = open(self.log, "wb")
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "slr_sql", "serve", self.db, "--port", "0", *args],

@@ -699,23 +699,42 @@ class PgReadConnection:
         # a failure is classified as the store's own connection's when it is opened again
         # (PgConnection._alive): a server that does not answer is SLRServerUnreachable
         opening = f"{where}: cannot open a reading connection"
-        try:
-            raw = psycopg.connect(conninfo, autocommit=True)
-        except psycopg.Error as exc:
-            raise _error(exc, opening, busy_timeout, False) from None
-        try:
+
+        def prepare(raw: Any) -> None:
             raw.execute("SET default_transaction_read_only = on")
             # a lock of another session (LOCK TABLE, an ALTER TABLE not committed yet) is
             # waited for busy_timeout at most, then SLRBusy (55P03), as on the store's own
             # connection; without it a read would wait as long as the lock is held
             raw.execute(f"SET lock_timeout = {_lock_timeout_ms(busy_timeout)}")
             raw.execute(_search_path(schema))
+
+        try:
+            raw = psycopg.connect(conninfo, autocommit=True)
+        except psycopg.Error as exc:
+            raise _error(exc, opening, busy_timeout, False) from None
+        try:
+            prepare(raw)
         except psycopg.Error as exc:
             reason = _error(exc, opening, busy_timeout, _connected(raw))
             raw.close()
             raise reason if isinstance(reason, SLRError) else \
                 SLRError(f"{opening} ({_first_line(exc)})") from None
+
+        def reopen() -> Any:
+            again = psycopg.connect(conninfo, autocommit=True)
+            try:
+                prepare(again)
+            except BaseException:
+                again.close()
+                raise
+            return again
+
         self.conn = PgConnection(raw, where, busy_timeout)
+        # a connection the server dropped (a restart, a terminated backend) is opened again
+        # before the next read, as the store's own is: the subscriptions' hub keeps one
+        # reader for its whole life, and a reader left closed failed every delivery pass
+        # after a restart (no subscriber got anything more until the process restarted)
+        self.conn.reopen = reopen
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
         """Run one reading statement and return its rows. Every failure is an
