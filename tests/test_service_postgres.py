@@ -120,3 +120,26 @@ def test_an_event_whose_first_argument_is_too_long_to_index_is_rejected_alone(
         stored = HTTP.post(service.url + "/query", json={"goal": "seg(K, _)^T"}, timeout=30)
         assert stored.json()["answers"] == [{"K": "cup1", "T": 2.0}, {"K": "cup2", "T": 3.0}]
     assert "Traceback" not in (tmp_path / "serve.log").read_text()
+
+
+def test_a_program_text_holding_nul_is_refused_in_words_and_its_escape_loads(
+        postgres_url, tmp_path):
+    """PostgreSQL text cannot hold U+0000: a program whose text holds one is refused saying
+    so and how to write it (it was 'the store failed (PostgreSQL text fields cannot contain
+    NUL (0x00) bytes)', psycopg's words), nothing loaded; the escape ``\\x0\\`` loads and
+    answers as the raw character does on a file store."""
+    with ServiceProcess(postgres_url, log=tmp_path / "pg.log") as pg, \
+            ServiceProcess(tmp_path / "robot.db") as lite:
+        raw = {"text": "q('a\x00b').\nr(X) :- q(X).", "name": "nul"}
+        refused = HTTP.post(pg.url + "/load", json=raw, timeout=30)
+        assert refused.status_code == 400, refused.text
+        message = refused.json()["error"]["message"]
+        assert "U+0000 in a program text (at offset 4)" in message and "\\x0\\" in message
+        assert "0x00" not in message
+        assert HTTP.get(pg.url + "/programs", timeout=30).json()["programs"] == {}
+        assert HTTP.post(lite.url + "/load", json=raw, timeout=30).status_code == 200
+        escaped = {"text": "q('a\\x0\\b').\nr(X) :- q(X).", "name": "nul"}
+        assert HTTP.post(pg.url + "/load", json=escaped, timeout=30).status_code == 200
+        answers = [HTTP.post(server.url + "/query", json={"goal": "r(X)"}, timeout=30).json()
+                   for server in (pg, lite)]
+        assert answers[0] == answers[1] == {"answers": [{"X": "a\x00b"}]}
