@@ -143,3 +143,27 @@ def test_a_program_text_holding_nul_is_refused_in_words_and_its_escape_loads(
         answers = [HTTP.post(server.url + "/query", json={"goal": "r(X)"}, timeout=30).json()
                    for server in (pg, lite)]
         assert answers[0] == answers[1] == {"answers": [{"X": "a\x00b"}]}
+
+
+def test_a_subscription_holding_nul_is_taken_as_on_a_file(backend, tmp_path):
+    """A subscription whose pattern, condition or durable id holds U+0000 (events hold it in
+    an atom on both backends): subscribed, delivered and resumed alike on a file and on
+    PostgreSQL, whose text cannot hold the character (the registry's row failed: 'the store
+    failed (PostgreSQL text fields cannot contain NUL (0x00) bytes)', and /unsubscribe of
+    such an id too)."""
+    with ServiceProcess(backend, log=tmp_path / "serve.log") as service, \
+            slr_sql.connect(service.url) as client:
+        client.add_event("nz", ["a\x00b"], 1.0)
+        client.add_event("nz", ["c"], 2.0)
+        by_pattern = client.subscribe("nz('a\x00b')^T", since=0, id="id\x00one")
+        assert by_pattern.get(timeout=DEADLINE) == {"T": 1.0}
+        by_pattern.close()
+        again = client.subscribe("nz('a\x00b')^T", since=0, id="id\x00one")  # resumed
+        client.add_event("nz", ["a\x00b"], 3.0)
+        assert again.get(timeout=DEADLINE) == {"T": 3.0}
+        again.close()
+        client.unsubscribe("id\x00one")
+        where = client.subscribe("nz(X)^T", where="X \\== 'a\x00b'", since=0)
+        assert where.get(timeout=DEADLINE) == {"X": "c", "T": 2.0}
+        where.close()
+    assert "Traceback" not in (tmp_path / "serve.log").read_text()
