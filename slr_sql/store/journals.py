@@ -74,7 +74,11 @@ def read_text(value: str | None, holds_nul: bool) -> str | None:
     """
     if value is None or holds_nul or not value.startswith(_ESCAPED):
         return value
-    return json.loads(value[1:])
+    try:
+        text = json.loads(value[1:])
+    except ValueError:   # (a row written before the mark was: the text itself)
+        return value
+    return text if isinstance(text, str) else value
 
 
 class SubscriptionTables:
