@@ -641,6 +641,7 @@ class KnowledgeBase:
         >>> kb = open(); kb.load("c(X) <- a(X) seq b(X)."); [r["head"] for r in kb.event_rules()]
         ['c/1']
         """
+        self._refresh()   # (rules another process loaded or unloaded since the last call)
         return self._cep.infos()
 
     # -- synchronized queries (the work is in slr_sql/sync.py) -----------------

@@ -33,3 +33,23 @@ def test_a_mark_written_through_another_server_answers_a_waiting_long_poll(backe
                 break
         assert polled.status_code == 200, polled.text
         assert polled.json()["answers"] == [{"X": "a", "T": 1.0}]
+
+
+def test_event_rules_another_server_loaded_are_listed(backend, tmp_path):
+    """Server B (another process on the same store) loads an event rule, then unloads it:
+    server A's /event_rules lists it, then no longer, as A's /programs does (A listed the
+    rules of the program it had read last, until some other request read the store)."""
+    with ServiceProcess(backend, log=tmp_path / "a.log") as a, \
+            ServiceProcess(backend, log=tmp_path / "b.log") as b:
+        def heads() -> list:
+            listed = HTTP.get(a.url + "/event_rules", timeout=30)
+            assert listed.status_code == 200, listed.text
+            return [rule["head"] for rule in listed.json()["event_rules"]]
+
+        assert heads() == []
+        loaded = HTTP.post(b.url + "/load", json={"text": "c(X) <- p(X) seq q(X).",
+                                                  "name": "rules"}, timeout=30)
+        assert loaded.status_code == 200, loaded.text
+        assert heads() == ["c/1"]
+        assert HTTP.post(b.url + "/unload", json={"name": "rules"}, timeout=30).status_code == 200
+        assert heads() == []
