@@ -167,3 +167,39 @@ def test_a_subscription_holding_nul_is_taken_as_on_a_file(backend, tmp_path):
         assert where.get(timeout=DEADLINE) == {"X": "c", "T": 2.0}
         where.close()
     assert "Traceback" not in (tmp_path / "serve.log").read_text()
+
+
+@pytest.mark.parametrize("statement", [
+    "SELECT pg_terminate_backend(pid) FROM pg_stat_activity "
+    "WHERE datname = current_database() AND pid <> pg_backend_pid()",
+    'SELECT "pg_terminate_backend"(pid) FROM pg_stat_activity WHERE pid <> pg_backend_pid()',
+    "SELECT pg_catalog.pg_cancel_backend /* a comment */ (pid) FROM pg_stat_activity",
+    "SELECT pg_read_file('PG_VERSION')",
+    "SELECT pg_ls_dir('.')",
+    "SELECT pg_reload_conf()",
+    "SELECT pg_advisory_lock(1)",
+    "SELECT set_config('search_path', 'public', false)",
+    "SELECT pg_notify('slr_pending', 'slr')",
+    "SELECT U&\"\\0070g_read_file\"('PG_VERSION')",
+])
+def test_sql_over_the_service_refuses_what_acts_beyond_reading(postgres_url, tmp_path,
+                                                                 statement):
+    """/sql runs a statement read-only, which stops no function that acts on other sessions,
+    the server or its files: any client of /sql ended every session of the database (the
+    other `slr serve` on the store answered 503 at its next request), read the server's
+    files as the store's role could (a superuser's: every file the server can read), reloaded
+    its configuration, took session locks. Refused in words, 400, before the store runs it;
+    the other server goes on."""
+    with ServiceProcess(postgres_url, log=tmp_path / "a.log") as a, \
+            ServiceProcess(postgres_url, log=tmp_path / "b.log") as b:
+        assert HTTP.post(b.url + "/add", json={"event": "p(1)^1"}, timeout=30).status_code == 200
+        refused = HTTP.post(a.url + "/sql", json={"query": statement}, timeout=30)
+        assert refused.status_code == 400, refused.text
+        assert refused.json()["error"]["kind"] == "BadRequest"
+        assert "not allowed" in refused.json()["error"]["message"]
+        after = HTTP.post(b.url + "/add", json={"event": "p(2)^2"}, timeout=30)
+        assert after.status_code == 200, after.text
+        reads = HTTP.post(a.url + "/sql", json={"query": "SELECT count(*), pg_size_pretty("
+                                                "pg_total_relation_size('p')) FROM p"},
+                          timeout=30)
+        assert reads.status_code == 200 and reads.json()["rows"][0][0] == 2, reads.text
