@@ -203,3 +203,18 @@ def test_sql_over_the_service_refuses_what_acts_beyond_reading(postgres_url, tmp
                                                 "pg_total_relation_size('p')) FROM p"},
                           timeout=30)
         assert reads.status_code == 200 and reads.json()["rows"][0][0] == 2, reads.text
+
+
+def test_a_mark_or_sql_parameter_holding_nul_is_refused_in_words(postgres_url, tmp_path):
+    """What a PostgreSQL store cannot hold (U+0000 in a mark's type, an SQL parameter) is a
+    400 saying so, nothing stored (psycopg's words: 'PostgreSQL text fields cannot contain
+    NUL (0x00) bytes'); the same requests go on to work without the character."""
+    with ServiceProcess(postgres_url, log=tmp_path / "serve.log") as service:
+        for path, body in (("/mark_complete", {"type": "p\x00/1", "time": 3}),
+                           ("/sql", {"query": "SELECT ?", "params": ["a\x00b"]})):
+            refused = HTTP.post(service.url + path, json=body, timeout=30)
+            assert refused.status_code == 400, refused.text
+            message = refused.json()["error"]["message"]
+            assert "cannot hold the character U+0000" in message and "0x00" not in message
+        assert HTTP.post(service.url + "/mark_complete", json={"type": "p/1", "time": 3},
+                         timeout=30).json() == {"type": "p/1", "time": 3.0}

@@ -176,6 +176,11 @@ def _error(exc: BaseException, where: str, busy_timeout: float | None = None,
     if isinstance(exc, (psycopg.OperationalError, psycopg.InterfaceError)) and not state:
         # e.g. more parameters than the protocol carries: refused before it was sent
         return SLRError(f"{where}: the statement cannot be sent ({_first_line(exc)})")
+    if isinstance(exc, psycopg.DataError) and not state and "NUL" in str(exc):
+        # (psycopg refuses it before sending: its words name its own API)
+        return PgStatementError("PostgreSQL text cannot hold the character U+0000 (a value "
+                                "of the statement holds it; an event's arguments can: they "
+                                "are stored escaped)")
     if isinstance(exc, errors.ReadOnlySqlTransaction):
         return SLRError(f"read-only: the statement would change the store "
                         f"({_first_line(exc)}); pass write=True to allow it")
