@@ -235,6 +235,14 @@ class KnowledgeBase:
             raise SLRError(f"load: filename is the text shown in messages (a str without lone "
                            f"surrogates), not {shown(filename)}")
         clauses = parse_program(text, filename)   # syntax errors before taking the lock
+        if not self.store.dialect.text_holds_nul:
+            for what, value in (("program text", text), ("filename", filename),
+                                ("program name", name)):
+                if "\x00" in value:
+                    raise SLRError(
+                        f"load: a PostgreSQL store cannot hold the character U+0000 in a "
+                        f"{what} (at offset {value.index(chr(0))}); in a quoted atom or "
+                        f"string write it as \\x0\\")
         self.loader.load(name, text, filename, clauses, replace)
         self._pipeline.loaded()
 
@@ -633,6 +641,7 @@ class KnowledgeBase:
         >>> kb = open(); kb.load("c(X) <- a(X) seq b(X)."); [r["head"] for r in kb.event_rules()]
         ['c/1']
         """
+        self._refresh()   # (rules another process loaded or unloaded since the last call)
         return self._cep.infos()
 
     # -- synchronized queries (the work is in slr_sql/sync.py) -----------------

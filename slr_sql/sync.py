@@ -48,7 +48,7 @@ from .host import Host
 from .plans import instantiate
 from .store import DatabaseError, store_error
 from .store.checks import BadEvent, check_times
-from .terms import Atom, Struct, Var, deref
+from .terms import Atom, Struct, Var, deref, format_atom
 
 _first, _second, _fourth = itemgetter(0), itemgetter(1), itemgetter(3)
 
@@ -109,6 +109,20 @@ def type_text(key: tuple[str, int]) -> str:
     'location/2'
     """
     return f"{key[0]}/{key[1]}"
+
+
+def quoted_type_text(key: tuple[str, int]) -> str:
+    """An event type key as Prolog writes its indicator with the name quoted where it must
+    be (``writeq``): the form a warning, a log line, shows. A name any client can send
+    (``add_event`` takes any string) then stays on its line: a line break or a NUL in it is
+    an escape, never a line of the log of its own, and the text reads back as the type.
+
+    >>> quoted_type_text(("location", 2)), quoted_type_text(("p q", 1))
+    ('location/2', "'p q'/1")
+    >>> print(quoted_type_text(("a\\nINFO: forged", 0)))
+    'a\\nINFO: forged'/0
+    """
+    return f"{format_atom(key[0])}/{key[1]}"
 
 
 def parse_type(spec: Any) -> tuple[str, int | None]:
@@ -292,7 +306,7 @@ class PendingQuery(Future):
 
 
 def _delay_warning(key: tuple[str, int], observed: float, cap: float, clock: Any) -> str:
-    name = type_text(key)
+    name = quoted_type_text(key)
     return (f"{name}: an event arrived {_fmt(observed, 1)} s after its end time on a store "
             f"whose clock is a {type(clock).__name__} (now {_fmt(clock.now(), 1)}): the "
             f"events' times are probably not the clock's time. The learned delay of {name} "
@@ -389,7 +403,7 @@ class Completeness:
             if self.store.closed:
                 return
             for key, d in sorted(unwritten.items()):
-                name = type_text(key)
+                name = quoted_type_text(key)
                 warnings.warn(LearnedDelayNotWrittenWarning(
                     f"{name}: the delay learned here ({_fmt(d)} s) was not written when the "
                     f"knowledge base closed ({exc}); the store keeps "

@@ -49,12 +49,14 @@ HTTP = httpx.Client(verify=False, limits=httpx.Limits(max_keepalive_connections=
 
 
 class ServiceProcess:
-    """``with ServiceProcess(db, "--token", "t") as server: server.url``"""
+    """``with ServiceProcess(db, "--token", "t") as server: server.url``; ``log``: where the
+    server's stderr goes (default: beside the file, ``DB.server.log``; give it for a
+    PostgreSQL URL)."""
 
     def __init__(self, db: Path | str, *args: str, env: dict | None = None,
                  log: Path | None = None):
         self.db = str(db)
-        self.log = log or Path(str(db) + ".server.log")   # log=: for a PostgreSQL URL
+        self.log = Path(str(db) + ".server.log") if log is None else Path(log)   # log=: for a PostgreSQL URL
         self._log_handle = open(self.log, "wb")
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "slr_sql", "serve", self.db, "--port", "0", *args],

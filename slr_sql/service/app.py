@@ -391,6 +391,14 @@ class _Service:
         self.answer_texts = _AnswerTexts()
         self.fanout: FanOut | None = None
         self.endpoints = _ENDPOINTS
+        # other processes write the store too (another `slr serve`, `slr add DB`, a
+        # bridge): while synchronized queries wait, the store is checked for their commits
+        # (the synchronizer's poll), so their marks and events answer a long-poll. Without
+        # it a waiting query saw them only at this server's next store call, and a client
+        # that only long-polled waited until its query's timeout
+        synchronizer = getattr(kb, "synchronizer", None)
+        if synchronizer is not None:
+            synchronizer.watch_external()
 
     # -- plumbing -----------------------------------------------------------------------------
     async def body(self, request: Request) -> dict:

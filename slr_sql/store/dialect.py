@@ -77,6 +77,8 @@ class SQLiteDialect(SQLiteQueryPrinter):
     # (here a separate read costs less than RETURNING's buffered copy)
     copies_returning = False
     text_holds_nul = True    # a TEXT value may contain U+0000
+    # the most UTF-8 bytes of an event's first argument as stored (None: no limit)
+    first_argument_bytes: int | None = None
     identifier_bytes: int | None = None   # names of any length
     without_rowid = " WITHOUT ROWID"
     pages_streams = False    # a statement's rows are read as needed (sqlite3 steps it)
@@ -141,6 +143,12 @@ class PostgresDialect(PostgresQueryPrinter):
     # (a catalog read for triggers and a separate read are two more round trips)
     copies_returning = True
     text_holds_nul = False   # text cannot contain U+0000 (values escape it as JSON)
+    # an event's first argument is a key of two B-tree indexes ((arg1, t_end), (arg1,
+    # t_start)), whose entries hold at most 2,704 bytes: a longer text (or one compressing
+    # to more) fails the whole statement, every event of its batch with it, in the server's
+    # words. Refused ahead instead, as that event's EventRejected (the 2,676 bytes that fit
+    # beside the time, less a margin)
+    first_argument_bytes: int | None = 2600
     identifier_bytes: int | None = 63     # longer names are cut, silently (NAMEDATALEN)
     without_rowid = ""
     pages_streams = True     # psycopg reads a whole result: lookups read growing pages

@@ -17,12 +17,13 @@ themselves are created and dropped by :meth:`Catalog.create_journal` / ``drop_jo
 from __future__ import annotations
 
 import functools
+import json
 from collections.abc import Callable, Iterable
 from typing import Any, NamedTuple
 
 from .sqltext import quote_identifier
 
-__all__ = ["SubscriptionRecord", "SubscriptionTables", "JournalReader"]
+__all__ = ["SubscriptionRecord", "SubscriptionTables", "JournalReader", "stored_text", "read_text"]
 
 _COLUMNS = ("id", "durable", "pattern", "where_goal", "since", "until", "type_name",
             "type_arity", "history_done", "live_pos", "finished", "owner", "lease_until")
@@ -45,12 +46,50 @@ class SubscriptionRecord(NamedTuple):
     lease_until: float | None
 
 
+# A store whose text cannot hold U+0000 (PostgreSQL) keeps a subscription's id, pattern,
+# condition or type name holding one as its JSON after this mark, and a text beginning with
+# the mark too, so that every text reads back as itself: a subscription to events with a
+# U+0000 in an atom (which such a store holds, escaped) is taken as on SQLite
+_ESCAPED = "\x01"
+
+
+def stored_text(value: str | None, holds_nul: bool) -> str | None:
+    """``value`` as a store whose text holds U+0000 or not (``holds_nul``) keeps it.
+
+    >>> stored_text("cam(X)^T", False), stored_text("a\\x00b", False) == '\\x01"a\\\\u0000b"'
+    ('cam(X)^T', True)
+    >>> read_text(stored_text("p('a\\x00b')^T", False), False) == "p('a\\x00b')^T"
+    True
+    """
+    if value is None or holds_nul or ("\x00" not in value and not value.startswith(_ESCAPED)):
+        return value
+    return _ESCAPED + json.dumps(value)
+
+
+def read_text(value: str | None, holds_nul: bool) -> str | None:
+    """The text :func:`stored_text` kept as ``value``.
+
+    >>> read_text('\\x01"a\\\\u0000"', False) == "a\\x00", read_text("cam", False)
+    (True, 'cam')
+    """
+    if value is None or holds_nul or not value.startswith(_ESCAPED):
+        return value
+    try:
+        text = json.loads(value[1:])
+    except ValueError:   # (a row written before the mark was: the text itself)
+        return value
+    return text if isinstance(text, str) else value
+
+
 class SubscriptionTables:
     """The registry of subscriptions on the store's connection (every write inside the
     caller's transaction, or one of its own)."""
 
     def __init__(self, db: Any):
         self.db = db
+        holds_nul = bool(getattr(getattr(db, "dialect", None), "text_holds_nul", True))
+        self._in = functools.partial(stored_text, holds_nul=holds_nul)
+        self._out = functools.partial(read_text, holds_nul=holds_nul)
 
     def _run(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
         return self.db.execute(sql, params)
@@ -59,15 +98,18 @@ class SubscriptionTables:
         """Does an unfinished subscription (of any process) want event type name/arity?"""
         return bool(self._run(
             "SELECT 1 FROM slr_subscriptions WHERE type_name = ? AND type_arity = ? "
-            "AND finished = 0 LIMIT 1", (name, arity)))
+            "AND finished = 0 LIMIT 1", (self._in(name), arity)))
 
     def subscription_record(self, sub_id: str) -> SubscriptionRecord | None:
         """The stored definition and position of subscription ``sub_id``, if any."""
         rows = self._run(
             "SELECT pattern, where_goal, since, until, history_top, history_pos, "
             "history_done, live_start, live_pos, finished, owner, lease_until "
-            "FROM slr_subscriptions WHERE id = ?", (sub_id,))
-        return SubscriptionRecord(*rows[0]) if rows else None
+            "FROM slr_subscriptions WHERE id = ?", (self._in(sub_id),))
+        if not rows:
+            return None
+        pattern, where_goal, *position = rows[0]
+        return SubscriptionRecord(self._out(pattern), self._out(where_goal), *position)
 
     def insert_subscription(self, sub_id: str, durable: bool, pattern: str,
                             where_goal: str | None, since: float, until: float | None,
@@ -81,18 +123,20 @@ class SubscriptionTables:
             "until, type_name, type_arity, history_top, history_pos, history_done, "
             "live_start, live_pos, finished, owner, lease_until, created_at) "
             "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 0, ?, ?, ?, 0, ?, ?, ?)",
-            (sub_id, int(durable), pattern, where_goal, since, until, type_name, type_arity,
+            (self._in(sub_id), int(durable), self._in(pattern), self._in(where_goal), since,
+             until, self._in(type_name), type_arity,
              history_top, int(history_top == 0), live_start, live_start, owner, lease_until,
              created_at))
 
     def claim_subscription(self, sub_id: str, owner: str, lease_until: float) -> None:
         """Make ``owner`` (a process) the deliverer of ``sub_id`` until ``lease_until``."""
         self._run("UPDATE slr_subscriptions SET owner = ?, lease_until = ? WHERE id = ?",
-                  (owner, lease_until, sub_id))
+                  (owner, lease_until, self._in(sub_id)))
 
     def delete_subscription(self, sub_id: str, owner: str | None = None) -> bool:
         """Remove ``sub_id`` (only while ``owner`` holds it, when given); False if there was
         no such row."""
+        sub_id = self._in(sub_id)
         if owner is None:
             if not self._run("SELECT 1 FROM slr_subscriptions WHERE id = ?", (sub_id,)):
                 return False
@@ -113,14 +157,14 @@ class SubscriptionTables:
             "WHERE id = ? AND owner = ? AND (history_done < ? OR (history_done = ? AND "
             "history_pos <= ? AND live_pos <= ?))",
             (history_done, history_pos, live_pos, int(finished), lease_until, new_owner,
-             sub_id, owner, history_done, history_done, history_pos, live_pos))
+             self._in(sub_id), owner, history_done, history_done, history_pos, live_pos))
 
     def renew_subscriptions(self, owner: str, lease_until: float) -> set[str]:
         """Extend every claim of ``owner``; the ids it still holds."""
         self._run("UPDATE slr_subscriptions SET lease_until = ? WHERE owner = ?",
                   (lease_until, owner))
-        return {r[0] for r in self._run("SELECT id FROM slr_subscriptions WHERE owner = ?",
-                                        (owner,))}
+        return {self._out(r[0]) for r in self._run(
+            "SELECT id FROM slr_subscriptions WHERE owner = ?", (owner,))}
 
     def expire_subscriptions(self, now_wall: float) -> None:
         """Remove the non-durable subscriptions whose claim ran out (their process died)."""
@@ -129,9 +173,9 @@ class SubscriptionTables:
 
     def live_positions(self, name: str, arity: int) -> list[tuple[str, str | None, int]]:
         """``(id, owner, live_pos)`` of every unfinished subscription of name/arity."""
-        return [(r[0], r[1], r[2]) for r in self._run(
+        return [(self._out(r[0]), r[1], r[2]) for r in self._run(
             "SELECT id, owner, live_pos FROM slr_subscriptions WHERE type_name = ? AND "
-            "type_arity = ? AND finished = 0", (name, arity))]
+            "type_arity = ? AND finished = 0", (self._in(name), arity))]
 
     def trim_journal(self, journal: str, through_jid: int) -> None:
         """Delete the rows of ``journal`` up to ``through_jid`` (every subscription is past
@@ -143,7 +187,11 @@ class SubscriptionTables:
     def subscription_rows(self) -> list[dict[str, Any]]:
         """Every registered subscription, as dicts, by id."""
         rows = self._run(f"SELECT {', '.join(_COLUMNS)} FROM slr_subscriptions ORDER BY id")
-        return [dict(zip(_COLUMNS, row)) for row in rows]
+        out = [dict(zip(_COLUMNS, row)) for row in rows]
+        for row in out:
+            for column in ("id", "pattern", "where_goal", "type_name"):
+                row[column] = self._out(row[column])
+        return out
 
     def journal_start(self, table: str, journal: str) -> tuple[int, int]:
         """``(greatest seq of table, greatest jid of journal)``, 0 when empty: where a new

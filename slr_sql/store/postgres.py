@@ -174,6 +174,11 @@ def _error(exc: BaseException, where: str, busy_timeout: float | None = None,
     if isinstance(exc, (psycopg.OperationalError, psycopg.InterfaceError)) and not state:
         # e.g. more parameters than the protocol carries: refused before it was sent
         return SLRError(f"{where}: the statement cannot be sent ({_first_line(exc)})")
+    if isinstance(exc, psycopg.DataError) and not state and "NUL" in str(exc):
+        # (psycopg refuses it before sending: its words name its own API)
+        return PgStatementError("PostgreSQL text cannot hold the character U+0000 (a value "
+                                "of the statement holds it; an event's arguments can: they "
+                                "are stored escaped)")
     if isinstance(exc, errors.ReadOnlySqlTransaction):
         return SLRError(f"read-only: the statement would change the store "
                         f"({_first_line(exc)}); pass write=True to allow it")
@@ -697,23 +702,42 @@ class PgReadConnection:
         # a failure is classified as the store's own connection's when it is opened again
         # (PgConnection._alive): a server that does not answer is SLRServerUnreachable
         opening = f"{where}: cannot open a reading connection"
-        try:
-            raw = psycopg.connect(conninfo, autocommit=True)
-        except psycopg.Error as exc:
-            raise _error(exc, opening, busy_timeout, False) from None
-        try:
+
+        def prepare(raw: Any) -> None:
             raw.execute("SET default_transaction_read_only = on")
             # a lock of another session (LOCK TABLE, an ALTER TABLE not committed yet) is
             # waited for busy_timeout at most, then SLRBusy (55P03), as on the store's own
             # connection; without it a read would wait as long as the lock is held
             raw.execute(f"SET lock_timeout = {_lock_timeout_ms(busy_timeout)}")
             raw.execute(_search_path(schema))
+
+        try:
+            raw = psycopg.connect(conninfo, autocommit=True)
+        except psycopg.Error as exc:
+            raise _error(exc, opening, busy_timeout, False) from None
+        try:
+            prepare(raw)
         except psycopg.Error as exc:
             reason = _error(exc, opening, busy_timeout, _connected(raw))
             raw.close()
             raise reason if isinstance(reason, SLRError) else \
                 SLRError(f"{opening} ({_first_line(exc)})") from None
+
+        def reopen() -> Any:
+            again = psycopg.connect(conninfo, autocommit=True)
+            try:
+                prepare(again)
+            except BaseException:
+                again.close()
+                raise
+            return again
+
         self.conn = PgConnection(raw, where, busy_timeout)
+        # a connection the server dropped (a restart, a terminated backend) is opened again
+        # before the next read, as the store's own is: the subscriptions' hub keeps one
+        # reader for its whole life, and a reader left closed failed every delivery pass
+        # after a restart (no subscriber got anything more until the process restarted)
+        self.conn.reopen = reopen
 
     def execute(self, sql: str, params: Iterable[Any] = ()) -> list[tuple]:
         """Run one reading statement and return its rows. Every failure is an

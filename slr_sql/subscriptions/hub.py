@@ -267,7 +267,7 @@ class SubscriptionHub:
         gap = getattr(self.kb, "max_learned_delay", None) or DEFAULT_MAX_LEARNED_DELAY
         if latest is None or now - latest <= gap:
             return
-        name = f"{key[0]}/{key[1]}"
+        name = f"{format_atom(key[0])}/{key[1]}"   # (quoted: a line break stays an escape)
         warnings.warn(LearnedDelayWarning(
             f"subscribe(since=\"now\") on {name}: its latest event ends at {latest:g}, "
             f"{now - latest:.6g} s before the clock's now ({type(self.clock).__name__}); "
