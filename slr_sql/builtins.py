@@ -102,7 +102,9 @@ def _type_rank(t: Any) -> int:
     if tt is String:  # SWI-Prolog 9 orders strings before atoms: Var < Number < String < Atom
         return 2
     if tt is Atom:
-        return 3
+        # SWI-Prolog 7's [] is a reserved symbol, no atom: it sorts after the strings and
+        # before every atom ('' included), not as the text '[]' among them
+        return 3 if t == "[]" else 4
     return 5
 
 
@@ -141,9 +143,11 @@ def compare_terms(a: Any, b: Any) -> int:
                             return -1 if sa < sb else 1
                 else:
                     return -1 if a < b else 1
-            elif ra == 3 or ra == 2:
+            elif ra == 4 or ra == 2:
                 if a != b:
                     return -1 if str(a) < str(b) else 1
+            elif ra == 3:
+                pass   # [] and [] (the only term of its rank)
             elif ra == 0:
                 return -1 if id(a) < id(b) else 1
             else:
@@ -152,7 +156,11 @@ def compare_terms(a: Any, b: Any) -> int:
                 if na != nb:
                     return -1 if na < nb else 1
                 if a.name != b.name:
-                    return -1 if str(a.name) < str(b.name) else 1
+                    # a list cell is named '[|]' in SWI-Prolog 7 (functor/3 says so), not
+                    # '.': [a] sorts after 'Z'(1, 2) and before a(1, 2)
+                    name_a = "[|]" if na == 2 and a.name == "." else str(a.name)
+                    name_b = "[|]" if nb == 2 and b.name == "." else str(b.name)
+                    return -1 if name_a < name_b else 1
                 pair_seen = False
                 if via:
                     key = (id(a), id(b))

@@ -229,6 +229,16 @@ GOALS = [
     'setof(X, member(K-X, [f(0.0)-a, f(-0.0)-b, f(0.0)-c]), L)',
     'findall(X, member(X, [0.0, -0.0, 0.0]), L), sort(L, S)',
     'aggregate_all(set(X), member(X, [0.0, -0.0, 0.0]), L)',
+    # [] is no atom in SWI-Prolog 7: it sorts after the strings and before every atom ('' too);
+    # a list cell sorts under its name '[|]' (after 'Z'(1, 2), before a(1, 2))
+    'msort(["zzz", [], \'\', 0, \'A\', \'[x\', [a], 1/2, \'Z\'(1, 2), a(1, 2), f(1)], L)',
+    "compare(O, [], '')",
+    'compare(O, [], "s")',
+    'compare(O, [a], 1/2)',
+    "compare(O, [a], 'Z'(1, 2))",
+    "setof(X, member(X, [b, [], '', \"s\"]), L)",
+    "sort(0, @>=, [[], a, '', [x], x/y], L)",
+    "aggregate_all(set(X), member(X, [[a], 1/2, [], '']), L)",
     'aggregate_all(count, member(-0.0, [0.0, -0.0, 0.0]), N)',
     'memberchk(-0.0, [0.0, X])',
     'nth0(I, [0.0, -0.0, 0.0], -0.0)',
@@ -673,3 +683,27 @@ def test_over_stored_events_the_first_bad_solution_raises_as_in_swipl(swipl, goa
                 kb.query(goal)
             assert swidiff.canonical_error(raised.value.term) == \
                 swidiff.from_swi(theirs["error"], {}), (compiled, raised.value.term)
+
+
+# The standard order over stored values, on both backends and both paths (SQLite's compiled
+# aggregate_all(set) sorts in its slr_setof aggregate; PostgreSQL's runs in the interpreter):
+# the empty list and list cells among atoms and other compounds, as SWI-Prolog's sort/2 of
+# the same values. (stored: q(V)^1, q(V)^2, ... in this order)
+STORED_ORDER_VALUES = ["[a]", "'Z'(1, 2)", "''", "[]", '"s"', "1/2", "a(1, 2)", "'A'"]
+
+
+@pytest.mark.parametrize("goal", ["aggregate_all(set(X), q(X)^_, L)",
+                                  "setof(X, T^q(X)^T, L)",
+                                  "findall(X, q(X)^_, L0), msort(L0, L)"])
+def test_stored_values_sort_in_swipl_standard_order(swipl, backend, goal):
+    import slr_sql
+
+    example = swidiff.builtin_example(f"sort([{', '.join(STORED_ORDER_VALUES)}], L)")
+    theirs = swipl.run(example[2])[0]
+    expected = [swidiff.swi_answer(a, ["L"]) for a in theirs["answers"]]
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(100)) as kb:
+        kb.add_many([f"q({v})^{i}" for i, v in enumerate(STORED_ORDER_VALUES, 1)])
+        for compiled in (True, False):
+            kb.sql_enabled = compiled
+            answers = [swidiff.slr_answer(a, ["L"]) for a in kb.query(goal)]
+            assert answers == expected, (compiled, kb.explain(goal))
