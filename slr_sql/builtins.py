@@ -787,9 +787,47 @@ def _case_converted(m, a, convert: Callable[[str], str]) -> bool:
     return str(r) == out
 
 
+def _simple_upper(ch: str) -> str:
+    """One character's simple uppercase mapping (Unicode's one-character mapping, which
+    SWI-Prolog's upcase_atom applies): ``str.upper`` where it gives one character; else the
+    titlecase where that is one character (U+1F80 'ᾀ' -> U+1F88 'ᾈ'), else the character
+    itself ('ß' stays 'ß', where ``str.upper`` gives 'SS').
+
+    >>> _simple_upper("a"), _simple_upper("ß"), _simple_upper("\u1f80") == "\u1f88"
+    ('A', 'ß', True)
+    """
+    u = ch.upper()
+    if len(u) == 1:
+        return u
+    t = ch.title()
+    return t if len(t) == 1 else ch
+
+
+def _simple_lower(ch: str) -> str:
+    """One character's simple lowercase mapping ('İ' -> 'i', where ``str.lower`` adds a
+    combining dot; the only character whose full lowercase is longer).
+
+    >>> _simple_lower("A"), _simple_lower("\u0130")
+    ('a', 'i')
+    """
+    lo = ch.lower()
+    return lo if len(lo) == 1 else lo[0]
+
+
+def _upcase_text(text: str) -> str:
+    """A text upper-cased one character at a time, as SWI-Prolog does (no 'ß' -> 'SS')."""
+    return text.upper() if text.isascii() else "".join(map(_simple_upper, text))
+
+
+def _downcase_text(text: str) -> str:
+    """A text lower-cased one character at a time, as SWI-Prolog does: no final sigma
+    ('ΑΣ' gives 'ασ', where ``str.lower`` gives 'ας'), 'İ' gives 'i'."""
+    return text.lower() if text.isascii() else "".join(map(_simple_lower, text))
+
+
 @det("upcase_atom", 2)
 def _upcase(m, a):
-    return _case_converted(m, a, str.upper)
+    return _case_converted(m, a, _upcase_text)
 
 
 @nondet("sub_atom", 5)
@@ -1169,7 +1207,7 @@ def _number_string(m, a):
 
 @det("downcase_atom", 2)
 def _downcase(m, a):
-    return _case_converted(m, a, str.lower)
+    return _case_converted(m, a, _downcase_text)
 
 
 @det("atomic_list_concat", 2)

@@ -17,6 +17,12 @@ from __future__ import annotations
 import pytest
 import test_swi_differential as swidiff
 
+# Every character whose full case mapping (Python's str.upper/str.lower) is not one character:
+# SWI-Prolog maps a text one character at a time, by the simple mapping ('ß' stays 'ß')
+SPECIAL_CASE_TEXT = "".join(
+    chr(c) for c in range(0x80, 0x20000)
+    if not 0xD800 <= c <= 0xDFFF and (len(chr(c).upper()) != 1 or len(chr(c).lower()) != 1))
+
 GOALS = [
     'msort([b, 1, a, 1.0, "s", f(x), [1], 0.5, -1], L)',
     'sort([b, 1, a, 1.0, "s", f(x), [1], 1, b], L)',
@@ -229,6 +235,11 @@ GOALS = [
     'setof(X, member(K-X, [f(0.0)-a, f(-0.0)-b, f(0.0)-c]), L)',
     'findall(X, member(X, [0.0, -0.0, 0.0]), L), sort(L, S)',
     'aggregate_all(set(X), member(X, [0.0, -0.0, 0.0]), L)',
+    f"upcase_atom('{SPECIAL_CASE_TEXT}', U)",
+    f"downcase_atom('{SPECIAL_CASE_TEXT}', D)",
+    "upcase_atom('straße', U)",
+    "downcase_atom('ΟΔΟΣ Σ', D)",    # no final sigma: 'οδοσ σ'
+    "downcase_atom('İ', D)",
     # [] is no atom in SWI-Prolog 7: it sorts after the strings and before every atom ('' too);
     # a list cell sorts under its name '[|]' (after 'Z'(1, 2), before a(1, 2))
     'msort(["zzz", [], \'\', 0, \'A\', \'[x\', [a], 1/2, \'Z\'(1, 2), a(1, 2), f(1)], L)',
