@@ -285,7 +285,7 @@ _typecheck("integer", lambda t: type(t) is int)
 _typecheck("float", lambda t: type(t) is float)
 _typecheck("atomic", lambda t: type(t) in (Atom, int, float, String))
 _typecheck("compound", lambda t: type(t) is Struct)
-_typecheck("callable", lambda t: type(t) in (Atom, Struct))
+_typecheck("callable", lambda t: type(t) is Struct or (type(t) is Atom and t != "[]"))  # [] too
 _typecheck("is_list", lambda t: list_items(t)[1] == "[]" and type(list_items(t)[1]) is Atom)
 _typecheck("string", lambda t: type(t) is String)
 _typecheck("ground", is_ground)

@@ -244,6 +244,8 @@ GOALS = [
     # a list cell sorts under its name '[|]' (after 'Z'(1, 2), before a(1, 2))
     'msort(["zzz", [], \'\', 0, \'A\', \'[x\', [a], 1/2, \'Z\'(1, 2), a(1, 2), f(1)], L)',
     "compare(O, [], '')",
+    'callable([])',   # no atom, so no callable term either
+    "callable('[|]'(a, []))",
     'compare(O, [], "s")',
     'compare(O, [a], 1/2)',
     "compare(O, [a], 'Z'(1, 2))",
