@@ -1522,13 +1522,16 @@ def _out(m: "Machine"):
     return m.engine.out or sys.stdout
 
 
-def _write_text(t: Any, quoted: bool = False, deadline: float | None = None) -> str:
+def _write_text(t: Any, quoted: bool = False, deadline: float | None = None,
+                numbervars: bool = True) -> str:
+    """A term as write/1 (``quoted``: writeq/1, print/1) writes it: ``'$VAR'(1)`` as ``B``
+    (SWI-Prolog's numbervars(true)) unless ``numbervars`` is false (write_canonical/1)."""
     from .terms import format_term
 
     t = deref(t)
     if not quoted and type(t) in (Atom, String):
         return str(t)
-    return format_term(t, quoted=quoted, deadline=deadline)
+    return format_term(t, quoted=quoted, deadline=deadline, numbervars=numbervars)
 
 
 @det("write", 1)
@@ -1539,7 +1542,8 @@ def _write(m, a):
 
 DET[("print", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], True, m.deadline)), True)[1]
 DET[("writeq", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], True, m.deadline)), True)[1]
-DET[("write_canonical", 1)] = DET[("writeq", 1)]
+DET[("write_canonical", 1)] = \
+    lambda m, a: (_out(m).write(_write_text(a[0], True, m.deadline, numbervars=False)), True)[1]
 DET[("writeln", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], deadline=m.deadline) + "\n"), True)[1]
 DET[("nl", 0)] = lambda m, a: (_out(m).write("\n"), True)[1]
 DET[("tab", 1)] = lambda m, a: (_out(m).write(" " * evaluate(a[0])), True)[1]

@@ -959,6 +959,32 @@ _PUT, _SPACE, _PREFIX_END, _LIST_REST, _UNGRAY = (
     _Op("put"), _Op("space"), _Op("prefix end"), _Op("list rest"), _Op("ungray"))
 
 
+_VARIABLE_NAME = re.compile(r"[A-Z_][A-Za-z0-9_]*\Z")
+
+
+def _numbervar_name(arg: Any) -> str | None:
+    """The name ``'$VAR'(arg)`` is written as under ``numbervars`` (None: written as a
+    compound): an integer within 64 bits N >= 0 is a letter and N // 26 after it (``A``,
+    ``Z``, ``A1``), a negative one ``S_`` and -N; an atom spelled as a variable is itself.
+
+    >>> _numbervar_name(0), _numbervar_name(27), _numbervar_name(-3), _numbervar_name(Atom("Foo"))
+    ('A', 'B1', 'S_3', 'Foo')
+    >>> _numbervar_name(Atom("foo")) is None, _numbervar_name(2 ** 63) is None
+    (True, True)
+    """
+    while type(arg) is Var and arg.ref is not None:
+        arg = arg.ref
+    if type(arg) is int:
+        if not -(1 << 63) <= arg < (1 << 63):
+            return None
+        if arg < 0:
+            return f"S_{-arg}"
+        return chr(65 + arg % 26) + (str(arg // 26) if arg >= 26 else "")
+    if type(arg) is Atom and _VARIABLE_NAME.match(arg):
+        return str(arg)
+    return None
+
+
 class _Writer:
     """Accumulates tokens, inserting a space where two tokens would otherwise glue.
 
@@ -967,16 +993,17 @@ class _Writer:
     it is being written: meeting it again inside itself means the term is cyclic.
     """
 
-    __slots__ = ("out", "last", "quoted", "deadline", "limit", "float_text")
+    __slots__ = ("out", "last", "quoted", "deadline", "limit", "float_text", "numbervars")
 
     def __init__(self, quoted: bool, deadline: float | None = None, limit: int | None = None,
-                 message: bool = False):
+                 message: bool = False, numbervars: bool = False):
         self.out: list[str] = []
         self.last = ""  # last character written
         self.quoted = quoted
         self.deadline = deadline
         self.limit = limit  # pieces of text after which the writer stops (with "...")
         self.float_text = _format_float_in_message if message else _format_float
+        self.numbervars = numbervars
 
     def put(self, s: str) -> None:
         if not s:
@@ -1029,6 +1056,11 @@ class _Writer:
                 t = t.ref
                 via = True
             if type(t) is Struct:
+                if self.numbervars and t.name == "$VAR" and len(t.args) == 1:
+                    name = _numbervar_name(t.args[0])
+                    if name is not None:
+                        put(name)
+                        continue
                 if via:
                     if id(t) in gray:
                         raise _CyclicTerm
@@ -1156,14 +1188,17 @@ class _Writer:
 
 def format_term(t: Any, quoted: bool = True, priority: int = 1200,
                 deadline: float | None = None, limit: int | None = None,
-                message: bool = False) -> str:
+                message: bool = False, numbervars: bool = False) -> str:
     """Prolog text of a term, like SWI-Prolog's ``writeq`` (``quoted=False``: like ``write``).
 
     A cyclic term is written as SWI-Prolog writes it, ``@(Template, [S_1=Value, ...])``
     (see :func:`factorize_cycles`). ``deadline`` (``time.monotonic()``) stops writing a
     huge term with SLRTimeout; ``limit`` (for messages) cuts the text after about that
     many tokens with ``...``; ``message`` writes NaN and the infinities as ``nan``,
-    ``inf``, ``-inf`` (as a message writes an event's times), not as SWI's ``1.5NaN``.
+    ``inf``, ``-inf`` (as a message writes an event's times), not as SWI's ``1.5NaN``;
+    ``numbervars`` writes ``'$VAR'(N)`` as a variable name (``A``..``Z``, ``A1``.., and
+    ``S_N`` for a negative N) and ``'$VAR'('Name')`` as ``Name``, as SWI-Prolog's
+    ``write``, ``print`` and ``writeq`` do (its option ``numbervars(true)``).
 
     >>> from slr_sql.terms import make_list
     >>> format_term(Struct(":-", (Atom("a"), Struct(",", (Atom("b"), Atom("c"))))))
@@ -1172,11 +1207,13 @@ def format_term(t: Any, quoted: bool = True, priority: int = 1200,
     ('(1+2)*3', '- 1')
     >>> print(format_term(make_list([Atom("hello world"), String("s"), 1.0], Var("T"))))
     ['hello world',"s",1.0|T]
+    >>> format_term(Struct("-", (Struct("$VAR", (27,)),)), numbervars=True)
+    '-B1'
     """
-    w = _Writer(quoted, deadline, limit, message)
+    w = _Writer(quoted, deadline, limit, message, numbervars)
     try:
         w.write(t, priority)
     except _CyclicTerm:
-        w = _Writer(quoted, deadline, limit, message)
+        w = _Writer(quoted, deadline, limit, message, numbervars)
         w.write(factorize_cycles(t, deadline), priority)
     return "".join(w.out)

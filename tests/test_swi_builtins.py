@@ -125,6 +125,13 @@ GOALS = [
     'format(atom(A), "x~n", [])',
     'format(atom(A), "~~", [])',
     'format(atom(A), "~w", x)',
+    # write, print and writeq (~w, ~p, ~q) write '$VAR'(N) as a variable name (numbervars)
+    "format(atom(A), \"~w ~q ~p\", ['$VAR'(0), '$VAR'(27), '$VAR'(-1)])",
+    "format(atom(A), \"~q\", [f(- '$VAR'(1), '$VAR'('Foo'), '$VAR'('_G1'), '$VAR'(foo))])",
+    "format(atom(A), \"~w\", ['$VAR'(1) * '$VAR'(2) - '$VAR'(1.0)])",
+    "format(atom(A), \"~q\", [['$VAR'(9223372036854775807)|'$VAR'(9223372036854775808)]])",
+    "format(atom(A), \"~q\", ['$VAR'(\"Foo\")])",
+    "term_to_atom('$VAR'(1), A)",
     'functor(f(a, b), N, A)',
     'functor(T, f, 2)',
     'functor(T, f, 0)',
