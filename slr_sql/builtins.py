@@ -560,21 +560,6 @@ def text_of(t: Any, what: str = "atomic") -> str:
     raise type_error(what, t)
 
 
-def _parse_number(s: str) -> Any:
-    from .parser import parse_term
-
-    try:
-        t, _ = parse_term(s.strip())
-    except Exception:
-        return None
-    t = deref(t)
-    if type(t) in (int, float):
-        return t
-    if type(t) is Struct and t.name == "-" and len(t.args) == 1 and type(deref(t.args[0])) in (int, float):
-        return -deref(t.args[0])
-    return None
-
-
 # -- the classic atom builtins, as SWI-Prolog 7+ has them (its answers and errors are the
 # contract, docs/semantics.md): the text of an atom, a string or a number is accepted where
 # an atom is read; `[]` is not an atom (SWI-7), compounds are type errors.
@@ -646,6 +631,9 @@ def _number_of_text(s: str, leading_layout: bool) -> Any:
 
     try:
         t, _ = parse_term(s)
+        # the reader takes an end '.' after a term, a number's text has none ("1." and
+        # "1.0." are no numbers, as in SWI-Prolog): with one already there, a second fails
+        parse_term(s + "\n.")
     except SLRError:
         return None
     t = deref(t)
@@ -1198,10 +1186,10 @@ def _string_code(m, a):
 def _number_string(m, a):
     s = deref(a[1])
     if type(s) is not Var:
-        n = _parse_number(text_of(s))
-        if n is None:
-            raise iso_error(Struct("syntax_error", (Atom("illegal_number"),)))
-        return m.unify(a[0], n)
+        # a text that is no number fails (SWI-Prolog's number_string, unlike ISO's
+        # number_codes, raises no syntax error), and so does one with layout around it
+        n = _number_of_text(text_of(s), leading_layout=False)
+        return n is not None and m.unify(a[0], n)
     return m.unify(s, String(text_of(a[0])))
 
 

@@ -252,6 +252,13 @@ GOALS = [
     'msort(["zzz", [], \'\', 0, \'A\', \'[x\', [a], 1/2, \'Z\'(1, 2), a(1, 2), f(1)], L)',
     "compare(O, [], '')",
     'callable([])',   # no atom, so no callable term either
+    # a number's text has no end '.' (the reader's end of a clause is not part of it)
+    'number_codes(N, "1.")', "atom_number('1.', N)", "atom_number('1.0.', N)",
+    'number_codes(N, "1.%")',
+    # number_string/2 fails on a text that is no number (no syntax error), layout included
+    'number_string(N, "1.")', 'number_string(N, " 1")', 'number_string(N, "1 ")',
+    'number_string(N, "abc")', 'number_string(N, "")', 'number_string(N, "- 1")',
+    'number_string(N, "+1")', 'number_string(N, "0x1A")', 'number_string(N, "-1.5e3")',
     "callable('[|]'(a, []))",
     'compare(O, [], "s")',
     'compare(O, [a], 1/2)',
