@@ -1776,7 +1776,8 @@ def _aggregate_arith(m: "Machine", kind: str, template, goal, out, nxt):
     each solution is evaluated as it comes (``S is S0 + X``, ``M is max(M0, X)``), so a
     solution that is no number raises its error there, before any error a later solution
     of the goal would throw. ``max(X-W)``/``min(X-W)``: the witness form (docs/sql.md),
-    the first solution whose X is strictly better, X compared as it comes."""
+    answered as ``max(X, W)`` is (:func:`_aggregate_witness`): the first X must be a number,
+    then the first solution whose X is strictly better, X compared as it comes."""
     t0 = deref(template)
     witness = kind != "sum" and type(t0) is Struct and t0.name == "-" and len(t0.args) == 2
     state: list = [0] if kind == "sum" else []   # the sum; or the best so far
@@ -1786,6 +1787,11 @@ def _aggregate_arith(m: "Machine", kind: str, template, goal, out, nxt):
             state[0] = apply_binary("+", state[0], evaluate(found))
         elif witness:
             if not state:
+                first = deref(deref(found).args[0])
+                if type(first) is Var:
+                    raise instantiation_error()
+                if type(first) not in (int, float):
+                    raise type_error("number", first)
                 state.append(found)
                 return
             a, b = evaluate(deref(found).args[0]), evaluate(deref(state[0]).args[0])
