@@ -761,7 +761,9 @@ def _term_to_atom(m, a):
         if not source.strip():
             return m.unify(t, Atom("end_of_file"))
         return m.unify(t, _parse_any(Atom(source)))
-    return m.unify(text, Atom(format_term(t, deadline=m.deadline)))
+    # SWI-Prolog's term_to_atom writes a quote inside quotes doubled and a newline as it
+    # is ('it''s'), where writeq writes 'it\'s'
+    return m.unify(text, Atom(format_term(t, deadline=m.deadline, char_escapes=False)))
 
 
 def _case_converted(m, a, convert: Callable[[str], str]) -> bool:
