@@ -613,6 +613,38 @@ def _list_text(t: Any) -> str:
     return "".join(out)
 
 
+def _code_or_char_list_text(t: Any) -> str:
+    """The text of a list as SWI-Prolog's atom_length/2 reads one: its first element makes
+    it a character list (a one-character atom) or a code list, and every element must be
+    of that kind (``type_error(character, X)`` / ``type_error(character_code, X)``); a
+    partial list is an instantiation error, another tail ``type_error(text, List)``.
+
+    >>> _code_or_char_list_text(make_list([104, 105])), _code_or_char_list_text(make_list([Atom("a")]))
+    ('hi', 'a')
+    """
+    items, tail = list_items(t)
+    if type(tail) is Var:
+        raise instantiation_error()
+    if not (type(tail) is Atom and tail == "[]"):
+        raise type_error("text", t)
+    first = deref(items[0]) if items else None
+    chars = type(first) is Atom and len(first) == 1
+    out = []
+    for x in items:
+        x = deref(x)
+        if type(x) is Var:
+            raise instantiation_error()
+        if chars:
+            if not (type(x) is Atom and len(x) == 1):
+                raise type_error("character", x)
+            out.append(str(x))
+        else:
+            if type(x) is not int or not 0 <= x <= 0x10FFFF or 0xD800 <= x <= 0xDFFF:
+                raise type_error("character_code", x)
+            out.append(chr(x))
+    return "".join(out)
+
+
 def _number_of_text(s: str, leading_layout: bool) -> Any:
     """The number a text is in Prolog syntax (an optional sign, then a number token: 12,
     -1.5, 0x1A, 0'a, 1.0Inf), or None. ``leading_layout`` allows spaces before it (as
@@ -685,6 +717,8 @@ def _atom_length(m, a):
     n = _length_argument(a[1])
     if type(t) is Atom and t == "[]":
         text = ""   # as SWI-Prolog 7: [] has no characters of its own
+    elif type(t) is Struct and t.name == "." and len(t.args) == 2:
+        text = _code_or_char_list_text(t)   # a code or character list is text too (SWI)
     else:
         text = _atom_text(t, "text")
     return m.unify(n, len(text))

@@ -256,6 +256,12 @@ GOALS = [
     'msort(["zzz", [], \'\', 0, \'A\', \'[x\', [a], 1/2, \'Z\'(1, 2), a(1, 2), f(1)], L)',
     "compare(O, [], '')",
     'callable([])',   # no atom, so no callable term either
+    # atom_length/2 takes a code or character list as text, as SWI-Prolog (its first element
+    # says which), with SWI-Prolog's errors for a bad element or tail
+    'atom_length([104, 105], L)', 'atom_length([a, b], L)', 'atom_length([1, 2], 2)',
+    "atom_length([0'a, b], L)", 'atom_length([a|_], L)', 'atom_length([a|b], L)',
+    'atom_length([f(x)], L)', 'atom_length([a, "s"], L)', 'atom_length([ab], L)',
+    'atom_length([-1], L)', 'atom_length([1, 2], foo)',
     # a number's text has no end '.' (the reader's end of a clause is not part of it)
     'number_codes(N, "1.")', "atom_number('1.', N)", "atom_number('1.0.', N)",
     'number_codes(N, "1.%")',
