@@ -102,7 +102,9 @@ def _type_rank(t: Any) -> int:
     if tt is String:  # SWI-Prolog 9 orders strings before atoms: Var < Number < String < Atom
         return 2
     if tt is Atom:
-        return 3
+        # SWI-Prolog 7's [] is a reserved symbol, no atom: it sorts after the strings and
+        # before every atom ('' included), not as the text '[]' among them
+        return 3 if t == "[]" else 4
     return 5
 
 
@@ -141,9 +143,11 @@ def compare_terms(a: Any, b: Any) -> int:
                             return -1 if sa < sb else 1
                 else:
                     return -1 if a < b else 1
-            elif ra == 3 or ra == 2:
+            elif ra == 4 or ra == 2:
                 if a != b:
                     return -1 if str(a) < str(b) else 1
+            elif ra == 3:
+                pass   # [] and [] (the only term of its rank)
             elif ra == 0:
                 return -1 if id(a) < id(b) else 1
             else:
@@ -152,7 +156,11 @@ def compare_terms(a: Any, b: Any) -> int:
                 if na != nb:
                     return -1 if na < nb else 1
                 if a.name != b.name:
-                    return -1 if str(a.name) < str(b.name) else 1
+                    # a list cell is named '[|]' in SWI-Prolog 7 (functor/3 says so), not
+                    # '.': [a] sorts after 'Z'(1, 2) and before a(1, 2)
+                    name_a = "[|]" if na == 2 and a.name == "." else str(a.name)
+                    name_b = "[|]" if nb == 2 and b.name == "." else str(b.name)
+                    return -1 if name_a < name_b else 1
                 pair_seen = False
                 if via:
                     key = (id(a), id(b))
@@ -277,7 +285,7 @@ _typecheck("integer", lambda t: type(t) is int)
 _typecheck("float", lambda t: type(t) is float)
 _typecheck("atomic", lambda t: type(t) in (Atom, int, float, String))
 _typecheck("compound", lambda t: type(t) is Struct)
-_typecheck("callable", lambda t: type(t) in (Atom, Struct))
+_typecheck("callable", lambda t: type(t) is Struct or (type(t) is Atom and t != "[]"))  # [] too
 _typecheck("is_list", lambda t: list_items(t)[1] == "[]" and type(list_items(t)[1]) is Atom)
 _typecheck("string", lambda t: type(t) is String)
 _typecheck("ground", is_ground)
@@ -552,21 +560,6 @@ def text_of(t: Any, what: str = "atomic") -> str:
     raise type_error(what, t)
 
 
-def _parse_number(s: str) -> Any:
-    from .parser import parse_term
-
-    try:
-        t, _ = parse_term(s.strip())
-    except Exception:
-        return None
-    t = deref(t)
-    if type(t) in (int, float):
-        return t
-    if type(t) is Struct and t.name == "-" and len(t.args) == 1 and type(deref(t.args[0])) in (int, float):
-        return -deref(t.args[0])
-    return None
-
-
 # -- the classic atom builtins, as SWI-Prolog 7+ has them (its answers and errors are the
 # contract, docs/semantics.md): the text of an atom, a string or a number is accepted where
 # an atom is read; `[]` is not an atom (SWI-7), compounds are type errors.
@@ -620,6 +613,38 @@ def _list_text(t: Any) -> str:
     return "".join(out)
 
 
+def _code_or_char_list_text(t: Any) -> str:
+    """The text of a list as SWI-Prolog's atom_length/2 reads one: its first element makes
+    it a character list (a one-character atom) or a code list, and every element must be
+    of that kind (``type_error(character, X)`` / ``type_error(character_code, X)``); a
+    partial list is an instantiation error, another tail ``type_error(text, List)``.
+
+    >>> _code_or_char_list_text(make_list([104, 105])), _code_or_char_list_text(make_list([Atom("a")]))
+    ('hi', 'a')
+    """
+    items, tail = list_items(t)
+    if type(tail) is Var:
+        raise instantiation_error()
+    if not (type(tail) is Atom and tail == "[]"):
+        raise type_error("text", t)
+    first = deref(items[0]) if items else None
+    chars = type(first) is Atom and len(first) == 1
+    out = []
+    for x in items:
+        x = deref(x)
+        if type(x) is Var:
+            raise instantiation_error()
+        if chars:
+            if not (type(x) is Atom and len(x) == 1):
+                raise type_error("character", x)
+            out.append(str(x))
+        else:
+            if type(x) is not int or not 0 <= x <= 0x10FFFF or 0xD800 <= x <= 0xDFFF:
+                raise type_error("character_code", x)
+            out.append(chr(x))
+    return "".join(out)
+
+
 def _number_of_text(s: str, leading_layout: bool) -> Any:
     """The number a text is in Prolog syntax (an optional sign, then a number token: 12,
     -1.5, 0x1A, 0'a, 1.0Inf), or None. ``leading_layout`` allows spaces before it (as
@@ -638,6 +663,9 @@ def _number_of_text(s: str, leading_layout: bool) -> Any:
 
     try:
         t, _ = parse_term(s)
+        # the reader takes an end '.' after a term, a number's text has none ("1." and
+        # "1.0." are no numbers, as in SWI-Prolog): with one already there, a second fails
+        parse_term(s + "\n.")
     except SLRError:
         return None
     t = deref(t)
@@ -689,6 +717,8 @@ def _atom_length(m, a):
     n = _length_argument(a[1])
     if type(t) is Atom and t == "[]":
         text = ""   # as SWI-Prolog 7: [] has no characters of its own
+    elif type(t) is Struct and t.name == "." and len(t.args) == 2:
+        text = _code_or_char_list_text(t)   # a code or character list is text too (SWI)
     else:
         text = _atom_text(t, "text")
     return m.unify(n, len(text))
@@ -765,7 +795,9 @@ def _term_to_atom(m, a):
         if not source.strip():
             return m.unify(t, Atom("end_of_file"))
         return m.unify(t, _parse_any(Atom(source)))
-    return m.unify(text, Atom(format_term(t, deadline=m.deadline)))
+    # SWI-Prolog's term_to_atom writes a quote inside quotes doubled and a newline as it
+    # is ('it''s'), where writeq writes 'it\'s'
+    return m.unify(text, Atom(format_term(t, deadline=m.deadline, char_escapes=False)))
 
 
 def _case_converted(m, a, convert: Callable[[str], str]) -> bool:
@@ -779,9 +811,47 @@ def _case_converted(m, a, convert: Callable[[str], str]) -> bool:
     return str(r) == out
 
 
+def _simple_upper(ch: str) -> str:
+    """One character's simple uppercase mapping (Unicode's one-character mapping, which
+    SWI-Prolog's upcase_atom applies): ``str.upper`` where it gives one character; else the
+    titlecase where that is one character (U+1F80 'ᾀ' -> U+1F88 'ᾈ'), else the character
+    itself ('ß' stays 'ß', where ``str.upper`` gives 'SS').
+
+    >>> _simple_upper("a"), _simple_upper("ß"), _simple_upper("\u1f80") == "\u1f88"
+    ('A', 'ß', True)
+    """
+    u = ch.upper()
+    if len(u) == 1:
+        return u
+    t = ch.title()
+    return t if len(t) == 1 else ch
+
+
+def _simple_lower(ch: str) -> str:
+    """One character's simple lowercase mapping ('İ' -> 'i', where ``str.lower`` adds a
+    combining dot; the only character whose full lowercase is longer).
+
+    >>> _simple_lower("A"), _simple_lower("\u0130")
+    ('a', 'i')
+    """
+    lo = ch.lower()
+    return lo if len(lo) == 1 else lo[0]
+
+
+def _upcase_text(text: str) -> str:
+    """A text upper-cased one character at a time, as SWI-Prolog does (no 'ß' -> 'SS')."""
+    return text.upper() if text.isascii() else "".join(map(_simple_upper, text))
+
+
+def _downcase_text(text: str) -> str:
+    """A text lower-cased one character at a time, as SWI-Prolog does: no final sigma
+    ('ΑΣ' gives 'ασ', where ``str.lower`` gives 'ας'), 'İ' gives 'i'."""
+    return text.lower() if text.isascii() else "".join(map(_simple_lower, text))
+
+
 @det("upcase_atom", 2)
 def _upcase(m, a):
-    return _case_converted(m, a, str.upper)
+    return _case_converted(m, a, _upcase_text)
 
 
 @nondet("sub_atom", 5)
@@ -1152,16 +1222,16 @@ def _string_code(m, a):
 def _number_string(m, a):
     s = deref(a[1])
     if type(s) is not Var:
-        n = _parse_number(text_of(s))
-        if n is None:
-            raise iso_error(Struct("syntax_error", (Atom("illegal_number"),)))
-        return m.unify(a[0], n)
+        # a text that is no number fails (SWI-Prolog's number_string, unlike ISO's
+        # number_codes, raises no syntax error), and so does one with layout around it
+        n = _number_of_text(text_of(s), leading_layout=False)
+        return n is not None and m.unify(a[0], n)
     return m.unify(s, String(text_of(a[0])))
 
 
 @det("downcase_atom", 2)
 def _downcase(m, a):
-    return _case_converted(m, a, str.lower)
+    return _case_converted(m, a, _downcase_text)
 
 
 @det("atomic_list_concat", 2)
@@ -1476,13 +1546,16 @@ def _out(m: "Machine"):
     return m.engine.out or sys.stdout
 
 
-def _write_text(t: Any, quoted: bool = False, deadline: float | None = None) -> str:
+def _write_text(t: Any, quoted: bool = False, deadline: float | None = None,
+                numbervars: bool = True) -> str:
+    """A term as write/1 (``quoted``: writeq/1, print/1) writes it: ``'$VAR'(1)`` as ``B``
+    (SWI-Prolog's numbervars(true)) unless ``numbervars`` is false (write_canonical/1)."""
     from .terms import format_term
 
     t = deref(t)
     if not quoted and type(t) in (Atom, String):
         return str(t)
-    return format_term(t, quoted=quoted, deadline=deadline)
+    return format_term(t, quoted=quoted, deadline=deadline, numbervars=numbervars)
 
 
 @det("write", 1)
@@ -1493,7 +1566,8 @@ def _write(m, a):
 
 DET[("print", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], True, m.deadline)), True)[1]
 DET[("writeq", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], True, m.deadline)), True)[1]
-DET[("write_canonical", 1)] = DET[("writeq", 1)]
+DET[("write_canonical", 1)] = \
+    lambda m, a: (_out(m).write(_write_text(a[0], True, m.deadline, numbervars=False)), True)[1]
 DET[("writeln", 1)] = lambda m, a: (_out(m).write(_write_text(a[0], deadline=m.deadline) + "\n"), True)[1]
 DET[("nl", 0)] = lambda m, a: (_out(m).write("\n"), True)[1]
 
@@ -1752,7 +1826,8 @@ def _aggregate_arith(m: "Machine", kind: str, template, goal, out, nxt):
     each solution is evaluated as it comes (``S is S0 + X``, ``M is max(M0, X)``), so a
     solution that is no number raises its error there, before any error a later solution
     of the goal would throw. ``max(X-W)``/``min(X-W)``: the witness form (docs/sql.md),
-    the first solution whose X is strictly better, X compared as it comes."""
+    answered as ``max(X, W)`` is (:func:`_aggregate_witness`): the first X must be a number,
+    then the first solution whose X is strictly better, X compared as it comes."""
     t0 = deref(template)
     witness = kind != "sum" and type(t0) is Struct and t0.name == "-" and len(t0.args) == 2
     state: list = [0] if kind == "sum" else []   # the sum; or the best so far
@@ -1762,6 +1837,11 @@ def _aggregate_arith(m: "Machine", kind: str, template, goal, out, nxt):
             state[0] = apply_binary("+", state[0], evaluate(found))
         elif witness:
             if not state:
+                first = deref(deref(found).args[0])
+                if type(first) is Var:
+                    raise instantiation_error()
+                if type(first) not in (int, float):
+                    raise type_error("number", first)
                 state.append(found)
                 return
             a, b = evaluate(deref(found).args[0]), evaluate(deref(state[0]).args[0])

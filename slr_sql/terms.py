@@ -870,11 +870,16 @@ _ESCAPES = {"\\": "\\\\", "\n": "\\n", "\t": "\\t", "\r": "\\r", "\a": "\\a", "\
 _ARG_PRIORITY = 999  # arguments and list elements, as writeq prints them
 
 
-def format_atom(name: str, quoted: bool = True) -> str:
+def format_atom(name: str, quoted: bool = True, escapes: bool = True) -> str:
     """The text of an atom, quoted only when it would not read back as the same atom.
+    ``escapes=False``: inside the quotes only a quote (doubled), a backslash (``\\``) and
+    a newline (``\n``) are escaped, every other character is itself (SWI-Prolog's
+    term_to_atom/2, which writes the newline itself too).
 
     >>> format_atom("cup1"), format_atom("hello world"), format_atom("=.."), format_atom("A")
     ('cup1', "'hello world'", '=..', "'A'")
+    >>> print(format_atom("it's"), format_atom("it's", escapes=False))
+    'it\\'s' 'it''s'
     """
     if not quoted or name in _SOLO:
         return name
@@ -885,7 +890,7 @@ def format_atom(name: str, quoted: bool = True) -> str:
     elif (_ASCII_SYMBOL_ATOM.match(name) if ascii else _unicode_pattern("symbol atom").match(name)) \
             and not name.startswith("/*") and name != ".":
         return name
-    return "'" + _escape(name, "'") + "'"
+    return "'" + _escape(name, "'", escapes) + "'"
 
 
 def quoted_text(text: str, quote: str = "'") -> str:
@@ -920,7 +925,11 @@ def char_escape(ch: str) -> str:
     return _ESCAPES.get(ch) or f"\\x{ord(ch):X}\\"
 
 
-def _escape(text: str, quote: str) -> str:
+def _escape(text: str, quote: str, escapes: bool = True) -> str:
+    if not escapes:
+        # (a newline stays \n: this reader, unlike SWI-Prolog's, ends a quoted text at a
+        # raw one, and what term_to_atom writes must read back)
+        return text.replace("\\", "\\\\").replace(quote, quote + quote).replace("\n", "\\n")
     ascii = text.isascii()
     if not (_ASCII_NEEDS_ESCAPE if ascii else _unicode_pattern("needs escape")).search(text):
         return text
@@ -991,6 +1000,32 @@ _PUT, _SPACE, _PREFIX_END, _LIST_REST, _UNGRAY = (
     _Op("put"), _Op("space"), _Op("prefix end"), _Op("list rest"), _Op("ungray"))
 
 
+_VARIABLE_NAME = re.compile(r"[A-Z_][A-Za-z0-9_]*\Z")
+
+
+def _numbervar_name(arg: Any) -> str | None:
+    """The name ``'$VAR'(arg)`` is written as under ``numbervars`` (None: written as a
+    compound): an integer within 64 bits N >= 0 is a letter and N // 26 after it (``A``,
+    ``Z``, ``A1``), a negative one ``S_`` and -N; an atom spelled as a variable is itself.
+
+    >>> _numbervar_name(0), _numbervar_name(27), _numbervar_name(-3), _numbervar_name(Atom("Foo"))
+    ('A', 'B1', 'S_3', 'Foo')
+    >>> _numbervar_name(Atom("foo")) is None, _numbervar_name(2 ** 63) is None
+    (True, True)
+    """
+    while type(arg) is Var and arg.ref is not None:
+        arg = arg.ref
+    if type(arg) is int:
+        if not -(1 << 63) <= arg < (1 << 63):
+            return None
+        if arg < 0:
+            return f"S_{-arg}"
+        return chr(65 + arg % 26) + (str(arg // 26) if arg >= 26 else "")
+    if type(arg) is Atom and _VARIABLE_NAME.match(arg):
+        return str(arg)
+    return None
+
+
 class _Writer:
     """Accumulates tokens, inserting a space where two tokens would otherwise glue.
 
@@ -999,16 +1034,19 @@ class _Writer:
     it is being written: meeting it again inside itself means the term is cyclic.
     """
 
-    __slots__ = ("out", "last", "quoted", "deadline", "limit", "float_text")
+    __slots__ = ("out", "last", "quoted", "deadline", "limit", "float_text", "numbervars",
+                 "escapes")
 
     def __init__(self, quoted: bool, deadline: float | None = None, limit: int | None = None,
-                 message: bool = False):
+                 message: bool = False, numbervars: bool = False, escapes: bool = True):
         self.out: list[str] = []
         self.last = ""  # last character written
         self.quoted = quoted
         self.deadline = deadline
         self.limit = limit  # pieces of text after which the writer stops (with "...")
         self.float_text = _format_float_in_message if message else _format_float
+        self.numbervars = numbervars
+        self.escapes = escapes
 
     def put(self, s: str) -> None:
         if not s:
@@ -1061,6 +1099,11 @@ class _Writer:
                 t = t.ref
                 via = True
             if type(t) is Struct:
+                if self.numbervars and t.name == "$VAR" and len(t.args) == 1:
+                    name = _numbervar_name(t.args[0])
+                    if name is not None:
+                        put(name)
+                        continue
                 if via:
                     if id(t) in gray:
                         raise _CyclicTerm
@@ -1084,15 +1127,15 @@ class _Writer:
             if operand and _is_op_atom(t):
                 # An operator atom as the operand of an operator: `(-)=a`, `- (-)`.
                 self.put("(")
-                self.put(format_atom(t, self.quoted))
+                self.put(format_atom(t, self.quoted, self.escapes))
                 self.put(")")
             else:
-                self.put(format_atom(t, self.quoted))
+                self.put(format_atom(t, self.quoted, self.escapes))
         elif tt is Var:
             self.put(t.name)
         elif tt is String or isinstance(t, str):
             if self.quoted:
-                self.put('"' + _escape(t, '"') + '"')
+                self.put('"' + _escape(t, '"', self.escapes) + '"')
             else:
                 self.put(str(t))
         elif tt is int:
@@ -1130,10 +1173,10 @@ class _Writer:
                 todo.append((_PUT, name))
             elif name[0].isalpha():
                 todo.append((_SPACE,))
-                todo.append((_PUT, format_atom(name, self.quoted)))
+                todo.append((_PUT, format_atom(name, self.quoted, self.escapes)))
                 todo.append((_SPACE,))
             else:
-                todo.append((_PUT, format_atom(name, self.quoted)))
+                todo.append((_PUT, format_atom(name, self.quoted, self.escapes)))
             todo.append((args[0], lp, True))
             return
         if n == 1 and name in PREFIX_OPS and name not in ("|", ","):
@@ -1142,12 +1185,12 @@ class _Writer:
             if open_:
                 put("(")
                 todo.append((_PUT, ")"))
-            put(format_atom(name, self.quoted))
+            put(format_atom(name, self.quoted, self.escapes))
             todo.append((_PREFIX_END, len(self.out), name))
             todo.append((args[0], ap, True))
             return
         # canonical form: name(arg, ...)
-        put(format_atom(name, self.quoted))
+        put(format_atom(name, self.quoted, self.escapes))
         self.out.append("(")
         self.last = "("
         todo.append((_PUT, ")"))
@@ -1188,14 +1231,20 @@ class _Writer:
 
 def format_term(t: Any, quoted: bool = True, priority: int = 1200,
                 deadline: float | None = None, limit: int | None = None,
-                message: bool = False) -> str:
+                message: bool = False, numbervars: bool = False,
+                char_escapes: bool = True) -> str:
     """Prolog text of a term, like SWI-Prolog's ``writeq`` (``quoted=False``: like ``write``).
 
     A cyclic term is written as SWI-Prolog writes it, ``@(Template, [S_1=Value, ...])``
     (see :func:`factorize_cycles`). ``deadline`` (``time.monotonic()``) stops writing a
     huge term with SLRTimeout; ``limit`` (for messages) cuts the text after about that
     many tokens with ``...``; ``message`` writes NaN and the infinities as ``nan``,
-    ``inf``, ``-inf`` (as a message writes an event's times), not as SWI's ``1.5NaN``.
+    ``inf``, ``-inf`` (as a message writes an event's times), not as SWI's ``1.5NaN``;
+    ``numbervars`` writes ``'$VAR'(N)`` as a variable name (``A``..``Z``, ``A1``.., and
+    ``S_N`` for a negative N) and ``'$VAR'('Name')`` as ``Name``, as SWI-Prolog's
+    ``write``, ``print`` and ``writeq`` do (its option ``numbervars(true)``);
+    ``char_escapes=False`` escapes only quotes (doubled) and backslashes inside quoted
+    atoms and strings, as SWI-Prolog's ``term_to_atom/2`` writes (:func:`format_atom`).
 
     >>> from slr_sql.terms import make_list
     >>> format_term(Struct(":-", (Atom("a"), Struct(",", (Atom("b"), Atom("c"))))))
@@ -1204,11 +1253,13 @@ def format_term(t: Any, quoted: bool = True, priority: int = 1200,
     ('(1+2)*3', '- 1')
     >>> print(format_term(make_list([Atom("hello world"), String("s"), 1.0], Var("T"))))
     ['hello world',"s",1.0|T]
+    >>> format_term(Struct("-", (Struct("$VAR", (27,)),)), numbervars=True)
+    '-B1'
     """
-    w = _Writer(quoted, deadline, limit, message)
+    w = _Writer(quoted, deadline, limit, message, numbervars, char_escapes)
     try:
         w.write(t, priority)
     except _CyclicTerm:
-        w = _Writer(quoted, deadline, limit, message)
+        w = _Writer(quoted, deadline, limit, message, numbervars, char_escapes)
         w.write(factorize_cycles(t, deadline), priority)
     return "".join(w.out)

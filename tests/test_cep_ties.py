@@ -355,3 +355,46 @@ def test_the_timer_wakes_a_chronological_decision_for_another_alternatives_type(
         assert derived.wait(timeout=20), "the timer did not decide a(1)^5"
         assert _rows(kb, "c") == [(1, 1.0, 5.0)]
         sub.close()
+
+
+# Events of the same times are told apart by their stored values, in SQLite's order (numbers
+# by value, then text byte by byte): PostgreSQL's text columns must order them alike, not as
+# text (12 before 9, and the atom '9', stored tagged there, after every letter).
+TIED_BY_VALUE = [
+    ("numbers", [9, 12, 10.0, 100]),
+    ("atoms", ["9", "A", "b"]),
+    ("numbers and atoms", [12, "12", 9, "9", 1.5]),
+]
+
+
+@pytest.mark.parametrize("policy", ["recent", "chronological"])
+@pytest.mark.parametrize("values", [v for _, v in TIED_BY_VALUE],
+                         ids=[name for name, _ in TIED_BY_VALUE])
+def test_partners_of_the_same_times_are_chosen_by_value_as_on_sqlite(backend, policy, values):
+    from test_cep_differential import run
+
+    rule = {"pattern": ("seq", ("leaf", "a", ("X",)), ("leaf", "b", ("Y",))), "head": ["X", "Y"],
+            "where": [], "cnot": None, "within": None, "policy": policy}
+    events = [("a", (v,), 1.0, 1.0) for v in values] + [("b", (k,), 2.0 + k, 2.0 + k)
+                                                         for k in range(len(values) - 1)]
+    expected = [(tuple(h), s, e) for h, s, e in reference(rule, events)]
+    got = run(rule, events, list(reversed(range(len(events)))), [], False, False, where=backend)
+    assert sorted(_typed(_plain(got))) == sorted(_typed(expected))
+
+
+@pytest.mark.parametrize("values", [v for _, v in TIED_BY_VALUE],
+                         ids=[name for name, _ in TIED_BY_VALUE])
+def test_chronological_terminators_of_the_same_times_go_by_value_as_on_sqlite(backend, values):
+    from test_cep_differential import run
+
+    rule = {"pattern": ("seq", ("leaf", "a", ("_",)), ("leaf", "b", ("Y",))), "head": ["Y"],
+            "where": [], "cnot": None, "within": None, "policy": "chronological"}
+    events = [("a", (0,), 1.0, 1.0)] + [("b", (v,), 2.0, 2.0) for v in values]
+    expected = [(tuple(h), s, e) for h, s, e in reference(rule, events)]
+    got = run(rule, events, list(reversed(range(len(events)))), [], False, False, where=backend)
+    assert sorted(_typed(_plain(got))) == sorted(_typed(expected))
+
+
+def _plain(rows: list) -> list:
+    """Rows read from a store with their atoms as the reference's str."""
+    return [(tuple(str(v) if isinstance(v, str) else v for v in h), s, e) for h, s, e in rows]

@@ -112,8 +112,20 @@ def _may_pass(exc: BaseException, path: str | None) -> bool:
     return isinstance(exc, DatabaseError) and isinstance(store_error(exc, path), SLRUnavailable)
 
 
-def _sqlite_key(v: Any) -> tuple:
-    """A stored value's place in SQLite's order: numbers, then text, then blobs."""
+def _sqlite_key(v: Any, from_column: Any = None) -> tuple:
+    """A stored value's place in SQLite's order: numbers, then text, then blobs.
+    ``from_column``: the store's reading of a column value (PostgreSQL's columns are text:
+    ``'12'`` is the number 12, and ``{"$atom":"9"}`` the atom SQLite stores as ``9``).
+
+    >>> from slr_sql.store.dialect import POSTGRES
+    >>> _sqlite_key('12', POSTGRES.from_column), _sqlite_key('{"$atom":"9"}', POSTGRES.from_column)
+    ((0, 12, 'integer'), (1, 0, '9'))
+    """
+    if from_column is not None:
+        v = from_column(v)
+        if (type(v) is str and v.startswith('{"$atom":"') and v[10:11] not in ("[", "{", "\\")
+                and "\\u0000" not in v):
+            v = json.loads(v)["$atom"]
     if type(v) is int:
         return (0, v, "integer")
     if type(v) is float:
@@ -730,6 +742,7 @@ class RuleRuntime:
         the arrival order (chronological decisions consume rows, so their order matters)."""
         args: dict = {}
         groups: dict = {}
+        from_column = self.eng.store.dialect.from_column
         for row in rows:
             groups.setdefault((row[1], row[3]), []).append(_rowids(row[4])[0])
         for (n, pos), seqs in groups.items():
@@ -741,7 +754,7 @@ class RuleRuntime:
                 for r in self._ask(
                         rows_by_seq(self.alts[n].tables[pos], arity, len(chunk)),
                         {f"s{j}": seq for j, seq in enumerate(chunk)}):
-                    args[(n, pos, r[0])] = tuple(_sqlite_key(v) for v in r[1:])
+                    args[(n, pos, r[0])] = tuple(_sqlite_key(v, from_column) for v in r[1:])
 
         def key(row: tuple) -> tuple:
             seq = _rowids(row[4])[0]

@@ -810,8 +810,7 @@ class AltSQL:
         keys = [f"{alias}.t_end{d}", f"{alias}.t_start{d}"]
         for j in range(leaf.arity):
             if j not in fixed:
-                keys += [f"{alias}.arg{j + 1}{d}",
-                         f"{self.dialect.typeof(f'{alias}.arg{j + 1}')}{d}"]
+                keys += [f"{k}{d}" for k in self.dialect.value_order(f"{alias}.arg{j + 1}")]
         return keys + [f"{alias}.seq{d}"]
 
     def _fixed_args(self, p: int, chosen: set) -> frozenset[int]:

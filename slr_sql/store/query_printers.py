@@ -119,6 +119,17 @@ class SQLiteQueryPrinter:
         """A stored value as a number in arithmetic (raises on anything else)."""
         return f"slr_num({value})"
 
+    def value_order(self, value: str) -> list[str]:
+        """The ORDER BY keys that put stored values in SQLite's order (the order that
+        breaks an event rule's ties between events of the same times): numbers first, by
+        value (an integer and a real compared exactly), then text byte by byte, then the
+        SQL type (1 before 1.0).
+
+        >>> SQLiteQueryPrinter().value_order("e0.arg1")
+        ['e0.arg1', 'typeof(e0.arg1)']
+        """
+        return [value, f"typeof({value})"]
+
     def comparison(self, op: str, a: str, kind_a: str, b: str, kind_b: str) -> str:
         """``a op b`` for an arithmetic comparison of two numbers of the kinds ``float``
         (a double), ``small`` (an integer constant of at most 2**53), ``int`` (another
@@ -284,6 +295,22 @@ class PostgresQueryPrinter:
         return (f"(CASE slr_typeof({value}) WHEN 'integer' THEN CAST({value} AS numeric) "
                 f"WHEN 'real' THEN {_exact(f'CAST({value} AS double precision)')} "
                 f"ELSE slr_num({value}) END)")
+
+    def value_order(self, value: str) -> list[str]:
+        # SQLite's order of the values (a column of text here would put 12 before 9, and
+        # an atom that reads as a number, stored tagged as {"$atom":"9"}, after every
+        # letter): numbers by their exact value (text has none: NULL, after the numbers
+        # in ascending order), then the text SQLite stores, byte by byte (an atom that
+        # SQLite keeps untagged is read out of its tag; one holding U+0000 stays tagged,
+        # PostgreSQL text cannot hold the character), then the SQL type
+        number = (f"CASE slr_typeof({value}) WHEN 'integer' THEN CAST({value} AS numeric) "
+                  f"WHEN 'real' THEN {_exact(f'CAST({value} AS double precision)')} END")
+        text = (f"(CASE WHEN slr_typeof({value}) = 'text' THEN "
+                f"CASE WHEN left({value}, 10) = '{{\"$atom\":\"' "
+                f"AND substr({value}, 11, 1) NOT IN ('[', '{{', '\\') "
+                f"AND strpos({value}, '\\u0000') = 0 "
+                f"THEN CAST({value} AS json) ->> '$atom' ELSE {value} END END) COLLATE \"C\"")
+        return [number, text, f"slr_typeof({value})"]
 
     def comparison(self, op: str, a: str, kind_a: str, b: str, kind_b: str) -> str:
         # a double meets an integer or a stored value as a NUMERIC (the server would turn
