@@ -34,6 +34,13 @@ def silent_client(port: int):
                    ping_interval=None, max_size=None, close_timeout=1.0)
 
 
+def view_port(process: subprocess.Popen) -> int:
+    """The port `slr foxglove` says it listens on, from its first line."""
+    line = process.stdout.readline()
+    assert line.startswith("foxglove: ws://127.0.0.1:"), process.stderr.read()
+    return int(line.split(":")[3].split()[0])
+
+
 def subscribe(ws, topic: str) -> None:
     channels: dict[str, int] = {}
     deadline = time.monotonic() + DEADLINE
@@ -52,14 +59,11 @@ def test_a_client_that_never_reads_does_not_keep_the_view_from_stopping(tmp_path
     db = tmp_path / "robot.db"
     with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
         kb.add_many([("seg", ("cup1", [0.4]), 1.0, 1.0)])
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
     process = subprocess.Popen([sys.executable, "-m", "slr_sql", "foxglove", str(db),
                                 "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                               text=True, env=env)
+                               text=True, env={**os.environ, "PYTHONPATH": str(REPO)})
     try:
-        line = process.stdout.readline()
-        assert line.startswith("foxglove: ws://127.0.0.1:"), process.stderr.read()
-        port = int(line.split(":")[3].split()[0])
+        port = view_port(process)
         with silent_client(port) as silent, FoxgloveClient(port) as reader:
             subscribe(silent, "/seg/2")
             reader.pump(lambda: "/seg/2" in reader.channels, time.monotonic() + DEADLINE)
@@ -298,14 +302,11 @@ def test_a_slow_client_of_large_messages_holds_at_most_the_backlog_bytes(tmp_pat
     db = tmp_path / "robot.db"
     with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
         kb.add_many([("camera", ("x",), 1.0, 1.0)])
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
     process = subprocess.Popen([sys.executable, "-m", "slr_sql", "foxglove", str(db),
                                 "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                               text=True, env=env)
+                               text=True, env={**os.environ, "PYTHONPATH": str(REPO)})
     try:
-        line = process.stdout.readline()
-        assert line.startswith("foxglove: ws://127.0.0.1:"), process.stderr.read()
-        port = int(line.split(":")[3].split()[0])
+        port = view_port(process)
         with silent_client(port) as silent, FoxgloveClient(port) as reader:
             subscribe(silent, "/camera/1")
             reader.pump(lambda: "/camera/1" in reader.channels, time.monotonic() + DEADLINE)
