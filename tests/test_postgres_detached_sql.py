@@ -14,10 +14,12 @@ import slr_sql
 from slr_sql import SLRTimeout, SLRUnavailable
 from slr_sql.store import postgres as pg_backend
 
-# 1-2 s of the server's CPU (2-4 ns per character of the text times the pattern's), and no
-# check of statement_timeout until it ends: 5-10 times the tests' timeout of 0.2 s, long
-# enough to be still running when the caller is back, and each test waits it out
-LONG_LIKE = "SELECT repeat('0', 500000) LIKE ('%' || repeat('0', 1000) || '1') AS tag_{}"
+# LIKE over a long text checks statement_timeout only when it ends. Its length is chosen
+# (long_like) for 1.5-2 s of this server's CPU: well past the tests' timeout of 0.2 s and the
+# caller's grace of 0.5 s, so still running when the caller is back, and short enough to wait
+# out. (Fixed at 500,000 characters it took 0.46 s on a faster machine, which ended it --
+# stopped at its timeout -- within the grace, and the tests failed.)
+LIKE = "SELECT repeat('0', {n}) LIKE ('%' || repeat('0', 1000) || '1') AS tag_{tag}"
 
 
 def _running(admin_url: str, tag: str) -> bool:
@@ -35,19 +37,16 @@ def _wait_until_done(admin_url: str, tag: str, seconds: float = 120.0) -> None:
         time.sleep(0.05)
 
 
-def _abandon(kb, tag: str) -> str:
-    """Run LONG_LIKE with a short timeout until the server is still running it when the
-    caller is given back; its tag. (On a loaded machine the server may reach its timeout
-    before the LIKE has begun -- while it is parsed or waits for a core -- and then stops
-    it as any statement: that is not the case under test, so a longer timeout is tried.)"""
-    for n, timeout in enumerate((0.2, 0.4, 0.8, 1.2)):
-        try:
-            kb.sql(LONG_LIKE.format(f"{tag}{n}"), timeout=timeout)
-        except SLRTimeout as exc:
-            if "left to finish on its own connection" in str(exc):
-                return f"{tag}{n}"
-            assert "statement timeout" in str(exc), exc
-    raise AssertionError("the server stopped every long LIKE at its timeout")
+@pytest.fixture(scope="module")
+def long_like(postgres_server) -> str:
+    """LIKE with a text long enough for about 1.5 s of the server's CPU ({tag} to fill)."""
+    n = 500_000
+    with psycopg.connect(postgres_server[1], autocommit=True) as conn:
+        began = time.monotonic()
+        conn.execute(LIKE.format(n=n, tag="calibrate"))
+        took = time.monotonic() - began
+    n = min(int(n * 1.5 / max(took, 0.05)), 20_000_000)
+    return LIKE.replace("{n}", str(n))
 
 
 @pytest.fixture
@@ -57,27 +56,30 @@ def kb(postgres_url):
 
 
 def test_a_statement_the_server_does_not_stop_leaves_the_store_and_its_caller_free(
-        kb, postgres_server):
+        kb, postgres_server, long_like):
     admin = postgres_server[1]
-    tag = _abandon(kb, "a")
+    with pytest.raises(SLRTimeout, match="left to finish on its own connection"):
+        kb.sql(long_like.format(tag="a"), timeout=0.2)
     # the caller is back while the server still runs it...
-    assert _running(admin, tag)
+    assert _running(admin, "a")
     # ...and the store's own connection serves writers and readers meanwhile
     kb.add("seg(cup1)^1")
     assert kb.query("seg(X)^T") == [{"X": "cup1", "T": 1.0}]
     assert kb.sql("SELECT arg1 FROM seg")[1] == [("cup1",)]
-    _wait_until_done(admin, tag)
+    _wait_until_done(admin, "a")
     assert kb.sql("SELECT 1 AS one", timeout=5)[1] == [(1,)]
 
 
-def test_only_a_few_abandoned_statements_may_run_at_once(kb, postgres_server, monkeypatch):
+def test_only_a_few_abandoned_statements_may_run_at_once(kb, postgres_server, monkeypatch,
+                                                         long_like):
     admin = postgres_server[1]
     monkeypatch.setattr(pg_backend, "MOST_ABANDONED", 1)
-    tag = _abandon(kb, "b")
+    with pytest.raises(SLRTimeout):
+        kb.sql(long_like.format(tag="b"), timeout=0.2)
     with pytest.raises(SLRUnavailable, match="still run on the server past their timeouts"):
         kb.sql("SELECT 1 AS one")
     kb.add("seg(cup1)^1")       # writers are not held up
-    _wait_until_done(admin, tag)
+    _wait_until_done(admin, "b")
     # the abandoned statement's thread gave its slot back when the server answered
     deadline = time.monotonic() + 30
     while True:
