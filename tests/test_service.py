@@ -310,6 +310,16 @@ def test_a_large_batch_goes_in_several_requests_and_keeps_indexes(remote, tag):
 
 # -- synchronized queries over long-poll ---------------------------------------------------
 
+def test_a_query_cancelled_as_soon_as_submitted_is_cancelled(server, remote, tag):
+    """The client's poller sends its first GET right after the submit: when the cancel's
+    DELETE reached the server first, the GET met the handle gone (404) and failed the query
+    with "no submitted query ...", so cancel() answered False (about 2 in 100)."""
+    complete_only_as_marked(remote, f"{tag}seen/1")
+    for _ in range(200):
+        waiting = remote.submit(f"{tag}seen(X)^T", at=1e9)
+        assert waiting.cancel() and waiting.cancelled()
+
+
 def test_submitted_query_waits_until_another_client_completes_the_history(server, remote, tag):
     complete_only_as_marked(remote, f"{tag}seen/1")
     remote.add(f"{tag}seen(a)^1")

@@ -762,6 +762,9 @@ class RemotePendingQuery(Future):
         self.waiting_for: list[RemoteWait] = []   # as of the latest reply
         self._waiting = ""                        # the server's words for it
         self._explanation: str | None = None
+        # set by cancel() before its DELETE: the poller's GET in flight then meets the
+        # handle already gone (404), which is the cancel's outcome, not the query's
+        self._cancelling = False
 
     def __repr__(self) -> str:
         state = "answered" if self.done() else "waiting"
@@ -798,6 +801,7 @@ class RemotePendingQuery(Future):
     def cancel(self) -> bool:
         if self.done():
             return False
+        self._cancelling = True
         try:
             self.client._request("DELETE", f"/submit/{quote(self.handle)}", ok=(200, 404))
         except SLRError:
@@ -850,7 +854,8 @@ class RemotePendingQuery(Future):
                                                     timeout=POLL_WAIT + client.timeout,
                                                     ok=(200, 202))
                 except SLRError as exc:  # the query's own error, or the server is gone
-                    self._fail(exc)
+                    if not self._cancelling:
+                        self._fail(exc)
                     return
                 self._settle(status, reply)
         finally:
