@@ -70,8 +70,10 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
 
     A robot's mark is kept per robot; the fleet store's own mark of a type is the least mark
     of the robots it knows, once every one of them has marked it (a history of the fleet is
-    complete up to t when each robot's is). The store's own name is not among them: its
-    own events are complete as far as its own marks say.
+    complete up to t when each robot's is). The robots it knows are those it holds rows or
+    marks of and those whose last contact said events wait on them (``pending`` above 0); a
+    contact alone makes no robot one the mark waits for. The store's own name is not among
+    them: its own events are complete as far as its own marks say.
 
     >>> import slr_sql
     >>> fleet = slr_sql.open()
@@ -134,10 +136,12 @@ def receive(kb: Host, robot: str, batches: list, marks: dict | None = None,
                 for mk, t in its_marks.items():
                     store.meta_raise(f"{FLEET_MARK}{who}/{mk}", float(t))
             # the robots the fleet knows: those it holds events of (relayed ones included),
-            # those that made contact (a robot whose store has marks and no event yet counts
-            # from its first mark), and this one -- not the store itself, whose own events
-            # are complete as far as its own marks say (they raise the same mark)
-            robots = set(store.robots()) | {r["robot"] for r in store.fleet_contacts()}
+            # those that made contact and have a history here or on the way (a robot whose
+            # store has marks and no event yet counts from its first mark), and this one --
+            # not the store itself, whose own events are complete as far as its own marks
+            # say (they raise the same mark)
+            robots = set(store.robots()) | {r["robot"] for r in store.fleet_contacts()
+                                            if _holds_marks_back(store, r)}
             robots.add(robot)
             robots.discard(store.robot)
             for mk in sorted({mk for its_marks in given.values() for mk in its_marks}):
@@ -249,6 +253,27 @@ def _check_relayed(relayed: Any) -> None:
             check_robot_name(who)
         except SLRError as exc:
             raise SLRError(f"a shipment's relayed marks: {exc}") from None
+
+
+def _holds_marks_back(store: Any, contact: dict) -> bool:
+    """Whether a robot of ``slr fleet status`` (``contact``, a row of ``fleet_contacts``) is
+    one the fleet's marks wait for: one whose rows this store holds (relayed, or shipped
+    by itself), one whose pusher said at its last contact that events wait on it, one with
+    a mark kept here. A contact alone (pending 0, no rows, no marks: a robot whose store
+    holds nothing yet, or anyone using a new name with the fleet's token) is not: there is
+    no history of it to wait for, and waiting for its mark would hold every synchronized
+    query on the fleet back until that name shipped one.
+
+    >>> import slr_sql; fleet = slr_sql.open()
+    >>> _holds_marks_back(fleet.store, {"robot": "r9", "shipped": 0, "pending": 0, "via": None})
+    False
+    >>> _holds_marks_back(fleet.store, {"robot": "r9", "shipped": 0, "pending": 2, "via": None})
+    True
+    """
+    if contact["via"] is not None or contact["shipped"] or contact["pending"]:
+        return True
+    prefix = f"{FLEET_MARK}{contact['robot']}/"
+    return any(names_a_type(key[len(prefix):]) for key in store.meta_items(prefix))
 
 
 def _check_mark_routes(store: Any, robot: str, given: dict) -> None:
