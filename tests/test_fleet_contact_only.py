@@ -19,16 +19,9 @@ import slr_sql
 from slr_sql import fleet
 from slr_sql.shipping import receive
 
+from test_fleet_relay import robot_store
+
 TOKEN = "fleet-token-shared-by-every-robot"
-
-
-def robot_store(path, robot: str, until: float | None, events: tuple = ()) -> str:
-    with slr_sql.open(path, robot=robot, clock=slr_sql.ManualClock(1000)) as kb:
-        for event in events:
-            kb.add(event)
-        if until is not None:
-            kb.mark_complete("seen/1", until)
-    return str(path)
 
 
 def mark_complete(path, until: float) -> None:

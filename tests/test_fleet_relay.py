@@ -16,12 +16,14 @@ import slr_sql
 from slr_sql import fleet
 
 
-def robot_store(path, robot: str, until: float | None, events: tuple = ()) -> None:
+def robot_store(path, robot: str, until: float | None, events: tuple = ()) -> str:
+    """A store of ``robot`` holding ``events``, seen/1 marked complete up to ``until``."""
     with slr_sql.open(path, robot=robot, clock=slr_sql.ManualClock(1000)) as kb:
         for event in events:
             kb.add(event)
         if until is not None:
             kb.mark_complete("seen/1", until)
+    return str(path)
 
 
 def meta(path, key: str):
