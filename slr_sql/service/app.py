@@ -22,6 +22,7 @@ subscription is consumed with ``async for`` on the event loop (no thread per sub
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
 import logging
 import math
@@ -29,7 +30,7 @@ import re
 import time
 import uuid
 from dataclasses import dataclass
-from typing import Any, Awaitable, Callable
+from typing import Any, AsyncIterator, Awaitable, Callable
 
 from starlette.applications import Starlette
 from starlette.middleware import Middleware
@@ -76,6 +77,7 @@ class Limits:
     max_pending: int = 10_000        # submitted queries kept at once (503 beyond)
     sql_timeout: float = 30.0        # seconds a read-only SQL statement may run
     subscribe_queue: int = 1000      # answers held in memory per WebSocket subscriber
+    max_running_queries: int = 4     # queries and SQL statements evaluated at once (see below)
 
 
 # -- small helpers -----------------------------------------------------------------------------
@@ -387,6 +389,9 @@ class _Service:
         self.kb = kb
         self.check_token = BearerToken(token)
         self.limits = limits
+        self._query_slots: tuple[Any, asyncio.Semaphore] | None = None   # (its loop, it)
+        self.queries_running = 0      # holding a slot (query_slot)
+        self.queries_waiting = 0      # waiting for one
         self.submitted: dict[str, _Submitted] = {}
         self.answer_texts = _AnswerTexts()
         self.fanout: FanOut | None = None
@@ -496,6 +501,42 @@ class _Service:
     async def call(self, fn: Callable, *args: Any, **kwargs: Any) -> Any:
         """Run a blocking knowledge-base call on the thread pool."""
         return await run_in_threadpool(fn, *args, **kwargs)
+
+    @contextlib.asynccontextmanager
+    async def query_slot(self, wait: float) -> AsyncIterator[float]:
+        """Hold one of the ``max_running_queries`` slots for the body (a query or a SQL
+        statement evaluated on the thread pool); yields the seconds waited for it, for the
+        caller to take off the query's own timeout. A query evaluated by the interpreter
+        holds the GIL: 40 of them at once (the pool's size) left an add 1/41 of the
+        interpreter, and no thread at all, so ingestion stood still for as long as they ran
+        (an add waited 46 s beside 60 queries of 1.5 s). Beyond the slots a query waits
+        here, without a thread, ``wait`` seconds at most, then is answered 503 with
+        ``Retry-After`` (the ones before it may be done by then); adds, marks and loads
+        never take a slot."""
+        loop = asyncio.get_running_loop()
+        if self._query_slots is None or self._query_slots[0] is not loop:
+            # (one per loop: an app served by one loop after another, as tests do)
+            self._query_slots = (loop, asyncio.Semaphore(self.limits.max_running_queries))
+        slots = self._query_slots[1]
+        started = time.monotonic()
+        self.queries_waiting += 1
+        try:
+            async with asyncio.timeout(wait):
+                await slots.acquire()
+        except TimeoutError:
+            running = self.limits.max_running_queries
+            raise ServiceUnavailable(
+                f"the server is busy: {running} quer{'y' if running == 1 else 'ies'} (its "
+                f"max_running_queries) ran all the {wait:g} s this one could wait; try "
+                f"again") from None
+        finally:
+            self.queries_waiting -= 1
+        self.queries_running += 1
+        try:
+            yield time.monotonic() - started
+        finally:
+            self.queries_running -= 1
+            slots.release()
 
     # -- submitted queries ----------------------------------------------------------------------
     def _entry(self, request: Request) -> "_Submitted":
@@ -750,12 +791,14 @@ def _route(method: str, path: str, summary: str, *, body: dict | None = None,
     return register
 
 
-@_route("GET", "/health", "Liveness, version and limits (no token needed).",
+@_route("GET", "/health", "Liveness, version, limits and the queries running and "
+        "waiting for a slot (no token needed).",
         auth=False, response={"status": "string", "version": "string",
-                              "api": "string", "limits": "object"})
+                              "api": "string", "limits": "object", "queries": "object"})
 async def _health(svc: "_Service", request: Request) -> Any:
     return {"status": "ok", "version": slr_sql.__version__, "api": API_VERSION,
-            "limits": dataclasses.asdict(svc.limits)}
+            "limits": dataclasses.asdict(svc.limits),
+            "queries": {"running": svc.queries_running, "waiting": svc.queries_waiting}}
 
 
 @_route("GET", "/openapi.json", "This API's OpenAPI 3.1 description.",
@@ -891,15 +934,17 @@ async def _query(svc: "_Service", request: Request) -> Any:
     max_steps = _field(b, "max_steps", int)
     robot = _field(b, "robot", str)
     if _field(b, "wait", bool, default=False):
-        pending = await svc.call(svc.kb.submit, goal, at=at, args=args,
-                                  timeout=_cap(timeout, svc.limits.max_wait),
-                                  **({"robot": robot} if robot is not None else {}))
+        async with svc.query_slot(svc.limits.max_query_time):
+            pending = await svc.call(svc.kb.submit, goal, at=at, args=args,
+                                     timeout=_cap(timeout, svc.limits.max_wait),
+                                     **({"robot": robot} if robot is not None else {}))
         answers = await _unless_the_client_leaves(request, pending)
     else:
-        answers = await svc.call(svc.kb.query, goal, at=at, args=args, limit=limit,
-                                  timeout=_cap(timeout, svc.limits.max_query_time),
-                                  max_steps=max_steps,
-                                  **({"robot": robot} if robot is not None else {}))
+        budget = _cap(timeout, svc.limits.max_query_time)
+        async with svc.query_slot(budget) as waited:
+            answers = await svc.call(svc.kb.query, goal, at=at, args=args, limit=limit,
+                                     timeout=max(budget - waited, 0.0), max_steps=max_steps,
+                                     **({"robot": robot} if robot is not None else {}))
     return {"answers": encode_answers(answers)}
 
 
@@ -924,9 +969,10 @@ async def _submit(svc: "_Service", request: Request) -> Any:
     if sum(1 for s in svc.submitted.values() if not s.pending.done()) >= svc.limits.max_pending:
         raise ServiceUnavailable(f"{svc.limits.max_pending} submitted queries are pending "
                                  f"already")
-    pending = await svc.call(svc.kb.submit, goal, at=at, id=qid, args=args,
-                              timeout=_cap(timeout, svc.limits.max_wait),
-                              **({"robot": robot} if robot is not None else {}))
+    async with svc.query_slot(svc.limits.max_query_time):
+        pending = await svc.call(svc.kb.submit, goal, at=at, id=qid, args=args,
+                                 timeout=_cap(timeout, svc.limits.max_wait),
+                                 **({"robot": robot} if robot is not None else {}))
     handle = uuid.uuid4().hex
     entry = _Submitted(handle, pending, asyncio.wrap_future(pending))
     pending.add_done_callback(entry.finished)
@@ -1062,7 +1108,9 @@ async def _sql(svc: "_Service", request: Request) -> Any:
         if p is not None and type(p) not in (int, float, str):
             raise ServiceError(f"params[{i}]: a SQL parameter is a number, a string "
                                f"or null")
-    columns, rows = await svc.call(_read_only_sql, svc.kb, statement, params, timeout)
+    async with svc.query_slot(timeout) as waited:
+        columns, rows = await svc.call(_read_only_sql, svc.kb, statement, params,
+                                       max(timeout - waited, 0.0))
     return {"columns": list(columns), "rows": encode_plain([list(r) for r in rows])}
 
 

@@ -57,6 +57,29 @@ def prepare_collector_for_serving() -> None:
     gc.set_threshold(SERVING_GC_THRESHOLD, *gc.get_threshold()[1:])
 
 
+# Seconds a thread holding the GIL runs before a thread that waits for it gets it (Python's
+# default is 0.005): see prepare_switching_for_serving.
+SERVING_SWITCH_INTERVAL = 0.0005
+
+
+def prepare_switching_for_serving() -> None:
+    """Hand the GIL over ten times as often as Python's default while serving.
+
+    A request thread that releases the GIL (every SQLite call does) waits to take it back
+    until the thread holding it lets go, at the latest after the switch interval. An add
+    beside four CPU-bound queries (the interpreter holds the GIL) takes it back dozens of
+    times: 0.55-0.94 s with the default 5 ms, 0.06-0.11 s with 0.5 ms (benchmarks/README.md,
+    "Adds beside slow queries"); the queries lose a few per cent to the extra switches.
+
+    >>> import sys
+    >>> before = sys.getswitchinterval()
+    >>> prepare_switching_for_serving(); sys.getswitchinterval() == SERVING_SWITCH_INTERVAL
+    True
+    >>> sys.setswitchinterval(before)
+    """
+    sys.setswitchinterval(SERVING_SWITCH_INTERVAL)
+
+
 def is_loopback(host: str) -> bool:
     """True when every address ``host`` names is a loopback address.
 
@@ -265,6 +288,7 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
         shown = f"[{bound_host}]" if ":" in bound_host else bound_host
         scheme = "https" if ssl_certfile else "http"
         prepare_collector_for_serving()
+        prepare_switching_for_serving()
         if view is not None:
             print(f"slr serve: foxglove on ws://{foxglove[0]}:{view.port}", flush=True)
         # (kb.path: a PostgreSQL URL without its password, as every message shows it)
@@ -296,6 +320,9 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
               show_default=True, help="Seconds a query may run (the cap of timeout=).")
 @click.option("--max-wait", default=3600.0, type=click.FloatRange(0.001), show_default=True,
               help="Seconds a synchronized query may wait.")
+@click.option("--max-running-queries", default=4, type=click.IntRange(1), show_default=True,
+              help="Queries and SQL statements evaluated at once; the others wait for a "
+                   "slot (HTTP 503 after --max-query-time). Adds never wait for one.")
 @click.option("--max-connections", default=1000, type=click.IntRange(1), show_default=True,
               help="Open connections at once (beyond: HTTP 503).")
 @click.option("--ssl-keyfile", type=click.Path(exists=True, dir_okay=False), default=None,
@@ -323,7 +350,8 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
               help="How long a request waits for another process's lock on DB before it is "
                    "answered 503 with Retry-After.")
 def serve(db: str, host: str, port: int, token: str | None, max_body: int,
-          max_query_time: float, max_wait: float, max_connections: int,
+          max_query_time: float, max_wait: float, max_running_queries: int,
+          max_connections: int,
           ssl_keyfile: str | None, ssl_certfile: str | None, ws_compression: bool,
           cache_mib: float, foxglove: bool, foxglove_host: str, foxglove_port: int,
           shutdown_grace: float, busy_timeout: float) -> None:
@@ -336,7 +364,8 @@ def serve(db: str, host: str, port: int, token: str | None, max_body: int,
     except ImportError as exc:
         raise slr_sql.SLRError(f"slr serve needs the service extra ({exc.name} is missing): "
                                f"pip install 'slr_sql[service]'") from None
-    limits = Limits(max_body=max_body, max_query_time=max_query_time, max_wait=max_wait)
+    limits = Limits(max_body=max_body, max_query_time=max_query_time, max_wait=max_wait,
+                    max_running_queries=max_running_queries)
     run_server(db, host, port, token, limits=limits, max_connections=max_connections,
                ssl_keyfile=ssl_keyfile, ssl_certfile=ssl_certfile,
                ws_compression=ws_compression, cache_mib=cache_mib,
