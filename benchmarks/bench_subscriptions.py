@@ -82,7 +82,7 @@ def run_latency(mode: str, subscribers: int, rate: float, seconds: float, synchr
     receivers = [Receiver(n) for _ in range(subscribers)]
     added_at = [0.0] * n
     cpu0 = time.process_time()
-    with slr_sql.open(path, synchronous=synchronous) as kb:
+    with slr_sql.open(path, synchronous=synchronous, clock=slr_sql.ManualClock(0.0)) as kb:
         subs = []
         consumers: list[threading.Thread] = []
         loop_thread = None
@@ -218,7 +218,7 @@ def run_baseline(mode: str, subscribers: int, rate: float, seconds: float) -> di
 
 
 def add_rate(subscribers: int, events: int, synchronous: str, path: Path) -> float:
-    with slr_sql.open(path, synchronous=synchronous) as kb:
+    with slr_sql.open(path, synchronous=synchronous, clock=slr_sql.ManualClock(0.0)) as kb:
         receivers = [Receiver(events) for _ in range(subscribers)]
         subs = [kb.subscribe("p(I, V)^T", callback=r.receive, since=0) for r in receivers]
         t0 = time.perf_counter()
