@@ -62,6 +62,19 @@ def test_a_password_given_as_a_parameter_is_not_shown(tmp_path, secret_part):
     assert "cannot connect" in result.stderr, result.stderr
 
 
+@pytest.mark.parametrize("userinfo", [
+    "robot:Hunter2@secret@", "robot:Hun@ter2/se@cret@", "robot:Hunter2%40secret@"])
+def test_no_part_of_a_password_with_an_at_sign_is_shown(tmp_path, userinfo):
+    """A password holding '@' unescaped (libpq's URL wants %40): the user's part ends at the
+    last '@' before the host, and nothing of it up to there was to be shown."""
+    url = f"postgresql://{userinfo}nowhere.invalid/db?host={tmp_path}"
+    with pytest.raises(slr_sql.SLRError) as caught:
+        slr_sql.open(url)
+    for part in ("Hunter2", "secret", "cret", "ter2"):
+        assert part not in str(caught.value)
+    assert "robot:***@" in str(caught.value)
+
+
 def test_slr_serve_does_not_print_the_password_of_its_store(postgres_url, tmp_path):
     """``slr serve: DB on http://...`` printed DB as given, password and all, on the
     standard output a service manager keeps in its log."""

@@ -255,13 +255,24 @@ def shown_location(where: Any) -> str:
 
     >>> shown_location("postgresql://robot:s3cret@db/fleet?sslpassword=k3y&schema=a")
     'postgresql://robot:***@db/fleet?sslpassword=***&schema=a'
+    >>> shown_location("postgresql://robot:p@ss@db/fleet")     # an '@' left unescaped
+    'postgresql://robot:***@db/fleet'
     >>> shown_location("robot.db")
     'robot.db'
     """
     text = str(where)
     if not is_postgres_url(text):
         return text
-    text = re.sub(r"(://[^:/@]*):[^@]*@", r"\1:***@", text)
+    # the user's part ends at the last '@' (a host has none; a password written without
+    # escaping may): everything between the user's ':' and it is hidden, so no part of such a
+    # password shows (an '@' further on, in a parameter, hides the host too: better than a
+    # password)
+    scheme_end = text.find("://") + 3
+    first_at, last_at = text.find("@", scheme_end), text.rfind("@")
+    if first_at >= 0:
+        colon = text.find(":", scheme_end, first_at)   # (none: a user without a password)
+        if colon >= 0:
+            text = text[:colon + 1] + "***" + text[last_at:]
     return re.sub(r"([?&](?:ssl)?password=)[^&#]*", r"\1***", text, flags=re.IGNORECASE)
 
 
