@@ -1245,6 +1245,8 @@ def _alc3(m, a):
     sep = text_of(a[1])
     items, tail = list_items(a[0])
     if type(tail) is Atom and all(type(deref(x)) is not Var for x in items):
+        if len(sep) * (len(items) - 1) > MAX_BUILT_TEXT:   # (the separator repeated)
+            raise resource_error("memory")
         return m.unify(a[2], Atom(sep.join(text_of(x) for x in items)))
     if not sep:
         raise instantiation_error()
@@ -1295,6 +1297,12 @@ def proper_list(t: Any) -> list:
 # 150 bytes a cell, so 1.5 GB. Longer is resource_error(memory) at once, instead of a
 # MemoryError after minutes (SWI-Prolog's 1 GB stacks stop at a similar size).
 MAX_BUILT_LIST = 10_000_000
+# The longest text one builtin call makes by repeating (format/2's counts and columns: ~Nc,
+# ~Nn, ~Nd, ~*c; tab/1; atomic_list_concat/3's separator): 64 Mi characters, the most a
+# read-only SQL statement may make too. Longer is resource_error(memory) at once: a query's
+# format(atom(A), "~1000000000n", []) built a 1 GB atom in one Python step, 5 GB of the
+# server's memory and 20 s, past the query's timeout (which is looked at between steps).
+MAX_BUILT_TEXT = 64 << 20
 # Cells built between two looks at the query's deadline.
 _CELLS_PER_DEADLINE_CHECK = 1 << 16
 
@@ -1580,6 +1588,8 @@ def _tab(m: "Machine", a: list) -> bool:
         raise type_error("integer_expression", n)
     if n > sys.maxsize:
         raise evaluation_error("int_overflow")
+    if n > MAX_BUILT_TEXT:
+        raise resource_error("memory")
     _out(m).write(" " * n)
     return True
 
@@ -1593,7 +1603,7 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
     >>> format_text("~w has ~d items~n", [Atom("cup"), 3])
     'cup has 3 items\\n'
     """
-    out: list[str] = []
+    out = _BoundedText()
     args = list(args)
     i = 0
     n = len(fmt)
@@ -1684,12 +1694,29 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
 
 
 def _count(num: str, default: int) -> int:
-    """The numeric argument of a format directive (``~3d``, ``~*c``), or ``default``."""
+    """The numeric argument of a format directive (``~3d``, ``~*c``), or ``default``; a
+    count beyond :data:`MAX_BUILT_TEXT` is resource_error(memory)."""
     if not num:
         return default
     if len(num) > 12:  # ~99999999999999999d: no column or count is that large
         raise resource_error("memory")
-    return int(num)
+    count = int(num)
+    if count > MAX_BUILT_TEXT:
+        raise resource_error("memory")
+    return count
+
+
+class _BoundedText(list):
+    """format/2's output so far: resource_error(memory) once it passes MAX_BUILT_TEXT
+    characters (many directives, each within the bound)."""
+
+    size = 0
+
+    def append(self, piece: str) -> None:
+        self.size += len(piece)
+        if self.size > MAX_BUILT_TEXT:
+            raise resource_error("memory")
+        super().append(piece)
 
 
 def _char(code: Any) -> str:

@@ -4,14 +4,15 @@ documented bound), never with a raw Python exception, a hang or a crash.
 
 The bounds (docs/language.md, "Limits"): integers of at most terms.MAX_INTEGER_BITS bits;
 lists of at most builtins.MAX_BUILT_LIST cells built by one numlist/3, length/2 or
-functor/3 call; no limit on term nesting.
+functor/3 call; texts of at most builtins.MAX_BUILT_TEXT characters made by repeating (format/2's
+counts, tab/1, atomic_list_concat/3's separator); no limit on term nesting.
 """
 from __future__ import annotations
 
 import pytest
 
 import slr_sql
-from slr_sql.builtins import MAX_BUILT_LIST
+from slr_sql.builtins import MAX_BUILT_LIST, MAX_BUILT_TEXT
 from slr_sql.errors import SLRError, SLREvaluationError, SLRTimeout
 from slr_sql.terms import MAX_INTEGER_BITS, Struct, Var, format_term
 
@@ -180,6 +181,21 @@ def test_a_list_of_fifty_million_cells_is_a_resource_error_at_once(kb, timeout):
     assert error_of(kb, f"numlist(1, {MAX_BUILT_LIST + 1}, L)", timeout=timeout) == \
         "resource_error(memory)"
     assert error_of(kb, "functor(F, f, 100000000)", timeout=timeout) == "resource_error(memory)"
+
+
+@pytest.mark.parametrize("goal", [
+    'format(atom(A), "~1000000000n", [])', 'format(atom(A), "~900000000d", [1])',
+    'format(atom(A), "~*c", [1000000000, 0\'a])', 'format(atom(A), "~900000000D", [1])',
+    f'format(atom(A), "~{MAX_BUILT_TEXT // 2 + 1}c~{MAX_BUILT_TEXT // 2 + 1}c", [0\'a, 0\'b])',
+    "tab(900000000)",
+    "length(L, 1000), maplist(=(x), L), format(atom(S), \"~100000c\", [0'-]), "
+    "atomic_list_concat(L, S, A)",
+])
+def test_a_text_repeated_beyond_the_bound_is_a_resource_error_at_once(kb, goal):
+    """Each was a single Python step building gigabytes (5 GB of memory for the first, 20 s,
+    past any timeout), which a query over the service could ask for."""
+    assert error_of(kb, goal, timeout=5) == "resource_error(memory)"
+    assert kb.query('format(atom(A), "~3c~2d~n", [0\'a, 314])') == [{"A": slr_sql.Atom("aaa3.14\n")}]
 
 
 def test_building_a_long_list_stops_when_the_time_is_up(kb):
