@@ -286,7 +286,8 @@ def load(db: str, file: str, name: str, replace: bool) -> None:
     _existing_file(file)
     with _open(db) as kb:
         kb.load_file(file, name=name, replace=replace)
-    click.echo(f"{'replaced' if replace else 'loaded'} {printable_name(file)} as program {name!r}")
+    click.echo(f"{'replaced' if replace else 'loaded'} {printable_name(file)} as program "
+               f"{printable_name(name)}")
     _warn_event_like_facts(file, db)
 
 
@@ -583,12 +584,15 @@ def ingest(db: str, file: str, progress: bool | None) -> None:
     with _open(db) as kb:
         if progress and terminal:
             from rich.console import Console
+            from rich.markup import escape
             from rich.progress import BarColumn, DownloadColumn, Progress, TimeRemainingColumn
 
             columns = ("[progress.description]{task.description}", BarColumn(),
                        DownloadColumn(), TimeRemainingColumn())
             with Progress(*columns, console=Console(stderr=True), transient=True) as bar:
-                task = bar.add_task(f"ingesting {os.path.basename(label)}", total=size)
+                # (the description is rich markup: a file's name is text, never markup)
+                task = bar.add_task(
+                    f"ingesting {escape(printable_name(os.path.basename(label)))}", total=size)
                 report = ingest_file(kb, source, lambda n: bar.update(task, advance=n))
         elif progress:
             report = ingest_file(kb, source, LineProgress(f"ingesting {label}", size))
@@ -869,7 +873,7 @@ def unload(db: str, name: str) -> None:
     """Remove the program NAME (its clauses, declarations and buffers; events stay)."""
     with _open(db, create=False) as kb:
         kb.unload(name)
-    click.echo(f"unloaded program {name!r}")
+    click.echo(f"unloaded program {printable_name(name)}")
 
 
 @dataclass

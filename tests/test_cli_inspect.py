@@ -54,7 +54,7 @@ def test_programs_source_prints_the_text(store):
 
 def test_unload_removes_a_program_and_its_buffers_but_keeps_the_events(store):
     r = slr("unload", store, "tea")
-    assert (r.returncode, r.stdout) == (0, "unloaded program 'tea'\n")
+    assert (r.returncode, r.stdout) == (0, "unloaded program tea\n")
     assert [line.split(":")[0] for line in slr("programs", store).stdout.splitlines()] == ["main"]
     assert "buffers" not in slr("describe", store, "obj").stdout
     assert slr("query", store, "obj(O, _, _)^T", "--json").stdout.count("\n") == 2

@@ -90,6 +90,7 @@ def import_command(bag: str, db_argument: str | None, db_option: str | None,
     if not os.path.exists(bag):
         raise slr_sql.SLRError(f"no such bag: {bag}")
     from rich.console import Console
+    from rich.markup import escape
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                TimeRemainingColumn)
 
@@ -106,8 +107,9 @@ def import_command(bag: str, db_argument: str | None, db_option: str | None,
                 TextColumn("[progress.description]{task.description}"), BarColumn(),
                 MofNCompleteColumn(), TimeRemainingColumn(), console=console,
                 transient=True) as bar:
-            task = bar.add_task(f"importing {os.path.basename(os.path.normpath(bag))}",
-                                total=None)
+            # (the description is rich markup: the bag's name is text, never markup)
+            name = printable_name(os.path.basename(os.path.normpath(bag)))
+            task = bar.add_task(f"importing {escape(name)}", total=None)
 
             def progress(done: int, total: int) -> None:
                 nonlocal started
