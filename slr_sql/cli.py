@@ -1452,8 +1452,9 @@ def _completion_words(kb: KnowledgeBaseAPI) -> list[str]:
     if store is not None:
         words |= {name for name, _ in store.event_types()}
     words |= {name for name, _ in BUILTIN_NAMES} | {name for name, _ in CONTROL}
-    # (a name that needs quotes is not completed: it is typed with its quotes)
-    return sorted(w for w in words if not w.startswith("$")
+    # (a name that needs quotes is not completed: it is typed with its quotes; member_/3 is
+    # member/2's helper, named as in SWI-Prolog's library, which does not export it either)
+    return sorted(w for w in words if not w.startswith("$") and w != "member_"
                   and re.fullmatch(r"[a-z][A-Za-z0-9_]*", w))
 
 
