@@ -14,6 +14,7 @@ so they need no nested interpreter either.
 """
 from __future__ import annotations
 
+import os
 import time
 from math import copysign
 from typing import Any, Callable, Iterator
@@ -26,6 +27,31 @@ from .terms import (Atom, Struct, Var, deref, format_atom, format_term, term_var
 from .unify import bound_args, copy_term, undo, unify, unify_event_row
 
 __all__ = ["Engine", "Machine", "unify", "copy_term", "PrologThrow"]
+
+# How much one query may grow the process's resident memory, looked at every
+# _MEMORY_CHECK_EVERY limit checks (2048 steps each) from its first: beyond is
+# resource_error(memory), catchable by catch/3 as in SWI-Prolog, whose 1 GB stacks stop a
+# query at a similar size. Without it nth1(100000000, L, x) grew ~40 MB a second until its
+# timeout: four such queries over the service (--max-running-queries) held gigabytes for
+# 30 s, enough to have a robot's store server killed for memory. The process's resident
+# set, not the query's own: a query beside others that grow may meet it first.
+MAX_QUERY_GROWTH = 1 << 30
+_MEMORY_CHECK_EVERY = 16
+_PAGE_SIZE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
+
+
+def resident_bytes() -> int | None:
+    """The process's resident memory now, in bytes (Linux's /proc); None where unknown.
+
+    >>> resident_bytes() is None or resident_bytes() > 0
+    True
+    """
+    try:
+        with open("/proc/self/statm", "rb") as statm:
+            return int(statm.read().split()[1]) * _PAGE_SIZE
+    except (OSError, ValueError, IndexError):
+        return None
+
 
 # choicepoint kinds
 K_CLAUSES, K_GEN, K_ALT, K_DEAD, K_COLLECT, K_CATCH, K_REACTIVATE = range(7)
@@ -101,6 +127,8 @@ class Machine:
         self.deadline = time.monotonic() + timeout if timeout is not None else None
         self.max_steps = max_steps
         self.timeout = timeout
+        self._memory_base: int | None = None   # resident bytes at its first look
+        self._memory_checks = 0                # limit checks until the next look
         # hooks for synchronized queries: called before prev/next read the store
         self.on_prev: Callable | None = None
         self.on_next: Callable | None = None
@@ -241,6 +269,18 @@ class Machine:
         if self.deadline is not None and time.monotonic() > self.deadline:
             raise SLRTimeout(f"query timed out after {self.timeout} s "
                              f"({self.steps} inference steps)")
+        self._memory_checks -= 1
+        if self._memory_checks <= 0:
+            self._memory_checks = _MEMORY_CHECK_EVERY
+            now = resident_bytes()
+            if now is not None:
+                if self._memory_base is None:
+                    self._memory_base = now
+                elif now - self._memory_base > MAX_QUERY_GROWTH:
+                    # (caught, what it built is let go; freed memory stays resident, so the
+                    # query may grow as much again from here)
+                    self._memory_base = now
+                    raise resource_error("memory")
 
     def _backtrack(self):
         """Resume the newest choicepoint; returns the continuation, or False when none is left."""

@@ -4,7 +4,7 @@ documented bound), never with a raw Python exception, a hang or a crash.
 
 The bounds (docs/language.md, "Limits"): integers of at most terms.MAX_INTEGER_BITS bits;
 lists of at most builtins.MAX_BUILT_LIST cells built by one numlist/3, length/2 or
-functor/3 call; texts of at most builtins.MAX_BUILT_TEXT characters made by repeating (format/2's
+functor/3 call; a query grows the process's memory by at most engine.MAX_QUERY_GROWTH; texts of at most builtins.MAX_BUILT_TEXT characters made by repeating (format/2's
 counts, tab/1, atomic_list_concat/3's separator); no limit on term nesting.
 """
 from __future__ import annotations
@@ -12,6 +12,7 @@ from __future__ import annotations
 import pytest
 
 import slr_sql
+from slr_sql import engine
 from slr_sql.builtins import MAX_BUILT_LIST, MAX_BUILT_TEXT
 from slr_sql.errors import SLRError, SLREvaluationError, SLRTimeout
 from slr_sql.terms import MAX_INTEGER_BITS, Struct, Var, format_term
@@ -196,6 +197,20 @@ def test_a_text_repeated_beyond_the_bound_is_a_resource_error_at_once(kb, goal):
     past any timeout), which a query over the service could ask for."""
     assert error_of(kb, goal, timeout=5) == "resource_error(memory)"
     assert kb.query('format(atom(A), "~3c~2d~n", [0\'a, 314])') == [{"A": slr_sql.Atom("aaa3.14\n")}]
+
+
+@pytest.mark.parametrize("goal", [
+    "nth1(100000000, L, x)", "length(L, N), N > 20000000",
+    "findall(X, between(1, inf, X), L)"])
+def test_a_query_that_keeps_growing_is_a_resource_error_not_a_timeout(kb, goal, monkeypatch):
+    """Each grew the process by tens of MB a second until its timeout (4 of them over the
+    service: gigabytes); past engine.MAX_QUERY_GROWTH (1 GiB, lowered here to be quick) of the
+    process's resident memory it is resource_error(memory), which catch/3 catches."""
+    monkeypatch.setattr(engine, "MAX_QUERY_GROWTH", 48 << 20)
+    assert error_of(kb, goal, timeout=120) == "resource_error(memory)"
+    caught = f"catch(({goal}), error(resource_error(memory), _), true)"
+    assert kb.query(caught, timeout=120) == [{}] or goal.startswith("length")
+    assert kb.query("X = 1") == [{"X": 1}]
 
 
 def test_building_a_long_list_stops_when_the_time_is_up(kb):
