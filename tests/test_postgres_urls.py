@@ -87,6 +87,15 @@ def test_a_password_parameter_with_an_escaped_name_is_not_shown(tmp_path, secret
     assert "***" in str(caught.value)
 
 
+def test_a_password_parameter_holding_a_hash_sign_is_hidden_whole(tmp_path):
+    """A '#' written unescaped in ``?password=`` ends the URL's query for split_url, and the
+    message showed the rest of what the user wrote as the password."""
+    url = f"postgresql:///nowhere?host={tmp_path}&password=Hunter2#secretpart"
+    with pytest.raises(slr_sql.SLRError) as caught:
+        slr_sql.open(url)
+    assert "Hunter2" not in str(caught.value) and "secretpart" not in str(caught.value)
+
+
 def test_a_password_libpq_cannot_decode_is_not_shown_in_its_words(tmp_path):
     """libpq refuses a bad %-escape quoting the token: "invalid percent-encoded token:
     \"Hunter2%zzsecret\"", the password itself, in slr's "cannot connect (...)"."""

@@ -275,8 +275,9 @@ def shown_location(where: Any) -> str:
         if colon >= 0:
             text = text[:colon + 1] + "***" + text[last_at:]
     # a parameter's name is decoded as its value is, by libpq and by split_url (pass%77ord is
-    # password): the name is compared decoded
-    return re.sub(r"([?&])([^=&#]*)=([^&#]*)",
+    # password): the name is compared decoded; a value runs on over a '#' (written
+    # unescaped in a password, what follows it is the password's too)
+    return re.sub(r"([?&])([^=&#]*)=([^&]*)",
                   lambda m: f"{m[1]}{m[2]}=***" if unquote(m[2]).lower() in _PASSWORD_KEYS
                   else m[0], text)
 
