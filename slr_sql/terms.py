@@ -71,13 +71,15 @@ def int_from_text(digits: str, base: int = 10) -> int:
     >>> int_from_text("1" * 5000) % 1000, int_from_text("ff", 16), int_from_text("-7")
     (111, 255, -7)
     """
-    if base != 10 or len(digits) <= _PIECE_DIGITS:
+    # (int() has no limit in a base that is a power of two, and the limit in any other)
+    if len(digits) <= _PIECE_DIGITS or base & (base - 1) == 0:
         return int(digits, base)
     if digits[0] == "-":
-        return -int_from_text(digits[1:])
+        return -int_from_text(digits[1:], base)
     half = len(digits) // 2
-    return (int_from_text(digits[:-half]) * _power_of_ten(half)
-            + int_from_text(digits[-half:]))
+    scale = _power_of_ten(half) if base == 10 else base ** half
+    return (int_from_text(digits[:-half], base) * scale
+            + int_from_text(digits[-half:], base))
 
 
 class Atom(str):

@@ -62,3 +62,16 @@ def test_the_service_sends_and_takes_the_integer(db, tmp_path):
         assert response.status_code == 400, response.text
         assert "integer too large" in response.json()["error"]["message"]
         assert server.healthy()
+
+
+@pytest.mark.parametrize("radix, digit", [(3, "2"), (36, "z"), (10, "7")])
+def test_a_radix_integer_of_more_than_4300_digits_is_read(radix, digit):
+    """R'digits in a base that is no power of two: int(digits, R) has the 4,300-digit limit
+    too, and the query failed with "ValueError: Exceeds the limit ..." in Python's words."""
+    digits = digit * 5000
+    with slr_sql.open(":memory:") as kb:
+        answer = kb.query(f"X = {radix}'{digits}, Y is X mod 1000003")
+    expected = 0
+    for _ in digits:
+        expected = (expected * radix + int(digit, 36)) % 1000003
+    assert answer[0]["Y"] == expected

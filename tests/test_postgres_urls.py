@@ -75,6 +75,37 @@ def test_no_part_of_a_password_with_an_at_sign_is_shown(tmp_path, userinfo):
     assert "robot:***@" in str(caught.value)
 
 
+@pytest.mark.parametrize("secret_part", [
+    "pass%77ord=Hunter2secret", "%70assword=Hunter2secret", "sslpass%77ord=Hunter2secret"])
+def test_a_password_parameter_with_an_escaped_name_is_not_shown(tmp_path, secret_part):
+    """libpq decodes a parameter's name as its value (``pass%77ord`` is ``password``), and so
+    does split_url: such a password reached the server and showed in the message as written."""
+    url = f"postgresql:///nowhere?host={tmp_path}&{secret_part}"
+    with pytest.raises(slr_sql.SLRError) as caught:
+        slr_sql.open(url)
+    assert "Hunter2secret" not in str(caught.value)
+    assert "***" in str(caught.value)
+
+
+def test_a_password_parameter_holding_a_hash_sign_is_hidden_whole(tmp_path):
+    """A '#' written unescaped in ``?password=`` ends the URL's query for split_url, and the
+    message showed the rest of what the user wrote as the password."""
+    url = f"postgresql:///nowhere?host={tmp_path}&password=Hunter2#secretpart"
+    with pytest.raises(slr_sql.SLRError) as caught:
+        slr_sql.open(url)
+    assert "Hunter2" not in str(caught.value) and "secretpart" not in str(caught.value)
+
+
+def test_a_password_libpq_cannot_decode_is_not_shown_in_its_words(tmp_path):
+    """libpq refuses a bad %-escape quoting the token: "invalid percent-encoded token:
+    \"Hunter2%zzsecret\"", the password itself, in slr's "cannot connect (...)"."""
+    url = f"postgresql://robot:Hunter2%zzsecret@/nowhere?host={tmp_path}"
+    with pytest.raises(slr_sql.SLRError) as caught:
+        slr_sql.open(url)
+    assert "Hunter2" not in str(caught.value) and "secret" not in str(caught.value)
+    assert "robot:***@" in str(caught.value)
+
+
 def test_slr_serve_does_not_print_the_password_of_its_store(postgres_url, tmp_path):
     """``slr serve: DB on http://...`` printed DB as given, password and all, on the
     standard output a service manager keeps in its log."""

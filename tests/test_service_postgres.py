@@ -181,6 +181,9 @@ def test_a_subscription_holding_nul_is_taken_as_on_a_file(backend, tmp_path):
     "SELECT set_config('search_path', 'public', false)",
     "SELECT pg_notify('slr_pending', 'slr')",
     "SELECT U&\"\\0070g_read_file\"('PG_VERSION')",
+    # ts_stat runs the text it is given as a query, where no name is seen before it runs
+    "SELECT * FROM ts_stat('SELECT to_tsvector(count(pg_' || 'terminate_backend(pid))::text) "
+    "FROM pg_stat_activity WHERE datname = current_database() AND pid <> pg_backend_pid()')",
 ])
 def test_sql_over_the_service_refuses_what_acts_beyond_reading(postgres_url, tmp_path,
                                                                  statement):

@@ -34,6 +34,7 @@ import time
 import weakref
 from contextlib import contextmanager
 from typing import Any, Callable, Iterable, Iterator
+from urllib.parse import unquote
 
 from ..errors import SLRError, SLRStoreGone, SLRTimeout
 from ..lockorder import ordered_lock
@@ -273,7 +274,30 @@ def shown_location(where: Any) -> str:
         colon = text.find(":", scheme_end, first_at)   # (none: a user without a password)
         if colon >= 0:
             text = text[:colon + 1] + "***" + text[last_at:]
-    return re.sub(r"([?&](?:ssl)?password=)[^&#]*", r"\1***", text, flags=re.IGNORECASE)
+    # a parameter's name is decoded as its value is, by libpq and by split_url (pass%77ord is
+    # password): the name is compared decoded; a value runs on over a '#' (written
+    # unescaped in a password, what follows it is the password's too)
+    return re.sub(r"([?&])([^=&#]*)=([^&]*)",
+                  lambda m: f"{m[1]}{m[2]}=***" if unquote(m[2]).lower() in _PASSWORD_KEYS
+                  else m[0], text)
+
+
+_PASSWORD_KEYS = ("password", "sslpassword")
+
+
+def password_token(where: str) -> str:
+    """The password of a PostgreSQL URL's user part as written ('' if none): libpq quotes
+    it in some of its messages (a bad %-escape), which say so with it hidden.
+
+    >>> password_token("postgresql://robot:s3%zz@db/fleet"), password_token("postgresql://db")
+    ('s3%zz', '')
+    """
+    if not is_postgres_url(where):
+        return ""
+    scheme_end = where.find("://") + 3
+    first_at, last_at = where.find("@", scheme_end), where.rfind("@")
+    colon = where.find(":", scheme_end, first_at) if first_at >= 0 else -1
+    return where[colon + 1:last_at] if colon >= 0 else ""
 
 
 def refuse_no_store(path: str) -> None:

@@ -36,7 +36,7 @@ from ..errors import SLRBusy, SLRCancelled, SLRError, SLRServerUnreachable, SLRS
 from ..lockorder import ordered_lock
 from .connection import Database, DatabaseError, drop_commit_callbacks, in_own_transaction, \
     is_postgres_url, merge_commit_callbacks, run_after_rollback, \
-    run_commit_callbacks, shown_location
+    password_token, run_commit_callbacks, shown_location
 from .authorizer import transaction_control_refusal
 from .dialect import POSTGRES
 from .functions import SqlFunctions
@@ -1108,7 +1108,12 @@ class PgDatabase:
         try:
             raw = psycopg.connect(conninfo, autocommit=True)
         except psycopg.Error as exc:
-            raise SLRError(f"{self.path}: cannot connect ({_first_line(exc)})") from None
+            reason = _first_line(exc)
+            secret = password_token(url)
+            if secret:
+                # libpq quotes a token it cannot decode: the password, when it is one
+                reason = reason.replace(secret, "***")
+            raise SLRError(f"{self.path}: cannot connect ({reason})") from None
         self.conn = PgConnection(raw, self.path, busy_timeout)
         self.detached = DetachedStatements(conninfo, schema, self.path, busy_timeout)
         try:

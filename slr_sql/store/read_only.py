@@ -44,7 +44,8 @@ _PRAGMA = re.compile(r"pragma\s+(?:main\.)?(\w+)\s*(?:\([\w\"'`\[\].\s]*\))?\Z",
 # sessions (ending or cancelling them: every other `slr serve` on the store, any other
 # application), on the server (its configuration, logs, WAL, replication, statistics),
 # on its files (reading them, listing folders: a superuser role's, or pg_read_server_files'),
-# session-level locks and notifications, and text run as a statement (query_to_xml, dblink),
+# session-level locks and notifications, and text run as a statement (query_to_xml, dblink,
+# ts_stat, ts_rewrite),
 # which a check of names cannot see into. A client of /sql reads the store; none of these is
 # needed for that. Matched as an identifier (any case, quoted or schema-qualified) before
 # its opening parenthesis, comments between them included; a name inside a string literal
@@ -58,7 +59,8 @@ _SERVER_FUNCTIONS = re.compile(
     r"|pg_\w*replication_\w+|pg_logical_\w+|pg_replication_origin_\w+"
     r"|pg_stat_reset\w*|pg_import_system_collations|pg_drop_\w+|pg_create_\w+"
     r"|pg_stat_statements_reset|brin_\w+|gin_clean_pending_list"
-    r"|query_to_xml\w*|cursor_to_xml\w*|dblink\w*|lo_\w+)(?![\w$])\"?", re.I)
+    r"|query_to_xml\w*|cursor_to_xml\w*|dblink\w*|ts_stat|ts_rewrite|lo_\w+)(?![\w$])\"?",
+    re.I)
 _SPACES = re.compile(r"\s*")
 
 
