@@ -1242,7 +1242,8 @@ class Shell:
 
     def _load_file(self, path: str) -> None:
         self.kb.load_file(path)
-        self.echo(f"loaded {path}")
+        # (named as slr load names a file: a name with a control character quoted, as writeq)
+        self.echo(f"loaded {printable_name(path)}")
 
     def _add(self, event: str) -> None:
         self.kb.add(strip_full_stop(event))

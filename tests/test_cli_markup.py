@@ -67,3 +67,14 @@ def test_load_and_unload_name_the_program_as_the_cli_names_things(tmp_path):
     r = slr("load", db, str(tmp_path / "tea.slr"), "--name", "it's\nhot")
     assert r.stdout.endswith(" as program 'it\\'s\\nhot'\n"), r.stdout
     assert slr("unload", db, "tea").stdout == "unloaded program tea\n"
+
+
+def test_the_shell_names_a_loaded_file_as_slr_load_does(tmp_path):
+    # a file name with a tab: quoted and escaped as one name, as slr load prints it,
+    # not escaped in place (which read as two words with a backslash)
+    name = tmp_path / "te\ta.slr"
+    name.write_text("hot(tea).\n", encoding="utf-8")
+    db = str(tmp_path / "t.db")
+    assert slr("load", db, str(tmp_path / "te\ta.slr"), "--name", "x").returncode == 0
+    r = slr("shell", db, stdin=f"load '{name}'.\nhot(X).\n")
+    assert f"loaded '{tmp_path}/te\\ta.slr'\n" in r.stdout, (r.stdout, r.stderr)
