@@ -447,7 +447,7 @@ class Catalog:
                     rows = [tuple(map(dialect.to_column, row)) for row in rows]
                 if arity:
                     index = quote_identifier("slr_facts_ix_" + plain[len("slr_facts_"):])
-                    execute(f"CREATE INDEX {index} ON {table} (arg1)")
+                    execute(f"CREATE INDEX {index} ON {table}{dialect.equality_index} (arg1)")
                 self.db.executemany(f"INSERT INTO {table} VALUES (?{', ?' * arity})",
                                     [(i,) + tuple(row) for i, row in enumerate(rows)])
                 out[(name, arity)] = table

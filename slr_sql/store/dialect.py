@@ -45,6 +45,7 @@ class Dialect(Protocol):
     name: str
     paramstyle: str
     text_holds_nul: bool
+    equality_index: str
     zero_signs_in_sql: bool
 
     def statement(self, sql: str) -> str: ...
@@ -78,6 +79,7 @@ class SQLiteDialect(SQLiteQueryPrinter):
     # (here a separate read costs less than RETURNING's buffered copy)
     copies_returning = False
     text_holds_nul = True    # a TEXT value may contain U+0000
+    equality_index = ""      # how an index used only by ``=`` is built (a B-tree)
     # the most UTF-8 bytes of an event's first argument as stored (None: no limit)
     first_argument_bytes: int | None = None
     identifier_bytes: int | None = None   # names of any length
@@ -144,6 +146,9 @@ class PostgresDialect(PostgresQueryPrinter):
     # (a catalog read for triggers and a separate read are two more round trips)
     copies_returning = True
     text_holds_nul = False   # text cannot contain U+0000 (values escape it as JSON)
+    # a B-tree entry holds at most 2,704 bytes, a hash index's only the value's 4-byte hash:
+    # an index read only by ``=`` (a fact's first argument) takes a value of any length
+    equality_index = " USING hash"
     # an event's first argument is a key of two B-tree indexes ((arg1, t_end), (arg1,
     # t_start)), whose entries hold at most 2,704 bytes: a longer text (or one compressing
     # to more) fails the whole statement, every event of its batch with it, in the server's
