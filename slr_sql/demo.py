@@ -261,20 +261,23 @@ def _plan_line(kb: KnowledgeBaseAPI, goal: str) -> str:
 
 
 def _print_result(console: Any, result: DemoResult) -> None:
+    from rich.markup import escape   # goals, plans and notes are text: a list [a, b] in
+                                     # them is no markup tag
+
     q = result.query
     at = "" if q.at is None else f"   [dim](at={q.at:g})[/dim]"
-    console.print(f"\n[bold cyan]control>[/bold cyan] [bold]{q.title}[/bold]")
-    console.print(f"  [green]?-[/green] {q.goal}.{at}", markup=True, highlight=False)
+    console.print(f"\n[bold cyan]control>[/bold cyan] [bold]{escape(q.title)}[/bold]")
+    console.print(f"  [green]?-[/green] {escape(q.goal)}.{at}", markup=True, highlight=False)
     if not result.answers:
         console.print("  [red]false.[/red]")
     for answer in result.answers:
         for line in _display_answer(answer):
             console.print("  " + line, markup=False, highlight=False)
-    console.print(f"  [dim]why: {q.why}[/dim]", highlight=False)
+    console.print(f"  [dim]why: {escape(q.why)}[/dim]", highlight=False)
     if result.plan:
-        console.print(f"  [dim]plan: {result.plan}[/dim]", highlight=False)
+        console.print(f"  [dim]plan: {escape(result.plan)}[/dim]", highlight=False)
     for note in result.notes:
-        console.print(f"  [yellow]{note}[/yellow]", highlight=False)
+        console.print(f"  [yellow]{escape(note)}[/yellow]", highlight=False)
 
 
 def _display_answer(answer: dict[str, Any]) -> list[str]:

@@ -329,3 +329,22 @@ def test_ingest_fast_path_reads_events_like_the_parser(text):
             rows.append([{c: v for c, v in zip(columns, row) if c not in ("seq", "arrival")} for row in data])
     assert rows[0] == rows[1]
     assert [type(v) for v in rows[0][0].values()] == [type(v) for v in rows[1][0].values()]
+
+
+def test_the_demo_prints_goals_plans_and_notes_as_text_not_markup():
+    """A list [cup1, cup2] in a goal, a plan or a note read as a rich markup tag (an unknown
+    style): it vanished from what the demo printed."""
+    import io
+
+    from rich.console import Console
+
+    from slr_sql.demo import DemoQuery, DemoResult, _print_result
+
+    out = io.StringIO()
+    query = DemoQuery("[bold]title", "member(X, [cup1, cup2])", None, "why [cup1]")
+    _print_result(Console(file=out, width=200),
+                  DemoResult(query, [{"X": 1}], plan="plan [cup1, cup2]", notes=["[a, b]"]))
+    printed = out.getvalue()
+    for text in ("[bold]title", "member(X, [cup1, cup2]).", "why [cup1]",
+                 "plan [cup1, cup2]", "[a, b]"):
+        assert text in printed, printed
