@@ -119,3 +119,40 @@ def test_read_only_statements_in_many_threads_answer_alike(kb):
 def test_a_write_through_read_only_sql_is_still_refused(kb):
     with pytest.raises(slr_sql.SLRError, match="read-only"):
         kb.sql("DELETE FROM slr_meta")
+
+
+def test_a_statement_that_finds_every_connection_busy_is_slr_busy_not_a_timeout(
+        kb, postgres_server, postgres_url):
+    """Every connection of read-only SQL runs a statement (here each waits for a lock another
+    session holds): one more waits its timeout for a connection and did not start, a
+    condition that passes (SLRBusy: the service answers 503 with Retry-After), not the
+    SLRTimeout of a statement that ran too long."""
+    kb.add("seen(cup1)^1")
+    table = "slr.slr_meta"                           # (a table of every store; its schema)
+    with psycopg.connect(postgres_url) as holder:
+        holder.execute(f"LOCK TABLE {table} IN ACCESS EXCLUSIVE MODE")
+        answers: list = []
+        waiting = [threading.Thread(target=lambda: answers.append(
+            kb.sql(f"SELECT count(*) AS tag_locked FROM {table}", timeout=120)))
+            for _ in range(pg_backend.MOST_RUNNING)]
+        for t in waiting:
+            t.start()
+        deadline = time.monotonic() + 60
+        while not _count_waiting_for_lock(postgres_server[1]) == pg_backend.MOST_RUNNING:
+            assert time.monotonic() < deadline, "the statements never waited for the lock"
+            time.sleep(0.02)
+        with pytest.raises(slr_sql.SLRBusy) as caught:
+            kb.sql("SELECT 1", timeout=0.3)
+        assert "did not start" in str(caught.value) and "try again" in str(caught.value)
+        holder.rollback()                            # (the lock goes: they all answer)
+    for t in waiting:
+        t.join(60)
+    assert len(answers) == pg_backend.MOST_RUNNING
+    assert kb.sql("SELECT 1 AS one", timeout=60)[1] == [(1,)]
+
+
+def _count_waiting_for_lock(admin_url: str) -> int:
+    with psycopg.connect(admin_url, autocommit=True) as conn:
+        return conn.execute(
+            "SELECT count(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock' "
+            "AND query LIKE %s", ("%AS tag_locked%",)).fetchone()[0]

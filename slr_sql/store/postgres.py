@@ -973,8 +973,11 @@ class DetachedStatements:
         deadline = None if timeout is None else time.monotonic() + timeout
         # (waiting for a slot counts against the caller's timeout)
         if not self.slots.acquire(timeout=timeout):
-            raise SLRTimeout(f"query timed out (waiting {timeout:g} s for one of the "
-                             f"{MOST_RUNNING} connections that run read-only statements)")
+            # (a condition that passes as the others end: SLRBusy, the service's 503 with
+            # Retry-After, not a timeout of a statement that never started)
+            raise SLRBusy(f"{self.where}: the {MOST_RUNNING} connections that run read-only "
+                          f"SQL statements were all busy for the {timeout:g} s this one could "
+                          f"wait; it did not start (try again)")
         with self.lock:
             raw, self.idle = self.idle, None
             if self.closed:
