@@ -659,7 +659,7 @@ def _number_of_text(s: str, leading_layout: bool) -> Any:
         s = s[1:]
     if not s[:1].isdigit():
         return None
-    from .parser import parse_term
+    from .parser import _parser, parse_term
 
     try:
         t, _ = parse_term(s)
@@ -667,6 +667,11 @@ def _number_of_text(s: str, leading_layout: bool) -> Any:
         # "1.0." are no numbers, as in SWI-Prolog): with one already there, a second fails
         parse_term(s + "\n.")
     except SLRError:
+        return None
+    # nor a comment after it: the reader skips "1/**/" and "1%c" to 1, but the number token
+    # must be the whole text (SWI-Prolog: illegal_number); the text parsed, so it lexes
+    tokens = list(_parser().lex(s))
+    if len(tokens) != 1 or tokens[0].end_pos != len(s):
         return None
     t = deref(t)
     if type(t) is not int and type(t) is not float:

@@ -277,6 +277,10 @@ GOALS = [
     'number_string(N, "1.")', 'number_string(N, " 1")', 'number_string(N, "1 ")',
     'number_string(N, "abc")', 'number_string(N, "")', 'number_string(N, "- 1")',
     'number_string(N, "+1")', 'number_string(N, "0x1A")', 'number_string(N, "-1.5e3")',
+    # a comment after a number's text: no number (the reader alone skips it to 1)
+    'number_codes(X, "1/**/")', 'number_codes(X, "1%c")', "atom_number('1/**/', X)",
+    "atom_number('1%c', X)", 'number_string(N, "1/**/")', 'number_codes(X, "0\'%")',
+    'number_codes(X, "/**/1")', "term_to_atom(T, '1/**/')", "term_to_atom(T, '1/**/+2')",
     "callable('[|]'(a, []))",
     'compare(O, [], "s")',
     'compare(O, [a], 1/2)',
