@@ -1225,11 +1225,15 @@ def _string_code(m, a):
 
 @det("number_string", 2)
 def _number_string(m, a):
-    s = deref(a[1])
+    n, s = deref(a[0]), deref(a[1])
+    # as SWI-Prolog: a bound first argument must be a number, and the text a string or a
+    # code or character list (an atom or a number there is type_error(list, ..))
+    if type(n) is not Var and type(n) is not int and type(n) is not float:
+        raise type_error("number", n)
     if type(s) is not Var:
         # a text that is no number fails (SWI-Prolog's number_string, unlike ISO's
         # number_codes, raises no syntax error), and so does one with layout around it
-        n = _number_of_text(text_of(s), leading_layout=False)
+        n = _number_of_text(_list_text(s), leading_layout=False)
         return n is not None and m.unify(a[0], n)
     return m.unify(s, String(text_of(a[0])))
 

@@ -277,6 +277,12 @@ GOALS = [
     'number_string(N, "1.")', 'number_string(N, " 1")', 'number_string(N, "1 ")',
     'number_string(N, "abc")', 'number_string(N, "")', 'number_string(N, "- 1")',
     'number_string(N, "+1")', 'number_string(N, "0x1A")', 'number_string(N, "-1.5e3")',
+    # number_string/2's errors: a bound first argument that is no number, a text that is
+    # no string or code list (an atom or a number too: SWI-Prolog's type_error(list, ..))
+    'number_string(a, S)', 'number_string(a, "1")', 'number_string(f(x), S)',
+    "number_string(N, '12')", 'number_string(N, 12)', "number_string(1, '1')",
+    'number_string(1, f(x))', "number_string(N, [0'1|_])", "number_string(N, [0'1|a])",
+    'number_string(N, [f(x)])', 'number_string(N, [])', "number_string(N, ['1'])",
     # a comment after a number's text: no number (the reader alone skips it to 1)
     'number_codes(X, "1/**/")', 'number_codes(X, "1%c")', "atom_number('1/**/', X)",
     "atom_number('1%c', X)", 'number_string(N, "1/**/")', 'number_codes(X, "0\'%")',
