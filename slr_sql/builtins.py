@@ -1645,7 +1645,11 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
         elif d in "pq":
             out.append(_write_text(take(), True, deadline))
         elif d == "a":
-            out.append(text_of(take()))
+            # atomic only: SWI-Prolog's ~a refuses a code list and [] (text_of takes them)
+            arg = deref(take())
+            if arg == NIL or (type(arg) is Struct and arg.name == "." and len(arg.args) == 2):
+                raise type_error("atomic", arg)
+            out.append(text_of(arg))
         elif d in "dD":
             v = evaluate(take())
             if type(v) is not int:

@@ -780,3 +780,26 @@ def test_the_witness_form_x_minus_w_answers_as_x_comma_w_in_swipl(swipl, kind, i
     _, _, swi, [(_, _, names)] = swidiff.builtin_example(theirs)
     example = ("", [], swi, [(ours, theirs, names)])
     assert swidiff.check_example(example, swipl.run(example[2])) is not swidiff.DISCARDED
+
+
+# format's ~a takes atomic text only: SWI-Prolog refuses a code list, [] and a compound with
+# its own format_argument_type(a, Culprit); slr_sql raises ISO's type_error(atomic, Culprit)
+# (as for ~d, LEFT_ALONE) for the same culprit, where it wrote the list's text.
+FORMAT_A_REFUSED = ["[104, 105]", "[]", "[a, b]", "f(x)", "\"hi\" - 1"]
+
+
+@pytest.mark.parametrize("culprit", FORMAT_A_REFUSED)
+def test_format_a_refuses_what_swipl_refuses(swipl, culprit):
+    import slr_sql
+    from slr_sql.errors import SLREvaluationError
+
+    goal = f'format(atom(A), "~a", [{culprit}])'
+    theirs = swipl.run(swidiff.builtin_example(goal)[2])[0]
+    assert theirs["answers"] == [] and theirs["error"] is not None
+    kind, (directive, swi_culprit) = swidiff.from_swi(theirs["error"], {})[1:]
+    assert (kind, directive) == ("format_argument_type", ("a", "a"))
+    with slr_sql.open(clock=slr_sql.ManualClock(0)) as kb:
+        with pytest.raises(SLREvaluationError) as raised:
+            kb.query(goal)
+    assert swidiff.canonical_error(raised.value.term) == \
+        ("c", "type_error", (("a", "atomic"), swi_culprit))
