@@ -1703,6 +1703,8 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
             pass  # column alignment is not supported; text is emitted unpadded
         else:
             raise iso_error(Struct("format", (String(f"unknown directive ~{d}"),)))
+    if args:  # an argument no directive took (SWI-Prolog's error)
+        raise iso_error(Struct("format", (Atom("too many arguments"),)))
     return "".join(out)
 
 

@@ -126,6 +126,7 @@ GOALS = [
     'format(atom(A), "~q", [\'A b\'])',
     'format(atom(A), "~a", [1])',
     'format(atom(A), "~w and ~w", [x])',
+    'format(atom(A), "~w", [a, b])', 'format(atom(A), "x", [a])', 'format(atom(A), "~i", [a, b])',
     'format(atom(A), "~2f", [3])',
     'format(atom(A), "~e", [1.5])',
     'format(atom(A), "~p", ["s"])',
