@@ -659,7 +659,7 @@ def _number_of_text(s: str, leading_layout: bool) -> Any:
         s = s[1:]
     if not s[:1].isdigit():
         return None
-    from .parser import parse_term
+    from .parser import _parser, parse_term
 
     try:
         t, _ = parse_term(s)
@@ -667,6 +667,11 @@ def _number_of_text(s: str, leading_layout: bool) -> Any:
         # "1.0." are no numbers, as in SWI-Prolog): with one already there, a second fails
         parse_term(s + "\n.")
     except SLRError:
+        return None
+    # nor a comment after it: the reader skips "1/**/" and "1%c" to 1, but the number token
+    # must be the whole text (SWI-Prolog: illegal_number); the text parsed, so it lexes
+    tokens = list(_parser().lex(s))
+    if len(tokens) != 1 or tokens[0].end_pos != len(s):
         return None
     t = deref(t)
     if type(t) is not int and type(t) is not float:
@@ -1220,11 +1225,15 @@ def _string_code(m, a):
 
 @det("number_string", 2)
 def _number_string(m, a):
-    s = deref(a[1])
+    n, s = deref(a[0]), deref(a[1])
+    # as SWI-Prolog: a bound first argument must be a number, and the text a string or a
+    # code or character list (an atom or a number there is type_error(list, ..))
+    if type(n) is not Var and type(n) is not int and type(n) is not float:
+        raise type_error("number", n)
     if type(s) is not Var:
         # a text that is no number fails (SWI-Prolog's number_string, unlike ISO's
         # number_codes, raises no syntax error), and so does one with layout around it
-        n = _number_of_text(text_of(s), leading_layout=False)
+        n = _number_of_text(_list_text(s), leading_layout=False)
         return n is not None and m.unify(a[0], n)
     return m.unify(s, String(text_of(a[0])))
 
@@ -1636,7 +1645,11 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
         elif d in "pq":
             out.append(_write_text(take(), True, deadline))
         elif d == "a":
-            out.append(text_of(take()))
+            # atomic only: SWI-Prolog's ~a refuses a code list and [] (text_of takes them)
+            arg = deref(take())
+            if arg == NIL or (type(arg) is Struct and arg.name == "." and len(arg.args) == 2):
+                raise type_error("atomic", arg)
+            out.append(text_of(arg))
         elif d in "dD":
             v = evaluate(take())
             if type(v) is not int:
@@ -1690,6 +1703,8 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
             pass  # column alignment is not supported; text is emitted unpadded
         else:
             raise iso_error(Struct("format", (String(f"unknown directive ~{d}"),)))
+    if args:  # an argument no directive took (SWI-Prolog's error)
+        raise iso_error(Struct("format", (Atom("too many arguments"),)))
     return "".join(out)
 
 

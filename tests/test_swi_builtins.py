@@ -126,6 +126,7 @@ GOALS = [
     'format(atom(A), "~q", [\'A b\'])',
     'format(atom(A), "~a", [1])',
     'format(atom(A), "~w and ~w", [x])',
+    'format(atom(A), "~w", [a, b])', 'format(atom(A), "x", [a])', 'format(atom(A), "~i", [a, b])',
     'format(atom(A), "~2f", [3])',
     'format(atom(A), "~e", [1.5])',
     'format(atom(A), "~p", ["s"])',
@@ -277,6 +278,16 @@ GOALS = [
     'number_string(N, "1.")', 'number_string(N, " 1")', 'number_string(N, "1 ")',
     'number_string(N, "abc")', 'number_string(N, "")', 'number_string(N, "- 1")',
     'number_string(N, "+1")', 'number_string(N, "0x1A")', 'number_string(N, "-1.5e3")',
+    # number_string/2's errors: a bound first argument that is no number, a text that is
+    # no string or code list (an atom or a number too: SWI-Prolog's type_error(list, ..))
+    'number_string(a, S)', 'number_string(a, "1")', 'number_string(f(x), S)',
+    "number_string(N, '12')", 'number_string(N, 12)', "number_string(1, '1')",
+    'number_string(1, f(x))', "number_string(N, [0'1|_])", "number_string(N, [0'1|a])",
+    'number_string(N, [f(x)])', 'number_string(N, [])', "number_string(N, ['1'])",
+    # a comment after a number's text: no number (the reader alone skips it to 1)
+    'number_codes(X, "1/**/")', 'number_codes(X, "1%c")', "atom_number('1/**/', X)",
+    "atom_number('1%c', X)", 'number_string(N, "1/**/")', 'number_codes(X, "0\'%")',
+    'number_codes(X, "/**/1")', "term_to_atom(T, '1/**/')", "term_to_atom(T, '1/**/+2')",
     "callable('[|]'(a, []))",
     'compare(O, [], "s")',
     'compare(O, [a], 1/2)',
@@ -770,3 +781,26 @@ def test_the_witness_form_x_minus_w_answers_as_x_comma_w_in_swipl(swipl, kind, i
     _, _, swi, [(_, _, names)] = swidiff.builtin_example(theirs)
     example = ("", [], swi, [(ours, theirs, names)])
     assert swidiff.check_example(example, swipl.run(example[2])) is not swidiff.DISCARDED
+
+
+# format's ~a takes atomic text only: SWI-Prolog refuses a code list, [] and a compound with
+# its own format_argument_type(a, Culprit); slr_sql raises ISO's type_error(atomic, Culprit)
+# (as for ~d, LEFT_ALONE) for the same culprit, where it wrote the list's text.
+FORMAT_A_REFUSED = ["[104, 105]", "[]", "[a, b]", "f(x)", "\"hi\" - 1"]
+
+
+@pytest.mark.parametrize("culprit", FORMAT_A_REFUSED)
+def test_format_a_refuses_what_swipl_refuses(swipl, culprit):
+    import slr_sql
+    from slr_sql.errors import SLREvaluationError
+
+    goal = f'format(atom(A), "~a", [{culprit}])'
+    theirs = swipl.run(swidiff.builtin_example(goal)[2])[0]
+    assert theirs["answers"] == [] and theirs["error"] is not None
+    kind, (directive, swi_culprit) = swidiff.from_swi(theirs["error"], {})[1:]
+    assert (kind, directive) == ("format_argument_type", ("a", "a"))
+    with slr_sql.open(clock=slr_sql.ManualClock(0)) as kb:
+        with pytest.raises(SLREvaluationError) as raised:
+            kb.query(goal)
+    assert swidiff.canonical_error(raised.value.term) == \
+        ("c", "type_error", (("a", "atomic"), swi_culprit))
