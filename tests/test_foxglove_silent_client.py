@@ -16,6 +16,7 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 from websockets.sync.client import connect
 
 import slr_sql
@@ -415,3 +416,55 @@ def test_a_burst_of_more_than_two_pages_is_sent_without_waiting_for_another_chan
         view.close()
         view_kb.close()
     assert foxglove_live.PAGE_ROWS == 10_000
+
+
+@pytest.mark.parametrize("command", [
+    ["foxglove", "--port", "0", "--message-max"],
+    ["serve", "--port", "0", "--foxglove", "--foxglove-port", "0", "--foxglove-message-max"]])
+def test_a_raised_message_cap_sends_larger_messages_and_queues_fewer(tmp_path, command):
+    """`slr foxglove --message-max` and `slr serve --foxglove-message-max`: a camera topic's
+    100 KB messages, left out at the default 64 KiB, reach a client at a cap of 256 KiB; the
+    SDK then queues 256 of them per slow client, so it still holds at most 64 MiB."""
+    from slr_sql.viz import foxglove_live
+
+    db = tmp_path / "robot.db"
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add_many([("camera", ("x",), 1.0, 1.0)])
+    process = subprocess.Popen([sys.executable, "-m", "slr_sql", command[0], str(db),
+                                *command[1:], str(256 * 1024)],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               env={**os.environ, "PYTHONPATH": str(REPO)})
+    try:
+        line = process.stdout.readline()      # (either says where the view listens first)
+        assert "foxglove" in line and "ws://127.0.0.1:" in line, process.stderr.read()
+        port = int(line.split("ws://127.0.0.1:")[1].split()[0])
+        with FoxgloveClient(port) as reader:
+            reader.pump(lambda: "/camera/1" in reader.channels, time.monotonic() + DEADLINE)
+            reader.subscribe("/camera/1")
+            with slr_sql.open(db, clock=slr_sql.ManualClock(0.0)) as kb:
+                kb.add_many([("camera", ("big" + "b" * 100_000,), 2.0, 2.0)])
+                kb.add_many([("camera", ("huge" + "h" * 300_000,), 3.0, 3.0)])
+                kb.add_many([("camera", ("last",), 4.0, 4.0)])
+            reader.pump(lambda: any(m["arg1"] == "last" for _, m in reader.on("/camera/1")),
+                        time.monotonic() + DEADLINE)
+            got = [m["arg1"][:4] for _, m in reader.on("/camera/1")]
+        process.send_signal(signal.SIGTERM)
+        out, err = process.communicate(timeout=DEADLINE)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    assert "bigb" in got and "huge" not in got and got[-1] == "last", got
+    [said] = [line for line in err.splitlines() if "larger than" in line]
+    assert said.endswith("foxglove: /camera/1: messages larger than 262,144 bytes are left out "
+                         "(the view's limit, so that a slow client holds at most 64 MiB)"), err
+    assert foxglove_live.backlog_messages(256 * 1024) == 256
+
+
+@pytest.mark.parametrize("cap", [100, 1023, True, 2.5e5, "65536"])
+def test_a_message_cap_that_is_no_integer_of_1024_at_least_is_refused_in_words(tmp_path, cap):
+    from slr_sql.viz.foxglove_live import FoxgloveView
+
+    with slr_sql.open(tmp_path / "r.db") as kb:
+        with pytest.raises(slr_sql.SLRError, match="message_max_bytes must be an integer"):
+            FoxgloveView(kb.store, port=0, message_max_bytes=cap)

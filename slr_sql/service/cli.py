@@ -204,6 +204,7 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
                ssl_keyfile: str | None = None, ssl_certfile: str | None = None,
                log_level: str = "warning", ws_compression: bool = False,
                cache_mib: float | None = None, foxglove: tuple[str, int] | None = None,
+               foxglove_message_max: int = 64 * 1024,
                shutdown_grace: float = SHUTDOWN_GRACE,
                busy_timeout: float | None = None) -> None:
     """Open ``db`` and serve it until SIGINT/SIGTERM; then close it.
@@ -215,7 +216,8 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
     the store's SQLite page cache (default 64 MiB), the part of the server's memory that
     grows with the store until it is full. ``foxglove``: ``(host, port)`` of a live Foxglove
     view of the store beside the service (:mod:`slr_sql.viz.foxglove_live`; it has no token:
-    keep it on loopback unless the network is yours). ``shutdown_grace``: seconds the
+    keep it on loopback unless the network is yours); ``foxglove_message_max``: its largest
+    message in bytes (``FoxgloveView``'s ``message_max_bytes``). ``shutdown_grace``: seconds the
     requests in flight get after SIGINT/SIGTERM (a synchronized query may wait for an hour)
     before the server stops anyway. ``busy_timeout``: seconds a request waits for another
     process's lock before it is answered 503 (retryable; default
@@ -269,6 +271,7 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
             view_kb = slr_sql.open(db)   # a connection of its own: it reads while others write
             try:
                 view = FoxgloveView(view_kb.store, host=foxglove[0], port=foxglove[1],
+                                    message_max_bytes=foxglove_message_max,
                                     log=lambda text: view_log.warning("%s", text)).start()
             except OSError as exc:
                 raise slr_sql.SLRError(f"cannot listen on {foxglove[0]}:{foxglove[1]} for "
@@ -341,6 +344,9 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
               help="Address of the Foxglove view (it has no token).")
 @click.option("--foxglove-port", default=8766, type=click.IntRange(0, 65535), show_default=True,
               help="Port of the Foxglove view.")
+@click.option("--foxglove-message-max", default=64 * 1024, type=click.IntRange(1024, 1 << 30),
+              show_default=True, metavar="BYTES",
+              help="Largest message of the Foxglove view (slr foxglove --message-max).")
 @click.option("--shutdown-grace", default=SHUTDOWN_GRACE, type=click.FloatRange(0.0),
               show_default=True, metavar="SECONDS",
               help="On SIGINT/SIGTERM, how long requests in flight (a waiting synchronized "
@@ -354,6 +360,7 @@ def serve(db: str, host: str, port: int, token: str | None, max_body: int,
           max_connections: int,
           ssl_keyfile: str | None, ssl_certfile: str | None, ws_compression: bool,
           cache_mib: float, foxglove: bool, foxglove_host: str, foxglove_port: int,
+          foxglove_message_max: int,
           shutdown_grace: float, busy_timeout: float) -> None:
     """Serve DB to other processes over HTTP/JSON and WebSocket (docs/service.md).
 
@@ -370,5 +377,5 @@ def serve(db: str, host: str, port: int, token: str | None, max_body: int,
                ssl_keyfile=ssl_keyfile, ssl_certfile=ssl_certfile,
                ws_compression=ws_compression, cache_mib=cache_mib,
                foxglove=(foxglove_host, foxglove_port) if foxglove else None,
-               shutdown_grace=shutdown_grace, busy_timeout=busy_timeout)
+               foxglove_message_max=foxglove_message_max, shutdown_grace=shutdown_grace, busy_timeout=busy_timeout)
     sys.stdout.flush()

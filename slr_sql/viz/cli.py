@@ -35,7 +35,11 @@ def _store_for_view(db: str) -> tuple:
               help="TCP port (0: any free port; the line printed at start names it).")
 @click.option("--poll", default=0.002, type=click.FloatRange(0.0005, 10.0), show_default=True,
               help="Seconds between two looks at the store for new events.")
-def foxglove_command(db: str, host: str, port: int, poll: float) -> None:
+@click.option("--message-max", default=64 * 1024, type=click.IntRange(1024, 1 << 30),
+              show_default=True, metavar="BYTES",
+              help="Largest message sent (larger ones are left out, said once per topic); a "
+                   "slow client holds at most 64 MiB of messages, or one if it is larger.")
+def foxglove_command(db: str, host: str, port: int, poll: float, message_max: int) -> None:
     """Serve DB to Foxglove (WebSocket, foxglove.websocket.v1) until SIGINT or SIGTERM:
     every event type a channel, new events live, tf as foxglove.FrameTransforms."""
     from .foxglove_live import FoxgloveView, forward_sdk_log
@@ -46,7 +50,8 @@ def foxglove_command(db: str, host: str, port: int, poll: float) -> None:
     kb, store = _store_for_view(db)
     try:
         view = FoxgloveView(store, host=host, port=port, poll=poll,
-                            log=lambda text: click.echo(text, err=True)).start()
+                            log=lambda text: click.echo(text, err=True),
+                            message_max_bytes=message_max).start()
     except OSError as exc:
         kb.close()
         raise slr_sql.SLRError(f"cannot listen on {host}:{port}: {exc}") from None

@@ -49,10 +49,19 @@ PAGE_ROWS = 10_000  # rows of one type read in one pass; a full page makes anoth
 # BACKLOG_BYTES (64 MiB) of messages, where 1,024 messages of an event type with megabyte
 # arguments held a gigabyte per slow client
 BACKLOG_MESSAGES = 1024
-MESSAGE_MAX_BYTES = 64 * 1024
+MESSAGE_MAX_BYTES = 64 * 1024    # the default; ``message_max_bytes=`` / --message-max
 BACKLOG_BYTES = BACKLOG_MESSAGES * MESSAGE_MAX_BYTES
-_TOO_LARGE = (f"messages larger than {MESSAGE_MAX_BYTES:,} bytes are left out (the view's "
-              f"limit, so that a slow client holds at most {BACKLOG_BYTES >> 20} MiB)")
+
+
+def backlog_messages(message_max_bytes: int) -> int:
+    """The messages the SDK may queue for one slow client when none is larger than
+    ``message_max_bytes``: as many as make BACKLOG_BYTES (one at least), so a larger cap
+    (a camera topic's images) queues fewer of them and the bytes held stay bounded.
+
+    >>> backlog_messages(MESSAGE_MAX_BYTES), backlog_messages(1 << 20), backlog_messages(1 << 30)
+    (1024, 64, 1)
+    """
+    return max(1, BACKLOG_BYTES // message_max_bytes)
 
 
 class FoxgloveUnavailable(SLRError):
@@ -146,15 +155,26 @@ class FoxgloveView:
 
     def __init__(self, store: Any, host: str = "127.0.0.1", port: int = 8765,
                  poll: float = 0.002, static_every: float = 5.0, name: str = "slr_sql",
-                 log: Callable[[str], None] | None = None):
+                 log: Callable[[str], None] | None = None,
+                 message_max_bytes: int = MESSAGE_MAX_BYTES):
         try:
             import foxglove
         except ImportError as exc:
             raise FoxgloveUnavailable(
                 f"the Foxglove view needs the foxglove-sdk package ({exc}): "
                 f"pip install 'slr_sql[foxglove]'") from None
+        if isinstance(message_max_bytes, bool) or not isinstance(message_max_bytes, int) or \
+                message_max_bytes < 1024:
+            raise SLRError(f"foxglove: message_max_bytes must be an integer of at least 1024, "
+                           f"not {message_max_bytes!r}")
         self.store = store
         self.poll = poll
+        self.message_max = message_max_bytes
+        self.backlog = backlog_messages(message_max_bytes)
+        self._too_large_text = (
+            f"messages larger than {message_max_bytes:,} bytes are left out (the view's "
+            f"limit, so that a slow client holds at most "
+            f"{self.backlog * message_max_bytes / 2 ** 20:g} MiB)")
         self.static_every = static_every
         # (a store's names are in some lines, and a broken store would say so at every poll)
         self.log = ThrottledLog(log or (lambda text: None))
@@ -193,7 +213,7 @@ class FoxgloveView:
             self.server = foxglove.start_server(name=name, host=host, port=port,
                                                 context=self.context,
                                                 server_listener=Listener(),
-                                                message_backlog_size=BACKLOG_MESSAGES)
+                                                message_backlog_size=self.backlog)
         except (RuntimeError, OSError) as exc:   # the SDK's bind errors are RuntimeErrors
             reason = str(exc).removeprefix("FoxgloveError: ")
             raise FoxgloveCannotListen(f"cannot listen on {host}:{port}: {reason}") from None
@@ -321,7 +341,7 @@ class FoxgloveView:
             except (ValueError, TypeError) as exc:   # a row written by hand, not a term
                 self._trouble(key, f"rows that are not events are left out ({exc})")
                 continue
-            if len(data) > MESSAGE_MAX_BYTES:
+            if len(data) > self.message_max:
                 self._left_out(event.topic)
                 continue
             channel.log(data, log_time=time_ns(row[end]))
@@ -332,7 +352,7 @@ class FoxgloveView:
                 data = transform_message([row])
                 if data is None:
                     continue
-                if len(data) > MESSAGE_MAX_BYTES:
+                if len(data) > self.message_max:
                     self._left_out(TF_TOPICS[key])
                     continue
                 tf.log(data, log_time=time_ns(row[4]))
@@ -343,7 +363,7 @@ class FoxgloveView:
         out (a type may hold a few such events among many that are sent)."""
         if topic not in self._too_large:
             self._too_large.add(topic)
-            self.log(f"foxglove: {topic}: {_TOO_LARGE}")
+            self.log(f"foxglove: {topic}: {self._too_large_text}")
 
     def _trouble(self, key: tuple[str, int], text: str) -> None:
         """Say a type's trouble once (again only once it was gone in between)."""
@@ -366,7 +386,7 @@ class FoxgloveView:
                 continue
             source = self.store.meta_get(_MARK_SOURCE + type_text, "") or ""
             data = mark_message(type_text, until, str(source))
-            if len(data) > MESSAGE_MAX_BYTES:
+            if len(data) > self.message_max:
                 self._left_out(MARKS_TOPIC)
                 continue
             self._marks_channel.log(data, log_time=time_ns(time.time()))
@@ -405,7 +425,7 @@ class FoxgloveView:
             data = transform_message(rows)
             if data is None:
                 continue
-            if len(data) <= MESSAGE_MAX_BYTES:
+            if len(data) <= self.message_max:
                 self._tf["tf_static"].log(data, log_time=log_time)
             elif len(rows) > 1:
                 half = len(rows) // 2
