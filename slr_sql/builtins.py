@@ -1616,6 +1616,7 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
     args = list(args)
     i = 0
     n = len(fmt)
+    columns = _ColumnStops(out)
 
     def take():
         if not args:
@@ -1630,6 +1631,9 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
             continue
         i += 1
         num = ""
+        if i + 1 < n and fmt[i] == "`":      # ~`ct: the fill character c
+            num = str(ord(fmt[i + 1]))
+            i += 2
         while i < n and (fmt[i].isdigit() or fmt[i] == "*"):
             if fmt[i] == "*":
                 num = int_text(evaluate(take()))
@@ -1699,8 +1703,12 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
             out.append("~")
         elif d == "i":
             take()
-        elif d in "t|+":
-            pass  # column alignment is not supported; text is emitted unpadded
+        elif d == "t":
+            columns.fill(_char(_count(num, 32)))
+        elif d == "|":
+            columns.stop(None if not num else _count(num, 0), relative=False)
+        elif d == "+":
+            columns.stop(_count(num, 8), relative=True)
         else:
             raise iso_error(Struct("format", (String(f"unknown directive ~{d}"),)))
     if args:  # an argument no directive took (SWI-Prolog's error)
@@ -1721,6 +1729,51 @@ def _count(num: str, default: int) -> int:
     return count
 
 
+class _ColumnStops:
+    """format/2's column stops, as SWI-Prolog's: ``~t`` marks a fill point (``~Ct``,
+    ``~`ct``: filled with character C or c, else spaces) in the text since the last stop;
+    ``~N|`` (column N; bare: here) and ``~N+`` (N past the last stop, 8 by default) pad that
+    text to the column at its fill points -- evenly, the last ones one more when the
+    padding does not divide -- or on its right when it has none. Text already past the
+    column is left as it is; columns count from the last line break.
+
+    >>> format_text("~w~t~10|~w", [Atom("abc"), Atom("def")])
+    'abc       def'
+    >>> format_text("~t~w~t~10|", [Atom("abc")]), format_text("~`-t~5|", [])
+    ('   abc    ', '-----')
+    """
+
+    def __init__(self, out: "_BoundedText"):
+        self.out = out
+        self.start = 0            # the piece where the text since the last stop begins
+        self.column = 0           # the column it begins at
+        self.fills: list[tuple[int, str]] = []   # (piece, fill character) of each ~t
+
+    def fill(self, char: str) -> None:
+        self.fills.append((len(self.out), char))
+        self.out.append("")
+
+    def stop(self, count: int | None, relative: bool) -> None:
+        out = self.out
+        text = "".join(out[self.start:])
+        line_break = text.rfind("\n")
+        here = len(text) - line_break - 1 if line_break >= 0 else self.column + len(text)
+        if count is None:
+            target = here
+        else:
+            target = self.column + count if relative else count
+        pad = target - here
+        if pad > 0:
+            if self.fills:
+                each, rest = divmod(pad, len(self.fills))
+                for k, (piece, char) in enumerate(self.fills):
+                    out.put(piece, char * (each + (k >= len(self.fills) - rest)))
+            else:
+                out.append(" " * pad)
+            here = target
+        self.start, self.column, self.fills = len(out), here, []
+
+
 class _BoundedText(list):
     """format/2's output so far: resource_error(memory) once it passes MAX_BUILT_TEXT
     characters (many directives, each within the bound)."""
@@ -1732,6 +1785,13 @@ class _BoundedText(list):
         if self.size > MAX_BUILT_TEXT:
             raise resource_error("memory")
         super().append(piece)
+
+    def put(self, index: int, piece: str) -> None:
+        """Put ``piece`` in place of the empty piece at ``index`` (a fill point)."""
+        self.size += len(piece)
+        if self.size > MAX_BUILT_TEXT:
+            raise resource_error("memory")
+        self[index] = piece
 
 
 def _char(code: Any) -> str:
