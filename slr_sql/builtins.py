@@ -659,7 +659,7 @@ def _number_of_text(s: str, leading_layout: bool) -> Any:
         s = s[1:]
     if not s[:1].isdigit():
         return None
-    from .parser import _parser, parse_term
+    from .parser import parse_term, token_spans
 
     try:
         t, _ = parse_term(s)
@@ -670,8 +670,8 @@ def _number_of_text(s: str, leading_layout: bool) -> Any:
         return None
     # nor a comment after it: the reader skips "1/**/" and "1%c" to 1, but the number token
     # must be the whole text (SWI-Prolog: illegal_number); the text parsed, so it lexes
-    tokens = list(_parser().lex(s))
-    if len(tokens) != 1 or tokens[0].end_pos != len(s):
+    spans = token_spans(s)
+    if len(spans) != 1 or spans[0][1] != len(s):
         return None
     t = deref(t)
     if type(t) is not int and type(t) is not float:

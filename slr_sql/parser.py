@@ -35,7 +35,7 @@ from .terms import INFIX_OPS, PREFIX_OPS
 from .terms import CONS, NIL, TRUE, Atom, Clause, Span, String, Struct, Var, make_list
 from .terms import MAX_INTEGER_BITS, int_from_text
 
-__all__ = ["parse_program", "parse_term", "parse_event_fast"]
+__all__ = ["parse_program", "parse_term", "parse_event_fast", "token_spans"]
 
 _GRAMMAR_PATH = Path(__file__).with_name("grammar") / "slr.lark"
 
@@ -648,6 +648,17 @@ def _bar_to_semicolon(goal: Any) -> Any:
 # ------------------------------------------------------------------------ entry points
 _LARK: Lark | None = None
 _LOCK = ordered_lock("parser")
+
+
+def token_spans(text: str) -> list[tuple[int, int]]:
+    """The ``(start, end)`` offsets of the tokens the reader makes of ``text`` (layout and
+    comments are no tokens): how number_codes/2 and the like tell a number's text from one
+    with a comment after it.
+
+    >>> token_spans("12"), token_spans("1/**/")
+    ([(0, 2)], [(0, 1)])
+    """
+    return [(token.start_pos, token.end_pos) for token in _parser().lex(text)]
 
 
 def _parser() -> Lark:
