@@ -42,6 +42,19 @@ def view_port(process: subprocess.Popen) -> int:
     return int(line.split(":")[3].split()[0])
 
 
+def stop_view(process: subprocess.Popen) -> str:
+    """SIGTERM to a view's process, and its stderr once it ended."""
+    process.send_signal(signal.SIGTERM)
+    return process.communicate(timeout=DEADLINE)[1]
+
+
+def kill_if_running(process: subprocess.Popen) -> None:
+    """(A test that failed before it stopped the view leaves no process behind.)"""
+    if process.poll() is None:
+        process.kill()
+        process.communicate()
+
+
 def subscribe(ws, topic: str) -> None:
     channels: dict[str, int] = {}
     deadline = time.monotonic() + DEADLINE
@@ -338,12 +351,9 @@ def test_a_slow_client_of_large_messages_holds_at_most_the_backlog_bytes(tmp_pat
                 if isinstance(frame, bytes):
                     held += len(frame)
                     newest = json.loads(frame[13:])["arg1"]
-        process.send_signal(signal.SIGTERM)
-        out, err = process.communicate(timeout=DEADLINE)
+        err = stop_view(process)
     finally:
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
+        kill_if_running(process)
     assert held < BACKLOG, f"{held / 2 ** 20:.0f} MiB held for one client"
     assert read == [60_001] * 5
     assert process.returncode == 0, err
@@ -448,12 +458,9 @@ def test_a_raised_message_cap_sends_larger_messages_and_queues_fewer(tmp_path, c
             reader.pump(lambda: any(m["arg1"] == "last" for _, m in reader.on("/camera/1")),
                         time.monotonic() + DEADLINE)
             got = [m["arg1"][:4] for _, m in reader.on("/camera/1")]
-        process.send_signal(signal.SIGTERM)
-        out, err = process.communicate(timeout=DEADLINE)
+        err = stop_view(process)
     finally:
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
+        kill_if_running(process)
     assert "bigb" in got and "huge" not in got and got[-1] == "last", got
     [said] = [line for line in err.splitlines() if "larger than" in line]
     assert said.endswith("foxglove: /camera/1: messages larger than 262,144 bytes are left out "
