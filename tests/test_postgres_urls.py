@@ -151,3 +151,21 @@ def test_slr_stats_of_a_postgresql_store_says_what_its_space_is_without_the_pass
     assert "in its schema's tables and indexes" in first and "WAL" not in first, first
     assert "Hunter2secret" not in result.stdout + result.stderr
     assert "  seen/1: 1 stored" in result.stdout
+
+
+@pytest.mark.parametrize("url", ["POSTGRESQL://robot:Hunter2secret@db/x",
+                                 "Postgres://robot:Hunter2secret@db/x",
+                                 "mysql://robot:Hunter2secret@db/x"])
+def test_a_url_of_another_spelling_is_no_store_and_its_password_is_not_shown(tmp_path, url):
+    """libpq reads only postgresql:// and postgres:// in lower case; another scheme was taken
+    as a file path (the folder "POSTGRESQL:") and the message showed it, password and all."""
+    with pytest.raises(slr_sql.SLRError) as caught:
+        slr_sql.open(url)
+    assert "Hunter2secret" not in str(caught.value) and "not a store" in str(caught.value)
+    for command in (["query", url, "p(X)"], ["add", url, "p(1)^1"]):
+        result = subprocess.run([sys.executable, "-m", "slr_sql", *command], cwd=tmp_path,
+                                capture_output=True, text=True, timeout=120,
+                                env={**os.environ, "PYTHONPATH": str(REPO)})
+        assert result.returncode != 0 and "not a store" in result.stderr, result.stderr
+        assert "Hunter2secret" not in result.stderr + result.stdout
+    assert not list(tmp_path.iterdir())        # no folder "POSTGRESQL:" made

@@ -147,6 +147,9 @@ def check_file(path: str, adopt: bool = False) -> bool:
     if path == "":   # (SQLite makes "" a private temporary file, deleted on close)
         raise SLRError("a store's path is empty: give a file name (or no path for a store "
                        "in memory)")
+    if _URL_SHAPED.match(path):   # (POSTGRESQL://..., mysql://...: read as folders "X:")
+        raise SLRError(f"{shown_location(path)}: not a store: a URL names a PostgreSQL store "
+                       f"and begins postgresql:// or postgres:// (in lower case)")
     if os.path.isdir(path):
         raise SLRError(f"{path}: is a directory, not a store file")
     folder = os.path.dirname(os.path.abspath(path))
@@ -258,11 +261,11 @@ def shown_location(where: Any) -> str:
     'postgresql://robot:***@db/fleet?sslpassword=***&schema=a'
     >>> shown_location("postgresql://robot:p@ss@db/fleet")     # an '@' left unescaped
     'postgresql://robot:***@db/fleet'
-    >>> shown_location("robot.db")
-    'robot.db'
+    >>> shown_location("robot.db"), shown_location("POSTGRESQL://robot:s3cret@db/fleet")
+    ('robot.db', 'POSTGRESQL://robot:***@db/fleet')
     """
     text = str(where)
-    if not is_postgres_url(text):
+    if not _URL_SHAPED.match(text):   # (any scheme: a mistyped one names a password too)
         return text
     # the user's part ends at the last '@' (a host has none; a password written without
     # escaping may): everything between the user's ':' and it is hidden, so no part of such a
@@ -283,6 +286,7 @@ def shown_location(where: Any) -> str:
 
 
 _PASSWORD_KEYS = ("password", "sslpassword")
+_URL_SHAPED = re.compile(r"[A-Za-z][A-Za-z0-9+.-]*://")
 
 
 def password_token(where: str) -> str:
@@ -313,6 +317,9 @@ def refuse_no_store(path: str) -> None:
     """
     if path.startswith(("postgresql://", "postgres://")):
         return
+    if _URL_SHAPED.match(path):
+        raise SLRError(f"{shown_location(path)}: not a store: a URL names a PostgreSQL store "
+                       f"and begins postgresql:// or postgres:// (in lower case)")
     if not os.path.lexists(path):
         raise SLRError(f"no such store: {path}")
     if os.path.isfile(path) and os.path.getsize(path) == 0:
