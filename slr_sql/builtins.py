@@ -1651,7 +1651,7 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
         elif d == "a":
             # atomic only: SWI-Prolog's ~a refuses a code list and [] (text_of takes them)
             arg = deref(take())
-            if arg == NIL or (type(arg) is Struct and arg.name == "." and len(arg.args) == 2):
+            if arg == NIL or (type(arg) is Struct and arg.name == CONS and len(arg.args) == 2):
                 raise type_error("atomic", arg)
             out.append(text_of(arg))
         elif d in "dD":
@@ -1780,17 +1780,18 @@ class _BoundedText(list):
 
     size = 0
 
-    def append(self, piece: str) -> None:
+    def _grow(self, piece: str) -> None:
         self.size += len(piece)
         if self.size > MAX_BUILT_TEXT:
             raise resource_error("memory")
+
+    def append(self, piece: str) -> None:
+        self._grow(piece)
         super().append(piece)
 
     def put(self, index: int, piece: str) -> None:
         """Put ``piece`` in place of the empty piece at ``index`` (a fill point)."""
-        self.size += len(piece)
-        if self.size > MAX_BUILT_TEXT:
-            raise resource_error("memory")
+        self._grow(piece)
         self[index] = piece
 
 

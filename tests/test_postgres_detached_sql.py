@@ -128,12 +128,11 @@ def test_a_statement_that_finds_every_connection_busy_is_slr_busy_not_a_timeout(
     condition that passes (SLRBusy: the service answers 503 with Retry-After), not the
     SLRTimeout of a statement that ran too long."""
     kb.add("seen(cup1)^1")
-    table = "slr.slr_meta"                           # (a table of every store; its schema)
     with psycopg.connect(postgres_url) as holder:
-        holder.execute(f"LOCK TABLE {table} IN ACCESS EXCLUSIVE MODE")
+        holder.execute("LOCK TABLE slr.slr_meta IN ACCESS EXCLUSIVE MODE")   # (every store's)
         answers: list = []
         waiting = [threading.Thread(target=lambda: answers.append(
-            kb.sql(f"SELECT count(*) AS tag_locked FROM {table}", timeout=120)))
+            kb.sql("SELECT count(*) AS tag_locked FROM slr.slr_meta", timeout=120)))
             for _ in range(pg_backend.MOST_RUNNING)]
         for t in waiting:
             t.start()

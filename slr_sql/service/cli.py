@@ -377,5 +377,6 @@ def serve(db: str, host: str, port: int, token: str | None, max_body: int,
                ssl_keyfile=ssl_keyfile, ssl_certfile=ssl_certfile,
                ws_compression=ws_compression, cache_mib=cache_mib,
                foxglove=(foxglove_host, foxglove_port) if foxglove else None,
-               foxglove_message_max=foxglove_message_max, shutdown_grace=shutdown_grace, busy_timeout=busy_timeout)
+               foxglove_message_max=foxglove_message_max, shutdown_grace=shutdown_grace,
+               busy_timeout=busy_timeout)
     sys.stdout.flush()

@@ -147,9 +147,7 @@ def check_file(path: str, adopt: bool = False) -> bool:
     if path == "":   # (SQLite makes "" a private temporary file, deleted on close)
         raise SLRError("a store's path is empty: give a file name (or no path for a store "
                        "in memory)")
-    if _URL_SHAPED.match(path):   # (POSTGRESQL://..., mysql://...: read as folders "X:")
-        raise SLRError(f"{shown_location(path)}: not a store: a URL names a PostgreSQL store "
-                       f"and begins postgresql:// or postgres:// (in lower case)")
+    _refuse_url_shaped(path)
     if os.path.isdir(path):
         raise SLRError(f"{path}: is a directory, not a store file")
     folder = os.path.dirname(os.path.abspath(path))
@@ -267,16 +265,10 @@ def shown_location(where: Any) -> str:
     text = str(where)
     if not _URL_SHAPED.match(text):   # (any scheme: a mistyped one names a password too)
         return text
-    # the user's part ends at the last '@' (a host has none; a password written without
-    # escaping may): everything between the user's ':' and it is hidden, so no part of such a
-    # password shows (an '@' further on, in a parameter, hides the host too: better than a
-    # password)
-    scheme_end = text.find("://") + 3
-    first_at, last_at = text.find("@", scheme_end), text.rfind("@")
-    if first_at >= 0:
-        colon = text.find(":", scheme_end, first_at)   # (none: a user without a password)
-        if colon >= 0:
-            text = text[:colon + 1] + "***" + text[last_at:]
+    # (an '@' further on, in a parameter, hides the host too: better than a password)
+    span = _password_span(text)
+    if span is not None:
+        text = text[:span[0]] + "***" + text[span[1]:]
     # a parameter's name is decoded as its value is, by libpq and by split_url (pass%77ord is
     # password): the name is compared decoded; a value runs on over a '#' (written
     # unescaped in a password, what follows it is the password's too)
@@ -289,6 +281,27 @@ _PASSWORD_KEYS = ("password", "sslpassword")
 _URL_SHAPED = re.compile(r"[A-Za-z][A-Za-z0-9+.-]*://")
 
 
+def _password_span(url: str) -> tuple[int, int] | None:
+    """Where the password of a URL's user part is, ``(start, end)``; None without one. The
+    user's part ends at the last '@' (a host has none; a password written without escaping
+    may), the password begins after the first ':' before the first '@'."""
+    scheme_end = url.find("://") + 3
+    first_at = url.find("@", scheme_end)
+    if first_at < 0:
+        return None
+    colon = url.find(":", scheme_end, first_at)   # (none: a user without a password)
+    return None if colon < 0 else (colon + 1, url.rfind("@"))
+
+
+def _refuse_url_shaped(path: str) -> None:
+    """A store name that is a URL but no PostgreSQL one (``POSTGRESQL://``, ``mysql://``)
+    is no store (a file path would make it a folder ``POSTGRESQL:``); said without its
+    password."""
+    if _URL_SHAPED.match(path) and not is_postgres_url(path):
+        raise SLRError(f"{shown_location(path)}: not a store: a URL names a PostgreSQL store "
+                       f"and begins postgresql:// or postgres:// (in lower case)")
+
+
 def password_token(where: str) -> str:
     """The password of a PostgreSQL URL's user part as written ('' if none): libpq quotes
     it in some of its messages (a bad %-escape), which say so with it hidden.
@@ -296,12 +309,8 @@ def password_token(where: str) -> str:
     >>> password_token("postgresql://robot:s3%zz@db/fleet"), password_token("postgresql://db")
     ('s3%zz', '')
     """
-    if not is_postgres_url(where):
-        return ""
-    scheme_end = where.find("://") + 3
-    first_at, last_at = where.find("@", scheme_end), where.rfind("@")
-    colon = where.find(":", scheme_end, first_at) if first_at >= 0 else -1
-    return where[colon + 1:last_at] if colon >= 0 else ""
+    span = _password_span(where) if is_postgres_url(where) else None
+    return "" if span is None else where[span[0]:span[1]]
 
 
 def refuse_no_store(path: str) -> None:
@@ -315,11 +324,9 @@ def refuse_no_store(path: str) -> None:
     ...
     slr_sql.errors.SLRError: no such store: nowhere.db
     """
-    if path.startswith(("postgresql://", "postgres://")):
+    if is_postgres_url(path):
         return
-    if _URL_SHAPED.match(path):
-        raise SLRError(f"{shown_location(path)}: not a store: a URL names a PostgreSQL store "
-                       f"and begins postgresql:// or postgres:// (in lower case)")
+    _refuse_url_shaped(path)
     if not os.path.lexists(path):
         raise SLRError(f"no such store: {path}")
     if os.path.isfile(path) and os.path.getsize(path) == 0:
