@@ -168,3 +168,31 @@ def test_an_export_of_a_postgresql_store_is_the_export_of_the_same_sqlite_store(
     assert out.returncode == 0, out.stderr
     assert [m for m in _messages(tmp_path / "cli.mcap") if m[0] == "/seg/2"] == \
         [m for m in _messages(tmp_path / "sqlite.mcap") if m[0] == "/seg/2"]
+
+
+def test_an_export_of_large_events_holds_one_bounded_page_at_a_time(tmp_path, monkeypatch):
+    import random
+    import string
+    import tracemalloc
+
+    from slr_sql.viz import mcap_export
+    # a 2 MiB page instead of 32, so that a store of 24 MB shows the bound
+    monkeypatch.setattr(mcap_export, "PAGE_BYTES", 2 << 20)
+    letters = random.Random(3)
+    texts = ["".join(letters.choices(string.ascii_letters, k=1 << 20)) for _ in range(24)]
+    with slr_sql.open(tmp_path / "big.db", clock=ManualClock(100.0)) as kb:
+        for i, text in enumerate(texts):   # a megabyte each: the type does not fit one page
+            kb.add_event("scan", [String(text), i], float(i + 1))
+        tracemalloc.start()
+        try:
+            report = export_mcap(kb.store, tmp_path / "big.mcap")
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+    assert report.per_type == {("scan", 2): 24}
+    # a page (two events), the message being written and the writer's chunk; reading every
+    # row in one statement held all 24 MB
+    assert peak < 12 << 20, peak
+    with open(tmp_path / "big.mcap", "rb") as stream:
+        sizes = [len(m.data) for _, _, m in make_reader(stream).iter_messages()]
+    assert len(sizes) == 24 and min(sizes) > 1 << 20

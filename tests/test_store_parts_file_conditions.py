@@ -65,6 +65,7 @@ READS = {
     "max_end": lambda s: s.max_end("p", 1),
     "max_seq": lambda s: s.max_seq("p", 1),
     "raw_rows": lambda s: s.raw_rows("p", 1, after_seq=0),
+    "raw_page": lambda s: s.raw_page("p", 1, rows=5, max_bytes=100, after_seq=0),
     "latest_rows": lambda s: s.latest_rows("p", 1, (0,), ["a"], 5.0, False),
     "bracket": lambda s: s.bracket("r", 2, {0: "a"}, 1.5),
     "bracket_zero": lambda s: s.bracket("r", 2, {0: "a", 1: 0.0}, 1.5),

@@ -85,3 +85,48 @@ def test_every_test_id_is_short_enough_for_a_programs_environment(request):
     list too long". A parametrized test names its long values with ``ids=``."""
     longest = max(request.session.items, key=lambda item: len(item.nodeid))
     assert len(longest.nodeid) < 1000, longest.nodeid[:200]
+
+
+def _stored_pages(store, name: str, arity: int, rows: int, max_bytes: int, **where) -> list:
+    """Every page of a type, read the way a live view (``after_seq``) or an export
+    (``after_key``) reads them."""
+    pages, after_seq, after_key = [], 0, None
+    while True:
+        if "end_from" in where:
+            page = store.raw_page(name, arity, rows=rows, max_bytes=max_bytes,
+                                  after_key=after_key, **where)
+        else:
+            page = store.raw_page(name, arity, rows=rows, max_bytes=max_bytes,
+                                  after_seq=after_seq)
+        pages.append(page)
+        if not page.more:
+            return pages
+        last = page.rows[-1]
+        after_seq, after_key = last[-1], (last[arity + 1], last[arity], last[-1])
+
+
+@pytest.mark.parametrize("where", [{}, {"end_from": 0.0}], ids=["arrival", "end"])
+def test_a_page_of_rows_holds_at_most_its_bytes_and_paging_reads_every_row(backend, where):
+    sizes = [300, 10, 10, 500, 20, 900, 5, 5, 5, 250]   # characters of each event's text
+    with slr_sql.open(backend, clock=ManualClock(100.0)) as kb:
+        kb.add_many([f"e('{chr(97 + i) * size}', {i})^{i + 1}" for i, size in enumerate(sizes)])
+        pages = _stored_pages(kb.store, "e", 2, rows=4, max_bytes=400, **where)
+        read = [row for page in pages for row in page.rows]
+        assert [row[0] for row in read] == [chr(97 + i) * size for i, size in enumerate(sizes)]
+        for page in pages:
+            # one row at least, however large; then only what keeps within the bound
+            assert 1 <= len(page.rows) <= 4
+            if len(page.rows) > 1:
+                assert sum(len(row[0]) + len(str(row[1])) for row in page.rows) <= 400
+        # 301 + 11 + 11 bytes, then 501, 21 and 901 alone, then the last four (269)
+        assert [len(page.rows) for page in pages] == [3, 1, 1, 1, 4]
+        assert [page.more for page in pages] == [True, True, True, True, False]
+
+
+def test_a_page_says_no_more_when_its_rows_are_the_last(backend):
+    with slr_sql.open(backend, clock=ManualClock(100.0)) as kb:
+        kb.add_many(["e(1)^1", "e(2)^2"])
+        full = kb.store.raw_page("e", 1, rows=2, max_bytes=100, after_seq=0)
+        assert ([row[0] for row in full.rows], full.more) == ([1, 2], False)
+        assert kb.store.raw_page("e", 1, rows=1, max_bytes=100, after_seq=0).more
+        assert kb.store.raw_page("nothing", 1, rows=5, max_bytes=100, after_seq=0).rows == []

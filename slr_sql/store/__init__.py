@@ -63,13 +63,13 @@ from .fleet import ROBOT_NAME_MAX, Fleet, RouteConflict, ShipmentConflict, Write
     check_robot_name
 from .functions import SqlFunctions
 from .journals import JournalReader, SubscriptionRecord, SubscriptionTables
-from .lookups import EventReader, Row, null_argument_text
+from .lookups import EventReader, RawPage, Row, null_argument_text
 from .schema import migration_scripts
 from .space import ServerSpace, Space
 from .sqltext import quote_identifier, split_sql_script, sql_literal, store_error
 from .tables import EventTables, start_compared
 
-__all__ = ["EventStore", "Event", "EventBatch", "Row", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
+__all__ = ["EventStore", "Event", "EventBatch", "Row", "RawPage", "ProgramText", "CACHE_SIZE_KIB", "DEFAULT_BUSY_TIMEOUT",
            "DatabaseError", "quote_identifier", "sql_literal", "format_event",
            "migration_scripts", "split_sql_script", "run_sql_file", "refuse_no_store", "shown_location", "store_error",
            "check_robot_name", "ROBOT_NAME_MAX", "RouteConflict", "ShipmentConflict", "WriterInFlight", "ReadConnection", "ArgEquals", "BufferPlan", "JsonArray",
@@ -585,6 +585,14 @@ class EventStore:
                  limit: int | None = None, after_key: tuple | None = None) -> list[tuple]:
         return self._reader.raw_rows(name, arity, after_seq=after_seq, end_from=end_from,
                                      end_to=end_to, limit=limit, after_key=after_key)
+
+    @_doc(EventReader.raw_page)
+    def raw_page(self, name: str, arity: int, *, rows: int, max_bytes: int,
+                 after_seq: int | None = None, end_from: float | None = None,
+                 end_to: float | None = None, after_key: tuple | None = None) -> RawPage:
+        return self._reader.raw_page(name, arity, rows=rows, max_bytes=max_bytes,
+                                     after_seq=after_seq, end_from=end_from, end_to=end_to,
+                                     after_key=after_key)
 
     @_doc(EventReader.count)
     def count(self, name: str, arity: int) -> int:

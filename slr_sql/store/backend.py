@@ -26,7 +26,7 @@ from .catalog import ProgramText
 from .events import Event
 from .functions import SqlFunctions
 from .journals import JournalReader, SubscriptionRecord
-from .lookups import Row
+from .lookups import RawPage, Row
 
 __all__ = ["Backend", "CompiledSQL", "RawStatements"]
 
@@ -130,6 +130,11 @@ class Backend(Protocol):
     def raw_rows(self, name: str, arity: int, *, after_seq: int | None = None,
                  end_from: float | None = None, end_to: float | None = None,
                  limit: int | None = None, after_key: tuple[Any, ...] | None = None) -> list[tuple[Any, ...]]: ...
+
+    def raw_page(self, name: str, arity: int, *, rows: int, max_bytes: int,
+                 after_seq: int | None = None, end_from: float | None = None,
+                 end_to: float | None = None,
+                 after_key: tuple[Any, ...] | None = None) -> RawPage: ...
 
     def set_write_groups(self, groups: Iterable[Iterable[tuple[str, int]]]) -> None: ...
 

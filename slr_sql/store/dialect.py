@@ -50,6 +50,7 @@ class Dialect(Protocol):
 
     def statement(self, sql: str) -> str: ...
     def typeof(self, expr: str) -> str: ...
+    def byte_length(self, expr: str) -> str: ...
     def value_order(self, value: str) -> list[str]: ...
     def number(self, expr: str) -> str: ...
     def infinity(self, negative: bool = False) -> str: ...
@@ -110,6 +111,10 @@ class SQLiteDialect(SQLiteQueryPrinter):
 
     def typeof(self, expr: str) -> str:
         return f"typeof({expr})"
+
+    def byte_length(self, expr: str) -> str:
+        """A stored value's size in bytes (a number's as its text)."""
+        return f"length(CAST({expr} AS BLOB))"
 
     def number(self, expr: str) -> str:
         return expr
@@ -190,6 +195,10 @@ class PostgresDialect(PostgresQueryPrinter):
 
     def typeof(self, expr: str) -> str:
         return f"slr_typeof({expr})"
+
+    def byte_length(self, expr: str) -> str:
+        """A stored value's size in bytes (every value column is text)."""
+        return f"octet_length({expr})"
 
     def number(self, expr: str) -> str:
         return f"slr_number({expr})"

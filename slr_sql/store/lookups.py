@@ -13,6 +13,7 @@ first row or two does not read the rest.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 import sqlite3
 from typing import Any, Callable, Iterable, Iterator
 
@@ -22,7 +23,7 @@ from .connection import Database
 from .sqltext import quote_identifier
 from .tables import EventTables, EventType
 
-__all__ = ["Row", "EventReader", "null_argument_text"]
+__all__ = ["Row", "RawPage", "EventReader", "null_argument_text"]
 
 Row = tuple[Any, ...]    # (args: tuple[term, ...], start: float, end: float, seq: int)
 
@@ -97,6 +98,15 @@ def null_argument_text(name: str, arity: int, table: str, argument: int, seq: in
             f"is NULL, which is no term (written by hand, by another client of the database); "
             f"fix or delete it (DELETE FROM {quote_identifier(table)} WHERE arg{argument} IS "
             f"NULL)")
+
+
+@dataclass(frozen=True)
+class RawPage:
+    """A page of stored rows (see :meth:`EventReader.raw_page`): the rows, and whether rows
+    were left after them when it was read."""
+
+    rows: list[tuple]
+    more: bool
 
 
 class _OpenStatement:
@@ -770,30 +780,84 @@ class EventReader:
                 return []
             columns = ", ".join([f"arg{i + 1}" for i in range(arity)]
                                 + ["t_start", "t_end", "arrival", "seq"])
-            params: list = []
-            if after_seq is not None:
-                where, order = "seq > ?", "seq"
-                params.append(int(after_seq))
-            else:
-                conditions = []
-                if end_from is not None:
-                    conditions.append("t_end >= ?")
-                    params.append(float(end_from))
-                if end_to is not None:
-                    conditions.append("t_end <= ?")
-                    params.append(float(end_to))
-                if after_key is not None:
-                    conditions.append("(t_end, t_start, seq) > (?, ?, ?)")
-                    params += [float(after_key[0]), float(after_key[1]), int(after_key[2])]
-                # no condition: no WHERE (PostgreSQL refuses `WHERE 1`: it needs a boolean)
-                where = " AND ".join(conditions)
-                order = "t_end, t_start, seq"
-            sql = (f"SELECT {columns} FROM {event_type.quoted}"
-                   + (f" WHERE {where}" if where else "") + f" ORDER BY {order}")
-            if limit is not None:
-                sql += " LIMIT ?"
-                params.append(int(limit))
-            rows = self.db.execute(sql, params)
+            return self._as_stored(arity, self._raw_select(
+                event_type, columns, after_seq, end_from, end_to, after_key, limit))
+
+    def raw_page(self, name: str, arity: int, *, rows: int, max_bytes: int,
+                 after_seq: int | None = None, end_from: float | None = None,
+                 end_to: float | None = None, after_key: tuple | None = None) -> RawPage:
+        """The rows :meth:`raw_rows` reads with the same arguments, at most ``rows`` of them
+        and, past the first, at most ``max_bytes`` of argument values: a reader that pages
+        through a type (a live view, an export) holds a bounded page however large each
+        event is. The page says whether rows are left after it.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None)
+        >>> s.add_events([("p", (str(i) * 100,), i, i) for i in range(1, 4)])
+        []
+        >>> page = s.raw_page("p", 1, rows=10, max_bytes=250, after_seq=0)
+        >>> [row[0][:3] for row in page.rows], page.more
+        (['111', '222'], True)
+        """
+        if rows < 1:
+            raise ValueError("a page holds at least one row")
+        with self.db.lock:
+            self.db.check_open()
+            event_type = self.tables.lookup(name, arity)
+            if event_type is None:
+                return RawPage([], False)
+            size = " + ".join(
+                [f"coalesce({self.db.dialect.byte_length(f'arg{i + 1}')}, 0)"
+                 for i in range(arity)]) or "0"
+            # the sizes first (one more row than a page: whether any is left), then only the
+            # rows that fit, so no statement ever hands over more than the bound of values
+            sizes = self._raw_select(event_type, size, after_seq, end_from, end_to,
+                                     after_key, rows + 1)
+            taken, total = 0, 0
+            for (row_size,) in sizes[:rows]:
+                if taken and total + row_size > max_bytes:
+                    break
+                total += row_size
+                taken += 1
+            if not taken:
+                return RawPage([], False)
+            columns = ", ".join([f"arg{i + 1}" for i in range(arity)]
+                                + ["t_start", "t_end", "arrival", "seq"])
+            found = self._raw_select(event_type, columns, after_seq, end_from, end_to,
+                                     after_key, taken)
+        return RawPage(self._as_stored(arity, found), taken < len(sizes))
+
+    def _raw_select(self, event_type: EventType, columns: str, after_seq: int | None,
+                    end_from: float | None, end_to: float | None, after_key: tuple | None,
+                    limit: int | None) -> list[tuple]:
+        """``columns`` of a type's rows in :meth:`raw_rows`'s order and bounds."""
+        params: list = []
+        if after_seq is not None:
+            where, order = "seq > ?", "seq"
+            params.append(int(after_seq))
+        else:
+            conditions = []
+            if end_from is not None:
+                conditions.append("t_end >= ?")
+                params.append(float(end_from))
+            if end_to is not None:
+                conditions.append("t_end <= ?")
+                params.append(float(end_to))
+            if after_key is not None:
+                conditions.append("(t_end, t_start, seq) > (?, ?, ?)")
+                params += [float(after_key[0]), float(after_key[1]), int(after_key[2])]
+            # no condition: no WHERE (PostgreSQL refuses `WHERE 1`: it needs a boolean)
+            where = " AND ".join(conditions)
+            order = "t_end, t_start, seq"
+        sql = (f"SELECT {columns} FROM {event_type.quoted}"
+               + (f" WHERE {where}" if where else "") + f" ORDER BY {order}")
+        if limit is not None:
+            sql += " LIMIT ?"
+            params.append(int(limit))
+        return self.db.execute(sql, params)
+
+    def _as_stored(self, arity: int, rows: list[tuple]) -> list[tuple]:
+        """Rows with their argument values as SQLite stores them."""
         from_column = self.db.dialect.from_column
         if from_column is not None:   # a server's typed columns: as SQLite stores them
             rows = [tuple([from_column(v) for v in row[:arity]]) + tuple(row[arity:])

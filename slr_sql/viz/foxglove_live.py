@@ -35,7 +35,7 @@ from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, TF_TOPIC
                        time_ns, transform_message)
 
 __all__ = ["FoxgloveView", "FoxgloveUnavailable", "FoxgloveCannotListen", "forward_sdk_log",
-           "BACKLOG_BYTES", "BACKLOG_MESSAGES", "MESSAGE_MAX_BYTES"]
+           "BACKLOG_BYTES", "BACKLOG_MESSAGES", "MESSAGE_MAX_BYTES", "PAGE_BYTES", "PAGE_ROWS"]
 
 _MARK_PREFIX = "sync/mark/"
 _TF_STATIC = ("tf_static", 3)
@@ -43,6 +43,8 @@ _UNREADABLE = "its rows cannot be read"
 _MARK_SOURCE = "sync/marksrc/"
 STATIC_GAP = 0.25   # seconds: the least time between two latched /tf_static messages asked for
 PAGE_ROWS = 10_000  # rows of one type read in one pass; a full page makes another pass
+PAGE_BYTES = 16 << 20   # and at most these bytes of their values (one row at least): the
+# view holds a bounded page however large a type's events are
 # What the view's server holds for one client that reads too slowly: the foxglove-sdk queues
 # at most BACKLOG_MESSAGES messages per client (dropping the oldest beyond), whatever their
 # size, so the view sends no message larger than MESSAGE_MAX_BYTES: a client holds at most
@@ -325,11 +327,13 @@ class FoxgloveView:
     def _follow_type(self, key: tuple[str, int], event: Any, channel: Any,
                      initial: bool) -> bool:
         """Send a page of a type's rows beyond those read; whether the page was full."""
-        rows = self.store.raw_rows(key[0], key[1], after_seq=self.seen[key], limit=PAGE_ROWS)
+        page = self.store.raw_page(key[0], key[1], after_seq=self.seen[key], rows=PAGE_ROWS,
+                                   max_bytes=PAGE_BYTES)
+        rows = page.rows
         if not rows:
             return False
         self.seen[key] = rows[-1][-1]
-        full = len(rows) == PAGE_ROWS
+        full = page.more
         if key == _TF_STATIC:
             self._keep_static(rows)
         if initial:
@@ -396,7 +400,8 @@ class FoxgloveView:
         (the rows stored later come through :meth:`_follow`)."""
         after, upto = 0, self.seen.get(_TF_STATIC, 0)
         while after < upto:
-            rows = self.store.raw_rows(*_TF_STATIC, after_seq=after, limit=10_000)
+            rows = self.store.raw_page(*_TF_STATIC, after_seq=after, rows=PAGE_ROWS,
+                                       max_bytes=PAGE_BYTES).rows
             if not rows:
                 break
             self._keep_static([row for row in rows if row[-1] <= upto])

@@ -36,6 +36,8 @@ __all__ = ["export_mcap", "ExportReport", "McapUnavailable", "ExportRefused", "E
            "ExportDamaged", "is_slr_export", "export_messages", "export_summary", "export_batches", "select_types"]
 
 PAGE = 20_000   # rows read per statement
+PAGE_BYTES = 32 << 20   # and at most these bytes of their values (one row at least): an
+# export holds a bounded page however large a type's events are
 
 
 class McapUnavailable(SLRError):
@@ -102,12 +104,12 @@ def select_types(available: Iterable[tuple[str, int]], wanted: Iterable[str]) ->
 def _rows(store: Any, key: tuple, start: float | None, end: float | None) -> Iterator[tuple]:
     after = None
     while True:
-        page = store.raw_rows(key[0], key[1], end_from=start, end_to=end, limit=PAGE,
-                              after_key=after)
-        yield from page
-        if len(page) < PAGE:
+        page = store.raw_page(key[0], key[1], end_from=start, end_to=end, rows=PAGE,
+                              max_bytes=PAGE_BYTES, after_key=after)
+        yield from page.rows
+        if not page.more:
             return
-        last = page[-1]
+        last = page.rows[-1]
         n = key[1]
         after = (last[n + 1], last[n], last[n + 3])
 
