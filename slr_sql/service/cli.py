@@ -9,7 +9,7 @@ import logging
 import signal
 import sys
 import threading
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import click
 
@@ -17,9 +17,7 @@ import slr_sql
 
 from ..log_throttle import ThrottledLogFilter
 from ..store import DEFAULT_BUSY_TIMEOUT
-
-if TYPE_CHECKING:
-    import socket
+from .background import is_loopback, listen_on, uvicorn_config
 
 __all__ = ["serve", "run_server", "is_loopback"]
 
@@ -78,59 +76,6 @@ def prepare_switching_for_serving() -> None:
     >>> sys.setswitchinterval(before)
     """
     sys.setswitchinterval(SERVING_SWITCH_INTERVAL)
-
-
-def is_loopback(host: str) -> bool:
-    """True when every address ``host`` names is a loopback address.
-
-    >>> is_loopback("127.0.0.1"), is_loopback("::1"), is_loopback("0.0.0.0"), is_loopback("")
-    (True, True, False, False)
-    """
-    # socket and ipaddress are imported here and in _listen, where used: every `slr` command
-    # imports this module (its `serve` is on the group), and socket costs ~5 ms to import
-    import ipaddress
-    import socket
-
-    host = host.strip().strip("[]")
-    if not host:
-        return False      # "" binds every interface
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        pass
-    try:
-        infos = socket.getaddrinfo(host, None)
-    except OSError:
-        return False
-    return bool(infos) and all(ipaddress.ip_address(info[4][0].split("%")[0]).is_loopback
-                               for info in infos)
-
-
-def _listen(host: str, port: int) -> socket.socket:
-    """A listening socket on host:port (port 0: any free port)."""
-    import socket
-
-    try:
-        infos = socket.getaddrinfo(host or None, port, type=socket.SOCK_STREAM,
-                                   flags=socket.AI_PASSIVE)
-    except OSError as exc:
-        raise slr_sql.SLRError(f"cannot listen on {host}:{port}: {exc}") from None
-    last: OSError | None = None
-    for family, kind, proto, _name, address in infos:
-        sock = socket.socket(family, kind, proto)
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            sock.bind(address)
-            sock.listen(512)
-            sock.set_inheritable(True)
-            return sock
-        except OSError as exc:
-            sock.close()
-            last = exc
-    raise slr_sql.SLRError(f"cannot listen on {host}:{port}: "
-                           f"{getattr(last, 'strerror', None) or last}")
 
 
 class _Stop(BaseException):
@@ -243,7 +188,8 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
         import uvicorn
 
         from .app import Limits, create_app
-        from .ws_protocol import SubscriberWebSocketProtocol
+        # (the subscriptions' WebSocket protocol imports websockets: missing, it is said here)
+        from .ws_protocol import SubscriberWebSocketProtocol  # noqa: F401
         # uvicorn's C parser of HTTP (~10% less server CPU than h11), which uvicorn imports
         # only once it serves
         if importlib.util.find_spec("httptools") is None:
@@ -252,7 +198,7 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
         raise slr_sql.SLRError(f"slr serve needs the service extra ({exc.name} is missing): "
                                f"pip install 'slr_sql[service]'") from None
     limits = limits or Limits()
-    sock = _listen(host, port)
+    sock = listen_on(host, port)
     try:
         options: dict[str, Any] = {} if cache_mib is None else {"cache_mib": cache_mib}
         if busy_timeout is not None:
@@ -277,14 +223,10 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
                 raise slr_sql.SLRError(f"cannot listen on {foxglove[0]}:{foxglove[1]} for "
                                        f"Foxglove: {exc}") from None
         app = create_app(kb, token=token, limits=limits)
-        config = uvicorn.Config(app, log_level=log_level, access_log=False, lifespan="off",
-                                ws_max_size=limits.max_body, limit_concurrency=max_connections,
-                                timeout_keep_alive=30, ssl_keyfile=ssl_keyfile,
-                                ssl_certfile=ssl_certfile, server_header=False,
-                                ws_per_message_deflate=ws_compression,
-                                ws=SubscriberWebSocketProtocol, http="httptools",
-                                loop="asyncio",   # what the WebSocket protocol is tested on
-                                timeout_graceful_shutdown=shutdown_grace)
+        config = uvicorn_config(app, limits, max_connections=max_connections,
+                                ssl_keyfile=ssl_keyfile, ssl_certfile=ssl_certfile,
+                                log_level=log_level, ws_compression=ws_compression,
+                                shutdown_grace=shutdown_grace)
         server = uvicorn.Server(config)
         throttle_stranger_logs()   # (after uvicorn.Config, which sets up uvicorn's loggers)
         bound_host, bound_port = sock.getsockname()[:2]

@@ -1,0 +1,205 @@
+"""The network service of an open knowledge base, served by a thread of this process.
+
+``slr serve DB`` (:func:`slr_sql.service.cli.run_server`) is the service as a program: it
+opens the store, serves until a signal, and tunes the process for serving. A Python
+program that holds a knowledge base already -- a robot's node that also answers remote
+clients, an example, a test of code written against :func:`slr_sql.connect` -- serves it
+with :class:`BackgroundServer` instead: the same application and limits, on a port of its
+own, stopped when the ``with`` block ends. The caller keeps its knowledge base open and
+closes it afterwards.
+"""
+from __future__ import annotations
+
+import enum
+import threading
+from typing import TYPE_CHECKING, Any
+
+import slr_sql
+
+if TYPE_CHECKING:
+    import socket
+
+    from ..kb import KnowledgeBase
+
+__all__ = ["BackgroundServer", "ServerState", "is_loopback", "listen_on", "uvicorn_config"]
+
+
+def is_loopback(host: str) -> bool:
+    """True when every address ``host`` names is a loopback address.
+
+    >>> is_loopback("127.0.0.1"), is_loopback("::1"), is_loopback("0.0.0.0"), is_loopback("")
+    (True, True, False, False)
+    """
+    # socket and ipaddress are imported here and in listen_on, where used: every `slr` command
+    # imports this module (its `serve` is on the group), and socket costs ~5 ms to import
+    import ipaddress
+    import socket
+
+    host = host.strip().strip("[]")
+    if not host:
+        return False      # "" binds every interface
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        pass
+    try:
+        infos = socket.getaddrinfo(host, None)
+    except OSError:
+        return False
+    return bool(infos) and all(ipaddress.ip_address(str(info[4][0]).split("%")[0]).is_loopback
+                               for info in infos)
+
+
+def listen_on(host: str, port: int) -> socket.socket:
+    """A listening socket on host:port (port 0: any free port): listening before a server
+    runs on it, so that clients may connect at once.
+
+    >>> sock = listen_on("127.0.0.1", 0); sock.getsockname()[1] > 0
+    True
+    >>> sock.close()
+    """
+    import socket
+
+    try:
+        infos = socket.getaddrinfo(host or None, port, type=socket.SOCK_STREAM,
+                                   flags=socket.AI_PASSIVE)
+    except OSError as exc:
+        raise slr_sql.SLRError(f"cannot listen on {host}:{port}: {exc}") from None
+    last: OSError | None = None
+    for family, kind, proto, _name, address in infos:
+        sock = socket.socket(family, kind, proto)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            sock.bind(address)
+            sock.listen(512)
+            sock.set_inheritable(True)
+            return sock
+        except OSError as exc:
+            sock.close()
+            last = exc
+    raise slr_sql.SLRError(f"cannot listen on {host}:{port}: "
+                           f"{getattr(last, 'strerror', None) or last}")
+
+
+def uvicorn_config(app: Any, limits: Any, *, max_connections: int | None = 1000,
+                   ssl_keyfile: str | None = None, ssl_certfile: str | None = None,
+                   log_level: str = "warning", ws_compression: bool = False,
+                   shutdown_grace: float = 10.0) -> Any:
+    """The uvicorn configuration both ways of serving use: the WebSocket protocol of
+    subscriptions, the C parser of HTTP, no server header, the request body bound.
+
+    >>> from slr_sql.service.app import Limits, create_app
+    >>> with slr_sql.open() as kb:
+    ...     config = uvicorn_config(create_app(kb), Limits())
+    >>> config.ws_max_size == Limits().max_body, config.server_header
+    (True, False)
+    """
+    import uvicorn
+
+    from .ws_protocol import SubscriberWebSocketProtocol
+    return uvicorn.Config(app, log_level=log_level, access_log=False, lifespan="off",
+                          ws_max_size=limits.max_body, limit_concurrency=max_connections,
+                          timeout_keep_alive=30, ssl_keyfile=ssl_keyfile,
+                          ssl_certfile=ssl_certfile, server_header=False,
+                          ws_per_message_deflate=ws_compression,
+                          ws=SubscriberWebSocketProtocol, http="httptools",
+                          loop="asyncio",   # what the WebSocket protocol is tested on
+                          # (uvicorn waits with asyncio.wait_for: seconds as a float)
+                          timeout_graceful_shutdown=shutdown_grace)  # type: ignore[arg-type]
+
+
+class ServerState(enum.Enum):
+    """Where a :class:`BackgroundServer` is in its life: made, serving, or stopped (a
+    stopped server does not start again: make another)."""
+
+    MADE = "made"
+    SERVING = "serving"
+    STOPPED = "stopped"
+
+
+class BackgroundServer:
+    """Serve the knowledge base ``kb`` on ``host:port`` (port 0: a free one) from a thread
+    of this process until :meth:`stop` or the end of the ``with`` block; :attr:`url` is
+    where :func:`slr_sql.connect` reaches it. The socket listens before :meth:`start`
+    returns, so a client may connect at once. ``token`` and ``limits`` as for ``slr
+    serve``; a non-loopback host needs a token.
+
+    >>> import slr_sql
+    >>> with slr_sql.open(clock=slr_sql.ManualClock(10)) as local:
+    ...     with BackgroundServer(local) as server, slr_sql.connect(server.url) as kb:
+    ...         kb.add("seen(cup1)^2")
+    ...         [answer["X"] for answer in kb.query("seen(X)^T")]
+    [Atom('cup1')]
+    """
+
+    def __init__(self, kb: KnowledgeBase, host: str = "127.0.0.1", port: int = 0,
+                 token: str | None = None, *, limits: Any = None,
+                 max_connections: int | None = 1000, stop_grace: float = 5.0) -> None:
+        if not token and not is_loopback(host):
+            raise slr_sql.SLRError(f"refusing to serve on {host or 'every interface'} "
+                                   f"without a token: give token=...")
+        self.kb = kb
+        self.host, self.port = host, port
+        self.token = token or None
+        self.limits = limits
+        self.max_connections = max_connections
+        self.stop_grace = stop_grace
+        self.state = ServerState.MADE
+        self._server: Any = None
+        self._thread: threading.Thread | None = None
+        self._socket: Any = None
+
+    @property
+    def url(self) -> str:
+        """``http://HOST:PORT`` of the serving server."""
+        if self.state is not ServerState.SERVING:
+            raise slr_sql.SLRError(f"the server is {self.state.value}, not serving")
+        shown = f"[{self.host}]" if ":" in self.host else self.host
+        return f"http://{shown}:{self.port}"
+
+    def start(self) -> "BackgroundServer":
+        """Listen and serve from a thread; returns the server (serving)."""
+        if self.state is not ServerState.MADE:
+            raise slr_sql.SLRError(f"the server is {self.state.value}: make another to "
+                                   f"serve again")
+        try:
+            import uvicorn
+
+            from .app import Limits, create_app
+        except ImportError as exc:
+            raise slr_sql.SLRError(f"serving needs the service extra ({exc.name} is "
+                                   f"missing): pip install 'slr_sql[service]'") from None
+        limits = self.limits or Limits()
+        sock = listen_on(self.host, self.port)
+        app = create_app(self.kb, token=self.token, limits=limits)
+        server = uvicorn.Server(uvicorn_config(app, limits,
+                                               max_connections=self.max_connections,
+                                               shutdown_grace=self.stop_grace))
+        self.host, self.port = sock.getsockname()[:2]
+        self._socket, self._server = sock, server
+        # (uvicorn leaves signals alone outside the main thread: they stay the program's)
+        self._thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]},
+                                        name=f"slr-serve:{self.port}", daemon=True)
+        self._thread.start()
+        self.state = ServerState.SERVING
+        return self
+
+    def stop(self) -> None:
+        """Stop serving: requests in flight get ``stop_grace`` seconds, then the thread ends
+        and the socket closes. The knowledge base stays open (it is the caller's)."""
+        if self.state is not ServerState.SERVING:
+            self.state = ServerState.STOPPED
+            return
+        self.state = ServerState.STOPPED
+        self._server.should_exit = True
+        if self._thread is not None:
+            self._thread.join(self.stop_grace + 5.0)
+        self._socket.close()
+
+    def __enter__(self) -> "BackgroundServer":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
