@@ -19,7 +19,11 @@ def connect(url: str, token: str | None = None, **options):
     """A client for the ``slr serve`` at ``url`` with the methods of a local knowledge base
     (``token`` defaults to ``$SLR_TOKEN``; needs ``pip install 'slr_sql[service]'``).
 
-    >>> kb = connect("http://127.0.0.1:8765")   # doctest: +SKIP
+    >>> from slr_sql.service.background import BackgroundServer   # (a server in this program)
+    >>> server = BackgroundServer(open(clock=ManualClock(10))).start()
+    >>> kb = connect(server.url); kb.add("seen(cup1)^2"); kb.query("seen(X)^T")
+    [{'X': Atom('cup1'), 'T': 2.0}]
+    >>> kb.close(); server.stop(); server.kb.close()
     """
     from .service.client import connect as _connect  # deferred: `import slr_sql` needs no httpx
 

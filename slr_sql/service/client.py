@@ -2,10 +2,17 @@
 KnowledgeBase, returning the same Python values and raising the same SLRError classes.
 
 >>> import slr_sql
->>> kb = slr_sql.connect("http://127.0.0.1:8765")       # doctest: +SKIP
->>> kb.add("obj(cup1, cup, red)^2.0")                    # doctest: +SKIP
->>> kb.query("obj(O, cup, C)^T")                         # doctest: +SKIP
+>>> from slr_sql.service.background import BackgroundServer
+>>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+>>> kb = slr_sql.connect(server.url)      # e.g. slr_sql.connect("http://127.0.0.1:8765")
+>>> kb.add("obj(cup1, cup, red)^2.0")
+>>> kb.query("obj(O, cup, C)^T")
 [{'O': Atom('cup1'), 'C': Atom('red'), 'T': 2.0}]
+>>> kb.close(); server.stop(); server.kb.close()
+
+``server`` is a :class:`~slr_sql.service.background.BackgroundServer`: the service of a
+knowledge base this program holds, here a memory store on a manual clock (the examples of
+this module use one). ``slr serve DB`` is the service as a program.
 
 What differs from a local knowledge base:
 
@@ -46,12 +53,15 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 from urllib.parse import quote, urlsplit
 
+import slr_sql  # noqa: F401  (the examples' slr_sql.open and slr_sql.connect)
 from slr_sql import EventRejected, SLRError, SLRTimeout, SLRUnavailable
 from slr_sql.api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 
 from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args,
                        encode_arguments, encode_term, loads)
 from .auth import check_token_text
+# (the server of this module's examples: a knowledge base served from a thread)
+from .background import BackgroundServer  # noqa: F401
 from .errors import (ServiceError, ServiceOutcomeUnknown, ServiceUnavailable, error_from_body,
                      parse_retry_after)
 from .http_pool import AnswerLost, AnswerTimeout, HttpPool, RequestInvalid, RequestNotSent
@@ -74,7 +84,15 @@ def connect(url: str, token: str | None = None, *, timeout: float = 60.0) -> "Re
     """A client for the ``slr serve`` at ``url``; ``token`` defaults to ``$SLR_TOKEN``.
     ``timeout`` bounds how long one request may take beyond the query's own timeout.
 
-    >>> kb = connect("http://127.0.0.1:8765", token="secret")   # doctest: +SKIP
+    >>> local = slr_sql.open(clock=slr_sql.ManualClock(10))
+    >>> server = BackgroundServer(local, token="secret").start()
+    >>> kb = connect(server.url, token="secret"); kb.add("p(1)^1"); kb.query("p(X)^T")
+    [{'X': 1, 'T': 1.0}]
+    >>> with connect(server.url, token="wrong") as stranger: stranger.query("p(X)^T")
+    Traceback (most recent call last):
+    ...
+    slr_sql.service.errors.ServiceError: a valid token is required (Authorization: Bearer TOKEN; the server's --token or SLR_TOKEN)
+    >>> kb.close(); server.stop(); local.close()
     """
     return RemoteKnowledgeBase(url, token=token, timeout=timeout)
 
@@ -321,19 +339,40 @@ class RemoteKnowledgeBase:
         return self.timeout + (query_timeout or 0.0)
 
     def limits(self) -> dict:
-        """The server's limits (``GET /health``), fetched once."""
+        """The server's limits (``GET /health``), fetched once.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url)
+        >>> kb.limits()["max_body"], kb.limits()["max_query_time"]
+        (1048576, 30.0)
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         if self._limits is None:
             limits = self.health().get("limits")
             self._limits = limits if isinstance(limits, dict) else {}
         return self._limits
 
     def health(self) -> dict:
-        """``{"status": "ok", "version", "api", "limits"}`` of the server."""
+        """``{"status": "ok", "version", "api", "limits"}`` of the server.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url)
+        >>> health = kb.health(); health["status"], health["api"]
+        ('ok', '1')
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         return self._get("/health")
 
     # -- lifecycle ------------------------------------------------------------------------------
     def close(self) -> None:
-        """Close the connection; submitted queries still waiting fail with SLRError."""
+        """Close the connection; submitted queries still waiting fail with SLRError.
+
+        >>> kb = slr_sql.connect("http://127.0.0.1:8765"); kb.close()
+        >>> kb.query("true")       # (refused here: nothing is sent)
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: the connection to the knowledge base is closed
+        """
         if self.closed:
             return
         self.closed = True
@@ -352,13 +391,28 @@ class RemoteKnowledgeBase:
     # -- events ---------------------------------------------------------------------------------
     @_reads_answer
     def add(self, text: str) -> None:
-        """Add one event written in SLR syntax (``p(..)^T`` or ``p(..)^[S,E]``)."""
+        """Add one event written in SLR syntax (``p(..)^T`` or ``p(..)^[S,E]``).
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url)
+        >>> kb.add("seen(cup1)^2"); kb.query("seen(X)^T")
+        [{'X': Atom('cup1'), 'T': 2.0}]
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         _expect(self._post("/add", {"event": _text(text, "event")}), "added", int)
 
     @_reads_answer
     def add_event(self, name: str, args: Iterable[Any], start: float,
                   end: float | None = None) -> None:
-        """Add one event from Python values (``str`` is an atom, ``String`` a string)."""
+        """Add one event from Python values (``str`` is an atom, ``String`` a string).
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url)
+        >>> kb.add_event("seg", ["cup1", [0.4, 0.1, 0.9]], start=3.0, end=3.5)
+        >>> kb.query("seg(O, L)^[S, E]")
+        [{'O': Atom('cup1'), 'L': [0.4, 0.1, 0.9], 'S': 3.0, 'E': 3.5}]
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         _expect(self._post("/add_event", _event_object(name, args, start, end, "")), "added",
                 int)
 
@@ -366,7 +420,15 @@ class RemoteKnowledgeBase:
     def add_many(self, events: Iterable[Any], atomic: bool = False) -> list[EventRejected]:
         """Add many events (SLR strings or ``(name, args, start, end)`` tuples); returns the
         rejected ones, each with ``.index``. Batches larger than the server's body limit go in
-        several requests (one transaction each) unless ``atomic``."""
+        several requests (one transaction each) unless ``atomic``.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url)
+        >>> rejected = kb.add_many(["p(1)^1", ("p", [2], 2.0, 2.0), "p(^3"])
+        >>> [e.index for e in rejected], kb.query("p(X)^T")
+        ([2], [{'X': 1, 'T': 1.0}, {'X': 2, 'T': 2.0}])
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         items: list = []
         rejected: list[EventRejected] = []
         for i, ev in enumerate(events):
@@ -422,7 +484,15 @@ class RemoteKnowledgeBase:
     def load(self, text: str, filename: str = "<string>", *, name: str = "main",
              replace: bool = False) -> None:
         """Add program text to the program ``name`` (all or nothing); ``replace=True`` swaps
-        that program for ``text``."""
+        that program for ``text``.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url)
+        >>> kb.load("color(O,C)^T :- prev(obj(O,_,C)^Z, T)."); kb.add("obj(cup1, cup, red)^2.0")
+        >>> kb.query("color(cup1, C)^5")
+        [{'C': Atom('red')}]
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         body: dict[str, Any] = {"text": _text(text, "text"), "name": _text(name, "name")}
         if filename != "<string>":
             body["filename"] = str(filename)
@@ -432,7 +502,17 @@ class RemoteKnowledgeBase:
 
     def load_file(self, path: str | Path, *, name: str = "main",
                   replace: bool = False) -> None:
-        """Read a program file here and load its text on the server."""
+        """Read a program file here and load its text on the server.
+
+        >>> import pathlib, tempfile
+        >>> rules = pathlib.Path(tempfile.mkdtemp()) / "rules.slr"
+        >>> _ = rules.write_text("big(X) :- size(X, S)^_, S > 2.")
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); kb.load_file(rules); kb.add("size(box, 3)^1")
+        >>> kb.query("big(X)"), kb.programs()["main"].filenames == (str(rules),)
+        ([{'X': Atom('box')}], True)
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         try:
             text = Path(path).read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
@@ -441,12 +521,28 @@ class RemoteKnowledgeBase:
 
     @_reads_answer
     def unload(self, name: str) -> None:
-        """Remove the program loaded under ``name``."""
+        """Remove the program loaded under ``name``.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url)
+        >>> kb.load("tea(green).", name="tea"); list(kb.programs())
+        ['tea']
+        >>> kb.unload("tea"); kb.programs()
+        {}
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         _expect(self._post("/unload", {"name": name}), "unloaded", str)
 
     @_reads_answer
     def programs(self) -> dict[str, ProgramInfo]:
-        """The named programs stored in the file, in load order of their first text."""
+        """The named programs stored in the file, in load order of their first text.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url)
+        >>> kb.load("tea(green).", name="tea"); info = kb.programs()["tea"]; info.source, info.texts
+        ('tea(green).', 1)
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         out: dict[str, ProgramInfo] = {}
         for name, info in decode_plain(_expect(self._get("/programs"), "programs",
                                                dict)).items():
@@ -461,11 +557,28 @@ class RemoteKnowledgeBase:
 
     @_reads_answer
     def event_rules(self) -> list[dict[str, Any]]:
-        """The event rules in force on the server, in the order they run."""
+        """The event rules in force on the server, in the order they run.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url)
+        >>> kb.load("c(X) <- a(X) seq b(X)."); kb.add_many(["a(1)^1", "b(1)^2"])
+        []
+        >>> [(rule["head"], rule["detections"]) for rule in kb.event_rules()]
+        [('c/1', 1)]
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         return decode_plain(_expect(self._get("/event_rules"), "event_rules", list))
 
     def define(self, name: str, arity: int, fn: Callable) -> None:
-        """Not available remotely: Python predicates must run in the server's process."""
+        """Not available remotely: Python predicates must run in the server's process.
+
+        >>> kb = slr_sql.connect("http://127.0.0.1:8765")   # (refused here: nothing is sent)
+        >>> kb.define("double", 2, lambda x, y: (x, 2 * x))
+        Traceback (most recent call last):
+        ...
+        slr_sql.service.errors.ServiceError: define() is not available over the network: register Python predicates in the process that runs the server
+        >>> kb.close()
+        """
         raise ServiceError("define() is not available over the network: register Python "
                            "predicates in the process that runs the server",
                            kind="NotImplemented")
@@ -477,7 +590,15 @@ class RemoteKnowledgeBase:
               limit: int | None = None, wait: bool = False,
               robot: str | None = None) -> list[dict[str, Any]]:
         """Answer ``goal`` on the server (see ``KnowledgeBase.query``); ``timeout`` is
-        capped by the server's ``max_query_time``."""
+        capped by the server's ``max_query_time``.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); kb.add_many(["p(1)^1", "p(2)^2", "p(3)^3"])
+        []
+        >>> kb.query("p(X)^T, X >= 2"), kb.query("between(1, inf, X)", limit=2)
+        ([{'X': 2, 'T': 2.0}, {'X': 3, 'T': 3.0}], [{'X': 1}, {'X': 2}])
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         if wait:  # synchronized: long-polls, however long the wait (as kb.query does it)
             return self.submit(goal, at=at, args=args, timeout=timeout, robot=robot).result()
         body = _goal_body(goal, at, args, timeout)
@@ -493,7 +614,18 @@ class RemoteKnowledgeBase:
     # -- fleets (slr fleet push / status to an `slr serve` fleet store) -------------------------
     @_reads_answer
     def fleet_positions(self, robot: str) -> dict[tuple[str, int], int]:
-        """Per event type, the last sequence of ``robot``'s store the server's store holds."""
+        """Per event type, the last sequence of ``robot``'s store the server's store holds.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); kb.fleet_positions("r1")
+        {}
+        >>> robot = slr_sql.open(clock=slr_sql.ManualClock(10)); robot.add("seen(pallet7)^3")
+        >>> kb.fleet_receive("r1", [("seen", 1, robot.store.fleet_read_after("seen", 1, 0, 100))])
+        1
+        >>> kb.fleet_positions("r1")
+        {('seen', 1): 1}
+        >>> robot.close(); kb.close(); server.stop(); server.kb.close()
+        """
         reply = self._request("GET", "/fleet/positions", params={"robot": robot})[1]
         return {(str(n), int(a)): int(p) for n, a, p in _expect(reply, "positions", list)}
 
@@ -508,7 +640,17 @@ class RemoteKnowledgeBase:
         ``{(name, arity): position}``, the positions the batches were read after (a
         ``Conflict`` error when the server's store holds less: restored or replaced).
         ``relayed``: ``{robot: {"p/N": t}}``, the marks of robots whose rows the sender
-        relays."""
+        relays.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url)
+        >>> robot = slr_sql.open(clock=slr_sql.ManualClock(10)); robot.add("seen(pallet7)^3")
+        >>> rows = robot.store.fleet_read_after("seen", 1, 0, 100); kb.fleet_receive("r1", [("seen", 1, rows)])
+        1
+        >>> kb.fleet_receive("r1", [("seen", 1, rows)]), kb.query("origin(R, seen(P)^T)")
+        (0, [{'R': Atom('r1'), 'P': Atom('pallet7'), 'T': 3.0}])
+        >>> robot.close(); kb.close(); server.stop(); server.kb.close()
+        """
         stored = 0
         # (piece, the position its rows were read after: the previous piece's last seq)
         pieces: list[tuple[list, list | None]] = []
@@ -538,7 +680,17 @@ class RemoteKnowledgeBase:
 
     @_reads_answer
     def fleet_status(self) -> list[dict[str, Any]]:
-        """Per robot that shipped to the server's store: its contact row."""
+        """Per robot that shipped to the server's store: its contact row.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url)
+        >>> robot = slr_sql.open(clock=slr_sql.ManualClock(10)); robot.add("seen(pallet7)^3")
+        >>> kb.fleet_receive("r1", [("seen", 1, robot.store.fleet_read_after("seen", 1, 0, 100))], pending=0)
+        1
+        >>> [(row["robot"], row["shipped"], row["pending"]) for row in kb.fleet_status()]
+        [('r1', 1, 0)]
+        >>> robot.close(); kb.close(); server.stop(); server.kb.close()
+        """
         return [dict(r) for r in _expect(self._get("/fleet/status"), "robots", list)]
 
     @_reads_answer
@@ -546,7 +698,16 @@ class RemoteKnowledgeBase:
                args: dict | None = None, timeout: float | None = None,
                callback: Callable[[Any], Any] | None = None,
                robot: str | None = None) -> PendingQueryAPI:
-        """A synchronized query on the server: a Future answered with the answer list."""
+        """A synchronized query on the server: a Future answered with the answer list.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); kb.add("p(a)^11")
+        >>> p = kb.submit("findall(X, p(X)^_, L)", at=12); p.done()
+        False
+        >>> kb.mark_complete("p/1", 12); p.result(timeout=5)
+        [{'L': [Atom('a')]}]
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         body = _goal_body(goal, at, args, timeout)
         if id is not None:
             body["id"] = str(id)
@@ -565,7 +726,15 @@ class RemoteKnowledgeBase:
     async def ask(self, goal: str, at: float | None = None, id: str | None = None,
                   args: dict | None = None, timeout: float | None = None,
                   robot: str | None = None) -> list[dict[str, Any]]:
-        """``await kb.ask(goal, at=z)``: :meth:`submit` for asyncio code."""
+        """``await kb.ask(goal, at=z)``: :meth:`submit` for asyncio code.
+
+        >>> import asyncio
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); kb.add("p(1)^1"); kb.mark_complete("p/1", 5)
+        >>> asyncio.run(kb.ask("p(X)^T", at=5))
+        [{'X': 1, 'T': 1.0}]
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         import asyncio
 
         from concurrent.futures import Future
@@ -576,7 +745,14 @@ class RemoteKnowledgeBase:
 
     @_reads_answer
     def explain(self, goal: str) -> str:
-        """How ``goal`` would run on the server: which engine, and why."""
+        """How ``goal`` would run on the server: which engine, and why.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); kb.add("obj(cup1, cup, red)^2")
+        >>> print(kb.explain("obj(O, cup, C)^T").splitlines()[1])
+        engine: sql (one prepared statement; rows decoded into answers)
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         return _expect(self._post("/explain", {"goal": _text(goal, "goal")}), "explain", str)
 
     def solutions(self, goal: str, at: float | None = None, args: dict | None = None,
@@ -585,31 +761,69 @@ class RemoteKnowledgeBase:
         """The answers of ``goal`` one at a time (see ``KnowledgeBase.solutions``). The server
         answers a request as a whole, so this iterates over one :meth:`query`'s answers; a
         goal with endless answers needs ``timeout`` (capped by the server's
-        ``max_query_time``) or ``query(..., limit=N)``."""
+        ``max_query_time``) or ``query(..., limit=N)``.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url)
+        >>> for answer in kb.solutions("member(X, [a, b])"): print(answer)
+        {'X': Atom('a')}
+        {'X': Atom('b')}
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         yield from self.query(goal, at=at, args=args, timeout=timeout, robot=robot)
 
     @_reads_answer
     def goal_warnings(self, goal: str) -> list[str]:
         """The server's warnings about ``goal`` that do not change its answer (likely typos:
-        see ``KnowledgeBase.goal_warnings``)."""
+        see ``KnowledgeBase.goal_warnings``).
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); kb.load("color(O,C)^T :- prev(obj(O,_,C)^Z, T).")
+        >>> kb.goal_warnings("colour(cup2, C)^20")
+        ['no events or rules of colour/2; did you mean color/2?']
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         return list(_expect(self._post("/warnings", {"goal": _text(goal, "goal")}),
                             "warnings", list))
 
     def pending(self) -> list[PendingQueryAPI]:
         """The synchronized queries this client submitted that are still waiting (each
-        with ``waiting_for`` as of its latest poll)."""
+        with ``waiting_for`` as of its latest poll).
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); waiting = kb.submit("p(X)^T", at=20)
+        >>> [p.goal for p in kb.pending()]
+        ['p(X)^T']
+        >>> kb.mark_complete("p/1", 20); waiting.result(timeout=5), kb.pending()
+        ([], [])
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         with self._lock:
             return [p for p in self._pending if not p.done()]
 
     @_reads_answer
     def mark_complete(self, event_type: str, t: float) -> None:
-        """Declare the history of ``"p/N"`` complete up to ``t``."""
+        """Declare the history of ``"p/N"`` complete up to ``t``.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url)
+        >>> kb.complete_until("p/1"), kb.mark_complete("p/1", 15), kb.complete_until("p/1")
+        (10.0, None, 15.0)
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         _expect(self._post("/mark_complete", {"type": event_type, "time": _number(t, "t")}),
                 "type", str)
 
     @_reads_answer
     def complete_until(self, event_type: str) -> float:
-        """The time up to which the history of ``"p/N"`` is complete now."""
+        """The time up to which the history of ``"p/N"`` is complete now.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); kb.load(":- max_delay(p/1, 4).")
+        >>> kb.complete_until("p/1")     # now (10) less the delay the events of p/1 may have
+        6.0
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         return float(decode_plain(self._get("/complete_until", {"type": event_type})["time"]))
 
     # -- buffers --------------------------------------------------------------------------------
@@ -618,7 +832,16 @@ class RemoteKnowledgeBase:
                    keep_seconds: float | None = None,
                    keep_between: tuple[float, float] | None = None) -> int:
         """Keep a history of the events matching ``pattern``: the ``keep_last`` most recent
-        per key, the last ``keep_seconds``, or those inside ``keep_between=(t1, t2)``."""
+        per key, the last ``keep_seconds``, or those inside ``keep_between=(t1, t2)``.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); kb.add_buffer("pos(R, _)", keep_last=1)
+        1
+        >>> kb.add_many(["pos(r1, 1)^1", "pos(r1, 2)^2", "pos(r2, 5)^2"]); kb.query("pos(R, X)^T")
+        []
+        [{'R': Atom('r1'), 'X': 2, 'T': 2.0}, {'R': Atom('r2'), 'X': 5, 'T': 2.0}]
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         body: dict[str, Any] = {"pattern": _text(pattern, "pattern")}
         if keep_last is not None:
             body["keep_last"] = keep_last
@@ -631,12 +854,27 @@ class RemoteKnowledgeBase:
 
     @_reads_answer
     def remove_buffer(self, buffer_id: int) -> None:
-        """Remove a runtime buffer (the events it kept stay)."""
+        """Remove a runtime buffer (the events it kept stay).
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); buffer = kb.add_buffer("p(_)", keep_last=1)
+        >>> kb.remove_buffer(buffer); kb.buffers()
+        []
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         _expect(self._request("DELETE", f"/buffers/{int(buffer_id)}")[1], "removed", int)
 
     @_reads_answer
     def buffers(self) -> list:
-        """The active buffers with their counters (``BufferInfo`` objects)."""
+        """The active buffers with their counters (``BufferInfo`` objects).
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); _ = kb.add_buffer("p(_)", keep_last=1)
+        >>> kb.add_many(["p(a)^1", "p(b)^2"]); [(info.pattern, info.pruned) for info in kb.buffers()]
+        []
+        [('p(_)', 1)]
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         infos = decode_plain(_expect(self._get("/buffers"), "buffers", list))
         try:
             from slr_sql.buffers import BufferInfo
@@ -660,7 +898,17 @@ class RemoteKnowledgeBase:
             timeout: float | None = None) -> tuple[list[str], list[tuple]]:
         """Run one read-only SQL statement on the server's store: (column names, rows).
         ``timeout`` is capped by the server's ``sql_timeout``; ``write=True`` is refused
-        (the service runs read-only SQL only: write in the server's process)."""
+        (the service runs read-only SQL only: write in the server's process).
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); kb.add("p(a)^1"); kb.sql("SELECT arg1, t_end FROM p")
+        (['arg1', 't_end'], [('a', 1.0)])
+        >>> kb.sql("DELETE FROM p")
+        Traceback (most recent call last):
+        ...
+        slr_sql.service.errors.ServiceError: sql over the service is read-only: DELETE statements are not allowed (SELECT, WITH, VALUES, EXPLAIN)
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         if write:
             raise ServiceError("sql(write=True) is not available over the network: the "
                                "service runs read-only SQL only (write with `slr sql DB "
@@ -677,14 +925,29 @@ class RemoteKnowledgeBase:
     @_reads_answer
     def stats(self) -> dict:
         """File size, events per type, buffers and counters; ``["text"]`` is what
-        ``slr stats`` prints."""
+        ``slr stats`` prints.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); kb.add_many(["p(a)^1", "p(b)^2", "q(1)^1"])
+        []
+        >>> kb.stats()["rows"]
+        [{'type': 'p/1', 'count': 2}, {'type': 'q/1', 'count': 1}]
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         reply = self._get("/stats")
         _expect(reply, "text", str)
         return decode_plain(reply)
 
     def plot(self, types: Iterable[str] | str | None = None, **options: Any) -> Any:
         """A timeline of the server's event histories as a matplotlib Figure (read through
-        :meth:`sql`); options as for ``KnowledgeBase.plot``."""
+        :meth:`sql`); options as for ``KnowledgeBase.plot``.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); kb.add("move(r1)^[2, 8]")
+        >>> kb.plot(start=0, end=10, size=(600, 120)).get_size_inches().tolist()
+        [6.0, 1.2]
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         from slr_sql.plot import timeline  # deferred: matplotlib is the extra slr_sql[plot]
         return timeline(self, types, **options)
 
@@ -699,16 +962,26 @@ class RemoteKnowledgeBase:
         ends it. ``max_queue`` is capped by the server's ``subscribe_queue``; up to
         ``subscribe_batch`` answers already waiting on the server travel in one frame.
 
-        >>> sub = connect("http://127.0.0.1:8765").subscribe("p(X)^T", since=0)  # doctest: +SKIP
-        >>> next(sub)                                                          # doctest: +SKIP
-        {'X': Atom('a'), 'T': 1.0}
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); sub = kb.subscribe("p(X)^T", where="X > 1", since=0)
+        >>> kb.add_many(["p(1)^1", "p(2)^2"]); sub.get(timeout=5)
+        []
+        {'X': 2, 'T': 2.0}
+        >>> sub.close(); kb.close(); server.stop(); server.kb.close()
         """
         return RemoteSubscription(self, pattern, where=where, since=since, until=until, id=id,
                                   batch=self.subscribe_batch, callback=callback,
                                   max_queue=max_queue, max_lag=max_lag)
 
     def unsubscribe(self, id: str) -> None:
-        """Remove the durable subscription ``id`` and its position on the server."""
+        """Remove the durable subscription ``id`` and its position on the server.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); sub = kb.subscribe("p(X)^T", id="watcher")
+        >>> kb.unsubscribe("watcher"); sub.get(timeout=5) is None    # (it has ended)
+        True
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         self._post("/unsubscribe", {"id": _text(id, "id")})
 
 
@@ -1025,7 +1298,14 @@ class RemoteSubscription:
     def get(self, timeout: float | None = None) -> dict | None:
         """The next answer; None once the subscription has ended (``until`` reached or
         closed). Raises SLRTimeout when none came within ``timeout`` seconds, and the error
-        that ended the subscription on the server."""
+        that ended the subscription on the server.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); sub = kb.subscribe("p(X)^T", since=0, until=12)
+        >>> kb.add("p(1)^11"); kb.mark_complete("p/1", 12); sub.get(timeout=5), sub.get(timeout=5)
+        ({'X': 1, 'T': 11.0}, None)
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         self._check_pull()
         try:
             return self._next(timeout)
@@ -1075,7 +1355,14 @@ class RemoteSubscription:
         """Unsubscribe (closes the WebSocket); an iteration blocked in another thread
         ends. The last answer given out counts as handled unless ``ack=False``; answers
         received but not iterated yet are dropped (unhandled: a durable subscription
-        delivers them again)."""
+        delivers them again).
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); sub = kb.subscribe("p(X)^T")
+        >>> sub.close(); kb.add("p(1)^11"); sub.get(timeout=5) is None
+        True
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         if not self._done:
             self._ack(self._returned if ack else self._handled)
         self._done = True
