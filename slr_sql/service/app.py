@@ -1096,17 +1096,18 @@ async def _unsubscribe(svc: "_Service", request: Request) -> Any:
 
 @_route("POST", "/sql", "Run one read-only SQL statement on the store "
         "(SELECT, WITH, VALUES, EXPLAIN, introspection PRAGMAs).",
-        body={"query": ("string", True), "params": ("array", False),
+        body={"query": ("string", True), "params": ("SqlParams", False),
               "timeout": ("Number", False)},
         response={"columns": "array", "rows": "array"})
 async def _sql(svc: "_Service", request: Request) -> Any:
     b = await svc.body(request)
     statement = _field(b, "query", str, required=True)
-    params = _field(b, "params", list, default=[])
+    # (an array for ? placeholders, an object for :name ones, as kb.sql takes them)
+    params = _field(b, "params", (list, dict), default=[])
     timeout = _cap(_number(b, "timeout", minimum=0), svc.limits.sql_timeout)
-    for i, p in enumerate(params):
+    for i, p in params.items() if isinstance(params, dict) else enumerate(params):
         if p is not None and type(p) not in (int, float, str):
-            raise ServiceError(f"params[{i}]: a SQL parameter is a number, a string "
+            raise ServiceError(f"params[{i!r}]: a SQL parameter is a number, a string "
                                f"or null")
     async with svc.query_slot(timeout) as waited:
         columns, rows = await svc.call(_read_only_sql, svc.kb, statement, params,
@@ -1402,7 +1403,8 @@ class _SubscribeEndpoint:
 
 # -- read-only SQL and stats (run on the thread pool) ------------------------------------------
 
-def _read_only_sql(kb: KnowledgeBase, statement: str, params: list, timeout: float) -> tuple:
+def _read_only_sql(kb: KnowledgeBase, statement: str, params: list | dict,
+                   timeout: float) -> tuple:
     """One statement that cannot change the store: the first keyword must read, and the
     store runs it read-only (``kb.sql`` without ``write``); a statement that runs longer
     than ``timeout`` seconds is interrupted."""
@@ -1447,6 +1449,9 @@ _SCHEMAS: dict[str, Any] = {
                             "f(..) = {\"f\": [args]}; variable = {\"$var\": name}.",
              "anyOf": [{"type": "string"}, {"type": "number"}, {"type": "array"},
                        {"type": "object", "minProperties": 1, "maxProperties": 1}]},
+    "SqlParams": {"description": "values of the ? placeholders (an array) or of the :name "
+                                 "ones (an object)",
+                  "anyOf": [{"type": "array"}, {"type": "object"}]},
     "TermList": {"type": "array", "items": {"$ref": "#/components/schemas/Term"}},
     "Number": {"anyOf": [{"type": "number"}, {"type": "object", "properties": {
         "$float": {"enum": ["inf", "-inf", "nan"]}}}]},

@@ -50,7 +50,7 @@ import threading
 import time
 from concurrent.futures import Future, InvalidStateError
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator, Mapping
 from urllib.parse import quote, urlsplit
 
 import slr_sql  # noqa: F401  (the examples' slr_sql.open and slr_sql.connect)
@@ -897,11 +897,14 @@ class RemoteKnowledgeBase:
     def sql(self, query: str, params: Iterable[Any] = (), write: bool = False,
             timeout: float | None = None) -> tuple[list[str], list[tuple]]:
         """Run one read-only SQL statement on the server's store: (column names, rows).
-        ``timeout`` is capped by the server's ``sql_timeout``; ``write=True`` is refused
+        ``params``: values for ``?`` placeholders (a sequence) or ``:name`` ones (a
+        mapping), numbers, strings or None. ``timeout`` is capped by the server's ``sql_timeout``; ``write=True`` is refused
         (the service runs read-only SQL only: write in the server's process).
 
         >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
-        >>> kb = slr_sql.connect(server.url); kb.add("p(a)^1"); kb.sql("SELECT arg1, t_end FROM p")
+        >>> kb = slr_sql.connect(server.url); kb.add_many(["p(a)^1", "p(b)^4"])
+        []
+        >>> kb.sql("SELECT arg1, t_end FROM p WHERE t_end < :t", {"t": 3})
         (['arg1', 't_end'], [('a', 1.0)])
         >>> kb.sql("DELETE FROM p")
         Traceback (most recent call last):
@@ -914,7 +917,9 @@ class RemoteKnowledgeBase:
                                "service runs read-only SQL only (write with `slr sql DB "
                                "--write` in the server's machine)", kind="BadRequest",
                                status=0)
-        body: dict[str, Any] = {"query": _text(query, "query"), "params": list(params)}
+        # (a mapping names :name placeholders: list() of it would send its keys as values)
+        body: dict[str, Any] = {"query": _text(query, "query"), "params": dict(params)
+                                if isinstance(params, Mapping) else list(params)}
         if timeout is not None:
             body["timeout"] = _number(timeout, "timeout")
         reply = self._post("/sql", body, timeout=self._read_timeout(

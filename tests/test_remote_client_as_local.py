@@ -1,0 +1,40 @@
+"""The remote client (slr_sql.connect) against a BackgroundServer answers a call as a local
+knowledge base answers the same call: the same values, the same errors in the same words.
+Each test makes its two stores, a local one and a served one, on the same ManualClock time."""
+from __future__ import annotations
+
+import contextlib
+
+import pytest
+
+import slr_sql
+from slr_sql.service.background import BackgroundServer
+
+
+@contextlib.contextmanager
+def local_and_remote():
+    """A local knowledge base, and a client of another one served from a thread (both
+    memory stores on a ManualClock at 10)."""
+    with slr_sql.open(clock=slr_sql.ManualClock(10)) as local, \
+            slr_sql.open(clock=slr_sql.ManualClock(10)) as served, \
+            BackgroundServer(served) as server, slr_sql.connect(server.url) as remote:
+        yield local, remote
+
+
+def test_sql_params_by_name_are_the_values_of_the_names_not_the_names():
+    # a mapping of :name placeholders once went as list(mapping): its keys were the values
+    with local_and_remote() as (local, remote):
+        for kb in (local, remote):
+            kb.add_many(["p(a)^1", "p(b)^4"])
+        for call in (lambda kb: kb.sql("SELECT :x + 1 AS y", {"x": 41}),
+                     lambda kb: kb.sql("SELECT arg1 FROM p WHERE t_end < :t", {"t": 3})):
+            assert call(remote) == call(local)
+        assert remote.sql("SELECT :x + 1 AS y", {"x": 41}) == (["y"], [(42,)])
+        assert remote.sql("SELECT ? * 2 AS y", (21,)) == (["y"], [(42,)])
+
+
+def test_a_sql_param_by_name_that_is_no_sql_value_is_refused_by_name():
+    with local_and_remote() as (_local, remote):
+        with pytest.raises(slr_sql.SLRError, match=r"params\['x'\]: a SQL parameter is a "
+                                                    r"number, a string or null"):
+            remote.sql("SELECT :x", {"x": [1, 2]})
