@@ -38,3 +38,21 @@ def test_a_sql_param_by_name_that_is_no_sql_value_is_refused_by_name():
         with pytest.raises(slr_sql.SLRError, match=r"params\['x'\]: a SQL parameter is a "
                                                     r"number, a string or null"):
             remote.sql("SELECT :x", {"x": [1, 2]})
+
+
+def test_a_synchronized_query_not_answered_in_time_says_so_in_the_local_words():
+    # the server's sentence was once put inside the client's own ("was not answered within
+    # 0.2 s: synchronized query 'far' (...) was not answerable: ..."): it said it twice
+    with local_and_remote() as (local, remote):
+        messages = []
+        for kb in (local, remote):
+            pending = kb.submit("r(X)^T", at=60, id="far")
+            with pytest.raises(slr_sql.SLRTimeout) as info:
+                pending.result(timeout=0.2)
+            pending.cancel()
+            messages.append(str(info.value))
+        assert messages[1] == messages[0]
+        assert messages[0].startswith("synchronized query 'far' (r(X)^T at 60) was not "
+                                      "answerable within 0.2 s: r/1 (goal set) would require "
+                                      "its history up to 60, but it is complete only up to 10")
+        assert messages[0].count("synchronized query") == 1

@@ -1065,10 +1065,16 @@ class RemotePendingQuery(Future):
             pass
         if self.done():
             return super().result(0)
-        what = self._waiting or (", ".join(map(str, self.waiting_for)) or "its answer")
-        raise SLRTimeout(f"synchronized query {self.id!r} ({self.goal} at {self.at}) was not "
-                         f"answered within {timeout:g} s: {what}; it is still waiting (call "
-                         f"result() again, or cancel())")
+        still = "it is still waiting (call result() again, or cancel())"
+        # the server's words are the local knowledge base's without the wait: "synchronized
+        # query ID (GOAL at T) was not answerable: WHAT"; the wait goes where the local puts it
+        head, answerable, what = self._waiting.partition(" was not answerable: ")
+        if answerable:
+            raise SLRTimeout(f"{head} was not answerable within {timeout:g} s: {what}; {still}")
+        what = ", ".join(map(str, self.waiting_for)) or "its answer"
+        at = "now" if self.at is None else _time_text(float(self.at))
+        raise SLRTimeout(f"synchronized query {self.id!r} ({self.goal} at {at}) was not "
+                         f"answered within {timeout:g} s: {what}; {still}")
 
     def explain(self) -> str:
         """What the query waited for and what released it (the server's explanation)."""
