@@ -56,3 +56,13 @@ def test_a_synchronized_query_not_answered_in_time_says_so_in_the_local_words():
                                       "answerable within 0.2 s: r/1 (goal set) would require "
                                       "its history up to 60, but it is complete only up to 10")
         assert messages[0].count("synchronized query") == 1
+
+
+def test_a_query_out_of_time_says_the_timeout_it_was_given():
+    # the server took the moment of taking a free query slot off the timeout: the error
+    # said "after 0.19998527899879265 s" for timeout=0.2
+    with local_and_remote() as (local, remote):
+        for kb in (local, remote):
+            with pytest.raises(slr_sql.SLRTimeout,
+                               match=r"^query timed out after 0\.2 s \(\d+ inference steps\)$"):
+                kb.query("between(1, inf, X), fail", timeout=0.2)
