@@ -66,3 +66,18 @@ def test_a_query_out_of_time_says_the_timeout_it_was_given():
             with pytest.raises(slr_sql.SLRTimeout,
                                match=r"^query timed out after 0\.2 s \(\d+ inference steps\)$"):
                 kb.query("between(1, inf, X), fail", timeout=0.2)
+
+
+def test_add_many_rejects_what_is_no_event_in_the_local_words_and_names_each_rejected_event():
+    # the client had its own words for an item that is neither text nor a 4-tuple, and its
+    # rejections had no .event (the caller's item, which a local knowledge base sets)
+    with local_and_remote() as (local, remote):
+        batch = ["q(1)^1", ("p",), 5, "p(1)^[2,1]", ("p", [1], 2.0, 1.0)]
+        seen = [[(e.index, str(e), e.event) for e in kb.add_many(batch)] for kb in (local, remote)]
+        assert seen[1] == seen[0]
+        assert seen[0][0] == (1, "event #1 is neither SLR text nor a (name, args, start, end) "
+                                 "tuple: ('p',)", ("p",))
+        assert [event for _index, _text, event in seen[0]] == batch[1:]
+        for kb in (local, remote):
+            with pytest.raises(slr_sql.EventRejected, match=r"^event #0 is neither SLR text"):
+                kb.add_many([5], atomic=True)

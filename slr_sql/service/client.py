@@ -59,6 +59,7 @@ from slr_sql.api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 
 from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args,
                        encode_arguments, encode_term, loads)
+from ..store.checks import shown
 from .auth import check_token_text
 # (the server of this module's examples: a knowledge base served from a thread)
 from .background import BackgroundServer  # noqa: F401
@@ -430,13 +431,15 @@ class RemoteKnowledgeBase:
         >>> kb.close(); server.stop(); server.kb.close()
         """
         items: list = []
+        given: list = []                # the caller's events (a rejection's .event)
         rejected: list[EventRejected] = []
         for i, ev in enumerate(events):
+            given.append(ev)
             if isinstance(ev, str):
                 items.append(ev)
                 continue
             try:
-                items.append(_tuple_object(ev))
+                items.append(_tuple_object(ev, i))
             except SLRError as exc:
                 if atomic:
                     raise
@@ -450,6 +453,8 @@ class RemoteKnowledgeBase:
             exc.carried = (carried[0], carried[1])
             raise
         rejected.sort(key=lambda e: e.index if isinstance(e.index, int) else len(items))
+        for exc in rejected:            # (as a local knowledge base sets it)
+            exc.event = given[exc.index] if isinstance(exc.index, int) else None
         return rejected
 
     def _send_events(self, items: list, offset: int, atomic: bool, budget: int,
@@ -1432,15 +1437,18 @@ def _time(t: Any, where: str) -> Any:
     return t if type(t) is float and t - t == 0.0 else encode_term(t, _where=where)
 
 
-def _tuple_object(ev: Any) -> dict:
+def _tuple_object(ev: Any, index: int) -> dict:
+    """The JSON object of the event tuple ``ev`` (item ``index`` of a batch), or the
+    EventRejected that names it."""
     try:
         name, args, start, end = ev
-    except (TypeError, ValueError):
-        raise EventRejected(f"{ev!r}: an event is SLR text or (name, args, start, end)") from None
+    except (TypeError, ValueError):   # (in the words of a local knowledge base)
+        raise EventRejected(f"event #{index} is neither SLR text nor a (name, args, start, "
+                            f"end) tuple: {shown(ev)}") from None
     try:
         return _event_object(name, args, start, end, "")
-    except TermError as exc:
-        raise EventRejected(f"{ev!r}: {exc}") from None
+    except (TermError, SLRError) as exc:
+        raise EventRejected(f"{shown(ev)}: {exc}") from None
 
 
 def _rejected(exc: SLRError, index: int) -> EventRejected:
