@@ -453,8 +453,9 @@ class RemoteKnowledgeBase:
             exc.carried = (carried[0], carried[1])
             raise
         rejected.sort(key=lambda e: e.index if isinstance(e.index, int) else len(items))
-        for exc in rejected:            # (as a local knowledge base sets it)
-            exc.event = given[exc.index] if isinstance(exc.index, int) else None
+        for rejection in rejected:      # (as a local knowledge base sets it)
+            rejection.event = given[rejection.index] \
+                if isinstance(rejection.index, int) else None
         return rejected
 
     def _send_events(self, items: list, offset: int, atomic: bool, budget: int,
