@@ -81,3 +81,32 @@ def test_add_many_rejects_what_is_no_event_in_the_local_words_and_names_each_rej
         for kb in (local, remote):
             with pytest.raises(slr_sql.EventRejected, match=r"^event #0 is neither SLR text"):
                 kb.add_many([5], atomic=True)
+
+
+def test_a_closed_client_leaves_no_long_poll_behind_and_the_server_stops_at_once(caplog):
+    # a client closed while its synchronized query was waiting left that query's long-poll
+    # open on the server for up to max_poll: a server stopping meanwhile waited its whole
+    # grace, then cancelled the poll and logged "Exception in ASGI application" with a
+    # traceback
+    import threading
+    import time
+
+    with slr_sql.open(clock=slr_sql.ManualClock(10)) as served:
+        server = BackgroundServer(served, stop_grace=5.0).start()
+        try:
+            remote = slr_sql.connect(server.url)
+            waiting = remote.submit("p(X)^T", at=20)
+            # the poll is in flight once the server holds a request task for it
+            state = server._server.server_state
+            deadline = time.monotonic() + 10
+            while not state.tasks and time.monotonic() < deadline:
+                threading.Event().wait(0.01)
+            assert state.tasks, "the client's long-poll never reached the server"
+            remote.close()
+            with pytest.raises(slr_sql.SLRError, match="closed"):
+                waiting.result(timeout=5)
+            started = time.monotonic()
+        finally:
+            server.stop()
+        assert time.monotonic() - started < 2.0
+    assert not [r for r in caplog.records if r.levelname == "ERROR"], caplog.text

@@ -551,10 +551,21 @@ class _Service:
                                kind="NotFound")
         return entry
 
-    async def _poll(self, entry: "_Submitted", wait: float) -> Any:
+    async def _poll(self, entry: "_Submitted", wait: float, receive: Callable) -> Any:
+        """The state of ``entry`` once answered or after ``wait`` seconds; a client that
+        leaves first (a closed client, a stopping program) is :class:`ClientDisconnect`:
+        its poll held a task and a place of --max-connections for up to max_poll, and a
+        server stopping meanwhile waited its grace for it, then cancelled it."""
         wait = min(wait, self.limits.max_poll)
         if wait > 0 and not entry.pending.done():
-            await asyncio.wait({entry.waiter}, timeout=wait)
+            leaving = asyncio.ensure_future(_disconnected(receive))
+            try:
+                await asyncio.wait({entry.waiter, leaving}, timeout=wait,
+                                   return_when=asyncio.FIRST_COMPLETED)
+            finally:
+                leaving.cancel()
+            if leaving.done() and not leaving.cancelled() and not entry.pending.done():
+                raise ClientDisconnect()
         pending = entry.pending
         state: dict[str, Any] = {"handle": entry.handle, "id": pending.id,
                                  "done": pending.done()}
@@ -980,7 +991,7 @@ async def _submit(svc: "_Service", request: Request) -> Any:
     entry = _Submitted(handle, pending, asyncio.wrap_future(pending))
     pending.add_done_callback(entry.finished)
     svc.submitted[handle] = entry
-    return await svc._poll(entry, wait)
+    return await svc._poll(entry, wait, request.receive)
 
 
 @_route("GET", "/submit/{handle}", "The state of a submitted query; waits up "
@@ -991,7 +1002,7 @@ async def _submit(svc: "_Service", request: Request) -> Any:
 async def _poll(svc: "_Service", request: Request) -> Any:
     entry = svc._entry(request)
     wait = _query_number(request, "wait")
-    return await svc._poll(entry, wait)
+    return await svc._poll(entry, wait, request.receive)
 
 
 @_route("DELETE", "/submit/{handle}", "Cancel a submitted query and forget it.",

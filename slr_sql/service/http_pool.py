@@ -100,6 +100,7 @@ class HttpPool:
         self.connect_timeout = connect_timeout
         self.max_idle = max_idle
         self._idle: list[tuple[http.client.HTTPConnection, float]] = []
+        self._busy: set[http.client.HTTPConnection] = set()   # carrying a request now
         self._lock = threading.Lock()
         self.closed = False
 
@@ -168,6 +169,16 @@ class HttpPool:
         except (UnicodeError, TypeError) as exc:
             raise RequestInvalid(f"the request's path cannot be sent: {exc}") from None
         conn = self._connection()
+        with self._lock:
+            self._busy.add(conn)
+        try:
+            return self._exchange(conn, method, target, content, timeout)
+        finally:
+            with self._lock:
+                self._busy.discard(conn)
+
+    def _exchange(self, conn: http.client.HTTPConnection, method: str, target: str,
+                  content: bytes | None, timeout: float | None) -> HttpAnswer:
         assert conn.sock is not None
         conn.sock.settimeout(_socket_timeout(self.timeout if timeout is None else timeout))
         headers = self.headers if content is None else \
@@ -205,12 +216,22 @@ class HttpPool:
         return HttpAnswer(response.status, response.headers, body)
 
     def close(self) -> None:
-        """Close the idle connections; one in use closes when its request ends."""
+        """Close the idle connections, and end those in use: their requests (a long-poll of
+        another thread, say) fail at once with :class:`AnswerLost` instead of holding the
+        server's place until their answer."""
         with self._lock:
             self.closed = True
             idle, self._idle = self._idle, []
+            busy = list(self._busy)
         for conn, _ in idle:
             conn.close()
+        for conn in busy:
+            sock = conn.sock
+            if sock is not None:
+                try:      # (wakes the thread reading it; that thread closes the connection)
+                    sock.shutdown(socket.SHUT_RDWR)
+                except OSError:
+                    pass
 
 
 def _socket_timeout(seconds: float) -> float | None:
