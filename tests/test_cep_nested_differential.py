@@ -93,6 +93,12 @@ def _own_bindings(part, chosen):
     return b
 
 
+def _bound(x, bindings):
+    if isinstance(x, tuple):
+        return _bound(x[1], bindings) and _bound(x[2], bindings)
+    return not isinstance(x, str) or x in bindings
+
+
 def interval(tree, chosen, k, events):
     """The interval of the sub-tree over the chosen events (leaves numbered from k[0]), or
     None when a relation, a window, a where or a cnot inside it rejects them."""
@@ -111,7 +117,10 @@ def interval(tree, chosen, k, events):
             return iv if e - s <= tree[2] else None
         own = _own_bindings(tree[1], chosen[first:k[0]])
         if kind == "where":
-            ok = all(cd._compare(op, cd._operand(x, own), cd._operand(y, own))
+            # a variable its part does not bind is unbound there: an instantiation error
+            # rejects the candidate, whatever another part binds (SPEC §6, scope)
+            ok = all(_bound(x, own) and _bound(y, own)
+                     and cd._compare(op, cd._operand(x, own), cd._operand(y, own))
                      for op, x, y in tree[2])
             return iv if ok else None
         for _, name, args in (leaf[:3] for leaf in tree[2]):
@@ -280,7 +289,10 @@ class Generator:
             if self.r.random() < 0.3:
                 left = ("-", self.r.choice(names), self.r.choice(names))
             op = self.r.choice(["<", ">", "=<", ">=", "=:=", "=\\="])
-            return ("where", tree, [(op, left, self.r.choice(names + [0, 1, 2]))])
+            # (now and then a variable of another part: unbound in this one's scope)
+            right = self.r.choice(names + [0, 1, 2] + (["X", "Y"] if self.r.random() < 0.2
+                                                      else []))
+            return ("where", tree, [(op, left, right)])
         if x < 0.42:
             negated = [("leaf", "c", (self.r.choice(sorted(data) + ["_", 1]),))]
             if self.r.random() < 0.3:
@@ -452,3 +464,23 @@ def test_a_one_atom_pattern_with_cnot_is_blocked_by_an_event_inside(backend, pol
     ordered = derived(":- in_order(a/1).\n:- in_order(c/1).\n",
                       [["c(1)^4"], ["a(1)^[3,5]"], ["c(2)^9", "a(2)^[6,8]"]])
     assert ordered == only_a2
+
+
+def test_a_where_inside_a_pattern_sees_only_its_parts_bindings(backend):
+    # a where goal on a part ran on the whole match's bindings: another part's Y was bound
+    # in `(a(X) where X < Y) seq b(Y)`; the goal runs with its part's bindings (SPEC §6,
+    # scope, as cnot does), and what it binds still reaches the rest of the pattern
+    clock = ManualClock(0.0)
+    with slr_sql.open(backend, clock=clock) as kb:
+        kb.load("lt <- (a(X) where X < Y) seq b(Y).\n"
+                "none_of(X) <- (a(X) where \\+ c(Y)^_) seq b(Y).\n"
+                "next_one(Y) <- (a(X) where Y is X + 1) seq b(Y).\n"
+                "both_parts <- ((a(X) seq b(Y)) where X < Y) seq d(_, _).\n")
+        kb.add_many(["c(5)^0.5", "a(1)^1", "b(2)^2", "b(1)^3", "d(0, 0)^4"])
+        clock.set(100.0)
+        assert _rows(kb, "lt", 0) == []   # (Y unbound there: an instantiation error)
+        assert _rows(kb, "none_of", 1) == []   # (any c blocks: Y is free there)
+        assert _rows(kb, "next_one", 1) == [((2,), 1.0, 2.0)]
+        assert _rows(kb, "both_parts", 0) == [((), 1.0, 4.0)]
+        errors = {r["head"]: (r["errors"], r["last_error"]) for r in kb.event_rules()}
+        assert errors["lt/0"] == (2, "error(instantiation_error,_)")
