@@ -357,15 +357,16 @@ def run(text, policy, events, order, cuts, marks, one_by_one, head=("r", 0)):
         return _rows(kb, *head)
 
 
-def run_streamed(rule, events, delays, max_delay, in_order):
+def run_streamed(rule, events, delays, max_delay, in_order, buffers=""):
     """The complex events when each event arrives at its end + its delay (the clock moved
-    there first), with ``max_delay`` declared for every type and ``in_order`` types."""
+    there first), with ``max_delay`` declared for every type and ``in_order`` types; the
+    clock then jumps past everything."""
     clock = ManualClock(0.0)
     with slr_sql.open(clock=clock) as kb:
         kb.load(f":- consumption({rule['policy']}).\n"
                 + "".join(f":- max_delay({n}/{a}, {max_delay}).\n" for n, a in TYPES.items())
                 + "".join(f":- in_order({n}/{TYPES[n]}).\n" for n in in_order)
-                + rule_text(rule))
+                + rule_text(rule) + "\n" + buffers)
         for i in sorted(range(len(events)), key=lambda i: (events[i][3] + delays[i], i)):
             clock.set(max(clock.now(), events[i][3] + delays[i]))
             kb.add(cd._event_text(events[i]))
@@ -404,6 +405,25 @@ def test_a_live_stream_within_max_delay_equals_the_reference(rnd):
     got = run_streamed(rule, events, delays, max_delay, in_order)
     assert cd._typed(got) == _expected(reference(rule, events)), (
         rule_text(rule), events, delays, max_delay, in_order)
+
+
+@settings(max_examples=30 * FACTOR, **SETTINGS)
+@given(st.randoms(use_true_random=False))
+def test_time_buffers_covering_window_and_delay_lose_no_detection(rnd):
+    # docs/events.md: a tBuffer of the rule's window plus max_delay on every type it reads
+    # keeps what a late terminator needs, and what a waiting decision needs when it is made
+    gen = Generator(rnd)
+    window = rnd.choice([1, 2, 3])
+    rule = gen.rule()
+    rule["pattern"] = ("within", rule["pattern"], window)
+    events = gen.stream()
+    max_delay = rnd.choice([0, 0.5, 1, 2])
+    delays = [rnd.choice([0, 0, max_delay / 2, max_delay]) for _ in events]
+    buffers = "".join(f"tBuffer({name}({', '.join(['_'] * n)}), {window + max_delay}).\n"
+                      for name, n in TYPES.items() if name != "r")
+    got = run_streamed(rule, events, delays, max_delay, (), buffers)
+    assert cd._typed(got) == _expected(reference(rule, events)), (
+        rule_text(rule), events, delays, max_delay)
 
 
 @settings(max_examples=30 * FACTOR, **SETTINGS)
@@ -484,3 +504,31 @@ def test_a_where_inside_a_pattern_sees_only_its_parts_bindings(backend):
         assert _rows(kb, "both_parts", 0) == [((), 1.0, 4.0)]
         errors = {r["head"]: (r["errors"], r["last_error"]) for r in kb.event_rules()}
         assert errors["lt/0"] == (2, "error(instantiation_error,_)")
+
+
+@pytest.mark.parametrize("policy", ["recent", "chronological"])
+def test_a_clock_jump_makes_the_decisions_it_allows_before_time_buffers_prune(backend, policy):
+    # a decision due at 4 (max_delay 0) waited for the clock; a jump to 100 pruned its
+    # events (tBuffer 3 s, the window plus max_delay as docs/events.md advises) before the
+    # decision was made, so the match was lost: a ManualClock set far ahead, or a
+    # StreamClock at a gap of a recording; moved in small steps, the same clock found it
+    stores = itertools.count()
+
+    def derived(clock, steps):
+        k = next(stores)
+        where = (backend + ("&" if "?" in backend else "?") + f"schema=s{k}"
+                 if backend.startswith("postgresql") else f"{backend}.{k}")
+        with slr_sql.open(where, clock=clock) as kb:
+            kb.load(f":- consumption({policy}).\n"
+                    ":- max_delay(a/1, 0).\n:- max_delay(b/1, 0).\n:- max_delay(x/0, 0).\n"
+                    "tBuffer(a(_), 3).\ntBuffer(b(_), 3).\nr(X) <- (b(X) seq a(X)) within 3.")
+            for step in steps:
+                if isinstance(step, float):
+                    clock.set(step)
+                else:
+                    kb.add(step)
+            return _rows(kb, "r", 1)
+
+    found = [((1,), 2.0, 4.0)]
+    assert derived(ManualClock(0.0), [2.0, "b(1)^2", 4.0, "a(1)^4", 100.0]) == found
+    assert derived(slr_sql.StreamClock(), ["b(1)^2", "a(1)^4", "x^100"]) == found
