@@ -143,6 +143,7 @@ class KnowledgeBase:
         self._buffers = _buffers.attach(self)
         from . import sync as _sync  # synchronized queries: slr_sql/sync.py
         self._sync = _sync.attach(self)
+        self._buffers.follow_clock()   # (after the synchronizer: buffers prune after decisions)
         from . import planner as _planner  # SQL compiler: slr_sql/planner.py
         _planner.attach(self)
         from . import cep as _cep  # event rules: slr_sql/cep/

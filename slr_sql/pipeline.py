@@ -24,8 +24,10 @@ this order:
    synchronizer's timer started (its thread has no caller to raise to). With a wall clock
    such a failure also asks for a retry timer (:data:`RETRY_DELAYS`), so that the decisions
    are made without another add; a clock that tells when it moves calls at its next move;
-5. **buffers**: space the buffers' pruning freed is reclaimed, without waiting for another
-   writer's lock (a busy reclaim is left to the next add: the add's events are committed);
+5. **buffers**: a clock move that came during the run (a ``StreamClock`` moved by stage 3)
+   prunes the tBuffers now, after the decisions it allowed; space the buffers' pruning
+   freed is reclaimed, without waiting for another writer's lock (a busy reclaim is left to
+   the next add: the add's events are committed);
 6. **wake**: ``kb.add_listeners`` are called and the subscription hub is woken, once per
    batch, in the order the batches were stored (the add's events with the complex events
    its transaction derived, then each decision round's).
@@ -89,7 +91,7 @@ class _Run:
     """One pass of the pipeline on one thread: the stage it is in, and whether a request
     for decisions arrived since its decision stage last looked."""
 
-    __slots__ = ("stage", "again", "outer", "stored", "timer")
+    __slots__ = ("stage", "again", "outer", "stored", "timer", "prune_at")
 
     def __init__(self, outer: _Run | None, timer: bool = False) -> None:
         self.stage = STAGES[0]
@@ -97,6 +99,7 @@ class _Run:
         self.outer = outer   # the run a listener's own add interrupted on this thread
         self.stored = False  # an add whose events are committed (stage 2 is behind it)
         self.timer = timer   # started by the synchronizer's timer thread
+        self.prune_at: float | None = None   # a clock move's tBuffer pruning, for stage 5
 
 
 def with_derived(stored: Batch, derived: Batch) -> Batch:
@@ -151,6 +154,7 @@ class EventPipeline:
         self._runs: dict[int, _Run] = {}
         self._retry_delay = 0.0   # the last retry's (0: the last round did not fail)
         sync.progress_hook = self.progress
+        buffers.prune_hook = self.prune_after_decisions
 
     # -- entries ---------------------------------------------------------------------------
     def add(self, events: Batch, atomic: bool) -> list[EventRejected]:
@@ -250,6 +254,26 @@ class EventPipeline:
         finally:
             self._leave(run)
 
+    def prune_after_decisions(self, now: float) -> bool:
+        """The clock moved to ``now`` while this thread runs the pipeline (a
+        ``StreamClock`` moved by the events stage 3 observes, a listener of stage 6 setting
+        a ``ManualClock``): the tBuffers' pruning at ``now`` waits for stage 5, after the
+        decisions the move allows -- a decision that became possible before the move's end
+        chooses among the events it would have found then, as when the clock moves in
+        small steps. False when no run is under way here (the clock's listeners then run
+        the decisions first: the synchronizer's comes before the buffers').
+
+        >>> import slr_sql
+        >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); kb._pipeline.prune_after_decisions(1.0)
+        False
+        """
+        run = self._runs.get(threading.get_ident())
+        if run is None:
+            return False
+        run.prune_at = now if run.prune_at is None else max(run.prune_at, now)
+        run.again = True
+        return True
+
     def loaded(self) -> None:
         """After a load or unload committed: the timers of the pending decisions of the
         rules it installed (not asked for inside its transaction: the synchronizer's lock
@@ -334,6 +358,9 @@ class EventPipeline:
             run.stage = "decisions"
             self._decide(run, batches)
             run.stage = "buffers"
+            if run.prune_at is not None:
+                now, run.prune_at = run.prune_at, None
+                self.buffers.prune_at(now)
             if batches:
                 self.buffers.on_add(batches[0])
             run.stage = "wake"

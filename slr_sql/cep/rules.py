@@ -343,6 +343,9 @@ class _Reader:
         self.clause = clause
         self.alt = Alternative()
         self.unify_goals: list = []   # V = f(..) for compound arguments with variables
+        # each where goal: the counts (leaves, goals, unify goals) before its part, after
+        # its part, after its goals, and the variables its part binds
+        self.where_scopes: list = []
 
     def error(self, message: str, near: Any = None) -> SLRSyntaxError:
         return rule_error(self.clause, message, near)
@@ -351,6 +354,9 @@ class _Reader:
         interval, terms = self.node(pattern)
         self.alt.interval = interval
         self.alt.terminators = frozenset(terms)
+        # (the last first: a scope's goals lie before those of every scope read after it)
+        for scope in reversed(self.where_scopes):
+            self.scope_where(*scope)
         self.alt.goals = self.unify_goals + self.alt.goals
         return self.alt
 
@@ -372,12 +378,16 @@ class _Reader:
                                          tuple(range(first, len(self.alt.leaves)))))
                 return interval, terms
             if op == "where":
+                marks = (len(self.alt.leaves), len(self.alt.goals), len(self.unify_goals))
                 interval, terms = self.node(p.args[0])
                 goal = deref(p.args[1])
                 if type(goal) not in (Atom, Struct):
                     raise self.error(f"where: the condition must be a goal, not "
                                      f"{format_term(goal)}", goal)
+                after = (len(self.alt.leaves), len(self.alt.goals), len(self.unify_goals))
+                own = self.bound_since(*marks)
                 self.alt.goals.extend(_flatten_and(goal))
+                self.where_scopes.append((marks, after, len(self.alt.goals), own))
                 return interval, terms
             if op == "cnot":
                 marks = (len(self.alt.leaves), len(self.alt.goals), len(self.unify_goals))
@@ -418,6 +428,43 @@ class _Reader:
         pos = len(self.alt.leaves)
         self.alt.leaves.append(leaf)
         return (("s", pos), ("e", pos)), {pos}
+
+    def scope_where(self, before: tuple, after: tuple, end: int, own: set[int]) -> None:
+        """Run a where goal with the bindings of its part only (SPEC §6, scope): in
+        ``(a(X) where X < Y) seq b(Y)`` the goal sees no Y (an instantiation error, as
+        Prolog raises it), and in ``(a(X) where \\+ c(Y)^_) seq b(Y)`` any c blocks. A
+        variable the part does not bind but other parts of the pattern (or other where
+        goals) use is renamed apart in the goal, and unified with its namesake after it:
+        what the goal binds still reaches the rest, as when the goal runs first."""
+        outside: set[int] = set()
+        for leaf in self.alt.leaves[:before[0]] + self.alt.leaves[after[0]:]:
+            for t in leaf.args + (leaf.start, leaf.end):
+                if t is not None:
+                    outside.update(id(v) for v in term_vars(t))
+        for goal in (self.alt.goals[:before[1]] + self.alt.goals[end:]
+                     + self.unify_goals[:before[2]] + self.unify_goals[after[2]:]):
+            outside.update(id(v) for v in term_vars(goal))
+        goals = self.alt.goals[after[1]:end]
+        renamed: dict[int, tuple[Var, Var]] = {}
+        for goal in goals:
+            for v in term_vars(goal):
+                if id(v) in outside and id(v) not in own and id(v) not in renamed:
+                    renamed[id(v)] = (v, Var(f"_{v.name}{len(renamed)}"))
+        if not renamed:
+            return
+
+        def rename(t: Any) -> Any:
+            t = deref(t)
+            if type(t) is Var:
+                pair = renamed.get(id(t))
+                return t if pair is None else pair[1]
+            if type(t) is Struct:
+                return Struct(t.name, tuple(rename(a) for a in t.args))
+            return t
+
+        self.alt.goals[after[1]:end] = ([rename(g) for g in goals]
+                                        + [Struct("=", (new, old))
+                                           for old, new in renamed.values()])
 
     def bound_since(self, leaves: int, goals: int, unify_goals: int) -> set[int]:
         """ids of the variables the part read since these counts binds: its event atoms

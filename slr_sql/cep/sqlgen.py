@@ -1053,6 +1053,9 @@ class AltSQL:
             chosen = chosen | {p}
         own = self.cond_sql(top, within={pos})
         conds = [self.inputs_complete(f"{t}.t_end")] + own
+        if not partners and self.negs:
+            # the partners' sub-queries check the negations; a one-atom pattern has none
+            conds.append(self.neg_ok(top))
         if span:
             source = self._span_join(pos)
             conds = self._span_conditions(pos) + conds
