@@ -645,18 +645,36 @@ def _code_or_char_list_text(t: Any) -> str:
     return "".join(out)
 
 
-def _number_of_text(s: str, leading_layout: bool) -> Any:
-    """The number a text is in Prolog syntax (an optional sign, then a number token: 12,
+def _number_of_text(s: str, leading_layout: bool, bare_quote_is_zero: bool = True) -> Any:
+    r"""The number a text is in Prolog syntax (an optional sign, then a number token: 12,
     -1.5, 0x1A, 0'a, 1.0Inf), or None. ``leading_layout`` allows spaces before it (as
-    number_codes/2 does; atom_number/2 and name/2 do not)."""
+    number_codes/2 does; atom_number/2 and name/2 do not).
+
+    A character code is read as SWI-Prolog's number texts read it, not as its reader does:
+    ``0'`` and the one character after it, whatever it is (a space, a newline, a backslash:
+    no escape), or a doubled quote; the text ``0'`` alone is 0 (``bare_quote_is_zero``:
+    all but atom_number/2, which fails on it).
+
+    >>> _number_of_text("0' ", False), _number_of_text("-0'\\", False), _number_of_text("0'\\n", False)
+    (32, -92, None)
+    >>> _number_of_text("0'", False), _number_of_text("0'", False, bare_quote_is_zero=False)
+    (0, None)
+    """
+    if s == "0'":
+        return 0 if bare_quote_is_zero else None
     if leading_layout:
         s = s.lstrip()
-    if s != s.rstrip():
-        return None  # "3 " is no number, in any of the three
     sign = 1
     if s[:1] in ("-", "+"):
         sign = -1 if s[0] == "-" else 1
         s = s[1:]
+    if s.startswith("0'"):
+        code = s[2:]
+        if code == "''":
+            code = "'"
+        return sign * ord(code) if len(code) == 1 else None
+    if s != s.rstrip():
+        return None  # "3 " is no number, in any of the three
     if not s[:1].isdigit():
         return None
     from .parser import parse_term, token_spans
@@ -785,7 +803,7 @@ def _atom_number(m, a):
         return m.unify(x, Atom(_atom_text(n)))
     if type(x) is not Atom and type(x) is not String:
         raise type_error("atom", x)
-    n = _number_of_text(_atom_text(x, "atom"), leading_layout=False)
+    n = _number_of_text(_atom_text(x, "atom"), leading_layout=False, bare_quote_is_zero=False)
     return n is not None and m.unify(a[1], n)
 
 
@@ -801,7 +819,7 @@ def _term_to_atom(m, a):
             return m.unify(t, Atom("end_of_file"))
         return m.unify(t, _parse_any(Atom(source)))
     # SWI-Prolog's term_to_atom writes a quote inside quotes doubled and a newline as it
-    # is ('it''s'), where writeq writes 'it\'s'
+    # is ('it''s'), where writeq writes 'it\'s' and '\n'
     return m.unify(text, Atom(format_term(t, deadline=m.deadline, char_escapes=False)))
 
 

@@ -874,9 +874,9 @@ _ARG_PRIORITY = 999  # arguments and list elements, as writeq prints them
 
 def format_atom(name: str, quoted: bool = True, escapes: bool = True) -> str:
     """The text of an atom, quoted only when it would not read back as the same atom.
-    ``escapes=False``: inside the quotes only a quote (doubled), a backslash (``\\``) and
-    a newline (``\n``) are escaped, every other character is itself (SWI-Prolog's
-    term_to_atom/2, which writes the newline itself too).
+    ``escapes=False``: inside the quotes only a quote (doubled) and a backslash (``\\``)
+    are escaped, every other character is itself, a newline too (SWI-Prolog's
+    term_to_atom/2; the reader takes a raw newline inside quotes, as SWI-Prolog's does).
 
     >>> format_atom("cup1"), format_atom("hello world"), format_atom("=.."), format_atom("A")
     ('cup1', "'hello world'", '=..', "'A'")
@@ -929,9 +929,7 @@ def char_escape(ch: str) -> str:
 
 def _escape(text: str, quote: str, escapes: bool = True) -> str:
     if not escapes:
-        # (a newline stays \n: this reader, unlike SWI-Prolog's, ends a quoted text at a
-        # raw one, and what term_to_atom writes must read back)
-        return text.replace("\\", "\\\\").replace(quote, quote + quote).replace("\n", "\\n")
+        return text.replace("\\", "\\\\").replace(quote, quote + quote)
     ascii = text.isascii()
     if not (_ASCII_NEEDS_ESCAPE if ascii else _unicode_pattern("needs escape")).search(text):
         return text
