@@ -1224,12 +1224,13 @@ def _char_code(m, a):
 
 
 def _parse_any(t):
-    """The term a text reads as; a syntax error is the ISO error ``syntax_error(Message)``
-    (catchable, as in SWI-Prolog), never a raw SLRSyntaxError."""
-    from .parser import parse_term
+    """The term a text reads as (its first term: what follows the '.' that ends it is
+    ignored, as SWI-Prolog's term_to_atom/2 ignores it); a syntax error is the ISO error
+    ``syntax_error(Message)`` (catchable, as in SWI-Prolog), never a raw SLRSyntaxError."""
+    from .parser import parse_first_term
 
     try:
-        return parse_term(text_of(t))[0]
+        return parse_first_term(text_of(t))[0]
     except SLRSyntaxError as exc:
         raise iso_error(Struct("syntax_error", (Atom(exc.message),))) from None
 

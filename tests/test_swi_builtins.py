@@ -164,6 +164,10 @@ GOALS = [
     "term_to_atom(T, '\\'a\\nb\\'')", "term_to_atom(T, '\"a\\nb\"')",
     "term_to_atom(T, 'f(\\'x\\n\\ny\\', \\'z\\')')", "term_to_atom(T, '0\\'\\n')",
     "atom_length('a\\nb', L), term_to_atom('a\\nb', A), atom_length(A, N)",
+    # the text's first term is read, up to the '.' that ends it; what follows is ignored
+    "term_to_atom(T, 'a. b')", "term_to_atom(T, 'a. ))')", "term_to_atom(T, 'f(X, Y). g(X)')",
+    "term_to_atom(T, 'a ; b. c')", "term_to_atom(T, '\"s\".%x')", "term_to_atom(T, 'a. \\'')",
+    "term_to_atom(T, '\\'x. y\\'. z')", 'term_string(T, "1. 2")',
     'functor(f(a, b), N, A)',
     'functor(T, f, 2)',
     'functor(T, f, 0)',
