@@ -1654,8 +1654,12 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
             num = str(ord(fmt[i + 1]))
             i += 2
         while i < n and (fmt[i].isdigit() or fmt[i] == "*"):
-            if fmt[i] == "*":
-                num = int_text(evaluate(take()))
+            if fmt[i] == "*":   # a count as it is, not evaluated (SWI-Prolog's error)
+                count = deref(take())
+                if type(count) is not int or count < 0:
+                    raise iso_error(Struct("format", (
+                        Atom("no or negative integer for `*' argument"),)))
+                num = int_text(count)
             else:
                 num += fmt[i]
             i += 1
@@ -1702,7 +1706,7 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
         elif d == "n":
             out.append("\n" * _count(num, 1))
         elif d == "c":
-            out.append(_char(evaluate(take())) * _count(num, 1))
+            out.append(_format_char(take()) * _count(num, 1))
         elif d == "r":
             v = evaluate(take())
             if type(v) is not int:
@@ -1822,6 +1826,20 @@ def _char(code: Any) -> str:
     if not 0 <= code <= 0x10FFFF or 0xD800 <= code <= 0xDFFF:
         raise iso_error(Struct("representation_error", (Atom("code_point"),)))
     return chr(code)
+
+
+def _format_char(arg: Any) -> str:
+    """``~c``'s character: its argument a code as it is (not evaluated), as SWI-Prolog's; what
+    is no code (an atom, a variable, a float, an expression, a negative integer) is SWI-Prolog's
+    ``format_argument_type(c, Culprit)``.
+
+    >>> _format_char(97)
+    'a'
+    """
+    arg = deref(arg)
+    if type(arg) is not int or arg < 0:
+        raise iso_error(Struct("format_argument_type", (Atom("c"), arg)))
+    return _char(arg)
 
 
 def _format_args(t: Any) -> list:

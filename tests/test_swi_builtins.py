@@ -128,6 +128,15 @@ GOALS = [
     'format(atom(A), "~w and ~w", [x])',
     'format(atom(A), "~w", [a, b])', 'format(atom(A), "x", [a])', 'format(atom(A), "~i", [a, b])',
     'format(atom(A), "~2f", [3])',
+    # ~c takes a code as it is (no expression): anything else is SWI-Prolog's
+    # format_argument_type(c, Culprit); a count ~*c a non-negative integer, not evaluated
+    'format(atom(A), "~c", [a])', 'format(atom(A), "~c", [_])', 'format(atom(A), "~c", [1.5])',
+    'format(atom(A), "~c", [96+1])', 'format(atom(A), "~c", [-1])', 'format(atom(A), "~c", ["a"])',
+    'format(atom(A), "~c", [[97]])', 'format(atom(A), "~2c", [f(x)])', 'format(atom(A), "~c", [1114112])',
+    'format(atom(A), "~3c~c", [0\'a, 98])', 'format(atom(A), "~*c", [a, 0\'x])',
+    'format(atom(A), "~*c", [-1, 0\'x])', 'format(atom(A), "~*c", [_, 0\'x])',
+    'format(atom(A), "~*c", [1+1, 0\'x])', 'format(atom(A), "~*c", [2, 0\'x])',
+    'format(atom(A), "~t~w~*|", [a, 2.0])',
     # column stops and fill points (~t ~N| ~N+), padded as SWI-Prolog pads them
     'format(atom(A), "~w~t~10|~w", [abc, def])', 'format(atom(A), "~t~w~10|~w", [abc, def])',
     'format(atom(A), "~t~w~t~11|~w", [abc, def])', 'format(atom(A), "~t~w~t~10|~w", [abc, d])',
