@@ -1626,7 +1626,8 @@ DET[("tab", 1)] = _tab
 
 
 def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
-    """SWI-style ``format/2`` directives: ~w ~p ~q ~a ~d ~D ~s ~e ~f ~g ~n ~c ~r ~8| ~t ~~ ~i ~*c.
+    """SWI-style ``format/2`` directives: ~w ~p ~q ~a ~d ~D ~s ~e ~E ~f ~g ~G ~n ~c ~r ~R ~8| ~t
+    ~~ ~i ~*c.
 
     >>> format_text("~w has ~d items~n", [Atom("cup"), 3])
     'cup has 3 items\\n'
@@ -1649,23 +1650,31 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
             i += 1
             continue
         i += 1
+        # the numeric argument: ~`c (a fill character), ~* (the next argument) or digits;
+        # then an optional ':' (SWI-Prolog's locale modifier: its default locale, as here,
+        # groups no digits) and the directive, NUL where the text ends (SWI-Prolog's
+        # existence_error(format_character, '\x0\'), or the last digit of a count)
         num = ""
-        if i + 1 < n and fmt[i] == "`":      # ~`ct: the fill character c
-            num = str(ord(fmt[i + 1]))
+        digits_end = False                # a count's digits ran to the end of the text
+        if i < n and fmt[i] == "`":
+            if i + 1 < n:
+                num = str(ord(fmt[i + 1]))
             i += 2
-        while i < n and (fmt[i].isdigit() or fmt[i] == "*"):
-            if fmt[i] == "*":   # a count as it is, not evaluated (SWI-Prolog's error)
-                count = deref(take())
-                if type(count) is not int or count < 0:
-                    raise iso_error(Struct("format", (
-                        Atom("no or negative integer for `*' argument"),)))
-                num = int_text(count)
-            else:
-                num += fmt[i]
+        elif i < n and fmt[i] == "*":   # a count as it is, not evaluated (SWI-Prolog's error)
+            count = deref(take())
+            if type(count) is not int or count < 0:
+                raise iso_error(Struct("format", (
+                    Atom("no or negative integer for `*' argument"),)))
+            num = int_text(count)
             i += 1
-        if i >= n:
-            break
-        d = fmt[i]
+        else:
+            while i < n and "0" <= fmt[i] <= "9":
+                num += fmt[i]
+                i += 1
+            digits_end = i >= n and num != ""
+        if i < n and fmt[i] == ":":
+            i += 1
+        d = fmt[i] if i < n else num[-1] if digits_end else "\0"
         i += 1
         if d == "w":
             out.append(_write_text(take(), deadline=deadline))
@@ -1694,20 +1703,17 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
                 digits = digits.rjust(k + 1, "0")
                 digits = digits[:-k] + "." + digits[-k:]
             out.append(("-" if v < 0 else "") + digits)
-        elif d == "f" or d == "e" or d == "g":
-            try:
-                v = float(evaluate(take()))
-            except OverflowError:  # an integer beyond the largest float
-                raise evaluation_error("float_overflow") from None
+        elif d in "feEgG":
+            v = evaluate(take())
             prec = min(_count(num, 6), 1000)
-            out.append(f"{v:.{prec}{d}}")
+            out.append(_float_directive_text(v, prec, d))
         elif d == "s":
             out.append(text_of(take()))
         elif d == "n":
             out.append("\n" * _count(num, 1))
         elif d == "c":
             out.append(_format_char(take()) * _count(num, 1))
-        elif d == "r":
+        elif d == "r" or d == "R":     # ~R: the digits beyond 9 as capitals
             v = evaluate(take())
             if type(v) is not int:
                 raise type_error("integer", v)
@@ -1715,6 +1721,8 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
             if not 2 <= base <= 36:
                 raise _err_domain("radix", base)
             digits = "0123456789abcdefghijklmnopqrstuvwxyz"
+            if d == "R":
+                digits = digits.upper()
             s, x = "", abs(v)
             while True:
                 s = digits[x % base] + s
@@ -1733,10 +1741,38 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
         elif d == "+":
             columns.stop(_count(num, 8), relative=True)
         else:
-            raise iso_error(Struct("format", (String(f"unknown directive ~{d}"),)))
+            raise iso_error(Struct("existence_error", (Atom("format_character"), Atom(d))))
     if args:  # an argument no directive took (SWI-Prolog's error)
         raise iso_error(Struct("format", (Atom("too many arguments"),)))
     return "".join(out)
+
+
+def _float_directive_text(v: int | float, prec: int, d: str) -> str:
+    """``~Nf``, ``~Ne``, ``~Ng`` (``~E``, ``~G``) of a number, as SWI-Prolog writes it: a
+    float or an integer of 64 bits as C's printf writes the double, an integer beyond 64
+    bits with all its digits (SWI-Prolog formats it with GMP: ``~e`` of ``10**400`` is
+    ``1.000000e+400``, where a double overflows).
+
+    >>> _float_directive_text(2.5, 2, "f"), _float_directive_text(10**400, 6, "e")
+    ('2.50', '1.000000e+400')
+    >>> _float_directive_text(-(10**30) - 7, 1, "f")
+    '-1000000000000000000000000000007.0'
+    """
+    if type(v) is int and not -(2**63) <= v < 2**63:
+        if d == "f":
+            return int_text(v) + ("." + "0" * prec if prec else "")
+        import decimal
+
+        with decimal.localcontext() as context:
+            context.rounding = decimal.ROUND_HALF_UP     # (GMP's, as SWI-Prolog's shows)
+            text = format(decimal.Decimal(v), f".{prec}{d}")
+        if d in "gG":  # as C's %g: no trailing zeros (a Decimal keeps them)
+            mantissa, e, exponent = text.partition("e" if d == "g" else "E")
+            if "." in mantissa:
+                mantissa = mantissa.rstrip("0").rstrip(".")
+            text = mantissa + e + exponent
+        return text
+    return f"{float(v):.{prec}{d}}"
 
 
 def _count(num: str, default: int) -> int:

@@ -137,6 +137,23 @@ GOALS = [
     'format(atom(A), "~*c", [-1, 0\'x])', 'format(atom(A), "~*c", [_, 0\'x])',
     'format(atom(A), "~*c", [1+1, 0\'x])', 'format(atom(A), "~*c", [2, 0\'x])',
     'format(atom(A), "~t~w~*|", [a, 2.0])',
+    # a directive format/2 does not know is SWI-Prolog's existence_error(format_character, C):
+    # C is NUL where the text ends after the ~ (or the last digit of a count there)
+    'format(atom(A), "~z", [a])', 'format(atom(A), "~w~Z", [a])', 'format(atom(A), "abc~", [])',
+    'format(atom(A), "~5z", [])', 'format(atom(A), "~`xz", [])', 'format(atom(A), "~ ", [])',
+    'format(atom(A), "~\\n", [])', 'format(atom(A), "~12", [])', 'format(atom(A), "~*", [1])',
+    'format(atom(A), "~`", [])', 'format(atom(A), "~`ab", [])', 'format(atom(A), "~`x12z", [])',
+    'format(atom(A), "~1:", [])', 'format(atom(A), "~:z", [])', 'format(atom(A), "~z~w", [a, b])',
+    'format(atom(A), "~:d ~:D ~:a", [1234567, 1234, x])',
+    # ~R (capital digits), ~E and ~G; an integer beyond 64 bits in ~e ~f ~g with all its
+    # digits, one within 64 bits as its double
+    'format(atom(A), "~16R ~8R ~R", [255, -255, 255])', 'format(atom(A), "~37R", [1])',
+    'format(atom(A), "~R", [a])', 'format(atom(A), "~E ~3E ~G ~G", [1.5, 12345.678, 1.5, 1.0e20])',
+    'X is 10**400, format(atom(A), "~e ~g ~0e ~E ~G ~30g", [X, X, X, X, X, X])',
+    'X is -(10**30)-7, format(atom(A), "~f ~3e ~0f", [X, X, X])',
+    'X is 2**60+1, format(atom(A), "~20e ~f ~20g", [X, X, X])',
+    'X is 2**64, format(atom(A), "~20g ~g ~10g ~e", [X, X, X, X])',
+    'X is 25*10**30, format(atom(A), "~0e ~1e", [X, X])',
     # column stops and fill points (~t ~N| ~N+), padded as SWI-Prolog pads them
     'format(atom(A), "~w~t~10|~w", [abc, def])', 'format(atom(A), "~t~w~10|~w", [abc, def])',
     'format(atom(A), "~t~w~t~11|~w", [abc, def])', 'format(atom(A), "~t~w~t~10|~w", [abc, d])',
