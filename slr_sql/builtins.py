@@ -207,31 +207,41 @@ for _op, _test in (("=:=", lambda x, y: x == y), ("=\\=", lambda x, y: x != y),
 
 @det("succ", 2)
 def _succ(m, a):
-    x = deref(a[0])
+    """succ(X, Y): Y = X + 1 over the natural numbers. As SWI-Prolog: each bound argument
+    is checked in turn, type_error(integer, V) or domain_error(not_less_than_zero, V)."""
+    x, y = deref(a[0]), deref(a[1])
+    for v in (x, y):
+        if type(v) is not Var:
+            if type(v) is not int:
+                raise type_error("integer", v)
+            if v < 0:
+                raise _err_domain("not_less_than_zero", v)
     if type(x) is int:
-        if x < 0:
-            raise type_error("not_less_than_zero", x)
-        return m.unify(a[1], x + 1)
-    y = deref(a[1])
+        return m.unify(y, x + 1)
     if type(y) is int:
-        if y <= 0:
-            if y < 0:
-                raise type_error("not_less_than_zero", y)
-            return False
-        return m.unify(a[0], y - 1)
-    if type(x) is Var and type(y) is Var:
-        raise instantiation_error()
-    raise type_error("integer", x if type(x) is not Var else y)
+        return y > 0 and m.unify(x, y - 1)
+    raise instantiation_error()
 
 
 @det("plus", 3)
 def _plus(m, a):
+    """plus(X, Y, Z): Z = X + Y over the integers, any two given. As SWI-Prolog: each bound
+    argument must be an integer (type_error(integer, V), not evaluated), then two bound."""
     x, y, z = (deref(v) for v in a)
+    for v in (x, y, z):
+        if type(v) is not Var and type(v) is not int:
+            raise type_error("integer", v)
     if type(z) is Var:
-        return m.unify(z, evaluate(x) + evaluate(y))
+        if type(x) is Var or type(y) is Var:
+            raise instantiation_error()
+        return m.unify(z, x + y)
     if type(y) is Var:
-        return m.unify(y, evaluate(z) - evaluate(x))
-    return m.unify(x, evaluate(z) - evaluate(y))
+        if type(x) is Var:
+            raise instantiation_error()
+        return m.unify(y, z - x)
+    if type(x) is Var:
+        return m.unify(x, z - y)
+    return x + y == z
 
 
 @nondet("between", 3)
@@ -807,20 +817,29 @@ def _atom_number(m, a):
     return n is not None and m.unify(a[1], n)
 
 
-@det("term_to_atom", 2)
-def _term_to_atom(m, a):
+def _term_text(m: "Machine", a: list, make: Callable[[str], Any]) -> bool:
+    """term_to_atom/2 (``make``: Atom) and term_string/2 (String)."""
     from .terms import format_term
 
     t = deref(a[0])
     text = deref(a[1])
     if type(text) is not Var:  # as SWI-Prolog: a given text is read, then unified
-        source = _atom_text(text, "text")
+        # (a code or character list is text too, [] the empty one)
+        source = "" if text == NIL else _code_or_char_list_text(text) \
+            if type(text) is Struct and text.name == CONS and len(text.args) == 2 \
+            else _atom_text(text, "text")
         if not source.strip():
             return m.unify(t, Atom("end_of_file"))
         return m.unify(t, _parse_any(Atom(source)))
     # SWI-Prolog's term_to_atom writes a quote inside quotes doubled and a newline as it
     # is ('it''s'), where writeq writes 'it\'s' and '\n'
-    return m.unify(text, Atom(format_term(t, deadline=m.deadline, char_escapes=False)))
+    return m.unify(text, make(format_term(t, deadline=m.deadline, char_escapes=False)))
+
+
+DET[("term_to_atom", 2)] = lambda m, a: _term_text(m, a, Atom)
+# (as term_to_atom/2, the text a string: quoted as writeq quotes, where it was the text
+# write/1 makes, term_string('A', S) giving "A")
+DET[("term_string", 2)] = lambda m, a: _term_text(m, a, String)
 
 
 def _case_converted(m, a, convert: Callable[[str], str]) -> bool:
@@ -1202,7 +1221,6 @@ _text_conv("atom_string", lambda s: String(s), lambda t: Atom(text_of(t)))
 _text_conv("string_chars", lambda s: make_list([Atom(c) for c in s]), lambda t: String(text_of(t)))
 _text_conv("string_codes", lambda s: make_list([ord(c) for c in s]), lambda t: String(text_of(t)))
 _text_conv("string_to_atom", lambda s: Atom(s), lambda t: String(text_of(t)))
-_text_conv("term_string", lambda s: String(s), lambda t: _parse_any(t))
 
 
 @det("char_code", 2)

@@ -101,6 +101,15 @@ GOALS = [
     'between(1, infinite, 3)',
     'between(1, a, X)',
     'between(1.0, 3, X)',
+    # succ/2 and plus/3 take integers as they are (no expression, no float), each bound
+    # argument checked in turn: type_error(integer, V), domain_error(not_less_than_zero, V)
+    'succ(X, 0)', 'succ(X, -1)', 'succ(-1, X)', 'succ(2, -1)', 'succ(2, 3)', 'succ(2, 4)',
+    'succ(a, X)', 'succ(X, a)', 'succ(X, Y)', 'succ(1.0, X)', 'succ(-1, a)', 'succ(a, -1)',
+    'succ(1+1, X)', 'succ(X, 9223372036854775808)',
+    'plus(1, 2, X)', 'plus(X, 2, 5)', 'plus(1, X, 5)', 'plus(X, Y, 3)', 'plus(1.0, 2, X)',
+    'plus(X, 2.0, 3)', 'plus(1+1, 2, X)', 'plus(1, 2, 3)', 'plus(1, 2, 4)', 'plus(1, 2, 3.0)',
+    'plus(1, X, a)', 'plus(X, a, 3)', 'plus(inf, 1, X)', 'plus(X, 1.0, Y)', 'plus(X, Y, 1.0)',
+    'plus(2, X, Y)', 'foldl(plus, [1, 2.5], 0, S)',
     'findall(X, (member(X, [a, b]), repeat, !), L)',
     'aggregate_all(count, (repeat, !), N)',
     'repeat, between(1, 3, X), X >= 2, !',
@@ -194,6 +203,15 @@ GOALS = [
     "term_to_atom(T, 'a. b')", "term_to_atom(T, 'a. ))')", "term_to_atom(T, 'f(X, Y). g(X)')",
     "term_to_atom(T, 'a ; b. c')", "term_to_atom(T, '\"s\".%x')", "term_to_atom(T, 'a. \\'')",
     "term_to_atom(T, '\\'x. y\\'. z')", 'term_string(T, "1. 2")',
+    # term_string/2 writes as term_to_atom/2 does (quoted), and reads a given text
+    "term_string(f('A', \"s\", 'it''s', 'a\\nb', 'hello world', - 1, 1-2, - - 1), S)",
+    'term_string(" 1", S)', 'term_string(-0.0, S)',
+    'term_string(f(x), a)', 'term_string(f(x), "f(x)")', "term_string(f(x), 'f(x)')",
+    'term_string(T, 12)', 'term_string(T, f(x))', 'term_string(T, "f(X, Y, X)")',
+    # a code or character list is text too ([] the empty one: end_of_file)
+    'term_to_atom(T, [])', 'term_string(T, [])', "term_to_atom(T, [0'f, 0'(, 0'x, 0')])",
+    "term_string(T, [a, '(', b, ')'])", 'term_to_atom(T, [f(x)])', 'term_to_atom(T, [a|_])',
+    "term_to_atom(T, [a, 0'b])", "term_to_atom(T, [0'a, b])", 'term_to_atom(T, [a|b])',
     'functor(f(a, b), N, A)',
     'functor(T, f, 2)',
     'functor(T, f, 0)',
