@@ -464,6 +464,15 @@ GOALS = [
     'X is 10 ** 400 + 0.5',
     # functions SWI-Prolog 9 has not (log2/1, log/2, succ/1), msb/1 of a number below one,
     # shifts by a negative amount (the other way)
+    # SWI-Prolog's hyperbolic functions, lsb/1, popcount/1, getbit/2, nexttoward/2
+    'X is sinh(1)', 'X is cosh(-1)', 'X is tanh(1000)', 'X is asinh(1)', 'X is acosh(2)',
+    'X is atanh(0.5)', 'X is sinh(1000)', 'X is acosh(0.5)', 'X is atanh(-1)', 'X is atanh(2)',
+    'X is sinh(-0.0)', 'X is tanh(inf)', 'X is cosh(nan)', 'X is sinh(a)',
+    'X is lsb(12)', 'X is lsb(0)', 'X is lsb(1.0)', 'X is lsb(2**100)', 'X is popcount(255)',
+    'X is popcount(-1)', 'X is popcount(1.5)', 'X is getbit(5, 0)', 'X is getbit(5, 1)',
+    'X is getbit(-1, 3)', 'X is getbit(5, -1)', 'X is getbit(2**100, 100)',
+    'X is getbit(-2, inf)', 'X is nexttoward(1, 2)', 'X is nexttoward(1.0, 0)',
+    'X is nexttoward(0, -1)', 'X is nexttoward(inf, 1)',
     'X is log2(8)',
     'X is log(2, 8)',
     'X is succ(1)',
