@@ -249,10 +249,13 @@ def _between(m, a):
     lo = deref(a[0])
     hi = deref(a[1])
     x = deref(a[2])
-    if type(lo) is Var or type(hi) is Var:
+    # (each bound argument checked in turn, as SWI-Prolog: between(a, H, X) is a type error)
+    if type(lo) is Var:
         raise instantiation_error()
     if type(lo) is not int:
         raise type_error("integer", lo)
+    if type(hi) is Var:
+        raise instantiation_error()
     if hi in ("inf", "infinite") and type(hi) is Atom:
         hi = math.inf
     elif type(hi) is not int:
@@ -597,8 +600,10 @@ def _atom_text(t: Any, compound_error: str = "atomic", nil_error: str = "atom") 
 
 
 def _list_text(t: Any) -> str:
-    """The text of a code or character list (SWI accepts either kind, even mixed) or a
-    string: a partial list is an instantiation error, anything else a type error."""
+    """The text of a code or character list or a string: a partial list is an
+    instantiation error, anything else a type error. As SWI-Prolog 9, the first element
+    says which kind of list it is: a code after characters is type_error(character, C), a
+    character after codes type_error(character_code, C)."""
     t = deref(t)
     if type(t) is String:
         return str(t)
@@ -608,18 +613,20 @@ def _list_text(t: Any) -> str:
     if not (type(tail) is Atom and tail == "[]"):
         raise type_error("list", t)
     out = []
+    first = deref(items[0]) if items else None
+    chars = type(first) is Atom and len(first) == 1
     for x in items:
         x = deref(x)
         if type(x) is Var:
             raise instantiation_error()
-        if type(x) is int:
+        if type(x) is int and not chars:
             if not 0 <= x <= 0x10FFFF or 0xD800 <= x <= 0xDFFF:
                 raise type_error("character_code", x)
             out.append(chr(x))
-        elif type(x) is Atom and len(x) == 1:
+        elif type(x) is Atom and len(x) == 1 and chars:
             out.append(str(x))
         else:
-            raise type_error("character_code", x)
+            raise type_error("character" if chars else "character_code", x)
     return "".join(out)
 
 
@@ -781,11 +788,25 @@ def _name(m, a):
     """name(AtomOrNumber, Codes): a text that is a number (no leading layout) gives the
     number, any other text an atom."""
     x = deref(a[0])
-    if type(x) is not Var:
+    if type(x) is not Var and (type(x) is Struct or not _is_text_given(a[1])):
         return m.unify(a[1], make_list([ord(c) for c in _atom_text(x, "atomic", "atomic")]))
     text = _list_text(a[1])
     n = _number_of_text(text, leading_layout=False)
     return m.unify(x, Atom(text) if n is None else n)
+
+
+def _is_text_given(t: Any) -> bool:
+    """A ground text argument (a string, a list with no variable in it, anything else but a
+    variable): number_codes/2 and name/2 read it even when the other argument is given, as
+    SWI-Prolog does (number_codes(1, "01") is true, number_codes(1, foo) a type error);
+    a partial one is compared with the text of the given term (number_codes(12, [X, Y]))."""
+    t = deref(t)
+    if type(t) is Var:
+        return False
+    if type(t) is not Struct:
+        return True
+    items, tail = list_items(t)
+    return type(tail) is not Var and all(type(deref(x)) is not Var for x in items)
 
 
 @det("number_codes", 2)
@@ -794,7 +815,8 @@ def _number_codes(m, a):
     if type(x) is not Var:
         if type(x) is not int and type(x) is not float:
             raise type_error("number", x)
-        return m.unify(a[1], make_list([ord(c) for c in _atom_text(x)]))
+        if not _is_text_given(a[1]):
+            return m.unify(a[1], make_list([ord(c) for c in _atom_text(x)]))
     n = _number_of_text(_list_text(a[1]), leading_layout=True)
     if n is None:
         raise iso_error(Struct("syntax_error", (Atom("illegal_number"),)))

@@ -366,6 +366,20 @@ GOALS = [
     'number_codes(X, "0\'\\\\x41\\\\")', 'number_codes(X, "0\'\'")', 'number_codes(X, "0\'\'\'")',
     'number_codes(X, "0\'\'\'\'")', 'number_codes(X, " -0\'a")', "atom_number('+0\\'a', X)",
     'name(X, "0\'\\\\n")', 'number_codes(X, "0\'a\\n")',
+    # a given text is read even when the number is given (number_codes(1, "01") is true);
+    # a partial one is compared with the number's text
+    'number_codes(1, "01")', 'number_codes(1, " 1")', 'number_codes(1, "1.0")',
+    'number_codes(1, "a")', "number_codes(1, [0'a|_])", 'number_codes(1, [a, b])',
+    'number_codes(10, "0xA")', 'number_codes(1, foo)', 'number_codes(12, [X, Y])',
+    "number_codes(12, [X, 0'2])", 'number_codes(1, [])', "number_codes(1, [0'1|a])",
+    'name(1, "01")', "name(1, [X])", 'name(a, "a")', "name('01', \"01\")", "name('1', \"1\")",
+    # a code or character list is one or the other, by its first element
+    "number_codes(X, [0'a, b])", "number_codes(X, [0'1, a])", "number_codes(X, ['1', 0'2])",
+    "atom_codes(X, [0'a, b])", "atom_codes(X, [a, 0'b])", "atom_chars(X, [a, 0'b])",
+    "name(X, [a, 0'1])", "name(a, [0'a, b])", 'number_string(X, [0\'1, a])',
+    # between/3 checks its bound arguments in turn
+    'between(infinite, Y, 1+1)', 'between(a, Y, 1)', 'between(1, Y, 1)', 'between(X, a, 1)',
+    'between(1.0, Y, 1)', 'between(1, 3, 1+1)',
     "callable('[|]'(a, []))",
     'compare(O, [], "s")',
     'compare(O, [a], 1/2)',
