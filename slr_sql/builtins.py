@@ -1478,13 +1478,28 @@ def _sort(m, a):
     return m.unify(a[1], make_list(_dedup(sorted(proper_list(a[0]), key=_cmp_key))))
 
 
+_SORT_ORDERS = {"<": Atom("@<"), ">": Atom("@>"), "=<": Atom("@=<"), ">=": Atom("@>=")}
+
+
 @det("sort", 4)
 def _sort4(m, a):
     key = deref(a[0])
     order = deref(a[1])
-    items = proper_list(a[2])
+    if type(key) is Var:
+        raise instantiation_error()
     if type(key) is not int:
         raise type_error("integer", key)
+    if key < 0:
+        raise _err_domain("not_less_than_one", key)    # (SWI-Prolog's, though 0 is one)
+    if type(order) is Var:
+        raise instantiation_error()
+    if type(order) is not Atom:
+        raise type_error("atom", order)
+    # SWI-Prolog takes < > =< >= for @< @> @=< @>= (the standard order all the same)
+    order = _SORT_ORDERS.get(str(order), order)
+    if str(order) not in ("@<", "@>", "@=<", "@>="):
+        raise _err_domain("order", order)
+    items = proper_list(a[2])
 
     def k(t):
         if key == 0:
@@ -1494,8 +1509,6 @@ def _sort4(m, a):
             raise type_error("compound", t)
         return t.args[key - 1]
 
-    if str(order) not in ("@<", "@>", "@=<", "@>="):
-        raise _err_domain("order", order)
     desc = order in ("@>", "@>=")
     res = sorted(items, key=lambda t: _cmp_key(k(t)), reverse=desc)
     if order in ("@<", "@>"):
@@ -2753,6 +2766,15 @@ nth1(I, _, _) :- throw(error(type_error(integer, I), _)).
 '$nth_det'(I, [_|T], E) :- I1 is I-1, '$nth_det'(I1, T, E).
 '$nth_gen'([E|_], E, B, B).
 '$nth_gen'([_|T], E, B0, B) :- B1 is B0+1, '$nth_gen'(T, E, B1, B).
+nth0(I, L, E, R) :- var(I), !, '$nth_gen'(L, E, R, 0, I).
+nth0(I, L, E, R) :- '$nth_index'(I, nonneg, 0), '$nth_del'(I, L, E, R).
+nth1(I, L, E, R) :- var(I), !, '$nth_gen'(L, E, R, 1, I).
+nth1(I, L, E, R) :- '$nth_index'(I, positive_integer, 1), I0 is I-1, '$nth_del'(I0, L, E, R).
+'$nth_index'(I, Type, Min) :- ( integer(I), I >= Min -> true ; throw(error(type_error(Type, I), _)) ).
+'$nth_gen'([E|R], E, R, B, B).
+'$nth_gen'([H|T], E, [H|R], B0, B) :- B1 is B0+1, '$nth_gen'(T, E, R, B1, B).
+'$nth_del'(0, [E|R], E, R) :- !.
+'$nth_del'(I, [H|T], E, [H|R]) :- I1 is I-1, '$nth_del'(I1, T, E, R).
 last([X|Xs], Last) :- '$last'(Xs, X, Last).
 '$last'([], Last, Last).
 '$last'([X|Xs], _, Last) :- '$last'(Xs, X, Last).
