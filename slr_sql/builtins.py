@@ -1734,15 +1734,13 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
         elif d in "pq":
             out.append(_write_text(take(), True, deadline))
         elif d == "a":
-            # atomic only: SWI-Prolog's ~a refuses a code list and [] (text_of takes them)
+            # atomic only, and not [] (text_of takes a code list and [])
             arg = deref(take())
-            if arg == NIL or (type(arg) is Struct and arg.name == CONS and len(arg.args) == 2):
-                raise type_error("atomic", arg)
+            if type(arg) is Var or type(arg) is Struct or arg == NIL:
+                raise _format_argument_type(d, arg)
             out.append(text_of(arg))
         elif d in "dD":
-            v = evaluate(take())
-            if type(v) is not int:
-                raise type_error("integer", v)
+            v = _format_integer(take(), d)
             k = _count(num, 0)
             digits = int_text(abs(v))
             if d == "D":  # groups of three digits left of the point
@@ -1761,15 +1759,13 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
             prec = min(_count(num, 6), 1000)
             out.append(_float_directive_text(v, prec, d))
         elif d == "s":
-            out.append(text_of(take()))
+            out.append(_format_codes(take()))
         elif d == "n":
             out.append("\n" * _count(num, 1))
         elif d == "c":
             out.append(_format_char(take()) * _count(num, 1))
         elif d == "r" or d == "R":     # ~R: the digits beyond 9 as capitals
-            v = evaluate(take())
-            if type(v) is not int:
-                raise type_error("integer", v)
+            v = _format_integer(take(), d)
             base = _count(num, 8)
             if not 2 <= base <= 36:
                 raise _err_domain("radix", base)
@@ -1917,6 +1913,48 @@ def _char(code: Any) -> str:
     return chr(code)
 
 
+def _format_argument_type(directive: str, culprit: Any) -> SLREvaluationError:
+    """SWI-Prolog's error for an argument a format/2 directive does not take."""
+    return iso_error(Struct("format_argument_type", (Atom(directive), culprit)))
+
+
+def _format_integer(arg: Any, directive: str) -> int:
+    """The integer of ``~d``, ``~D``, ``~r``, ``~R``: the argument evaluated, as SWI-Prolog;
+    a value that is no integer is ``format_argument_type(D, Arg)`` (the argument as given),
+    an infinity or a NaN the evaluation error SWI-Prolog raises for it.
+
+    >>> _format_integer(Struct("+", (1, 2)), "d")
+    3
+    """
+    v = evaluate(arg)
+    if type(v) is not int:
+        if v != v:
+            raise evaluation_error("undefined")
+        if v in (math.inf, -math.inf):
+            raise evaluation_error("float_overflow")
+        raise _format_argument_type(directive, deref(arg))
+    return v
+
+
+def _format_codes(arg: Any) -> str:
+    """The text of ``~s``: a code or character list, a string or an atom, as SWI-Prolog
+    takes it; anything else (a number, a partial or mixed list, a compound, a variable) is
+    ``format_argument_type(s, Arg)``.
+
+    >>> _format_codes(make_list([104, 105])), _format_codes(String("hi"))
+    ('hi', 'hi')
+    """
+    arg = deref(arg)
+    if type(arg) is String or type(arg) is Atom:
+        return "" if arg == NIL else str(arg)
+    if type(arg) is Struct and arg.name == CONS and len(arg.args) == 2:
+        try:
+            return _code_or_char_list_text(arg)
+        except SLREvaluationError:
+            pass
+    raise _format_argument_type("s", arg)
+
+
 def _format_char(arg: Any) -> str:
     """``~c``'s character: its argument a code as it is (not evaluated), as SWI-Prolog's; what
     is no code (an atom, a variable, a float, an expression, a negative integer) is SWI-Prolog's
@@ -1927,7 +1965,7 @@ def _format_char(arg: Any) -> str:
     """
     arg = deref(arg)
     if type(arg) is not int or arg < 0:
-        raise iso_error(Struct("format_argument_type", (Atom("c"), arg)))
+        raise _format_argument_type("c", arg)
     return _char(arg)
 
 
