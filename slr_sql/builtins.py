@@ -149,7 +149,7 @@ def compare_terms(a: Any, b: Any) -> int:
             elif ra == 3:
                 pass   # [] and [] (the only term of its rank)
             elif ra == 0:
-                return -1 if id(a) < id(b) else 1
+                return -1 if a.age < b.age else 1
             else:
                 # compound: arity, name, then arguments left to right
                 na, nb = len(a.args), len(b.args)

@@ -16,6 +16,7 @@ mutated, and renamed apart before use.
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 import re
 import time
@@ -108,6 +109,9 @@ class String(str):
         return f"String({str.__repr__(self)})"
 
 
+_VAR_AGES = itertools.count(1)
+
+
 class Var:
     """A logic variable. ``ref`` is ``None`` while unbound; ``name`` is for answers and printing.
 
@@ -115,15 +119,14 @@ class Var:
     True
     """
 
-    __slots__ = ("ref", "name")
-    _counter = 0
+    __slots__ = ("ref", "name", "age")
 
     def __init__(self, name: str | None = None):
         self.ref = None
-        if name is None:
-            Var._counter += 1
-            name = f"_G{Var._counter}"
-        self.name = name
+        # the standard order of two variables is their age, as SWI-Prolog's (by address):
+        # of a query's, the first written is the oldest
+        self.age = age = next(_VAR_AGES)
+        self.name = f"_G{age}" if name is None else name
 
     def __repr__(self) -> str:
         return f"Var({self.name!r})" if self.ref is None else _term_repr(self)
