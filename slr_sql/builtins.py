@@ -2183,6 +2183,9 @@ def _bagof(m: "Machine", args, nxt, is_set: bool):
                 w, t = deref(r).args
                 for g in groups:
                     if _variant(g[0], w):
+                        # one witness for the group, as SWI-Prolog's pick_same/4 (V = Vars):
+                        # the variables of its solutions' copies become the same ones
+                        m.unify(g[0], w)
                         g[1].append(t)
                         break
                 else:

@@ -45,6 +45,12 @@ GOALS = [
     'setof(X, member(X, []), L)',
     'bagof(X, fail, L)',
     'setof(Y-Xs, setof(X, member(X-Y, [1-a, 2-b, 3-a]), Xs), L)',
+    # a group's solutions share its witness: their copies of a free variable are one variable
+    'bagof(X, member(X, [A, B, A]), L)', 'setof(V, member(V, [B, A, c]), L)',
+    'bagof(X-Y, member(X, [A, B]), L)', 'setof(X, member(X, [f(A), f(B), f(A)]), L)',
+    'bagof(K-X, member(K-X, [a-P, b-Q, a-P]), L)', 'bagof(X, member(X-K, [P-a, Q-b, P-a]), L)',
+    'setof(K-Vs, bagof(V, member(K-V, [a-X, b-Y, a-X]), Vs), L)',
+    'bagof(T, member(T, [f(X, Y), f(Y, X)]), L)', 'bagof(X, (member(X, [1, 2]) ; X = Z), L)',
     'aggregate_all(count, member(_, [a, b]), N)',
     'aggregate_all(sum(X), member(X, [1, 2.5, 3]), S)',
     'aggregate_all(sum(X), member(X, []), S)',
