@@ -261,6 +261,17 @@ GOALS = [
     'T =.. [a]',
     'T =.. [1, 2]',
     'atom_concat(X, Y, abc)',
+    # a term called as a goal is a body first: a goal inside its control constructs that is
+    # no callable term is type_error(callable, Goal) before any of it runs (on both paths)
+    'call((fail, 1))', 'call((fail ; 1))', 'call((fail -> 1 ; true))', 'call((fail, \\+ 1))',
+    'call((fail, findall(X, 1, L)))', 'call((fail, call(1)))', 'call((fail, X))',
+    'call((fail, (a, 1)))', 'call((fail *-> 1 ; true))', '(fail, call((true, 1)))',
+    'findall(X, (fail, 1), L)', 'call(\\+ (fail, 1))', '\\+ (fail, 1)', 'forall(fail, (fail, 1))',
+    'forall(true, (fail, 1))', 'catch((fail, 1), error(E, _), true)', 'call((fail, "s"))',
+    'call((fail, []))', 'call((fail, f(x)))', 'call((fail, 1.5))', 'G = (fail, 1), call(G)',
+    'G = (fail, 1), G', 'once((fail, 1))', 'ignore((fail, 1))', 'aggregate_all(count, (fail, 1), N)',
+    'bagof(X, (fail, 1), L)', 'not((fail, 1))', 'fail, 1', 'findall(X, (member(X, [1]) ; 2), L)',
+    'X = 1, call((fail, X))', 'call((fail, Y)), Y = 1', 'catch(findall(X, (fail, 1), L), error(E, _), true)',
     'findall(X, member(X, [a, b]), L, [c])',
     'findall(X, member(X, [a, b]), L, T)',
     'findall(X, member(X, [a]), [a|T], [z])',
