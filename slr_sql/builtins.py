@@ -353,6 +353,8 @@ def _arg(m, a):
     if type(t) is not Struct:
         raise type_error("compound", t)
     if type(n) is int:
+        if n < 0:   # (0 fails, as SWI-Prolog: no argument, no error)
+            raise _err_domain("not_less_than_zero", n)
         if 1 <= n <= len(t.args) and m.unify(a[2], t.args[n - 1]):
             yield None
         return

@@ -253,6 +253,7 @@ GOALS = [
     'arg(N, f(a, b), X)',
     'arg(3, f(a, b), X)',
     'arg(0, f(a), X)',
+    'arg(-1, f(a), X)', 'arg(-5, [a], X)', 'arg(-1, a, X)', 'arg(-1, X, Y)',
     'arg(a, f(a), X)',
     'arg(1, a, X)',
     'f(a, B) =.. L',
