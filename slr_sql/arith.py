@@ -414,13 +414,12 @@ CONSTANTS = {
     "pi": math.pi,
     "e": math.e,
     "inf": math.inf,
-    "infinite": math.inf,
     "nan": math.nan,
     "epsilon": 2.220446049250313e-16,
-    "max_tagged_integer": (1 << 60) - 1,
-    "random": None,
+    # (SWI-Prolog 9.0 has no infinite, max_tagged_integer, realtime nor random/0 function:
+    # type_error(evaluable, Name/0) there, and here)
+    "random_float": None,
     "cputime": None,
-    "realtime": None,
 }
 
 
@@ -541,8 +540,7 @@ def _atomic_value(t: Any, tt: type) -> int | float:
                 import random
                 import time
 
-                return {"random": random.random, "cputime": time.process_time,
-                        "realtime": lambda: int(time.time())}[t]()
+                return {"random_float": random.random, "cputime": time.process_time}[t]()
             return v
         if t == "[]":
             raise type_error("evaluable", t)
