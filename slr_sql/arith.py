@@ -322,6 +322,33 @@ def _msb(a):
     return a.bit_length() - 1
 
 
+def _lsb(a):
+    a = _int_required(a)
+    if a < 1:
+        raise iso_error(Struct("domain_error", (Atom("not_less_than_one"), a)))
+    return (a & -a).bit_length() - 1
+
+
+def _natural(a):
+    """An integer operand that must not be negative (popcount/1, getbit/2)."""
+    a = _int_required(a)
+    if a < 0:
+        raise iso_error(Struct("domain_error", (Atom("not_less_than_zero"), a)))
+    return a
+
+
+def _getbit(a, b):
+    _int_required(a), _int_required(b)    # (both types first, as SWI-Prolog)
+    a = _natural(a)
+    return (a >> _natural(b)) & 1
+
+
+def _atanh(a):
+    if a == 1 or a == -1:   # SWI-Prolog: an infinity, so float_overflow (Python: undefined)
+        return math.copysign(math.inf, a)
+    return math.atanh(a)
+
+
 BINARY = {
     "+": lambda a, b: a + b,
     "-": lambda a, b: a - b,
@@ -344,6 +371,8 @@ BINARY = {
     "\\/": lambda a, b: _int_required(a) | _int_required(b),
     "xor": lambda a, b: _int_required(a) ^ _int_required(b),
     "gcd": lambda a, b: math.gcd(_int_required(a), _int_required(b)),
+    "getbit": _getbit,
+    "nexttoward": _float_args(math.nextafter),
 }
 
 UNARY = {
@@ -358,6 +387,12 @@ UNARY = {
     "asin": _float_args(math.asin),
     "acos": _float_args(math.acos),
     "atan": _float_args(math.atan),
+    "sinh": _float_args(math.sinh),
+    "cosh": _float_args(math.cosh),
+    "tanh": _float_args(math.tanh),
+    "asinh": _float_args(math.asinh),
+    "acosh": _float_args(math.acosh),
+    "atanh": _float_args(_atanh),
     "exp": _float_args(math.exp),
     "log": _float_args(_log),
     "floor": lambda a: _to_int(math.floor, a),
@@ -371,19 +406,20 @@ UNARY = {
     "float_fractional_part": _fractional_part,
     "\\": lambda a: ~_int_required(a),
     "msb": _msb,
+    "lsb": _lsb,
+    "popcount": lambda a: bin(_natural(a)).count("1"),
 }
 
 CONSTANTS = {
     "pi": math.pi,
     "e": math.e,
     "inf": math.inf,
-    "infinite": math.inf,
     "nan": math.nan,
     "epsilon": 2.220446049250313e-16,
-    "max_tagged_integer": (1 << 60) - 1,
-    "random": None,
+    # (SWI-Prolog 9.0 has no infinite, max_tagged_integer, realtime nor random/0 function:
+    # type_error(evaluable, Name/0) there, and here)
+    "random_float": None,
     "cputime": None,
-    "realtime": None,
 }
 
 
@@ -504,8 +540,7 @@ def _atomic_value(t: Any, tt: type) -> int | float:
                 import random
                 import time
 
-                return {"random": random.random, "cputime": time.process_time,
-                        "realtime": lambda: int(time.time())}[t]()
+                return {"random_float": random.random, "cputime": time.process_time}[t]()
             return v
         if t == "[]":
             raise type_error("evaluable", t)

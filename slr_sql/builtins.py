@@ -149,7 +149,7 @@ def compare_terms(a: Any, b: Any) -> int:
             elif ra == 3:
                 pass   # [] and [] (the only term of its rank)
             elif ra == 0:
-                return -1 if id(a) < id(b) else 1
+                return -1 if a.age < b.age else 1
             else:
                 # compound: arity, name, then arguments left to right
                 na, nb = len(a.args), len(b.args)
@@ -207,31 +207,41 @@ for _op, _test in (("=:=", lambda x, y: x == y), ("=\\=", lambda x, y: x != y),
 
 @det("succ", 2)
 def _succ(m, a):
-    x = deref(a[0])
+    """succ(X, Y): Y = X + 1 over the natural numbers. As SWI-Prolog: each bound argument
+    is checked in turn, type_error(integer, V) or domain_error(not_less_than_zero, V)."""
+    x, y = deref(a[0]), deref(a[1])
+    for v in (x, y):
+        if type(v) is not Var:
+            if type(v) is not int:
+                raise type_error("integer", v)
+            if v < 0:
+                raise _err_domain("not_less_than_zero", v)
     if type(x) is int:
-        if x < 0:
-            raise type_error("not_less_than_zero", x)
-        return m.unify(a[1], x + 1)
-    y = deref(a[1])
+        return m.unify(y, x + 1)
     if type(y) is int:
-        if y <= 0:
-            if y < 0:
-                raise type_error("not_less_than_zero", y)
-            return False
-        return m.unify(a[0], y - 1)
-    if type(x) is Var and type(y) is Var:
-        raise instantiation_error()
-    raise type_error("integer", x if type(x) is not Var else y)
+        return y > 0 and m.unify(x, y - 1)
+    raise instantiation_error()
 
 
 @det("plus", 3)
 def _plus(m, a):
+    """plus(X, Y, Z): Z = X + Y over the integers, any two given. As SWI-Prolog: each bound
+    argument must be an integer (type_error(integer, V), not evaluated), then two bound."""
     x, y, z = (deref(v) for v in a)
+    for v in (x, y, z):
+        if type(v) is not Var and type(v) is not int:
+            raise type_error("integer", v)
     if type(z) is Var:
-        return m.unify(z, evaluate(x) + evaluate(y))
+        if type(x) is Var or type(y) is Var:
+            raise instantiation_error()
+        return m.unify(z, x + y)
     if type(y) is Var:
-        return m.unify(y, evaluate(z) - evaluate(x))
-    return m.unify(x, evaluate(z) - evaluate(y))
+        if type(x) is Var:
+            raise instantiation_error()
+        return m.unify(y, z - x)
+    if type(x) is Var:
+        return m.unify(x, z - y)
+    return x + y == z
 
 
 @nondet("between", 3)
@@ -239,10 +249,13 @@ def _between(m, a):
     lo = deref(a[0])
     hi = deref(a[1])
     x = deref(a[2])
-    if type(lo) is Var or type(hi) is Var:
+    # (each bound argument checked in turn, as SWI-Prolog: between(a, H, X) is a type error)
+    if type(lo) is Var:
         raise instantiation_error()
     if type(lo) is not int:
         raise type_error("integer", lo)
+    if type(hi) is Var:
+        raise instantiation_error()
     if hi in ("inf", "infinite") and type(hi) is Atom:
         hi = math.inf
     elif type(hi) is not int:
@@ -340,6 +353,8 @@ def _arg(m, a):
     if type(t) is not Struct:
         raise type_error("compound", t)
     if type(n) is int:
+        if n < 0:   # (0 fails, as SWI-Prolog: no argument, no error)
+            raise _err_domain("not_less_than_zero", n)
         if 1 <= n <= len(t.args) and m.unify(a[2], t.args[n - 1]):
             yield None
         return
@@ -587,8 +602,10 @@ def _atom_text(t: Any, compound_error: str = "atomic", nil_error: str = "atom") 
 
 
 def _list_text(t: Any) -> str:
-    """The text of a code or character list (SWI accepts either kind, even mixed) or a
-    string: a partial list is an instantiation error, anything else a type error."""
+    """The text of a code or character list or a string: a partial list is an
+    instantiation error, anything else a type error. As SWI-Prolog 9, the first element
+    says which kind of list it is: a code after characters is type_error(character, C), a
+    character after codes type_error(character_code, C)."""
     t = deref(t)
     if type(t) is String:
         return str(t)
@@ -598,18 +615,20 @@ def _list_text(t: Any) -> str:
     if not (type(tail) is Atom and tail == "[]"):
         raise type_error("list", t)
     out = []
+    first = deref(items[0]) if items else None
+    chars = type(first) is Atom and len(first) == 1
     for x in items:
         x = deref(x)
         if type(x) is Var:
             raise instantiation_error()
-        if type(x) is int:
+        if type(x) is int and not chars:
             if not 0 <= x <= 0x10FFFF or 0xD800 <= x <= 0xDFFF:
                 raise type_error("character_code", x)
             out.append(chr(x))
-        elif type(x) is Atom and len(x) == 1:
+        elif type(x) is Atom and len(x) == 1 and chars:
             out.append(str(x))
         else:
-            raise type_error("character_code", x)
+            raise type_error("character" if chars else "character_code", x)
     return "".join(out)
 
 
@@ -645,18 +664,36 @@ def _code_or_char_list_text(t: Any) -> str:
     return "".join(out)
 
 
-def _number_of_text(s: str, leading_layout: bool) -> Any:
-    """The number a text is in Prolog syntax (an optional sign, then a number token: 12,
+def _number_of_text(s: str, leading_layout: bool, bare_quote_is_zero: bool = True) -> Any:
+    r"""The number a text is in Prolog syntax (an optional sign, then a number token: 12,
     -1.5, 0x1A, 0'a, 1.0Inf), or None. ``leading_layout`` allows spaces before it (as
-    number_codes/2 does; atom_number/2 and name/2 do not)."""
+    number_codes/2 does; atom_number/2 and name/2 do not).
+
+    A character code is read as SWI-Prolog's number texts read it, not as its reader does:
+    ``0'`` and the one character after it, whatever it is (a space, a newline, a backslash:
+    no escape), or a doubled quote; the text ``0'`` alone is 0 (``bare_quote_is_zero``:
+    all but atom_number/2, which fails on it).
+
+    >>> _number_of_text("0' ", False), _number_of_text("-0'\\", False), _number_of_text("0'\\n", False)
+    (32, -92, None)
+    >>> _number_of_text("0'", False), _number_of_text("0'", False, bare_quote_is_zero=False)
+    (0, None)
+    """
+    if s == "0'":
+        return 0 if bare_quote_is_zero else None
     if leading_layout:
         s = s.lstrip()
-    if s != s.rstrip():
-        return None  # "3 " is no number, in any of the three
     sign = 1
     if s[:1] in ("-", "+"):
         sign = -1 if s[0] == "-" else 1
         s = s[1:]
+    if s.startswith("0'"):
+        code = s[2:]
+        if code == "''":
+            code = "'"
+        return sign * ord(code) if len(code) == 1 else None
+    if s != s.rstrip():
+        return None  # "3 " is no number, in any of the three
     if not s[:1].isdigit():
         return None
     from .parser import parse_term, token_spans
@@ -753,11 +790,25 @@ def _name(m, a):
     """name(AtomOrNumber, Codes): a text that is a number (no leading layout) gives the
     number, any other text an atom."""
     x = deref(a[0])
-    if type(x) is not Var:
+    if type(x) is not Var and (type(x) is Struct or not _is_text_given(a[1])):
         return m.unify(a[1], make_list([ord(c) for c in _atom_text(x, "atomic", "atomic")]))
     text = _list_text(a[1])
     n = _number_of_text(text, leading_layout=False)
     return m.unify(x, Atom(text) if n is None else n)
+
+
+def _is_text_given(t: Any) -> bool:
+    """A ground text argument (a string, a list with no variable in it, anything else but a
+    variable): number_codes/2 and name/2 read it even when the other argument is given, as
+    SWI-Prolog does (number_codes(1, "01") is true, number_codes(1, foo) a type error);
+    a partial one is compared with the text of the given term (number_codes(12, [X, Y]))."""
+    t = deref(t)
+    if type(t) is Var:
+        return False
+    if type(t) is not Struct:
+        return True
+    items, tail = list_items(t)
+    return type(tail) is not Var and all(type(deref(x)) is not Var for x in items)
 
 
 @det("number_codes", 2)
@@ -766,7 +817,8 @@ def _number_codes(m, a):
     if type(x) is not Var:
         if type(x) is not int and type(x) is not float:
             raise type_error("number", x)
-        return m.unify(a[1], make_list([ord(c) for c in _atom_text(x)]))
+        if not _is_text_given(a[1]):
+            return m.unify(a[1], make_list([ord(c) for c in _atom_text(x)]))
     n = _number_of_text(_list_text(a[1]), leading_layout=True)
     if n is None:
         raise iso_error(Struct("syntax_error", (Atom("illegal_number"),)))
@@ -785,24 +837,33 @@ def _atom_number(m, a):
         return m.unify(x, Atom(_atom_text(n)))
     if type(x) is not Atom and type(x) is not String:
         raise type_error("atom", x)
-    n = _number_of_text(_atom_text(x, "atom"), leading_layout=False)
+    n = _number_of_text(_atom_text(x, "atom"), leading_layout=False, bare_quote_is_zero=False)
     return n is not None and m.unify(a[1], n)
 
 
-@det("term_to_atom", 2)
-def _term_to_atom(m, a):
+def _term_text(m: "Machine", a: list, make: Callable[[str], Any]) -> bool:
+    """term_to_atom/2 (``make``: Atom) and term_string/2 (String)."""
     from .terms import format_term
 
     t = deref(a[0])
     text = deref(a[1])
     if type(text) is not Var:  # as SWI-Prolog: a given text is read, then unified
-        source = _atom_text(text, "text")
+        # (a code or character list is text too, [] the empty one)
+        source = "" if text == NIL else _code_or_char_list_text(text) \
+            if type(text) is Struct and text.name == CONS and len(text.args) == 2 \
+            else _atom_text(text, "text")
         if not source.strip():
             return m.unify(t, Atom("end_of_file"))
         return m.unify(t, _parse_any(Atom(source)))
     # SWI-Prolog's term_to_atom writes a quote inside quotes doubled and a newline as it
-    # is ('it''s'), where writeq writes 'it\'s'
-    return m.unify(text, Atom(format_term(t, deadline=m.deadline, char_escapes=False)))
+    # is ('it''s'), where writeq writes 'it\'s' and '\n'
+    return m.unify(text, make(format_term(t, deadline=m.deadline, char_escapes=False)))
+
+
+DET[("term_to_atom", 2)] = lambda m, a: _term_text(m, a, Atom)
+# (as term_to_atom/2, the text a string: quoted as writeq quotes, where it was the text
+# write/1 makes, term_string('A', S) giving "A")
+DET[("term_string", 2)] = lambda m, a: _term_text(m, a, String)
 
 
 def _case_converted(m, a, convert: Callable[[str], str]) -> bool:
@@ -1184,7 +1245,6 @@ _text_conv("atom_string", lambda s: String(s), lambda t: Atom(text_of(t)))
 _text_conv("string_chars", lambda s: make_list([Atom(c) for c in s]), lambda t: String(text_of(t)))
 _text_conv("string_codes", lambda s: make_list([ord(c) for c in s]), lambda t: String(text_of(t)))
 _text_conv("string_to_atom", lambda s: Atom(s), lambda t: String(text_of(t)))
-_text_conv("term_string", lambda s: String(s), lambda t: _parse_any(t))
 
 
 @det("char_code", 2)
@@ -1206,12 +1266,13 @@ def _char_code(m, a):
 
 
 def _parse_any(t):
-    """The term a text reads as; a syntax error is the ISO error ``syntax_error(Message)``
-    (catchable, as in SWI-Prolog), never a raw SLRSyntaxError."""
-    from .parser import parse_term
+    """The term a text reads as (its first term: what follows the '.' that ends it is
+    ignored, as SWI-Prolog's term_to_atom/2 ignores it); a syntax error is the ISO error
+    ``syntax_error(Message)`` (catchable, as in SWI-Prolog), never a raw SLRSyntaxError."""
+    from .parser import parse_first_term
 
     try:
-        return parse_term(text_of(t))[0]
+        return parse_first_term(text_of(t))[0]
     except SLRSyntaxError as exc:
         raise iso_error(Struct("syntax_error", (Atom(exc.message),))) from None
 
@@ -1419,13 +1480,28 @@ def _sort(m, a):
     return m.unify(a[1], make_list(_dedup(sorted(proper_list(a[0]), key=_cmp_key))))
 
 
+_SORT_ORDERS = {"<": Atom("@<"), ">": Atom("@>"), "=<": Atom("@=<"), ">=": Atom("@>=")}
+
+
 @det("sort", 4)
 def _sort4(m, a):
     key = deref(a[0])
     order = deref(a[1])
-    items = proper_list(a[2])
+    if type(key) is Var:
+        raise instantiation_error()
     if type(key) is not int:
         raise type_error("integer", key)
+    if key < 0:
+        raise _err_domain("not_less_than_one", key)    # (SWI-Prolog's, though 0 is one)
+    if type(order) is Var:
+        raise instantiation_error()
+    if type(order) is not Atom:
+        raise type_error("atom", order)
+    # SWI-Prolog takes < > =< >= for @< @> @=< @>= (the standard order all the same)
+    order = _SORT_ORDERS.get(str(order), order)
+    if str(order) not in ("@<", "@>", "@=<", "@>="):
+        raise _err_domain("order", order)
+    items = proper_list(a[2])
 
     def k(t):
         if key == 0:
@@ -1435,8 +1511,6 @@ def _sort4(m, a):
             raise type_error("compound", t)
         return t.args[key - 1]
 
-    if str(order) not in ("@<", "@>", "@=<", "@>="):
-        raise _err_domain("order", order)
     desc = order in ("@>", "@>=")
     res = sorted(items, key=lambda t: _cmp_key(k(t)), reverse=desc)
     if order in ("@<", "@>"):
@@ -1607,7 +1681,8 @@ DET[("tab", 1)] = _tab
 
 
 def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
-    """SWI-style ``format/2`` directives: ~w ~p ~q ~a ~d ~D ~s ~e ~f ~g ~n ~c ~r ~8| ~t ~~ ~i ~*c.
+    """SWI-style ``format/2`` directives: ~w ~p ~q ~a ~d ~D ~s ~e ~E ~f ~g ~G ~n ~c ~r ~R ~8| ~t
+    ~~ ~i ~*c.
 
     >>> format_text("~w has ~d items~n", [Atom("cup"), 3])
     'cup has 3 items\\n'
@@ -1630,34 +1705,44 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
             i += 1
             continue
         i += 1
+        # the numeric argument: ~`c (a fill character), ~* (the next argument) or digits;
+        # then an optional ':' (SWI-Prolog's locale modifier: its default locale, as here,
+        # groups no digits) and the directive, NUL where the text ends (SWI-Prolog's
+        # existence_error(format_character, '\x0\'), or the last digit of a count)
         num = ""
-        if i + 1 < n and fmt[i] == "`":      # ~`ct: the fill character c
-            num = str(ord(fmt[i + 1]))
+        digits_end = False                # a count's digits ran to the end of the text
+        if i < n and fmt[i] == "`":
+            if i + 1 < n:
+                num = str(ord(fmt[i + 1]))
             i += 2
-        while i < n and (fmt[i].isdigit() or fmt[i] == "*"):
-            if fmt[i] == "*":
-                num = int_text(evaluate(take()))
-            else:
-                num += fmt[i]
+        elif i < n and fmt[i] == "*":   # a count as it is, not evaluated (SWI-Prolog's error)
+            count = deref(take())
+            if type(count) is not int or count < 0:
+                raise iso_error(Struct("format", (
+                    Atom("no or negative integer for `*' argument"),)))
+            num = int_text(count)
             i += 1
-        if i >= n:
-            break
-        d = fmt[i]
+        else:
+            while i < n and "0" <= fmt[i] <= "9":
+                num += fmt[i]
+                i += 1
+            digits_end = i >= n and num != ""
+        if i < n and fmt[i] == ":":
+            i += 1
+        d = fmt[i] if i < n else num[-1] if digits_end else "\0"
         i += 1
         if d == "w":
             out.append(_write_text(take(), deadline=deadline))
         elif d in "pq":
             out.append(_write_text(take(), True, deadline))
         elif d == "a":
-            # atomic only: SWI-Prolog's ~a refuses a code list and [] (text_of takes them)
+            # atomic only, and not [] (text_of takes a code list and [])
             arg = deref(take())
-            if arg == NIL or (type(arg) is Struct and arg.name == CONS and len(arg.args) == 2):
-                raise type_error("atomic", arg)
+            if type(arg) is Var or type(arg) is Struct or arg == NIL:
+                raise _format_argument_type(d, arg)
             out.append(text_of(arg))
         elif d in "dD":
-            v = evaluate(take())
-            if type(v) is not int:
-                raise type_error("integer", v)
+            v = _format_integer(take(), d)
             k = _count(num, 0)
             digits = int_text(abs(v))
             if d == "D":  # groups of three digits left of the point
@@ -1671,27 +1756,24 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
                 digits = digits.rjust(k + 1, "0")
                 digits = digits[:-k] + "." + digits[-k:]
             out.append(("-" if v < 0 else "") + digits)
-        elif d == "f" or d == "e" or d == "g":
-            try:
-                v = float(evaluate(take()))
-            except OverflowError:  # an integer beyond the largest float
-                raise evaluation_error("float_overflow") from None
+        elif d in "feEgG":
+            v = evaluate(take())
             prec = min(_count(num, 6), 1000)
-            out.append(f"{v:.{prec}{d}}")
+            out.append(_float_directive_text(v, prec, d))
         elif d == "s":
-            out.append(text_of(take()))
+            out.append(_format_codes(take()))
         elif d == "n":
             out.append("\n" * _count(num, 1))
         elif d == "c":
-            out.append(_char(evaluate(take())) * _count(num, 1))
-        elif d == "r":
-            v = evaluate(take())
-            if type(v) is not int:
-                raise type_error("integer", v)
+            out.append(_format_char(take()) * _count(num, 1))
+        elif d == "r" or d == "R":     # ~R: the digits beyond 9 as capitals
+            v = _format_integer(take(), d)
             base = _count(num, 8)
             if not 2 <= base <= 36:
                 raise _err_domain("radix", base)
             digits = "0123456789abcdefghijklmnopqrstuvwxyz"
+            if d == "R":
+                digits = digits.upper()
             s, x = "", abs(v)
             while True:
                 s = digits[x % base] + s
@@ -1710,10 +1792,38 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
         elif d == "+":
             columns.stop(_count(num, 8), relative=True)
         else:
-            raise iso_error(Struct("format", (String(f"unknown directive ~{d}"),)))
+            raise iso_error(Struct("existence_error", (Atom("format_character"), Atom(d))))
     if args:  # an argument no directive took (SWI-Prolog's error)
         raise iso_error(Struct("format", (Atom("too many arguments"),)))
     return "".join(out)
+
+
+def _float_directive_text(v: int | float, prec: int, d: str) -> str:
+    """``~Nf``, ``~Ne``, ``~Ng`` (``~E``, ``~G``) of a number, as SWI-Prolog writes it: a
+    float or an integer of 64 bits as C's printf writes the double, an integer beyond 64
+    bits with all its digits (SWI-Prolog formats it with GMP: ``~e`` of ``10**400`` is
+    ``1.000000e+400``, where a double overflows).
+
+    >>> _float_directive_text(2.5, 2, "f"), _float_directive_text(10**400, 6, "e")
+    ('2.50', '1.000000e+400')
+    >>> _float_directive_text(-(10**30) - 7, 1, "f")
+    '-1000000000000000000000000000007.0'
+    """
+    if type(v) is int and not -(2**63) <= v < 2**63:
+        if d == "f":
+            return int_text(v) + ("." + "0" * prec if prec else "")
+        import decimal
+
+        with decimal.localcontext() as context:
+            context.rounding = decimal.ROUND_HALF_UP     # (GMP's, as SWI-Prolog's shows)
+            text = format(decimal.Decimal(v), f".{prec}{d}")
+        if d in "gG":  # as C's %g: no trailing zeros (a Decimal keeps them)
+            mantissa, e, exponent = text.partition("e" if d == "g" else "E")
+            if "." in mantissa:
+                mantissa = mantissa.rstrip("0").rstrip(".")
+            text = mantissa + e + exponent
+        return text
+    return f"{float(v):.{prec}{d}}"
 
 
 def _count(num: str, default: int) -> int:
@@ -1803,6 +1913,62 @@ def _char(code: Any) -> str:
     if not 0 <= code <= 0x10FFFF or 0xD800 <= code <= 0xDFFF:
         raise iso_error(Struct("representation_error", (Atom("code_point"),)))
     return chr(code)
+
+
+def _format_argument_type(directive: str, culprit: Any) -> SLREvaluationError:
+    """SWI-Prolog's error for an argument a format/2 directive does not take."""
+    return iso_error(Struct("format_argument_type", (Atom(directive), culprit)))
+
+
+def _format_integer(arg: Any, directive: str) -> int:
+    """The integer of ``~d``, ``~D``, ``~r``, ``~R``: the argument evaluated, as SWI-Prolog;
+    a value that is no integer is ``format_argument_type(D, Arg)`` (the argument as given),
+    an infinity or a NaN the evaluation error SWI-Prolog raises for it.
+
+    >>> _format_integer(Struct("+", (1, 2)), "d")
+    3
+    """
+    v = evaluate(arg)
+    if type(v) is not int:
+        if v != v:
+            raise evaluation_error("undefined")
+        if v in (math.inf, -math.inf):
+            raise evaluation_error("float_overflow")
+        raise _format_argument_type(directive, deref(arg))
+    return v
+
+
+def _format_codes(arg: Any) -> str:
+    """The text of ``~s``: a code or character list, a string or an atom, as SWI-Prolog
+    takes it; anything else (a number, a partial or mixed list, a compound, a variable) is
+    ``format_argument_type(s, Arg)``.
+
+    >>> _format_codes(make_list([104, 105])), _format_codes(String("hi"))
+    ('hi', 'hi')
+    """
+    arg = deref(arg)
+    if type(arg) is String or type(arg) is Atom:
+        return "" if arg == NIL else str(arg)
+    if type(arg) is Struct and arg.name == CONS and len(arg.args) == 2:
+        try:
+            return _code_or_char_list_text(arg)
+        except SLREvaluationError:
+            pass
+    raise _format_argument_type("s", arg)
+
+
+def _format_char(arg: Any) -> str:
+    """``~c``'s character: its argument a code as it is (not evaluated), as SWI-Prolog's; what
+    is no code (an atom, a variable, a float, an expression, a negative integer) is SWI-Prolog's
+    ``format_argument_type(c, Culprit)``.
+
+    >>> _format_char(97)
+    'a'
+    """
+    arg = deref(arg)
+    if type(arg) is not int or arg < 0:
+        raise _format_argument_type("c", arg)
+    return _char(arg)
 
 
 def _format_args(t: Any) -> list:
@@ -2019,6 +2185,9 @@ def _bagof(m: "Machine", args, nxt, is_set: bool):
                 w, t = deref(r).args
                 for g in groups:
                     if _variant(g[0], w):
+                        # one witness for the group, as SWI-Prolog's pick_same/4 (V = Vars):
+                        # the variables of its solutions' copies become the same ones
+                        m.unify(g[0], w)
                         g[1].append(t)
                         break
                 else:
@@ -2640,6 +2809,15 @@ nth1(I, _, _) :- throw(error(type_error(integer, I), _)).
 '$nth_det'(I, [_|T], E) :- I1 is I-1, '$nth_det'(I1, T, E).
 '$nth_gen'([E|_], E, B, B).
 '$nth_gen'([_|T], E, B0, B) :- B1 is B0+1, '$nth_gen'(T, E, B1, B).
+nth0(I, L, E, R) :- var(I), !, '$nth_gen'(L, E, R, 0, I).
+nth0(I, L, E, R) :- '$nth_index'(I, nonneg, 0), '$nth_del'(I, L, E, R).
+nth1(I, L, E, R) :- var(I), !, '$nth_gen'(L, E, R, 1, I).
+nth1(I, L, E, R) :- '$nth_index'(I, positive_integer, 1), I0 is I-1, '$nth_del'(I0, L, E, R).
+'$nth_index'(I, Type, Min) :- ( integer(I), I >= Min -> true ; throw(error(type_error(Type, I), _)) ).
+'$nth_gen'([E|R], E, R, B, B).
+'$nth_gen'([H|T], E, [H|R], B0, B) :- B1 is B0+1, '$nth_gen'(T, E, R, B1, B).
+'$nth_del'(0, [E|R], E, R) :- !.
+'$nth_del'(I, [H|T], E, [H|R]) :- I1 is I-1, '$nth_del'(I1, T, E, R).
 last([X|Xs], Last) :- '$last'(Xs, X, Last).
 '$last'([], Last, Last).
 '$last'([X|Xs], _, Last) :- '$last'(Xs, X, Last).

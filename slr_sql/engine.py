@@ -162,6 +162,7 @@ class Machine:
     # -- the main loop ------------------------------------------------------------------
     def solve(self, goal: Any) -> Iterator[None]:
         """Prove ``goal``; yields after each solution (bindings readable until resumed)."""
+        check_body(goal)
         cont = (goal, 0, None)
         engine = self.engine
         preds = engine.program.preds
@@ -203,6 +204,7 @@ class Machine:
                         goal = r
                     # a variable goal G is call(G) (ISO 7.6.2): a cut inside it is local
                     cb = len(self.cps)
+                    check_body(goal)
                 tg = type(goal)
                 if tg is Struct:
                     args = goal.args
@@ -456,6 +458,7 @@ class Machine:
         if name == "*->":
             return (args[0], len(cps), (args[1], cb, nxt))
         if name == "\\+" or name == "not":
+            check_body(args[0])
             height = len(cps)
             cps.append([K_ALT, len(self.trail), nxt, None, None, None])
             return (args[0], height + 1, (Special(S_NAFAIL, height), cb, None))
@@ -467,6 +470,7 @@ class Machine:
                 raise instantiation_error()
             if type(goal) not in (Struct, Atom):
                 raise type_error("callable", goal)
+            check_body(goal)
             return (goal, len(cps), nxt)
         if name == "^":
             ev = split_event_atom(Struct("^", args))
@@ -483,6 +487,7 @@ class Machine:
             height = len(cps)
             cp = [K_CATCH, len(self.trail), nxt, args[1], args[2], cb]
             cps.append(cp)
+            check_body(args[0])    # (raised inside the catch: catch/3 catches it)
             return (args[0], height + 1, (Special(S_POPCATCH, cp), cb, nxt))
         # collection predicates
         from .builtins import collector
@@ -528,6 +533,7 @@ class Machine:
         """Run ``goal`` to exhaustion collecting copies of ``template``, then ``finish``;
         ``each`` sees every copy as it is found (an error it raises stops the goal there, as
         SWI-Prolog's aggregate_all(max(X), ..) evaluating each solution as it comes)."""
+        check_body(goal)
         results: list = []
         height = len(self.cps)
         self.cps.append([K_COLLECT, len(self.trail), nxt, results, finish, None])
@@ -665,6 +671,35 @@ def _unify_pattern(p: Any, t: Any, frame: list, trail: list) -> bool:
             if type(t) is not Struct or t.name != p.name or len(t.args) != len(p.args):
                 return False
     return unify(p, t, trail)
+
+
+_BODY_CONTROL = frozenset(((",", 2), (";", 2), ("->", 2), ("*->", 2), ("\\+", 1)))
+
+
+def check_body(goal: Any) -> None:
+    """A term called as a goal is made a body first, as SWI-Prolog's call/1 does (ISO 7.6.2):
+    every goal inside its control constructs (``,`` ``;`` ``->`` ``*->`` ``\\+``) must be
+    callable or a variable, else the whole term is ``type_error(callable, Goal)`` -- before
+    any of it runs (``call((fail, 1))`` raises, it does not fail).
+
+    >>> check_body(Struct(",", (Atom("fail"), Var())))
+    >>> check_body(Struct(",", (Atom("fail"), 1)))
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLREvaluationError: error(type_error(callable,(fail,1)),_)
+    """
+    t = deref(goal)
+    if type(t) is not Struct or (t.name, len(t.args)) not in _BODY_CONTROL:
+        return
+    stack = list(t.args)
+    while stack:
+        x = deref(stack.pop())
+        tx = type(x)
+        if tx is Struct:
+            if (x.name, len(x.args)) in _BODY_CONTROL:
+                stack.extend(x.args)
+        elif tx is not Var and (tx is not Atom or x == "[]"):
+            raise type_error("callable", t)
 
 
 def _add_args(goal: Any, extra: tuple) -> Any:

@@ -35,7 +35,7 @@ from .terms import INFIX_OPS, PREFIX_OPS
 from .terms import CONS, NIL, TRUE, Atom, Clause, Span, String, Struct, Var, make_list
 from .terms import MAX_INTEGER_BITS, int_from_text
 
-__all__ = ["parse_program", "parse_term", "parse_event_fast", "token_spans"]
+__all__ = ["parse_program", "parse_term", "parse_first_term", "parse_event_fast", "token_spans"]
 
 _GRAMMAR_PATH = Path(__file__).with_name("grammar") / "slr.lark"
 
@@ -648,6 +648,23 @@ def _bar_to_semicolon(goal: Any) -> Any:
 # ------------------------------------------------------------------------ entry points
 _LARK: Lark | None = None
 _LOCK = ordered_lock("parser")
+
+
+def parse_first_term(text: str) -> tuple[Any, dict[str, Var]]:
+    """Parse the first term of ``text``, up to the '.' that ends it, and ignore what follows,
+    as SWI-Prolog's term_to_atom/2 and term_string/2 read a text; without such a '.' the
+    whole text is the term (:func:`parse_term`).
+
+    >>> str(parse_first_term("f(X). g(")[0]), str(parse_first_term("'a. b'")[0])
+    ('f(X)', 'a. b')
+    """
+    try:
+        for token in _parser().lex(text):
+            if token.type == "END":
+                return _parse(text[:token.end_pos], "<query>", "query")
+    except UnexpectedInput:
+        pass  # a text that does not lex up to an end: parse_term says where it is wrong
+    return _parse(text, "<query>", "query")
 
 
 def token_spans(text: str) -> list[tuple[int, int]]:

@@ -16,6 +16,7 @@ mutated, and renamed apart before use.
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 import re
 import time
@@ -108,6 +109,9 @@ class String(str):
         return f"String({str.__repr__(self)})"
 
 
+_VAR_AGES = itertools.count(1)
+
+
 class Var:
     """A logic variable. ``ref`` is ``None`` while unbound; ``name`` is for answers and printing.
 
@@ -115,15 +119,14 @@ class Var:
     True
     """
 
-    __slots__ = ("ref", "name")
-    _counter = 0
+    __slots__ = ("ref", "name", "age")
 
     def __init__(self, name: str | None = None):
         self.ref = None
-        if name is None:
-            Var._counter += 1
-            name = f"_G{Var._counter}"
-        self.name = name
+        # the standard order of two variables is their age, as SWI-Prolog's (by address):
+        # of a query's, the first written is the oldest
+        self.age = age = next(_VAR_AGES)
+        self.name = f"_G{age}" if name is None else name
 
     def __repr__(self) -> str:
         return f"Var({self.name!r})" if self.ref is None else _term_repr(self)
@@ -874,9 +877,9 @@ _ARG_PRIORITY = 999  # arguments and list elements, as writeq prints them
 
 def format_atom(name: str, quoted: bool = True, escapes: bool = True) -> str:
     """The text of an atom, quoted only when it would not read back as the same atom.
-    ``escapes=False``: inside the quotes only a quote (doubled), a backslash (``\\``) and
-    a newline (``\n``) are escaped, every other character is itself (SWI-Prolog's
-    term_to_atom/2, which writes the newline itself too).
+    ``escapes=False``: inside the quotes only a quote (doubled) and a backslash (``\\``)
+    are escaped, every other character is itself, a newline too (SWI-Prolog's
+    term_to_atom/2; the reader takes a raw newline inside quotes, as SWI-Prolog's does).
 
     >>> format_atom("cup1"), format_atom("hello world"), format_atom("=.."), format_atom("A")
     ('cup1', "'hello world'", '=..', "'A'")
@@ -929,9 +932,7 @@ def char_escape(ch: str) -> str:
 
 def _escape(text: str, quote: str, escapes: bool = True) -> str:
     if not escapes:
-        # (a newline stays \n: this reader, unlike SWI-Prolog's, ends a quoted text at a
-        # raw one, and what term_to_atom writes must read back)
-        return text.replace("\\", "\\\\").replace(quote, quote + quote).replace("\n", "\\n")
+        return text.replace("\\", "\\\\").replace(quote, quote + quote)
     ascii = text.isascii()
     if not (_ASCII_NEEDS_ESCAPE if ascii else _unicode_pattern("needs escape")).search(text):
         return text

@@ -82,9 +82,9 @@ class BuiltinGoals:
                 raise Fallback(f"unbound variable in the arithmetic expression {format_for_message(shown_in_message(t))}")
             from ..arith import evaluate
 
-            if tt is Atom and t in ("random", "cputime", "realtime"):
+            if tt is Atom and t in ("random_float", "cputime"):
                 raise Fallback(f"the non-deterministic function {t}")
-            if tt is Struct and any(deref(a) in ("random", "cputime", "realtime")
+            if tt is Struct and any(deref(a) in ("random_float", "cputime")
                                     for a in _atoms(t)):
                 raise Fallback("a non-deterministic arithmetic function")
             try:

@@ -16,7 +16,8 @@ from .builtin_goals import BuiltinGoals
 from .control import ControlGoals, IfThenMarker
 from .events import EventGoals
 from .guards import unused_checks
-from .model import Col, Fallback, Part, Site, State, format_for_message, has_var
+from .model import (Col, Fallback, Part, Site, State, check_called_body, format_for_message,
+                    has_var)
 from .rules import RuleGoals
 from .unify import Unification
 
@@ -121,6 +122,7 @@ class Compiler(Unification, BuiltinGoals, ControlGoals, RuleGoals, EventGoals, A
     # ------------------------------------------------------------------ driver
     def compile(self, goal: Any, emit: Callable[[State], None]) -> None:
         st = self.state = State(self.dialect.may_raise)
+        check_called_body(goal)
         self.solve((goal, (), None), st, emit)
 
     def solve(self, cont, st: State, emit) -> None:
@@ -164,6 +166,8 @@ class Compiler(Unification, BuiltinGoals, ControlGoals, RuleGoals, EventGoals, A
         tg = type(g)
         if tg is Var:
             raise Fallback("a goal that is an unbound variable (call/N on an unknown goal)")
+        if type(goal) is Var:
+            check_called_body(g)    # a variable goal G is call(G)
         if tg is Col:
             raise Fallback("a goal only known at run time (call/N on an unknown goal)")
         if tg is IfThenMarker:

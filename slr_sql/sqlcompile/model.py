@@ -299,6 +299,36 @@ def term_free_vars(t: Any) -> list:
     return out
 
 
+_BODY_CONTROL = frozenset(((",", 2), (";", 2), ("->", 2), ("*->", 2), ("\\+", 1)))
+
+
+def check_called_body(goal: Any) -> None:
+    """A term called as a goal (a query, call/1, \\+, findall, aggregate_all, forall) is a
+    body for the interpreter, which raises type_error(callable, Goal) before running it when
+    a goal inside its control constructs is no callable term (engine.check_body): such a
+    body, or one with a goal known only at run time there, runs in the interpreter.
+
+    >>> check_called_body(Struct(",", (Atom("fail"), 1)))
+    Traceback (most recent call last):
+    ...
+    slr_sql.sqlcompile.model.Fallback: fail,1 is not callable (type error at run time)
+    """
+    t = deref(goal)
+    if type(t) is not Struct or (t.name, len(t.args)) not in _BODY_CONTROL:
+        return
+    stack = list(t.args)
+    while stack:
+        x = deref(stack.pop())
+        tx = type(x)
+        if tx is Struct:
+            if (x.name, len(x.args)) in _BODY_CONTROL:
+                stack.extend(x.args)
+        elif tx is Col:
+            raise Fallback("a goal only known at run time inside a called body")
+        elif tx is not Var and (tx is not Atom or x == "[]"):
+            raise Fallback(f"{format_for_message(t)} is not callable (type error at run time)")
+
+
 def format_for_message(t: Any) -> str:
     """A term as Prolog text for a fallback reason; never raises (``repr`` otherwise).
 
