@@ -279,3 +279,91 @@ def test_the_client_goes_straight_to_the_url_whatever_the_proxy_variables_say(
         assert kb.query("proxied(X)^T") == [{"X": slr_sql.Atom("a"), "T": 1.0}]
         with kb.subscribe("proxied(X)^T", since=0) as sub:
             assert sub.get(timeout=DEADLINE)["X"] == slr_sql.Atom("a")
+
+
+@pytest.mark.parametrize("request_body, path", [
+    ({"goal": "zz(X)^T", "at": 1e15, "wait": True, "timeout": 3000}, "/query"),
+    ({"goal": "zz(X)^T", "at": 1e15, "wait": 60, "timeout": 3000}, "/submit"),
+], ids=["synchronized-query", "long-poll"])
+def test_a_stopping_server_ends_its_waiting_requests_at_once(tmp_path, request_body, path):
+    """A synchronized query waiting for its answer (or a long-poll of a submitted one) held
+    the stop for the whole grace (10 s), then was cancelled, with uvicorn's traceback in the
+    log. A stopping server now ends them at once: the query is answered 503 (ask again,
+    of the next server), the poll with the state as it is (not done)."""
+    import signal
+    import threading
+    import time
+
+    served = ServiceProcess(tmp_path / "w.db")
+    outcome: list = []
+
+    def wait_long() -> None:
+        try:
+            answer = HTTP.post(served.url + path, timeout=120, json=request_body)
+            outcome.append((answer.status_code, answer.json()))
+        except httpx.HTTPError as exc:
+            outcome.append(type(exc).__name__)
+
+    waiter = threading.Thread(target=wait_long)
+    waiter.start()
+    try:
+        deadline = time.monotonic() + 30
+        while HTTP.get(served.url + "/health").json()["queries"]["held"] == 0:
+            assert time.monotonic() < deadline, "the request is not held"
+        started = time.monotonic()
+        served.proc.send_signal(signal.SIGTERM)
+        assert served.proc.wait(timeout=30) == 0
+        took = time.monotonic() - started
+    finally:
+        served.stop()
+        waiter.join(timeout=60)
+    assert took < 5, took          # the grace is 10 s
+    log = served.log.read_text()
+    assert "Traceback" not in log and "Exception in ASGI" not in log, log
+    [(status, body)] = outcome
+    if path == "/query":
+        assert status == 503 and "the server is stopping" in body["error"]["message"], body
+    else:
+        assert status == 202 and body["done"] is False, body   # (202: not answered yet)
+
+
+def test_a_request_still_running_when_the_grace_ends_is_answered_503_without_a_traceback(
+        tmp_path):
+    """A query still evaluating when the stop's grace ended was cancelled by uvicorn, which
+    logged it with a traceback (a line any client could cause). It is now answered 503 (ask
+    again) and logged on one line."""
+    import signal
+    import threading
+    import time
+
+    # (the query's thread runs on to its timeout, which the process waits for as it exits:
+    # 3 s here, --max-query-time at most)
+    served = ServiceProcess(tmp_path / "w.db", "--shutdown-grace", "0.5",
+                            "--max-query-time", "3")
+    outcome: list = []
+
+    def query_long() -> None:
+        try:
+            answer = HTTP.post(served.url + "/query", timeout=120, json={
+                "goal": "between(1, inf, X), X < 0", "timeout": 3})
+            outcome.append((answer.status_code, answer.json()))
+        except httpx.HTTPError as exc:
+            outcome.append(type(exc).__name__)
+
+    asking = threading.Thread(target=query_long)
+    asking.start()
+    try:
+        deadline = time.monotonic() + 30
+        while HTTP.get(served.url + "/health").json()["queries"]["running"] == 0:
+            assert time.monotonic() < deadline, "the query does not run"
+        served.proc.send_signal(signal.SIGTERM)
+        assert served.proc.wait(timeout=60) == 0
+    finally:
+        served.stop()
+        asking.join(timeout=60)
+    log = served.log.read_text()
+    assert "Traceback" not in log and "Exception in ASGI" not in log, log
+    assert "POST /query was still running when the server stopped; answered 503" in log, log
+    [(status, body)] = outcome
+    assert status == 503 and "the server stopped before the answer was ready" in \
+        body["error"]["message"], body

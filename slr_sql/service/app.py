@@ -203,19 +203,24 @@ class _AnswerOnce:
     is dropped (a debug line), and the middleware waits (briefly) until the server has seen
     the connection close, so that it does not report an unfinished response either."""
 
-    def __init__(self, app: Any, direct: dict | None = None):
+    def __init__(self, app: Any, direct: dict | None = None,
+                 stopping: asyncio.Event | None = None):
         self.app = app
         self.direct = direct or {}
+        self.stopping = stopping
 
     async def __call__(self, scope: dict, receive: Callable, send: Callable) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
         failed: list[BaseException] = []
+        started: list[bool] = []
 
         async def send_once(message: Any) -> None:
             if failed:
                 return
+            if message.get("type") == "http.response.start":
+                started.append(True)
             try:
                 await send(message)
             except Exception as exc:  # noqa: BLE001 - whatever the server raises: it is gone
@@ -225,11 +230,25 @@ class _AnswerOnce:
 
         endpoint = None if scope.get("root_path") else \
             self.direct.get((scope["method"], scope["path"]))
-        if endpoint is None:
-            await self.app(scope, receive, send_once)
-        else:
-            response = await endpoint(Request(scope, receive, send_once))
-            await response(scope, receive, send_once)
+        try:
+            if endpoint is None:
+                await self.app(scope, receive, send_once)
+            else:
+                response = await endpoint(Request(scope, receive, send_once))
+                await response(scope, receive, send_once)
+        except asyncio.CancelledError:
+            if self.stopping is None or not self.stopping.is_set():
+                raise
+            # the stopping server's grace is over and it cancels what still runs: the
+            # client is answered as for any condition that passes (uncaught, uvicorn logs the
+            # cancelled request with a traceback); a write it cut is the store's to undo
+            log.warning("%s %s was still running when the server stopped; answered 503",
+                     log_text(str(scope.get("method"))), log_text(str(scope.get("path"))))
+            if not started:
+                await _error_response(ServiceUnavailable(
+                    "the server stopped before the answer was ready: ask again (another "
+                    "server, or this one once it is back)"))(scope, receive, send_once)
+            return
         if failed:
             try:
                 await asyncio.wait_for(_disconnected(receive), 5.0)
@@ -270,20 +289,28 @@ async def _disconnected(receive: Callable) -> None:
         pass
 
 
-async def _unless_the_client_leaves(request: Request, pending: Any) -> Any:
+async def _unless_the_client_leaves(svc: "_Service", request: Request, pending: Any) -> Any:
     """The answer of ``pending`` (a synchronized query of this request, whose body was
     read); when the client leaves first, the query is cancelled (nobody would read its
     answer: a wait of up to max_wait would hold a task and a place of --max-connections)
-    and :class:`ClientDisconnect` raised."""
+    and :class:`ClientDisconnect` raised. When the server begins to stop first, the query
+    is cancelled and answered 503: the client asks again, of the next server."""
     waiting = asyncio.wrap_future(pending)
     leaving = asyncio.ensure_future(_disconnected(request.receive))
+    stops = asyncio.ensure_future(svc.stopping.wait())
+    svc.requests_held += 1
     try:
-        await asyncio.wait({waiting, leaving}, return_when=asyncio.FIRST_COMPLETED)
+        await asyncio.wait({waiting, leaving, stops}, return_when=asyncio.FIRST_COMPLETED)
     finally:
+        svc.requests_held -= 1
         leaving.cancel()
+        stops.cancel()
     if not waiting.done():
         waiting.cancel()          # (cancels the query too)
         pending.cancel()
+        if svc.stopping.is_set():
+            raise ServiceUnavailable("the server is stopping: ask again (another server, "
+                                     "or this one once it is back)")
         raise ClientDisconnect()
     return waiting.result()
 
@@ -393,6 +420,10 @@ class _Service:
         self.queries_running = 0      # holding a slot (query_slot)
         self.queries_waiting = 0      # waiting for one
         self.submitted: dict[str, _Submitted] = {}
+        # set when the server begins to stop: the requests that wait (a poll, a synchronized
+        # query) end at once instead of holding the shutdown for its whole grace
+        self.stopping = asyncio.Event()
+        self.requests_held = 0        # waiting for an answer: synchronized queries, polls
         self.answer_texts = _AnswerTexts()
         self.fanout: FanOut | None = None
         self.endpoints = _ENDPOINTS
@@ -559,11 +590,17 @@ class _Service:
         wait = min(wait, self.limits.max_poll)
         if wait > 0 and not entry.pending.done():
             leaving = asyncio.ensure_future(_disconnected(receive))
+            stopping = asyncio.ensure_future(self.stopping.wait())
+            self.requests_held += 1
             try:
-                await asyncio.wait({entry.waiter, leaving}, timeout=wait,
+                # (a stopping server answers the state as it is: the client polls again,
+                # at the next server)
+                await asyncio.wait({entry.waiter, leaving, stopping}, timeout=wait,
                                    return_when=asyncio.FIRST_COMPLETED)
             finally:
+                self.requests_held -= 1
                 leaving.cancel()
+                stopping.cancel()
             if leaving.done() and not leaving.cancelled() and not entry.pending.done():
                 raise ClientDisconnect()
         pending = entry.pending
@@ -805,14 +842,16 @@ def _route(method: str, path: str, summary: str, *, body: dict | None = None,
     return register
 
 
-@_route("GET", "/health", "Liveness, version, limits and the queries running and "
-        "waiting for a slot (no token needed).",
+@_route("GET", "/health", "Liveness, version, limits, the queries running and "
+        "waiting for a slot, and the requests held waiting for an answer (synchronized "
+        "queries, polls) (no token needed).",
         auth=False, response={"status": "string", "version": "string",
                               "api": "string", "limits": "object", "queries": "object"})
 async def _health(svc: "_Service", request: Request) -> Any:
     return {"status": "ok", "version": slr_sql.__version__, "api": API_VERSION,
             "limits": dataclasses.asdict(svc.limits),
-            "queries": {"running": svc.queries_running, "waiting": svc.queries_waiting}}
+            "queries": {"running": svc.queries_running, "waiting": svc.queries_waiting,
+                        "held": svc.requests_held}}
 
 
 @_route("GET", "/openapi.json", "This API's OpenAPI 3.1 description.",
@@ -952,7 +991,7 @@ async def _query(svc: "_Service", request: Request) -> Any:
             pending = await svc.call(svc.kb.submit, goal, at=at, args=args,
                                      timeout=_cap(timeout, svc.limits.max_wait),
                                      **({"robot": robot} if robot is not None else {}))
-        answers = await _unless_the_client_leaves(request, pending)
+        answers = await _unless_the_client_leaves(svc, request, pending)
     else:
         budget = _cap(timeout, svc.limits.max_query_time)
         async with svc.query_slot(budget) as waited:
@@ -1591,7 +1630,8 @@ def create_app(kb: KnowledgeBase, *, token: str | None = None, limits: Limits | 
 
     routes = service.starlette_routes()
     app = Starlette(routes=routes,
-                    middleware=[Middleware(_AnswerOnce, direct=_direct_routes(routes))],
+                    middleware=[Middleware(_AnswerOnce, direct=_direct_routes(routes),
+                                               stopping=service.stopping)],
                     exception_handlers={HTTPException: http_error, Exception: internal_error})
     app.state.service = service
     return app

@@ -21,7 +21,8 @@ if TYPE_CHECKING:
 
     from ..kb import KnowledgeBase
 
-__all__ = ["BackgroundServer", "ServerState", "is_loopback", "listen_on", "uvicorn_config"]
+__all__ = ["BackgroundServer", "ServerState", "is_loopback", "listen_on", "service_server",
+           "uvicorn_config"]
 
 
 def is_loopback(host: str) -> bool:
@@ -110,6 +111,30 @@ def uvicorn_config(app: Any, limits: Any, *, max_connections: int | None = 1000,
                           timeout_graceful_shutdown=shutdown_grace)  # type: ignore[arg-type]
 
 
+def service_server(config: Any) -> Any:
+    """The uvicorn ``Server`` of ``config`` (see :func:`uvicorn_config`), which tells the
+    service it begins to stop before it waits for the requests in flight: a poll answers
+    the state as it is and a synchronized query 503 at once, instead of holding the stop
+    for its whole grace.
+
+    >>> from slr_sql.service.app import Limits, create_app
+    >>> with slr_sql.open() as kb:
+    ...     server = service_server(uvicorn_config(create_app(kb), Limits()))
+    >>> type(server).__mro__[1].__name__
+    'Server'
+    """
+    import uvicorn
+
+    class ServiceServer(uvicorn.Server):
+        async def shutdown(self, sockets: Any = None) -> None:
+            service = getattr(getattr(self.config.app, "state", None), "service", None)
+            if service is not None:
+                service.stopping.set()
+            await super().shutdown(sockets=sockets)
+
+    return ServiceServer(config)
+
+
 class ServerState(enum.Enum):
     """Where a :class:`BackgroundServer` is in its life: made, serving, or stopped (a
     stopped server does not start again: make another)."""
@@ -165,7 +190,7 @@ class BackgroundServer:
             raise slr_sql.SLRError(f"the server is {self.state.value}: make another to "
                                    f"serve again")
         try:
-            import uvicorn
+            import uvicorn  # noqa: F401 - (missing: said here, before anything opens)
 
             from .app import Limits, create_app
         except ImportError as exc:
@@ -174,7 +199,7 @@ class BackgroundServer:
         limits = self.limits or Limits()
         sock = listen_on(self.host, self.port)
         app = create_app(self.kb, token=self.token, limits=limits)
-        server = uvicorn.Server(uvicorn_config(app, limits,
+        server = service_server(uvicorn_config(app, limits,
                                                max_connections=self.max_connections,
                                                shutdown_grace=self.stop_grace))
         self.host, self.port = sock.getsockname()[:2]

@@ -17,7 +17,7 @@ import slr_sql
 
 from ..log_throttle import ThrottledLogFilter
 from ..store import DEFAULT_BUSY_TIMEOUT
-from .background import is_loopback, listen_on, uvicorn_config
+from .background import is_loopback, listen_on, service_server, uvicorn_config
 
 __all__ = ["serve", "run_server", "is_loopback"]
 
@@ -185,7 +185,7 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
     if bool(ssl_keyfile) != bool(ssl_certfile):
         raise slr_sql.SLRError("TLS needs both --ssl-keyfile and --ssl-certfile")
     try:
-        import uvicorn
+        import uvicorn  # noqa: F401 - (missing: said here, before anything opens)
 
         from .app import Limits, create_app
         # (the subscriptions' WebSocket protocol imports websockets: missing, it is said here)
@@ -227,7 +227,7 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
                                 ssl_keyfile=ssl_keyfile, ssl_certfile=ssl_certfile,
                                 log_level=log_level, ws_compression=ws_compression,
                                 shutdown_grace=shutdown_grace)
-        server = uvicorn.Server(config)
+        server = service_server(config)
         throttle_stranger_logs()   # (after uvicorn.Config, which sets up uvicorn's loggers)
         bound_host, bound_port = sock.getsockname()[:2]
         shown = f"[{bound_host}]" if ":" in bound_host else bound_host
