@@ -237,14 +237,16 @@ class AltSQL:
             return None
         typeof = self.dialect.typeof
         p = self._param(self._stored(encoded))
+        # (an argument's indexes hold the dialect's key of it: key_equal lets them serve)
+        equal = self.dialect.key_equal(ref.sql, p)
         if type(value) is int and type(encoded) is int:
-            return f"({ref.sql} = {p} AND {typeof(ref.sql)} = 'integer')"
+            return f"({equal} AND {typeof(ref.sql)} = 'integer')"
         if type(value) is float:
             # (-0.0 and 0.0 are two terms; SQLite's = takes one for the other)
             sign = None if value else self.dialect.zero_sign(ref.sql, math.copysign(1.0, value) < 0)
-            return f"({ref.sql} = {p} AND {typeof(ref.sql)} = 'real'" + \
+            return f"({equal} AND {typeof(ref.sql)} = 'real'" + \
                 (f" AND {sign})" if sign else ")")
-        return f"{ref.sql} = {p}"
+        return equal if equal == f"{ref.sql} = {p}" else f"({equal})"
 
     def _stored(self, encoded: Any) -> Any:
         """An encoded value as the store's columns hold it."""
@@ -257,7 +259,7 @@ class AltSQL:
             return f"{a.sql} = {b.sql}"
         if a.kind == "data" and b.kind == "data":
             sign = self.dialect.same_zero_sign(a.sql, b.sql)
-            return f"({a.sql} = {b.sql} AND {typeof(a.sql)} = {typeof(b.sql)}" + \
+            return f"({self.dialect.key_equal(a.sql, b.sql)} AND {typeof(a.sql)} = {typeof(b.sql)}" + \
                 (f" AND {sign})" if sign else ")")
         d, t = (a, b) if a.kind == "data" else (b, a)
         # times match by value (a time 5.0 and a data argument 5 are the same instant)
@@ -1168,14 +1170,19 @@ _PENDING_READ = ("SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, 
                  "wait_time FROM slr_cep_pending WHERE rule = :rule")
 
 
-def create_index(name: str, table: str, columns: list[str]) -> str:
-    """An index a rule's statements search (created once, kept with the table).
+def create_index(name: str, table: str, columns: list[str], dialect: Any = SQLITE) -> str:
+    """An index a rule's statements search (created once, kept with the table); a data
+    argument is indexed as the ``dialect``'s key of it (any length on PostgreSQL).
 
     >>> create_index("slr_cep_ix__a__arg2_end", "a", ["arg2", "t_end", "t_start"])
     'CREATE INDEX IF NOT EXISTS "slr_cep_ix__a__arg2_end" ON "a" (arg2, t_end, t_start)'
+    >>> from slr_sql.store.dialect import POSTGRES
+    >>> create_index("slr_cep_ix__a__arg2_end", "a", ["arg2", "t_end"], POSTGRES)
+    'CREATE INDEX IF NOT EXISTS "slr_cep_ix__a__arg2_end" ON "a" (slr_key(arg2), t_end)'
     """
+    keys = [dialect.key(c) if c.startswith("arg") else c for c in columns]
     return (f"CREATE INDEX IF NOT EXISTS {quote_identifier(name)} ON "
-            f"{quote_identifier(table)} ({', '.join(columns)})")
+            f"{quote_identifier(table)} ({', '.join(keys)})")
 
 
 def max_id(table: str) -> str:

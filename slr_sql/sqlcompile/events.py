@@ -12,9 +12,15 @@ Mixed into :class:`slr_sql.sqlcompile.Compiler` (uses ``self.solve``, ``self.uni
 """
 from __future__ import annotations
 
+import re
+
 from ..program import event_key, split_event_atom
 from ..terms import Atom, Struct, Var, deref, list_items, make_list
 from .model import NUMERIC, Col, Fallback, State
+
+# what a plain equality of an event's first argument may compare it with, for its key's
+# equality (a named parameter, or another table's column)
+_PLAIN_OPERAND = re.compile(r"(?::\w+|\w+\.arg\d+)\Z")
 
 
 def _check_point_stamp(s, e) -> None:
@@ -85,10 +91,28 @@ class EventGoals:
         """Match an event pattern (data arguments + (start, end)) with a row of ``alias``:
         the data by unification, the stored times by value (``^5`` finds 5.0)."""
         for i, p in enumerate(pattern[:n]):
+            since = len(st.conds)
             if not self.unify(p, Col(f"{alias}.arg{i + 1}"), st):
                 return False
+            if i == 0:
+                self.key_conditions(f"{alias}.arg1", st, since)
         return (self.match_time(pattern[n], Col(f"{alias}.t_start", "float"), st)
                 and self.match_time(pattern[n + 1], Col(f"{alias}.t_end", "float"), st))
+
+    def key_conditions(self, column: str, st: State, since: int) -> None:
+        """The first argument's indexes hold the dialect's key of the text
+        (``slr_key(arg1)`` on PostgreSQL: any length): each plain equality of ``column``
+        with a parameter or another column among the conditions from ``since`` on gets
+        its keys' equality beside it, which the index serves (implied by the equality, so
+        the answers are the same). Nothing on SQLite, whose index holds the text."""
+        key = self.dialect.key
+        if key(column) == column:
+            return
+        for cond in st.conds[since:]:
+            left, equals, right = cond.partition(" = ")
+            other = right if left == column else left if right == column else None
+            if equals and other is not None and _PLAIN_OPERAND.match(other):
+                st.conds.append(f"{key(column)} = {key(other)}")
 
     def event_table(self, name: str, n: int) -> str | None:
         table = self.ctx.event_table(name, n)

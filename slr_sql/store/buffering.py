@@ -397,9 +397,11 @@ class PostgresBufferPrinter:
         return conds[0] if len(conds) == 1 else "(" + " AND ".join(conds) + ")"
 
     def key_equal(self, match: PatternMatch) -> str:
+        # the keys' B-tree indexes (the event table's first argument, slr_bix_N) hold
+        # slr_key of the values: a key of any length (migration pg_0013)
         parts = []
         for place in match.keys:
-            parts.append(f"{self.value('', place)} = {self.value('NEW.', place)}")
+            parts.append(POSTGRES.key_equal(self.value('', place), self.value('NEW.', place)))
             vtype = self.vtype("", place)
             if vtype is not None:
                 parts.append(f"{vtype} = {self.vtype('NEW.', place)}")
@@ -487,7 +489,8 @@ class PostgresBufferPrinter:
                 f"{count_pruned}\n  RETURN NULL;",
                 "DECLARE n bigint;\n")
             if m.keys and m.keys[0] != (1, None):
-                values = ", ".join(f"({self.value('', place)})" for place in m.keys)
+                values = ", ".join(f"({POSTGRES.key(self.value('', place))})"
+                                   for place in m.keys)
                 where = f" WHERE {row_match}" if m.tests else ""
                 index = f"slr_bix_{bid}"
                 out[index] = (f"CREATE INDEX {quote_identifier(index)} ON {t} "

@@ -48,6 +48,9 @@ class Dialect(Protocol):
     equality_index: str
     zero_signs_in_sql: bool
 
+    def key(self, expr: str) -> str: ...
+    def key_equal(self, expr: str, value: str) -> str: ...
+
     def statement(self, sql: str) -> str: ...
     def typeof(self, expr: str) -> str: ...
     def value_order(self, value: str) -> list[str]: ...
@@ -80,8 +83,6 @@ class SQLiteDialect(SQLiteQueryPrinter):
     copies_returning = False
     text_holds_nul = True    # a TEXT value may contain U+0000
     equality_index = ""      # how an index used only by ``=`` is built (a B-tree)
-    # the most UTF-8 bytes of an event's first argument as stored (None: no limit)
-    first_argument_bytes: int | None = None
     identifier_bytes: int | None = None   # names of any length
     without_rowid = " WITHOUT ROWID"
     pages_streams = False    # a statement's rows are read as needed (sqlite3 steps it)
@@ -94,6 +95,21 @@ class SQLiteDialect(SQLiteQueryPrinter):
 
     def statement(self, sql: str) -> str:
         return sql
+
+    def key(self, expr: str) -> str:
+        """What a B-tree index holds of a text users choose (an event's data argument, a
+        type's name): the text itself here (SQLite's keys have no length limit)."""
+        return expr
+
+    def key_equal(self, expr: str, value: str) -> str:
+        """``expr = value``, written so that an index over :meth:`key` of ``expr``
+        serves it (``value`` is an SQL expression: a named parameter may appear twice, a
+        ``?`` is then bound twice).
+
+        >>> SQLITE.key_equal("arg1", ":v"), POSTGRES.key_equal("arg1", ":v")
+        ('arg1 = :v', 'slr_key(arg1) = slr_key(:v) AND arg1 = :v')
+        """
+        return f"{expr} = {value}"
 
     def scalar(self, name: str) -> str:
         """The two-argument ``max``/``min`` of values (not the aggregates)."""
@@ -149,12 +165,6 @@ class PostgresDialect(PostgresQueryPrinter):
     # a B-tree entry holds at most 2,704 bytes, a hash index's only the value's 4-byte hash:
     # an index read only by ``=`` (a fact's first argument) takes a value of any length
     equality_index = " USING hash"
-    # an event's first argument is a key of two B-tree indexes ((arg1, t_end), (arg1,
-    # t_start)), whose entries hold at most 2,704 bytes: a longer text (or one compressing
-    # to more) fails the whole statement, every event of its batch with it, in the server's
-    # words. Refused ahead instead, as that event's EventRejected (the 2,676 bytes that fit
-    # beside the time, less a margin)
-    first_argument_bytes: int | None = 2600
     identifier_bytes: int | None = 63     # longer names are cut, silently (NAMEDATALEN)
     without_rowid = ""
     pages_streams = True     # psycopg reads a whole result: lookups read growing pages
@@ -175,6 +185,16 @@ class PostgresDialect(PostgresQueryPrinter):
     true = "TRUE"
     false = "FALSE"
     python_functions = False
+
+    def key(self, expr: str) -> str:
+        """What a B-tree index holds of a text users choose: ``slr_key(text)`` (migration
+        ``pg_0013``: the text when shorter than 64 characters, else its SHA-256 in hex), so
+        that no entry passes the server's 2,704 bytes whatever the text's length."""
+        return f"slr_key({expr})"
+
+    def key_equal(self, expr: str, value: str) -> str:
+        # the index finds the rows of the key; the exact comparison decides
+        return f"slr_key({expr}) = slr_key({value}) AND {expr} = {value}"
 
     def scalar(self, name: str) -> str:
         return {"max": "GREATEST", "min": "LEAST"}.get(name, name)

@@ -131,6 +131,8 @@ class EventReader:
         self.to_column = db.dialect.to_column
         from_column = db.dialect.from_column
         self.decode = decode if from_column is None else (lambda v: decode(from_column(v)))
+        # how many parameters the first argument's equality binds (see _equalities)
+        self._first_binds = db.dialect.key_equal("arg1", "?").count("?")
 
     def _pushdown(self, event_type: EventType, bound: dict[int, Any] | None
                   ) -> tuple[tuple[int, ...], list]:
@@ -152,6 +154,20 @@ class EventReader:
             positions.append(position)
             values.append(value)
         return tuple(positions), values
+
+    def _equalities(self, positions: tuple[int, ...]) -> list[str]:
+        """``argN = ?`` for each bound position, the first argument's as the dialect's
+        ``key_equal`` (its indexes hold the key of the text: on PostgreSQL a ``?`` bound
+        twice, see :meth:`_bound`)."""
+        return [self.db.dialect.key_equal("arg1", "?") if p == 0 else f"arg{p + 1} = ?"
+                for p in positions]
+
+    def _bound(self, positions: tuple[int, ...], values: list) -> list:
+        """The parameters of :meth:`_equalities` for ``values``: the first argument's as
+        many times as its condition names it."""
+        if positions and positions[0] == 0 and self._first_binds > 1:
+            return [values[0]] * (self._first_binds - 1) + values
+        return values
 
     def _start_order(self, event_type: EventType) -> bool:
         """Whether the start-ordered indexes of ``event_type`` (or of the type of its name
@@ -175,7 +191,7 @@ class EventReader:
         by_arg1 = bool(positions) and positions[0] == 0
         # one robot's events (a fleet store asked per robot): its parameter follows the
         # arguments'
-        conditions = [f"arg{p + 1} = ?" for p in positions] + (["robot = ?"] if robot else [])
+        conditions = self._equalities(positions) + (["robot = ?"] if robot else [])
         if kind == "scan":
             index = event_type.index_arg1_end if by_arg1 else event_type.index_end
             if flags[0]:
@@ -329,7 +345,7 @@ class EventReader:
 
         def statement_sql(resume: bool) -> str:
             return self._select_sql(event_type, kind, positions, flags, resume, by_robot)
-        return self._stream(statement_sql, values + times, arity, kind)
+        return self._stream(statement_sql, self._bound(positions, values) + times, arity, kind)
 
     def scan(self, name: str, arity: int, bound: dict[int, Any] | None = None,
              end_le: float | None = None, robot: str | None = None) -> Iterator[Row]:
@@ -498,7 +514,8 @@ class EventReader:
         if sql is None:
             sql = self._latest_sql(event_type, positions, point)
         try:   # (the prev lookup: execute's mapping without its lock and check, made above)
-            rows = db.conn.execute(sql, (PROGRAM_VERSION, PROGRESS_VERSION, *values, *values,
+            bound = self._bound(positions, values)
+            rows = db.conn.execute(sql, (PROGRAM_VERSION, PROGRESS_VERSION, *bound, *bound,
                                          float(t))).fetchall()
         except sqlite3.Error as exc:
             raise db.failure(exc) from None
@@ -510,7 +527,7 @@ class EventReader:
                     point: bool) -> str:
         """The statement of :meth:`_latest_rows`, built now and cached (lock held)."""
         arity = event_type.arity
-        where = " AND ".join([f"arg{p + 1} = ?" for p in positions]
+        where = " AND ".join(self._equalities(positions)
                              + (["t_start = t_end"] if point else []))
         where = (where + " AND ") if where else ""
         columns = ", ".join([f"arg{i + 1}" for i in range(arity)]
@@ -608,9 +625,8 @@ class EventReader:
             if union is None:
                 typeof = self.db.dialect.typeof
                 where = " AND ".join(
-                    f"arg{p + 1} = ?" + ("" if kind is None
-                                         else f" AND {typeof(f'arg{p + 1}')} = '{kind}'")
-                    for p, kind in zip(positions, kinds))
+                    equal + ("" if kind is None else f" AND {typeof(f'arg{p + 1}')} = '{kind}'")
+                    for equal, p, kind in zip(self._equalities(positions), positions, kinds))
                 cols = event_type.columns
                 hints = self.db.dialect.index_hints
                 by_end = f" INDEXED BY {event_type.index_arg1_end}" if hints else ""
@@ -630,6 +646,7 @@ class EventReader:
                     f"SELECT * FROM ({probe} LIMIT 1) AS probe_{n}"
                     for n, probe in enumerate(each))
             t = float(t)
+            values = self._bound(positions, values)
             params = [values + [t, _earliest_holding_start(t, longest), t] if holding
                       else values + [t], values + [t], values + [t]][:probes]
             found: list = [None, None, None]

@@ -39,6 +39,7 @@ from typing import Any, Callable, Iterable, Iterator
 
 from ..errors import SLRError, SLRUnavailable
 from .connection import Database, DatabaseError
+from .dialect import SQLITE
 from .sqltext import RESERVED_PREFIXES, SAFE_IDENTIFIER, SQL_KEYWORDS, quote_identifier
 
 __all__ = ["EventType", "EventTables", "START_ORDER_RETRY", "START_ORDER_RETRY_LOOKUPS"]
@@ -94,12 +95,18 @@ class EventType:
         self.index_arg1_end = quote_identifier(f"slr_ix__{table}__a1_end")
         self.index_arg1_start = quote_identifier(f"slr_ix__{table}__a1_start")
 
-    def start_index_statements(self) -> dict[str, str]:
+    def start_index_statements(self, dialect: Any = SQLITE) -> dict[str, str]:
         """The start-ordered indexes' names and ``CREATE INDEX IF NOT EXISTS`` statements
-        (no ``(arg1, ...)`` one for a type without arguments)."""
+        (no ``(arg1, ...)`` one for a type without arguments; the first argument as the
+        ``dialect``'s :meth:`~slr_sql.store.dialect.SQLiteDialect.key` of it).
+
+        >>> from slr_sql.store.dialect import POSTGRES
+        >>> list(EventType("p", 1, "p", False).start_index_statements(POSTGRES).values())[1]
+        'CREATE INDEX IF NOT EXISTS "slr_ix__p__a1_start" ON "p" (slr_key(arg1), t_start, t_end)'
+        """
         made = {self.index_start: "t_start, t_end"}
         if self.arity >= 1:
-            made[self.index_arg1_start] = "arg1, t_start, t_end"
+            made[self.index_arg1_start] = f"{dialect.key('arg1')}, t_start, t_end"
         return {index.strip('"'): f"CREATE INDEX IF NOT EXISTS {index} ON {self.quoted} "
                                   f"({columns})" for index, columns in made.items()}
 
@@ -448,7 +455,7 @@ class EventTables:
         execute(f"CREATE INDEX {event_type.index_end} ON {event_type.quoted} (t_end, t_start)")
         if arity >= 1:
             execute(f"CREATE INDEX {event_type.index_arg1_end} ON {event_type.quoted} "
-                    "(arg1, t_end, t_start)")
+                    f"({dialect.key('arg1')}, t_end, t_start)")
         if start_order:
             self._create_start_indexes(event_type)
         execute("INSERT INTO slr_event_types (name, arity, table_name, declared) "
@@ -465,7 +472,7 @@ class EventTables:
         return event_type
 
     def _create_start_indexes(self, event_type: EventType) -> None:
-        for statement in event_type.start_index_statements().values():
+        for statement in event_type.start_index_statements(self.db.dialect).values():
             self.db.execute(statement)
 
     def ensure_start_order(self, event_type: EventType) -> bool:
@@ -570,7 +577,7 @@ class EventTables:
         extra: dict[str, str] = {}
         own: dict[tuple[str, int], list[str]] = {}
         for event_type in lacking:
-            statements = event_type.start_index_statements()
+            statements = event_type.start_index_statements(self.db.dialect)
             extra.update(statements)
             own[(event_type.name, event_type.arity)] = list(statements)
         steps = self.db.hypothetical_plan(sql, extra)
