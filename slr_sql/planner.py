@@ -34,7 +34,7 @@ from .program import Slot, Template, build
 from .sqlcompile import Col, ColRef, Compiler, Fallback, Part, resolve
 from .errors import SLRBusy
 from .store import DatabaseError
-from .store.dialect import Unprintable
+from .store.dialect import Unprintable, short_text
 from .terms import Atom, Struct, Var, deref, from_python, int_text, make_list, \
     to_python
 
@@ -282,6 +282,10 @@ class SqlPlan:
         self.time_sites = time_sites      # ((name, n), time parameter or SQL) per prev/next
         self.params = params
         self.arg_params = arg_params      # variable name -> parameter name
+        # arguments compared with an event's first argument on PostgreSQL: each binds
+        # :<name>_short too, the value when it is its own key (dialect.key_equal)
+        self.short_args = tuple(p for p in arg_params.values()
+                                if f":{p}_short" in (sql or "") + "".join(guards))
         self.has_at = has_at
         self.recipes = recipes            # per branch: [(name, how, data)]
         self.missing = missing            # event types without a table when compiled
@@ -318,6 +322,8 @@ class SqlPlan:
             # (after the checks above, which read the encoded values)
             for pname in self.arg_params.values():
                 params[pname] = to_column(params[pname])
+        for pname in self.short_args:
+            params[pname + "_short"] = short_text(params[pname])
         for key in self.start_ordered:
             kb.store.ensure_start_order(*key)
         undone = kb.store.start_order_builds_undone

@@ -118,14 +118,25 @@ def _plan_of(url: str, sql: str, params) -> str:
 
 def test_lookups_by_the_first_argument_search_its_index(postgres_url):
     """A store's prev lookup and a compiled goal with the first argument bound read the
-    index over slr_key(arg1), as they read the one over arg1 before."""
+    index over slr_key(arg1): for a short value (its own key: one equality, whose rows the
+    planner estimates right) backwards from the time, as the one over arg1 before; for a
+    long one (its digest, then the text) too."""
     with slr_sql.open(postgres_url, clock=ManualClock(1e6)) as kb:
         kb.load(":- max_delay(seg/2, 0).\n")
-        kb.add_many([("seg", [f"o{i % 500}", i], float(i), float(i)) for i in range(20_000)])
-        lookup = kb.store.lookup_sql("prev", "seg", 2, {0: "o5"})
-        assert lookup.count("?") == 3   # (o5 twice: its key and its text)
-        assert "slr_ix__seg__a1_end" in _plan_of(postgres_url, lookup, ["o5", "o5", 9000.0])
-        for goal in ("seg(o5, N)^T", "prev(seg(o5, N)^T, 9000)"):
+        kb.add_many([("seg", [f"o{i % 200}" if i % 400 else LONG, i], float(i), float(i))
+                     for i in range(20_000)])
+        # (read in pages: the first of 8 rows)
+        lookup = kb.store.lookup_sql("prev", "seg", 2, {0: "o5"}) + " LIMIT 8"
+        assert lookup.count("?") == 5   # (the value's short text, the value, twice; the time)
+        plan = _plan_of(postgres_url, lookup, ["o5", "o5", "o5", "o5", 9000.0])
+        assert "Index Scan Backward using slr_ix__seg__a1_end" in plan, plan
+        assert "Bitmap" not in plan, plan   # (not every row of the key, sorted)
+        # a long value: its digest's rows (the planner takes the text's equality for a
+        # second filter, and reads them all)
+        plan = _plan_of(postgres_url, lookup, [None, LONG, None, LONG, 9000.0])
+        assert "Index Cond" in plan and "slr_ix__seg__a1_end" in plan, plan
+        for goal in ("seg(o5, N)^T", "prev(seg(o5, N)^T, 9000)", f"prev(seg('{LONG}', N)^T, 9000)"):
             entry = plan_for(kb, kb.plans.plan(goal, ()), False)
             assert "slr_key(" in entry.sql
-            assert "slr_ix__seg__a1_end" in _plan_of(postgres_url, entry.sql, entry.params), goal
+            plan = _plan_of(postgres_url, entry.sql, entry.params)
+            assert "slr_ix__seg__a1_end" in plan, (goal, plan)

@@ -36,7 +36,7 @@ from typing import Any, Callable
 
 from ..encoding import Unencodable, encode
 from ..store import quote_identifier
-from ..store.dialect import SQLITE
+from ..store.dialect import SQLITE, short_text
 from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
 from .rules import Alternative, Expr, Leaf
 
@@ -236,9 +236,11 @@ class AltSQL:
         except Unencodable:
             return None
         typeof = self.dialect.typeof
-        p = self._param(self._stored(encoded))
+        stored = self._stored(encoded)
+        p = self._param(stored)
         # (an argument's indexes hold the dialect's key of it: key_equal lets them serve)
-        equal = self.dialect.key_equal(ref.sql, p)
+        equal = self.dialect.key_equal(ref.sql, p, p if short_text(stored) is not None
+                                       else "NULL")
         if type(value) is int and type(encoded) is int:
             return f"({equal} AND {typeof(ref.sql)} = 'integer')"
         if type(value) is float:

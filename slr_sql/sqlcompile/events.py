@@ -15,12 +15,15 @@ from __future__ import annotations
 import re
 
 from ..program import event_key, split_event_atom
+from ..store.dialect import short_text
 from ..terms import Atom, Struct, Var, deref, list_items, make_list
 from .model import NUMERIC, Col, Fallback, State
 
 # what a plain equality of an event's first argument may compare it with, for its key's
 # equality (a named parameter, or another table's column)
 _PLAIN_OPERAND = re.compile(r"(?::\w+|\w+\.arg\d+)\Z")
+# an argument from Python (planner.compile_goal names them :a<slot>)
+_ARG_PARAM = re.compile(r":a\d+\Z")
 
 
 def _check_point_stamp(s, e) -> None:
@@ -102,17 +105,26 @@ class EventGoals:
     def key_conditions(self, column: str, st: State, since: int) -> None:
         """The first argument's indexes hold the dialect's key of the text
         (``slr_key(arg1)`` on PostgreSQL: any length): each plain equality of ``column``
-        with a parameter or another column among the conditions from ``since`` on gets
-        its keys' equality beside it, which the index serves (implied by the equality, so
-        the answers are the same). Nothing on SQLite, whose index holds the text."""
-        key = self.dialect.key
-        if key(column) == column:
+        with a parameter or another column among the conditions from ``since`` on is
+        written as the dialect's ``key_equal`` (the same rows, found through the index),
+        with the value's short text where it is known: a constant's, or an argument's
+        from Python bound beside it (``:aN_short``, see ``SqlPlan``). Nothing on SQLite,
+        whose index holds the text."""
+        dialect = self.dialect
+        if dialect.key(column) == column:
             return
-        for cond in st.conds[since:]:
-            left, equals, right = cond.partition(" = ")
+        conds = st.conds
+        for i in range(since, len(conds)):
+            left, equals, right = conds[i].partition(" = ")
             other = right if left == column else left if right == column else None
-            if equals and other is not None and _PLAIN_OPERAND.match(other):
-                st.conds.append(f"{key(column)} = {key(other)}")
+            if not equals or other is None or not _PLAIN_OPERAND.match(other):
+                continue
+            short = None
+            if _ARG_PARAM.match(other):
+                short = f"{other}_short"
+            elif other[1:] in self.params:
+                short = other if short_text(self.params[other[1:]]) is not None else "NULL"
+            conds[i] = dialect.key_equal(column, other, short)
 
     def event_table(self, name: str, n: int) -> str | None:
         table = self.ctx.event_table(name, n)

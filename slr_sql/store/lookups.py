@@ -19,6 +19,7 @@ from typing import Any, Callable, Iterable, Iterator
 from ..encoding import INT64_MAX, INT64_MIN, Unencodable, decode, encode
 from .catalog import PROGRAM_VERSION, PROGRESS_VERSION
 from .connection import Database
+from .dialect import short_text
 from .sqltext import quote_identifier
 from .tables import EventTables, EventType
 
@@ -131,8 +132,8 @@ class EventReader:
         self.to_column = db.dialect.to_column
         from_column = db.dialect.from_column
         self.decode = decode if from_column is None else (lambda v: decode(from_column(v)))
-        # how many parameters the first argument's equality binds (see _equalities)
-        self._first_binds = db.dialect.key_equal("arg1", "?").count("?")
+        # whether the first argument's indexes hold a key of the text (see _equalities)
+        self._keyed = db.dialect.key("arg1") != "arg1"
 
     def _pushdown(self, event_type: EventType, bound: dict[int, Any] | None
                   ) -> tuple[tuple[int, ...], list]:
@@ -157,16 +158,16 @@ class EventReader:
 
     def _equalities(self, positions: tuple[int, ...]) -> list[str]:
         """``argN = ?`` for each bound position, the first argument's as the dialect's
-        ``key_equal`` (its indexes hold the key of the text: on PostgreSQL a ``?`` bound
-        twice, see :meth:`_bound`)."""
-        return [self.db.dialect.key_equal("arg1", "?") if p == 0 else f"arg{p + 1} = ?"
+        ``key_equal`` (its indexes hold the key of the text; on PostgreSQL its ``?`` are
+        the value's short text and the value, twice: :meth:`_bound`)."""
+        return [self.db.dialect.key_equal("arg1", "?", "?") if p == 0 else f"arg{p + 1} = ?"
                 for p in positions]
 
     def _bound(self, positions: tuple[int, ...], values: list) -> list:
-        """The parameters of :meth:`_equalities` for ``values``: the first argument's as
-        many times as its condition names it."""
-        if positions and positions[0] == 0 and self._first_binds > 1:
-            return [values[0]] * (self._first_binds - 1) + values
+        """The parameters of :meth:`_equalities` for ``values``."""
+        if positions and positions[0] == 0 and self._keyed:
+            short = short_text(values[0])
+            return [short, values[0], short] + values
         return values
 
     def _start_order(self, event_type: EventType) -> bool:
