@@ -3,9 +3,9 @@
 -- length limit). A B-tree entry of PostgreSQL holds at most ~2,704 bytes, so a text that
 -- users choose (an event's data argument, an event type's name, a durable subscription's
 -- id, a program's name, a completeness mark naming a type) is no longer
--- a B-tree key as it is: a B-tree holds slr_key(text) instead, and a statement that
--- searches it compares slr_key(column) = slr_key(value) AND column = value (the exact
--- comparison decides; docs/postgres.md, "Long values").
+-- a B-tree key as it is: a key of the catalog is a unique index over slr_key(text), an
+-- index over data arguments holds the short texts as they are and the long ones' slr_key
+-- (docs/postgres.md, "Long values").
 
 -- A text of fewer than 64 characters as it is; a longer one as the SHA-256 of its UTF-8
 -- bytes in 64 hex digits (at most 252 bytes either way). The two kinds cannot meet (64
@@ -22,24 +22,47 @@ $$;
 
 -- Event tables (and complex event types' tables): every B-tree index over data arguments
 -- (the store's (arg1, t_end, t_start) and (arg1, t_start, t_end), the event rules'
--- slr_cep_ix__ ones) is made again over slr_key(argN).
+-- slr_cep_ix__ ones) is made again as the key indexes of slr_sql/store/dialect.py: a
+-- partial index over the rows whose texts have fewer than 64 characters, as it was, and
+-- (over one text) slr_key's over the others, named with _k after it. A short text is then
+-- still read from the index alone, its statistics kept (docs/postgres.md, "Long values").
 DO $$
 DECLARE
     ix RECORD;
-    head TEXT;
+    columns TEXT[];
+    keys TEXT[];
+    rest TEXT[];
 BEGIN
     FOR ix IN
-        SELECT i.indexrelid::regclass AS name, pg_get_indexdef(i.indexrelid) AS def
+        SELECT c.relname AS name, t.relname AS tbl,
+               substring(pg_get_indexdef(i.indexrelid) FROM 'USING btree \((.*)\)$') AS cols
         FROM pg_index i
         JOIN pg_class t ON t.oid = i.indrelid
+        JOIN pg_class c ON c.oid = i.indexrelid
         WHERE t.relnamespace = (SELECT oid FROM pg_namespace WHERE nspname = current_schema())
           AND t.relname IN (SELECT table_name FROM slr_event_types)
-          AND pg_get_indexdef(i.indexrelid) ~ 'USING btree \((arg[0-9]+[,)]|.*, arg[0-9]+[,)])'
+          AND i.indpred IS NULL
+          AND pg_get_indexdef(i.indexrelid) ~ 'USING btree \((arg[0-9]+, .*)\)$'
     LOOP
-        head := substr(ix.def, 1, strpos(ix.def, ' USING btree (') + 13);
-        EXECUTE 'DROP INDEX ' || ix.name::text;
-        EXECUTE head || regexp_replace(substr(ix.def, length(head) + 1),
-                                       '(^|, )(arg[0-9]+)(?=[,)])', '\1slr_key(\2)', 'g');
+        columns := string_to_array(ix.cols, ', ');
+        keys := ARRAY(SELECT c FROM unnest(columns) AS c WHERE c ~ '^arg[0-9]+$');
+        rest := ARRAY(SELECT c FROM unnest(columns) AS c WHERE c !~ '^arg[0-9]+$');
+        IF cardinality(keys) + cardinality(rest) <> cardinality(columns)
+           OR EXISTS (SELECT 1 FROM unnest(rest) AS c WHERE c !~ '^t_(start|end)$') THEN
+            CONTINUE;   -- (an index the store did not make)
+        END IF;
+        EXECUTE format('DROP INDEX %I', ix.name);
+        IF cardinality(keys) = 1 THEN
+            EXECUTE format('CREATE INDEX %I ON %I (%s) WHERE char_length(%s) < 64',
+                           ix.name, ix.tbl, ix.cols, keys[1]);
+            EXECUTE format('CREATE INDEX %I ON %I (slr_key(%s), %s) WHERE char_length(%s) >= 64',
+                           ix.name || '_k', ix.tbl, keys[1], array_to_string(rest, ', '),
+                           keys[1]);
+        ELSE
+            EXECUTE format('CREATE INDEX %I ON %I (%s) WHERE %s', ix.name, ix.tbl, ix.cols,
+                           (SELECT string_agg(format('char_length(%s) < 64', k), ' AND ')
+                            FROM unnest(keys) AS k));
+        END IF;
     END LOOP;
 END $$;
 

@@ -38,6 +38,10 @@ def test_an_event_whose_first_argument_is_ten_kilobytes_is_stored_and_found(back
             assert [a["N"] for a in kb.query(f"prev(e('{LONG}', N)^T, 3.5)")] == [1]
             assert [a["N"] for a in kb.query(f"next(e('{OTHER}', N)^T, [0, 9])")] == [2]
             assert [a["N"] for a in kb.query("e(short, N)^T")] == [3]
+            for value, found in ((LONG, [1, 4]), ("short", [3]), (OTHER, [2])):   # (args)
+                assert [a["N"] for a in kb.query("e(X, N)^T", args={"X": value})] == found
+                assert [a["N"] for a in kb.query("prev(e(X, N)^S, T)",
+                                                 args={"X": value, "T": 9})] == found[-1:]
             assert sorted(len(a["X"]) for a in kb.query("e(X, _)^T")) == [5] + [10_000] * 3
         assert [a["N"] for a in kb.query("e(X, N)^T, e(X, M)^T2, M > N")] == [1]
 

@@ -1172,19 +1172,21 @@ _PENDING_READ = ("SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, 
                  "wait_time FROM slr_cep_pending WHERE rule = :rule")
 
 
-def create_index(name: str, table: str, columns: list[str], dialect: Any = SQLITE) -> str:
-    """An index a rule's statements search (created once, kept with the table); a data
-    argument is indexed as the ``dialect``'s key of it (any length on PostgreSQL).
+def create_index(name: str, table: str, columns: list[str], dialect: Any = SQLITE) -> list[str]:
+    """The indexes a rule's statements search (created once, kept with the table): over
+    its data arguments as the ``dialect``'s key indexes (any length on PostgreSQL).
 
     >>> create_index("slr_cep_ix__a__arg2_end", "a", ["arg2", "t_end", "t_start"])
-    'CREATE INDEX IF NOT EXISTS "slr_cep_ix__a__arg2_end" ON "a" (arg2, t_end, t_start)'
+    ['CREATE INDEX IF NOT EXISTS "slr_cep_ix__a__arg2_end" ON "a" (arg2, t_end, t_start)']
     >>> from slr_sql.store.dialect import POSTGRES
-    >>> create_index("slr_cep_ix__a__arg2_end", "a", ["arg2", "t_end"], POSTGRES)
-    'CREATE INDEX IF NOT EXISTS "slr_cep_ix__a__arg2_end" ON "a" (slr_key(arg2), t_end)'
+    >>> create_index("slr_cep_ix__a__arg2_end", "a", ["arg2", "t_end"], POSTGRES)[1]
+    'CREATE INDEX IF NOT EXISTS "slr_cep_ix__a__arg2_end_k" ON "a" (slr_key(arg2), t_end) WHERE char_length(arg2) >= 64'
     """
-    keys = [dialect.key(c) if c.startswith("arg") else c for c in columns]
-    return (f"CREATE INDEX IF NOT EXISTS {quote_identifier(name)} ON "
-            f"{quote_identifier(table)} ({', '.join(keys)})")
+    keys = [c for c in columns if c.startswith("arg")]
+    rest = [c for c in columns if not c.startswith("arg")]
+    return [f"CREATE INDEX IF NOT EXISTS {quote_identifier(name + suffix)} ON "
+            f"{quote_identifier(table)} {indexed}"
+            for suffix, indexed in dialect.key_indexes(keys, rest)]
 
 
 def max_id(table: str) -> str:

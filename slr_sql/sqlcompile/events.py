@@ -103,13 +103,14 @@ class EventGoals:
                 and self.match_time(pattern[n + 1], Col(f"{alias}.t_end", "float"), st))
 
     def key_conditions(self, column: str, st: State, since: int) -> None:
-        """The first argument's indexes hold the dialect's key of the text
-        (``slr_key(arg1)`` on PostgreSQL: any length): each plain equality of ``column``
-        with a parameter or another column among the conditions from ``since`` on is
-        written as the dialect's ``key_equal`` (the same rows, found through the index),
-        with the value's short text where it is known: a constant's, or an argument's
-        from Python bound beside it (``:aN_short``, see ``SqlPlan``). Nothing on SQLite,
-        whose index holds the text."""
+        """An event's first argument is read through the dialect's key indexes (on
+        PostgreSQL partial ones: short texts as they are, long ones by slr_key): each plain
+        equality of ``column`` with a parameter or another column among the conditions
+        from ``since`` on is written as the dialect's ``key_equal`` -- the same rows, with
+        the predicate of the index that holds them. A constant's form follows its length;
+        an argument from Python gets the short text's form, and ``key_forms`` the long
+        one's, which ``SqlPlan`` runs instead for a long text (one form each: the planner
+        then keeps a plan for each). Nothing on SQLite, whose index holds the text."""
         dialect = self.dialect
         if dialect.key(column) == column:
             return
@@ -119,12 +120,16 @@ class EventGoals:
             other = right if left == column else left if right == column else None
             if not equals or other is None or not _PLAIN_OPERAND.match(other):
                 continue
-            short = None
             if _ARG_PARAM.match(other):
-                short = f"{other}_short"
+                conds[i] = dialect.key_equal(column, other, other)
+                form = (other[1:], conds[i], dialect.key_equal(column, other, "NULL"))
+                if form not in self.key_forms:
+                    self.key_forms.append(form)
             elif other[1:] in self.params:
-                short = other if short_text(self.params[other[1:]]) is not None else "NULL"
-            conds[i] = dialect.key_equal(column, other, short)
+                short = short_text(self.params[other[1:]]) is not None
+                conds[i] = dialect.key_equal(column, other, other if short else "NULL")
+            else:
+                conds[i] = dialect.key_equal(column, other)
 
     def event_table(self, name: str, n: int) -> str | None:
         table = self.ctx.event_table(name, n)

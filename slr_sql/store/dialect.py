@@ -64,6 +64,7 @@ class Dialect(Protocol):
     zero_signs_in_sql: bool
 
     def key(self, expr: str) -> str: ...
+    def key_indexes(self, keys: list[str], rest: list[str]) -> list[tuple[str, str]]: ...
     def key_equal(self, expr: str, value: str, short: str | None = None) -> str: ...
 
     def statement(self, sql: str) -> str: ...
@@ -112,24 +113,38 @@ class SQLiteDialect(SQLiteQueryPrinter):
         return sql
 
     def key(self, expr: str) -> str:
-        """What a B-tree index holds of a text users choose (an event's data argument, a
-        type's name): the text itself here (SQLite's keys have no length limit)."""
+        """What a unique B-tree index holds of a text users choose (a type's name, a
+        subscription's id): the text itself here (SQLite's keys have no length limit)."""
         return expr
 
+    def key_indexes(self, keys: list[str], rest: list[str]) -> list[tuple[str, str]]:
+        """The B-tree indexes over the texts ``keys`` (data arguments, or expressions of
+        them) followed by ``rest`` (times): ``(name suffix, columns and WHERE)`` of each.
+
+        >>> SQLITE.key_indexes(["arg1"], ["t_end", "t_start"])
+        [('', '(arg1, t_end, t_start)')]
+        >>> POSTGRES.key_indexes(["arg1"], ["t_end"])
+        [('', '(arg1, t_end) WHERE char_length(arg1) < 64'), ('_k', '(slr_key(arg1), t_end) WHERE char_length(arg1) >= 64')]
+        >>> POSTGRES.key_indexes(["arg1", "arg3"], ["t_end"])
+        [('', '(arg1, arg3, t_end) WHERE char_length(arg1) < 64 AND char_length(arg3) < 64')]
+        """
+        return [("", f"({', '.join(keys + rest)})")]
+
     def key_equal(self, expr: str, value: str, short: str | None = None) -> str:
-        """``expr = value``, written so that an index over :meth:`key` of ``expr`` serves
+        """``expr = value``, written so that the :meth:`key_indexes` over ``expr`` serve
         it. ``value`` is an SQL expression (a named parameter may appear more than once, a
-        ``?`` is then bound as often); ``short``, where the caller knows it, is an SQL
-        expression that is the value when it has fewer than 64 characters and NULL when not
-        (``"NULL"`` for a long constant, the value's own parameter for a short one, or a
-        parameter bound to :func:`short_text` of it).
+        ``?`` is then bound as often); ``short``, where the caller knows it, is ``value``
+        itself for a value of fewer than 64 characters, ``"NULL"`` for a longer one, or a
+        parameter bound to :func:`short_text` of the value (None: a column, tested here).
 
         >>> SQLITE.key_equal("arg1", ":v", ":s")
         'arg1 = :v'
-        >>> POSTGRES.key_equal("arg1", ":v")
-        'slr_key(arg1) = slr_key(:v) AND arg1 = :v'
+        >>> POSTGRES.key_equal("arg1", ":v", ":v")
+        'arg1 = :v AND char_length(arg1) < 64'
+        >>> POSTGRES.key_equal("arg1", ":v", "NULL")
+        'slr_key(arg1) = slr_key(:v) AND arg1 = :v AND char_length(arg1) >= 64'
         >>> POSTGRES.key_equal("arg1", ":v", ":s")
-        'slr_key(arg1) = coalesce(CAST(:s AS text), slr_key(:v)) AND (CAST(:s AS text) IS NOT NULL OR arg1 = :v)'
+        '(CAST(:s AS text) IS NOT NULL AND arg1 = :v AND char_length(arg1) < 64 OR CAST(:s AS text) IS NULL AND slr_key(arg1) = slr_key(:v) AND arg1 = :v AND char_length(arg1) >= 64)'
         """
         return f"{expr} = {value}"
 
@@ -209,25 +224,41 @@ class PostgresDialect(PostgresQueryPrinter):
     python_functions = False
 
     def key(self, expr: str) -> str:
-        """What a B-tree index holds of a text users choose: ``slr_key(text)`` (migration
-        ``pg_0013``: the text when shorter than 64 characters, else its SHA-256 in hex), so
-        that no entry passes the server's 2,704 bytes whatever the text's length."""
+        """What a unique B-tree index holds of a text users choose: ``slr_key(text)``
+        (migration ``pg_0013``: the text when it has fewer than 64 characters, else its
+        SHA-256 in hex), so that no entry passes the server's 2,704 bytes."""
         return f"slr_key({expr})"
 
+    def key_indexes(self, keys: list[str], rest: list[str]) -> list[tuple[str, str]]:
+        # A text of fewer than 64 characters (at most 252 bytes) is indexed as it is, in a
+        # partial index over such rows: the planner keeps the column's statistics and can
+        # read the times from the index alone, as before (over slr_key(arg1) a prev lookup
+        # read the rows of its key from the table: 2-3 times slower). A longer one goes to
+        # a partial index over its slr_key. An index over two texts holds the rows whose
+        # texts are both short
+        if len(keys) == 1:
+            key = keys[0]
+            return [("", f"({', '.join(keys + rest)}) WHERE char_length({key}) < 64"),
+                    ("_k", f"({', '.join([f'slr_key({key})'] + rest)}) "
+                           f"WHERE char_length({key}) >= 64")]
+        return [("", f"({', '.join(keys + rest)}) WHERE "
+                     + " AND ".join(f"char_length({key}) < 64" for key in keys))]
+
     def key_equal(self, expr: str, value: str, short: str | None = None) -> str:
-        # the index finds the rows of the key; the exact comparison decides where the key
-        # is a digest
+        # each form names the predicate of the partial index it reads (key_indexes); the
+        # planner, given the value, keeps one branch of the last
+        near = f"{expr} = {value} AND char_length({expr}) < 64"
+        far = (f"slr_key({expr}) = slr_key({value}) AND {expr} = {value} "
+               f"AND char_length({expr}) >= 64")
+        if short == value:
+            return near
+        if short == "NULL":
+            return far
         if short is None:
-            return f"slr_key({expr}) = slr_key({value}) AND {expr} = {value}"
-        # A text of fewer than 64 characters is its own key (no digest has fewer): there
-        # the keys' equality is the texts', and the planner, given ``short``, keeps only
-        # it. Both equalities at once were counted as two filters (1/1000 of the key's
-        # rows for 1,000 keys): a prev lookup of an object with 50 events read all 50 and
-        # sorted them instead of reading the index backwards, and a prepared statement's
-        # plan was made again at each run
-        short = f"CAST({short} AS text)"
-        return (f"slr_key({expr}) = coalesce({short}, slr_key({value})) AND "
-                f"({short} IS NOT NULL OR {expr} = {value})")
+            test, untest = f"char_length({value}) < 64", f"char_length({value}) >= 64"
+        else:
+            test, untest = f"CAST({short} AS text) IS NOT NULL", f"CAST({short} AS text) IS NULL"
+        return f"({test} AND {near} OR {untest} AND {far})"
 
     def scalar(self, name: str) -> str:
         return {"max": "GREATEST", "min": "LEAST"}.get(name, name)
