@@ -88,6 +88,22 @@ def test_a_count_buffer_keyed_by_a_first_argument_of_ten_kilobytes(backend):
             (5, 4), (10_000, 2), (10_000, 3)]
 
 
+def test_a_count_buffer_keyed_by_a_later_argument_of_ten_kilobytes(backend):
+    """Its key has an index of its own (slr_bix_N; on PostgreSQL two, short and long keys),
+    made once: a store opened again finds the buffer's objects as this version makes them."""
+    with slr_sql.open(backend, clock=ManualClock(10.0)) as kb:
+        buffer = kb.add_buffer("e(_, K)", keep_last=1)
+        kb.add_many([("e", [1, LONG], 1.0, 1.0), ("e", [2, LONG], 2.0, 2.0),
+                     ("e", [3, OTHER], 3.0, 3.0), "e(4, short)^4.0"])
+        assert [a["N"] for a in kb.query("e(N, _)^T")] == [2, 3, 4]
+        objects = kb.store.buffer_objects(buffer)
+        assert (f"slr_bix_{buffer}_k" in objects) == backend.startswith("postgres")
+    with slr_sql.open(backend, clock=ManualClock(10.0)) as kb:
+        assert kb.store.buffer_objects(buffer) == objects
+        kb.add_event("e", [5, LONG], 5.0)
+        assert [a["N"] for a in kb.query("e(N, _)^T")] == [3, 4, 5]
+
+
 def test_a_durable_subscription_whose_id_is_ten_kilobytes(backend):
     """Its position is kept under its id: a second subscription of the id resumes after the
     answer handled (closed normally), and it is removed by the id."""
