@@ -142,9 +142,9 @@ class SQLiteDialect(SQLiteQueryPrinter):
         >>> POSTGRES.key_equal("arg1", ":v", ":v")
         'arg1 = :v AND char_length(arg1) < 64'
         >>> POSTGRES.key_equal("arg1", ":v", "NULL")
-        'slr_key(arg1) = slr_key(:v) AND arg1 = :v AND char_length(arg1) >= 64'
+        'slr_key(arg1) = slr_key(:v) AND :v = arg1 AND char_length(arg1) >= 64'
         >>> POSTGRES.key_equal("arg1", ":v", ":s")
-        '(CAST(:s AS text) IS NOT NULL AND arg1 = :v AND char_length(arg1) < 64 OR CAST(:s AS text) IS NULL AND slr_key(arg1) = slr_key(:v) AND arg1 = :v AND char_length(arg1) >= 64)'
+        '(CAST(:s AS text) IS NOT NULL AND arg1 = :v AND char_length(arg1) < 64 OR CAST(:s AS text) IS NULL AND slr_key(arg1) = slr_key(:v) AND :v = arg1 AND char_length(arg1) >= 64)'
         """
         return f"{expr} = {value}"
 
@@ -246,9 +246,11 @@ class PostgresDialect(PostgresQueryPrinter):
 
     def key_equal(self, expr: str, value: str, short: str | None = None) -> str:
         # each form names the predicate of the partial index it reads (key_indexes); the
-        # planner, given the value, keeps one branch of the last
+        # planner, given the value, keeps one branch of the last. (The long form's exact
+        # comparison is written the other way round: an equality common to both branches
+        # would be taken out of the OR, and a join could then read neither index)
         near = f"{expr} = {value} AND char_length({expr}) < 64"
-        far = (f"slr_key({expr}) = slr_key({value}) AND {expr} = {value} "
+        far = (f"slr_key({expr}) = slr_key({value}) AND {value} = {expr} "
                f"AND char_length({expr}) >= 64")
         if short == value:
             return near
