@@ -24,8 +24,9 @@ $$;
 -- (the store's (arg1, t_end, t_start) and (arg1, t_start, t_end), the event rules'
 -- slr_cep_ix__ ones) is made again as the key indexes of slr_sql/store/dialect.py: a
 -- partial index over the rows whose texts have fewer than 64 characters, as it was, and
--- (over one text) slr_key's over the others, named with _k after it. A short text is then
--- still read from the index alone, its statistics kept (docs/postgres.md, "Long values").
+-- (over one text) one over slr_key of every row, named with _k after it. A short value is
+-- still read from the index alone, its statistics kept; a join searches slr_key's
+-- (docs/postgres.md, "Long values").
 DO $$
 DECLARE
     ix RECORD;
@@ -55,9 +56,8 @@ BEGIN
         IF cardinality(keys) = 1 THEN
             EXECUTE format('CREATE INDEX %I ON %I (%s) WHERE char_length(%s) < 64',
                            ix.name, ix.tbl, ix.cols, keys[1]);
-            EXECUTE format('CREATE INDEX %I ON %I (slr_key(%s), %s) WHERE char_length(%s) >= 64',
-                           ix.name || '_k', ix.tbl, keys[1], array_to_string(rest, ', '),
-                           keys[1]);
+            EXECUTE format('CREATE INDEX %I ON %I (slr_key(%s), %s)',
+                           ix.name || '_k', ix.tbl, keys[1], array_to_string(rest, ', '));
         ELSE
             EXECUTE format('CREATE INDEX %I ON %I (%s) WHERE %s', ix.name, ix.tbl, ix.cols,
                            (SELECT string_agg(format('char_length(%s) < 64', k), ' AND ')

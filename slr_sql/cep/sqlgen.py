@@ -1180,7 +1180,7 @@ def create_index(name: str, table: str, columns: list[str], dialect: Any = SQLIT
     ['CREATE INDEX IF NOT EXISTS "slr_cep_ix__a__arg2_end" ON "a" (arg2, t_end, t_start)']
     >>> from slr_sql.store.dialect import POSTGRES
     >>> create_index("slr_cep_ix__a__arg2_end", "a", ["arg2", "t_end"], POSTGRES)[1]
-    'CREATE INDEX IF NOT EXISTS "slr_cep_ix__a__arg2_end_k" ON "a" (slr_key(arg2), t_end) WHERE char_length(arg2) >= 64'
+    'CREATE INDEX IF NOT EXISTS "slr_cep_ix__a__arg2_end_k" ON "a" (slr_key(arg2), t_end)'
     """
     keys = [c for c in columns if c.startswith("arg")]
     rest = [c for c in columns if not c.startswith("arg")]

@@ -124,7 +124,7 @@ class SQLiteDialect(SQLiteQueryPrinter):
         >>> SQLITE.key_indexes(["arg1"], ["t_end", "t_start"])
         [('', '(arg1, t_end, t_start)')]
         >>> POSTGRES.key_indexes(["arg1"], ["t_end"])
-        [('', '(arg1, t_end) WHERE char_length(arg1) < 64'), ('_k', '(slr_key(arg1), t_end) WHERE char_length(arg1) >= 64')]
+        [('', '(arg1, t_end) WHERE char_length(arg1) < 64'), ('_k', '(slr_key(arg1), t_end)')]
         >>> POSTGRES.key_indexes(["arg1", "arg3"], ["t_end"])
         [('', '(arg1, arg3, t_end) WHERE char_length(arg1) < 64 AND char_length(arg3) < 64')]
         """
@@ -135,16 +135,16 @@ class SQLiteDialect(SQLiteQueryPrinter):
         it. ``value`` is an SQL expression (a named parameter may appear more than once, a
         ``?`` is then bound as often); ``short``, where the caller knows it, is ``value``
         itself for a value of fewer than 64 characters, ``"NULL"`` for a longer one, or a
-        parameter bound to :func:`short_text` of the value (None: a column, tested here).
+        parameter bound to :func:`short_text` of the value (None: not known, a column).
 
         >>> SQLITE.key_equal("arg1", ":v", ":s")
         'arg1 = :v'
         >>> POSTGRES.key_equal("arg1", ":v", ":v")
         'arg1 = :v AND char_length(arg1) < 64'
-        >>> POSTGRES.key_equal("arg1", ":v", "NULL")
-        'slr_key(arg1) = slr_key(:v) AND :v = arg1 AND char_length(arg1) >= 64'
+        >>> POSTGRES.key_equal("arg1", "t0.arg1")
+        'slr_key(arg1) = slr_key(t0.arg1) AND t0.arg1 = arg1'
         >>> POSTGRES.key_equal("arg1", ":v", ":s")
-        '(CAST(:s AS text) IS NOT NULL AND arg1 = :v AND char_length(arg1) < 64 OR CAST(:s AS text) IS NULL AND slr_key(arg1) = slr_key(:v) AND :v = arg1 AND char_length(arg1) >= 64)'
+        '(CAST(:s AS text) IS NOT NULL AND arg1 = :v AND char_length(arg1) < 64 OR CAST(:s AS text) IS NULL AND slr_key(arg1) = slr_key(:v) AND :v = arg1)'
         """
         return f"{expr} = {value}"
 
@@ -230,37 +230,34 @@ class PostgresDialect(PostgresQueryPrinter):
         return f"slr_key({expr})"
 
     def key_indexes(self, keys: list[str], rest: list[str]) -> list[tuple[str, str]]:
-        # A text of fewer than 64 characters (at most 252 bytes) is indexed as it is, in a
-        # partial index over such rows: the planner keeps the column's statistics and can
-        # read the times from the index alone, as before (over slr_key(arg1) a prev lookup
-        # read the rows of its key from the table: 2-3 times slower). A longer one goes to
-        # a partial index over its slr_key. An index over two texts holds the rows whose
-        # texts are both short
+        # Two indexes. A text of fewer than 64 characters (at most 252 bytes) is indexed as
+        # it is, in a partial index over such rows: a lookup of a value keeps the column's
+        # statistics and reads the times from the index alone, as before (over slr_key
+        # only, a prev lookup read the rows of its key from the table: 2-3 times slower).
+        # Every row is in the index over its slr_key: a join searches it with one
+        # condition (over the long texts only, a join read both indexes as bitmaps:
+        # 3 times slower). An index over two texts holds the rows whose texts are short
         if len(keys) == 1:
             key = keys[0]
             return [("", f"({', '.join(keys + rest)}) WHERE char_length({key}) < 64"),
-                    ("_k", f"({', '.join([f'slr_key({key})'] + rest)}) "
-                           f"WHERE char_length({key}) >= 64")]
+                    ("_k", f"({', '.join([f'slr_key({key})'] + rest)})")]
         return [("", f"({', '.join(keys + rest)}) WHERE "
                      + " AND ".join(f"char_length({key}) < 64" for key in keys))]
 
     def key_equal(self, expr: str, value: str, short: str | None = None) -> str:
-        # each form names the predicate of the partial index it reads (key_indexes); the
-        # planner, given the value, keeps one branch of the last. (The long form's exact
-        # comparison is written the other way round: an equality common to both branches
-        # would be taken out of the OR, and a join could then read neither index)
+        # a short value reads the partial index (its predicate named), a long one or a
+        # column the index over slr_key (key_indexes); the planner, given a value for
+        # ``short``, keeps one branch of the last. (The long form's exact comparison is
+        # written the other way round: an equality common to both branches would be
+        # taken out of the OR)
         near = f"{expr} = {value} AND char_length({expr}) < 64"
-        far = (f"slr_key({expr}) = slr_key({value}) AND {value} = {expr} "
-               f"AND char_length({expr}) >= 64")
+        far = f"slr_key({expr}) = slr_key({value}) AND {value} = {expr}"
         if short == value:
             return near
-        if short == "NULL":
+        if short is None or short == "NULL":
             return far
-        if short is None:
-            test, untest = f"char_length({value}) < 64", f"char_length({value}) >= 64"
-        else:
-            test, untest = f"CAST({short} AS text) IS NOT NULL", f"CAST({short} AS text) IS NULL"
-        return f"({test} AND {near} OR {untest} AND {far})"
+        short = f"CAST({short} AS text)"
+        return f"({short} IS NOT NULL AND {near} OR {short} IS NULL AND {far})"
 
     def scalar(self, name: str) -> str:
         return {"max": "GREATEST", "min": "LEAST"}.get(name, name)
