@@ -492,7 +492,9 @@ class PostgresBufferPrinter:
                 values = [f"({self.value('', place)})" for place in m.keys]
                 for suffix, indexed in POSTGRES.key_indexes(values, ["t_end", "t_start"]):
                     index = f"slr_bix_{bid}{suffix}"
-                    where = f" AND {row_match}" if m.tests else ""
+                    # (over the rows the buffer governs, beside a key index's own predicate)
+                    where = "" if not m.tests else \
+                        f" AND {row_match}" if " WHERE " in indexed else f" WHERE {row_match}"
                     out[index] = f"CREATE INDEX {quote_identifier(index)} ON {t} {indexed}{where}"
         elif plan.kind == "window":
             t1, t2 = _pg_float(plan.t1), _pg_float(plan.t2)  # type: ignore[arg-type]
