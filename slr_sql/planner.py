@@ -34,7 +34,7 @@ from .program import Slot, Template, build
 from .sqlcompile import Col, ColRef, Compiler, Fallback, Part, resolve
 from .errors import SLRBusy
 from .store import DatabaseError
-from .store.dialect import Unprintable
+from .store.dialect import Unprintable, short_text
 from .terms import Atom, Struct, Var, deref, from_python, int_text, make_list, \
     to_python
 
@@ -259,7 +259,8 @@ class SqlPlan:
     answers."""
 
     def __init__(self, sql, params, arg_params, has_at, recipes, missing, sites, modes, goal,
-                 time_sites=(), guards=(), has_robot=False, start_ordered=(), read_types=()):
+                 time_sites=(), guards=(), has_robot=False, start_ordered=(), read_types=(),
+                 key_forms=()):
         self.sql = sql
         # event types read in start order: their indexes made sure of before each run
         # (built on first need; once built, an attribute read per run)
@@ -282,6 +283,10 @@ class SqlPlan:
         self.time_sites = time_sites      # ((name, n), time parameter or SQL) per prev/next
         self.params = params
         self.arg_params = arg_params      # variable name -> parameter name
+        # arguments compared with an event's first argument on PostgreSQL: (parameter,
+        # the statement's condition for a short text, for a long one; Compiler.key_forms)
+        self.key_forms = tuple(key_forms)
+        self._long_texts: dict[frozenset, tuple] = {}
         self.has_at = has_at
         self.recipes = recipes            # per branch: [(name, how, data)]
         self.missing = missing            # event types without a table when compiled
@@ -327,17 +332,35 @@ class SqlPlan:
                     # (where the planner cannot be asked, only next's types, above)
                     kb.store.prepare_start_order(sql, self.read_types, build_if_unsure=False)
             self.prepared_at = undone
-        for guard in self.guards:
+        sql, guards = self.sql, self.guards
+        if self.key_forms:
+            long = frozenset(p for p, _, _ in self.key_forms if short_text(params[p]) is None)
+            if long:
+                sql, guards = self._with_long_texts(long)
+        for guard in guards:
             kb.store.run_compiled(guard, params, None, deadline, may_fall_back=True,
                                   instructions=instructions)
-        if self.sql is None:
+        if sql is None:
             return []
-        rows = kb.store.run_compiled(self.sql, params, limit, deadline, may_fall_back=True,
+        rows = kb.store.run_compiled(sql, params, limit, deadline, may_fall_back=True,
                                      instructions=instructions)
         from_column = dialect.from_column
         if from_column is not None:   # answer columns are the columns' text there
             rows = [(row[0],) + tuple([from_column(v) for v in row[1:]]) for row in rows]
         return rows
+
+    def _with_long_texts(self, long: frozenset) -> tuple:
+        """The statement and guards for the arguments ``long`` bound to long texts: their
+        equalities with a first argument in the form that reads its slr_key's index."""
+        texts = self._long_texts.get(long)
+        if texts is None:
+            def swap(text):
+                for pname, short_form, long_form in self.key_forms:
+                    if pname in long and text is not None:
+                        text = text.replace(short_form, long_form)
+                return text
+            texts = self._long_texts[long] = (swap(self.sql), tuple(map(swap, self.guards)))
+        return texts
 
     def run(self, kb, args, at, limit, deadline=None, robot=None):
         values = {name: from_python(args[name]) for name in self.arg_params}
@@ -554,7 +577,7 @@ def compile_goal(kb, plan, has_at: bool, robot: bool = False) -> SqlPlan:
     return SqlPlan(sql, dict(comp.params), arg_params, has_at,
                    [p.extra for p in parts], frozenset(comp.missing), comp.sites, comp.modes,
                    plan.text, tuple(dict.fromkeys(comp.time_sites)), guards, robot,
-                   comp.start_ordered, comp.read_types)
+                   comp.start_ordered, comp.read_types, comp.key_forms)
 
 
 def _has_ref(t) -> bool:

@@ -16,11 +16,13 @@ from slr_sql.store.schema import migration_scripts
 
 from test_fleet_routes import robot_store, seen
 from test_other_process_pending import BY_DELAY, _add_in_another_process, _c, _heard_of_it
+from test_postgres_long_keys import as_version_12
 
 
 def as_version_9(url: str) -> None:
     """Take a PostgreSQL store back to what schema version 9 wrote: no routes table, no
     notifying trigger on the pending rows (as another client of the database)."""
+    as_version_12(url)
     conninfo, schema = split_url(url)
     with psycopg.connect(conninfo, autocommit=True) as conn:
         conn.execute(f'SET search_path = "{schema}"')

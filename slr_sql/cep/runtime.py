@@ -228,10 +228,12 @@ class RuleRuntime:
         for table, column in self.indexes():
             for first, second in (("t_end", "t_start"), ("t_start", "t_end")):
                 name = index_name(table, column, first[2:])
-                eng.store.run_compiled(create_index(name, table,
-                                                           [column, first, second]), {})
+                for statement in create_index(name, table, [column, first, second],
+                                              eng.store.dialect):
+                    eng.store.run_compiled(statement, {})
         for name, table, columns in self.anchor_indexes():
-            eng.store.run_compiled(create_index(name, table, columns), {})
+            for statement in create_index(name, table, columns, eng.store.dialect):
+                eng.store.run_compiled(statement, {})
         self.generation = eng.generation
 
     def _plain_plan(self, sql: AltSQL, residual: Residual) -> tuple | None:

@@ -36,7 +36,7 @@ from typing import Any, Callable
 
 from ..encoding import Unencodable, encode
 from ..store import quote_identifier
-from ..store.dialect import SQLITE
+from ..store.dialect import SQLITE, short_text
 from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
 from .rules import Alternative, Expr, Leaf
 
@@ -236,15 +236,19 @@ class AltSQL:
         except Unencodable:
             return None
         typeof = self.dialect.typeof
-        p = self._param(self._stored(encoded))
+        stored = self._stored(encoded)
+        p = self._param(stored)
+        # (an argument's indexes hold the dialect's key of it: key_equal lets them serve)
+        equal = self.dialect.key_equal(ref.sql, p, p if short_text(stored) is not None
+                                       else "NULL")
         if type(value) is int and type(encoded) is int:
-            return f"({ref.sql} = {p} AND {typeof(ref.sql)} = 'integer')"
+            return f"({equal} AND {typeof(ref.sql)} = 'integer')"
         if type(value) is float:
             # (-0.0 and 0.0 are two terms; SQLite's = takes one for the other)
             sign = None if value else self.dialect.zero_sign(ref.sql, math.copysign(1.0, value) < 0)
-            return f"({ref.sql} = {p} AND {typeof(ref.sql)} = 'real'" + \
+            return f"({equal} AND {typeof(ref.sql)} = 'real'" + \
                 (f" AND {sign})" if sign else ")")
-        return f"{ref.sql} = {p}"
+        return equal if equal == f"{ref.sql} = {p}" else f"({equal})"
 
     def _stored(self, encoded: Any) -> Any:
         """An encoded value as the store's columns hold it."""
@@ -257,7 +261,7 @@ class AltSQL:
             return f"{a.sql} = {b.sql}"
         if a.kind == "data" and b.kind == "data":
             sign = self.dialect.same_zero_sign(a.sql, b.sql)
-            return f"({a.sql} = {b.sql} AND {typeof(a.sql)} = {typeof(b.sql)}" + \
+            return f"({self.dialect.key_equal(a.sql, b.sql)} AND {typeof(a.sql)} = {typeof(b.sql)}" + \
                 (f" AND {sign})" if sign else ")")
         d, t = (a, b) if a.kind == "data" else (b, a)
         # times match by value (a time 5.0 and a data argument 5 are the same instant)
@@ -1171,14 +1175,21 @@ _PENDING_READ = ("SELECT id, alt, kind, pos, rowids, t_start, t_end, wait_type, 
                  "wait_time FROM slr_cep_pending WHERE rule = :rule")
 
 
-def create_index(name: str, table: str, columns: list[str]) -> str:
-    """An index a rule's statements search (created once, kept with the table).
+def create_index(name: str, table: str, columns: list[str], dialect: Any = SQLITE) -> list[str]:
+    """The indexes a rule's statements search (created once, kept with the table): over
+    its data arguments as the ``dialect``'s key indexes (any length on PostgreSQL).
 
     >>> create_index("slr_cep_ix__a__arg2_end", "a", ["arg2", "t_end", "t_start"])
-    'CREATE INDEX IF NOT EXISTS "slr_cep_ix__a__arg2_end" ON "a" (arg2, t_end, t_start)'
+    ['CREATE INDEX IF NOT EXISTS "slr_cep_ix__a__arg2_end" ON "a" (arg2, t_end, t_start)']
+    >>> from slr_sql.store.dialect import POSTGRES
+    >>> create_index("slr_cep_ix__a__arg2_end", "a", ["arg2", "t_end"], POSTGRES)[1]
+    'CREATE INDEX IF NOT EXISTS "slr_cep_ix__a__arg2_end_k" ON "a" (slr_key(arg2), t_end)'
     """
-    return (f"CREATE INDEX IF NOT EXISTS {quote_identifier(name)} ON "
-            f"{quote_identifier(table)} ({', '.join(columns)})")
+    keys = [c for c in columns if c.startswith("arg")]
+    rest = [c for c in columns if not c.startswith("arg")]
+    return [f"CREATE INDEX IF NOT EXISTS {quote_identifier(name + suffix)} ON "
+            f"{quote_identifier(table)} {indexed}"
+            for suffix, indexed in dialect.key_indexes(keys, rest)]
 
 
 def max_id(table: str) -> str:

@@ -54,6 +54,9 @@ class Compiler(Unification, BuiltinGoals, ControlGoals, RuleGoals, EventGoals, A
         self.has_at = has_at
         self.literal = literal        # views: constants as literals, no parameters
         self.params: dict[str, Any] = {}
+        # (argument parameter, its equality with a first argument for a short text, for a
+        # long one): the statement has the first; a run with a long text, the second
+        self.key_forms: list[tuple[str, str, str]] = []
         self._const: dict[tuple, str] = {}
         self._alias = itertools.count()
         self.missing: set = set()     # event types without a table when compiled

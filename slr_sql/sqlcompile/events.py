@@ -12,9 +12,18 @@ Mixed into :class:`slr_sql.sqlcompile.Compiler` (uses ``self.solve``, ``self.uni
 """
 from __future__ import annotations
 
+import re
+
 from ..program import event_key, split_event_atom
+from ..store.dialect import short_text
 from ..terms import Atom, Struct, Var, deref, list_items, make_list
 from .model import NUMERIC, Col, Fallback, State
+
+# what a plain equality of an event's first argument may compare it with, for its key's
+# equality (a named parameter, or another table's column)
+_PLAIN_OPERAND = re.compile(r"(?::\w+|\w+\.arg\d+)\Z")
+# an argument from Python (planner.compile_goal names them :a<slot>)
+_ARG_PARAM = re.compile(r":a\d+\Z")
 
 
 def _check_point_stamp(s, e) -> None:
@@ -85,10 +94,42 @@ class EventGoals:
         """Match an event pattern (data arguments + (start, end)) with a row of ``alias``:
         the data by unification, the stored times by value (``^5`` finds 5.0)."""
         for i, p in enumerate(pattern[:n]):
+            since = len(st.conds)
             if not self.unify(p, Col(f"{alias}.arg{i + 1}"), st):
                 return False
+            if i == 0:
+                self.key_conditions(f"{alias}.arg1", st, since)
         return (self.match_time(pattern[n], Col(f"{alias}.t_start", "float"), st)
                 and self.match_time(pattern[n + 1], Col(f"{alias}.t_end", "float"), st))
+
+    def key_conditions(self, column: str, st: State, since: int) -> None:
+        """An event's first argument is read through the dialect's key indexes (on
+        PostgreSQL partial ones: short texts as they are, long ones by slr_key): each plain
+        equality of ``column`` with a parameter or another column among the conditions
+        from ``since`` on is written as the dialect's ``key_equal`` -- the same rows, with
+        the predicate of the index that holds them. A constant's form follows its length;
+        an argument from Python gets the short text's form, and ``key_forms`` the long
+        one's, which ``SqlPlan`` runs instead for a long text (one form each: the planner
+        then keeps a plan for each). Nothing on SQLite, whose index holds the text."""
+        dialect = self.dialect
+        if dialect.key(column) == column:
+            return
+        conds = st.conds
+        for i in range(since, len(conds)):
+            left, equals, right = conds[i].partition(" = ")
+            other = right if left == column else left if right == column else None
+            if not equals or other is None or not _PLAIN_OPERAND.match(other):
+                continue
+            if _ARG_PARAM.match(other):
+                conds[i] = dialect.key_equal(column, other, other)
+                form = (other[1:], conds[i], dialect.key_equal(column, other, "NULL"))
+                if form not in self.key_forms:
+                    self.key_forms.append(form)
+            elif other[1:] in self.params:
+                short = short_text(self.params[other[1:]]) is not None
+                conds[i] = dialect.key_equal(column, other, other if short else "NULL")
+            else:
+                conds[i] = dialect.key_equal(column, other)
 
     def event_table(self, name: str, n: int) -> str | None:
         table = self.ctx.event_table(name, n)

@@ -397,9 +397,11 @@ class PostgresBufferPrinter:
         return conds[0] if len(conds) == 1 else "(" + " AND ".join(conds) + ")"
 
     def key_equal(self, match: PatternMatch) -> str:
+        # the keys' B-tree indexes (the event table's first argument, slr_bix_N) are
+        # PostgreSQL's key indexes: a key of any length (dialect.key_indexes)
         parts = []
         for place in match.keys:
-            parts.append(f"{self.value('', place)} = {self.value('NEW.', place)}")
+            parts.append(POSTGRES.key_equal(self.value('', place), self.value('NEW.', place)))
             vtype = self.vtype("", place)
             if vtype is not None:
                 parts.append(f"{vtype} = {self.vtype('NEW.', place)}")
@@ -487,11 +489,13 @@ class PostgresBufferPrinter:
                 f"{count_pruned}\n  RETURN NULL;",
                 "DECLARE n bigint;\n")
             if m.keys and m.keys[0] != (1, None):
-                values = ", ".join(f"({self.value('', place)})" for place in m.keys)
-                where = f" WHERE {row_match}" if m.tests else ""
-                index = f"slr_bix_{bid}"
-                out[index] = (f"CREATE INDEX {quote_identifier(index)} ON {t} "
-                              f"({values}, t_end, t_start){where}")
+                values = [f"({self.value('', place)})" for place in m.keys]
+                for suffix, indexed in POSTGRES.key_indexes(values, ["t_end", "t_start"]):
+                    index = f"slr_bix_{bid}{suffix}"
+                    # (over the rows the buffer governs, beside a key index's own predicate)
+                    where = "" if not m.tests else \
+                        f" AND {row_match}" if " WHERE " in indexed else f" WHERE {row_match}"
+                    out[index] = f"CREATE INDEX {quote_identifier(index)} ON {t} {indexed}{where}"
         elif plan.kind == "window":
             t1, t2 = _pg_float(plan.t1), _pg_float(plan.t2)  # type: ignore[arg-type]
             outside = f"(NEW.t_start < {t1} OR NEW.t_end > {t2})"
@@ -644,8 +648,9 @@ class BufferTables:
                     "WHERE s.nspname = current_schema() AND p.proname LIKE ? "
                     "UNION ALL SELECT c.relname, obj_description(c.oid, 'pg_class') "
                     "FROM pg_class c JOIN pg_namespace s ON s.oid = c.relnamespace "
-                    "WHERE s.nspname = current_schema() AND c.relkind = 'i' AND c.relname = ?",
-                    (f"slr\\_buf\\_{bid}\\_%", f"slr_bix_{bid}"))
+                    "WHERE s.nspname = current_schema() AND c.relkind = 'i' "
+                    "AND c.relname IN (?, ?)",   # (slr_bix_N_k: its long keys, key_indexes)
+                    (f"slr\\_buf\\_{bid}\\_%", f"slr_bix_{bid}", f"slr_bix_{bid}_k"))
         return {name: sql for name, sql in rows}
 
     def install_buffer_objects(self, plan: BufferPlan, table: str) -> bool:

@@ -135,7 +135,8 @@ class Catalog:
     def _bump(self, key: str) -> int:
         """Add one to the counter ``key`` (in the caller's transaction); returns the new value."""
         execute = self.db.execute
-        execute("INSERT INTO slr_meta (key, value) VALUES (?, '1') ON CONFLICT(key) "
+        execute("INSERT INTO slr_meta (key, value) VALUES (?, '1') "
+                f"ON CONFLICT ({self.db.dialect.key('key')}) "
                 "DO UPDATE SET value = CAST(slr_meta.value AS INTEGER) + 1", (key,))
         return int(execute("SELECT value FROM slr_meta WHERE key = ?", (key,))[0][0])
 
@@ -296,7 +297,8 @@ class Catalog:
         text = json.dumps(value)
         with self.db.transaction():
             self.db.execute("INSERT INTO slr_meta (key, value) VALUES (?, ?) "
-                            "ON CONFLICT(key) DO UPDATE SET value = excluded.value",
+                            f"ON CONFLICT ({self.db.dialect.key('key')}) "
+                            "DO UPDATE SET value = excluded.value",
                             (key, text))
 
     def meta_raise(self, key: str, value: float) -> float:
@@ -333,8 +335,8 @@ class Catalog:
                 else json.dumps(value)
             # (a row comes back when the value was written: inserted, or raised)
             changed = execute(
-                "INSERT INTO slr_meta (key, value) VALUES (?, ?) ON CONFLICT(key) DO "
-                "UPDATE SET value = excluded.value "
+                "INSERT INTO slr_meta (key, value) VALUES (?, ?) "
+                f"ON CONFLICT ({dialect.key('key')}) DO UPDATE SET value = excluded.value "
                 f"WHERE {_stored_number(dialect)} < CAST(excluded.value AS {dialect.real}) "
                 "RETURNING 1", (key, text))
             if changed:
@@ -462,8 +464,9 @@ class Catalog:
             if views:
                 self.meta_set("sql_views", kept)
             if version is not None:
-                execute("INSERT INTO slr_meta (key, value) VALUES (?, ?) ON CONFLICT(key) "
-                        "DO UPDATE SET value = excluded.value", (FACTS_VERSION, int(version)))
+                execute("INSERT INTO slr_meta (key, value) VALUES (?, ?) "
+                        f"ON CONFLICT ({self.db.dialect.key('key')}) DO UPDATE SET value "
+                        "= excluded.value", (FACTS_VERSION, int(version)))
         return out
 
     def fact_tables_for(self, keys: Iterable[tuple[str, int]]) -> dict:

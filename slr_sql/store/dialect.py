@@ -30,13 +30,28 @@ from typing import Any, Protocol
 
 from .query_printers import PostgresQueryPrinter, SQLiteQueryPrinter, Unprintable
 
-__all__ = ["POSTGRES", "SQLITE", "Dialect", "PostgresDialect", "SQLiteDialect", "Unprintable"]
+__all__ = ["KEY_TEXT_CHARACTERS", "POSTGRES", "SQLITE", "Dialect", "PostgresDialect",
+           "SQLiteDialect", "Unprintable", "short_text"]
 
 # A stored text that reads as a number (PostgreSQL columns): integers, and Python's float
 # texts (repr: always a '.', an exponent, or inf).
 _INT_TEXT = re.compile(r"-?[0-9]+\Z")
 _FLOAT_TEXT = re.compile(r"-?(?:[0-9]+\.[0-9]*|\.[0-9]+|[0-9]+(?=[eE]))(?:[eE][-+]?[0-9]+)?\Z"
                          r"|-?inf\Z")
+
+
+# a text of fewer characters is its own key in PostgreSQL's indexes (slr_key, pg_0013)
+KEY_TEXT_CHARACTERS = 64
+
+
+def short_text(value: Any) -> Any:
+    """``value`` when it is a text that is its own key (fewer than 64 characters), else
+    None: what a ``short`` parameter of :meth:`PostgresDialect.key_equal` is bound to.
+
+    >>> short_text("cup1"), short_text("x" * 64), short_text(None)
+    ('cup1', None, None)
+    """
+    return value if type(value) is str and len(value) < KEY_TEXT_CHARACTERS else None
 
 
 class Dialect(Protocol):
@@ -47,6 +62,10 @@ class Dialect(Protocol):
     text_holds_nul: bool
     equality_index: str
     zero_signs_in_sql: bool
+
+    def key(self, expr: str) -> str: ...
+    def key_indexes(self, keys: list[str], rest: list[str]) -> list[tuple[str, str]]: ...
+    def key_equal(self, expr: str, value: str, short: str | None = None) -> str: ...
 
     def statement(self, sql: str) -> str: ...
     def typeof(self, expr: str) -> str: ...
@@ -81,8 +100,6 @@ class SQLiteDialect(SQLiteQueryPrinter):
     copies_returning = False
     text_holds_nul = True    # a TEXT value may contain U+0000
     equality_index = ""      # how an index used only by ``=`` is built (a B-tree)
-    # the most UTF-8 bytes of an event's first argument as stored (None: no limit)
-    first_argument_bytes: int | None = None
     identifier_bytes: int | None = None   # names of any length
     without_rowid = " WITHOUT ROWID"
     pages_streams = False    # a statement's rows are read as needed (sqlite3 steps it)
@@ -95,6 +112,42 @@ class SQLiteDialect(SQLiteQueryPrinter):
 
     def statement(self, sql: str) -> str:
         return sql
+
+    def key(self, expr: str) -> str:
+        """What a unique B-tree index holds of a text users choose (a type's name, a
+        subscription's id): the text itself here (SQLite's keys have no length limit)."""
+        return expr
+
+    def key_indexes(self, keys: list[str], rest: list[str]) -> list[tuple[str, str]]:
+        """The B-tree indexes over the texts ``keys`` (data arguments, or expressions of
+        them) followed by ``rest`` (times): ``(name suffix, columns and WHERE)`` of each.
+
+        >>> SQLITE.key_indexes(["arg1"], ["t_end", "t_start"])
+        [('', '(arg1, t_end, t_start)')]
+        >>> POSTGRES.key_indexes(["arg1"], ["t_end"])
+        [('', '(arg1, t_end) WHERE char_length(arg1) < 64'), ('_k', '(slr_key(arg1), t_end)')]
+        >>> POSTGRES.key_indexes(["arg1", "arg3"], ["t_end"])
+        [('', '(arg1, arg3, t_end) WHERE char_length(arg1) < 64 AND char_length(arg3) < 64')]
+        """
+        return [("", f"({', '.join(keys + rest)})")]
+
+    def key_equal(self, expr: str, value: str, short: str | None = None) -> str:
+        """``expr = value``, written so that the :meth:`key_indexes` over ``expr`` serve
+        it. ``value`` is an SQL expression (a named parameter may appear more than once, a
+        ``?`` is then bound as often); ``short``, where the caller knows it, is ``value``
+        itself for a value of fewer than 64 characters, ``"NULL"`` for a longer one, or a
+        parameter bound to :func:`short_text` of the value (None: not known, a column).
+
+        >>> SQLITE.key_equal("arg1", ":v", ":s")
+        'arg1 = :v'
+        >>> POSTGRES.key_equal("arg1", ":v", ":v")
+        'arg1 = :v AND char_length(arg1) < 64'
+        >>> POSTGRES.key_equal("arg1", "t0.arg1")
+        'slr_key(arg1) = slr_key(t0.arg1) AND t0.arg1 = arg1'
+        >>> POSTGRES.key_equal("arg1", ":v", ":s")
+        '(CAST(:s AS text) IS NOT NULL AND arg1 = :v AND char_length(arg1) < 64 OR CAST(:s AS text) IS NULL AND slr_key(arg1) = slr_key(:v) AND :v = arg1)'
+        """
+        return f"{expr} = {value}"
 
     def scalar(self, name: str) -> str:
         """The two-argument ``max``/``min`` of values (not the aggregates)."""
@@ -154,12 +207,6 @@ class PostgresDialect(PostgresQueryPrinter):
     # a B-tree entry holds at most 2,704 bytes, a hash index's only the value's 4-byte hash:
     # an index read only by ``=`` (a fact's first argument) takes a value of any length
     equality_index = " USING hash"
-    # an event's first argument is a key of two B-tree indexes ((arg1, t_end), (arg1,
-    # t_start)), whose entries hold at most 2,704 bytes: a longer text (or one compressing
-    # to more) fails the whole statement, every event of its batch with it, in the server's
-    # words. Refused ahead instead, as that event's EventRejected (the 2,676 bytes that fit
-    # beside the time, less a margin)
-    first_argument_bytes: int | None = 2600
     identifier_bytes: int | None = 63     # longer names are cut, silently (NAMEDATALEN)
     without_rowid = ""
     pages_streams = True     # psycopg reads a whole result: lookups read growing pages
@@ -180,6 +227,42 @@ class PostgresDialect(PostgresQueryPrinter):
     true = "TRUE"
     false = "FALSE"
     python_functions = False
+
+    def key(self, expr: str) -> str:
+        """What a unique B-tree index holds of a text users choose: ``slr_key(text)``
+        (migration ``pg_0013``: the text when it has fewer than 64 characters, else its
+        SHA-256 in hex), so that no entry passes the server's 2,704 bytes."""
+        return f"slr_key({expr})"
+
+    def key_indexes(self, keys: list[str], rest: list[str]) -> list[tuple[str, str]]:
+        # Two indexes. A text of fewer than 64 characters (at most 252 bytes) is indexed as
+        # it is, in a partial index over such rows: a lookup of a value keeps the column's
+        # statistics and reads the times from the index alone, as before (over slr_key
+        # only, a prev lookup read the rows of its key from the table: 2-3 times slower).
+        # Every row is in the index over its slr_key: a join searches it with one
+        # condition (over the long texts only, a join read both indexes as bitmaps:
+        # 3 times slower). An index over two texts holds the rows whose texts are short
+        if len(keys) == 1:
+            key = keys[0]
+            return [("", f"({', '.join(keys + rest)}) WHERE char_length({key}) < 64"),
+                    ("_k", f"({', '.join([f'slr_key({key})'] + rest)})")]
+        return [("", f"({', '.join(keys + rest)}) WHERE "
+                     + " AND ".join(f"char_length({key}) < 64" for key in keys))]
+
+    def key_equal(self, expr: str, value: str, short: str | None = None) -> str:
+        # a short value reads the partial index (its predicate named), a long one or a
+        # column the index over slr_key (key_indexes); the planner, given a value for
+        # ``short``, keeps one branch of the last. (The long form's exact comparison is
+        # written the other way round: an equality common to both branches would be
+        # taken out of the OR)
+        near = f"{expr} = {value} AND char_length({expr}) < 64"
+        far = f"slr_key({expr}) = slr_key({value}) AND {value} = {expr}"
+        if short == value:
+            return near
+        if short is None or short == "NULL":
+            return far
+        short = f"CAST({short} AS text)"
+        return f"({short} IS NOT NULL AND {near} OR {short} IS NULL AND {far})"
 
     def scalar(self, name: str) -> str:
         return {"max": "GREATEST", "min": "LEAST"}.get(name, name)

@@ -117,30 +117,6 @@ def _encoded_columns(split: tuple[str, int, list, list, list]
     return name, arity, columns, starts, ends_column
 
 
-def first_argument_problem(size: int, most: int) -> str:
-    """Why an event whose first argument is ``size`` bytes as stored cannot be stored in a
-    store that indexes at most ``most`` (a PostgreSQL store's B-tree entries).
-
-    >>> first_argument_problem(3000, 2600)
-    'the first argument cannot be stored: 3000 bytes as stored, more than the 2600 a PostgreSQL store indexes (a long value can be a later argument)'
-    """
-    return (f"the first argument cannot be stored: {size} bytes as stored, more than the "
-            f"{most} a PostgreSQL store indexes (a long value can be a later argument)")
-
-
-def _longest_stored(column: list, most: int, dialect: Any) -> bool:
-    """Whether a value of an encoded argument ``column`` is more than ``most`` UTF-8 bytes
-    once in the column's text (``dialect.to_column``). Only a string longer than a sixth of
-    ``most`` can be (its stored form escapes a control character in six)."""
-    to_column = dialect.to_column
-    for value in column:
-        if type(value) is str and len(value) > most // 6:
-            text = value if to_column is None else to_column(value)
-            if len(text.encode()) > most:
-                return True
-    return False
-
-
 def _widen(ends: dict, key: tuple, earliest: float, latest: float) -> None:
     known = ends.get(key)
     if known is not None:
@@ -249,9 +225,6 @@ class EventWriter:
         if checked is None:
             return False
         name, arity, columns, starts, ends_column = checked
-        most = self.db.dialect.first_argument_bytes
-        if most is not None and arity and _longest_stored(columns[0], most, self.db.dialect):
-            return False   # (event by event: that event is rejected, saying why)
         event_type = self._type_or_none(name, arity)
         if event_type is None:
             return False
@@ -384,7 +357,6 @@ class EventWriter:
         with_robot = robot is not None  # else the column's NULL, not bound per row
         tail = (arrival, robot) if with_robot else (arrival,)
         insert_sql = attrgetter("insert_sql" if with_robot else "insert_unnamed_sql")
-        most = self.db.dialect.first_argument_bytes
         rows: list = []
         append = rows.append
         # each type's rows, in their order: what a table's seq, its triggers and its journal
@@ -415,9 +387,6 @@ class EventWriter:
                     row = (enc(args[0]), enc(args[1]), start, end, *tail)
                 else:
                     row = (*map(enc, args), start, end, *tail)
-                if most is not None and arity and type(row[0]) is str and \
-                        len(row[0]) > most // 4 and len(row[0].encode()) > most:
-                    raise BadEvent(first_argument_problem(len(row[0].encode()), most))
                 if arity != current_arity or name != current_name:
                     current_type = (isinstance(name, str) and types.get((name, arity))
                                     or self.type_for_new_event(name, arity))

@@ -162,7 +162,8 @@ class Fleet:
                 raise SLRError(f"{self.db.path or ':memory:'} is the store of robot "
                                f"{_json_text(rows[0][0])!r}, not {robot!r}")
             self.db.execute("INSERT INTO slr_meta (key, value) VALUES ('robot', ?) "
-                            "ON CONFLICT (key) DO UPDATE SET value = excluded.value",
+                            f"ON CONFLICT ({self.db.dialect.key('key')}) "
+                            "DO UPDATE SET value = excluded.value",
                             (json.dumps(robot),))
             self.db.execute(_ADD_ROBOT, (robot,))
         self.robot = robot
@@ -403,8 +404,8 @@ class Fleet:
                        "slr_fleet_robots.last_arrival IS NULL OR excluded.last_arrival > "
                        "slr_fleet_robots.last_arrival THEN excluded.last_arrival ELSE "
                        "slr_fleet_robots.last_arrival END", (robot, len(fresh), latest))
-            unanswered(_SET_POSITION, (robot, name, arity, rows[-1][0] if resync
-                                       else fresh[-1][0]))
+            unanswered(_position_upsert(self.db.dialect),
+                       (robot, name, arity, rows[-1][0] if resync else fresh[-1][0]))
             return len(fresh)
 
     def _take_routes(self, robot: str, rows: list[tuple]) -> list[tuple]:
@@ -465,7 +466,7 @@ class Fleet:
                     "nothing of the shipment is stored")
 
     def _set_position(self, robot: str, name: str, arity: int, position: int) -> None:
-        self.db.execute(_SET_POSITION, (robot, name, arity, position))
+        self.db.execute(_position_upsert(self.db.dialect), (robot, name, arity, position))
 
     def _held_identically(self, name: str, arity: int, robot: str,
                           rows: list[tuple]) -> list[bool]:
@@ -544,9 +545,12 @@ class Fleet:
             return [rows[who] for who in sorted(rows)]
 
 
-_SET_POSITION = ("INSERT INTO slr_fleet_positions (robot, type_name, type_arity, position) "
-                 "VALUES (?, ?, ?, ?) ON CONFLICT (robot, type_name, type_arity) DO UPDATE "
-                 "SET position = excluded.position")
+def _position_upsert(dialect: Any) -> str:
+    """The upsert of a robot's position in one event type (the type's name is a key of any
+    length: the dialect's key of it)."""
+    return ("INSERT INTO slr_fleet_positions (robot, type_name, type_arity, position) "
+            f"VALUES (?, ?, ?, ?) ON CONFLICT (robot, {dialect.key('type_name')}, type_arity) "
+            "DO UPDATE SET position = excluded.position")
 
 
 def _shipped_insert(table: str, arity: int) -> str:

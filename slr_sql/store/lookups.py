@@ -20,6 +20,7 @@ from typing import Any, Callable, Iterable, Iterator
 from ..encoding import INT64_MAX, INT64_MIN, Unencodable, decode, encode
 from .catalog import PROGRAM_VERSION, PROGRESS_VERSION
 from .connection import Database
+from .dialect import short_text
 from .sqltext import quote_identifier
 from .tables import EventTables, EventType
 
@@ -141,6 +142,8 @@ class EventReader:
         self.to_column = db.dialect.to_column
         from_column = db.dialect.from_column
         self.decode = decode if from_column is None else (lambda v: decode(from_column(v)))
+        # whether a long first argument is looked up otherwise (see _equalities)
+        self._keyed = db.dialect.key("arg1") != "arg1"
 
     def _pushdown(self, event_type: EventType, bound: dict[int, Any] | None
                   ) -> tuple[tuple[int, ...], list]:
@@ -163,6 +166,22 @@ class EventReader:
             values.append(value)
         return tuple(positions), values
 
+    def _far(self, positions: tuple[int, ...], values: list) -> bool:
+        """Whether the first argument is bound to a text that is not its own key (on
+        PostgreSQL, of 64 characters or more): its rows are in another index."""
+        return self._keyed and positions[:1] == (0,) and short_text(values[0]) is None
+
+    def _equalities(self, positions: tuple[int, ...], far: bool) -> list[str]:
+        """``argN = ?`` for each bound position, the first argument's as the dialect's
+        ``key_equal`` (PostgreSQL's indexes over it are partial: a short text's, and a
+        long one's key's; the latter binds the text twice, :meth:`_bound`)."""
+        return [self.db.dialect.key_equal("arg1", "?", "NULL" if far else "?") if p == 0
+                else f"arg{p + 1} = ?" for p in positions]
+
+    def _bound(self, values: list, far: bool) -> list:
+        """The parameters of :meth:`_equalities` for ``values``."""
+        return values[:1] + values if far else values
+
     def _start_order(self, event_type: EventType) -> bool:
         """Whether the start-ordered indexes of ``event_type`` (or of the type of its name
         now, should a rollback have reloaded the types) may be named: built if need be."""
@@ -172,20 +191,21 @@ class EventReader:
         return self.tables.ensure_start_order(current)
 
     def _select_sql(self, event_type: EventType, kind: str, positions: tuple[int, ...],
-                    flags: tuple[bool, ...], resume: bool = False, robot: bool = False) -> str:
+                    flags: tuple[bool, ...], resume: bool = False, robot: bool = False,
+                    far: bool = False) -> str:
         """The statement of a lookup (lock held); one in start order names its index only
         once it is there."""
         # (built on a server too, whose planner then finds it: the same indexes either way)
         ordered = kind not in _START_KINDS or self._start_order(event_type)
         hint = self.db.dialect.index_hints and ordered
-        key = (event_type.table, kind, positions, flags, resume, robot, hint)
+        key = (event_type.table, kind, positions, flags, resume, robot, hint, far)
         sql = self.sql_cache.get(key)
         if sql is not None:
             return sql
         by_arg1 = bool(positions) and positions[0] == 0
         # one robot's events (a fleet store asked per robot): its parameter follows the
         # arguments'
-        conditions = [f"arg{p + 1} = ?" for p in positions] + (["robot = ?"] if robot else [])
+        conditions = self._equalities(positions, far) + (["robot = ?"] if robot else [])
         if kind == "scan":
             index = event_type.index_arg1_end if by_arg1 else event_type.index_end
             if flags[0]:
@@ -337,9 +357,11 @@ class EventReader:
         if by_robot:
             values.append(robot)
 
+        far = self._far(positions, values)
+
         def statement_sql(resume: bool) -> str:
-            return self._select_sql(event_type, kind, positions, flags, resume, by_robot)
-        return self._stream(statement_sql, values + times, arity, kind)
+            return self._select_sql(event_type, kind, positions, flags, resume, by_robot, far)
+        return self._stream(statement_sql, self._bound(values, far) + times, arity, kind)
 
     def scan(self, name: str, arity: int, bound: dict[int, Any] | None = None,
              end_le: float | None = None, robot: str | None = None) -> Iterator[Row]:
@@ -504,11 +526,13 @@ class EventReader:
         """:meth:`latest_rows` with ``values`` in the stored form (lock held); the rows'
         arguments as :func:`~slr_sql.encoding.decode` reads them."""
         db = self.db
-        sql = self.sql_cache.get((event_type.table, "latest", positions, point))
+        far = self._far(positions, values)
+        sql = self.sql_cache.get((event_type.table, "latest", positions, point, far))
         if sql is None:
-            sql = self._latest_sql(event_type, positions, point)
+            sql = self._latest_sql(event_type, positions, point, far)
         try:   # (the prev lookup: execute's mapping without its lock and check, made above)
-            rows = db.conn.execute(sql, (PROGRAM_VERSION, PROGRESS_VERSION, *values, *values,
+            bound = self._bound(values, far)
+            rows = db.conn.execute(sql, (PROGRAM_VERSION, PROGRESS_VERSION, *bound, *bound,
                                          float(t))).fetchall()
         except sqlite3.Error as exc:
             raise db.failure(exc) from None
@@ -517,10 +541,10 @@ class EventReader:
         return self._from_columns(rows, event_type.arity)
 
     def _latest_sql(self, event_type: EventType, positions: tuple[int, ...],
-                    point: bool) -> str:
+                    point: bool, far: bool) -> str:
         """The statement of :meth:`_latest_rows`, built now and cached (lock held)."""
         arity = event_type.arity
-        where = " AND ".join([f"arg{p + 1} = ?" for p in positions]
+        where = " AND ".join(self._equalities(positions, far)
                              + (["t_start = t_end"] if point else []))
         where = (where + " AND ") if where else ""
         columns = ", ".join([f"arg{i + 1}" for i in range(arity)]
@@ -531,7 +555,7 @@ class EventReader:
         sql = (f"SELECT {columns} FROM {event_type.quoted} WHERE {where}t_end = "
                f"(SELECT t_end FROM {event_type.quoted} WHERE {where}t_end <= ? "
                f"ORDER BY t_end DESC LIMIT 1) ORDER BY t_start, seq")
-        self.sql_cache[(event_type.table, "latest", positions, point)] = sql
+        self.sql_cache[(event_type.table, "latest", positions, point, far)] = sql
         return sql
 
     def _from_columns(self, rows: list[tuple], arity: int) -> list[tuple]:
@@ -609,7 +633,8 @@ class EventReader:
             # (before a finite t: the latest started of those holding at t, read in start
             # order from t back to t - longest; else the latest ended)
             holding = math.isfinite(t)
-            key = (event_type.table, "bracket", positions, start_hint, kinds, holding)
+            far = self._far(positions, values)
+            key = (event_type.table, "bracket", positions, start_hint, kinds, holding, far)
             # (SQL's = takes -0.0 for 0.0: each probe is then run on its own and read on to
             # the first row whose zeros have the bound ones' signs)
             signs = () if self.db.dialect.zero_signs_in_sql else _zero_signs(bound, positions)
@@ -618,9 +643,9 @@ class EventReader:
             if union is None:
                 typeof = self.db.dialect.typeof
                 where = " AND ".join(
-                    f"arg{p + 1} = ?" + ("" if kind is None
-                                         else f" AND {typeof(f'arg{p + 1}')} = '{kind}'")
-                    for p, kind in zip(positions, kinds))
+                    equal + ("" if kind is None else f" AND {typeof(f'arg{p + 1}')} = '{kind}'")
+                    for equal, p, kind in zip(self._equalities(positions, far), positions,
+                                              kinds))
                 cols = event_type.columns
                 hints = self.db.dialect.index_hints
                 by_end = f" INDEXED BY {event_type.index_arg1_end}" if hints else ""
@@ -640,6 +665,7 @@ class EventReader:
                     f"SELECT * FROM ({probe} LIMIT 1) AS probe_{n}"
                     for n, probe in enumerate(each))
             t = float(t)
+            values = self._bound(values, far)
             params = [values + [t, _earliest_holding_start(t, longest), t] if holding
                       else values + [t], values + [t], values + [t]][:probes]
             found: list = [None, None, None]

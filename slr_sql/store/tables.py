@@ -39,6 +39,7 @@ from typing import Any, Callable, Iterable, Iterator
 
 from ..errors import SLRError, SLRUnavailable
 from .connection import Database, DatabaseError
+from .dialect import SQLITE
 from .sqltext import RESERVED_PREFIXES, SAFE_IDENTIFIER, SQL_KEYWORDS, quote_identifier
 
 __all__ = ["EventType", "EventTables", "START_ORDER_RETRY", "START_ORDER_RETRY_LOOKUPS"]
@@ -94,14 +95,23 @@ class EventType:
         self.index_arg1_end = quote_identifier(f"slr_ix__{table}__a1_end")
         self.index_arg1_start = quote_identifier(f"slr_ix__{table}__a1_start")
 
-    def start_index_statements(self) -> dict[str, str]:
+    def start_index_statements(self, dialect: Any = SQLITE) -> dict[str, str]:
         """The start-ordered indexes' names and ``CREATE INDEX IF NOT EXISTS`` statements
-        (no ``(arg1, ...)`` one for a type without arguments)."""
-        made = {self.index_start: "t_start, t_end"}
+        (no ``(arg1, ...)`` one for a type without arguments; those over the first
+        argument as the ``dialect``'s :meth:`~slr_sql.store.dialect.SQLiteDialect.key_indexes`).
+
+        >>> list(EventType("p", 1, "p", False).start_index_statements().values())[1]
+        'CREATE INDEX IF NOT EXISTS "slr_ix__p__a1_start" ON "p" (arg1, t_start, t_end)'
+        >>> from slr_sql.store.dialect import POSTGRES
+        >>> list(EventType("p", 1, "p", False).start_index_statements(POSTGRES))
+        ['slr_ix__p__start', 'slr_ix__p__a1_start', 'slr_ix__p__a1_start_k']
+        """
+        made = {self.index_start.strip('"'): "(t_start, t_end)"}
         if self.arity >= 1:
-            made[self.index_arg1_start] = "arg1, t_start, t_end"
-        return {index.strip('"'): f"CREATE INDEX IF NOT EXISTS {index} ON {self.quoted} "
-                                  f"({columns})" for index, columns in made.items()}
+            for suffix, columns in dialect.key_indexes(["arg1"], ["t_start", "t_end"]):
+                made[self.index_arg1_start.strip('"') + suffix] = columns
+        return {index: f"CREATE INDEX IF NOT EXISTS {quote_identifier(index)} ON "
+                       f"{self.quoted} {columns}" for index, columns in made.items()}
 
     def insert_rows_sql(self, rows: int, with_robot: bool) -> str:
         """One INSERT of ``rows`` rows (multi-row VALUES), with the robot column bound or
@@ -447,8 +457,9 @@ class EventTables:
                 "robot TEXT)")
         execute(f"CREATE INDEX {event_type.index_end} ON {event_type.quoted} (t_end, t_start)")
         if arity >= 1:
-            execute(f"CREATE INDEX {event_type.index_arg1_end} ON {event_type.quoted} "
-                    "(arg1, t_end, t_start)")
+            for suffix, columns in dialect.key_indexes(["arg1"], ["t_end", "t_start"]):
+                index = quote_identifier(event_type.index_arg1_end.strip('"') + suffix)
+                execute(f"CREATE INDEX {index} ON {event_type.quoted} {columns}")
         if start_order:
             self._create_start_indexes(event_type)
         execute("INSERT INTO slr_event_types (name, arity, table_name, declared) "
@@ -465,7 +476,7 @@ class EventTables:
         return event_type
 
     def _create_start_indexes(self, event_type: EventType) -> None:
-        for statement in event_type.start_index_statements().values():
+        for statement in event_type.start_index_statements(self.db.dialect).values():
             self.db.execute(statement)
 
     def ensure_start_order(self, event_type: EventType) -> bool:
@@ -570,7 +581,7 @@ class EventTables:
         extra: dict[str, str] = {}
         own: dict[tuple[str, int], list[str]] = {}
         for event_type in lacking:
-            statements = event_type.start_index_statements()
+            statements = event_type.start_index_statements(self.db.dialect)
             extra.update(statements)
             own[(event_type.name, event_type.arity)] = list(statements)
         steps = self.db.hypothetical_plan(sql, extra)
