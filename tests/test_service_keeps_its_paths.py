@@ -158,7 +158,16 @@ def test_a_postgresql_lock_held_too_long_names_no_host_or_database(postgres_url,
         request_id = _hidden(answer.text, *secrets)
         assert HTTP.post(server.url + "/add", json={"event": "p(2)^2"},
                          timeout=30).status_code == 200
+        # a value the store cannot hold: the request's fault (400), its words kept, without
+        # the location the store's message starts with
+        refused = HTTP.post(server.url + "/mark_complete", json={"type": "p\x00/1", "time": 3},
+                            timeout=30)
     _logged(server.log.read_text(), request_id, f"{database}")
+    assert refused.status_code == 400, refused.text
+    message = refused.json()["error"]["message"]
+    assert message.startswith("the store failed (") and "U+0000" in message, message
+    for secret in secrets:
+        assert secret not in refused.text, refused.text
 
 
 def test_the_services_own_refusals_keep_their_words(served_store):
