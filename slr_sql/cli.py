@@ -169,9 +169,41 @@ class SLRGroup(click.Group):
         except RecursionError:
             _err("error: the term is nested too deeply")
             ctx.exit(1)
+        except BrokenPipeError as exc:
+            # the reader of the output left (`slr sql DB ... | head -1`): no word on standard
+            # error (it was "error: BrokenPipeError ... this is a bug in slr_sql"), exit 1 as
+            # Python's own recipe and rich's tables do (`slr ros info BAG | head -1`)
+            if not standard_output_gone():
+                _err(f"error: {error_words(exc)}")
+            ctx.exit(1)
         except Exception as exc:  # SLRError, a database error, or a bug: words, exit 1
             _err(f"error: {error_words(exc)}")
             ctx.exit(1)
+
+
+def standard_output_gone() -> bool:
+    """Whether standard output is a pipe whose reader closed it (``| head`` read its
+    lines). If so, standard output is pointed at the null device, so that the interpreter's
+    last flush of what is buffered finds no closed pipe (it printed "Exception ignored ...
+    BrokenPipeError" after the command had ended).
+
+    >>> standard_output_gone()
+    False
+    """
+    import select
+
+    try:
+        fd = sys.stdout.fileno()
+        poller = select.poll()
+        poller.register(fd, select.POLLOUT)
+        gone = any(events & select.POLLERR for _, events in poller.poll(0))
+    except (OSError, ValueError, AttributeError):
+        return False
+    if gone:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, fd)
+        os.close(null)
+    return gone
 
 
 def strip_full_stop(text: str) -> str:
