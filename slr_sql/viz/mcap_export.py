@@ -331,7 +331,10 @@ def is_slr_export(path: str | Path) -> bool:
     (True, False)
     """
     path = Path(path)
-    if not path.is_file() or path.suffix != ".mcap":
+    try:
+        if not path.is_file() or path.suffix != ".mcap":
+            return False
+    except OSError:   # (a name too long: the bag reader says why)
         return False
     try:
         from mcap.reader import make_reader
