@@ -169,6 +169,12 @@ class SLRGroup(click.Group):
         except RecursionError:
             _err("error: the term is nested too deeply")
             ctx.exit(1)
+        except MemoryError:
+            # an input larger than memory (`slr ingest DB /dev/zero`: one endless line), a
+            # goal that builds too much: no bug of slr_sql, and its message is empty
+            _err("error: out of memory (an input line, a file or an answer larger than this "
+                 "process may hold)")
+            ctx.exit(1)
         except BrokenPipeError as exc:
             # the reader of the output left (`slr sql DB ... | head -1`): no word on standard
             # error (it was "error: BrokenPipeError ... this is a bug in slr_sql"), exit 1 as

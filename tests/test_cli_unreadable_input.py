@@ -79,3 +79,28 @@ def test_a_bag_name_too_long_for_the_file_system_is_said_in_words(tmp_path, comm
     assert result.returncode == 1
     assert "File name too long" in result.stderr or "no such bag" in result.stderr, \
         result.stderr
+
+
+def test_an_input_larger_than_memory_is_said_in_words(tmp_path):
+    """`slr ingest DB /dev/zero` reads one endless line: MemoryError, whose message is
+    empty, was printed as "error: MemoryError:  (this is a bug in slr_sql ...)". The
+    process's address space is bounded here (1.5 GB) so that the test does not take the
+    machine's memory."""
+    import resource
+
+    db = tmp_path / "r.db"
+    with slr_sql.open(db, clock=ManualClock(0.0)) as kb:
+        kb.add("p(1)^1")
+
+    def bounded() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (1_500_000_000, 1_500_000_000))
+
+    result = subprocess.run([sys.executable, "-m", "slr_sql", "ingest", str(db), "/dev/zero"],
+                            capture_output=True, text=True, timeout=120, preexec_fn=bounded,
+                            env={**os.environ, "PYTHONPATH": str(REPO)},
+                            stdin=subprocess.DEVNULL)
+    no_bug(result)
+    assert result.returncode == 1
+    assert "error: out of memory" in result.stderr, result.stderr
+    with slr_sql.open(db, clock=ManualClock(0.0)) as kb:
+        assert kb.query("p(X)^T") == [{"X": 1, "T": 1.0}]
