@@ -174,7 +174,7 @@ class _Counted:
     (``tell``), which a pipe cannot say (``Illegal seek``); here, the bytes written so far.
 
     >>> import io
-    >>> out = _Counted(io.BytesIO()); out.write(b"MCAP"); out.tell()
+    >>> out = _Counted(io.BytesIO()); _ = out.write(b"MCAP"); out.tell()
     4
     """
 
