@@ -169,9 +169,47 @@ class SLRGroup(click.Group):
         except RecursionError:
             _err("error: the term is nested too deeply")
             ctx.exit(1)
+        except MemoryError:
+            # an input larger than memory (`slr ingest DB /dev/zero`: one endless line), a
+            # goal that builds too much: no bug of slr_sql, and its message is empty
+            _err("error: out of memory (an input line, a file or an answer larger than this "
+                 "process may hold)")
+            ctx.exit(1)
+        except BrokenPipeError as exc:
+            # the reader of the output left (`slr sql DB ... | head -1`): no word on standard
+            # error (it was "error: BrokenPipeError ... this is a bug in slr_sql"), exit 1 as
+            # Python's own recipe and rich's tables do (`slr ros info BAG | head -1`)
+            if not standard_output_gone():
+                _err(f"error: {error_words(exc)}")
+            ctx.exit(1)
         except Exception as exc:  # SLRError, a database error, or a bug: words, exit 1
             _err(f"error: {error_words(exc)}")
             ctx.exit(1)
+
+
+def standard_output_gone() -> bool:
+    """Whether standard output is a pipe whose reader closed it (``| head`` read its
+    lines). If so, standard output is pointed at the null device, so that the interpreter's
+    last flush of what is buffered finds no closed pipe (it printed "Exception ignored ...
+    BrokenPipeError" after the command had ended).
+
+    >>> standard_output_gone()
+    False
+    """
+    import select
+
+    try:
+        fd = sys.stdout.fileno()
+        poller = select.poll()
+        poller.register(fd, select.POLLOUT)
+        gone = any(events & select.POLLERR for _, events in poller.poll(0))
+    except (OSError, ValueError, AttributeError):
+        return False
+    if gone:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, fd)
+        os.close(null)
+    return gone
 
 
 def strip_full_stop(text: str) -> str:
@@ -435,6 +473,9 @@ def parse_event_line(line: str) -> str | tuple | None:
 class IngestReport:
     added: int
     bad: list[tuple[int, str]]  # (line number, reason)
+    # reading stopped after this many lines, for this reason (an I/O error of the disk, a
+    # network file system); the lines before it were ingested. None: read to its end.
+    unread: tuple[int, str] | None = None
 
 
 _EMBEDDED_POSITION = re.compile(r"<[a-z]+>:\d+:(\d+): (.*)")
@@ -487,8 +528,25 @@ def _add_batch(kb: KnowledgeBaseAPI, batch: list[tuple[int, Any]], bad: list[tup
     return added
 
 
+class _Unreadable(Exception):
+    """Reading the input failed (an I/O error) after ``lines`` lines."""
+
+    def __init__(self, lines: int, reason: str):
+        super().__init__(reason)
+        self.lines, self.reason = lines, reason
+
+
 def _numbered_lines(handle: Iterable[bytes]) -> Iterator[tuple[int, bytes]]:
-    for lineno, line in enumerate(handle, start=1):
+    lineno = 0
+    lines = iter(handle)
+    while True:
+        try:
+            line = next(lines)
+        except StopIteration:
+            return
+        except OSError as exc:
+            raise _Unreadable(lineno, exc.strerror or str(exc)) from None
+        lineno += 1
         yield lineno, line
 
 
@@ -509,6 +567,7 @@ def ingest_file(kb: KnowledgeBaseAPI, path: str | Any, progress: Any = None) -> 
     bad: list[tuple[int, str]] = []
     added = 0
     batch: list[tuple[int, Any]] = []
+    unread: tuple[int, str] | None = None
     handle = open(path, "rb") if isinstance(path, (str, os.PathLike)) else path
     try:  # decoded line by line: one bad byte costs one line
         for lineno, raw in _numbered_lines(handle):
@@ -530,12 +589,14 @@ def ingest_file(kb: KnowledgeBaseAPI, path: str | Any, progress: Any = None) -> 
             if len(batch) >= INGEST_BATCH:
                 added += _add_batch(kb, batch, bad)
                 batch = []
+    except _Unreadable as exc:   # the lines read go in all the same (what was read is good)
+        unread = (exc.lines, exc.reason)
     finally:
         if handle is not path:
             handle.close()
     added += _add_batch(kb, batch, bad)
     bad.sort()
-    return IngestReport(added, bad)
+    return IngestReport(added, bad, unread)
 
 
 class LineProgress:
@@ -602,7 +663,11 @@ def ingest(db: str, file: str, progress: bool | None) -> None:
         _err(f"{label}:{lineno}: {reason}")
     click.echo(f"ingested {report.added} event{'s' if report.added != 1 else ''}"
                + (f", {len(report.bad)} bad line{'s' if len(report.bad) != 1 else ''}" if report.bad else ""))
-    if report.bad:
+    if report.unread is not None:
+        lines, reason = report.unread
+        _err(f"error: cannot read {label} after line {lines}: {reason} (the events of the "
+             f"lines before it were ingested)")
+    if report.bad or report.unread is not None:
         sys.exit(1)
 
 
@@ -630,6 +695,8 @@ def run(file: str, db: str | None, quiet: bool) -> None:
             text = handle.read()
     except UnicodeDecodeError:
         raise slr_sql.SLRError(f"{file}: not an example file (not UTF-8 text)") from None
+    except OSError as exc:   # an I/O error of the disk, a name too long, ...
+        raise slr_sql.SLRError(f"cannot read {file}: {exc.strerror or exc}") from None
     example = parse_example(text, file)
     if db is not None and os.path.exists(db) and os.path.getsize(db) > 0:
         raise slr_sql.SLRError(f"{shown_location(db)} exists; slr run wants a fresh store (remove it first)")

@@ -6,11 +6,39 @@ from typing import Any
 
 __all__ = ["SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRUnavailable",
            "SLRBusy", "SLRStoreFull", "SLRStoreGone", "SLRServerUnreachable", "SLRCancelled",
-           "SLRStatementTimeout", "EventRejected", "NotAnEvent", "log_failure"]
+           "SLRStatementTimeout", "EventRejected", "NotAnEvent", "log_failure",
+           "naming_the_store"]
 
 
 class SLRError(Exception):
-    """Base class of every error slr_sql raises on purpose."""
+    """Base class of every error slr_sql raises on purpose.
+
+    ``store_location``: the store's location (its file path, a PostgreSQL URL without its
+    password) when the message starts with it, ``store_failure``: True when the store itself
+    failed rather than the call (:func:`naming_the_store`).
+    """
+
+    store_location: str | None = None
+    store_failure = False
+
+
+def naming_the_store(exc: Any, where: Any, failure: bool = False) -> Any:
+    """``exc``, whose message starts with ``where: `` (the store's location: a file path, a
+    PostgreSQL URL's host and database), marked so; ``failure``: the store itself failed,
+    not the call that met it (its file damaged or unreadable, its database server refusing
+    the connection). A client of ``slr serve`` is not told where the server keeps its
+    store: the service answers the message without that start, or a failure (and every
+    condition that may pass, :class:`SLRUnavailable`) as a 5xx in general words with a
+    request id, the message in the server's log.
+
+    >>> e = naming_the_store(SLRError("/srv/robot.db: the file is damaged"), "/srv/robot.db",
+    ...                      failure=True)
+    >>> e.store_location, e.store_failure
+    ('/srv/robot.db', True)
+    """
+    exc.store_location = str(where)
+    exc.store_failure = failure
+    return exc
 
 
 class SLRSyntaxError(SLRError):

@@ -38,7 +38,7 @@ from typing import Any, Iterable
 from .errors import SLRError, SLRTimeout
 from .store.timeline import Statement, TimelineStatements, timeline_statements
 from .store import DatabaseError, quote_identifier
-from .printable import shown
+from .printable import printable_text, shown
 
 __all__ = [
     "timeline", "collect_timeline", "draw_timeline", "save_timeline", "parse_value_spec",
@@ -719,8 +719,10 @@ def collect_timeline(source: Any, types: Iterable[str] | str | None = None, *,
     queries = [] if query is None else [_collect_query(source, query, every, lo, hi, timeout)]
     height, top, bottom = _vertical(height, dpi, len(rows) + len(queries), len(series),
                                     bool(title))
+    # (a title from a file name or an argument that is no UTF-8 holds lone surrogates, which
+    # matplotlib cannot draw: "TypeError: set_text(): incompatible function arguments")
     return Timeline(lo, hi, width, height, dpi, bins, left, right, top, bottom, rows, series,
-                    title or "", origin, queries)
+                    printable_text(title) if title else "", origin, queries)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -28,6 +28,8 @@ interpreter (docs/architecture.md).
 """
 from __future__ import annotations
 
+import hashlib
+
 from functools import lru_cache
 from math import copysign
 from json.encoder import encode_basestring as _quote  # C-accelerated; keeps non-ASCII
@@ -51,6 +53,15 @@ def statement_deadline(store: Any) -> float | None:
     (None, None)
     """
     return None if store is None else store.statement_deadline
+
+
+def _key(v):
+    """What a PostgreSQL index over a text users choose holds of it (``slr_key``,
+    pg_0013): the text when shorter than 64 characters, else the SHA-256 of its UTF-8."""
+    if v is None:
+        return None
+    v = str(v)
+    return v if len(v) < 64 else hashlib.sha256(v.encode("utf-8", "surrogatepass")).hexdigest()
 
 
 def _num(v):
@@ -244,6 +255,7 @@ SQL_FUNCTIONS = SqlFunctions(
     functions=(
         SqlFunction("slr_j", 1, _j, Native.MIGRATION),
         SqlFunction("slr_num", 1, _num, Native.MIGRATION),
+        SqlFunction("slr_key", 1, _key, Native.MIGRATION),
         SqlFunction("slr_ar1", 2, _ar1, Native.INTERPRETER_ONLY),
         SqlFunction("slr_ar2", 3, _ar2, Native.INTERPRETER_ONLY),
         SqlFunction("slr_det", -1, _det, Native.INTERPRETER_ONLY),

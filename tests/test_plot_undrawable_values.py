@@ -125,3 +125,17 @@ def test_the_number_of_samples_is_said_as_a_number_not_300_digits():
     message = str(caught.value)
     assert "asks the goal 2.08e+298 times between" in message, message
     assert len(message) < 200
+
+
+def test_a_store_whose_file_name_is_no_utf8_is_drawn_with_its_name_escaped(tmp_path):
+    """The figure's title is the store's file name; one holding a byte that is no UTF-8
+    (a lone surrogate in Python) made matplotlib raise "TypeError: set_text(): incompatible
+    function arguments" (printed as a bug in slr_sql). So did such a --title."""
+    db = os.fsdecode(os.fsencode(str(tmp_path)) + b"/r\xffobot.db")
+    with slr_sql.open(db, clock=ManualClock(0.0)) as kb:
+        kb.add_many(["p(1)^1", "p(2)^2"])
+    for args in ((), ("--title", os.fsdecode(b"run \xfe"))):
+        result = slr("plot", db, *args, "-o", str(tmp_path / "out.png"))
+        assert result.returncode == 0, result.stderr
+        assert (tmp_path / "out.png").read_bytes()[:4] == b"\x89PNG"
+        (tmp_path / "out.png").unlink()

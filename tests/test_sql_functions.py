@@ -136,3 +136,16 @@ def test_a_builtin_reading_the_machines_deadline_runs_inside_sql(kb):
     assert "engine: sql" in kb.explain("q(N, A)")
     assert kb.query("q(N, A)") == [{"N": 1, "A": slr_sql.Atom("f(1)")}]
     assert calls == [7]
+
+
+def test_slr_key_is_the_same_text_in_python_and_on_postgresql(postgres_url):
+    import psycopg
+
+    from slr_sql.sql_functions import _key
+    values = ["", "cup1", "x" * 63, "x" * 64, "é" * 70, "a\\b" * 30, "日本" * 40, "\\x00" * 20]
+    with slr_sql.open(postgres_url):  # applies the migrations
+        pass
+    with psycopg.connect(postgres_url) as conn:
+        on_server = [conn.execute("SELECT slr.slr_key(%s)", (v,)).fetchone()[0] for v in values]
+    assert on_server == [_key(v) for v in values]
+    assert [len(k) for k in on_server[:4]] == [0, 4, 63, 64] and on_server[3] != "x" * 64

@@ -39,6 +39,7 @@ from typing import Any, Callable
 
 from slr_sql import ManualClock, SLRError
 from slr_sql.api import KnowledgeBaseAPI
+from slr_sql.printable import shorten
 
 from .mapping import IMPORT_CHECKPOINT, BoundEntry, Mapping, MessageError, normalize_topic
 from . import fast_tf
@@ -142,7 +143,11 @@ def open_bag(path: str | Path) -> Any:
     except ImportError as exc:  # pragma: no cover - the extra is part of the test install
         raise BagError(f"reading bags needs rosbags ({exc}): pip install 'slr_sql[ros]'") from None
     path = Path(path)
-    if not path.exists():
+    try:
+        found = path.exists()
+    except OSError as exc:   # a name too long for the file system, ...
+        raise BagError(f"cannot read {shorten(str(path))}: {exc.strerror or exc}") from None
+    if not found:
         raise BagError(f"cannot read {path}: no such file or directory")
     default = ros1_typestore() if path.suffix == ".bag" else get_typestore(Stores.ROS2_KILTED)
     try:

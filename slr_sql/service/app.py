@@ -87,8 +87,83 @@ def _json(obj: Any, status: int = 200, headers: dict | None = None) -> Response:
                     headers=headers)
 
 
-def _error_response(exc: BaseException) -> Response:
+# What a client reads of a failure whose words are the server's own (the store's location, a
+# file path or a PostgreSQL URL's host and database; the database server's words; a bug's
+# text), by its kind: the words go to the server's log under a request id, which the answer
+# gives (public_error_body)
+_GENERAL_WORDS = {
+    "SLRBusy": "the store is busy (another writer held it too long); retry",
+    "SLRStoreFull": "the store is full (its disk or size limit); retry once the server has "
+                    "space",
+    "SLRStoreGone": "the store's file was deleted or replaced while the server had it open",
+    "SLRServerUnreachable": "the store's database server is not reachable; retry",
+    "SLRCancelled": "the store's database server cancelled the statement; retry",
+    "SLRSubscriptionInUse": "the subscription is delivered elsewhere now (open here, or held by "
+                            "another process); retry once that one closes",
+    "SLRStatementTimeout": "the store's database server cancelled the statement at its "
+                           "statement_timeout setting (not the call's timeout=); a retry meets "
+                           "it again",
+    "SLRUnavailable": "the store cannot answer now, a condition that may pass; retry",
+    "InternalError": "internal error",
+}
+
+
+def _said_in_the_log_only(exc: BaseException, status: int) -> bool:
+    """Are ``exc``'s words the server's own (see :func:`public_error_body`)? The service's
+    own refusals (ServiceError: a full queue of pending queries, a body too large) are
+    worded by it for the client and name nothing of the server."""
+    if isinstance(exc, ServiceError):
+        return False
+    return status >= 500 or isinstance(exc, slr_sql.SLRStatementTimeout) or \
+        bool(getattr(exc, "store_failure", False))
+
+
+def public_error_body(exc: BaseException) -> dict:
+    """The JSON error body a client is answered with for ``exc``: :func:`error_body`, but an
+    answer whose words are the server's own -- a 5xx (the store busy, full or gone, its
+    database server unreachable, a bug of the server), a cancel at the database server's
+    statement_timeout, a failure of the store itself (its file damaged: a 500 rather than the
+    400 of a bad request) -- says its kind in general words and a ``request`` id instead. The
+    store's location is not a client's business (any client could read where the server
+    keeps its files); the words, with the id, are one line of the server's log (a bug's with
+    its traceback), for the operator to find. Another message that starts with the store's
+    location (``SLRError.store_location``: a value the store cannot hold) loses that start.
+
+    >>> body = public_error_body(slr_sql.SLRBusy("/srv/robot.db: locked by another writer"))
+    >>> body["error"]["status"], body["error"]["kind"], "/srv" in str(body)
+    (503, 'SLRBusy', False)
+    >>> body["error"]["message"].startswith("the store is busy")
+    True
+    """
     body = error_body(exc)
+    err = body["error"]
+    if not _said_in_the_log_only(exc, err["status"]):
+        where = getattr(exc, "store_location", None)
+        if where and err["message"].startswith(f"{where}: "):
+            # (marked where it was raised: a request's own text is never cut here)
+            err["message"] = err["message"][len(where) + 2:]
+        return body
+    if err["status"] < 500 and not isinstance(exc, SLRTimeout):
+        err["status"] = 500        # the store failed, not the request
+    request_id = uuid.uuid4().hex[:12]
+    words = _GENERAL_WORDS.get(err["kind"]) or next(
+        (_GENERAL_WORDS[c.__name__] for c in type(exc).__mro__ if c.__name__ in _GENERAL_WORDS),
+        "the store failed")
+    err["message"] = f"{words} (request {request_id}: the server's log has the details)"
+    err["request"] = request_id
+    for key in ("line", "column", "source_line", "filename"):
+        err.pop(key, None)
+    # (a template per status and kind: the log's throttle counts each apart)
+    said = f"request %s answered {err['status']}: %s"
+    if err["kind"] == "InternalError":
+        log.error(said, request_id, log_text(exc), exc_info=exc)
+    else:
+        log.warning(said, request_id, log_text(exc))
+    return body
+
+
+def _error_response(exc: BaseException) -> Response:
+    body = public_error_body(exc)
     status = body["error"]["status"]
     headers = {"WWW-Authenticate": 'Bearer realm="slr"'} if status == 401 else None
     wait = retry_after(exc)
@@ -108,16 +183,14 @@ def _classify(exc: BaseException) -> BaseException:
     if condition is not None:
         return condition
     if type(exc).__module__ == "sqlite3":
-        log.error("SQLite error", exc_info=exc)
-        return exc
+        return exc        # (an internal error: public_error_body logs it)
     if isinstance(exc, (TypeError, ValueError, UnicodeError, OverflowError, RecursionError,
                         ArithmeticError)):
         # (one line, its text escaped and bounded: the input is a client's)
         log.warning("input the knowledge base did not take: %s", log_text(exc))
         reason = "too deeply nested" if isinstance(exc, RecursionError) else str(exc)
         return ServiceError(f"bad request: {reason}", kind="BadRequest")
-    log.error("internal error", exc_info=exc)
-    return exc
+    return exc            # (an internal error: public_error_body logs it)
 
 
 def _field(body: dict, name: str, types: type | tuple, *, required: bool = False,
@@ -622,7 +695,7 @@ class _Service:
                 log_failure(log, "PendingQuery.explain", failure)
         exc = pending.exception()
         if exc is not None:
-            body = error_body(_classify(exc))
+            body = public_error_body(_classify(exc))
             body.update(state)
             return body["error"]["status"], body
         state["answers"] = encode_answers(pending.result())
@@ -1303,7 +1376,7 @@ def _event_time(obj: dict, key: str) -> Any:
 
 
 def _rejection(exc: BaseException, index: int | None) -> dict:
-    err = error_body(exc)["error"]
+    err = public_error_body(exc)["error"]
     err["kind"] = "EventRejected"
     err["index"] = index
     if "line" in err:  # a syntax error inside one event: keep the words and where
@@ -1421,7 +1494,7 @@ class _Acks:
 
 
 async def _send_error(websocket: WebSocket, exc: BaseException) -> None:
-    body = error_body(exc)
+    body = public_error_body(exc)
     body["type"] = "error"
     try:
         await websocket.send_text(dumps(body).decode("utf-8"))
@@ -1625,8 +1698,7 @@ def create_app(kb: KnowledgeBase, *, token: str | None = None, limits: Limits | 
         return response
 
     async def internal_error(request: Request, exc: Exception) -> Response:
-        log.error("internal error", exc_info=exc)
-        return _error_response(exc)
+        return _error_response(exc)    # (which logs it)
 
     routes = service.starlette_routes()
     app = Starlette(routes=routes,

@@ -89,7 +89,8 @@ def uvicorn_config(app: Any, limits: Any, *, max_connections: int | None = 1000,
                    log_level: str = "warning", ws_compression: bool = False,
                    shutdown_grace: float = 10.0) -> Any:
     """The uvicorn configuration both ways of serving use: the WebSocket protocol of
-    subscriptions, the C parser of HTTP, no server header, the request body bound.
+    subscriptions, the C parser of HTTP with a bound on the time its headers take (the
+    body's, ``limits.body_timeout``), no server header, the request body bound.
 
     >>> from slr_sql.service.app import Limits, create_app
     >>> with slr_sql.open() as kb:
@@ -99,13 +100,15 @@ def uvicorn_config(app: Any, limits: Any, *, max_connections: int | None = 1000,
     """
     import uvicorn
 
-    from .ws_protocol import SubscriberWebSocketProtocol
+    from .ws_protocol import SubscriberWebSocketProtocol, http_protocol_with_header_timeout
     return uvicorn.Config(app, log_level=log_level, access_log=False, lifespan="off",
                           ws_max_size=limits.max_body, limit_concurrency=max_connections,
                           timeout_keep_alive=30, ssl_keyfile=ssl_keyfile,
                           ssl_certfile=ssl_certfile, server_header=False,
                           ws_per_message_deflate=ws_compression,
-                          ws=SubscriberWebSocketProtocol, http="httptools",
+                          ws=SubscriberWebSocketProtocol,
+                          # httptools, closing a connection whose headers do not come
+                          http=http_protocol_with_header_timeout(limits.body_timeout),
                           loop="asyncio",   # what the WebSocket protocol is tested on
                           # (uvicorn waits with asyncio.wait_for: seconds as a float)
                           timeout_graceful_shutdown=shutdown_grace)  # type: ignore[arg-type]

@@ -293,6 +293,10 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
               show_default=True, metavar="SECONDS",
               help="On SIGINT/SIGTERM, how long requests in flight (a waiting synchronized "
                    "query) may finish before the server stops.")
+@click.option("--request-timeout", default=30.0, type=click.FloatRange(0.001),
+              show_default=True, metavar="SECONDS",
+              help="How long a client may take to send a request's headers, and then its "
+                   "body (HTTP 408); a connection that sends no request is closed after it.")
 @click.option("--busy-timeout", default=DEFAULT_BUSY_TIMEOUT, type=click.FloatRange(0.0),
               show_default=True, metavar="SECONDS",
               help="How long a request waits for another process's lock on DB before it is "
@@ -303,7 +307,7 @@ def serve(db: str, host: str, port: int, token: str | None, max_body: int,
           ssl_keyfile: str | None, ssl_certfile: str | None, ws_compression: bool,
           cache_mib: float, foxglove: bool, foxglove_host: str, foxglove_port: int,
           foxglove_message_max: int,
-          shutdown_grace: float, busy_timeout: float) -> None:
+          shutdown_grace: float, request_timeout: float, busy_timeout: float) -> None:
     """Serve DB to other processes over HTTP/JSON and WebSocket (docs/service.md).
 
     Clients: slr_sql.connect(URL, token=...) or any slr command with the URL in place of DB.
@@ -314,7 +318,7 @@ def serve(db: str, host: str, port: int, token: str | None, max_body: int,
         raise slr_sql.SLRError(f"slr serve needs the service extra ({exc.name} is missing): "
                                f"pip install 'slr_sql[service]'") from None
     limits = Limits(max_body=max_body, max_query_time=max_query_time, max_wait=max_wait,
-                    max_running_queries=max_running_queries)
+                    max_running_queries=max_running_queries, body_timeout=request_timeout)
     run_server(db, host, port, token, limits=limits, max_connections=max_connections,
                ssl_keyfile=ssl_keyfile, ssl_certfile=ssl_certfile,
                ws_compression=ws_compression, cache_mib=cache_mib,

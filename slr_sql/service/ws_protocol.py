@@ -106,3 +106,57 @@ def _tracks_flow(protocol: WebSocketsSansIOProtocol) -> bool:
     uvicorn 0.52.1 on, the floor pyproject.toml sets); without it the app sends through
     ASGI."""
     return all(hasattr(protocol, name) for name in ("writable", "disconnected", "close_sent"))
+
+
+def http_protocol_with_header_timeout(seconds: float) -> type:
+    """uvicorn's HTTP protocol (httptools) closing a connection whose request headers did
+    not arrive within ``seconds`` of its opening, or of the first byte of a later request
+    on it (``slr serve --request-timeout``). uvicorn arms no timer until the headers are
+    complete: a client that opened connections and sent a request's first line, or
+    nothing at all, held each one for as long as it liked, and ``--max-connections`` of
+    them (1000, from any one client) left every other client a 503 for as long as they
+    stayed (a "slowloris"). The body has its own limit (the app's ``body_timeout``), and a
+    connection idle between requests uvicorn's keep-alive timeout.
+
+    >>> protocol = http_protocol_with_header_timeout(30.0)
+    >>> protocol.header_timeout, protocol.__name__
+    (30.0, 'HeaderTimeoutHttpToolsProtocol')
+    """
+    from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
+
+    class HeaderTimeoutHttpToolsProtocol(HttpToolsProtocol):
+        header_timeout = seconds
+        _header_timer: Any = None
+
+        def _arm_header_timer(self) -> None:
+            if self._header_timer is None:
+                self._header_timer = self.loop.call_later(self.header_timeout,
+                                                          self._headers_too_slow)
+
+        def _cancel_header_timer(self) -> None:
+            if self._header_timer is not None:
+                self._header_timer.cancel()
+                self._header_timer = None
+
+        def _headers_too_slow(self) -> None:
+            self._header_timer = None
+            if not self.transport.is_closing():
+                self.transport.close()    # (nothing to answer: no request was read)
+
+        def connection_made(self, transport: Any) -> None:  # type: ignore[override]
+            super().connection_made(transport)
+            self._arm_header_timer()
+
+        def on_message_begin(self) -> None:
+            super().on_message_begin()
+            self._arm_header_timer()
+
+        def on_headers_complete(self) -> None:
+            self._cancel_header_timer()
+            super().on_headers_complete()
+
+        def connection_lost(self, exc: Exception | None) -> None:
+            self._cancel_header_timer()
+            super().connection_lost(exc)
+
+    return HeaderTimeoutHttpToolsProtocol

@@ -36,7 +36,7 @@ from contextlib import contextmanager
 from typing import Any, Callable, Iterable, Iterator
 from urllib.parse import unquote
 
-from ..errors import SLRError, SLRStoreGone, SLRTimeout
+from ..errors import SLRError, SLRStoreGone, SLRTimeout, naming_the_store
 from ..lockorder import ordered_lock
 from .authorizer import READ_ONLY_RESULT_BYTES, READ_ONLY_VALUE_BYTES, SqlGuard, \
     harden_connection
@@ -954,9 +954,15 @@ class Database:
             else "the transaction is rolled back, nothing of it will be written"
         if isinstance(reason, sqlite3.Error):
             error = store_error(reason, self.path, self.busy_timeout, outcome)
-            return error if outcome in str(error) else type(error)(f"{error}; {outcome}")
-        return SLRError(f"{self.path or ':memory:'}: the transaction ended before its end "
-                        f"(a statement ended it); {outcome}")
+            if outcome in str(error):
+                return error
+            longer = type(error)(f"{error}; {outcome}")
+            if error.store_location is None:
+                return longer
+            return naming_the_store(longer, error.store_location, error.store_failure)
+        where = self.path or ":memory:"
+        return naming_the_store(SLRError(f"{where}: the transaction ended before its end (a "
+                                         f"statement ended it); {outcome}"), where)
 
     def _begin(self, timeout: float) -> None:
         """``BEGIN IMMEDIATE``, waiting at most ``timeout`` seconds for another

@@ -32,7 +32,7 @@ from urllib.parse import parse_qsl, urlencode, urlsplit
 
 from ..errors import SLRBusy, SLRCancelled, SLRError, SLRServerUnreachable, SLRStatementTimeout, \
     SLRTimeout, \
-    SLRUnavailable
+    SLRUnavailable, naming_the_store
 from ..lockorder import ordered_lock
 from .connection import Database, DatabaseError, drop_commit_callbacks, in_own_transaction, \
     is_postgres_url, merge_commit_callbacks, run_after_rollback, \
@@ -167,13 +167,14 @@ def _error(exc: BaseException, where: str, busy_timeout: float | None = None,
             not state and isinstance(exc, (psycopg.OperationalError, psycopg.InterfaceError))))
     if not connected:
         if state.startswith("28") or state in ("3D000", "57P04"):   # (no retry helps)
-            return SLRError(f"{where}: the server refused the connection "
-                            f"({_first_line(exc)})")
+            return naming_the_store(SLRError(f"{where}: the server refused the connection "
+                                             f"({_first_line(exc)})"), where, failure=True)
         return SLRServerUnreachable(f"{where}: the server is not reachable "
                                     f"({_first_line(exc)})")
     if isinstance(exc, (psycopg.OperationalError, psycopg.InterfaceError)) and not state:
         # e.g. more parameters than the protocol carries: refused before it was sent
-        return SLRError(f"{where}: the statement cannot be sent ({_first_line(exc)})")
+        return naming_the_store(SLRError(f"{where}: the statement cannot be sent "
+                                         f"({_first_line(exc)})"), where)
     if isinstance(exc, psycopg.DataError) and not state and "NUL" in str(exc):
         # (psycopg refuses it before sending: its words name its own API)
         return PgStatementError("PostgreSQL text cannot hold the character U+0000 (a value "
@@ -672,7 +673,8 @@ def _read_error(exc: BaseException, where: str) -> SLRError:
     >>> _read_error(PgStatementError('relation "j" does not exist'), "db")
     SLRError('db: the store failed (relation "j" does not exist)')
     """
-    return exc if isinstance(exc, SLRError) else SLRError(f"{where}: the store failed ({exc})")
+    return exc if isinstance(exc, SLRError) else \
+        naming_the_store(SLRError(f"{where}: the store failed ({exc})"), where)
 
 
 # The greatest lock_timeout (ms) the server takes: an int setting
@@ -1116,7 +1118,8 @@ class PgDatabase:
             if secret:
                 # libpq quotes a token it cannot decode: the password, when it is one
                 reason = reason.replace(secret, "***")
-            raise SLRError(f"{self.path}: cannot connect ({reason})") from None
+            raise naming_the_store(SLRError(f"{self.path}: cannot connect ({reason})"),
+                                   self.path, failure=True) from None
         self.conn = PgConnection(raw, self.path, busy_timeout)
         self.detached = DetachedStatements(conninfo, schema, self.path, busy_timeout)
         try:

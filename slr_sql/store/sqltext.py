@@ -14,7 +14,7 @@ import sqlite3
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from ..errors import SLRBusy, SLRError, SLRStoreFull
+from ..errors import SLRBusy, SLRError, SLRStoreFull, naming_the_store
 
 __all__ = ["quote_identifier", "qualified_identifier", "sql_literal", "split_sql_script",
            "SAFE_IDENTIFIER", "RESERVED_PREFIXES", "SQL_KEYWORDS", "busy_error", "store_error", "disk_is_full",
@@ -113,10 +113,13 @@ def store_error(exc: BaseException, path: str | None, timeout: float | None = No
         return SLRStoreFull(f"{where}: the disk is full (or the store reached its size limit; "
                             f"{text}); {outcome}: free space and retry")
     if code in (sqlite3.SQLITE_CORRUPT, sqlite3.SQLITE_NOTADB):
-        return SLRError(f"{where}: the file is damaged ({text}); restore it from a copy")
+        return naming_the_store(SLRError(f"{where}: the file is damaged ({text}); restore it "
+                                         f"from a copy"), where, failure=True)
     if code == sqlite3.SQLITE_IOERR:
-        return SLRError(f"{where}: the disk failed to read or write the store ({text})")
-    return SLRError(f"{where}: the store failed ({text})")
+        return naming_the_store(SLRError(f"{where}: the disk failed to read or write the "
+                                         f"store ({text})"), where, failure=True)
+    # (a statement's error: a value the store cannot hold, a table another process dropped)
+    return naming_the_store(SLRError(f"{where}: the store failed ({text})"), where)
 
 
 def file_uri(path: str, mode: str = "ro") -> str:

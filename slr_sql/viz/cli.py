@@ -97,12 +97,30 @@ def export_command(db: str, file: str, types: tuple[str, ...], start: float | No
         if value is not None and not math.isfinite(value):
             raise slr_sql.SLRError(f"{option} must be a finite number of seconds")
     refuse_no_store(db)
+    # (FILE standard output, /dev/stdout: the summary goes to standard error, not into it)
+    summary_to_stderr = _is_standard_output(file)
     with slr_sql.open(db) as kb:
         try:
             report = export_mcap(kb.store, file, start, end, types)
         except OSError as exc:
             raise slr_sql.SLRError(f"cannot write {file}: {exc.strerror or exc}") from None
     for (name, arity), n in sorted(report.per_type.items()):
-        click.echo(f"{printable_name(name)}/{arity}: {n}")
+        click.echo(f"{printable_name(name)}/{arity}: {n}", err=summary_to_stderr)
     click.echo(f"exported {report.messages} event{'s' if report.messages != 1 else ''} "
-               f"to {printable_name(file)}")
+               f"to {printable_name(file)}", err=summary_to_stderr)
+
+
+def _is_standard_output(file: str) -> bool:
+    """Whether ``file`` names the file this process's standard output is (``/dev/stdout``,
+    ``/proc/self/fd/1``, the pipe or terminal it writes to).
+
+    >>> _is_standard_output("/no/such/file")
+    False
+    """
+    import os
+
+    try:
+        named, own = os.stat(file), os.fstat(sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        return False
+    return (named.st_dev, named.st_ino) == (own.st_dev, own.st_ino)

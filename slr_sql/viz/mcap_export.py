@@ -22,6 +22,7 @@ import json
 import math
 import os
 import secrets
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
@@ -138,12 +139,23 @@ def export_mcap(store: Any, path: str | Path, start: float | None = None,
     if start is not None and end is not None and start > end:
         raise SLRError(f"empty time window: --from {start:g} is after --to {end:g}")
     keys = select_types(store.event_types(), types)
-    _check_overwrite(store, path)
+    stream = _check_overwrite(store, path)
     report = ExportReport(str(path))
+    if stream:
+        # a pipe or a terminal (/dev/stdout, a FIFO): written into, as it is (renaming a
+        # file over it replaced the device or the link itself: as root, /dev/full or
+        # /dev/stdout of the whole machine)
+        with open(path, "wb") as out:
+            _write(writer_module, _Counted(out), store, keys, start, end, progress, report)
+            out.flush()
+        return report
     # Written beside ``path`` under a name of its own and renamed over it once whole: an
     # export that stops half way (an error, Ctrl-C, a full disk) leaves no half MCAP file and
-    # an older export of that name as it was.
-    part = _part_path(Path(path))
+    # an older export of that name as it was. A symbolic link's target takes the export, the
+    # link stays.
+    real = Path(os.path.realpath(path))
+    part = _part_path(real)
+    path = real
     try:
         with open(part, "xb") as out:
             _write(writer_module, out, store, keys, start, end, progress, report)
@@ -157,6 +169,34 @@ def export_mcap(store: Any, path: str | Path, start: float | None = None,
             pass
         raise
     return report
+
+
+class _Counted:
+    """A pipe or terminal as the MCAP writer's stream: the writer asks where it is
+    (``tell``), which a pipe cannot say (``Illegal seek``); here, the bytes written so far.
+
+    >>> import io
+    >>> out = _Counted(io.BytesIO()); _ = out.write(b"MCAP"); out.tell()
+    4
+    """
+
+    def __init__(self, raw: Any):
+        self.raw = raw
+        self.written = 0
+
+    def write(self, data: bytes) -> int:
+        self.raw.write(data)
+        self.written += len(data)
+        return len(data)
+
+    def tell(self) -> int:
+        return self.written
+
+    def flush(self) -> None:
+        self.raw.flush()
+
+    def close(self) -> None:
+        self.raw.close()
 
 
 def _part_path(path: Path) -> Path:
@@ -238,16 +278,27 @@ def _write(writer_module: Any, out: Any, store: Any, keys: list, start: float | 
 SQLITE_MAGIC = b"SQLite format 3\x00"
 
 
-def _check_overwrite(store: Any, path: str | Path) -> None:
+def _check_overwrite(store: Any, path: str | Path) -> bool:
     """Refuse (SLRError) to write the MCAP over the store being exported (its file, or the
-    file's WAL or journal; opening it for writing truncates the store) or over any other
-    SQLite database (another store, named where an export was not meant to go)."""
+    file's WAL or journal; opening it for writing truncates the store), over any other
+    SQLite database (another store, named where an export was not meant to go), or over
+    what is no file, pipe or terminal (a disk's device, a socket). True when ``path`` is a
+    pipe or a character device (a terminal, ``/dev/stdout``), which the export is written
+    into rather than replaced; it is not read here (a pipe's read would wait for a writer
+    that never comes)."""
     target = Path(path)
     if target.is_dir():
         raise ExportRefused(f"{path} is a directory: an export is an MCAP file; name a file "
                             f"in it, e.g. {target / 'export.mcap'}")
-    if not target.exists():
-        return
+    try:
+        mode = os.stat(target).st_mode
+    except OSError:
+        return False             # (no such file: made; another reason: writing says why)
+    if stat.S_ISFIFO(mode) or stat.S_ISCHR(mode):
+        return True
+    if not stat.S_ISREG(mode):
+        raise ExportRefused(f"{path} is not a file (a block device or a socket): an export is "
+                            f"an MCAP file; name a file")
     own = getattr(store, "path", None)
     if own is not None and "://" not in str(own):
         for suffix in ("", "-wal", "-shm", "-journal"):
@@ -265,6 +316,7 @@ def _check_overwrite(store: Any, path: str | Path) -> None:
     if head == SQLITE_MAGIC:
         raise ExportRefused(f"{path} is an SQLite database (a store?), not an export: an export is "
                        "an MCAP file; remove the file first or choose another name")
+    return False
 
 
 def is_slr_export(path: str | Path) -> bool:
@@ -281,7 +333,10 @@ def is_slr_export(path: str | Path) -> bool:
     (True, False)
     """
     path = Path(path)
-    if not path.is_file() or path.suffix != ".mcap":
+    try:
+        if not path.is_file() or path.suffix != ".mcap":
+            return False
+    except OSError:   # (a name too long: the bag reader says why)
         return False
     try:
         from mcap.reader import make_reader
