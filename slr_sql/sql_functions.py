@@ -11,6 +11,8 @@ interpreter (docs/architecture.md).
 
 * ``slr_j``: a stored value's form inside JSON (list elements, compound arguments);
 * ``slr_num``: a stored value as a number in arithmetic (raises on anything else);
+* ``slr_key``: what an index over a text users choose holds of it on PostgreSQL (the text
+  under 64 characters, else its SHA-256), so that values of any length are keys;
 * ``slr_ar1``, ``slr_ar2``: Prolog's arithmetic functions (big integers refused, as the
   interpreter refuses them in a 64-bit column);
 * ``slr_det``: a det builtin or ``kb.define`` predicate at a call site of the compiler;
@@ -20,7 +22,7 @@ interpreter (docs/architecture.md).
 * aggregates ``slr_sum``, ``slr_max``, ``slr_min``, ``slr_setof``.
 
 >>> [name for name, arity in SQL_FUNCTIONS.names()][:3]
-['slr_j', 'slr_num', 'slr_ar1']
+['slr_j', 'slr_num', 'slr_key']
 >>> from slr_sql.store import EventStore
 >>> store = EventStore(None); store.install_functions(SQL_FUNCTIONS)
 >>> store.sql("SELECT slr_ar2('+', 1, 2), slr_cep_cmp('<', 1, 2)")[1]
