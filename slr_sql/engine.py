@@ -23,7 +23,8 @@ from .arith import instantiation_error, iso_error, resource_error, type_error
 from .errors import SLREvaluationError, SLRTimeout
 from .program import MAX_RECURSIVE_NEST, Predicate, Program, Slot, Template, build, \
     event_key, split_event_atom
-from .terms import (Atom, Struct, Var, deref, format_atom, format_term, term_vars)
+from .terms import (Atom, Struct, Var, body_problem, deref, format_atom, format_term,
+                    term_vars)
 from .unify import bound_args, copy_term, undo, unify, unify_event_row
 
 __all__ = ["Engine", "Machine", "unify", "copy_term", "PrologThrow"]
@@ -673,7 +674,6 @@ def _unify_pattern(p: Any, t: Any, frame: list, trail: list) -> bool:
     return unify(p, t, trail)
 
 
-_BODY_CONTROL = frozenset(((",", 2), (";", 2), ("->", 2), ("*->", 2), ("\\+", 1)))
 
 
 def check_body(goal: Any) -> None:
@@ -688,18 +688,8 @@ def check_body(goal: Any) -> None:
     ...
     slr_sql.errors.SLREvaluationError: error(type_error(callable,(fail,1)),_)
     """
-    t = deref(goal)
-    if type(t) is not Struct or (t.name, len(t.args)) not in _BODY_CONTROL:
-        return
-    stack = list(t.args)
-    while stack:
-        x = deref(stack.pop())
-        tx = type(x)
-        if tx is Struct:
-            if (x.name, len(x.args)) in _BODY_CONTROL:
-                stack.extend(x.args)
-        elif tx is not Var and (tx is not Atom or x == "[]"):
-            raise type_error("callable", t)
+    if body_problem(goal) is not None:
+        raise type_error("callable", deref(goal))
 
 
 def _add_args(goal: Any, extra: tuple) -> Any:

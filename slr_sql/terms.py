@@ -31,7 +31,8 @@ __all__ = [
     "deref", "make_list", "list_items", "is_ground", "is_callable", "from_python",
     "to_python", "term_vars", "Span", "Clause", "indicator",
     "format_term", "format_atom", "quoted_text", "undrawn_character", "char_escape", "INFIX_OPS", "PREFIX_OPS", "OPERATORS",
-    "MAX_INTEGER_BITS", "int_text", "int_from_text", "factorize_cycles",
+    "MAX_INTEGER_BITS", "int_text", "int_from_text", "factorize_cycles", "BODY_CONTROL",
+    "body_problem",
 ]
 
 # The largest integer slr_sql reads, computes or stores, in bits (2**18 bits: about 78,900
@@ -1266,3 +1267,33 @@ def format_term(t: Any, quoted: bool = True, priority: int = 1200,
         w = _Writer(quoted, deadline, limit, message, numbervars, char_escapes)
         w.write(factorize_cycles(t, deadline), priority)
     return "".join(w.out)
+
+
+# The control constructs whose arguments a called body runs as goals
+BODY_CONTROL = frozenset(((",", 2), (";", 2), ("->", 2), ("*->", 2), ("\\+", 1)))
+
+
+def body_problem(goal: Any, unknown: type | None = None) -> str | None:
+    """What keeps ``goal``, a body to call, from running as it is: ``"uncallable"`` when a
+    goal inside its control constructs is no callable term (a number, ``[]``: Prolog's
+    type_error(callable, Body) before anything runs), ``"unknown"`` when one is of the type
+    ``unknown`` (a compiler's value known only at run time), else None; the first met.
+
+    >>> body_problem(Struct(",", (Atom("fail"), 1))), body_problem(Struct(",", (Atom("a"), Var())))
+    ('uncallable', None)
+    """
+    t = deref(goal)
+    if type(t) is not Struct or (t.name, len(t.args)) not in BODY_CONTROL:
+        return None
+    stack = list(t.args)
+    while stack:
+        x = deref(stack.pop())
+        tx = type(x)
+        if tx is Struct:
+            if (x.name, len(x.args)) in BODY_CONTROL:
+                stack.extend(x.args)
+        elif unknown is not None and tx is unknown:
+            return "unknown"
+        elif tx is not Var and (tx is not Atom or x == "[]"):
+            return "uncallable"
+    return None

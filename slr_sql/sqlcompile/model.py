@@ -10,7 +10,7 @@ import weakref
 from typing import Any
 
 from ..store.dialect import SQLITE
-from ..terms import Atom, Struct, Var, deref, list_items
+from ..terms import Atom, Struct, Var, body_problem, deref, list_items
 
 
 class Fallback(Exception):
@@ -299,7 +299,6 @@ def term_free_vars(t: Any) -> list:
     return out
 
 
-_BODY_CONTROL = frozenset(((",", 2), (";", 2), ("->", 2), ("*->", 2), ("\\+", 1)))
 
 
 def check_called_body(goal: Any) -> None:
@@ -313,20 +312,12 @@ def check_called_body(goal: Any) -> None:
     ...
     slr_sql.sqlcompile.model.Fallback: fail,1 is not callable (type error at run time)
     """
-    t = deref(goal)
-    if type(t) is not Struct or (t.name, len(t.args)) not in _BODY_CONTROL:
-        return
-    stack = list(t.args)
-    while stack:
-        x = deref(stack.pop())
-        tx = type(x)
-        if tx is Struct:
-            if (x.name, len(x.args)) in _BODY_CONTROL:
-                stack.extend(x.args)
-        elif tx is Col:
-            raise Fallback("a goal only known at run time inside a called body")
-        elif tx is not Var and (tx is not Atom or x == "[]"):
-            raise Fallback(f"{format_for_message(t)} is not callable (type error at run time)")
+    problem = body_problem(goal, unknown=Col)
+    if problem == "unknown":
+        raise Fallback("a goal only known at run time inside a called body")
+    if problem == "uncallable":
+        raise Fallback(f"{format_for_message(deref(goal))} is not callable (type error at run "
+                       f"time)")
 
 
 def format_for_message(t: Any) -> str:
