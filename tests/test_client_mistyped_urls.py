@@ -281,6 +281,39 @@ def test_the_client_goes_straight_to_the_url_whatever_the_proxy_variables_say(
             assert sub.get(timeout=DEADLINE)["X"] == slr_sql.Atom("a")
 
 
+def _stop_while_asked(served, path: str, body: dict, counter: str) -> tuple[float, tuple]:
+    """Ask ``body`` of ``path`` from a thread, SIGTERM the server once its /health counts the
+    request (``queries[counter]``), and return the seconds the stop took and the answer."""
+    import signal
+    import threading
+    import time
+
+    outcome: list = []
+
+    def ask() -> None:
+        try:
+            answer = HTTP.post(served.url + path, timeout=120, json=body)
+            outcome.append((answer.status_code, answer.json()))
+        except httpx.HTTPError as exc:
+            outcome.append(type(exc).__name__)
+
+    asking = threading.Thread(target=ask)
+    asking.start()
+    try:
+        deadline = time.monotonic() + 30
+        while HTTP.get(served.url + "/health").json()["queries"][counter] == 0:
+            assert time.monotonic() < deadline, f"the request is not counted {counter}"
+        started = time.monotonic()
+        served.proc.send_signal(signal.SIGTERM)
+        assert served.proc.wait(timeout=60) == 0
+        took = time.monotonic() - started
+    finally:
+        served.stop()
+        asking.join(timeout=60)
+    [answered] = outcome
+    return took, answered
+
+
 @pytest.mark.parametrize("request_body, path", [
     ({"goal": "zz(X)^T", "at": 1e15, "wait": True, "timeout": 3000}, "/query"),
     ({"goal": "zz(X)^T", "at": 1e15, "wait": 60, "timeout": 3000}, "/submit"),
@@ -290,37 +323,11 @@ def test_a_stopping_server_ends_its_waiting_requests_at_once(tmp_path, request_b
     the stop for the whole grace (10 s), then was cancelled, with uvicorn's traceback in the
     log. A stopping server now ends them at once: the query is answered 503 (ask again,
     of the next server), the poll with the state as it is (not done)."""
-    import signal
-    import threading
-    import time
-
     served = ServiceProcess(tmp_path / "w.db")
-    outcome: list = []
-
-    def wait_long() -> None:
-        try:
-            answer = HTTP.post(served.url + path, timeout=120, json=request_body)
-            outcome.append((answer.status_code, answer.json()))
-        except httpx.HTTPError as exc:
-            outcome.append(type(exc).__name__)
-
-    waiter = threading.Thread(target=wait_long)
-    waiter.start()
-    try:
-        deadline = time.monotonic() + 30
-        while HTTP.get(served.url + "/health").json()["queries"]["held"] == 0:
-            assert time.monotonic() < deadline, "the request is not held"
-        started = time.monotonic()
-        served.proc.send_signal(signal.SIGTERM)
-        assert served.proc.wait(timeout=30) == 0
-        took = time.monotonic() - started
-    finally:
-        served.stop()
-        waiter.join(timeout=60)
+    took, (status, body) = _stop_while_asked(served, path, request_body, "held")
     assert took < 5, took          # the grace is 10 s
     log = served.log.read_text()
     assert "Traceback" not in log and "Exception in ASGI" not in log, log
-    [(status, body)] = outcome
     if path == "/query":
         assert status == 503 and "the server is stopping" in body["error"]["message"], body
     else:
@@ -332,38 +339,14 @@ def test_a_request_still_running_when_the_grace_ends_is_answered_503_without_a_t
     """A query still evaluating when the stop's grace ended was cancelled by uvicorn, which
     logged it with a traceback (a line any client could cause). It is now answered 503 (ask
     again) and logged on one line."""
-    import signal
-    import threading
-    import time
-
     # (the query's thread runs on to its timeout, which the process waits for as it exits:
     # 3 s here, --max-query-time at most)
     served = ServiceProcess(tmp_path / "w.db", "--shutdown-grace", "0.5",
                             "--max-query-time", "3")
-    outcome: list = []
-
-    def query_long() -> None:
-        try:
-            answer = HTTP.post(served.url + "/query", timeout=120, json={
-                "goal": "between(1, inf, X), X < 0", "timeout": 3})
-            outcome.append((answer.status_code, answer.json()))
-        except httpx.HTTPError as exc:
-            outcome.append(type(exc).__name__)
-
-    asking = threading.Thread(target=query_long)
-    asking.start()
-    try:
-        deadline = time.monotonic() + 30
-        while HTTP.get(served.url + "/health").json()["queries"]["running"] == 0:
-            assert time.monotonic() < deadline, "the query does not run"
-        served.proc.send_signal(signal.SIGTERM)
-        assert served.proc.wait(timeout=60) == 0
-    finally:
-        served.stop()
-        asking.join(timeout=60)
+    _, (status, body) = _stop_while_asked(
+        served, "/query", {"goal": "between(1, inf, X), X < 0", "timeout": 3}, "running")
     log = served.log.read_text()
     assert "Traceback" not in log and "Exception in ASGI" not in log, log
     assert "POST /query was still running when the server stopped; answered 503" in log, log
-    [(status, body)] = outcome
     assert status == 503 and "the server stopped before the answer was ready" in \
         body["error"]["message"], body
