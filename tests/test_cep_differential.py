@@ -357,6 +357,29 @@ def _event_text(ev):
     return f"{name}({', '.join(repr(a) for a in args)})^{stamp}"
 
 
+def feed(kb, sequence, cuts, marks, one_by_one) -> None:
+    """Add the events of ``sequence`` in its order: one add each when ``one_by_one``, else
+    batches cut at ``cuts``; after each event, when ``marks``, the completeness mark its
+    type has earned (complete up to t once every event of it ending by t has arrived)."""
+    items = []
+    for k, ev in enumerate(sequence):
+        items.append(_event_text(ev))
+        if marks:
+            name = ev[0]
+            t = min([x[3] for x in sequence[k + 1:] if x[0] == name], default=100.0) - 0.5
+            if t > 0:
+                items.append(f"fullyUpdated({name}/{TYPES[name]})^{t}")
+    if one_by_one:
+        for text in items:
+            kb.add(text)
+    else:
+        start = 0
+        for cut in sorted(set(cuts)) + [len(items)]:
+            if start < cut <= len(items):
+                assert kb.add_many(items[start:cut]) == []
+                start = cut
+
+
 def run(rule, events, order, cuts, marks, one_by_one, buffer="", where=None):
     """Add ``events`` in ``order`` (batches cut at ``cuts``), with completeness marks when
     ``marks``; then move the clock past everything. Returns the stored complex events of
@@ -366,28 +389,7 @@ def run(rule, events, order, cuts, marks, one_by_one, buffer="", where=None):
         policy = rule["policy"]
         kb.load(f":- consumption({policy}).\n" + rule_text(rule)
                 + ("\n" + WHERE_PROGRAM if rule.get("interpret") else "") + buffer)
-        sequence = [events[i] for i in order]
-        items = []
-        seen = set()
-        for k, ev in enumerate(sequence):
-            items.append(_event_text(ev))
-            seen.add(k)
-            if marks:
-                # a type is complete up to t once every event of it ending by t has arrived
-                name = ev[0]
-                rest = [x for j, x in enumerate(sequence) if j not in seen and x[0] == name]
-                t = min([x[3] for x in rest], default=100.0) - 0.5
-                if t > 0:
-                    items.append(f"fullyUpdated({name}/{TYPES[name]})^{t}")
-        if one_by_one:
-            for text in items:
-                kb.add(text)
-        else:
-            start = 0
-            for cut in sorted(set(cuts)) + [len(items)]:
-                if start < cut <= len(items):
-                    assert kb.add_many(items[start:cut]) == []
-                    start = cut
+        feed(kb, [events[i] for i in order], cuts, marks, one_by_one)
         clock.set(100.0)
         arity = len(rule["head"])
         if where is not None:

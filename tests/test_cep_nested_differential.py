@@ -338,24 +338,7 @@ def run(text, policy, events, order, cuts, marks, one_by_one, head=("r", 0)):
     clock = ManualClock(0.0)
     with slr_sql.open(clock=clock) as kb:
         kb.load(f":- consumption({policy}).\n" + text)
-        sequence = [events[i] for i in order]
-        items = []
-        for k, ev in enumerate(sequence):
-            items.append(cd._event_text(ev))
-            if marks:
-                rest = [x[3] for x in sequence[k + 1:] if x[0] == ev[0]]
-                t = min(rest, default=100.0) - 0.5
-                if t > 0:
-                    items.append(f"fullyUpdated({ev[0]}/{TYPES[ev[0]]})^{t}")
-        if one_by_one:
-            for item in items:
-                kb.add(item)
-        else:
-            start = 0
-            for cut in sorted(set(cuts)) + [len(items)]:
-                if start < cut <= len(items):
-                    assert kb.add_many(items[start:cut]) == []
-                    start = cut
+        cd.feed(kb, [events[i] for i in order], cuts, marks, one_by_one)
         clock.set(100.0)
         return _rows(kb, *head)
 
