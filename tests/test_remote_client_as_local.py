@@ -110,3 +110,22 @@ def test_a_closed_client_leaves_no_long_poll_behind_and_the_server_stops_at_once
             server.stop()
         assert time.monotonic() - started < 2.0
     assert not [r for r in caplog.records if r.levelname == "ERROR"], caplog.text
+
+
+@pytest.mark.parametrize("ending", ["until", "close"])
+def test_a_subscription_says_it_is_closed_as_a_local_one_does(ending):
+    with local_and_remote() as (local, remote):
+        states = []
+        for kb in (local, remote):
+            sub = kb.subscribe("p(X)^T", since=0, until=12)
+            kb.add("p(1)^11")
+            before = sub.closed
+            if ending == "until":
+                kb.mark_complete("p/1", 12)
+                taken = [sub.get(timeout=10), sub.get(timeout=10)]
+            else:
+                sub.close()
+                taken = []
+            states.append((before, [a and a["X"] for a in taken], sub.closed))
+        assert states[0] == states[1]
+        assert states[0][0] is False and states[0][2] is True

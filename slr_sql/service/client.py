@@ -1305,6 +1305,19 @@ class RemoteSubscription:
             raise error_from_body(message, int(message.get("error", {}).get("status", 400)))
         return message
 
+    @property
+    def closed(self) -> bool:
+        """True once closed, or ended (``until`` reached, an error) and every answer taken:
+        as a local subscription's ``closed``.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); sub = kb.subscribe("p(X)^T")
+        >>> sub.closed, sub.close(), sub.closed
+        (False, None, True)
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
+        return self._done
+
     def __iter__(self) -> "RemoteSubscription":
         return self
 
