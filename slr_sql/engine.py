@@ -20,7 +20,7 @@ from math import copysign
 from typing import Any, Callable, Iterator
 
 from .arith import instantiation_error, iso_error, resource_error, type_error
-from .errors import SLREvaluationError, SLRTimeout
+from .errors import SLRError, SLREvaluationError, SLRTimeout
 from .program import MAX_RECURSIVE_NEST, Predicate, Program, Slot, Template, build, \
     event_key, split_event_atom
 from .terms import (Atom, Struct, Var, body_problem, deref, format_atom, format_term,
@@ -100,6 +100,9 @@ class Engine:
         self.sql_calls: dict = {}
         self.use_sql = True
         self.frames: Any = None  # tf_lookup's frame tree (slr_sql.frames), made on first use
+        # set when the knowledge base closes: a query still running (a server stopping, whose
+        # process waits for its threads) ends at its next check instead of at its timeout
+        self.stopped = False
 
     def machine(self, at: float | None = None, timeout: float | None = None,
                 max_steps: int | None = None) -> "Machine":
@@ -267,6 +270,8 @@ class Machine:
 
     def _check_limits(self, n: int) -> None:
         self.steps += n
+        if self.engine.stopped:
+            raise SLRError("the knowledge base was closed while the query ran")
         if self.max_steps is not None and self.steps > self.max_steps:
             raise SLRTimeout(f"step limit of {self.max_steps} inference steps exceeded")
         if self.deadline is not None and time.monotonic() > self.deadline:

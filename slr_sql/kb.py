@@ -192,12 +192,16 @@ class KnowledgeBase:
     # -- lifecycle ----------------------------------------------------------------------
     def close(self) -> None:
         """Close the store. It never waits for another process (the checkpoint of the WAL
-        on close is ``PASSIVE``: what a reader still needs stays in the WAL).
+        on close is ``PASSIVE``: what a reader still needs stays in the WAL). A query that
+        another thread still evaluates ends at its next check (every 2,048 inference
+        steps) with SLRError "the knowledge base was closed while the query ran".
 
         >>> kb = open(); kb.close(); kb.query("true")
         Traceback (most recent call last):
         slr_sql.errors.SLRError: the event store is closed
         """
+        if getattr(self, "engine", None) is not None:   # queries still running end
+            self.engine.stopped = True
         if getattr(self, "_subscriptions", None) is not None:  # positions, threads
             self._subscriptions.close()
         if getattr(self, "_cep", None) is not None:
