@@ -43,6 +43,13 @@ def post(url: str, path: str, body: dict, timeout: float = 600.0) -> tuple[int, 
         return e.code, json.loads(e.read())
 
 
+def queries_now(url: str) -> dict[str, int]:
+    """The server's queries running and waiting for a slot (``GET /health``)."""
+    with urllib.request.urlopen(url + "/health", timeout=60) as answer:
+        queries = json.loads(answer.read())["queries"]
+    return {"running": queries["running"], "waiting": queries["waiting"]}
+
+
 def timed_add(url: str, i: int) -> float:
     t = time.perf_counter()
     status, _ = post(url, "/add_many", {"events": [f"e({i})^{i}"]})
@@ -81,7 +88,11 @@ def main() -> None:
             threads = [threading.Thread(target=ask) for _ in range(args.queries)]
             for th in threads:
                 th.start()
-            time.sleep(1.0)               # (a benchmark: the queries are all under way)
+            # the adds are timed once every query runs or waits for a slot (/health counts
+            # them): a deadline, not a guess at how long that takes
+            deadline = time.monotonic() + 60
+            while sum(queries_now(url).values()) < args.queries and time.monotonic() < deadline:
+                threading.Event().wait(0.01)
             beside = [timed_add(url, i) for i in range(args.adds)]
             for th in threads:
                 th.join()

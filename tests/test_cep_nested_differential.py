@@ -440,6 +440,14 @@ def test_a_rule_over_complex_events_equals_the_reference(rnd):
 
 # ------------------------------------------------------------------------------ found here
 
+def another_store(backend: str, k: int) -> str:
+    """The ``k``-th store of a test beside ``backend``'s: a schema of its own on PostgreSQL,
+    a file beside it on SQLite."""
+    if backend.startswith("postgresql"):
+        return backend + ("&" if "?" in backend else "?") + f"schema=s{k}"
+    return f"{backend}.{k}"
+
+
 @pytest.mark.parametrize("policy", ["unrestricted", "recent", "chronological"])
 def test_a_one_atom_pattern_with_cnot_is_blocked_by_an_event_inside(backend, policy):
     # recent chose each terminator's partners in nested sub-queries, which also checked the
@@ -448,9 +456,7 @@ def test_a_one_atom_pattern_with_cnot_is_blocked_by_an_event_inside(backend, pol
     stores = itertools.count()
 
     def derived(declarations, steps):
-        k = next(stores)
-        where = (backend + ("&" if "?" in backend else "?") + f"schema=s{k}"
-                 if backend.startswith("postgresql") else f"{backend}.{k}")
+        where = another_store(backend, next(stores))
         clock = ManualClock(0.0)
         with slr_sql.open(where, clock=clock) as kb:
             kb.load(f":- consumption({policy}).\n{declarations}r(X) <- a(X) cnot c(_).")
@@ -501,9 +507,7 @@ def test_a_clock_jump_makes_the_decisions_it_allows_before_time_buffers_prune(ba
     stores = itertools.count()
 
     def derived(clock, steps):
-        k = next(stores)
-        where = (backend + ("&" if "?" in backend else "?") + f"schema=s{k}"
-                 if backend.startswith("postgresql") else f"{backend}.{k}")
+        where = another_store(backend, next(stores))
         with slr_sql.open(where, clock=clock) as kb:
             kb.load(f":- consumption({policy}).\n"
                     ":- max_delay(a/1, 0).\n:- max_delay(b/1, 0).\n:- max_delay(x/0, 0).\n"

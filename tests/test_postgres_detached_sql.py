@@ -139,7 +139,7 @@ def test_a_statement_that_finds_every_connection_busy_is_slr_busy_not_a_timeout(
         deadline = time.monotonic() + 60
         while not _count_waiting_for_lock(postgres_server[1]) == pg_backend.MOST_RUNNING:
             assert time.monotonic() < deadline, "the statements never waited for the lock"
-            time.sleep(0.02)
+            time.sleep(0.02)   # polling the server's sessions; the deadline bounds the wait
         with pytest.raises(slr_sql.SLRBusy) as caught:
             kb.sql("SELECT 1", timeout=0.3)
         assert "did not start" in str(caught.value) and "try again" in str(caught.value)

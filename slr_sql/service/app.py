@@ -369,15 +369,7 @@ async def _unless_the_client_leaves(svc: "_Service", request: Request, pending: 
     and :class:`ClientDisconnect` raised. When the server begins to stop first, the query
     is cancelled and answered 503: the client asks again, of the next server."""
     waiting = asyncio.wrap_future(pending)
-    leaving = asyncio.ensure_future(_disconnected(request.receive))
-    stops = asyncio.ensure_future(svc.stopping.wait())
-    svc.requests_held += 1
-    try:
-        await asyncio.wait({waiting, leaving, stops}, return_when=asyncio.FIRST_COMPLETED)
-    finally:
-        svc.requests_held -= 1
-        leaving.cancel()
-        stops.cancel()
+    await svc.hold(waiting, request.receive)
     if not waiting.done():
         waiting.cancel()          # (cancels the query too)
         pending.cancel()
@@ -655,6 +647,23 @@ class _Service:
                                kind="NotFound")
         return entry
 
+    async def hold(self, answer: "asyncio.Future[Any]", receive: Callable,
+                   timeout: float | None = None) -> bool:
+        """Wait for ``answer`` (a synchronized query's) up to ``timeout`` seconds, or until
+        the client leaves or the server begins to stop, counted in /health's "held"
+        meanwhile; whether the client left."""
+        leaving = asyncio.ensure_future(_disconnected(receive))
+        stopping = asyncio.ensure_future(self.stopping.wait())
+        self.requests_held += 1
+        try:
+            await asyncio.wait({answer, leaving, stopping}, timeout=timeout,
+                               return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            self.requests_held -= 1
+            leaving.cancel()
+            stopping.cancel()
+        return leaving.done() and not leaving.cancelled()
+
     async def _poll(self, entry: "_Submitted", wait: float, receive: Callable) -> Any:
         """The state of ``entry`` once answered or after ``wait`` seconds; a client that
         leaves first (a closed client, a stopping program) is :class:`ClientDisconnect`:
@@ -662,19 +671,9 @@ class _Service:
         server stopping meanwhile waited its grace for it, then cancelled it."""
         wait = min(wait, self.limits.max_poll)
         if wait > 0 and not entry.pending.done():
-            leaving = asyncio.ensure_future(_disconnected(receive))
-            stopping = asyncio.ensure_future(self.stopping.wait())
-            self.requests_held += 1
-            try:
-                # (a stopping server answers the state as it is: the client polls again,
-                # at the next server)
-                await asyncio.wait({entry.waiter, leaving, stopping}, timeout=wait,
-                                   return_when=asyncio.FIRST_COMPLETED)
-            finally:
-                self.requests_held -= 1
-                leaving.cancel()
-                stopping.cancel()
-            if leaving.done() and not leaving.cancelled() and not entry.pending.done():
+            # (a stopping server answers the state as it is: the client polls again, at the
+            # next server)
+            if await self.hold(entry.waiter, receive, wait) and not entry.pending.done():
                 raise ClientDisconnect()
         pending = entry.pending
         state: dict[str, Any] = {"handle": entry.handle, "id": pending.id,
