@@ -214,7 +214,14 @@ def service_server(config: Any) -> Any:
 
 class ServerState(enum.Enum):
     """Where a :class:`BackgroundServer` is in its life: made, serving, or stopped (a
-    stopped server does not start again: make another)."""
+    stopped server does not start again: make another).
+
+    >>> with slr_sql.open() as kb:
+    ...     server = BackgroundServer(kb); made = server.state
+    ...     with server: serving = server.state
+    >>> made, serving, server.state
+    (<ServerState.MADE: 'made'>, <ServerState.SERVING: 'serving'>, <ServerState.STOPPED: 'stopped'>)
+    """
 
     MADE = "made"
     SERVING = "serving"
@@ -255,14 +262,25 @@ class BackgroundServer:
 
     @property
     def url(self) -> str:
-        """``http://HOST:PORT`` of the serving server."""
+        """``http://HOST:PORT`` of the serving server.
+
+        >>> with slr_sql.open() as kb, BackgroundServer(kb, port=0) as server:
+        ...     server.url == f"http://127.0.0.1:{server.port}" and server.port > 0
+        True
+        """
         if self.state is not ServerState.SERVING:
             raise slr_sql.SLRError(f"the server is {self.state.value}, not serving")
         shown = f"[{self.host}]" if ":" in self.host else self.host
         return f"http://{shown}:{self.port}"
 
     def start(self) -> "BackgroundServer":
-        """Listen and serve from a thread; returns the server (serving)."""
+        """Listen and serve from a thread; returns the server (serving).
+
+        >>> kb = slr_sql.open(); server = BackgroundServer(kb).start()
+        >>> with slr_sql.connect(server.url) as remote: remote.health()["status"]
+        'ok'
+        >>> server.stop(); kb.close()
+        """
         if self.state is not ServerState.MADE:
             raise slr_sql.SLRError(f"the server is {self.state.value}: make another to "
                                    f"serve again")
@@ -290,7 +308,14 @@ class BackgroundServer:
 
     def stop(self) -> None:
         """Stop serving: requests in flight get ``stop_grace`` seconds, then the thread ends
-        and the socket closes. The knowledge base stays open (it is the caller's)."""
+        and the socket closes. The knowledge base stays open (it is the caller's). Prompt
+        once nothing is in flight (see :func:`service_server`); stopping again does nothing.
+
+        >>> kb = slr_sql.open(); server = BackgroundServer(kb).start(); server.stop()
+        >>> server.state, kb.query("true"); server.stop()
+        (<ServerState.STOPPED: 'stopped'>, [{}])
+        >>> kb.close()
+        """
         if self.state is not ServerState.SERVING:
             self.state = ServerState.STOPPED
             return
