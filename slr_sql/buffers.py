@@ -37,7 +37,7 @@ from typing import Any, Callable, Iterable
 from .clocks import parse_duration
 from .encoding import INT64_MAX, INT64_MIN, Unencodable, encode
 from .unify import copy_term, undo, unify
-from .errors import SLRError, SLRUnavailable
+from .errors import BufferNotFound, SLRError, SLRUnavailable
 from .lockorder import ordered_lock
 from .host import Host
 from .printable import printable_name, printable_text
@@ -647,7 +647,7 @@ class BufferManager:
                                        f"program at {spec.origin}; it goes with the program")
                     self.uninstall(spec)
                     return
-        raise SLRError(f"no active buffer #{buffer_id}")
+        raise BufferNotFound(f"no active buffer #{buffer_id}")
 
     def infos(self) -> list[BufferInfo]:
         out = []

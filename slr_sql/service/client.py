@@ -423,6 +423,9 @@ class RemoteKnowledgeBase:
         [{'O': Atom('cup1'), 'L': [0.4, 0.1, 0.9], 'S': 3.0, 'E': 3.5}]
         >>> kb.close(); server.stop(); server.kb.close()
         """
+        if not isinstance(name, str):     # (refused in a local knowledge base's words)
+            raise EventRejected(f"add_event: event name must be an atom (a str), not "
+                                f"{shown(name)}")
         _expect(self._post("/add_event", _event_object(name, args, start, end, "")), "added",
                 int)
 
@@ -439,6 +442,7 @@ class RemoteKnowledgeBase:
         ([2], [{'X': 1, 'T': 1.0}, {'X': 2, 'T': 2.0}])
         >>> kb.close(); server.stop(); server.kb.close()
         """
+        _iterable(events, "add_many")
         items: list = []
         given: list = []                # the caller's events (a rejection's .event)
         rejected: list[EventRejected] = []
@@ -875,9 +879,16 @@ class RemoteKnowledgeBase:
         >>> kb = slr_sql.connect(server.url); buffer = kb.add_buffer("p(_)", keep_last=1)
         >>> kb.remove_buffer(buffer); kb.buffers()
         []
+        >>> kb.remove_buffer(buffer)       # (the class a local knowledge base raises)
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.BufferNotFound: no active buffer #1
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        _expect(self._request("DELETE", f"/buffers/{int(buffer_id)}")[1], "removed", int)
+        if type(buffer_id) is not int:     # (refused in a local knowledge base's words)
+            raise SLRError(f"remove_buffer: a buffer id is an integer (kb.buffers() lists "
+                           f"them), not {shown(buffer_id)}")
+        _expect(self._request("DELETE", f"/buffers/{buffer_id}")[1], "removed", int)
 
     @_reads_answer
     def buffers(self) -> list:
@@ -1489,6 +1500,22 @@ def _text(value: Any, what: str) -> str:
     return str(value)
 
 
+def _iterable(value: Any, where: str) -> None:
+    """Refuse ``value`` that no ``for`` can go through (``where``: the method), in the words
+    of a local knowledge base.
+
+    >>> _iterable(5, "add_many")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: add_many takes an iterable of events (SLR text or (name, args, start, end) tuples), not 5
+    """
+    try:
+        iter(value)
+    except TypeError:
+        raise SLRError(f"{where} takes an iterable of events (SLR text or (name, args, start, "
+                       f"end) tuples), not {shown(value)}") from None
+
+
 def _number(value: Any, what: str) -> Any:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SLRError(f"{what} must be a number, not {value!r}")
@@ -1511,7 +1538,9 @@ def _event_object(name: Any, args: Iterable[Any], start: Any, end: Any, where: s
         arg_list = args if type(args) is list else list(args)
     except TypeError:
         raise EventRejected(f"{where}args must be a list of values, not {args!r}") from None
-    obj: dict[str, Any] = {"name": name if isinstance(name, str) else str(name),
+    if not isinstance(name, str):   # (not sent as its text: a local store refuses it too)
+        raise EventRejected(f"{where}event name must be an atom, not {shown(name)}")
+    obj: dict[str, Any] = {"name": name,
                            "args": encode_arguments(arg_list, f"{where}args"),
                            "start": _time(start, f"{where}start")}
     if end is not None:
