@@ -1238,8 +1238,8 @@ async def _sql(svc: "_Service", request: Request) -> Any:
 
 
 @_route("GET", "/stats", "File size, events per type, buffers and their "
-        "counters (what slr stats prints, as data and as text).",
-        response={"path": "string", "rows": "array", "space": "object",
+        "counters (what slr stats prints, as data and as text; not where the store is).",
+        response={"rows": "array", "space": "object",
                   "buffers": "array", "now": "Number", "text": "string"})
 async def _stats(svc: "_Service", request: Request) -> Any:
     return await svc.call(_stats_of, svc.kb)
@@ -1555,14 +1555,15 @@ def _stats_of(kb: KnowledgeBase) -> dict:
     from slr_sql import buffers as history   # the same figures `slr stats` prints
 
     data = history.stats(kb.store)
-    path = str(kb.path or ":memory:")
-    return {"path": path,
-            "rows": [{"type": f"{name}/{arity}", "count": count}
+    # where the server keeps its store (a file path, a PostgreSQL host and database) is not
+    # said to a client, as a 5xx answer does not say it: any holder of the token could read
+    # it here, and it is the operator's business (`slr stats DB` on the server names it)
+    return {"rows": [{"type": f"{name}/{arity}", "count": count}
                      for (name, arity), count in data["rows"].items()],
             "space": encode_plain(data["space"]),
             "buffers": encode_plain(data["buffers"]),
             "now": encode_plain(float(data["now"])),
-            "text": history.format_stats(kb.store, path)}
+            "text": history.format_stats(kb.store, str(kb.path or ""), named=False)}
 
 
 # -- OpenAPI schemas -----------------------------------------------------------------------

@@ -956,13 +956,15 @@ class RemoteKnowledgeBase:
     @_reads_answer
     def stats(self) -> dict:
         """File size, events per type, buffers and counters; ``["text"]`` is what
-        ``slr stats`` prints.
+        ``slr stats`` prints, but for where the store is, which the server does not say.
 
         >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
         >>> kb = slr_sql.connect(server.url); kb.add_many(["p(a)^1", "p(b)^2", "q(1)^1"])
         []
         >>> kb.stats()["rows"]
         [{'type': 'p/1', 'count': 2}, {'type': 'q/1', 'count': 1}]
+        >>> print(kb.stats()["text"].splitlines()[0])
+        store file: ... bytes (... MiB) = ... bytes database + 0 bytes WAL; ... pages of ... bytes, 0 free
         >>> kb.close(); server.stop(); server.kb.close()
         """
         reply = self._get("/stats")
