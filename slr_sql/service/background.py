@@ -193,10 +193,10 @@ def service_server(config: Any) -> Any:
                                        timeout=self.config.timeout_graceful_shutdown)
             except asyncio.TimeoutError:
                 logging.getLogger("uvicorn.error").error(
-                    "Cancel %s running task(s), timeout graceful shutdown exceeded",
-                    len(self.server_state.tasks))
+                    "stopping: %s request(s) still running after the %s s grace are cancelled",
+                    len(self.server_state.tasks), self.config.timeout_graceful_shutdown)
                 for task in self.server_state.tasks:
-                    task.cancel(msg="Task cancelled, timeout graceful shutdown exceeded")
+                    task.cancel(msg="the server's stop grace ended")
             if not self.force_exit:
                 await self.lifespan.shutdown()
 
