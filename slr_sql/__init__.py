@@ -8,7 +8,7 @@
 """
 from .api import KnowledgeBaseAPI, PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import Clock, ManualClock, StreamClock, WallClock
-from .errors import EventRejected, NotAnEvent, SLRBusy, SLRCancelled, SLRError, SLREvaluationError, \
+from .errors import BufferNotFound, EventRejected, NotAnEvent, SLRBusy, SLRCancelled, SLRError, SLREvaluationError, \
     SLRStatementTimeout, SLRStoreFull, SLRServerUnreachable, SLRStoreGone, SLRSubscriptionInUse, \
     SLRSyntaxError, SLRTimeout, SLRUnavailable
 from .kb import KnowledgeBase, open
@@ -35,7 +35,7 @@ __all__ = [
     "ProgramInfo", "Clock", "WallClock", "ManualClock", "StreamClock",
     "SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRBusy", "EventRejected",
     "SLRUnavailable", "SLRStoreFull", "SLRStoreGone", "SLRServerUnreachable", "SLRCancelled",
-    "SLRStatementTimeout", "SLRSubscriptionInUse", "NotAnEvent",
+    "SLRStatementTimeout", "SLRSubscriptionInUse", "NotAnEvent", "BufferNotFound",
     "Atom", "String", "Struct", "Var",
 ]
 __version__ = "0.1.0"

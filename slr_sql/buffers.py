@@ -37,7 +37,7 @@ from typing import Any, Callable, Iterable
 from .clocks import parse_duration
 from .encoding import INT64_MAX, INT64_MIN, Unencodable, encode
 from .unify import copy_term, undo, unify
-from .errors import SLRError, SLRUnavailable
+from .errors import BufferNotFound, SLRError, SLRUnavailable
 from .lockorder import ordered_lock
 from .host import Host
 from .printable import printable_name, printable_text
@@ -647,7 +647,7 @@ class BufferManager:
                                        f"program at {spec.origin}; it goes with the program")
                     self.uninstall(spec)
                     return
-        raise SLRError(f"no active buffer #{buffer_id}")
+        raise BufferNotFound(f"no active buffer #{buffer_id}")
 
     def infos(self) -> list[BufferInfo]:
         out = []
@@ -728,8 +728,10 @@ def stats(store: Any) -> dict[str, Any]:
             "buffers": store.buffer_rows(active_only=False), "now": store.recorded_now()}
 
 
-def format_stats(store: Any, path: str = "") -> str:
-    """The text ``slr stats DB`` prints.
+def format_stats(store: Any, path: str = "", *, named: bool = True) -> str:
+    """The text ``slr stats DB`` prints. ``named=False``: the first line does not say where
+    the store is (``path`` still tells a PostgreSQL store's figures from a file's), as
+    ``slr serve``'s ``GET /stats`` answers it.
 
     >>> import slr_sql
     >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); kb.load("cBuffer(pos(R, _), 1).")
@@ -742,6 +744,8 @@ def format_stats(store: Any, path: str = "") -> str:
       pos/2: 1 stored, 1 pruned
     buffers: 1 active; dropped late/outside: 0; pruned: 1
       #1 cBuffer pos(R,_) last 1 [program, <string>:1]: pruned 1, dropped 0
+    >>> print(format_stats(kb.store, "/srv/robot.db", named=False).splitlines()[0])
+    store file: ... bytes (... MiB) = ... bytes database + 0 bytes WAL; ... pages of ... bytes, 0 free
     """
     from .store import is_postgres_url, shown_location
 
@@ -751,11 +755,11 @@ def format_stats(store: Any, path: str = "") -> str:
     if is_postgres_url(path):
         # (the server's files and WAL are shared by every database on it: what is the
         # store's own is its schema's tables with their indexes)
-        lines = [f"store {shown_location(path)}: {total} bytes ({total / 1048576:.2f} MiB) "
+        lines = [f"store{' ' + shown_location(path) if named else ''}: {total} bytes ({total / 1048576:.2f} MiB) "
                  f"in its schema's tables and indexes ({space['page_count']} pages of "
                  f"{space['page_size']} bytes)"]
     else:
-        lines = [f"file {printable_name(path)}: {total} bytes ({total / 1048576:.2f} MiB) = "
+        lines = [f"{'file ' + printable_name(path) if named else 'store file'}: {total} bytes ({total / 1048576:.2f} MiB) = "
                  f"{space['file_bytes']} bytes database + {space['wal_bytes']} bytes WAL; "
                  f"{space['page_count']} pages of {space['page_size']} bytes, "
                  f"{space['free_pages']} free"]

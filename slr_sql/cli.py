@@ -2075,10 +2075,12 @@ def subscribe(db: str, pattern: str, where: str | None, since: str, until: float
                 try:
                     sys.stdout.write(answer_json(answer) + "\n")
                     sys.stdout.flush()
-                except BrokenPipeError:  # the reader went away (| head): a normal end
-                    os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+                except BrokenPipeError:
+                    # the reader went away (| head): status 1 and no word, as every command
+                    # ends then (SLRGroup.invoke); the answer not written stays unhandled
+                    # (a durable subscription delivers it again)
                     sub.close(ack=False)
-                    break
+                    raise
         finally:
             sub.close()
 

@@ -6,7 +6,7 @@ from typing import Any
 
 __all__ = ["SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRUnavailable",
            "SLRBusy", "SLRStoreFull", "SLRStoreGone", "SLRServerUnreachable", "SLRCancelled",
-           "SLRStatementTimeout", "EventRejected", "NotAnEvent", "log_failure",
+           "SLRStatementTimeout", "EventRejected", "NotAnEvent", "BufferNotFound", "log_failure",
            "naming_the_store"]
 
 
@@ -204,6 +204,16 @@ class NotAnEvent(SLRError):
 
     >>> issubclass(NotAnEvent, SLRError)
     True
+    """
+
+
+class BufferNotFound(SLRError):
+    """No active buffer has the id given to ``remove_buffer``: removed already, or never
+    made (``kb.buffers()`` lists the active ones). The same class locally and from
+    ``slr_sql.connect``'s client; the service answers it with 404.
+
+    >>> issubclass(BufferNotFound, SLRError), str(BufferNotFound("no active buffer #7"))
+    (True, 'no active buffer #7')
     """
 
 

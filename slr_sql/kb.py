@@ -23,7 +23,7 @@ from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .engine import Engine
 from .encoding import NullArgument, event_form_loop
-from .errors import EventRejected, NotAnEvent, SLRError, SLRUnavailable
+from .errors import BufferNotFound, EventRejected, NotAnEvent, SLRError, SLRUnavailable
 from .parser import parse_event_fast, parse_program, parse_term
 from .loader import ProgramLoader
 from .plans import PlanCache, argument_term, instantiate
@@ -393,7 +393,13 @@ class KnowledgeBase:
         >>> kb = open(clock=ManualClock(0)); kb.add_many(["p(1)^1", ("p", [2], 2.0, 2.0)])
         []
         """
-        events = events if type(events) is list else list(events)
+        if type(events) is not list:
+            try:
+                iterator = iter(events)
+            except TypeError:
+                raise SLRError(f"add_many takes an iterable of events (SLR text or (name, args, "
+                               f"start, end) tuples), not {shown(events)}") from None
+            events = list(iterator)
         errors: list[EventRejected] = []
         form = _event_tuples(events)
         if form == "tuples":  # the common bulk case: handed to the store as they are
@@ -772,7 +778,7 @@ class KnowledgeBase:
             raise SLRError(f"remove_buffer: a buffer id is an integer (kb.buffers() lists "
                            f"them), not {shown(buffer_id)}")
         if not -2 ** 63 <= buffer_id < 2 ** 63:
-            raise SLRError(f"no active buffer #{shown(buffer_id)}")
+            raise BufferNotFound(f"no active buffer #{shown(buffer_id)}")
         self._refresh()
         self._buffers.remove_runtime(buffer_id)
 

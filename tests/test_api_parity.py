@@ -224,3 +224,50 @@ def test_every_method_gives_the_same_values_local_and_remote(pair, tmp_path):
     with slr_sql.connect(remote.url) as other:
         assert other.query("true") == [{}]
     assert ran == PROTOCOL_METHODS, PROTOCOL_METHODS - ran
+
+
+# the same condition, met locally and through `slr serve`: the same error class (each was
+# another class, or no error at all, on one side)
+SAME_CONDITION = {
+    # an unknown buffer id: ServiceError (NotFound) remotely, a plain SLRError locally
+    "unknown buffer": (lambda kb: kb.remove_buffer(10 ** 6), "BufferNotFound"),
+    # remotely int("1") was sent (a buffer removed by another id's text), int("x") a ValueError
+    "buffer id given as text": (lambda kb: kb.remove_buffer("x"), "SLRError"),
+    "buffer id that is a bool": (lambda kb: kb.remove_buffer(True), "SLRError"),
+    # remotely the name's str() was stored: an event 5/1 (or None/1) that a local store refuses
+    "event name that is no atom": (lambda kb: kb.add_event(5, [1], start=1.0), "EventRejected"),
+    "event name in a batch that is no atom": (
+        lambda kb: [(e.index, type(e).__name__) for e in kb.add_many([(None, [1], 1.0, 1.0)])],
+        [(0, "EventRejected")]),
+    # locally the boundary's "add_many: TypeError: ...", remotely a bare TypeError
+    "no events to go through": (lambda kb: kb.add_many(5), "SLRError"),
+    # ServiceError (BadRequest, RequestTimeout) remotely, SLRError and SLRTimeout locally
+    "sql naming no table": (lambda kb: kb.sql("SELECT * FROM nosuch"), "SLRError"),
+    "sql running out of its timeout": (lambda kb: kb.sql(
+        "WITH RECURSIVE c(x) AS (SELECT 1 UNION ALL SELECT x + 1 FROM c) SELECT count(*) "
+        "FROM c", timeout=0.2), "SLRTimeout"),
+}
+
+
+@pytest.mark.parametrize("condition", sorted(SAME_CONDITION))
+def test_the_same_condition_is_the_same_error_class_local_and_remote(pair, condition):
+    call, expected = SAME_CONDITION[condition]
+    local, remote = both(pair, call)
+    assert local == expected
+    if condition == "event name in a batch that is no atom":
+        assert pair[1].sql("SELECT name FROM slr_event_types WHERE name IN ('None', '5')")[1] \
+            == []
+
+
+def test_an_unknown_buffer_is_a_404_named_after_its_condition(pair):
+    import httpx
+
+    from slr_sql.service.errors import error_status
+
+    _local, remote = pair
+    response = httpx.delete(f"{remote.url}/buffers/987654")
+    assert response.status_code == 404
+    assert response.json()["error"]["kind"] == "BufferNotFound"
+    assert error_status(slr_sql.BufferNotFound("no active buffer #1")) == 404
+    assert "BufferNotFound" in slr_sql.__all__ and issubclass(slr_sql.BufferNotFound,
+                                                             slr_sql.SLRError)

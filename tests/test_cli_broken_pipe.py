@@ -46,9 +46,26 @@ def first_line_then_leave(*args: str) -> tuple[bytes, int, str]:
     ["sql", "--json", "{db}", "SELECT * FROM p"],
     ["query", "{db}", "p(X, Y)^T"],
     ["query", "--json", "{db}", "p(X, Y)^T"],
+    # (it ended with status 0, as if its --until had been reached)
+    ["subscribe", "{db}", "p(X, Y)^T", "--since", "0"],
 ], ids=lambda args: " ".join(args[:2]))
 def test_a_reader_that_leaves_early_is_no_error_of_slr(many_rows, args):
     line, status, errors = first_line_then_leave(*[a.format(db=many_rows) for a in args])
     assert line.strip(), "nothing printed"
     assert status == 1
     assert errors == "", errors       # no "bug", no "Exception ignored", no traceback
+
+
+def test_a_reader_that_leaves_a_subscription_to_a_server_early_is_no_error_either(tmp_path):
+    from service_helpers import ServiceProcess
+
+    db = tmp_path / "served.db"
+    with slr_sql.open(db, clock=ManualClock(0.0)) as kb:
+        kb.add_many([("p", (i, "x" * 100), float(i), float(i)) for i in range(5000)])
+    with ServiceProcess(db) as server:
+        line, status, errors = first_line_then_leave("subscribe", server.url, "p(X, Y)^T",
+                                                     "--since", "0")
+        assert server.healthy()
+    assert line.strip(), "nothing printed"
+    assert status == 1
+    assert errors == "", errors

@@ -99,3 +99,32 @@ def test_every_module_level_public_function_has_an_example():
             if ">>>" not in (ast.get_docstring(node) or ""):
                 without.append(f"{relative}:{node.lineno} {node.name}")
     assert without == [], "public functions without a docstring example:\n" + "\n".join(without)
+
+
+def test_every_public_class_and_method_of_the_remote_client_has_an_example():
+    """The remote client (``slr_sql.connect``), its errors and the background server show
+    a runnable example on each public class, method and property, as the knowledge base's
+    methods do: a reader of ``RemotePendingQuery`` or ``RemoteWait`` sees a call that works."""
+    import inspect
+
+    from slr_sql.service import background, client, errors
+
+    without = []
+    for module in (client, background, errors):
+        for name in module.__all__:
+            cls = getattr(module, name)
+            if not inspect.isclass(cls):
+                continue
+            members = {name: cls}
+            for attribute, member in vars(cls).items():
+                if attribute.startswith("_"):
+                    continue
+                if isinstance(member, property):
+                    member = member.fget
+                elif isinstance(member, (classmethod, staticmethod)):
+                    member = member.__func__
+                if inspect.isfunction(member):
+                    members[f"{name}.{attribute}"] = member
+            without += [f"{module.__name__}.{shown}" for shown, member in members.items()
+                        if ">>>" not in (member.__doc__ or "")]
+    assert without == [], "without a docstring example:\n" + "\n".join(without)

@@ -46,3 +46,64 @@ def test_a_token_is_asked_of_every_client_and_none_is_refused_beyond_loopback():
         with pytest.raises(slr_sql.SLRError, match="without a token"):
             BackgroundServer(local, host="0.0.0.0")
         assert BackgroundServer(local).state is ServerState.MADE
+
+
+def test_stop_is_prompt_once_nothing_is_in_flight():
+    # uvicorn's serving loop looked at should_exit every 0.1 s and its shutdown paused 0.1 s
+    # and looked for the connections' end every 0.1 s: every stop took 0.1-0.3 s (each of
+    # the client's examples starts and stops a server). The fastest of a few stops, each
+    # after a client's request, is well under one such pause now.
+    import time
+
+    took = []
+    with slr_sql.open(clock=slr_sql.ManualClock(10)) as local:
+        for _ in range(5):
+            server = BackgroundServer(local).start()
+            with slr_sql.connect(server.url) as remote:
+                remote.add("seen(cup1)^2")
+                began = time.monotonic()
+                server.stop()
+                took.append(time.monotonic() - began)
+    assert min(took) < 0.09, took
+
+
+def test_a_request_in_flight_when_stop_is_asked_is_still_answered():
+    # the prompt stop keeps what a stop does for requests in flight: listening ends at
+    # once, the request running gets the grace (stop_grace) and its answer
+    import threading
+    import time
+
+    entered, release = threading.Event(), threading.Event()
+
+    def gate(x):
+        entered.set()
+        release.wait(30)
+        return (1,)
+
+    with slr_sql.open(clock=slr_sql.ManualClock(10)) as local:
+        local.define("gate", 1, gate)
+        server = BackgroundServer(local, stop_grace=30.0).start()
+        url = server.url
+        answers: list = []
+        remote = slr_sql.connect(url)
+        asking = threading.Thread(target=lambda: answers.append(remote.query("gate(X)")))
+        asking.start()
+        assert entered.wait(30), "the query never reached the server"
+        stopping = threading.Thread(target=server.stop)
+        stopping.start()
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:     # until the server listens no more
+            try:
+                httpx.get(url + "/health", timeout=1)
+            except httpx.TransportError:
+                break
+            threading.Event().wait(0.01)
+        else:
+            pytest.fail("the stopping server still listens")
+        assert stopping.is_alive()     # waiting for the request in flight
+        release.set()
+        asking.join(30)
+        stopping.join(30)
+        remote.close()
+        assert answers == [[{"X": 1}]]
+        assert not stopping.is_alive()

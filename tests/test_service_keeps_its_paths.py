@@ -178,3 +178,45 @@ def test_the_services_own_refusals_keep_their_words(served_store):
     assert bad.status_code == 400 and bad.json()["error"]["kind"] == "SLRSyntaxError"
     assert "request" not in bad.json()["error"]
     assert unknown.status_code in (200, 400), unknown.text
+
+
+def _slr_stats(where: str) -> str:
+    import subprocess
+    import sys
+
+    from service_helpers import slr_env
+
+    done = subprocess.run([sys.executable, "-m", "slr_sql", "stats", where], env=slr_env(),
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
+def test_stats_say_the_figures_and_not_where_the_store_is(served_store):
+    """GET /stats answered the store's path to any client past the token, while a 5xx no
+    longer names it: it says the figures without the location, as `slr stats URL` prints
+    them; `slr stats DB` on the server's machine still names its file."""
+    with ServiceProcess(served_store) as server:
+        answer = HTTP.get(server.url + "/stats", timeout=30)
+        remote_text = _slr_stats(server.url)
+    assert answer.status_code == 200, answer.text
+    stats = answer.json()
+    for secret in ("secret-folder", "robot.db"):
+        assert secret not in answer.text and secret not in remote_text
+    assert "path" not in stats and {"type": "p/1", "count": 1} in stats["rows"]
+    assert stats["text"].startswith("store file: ") and "p/1: 1 stored" in stats["text"]
+    assert remote_text.startswith("store file: ") and "p/1: 1 stored" in remote_text
+    assert _slr_stats(str(served_store)).startswith(f"file {served_store}: ")
+
+
+def test_stats_of_a_postgresql_store_name_no_host_or_database(postgres_url, tmp_path):
+    database = re.search(r"/([^/?]+)(\?|$)", postgres_url.split("://", 1)[1]).group(1)
+    folder = re.search(r"host=([^&]+)", postgres_url)
+    with slr_sql.open(postgres_url, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.add("p(1)^1")
+    with ServiceProcess(postgres_url, log=tmp_path / "serve.log") as server:
+        answer = HTTP.get(server.url + "/stats", timeout=30)
+    assert answer.status_code == 200, answer.text
+    for secret in [database] + ([folder.group(1)] if folder else []):
+        assert secret not in answer.text, answer.text
+    assert answer.json()["text"].startswith("store: ") and "p/1: 1 stored" in answer.text

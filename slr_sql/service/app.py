@@ -1202,11 +1202,8 @@ async def _add_buffer(svc: "_Service", request: Request) -> Any:
 async def _remove_buffer(svc: "_Service", request: Request) -> Any:
     buffer_id = request.path_params["buffer_id"]
 
-    def remove() -> None:
-        if not any(getattr(info, "id", None) == buffer_id for info in svc.kb.buffers()):
-            raise ServiceError(f"no active buffer #{buffer_id}", kind="NotFound")
-        svc.kb.remove_buffer(buffer_id)
-    await svc.call(remove)
+    # (an unknown id is the knowledge base's BufferNotFound: 404, as error_status says)
+    await svc.call(svc.kb.remove_buffer, buffer_id)
     return {"removed": buffer_id}
 
 
@@ -1241,8 +1238,8 @@ async def _sql(svc: "_Service", request: Request) -> Any:
 
 
 @_route("GET", "/stats", "File size, events per type, buffers and their "
-        "counters (what slr stats prints, as data and as text).",
-        response={"path": "string", "rows": "array", "space": "object",
+        "counters (what slr stats prints, as data and as text; not where the store is).",
+        response={"rows": "array", "space": "object",
                   "buffers": "array", "now": "Number", "text": "string"})
 async def _stats(svc: "_Service", request: Request) -> Any:
     return await svc.call(_stats_of, svc.kb)
@@ -1538,14 +1535,18 @@ def _read_only_sql(kb: KnowledgeBase, statement: str, params: list | dict,
         raise ServiceError(f"sql over the service is read-only: {refusal}")
     try:
         return kb.sql(statement, params, timeout=timeout)
-    except SLRTimeout:
-        raise ServiceError(f"sql: the statement ran longer than {timeout:g} s",
-                           kind="RequestTimeout") from None
-    except SLRError as exc:
-        if type(exc) is not SLRError:  # SLRBusy and the like keep their kind
+    except SLRTimeout as exc:
+        if type(exc) is not SLRTimeout:   # (SLRStatementTimeout keeps its kind and words)
             raise
-        message = str(exc)
-        raise ServiceError(message if message.startswith("sql: ") else f"sql: {message}") from None
+        # the class kb.sql raises locally (408 all the same), in the service's words
+        raise SLRTimeout(f"sql: the statement ran longer than {timeout:g} s") from None
+    except SLRError as exc:
+        # SLRBusy and the like keep their kind, a message naming the store its mark (the
+        # answer drops or hides the location): the class of kb.sql's error locally
+        if type(exc) is not SLRError or exc.store_location is not None or \
+                str(exc).startswith("sql: "):
+            raise
+        raise SLRError(f"sql: {exc}") from None
 
 
 def _stats_of(kb: KnowledgeBase) -> dict:
@@ -1554,14 +1555,15 @@ def _stats_of(kb: KnowledgeBase) -> dict:
     from slr_sql import buffers as history   # the same figures `slr stats` prints
 
     data = history.stats(kb.store)
-    path = str(kb.path or ":memory:")
-    return {"path": path,
-            "rows": [{"type": f"{name}/{arity}", "count": count}
+    # where the server keeps its store (a file path, a PostgreSQL host and database) is not
+    # said to a client, as a 5xx answer does not say it: any holder of the token could read
+    # it here, and it is the operator's business (`slr stats DB` on the server names it)
+    return {"rows": [{"type": f"{name}/{arity}", "count": count}
                      for (name, arity), count in data["rows"].items()],
             "space": encode_plain(data["space"]),
             "buffers": encode_plain(data["buffers"]),
             "now": encode_plain(float(data["now"])),
-            "text": history.format_stats(kb.store, path)}
+            "text": history.format_stats(kb.store, str(kb.path or ""), named=False)}
 
 
 # -- OpenAPI schemas -----------------------------------------------------------------------
@@ -1613,7 +1615,8 @@ _SCHEMAS: dict[str, Any] = {
     "Error": {"type": "object", "required": ["error"], "properties": {"error": {
         "type": "object", "required": ["kind", "status", "message"], "properties": {
             "kind": {"type": "string", "description": "SLRSyntaxError, SLREvaluationError, "
-                     "SLRTimeout, EventRejected, SLRError, BadRequest, Unauthorized, NotFound, "
+                     "SLRTimeout, EventRejected, SLRError, BufferNotFound, BadRequest, "
+                     "Unauthorized, NotFound, "
                      "MethodNotAllowed, RequestTimeout, PayloadTooLarge, Unavailable"},
             "status": {"type": "integer"}, "message": {"type": "string"},
             "line": {"type": "integer"}, "column": {"type": "integer"},

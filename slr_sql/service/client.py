@@ -225,7 +225,16 @@ def _not_subscribed(url: str, exc: BaseException) -> ServiceError:
 
 
 class RemoteKnowledgeBase:
-    """A knowledge base served by ``slr serve``; see :func:`connect`."""
+    """A knowledge base served by ``slr serve``; see :func:`connect`.
+
+    >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+    >>> with RemoteKnowledgeBase(server.url) as kb:
+    ...     kb.add("p(1)^1"); kb.query("p(X)^T"), kb.url == server.url
+    ([{'X': 1, 'T': 1.0}], True)
+    >>> kb.closed
+    True
+    >>> server.stop(); server.kb.close()
+    """
 
     def __init__(self, url: str, token: str | None = None, *, timeout: float = 60.0):
         try:
@@ -414,6 +423,9 @@ class RemoteKnowledgeBase:
         [{'O': Atom('cup1'), 'L': [0.4, 0.1, 0.9], 'S': 3.0, 'E': 3.5}]
         >>> kb.close(); server.stop(); server.kb.close()
         """
+        if not isinstance(name, str):     # (refused in a local knowledge base's words)
+            raise EventRejected(f"add_event: event name must be an atom (a str), not "
+                                f"{shown(name)}")
         _expect(self._post("/add_event", _event_object(name, args, start, end, "")), "added",
                 int)
 
@@ -430,6 +442,7 @@ class RemoteKnowledgeBase:
         ([2], [{'X': 1, 'T': 1.0}, {'X': 2, 'T': 2.0}])
         >>> kb.close(); server.stop(); server.kb.close()
         """
+        _iterable(events, "add_many")
         items: list = []
         given: list = []                # the caller's events (a rejection's .event)
         rejected: list[EventRejected] = []
@@ -866,9 +879,16 @@ class RemoteKnowledgeBase:
         >>> kb = slr_sql.connect(server.url); buffer = kb.add_buffer("p(_)", keep_last=1)
         >>> kb.remove_buffer(buffer); kb.buffers()
         []
+        >>> kb.remove_buffer(buffer)       # (the class a local knowledge base raises)
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.BufferNotFound: no active buffer #1
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        _expect(self._request("DELETE", f"/buffers/{int(buffer_id)}")[1], "removed", int)
+        if type(buffer_id) is not int:     # (refused in a local knowledge base's words)
+            raise SLRError(f"remove_buffer: a buffer id is an integer (kb.buffers() lists "
+                           f"them), not {shown(buffer_id)}")
+        _expect(self._request("DELETE", f"/buffers/{buffer_id}")[1], "removed", int)
 
     @_reads_answer
     def buffers(self) -> list:
@@ -936,13 +956,15 @@ class RemoteKnowledgeBase:
     @_reads_answer
     def stats(self) -> dict:
         """File size, events per type, buffers and counters; ``["text"]`` is what
-        ``slr stats`` prints.
+        ``slr stats`` prints, but for where the store is, which the server does not say.
 
         >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
         >>> kb = slr_sql.connect(server.url); kb.add_many(["p(a)^1", "p(b)^2", "q(1)^1"])
         []
         >>> kb.stats()["rows"]
         [{'type': 'p/1', 'count': 2}, {'type': 'q/1', 'count': 1}]
+        >>> print(kb.stats()["text"].splitlines()[0])
+        store file: ... bytes (... MiB) = ... bytes database + 0 bytes WAL; ... pages of ... bytes, 0 free
         >>> kb.close(); server.stop(); server.kb.close()
         """
         reply = self._get("/stats")
@@ -999,7 +1021,17 @@ class RemoteKnowledgeBase:
 class RemoteWait:
     """One condition a remote synchronized query waits for (``waiting_for``): event type
     ``type`` (name/arity) complete up to ``time``, and why (``reason``); printed as the
-    local ``Wait`` is."""
+    local ``Wait`` is.
+
+    >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+    >>> kb = slr_sql.connect(server.url); p = kb.submit("p(X)^T", at=20)
+    >>> p.waiting_for
+    [RemoteWait(p/1, 20, 'goal set')]
+    >>> wait = p.waiting_for[0]; print(wait); wait.type, wait.time
+    p/1 complete up to 20 (goal set)
+    ('p/1', 20.0)
+    >>> kb.close(); server.stop(); server.kb.close()
+    """
 
     __slots__ = ("type", "time", "reason", "kind")
 
@@ -1008,6 +1040,12 @@ class RemoteWait:
 
     @classmethod
     def from_json(cls, obj: dict) -> "RemoteWait":
+        """The condition of one item of the server's ``waiting_for`` (a time that is no
+        number is NaN).
+
+        >>> print(RemoteWait.from_json({"type": "obj/3", "time": 12.5, "reason": "goal set"}))
+        obj/3 complete up to 12.5 (goal set)
+        """
         t = decode_plain(obj.get("time"))
         return cls(str(obj.get("type", "")), float(t) if isinstance(t, (int, float)) else
                    float("nan"), str(obj.get("reason", "")), str(obj.get("kind", "complete")))
@@ -1033,7 +1071,16 @@ def _time_text(t: float) -> str:
 class RemotePendingQuery(Future):
     """A synchronized query submitted to the server: a ``concurrent.futures.Future`` whose
     result is the answer list. ``id``, ``goal``, ``at``, ``handle``; ``explain()`` says what
-    it waited for (once answered). ``cancel()`` cancels it on the server too."""
+    it waited for (once answered). ``cancel()`` cancels it on the server too.
+
+    >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+    >>> kb = slr_sql.connect(server.url); kb.add("p(1)^11")
+    >>> p = kb.submit("p(X)^T", at=20, id="q1"); p, p.done()
+    (<RemotePendingQuery 'q1' 'p(X)^T': waiting>, False)
+    >>> kb.mark_complete("p/1", 20); p.result(timeout=5), p
+    ([{'X': 1, 'T': 11.0}], <RemotePendingQuery 'q1' 'p(X)^T': answered>)
+    >>> kb.close(); server.stop(); server.kb.close()
+    """
 
     def __init__(self, client: RemoteKnowledgeBase, handle: str, id: str | None, goal: str,
                  at: float | None):
@@ -1057,7 +1104,18 @@ class RemotePendingQuery(Future):
     def result(self, timeout: float | None = None) -> list[dict[str, Any]]:
         """The answer list, waiting up to ``timeout`` seconds (None: for ever). When the
         wait runs out first: :class:`~slr_sql.SLRTimeout` saying what the query waits for
-        on the server (it goes on waiting: call ``result`` again, or ``cancel()``)."""
+        on the server (it goes on waiting: call ``result`` again, or ``cancel()``).
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); p = kb.submit("p(X)^T", at=20, id="q1")
+        >>> p.result(timeout=0.01)
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRTimeout: synchronized query 'q1' (p(X)^T at 20) was not answerable within 0.01 s: p/1 (goal set) would require its history up to 20, but it is complete only up to 10 (now 10; ...); it is still waiting (call result() again, or cancel())
+        >>> kb.add("p(1)^12"); kb.mark_complete("p/1", 20); p.result(timeout=5)
+        [{'X': 1, 'T': 12.0}]
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         try:
             return super().result(timeout)
         except TimeoutError:
@@ -1083,12 +1141,30 @@ class RemotePendingQuery(Future):
                          f"answered within {timeout:g} s: {what}; {still}")
 
     def explain(self) -> str:
-        """What the query waited for and what released it (the server's explanation)."""
+        """What the query waited for and what released it (the server's explanation).
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); p = kb.submit("p(X)^T", at=20); p.explain()
+        'waiting (the explanation comes with the answer)'
+        >>> kb.mark_complete("p/1", 20); p.result(timeout=5); print(p.explain())
+        []
+        waited 0 s for p/1 complete up to 20 (goal set); released by kb.mark_complete('p/1', 20)
+        answered at clock 10 (0 s after submission, 1 evaluation, by sql)
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         if self._explanation is not None:
             return self._explanation
         return "answered" if self.done() else "waiting (the explanation comes with the answer)"
 
     def cancel(self) -> bool:
+        """Stop waiting, here and on the server; False if it was answered already.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); p = kb.submit("p(X)^T", at=20)
+        >>> p.cancel(), p.cancelled(), kb.pending(), server.kb.pending()
+        (True, True, [], [])
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
         if self.done():
             return False
         self._cancelling = True
@@ -1162,7 +1238,16 @@ class RemoteSubscription:
     at a normal ``close()``, as with a local subscription. Acknowledgements are batched: sent
     once half the server's window (``ack_window`` answers may be unacknowledged) was handled,
     or when the consumer waits for answers and none came within ``ack_delay`` seconds, or at
-    ``close()``."""
+    ``close()``.
+
+    >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+    >>> kb = slr_sql.connect(server.url); sub = kb.subscribe("p(X)^T", since=0, until=12)
+    >>> kb.add_many(["p(1)^11", "p(2)^11.5"]); kb.mark_complete("p/1", 12)
+    []
+    >>> [answer["X"] for answer in sub], sub.closed
+    ([1, 2], True)
+    >>> kb.close(); server.stop(); server.kb.close()
+    """
 
     ack_delay = 0.05
     _join_timeout = 30.0       # close() waits this long for a callback that is running
@@ -1417,6 +1502,22 @@ def _text(value: Any, what: str) -> str:
     return str(value)
 
 
+def _iterable(value: Any, where: str) -> None:
+    """Refuse ``value`` that no ``for`` can go through (``where``: the method), in the words
+    of a local knowledge base.
+
+    >>> _iterable(5, "add_many")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: add_many takes an iterable of events (SLR text or (name, args, start, end) tuples), not 5
+    """
+    try:
+        iter(value)
+    except TypeError:
+        raise SLRError(f"{where} takes an iterable of events (SLR text or (name, args, start, "
+                       f"end) tuples), not {shown(value)}") from None
+
+
 def _number(value: Any, what: str) -> Any:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SLRError(f"{what} must be a number, not {value!r}")
@@ -1439,7 +1540,9 @@ def _event_object(name: Any, args: Iterable[Any], start: Any, end: Any, where: s
         arg_list = args if type(args) is list else list(args)
     except TypeError:
         raise EventRejected(f"{where}args must be a list of values, not {args!r}") from None
-    obj: dict[str, Any] = {"name": name if isinstance(name, str) else str(name),
+    if not isinstance(name, str):   # (not sent as its text: a local store refuses it too)
+        raise EventRejected(f"{where}event name must be an atom, not {shown(name)}")
+    obj: dict[str, Any] = {"name": name,
                            "args": encode_arguments(arg_list, f"{where}args"),
                            "start": _time(start, f"{where}start")}
     if end is not None:

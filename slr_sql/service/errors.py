@@ -19,7 +19,7 @@ from email.utils import parsedate_to_datetime
 from typing import Any
 
 import slr_sql
-from slr_sql import EventRejected, SLRCancelled, SLREvaluationError, SLRError, SLRSyntaxError, \
+from slr_sql import BufferNotFound, EventRejected, SLRCancelled, SLREvaluationError, SLRError, SLRSyntaxError, \
     SLRTimeout, SLRUnavailable
 
 from .encoding import TermError, decode_term, encode_term
@@ -112,9 +112,13 @@ def error_status(exc: BaseException) -> int:
     >>> from slr_sql import SLRTimeout, SLRBusy
     >>> error_status(SLRError("bad goal")), error_status(SLRTimeout("slow")), error_status(SLRBusy("locked"))
     (400, 408, 503)
+    >>> error_status(BufferNotFound("no active buffer #7"))
+    404
     """
     if isinstance(exc, ServiceError):
         return exc.status
+    if isinstance(exc, BufferNotFound):
+        return 404
     if isinstance(exc, SLRTimeout):
         return 408
     if isinstance(exc, SLRUnavailable):   # a lock wait ran out, the disk is full: try again
