@@ -36,3 +36,106 @@ def test_a_query_running_when_the_knowledge_base_closes_ends_with_an_slr_error(t
     [ended] = outcome
     assert isinstance(ended, slr_sql.SLRError) and \
         "the knowledge base was closed while the query ran" in str(ended), ended
+
+
+# A compiled query of one statement: 500 ** 3 rows of the cross join, none an answer (about a
+# minute of either engine's CPU: far past DEADLINE, so a close that waited for it fails)
+EVENTS = 500
+SLOW_BODY = "p(X)^_, p(Y)^_, {started}p(Z)^_, X > Y, Y > Z, Z > X"
+DEADLINE = 30.0   # seconds a wait may take before the test fails
+
+
+def _slow_store(where: str) -> tuple[slr_sql.KnowledgeBase, threading.Event | None]:
+    """A store of EVENTS p/1 events whose rule ``slow`` compiles to one long statement, and
+    on SQLite the event its statement sets as it runs (a defined predicate called from the
+    SQL; on PostgreSQL it would send the rule to the interpreter: None)."""
+    kb = slr_sql.open(where, clock=slr_sql.ManualClock(0.0))
+    kb.add_many([f"p({i})^{i}" for i in range(EVENTS)])
+    started = None
+    if kb.store.python_functions:
+        started = threading.Event()
+        kb.define("started", 0, lambda: started.set() or True)
+    kb.load(f"slow :- {SLOW_BODY.format(started='started, ' if started else '')}.")
+    assert "engine: sql" in kb.explain("slow")
+    return kb, started
+
+
+def _store_pid(kb) -> int | None:
+    """The server process of the store's connection (None on SQLite); asked before the
+    query starts, whose statement holds the connection."""
+    if kb.store.python_functions:
+        return None
+    return kb.sql("SELECT pg_backend_pid()", write=True)[1][0][0]
+
+
+def _wait_until_running(where: str, pid: int | None, started: threading.Event | None,
+                        ended: threading.Event) -> None:
+    """Until the query's statement runs: the event its SQL sets (SQLite), or the server
+    showing the store's connection ``pid`` active for 100 ms (PostgreSQL, polled up to
+    DEADLINE)."""
+    if started is not None:
+        assert started.wait(DEADLINE), "the statement did not start"
+        return
+    import psycopg
+    running = ("SELECT count(*) FROM pg_stat_activity WHERE pid = %s AND state = 'active' "
+               "AND clock_timestamp() - query_start > interval '100 milliseconds'")
+    deadline = time.monotonic() + DEADLINE
+    with psycopg.connect(where, autocommit=True) as admin:
+        while not admin.execute(running, (pid,)).fetchone()[0]:
+            assert not ended.is_set() and time.monotonic() < deadline, \
+                "the statement did not start"
+            ended.wait(0.01)
+
+
+@pytest.mark.parametrize("timeout", [None, 120.0], ids=["no timeout", "a timeout far off"])
+def test_a_compiled_query_running_when_the_knowledge_base_closes_ends_with_an_slr_error(
+        backend, timeout, caplog):
+    """A query compiled to one long statement held the store's lock while SQLite or the
+    server ran it: the close waited for it to end (a minute here; up to --max-query-time for
+    `slr serve`). The close now interrupts (SQLite) or cancels (PostgreSQL) it, and the
+    query ends with the interpreter's words; the store is closed, its events unchanged."""
+    kb, started = _slow_store(backend)
+    outcome: list = []
+    ended = threading.Event()
+
+    def ask() -> None:
+        try:
+            outcome.append(kb.query("slow", timeout=timeout))
+        except BaseException as exc:   # (asserted on below)
+            outcome.append(exc)
+        ended.set()
+
+    pid = _store_pid(kb)
+    # (daemon threads: without the fix the statement runs on, and the close waits for it)
+    threading.Thread(target=ask, daemon=True).start()
+    _wait_until_running(backend, pid, started, ended)
+    closed = threading.Event()
+    threading.Thread(target=lambda: (kb.close(), closed.set()), daemon=True).start()
+    assert ended.wait(DEADLINE), "the query ran on after the close"
+    assert closed.wait(DEADLINE), "the close waited"
+    [error] = outcome
+    assert type(error) is slr_sql.SLRError, repr(error)
+    assert str(error) == "the knowledge base was closed while the query ran"
+    assert not [r for r in caplog.records if r.levelname in ("ERROR", "CRITICAL")
+                or r.exc_info], caplog.text
+    with pytest.raises(slr_sql.SLRError, match="^the event store is closed$"):
+        kb.query("slow", timeout=timeout)
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(0.0)) as again:
+        assert again.query("findall(X, p(X)^_, L), length(L, N)")[0]["N"] == EVENTS
+
+
+def test_a_query_started_once_the_store_stops_its_queries_is_refused_in_words(backend):
+    """Between the start of a close and the store's own close (the parts of the knowledge
+    base closing first), a query's statement no longer starts; the store's other statements
+    (an add's) still run."""
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.load("r(X) :- p(X)^_.")
+        kb.add("p(1)^1")
+        kb.store.stop_queries()
+        with pytest.raises(slr_sql.SLRError) as caught:
+            kb.query("r(X)")
+        assert type(caught.value) is slr_sql.SLRError
+        assert str(caught.value) == "the knowledge base was closed while the query ran"
+        kb.add("p(2)^2")
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(0.0)) as again:
+        assert again.query("r(X)") == [{"X": 1}, {"X": 2}]

@@ -30,9 +30,8 @@ from contextlib import contextmanager, suppress
 from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
-from ..errors import SLRBusy, SLRCancelled, SLRError, SLRServerUnreachable, SLRStatementTimeout, \
-    SLRTimeout, \
-    SLRUnavailable, naming_the_store
+from ..errors import CLOSED_WHILE_RUNNING, SLRBusy, SLRCancelled, SLRError, \
+    SLRServerUnreachable, SLRStatementTimeout, SLRTimeout, SLRUnavailable, naming_the_store
 from ..lockorder import ordered_lock
 from .connection import Database, DatabaseError, drop_commit_callbacks, in_own_transaction, \
     is_postgres_url, merge_commit_callbacks, run_after_rollback, \
@@ -774,6 +773,11 @@ MOST_RUNNING = 4
 # Seconds past its timeout a caller waits for the server to stop the statement itself.
 STOP_GRACE = 0.5
 
+# Seconds stop_queries waits for a query's cancelled statement to end before it cancels it
+# again (doubling up to 2 s), and seconds one cancel request may take
+CANCEL_AGAIN = 0.1
+STOP_CANCEL_TIMEOUT = 5.0
+
 
 # A transaction-control statement, by its first keywords (PostgreSQL's "Transaction
 # Control" commands: COMMIT PREPARED and ROLLBACK PREPARED start as COMMIT and ROLLBACK)
@@ -1110,6 +1114,13 @@ class PgDatabase:
         # a written statement failed in the caller's transaction, which it left aborted: the
         # session advisory locks it may have taken are let go at the transaction's end
         self.session_locks_left = False
+        # set by stop_queries, before a close: a query's statement still running (which holds
+        # the lock the close waits for) is cancelled, and none starts any more
+        self.stopping = False
+        # the thread whose query's statement runs on the store's connection now (None: none),
+        # and the condition its end is told by
+        self.query_thread: int | None = None
+        self.query_ended = threading.Condition(threading.Lock())
         try:
             raw = psycopg.connect(conninfo, autocommit=True)
         except psycopg.Error as exc:
@@ -1356,7 +1367,47 @@ class PgDatabase:
         for stream in list(self.open_streams):
             stream.suspend()
 
+    def stop_queries(self) -> None:
+        """(:meth:`Database.stop_queries`) The statement of a query running on the store's
+        connection is cancelled (``cancel_safe``: a request of its own to the server), again
+        until it has ended -- a cancel that reaches the server before the statement is lost
+        -- and a query's statement started later is refused. Returns once none runs."""
+        psycopg = _psycopg()
+        pause = CANCEL_AGAIN
+        with self.query_ended:
+            self.stopping = True
+            running = self.query_thread
+        while running is not None and running != threading.get_ident():
+            with suppress(psycopg.Error):
+                self.conn.raw.cancel_safe(timeout=STOP_CANCEL_TIMEOUT)
+            with self.query_ended:
+                if self.query_thread is not None:
+                    self.query_ended.wait(pause)
+                running = self.query_thread
+            pause = min(pause * 2, 2.0)
+
+    @contextmanager
+    def _query_statement(self) -> Iterator[None]:
+        """Around a query's statement on the store's connection (the lock held): known to
+        :meth:`stop_queries`, which cancels it; once stopping, refused (and a cancel it met
+        said in the words of a close)."""
+        with self.query_ended:
+            if self.stopping:
+                raise SLRError(CLOSED_WHILE_RUNNING)
+            self.query_thread = threading.get_ident()
+        try:
+            yield
+        except SLRCancelled:
+            if self.stopping:
+                raise SLRError(CLOSED_WHILE_RUNNING) from None
+            raise
+        finally:
+            with self.query_ended:
+                self.query_thread = None
+                self.query_ended.notify_all()
+
     def close(self) -> None:
+        self.stop_queries()
         self.draining.set()
         with self.lock:
             if self.closed:
@@ -1692,60 +1743,68 @@ class PgDatabase:
         # statement_timeout, is its only limit)
         with self.lock:
             self.check_open()
-            deadline = self._outer(deadline)
-            if deadline is None and (self.tx_depth == 0 or not may_fall_back):
-                # (an event rule's statement inside the writer's transaction: a failure
-                # fails the add, so no savepoint round trips)
-                cursor = self.conn.execute(sql, params)
-                return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
-            if deadline is None:
-                # inside a transaction: a statement that fails (the query then goes to the
-                # interpreter) must not abort the caller's transaction
-                self.conn.execute("SAVEPOINT slr_compiled")
-                try:
-                    cursor = self.conn.execute(sql, params)
-                    rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
-                except BaseException:
-                    self.conn.execute("ROLLBACK TO slr_compiled")
-                    self.conn.execute("RELEASE slr_compiled")
-                    raise
-                self.conn.execute("RELEASE slr_compiled")
-                return rows
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise SLRTimeout("query timed out (in its compiled SQL statement)")
-            own = self.tx_depth == 0
-            outer = None
-            if own:
-                self.conn.execute("BEGIN")
-            else:
-                # in the caller's transaction a SET LOCAL outlasts the savepoint's release,
-                # to the transaction's end: the setting in force before (an administrator's,
-                # the session's, the transaction's) is read here and put back before the
-                # release (read in the savepoint's round trip)
-                self.conn.savepoint_later("slr_compiled")
-                outer = self.conn.execute("SHOW statement_timeout").fetchone()[0]
+            if not may_fall_back:
+                return self._run_compiled(sql, params, limit, deadline, may_fall_back)
+            with self._query_statement():   # (a query's: a close cancels it)
+                return self._run_compiled(sql, params, limit, deadline, may_fall_back)
+
+    def _run_compiled(self, sql: str, params: dict, limit: int | None,
+                      deadline: float | None, may_fall_back: bool) -> list[tuple]:
+        """:meth:`run_compiled`, the lock held."""
+        deadline = self._outer(deadline)
+        if deadline is None and (self.tx_depth == 0 or not may_fall_back):
+            # (an event rule's statement inside the writer's transaction: a failure
+            # fails the add, so no savepoint round trips)
+            cursor = self.conn.execute(sql, params)
+            return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+        if deadline is None:
+            # inside a transaction: a statement that fails (the query then goes to the
+            # interpreter) must not abort the caller's transaction
+            self.conn.execute("SAVEPOINT slr_compiled")
             try:
-                self.conn.execute(f"SET LOCAL statement_timeout = {_timeout_ms(left)}")
                 cursor = self.conn.execute(sql, params)
                 rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
-                if not own:
-                    self.conn.execute("SELECT set_config('statement_timeout', ?, true)",
-                                      (outer,))
-                    self.conn.execute("RELEASE slr_compiled")
-            except BaseException as exc:
-                if own:
-                    self.conn.rollback()
-                else:
-                    self.conn.execute("ROLLBACK TO slr_compiled")
-                    self.conn.execute("RELEASE slr_compiled")
-                error = _own_deadline(exc, deadline)
-                if error is exc:
-                    raise
-                raise error from None
-            if own:
-                self.conn.execute("COMMIT")
+            except BaseException:
+                self.conn.execute("ROLLBACK TO slr_compiled")
+                self.conn.execute("RELEASE slr_compiled")
+                raise
+            self.conn.execute("RELEASE slr_compiled")
             return rows
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise SLRTimeout("query timed out (in its compiled SQL statement)")
+        own = self.tx_depth == 0
+        outer = None
+        if own:
+            self.conn.execute("BEGIN")
+        else:
+            # in the caller's transaction a SET LOCAL outlasts the savepoint's release,
+            # to the transaction's end: the setting in force before (an administrator's,
+            # the session's, the transaction's) is read here and put back before the
+            # release (read in the savepoint's round trip)
+            self.conn.savepoint_later("slr_compiled")
+            outer = self.conn.execute("SHOW statement_timeout").fetchone()[0]
+        try:
+            self.conn.execute(f"SET LOCAL statement_timeout = {_timeout_ms(left)}")
+            cursor = self.conn.execute(sql, params)
+            rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+            if not own:
+                self.conn.execute("SELECT set_config('statement_timeout', ?, true)",
+                                  (outer,))
+                self.conn.execute("RELEASE slr_compiled")
+        except BaseException as exc:
+            if own:
+                self.conn.rollback()
+            else:
+                self.conn.execute("ROLLBACK TO slr_compiled")
+                self.conn.execute("RELEASE slr_compiled")
+            error = _own_deadline(exc, deadline)
+            if error is exc:
+                raise
+            raise error from None
+        if own:
+            self.conn.execute("COMMIT")
+        return rows
 
     def run_compiled_many(self, sql: str, rows: list) -> None:
         with self.lock:
