@@ -45,14 +45,15 @@ SLOW_BODY = "p(X)^_, p(Y)^_, {started}p(Z)^_, X > Y, Y > Z, Z > X"
 DEADLINE = 30.0   # seconds a wait may take before the test fails
 
 
-def _slow_store(where: str) -> tuple[slr_sql.KnowledgeBase, threading.Event | None]:
+def _slow_store(where: str, signalled: bool = True
+                ) -> tuple[slr_sql.KnowledgeBase, threading.Event | None]:
     """A store of EVENTS p/1 events whose rule ``slow`` compiles to one long statement, and
-    on SQLite the event its statement sets as it runs (a defined predicate called from the
-    SQL; on PostgreSQL it would send the rule to the interpreter: None)."""
+    (``signalled``) on SQLite the event its statement sets as it runs (a defined predicate
+    called from the SQL; on PostgreSQL it would send the rule to the interpreter: None)."""
     kb = slr_sql.open(where, clock=slr_sql.ManualClock(0.0))
     kb.add_many([f"p({i})^{i}" for i in range(EVENTS)])
     started = None
-    if kb.store.python_functions:
+    if signalled and kb.store.python_functions:
         started = threading.Event()
         kb.define("started", 0, lambda: started.set() or True)
     kb.load(f"slow :- {SLOW_BODY.format(started='started, ' if started else '')}.")
@@ -139,3 +140,49 @@ def test_a_query_started_once_the_store_stops_its_queries_is_refused_in_words(ba
         kb.add("p(2)^2")
     with slr_sql.open(backend, clock=slr_sql.ManualClock(0.0)) as again:
         assert again.query("r(X)") == [{"X": 1}, {"X": 2}]
+
+
+def test_a_stopping_server_ends_a_compiled_query_still_running_after_its_grace(
+        backend, tmp_path):
+    """`slr serve` stopping (SIGTERM) answers a query still running when its grace ends 503
+    and closes the store: a compiled query's statement then ran on to its end (or to
+    --max-query-time) while the process waited for its thread. It now ends with the close,
+    and nothing of it reaches the log as a traceback."""
+    import signal
+
+    import httpx
+    from service_helpers import HTTP, ServiceProcess
+
+    _slow_store(backend, signalled=False)[0].close()
+    served = ServiceProcess(backend, "--shutdown-grace", "0.5", "--max-query-time", "120",
+                            log=tmp_path / "server.log")
+    outcome: list = []
+
+    def ask() -> None:
+        try:
+            answer = HTTP.post(served.url + "/query", timeout=180,
+                               json={"goal": "slow", "timeout": 120})
+            outcome.append((answer.status_code, answer.json()))
+        except httpx.HTTPError as exc:
+            outcome.append(type(exc).__name__)
+
+    asking = threading.Thread(target=ask, daemon=True)
+    asking.start()
+    try:
+        deadline = time.monotonic() + DEADLINE
+        while HTTP.get(served.url + "/health").json()["queries"]["running"] == 0:
+            assert time.monotonic() < deadline, "the query is not counted running"
+        started = time.monotonic()
+        served.proc.send_signal(signal.SIGTERM)
+        assert served.proc.wait(timeout=DEADLINE) == 0
+        took = time.monotonic() - started
+    finally:
+        served.stop()
+        asking.join(DEADLINE)
+    assert took < 10, took
+    [(status, body)] = outcome
+    assert status == 503 and "the server stopped before the answer was ready" in \
+        body["error"]["message"], body
+    log = served.log.read_text()
+    assert "Traceback" not in log and "Exception in ASGI" not in log, log
+    assert "POST /query was still running when the server stopped; answered 503" in log, log
