@@ -186,3 +186,29 @@ def test_a_stopping_server_ends_a_compiled_query_still_running_after_its_grace(
     log = served.log.read_text()
     assert "Traceback" not in log and "Exception in ASGI" not in log, log
     assert "POST /query was still running when the server stopped; answered 503" in log, log
+
+
+def test_a_queries_own_deadline_ends_its_long_compiled_statement(backend, tmp_path):
+    """The other end of a long statement, on both backends: the query's timeout (a compiled
+    goal, a compiled sub-goal the interpreter calls, a synchronized query) and `slr serve`'s
+    --max-query-time for a request without one interrupt (SQLite) or cancel (PostgreSQL) it;
+    the store is free at once afterwards."""
+    from service_helpers import HTTP, ServiceProcess
+
+    kb, _ = _slow_store(backend, signalled=False)
+    with kb:
+        kb.mark_complete("p/1", 1000.0)
+        for ask in (lambda: kb.query("slow", timeout=0.5),
+                    lambda: kb.query("findall(x, slow, L)", timeout=0.5),
+                    lambda: kb.query("slow", at=600.0, wait=True, timeout=0.5)):
+            began = time.monotonic()
+            with pytest.raises(slr_sql.SLRTimeout):
+                ask()
+            assert time.monotonic() - began < DEADLINE
+            assert kb.query("p(X)^_, X > 498") == [{"X": 499}]   # (no statement left running)
+    with ServiceProcess(backend, "--max-query-time", "0.5", log=tmp_path / "server.log") \
+            as served:
+        began = time.monotonic()
+        answer = HTTP.post(served.url + "/query", json={"goal": "slow"}, timeout=DEADLINE)
+        assert answer.status_code == 408 and answer.json()["error"]["kind"] == "SLRTimeout"
+        assert time.monotonic() - began < DEADLINE
