@@ -212,3 +212,56 @@ def test_a_queries_own_deadline_ends_its_long_compiled_statement(backend, tmp_pa
         answer = HTTP.post(served.url + "/query", json={"goal": "slow"}, timeout=DEADLINE)
         assert answer.status_code == 408 and answer.json()["error"]["kind"] == "SLRTimeout"
         assert time.monotonic() - began < DEADLINE
+
+
+def _printed_statement(kb) -> str:
+    """The statement ``slow`` compiles to, as kb.explain prints it (kb.sql runs it as
+    printed: the connection's SQL functions are there)."""
+    lines = kb.explain("slow").splitlines()
+    return "\n".join(line.strip() for line in lines[lines.index("sql:") + 1:])
+
+
+@pytest.mark.parametrize("timeout", [None, 120.0], ids=["no timeout", "a timeout far off"])
+def test_a_read_only_sql_statement_running_when_the_knowledge_base_closes_ends_in_words(
+        backend, timeout, caplog):
+    """kb.sql's read-only statement (slr serve's /sql) ends with the close as a compiled
+    query's does: on SQLite it held the store's lock, which the close waited for; on
+    PostgreSQL it runs on a connection of its own, and its caller waited for its end."""
+    kb, started = _slow_store(backend)
+    statement = _printed_statement(kb)
+    outcome: list = []
+    ended = threading.Event()
+
+    def ask() -> None:
+        try:
+            outcome.append(kb.sql(statement, timeout=timeout))
+        except BaseException as exc:   # (asserted on below)
+            outcome.append(exc)
+        ended.set()
+
+    threading.Thread(target=ask, daemon=True).start()
+    if started is not None:
+        assert started.wait(DEADLINE), "the statement did not start"
+    else:   # (on a connection of its own: the server's view of the database)
+        import psycopg
+        active = ("SELECT count(*) FROM pg_stat_activity WHERE datname = current_database() "
+                  "AND state = 'active' AND left(query, 60) = left(%s, 60)")
+        deadline = time.monotonic() + DEADLINE
+        with psycopg.connect(backend, autocommit=True) as admin:
+            while not admin.execute(active, (statement,)).fetchone()[0]:
+                assert not ended.is_set() and time.monotonic() < deadline, \
+                    "the statement did not start"
+                ended.wait(0.01)
+    closed = threading.Event()
+    threading.Thread(target=lambda: (kb.close(), closed.set()), daemon=True).start()
+    assert ended.wait(DEADLINE), "the statement ran on after the close"
+    assert closed.wait(DEADLINE), "the close waited"
+    [error] = outcome
+    assert type(error) is slr_sql.SLRError, repr(error)
+    assert str(error) == "the knowledge base was closed while the query ran"
+    assert not [r for r in caplog.records if r.levelname in ("ERROR", "CRITICAL")
+                or r.exc_info], caplog.text
+    if started is None:   # the server's statement was cancelled, not left to run on
+        with psycopg.connect(backend, autocommit=True) as admin:
+            while admin.execute(active, (statement,)).fetchone()[0]:
+                assert time.monotonic() < deadline + DEADLINE, "the statement runs on"

@@ -930,6 +930,20 @@ def _leave_nothing(raw: Any) -> None:
     raw.execute("ROLLBACK; SELECT pg_advisory_unlock_all()")   # (one round trip)
 
 
+class _DetachedStatement:
+    """One statement of :class:`DetachedStatements` while it runs: its connection (once it
+    has one), the event its caller waits for, and what ended the wait early (the caller
+    gave up at its timeout, or the store stopped its queries)."""
+
+    __slots__ = ("raw", "finished", "abandoned", "stopped")
+
+    def __init__(self) -> None:
+        self.raw: Any = None
+        self.finished = threading.Event()
+        self.abandoned = False
+        self.stopped = False
+
+
 class DetachedStatements:
     """The read-only statements of ``kb.sql`` outside a transaction, each on a connection of
     its own in a thread of its own: the store's connection and lock are never held by them
@@ -937,7 +951,8 @@ class DetachedStatements:
     timeout (plus :data:`STOP_GRACE`) has passed even if the server has not stopped the
     statement yet. The abandoned statement's thread closes its connection when the server
     is done; at most :data:`MOST_ABANDONED` may be abandoned at once. One idle connection
-    is kept for the next statement."""
+    is kept for the next statement. :meth:`stop` (a close is coming) ends the callers
+    still waiting at once and cancels their statements."""
 
     def __init__(self, conninfo: str, schema: str, where: str, busy_timeout: float):
         self.conninfo = conninfo
@@ -948,6 +963,8 @@ class DetachedStatements:
         self.idle: Any = None          # a psycopg connection ready for the next statement
         self.abandoned = 0
         self.closed = False
+        self.stopped = False           # stop(): no statement starts any more
+        self.running: set[_DetachedStatement] = set()
         # a slot per statement running on a connection of its own (MOST_RUNNING at most)
         self.slots = threading.BoundedSemaphore(MOST_RUNNING)
 
@@ -964,13 +981,19 @@ class DetachedStatements:
             raise
         return raw
 
+    def _refuse_if_ended(self) -> None:
+        """(the lock held) The store's words once it stopped its queries or closed."""
+        if self.closed:
+            raise SLRError("the event store is closed")
+        if self.stopped:
+            raise SLRError(CLOSED_WHILE_RUNNING)
+
     def run(self, statement: str, bound: Any,
             timeout: float | None) -> tuple[list[str], list[tuple]]:
         """Run one read-only ``statement`` (already in psycopg's style; ``bound``: its
         parameters or None) and return ``(column names, rows)``."""
         with self.lock:
-            if self.closed:
-                raise SLRError("the event store is closed")
+            self._refuse_if_ended()
             if self.abandoned >= MOST_ABANDONED:
                 raise SLRUnavailable(
                     f"{self.where}: {self.abandoned} earlier SQL statements still run on the "
@@ -984,16 +1007,22 @@ class DetachedStatements:
             raise SLRBusy(f"{self.where}: the {MOST_RUNNING} connections that run read-only "
                           f"SQL statements were all busy for the {timeout:g} s this one could "
                           f"wait; it did not start (try again)")
+        one = _DetachedStatement()
         with self.lock:
             raw, self.idle = self.idle, None
-            if self.closed:
+            try:
+                self._refuse_if_ended()
+            except SLRError:
                 self.slots.release()
-                raise SLRError("the event store is closed")
+                if raw is not None:
+                    with suppress(Exception):
+                        raw.close()
+                raise
+            self.running.add(one)
+            one.raw = raw
         if deadline is not None:   # (what is left of it; a statement_timeout of 0 is none)
             timeout = max(0.001, deadline - time.monotonic())
         outcome: dict[str, Any] = {}
-        finished = threading.Event()
-        state = {"abandoned": False}
 
         def work() -> None:
             nonlocal raw
@@ -1001,6 +1030,8 @@ class DetachedStatements:
             try:
                 if raw is None:
                     raw = self._connect()
+                    with self.lock:
+                        one.raw = raw   # (stop cancels its statement from now on)
                     raw.execute("BEGIN READ ONLY")
                 else:
                     try:
@@ -1013,6 +1044,8 @@ class DetachedStatements:
                             raw.close()
                         raw = None
                         raw = self._connect()
+                        with self.lock:
+                            one.raw = raw
                         raw.execute("BEGIN READ ONLY")
                 try:
                     if timeout is not None:
@@ -1031,33 +1064,53 @@ class DetachedStatements:
                 outcome["error"] = exc
             finally:
                 with self.lock:
-                    if state["abandoned"]:
+                    self.running.discard(one)
+                    if one.abandoned:
                         self.abandoned -= 1
                     keep = (raw is not None and _connected(raw) and not self.closed
-                            and self.idle is None and "value" in outcome)
+                            and not self.stopped and self.idle is None
+                            and "value" in outcome)
                     if keep:
                         self.idle = raw
                 if not keep and raw is not None:
                     with suppress(Exception):
                         raw.close()
                 self.slots.release()
-                finished.set()
+                one.finished.set()
 
         threading.Thread(target=work, name="slr-sql-statement", daemon=True).start()
-        if not finished.wait(None if timeout is None else timeout + STOP_GRACE):
+        if not one.finished.wait(None if timeout is None else timeout + STOP_GRACE):
             with self.lock:
-                if not finished.is_set():
-                    state["abandoned"] = True
+                if not one.finished.is_set():
+                    one.abandoned = True
                     self.abandoned += 1
-            if state["abandoned"]:
+            if one.abandoned:
                 raise SLRTimeout(
                     f"query timed out (the server had not stopped the statement "
                     f"{timeout + STOP_GRACE:g} s after it began; it is left to finish on "
                     f"its own connection)")
-            finished.wait()
-        if "error" in outcome:
-            raise outcome["error"]
-        return outcome["value"]
+            one.finished.wait()
+        if "value" in outcome:
+            return outcome["value"]
+        if one.stopped:   # (ended by stop(), or the server's cancel it sent)
+            raise SLRError(CLOSED_WHILE_RUNNING)
+        raise outcome["error"]
+
+    def stop(self) -> None:
+        """End the statements running now, a close coming: each caller gets SLRError
+        "the knowledge base was closed while the query ran" at once, each statement is
+        cancelled on the server (``cancel_safe``; one the cancel misses runs on to its end
+        on its own connection, as one abandoned at its timeout), and none starts any more."""
+        with self.lock:
+            self.stopped = True
+            running = [(one, one.raw) for one in self.running]
+            for one, _ in running:
+                one.stopped = True
+        for one, raw in running:
+            if raw is not None:
+                with suppress(Exception):   # (its thread may be closing it meanwhile)
+                    raw.cancel_safe(timeout=STOP_CANCEL_TIMEOUT)
+            one.finished.set()
 
     def close(self) -> None:
         """Close the idle connection; a running statement's thread closes its own."""
@@ -1368,12 +1421,16 @@ class PgDatabase:
             stream.suspend()
 
     def stop_queries(self) -> None:
-        """(:meth:`Database.stop_queries`) The statement of a query running on the store's
-        connection is cancelled (``cancel_safe``: a request of its own to the server), again
-        until it has ended -- a cancel that reaches the server before the statement is lost
-        -- and a query's statement started later is refused. Returns once none runs."""
+        """(:meth:`Database.stop_queries`) The statement of a query (a compiled query's, a
+        read-only ``kb.sql``'s) running on the store's connection is cancelled
+        (``cancel_safe``: a request of its own to the server), again until it has ended -- a
+        cancel that reaches the server before the statement is lost -- and a query's
+        statement started later is refused; the read-only ``kb.sql`` statements running on
+        connections of their own end too (:meth:`DetachedStatements.stop`). Returns once no
+        query's statement runs on the store's connection."""
         psycopg = _psycopg()
         pause = CANCEL_AGAIN
+        self.detached.stop()   # (kb.sql's statements on connections of their own)
         with self.query_ended:
             self.stopping = True
             running = self.query_thread
@@ -1554,10 +1611,11 @@ class PgDatabase:
         with self.lock:
             self.check_open()
             own, raw, deadline = self._raw_statement(timeout)
-            try:
-                return self._read_only(raw, own, query, params, timeout)
-            except _psycopg().Error as exc:
-                raise self._raw_statement_error(exc, raw, deadline) from None
+            with self._query_statement():   # (a close cancels it)
+                try:
+                    return self._read_only(raw, own, query, params, timeout)
+                except _psycopg().Error as exc:
+                    raise self._raw_statement_error(exc, raw, deadline) from None
 
     def _raw_statement(self, timeout: float | None) -> tuple[bool, Any, float | None]:
         """For one statement of :meth:`sql` on the store's connection (the lock held):
