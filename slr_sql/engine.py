@@ -268,9 +268,16 @@ class Machine:
             raise SLRTimeout(f"query timed out after {self.timeout} s "
                              f"({self.steps} inference steps)")
 
+    def _in_own_transaction(self) -> bool:
+        """Whether this thread is inside a transaction of the store: a goal evaluated there
+        (an event rule's where goal deciding in its add) is part of a write, which a close
+        waits for instead of ending it."""
+        events = self.engine.events
+        return bool(getattr(events, "in_transaction_here", False))
+
     def _check_limits(self, n: int) -> None:
         self.steps += n
-        if self.engine.stopped:
+        if self.engine.stopped and not self._in_own_transaction():
             raise SLRError(CLOSED_WHILE_RUNNING)
         if self.max_steps is not None and self.steps > self.max_steps:
             raise SLRTimeout(f"step limit of {self.max_steps} inference steps exceeded")

@@ -196,7 +196,8 @@ class KnowledgeBase:
         another thread still evaluates ends at its next check (every 2,048 inference
         steps), and a statement of a compiled query at once (interrupted on SQLite,
         cancelled on PostgreSQL), with SLRError "the knowledge base was closed while the
-        query ran"; an add still running is waited for.
+        query ran". A transaction still running is waited for, what it evaluates included
+        (an add, and the event rules' ``where`` goals deciding in it).
 
         >>> kb = open(); kb.close(); kb.query("true")
         Traceback (most recent call last):

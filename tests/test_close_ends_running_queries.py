@@ -265,3 +265,37 @@ def test_a_read_only_sql_statement_running_when_the_knowledge_base_closes_ends_i
         with psycopg.connect(backend, autocommit=True) as admin:
             while admin.execute(active, (statement,)).fetchone()[0]:
                 assert time.monotonic() < deadline + DEADLINE, "the statement runs on"
+
+
+def test_an_event_rule_deciding_in_its_add_when_the_knowledge_base_closes_decides_as_before(
+        backend):
+    """A close waits for a transaction, the goals evaluated inside it included: an event
+    rule's `where` goal deciding in its add is part of that write. Ended by the close like a
+    query, it counted as the rule's error and rejected the match, a decision the close made
+    (and stored, since the add then committed)."""
+    kb = slr_sql.open(backend, clock=slr_sql.ManualClock(0.0))
+    kb.add_many([f"p({i})^{i}" for i in range(300)])
+    kb.mark_complete("p/1", 5000.0)
+    deciding = threading.Event()
+    kb.define("deciding", 0, lambda: deciding.set() or True)
+    kb.load("r(X) <- a(X) where (deciding, aggregate_all(count, (p(Y)^_, p(Z)^_, Y > Z), N), "
+            "N > X).")
+    added = threading.Event()
+    # (what the add itself says is not asserted: its stages after the commit may meet the
+    # closed store)
+    threading.Thread(target=lambda: (_ignore_errors(lambda: kb.add("a(1)^1000")),
+                                     added.set()), daemon=True).start()
+    assert deciding.wait(DEADLINE), "the where goal was not asked"
+    closed = threading.Event()
+    threading.Thread(target=lambda: (kb.close(), closed.set()), daemon=True).start()
+    assert closed.wait(DEADLINE) and added.wait(DEADLINE)
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(0.0)) as again:
+        assert again.query("a(X)^T") == [{"X": 1, "T": 1000.0}]
+        assert again.query("r(X)^T") == [{"X": 1, "T": 1000.0}]
+
+
+def _ignore_errors(call) -> None:
+    try:
+        call()
+    except slr_sql.SLRError:
+        pass

@@ -680,8 +680,10 @@ class Database:
         connection now or start later with SLRError "the knowledge base was closed while
         the query ran", at the next check of their progress handler (every
         :data:`STOP_CHECK_INSTRUCTIONS` virtual machine instructions): a close is coming,
-        which would otherwise wait for them to end. Writes are left to end (a close never
-        cuts one). Called without the lock, from any thread; :meth:`close` calls it first.
+        which would otherwise wait for them to end. A transaction is left to end, the
+        statements inside it included (a close never cuts a write, nor an event rule's
+        ``where`` goal deciding in its add). Called without the lock, from any thread;
+        :meth:`close` calls it first.
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None); s.stop_queries(); s.run_compiled("SELECT 1", {})
@@ -1093,7 +1095,7 @@ class Database:
             conn.set_authorizer(guard.read_only)
             longest = conn.setlimit(sqlite3.SQLITE_LIMIT_LENGTH, READ_ONLY_VALUE_BYTES)
             try:
-                with self._deadline(deadline, "the SQL statement", stops=True):
+                with self._deadline(deadline, "the SQL statement", stops=not self.tx_depth):
                     cursor = conn.execute(query, bound_parameters(params))
                     columns = [d[0] for d in cursor.description] if cursor.description else []
                     return columns, _bounded_rows(cursor)
@@ -1277,7 +1279,7 @@ class Database:
         statement's intervals on from where its previous run left off).
         ``may_fall_back``: the caller answers with the interpreter when the statement
         fails, so a failure must leave the caller's transaction usable (SQLite's does); it
-        is a query's statement, which :meth:`stop_queries` ends.
+        is a query's statement, which :meth:`stop_queries` ends outside a transaction.
 
         >>> from slr_sql.store import EventStore
         >>> EventStore(None).run_compiled("SELECT :a + 1", {"a": 1})
@@ -1290,11 +1292,14 @@ class Database:
         """
         with self.lock:
             self.check_open()
-            if may_fall_back and self.stopping:
+            # (inside a transaction it is part of a write -- an event rule's where goal
+            # deciding in its add -- which a close waits for)
+            stops = may_fall_back and not self.tx_depth
+            if stops and self.stopping:
                 raise SLRError(CLOSED_WHILE_RUNNING)
             try:
                 with self._deadline(deadline, "its compiled SQL statement", instructions,
-                                    stops=may_fall_back):
+                                    stops=stops):
                     cursor = self.conn.execute(sql, params)
                     try:
                         return cursor.fetchall() if limit is None else cursor.fetchmany(limit)

@@ -1421,13 +1421,13 @@ class PgDatabase:
             stream.suspend()
 
     def stop_queries(self) -> None:
-        """(:meth:`Database.stop_queries`) The statement of a query (a compiled query's, a
-        read-only ``kb.sql``'s) running on the store's connection is cancelled
-        (``cancel_safe``: a request of its own to the server), again until it has ended -- a
-        cancel that reaches the server before the statement is lost -- and a query's
-        statement started later is refused; the read-only ``kb.sql`` statements running on
-        connections of their own end too (:meth:`DetachedStatements.stop`). Returns once no
-        query's statement runs on the store's connection."""
+        """(:meth:`Database.stop_queries`) The statement of a compiled query running on the
+        store's connection outside a transaction is cancelled (``cancel_safe``: a request of
+        its own to the server), again until it has ended -- a cancel that reaches the server
+        before the statement is lost -- and one started later is refused; the read-only
+        ``kb.sql`` statements running on connections of their own end too
+        (:meth:`DetachedStatements.stop`). Returns once no query's statement runs on the
+        store's connection."""
         psycopg = _psycopg()
         pause = CANCEL_AGAIN
         self.detached.stop()   # (kb.sql's statements on connections of their own)
@@ -1611,11 +1611,10 @@ class PgDatabase:
         with self.lock:
             self.check_open()
             own, raw, deadline = self._raw_statement(timeout)
-            with self._query_statement():   # (a close cancels it)
-                try:
-                    return self._read_only(raw, own, query, params, timeout)
-                except _psycopg().Error as exc:
-                    raise self._raw_statement_error(exc, raw, deadline) from None
+            try:
+                return self._read_only(raw, own, query, params, timeout)
+            except _psycopg().Error as exc:
+                raise self._raw_statement_error(exc, raw, deadline) from None
 
     def _raw_statement(self, timeout: float | None) -> tuple[bool, Any, float | None]:
         """For one statement of :meth:`sql` on the store's connection (the lock held):
@@ -1801,7 +1800,9 @@ class PgDatabase:
         # statement_timeout, is its only limit)
         with self.lock:
             self.check_open()
-            if not may_fall_back:
+            if not may_fall_back or self.tx_depth:
+                # (inside a transaction it is part of a write -- an event rule's where goal
+                # deciding in its add -- which a close waits for)
                 return self._run_compiled(sql, params, limit, deadline, may_fall_back)
             with self._query_statement():   # (a query's: a close cancels it)
                 return self._run_compiled(sql, params, limit, deadline, may_fall_back)
