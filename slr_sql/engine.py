@@ -20,7 +20,7 @@ from math import copysign
 from typing import Any, Callable, Iterator
 
 from .arith import instantiation_error, iso_error, resource_error, type_error
-from .errors import SLRError, SLREvaluationError, SLRTimeout
+from .errors import CLOSED_WHILE_RUNNING, SLRError, SLREvaluationError, SLRTimeout
 from .program import MAX_RECURSIVE_NEST, Predicate, Program, Slot, Template, build, \
     event_key, split_event_atom
 from .terms import (Atom, Struct, Var, body_problem, deref, format_atom, format_term,
@@ -268,10 +268,17 @@ class Machine:
             raise SLRTimeout(f"query timed out after {self.timeout} s "
                              f"({self.steps} inference steps)")
 
+    def _in_own_transaction(self) -> bool:
+        """Whether this thread is inside a transaction of the store: a goal evaluated there
+        (an event rule's where goal deciding in its add) is part of a write, which a close
+        waits for instead of ending it."""
+        events = self.engine.events
+        return bool(getattr(events, "in_transaction_here", False))
+
     def _check_limits(self, n: int) -> None:
         self.steps += n
-        if self.engine.stopped:
-            raise SLRError("the knowledge base was closed while the query ran")
+        if self.engine.stopped and not self._in_own_transaction():
+            raise SLRError(CLOSED_WHILE_RUNNING)
         if self.max_steps is not None and self.steps > self.max_steps:
             raise SLRTimeout(f"step limit of {self.max_steps} inference steps exceeded")
         if self.deadline is not None and time.monotonic() > self.deadline:

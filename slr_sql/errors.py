@@ -7,7 +7,12 @@ from typing import Any
 __all__ = ["SLRError", "SLRSyntaxError", "SLREvaluationError", "SLRTimeout", "SLRUnavailable",
            "SLRBusy", "SLRStoreFull", "SLRStoreGone", "SLRServerUnreachable", "SLRCancelled",
            "SLRStatementTimeout", "EventRejected", "NotAnEvent", "BufferNotFound", "log_failure",
-           "naming_the_store"]
+           "naming_the_store", "CLOSED_WHILE_RUNNING"]
+
+# The words of the SLRError a query still running when its knowledge base closes ends with:
+# the interpreter's at its next check, a compiled statement's interrupted (SQLite) or
+# cancelled (PostgreSQL) by the close
+CLOSED_WHILE_RUNNING = "the knowledge base was closed while the query ran"
 
 
 class SLRError(Exception):

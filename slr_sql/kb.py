@@ -194,7 +194,10 @@ class KnowledgeBase:
         """Close the store. It never waits for another process (the checkpoint of the WAL
         on close is ``PASSIVE``: what a reader still needs stays in the WAL). A query that
         another thread still evaluates ends at its next check (every 2,048 inference
-        steps) with SLRError "the knowledge base was closed while the query ran".
+        steps), and a statement of a compiled query at once (interrupted on SQLite,
+        cancelled on PostgreSQL), with SLRError "the knowledge base was closed while the
+        query ran". A transaction still running is waited for, what it evaluates included
+        (an add, and the event rules' ``where`` goals deciding in it).
 
         >>> kb = open(); kb.close(); kb.query("true")
         Traceback (most recent call last):
@@ -202,6 +205,10 @@ class KnowledgeBase:
         """
         if getattr(self, "engine", None) is not None:   # queries still running end
             self.engine.stopped = True
+        if getattr(self, "store", None) is not None:
+            # (before the parts close: their closing may wait for the store's lock, which a
+            # query's statement holds while it runs)
+            self.store.stop_queries()
         if getattr(self, "_subscriptions", None) is not None:  # positions, threads
             self._subscriptions.close()
         if getattr(self, "_cep", None) is not None:

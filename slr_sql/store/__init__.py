@@ -280,6 +280,10 @@ class EventStore:
     def schema_version(self) -> int:
         return self._db.schema_version()
 
+    @_doc(Database.stop_queries)
+    def stop_queries(self) -> None:
+        self._db.stop_queries()
+
     @_doc(Database.close)
     def close(self) -> None:
         self._db.close()

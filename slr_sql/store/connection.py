@@ -36,7 +36,7 @@ from contextlib import contextmanager
 from typing import Any, Callable, Iterable, Iterator
 from urllib.parse import unquote
 
-from ..errors import SLRError, SLRStoreGone, SLRTimeout, naming_the_store
+from ..errors import CLOSED_WHILE_RUNNING, SLRError, SLRStoreGone, SLRTimeout, naming_the_store
 from ..lockorder import ordered_lock
 from .authorizer import READ_ONLY_RESULT_BYTES, READ_ONLY_VALUE_BYTES, SqlGuard, \
     harden_connection
@@ -64,6 +64,11 @@ CACHE_SIZE_KIB = 65536  # PRAGMA cache_size of the store's connection (64 MiB)
 # enough for any ordinary transaction of another writer (milliseconds) and a checkpoint,
 # short enough that a process stuck holding the lock is reported rather than waited for.
 DEFAULT_BUSY_TIMEOUT = 5.0
+# How often (virtual machine instructions) the progress handler of a statement with a
+# deadline, or of a query's statement, looks at the clock and at stop_queries: ~0.3 ms of
+# work at SQLite's ~70 million instructions a second
+STOP_CHECK_INSTRUCTIONS = 20000
+
 # How often (virtual machine instructions) an instruction budget's progress handler counts:
 # ~15 us between calls at SQLite's ~70 million instructions a second, so the Python call
 # costs ~1 % of a statement's time
@@ -398,9 +403,13 @@ class Database:
         # when a transaction begins (see suspend_streams)
         self.open_streams: weakref.WeakSet = weakref.WeakSet()
         self.deadline: float | None = None  # of the compiled statement running now
-        # (handler, every n instructions) of the statement running now: what _deadline
-        # puts back when an inner statement's own limit ends
-        self.progress: tuple[Callable[[], int], int] | None = None
+        # (handler, every n instructions, whether it ends the statement once stopping) of the
+        # statement running now: what _deadline puts back when an inner statement's own
+        # limit ends
+        self.progress: tuple[Callable[[], int], int, bool] | None = None
+        # set by stop_queries, before a close: a query's statement still running (which
+        # holds the lock the close waits for) ends at its next progress check
+        self.stopping = False
         # the Python functions statements may call (install_functions), on every connection
         self.functions: SqlFunctions | None = None
         # (schema version, in-memory copy of the schema, extra indexes made in it, the
@@ -666,13 +675,34 @@ class Database:
         for stream in list(self.open_streams):
             stream.suspend()
 
+    def stop_queries(self) -> None:
+        """End the queries' statements (compiled queries, read-only SQL) that run on this
+        connection now or start later with SLRError "the knowledge base was closed while
+        the query ran", at the next check of their progress handler (every
+        :data:`STOP_CHECK_INSTRUCTIONS` virtual machine instructions): a close is coming,
+        which would otherwise wait for them to end. A transaction is left to end, the
+        statements inside it included (a close never cuts a write, nor an event rule's
+        ``where`` goal deciding in its add). Called without the lock, from any thread;
+        :meth:`close` calls it first.
+
+        >>> from slr_sql.store import EventStore
+        >>> s = EventStore(None); s.stop_queries(); s.run_compiled("SELECT 1", {})
+        [(1,)]
+        >>> s.run_compiled("SELECT 1", {}, may_fall_back=True)
+        Traceback (most recent call last):
+        slr_sql.errors.SLRError: the knowledge base was closed while the query ran
+        """
+        self.stopping = True
+
     def close(self) -> None:
         """Checkpoint what the WAL holds, as far as no reader needs it (``PASSIVE``: never
-        waits for another connection), and close. Idempotent.
+        waits for another connection), and close. Idempotent. A query's statement still
+        running ends first (:meth:`stop_queries`).
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None); s.close(); s.close()
         """
+        self.stop_queries()
         with self.lock:
             if self.closed:
                 return
@@ -1065,7 +1095,7 @@ class Database:
             conn.set_authorizer(guard.read_only)
             longest = conn.setlimit(sqlite3.SQLITE_LIMIT_LENGTH, READ_ONLY_VALUE_BYTES)
             try:
-                with self._deadline(deadline, "the SQL statement"):
+                with self._deadline(deadline, "the SQL statement", stops=not self.tx_depth):
                     cursor = conn.execute(query, bound_parameters(params))
                     columns = [d[0] for d in cursor.description] if cursor.description else []
                     return columns, _bounded_rows(cursor)
@@ -1248,7 +1278,8 @@ class Database:
         exact to within one :data:`INSTRUCTIONS_PER_CHECK` (SQLite counts a cached
         statement's intervals on from where its previous run left off).
         ``may_fall_back``: the caller answers with the interpreter when the statement
-        fails, so a failure must leave the caller's transaction usable (SQLite's does).
+        fails, so a failure must leave the caller's transaction usable (SQLite's does); it
+        is a query's statement, which :meth:`stop_queries` ends outside a transaction.
 
         >>> from slr_sql.store import EventStore
         >>> EventStore(None).run_compiled("SELECT :a + 1", {"a": 1})
@@ -1261,8 +1292,14 @@ class Database:
         """
         with self.lock:
             self.check_open()
+            # (inside a transaction it is part of a write -- an event rule's where goal
+            # deciding in its add -- which a close waits for)
+            stops = may_fall_back and not self.tx_depth
+            if stops and self.stopping:
+                raise SLRError(CLOSED_WHILE_RUNNING)
             try:
-                with self._deadline(deadline, "its compiled SQL statement", instructions):
+                with self._deadline(deadline, "its compiled SQL statement", instructions,
+                                    stops=stops):
                     cursor = self.conn.execute(sql, params)
                     try:
                         return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
@@ -1307,31 +1344,41 @@ class Database:
 
     @contextmanager
     def _deadline(self, deadline: float | None, what: str,
-                  instructions: int | None = None) -> Iterator[None]:
+                  instructions: int | None = None, stops: bool = False) -> Iterator[None]:
         """Interrupt the statements run inside past ``deadline`` (``time.monotonic()``), or
-        past ``instructions`` virtual machine instructions, with :class:`SLRTimeout`. A
-        statement run from inside another (a ``kb.define`` predicate querying the kb from
-        SQL) keeps the outer deadline, and without a budget of its own its instructions count
-        against the outer budget: the handler is per connection (one with its own budget or
-        an earlier deadline has its own handler while it runs, and the outer's is put back).
-        Call with the lock held."""
+        past ``instructions`` virtual machine instructions, with :class:`SLRTimeout`; with
+        ``stops`` (a query's statement), once :meth:`stop_queries` was called, with SLRError
+        :data:`CLOSED_WHILE_RUNNING`. A statement run from inside another (a ``kb.define``
+        predicate querying the kb from SQL) keeps the outer deadline, and without a budget
+        of its own its instructions count against the outer budget: the handler is per
+        connection (one with its own budget or an earlier deadline has its own handler while
+        it runs, and the outer's is put back). Call with the lock held."""
         conn = self.conn
         outer, outer_handler = self.deadline, self.progress
         if deadline is None or (outer is not None and outer <= deadline):
             deadline = outer
+        # (an inner statement of a query's statement ends with it)
+        stops = stops or (outer_handler is not None and outer_handler[2])
         checks = [0]
         allowed = -1 if instructions is None else max(1, instructions // INSTRUCTIONS_PER_CHECK)
-        handler: tuple[Callable[[], int], int] | None = outer_handler
+        handler: tuple[Callable[[], int], int, bool] | None = outer_handler
         if instructions is not None:
             def out_of_budget() -> int:
                 checks[0] += 1
-                if checks[0] > allowed:
+                if checks[0] > allowed or (stops and self.stopping):
                     return 1
                 return 1 if deadline is not None and time.monotonic() > deadline else 0
 
-            handler = (out_of_budget, INSTRUCTIONS_PER_CHECK)
+            handler = (out_of_budget, INSTRUCTIONS_PER_CHECK, stops)
         elif deadline is not outer:
-            handler = (lambda: 1 if time.monotonic() > deadline else 0, 20000)
+            handler = (lambda: 1 if (stops and self.stopping) or time.monotonic() > deadline
+                       else 0, STOP_CHECK_INSTRUCTIONS, stops)
+        elif stops and (outer_handler is None or not outer_handler[2]):
+            # (no limit of its own: the outer's, if any, still counts)
+            limit = None if outer_handler is None else outer_handler[0]
+            handler = (lambda: 1 if self.stopping or (limit is not None and limit()) else 0,
+                       STOP_CHECK_INSTRUCTIONS if outer_handler is None else outer_handler[1],
+                       True)
         if handler is not outer_handler and handler is not None:
             self.deadline, self.progress = deadline, handler
             conn.set_progress_handler(handler[0], handler[1])
@@ -1346,6 +1393,8 @@ class Database:
                                      f"instructions (in {what})") from None
                 if deadline is not None and time.monotonic() > deadline:
                     raise SLRTimeout(f"query timed out (in {what})") from None
+                if stops and self.stopping:
+                    raise SLRError(CLOSED_WHILE_RUNNING) from None
             raise busy_error(exc, self.path, self.busy_timeout) or exc from None
         finally:
             if handler is not outer_handler:

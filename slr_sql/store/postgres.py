@@ -30,9 +30,8 @@ from contextlib import contextmanager, suppress
 from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
-from ..errors import SLRBusy, SLRCancelled, SLRError, SLRServerUnreachable, SLRStatementTimeout, \
-    SLRTimeout, \
-    SLRUnavailable, naming_the_store
+from ..errors import CLOSED_WHILE_RUNNING, SLRBusy, SLRCancelled, SLRError, \
+    SLRServerUnreachable, SLRStatementTimeout, SLRTimeout, SLRUnavailable, naming_the_store
 from ..lockorder import ordered_lock
 from .connection import Database, DatabaseError, drop_commit_callbacks, in_own_transaction, \
     is_postgres_url, merge_commit_callbacks, run_after_rollback, \
@@ -774,6 +773,11 @@ MOST_RUNNING = 4
 # Seconds past its timeout a caller waits for the server to stop the statement itself.
 STOP_GRACE = 0.5
 
+# Seconds stop_queries waits for a query's cancelled statement to end before it cancels it
+# again (doubling up to 2 s), and seconds one cancel request may take
+CANCEL_AGAIN = 0.1
+STOP_CANCEL_TIMEOUT = 5.0
+
 
 # A transaction-control statement, by its first keywords (PostgreSQL's "Transaction
 # Control" commands: COMMIT PREPARED and ROLLBACK PREPARED start as COMMIT and ROLLBACK)
@@ -926,6 +930,20 @@ def _leave_nothing(raw: Any) -> None:
     raw.execute("ROLLBACK; SELECT pg_advisory_unlock_all()")   # (one round trip)
 
 
+class _DetachedStatement:
+    """One statement of :class:`DetachedStatements` while it runs: its connection (once it
+    has one), the event its caller waits for, and what ended the wait early (the caller
+    gave up at its timeout, or the store stopped its queries)."""
+
+    __slots__ = ("raw", "finished", "abandoned", "stopped")
+
+    def __init__(self) -> None:
+        self.raw: Any = None
+        self.finished = threading.Event()
+        self.abandoned = False
+        self.stopped = False
+
+
 class DetachedStatements:
     """The read-only statements of ``kb.sql`` outside a transaction, each on a connection of
     its own in a thread of its own: the store's connection and lock are never held by them
@@ -933,7 +951,8 @@ class DetachedStatements:
     timeout (plus :data:`STOP_GRACE`) has passed even if the server has not stopped the
     statement yet. The abandoned statement's thread closes its connection when the server
     is done; at most :data:`MOST_ABANDONED` may be abandoned at once. One idle connection
-    is kept for the next statement."""
+    is kept for the next statement. :meth:`stop` (a close is coming) ends the callers
+    still waiting at once and cancels their statements."""
 
     def __init__(self, conninfo: str, schema: str, where: str, busy_timeout: float):
         self.conninfo = conninfo
@@ -944,6 +963,8 @@ class DetachedStatements:
         self.idle: Any = None          # a psycopg connection ready for the next statement
         self.abandoned = 0
         self.closed = False
+        self.stopped = False           # stop(): no statement starts any more
+        self.running: set[_DetachedStatement] = set()
         # a slot per statement running on a connection of its own (MOST_RUNNING at most)
         self.slots = threading.BoundedSemaphore(MOST_RUNNING)
 
@@ -960,13 +981,19 @@ class DetachedStatements:
             raise
         return raw
 
+    def _refuse_if_ended(self) -> None:
+        """(the lock held) The store's words once it stopped its queries or closed."""
+        if self.closed:
+            raise SLRError("the event store is closed")
+        if self.stopped:
+            raise SLRError(CLOSED_WHILE_RUNNING)
+
     def run(self, statement: str, bound: Any,
             timeout: float | None) -> tuple[list[str], list[tuple]]:
         """Run one read-only ``statement`` (already in psycopg's style; ``bound``: its
         parameters or None) and return ``(column names, rows)``."""
         with self.lock:
-            if self.closed:
-                raise SLRError("the event store is closed")
+            self._refuse_if_ended()
             if self.abandoned >= MOST_ABANDONED:
                 raise SLRUnavailable(
                     f"{self.where}: {self.abandoned} earlier SQL statements still run on the "
@@ -980,16 +1007,22 @@ class DetachedStatements:
             raise SLRBusy(f"{self.where}: the {MOST_RUNNING} connections that run read-only "
                           f"SQL statements were all busy for the {timeout:g} s this one could "
                           f"wait; it did not start (try again)")
+        one = _DetachedStatement()
         with self.lock:
             raw, self.idle = self.idle, None
-            if self.closed:
+            try:
+                self._refuse_if_ended()
+            except SLRError:
                 self.slots.release()
-                raise SLRError("the event store is closed")
+                if raw is not None:
+                    with suppress(Exception):
+                        raw.close()
+                raise
+            self.running.add(one)
+            one.raw = raw
         if deadline is not None:   # (what is left of it; a statement_timeout of 0 is none)
             timeout = max(0.001, deadline - time.monotonic())
         outcome: dict[str, Any] = {}
-        finished = threading.Event()
-        state = {"abandoned": False}
 
         def work() -> None:
             nonlocal raw
@@ -997,6 +1030,8 @@ class DetachedStatements:
             try:
                 if raw is None:
                     raw = self._connect()
+                    with self.lock:
+                        one.raw = raw   # (stop cancels its statement from now on)
                     raw.execute("BEGIN READ ONLY")
                 else:
                     try:
@@ -1009,6 +1044,8 @@ class DetachedStatements:
                             raw.close()
                         raw = None
                         raw = self._connect()
+                        with self.lock:
+                            one.raw = raw
                         raw.execute("BEGIN READ ONLY")
                 try:
                     if timeout is not None:
@@ -1027,33 +1064,53 @@ class DetachedStatements:
                 outcome["error"] = exc
             finally:
                 with self.lock:
-                    if state["abandoned"]:
+                    self.running.discard(one)
+                    if one.abandoned:
                         self.abandoned -= 1
                     keep = (raw is not None and _connected(raw) and not self.closed
-                            and self.idle is None and "value" in outcome)
+                            and not self.stopped and self.idle is None
+                            and "value" in outcome)
                     if keep:
                         self.idle = raw
                 if not keep and raw is not None:
                     with suppress(Exception):
                         raw.close()
                 self.slots.release()
-                finished.set()
+                one.finished.set()
 
         threading.Thread(target=work, name="slr-sql-statement", daemon=True).start()
-        if not finished.wait(None if timeout is None else timeout + STOP_GRACE):
+        if not one.finished.wait(None if timeout is None else timeout + STOP_GRACE):
             with self.lock:
-                if not finished.is_set():
-                    state["abandoned"] = True
+                if not one.finished.is_set():
+                    one.abandoned = True
                     self.abandoned += 1
-            if state["abandoned"]:
+            if one.abandoned:
                 raise SLRTimeout(
                     f"query timed out (the server had not stopped the statement "
                     f"{timeout + STOP_GRACE:g} s after it began; it is left to finish on "
                     f"its own connection)")
-            finished.wait()
-        if "error" in outcome:
-            raise outcome["error"]
-        return outcome["value"]
+            one.finished.wait()
+        if "value" in outcome:
+            return outcome["value"]
+        if one.stopped:   # (ended by stop(), or the server's cancel it sent)
+            raise SLRError(CLOSED_WHILE_RUNNING)
+        raise outcome["error"]
+
+    def stop(self) -> None:
+        """End the statements running now, a close coming: each caller gets SLRError
+        "the knowledge base was closed while the query ran" at once, each statement is
+        cancelled on the server (``cancel_safe``; one the cancel misses runs on to its end
+        on its own connection, as one abandoned at its timeout), and none starts any more."""
+        with self.lock:
+            self.stopped = True
+            running = [(one, one.raw) for one in self.running]
+            for one, _ in running:
+                one.stopped = True
+        for one, raw in running:
+            if raw is not None:
+                with suppress(Exception):   # (its thread may be closing it meanwhile)
+                    raw.cancel_safe(timeout=STOP_CANCEL_TIMEOUT)
+            one.finished.set()
 
     def close(self) -> None:
         """Close the idle connection; a running statement's thread closes its own."""
@@ -1110,6 +1167,13 @@ class PgDatabase:
         # a written statement failed in the caller's transaction, which it left aborted: the
         # session advisory locks it may have taken are let go at the transaction's end
         self.session_locks_left = False
+        # set by stop_queries, before a close: a query's statement still running (which holds
+        # the lock the close waits for) is cancelled, and none starts any more
+        self.stopping = False
+        # the thread whose query's statement runs on the store's connection now (None: none),
+        # and the condition its end is told by
+        self.query_thread: int | None = None
+        self.query_ended = threading.Condition(threading.Lock())
         try:
             raw = psycopg.connect(conninfo, autocommit=True)
         except psycopg.Error as exc:
@@ -1356,7 +1420,51 @@ class PgDatabase:
         for stream in list(self.open_streams):
             stream.suspend()
 
+    def stop_queries(self) -> None:
+        """(:meth:`Database.stop_queries`) The statement of a compiled query running on the
+        store's connection outside a transaction is cancelled (``cancel_safe``: a request of
+        its own to the server), again until it has ended -- a cancel that reaches the server
+        before the statement is lost -- and one started later is refused; the read-only
+        ``kb.sql`` statements running on connections of their own end too
+        (:meth:`DetachedStatements.stop`). Returns once no query's statement runs on the
+        store's connection."""
+        psycopg = _psycopg()
+        pause = CANCEL_AGAIN
+        self.detached.stop()   # (kb.sql's statements on connections of their own)
+        with self.query_ended:
+            self.stopping = True
+            running = self.query_thread
+        while running is not None and running != threading.get_ident():
+            with suppress(psycopg.Error):
+                self.conn.raw.cancel_safe(timeout=STOP_CANCEL_TIMEOUT)
+            with self.query_ended:
+                if self.query_thread is not None:
+                    self.query_ended.wait(pause)
+                running = self.query_thread
+            pause = min(pause * 2, 2.0)
+
+    @contextmanager
+    def _query_statement(self) -> Iterator[None]:
+        """Around a query's statement on the store's connection (the lock held): known to
+        :meth:`stop_queries`, which cancels it; once stopping, refused (and a cancel it met
+        said in the words of a close)."""
+        with self.query_ended:
+            if self.stopping:
+                raise SLRError(CLOSED_WHILE_RUNNING)
+            self.query_thread = threading.get_ident()
+        try:
+            yield
+        except SLRCancelled:
+            if self.stopping:
+                raise SLRError(CLOSED_WHILE_RUNNING) from None
+            raise
+        finally:
+            with self.query_ended:
+                self.query_thread = None
+                self.query_ended.notify_all()
+
     def close(self) -> None:
+        self.stop_queries()
         self.draining.set()
         with self.lock:
             if self.closed:
@@ -1692,60 +1800,70 @@ class PgDatabase:
         # statement_timeout, is its only limit)
         with self.lock:
             self.check_open()
-            deadline = self._outer(deadline)
-            if deadline is None and (self.tx_depth == 0 or not may_fall_back):
-                # (an event rule's statement inside the writer's transaction: a failure
-                # fails the add, so no savepoint round trips)
-                cursor = self.conn.execute(sql, params)
-                return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
-            if deadline is None:
-                # inside a transaction: a statement that fails (the query then goes to the
-                # interpreter) must not abort the caller's transaction
-                self.conn.execute("SAVEPOINT slr_compiled")
-                try:
-                    cursor = self.conn.execute(sql, params)
-                    rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
-                except BaseException:
-                    self.conn.execute("ROLLBACK TO slr_compiled")
-                    self.conn.execute("RELEASE slr_compiled")
-                    raise
-                self.conn.execute("RELEASE slr_compiled")
-                return rows
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise SLRTimeout("query timed out (in its compiled SQL statement)")
-            own = self.tx_depth == 0
-            outer = None
-            if own:
-                self.conn.execute("BEGIN")
-            else:
-                # in the caller's transaction a SET LOCAL outlasts the savepoint's release,
-                # to the transaction's end: the setting in force before (an administrator's,
-                # the session's, the transaction's) is read here and put back before the
-                # release (read in the savepoint's round trip)
-                self.conn.savepoint_later("slr_compiled")
-                outer = self.conn.execute("SHOW statement_timeout").fetchone()[0]
+            if not may_fall_back or self.tx_depth:
+                # (inside a transaction it is part of a write -- an event rule's where goal
+                # deciding in its add -- which a close waits for)
+                return self._run_compiled(sql, params, limit, deadline, may_fall_back)
+            with self._query_statement():   # (a query's: a close cancels it)
+                return self._run_compiled(sql, params, limit, deadline, may_fall_back)
+
+    def _run_compiled(self, sql: str, params: dict, limit: int | None,
+                      deadline: float | None, may_fall_back: bool) -> list[tuple]:
+        """:meth:`run_compiled`, the lock held."""
+        deadline = self._outer(deadline)
+        if deadline is None and (self.tx_depth == 0 or not may_fall_back):
+            # (an event rule's statement inside the writer's transaction: a failure
+            # fails the add, so no savepoint round trips)
+            cursor = self.conn.execute(sql, params)
+            return cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+        if deadline is None:
+            # inside a transaction: a statement that fails (the query then goes to the
+            # interpreter) must not abort the caller's transaction
+            self.conn.execute("SAVEPOINT slr_compiled")
             try:
-                self.conn.execute(f"SET LOCAL statement_timeout = {_timeout_ms(left)}")
                 cursor = self.conn.execute(sql, params)
                 rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
-                if not own:
-                    self.conn.execute("SELECT set_config('statement_timeout', ?, true)",
-                                      (outer,))
-                    self.conn.execute("RELEASE slr_compiled")
-            except BaseException as exc:
-                if own:
-                    self.conn.rollback()
-                else:
-                    self.conn.execute("ROLLBACK TO slr_compiled")
-                    self.conn.execute("RELEASE slr_compiled")
-                error = _own_deadline(exc, deadline)
-                if error is exc:
-                    raise
-                raise error from None
-            if own:
-                self.conn.execute("COMMIT")
+            except BaseException:
+                self.conn.execute("ROLLBACK TO slr_compiled")
+                self.conn.execute("RELEASE slr_compiled")
+                raise
+            self.conn.execute("RELEASE slr_compiled")
             return rows
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise SLRTimeout("query timed out (in its compiled SQL statement)")
+        own = self.tx_depth == 0
+        outer = None
+        if own:
+            self.conn.execute("BEGIN")
+        else:
+            # in the caller's transaction a SET LOCAL outlasts the savepoint's release,
+            # to the transaction's end: the setting in force before (an administrator's,
+            # the session's, the transaction's) is read here and put back before the
+            # release (read in the savepoint's round trip)
+            self.conn.savepoint_later("slr_compiled")
+            outer = self.conn.execute("SHOW statement_timeout").fetchone()[0]
+        try:
+            self.conn.execute(f"SET LOCAL statement_timeout = {_timeout_ms(left)}")
+            cursor = self.conn.execute(sql, params)
+            rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+            if not own:
+                self.conn.execute("SELECT set_config('statement_timeout', ?, true)",
+                                  (outer,))
+                self.conn.execute("RELEASE slr_compiled")
+        except BaseException as exc:
+            if own:
+                self.conn.rollback()
+            else:
+                self.conn.execute("ROLLBACK TO slr_compiled")
+                self.conn.execute("RELEASE slr_compiled")
+            error = _own_deadline(exc, deadline)
+            if error is exc:
+                raise
+            raise error from None
+        if own:
+            self.conn.execute("COMMIT")
+        return rows
 
     def run_compiled_many(self, sql: str, rows: list) -> None:
         with self.lock:
