@@ -190,7 +190,17 @@ class EventPipeline:
         return mark_errors + errors if mark_errors else errors
 
     def _observe(self, run: _Run, stored: Batch, written: Any) -> None:
-        """Stages 3-6 of an add whose events (and marks) are committed."""
+        """Stages 3-6 of an add whose events (and marks) are committed. A close on another
+        thread meanwhile ends them quietly: the add is done (raising would have its caller
+        retry it and store the events twice); what is left to decide is decided when the
+        store is opened again."""
+        try:
+            self._observe_committed(run, stored, written)
+        except SLRError:
+            if not self.store.closed:
+                raise
+
+    def _observe_committed(self, run: _Run, stored: Batch, written: Any) -> None:
         run.stage = "completeness"
         self.sync.on_add(stored)
         if written is not None:   # after the events of the same batch are observed
