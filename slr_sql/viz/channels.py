@@ -24,6 +24,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any
 
+from .. import encoding
 from ..encoding import column_json, decode, decode_json
 from ..errors import SLRError
 from ..terms import Atom, format_term
@@ -113,13 +114,27 @@ class EventChannel:
     schema: dict
     metadata: dict = field(default_factory=dict)
     _keys: list | None = field(default=None, repr=False, compare=False)
+    _key_tuple: tuple | None = field(default=None, repr=False, compare=False)
 
     @property
     def schema_name(self) -> str:
         return f"slr.{self.name}/{self.arity}"
 
     def message(self, row: tuple) -> bytes:
-        """The JSON message of a stored row ``(arg1..argN, start, end, arrival, seq)``."""
+        """The JSON message of a stored row ``(arg1..argN, start, end, arrival, seq)``:
+        written by the C loop when it is built (the same bytes, see
+        :meth:`python_message`), one call per row."""
+        loop = encoding.event_message_loop
+        if loop is not None and type(row) is tuple:
+            keys = self._key_tuple
+            if keys is None:
+                keys = self._key_tuple = tuple(
+                    ('{"arg1":' if i == 0 else f',"arg{i + 1}":') for i in range(self.arity))
+            return loop(row, keys, _TEXTS, _argument_text)
+        return self.python_message(row)
+
+    def python_message(self, row: tuple) -> bytes:
+        """:meth:`message` in Python (the reference of the C loop, and its fallback)."""
         n = self.arity
         keys = self._keys
         if keys is None:
@@ -151,6 +166,16 @@ class EventChannel:
                      + ',"end":' + _float_repr(float(row[n + 1])) + ',"arrival":'
                      + _float_repr(float(row[n + 2])) + "}")
         return "".join(parts).encode()
+
+
+def _argument_text(value: Any) -> str:
+    """The text of an argument the C loop of :meth:`EventChannel.message` leaves to Python
+    (a str :data:`_TEXTS` does not hold, a number that is no finite float or int, anything
+    else), as the Python method writes it: an atom's text kept when short."""
+    text = column_json(value)
+    if type(value) is str and len(_TEXTS) < _TEXTS_MAX and len(value) <= _TEXT_MAX:
+        _TEXTS[value] = text
+    return text
 
 
 def event_channel(name: str, arity: int, sample: tuple | None = None) -> EventChannel:
