@@ -573,15 +573,12 @@ buffer_add_argument(Buffer *buffer, PyObject *value, PyObject *texts, PyObject *
         if (length > 0) {
             Py_UCS4 first = PyUnicode_READ_CHAR(value, 0);
             if (first == '[' || first == '{') {
-                int atom = 0;
-                if (first == '{' && length >= 9) {
-                    PyObject *head = PyUnicode_Substring(value, 0, 9);
-                    if (head == NULL)
-                        return -1;
-                    atom = PyUnicode_CompareWithASCIIString(head, "{\"$atom\":") == 0;
-                    Py_DECREF(head);
-                }
-                if (!atom)
+                static const char atom_head[] = "{\"$atom\":";
+                Py_ssize_t k = 0;
+                if (first == '{' && length >= 9)
+                    while (k < 9 && PyUnicode_READ_CHAR(value, k) == (Py_UCS4)atom_head[k])
+                        k++;
+                if (k < 9)
                     return buffer_add_str(buffer, value);
             }
         }
