@@ -134,7 +134,11 @@ class EventChannel:
         return self.python_message(row)
 
     def python_message(self, row: tuple) -> bytes:
-        """:meth:`message` in Python (the reference of the C loop, and its fallback)."""
+        """:meth:`message` in Python (the reference of the C loop, and its fallback).
+
+        >>> event_channel("p", 1).python_message(("cup1", 1.5, 2.0, 2.5, 7))
+        b'{"arg1":"cup1","start":1.5,"end":2.0,"arrival":2.5}'
+        """
         n = self.arity
         keys = self._keys
         if keys is None:
