@@ -27,6 +27,14 @@
  *   event_form(events)
  *       "tuples" if every item of the list is a 4-tuple whose args is a tuple, "lists" if
  *       some args are lists instead, None otherwise: kb.py's _event_tuples in one pass.
+ *   event_message(row, keys, texts, fallback)
+ *       the JSON message of a stored event row (arg1..argN, start, end, arrival, ...) as
+ *       slr_sql/viz/channels.py's EventChannel.message writes it, in UTF-8 bytes: `keys` the
+ *       N texts before each argument ('{"arg1":', ',"arg2":', ...); an argument that is a
+ *       str starting with '[' or '{' (but '{"$atom":') as it is, another str as `texts`
+ *       holds it (the cached JSON of atoms), a finite float as repr writes it, an int as
+ *       str; anything else (and a str `texts` does not hold) as `fallback(value)` returns
+ *       it; the three times as repr(float(t)).
  *
  * `data` is orjson's output: its JSON syntax is trusted, every byte is checked. All are
  * pure functions of their arguments (the byte table is constant). The Python versions stay
@@ -502,6 +510,164 @@ event_form(PyObject *Py_UNUSED(module), PyObject *events)
     return PyUnicode_FromString(lists ? "lists" : "tuples");
 }
 
+/* A growing byte buffer (the message being written). */
+typedef struct {
+    char *data;
+    Py_ssize_t size, capacity;
+} Buffer;
+
+static int
+buffer_add(Buffer *buffer, const char *text, Py_ssize_t size)
+{
+    if (buffer->size + size > buffer->capacity) {
+        Py_ssize_t capacity = (buffer->size + size) * 2 + 64;
+        char *data = PyMem_Realloc(buffer->data, capacity);
+        if (data == NULL) {
+            PyErr_NoMemory();
+            return -1;
+        }
+        buffer->data = data;
+        buffer->capacity = capacity;
+    }
+    memcpy(buffer->data + buffer->size, text, size);
+    buffer->size += size;
+    return 0;
+}
+
+/* The UTF-8 of a str (an exception set when it has none: a lone surrogate). */
+static int
+buffer_add_str(Buffer *buffer, PyObject *text)
+{
+    Py_ssize_t size;
+    const char *utf8;
+    if (!PyUnicode_Check(text)) {
+        PyErr_Format(PyExc_TypeError, "a message's text is a str, not %.100s",
+                     Py_TYPE(text)->tp_name);
+        return -1;
+    }
+    utf8 = PyUnicode_AsUTF8AndSize(text, &size);
+    return utf8 == NULL ? -1 : buffer_add(buffer, utf8, size);
+}
+
+/* repr of a float: its shortest text, with ".0" when integral, "inf", "nan". */
+static int
+buffer_add_double(Buffer *buffer, double value)
+{
+    char *text = PyOS_double_to_string(value, 'r', 0, Py_DTSF_ADD_DOT_0, NULL);
+    int result;
+    if (text == NULL)
+        return -1;
+    result = buffer_add(buffer, text, (Py_ssize_t)strlen(text));
+    PyMem_Free(text);
+    return result;
+}
+
+/* One argument's text (see event_message). */
+static int
+buffer_add_argument(Buffer *buffer, PyObject *value, PyObject *texts, PyObject *fallback)
+{
+    PyObject *text;
+    int result;
+    if (PyUnicode_CheckExact(value)) {
+        Py_ssize_t length = PyUnicode_GET_LENGTH(value);
+        if (length > 0) {
+            Py_UCS4 first = PyUnicode_READ_CHAR(value, 0);
+            if (first == '[' || first == '{') {
+                static const char atom_head[] = "{\"$atom\":";
+                Py_ssize_t k = 0;
+                if (first == '{' && length >= 9)
+                    while (k < 9 && PyUnicode_READ_CHAR(value, k) == (Py_UCS4)atom_head[k])
+                        k++;
+                if (k < 9)
+                    return buffer_add_str(buffer, value);
+            }
+        }
+        text = PyDict_GetItemWithError(texts, value);   /* borrowed */
+        if (text != NULL)
+            return buffer_add_str(buffer, text);
+        if (PyErr_Occurred())
+            return -1;
+    }
+    else if (PyFloat_CheckExact(value)) {
+        double v = PyFloat_AS_DOUBLE(value);
+        if (Py_IS_FINITE(v))
+            return buffer_add_double(buffer, v);
+    }
+    else if (PyLong_CheckExact(value)) {
+        text = PyObject_Str(value);
+        if (text == NULL)
+            return -1;
+        result = buffer_add_str(buffer, text);
+        Py_DECREF(text);
+        return result;
+    }
+    text = PyObject_CallOneArg(fallback, value);
+    if (text == NULL)
+        return -1;
+    result = buffer_add_str(buffer, text);
+    Py_DECREF(text);
+    return result;
+}
+
+static PyObject *
+event_message(PyObject *Py_UNUSED(module), PyObject *const *args, Py_ssize_t nargs)
+{
+    PyObject *row, *keys, *texts, *fallback, *out = NULL;
+    Py_ssize_t n, i;
+    Buffer buffer = {NULL, 0, 0};
+    static const char *const time_keys[3] = {",\"start\":", ",\"end\":", ",\"arrival\":"};
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "event_message(row, keys, texts, fallback)");
+        return NULL;
+    }
+    row = args[0];
+    keys = args[1];
+    texts = args[2];
+    fallback = args[3];
+    if (!PyTuple_Check(row) || !PyTuple_Check(keys) || !PyDict_Check(texts)) {
+        PyErr_SetString(PyExc_TypeError,
+                        "event_message: row and keys are tuples, texts a dict");
+        return NULL;
+    }
+    n = PyTuple_GET_SIZE(keys);
+    if (PyTuple_GET_SIZE(row) < n + 3) {
+        PyErr_SetString(PyExc_ValueError, "event_message: the row has no times");
+        return NULL;
+    }
+    for (i = 0; i < n; i++) {
+        if (buffer_add_str(&buffer, PyTuple_GET_ITEM(keys, i)) < 0
+                || buffer_add_argument(&buffer, PyTuple_GET_ITEM(row, i), texts, fallback) < 0)
+            goto done;
+    }
+    for (i = 0; i < 3; i++) {
+        PyObject *t = PyTuple_GET_ITEM(row, n + i);
+        double v;
+        /* (no argument: the object opens with the start time) */
+        const char *key = time_keys[i] + (i == 0 && n == 0 ? 1 : 0);
+        if (i == 0 && n == 0 && buffer_add(&buffer, "{", 1) < 0)
+            goto done;
+        if (buffer_add(&buffer, key, (Py_ssize_t)strlen(key)) < 0)
+            goto done;
+        if (PyFloat_CheckExact(t))
+            v = PyFloat_AS_DOUBLE(t);
+        else {
+            PyObject *f = PyNumber_Float(t);
+            if (f == NULL)
+                goto done;
+            v = PyFloat_AS_DOUBLE(f);
+            Py_DECREF(f);
+        }
+        if (buffer_add_double(&buffer, v) < 0)
+            goto done;
+    }
+    if (buffer_add(&buffer, "}", 1) < 0)
+        goto done;
+    out = PyBytes_FromStringAndSize(buffer.data, buffer.size);
+done:
+    PyMem_Free(buffer.data);
+    return out;
+}
+
 static PyMethodDef methods[] = {
     {"number_rows", (PyCFunction)number_rows, METH_O,
      "number_rows(values) -> bool\n\n"
@@ -521,6 +687,9 @@ static PyMethodDef methods[] = {
     {"event_form", (PyCFunction)event_form, METH_O,
      "event_form(events) -> 'tuples' | 'lists' | None\n\n"
      "Whether every event is a 4-tuple with tuple (or list) arguments."},
+    {"event_message", (PyCFunction)(void (*)(void))event_message, METH_FASTCALL,
+     "event_message(row, keys, texts, fallback) -> bytes\n\n"
+     "The JSON message of a stored event row, as EventChannel.message writes it."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -99,6 +99,10 @@ else:
 event_columns_loop: Callable[[list], tuple | None] | None = \
     getattr(_speedups, "event_columns", None)
 event_form_loop: Callable[[list], str | None] | None = getattr(_speedups, "event_form", None)
+# And one writes a stored event row's JSON message (slr_sql/viz/channels.py, an export's and
+# the live view's per-row cost); None without it: the Python method writes the same bytes.
+event_message_loop: Callable[[tuple, tuple, dict, Callable[[Any], str]], bytes] | None = \
+    getattr(_speedups, "event_message", None)
 
 __all__ = ["encode", "encode_column", "decode", "decode_answer", "encode_json", "Unencodable",
            "NullArgument",

@@ -196,3 +196,44 @@ def test_an_export_of_large_events_holds_one_bounded_page_at_a_time(tmp_path, mo
     with open(tmp_path / "big.mcap", "rb") as stream:
         sizes = [len(m.data) for _, _, m in make_reader(stream).iter_messages()]
     assert len(sizes) == 24 and min(sizes) > 1 << 20
+
+
+def test_an_export_of_several_types_read_in_small_pages_merges_them_in_time_order(
+        tmp_path, monkeypatch):
+    """The types' histories are merged page by page: with pages of 3 rows, every message is
+    in (end, start, type, seq) order, each written once, each FrameTransforms right after
+    its tf event, and progress is told at every 10,000th."""
+    from slr_sql.viz import mcap_export
+    monkeypatch.setattr(mcap_export, "PAGE", 3)
+    with slr_sql.open(tmp_path / "r.db", clock=ManualClock(100.0)) as kb:
+        batch = []
+        for i in range(400):
+            end = float(i // 4)         # equal end times across and within types
+            batch.append(("a" if i % 3 else "b", (i,), end - (i % 2), end))
+            if i % 7 == 0:
+                batch.append(("tf", ("map", f"f{i}", Struct("pose", ([1.0, 2.0, 3.0],
+                                                                     [0.0, 0.0, 0.0, 1.0]))),
+                              end, end))
+        kb.add_many(batch)
+        kb.add_many([("c", (j,), float(j), float(j)) for j in range(20_500)])
+        seen = []
+        report = export_mcap(kb.store, tmp_path / "out.mcap", progress=seen.append)
+        stored = kb.store
+        expected = sorted(
+            (row[n + 1], row[n], index, row[n + 3])
+            for index, (name, n) in enumerate(sorted(stored.event_types()))
+            for row in stored.raw_rows(name, n))
+    assert report.messages == len(expected) == 400 + 58 + 20_500
+    assert seen == [10_000, 20_000]
+    with open(tmp_path / "out.mcap", "rb") as stream:
+        written = [(c.topic, m.log_time, m.sequence, json.loads(m.data))
+                   for _, c, m in make_reader(stream).iter_messages(log_time_order=False)]
+    events = [(end, start, topic) for topic, _, _, m in written if topic != "/tf"
+              for end, start in [(m["end"], m["start"])]]
+    names = sorted(kb_type for kb_type in ("a", "b", "c", "tf"))
+    assert [(e, s, f"/{names[i]}/{3 if names[i] == 'tf' else 1}") for e, s, i, _ in expected] \
+        == events
+    transforms = [i for i, w in enumerate(written) if w[0] == "/tf"]
+    assert len(transforms) == 58
+    for i in transforms:   # right after its tf event, with the same times and sequence
+        assert written[i - 1][0] == "/tf/3" and written[i - 1][1:3] == written[i][1:3]

@@ -32,3 +32,30 @@ def test_a_transform_beyond_any_float_is_left_out(pose):
 def test_a_row_of_plain_numbers_is_still_written_from_its_text():
     message = json.loads(transform_message([GOOD]))
     assert message["transforms"][0]["rotation"] == {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
+
+
+@pytest.mark.parametrize("pose", [
+    '{"pose":[[01,2,3],[0,0,0,1]]}',          # a leading zero
+    '{"pose":[[,2,3],[0,0,0,1]]}',            # an empty place
+    '{"pose":[[1e5e5,2,3],[0,0,0,1]]}',       # two exponents
+    '{"pose":[[1.,2,3],[0,0,0,1]]}',          # no digit after the point
+    '{"pose":[[+1,2,3],[0,0,0,1]]}',          # a plus sign
+])
+def test_a_stored_pose_of_texts_that_are_no_json_numbers_gives_no_broken_message(pose):
+    """A pose row written by hand whose numbers only looked like numbers (digits, points,
+    signs, e's) was copied as it was into the message: invalid JSON in the MCAP file and
+    on Foxglove's socket. Such a row is now decoded like any other (and left out)."""
+    row = ("map", "cam", pose, 1.0, 1.0, 1.0, 2)
+    assert transform_message([row]) is None
+    message = json.loads(transform_message([row, GOOD]))
+    assert [t["child_frame_id"] for t in message["transforms"]] == ["base"]
+
+
+def test_poses_of_json_numbers_are_written_from_their_text_as_decoded():
+    rows = [GOOD, ("map", "cam", '{"pose":[[1e-05,-2.5,3.25],[0.0,0.0,0.7071,0.7071]]}', 4.0,
+                   5.0, 6.0, 3),
+            ("map", "odom", '{"pose":[[1.5e+16,-0.0,2E-7],[0.0,0.0,0.0,1.0]]}', 4.0, 5.0, 6.0,
+             4)]
+    for row in rows:   # the text as stored; decoding it gives the same numbers
+        fast = json.loads(transform_message([row]))["transforms"]
+        assert json.loads(transform_message([row, row]))["transforms"] == fast * 2

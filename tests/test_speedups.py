@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from slr_sql import encoding
 from slr_sql.encoding import Unencodable, encode, encode_column
-from slr_sql.terms import CONS, NIL, Atom, Struct, Var, make_list
+from slr_sql.terms import CONS, NIL, Atom, String, Struct, Var, make_list
 
 speedups = encoding._speedups
 
@@ -302,6 +302,7 @@ def test_the_built_accelerator_has_the_event_loops():
     if speedups is not None:
         assert encoding.event_columns_loop is speedups.event_columns
         assert encoding.event_form_loop is speedups.event_form
+        assert encoding.event_message_loop is speedups.event_message
 
 
 _TIMES = st.one_of(st.floats(-1e3, 1e3), st.sampled_from([-0.0, 0.0, math.inf, -math.inf,
@@ -381,3 +382,58 @@ def test_event_form_answers_as_the_column_checks_do(events):
     from slr_sql.kb import _event_form_by_columns
 
     assert speedups.event_form(events) == _event_form_by_columns(events)
+
+
+# -- the JSON message of a stored event row (slr_sql/viz/channels.py) --
+
+class _Text(str):
+    """A str of a subclass: no exact str to the loop (column_json decides, uncached)."""
+
+
+_TERMS = st.recursive(
+    st.one_of(st.text(max_size=4).map(Atom), st.text(max_size=4).map(String),
+              st.integers(-2 ** 70, 2 ** 70), st.floats(allow_nan=False),
+              st.sampled_from([Atom("{x"), Atom('{"$atom":"a"}'), Atom("[]"), Atom("")])),
+    lambda inner: st.one_of(st.lists(inner, max_size=3),
+                            st.tuples(st.sampled_from(["f", "{"]),
+                                      st.lists(inner, min_size=1, max_size=2))
+                            .map(lambda t: Struct(t[0], tuple(t[1])))),
+    max_leaves=6)
+_STORED = st.one_of(_TERMS.map(encode), st.sampled_from(
+    [None, b"\x00", True, math.inf, -math.inf, math.nan, "\ud800", "{\"$atom\":\"\ud800\"}",
+     _Text("cup"), 10 ** 5000, "", "{", "[", '{"$atom":']))
+_ROW_TIMES = st.one_of(st.floats(), st.integers(-10, 10), st.sampled_from(["1.5", None, "x"]))
+
+
+def _outcome(function, *args):
+    try:
+        return function(*args)
+    except Exception as exc:  # noqa: BLE001 - compared, not handled
+        return type(exc)
+
+
+@needs_c
+@given(st.integers(0, 3).flatmap(lambda n: st.tuples(
+    st.just(n), st.lists(_STORED, min_size=n, max_size=n), st.lists(_ROW_TIMES, min_size=3,
+                                                                    max_size=3))))
+@example((1, [encode(Atom("cup1"))], [1.5, 2, 2.5]))
+@example((2, ['{"$atom":"[x]"}', _Text("[1]")], [0.0, -0.0, 1e300]))
+def test_event_message_writes_the_bytes_of_the_python_message(case):
+    from slr_sql.viz import channels
+
+    n, args, times = case
+    row = (*args, *times, 7)
+    channel = channels.event_channel("p", n)
+    assert encoding.event_message_loop is speedups.event_message
+    for _ in range(2):   # (the second time, atoms come from the cache)
+        assert _outcome(channel.message, row) == _outcome(channel.python_message, row)
+
+
+@needs_c
+def test_event_message_keeps_short_atoms_as_the_python_message_does():
+    from slr_sql.viz import channels
+
+    channel = channels.event_channel("p", 2)
+    short, long = "c" + "x" * 20, "d" * (channels._TEXT_MAX + 1)
+    channel.message((short, long, 1.0, 2.0, 3.0, 1))
+    assert channels._TEXTS[short] == '"' + short + '"' and long not in channels._TEXTS

@@ -20,9 +20,11 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass, field
 from typing import Any
 
+from .. import encoding
 from ..encoding import column_json, decode, decode_json
 from ..errors import SLRError
 from ..terms import Atom, format_term
@@ -112,13 +114,31 @@ class EventChannel:
     schema: dict
     metadata: dict = field(default_factory=dict)
     _keys: list | None = field(default=None, repr=False, compare=False)
+    _key_tuple: tuple | None = field(default=None, repr=False, compare=False)
 
     @property
     def schema_name(self) -> str:
         return f"slr.{self.name}/{self.arity}"
 
     def message(self, row: tuple) -> bytes:
-        """The JSON message of a stored row ``(arg1..argN, start, end, arrival, seq)``."""
+        """The JSON message of a stored row ``(arg1..argN, start, end, arrival, seq)``:
+        written by the C loop when it is built (the same bytes, see
+        :meth:`python_message`), one call per row."""
+        loop = encoding.event_message_loop
+        if loop is not None and type(row) is tuple:
+            keys = self._key_tuple
+            if keys is None:
+                keys = self._key_tuple = tuple(
+                    ('{"arg1":' if i == 0 else f',"arg{i + 1}":') for i in range(self.arity))
+            return loop(row, keys, _TEXTS, _argument_text)
+        return self.python_message(row)
+
+    def python_message(self, row: tuple) -> bytes:
+        """:meth:`message` in Python (the reference of the C loop, and its fallback).
+
+        >>> event_channel("p", 1).python_message(("cup1", 1.5, 2.0, 2.5, 7))
+        b'{"arg1":"cup1","start":1.5,"end":2.0,"arrival":2.5}'
+        """
         n = self.arity
         keys = self._keys
         if keys is None:
@@ -150,6 +170,16 @@ class EventChannel:
                      + ',"end":' + _float_repr(float(row[n + 1])) + ',"arrival":'
                      + _float_repr(float(row[n + 2])) + "}")
         return "".join(parts).encode()
+
+
+def _argument_text(value: Any) -> str:
+    """The text of an argument the C loop of :meth:`EventChannel.message` leaves to Python
+    (a str :data:`_TEXTS` does not hold, a number that is no finite float or int, anything
+    else), as the Python method writes it: an atom's text kept when short."""
+    text = column_json(value)
+    if type(value) is str and len(_TEXTS) < _TEXTS_MAX and len(value) <= _TEXT_MAX:
+        _TEXTS[value] = text
+    return text
 
 
 def event_channel(name: str, arity: int, sample: tuple | None = None) -> EventChannel:
@@ -281,30 +311,32 @@ def _plain_frame(value: Any) -> str | None:
     return text
 
 
-_NUMBER_CHARS = frozenset("0123456789.-+eE")
+# a pose as the encoder stores it: two lists of JSON numbers (3 and 4 of them)
+_NUMBER = r"(-?(?:0|[1-9][0-9]*)(?:\.[0-9]+)?(?:[eE][-+]?[0-9]+)?)"
+_STORED_POSE = re.compile(r'\{"pose":\[\[' + ",".join([_NUMBER] * 3) + r"\],\["
+                          + ",".join([_NUMBER] * 4) + r"\]\]\}")
 
 
 def _one_transform(row: tuple) -> bytes | None:
     """transform_message of one row in its common form (plain frame names, a pose of finite
-    numbers), written from the stored text directly (the encoder wrote each number's
+    JSON numbers), written from the stored text directly (the encoder wrote each number's
     shortest text, at most 24 characters for a float); None for anything else (the general
-    path decides: an integer of 400 digits is no float)."""
+    path decides: an integer of 400 digits is no float, a text that is no JSON number is
+    no pose)."""
     parent, child, pose = _plain_frame(row[0]), _plain_frame(row[1]), row[2]
-    if parent is None or child is None or type(pose) is not str \
-            or not pose.startswith('{"pose":[[') or not pose.endswith("]]}"):
+    if parent is None or child is None or type(pose) is not str:
         return None
-    halves = pose[10:-3].split("],[")
-    if len(halves) != 2:
+    match = _STORED_POSE.fullmatch(pose)
+    if match is None or "e999" in pose:
         return None
-    t, q = halves[0].split(","), halves[1].split(",")
-    if len(t) != 3 or len(q) != 4 or "e999" in pose or max(map(len, t + q)) > 24 \
-            or not _NUMBER_CHARS.issuperset(halves[0].replace(",", "") + halves[1].replace(",", "")):
+    x, y, z, qx, qy, qz, qw = numbers = match.groups()
+    if max(map(len, numbers)) > 24:
         return None
     ns = time_ns(row[4])
     return (f'{{"transforms":[{{"timestamp":{{"sec":{ns // 1_000_000_000},"nsec":'
             f'{ns % 1_000_000_000}}},"parent_frame_id":{parent},"child_frame_id":{child},'
-            f'"translation":{{"x":{t[0]},"y":{t[1]},"z":{t[2]}}},"rotation":{{"x":{q[0]},'
-            f'"y":{q[1]},"z":{q[2]},"w":{q[3]}}}}}]}}').encode()
+            f'"translation":{{"x":{x},"y":{y},"z":{z}}},"rotation":{{"x":{qx},'
+            f'"y":{qy},"z":{qz},"w":{qw}}}}}]}}').encode()
 
 
 def mark_message(type_text: str, until: float, source: str) -> bytes:

@@ -24,6 +24,8 @@ import os
 import secrets
 import stat
 from dataclasses import dataclass, field
+from itertools import chain, repeat
+from operator import itemgetter
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
@@ -102,23 +104,31 @@ def select_types(available: Iterable[tuple[str, int]], wanted: Iterable[str]) ->
     return out
 
 
-def _rows(store: Any, key: tuple, start: float | None, end: float | None) -> Iterator[tuple]:
+def _pages(store: Any, key: tuple, start: float | None, end: float | None) -> Iterator[list]:
+    """The pages of a type's rows in store order (end, start, seq)."""
     after = None
+    n = key[1]
     while True:
         page = store.raw_page(key[0], key[1], end_from=start, end_to=end, rows=PAGE,
                               max_bytes=PAGE_BYTES, after_key=after)
-        yield from page.rows
-        if not page.more:
+        if not page.rows:
             return
-        last = page.rows[-1]
-        n = key[1]
+        more, last = page.more, page.rows[-1]
+        yield page.rows
+        if not more:
+            return
         after = (last[n + 1], last[n], last[n + 3])
 
 
-def _keyed(rows: Iterator[tuple], n: int, index: int) -> Iterator[tuple]:
-    """``(end, start, type index, seq, row)`` of each row of a type of arity ``n``."""
-    for row in rows:
-        yield (row[n + 1], row[n], index, row[n + 3], row)
+def _keyed(store: Any, key: tuple, start: float | None, end: float | None,
+           index: int) -> Iterator[tuple]:
+    """``(end, start, type index, seq, row)`` of each row of a type, a page at a time (each
+    page's tuples made by C's loops: no Python frame per row)."""
+    n = key[1]
+    end_of, start_of, seq_of = itemgetter(n + 1), itemgetter(n), itemgetter(n + 3)
+    return chain.from_iterable(
+        zip(map(end_of, rows), map(start_of, rows), repeat(index), map(seq_of, rows), rows)
+        for rows in _pages(store, key, start, end))
 
 
 def export_mcap(store: Any, path: str | Path, start: float | None = None,
@@ -226,8 +236,7 @@ def _write(writer_module: Any, out: Any, store: Any, keys: list, start: float | 
                                                    json.dumps(TRANSFORMS_SCHEMA).encode())
             tf_channels[key] = writer.register_channel(topic, "json", tf_schema, {})
     # merge the types' histories by end time (then start, then the type, then seq)
-    streams = [_keyed(_rows(store, key, start, end), key[1], index)
-               for index, key in enumerate(keys)]
+    streams = [_keyed(store, key, start, end, index) for index, key in enumerate(keys)]
     add = writer.add_message
     count = 0
     info = [(channels[key][0].message, channels[key][1], key[1] + 2, tf_channels.get(key))
@@ -236,8 +245,10 @@ def _write(writer_module: Any, out: Any, store: Any, keys: list, start: float | 
     merged = heapq.merge(*streams) if len(streams) > 1 else (streams[0] if streams else ())
     for end_time, _, index, seq, row in merged:
         message, channel_id, arrival_at, tf = info[index]
-        log_time = time_ns(end_time)
-        publish_time = time_ns(row[arrival_at])
+        # (time_ns, inline for the common times: after 1970, before 2540)
+        log_time = round(end_time * 1e9) if 0.0 < end_time < 1.8e10 else time_ns(end_time)
+        arrival = row[arrival_at]
+        publish_time = round(arrival * 1e9) if 0.0 < arrival < 1.8e10 else time_ns(arrival)
         try:
             data = message(row)
         except (ValueError, TypeError) as exc:   # a row written by hand, not a term
