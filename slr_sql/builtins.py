@@ -16,7 +16,7 @@ import unicodedata as _ud
 from typing import Any, Callable, Iterator
 
 from .arith import (apply_binary, evaluate, evaluation_error, instantiation_error, iso_error,
-                    resource_error, type_error)
+                    resource_error, type_error, with_context)
 from .unify import bound_args, copy_term, unify, undo, unify_event_row
 from .errors import SLRError, SLREvaluationError, SLRSyntaxError
 from .program import Program, split_event_atom, event_key
@@ -62,6 +62,104 @@ def nondet(name: str, arity: int):
         NONDET[(name, arity)] = f
         return f
     return deco
+
+
+# The context SWI-Prolog gives an error a builtin raises: context(system:Name/Arity, _) for
+# its C builtins (error_context()); these others name the predicate otherwise, or (None)
+# leave the context unbound, as SWI-Prolog's library predicates (must_be/2) do. slr_sql's
+# own builtins (robot library, prev/next) leave it unbound too.
+def _pi(name: str, arity: int, module: str | None = "system") -> Any:
+    pi = Struct("/", (Atom(name), arity))
+    return pi if module is None else Struct(":", (Atom(module), pi))
+
+
+_OTHER_CONTEXTS: dict[tuple[str, int], Any] = {
+    ("length", 2): _pi("length", 2, None),
+    ("$sub_string", 5): _pi("sub_string", 5),
+    ("$char_type", 2): _pi("char_type", 2),
+    ("$code_type", 2): _pi("code_type", 2),
+    ("$term_variables", 2): _pi("term_variables", 2),
+    ("string_to_atom", 2): _pi("atom_string", 2),
+    # the library's folds raise the errors of their `is`
+    **{key: _pi("is", 2) for key in [("sum_list", 2), ("sumlist", 2), ("max_list", 2),
+                                      ("min_list", 2)]},
+    **{key: None for key in [
+        ("numlist", 3), ("list_to_set", 2), ("max_member", 2), ("min_member", 2),
+        ("reverse", 2), ("interpolate", 3), ("extrapolate", 2), ("distance", 3),
+        ("pos_multiply", 2), ("tf_lookup", 4), ("tf_lookup", 5), ("prev", 2), ("next", 2),
+        ("next", 3), ("origin", 2), ("get_field", 3)]},
+}
+
+# SWI-Prolog's C code names some errors' predicate without its module: a conversion's
+# first argument that is not of its type, or a text that is no number (syntax_error)
+_FIRST_ARGUMENT_TYPES = {("atom_chars", 2): "atom", ("atom_codes", 2): "atom",
+                         ("number_codes", 2): "number", ("name", 2): "atomic",
+                         ("number_string", 2): "number"}
+
+
+def _unbound_element(items: Any) -> bool:
+    """Whether the list ``items`` has an unbound element before its end."""
+    items = deref(items)
+    while type(items) is Struct and items.name == "." and len(items.args) == 2:
+        if type(deref(items.args[0])) is Var:
+            return True
+        items = deref(items.args[1])
+    return False
+
+
+def error_context(key: tuple[str, int], formal: Any = None, args: tuple = ()) -> Any:
+    """The predicate indicator SWI-Prolog names in the context of the error ``formal`` that
+    the builtin ``key`` (called with ``args``) raises, or None where it leaves the context
+    unbound.
+
+    >>> str(error_context(("atom_length", 2)))
+    'system:atom_length/2'
+    >>> error_context(("numlist", 3)) is None
+    True
+    """
+    kind = formal.name if type(formal) is Struct else formal
+    what = deref(formal.args[0]) if type(formal) is Struct and formal.args else None
+    name, arity = key
+    if key in _FIRST_ARGUMENT_TYPES:
+        if kind == "syntax_error" or (kind == "type_error" and what == _FIRST_ARGUMENT_TYPES[key]):
+            return _pi(name, arity, None)
+    elif key == ("arg", 3):
+        # (the term's errors; N's are the module's)
+        if kind == "instantiation_error" or (kind == "type_error" and what == "compound"):
+            return _pi("arg", 3, None)
+    elif key in (("$char_type", 2), ("$code_type", 2)):
+        if kind == "instantiation_error" or (kind == "type_error" and what == "char_type"):
+            return _pi("char_type", 2, None)
+    elif key == ("keysort", 2):
+        # an element's errors (a partial list's are the module's)
+        if (kind == "type_error" and what == "pair") or (
+                kind == "instantiation_error" and args and _unbound_element(args[0])):
+            return _pi("keysort", 2, None)
+    elif name == "format" and kind == "instantiation_error" and arity >= 2 \
+            and type(deref(args[-2])) is Var:
+        return _pi("format", arity, None)   # the format text unbound
+    if key in _OTHER_CONTEXTS:
+        return _OTHER_CONTEXTS[key]
+    if name.startswith("$"):
+        return None
+    return _pi(name, arity)
+
+
+def in_builtin(exc: SLREvaluationError, key: tuple[str, int], args: tuple = ()) -> SLREvaluationError:
+    """``exc``, raised by the builtin ``key`` called with ``args``, with its context as
+    SWI-Prolog gives it (an arithmetic function's own error keeps the function's).
+
+    >>> str(in_builtin(instantiation_error(), ("atom_length", 2)))
+    'error(instantiation_error,context(system:atom_length/2,_))'
+    >>> str(in_builtin(instantiation_error(), ("numlist", 3)))
+    'error(instantiation_error,_)'
+    """
+    term = exc.term
+    if not (type(term) is Struct and term.name == "error" and len(term.args) == 2) \
+            or type(deref(term.args[1])) is not Var:
+        return exc
+    culprit = error_context(key, deref(term.args[0]), args)
+    return exc if culprit is None else with_context(exc, culprit)
 
 
 def _err_domain(domain: str, culprit: Any) -> SLREvaluationError:
@@ -188,6 +286,13 @@ for _op, _test in (("@<", lambda c: c < 0), ("@>", lambda c: c > 0),
 
 @det("compare", 3)
 def _compare(m, a):
+    order = deref(a[0])
+    if type(order) is not Var:
+        # a bound order is checked first, as SWI-Prolog does (compare(=, a, b) fails)
+        if type(order) is not Atom:
+            raise type_error("atom", order)
+        if order not in ("<", "=", ">"):
+            raise _err_domain("order", order)
     c = compare_terms(a[1], a[2])
     return m.unify(a[0], Atom("<" if c < 0 else ">" if c > 0 else "="))
 
@@ -766,9 +871,66 @@ def _atom_length(m, a):
     return m.unify(n, len(text))
 
 
+def text_in(t: Any, mode: str, expected: str = "text", numbers: bool = True) -> str:
+    """The text of a builtin's text argument as SWI-Prolog 9 reads it, by ``mode``:
+
+    * ``"any"``: an atom, a string, a number, or a code or character list (its first element
+      says which; a bad element is type_error(character_code | character, E), a partial list
+      an instantiation error); ``[]`` is the empty text; else type_error(``expected``, T)
+      (string_length/2, string_chars/2, ...).
+    * ``"no_number"``: "any" but a number (split_string/4, string_code/3).
+    * ``"whole"``: "any", but a list that is no text is type_error(``expected``, List) as a
+      whole (atom_string/2, string_to_atom/2; without ``numbers``, format/2's format).
+    * ``"atomic"``: an atom, a string or a number; ``[]`` is type_error(atom, []), a list or
+      compound type_error(atomic, T) (string_concat/3).
+    * ``"list"``: a string or a code or character list, as "any"; else type_error(list, T)
+      (string_chars/2 and string_codes/2 from the list).
+
+    >>> text_in(make_list([Atom("h"), Atom("i")]), "any"), text_in(NIL, "any"), text_in(12, "any")
+    ('hi', '', '12')
+    >>> text_in(make_list([Atom("h"), 105]), "any")
+    Traceback (most recent call last):
+    slr_sql.errors.SLREvaluationError: error(type_error(character,105),_)
+    >>> text_in(make_list([Atom("h"), 105]), "whole", "atom")
+    Traceback (most recent call last):
+    slr_sql.errors.SLREvaluationError: error(type_error(atom,[h,105]),_)
+    """
+    t = deref(t)
+    tt = type(t)
+    if tt is Var:
+        raise instantiation_error()
+    if tt is String:
+        return str(t)
+    if mode == "list":
+        if tt is Struct or (tt is Atom and t == "[]"):
+            return _list_text(t)
+        raise type_error("list", t)
+    if tt is Atom:
+        if t != "[]":
+            return str(t)
+        if mode == "atomic":
+            raise type_error("atom", t)
+        return ""
+    if tt is int or tt is float:
+        if mode == "no_number" or not numbers:
+            raise type_error(expected, t)
+        return text_of(t)
+    if mode == "atomic":
+        raise type_error("atomic", t)
+    if tt is Struct and t.name == "." and len(t.args) == 2:
+        if mode != "whole":
+            return _code_or_char_list_text(t)
+        try:
+            return _code_or_char_list_text(t)
+        except SLREvaluationError:
+            raise type_error(expected, t) from None
+    raise type_error(expected, t)
+
+
 @det("string_length", 2)
 def _string_length(m, a):
-    return m.unify(a[1], len(text_of(a[0])))
+    n = _length_argument(a[1])
+    return m.unify(n, len(text_in(a[0], "any")))
 
 
 def _from_text(make: Callable[[str], Any], parse: Callable[[str], Any]):
@@ -776,7 +938,12 @@ def _from_text(make: Callable[[str], Any], parse: Callable[[str], Any]):
     def f(m, a):
         x = deref(a[0])
         if type(x) is not Var:
-            return m.unify(a[1], make(_atom_text(x, "atom")))
+            text = _atom_text(x, "atom")
+            if _is_text_given(a[1]):
+                # a given list is read as in the other mode (SWI-Prolog: its type errors;
+                # a character list for atom_codes, a code list for atom_chars too)
+                return _list_text(a[1]) == text
+            return m.unify(a[1], make(text))
         return m.unify(x, parse(_list_text(a[1])))
     return f
 
@@ -867,14 +1034,15 @@ DET[("term_string", 2)] = lambda m, a: _term_text(m, a, String)
 
 
 def _case_converted(m, a, convert: Callable[[str], str]) -> bool:
-    """upcase_atom/2, downcase_atom/2: a bound result (atom or string) is compared as text."""
+    """upcase_atom/2, downcase_atom/2: a bound result (an atom, a string, a number) is
+    compared as text; [] or a compound there is type_error(atom, R), as in SWI-Prolog."""
     out = convert(_atom_text(a[0]))
     r = deref(a[1])
     if type(r) is Var:
         return m.unify(r, Atom(out))
-    if type(r) is not Atom and type(r) is not String:
-        raise type_error("atom", r)
-    return str(r) == out
+    if type(r) is Atom and r != "[]" or type(r) in (String, int, float):
+        return text_of(r) == out
+    raise type_error("atom", r)
 
 
 def _simple_upper(ch: str) -> str:
@@ -1219,12 +1387,24 @@ def _code_type2(m, a):
 
 @nondet("string_concat", 3)
 def _string_concat(m, a):
+    """string_concat/3 as SWI-Prolog's: atomic parts (no lists, no []); with either part
+    unbound the whole is split, a bound part pinning the split."""
     x, y = deref(a[0]), deref(a[1])
     if type(x) is not Var and type(y) is not Var:
-        if m.unify(a[2], String(text_of(x) + text_of(y))):
+        if m.unify(a[2], String(text_in(x, "atomic") + text_in(y, "atomic"))):
             yield None
         return
-    s = text_of(a[2])
+    px = text_in(x, "atomic") if type(x) is not Var else None
+    py = text_in(y, "atomic") if type(y) is not Var else None
+    s = text_in(a[2], "atomic")
+    if px is not None:
+        if s.startswith(px) and m.unify(y, String(s[len(px):])):
+            yield None
+        return
+    if py is not None:
+        if s.endswith(py) and m.unify(x, String(s[:len(s) - len(py)])):
+            yield None
+        return
     for i in range(len(s) + 1):
         mark = len(m.trail)
         if m.unify(x, String(s[:i])) and m.unify(y, String(s[i:])):
@@ -1232,19 +1412,32 @@ def _string_concat(m, a):
         m.undo_to(mark)
 
 
-def _text_conv(name: str, make: Callable[[str], Any], parse: Callable[[Any], str]):
+def _text_conv(name: str, make: Callable[[str], Any], parse: Callable[[Any], Any],
+               first: tuple[str, str], second: tuple[str, str]):
+    """A conversion Text <-> Other: from the first argument when it is bound (read in the
+    text mode ``first``, :func:`text_in`), else from the second (mode ``second``)."""
     def f(m, a):
         x = deref(a[0])
         if type(x) is not Var:
-            return m.unify(a[1], make(text_of(x)))
-        return m.unify(x, parse(a[1]))
+            text = text_in(x, *first)
+            if _is_text_given(a[1]):
+                # a given second argument is read as text and compared (SWI-Prolog:
+                # string_chars(ab, [0'a, 0'b]) is true); one that is no text fails
+                try:
+                    return text_in(a[1], *second) == text
+                except SLREvaluationError:
+                    return False
+            return m.unify(a[1], make(text))
+        return m.unify(x, parse(text_in(a[1], *second)))
     DET[(name, 2)] = f
 
 
-_text_conv("atom_string", lambda s: String(s), lambda t: Atom(text_of(t)))
-_text_conv("string_chars", lambda s: make_list([Atom(c) for c in s]), lambda t: String(text_of(t)))
-_text_conv("string_codes", lambda s: make_list([ord(c) for c in s]), lambda t: String(text_of(t)))
-_text_conv("string_to_atom", lambda s: Atom(s), lambda t: String(text_of(t)))
+_text_conv("atom_string", String, Atom, ("whole", "atom"), ("whole", "string"))
+_text_conv("string_to_atom", Atom, String, ("whole", "string"), ("whole", "atom"))
+_text_conv("string_chars", lambda s: make_list([Atom(c) for c in s]), String, ("any", "text"),
+           ("list", "list"))
+_text_conv("string_codes", lambda s: make_list([ord(c) for c in s]), String, ("any", "text"),
+           ("list", "list"))
 
 
 @det("char_code", 2)
@@ -1277,11 +1470,25 @@ def _parse_any(t):
         raise iso_error(Struct("syntax_error", (Atom(exc.message),))) from None
 
 
-@det("string_code", 3)
+@nondet("string_code", 3)
 def _string_code(m, a):
+    """string_code(Index, Text, Code) as SWI-Prolog's: Text an atom, a string or a code or
+    character list (no number); an unbound Index enumerates the text's positions."""
+    s = text_in(a[1], "no_number")
     i = deref(a[0])
-    s = text_of(a[1])
-    return type(i) is int and 1 <= i <= len(s) and m.unify(a[2], ord(s[i - 1]))
+    if type(i) is Var:
+        for k, ch in enumerate(s, 1):
+            mark = len(m.trail)
+            if m.unify(i, k) and m.unify(a[2], ord(ch)):
+                yield None
+            m.undo_to(mark)
+        return
+    if type(i) is not int:
+        raise type_error("integer", i)
+    if i < 0:
+        raise _err_domain("not_less_than_zero", i)
+    if 1 <= i <= len(s) and m.unify(a[2], ord(s[i - 1])):
+        yield None
 
 
 @det("number_string", 2)
@@ -1304,29 +1511,63 @@ def _downcase(m, a):
     return _case_converted(m, a, _downcase_text)
 
 
+def _concat_items(items_term: Any) -> list[str] | None:
+    """The texts of atomic_list_concat's list, as SWI-Prolog reads them for joining: an
+    atom, a string or a number each (``[]`` or a compound is type_error(text, E)); None
+    when the list is partial or has an unbound element (before any bad one); a tail that
+    is no list is type_error(list, Tail)."""
+    items, tail = list_items(items_term)
+    if type(tail) is not Var and not (type(tail) is Atom and tail == "[]"):
+        raise type_error("list", tail)
+    out = []
+    for x in items:
+        x = deref(x)
+        if type(x) is Var:
+            return None
+        out.append(_join_text(x))
+    return None if type(tail) is Var else out
+
+
+def _join_text(t: Any) -> str:
+    """An atomic text to join (atomic_list_concat's parts and separator)."""
+    t = deref(t)
+    if type(t) is Var:
+        raise instantiation_error()
+    if type(t) is String or type(t) is Atom and t != "[]":
+        return str(t)
+    if type(t) is int or type(t) is float:
+        return text_of(t)
+    raise type_error("text", t)
+
+
 @det("atomic_list_concat", 2)
 def _alc2(m, a):
-    items, _ = list_items(a[0])
-    return m.unify(a[1], Atom("".join(text_of(x) for x in items)))
+    parts = _concat_items(a[0])
+    if parts is None:
+        raise instantiation_error()
+    return m.unify(a[1], Atom("".join(parts)))
 
 
 @det("atomic_list_concat", 3)
 def _alc3(m, a):
-    sep = text_of(a[1])
-    items, tail = list_items(a[0])
-    if type(tail) is Atom and all(type(deref(x)) is not Var for x in items):
-        if len(sep) * (len(items) - 1) > MAX_BUILT_TEXT:   # (the separator repeated)
+    """atomic_list_concat(Parts, Sep, Atom) as SWI-Prolog's: the separator first, then the
+    parts joined; with a part or the list's tail unbound, Atom split at each separator."""
+    sep = _join_text(a[1])
+    parts = _concat_items(a[0])
+    if parts is not None:
+        if len(sep) * (len(parts) - 1) > MAX_BUILT_TEXT:   # (the separator repeated)
             raise resource_error("memory")
-        return m.unify(a[2], Atom(sep.join(text_of(x) for x in items)))
+        return m.unify(a[2], Atom(sep.join(parts)))
     if not sep:
-        raise instantiation_error()
-    parts = text_of(a[2]).split(sep)
-    return m.unify(a[0], make_list([Atom(p) for p in parts]))
+        raise _err_domain("non_empty_atom", deref(a[1]))
+    whole = text_in(a[2], "atomic")
+    return m.unify(a[0], make_list([Atom(p) for p in whole.split(sep)]))
 
 
 @det("split_string", 4)
 def _split_string(m, a):
-    s, seps, pad = text_of(a[0]), text_of(a[1]), text_of(a[2])
+    s, seps, pad = (text_in(a[0], "no_number"), text_in(a[1], "no_number"),
+                    text_in(a[2], "no_number"))
     parts = [s] if not seps else _split_any(s, seps)
     return m.unify(a[3], make_list([String(p.strip(pad)) for p in parts]))
 
@@ -1981,20 +2222,21 @@ def _format_args(t: Any) -> list:
 
 @det("format", 1)
 def _format1(m, a):
-    _out(m).write(format_text(text_of(a[0]), [], m.deadline))
+    _out(m).write(format_text(text_in(a[0], "whole", numbers=False), [], m.deadline))
     return True
 
 
 @det("format", 2)
 def _format2(m, a):
-    _out(m).write(format_text(text_of(a[0]), _format_args(a[1]), m.deadline))
+    _out(m).write(format_text(text_in(a[0], "whole", numbers=False), _format_args(a[1]),
+                              m.deadline))
     return True
 
 
 @det("format", 3)
 def _format3(m, a):
     sink = deref(a[0])
-    text = format_text(text_of(a[1]), _format_args(a[2]), m.deadline)
+    text = format_text(text_in(a[1], "whole", numbers=False), _format_args(a[2]), m.deadline)
     if type(sink) is Struct and len(sink.args) == 1:
         kind = sink.name
         if kind == "atom":
@@ -2090,6 +2332,28 @@ def _aggregate_all(m: "Machine", args, nxt):
     return m.push_collect(template, goal, finish, nxt)
 
 
+def _raising_in(each: Callable[[Any], None], culprit: Any) -> Callable[[Any], None]:
+    """``each`` whose errors name ``culprit`` in their context, as the library's errors
+    name the comparison or ``is`` that raised them (an arithmetic function's own error
+    keeps the function's)."""
+    def checked(found: Any) -> None:
+        try:
+            each(found)
+        except SLREvaluationError as exc:
+            raise with_context(exc, culprit)
+    return checked
+
+
+def _better(kind: str, x: Any, best: Any) -> bool:
+    """``X > Best`` (max) or ``X < Best`` (min), as the library compares a witness form's
+    solutions: its errors are the comparison's."""
+    try:
+        a, b = evaluate(x), evaluate(best)
+    except SLREvaluationError as exc:
+        raise with_context(exc, _pi(">" if kind == "max" else "<", 2))
+    return a > b if kind == "max" else a < b
+
+
 def _aggregate_arith(m: "Machine", kind: str, template, goal, out, nxt):
     """``aggregate_all(sum(X) | max(X) | min(X), ..)`` as SWI-Prolog's library(aggregate):
     each solution is evaluated as it comes (``S is S0 + X``, ``M is max(M0, X)``), so a
@@ -2113,14 +2377,16 @@ def _aggregate_arith(m: "Machine", kind: str, template, goal, out, nxt):
                     raise type_error("number", first)
                 state.append(found)
                 return
-            a, b = evaluate(deref(found).args[0]), evaluate(deref(state[0]).args[0])
-            if (a > b) if kind == "max" else (a < b):
+            if _better(kind, deref(found).args[0], deref(state[0]).args[0]):
                 state[0] = found
         else:
             value = evaluate(found)
             # the first solution is max(X, X), as SWI-Prolog's State = state(X) starts:
             # max(inf, inf) is float_overflow, so a lone inf is too
             state[:] = [apply_binary(kind, state[0] if state else value, value)]
+
+    if not witness:
+        each = _raising_in(each, _pi("is", 2))
 
     def finish(m, results, nxt):
         if not state:
@@ -2153,9 +2419,9 @@ def _aggregate_witness(m: "Machine", spec: Struct, goal, out, nxt):
                 raise type_error("number", first)
             best.append(found)
             return
-        a, b = evaluate(found.args[0]), evaluate(best[0].args[0])
-        if (a > b) if kind == "max" else (a < b):
+        if _better(kind, found.args[0], best[0].args[0]):
             best[0] = found
+
 
     def finish(m, results, nxt):
         if not best:

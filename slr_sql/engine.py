@@ -240,11 +240,14 @@ class Machine:
                     continue
                 f = det.get(key)
                 if f is not None:
-                    cont = nxt if f(self, args) else False
+                    try:
+                        cont = nxt if f(self, args) else False
+                    except SLREvaluationError as exc:
+                        raise _in_builtin(exc, key, args)
                     continue
                 g = nondet.get(key)
                 if g is not None:
-                    cont = self.push_solutions(g(self, args), nxt)
+                    cont = self.push_solutions(g(self, args), nxt, key)
                     continue
                 cont = self._other(key, args, nxt)
             except PrologThrow as exc:
@@ -310,6 +313,10 @@ class Machine:
                 except StopIteration:
                     cps.pop()
                     continue
+                except SLREvaluationError as exc:
+                    if cp[4] is not None:
+                        raise _in_builtin(exc, cp[4])
+                    raise
                 return cp[2]
             elif kind == K_ALT:
                 cps.pop()
@@ -377,17 +384,22 @@ class Machine:
             else:
                 yield None
 
-    def push_solutions(self, gen: Iterator, nxt):
+    def push_solutions(self, gen: Iterator, nxt, builtin: tuple | None = None):
         """Solve a goal by a generator: each ``next(gen)`` makes the next solution (binding
         on the trail, undone on backtracking) and yields; the machine then continues with
-        ``nxt``. Returns ``nxt``, or False when ``gen`` has no solution at all."""
-        cp = [K_GEN, len(self.trail), nxt, gen, None, None]
+        ``nxt``. Returns ``nxt``, or False when ``gen`` has no solution at all. An error the
+        generator of the builtin (name, arity) raises names it in its context."""
+        cp = [K_GEN, len(self.trail), nxt, gen, builtin, None]
         self.cps.append(cp)
         try:
             next(gen)
         except StopIteration:
             self.cps.pop()
             return False
+        except SLREvaluationError as exc:
+            if builtin is not None:
+                raise _in_builtin(exc, builtin)
+            raise
         return nxt
 
     def _other(self, key, args, nxt):
@@ -679,6 +691,13 @@ def _unify_pattern(p: Any, t: Any, frame: list, trail: list) -> bool:
     return unify(p, t, trail)
 
 
+
+
+def _in_builtin(exc: SLREvaluationError, key: tuple, args: tuple = ()) -> SLREvaluationError:
+    """``exc`` raised by the builtin ``key``, its context filled as SWI-Prolog's."""
+    from .builtins import in_builtin as fill
+
+    return fill(exc, key, args)
 
 
 def check_body(goal: Any) -> None:
