@@ -138,6 +138,8 @@ def error_context(key: tuple[str, int], formal: Any = None, args: tuple = ()) ->
     elif name == "format" and kind == "instantiation_error" and arity >= 2 \
             and type(deref(args[-2])) is Var:
         return _pi("format", arity, None)   # the format text unbound
+    if kind == "syntax_error":
+        return None   # (SWI-Prolog's context of a syntax error is the text and where in it)
     if key in _OTHER_CONTEXTS:
         return _OTHER_CONTEXTS[key]
     if name.startswith("$"):
@@ -2271,6 +2273,12 @@ def _strip_carets(goal: Any) -> tuple[Any, list]:
     return goal, quantified
 
 
+# the library predicates SWI-Prolog names in the context of their goal's errors: findall/3
+# (and bagof/3, setof/3, aggregate_all's bag and set) run it in '$bags':findall_loop/4
+_FINDALL_LOOP = _pi("findall_loop", 4, "$bags")
+_AGGREGATE_ALL = _pi("aggregate_all", 3, "aggregate")
+
+
 def collector(m: "Machine", key, args, nxt):
     """Start the all-solutions builtin ``key`` (findall/3,4, forall/2, aggregate_all/3,
     bagof/3, setof/3) on the machine ``m``; ``nxt`` is the continuation after it.
@@ -2285,12 +2293,13 @@ def collector(m: "Machine", key, args, nxt):
     if name in ("findall", "findAll") and arity == 3:
         def finish(m, results, nxt, out=args[2]):
             return nxt if m.unify(out, make_list(results)) else False
-        return m.push_collect(args[0], args[1], finish, nxt)
+        return m.push_collect(args[0], args[1], finish, nxt, caller=_FINDALL_LOOP)
     if name == "findall" and arity == 4:
         def finish(m, results, nxt, out=args[2], tail=args[3]):
             return nxt if m.unify(out, make_list(results, tail)) else False
-        return m.push_collect(args[0], args[1], finish, nxt)
+        return m.push_collect(args[0], args[1], finish, nxt, caller=_FINDALL_LOOP)
     if name == "forall":
+        m.meta_check(args[0], _pi("forall", 2, "$apply"))
         goal = Struct("\\+", (Struct(",", (Struct("call", (args[0],)),
                                            Struct("\\+", (Struct("call", (args[1],)),)))),))
         return (goal, len(m.cps), nxt)
@@ -2306,7 +2315,8 @@ def _aggregate_all(m: "Machine", args, nxt):
     goal = args[1]
     out = args[2]
     if type(spec) is Atom and spec == "count":
-        return m.push_collect(NIL, goal, lambda m, r, nxt: nxt if m.unify(out, len(r)) else False, nxt)
+        return m.push_collect(NIL, goal, lambda m, r, nxt: nxt if m.unify(out, len(r)) else False, nxt,
+                              caller=_AGGREGATE_ALL)
     if type(spec) is Struct and spec.name in ("max", "min") and len(spec.args) == 2:
         return _aggregate_witness(m, spec, goal, out, nxt)
     if type(spec) is not Struct or len(spec.args) != 1:
@@ -2329,7 +2339,7 @@ def _aggregate_all(m: "Machine", args, nxt):
             raise _err_domain("aggregate_template", spec)
         return nxt if m.unify(out, value) else False
 
-    return m.push_collect(template, goal, finish, nxt)
+    return m.push_collect(template, goal, finish, nxt, caller=_FINDALL_LOOP)
 
 
 def _raising_in(each: Callable[[Any], None], culprit: Any) -> Callable[[Any], None]:
@@ -2398,7 +2408,7 @@ def _aggregate_arith(m: "Machine", kind: str, template, goal, out, nxt):
             value = state[0]
         return nxt if m.unify(out, value) else False
 
-    return m.push_collect(template, goal, finish, nxt, each)
+    return m.push_collect(template, goal, finish, nxt, each, caller=_AGGREGATE_ALL)
 
 
 def _aggregate_witness(m: "Machine", spec: Struct, goal, out, nxt):
@@ -2428,7 +2438,8 @@ def _aggregate_witness(m: "Machine", spec: Struct, goal, out, nxt):
             return False
         return nxt if m.unify(out, Struct(kind, (best[0].args[0], best[0].args[1]))) else False
 
-    return m.push_collect(Struct("w", (spec.args[0], spec.args[1])), goal, finish, nxt, each)
+    return m.push_collect(Struct("w", (spec.args[0], spec.args[1])), goal, finish, nxt, each,
+                          caller=_AGGREGATE_ALL)
 
 
 def _bagof(m: "Machine", args, nxt, is_set: bool):
@@ -2462,7 +2473,7 @@ def _bagof(m: "Machine", args, nxt, is_set: bool):
             groups = [(w, _dedup(sorted(items, key=_cmp_key))) for w, items in groups]
         return m.push_solutions(_bag_solutions(m, witness, out, groups), nxt)
 
-    return m.push_collect(pair, inner, finish, nxt)
+    return m.push_collect(pair, inner, finish, nxt, caller=_FINDALL_LOOP)
 
 
 def _bag_solutions(m: "Machine", witness, out, groups) -> Iterator[None]:

@@ -19,7 +19,7 @@ import time
 from math import copysign
 from typing import Any, Callable, Iterator
 
-from .arith import instantiation_error, iso_error, resource_error, type_error
+from .arith import instantiation_error, iso_error, resource_error, type_error, with_context
 from .errors import SLRError, SLREvaluationError, SLRTimeout
 from .program import MAX_RECURSIVE_NEST, Predicate, Program, Slot, Template, build, \
     event_key, split_event_atom
@@ -116,6 +116,12 @@ CONTROL = {
     ("aggregate_all", 3), ("bagof", 3), ("setof", 3), ("catch", 3), ("throw", 1),
     ("fail", 0), ("false", 0), ("^", 2), ("not", 1),
 }
+
+
+# the meta predicates SWI-Prolog names in the context of the errors of the goals they call
+_SYSTEM_CATCH = Struct(":", (Atom("system"), Struct("/", (Atom("catch"), 3))))
+_SYSTEM_NOT = Struct(":", (Atom("system"), Struct("/", (Atom("not"), 1))))
+_SYSTEM_THROW = Struct(":", (Atom("system"), Struct("/", (Atom("throw"), 1))))
 
 
 class Machine:
@@ -476,6 +482,8 @@ class Machine:
         if name == "*->":
             return (args[0], len(cps), (args[1], cb, nxt))
         if name == "\\+" or name == "not":
+            if name == "not":
+                self.meta_check(args[0], _SYSTEM_NOT)
             check_body(args[0])
             height = len(cps)
             cps.append([K_ALT, len(self.trail), nxt, None, None, None])
@@ -499,13 +507,14 @@ class Machine:
         if name == "throw":
             ball = deref(args[0])
             if type(ball) is Var:
-                raise instantiation_error()
+                raise with_context(instantiation_error(), _SYSTEM_THROW)
             raise PrologThrow(copy_term(ball, deadline=self.deadline))
         if name == "catch":
             height = len(cps)
             cp = [K_CATCH, len(self.trail), nxt, args[1], args[2], cb]
             cps.append(cp)
-            check_body(args[0])    # (raised inside the catch: catch/3 catches it)
+            # (raised inside the catch: catch/3 catches it)
+            self.meta_check(args[0], _SYSTEM_CATCH)
             return (args[0], height + 1, (Special(S_POPCATCH, cp), cb, nxt))
         # collection predicates
         from .builtins import collector
@@ -546,11 +555,39 @@ class Machine:
             return nxt
         raise AssertionError(op)
 
+    def meta_check(self, goal: Any, caller: Any) -> None:
+        """The errors SWI-Prolog raises as the meta predicate ``caller`` (a predicate
+        indicator) calls ``goal``, named in their context: an unbound goal, one that is no
+        body (type_error(callable, Goal)), an undefined procedure as the goal itself (one
+        inside its control constructs is left to the call, its context unbound)."""
+        g = deref(goal)
+        try:
+            if type(g) is Var:
+                raise instantiation_error()
+            check_body(g)
+            if type(g) is Struct:
+                key, args = (g.name, len(g.args)), g.args
+            elif type(g) is Atom:
+                key, args = (g, 0), ()
+            else:
+                raise type_error("callable", g)
+            engine = self.engine
+            if not (key in CONTROL or key in engine.program.preds or key in engine.library.preds
+                    or key in engine.det or key in engine.nondet or key in engine.python_preds
+                    or key in engine.program.dynamic):
+                self._other(key, args, None)
+        except SLREvaluationError as exc:
+            raise with_context(exc, caller)
+
     def push_collect(self, template: Any, goal: Any, finish: Callable, nxt,
-                     each: Callable[[Any], None] | None = None):
+                     each: Callable[[Any], None] | None = None, caller: Any = None):
         """Run ``goal`` to exhaustion collecting copies of ``template``, then ``finish``;
         ``each`` sees every copy as it is found (an error it raises stops the goal there, as
-        SWI-Prolog's aggregate_all(max(X), ..) evaluating each solution as it comes)."""
+        SWI-Prolog's aggregate_all(max(X), ..) evaluating each solution as it comes).
+        ``caller``: the predicate SWI-Prolog names in the context of the goal's own errors
+        (:meth:`meta_check`)."""
+        if caller is not None:
+            self.meta_check(goal, caller)
         check_body(goal)
         results: list = []
         height = len(self.cps)

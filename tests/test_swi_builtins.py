@@ -930,6 +930,15 @@ CONTEXT_GOALS = [f"catch({goal}, E, true)" for goal in [
     "string_code(0, \"ab\", C)", "string_code(-1, \"ab\", C)", "string_code(X, \"ab\", C)",
     "string_code(1, X, C)", "string_code(1, f(x), C)", "string_code(1.0, \"ab\", C)",
     "string_code(1, [a, 0'b], C)", "string_code(1, [], C)",
+    # the goal of a meta predicate: an unbound one, one that is no body, an undefined
+    # procedure as the goal itself (findall/3, bagof/3, setof/3 and aggregate_all's bag
+    # and set run it in '$bags':findall_loop/4)
+    "findall(X, foo(X), L)", "findall(X, 1, L)", "findall(X, G, L)", "findall(X, foo, L, T)",
+    "bagof(X, Y^foo(X, Y), L)", "setof(X, Y^1, L)", "aggregate_all(count, foo, N)",
+    "aggregate_all(count, X, N)", "aggregate_all(bag(X), foo(X), N)",
+    "aggregate_all(max(X), foo(X), N)", "aggregate_all(max(X, W), foo(X, W), N)",
+    "forall(foo, true)", "forall(1, true)", "forall(X, true)", "not(foo)", "not(1)",
+    "catch(foo, E0, true)", "catch(1, E0, true)", "catch(X, E0, true)", "throw(_)",
 ]]
 
 
