@@ -567,16 +567,16 @@ def _other_compound(t: Struct, depth: int) -> int | float:
     n = len(args)
     if name == "." and n == 2:
         # [X] is the character code X, as in SWI-Prolog: a code or a one-char atom
+        # (SWI-Prolog: the element first, then that it is the only one)
         tail = deref(args[1])
-        if tail == "[]" and type(tail) is Atom:
-            x = deref(args[0])
-            if type(x) is Var:
-                raise instantiation_error()
-            if type(x) is int and x >= 0:
-                return x
-            if type(x) is Atom and len(x) == 1:
-                return ord(x)
+        x = deref(args[0])
+        if type(x) is Var:
+            raise instantiation_error()
+        if not (type(x) is int and x >= 0 or type(x) is Atom and len(x) == 1 and x != "[]"):
             raise type_error("character", x)
+        if not (tail == "[]" and type(tail) is Atom):
+            raise _not_one_character(t)
+        return x if type(x) is int else ord(x)
     # as SWI-Prolog: the arguments are evaluated (right first) before the functor is
     # found unknown, so f(Y) with Y unbound is an instantiation error
     for a in reversed(args):
@@ -597,9 +597,19 @@ def _atomic_value(t: Any, tt: type) -> int | float:
         if t == "[]":
             raise type_error("evaluable", t)
         raise type_error("evaluable", Struct("/", (t, 0)))
-    if tt is String and len(t) == 1:
-        return ord(t)
+    if tt is String:
+        if len(t) == 1:
+            return ord(t)
+        raise _not_one_character(t)
     raise type_error("evaluable", t)
+
+
+def _not_one_character(t: Any) -> SLREvaluationError:
+    """SWI-Prolog's error for a list or string of other than one character as an
+    expression (its own term: type_error([], T), with a message as its context)."""
+    return iso_error(Struct("type_error", (Atom("[]"), t)),
+                     Struct("context", (Struct(":", (Atom("system"), Struct("/", (Atom("is"), 2)))),
+                                        Atom('"x" must hold one character'))))
 
 
 class _Apply:

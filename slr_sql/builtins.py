@@ -135,9 +135,10 @@ def error_context(key: tuple[str, int], formal: Any = None, args: tuple = ()) ->
         if (kind == "type_error" and what == "pair") or (
                 kind == "instantiation_error" and args and _unbound_element(args[0])):
             return _pi("keysort", 2, None)
-    elif name == "format" and kind == "instantiation_error" and arity >= 2 \
-            and type(deref(args[-2])) is Var:
-        return _pi("format", arity, None)   # the format text unbound
+    elif name == "format" and arity >= 2 and (
+            kind == "instantiation_error" and type(deref(args[-2])) is Var
+            or kind == "type_error" and what == "text"):
+        return _pi("format", arity, None)   # the format text unbound or no text
     if kind == "syntax_error":
         return None   # (SWI-Prolog's context of a syntax error is the text and where in it)
     if key in _OTHER_CONTEXTS:
@@ -477,22 +478,45 @@ def _arg(m, a):
 @det("=..", 2)
 def _univ(m, a):
     t = deref(a[0])
-    if type(t) is Struct:
-        return m.unify(a[1], make_list((_visible_name(t),) + t.args))
-    if type(t) is not Var:
-        return m.unify(a[1], make_list([t]))
     items, tail = list_items(a[1])
-    if type(tail) is Var:
-        raise instantiation_error()
-    if not items:
+    if type(t) is not Var:
+        name = _visible_name(t) if type(t) is Struct else t
+        # a given list is a list or a partial one (SWI-Prolog: after its first element is
+        # compared with the name, the tail is the culprit)
+        if type(tail) is not Var and not (type(tail) is Atom and tail == "[]"):
+            if items:
+                mark = len(m.trail)
+                same = m.unify(items[0], name)
+                m.undo_to(mark)
+                if not same:
+                    return False
+            raise type_error("list", tail)
+        if type(t) is Struct:
+            return m.unify(a[1], make_list((name,) + t.args))
+        return m.unify(a[1], make_list([t]))
+    if not items and type(tail) is Atom and tail == "[]":
         raise _err_domain("non_empty_list", NIL)
-    head = deref(items[0])
+    head = deref(items[0]) if items else None
+    # the name is checked before the rest of the list (SWI-Prolog: X =.. [f(x)|_] is
+    # type_error(atom, f(x))), then the list: a partial one is an instantiation error, a
+    # tail that is no list type_error(list, List)
+    if items and len(items) > 1 and type(head) is not Var and \
+            (type(head) is not Atom or head == "[]"):
+        raise type_error("atom", head)
+    if type(tail) is Var:
+        if items and type(head) is not Var and type(head) is not Atom:
+            raise type_error("atom", head)
+        raise instantiation_error()
+    if not (type(tail) is Atom and tail == "[]"):
+        raise type_error("list", deref(a[1]))
     if len(items) == 1:
+        if type(head) is Var:
+            raise instantiation_error()
+        if type(head) is Struct:
+            raise type_error("atomic", head)
         return m.unify(t, head)
     if type(head) is Var:
         raise instantiation_error()
-    if type(head) is not Atom:
-        raise type_error("atom", head)
     return m.unify(t, Struct(_internal_name(head, len(items) - 1), tuple(items[1:])))
 
 
@@ -827,21 +851,24 @@ def _number_of_text(s: str, leading_layout: bool, bare_quote_is_zero: bool = Tru
 def _atom_concat(m, a):
     x, y = deref(a[0]), deref(a[1])
     if type(x) is not Var and type(y) is not Var:
-        if m.unify(a[2], Atom(_atom_text(x) + _atom_text(y))):
+        joined = _atom_text(x) + _atom_text(y)
+        if type(deref(a[2])) is not Var:
+            _atom_text(a[2])   # (a given whole is atomic text, SWI-Prolog checks)
+        if m.unify(a[2], Atom(joined)):
             yield None
         return
+    # a bound part is checked (type errors, before the whole's) and pins the split
+    px = _atom_text(x) if type(x) is not Var else None
+    py = _atom_text(y) if type(y) is not Var else None
     z = deref(a[2])
     if type(z) is Var:
         raise instantiation_error()
     s = _atom_text(z)
-    # a bound part is checked (type errors) and pins the split
-    if type(x) is not Var:
-        px = _atom_text(x)
+    if px is not None:
         if s.startswith(px) and m.unify(y, Atom(s[len(px):])):
             yield None
         return
-    if type(y) is not Var:
-        py = _atom_text(y)
+    if py is not None:
         if s.endswith(py) and m.unify(x, Atom(s[:len(s) - len(py)])):
             yield None
         return
@@ -863,14 +890,14 @@ def _length_argument(t: Any) -> Any:
 @det("atom_length", 2)
 def _atom_length(m, a):
     t = deref(a[0])
-    n = _length_argument(a[1])
     if type(t) is Atom and t == "[]":
         text = ""   # as SWI-Prolog 7: [] has no characters of its own
     elif type(t) is Struct and t.name == "." and len(t.args) == 2:
         text = _code_or_char_list_text(t)   # a code or character list is text too (SWI)
     else:
         text = _atom_text(t, "text")
-    return m.unify(n, len(text))
+    # (the text's errors first, then the length's, as SWI-Prolog checks)
+    return m.unify(_length_argument(a[1]), len(text))
 
 
 def text_in(t: Any, mode: str, expected: str = "text", numbers: bool = True) -> str:
@@ -931,8 +958,8 @@ def text_in(t: Any, mode: str, expected: str = "text", numbers: bool = True) -> 
 
 @det("string_length", 2)
 def _string_length(m, a):
-    n = _length_argument(a[1])
-    return m.unify(n, len(text_in(a[0], "any")))
+    text = text_in(a[0], "any")   # (the text's errors first, as SWI-Prolog checks)
+    return m.unify(_length_argument(a[1]), len(text))
 
 
 def _from_text(make: Callable[[str], Any], parse: Callable[[str], Any]):
@@ -959,7 +986,8 @@ def _name(m, a):
     """name(AtomOrNumber, Codes): a text that is a number (no leading layout) gives the
     number, any other text an atom."""
     x = deref(a[0])
-    if type(x) is not Var and (type(x) is Struct or not _is_text_given(a[1])):
+    if type(x) is not Var and (type(x) is Struct or x == NIL and type(x) is Atom
+                               or not _is_text_given(a[1])):
         return m.unify(a[1], make_list([ord(c) for c in _atom_text(x, "atomic", "atomic")]))
     text = _list_text(a[1])
     n = _number_of_text(text, leading_layout=False)
@@ -996,18 +1024,22 @@ def _number_codes(m, a):
 
 @det("atom_number", 2)
 def _atom_number(m, a):
+    """atom_number/2 as SWI-Prolog's library clauses: an atom's (or a string's) text is
+    read as a number (no number: false); else a given number makes the atom (any other
+    first argument then fails to unify); else a bound second argument must be a number,
+    and the first an atom."""
     x = deref(a[0])
-    if type(x) is Var:
-        n = deref(a[1])
-        if type(n) is Var:
-            raise instantiation_error()
-        if type(n) is not int and type(n) is not float:
-            raise type_error("number", n)
+    if type(x) is String or type(x) is Atom and x != "[]":
+        n = _number_of_text(str(x), leading_layout=False, bare_quote_is_zero=False)
+        return n is not None and m.unify(a[1], n)
+    n = deref(a[1])
+    if type(n) is int or type(n) is float:
         return m.unify(x, Atom(_atom_text(n)))
-    if type(x) is not Atom and type(x) is not String:
-        raise type_error("atom", x)
-    n = _number_of_text(_atom_text(x, "atom"), leading_layout=False, bare_quote_is_zero=False)
-    return n is not None and m.unify(a[1], n)
+    if type(n) is not Var:
+        raise type_error("number", n)
+    if type(x) is Var:
+        raise instantiation_error()
+    raise type_error("atom", x)
 
 
 def _term_text(m: "Machine", a: list, make: Callable[[str], Any]) -> bool:
@@ -1393,7 +1425,10 @@ def _string_concat(m, a):
     unbound the whole is split, a bound part pinning the split."""
     x, y = deref(a[0]), deref(a[1])
     if type(x) is not Var and type(y) is not Var:
-        if m.unify(a[2], String(text_in(x, "atomic") + text_in(y, "atomic"))):
+        joined = text_in(x, "atomic") + text_in(y, "atomic")
+        if type(deref(a[2])) is not Var:
+            text_in(a[2], "atomic")   # (a given whole is atomic text, SWI-Prolog checks)
+        if m.unify(a[2], String(joined)):
             yield None
         return
     px = text_in(x, "atomic") if type(x) is not Var else None
@@ -1415,18 +1450,28 @@ def _string_concat(m, a):
 
 
 def _text_conv(name: str, make: Callable[[str], Any], parse: Callable[[Any], Any],
-               first: tuple[str, str], second: tuple[str, str]):
+               first: tuple[str, str], second: tuple[str, str], either: bool = False):
     """A conversion Text <-> Other: from the first argument when it is bound (read in the
-    text mode ``first``, :func:`text_in`), else from the second (mode ``second``)."""
+    text mode ``first``, :func:`text_in`), else from the second (mode ``second``);
+    ``either``: from the second too when the first is no text (SWI-Prolog's atom_string/2:
+    atom_string(f(x), 1) fails, atom_string(f(x), g) is type_error(string, g))."""
     def f(m, a):
         x = deref(a[0])
         if type(x) is not Var:
-            text = text_in(x, *first)
+            try:
+                text = text_in(x, *first)
+            except SLREvaluationError as exc:
+                # a partial list (and for ``either`` anything that is no text) is made
+                # from the second argument when that is given, as SWI-Prolog does
+                partial = deref(exc.term.args[0]) == "instantiation_error"
+                if not (either or partial) or type(deref(a[1])) is Var:
+                    raise
+                return m.unify(x, parse(text_in(a[1], *second)))
             if _is_text_given(a[1]):
                 # a given second argument is read as text and compared (SWI-Prolog:
                 # string_chars(ab, [0'a, 0'b]) is true); one that is no text fails
                 try:
-                    return text_in(a[1], *second) == text
+                    return text_in(a[1], "any") == text
                 except SLREvaluationError:
                     return False
             return m.unify(a[1], make(text))
@@ -1434,8 +1479,9 @@ def _text_conv(name: str, make: Callable[[str], Any], parse: Callable[[Any], Any
     DET[(name, 2)] = f
 
 
-_text_conv("atom_string", String, Atom, ("whole", "atom"), ("whole", "string"))
-_text_conv("string_to_atom", Atom, String, ("whole", "string"), ("whole", "atom"))
+_text_conv("atom_string", String, Atom, ("whole", "atom"), ("whole", "string"), either=True)
+# string_to_atom(S, A) is SWI-Prolog's atom_string(A, S)
+DET[("string_to_atom", 2)] = lambda m, a: DET[("atom_string", 2)](m, (a[1], a[0]))
 _text_conv("string_chars", lambda s: make_list([Atom(c) for c in s]), String, ("any", "text"),
            ("list", "list"))
 _text_conv("string_codes", lambda s: make_list([ord(c) for c in s]), String, ("any", "text"),
@@ -1446,11 +1492,13 @@ _text_conv("string_codes", lambda s: make_list([ord(c) for c in s]), String, ("a
 def _char_code(m, a):
     """ISO 8.16.6: errors as SWI-Prolog (a one-character atom, or a code)."""
     x = deref(a[0])
+    c = deref(a[1])
     if type(x) is not Var:
         if type(x) is not Atom or len(x) != 1:
             raise type_error("character", x)
-        return m.unify(a[1], ord(x))
-    c = deref(a[1])
+        if type(c) is not Var and type(c) is not int:
+            raise type_error("integer", c)
+        return m.unify(c, ord(x))
     if type(c) is Var:
         raise instantiation_error()
     if type(c) is not int:
@@ -1570,6 +1618,10 @@ def _alc3(m, a):
 def _split_string(m, a):
     s, seps, pad = (text_in(a[0], "no_number"), text_in(a[1], "no_number"),
                     text_in(a[2], "no_number"))
+    out = deref(a[3])
+    if type(out) is not Var and not (type(out) is Atom and out == "[]") \
+            and not (type(out) is Struct and out.name == "." and len(out.args) == 2):
+        raise type_error("list", out)
     parts = [s] if not seps else _split_any(s, seps)
     return m.unify(a[3], make_list([String(p.strip(pad)) for p in parts]))
 
@@ -1726,16 +1778,33 @@ def _sort(m, a):
 _SORT_ORDERS = {"<": Atom("@<"), ">": Atom("@>"), "=<": Atom("@=<"), ">=": Atom("@>=")}
 
 
+def _sort_key(key: Any) -> None:
+    """sort/4's key as SWI-Prolog checks it first: an argument position (a non-negative
+    integer), a dict key (an atom) or a path of such keys (a list); anything else is
+    type_error(sort_key, Key)."""
+    key = deref(key)
+    if type(key) is Var:
+        raise instantiation_error()
+    if type(key) is int:
+        if key < 0:
+            raise _err_domain("not_less_than_one", key)    # (SWI-Prolog's, though 0 is one)
+        return
+    if type(key) is Atom:
+        return
+    if type(key) is Struct and key.name == "." and len(key.args) == 2:
+        items, tail = list_items(key)
+        if type(tail) is Atom and tail == "[]":
+            for x in items:
+                _sort_key(x)
+            return
+    raise type_error("sort_key", key)
+
+
 @det("sort", 4)
 def _sort4(m, a):
     key = deref(a[0])
     order = deref(a[1])
-    if type(key) is Var:
-        raise instantiation_error()
-    if type(key) is not int:
-        raise type_error("integer", key)
-    if key < 0:
-        raise _err_domain("not_less_than_one", key)    # (SWI-Prolog's, though 0 is one)
+    _sort_key(key)
     if type(order) is Var:
         raise instantiation_error()
     if type(order) is not Atom:
@@ -1745,6 +1814,11 @@ def _sort4(m, a):
     if str(order) not in ("@<", "@>", "@=<", "@>="):
         raise _err_domain("order", order)
     items = proper_list(a[2])
+    if type(key) is not int:
+        if not items:
+            return m.unify(a[3], NIL)
+        # (SWI-Prolog's dict keys and key paths: slr_sql has no dicts)
+        raise type_error("integer", key)
 
     def k(t):
         if key == 0:
@@ -1781,11 +1855,30 @@ def _numbers(t: Any) -> list:
     return [evaluate(x) for x in proper_list(t)]
 
 
+def _no_matching_rule(name: str, args: tuple, arity: int | None = None) -> SLREvaluationError:
+    """SWI-Prolog 9's error when no rule of its library(lists) predicate ``name`` (a `=>`
+    rule) matches the call ``name(args)``: existence_error(matching_rule, lists:Goal) in
+    ``context(lists:name/arity, _)``."""
+    goal = Struct(name, args)
+    return iso_error(Struct("existence_error", (Atom("matching_rule"),
+                                                Struct(":", (Atom("lists"), goal)))),
+                     Struct("context", (_pi(name, arity or len(args), "lists"), Var("_"))))
+
+
+def _is_nil(t: Any) -> bool:
+    return type(t) is Atom and t == "[]"
+
+
 @det("sum_list", 2)
 def _sum_list(m, a):
+    """sum_list/2 as SWI-Prolog's library: each element added as it comes (Y is Y0 + X);
+    a tail that is no list (unbound too: `=>` rules do not bind) is no matching rule."""
+    items, tail = list_items(a[0])
     total: Any = 0
-    for x in _numbers(a[0]):
-        total = apply_binary("+", total, x)   # Y is Y0 + X: inf + 1 is float_overflow
+    for x in items:
+        total = apply_binary("+", total, evaluate(x))   # Y is Y0 + X: inf + 1 is float_overflow
+    if not _is_nil(tail):
+        raise _no_matching_rule("sum_list", (tail, total, a[1]))
     return m.unify(a[1], total)
 
 
@@ -1803,9 +1896,19 @@ def _extreme(items: list, better: Callable[[Any, Any], bool]) -> Any:
     return best
 
 
-def _unify_extreme(m, out, items, better) -> bool:
+def _unify_extreme(m, out, t, better, name: str) -> bool:
+    """max_member/2, min_member/2 (``name``) as SWI-Prolog's library: [] fails, a term that
+    is no list, or a tail that is none (unbound too), is no matching rule."""
+    t = deref(t)
+    if _is_nil(t):
+        return False
+    if not (type(t) is Struct and t.name == "." and len(t.args) == 2):
+        raise _no_matching_rule(name, (out, t))
+    items, tail = list_items(t)
     best = _extreme(items, better)
-    return best is not None and m.unify(out, best)
+    if not _is_nil(tail):
+        raise _no_matching_rule(name + "_", (tail, best, out))
+    return m.unify(out, best)
 
 
 def _fold_arith(name: str, items: list) -> Any:
@@ -1819,28 +1922,39 @@ def _fold_arith(name: str, items: list) -> Any:
     return value
 
 
-def _unify_fold(m, out, name: str, items: list) -> bool:
-    value = _fold_arith(name, items)
-    return value is not None and m.unify(out, value)
+def _unify_fold(m, out, name: str, t: Any) -> bool:
+    """max_list/2, min_list/2 (``name`` max or min) as SWI-Prolog's library folds: [] fails,
+    a term that is no list, or a tail that is none (unbound too), is no matching rule."""
+    t = deref(t)
+    if _is_nil(t):
+        return False
+    what = name + "_list"
+    if not (type(t) is Struct and t.name == "." and len(t.args) == 2):
+        raise _no_matching_rule(what, (t, out))
+    items, tail = list_items(t)
+    value = _fold_arith(name, [evaluate(x) for x in items])
+    if not _is_nil(tail):
+        # (the library's fold starts from the first element as it is)
+        raise _no_matching_rule(what, (tail, items[0] if len(items) == 1 else value, out))
+    return m.unify(out, value)
 
 
-DET[("max_list", 2)] = lambda m, a: _unify_fold(m, a[1], "max", _numbers(a[0]))
-DET[("min_list", 2)] = lambda m, a: _unify_fold(m, a[1], "min", _numbers(a[0]))
+DET[("max_list", 2)] = lambda m, a: _unify_fold(m, a[1], "max", a[0])
+DET[("min_list", 2)] = lambda m, a: _unify_fold(m, a[1], "min", a[0])
 DET[("max_member", 2)] = lambda m, a: _unify_extreme(
-    m, a[0], proper_list(a[1]), lambda x, y: compare_terms(x, y) > 0)
+    m, a[0], a[1], lambda x, y: compare_terms(x, y) > 0, "max_member")
 DET[("min_member", 2)] = lambda m, a: _unify_extreme(
-    m, a[0], proper_list(a[1]), lambda x, y: compare_terms(x, y) < 0)
+    m, a[0], a[1], lambda x, y: compare_terms(x, y) < 0, "min_member")
 
 
 @det("numlist", 3)
 def _numlist(m, a):
     lo, hi = deref(a[0]), deref(a[1])
-    if type(lo) is Var or type(hi) is Var:
-        raise instantiation_error()
-    if type(lo) is not int:
-        raise type_error("integer", lo)
-    if type(hi) is not int:
-        raise type_error("integer", hi)
+    for bound in (lo, hi):   # must_be(integer, L), then must_be(integer, H)
+        if type(bound) is Var:
+            raise instantiation_error()
+        if type(bound) is not int:
+            raise type_error("integer", bound)
     if lo > hi:
         return False
     return m.unify(a[2], build_list(m, hi - lo + 1, lambda i: lo + i))
@@ -1848,6 +1962,9 @@ def _numlist(m, a):
 
 @det("reverse", 2)
 def _reverse(m, a):
+    items, tail = list_items(a[0])
+    if type(tail) is not Var and not _is_nil(tail):
+        return False   # (the library's clauses are for [] and [X|Xs] only)
     return m.unify(a[1], make_list(list(reversed(proper_list(a[0])))))
 
 
@@ -1862,6 +1979,9 @@ def _memberchk(m, a):
         undo(trail, mark)
     if type(tail) is Var:
         return m.unify(tail, Struct(".", (a[0], Var())))
+    if not _is_nil(tail):
+        raise iso_error(Struct("type_error", (Atom("list"), tail)),
+                        Struct("context", (_pi("$memberchk", 3), Var("_"))))
     return False
 
 
@@ -3124,8 +3244,10 @@ foldl(G, L1, L2, V0, V) :- '$foldl'(L1, L2, G, V0, V).
 '$foldl'([X|Xs], [Y|Ys], G, V0, V) :- call(G, X, Y, V0, V1), '$foldl'(Xs, Ys, G, V1, V).
 delete([], _, []).
 delete([H|T], X, R) :- ( H \= X -> R = [H|R1] ; R = R1 ), delete(T, X, R1).
-subtract([], _, []).
-subtract([E|T], D, R) :- ( memberchk(E, D) -> R = R1 ; R = [E|R1] ), subtract(T, D, R1).
+subtract(L, D, R) :- var(L), !, throw(error(existence_error(matching_rule, lists:subtract(L, D, R)), context(lists:subtract/3, _))).
+subtract([], _, R) :- !, R = [].
+subtract([E|T], D, R) :- !, ( memberchk(E, D) -> R = R1 ; R = [E|R1] ), subtract(T, D, R1).
+subtract(L, D, R) :- throw(error(existence_error(matching_rule, lists:subtract(L, D, R)), context(lists:subtract/3, _))).
 intersection([], _, []).
 intersection([X|T], L, I) :- ( memberchk(X, L) -> I = [X|R] ; I = R ), intersection(T, L, R).
 union([], L, L).

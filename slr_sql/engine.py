@@ -417,8 +417,9 @@ class Machine:
         if key in self.engine.program.dynamic:
             return False
         name, arity = key
+        # (a list cell's name is '[|]' in SWI-Prolog 7: call([a], X) is no '.'/3)
         error = iso_error(Struct("existence_error", (
-            Atom("procedure"), Struct("/", (Atom(name), arity)))))
+            Atom("procedure"), Struct("/", (Atom("[|]" if name == "." else name), arity)))))
         hint = self._event_hint(name, arity, args)
         if hint:
             error = SLREvaluationError(error.term, f"{error}: {hint}")

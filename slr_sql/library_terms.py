@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from .terms import Atom as A, Clause, Span, String, Struct as S, Var
 
-SOURCE_SHA256 = 'aa1eef215d8d446c2c2da4a69df110284eb709b7d13d9210d5fbc595888d5001'
+SOURCE_SHA256 = '497098a32b17762e3e60c16e30193731e77f74b3dd60d656773c9fcd33750b46'
 
 
 def clauses(source: str) -> list[Clause]:
@@ -125,192 +125,196 @@ def clauses(source: str) -> list[Clause]:
     out.append(Clause(S(A('delete'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 56, 1, 56, 19), (), source[2872:2890]))
     v = [Var('H'), Var('T'), Var('X'), Var('R'), Var('R1')]
     out.append(Clause(S(A('delete'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('\\='), (v[0], v[2])), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('='), (v[3], v[4])))), S(A('delete'), (v[1], v[2], v[4])))), Span('<library>', 57, 1, 57, 76), (('H', v[0]), ('T', v[1]), ('X', v[2]), ('R', v[3]), ('R1', v[4]), ), source[2891:2966]))
-    v = [Var('_')]
-    out.append(Clause(S(A('subtract'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 58, 1, 58, 21), (), source[2967:2987]))
+    v = [Var('L'), Var('D'), Var('R'), Var('_')]
+    out.append(Clause(S(A('subtract'), (v[0], v[1], v[2])), S(A(','), (S(A('var'), (v[0],)), S(A(','), (A('!'), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('subtract'), (v[0], v[1], v[2])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('subtract'), 3)))), v[3])))),)))))), Span('<library>', 58, 1, 58, 133), (('L', v[0]), ('D', v[1]), ('R', v[2]), ), source[2967:3099]))
+    v = [Var('_'), Var('R')]
+    out.append(Clause(S(A('subtract'), (A('[]'), v[0], v[1])), S(A(','), (A('!'), S(A('='), (v[1], A('[]'))))), Span('<library>', 59, 1, 59, 33), (('R', v[1]), ), source[3100:3132]))
     v = [Var('E'), Var('T'), Var('D'), Var('R'), Var('R1')]
-    out.append(Clause(S(A('subtract'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], v[4])))), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('subtract'), (v[1], v[2], v[4])))), Span('<library>', 59, 1, 59, 89), (('E', v[0]), ('T', v[1]), ('D', v[2]), ('R', v[3]), ('R1', v[4]), ), source[2988:3076]))
+    out.append(Clause(S(A('subtract'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (A('!'), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], v[4])))), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('subtract'), (v[1], v[2], v[4])))))), Span('<library>', 60, 1, 60, 92), (('E', v[0]), ('T', v[1]), ('D', v[2]), ('R', v[3]), ('R1', v[4]), ), source[3133:3224]))
+    v = [Var('L'), Var('D'), Var('R'), Var('_')]
+    out.append(Clause(S(A('subtract'), (v[0], v[1], v[2])), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('subtract'), (v[0], v[1], v[2])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('subtract'), 3)))), v[3])))),)), Span('<library>', 61, 1, 61, 122), (('L', v[0]), ('D', v[1]), ('R', v[2]), ), source[3225:3346]))
     v = [Var('_')]
-    out.append(Clause(S(A('intersection'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 60, 1, 60, 25), (), source[3077:3101]))
+    out.append(Clause(S(A('intersection'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 62, 1, 62, 25), (), source[3347:3371]))
     v = [Var('X'), Var('T'), Var('L'), Var('I'), Var('R')]
-    out.append(Clause(S(A('intersection'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('='), (v[3], v[4])))), S(A('intersection'), (v[1], v[2], v[4])))), Span('<library>', 61, 1, 61, 94), (('X', v[0]), ('T', v[1]), ('L', v[2]), ('I', v[3]), ('R', v[4]), ), source[3102:3195]))
+    out.append(Clause(S(A('intersection'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('='), (v[3], v[4])))), S(A('intersection'), (v[1], v[2], v[4])))), Span('<library>', 63, 1, 63, 94), (('X', v[0]), ('T', v[1]), ('L', v[2]), ('I', v[3]), ('R', v[4]), ), source[3372:3465]))
     v = [Var('L')]
-    out.append(Clause(S(A('union'), (A('[]'), v[0], v[0])), A('true'), Span('<library>', 62, 1, 62, 17), (('L', v[0]), ), source[3196:3212]))
+    out.append(Clause(S(A('union'), (A('[]'), v[0], v[0])), A('true'), Span('<library>', 64, 1, 64, 17), (('L', v[0]), ), source[3466:3482]))
     v = [Var('H'), Var('T'), Var('L'), Var('R'), Var('R1')]
-    out.append(Clause(S(A('union'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], v[4])))), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('union'), (v[1], v[2], v[4])))), Span('<library>', 63, 1, 63, 83), (('H', v[0]), ('T', v[1]), ('L', v[2]), ('R', v[3]), ('R1', v[4]), ), source[3213:3295]))
+    out.append(Clause(S(A('union'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], v[4])))), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('union'), (v[1], v[2], v[4])))), Span('<library>', 65, 1, 65, 83), (('H', v[0]), ('T', v[1]), ('L', v[2]), ('R', v[3]), ('R1', v[4]), ), source[3483:3565]))
     v = []
-    out.append(Clause(S(A('permutation'), (A('[]'), A('[]'))), A('true'), Span('<library>', 64, 1, 64, 21), (), source[3296:3316]))
+    out.append(Clause(S(A('permutation'), (A('[]'), A('[]'))), A('true'), Span('<library>', 66, 1, 66, 21), (), source[3566:3586]))
     v = [Var('L'), Var('H'), Var('T'), Var('R')]
-    out.append(Clause(S(A('permutation'), (v[0], S(A('.'), (v[1], v[2])))), S(A(','), (S(A('select'), (v[1], v[0], v[3])), S(A('permutation'), (v[3], v[2])))), Span('<library>', 65, 1, 65, 61), (('L', v[0]), ('H', v[1]), ('T', v[2]), ('R', v[3]), ), source[3317:3377]))
+    out.append(Clause(S(A('permutation'), (v[0], S(A('.'), (v[1], v[2])))), S(A(','), (S(A('select'), (v[1], v[0], v[3])), S(A('permutation'), (v[3], v[2])))), Span('<library>', 67, 1, 67, 61), (('L', v[0]), ('H', v[1]), ('T', v[2]), ('R', v[3]), ), source[3587:3647]))
     v = [Var('G')]
-    out.append(Clause(S(A('once'), (v[0],)), S(A(','), (S(A('call'), (v[0],)), A('!'))), Span('<library>', 66, 1, 66, 23), (('G', v[0]), ), source[3378:3400]))
+    out.append(Clause(S(A('once'), (v[0],)), S(A(','), (S(A('call'), (v[0],)), A('!'))), Span('<library>', 68, 1, 68, 23), (('G', v[0]), ), source[3648:3670]))
     v = [Var('G')]
-    out.append(Clause(S(A('ignore'), (v[0],)), S(A(';'), (S(A('->'), (S(A('call'), (v[0],)), A('true'))), A('true'))), Span('<library>', 67, 1, 67, 41), (('G', v[0]), ), source[3401:3441]))
+    out.append(Clause(S(A('ignore'), (v[0],)), S(A(';'), (S(A('->'), (S(A('call'), (v[0],)), A('true'))), A('true'))), Span('<library>', 69, 1, 69, 41), (('G', v[0]), ), source[3671:3711]))
     v = []
-    out.append(Clause(S(A('pairs_keys_values'), (A('[]'), A('[]'), A('[]'))), A('true'), Span('<library>', 68, 1, 68, 31), (), source[3442:3472]))
+    out.append(Clause(S(A('pairs_keys_values'), (A('[]'), A('[]'), A('[]'))), A('true'), Span('<library>', 70, 1, 70, 31), (), source[3712:3742]))
     v = [Var('K'), Var('V'), Var('T'), Var('Ks'), Var('Vs')]
-    out.append(Clause(S(A('pairs_keys_values'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[0], v[3])), S(A('.'), (v[1], v[4])))), S(A('pairs_keys_values'), (v[2], v[3], v[4])), Span('<library>', 69, 1, 69, 76), (('K', v[0]), ('V', v[1]), ('T', v[2]), ('Ks', v[3]), ('Vs', v[4]), ), source[3473:3548]))
+    out.append(Clause(S(A('pairs_keys_values'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[0], v[3])), S(A('.'), (v[1], v[4])))), S(A('pairs_keys_values'), (v[2], v[3], v[4])), Span('<library>', 71, 1, 71, 76), (('K', v[0]), ('V', v[1]), ('T', v[2]), ('Ks', v[3]), ('Vs', v[4]), ), source[3743:3818]))
     v = []
-    out.append(Clause(S(A('pairs_keys'), (A('[]'), A('[]'))), A('true'), Span('<library>', 70, 1, 70, 20), (), source[3549:3568]))
+    out.append(Clause(S(A('pairs_keys'), (A('[]'), A('[]'))), A('true'), Span('<library>', 72, 1, 72, 20), (), source[3819:3838]))
     v = [Var('K'), Var('_'), Var('T'), Var('Ks')]
-    out.append(Clause(S(A('pairs_keys'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[0], v[3])))), S(A('pairs_keys'), (v[2], v[3])), Span('<library>', 71, 1, 71, 50), (('K', v[0]), ('T', v[2]), ('Ks', v[3]), ), source[3569:3618]))
+    out.append(Clause(S(A('pairs_keys'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[0], v[3])))), S(A('pairs_keys'), (v[2], v[3])), Span('<library>', 73, 1, 73, 50), (('K', v[0]), ('T', v[2]), ('Ks', v[3]), ), source[3839:3888]))
     v = []
-    out.append(Clause(S(A('pairs_values'), (A('[]'), A('[]'))), A('true'), Span('<library>', 72, 1, 72, 22), (), source[3619:3640]))
+    out.append(Clause(S(A('pairs_values'), (A('[]'), A('[]'))), A('true'), Span('<library>', 74, 1, 74, 22), (), source[3889:3910]))
     v = [Var('_'), Var('V'), Var('T'), Var('Vs')]
-    out.append(Clause(S(A('pairs_values'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[1], v[3])))), S(A('pairs_values'), (v[2], v[3])), Span('<library>', 73, 1, 73, 54), (('V', v[1]), ('T', v[2]), ('Vs', v[3]), ), source[3641:3694]))
+    out.append(Clause(S(A('pairs_values'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[1], v[3])))), S(A('pairs_values'), (v[2], v[3])), Span('<library>', 75, 1, 75, 54), (('V', v[1]), ('T', v[2]), ('Vs', v[3]), ), source[3911:3964]))
     v = [Var('List'), Var('Flat'), Var('Flat0')]
-    out.append(Clause(S(A('flatten'), (v[0], v[1])), S(A(','), (S(A('$flatten'), (v[0], A('[]'), v[2])), S(A(','), (A('!'), S(A('='), (v[1], v[2])))))), Span('<library>', 74, 1, 74, 69), (('List', v[0]), ('Flat', v[1]), ('Flat0', v[2]), ), source[3695:3763]))
+    out.append(Clause(S(A('flatten'), (v[0], v[1])), S(A(','), (S(A('$flatten'), (v[0], A('[]'), v[2])), S(A(','), (A('!'), S(A('='), (v[1], v[2])))))), Span('<library>', 76, 1, 76, 69), (('List', v[0]), ('Flat', v[1]), ('Flat0', v[2]), ), source[3965:4033]))
     v = [Var('Var'), Var('Tl')]
-    out.append(Clause(S(A('$flatten'), (v[0], v[1], S(A('.'), (v[0], v[1])))), S(A(','), (S(A('var'), (v[0],)), A('!'))), Span('<library>', 75, 1, 75, 46), (('Var', v[0]), ('Tl', v[1]), ), source[3764:3809]))
+    out.append(Clause(S(A('$flatten'), (v[0], v[1], S(A('.'), (v[0], v[1])))), S(A(','), (S(A('var'), (v[0],)), A('!'))), Span('<library>', 77, 1, 77, 46), (('Var', v[0]), ('Tl', v[1]), ), source[4034:4079]))
     v = [Var('Tl')]
-    out.append(Clause(S(A('$flatten'), (A('[]'), v[0], v[0])), A('!'), Span('<library>', 76, 1, 76, 29), (('Tl', v[0]), ), source[3810:3838]))
+    out.append(Clause(S(A('$flatten'), (A('[]'), v[0], v[0])), A('!'), Span('<library>', 78, 1, 78, 29), (('Tl', v[0]), ), source[4080:4108]))
     v = [Var('Hd'), Var('Tl'), Var('Tail'), Var('List'), Var('FlatHeadTail')]
-    out.append(Clause(S(A('$flatten'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (A('!'), S(A(','), (S(A('$flatten'), (v[0], v[4], v[3])), S(A('$flatten'), (v[1], v[2], v[4])))))), Span('<library>', 77, 1, 77, 110), (('Hd', v[0]), ('Tl', v[1]), ('Tail', v[2]), ('List', v[3]), ('FlatHeadTail', v[4]), ), source[3839:3948]))
+    out.append(Clause(S(A('$flatten'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (A('!'), S(A(','), (S(A('$flatten'), (v[0], v[4], v[3])), S(A('$flatten'), (v[1], v[2], v[4])))))), Span('<library>', 79, 1, 79, 110), (('Hd', v[0]), ('Tl', v[1]), ('Tail', v[2]), ('List', v[3]), ('FlatHeadTail', v[4]), ), source[4109:4218]))
     v = [Var('NonList'), Var('Tl')]
-    out.append(Clause(S(A('$flatten'), (v[0], v[1], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 78, 1, 78, 39), (('NonList', v[0]), ('Tl', v[1]), ), source[3949:3987]))
+    out.append(Clause(S(A('$flatten'), (v[0], v[1], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 80, 1, 80, 39), (('NonList', v[0]), ('Tl', v[1]), ), source[4219:4257]))
     v = []
-    out.append(Clause(A('repeat'), A('$repeat'), Span('<library>', 79, 1, 79, 21), (), source[3988:4008]))
+    out.append(Clause(A('repeat'), A('$repeat'), Span('<library>', 81, 1, 81, 21), (), source[4258:4278]))
     v = [Var('Term'), Var('Vars')]
-    out.append(Clause(S(A('term_variables'), (v[0], v[1])), S(A('$term_variables'), (v[0], v[1])), Span('<library>', 80, 1, 80, 61), (('Term', v[0]), ('Vars', v[1]), ), source[4009:4069]))
+    out.append(Clause(S(A('term_variables'), (v[0], v[1])), S(A('$term_variables'), (v[0], v[1])), Span('<library>', 82, 1, 82, 61), (('Term', v[0]), ('Vars', v[1]), ), source[4279:4339]))
     v = [Var('P'), Var('L'), Var('Sorted'), Var('N'), Var('Tail'), Var('_'), Var('Sorted1'), Var('_'), Var('_')]
-    out.append(Clause(S(A('predsort'), (v[0], v[1], v[2])), S(A(','), (S(A('$skip_list'), (v[3], v[1], v[4])), S(A(';'), (S(A('->'), (S(A('=='), (v[4], A('[]'))), S(A(','), (S(A('$predsort'), (v[0], v[3], v[1], v[5], v[6])), S(A('='), (v[2], v[6])))))), S(A(';'), (S(A('->'), (S(A('var'), (v[4],)), S(A('throw'), (S(A('error'), (A('instantiation_error'), v[7])),)))), S(A('throw'), (S(A('error'), (S(A('type_error'), (A('list'), v[1])), v[8])),)))))))), Span('<library>', 81, 1, 81, 213), (('P', v[0]), ('L', v[1]), ('Sorted', v[2]), ('N', v[3]), ('Tail', v[4]), ('Sorted1', v[6]), ), source[4070:4282]))
+    out.append(Clause(S(A('predsort'), (v[0], v[1], v[2])), S(A(','), (S(A('$skip_list'), (v[3], v[1], v[4])), S(A(';'), (S(A('->'), (S(A('=='), (v[4], A('[]'))), S(A(','), (S(A('$predsort'), (v[0], v[3], v[1], v[5], v[6])), S(A('='), (v[2], v[6])))))), S(A(';'), (S(A('->'), (S(A('var'), (v[4],)), S(A('throw'), (S(A('error'), (A('instantiation_error'), v[7])),)))), S(A('throw'), (S(A('error'), (S(A('type_error'), (A('list'), v[1])), v[8])),)))))))), Span('<library>', 83, 1, 83, 213), (('P', v[0]), ('L', v[1]), ('Sorted', v[2]), ('N', v[3]), ('Tail', v[4]), ('Sorted1', v[6]), ), source[4340:4552]))
     v = [Var('P'), Var('X1'), Var('X2'), Var('L'), Var('R'), Var('Delta')]
-    out.append(Clause(S(A('$predsort'), (v[0], 2, S(A('.'), (v[1], S(A('.'), (v[2], v[3])))), v[3], v[4])), S(A(','), (A('!'), S(A(','), (S(A('call'), (v[0], v[5], v[1], v[2])), S(A('$predsort2'), (v[5], v[1], v[2], v[4])))))), Span('<library>', 82, 1, 82, 98), (('P', v[0]), ('X1', v[1]), ('X2', v[2]), ('L', v[3]), ('R', v[4]), ('Delta', v[5]), ), source[4283:4380]))
+    out.append(Clause(S(A('$predsort'), (v[0], 2, S(A('.'), (v[1], S(A('.'), (v[2], v[3])))), v[3], v[4])), S(A(','), (A('!'), S(A(','), (S(A('call'), (v[0], v[5], v[1], v[2])), S(A('$predsort2'), (v[5], v[1], v[2], v[4])))))), Span('<library>', 84, 1, 84, 98), (('P', v[0]), ('X1', v[1]), ('X2', v[2]), ('L', v[3]), ('R', v[4]), ('Delta', v[5]), ), source[4553:4650]))
     v = [Var('_'), Var('X'), Var('L')]
-    out.append(Clause(S(A('$predsort'), (v[0], 1, S(A('.'), (v[1], v[2])), v[2], S(A('.'), (v[1], A('[]'))))), A('!'), Span('<library>', 83, 1, 83, 39), (('X', v[1]), ('L', v[2]), ), source[4381:4419]))
+    out.append(Clause(S(A('$predsort'), (v[0], 1, S(A('.'), (v[1], v[2])), v[2], S(A('.'), (v[1], A('[]'))))), A('!'), Span('<library>', 85, 1, 85, 39), (('X', v[1]), ('L', v[2]), ), source[4651:4689]))
     v = [Var('_'), Var('L')]
-    out.append(Clause(S(A('$predsort'), (v[0], 0, v[1], v[1], A('[]'))), A('!'), Span('<library>', 84, 1, 84, 34), (('L', v[1]), ), source[4420:4453]))
+    out.append(Clause(S(A('$predsort'), (v[0], 0, v[1], v[1], A('[]'))), A('!'), Span('<library>', 86, 1, 86, 34), (('L', v[1]), ), source[4690:4723]))
     v = [Var('P'), Var('N'), Var('L1'), Var('L3'), Var('R'), Var('N1'), Var('N2'), Var('L2'), Var('R1'), Var('R2')]
-    out.append(Clause(S(A('$predsort'), (v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('is'), (v[5], S(A('//'), (v[1], 2)))), S(A(','), (S(A('plus'), (v[5], v[6], v[1])), S(A(','), (S(A('$predsort'), (v[0], v[5], v[2], v[7], v[8])), S(A(','), (S(A('$predsort'), (v[0], v[6], v[7], v[3], v[9])), S(A('$predmerge'), (v[0], v[8], v[9], v[4])))))))))), Span('<library>', 85, 1, 85, 155), (('P', v[0]), ('N', v[1]), ('L1', v[2]), ('L3', v[3]), ('R', v[4]), ('N1', v[5]), ('N2', v[6]), ('L2', v[7]), ('R1', v[8]), ('R2', v[9]), ), source[4454:4608]))
+    out.append(Clause(S(A('$predsort'), (v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('is'), (v[5], S(A('//'), (v[1], 2)))), S(A(','), (S(A('plus'), (v[5], v[6], v[1])), S(A(','), (S(A('$predsort'), (v[0], v[5], v[2], v[7], v[8])), S(A(','), (S(A('$predsort'), (v[0], v[6], v[7], v[3], v[9])), S(A('$predmerge'), (v[0], v[8], v[9], v[4])))))))))), Span('<library>', 87, 1, 87, 155), (('P', v[0]), ('N', v[1]), ('L1', v[2]), ('L3', v[3]), ('R', v[4]), ('N1', v[5]), ('N2', v[6]), ('L2', v[7]), ('R1', v[8]), ('R2', v[9]), ), source[4724:4878]))
     v = [Var('X1'), Var('X2')]
-    out.append(Clause(S(A('$predsort2'), (A('<'), v[0], v[1], S(A('.'), (v[0], S(A('.'), (v[1], A('[]'))))))), A('true'), Span('<library>', 86, 1, 86, 37), (('X1', v[0]), ('X2', v[1]), ), source[4609:4645]))
+    out.append(Clause(S(A('$predsort2'), (A('<'), v[0], v[1], S(A('.'), (v[0], S(A('.'), (v[1], A('[]'))))))), A('true'), Span('<library>', 88, 1, 88, 37), (('X1', v[0]), ('X2', v[1]), ), source[4879:4915]))
     v = [Var('X1'), Var('_')]
-    out.append(Clause(S(A('$predsort2'), (A('='), v[0], v[1], S(A('.'), (v[0], A('[]'))))), A('true'), Span('<library>', 87, 1, 87, 32), (('X1', v[0]), ), source[4646:4677]))
+    out.append(Clause(S(A('$predsort2'), (A('='), v[0], v[1], S(A('.'), (v[0], A('[]'))))), A('true'), Span('<library>', 89, 1, 89, 32), (('X1', v[0]), ), source[4916:4947]))
     v = [Var('X1'), Var('X2')]
-    out.append(Clause(S(A('$predsort2'), (A('>'), v[0], v[1], S(A('.'), (v[1], S(A('.'), (v[0], A('[]'))))))), A('true'), Span('<library>', 88, 1, 88, 37), (('X1', v[0]), ('X2', v[1]), ), source[4678:4714]))
+    out.append(Clause(S(A('$predsort2'), (A('>'), v[0], v[1], S(A('.'), (v[1], S(A('.'), (v[0], A('[]'))))))), A('true'), Span('<library>', 90, 1, 90, 37), (('X1', v[0]), ('X2', v[1]), ), source[4948:4984]))
     v = [Var('_'), Var('R')]
-    out.append(Clause(S(A('$predmerge'), (v[0], A('[]'), v[1], v[1])), A('!'), Span('<library>', 89, 1, 89, 32), (('R', v[1]), ), source[4715:4746]))
+    out.append(Clause(S(A('$predmerge'), (v[0], A('[]'), v[1], v[1])), A('!'), Span('<library>', 91, 1, 91, 32), (('R', v[1]), ), source[4985:5016]))
     v = [Var('_'), Var('R')]
-    out.append(Clause(S(A('$predmerge'), (v[0], v[1], A('[]'), v[1])), A('!'), Span('<library>', 90, 1, 90, 32), (('R', v[1]), ), source[4747:4778]))
+    out.append(Clause(S(A('$predmerge'), (v[0], v[1], A('[]'), v[1])), A('!'), Span('<library>', 92, 1, 92, 32), (('R', v[1]), ), source[5017:5048]))
     v = [Var('P'), Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Result'), Var('Delta')]
-    out.append(Clause(S(A('$predmerge'), (v[0], S(A('.'), (v[1], v[2])), S(A('.'), (v[3], v[4])), v[5])), S(A(','), (S(A('call'), (v[0], v[6], v[1], v[3])), S(A(','), (A('!'), S(A('$predmerge_'), (v[6], v[0], v[1], v[3], v[2], v[4], v[5])))))), Span('<library>', 91, 1, 91, 121), (('P', v[0]), ('H1', v[1]), ('T1', v[2]), ('H2', v[3]), ('T2', v[4]), ('Result', v[5]), ('Delta', v[6]), ), source[4779:4899]))
+    out.append(Clause(S(A('$predmerge'), (v[0], S(A('.'), (v[1], v[2])), S(A('.'), (v[3], v[4])), v[5])), S(A(','), (S(A('call'), (v[0], v[6], v[1], v[3])), S(A(','), (A('!'), S(A('$predmerge_'), (v[6], v[0], v[1], v[3], v[2], v[4], v[5])))))), Span('<library>', 93, 1, 93, 121), (('P', v[0]), ('H1', v[1]), ('T1', v[2]), ('H2', v[3]), ('T2', v[4]), ('Result', v[5]), ('Delta', v[6]), ), source[5049:5169]))
     v = [Var('P'), Var('H1'), Var('H2'), Var('T1'), Var('T2'), Var('R')]
-    out.append(Clause(S(A('$predmerge_'), (A('>'), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[2], v[5])))), S(A('$predmerge'), (v[0], S(A('.'), (v[1], v[3])), v[4], v[5])), Span('<library>', 92, 1, 92, 82), (('P', v[0]), ('H1', v[1]), ('H2', v[2]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[4900:4981]))
+    out.append(Clause(S(A('$predmerge_'), (A('>'), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[2], v[5])))), S(A('$predmerge'), (v[0], S(A('.'), (v[1], v[3])), v[4], v[5])), Span('<library>', 94, 1, 94, 82), (('P', v[0]), ('H1', v[1]), ('H2', v[2]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[5170:5251]))
     v = [Var('P'), Var('H1'), Var('_'), Var('T1'), Var('T2'), Var('R')]
-    out.append(Clause(S(A('$predmerge_'), (A('='), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[1], v[5])))), S(A('$predmerge'), (v[0], v[3], v[4], v[5])), Span('<library>', 93, 1, 93, 76), (('P', v[0]), ('H1', v[1]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[4982:5057]))
+    out.append(Clause(S(A('$predmerge_'), (A('='), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[1], v[5])))), S(A('$predmerge'), (v[0], v[3], v[4], v[5])), Span('<library>', 95, 1, 95, 76), (('P', v[0]), ('H1', v[1]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[5252:5327]))
     v = [Var('P'), Var('H1'), Var('H2'), Var('T1'), Var('T2'), Var('R')]
-    out.append(Clause(S(A('$predmerge_'), (A('<'), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[1], v[5])))), S(A('$predmerge'), (v[0], v[3], S(A('.'), (v[2], v[4])), v[5])), Span('<library>', 94, 1, 94, 82), (('P', v[0]), ('H1', v[1]), ('H2', v[2]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[5058:5139]))
+    out.append(Clause(S(A('$predmerge_'), (A('<'), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[1], v[5])))), S(A('$predmerge'), (v[0], v[3], S(A('.'), (v[2], v[4])), v[5])), Span('<library>', 96, 1, 96, 82), (('P', v[0]), ('H1', v[1]), ('H2', v[2]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[5328:5409]))
     v = [Var('String'), Var('Before'), Var('Length'), Var('After'), Var('Sub')]
-    out.append(Clause(S(A('sub_string'), (v[0], v[1], v[2], v[3], v[4])), S(A('$sub_string'), (v[0], v[1], v[2], v[3], v[4])), Span('<library>', 95, 1, 95, 101), (('String', v[0]), ('Before', v[1]), ('Length', v[2]), ('After', v[3]), ('Sub', v[4]), ), source[5140:5240]))
+    out.append(Clause(S(A('sub_string'), (v[0], v[1], v[2], v[3], v[4])), S(A('$sub_string'), (v[0], v[1], v[2], v[3], v[4])), Span('<library>', 97, 1, 97, 101), (('String', v[0]), ('Before', v[1]), ('Length', v[2]), ('After', v[3]), ('Sub', v[4]), ), source[5410:5510]))
     v = [Var('Char'), Var('Type')]
-    out.append(Clause(S(A('char_type'), (v[0], v[1])), S(A('$char_type'), (v[0], v[1])), Span('<library>', 96, 1, 96, 51), (('Char', v[0]), ('Type', v[1]), ), source[5241:5291]))
+    out.append(Clause(S(A('char_type'), (v[0], v[1])), S(A('$char_type'), (v[0], v[1])), Span('<library>', 98, 1, 98, 51), (('Char', v[0]), ('Type', v[1]), ), source[5511:5561]))
     v = [Var('Code'), Var('Type')]
-    out.append(Clause(S(A('code_type'), (v[0], v[1])), S(A('$code_type'), (v[0], v[1])), Span('<library>', 97, 1, 97, 51), (('Code', v[0]), ('Type', v[1]), ), source[5292:5342]))
+    out.append(Clause(S(A('code_type'), (v[0], v[1])), S(A('$code_type'), (v[0], v[1])), Span('<library>', 99, 1, 99, 51), (('Code', v[0]), ('Type', v[1]), ), source[5562:5612]))
     v = [Var('X'), Var('Y')]
-    out.append(Clause(S(A('unify_with_occurs_check'), (v[0], v[1])), S(A('$unify_with_occurs_check'), (v[0], v[1])), Span('<library>', 98, 1, 98, 67), (('X', v[0]), ('Y', v[1]), ), source[5343:5409]))
+    out.append(Clause(S(A('unify_with_occurs_check'), (v[0], v[1])), S(A('$unify_with_occurs_check'), (v[0], v[1])), Span('<library>', 100, 1, 100, 67), (('X', v[0]), ('Y', v[1]), ), source[5613:5679]))
     v = [Var('List'), Var('Set')]
-    out.append(Clause(S(A('list_to_ord_set'), (v[0], v[1])), S(A('sort'), (v[0], v[1])), Span('<library>', 99, 1, 99, 47), (('List', v[0]), ('Set', v[1]), ), source[5410:5456]))
+    out.append(Clause(S(A('list_to_ord_set'), (v[0], v[1])), S(A('sort'), (v[0], v[1])), Span('<library>', 101, 1, 101, 47), (('List', v[0]), ('Set', v[1]), ), source[5680:5726]))
     v = [Var('Sets'), Var('Union'), Var('_'), Var('_'), Var('N'), Var('_')]
-    out.append(Clause(S(A('ord_union'), (v[0], v[1])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[1], A('[]'))))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[2], v[3])))))), S(A(','), (S(A('length'), (v[0], v[4])), S(A('$ord_union_all'), (v[4], v[0], v[1], A('[]'))))))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_union'), (v[0], v[1])))))), v[5])),)))))), Span('<library>', 100, 1, 100, 224), (('Sets', v[0]), ('Union', v[1]), ('N', v[4]), ), source[5457:5680]))
+    out.append(Clause(S(A('ord_union'), (v[0], v[1])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[1], A('[]'))))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[2], v[3])))))), S(A(','), (S(A('length'), (v[0], v[4])), S(A('$ord_union_all'), (v[4], v[0], v[1], A('[]'))))))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_union'), (v[0], v[1])))))), v[5])),)))))), Span('<library>', 102, 1, 102, 224), (('Sets', v[0]), ('Union', v[1]), ('N', v[4]), ), source[5727:5950]))
     v = [Var('N'), Var('Sets0'), Var('Union'), Var('Sets'), Var('Set1'), Var('Set2'), Var('A'), Var('Z'), Var('X'), Var('Sets1'), Var('Y')]
-    out.append(Clause(S(A('$ord_union_all'), (v[0], v[1], v[2], v[3])), S(A(';'), (S(A('->'), (S(A('=:='), (v[0], 1)), S(A('='), (v[1], S(A('.'), (v[2], v[3])))))), S(A(';'), (S(A('->'), (S(A('=:='), (v[0], 2)), S(A(','), (S(A('='), (v[1], S(A('.'), (v[4], S(A('.'), (v[5], v[3])))))), S(A('$ord_union_f'), (v[4], v[5], v[2])))))), S(A(','), (S(A('is'), (v[6], S(A('>>'), (v[0], 1)))), S(A(','), (S(A('is'), (v[7], S(A('-'), (v[0], v[6])))), S(A(','), (S(A('$ord_union_all'), (v[6], v[1], v[8], v[9])), S(A(','), (S(A('$ord_union_all'), (v[7], v[9], v[10], v[3])), S(A('$ord_union_f'), (v[8], v[10], v[2])))))))))))))), Span('<library>', 101, 1, 101, 284), (('N', v[0]), ('Sets0', v[1]), ('Union', v[2]), ('Sets', v[3]), ('Set1', v[4]), ('Set2', v[5]), ('A', v[6]), ('Z', v[7]), ('X', v[8]), ('Sets1', v[9]), ('Y', v[10]), ), source[5681:5964]))
+    out.append(Clause(S(A('$ord_union_all'), (v[0], v[1], v[2], v[3])), S(A(';'), (S(A('->'), (S(A('=:='), (v[0], 1)), S(A('='), (v[1], S(A('.'), (v[2], v[3])))))), S(A(';'), (S(A('->'), (S(A('=:='), (v[0], 2)), S(A(','), (S(A('='), (v[1], S(A('.'), (v[4], S(A('.'), (v[5], v[3])))))), S(A('$ord_union_f'), (v[4], v[5], v[2])))))), S(A(','), (S(A('is'), (v[6], S(A('>>'), (v[0], 1)))), S(A(','), (S(A('is'), (v[7], S(A('-'), (v[0], v[6])))), S(A(','), (S(A('$ord_union_all'), (v[6], v[1], v[8], v[9])), S(A(','), (S(A('$ord_union_all'), (v[7], v[9], v[10], v[3])), S(A('$ord_union_f'), (v[8], v[10], v[2])))))))))))))), Span('<library>', 103, 1, 103, 284), (('N', v[0]), ('Sets0', v[1]), ('Union', v[2]), ('Sets', v[3]), ('Set1', v[4]), ('Set2', v[5]), ('A', v[6]), ('Z', v[7]), ('X', v[8]), ('Sets1', v[9]), ('Y', v[10]), ), source[5951:6234]))
     v = [Var('Set1'), Var('Set2'), Var('Union')]
-    out.append(Clause(S(A('ord_union'), (v[0], v[1], v[2])), S(A('$ord_union_f'), (v[0], v[1], v[2])), Span('<library>', 102, 1, 102, 67), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ), source[5965:6031]))
+    out.append(Clause(S(A('ord_union'), (v[0], v[1], v[2])), S(A('$ord_union_f'), (v[0], v[1], v[2])), Span('<library>', 104, 1, 104, 67), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ), source[6235:6301]))
     v = [Var('Set1'), Var('Set2'), Var('Union')]
-    out.append(Clause(S(A('$ord_union_f'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('union'), v[0], v[1], v[2])), A('true'))), S(A('$ord_union'), (v[0], v[1], v[2])))), Span('<library>', 103, 1, 103, 122), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ), source[6032:6153]))
+    out.append(Clause(S(A('$ord_union_f'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('union'), v[0], v[1], v[2])), A('true'))), S(A('$ord_union'), (v[0], v[1], v[2])))), Span('<library>', 105, 1, 105, 122), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ), source[6302:6423]))
     v = [Var('Set1'), Var('Set2'), Var('Union'), Var('H1'), Var('T1'), Var('_')]
-    out.append(Clause(S(A('$ord_union'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[2], v[1])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[3], v[4])))))), S(A('$ord_union2'), (v[1], v[3], v[4], v[2])))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_union'), (v[0], v[1], v[2])))))), v[5])),)))))), Span('<library>', 104, 1, 104, 224), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ('H1', v[3]), ('T1', v[4]), ), source[6154:6377]))
+    out.append(Clause(S(A('$ord_union'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[2], v[1])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[3], v[4])))))), S(A('$ord_union2'), (v[1], v[3], v[4], v[2])))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_union'), (v[0], v[1], v[2])))))), v[5])),)))))), Span('<library>', 106, 1, 106, 224), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ('H1', v[3]), ('T1', v[4]), ), source[6424:6647]))
     v = [Var('L2'), Var('H1'), Var('T1'), Var('Union'), Var('H2'), Var('T2'), Var('Order'), Var('_')]
-    out.append(Clause(S(A('$ord_union2'), (v[0], v[1], v[2], v[3])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[3], S(A('.'), (v[1], v[2])))))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[4], v[5])))))), S(A(','), (S(A('compare'), (v[6], v[1], v[4])), S(A('$ord_union3'), (v[6], v[1], v[2], v[4], v[5], v[3])))))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('union2'), (v[0], v[1], v[2], v[3])))))), v[7])),)))))), Span('<library>', 105, 1, 105, 252), (('L2', v[0]), ('H1', v[1]), ('T1', v[2]), ('Union', v[3]), ('H2', v[4]), ('T2', v[5]), ('Order', v[6]), ), source[6378:6629]))
+    out.append(Clause(S(A('$ord_union2'), (v[0], v[1], v[2], v[3])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[3], S(A('.'), (v[1], v[2])))))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[4], v[5])))))), S(A(','), (S(A('compare'), (v[6], v[1], v[4])), S(A('$ord_union3'), (v[6], v[1], v[2], v[4], v[5], v[3])))))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('union2'), (v[0], v[1], v[2], v[3])))))), v[7])),)))))), Span('<library>', 107, 1, 107, 252), (('L2', v[0]), ('H1', v[1]), ('T1', v[2]), ('Union', v[3]), ('H2', v[4]), ('T2', v[5]), ('Order', v[6]), ), source[6648:6899]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Union'), Var('Union0')]
-    out.append(Clause(S(A('$ord_union3'), (A('<'), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[0], v[5])))), S(A('$ord_union2'), (v[1], v[2], v[3], v[5])))), Span('<library>', 106, 1, 106, 101), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[6630:6730]))
+    out.append(Clause(S(A('$ord_union3'), (A('<'), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[0], v[5])))), S(A('$ord_union2'), (v[1], v[2], v[3], v[5])))), Span('<library>', 108, 1, 108, 101), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[6900:7000]))
     v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Union'), Var('Union0')]
-    out.append(Clause(S(A('$ord_union3'), (A('='), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[0], v[5])))), S(A('$ord_union'), (v[1], v[3], v[5])))), Span('<library>', 107, 1, 107, 95), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[6731:6825]))
+    out.append(Clause(S(A('$ord_union3'), (A('='), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[0], v[5])))), S(A('$ord_union'), (v[1], v[3], v[5])))), Span('<library>', 109, 1, 109, 95), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[7001:7095]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Union'), Var('Union0')]
-    out.append(Clause(S(A('$ord_union3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[2], v[5])))), S(A('$ord_union2'), (v[3], v[0], v[1], v[5])))), Span('<library>', 108, 1, 108, 101), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[6826:6926]))
+    out.append(Clause(S(A('$ord_union3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[2], v[5])))), S(A('$ord_union2'), (v[3], v[0], v[1], v[5])))), Span('<library>', 110, 1, 110, 101), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[7096:7196]))
     v = [Var('Set'), Var('Delete'), Var('Remaining')]
-    out.append(Clause(S(A('ord_subtract'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('subtract'), v[0], v[1], v[2])), A('true'))), S(A('$ord_subtract'), (v[0], v[1], v[2])))), Span('<library>', 109, 1, 109, 141), (('Set', v[0]), ('Delete', v[1]), ('Remaining', v[2]), ), source[6927:7067]))
+    out.append(Clause(S(A('ord_subtract'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('subtract'), v[0], v[1], v[2])), A('true'))), S(A('$ord_subtract'), (v[0], v[1], v[2])))), Span('<library>', 111, 1, 111, 141), (('Set', v[0]), ('Delete', v[1]), ('Remaining', v[2]), ), source[7197:7337]))
     v = [Var('L1'), Var('L2'), Var('Diff'), Var('H1'), Var('T1'), Var('_')]
-    out.append(Clause(S(A('$ord_subtract'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[2], A('[]'))))), S(A(';'), (S(A('->'), (S(A('=='), (v[1], A('[]'))), S(A('='), (v[2], v[0])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[3], v[4])))))), S(A('$ord_diff21'), (v[1], v[3], v[4], v[2])))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_subtract'), (v[0], v[1], v[2])))))), v[5])),)))))))), Span('<library>', 110, 1, 110, 232), (('L1', v[0]), ('L2', v[1]), ('Diff', v[2]), ('H1', v[3]), ('T1', v[4]), ), source[7068:7299]))
+    out.append(Clause(S(A('$ord_subtract'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[2], A('[]'))))), S(A(';'), (S(A('->'), (S(A('=='), (v[1], A('[]'))), S(A('='), (v[2], v[0])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[3], v[4])))))), S(A('$ord_diff21'), (v[1], v[3], v[4], v[2])))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_subtract'), (v[0], v[1], v[2])))))), v[5])),)))))))), Span('<library>', 112, 1, 112, 232), (('L1', v[0]), ('L2', v[1]), ('Diff', v[2]), ('H1', v[3]), ('T1', v[4]), ), source[7338:7569]))
     v = [Var('H1'), Var('T1')]
-    out.append(Clause(S(A('$ord_diff21'), (A('[]'), v[0], v[1], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 111, 1, 111, 36), (('H1', v[0]), ('T1', v[1]), ), source[7300:7335]))
+    out.append(Clause(S(A('$ord_diff21'), (A('[]'), v[0], v[1], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 113, 1, 113, 36), (('H1', v[0]), ('T1', v[1]), ), source[7570:7605]))
     v = [Var('H2'), Var('T2'), Var('H1'), Var('T1'), Var('Diff'), Var('Order')]
-    out.append(Clause(S(A('$ord_diff21'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[2], v[0])), S(A('$ord_diff3'), (v[5], v[2], v[3], v[0], v[1], v[4])))), Span('<library>', 112, 1, 112, 107), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Diff', v[4]), ('Order', v[5]), ), source[7336:7442]))
+    out.append(Clause(S(A('$ord_diff21'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[2], v[0])), S(A('$ord_diff3'), (v[5], v[2], v[3], v[0], v[1], v[4])))), Span('<library>', 114, 1, 114, 107), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Diff', v[4]), ('Order', v[5]), ), source[7606:7712]))
     v = [Var('_'), Var('_')]
-    out.append(Clause(S(A('$ord_diff12'), (A('[]'), v[0], v[1], A('[]'))), A('true'), Span('<library>', 113, 1, 113, 29), (), source[7443:7471]))
+    out.append(Clause(S(A('$ord_diff12'), (A('[]'), v[0], v[1], A('[]'))), A('true'), Span('<library>', 115, 1, 115, 29), (), source[7713:7741]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Diff'), Var('Order')]
-    out.append(Clause(S(A('$ord_diff12'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[0], v[2])), S(A('$ord_diff3'), (v[5], v[0], v[1], v[2], v[3], v[4])))), Span('<library>', 114, 1, 114, 107), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Diff', v[4]), ('Order', v[5]), ), source[7472:7578]))
+    out.append(Clause(S(A('$ord_diff12'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[0], v[2])), S(A('$ord_diff3'), (v[5], v[0], v[1], v[2], v[3], v[4])))), Span('<library>', 116, 1, 116, 107), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Diff', v[4]), ('Order', v[5]), ), source[7742:7848]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Diff')]
-    out.append(Clause(S(A('$ord_diff3'), (A('<'), v[0], v[1], v[2], v[3], S(A('.'), (v[0], v[4])))), S(A('$ord_diff12'), (v[1], v[2], v[3], v[4])), Span('<library>', 115, 1, 115, 81), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Diff', v[4]), ), source[7579:7659]))
+    out.append(Clause(S(A('$ord_diff3'), (A('<'), v[0], v[1], v[2], v[3], S(A('.'), (v[0], v[4])))), S(A('$ord_diff12'), (v[1], v[2], v[3], v[4])), Span('<library>', 117, 1, 117, 81), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Diff', v[4]), ), source[7849:7929]))
     v = [Var('_'), Var('T1'), Var('_'), Var('T2'), Var('Diff')]
-    out.append(Clause(S(A('$ord_diff3'), (A('='), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_subtract'), (v[1], v[3], v[4])), Span('<library>', 116, 1, 116, 72), (('T1', v[1]), ('T2', v[3]), ('Diff', v[4]), ), source[7660:7731]))
+    out.append(Clause(S(A('$ord_diff3'), (A('='), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_subtract'), (v[1], v[3], v[4])), Span('<library>', 118, 1, 118, 72), (('T1', v[1]), ('T2', v[3]), ('Diff', v[4]), ), source[7930:8001]))
     v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Diff')]
-    out.append(Clause(S(A('$ord_diff3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_diff21'), (v[3], v[0], v[1], v[4])), Span('<library>', 117, 1, 117, 75), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Diff', v[4]), ), source[7732:7806]))
+    out.append(Clause(S(A('$ord_diff3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_diff21'), (v[3], v[0], v[1], v[4])), Span('<library>', 119, 1, 119, 75), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Diff', v[4]), ), source[8002:8076]))
     v = [Var('Item'), Var('Set'), Var('In')]
-    out.append(Clause(S(A('ord_memberchk'), (v[0], v[1])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('memberchk'), v[0], v[1], v[2])), S(A('=='), (v[2], A('true'))))), S(A('$ord_memberchk'), (v[0], v[1])))), Span('<library>', 118, 1, 118, 115), (('Item', v[0]), ('Set', v[1]), ('In', v[2]), ), source[7807:7921]))
+    out.append(Clause(S(A('ord_memberchk'), (v[0], v[1])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('memberchk'), v[0], v[1], v[2])), S(A('=='), (v[2], A('true'))))), S(A('$ord_memberchk'), (v[0], v[1])))), Span('<library>', 120, 1, 120, 115), (('Item', v[0]), ('Set', v[1]), ('In', v[2]), ), source[8077:8191]))
     v = [Var('Item'), Var('X1'), Var('X2'), Var('X3'), Var('X4'), Var('Xs'), Var('R4'), Var('R2')]
-    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], S(A('.'), (v[2], S(A('.'), (v[3], S(A('.'), (v[4], v[5])))))))))), S(A(','), (A('!'), S(A(','), (S(A('compare'), (v[6], v[0], v[4])), S(A(';'), (S(A('->'), (S(A('='), (v[6], A('>'))), S(A('$ord_memberchk'), (v[0], v[5])))), S(A(';'), (S(A('->'), (S(A('='), (v[6], A('<'))), S(A(','), (S(A('compare'), (v[7], v[0], v[2])), S(A(';'), (S(A('->'), (S(A('='), (v[7], A('>'))), S(A('=='), (v[0], v[3])))), S(A(';'), (S(A('->'), (S(A('='), (v[7], A('<'))), S(A('=='), (v[0], v[1])))), A('true'))))))))), A('true'))))))))), Span('<library>', 119, 1, 119, 220), (('Item', v[0]), ('X1', v[1]), ('X2', v[2]), ('X3', v[3]), ('X4', v[4]), ('Xs', v[5]), ('R4', v[6]), ('R2', v[7]), ), source[7922:8141]))
+    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], S(A('.'), (v[2], S(A('.'), (v[3], S(A('.'), (v[4], v[5])))))))))), S(A(','), (A('!'), S(A(','), (S(A('compare'), (v[6], v[0], v[4])), S(A(';'), (S(A('->'), (S(A('='), (v[6], A('>'))), S(A('$ord_memberchk'), (v[0], v[5])))), S(A(';'), (S(A('->'), (S(A('='), (v[6], A('<'))), S(A(','), (S(A('compare'), (v[7], v[0], v[2])), S(A(';'), (S(A('->'), (S(A('='), (v[7], A('>'))), S(A('=='), (v[0], v[3])))), S(A(';'), (S(A('->'), (S(A('='), (v[7], A('<'))), S(A('=='), (v[0], v[1])))), A('true'))))))))), A('true'))))))))), Span('<library>', 121, 1, 121, 220), (('Item', v[0]), ('X1', v[1]), ('X2', v[2]), ('X3', v[3]), ('X4', v[4]), ('Xs', v[5]), ('R4', v[6]), ('R2', v[7]), ), source[8192:8411]))
     v = [Var('Item'), Var('X1'), Var('X2'), Var('Xs'), Var('R2')]
-    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], S(A('.'), (v[2], v[3])))))), S(A(','), (A('!'), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A(';'), (S(A('->'), (S(A('='), (v[4], A('>'))), S(A('$ord_memberchk'), (v[0], v[3])))), S(A(';'), (S(A('->'), (S(A('='), (v[4], A('<'))), S(A('=='), (v[0], v[1])))), A('true'))))))))), Span('<library>', 120, 1, 120, 141), (('Item', v[0]), ('X1', v[1]), ('X2', v[2]), ('Xs', v[3]), ('R2', v[4]), ), source[8142:8282]))
+    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], S(A('.'), (v[2], v[3])))))), S(A(','), (A('!'), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A(';'), (S(A('->'), (S(A('='), (v[4], A('>'))), S(A('$ord_memberchk'), (v[0], v[3])))), S(A(';'), (S(A('->'), (S(A('='), (v[4], A('<'))), S(A('=='), (v[0], v[1])))), A('true'))))))))), Span('<library>', 122, 1, 122, 141), (('Item', v[0]), ('X1', v[1]), ('X2', v[2]), ('Xs', v[3]), ('R2', v[4]), ), source[8412:8552]))
     v = [Var('Item'), Var('X1')]
-    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], A('[]'))))), S(A('=='), (v[0], v[1])), Span('<library>', 121, 1, 121, 44), (('Item', v[0]), ('X1', v[1]), ), source[8283:8326]))
+    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], A('[]'))))), S(A('=='), (v[0], v[1])), Span('<library>', 123, 1, 123, 44), (('Item', v[0]), ('X1', v[1]), ), source[8553:8596]))
     v = [Var('Set1'), Var('Set2'), Var('Intersection')]
-    out.append(Clause(S(A('ord_intersection'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[2], A('[]'))), S(A('\\+'), (S(A('$ord_intersect'), (v[0], v[1])),)))), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('intersection'), v[0], v[1], v[2])), A('true'))), S(A('$ord_intersection'), (v[0], v[1], v[2])))))), Span('<library>', 122, 1, 122, 215), (('Set1', v[0]), ('Set2', v[1]), ('Intersection', v[2]), ), source[8327:8541]))
+    out.append(Clause(S(A('ord_intersection'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[2], A('[]'))), S(A('\\+'), (S(A('$ord_intersect'), (v[0], v[1])),)))), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('intersection'), v[0], v[1], v[2])), A('true'))), S(A('$ord_intersection'), (v[0], v[1], v[2])))))), Span('<library>', 124, 1, 124, 215), (('Set1', v[0]), ('Set2', v[1]), ('Intersection', v[2]), ), source[8597:8811]))
     v = [Var('H1'), Var('T1'), Var('L2')]
-    out.append(Clause(S(A('$ord_intersect'), (S(A('.'), (v[0], v[1])), v[2])), S(A('$ord_intersect_'), (v[2], v[0], v[1])), Span('<library>', 123, 1, 123, 64), (('H1', v[0]), ('T1', v[1]), ('L2', v[2]), ), source[8542:8605]))
+    out.append(Clause(S(A('$ord_intersect'), (S(A('.'), (v[0], v[1])), v[2])), S(A('$ord_intersect_'), (v[2], v[0], v[1])), Span('<library>', 125, 1, 125, 64), (('H1', v[0]), ('T1', v[1]), ('L2', v[2]), ), source[8812:8875]))
     v = [Var('H2'), Var('T2'), Var('H1'), Var('T1'), Var('Order')]
-    out.append(Clause(S(A('$ord_intersect_'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[2], v[0])), S(A('$ord_intersect__'), (v[4], v[2], v[3], v[0], v[1])))), Span('<library>', 124, 1, 124, 105), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Order', v[4]), ), source[8606:8710]))
+    out.append(Clause(S(A('$ord_intersect_'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[2], v[0])), S(A('$ord_intersect__'), (v[4], v[2], v[3], v[0], v[1])))), Span('<library>', 126, 1, 126, 105), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Order', v[4]), ), source[8876:8980]))
     v = [Var('_'), Var('T1'), Var('H2'), Var('T2')]
-    out.append(Clause(S(A('$ord_intersect__'), (A('<'), v[0], v[1], v[2], v[3])), S(A('$ord_intersect_'), (v[1], v[2], v[3])), Span('<library>', 125, 1, 125, 73), (('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ), source[8711:8783]))
+    out.append(Clause(S(A('$ord_intersect__'), (A('<'), v[0], v[1], v[2], v[3])), S(A('$ord_intersect_'), (v[1], v[2], v[3])), Span('<library>', 127, 1, 127, 73), (('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ), source[8981:9053]))
     v = [Var('_'), Var('_'), Var('_'), Var('_')]
-    out.append(Clause(S(A('$ord_intersect__'), (A('='), v[0], v[1], v[2], v[3])), A('true'), Span('<library>', 126, 1, 126, 37), (), source[8784:8820]))
+    out.append(Clause(S(A('$ord_intersect__'), (A('='), v[0], v[1], v[2], v[3])), A('true'), Span('<library>', 128, 1, 128, 37), (), source[9054:9090]))
     v = [Var('H1'), Var('T1'), Var('_'), Var('T2')]
-    out.append(Clause(S(A('$ord_intersect__'), (A('>'), v[0], v[1], v[2], v[3])), S(A('$ord_intersect_'), (v[3], v[0], v[1])), Span('<library>', 127, 1, 127, 73), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ), source[8821:8893]))
+    out.append(Clause(S(A('$ord_intersect__'), (A('>'), v[0], v[1], v[2], v[3])), S(A('$ord_intersect_'), (v[3], v[0], v[1])), Span('<library>', 129, 1, 129, 73), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ), source[9091:9163]))
     v = [Var('_')]
-    out.append(Clause(S(A('$ord_intersection'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 128, 1, 128, 32), (), source[8894:8925]))
+    out.append(Clause(S(A('$ord_intersection'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 130, 1, 130, 32), (), source[9164:9195]))
     v = [Var('H1'), Var('T1'), Var('L2'), Var('Int')]
-    out.append(Clause(S(A('$ord_intersection'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A('$ord_isect2'), (v[2], v[0], v[1], v[3])), Span('<library>', 129, 1, 129, 73), (('H1', v[0]), ('T1', v[1]), ('L2', v[2]), ('Int', v[3]), ), source[8926:8998]))
+    out.append(Clause(S(A('$ord_intersection'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A('$ord_isect2'), (v[2], v[0], v[1], v[3])), Span('<library>', 131, 1, 131, 73), (('H1', v[0]), ('T1', v[1]), ('L2', v[2]), ('Int', v[3]), ), source[9196:9268]))
     v = [Var('_'), Var('_')]
-    out.append(Clause(S(A('$ord_isect2'), (A('[]'), v[0], v[1], A('[]'))), A('true'), Span('<library>', 130, 1, 130, 29), (), source[8999:9027]))
+    out.append(Clause(S(A('$ord_isect2'), (A('[]'), v[0], v[1], A('[]'))), A('true'), Span('<library>', 132, 1, 132, 29), (), source[9269:9297]))
     v = [Var('H2'), Var('T2'), Var('H1'), Var('T1'), Var('Int'), Var('Order')]
-    out.append(Clause(S(A('$ord_isect2'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[2], v[0])), S(A('$ord_isect3'), (v[5], v[2], v[3], v[0], v[1], v[4])))), Span('<library>', 131, 1, 131, 106), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Int', v[4]), ('Order', v[5]), ), source[9028:9133]))
+    out.append(Clause(S(A('$ord_isect2'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[2], v[0])), S(A('$ord_isect3'), (v[5], v[2], v[3], v[0], v[1], v[4])))), Span('<library>', 133, 1, 133, 106), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Int', v[4]), ('Order', v[5]), ), source[9298:9403]))
     v = [Var('_'), Var('T1'), Var('H2'), Var('T2'), Var('Int')]
-    out.append(Clause(S(A('$ord_isect3'), (A('<'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_isect2'), (v[1], v[2], v[3], v[4])), Span('<library>', 132, 1, 132, 74), (('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Int', v[4]), ), source[9134:9207]))
+    out.append(Clause(S(A('$ord_isect3'), (A('<'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_isect2'), (v[1], v[2], v[3], v[4])), Span('<library>', 134, 1, 134, 74), (('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Int', v[4]), ), source[9404:9477]))
     v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Int')]
-    out.append(Clause(S(A('$ord_isect3'), (A('='), v[0], v[1], v[2], v[3], S(A('.'), (v[0], v[4])))), S(A('$ord_intersection'), (v[1], v[3], v[4])), Span('<library>', 133, 1, 133, 81), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Int', v[4]), ), source[9208:9288]))
+    out.append(Clause(S(A('$ord_isect3'), (A('='), v[0], v[1], v[2], v[3], S(A('.'), (v[0], v[4])))), S(A('$ord_intersection'), (v[1], v[3], v[4])), Span('<library>', 135, 1, 135, 81), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Int', v[4]), ), source[9478:9558]))
     v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Int')]
-    out.append(Clause(S(A('$ord_isect3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_isect2'), (v[3], v[0], v[1], v[4])), Span('<library>', 134, 1, 134, 74), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Int', v[4]), ), source[9289:9362]))
+    out.append(Clause(S(A('$ord_isect3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_isect2'), (v[3], v[0], v[1], v[4])), Span('<library>', 136, 1, 136, 74), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Int', v[4]), ), source[9559:9632]))
     v = [Var('Sub'), Var('Super')]
-    out.append(Clause(S(A('ord_subset'), (v[0], v[1])), S(A('$ord_subset'), (v[0], v[1])), Span('<library>', 135, 1, 135, 53), (('Sub', v[0]), ('Super', v[1]), ), source[9363:9415]))
+    out.append(Clause(S(A('ord_subset'), (v[0], v[1])), S(A('$ord_subset'), (v[0], v[1])), Span('<library>', 137, 1, 137, 53), (('Sub', v[0]), ('Super', v[1]), ), source[9633:9685]))
     v = [Var('_')]
-    out.append(Clause(S(A('$ord_subset'), (A('[]'), v[0])), A('true'), Span('<library>', 136, 1, 136, 22), (), source[9416:9437]))
+    out.append(Clause(S(A('$ord_subset'), (A('[]'), v[0])), A('true'), Span('<library>', 138, 1, 138, 22), (), source[9686:9707]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Order')]
-    out.append(Clause(S(A('$ord_subset'), (S(A('.'), (v[0], v[1])), S(A('.'), (v[2], v[3])))), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_subset_'), (v[4], v[0], v[1], v[3])))), Span('<library>', 137, 1, 137, 94), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Order', v[4]), ), source[9438:9531]))
+    out.append(Clause(S(A('$ord_subset'), (S(A('.'), (v[0], v[1])), S(A('.'), (v[2], v[3])))), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_subset_'), (v[4], v[0], v[1], v[3])))), Span('<library>', 139, 1, 139, 94), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Order', v[4]), ), source[9708:9801]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Order')]
-    out.append(Clause(S(A('$ord_subset_'), (A('>'), v[0], v[1], S(A('.'), (v[2], v[3])))), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_subset_'), (v[4], v[0], v[1], v[3])))), Span('<library>', 138, 1, 138, 99), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Order', v[4]), ), source[9532:9630]))
+    out.append(Clause(S(A('$ord_subset_'), (A('>'), v[0], v[1], S(A('.'), (v[2], v[3])))), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_subset_'), (v[4], v[0], v[1], v[3])))), Span('<library>', 140, 1, 140, 99), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Order', v[4]), ), source[9802:9900]))
     v = [Var('_'), Var('T1'), Var('T2')]
-    out.append(Clause(S(A('$ord_subset_'), (A('='), v[0], v[1], v[2])), S(A('$ord_subset'), (v[1], v[2])), Span('<library>', 139, 1, 139, 57), (('T1', v[1]), ('T2', v[2]), ), source[9631:9687]))
+    out.append(Clause(S(A('$ord_subset_'), (A('='), v[0], v[1], v[2])), S(A('$ord_subset'), (v[1], v[2])), Span('<library>', 141, 1, 141, 57), (('T1', v[1]), ('T2', v[2]), ), source[9901:9957]))
     v = [Var('Set'), Var('El'), Var('Add')]
-    out.append(Clause(S(A('ord_add_element'), (v[0], v[1], v[2])), S(A('$ord_add_element'), (v[0], v[1], v[2])), Span('<library>', 140, 1, 140, 67), (('Set', v[0]), ('El', v[1]), ('Add', v[2]), ), source[9688:9754]))
+    out.append(Clause(S(A('ord_add_element'), (v[0], v[1], v[2])), S(A('$ord_add_element'), (v[0], v[1], v[2])), Span('<library>', 142, 1, 142, 67), (('Set', v[0]), ('El', v[1]), ('Add', v[2]), ), source[9958:10024]))
     v = [Var('El')]
-    out.append(Clause(S(A('$ord_add_element'), (A('[]'), v[0], S(A('.'), (v[0], A('[]'))))), A('true'), Span('<library>', 141, 1, 141, 34), (('El', v[0]), ), source[9755:9788]))
+    out.append(Clause(S(A('$ord_add_element'), (A('[]'), v[0], S(A('.'), (v[0], A('[]'))))), A('true'), Span('<library>', 143, 1, 143, 34), (('El', v[0]), ), source[10025:10058]))
     v = [Var('H'), Var('T'), Var('El'), Var('Add'), Var('Order')]
-    out.append(Clause(S(A('$ord_add_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_addel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 142, 1, 142, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Add', v[3]), ('Order', v[4]), ), source[9789:9885]))
+    out.append(Clause(S(A('$ord_add_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_addel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 144, 1, 144, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Add', v[3]), ('Order', v[4]), ), source[10059:10155]))
     v = [Var('H'), Var('T'), Var('El'), Var('Add')]
-    out.append(Clause(S(A('$ord_addel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_add_element'), (v[1], v[2], v[3])), Span('<library>', 143, 1, 143, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Add', v[3]), ), source[9886:9957]))
+    out.append(Clause(S(A('$ord_addel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_add_element'), (v[1], v[2], v[3])), Span('<library>', 145, 1, 145, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Add', v[3]), ), source[10156:10227]))
     v = [Var('H'), Var('T'), Var('_')]
-    out.append(Clause(S(A('$ord_addel'), (A('='), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 144, 1, 144, 35), (('H', v[0]), ('T', v[1]), ), source[9958:9992]))
+    out.append(Clause(S(A('$ord_addel'), (A('='), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 146, 1, 146, 35), (('H', v[0]), ('T', v[1]), ), source[10228:10262]))
     v = [Var('H'), Var('T'), Var('El')]
-    out.append(Clause(S(A('$ord_addel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[2], S(A('.'), (v[0], v[1])))))), A('true'), Span('<library>', 145, 1, 145, 40), (('H', v[0]), ('T', v[1]), ('El', v[2]), ), source[9993:10032]))
+    out.append(Clause(S(A('$ord_addel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[2], S(A('.'), (v[0], v[1])))))), A('true'), Span('<library>', 147, 1, 147, 40), (('H', v[0]), ('T', v[1]), ('El', v[2]), ), source[10263:10302]))
     v = [Var('Set'), Var('El'), Var('Del')]
-    out.append(Clause(S(A('ord_del_element'), (v[0], v[1], v[2])), S(A('$ord_del_element'), (v[0], v[1], v[2])), Span('<library>', 146, 1, 146, 67), (('Set', v[0]), ('El', v[1]), ('Del', v[2]), ), source[10033:10099]))
+    out.append(Clause(S(A('ord_del_element'), (v[0], v[1], v[2])), S(A('$ord_del_element'), (v[0], v[1], v[2])), Span('<library>', 148, 1, 148, 67), (('Set', v[0]), ('El', v[1]), ('Del', v[2]), ), source[10303:10369]))
     v = [Var('_')]
-    out.append(Clause(S(A('$ord_del_element'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 147, 1, 147, 31), (), source[10100:10130]))
+    out.append(Clause(S(A('$ord_del_element'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 149, 1, 149, 31), (), source[10370:10400]))
     v = [Var('H'), Var('T'), Var('El'), Var('Del'), Var('Order')]
-    out.append(Clause(S(A('$ord_del_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_delel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 148, 1, 148, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ('Order', v[4]), ), source[10131:10227]))
+    out.append(Clause(S(A('$ord_del_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_delel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 150, 1, 150, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ('Order', v[4]), ), source[10401:10497]))
     v = [Var('H'), Var('T'), Var('El'), Var('Del')]
-    out.append(Clause(S(A('$ord_delel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_del_element'), (v[1], v[2], v[3])), Span('<library>', 149, 1, 149, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ), source[10228:10299]))
+    out.append(Clause(S(A('$ord_delel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_del_element'), (v[1], v[2], v[3])), Span('<library>', 151, 1, 151, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ), source[10498:10569]))
     v = [Var('_'), Var('T'), Var('_')]
-    out.append(Clause(S(A('$ord_delel'), (A('='), v[0], v[1], v[2], v[1])), A('true'), Span('<library>', 150, 1, 150, 31), (('T', v[1]), ), source[10300:10330]))
+    out.append(Clause(S(A('$ord_delel'), (A('='), v[0], v[1], v[2], v[1])), A('true'), Span('<library>', 152, 1, 152, 31), (('T', v[1]), ), source[10570:10600]))
     v = [Var('H'), Var('T'), Var('_')]
-    out.append(Clause(S(A('$ord_delel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 151, 1, 151, 35), (('H', v[0]), ('T', v[1]), ), source[10331:10365]))
+    out.append(Clause(S(A('$ord_delel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 153, 1, 153, 35), (('H', v[0]), ('T', v[1]), ), source[10601:10635]))
     return out
