@@ -423,6 +423,8 @@ def _functor(m, a):
         return m.unify(a[1], t) and m.unify(a[2], 0)
     name = deref(a[1])
     n = deref(a[2])
+    if type(name) is Struct:
+        raise type_error("atomic", name)   # (before the arity, as SWI-Prolog checks)
     if type(name) is Var or type(n) is Var:
         raise instantiation_error()
     if type(n) is not int:
@@ -853,7 +855,10 @@ def _atom_concat(m, a):
     if type(x) is not Var and type(y) is not Var:
         joined = _atom_text(x) + _atom_text(y)
         if type(deref(a[2])) is not Var:
-            _atom_text(a[2])   # (a given whole is atomic text, SWI-Prolog checks)
+            # a given whole is atomic text, compared as text (atom_concat(a, b, "ab"))
+            if _atom_text(a[2]) == joined:
+                yield None
+            return
         if m.unify(a[2], Atom(joined)):
             yield None
         return
@@ -1427,7 +1432,10 @@ def _string_concat(m, a):
     if type(x) is not Var and type(y) is not Var:
         joined = text_in(x, "atomic") + text_in(y, "atomic")
         if type(deref(a[2])) is not Var:
-            text_in(a[2], "atomic")   # (a given whole is atomic text, SWI-Prolog checks)
+            # a given whole is atomic text, compared as text (string_concat(a, b, ab))
+            if text_in(a[2], "atomic") == joined:
+                yield None
+            return
         if m.unify(a[2], String(joined)):
             yield None
         return
@@ -1622,20 +1630,37 @@ def _split_string(m, a):
     if type(out) is not Var and not (type(out) is Atom and out == "[]") \
             and not (type(out) is Struct and out.name == "." and len(out.args) == 2):
         raise type_error("list", out)
-    parts = [s] if not seps else _split_any(s, seps)
-    return m.unify(a[3], make_list([String(p.strip(pad)) for p in parts]))
+    return m.unify(a[3], make_list([String(p) for p in _split_any(s, seps, pad)]))
 
 
-def _split_any(s: str, seps: str) -> list[str]:
-    out, cur = [], []
-    for ch in s:
-        if ch in seps:
-            out.append("".join(cur))
-            cur = []
-        else:
-            cur.append(ch)
-    out.append("".join(cur))
-    return out
+def _split_any(s: str, seps: str, pad: str) -> list[str]:
+    """split_string/4's fields as SWI-Prolog makes them: the whole text stripped of ``pad``
+    at both ends, then each field from its start, where ``pad`` is skipped first (so pad
+    characters that are separators too join adjacent separators), to the next separator,
+    stripped of ``pad`` at its end.
+
+    >>> _split_any("//a//b//", "/", "/"), _split_any("/home//jan", "/", "")
+    (['a', 'b'], ['', 'home', '', 'jan'])
+    """
+    start, end = 0, len(s)
+    while start < end and s[start] in pad:
+        start += 1
+    while end > start and s[end - 1] in pad:
+        end -= 1
+    out = []
+    while True:
+        while start < end and s[start] in pad:
+            start += 1
+        stop = start
+        while stop < end and s[stop] not in seps:
+            stop += 1
+        last = stop
+        while last > start and s[last - 1] in pad:
+            last -= 1
+        out.append(s[start:last])
+        if stop >= end:
+            return out
+        start = stop + 1
 
 
 # -- lists -----------------------------------------------------------------------------------------
@@ -1958,6 +1983,14 @@ def _numlist(m, a):
     if lo > hi:
         return False
     return m.unify(a[2], build_list(m, hi - lo + 1, lambda i: lo + i))
+
+
+@det("$must_be_list", 1)
+def _must_be_list(m, a):
+    """must_be(list, L): a partial list is an instantiation error, another term that is no
+    list type_error(list, L) (the context unbound, as the library's)."""
+    proper_list(a[0])
+    return True
 
 
 @det("reverse", 2)
@@ -3193,7 +3226,7 @@ member_(_, X, X).
 member_([Y|Ys], X, _) :- member_(Ys, X, Y).
 append([], L, L).
 append([H|T], L, [H|R]) :- append(T, L, R).
-append(ListOfLists, List) :- '$append_all'(ListOfLists, List).
+append(ListOfLists, List) :- '$must_be_list'(ListOfLists), '$append_all'(ListOfLists, List).
 '$append_all'([], []).
 '$append_all'([L|Ls], As) :- append(L, Ws, As), '$append_all'(Ls, Ws).
 nth0(I, L, E) :- integer(I), !, I >= 0, '$nth_det'(I, L, E).
@@ -3252,8 +3285,9 @@ intersection([], _, []).
 intersection([X|T], L, I) :- ( memberchk(X, L) -> I = [X|R] ; I = R ), intersection(T, L, R).
 union([], L, L).
 union([H|T], L, R) :- ( memberchk(H, L) -> R = R1 ; R = [H|R1] ), union(T, L, R1).
-permutation([], []).
-permutation(L, [H|T]) :- select(H, L, R), permutation(R, T).
+permutation(Xs, Ys) :- '$skip_list'(Xlen, Xs, XTail), '$skip_list'(Ylen, Ys, YTail), ( XTail == [], YTail == [] -> Xlen == Ylen ; var(XTail), YTail == [] -> length(Xs, Ylen) ; XTail == [], var(YTail) -> length(Ys, Xlen) ; var(XTail), var(YTail) -> length(Xs, Len), length(Ys, Len) ; '$must_be_list'(Xs), '$must_be_list'(Ys) ), '$perm'(Xs, Ys).
+'$perm'([], []).
+'$perm'(List, [First|Perm]) :- select(First, List, Rest), '$perm'(Rest, Perm).
 once(G) :- call(G), !.
 ignore(G) :- ( call(G) -> true ; true ).
 pairs_keys_values([], [], []).

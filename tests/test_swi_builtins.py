@@ -897,6 +897,37 @@ ORDER_GOALS = [f"catch({goal}, E, true)" if not goal.startswith("catch(") else g
     "string_length(X, 2.5)",
     "atom_length(f(x), a)",
     "catch(call([a], X), error(F, _), true)",
+    # split_string/4's fields as SWI-Prolog's C makes them (pad skipped at a field's start:
+    # separators that are pad characters too act as one), a given whole of a concatenation
+    # compared as text, functor/3's name before its arity, append/2's and permutation/2's
+    # list checks (the library's must_be(list, L) and length prelude)
+    'split_string("//a//b//", "/", "/", L)',
+    'split_string("a b", abc, "abc", L)',
+    'split_string("  a  b  ", " ", " ", L)',
+    'split_string("abca", "a", "a", L)',
+    'split_string(" a ", "", " ", L)',
+    'split_string("a, b ,c", ",", " ", L)',
+    'split_string("/home//jan///nice/path", "/", "", L)',
+    'split_string("a.b.", ".", ".", L)',
+    'atom_concat(a, b, "ab")',
+    "string_concat(a, b, ab)",
+    'string_concat("", succ, succ)',
+    "atom_concat(a, b, ac)",
+    "functor(X, f(x), a)",
+    "functor(X, f(x), 0)",
+    "functor(X, [a-1], 1.5)",
+    "functor(X, 1, 1)",
+    "append(X, Y)",
+    "append(succ, X)",
+    "append([[a]|T], X)",
+    "append([[a], [b, c]], X)",
+    'permutation([a, b], "a b")',
+    "permutation(X, [a, b])",
+    "permutation([a, b, c], X)",
+    'permutation(" ", 3)',
+    "permutation([a|T], [b, a])",
+    "permutation([a, b], [b|T])",
+    "permutation([a, b], [a, b, c])",
 ]]
 
 
