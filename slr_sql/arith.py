@@ -43,11 +43,15 @@ def with_context(exc: SLREvaluationError, culprit: Any) -> SLREvaluationError:
     if not (type(term) is Struct and term.name == "error" and len(term.args) == 2):
         return exc
     context = deref(term.args[1])
-    if type(context) is not Var:
+    message: Any = Var("_")
+    if type(context) is Struct and context.name == "context" and len(context.args) == 2 \
+            and type(deref(context.args[0])) is Var:
+        message = context.args[1]   # context(_, Message): the culprit filled in
+    elif type(context) is not Var:
         return exc
     from .terms import MESSAGE_TOKENS, format_term
 
-    new = iso_error(term.args[0], Struct("context", (culprit, Var("_"))))
+    new = iso_error(term.args[0], Struct("context", (culprit, message)))
     # the message is the term's text (bounded), and perhaps a hint after it: kept
     message = exc.args[0] if exc.args else ""
     old_text = format_term(term, limit=MESSAGE_TOKENS)
@@ -607,9 +611,9 @@ def _atomic_value(t: Any, tt: type) -> int | float:
 def _not_one_character(t: Any) -> SLREvaluationError:
     """SWI-Prolog's error for a list or string of other than one character as an
     expression (its own term: type_error([], T), with a message as its context)."""
+    # (the evaluating predicate fills the context's first argument)
     return iso_error(Struct("type_error", (Atom("[]"), t)),
-                     Struct("context", (Struct(":", (Atom("system"), Struct("/", (Atom("is"), 2)))),
-                                        Atom('"x" must hold one character'))))
+                     Struct("context", (Var("_"), Atom('"x" must hold one character'))))
 
 
 class _Apply:

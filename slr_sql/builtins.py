@@ -158,8 +158,12 @@ def in_builtin(exc: SLREvaluationError, key: tuple[str, int], args: tuple = ()) 
     'error(instantiation_error,_)'
     """
     term = exc.term
-    if not (type(term) is Struct and term.name == "error" and len(term.args) == 2) \
-            or type(deref(term.args[1])) is not Var:
+    if not (type(term) is Struct and term.name == "error" and len(term.args) == 2):
+        return exc
+    context = deref(term.args[1])
+    if type(context) is not Var and not (
+            type(context) is Struct and context.name == "context" and len(context.args) == 2
+            and type(deref(context.args[0])) is Var):
         return exc
     culprit = error_context(key, deref(term.args[0]), args)
     return exc if culprit is None else with_context(exc, culprit)
@@ -3322,17 +3326,17 @@ char_type(Char, Type) :- '$char_type'(Char, Type).
 code_type(Code, Type) :- '$code_type'(Code, Type).
 unify_with_occurs_check(X, Y) :- '$unify_with_occurs_check'(X, Y).
 list_to_ord_set(List, Set) :- sort(List, Set).
-ord_union(Sets, Union) :- ( Sets == [] -> Union = [] ; nonvar(Sets), Sets = [_|_] -> length(Sets, N), '$ord_union_all'(N, Sets, Union, []) ; throw(error(existence_error(matching_rule, ordsets:ord_union(Sets, Union)), _)) ).
+ord_union(Sets, Union) :- ( Sets == [] -> Union = [] ; nonvar(Sets), Sets = [_|_] -> length(Sets, N), '$ord_union_all'(N, Sets, Union, []) ; throw(error(existence_error(matching_rule, ordsets:ord_union(Sets, Union)), context(ordsets:ord_union/2, _))) ).
 '$ord_union_all'(N, Sets0, Union, Sets) :- ( N =:= 1 -> Sets0 = [Union|Sets] ; N =:= 2 -> Sets0 = [Set1, Set2|Sets], '$ord_union_f'(Set1, Set2, Union) ; A is N >> 1, Z is N - A, '$ord_union_all'(A, Sets0, X, Sets1), '$ord_union_all'(Z, Sets1, Y, Sets), '$ord_union_f'(X, Y, Union) ).
 ord_union(Set1, Set2, Union) :- '$ord_union_f'(Set1, Set2, Union).
 '$ord_union_f'(Set1, Set2, Union) :- ( '$ord_fast'(union, Set1, Set2, Union) -> true ; '$ord_union'(Set1, Set2, Union) ).
-'$ord_union'(Set1, Set2, Union) :- ( Set1 == [] -> Union = Set2 ; nonvar(Set1), Set1 = [H1|T1] -> '$ord_union2'(Set2, H1, T1, Union) ; throw(error(existence_error(matching_rule, ordsets:ord_union(Set1, Set2, Union)), _)) ).
-'$ord_union2'(L2, H1, T1, Union) :- ( L2 == [] -> Union = [H1|T1] ; nonvar(L2), L2 = [H2|T2] -> compare(Order, H1, H2), '$ord_union3'(Order, H1, T1, H2, T2, Union) ; throw(error(existence_error(matching_rule, ordsets:union2(L2, H1, T1, Union)), _)) ).
+'$ord_union'(Set1, Set2, Union) :- ( Set1 == [] -> Union = Set2 ; nonvar(Set1), Set1 = [H1|T1] -> '$ord_union2'(Set2, H1, T1, Union) ; throw(error(existence_error(matching_rule, ordsets:ord_union(Set1, Set2, Union)), context(ordsets:ord_union/3, _))) ).
+'$ord_union2'(L2, H1, T1, Union) :- ( L2 == [] -> Union = [H1|T1] ; nonvar(L2), L2 = [H2|T2] -> compare(Order, H1, H2), '$ord_union3'(Order, H1, T1, H2, T2, Union) ; throw(error(existence_error(matching_rule, ordsets:union2(L2, H1, T1, Union)), context(ordsets:union2/4, _))) ).
 '$ord_union3'('<', H1, T1, H2, T2, Union) :- Union = [H1|Union0], '$ord_union2'(T1, H2, T2, Union0).
 '$ord_union3'('=', H1, T1, _, T2, Union) :- Union = [H1|Union0], '$ord_union'(T1, T2, Union0).
 '$ord_union3'('>', H1, T1, H2, T2, Union) :- Union = [H2|Union0], '$ord_union2'(T2, H1, T1, Union0).
 ord_subtract(Set, Delete, Remaining) :- ( '$ord_fast'(subtract, Set, Delete, Remaining) -> true ; '$ord_subtract'(Set, Delete, Remaining) ).
-'$ord_subtract'(L1, L2, Diff) :- ( L1 == [] -> Diff = [] ; L2 == [] -> Diff = L1 ; nonvar(L1), L1 = [H1|T1] -> '$ord_diff21'(L2, H1, T1, Diff) ; throw(error(existence_error(matching_rule, ordsets:ord_subtract(L1, L2, Diff)), _)) ).
+'$ord_subtract'(L1, L2, Diff) :- ( L1 == [] -> Diff = [] ; L2 == [] -> Diff = L1 ; nonvar(L1), L1 = [H1|T1] -> '$ord_diff21'(L2, H1, T1, Diff) ; throw(error(existence_error(matching_rule, ordsets:ord_subtract(L1, L2, Diff)), context(ordsets:ord_subtract/3, _))) ).
 '$ord_diff21'([], H1, T1, [H1|T1]).
 '$ord_diff21'([H2|T2], H1, T1, Diff) :- compare(Order, H1, H2), '$ord_diff3'(Order, H1, T1, H2, T2, Diff).
 '$ord_diff12'([], _, _, []).

@@ -1041,6 +1041,21 @@ CONTEXT_GOALS = [f"catch({goal}, E, true)" for goal in [
     "aggregate_all(max(X), foo(X), N)", "aggregate_all(max(X, W), foo(X, W), N)",
     "forall(foo, true)", "forall(1, true)", "forall(X, true)", "not(foo)", "not(1)",
     "catch(foo, E0, true)", "catch(1, E0, true)", "catch(X, E0, true)", "throw(_)",
+    # library(ordsets)' => rules name the rule that did not match; a list or string of
+    # other than one character in arithmetic: SWI-Prolog's message, the evaluating
+    # predicate named with it
+    "ord_union(2.0, [a|_], atom)",
+    "ord_union('', '-', [[a], [b, c]])",
+    "ord_union([b], [a|c], U)",
+    "ord_union(a, U)",
+    "ord_subtract(a, [b], D)",
+    "[a|_] < foo",
+    "[a, 0'b] < A",
+    "1 =:= [x|y]",
+    "X is [1, 2]",
+    'X is "ab"',
+    'X is "" + 1',
+    "[1, 2] =:= []",
 ]]
 
 
