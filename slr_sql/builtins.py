@@ -2117,7 +2117,8 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
             i += 2
         elif i < n and fmt[i] == "*":   # a count as it is, not evaluated (SWI-Prolog's error)
             count = deref(take())
-            if type(count) is not int or count < 0:
+            # (SWI-Prolog takes a C int: a count beyond 2**31 - 1 is no count either)
+            if type(count) is not int or not 0 <= count <= 0x7FFFFFFF:
                 raise iso_error(Struct("format", (
                     Atom("no or negative integer for `*' argument"),)))
             num = int_text(count)

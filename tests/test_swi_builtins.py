@@ -928,6 +928,9 @@ ORDER_GOALS = [f"catch({goal}, E, true)" if not goal.startswith("catch(") else g
     "permutation([a|T], [b, a])",
     "permutation([a, b], [b|T])",
     "permutation([a, b], [a, b, c])",
+    # a ~* count is a C int in SWI-Prolog
+    'format(atom(A), "~*c", [2147483648, 0\'a])', 'format(atom(A), "~*c", [2147483647, -1])',
+    'format(atom(A), "~*c", [100000000000000000000, 0\'a])',
 ]]
 
 
