@@ -1121,6 +1121,41 @@ def test_over_stored_events_the_first_bad_solution_raises_as_in_swipl(swipl, goa
                 swidiff.from_swi(theirs["error"], {}), (compiled, raised.value.term)
 
 
+# The whole error term, its context too, on both backends and both paths (a compiled
+# statement that raises is run again by the interpreter): a rule over stored events, and
+# SWI-Prolog's error for the same values given as a list. (stored: p(1)^1, p(foo)^2)
+ERROR_RULES = "s(S) :- aggregate_all(sum(X), p(X)^_, S).\n" \
+    "m(S) :- aggregate_all(max(X), p(X)^_, S).\n" \
+    "d(Y) :- p(X)^_, Y is X / 0.\n" \
+    "l(L) :- p(X)^_, X \\== 1, atom_length(X, L), L > a.\n"
+ERRORS_OVER_EVENTS = {
+    "s(S)": "aggregate_all(sum(X), member(X, [1, foo]), S)",
+    "m(S)": "aggregate_all(max(X), member(X, [1, foo]), S)",
+    "d(Y)": "member(X, [1, foo]), Y is X / 0",
+    "l(L)": "member(X, [1, foo]), X \\== 1, atom_length(X, L), L > a",
+}
+
+
+@pytest.mark.parametrize("goal", sorted(ERRORS_OVER_EVENTS))
+def test_an_error_over_stored_events_has_swipl_context_on_both_paths(swipl, backend, goal):
+    import slr_sql
+    from slr_sql.errors import SLREvaluationError
+
+    example = swidiff.builtin_example(f"catch(({ERRORS_OVER_EVENTS[goal]}), E, true)")
+    theirs = swipl.run(example[2])[0]
+    names = example[3][0][2]
+    expected = swidiff.swi_answer(theirs["answers"][0], names)["E"]
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(10)) as kb:
+        kb.load(ERROR_RULES)
+        kb.add_many(["p(1)^1", "p(foo)^2"])
+        for compiled in (True, False):
+            kb.sql_enabled = compiled
+            with pytest.raises(SLREvaluationError) as raised:
+                kb.query(goal)
+            assert swidiff.from_slr(slr_sql.terms.to_python(raised.value.term), {}) == expected, \
+                (compiled, raised.value.term, kb.explain(goal))
+
+
 # The standard order over stored values, on both backends and both paths (SQLite's compiled
 # aggregate_all(set) sorts in its slr_setof aggregate; PostgreSQL's runs in the interpreter):
 # the empty list and list cells among atoms and other compounds, as SWI-Prolog's sort/2 of
