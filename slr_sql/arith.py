@@ -439,7 +439,21 @@ UNARY = {
     "msb": _msb,
     "lsb": _lsb,
     "popcount": lambda a: bin(_natural(a)).count("1"),
+    "random": lambda a: _random_below(a),
 }
+
+
+def _random_below(a):
+    """random(N): a random integer 0 =< R < N (SWI-Prolog's; N an integer, or an integral
+    float, at least 1)."""
+    import random
+
+    if type(a) is float and a - a == 0.0 and a == int(a):
+        a = int(a)   # (SWI-Prolog takes an integral float as its integer: random(2.0))
+    a = _int_required(a)
+    if a < 1:
+        raise iso_error(Struct("domain_error", (Atom("not_less_than_one"), a)))
+    return random.randrange(a)
 
 CONSTANTS = {
     "pi": math.pi,
