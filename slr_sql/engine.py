@@ -253,7 +253,7 @@ class Machine:
                     continue
                 g = nondet.get(key)
                 if g is not None:
-                    cont = self.push_solutions(g(self, args), nxt, key)
+                    cont = self.push_solutions(g(self, args), nxt, g)
                     continue
                 cont = self._other(key, args, nxt)
             except PrologThrow as exc:
@@ -321,7 +321,7 @@ class Machine:
                     continue
                 except SLREvaluationError as exc:
                     if cp[4] is not None:
-                        raise _in_builtin(exc, cp[4])
+                        raise _in_nondet_builtin(exc, cp[4])
                     raise
                 return cp[2]
             elif kind == K_ALT:
@@ -390,11 +390,12 @@ class Machine:
             else:
                 yield None
 
-    def push_solutions(self, gen: Iterator, nxt, builtin: tuple | None = None):
+    def push_solutions(self, gen: Iterator, nxt, builtin: Callable | None = None):
         """Solve a goal by a generator: each ``next(gen)`` makes the next solution (binding
         on the trail, undone on backtracking) and yields; the machine then continues with
         ``nxt``. Returns ``nxt``, or False when ``gen`` has no solution at all. An error the
-        generator of the builtin (name, arity) raises names it in its context."""
+        generator of the nondeterministic builtin ``builtin`` (its function, shared: no
+        key tuple is kept per choicepoint) raises names it in its context."""
         cp = [K_GEN, len(self.trail), nxt, gen, builtin, None]
         self.cps.append(cp)
         try:
@@ -404,7 +405,7 @@ class Machine:
             return False
         except SLREvaluationError as exc:
             if builtin is not None:
-                raise _in_builtin(exc, builtin)
+                raise _in_nondet_builtin(exc, builtin)
             raise
         return nxt
 
@@ -736,6 +737,16 @@ def _in_builtin(exc: SLREvaluationError, key: tuple, args: tuple = ()) -> SLREva
     from .builtins import in_builtin as fill
 
     return fill(exc, key, args)
+
+
+def _in_nondet_builtin(exc: SLREvaluationError, fn: Callable) -> SLREvaluationError:
+    """``exc`` raised by the nondeterministic builtin whose function is ``fn``."""
+    from .builtins import NONDET
+
+    for key, f in NONDET.items():
+        if f is fn:
+            return _in_builtin(exc, key)
+    return exc
 
 
 def check_body(goal: Any) -> None:
