@@ -12,7 +12,7 @@ from .terms import MAX_INTEGER_BITS, Atom, Struct, Var, deref, String
 from .errors import SLREvaluationError
 
 __all__ = ["evaluate", "apply_binary", "type_error", "instantiation_error", "evaluation_error", "iso_error",
-           "resource_error"]
+           "resource_error", "with_context"]
 
 
 def iso_error(formal: Any, context: Any = None) -> SLREvaluationError:
@@ -27,6 +27,37 @@ def iso_error(formal: Any, context: Any = None) -> SLREvaluationError:
     from .terms import MESSAGE_TOKENS, format_term
 
     return SLREvaluationError(term, format_term(term, limit=MESSAGE_TOKENS))
+
+
+def with_context(exc: SLREvaluationError, culprit: Any) -> SLREvaluationError:
+    """``exc`` with its error term's unbound context filled as SWI-Prolog fills it:
+    ``context(Culprit, _)``, where Culprit names the predicate (``system:atom_length/2``) or
+    the arithmetic function (``(/)/2``) that raised it. An error whose context is already
+    bound, or a ball that is no ``error/2`` term, is returned as it is.
+
+    >>> from slr_sql.terms import Atom, Struct
+    >>> str(with_context(instantiation_error(), Struct("/", (Atom("succ"), 2))))
+    'error(instantiation_error,context(succ/2,_))'
+    """
+    term = exc.term
+    if not (type(term) is Struct and term.name == "error" and len(term.args) == 2):
+        return exc
+    context = deref(term.args[1])
+    message: Any = Var("_")
+    if type(context) is Struct and context.name == "context" and len(context.args) == 2 \
+            and type(deref(context.args[0])) is Var:
+        message = context.args[1]   # context(_, Message): the culprit filled in
+    elif type(context) is not Var:
+        return exc
+    from .terms import MESSAGE_TOKENS, format_term
+
+    new = iso_error(term.args[0], Struct("context", (culprit, message)))
+    # the message is the term's text (bounded), and perhaps a hint after it: kept
+    message = exc.args[0] if exc.args else ""
+    old_text = format_term(term, limit=MESSAGE_TOKENS)
+    if isinstance(message, str) and message.startswith(old_text):
+        new.args = (new.args[0] + message[len(old_text):],)
+    return new
 
 
 def instantiation_error() -> SLREvaluationError:
@@ -408,7 +439,21 @@ UNARY = {
     "msb": _msb,
     "lsb": _lsb,
     "popcount": lambda a: bin(_natural(a)).count("1"),
+    "random": lambda a: _random_below(a),
 }
+
+
+def _random_below(a):
+    """random(N): a random integer 0 =< R < N (SWI-Prolog's; N an integer, or an integral
+    float, at least 1)."""
+    import random
+
+    if type(a) is float and a - a == 0.0 and a == int(a):
+        a = int(a)   # (SWI-Prolog takes an integral float as its integer: random(2.0))
+    a = _int_required(a)
+    if a < 1:
+        raise iso_error(Struct("domain_error", (Atom("not_less_than_one"), a)))
+    return random.randrange(a)
 
 CONSTANTS = {
     "pi": math.pi,
@@ -463,8 +508,33 @@ def evaluate(t: Any, _depth: int = 0) -> int | float:
             raise evaluation_error("float_overflow") from exc
         except (ValueError, ZeroDivisionError) as exc:
             raise evaluation_error("undefined") from exc
+        except SLREvaluationError as exc:
+            raise _in_function(exc, name, n)
         return _other_compound(t, _depth)
     return _atomic_value(t, tt)
+
+
+# SWI-Prolog's names for functions in an error's context (0 ^ -1 is raised by its power)
+_CONTEXT_NAMES = {"^": "**", "getbit": "bit"}
+
+
+def _in_function(exc: SLREvaluationError, name: str, n: int) -> SLREvaluationError:
+    """An error raised while applying the function name/n, as SWI-Prolog's: one the function
+    raises itself (a zero divisor, an operand of the wrong type or domain) names it in its
+    context (``context((/)/2, _)``); an undefined or overflowing float, an unbound or unknown
+    operand (raised by an operand nested inside the call too), is left for the predicate that evaluates (``context(system:(is)/2, _)``)."""
+    term = exc.term
+    if type(term) is not Struct or term.name != "error" or len(term.args) != 2:
+        return exc
+    formal = deref(term.args[0])
+    if type(formal) is not Struct or len(formal.args) == 0:
+        return exc
+    kind = formal.name
+    what = deref(formal.args[0])
+    if (kind == "evaluation_error" and what == "zero_divisor") or kind == "domain_error" \
+            or (kind == "type_error" and what in ("integer", "float")):
+        return with_context(exc, Struct("/", (Atom(_CONTEXT_NAMES.get(name, name)), n)))
+    return exc
 
 
 # The functions whose float result SWI-Prolog passes on unchecked: they make no new
@@ -515,16 +585,16 @@ def _other_compound(t: Struct, depth: int) -> int | float:
     n = len(args)
     if name == "." and n == 2:
         # [X] is the character code X, as in SWI-Prolog: a code or a one-char atom
+        # (SWI-Prolog: the element first, then that it is the only one)
         tail = deref(args[1])
-        if tail == "[]" and type(tail) is Atom:
-            x = deref(args[0])
-            if type(x) is Var:
-                raise instantiation_error()
-            if type(x) is int and x >= 0:
-                return x
-            if type(x) is Atom and len(x) == 1:
-                return ord(x)
+        x = deref(args[0])
+        if type(x) is Var:
+            raise instantiation_error()
+        if not (type(x) is int and x >= 0 or type(x) is Atom and len(x) == 1 and x != "[]"):
             raise type_error("character", x)
+        if not (tail == "[]" and type(tail) is Atom):
+            raise _not_one_character(t)
+        return x if type(x) is int else ord(x)
     # as SWI-Prolog: the arguments are evaluated (right first) before the functor is
     # found unknown, so f(Y) with Y unbound is an instantiation error
     for a in reversed(args):
@@ -545,9 +615,19 @@ def _atomic_value(t: Any, tt: type) -> int | float:
         if t == "[]":
             raise type_error("evaluable", t)
         raise type_error("evaluable", Struct("/", (t, 0)))
-    if tt is String and len(t) == 1:
-        return ord(t)
+    if tt is String:
+        if len(t) == 1:
+            return ord(t)
+        raise _not_one_character(t)
     raise type_error("evaluable", t)
+
+
+def _not_one_character(t: Any) -> SLREvaluationError:
+    """SWI-Prolog's error for a list or string of other than one character as an
+    expression (its own term: type_error([], T), with a message as its context)."""
+    # (the evaluating predicate fills the context's first argument)
+    return iso_error(Struct("type_error", (Atom("[]"), t)),
+                     Struct("context", (Var("_"), Atom('"x" must hold one character'))))
 
 
 class _Apply:
@@ -579,6 +659,8 @@ def _evaluate_deep(t: Any) -> int | float:
                 raise evaluation_error("float_overflow") from exc
             except (ValueError, ZeroDivisionError) as exc:
                 raise evaluation_error("undefined") from exc
+            except SLREvaluationError as exc:
+                raise _in_function(exc, x.term.name, x.n)
             continue
         x = deref(x)
         tx = type(x)

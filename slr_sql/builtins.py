@@ -16,7 +16,7 @@ import unicodedata as _ud
 from typing import Any, Callable, Iterator
 
 from .arith import (apply_binary, evaluate, evaluation_error, instantiation_error, iso_error,
-                    resource_error, type_error)
+                    resource_error, type_error, with_context)
 from .unify import bound_args, copy_term, unify, undo, unify_event_row
 from .errors import SLRError, SLREvaluationError, SLRSyntaxError
 from .program import Program, split_event_atom, event_key
@@ -62,6 +62,111 @@ def nondet(name: str, arity: int):
         NONDET[(name, arity)] = f
         return f
     return deco
+
+
+# The context SWI-Prolog gives an error a builtin raises: context(system:Name/Arity, _) for
+# its C builtins (error_context()); these others name the predicate otherwise, or (None)
+# leave the context unbound, as SWI-Prolog's library predicates (must_be/2) do. slr_sql's
+# own builtins (robot library, prev/next) leave it unbound too.
+def _pi(name: str, arity: int, module: str | None = "system") -> Any:
+    pi = Struct("/", (Atom(name), arity))
+    return pi if module is None else Struct(":", (Atom(module), pi))
+
+
+_OTHER_CONTEXTS: dict[tuple[str, int], Any] = {
+    ("length", 2): _pi("length", 2, None),
+    ("$sub_string", 5): _pi("sub_string", 5),
+    ("$char_type", 2): _pi("char_type", 2),
+    ("$code_type", 2): _pi("code_type", 2),
+    ("$term_variables", 2): _pi("term_variables", 2),
+    ("string_to_atom", 2): _pi("atom_string", 2),
+    # the library's folds raise the errors of their `is`
+    **{key: _pi("is", 2) for key in [("sum_list", 2), ("sumlist", 2), ("max_list", 2),
+                                      ("min_list", 2)]},
+    **{key: None for key in [
+        ("numlist", 3), ("list_to_set", 2), ("max_member", 2), ("min_member", 2),
+        ("reverse", 2), ("interpolate", 3), ("extrapolate", 2), ("distance", 3),
+        ("pos_multiply", 2), ("tf_lookup", 4), ("tf_lookup", 5), ("prev", 2), ("next", 2),
+        ("next", 3), ("origin", 2), ("get_field", 3)]},
+}
+
+# SWI-Prolog's C code names some errors' predicate without its module: a conversion's
+# first argument that is not of its type, or a text that is no number (syntax_error)
+_FIRST_ARGUMENT_TYPES = {("atom_chars", 2): "atom", ("atom_codes", 2): "atom",
+                         ("number_codes", 2): "number", ("name", 2): "atomic",
+                         ("number_string", 2): "number"}
+
+
+def _unbound_element(items: Any) -> bool:
+    """Whether the list ``items`` has an unbound element before its end."""
+    items = deref(items)
+    while type(items) is Struct and items.name == "." and len(items.args) == 2:
+        if type(deref(items.args[0])) is Var:
+            return True
+        items = deref(items.args[1])
+    return False
+
+
+def error_context(key: tuple[str, int], formal: Any = None, args: tuple = ()) -> Any:
+    """The predicate indicator SWI-Prolog names in the context of the error ``formal`` that
+    the builtin ``key`` (called with ``args``) raises, or None where it leaves the context
+    unbound.
+
+    >>> str(error_context(("atom_length", 2)))
+    'system:atom_length/2'
+    >>> error_context(("numlist", 3)) is None
+    True
+    """
+    kind = formal.name if type(formal) is Struct else formal
+    what = deref(formal.args[0]) if type(formal) is Struct and formal.args else None
+    name, arity = key
+    if key in _FIRST_ARGUMENT_TYPES:
+        if kind == "syntax_error" or (kind == "type_error" and what == _FIRST_ARGUMENT_TYPES[key]):
+            return _pi(name, arity, None)
+    elif key == ("arg", 3):
+        # (the term's errors; N's are the module's)
+        if kind == "instantiation_error" or (kind == "type_error" and what == "compound"):
+            return _pi("arg", 3, None)
+    elif key in (("$char_type", 2), ("$code_type", 2)):
+        if kind == "instantiation_error" or (kind == "type_error" and what == "char_type"):
+            return _pi("char_type", 2, None)
+    elif key == ("keysort", 2):
+        # an element's errors (a partial list's are the module's)
+        if (kind == "type_error" and what == "pair") or (
+                kind == "instantiation_error" and args and _unbound_element(args[0])):
+            return _pi("keysort", 2, None)
+    elif name == "format" and arity >= 2 and (
+            kind == "instantiation_error" and type(deref(args[-2])) is Var
+            or kind == "type_error" and what == "text"):
+        return _pi("format", arity, None)   # the format text unbound or no text
+    if kind == "syntax_error":
+        return None   # (SWI-Prolog's context of a syntax error is the text and where in it)
+    if key in _OTHER_CONTEXTS:
+        return _OTHER_CONTEXTS[key]
+    if name.startswith("$"):
+        return None
+    return _pi(name, arity)
+
+
+def in_builtin(exc: SLREvaluationError, key: tuple[str, int], args: tuple = ()) -> SLREvaluationError:
+    """``exc``, raised by the builtin ``key`` called with ``args``, with its context as
+    SWI-Prolog gives it (an arithmetic function's own error keeps the function's).
+
+    >>> str(in_builtin(instantiation_error(), ("atom_length", 2)))
+    'error(instantiation_error,context(system:atom_length/2,_))'
+    >>> str(in_builtin(instantiation_error(), ("numlist", 3)))
+    'error(instantiation_error,_)'
+    """
+    term = exc.term
+    if not (type(term) is Struct and term.name == "error" and len(term.args) == 2):
+        return exc
+    context = deref(term.args[1])
+    if type(context) is not Var and not (
+            type(context) is Struct and context.name == "context" and len(context.args) == 2
+            and type(deref(context.args[0])) is Var):
+        return exc
+    culprit = error_context(key, deref(term.args[0]), args)
+    return exc if culprit is None else with_context(exc, culprit)
 
 
 def _err_domain(domain: str, culprit: Any) -> SLREvaluationError:
@@ -188,6 +293,13 @@ for _op, _test in (("@<", lambda c: c < 0), ("@>", lambda c: c > 0),
 
 @det("compare", 3)
 def _compare(m, a):
+    order = deref(a[0])
+    if type(order) is not Var:
+        # a bound order is checked first, as SWI-Prolog does (compare(=, a, b) fails)
+        if type(order) is not Atom:
+            raise type_error("atom", order)
+        if order not in ("<", "=", ">"):
+            raise _err_domain("order", order)
     c = compare_terms(a[1], a[2])
     return m.unify(a[0], Atom("<" if c < 0 else ">" if c > 0 else "="))
 
@@ -315,6 +427,8 @@ def _functor(m, a):
         return m.unify(a[1], t) and m.unify(a[2], 0)
     name = deref(a[1])
     n = deref(a[2])
+    if type(name) is Struct:
+        raise type_error("atomic", name)   # (before the arity, as SWI-Prolog checks)
     if type(name) is Var or type(n) is Var:
         raise instantiation_error()
     if type(n) is not int:
@@ -370,22 +484,45 @@ def _arg(m, a):
 @det("=..", 2)
 def _univ(m, a):
     t = deref(a[0])
-    if type(t) is Struct:
-        return m.unify(a[1], make_list((_visible_name(t),) + t.args))
-    if type(t) is not Var:
-        return m.unify(a[1], make_list([t]))
     items, tail = list_items(a[1])
-    if type(tail) is Var:
-        raise instantiation_error()
-    if not items:
+    if type(t) is not Var:
+        name = _visible_name(t) if type(t) is Struct else t
+        # a given list is a list or a partial one (SWI-Prolog: after its first element is
+        # compared with the name, the tail is the culprit)
+        if type(tail) is not Var and not (type(tail) is Atom and tail == "[]"):
+            if items:
+                mark = len(m.trail)
+                same = m.unify(items[0], name)
+                m.undo_to(mark)
+                if not same:
+                    return False
+            raise type_error("list", tail)
+        if type(t) is Struct:
+            return m.unify(a[1], make_list((name,) + t.args))
+        return m.unify(a[1], make_list([t]))
+    if not items and type(tail) is Atom and tail == "[]":
         raise _err_domain("non_empty_list", NIL)
-    head = deref(items[0])
+    head = deref(items[0]) if items else None
+    # the name is checked before the rest of the list (SWI-Prolog: X =.. [f(x)|_] is
+    # type_error(atom, f(x))), then the list: a partial one is an instantiation error, a
+    # tail that is no list type_error(list, List)
+    if items and len(items) > 1 and type(head) is not Var and \
+            (type(head) is not Atom or head == "[]"):
+        raise type_error("atom", head)
+    if type(tail) is Var:
+        if items and type(head) is not Var and type(head) is not Atom:
+            raise type_error("atom", head)
+        raise instantiation_error()
+    if not (type(tail) is Atom and tail == "[]"):
+        raise type_error("list", deref(a[1]))
     if len(items) == 1:
+        if type(head) is Var:
+            raise instantiation_error()
+        if type(head) is Struct:
+            raise type_error("atomic", head)
         return m.unify(t, head)
     if type(head) is Var:
         raise instantiation_error()
-    if type(head) is not Atom:
-        raise type_error("atom", head)
     return m.unify(t, Struct(_internal_name(head, len(items) - 1), tuple(items[1:])))
 
 
@@ -720,21 +857,27 @@ def _number_of_text(s: str, leading_layout: bool, bare_quote_is_zero: bool = Tru
 def _atom_concat(m, a):
     x, y = deref(a[0]), deref(a[1])
     if type(x) is not Var and type(y) is not Var:
-        if m.unify(a[2], Atom(_atom_text(x) + _atom_text(y))):
+        joined = _atom_text(x) + _atom_text(y)
+        if type(deref(a[2])) is not Var:
+            # a given whole is atomic text, compared as text (atom_concat(a, b, "ab"))
+            if _atom_text(a[2]) == joined:
+                yield None
+            return
+        if m.unify(a[2], Atom(joined)):
             yield None
         return
+    # a bound part is checked (type errors, before the whole's) and pins the split
+    px = _atom_text(x) if type(x) is not Var else None
+    py = _atom_text(y) if type(y) is not Var else None
     z = deref(a[2])
     if type(z) is Var:
         raise instantiation_error()
     s = _atom_text(z)
-    # a bound part is checked (type errors) and pins the split
-    if type(x) is not Var:
-        px = _atom_text(x)
+    if px is not None:
         if s.startswith(px) and m.unify(y, Atom(s[len(px):])):
             yield None
         return
-    if type(y) is not Var:
-        py = _atom_text(y)
+    if py is not None:
         if s.endswith(py) and m.unify(x, Atom(s[:len(s) - len(py)])):
             yield None
         return
@@ -756,19 +899,76 @@ def _length_argument(t: Any) -> Any:
 @det("atom_length", 2)
 def _atom_length(m, a):
     t = deref(a[0])
-    n = _length_argument(a[1])
     if type(t) is Atom and t == "[]":
         text = ""   # as SWI-Prolog 7: [] has no characters of its own
     elif type(t) is Struct and t.name == "." and len(t.args) == 2:
         text = _code_or_char_list_text(t)   # a code or character list is text too (SWI)
     else:
         text = _atom_text(t, "text")
-    return m.unify(n, len(text))
+    # (the text's errors first, then the length's, as SWI-Prolog checks)
+    return m.unify(_length_argument(a[1]), len(text))
+
+
+def text_in(t: Any, mode: str, expected: str = "text", numbers: bool = True) -> str:
+    """The text of a builtin's text argument as SWI-Prolog 9 reads it, by ``mode``:
+
+    * ``"any"``: an atom, a string, a number, or a code or character list (its first element
+      says which; a bad element is type_error(character_code | character, E), a partial list
+      an instantiation error); ``[]`` is the empty text; else type_error(``expected``, T)
+      (string_length/2, string_chars/2, ...).
+    * ``"no_number"``: "any" but a number (split_string/4, string_code/3).
+    * ``"whole"``: "any", but a list that is no text is type_error(``expected``, List) as a
+      whole (atom_string/2, string_to_atom/2; without ``numbers``, format/2's format).
+    * ``"atomic"``: an atom, a string or a number; ``[]`` is type_error(atom, []), a list or
+      compound type_error(atomic, T) (string_concat/3).
+    * ``"list"``: a string or a code or character list, as "any"; else type_error(list, T)
+      (string_chars/2 and string_codes/2 from the list).
+
+    >>> text_in(make_list([Atom("h"), Atom("i")]), "any"), text_in(NIL, "any"), text_in(12, "any")
+    ('hi', '', '12')
+    >>> text_in(make_list([Atom("h"), 105]), "any")
+    Traceback (most recent call last):
+    slr_sql.errors.SLREvaluationError: error(type_error(character,105),_)
+    >>> text_in(make_list([Atom("h"), 105]), "whole", "atom")
+    Traceback (most recent call last):
+    slr_sql.errors.SLREvaluationError: error(type_error(atom,[h,105]),_)
+    """
+    t = deref(t)
+    tt = type(t)
+    if tt is Var:
+        raise instantiation_error()
+    if tt is String:
+        return str(t)
+    if mode == "list":
+        if tt is Struct or (tt is Atom and t == "[]"):
+            return _list_text(t)
+        raise type_error("list", t)
+    if tt is Atom:
+        if t != "[]":
+            return str(t)
+        if mode == "atomic":
+            raise type_error("atom", t)
+        return ""
+    if tt is int or tt is float:
+        if mode == "no_number" or not numbers:
+            raise type_error(expected, t)
+        return text_of(t)
+    if mode == "atomic":
+        raise type_error("atomic", t)
+    if tt is Struct and t.name == "." and len(t.args) == 2:
+        if mode != "whole":
+            return _code_or_char_list_text(t)
+        try:
+            return _code_or_char_list_text(t)
+        except SLREvaluationError:
+            raise type_error(expected, t) from None
+    raise type_error(expected, t)
 
 
 @det("string_length", 2)
 def _string_length(m, a):
-    return m.unify(a[1], len(text_of(a[0])))
+    text = text_in(a[0], "any")   # (the text's errors first, as SWI-Prolog checks)
+    return m.unify(_length_argument(a[1]), len(text))
 
 
 def _from_text(make: Callable[[str], Any], parse: Callable[[str], Any]):
@@ -776,7 +976,12 @@ def _from_text(make: Callable[[str], Any], parse: Callable[[str], Any]):
     def f(m, a):
         x = deref(a[0])
         if type(x) is not Var:
-            return m.unify(a[1], make(_atom_text(x, "atom")))
+            text = _atom_text(x, "atom")
+            if _is_text_given(a[1]):
+                # a given list is read as in the other mode (SWI-Prolog: its type errors;
+                # a character list for atom_codes, a code list for atom_chars too)
+                return _list_text(a[1]) == text
+            return m.unify(a[1], make(text))
         return m.unify(x, parse(_list_text(a[1])))
     return f
 
@@ -790,7 +995,8 @@ def _name(m, a):
     """name(AtomOrNumber, Codes): a text that is a number (no leading layout) gives the
     number, any other text an atom."""
     x = deref(a[0])
-    if type(x) is not Var and (type(x) is Struct or not _is_text_given(a[1])):
+    if type(x) is not Var and (type(x) is Struct or x == NIL and type(x) is Atom
+                               or not _is_text_given(a[1])):
         return m.unify(a[1], make_list([ord(c) for c in _atom_text(x, "atomic", "atomic")]))
     text = _list_text(a[1])
     n = _number_of_text(text, leading_layout=False)
@@ -827,18 +1033,22 @@ def _number_codes(m, a):
 
 @det("atom_number", 2)
 def _atom_number(m, a):
+    """atom_number/2 as SWI-Prolog's library clauses: an atom's (or a string's) text is
+    read as a number (no number: false); else a given number makes the atom (any other
+    first argument then fails to unify); else a bound second argument must be a number,
+    and the first an atom."""
     x = deref(a[0])
-    if type(x) is Var:
-        n = deref(a[1])
-        if type(n) is Var:
-            raise instantiation_error()
-        if type(n) is not int and type(n) is not float:
-            raise type_error("number", n)
+    if type(x) is String or type(x) is Atom and x != "[]":
+        n = _number_of_text(str(x), leading_layout=False, bare_quote_is_zero=False)
+        return n is not None and m.unify(a[1], n)
+    n = deref(a[1])
+    if type(n) is int or type(n) is float:
         return m.unify(x, Atom(_atom_text(n)))
-    if type(x) is not Atom and type(x) is not String:
-        raise type_error("atom", x)
-    n = _number_of_text(_atom_text(x, "atom"), leading_layout=False, bare_quote_is_zero=False)
-    return n is not None and m.unify(a[1], n)
+    if type(n) is not Var:
+        raise type_error("number", n)
+    if type(x) is Var:
+        raise instantiation_error()
+    raise type_error("atom", x)
 
 
 def _term_text(m: "Machine", a: list, make: Callable[[str], Any]) -> bool:
@@ -867,14 +1077,15 @@ DET[("term_string", 2)] = lambda m, a: _term_text(m, a, String)
 
 
 def _case_converted(m, a, convert: Callable[[str], str]) -> bool:
-    """upcase_atom/2, downcase_atom/2: a bound result (atom or string) is compared as text."""
+    """upcase_atom/2, downcase_atom/2: a bound result (an atom, a string, a number) is
+    compared as text; [] or a compound there is type_error(atom, R), as in SWI-Prolog."""
     out = convert(_atom_text(a[0]))
     r = deref(a[1])
     if type(r) is Var:
         return m.unify(r, Atom(out))
-    if type(r) is not Atom and type(r) is not String:
-        raise type_error("atom", r)
-    return str(r) == out
+    if type(r) is Atom and r != "[]" or type(r) in (String, int, float):
+        return text_of(r) == out
+    raise type_error("atom", r)
 
 
 def _simple_upper(ch: str) -> str:
@@ -1219,12 +1430,30 @@ def _code_type2(m, a):
 
 @nondet("string_concat", 3)
 def _string_concat(m, a):
+    """string_concat/3 as SWI-Prolog's: atomic parts (no lists, no []); with either part
+    unbound the whole is split, a bound part pinning the split."""
     x, y = deref(a[0]), deref(a[1])
     if type(x) is not Var and type(y) is not Var:
-        if m.unify(a[2], String(text_of(x) + text_of(y))):
+        joined = text_in(x, "atomic") + text_in(y, "atomic")
+        if type(deref(a[2])) is not Var:
+            # a given whole is atomic text, compared as text (string_concat(a, b, ab))
+            if text_in(a[2], "atomic") == joined:
+                yield None
+            return
+        if m.unify(a[2], String(joined)):
             yield None
         return
-    s = text_of(a[2])
+    px = text_in(x, "atomic") if type(x) is not Var else None
+    py = text_in(y, "atomic") if type(y) is not Var else None
+    s = text_in(a[2], "atomic")
+    if px is not None:
+        if s.startswith(px) and m.unify(y, String(s[len(px):])):
+            yield None
+        return
+    if py is not None:
+        if s.endswith(py) and m.unify(x, String(s[:len(s) - len(py)])):
+            yield None
+        return
     for i in range(len(s) + 1):
         mark = len(m.trail)
         if m.unify(x, String(s[:i])) and m.unify(y, String(s[i:])):
@@ -1232,30 +1461,56 @@ def _string_concat(m, a):
         m.undo_to(mark)
 
 
-def _text_conv(name: str, make: Callable[[str], Any], parse: Callable[[Any], str]):
+def _text_conv(name: str, make: Callable[[str], Any], parse: Callable[[Any], Any],
+               first: tuple[str, str], second: tuple[str, str], either: bool = False):
+    """A conversion Text <-> Other: from the first argument when it is bound (read in the
+    text mode ``first``, :func:`text_in`), else from the second (mode ``second``);
+    ``either``: from the second too when the first is no text (SWI-Prolog's atom_string/2:
+    atom_string(f(x), 1) fails, atom_string(f(x), g) is type_error(string, g))."""
     def f(m, a):
         x = deref(a[0])
         if type(x) is not Var:
-            return m.unify(a[1], make(text_of(x)))
-        return m.unify(x, parse(a[1]))
+            try:
+                text = text_in(x, *first)
+            except SLREvaluationError as exc:
+                # a partial list (and for ``either`` anything that is no text) is made
+                # from the second argument when that is given, as SWI-Prolog does
+                partial = deref(exc.term.args[0]) == "instantiation_error"
+                if not (either or partial) or type(deref(a[1])) is Var:
+                    raise
+                return m.unify(x, parse(text_in(a[1], *second)))
+            if _is_text_given(a[1]):
+                # a given second argument is read as text and compared (SWI-Prolog:
+                # string_chars(ab, [0'a, 0'b]) is true); one that is no text fails
+                try:
+                    return text_in(a[1], "any") == text
+                except SLREvaluationError:
+                    return False
+            return m.unify(a[1], make(text))
+        return m.unify(x, parse(text_in(a[1], *second)))
     DET[(name, 2)] = f
 
 
-_text_conv("atom_string", lambda s: String(s), lambda t: Atom(text_of(t)))
-_text_conv("string_chars", lambda s: make_list([Atom(c) for c in s]), lambda t: String(text_of(t)))
-_text_conv("string_codes", lambda s: make_list([ord(c) for c in s]), lambda t: String(text_of(t)))
-_text_conv("string_to_atom", lambda s: Atom(s), lambda t: String(text_of(t)))
+_text_conv("atom_string", String, Atom, ("whole", "atom"), ("whole", "string"), either=True)
+# string_to_atom(S, A) is SWI-Prolog's atom_string(A, S)
+DET[("string_to_atom", 2)] = lambda m, a: DET[("atom_string", 2)](m, (a[1], a[0]))
+_text_conv("string_chars", lambda s: make_list([Atom(c) for c in s]), String, ("any", "text"),
+           ("list", "list"))
+_text_conv("string_codes", lambda s: make_list([ord(c) for c in s]), String, ("any", "text"),
+           ("list", "list"))
 
 
 @det("char_code", 2)
 def _char_code(m, a):
     """ISO 8.16.6: errors as SWI-Prolog (a one-character atom, or a code)."""
     x = deref(a[0])
+    c = deref(a[1])
     if type(x) is not Var:
         if type(x) is not Atom or len(x) != 1:
             raise type_error("character", x)
-        return m.unify(a[1], ord(x))
-    c = deref(a[1])
+        if type(c) is not Var and type(c) is not int:
+            raise type_error("integer", c)
+        return m.unify(c, ord(x))
     if type(c) is Var:
         raise instantiation_error()
     if type(c) is not int:
@@ -1277,11 +1532,25 @@ def _parse_any(t):
         raise iso_error(Struct("syntax_error", (Atom(exc.message),))) from None
 
 
-@det("string_code", 3)
+@nondet("string_code", 3)
 def _string_code(m, a):
+    """string_code(Index, Text, Code) as SWI-Prolog's: Text an atom, a string or a code or
+    character list (no number); an unbound Index enumerates the text's positions."""
+    s = text_in(a[1], "no_number")
     i = deref(a[0])
-    s = text_of(a[1])
-    return type(i) is int and 1 <= i <= len(s) and m.unify(a[2], ord(s[i - 1]))
+    if type(i) is Var:
+        for k, ch in enumerate(s, 1):
+            mark = len(m.trail)
+            if m.unify(i, k) and m.unify(a[2], ord(ch)):
+                yield None
+            m.undo_to(mark)
+        return
+    if type(i) is not int:
+        raise type_error("integer", i)
+    if i < 0:
+        raise _err_domain("not_less_than_zero", i)
+    if 1 <= i <= len(s) and m.unify(a[2], ord(s[i - 1])):
+        yield None
 
 
 @det("number_string", 2)
@@ -1304,43 +1573,98 @@ def _downcase(m, a):
     return _case_converted(m, a, _downcase_text)
 
 
+def _concat_items(items_term: Any) -> list[str] | None:
+    """The texts of atomic_list_concat's list, as SWI-Prolog reads them for joining: an
+    atom, a string or a number each (``[]`` or a compound is type_error(text, E)); None
+    when the list is partial or has an unbound element (before any bad one); a tail that
+    is no list is type_error(list, Tail)."""
+    items, tail = list_items(items_term)
+    if type(tail) is not Var and not (type(tail) is Atom and tail == "[]"):
+        raise type_error("list", tail)
+    out = []
+    for x in items:
+        x = deref(x)
+        if type(x) is Var:
+            return None
+        out.append(_join_text(x))
+    return None if type(tail) is Var else out
+
+
+def _join_text(t: Any) -> str:
+    """An atomic text to join (atomic_list_concat's parts and separator)."""
+    t = deref(t)
+    if type(t) is Var:
+        raise instantiation_error()
+    if type(t) is String or type(t) is Atom and t != "[]":
+        return str(t)
+    if type(t) is int or type(t) is float:
+        return text_of(t)
+    raise type_error("text", t)
+
+
 @det("atomic_list_concat", 2)
 def _alc2(m, a):
-    items, _ = list_items(a[0])
-    return m.unify(a[1], Atom("".join(text_of(x) for x in items)))
+    parts = _concat_items(a[0])
+    if parts is None:
+        raise instantiation_error()
+    return m.unify(a[1], Atom("".join(parts)))
 
 
 @det("atomic_list_concat", 3)
 def _alc3(m, a):
-    sep = text_of(a[1])
-    items, tail = list_items(a[0])
-    if type(tail) is Atom and all(type(deref(x)) is not Var for x in items):
-        if len(sep) * (len(items) - 1) > MAX_BUILT_TEXT:   # (the separator repeated)
+    """atomic_list_concat(Parts, Sep, Atom) as SWI-Prolog's: the separator first, then the
+    parts joined; with a part or the list's tail unbound, Atom split at each separator."""
+    sep = _join_text(a[1])
+    parts = _concat_items(a[0])
+    if parts is not None:
+        if len(sep) * (len(parts) - 1) > MAX_BUILT_TEXT:   # (the separator repeated)
             raise resource_error("memory")
-        return m.unify(a[2], Atom(sep.join(text_of(x) for x in items)))
+        return m.unify(a[2], Atom(sep.join(parts)))
     if not sep:
-        raise instantiation_error()
-    parts = text_of(a[2]).split(sep)
-    return m.unify(a[0], make_list([Atom(p) for p in parts]))
+        raise _err_domain("non_empty_atom", deref(a[1]))
+    whole = text_in(a[2], "atomic")
+    return m.unify(a[0], make_list([Atom(p) for p in whole.split(sep)]))
 
 
 @det("split_string", 4)
 def _split_string(m, a):
-    s, seps, pad = text_of(a[0]), text_of(a[1]), text_of(a[2])
-    parts = [s] if not seps else _split_any(s, seps)
-    return m.unify(a[3], make_list([String(p.strip(pad)) for p in parts]))
+    s, seps, pad = (text_in(a[0], "no_number"), text_in(a[1], "no_number"),
+                    text_in(a[2], "no_number"))
+    out = deref(a[3])
+    if type(out) is not Var and not (type(out) is Atom and out == "[]") \
+            and not (type(out) is Struct and out.name == "." and len(out.args) == 2):
+        raise type_error("list", out)
+    return m.unify(a[3], make_list([String(p) for p in _split_any(s, seps, pad)]))
 
 
-def _split_any(s: str, seps: str) -> list[str]:
-    out, cur = [], []
-    for ch in s:
-        if ch in seps:
-            out.append("".join(cur))
-            cur = []
-        else:
-            cur.append(ch)
-    out.append("".join(cur))
-    return out
+def _split_any(s: str, seps: str, pad: str) -> list[str]:
+    """split_string/4's fields as SWI-Prolog makes them: the whole text stripped of ``pad``
+    at both ends, then each field from its start, where ``pad`` is skipped first (so pad
+    characters that are separators too join adjacent separators), to the next separator,
+    stripped of ``pad`` at its end.
+
+    >>> _split_any("//a//b//", "/", "/"), _split_any("/home//jan", "/", "")
+    (['a', 'b'], ['', 'home', '', 'jan'])
+    """
+    start, end = 0, len(s)
+    while start < end and s[start] in pad:
+        start += 1
+    while end > start and s[end - 1] in pad:
+        end -= 1
+    out = []
+    while True:
+        while start < end and s[start] in pad:
+            start += 1
+        stop = start
+        while stop < end and s[stop] not in seps:
+            stop += 1
+        last = stop
+        while last > start and s[last - 1] in pad:
+            last -= 1
+        out.append(s[start:last])
+        if stop >= end:
+            return out
+        start = stop + 1
 
 
 # -- lists -----------------------------------------------------------------------------------------
@@ -1483,16 +1807,33 @@ def _sort(m, a):
 _SORT_ORDERS = {"<": Atom("@<"), ">": Atom("@>"), "=<": Atom("@=<"), ">=": Atom("@>=")}
 
 
+def _sort_key(key: Any) -> None:
+    """sort/4's key as SWI-Prolog checks it first: an argument position (a non-negative
+    integer), a dict key (an atom) or a path of such keys (a list); anything else is
+    type_error(sort_key, Key)."""
+    key = deref(key)
+    if type(key) is Var:
+        raise instantiation_error()
+    if type(key) is int:
+        if key < 0:
+            raise _err_domain("not_less_than_one", key)    # (SWI-Prolog's, though 0 is one)
+        return
+    if type(key) is Atom:
+        return
+    if type(key) is Struct and key.name == "." and len(key.args) == 2:
+        items, tail = list_items(key)
+        if type(tail) is Atom and tail == "[]":
+            for x in items:
+                _sort_key(x)
+            return
+    raise type_error("sort_key", key)
+
+
 @det("sort", 4)
 def _sort4(m, a):
     key = deref(a[0])
     order = deref(a[1])
-    if type(key) is Var:
-        raise instantiation_error()
-    if type(key) is not int:
-        raise type_error("integer", key)
-    if key < 0:
-        raise _err_domain("not_less_than_one", key)    # (SWI-Prolog's, though 0 is one)
+    _sort_key(key)
     if type(order) is Var:
         raise instantiation_error()
     if type(order) is not Atom:
@@ -1502,6 +1843,11 @@ def _sort4(m, a):
     if str(order) not in ("@<", "@>", "@=<", "@>="):
         raise _err_domain("order", order)
     items = proper_list(a[2])
+    if type(key) is not int:
+        if not items:
+            return m.unify(a[3], NIL)
+        # (SWI-Prolog's dict keys and key paths: slr_sql has no dicts)
+        raise type_error("integer", key)
 
     def k(t):
         if key == 0:
@@ -1538,11 +1884,30 @@ def _numbers(t: Any) -> list:
     return [evaluate(x) for x in proper_list(t)]
 
 
+def _no_matching_rule(name: str, args: tuple, arity: int | None = None) -> SLREvaluationError:
+    """SWI-Prolog 9's error when no rule of its library(lists) predicate ``name`` (a `=>`
+    rule) matches the call ``name(args)``: existence_error(matching_rule, lists:Goal) in
+    ``context(lists:name/arity, _)``."""
+    goal = Struct(name, args)
+    return iso_error(Struct("existence_error", (Atom("matching_rule"),
+                                                Struct(":", (Atom("lists"), goal)))),
+                     Struct("context", (_pi(name, arity or len(args), "lists"), Var("_"))))
+
+
+def _is_nil(t: Any) -> bool:
+    return type(t) is Atom and t == "[]"
+
+
 @det("sum_list", 2)
 def _sum_list(m, a):
+    """sum_list/2 as SWI-Prolog's library: each element added as it comes (Y is Y0 + X);
+    a tail that is no list (unbound too: `=>` rules do not bind) is no matching rule."""
+    items, tail = list_items(a[0])
     total: Any = 0
-    for x in _numbers(a[0]):
-        total = apply_binary("+", total, x)   # Y is Y0 + X: inf + 1 is float_overflow
+    for x in items:
+        total = apply_binary("+", total, evaluate(x))   # Y is Y0 + X: inf + 1 is float_overflow
+    if not _is_nil(tail):
+        raise _no_matching_rule("sum_list", (tail, total, a[1]))
     return m.unify(a[1], total)
 
 
@@ -1560,9 +1925,19 @@ def _extreme(items: list, better: Callable[[Any, Any], bool]) -> Any:
     return best
 
 
-def _unify_extreme(m, out, items, better) -> bool:
+def _unify_extreme(m, out, t, better, name: str) -> bool:
+    """max_member/2, min_member/2 (``name``) as SWI-Prolog's library: [] fails, a term that
+    is no list, or a tail that is none (unbound too), is no matching rule."""
+    t = deref(t)
+    if _is_nil(t):
+        return False
+    if not (type(t) is Struct and t.name == "." and len(t.args) == 2):
+        raise _no_matching_rule(name, (out, t))
+    items, tail = list_items(t)
     best = _extreme(items, better)
-    return best is not None and m.unify(out, best)
+    if not _is_nil(tail):
+        raise _no_matching_rule(name + "_", (tail, best, out))
+    return m.unify(out, best)
 
 
 def _fold_arith(name: str, items: list) -> Any:
@@ -1576,35 +1951,57 @@ def _fold_arith(name: str, items: list) -> Any:
     return value
 
 
-def _unify_fold(m, out, name: str, items: list) -> bool:
-    value = _fold_arith(name, items)
-    return value is not None and m.unify(out, value)
+def _unify_fold(m, out, name: str, t: Any) -> bool:
+    """max_list/2, min_list/2 (``name`` max or min) as SWI-Prolog's library folds: [] fails,
+    a term that is no list, or a tail that is none (unbound too), is no matching rule."""
+    t = deref(t)
+    if _is_nil(t):
+        return False
+    what = name + "_list"
+    if not (type(t) is Struct and t.name == "." and len(t.args) == 2):
+        raise _no_matching_rule(what, (t, out))
+    items, tail = list_items(t)
+    value = _fold_arith(name, [evaluate(x) for x in items])
+    if not _is_nil(tail):
+        # (the library's fold starts from the first element as it is)
+        raise _no_matching_rule(what, (tail, items[0] if len(items) == 1 else value, out))
+    return m.unify(out, value)
 
 
-DET[("max_list", 2)] = lambda m, a: _unify_fold(m, a[1], "max", _numbers(a[0]))
-DET[("min_list", 2)] = lambda m, a: _unify_fold(m, a[1], "min", _numbers(a[0]))
+DET[("max_list", 2)] = lambda m, a: _unify_fold(m, a[1], "max", a[0])
+DET[("min_list", 2)] = lambda m, a: _unify_fold(m, a[1], "min", a[0])
 DET[("max_member", 2)] = lambda m, a: _unify_extreme(
-    m, a[0], proper_list(a[1]), lambda x, y: compare_terms(x, y) > 0)
+    m, a[0], a[1], lambda x, y: compare_terms(x, y) > 0, "max_member")
 DET[("min_member", 2)] = lambda m, a: _unify_extreme(
-    m, a[0], proper_list(a[1]), lambda x, y: compare_terms(x, y) < 0)
+    m, a[0], a[1], lambda x, y: compare_terms(x, y) < 0, "min_member")
 
 
 @det("numlist", 3)
 def _numlist(m, a):
     lo, hi = deref(a[0]), deref(a[1])
-    if type(lo) is Var or type(hi) is Var:
-        raise instantiation_error()
-    if type(lo) is not int:
-        raise type_error("integer", lo)
-    if type(hi) is not int:
-        raise type_error("integer", hi)
+    for bound in (lo, hi):   # must_be(integer, L), then must_be(integer, H)
+        if type(bound) is Var:
+            raise instantiation_error()
+        if type(bound) is not int:
+            raise type_error("integer", bound)
     if lo > hi:
         return False
     return m.unify(a[2], build_list(m, hi - lo + 1, lambda i: lo + i))
 
 
+@det("$must_be_list", 1)
+def _must_be_list(m, a):
+    """must_be(list, L): a partial list is an instantiation error, another term that is no
+    list type_error(list, L) (the context unbound, as the library's)."""
+    proper_list(a[0])
+    return True
+
+
 @det("reverse", 2)
 def _reverse(m, a):
+    items, tail = list_items(a[0])
+    if type(tail) is not Var and not _is_nil(tail):
+        return False   # (the library's clauses are for [] and [X|Xs] only)
     return m.unify(a[1], make_list(list(reversed(proper_list(a[0])))))
 
 
@@ -1619,6 +2016,9 @@ def _memberchk(m, a):
         undo(trail, mark)
     if type(tail) is Var:
         return m.unify(tail, Struct(".", (a[0], Var())))
+    if not _is_nil(tail):
+        raise iso_error(Struct("type_error", (Atom("list"), tail)),
+                        Struct("context", (_pi("$memberchk", 3), Var("_"))))
     return False
 
 
@@ -1717,7 +2117,8 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
             i += 2
         elif i < n and fmt[i] == "*":   # a count as it is, not evaluated (SWI-Prolog's error)
             count = deref(take())
-            if type(count) is not int or count < 0:
+            # (SWI-Prolog takes a C int: a count beyond 2**31 - 1 is no count either)
+            if type(count) is not int or not 0 <= count <= 0x7FFFFFFF:
                 raise iso_error(Struct("format", (
                     Atom("no or negative integer for `*' argument"),)))
             num = int_text(count)
@@ -1981,20 +2382,21 @@ def _format_args(t: Any) -> list:
 
 @det("format", 1)
 def _format1(m, a):
-    _out(m).write(format_text(text_of(a[0]), [], m.deadline))
+    _out(m).write(format_text(text_in(a[0], "whole", numbers=False), [], m.deadline))
     return True
 
 
 @det("format", 2)
 def _format2(m, a):
-    _out(m).write(format_text(text_of(a[0]), _format_args(a[1]), m.deadline))
+    _out(m).write(format_text(text_in(a[0], "whole", numbers=False), _format_args(a[1]),
+                              m.deadline))
     return True
 
 
 @det("format", 3)
 def _format3(m, a):
     sink = deref(a[0])
-    text = format_text(text_of(a[1]), _format_args(a[2]), m.deadline)
+    text = format_text(text_in(a[1], "whole", numbers=False), _format_args(a[2]), m.deadline)
     if type(sink) is Struct and len(sink.args) == 1:
         kind = sink.name
         if kind == "atom":
@@ -2029,6 +2431,12 @@ def _strip_carets(goal: Any) -> tuple[Any, list]:
     return goal, quantified
 
 
+# the library predicates SWI-Prolog names in the context of their goal's errors: findall/3
+# (and bagof/3, setof/3, aggregate_all's bag and set) run it in '$bags':findall_loop/4
+_FINDALL_LOOP = _pi("findall_loop", 4, "$bags")
+_AGGREGATE_ALL = _pi("aggregate_all", 3, "aggregate")
+
+
 def collector(m: "Machine", key, args, nxt):
     """Start the all-solutions builtin ``key`` (findall/3,4, forall/2, aggregate_all/3,
     bagof/3, setof/3) on the machine ``m``; ``nxt`` is the continuation after it.
@@ -2043,12 +2451,13 @@ def collector(m: "Machine", key, args, nxt):
     if name in ("findall", "findAll") and arity == 3:
         def finish(m, results, nxt, out=args[2]):
             return nxt if m.unify(out, make_list(results)) else False
-        return m.push_collect(args[0], args[1], finish, nxt)
+        return m.push_collect(args[0], args[1], finish, nxt, caller=_FINDALL_LOOP)
     if name == "findall" and arity == 4:
         def finish(m, results, nxt, out=args[2], tail=args[3]):
             return nxt if m.unify(out, make_list(results, tail)) else False
-        return m.push_collect(args[0], args[1], finish, nxt)
+        return m.push_collect(args[0], args[1], finish, nxt, caller=_FINDALL_LOOP)
     if name == "forall":
+        m.meta_check(args[0], _pi("forall", 2, "$apply"))
         goal = Struct("\\+", (Struct(",", (Struct("call", (args[0],)),
                                            Struct("\\+", (Struct("call", (args[1],)),)))),))
         return (goal, len(m.cps), nxt)
@@ -2064,7 +2473,8 @@ def _aggregate_all(m: "Machine", args, nxt):
     goal = args[1]
     out = args[2]
     if type(spec) is Atom and spec == "count":
-        return m.push_collect(NIL, goal, lambda m, r, nxt: nxt if m.unify(out, len(r)) else False, nxt)
+        return m.push_collect(NIL, goal, lambda m, r, nxt: nxt if m.unify(out, len(r)) else False, nxt,
+                              caller=_AGGREGATE_ALL)
     if type(spec) is Struct and spec.name in ("max", "min") and len(spec.args) == 2:
         return _aggregate_witness(m, spec, goal, out, nxt)
     if type(spec) is not Struct or len(spec.args) != 1:
@@ -2087,7 +2497,29 @@ def _aggregate_all(m: "Machine", args, nxt):
             raise _err_domain("aggregate_template", spec)
         return nxt if m.unify(out, value) else False
 
-    return m.push_collect(template, goal, finish, nxt)
+    return m.push_collect(template, goal, finish, nxt, caller=_FINDALL_LOOP)
+
+
+def _raising_in(each: Callable[[Any], None], culprit: Any) -> Callable[[Any], None]:
+    """``each`` whose errors name ``culprit`` in their context, as the library's errors
+    name the comparison or ``is`` that raised them (an arithmetic function's own error
+    keeps the function's)."""
+    def checked(found: Any) -> None:
+        try:
+            each(found)
+        except SLREvaluationError as exc:
+            raise with_context(exc, culprit)
+    return checked
+
+
+def _better(kind: str, x: Any, best: Any) -> bool:
+    """``X > Best`` (max) or ``X < Best`` (min), as the library compares a witness form's
+    solutions: its errors are the comparison's."""
+    try:
+        a, b = evaluate(x), evaluate(best)
+    except SLREvaluationError as exc:
+        raise with_context(exc, _pi(">" if kind == "max" else "<", 2))
+    return a > b if kind == "max" else a < b
 
 
 def _aggregate_arith(m: "Machine", kind: str, template, goal, out, nxt):
@@ -2113,14 +2545,16 @@ def _aggregate_arith(m: "Machine", kind: str, template, goal, out, nxt):
                     raise type_error("number", first)
                 state.append(found)
                 return
-            a, b = evaluate(deref(found).args[0]), evaluate(deref(state[0]).args[0])
-            if (a > b) if kind == "max" else (a < b):
+            if _better(kind, deref(found).args[0], deref(state[0]).args[0]):
                 state[0] = found
         else:
             value = evaluate(found)
             # the first solution is max(X, X), as SWI-Prolog's State = state(X) starts:
             # max(inf, inf) is float_overflow, so a lone inf is too
             state[:] = [apply_binary(kind, state[0] if state else value, value)]
+
+    if not witness:
+        each = _raising_in(each, _pi("is", 2))
 
     def finish(m, results, nxt):
         if not state:
@@ -2132,7 +2566,7 @@ def _aggregate_arith(m: "Machine", kind: str, template, goal, out, nxt):
             value = state[0]
         return nxt if m.unify(out, value) else False
 
-    return m.push_collect(template, goal, finish, nxt, each)
+    return m.push_collect(template, goal, finish, nxt, each, caller=_AGGREGATE_ALL)
 
 
 def _aggregate_witness(m: "Machine", spec: Struct, goal, out, nxt):
@@ -2153,16 +2587,17 @@ def _aggregate_witness(m: "Machine", spec: Struct, goal, out, nxt):
                 raise type_error("number", first)
             best.append(found)
             return
-        a, b = evaluate(found.args[0]), evaluate(best[0].args[0])
-        if (a > b) if kind == "max" else (a < b):
+        if _better(kind, found.args[0], best[0].args[0]):
             best[0] = found
+
 
     def finish(m, results, nxt):
         if not best:
             return False
         return nxt if m.unify(out, Struct(kind, (best[0].args[0], best[0].args[1]))) else False
 
-    return m.push_collect(Struct("w", (spec.args[0], spec.args[1])), goal, finish, nxt, each)
+    return m.push_collect(Struct("w", (spec.args[0], spec.args[1])), goal, finish, nxt, each,
+                          caller=_AGGREGATE_ALL)
 
 
 def _bagof(m: "Machine", args, nxt, is_set: bool):
@@ -2196,7 +2631,7 @@ def _bagof(m: "Machine", args, nxt, is_set: bool):
             groups = [(w, _dedup(sorted(items, key=_cmp_key))) for w, items in groups]
         return m.push_solutions(_bag_solutions(m, witness, out, groups), nxt)
 
-    return m.push_collect(pair, inner, finish, nxt)
+    return m.push_collect(pair, inner, finish, nxt, caller=_FINDALL_LOOP)
 
 
 def _bag_solutions(m: "Machine", witness, out, groups) -> Iterator[None]:
@@ -2796,7 +3231,7 @@ member_(_, X, X).
 member_([Y|Ys], X, _) :- member_(Ys, X, Y).
 append([], L, L).
 append([H|T], L, [H|R]) :- append(T, L, R).
-append(ListOfLists, List) :- '$append_all'(ListOfLists, List).
+append(ListOfLists, List) :- '$must_be_list'(ListOfLists), '$append_all'(ListOfLists, List).
 '$append_all'([], []).
 '$append_all'([L|Ls], As) :- append(L, Ws, As), '$append_all'(Ls, Ws).
 nth0(I, L, E) :- integer(I), !, I >= 0, '$nth_det'(I, L, E).
@@ -2847,14 +3282,17 @@ foldl(G, L1, L2, V0, V) :- '$foldl'(L1, L2, G, V0, V).
 '$foldl'([X|Xs], [Y|Ys], G, V0, V) :- call(G, X, Y, V0, V1), '$foldl'(Xs, Ys, G, V1, V).
 delete([], _, []).
 delete([H|T], X, R) :- ( H \= X -> R = [H|R1] ; R = R1 ), delete(T, X, R1).
-subtract([], _, []).
-subtract([E|T], D, R) :- ( memberchk(E, D) -> R = R1 ; R = [E|R1] ), subtract(T, D, R1).
+subtract(L, D, R) :- var(L), !, throw(error(existence_error(matching_rule, lists:subtract(L, D, R)), context(lists:subtract/3, _))).
+subtract([], _, R) :- !, R = [].
+subtract([E|T], D, R) :- !, ( memberchk(E, D) -> R = R1 ; R = [E|R1] ), subtract(T, D, R1).
+subtract(L, D, R) :- throw(error(existence_error(matching_rule, lists:subtract(L, D, R)), context(lists:subtract/3, _))).
 intersection([], _, []).
 intersection([X|T], L, I) :- ( memberchk(X, L) -> I = [X|R] ; I = R ), intersection(T, L, R).
 union([], L, L).
 union([H|T], L, R) :- ( memberchk(H, L) -> R = R1 ; R = [H|R1] ), union(T, L, R1).
-permutation([], []).
-permutation(L, [H|T]) :- select(H, L, R), permutation(R, T).
+permutation(Xs, Ys) :- '$skip_list'(Xlen, Xs, XTail), '$skip_list'(Ylen, Ys, YTail), ( XTail == [], YTail == [] -> Xlen == Ylen ; var(XTail), YTail == [] -> length(Xs, Ylen) ; XTail == [], var(YTail) -> length(Ys, Xlen) ; var(XTail), var(YTail) -> length(Xs, Len), length(Ys, Len) ; '$must_be_list'(Xs), '$must_be_list'(Ys) ), '$perm'(Xs, Ys).
+'$perm'([], []).
+'$perm'(List, [First|Perm]) :- select(First, List, Rest), '$perm'(Rest, Perm).
 once(G) :- call(G), !.
 ignore(G) :- ( call(G) -> true ; true ).
 pairs_keys_values([], [], []).
@@ -2889,17 +3327,17 @@ char_type(Char, Type) :- '$char_type'(Char, Type).
 code_type(Code, Type) :- '$code_type'(Code, Type).
 unify_with_occurs_check(X, Y) :- '$unify_with_occurs_check'(X, Y).
 list_to_ord_set(List, Set) :- sort(List, Set).
-ord_union(Sets, Union) :- ( Sets == [] -> Union = [] ; nonvar(Sets), Sets = [_|_] -> length(Sets, N), '$ord_union_all'(N, Sets, Union, []) ; throw(error(existence_error(matching_rule, ordsets:ord_union(Sets, Union)), _)) ).
+ord_union(Sets, Union) :- ( Sets == [] -> Union = [] ; nonvar(Sets), Sets = [_|_] -> length(Sets, N), '$ord_union_all'(N, Sets, Union, []) ; throw(error(existence_error(matching_rule, ordsets:ord_union(Sets, Union)), context(ordsets:ord_union/2, _))) ).
 '$ord_union_all'(N, Sets0, Union, Sets) :- ( N =:= 1 -> Sets0 = [Union|Sets] ; N =:= 2 -> Sets0 = [Set1, Set2|Sets], '$ord_union_f'(Set1, Set2, Union) ; A is N >> 1, Z is N - A, '$ord_union_all'(A, Sets0, X, Sets1), '$ord_union_all'(Z, Sets1, Y, Sets), '$ord_union_f'(X, Y, Union) ).
 ord_union(Set1, Set2, Union) :- '$ord_union_f'(Set1, Set2, Union).
 '$ord_union_f'(Set1, Set2, Union) :- ( '$ord_fast'(union, Set1, Set2, Union) -> true ; '$ord_union'(Set1, Set2, Union) ).
-'$ord_union'(Set1, Set2, Union) :- ( Set1 == [] -> Union = Set2 ; nonvar(Set1), Set1 = [H1|T1] -> '$ord_union2'(Set2, H1, T1, Union) ; throw(error(existence_error(matching_rule, ordsets:ord_union(Set1, Set2, Union)), _)) ).
-'$ord_union2'(L2, H1, T1, Union) :- ( L2 == [] -> Union = [H1|T1] ; nonvar(L2), L2 = [H2|T2] -> compare(Order, H1, H2), '$ord_union3'(Order, H1, T1, H2, T2, Union) ; throw(error(existence_error(matching_rule, ordsets:union2(L2, H1, T1, Union)), _)) ).
+'$ord_union'(Set1, Set2, Union) :- ( Set1 == [] -> Union = Set2 ; nonvar(Set1), Set1 = [H1|T1] -> '$ord_union2'(Set2, H1, T1, Union) ; throw(error(existence_error(matching_rule, ordsets:ord_union(Set1, Set2, Union)), context(ordsets:ord_union/3, _))) ).
+'$ord_union2'(L2, H1, T1, Union) :- ( L2 == [] -> Union = [H1|T1] ; nonvar(L2), L2 = [H2|T2] -> compare(Order, H1, H2), '$ord_union3'(Order, H1, T1, H2, T2, Union) ; throw(error(existence_error(matching_rule, ordsets:union2(L2, H1, T1, Union)), context(ordsets:union2/4, _))) ).
 '$ord_union3'('<', H1, T1, H2, T2, Union) :- Union = [H1|Union0], '$ord_union2'(T1, H2, T2, Union0).
 '$ord_union3'('=', H1, T1, _, T2, Union) :- Union = [H1|Union0], '$ord_union'(T1, T2, Union0).
 '$ord_union3'('>', H1, T1, H2, T2, Union) :- Union = [H2|Union0], '$ord_union2'(T2, H1, T1, Union0).
 ord_subtract(Set, Delete, Remaining) :- ( '$ord_fast'(subtract, Set, Delete, Remaining) -> true ; '$ord_subtract'(Set, Delete, Remaining) ).
-'$ord_subtract'(L1, L2, Diff) :- ( L1 == [] -> Diff = [] ; L2 == [] -> Diff = L1 ; nonvar(L1), L1 = [H1|T1] -> '$ord_diff21'(L2, H1, T1, Diff) ; throw(error(existence_error(matching_rule, ordsets:ord_subtract(L1, L2, Diff)), _)) ).
+'$ord_subtract'(L1, L2, Diff) :- ( L1 == [] -> Diff = [] ; L2 == [] -> Diff = L1 ; nonvar(L1), L1 = [H1|T1] -> '$ord_diff21'(L2, H1, T1, Diff) ; throw(error(existence_error(matching_rule, ordsets:ord_subtract(L1, L2, Diff)), context(ordsets:ord_subtract/3, _))) ).
 '$ord_diff21'([], H1, T1, [H1|T1]).
 '$ord_diff21'([H2|T2], H1, T1, Diff) :- compare(Order, H1, H2), '$ord_diff3'(Order, H1, T1, H2, T2, Diff).
 '$ord_diff12'([], _, _, []).

@@ -19,7 +19,7 @@ import time
 from math import copysign
 from typing import Any, Callable, Iterator
 
-from .arith import instantiation_error, iso_error, resource_error, type_error
+from .arith import instantiation_error, iso_error, resource_error, type_error, with_context
 from .errors import CLOSED_WHILE_RUNNING, SLRError, SLREvaluationError, SLRTimeout
 from .program import MAX_RECURSIVE_NEST, Predicate, Program, Slot, Template, build, \
     event_key, split_event_atom
@@ -116,6 +116,12 @@ CONTROL = {
     ("aggregate_all", 3), ("bagof", 3), ("setof", 3), ("catch", 3), ("throw", 1),
     ("fail", 0), ("false", 0), ("^", 2), ("not", 1),
 }
+
+
+# the meta predicates SWI-Prolog names in the context of the errors of the goals they call
+_SYSTEM_CATCH = Struct(":", (Atom("system"), Struct("/", (Atom("catch"), 3))))
+_SYSTEM_NOT = Struct(":", (Atom("system"), Struct("/", (Atom("not"), 1))))
+_SYSTEM_THROW = Struct(":", (Atom("system"), Struct("/", (Atom("throw"), 1))))
 
 
 class Machine:
@@ -240,11 +246,14 @@ class Machine:
                     continue
                 f = det.get(key)
                 if f is not None:
-                    cont = nxt if f(self, args) else False
+                    try:
+                        cont = nxt if f(self, args) else False
+                    except SLREvaluationError as exc:
+                        raise _in_builtin(exc, key, args)
                     continue
                 g = nondet.get(key)
                 if g is not None:
-                    cont = self.push_solutions(g(self, args), nxt)
+                    cont = self.push_solutions(g(self, args), nxt, g)
                     continue
                 cont = self._other(key, args, nxt)
             except PrologThrow as exc:
@@ -317,6 +326,10 @@ class Machine:
                 except StopIteration:
                     cps.pop()
                     continue
+                except SLREvaluationError as exc:
+                    if cp[4] is not None:
+                        raise _in_nondet_builtin(exc, cp[4])
+                    raise
                 return cp[2]
             elif kind == K_ALT:
                 cps.pop()
@@ -384,17 +397,23 @@ class Machine:
             else:
                 yield None
 
-    def push_solutions(self, gen: Iterator, nxt):
+    def push_solutions(self, gen: Iterator, nxt, builtin: Callable | None = None):
         """Solve a goal by a generator: each ``next(gen)`` makes the next solution (binding
         on the trail, undone on backtracking) and yields; the machine then continues with
-        ``nxt``. Returns ``nxt``, or False when ``gen`` has no solution at all."""
-        cp = [K_GEN, len(self.trail), nxt, gen, None, None]
+        ``nxt``. Returns ``nxt``, or False when ``gen`` has no solution at all. An error the
+        generator of the nondeterministic builtin ``builtin`` (its function, shared: no
+        key tuple is kept per choicepoint) raises names it in its context."""
+        cp = [K_GEN, len(self.trail), nxt, gen, builtin, None]
         self.cps.append(cp)
         try:
             next(gen)
         except StopIteration:
             self.cps.pop()
             return False
+        except SLREvaluationError as exc:
+            if builtin is not None:
+                raise _in_nondet_builtin(exc, builtin)
+            raise
         return nxt
 
     def _other(self, key, args, nxt):
@@ -406,8 +425,9 @@ class Machine:
         if key in self.engine.program.dynamic:
             return False
         name, arity = key
+        # (a list cell's name is '[|]' in SWI-Prolog 7: call([a], X) is no '.'/3)
         error = iso_error(Struct("existence_error", (
-            Atom("procedure"), Struct("/", (Atom(name), arity)))))
+            Atom("procedure"), Struct("/", (Atom("[|]" if name == "." else name), arity)))))
         hint = self._event_hint(name, arity, args)
         if hint:
             error = SLREvaluationError(error.term, f"{error}: {hint}")
@@ -471,6 +491,8 @@ class Machine:
         if name == "*->":
             return (args[0], len(cps), (args[1], cb, nxt))
         if name == "\\+" or name == "not":
+            if name == "not":
+                self.meta_check(args[0], _SYSTEM_NOT)
             check_body(args[0])
             height = len(cps)
             cps.append([K_ALT, len(self.trail), nxt, None, None, None])
@@ -494,13 +516,14 @@ class Machine:
         if name == "throw":
             ball = deref(args[0])
             if type(ball) is Var:
-                raise instantiation_error()
+                raise with_context(instantiation_error(), _SYSTEM_THROW)
             raise PrologThrow(copy_term(ball, deadline=self.deadline))
         if name == "catch":
             height = len(cps)
             cp = [K_CATCH, len(self.trail), nxt, args[1], args[2], cb]
             cps.append(cp)
-            check_body(args[0])    # (raised inside the catch: catch/3 catches it)
+            # (raised inside the catch: catch/3 catches it)
+            self.meta_check(args[0], _SYSTEM_CATCH)
             return (args[0], height + 1, (Special(S_POPCATCH, cp), cb, nxt))
         # collection predicates
         from .builtins import collector
@@ -541,11 +564,39 @@ class Machine:
             return nxt
         raise AssertionError(op)
 
+    def meta_check(self, goal: Any, caller: Any) -> None:
+        """The errors SWI-Prolog raises as the meta predicate ``caller`` (a predicate
+        indicator) calls ``goal``, named in their context: an unbound goal, one that is no
+        body (type_error(callable, Goal)), an undefined procedure as the goal itself (one
+        inside its control constructs is left to the call, its context unbound)."""
+        g = deref(goal)
+        try:
+            if type(g) is Var:
+                raise instantiation_error()
+            check_body(g)
+            if type(g) is Struct:
+                key, args = (g.name, len(g.args)), g.args
+            elif type(g) is Atom:
+                key, args = (g, 0), ()
+            else:
+                raise type_error("callable", g)
+            engine = self.engine
+            if not (key in CONTROL or key in engine.program.preds or key in engine.library.preds
+                    or key in engine.det or key in engine.nondet or key in engine.python_preds
+                    or key in engine.program.dynamic):
+                self._other(key, args, None)
+        except SLREvaluationError as exc:
+            raise with_context(exc, caller)
+
     def push_collect(self, template: Any, goal: Any, finish: Callable, nxt,
-                     each: Callable[[Any], None] | None = None):
+                     each: Callable[[Any], None] | None = None, caller: Any = None):
         """Run ``goal`` to exhaustion collecting copies of ``template``, then ``finish``;
         ``each`` sees every copy as it is found (an error it raises stops the goal there, as
-        SWI-Prolog's aggregate_all(max(X), ..) evaluating each solution as it comes)."""
+        SWI-Prolog's aggregate_all(max(X), ..) evaluating each solution as it comes).
+        ``caller``: the predicate SWI-Prolog names in the context of the goal's own errors
+        (:meth:`meta_check`)."""
+        if caller is not None:
+            self.meta_check(goal, caller)
         check_body(goal)
         results: list = []
         height = len(self.cps)
@@ -686,6 +737,23 @@ def _unify_pattern(p: Any, t: Any, frame: list, trail: list) -> bool:
     return unify(p, t, trail)
 
 
+
+
+def _in_builtin(exc: SLREvaluationError, key: tuple, args: tuple = ()) -> SLREvaluationError:
+    """``exc`` raised by the builtin ``key``, its context filled as SWI-Prolog's."""
+    from .builtins import in_builtin as fill
+
+    return fill(exc, key, args)
+
+
+def _in_nondet_builtin(exc: SLREvaluationError, fn: Callable) -> SLREvaluationError:
+    """``exc`` raised by the nondeterministic builtin whose function is ``fn``."""
+    from .builtins import NONDET
+
+    for key, f in NONDET.items():
+        if f is fn:
+            return _in_builtin(exc, key)
+    return exc
 
 
 def check_body(goal: Any) -> None:

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from .terms import Atom as A, Clause, Span, String, Struct as S, Var
 
-SOURCE_SHA256 = 'aa1eef215d8d446c2c2da4a69df110284eb709b7d13d9210d5fbc595888d5001'
+SOURCE_SHA256 = '2d0f845b7eb56252c94d176af5b5083849d706f519a52ad1081296425c0b729e'
 
 
 def clauses(source: str) -> list[Clause]:
@@ -24,293 +24,299 @@ def clauses(source: str) -> list[Clause]:
     v = [Var('H'), Var('T'), Var('L'), Var('R')]
     out.append(Clause(S(A('append'), (S(A('.'), (v[0], v[1])), v[2], S(A('.'), (v[0], v[3])))), S(A('append'), (v[1], v[2], v[3])), Span('<library>', 6, 1, 6, 44), (('H', v[0]), ('T', v[1]), ('L', v[2]), ('R', v[3]), ), source[121:164]))
     v = [Var('ListOfLists'), Var('List')]
-    out.append(Clause(S(A('append'), (v[0], v[1])), S(A('$append_all'), (v[0], v[1])), Span('<library>', 7, 1, 7, 63), (('ListOfLists', v[0]), ('List', v[1]), ), source[165:227]))
+    out.append(Clause(S(A('append'), (v[0], v[1])), S(A(','), (S(A('$must_be_list'), (v[0],)), S(A('$append_all'), (v[0], v[1])))), Span('<library>', 7, 1, 7, 93), (('ListOfLists', v[0]), ('List', v[1]), ), source[165:257]))
     v = []
-    out.append(Clause(S(A('$append_all'), (A('[]'), A('[]'))), A('true'), Span('<library>', 8, 1, 8, 23), (), source[228:250]))
+    out.append(Clause(S(A('$append_all'), (A('[]'), A('[]'))), A('true'), Span('<library>', 8, 1, 8, 23), (), source[258:280]))
     v = [Var('L'), Var('Ls'), Var('As'), Var('Ws')]
-    out.append(Clause(S(A('$append_all'), (S(A('.'), (v[0], v[1])), v[2])), S(A(','), (S(A('append'), (v[0], v[3], v[2])), S(A('$append_all'), (v[1], v[3])))), Span('<library>', 9, 1, 9, 71), (('L', v[0]), ('Ls', v[1]), ('As', v[2]), ('Ws', v[3]), ), source[251:321]))
+    out.append(Clause(S(A('$append_all'), (S(A('.'), (v[0], v[1])), v[2])), S(A(','), (S(A('append'), (v[0], v[3], v[2])), S(A('$append_all'), (v[1], v[3])))), Span('<library>', 9, 1, 9, 71), (('L', v[0]), ('Ls', v[1]), ('As', v[2]), ('Ws', v[3]), ), source[281:351]))
     v = [Var('I'), Var('L'), Var('E')]
-    out.append(Clause(S(A('nth0'), (v[0], v[1], v[2])), S(A(','), (S(A('integer'), (v[0],)), S(A(','), (A('!'), S(A(','), (S(A('>='), (v[0], 0)), S(A('$nth_det'), (v[0], v[1], v[2])))))))), Span('<library>', 10, 1, 10, 61), (('I', v[0]), ('L', v[1]), ('E', v[2]), ), source[322:382]))
+    out.append(Clause(S(A('nth0'), (v[0], v[1], v[2])), S(A(','), (S(A('integer'), (v[0],)), S(A(','), (A('!'), S(A(','), (S(A('>='), (v[0], 0)), S(A('$nth_det'), (v[0], v[1], v[2])))))))), Span('<library>', 10, 1, 10, 61), (('I', v[0]), ('L', v[1]), ('E', v[2]), ), source[352:412]))
     v = [Var('I'), Var('L'), Var('E')]
-    out.append(Clause(S(A('nth0'), (v[0], v[1], v[2])), S(A(','), (S(A('var'), (v[0],)), S(A(','), (A('!'), S(A('$nth_gen'), (v[1], v[2], 0, v[0])))))), Span('<library>', 11, 1, 11, 52), (('I', v[0]), ('L', v[1]), ('E', v[2]), ), source[383:434]))
+    out.append(Clause(S(A('nth0'), (v[0], v[1], v[2])), S(A(','), (S(A('var'), (v[0],)), S(A(','), (A('!'), S(A('$nth_gen'), (v[1], v[2], 0, v[0])))))), Span('<library>', 11, 1, 11, 52), (('I', v[0]), ('L', v[1]), ('E', v[2]), ), source[413:464]))
     v = [Var('I'), Var('_'), Var('_'), Var('_')]
-    out.append(Clause(S(A('nth0'), (v[0], v[1], v[2])), S(A('throw'), (S(A('error'), (S(A('type_error'), (A('integer'), v[0])), v[3])),)), Span('<library>', 12, 1, 12, 58), (('I', v[0]), ), source[435:492]))
+    out.append(Clause(S(A('nth0'), (v[0], v[1], v[2])), S(A('throw'), (S(A('error'), (S(A('type_error'), (A('integer'), v[0])), v[3])),)), Span('<library>', 12, 1, 12, 58), (('I', v[0]), ), source[465:522]))
     v = [Var('I'), Var('L'), Var('E'), Var('I0')]
-    out.append(Clause(S(A('nth1'), (v[0], v[1], v[2])), S(A(','), (S(A('integer'), (v[0],)), S(A(','), (A('!'), S(A(','), (S(A('>='), (v[0], 1)), S(A(','), (S(A('is'), (v[3], S(A('-'), (v[0], 1)))), S(A('$nth_det'), (v[3], v[1], v[2])))))))))), Span('<library>', 13, 1, 13, 73), (('I', v[0]), ('L', v[1]), ('E', v[2]), ('I0', v[3]), ), source[493:565]))
+    out.append(Clause(S(A('nth1'), (v[0], v[1], v[2])), S(A(','), (S(A('integer'), (v[0],)), S(A(','), (A('!'), S(A(','), (S(A('>='), (v[0], 1)), S(A(','), (S(A('is'), (v[3], S(A('-'), (v[0], 1)))), S(A('$nth_det'), (v[3], v[1], v[2])))))))))), Span('<library>', 13, 1, 13, 73), (('I', v[0]), ('L', v[1]), ('E', v[2]), ('I0', v[3]), ), source[523:595]))
     v = [Var('I'), Var('L'), Var('E')]
-    out.append(Clause(S(A('nth1'), (v[0], v[1], v[2])), S(A(','), (S(A('var'), (v[0],)), S(A(','), (A('!'), S(A('$nth_gen'), (v[1], v[2], 1, v[0])))))), Span('<library>', 14, 1, 14, 52), (('I', v[0]), ('L', v[1]), ('E', v[2]), ), source[566:617]))
+    out.append(Clause(S(A('nth1'), (v[0], v[1], v[2])), S(A(','), (S(A('var'), (v[0],)), S(A(','), (A('!'), S(A('$nth_gen'), (v[1], v[2], 1, v[0])))))), Span('<library>', 14, 1, 14, 52), (('I', v[0]), ('L', v[1]), ('E', v[2]), ), source[596:647]))
     v = [Var('I'), Var('_'), Var('_'), Var('_')]
-    out.append(Clause(S(A('nth1'), (v[0], v[1], v[2])), S(A('throw'), (S(A('error'), (S(A('type_error'), (A('integer'), v[0])), v[3])),)), Span('<library>', 15, 1, 15, 58), (('I', v[0]), ), source[618:675]))
+    out.append(Clause(S(A('nth1'), (v[0], v[1], v[2])), S(A('throw'), (S(A('error'), (S(A('type_error'), (A('integer'), v[0])), v[3])),)), Span('<library>', 15, 1, 15, 58), (('I', v[0]), ), source[648:705]))
     v = [Var('E'), Var('_')]
-    out.append(Clause(S(A('$nth_det'), (0, S(A('.'), (v[0], v[1])), v[0])), A('!'), Span('<library>', 16, 1, 16, 30), (('E', v[0]), ), source[676:705]))
+    out.append(Clause(S(A('$nth_det'), (0, S(A('.'), (v[0], v[1])), v[0])), A('!'), Span('<library>', 16, 1, 16, 30), (('E', v[0]), ), source[706:735]))
     v = [Var('I'), Var('_'), Var('T'), Var('E'), Var('I1')]
-    out.append(Clause(S(A('$nth_det'), (v[0], S(A('.'), (v[1], v[2])), v[3])), S(A(','), (S(A('is'), (v[4], S(A('-'), (v[0], 1)))), S(A('$nth_det'), (v[4], v[2], v[3])))), Span('<library>', 17, 1, 17, 60), (('I', v[0]), ('T', v[2]), ('E', v[3]), ('I1', v[4]), ), source[706:765]))
+    out.append(Clause(S(A('$nth_det'), (v[0], S(A('.'), (v[1], v[2])), v[3])), S(A(','), (S(A('is'), (v[4], S(A('-'), (v[0], 1)))), S(A('$nth_det'), (v[4], v[2], v[3])))), Span('<library>', 17, 1, 17, 60), (('I', v[0]), ('T', v[2]), ('E', v[3]), ('I1', v[4]), ), source[736:795]))
     v = [Var('E'), Var('_'), Var('B')]
-    out.append(Clause(S(A('$nth_gen'), (S(A('.'), (v[0], v[1])), v[0], v[2], v[2])), A('true'), Span('<library>', 18, 1, 18, 28), (('E', v[0]), ('B', v[2]), ), source[766:793]))
+    out.append(Clause(S(A('$nth_gen'), (S(A('.'), (v[0], v[1])), v[0], v[2], v[2])), A('true'), Span('<library>', 18, 1, 18, 28), (('E', v[0]), ('B', v[2]), ), source[796:823]))
     v = [Var('_'), Var('T'), Var('E'), Var('B0'), Var('B'), Var('B1')]
-    out.append(Clause(S(A('$nth_gen'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('is'), (v[5], S(A('+'), (v[3], 1)))), S(A('$nth_gen'), (v[1], v[2], v[5], v[4])))), Span('<library>', 19, 1, 19, 68), (('T', v[1]), ('E', v[2]), ('B0', v[3]), ('B', v[4]), ('B1', v[5]), ), source[794:861]))
+    out.append(Clause(S(A('$nth_gen'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('is'), (v[5], S(A('+'), (v[3], 1)))), S(A('$nth_gen'), (v[1], v[2], v[5], v[4])))), Span('<library>', 19, 1, 19, 68), (('T', v[1]), ('E', v[2]), ('B0', v[3]), ('B', v[4]), ('B1', v[5]), ), source[824:891]))
     v = [Var('I'), Var('L'), Var('E'), Var('R')]
-    out.append(Clause(S(A('nth0'), (v[0], v[1], v[2], v[3])), S(A(','), (S(A('var'), (v[0],)), S(A(','), (A('!'), S(A('$nth_gen'), (v[1], v[2], v[3], 0, v[0])))))), Span('<library>', 20, 1, 20, 58), (('I', v[0]), ('L', v[1]), ('E', v[2]), ('R', v[3]), ), source[862:919]))
+    out.append(Clause(S(A('nth0'), (v[0], v[1], v[2], v[3])), S(A(','), (S(A('var'), (v[0],)), S(A(','), (A('!'), S(A('$nth_gen'), (v[1], v[2], v[3], 0, v[0])))))), Span('<library>', 20, 1, 20, 58), (('I', v[0]), ('L', v[1]), ('E', v[2]), ('R', v[3]), ), source[892:949]))
     v = [Var('I'), Var('L'), Var('E'), Var('R')]
-    out.append(Clause(S(A('nth0'), (v[0], v[1], v[2], v[3])), S(A(','), (S(A('$nth_index'), (v[0], A('nonneg'), 0)), S(A('$nth_del'), (v[0], v[1], v[2], v[3])))), Span('<library>', 21, 1, 21, 72), (('I', v[0]), ('L', v[1]), ('E', v[2]), ('R', v[3]), ), source[920:991]))
+    out.append(Clause(S(A('nth0'), (v[0], v[1], v[2], v[3])), S(A(','), (S(A('$nth_index'), (v[0], A('nonneg'), 0)), S(A('$nth_del'), (v[0], v[1], v[2], v[3])))), Span('<library>', 21, 1, 21, 72), (('I', v[0]), ('L', v[1]), ('E', v[2]), ('R', v[3]), ), source[950:1021]))
     v = [Var('I'), Var('L'), Var('E'), Var('R')]
-    out.append(Clause(S(A('nth1'), (v[0], v[1], v[2], v[3])), S(A(','), (S(A('var'), (v[0],)), S(A(','), (A('!'), S(A('$nth_gen'), (v[1], v[2], v[3], 1, v[0])))))), Span('<library>', 22, 1, 22, 58), (('I', v[0]), ('L', v[1]), ('E', v[2]), ('R', v[3]), ), source[992:1049]))
+    out.append(Clause(S(A('nth1'), (v[0], v[1], v[2], v[3])), S(A(','), (S(A('var'), (v[0],)), S(A(','), (A('!'), S(A('$nth_gen'), (v[1], v[2], v[3], 1, v[0])))))), Span('<library>', 22, 1, 22, 58), (('I', v[0]), ('L', v[1]), ('E', v[2]), ('R', v[3]), ), source[1022:1079]))
     v = [Var('I'), Var('L'), Var('E'), Var('R'), Var('I0')]
-    out.append(Clause(S(A('nth1'), (v[0], v[1], v[2], v[3])), S(A(','), (S(A('$nth_index'), (v[0], A('positive_integer'), 1)), S(A(','), (S(A('is'), (v[4], S(A('-'), (v[0], 1)))), S(A('$nth_del'), (v[4], v[1], v[2], v[3])))))), Span('<library>', 23, 1, 23, 94), (('I', v[0]), ('L', v[1]), ('E', v[2]), ('R', v[3]), ('I0', v[4]), ), source[1050:1143]))
+    out.append(Clause(S(A('nth1'), (v[0], v[1], v[2], v[3])), S(A(','), (S(A('$nth_index'), (v[0], A('positive_integer'), 1)), S(A(','), (S(A('is'), (v[4], S(A('-'), (v[0], 1)))), S(A('$nth_del'), (v[4], v[1], v[2], v[3])))))), Span('<library>', 23, 1, 23, 94), (('I', v[0]), ('L', v[1]), ('E', v[2]), ('R', v[3]), ('I0', v[4]), ), source[1080:1173]))
     v = [Var('I'), Var('Type'), Var('Min'), Var('_')]
-    out.append(Clause(S(A('$nth_index'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A(','), (S(A('integer'), (v[0],)), S(A('>='), (v[0], v[2])))), A('true'))), S(A('throw'), (S(A('error'), (S(A('type_error'), (v[1], v[0])), v[3])),)))), Span('<library>', 24, 1, 24, 103), (('I', v[0]), ('Type', v[1]), ('Min', v[2]), ), source[1144:1246]))
+    out.append(Clause(S(A('$nth_index'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A(','), (S(A('integer'), (v[0],)), S(A('>='), (v[0], v[2])))), A('true'))), S(A('throw'), (S(A('error'), (S(A('type_error'), (v[1], v[0])), v[3])),)))), Span('<library>', 24, 1, 24, 103), (('I', v[0]), ('Type', v[1]), ('Min', v[2]), ), source[1174:1276]))
     v = [Var('E'), Var('R'), Var('B')]
-    out.append(Clause(S(A('$nth_gen'), (S(A('.'), (v[0], v[1])), v[0], v[1], v[2], v[2])), A('true'), Span('<library>', 25, 1, 25, 31), (('E', v[0]), ('R', v[1]), ('B', v[2]), ), source[1247:1277]))
+    out.append(Clause(S(A('$nth_gen'), (S(A('.'), (v[0], v[1])), v[0], v[1], v[2], v[2])), A('true'), Span('<library>', 25, 1, 25, 31), (('E', v[0]), ('R', v[1]), ('B', v[2]), ), source[1277:1307]))
     v = [Var('H'), Var('T'), Var('E'), Var('R'), Var('B0'), Var('B'), Var('B1')]
-    out.append(Clause(S(A('$nth_gen'), (S(A('.'), (v[0], v[1])), v[2], S(A('.'), (v[0], v[3])), v[4], v[5])), S(A(','), (S(A('is'), (v[6], S(A('+'), (v[4], 1)))), S(A('$nth_gen'), (v[1], v[2], v[3], v[6], v[5])))), Span('<library>', 26, 1, 26, 78), (('H', v[0]), ('T', v[1]), ('E', v[2]), ('R', v[3]), ('B0', v[4]), ('B', v[5]), ('B1', v[6]), ), source[1278:1355]))
+    out.append(Clause(S(A('$nth_gen'), (S(A('.'), (v[0], v[1])), v[2], S(A('.'), (v[0], v[3])), v[4], v[5])), S(A(','), (S(A('is'), (v[6], S(A('+'), (v[4], 1)))), S(A('$nth_gen'), (v[1], v[2], v[3], v[6], v[5])))), Span('<library>', 26, 1, 26, 78), (('H', v[0]), ('T', v[1]), ('E', v[2]), ('R', v[3]), ('B0', v[4]), ('B', v[5]), ('B1', v[6]), ), source[1308:1385]))
     v = [Var('E'), Var('R')]
-    out.append(Clause(S(A('$nth_del'), (0, S(A('.'), (v[0], v[1])), v[0], v[1])), A('!'), Span('<library>', 27, 1, 27, 33), (('E', v[0]), ('R', v[1]), ), source[1356:1388]))
+    out.append(Clause(S(A('$nth_del'), (0, S(A('.'), (v[0], v[1])), v[0], v[1])), A('!'), Span('<library>', 27, 1, 27, 33), (('E', v[0]), ('R', v[1]), ), source[1386:1418]))
     v = [Var('I'), Var('H'), Var('T'), Var('E'), Var('R'), Var('I1')]
-    out.append(Clause(S(A('$nth_del'), (v[0], S(A('.'), (v[1], v[2])), v[3], S(A('.'), (v[1], v[4])))), S(A(','), (S(A('is'), (v[5], S(A('-'), (v[0], 1)))), S(A('$nth_del'), (v[5], v[2], v[3], v[4])))), Span('<library>', 28, 1, 28, 70), (('I', v[0]), ('H', v[1]), ('T', v[2]), ('E', v[3]), ('R', v[4]), ('I1', v[5]), ), source[1389:1458]))
+    out.append(Clause(S(A('$nth_del'), (v[0], S(A('.'), (v[1], v[2])), v[3], S(A('.'), (v[1], v[4])))), S(A(','), (S(A('is'), (v[5], S(A('-'), (v[0], 1)))), S(A('$nth_del'), (v[5], v[2], v[3], v[4])))), Span('<library>', 28, 1, 28, 70), (('I', v[0]), ('H', v[1]), ('T', v[2]), ('E', v[3]), ('R', v[4]), ('I1', v[5]), ), source[1419:1488]))
     v = [Var('X'), Var('Xs'), Var('Last')]
-    out.append(Clause(S(A('last'), (S(A('.'), (v[0], v[1])), v[2])), S(A('$last'), (v[1], v[0], v[2])), Span('<library>', 29, 1, 29, 44), (('X', v[0]), ('Xs', v[1]), ('Last', v[2]), ), source[1459:1502]))
+    out.append(Clause(S(A('last'), (S(A('.'), (v[0], v[1])), v[2])), S(A('$last'), (v[1], v[0], v[2])), Span('<library>', 29, 1, 29, 44), (('X', v[0]), ('Xs', v[1]), ('Last', v[2]), ), source[1489:1532]))
     v = [Var('Last')]
-    out.append(Clause(S(A('$last'), (A('[]'), v[0], v[0])), A('true'), Span('<library>', 30, 1, 30, 25), (('Last', v[0]), ), source[1503:1527]))
+    out.append(Clause(S(A('$last'), (A('[]'), v[0], v[0])), A('true'), Span('<library>', 30, 1, 30, 25), (('Last', v[0]), ), source[1533:1557]))
     v = [Var('X'), Var('Xs'), Var('_'), Var('Last')]
-    out.append(Clause(S(A('$last'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A('$last'), (v[1], v[0], v[3])), Span('<library>', 31, 1, 31, 50), (('X', v[0]), ('Xs', v[1]), ('Last', v[3]), ), source[1528:1577]))
+    out.append(Clause(S(A('$last'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A('$last'), (v[1], v[0], v[3])), Span('<library>', 31, 1, 31, 50), (('X', v[0]), ('Xs', v[1]), ('Last', v[3]), ), source[1558:1607]))
     v = [Var('X'), Var('Head'), Var('Tail'), Var('Rest')]
-    out.append(Clause(S(A('select'), (v[0], S(A('.'), (v[1], v[2])), v[3])), S(A('$select3'), (v[2], v[1], v[0], v[3])), Span('<library>', 32, 1, 32, 65), (('X', v[0]), ('Head', v[1]), ('Tail', v[2]), ('Rest', v[3]), ), source[1578:1642]))
+    out.append(Clause(S(A('select'), (v[0], S(A('.'), (v[1], v[2])), v[3])), S(A('$select3'), (v[2], v[1], v[0], v[3])), Span('<library>', 32, 1, 32, 65), (('X', v[0]), ('Head', v[1]), ('Tail', v[2]), ('Rest', v[3]), ), source[1608:1672]))
     v = [Var('Tail'), Var('Head')]
-    out.append(Clause(S(A('$select3'), (v[0], v[1], v[1], v[0])), A('true'), Span('<library>', 33, 1, 33, 36), (('Tail', v[0]), ('Head', v[1]), ), source[1643:1678]))
+    out.append(Clause(S(A('$select3'), (v[0], v[1], v[1], v[0])), A('true'), Span('<library>', 33, 1, 33, 36), (('Tail', v[0]), ('Head', v[1]), ), source[1673:1708]))
     v = [Var('Head2'), Var('Tail'), Var('Head'), Var('X'), Var('Rest')]
-    out.append(Clause(S(A('$select3'), (S(A('.'), (v[0], v[1])), v[2], v[3], S(A('.'), (v[2], v[4])))), S(A('$select3'), (v[1], v[0], v[3], v[4])), Span('<library>', 34, 1, 34, 84), (('Head2', v[0]), ('Tail', v[1]), ('Head', v[2]), ('X', v[3]), ('Rest', v[4]), ), source[1679:1762]))
+    out.append(Clause(S(A('$select3'), (S(A('.'), (v[0], v[1])), v[2], v[3], S(A('.'), (v[2], v[4])))), S(A('$select3'), (v[1], v[0], v[3], v[4])), Span('<library>', 34, 1, 34, 84), (('Head2', v[0]), ('Tail', v[1]), ('Head', v[2]), ('X', v[3]), ('Rest', v[4]), ), source[1709:1792]))
     v = [Var('Elem'), Var('List'), Var('Rest'), Var('Rest0')]
-    out.append(Clause(S(A('selectchk'), (v[0], v[1], v[2])), S(A(','), (S(A('select'), (v[0], v[1], v[3])), S(A(','), (A('!'), S(A('='), (v[2], v[3])))))), Span('<library>', 35, 1, 35, 75), (('Elem', v[0]), ('List', v[1]), ('Rest', v[2]), ('Rest0', v[3]), ), source[1763:1837]))
+    out.append(Clause(S(A('selectchk'), (v[0], v[1], v[2])), S(A(','), (S(A('select'), (v[0], v[1], v[3])), S(A(','), (A('!'), S(A('='), (v[2], v[3])))))), Span('<library>', 35, 1, 35, 75), (('Elem', v[0]), ('List', v[1]), ('Rest', v[2]), ('Rest0', v[3]), ), source[1793:1867]))
     v = [Var('_')]
-    out.append(Clause(S(A('exclude'), (v[0], A('[]'), A('[]'))), A('true'), Span('<library>', 36, 1, 36, 20), (), source[1838:1857]))
+    out.append(Clause(S(A('exclude'), (v[0], A('[]'), A('[]'))), A('true'), Span('<library>', 36, 1, 36, 20), (), source[1868:1887]))
     v = [Var('P'), Var('H'), Var('T'), Var('R'), Var('R1')]
-    out.append(Clause(S(A('exclude'), (v[0], S(A('.'), (v[1], v[2])), v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('call'), (v[0], v[1])), S(A('='), (v[3], v[4])))), S(A('='), (v[3], S(A('.'), (v[1], v[4])))))), S(A('exclude'), (v[0], v[2], v[4])))), Span('<library>', 37, 1, 37, 82), (('P', v[0]), ('H', v[1]), ('T', v[2]), ('R', v[3]), ('R1', v[4]), ), source[1858:1939]))
+    out.append(Clause(S(A('exclude'), (v[0], S(A('.'), (v[1], v[2])), v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('call'), (v[0], v[1])), S(A('='), (v[3], v[4])))), S(A('='), (v[3], S(A('.'), (v[1], v[4])))))), S(A('exclude'), (v[0], v[2], v[4])))), Span('<library>', 37, 1, 37, 82), (('P', v[0]), ('H', v[1]), ('T', v[2]), ('R', v[3]), ('R1', v[4]), ), source[1888:1969]))
     v = [Var('_')]
-    out.append(Clause(S(A('include'), (v[0], A('[]'), A('[]'))), A('true'), Span('<library>', 38, 1, 38, 20), (), source[1940:1959]))
+    out.append(Clause(S(A('include'), (v[0], A('[]'), A('[]'))), A('true'), Span('<library>', 38, 1, 38, 20), (), source[1970:1989]))
     v = [Var('P'), Var('H'), Var('T'), Var('R'), Var('R1')]
-    out.append(Clause(S(A('include'), (v[0], S(A('.'), (v[1], v[2])), v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('call'), (v[0], v[1])), S(A('='), (v[3], S(A('.'), (v[1], v[4])))))), S(A('='), (v[3], v[4])))), S(A('include'), (v[0], v[2], v[4])))), Span('<library>', 39, 1, 39, 82), (('P', v[0]), ('H', v[1]), ('T', v[2]), ('R', v[3]), ('R1', v[4]), ), source[1960:2041]))
+    out.append(Clause(S(A('include'), (v[0], S(A('.'), (v[1], v[2])), v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('call'), (v[0], v[1])), S(A('='), (v[3], S(A('.'), (v[1], v[4])))))), S(A('='), (v[3], v[4])))), S(A('include'), (v[0], v[2], v[4])))), Span('<library>', 39, 1, 39, 82), (('P', v[0]), ('H', v[1]), ('T', v[2]), ('R', v[3]), ('R1', v[4]), ), source[1990:2071]))
     v = [Var('_')]
-    out.append(Clause(S(A('partition'), (v[0], A('[]'), A('[]'), A('[]'))), A('true'), Span('<library>', 40, 1, 40, 26), (), source[2042:2067]))
+    out.append(Clause(S(A('partition'), (v[0], A('[]'), A('[]'), A('[]'))), A('true'), Span('<library>', 40, 1, 40, 26), (), source[2072:2097]))
     v = [Var('P'), Var('H'), Var('T'), Var('I'), Var('E'), Var('I1'), Var('E1')]
-    out.append(Clause(S(A('partition'), (v[0], S(A('.'), (v[1], v[2])), v[3], v[4])), S(A(','), (S(A(';'), (S(A('->'), (S(A('call'), (v[0], v[1])), S(A(','), (S(A('='), (v[3], S(A('.'), (v[1], v[5])))), S(A('='), (v[4], v[6])))))), S(A(','), (S(A('='), (v[3], v[5])), S(A('='), (v[4], S(A('.'), (v[1], v[6])))))))), S(A('partition'), (v[0], v[2], v[5], v[6])))), Span('<library>', 41, 1, 41, 113), (('P', v[0]), ('H', v[1]), ('T', v[2]), ('I', v[3]), ('E', v[4]), ('I1', v[5]), ('E1', v[6]), ), source[2068:2180]))
+    out.append(Clause(S(A('partition'), (v[0], S(A('.'), (v[1], v[2])), v[3], v[4])), S(A(','), (S(A(';'), (S(A('->'), (S(A('call'), (v[0], v[1])), S(A(','), (S(A('='), (v[3], S(A('.'), (v[1], v[5])))), S(A('='), (v[4], v[6])))))), S(A(','), (S(A('='), (v[3], v[5])), S(A('='), (v[4], S(A('.'), (v[1], v[6])))))))), S(A('partition'), (v[0], v[2], v[5], v[6])))), Span('<library>', 41, 1, 41, 113), (('P', v[0]), ('H', v[1]), ('T', v[2]), ('I', v[3]), ('E', v[4]), ('I1', v[5]), ('E1', v[6]), ), source[2098:2210]))
     v = [Var('_')]
-    out.append(Clause(S(A('maplist'), (v[0], A('[]'))), A('true'), Span('<library>', 42, 1, 42, 16), (), source[2181:2196]))
+    out.append(Clause(S(A('maplist'), (v[0], A('[]'))), A('true'), Span('<library>', 42, 1, 42, 16), (), source[2211:2226]))
     v = [Var('G'), Var('A'), Var('As')]
-    out.append(Clause(S(A('maplist'), (v[0], S(A('.'), (v[1], v[2])))), S(A(','), (S(A('call'), (v[0], v[1])), S(A('maplist'), (v[0], v[2])))), Span('<library>', 43, 1, 43, 50), (('G', v[0]), ('A', v[1]), ('As', v[2]), ), source[2197:2246]))
+    out.append(Clause(S(A('maplist'), (v[0], S(A('.'), (v[1], v[2])))), S(A(','), (S(A('call'), (v[0], v[1])), S(A('maplist'), (v[0], v[2])))), Span('<library>', 43, 1, 43, 50), (('G', v[0]), ('A', v[1]), ('As', v[2]), ), source[2227:2276]))
     v = [Var('_')]
-    out.append(Clause(S(A('maplist'), (v[0], A('[]'), A('[]'))), A('true'), Span('<library>', 44, 1, 44, 20), (), source[2247:2266]))
+    out.append(Clause(S(A('maplist'), (v[0], A('[]'), A('[]'))), A('true'), Span('<library>', 44, 1, 44, 20), (), source[2277:2296]))
     v = [Var('G'), Var('A'), Var('As'), Var('B'), Var('Bs')]
-    out.append(Clause(S(A('maplist'), (v[0], S(A('.'), (v[1], v[2])), S(A('.'), (v[3], v[4])))), S(A(','), (S(A('call'), (v[0], v[1], v[3])), S(A('maplist'), (v[0], v[2], v[4])))), Span('<library>', 45, 1, 45, 65), (('G', v[0]), ('A', v[1]), ('As', v[2]), ('B', v[3]), ('Bs', v[4]), ), source[2267:2331]))
+    out.append(Clause(S(A('maplist'), (v[0], S(A('.'), (v[1], v[2])), S(A('.'), (v[3], v[4])))), S(A(','), (S(A('call'), (v[0], v[1], v[3])), S(A('maplist'), (v[0], v[2], v[4])))), Span('<library>', 45, 1, 45, 65), (('G', v[0]), ('A', v[1]), ('As', v[2]), ('B', v[3]), ('Bs', v[4]), ), source[2297:2361]))
     v = [Var('_')]
-    out.append(Clause(S(A('maplist'), (v[0], A('[]'), A('[]'), A('[]'))), A('true'), Span('<library>', 46, 1, 46, 24), (), source[2332:2355]))
+    out.append(Clause(S(A('maplist'), (v[0], A('[]'), A('[]'), A('[]'))), A('true'), Span('<library>', 46, 1, 46, 24), (), source[2362:2385]))
     v = [Var('G'), Var('A'), Var('As'), Var('B'), Var('Bs'), Var('C'), Var('Cs')]
-    out.append(Clause(S(A('maplist'), (v[0], S(A('.'), (v[1], v[2])), S(A('.'), (v[3], v[4])), S(A('.'), (v[5], v[6])))), S(A(','), (S(A('call'), (v[0], v[1], v[3], v[5])), S(A('maplist'), (v[0], v[2], v[4], v[6])))), Span('<library>', 47, 1, 47, 80), (('G', v[0]), ('A', v[1]), ('As', v[2]), ('B', v[3]), ('Bs', v[4]), ('C', v[5]), ('Cs', v[6]), ), source[2356:2435]))
+    out.append(Clause(S(A('maplist'), (v[0], S(A('.'), (v[1], v[2])), S(A('.'), (v[3], v[4])), S(A('.'), (v[5], v[6])))), S(A(','), (S(A('call'), (v[0], v[1], v[3], v[5])), S(A('maplist'), (v[0], v[2], v[4], v[6])))), Span('<library>', 47, 1, 47, 80), (('G', v[0]), ('A', v[1]), ('As', v[2]), ('B', v[3]), ('Bs', v[4]), ('C', v[5]), ('Cs', v[6]), ), source[2386:2465]))
     v = [Var('_')]
-    out.append(Clause(S(A('maplist'), (v[0], A('[]'), A('[]'), A('[]'), A('[]'))), A('true'), Span('<library>', 48, 1, 48, 28), (), source[2436:2463]))
+    out.append(Clause(S(A('maplist'), (v[0], A('[]'), A('[]'), A('[]'), A('[]'))), A('true'), Span('<library>', 48, 1, 48, 28), (), source[2466:2493]))
     v = [Var('G'), Var('A'), Var('As'), Var('B'), Var('Bs'), Var('C'), Var('Cs'), Var('D'), Var('Ds')]
-    out.append(Clause(S(A('maplist'), (v[0], S(A('.'), (v[1], v[2])), S(A('.'), (v[3], v[4])), S(A('.'), (v[5], v[6])), S(A('.'), (v[7], v[8])))), S(A(','), (S(A('call'), (v[0], v[1], v[3], v[5], v[7])), S(A('maplist'), (v[0], v[2], v[4], v[6], v[8])))), Span('<library>', 49, 1, 49, 95), (('G', v[0]), ('A', v[1]), ('As', v[2]), ('B', v[3]), ('Bs', v[4]), ('C', v[5]), ('Cs', v[6]), ('D', v[7]), ('Ds', v[8]), ), source[2464:2558]))
+    out.append(Clause(S(A('maplist'), (v[0], S(A('.'), (v[1], v[2])), S(A('.'), (v[3], v[4])), S(A('.'), (v[5], v[6])), S(A('.'), (v[7], v[8])))), S(A(','), (S(A('call'), (v[0], v[1], v[3], v[5], v[7])), S(A('maplist'), (v[0], v[2], v[4], v[6], v[8])))), Span('<library>', 49, 1, 49, 95), (('G', v[0]), ('A', v[1]), ('As', v[2]), ('B', v[3]), ('Bs', v[4]), ('C', v[5]), ('Cs', v[6]), ('D', v[7]), ('Ds', v[8]), ), source[2494:2588]))
     v = [Var('G'), Var('L'), Var('V0'), Var('V')]
-    out.append(Clause(S(A('foldl'), (v[0], v[1], v[2], v[3])), S(A('$foldl'), (v[1], v[0], v[2], v[3])), Span('<library>', 50, 1, 50, 45), (('G', v[0]), ('L', v[1]), ('V0', v[2]), ('V', v[3]), ), source[2559:2603]))
+    out.append(Clause(S(A('foldl'), (v[0], v[1], v[2], v[3])), S(A('$foldl'), (v[1], v[0], v[2], v[3])), Span('<library>', 50, 1, 50, 45), (('G', v[0]), ('L', v[1]), ('V0', v[2]), ('V', v[3]), ), source[2589:2633]))
     v = [Var('_'), Var('V')]
-    out.append(Clause(S(A('$foldl'), (A('[]'), v[0], v[1], v[1])), A('true'), Span('<library>', 51, 1, 51, 23), (('V', v[1]), ), source[2604:2626]))
+    out.append(Clause(S(A('$foldl'), (A('[]'), v[0], v[1], v[1])), A('true'), Span('<library>', 51, 1, 51, 23), (('V', v[1]), ), source[2634:2656]))
     v = [Var('X'), Var('Xs'), Var('G'), Var('V0'), Var('V'), Var('V1')]
-    out.append(Clause(S(A('$foldl'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('call'), (v[2], v[0], v[3], v[5])), S(A('$foldl'), (v[1], v[2], v[5], v[4])))), Span('<library>', 52, 1, 52, 74), (('X', v[0]), ('Xs', v[1]), ('G', v[2]), ('V0', v[3]), ('V', v[4]), ('V1', v[5]), ), source[2627:2700]))
+    out.append(Clause(S(A('$foldl'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('call'), (v[2], v[0], v[3], v[5])), S(A('$foldl'), (v[1], v[2], v[5], v[4])))), Span('<library>', 52, 1, 52, 74), (('X', v[0]), ('Xs', v[1]), ('G', v[2]), ('V0', v[3]), ('V', v[4]), ('V1', v[5]), ), source[2657:2730]))
     v = [Var('G'), Var('L1'), Var('L2'), Var('V0'), Var('V')]
-    out.append(Clause(S(A('foldl'), (v[0], v[1], v[2], v[3], v[4])), S(A('$foldl'), (v[1], v[2], v[0], v[3], v[4])), Span('<library>', 53, 1, 53, 55), (('G', v[0]), ('L1', v[1]), ('L2', v[2]), ('V0', v[3]), ('V', v[4]), ), source[2701:2755]))
+    out.append(Clause(S(A('foldl'), (v[0], v[1], v[2], v[3], v[4])), S(A('$foldl'), (v[1], v[2], v[0], v[3], v[4])), Span('<library>', 53, 1, 53, 55), (('G', v[0]), ('L1', v[1]), ('L2', v[2]), ('V0', v[3]), ('V', v[4]), ), source[2731:2785]))
     v = [Var('_'), Var('V')]
-    out.append(Clause(S(A('$foldl'), (A('[]'), A('[]'), v[0], v[1], v[1])), A('true'), Span('<library>', 54, 1, 54, 27), (('V', v[1]), ), source[2756:2782]))
+    out.append(Clause(S(A('$foldl'), (A('[]'), A('[]'), v[0], v[1], v[1])), A('true'), Span('<library>', 54, 1, 54, 27), (('V', v[1]), ), source[2786:2812]))
     v = [Var('X'), Var('Xs'), Var('Y'), Var('Ys'), Var('G'), Var('V0'), Var('V'), Var('V1')]
-    out.append(Clause(S(A('$foldl'), (S(A('.'), (v[0], v[1])), S(A('.'), (v[2], v[3])), v[4], v[5], v[6])), S(A(','), (S(A('call'), (v[4], v[0], v[2], v[5], v[7])), S(A('$foldl'), (v[1], v[3], v[4], v[7], v[6])))), Span('<library>', 55, 1, 55, 89), (('X', v[0]), ('Xs', v[1]), ('Y', v[2]), ('Ys', v[3]), ('G', v[4]), ('V0', v[5]), ('V', v[6]), ('V1', v[7]), ), source[2783:2871]))
+    out.append(Clause(S(A('$foldl'), (S(A('.'), (v[0], v[1])), S(A('.'), (v[2], v[3])), v[4], v[5], v[6])), S(A(','), (S(A('call'), (v[4], v[0], v[2], v[5], v[7])), S(A('$foldl'), (v[1], v[3], v[4], v[7], v[6])))), Span('<library>', 55, 1, 55, 89), (('X', v[0]), ('Xs', v[1]), ('Y', v[2]), ('Ys', v[3]), ('G', v[4]), ('V0', v[5]), ('V', v[6]), ('V1', v[7]), ), source[2813:2901]))
     v = [Var('_')]
-    out.append(Clause(S(A('delete'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 56, 1, 56, 19), (), source[2872:2890]))
+    out.append(Clause(S(A('delete'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 56, 1, 56, 19), (), source[2902:2920]))
     v = [Var('H'), Var('T'), Var('X'), Var('R'), Var('R1')]
-    out.append(Clause(S(A('delete'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('\\='), (v[0], v[2])), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('='), (v[3], v[4])))), S(A('delete'), (v[1], v[2], v[4])))), Span('<library>', 57, 1, 57, 76), (('H', v[0]), ('T', v[1]), ('X', v[2]), ('R', v[3]), ('R1', v[4]), ), source[2891:2966]))
-    v = [Var('_')]
-    out.append(Clause(S(A('subtract'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 58, 1, 58, 21), (), source[2967:2987]))
+    out.append(Clause(S(A('delete'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('\\='), (v[0], v[2])), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('='), (v[3], v[4])))), S(A('delete'), (v[1], v[2], v[4])))), Span('<library>', 57, 1, 57, 76), (('H', v[0]), ('T', v[1]), ('X', v[2]), ('R', v[3]), ('R1', v[4]), ), source[2921:2996]))
+    v = [Var('L'), Var('D'), Var('R'), Var('_')]
+    out.append(Clause(S(A('subtract'), (v[0], v[1], v[2])), S(A(','), (S(A('var'), (v[0],)), S(A(','), (A('!'), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('subtract'), (v[0], v[1], v[2])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('subtract'), 3)))), v[3])))),)))))), Span('<library>', 58, 1, 58, 133), (('L', v[0]), ('D', v[1]), ('R', v[2]), ), source[2997:3129]))
+    v = [Var('_'), Var('R')]
+    out.append(Clause(S(A('subtract'), (A('[]'), v[0], v[1])), S(A(','), (A('!'), S(A('='), (v[1], A('[]'))))), Span('<library>', 59, 1, 59, 33), (('R', v[1]), ), source[3130:3162]))
     v = [Var('E'), Var('T'), Var('D'), Var('R'), Var('R1')]
-    out.append(Clause(S(A('subtract'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], v[4])))), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('subtract'), (v[1], v[2], v[4])))), Span('<library>', 59, 1, 59, 89), (('E', v[0]), ('T', v[1]), ('D', v[2]), ('R', v[3]), ('R1', v[4]), ), source[2988:3076]))
+    out.append(Clause(S(A('subtract'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (A('!'), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], v[4])))), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('subtract'), (v[1], v[2], v[4])))))), Span('<library>', 60, 1, 60, 92), (('E', v[0]), ('T', v[1]), ('D', v[2]), ('R', v[3]), ('R1', v[4]), ), source[3163:3254]))
+    v = [Var('L'), Var('D'), Var('R'), Var('_')]
+    out.append(Clause(S(A('subtract'), (v[0], v[1], v[2])), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('subtract'), (v[0], v[1], v[2])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('subtract'), 3)))), v[3])))),)), Span('<library>', 61, 1, 61, 122), (('L', v[0]), ('D', v[1]), ('R', v[2]), ), source[3255:3376]))
     v = [Var('_')]
-    out.append(Clause(S(A('intersection'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 60, 1, 60, 25), (), source[3077:3101]))
+    out.append(Clause(S(A('intersection'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 62, 1, 62, 25), (), source[3377:3401]))
     v = [Var('X'), Var('T'), Var('L'), Var('I'), Var('R')]
-    out.append(Clause(S(A('intersection'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('='), (v[3], v[4])))), S(A('intersection'), (v[1], v[2], v[4])))), Span('<library>', 61, 1, 61, 94), (('X', v[0]), ('T', v[1]), ('L', v[2]), ('I', v[3]), ('R', v[4]), ), source[3102:3195]))
+    out.append(Clause(S(A('intersection'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('='), (v[3], v[4])))), S(A('intersection'), (v[1], v[2], v[4])))), Span('<library>', 63, 1, 63, 94), (('X', v[0]), ('T', v[1]), ('L', v[2]), ('I', v[3]), ('R', v[4]), ), source[3402:3495]))
     v = [Var('L')]
-    out.append(Clause(S(A('union'), (A('[]'), v[0], v[0])), A('true'), Span('<library>', 62, 1, 62, 17), (('L', v[0]), ), source[3196:3212]))
+    out.append(Clause(S(A('union'), (A('[]'), v[0], v[0])), A('true'), Span('<library>', 64, 1, 64, 17), (('L', v[0]), ), source[3496:3512]))
     v = [Var('H'), Var('T'), Var('L'), Var('R'), Var('R1')]
-    out.append(Clause(S(A('union'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], v[4])))), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('union'), (v[1], v[2], v[4])))), Span('<library>', 63, 1, 63, 83), (('H', v[0]), ('T', v[1]), ('L', v[2]), ('R', v[3]), ('R1', v[4]), ), source[3213:3295]))
+    out.append(Clause(S(A('union'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], v[4])))), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('union'), (v[1], v[2], v[4])))), Span('<library>', 65, 1, 65, 83), (('H', v[0]), ('T', v[1]), ('L', v[2]), ('R', v[3]), ('R1', v[4]), ), source[3513:3595]))
+    v = [Var('Xs'), Var('Ys'), Var('Xlen'), Var('XTail'), Var('Ylen'), Var('YTail'), Var('Len')]
+    out.append(Clause(S(A('permutation'), (v[0], v[1])), S(A(','), (S(A('$skip_list'), (v[2], v[0], v[3])), S(A(','), (S(A('$skip_list'), (v[4], v[1], v[5])), S(A(','), (S(A(';'), (S(A('->'), (S(A(','), (S(A('=='), (v[3], A('[]'))), S(A('=='), (v[5], A('[]'))))), S(A('=='), (v[2], v[4])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('var'), (v[3],)), S(A('=='), (v[5], A('[]'))))), S(A('length'), (v[0], v[4])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('=='), (v[3], A('[]'))), S(A('var'), (v[5],)))), S(A('length'), (v[1], v[2])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('var'), (v[3],)), S(A('var'), (v[5],)))), S(A(','), (S(A('length'), (v[0], v[6])), S(A('length'), (v[1], v[6])))))), S(A(','), (S(A('$must_be_list'), (v[0],)), S(A('$must_be_list'), (v[1],)))))))))))), S(A('$perm'), (v[0], v[1])))))))), Span('<library>', 66, 1, 66, 344), (('Xs', v[0]), ('Ys', v[1]), ('Xlen', v[2]), ('XTail', v[3]), ('Ylen', v[4]), ('YTail', v[5]), ('Len', v[6]), ), source[3596:3939]))
     v = []
-    out.append(Clause(S(A('permutation'), (A('[]'), A('[]'))), A('true'), Span('<library>', 64, 1, 64, 21), (), source[3296:3316]))
-    v = [Var('L'), Var('H'), Var('T'), Var('R')]
-    out.append(Clause(S(A('permutation'), (v[0], S(A('.'), (v[1], v[2])))), S(A(','), (S(A('select'), (v[1], v[0], v[3])), S(A('permutation'), (v[3], v[2])))), Span('<library>', 65, 1, 65, 61), (('L', v[0]), ('H', v[1]), ('T', v[2]), ('R', v[3]), ), source[3317:3377]))
+    out.append(Clause(S(A('$perm'), (A('[]'), A('[]'))), A('true'), Span('<library>', 67, 1, 67, 17), (), source[3940:3956]))
+    v = [Var('List'), Var('First'), Var('Perm'), Var('Rest')]
+    out.append(Clause(S(A('$perm'), (v[0], S(A('.'), (v[1], v[2])))), S(A(','), (S(A('select'), (v[1], v[0], v[3])), S(A('$perm'), (v[3], v[2])))), Span('<library>', 68, 1, 68, 79), (('List', v[0]), ('First', v[1]), ('Perm', v[2]), ('Rest', v[3]), ), source[3957:4035]))
     v = [Var('G')]
-    out.append(Clause(S(A('once'), (v[0],)), S(A(','), (S(A('call'), (v[0],)), A('!'))), Span('<library>', 66, 1, 66, 23), (('G', v[0]), ), source[3378:3400]))
+    out.append(Clause(S(A('once'), (v[0],)), S(A(','), (S(A('call'), (v[0],)), A('!'))), Span('<library>', 69, 1, 69, 23), (('G', v[0]), ), source[4036:4058]))
     v = [Var('G')]
-    out.append(Clause(S(A('ignore'), (v[0],)), S(A(';'), (S(A('->'), (S(A('call'), (v[0],)), A('true'))), A('true'))), Span('<library>', 67, 1, 67, 41), (('G', v[0]), ), source[3401:3441]))
+    out.append(Clause(S(A('ignore'), (v[0],)), S(A(';'), (S(A('->'), (S(A('call'), (v[0],)), A('true'))), A('true'))), Span('<library>', 70, 1, 70, 41), (('G', v[0]), ), source[4059:4099]))
     v = []
-    out.append(Clause(S(A('pairs_keys_values'), (A('[]'), A('[]'), A('[]'))), A('true'), Span('<library>', 68, 1, 68, 31), (), source[3442:3472]))
+    out.append(Clause(S(A('pairs_keys_values'), (A('[]'), A('[]'), A('[]'))), A('true'), Span('<library>', 71, 1, 71, 31), (), source[4100:4130]))
     v = [Var('K'), Var('V'), Var('T'), Var('Ks'), Var('Vs')]
-    out.append(Clause(S(A('pairs_keys_values'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[0], v[3])), S(A('.'), (v[1], v[4])))), S(A('pairs_keys_values'), (v[2], v[3], v[4])), Span('<library>', 69, 1, 69, 76), (('K', v[0]), ('V', v[1]), ('T', v[2]), ('Ks', v[3]), ('Vs', v[4]), ), source[3473:3548]))
+    out.append(Clause(S(A('pairs_keys_values'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[0], v[3])), S(A('.'), (v[1], v[4])))), S(A('pairs_keys_values'), (v[2], v[3], v[4])), Span('<library>', 72, 1, 72, 76), (('K', v[0]), ('V', v[1]), ('T', v[2]), ('Ks', v[3]), ('Vs', v[4]), ), source[4131:4206]))
     v = []
-    out.append(Clause(S(A('pairs_keys'), (A('[]'), A('[]'))), A('true'), Span('<library>', 70, 1, 70, 20), (), source[3549:3568]))
+    out.append(Clause(S(A('pairs_keys'), (A('[]'), A('[]'))), A('true'), Span('<library>', 73, 1, 73, 20), (), source[4207:4226]))
     v = [Var('K'), Var('_'), Var('T'), Var('Ks')]
-    out.append(Clause(S(A('pairs_keys'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[0], v[3])))), S(A('pairs_keys'), (v[2], v[3])), Span('<library>', 71, 1, 71, 50), (('K', v[0]), ('T', v[2]), ('Ks', v[3]), ), source[3569:3618]))
+    out.append(Clause(S(A('pairs_keys'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[0], v[3])))), S(A('pairs_keys'), (v[2], v[3])), Span('<library>', 74, 1, 74, 50), (('K', v[0]), ('T', v[2]), ('Ks', v[3]), ), source[4227:4276]))
     v = []
-    out.append(Clause(S(A('pairs_values'), (A('[]'), A('[]'))), A('true'), Span('<library>', 72, 1, 72, 22), (), source[3619:3640]))
+    out.append(Clause(S(A('pairs_values'), (A('[]'), A('[]'))), A('true'), Span('<library>', 75, 1, 75, 22), (), source[4277:4298]))
     v = [Var('_'), Var('V'), Var('T'), Var('Vs')]
-    out.append(Clause(S(A('pairs_values'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[1], v[3])))), S(A('pairs_values'), (v[2], v[3])), Span('<library>', 73, 1, 73, 54), (('V', v[1]), ('T', v[2]), ('Vs', v[3]), ), source[3641:3694]))
+    out.append(Clause(S(A('pairs_values'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[1], v[3])))), S(A('pairs_values'), (v[2], v[3])), Span('<library>', 76, 1, 76, 54), (('V', v[1]), ('T', v[2]), ('Vs', v[3]), ), source[4299:4352]))
     v = [Var('List'), Var('Flat'), Var('Flat0')]
-    out.append(Clause(S(A('flatten'), (v[0], v[1])), S(A(','), (S(A('$flatten'), (v[0], A('[]'), v[2])), S(A(','), (A('!'), S(A('='), (v[1], v[2])))))), Span('<library>', 74, 1, 74, 69), (('List', v[0]), ('Flat', v[1]), ('Flat0', v[2]), ), source[3695:3763]))
+    out.append(Clause(S(A('flatten'), (v[0], v[1])), S(A(','), (S(A('$flatten'), (v[0], A('[]'), v[2])), S(A(','), (A('!'), S(A('='), (v[1], v[2])))))), Span('<library>', 77, 1, 77, 69), (('List', v[0]), ('Flat', v[1]), ('Flat0', v[2]), ), source[4353:4421]))
     v = [Var('Var'), Var('Tl')]
-    out.append(Clause(S(A('$flatten'), (v[0], v[1], S(A('.'), (v[0], v[1])))), S(A(','), (S(A('var'), (v[0],)), A('!'))), Span('<library>', 75, 1, 75, 46), (('Var', v[0]), ('Tl', v[1]), ), source[3764:3809]))
+    out.append(Clause(S(A('$flatten'), (v[0], v[1], S(A('.'), (v[0], v[1])))), S(A(','), (S(A('var'), (v[0],)), A('!'))), Span('<library>', 78, 1, 78, 46), (('Var', v[0]), ('Tl', v[1]), ), source[4422:4467]))
     v = [Var('Tl')]
-    out.append(Clause(S(A('$flatten'), (A('[]'), v[0], v[0])), A('!'), Span('<library>', 76, 1, 76, 29), (('Tl', v[0]), ), source[3810:3838]))
+    out.append(Clause(S(A('$flatten'), (A('[]'), v[0], v[0])), A('!'), Span('<library>', 79, 1, 79, 29), (('Tl', v[0]), ), source[4468:4496]))
     v = [Var('Hd'), Var('Tl'), Var('Tail'), Var('List'), Var('FlatHeadTail')]
-    out.append(Clause(S(A('$flatten'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (A('!'), S(A(','), (S(A('$flatten'), (v[0], v[4], v[3])), S(A('$flatten'), (v[1], v[2], v[4])))))), Span('<library>', 77, 1, 77, 110), (('Hd', v[0]), ('Tl', v[1]), ('Tail', v[2]), ('List', v[3]), ('FlatHeadTail', v[4]), ), source[3839:3948]))
+    out.append(Clause(S(A('$flatten'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (A('!'), S(A(','), (S(A('$flatten'), (v[0], v[4], v[3])), S(A('$flatten'), (v[1], v[2], v[4])))))), Span('<library>', 80, 1, 80, 110), (('Hd', v[0]), ('Tl', v[1]), ('Tail', v[2]), ('List', v[3]), ('FlatHeadTail', v[4]), ), source[4497:4606]))
     v = [Var('NonList'), Var('Tl')]
-    out.append(Clause(S(A('$flatten'), (v[0], v[1], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 78, 1, 78, 39), (('NonList', v[0]), ('Tl', v[1]), ), source[3949:3987]))
+    out.append(Clause(S(A('$flatten'), (v[0], v[1], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 81, 1, 81, 39), (('NonList', v[0]), ('Tl', v[1]), ), source[4607:4645]))
     v = []
-    out.append(Clause(A('repeat'), A('$repeat'), Span('<library>', 79, 1, 79, 21), (), source[3988:4008]))
+    out.append(Clause(A('repeat'), A('$repeat'), Span('<library>', 82, 1, 82, 21), (), source[4646:4666]))
     v = [Var('Term'), Var('Vars')]
-    out.append(Clause(S(A('term_variables'), (v[0], v[1])), S(A('$term_variables'), (v[0], v[1])), Span('<library>', 80, 1, 80, 61), (('Term', v[0]), ('Vars', v[1]), ), source[4009:4069]))
+    out.append(Clause(S(A('term_variables'), (v[0], v[1])), S(A('$term_variables'), (v[0], v[1])), Span('<library>', 83, 1, 83, 61), (('Term', v[0]), ('Vars', v[1]), ), source[4667:4727]))
     v = [Var('P'), Var('L'), Var('Sorted'), Var('N'), Var('Tail'), Var('_'), Var('Sorted1'), Var('_'), Var('_')]
-    out.append(Clause(S(A('predsort'), (v[0], v[1], v[2])), S(A(','), (S(A('$skip_list'), (v[3], v[1], v[4])), S(A(';'), (S(A('->'), (S(A('=='), (v[4], A('[]'))), S(A(','), (S(A('$predsort'), (v[0], v[3], v[1], v[5], v[6])), S(A('='), (v[2], v[6])))))), S(A(';'), (S(A('->'), (S(A('var'), (v[4],)), S(A('throw'), (S(A('error'), (A('instantiation_error'), v[7])),)))), S(A('throw'), (S(A('error'), (S(A('type_error'), (A('list'), v[1])), v[8])),)))))))), Span('<library>', 81, 1, 81, 213), (('P', v[0]), ('L', v[1]), ('Sorted', v[2]), ('N', v[3]), ('Tail', v[4]), ('Sorted1', v[6]), ), source[4070:4282]))
+    out.append(Clause(S(A('predsort'), (v[0], v[1], v[2])), S(A(','), (S(A('$skip_list'), (v[3], v[1], v[4])), S(A(';'), (S(A('->'), (S(A('=='), (v[4], A('[]'))), S(A(','), (S(A('$predsort'), (v[0], v[3], v[1], v[5], v[6])), S(A('='), (v[2], v[6])))))), S(A(';'), (S(A('->'), (S(A('var'), (v[4],)), S(A('throw'), (S(A('error'), (A('instantiation_error'), v[7])),)))), S(A('throw'), (S(A('error'), (S(A('type_error'), (A('list'), v[1])), v[8])),)))))))), Span('<library>', 84, 1, 84, 213), (('P', v[0]), ('L', v[1]), ('Sorted', v[2]), ('N', v[3]), ('Tail', v[4]), ('Sorted1', v[6]), ), source[4728:4940]))
     v = [Var('P'), Var('X1'), Var('X2'), Var('L'), Var('R'), Var('Delta')]
-    out.append(Clause(S(A('$predsort'), (v[0], 2, S(A('.'), (v[1], S(A('.'), (v[2], v[3])))), v[3], v[4])), S(A(','), (A('!'), S(A(','), (S(A('call'), (v[0], v[5], v[1], v[2])), S(A('$predsort2'), (v[5], v[1], v[2], v[4])))))), Span('<library>', 82, 1, 82, 98), (('P', v[0]), ('X1', v[1]), ('X2', v[2]), ('L', v[3]), ('R', v[4]), ('Delta', v[5]), ), source[4283:4380]))
+    out.append(Clause(S(A('$predsort'), (v[0], 2, S(A('.'), (v[1], S(A('.'), (v[2], v[3])))), v[3], v[4])), S(A(','), (A('!'), S(A(','), (S(A('call'), (v[0], v[5], v[1], v[2])), S(A('$predsort2'), (v[5], v[1], v[2], v[4])))))), Span('<library>', 85, 1, 85, 98), (('P', v[0]), ('X1', v[1]), ('X2', v[2]), ('L', v[3]), ('R', v[4]), ('Delta', v[5]), ), source[4941:5038]))
     v = [Var('_'), Var('X'), Var('L')]
-    out.append(Clause(S(A('$predsort'), (v[0], 1, S(A('.'), (v[1], v[2])), v[2], S(A('.'), (v[1], A('[]'))))), A('!'), Span('<library>', 83, 1, 83, 39), (('X', v[1]), ('L', v[2]), ), source[4381:4419]))
+    out.append(Clause(S(A('$predsort'), (v[0], 1, S(A('.'), (v[1], v[2])), v[2], S(A('.'), (v[1], A('[]'))))), A('!'), Span('<library>', 86, 1, 86, 39), (('X', v[1]), ('L', v[2]), ), source[5039:5077]))
     v = [Var('_'), Var('L')]
-    out.append(Clause(S(A('$predsort'), (v[0], 0, v[1], v[1], A('[]'))), A('!'), Span('<library>', 84, 1, 84, 34), (('L', v[1]), ), source[4420:4453]))
+    out.append(Clause(S(A('$predsort'), (v[0], 0, v[1], v[1], A('[]'))), A('!'), Span('<library>', 87, 1, 87, 34), (('L', v[1]), ), source[5078:5111]))
     v = [Var('P'), Var('N'), Var('L1'), Var('L3'), Var('R'), Var('N1'), Var('N2'), Var('L2'), Var('R1'), Var('R2')]
-    out.append(Clause(S(A('$predsort'), (v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('is'), (v[5], S(A('//'), (v[1], 2)))), S(A(','), (S(A('plus'), (v[5], v[6], v[1])), S(A(','), (S(A('$predsort'), (v[0], v[5], v[2], v[7], v[8])), S(A(','), (S(A('$predsort'), (v[0], v[6], v[7], v[3], v[9])), S(A('$predmerge'), (v[0], v[8], v[9], v[4])))))))))), Span('<library>', 85, 1, 85, 155), (('P', v[0]), ('N', v[1]), ('L1', v[2]), ('L3', v[3]), ('R', v[4]), ('N1', v[5]), ('N2', v[6]), ('L2', v[7]), ('R1', v[8]), ('R2', v[9]), ), source[4454:4608]))
+    out.append(Clause(S(A('$predsort'), (v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('is'), (v[5], S(A('//'), (v[1], 2)))), S(A(','), (S(A('plus'), (v[5], v[6], v[1])), S(A(','), (S(A('$predsort'), (v[0], v[5], v[2], v[7], v[8])), S(A(','), (S(A('$predsort'), (v[0], v[6], v[7], v[3], v[9])), S(A('$predmerge'), (v[0], v[8], v[9], v[4])))))))))), Span('<library>', 88, 1, 88, 155), (('P', v[0]), ('N', v[1]), ('L1', v[2]), ('L3', v[3]), ('R', v[4]), ('N1', v[5]), ('N2', v[6]), ('L2', v[7]), ('R1', v[8]), ('R2', v[9]), ), source[5112:5266]))
     v = [Var('X1'), Var('X2')]
-    out.append(Clause(S(A('$predsort2'), (A('<'), v[0], v[1], S(A('.'), (v[0], S(A('.'), (v[1], A('[]'))))))), A('true'), Span('<library>', 86, 1, 86, 37), (('X1', v[0]), ('X2', v[1]), ), source[4609:4645]))
+    out.append(Clause(S(A('$predsort2'), (A('<'), v[0], v[1], S(A('.'), (v[0], S(A('.'), (v[1], A('[]'))))))), A('true'), Span('<library>', 89, 1, 89, 37), (('X1', v[0]), ('X2', v[1]), ), source[5267:5303]))
     v = [Var('X1'), Var('_')]
-    out.append(Clause(S(A('$predsort2'), (A('='), v[0], v[1], S(A('.'), (v[0], A('[]'))))), A('true'), Span('<library>', 87, 1, 87, 32), (('X1', v[0]), ), source[4646:4677]))
+    out.append(Clause(S(A('$predsort2'), (A('='), v[0], v[1], S(A('.'), (v[0], A('[]'))))), A('true'), Span('<library>', 90, 1, 90, 32), (('X1', v[0]), ), source[5304:5335]))
     v = [Var('X1'), Var('X2')]
-    out.append(Clause(S(A('$predsort2'), (A('>'), v[0], v[1], S(A('.'), (v[1], S(A('.'), (v[0], A('[]'))))))), A('true'), Span('<library>', 88, 1, 88, 37), (('X1', v[0]), ('X2', v[1]), ), source[4678:4714]))
+    out.append(Clause(S(A('$predsort2'), (A('>'), v[0], v[1], S(A('.'), (v[1], S(A('.'), (v[0], A('[]'))))))), A('true'), Span('<library>', 91, 1, 91, 37), (('X1', v[0]), ('X2', v[1]), ), source[5336:5372]))
     v = [Var('_'), Var('R')]
-    out.append(Clause(S(A('$predmerge'), (v[0], A('[]'), v[1], v[1])), A('!'), Span('<library>', 89, 1, 89, 32), (('R', v[1]), ), source[4715:4746]))
+    out.append(Clause(S(A('$predmerge'), (v[0], A('[]'), v[1], v[1])), A('!'), Span('<library>', 92, 1, 92, 32), (('R', v[1]), ), source[5373:5404]))
     v = [Var('_'), Var('R')]
-    out.append(Clause(S(A('$predmerge'), (v[0], v[1], A('[]'), v[1])), A('!'), Span('<library>', 90, 1, 90, 32), (('R', v[1]), ), source[4747:4778]))
+    out.append(Clause(S(A('$predmerge'), (v[0], v[1], A('[]'), v[1])), A('!'), Span('<library>', 93, 1, 93, 32), (('R', v[1]), ), source[5405:5436]))
     v = [Var('P'), Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Result'), Var('Delta')]
-    out.append(Clause(S(A('$predmerge'), (v[0], S(A('.'), (v[1], v[2])), S(A('.'), (v[3], v[4])), v[5])), S(A(','), (S(A('call'), (v[0], v[6], v[1], v[3])), S(A(','), (A('!'), S(A('$predmerge_'), (v[6], v[0], v[1], v[3], v[2], v[4], v[5])))))), Span('<library>', 91, 1, 91, 121), (('P', v[0]), ('H1', v[1]), ('T1', v[2]), ('H2', v[3]), ('T2', v[4]), ('Result', v[5]), ('Delta', v[6]), ), source[4779:4899]))
+    out.append(Clause(S(A('$predmerge'), (v[0], S(A('.'), (v[1], v[2])), S(A('.'), (v[3], v[4])), v[5])), S(A(','), (S(A('call'), (v[0], v[6], v[1], v[3])), S(A(','), (A('!'), S(A('$predmerge_'), (v[6], v[0], v[1], v[3], v[2], v[4], v[5])))))), Span('<library>', 94, 1, 94, 121), (('P', v[0]), ('H1', v[1]), ('T1', v[2]), ('H2', v[3]), ('T2', v[4]), ('Result', v[5]), ('Delta', v[6]), ), source[5437:5557]))
     v = [Var('P'), Var('H1'), Var('H2'), Var('T1'), Var('T2'), Var('R')]
-    out.append(Clause(S(A('$predmerge_'), (A('>'), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[2], v[5])))), S(A('$predmerge'), (v[0], S(A('.'), (v[1], v[3])), v[4], v[5])), Span('<library>', 92, 1, 92, 82), (('P', v[0]), ('H1', v[1]), ('H2', v[2]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[4900:4981]))
+    out.append(Clause(S(A('$predmerge_'), (A('>'), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[2], v[5])))), S(A('$predmerge'), (v[0], S(A('.'), (v[1], v[3])), v[4], v[5])), Span('<library>', 95, 1, 95, 82), (('P', v[0]), ('H1', v[1]), ('H2', v[2]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[5558:5639]))
     v = [Var('P'), Var('H1'), Var('_'), Var('T1'), Var('T2'), Var('R')]
-    out.append(Clause(S(A('$predmerge_'), (A('='), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[1], v[5])))), S(A('$predmerge'), (v[0], v[3], v[4], v[5])), Span('<library>', 93, 1, 93, 76), (('P', v[0]), ('H1', v[1]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[4982:5057]))
+    out.append(Clause(S(A('$predmerge_'), (A('='), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[1], v[5])))), S(A('$predmerge'), (v[0], v[3], v[4], v[5])), Span('<library>', 96, 1, 96, 76), (('P', v[0]), ('H1', v[1]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[5640:5715]))
     v = [Var('P'), Var('H1'), Var('H2'), Var('T1'), Var('T2'), Var('R')]
-    out.append(Clause(S(A('$predmerge_'), (A('<'), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[1], v[5])))), S(A('$predmerge'), (v[0], v[3], S(A('.'), (v[2], v[4])), v[5])), Span('<library>', 94, 1, 94, 82), (('P', v[0]), ('H1', v[1]), ('H2', v[2]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[5058:5139]))
+    out.append(Clause(S(A('$predmerge_'), (A('<'), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[1], v[5])))), S(A('$predmerge'), (v[0], v[3], S(A('.'), (v[2], v[4])), v[5])), Span('<library>', 97, 1, 97, 82), (('P', v[0]), ('H1', v[1]), ('H2', v[2]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[5716:5797]))
     v = [Var('String'), Var('Before'), Var('Length'), Var('After'), Var('Sub')]
-    out.append(Clause(S(A('sub_string'), (v[0], v[1], v[2], v[3], v[4])), S(A('$sub_string'), (v[0], v[1], v[2], v[3], v[4])), Span('<library>', 95, 1, 95, 101), (('String', v[0]), ('Before', v[1]), ('Length', v[2]), ('After', v[3]), ('Sub', v[4]), ), source[5140:5240]))
+    out.append(Clause(S(A('sub_string'), (v[0], v[1], v[2], v[3], v[4])), S(A('$sub_string'), (v[0], v[1], v[2], v[3], v[4])), Span('<library>', 98, 1, 98, 101), (('String', v[0]), ('Before', v[1]), ('Length', v[2]), ('After', v[3]), ('Sub', v[4]), ), source[5798:5898]))
     v = [Var('Char'), Var('Type')]
-    out.append(Clause(S(A('char_type'), (v[0], v[1])), S(A('$char_type'), (v[0], v[1])), Span('<library>', 96, 1, 96, 51), (('Char', v[0]), ('Type', v[1]), ), source[5241:5291]))
+    out.append(Clause(S(A('char_type'), (v[0], v[1])), S(A('$char_type'), (v[0], v[1])), Span('<library>', 99, 1, 99, 51), (('Char', v[0]), ('Type', v[1]), ), source[5899:5949]))
     v = [Var('Code'), Var('Type')]
-    out.append(Clause(S(A('code_type'), (v[0], v[1])), S(A('$code_type'), (v[0], v[1])), Span('<library>', 97, 1, 97, 51), (('Code', v[0]), ('Type', v[1]), ), source[5292:5342]))
+    out.append(Clause(S(A('code_type'), (v[0], v[1])), S(A('$code_type'), (v[0], v[1])), Span('<library>', 100, 1, 100, 51), (('Code', v[0]), ('Type', v[1]), ), source[5950:6000]))
     v = [Var('X'), Var('Y')]
-    out.append(Clause(S(A('unify_with_occurs_check'), (v[0], v[1])), S(A('$unify_with_occurs_check'), (v[0], v[1])), Span('<library>', 98, 1, 98, 67), (('X', v[0]), ('Y', v[1]), ), source[5343:5409]))
+    out.append(Clause(S(A('unify_with_occurs_check'), (v[0], v[1])), S(A('$unify_with_occurs_check'), (v[0], v[1])), Span('<library>', 101, 1, 101, 67), (('X', v[0]), ('Y', v[1]), ), source[6001:6067]))
     v = [Var('List'), Var('Set')]
-    out.append(Clause(S(A('list_to_ord_set'), (v[0], v[1])), S(A('sort'), (v[0], v[1])), Span('<library>', 99, 1, 99, 47), (('List', v[0]), ('Set', v[1]), ), source[5410:5456]))
+    out.append(Clause(S(A('list_to_ord_set'), (v[0], v[1])), S(A('sort'), (v[0], v[1])), Span('<library>', 102, 1, 102, 47), (('List', v[0]), ('Set', v[1]), ), source[6068:6114]))
     v = [Var('Sets'), Var('Union'), Var('_'), Var('_'), Var('N'), Var('_')]
-    out.append(Clause(S(A('ord_union'), (v[0], v[1])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[1], A('[]'))))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[2], v[3])))))), S(A(','), (S(A('length'), (v[0], v[4])), S(A('$ord_union_all'), (v[4], v[0], v[1], A('[]'))))))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_union'), (v[0], v[1])))))), v[5])),)))))), Span('<library>', 100, 1, 100, 224), (('Sets', v[0]), ('Union', v[1]), ('N', v[4]), ), source[5457:5680]))
+    out.append(Clause(S(A('ord_union'), (v[0], v[1])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[1], A('[]'))))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[2], v[3])))))), S(A(','), (S(A('length'), (v[0], v[4])), S(A('$ord_union_all'), (v[4], v[0], v[1], A('[]'))))))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_union'), (v[0], v[1])))))), S(A('context'), (S(A(':'), (A('ordsets'), S(A('/'), (A('ord_union'), 2)))), v[5])))),)))))), Span('<library>', 103, 1, 103, 254), (('Sets', v[0]), ('Union', v[1]), ('N', v[4]), ), source[6115:6368]))
     v = [Var('N'), Var('Sets0'), Var('Union'), Var('Sets'), Var('Set1'), Var('Set2'), Var('A'), Var('Z'), Var('X'), Var('Sets1'), Var('Y')]
-    out.append(Clause(S(A('$ord_union_all'), (v[0], v[1], v[2], v[3])), S(A(';'), (S(A('->'), (S(A('=:='), (v[0], 1)), S(A('='), (v[1], S(A('.'), (v[2], v[3])))))), S(A(';'), (S(A('->'), (S(A('=:='), (v[0], 2)), S(A(','), (S(A('='), (v[1], S(A('.'), (v[4], S(A('.'), (v[5], v[3])))))), S(A('$ord_union_f'), (v[4], v[5], v[2])))))), S(A(','), (S(A('is'), (v[6], S(A('>>'), (v[0], 1)))), S(A(','), (S(A('is'), (v[7], S(A('-'), (v[0], v[6])))), S(A(','), (S(A('$ord_union_all'), (v[6], v[1], v[8], v[9])), S(A(','), (S(A('$ord_union_all'), (v[7], v[9], v[10], v[3])), S(A('$ord_union_f'), (v[8], v[10], v[2])))))))))))))), Span('<library>', 101, 1, 101, 284), (('N', v[0]), ('Sets0', v[1]), ('Union', v[2]), ('Sets', v[3]), ('Set1', v[4]), ('Set2', v[5]), ('A', v[6]), ('Z', v[7]), ('X', v[8]), ('Sets1', v[9]), ('Y', v[10]), ), source[5681:5964]))
+    out.append(Clause(S(A('$ord_union_all'), (v[0], v[1], v[2], v[3])), S(A(';'), (S(A('->'), (S(A('=:='), (v[0], 1)), S(A('='), (v[1], S(A('.'), (v[2], v[3])))))), S(A(';'), (S(A('->'), (S(A('=:='), (v[0], 2)), S(A(','), (S(A('='), (v[1], S(A('.'), (v[4], S(A('.'), (v[5], v[3])))))), S(A('$ord_union_f'), (v[4], v[5], v[2])))))), S(A(','), (S(A('is'), (v[6], S(A('>>'), (v[0], 1)))), S(A(','), (S(A('is'), (v[7], S(A('-'), (v[0], v[6])))), S(A(','), (S(A('$ord_union_all'), (v[6], v[1], v[8], v[9])), S(A(','), (S(A('$ord_union_all'), (v[7], v[9], v[10], v[3])), S(A('$ord_union_f'), (v[8], v[10], v[2])))))))))))))), Span('<library>', 104, 1, 104, 284), (('N', v[0]), ('Sets0', v[1]), ('Union', v[2]), ('Sets', v[3]), ('Set1', v[4]), ('Set2', v[5]), ('A', v[6]), ('Z', v[7]), ('X', v[8]), ('Sets1', v[9]), ('Y', v[10]), ), source[6369:6652]))
     v = [Var('Set1'), Var('Set2'), Var('Union')]
-    out.append(Clause(S(A('ord_union'), (v[0], v[1], v[2])), S(A('$ord_union_f'), (v[0], v[1], v[2])), Span('<library>', 102, 1, 102, 67), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ), source[5965:6031]))
+    out.append(Clause(S(A('ord_union'), (v[0], v[1], v[2])), S(A('$ord_union_f'), (v[0], v[1], v[2])), Span('<library>', 105, 1, 105, 67), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ), source[6653:6719]))
     v = [Var('Set1'), Var('Set2'), Var('Union')]
-    out.append(Clause(S(A('$ord_union_f'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('union'), v[0], v[1], v[2])), A('true'))), S(A('$ord_union'), (v[0], v[1], v[2])))), Span('<library>', 103, 1, 103, 122), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ), source[6032:6153]))
+    out.append(Clause(S(A('$ord_union_f'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('union'), v[0], v[1], v[2])), A('true'))), S(A('$ord_union'), (v[0], v[1], v[2])))), Span('<library>', 106, 1, 106, 122), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ), source[6720:6841]))
     v = [Var('Set1'), Var('Set2'), Var('Union'), Var('H1'), Var('T1'), Var('_')]
-    out.append(Clause(S(A('$ord_union'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[2], v[1])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[3], v[4])))))), S(A('$ord_union2'), (v[1], v[3], v[4], v[2])))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_union'), (v[0], v[1], v[2])))))), v[5])),)))))), Span('<library>', 104, 1, 104, 224), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ('H1', v[3]), ('T1', v[4]), ), source[6154:6377]))
+    out.append(Clause(S(A('$ord_union'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[2], v[1])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[3], v[4])))))), S(A('$ord_union2'), (v[1], v[3], v[4], v[2])))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_union'), (v[0], v[1], v[2])))))), S(A('context'), (S(A(':'), (A('ordsets'), S(A('/'), (A('ord_union'), 3)))), v[5])))),)))))), Span('<library>', 107, 1, 107, 254), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ('H1', v[3]), ('T1', v[4]), ), source[6842:7095]))
     v = [Var('L2'), Var('H1'), Var('T1'), Var('Union'), Var('H2'), Var('T2'), Var('Order'), Var('_')]
-    out.append(Clause(S(A('$ord_union2'), (v[0], v[1], v[2], v[3])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[3], S(A('.'), (v[1], v[2])))))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[4], v[5])))))), S(A(','), (S(A('compare'), (v[6], v[1], v[4])), S(A('$ord_union3'), (v[6], v[1], v[2], v[4], v[5], v[3])))))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('union2'), (v[0], v[1], v[2], v[3])))))), v[7])),)))))), Span('<library>', 105, 1, 105, 252), (('L2', v[0]), ('H1', v[1]), ('T1', v[2]), ('Union', v[3]), ('H2', v[4]), ('T2', v[5]), ('Order', v[6]), ), source[6378:6629]))
+    out.append(Clause(S(A('$ord_union2'), (v[0], v[1], v[2], v[3])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[3], S(A('.'), (v[1], v[2])))))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[4], v[5])))))), S(A(','), (S(A('compare'), (v[6], v[1], v[4])), S(A('$ord_union3'), (v[6], v[1], v[2], v[4], v[5], v[3])))))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('union2'), (v[0], v[1], v[2], v[3])))))), S(A('context'), (S(A(':'), (A('ordsets'), S(A('/'), (A('union2'), 4)))), v[7])))),)))))), Span('<library>', 108, 1, 108, 279), (('L2', v[0]), ('H1', v[1]), ('T1', v[2]), ('Union', v[3]), ('H2', v[4]), ('T2', v[5]), ('Order', v[6]), ), source[7096:7374]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Union'), Var('Union0')]
-    out.append(Clause(S(A('$ord_union3'), (A('<'), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[0], v[5])))), S(A('$ord_union2'), (v[1], v[2], v[3], v[5])))), Span('<library>', 106, 1, 106, 101), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[6630:6730]))
+    out.append(Clause(S(A('$ord_union3'), (A('<'), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[0], v[5])))), S(A('$ord_union2'), (v[1], v[2], v[3], v[5])))), Span('<library>', 109, 1, 109, 101), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[7375:7475]))
     v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Union'), Var('Union0')]
-    out.append(Clause(S(A('$ord_union3'), (A('='), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[0], v[5])))), S(A('$ord_union'), (v[1], v[3], v[5])))), Span('<library>', 107, 1, 107, 95), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[6731:6825]))
+    out.append(Clause(S(A('$ord_union3'), (A('='), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[0], v[5])))), S(A('$ord_union'), (v[1], v[3], v[5])))), Span('<library>', 110, 1, 110, 95), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[7476:7570]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Union'), Var('Union0')]
-    out.append(Clause(S(A('$ord_union3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[2], v[5])))), S(A('$ord_union2'), (v[3], v[0], v[1], v[5])))), Span('<library>', 108, 1, 108, 101), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[6826:6926]))
+    out.append(Clause(S(A('$ord_union3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[2], v[5])))), S(A('$ord_union2'), (v[3], v[0], v[1], v[5])))), Span('<library>', 111, 1, 111, 101), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[7571:7671]))
     v = [Var('Set'), Var('Delete'), Var('Remaining')]
-    out.append(Clause(S(A('ord_subtract'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('subtract'), v[0], v[1], v[2])), A('true'))), S(A('$ord_subtract'), (v[0], v[1], v[2])))), Span('<library>', 109, 1, 109, 141), (('Set', v[0]), ('Delete', v[1]), ('Remaining', v[2]), ), source[6927:7067]))
+    out.append(Clause(S(A('ord_subtract'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('subtract'), v[0], v[1], v[2])), A('true'))), S(A('$ord_subtract'), (v[0], v[1], v[2])))), Span('<library>', 112, 1, 112, 141), (('Set', v[0]), ('Delete', v[1]), ('Remaining', v[2]), ), source[7672:7812]))
     v = [Var('L1'), Var('L2'), Var('Diff'), Var('H1'), Var('T1'), Var('_')]
-    out.append(Clause(S(A('$ord_subtract'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[2], A('[]'))))), S(A(';'), (S(A('->'), (S(A('=='), (v[1], A('[]'))), S(A('='), (v[2], v[0])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[3], v[4])))))), S(A('$ord_diff21'), (v[1], v[3], v[4], v[2])))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_subtract'), (v[0], v[1], v[2])))))), v[5])),)))))))), Span('<library>', 110, 1, 110, 232), (('L1', v[0]), ('L2', v[1]), ('Diff', v[2]), ('H1', v[3]), ('T1', v[4]), ), source[7068:7299]))
+    out.append(Clause(S(A('$ord_subtract'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[2], A('[]'))))), S(A(';'), (S(A('->'), (S(A('=='), (v[1], A('[]'))), S(A('='), (v[2], v[0])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[3], v[4])))))), S(A('$ord_diff21'), (v[1], v[3], v[4], v[2])))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_subtract'), (v[0], v[1], v[2])))))), S(A('context'), (S(A(':'), (A('ordsets'), S(A('/'), (A('ord_subtract'), 3)))), v[5])))),)))))))), Span('<library>', 113, 1, 113, 265), (('L1', v[0]), ('L2', v[1]), ('Diff', v[2]), ('H1', v[3]), ('T1', v[4]), ), source[7813:8077]))
     v = [Var('H1'), Var('T1')]
-    out.append(Clause(S(A('$ord_diff21'), (A('[]'), v[0], v[1], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 111, 1, 111, 36), (('H1', v[0]), ('T1', v[1]), ), source[7300:7335]))
+    out.append(Clause(S(A('$ord_diff21'), (A('[]'), v[0], v[1], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 114, 1, 114, 36), (('H1', v[0]), ('T1', v[1]), ), source[8078:8113]))
     v = [Var('H2'), Var('T2'), Var('H1'), Var('T1'), Var('Diff'), Var('Order')]
-    out.append(Clause(S(A('$ord_diff21'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[2], v[0])), S(A('$ord_diff3'), (v[5], v[2], v[3], v[0], v[1], v[4])))), Span('<library>', 112, 1, 112, 107), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Diff', v[4]), ('Order', v[5]), ), source[7336:7442]))
+    out.append(Clause(S(A('$ord_diff21'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[2], v[0])), S(A('$ord_diff3'), (v[5], v[2], v[3], v[0], v[1], v[4])))), Span('<library>', 115, 1, 115, 107), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Diff', v[4]), ('Order', v[5]), ), source[8114:8220]))
     v = [Var('_'), Var('_')]
-    out.append(Clause(S(A('$ord_diff12'), (A('[]'), v[0], v[1], A('[]'))), A('true'), Span('<library>', 113, 1, 113, 29), (), source[7443:7471]))
+    out.append(Clause(S(A('$ord_diff12'), (A('[]'), v[0], v[1], A('[]'))), A('true'), Span('<library>', 116, 1, 116, 29), (), source[8221:8249]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Diff'), Var('Order')]
-    out.append(Clause(S(A('$ord_diff12'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[0], v[2])), S(A('$ord_diff3'), (v[5], v[0], v[1], v[2], v[3], v[4])))), Span('<library>', 114, 1, 114, 107), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Diff', v[4]), ('Order', v[5]), ), source[7472:7578]))
+    out.append(Clause(S(A('$ord_diff12'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[0], v[2])), S(A('$ord_diff3'), (v[5], v[0], v[1], v[2], v[3], v[4])))), Span('<library>', 117, 1, 117, 107), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Diff', v[4]), ('Order', v[5]), ), source[8250:8356]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Diff')]
-    out.append(Clause(S(A('$ord_diff3'), (A('<'), v[0], v[1], v[2], v[3], S(A('.'), (v[0], v[4])))), S(A('$ord_diff12'), (v[1], v[2], v[3], v[4])), Span('<library>', 115, 1, 115, 81), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Diff', v[4]), ), source[7579:7659]))
+    out.append(Clause(S(A('$ord_diff3'), (A('<'), v[0], v[1], v[2], v[3], S(A('.'), (v[0], v[4])))), S(A('$ord_diff12'), (v[1], v[2], v[3], v[4])), Span('<library>', 118, 1, 118, 81), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Diff', v[4]), ), source[8357:8437]))
     v = [Var('_'), Var('T1'), Var('_'), Var('T2'), Var('Diff')]
-    out.append(Clause(S(A('$ord_diff3'), (A('='), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_subtract'), (v[1], v[3], v[4])), Span('<library>', 116, 1, 116, 72), (('T1', v[1]), ('T2', v[3]), ('Diff', v[4]), ), source[7660:7731]))
+    out.append(Clause(S(A('$ord_diff3'), (A('='), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_subtract'), (v[1], v[3], v[4])), Span('<library>', 119, 1, 119, 72), (('T1', v[1]), ('T2', v[3]), ('Diff', v[4]), ), source[8438:8509]))
     v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Diff')]
-    out.append(Clause(S(A('$ord_diff3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_diff21'), (v[3], v[0], v[1], v[4])), Span('<library>', 117, 1, 117, 75), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Diff', v[4]), ), source[7732:7806]))
+    out.append(Clause(S(A('$ord_diff3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_diff21'), (v[3], v[0], v[1], v[4])), Span('<library>', 120, 1, 120, 75), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Diff', v[4]), ), source[8510:8584]))
     v = [Var('Item'), Var('Set'), Var('In')]
-    out.append(Clause(S(A('ord_memberchk'), (v[0], v[1])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('memberchk'), v[0], v[1], v[2])), S(A('=='), (v[2], A('true'))))), S(A('$ord_memberchk'), (v[0], v[1])))), Span('<library>', 118, 1, 118, 115), (('Item', v[0]), ('Set', v[1]), ('In', v[2]), ), source[7807:7921]))
+    out.append(Clause(S(A('ord_memberchk'), (v[0], v[1])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('memberchk'), v[0], v[1], v[2])), S(A('=='), (v[2], A('true'))))), S(A('$ord_memberchk'), (v[0], v[1])))), Span('<library>', 121, 1, 121, 115), (('Item', v[0]), ('Set', v[1]), ('In', v[2]), ), source[8585:8699]))
     v = [Var('Item'), Var('X1'), Var('X2'), Var('X3'), Var('X4'), Var('Xs'), Var('R4'), Var('R2')]
-    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], S(A('.'), (v[2], S(A('.'), (v[3], S(A('.'), (v[4], v[5])))))))))), S(A(','), (A('!'), S(A(','), (S(A('compare'), (v[6], v[0], v[4])), S(A(';'), (S(A('->'), (S(A('='), (v[6], A('>'))), S(A('$ord_memberchk'), (v[0], v[5])))), S(A(';'), (S(A('->'), (S(A('='), (v[6], A('<'))), S(A(','), (S(A('compare'), (v[7], v[0], v[2])), S(A(';'), (S(A('->'), (S(A('='), (v[7], A('>'))), S(A('=='), (v[0], v[3])))), S(A(';'), (S(A('->'), (S(A('='), (v[7], A('<'))), S(A('=='), (v[0], v[1])))), A('true'))))))))), A('true'))))))))), Span('<library>', 119, 1, 119, 220), (('Item', v[0]), ('X1', v[1]), ('X2', v[2]), ('X3', v[3]), ('X4', v[4]), ('Xs', v[5]), ('R4', v[6]), ('R2', v[7]), ), source[7922:8141]))
+    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], S(A('.'), (v[2], S(A('.'), (v[3], S(A('.'), (v[4], v[5])))))))))), S(A(','), (A('!'), S(A(','), (S(A('compare'), (v[6], v[0], v[4])), S(A(';'), (S(A('->'), (S(A('='), (v[6], A('>'))), S(A('$ord_memberchk'), (v[0], v[5])))), S(A(';'), (S(A('->'), (S(A('='), (v[6], A('<'))), S(A(','), (S(A('compare'), (v[7], v[0], v[2])), S(A(';'), (S(A('->'), (S(A('='), (v[7], A('>'))), S(A('=='), (v[0], v[3])))), S(A(';'), (S(A('->'), (S(A('='), (v[7], A('<'))), S(A('=='), (v[0], v[1])))), A('true'))))))))), A('true'))))))))), Span('<library>', 122, 1, 122, 220), (('Item', v[0]), ('X1', v[1]), ('X2', v[2]), ('X3', v[3]), ('X4', v[4]), ('Xs', v[5]), ('R4', v[6]), ('R2', v[7]), ), source[8700:8919]))
     v = [Var('Item'), Var('X1'), Var('X2'), Var('Xs'), Var('R2')]
-    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], S(A('.'), (v[2], v[3])))))), S(A(','), (A('!'), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A(';'), (S(A('->'), (S(A('='), (v[4], A('>'))), S(A('$ord_memberchk'), (v[0], v[3])))), S(A(';'), (S(A('->'), (S(A('='), (v[4], A('<'))), S(A('=='), (v[0], v[1])))), A('true'))))))))), Span('<library>', 120, 1, 120, 141), (('Item', v[0]), ('X1', v[1]), ('X2', v[2]), ('Xs', v[3]), ('R2', v[4]), ), source[8142:8282]))
+    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], S(A('.'), (v[2], v[3])))))), S(A(','), (A('!'), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A(';'), (S(A('->'), (S(A('='), (v[4], A('>'))), S(A('$ord_memberchk'), (v[0], v[3])))), S(A(';'), (S(A('->'), (S(A('='), (v[4], A('<'))), S(A('=='), (v[0], v[1])))), A('true'))))))))), Span('<library>', 123, 1, 123, 141), (('Item', v[0]), ('X1', v[1]), ('X2', v[2]), ('Xs', v[3]), ('R2', v[4]), ), source[8920:9060]))
     v = [Var('Item'), Var('X1')]
-    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], A('[]'))))), S(A('=='), (v[0], v[1])), Span('<library>', 121, 1, 121, 44), (('Item', v[0]), ('X1', v[1]), ), source[8283:8326]))
+    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], A('[]'))))), S(A('=='), (v[0], v[1])), Span('<library>', 124, 1, 124, 44), (('Item', v[0]), ('X1', v[1]), ), source[9061:9104]))
     v = [Var('Set1'), Var('Set2'), Var('Intersection')]
-    out.append(Clause(S(A('ord_intersection'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[2], A('[]'))), S(A('\\+'), (S(A('$ord_intersect'), (v[0], v[1])),)))), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('intersection'), v[0], v[1], v[2])), A('true'))), S(A('$ord_intersection'), (v[0], v[1], v[2])))))), Span('<library>', 122, 1, 122, 215), (('Set1', v[0]), ('Set2', v[1]), ('Intersection', v[2]), ), source[8327:8541]))
+    out.append(Clause(S(A('ord_intersection'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[2], A('[]'))), S(A('\\+'), (S(A('$ord_intersect'), (v[0], v[1])),)))), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('intersection'), v[0], v[1], v[2])), A('true'))), S(A('$ord_intersection'), (v[0], v[1], v[2])))))), Span('<library>', 125, 1, 125, 215), (('Set1', v[0]), ('Set2', v[1]), ('Intersection', v[2]), ), source[9105:9319]))
     v = [Var('H1'), Var('T1'), Var('L2')]
-    out.append(Clause(S(A('$ord_intersect'), (S(A('.'), (v[0], v[1])), v[2])), S(A('$ord_intersect_'), (v[2], v[0], v[1])), Span('<library>', 123, 1, 123, 64), (('H1', v[0]), ('T1', v[1]), ('L2', v[2]), ), source[8542:8605]))
+    out.append(Clause(S(A('$ord_intersect'), (S(A('.'), (v[0], v[1])), v[2])), S(A('$ord_intersect_'), (v[2], v[0], v[1])), Span('<library>', 126, 1, 126, 64), (('H1', v[0]), ('T1', v[1]), ('L2', v[2]), ), source[9320:9383]))
     v = [Var('H2'), Var('T2'), Var('H1'), Var('T1'), Var('Order')]
-    out.append(Clause(S(A('$ord_intersect_'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[2], v[0])), S(A('$ord_intersect__'), (v[4], v[2], v[3], v[0], v[1])))), Span('<library>', 124, 1, 124, 105), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Order', v[4]), ), source[8606:8710]))
+    out.append(Clause(S(A('$ord_intersect_'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[2], v[0])), S(A('$ord_intersect__'), (v[4], v[2], v[3], v[0], v[1])))), Span('<library>', 127, 1, 127, 105), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Order', v[4]), ), source[9384:9488]))
     v = [Var('_'), Var('T1'), Var('H2'), Var('T2')]
-    out.append(Clause(S(A('$ord_intersect__'), (A('<'), v[0], v[1], v[2], v[3])), S(A('$ord_intersect_'), (v[1], v[2], v[3])), Span('<library>', 125, 1, 125, 73), (('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ), source[8711:8783]))
+    out.append(Clause(S(A('$ord_intersect__'), (A('<'), v[0], v[1], v[2], v[3])), S(A('$ord_intersect_'), (v[1], v[2], v[3])), Span('<library>', 128, 1, 128, 73), (('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ), source[9489:9561]))
     v = [Var('_'), Var('_'), Var('_'), Var('_')]
-    out.append(Clause(S(A('$ord_intersect__'), (A('='), v[0], v[1], v[2], v[3])), A('true'), Span('<library>', 126, 1, 126, 37), (), source[8784:8820]))
+    out.append(Clause(S(A('$ord_intersect__'), (A('='), v[0], v[1], v[2], v[3])), A('true'), Span('<library>', 129, 1, 129, 37), (), source[9562:9598]))
     v = [Var('H1'), Var('T1'), Var('_'), Var('T2')]
-    out.append(Clause(S(A('$ord_intersect__'), (A('>'), v[0], v[1], v[2], v[3])), S(A('$ord_intersect_'), (v[3], v[0], v[1])), Span('<library>', 127, 1, 127, 73), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ), source[8821:8893]))
+    out.append(Clause(S(A('$ord_intersect__'), (A('>'), v[0], v[1], v[2], v[3])), S(A('$ord_intersect_'), (v[3], v[0], v[1])), Span('<library>', 130, 1, 130, 73), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ), source[9599:9671]))
     v = [Var('_')]
-    out.append(Clause(S(A('$ord_intersection'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 128, 1, 128, 32), (), source[8894:8925]))
+    out.append(Clause(S(A('$ord_intersection'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 131, 1, 131, 32), (), source[9672:9703]))
     v = [Var('H1'), Var('T1'), Var('L2'), Var('Int')]
-    out.append(Clause(S(A('$ord_intersection'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A('$ord_isect2'), (v[2], v[0], v[1], v[3])), Span('<library>', 129, 1, 129, 73), (('H1', v[0]), ('T1', v[1]), ('L2', v[2]), ('Int', v[3]), ), source[8926:8998]))
+    out.append(Clause(S(A('$ord_intersection'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A('$ord_isect2'), (v[2], v[0], v[1], v[3])), Span('<library>', 132, 1, 132, 73), (('H1', v[0]), ('T1', v[1]), ('L2', v[2]), ('Int', v[3]), ), source[9704:9776]))
     v = [Var('_'), Var('_')]
-    out.append(Clause(S(A('$ord_isect2'), (A('[]'), v[0], v[1], A('[]'))), A('true'), Span('<library>', 130, 1, 130, 29), (), source[8999:9027]))
+    out.append(Clause(S(A('$ord_isect2'), (A('[]'), v[0], v[1], A('[]'))), A('true'), Span('<library>', 133, 1, 133, 29), (), source[9777:9805]))
     v = [Var('H2'), Var('T2'), Var('H1'), Var('T1'), Var('Int'), Var('Order')]
-    out.append(Clause(S(A('$ord_isect2'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[2], v[0])), S(A('$ord_isect3'), (v[5], v[2], v[3], v[0], v[1], v[4])))), Span('<library>', 131, 1, 131, 106), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Int', v[4]), ('Order', v[5]), ), source[9028:9133]))
+    out.append(Clause(S(A('$ord_isect2'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[2], v[0])), S(A('$ord_isect3'), (v[5], v[2], v[3], v[0], v[1], v[4])))), Span('<library>', 134, 1, 134, 106), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Int', v[4]), ('Order', v[5]), ), source[9806:9911]))
     v = [Var('_'), Var('T1'), Var('H2'), Var('T2'), Var('Int')]
-    out.append(Clause(S(A('$ord_isect3'), (A('<'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_isect2'), (v[1], v[2], v[3], v[4])), Span('<library>', 132, 1, 132, 74), (('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Int', v[4]), ), source[9134:9207]))
+    out.append(Clause(S(A('$ord_isect3'), (A('<'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_isect2'), (v[1], v[2], v[3], v[4])), Span('<library>', 135, 1, 135, 74), (('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Int', v[4]), ), source[9912:9985]))
     v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Int')]
-    out.append(Clause(S(A('$ord_isect3'), (A('='), v[0], v[1], v[2], v[3], S(A('.'), (v[0], v[4])))), S(A('$ord_intersection'), (v[1], v[3], v[4])), Span('<library>', 133, 1, 133, 81), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Int', v[4]), ), source[9208:9288]))
+    out.append(Clause(S(A('$ord_isect3'), (A('='), v[0], v[1], v[2], v[3], S(A('.'), (v[0], v[4])))), S(A('$ord_intersection'), (v[1], v[3], v[4])), Span('<library>', 136, 1, 136, 81), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Int', v[4]), ), source[9986:10066]))
     v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Int')]
-    out.append(Clause(S(A('$ord_isect3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_isect2'), (v[3], v[0], v[1], v[4])), Span('<library>', 134, 1, 134, 74), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Int', v[4]), ), source[9289:9362]))
+    out.append(Clause(S(A('$ord_isect3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_isect2'), (v[3], v[0], v[1], v[4])), Span('<library>', 137, 1, 137, 74), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Int', v[4]), ), source[10067:10140]))
     v = [Var('Sub'), Var('Super')]
-    out.append(Clause(S(A('ord_subset'), (v[0], v[1])), S(A('$ord_subset'), (v[0], v[1])), Span('<library>', 135, 1, 135, 53), (('Sub', v[0]), ('Super', v[1]), ), source[9363:9415]))
+    out.append(Clause(S(A('ord_subset'), (v[0], v[1])), S(A('$ord_subset'), (v[0], v[1])), Span('<library>', 138, 1, 138, 53), (('Sub', v[0]), ('Super', v[1]), ), source[10141:10193]))
     v = [Var('_')]
-    out.append(Clause(S(A('$ord_subset'), (A('[]'), v[0])), A('true'), Span('<library>', 136, 1, 136, 22), (), source[9416:9437]))
+    out.append(Clause(S(A('$ord_subset'), (A('[]'), v[0])), A('true'), Span('<library>', 139, 1, 139, 22), (), source[10194:10215]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Order')]
-    out.append(Clause(S(A('$ord_subset'), (S(A('.'), (v[0], v[1])), S(A('.'), (v[2], v[3])))), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_subset_'), (v[4], v[0], v[1], v[3])))), Span('<library>', 137, 1, 137, 94), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Order', v[4]), ), source[9438:9531]))
+    out.append(Clause(S(A('$ord_subset'), (S(A('.'), (v[0], v[1])), S(A('.'), (v[2], v[3])))), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_subset_'), (v[4], v[0], v[1], v[3])))), Span('<library>', 140, 1, 140, 94), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Order', v[4]), ), source[10216:10309]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Order')]
-    out.append(Clause(S(A('$ord_subset_'), (A('>'), v[0], v[1], S(A('.'), (v[2], v[3])))), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_subset_'), (v[4], v[0], v[1], v[3])))), Span('<library>', 138, 1, 138, 99), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Order', v[4]), ), source[9532:9630]))
+    out.append(Clause(S(A('$ord_subset_'), (A('>'), v[0], v[1], S(A('.'), (v[2], v[3])))), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_subset_'), (v[4], v[0], v[1], v[3])))), Span('<library>', 141, 1, 141, 99), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Order', v[4]), ), source[10310:10408]))
     v = [Var('_'), Var('T1'), Var('T2')]
-    out.append(Clause(S(A('$ord_subset_'), (A('='), v[0], v[1], v[2])), S(A('$ord_subset'), (v[1], v[2])), Span('<library>', 139, 1, 139, 57), (('T1', v[1]), ('T2', v[2]), ), source[9631:9687]))
+    out.append(Clause(S(A('$ord_subset_'), (A('='), v[0], v[1], v[2])), S(A('$ord_subset'), (v[1], v[2])), Span('<library>', 142, 1, 142, 57), (('T1', v[1]), ('T2', v[2]), ), source[10409:10465]))
     v = [Var('Set'), Var('El'), Var('Add')]
-    out.append(Clause(S(A('ord_add_element'), (v[0], v[1], v[2])), S(A('$ord_add_element'), (v[0], v[1], v[2])), Span('<library>', 140, 1, 140, 67), (('Set', v[0]), ('El', v[1]), ('Add', v[2]), ), source[9688:9754]))
+    out.append(Clause(S(A('ord_add_element'), (v[0], v[1], v[2])), S(A('$ord_add_element'), (v[0], v[1], v[2])), Span('<library>', 143, 1, 143, 67), (('Set', v[0]), ('El', v[1]), ('Add', v[2]), ), source[10466:10532]))
     v = [Var('El')]
-    out.append(Clause(S(A('$ord_add_element'), (A('[]'), v[0], S(A('.'), (v[0], A('[]'))))), A('true'), Span('<library>', 141, 1, 141, 34), (('El', v[0]), ), source[9755:9788]))
+    out.append(Clause(S(A('$ord_add_element'), (A('[]'), v[0], S(A('.'), (v[0], A('[]'))))), A('true'), Span('<library>', 144, 1, 144, 34), (('El', v[0]), ), source[10533:10566]))
     v = [Var('H'), Var('T'), Var('El'), Var('Add'), Var('Order')]
-    out.append(Clause(S(A('$ord_add_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_addel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 142, 1, 142, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Add', v[3]), ('Order', v[4]), ), source[9789:9885]))
+    out.append(Clause(S(A('$ord_add_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_addel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 145, 1, 145, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Add', v[3]), ('Order', v[4]), ), source[10567:10663]))
     v = [Var('H'), Var('T'), Var('El'), Var('Add')]
-    out.append(Clause(S(A('$ord_addel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_add_element'), (v[1], v[2], v[3])), Span('<library>', 143, 1, 143, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Add', v[3]), ), source[9886:9957]))
+    out.append(Clause(S(A('$ord_addel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_add_element'), (v[1], v[2], v[3])), Span('<library>', 146, 1, 146, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Add', v[3]), ), source[10664:10735]))
     v = [Var('H'), Var('T'), Var('_')]
-    out.append(Clause(S(A('$ord_addel'), (A('='), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 144, 1, 144, 35), (('H', v[0]), ('T', v[1]), ), source[9958:9992]))
+    out.append(Clause(S(A('$ord_addel'), (A('='), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 147, 1, 147, 35), (('H', v[0]), ('T', v[1]), ), source[10736:10770]))
     v = [Var('H'), Var('T'), Var('El')]
-    out.append(Clause(S(A('$ord_addel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[2], S(A('.'), (v[0], v[1])))))), A('true'), Span('<library>', 145, 1, 145, 40), (('H', v[0]), ('T', v[1]), ('El', v[2]), ), source[9993:10032]))
+    out.append(Clause(S(A('$ord_addel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[2], S(A('.'), (v[0], v[1])))))), A('true'), Span('<library>', 148, 1, 148, 40), (('H', v[0]), ('T', v[1]), ('El', v[2]), ), source[10771:10810]))
     v = [Var('Set'), Var('El'), Var('Del')]
-    out.append(Clause(S(A('ord_del_element'), (v[0], v[1], v[2])), S(A('$ord_del_element'), (v[0], v[1], v[2])), Span('<library>', 146, 1, 146, 67), (('Set', v[0]), ('El', v[1]), ('Del', v[2]), ), source[10033:10099]))
+    out.append(Clause(S(A('ord_del_element'), (v[0], v[1], v[2])), S(A('$ord_del_element'), (v[0], v[1], v[2])), Span('<library>', 149, 1, 149, 67), (('Set', v[0]), ('El', v[1]), ('Del', v[2]), ), source[10811:10877]))
     v = [Var('_')]
-    out.append(Clause(S(A('$ord_del_element'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 147, 1, 147, 31), (), source[10100:10130]))
+    out.append(Clause(S(A('$ord_del_element'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 150, 1, 150, 31), (), source[10878:10908]))
     v = [Var('H'), Var('T'), Var('El'), Var('Del'), Var('Order')]
-    out.append(Clause(S(A('$ord_del_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_delel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 148, 1, 148, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ('Order', v[4]), ), source[10131:10227]))
+    out.append(Clause(S(A('$ord_del_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_delel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 151, 1, 151, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ('Order', v[4]), ), source[10909:11005]))
     v = [Var('H'), Var('T'), Var('El'), Var('Del')]
-    out.append(Clause(S(A('$ord_delel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_del_element'), (v[1], v[2], v[3])), Span('<library>', 149, 1, 149, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ), source[10228:10299]))
+    out.append(Clause(S(A('$ord_delel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_del_element'), (v[1], v[2], v[3])), Span('<library>', 152, 1, 152, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ), source[11006:11077]))
     v = [Var('_'), Var('T'), Var('_')]
-    out.append(Clause(S(A('$ord_delel'), (A('='), v[0], v[1], v[2], v[1])), A('true'), Span('<library>', 150, 1, 150, 31), (('T', v[1]), ), source[10300:10330]))
+    out.append(Clause(S(A('$ord_delel'), (A('='), v[0], v[1], v[2], v[1])), A('true'), Span('<library>', 153, 1, 153, 31), (('T', v[1]), ), source[11078:11108]))
     v = [Var('H'), Var('T'), Var('_')]
-    out.append(Clause(S(A('$ord_delel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 151, 1, 151, 35), (('H', v[0]), ('T', v[1]), ), source[10331:10365]))
+    out.append(Clause(S(A('$ord_delel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 154, 1, 154, 35), (('H', v[0]), ('T', v[1]), ), source[11109:11143]))
     return out

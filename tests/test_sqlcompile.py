@@ -145,6 +145,10 @@ FALLBACKS = [
     ("task(G)^_, G = 'a\"b'(X)", "characters a JSON path cannot hold", []),
     ("aggregate_all(max(T-X), item(X)^T, M)", "witness",
      [{"M": slr_sql.Struct("max", (2.0, slr_sql.Atom("i2")))}]),
+    # random(N) differs from call to call: never folded at compile time, nor evaluated by
+    # SQL (which may evaluate an expression more than once)
+    ("Y is random(1)", "non-deterministic", [{"Y": 0}]),
+    ("p(X), Y is random(X) * 0", "non-deterministic", [{"X": 1, "Y": 0}, {"X": 2, "Y": 0}]),
 ]
 
 

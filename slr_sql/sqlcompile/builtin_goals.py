@@ -84,13 +84,14 @@ class BuiltinGoals:
 
             if tt is Atom and t in ("random_float", "cputime"):
                 raise Fallback(f"the non-deterministic function {t}")
-            if tt is Struct and any(deref(a) in ("random_float", "cputime")
-                                    for a in _atoms(t)):
+            if tt is Struct and _nondeterministic(t):
                 raise Fallback("a non-deterministic arithmetic function")
             try:
                 return None, evaluate(t), False
             except Exception as exc:
                 raise Fallback(f"arithmetic error: {exc}")
+        if tt is Struct and _nondeterministic(t):
+            raise Fallback("a non-deterministic arithmetic function")
         if tt is Struct and len(t.args) in (1, 2):
             from ..arith import BINARY, UNARY
 
@@ -257,11 +258,17 @@ def _is_float(sql, v) -> bool:
     return v == "float" if sql is not None else type(v) is float
 
 
-def _atoms(t):
+def _nondeterministic(t) -> bool:
+    """An expression with random_float, cputime or random/1 in it: its value differs from
+    call to call (never folded at compile time, nor evaluated by SQL, which may evaluate
+    an expression more than once)."""
     stack = [t]
     while stack:
         x = deref(stack.pop())
         if type(x) is Struct:
+            if x.name == "random" and len(x.args) == 1:
+                return True
             stack.extend(x.args)
-        else:
-            yield x
+        elif type(x) is Atom and x in ("random_float", "cputime"):
+            return True
+    return False
