@@ -76,14 +76,20 @@ MARKS_SCHEMA: dict = {
 
 
 def time_ns(t: float) -> int:
-    """Seconds as the unsigned nanoseconds of MCAP and Foxglove (negative times clamp to 0).
+    """Seconds as the unsigned nanoseconds of MCAP and Foxglove (negative times clamp to 0,
+    times past 2**64 ns, the year 2554, to the last: an event may end at any finite time).
 
-    >>> time_ns(1.5), time_ns(-3.0)
-    (1500000000, 0)
+    >>> time_ns(1.5), time_ns(-3.0), time_ns(1e300) == 2 ** 64 - 1
+    (1500000000, 0, True)
     """
     if not t > 0.0:
         return 0
+    if not t < _LAST_SECOND:   # (t * 1e9 may be infinite: no int)
+        return 2 ** 64 - 1
     return min(int(round(t * 1e9)), 2 ** 64 - 1)
+
+
+_LAST_SECOND = 2 ** 64 / 1e9
 
 
 def _kind_schema(value: Any) -> dict:
