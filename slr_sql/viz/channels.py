@@ -244,8 +244,8 @@ def _frame(value: Any) -> str:
 
 def transform_message(rows: list) -> bytes | None:
     """``foxglove.FrameTransforms`` of stored tf / tf_static rows (``(parent, child, pose,
-    start, end, arrival, seq)``); rows whose third argument is not a pose are left out
-    (None when none is left).
+    start, end, arrival, seq)``); rows whose third argument is not a pose (of finite
+    numbers, a quaternion other than zero) are left out (None when none is left).
 
     >>> transform_message([("map", "base", '{"pose":[[1.0,2.0,3.0],[0.0,0.0,0.0,1.0]]}', 2.5, 2.5, 3.0, 1)])
     b'{"transforms":[{"timestamp":{"sec":2,"nsec":500000000},"parent_frame_id":"map","child_frame_id":"base","translation":{"x":1.0,"y":2.0,"z":3.0},"rotation":{"x":0.0,"y":0.0,"z":0.0,"w":1.0}}]}'
@@ -263,8 +263,8 @@ def transform_message(rows: list) -> bytes | None:
             values = [float(v) for v in (x, y, z, qx, qy, qz, qw)]
         except (TypeError, ValueError, KeyError, AttributeError, OverflowError):
             continue     # (OverflowError: an integer beyond any float)
-        if not all(math.isfinite(v) for v in values):
-            continue
+        if not all(math.isfinite(v) for v in values) or not any(values[3:]):
+            continue     # (a zero quaternion is no rotation: tf_lookup refuses it too)
         ns = time_ns(row[4])
         out.append({"timestamp": {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000},
                     "parent_frame_id": _frame(row[0]), "child_frame_id": _frame(row[1]),
@@ -288,6 +288,7 @@ def _plain_frame(value: Any) -> str | None:
 
 
 _NUMBER_CHARS = frozenset("0123456789.-+eE")
+_NONZERO_DIGITS = frozenset("123456789")
 
 
 def _one_transform(row: tuple) -> bytes | None:
@@ -304,8 +305,9 @@ def _one_transform(row: tuple) -> bytes | None:
         return None
     t, q = halves[0].split(","), halves[1].split(",")
     if len(t) != 3 or len(q) != 4 or "e999" in pose or max(map(len, t + q)) > 24 \
-            or not _NUMBER_CHARS.issuperset(halves[0].replace(",", "") + halves[1].replace(",", "")):
-        return None
+            or not _NUMBER_CHARS.issuperset(halves[0].replace(",", "") + halves[1].replace(",", "")) \
+            or not any(_NONZERO_DIGITS.intersection(v.lower().partition("e")[0]) for v in q):
+        return None   # (no non-zero digit: a zero quaternion, perhaps; the general path checks)
     ns = time_ns(row[4])
     return (f'{{"transforms":[{{"timestamp":{{"sec":{ns // 1_000_000_000},"nsec":'
             f'{ns % 1_000_000_000}}},"parent_frame_id":{parent},"child_frame_id":{child},'
