@@ -27,7 +27,7 @@ from .api import KnowledgeBaseAPI
 from .answers import answer_text, value_text
 from .encoding import decode
 from .kb import KnowledgeBase
-from .parser import parse_event_fast
+from .parser import full_stop_end, parse_event_fast
 from .printable import printable_name, printable_syntax_error, printable_text
 from .store import refuse_no_store, shown_location
 from .terms import Atom, Struct, list_items
@@ -1287,12 +1287,15 @@ class Shell:
                 return self._guarded(lambda: self._set_at(strip_full_stop(rest)))
         self.pending.append(line.rstrip("\n"))
         text = "\n".join(self.pending).strip()
-        if not text.endswith(".") or text.endswith(".."):
+        # its full stop as the reader sees it: a comment may follow it, a '.' inside a
+        # comment or quotes is none
+        end = full_stop_end(text)
+        if end is None:
             self.state = ShellState.CONTINUING  # a goal spanning several lines
             return True
         self.pending = []
         self.state = ShellState.READY
-        return self._guarded(lambda: self._run(text))
+        return self._guarded(lambda: self._run(text[:end]))
 
     def _guarded(self, action: Any) -> bool:
         try:

@@ -526,3 +526,40 @@ def test_a_sigint_as_the_editor_accepts_the_line_stops_its_goal_before_it_starts
         interactive(Shell(kb, echo=said.append, echo_err=said.append), prompt,
                     echo=said.append)
     assert sent and said == ["\n% interrupted", "O = cup2, T = 2.0"]
+
+
+def test_a_comment_after_the_full_stop_ends_the_goal_and_a_full_stop_inside_one_does_not(store):
+    """The end of a goal is its full stop as the reader sees it (SWI-Prolog's toplevel): a
+    goal followed by a comment ran never (the line did not end with '.'), and the next goal
+    was joined to it, both lost in one syntax error; a '.' inside a comment or a quoted
+    atom spanning lines ended the goal there, and its rest was an error of its own."""
+    r = run_piped(store,
+                  "seg(cup1, L)^T.   % where was cup1?",
+                  "X = 1. /* a block comment */",
+                  "X = 2 % this is not the end.",
+                  ", Y = 3.",
+                  "assert(near(a)). % a command too",
+                  "near(N).%",
+                  "X = 'a. b'.",
+                  "X = 'a.",                      # a quoted atom may span lines
+                  "b'.",
+                  "X = a\x00b.")                    # no token: its error, not a wait
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.startswith("<shell>:1:6: unexpected character") and r.stderr.count("\n") == 3
+    assert r.stdout.splitlines() == ["L = table, T = 1.0", "X = 1", "X = 2, Y = 3", "true.",
+                                     "N = a", "X = 'a. b'", "X = 'a.\\nb'"]
+
+
+def test_a_comment_after_the_full_stop_in_the_terminal(store):
+    child = spawn_shell(store)
+    child.sendline("seg(cup2, L)^T.  % where was cup2?")
+    child.expect(r"L = shelf, T = 2\.0")
+    press(child, "\r")
+    child.expect(PROMPT)
+    child.sendline("X = 2 % not the end.")
+    child.expect(r"\|")                     # the goal goes on on the next line
+    child.sendline(", Y = 3.")
+    child.expect(r"X = 2, Y = 3")
+    press(child, "\r")
+    child.expect(PROMPT)
+    leave(child)
