@@ -1489,6 +1489,56 @@ class Shell:
                 close()
 
 
+def read_key(stream: Any = None) -> str:
+    """One key pressed at the terminal ``stream`` (standard input): a character, or an
+    escape sequence (an arrow key) whole. Ctrl-C raises KeyboardInterrupt, Ctrl-D EOFError.
+
+    Keys typed ahead stay for what reads next: click's ``getchar`` read up to 32 bytes as
+    one key (``;;`` pressed quickly was no ``;`` and stopped the answers, a line typed
+    after the key went with it) and its raw mode discarded the keys typed while the goal
+    ran (``TCSAFLUSH``).
+
+    >>> import os, pty
+    >>> main_end, terminal_end = pty.openpty()
+    >>> _ = os.write(main_end, ";é\x1b[A;".encode())
+    >>> terminal = os.fdopen(terminal_end)
+    >>> [read_key(terminal) for _ in range(4)] == [";", "é", chr(27) + "[A", ";"]
+    True
+    """
+    import select
+    import termios
+    import tty
+
+    fd = (stream or sys.stdin).fileno()
+
+    def ready() -> bool:   # the rest of a key comes in the same write
+        return bool(select.select([fd], [], [], 0.05)[0])
+
+    saved = termios.tcgetattr(fd)
+    try:
+        tty.setraw(fd, termios.TCSANOW)   # (TCSANOW: keys typed ahead are kept)
+        key = os.read(fd, 1)
+        if key and key[0] >= 0xC0:        # a UTF-8 character's lead byte
+            more = 1 if key[0] < 0xE0 else 2 if key[0] < 0xF0 else 3
+            while more and ready():
+                key += os.read(fd, 1)
+                more -= 1
+        elif key == b"\x1b" and ready():
+            key += os.read(fd, 1)
+            if key[1:] in (b"[", b"O"):   # a control sequence: up to its final byte
+                while ready():
+                    key += os.read(fd, 1)
+                    if 0x40 <= key[-1] <= 0x7E:
+                        break
+    finally:
+        termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+    if key == b"\x03":
+        raise KeyboardInterrupt
+    if key in (b"", b"\x04"):
+        raise EOFError
+    return key.decode("utf-8", "replace")
+
+
 def _is_clause(term: Any) -> bool:
     return isinstance(term, Struct) and term.name == ":-" and len(term.args) == 2
 
@@ -1561,7 +1611,7 @@ def shell(db: str) -> None:
                     if name.startswith(word) and name != word:
                         yield Completion(name, start_position=-len(word))
 
-        session = Shell(kb, ask=click.getchar)
+        session = Shell(kb, ask=read_key)
         prompt: PromptSession[str] = PromptSession(history=FileHistory(_history_path()),
                                completer=PredicateCompleter(), complete_while_typing=False)
         click.echo(f"slr shell on {printable_name(shown_location(db))} — `help` for commands, Ctrl-C stops a goal, "

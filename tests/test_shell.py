@@ -563,3 +563,37 @@ def test_a_comment_after_the_full_stop_in_the_terminal(store):
     press(child, "\r")
     child.expect(PROMPT)
     leave(child)
+
+
+def test_keys_pressed_faster_than_the_answers_come_each_count(store):
+    """Two ';' read at once (pressed quickly, a key held down) were taken as one key of two
+    characters, which is no ';': the answers stopped after the first."""
+    child = spawn_shell(store)
+    child.sendline("between(1, 3, X).")
+    child.expect("X = 1")
+    press(child, ";;")                      # in one write: one read of the terminal
+    child.expect(r"X = 2 ;\r\n")
+    child.expect("X = 3")
+    press(child, "\r")
+    child.expect(r" \.\r\n")
+    child.expect(PROMPT)
+    child.sendline("X = done.")             # nothing of the keys is left over
+    child.expect(r"X = done")
+    press(child, "\r")
+    child.expect(PROMPT)
+    leave(child)
+
+
+def test_a_key_typed_while_the_goal_runs_answers_its_first_answer(store):
+    """A ';' typed before the first answer came (the terminal cooked, the goal running) was
+    thrown away as the shell took the terminal raw for the key (TCSAFLUSH): it waited for
+    another key."""
+    child = spawn_shell(store)
+    child.sendline("\\+ \\+ (numlist(1, 300000, L), msort(L, _)), member(X, [a, b]).")
+    wait_for_terminal(child, raw=False)     # the goal runs
+    child.send(";")
+    child.expect(r"X = a ;\r\n")
+    child.expect("X = b")
+    press(child, "\r")
+    child.expect(PROMPT)
+    leave(child)
