@@ -1198,19 +1198,40 @@ def abbreviated(value: Any) -> Any:
     >>> value_text(abbreviated(list(range(1, 20))))
     '[1,2,3,4,5,6,7,8,9|...]'
     """
-    if isinstance(value, list):
-        items = [abbreviated(v) for v in value[:MAX_LIST_ITEMS]]
-        if len(value) < MAX_LIST_ITEMS:
-            return items
-        tail: Any = Atom("...")
-        for item in reversed(items[:MAX_LIST_ITEMS - 1]):
-            tail = Struct(".", (item, tail))
-        return tail
-    if isinstance(value, Struct):
-        return Struct(value.name, tuple(abbreviated(a) for a in value.args))
-    if isinstance(value, str) and not isinstance(value, Atom) and len(value) > MAX_STRING_CHARS:
-        return value[:MAX_STRING_CHARS] + "..."
-    return value
+    # (iterative: an answer may be nested deeper than Python's recursion)
+    done: list = []
+    todo: list = [(value, None)]
+    while todo:
+        item, built = todo.pop()
+        if built is not None:   # its arguments are the last results: put them together
+            name, n, length = built
+            args = done[len(done) - n:]
+            del done[len(done) - n:]
+            done.append(Struct(name, tuple(args)) if name is not None
+                        else _cut_list(args, length))
+        elif isinstance(item, list):
+            kept = item[:MAX_LIST_ITEMS]
+            todo.append((None, (None, len(kept), len(item))))
+            todo.extend((a, None) for a in reversed(kept))
+        elif isinstance(item, Struct):
+            todo.append((None, (item.name, len(item.args), 0)))
+            todo.extend((a, None) for a in reversed(item.args))
+        elif isinstance(item, str) and not isinstance(item, Atom) \
+                and len(item) > MAX_STRING_CHARS:
+            done.append(item[:MAX_STRING_CHARS] + "...")
+        else:
+            done.append(item)
+    return done[0]
+
+
+def _cut_list(items: list, length: int) -> Any:
+    """The first items of a list of ``length`` items, ``[a,b,...|...]`` if it had more."""
+    if length < MAX_LIST_ITEMS:
+        return items
+    tail: Any = Atom("...")
+    for item in reversed(items[:MAX_LIST_ITEMS - 1]):
+        tail = Struct(".", (item, tail))
+    return tail
 
 
 class ShellState:
