@@ -38,3 +38,24 @@ def test_an_event_too_wide_names_the_limit_of_its_own_backend(backend):
         else:
             raise AssertionError("a too wide event was stored")
         assert kb.store.event_types() == {}
+
+
+def test_an_event_rule_whose_head_is_wider_than_a_table_is_refused_and_changes_nothing(backend):
+    """The load was refused, but the refused rule stayed in force in the knowledge base that
+    loaded it: every later add of its pattern's events failed with "the store failed (no
+    such table: slr_cep_m_...)" until the process opened the store again."""
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(0.0)) as kb:
+        kb.load("seen(X) <- a(X).", name="ok")
+        rules_before = [r["rule"] for r in kb.event_rules()]
+        too_wide = kb.store.max_event_arity + 1
+        head = "big(" + ", ".join(["X"] * too_wide) + ")"
+        try:
+            kb.load(f"{head} <- a(X).", name="wide")
+        except slr_sql.SLRError as exc:
+            assert f"cannot declare event big/{too_wide}: too many arguments" in str(exc)
+        else:
+            raise AssertionError("a rule too wide for its table was loaded")
+        assert kb.add("a(1)^1.0") is None and kb.add_many(["a(2)^2.0"]) == []
+        assert kb.query("seen(X)^T") == [{"X": 1, "T": 1.0}, {"X": 2, "T": 2.0}]
+        assert [r["rule"] for r in kb.event_rules()] == rules_before
+        assert sorted(kb.programs()) == ["ok"]
