@@ -1287,7 +1287,9 @@ class Shell:
         """Handle one input line; returns False when the user asked to leave."""
         stripped = line.strip()
         if self.state == ShellState.CONSULTING:
-            if stripped in ("end_of_file.", "end_of_file"):
+            end = full_stop_end(stripped)   # (a comment may follow the full stop)
+            if stripped == "end_of_file" or (end is not None
+                                             and stripped[:end] == "end_of_file."):
                 return self._guarded(self._end_consult)
             self.consulted.append(line.rstrip("\n"))
             return True

@@ -623,3 +623,11 @@ def test_an_answer_nested_deeper_than_pythons_recursion_is_printed(tmp_path):
     press(child, "\r")
     child.expect(PROMPT)
     leave(child)
+
+
+def test_end_of_file_with_a_comment_after_it_ends_the_consult(store):
+    """It was taken as one more consulted line: the goals after it became program text."""
+    r = run_piped(store, "[user].", "q(1).", "end_of_file.  % done", "q(X).")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines() == ["% type clauses; end_of_file. or Ctrl-D ends",
+                                     "% consulted into the program 'user'", "X = 1"]
