@@ -68,19 +68,35 @@ def _as_engine_term(value: Any) -> Any:
     """Turn a returned answer value back into an engine term, so the printer can quote it.
 
     Returned strings are plain ``str`` (atoms are :class:`slr_sql.Atom`), so a plain ``str``
-    goes back to a Prolog string, not to an atom as ``from_python`` would make it.
+    goes back to a Prolog string, not to an atom as ``from_python`` would make it. Iterative:
+    an answer may be nested deeper than Python's recursion (a program's fact 5,000 deep).
+
+    >>> from slr_sql.terms import Atom, Struct
+    >>> str(_as_engine_term(Struct("f", (Atom("a"), "s", [1, Struct("g", (2,))]))))
+    'f(a,"s",[1,g(2)])'
     """
     from .terms import Atom, String, Struct, Var, make_list
 
-    if isinstance(value, Atom) or isinstance(value, Var):
-        return value
-    if isinstance(value, str):
-        return String(value)
-    if isinstance(value, (list, tuple)):
-        return make_list([_as_engine_term(v) for v in value])
-    if isinstance(value, Struct):
-        return Struct(value.name, tuple(_as_engine_term(a) for a in value.args))
-    return value
+    done: list = []
+    todo: list = [(value, None)]
+    while todo:
+        item, built = todo.pop()
+        if built is not None:   # its arguments are the last results: put them together
+            name, n = built
+            args = done[len(done) - n:]
+            del done[len(done) - n:]
+            done.append(make_list(args) if name is None else Struct(name, tuple(args)))
+        elif isinstance(item, Atom) or isinstance(item, Var):
+            done.append(item)
+        elif isinstance(item, str):
+            done.append(String(item))
+        elif isinstance(item, (list, tuple)) or isinstance(item, Struct):
+            args = item.args if isinstance(item, Struct) else item
+            todo.append((None, (item.name if isinstance(item, Struct) else None, len(args))))
+            todo.extend((a, None) for a in reversed(args))
+        else:
+            done.append(item)
+    return done[0]
 
 
 def value_text(value: Any, digits: int | None = None) -> str:

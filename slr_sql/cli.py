@@ -27,7 +27,7 @@ from .api import KnowledgeBaseAPI
 from .answers import answer_text, value_text
 from .encoding import decode
 from .kb import KnowledgeBase
-from .parser import parse_event_fast
+from .parser import full_stop_end, parse_event_fast
 from .printable import printable_name, printable_syntax_error, printable_text
 from .store import refuse_no_store, shown_location
 from .terms import Atom, Struct, list_items
@@ -1198,19 +1198,40 @@ def abbreviated(value: Any) -> Any:
     >>> value_text(abbreviated(list(range(1, 20))))
     '[1,2,3,4,5,6,7,8,9|...]'
     """
-    if isinstance(value, list):
-        items = [abbreviated(v) for v in value[:MAX_LIST_ITEMS]]
-        if len(value) < MAX_LIST_ITEMS:
-            return items
-        tail: Any = Atom("...")
-        for item in reversed(items[:MAX_LIST_ITEMS - 1]):
-            tail = Struct(".", (item, tail))
-        return tail
-    if isinstance(value, Struct):
-        return Struct(value.name, tuple(abbreviated(a) for a in value.args))
-    if isinstance(value, str) and not isinstance(value, Atom) and len(value) > MAX_STRING_CHARS:
-        return value[:MAX_STRING_CHARS] + "..."
-    return value
+    # (iterative: an answer may be nested deeper than Python's recursion)
+    done: list = []
+    todo: list = [(value, None)]
+    while todo:
+        item, built = todo.pop()
+        if built is not None:   # its arguments are the last results: put them together
+            name, n, length = built
+            args = done[len(done) - n:]
+            del done[len(done) - n:]
+            done.append(Struct(name, tuple(args)) if name is not None
+                        else _cut_list(args, length))
+        elif isinstance(item, list):
+            kept = item[:MAX_LIST_ITEMS]
+            todo.append((None, (None, len(kept), len(item))))
+            todo.extend((a, None) for a in reversed(kept))
+        elif isinstance(item, Struct):
+            todo.append((None, (item.name, len(item.args), 0)))
+            todo.extend((a, None) for a in reversed(item.args))
+        elif isinstance(item, str) and not isinstance(item, Atom) \
+                and len(item) > MAX_STRING_CHARS:
+            done.append(item[:MAX_STRING_CHARS] + "...")
+        else:
+            done.append(item)
+    return done[0]
+
+
+def _cut_list(items: list, length: int) -> Any:
+    """The first items of a list of ``length`` items, ``[a,b,...|...]`` if it had more."""
+    if length < MAX_LIST_ITEMS:
+        return items
+    tail: Any = Atom("...")
+    for item in reversed(items[:MAX_LIST_ITEMS - 1]):
+        tail = Struct(".", (item, tail))
+    return tail
 
 
 class ShellState:
@@ -1266,7 +1287,9 @@ class Shell:
         """Handle one input line; returns False when the user asked to leave."""
         stripped = line.strip()
         if self.state == ShellState.CONSULTING:
-            if stripped in ("end_of_file.", "end_of_file"):
+            end = full_stop_end(stripped)   # (a comment may follow the full stop)
+            if stripped == "end_of_file" or (end is not None
+                                             and stripped[:end] == "end_of_file."):
                 return self._guarded(self._end_consult)
             self.consulted.append(line.rstrip("\n"))
             return True
@@ -1287,12 +1310,15 @@ class Shell:
                 return self._guarded(lambda: self._set_at(strip_full_stop(rest)))
         self.pending.append(line.rstrip("\n"))
         text = "\n".join(self.pending).strip()
-        if not text.endswith(".") or text.endswith(".."):
+        # its full stop as the reader sees it: a comment may follow it, a '.' inside a
+        # comment or quotes is none
+        end = full_stop_end(text)
+        if end is None:
             self.state = ShellState.CONTINUING  # a goal spanning several lines
             return True
         self.pending = []
         self.state = ShellState.READY
-        return self._guarded(lambda: self._run(text))
+        return self._guarded(lambda: self._run(text[:end]))
 
     def _guarded(self, action: Any) -> bool:
         try:
@@ -1486,6 +1512,56 @@ class Shell:
                 close()
 
 
+def read_key(stream: Any = None) -> str:
+    """One key pressed at the terminal ``stream`` (standard input): a character, or an
+    escape sequence (an arrow key) whole. Ctrl-C raises KeyboardInterrupt, Ctrl-D EOFError.
+
+    Keys typed ahead stay for what reads next: click's ``getchar`` read up to 32 bytes as
+    one key (``;;`` pressed quickly was no ``;`` and stopped the answers, a line typed
+    after the key went with it) and its raw mode discarded the keys typed while the goal
+    ran (``TCSAFLUSH``).
+
+    >>> import os, pty
+    >>> main_end, terminal_end = pty.openpty()
+    >>> _ = os.write(main_end, ";é\x1b[A;".encode())
+    >>> terminal = os.fdopen(terminal_end)
+    >>> [read_key(terminal) for _ in range(4)] == [";", "é", chr(27) + "[A", ";"]
+    True
+    """
+    import select
+    import termios
+    import tty
+
+    fd = (stream or sys.stdin).fileno()
+
+    def ready() -> bool:   # the rest of a key comes in the same write
+        return bool(select.select([fd], [], [], 0.05)[0])
+
+    saved = termios.tcgetattr(fd)
+    try:
+        tty.setraw(fd, termios.TCSANOW)   # (TCSANOW: keys typed ahead are kept)
+        key = os.read(fd, 1)
+        if key and key[0] >= 0xC0:        # a UTF-8 character's lead byte
+            more = 1 if key[0] < 0xE0 else 2 if key[0] < 0xF0 else 3
+            while more and ready():
+                key += os.read(fd, 1)
+                more -= 1
+        elif key == b"\x1b" and ready():
+            key += os.read(fd, 1)
+            if key[1:] in (b"[", b"O"):   # a control sequence: up to its final byte
+                while ready():
+                    key += os.read(fd, 1)
+                    if 0x40 <= key[-1] <= 0x7E:
+                        break
+    finally:
+        termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+    if key == b"\x03":
+        raise KeyboardInterrupt
+    if key in (b"", b"\x04"):
+        raise EOFError
+    return key.decode("utf-8", "replace")
+
+
 def _is_clause(term: Any) -> bool:
     return isinstance(term, Struct) and term.name == ":-" and len(term.args) == 2
 
@@ -1558,7 +1634,7 @@ def shell(db: str) -> None:
                     if name.startswith(word) and name != word:
                         yield Completion(name, start_position=-len(word))
 
-        session = Shell(kb, ask=click.getchar)
+        session = Shell(kb, ask=read_key)
         prompt: PromptSession[str] = PromptSession(history=FileHistory(_history_path()),
                                completer=PredicateCompleter(), complete_while_typing=False)
         click.echo(f"slr shell on {printable_name(shown_location(db))} — `help` for commands, Ctrl-C stops a goal, "

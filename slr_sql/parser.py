@@ -35,7 +35,8 @@ from .terms import INFIX_OPS, PREFIX_OPS
 from .terms import CONS, NIL, TRUE, Atom, Clause, Span, String, Struct, Var, make_list
 from .terms import MAX_INTEGER_BITS, int_from_text
 
-__all__ = ["parse_program", "parse_term", "parse_first_term", "parse_event_fast", "token_spans"]
+__all__ = ["parse_program", "parse_term", "parse_first_term", "parse_event_fast", "token_spans",
+           "full_stop_end"]
 
 _GRAMMAR_PATH = Path(__file__).with_name("grammar") / "slr.lark"
 
@@ -665,6 +666,35 @@ def parse_first_term(text: str) -> tuple[Any, dict[str, Var]]:
     except UnexpectedInput:
         pass  # a text that does not lex up to an end: parse_term says where it is wrong
     return _parse(text, "<query>", "query")
+
+
+def full_stop_end(text: str) -> int | None:
+    """Where the clause or goal typed so far in ``text`` ends (the offset after its full
+    stop, so a comment after the stop is left out), or None while the reader would read on:
+    no full stop yet, a '.' inside a comment, or a quote still open (a quoted atom or
+    string may span lines). Any other text that does not lex (a character no token holds,
+    a bad escape in closed quotes) ends at its last character if that is a '.' (not
+    ``..``), so that its syntax error is shown rather than waited on.
+
+    >>> full_stop_end("X = 1. % the answer"), full_stop_end("X = 1 % not the end.")
+    (6, None)
+    >>> full_stop_end("X = 'a. b"), full_stop_end('X = "a.'), full_stop_end("X =.. [f")
+    (None, None, None)
+    >>> full_stop_end("X = 'a." + chr(10) + "b'."), full_stop_end("X = a" + chr(0) + ".")
+    (11, 7)
+    """
+    try:
+        tokens = list(_parser().lex(text))
+    except UnexpectedInput as exc:
+        at = getattr(exc, "pos_in_stream", None)
+        if at is not None and text[at:at + 1] in ("'", '"', "`") \
+                and text[at] not in text[at + 1:]:
+            return None   # the quote opened there is not closed yet
+        stripped = text.rstrip()
+        return len(stripped) if stripped.endswith(".") and not stripped.endswith("..") else None
+    if tokens and tokens[-1].type == "END":
+        return tokens[-1].end_pos
+    return None
 
 
 def token_spans(text: str) -> list[tuple[int, int]]:

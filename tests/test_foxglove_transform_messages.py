@@ -1,6 +1,7 @@
 """``foxglove.FrameTransforms`` messages of stored tf rows (slr_sql/viz/channels.py), which
 the live view sends and ``slr export`` writes: a transform whose numbers are no finite
-floats is left out, whether the message is written from the stored text (one row) or
+floats, or whose quaternion is zero (no rotation: ``tf_lookup`` refuses it as tf2 does), is
+left out, whether the message is written from the stored text (one row) or
 decoded (several rows)."""
 from __future__ import annotations
 
@@ -59,3 +60,31 @@ def test_poses_of_json_numbers_are_written_from_their_text_as_decoded():
     for row in rows:   # the text as stored; decoding it gives the same numbers
         fast = json.loads(transform_message([row]))["transforms"]
         assert json.loads(transform_message([row, row]))["transforms"] == fast * 2
+
+
+@pytest.mark.parametrize("quaternion", ["[0,0,0,0]", "[0.0,-0.0,0e5,0.0]"])
+def test_a_transform_whose_quaternion_is_zero_is_left_out(quaternion):
+    """It was sent and exported as it was stored, a rotation of zero length that no viewer
+    can apply, where tf_lookup over the same row fails."""
+    bad = ("map", "cam", f'{{"pose":[[1,0,0],{quaternion}]}}', 1.0, 1.0, 1.0, 2)
+    assert transform_message([bad]) is None
+    message = json.loads(transform_message([bad, GOOD]))
+    assert [t["child_frame_id"] for t in message["transforms"]] == ["base"]
+
+
+def test_an_export_leaves_a_zero_rotation_out_of_its_frame_transforms(tmp_path):
+    """The event itself is exported as stored (its channel), only /tf leaves it out."""
+    import slr_sql
+    from slr_sql import ManualClock, Struct
+    from mcap.reader import make_reader
+    from slr_sql.viz.mcap_export import export_mcap
+
+    with slr_sql.open(tmp_path / "r.db", clock=ManualClock(10.0)) as kb:
+        kb.add_many([("tf", ("map", "cam", Struct("pose", ([1, 0, 0], [0, 0, 0, 0]))), 1.0, 1.0),
+                     ("tf", ("map", "base", Struct("pose", ([1, 0, 0], [0, 0, 0, 1]))), 2.0, 2.0)])
+        export_mcap(kb.store, tmp_path / "r.mcap")
+    with open(tmp_path / "r.mcap", "rb") as stream:
+        topics = [(channel.topic, json.loads(message.data))
+                  for _, channel, message in make_reader(stream).iter_messages()]
+    assert [t for t, _ in topics] == ["/tf/3", "/tf/3", "/tf"]
+    assert topics[2][1]["transforms"][0]["child_frame_id"] == "base"

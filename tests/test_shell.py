@@ -526,3 +526,108 @@ def test_a_sigint_as_the_editor_accepts_the_line_stops_its_goal_before_it_starts
         interactive(Shell(kb, echo=said.append, echo_err=said.append), prompt,
                     echo=said.append)
     assert sent and said == ["\n% interrupted", "O = cup2, T = 2.0"]
+
+
+def test_a_comment_after_the_full_stop_ends_the_goal_and_a_full_stop_inside_one_does_not(store):
+    """The end of a goal is its full stop as the reader sees it (SWI-Prolog's toplevel): a
+    goal followed by a comment ran never (the line did not end with '.'), and the next goal
+    was joined to it, both lost in one syntax error; a '.' inside a comment or a quoted
+    atom spanning lines ended the goal there, and its rest was an error of its own."""
+    r = run_piped(store,
+                  "seg(cup1, L)^T.   % where was cup1?",
+                  "X = 1. /* a block comment */",
+                  "X = 2 % this is not the end.",
+                  ", Y = 3.",
+                  "assert(near(a)). % a command too",
+                  "near(N).%",
+                  "X = 'a. b'.",
+                  "X = 'a.",                      # a quoted atom may span lines
+                  "b'.",
+                  "X = a\x00b.")                    # no token: its error, not a wait
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.startswith("<shell>:1:6: unexpected character") and r.stderr.count("\n") == 3
+    assert r.stdout.splitlines() == ["L = table, T = 1.0", "X = 1", "X = 2, Y = 3", "true.",
+                                     "N = a", "X = 'a. b'", "X = 'a.\\nb'"]
+
+
+def test_a_comment_after_the_full_stop_in_the_terminal(store):
+    child = spawn_shell(store)
+    child.sendline("seg(cup2, L)^T.  % where was cup2?")
+    child.expect(r"L = shelf, T = 2\.0")
+    press(child, "\r")
+    child.expect(PROMPT)
+    child.sendline("X = 2 % not the end.")
+    child.expect(r"\|")                     # the goal goes on on the next line
+    child.sendline(", Y = 3.")
+    child.expect(r"X = 2, Y = 3")
+    press(child, "\r")
+    child.expect(PROMPT)
+    leave(child)
+
+
+def test_keys_pressed_faster_than_the_answers_come_each_count(store):
+    """Two ';' read at once (pressed quickly, a key held down) were taken as one key of two
+    characters, which is no ';': the answers stopped after the first."""
+    child = spawn_shell(store)
+    child.sendline("between(1, 3, X).")
+    child.expect("X = 1")
+    press(child, ";;")                      # in one write: one read of the terminal
+    child.expect(r"X = 2 ;\r\n")
+    child.expect("X = 3")
+    press(child, "\r")
+    child.expect(r" \.\r\n")
+    child.expect(PROMPT)
+    child.sendline("X = done.")             # nothing of the keys is left over
+    child.expect(r"X = done")
+    press(child, "\r")
+    child.expect(PROMPT)
+    leave(child)
+
+
+def test_a_key_typed_while_the_goal_runs_answers_its_first_answer(store):
+    """A ';' typed before the first answer came (the terminal cooked, the goal running) was
+    thrown away as the shell took the terminal raw for the key (TCSAFLUSH): it waited for
+    another key."""
+    child = spawn_shell(store)
+    child.sendline("\\+ \\+ (numlist(1, 300000, L), msort(L, _)), member(X, [a, b]).")
+    wait_for_terminal(child, raw=False)     # the goal runs
+    child.send(";")
+    child.expect(r"X = a ;\r\n")
+    child.expect("X = b")
+    press(child, "\r")
+    child.expect(PROMPT)
+    leave(child)
+
+
+DEEP = 5000   # deeper than Python's recursion
+
+
+def test_an_answer_nested_deeper_than_pythons_recursion_is_printed(tmp_path):
+    """The goal answered, but printing its answer said "the term is nested too deeply" (the
+    answer's printer and the shell's abbreviation recursed), in `slr query`, the piped
+    shell and the terminal shell alike."""
+    db = str(tmp_path / "deep.db")
+    program = tmp_path / "deep.pl"
+    program.write_text("deep(" + "f(" * DEEP + "a" + ")" * DEEP + ").\n")
+    assert slr("load", db, str(program)).returncode == 0
+    expected = "X = " + "f(" * DEEP + "a" + ")" * DEEP
+    query = slr("query", db, "deep(X)")
+    assert query.returncode == 0, query.stderr
+    assert query.stdout.splitlines() == [expected]
+    piped = run_piped(db, "deep(X).", "Y = ok.")
+    assert piped.stderr == "" and piped.stdout.splitlines() == [expected, "Y = ok"]
+    child = spawn_shell(db)
+    child.sendline("deep(X), L = [1,2,3,4,5,6,7,8,9,10,11].")
+    child.expect(r"X = (f\()+a")
+    child.expect(r"\)+, L = \[1,2,3,4,5,6,7,8,9\|\.\.\.\]")
+    press(child, "\r")
+    child.expect(PROMPT)
+    leave(child)
+
+
+def test_end_of_file_with_a_comment_after_it_ends_the_consult(store):
+    """It was taken as one more consulted line: the goals after it became program text."""
+    r = run_piped(store, "[user].", "q(1).", "end_of_file.  % done", "q(X).")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines() == ["% type clauses; end_of_file. or Ctrl-D ends",
+                                     "% consulted into the program 'user'", "X = 1"]

@@ -1015,7 +1015,14 @@ class EventRules:
         if decls is not self._decls:
             with self.store.lock:
                 if decls is not self._decls:
-                    self.install(list(getattr(decls, "event_rules", ())))
+                    try:
+                        self.install(list(getattr(decls, "event_rules", ())))
+                    except BaseException:
+                        # install may have made the refused rules the ones in force before
+                        # it failed (a head wider than a table); the load restores the
+                        # declarations, which the next call installs again
+                        self._decls = None
+                        raise
                     self._decls = decls
         self.wake_if_due()
 

@@ -419,7 +419,8 @@ class Catalog:
                             version: int | None = None) -> dict:
         """Make the ``slr_facts_*`` tables exactly ``{(name, arity): [encoded rows]}`` (rows
         in clause order; ``ord`` is the position). Returns ``{(name, arity): quoted table}``.
-        ``version``: the program version they are built for (recorded with them).
+        ``version``: the program version they are built for (recorded with them). A
+        predicate wider than a table may be (the store's column limit) gets no table.
 
         >>> from slr_sql.store import EventStore
         >>> EventStore(None).replace_fact_tables({("color", 2): [("cup1", "red")]})
@@ -438,6 +439,10 @@ class Catalog:
             for table in existing:
                 execute(f"DROP TABLE {self.db.qualified(table)}")
             for (name, arity), rows in tables.items():
+                if arity + 1 > self.db.max_columns:
+                    # Prolog takes any arity; a table has a column limit. Such facts stay
+                    # in the program (interpreted, or unfolded by the compiler).
+                    continue
                 plain = self._fact_table(name, arity)
                 table = quote_identifier(plain)
                 dialect = self.db.dialect

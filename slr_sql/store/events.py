@@ -426,7 +426,7 @@ class EventWriter:
                            "character U+0000 (an argument can: it is stored escaped)")
         if arity > self.tables.max_arity:
             raise BadEvent(f"too many arguments: {arity} (an event has at most "
-                           f"{self.tables.max_arity}, the column limit of SQLite)")
+                           f"{self.tables.max_arity}, the column limit of the store's tables)")
         event_type = self.tables.lookup(name, arity)
         if event_type is not None:
             return event_type

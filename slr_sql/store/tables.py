@@ -614,7 +614,7 @@ class EventTables:
             raise ValueError(f"bad event type {name!r}/{arity!r}")
         if arity > self.max_arity:
             raise SLRError(f"cannot declare event {name}/{arity}: too many arguments (an "
-                           f"event has at most {self.max_arity}, the column limit of SQLite)")
+                           f"event has at most {self.max_arity}, the column limit of the store's tables)")
         with self.db.transaction():
             return self.register(str(name), arity, declared=True,
                                  start_order=start_order).table

@@ -78,14 +78,20 @@ MARKS_SCHEMA: dict = {
 
 
 def time_ns(t: float) -> int:
-    """Seconds as the unsigned nanoseconds of MCAP and Foxglove (negative times clamp to 0).
+    """Seconds as the unsigned nanoseconds of MCAP and Foxglove (negative times clamp to 0,
+    times past 2**64 ns, the year 2554, to the last: an event may end at any finite time).
 
-    >>> time_ns(1.5), time_ns(-3.0)
-    (1500000000, 0)
+    >>> time_ns(1.5), time_ns(-3.0), time_ns(1e300) == 2 ** 64 - 1
+    (1500000000, 0, True)
     """
     if not t > 0.0:
         return 0
+    if not t < _LAST_SECOND:   # (t * 1e9 may be infinite: no int)
+        return 2 ** 64 - 1
     return min(int(round(t * 1e9)), 2 ** 64 - 1)
+
+
+_LAST_SECOND = 2 ** 64 / 1e9
 
 
 def _kind_schema(value: Any) -> dict:
@@ -268,8 +274,8 @@ def _frame(value: Any) -> str:
 
 def transform_message(rows: list) -> bytes | None:
     """``foxglove.FrameTransforms`` of stored tf / tf_static rows (``(parent, child, pose,
-    start, end, arrival, seq)``); rows whose third argument is not a pose are left out
-    (None when none is left).
+    start, end, arrival, seq)``); rows whose third argument is not a pose (of finite
+    numbers, a quaternion other than zero) are left out (None when none is left).
 
     >>> transform_message([("map", "base", '{"pose":[[1.0,2.0,3.0],[0.0,0.0,0.0,1.0]]}', 2.5, 2.5, 3.0, 1)])
     b'{"transforms":[{"timestamp":{"sec":2,"nsec":500000000},"parent_frame_id":"map","child_frame_id":"base","translation":{"x":1.0,"y":2.0,"z":3.0},"rotation":{"x":0.0,"y":0.0,"z":0.0,"w":1.0}}]}'
@@ -287,8 +293,8 @@ def transform_message(rows: list) -> bytes | None:
             values = [float(v) for v in (x, y, z, qx, qy, qz, qw)]
         except (TypeError, ValueError, KeyError, AttributeError, OverflowError):
             continue     # (OverflowError: an integer beyond any float)
-        if not all(math.isfinite(v) for v in values):
-            continue
+        if not all(math.isfinite(v) for v in values) or not any(values[3:]):
+            continue     # (a zero quaternion is no rotation: tf_lookup refuses it too)
         ns = time_ns(row[4])
         out.append({"timestamp": {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000},
                     "parent_frame_id": _frame(row[0]), "child_frame_id": _frame(row[1]),
@@ -315,6 +321,7 @@ def _plain_frame(value: Any) -> str | None:
 _NUMBER = r"(-?(?:0|[1-9][0-9]*)(?:\.[0-9]+)?(?:[eE][-+]?[0-9]+)?)"
 _STORED_POSE = re.compile(r'\{"pose":\[\[' + ",".join([_NUMBER] * 3) + r"\],\["
                           + ",".join([_NUMBER] * 4) + r"\]\]\}")
+_NONZERO_DIGITS = frozenset("123456789")
 
 
 def _one_transform(row: tuple) -> bytes | None:
@@ -332,6 +339,8 @@ def _one_transform(row: tuple) -> bytes | None:
     x, y, z, qx, qy, qz, qw = numbers = match.groups()
     if max(map(len, numbers)) > 24:
         return None
+    if not any(_NONZERO_DIGITS.intersection(v.lower().partition("e")[0]) for v in (qx, qy, qz, qw)):
+        return None   # (no non-zero digit: a zero quaternion, perhaps; the general path checks)
     ns = time_ns(row[4])
     return (f'{{"transforms":[{{"timestamp":{{"sec":{ns // 1_000_000_000},"nsec":'
             f'{ns % 1_000_000_000}}},"parent_frame_id":{parent},"child_frame_id":{child},'
