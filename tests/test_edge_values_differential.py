@@ -35,6 +35,7 @@ import pytest
 import slr_sql
 from slr_sql import Atom, ManualClock, String, Struct, Var
 from slr_sql.errors import SLRError, SLRTimeout
+from slr_sql.terms import make_list, to_python
 
 FACTOR = int(os.environ.get("SLR_DIFF_FACTOR", "1"))   # SLR_DIFF_FACTOR=20: a longer hunt
 SEEDS = int(os.environ.get("SLR_DIFF_SEEDS", "0")) or 6 * FACTOR
@@ -115,6 +116,26 @@ def answers(result: list[dict]) -> list:
     return [tuple(sorted((k, typed(v)) for k, v in a.items())) for a in result]
 
 
+def provenance(kb) -> dict:
+    """Each event rule's matches (its provenance table), the events named by what they are
+    (type, values, times) instead of by their seq, which depends on the arrival order; an
+    event a buffer pruned since is None."""
+    events: dict = {}
+    for name, arity in (("p", 2), ("q", 1)):
+        if kb.store.table_for(name, arity) is not None:
+            events[name] = {seq: (name, typed(to_python(make_list(list(args)))), start, end)
+                            for args, start, end, seq in kb.store.scan(name, arity, {})}
+    out = {}
+    for info in kb.event_rules():
+        types = ["p", "q"] if info["head"] == "r/2" else ["p"]
+        positions = ", ".join(f"r{i}" for i in range(1, len(types) + 1))
+        _, rows = kb.sql(f'SELECT {positions}, t_start, t_end FROM "{info["provenance"]}"')
+        out[info["head"]] = sorted(
+            ((tuple(events.get(t, {}).get(seq) for t, seq in zip(types, row)), row[-2], row[-1])
+             for row in rows), key=repr)
+    return out
+
+
 def outcome(ask) -> object:
     """The answers of ``ask()``, or its error's kind and words."""
     try:
@@ -132,7 +153,10 @@ def draw_case(rng: random.Random) -> dict:
         if rng.random() < 0.75:
             stream.append(("p", (rng.choice(KEYS), rng.choice(VALUES)), start, end))
         else:
-            stream.append(("q", (rng.choice(VALUES),), end, end))
+            # often a value a p has: the event rule r joins them
+            p_values = [args[1] for name, args, _, _ in stream if name == "p"]
+            stream.append(("q", (rng.choice(p_values if p_values and rng.random() < 0.6
+                                            else VALUES),), end, end))
     in_order = sorted(stream, key=lambda e: (e[3], e[2]))
     # late arrivals: a random order in which events of one type, start and end keep their
     # relative order (so that store order, which breaks such ties by arrival, is the same)
@@ -244,6 +268,7 @@ def run_store(where: str, case: dict, order: str) -> dict:
             subscription.close()
         out["complex"] = [answers(kb.query(goal)) for goal in
                           ("r(K, V)^[S, E]", "long(K)^[S, E]", "r(K, V)^_, long(K)^_")]
+        out["complex"].append(provenance(kb))
         for sql in (True, False):
             kb.sql_enabled = sql
             out["sql" if sql else "interpreted"] = [outcome(lambda: kb.query(goal, args=args))
