@@ -35,7 +35,7 @@ import pytest
 import slr_sql
 from slr_sql import Atom, ManualClock, String, Struct, Var
 from slr_sql.errors import SLRError, SLRTimeout
-from slr_sql.terms import make_list, to_python
+from slr_sql.terms import format_term, from_python, make_list, to_python
 
 FACTOR = int(os.environ.get("SLR_DIFF_FACTOR", "1"))   # SLR_DIFF_FACTOR=20: a longer hunt
 SEEDS = int(os.environ.get("SLR_DIFF_SEEDS", "0")) or 6 * FACTOR
@@ -136,6 +136,13 @@ def provenance(kb) -> dict:
     return out
 
 
+def written(value) -> str:
+    """A value as SLR text (a compound of no arguments has none: its name instead)."""
+    if isinstance(value, Struct) and not value.args:
+        return format_term(Atom(value.name))
+    return format_term(from_python(value))
+
+
 def outcome(ask) -> object:
     """The answers of ``ask()``, or its error's kind and words."""
     try:
@@ -191,7 +198,7 @@ def draw_case(rng: random.Random) -> dict:
         ("texts(K, N)", {}),
     ]
     for _ in range(10):
-        kind = rng.randint(0, 11)
+        kind = rng.randint(0, 13)
         if kind == 0:
             goals.append(("p(K, V)^[S, E]", {"K": key()}))
         elif kind == 1:
@@ -220,8 +227,16 @@ def draw_case(rng: random.Random) -> dict:
                                       "p(K, f(g(X), Y))^_", "q([X, Y])^_", "q(f(X))^_"]), {}))
         elif kind == 10:
             goals.append(("p(K, V)^_, q(W)^_, V = W", {}))
-        else:
+        elif kind == 11:
             goals.append(("p(K, V)^_, compare(O, K, V)", {}))
+        elif kind == 12:
+            # the value written in the goal's text, not bound from Python
+            goals.append((rng.choice(["p({k}, V)^[S, E]", "p(K, {v})^T", "q({v})^T",
+                                      "prev(p({k}, V)^Z, 9)", "next(p(K, {v})^Z, [0, inf])",
+                                      "p(K, V)^_, V == {v}", "p(K, V)^_, V @< {v}"]).format(
+                k=written(key()), v=written(value())), {}))
+        else:
+            goals.append(("p(K, V)^_, q(W)^_, V @< W, K \\== W", {}))
     buffers = []
     if rng.random() < 0.6:
         buffers.append(("p(K, _)", {"keep_last": rng.choice([1, 2])}))
