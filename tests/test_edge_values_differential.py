@@ -348,6 +348,67 @@ def test_edge_values_answer_alike_in_any_order_on_both_backends(seed, tmp_path, 
     check_case(seed, tmp_path, database)
 
 
+LIVE_PROGRAM = PROGRAM.replace(":- max_delay(p/2, 1000). :- max_delay(q/1, 1000).",
+                               ":- max_delay(p/2, 2). :- max_delay(q/1, 2).")
+
+
+def run_live(where: str, case: dict, arrivals: list) -> dict:
+    """The case's goals submitted synchronized at clock 0; then each event added at its
+    arrival time (the clock set there first), so the clock releases the queries."""
+    clock = ManualClock(0.0)
+    with slr_sql.open(where, clock=clock) as kb:
+        kb.load(LIVE_PROGRAM)
+        pending = [(z, kb.submit(goal, at=z, args=args))
+                   for z in (1.0, 3.5, 7.0) for goal, args in case["goals"]]
+        for arrival, (name, args, start, end) in arrivals:
+            clock.set(max(clock.now(), arrival))
+            assert kb.add_many([(name, list(args), start, end)]) == []
+        released = sum(p.done() for _, p in pending)
+        clock.set(100.0)
+        # a next(.., [A, inf]) waits for inf, and only rules answer last(K, V)^T
+        for type_name in ("p/2", "q/1", "last/2"):
+            kb.mark_complete(type_name, math.inf)
+        synchronized = [outcome(lambda: p.result(timeout=30)) for _, p in pending]
+        direct = [outcome(lambda: kb.query(goal, at=z, args=args))
+                  for z in (1.0, 3.5, 7.0) for goal, args in case["goals"]]
+    return {"synchronized": synchronized, "direct": direct, "released": released}
+
+
+@pytest.mark.parametrize("seed", range(max(1, SEEDS // 2)))
+def test_synchronized_queries_released_by_the_clock_answer_the_complete_stream(seed, tmp_path,
+                                                                               database):
+    """Late arrivals within max_delay on a live clock: a synchronized query released by the
+    clock (no marks) answers what the complete stream answers (``query(at=z)`` at the end),
+    the same on both backends and whether the events came in order or late."""
+    rng = random.Random(10_000 + seed)
+    case = draw_case(rng)
+    # each event arrives up to max_delay after its end; events of one type, start and end
+    # keep their relative order (store order breaks their tie by arrival)
+    arrival = [event[3] + rng.choice([0.0, 0.5, 1.0, 2.0]) for event in case["in_order"]]
+    groups: dict = {}
+    for i, (name, _, start, end) in enumerate(case["in_order"]):
+        groups.setdefault((name, start, end), []).append(i)
+    for members in groups.values():
+        for i, a in zip(members, sorted(arrival[i] for i in members)):
+            arrival[i] = a
+    late = sorted(zip(arrival, case["in_order"]), key=lambda x: x[0])
+    on_time = [(event[3], event) for event in case["in_order"]]
+    got = {}
+    for backend, order in itertools.product(("sqlite", "postgres"), ("on_time", "late")):
+        where = (str(tmp_path / f"live-{order}.db") if backend == "sqlite"
+                 else in_schema(database, f"live{next(_SCHEMAS)}"))
+        got[backend, order] = run_live(where, case, on_time if order == "on_time" else late)
+    base = got["sqlite", "on_time"]
+    # the clock released most of them as the events came (the first z's at least)
+    assert all(other["released"] >= len(case["goals"]) for other in got.values())
+    goals = [(z, goal, args) for z in (1.0, 3.5, 7.0) for goal, args in case["goals"]]
+    for key, other in got.items():
+        for i, (z, goal, args) in enumerate(goals):
+            context = f"{key} {goal} {args} at {z}\nstream: {case['in_order']}"
+            assert other["synchronized"][i] == other["direct"][i], context
+            assert other["direct"][i] == base["direct"][i], context
+
+
 def test_compounds_of_no_arguments_compare_as_in_swi_prolog(backend):
     """``Struct("f", ())`` (from Python or JSON; SWI-Prolog 7's ``f()``) equals another
     ``f()`` and sorts after the atom ``f`` and before ``g()`` and ``f(1)``: comparing two of
