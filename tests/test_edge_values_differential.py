@@ -74,6 +74,10 @@ big(K, V) :- p(K, V)^_, number(V), V > 1.0e300.
 texts(K, N) :- p(K, _)^_, atom(K), atom_length(K, N), N > 63.
 r(K, V) <- p(K, V) seq q(V).
 long(K) <- p(K, _)^[S, E] where E - S > 0.
+:- consumption(recent_r/2, recent).
+recent_r(K, V) <- p(K, V) seq q(V).
+:- consumption(oldest_r/2, chronological).
+oldest_r(K, V) <- p(K, V) seq q(V).
 """
 
 
@@ -127,7 +131,7 @@ def provenance(kb) -> dict:
                             for args, start, end, seq in kb.store.scan(name, arity, {})}
     out = {}
     for info in kb.event_rules():
-        types = ["p", "q"] if info["head"] == "r/2" else ["p"]
+        types = ["p"] if info["head"] == "long/1" else ["p", "q"]
         positions = ", ".join(f"r{i}" for i in range(1, len(types) + 1))
         _, rows = kb.sql(f'SELECT {positions}, t_start, t_end FROM "{info["provenance"]}"')
         out[info["head"]] = sorted(
@@ -282,7 +286,8 @@ def run_store(where: str, case: dict, order: str) -> dict:
             out[name] = answers(received)
             subscription.close()
         out["complex"] = [answers(kb.query(goal)) for goal in
-                          ("r(K, V)^[S, E]", "long(K)^[S, E]", "r(K, V)^_, long(K)^_")]
+                          ("r(K, V)^[S, E]", "long(K)^[S, E]", "r(K, V)^_, long(K)^_",
+                           "recent_r(K, V)^[S, E]", "oldest_r(K, V)^[S, E]")]
         out["complex"].append(provenance(kb))
         for sql in (True, False):
             kb.sql_enabled = sql
