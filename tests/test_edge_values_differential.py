@@ -45,7 +45,7 @@ from slr_sql.errors import SLRError, SLRTimeout
 from slr_sql.terms import format_term, from_python, make_list, to_python
 
 FACTOR = int(os.environ.get("SLR_DIFF_FACTOR", "1"))   # SLR_DIFF_FACTOR=20: a longer hunt
-SEEDS = int(os.environ.get("SLR_DIFF_SEEDS", "0")) or 5 * FACTOR
+SEEDS = int(os.environ.get("SLR_DIFF_SEEDS", "0")) or 4 * FACTOR
 _SCHEMAS = itertools.count()
 
 LONG = "long_" + "x" * 70
