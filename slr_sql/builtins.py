@@ -273,7 +273,9 @@ def compare_terms(a: Any, b: Any) -> int:
                         seen = set()
                     pair_seen = key in seen
                     seen.add(key)
-                if not pair_seen:
+                # a compound of no arguments (Struct("f", ()) from Python or JSON, as
+                # SWI-Prolog 7's f()) equals one of the same name: nothing to descend into
+                if not pair_seen and na:
                     if stack is None:
                         stack = []
                     stack.extend(zip(reversed(a.args[1:]), reversed(b.args[1:])))

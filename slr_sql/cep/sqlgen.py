@@ -705,6 +705,19 @@ class AltSQL:
                 + [render(self.S, aliases), render(self.E, aliases)]
                 + [render(h, aliases) for h in self.head_sql] + [":now"])
 
+    def _match_order(self, aliases: dict[str, str]) -> str:
+        """ORDER BY of a statement that finds several matches at once: the store order of
+        the events at each position, left to right -- the order Prolog's nested loops over
+        the events in store order give. The matches of one round are stored (and their
+        complex events arrive) in this order, whatever plan the database chose: without it,
+        PostgreSQL and SQLite stored two complex events of the same interval in other
+        orders, and queries listed them so. The unary plus keeps the order from choosing the
+        plan: SQLite would rather scan a whole table by an index in that order than sort the
+        few new matches of a round."""
+        return " ORDER BY " + ", ".join(
+            f"+{aliases[f'e{p}']}.t_end, +{aliases[f'e{p}']}.t_start, +{aliases[f'e{p}']}.seq"
+            for p in range(self.k))
+
     def _delta_conds(self, pos: int, dirty: set, aliases: dict[str, str]) -> list[str]:
         conds = [f"{aliases[f'e{pos}']}.seq > :w{pos}"]
         for j in range(pos):
@@ -733,7 +746,8 @@ class AltSQL:
         if self.negs:
             conds += [self.neg_complete(a), self.neg_ok(a)]
         return (self._prov_insert() + f"SELECT {', '.join(self._prov_values(a))} FROM "
-                f"{self._from(self._order_from(pos), a)} WHERE {self._where(conds)}")
+                f"{self._from(self._order_from(pos), a)} WHERE {self._where(conds)}"
+                + self._match_order(a))
 
     def delta_pending(self, pos: int, dirty: set) -> str:
         key = ("delta_pending", pos, tuple(self.alt.leaves[j].key in dirty for j in range(pos)))
@@ -752,7 +766,8 @@ class AltSQL:
                 "created_at) "
                 f"SELECT :rule, {self.index}, 'match', NULL, {self.dialect.json_array(seqs)}, "
                 f"{render(self.S, a)}, {render(self.E, a)}, :now FROM "
-                f"{self._from(self._order_from(pos), a)} WHERE {self._where(conds)}")
+                f"{self._from(self._order_from(pos), a)} WHERE {self._where(conds)}"
+                + self._match_order(a))
 
     def delta_select(self, pos: int, dirty: set) -> str:
         key = ("delta_select", pos, tuple(self.alt.leaves[j].key in dirty for j in range(pos)))
@@ -770,7 +785,7 @@ class AltSQL:
             cols += [f"({self.neg_complete(a)})", f"({self.neg_ok(a)})"]
         conds = self._delta_conds(pos, dirty, a) + self.cond_sql(a)
         return (f"SELECT {', '.join(cols)} FROM {self._from(self._order_from(pos), a)} "
-                f"WHERE {self._where(conds)}")
+                f"WHERE {self._where(conds)}" + self._match_order(a))
 
     def match_select(self) -> str:
         key = ("match_select", )
@@ -1031,7 +1046,8 @@ class AltSQL:
         complete now and hold, into the provenance table (one statement)."""
         a = self.aliases()
         return (self._prov_insert() + f"SELECT {', '.join(self._prov_values(a))} FROM "
-                f"{self._pending_join(a)} AND {self.neg_complete(a)} AND {self.neg_ok(a)}")
+                f"{self._pending_join(a)} AND {self.neg_complete(a)} AND {self.neg_ok(a)}"
+                + self._match_order(a))
 
     def pending_match_delete(self) -> str:
         """Delete the pending matches that can be decided now (made, or refuted)."""
