@@ -31,7 +31,7 @@ from .store.checks import shown
 from .terms import Atom, String, Struct, Var, deref, from_python, same_float, to_python
 
 __all__ = ["Plan", "PlanCache", "PrevLookup", "BoundPrev", "instantiate", "argument_term",
-           "python_words"]
+           "check_goal", "python_words"]
 
 # at most this many plans are kept; past it the cache starts again (goals built by string
 # splicing would otherwise grow it without bound)
@@ -326,8 +326,7 @@ class PlanCache:
         plan = self.entries.get(key)
         if plan is not None:
             return plan
-        if not isinstance(goal, str):
-            raise SLRError(f"a goal is SLR text (a str), not {type(goal).__name__} {shown(goal)}")
+        check_goal(goal)
         term, varnames = parse_term(goal, "<query>")
         compiled = compile_clause((), term)
         slots: dict[str, int] = {}
@@ -384,6 +383,19 @@ def instantiate(plan: Plan, args: dict | None, terms: bool = False) -> tuple[Any
         if frame[slot] is None:
             frame[slot] = Var(name)
     return goal, frame
+
+
+def check_goal(goal: Any) -> None:
+    """A goal is SLR text, else an :class:`SLRError` (run by the client of ``slr serve``
+    too, before sending).
+
+    >>> check_goal(42)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: a goal is SLR text (a str), not int 42
+    """
+    if not isinstance(goal, str):
+        raise SLRError(f"a goal is SLR text (a str), not {type(goal).__name__} {shown(goal)}")
 
 
 def argument_term(name: str, value: Any) -> Any:
