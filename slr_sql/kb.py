@@ -491,9 +491,10 @@ class KnowledgeBase:
         [{'X': 1, 'T': 1.0}]
         """
         if limit is not None or at is not None or timeout is not None or robot is not None \
-                or (args is not None and type(args) is not dict):
+                or max_steps is not None or (args is not None and type(args) is not dict):
             # (the common query gives none of them: no call on its path)
-            check_query_options(at=at, timeout=timeout, limit=limit, robot=robot, args=args)
+            check_query_options(at=at, timeout=timeout, limit=limit, robot=robot, args=args,
+                                max_steps=max_steps)
         if wait:  # synchronized (SLRTimeout names the incomplete types)
             return self.submit(goal, at=at, args=args, timeout=timeout, robot=robot).result()
         if args and limit is None and robot is None:
@@ -832,8 +833,7 @@ class KnowledgeBase:
             raise SLRError("sql: the statement or a parameter is not valid Unicode (a lone "
                            "surrogate such as '\\ud800'); nothing was run") from None
         except (OverflowError, TypeError, ValueError) as exc:  # a parameter SQLite cannot take
-            raise SLRError(f"sql: a parameter cannot be bound: {_python_words(exc)} "
-                           f"(parameters are None, int of 64 bits, float, str or bytes)") from None
+            raise unbindable_parameter(exc) from None
 
     def _sql_write(self, query: str, params: Iterable[Any], timeout: float | None
                    ) -> tuple[list[str], list[tuple]]:
@@ -969,6 +969,17 @@ def not_event_text(text: Any) -> SLRError:
                     f"add_many([...]) take tuples")
 
 
+def unbindable_parameter(exc: BaseException) -> SLRError:
+    """The error of ``sql`` whose ``params`` cannot be bound (``exc``: why), raised by the
+    client of ``slr serve`` too for parameters it cannot go through.
+
+    >>> print(unbindable_parameter(TypeError("'int' object is not iterable")))
+    sql: a parameter cannot be bound: 'int' object is not iterable (parameters are None, int of 64 bits, float, str or bytes)
+    """
+    return SLRError(f"sql: a parameter cannot be bound: {_python_words(exc)} "
+                    f"(parameters are None, int of 64 bits, float, str or bytes)")
+
+
 def check_sql(query: Any, timeout: Any) -> None:
     """The statement and the ``timeout`` of ``sql``, else an :class:`SLRError` (run by the
     client of ``slr serve`` too, before sending).
@@ -1056,9 +1067,10 @@ def check_mark(event_type: Any, t: Any) -> None:
 
 
 def check_query_options(at: Any = None, timeout: Any = None, limit: Any = None,
-                        robot: Any = None, args: Any = None) -> None:
+                        robot: Any = None, args: Any = None, max_steps: Any = None) -> None:
     """The options of ``query``, ``solutions``, ``submit`` and ``ask``: ``at`` and
-    ``timeout`` numbers of seconds (``timeout`` >= 0), ``limit`` a count, ``robot`` a
+    ``timeout`` numbers of seconds (``timeout`` >= 0), ``limit`` and ``max_steps``
+    counts, ``robot`` a
     robot's name, ``args`` a dict (None: not given), else an :class:`SLRError` (run by
     the client of ``slr serve`` too, before sending).
 
@@ -1070,6 +1082,8 @@ def check_query_options(at: Any = None, timeout: Any = None, limit: Any = None,
     """
     if limit is not None and (type(limit) is not int or limit < 0):
         raise SLRError(f"limit must be a count (an integer >= 0), not {shown(limit)}")
+    if max_steps is not None and (type(max_steps) is not int or max_steps < 0):
+        raise SLRError(f"max_steps must be a count (an integer >= 0), not {shown(max_steps)}")
     check_time_option("at", at)
     check_time_option("timeout", timeout, minimum=0.0)
     if robot is not None:
@@ -1170,8 +1184,19 @@ def _boundary(method: Callable) -> Callable:
                 args[1] if where == "open" and len(args) > 1 else kwargs.get("path"))
             raise store_error(exc, path) from None
         except Exception as exc:  # noqa: BLE001 - the boundary: every kind becomes words
-            raise SLRError(f"{where}: {type(exc).__name__}: {exc}") from exc
+            raise unforeseen_failure(where, exc) from exc
     return guarded
+
+
+def unforeseen_failure(where: str, exc: BaseException) -> SLRError:
+    """The facade's last resort (:func:`_boundary`): a Python error no check foresaw,
+    raised by the method ``where``, as an :class:`SLRError` (the client of ``slr serve``
+    words what it runs on the caller's side, ``plot``, so too).
+
+    >>> print(unforeseen_failure("plot", TypeError("'int' object is not iterable")))
+    plot: TypeError: 'int' object is not iterable
+    """
+    return SLRError(f"{where}: {type(exc).__name__}: {exc}")
 
 
 # Every public method of the facade goes through the boundary (one list, kept next to it).

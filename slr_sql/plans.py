@@ -31,7 +31,7 @@ from .store.checks import shown
 from .terms import Atom, String, Struct, Var, deref, from_python, same_float, to_python
 
 __all__ = ["Plan", "PlanCache", "PrevLookup", "BoundPrev", "instantiate", "argument_term",
-           "check_goal", "python_words"]
+           "check_goal", "not_a_variable", "python_words"]
 
 # at most this many plans are kept; past it the cache starts again (goals built by string
 # splicing would otherwise grow it without bound)
@@ -343,7 +343,7 @@ class PlanCache:
             walk(g)
         for name in arg_names:
             if name not in varnames:
-                raise SLRError(f"args names {shown(name)}, which is not a variable of the goal {shown(goal)}")
+                raise not_a_variable(name, goal)
         names = [(n, slots[n]) for n in varnames if not n.startswith("_") and n in slots]
         plan = Plan(compiled, names, {n: slots[n] for n in arg_names if n in slots}, goal,
                      PrevLookup.recognise(compiled))
@@ -383,6 +383,17 @@ def instantiate(plan: Plan, args: dict | None, terms: bool = False) -> tuple[Any
         if frame[slot] is None:
             frame[slot] = Var(name)
     return goal, frame
+
+
+def not_a_variable(name: Any, goal: str) -> SLRError:
+    """The error of ``args`` naming ``name``, which is no variable of ``goal`` (the client
+    of ``slr serve`` raises it too for a name that is no str, which names none).
+
+    >>> print(not_a_variable(5, "X = 1"))
+    args names 5, which is not a variable of the goal 'X = 1'
+    """
+    return SLRError(f"args names {shown(name)}, which is not a variable of the goal "
+                    f"{shown(goal)}")
 
 
 def check_goal(goal: Any) -> None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import inspect
 import threading
+import time
 import typing
 
 import pytest
@@ -384,7 +385,61 @@ SAME_WORDS = {
                                 "subscribe: where must be a goal as text, not 5"),
     "subscribe to a pattern that is no text": (lambda kb: kb.subscribe(5), "SLRError",
                                                "subscribe: the pattern must be text"),
+    # locally max_steps="x" was taken (and ignored until the step count was compared)
+    "max_steps that is text": (lambda kb: kb.query("true", max_steps="x"), "SLRError",
+                               "max_steps must be a count (an integer >= 0), not 'x'"),
+    "negative max_steps": (lambda kb: kb.query("true", max_steps=-1), "SLRError",
+                           "max_steps must be a count (an integer >= 0), not -1"),
+    # remotely the key's str() was sent: args names '5'
+    "args naming no variable": (lambda kb: kb.query("X = 1", args={5: 1}), "SLRError",
+                                "args names 5, which is not a variable of the goal 'X = 1'"),
+    "add_event at a time that is text": (lambda kb: kb.add_event("p", [1], "x"),
+                                         "EventRejected",
+                                         "p(1)^'x': event times must be numbers (got 'x')"),
+    "add_event ending at a time that is text": (lambda kb: kb.add_event("p", [1], 1.0, "x"),
+                                                "EventRejected",
+                                                "p(1)^[1.0,'x']: event times must be numbers"),
+    "add_event of an argument that is no term": (lambda kb: kb.add_event("p", [None], 1.0),
+                                                 "EventRejected",
+                                                 "p(None)^1.0: event argument cannot be "
+                                                 "stored"),
+    "add_many of a tuple at a time that is text": (
+        lambda kb: [(e.index, type(e).__name__, str(e))
+                    for e in kb.add_many([("p", [1], "x", 1.0)])],
+        "value", "event times must be numbers (got 'x')"),
+    # remotely "the query parameter "type" (p/N) is required"
+    "complete_until of an empty type": (lambda kb: kb.complete_until(""), "SLRError",
+                                        "expected an event type p/N or p, not "),
+    # remotely a path no route matched: ServiceError (NotFound), "no such endpoint"
+    "remove_buffer of a negative id": (lambda kb: kb.remove_buffer(-1), "BufferNotFound",
+                                       "no active buffer #-1"),
+    "add_buffer of a pattern that is no term": (lambda kb: kb.add_buffer(5, keep_last=1),
+                                                "SLRError",
+                                                "a buffer pattern must be an event term, "
+                                                "not 5"),
+    # remotely raw Python errors, no SLRError
+    "sql parameters that are no sequence": (lambda kb: kb.sql("SELECT ?", 5), "SLRError",
+                                            "sql: a parameter cannot be bound: 'int' object is "
+                                            "not iterable"),
+    "plot of types that are no list": (lambda kb: kb.plot(5), "SLRError",
+                                       "plot: TypeError: 'int' object is not iterable"),
+    "unsubscribe of an id that is no text": (lambda kb: kb.unsubscribe(5), "SLRError",
+                                             "no subscription with id 5"),
 }
+
+
+# what a local knowledge base takes, taken remotely too (the server refused it)
+SAME_VALUE = {
+    # (stamped now: the stores' clocks are wall clocks)
+    "an event named ''": lambda kb: kb.add_event("", [1], time.time()),
+    "a bool as an SQL parameter": lambda kb: kb.sql("SELECT ? + 1", [True]),
+}
+
+
+@pytest.mark.parametrize("condition", sorted(SAME_VALUE))
+def test_what_a_local_knowledge_base_takes_is_taken_remotely_too(pair, condition):
+    local, remote = (_error(SAME_VALUE[condition], kb) for kb in pair)
+    assert local == remote and local[0] == "value", (local, remote)
 
 
 @pytest.mark.parametrize("condition", sorted(SAME_WORDS))

@@ -60,11 +60,16 @@ from slr_sql.api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args,
                        encode_arguments, encode_term, loads)
 from ..kb import (check_event_type, check_load, check_mark, check_program_name,
-                  check_query_options, check_sql, not_event_text, read_program_file)
-from ..buffers import check_buffer_policy
-from ..plans import argument_term, check_goal
+                  check_query_options, check_sql, not_event_text, read_program_file,
+                  unbindable_parameter, unforeseen_failure)
+from ..buffers import analyze, check_buffer_policy
+from ..terms import format_term
+from ..plans import argument_term, check_goal, not_a_variable
 from ..subscriptions.hub import DEFAULT_MAX_QUEUE, check_subscription
-from ..store.checks import event_arguments, shown
+from ..encoding import Unencodable
+from ..encoding import encode as encode_stored
+from ..store.checks import BadEvent, check_times, event_arguments, event_rejection, shown
+from ..subscriptions.registry import no_subscription
 from .auth import check_token_text
 # (the server of this module's examples: a knowledge base served from a thread)
 from .background import BackgroundServer  # noqa: F401
@@ -623,7 +628,8 @@ class RemoteKnowledgeBase:
         ([{'X': 2, 'T': 2.0}, {'X': 3, 'T': 3.0}], [{'X': 1}, {'X': 2}])
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        check_query_options(at=at, timeout=timeout, limit=limit, robot=robot, args=args)
+        check_query_options(at=at, timeout=timeout, limit=limit, robot=robot, args=args,
+                            max_steps=max_steps)
         if wait:  # synchronized: long-polls, however long the wait (as kb.query does it)
             return self.submit(goal, at=at, args=args, timeout=timeout, robot=robot).result()
         body = _goal_body(goal, at, args, timeout)
@@ -875,7 +881,10 @@ class RemoteKnowledgeBase:
         # (the policy checked as a local knowledge base checks it, and sent as it reads it:
         # a duration written "500ms" travels as 0.5)
         kind, amount, t1, t2 = check_buffer_policy(keep_last, keep_seconds, keep_between)
-        body: dict[str, Any] = {"pattern": _text(pattern, "pattern")}
+        if not isinstance(pattern, str):
+            analyze(pattern)                # (a local knowledge base's words for no pattern)
+            pattern = format_term(pattern)  # (a term it takes: sent as its text)
+        body: dict[str, Any] = {"pattern": pattern}
         if kind == "cBuffer":
             body["keep_last"] = amount
         elif kind == "tBuffer":
@@ -937,7 +946,7 @@ class RemoteKnowledgeBase:
             timeout: float | None = None) -> tuple[list[str], list[tuple]]:
         """Run one read-only SQL statement on the server's store: (column names, rows).
         ``params``: values for ``?`` placeholders (a sequence) or ``:name`` ones (a
-        mapping), numbers, strings or None. ``timeout`` is capped by the server's ``sql_timeout``; ``write=True`` is refused
+        mapping), numbers, strings, booleans or None. ``timeout`` is capped by the server's ``sql_timeout``; ``write=True`` is refused
         (the service runs read-only SQL only: write in the server's process).
 
         >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
@@ -958,8 +967,18 @@ class RemoteKnowledgeBase:
                                "--write` in the server's machine)", kind="BadRequest",
                                status=0)
         # (a mapping names :name placeholders: list() of it would send its keys as values)
-        body: dict[str, Any] = {"query": _text(query, "query"), "params": dict(params)
-                                if isinstance(params, Mapping) else list(params)}
+        try:
+            sent = dict(params) if isinstance(params, Mapping) else list(params)
+        except (TypeError, ValueError) as exc:
+            raise unbindable_parameter(exc) from None
+        for key, value in sent.items() if isinstance(sent, dict) else enumerate(sent):
+            if value is not None and type(value) not in (bool, int, str) and not (
+                    type(value) is float and math.isfinite(value)):
+                # (a value JSON cannot carry: bytes, NaN, ... -- a local store may bind them)
+                raise SLRError(f"sql: parameter {key!r} = {shown(value)} cannot be sent to slr "
+                               f"serve (parameters over the network are None, bool, int, "
+                               f"finite float or str)")
+        body: dict[str, Any] = {"query": query, "params": sent}
         if timeout is not None:
             body["timeout"] = _number(timeout, "timeout")
         reply = self._post("/sql", body, timeout=self._read_timeout(
@@ -996,7 +1015,12 @@ class RemoteKnowledgeBase:
         >>> kb.close(); server.stop(); server.kb.close()
         """
         from slr_sql.plot import timeline  # deferred: matplotlib is the extra slr_sql[plot]
-        return timeline(self, types, **options)
+        try:
+            return timeline(self, types, **options)
+        except SLRError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - as a local knowledge base's boundary words it
+            raise unforeseen_failure("plot", exc) from exc
 
     # -- subscriptions --------------------------------------------------------------------------
     def subscribe(self, pattern: str, where: str | None = None, since: Any = "now",
@@ -1029,7 +1053,9 @@ class RemoteKnowledgeBase:
         True
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        self._post("/unsubscribe", {"id": _text(id, "id")})
+        if not isinstance(id, str):   # (no subscription's id: sent, it would be its str)
+            raise no_subscription(id)
+        self._post("/unsubscribe", {"id": id})
 
 
 class RemoteWait:
@@ -1545,6 +1571,9 @@ def _goal_body(goal: str, at: Any, args: dict | None, timeout: Any) -> dict:
     check_goal(goal)
     body: dict[str, Any] = {"goal": goal}
     if args:
+        for name in args:
+            if not isinstance(name, str):   # (no variable's name: sent, it would be its str)
+                raise not_a_variable(name, goal)
         body["args"] = _encoded_args(args)
     if at is not None:
         body["at"] = _number(at, "at")
@@ -1577,10 +1606,24 @@ def _event_object(name: Any, args: Iterable[Any], start: Any, end: Any, where: s
     # them: a str or a generator is no argument list)
     arguments = event_arguments(name, args, start, end)
     arg_list = arguments if type(arguments) is list else list(arguments)
+    # (times and arguments a local store refuses are refused in its words: the order of its
+    # checks, the times first)
+    try:
+        check_times(start, end)
+    except BadEvent as exc:
+        raise event_rejection((name, arguments, start, end), exc) from None
     if not isinstance(name, str):   # (not sent as its text: a local store refuses it too)
         raise EventRejected(f"{where}event name must be an atom, not {shown(name)}")
-    obj: dict[str, Any] = {"name": name,
-                           "args": encode_arguments(arg_list, f"{where}args"),
+    try:
+        encoded = encode_arguments(arg_list, f"{where}args")
+    except TermError:
+        for arg in arg_list:
+            try:
+                encode_stored(arg)
+            except Unencodable as exc:
+                raise event_rejection((name, arguments, start, end), exc) from None
+        raise       # (a term the wire cannot carry)
+    obj: dict[str, Any] = {"name": name, "args": encoded,
                            "start": _time(start, f"{where}start")}
     if end is not None:
         obj["end"] = _time(end, f"{where}end")
@@ -1602,6 +1645,8 @@ def _tuple_object(ev: Any, index: int) -> dict:
     arguments = event_arguments(name, args, start, end)   # (its EventRejected as it is)
     try:
         return _event_object(name, arguments, start, end, "")
+    except EventRejected:
+        raise       # (in a local knowledge base's words already)
     except (TermError, SLRError) as exc:
         raise EventRejected(f"{shown(ev)}: {exc}") from None
 
