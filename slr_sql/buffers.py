@@ -318,6 +318,42 @@ def check_seconds(value: Any, what: str = "keep_seconds") -> float:
                        f"float holds (inf keeps everything)") from None
 
 
+def check_buffer_policy(keep_last: Any = None, keep_seconds: Any = None,
+                        keep_between: Any = None) -> tuple[str, Any, float | None, float | None]:
+    """The policy of ``add_buffer``: exactly one of ``keep_last``, ``keep_seconds`` (a
+    number, or a duration as text: ``"500ms"``) and ``keep_between``, as ``(kind, amount,
+    t1, t2)``; else an SLRError in words. The client of ``slr serve`` runs it too, and
+    sends what it returns.
+
+    >>> check_buffer_policy(keep_last=2), check_buffer_policy(keep_seconds="500ms")
+    (('cBuffer', 2, None, None), ('tBuffer', 0.5, None, None))
+    >>> check_buffer_policy(keep_between=(1, 5))
+    ('window', None, 1.0, 5.0)
+    >>> check_buffer_policy(keep_last="x")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: keep_last must be a non-negative integer, not 'x'
+    """
+    given = [name for name, value in (("keep_last", keep_last),
+                                      ("keep_seconds", keep_seconds),
+                                      ("keep_between", keep_between)) if value is not None]
+    if len(given) != 1:
+        raise SLRError("add_buffer needs exactly one of keep_last=N, keep_seconds=L, "
+                       f"keep_between=(T1, T2) (got {', '.join(given) or 'none'})")
+    if keep_last is not None:
+        return "cBuffer", check_count(keep_last), None, None
+    if keep_seconds is not None:
+        return "tBuffer", _seconds(keep_seconds), None, None
+    try:
+        t1, t2 = keep_between
+    except (TypeError, ValueError):
+        raise SLRError("keep_between must be a pair of times (T1, T2)") from None
+    t1, t2 = check_time(t1, "keep_between's T1"), check_time(t2, "keep_between's T2")
+    if not t1 <= t2:
+        raise SLRError(f"keep_between=({t1}, {t2}): T1 must not be after T2")
+    return "window", None, t1, t2
+
+
 def check_time(value: Any, what: str) -> float:
     """A window bound: a number (``-inf``/``inf`` allowed), else an SLRError in words.
 
@@ -611,28 +647,9 @@ class BufferManager:
     # -- runtime policies ------------------------------------------------------------
     def add_runtime(self, pattern: Any, keep_last: Any = None, keep_seconds: Any = None,
                     keep_between: Any = None) -> int:
-        given = [name for name, value in (("keep_last", keep_last),
-                                          ("keep_seconds", keep_seconds),
-                                          ("keep_between", keep_between)) if value is not None]
-        if len(given) != 1:
-            raise SLRError("add_buffer needs exactly one of keep_last=N, keep_seconds=L, "
-                           f"keep_between=(T1, T2) (got {', '.join(given) or 'none'})")
+        kind, amount, t1, t2 = check_buffer_policy(keep_last, keep_seconds, keep_between)
         term = _parse_pattern(pattern) if isinstance(pattern, str) else pattern
         compiled = analyze(term)
-        t1 = t2 = amount = None
-        if keep_last is not None:
-            kind, amount = "cBuffer", check_count(keep_last)
-        elif keep_seconds is not None:
-            kind, amount = "tBuffer", _seconds(keep_seconds)
-        else:
-            try:
-                t1, t2 = keep_between
-            except (TypeError, ValueError):
-                raise SLRError("keep_between must be a pair of times (T1, T2)") from None
-            t1, t2 = check_time(t1, "keep_between's T1"), check_time(t2, "keep_between's T2")
-            if not t1 <= t2:
-                raise SLRError(f"keep_between=({t1}, {t2}): T1 must not be after T2")
-            kind = "window"
         spec = BufferSpec(kind, compiled, amount, t1, t2, "runtime", "kb.add_buffer")
         with self.kb.loader.load_lock, self.store.transaction(), self.lock:
             conflicts(self.active() + [spec])

@@ -13,6 +13,7 @@ from __future__ import annotations
 import functools
 import math
 import numbers
+import os
 import time
 from operator import itemgetter
 from pathlib import Path
@@ -26,7 +27,7 @@ from .encoding import NullArgument, event_form_loop
 from .errors import BufferNotFound, EventRejected, NotAnEvent, SLRError, SLRUnavailable
 from .parser import parse_event_fast, parse_program, parse_term
 from .loader import ProgramLoader
-from .plans import PlanCache, argument_term, instantiate
+from .plans import PlanCache, argument_term, check_goal, instantiate
 from .plans import python_words as _python_words
 from .sql_functions import SQL_FUNCTIONS
 from .program import BufferDecl, Declarations, Program, split_event_atom, event_key
@@ -82,7 +83,18 @@ def _is_time_expression(t: Any) -> bool:
     return True
 
 
-def _program_name(name: Any) -> str:
+def check_program_name(name: Any) -> str:
+    """``name`` if it can name a program, else an :class:`SLRError` saying why. One of the
+    checks of a method's arguments that a local knowledge base and ``slr_sql.connect``'s
+    client both run (the client before sending): the same condition, the same words.
+
+    >>> check_program_name("tea")
+    'tea'
+    >>> check_program_name(5)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: a program name is a non-empty string, not 5
+    """
     if not isinstance(name, str) or not name:
         raise SLRError(f"a program name is a non-empty string, not {shown(name)}")
     problem = text_problem(name)
@@ -105,7 +117,7 @@ class KnowledgeBase:
                  cache_mib: float = CACHE_SIZE_KIB / 1024, robot: str | None = None,
                  max_learned_delay: float | None = DEFAULT_MAX_LEARNED_DELAY):
         if max_learned_delay is not None:
-            _check_time_option("max_learned_delay", max_learned_delay, minimum=0.0)
+            check_time_option("max_learned_delay", max_learned_delay, minimum=0.0)
             max_learned_delay = float(max_learned_delay)
         # the largest delay a type may learn (clocks.DEFAULT_MAX_LEARNED_DELAY; None: no cap)
         self.max_learned_delay = max_learned_delay
@@ -239,13 +251,7 @@ class KnowledgeBase:
         >>> kb.load("p(3).", name="main", replace=True); [a["X"] for a in kb.query("p(X)")]
         [3]
         """
-        name = _program_name(name)
-        if not isinstance(text, str):
-            raise SLRError(f"load takes program text (a str), not a {type(text).__name__}; "
-                           f"load_file(path) reads a file")
-        if not isinstance(filename, str) or text_problem(filename):
-            raise SLRError(f"load: filename is the text shown in messages (a str without lone "
-                           f"surrogates), not {shown(filename)}")
+        name = check_load(text, filename, name)
         clauses = parse_program(text, filename)   # syntax errors before taking the lock
         if not self.store.dialect.text_holds_nul:
             for what, value in (("program text", text), ("filename", filename),
@@ -265,7 +271,7 @@ class KnowledgeBase:
         >>> kb = open(); kb.load("p(1).", name="tea"); kb.unload("tea"); kb.programs()
         {}
         """
-        name = _program_name(name)
+        name = check_program_name(name)
         self.loader.unload(name)
         self._pipeline.loaded()
 
@@ -300,15 +306,7 @@ class KnowledgeBase:
         [{'X': Atom('box')}]
         >>> kb.close()
         """
-        path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except UnicodeDecodeError as exc:
-            raise SLRError(f"{path}: not a program (not UTF-8 text: byte "
-                           f"0x{exc.object[exc.start]:02x} at offset {exc.start})") from None
-        except OSError as exc:
-            raise SLRError(f"{path}: {exc.strerror or exc}") from None
-        self.load(text, str(path), name=name, replace=replace)
+        self.load(read_program_file(path), str(path), name=name, replace=replace)
 
     def define(self, name: str, arity: int, fn: Callable) -> None:
         """Register a Python predicate ``name/arity``.
@@ -367,9 +365,7 @@ class KnowledgeBase:
         1
         """
         if not isinstance(text, str):
-            raise SLRError(f"add takes one event written in SLR syntax (a str), not a "
-                           f"{type(text).__name__}; add_event(name, args, start, end) and "
-                           f"add_many([...]) take tuples")
+            raise not_event_text(text)
         try:
             event = self._event_from_text(text)
         except (ValueError, OverflowError) as exc:  # a number too long for Python to read
@@ -494,13 +490,11 @@ class KnowledgeBase:
         >>> kb.query("prev(pos(a, X)^T, 4)")
         [{'X': 1, 'T': 1.0}]
         """
-        if limit is not None and (type(limit) is not int or limit < 0):
-            raise SLRError(f"limit must be a count (an integer >= 0), not {shown(limit)}")
-        if at is not None or timeout is not None:
-            _check_time_option("at", at)
-            _check_time_option("timeout", timeout, minimum=0.0)
-        if robot is not None:
-            check_robot_name(robot)
+        if limit is not None or at is not None or timeout is not None or robot is not None \
+                or max_steps is not None or (args is not None and type(args) is not dict):
+            # (the common query gives none of them: no call on its path)
+            check_query_options(at=at, timeout=timeout, limit=limit, robot=robot, args=args,
+                                max_steps=max_steps)
         if wait:  # synchronized (SLRTimeout names the incomplete types)
             return self.submit(goal, at=at, args=args, timeout=timeout, robot=robot).result()
         if args and limit is None and robot is None:
@@ -562,10 +556,7 @@ class KnowledgeBase:
         >>> list(islice(open().solutions("between(1, inf, X)"), 3))
         [{'X': 1}, {'X': 2}, {'X': 3}]
         """
-        _check_time_option("at", at)
-        _check_time_option("timeout", timeout, minimum=0.0)
-        if robot is not None:
-            check_robot_name(robot)
+        check_query_options(at=at, timeout=timeout, robot=robot, args=args)
         try:
             self._refresh()
             plan = self.plans.plan(goal, tuple(args) if args else ())
@@ -614,6 +605,7 @@ class KnowledgeBase:
 
         from .analysis import goal_refs
 
+        check_goal(goal)
         self._refresh()
         term, _ = parse_term(goal, "<query>")
         program = self.engine.program
@@ -639,6 +631,7 @@ class KnowledgeBase:
         >>> open().explain("p(X)").splitlines()[0]
         'goal: p(X)'
         """
+        check_goal(goal)
         self._refresh()
         rules = self._cep.explain(goal)  # (is a rule, lines) or None
         if rules is not None and rules[0]:
@@ -682,8 +675,7 @@ class KnowledgeBase:
         >>> kb.mark_complete("p/1", 1); p.result(timeout=5)
         [{'L': [Atom('a')]}]
         """
-        if robot is not None:
-            check_robot_name(robot)
+        check_query_options(at=at, timeout=timeout, robot=robot, args=args)
         self._refresh()
         return self._sync.submit(goal, at=at, id=id, args=args, timeout=timeout,
                                  callback=callback, robot=robot)
@@ -718,15 +710,7 @@ class KnowledgeBase:
         10.0
         >>> kb.close()
         """
-        _check_event_type("mark_complete", event_type)
-        if isinstance(t, bool) or not isinstance(t, numbers.Real):  # (numpy numbers are Real)
-            raise SLRError(f"mark_complete: t must be a number of seconds, not {shown(t)}")
-        try:
-            if math.isnan(float(t)):
-                raise SLRError("mark_complete: t must be a number of seconds, not NaN")
-        except OverflowError:
-            raise SLRError(f"mark_complete: t is out of range (an integer of "
-                           f"{int(t).bit_length()} bits; a time is a float)") from None
+        check_mark(event_type, t)
         self._refresh()
         self._pipeline.mark(event_type, t)
 
@@ -739,7 +723,7 @@ class KnowledgeBase:
         15.0
         >>> kb.close()
         """
-        _check_event_type("complete_until", event_type)
+        check_event_type("complete_until", event_type)
         self._refresh()
         return self._sync.complete_until(event_type)
 
@@ -835,8 +819,7 @@ class KnowledgeBase:
         """
         from .store import DatabaseError
 
-        if not isinstance(query, str):
-            raise SLRError(f"sql: the statement is text (a str), not a {type(query).__name__}")
+        check_sql(query, timeout)
         try:
             if not write:
                 return self.store.sql(query, params, False, timeout)
@@ -850,8 +833,7 @@ class KnowledgeBase:
             raise SLRError("sql: the statement or a parameter is not valid Unicode (a lone "
                            "surrogate such as '\\ud800'); nothing was run") from None
         except (OverflowError, TypeError, ValueError) as exc:  # a parameter SQLite cannot take
-            raise SLRError(f"sql: a parameter cannot be bound: {_python_words(exc)} "
-                           f"(parameters are None, int of 64 bits, float, str or bytes)") from None
+            raise unbindable_parameter(exc) from None
 
     def _sql_write(self, query: str, params: Iterable[Any], timeout: float | None
                    ) -> tuple[list[str], list[tuple]]:
@@ -951,9 +933,101 @@ class KnowledgeBase:
         self._subscriptions.unsubscribe(id)
 
 
-def _check_event_type(method: str, spec: Any) -> None:
-    """An event type argument: text ``"p/N"`` or ``"p"`` (or a ``(name, arity)`` pair) that
-    can be stored, with an arity an event may have."""
+def read_program_file(path: Any) -> str:
+    """The text of the program file ``path`` for ``load_file``, else an :class:`SLRError`
+    naming it (the client of ``slr serve`` reads the file the same way, where it runs).
+
+    >>> read_program_file("/no/such/rules.slr")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: /no/such/rules.slr: No such file or directory
+    """
+    if not isinstance(path, (str, os.PathLike)):
+        raise SLRError(f"load_file takes a file's path (a str or a pathlib.Path), not "
+                       f"{shown(path)}")
+    path = Path(path)
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise SLRError(f"{path}: not a program (not UTF-8 text: byte "
+                       f"0x{exc.object[exc.start]:02x} at offset {exc.start})") from None
+    except OSError as exc:
+        raise SLRError(f"{path}: {exc.strerror or exc}") from None
+    except ValueError as exc:   # a NUL in the path
+        raise SLRError(f"{shown(str(path))}: {exc}") from None
+
+
+def not_event_text(text: Any) -> SLRError:
+    """The error of ``add`` given ``text`` that is no str (the client of ``slr serve``
+    raises it too, before sending).
+
+    >>> print(not_event_text(("p", [1], 1.0, 1.0)))
+    add takes one event written in SLR syntax (a str), not a tuple; add_event(name, args, start, end) and add_many([...]) take tuples
+    """
+    return SLRError(f"add takes one event written in SLR syntax (a str), not a "
+                    f"{type(text).__name__}; add_event(name, args, start, end) and "
+                    f"add_many([...]) take tuples")
+
+
+def unbindable_parameter(exc: BaseException) -> SLRError:
+    """The error of ``sql`` whose ``params`` cannot be bound (``exc``: why), raised by the
+    client of ``slr serve`` too for parameters it cannot go through.
+
+    >>> print(unbindable_parameter(TypeError("'int' object is not iterable")))
+    sql: a parameter cannot be bound: 'int' object is not iterable (parameters are None, int of 64 bits, float, str or bytes)
+    """
+    return SLRError(f"sql: a parameter cannot be bound: {_python_words(exc)} "
+                    f"(parameters are None, int of 64 bits, float, str or bytes)")
+
+
+def check_sql(query: Any, timeout: Any) -> None:
+    """The statement and the ``timeout`` of ``sql``, else an :class:`SLRError` (run by the
+    client of ``slr serve`` too, before sending).
+
+    >>> check_sql("SELECT 1", 2.0)
+    >>> check_sql("SELECT 1", "soon")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: sql: timeout must be a number of seconds, not 'soon'
+    """
+    if not isinstance(query, str):
+        raise SLRError(f"sql: the statement is text (a str), not a {type(query).__name__}")
+    check_time_option("sql: timeout", timeout, minimum=0.0)
+
+
+def check_load(text: Any, filename: Any, name: Any) -> str:
+    """The arguments of ``load``: program text, the file name its messages show and the
+    program's name (returned), else an :class:`SLRError` (run by the client of ``slr
+    serve`` too, before sending).
+
+    >>> check_load("p(1).", "<string>", "main")
+    'main'
+    >>> check_load(b"p(1).", "<string>", "main")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: load takes program text (a str), not a bytes; load_file(path) reads a file
+    """
+    name = check_program_name(name)
+    if not isinstance(text, str):
+        raise SLRError(f"load takes program text (a str), not a {type(text).__name__}; "
+                       f"load_file(path) reads a file")
+    if not isinstance(filename, str) or text_problem(filename):
+        raise SLRError(f"load: filename is the text shown in messages (a str without lone "
+                       f"surrogates), not {shown(filename)}")
+    return name
+
+
+def check_event_type(method: str, spec: Any) -> None:
+    """An event type argument of ``method``: text ``"p/N"`` or ``"p"`` (or a ``(name,
+    arity)`` pair) that can be stored, with an arity an event may have; else an
+    :class:`SLRError` (run by the client of ``slr serve`` too, before sending).
+
+    >>> check_event_type("complete_until", "p/1")
+    >>> check_event_type("complete_until", 5)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: complete_until: the event type is text such as "p/2" or "p", not 5
+    """
     if isinstance(spec, tuple) and len(spec) == 2 and isinstance(spec[0], str) and \
             (spec[1] is None or (type(spec[1]) is int and 0 <= spec[1] <= 100_000)):
         text = spec[0]
@@ -971,8 +1045,63 @@ def _check_event_type(method: str, spec: Any) -> None:
         raise SLRError(f"{method}: the event type {shown(spec)} cannot be stored: {problem}")
 
 
-def _check_time_option(name: str, value: Any, minimum: float | None = None) -> None:
-    """``at=`` and ``timeout=`` are numbers of seconds (``None``: not given)."""
+def check_mark(event_type: Any, t: Any) -> None:
+    """The arguments of ``mark_complete``: an event type and a number of seconds, else an
+    :class:`SLRError` (run by the client of ``slr serve`` too, before sending).
+
+    >>> check_mark("p/1", 10)
+    >>> check_mark("p/1", "later")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: mark_complete: t must be a number of seconds, not 'later'
+    """
+    check_event_type("mark_complete", event_type)
+    if isinstance(t, bool) or not isinstance(t, numbers.Real):  # (numpy numbers are Real)
+        raise SLRError(f"mark_complete: t must be a number of seconds, not {shown(t)}")
+    try:
+        if math.isnan(float(t)):
+            raise SLRError("mark_complete: t must be a number of seconds, not NaN")
+    except OverflowError:
+        raise SLRError(f"mark_complete: t is out of range (an integer of "
+                       f"{int(t).bit_length()} bits; a time is a float)") from None
+
+
+def check_query_options(at: Any = None, timeout: Any = None, limit: Any = None,
+                        robot: Any = None, args: Any = None, max_steps: Any = None) -> None:
+    """The options of ``query``, ``solutions``, ``submit`` and ``ask``: ``at`` and
+    ``timeout`` numbers of seconds (``timeout`` >= 0), ``limit`` and ``max_steps``
+    counts, ``robot`` a
+    robot's name, ``args`` a dict (None: not given), else an :class:`SLRError` (run by
+    the client of ``slr serve`` too, before sending).
+
+    >>> check_query_options(at=5, timeout=1.5, limit=3, args={"X": 1})
+    >>> check_query_options(limit="x")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: limit must be a count (an integer >= 0), not 'x'
+    """
+    if limit is not None and (type(limit) is not int or limit < 0):
+        raise SLRError(f"limit must be a count (an integer >= 0), not {shown(limit)}")
+    if max_steps is not None and (type(max_steps) is not int or max_steps < 0):
+        raise SLRError(f"max_steps must be a count (an integer >= 0), not {shown(max_steps)}")
+    check_time_option("at", at)
+    check_time_option("timeout", timeout, minimum=0.0)
+    if robot is not None:
+        check_robot_name(robot)
+    if args is not None and not isinstance(args, dict):
+        raise SLRError(f"args must be a dict of variable name -> value, not {shown(args)}")
+
+
+def check_time_option(name: str, value: Any, minimum: float | None = None) -> None:
+    """``at=`` and ``timeout=`` are numbers of seconds (``None``: not given), else an
+    :class:`SLRError` (run by the client of ``slr serve`` too, before sending).
+
+    >>> check_time_option("timeout", 2.5, minimum=0.0)
+    >>> check_time_option("timeout", -1, minimum=0.0)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: timeout must be a number of seconds >= 0, not -1
+    """
     if value is None:
         return
     if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -1055,8 +1184,19 @@ def _boundary(method: Callable) -> Callable:
                 args[1] if where == "open" and len(args) > 1 else kwargs.get("path"))
             raise store_error(exc, path) from None
         except Exception as exc:  # noqa: BLE001 - the boundary: every kind becomes words
-            raise SLRError(f"{where}: {type(exc).__name__}: {exc}") from exc
+            raise unforeseen_failure(where, exc) from exc
     return guarded
+
+
+def unforeseen_failure(where: str, exc: BaseException) -> SLRError:
+    """The facade's last resort (:func:`_boundary`): a Python error no check foresaw,
+    raised by the method ``where``, as an :class:`SLRError` (the client of ``slr serve``
+    words what it runs on the caller's side, ``plot``, so too).
+
+    >>> print(unforeseen_failure("plot", TypeError("'int' object is not iterable")))
+    plot: TypeError: 'int' object is not iterable
+    """
+    return SLRError(f"{where}: {type(exc).__name__}: {exc}")
 
 
 # Every public method of the facade goes through the boundary (one list, kept next to it).

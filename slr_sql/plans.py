@@ -31,7 +31,7 @@ from .store.checks import shown
 from .terms import Atom, String, Struct, Var, deref, from_python, same_float, to_python
 
 __all__ = ["Plan", "PlanCache", "PrevLookup", "BoundPrev", "instantiate", "argument_term",
-           "python_words"]
+           "check_goal", "not_a_variable", "python_words"]
 
 # at most this many plans are kept; past it the cache starts again (goals built by string
 # splicing would otherwise grow it without bound)
@@ -326,8 +326,7 @@ class PlanCache:
         plan = self.entries.get(key)
         if plan is not None:
             return plan
-        if not isinstance(goal, str):
-            raise SLRError(f"a goal is SLR text (a str), not {type(goal).__name__} {shown(goal)}")
+        check_goal(goal)
         term, varnames = parse_term(goal, "<query>")
         compiled = compile_clause((), term)
         slots: dict[str, int] = {}
@@ -344,7 +343,7 @@ class PlanCache:
             walk(g)
         for name in arg_names:
             if name not in varnames:
-                raise SLRError(f"args names {shown(name)}, which is not a variable of the goal {shown(goal)}")
+                raise not_a_variable(name, goal)
         names = [(n, slots[n]) for n in varnames if not n.startswith("_") and n in slots]
         plan = Plan(compiled, names, {n: slots[n] for n in arg_names if n in slots}, goal,
                      PrevLookup.recognise(compiled))
@@ -384,6 +383,30 @@ def instantiate(plan: Plan, args: dict | None, terms: bool = False) -> tuple[Any
         if frame[slot] is None:
             frame[slot] = Var(name)
     return goal, frame
+
+
+def not_a_variable(name: Any, goal: str) -> SLRError:
+    """The error of ``args`` naming ``name``, which is no variable of ``goal`` (the client
+    of ``slr serve`` raises it too for a name that is no str, which names none).
+
+    >>> print(not_a_variable(5, "X = 1"))
+    args names 5, which is not a variable of the goal 'X = 1'
+    """
+    return SLRError(f"args names {shown(name)}, which is not a variable of the goal "
+                    f"{shown(goal)}")
+
+
+def check_goal(goal: Any) -> None:
+    """A goal is SLR text, else an :class:`SLRError` (run by the client of ``slr serve``
+    too, before sending).
+
+    >>> check_goal(42)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: a goal is SLR text (a str), not int 42
+    """
+    if not isinstance(goal, str):
+        raise SLRError(f"a goal is SLR text (a str), not {type(goal).__name__} {shown(goal)}")
 
 
 def argument_term(name: str, value: Any) -> Any:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import inspect
 import threading
+import time
 import typing
 
 import pytest
@@ -271,3 +272,180 @@ def test_an_unknown_buffer_is_a_404_named_after_its_condition(pair):
     assert error_status(slr_sql.BufferNotFound("no active buffer #1")) == 404
     assert "BufferNotFound" in slr_sql.__all__ and issubclass(slr_sql.BufferNotFound,
                                                              slr_sql.SLRError)
+
+
+def _error(fn, kb):
+    """(class name, message) of the SLRError ``fn(kb)`` raises; ("value", ...) otherwise."""
+    try:
+        return "value", repr(fn(kb))
+    except slr_sql.SLRError as exc:
+        return type(exc).__name__, str(exc)
+
+
+# an argument a local knowledge base refuses: the same class and the same words through
+# `slr serve` (the client runs the local check before sending: each was a ServiceError
+# (BadRequest) of the server's words, a TermError, a raw Python error, or no error at all,
+# on one side)
+SAME_WORDS = {
+    "limit that is text": (lambda kb: kb.query("true", limit="x"), "SLRError",
+                           "limit must be a count (an integer >= 0), not 'x'"),
+    "limit that is a float": (lambda kb: kb.query("true", limit=1.0), "SLRError",
+                              "limit must be a count (an integer >= 0), not 1.0"),
+    "negative timeout": (lambda kb: kb.query("true", timeout=-1), "SLRError",
+                         "timeout must be a number of seconds >= 0, not -1"),
+    "timeout that is text": (lambda kb: kb.query("true", timeout="x"), "SLRError",
+                             "timeout must be a number of seconds, not 'x'"),
+    "at that is a bool": (lambda kb: kb.query("true", at=True), "SLRError",
+                          "at must be a number of seconds, not True"),
+    "robot that is no name": (lambda kb: kb.query("true", robot=5), "SLRError",
+                              "a robot's name is a non-empty text, not 5"),
+    "args value that is no term": (lambda kb: kb.query("X = Y", args={"Y": {1}}), "SLRError",
+                                   "args['Y'] = {1} is not a term"),
+    "args value None": (lambda kb: kb.query("X = Y", args={"Y": None}), "SLRError",
+                        "args['Y'] = None is not a term"),
+    "args that is no dict": (lambda kb: kb.query("X = 1", args=[1]), "SLRError",
+                             "args must be a dict of variable name -> value, not [1]"),
+    "goal that is no text": (lambda kb: kb.query(5), "SLRError",
+                             "a goal is SLR text (a str), not int 5"),
+    "explain of a goal that is no text": (lambda kb: kb.explain(5), "SLRError",
+                                          "a goal is SLR text (a str), not int 5"),
+    "warnings of a goal that is no text": (lambda kb: kb.goal_warnings(None), "SLRError",
+                                           "a goal is SLR text (a str), not NoneType None"),
+    "solutions with a negative timeout": (lambda kb: list(kb.solutions("true", timeout=-1)),
+                                          "SLRError",
+                                          "timeout must be a number of seconds >= 0, not -1"),
+    # locally the boundary's "submit: ValueError: could not convert string to float: 'x'"
+    "submit at a time that is text": (lambda kb: kb.submit("true", at="x"), "SLRError",
+                                      "at must be a number of seconds, not 'x'"),
+    "submit with a negative timeout": (lambda kb: kb.submit("true", at=0, timeout=-1),
+                                       "SLRError",
+                                       "timeout must be a number of seconds >= 0, not -1"),
+    "unload of a name that is no text": (lambda kb: kb.unload(5), "SLRError",
+                                         "a program name is a non-empty string, not 5"),
+    "load under a name that is no text": (lambda kb: kb.load("p(1).", name=5), "SLRError",
+                                          "a program name is a non-empty string, not 5"),
+    "load of text that is no str": (lambda kb: kb.load(b"p(1)."), "SLRError",
+                                    "load takes program text (a str), not a bytes"),
+    "load with a filename that is no str": (lambda kb: kb.load("p(1).", 5), "SLRError",
+                                            "load: filename is the text shown in messages"),
+    "load_file of a path that is no path": (lambda kb: kb.load_file(5), "SLRError",
+                                            "load_file takes a file's path (a str or a "
+                                            "pathlib.Path), not 5"),
+    "load_file of a missing file": (lambda kb: kb.load_file("/no/such/dir/rules.slr"),
+                                    "SLRError",
+                                    "/no/such/dir/rules.slr: No such file or directory"),
+    "add of no text": (lambda kb: kb.add(("p", [1], 1.0, 1.0)), "SLRError",
+                       "add takes one event written in SLR syntax (a str), not a tuple"),
+    "add_event arguments that are no list": (lambda kb: kb.add_event("p", 5, 1.0),
+                                             "EventRejected",
+                                             "event arguments must be a list or tuple, not "
+                                             "int 5"),
+    # remotely list("ab") was sent: an event p(a, b) that a local store refuses
+    "add_event arguments that are a str": (lambda kb: kb.add_event("p", "ab", 1.0),
+                                           "EventRejected",
+                                           "event arguments must be a list or tuple, not "
+                                           "str 'ab'"),
+    "mark_complete at a time that is text": (lambda kb: kb.mark_complete("p/1", "x"),
+                                             "SLRError",
+                                             "mark_complete: t must be a number of seconds, "
+                                             "not 'x'"),
+    "mark_complete of a type that is no text": (lambda kb: kb.mark_complete(5, 1.0),
+                                                "SLRError",
+                                                "mark_complete: the event type is text such as"),
+    "complete_until of a type that is no text": (lambda kb: kb.complete_until(None),
+                                                 "SLRError",
+                                                 "complete_until: the event type is text such "
+                                                 "as"),
+    "keep_last that is text": (lambda kb: kb.add_buffer("p(_)", keep_last="x"), "SLRError",
+                               "keep_last must be a non-negative integer, not 'x'"),
+    "keep_last that is a bool": (lambda kb: kb.add_buffer("p(_)", keep_last=True),
+                                 "SLRError",
+                                 "keep_last must be a non-negative integer, not True"),
+    "negative keep_seconds": (lambda kb: kb.add_buffer("p(_)", keep_seconds=-1), "SLRError",
+                              "keep_seconds must be a non-negative number of seconds, not -1"),
+    "keep_between that is no pair": (lambda kb: kb.add_buffer("p(_)", keep_between=5),
+                                     "SLRError",
+                                     "keep_between must be a pair of times (T1, T2)"),
+    "sql statement that is no text": (lambda kb: kb.sql(5), "SLRError",
+                                      "sql: the statement is text (a str), not a int"),
+    # locally "sql: a parameter cannot be bound: unsupported operand type(s) ..."
+    "sql timeout that is text": (lambda kb: kb.sql("SELECT 1", timeout="x"), "SLRError",
+                                 "sql: timeout must be a number of seconds, not 'x'"),
+    "subscribe with max_queue 0": (lambda kb: kb.subscribe("p(X)^T", max_queue=0),
+                                   "SLRError",
+                                   "subscribe: max_queue must be a positive integer, not 0"),
+    "subscribe with max_lag 0": (lambda kb: kb.subscribe("p(X)^T", max_lag=0), "SLRError",
+                                 "subscribe: max_lag must be a positive integer or None, "
+                                 "not 0"),
+    "subscribe since a time that is text": (lambda kb: kb.subscribe("p(X)^T", since="x"),
+                                            "SLRError",
+                                            "subscribe: since must be a number of seconds, "
+                                            "not 'x'"),
+    "subscribe where no goal": (lambda kb: kb.subscribe("p(X)^T", where=5), "SLRError",
+                                "subscribe: where must be a goal as text, not 5"),
+    "subscribe to a pattern that is no text": (lambda kb: kb.subscribe(5), "SLRError",
+                                               "subscribe: the pattern must be text"),
+    # locally max_steps="x" was taken (and ignored until the step count was compared)
+    "max_steps that is text": (lambda kb: kb.query("true", max_steps="x"), "SLRError",
+                               "max_steps must be a count (an integer >= 0), not 'x'"),
+    "negative max_steps": (lambda kb: kb.query("true", max_steps=-1), "SLRError",
+                           "max_steps must be a count (an integer >= 0), not -1"),
+    # remotely the key's str() was sent: args names '5'
+    "args naming no variable": (lambda kb: kb.query("X = 1", args={5: 1}), "SLRError",
+                                "args names 5, which is not a variable of the goal 'X = 1'"),
+    "add_event at a time that is text": (lambda kb: kb.add_event("p", [1], "x"),
+                                         "EventRejected",
+                                         "p(1)^'x': event times must be numbers (got 'x')"),
+    "add_event ending at a time that is text": (lambda kb: kb.add_event("p", [1], 1.0, "x"),
+                                                "EventRejected",
+                                                "p(1)^[1.0,'x']: event times must be numbers"),
+    "add_event of an argument that is no term": (lambda kb: kb.add_event("p", [None], 1.0),
+                                                 "EventRejected",
+                                                 "p(None)^1.0: event argument cannot be "
+                                                 "stored"),
+    "add_many of a tuple at a time that is text": (
+        lambda kb: [(e.index, type(e).__name__, str(e))
+                    for e in kb.add_many([("p", [1], "x", 1.0)])],
+        "value", "event times must be numbers (got 'x')"),
+    # remotely "the query parameter "type" (p/N) is required"
+    "complete_until of an empty type": (lambda kb: kb.complete_until(""), "SLRError",
+                                        "expected an event type p/N or p, not "),
+    # remotely a path no route matched: ServiceError (NotFound), "no such endpoint"
+    "remove_buffer of a negative id": (lambda kb: kb.remove_buffer(-1), "BufferNotFound",
+                                       "no active buffer #-1"),
+    "add_buffer of a pattern that is no term": (lambda kb: kb.add_buffer(5, keep_last=1),
+                                                "SLRError",
+                                                "a buffer pattern must be an event term, "
+                                                "not 5"),
+    # remotely raw Python errors, no SLRError
+    "sql parameters that are no sequence": (lambda kb: kb.sql("SELECT ?", 5), "SLRError",
+                                            "sql: a parameter cannot be bound: 'int' object is "
+                                            "not iterable"),
+    "plot of types that are no list": (lambda kb: kb.plot(5), "SLRError",
+                                       "plot: TypeError: 'int' object is not iterable"),
+    "unsubscribe of an id that is no text": (lambda kb: kb.unsubscribe(5), "SLRError",
+                                             "no subscription with id 5"),
+}
+
+
+# what a local knowledge base takes, taken remotely too (the server refused it)
+SAME_VALUE = {
+    # (stamped now: the stores' clocks are wall clocks)
+    "an event named ''": lambda kb: kb.add_event("", [1], time.time()),
+    "a bool as an SQL parameter": lambda kb: kb.sql("SELECT ? + 1", [True]),
+}
+
+
+@pytest.mark.parametrize("condition", sorted(SAME_VALUE))
+def test_what_a_local_knowledge_base_takes_is_taken_remotely_too(pair, condition):
+    local, remote = (_error(SAME_VALUE[condition], kb) for kb in pair)
+    assert local == remote and local[0] == "value", (local, remote)
+
+
+@pytest.mark.parametrize("condition", sorted(SAME_WORDS))
+def test_a_refused_argument_is_the_same_error_in_the_same_words_local_and_remote(
+        pair, condition):
+    call, expected_class, expected_words = SAME_WORDS[condition]
+    local, remote = (_error(call, kb) for kb in pair)
+    assert local == remote
+    assert local[0] == expected_class and expected_words in local[1], local

@@ -263,8 +263,11 @@ def test_a_prefix_beyond_ascii_and_a_parameter_no_url_carries_are_slr_errors(ser
         assert caught.value.status == 404
     with slr_sql.connect(server.url, token="s3cret") as kb:
         with pytest.raises(ServiceError) as caught:
-            kb.complete_until("p\ud800/1")
+            kb.fleet_positions("r\ud800")
         assert caught.value.kind == "BadRequest" and caught.value.status == 0
+        # (an event type the store cannot hold is refused before any URL, as locally)
+        with pytest.raises(slr_sql.SLRError, match="cannot be stored: text with a lone"):
+            kb.complete_until("p\ud800/1")
 
 
 def test_the_client_goes_straight_to_the_url_whatever_the_proxy_variables_say(

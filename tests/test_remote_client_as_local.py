@@ -35,8 +35,9 @@ def test_sql_params_by_name_are_the_values_of_the_names_not_the_names():
 
 def test_a_sql_param_by_name_that_is_no_sql_value_is_refused_by_name():
     with local_and_remote() as (_local, remote):
-        with pytest.raises(slr_sql.SLRError, match=r"params\['x'\]: a SQL parameter is a "
-                                                    r"number, a string or null"):
+        # (refused by the client, which cannot send it, before anything is sent)
+        with pytest.raises(slr_sql.SLRError, match=r"sql: parameter 'x' = \[1, 2\] cannot be "
+                                                    r"sent to slr serve"):
             remote.sql("SELECT :x", {"x": [1, 2]})
 
 

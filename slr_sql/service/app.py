@@ -461,7 +461,7 @@ class _IdConvertor(Convertor):
     check; int() refuses more than 4,300 digits, and that exception would reach the client
     as a 500 and the log as a traceback. A longer path is no route (404)."""
 
-    regex = "[0-9]{1,64}"
+    regex = "-?[0-9]{1,64}"   # (-1 is no buffer's id: BufferNotFound, as locally)
 
     def convert(self, value: str) -> int:
         return int(value)
@@ -1159,7 +1159,7 @@ async def _mark_complete(svc: "_Service", request: Request) -> Any:
         response={"type": "string", "time": "Number"})
 async def _complete_until(svc: "_Service", request: Request) -> Any:
     event_type = request.query_params.get("type")
-    if not event_type:
+    if event_type is None:      # ("": the knowledge base's words say what it is not)
         raise ServiceError('the query parameter "type" (p/N) is required')
     t = await svc.call(svc.kb.complete_until, event_type)
     return {"type": event_type, "time": encode_plain(float(t))}
@@ -1228,9 +1228,9 @@ async def _sql(svc: "_Service", request: Request) -> Any:
     params = _field(b, "params", (list, dict), default=[])
     timeout = _cap(_number(b, "timeout", minimum=0), svc.limits.sql_timeout)
     for i, p in params.items() if isinstance(params, dict) else enumerate(params):
-        if p is not None and type(p) not in (int, float, str):
-            raise ServiceError(f"params[{i!r}]: a SQL parameter is a number, a string "
-                               f"or null")
+        if p is not None and type(p) not in (int, float, str, bool):   # (True binds 1)
+            raise ServiceError(f"params[{i!r}]: a SQL parameter is a number, a string, "
+                               f"true, false or null")
     async with svc.query_slot(timeout) as waited:
         columns, rows = await svc.call(_read_only_sql, svc.kb, statement, params,
                                        max(timeout - waited, 0.0))
@@ -1342,8 +1342,8 @@ def _event_tuple(obj: dict, plain: bool = False) -> tuple:
     ``plain``: the arguments need no decoding (:func:`_plain_arguments`). In a batch, the
     index of the event says which one a message is about."""
     name = obj.get("name")
-    if type(name) is not str or not name:
-        raise ServiceError('"name" must be a non-empty string')
+    if type(name) is not str:   # ("" is an atom: the knowledge base decides, as locally)
+        raise ServiceError('"name" must be a string')
     args = obj.get("args", [])
     if type(args) is not list:
         raise ServiceError('"args" must be an array of terms')

@@ -59,7 +59,17 @@ from slr_sql.api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 
 from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args,
                        encode_arguments, encode_term, loads)
-from ..store.checks import shown
+from ..kb import (check_event_type, check_load, check_mark, check_program_name,
+                  check_query_options, check_sql, not_event_text, read_program_file,
+                  unbindable_parameter, unforeseen_failure)
+from ..buffers import analyze, check_buffer_policy
+from ..terms import format_term
+from ..plans import argument_term, check_goal, not_a_variable
+from ..subscriptions.hub import DEFAULT_MAX_QUEUE, check_subscription
+from ..encoding import Unencodable
+from ..encoding import encode as encode_stored
+from ..store.checks import BadEvent, check_times, event_arguments, event_rejection, shown
+from ..subscriptions.registry import no_subscription
 from .auth import check_token_text
 # (the server of this module's examples: a knowledge base served from a thread)
 from .background import BackgroundServer  # noqa: F401
@@ -409,7 +419,9 @@ class RemoteKnowledgeBase:
         [{'X': Atom('cup1'), 'T': 2.0}]
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        _expect(self._post("/add", {"event": _text(text, "event")}), "added", int)
+        if not isinstance(text, str):
+            raise not_event_text(text)
+        _expect(self._post("/add", {"event": text}), "added", int)
 
     @_reads_answer
     def add_event(self, name: str, args: Iterable[Any], start: float,
@@ -423,6 +435,8 @@ class RemoteKnowledgeBase:
         [{'O': Atom('cup1'), 'L': [0.4, 0.1, 0.9], 'S': 3.0, 'E': 3.5}]
         >>> kb.close(); server.stop(); server.kb.close()
         """
+        if end is None:
+            end = start
         if not isinstance(name, str):     # (refused in a local knowledge base's words)
             raise EventRejected(f"add_event: event name must be an atom (a str), not "
                                 f"{shown(name)}")
@@ -512,9 +526,9 @@ class RemoteKnowledgeBase:
         [{'C': Atom('red')}]
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        body: dict[str, Any] = {"text": _text(text, "text"), "name": _text(name, "name")}
+        body: dict[str, Any] = {"text": text, "name": check_load(text, filename, name)}
         if filename != "<string>":
-            body["filename"] = str(filename)
+            body["filename"] = filename
         if replace:
             body["replace"] = True
         _expect(self._post("/load", body), "loaded", bool)
@@ -532,11 +546,7 @@ class RemoteKnowledgeBase:
         ([{'X': Atom('box')}], True)
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        try:
-            text = Path(path).read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise SLRError(f"cannot read {path}: {exc}") from None
-        self.load(text, str(path), name=name, replace=replace)
+        self.load(read_program_file(path), str(path), name=name, replace=replace)
 
     @_reads_answer
     def unload(self, name: str) -> None:
@@ -550,7 +560,7 @@ class RemoteKnowledgeBase:
         {}
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        _expect(self._post("/unload", {"name": name}), "unloaded", str)
+        _expect(self._post("/unload", {"name": check_program_name(name)}), "unloaded", str)
 
     @_reads_answer
     def programs(self) -> dict[str, ProgramInfo]:
@@ -618,6 +628,8 @@ class RemoteKnowledgeBase:
         ([{'X': 2, 'T': 2.0}, {'X': 3, 'T': 3.0}], [{'X': 1}, {'X': 2}])
         >>> kb.close(); server.stop(); server.kb.close()
         """
+        check_query_options(at=at, timeout=timeout, limit=limit, robot=robot, args=args,
+                            max_steps=max_steps)
         if wait:  # synchronized: long-polls, however long the wait (as kb.query does it)
             return self.submit(goal, at=at, args=args, timeout=timeout, robot=robot).result()
         body = _goal_body(goal, at, args, timeout)
@@ -727,6 +739,7 @@ class RemoteKnowledgeBase:
         [{'L': [Atom('a')]}]
         >>> kb.close(); server.stop(); server.kb.close()
         """
+        check_query_options(at=at, timeout=timeout, robot=robot, args=args)
         body = _goal_body(goal, at, args, timeout)
         if id is not None:
             body["id"] = str(id)
@@ -772,7 +785,8 @@ class RemoteKnowledgeBase:
         engine: sql (one prepared statement; rows decoded into answers)
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        return _expect(self._post("/explain", {"goal": _text(goal, "goal")}), "explain", str)
+        check_goal(goal)
+        return _expect(self._post("/explain", {"goal": goal}), "explain", str)
 
     def solutions(self, goal: str, at: float | None = None, args: dict | None = None,
                   timeout: float | None = None,
@@ -802,7 +816,8 @@ class RemoteKnowledgeBase:
         ['no events or rules of colour/2; did you mean color/2?']
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        return list(_expect(self._post("/warnings", {"goal": _text(goal, "goal")}),
+        check_goal(goal)
+        return list(_expect(self._post("/warnings", {"goal": goal}),
                             "warnings", list))
 
     def pending(self) -> list[PendingQueryAPI]:
@@ -830,6 +845,7 @@ class RemoteKnowledgeBase:
         (10.0, None, 15.0)
         >>> kb.close(); server.stop(); server.kb.close()
         """
+        check_mark(event_type, t)
         _expect(self._post("/mark_complete", {"type": event_type, "time": _number(t, "t")}),
                 "type", str)
 
@@ -843,6 +859,7 @@ class RemoteKnowledgeBase:
         6.0
         >>> kb.close(); server.stop(); server.kb.close()
         """
+        check_event_type("complete_until", event_type)
         return float(decode_plain(self._get("/complete_until", {"type": event_type})["time"]))
 
     # -- buffers --------------------------------------------------------------------------------
@@ -861,14 +878,19 @@ class RemoteKnowledgeBase:
         [{'R': Atom('r1'), 'X': 2, 'T': 2.0}, {'R': Atom('r2'), 'X': 5, 'T': 2.0}]
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        body: dict[str, Any] = {"pattern": _text(pattern, "pattern")}
-        if keep_last is not None:
-            body["keep_last"] = keep_last
-        if keep_seconds is not None:
-            body["keep_seconds"] = _number(keep_seconds, "keep_seconds")
-        if keep_between is not None:
-            t1, t2 = keep_between
-            body["keep_between"] = [_number(t1, "keep_between"), _number(t2, "keep_between")]
+        # (the policy checked as a local knowledge base checks it, and sent as it reads it:
+        # a duration written "500ms" travels as 0.5)
+        kind, amount, t1, t2 = check_buffer_policy(keep_last, keep_seconds, keep_between)
+        if not isinstance(pattern, str):
+            analyze(pattern)                # (a local knowledge base's words for no pattern)
+            pattern = format_term(pattern)  # (a term it takes: sent as its text)
+        body: dict[str, Any] = {"pattern": pattern}
+        if kind == "cBuffer":
+            body["keep_last"] = amount
+        elif kind == "tBuffer":
+            body["keep_seconds"] = encode_term(amount)
+        else:
+            body["keep_between"] = [encode_term(t1), encode_term(t2)]
         return _expect(self._post("/buffers", body), "id", int)
 
     @_reads_answer
@@ -924,7 +946,7 @@ class RemoteKnowledgeBase:
             timeout: float | None = None) -> tuple[list[str], list[tuple]]:
         """Run one read-only SQL statement on the server's store: (column names, rows).
         ``params``: values for ``?`` placeholders (a sequence) or ``:name`` ones (a
-        mapping), numbers, strings or None. ``timeout`` is capped by the server's ``sql_timeout``; ``write=True`` is refused
+        mapping), numbers, strings, booleans or None. ``timeout`` is capped by the server's ``sql_timeout``; ``write=True`` is refused
         (the service runs read-only SQL only: write in the server's process).
 
         >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
@@ -938,14 +960,25 @@ class RemoteKnowledgeBase:
         slr_sql.service.errors.ServiceError: sql over the service is read-only: DELETE statements are not allowed (SELECT, WITH, VALUES, EXPLAIN)
         >>> kb.close(); server.stop(); server.kb.close()
         """
+        check_sql(query, timeout)
         if write:
             raise ServiceError("sql(write=True) is not available over the network: the "
                                "service runs read-only SQL only (write with `slr sql DB "
                                "--write` in the server's machine)", kind="BadRequest",
                                status=0)
         # (a mapping names :name placeholders: list() of it would send its keys as values)
-        body: dict[str, Any] = {"query": _text(query, "query"), "params": dict(params)
-                                if isinstance(params, Mapping) else list(params)}
+        try:
+            sent = dict(params) if isinstance(params, Mapping) else list(params)
+        except (TypeError, ValueError) as exc:
+            raise unbindable_parameter(exc) from None
+        for key, value in sent.items() if isinstance(sent, dict) else enumerate(sent):
+            if value is not None and type(value) not in (bool, int, str) and not (
+                    type(value) is float and math.isfinite(value)):
+                # (a value JSON cannot carry: bytes, NaN, ... -- a local store may bind them)
+                raise SLRError(f"sql: parameter {key!r} = {shown(value)} cannot be sent to slr "
+                               f"serve (parameters over the network are None, bool, int, "
+                               f"finite float or str)")
+        body: dict[str, Any] = {"query": query, "params": sent}
         if timeout is not None:
             body["timeout"] = _number(timeout, "timeout")
         reply = self._post("/sql", body, timeout=self._read_timeout(
@@ -982,7 +1015,12 @@ class RemoteKnowledgeBase:
         >>> kb.close(); server.stop(); server.kb.close()
         """
         from slr_sql.plot import timeline  # deferred: matplotlib is the extra slr_sql[plot]
-        return timeline(self, types, **options)
+        try:
+            return timeline(self, types, **options)
+        except SLRError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - as a local knowledge base's boundary words it
+            raise unforeseen_failure("plot", exc) from exc
 
     # -- subscriptions --------------------------------------------------------------------------
     def subscribe(self, pattern: str, where: str | None = None, since: Any = "now",
@@ -1015,7 +1053,9 @@ class RemoteKnowledgeBase:
         True
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        self._post("/unsubscribe", {"id": _text(id, "id")})
+        if not isinstance(id, str):   # (no subscription's id: sent, it would be its str)
+            raise no_subscription(id)
+        self._post("/unsubscribe", {"id": id})
 
 
 class RemoteWait:
@@ -1254,7 +1294,8 @@ class RemoteSubscription:
 
     def __init__(self, client: RemoteKnowledgeBase, pattern: str, *, where: str | None,
                  since: Any, until: float | None, id: str | None, batch: int = 1,
-                 callback: Callable[[dict], Any] | None = None, max_queue: int | None = None,
+                 callback: Callable[[dict], Any] | None = None,
+                 max_queue: int = DEFAULT_MAX_QUEUE,
                  max_lag: int | None = 1_000_000):
         try:
             from websockets.exceptions import WebSocketException
@@ -1262,22 +1303,24 @@ class RemoteSubscription:
         except ImportError:  # pragma: no cover
             raise SLRError("subscriptions over the network need the service extra: "
                            "pip install 'slr_sql[service]'") from None
+        # (checked as a local knowledge base checks them, before anything is sent)
+        where, since_value, until_value = check_subscription(
+            pattern, where, since, until, id, callback, max_queue, max_lag)
         self._closed_exc = WebSocketException
         url = "ws" + client.url[len("http"):] + "/subscribe"
         headers = {"Authorization": client._headers["Authorization"]} \
             if "Authorization" in client._headers else None
-        request: dict[str, Any] = {"op": "subscribe", "pattern": _text(pattern, "pattern"),
-                                   "since": since if since == "now" else _number(since, "since")}
+        request: dict[str, Any] = {"op": "subscribe", "pattern": pattern, "since":
+                                   "now" if since_value is None else encode_term(since_value)}
         if where is not None:
             request["where"] = where
-        if until is not None:
-            request["until"] = _number(until, "until")
+        if until_value is not None:
+            request["until"] = encode_term(until_value)
         if id is not None:
             request["id"] = id
         if batch != 1:
             request["batch"] = batch
-        if max_queue is not None:
-            request["max_queue"] = max_queue
+        request["max_queue"] = max_queue
         request["max_lag"] = max_lag
         request["ack"] = True
         self.pattern = pattern
@@ -1525,9 +1568,13 @@ def _number(value: Any, what: str) -> Any:
 
 
 def _goal_body(goal: str, at: Any, args: dict | None, timeout: Any) -> dict:
-    body: dict[str, Any] = {"goal": _text(goal, "goal")}
+    check_goal(goal)
+    body: dict[str, Any] = {"goal": goal}
     if args:
-        body["args"] = encode_args(args)
+        for name in args:
+            if not isinstance(name, str):   # (no variable's name: sent, it would be its str)
+                raise not_a_variable(name, goal)
+        body["args"] = _encoded_args(args)
     if at is not None:
         body["at"] = _number(at, "at")
     if timeout is not None:
@@ -1535,15 +1582,48 @@ def _goal_body(goal: str, at: Any, args: dict | None, timeout: Any) -> dict:
     return body
 
 
-def _event_object(name: Any, args: Iterable[Any], start: Any, end: Any, where: str) -> dict:
+def _encoded_args(args: dict) -> dict:
+    """``args`` of a query as JSON; a value that is no term is refused as a local knowledge
+    base refuses it (:func:`slr_sql.plans.argument_term`, its check), in its words.
+
+    >>> _encoded_args({"X": object()})
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: args['X'] = <object object at ...> is not a term: ...
+    """
     try:
-        arg_list = args if type(args) is list else list(args)
-    except TypeError:
-        raise EventRejected(f"{where}args must be a list of values, not {args!r}") from None
+        encoded = encode_args(args)
+    except TermError:
+        for name, value in args.items():
+            argument_term(name, value)
+        raise       # (a term the wire cannot carry)
+    assert encoded is not None
+    return encoded
+
+
+def _event_object(name: Any, args: Iterable[Any], start: Any, end: Any, where: str) -> dict:
+    # (arguments that are no list or tuple are refused as a local knowledge base refuses
+    # them: a str or a generator is no argument list)
+    arguments = event_arguments(name, args, start, end)
+    arg_list = arguments if type(arguments) is list else list(arguments)
+    # (times and arguments a local store refuses are refused in its words: the order of its
+    # checks, the times first)
+    try:
+        check_times(start, end)
+    except BadEvent as exc:
+        raise event_rejection((name, arguments, start, end), exc) from None
     if not isinstance(name, str):   # (not sent as its text: a local store refuses it too)
         raise EventRejected(f"{where}event name must be an atom, not {shown(name)}")
-    obj: dict[str, Any] = {"name": name,
-                           "args": encode_arguments(arg_list, f"{where}args"),
+    try:
+        encoded = encode_arguments(arg_list, f"{where}args")
+    except TermError:
+        for arg in arg_list:
+            try:
+                encode_stored(arg)
+            except Unencodable as exc:
+                raise event_rejection((name, arguments, start, end), exc) from None
+        raise       # (a term the wire cannot carry)
+    obj: dict[str, Any] = {"name": name, "args": encoded,
                            "start": _time(start, f"{where}start")}
     if end is not None:
         obj["end"] = _time(end, f"{where}end")
@@ -1562,8 +1642,11 @@ def _tuple_object(ev: Any, index: int) -> dict:
     except (TypeError, ValueError):   # (in the words of a local knowledge base)
         raise EventRejected(f"event #{index} is neither SLR text nor a (name, args, start, "
                             f"end) tuple: {shown(ev)}") from None
+    arguments = event_arguments(name, args, start, end)   # (its EventRejected as it is)
     try:
-        return _event_object(name, args, start, end, "")
+        return _event_object(name, arguments, start, end, "")
+    except EventRejected:
+        raise       # (in a local knowledge base's words already)
     except (TermError, SLRError) as exc:
         raise EventRejected(f"{shown(ev)}: {exc}") from None
 

@@ -17,7 +17,8 @@ from ..printable import shorten, shown
 from ..terms import Atom, String, Struct, Var
 
 __all__ = ["BadEvent", "check_times", "rejection_reason", "format_event", "arguments_problem",
-           "text_problem", "shorten", "shown", "event_arguments"]
+           "text_problem", "shorten", "shown", "event_arguments",
+           "event_rejection"]
 
 
 class BadEvent(Exception):
@@ -91,6 +92,24 @@ def check_times(start: Any, end: Any) -> tuple[float, float]:
     if start > end:
         raise BadEvent(f"start time {start!r} is after end time {end!r}")
     return start + 0.0, end + 0.0   # (a time -0.0 is the time 0.0: see store_time)
+
+
+def event_rejection(event: Any, exc: Exception) -> EventRejected:
+    """The :class:`EventRejected` of ``event`` ``(name, args, start, end)`` refused for
+    ``exc`` (a :class:`BadEvent` or an Unencodable argument): the store's, and the client
+    of ``slr serve``'s for what it refuses before sending.
+
+    >>> print(event_rejection(("p", [1], 2.0, 1.0), BadEvent("start time 2.0 is after end time 1.0")))
+    p(1)^[2.0,1.0]: start time 2.0 is after end time 1.0
+    """
+    try:
+        name, args, start, end = event
+        message = f"{format_event(name, args, start, end)}: {rejection_reason(exc)}"
+    except Exception:  # an event too malformed to print (the reason says what it is)
+        message = rejection_reason(exc)
+    error = EventRejected(message)
+    error.event = event
+    return error
 
 
 def rejection_reason(exc: Exception) -> str:

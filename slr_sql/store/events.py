@@ -17,8 +17,8 @@ from typing import Any, Iterable, Iterator
 
 from ..encoding import Unencodable, encode, encode_column, event_columns_loop
 from ..errors import EventRejected
-from .checks import BadEvent, arguments_problem, check_times, format_event, \
-    rejection_reason, shown, text_problem
+from .checks import BadEvent, arguments_problem, check_times, event_rejection, \
+    shown, text_problem
 from .connection import Database
 from .tables import EventTables, EventType
 
@@ -438,15 +438,8 @@ class EventWriter:
         return self.tables.register(name, arity, declared=False)
 
     def _rejection(self, index: int, event: Any, exc: Exception) -> EventRejected:
-        try:
-            name, args, start, end = event
-            text = format_event(name, args, start, end)
-            message = f"{text}: {rejection_reason(exc)}"
-        except Exception:  # an event too malformed to print (the reason says what it is)
-            message = rejection_reason(exc)
-        error = EventRejected(message)
+        error = event_rejection(event, exc)
         error.index = index
-        error.event = event
         return error
 
     def add_event(self, name: str, args: Iterable[Any], start: float, end: float) -> None:

@@ -34,7 +34,7 @@ from .queue import HISTORY_PHASE, LIVE_PHASE, Subscription, SubscriptionOverflow
     SubscriptionState, resolve_threadsafe
 from .registry import SubscriptionRegistry, journal_table
 
-__all__ = ["SubscriptionHub", "DEFAULT_MAX_QUEUE", "DEFAULT_MAX_LAG", "POLL_INTERVAL"]
+__all__ = ["SubscriptionHub", "check_subscription", "DEFAULT_MAX_QUEUE", "DEFAULT_MAX_LAG", "POLL_INTERVAL"]
 
 log = logging.getLogger("slr_sql.subscriptions")
 
@@ -67,6 +67,53 @@ class _TypeInfo:
         argument = next((i for i, v in enumerate(values, 1) if v is None), 1)
         return NotAnEvent("subscribe: " + null_argument_text(self.name, self.arity, self.table,
                                                              argument, seq))
+
+
+def check_subscription(pattern: Any, where: Any, since: Any, until: Any, id: Any,
+                       callback: Any, max_queue: Any, max_lag: Any,
+                       now: Callable[[], float] | None = None
+                       ) -> tuple[str | None, float | None, float | None]:
+    """The arguments of ``subscribe`` (see :meth:`slr_sql.KnowledgeBase.subscribe`) as
+    ``(where, since, until)`` (``where`` None when blank, ``until`` None when unbounded),
+    else an SLRError in words. ``now``: the clock's ``now``, for ``since="now"``; without
+    it (the client of ``slr serve``, which runs these checks too before sending) that
+    ``since`` is None and ``until`` is compared with it where the store's clock is.
+
+    >>> check_subscription("p(X)^T", " ", 0, 5, None, None, 10, None)
+    (None, 0.0, 5.0)
+    >>> check_subscription("p(X)^T", None, "now", None, None, None, 0, None)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: subscribe: max_queue must be a positive integer, not 0
+    """
+    if not isinstance(pattern, str):
+        raise SLRError(f"subscribe: the pattern must be text such as 'face(F, R)^T', "
+                       f"not {shown(pattern)}")
+    if where is not None and not isinstance(where, str):
+        raise SLRError(f"subscribe: where must be a goal as text, not {shown(where)}")
+    if where is not None and not where.strip():
+        where = None
+    if isinstance(since, str) and since.strip() == "now":
+        since_value = None if now is None else float(now())
+    else:
+        since_value = time_arg(since, "since")
+    until_value = None if until is None else time_arg(until, "until")
+    if until_value == _INF:
+        until_value = None
+    if until_value is not None and since_value is not None and until_value < since_value:
+        raise SLRError(f"subscribe: until ({until_value:g}) is before since "
+                       f"({since_value:g})")
+    if id is not None and (not isinstance(id, str) or not id):
+        raise SLRError(f"subscribe: id must be a non-empty string, not {shown(id)}")
+    if callback is not None and not callable(callback):
+        raise SLRError("subscribe: callback must be callable")
+    if isinstance(max_queue, bool) or not isinstance(max_queue, int) or max_queue < 1:
+        raise SLRError(f"subscribe: max_queue must be a positive integer, not {shown(max_queue)}")
+    if max_lag is not None and (isinstance(max_lag, bool) or not isinstance(max_lag, int)
+                                or max_lag < 1):
+        raise SLRError(f"subscribe: max_lag must be a positive integer or None, "
+                       f"not {shown(max_lag)}")
+    return where, since_value, until_value
 
 
 class SubscriptionHub:
@@ -186,33 +233,9 @@ class SubscriptionHub:
         """
         if self._closed:
             raise SLRError("the knowledge base is closed")
-        if not isinstance(pattern, str):
-            raise SLRError(f"subscribe: the pattern must be text such as 'face(F, R)^T', "
-                           f"not {shown(pattern)}")
-        if where is not None and not isinstance(where, str):
-            raise SLRError(f"subscribe: where must be a goal as text, not {shown(where)}")
-        if where is not None and not where.strip():
-            where = None
-        if isinstance(since, str) and since.strip() == "now":
-            since_value = float(self.clock.now())
-        else:
-            since_value = time_arg(since, "since")
-        until_value = None if until is None else time_arg(until, "until")
-        if until_value == _INF:
-            until_value = None
-        if until_value is not None and until_value < since_value:
-            raise SLRError(f"subscribe: until ({until_value:g}) is before since "
-                           f"({since_value:g})")
-        if id is not None and (not isinstance(id, str) or not id):
-            raise SLRError(f"subscribe: id must be a non-empty string, not {shown(id)}")
-        if callback is not None and not callable(callback):
-            raise SLRError("subscribe: callback must be callable")
-        if isinstance(max_queue, bool) or not isinstance(max_queue, int) or max_queue < 1:
-            raise SLRError(f"subscribe: max_queue must be a positive integer, not {shown(max_queue)}")
-        if max_lag is not None and (isinstance(max_lag, bool) or not isinstance(max_lag, int)
-                                    or max_lag < 1):
-            raise SLRError(f"subscribe: max_lag must be a positive integer or None, "
-                           f"not {shown(max_lag)}")
+        where, since_value, until_value = check_subscription(
+            pattern, where, since, until, id, callback, max_queue, max_lag, now=self.clock.now)
+        assert since_value is not None
         pattern = pattern.strip()
         matcher = Matcher(self.kb.query, pattern, where)   # SLRSyntaxError for bad texts
         if isinstance(since, str):

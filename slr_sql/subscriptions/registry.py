@@ -17,6 +17,16 @@ from ..errors import SLRError, SLRSubscriptionInUse
 from ..store.checks import shown
 from .queue import HISTORY_PHASE, LIVE_PHASE, Subscription, SubscriptionState
 
+
+def no_subscription(sub_id: Any) -> SLRError:
+    """The error of ``unsubscribe`` of an id no subscription has (the client of ``slr
+    serve`` raises it too for an id that is no str, which names none).
+
+    >>> print(no_subscription("watcher"))
+    no subscription with id 'watcher'
+    """
+    return SLRError(f"no subscription with id {shown(sub_id)}")
+
 __all__ = ["SubscriptionRegistry", "journal_table", "owner_alive", "JOURNAL_PREFIX",
            "TRIGGER_PREFIX", "LEASE_SECONDS"]
 
@@ -156,7 +166,7 @@ class SubscriptionRegistry:
         """Remove the row of ``sub_id`` (not open in this process)."""
         with self.store.transaction():
             if not self.store.delete_subscription(sub_id):
-                raise SLRError(f"no subscription with id {shown(sub_id)}")
+                raise no_subscription(sub_id)
 
     def write_position(self, sub: Subscription, release: bool = False) -> None:
         """Move ``sub``'s stored position to where it is (``release``: and let go of it)."""
