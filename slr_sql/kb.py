@@ -37,7 +37,7 @@ from .terms import Atom, String, Struct, Var, deref
 from .terms import format_atom, format_term
 
 __all__ = ["KnowledgeBase", "open", "Declarations", "BufferDecl", "ProgramInfo",
-           "parse_duration"]
+           "check_time_option", "parse_duration"]
 
 
 _TUPLE = frozenset({tuple})
@@ -105,7 +105,7 @@ class KnowledgeBase:
                  cache_mib: float = CACHE_SIZE_KIB / 1024, robot: str | None = None,
                  max_learned_delay: float | None = DEFAULT_MAX_LEARNED_DELAY):
         if max_learned_delay is not None:
-            _check_time_option("max_learned_delay", max_learned_delay, minimum=0.0)
+            check_time_option("max_learned_delay", max_learned_delay, minimum=0.0)
             max_learned_delay = float(max_learned_delay)
         # the largest delay a type may learn (clocks.DEFAULT_MAX_LEARNED_DELAY; None: no cap)
         self.max_learned_delay = max_learned_delay
@@ -497,8 +497,8 @@ class KnowledgeBase:
         if limit is not None and (type(limit) is not int or limit < 0):
             raise SLRError(f"limit must be a count (an integer >= 0), not {shown(limit)}")
         if at is not None or timeout is not None:
-            _check_time_option("at", at)
-            _check_time_option("timeout", timeout, minimum=0.0)
+            check_time_option("at", at)
+            check_time_option("timeout", timeout, minimum=0.0)
         if robot is not None:
             check_robot_name(robot)
         if wait:  # synchronized (SLRTimeout names the incomplete types)
@@ -562,8 +562,8 @@ class KnowledgeBase:
         >>> list(islice(open().solutions("between(1, inf, X)"), 3))
         [{'X': 1}, {'X': 2}, {'X': 3}]
         """
-        _check_time_option("at", at)
-        _check_time_option("timeout", timeout, minimum=0.0)
+        check_time_option("at", at)
+        check_time_option("timeout", timeout, minimum=0.0)
         if robot is not None:
             check_robot_name(robot)
         try:
@@ -971,8 +971,17 @@ def _check_event_type(method: str, spec: Any) -> None:
         raise SLRError(f"{method}: the event type {shown(spec)} cannot be stored: {problem}")
 
 
-def _check_time_option(name: str, value: Any, minimum: float | None = None) -> None:
-    """``at=`` and ``timeout=`` are numbers of seconds (``None``: not given)."""
+def check_time_option(name: str, value: Any, minimum: float | None = None) -> None:
+    """Refuse ``value`` for the option ``name`` unless it is a number of seconds (``None``:
+    not given) and at least ``minimum``: the one check of ``at=`` and ``timeout=`` (the
+    shell's ``at Z`` too, so that it refuses what a query would).
+
+    >>> check_time_option("at", float("inf"))     # (every stored event)
+    >>> check_time_option("at", float("nan"))
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: at must be a number of seconds, not nan
+    """
     if value is None:
         return
     if isinstance(value, bool) or not isinstance(value, (int, float)):
