@@ -26,7 +26,7 @@ import slr_sql
 from .api import KnowledgeBaseAPI
 from .answers import answer_text, value_text
 from .encoding import decode
-from .kb import KnowledgeBase
+from .kb import KnowledgeBase, check_time_option
 from .parser import full_stop_end, parse_event_fast
 from .printable import printable_name, printable_syntax_error, printable_text
 from .store import refuse_no_store, shown_location
@@ -1343,7 +1343,11 @@ class Shell:
         self.echo("added.")
 
     def _set_at(self, value: str) -> None:
-        self.at = None if value in ("none", "off") else float(value)
+        at = None if value in ("none", "off") else float(value)
+        # refused here as every query would refuse it (nan), not echoed as a view and then
+        # failing each goal; inf is a view queries take (every stored event)
+        check_time_option("at", at)
+        self.at = at
         self.echo(f"stream view: {'every stored event' if self.at is None else f'at {self.at:g}'}")
 
     # -- the program 'user' ----------------------------------------------------------------

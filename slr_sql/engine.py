@@ -23,8 +23,8 @@ from .arith import instantiation_error, iso_error, resource_error, type_error, w
 from .errors import CLOSED_WHILE_RUNNING, SLRError, SLREvaluationError, SLRTimeout
 from .program import MAX_RECURSIVE_NEST, Predicate, Program, Slot, Template, build, \
     event_key, split_event_atom
-from .terms import (Atom, Struct, Var, body_problem, deref, format_atom, format_term,
-                    term_vars)
+from .terms import (Atom, CheckedBodies, Struct, Var, body_problem, deref, format_atom,
+                    format_term, term_vars)
 from .unify import bound_args, copy_term, undo, unify, unify_event_row
 
 __all__ = ["Engine", "Machine", "unify", "copy_term", "PrologThrow"]
@@ -148,6 +148,9 @@ class Machine:
         self.sql_calls: dict | None = None   # set by solve(): compiled sub-goals, if allowed
         # the robot whose events every event goal, prev and next reads (None: everyone's)
         self.robot: str | None = None
+        # the bodies check_body walked (\+ \+ ... nested N deep walked each nested body
+        # again, N²/2 steps)
+        self._bodies = CheckedBodies()
 
     # -- helpers used by builtins -------------------------------------------------------
     def unify(self, a: Any, b: Any) -> bool:
@@ -172,7 +175,7 @@ class Machine:
     # -- the main loop ------------------------------------------------------------------
     def solve(self, goal: Any) -> Iterator[None]:
         """Prove ``goal``; yields after each solution (bindings readable until resumed)."""
-        check_body(goal)
+        self.check_body(goal)
         cont = (goal, 0, None)
         engine = self.engine
         preds = engine.program.preds
@@ -214,7 +217,7 @@ class Machine:
                         goal = r
                     # a variable goal G is call(G) (ISO 7.6.2): a cut inside it is local
                     cb = len(self.cps)
-                    check_body(goal)
+                    self.check_body(goal)
                 tg = type(goal)
                 if tg is Struct:
                     args = goal.args
@@ -493,7 +496,7 @@ class Machine:
         if name == "\\+" or name == "not":
             if name == "not":
                 self.meta_check(args[0], _SYSTEM_NOT)
-            check_body(args[0])
+            self.check_body(args[0])
             height = len(cps)
             cps.append([K_ALT, len(self.trail), nxt, None, None, None])
             return (args[0], height + 1, (Special(S_NAFAIL, height), cb, None))
@@ -505,7 +508,7 @@ class Machine:
                 raise instantiation_error()
             if type(goal) not in (Struct, Atom):
                 raise type_error("callable", goal)
-            check_body(goal)
+            self.check_body(goal)
             return (goal, len(cps), nxt)
         if name == "^":
             ev = split_event_atom(Struct("^", args))
@@ -564,6 +567,12 @@ class Machine:
             return nxt
         raise AssertionError(op)
 
+    def check_body(self, goal: Any) -> None:
+        """:func:`check_body`, walking a body inside one already found callable only when it
+        must (:class:`CheckedBodies`)."""
+        if self._bodies.problem(goal) is not None:
+            raise type_error("callable", deref(goal))
+
     def meta_check(self, goal: Any, caller: Any) -> None:
         """The errors SWI-Prolog raises as the meta predicate ``caller`` (a predicate
         indicator) calls ``goal``, named in their context: an unbound goal, one that is no
@@ -573,7 +582,7 @@ class Machine:
         try:
             if type(g) is Var:
                 raise instantiation_error()
-            check_body(g)
+            self.check_body(g)
             if type(g) is Struct:
                 key, args = (g.name, len(g.args)), g.args
             elif type(g) is Atom:
@@ -597,7 +606,7 @@ class Machine:
         (:meth:`meta_check`)."""
         if caller is not None:
             self.meta_check(goal, caller)
-        check_body(goal)
+        self.check_body(goal)
         results: list = []
         height = len(self.cps)
         self.cps.append([K_COLLECT, len(self.trail), nxt, results, finish, None])

@@ -38,7 +38,7 @@ from .terms import Atom, String, Struct, Var, deref
 from .terms import format_atom, format_term
 
 __all__ = ["KnowledgeBase", "open", "Declarations", "BufferDecl", "ProgramInfo",
-           "parse_duration"]
+           "check_time_option", "parse_duration"]
 
 
 _TUPLE = frozenset({tuple})

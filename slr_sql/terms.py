@@ -32,7 +32,7 @@ __all__ = [
     "to_python", "term_vars", "Span", "Clause", "indicator",
     "format_term", "format_atom", "quoted_text", "undrawn_character", "char_escape", "INFIX_OPS", "PREFIX_OPS", "OPERATORS",
     "MAX_INTEGER_BITS", "int_text", "int_from_text", "factorize_cycles", "BODY_CONTROL",
-    "body_problem",
+    "body_problem", "CheckedBodies",
 ]
 
 # The largest integer slr_sql reads, computes or stores, in bits (2**18 bits: about 78,900
@@ -1297,3 +1297,66 @@ def body_problem(goal: Any, unknown: type | None = None) -> str | None:
         elif tx is not Var and (tx is not Atom or x == "[]"):
             return "uncallable"
     return None
+
+
+class CheckedBodies:
+    r""":func:`body_problem` for the bodies one query (or one compilation) calls, walking a
+    body inside one already walked only when it must: a large body found without a problem
+    and with no variable as a goal in its control constructs cannot gain one (nothing bound
+    or undone later changes it), so the bodies inside it -- the goal of each nested ``\+``,
+    ``call/1``, ``findall/3`` -- are remembered as checked. ``\+ \+ ... \+ true``
+    nested N deep was walked once per level, N²/2 steps; it is walked once. A body with a
+    variable as a goal is walked each time (what the variable is bound to may have
+    changed). Only the last such body is remembered: the memory is that of one body.
+
+    >>> bodies = CheckedBodies()
+    >>> deep = Atom("true")
+    >>> for _ in range(20):
+    ...     deep = Struct("\\+", (deep,))
+    >>> bodies.problem(deep), bodies.problem(deep.args[0].args[0])   # the second not walked
+    (None, None)
+    >>> bodies.problem(Struct(",", (Atom("fail"), 1)))
+    'uncallable'
+    """
+
+    # the fewest control constructs of a body remembered: a smaller one is walked again
+    # (about as fast as looking it up)
+    REMEMBERED = 16
+
+    __slots__ = ("unknown", "_root", "_parts")
+
+    def __init__(self, unknown: type | None = None):
+        self.unknown = unknown           # body_problem's: a value known only at run time
+        self._root: Any = None           # keeps the remembered ids from being reused
+        self._parts: frozenset[int] = frozenset()
+
+    def problem(self, goal: Any) -> str | None:
+        """What :func:`body_problem` says of ``goal`` (``unknown`` as given)."""
+        t = deref(goal)
+        if type(t) is not Struct or (t.name, len(t.args)) not in BODY_CONTROL:
+            return None
+        if id(t) in self._parts:
+            return None
+        unknown = self.unknown
+        parts = [t]
+        closed = True
+        stack = list(t.args)
+        while stack:
+            x = stack.pop()
+            tx = type(x)
+            if tx is Var:
+                closed = False   # (bound now, it may be unbound and bound again)
+                x = deref(x)
+                tx = type(x)
+            if tx is Struct:
+                if (x.name, len(x.args)) in BODY_CONTROL:
+                    parts.append(x)
+                    stack.extend(x.args)
+            elif unknown is not None and tx is unknown:
+                return "unknown"
+            elif tx is not Var and (tx is not Atom or x == "[]"):
+                return "uncallable"
+        if closed and len(parts) >= self.REMEMBERED:
+            self._root = t
+            self._parts = frozenset(map(id, parts))
+        return None

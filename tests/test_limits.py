@@ -63,6 +63,37 @@ def test_long_arithmetic_and_long_bodies(kb):
     assert kb.query("; ".join(["fail"] * n) + "; X = done") == [{"X": "done"}]
 
 
+# \+ nested this deep: each \+ walked its whole body again (N²/2 steps), over 1.5 minutes;
+# once walked, about 0.1 s
+NEGATIONS = 20_000
+
+
+@pytest.mark.parametrize("innermost, expected", [
+    ("true", [{}]),
+    ("fail", []),
+    ("(X = 1, X == 1)", [{}]),
+])
+def test_negations_nested_deep_answer_within_the_timeout(kb, innermost, expected):
+    goal = "\\+ " * NEGATIONS + innermost
+    assert kb.query(goal, timeout=ANSWERS_WITHIN * 4) == expected
+    # the same body built at run time and called
+    assert kb.query(f"\\+ \\+ (G = ({goal}), call(G))", timeout=ANSWERS_WITHIN * 4) == expected
+
+
+NEGATED_40 = "\\+ " * 40 + "true"
+
+
+@pytest.mark.parametrize("goal", [
+    NEGATED_40 + ", (true, 1)",                 # found before any of it runs
+    NEGATED_40 + ", G = (true, 1), call(G)",    # a body made at run time
+    "X = 1, " + "\\+ " * 40 + "(true, X)",         # a goal bound after the body began
+    # bound again on backtracking: true, then 1
+    "member(X, [true, 1]), " + "\\+ " * 40 + "(true, X), fail",
+])
+def test_a_deeply_negated_body_that_is_no_body_is_still_a_type_error(kb, goal):
+    assert error_of(kb, goal).startswith("type_error(callable,")
+
+
 # ------------------------------------------------------------------------- cyclic terms
 def test_cyclic_answers_come_back_as_swi_prints_them(kb):
     (answer,) = kb.query("X = f(X)")

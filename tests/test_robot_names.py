@@ -50,7 +50,7 @@ def test_the_check_says_which_character_at_which_position(name, words):
     assert name not in message and repr(name) in message
 
 
-@pytest.mark.parametrize("name", ["r1", "forklift-2", "Roboter_ü", "ロボット1", "a b"])
+@pytest.mark.parametrize("name", ["r1", "forklift-2", "Roboter_ü", "ロボット1", "a b", " r1 "])
 def test_plain_names_in_any_script_are_names(name):
     assert check_robot_name(name) == name
 
@@ -62,6 +62,23 @@ def test_naming_a_store_refuses_it_and_names_nothing(tmp_path):
         slr_sql.open(db, robot="r1\u202eevil")
     with slr_sql.open(db) as kb:
         assert kb.store.robot is None and kb.store.robots() == []
+
+
+WHITE_SPACE_ONLY = [" ", "   ", "\u3000", "\u00a0 "]
+
+
+@pytest.mark.parametrize("name", WHITE_SPACE_ONLY)
+def test_a_name_of_white_space_only_is_refused_and_names_nothing(tmp_path, name):
+    """It was taken: a robot shown in tables and logs as nothing at all."""
+    with pytest.raises(SLRError, match="is only white space"):
+        check_robot_name(name)
+    db = tmp_path / "r.db"
+    with pytest.raises(SLRError, match="is only white space"):
+        slr_sql.open(db, robot=name)
+    with slr_sql.open(db) as kb:
+        assert kb.store.robot is None
+        with pytest.raises(SLRError, match="is only white space"):
+            kb.query("seen(X)^T", robot=name)
 
 
 def slr(*args: str) -> subprocess.CompletedProcess:
@@ -84,6 +101,22 @@ def test_the_cli_refuses_it_with_words_not_a_traceback(tmp_path, command):
     assert not (tmp_path / "fleet.db").exists()
     with slr_sql.open(db) as kb:
         assert kb.store.robot is None
+
+
+@pytest.mark.parametrize("command", ["name", "push", "query"])
+def test_the_cli_refuses_a_name_of_white_space_only_in_words(tmp_path, command):
+    db = str(tmp_path / "r.db")
+    assert slr("add", db, "seen(a)^1").returncode == 0
+    args = {"name": ["fleet", "name", db, " "],
+            "push": ["fleet", "push", db, str(tmp_path / "fleet.db"), "--robot", " "],
+            "query": ["query", db, "seen(X)^T", "--robot", " "]}[command]
+    done = slr(*args)
+    assert done.returncode == 1, done.stdout
+    assert done.stderr == ("error: robot name ' ' is only white space; name robots with "
+                           "plain words (r1, forklift-2, ...)\n")
+    assert not (tmp_path / "fleet.db").exists()
+    with slr_sql.open(db) as kb:
+        assert kb.store.robot is None and kb.store.robots() == []
 
 
 def test_a_store_named_so_before_the_check_does_not_ship(tmp_path):

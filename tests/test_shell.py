@@ -631,3 +631,19 @@ def test_end_of_file_with_a_comment_after_it_ends_the_consult(store):
     assert r.returncode == 0, r.stderr
     assert r.stdout.splitlines() == ["% type clauses; end_of_file. or Ctrl-D ends",
                                      "% consulted into the program 'user'", "X = 1"]
+
+
+def test_at_nan_is_refused_at_once_in_the_queries_words_and_the_view_stays(store):
+    """`at nan` was echoed as a stream view, and then every goal failed with "at must be a
+    number of seconds, not nan". It is refused as it is typed, in those words, and the view
+    set before stays; `at inf` is a view queries take (every stored event)."""
+    r = run_piped(store, "at 1", "at nan", "seg(X, P)^T.", "at inf", "seg(X, P)^T.")
+    assert r.returncode == 0, r.stderr
+    assert r.stderr == "error: at must be a number of seconds, not nan\n"
+    assert r.stdout.splitlines() == [
+        "stream view: at 1",
+        "X = cup1, P = table, T = 1.0",
+        "stream view: at inf",
+        "X = cup1, P = table, T = 1.0",
+        "X = cup2, P = shelf, T = 2.0",
+    ]

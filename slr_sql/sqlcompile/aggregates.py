@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..terms import NIL, Atom, Struct, deref
-from .model import (Col, Fallback, Part, check_called_body, format_for_message, key_columns, resolve,
+from .model import (Col, Fallback, Part, format_for_message, key_columns, resolve,
                     shown_in_message)
 
 
@@ -20,7 +20,7 @@ class AggregateGoals:
     def findall_sql(self, g, args, ctx, nxt, st, emit):
         self.record_mode(g)
         template, goal, out = args
-        check_called_body(goal)
+        self.check_called_body(goal)
         parts = self.sub_parts(goal, ctx, st, lambda s: [self.json_sql(resolve(template))])
         if not parts:
             value: Any = NIL
@@ -54,7 +54,7 @@ class AggregateGoals:
         self.record_mode(g)
         spec = deref(args[0])
         goal, out = args[1], args[2]
-        check_called_body(goal)
+        self.check_called_body(goal)
         if type(spec) is Atom and spec == "count":
             kind, templ = "count", None
         elif type(spec) is Struct and len(spec.args) == 1 and spec.name in (

@@ -10,7 +10,7 @@ from typing import Any, Callable
 
 from ..program import event_key, split_event_atom
 from ..store.dialect import SQLITE
-from ..terms import Atom, Struct, Var, deref
+from ..terms import Atom, CheckedBodies, Struct, Var, deref
 from .aggregates import AggregateGoals
 from .builtin_goals import BuiltinGoals
 from .control import ControlGoals, IfThenMarker
@@ -65,6 +65,9 @@ class Compiler(Unification, BuiltinGoals, ControlGoals, RuleGoals, EventGoals, A
         self.modes: list[str] = []
         self._modes_seen: set = set()
         self.branches = 0
+        # the called bodies checked so far: a body inside one checked is not walked again
+        # (\+ \+ ... nested N deep walked each nested body, N²/2 steps)
+        self._bodies = CheckedBodies(unknown=Col)
         # ((name, n), upper time SQL) of every prev/next: a synchronized query may run the
         # statement once each history is complete up to its time (slr_sql.sync)
         self.time_sites: list[tuple[tuple[str, int], str]] = []
@@ -122,10 +125,14 @@ class Compiler(Unification, BuiltinGoals, ControlGoals, RuleGoals, EventGoals, A
             self._modes_seen.add(text)
             self.modes.append(text)
 
+    def check_called_body(self, goal: Any) -> None:
+        """:func:`check_called_body` with this compilation's bodies checked so far."""
+        check_called_body(goal, self._bodies)
+
     # ------------------------------------------------------------------ driver
     def compile(self, goal: Any, emit: Callable[[State], None]) -> None:
         st = self.state = State(self.dialect.may_raise)
-        check_called_body(goal)
+        self.check_called_body(goal)
         self.solve((goal, (), None), st, emit)
 
     def solve(self, cont, st: State, emit) -> None:
@@ -170,7 +177,7 @@ class Compiler(Unification, BuiltinGoals, ControlGoals, RuleGoals, EventGoals, A
         if tg is Var:
             raise Fallback("a goal that is an unbound variable (call/N on an unknown goal)")
         if type(goal) is Var:
-            check_called_body(g)    # a variable goal G is call(G)
+            self.check_called_body(g)    # a variable goal G is call(G)
         if tg is Col:
             raise Fallback("a goal only known at run time (call/N on an unknown goal)")
         if tg is IfThenMarker:

@@ -10,7 +10,7 @@ and ``self.record_mode``).
 from __future__ import annotations
 
 from ..terms import Atom, Struct, Var, deref
-from .model import Col, Fallback, Part, State, check_called_body
+from .model import Col, Fallback, Part, State
 
 
 class ControlGoals:
@@ -127,7 +127,7 @@ class ControlGoals:
 
     def neg_sql(self, g, args, ctx, nxt, st, emit):
         self.record_mode(g)
-        check_called_body(args[0])
+        self.check_called_body(args[0])
         parts = self.sub_parts(args[0], ctx, st, first=True)
         for p in parts:
             if not p.froms and not p.conds:
@@ -149,12 +149,12 @@ class ControlGoals:
                 goal = Struct(goal.name, goal.args + tuple(args[1:]))
             else:
                 raise Fallback("call/N on a non-callable term (type error)")
-        check_called_body(goal)
+        self.check_called_body(goal)
         self.solve((goal, ctx, nxt), st, emit)
 
     def forall_sql(self, g, args, ctx, nxt, st, emit):
-        check_called_body(args[0])
-        check_called_body(args[1])
+        self.check_called_body(args[0])
+        self.check_called_body(args[1])
         rewritten = Struct("\\+", (Struct(",", (args[0], Struct("\\+", (args[1],)))),))
         self.solve((rewritten, ctx, nxt), st, emit)
 

@@ -10,7 +10,7 @@ import weakref
 from typing import Any
 
 from ..store.dialect import SQLITE
-from ..terms import Atom, Struct, Var, body_problem, deref, list_items
+from ..terms import Atom, CheckedBodies, Struct, Var, body_problem, deref, list_items
 
 
 class Fallback(Exception):
@@ -301,7 +301,7 @@ def term_free_vars(t: Any) -> list:
 
 
 
-def check_called_body(goal: Any) -> None:
+def check_called_body(goal: Any, bodies: CheckedBodies | None = None) -> None:
     """A term called as a goal (a query, call/1, \\+, findall, aggregate_all, forall) is a
     body for the interpreter, which raises type_error(callable, Goal) before running it when
     a goal inside its control constructs is no callable term (engine.check_body): such a
@@ -312,7 +312,7 @@ def check_called_body(goal: Any) -> None:
     ...
     slr_sql.sqlcompile.model.Fallback: fail,1 is not callable (type error at run time)
     """
-    problem = body_problem(goal, unknown=Col)
+    problem = body_problem(goal, unknown=Col) if bodies is None else bodies.problem(goal)
     if problem == "unknown":
         raise Fallback("a goal only known at run time inside a called body")
     if problem == "uncallable":

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from ..program import build
 from ..terms import Atom, Struct, deref, list_items
-from .model import Col, Fallback, check_called_body
+from .model import Col, Fallback
 
 
 class RuleGoals:
@@ -73,7 +73,7 @@ class RuleGoals:
                 return
             raise Fallback("member/2 over a list only known at run time")
         if key in (("once", 1), ("ignore", 1)):
-            check_called_body(args[0])     # (the library calls it: call/1's check)
+            self.check_called_body(args[0])     # (the library calls it: call/1's check)
         if key == ("once", 1):
             return self.ite_sql(args[0], Atom("true"), Atom("fail"), ctx, nxt, st, emit)
         if key == ("ignore", 1):

@@ -50,9 +50,9 @@ _TAKE_ROUTE = _ADD_ROUTE + " RETURNING via"
 
 def check_robot_name(name: Any) -> str:
     """``name`` if it can name a robot (a non-empty text of at most :data:`ROBOT_NAME_MAX`
-    characters, without control, format or line-separating characters), else an
-    :class:`SLRError` saying why -- the one check of every way a robot's name comes in
-    (naming a store, a push, a shipment, a query).
+    characters, not only white space, without control, format or line-separating
+    characters), else an :class:`SLRError` saying why -- the one check of every way a robot's
+    name comes in (naming a store, a push, a shipment, a query).
 
     >>> check_robot_name("r1")
     'r1'
@@ -60,6 +60,10 @@ def check_robot_name(name: Any) -> str:
     Traceback (most recent call last):
     ...
     slr_sql.errors.SLRError: robot name 'r1\u202eevil' has U+202E RIGHT-TO-LEFT OVERRIDE at position 3 (a format character: it would change how the name and what follows it read in logs, tables and plots); name robots with plain words (r1, forklift-2, ...)
+    >>> check_robot_name(" ")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: robot name ' ' is only white space; name robots with plain words (r1, forklift-2, ...)
     """
     if not isinstance(name, str) or not name:
         raise SLRError(f"a robot's name is a non-empty text, not {shown(name)}")
@@ -79,6 +83,10 @@ def check_robot_name(name: Any) -> str:
                 f"position {position} ({kind}: it would change how the name and what follows "
                 "it read in logs, tables and plots); name robots with plain words (r1, "
                 "forklift-2, ...)")
+    if not name.strip():
+        # shown in a table or log as nothing at all, and a name nobody could tell or type
+        raise SLRError(f"robot name {shown(name)} is only white space; name robots with plain "
+                       "words (r1, forklift-2, ...)")
     if encode(Atom(name)) != name:  # the column holds the atom's stored form: the name itself
         raise SLRError(f"robot name {shown(name)} reads as a compound term or string when stored; "
                        "name robots with plain words (r1, forklift-2, ...)")
