@@ -95,11 +95,26 @@ def anchor_index(table: str, key: str | None, column: str) -> tuple[str, list[st
 
 
 def _expr(e: Expr, dialect: Any = SQLITE) -> str:
+    """A time expression as SQL: a chain of one scalar (the ``min`` of a long ``and``'s
+    starts) is printed as one call of many arguments, not nested calls, which SQLite's
+    parser refused beyond ~30 parts ("parser stack overflow") once the rule was decided.
+
+    >>> _expr(("min", ("min", ("s", 0), ("s", 1)), ("s", 2)))
+    'min({e0}.t_start, {e1}.t_start, {e2}.t_start)'
+    """
     if e[0] == "s":
         return f"{{e{e[1]}}}.t_start"
     if e[0] == "e":
         return f"{{e{e[1]}}}.t_end"
-    return f"{dialect.scalar(e[0])}({_expr(e[1], dialect)}, {_expr(e[2], dialect)})"
+    operands: list = []
+    pending = [e[2], e[1]]
+    while pending:   # the operands of the chain, left to right
+        part = pending.pop()
+        if part[0] == e[0]:
+            pending += [part[2], part[1]]
+        else:
+            operands.append(part)
+    return f"{dialect.scalar(e[0])}({', '.join(_expr(o, dialect) for o in operands)})"
 
 
 def _expr_positions(e: Expr) -> frozenset:
