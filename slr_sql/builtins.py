@@ -1999,12 +1999,46 @@ def _must_be_list(m, a):
     return True
 
 
-@det("reverse", 2)
-def _reverse(m, a):
+@det("$reverse_list", 2)
+def _reverse_list(m, a):
+    """reverse/2 of a list that is no partial one (the compiled path calls it where the
+    list's end is known): its reverse, or failure when its tail is no list."""
     items, tail = list_items(a[0])
-    if type(tail) is not Var and not _is_nil(tail):
+    if not _is_nil(tail):
         return False   # (the library's clauses are for [] and [X|Xs] only)
-    return m.unify(a[1], make_list(list(reversed(proper_list(a[0])))))
+    return m.unify(a[1], make_list(items[::-1]))
+
+
+@nondet("reverse", 2)
+def _reverse(m, a):
+    """reverse(Xs, Ys) as SWI-Prolog's library clauses, which walk Ys's cells beside Xs's
+    (``reverse([X|Xs], [_|Bound], Rs, Ys)``): a partial Xs is completed to one length after
+    another, as far as Ys has cells for it (with no end when Ys is partial too):
+    ``reverse(L, [1, 2])`` answers L = [2, 1] and ends, ``reverse([1|T], R)`` has no end."""
+    items, tail = list_items(a[0])
+    if type(tail) is not Var:
+        if _reverse_list(m, a):
+            yield None
+        return
+    ys = a[1]
+    trail = m.trail
+    extra = 0
+    while True:
+        # the list with `extra` more elements: its solution, if Ys is its reverse
+        fresh = [Var() for _ in range(extra)]
+        mark = len(trail)
+        if m.unify(tail, make_list(fresh)) and m.unify(ys, make_list((items + fresh)[::-1])):
+            yield None
+        m.undo_to(mark)
+        # one element more only where Ys has a cell for it too (the clauses' walk fails
+        # there, and with it every longer list)
+        longer = m.unify(tail, make_list([Var() for _ in range(extra + 1)], Var())) and \
+            m.unify(ys, make_list([Var() for _ in range(len(items) + extra + 1)], Var()))
+        m.undo_to(mark)
+        if not longer:
+            return
+        extra += 1
+        m.count_steps(1)   # (a walk that finds no solution is ended by the query's limits)
 
 
 @det("memberchk", 2)

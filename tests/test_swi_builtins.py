@@ -140,6 +140,13 @@ GOALS = [
     'append(X, Y, [1, 2])',
     'append([1], X, [1, 2, 3])',
     'member(X, [a|b])',
+    # reverse/2 as the library's clauses, which walk the second list beside the first: a
+    # partial first list is completed one length after another, while the second has cells
+    'reverse([a, b, c], L)', 'reverse(L, [1, 2])', 'reverse([1|T], [a, b, c])',
+    'reverse([1|T], [2])', 'reverse([1|T], [a|b])', 'reverse([1, 2|T], [X])',
+    'reverse([1|T], R), (length(T, 3) -> ! ; true)', 'reverse(L, [a|R]), (length(L, 3) -> ! ; true)',
+    'reverse(L, L), (length(L, 4) -> ! ; true)', 'reverse(L, R), (length(L, 2) -> ! ; true)',
+    'reverse([1, 2], [X|a])',
     'format(atom(A), "~w-~a", [x, y])',
     'format(atom(A), "~d", [3])',
     # tab/1's count: a float, a count beyond 64 bits (TypeError and OverflowError were
