@@ -979,11 +979,16 @@ def _from_text(make: Callable[[str], Any], parse: Callable[[str], Any]):
         x = deref(a[0])
         if type(x) is not Var:
             text = _atom_text(x, "atom")
-            if _is_text_given(a[1]):
-                # a given list is read as in the other mode (SWI-Prolog: its type errors;
-                # a character list for atom_codes, a code list for atom_chars too)
-                return _list_text(a[1]) == text
-            return m.unify(a[1], make(text))
+            if m.unify(a[1], make(text)):
+                return True
+            if not _is_text_given(a[1]):
+                return False
+            # as SWI-Prolog's: a given text that is not the list made from the first
+            # argument is read as in the other mode (its type errors; a character list for
+            # atom_codes, a code list for atom_chars too, a string) and the atom of that text
+            # unified with the first argument -- so only an atom is equal to a string there:
+            # atom_chars(ab, "ab") is true, atom_chars("", "") and atom_chars(1, "1") false
+            return m.unify(x, Atom(_list_text(a[1])))
         return m.unify(x, parse(_list_text(a[1])))
     return f
 

@@ -827,6 +827,11 @@ TEXT_GOALS = [
     "atomic_list_concat([a, X], '-', A)", "atomic_list_concat(L, X, ab)",
     "atom_codes(ab, a)", "atom_codes(ab, [a, b])", "atom_chars(ab, [0'a, b])",
     "atom_chars(ab, [x|y])", "atom_codes(ab, [0'a|_])", "atom_chars(ab, \"ab\")",
+    # both given: the list made from the first, else the atom of the second's text unified
+    # with the first (so a string or a number there is never equal to a string)
+    'atom_chars("", "")', 'atom_codes("", "")', "atom_codes('', \"\")", 'atom_chars("ab", "ab")',
+    'atom_chars(12, "12")', 'atom_codes(1.5, "1.5")', 'atom_chars(ab, [97, 98])',
+    "atom_chars('', '')", 'atom_chars(a, "")', 'atom_chars("ab", [a, b])', 'atom_chars(1, [a])',
     "upcase_atom(ab, [])", "upcase_atom(ab, [a])", "upcase_atom('12', 12)",
     "upcase_atom(ab, \"AB\")", "downcase_atom('AB', \"ab\")", "upcase_atom(ab, f(x))",
     "format(atom(A), 12, [])", "format(atom(A), [0'a, b], [])", "format(atom(A), [], [])",
