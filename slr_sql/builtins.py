@@ -2174,9 +2174,9 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
         d = fmt[i] if i < n else num[-1] if digits_end else "\0"
         i += 1
         if d == "w":
-            out.append(_write_text(take(), deadline=deadline))
+            columns.term(_write_text(take(), deadline=deadline))
         elif d in "pq":
-            out.append(_write_text(take(), True, deadline))
+            columns.term(_write_text(take(), True, deadline))
         elif d == "a":
             # atomic only, and not [] (text_of takes a code list and [])
             arg = deref(take())
@@ -2287,29 +2287,68 @@ class _ColumnStops:
     ``~N|`` (column N; bare: here) and ``~N+`` (N past the last stop, 8 by default) pad that
     text to the column at its fill points -- evenly, the last ones one more when the
     padding does not divide -- or on its right when it has none. Text already past the
-    column is left as it is; columns count from the last line break.
+    column is left as it is.
+
+    The column is counted as SWI-Prolog 9 counts it: format's own text (its literal
+    characters, ``~a``, ``~s``, ``~c``, numbers, ``~n``) one character at a time, a line
+    break or carriage return back to 0, a tab to ``(column + 1) | 7``, a backspace one back;
+    a term written by ``~w``, ``~p``, ``~q`` adds the column its text ends at when written
+    on a line of its own (the output stream's count: a tab to ``(position | 7) + 1``) --
+    unless no fill point is pending and the output so far ends at the column, where the
+    term goes straight to the output and the column is where the output then ends. So
+    ``format("ab~t~w~10|", ['\\nc'])`` pads 'ab' to 'ab' and 7 spaces: 'c' counts from
+    column 2.
 
     >>> format_text("~w~t~10|~w", [Atom("abc"), Atom("def")])
     'abc       def'
     >>> format_text("~t~w~t~10|", [Atom("abc")]), format_text("~`-t~5|", [])
     ('   abc    ', '-----')
+    >>> format_text("ab~t~w~10|", [Atom("\\nc")]), format_text("ab~t~a~10|", [Atom("\\nc")])
+    ('ab       \\nc', 'ab         \\nc')
     """
 
     def __init__(self, out: "_BoundedText"):
         self.out = out
         self.start = 0            # the piece where the text since the last stop begins
-        self.column = 0           # the column it begins at
+        self.column = 0           # the column it begins at (format's count)
+        self.position = 0         # where the output ends on its line there (the stream's)
         self.fills: list[tuple[int, str]] = []   # (piece, fill character) of each ~t
+        self.terms: set[int] = set()             # the pieces ~w, ~p, ~q wrote
 
     def fill(self, char: str) -> None:
         self.fills.append((len(self.out), char))
         self.out.append("")
 
+    def term(self, text: str) -> None:
+        """Append the text of a term written by ~w, ~p or ~q."""
+        self.terms.add(len(self.out))
+        self.out.append(text)
+
+    def _column_here(self) -> int:
+        """The column at the end of the output, as SWI-Prolog counts it (the class's
+        docstring)."""
+        out = self.out
+        column, position = self.column, self.position
+        fills = {piece for piece, _ in self.fills}
+        pending = False
+        for index in range(self.start, len(out)):
+            if index in fills:
+                pending = True
+                continue
+            piece = out[index]
+            if index not in self.terms:
+                column = _format_column(piece, column)
+            elif pending or position != column:
+                column += _line_position(piece, 0)
+            else:
+                column = _line_position(piece, position)
+            if not pending:          # (output goes straight to the stream until a ~t)
+                position = _line_position(piece, position)
+        return column
+
     def stop(self, count: int | None, relative: bool) -> None:
         out = self.out
-        text = "".join(out[self.start:])
-        line_break = text.rfind("\n")
-        here = len(text) - line_break - 1 if line_break >= 0 else self.column + len(text)
+        here = self._column_here()
         if count is None:
             target = here
         else:
@@ -2323,7 +2362,53 @@ class _ColumnStops:
             else:
                 out.append(" " * pad)
             here = target
+        self.position = _line_position("".join(out[self.start:]), self.position)
         self.start, self.column, self.fills = len(out), here, []
+        self.terms.clear()
+
+
+def _format_column(text: str, column: int) -> int:
+    """The column after format/2 output ``text`` from ``column``, as SWI-Prolog's format
+    counts its own output (update_column(): a tab to ``(column + 1) | 7``).
+
+    >>> _format_column("a\\tb", 0), _format_column("ab\\nc", 5), _format_column("\\b", 0)
+    (8, 1, 0)
+    """
+    cut = max(text.rfind("\n"), text.rfind("\r"))
+    if cut >= 0:
+        column, text = 0, text[cut + 1:]
+    if "\t" not in text and "\b" not in text:
+        return column + len(text)
+    for c in text:
+        if c == "\t":
+            column = (column + 1) | 7
+        elif c == "\b":
+            column = max(column - 1, 0)
+        else:
+            column += 1
+    return column
+
+
+def _line_position(text: str, position: int) -> int:
+    """Where an output stream's line ends after ``text`` written from ``position``, as
+    SWI-Prolog's streams count it (a tab to ``(position | 7) + 1``).
+
+    >>> _line_position("a\\tb", 0), _line_position("ab\\nc", 5), _line_position("\\b", 0)
+    (9, 1, 0)
+    """
+    cut = max(text.rfind("\n"), text.rfind("\r"))
+    if cut >= 0:
+        position, text = 0, text[cut + 1:]
+    if "\t" not in text and "\b" not in text:
+        return position + len(text)
+    for c in text:
+        if c == "\t":
+            position = (position | 7) + 1
+        elif c == "\b":
+            position = max(position - 1, 0)
+        else:
+            position += 1
+    return position
 
 
 class _BoundedText(list):

@@ -213,6 +213,18 @@ GOALS = [
     'format(atom(A), "~w~t~w~10|", [ab, cd])', 'format(atom(A), "~t~w~t~w~t~12|", [ab, cd])',
     'format(atom(A), "~t~w~t~w~t~13|", [ab, cd])', 'format(atom(A), "~`*t~t~20|", [])',
     'format(atom(A), "~w~t~10+~w~t~10+~w", [name, age, x])',
+    # ... counting columns as SWI-Prolog 9: format's own text a character at a time (a tab
+    # to (C + 1) | 7, a backspace one back, a carriage return or line break to 0), a term of
+    # ~w ~p ~q from the column where its text's last line ends, on a line of its own (a tab
+    # to (P | 7) + 1) -- or straight as the output's own when no ~t is pending
+    "format(atom(A), \"~t~w~10|\", ['a\\nb'])", "format(atom(A), \"ab~t~w~10|\", ['\\nc'])",
+    "format(atom(A), \"ab~t~a~10|\", ['\\nc'])", "format(atom(A), \"~t~w~10|\", ['a\\tb'])",
+    "format(atom(A), \"~t~a~10|\", ['a\\tb'])", "format(atom(A), \"ab~t~w~10|\", ['\\tc'])",
+    "format(atom(A), \"~t~w~4|\", ['a\\b'])", "format(atom(A), \"ab~t~a~10|\", ['\\bc'])",
+    "format(atom(A), \"~t~w~10|\", ['a\\r'])", "format(atom(A), \"~w~t~w~10|\", ['x\\ny', 'z\\nw'])",
+    "format(atom(A), \"ab~t~w~3+~w~t~5+\", ['\\nc', d])", "format(atom(A), \"ab~w~t~10|x\", ['\\tc'])",
+    "format(atom(A), \"ab~t~c~10|\", [9])", "format(atom(A), \"ab~tx\\ty~10|\", [])",
+    "format(atom(A), \"ab~t~w~10|\", [f('\\nc')])", "format(atom(A), \"~t~w~6|~t~w~6+\", ['a\\nb', 'c\\nd'])",
     'format(atom(A), "~e", [1.5])',
     'format(atom(A), "~p", ["s"])',
     'format(atom(A), "~s", [[104, 105]])',
