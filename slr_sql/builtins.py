@@ -1359,6 +1359,12 @@ def _char_type(m, a, codes: bool):
     x = deref(a[0])
     t = deref(a[1])
     c = _code_of(x) if type(x) is not Var else None   # as SWI-Prolog: the character first
+    if c == -1:
+        # end of file (-1, end_of_file) is of the class end_of_file only, before the class
+        # is looked at: char_type(-1, foo) fails, as SWI-Prolog's
+        if m.unify(t, Atom("end_of_file")):
+            yield None
+        return
     if type(t) is not Var and not (type(t) is Atom and t != "[]" or type(t) is Struct):
         raise type_error("char_type", t)
     if type(t) is Struct:
@@ -1370,10 +1376,6 @@ def _char_type(m, a, codes: bool):
     if c is not None:
         if type(t) is not Var:
             if _char_type_check(m, c, name, arity, args, codes):
-                yield None
-            return
-        if c == -1:
-            if m.unify(t, Atom("end_of_file")):
                 yield None
             return
         for tname, tarity, test, kind in _CHAR_TYPES:
@@ -1546,6 +1548,19 @@ def _string_code(m, a):
     s = text_in(a[1], "no_number")
     i = deref(a[0])
     if type(i) is Var:
+        code = deref(a[2])
+        if type(code) is not Var:
+            # as SWI-Prolog: a given character (a code, or a one-character atom or string:
+            # string_code(I, "ab", a) is I = 1) is looked for; anything else is its error
+            # (type_error(character, C), domain_error(character, C) beyond Unicode)
+            c = _arg_code(code)
+            for k, ch in enumerate(s, 1):
+                if ord(ch) == c:
+                    mark = len(m.trail)
+                    if m.unify(i, k):
+                        yield None
+                    m.undo_to(mark)
+            return
         for k, ch in enumerate(s, 1):
             mark = len(m.trail)
             if m.unify(i, k) and m.unify(a[2], ord(ch)):

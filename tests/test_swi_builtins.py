@@ -920,6 +920,18 @@ ORDER_GOALS = [f"catch({goal}, E, true)" if not goal.startswith("catch(") else g
     'split_string(a, "", "", [a|b])',
     "string_length(X, 2.5)",
     "atom_length(f(x), a)",
+    # string_code/3 with the index unbound and the code given: a character (a code, a
+    # one-character atom or string) looked for, anything else SWI-Prolog's error, after
+    # the text's (with the index given the code is only unified)
+    'string_code(X, "aba", a)', 'string_code(X, "ab", "a")', 'string_code(X, [a, b], b)',
+    'string_code(X, "ab", ab)', 'string_code(X, "ab", 1114112)', 'string_code(X, "ab", -1)',
+    'string_code(X, "", 1.5)', 'string_code(X, "ab", end_of_file)', "string_code(X, \"ab\", '')",
+    'string_code(X, "ab", 0\'a + 0)', 'string_code(X, f(x), 1.5)', 'string_code(1, "ab", a)',
+    # char_type/2, code_type/2 of the end of file: its class end_of_file, before the class
+    # argument is checked
+    'char_type(-1, foo)', 'code_type(-1, f(x, y))', 'char_type(end_of_file, 1)',
+    'code_type(end_of_file, "alpha")', 'char_type(end_of_file, code(C))', 'code_type(-1, [])',
+    'char_type(end_of_file, end_of_file)',
     "catch(call([a], X), error(F, _), true)",
     # split_string/4's fields as SWI-Prolog's C makes them (pad skipped at a field's start:
     # separators that are pad characters too act as one), a given whole of a concatenation
