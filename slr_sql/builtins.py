@@ -1829,33 +1829,69 @@ def _sort(m, a):
 _SORT_ORDERS = {"<": Atom("@<"), ">": Atom("@>"), "=<": Atom("@=<"), ">=": Atom("@>=")}
 
 
-def _sort_key(key: Any) -> None:
-    """sort/4's key as SWI-Prolog checks it first: an argument position (a non-negative
-    integer), a dict key (an atom) or a path of such keys (a list); anything else is
-    type_error(sort_key, Key)."""
+def _sort_key(key: Any) -> list | None:
+    """sort/4's key as SWI-Prolog checks it first, as the path of keys its sort follows into
+    each element: an argument position (a non-negative integer; 0 the element itself), a
+    dict key (an atom, ``[]`` too) or a list of such keys (the positions there positive);
+    another key is type_error(sort_key, Key). None where SWI-Prolog's sort/4 fails: a path
+    holding a key that is neither (a variable, a float, a compound) -- checked in order,
+    after the positions before it.
+
+    >>> _sort_key(0), _sort_key(2), _sort_key(make_list([1, Atom("a")])), _sort_key(make_list([1.5]))
+    ([], [2], [1, Atom('a')], None)
+    """
     key = deref(key)
     if type(key) is Var:
         raise instantiation_error()
     if type(key) is int:
         if key < 0:
             raise _err_domain("not_less_than_one", key)    # (SWI-Prolog's, though 0 is one)
-        return
+        return [key] if key else []
     if type(key) is Atom:
-        return
+        return [key]
     if type(key) is Struct and key.name == "." and len(key.args) == 2:
         items, tail = list_items(key)
         if type(tail) is Atom and tail == "[]":
+            path: list = []
             for x in items:
-                _sort_key(x)
-            return
+                x = deref(x)
+                if type(x) is int:
+                    if x < 1:
+                        raise _err_domain("not_less_than_one", x)
+                elif type(x) is not Atom:
+                    return None
+                path.append(x)
+            return path
     raise type_error("sort_key", key)
+
+
+def _sort_key_of(path: list, t: Any) -> Any:
+    """The part of the element ``t`` sort/4's key ``path`` names, with SWI-Prolog's errors:
+    a variable on the way is an instantiation error, a term that is no compound
+    type_error(compound, T); a dict key reaches into no term (slr_sql has no dicts:
+    type_error(dict, T), as SWI-Prolog's for a compound), a position past the compound's
+    arguments is ISO's type_error(compound, T) (SWI-Prolog's own existence_error(argument,
+    N, T) has three arguments)."""
+    for step in path:
+        t = deref(t)
+        if type(t) is Var:
+            raise instantiation_error()
+        if type(t) is not Struct:
+            raise type_error("compound", t)
+        if type(step) is not int:
+            raise type_error("dict", t)
+        if len(t.args) < step:
+            raise type_error("compound", t)
+        t = t.args[step - 1]
+    return t
 
 
 @det("sort", 4)
 def _sort4(m, a):
-    key = deref(a[0])
+    path = _sort_key(a[0])
+    if path is None:
+        return False
     order = deref(a[1])
-    _sort_key(key)
     if type(order) is Var:
         raise instantiation_error()
     if type(order) is not Atom:
@@ -1865,29 +1901,17 @@ def _sort4(m, a):
     if str(order) not in ("@<", "@>", "@=<", "@>="):
         raise _err_domain("order", order)
     items = proper_list(a[2])
-    if type(key) is not int:
-        if not items:
-            return m.unify(a[3], NIL)
-        # (SWI-Prolog's dict keys and key paths: slr_sql has no dicts)
-        raise type_error("integer", key)
-
-    def k(t):
-        if key == 0:
-            return t
-        t = deref(t)
-        if type(t) is not Struct or len(t.args) < key:
-            raise type_error("compound", t)
-        return t.args[key - 1]
-
-    desc = order in ("@>", "@>=")
-    res = sorted(items, key=lambda t: _cmp_key(k(t)), reverse=desc)
+    # every element's key first, in the list's order (the first bad element's error)
+    keys = [_sort_key_of(path, t) for t in items]
+    ranked = sorted(range(len(items)), key=lambda j: _cmp_key(keys[j]),
+                    reverse=order in ("@>", "@>="))
     if order in ("@<", "@>"):
-        out = []
-        for x in res:
-            if not out or compare_terms(k(out[-1]), k(x)) != 0:
-                out.append(x)
-        res = out
-    return m.unify(a[3], make_list(res))
+        kept: list[int] = []
+        for j in ranked:
+            if not kept or compare_terms(keys[kept[-1]], keys[j]) != 0:
+                kept.append(j)
+        ranked = kept
+    return m.unify(a[3], make_list([items[j] for j in ranked]))
 
 
 @det("keysort", 2)
