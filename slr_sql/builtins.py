@@ -2065,6 +2065,13 @@ def _reverse(m, a):
             yield None
         return
     ys = a[1]
+    ys_items, ys_tail = list_items(ys)
+    if type(ys_tail) is not Var:
+        # Ys's cells end: the walk reaches only their number of elements, and only a proper
+        # Ys ends it there (its cell after the last is [])
+        if _is_nil(ys_tail) and m.unify(a[0], make_list(ys_items[::-1])):
+            yield None
+        return
     trail = m.trail
     extra = 0
     while True:
@@ -2082,7 +2089,9 @@ def _reverse(m, a):
         if not longer:
             return
         extra += 1
-        m.count_steps(1)   # (a walk that finds no solution is ended by the query's limits)
+        # (each length is a walk of its own: counted by its cells, a walk that finds no
+        # solution is ended by the query's limits)
+        m.count_steps(extra)
 
 
 @det("memberchk", 2)
