@@ -1002,9 +1002,13 @@ def _name(m, a):
     """name(AtomOrNumber, Codes): a text that is a number (no leading layout) gives the
     number, any other text an atom."""
     x = deref(a[0])
-    if type(x) is not Var and (type(x) is Struct or x == NIL and type(x) is Atom
-                               or not _is_text_given(a[1])):
-        return m.unify(a[1], make_list([ord(c) for c in _atom_text(x, "atomic", "atomic")]))
+    if type(x) is not Var:
+        # as SWI-Prolog's: the codes of the first argument's text, else a given text read
+        # (name("ab", [97, 98]) and name('12', [0'1, 0'2]) are true, name(1, "01") too)
+        if m.unify(a[1], make_list([ord(c) for c in _atom_text(x, "atomic", "atomic")])):
+            return True
+        if not _is_text_given(a[1]):
+            return False
     text = _list_text(a[1])
     n = _number_of_text(text, leading_layout=False)
     return m.unify(x, Atom(text) if n is None else n)

@@ -858,6 +858,9 @@ TEXT_GOALS = [
     'atom_chars("", "")', 'atom_codes("", "")', "atom_codes('', \"\")", 'atom_chars("ab", "ab")',
     'atom_chars(12, "12")', 'atom_codes(1.5, "1.5")', 'atom_chars(ab, [97, 98])',
     "atom_chars('', '')", 'atom_chars(a, "")', 'atom_chars("ab", [a, b])', 'atom_chars(1, [a])',
+    # name/2 alike: the codes of the first, else the given text read (a number, or an atom)
+    'name("ab", [97, 98])', 'name("", [])', "name('12', [0'1, 0'2])", "name(\"12\", [0'1, 0'2])",
+    'name("ab", "ab")', 'name(12, "12")', "name(1.5, '1.5')",
     "upcase_atom(ab, [])", "upcase_atom(ab, [a])", "upcase_atom('12', 12)",
     "upcase_atom(ab, \"AB\")", "downcase_atom('AB', \"ab\")", "upcase_atom(ab, f(x))",
     "format(atom(A), 12, [])", "format(atom(A), [0'a, b], [])", "format(atom(A), [], [])",
