@@ -979,11 +979,16 @@ def _from_text(make: Callable[[str], Any], parse: Callable[[str], Any]):
         x = deref(a[0])
         if type(x) is not Var:
             text = _atom_text(x, "atom")
-            if _is_text_given(a[1]):
-                # a given list is read as in the other mode (SWI-Prolog: its type errors;
-                # a character list for atom_codes, a code list for atom_chars too)
-                return _list_text(a[1]) == text
-            return m.unify(a[1], make(text))
+            if m.unify(a[1], make(text)):
+                return True
+            if not _is_text_given(a[1]):
+                return False
+            # as SWI-Prolog's: a given text that is not the list made from the first
+            # argument is read as in the other mode (its type errors; a character list for
+            # atom_codes, a code list for atom_chars too, a string) and the atom of that text
+            # unified with the first argument -- so only an atom is equal to a string there:
+            # atom_chars(ab, "ab") is true, atom_chars("", "") and atom_chars(1, "1") false
+            return m.unify(x, Atom(_list_text(a[1])))
         return m.unify(x, parse(_list_text(a[1])))
     return f
 
@@ -997,9 +1002,13 @@ def _name(m, a):
     """name(AtomOrNumber, Codes): a text that is a number (no leading layout) gives the
     number, any other text an atom."""
     x = deref(a[0])
-    if type(x) is not Var and (type(x) is Struct or x == NIL and type(x) is Atom
-                               or not _is_text_given(a[1])):
-        return m.unify(a[1], make_list([ord(c) for c in _atom_text(x, "atomic", "atomic")]))
+    if type(x) is not Var:
+        # as SWI-Prolog's: the codes of the first argument's text, else a given text read
+        # (name("ab", [97, 98]) and name('12', [0'1, 0'2]) are true, name(1, "01") too)
+        if m.unify(a[1], make_list([ord(c) for c in _atom_text(x, "atomic", "atomic")])):
+            return True
+        if not _is_text_given(a[1]):
+            return False
     text = _list_text(a[1])
     n = _number_of_text(text, leading_layout=False)
     return m.unify(x, Atom(text) if n is None else n)
@@ -1354,6 +1363,12 @@ def _char_type(m, a, codes: bool):
     x = deref(a[0])
     t = deref(a[1])
     c = _code_of(x) if type(x) is not Var else None   # as SWI-Prolog: the character first
+    if c == -1:
+        # end of file (-1, end_of_file) is of the class end_of_file only, before the class
+        # is looked at: char_type(-1, foo) fails, as SWI-Prolog's
+        if m.unify(t, Atom("end_of_file")):
+            yield None
+        return
     if type(t) is not Var and not (type(t) is Atom and t != "[]" or type(t) is Struct):
         raise type_error("char_type", t)
     if type(t) is Struct:
@@ -1365,10 +1380,6 @@ def _char_type(m, a, codes: bool):
     if c is not None:
         if type(t) is not Var:
             if _char_type_check(m, c, name, arity, args, codes):
-                yield None
-            return
-        if c == -1:
-            if m.unify(t, Atom("end_of_file")):
                 yield None
             return
         for tname, tarity, test, kind in _CHAR_TYPES:
@@ -1541,6 +1552,19 @@ def _string_code(m, a):
     s = text_in(a[1], "no_number")
     i = deref(a[0])
     if type(i) is Var:
+        code = deref(a[2])
+        if type(code) is not Var:
+            # as SWI-Prolog: a given character (a code, or a one-character atom or string:
+            # string_code(I, "ab", a) is I = 1) is looked for; anything else is its error
+            # (type_error(character, C), domain_error(character, C) beyond Unicode)
+            c = _arg_code(code)
+            for k, ch in enumerate(s, 1):
+                if ord(ch) == c:
+                    mark = len(m.trail)
+                    if m.unify(i, k):
+                        yield None
+                    m.undo_to(mark)
+            return
         for k, ch in enumerate(s, 1):
             mark = len(m.trail)
             if m.unify(i, k) and m.unify(a[2], ord(ch)):
@@ -1809,33 +1833,69 @@ def _sort(m, a):
 _SORT_ORDERS = {"<": Atom("@<"), ">": Atom("@>"), "=<": Atom("@=<"), ">=": Atom("@>=")}
 
 
-def _sort_key(key: Any) -> None:
-    """sort/4's key as SWI-Prolog checks it first: an argument position (a non-negative
-    integer), a dict key (an atom) or a path of such keys (a list); anything else is
-    type_error(sort_key, Key)."""
+def _sort_key(key: Any) -> list | None:
+    """sort/4's key as SWI-Prolog checks it first, as the path of keys its sort follows into
+    each element: an argument position (a non-negative integer; 0 the element itself), a
+    dict key (an atom, ``[]`` too) or a list of such keys (the positions there positive);
+    another key is type_error(sort_key, Key). None where SWI-Prolog's sort/4 fails: a path
+    holding a key that is neither (a variable, a float, a compound) -- checked in order,
+    after the positions before it.
+
+    >>> _sort_key(0), _sort_key(2), _sort_key(make_list([1, Atom("a")])), _sort_key(make_list([1.5]))
+    ([], [2], [1, Atom('a')], None)
+    """
     key = deref(key)
     if type(key) is Var:
         raise instantiation_error()
     if type(key) is int:
         if key < 0:
             raise _err_domain("not_less_than_one", key)    # (SWI-Prolog's, though 0 is one)
-        return
+        return [key] if key else []
     if type(key) is Atom:
-        return
+        return [key]
     if type(key) is Struct and key.name == "." and len(key.args) == 2:
         items, tail = list_items(key)
         if type(tail) is Atom and tail == "[]":
+            path: list = []
             for x in items:
-                _sort_key(x)
-            return
+                x = deref(x)
+                if type(x) is int:
+                    if x < 1:
+                        raise _err_domain("not_less_than_one", x)
+                elif type(x) is not Atom:
+                    return None
+                path.append(x)
+            return path
     raise type_error("sort_key", key)
+
+
+def _sort_key_of(path: list, t: Any) -> Any:
+    """The part of the element ``t`` sort/4's key ``path`` names, with SWI-Prolog's errors:
+    a variable on the way is an instantiation error, a term that is no compound
+    type_error(compound, T); a dict key reaches into no term (slr_sql has no dicts:
+    type_error(dict, T), as SWI-Prolog's for a compound), a position past the compound's
+    arguments is ISO's type_error(compound, T) (SWI-Prolog's own existence_error(argument,
+    N, T) has three arguments)."""
+    for step in path:
+        t = deref(t)
+        if type(t) is Var:
+            raise instantiation_error()
+        if type(t) is not Struct:
+            raise type_error("compound", t)
+        if type(step) is not int:
+            raise type_error("dict", t)
+        if len(t.args) < step:
+            raise type_error("compound", t)
+        t = t.args[step - 1]
+    return t
 
 
 @det("sort", 4)
 def _sort4(m, a):
-    key = deref(a[0])
+    path = _sort_key(a[0])
+    if path is None:
+        return False
     order = deref(a[1])
-    _sort_key(key)
     if type(order) is Var:
         raise instantiation_error()
     if type(order) is not Atom:
@@ -1845,29 +1905,17 @@ def _sort4(m, a):
     if str(order) not in ("@<", "@>", "@=<", "@>="):
         raise _err_domain("order", order)
     items = proper_list(a[2])
-    if type(key) is not int:
-        if not items:
-            return m.unify(a[3], NIL)
-        # (SWI-Prolog's dict keys and key paths: slr_sql has no dicts)
-        raise type_error("integer", key)
-
-    def k(t):
-        if key == 0:
-            return t
-        t = deref(t)
-        if type(t) is not Struct or len(t.args) < key:
-            raise type_error("compound", t)
-        return t.args[key - 1]
-
-    desc = order in ("@>", "@>=")
-    res = sorted(items, key=lambda t: _cmp_key(k(t)), reverse=desc)
+    # every element's key first, in the list's order (the first bad element's error)
+    keys = [_sort_key_of(path, t) for t in items]
+    ranked = sorted(range(len(items)), key=lambda j: _cmp_key(keys[j]),
+                    reverse=order in ("@>", "@>="))
     if order in ("@<", "@>"):
-        out = []
-        for x in res:
-            if not out or compare_terms(k(out[-1]), k(x)) != 0:
-                out.append(x)
-        res = out
-    return m.unify(a[3], make_list(res))
+        kept: list[int] = []
+        for j in ranked:
+            if not kept or compare_terms(keys[kept[-1]], keys[j]) != 0:
+                kept.append(j)
+        ranked = kept
+    return m.unify(a[3], make_list([items[j] for j in ranked]))
 
 
 @det("keysort", 2)
@@ -1999,12 +2047,55 @@ def _must_be_list(m, a):
     return True
 
 
-@det("reverse", 2)
-def _reverse(m, a):
+@det("$reverse_list", 2)
+def _reverse_list(m, a):
+    """reverse/2 of a list that is no partial one (the compiled path calls it where the
+    list's end is known): its reverse, or failure when its tail is no list."""
     items, tail = list_items(a[0])
-    if type(tail) is not Var and not _is_nil(tail):
+    if not _is_nil(tail):
         return False   # (the library's clauses are for [] and [X|Xs] only)
-    return m.unify(a[1], make_list(list(reversed(proper_list(a[0])))))
+    return m.unify(a[1], make_list(items[::-1]))
+
+
+@nondet("reverse", 2)
+def _reverse(m, a):
+    """reverse(Xs, Ys) as SWI-Prolog's library clauses, which walk Ys's cells beside Xs's
+    (``reverse([X|Xs], [_|Bound], Rs, Ys)``): a partial Xs is completed to one length after
+    another, as far as Ys has cells for it (with no end when Ys is partial too):
+    ``reverse(L, [1, 2])`` answers L = [2, 1] and ends, ``reverse([1|T], R)`` has no end."""
+    items, tail = list_items(a[0])
+    if type(tail) is not Var:
+        if _reverse_list(m, a):
+            yield None
+        return
+    ys = a[1]
+    ys_items, ys_tail = list_items(ys)
+    if type(ys_tail) is not Var:
+        # Ys's cells end: the walk reaches only their number of elements, and only a proper
+        # Ys ends it there (its cell after the last is [])
+        if _is_nil(ys_tail) and m.unify(a[0], make_list(ys_items[::-1])):
+            yield None
+        return
+    trail = m.trail
+    extra = 0
+    while True:
+        # the list with `extra` more elements: its solution, if Ys is its reverse
+        fresh = [Var() for _ in range(extra)]
+        mark = len(trail)
+        if m.unify(tail, make_list(fresh)) and m.unify(ys, make_list((items + fresh)[::-1])):
+            yield None
+        m.undo_to(mark)
+        # one element more only where Ys has a cell for it too (the clauses' walk fails
+        # there, and with it every longer list)
+        longer = m.unify(tail, make_list([Var() for _ in range(extra + 1)], Var())) and \
+            m.unify(ys, make_list([Var() for _ in range(len(items) + extra + 1)], Var()))
+        m.undo_to(mark)
+        if not longer:
+            return
+        extra += 1
+        # (each length is a walk of its own: counted by its cells, a walk that finds no
+        # solution is ended by the query's limits)
+        m.count_steps(extra)
 
 
 @det("memberchk", 2)
@@ -2135,9 +2226,9 @@ def format_text(fmt: str, args: list, deadline: float | None = None) -> str:
         d = fmt[i] if i < n else num[-1] if digits_end else "\0"
         i += 1
         if d == "w":
-            out.append(_write_text(take(), deadline=deadline))
+            columns.term(_write_text(take(), deadline=deadline))
         elif d in "pq":
-            out.append(_write_text(take(), True, deadline))
+            columns.term(_write_text(take(), True, deadline))
         elif d == "a":
             # atomic only, and not [] (text_of takes a code list and [])
             arg = deref(take())
@@ -2248,29 +2339,68 @@ class _ColumnStops:
     ``~N|`` (column N; bare: here) and ``~N+`` (N past the last stop, 8 by default) pad that
     text to the column at its fill points -- evenly, the last ones one more when the
     padding does not divide -- or on its right when it has none. Text already past the
-    column is left as it is; columns count from the last line break.
+    column is left as it is.
+
+    The column is counted as SWI-Prolog 9 counts it: format's own text (its literal
+    characters, ``~a``, ``~s``, ``~c``, numbers, ``~n``) one character at a time, a line
+    break or carriage return back to 0, a tab to ``(column + 1) | 7``, a backspace one back;
+    a term written by ``~w``, ``~p``, ``~q`` adds the column its text ends at when written
+    on a line of its own (the output stream's count: a tab to ``(position | 7) + 1``) --
+    unless no fill point is pending and the output so far ends at the column, where the
+    term goes straight to the output and the column is where the output then ends. So
+    ``format("ab~t~w~10|", ['\\nc'])`` pads 'ab' to 'ab' and 7 spaces: 'c' counts from
+    column 2.
 
     >>> format_text("~w~t~10|~w", [Atom("abc"), Atom("def")])
     'abc       def'
     >>> format_text("~t~w~t~10|", [Atom("abc")]), format_text("~`-t~5|", [])
     ('   abc    ', '-----')
+    >>> format_text("ab~t~w~10|", [Atom("\\nc")]), format_text("ab~t~a~10|", [Atom("\\nc")])
+    ('ab       \\nc', 'ab         \\nc')
     """
 
     def __init__(self, out: "_BoundedText"):
         self.out = out
         self.start = 0            # the piece where the text since the last stop begins
-        self.column = 0           # the column it begins at
+        self.column = 0           # the column it begins at (format's count)
+        self.position = 0         # where the output ends on its line there (the stream's)
         self.fills: list[tuple[int, str]] = []   # (piece, fill character) of each ~t
+        self.terms: set[int] = set()             # the pieces ~w, ~p, ~q wrote
 
     def fill(self, char: str) -> None:
         self.fills.append((len(self.out), char))
         self.out.append("")
 
+    def term(self, text: str) -> None:
+        """Append the text of a term written by ~w, ~p or ~q."""
+        self.terms.add(len(self.out))
+        self.out.append(text)
+
+    def _column_here(self) -> int:
+        """The column at the end of the output, as SWI-Prolog counts it (the class's
+        docstring)."""
+        out = self.out
+        column, position = self.column, self.position
+        fills = {piece for piece, _ in self.fills}
+        pending = False
+        for index in range(self.start, len(out)):
+            if index in fills:
+                pending = True
+                continue
+            piece = out[index]
+            if index not in self.terms:
+                column = _format_column(piece, column)
+            elif pending or position != column:
+                column += _line_position(piece, 0)
+            else:
+                column = _line_position(piece, position)
+            if not pending:          # (output goes straight to the stream until a ~t)
+                position = _line_position(piece, position)
+        return column
+
     def stop(self, count: int | None, relative: bool) -> None:
         out = self.out
-        text = "".join(out[self.start:])
-        line_break = text.rfind("\n")
-        here = len(text) - line_break - 1 if line_break >= 0 else self.column + len(text)
+        here = self._column_here()
         if count is None:
             target = here
         else:
@@ -2284,7 +2414,53 @@ class _ColumnStops:
             else:
                 out.append(" " * pad)
             here = target
+        self.position = _line_position("".join(out[self.start:]), self.position)
         self.start, self.column, self.fills = len(out), here, []
+        self.terms.clear()
+
+
+def _format_column(text: str, column: int) -> int:
+    """The column after format/2 output ``text`` from ``column``, as SWI-Prolog's format
+    counts its own output (update_column(): a tab to ``(column + 1) | 7``).
+
+    >>> _format_column("a\\tb", 0), _format_column("ab\\nc", 5), _format_column("\\b", 0)
+    (8, 1, 0)
+    """
+    cut = max(text.rfind("\n"), text.rfind("\r"))
+    if cut >= 0:
+        column, text = 0, text[cut + 1:]
+    if "\t" not in text and "\b" not in text:
+        return column + len(text)
+    for c in text:
+        if c == "\t":
+            column = (column + 1) | 7
+        elif c == "\b":
+            column = max(column - 1, 0)
+        else:
+            column += 1
+    return column
+
+
+def _line_position(text: str, position: int) -> int:
+    """Where an output stream's line ends after ``text`` written from ``position``, as
+    SWI-Prolog's streams count it (a tab to ``(position | 7) + 1``).
+
+    >>> _line_position("a\\tb", 0), _line_position("ab\\nc", 5), _line_position("\\b", 0)
+    (9, 1, 0)
+    """
+    cut = max(text.rfind("\n"), text.rfind("\r"))
+    if cut >= 0:
+        position, text = 0, text[cut + 1:]
+    if "\t" not in text and "\b" not in text:
+        return position + len(text)
+    for c in text:
+        if c == "\t":
+            position = (position | 7) + 1
+        elif c == "\b":
+            position = max(position - 1, 0)
+        else:
+            position += 1
+    return position
 
 
 class _BoundedText(list):

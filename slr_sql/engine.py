@@ -280,6 +280,12 @@ class Machine:
             raise SLRTimeout(f"query timed out after {self.timeout} s "
                              f"({self.steps} inference steps)")
 
+    def count_steps(self, n: int) -> None:
+        """Count ``n`` inference steps a builtin made inside one call (a generator looking
+        for its next solution) against the query's limits, as the machine counts its own:
+        SLRTimeout once past max_steps or the deadline."""
+        self._check_limits(n)
+
     def _in_own_transaction(self) -> bool:
         """Whether this thread is inside a transaction of the store: a goal evaluated there
         (an event rule's where goal deciding in its add) is part of a write, which a close

@@ -252,6 +252,23 @@ def test_building_a_long_list_stops_when_the_time_is_up(kb):
     assert kb.query("numlist(1, 3, L)") == [{"L": [1, 2, 3]}]  # the kb is fine afterwards
 
 
+def test_reverse_of_a_partial_list_with_no_solution_meets_the_limits(kb):
+    # (reverse/2 completes L to one length after another; [a|L] is never one of them: a walk
+    # inside one builtin call, counted by the cells of each length it tries)
+    with pytest.raises(SLRTimeout, match="step limit"):
+        kb.query("reverse(L, [a|L])", max_steps=5000, timeout=5)
+    with pytest.raises(SLRTimeout):
+        kb.query("reverse(L, [a|L])", timeout=RUNS_OUT)
+    assert kb.query("reverse(L, [a, b])") == [{"L": ["b", "a"]}]
+
+
+def test_reverse_into_an_unbound_list_takes_one_walk(kb):
+    # (the other list proper: the one length its cells allow is made at once, not each
+    # shorter one tried first -- quadratic, minutes for these 100,000 cells)
+    goal = "numlist(1, 100000, L), reverse(R, L), R = [X|_], length(R, N)"
+    assert kb.query(goal, timeout=ANSWERS_WITHIN, max_steps=1000)[0]["X"] == 100000
+
+
 @pytest.mark.parametrize("timeout", [1, None])
 @pytest.mark.parametrize("goal", [
     "X is 7**100000000", "X is 7^100000000", "X is 1 << 100000000000",

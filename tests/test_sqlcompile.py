@@ -147,6 +147,9 @@ FALLBACKS = [
      [{"M": slr_sql.Struct("max", (2.0, slr_sql.Atom("i2")))}]),
     # random(N) differs from call to call: never folded at compile time, nor evaluated by
     # SQL (which may evaluate an expression more than once)
+    # (a partial list: reverse/2 enumerates its lengths; a known list compiles)
+    ("seg(O, _)^_, reverse(L, [O, x])", "reverse/2 of a partial list",
+     [{"O": "cup1", "L": ["x", "cup1"]}]),
     ("Y is random(1)", "non-deterministic", [{"Y": 0}]),
     ("p(X), Y is random(X) * 0", "non-deterministic", [{"X": 1, "Y": 0}, {"X": 2, "Y": 0}]),
 ]
@@ -181,6 +184,20 @@ def test_fallback_effects_and_unknown_predicates():
     assert "unknown predicate nope/1" in engine(kb, "nope(X)")
     with pytest.raises(SLREvaluationError, match="existence_error"):
         kb.query("nope(X)")
+
+
+def test_reverse_of_a_list_known_when_reached_compiles():
+    # (only a partial list enumerates: a stored list, or one with stored elements, is one
+    # answer of a deterministic call inside the statement)
+    kb = fallback_kb()
+    for goal, expected in [
+            ("seg(O, L)^_, reverse(L, R)",
+             [{"O": "cup1", "L": [0.5, 0.1, 0.9], "R": [0.9, 0.1, 0.5]}]),
+            ("item(X)^_, reverse([X, a], R)",
+             [{"X": "i1", "R": ["a", "i1"]}, {"X": "i2", "R": ["a", "i2"]}]),
+            ("val(X)^_, reverse(X, R)", [])]:
+        assert engine(kb, goal) == "sql", goal
+        assert both(kb, goal) == (expected, expected), goal
 
 
 def test_fallback_at_run_time_raises_the_interpreters_error():

@@ -12,7 +12,7 @@ import operator
 from typing import Any
 
 from ..encoding import INT64_MAX, INT64_MIN
-from ..terms import Atom, Struct, Var, deref
+from ..terms import Atom, Struct, Var, deref, list_items
 from .model import (NUMERIC, SITES, Col, ColRef, Fallback, Site, format_for_message, shown_in_message, next_site_id,
                     has_col, has_var, resolve, term_free_vars)
 
@@ -192,6 +192,17 @@ class BuiltinGoals:
             raise Fallback(f"{name}/{key[1]} reads the stored transforms (and waits for them "
                            f"in a synchronized query): it runs in the interpreter")
         self.det_sql(key, self.ctx.det[key], False, args, nxt, st, emit)
+
+    def reverse_sql(self, args, nxt, st, emit):
+        """reverse/2 of a list whose end is known when the goal is reached (a proper list,
+        a stored value, no list at all) as the deterministic ``$reverse_list``; of a partial
+        list, which enumerates one length after another, in the interpreter."""
+        _, tail = list_items(resolve(args[0]))
+        if type(tail) is Var:
+            raise Fallback("reverse/2 of a partial list enumerates lists of each length: "
+                           "it runs in the interpreter")
+        self.det_sql(("reverse", 2), self.ctx.det[("$reverse_list", 2)], False, args, nxt,
+                     st, emit)
 
     def det_sql(self, key, fn, python, args, nxt, st, emit):
         """A deterministic builtin or ``kb.define`` predicate as the function ``slr_det``."""

@@ -208,6 +208,8 @@ class Compiler(Unification, BuiltinGoals, ControlGoals, RuleGoals, EventGoals, A
         if key == ("origin", 2):
             self.record_mode(g)
             return self.origin_sql(args, ctx, nxt, st, emit)
+        if key == ("reverse", 2):
+            return self.reverse_sql(args, nxt, st, emit)
         if key in self.ctx.nondet:
             raise Fallback(f"the builtin {name}/{len(args)} has no SQL form")
         fn = self.ctx.python_preds.get(key)
