@@ -2426,19 +2426,7 @@ def _format_column(text: str, column: int) -> int:
     >>> _format_column("a\\tb", 0), _format_column("ab\\nc", 5), _format_column("\\b", 0)
     (8, 1, 0)
     """
-    cut = max(text.rfind("\n"), text.rfind("\r"))
-    if cut >= 0:
-        column, text = 0, text[cut + 1:]
-    if "\t" not in text and "\b" not in text:
-        return column + len(text)
-    for c in text:
-        if c == "\t":
-            column = (column + 1) | 7
-        elif c == "\b":
-            column = max(column - 1, 0)
-        else:
-            column += 1
-    return column
+    return _column_after(text, column, lambda c: (c + 1) | 7)
 
 
 def _line_position(text: str, position: int) -> int:
@@ -2448,19 +2436,25 @@ def _line_position(text: str, position: int) -> int:
     >>> _line_position("a\\tb", 0), _line_position("ab\\nc", 5), _line_position("\\b", 0)
     (9, 1, 0)
     """
+    return _column_after(text, position, lambda c: (c | 7) + 1)
+
+
+def _column_after(text: str, column: int, tab: Callable[[int], int]) -> int:
+    """The column after ``text`` from ``column``: a new line or return goes to 0, a
+    backspace back one, a tab where ``tab`` says (format and streams differ there)."""
     cut = max(text.rfind("\n"), text.rfind("\r"))
     if cut >= 0:
-        position, text = 0, text[cut + 1:]
+        column, text = 0, text[cut + 1:]
     if "\t" not in text and "\b" not in text:
-        return position + len(text)
+        return column + len(text)
     for c in text:
         if c == "\t":
-            position = (position | 7) + 1
+            column = tab(column)
         elif c == "\b":
-            position = max(position - 1, 0)
+            column = max(column - 1, 0)
         else:
-            position += 1
-    return position
+            column += 1
+    return column
 
 
 class _BoundedText(list):
