@@ -23,8 +23,8 @@ from .arith import instantiation_error, iso_error, resource_error, type_error, w
 from .errors import CLOSED_WHILE_RUNNING, SLRError, SLREvaluationError, SLRTimeout
 from .program import MAX_RECURSIVE_NEST, Predicate, Program, Slot, Template, build, \
     event_key, split_event_atom
-from .terms import (Atom, CheckedBodies, Struct, Var, body_problem, deref, format_atom,
-                    format_term, term_vars)
+from .terms import (Atom, CheckedBodies, Struct, Var, deref, format_atom, format_term,
+                    term_vars)
 from .unify import bound_args, copy_term, undo, unify, unify_event_row
 
 __all__ = ["Engine", "Machine", "unify", "copy_term", "PrologThrow"]
@@ -574,8 +574,19 @@ class Machine:
         raise AssertionError(op)
 
     def check_body(self, goal: Any) -> None:
-        """:func:`check_body`, walking a body inside one already found callable only when it
-        must (:class:`CheckedBodies`)."""
+        """A term called as a goal is made a body first, as SWI-Prolog's call/1 does (ISO
+        7.6.2): every goal inside its control constructs (``,`` ``;`` ``->`` ``*->``
+        ``\\+``) must be callable or a variable, else the whole term is
+        ``type_error(callable, Goal)`` -- before any of it runs (``call((fail, 1))`` raises,
+        it does not fail). A body inside one already found callable is walked again only
+        when it must (:class:`CheckedBodies`).
+
+        >>> m = Engine(Program()).machine(); m.check_body(Struct(",", (Atom("fail"), Var())))
+        >>> m.check_body(Struct(",", (Atom("fail"), 1)))
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLREvaluationError: error(type_error(callable,(fail,1)),_)
+        """
         if self._bodies.problem(goal) is not None:
             raise type_error("callable", deref(goal))
 
@@ -769,22 +780,6 @@ def _in_nondet_builtin(exc: SLREvaluationError, fn: Callable) -> SLREvaluationEr
         if f is fn:
             return _in_builtin(exc, key)
     return exc
-
-
-def check_body(goal: Any) -> None:
-    """A term called as a goal is made a body first, as SWI-Prolog's call/1 does (ISO 7.6.2):
-    every goal inside its control constructs (``,`` ``;`` ``->`` ``*->`` ``\\+``) must be
-    callable or a variable, else the whole term is ``type_error(callable, Goal)`` -- before
-    any of it runs (``call((fail, 1))`` raises, it does not fail).
-
-    >>> check_body(Struct(",", (Atom("fail"), Var())))
-    >>> check_body(Struct(",", (Atom("fail"), 1)))
-    Traceback (most recent call last):
-    ...
-    slr_sql.errors.SLREvaluationError: error(type_error(callable,(fail,1)),_)
-    """
-    if body_problem(goal) is not None:
-        raise type_error("callable", deref(goal))
 
 
 def _add_args(goal: Any, extra: tuple) -> Any:

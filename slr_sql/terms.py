@@ -1282,21 +1282,7 @@ def body_problem(goal: Any, unknown: type | None = None) -> str | None:
     >>> body_problem(Struct(",", (Atom("fail"), 1))), body_problem(Struct(",", (Atom("a"), Var())))
     ('uncallable', None)
     """
-    t = deref(goal)
-    if type(t) is not Struct or (t.name, len(t.args)) not in BODY_CONTROL:
-        return None
-    stack = list(t.args)
-    while stack:
-        x = deref(stack.pop())
-        tx = type(x)
-        if tx is Struct:
-            if (x.name, len(x.args)) in BODY_CONTROL:
-                stack.extend(x.args)
-        elif unknown is not None and tx is unknown:
-            return "unknown"
-        elif tx is not Var and (tx is not Atom or x == "[]"):
-            return "uncallable"
-    return None
+    return CheckedBodies(unknown).problem(goal)
 
 
 class CheckedBodies:
