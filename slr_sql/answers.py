@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import math
 import re
-from typing import Any
+from typing import Any, Callable
 
 from .terms import Var, deref, int_text, quoted_text, to_python
 
-__all__ = ["answer_bindings", "value_text", "answer_text"]
+__all__ = ["answer_bindings", "value_text", "answer_text", "rebuilt"]
 
 
 def answer_bindings(names: list, frame: list, deadline: float | None = None) -> dict[str, Any]:
@@ -77,25 +77,44 @@ def _as_engine_term(value: Any) -> Any:
     """
     from .terms import Atom, String, Struct, Var, make_list
 
+    def split(item: Any) -> tuple[Any, Any]:
+        if isinstance(item, Atom) or isinstance(item, Var):
+            return None, item
+        if isinstance(item, str):
+            return None, String(item)
+        if isinstance(item, Struct):
+            return item.args, lambda args, name=item.name: Struct(name, tuple(args))
+        if isinstance(item, (list, tuple)):
+            return item, make_list
+        return None, item
+
+    return rebuilt(value, split)
+
+
+def rebuilt(value: Any, split: Callable[[Any], tuple[Any, Any]]) -> Any:
+    """``value`` rebuilt from the leaves up, without recursion (an answer may be nested
+    deeper than Python's recursion): ``split(item)`` gives ``(None, new_leaf)`` for a leaf,
+    ``(children, make)`` for a node, ``make`` putting the rebuilt children together.
+
+    >>> rebuilt([1, [2, 3]], lambda x: (x, sum) if isinstance(x, list) else (None, x * 10))
+    60
+    """
     done: list = []
     todo: list = [(value, None)]
     while todo:
-        item, built = todo.pop()
-        if built is not None:   # its arguments are the last results: put them together
-            name, n = built
-            args = done[len(done) - n:]
+        item, node = todo.pop()
+        if node is not None:   # its children are the last results: put them together
+            n, make = node
+            children = done[len(done) - n:]
             del done[len(done) - n:]
-            done.append(make_list(args) if name is None else Struct(name, tuple(args)))
-        elif isinstance(item, Atom) or isinstance(item, Var):
-            done.append(item)
-        elif isinstance(item, str):
-            done.append(String(item))
-        elif isinstance(item, (list, tuple)) or isinstance(item, Struct):
-            args = item.args if isinstance(item, Struct) else item
-            todo.append((None, (item.name if isinstance(item, Struct) else None, len(args))))
-            todo.extend((a, None) for a in reversed(args))
+            done.append(make(children))
+            continue
+        children, result = split(item)
+        if children is None:
+            done.append(result)
         else:
-            done.append(item)
+            todo.append((None, (len(children), result)))
+            todo.extend((c, None) for c in reversed(children))
     return done[0]
 
 

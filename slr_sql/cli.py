@@ -24,7 +24,7 @@ import click
 import slr_sql
 
 from .api import KnowledgeBaseAPI
-from .answers import answer_text, value_text
+from .answers import answer_text, rebuilt, value_text
 from .encoding import decode
 from .kb import KnowledgeBase, check_time_option
 from .parser import full_stop_end, parse_event_fast
@@ -1198,30 +1198,16 @@ def abbreviated(value: Any) -> Any:
     >>> value_text(abbreviated(list(range(1, 20))))
     '[1,2,3,4,5,6,7,8,9|...]'
     """
-    # (iterative: an answer may be nested deeper than Python's recursion)
-    done: list = []
-    todo: list = [(value, None)]
-    while todo:
-        item, built = todo.pop()
-        if built is not None:   # its arguments are the last results: put them together
-            name, n, length = built
-            args = done[len(done) - n:]
-            del done[len(done) - n:]
-            done.append(Struct(name, tuple(args)) if name is not None
-                        else _cut_list(args, length))
-        elif isinstance(item, list):
-            kept = item[:MAX_LIST_ITEMS]
-            todo.append((None, (None, len(kept), len(item))))
-            todo.extend((a, None) for a in reversed(kept))
-        elif isinstance(item, Struct):
-            todo.append((None, (item.name, len(item.args), 0)))
-            todo.extend((a, None) for a in reversed(item.args))
-        elif isinstance(item, str) and not isinstance(item, Atom) \
-                and len(item) > MAX_STRING_CHARS:
-            done.append(item[:MAX_STRING_CHARS] + "...")
-        else:
-            done.append(item)
-    return done[0]
+    def split(item: Any) -> tuple[Any, Any]:
+        if isinstance(item, list):
+            return item[:MAX_LIST_ITEMS], lambda args, length=len(item): _cut_list(args, length)
+        if isinstance(item, Struct):
+            return item.args, lambda args, name=item.name: Struct(name, tuple(args))
+        if isinstance(item, str) and not isinstance(item, Atom) and len(item) > MAX_STRING_CHARS:
+            return None, item[:MAX_STRING_CHARS] + "..."
+        return None, item
+
+    return rebuilt(value, split)   # (iterative: an answer may be nested deeply)
 
 
 def _cut_list(items: list, length: int) -> Any:
