@@ -67,11 +67,45 @@ def test_stop_is_prompt_once_nothing_is_in_flight():
     assert min(took) < 0.09, took
 
 
-def test_a_request_in_flight_when_stop_is_asked_is_still_answered():
-    # the prompt stop keeps what a stop does for requests in flight: listening ends at
-    # once, the request running gets the grace (stop_grace) and its answer
+def test_the_installed_uvicorn_keeps_what_the_prompt_stop_reads():
+    # the prompt stop reads uvicorn.Server's state; a uvicorn that moved it gets its own
+    # (slower) stop -- this says the one installed is the one the prompt stop was written for
     import threading
     import time
+
+    from slr_sql.service.app import Limits, create_app
+    from slr_sql.service.background import listen_on, service_server, uvicorn_config
+
+    with slr_sql.open() as local:
+        server = service_server(uvicorn_config(create_app(local), Limits()))
+        assert not server.knows_uvicorn_shutdown()     # (its state comes with the start)
+        sock = listen_on("127.0.0.1", 0)
+        serving = threading.Thread(target=server.run, kwargs={"sockets": [sock]})
+        serving.start()
+        deadline = time.monotonic() + 30
+        while not server.started and serving.is_alive() and time.monotonic() < deadline:
+            threading.Event().wait(0.005)
+        try:
+            assert server.started and server.knows_uvicorn_shutdown()
+        finally:
+            server.request_exit()
+            serving.join(30)
+            sock.close()
+        assert not serving.is_alive()
+
+
+@pytest.mark.parametrize("uvicorn_moved", [False, True], ids=["prompt stop", "uvicorn's stop"])
+def test_a_request_in_flight_when_stop_is_asked_is_still_answered(uvicorn_moved, monkeypatch):
+    # the prompt stop keeps what a stop does for requests in flight: listening ends at
+    # once, the request running gets the grace (stop_grace) and its answer; so does
+    # uvicorn's own stop, taken when uvicorn no longer has what the prompt one reads
+    import threading
+    import time
+
+    if uvicorn_moved:
+        from slr_sql.service import background
+        monkeypatch.setattr(background, "_UVICORN_SHUTDOWN_ATTRIBUTES",
+                            background._UVICORN_SHUTDOWN_ATTRIBUTES + ("moved_away",))
 
     entered, release = threading.Event(), threading.Event()
 

@@ -119,6 +119,10 @@ def uvicorn_config(app: Any, limits: Any, *, max_connections: int | None = 1000,
 SHUTDOWN_POLL = 0.005
 
 
+# What the shorter stop of service_server reads of uvicorn.Server (set by its startup)
+_UVICORN_SHUTDOWN_ATTRIBUTES = ("servers", "server_state", "lifespan", "force_exit", "config")
+
+
 def service_server(config: Any) -> Any:
     """The uvicorn ``Server`` of ``config`` (see :func:`uvicorn_config`), which tells the
     service it begins to stop before it waits for the requests in flight: a poll answers
@@ -181,6 +185,10 @@ def service_server(config: Any) -> Any:
             service = getattr(getattr(self.config.app, "state", None), "service", None)
             if service is not None:
                 service.stopping.set()
+            if not self.knows_uvicorn_shutdown():
+                # a uvicorn whose internals moved: its own stop, slower but its own
+                await super().shutdown(sockets)
+                return
             # uvicorn's shutdown (0.54), its fixed pause and 0.1 s looks made shorter
             for server in self.servers:
                 server.close()
@@ -199,6 +207,13 @@ def service_server(config: Any) -> Any:
                     task.cancel(msg="the server's stop grace ended")
             if not self.force_exit:
                 await self.lifespan.shutdown()
+
+        def knows_uvicorn_shutdown(self) -> bool:
+            """Whether this uvicorn keeps the state the shorter stop reads (0.52-0.54 do);
+            a later one that moved it gets its own stop instead of an AttributeError."""
+            state = getattr(self, "server_state", None)
+            return (all(hasattr(self, name) for name in _UVICORN_SHUTDOWN_ATTRIBUTES)
+                    and hasattr(state, "connections") and hasattr(state, "tasks"))
 
         async def _wait_for_requests(self) -> None:
             state = self.server_state
