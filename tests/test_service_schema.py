@@ -169,6 +169,8 @@ def test_the_description_lists_the_statuses_of_its_operations(spec):
     assert {"200", "202", "404", "408"} <= set(ops[("/submit/{handle}", "GET")])
     assert {"200", "404"} <= set(ops[("/buffers/{buffer_id}", "DELETE")])
     assert "401" not in ops[("/health", "GET")]
+    # a robot's token (--robot-tokens) beyond shipping as its robot
+    assert "403" in ops[("/query", "POST")] and "403" in ops[("/fleet/receive", "POST")]
     programs = ops[("/programs", "GET")]["200"]["content"]["application/json"]["schema"]
     assert programs["properties"]["programs"] == {"$ref": "#/components/schemas/ProgramMap"}
 

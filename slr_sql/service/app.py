@@ -30,7 +30,7 @@ import re
 import time
 import uuid
 from dataclasses import dataclass
-from typing import Any, AsyncIterator, Awaitable, Callable
+from typing import Any, AsyncIterator, Awaitable, Callable, Iterable
 
 from starlette.applications import Starlette
 from starlette.middleware import Middleware
@@ -53,8 +53,9 @@ from slr_sql.store.read_only import read_only_refusal
 
 from .encoding import (decode_args, decode_arguments, decode_term, dumps, encode_answers,
                        encode_plain, loads)
-from .auth import BearerToken
-from .errors import ServiceError, ServiceUnavailable, error_body, retry_after, store_condition
+from .auth import BearerToken, RobotAccess, RobotToken
+from .errors import (ServiceError, ServiceForbidden, ServiceUnavailable, error_body, retry_after,
+                     store_condition)
 from .fanout import FRAMES_EXTENSION, GONE, FanOut, FrameChannel
 
 __all__ = ["create_app", "Limits", "API_VERSION"]
@@ -450,6 +451,7 @@ class _Endpoint:
     query: dict | None = None     # query parameter -> (schema name, required)
     response: dict | None = None  # field -> schema name
     auth: bool = True
+    robot: bool = False           # a robot's token may use it too (--robot-tokens)
 
 
 _ROUTE_PARAM = re.compile(r"\{(\w+)(?::\w+)?\}")
@@ -474,12 +476,13 @@ register_url_convertor("slr_id", _IdConvertor())
 
 
 class _Service:
-    """State shared by the endpoints: the knowledge base, the token, the limits and the
+    """State shared by the endpoints: the knowledge base, the tokens, the limits and the
     submitted queries (handle -> _Submitted)."""
 
-    def __init__(self, kb: KnowledgeBase, token: str | None, limits: Limits):
+    def __init__(self, kb: KnowledgeBase, token: str | None, limits: Limits,
+                 robot_tokens: Iterable[RobotToken] = ()):
         self.kb = kb
-        self.check_token = BearerToken(token)
+        self.check_token = BearerToken(token, robot_tokens)
         self.limits = limits
         self._query_slots: tuple[Any, asyncio.Semaphore] | None = None   # (its loop, it)
         self.queries_running = 0      # holding a slot (query_slot)
@@ -580,7 +583,11 @@ class _Service:
                 # a route answers only its endpoints' methods (HEAD as GET)
                 e = by_method.get(request.method) or by_method["GET"]
                 if e.auth:
-                    self.check_token(request.headers.get("authorization"))
+                    robot = self.check_token(request.headers.get("authorization"))
+                    if robot is not None:
+                        if not e.robot:
+                            raise _robot_may_not(robot, f"{request.method} {request.url.path}")
+                        request.state.robot = robot
                 result = await e.handler(self, request)
                 status = 200
                 if isinstance(result, tuple):
@@ -729,9 +736,12 @@ class _Service:
         closing: list = []
         try:
             request = await self._first_message(websocket)
-            self.check_token(websocket.headers.get("authorization")
-                             or (f"Bearer {request['token']}" if isinstance(request.get("token"), str)
-                                 else None))
+            robot = self.check_token(
+                websocket.headers.get("authorization")
+                or (f"Bearer {request['token']}" if isinstance(request.get("token"), str)
+                    else None))
+            if robot is not None:
+                raise _robot_may_not(robot, "a subscription")
             pattern, kwargs = _subscribe_request(request)
             batch = _batch_size(request)
             kwargs["max_queue"] = max(min(kwargs.get("max_queue", self.limits.subscribe_queue),
@@ -905,11 +915,12 @@ _ENDPOINTS: list[_Endpoint] = []
 
 def _route(method: str, path: str, summary: str, *, body: dict | None = None,
            query: dict | None = None, response: dict | None = None,
-           auth: bool = True) -> Callable:
-    """Register an endpoint: its handler, and what the OpenAPI description says of it."""
+           auth: bool = True, robot: bool = False) -> Callable:
+    """Register an endpoint: its handler, and what the OpenAPI description says of it;
+    ``robot``: a robot's token may use it (the endpoints a pusher needs)."""
     def register(handler: Callable) -> Callable:
         _ENDPOINTS.append(_Endpoint(method, path, handler, summary, body, query, response,
-                                    auth))
+                                    auth, robot))
         return handler
     return register
 
@@ -1248,7 +1259,7 @@ async def _stats(svc: "_Service", request: Request) -> Any:
 
 @_route("GET", "/fleet/positions", "What this fleet store holds of a robot: per event "
         "type, the last sequence of the robot's store stored here (slr fleet push).",
-        query={"robot": ("string", True)}, response={"positions": "array"})
+        query={"robot": ("string", True)}, response={"positions": "array"}, robot=True)
 async def _fleet_positions(svc: "_Service", request: Request) -> Any:
     from slr_sql.shipping import positions
     from slr_sql.store import check_robot_name
@@ -1256,6 +1267,7 @@ async def _fleet_positions(svc: "_Service", request: Request) -> Any:
     if not robot:
         raise SLRError("robot= names the robot")
     check_robot_name(robot)
+    _ships_as(request, robot)
     found = await svc.call(positions, svc.kb, robot)
     return {"positions": [[n, a, p] for (n, a), p in sorted(found.items())]}
 
@@ -1266,11 +1278,14 @@ async def _fleet_positions(svc: "_Service", request: Request) -> Any:
               "marks": ("object", False), "pending": ("integer", False),
               "head_arrival": ("Number", False), "after": ("array", False),
               "resync": ("array", False), "relayed": ("object", False)},
-        response={"stored": "integer"})
+        response={"stored": "integer"}, robot=True)
 async def _fleet_receive(svc: "_Service", request: Request) -> Any:
     from slr_sql.shipping import FleetBehind, receive
     b = await svc.body(request)
     robot = _field(b, "robot", str, required=True)
+    access = _ships_as(request, robot)
+    if access is not None:
+        _brings_only_its_robots(access, b.get("batches"), b.get("relayed"))
     try:
         stored = await svc.call(receive, svc.kb, robot,
                                 _field(b, "batches", list, required=True),
@@ -1281,6 +1296,45 @@ async def _fleet_receive(svc: "_Service", request: Request) -> Any:
     except FleetBehind as exc:   # the pusher asks the positions again (slr_sql.fleet)
         raise ServiceError(str(exc), kind="Conflict") from None
     return {"stored": stored}
+
+
+def _robot_may_not(access: RobotAccess, what: str) -> ServiceForbidden:
+    return ServiceForbidden(
+        f"the token of robot {access.robot!r} (--robot-tokens) ships to the fleet "
+        f"store as {access.robot!r} (GET /fleet/positions, POST /fleet/receive) and may not "
+        f"use {what}; the server's own token may")
+
+
+def _ships_as(request: Request, robot: str) -> RobotAccess | None:
+    """The robot token's access of ``request`` (None: the server's own token, or none
+    needed), once it is sure the request ships as ``robot``: a robot's token ships as its
+    robot only (a shipment under another name could hold the fleet's marks back, or take
+    another robot's route)."""
+    access = getattr(request.state, "robot", None)
+    if access is not None and robot != access.robot:
+        raise ServiceForbidden(f"the token of robot {access.robot!r} (--robot-tokens) "
+                               f"ships as {access.robot!r} only, not as {robot!r}")
+    return access
+
+
+def _brings_only_its_robots(access: RobotAccess, batches: Any, relayed: Any) -> None:
+    """Refuse a shipment of a robot's token that brings rows or marks of a robot it does not
+    relay (its line of --robot-tokens names those it does). What is not of a shipment's
+    shape is left to the shipment's own check (400)."""
+    def refuse(who: str, what: str) -> ServiceForbidden:
+        return ServiceForbidden(
+            f"the token of robot {access.robot!r} (--robot-tokens) ships no "
+            f"{what} of robot {who!r}: it does not relay that robot (a store that relays the "
+            f"rows of other robots names them after 'relays' on its line)")
+    for batch in batches if type(batches) is list else ():
+        rows = batch[2] if type(batch) is list and len(batch) == 3 else None
+        for row in rows if type(rows) is list else ():
+            who = row[-1] if type(row) is list and row else None
+            if type(who) is str and not access.may_bring(who):
+                raise refuse(who, "rows")
+    for who in relayed if type(relayed) is dict else ():
+        if type(who) is str and not access.may_bring(who):
+            raise refuse(who, "marks")
 
 
 @_route("GET", "/fleet/status", "Per robot that shipped here: events stored, what it "
@@ -1616,7 +1670,7 @@ _SCHEMAS: dict[str, Any] = {
         "type": "object", "required": ["kind", "status", "message"], "properties": {
             "kind": {"type": "string", "description": "SLRSyntaxError, SLREvaluationError, "
                      "SLRTimeout, EventRejected, SLRError, BufferNotFound, BadRequest, "
-                     "Unauthorized, NotFound, "
+                     "Unauthorized, Forbidden, NotFound, "
                      "MethodNotAllowed, RequestTimeout, PayloadTooLarge, Unavailable"},
             "status": {"type": "integer"}, "message": {"type": "string"},
             "line": {"type": "integer"}, "column": {"type": "integer"},
@@ -1651,6 +1705,8 @@ def _responses(e: _Endpoint) -> dict:
     out: dict[str, Any] = {"200": ok, "400": error}
     if e.auth:
         out["401"] = error
+        out["403"] = dict(error, description="a robot's token (--robot-tokens) used beyond "
+                                             "shipping as its robot")
     if e.body:                     # the body's time and size limits
         out["408"] = dict(error, description="the body did not arrive in time, or the "
                                              "query ran out of its time")
@@ -1673,12 +1729,15 @@ def _responses(e: _Endpoint) -> dict:
 
 # -- the application -----------------------------------------------------------------------
 
-def create_app(kb: KnowledgeBase, *, token: str | None = None, limits: Limits | None = None) -> Starlette:
+def create_app(kb: KnowledgeBase, *, token: str | None = None, limits: Limits | None = None,
+               robot_tokens: Iterable[RobotToken] = ()) -> Starlette:
     """The Starlette application serving ``kb`` (which the caller keeps and closes).
 
     ``token``: when given, every request but ``/health`` and ``/openapi.json`` must carry
-    ``Authorization: Bearer TOKEN`` (compared in constant time). ``limits``: see
-    :class:`Limits`.
+    ``Authorization: Bearer TOKEN`` (compared in constant time). ``robot_tokens``: tokens
+    of robots (:class:`~slr_sql.service.auth.RobotToken`, ``slr serve --robot-tokens``),
+    each of which may only ship to the fleet store as its robot (403 ``Forbidden`` beyond);
+    they need ``token`` beside them. ``limits``: see :class:`Limits`.
 
     >>> import slr_sql
     >>> with slr_sql.open() as kb:
@@ -1686,7 +1745,7 @@ def create_app(kb: KnowledgeBase, *, token: str | None = None, limits: Limits | 
     ...     "/query" in {r.path for r in app.routes}
     True
     """
-    service = _Service(kb, token or None, limits or Limits())
+    service = _Service(kb, token or None, limits or Limits(), robot_tokens)
 
     async def http_error(request: Request, exc: Exception) -> Response:
         assert isinstance(exc, HTTPException)

@@ -245,8 +245,9 @@ class BackgroundServer:
     """Serve the knowledge base ``kb`` on ``host:port`` (port 0: a free one) from a thread
     of this process until :meth:`stop` or the end of the ``with`` block; :attr:`url` is
     where :func:`slr_sql.connect` reaches it. The socket listens before :meth:`start`
-    returns, so a client may connect at once. ``token`` and ``limits`` as for ``slr
-    serve``; a non-loopback host needs a token.
+    returns, so a client may connect at once. ``token``, ``robot_tokens`` (a list of
+    :class:`~slr_sql.service.auth.RobotToken`) and ``limits`` as for ``slr serve``; a
+    non-loopback host needs a token.
 
     >>> import slr_sql
     >>> with slr_sql.open(clock=slr_sql.ManualClock(10)) as local:
@@ -258,13 +259,17 @@ class BackgroundServer:
 
     def __init__(self, kb: KnowledgeBase, host: str = "127.0.0.1", port: int = 0,
                  token: str | None = None, *, limits: Any = None,
-                 max_connections: int | None = 1000, stop_grace: float = 5.0) -> None:
+                 max_connections: int | None = 1000, stop_grace: float = 5.0,
+                 robot_tokens: Any = ()) -> None:
         if not token and not is_loopback(host):
             raise slr_sql.SLRError(f"refusing to serve on {host or 'every interface'} "
                                    f"without a token: give token=...")
         self.kb = kb
         self.host, self.port = host, port
         self.token = token or None
+        self.robot_tokens = list(robot_tokens)
+        from .auth import BearerToken
+        BearerToken(self.token, self.robot_tokens)   # (refused here, before any socket)
         self.limits = limits
         self.max_connections = max_connections
         self.stop_grace = stop_grace
@@ -306,7 +311,8 @@ class BackgroundServer:
                                    f"missing): pip install 'slr_sql[service]'") from None
         limits = self.limits or Limits()
         sock = listen_on(self.host, self.port)
-        app = create_app(self.kb, token=self.token, limits=limits)
+        app = create_app(self.kb, token=self.token, limits=limits,
+                         robot_tokens=self.robot_tokens)
         server = service_server(uvicorn_config(app, limits,
                                                max_connections=self.max_connections,
                                                shutdown_grace=self.stop_grace))

@@ -151,7 +151,7 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
                cache_mib: float | None = None, foxglove: tuple[str, int] | None = None,
                foxglove_message_max: int = 64 * 1024,
                shutdown_grace: float = SHUTDOWN_GRACE,
-               busy_timeout: float | None = None) -> None:
+               busy_timeout: float | None = None, robot_tokens: Any = ()) -> None:
     """Open ``db`` and serve it until SIGINT/SIGTERM; then close it.
 
     Refuses (SLRError) to listen on a non-loopback address without a token. Prints
@@ -166,7 +166,9 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
     requests in flight get after SIGINT/SIGTERM (a synchronized query may wait for an hour)
     before the server stops anyway. ``busy_timeout``: seconds a request waits for another
     process's lock before it is answered 503 (retryable; default
-    :data:`~slr_sql.store.DEFAULT_BUSY_TIMEOUT`).
+    :data:`~slr_sql.store.DEFAULT_BUSY_TIMEOUT`). ``robot_tokens``: the tokens of robots
+    (:class:`~slr_sql.service.auth.RobotToken`, ``--robot-tokens FILE``), each of which may
+    only ship to the fleet store as its robot; they need ``token`` beside them.
 
     A server runs until it is stopped (``slr serve DB`` calls this); what it refuses, it
     refuses before it opens anything:
@@ -184,6 +186,9 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
             f"or bind to 127.0.0.1")
     if bool(ssl_keyfile) != bool(ssl_certfile):
         raise slr_sql.SLRError("TLS needs both --ssl-keyfile and --ssl-certfile")
+    robot_tokens = list(robot_tokens)
+    from .auth import BearerToken
+    BearerToken(token, robot_tokens)   # (refused before anything opens: the same check)
     try:
         import uvicorn  # noqa: F401 - (missing: said here, before anything opens)
 
@@ -222,7 +227,7 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
             except OSError as exc:
                 raise slr_sql.SLRError(f"cannot listen on {foxglove[0]}:{foxglove[1]} for "
                                        f"Foxglove: {exc}") from None
-        app = create_app(kb, token=token, limits=limits)
+        app = create_app(kb, token=token, limits=limits, robot_tokens=robot_tokens)
         config = uvicorn_config(app, limits, max_connections=max_connections,
                                 ssl_keyfile=ssl_keyfile, ssl_certfile=ssl_certfile,
                                 log_level=log_level, ws_compression=ws_compression,
@@ -259,6 +264,10 @@ def run_server(db: str, host: str = "127.0.0.1", port: int = 8765, token: str | 
               help="Port (0: any free port; the URL is printed).")
 @click.option("--token", envvar="SLR_TOKEN", default=None,
               help="Clients must send it (Authorization: Bearer TOKEN). Default: $SLR_TOKEN.")
+@click.option("--robot-tokens", "robot_tokens_file", default=None, metavar="FILE",
+              help="Tokens of robots, a line 'ROBOT TOKEN' each (or 'ROBOT TOKEN relays "
+                   "ROBOT...'): a robot's token may only ship to the fleet store as that "
+                   "robot (slr fleet push). Read once, at the start; needs --token.")
 @click.option("--max-body", default=1 << 20, type=click.IntRange(1024), show_default=True,
               help="Largest request body, bytes (larger: HTTP 413).")
 @click.option("--max-query-time", default=30.0, type=click.FloatRange(0.001),
@@ -307,7 +316,8 @@ def serve(db: str, host: str, port: int, token: str | None, max_body: int,
           ssl_keyfile: str | None, ssl_certfile: str | None, ws_compression: bool,
           cache_mib: float, foxglove: bool, foxglove_host: str, foxglove_port: int,
           foxglove_message_max: int,
-          shutdown_grace: float, request_timeout: float, busy_timeout: float) -> None:
+          shutdown_grace: float, request_timeout: float, busy_timeout: float,
+          robot_tokens_file: str | None) -> None:
     """Serve DB to other processes over HTTP/JSON and WebSocket (docs/service.md).
 
     Clients: slr_sql.connect(URL, token=...) or any slr command with the URL in place of DB.
@@ -317,6 +327,8 @@ def serve(db: str, host: str, port: int, token: str | None, max_body: int,
     except ImportError as exc:
         raise slr_sql.SLRError(f"slr serve needs the service extra ({exc.name} is missing): "
                                f"pip install 'slr_sql[service]'") from None
+    from .auth import read_robot_tokens
+    robot_tokens = [] if robot_tokens_file is None else read_robot_tokens(robot_tokens_file)
     limits = Limits(max_body=max_body, max_query_time=max_query_time, max_wait=max_wait,
                     max_running_queries=max_running_queries, body_timeout=request_timeout)
     run_server(db, host, port, token, limits=limits, max_connections=max_connections,
@@ -324,5 +336,5 @@ def serve(db: str, host: str, port: int, token: str | None, max_body: int,
                ws_compression=ws_compression, cache_mib=cache_mib,
                foxglove=(foxglove_host, foxglove_port) if foxglove else None,
                foxglove_message_max=foxglove_message_max, shutdown_grace=shutdown_grace,
-               busy_timeout=busy_timeout)
+               busy_timeout=busy_timeout, robot_tokens=robot_tokens)
     sys.stdout.flush()

@@ -24,13 +24,14 @@ from slr_sql import BufferNotFound, EventRejected, SLRCancelled, SLREvaluationEr
 
 from .encoding import TermError, decode_term, encode_term
 
-__all__ = ["ServiceError", "ServiceUnavailable", "ServiceOutcomeUnknown", "error_body",
+__all__ = ["ServiceError", "ServiceForbidden", "ServiceUnavailable", "ServiceOutcomeUnknown",
+           "error_body",
            "error_status", "error_from_body", "retry_after", "parse_retry_after",
            "store_condition", "STATUS_KINDS"]
 
 # kind of a ServiceError -> its HTTP status
 STATUS_KINDS = {
-    "BadRequest": 400, "Unauthorized": 401, "NotFound": 404, "MethodNotAllowed": 405,
+    "BadRequest": 400, "Unauthorized": 401, "Forbidden": 403, "NotFound": 404, "MethodNotAllowed": 405,
     "RequestTimeout": 408, "Conflict": 409, "PayloadTooLarge": 413, "InternalError": 500,
     "NotImplemented": 501, "Unavailable": 503,
 }
@@ -49,6 +50,23 @@ class ServiceError(SLRError):
         self.kind = kind
         self.status = STATUS_KINDS.get(kind, 400) if status is None else status
         super().__init__(message)
+
+
+class ServiceForbidden(ServiceError):
+    """The token is valid but does not allow the request: a robot's token (``slr serve
+    --robot-tokens``) used for anything but shipping as its robot -- another endpoint than
+    the ``/fleet/*`` ones a pusher needs, or a shipment or positions under another robot's
+    name, or rows and marks of a robot it does not relay. ``kind`` ``"Forbidden"``,
+    ``status`` 403; nothing of the request was done. Retrying does not help: the robot's
+    token decides it.
+
+    >>> e = ServiceForbidden("the token of robot 'r1' ships as 'r1' only, not as 'r2'")
+    >>> e.kind, e.status, isinstance(e, ServiceError)
+    ('Forbidden', 403, True)
+    """
+
+    def __init__(self, message: str):
+        super().__init__(message, kind="Forbidden")
 
 
 class ServiceUnavailable(ServiceError, SLRUnavailable):
@@ -267,6 +285,8 @@ def error_from_body(body: Any, status: int) -> SLRError:
             return exc
     if kind == "Unavailable" or status == 503:
         return ServiceUnavailable(message, status, kind)
+    if kind == "Forbidden":
+        return ServiceForbidden(message)
     return ServiceError(message, kind=kind, status=status)
 
 
