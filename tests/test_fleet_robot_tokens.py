@@ -268,3 +268,29 @@ def test_a_robot_tokens_file_the_server_cannot_take_stops_it_at_its_start(
     for secret in ("tok-r1", "tok\x01en", FULL, "same"):   # (a secret: its line is named)
         assert secret not in said, said
     assert not db.exists()            # refused before the store is opened
+
+
+def test_a_fleet_store_on_postgresql_served_with_robot_tokens_tells_robots_apart(
+        postgres_url, tmp_path):
+    """The tokens are the service's, whatever store it serves: a PostgreSQL fleet store
+    behind ``slr serve`` takes r1's shipment from r1's token and refuses r2's."""
+    (tmp_path / "tokens").write_text(TOKENS_FILE)
+    r1 = robot_store(tmp_path / "r1.db", "r1", "seen(a)^10")
+    r2 = robot_store(tmp_path / "r2.db", "r2", "seen(c)^12")
+    with ServiceProcess(postgres_url, "--token", FULL, "--robot-tokens",
+                        str(tmp_path / "tokens"), log=tmp_path / "serve.log") as server:
+        assert fleet.push(r1, server.url, token=TOKENS["r1"]).shipped == 1
+        with pytest.raises(ServiceForbidden, match="ships as 'r1' only, not as 'r2'"):
+            fleet.push(r2, server.url, token=TOKENS["r1"])
+        assert origins(server, "r1") == ["a"] and origins(server, "r2") == []
+        assert listed(server) == {"r1"}
+
+
+def test_the_tokens_file_of_the_docs_reads_as_it_says():
+    from pathlib import Path
+
+    from slr_sql.service.auth import parse_robot_tokens
+    text = (Path(__file__).resolve().parent.parent / "docs" / "fleet.md").read_text()
+    example = "#" + text.split("\n# robots.tokens:", 1)[1].split("```", 1)[0]
+    assert [(t.robot, t.relays) for t in parse_robot_tokens(example)] == [
+        ("r1", frozenset()), ("r2", frozenset()), ("site", frozenset({"r3", "r4"}))]
