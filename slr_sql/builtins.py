@@ -2337,9 +2337,9 @@ class _ColumnStops:
     """format/2's column stops, as SWI-Prolog's: ``~t`` marks a fill point (``~Ct``,
     ``~`ct``: filled with character C or c, else spaces) in the text since the last stop;
     ``~N|`` (column N; bare: here) and ``~N+`` (N past the last stop, 8 by default) pad that
-    text to the column at its fill points -- evenly, the last ones one more when the
-    padding does not divide -- or on its right when it has none. Text already past the
-    column is left as it is.
+    text to the column at its fill points -- evenly, the rest spread from the middle one
+    (``_fill_sizes``) -- or on its right when it has none. Text already past the column is
+    left as it is, and the count goes on from the column all the same.
 
     The column is counted as SWI-Prolog 9 counts it: format's own text (its literal
     characters, ``~a``, ``~s``, ``~c``, numbers, ``~n``) one character at a time, a line
@@ -2408,15 +2408,35 @@ class _ColumnStops:
         pad = target - here
         if pad > 0:
             if self.fills:
-                each, rest = divmod(pad, len(self.fills))
-                for k, (piece, char) in enumerate(self.fills):
-                    out.put(piece, char * (each + (k >= len(self.fills) - rest)))
+                for (piece, char), size in zip(self.fills, _fill_sizes(pad, len(self.fills))):
+                    out.put(piece, char * size)
             else:
                 out.append(" " * pad)
-            here = target
         self.position = _line_position("".join(out[self.start:]), self.position)
-        self.start, self.column, self.fills = len(out), here, []
+        # the column is the stop's even where the text went past it (SWI-Prolog counts on
+        # from the stop: "abcdef~3|~t~a~10|" pads 'x' from column 3)
+        self.start, self.column, self.fills = len(out), target, []
         self.terms.clear()
+
+
+def _fill_sizes(pad: int, fills: int) -> list[int]:
+    """How many fill characters each of ``fills`` fill points gets of ``pad``, as
+    SWI-Prolog's format/2 spreads them: each the same share, then the rest one at a time
+    from the middle fill point outwards, alternately right and left at growing distances
+    (``m``, ``m + 1``, ``m - 2``, ``m + 3``, ...; ``m = fills // 2``), where a distance
+    past either end gives nothing (SWI-Prolog 9's pl-fmt.c: such a column comes out short).
+
+    >>> _fill_sizes(7, 3), _fill_sizes(3, 4), _fill_sizes(9, 5)
+    ([2, 3, 2], [1, 0, 1, 1], [2, 1, 2, 2, 1])
+    """
+    each, rest = divmod(pad, fills)
+    sizes = [each] * fills
+    middle = fills // 2
+    for k in range(rest):
+        index = middle + (k if k % 2 else -k)
+        if 0 <= index < fills:
+            sizes[index] += 1
+    return sizes
 
 
 def _format_column(text: str, column: int) -> int:

@@ -227,6 +227,17 @@ GOALS = [
     'format(atom(A), "~w~t~w~10|", [ab, cd])', 'format(atom(A), "~t~w~t~w~t~12|", [ab, cd])',
     'format(atom(A), "~t~w~t~w~t~13|", [ab, cd])', 'format(atom(A), "~`*t~t~20|", [])',
     'format(atom(A), "~w~t~10+~w~t~10+~w", [name, age, x])',
+    'format(atom(A), "~a~t~20|", [abc])', 'format(atom(A), "~t~d~6+", [123])',
+    # padding that does not divide among the fill points: the rest one at a time from the
+    # middle one outwards (m, m+1, m-2, m+3, ...), and a place past either end is lost
+    'format(atom(A), "~t~w~t~w~t~14|", [ab, cd])', 'format(atom(A), "~`xt~`yt~`zt~7|", [])',
+    'format(atom(A), "~ta~tb~tc~t~10|", [])', 'format(atom(A), "~ta~tb~tc~t~12|", [])',
+    'format(atom(A), "~a~t~a~t~a~t~a~11|", [a, b, c, d])', 'format(atom(A), "~t~`-t~`=t~10|", [])',
+    'format(atom(A), "~`at~`bt~`ct~`dt~`et~9|", [])',
+    'format(atom(A), "~`at~`bt~`ct~`dt~`et~`ft~11|", [])',
+    'format(atom(A), "~`at~`bt~`ct~`dt~`et~`ft~`gt~`ht~`it~`jt~19|", [])',
+    # text past a stop: the count goes on from the stop's column, not the text's end
+    'format(atom(A), "abcdef~3|~t~a~10|", [x])', 'format(atom(A), "abcdef~3|~a~t~10|~a", [x, y])',
     # ... counting columns as SWI-Prolog 9: format's own text a character at a time (a tab
     # to (C + 1) | 7, a backspace one back, a carriage return or line break to 0), a term of
     # ~w ~p ~q from the column where its text's last line ends, on a line of its own (a tab
