@@ -93,7 +93,8 @@ _OTHER_CONTEXTS: dict[tuple[str, int], Any] = {
 # SWI-Prolog's C code names some errors' predicate without its module: a conversion's
 # first argument that is not of its type, or a text that is no number (syntax_error)
 _FIRST_ARGUMENT_TYPES = {("atom_chars", 2): "atom", ("atom_codes", 2): "atom",
-                         ("number_codes", 2): "number", ("name", 2): "atomic",
+                         ("number_codes", 2): "number", ("number_chars", 2): "number",
+                         ("name", 2): "atomic",
                          ("number_string", 2): "number"}
 
 
@@ -1028,18 +1029,27 @@ def _is_text_given(t: Any) -> bool:
     return type(tail) is not Var and all(type(deref(x)) is not Var for x in items)
 
 
-@det("number_codes", 2)
-def _number_codes(m, a):
+def _number_text(m: "Machine", a: tuple, make: Callable[[str], Any]) -> bool:
+    """number_codes/2 (``make`` a code list) and number_chars/2 (a character list): from
+    the number when it is bound and the text is not, else the text read as a number (a
+    code or character list or a string for either, as SWI-Prolog's; leading layout
+    allowed) and unified with the first argument."""
     x = deref(a[0])
     if type(x) is not Var:
         if type(x) is not int and type(x) is not float:
             raise type_error("number", x)
         if not _is_text_given(a[1]):
-            return m.unify(a[1], make_list([ord(c) for c in _atom_text(x)]))
+            return m.unify(a[1], make(_atom_text(x)))
     n = _number_of_text(_list_text(a[1]), leading_layout=True)
     if n is None:
         raise iso_error(Struct("syntax_error", (Atom("illegal_number"),)))
     return m.unify(x, n)
+
+
+DET[("number_codes", 2)] = lambda m, a: _number_text(
+    m, a, lambda s: make_list([ord(c) for c in s]))
+DET[("number_chars", 2)] = lambda m, a: _number_text(
+    m, a, lambda s: make_list([Atom(c) for c in s]))
 
 
 @det("atom_number", 2)
@@ -1140,6 +1150,24 @@ def _downcase_text(text: str) -> str:
 @det("upcase_atom", 2)
 def _upcase(m, a):
     return _case_converted(m, a, _upcase_text)
+
+
+def _string_case(m: "Machine", a: tuple, convert: Callable[[str], str]) -> bool:
+    """string_upper/2, string_lower/2 as SWI-Prolog's: the text of an atom, a string or a
+    number (a list is type_error(atomic, L), [] type_error(atom, [])) converted one
+    character at a time, as a string; a given result (a string, an atom, a number) is
+    compared as text, anything else there is type_error(string, R)."""
+    out = convert(text_in(a[0], "atomic"))
+    r = deref(a[1])
+    if type(r) is Var:
+        return m.unify(r, String(out))
+    if type(r) is String or type(r) is Atom and r != "[]" or type(r) in (int, float):
+        return text_of(r) == out
+    raise type_error("string", r)
+
+
+DET[("string_upper", 2)] = lambda m, a: _string_case(m, a, _upcase_text)
+DET[("string_lower", 2)] = lambda m, a: _string_case(m, a, _downcase_text)
 
 
 @nondet("sub_atom", 5)

@@ -878,6 +878,28 @@ TEXT_GOALS = [
     "format(atom(A), [a|_], [])", "format(atom(A), [a, b], [])",
     "string_code(X, \"ab\", C)", "string_code(X, \"ab\", 0'b)", "string_code(1, 12, C)",
     "string_code(1, abc, C)", "string_code(1, [0'a, 0'b], C)", "compare(O, 1, 2)",
+    # string_lower/2, string_upper/2: atomic text in (no lists), a string out; a given
+    # result compared as text (a string, an atom, a number; else type_error(string, R))
+    'string_lower("AbC", S)', 'string_lower(abC, S)', 'string_lower(12, S)',
+    "string_lower([0'A], S)", "string_lower(['A'], S)", 'string_lower([], S)',
+    'string_lower(f(x), S)', 'string_lower(X, S)', 'string_lower([a|_], S)',
+    'string_lower("AB", "ab")', 'string_lower("AB", ab)', 'string_lower("AB", "aB")',
+    'string_lower("AB", f(x))', 'string_lower("AB", 12)', 'string_lower("12", 12)',
+    'string_lower("AB", [])', 'string_lower("", [])', "string_lower(\"\", '')",
+    "string_lower(\"AB\", [0'a, 0'b])", 'string_lower(X, "abc")', 'string_upper(abc, X), string(X)',
+    'string_lower("İΑΣ", S)', 'string_upper("ßǆ", S)', 'string_upper("ᾀ", S)', 'string_upper(1.5e10, S)',
+    # number_chars/2 as number_codes/2, with characters (a code list or a string is text too)
+    "number_chars(X, ['1', '2'])", "number_chars(12, L)", "number_chars(-0.0, L)",
+    "number_chars(1.0e10, L)", "number_chars(X, [a])", "number_chars(X, L)",
+    "number_chars(X, [' ', '1'])", "number_chars(X, ['0', x, f])", "number_chars(a, L)",
+    "number_chars(X, ['1', '.'])", "number_chars(X, ['-', '1'])", "number_chars(X, ['-', ' ', '1'])",
+    "number_chars(X, ['+', '1'])", "number_chars(X, [])", "number_chars(X, ['1'|_])",
+    "number_chars(X, [f(x)])", "number_chars(1, ['0', '1'])", 'number_chars(X, "12")',
+    "number_chars(X, '12')", "number_chars(12, [X, Y])", "number_chars(12, [X, '3'])",
+    "number_chars(X, ['0', '''', a])", "number_chars(X, [1])", "number_chars(X, ['1', 2])",
+    "number_chars(X, foo)", "number_chars(f(x), L)", "number_chars(X, ['1', '.', '0', 'I', 'n', 'f'])",
+    "number_chars(X, ['1', ' '])", "number_chars(X, ['/', '*', '*', '/', '1'])",
+    "number_chars(X, ['1', '%'])", "number_chars(X, [a|b])", "number_chars(a, ['1'])",
 ]
 
 
@@ -1082,6 +1104,8 @@ CONTEXT_GOALS = [f"catch({goal}, E, true)" for goal in [
     "arg(x, f(a), A)", "arg(X, Y, Z)", "arg(a, abc, 3)", "arg(-1, f(a), A)",
     "atom_codes(X, Y)", "atom_codes(f(x), C)", "atom_chars(X, [a|b])", "atom_chars([1, 2], A)",
     "number_codes(X, \"3x\")", "number_codes(a, C)", "name(f(x), N)", "number_string(a, S)",
+    "number_chars(X, [a])", "number_chars(f(x), L)", "number_chars(X, ['1', 2])",
+    "number_chars(X, L)", "string_lower(X, S)", "string_upper(\"a\", f(x))", "string_upper([], S)",
     "number_string(N, f(x))", "X =.. Y", "X =.. [f(x), 1]", "length(L, -1)", "length(a, N)",
     "length(L, a)", "msort(a, L)", "sort(0, foo, [1], L)", "sort(X, L)", "keysort([a], L)",
     "keysort([X], L)", "keysort([a|_], L)", "keysort(X, L)", "compare(foo, 1, 2)",
@@ -1245,6 +1269,41 @@ def test_stored_values_sort_in_swipl_standard_order(swipl, backend, goal):
             kb.sql_enabled = compiled
             answers = [swidiff.slr_answer(a, ["L"]) for a in kb.query(goal)]
             assert answers == expected, (compiled, kb.explain(goal))
+
+
+# The text builtins over stored values, on both paths (compiled SQL calls the same builtin
+# as the interpreter, through slr_det): SWI-Prolog's answers for the same values as a list
+STORED_TEXT_VALUES = ['"AbC"', "'straße'", "'ΟΔΟΣ'", "12", "-1.5", "'x y'", "''"]
+STORED_NUMBERS = ["12", "-1.5", "1.0e10", "-0.0", "3"]
+STORED_TEXT_GOALS = {
+    "v(X)^_, string_upper(X, S)": "member(X, VS), string_upper(X, S)",
+    "v(X)^_, string_lower(X, S), string_length(S, N)": "member(X, VS), string_lower(X, S), string_length(S, N)",
+    "n(X)^_, number_chars(X, C), number_chars(Y, C)": "member(X, NS), number_chars(X, C), number_chars(Y, C)",
+    "n(X)^_, number_codes(X, C), atom_codes(A, C), number_chars(Y, C)":
+        "member(X, NS), number_codes(X, C), atom_codes(A, C), number_chars(Y, C)",
+}
+
+
+@pytest.mark.parametrize("goal", sorted(STORED_TEXT_GOALS))
+def test_text_builtins_over_stored_values_answer_as_swipl_on_both_paths(swipl, backend, goal):
+    import slr_sql
+
+    swi_goal = (STORED_TEXT_GOALS[goal].replace("VS", f"[{', '.join(STORED_TEXT_VALUES)}]")
+                .replace("NS", f"[{', '.join(STORED_NUMBERS)}]"))
+    _, _, swi, [(_, _, names)] = swidiff.builtin_example(swi_goal)
+    theirs = swipl.run(swi)[0]
+    assert theirs["error"] is None and theirs["answers"]
+    expected = [swidiff.swi_answer(a, names) for a in theirs["answers"]]
+    with slr_sql.open(backend, clock=slr_sql.ManualClock(100)) as kb:
+        kb.add_many([f"v({v})^{i}" for i, v in enumerate(STORED_TEXT_VALUES, 1)]
+                    + [f"n({v})^{i}" for i, v in enumerate(STORED_NUMBERS, 1)])
+        # (on PostgreSQL a det builtin runs in the interpreter, docs/postgres.md)
+        assert ("engine: sql" in kb.explain(goal)) == (not backend.startswith("postgresql:"))
+        for compiled in (True, False):
+            kb.sql_enabled = compiled
+            answers = [swidiff.slr_answer(a, names) for a in kb.query(goal)]
+            assert answers == expected, (compiled, kb.explain(goal))
+
 
 
 # aggregate_all(max(X-W), ..) and min(X-W): slr_sql's witness form answers as the library's
