@@ -1074,7 +1074,7 @@ def _atom_number(m, a):
 
 def _term_text(m: "Machine", a: list, make: Callable[[str], Any]) -> bool:
     """term_to_atom/2 (``make``: Atom) and term_string/2 (String)."""
-    from .terms import format_term
+    from .terms import format_term, prolog_var_name
 
     t = deref(a[0])
     text = deref(a[1])
@@ -1088,7 +1088,8 @@ def _term_text(m: "Machine", a: list, make: Callable[[str], Any]) -> bool:
         return m.unify(t, _parse_any(Atom(source)))
     # SWI-Prolog's term_to_atom writes a quote inside quotes doubled and a newline as it
     # is ('it''s'), where writeq writes 'it\'s' and '\n'
-    return m.unify(text, make(format_term(t, deadline=m.deadline, char_escapes=False)))
+    return m.unify(text, make(format_term(t, deadline=m.deadline, char_escapes=False,
+                                          var_names=prolog_var_name)))
 
 
 DET[("term_to_atom", 2)] = lambda m, a: _term_text(m, a, Atom)
@@ -2161,13 +2162,15 @@ def _out(m: "Machine"):
 def _write_text(t: Any, quoted: bool = False, deadline: float | None = None,
                 numbervars: bool = True) -> str:
     """A term as write/1 (``quoted``: writeq/1, print/1) writes it: ``'$VAR'(1)`` as ``B``
-    (SWI-Prolog's numbervars(true)) unless ``numbervars`` is false (write_canonical/1)."""
-    from .terms import format_term
+    (SWI-Prolog's numbervars(true)) unless ``numbervars`` is false (write_canonical/1); an
+    unbound variable as ``_`` and its number (``_123``), as SWI-Prolog writes one."""
+    from .terms import format_term, prolog_var_name
 
     t = deref(t)
     if not quoted and type(t) in (Atom, String):
         return str(t)
-    return format_term(t, quoted=quoted, deadline=deadline, numbervars=numbervars)
+    return format_term(t, quoted=quoted, deadline=deadline, numbervars=numbervars,
+                       var_names=prolog_var_name)
 
 
 @det("write", 1)

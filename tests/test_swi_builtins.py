@@ -227,6 +227,12 @@ GOALS = [
     'format(atom(A), "~w~t~w~10|", [ab, cd])', 'format(atom(A), "~t~w~t~w~t~12|", [ab, cd])',
     'format(atom(A), "~t~w~t~w~t~13|", [ab, cd])', 'format(atom(A), "~`*t~t~20|", [])',
     'format(atom(A), "~w~t~10+~w~t~10+~w", [name, age, x])',
+    # an unbound variable is written as '_' and a number of its own (the test numbers them
+    # by first occurrence), not by its name in the source
+    'term_to_atom(f(X, Y, X), A)', 'term_to_atom(X, A)', 'term_string(f(X, _, X), S)',
+    'T = f(X, Y, X, _Z), format(atom(A), "~q ~p ~w", [T, T, T])', 'format(atom(A), "~w", [X])',
+    'T = f(X, Y), copy_term(T, T2), format(atom(A), "~w", [T2])', 'format(atom(A), "~w ~w", [X, Y])',
+    'term_to_atom(f(X), A), term_to_atom(T, A)', 'term_to_atom(f(X), A), sub_atom(A, 2, 1, _, C)',
     'format(atom(A), "~a~t~20|", [abc])', 'format(atom(A), "~t~d~6+", [123])',
     # padding that does not divide among the fill points: the rest one at a time from the
     # middle one outwards (m, m+1, m-2, m+3, ...), and a place past either end is lost
@@ -1281,6 +1287,7 @@ STORED_TEXT_GOALS = {
     "n(X)^_, number_chars(X, C), number_chars(Y, C)": "member(X, NS), number_chars(X, C), number_chars(Y, C)",
     "n(X)^_, number_codes(X, C), atom_codes(A, C), number_chars(Y, C)":
         "member(X, NS), number_codes(X, C), atom_codes(A, C), number_chars(Y, C)",
+    "v(X)^_, term_to_atom(f(X, Y, Y), A)": "member(X, VS), term_to_atom(f(X, Y, Y), A)",
 }
 
 
