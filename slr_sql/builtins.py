@@ -3503,6 +3503,38 @@ foldl(G, L, V0, V) :- '$foldl'(L, G, V0, V).
 foldl(G, L1, L2, V0, V) :- '$foldl'(L1, L2, G, V0, V).
 '$foldl'([], [], _, V, V).
 '$foldl'([X|Xs], [Y|Ys], G, V0, V) :- call(G, X, Y, V0, V1), '$foldl'(Xs, Ys, G, V1, V).
+foldl(G, L1, L2, L3, V0, V) :- '$foldl'(L1, L2, L3, G, V0, V).
+'$foldl'([], [], [], _, V, V).
+'$foldl'([X|Xs], [Y|Ys], [Z|Zs], G, V0, V) :- call(G, X, Y, Z, V0, V1), '$foldl'(Xs, Ys, Zs, G, V1, V).
+foldl(G, L1, L2, L3, L4, V0, V) :- '$foldl'(L1, L2, L3, L4, G, V0, V).
+'$foldl'([], [], [], [], _, V, V).
+'$foldl'([X|Xs], [Y|Ys], [Z|Zs], [W|Ws], G, V0, V) :- call(G, X, Y, Z, W, V0, V1), '$foldl'(Xs, Ys, Zs, Ws, G, V1, V).
+partition(P, L, Less, Equal, Greater) :- '$partition'(L, P, Less, Equal, Greater).
+'$partition'([], _, [], [], []).
+'$partition'([H|T], P, L, E, G) :- call(P, H, Diff), '$partition'(Diff, H, P, T, L, E, G).
+'$partition'(<, H, P, T, L, E, G) :- !, L = [H|Rest], '$partition'(T, P, Rest, E, G).
+'$partition'(=, H, P, T, L, E, G) :- !, E = [H|Rest], '$partition'(T, P, L, Rest, G).
+'$partition'(>, H, P, T, L, E, G) :- !, G = [H|Rest], '$partition'(T, P, L, E, Rest).
+'$partition'(Diff, _, _, _, _, _, _) :- ( ground(Diff) -> throw(error(type_error(oneof([<, =, >]), Diff), _)) ; throw(error(instantiation_error, _)) ).
+convlist(G, ListIn, ListOut) :- '$convlist'(ListIn, ListOut, G).
+'$convlist'([], [], _).
+'$convlist'([H0|T0], ListOut, G) :- ( call(G, H0, H) -> ListOut = [H|T], '$convlist'(T0, T, G) ; '$convlist'(T0, ListOut, G) ).
+select(X, XList, Y, YList) :- '$select4'(XList, X, Y, YList).
+'$select4'([X|List], X, Y, [Y|List]).
+'$select4'([X0|XList], X, Y, [X0|YList]) :- '$select4'(XList, X, Y, YList).
+selectchk(X, XList, Y, YList) :- select(X, XList, Y, YList), !.
+nextto(X, Y, [X, Y|_]).
+nextto(X, Y, [_|Zs]) :- nextto(X, Y, Zs).
+prefix([], _).
+prefix([E|T0], [E|T]) :- prefix(T0, T).
+same_length([], []).
+same_length([_|T1], [_|T2]) :- same_length(T1, T2).
+proper_length(List, Length) :- '$skip_list'(Length0, List, Tail), Tail == [], Length = Length0.
+is_set(Set) :- '$skip_list'(Len, Set, Tail), Tail == [], sort(Set, Sorted), length(Sorted, Len).
+subset(L, S) :- var(L), !, throw(error(existence_error(matching_rule, lists:subset(L, S)), context(lists:subset/2, _))).
+subset([], _) :- !.
+subset([E|R], Set) :- !, memberchk(E, Set), subset(R, Set).
+subset(L, S) :- throw(error(existence_error(matching_rule, lists:subset(L, S)), context(lists:subset/2, _))).
 delete([], _, []).
 delete([H|T], X, R) :- ( H \= X -> R = [H|R1] ; R = R1 ), delete(T, X, R1).
 subtract(L, D, R) :- var(L), !, throw(error(existence_error(matching_rule, lists:subtract(L, D, R)), context(lists:subtract/3, _))).

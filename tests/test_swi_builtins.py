@@ -1059,6 +1059,12 @@ either(>, _, _).
 unbound(_, _, _).
 bad(foo, _, _).
 ord_union([], [], mine).
+to_two(X, O) :- compare(O, X, 2).
+no_order(_, foo).
+open_order(_, _).
+sum3(X, Y, Z, A0, A) :- A is A0 + X * Y * Z.
+sum4(X, Y, Z, W, A0, A) :- A is A0 + X * Y * Z * W.
+double_big(X, Y) :- X > 1, Y is X * 2.
 """
 PROGRAM_GOALS = [
     'predsort(desc, [c, a, b, a], L)',
@@ -1072,6 +1078,24 @@ PROGRAM_GOALS = [
     'ord_union([], [], U)',
     'ord_union([a], [b], U)',
     'ord_union([[b], [a]], U)',
+    # library(apply)'s and library(lists)'s other predicates, SWI-Prolog's clauses
+    'partition(to_two, [1, 2, 3, 2], L, E, G)', 'partition(to_two, [], L, E, G)',
+    'catch(partition(no_order, [1], L, E, G), Err, true)',
+    'catch(partition(open_order, [1], L, E, G), Err, true)',
+    'partition(to_two, [3, 1], [3], E, G)',
+    'foldl(sum3, [1, 2], [3, 4], [5, 6], 0, S)', 'foldl(sum3, [1], [3, 4], [5], 0, S)',
+    'foldl(sum4, [1, 2], [3, 4], [5, 6], [7, 8], 0, S)',
+    'convlist(double_big, [1, 2, 3], L)', 'convlist(succ, [1, 2, 0], L)',
+    'catch(convlist(succ, [a], L), Err, true)',
+    'select(b, [a, b, c, b], x, L)', 'select(X, [a, b], Y, [a, c])', 'select(b, L, x, [a, x])',
+    'selectchk(b, [a, b, c, b], x, L)', 'selectchk(z, [a, b], x, L)',
+    'nextto(X, Y, [1, 2, 3])', 'nextto(2, Y, [1, 2, 3])', 'nextto(X, Y, [])',
+    'prefix(P, [a, b])', 'prefix([a], [a, b])', 'same_length([a, b], L)', 'same_length(L, [])',
+    'same_length(L, a)', 'proper_length([a, b], N)', 'proper_length([a|_], N)', 'proper_length(a, N)',
+    'is_set([a, b])', 'is_set([a, b, a])', 'is_set([A, B])', 'is_set([A, A])', 'is_set([a|_])',
+    'is_set(1)', 'is_set([1, 1.0])', 'subset([a], [b, a])', 'subset([a, c], [b, a])',
+    'subset([], X)', 'subset([X], [a, b])', 'catch(subset(X, [a]), Err, true)',
+    'catch(subset([a|b], [a]), Err, true)', 'catch(subset(a, [a]), Err, true)',
 ]
 
 
