@@ -1030,6 +1030,8 @@ ORDER_GOALS = [f"catch({goal}, E, true)" if not goal.startswith("catch(") else g
 
 
 LEFT_ALONE = {
+    "atom('[]')": "the quoted atom '[]' reads as the empty list in slr_sql (one term for both, in the store's encoding, the compiled SQL and the Python API alike: docs/language.md, 'SWI-Prolog 7 text and lists'); SWI-Prolog 7 tells them apart",
+    'catch(call(foo), E, true)': "an undefined procedure's context names the frame that called it in SWI-Prolog (here system:call/1), which hangs on its last-call optimization, clause indexing and compiler (docs/language.md, 'Errors'); slr_sql leaves it unbound unless the meta predicate called the goal itself",
     'code_type(12288, T)': "beyond Latin-1 slr_sql's character classes come from Unicode's categories; SWI-Prolog asks its C library's tables and its own (it calls the ideographic space a period and a quote)",
     'sort(3, @<, [f(1,2)], L)': "SWI-Prolog's existence_error/3 (argument, 3, f(1,2)) is its own; slr_sql raises ISO's type_error(compound, f(1,2))",
     'sort([1, 2], @<, [f(g(1))], L)': "a key path's position past a compound's arguments: SWI-Prolog's existence_error/3 (argument, 2, g(1)) is its own; slr_sql raises ISO's type_error(compound, g(1))",
