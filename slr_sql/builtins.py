@@ -1093,6 +1093,35 @@ def _term_text(m: "Machine", a: list, make: Callable[[str], Any]) -> bool:
 
 
 DET[("term_to_atom", 2)] = lambda m, a: _term_text(m, a, Atom)
+
+
+@det("atom_to_term", 3)
+def _atom_to_term(m, a):
+    """atom_to_term(Text, Term, Bindings) as SWI-Prolog's: Text (an atom, a string, a number,
+    a code or character list) read as term_to_atom/2 reads it, Bindings the list of
+    ``'Name' = Var`` of its named variables in the order they first appear (``_`` left
+    out); a blank text is ``end_of_file`` with no bindings. Text must be bound, and
+    Bindings a list or a partial list (else type_error(list, B), before the text is read)."""
+    from .parser import parse_first_term
+
+    text = deref(a[0])
+    if type(text) is Var:
+        raise instantiation_error()
+    bindings = deref(a[2])
+    if type(bindings) is not Var and bindings != NIL and not (
+            type(bindings) is Struct and bindings.name == CONS and len(bindings.args) == 2):
+        raise type_error("list", bindings)
+    source = "" if text == NIL else _code_or_char_list_text(text) \
+        if type(text) is Struct and text.name == CONS and len(text.args) == 2 \
+        else _atom_text(text, "text")
+    if not source.strip():
+        return m.unify(a[1], Atom("end_of_file")) and m.unify(bindings, NIL)
+    try:
+        term, names = parse_first_term(source)
+    except SLRSyntaxError as exc:
+        raise iso_error(Struct("syntax_error", (Atom(exc.message),))) from None
+    pairs = make_list([Struct("=", (Atom(name), v)) for name, v in names.items()])
+    return m.unify(a[1], term) and m.unify(bindings, pairs)
 # (as term_to_atom/2, the text a string: quoted as writeq quotes, where it was the text
 # write/1 makes, term_string('A', S) giving "A")
 DET[("term_string", 2)] = lambda m, a: _term_text(m, a, String)

@@ -906,6 +906,21 @@ TEXT_GOALS = [
     "number_chars(X, foo)", "number_chars(f(x), L)", "number_chars(X, ['1', '.', '0', 'I', 'n', 'f'])",
     "number_chars(X, ['1', ' '])", "number_chars(X, ['/', '*', '*', '/', '1'])",
     "number_chars(X, ['1', '%'])", "number_chars(X, [a|b])", "number_chars(a, ['1'])",
+    # atom_to_term/3: the text read as term_to_atom/2 reads it, with its variables' names
+    "atom_to_term('foo(X, _Y, _, X)', T, B)", "atom_to_term(A, f(X, 'b c'), B)",
+    'atom_to_term(A, T, B)', "atom_to_term('', T, B)", "atom_to_term('  ', T, B)",
+    'atom_to_term("f(X)", T, B)', 'atom_to_term(12, T, B)', "atom_to_term('a. b', T, B)",
+    "atom_to_term([0'a], T, B)", "atom_to_term(['f', '(', 'X', ')'], T, B)",
+    "atom_to_term('f(X)', f(1), B)", "atom_to_term('f(X)', T, ['X'=1])",
+    'atom_to_term(f(x), T, B)', "atom_to_term('X', T, B)", "atom_to_term('f(X)', T, foo)",
+    "atom_to_term('foo(', T, foo)", "atom_to_term('f(X)', T, [a|b])",
+    "atom_to_term('f(X)', T, [a])", "atom_to_term('f(X)', T, [Y|Z])",
+    "atom_to_term('f(X)', T, ['X'=1|Z])", "atom_to_term('f(X, Y)', f(1, 2), B)",
+    "atom_to_term('f(_, _A)', T, B)", "atom_to_term('f(X, X)', T, [_=a])",
+    'atom_to_term("", T, B)', 'atom_to_term([], T, B)', 'atom_to_term(1.5, T, B)',
+    'catch(atom_to_term(A, T, B), E, true)', 'catch(atom_to_term(f(x), T, B), E, true)',
+    "catch(atom_to_term('f(X)', T, foo), E, true)",
+    "atom_to_term('X + Y * 2', T, B), B = [_=1, _=2], V is T",
 ]
 
 
