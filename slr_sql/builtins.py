@@ -1089,7 +1089,7 @@ def _term_text(m: "Machine", a: list, make: Callable[[str], Any]) -> bool:
     # SWI-Prolog's term_to_atom writes a quote inside quotes doubled and a newline as it
     # is ('it''s'), where writeq writes 'it\'s' and '\n'
     return m.unify(text, make(format_term(t, deadline=m.deadline, char_escapes=False,
-                                          var_names=prolog_var_name)))
+                                          var_names=prolog_var_name, cycle_names=False)))
 
 
 DET[("term_to_atom", 2)] = lambda m, a: _term_text(m, a, Atom)

@@ -1238,7 +1238,8 @@ class _Writer:
 def format_term(t: Any, quoted: bool = True, priority: int = 1200,
                 deadline: float | None = None, limit: int | None = None,
                 message: bool = False, numbervars: bool = False,
-                char_escapes: bool = True, var_names: Callable[[Var], str] | None = None) -> str:
+                char_escapes: bool = True, var_names: Callable[[Var], str] | None = None,
+                cycle_names: bool = True) -> str:
     """Prolog text of a term, like SWI-Prolog's ``writeq`` (``quoted=False``: like ``write``).
 
     A cyclic term is written as SWI-Prolog writes it, ``@(Template, [S_1=Value, ...])``
@@ -1252,7 +1253,9 @@ def format_term(t: Any, quoted: bool = True, priority: int = 1200,
     ``char_escapes=False`` escapes only quotes (doubled) and backslashes inside quoted
     atoms and strings, as SWI-Prolog's ``term_to_atom/2`` writes (:func:`format_atom`);
     ``var_names`` gives the text of an unbound variable (default: its name;
-    :func:`prolog_var_name` as Prolog's write/1 writes one).
+    :func:`prolog_var_name` as Prolog's write/1 writes one), but for the ``S_k`` of a cyclic
+    term's factorization unless ``cycle_names`` is false (SWI-Prolog's write/1 and format/2
+    write ``S_1``, its term_to_atom/2 a variable's ``_123``).
 
     >>> from slr_sql.terms import make_list
     >>> format_term(Struct(":-", (Atom("a"), Struct(",", (Atom("b"), Atom("c"))))))
@@ -1268,8 +1271,12 @@ def format_term(t: Any, quoted: bool = True, priority: int = 1200,
     try:
         w.write(t, priority)
     except _CyclicTerm:
+        factorized = factorize_cycles(t, deadline)
+        if var_names is not None and cycle_names:
+            labels = {id(deref(pair.args[0])) for pair in list_items(factorized.args[1])[0]}
+            var_names = (lambda names: lambda v: v.name if id(v) in labels else names(v))(var_names)
         w = _Writer(quoted, deadline, limit, message, numbervars, char_escapes, var_names)
-        w.write(factorize_cycles(t, deadline), priority)
+        w.write(factorized, priority)
     return "".join(w.out)
 
 
