@@ -93,7 +93,8 @@ _OTHER_CONTEXTS: dict[tuple[str, int], Any] = {
 # SWI-Prolog's C code names some errors' predicate without its module: a conversion's
 # first argument that is not of its type, or a text that is no number (syntax_error)
 _FIRST_ARGUMENT_TYPES = {("atom_chars", 2): "atom", ("atom_codes", 2): "atom",
-                         ("number_codes", 2): "number", ("name", 2): "atomic",
+                         ("number_codes", 2): "number", ("number_chars", 2): "number",
+                         ("name", 2): "atomic",
                          ("number_string", 2): "number"}
 
 
@@ -1028,18 +1029,27 @@ def _is_text_given(t: Any) -> bool:
     return type(tail) is not Var and all(type(deref(x)) is not Var for x in items)
 
 
-@det("number_codes", 2)
-def _number_codes(m, a):
+def _number_text(m: "Machine", a: tuple, make: Callable[[str], Any]) -> bool:
+    """number_codes/2 (``make`` a code list) and number_chars/2 (a character list): from
+    the number when it is bound and the text is not, else the text read as a number (a
+    code or character list or a string for either, as SWI-Prolog's; leading layout
+    allowed) and unified with the first argument."""
     x = deref(a[0])
     if type(x) is not Var:
         if type(x) is not int and type(x) is not float:
             raise type_error("number", x)
         if not _is_text_given(a[1]):
-            return m.unify(a[1], make_list([ord(c) for c in _atom_text(x)]))
+            return m.unify(a[1], make(_atom_text(x)))
     n = _number_of_text(_list_text(a[1]), leading_layout=True)
     if n is None:
         raise iso_error(Struct("syntax_error", (Atom("illegal_number"),)))
     return m.unify(x, n)
+
+
+DET[("number_codes", 2)] = lambda m, a: _number_text(
+    m, a, lambda s: make_list([ord(c) for c in s]))
+DET[("number_chars", 2)] = lambda m, a: _number_text(
+    m, a, lambda s: make_list([Atom(c) for c in s]))
 
 
 @det("atom_number", 2)
@@ -1064,7 +1074,7 @@ def _atom_number(m, a):
 
 def _term_text(m: "Machine", a: list, make: Callable[[str], Any]) -> bool:
     """term_to_atom/2 (``make``: Atom) and term_string/2 (String)."""
-    from .terms import format_term
+    from .terms import format_term, prolog_var_name
 
     t = deref(a[0])
     text = deref(a[1])
@@ -1078,10 +1088,40 @@ def _term_text(m: "Machine", a: list, make: Callable[[str], Any]) -> bool:
         return m.unify(t, _parse_any(Atom(source)))
     # SWI-Prolog's term_to_atom writes a quote inside quotes doubled and a newline as it
     # is ('it''s'), where writeq writes 'it\'s' and '\n'
-    return m.unify(text, make(format_term(t, deadline=m.deadline, char_escapes=False)))
+    return m.unify(text, make(format_term(t, deadline=m.deadline, char_escapes=False,
+                                          var_names=prolog_var_name, cycle_names=False)))
 
 
 DET[("term_to_atom", 2)] = lambda m, a: _term_text(m, a, Atom)
+
+
+@det("atom_to_term", 3)
+def _atom_to_term(m, a):
+    """atom_to_term(Text, Term, Bindings) as SWI-Prolog's: Text (an atom, a string, a number,
+    a code or character list) read as term_to_atom/2 reads it, Bindings the list of
+    ``'Name' = Var`` of its named variables in the order they first appear (``_`` left
+    out); a blank text is ``end_of_file`` with no bindings. Text must be bound, and
+    Bindings a list or a partial list (else type_error(list, B), before the text is read)."""
+    from .parser import parse_first_term
+
+    text = deref(a[0])
+    if type(text) is Var:
+        raise instantiation_error()
+    bindings = deref(a[2])
+    if type(bindings) is not Var and bindings != NIL and not (
+            type(bindings) is Struct and bindings.name == CONS and len(bindings.args) == 2):
+        raise type_error("list", bindings)
+    source = "" if text == NIL else _code_or_char_list_text(text) \
+        if type(text) is Struct and text.name == CONS and len(text.args) == 2 \
+        else _atom_text(text, "text")
+    if not source.strip():
+        return m.unify(a[1], Atom("end_of_file")) and m.unify(bindings, NIL)
+    try:
+        term, names = parse_first_term(source)
+    except SLRSyntaxError as exc:
+        raise iso_error(Struct("syntax_error", (Atom(exc.message),))) from None
+    pairs = make_list([Struct("=", (Atom(name), v)) for name, v in names.items()])
+    return m.unify(a[1], term) and m.unify(bindings, pairs)
 # (as term_to_atom/2, the text a string: quoted as writeq quotes, where it was the text
 # write/1 makes, term_string('A', S) giving "A")
 DET[("term_string", 2)] = lambda m, a: _term_text(m, a, String)
@@ -1140,6 +1180,24 @@ def _downcase_text(text: str) -> str:
 @det("upcase_atom", 2)
 def _upcase(m, a):
     return _case_converted(m, a, _upcase_text)
+
+
+def _string_case(m: "Machine", a: tuple, convert: Callable[[str], str]) -> bool:
+    """string_upper/2, string_lower/2 as SWI-Prolog's: the text of an atom, a string or a
+    number (a list is type_error(atomic, L), [] type_error(atom, [])) converted one
+    character at a time, as a string; a given result (a string, an atom, a number) is
+    compared as text, anything else there is type_error(string, R)."""
+    out = convert(text_in(a[0], "atomic"))
+    r = deref(a[1])
+    if type(r) is Var:
+        return m.unify(r, String(out))
+    if type(r) is String or type(r) is Atom and r != "[]" or type(r) in (int, float):
+        return text_of(r) == out
+    raise type_error("string", r)
+
+
+DET[("string_upper", 2)] = lambda m, a: _string_case(m, a, _upcase_text)
+DET[("string_lower", 2)] = lambda m, a: _string_case(m, a, _downcase_text)
 
 
 @nondet("sub_atom", 5)
@@ -2133,13 +2191,15 @@ def _out(m: "Machine"):
 def _write_text(t: Any, quoted: bool = False, deadline: float | None = None,
                 numbervars: bool = True) -> str:
     """A term as write/1 (``quoted``: writeq/1, print/1) writes it: ``'$VAR'(1)`` as ``B``
-    (SWI-Prolog's numbervars(true)) unless ``numbervars`` is false (write_canonical/1)."""
-    from .terms import format_term
+    (SWI-Prolog's numbervars(true)) unless ``numbervars`` is false (write_canonical/1); an
+    unbound variable as ``_`` and its number (``_123``), as SWI-Prolog writes one."""
+    from .terms import format_term, prolog_var_name
 
     t = deref(t)
     if not quoted and type(t) in (Atom, String):
         return str(t)
-    return format_term(t, quoted=quoted, deadline=deadline, numbervars=numbervars)
+    return format_term(t, quoted=quoted, deadline=deadline, numbervars=numbervars,
+                       var_names=prolog_var_name)
 
 
 @det("write", 1)
@@ -2337,9 +2397,9 @@ class _ColumnStops:
     """format/2's column stops, as SWI-Prolog's: ``~t`` marks a fill point (``~Ct``,
     ``~`ct``: filled with character C or c, else spaces) in the text since the last stop;
     ``~N|`` (column N; bare: here) and ``~N+`` (N past the last stop, 8 by default) pad that
-    text to the column at its fill points -- evenly, the last ones one more when the
-    padding does not divide -- or on its right when it has none. Text already past the
-    column is left as it is.
+    text to the column at its fill points -- evenly, the rest spread from the middle one
+    (``_fill_sizes``) -- or on its right when it has none. Text already past the column is
+    left as it is, and the count goes on from the column all the same.
 
     The column is counted as SWI-Prolog 9 counts it: format's own text (its literal
     characters, ``~a``, ``~s``, ``~c``, numbers, ``~n``) one character at a time, a line
@@ -2408,15 +2468,35 @@ class _ColumnStops:
         pad = target - here
         if pad > 0:
             if self.fills:
-                each, rest = divmod(pad, len(self.fills))
-                for k, (piece, char) in enumerate(self.fills):
-                    out.put(piece, char * (each + (k >= len(self.fills) - rest)))
+                for (piece, char), size in zip(self.fills, _fill_sizes(pad, len(self.fills))):
+                    out.put(piece, char * size)
             else:
                 out.append(" " * pad)
-            here = target
         self.position = _line_position("".join(out[self.start:]), self.position)
-        self.start, self.column, self.fills = len(out), here, []
+        # the column is the stop's even where the text went past it (SWI-Prolog counts on
+        # from the stop: "abcdef~3|~t~a~10|" pads 'x' from column 3)
+        self.start, self.column, self.fills = len(out), target, []
         self.terms.clear()
+
+
+def _fill_sizes(pad: int, fills: int) -> list[int]:
+    """How many fill characters each of ``fills`` fill points gets of ``pad``, as
+    SWI-Prolog's format/2 spreads them: each the same share, then the rest one at a time
+    from the middle fill point outwards, alternately right and left at growing distances
+    (``m``, ``m + 1``, ``m - 2``, ``m + 3``, ...; ``m = fills // 2``), where a distance
+    past either end gives nothing (SWI-Prolog 9's pl-fmt.c: such a column comes out short).
+
+    >>> _fill_sizes(7, 3), _fill_sizes(3, 4), _fill_sizes(9, 5)
+    ([2, 3, 2], [1, 0, 1, 1], [2, 1, 2, 2, 1])
+    """
+    each, rest = divmod(pad, fills)
+    sizes = [each] * fills
+    middle = fills // 2
+    for k in range(rest):
+        index = middle + (k if k % 2 else -k)
+        if 0 <= index < fills:
+            sizes[index] += 1
+    return sizes
 
 
 def _format_column(text: str, column: int) -> int:
@@ -3452,6 +3532,38 @@ foldl(G, L, V0, V) :- '$foldl'(L, G, V0, V).
 foldl(G, L1, L2, V0, V) :- '$foldl'(L1, L2, G, V0, V).
 '$foldl'([], [], _, V, V).
 '$foldl'([X|Xs], [Y|Ys], G, V0, V) :- call(G, X, Y, V0, V1), '$foldl'(Xs, Ys, G, V1, V).
+foldl(G, L1, L2, L3, V0, V) :- '$foldl'(L1, L2, L3, G, V0, V).
+'$foldl'([], [], [], _, V, V).
+'$foldl'([X|Xs], [Y|Ys], [Z|Zs], G, V0, V) :- call(G, X, Y, Z, V0, V1), '$foldl'(Xs, Ys, Zs, G, V1, V).
+foldl(G, L1, L2, L3, L4, V0, V) :- '$foldl'(L1, L2, L3, L4, G, V0, V).
+'$foldl'([], [], [], [], _, V, V).
+'$foldl'([X|Xs], [Y|Ys], [Z|Zs], [W|Ws], G, V0, V) :- call(G, X, Y, Z, W, V0, V1), '$foldl'(Xs, Ys, Zs, Ws, G, V1, V).
+partition(P, L, Less, Equal, Greater) :- '$partition'(L, P, Less, Equal, Greater).
+'$partition'([], _, [], [], []).
+'$partition'([H|T], P, L, E, G) :- call(P, H, Diff), '$partition'(Diff, H, P, T, L, E, G).
+'$partition'(<, H, P, T, L, E, G) :- !, L = [H|Rest], '$partition'(T, P, Rest, E, G).
+'$partition'(=, H, P, T, L, E, G) :- !, E = [H|Rest], '$partition'(T, P, L, Rest, G).
+'$partition'(>, H, P, T, L, E, G) :- !, G = [H|Rest], '$partition'(T, P, L, E, Rest).
+'$partition'(Diff, _, _, _, _, _, _) :- ( ground(Diff) -> throw(error(type_error(oneof([<, =, >]), Diff), _)) ; throw(error(instantiation_error, _)) ).
+convlist(G, ListIn, ListOut) :- '$convlist'(ListIn, ListOut, G).
+'$convlist'([], [], _).
+'$convlist'([H0|T0], ListOut, G) :- ( call(G, H0, H) -> ListOut = [H|T], '$convlist'(T0, T, G) ; '$convlist'(T0, ListOut, G) ).
+select(X, XList, Y, YList) :- '$select4'(XList, X, Y, YList).
+'$select4'([X|List], X, Y, [Y|List]).
+'$select4'([X0|XList], X, Y, [X0|YList]) :- '$select4'(XList, X, Y, YList).
+selectchk(X, XList, Y, YList) :- select(X, XList, Y, YList), !.
+nextto(X, Y, [X, Y|_]).
+nextto(X, Y, [_|Zs]) :- nextto(X, Y, Zs).
+prefix([], _).
+prefix([E|T0], [E|T]) :- prefix(T0, T).
+same_length([], []).
+same_length([_|T1], [_|T2]) :- same_length(T1, T2).
+proper_length(List, Length) :- '$skip_list'(Length0, List, Tail), Tail == [], Length = Length0.
+is_set(Set) :- '$skip_list'(Len, Set, Tail), Tail == [], sort(Set, Sorted), length(Sorted, Len).
+subset(L, S) :- var(L), !, throw(error(existence_error(matching_rule, lists:subset(L, S)), context(lists:subset/2, _))).
+subset([], _) :- !.
+subset([E|R], Set) :- !, memberchk(E, Set), subset(R, Set).
+subset(L, S) :- throw(error(existence_error(matching_rule, lists:subset(L, S)), context(lists:subset/2, _))).
 delete([], _, []).
 delete([H|T], X, R) :- ( H \= X -> R = [H|R1] ; R = R1 ), delete(T, X, R1).
 subtract(L, D, R) :- var(L), !, throw(error(existence_error(matching_rule, lists:subtract(L, D, R)), context(lists:subtract/3, _))).

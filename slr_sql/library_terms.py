@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from .terms import Atom as A, Clause, Span, String, Struct as S, Var
 
-SOURCE_SHA256 = '2d0f845b7eb56252c94d176af5b5083849d706f519a52ad1081296425c0b729e'
+SOURCE_SHA256 = 'bd8c2e6a816e2c36095e5057c1a5d14077356b9f11f252cc2643e71e62ecd869'
 
 
 def clauses(source: str) -> list[Clause]:
@@ -121,202 +121,266 @@ def clauses(source: str) -> list[Clause]:
     out.append(Clause(S(A('$foldl'), (A('[]'), A('[]'), v[0], v[1], v[1])), A('true'), Span('<library>', 54, 1, 54, 27), (('V', v[1]), ), source[2786:2812]))
     v = [Var('X'), Var('Xs'), Var('Y'), Var('Ys'), Var('G'), Var('V0'), Var('V'), Var('V1')]
     out.append(Clause(S(A('$foldl'), (S(A('.'), (v[0], v[1])), S(A('.'), (v[2], v[3])), v[4], v[5], v[6])), S(A(','), (S(A('call'), (v[4], v[0], v[2], v[5], v[7])), S(A('$foldl'), (v[1], v[3], v[4], v[7], v[6])))), Span('<library>', 55, 1, 55, 89), (('X', v[0]), ('Xs', v[1]), ('Y', v[2]), ('Ys', v[3]), ('G', v[4]), ('V0', v[5]), ('V', v[6]), ('V1', v[7]), ), source[2813:2901]))
+    v = [Var('G'), Var('L1'), Var('L2'), Var('L3'), Var('V0'), Var('V')]
+    out.append(Clause(S(A('foldl'), (v[0], v[1], v[2], v[3], v[4], v[5])), S(A('$foldl'), (v[1], v[2], v[3], v[0], v[4], v[5])), Span('<library>', 56, 1, 56, 63), (('G', v[0]), ('L1', v[1]), ('L2', v[2]), ('L3', v[3]), ('V0', v[4]), ('V', v[5]), ), source[2902:2964]))
+    v = [Var('_'), Var('V')]
+    out.append(Clause(S(A('$foldl'), (A('[]'), A('[]'), A('[]'), v[0], v[1], v[1])), A('true'), Span('<library>', 57, 1, 57, 31), (('V', v[1]), ), source[2965:2995]))
+    v = [Var('X'), Var('Xs'), Var('Y'), Var('Ys'), Var('Z'), Var('Zs'), Var('G'), Var('V0'), Var('V'), Var('V1')]
+    out.append(Clause(S(A('$foldl'), (S(A('.'), (v[0], v[1])), S(A('.'), (v[2], v[3])), S(A('.'), (v[4], v[5])), v[6], v[7], v[8])), S(A(','), (S(A('call'), (v[6], v[0], v[2], v[4], v[7], v[9])), S(A('$foldl'), (v[1], v[3], v[5], v[6], v[9], v[8])))), Span('<library>', 58, 1, 58, 104), (('X', v[0]), ('Xs', v[1]), ('Y', v[2]), ('Ys', v[3]), ('Z', v[4]), ('Zs', v[5]), ('G', v[6]), ('V0', v[7]), ('V', v[8]), ('V1', v[9]), ), source[2996:3099]))
+    v = [Var('G'), Var('L1'), Var('L2'), Var('L3'), Var('L4'), Var('V0'), Var('V')]
+    out.append(Clause(S(A('foldl'), (v[0], v[1], v[2], v[3], v[4], v[5], v[6])), S(A('$foldl'), (v[1], v[2], v[3], v[4], v[0], v[5], v[6])), Span('<library>', 59, 1, 59, 71), (('G', v[0]), ('L1', v[1]), ('L2', v[2]), ('L3', v[3]), ('L4', v[4]), ('V0', v[5]), ('V', v[6]), ), source[3100:3170]))
+    v = [Var('_'), Var('V')]
+    out.append(Clause(S(A('$foldl'), (A('[]'), A('[]'), A('[]'), A('[]'), v[0], v[1], v[1])), A('true'), Span('<library>', 60, 1, 60, 35), (('V', v[1]), ), source[3171:3205]))
+    v = [Var('X'), Var('Xs'), Var('Y'), Var('Ys'), Var('Z'), Var('Zs'), Var('W'), Var('Ws'), Var('G'), Var('V0'), Var('V'), Var('V1')]
+    out.append(Clause(S(A('$foldl'), (S(A('.'), (v[0], v[1])), S(A('.'), (v[2], v[3])), S(A('.'), (v[4], v[5])), S(A('.'), (v[6], v[7])), v[8], v[9], v[10])), S(A(','), (S(A('call'), (v[8], v[0], v[2], v[4], v[6], v[9], v[11])), S(A('$foldl'), (v[1], v[3], v[5], v[7], v[8], v[11], v[10])))), Span('<library>', 61, 1, 61, 119), (('X', v[0]), ('Xs', v[1]), ('Y', v[2]), ('Ys', v[3]), ('Z', v[4]), ('Zs', v[5]), ('W', v[6]), ('Ws', v[7]), ('G', v[8]), ('V0', v[9]), ('V', v[10]), ('V1', v[11]), ), source[3206:3324]))
+    v = [Var('P'), Var('L'), Var('Less'), Var('Equal'), Var('Greater')]
+    out.append(Clause(S(A('partition'), (v[0], v[1], v[2], v[3], v[4])), S(A('$partition'), (v[1], v[0], v[2], v[3], v[4])), Span('<library>', 62, 1, 62, 83), (('P', v[0]), ('L', v[1]), ('Less', v[2]), ('Equal', v[3]), ('Greater', v[4]), ), source[3325:3407]))
     v = [Var('_')]
-    out.append(Clause(S(A('delete'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 56, 1, 56, 19), (), source[2902:2920]))
+    out.append(Clause(S(A('$partition'), (A('[]'), v[0], A('[]'), A('[]'), A('[]'))), A('true'), Span('<library>', 63, 1, 63, 33), (), source[3408:3440]))
+    v = [Var('H'), Var('T'), Var('P'), Var('L'), Var('E'), Var('G'), Var('Diff')]
+    out.append(Clause(S(A('$partition'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4], v[5])), S(A(','), (S(A('call'), (v[2], v[0], v[6])), S(A('$partition'), (v[6], v[0], v[2], v[1], v[3], v[4], v[5])))), Span('<library>', 64, 1, 64, 91), (('H', v[0]), ('T', v[1]), ('P', v[2]), ('L', v[3]), ('E', v[4]), ('G', v[5]), ('Diff', v[6]), ), source[3441:3531]))
+    v = [Var('H'), Var('P'), Var('T'), Var('L'), Var('E'), Var('G'), Var('Rest')]
+    out.append(Clause(S(A('$partition'), (A('<'), v[0], v[1], v[2], v[3], v[4], v[5])), S(A(','), (A('!'), S(A(','), (S(A('='), (v[3], S(A('.'), (v[0], v[6])))), S(A('$partition'), (v[2], v[1], v[6], v[4], v[5])))))), Span('<library>', 65, 1, 65, 86), (('H', v[0]), ('P', v[1]), ('T', v[2]), ('L', v[3]), ('E', v[4]), ('G', v[5]), ('Rest', v[6]), ), source[3532:3617]))
+    v = [Var('H'), Var('P'), Var('T'), Var('L'), Var('E'), Var('G'), Var('Rest')]
+    out.append(Clause(S(A('$partition'), (A('='), v[0], v[1], v[2], v[3], v[4], v[5])), S(A(','), (A('!'), S(A(','), (S(A('='), (v[4], S(A('.'), (v[0], v[6])))), S(A('$partition'), (v[2], v[1], v[3], v[6], v[5])))))), Span('<library>', 66, 1, 66, 86), (('H', v[0]), ('P', v[1]), ('T', v[2]), ('L', v[3]), ('E', v[4]), ('G', v[5]), ('Rest', v[6]), ), source[3618:3703]))
+    v = [Var('H'), Var('P'), Var('T'), Var('L'), Var('E'), Var('G'), Var('Rest')]
+    out.append(Clause(S(A('$partition'), (A('>'), v[0], v[1], v[2], v[3], v[4], v[5])), S(A(','), (A('!'), S(A(','), (S(A('='), (v[5], S(A('.'), (v[0], v[6])))), S(A('$partition'), (v[2], v[1], v[3], v[4], v[6])))))), Span('<library>', 67, 1, 67, 86), (('H', v[0]), ('P', v[1]), ('T', v[2]), ('L', v[3]), ('E', v[4]), ('G', v[5]), ('Rest', v[6]), ), source[3704:3789]))
+    v = [Var('Diff'), Var('_'), Var('_'), Var('_'), Var('_'), Var('_'), Var('_'), Var('_'), Var('_')]
+    out.append(Clause(S(A('$partition'), (v[0], v[1], v[2], v[3], v[4], v[5], v[6])), S(A(';'), (S(A('->'), (S(A('ground'), (v[0],)), S(A('throw'), (S(A('error'), (S(A('type_error'), (S(A('oneof'), (S(A('.'), (A('<'), S(A('.'), (A('='), S(A('.'), (A('>'), A('[]'))))))),)), v[0])), v[7])),)))), S(A('throw'), (S(A('error'), (A('instantiation_error'), v[8])),)))), Span('<library>', 68, 1, 68, 152), (('Diff', v[0]), ), source[3790:3941]))
+    v = [Var('G'), Var('ListIn'), Var('ListOut')]
+    out.append(Clause(S(A('convlist'), (v[0], v[1], v[2])), S(A('$convlist'), (v[1], v[2], v[0])), Span('<library>', 69, 1, 69, 65), (('G', v[0]), ('ListIn', v[1]), ('ListOut', v[2]), ), source[3942:4006]))
+    v = [Var('_')]
+    out.append(Clause(S(A('$convlist'), (A('[]'), A('[]'), v[0])), A('true'), Span('<library>', 70, 1, 70, 24), (), source[4007:4030]))
+    v = [Var('H0'), Var('T0'), Var('ListOut'), Var('G'), Var('H'), Var('T')]
+    out.append(Clause(S(A('$convlist'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(';'), (S(A('->'), (S(A('call'), (v[3], v[0], v[4])), S(A(','), (S(A('='), (v[2], S(A('.'), (v[4], v[5])))), S(A('$convlist'), (v[1], v[5], v[3])))))), S(A('$convlist'), (v[1], v[2], v[3])))), Span('<library>', 71, 1, 71, 128), (('H0', v[0]), ('T0', v[1]), ('ListOut', v[2]), ('G', v[3]), ('H', v[4]), ('T', v[5]), ), source[4031:4158]))
+    v = [Var('X'), Var('XList'), Var('Y'), Var('YList')]
+    out.append(Clause(S(A('select'), (v[0], v[1], v[2], v[3])), S(A('$select4'), (v[1], v[0], v[2], v[3])), Span('<library>', 72, 1, 72, 62), (('X', v[0]), ('XList', v[1]), ('Y', v[2]), ('YList', v[3]), ), source[4159:4220]))
+    v = [Var('X'), Var('List'), Var('Y')]
+    out.append(Clause(S(A('$select4'), (S(A('.'), (v[0], v[1])), v[0], v[2], S(A('.'), (v[2], v[1])))), A('true'), Span('<library>', 73, 1, 73, 38), (('X', v[0]), ('List', v[1]), ('Y', v[2]), ), source[4221:4258]))
+    v = [Var('X0'), Var('XList'), Var('X'), Var('Y'), Var('YList')]
+    out.append(Clause(S(A('$select4'), (S(A('.'), (v[0], v[1])), v[2], v[3], S(A('.'), (v[0], v[4])))), S(A('$select4'), (v[1], v[2], v[3], v[4])), Span('<library>', 74, 1, 74, 76), (('X0', v[0]), ('XList', v[1]), ('X', v[2]), ('Y', v[3]), ('YList', v[4]), ), source[4259:4334]))
+    v = [Var('X'), Var('XList'), Var('Y'), Var('YList')]
+    out.append(Clause(S(A('selectchk'), (v[0], v[1], v[2], v[3])), S(A(','), (S(A('select'), (v[0], v[1], v[2], v[3])), A('!'))), Span('<library>', 75, 1, 75, 64), (('X', v[0]), ('XList', v[1]), ('Y', v[2]), ('YList', v[3]), ), source[4335:4398]))
+    v = [Var('X'), Var('Y'), Var('_')]
+    out.append(Clause(S(A('nextto'), (v[0], v[1], S(A('.'), (v[0], S(A('.'), (v[1], v[2])))))), A('true'), Span('<library>', 76, 1, 76, 24), (('X', v[0]), ('Y', v[1]), ), source[4399:4422]))
+    v = [Var('X'), Var('Y'), Var('_'), Var('Zs')]
+    out.append(Clause(S(A('nextto'), (v[0], v[1], S(A('.'), (v[2], v[3])))), S(A('nextto'), (v[0], v[1], v[3])), Span('<library>', 77, 1, 77, 42), (('X', v[0]), ('Y', v[1]), ('Zs', v[3]), ), source[4423:4464]))
+    v = [Var('_')]
+    out.append(Clause(S(A('prefix'), (A('[]'), v[0])), A('true'), Span('<library>', 78, 1, 78, 15), (), source[4465:4479]))
+    v = [Var('E'), Var('T0'), Var('T')]
+    out.append(Clause(S(A('prefix'), (S(A('.'), (v[0], v[1])), S(A('.'), (v[0], v[2])))), S(A('prefix'), (v[1], v[2])), Span('<library>', 79, 1, 79, 40), (('E', v[0]), ('T0', v[1]), ('T', v[2]), ), source[4480:4519]))
+    v = []
+    out.append(Clause(S(A('same_length'), (A('[]'), A('[]'))), A('true'), Span('<library>', 80, 1, 80, 21), (), source[4520:4540]))
+    v = [Var('_'), Var('T1'), Var('_'), Var('T2')]
+    out.append(Clause(S(A('same_length'), (S(A('.'), (v[0], v[1])), S(A('.'), (v[2], v[3])))), S(A('same_length'), (v[1], v[3])), Span('<library>', 81, 1, 81, 52), (('T1', v[1]), ('T2', v[3]), ), source[4541:4592]))
+    v = [Var('List'), Var('Length'), Var('Length0'), Var('Tail')]
+    out.append(Clause(S(A('proper_length'), (v[0], v[1])), S(A(','), (S(A('$skip_list'), (v[2], v[0], v[3])), S(A(','), (S(A('=='), (v[3], A('[]'))), S(A('='), (v[1], v[2])))))), Span('<library>', 82, 1, 82, 96), (('List', v[0]), ('Length', v[1]), ('Length0', v[2]), ('Tail', v[3]), ), source[4593:4688]))
+    v = [Var('Set'), Var('Len'), Var('Tail'), Var('Sorted')]
+    out.append(Clause(S(A('is_set'), (v[0],)), S(A(','), (S(A('$skip_list'), (v[1], v[0], v[2])), S(A(','), (S(A('=='), (v[2], A('[]'))), S(A(','), (S(A('sort'), (v[0], v[3])), S(A('length'), (v[3], v[1])))))))), Span('<library>', 83, 1, 83, 97), (('Set', v[0]), ('Len', v[1]), ('Tail', v[2]), ('Sorted', v[3]), ), source[4689:4785]))
+    v = [Var('L'), Var('S'), Var('_')]
+    out.append(Clause(S(A('subset'), (v[0], v[1])), S(A(','), (S(A('var'), (v[0],)), S(A(','), (A('!'), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('subset'), (v[0], v[1])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('subset'), 2)))), v[2])))),)))))), Span('<library>', 84, 1, 84, 121), (('L', v[0]), ('S', v[1]), ), source[4786:4906]))
+    v = [Var('_')]
+    out.append(Clause(S(A('subset'), (A('[]'), v[0])), A('!'), Span('<library>', 85, 1, 85, 20), (), source[4907:4926]))
+    v = [Var('E'), Var('R'), Var('Set')]
+    out.append(Clause(S(A('subset'), (S(A('.'), (v[0], v[1])), v[2])), S(A(','), (A('!'), S(A(','), (S(A('memberchk'), (v[0], v[2])), S(A('subset'), (v[1], v[2])))))), Span('<library>', 86, 1, 86, 60), (('E', v[0]), ('R', v[1]), ('Set', v[2]), ), source[4927:4986]))
+    v = [Var('L'), Var('S'), Var('_')]
+    out.append(Clause(S(A('subset'), (v[0], v[1])), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('subset'), (v[0], v[1])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('subset'), 2)))), v[2])))),)), Span('<library>', 87, 1, 87, 110), (('L', v[0]), ('S', v[1]), ), source[4987:5096]))
+    v = [Var('_')]
+    out.append(Clause(S(A('delete'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 88, 1, 88, 19), (), source[5097:5115]))
     v = [Var('H'), Var('T'), Var('X'), Var('R'), Var('R1')]
-    out.append(Clause(S(A('delete'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('\\='), (v[0], v[2])), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('='), (v[3], v[4])))), S(A('delete'), (v[1], v[2], v[4])))), Span('<library>', 57, 1, 57, 76), (('H', v[0]), ('T', v[1]), ('X', v[2]), ('R', v[3]), ('R1', v[4]), ), source[2921:2996]))
+    out.append(Clause(S(A('delete'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('\\='), (v[0], v[2])), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('='), (v[3], v[4])))), S(A('delete'), (v[1], v[2], v[4])))), Span('<library>', 89, 1, 89, 76), (('H', v[0]), ('T', v[1]), ('X', v[2]), ('R', v[3]), ('R1', v[4]), ), source[5116:5191]))
     v = [Var('L'), Var('D'), Var('R'), Var('_')]
-    out.append(Clause(S(A('subtract'), (v[0], v[1], v[2])), S(A(','), (S(A('var'), (v[0],)), S(A(','), (A('!'), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('subtract'), (v[0], v[1], v[2])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('subtract'), 3)))), v[3])))),)))))), Span('<library>', 58, 1, 58, 133), (('L', v[0]), ('D', v[1]), ('R', v[2]), ), source[2997:3129]))
+    out.append(Clause(S(A('subtract'), (v[0], v[1], v[2])), S(A(','), (S(A('var'), (v[0],)), S(A(','), (A('!'), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('subtract'), (v[0], v[1], v[2])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('subtract'), 3)))), v[3])))),)))))), Span('<library>', 90, 1, 90, 133), (('L', v[0]), ('D', v[1]), ('R', v[2]), ), source[5192:5324]))
     v = [Var('_'), Var('R')]
-    out.append(Clause(S(A('subtract'), (A('[]'), v[0], v[1])), S(A(','), (A('!'), S(A('='), (v[1], A('[]'))))), Span('<library>', 59, 1, 59, 33), (('R', v[1]), ), source[3130:3162]))
+    out.append(Clause(S(A('subtract'), (A('[]'), v[0], v[1])), S(A(','), (A('!'), S(A('='), (v[1], A('[]'))))), Span('<library>', 91, 1, 91, 33), (('R', v[1]), ), source[5325:5357]))
     v = [Var('E'), Var('T'), Var('D'), Var('R'), Var('R1')]
-    out.append(Clause(S(A('subtract'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (A('!'), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], v[4])))), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('subtract'), (v[1], v[2], v[4])))))), Span('<library>', 60, 1, 60, 92), (('E', v[0]), ('T', v[1]), ('D', v[2]), ('R', v[3]), ('R1', v[4]), ), source[3163:3254]))
+    out.append(Clause(S(A('subtract'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (A('!'), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], v[4])))), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('subtract'), (v[1], v[2], v[4])))))), Span('<library>', 92, 1, 92, 92), (('E', v[0]), ('T', v[1]), ('D', v[2]), ('R', v[3]), ('R1', v[4]), ), source[5358:5449]))
     v = [Var('L'), Var('D'), Var('R'), Var('_')]
-    out.append(Clause(S(A('subtract'), (v[0], v[1], v[2])), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('subtract'), (v[0], v[1], v[2])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('subtract'), 3)))), v[3])))),)), Span('<library>', 61, 1, 61, 122), (('L', v[0]), ('D', v[1]), ('R', v[2]), ), source[3255:3376]))
+    out.append(Clause(S(A('subtract'), (v[0], v[1], v[2])), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('lists'), S(A('subtract'), (v[0], v[1], v[2])))))), S(A('context'), (S(A(':'), (A('lists'), S(A('/'), (A('subtract'), 3)))), v[3])))),)), Span('<library>', 93, 1, 93, 122), (('L', v[0]), ('D', v[1]), ('R', v[2]), ), source[5450:5571]))
     v = [Var('_')]
-    out.append(Clause(S(A('intersection'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 62, 1, 62, 25), (), source[3377:3401]))
+    out.append(Clause(S(A('intersection'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 94, 1, 94, 25), (), source[5572:5596]))
     v = [Var('X'), Var('T'), Var('L'), Var('I'), Var('R')]
-    out.append(Clause(S(A('intersection'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('='), (v[3], v[4])))), S(A('intersection'), (v[1], v[2], v[4])))), Span('<library>', 63, 1, 63, 94), (('X', v[0]), ('T', v[1]), ('L', v[2]), ('I', v[3]), ('R', v[4]), ), source[3402:3495]))
+    out.append(Clause(S(A('intersection'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('='), (v[3], v[4])))), S(A('intersection'), (v[1], v[2], v[4])))), Span('<library>', 95, 1, 95, 94), (('X', v[0]), ('T', v[1]), ('L', v[2]), ('I', v[3]), ('R', v[4]), ), source[5597:5690]))
     v = [Var('L')]
-    out.append(Clause(S(A('union'), (A('[]'), v[0], v[0])), A('true'), Span('<library>', 64, 1, 64, 17), (('L', v[0]), ), source[3496:3512]))
+    out.append(Clause(S(A('union'), (A('[]'), v[0], v[0])), A('true'), Span('<library>', 96, 1, 96, 17), (('L', v[0]), ), source[5691:5707]))
     v = [Var('H'), Var('T'), Var('L'), Var('R'), Var('R1')]
-    out.append(Clause(S(A('union'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], v[4])))), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('union'), (v[1], v[2], v[4])))), Span('<library>', 65, 1, 65, 83), (('H', v[0]), ('T', v[1]), ('L', v[2]), ('R', v[3]), ('R1', v[4]), ), source[3513:3595]))
+    out.append(Clause(S(A('union'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A(';'), (S(A('->'), (S(A('memberchk'), (v[0], v[2])), S(A('='), (v[3], v[4])))), S(A('='), (v[3], S(A('.'), (v[0], v[4])))))), S(A('union'), (v[1], v[2], v[4])))), Span('<library>', 97, 1, 97, 83), (('H', v[0]), ('T', v[1]), ('L', v[2]), ('R', v[3]), ('R1', v[4]), ), source[5708:5790]))
     v = [Var('Xs'), Var('Ys'), Var('Xlen'), Var('XTail'), Var('Ylen'), Var('YTail'), Var('Len')]
-    out.append(Clause(S(A('permutation'), (v[0], v[1])), S(A(','), (S(A('$skip_list'), (v[2], v[0], v[3])), S(A(','), (S(A('$skip_list'), (v[4], v[1], v[5])), S(A(','), (S(A(';'), (S(A('->'), (S(A(','), (S(A('=='), (v[3], A('[]'))), S(A('=='), (v[5], A('[]'))))), S(A('=='), (v[2], v[4])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('var'), (v[3],)), S(A('=='), (v[5], A('[]'))))), S(A('length'), (v[0], v[4])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('=='), (v[3], A('[]'))), S(A('var'), (v[5],)))), S(A('length'), (v[1], v[2])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('var'), (v[3],)), S(A('var'), (v[5],)))), S(A(','), (S(A('length'), (v[0], v[6])), S(A('length'), (v[1], v[6])))))), S(A(','), (S(A('$must_be_list'), (v[0],)), S(A('$must_be_list'), (v[1],)))))))))))), S(A('$perm'), (v[0], v[1])))))))), Span('<library>', 66, 1, 66, 344), (('Xs', v[0]), ('Ys', v[1]), ('Xlen', v[2]), ('XTail', v[3]), ('Ylen', v[4]), ('YTail', v[5]), ('Len', v[6]), ), source[3596:3939]))
+    out.append(Clause(S(A('permutation'), (v[0], v[1])), S(A(','), (S(A('$skip_list'), (v[2], v[0], v[3])), S(A(','), (S(A('$skip_list'), (v[4], v[1], v[5])), S(A(','), (S(A(';'), (S(A('->'), (S(A(','), (S(A('=='), (v[3], A('[]'))), S(A('=='), (v[5], A('[]'))))), S(A('=='), (v[2], v[4])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('var'), (v[3],)), S(A('=='), (v[5], A('[]'))))), S(A('length'), (v[0], v[4])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('=='), (v[3], A('[]'))), S(A('var'), (v[5],)))), S(A('length'), (v[1], v[2])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('var'), (v[3],)), S(A('var'), (v[5],)))), S(A(','), (S(A('length'), (v[0], v[6])), S(A('length'), (v[1], v[6])))))), S(A(','), (S(A('$must_be_list'), (v[0],)), S(A('$must_be_list'), (v[1],)))))))))))), S(A('$perm'), (v[0], v[1])))))))), Span('<library>', 98, 1, 98, 344), (('Xs', v[0]), ('Ys', v[1]), ('Xlen', v[2]), ('XTail', v[3]), ('Ylen', v[4]), ('YTail', v[5]), ('Len', v[6]), ), source[5791:6134]))
     v = []
-    out.append(Clause(S(A('$perm'), (A('[]'), A('[]'))), A('true'), Span('<library>', 67, 1, 67, 17), (), source[3940:3956]))
+    out.append(Clause(S(A('$perm'), (A('[]'), A('[]'))), A('true'), Span('<library>', 99, 1, 99, 17), (), source[6135:6151]))
     v = [Var('List'), Var('First'), Var('Perm'), Var('Rest')]
-    out.append(Clause(S(A('$perm'), (v[0], S(A('.'), (v[1], v[2])))), S(A(','), (S(A('select'), (v[1], v[0], v[3])), S(A('$perm'), (v[3], v[2])))), Span('<library>', 68, 1, 68, 79), (('List', v[0]), ('First', v[1]), ('Perm', v[2]), ('Rest', v[3]), ), source[3957:4035]))
+    out.append(Clause(S(A('$perm'), (v[0], S(A('.'), (v[1], v[2])))), S(A(','), (S(A('select'), (v[1], v[0], v[3])), S(A('$perm'), (v[3], v[2])))), Span('<library>', 100, 1, 100, 79), (('List', v[0]), ('First', v[1]), ('Perm', v[2]), ('Rest', v[3]), ), source[6152:6230]))
     v = [Var('G')]
-    out.append(Clause(S(A('once'), (v[0],)), S(A(','), (S(A('call'), (v[0],)), A('!'))), Span('<library>', 69, 1, 69, 23), (('G', v[0]), ), source[4036:4058]))
+    out.append(Clause(S(A('once'), (v[0],)), S(A(','), (S(A('call'), (v[0],)), A('!'))), Span('<library>', 101, 1, 101, 23), (('G', v[0]), ), source[6231:6253]))
     v = [Var('G')]
-    out.append(Clause(S(A('ignore'), (v[0],)), S(A(';'), (S(A('->'), (S(A('call'), (v[0],)), A('true'))), A('true'))), Span('<library>', 70, 1, 70, 41), (('G', v[0]), ), source[4059:4099]))
+    out.append(Clause(S(A('ignore'), (v[0],)), S(A(';'), (S(A('->'), (S(A('call'), (v[0],)), A('true'))), A('true'))), Span('<library>', 102, 1, 102, 41), (('G', v[0]), ), source[6254:6294]))
     v = []
-    out.append(Clause(S(A('pairs_keys_values'), (A('[]'), A('[]'), A('[]'))), A('true'), Span('<library>', 71, 1, 71, 31), (), source[4100:4130]))
+    out.append(Clause(S(A('pairs_keys_values'), (A('[]'), A('[]'), A('[]'))), A('true'), Span('<library>', 103, 1, 103, 31), (), source[6295:6325]))
     v = [Var('K'), Var('V'), Var('T'), Var('Ks'), Var('Vs')]
-    out.append(Clause(S(A('pairs_keys_values'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[0], v[3])), S(A('.'), (v[1], v[4])))), S(A('pairs_keys_values'), (v[2], v[3], v[4])), Span('<library>', 72, 1, 72, 76), (('K', v[0]), ('V', v[1]), ('T', v[2]), ('Ks', v[3]), ('Vs', v[4]), ), source[4131:4206]))
+    out.append(Clause(S(A('pairs_keys_values'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[0], v[3])), S(A('.'), (v[1], v[4])))), S(A('pairs_keys_values'), (v[2], v[3], v[4])), Span('<library>', 104, 1, 104, 76), (('K', v[0]), ('V', v[1]), ('T', v[2]), ('Ks', v[3]), ('Vs', v[4]), ), source[6326:6401]))
     v = []
-    out.append(Clause(S(A('pairs_keys'), (A('[]'), A('[]'))), A('true'), Span('<library>', 73, 1, 73, 20), (), source[4207:4226]))
+    out.append(Clause(S(A('pairs_keys'), (A('[]'), A('[]'))), A('true'), Span('<library>', 105, 1, 105, 20), (), source[6402:6421]))
     v = [Var('K'), Var('_'), Var('T'), Var('Ks')]
-    out.append(Clause(S(A('pairs_keys'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[0], v[3])))), S(A('pairs_keys'), (v[2], v[3])), Span('<library>', 74, 1, 74, 50), (('K', v[0]), ('T', v[2]), ('Ks', v[3]), ), source[4227:4276]))
+    out.append(Clause(S(A('pairs_keys'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[0], v[3])))), S(A('pairs_keys'), (v[2], v[3])), Span('<library>', 106, 1, 106, 50), (('K', v[0]), ('T', v[2]), ('Ks', v[3]), ), source[6422:6471]))
     v = []
-    out.append(Clause(S(A('pairs_values'), (A('[]'), A('[]'))), A('true'), Span('<library>', 75, 1, 75, 22), (), source[4277:4298]))
+    out.append(Clause(S(A('pairs_values'), (A('[]'), A('[]'))), A('true'), Span('<library>', 107, 1, 107, 22), (), source[6472:6493]))
     v = [Var('_'), Var('V'), Var('T'), Var('Vs')]
-    out.append(Clause(S(A('pairs_values'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[1], v[3])))), S(A('pairs_values'), (v[2], v[3])), Span('<library>', 76, 1, 76, 54), (('V', v[1]), ('T', v[2]), ('Vs', v[3]), ), source[4299:4352]))
+    out.append(Clause(S(A('pairs_values'), (S(A('.'), (S(A('-'), (v[0], v[1])), v[2])), S(A('.'), (v[1], v[3])))), S(A('pairs_values'), (v[2], v[3])), Span('<library>', 108, 1, 108, 54), (('V', v[1]), ('T', v[2]), ('Vs', v[3]), ), source[6494:6547]))
     v = [Var('List'), Var('Flat'), Var('Flat0')]
-    out.append(Clause(S(A('flatten'), (v[0], v[1])), S(A(','), (S(A('$flatten'), (v[0], A('[]'), v[2])), S(A(','), (A('!'), S(A('='), (v[1], v[2])))))), Span('<library>', 77, 1, 77, 69), (('List', v[0]), ('Flat', v[1]), ('Flat0', v[2]), ), source[4353:4421]))
+    out.append(Clause(S(A('flatten'), (v[0], v[1])), S(A(','), (S(A('$flatten'), (v[0], A('[]'), v[2])), S(A(','), (A('!'), S(A('='), (v[1], v[2])))))), Span('<library>', 109, 1, 109, 69), (('List', v[0]), ('Flat', v[1]), ('Flat0', v[2]), ), source[6548:6616]))
     v = [Var('Var'), Var('Tl')]
-    out.append(Clause(S(A('$flatten'), (v[0], v[1], S(A('.'), (v[0], v[1])))), S(A(','), (S(A('var'), (v[0],)), A('!'))), Span('<library>', 78, 1, 78, 46), (('Var', v[0]), ('Tl', v[1]), ), source[4422:4467]))
+    out.append(Clause(S(A('$flatten'), (v[0], v[1], S(A('.'), (v[0], v[1])))), S(A(','), (S(A('var'), (v[0],)), A('!'))), Span('<library>', 110, 1, 110, 46), (('Var', v[0]), ('Tl', v[1]), ), source[6617:6662]))
     v = [Var('Tl')]
-    out.append(Clause(S(A('$flatten'), (A('[]'), v[0], v[0])), A('!'), Span('<library>', 79, 1, 79, 29), (('Tl', v[0]), ), source[4468:4496]))
+    out.append(Clause(S(A('$flatten'), (A('[]'), v[0], v[0])), A('!'), Span('<library>', 111, 1, 111, 29), (('Tl', v[0]), ), source[6663:6691]))
     v = [Var('Hd'), Var('Tl'), Var('Tail'), Var('List'), Var('FlatHeadTail')]
-    out.append(Clause(S(A('$flatten'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (A('!'), S(A(','), (S(A('$flatten'), (v[0], v[4], v[3])), S(A('$flatten'), (v[1], v[2], v[4])))))), Span('<library>', 80, 1, 80, 110), (('Hd', v[0]), ('Tl', v[1]), ('Tail', v[2]), ('List', v[3]), ('FlatHeadTail', v[4]), ), source[4497:4606]))
+    out.append(Clause(S(A('$flatten'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (A('!'), S(A(','), (S(A('$flatten'), (v[0], v[4], v[3])), S(A('$flatten'), (v[1], v[2], v[4])))))), Span('<library>', 112, 1, 112, 110), (('Hd', v[0]), ('Tl', v[1]), ('Tail', v[2]), ('List', v[3]), ('FlatHeadTail', v[4]), ), source[6692:6801]))
     v = [Var('NonList'), Var('Tl')]
-    out.append(Clause(S(A('$flatten'), (v[0], v[1], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 81, 1, 81, 39), (('NonList', v[0]), ('Tl', v[1]), ), source[4607:4645]))
+    out.append(Clause(S(A('$flatten'), (v[0], v[1], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 113, 1, 113, 39), (('NonList', v[0]), ('Tl', v[1]), ), source[6802:6840]))
     v = []
-    out.append(Clause(A('repeat'), A('$repeat'), Span('<library>', 82, 1, 82, 21), (), source[4646:4666]))
+    out.append(Clause(A('repeat'), A('$repeat'), Span('<library>', 114, 1, 114, 21), (), source[6841:6861]))
     v = [Var('Term'), Var('Vars')]
-    out.append(Clause(S(A('term_variables'), (v[0], v[1])), S(A('$term_variables'), (v[0], v[1])), Span('<library>', 83, 1, 83, 61), (('Term', v[0]), ('Vars', v[1]), ), source[4667:4727]))
+    out.append(Clause(S(A('term_variables'), (v[0], v[1])), S(A('$term_variables'), (v[0], v[1])), Span('<library>', 115, 1, 115, 61), (('Term', v[0]), ('Vars', v[1]), ), source[6862:6922]))
     v = [Var('P'), Var('L'), Var('Sorted'), Var('N'), Var('Tail'), Var('_'), Var('Sorted1'), Var('_'), Var('_')]
-    out.append(Clause(S(A('predsort'), (v[0], v[1], v[2])), S(A(','), (S(A('$skip_list'), (v[3], v[1], v[4])), S(A(';'), (S(A('->'), (S(A('=='), (v[4], A('[]'))), S(A(','), (S(A('$predsort'), (v[0], v[3], v[1], v[5], v[6])), S(A('='), (v[2], v[6])))))), S(A(';'), (S(A('->'), (S(A('var'), (v[4],)), S(A('throw'), (S(A('error'), (A('instantiation_error'), v[7])),)))), S(A('throw'), (S(A('error'), (S(A('type_error'), (A('list'), v[1])), v[8])),)))))))), Span('<library>', 84, 1, 84, 213), (('P', v[0]), ('L', v[1]), ('Sorted', v[2]), ('N', v[3]), ('Tail', v[4]), ('Sorted1', v[6]), ), source[4728:4940]))
+    out.append(Clause(S(A('predsort'), (v[0], v[1], v[2])), S(A(','), (S(A('$skip_list'), (v[3], v[1], v[4])), S(A(';'), (S(A('->'), (S(A('=='), (v[4], A('[]'))), S(A(','), (S(A('$predsort'), (v[0], v[3], v[1], v[5], v[6])), S(A('='), (v[2], v[6])))))), S(A(';'), (S(A('->'), (S(A('var'), (v[4],)), S(A('throw'), (S(A('error'), (A('instantiation_error'), v[7])),)))), S(A('throw'), (S(A('error'), (S(A('type_error'), (A('list'), v[1])), v[8])),)))))))), Span('<library>', 116, 1, 116, 213), (('P', v[0]), ('L', v[1]), ('Sorted', v[2]), ('N', v[3]), ('Tail', v[4]), ('Sorted1', v[6]), ), source[6923:7135]))
     v = [Var('P'), Var('X1'), Var('X2'), Var('L'), Var('R'), Var('Delta')]
-    out.append(Clause(S(A('$predsort'), (v[0], 2, S(A('.'), (v[1], S(A('.'), (v[2], v[3])))), v[3], v[4])), S(A(','), (A('!'), S(A(','), (S(A('call'), (v[0], v[5], v[1], v[2])), S(A('$predsort2'), (v[5], v[1], v[2], v[4])))))), Span('<library>', 85, 1, 85, 98), (('P', v[0]), ('X1', v[1]), ('X2', v[2]), ('L', v[3]), ('R', v[4]), ('Delta', v[5]), ), source[4941:5038]))
+    out.append(Clause(S(A('$predsort'), (v[0], 2, S(A('.'), (v[1], S(A('.'), (v[2], v[3])))), v[3], v[4])), S(A(','), (A('!'), S(A(','), (S(A('call'), (v[0], v[5], v[1], v[2])), S(A('$predsort2'), (v[5], v[1], v[2], v[4])))))), Span('<library>', 117, 1, 117, 98), (('P', v[0]), ('X1', v[1]), ('X2', v[2]), ('L', v[3]), ('R', v[4]), ('Delta', v[5]), ), source[7136:7233]))
     v = [Var('_'), Var('X'), Var('L')]
-    out.append(Clause(S(A('$predsort'), (v[0], 1, S(A('.'), (v[1], v[2])), v[2], S(A('.'), (v[1], A('[]'))))), A('!'), Span('<library>', 86, 1, 86, 39), (('X', v[1]), ('L', v[2]), ), source[5039:5077]))
+    out.append(Clause(S(A('$predsort'), (v[0], 1, S(A('.'), (v[1], v[2])), v[2], S(A('.'), (v[1], A('[]'))))), A('!'), Span('<library>', 118, 1, 118, 39), (('X', v[1]), ('L', v[2]), ), source[7234:7272]))
     v = [Var('_'), Var('L')]
-    out.append(Clause(S(A('$predsort'), (v[0], 0, v[1], v[1], A('[]'))), A('!'), Span('<library>', 87, 1, 87, 34), (('L', v[1]), ), source[5078:5111]))
+    out.append(Clause(S(A('$predsort'), (v[0], 0, v[1], v[1], A('[]'))), A('!'), Span('<library>', 119, 1, 119, 34), (('L', v[1]), ), source[7273:7306]))
     v = [Var('P'), Var('N'), Var('L1'), Var('L3'), Var('R'), Var('N1'), Var('N2'), Var('L2'), Var('R1'), Var('R2')]
-    out.append(Clause(S(A('$predsort'), (v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('is'), (v[5], S(A('//'), (v[1], 2)))), S(A(','), (S(A('plus'), (v[5], v[6], v[1])), S(A(','), (S(A('$predsort'), (v[0], v[5], v[2], v[7], v[8])), S(A(','), (S(A('$predsort'), (v[0], v[6], v[7], v[3], v[9])), S(A('$predmerge'), (v[0], v[8], v[9], v[4])))))))))), Span('<library>', 88, 1, 88, 155), (('P', v[0]), ('N', v[1]), ('L1', v[2]), ('L3', v[3]), ('R', v[4]), ('N1', v[5]), ('N2', v[6]), ('L2', v[7]), ('R1', v[8]), ('R2', v[9]), ), source[5112:5266]))
+    out.append(Clause(S(A('$predsort'), (v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('is'), (v[5], S(A('//'), (v[1], 2)))), S(A(','), (S(A('plus'), (v[5], v[6], v[1])), S(A(','), (S(A('$predsort'), (v[0], v[5], v[2], v[7], v[8])), S(A(','), (S(A('$predsort'), (v[0], v[6], v[7], v[3], v[9])), S(A('$predmerge'), (v[0], v[8], v[9], v[4])))))))))), Span('<library>', 120, 1, 120, 155), (('P', v[0]), ('N', v[1]), ('L1', v[2]), ('L3', v[3]), ('R', v[4]), ('N1', v[5]), ('N2', v[6]), ('L2', v[7]), ('R1', v[8]), ('R2', v[9]), ), source[7307:7461]))
     v = [Var('X1'), Var('X2')]
-    out.append(Clause(S(A('$predsort2'), (A('<'), v[0], v[1], S(A('.'), (v[0], S(A('.'), (v[1], A('[]'))))))), A('true'), Span('<library>', 89, 1, 89, 37), (('X1', v[0]), ('X2', v[1]), ), source[5267:5303]))
+    out.append(Clause(S(A('$predsort2'), (A('<'), v[0], v[1], S(A('.'), (v[0], S(A('.'), (v[1], A('[]'))))))), A('true'), Span('<library>', 121, 1, 121, 37), (('X1', v[0]), ('X2', v[1]), ), source[7462:7498]))
     v = [Var('X1'), Var('_')]
-    out.append(Clause(S(A('$predsort2'), (A('='), v[0], v[1], S(A('.'), (v[0], A('[]'))))), A('true'), Span('<library>', 90, 1, 90, 32), (('X1', v[0]), ), source[5304:5335]))
+    out.append(Clause(S(A('$predsort2'), (A('='), v[0], v[1], S(A('.'), (v[0], A('[]'))))), A('true'), Span('<library>', 122, 1, 122, 32), (('X1', v[0]), ), source[7499:7530]))
     v = [Var('X1'), Var('X2')]
-    out.append(Clause(S(A('$predsort2'), (A('>'), v[0], v[1], S(A('.'), (v[1], S(A('.'), (v[0], A('[]'))))))), A('true'), Span('<library>', 91, 1, 91, 37), (('X1', v[0]), ('X2', v[1]), ), source[5336:5372]))
+    out.append(Clause(S(A('$predsort2'), (A('>'), v[0], v[1], S(A('.'), (v[1], S(A('.'), (v[0], A('[]'))))))), A('true'), Span('<library>', 123, 1, 123, 37), (('X1', v[0]), ('X2', v[1]), ), source[7531:7567]))
     v = [Var('_'), Var('R')]
-    out.append(Clause(S(A('$predmerge'), (v[0], A('[]'), v[1], v[1])), A('!'), Span('<library>', 92, 1, 92, 32), (('R', v[1]), ), source[5373:5404]))
+    out.append(Clause(S(A('$predmerge'), (v[0], A('[]'), v[1], v[1])), A('!'), Span('<library>', 124, 1, 124, 32), (('R', v[1]), ), source[7568:7599]))
     v = [Var('_'), Var('R')]
-    out.append(Clause(S(A('$predmerge'), (v[0], v[1], A('[]'), v[1])), A('!'), Span('<library>', 93, 1, 93, 32), (('R', v[1]), ), source[5405:5436]))
+    out.append(Clause(S(A('$predmerge'), (v[0], v[1], A('[]'), v[1])), A('!'), Span('<library>', 125, 1, 125, 32), (('R', v[1]), ), source[7600:7631]))
     v = [Var('P'), Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Result'), Var('Delta')]
-    out.append(Clause(S(A('$predmerge'), (v[0], S(A('.'), (v[1], v[2])), S(A('.'), (v[3], v[4])), v[5])), S(A(','), (S(A('call'), (v[0], v[6], v[1], v[3])), S(A(','), (A('!'), S(A('$predmerge_'), (v[6], v[0], v[1], v[3], v[2], v[4], v[5])))))), Span('<library>', 94, 1, 94, 121), (('P', v[0]), ('H1', v[1]), ('T1', v[2]), ('H2', v[3]), ('T2', v[4]), ('Result', v[5]), ('Delta', v[6]), ), source[5437:5557]))
+    out.append(Clause(S(A('$predmerge'), (v[0], S(A('.'), (v[1], v[2])), S(A('.'), (v[3], v[4])), v[5])), S(A(','), (S(A('call'), (v[0], v[6], v[1], v[3])), S(A(','), (A('!'), S(A('$predmerge_'), (v[6], v[0], v[1], v[3], v[2], v[4], v[5])))))), Span('<library>', 126, 1, 126, 121), (('P', v[0]), ('H1', v[1]), ('T1', v[2]), ('H2', v[3]), ('T2', v[4]), ('Result', v[5]), ('Delta', v[6]), ), source[7632:7752]))
     v = [Var('P'), Var('H1'), Var('H2'), Var('T1'), Var('T2'), Var('R')]
-    out.append(Clause(S(A('$predmerge_'), (A('>'), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[2], v[5])))), S(A('$predmerge'), (v[0], S(A('.'), (v[1], v[3])), v[4], v[5])), Span('<library>', 95, 1, 95, 82), (('P', v[0]), ('H1', v[1]), ('H2', v[2]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[5558:5639]))
+    out.append(Clause(S(A('$predmerge_'), (A('>'), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[2], v[5])))), S(A('$predmerge'), (v[0], S(A('.'), (v[1], v[3])), v[4], v[5])), Span('<library>', 127, 1, 127, 82), (('P', v[0]), ('H1', v[1]), ('H2', v[2]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[7753:7834]))
     v = [Var('P'), Var('H1'), Var('_'), Var('T1'), Var('T2'), Var('R')]
-    out.append(Clause(S(A('$predmerge_'), (A('='), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[1], v[5])))), S(A('$predmerge'), (v[0], v[3], v[4], v[5])), Span('<library>', 96, 1, 96, 76), (('P', v[0]), ('H1', v[1]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[5640:5715]))
+    out.append(Clause(S(A('$predmerge_'), (A('='), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[1], v[5])))), S(A('$predmerge'), (v[0], v[3], v[4], v[5])), Span('<library>', 128, 1, 128, 76), (('P', v[0]), ('H1', v[1]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[7835:7910]))
     v = [Var('P'), Var('H1'), Var('H2'), Var('T1'), Var('T2'), Var('R')]
-    out.append(Clause(S(A('$predmerge_'), (A('<'), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[1], v[5])))), S(A('$predmerge'), (v[0], v[3], S(A('.'), (v[2], v[4])), v[5])), Span('<library>', 97, 1, 97, 82), (('P', v[0]), ('H1', v[1]), ('H2', v[2]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[5716:5797]))
+    out.append(Clause(S(A('$predmerge_'), (A('<'), v[0], v[1], v[2], v[3], v[4], S(A('.'), (v[1], v[5])))), S(A('$predmerge'), (v[0], v[3], S(A('.'), (v[2], v[4])), v[5])), Span('<library>', 129, 1, 129, 82), (('P', v[0]), ('H1', v[1]), ('H2', v[2]), ('T1', v[3]), ('T2', v[4]), ('R', v[5]), ), source[7911:7992]))
     v = [Var('String'), Var('Before'), Var('Length'), Var('After'), Var('Sub')]
-    out.append(Clause(S(A('sub_string'), (v[0], v[1], v[2], v[3], v[4])), S(A('$sub_string'), (v[0], v[1], v[2], v[3], v[4])), Span('<library>', 98, 1, 98, 101), (('String', v[0]), ('Before', v[1]), ('Length', v[2]), ('After', v[3]), ('Sub', v[4]), ), source[5798:5898]))
+    out.append(Clause(S(A('sub_string'), (v[0], v[1], v[2], v[3], v[4])), S(A('$sub_string'), (v[0], v[1], v[2], v[3], v[4])), Span('<library>', 130, 1, 130, 101), (('String', v[0]), ('Before', v[1]), ('Length', v[2]), ('After', v[3]), ('Sub', v[4]), ), source[7993:8093]))
     v = [Var('Char'), Var('Type')]
-    out.append(Clause(S(A('char_type'), (v[0], v[1])), S(A('$char_type'), (v[0], v[1])), Span('<library>', 99, 1, 99, 51), (('Char', v[0]), ('Type', v[1]), ), source[5899:5949]))
+    out.append(Clause(S(A('char_type'), (v[0], v[1])), S(A('$char_type'), (v[0], v[1])), Span('<library>', 131, 1, 131, 51), (('Char', v[0]), ('Type', v[1]), ), source[8094:8144]))
     v = [Var('Code'), Var('Type')]
-    out.append(Clause(S(A('code_type'), (v[0], v[1])), S(A('$code_type'), (v[0], v[1])), Span('<library>', 100, 1, 100, 51), (('Code', v[0]), ('Type', v[1]), ), source[5950:6000]))
+    out.append(Clause(S(A('code_type'), (v[0], v[1])), S(A('$code_type'), (v[0], v[1])), Span('<library>', 132, 1, 132, 51), (('Code', v[0]), ('Type', v[1]), ), source[8145:8195]))
     v = [Var('X'), Var('Y')]
-    out.append(Clause(S(A('unify_with_occurs_check'), (v[0], v[1])), S(A('$unify_with_occurs_check'), (v[0], v[1])), Span('<library>', 101, 1, 101, 67), (('X', v[0]), ('Y', v[1]), ), source[6001:6067]))
+    out.append(Clause(S(A('unify_with_occurs_check'), (v[0], v[1])), S(A('$unify_with_occurs_check'), (v[0], v[1])), Span('<library>', 133, 1, 133, 67), (('X', v[0]), ('Y', v[1]), ), source[8196:8262]))
     v = [Var('List'), Var('Set')]
-    out.append(Clause(S(A('list_to_ord_set'), (v[0], v[1])), S(A('sort'), (v[0], v[1])), Span('<library>', 102, 1, 102, 47), (('List', v[0]), ('Set', v[1]), ), source[6068:6114]))
+    out.append(Clause(S(A('list_to_ord_set'), (v[0], v[1])), S(A('sort'), (v[0], v[1])), Span('<library>', 134, 1, 134, 47), (('List', v[0]), ('Set', v[1]), ), source[8263:8309]))
     v = [Var('Sets'), Var('Union'), Var('_'), Var('_'), Var('N'), Var('_')]
-    out.append(Clause(S(A('ord_union'), (v[0], v[1])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[1], A('[]'))))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[2], v[3])))))), S(A(','), (S(A('length'), (v[0], v[4])), S(A('$ord_union_all'), (v[4], v[0], v[1], A('[]'))))))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_union'), (v[0], v[1])))))), S(A('context'), (S(A(':'), (A('ordsets'), S(A('/'), (A('ord_union'), 2)))), v[5])))),)))))), Span('<library>', 103, 1, 103, 254), (('Sets', v[0]), ('Union', v[1]), ('N', v[4]), ), source[6115:6368]))
+    out.append(Clause(S(A('ord_union'), (v[0], v[1])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[1], A('[]'))))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[2], v[3])))))), S(A(','), (S(A('length'), (v[0], v[4])), S(A('$ord_union_all'), (v[4], v[0], v[1], A('[]'))))))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_union'), (v[0], v[1])))))), S(A('context'), (S(A(':'), (A('ordsets'), S(A('/'), (A('ord_union'), 2)))), v[5])))),)))))), Span('<library>', 135, 1, 135, 254), (('Sets', v[0]), ('Union', v[1]), ('N', v[4]), ), source[8310:8563]))
     v = [Var('N'), Var('Sets0'), Var('Union'), Var('Sets'), Var('Set1'), Var('Set2'), Var('A'), Var('Z'), Var('X'), Var('Sets1'), Var('Y')]
-    out.append(Clause(S(A('$ord_union_all'), (v[0], v[1], v[2], v[3])), S(A(';'), (S(A('->'), (S(A('=:='), (v[0], 1)), S(A('='), (v[1], S(A('.'), (v[2], v[3])))))), S(A(';'), (S(A('->'), (S(A('=:='), (v[0], 2)), S(A(','), (S(A('='), (v[1], S(A('.'), (v[4], S(A('.'), (v[5], v[3])))))), S(A('$ord_union_f'), (v[4], v[5], v[2])))))), S(A(','), (S(A('is'), (v[6], S(A('>>'), (v[0], 1)))), S(A(','), (S(A('is'), (v[7], S(A('-'), (v[0], v[6])))), S(A(','), (S(A('$ord_union_all'), (v[6], v[1], v[8], v[9])), S(A(','), (S(A('$ord_union_all'), (v[7], v[9], v[10], v[3])), S(A('$ord_union_f'), (v[8], v[10], v[2])))))))))))))), Span('<library>', 104, 1, 104, 284), (('N', v[0]), ('Sets0', v[1]), ('Union', v[2]), ('Sets', v[3]), ('Set1', v[4]), ('Set2', v[5]), ('A', v[6]), ('Z', v[7]), ('X', v[8]), ('Sets1', v[9]), ('Y', v[10]), ), source[6369:6652]))
+    out.append(Clause(S(A('$ord_union_all'), (v[0], v[1], v[2], v[3])), S(A(';'), (S(A('->'), (S(A('=:='), (v[0], 1)), S(A('='), (v[1], S(A('.'), (v[2], v[3])))))), S(A(';'), (S(A('->'), (S(A('=:='), (v[0], 2)), S(A(','), (S(A('='), (v[1], S(A('.'), (v[4], S(A('.'), (v[5], v[3])))))), S(A('$ord_union_f'), (v[4], v[5], v[2])))))), S(A(','), (S(A('is'), (v[6], S(A('>>'), (v[0], 1)))), S(A(','), (S(A('is'), (v[7], S(A('-'), (v[0], v[6])))), S(A(','), (S(A('$ord_union_all'), (v[6], v[1], v[8], v[9])), S(A(','), (S(A('$ord_union_all'), (v[7], v[9], v[10], v[3])), S(A('$ord_union_f'), (v[8], v[10], v[2])))))))))))))), Span('<library>', 136, 1, 136, 284), (('N', v[0]), ('Sets0', v[1]), ('Union', v[2]), ('Sets', v[3]), ('Set1', v[4]), ('Set2', v[5]), ('A', v[6]), ('Z', v[7]), ('X', v[8]), ('Sets1', v[9]), ('Y', v[10]), ), source[8564:8847]))
     v = [Var('Set1'), Var('Set2'), Var('Union')]
-    out.append(Clause(S(A('ord_union'), (v[0], v[1], v[2])), S(A('$ord_union_f'), (v[0], v[1], v[2])), Span('<library>', 105, 1, 105, 67), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ), source[6653:6719]))
+    out.append(Clause(S(A('ord_union'), (v[0], v[1], v[2])), S(A('$ord_union_f'), (v[0], v[1], v[2])), Span('<library>', 137, 1, 137, 67), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ), source[8848:8914]))
     v = [Var('Set1'), Var('Set2'), Var('Union')]
-    out.append(Clause(S(A('$ord_union_f'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('union'), v[0], v[1], v[2])), A('true'))), S(A('$ord_union'), (v[0], v[1], v[2])))), Span('<library>', 106, 1, 106, 122), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ), source[6720:6841]))
+    out.append(Clause(S(A('$ord_union_f'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('union'), v[0], v[1], v[2])), A('true'))), S(A('$ord_union'), (v[0], v[1], v[2])))), Span('<library>', 138, 1, 138, 122), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ), source[8915:9036]))
     v = [Var('Set1'), Var('Set2'), Var('Union'), Var('H1'), Var('T1'), Var('_')]
-    out.append(Clause(S(A('$ord_union'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[2], v[1])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[3], v[4])))))), S(A('$ord_union2'), (v[1], v[3], v[4], v[2])))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_union'), (v[0], v[1], v[2])))))), S(A('context'), (S(A(':'), (A('ordsets'), S(A('/'), (A('ord_union'), 3)))), v[5])))),)))))), Span('<library>', 107, 1, 107, 254), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ('H1', v[3]), ('T1', v[4]), ), source[6842:7095]))
+    out.append(Clause(S(A('$ord_union'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[2], v[1])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[3], v[4])))))), S(A('$ord_union2'), (v[1], v[3], v[4], v[2])))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_union'), (v[0], v[1], v[2])))))), S(A('context'), (S(A(':'), (A('ordsets'), S(A('/'), (A('ord_union'), 3)))), v[5])))),)))))), Span('<library>', 139, 1, 139, 254), (('Set1', v[0]), ('Set2', v[1]), ('Union', v[2]), ('H1', v[3]), ('T1', v[4]), ), source[9037:9290]))
     v = [Var('L2'), Var('H1'), Var('T1'), Var('Union'), Var('H2'), Var('T2'), Var('Order'), Var('_')]
-    out.append(Clause(S(A('$ord_union2'), (v[0], v[1], v[2], v[3])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[3], S(A('.'), (v[1], v[2])))))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[4], v[5])))))), S(A(','), (S(A('compare'), (v[6], v[1], v[4])), S(A('$ord_union3'), (v[6], v[1], v[2], v[4], v[5], v[3])))))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('union2'), (v[0], v[1], v[2], v[3])))))), S(A('context'), (S(A(':'), (A('ordsets'), S(A('/'), (A('union2'), 4)))), v[7])))),)))))), Span('<library>', 108, 1, 108, 279), (('L2', v[0]), ('H1', v[1]), ('T1', v[2]), ('Union', v[3]), ('H2', v[4]), ('T2', v[5]), ('Order', v[6]), ), source[7096:7374]))
+    out.append(Clause(S(A('$ord_union2'), (v[0], v[1], v[2], v[3])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[3], S(A('.'), (v[1], v[2])))))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[4], v[5])))))), S(A(','), (S(A('compare'), (v[6], v[1], v[4])), S(A('$ord_union3'), (v[6], v[1], v[2], v[4], v[5], v[3])))))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('union2'), (v[0], v[1], v[2], v[3])))))), S(A('context'), (S(A(':'), (A('ordsets'), S(A('/'), (A('union2'), 4)))), v[7])))),)))))), Span('<library>', 140, 1, 140, 279), (('L2', v[0]), ('H1', v[1]), ('T1', v[2]), ('Union', v[3]), ('H2', v[4]), ('T2', v[5]), ('Order', v[6]), ), source[9291:9569]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Union'), Var('Union0')]
-    out.append(Clause(S(A('$ord_union3'), (A('<'), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[0], v[5])))), S(A('$ord_union2'), (v[1], v[2], v[3], v[5])))), Span('<library>', 109, 1, 109, 101), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[7375:7475]))
+    out.append(Clause(S(A('$ord_union3'), (A('<'), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[0], v[5])))), S(A('$ord_union2'), (v[1], v[2], v[3], v[5])))), Span('<library>', 141, 1, 141, 101), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[9570:9670]))
     v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Union'), Var('Union0')]
-    out.append(Clause(S(A('$ord_union3'), (A('='), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[0], v[5])))), S(A('$ord_union'), (v[1], v[3], v[5])))), Span('<library>', 110, 1, 110, 95), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[7476:7570]))
+    out.append(Clause(S(A('$ord_union3'), (A('='), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[0], v[5])))), S(A('$ord_union'), (v[1], v[3], v[5])))), Span('<library>', 142, 1, 142, 95), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[9671:9765]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Union'), Var('Union0')]
-    out.append(Clause(S(A('$ord_union3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[2], v[5])))), S(A('$ord_union2'), (v[3], v[0], v[1], v[5])))), Span('<library>', 111, 1, 111, 101), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[7571:7671]))
+    out.append(Clause(S(A('$ord_union3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A(','), (S(A('='), (v[4], S(A('.'), (v[2], v[5])))), S(A('$ord_union2'), (v[3], v[0], v[1], v[5])))), Span('<library>', 143, 1, 143, 101), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Union', v[4]), ('Union0', v[5]), ), source[9766:9866]))
     v = [Var('Set'), Var('Delete'), Var('Remaining')]
-    out.append(Clause(S(A('ord_subtract'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('subtract'), v[0], v[1], v[2])), A('true'))), S(A('$ord_subtract'), (v[0], v[1], v[2])))), Span('<library>', 112, 1, 112, 141), (('Set', v[0]), ('Delete', v[1]), ('Remaining', v[2]), ), source[7672:7812]))
+    out.append(Clause(S(A('ord_subtract'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('subtract'), v[0], v[1], v[2])), A('true'))), S(A('$ord_subtract'), (v[0], v[1], v[2])))), Span('<library>', 144, 1, 144, 141), (('Set', v[0]), ('Delete', v[1]), ('Remaining', v[2]), ), source[9867:10007]))
     v = [Var('L1'), Var('L2'), Var('Diff'), Var('H1'), Var('T1'), Var('_')]
-    out.append(Clause(S(A('$ord_subtract'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[2], A('[]'))))), S(A(';'), (S(A('->'), (S(A('=='), (v[1], A('[]'))), S(A('='), (v[2], v[0])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[3], v[4])))))), S(A('$ord_diff21'), (v[1], v[3], v[4], v[2])))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_subtract'), (v[0], v[1], v[2])))))), S(A('context'), (S(A(':'), (A('ordsets'), S(A('/'), (A('ord_subtract'), 3)))), v[5])))),)))))))), Span('<library>', 113, 1, 113, 265), (('L1', v[0]), ('L2', v[1]), ('Diff', v[2]), ('H1', v[3]), ('T1', v[4]), ), source[7813:8077]))
+    out.append(Clause(S(A('$ord_subtract'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[0], A('[]'))), S(A('='), (v[2], A('[]'))))), S(A(';'), (S(A('->'), (S(A('=='), (v[1], A('[]'))), S(A('='), (v[2], v[0])))), S(A(';'), (S(A('->'), (S(A(','), (S(A('nonvar'), (v[0],)), S(A('='), (v[0], S(A('.'), (v[3], v[4])))))), S(A('$ord_diff21'), (v[1], v[3], v[4], v[2])))), S(A('throw'), (S(A('error'), (S(A('existence_error'), (A('matching_rule'), S(A(':'), (A('ordsets'), S(A('ord_subtract'), (v[0], v[1], v[2])))))), S(A('context'), (S(A(':'), (A('ordsets'), S(A('/'), (A('ord_subtract'), 3)))), v[5])))),)))))))), Span('<library>', 145, 1, 145, 265), (('L1', v[0]), ('L2', v[1]), ('Diff', v[2]), ('H1', v[3]), ('T1', v[4]), ), source[10008:10272]))
     v = [Var('H1'), Var('T1')]
-    out.append(Clause(S(A('$ord_diff21'), (A('[]'), v[0], v[1], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 114, 1, 114, 36), (('H1', v[0]), ('T1', v[1]), ), source[8078:8113]))
+    out.append(Clause(S(A('$ord_diff21'), (A('[]'), v[0], v[1], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 146, 1, 146, 36), (('H1', v[0]), ('T1', v[1]), ), source[10273:10308]))
     v = [Var('H2'), Var('T2'), Var('H1'), Var('T1'), Var('Diff'), Var('Order')]
-    out.append(Clause(S(A('$ord_diff21'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[2], v[0])), S(A('$ord_diff3'), (v[5], v[2], v[3], v[0], v[1], v[4])))), Span('<library>', 115, 1, 115, 107), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Diff', v[4]), ('Order', v[5]), ), source[8114:8220]))
+    out.append(Clause(S(A('$ord_diff21'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[2], v[0])), S(A('$ord_diff3'), (v[5], v[2], v[3], v[0], v[1], v[4])))), Span('<library>', 147, 1, 147, 107), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Diff', v[4]), ('Order', v[5]), ), source[10309:10415]))
     v = [Var('_'), Var('_')]
-    out.append(Clause(S(A('$ord_diff12'), (A('[]'), v[0], v[1], A('[]'))), A('true'), Span('<library>', 116, 1, 116, 29), (), source[8221:8249]))
+    out.append(Clause(S(A('$ord_diff12'), (A('[]'), v[0], v[1], A('[]'))), A('true'), Span('<library>', 148, 1, 148, 29), (), source[10416:10444]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Diff'), Var('Order')]
-    out.append(Clause(S(A('$ord_diff12'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[0], v[2])), S(A('$ord_diff3'), (v[5], v[0], v[1], v[2], v[3], v[4])))), Span('<library>', 117, 1, 117, 107), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Diff', v[4]), ('Order', v[5]), ), source[8250:8356]))
+    out.append(Clause(S(A('$ord_diff12'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[0], v[2])), S(A('$ord_diff3'), (v[5], v[0], v[1], v[2], v[3], v[4])))), Span('<library>', 149, 1, 149, 107), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Diff', v[4]), ('Order', v[5]), ), source[10445:10551]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Diff')]
-    out.append(Clause(S(A('$ord_diff3'), (A('<'), v[0], v[1], v[2], v[3], S(A('.'), (v[0], v[4])))), S(A('$ord_diff12'), (v[1], v[2], v[3], v[4])), Span('<library>', 118, 1, 118, 81), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Diff', v[4]), ), source[8357:8437]))
+    out.append(Clause(S(A('$ord_diff3'), (A('<'), v[0], v[1], v[2], v[3], S(A('.'), (v[0], v[4])))), S(A('$ord_diff12'), (v[1], v[2], v[3], v[4])), Span('<library>', 150, 1, 150, 81), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Diff', v[4]), ), source[10552:10632]))
     v = [Var('_'), Var('T1'), Var('_'), Var('T2'), Var('Diff')]
-    out.append(Clause(S(A('$ord_diff3'), (A('='), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_subtract'), (v[1], v[3], v[4])), Span('<library>', 119, 1, 119, 72), (('T1', v[1]), ('T2', v[3]), ('Diff', v[4]), ), source[8438:8509]))
+    out.append(Clause(S(A('$ord_diff3'), (A('='), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_subtract'), (v[1], v[3], v[4])), Span('<library>', 151, 1, 151, 72), (('T1', v[1]), ('T2', v[3]), ('Diff', v[4]), ), source[10633:10704]))
     v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Diff')]
-    out.append(Clause(S(A('$ord_diff3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_diff21'), (v[3], v[0], v[1], v[4])), Span('<library>', 120, 1, 120, 75), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Diff', v[4]), ), source[8510:8584]))
+    out.append(Clause(S(A('$ord_diff3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_diff21'), (v[3], v[0], v[1], v[4])), Span('<library>', 152, 1, 152, 75), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Diff', v[4]), ), source[10705:10779]))
     v = [Var('Item'), Var('Set'), Var('In')]
-    out.append(Clause(S(A('ord_memberchk'), (v[0], v[1])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('memberchk'), v[0], v[1], v[2])), S(A('=='), (v[2], A('true'))))), S(A('$ord_memberchk'), (v[0], v[1])))), Span('<library>', 121, 1, 121, 115), (('Item', v[0]), ('Set', v[1]), ('In', v[2]), ), source[8585:8699]))
+    out.append(Clause(S(A('ord_memberchk'), (v[0], v[1])), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('memberchk'), v[0], v[1], v[2])), S(A('=='), (v[2], A('true'))))), S(A('$ord_memberchk'), (v[0], v[1])))), Span('<library>', 153, 1, 153, 115), (('Item', v[0]), ('Set', v[1]), ('In', v[2]), ), source[10780:10894]))
     v = [Var('Item'), Var('X1'), Var('X2'), Var('X3'), Var('X4'), Var('Xs'), Var('R4'), Var('R2')]
-    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], S(A('.'), (v[2], S(A('.'), (v[3], S(A('.'), (v[4], v[5])))))))))), S(A(','), (A('!'), S(A(','), (S(A('compare'), (v[6], v[0], v[4])), S(A(';'), (S(A('->'), (S(A('='), (v[6], A('>'))), S(A('$ord_memberchk'), (v[0], v[5])))), S(A(';'), (S(A('->'), (S(A('='), (v[6], A('<'))), S(A(','), (S(A('compare'), (v[7], v[0], v[2])), S(A(';'), (S(A('->'), (S(A('='), (v[7], A('>'))), S(A('=='), (v[0], v[3])))), S(A(';'), (S(A('->'), (S(A('='), (v[7], A('<'))), S(A('=='), (v[0], v[1])))), A('true'))))))))), A('true'))))))))), Span('<library>', 122, 1, 122, 220), (('Item', v[0]), ('X1', v[1]), ('X2', v[2]), ('X3', v[3]), ('X4', v[4]), ('Xs', v[5]), ('R4', v[6]), ('R2', v[7]), ), source[8700:8919]))
+    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], S(A('.'), (v[2], S(A('.'), (v[3], S(A('.'), (v[4], v[5])))))))))), S(A(','), (A('!'), S(A(','), (S(A('compare'), (v[6], v[0], v[4])), S(A(';'), (S(A('->'), (S(A('='), (v[6], A('>'))), S(A('$ord_memberchk'), (v[0], v[5])))), S(A(';'), (S(A('->'), (S(A('='), (v[6], A('<'))), S(A(','), (S(A('compare'), (v[7], v[0], v[2])), S(A(';'), (S(A('->'), (S(A('='), (v[7], A('>'))), S(A('=='), (v[0], v[3])))), S(A(';'), (S(A('->'), (S(A('='), (v[7], A('<'))), S(A('=='), (v[0], v[1])))), A('true'))))))))), A('true'))))))))), Span('<library>', 154, 1, 154, 220), (('Item', v[0]), ('X1', v[1]), ('X2', v[2]), ('X3', v[3]), ('X4', v[4]), ('Xs', v[5]), ('R4', v[6]), ('R2', v[7]), ), source[10895:11114]))
     v = [Var('Item'), Var('X1'), Var('X2'), Var('Xs'), Var('R2')]
-    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], S(A('.'), (v[2], v[3])))))), S(A(','), (A('!'), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A(';'), (S(A('->'), (S(A('='), (v[4], A('>'))), S(A('$ord_memberchk'), (v[0], v[3])))), S(A(';'), (S(A('->'), (S(A('='), (v[4], A('<'))), S(A('=='), (v[0], v[1])))), A('true'))))))))), Span('<library>', 123, 1, 123, 141), (('Item', v[0]), ('X1', v[1]), ('X2', v[2]), ('Xs', v[3]), ('R2', v[4]), ), source[8920:9060]))
+    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], S(A('.'), (v[2], v[3])))))), S(A(','), (A('!'), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A(';'), (S(A('->'), (S(A('='), (v[4], A('>'))), S(A('$ord_memberchk'), (v[0], v[3])))), S(A(';'), (S(A('->'), (S(A('='), (v[4], A('<'))), S(A('=='), (v[0], v[1])))), A('true'))))))))), Span('<library>', 155, 1, 155, 141), (('Item', v[0]), ('X1', v[1]), ('X2', v[2]), ('Xs', v[3]), ('R2', v[4]), ), source[11115:11255]))
     v = [Var('Item'), Var('X1')]
-    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], A('[]'))))), S(A('=='), (v[0], v[1])), Span('<library>', 124, 1, 124, 44), (('Item', v[0]), ('X1', v[1]), ), source[9061:9104]))
+    out.append(Clause(S(A('$ord_memberchk'), (v[0], S(A('.'), (v[1], A('[]'))))), S(A('=='), (v[0], v[1])), Span('<library>', 156, 1, 156, 44), (('Item', v[0]), ('X1', v[1]), ), source[11256:11299]))
     v = [Var('Set1'), Var('Set2'), Var('Intersection')]
-    out.append(Clause(S(A('ord_intersection'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[2], A('[]'))), S(A('\\+'), (S(A('$ord_intersect'), (v[0], v[1])),)))), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('intersection'), v[0], v[1], v[2])), A('true'))), S(A('$ord_intersection'), (v[0], v[1], v[2])))))), Span('<library>', 125, 1, 125, 215), (('Set1', v[0]), ('Set2', v[1]), ('Intersection', v[2]), ), source[9105:9319]))
+    out.append(Clause(S(A('ord_intersection'), (v[0], v[1], v[2])), S(A(';'), (S(A('->'), (S(A('=='), (v[2], A('[]'))), S(A('\\+'), (S(A('$ord_intersect'), (v[0], v[1])),)))), S(A(';'), (S(A('->'), (S(A('$ord_fast'), (A('intersection'), v[0], v[1], v[2])), A('true'))), S(A('$ord_intersection'), (v[0], v[1], v[2])))))), Span('<library>', 157, 1, 157, 215), (('Set1', v[0]), ('Set2', v[1]), ('Intersection', v[2]), ), source[11300:11514]))
     v = [Var('H1'), Var('T1'), Var('L2')]
-    out.append(Clause(S(A('$ord_intersect'), (S(A('.'), (v[0], v[1])), v[2])), S(A('$ord_intersect_'), (v[2], v[0], v[1])), Span('<library>', 126, 1, 126, 64), (('H1', v[0]), ('T1', v[1]), ('L2', v[2]), ), source[9320:9383]))
+    out.append(Clause(S(A('$ord_intersect'), (S(A('.'), (v[0], v[1])), v[2])), S(A('$ord_intersect_'), (v[2], v[0], v[1])), Span('<library>', 158, 1, 158, 64), (('H1', v[0]), ('T1', v[1]), ('L2', v[2]), ), source[11515:11578]))
     v = [Var('H2'), Var('T2'), Var('H1'), Var('T1'), Var('Order')]
-    out.append(Clause(S(A('$ord_intersect_'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[2], v[0])), S(A('$ord_intersect__'), (v[4], v[2], v[3], v[0], v[1])))), Span('<library>', 127, 1, 127, 105), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Order', v[4]), ), source[9384:9488]))
+    out.append(Clause(S(A('$ord_intersect_'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[2], v[0])), S(A('$ord_intersect__'), (v[4], v[2], v[3], v[0], v[1])))), Span('<library>', 159, 1, 159, 105), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Order', v[4]), ), source[11579:11683]))
     v = [Var('_'), Var('T1'), Var('H2'), Var('T2')]
-    out.append(Clause(S(A('$ord_intersect__'), (A('<'), v[0], v[1], v[2], v[3])), S(A('$ord_intersect_'), (v[1], v[2], v[3])), Span('<library>', 128, 1, 128, 73), (('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ), source[9489:9561]))
+    out.append(Clause(S(A('$ord_intersect__'), (A('<'), v[0], v[1], v[2], v[3])), S(A('$ord_intersect_'), (v[1], v[2], v[3])), Span('<library>', 160, 1, 160, 73), (('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ), source[11684:11756]))
     v = [Var('_'), Var('_'), Var('_'), Var('_')]
-    out.append(Clause(S(A('$ord_intersect__'), (A('='), v[0], v[1], v[2], v[3])), A('true'), Span('<library>', 129, 1, 129, 37), (), source[9562:9598]))
+    out.append(Clause(S(A('$ord_intersect__'), (A('='), v[0], v[1], v[2], v[3])), A('true'), Span('<library>', 161, 1, 161, 37), (), source[11757:11793]))
     v = [Var('H1'), Var('T1'), Var('_'), Var('T2')]
-    out.append(Clause(S(A('$ord_intersect__'), (A('>'), v[0], v[1], v[2], v[3])), S(A('$ord_intersect_'), (v[3], v[0], v[1])), Span('<library>', 130, 1, 130, 73), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ), source[9599:9671]))
+    out.append(Clause(S(A('$ord_intersect__'), (A('>'), v[0], v[1], v[2], v[3])), S(A('$ord_intersect_'), (v[3], v[0], v[1])), Span('<library>', 162, 1, 162, 73), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ), source[11794:11866]))
     v = [Var('_')]
-    out.append(Clause(S(A('$ord_intersection'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 131, 1, 131, 32), (), source[9672:9703]))
+    out.append(Clause(S(A('$ord_intersection'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 163, 1, 163, 32), (), source[11867:11898]))
     v = [Var('H1'), Var('T1'), Var('L2'), Var('Int')]
-    out.append(Clause(S(A('$ord_intersection'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A('$ord_isect2'), (v[2], v[0], v[1], v[3])), Span('<library>', 132, 1, 132, 73), (('H1', v[0]), ('T1', v[1]), ('L2', v[2]), ('Int', v[3]), ), source[9704:9776]))
+    out.append(Clause(S(A('$ord_intersection'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A('$ord_isect2'), (v[2], v[0], v[1], v[3])), Span('<library>', 164, 1, 164, 73), (('H1', v[0]), ('T1', v[1]), ('L2', v[2]), ('Int', v[3]), ), source[11899:11971]))
     v = [Var('_'), Var('_')]
-    out.append(Clause(S(A('$ord_isect2'), (A('[]'), v[0], v[1], A('[]'))), A('true'), Span('<library>', 133, 1, 133, 29), (), source[9777:9805]))
+    out.append(Clause(S(A('$ord_isect2'), (A('[]'), v[0], v[1], A('[]'))), A('true'), Span('<library>', 165, 1, 165, 29), (), source[11972:12000]))
     v = [Var('H2'), Var('T2'), Var('H1'), Var('T1'), Var('Int'), Var('Order')]
-    out.append(Clause(S(A('$ord_isect2'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[2], v[0])), S(A('$ord_isect3'), (v[5], v[2], v[3], v[0], v[1], v[4])))), Span('<library>', 134, 1, 134, 106), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Int', v[4]), ('Order', v[5]), ), source[9806:9911]))
+    out.append(Clause(S(A('$ord_isect2'), (S(A('.'), (v[0], v[1])), v[2], v[3], v[4])), S(A(','), (S(A('compare'), (v[5], v[2], v[0])), S(A('$ord_isect3'), (v[5], v[2], v[3], v[0], v[1], v[4])))), Span('<library>', 166, 1, 166, 106), (('H2', v[0]), ('T2', v[1]), ('H1', v[2]), ('T1', v[3]), ('Int', v[4]), ('Order', v[5]), ), source[12001:12106]))
     v = [Var('_'), Var('T1'), Var('H2'), Var('T2'), Var('Int')]
-    out.append(Clause(S(A('$ord_isect3'), (A('<'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_isect2'), (v[1], v[2], v[3], v[4])), Span('<library>', 135, 1, 135, 74), (('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Int', v[4]), ), source[9912:9985]))
+    out.append(Clause(S(A('$ord_isect3'), (A('<'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_isect2'), (v[1], v[2], v[3], v[4])), Span('<library>', 167, 1, 167, 74), (('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Int', v[4]), ), source[12107:12180]))
     v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Int')]
-    out.append(Clause(S(A('$ord_isect3'), (A('='), v[0], v[1], v[2], v[3], S(A('.'), (v[0], v[4])))), S(A('$ord_intersection'), (v[1], v[3], v[4])), Span('<library>', 136, 1, 136, 81), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Int', v[4]), ), source[9986:10066]))
+    out.append(Clause(S(A('$ord_isect3'), (A('='), v[0], v[1], v[2], v[3], S(A('.'), (v[0], v[4])))), S(A('$ord_intersection'), (v[1], v[3], v[4])), Span('<library>', 168, 1, 168, 81), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Int', v[4]), ), source[12181:12261]))
     v = [Var('H1'), Var('T1'), Var('_'), Var('T2'), Var('Int')]
-    out.append(Clause(S(A('$ord_isect3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_isect2'), (v[3], v[0], v[1], v[4])), Span('<library>', 137, 1, 137, 74), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Int', v[4]), ), source[10067:10140]))
+    out.append(Clause(S(A('$ord_isect3'), (A('>'), v[0], v[1], v[2], v[3], v[4])), S(A('$ord_isect2'), (v[3], v[0], v[1], v[4])), Span('<library>', 169, 1, 169, 74), (('H1', v[0]), ('T1', v[1]), ('T2', v[3]), ('Int', v[4]), ), source[12262:12335]))
     v = [Var('Sub'), Var('Super')]
-    out.append(Clause(S(A('ord_subset'), (v[0], v[1])), S(A('$ord_subset'), (v[0], v[1])), Span('<library>', 138, 1, 138, 53), (('Sub', v[0]), ('Super', v[1]), ), source[10141:10193]))
+    out.append(Clause(S(A('ord_subset'), (v[0], v[1])), S(A('$ord_subset'), (v[0], v[1])), Span('<library>', 170, 1, 170, 53), (('Sub', v[0]), ('Super', v[1]), ), source[12336:12388]))
     v = [Var('_')]
-    out.append(Clause(S(A('$ord_subset'), (A('[]'), v[0])), A('true'), Span('<library>', 139, 1, 139, 22), (), source[10194:10215]))
+    out.append(Clause(S(A('$ord_subset'), (A('[]'), v[0])), A('true'), Span('<library>', 171, 1, 171, 22), (), source[12389:12410]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Order')]
-    out.append(Clause(S(A('$ord_subset'), (S(A('.'), (v[0], v[1])), S(A('.'), (v[2], v[3])))), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_subset_'), (v[4], v[0], v[1], v[3])))), Span('<library>', 140, 1, 140, 94), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Order', v[4]), ), source[10216:10309]))
+    out.append(Clause(S(A('$ord_subset'), (S(A('.'), (v[0], v[1])), S(A('.'), (v[2], v[3])))), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_subset_'), (v[4], v[0], v[1], v[3])))), Span('<library>', 172, 1, 172, 94), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Order', v[4]), ), source[12411:12504]))
     v = [Var('H1'), Var('T1'), Var('H2'), Var('T2'), Var('Order')]
-    out.append(Clause(S(A('$ord_subset_'), (A('>'), v[0], v[1], S(A('.'), (v[2], v[3])))), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_subset_'), (v[4], v[0], v[1], v[3])))), Span('<library>', 141, 1, 141, 99), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Order', v[4]), ), source[10310:10408]))
+    out.append(Clause(S(A('$ord_subset_'), (A('>'), v[0], v[1], S(A('.'), (v[2], v[3])))), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_subset_'), (v[4], v[0], v[1], v[3])))), Span('<library>', 173, 1, 173, 99), (('H1', v[0]), ('T1', v[1]), ('H2', v[2]), ('T2', v[3]), ('Order', v[4]), ), source[12505:12603]))
     v = [Var('_'), Var('T1'), Var('T2')]
-    out.append(Clause(S(A('$ord_subset_'), (A('='), v[0], v[1], v[2])), S(A('$ord_subset'), (v[1], v[2])), Span('<library>', 142, 1, 142, 57), (('T1', v[1]), ('T2', v[2]), ), source[10409:10465]))
+    out.append(Clause(S(A('$ord_subset_'), (A('='), v[0], v[1], v[2])), S(A('$ord_subset'), (v[1], v[2])), Span('<library>', 174, 1, 174, 57), (('T1', v[1]), ('T2', v[2]), ), source[12604:12660]))
     v = [Var('Set'), Var('El'), Var('Add')]
-    out.append(Clause(S(A('ord_add_element'), (v[0], v[1], v[2])), S(A('$ord_add_element'), (v[0], v[1], v[2])), Span('<library>', 143, 1, 143, 67), (('Set', v[0]), ('El', v[1]), ('Add', v[2]), ), source[10466:10532]))
+    out.append(Clause(S(A('ord_add_element'), (v[0], v[1], v[2])), S(A('$ord_add_element'), (v[0], v[1], v[2])), Span('<library>', 175, 1, 175, 67), (('Set', v[0]), ('El', v[1]), ('Add', v[2]), ), source[12661:12727]))
     v = [Var('El')]
-    out.append(Clause(S(A('$ord_add_element'), (A('[]'), v[0], S(A('.'), (v[0], A('[]'))))), A('true'), Span('<library>', 144, 1, 144, 34), (('El', v[0]), ), source[10533:10566]))
+    out.append(Clause(S(A('$ord_add_element'), (A('[]'), v[0], S(A('.'), (v[0], A('[]'))))), A('true'), Span('<library>', 176, 1, 176, 34), (('El', v[0]), ), source[12728:12761]))
     v = [Var('H'), Var('T'), Var('El'), Var('Add'), Var('Order')]
-    out.append(Clause(S(A('$ord_add_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_addel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 145, 1, 145, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Add', v[3]), ('Order', v[4]), ), source[10567:10663]))
+    out.append(Clause(S(A('$ord_add_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_addel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 177, 1, 177, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Add', v[3]), ('Order', v[4]), ), source[12762:12858]))
     v = [Var('H'), Var('T'), Var('El'), Var('Add')]
-    out.append(Clause(S(A('$ord_addel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_add_element'), (v[1], v[2], v[3])), Span('<library>', 146, 1, 146, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Add', v[3]), ), source[10664:10735]))
+    out.append(Clause(S(A('$ord_addel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_add_element'), (v[1], v[2], v[3])), Span('<library>', 178, 1, 178, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Add', v[3]), ), source[12859:12930]))
     v = [Var('H'), Var('T'), Var('_')]
-    out.append(Clause(S(A('$ord_addel'), (A('='), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 147, 1, 147, 35), (('H', v[0]), ('T', v[1]), ), source[10736:10770]))
+    out.append(Clause(S(A('$ord_addel'), (A('='), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 179, 1, 179, 35), (('H', v[0]), ('T', v[1]), ), source[12931:12965]))
     v = [Var('H'), Var('T'), Var('El')]
-    out.append(Clause(S(A('$ord_addel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[2], S(A('.'), (v[0], v[1])))))), A('true'), Span('<library>', 148, 1, 148, 40), (('H', v[0]), ('T', v[1]), ('El', v[2]), ), source[10771:10810]))
+    out.append(Clause(S(A('$ord_addel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[2], S(A('.'), (v[0], v[1])))))), A('true'), Span('<library>', 180, 1, 180, 40), (('H', v[0]), ('T', v[1]), ('El', v[2]), ), source[12966:13005]))
     v = [Var('Set'), Var('El'), Var('Del')]
-    out.append(Clause(S(A('ord_del_element'), (v[0], v[1], v[2])), S(A('$ord_del_element'), (v[0], v[1], v[2])), Span('<library>', 149, 1, 149, 67), (('Set', v[0]), ('El', v[1]), ('Del', v[2]), ), source[10811:10877]))
+    out.append(Clause(S(A('ord_del_element'), (v[0], v[1], v[2])), S(A('$ord_del_element'), (v[0], v[1], v[2])), Span('<library>', 181, 1, 181, 67), (('Set', v[0]), ('El', v[1]), ('Del', v[2]), ), source[13006:13072]))
     v = [Var('_')]
-    out.append(Clause(S(A('$ord_del_element'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 150, 1, 150, 31), (), source[10878:10908]))
+    out.append(Clause(S(A('$ord_del_element'), (A('[]'), v[0], A('[]'))), A('true'), Span('<library>', 182, 1, 182, 31), (), source[13073:13103]))
     v = [Var('H'), Var('T'), Var('El'), Var('Del'), Var('Order')]
-    out.append(Clause(S(A('$ord_del_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_delel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 151, 1, 151, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ('Order', v[4]), ), source[10909:11005]))
+    out.append(Clause(S(A('$ord_del_element'), (S(A('.'), (v[0], v[1])), v[2], v[3])), S(A(','), (S(A('compare'), (v[4], v[0], v[2])), S(A('$ord_delel'), (v[4], v[0], v[1], v[2], v[3])))), Span('<library>', 183, 1, 183, 97), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ('Order', v[4]), ), source[13104:13200]))
     v = [Var('H'), Var('T'), Var('El'), Var('Del')]
-    out.append(Clause(S(A('$ord_delel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_del_element'), (v[1], v[2], v[3])), Span('<library>', 152, 1, 152, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ), source[11006:11077]))
+    out.append(Clause(S(A('$ord_delel'), (A('<'), v[0], v[1], v[2], S(A('.'), (v[0], v[3])))), S(A('$ord_del_element'), (v[1], v[2], v[3])), Span('<library>', 184, 1, 184, 72), (('H', v[0]), ('T', v[1]), ('El', v[2]), ('Del', v[3]), ), source[13201:13272]))
     v = [Var('_'), Var('T'), Var('_')]
-    out.append(Clause(S(A('$ord_delel'), (A('='), v[0], v[1], v[2], v[1])), A('true'), Span('<library>', 153, 1, 153, 31), (('T', v[1]), ), source[11078:11108]))
+    out.append(Clause(S(A('$ord_delel'), (A('='), v[0], v[1], v[2], v[1])), A('true'), Span('<library>', 185, 1, 185, 31), (('T', v[1]), ), source[13273:13303]))
     v = [Var('H'), Var('T'), Var('_')]
-    out.append(Clause(S(A('$ord_delel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 154, 1, 154, 35), (('H', v[0]), ('T', v[1]), ), source[11109:11143]))
+    out.append(Clause(S(A('$ord_delel'), (A('>'), v[0], v[1], v[2], S(A('.'), (v[0], v[1])))), A('true'), Span('<library>', 186, 1, 186, 35), (('H', v[0]), ('T', v[1]), ), source[13304:13338]))
     return out

@@ -21,7 +21,7 @@ import math
 import re
 import time
 from dataclasses import dataclass
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable
 
 from .errors import SLRTimeout
 from .unichars import ESCAPED, ID_CONTINUE, ID_START, SYMBOL
@@ -1039,10 +1039,11 @@ class _Writer:
     """
 
     __slots__ = ("out", "last", "quoted", "deadline", "limit", "float_text", "numbervars",
-                 "escapes")
+                 "escapes", "var_names")
 
     def __init__(self, quoted: bool, deadline: float | None = None, limit: int | None = None,
-                 message: bool = False, numbervars: bool = False, escapes: bool = True):
+                 message: bool = False, numbervars: bool = False, escapes: bool = True,
+                 var_names: Callable[["Var"], str] | None = None):
         self.out: list[str] = []
         self.last = ""  # last character written
         self.quoted = quoted
@@ -1051,6 +1052,7 @@ class _Writer:
         self.float_text = _format_float_in_message if message else _format_float
         self.numbervars = numbervars
         self.escapes = escapes
+        self.var_names = var_names
 
     def put(self, s: str) -> None:
         if not s:
@@ -1136,7 +1138,7 @@ class _Writer:
             else:
                 self.put(format_atom(t, self.quoted, self.escapes))
         elif tt is Var:
-            self.put(t.name)
+            self.put(t.name if self.var_names is None else self.var_names(t))
         elif tt is String or isinstance(t, str):
             if self.quoted:
                 self.put('"' + _escape(t, '"', self.escapes) + '"')
@@ -1236,7 +1238,8 @@ class _Writer:
 def format_term(t: Any, quoted: bool = True, priority: int = 1200,
                 deadline: float | None = None, limit: int | None = None,
                 message: bool = False, numbervars: bool = False,
-                char_escapes: bool = True) -> str:
+                char_escapes: bool = True, var_names: Callable[[Var], str] | None = None,
+                cycle_names: bool = True) -> str:
     """Prolog text of a term, like SWI-Prolog's ``writeq`` (``quoted=False``: like ``write``).
 
     A cyclic term is written as SWI-Prolog writes it, ``@(Template, [S_1=Value, ...])``
@@ -1248,7 +1251,11 @@ def format_term(t: Any, quoted: bool = True, priority: int = 1200,
     ``S_N`` for a negative N) and ``'$VAR'('Name')`` as ``Name``, as SWI-Prolog's
     ``write``, ``print`` and ``writeq`` do (its option ``numbervars(true)``);
     ``char_escapes=False`` escapes only quotes (doubled) and backslashes inside quoted
-    atoms and strings, as SWI-Prolog's ``term_to_atom/2`` writes (:func:`format_atom`).
+    atoms and strings, as SWI-Prolog's ``term_to_atom/2`` writes (:func:`format_atom`);
+    ``var_names`` gives the text of an unbound variable (default: its name;
+    :func:`prolog_var_name` as Prolog's write/1 writes one), but for the ``S_k`` of a cyclic
+    term's factorization unless ``cycle_names`` is false (SWI-Prolog's write/1 and format/2
+    write ``S_1``, its term_to_atom/2 a variable's ``_123``).
 
     >>> from slr_sql.terms import make_list
     >>> format_term(Struct(":-", (Atom("a"), Struct(",", (Atom("b"), Atom("c"))))))
@@ -1260,13 +1267,28 @@ def format_term(t: Any, quoted: bool = True, priority: int = 1200,
     >>> format_term(Struct("-", (Struct("$VAR", (27,)),)), numbervars=True)
     '-B1'
     """
-    w = _Writer(quoted, deadline, limit, message, numbervars, char_escapes)
+    w = _Writer(quoted, deadline, limit, message, numbervars, char_escapes, var_names)
     try:
         w.write(t, priority)
     except _CyclicTerm:
-        w = _Writer(quoted, deadline, limit, message, numbervars, char_escapes)
-        w.write(factorize_cycles(t, deadline), priority)
+        factorized = factorize_cycles(t, deadline)
+        if var_names is not None and cycle_names:
+            labels = {id(deref(pair.args[0])) for pair in list_items(factorized.args[1])[0]}
+            var_names = (lambda names: lambda v: v.name if id(v) in labels else names(v))(var_names)
+        w = _Writer(quoted, deadline, limit, message, numbervars, char_escapes, var_names)
+        w.write(factorized, priority)
     return "".join(w.out)
+
+
+def prolog_var_name(v: Var) -> str:
+    """The text Prolog's write/1, format/2 and term_to_atom/2 give an unbound variable, as
+    SWI-Prolog's: ``_`` and a number of its own (``_123``), not the name in the source,
+    which a program cannot see (``X = f(Y), term_to_atom(X, A)`` gives ``'f(_123)'``).
+
+    >>> v = Var("X"); prolog_var_name(v) == f"_{v.age}"
+    True
+    """
+    return f"_{v.age}"
 
 
 # The control constructs whose arguments a called body runs as goals

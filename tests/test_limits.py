@@ -111,7 +111,10 @@ def test_cyclic_answers_come_back_as_swi_prints_them(kb):
     ("X = f(X), copy_term(X, C), C = f(D), D == C", [{}]),     # the copy is cyclic too
     ("X = f(X), findall(X, true, [Y]), Y = f(Y)", [{}]),
     ("X = f(X), ground(X)", [{}]),
-    ("X = f(X, Z), term_to_atom(X, A)", [{"A": "@(S_1,[S_1=f(S_1,Z)])"}]),
+    # (a variable is written as '_' and a number of its own, the cycle's S_1 by term_to_atom
+    # too, as SWI-Prolog's: '@(_424,[_424=f(_424,_426)])'; write/1 keeps S_1)
+    ("X = f(X, Z), term_to_atom(X, A), sub_atom(A, 0, 3, _, P)", [{"P": "@(_"}]),
+    ("X = f(X, Z), format(atom(A), '~w', [X]), sub_atom(A, 0, 18, _, P)", [{"P": "@(S_1,[S_1=f(S_1,_"}]),
     ("L = [a|L], (is_list(L) -> R = yes ; R = no)", [{"R": "no"}]),
     ("X = f(X), Y = f(Y), compare(O, X, Y)", [{"O": "="}]),
 ])

@@ -328,10 +328,22 @@ def from_swi(j: dict, varmap: dict) -> tuple:
     if "pl" in j:
         return ("pl", tuple(from_swi(x, varmap) for x in j["pl"]), from_swi(j["tail"], varmap))
     if "a" in j:
-        return ("a", _codes(j["a"]))
+        return ("a", written_vars(_codes(j["a"]), "swi", varmap))
     if "s" in j:
-        return ("s", _codes(j["s"]))
+        return ("s", written_vars(_codes(j["s"]), "swi", varmap))
     return ("c", _codes(j["c"]), tuple(from_swi(x, varmap) for x in j["args"]))
+
+
+# a variable written by write/1, format/2, term_to_atom/2: '_' and a number of its own
+WRITTEN_VAR = re.compile(r"(?<![A-Za-z0-9_])_[0-9]+(?![A-Za-z0-9_])")
+
+
+def written_vars(text: str, side: str, varmap: dict) -> str:
+    """``text`` with each written variable (``_123``) numbered by its first occurrence in
+    the answer, shared with the answer's variables' numbering (``varmap``): the numbers
+    SWI-Prolog and slr_sql give a variable are their own."""
+    return WRITTEN_VAR.sub(
+        lambda m: f"_V{varmap.setdefault((side, 'written', m.group()), len(varmap))}", text)
 
 
 def from_slr(v, varmap: dict) -> tuple:
@@ -347,9 +359,10 @@ def from_slr(v, varmap: dict) -> tuple:
     if type(v) is list:
         return ("l", tuple(from_slr(x, varmap) for x in v))
     if type(v) is Atom:
-        return ("a", str(v))  # the empty list comes back as [], never as an atom
+        # (the empty list comes back as [], never as an atom)
+        return ("a", written_vars(str(v), "slr", varmap))
     if type(v) is str:
-        return ("s", v)
+        return ("s", written_vars(v, "slr", varmap))
     if type(v) is Struct:
         if v.name == "." and len(v.args) == 2:  # a partial list, flat
             items = []
