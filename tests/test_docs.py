@@ -20,12 +20,14 @@ from __future__ import annotations
 import ast
 import io
 import re
+import shlex
 import sqlite3
 import subprocess
 import sys
 import tokenize
 from pathlib import Path
 
+import click
 import pytest
 
 import slr_sql
@@ -421,3 +423,263 @@ def test_pages_send_no_user_to_a_private_name(path):
 def test_atoms_and_strings_in_answers_print_as_in_the_docs():
     assert answer_text(Atom("cup1")) == "cup1" and answer_text("outdated") == '"outdated"'
     assert answer_text([Atom("a"), 1]) == "[a,1]"
+
+
+# ------------------------------------------------ the `slr` command lines of every page
+# Every `slr ...` line of a page's code blocks, and every command of README's table, names
+# commands and options the installed `slr` has: what `slr COMMAND --help` would list, read
+# from the same click commands in this process (a subprocess per line would cost a second
+# each). A line that shows a real call (no `[...]`, no placeholder such as DB) is parsed as
+# `slr` would parse it; a usage line's `[--option VALUE]` shows the option's default.
+_USAGE_WORD = re.compile(r"[A-Z][A-Z_]*(\.[a-z]+)?|[A-Z]+x[A-Z]+")   # DB, FILE.mcap, WxH
+
+
+def slr_lines(path: Path) -> list[tuple[str, str]]:
+    """(``page:line``, text) of every ``slr ...`` line in the fenced blocks of a page: a
+    ``$ `` prompt dropped, a line ending in ``\\`` or inside an open quote joined with the
+    next, the indented ``[...]`` lines of a usage joined to it; psql's ``slr | face`` rows
+    (a schema named slr) are no command."""
+    found: list[tuple[str, str]] = []
+    in_block, pending, usage = False, "", False
+    for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+        text = line.strip()
+        if text.startswith("```"):
+            in_block, pending, usage = not in_block, "", False
+            continue
+        if not in_block:
+            continue
+        if usage and text.startswith("["):
+            found[-1] = (found[-1][0], f"{found[-1][1]} {text}")
+            continue
+        usage = False
+        text = pending + " " + text if pending else text.removeprefix("$ ")
+        pending = ""
+        if text.endswith("\\") or text.count('"') % 2 or text.count("'") % 2:
+            pending = text.rstrip("\\").rstrip()
+            continue
+        if re.match(r"slr [^|]", text):
+            found.append((f"{path.name}:{n}", text))
+            usage = "[" in text
+    return found
+
+
+def readme_table_commands() -> list[tuple[str, str]]:
+    """The ``slr ...`` usages of README's command table (each cell may hold several, ``·``)."""
+    found = []
+    for n, line in enumerate((ROOT / "README.md").read_text(encoding="utf-8").splitlines(),
+                             start=1):
+        if line.startswith("| `slr "):
+            cell = line.split(" | ")[0]
+            found += [(f"README.md:{n}", c) for c in re.findall(r"`(slr [^`]+)`", cell)]
+    return found
+
+
+def slr_command(words: list[str]) -> tuple[click.Command, list[str], list[str]]:
+    """The click command a line names (its group options checked on the way), the command
+    path and the words after it."""
+    from slr_sql.cli import main
+    command: click.Command = main
+    path = ["slr"]
+    while isinstance(command, click.Group):
+        word = words.pop(0)
+        if word.startswith("-"):
+            (option,) = [p for p in command.params if word in p.opts]
+            if not getattr(option, "is_flag", False):
+                words.pop(0)
+            continue
+        found = command.get_command(click.Context(command), word)
+        assert found is not None, f"{' '.join(path)} has no command {word}"
+        command, path = found, [*path, word]
+    return command, path, words
+
+
+def option_names(command: click.Command) -> set[str]:
+    return {o for p in command.params for o in (*p.opts, *p.secondary_opts)} | {"-h", "--help"}
+
+
+def check_usage(line: str) -> None:
+    words = [w for w in re.findall(r"[^\s\[\]…|]+", line)]
+    command, path, rest = slr_command(words[1:])
+    known = option_names(command)
+    for word in rest:
+        if word == "--ros-args":   # ROS's own arguments follow (`--params-file F`)
+            break
+        for option in re.findall(r"(?:^|/)(--?[a-z][a-z-]*)", word.split("=")[0]):
+            assert option in known, f"{' '.join(path)} has no option {option}"
+    # `[--port 8765]`: the value shown is the default
+    for option, value in re.findall(r"\[(--[a-z-]+)[ =]([^\]\s|]+)\]", line):
+        if not re.fullmatch(r"[a-z0-9_.]+", value):   # a placeholder: `p/N…`, `TYPE:ARG`
+            continue
+        (param,) = [p for p in command.params if option in p.opts]
+        default = param.default
+        assert str(default) == value or (isinstance(default, (int, float))
+                                         and float(default) == float(value)), \
+            f"{' '.join(path)} {option}: the page shows {value}, the default is {default}"
+
+
+def check_call(line: str) -> None:
+    from slr_sql.cli import main
+    argv = shlex.split(line, comments=True)
+    for stop in ("&", ">", "|"):
+        argv = argv[:argv.index(stop)] if stop in argv else argv
+    context = None
+    command: click.Command = main
+    name, args = "slr", argv[1:]
+    while True:
+        try:
+            context = command.make_context(name, list(args), parent=context)
+        except click.BadParameter as exc:
+            # a file of the user's that this folder has not (`--ssl-keyfile /etc/...`)
+            assert "does not exist" in str(exc), str(exc)
+            return
+        if not isinstance(command, click.Group):
+            return
+        rest = [*context._protected_args, *context.args]
+        name, found, args = command.resolve_command(context, rest)
+        assert found is not None, line
+        command = found
+
+
+SLR_LINES = [(where, line) for page in [ROOT / "README.md", *sorted(DOCS.glob("*.md"))]
+             for where, line in slr_lines(page)] + readme_table_commands()
+
+
+def test_the_pages_show_many_slr_command_lines():
+    pages = {where.split(":")[0] for where, _ in SLR_LINES}
+    assert len(SLR_LINES) >= 80 and {"README.md", "ros.md", "fleet.md", "plots.md",
+                                     "service.md", "buffers.md"} <= pages
+
+
+def is_usage(line: str) -> bool:
+    """A usage (``slr query DB GOAL [--at Z]``), not a call (``slr query robot.db 'p(X)'``)."""
+    return "[" in line.split("'")[0].split('"')[0] or "…" in line or any(
+        _USAGE_WORD.fullmatch(w) for w in line.split("#")[0].split()[1:])
+
+
+@pytest.mark.parametrize("where,line", SLR_LINES, ids=[w for w, _ in SLR_LINES])
+def test_each_slr_command_line_names_what_slr_has(where, line, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)   # a call's file arguments are looked for in an empty folder
+    check_usage(line)
+    if not is_usage(line):
+        check_call(line)
+
+
+# ---------------------------------------------------- `slr` lines run as a user runs them
+def slr_processes(folder: Path, *calls: tuple) -> list[subprocess.CompletedProcess]:
+    """Run ``slr`` calls as real processes, all at once (they are independent: one second
+    of start-up for all, not one each), and return what each did, in order. A call is the
+    argv after ``slr``, or ``(argv, {"input": text, "cwd": folder})`` (default: ``folder``,
+    no input)."""
+    from service_helpers import slr_env
+    started = []
+    for call in calls:
+        argv, how = (call[0], call[1]) if call and isinstance(call[0], tuple) else (call, {})
+        started.append((argv, how.get("input"), subprocess.Popen(
+            [sys.executable, "-m", "slr_sql", *argv], cwd=how.get("cwd", folder),
+            env=slr_env(), text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+            stdin=subprocess.DEVNULL if how.get("input") is None else subprocess.PIPE)))
+    done = []
+    for argv, stdin, process in started:
+        try:
+            out, err = process.communicate(stdin, timeout=120)
+        finally:
+            if process.poll() is None:
+                process.kill()
+                process.wait()
+        done.append(subprocess.CompletedProcess(argv, process.returncode, out, err))
+    return done
+
+
+def slr_argv(line: str) -> tuple[str, ...]:
+    """``slr query robot.db 'p(X)'   # X = 1`` -> ("query", "robot.db", "p(X)")."""
+    argv = shlex.split(line, comments=True)
+    assert argv[0] == "slr", line
+    return tuple(argv[1:])
+
+
+def shell_session(text: str) -> list[tuple[str, list[str]]]:
+    """The ``$ command`` lines of a block, each with the lines it prints."""
+    steps: list[tuple[str, list[str]]] = []
+    for line in text.strip("\n").splitlines():
+        if line.startswith("$ "):
+            steps.append((line[2:], []))
+        else:
+            steps[-1][1].append(line)
+    return steps
+
+
+_NUMBER = re.compile(r"\d+(\.\d+)?")
+
+
+def prints_as_shown(got: str, shown: list[str]) -> bool:
+    """``slr stats``-like output against a page's lines: the same lines, except that the
+    numbers of the ``file ...`` line (sizes that move with the schema and SQLite) and of
+    ``buffer clock (now):`` (the wall clock's time on a live store) are compared as numbers
+    of any value."""
+    lines = got.splitlines()
+    if len(lines) != len(shown):
+        return False
+    for line, page in zip(lines, shown):
+        if page.startswith(("file ", "buffer clock (now):")):
+            line, page = _NUMBER.sub("N", line), _NUMBER.sub("N", page)
+        if not shows(line, page):
+            return False
+    return True
+
+
+def test_the_readme_shell_lines_run_as_written(tmp_path, monkeypatch):
+    """README's `slr` lines, each a real `slr` process, on the store its tour leaves: a
+    result shown in a comment (`# C = blue`) is what the line prints, the others succeed;
+    the shell gets a goal with a comment after its full stop. Then its `slr stats` example,
+    on the store the `slr add` it names makes, prints the lines shown."""
+    monkeypatch.chdir(tmp_path)
+    env: dict = {}
+    try:
+        for line, text in code_blocks(ROOT / "README.md", "python"):
+            run_python_block(text, env, f"README.md:{line}")
+    finally:
+        env["kb"].close()
+    (block,) = [t for _, t in code_blocks(ROOT / "README.md", "sh") if "slr add robot.db" in t]
+    lines = [line for line in block.splitlines() if line.startswith("slr ")]
+    assert [slr_argv(line)[0] for line in lines] == ["add", "query", "query", "explain", "sql",
+                                                     "shell"]
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    (made_by,) = re.findall(r"`slr stats` on a store made by\n`(slr add [^`]+)`", readme)
+    (stats,) = [t for _, t in code_blocks(ROOT / "README.md", "") if "$ slr stats" in t]
+    ((stats_line, shown_stats),) = shell_session(stats)
+    stats_folder = tmp_path / "stats"
+    stats_folder.mkdir()
+    for done in slr_processes(tmp_path, slr_argv(lines[0]),
+                              (slr_argv(made_by), {"cwd": stats_folder})):
+        assert done.returncode == 0, done.stderr
+    *asked, shell, stats_done = slr_processes(
+        tmp_path, *[slr_argv(line) for line in lines[1:5]],
+        (slr_argv(lines[5]), {"input": "color(cup2, C)^20.   % the colour at 20\n"}),
+        (slr_argv(stats_line), {"cwd": stats_folder}))
+    for line, done in zip(lines[1:5], asked):
+        assert done.returncode == 0, (line, done.stderr)
+        comment = line.partition("#")[2].strip()
+        if comment:
+            assert done.stdout.splitlines() == [comment], line
+    assert asked[2].stdout.startswith("goal: color(cup2, C)^20\nengine: sql")
+    assert "cup2\tblue\t11.0" in asked[3].stdout.splitlines()
+    assert shell.returncode == 0 and "C = blue" in shell.stdout, shell.stderr
+    assert stats_done.returncode == 0 and prints_as_shown(stats_done.stdout, shown_stats), \
+        stats_done.stdout
+
+
+@pytest.mark.filterwarnings("error::slr_sql.clocks.LearnedDelayWarning")
+def test_the_buffer_counters_example_prints_as_shown(tmp_path, monkeypatch):
+    """buffers.md, "Counters and `slr stats`": the page's s.slr (the two buffers it names
+    with their lines) and Python block make the store whose `slr stats` the page shows."""
+    monkeypatch.chdir(tmp_path)
+    text = (DOCS / "buffers.md").read_text(encoding="utf-8")
+    section = text.split("## Counters and `slr stats`", 1)[1]
+    clauses = re.findall(r"`([ct]Buffer\([^`]+\)\.)` on its line (\d)", section)
+    assert [int(n) for _, n in clauses] == [1, 2]
+    (tmp_path / "s.slr").write_text("".join(c + "\n" for c, _ in clauses), encoding="utf-8")
+    assert run_page_blocks(page_block("buffers.md", 'kb.load_file("s.slr")')) == 0
+    (stats,) = [t for _, t in code_blocks(DOCS / "buffers.md", "") if "$ slr stats" in t]
+    ((line, shown),) = shell_session(stats)
+    (done,) = slr_processes(tmp_path, slr_argv(line))
+    assert done.returncode == 0 and prints_as_shown(done.stdout, shown), done.stdout
