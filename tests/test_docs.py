@@ -354,9 +354,74 @@ def test_the_python_api_examples_run_as_written(tmp_path, monkeypatch):
     exec('import slr_sql\nclock = slr_sql.ManualClock(0.0)\n'
          'kb = slr_sql.open("sim.db", clock=clock)', env)
     blocks = [page_block("api.md", marker) for marker in (
-        'kb.load_file("robot.slr")', "kb.define(", 'kb.add("obj(cup1', "kb.solutions(",
-        'kb.submit("findall(W', "relFace(F) <-", 'kb.sql("SELECT', "b(2) :- .")]
+        "def colors(", 'kb.load_file("robot.slr")', "kb.define(", 'kb.add("obj(cup1',
+        "kb.solutions(", 'kb.submit("findall(W', "relFace(F) <-", 'kb.sql("SELECT', "kb.plot(",
+        "b(2) :- .")]
     assert run_page_blocks(*blocks, env=env) == 11
+    with slr_sql.open("sim.db") as kb:
+        # the function of "Local or remote", given the store the examples filled
+        assert env["colors"](kb, 5.0) == [{"O": Atom("cup1"), "C": Atom("red"), "T": 5.0}]
+    assert (tmp_path / "timeline.png").stat().st_size > 0
+
+
+def test_the_api_pages_opening_examples_run_as_written(tmp_path, monkeypatch):
+    """api.md, "Opening a knowledge base": each way of opening, in a fresh folder (the
+    `...` of its `with` block is Python's Ellipsis)."""
+    monkeypatch.chdir(tmp_path)
+    env: dict = {}
+    where, text = page_block("api.md", 'slr_sql.open("robot.db", busy_timeout=2.0)')
+    opened: list = []
+    real_open = slr_sql.open
+
+    def open_and_keep(*args, **kwargs):   # every store the block opens is closed after it
+        opened.append(real_open(*args, **kwargs))
+        return opened[-1]
+
+    monkeypatch.setattr(slr_sql, "open", open_and_keep)
+    exec("import slr_sql", env)
+    try:
+        run_python_block(text, env, where)
+    finally:
+        for kb in opened:
+            kb.close()
+    assert {p.name for p in tmp_path.glob("*.db")} == {"robot.db", "sim.db", "shop.db", "r1.db"}
+
+
+@pytest.mark.filterwarnings("error::slr_sql.clocks.LearnedDelayWarning")
+def test_the_api_pages_subscription_lines_run_as_written(tmp_path, monkeypatch):
+    """api.md, "Subscriptions", on the face/2 events of its "Event rules" block: a `for` or
+    `async for` over a live subscription never ends, so each of those lines takes the next
+    answer only (the `for` line's is the one its comment shows); the other lines run."""
+    monkeypatch.chdir(tmp_path)
+    env: dict = {}
+    exec('import slr_sql\nclock = slr_sql.ManualClock(0.0)\n'
+         'kb = slr_sql.open("sim.db", clock=clock)', env)
+    import asyncio
+    where, text = page_block("api.md", 'sub = kb.subscribe("face(F, R)^T"')
+    comments = {tok.start[0]: tok.string[1:].strip()
+                for tok in tokenize.generate_tokens(io.StringIO(text).readline)
+                if tok.type == tokenize.COMMENT}
+    taken = []
+    try:
+        run_python_block(page_block("api.md", "relFace(F) <-")[1], env, "api.md")
+        for node in ast.parse(text).body:
+            if isinstance(node, (ast.For, ast.AsyncFor)):
+                source = ast.get_source_segment(text, node.iter)
+                subscription = eval(source, env)
+                if isinstance(node, ast.For):
+                    answer = next(iter(subscription))
+                    assert repr(answer) == balanced_prefix(comments[node.lineno])
+                else:
+                    async def first(aiter):
+                        async for answer in aiter:
+                            return answer
+                    answer = asyncio.run(first(subscription))
+                taken.append(answer)
+            else:
+                exec(compile(ast.Module([node], []), where, "exec"), env)
+    finally:
+        env["kb"].close()
+    assert [a["R"] for a in taken] == [65, 70]   # the async one goes on where the for stopped
 
 
 def test_the_runtime_buffer_examples_run_as_written(tmp_path, monkeypatch):
