@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import ast
 import io
+import json
 import re
 import shlex
 import sqlite3
@@ -41,14 +42,16 @@ LANGUAGE = DOCS / "language.md"
 
 
 def code_blocks(path: Path, lang: str) -> list[tuple[int, str]]:
-    """(first line number, text) of each fenced block of ``lang`` in a Markdown file."""
-    out, current, start, indent = [], None, 0, 0
+    """(first line number, text) of each fenced block of ``lang`` in a Markdown file
+    (``""``: the blocks whose fence names no language)."""
+    out, current, start, indent, block_lang = [], None, 0, 0, ""
     for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
-        if current is None and line.strip() == f"```{lang}":
-            current, start = [], n + 1
+        if current is None and line.strip().startswith("```"):
+            current, start, block_lang = [], n + 1, line.strip()[3:]
             indent = len(line) - len(line.lstrip())
         elif current is not None and line.strip() == "```":
-            out.append((start, "\n".join(current) + "\n"))
+            if block_lang == lang:
+                out.append((start, "\n".join(current) + "\n"))
             current = None
         elif current is not None:
             current.append(line[indent:] if line[:indent].isspace() else line)
@@ -748,3 +751,103 @@ def test_the_buffer_counters_example_prints_as_shown(tmp_path, monkeypatch):
     ((line, shown),) = shell_session(stats)
     (done,) = slr_processes(tmp_path, slr_argv(line))
     assert done.returncode == 0 and prints_as_shown(done.stdout, shown), done.stdout
+
+
+# ------------------------------------------------------------------------ docs/plots.md
+def tour_store(folder: Path) -> None:
+    """The robot.db the README's tour leaves in ``folder``."""
+    env: dict = {}
+    try:
+        for line, text in code_blocks(ROOT / "README.md", "python"):
+            exec(compile(text, f"README.md:{line}", "exec"), env)
+    finally:
+        env["kb"].close()
+    assert (folder / "robot.db").exists()
+
+
+def test_the_plots_page_examples_run_as_written(tmp_path, monkeypatch):
+    """plots.md on the store the README's tour leaves: its two `$ slr plot` lines print what
+    follows them (real processes), its Python block draws the rows its comment shows, and
+    the keyword arguments it lists for `kb.plot` are those `timeline` takes. (The
+    `slr demo --db demo.db` plot is not drawn here: the demo alone takes several seconds;
+    its line is parsed by the command-line test above.)"""
+    monkeypatch.chdir(tmp_path)
+    tour_store(tmp_path)
+    (block,) = [t for _, t in code_blocks(DOCS / "plots.md", "sh") if "$ slr plot" in t]
+    steps = shell_session(block)
+    assert len(steps) == 2
+    for (line, shown), done in zip(steps, slr_processes(tmp_path, *[slr_argv(line)
+                                                                    for line, _ in steps])):
+        assert done.returncode == 0 and done.stdout.splitlines() == shown, (line, done.stderr)
+    env: dict = {}
+    where, text = page_block("plots.md", "fig.slr_timeline.rows")
+    run_page_blocks((where, text), env=env)
+    # its last line is inside the `with` block: asked again of the figure it drew
+    (line,) = [line.strip() for line in text.splitlines() if "fig.slr_timeline.rows" in line]
+    expression, _, comment = line.partition("#")
+    assert repr(eval(expression, env)) == balanced_prefix(comment.strip())
+    assert (tmp_path / "sweep.png").stat().st_size > 0
+    import inspect
+
+    from slr_sql.plot import timeline
+    text = (DOCS / "plots.md").read_text(encoding="utf-8")
+    (listed,) = re.findall(r"`kb\.plot\((types=None, \*,[^`]+)\)` takes", text)
+    names = [part.split("=")[0].strip() for part in listed.replace("\n", " ").split(",")]
+    assert [n for n in names if n != "*"] == list(inspect.signature(timeline).parameters)[1:]
+
+
+# ------------------------------------------------------------------------ docs/fleet.md
+_CONTACT = re.compile(r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d UTC \(\d+ s ago\)")
+
+
+def test_the_fleet_pages_examples_run_as_written(tmp_path, monkeypatch):
+    """fleet.md (its worked example's session runs in tests/test_fleet.py): the Python line
+    names a store; `slr fleet status` on the warehouse of the worked example (made here
+    through the Python API) and on a fleet store a site store relays r1 and r2 to prints the
+    tables shown (the time of the last contact by shape), `--json` the keys the page lists;
+    `slr_sql.fleet.push` has the signature the page gives, and its report the fields."""
+    import inspect
+
+    from slr_sql import fleet
+    monkeypatch.chdir(tmp_path)
+    env: dict = {}
+    run_page_blocks(page_block("fleet.md", 'robot="r1"'), env=env)
+    with slr_sql.open("r1.db") as kb:
+        # (slr_meta holds JSON values)
+        assert kb.sql("SELECT value FROM slr_meta WHERE key = 'robot'")[1] == [('"r1"',)]
+    text = (DOCS / "fleet.md").read_text(encoding="utf-8")
+    session = text.split("## A worked example", 1)[1].split("```sh\n", 1)[1].split("```", 1)[0]
+    for command, _ in shell_session(session):
+        argv = slr_argv(command)
+        clock = slr_sql.ManualClock(100.0)   # the page's small times are the robots' own
+        if argv[:2] == ("fleet", "name"):
+            slr_sql.open(argv[2], robot=argv[3], clock=clock).close()
+        elif argv[0] == "add":
+            with slr_sql.open(argv[1], clock=clock) as kb:
+                kb.add_many(list(argv[2:]))
+        elif argv[:2] == ("fleet", "push"):
+            fleet.push(argv[2], argv[3])
+    for name, events in (("a1", ["seen(p1, dock)^1", "seen(p2, dock)^2"]),
+                         ("a2", ["seen(p3, dock)^3"])):
+        with slr_sql.open(f"{name}.db", robot=f"r{name[1]}", clock=slr_sql.ManualClock(9)) as kb:
+            kb.add_many(events)
+        fleet.push(f"{name}.db", "site.db")
+    fleet.push("site.db", "central.db", robot="site")
+    direct, relayed = [t for _, t in code_blocks(DOCS / "fleet.md", "")
+                       if t.startswith(("$ slr fleet status", "robot  shipped"))]
+    ((status_line, shown),) = shell_session(direct)
+    done = slr_processes(tmp_path, slr_argv(status_line), ("fleet", "status", "central.db"),
+                         ("fleet", "status", "warehouse.db", "--json"))
+    assert all(d.returncode == 0 for d in done), [d.stderr for d in done]
+    for got, page in ((done[0].stdout, "\n".join(shown)), (done[1].stdout, relayed)):
+        assert _CONTACT.sub("T", got).splitlines() == _CONTACT.sub("T", page).splitlines()
+    listed = re.search(r"`--json` prints the same as a list of objects \(([^)]*)\)",
+                       text.replace("\n", " ")).group(1)
+    assert [dict.keys() for dict in json.loads(done[2].stdout)][0] == set(
+        re.findall(r"`(\w+)`", listed))
+    signature = re.search(r"Python: `slr_sql\.fleet\.push\(([^`]+)\)` returns a `PushReport` "
+                          r"\(([^)]+)\)", text.replace("\n", " "))
+    params = [p.split("=")[0].strip() for p in signature.group(1).split(",") if p.strip() != "*"]
+    assert params == list(inspect.signature(fleet.push).parameters)
+    assert re.findall(r"`(\w+)`", signature.group(2)) == [
+        f.name for f in __import__("dataclasses").fields(fleet.PushReport)]
