@@ -851,3 +851,62 @@ def test_the_fleet_pages_examples_run_as_written(tmp_path, monkeypatch):
     assert params == list(inspect.signature(fleet.push).parameters)
     assert re.findall(r"`(\w+)`", signature.group(2)) == [
         f.name for f in __import__("dataclasses").fields(fleet.PushReport)]
+
+
+# --------------------------------------------------------------------- docs/postgres.md
+def test_the_postgres_pages_examples_run_as_written(postgres_url, tmp_path, monkeypatch):
+    """postgres.md against the suite's server: its Python block's URLs, with the server's
+    user, database and socket for the page's (a server of one's own is not
+    self-contained), open stores in the schemas they name; the psql session's tables are
+    there once a rule and a subscription use face/2, and `SELECT * FROM slr.face` holds
+    the rows shown; `slr stats URL` words its first line as the page says."""
+    import psycopg
+    monkeypatch.chdir(tmp_path)
+    where, text = page_block("postgres.md", "postgresql://robot@db.example/fleet")
+    info = psycopg.conninfo.conninfo_to_dict(postgres_url)
+    user, database, socket = info["user"], info["dbname"], info["host"]
+    text = text.replace("robot@db.example/fleet", f"{user}@/{database}?host={socket}")
+    text = text.replace("robot@/fleet?host=/run/postgresql", f"{user}@/{database}?host={socket}")
+    assert text.count(database) == 2
+    env: dict = {}
+    opened: list = []
+    real_open = slr_sql.open
+
+    def open_and_keep(*args, **kwargs):   # each store the block opens is closed after it
+        opened.append(real_open(*args, **kwargs))
+        return opened[-1]
+
+    monkeypatch.setattr(slr_sql, "open", open_and_keep)
+    try:
+        run_python_block(text, env, where)
+    finally:
+        for kb in opened:
+            kb.close()
+    monkeypatch.setattr(slr_sql, "open", real_open)
+    page = (DOCS / "postgres.md").read_text(encoding="utf-8")
+    psql = page.split("## The schema as seen in psql", 1)[1].split("```", 2)[1]
+    with slr_sql.open(postgres_url, clock=slr_sql.ManualClock(100.0)) as kb:
+        kb.add("face(antonio, 65)^28")
+        kb.add("face(antonio, 65.0)^29")
+        kb.add("obj(cup1, cup, red)^2")
+        kb.load("relFace(F) <- (face(F, R1) seq face(F, R2) seq face(F, R3)) within 5.")
+        kb.subscribe("face(F, R)^T", id="faces").close()
+        _, tables = kb.sql("SELECT table_schema, table_name FROM information_schema.tables "
+                           "WHERE table_schema IN ('slr', 'lab2')")
+        columns, rows = kb.sql("SELECT * FROM slr.face")
+    listed = re.findall(r"^ slr \| (\w+)", psql, flags=re.M)
+    assert len(listed) == 7
+    names = {name for schema, name in tables if schema == "slr"}
+    for name in listed:
+        assert name in names or (name.startswith("slr_cep_m_")
+                                 and any(n.startswith("slr_cep_m_") for n in names)), name
+    assert "slr_meta" in {name for schema, name in tables if schema == "lab2"}
+    table = psql.split("SELECT * FROM slr.face;", 1)[1].strip().splitlines()
+    assert [c.strip() for c in table[0].split("|")] == columns
+    shown = [[c.strip() for c in line.split("|")] for line in table[2:]]
+    assert shown == [[format(v, "g") if isinstance(v, float) else "" if v is None else str(v)
+                      for v in row] for row in rows]
+    (stats,) = slr_processes(tmp_path, ("stats", postgres_url))
+    assert stats.returncode == 0, stats.stderr
+    assert re.match(r"store postgresql://\S+: \d+ bytes \([\d.]+ MiB\) in its schema's tables "
+                    r"and indexes", stats.stdout), stats.stdout
