@@ -18,6 +18,7 @@
 from __future__ import annotations
 
 import ast
+import contextlib
 import io
 import json
 import re
@@ -26,6 +27,7 @@ import sqlite3
 import subprocess
 import sys
 import tokenize
+import warnings
 from pathlib import Path
 
 import click
@@ -44,8 +46,13 @@ LANGUAGE = DOCS / "language.md"
 def code_blocks(path: Path, lang: str) -> list[tuple[int, str]]:
     """(first line number, text) of each fenced block of ``lang`` in a Markdown file
     (``""``: the blocks whose fence names no language)."""
+    return fenced_blocks(path.read_text(encoding="utf-8"), lang)
+
+
+def fenced_blocks(markdown: str, lang: str) -> list[tuple[int, str]]:
+    """:func:`code_blocks` of Markdown text."""
     out, current, start, indent, block_lang = [], None, 0, 0, ""
-    for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+    for n, line in enumerate(markdown.splitlines(), start=1):
         if current is None and line.strip().startswith("```"):
             current, start, block_lang = [], n + 1, line.strip()[3:]
             indent = len(line) - len(line.lstrip())
@@ -910,3 +917,275 @@ def test_the_postgres_pages_examples_run_as_written(postgres_url, tmp_path, monk
     assert stats.returncode == 0, stats.stderr
     assert re.match(r"store postgresql://\S+: \d+ bytes \([\d.]+ MiB\) in its schema's tables "
                     r"and indexes", stats.stdout), stats.stdout
+
+
+# -------------------------------------------------------------------------- docs/ros.md
+def ros_section(title: str) -> str:
+    return (DOCS / "ros.md").read_text(encoding="utf-8").split(title, 1)[1].split("\n## ", 1)[0]
+
+
+def section_blocks(section: str, lang: str) -> list[str]:
+    return [text for _, text in fenced_blocks(section, lang)]
+
+
+@pytest.fixture(scope="module")
+def ros_recording(tmp_path_factory):
+    """A folder with the page's recording (`python examples/ros/make_bag.py demo_bag`, as the
+    page runs it from the repository) and what the commands of "From a bag to tf_lookup to
+    Foxglove"'s first steps print: the import into robot.db, `slr ros info` with and without
+    `--map-only` and `--json`."""
+    from service_helpers import slr_env
+    folder = tmp_path_factory.mktemp("ros_docs")
+    (folder / "examples").symlink_to(ROOT / "examples")
+    worked = ros_section("## From a bag to tf_lookup to Foxglove")
+    first, second = section_blocks(worked, "sh")[:2]
+    make, info = first.strip().splitlines()
+    assert make == "python examples/ros/make_bag.py demo_bag"
+    made = subprocess.run([sys.executable, *shlex.split(make)[1:]], cwd=folder, env=slr_env(),
+                          capture_output=True, text=True, timeout=120)
+    assert made.returncode == 0, made.stderr
+    map_only, imported = second.strip().splitlines()
+    assert map_only.endswith(" > draft.yaml")
+    done = slr_processes(folder, slr_argv(imported), slr_argv(info),
+                         slr_argv(map_only.removesuffix(" > draft.yaml")),
+                         slr_argv(info) + ("--json",))
+    assert all(d.returncode == 0 for d in done), [d.stderr for d in done]
+    (folder / "draft.yaml").write_text(done[2].stdout, encoding="utf-8")
+    return folder, {"import": done[0], "info": done[1], "json": json.loads(done[3].stdout),
+                    "import line": imported}
+
+
+def test_the_ros_pages_import_and_info_print_as_shown(ros_recording):
+    """ros.md: the import of the page's recording prints the table "Importing bags" shows;
+    `slr ros info` lists the topics and frames its worked example names; the draft MAP
+    `--map-only` writes imports every topic (a real `slr ros import`); the Python API's
+    import (run in process, on a store of its own) stores the events it prints."""
+    folder, done = ros_recording
+    ((command, shown),) = shell_session(section_blocks(ros_section("## Importing bags"), "sh")[1])
+    assert command == done["import line"]
+    assert done["import"].stdout.splitlines() == shown
+    # "`info` lists `/battery` (std_msgs/Float64, 12 messages), `/detections` ... (1)"
+    topics = {t["topic"]: t["count"] for t in done["json"]["topics"]}
+    assert topics == {"/battery": 12, "/detections": 24, "/tf": 123, "/tf_static": 1}
+    frames = {(f["topic"], f["parent"], f["child"]): f["count"] for f in done["json"]["frames"]}
+    assert frames == {("/tf", "map", "base"): 121, ("/tf", "cam", "base"): 2,
+                      ("/tf_static", "base", "cam_mount"): 1}
+    assert "map" in done["info"].stdout and "cam_mount" in done["info"].stdout
+    (draft,) = slr_processes(folder, ("ros", "import", "demo_bag", "draft.db", "--map",
+                                      "draft.yaml"))
+    assert draft.returncode == 0 and "imported 160 events from 160 messages" in draft.stdout
+    where, text = page_block("ros.md", "import_bag(kb,")
+    text = text.replace('"robot.db"', '"python.db"')
+    printed = io.StringIO()
+    with contextlib.chdir(folder), contextlib.redirect_stdout(printed), \
+            warnings.catch_warnings():
+        warnings.simplefilter("error", slr_sql.clocks.LearnedDelayWarning)
+        exec(compile(text, where, "exec"), {})
+    (line,) = [line for line in text.splitlines() if "print(report" in line]
+    assert printed.getvalue().strip() == line.partition("#")[2].strip()
+
+
+def test_the_ros_pages_rules_lookups_and_exports_run_as_written(ros_recording):
+    """ros.md on the imported recording: the paper's tf rule (`slr load`
+    examples/ros/tf_rules.slr, the block the page shows) answers the TF shown; each
+    `tf_lookup` line answers as its comment says (the pose shown, the inverse, none after
+    the last transform, one when extrapolating); the position rule gives the answer shown
+    first and one per detection; the export lines write what `slr ros import` reads back.
+    (`slr foxglove`, `slr ros bridge` and `ros2 launch` run until stopped, on a live graph:
+    their lines are checked by the command-line test; `slr foxglove` is tests/test_foxglove.py's.)"""
+    folder, _ = ros_recording
+    tf_example = ros_section("## The paper's tf example on a recording")
+    commands = section_blocks(tf_example, "sh")[0].strip().splitlines()
+    load, tf_query = [line for line in commands if line.startswith("slr ")][-2:]
+    (rule,) = section_blocks(tf_example, "prolog")
+    assert rule in (ROOT / "examples" / "ros" / "tf_rules.slr").read_text(encoding="utf-8")
+    (tf_shown,) = section_blocks(tf_example, "")
+    worked = ros_section("## From a bag to tf_lookup to Foxglove")
+    lookups = [line for line in section_blocks(worked, "sh")[2].splitlines()
+               if line.startswith("slr ")]
+    (position,) = [b for b in section_blocks(worked, "prolog") if b.startswith("position(")]
+    (folder / "position.slr").write_text(position, encoding="utf-8")
+    gives = re.search(r"\(`slr load robot.db position.slr; (slr query [^`]+)` gives\n`([^`]+)`",
+                      worked)
+    exports = [line for b in section_blocks(worked, "sh") for line in b.splitlines()
+               if line.startswith(("slr export", "slr ros import robot.mcap"))]
+    assert len(lookups) == 4 and len(exports) == 3
+    loaded = slr_processes(folder, slr_argv(load), ("load", "robot.db", "position.slr",
+                                                    "--name", "position"))
+    assert all(d.returncode == 0 for d in loaded), [d.stderr for d in loaded]
+    done = slr_processes(folder, slr_argv(tf_query), *map(slr_argv, lookups),
+                         slr_argv(gives.group(1)), *map(slr_argv, exports[:2]))
+    assert all(d.returncode == 0 for d in done), [d.stderr for d in done]
+    tf, *looked, positions, _, _ = [d.stdout.splitlines() for d in done]
+    assert tf == tf_shown.strip().splitlines()
+    assert looked[0] == [re.search(r"#\s+(P = .*)", worked).group(1)]
+    assert looked[1] == ["P = pose([-0.505,0.0,-1.0],[0.0,0.0,0.0,1.0])"]   # the inverse
+    assert looked[2] == ["false."] and len(looked[3]) == 1     # none after it; held
+    assert positions[0] == gives.group(2) and len(positions) == 24   # one per detection
+    (copied,) = slr_processes(folder, slr_argv(exports[2]))
+    assert copied.returncode == 0, copied.stderr
+    with slr_sql.open(folder / "robot.db") as original, slr_sql.open(folder / "copy.db") as copy:
+        for table in ("tf", "tf_static", "seg", "battery"):
+            rows = f"SELECT * FROM {table} ORDER BY t_end, t_start, seq"
+            assert [r[1:-2] for r in copy.sql(rows)[1]] == [r[1:-2] for r in original.sql(rows)[1]]
+
+
+def ros_environment() -> dict:
+    """The environment of a process that starts rclpy in a test: discovery on loopback only,
+    in a ROS domain of its own (docs/ros.md, "Isolation when testing")."""
+    import random
+
+    from service_helpers import slr_env
+    env = slr_env({"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+                   "ROS_DOMAIN_ID": str(random.SystemRandom().randint(1, 200))})
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    return env
+
+
+def test_the_ros_pages_request_example_runs_against_slr_ros_bridge(tmp_path):
+    """ros.md, "A worked example from the command line": the store of its `slr add`, a real
+    `slr ros bridge robot.db`, and the page's rclpy client as it is (a process of its own,
+    on loopback in a ROS domain of the test's): each reply it prints is the one its comment
+    shows, and the replies the `ros2 topic echo` lines show are the same replies. (`ros2`
+    itself is not installed here: the requests its `ros2 topic pub` lines send are read by
+    the bridge's own request reader instead.) Beside it, in a domain of its own, the "Python
+    API" block that runs a Bridge and a RequestServer in a program, for a few spins (its
+    `running` is the program's own flag)."""
+    import queue
+    import signal
+    import threading
+    import time
+
+    import yaml
+
+    from slr_sql.ros.protocol import parse_query, read_request
+    section = ros_section("### A worked example from the command line")
+    store_lines = section_blocks(section, "sh")[0].strip().splitlines()
+    assert store_lines[1] == "slr ros bridge robot.db &"
+    (client,) = section_blocks(section, "python")
+    (tmp_path / "client.py").write_text(client, encoding="utf-8")
+    where, api_block = page_block("ros.md", "Bridge(kb, mapping).start()")
+    (tmp_path / "live.yaml").write_text("version: 1\n", encoding="utf-8")
+    (tmp_path / "program.py").write_text(
+        "import slr_sql\nfrom slr_sql.ros.mapping import load_mapping\n\n"
+        "class Spins:   # the program's own flag: a few spins, then stop\n"
+        "    left = 10\n"
+        "    def __bool__(self):\n"
+        "        Spins.left -= 1\n"
+        "        return Spins.left >= 0\n\n"
+        "running = Spins()\n" + api_block + "print('spun', requests.resumed)\n",
+        encoding="utf-8")
+    (added,) = slr_processes(tmp_path, slr_argv(store_lines[0]))
+    assert added.returncode == 0, added.stderr
+    env = ros_environment()
+    bridge_log = (tmp_path / "bridge.log").open("w")
+    bridge = subprocess.Popen([sys.executable, "-m", "slr_sql", "ros", "bridge", "robot.db"],
+                              cwd=tmp_path, env=env, text=True, stdout=subprocess.PIPE,
+                              stderr=bridge_log, stdin=subprocess.DEVNULL)
+    bridge_log.close()
+    program = subprocess.Popen([sys.executable, "program.py"], cwd=tmp_path,
+                               env=ros_environment(), text=True, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, stdin=subprocess.DEVNULL)
+    lines: queue.Queue = queue.Queue()
+
+    def read_lines() -> None:
+        with bridge.stdout:
+            for line in bridge.stdout:
+                lines.put(line)
+
+    threading.Thread(target=read_lines, daemon=True).start()
+    try:
+        deadline = time.monotonic() + 60
+        while not lines.get(timeout=max(0.1, deadline - time.monotonic())).startswith(
+                "bridge ready"):
+            pass
+        asked = subprocess.run([sys.executable, "client.py"], cwd=tmp_path, env=env,
+                               capture_output=True, text=True, timeout=120)
+        assert asked.returncode == 0, asked.stderr
+        program_out, program_err = program.communicate(timeout=120)
+        assert program.returncode == 0 and program_out == "spun []\n", program_err
+    finally:
+        for process in (bridge, program):
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
+                try:
+                    process.wait(timeout=30)
+                except subprocess.TimeoutExpired:
+                    process.kill()
+                    process.wait()
+    assert bridge.returncode == 0, (tmp_path / "bridge.log").read_text(encoding="utf-8")
+    comments = [line.lstrip("# ") for line in client.splitlines() if line.startswith("# {")]
+    assert asked.stdout.splitlines() == comments
+    printed = [ast.literal_eval(line) for line in comments]
+    echoed = [json.loads(ast.literal_eval(line[len("data: "):]))
+              for block in section_blocks(section, "") for line in block.splitlines()
+              if line.startswith("data: ")]
+    assert echoed[0] == printed[0]                                   # q1
+    assert echoed[3] == dict(printed[1], token="c2")                 # the same add_buffer
+    # the requests of the `ros2 topic pub` lines, as the bridge reads them
+    published = " ".join(section_blocks(section, "sh")[1].split("\\\n"))
+    requests = re.findall(r"ros2 topic pub --once -w 1 (/slr/\w+) std_msgs/msg/String\s+'([^']+)'",
+                          published)
+    assert [topic for topic, _ in requests] == ["/slr/query"] * 2 + ["/slr/control"] * 2
+    for (topic, payload), reply in zip(requests, echoed):
+        token, body = read_request(yaml.safe_load(payload)["data"])
+        assert token == reply["token"]
+        if topic == "/slr/query":
+            parse_query(body)
+        else:
+            assert body["op"] == reply["op"]
+
+
+def test_the_ros_pages_maps_and_requests_read_as_the_page_says(ros_recording):
+    """ros.md's MAP examples load (the structure, the `/tf` entry written out, the publish
+    entries, the pub_sub.xml), a misspelt key and a field the bag's type lacks give the
+    errors "Mapping reference" shows, and its request and reply examples are what the
+    request protocol reads and writes: the query request parses, the error replies are
+    those of the goal and text they name. (In this process: no ROS needed.)"""
+    import yaml
+
+    from slr_sql.ros.bag_import import import_bag
+    from slr_sql.ros.mapping import MappingError, load_mapping, mapping_from_dict
+    from slr_sql.ros.protocol import dumps_reply, error_reply, parse_query, read_request
+    folder, _ = ros_recording
+    page = (DOCS / "ros.md").read_text(encoding="utf-8")
+    structure, tf_entry, publish = section_blocks(page, "yaml")
+    assert mapping_from_dict(yaml.safe_load(structure)).publish
+    assert mapping_from_dict({"topics": yaml.safe_load(tf_entry)}).topics["/tf"]
+    assert len(mapping_from_dict(yaml.safe_load(publish)).publish) == 2
+    (xml,) = section_blocks(page, "xml")
+    (folder / "pub_sub.xml").write_text(xml, encoding="utf-8")
+    assert load_mapping(folder / "pub_sub.xml").publish[0].topic == "/marker1"
+    shown = section_blocks(ros_section("## Mapping reference"), "")[0].strip().splitlines()
+    (folder / "odom.yaml").write_text("topics:\n  /odom:\n    evnt: odom\n", encoding="utf-8")
+    (folder / "dta.yaml").write_text("topics:\n  /battery:\n    args: [dta]\n",
+                                     encoding="utf-8")
+    with pytest.raises(MappingError) as misspelt:
+        load_mapping(folder / "odom.yaml")
+    with slr_sql.open(folder / "maps.db", clock=slr_sql.ManualClock(0.0)) as kb, \
+            pytest.raises(MappingError) as missing:
+        import_bag(kb, folder / "demo_bag", load_mapping(folder / "dta.yaml"))
+    assert [f"error: {misspelt.value}", f"error: {missing.value}"] == shown
+    # requests and replies: one JSON object a line, or one object over several lines
+    requests = ros_section("## Requests: queries and control over ROS")
+    objects = []
+    for block in section_blocks(requests, "json"):
+        text, at = block.strip(), 0
+        while at < len(text):
+            found, at = json.JSONDecoder().raw_decode(text, at)
+            objects.append(found)
+            at = len(text) - len(text[at:].lstrip())
+    query = next(o for o in objects if o.get("goal") == "color(O, C)^T")
+    assert parse_query(read_request(json.dumps(query))[1]).args == {"O": Atom("cup1")}
+    with slr_sql.open() as kb, pytest.raises(slr_sql.SLRSyntaxError) as bad_goal:
+        kb.query("obj(O, cup, C")
+    with pytest.raises(Exception) as not_json:
+        read_request("this is not JSON")
+    errors = [line for block in section_blocks(requests, "json") for line in block.splitlines()
+              if '"error"' in line]
+    assert errors == [dumps_reply(error_reply("q3", bad_goal.value)),
+                      dumps_reply(error_reply(None, not_json.value))]
+    for o in objects:
+        if "op" in o and "ok" not in o:   # a control request: a JSON object with a token
+            token, body = read_request(json.dumps(o))
+            assert token == o["token"] and body["op"] == o["op"]
