@@ -1189,3 +1189,52 @@ def test_the_ros_pages_maps_and_requests_read_as_the_page_says(ros_recording):
         if "op" in o and "ok" not in o:   # a control request: a JSON object with a token
             token, body = read_request(json.dumps(o))
             assert token == o["token"] and body["op"] == o["op"]
+
+
+# ------------------------------------- the `slr` lines of sql.md, schema.md, subscriptions.md
+def test_the_explain_sql_and_subscribe_lines_print_as_shown(tmp_path, monkeypatch):
+    """Real `slr` processes on the README tour's robot.db (which has sql.md's `color/2`),
+    with sql.md's `reach/2` rules and a `conn/2` event added: sql.md's two `$ slr explain`
+    sessions print what the page shows (its long SQL lines wrapped: compared word by word);
+    schema.md's two `slr sql` lines read the store (`--json`: a JSON list); subscriptions.md's
+    `slr subscribe` line prints, for the face events its output names, those lines, and
+    ends with status 0 on Ctrl-C."""
+    import signal
+    monkeypatch.chdir(tmp_path)
+    tour_store(tmp_path)
+    (reach,) = [t for _, t in code_blocks(DOCS / "sql.md", "prolog") if "reach(" in t]
+    with slr_sql.open("robot.db", clock=slr_sql.StreamClock()) as kb:
+        kb.load(reach, name="reach")
+        kb.add("conn(r1, r2)^1")
+    with slr_sql.open("faces.db", clock=slr_sql.ManualClock(10.0)) as kb:
+        kb.add_many(["face(bob, 50)^1", "face(antonio, 65)^2", "face(carl, 99.5)^3"])
+    sessions = [shell_session(t)[0] for _, t in code_blocks(DOCS / "sql.md", "")
+                if t.startswith("$ slr explain")]
+    schema_lines = [line for line in code_blocks(DOCS / "schema.md", "sh")[0][1].splitlines()
+                    if line.startswith("slr ")]
+    (subscribe_block,) = [t for _, t in code_blocks(DOCS / "subscriptions.md", "sh")
+                          if t.startswith("slr subscribe")]
+    subscribe_line, *subscribed = subscribe_block.strip().splitlines()
+    from service_helpers import slr_env
+    subscriber = subprocess.Popen(
+        [sys.executable, "-m", "slr_sql", *slr_argv(subscribe_line.replace("robot.db",
+                                                                           "faces.db"))],
+        cwd=tmp_path, env=slr_env(), text=True, stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, stdin=subprocess.DEVNULL)
+    try:
+        done = slr_processes(tmp_path, *[slr_argv(line) for line, _ in sessions],
+                             *map(slr_argv, schema_lines))
+        got = [subscriber.stdout.readline().rstrip("\n") for _ in subscribed]
+        subscriber.send_signal(signal.SIGINT)
+        rest, err = subscriber.communicate(timeout=60)
+    finally:
+        if subscriber.poll() is None:
+            subscriber.kill()
+            subscriber.communicate()
+    assert len(sessions) == 2 and len(schema_lines) == 2
+    assert all(d.returncode == 0 for d in done), [d.stderr for d in done]
+    for (line, shown), printed in zip(sessions, done):
+        assert printed.stdout.split() == " ".join(shown).split(), line
+    assert "cup1\t2.0" in done[2].stdout.splitlines()
+    assert [row["seq"] for row in json.loads(done[3].stdout)] == [2, 1, 3]
+    assert got == subscribed and rest == "" and subscriber.returncode == 0, err
