@@ -9,10 +9,32 @@
   store of the page's example; the ``sqlite3`` examples print what the page shows.
 * docs/semantics.md: its ``prolog`` blocks, as language.md's.
 * docs/schema.md: the internal tables have the columns its table lists.
-* docs/events.md, docs/synchronization.md, docs/subscriptions.md, docs/service.md: their
-  self-contained Python examples run in a fresh folder (the client's against a real
-  ``slr serve``), and each result they show (``...`` standing for a part left out) is what
-  the line returns.
+* docs/events.md, docs/synchronization.md, docs/subscriptions.md, docs/service.md,
+  docs/api.md, docs/buffers.md, docs/fleet.md, docs/plots.md, docs/postgres.md and
+  docs/ros.md: their self-contained Python examples run in a fresh folder (the client's
+  against a real ``slr serve``, the rclpy client's against a real ``slr ros bridge``, the
+  PostgreSQL ones on the suite's server), and each result they show (``...`` standing for
+  a part left out) is what the line returns.
+* Every ``slr ...`` line of every page's code blocks, and README's command table, names
+  commands and options ``slr`` has (the options its ``--help`` lists; a usage's
+  ``[--port 8765]`` shows the default), and a line that shows a call parses as ``slr``
+  parses it. The self-contained ones run as real ``slr`` processes and print what the page
+  shows after them (README's shell lines and ``slr stats``, buffers.md's ``slr stats``,
+  fleet.md's ``slr fleet status``, plots.md's ``slr plot``, ros.md's bag, ``tf_lookup``
+  and export lines, sql.md's ``slr explain``, schema.md's ``slr sql``, subscriptions.md's
+  ``slr subscribe``; fleet.md's worked session runs in tests/test_fleet.py).
+* Parsed only, not run, because they cannot be self-contained: what runs until stopped
+  or needs a live ROS graph or another machine -- ``slr foxglove`` and ``slr serve
+  --foxglove`` (tests/test_foxglove.py runs them), ``slr ros bridge ... --map`` with
+  ``--ros-args`` and ``ros2 launch`` (tests/test_ros_bridge.py), the ``ros2 topic`` lines
+  (no ``ros2`` here: their requests go through the bridge's request reader instead),
+  ``slr serve`` on a public address with TLS files, ``slr --token ... stats https://...``,
+  ``slr ingest http://... events.jsonl`` (no such file is shown), ``slr fleet push ...
+  http://fleet:8080 --follow``; the demo's plot (``slr demo --db demo.db`` alone takes
+  seconds); ros.md's ``slr sql`` lines on ``robot_goal`` and ``detections`` (tables of a
+  bag imported with ``--all``, not of the page's recording). The api.md ``for``/``async
+  for`` lines over a live subscription take one answer each; ros.md's Bridge program runs
+  a few spins (its ``running`` is the program's own).
 * No page cites a specification that is not in the repository.
 """
 from __future__ import annotations
