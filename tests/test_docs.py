@@ -1032,13 +1032,19 @@ def test_the_ros_pages_rules_lookups_and_exports_run_as_written(ros_recording):
     exports = [line for b in section_blocks(worked, "sh") for line in b.splitlines()
                if line.startswith(("slr export", "slr ros import robot.mcap"))]
     assert len(lookups) == 4 and len(exports) == 3
+    # "the events also form a log of the imports (`slr query DB ...`, or `slr sql DB ...`)"
+    logs = re.findall(r"`(slr (?:query|sql) DB [^`]+)`",
+                      ros_section("## Importing bags").split("form a log of the imports")[1])
+    assert len(logs) == 2
     loaded = slr_processes(folder, slr_argv(load), ("load", "robot.db", "position.slr",
                                                     "--name", "position"))
     assert all(d.returncode == 0 for d in loaded), [d.stderr for d in loaded]
     done = slr_processes(folder, slr_argv(tf_query), *map(slr_argv, lookups),
-                         slr_argv(gives.group(1)), *map(slr_argv, exports[:2]))
+                         slr_argv(gives.group(1)), *map(slr_argv, exports[:2]),
+                         *[slr_argv(log.replace(" DB ", " robot.db ")) for log in logs])
     assert all(d.returncode == 0 for d in done), [d.stderr for d in done]
-    tf, *looked, positions, _, _ = [d.stdout.splitlines() for d in done]
+    tf, *looked, positions, _, _, log_query, log_sql = [d.stdout.splitlines() for d in done]
+    assert len(log_query) == 4 and len(log_sql) == 5   # one per topic (and the header)
     assert tf == tf_shown.strip().splitlines()
     assert looked[0] == [re.search(r"#\s+(P = .*)", worked).group(1)]
     assert looked[1] == ["P = pose([-0.505,0.0,-1.0],[0.0,0.0,0.0,1.0])"]   # the inverse
