@@ -15,8 +15,8 @@
   against a real ``slr serve``, the rclpy client's against a real ``slr ros bridge``, the
   PostgreSQL ones on the suite's server), and each result they show (``...`` standing for
   a part left out) is what the line returns.
-* Every ``slr ...`` line of every page's code blocks, and README's command table, names
-  commands and options ``slr`` has (the options its ``--help`` lists; a usage's
+* Every ``slr ...`` line of every page's code blocks, README's command table, and every
+  ``slr COMMAND ...`` a page's prose names, names commands and options ``slr`` has (the options its ``--help`` lists; a usage's
   ``[--port 8765]`` shows the default), and a line that shows a call parses as ``slr``
   parses it. The self-contained ones run as real ``slr`` processes and print what the page
   shows after them (README's shell lines and ``slr stats``, buffers.md's ``slr stats``,
@@ -578,10 +578,12 @@ def slr_command(words: list[str]) -> tuple[click.Command, list[str], list[str]]:
     command: click.Command = main
     path = ["slr"]
     while isinstance(command, click.Group):
+        if not words or words[0] == "...":   # a mention of a group: `slr fleet`, `slr ros ...`
+            break
         word = words.pop(0)
         if word.startswith("-"):
             (option,) = [p for p in command.params if word in p.opts]
-            if not getattr(option, "is_flag", False):
+            if not getattr(option, "is_flag", False) and words:
                 words.pop(0)
             continue
         found = command.get_command(click.Context(command), word)
@@ -645,6 +647,32 @@ def test_the_pages_show_many_slr_command_lines():
     pages = {where.split(":")[0] for where, _ in SLR_LINES}
     assert len(SLR_LINES) >= 80 and {"README.md", "ros.md", "fleet.md", "plots.md",
                                      "service.md", "buffers.md"} <= pages
+
+
+def prose_slr_commands(path: Path) -> list[tuple[str, str]]:
+    """(``page:line``, text) of each ``slr COMMAND ...`` in a page's prose (backquoted, a
+    known command or ``--token`` after ``slr``; code blocks left out)."""
+    from slr_sql.cli import main
+    names = set(main.list_commands(click.Context(main))) | {"--token"}
+    found = []
+    text = path.read_text(encoding="utf-8")
+    for block in re.finditer(r"^\s*```.*?^\s*```$", text, flags=re.S | re.M):
+        text = text.replace(block.group(0), "\n" * block.group(0).count("\n"))
+    for match in re.finditer(r"`(slr [^`]+)`", text):
+        if match.group(1).split()[1] in names:
+            line = text.count("\n", 0, match.start()) + 1
+            found.append((f"{path.name}:{line}", " ".join(match.group(1).split())))
+    return found
+
+
+PROSE_SLR = [found for page in [ROOT / "README.md", *sorted(DOCS.glob("*.md"))]
+             for found in prose_slr_commands(page)]
+
+
+@pytest.mark.parametrize("where,line", PROSE_SLR, ids=[w for w, _ in PROSE_SLR])
+def test_each_slr_command_named_in_the_prose_is_one_slr_has(where, line):
+    """`slr sql --write`, `slr fleet push --robot NAME`, ...: the command and its options."""
+    check_usage(line)
 
 
 def is_usage(line: str) -> bool:
