@@ -31,8 +31,9 @@
   ``slr serve`` on a public address with TLS files, ``slr --token ... stats https://...``,
   ``slr ingest http://... events.jsonl`` (no such file is shown), ``slr fleet push ...
   http://fleet:8080 --follow``; the demo's plot (``slr demo --db demo.db`` alone takes
-  seconds); ros.md's ``slr sql`` lines on ``robot_goal`` and ``detections`` (tables of a
-  bag imported with ``--all``, not of the page's recording). The api.md ``for``/``async
+  seconds). ros.md's ``slr sql`` lines on ``robot_goal`` and ``detections`` (tables of
+  bags imported with ``--all``) run their SQL in process on a store holding such events.
+  The api.md ``for``/``async
   for`` lines over a live subscription take one answer each; ros.md's Bridge program runs
   a few spins (its ``running`` is the program's own).
 * No page cites a specification that is not in the repository.
@@ -1197,7 +1198,9 @@ def test_the_ros_pages_maps_and_requests_read_as_the_page_says(ros_recording):
     entries, the pub_sub.xml), a misspelt key and a field the bag's type lacks give the
     errors "Mapping reference" shows, and its request and reply examples are what the
     request protocol reads and writes: the query request parses, the error replies are
-    those of the goal and text they name. (In this process: no ROS needed.)"""
+    those of the goal and text they name; the SQL and the goal of "Messages: fields by
+    name" read the fields of the page's PointStamped term and of the recording's
+    /detections imported with `--all`. (In this process: no ROS needed.)"""
     import yaml
 
     from slr_sql.ros.bag_import import import_bag
@@ -1245,6 +1248,22 @@ def test_the_ros_pages_maps_and_requests_read_as_the_page_says(ros_recording):
         if "op" in o and "ok" not in o:   # a control request: a JSON object with a token
             token, body = read_request(json.dumps(o))
             assert token == o["token"] and body["op"] == o["op"]
+    # "Messages: fields by name": the page's PointStamped term as a /robot_goal event, and
+    # the recording imported with --all (its /detections whole); its SQL and SLR read them
+    messages = ros_section("### Messages: fields by name")
+    term = " ".join(re.search(r"compound — `('geometry_msgs/msg/PointStamped'[^`]+)`",
+                              messages).group(1).split())
+    selects = [" ".join(re.search(r'"(SELECT .*)"', line, flags=re.S).group(1).split())
+               for line in re.split(r"\n(?=slr )", section_blocks(messages, "sh")[0])]
+    (goal,) = [block.strip()[3:].rstrip(".") for block in section_blocks(page, "prolog")
+               if block.startswith("?- robot_goal")]
+    with slr_sql.open(folder / "messages.db", clock=slr_sql.ManualClock(0.0),
+                      max_learned_delay=0.0) as kb:
+        kb.add(f"robot_goal({term})^50.1")
+        import_bag(kb, folder / "demo_bag", None, all_topics=True)
+        assert kb.sql(selects[0])[1] == [(1.0, "map", 50.1)]
+        assert kb.sql(selects[1])[1][:1] == [(0.9,)]
+        assert [a["X"] for a in kb.query(goal)] == [1.0]
 
 
 # ------------------------------------- the `slr` lines of sql.md, schema.md, subscriptions.md
