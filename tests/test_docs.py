@@ -1153,9 +1153,14 @@ def test_the_ros_pages_request_example_runs_against_slr_ros_bridge(tmp_path):
     threading.Thread(target=read_lines, daemon=True).start()
     try:
         deadline = time.monotonic() + 60
-        while not lines.get(timeout=max(0.1, deadline - time.monotonic())).startswith(
-                "bridge ready"):
-            pass
+        while True:
+            try:
+                if lines.get(timeout=max(0.1, deadline - time.monotonic())).startswith(
+                        "bridge ready"):
+                    break
+            except queue.Empty:
+                raise AssertionError("the bridge did not start: " + (
+                    tmp_path / "bridge.log").read_text(encoding="utf-8")) from None
         asked = subprocess.run([sys.executable, "client.py"], cwd=tmp_path, env=env,
                                capture_output=True, text=True, timeout=120)
         assert asked.returncode == 0, asked.stderr
