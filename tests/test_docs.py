@@ -1103,9 +1103,11 @@ def test_the_ros_pages_request_example_runs_against_slr_ros_bridge(tmp_path):
     """ros.md, "A worked example from the command line": the store of its `slr add`, a real
     `slr ros bridge robot.db`, and the page's rclpy client as it is (a process of its own,
     on loopback in a ROS domain of the test's): each reply it prints is the one its comment
-    shows, and the replies the `ros2 topic echo` lines show are the same replies. (`ros2`
-    itself is not installed here: the requests its `ros2 topic pub` lines send are read by
-    the bridge's own request reader instead.) Beside it, in a domain of its own, the "Python
+    shows; `ros2` itself is not installed here, so the requests of its `ros2 topic pub` lines
+    (q2 and the add_input; its add_buffer is the client's own) are sent after the client's
+    through the client's `send`, and each reply the `ros2 topic echo` lines show is the one
+    the bridge gives; the add_input is then kept as the fact "Durable control state" shows.
+    Beside it, in a domain of its own, the "Python
     API" block that runs a Bridge and a RequestServer in a program, for a few spins (its
     `running` is the program's own flag)."""
     import queue
@@ -1119,8 +1121,20 @@ def test_the_ros_pages_request_example_runs_against_slr_ros_bridge(tmp_path):
     section = ros_section("### A worked example from the command line")
     store_lines = section_blocks(section, "sh")[0].strip().splitlines()
     assert store_lines[1] == "slr ros bridge robot.db &"
+    # the requests of the `ros2 topic pub` lines (YAML whose `data` is the request's JSON)
+    published = " ".join(section_blocks(section, "sh")[1].split("\\\n"))
+    requests = [(topic, yaml.safe_load(payload)["data"]) for topic, payload in re.findall(
+        r"ros2 topic pub --once -w 1 (/slr/\w+) std_msgs/msg/String\s+'([^']+)'", published)]
+    assert [topic for topic, _ in requests] == ["/slr/query"] * 2 + ["/slr/control"] * 2
     (client,) = section_blocks(section, "python")
-    (tmp_path / "client.py").write_text(client, encoding="utf-8")
+    # after the page's client, as it is, the test's own lines send two of those requests
+    # through its `send`: q2 and the add_input (the add_buffer is the client's own, again)
+    (tmp_path / "client.py").write_text(client + (
+        "\n# the test's: requests of the ros2 lines, one JSON reply a line\n"
+        "for topic, text in json.loads(open('requests.json').read()):\n"
+        "    publisher = query if topic == '/slr/query' else control\n"
+        "    print(json.dumps(send(publisher, json.loads(text))))\n"), encoding="utf-8")
+    (tmp_path / "requests.json").write_text(json.dumps(requests[1:3]), encoding="utf-8")
     where, api_block = page_block("ros.md", "Bridge(kb, mapping).start()")
     (tmp_path / "live.yaml").write_text("version: 1\n", encoding="utf-8")
     (tmp_path / "program.py").write_text(
@@ -1177,25 +1191,25 @@ def test_the_ros_pages_request_example_runs_against_slr_ros_bridge(tmp_path):
                     process.wait()
     assert bridge.returncode == 0, (tmp_path / "bridge.log").read_text(encoding="utf-8")
     comments = [line.lstrip("# ") for line in client.splitlines() if line.startswith("# {")]
-    assert asked.stdout.splitlines() == comments
+    *page_client, q2, c1 = asked.stdout.splitlines()
+    assert page_client == comments
     printed = [ast.literal_eval(line) for line in comments]
     echoed = [json.loads(ast.literal_eval(line[len("data: "):]))
               for block in section_blocks(section, "") for line in block.splitlines()
               if line.startswith("data: ")]
-    assert echoed[0] == printed[0]                                   # q1
-    assert echoed[3] == dict(printed[1], token="c2")                 # the same add_buffer
-    # the requests of the `ros2 topic pub` lines, as the bridge reads them
-    published = " ".join(section_blocks(section, "sh")[1].split("\\\n"))
-    requests = re.findall(r"ros2 topic pub --once -w 1 (/slr/\w+) std_msgs/msg/String\s+'([^']+)'",
-                          published)
-    assert [topic for topic, _ in requests] == ["/slr/query"] * 2 + ["/slr/control"] * 2
-    for (topic, payload), reply in zip(requests, echoed):
-        token, body = read_request(yaml.safe_load(payload)["data"])
+    assert [echoed[0], echoed[3]] == [printed[0], dict(printed[1], token="c2")]
+    assert [echoed[1], echoed[2]] == [json.loads(q2), json.loads(c1)]
+    for (topic, text), reply in zip(requests, echoed):
+        token, body = read_request(text)
         assert token == reply["token"]
         if topic == "/slr/query":
             parse_query(body)
-        else:
-            assert body["op"] == reply["op"]
+    # "Durable control state": the add_input is kept as the fact the page shows
+    (fact,) = [line.strip() for line in ros_section("### Durable control state").splitlines()
+               if line.strip().startswith("slr_ros_control(slr_bridge, input")]
+    with slr_sql.open(tmp_path / "robot.db") as kb:
+        assert [f"slr_ros_control(slr_bridge, input, '/battery', {answer_text(a['S'])})."
+                for a in kb.query("slr_ros_control(slr_bridge, input, '/battery', S)")] == [fact]
 
 
 def test_the_ros_pages_maps_and_requests_read_as_the_page_says(ros_recording):
