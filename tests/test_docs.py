@@ -1106,7 +1106,8 @@ def test_the_ros_pages_request_example_runs_against_slr_ros_bridge(tmp_path):
     shows; `ros2` itself is not installed here, so the requests of its `ros2 topic pub` lines
     (q2 and the add_input; its add_buffer is the client's own) are sent after the client's
     through the client's `send`, and each reply the `ros2 topic echo` lines show is the one
-    the bridge gives; the add_input is then kept as the fact "Durable control state" shows.
+    the bridge gives; a `list` then replies what "list" shows, and the add_input is kept as
+    the fact "Durable control state" shows.
     Beside it, in a domain of its own, the "Python
     API" block that runs a Bridge and a RequestServer in a program, for a few spins (its
     `running` is the program's own flag)."""
@@ -1134,7 +1135,9 @@ def test_the_ros_pages_request_example_runs_against_slr_ros_bridge(tmp_path):
         "for topic, text in json.loads(open('requests.json').read()):\n"
         "    publisher = query if topic == '/slr/query' else control\n"
         "    print(json.dumps(send(publisher, json.loads(text))))\n"), encoding="utf-8")
-    (tmp_path / "requests.json").write_text(json.dumps(requests[1:3]), encoding="utf-8")
+    listing = ("/slr/control", json.dumps({"token": "c4", "op": "list"}))   # "#### list"
+    (tmp_path / "requests.json").write_text(json.dumps([*requests[1:3], listing]),
+                                            encoding="utf-8")
     where, api_block = page_block("ros.md", "Bridge(kb, mapping).start()")
     (tmp_path / "live.yaml").write_text("version: 1\n", encoding="utf-8")
     (tmp_path / "program.py").write_text(
@@ -1191,7 +1194,9 @@ def test_the_ros_pages_request_example_runs_against_slr_ros_bridge(tmp_path):
                     process.wait()
     assert bridge.returncode == 0, (tmp_path / "bridge.log").read_text(encoding="utf-8")
     comments = [line.lstrip("# ") for line in client.splitlines() if line.startswith("# {")]
-    *page_client, q2, c1 = asked.stdout.splitlines()
+    *page_client, q2, c1, listed = asked.stdout.splitlines()
+    (list_reply,) = section_blocks(ros_section("#### list"), "json")
+    assert json.loads(listed) == json.loads(list_reply)
     assert page_client == comments
     printed = [ast.literal_eval(line) for line in comments]
     echoed = [json.loads(ast.literal_eval(line[len("data: "):]))
