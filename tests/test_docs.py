@@ -552,7 +552,8 @@ def slr_lines(path: Path) -> list[tuple[str, str]]:
         usage = False
         text = pending + " " + text if pending else text.removeprefix("$ ")
         pending = ""
-        if text.endswith("\\") or text.count('"') % 2 or text.count("'") % 2:
+        if text.startswith("slr ") and (text.endswith("\\") or text.count('"') % 2
+                                        or text.count("'") % 2):
             pending = text.rstrip("\\").rstrip()
             continue
         if re.match(r"slr [^|]", text):
@@ -598,7 +599,7 @@ def option_names(command: click.Command) -> set[str]:
 
 
 def check_usage(line: str) -> None:
-    words = [w for w in re.findall(r"[^\s\[\]…|]+", line)]
+    words = re.findall(r"[^\s\[\]…|]+", line)
     command, path, rest = slr_command(words[1:])
     known = option_names(command)
     for word in rest:
@@ -634,7 +635,9 @@ def check_call(line: str) -> None:
             return
         if not isinstance(command, click.Group):
             return
-        rest = [*context._protected_args, *context.args]
+        # (click 8.2 keeps the subcommand's words in _protected_args; 8.1 in protected_args)
+        protected = getattr(context, "_protected_args", None)
+        rest = [*(context.protected_args if protected is None else protected), *context.args]
         name, found, args = command.resolve_command(context, rest)
         assert found is not None, line
         command = found
