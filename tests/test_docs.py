@@ -756,18 +756,24 @@ def prints_as_shown(got: str, shown: list[str]) -> bool:
     return True
 
 
+def tour_store(folder: Path) -> None:
+    """The robot.db the README's tour leaves in ``folder`` (the current folder)."""
+    env: dict = {}
+    try:
+        for line, text in code_blocks(ROOT / "README.md", "python"):
+            exec(compile(text, f"README.md:{line}", "exec"), env)
+    finally:
+        env["kb"].close()
+    assert (folder / "robot.db").exists()
+
+
 def test_the_readme_shell_lines_run_as_written(tmp_path, monkeypatch):
     """README's `slr` lines, each a real `slr` process, on the store its tour leaves: a
     result shown in a comment (`# C = blue`) is what the line prints, the others succeed;
     the shell gets a goal with a comment after its full stop. Then its `slr stats` example,
     on the store the `slr add` it names makes, prints the lines shown."""
     monkeypatch.chdir(tmp_path)
-    env: dict = {}
-    try:
-        for line, text in code_blocks(ROOT / "README.md", "python"):
-            run_python_block(text, env, f"README.md:{line}")
-    finally:
-        env["kb"].close()
+    tour_store(tmp_path)
     (block,) = [t for _, t in code_blocks(ROOT / "README.md", "sh") if "slr add robot.db" in t]
     lines = [line for line in block.splitlines() if line.startswith("slr ")]
     assert [slr_argv(line)[0] for line in lines] == ["add", "query", "query", "explain", "sql",
@@ -815,17 +821,6 @@ def test_the_buffer_counters_example_prints_as_shown(tmp_path, monkeypatch):
 
 
 # ------------------------------------------------------------------------ docs/plots.md
-def tour_store(folder: Path) -> None:
-    """The robot.db the README's tour leaves in ``folder``."""
-    env: dict = {}
-    try:
-        for line, text in code_blocks(ROOT / "README.md", "python"):
-            exec(compile(text, f"README.md:{line}", "exec"), env)
-    finally:
-        env["kb"].close()
-    assert (folder / "robot.db").exists()
-
-
 def test_the_plots_page_examples_run_as_written(tmp_path, monkeypatch):
     """plots.md on the store the README's tour leaves: its two `$ slr plot` lines print what
     follows them (real processes), its Python block draws the rows its comment shows, and
