@@ -397,26 +397,36 @@ def test_the_python_api_examples_run_as_written(tmp_path, monkeypatch):
     assert (tmp_path / "timeline.png").stat().st_size > 0
 
 
+@contextlib.contextmanager
+def each_store_closed_after(monkeypatch):
+    """Inside: ``slr_sql.open`` as ever, and each store it opened is closed at the end (a
+    page's block that opens one store after another, ``kb = slr_sql.open(...)`` each time,
+    closes none of those it leaves)."""
+    opened: list = []
+    real_open = slr_sql.open
+
+    def open_and_keep(*args, **kwargs):
+        opened.append(real_open(*args, **kwargs))
+        return opened[-1]
+
+    with monkeypatch.context() as patched:
+        patched.setattr(slr_sql, "open", open_and_keep)
+        try:
+            yield
+        finally:
+            for kb in opened:
+                kb.close()
+
+
 def test_the_api_pages_opening_examples_run_as_written(tmp_path, monkeypatch):
     """api.md, "Opening a knowledge base": each way of opening, in a fresh folder (the
     `...` of its `with` block is Python's Ellipsis)."""
     monkeypatch.chdir(tmp_path)
     env: dict = {}
     where, text = page_block("api.md", 'slr_sql.open("robot.db", busy_timeout=2.0)')
-    opened: list = []
-    real_open = slr_sql.open
-
-    def open_and_keep(*args, **kwargs):   # every store the block opens is closed after it
-        opened.append(real_open(*args, **kwargs))
-        return opened[-1]
-
-    monkeypatch.setattr(slr_sql, "open", open_and_keep)
     exec("import slr_sql", env)
-    try:
+    with each_store_closed_after(monkeypatch):
         run_python_block(text, env, where)
-    finally:
-        for kb in opened:
-            kb.close()
     assert {p.name for p in tmp_path.glob("*.db")} == {"robot.db", "sim.db", "shop.db", "r1.db"}
 
 
@@ -862,6 +872,7 @@ def test_the_fleet_pages_examples_run_as_written(tmp_path, monkeypatch):
     through the Python API) and on a fleet store a site store relays r1 and r2 to prints the
     tables shown (the time of the last contact by shape), `--json` the keys the page lists;
     `slr_sql.fleet.push` has the signature the page gives, and its report the fields."""
+    import dataclasses
     import inspect
 
     from slr_sql import fleet
@@ -899,14 +910,14 @@ def test_the_fleet_pages_examples_run_as_written(tmp_path, monkeypatch):
         assert _CONTACT.sub("T", got).splitlines() == _CONTACT.sub("T", page).splitlines()
     listed = re.search(r"`--json` prints the same as a list of objects \(([^)]*)\)",
                        text.replace("\n", " ")).group(1)
-    assert [dict.keys() for dict in json.loads(done[2].stdout)][0] == set(
+    assert [row.keys() for row in json.loads(done[2].stdout)][0] == set(
         re.findall(r"`(\w+)`", listed))
     signature = re.search(r"Python: `slr_sql\.fleet\.push\(([^`]+)\)` returns a `PushReport` "
                           r"\(([^)]+)\)", text.replace("\n", " "))
     params = [p.split("=")[0].strip() for p in signature.group(1).split(",") if p.strip() != "*"]
     assert params == list(inspect.signature(fleet.push).parameters)
     assert re.findall(r"`(\w+)`", signature.group(2)) == [
-        f.name for f in __import__("dataclasses").fields(fleet.PushReport)]
+        f.name for f in dataclasses.fields(fleet.PushReport)]
 
 
 # --------------------------------------------------------------------- docs/postgres.md
@@ -924,21 +935,8 @@ def test_the_postgres_pages_examples_run_as_written(postgres_url, tmp_path, monk
     text = text.replace("robot@db.example/fleet", f"{user}@/{database}?host={socket}")
     text = text.replace("robot@/fleet?host=/run/postgresql", f"{user}@/{database}?host={socket}")
     assert text.count(database) == 2
-    env: dict = {}
-    opened: list = []
-    real_open = slr_sql.open
-
-    def open_and_keep(*args, **kwargs):   # each store the block opens is closed after it
-        opened.append(real_open(*args, **kwargs))
-        return opened[-1]
-
-    monkeypatch.setattr(slr_sql, "open", open_and_keep)
-    try:
-        run_python_block(text, env, where)
-    finally:
-        for kb in opened:
-            kb.close()
-    monkeypatch.setattr(slr_sql, "open", real_open)
+    with each_store_closed_after(monkeypatch):
+        run_python_block(text, {}, where)
     page = (DOCS / "postgres.md").read_text(encoding="utf-8")
     psql = page.split("## The schema as seen in psql", 1)[1].split("```", 2)[1]
     with slr_sql.open(postgres_url, clock=slr_sql.ManualClock(100.0)) as kb:
