@@ -1012,6 +1012,11 @@ def test_the_ros_pages_import_and_info_print_as_shown(ros_recording):
     assert command == done["import line"]
     assert done["import"].stdout.splitlines() == shown
     # "`info` lists `/battery` (std_msgs/Float64, 12 messages), `/detections` ... (1)"
+    prose = " ".join(ros_section("## From a bag to tf_lookup to Foxglove").split())
+    for named in ("`/battery` (std_msgs/Float64, 12 messages)", "(geometry_msgs/PoseArray, 24)",
+                  "`/tf` (123) and `/tf_static` (1)", "`map -> base` (121 transforms, 0 to 12 s)",
+                  "`cam -> base` (2) in `/tf`", "`base -> cam_mount` (1) in `/tf_static`"):
+        assert named in prose
     topics = {t["topic"]: t["count"] for t in done["json"]["topics"]}
     assert topics == {"/battery": 12, "/detections": 24, "/tf": 123, "/tf_static": 1}
     frames = {(f["topic"], f["parent"], f["child"]): f["count"] for f in done["json"]["frames"]}
@@ -1021,6 +1026,7 @@ def test_the_ros_pages_import_and_info_print_as_shown(ros_recording):
     (draft,) = slr_processes(folder, ("ros", "import", "demo_bag", "draft.db", "--map",
                                       "draft.yaml"))
     assert draft.returncode == 0 and "imported 160 events from 160 messages" in draft.stdout
+    assert "not imported" not in draft.stdout
     where, text = page_block("ros.md", "import_bag(kb,")
     text = text.replace('"robot.db"', '"python.db"')
     printed = io.StringIO()
