@@ -813,6 +813,32 @@ def test_the_readme_shell_lines_run_as_written(tmp_path, monkeypatch):
         stats_done.stdout
 
 
+def test_the_buffers_pages_declarations_load_and_conflict_as_shown(tmp_path, monkeypatch):
+    """buffers.md: its declarations block loads as one program; a robot.slr with the two
+    buffers its conflict example names, on the lines it names, is refused with the error
+    shown (the page wraps it; `(...)` leaves the explanation out) and nothing is loaded."""
+    monkeypatch.chdir(tmp_path)
+    ((_, declarations),) = code_blocks(DOCS / "buffers.md", "prolog")
+    conflict = " ".join(fenced_blocks(
+        (DOCS / "buffers.md").read_text(encoding="utf-8").split("### Conflicts", 1)[1], "")[0][1]
+        .split())
+    first, line1, second, line2 = re.match(
+        r"conflicting buffers: (.*) at robot\.slr:(\d) and (.*) at robot\.slr:(\d) ",
+        conflict).groups()
+    lines = [""] * int(line2)
+    lines[int(line1) - 1], lines[int(line2) - 1] = first + ".", second + "."
+    (tmp_path / "robot.slr").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    with slr_sql.open() as kb:
+        kb.load(declarations)
+        assert len(kb.buffers()) == 4
+    with slr_sql.open() as kb:
+        with pytest.raises(slr_sql.SLRError) as refused:
+            kb.load_file("robot.slr")
+        # (the message goes on after the parenthesis the page ends with: advice)
+        assert shows(str(refused.value), conflict + "...")
+        assert kb.buffers() == [] and kb.programs() == {}
+
+
 @pytest.mark.filterwarnings("error::slr_sql.clocks.LearnedDelayWarning")
 def test_the_buffer_counters_example_prints_as_shown(tmp_path, monkeypatch):
     """buffers.md, "Counters and `slr stats`": the page's s.slr (the two buffers it names
