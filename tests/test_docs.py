@@ -879,6 +879,14 @@ def test_the_plots_page_examples_run_as_written(tmp_path, monkeypatch):
     expression, _, comment = line.partition("#")
     assert repr(eval(expression, env)) == balanced_prefix(comment.strip())
     assert (tmp_path / "sweep.png").stat().st_size > 0
+    # `--dpi N`: the width and a given height stay; an automatic height grows with the text
+    with slr_sql.open("robot.db") as kb:
+        drawn = {(dpi, size): kb.plot(size=size, dpi=dpi).slr_timeline
+                 for dpi in (100, 200) for size in ((1200, None), (1200, 400))}
+    sizes = {dpi: [(drawn[dpi, size].width, drawn[dpi, size].height)
+                   for size in ((1200, None), (1200, 400))] for dpi in (100, 200)}
+    assert sizes[200][1] == sizes[100][1] == (1200, 400)
+    assert sizes[200][0][0] == sizes[100][0][0] == 1200 and sizes[200][0][1] > sizes[100][0][1]
     import inspect
 
     from slr_sql.plot import timeline
