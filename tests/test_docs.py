@@ -29,7 +29,9 @@
   ``--ros-args`` and ``ros2 launch`` (tests/test_ros_bridge.py), the ``ros2 topic`` lines
   (no ``ros2`` here: their requests go through the bridge's request reader instead),
   ``slr serve`` on a public address with TLS files, ``slr --token ... stats https://...``,
-  ``slr ingest http://... events.jsonl`` (no such file is shown), ``slr fleet push ...
+  ``slr ingest http://... events.jsonl`` (no such file is shown), service.md's ``slr add
+  http://...`` (the same event its Python block adds: its ``slr query http://...`` line
+  runs, after that block), ``slr fleet push ...
   http://fleet:8080 --follow``; the demo's plot (``slr demo --db demo.db`` alone takes
   seconds). ros.md's ``slr sql`` lines on ``robot_goal`` and ``detections`` (tables of
   bags imported with ``--all``) run their SQL in process on a store holding such events.
