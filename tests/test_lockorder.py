@@ -161,6 +161,25 @@ def test_a_representative_workload_keeps_the_order(debug_locks, tmp_path):
     assert all(_rank(held) < _rank(taken) for held, taken in seen)
 
 
+@pytest.mark.parametrize("callback", [False, True], ids=["pulled", "callback"])
+def test_a_close_with_a_subscription_waiting_for_its_until_keeps_the_order(
+        debug_locks, tmp_path, callback):
+    # the close records every position in one transaction (the store's lock); a subscription
+    # still waiting for its history to be complete up to `until` had its wait cancelled
+    # inside it, which takes the synchronizer's lock: the synchronizer's timer thread takes
+    # the two the other way round, and the close then deadlocked against it now and again
+    clock = ManualClock(0.0)
+    kb = slr_sql.open(tmp_path / "kb.db", clock=clock)
+    try:
+        kb.add_many(["p(1)^1", "p(2)^2"])
+        kb.subscribe("p(X)^T", since=0, until=10, id="durable")
+        kb.subscribe("p(X)^T", since=0, until=10,
+                     **({"callback": lambda answer: None} if callback else {}))
+    finally:
+        kb.close()
+    assert violations() == []
+
+
 def test_the_order_is_written_in_the_architecture_document():
     text = (Path(__file__).resolve().parent.parent / "docs" / "architecture.md").read_text()
     section = text[text.index("## Locks"):]

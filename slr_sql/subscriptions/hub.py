@@ -406,6 +406,13 @@ class SubscriptionHub:
             if self._closed:
                 return
             subs = list(self._subs.values())
+        for sub in subs:
+            # their waits for an `until` end first, outside the transaction below: cancelling
+            # one takes the synchronizer's lock, which comes before the store's (and the
+            # synchronizer's timer thread takes them in that order)
+            pending = sub.pending
+            if pending is not None and not pending.done():
+                pending.cancel()
         if subs and not self.store.closed:
             try:
                 with self.store.transaction():   # one commit for every position
