@@ -26,7 +26,8 @@ import slr_sql
 from .api import KnowledgeBaseAPI
 from .answers import answer_text, rebuilt, value_text
 from .encoding import decode
-from .kb import KnowledgeBase, check_time_option
+from .arguments import check_time_option
+from .kb import KnowledgeBase
 from .parser import full_stop_end, parse_event_fast
 from .printable import printable_name, printable_syntax_error, printable_text
 from .store import refuse_no_store, shown_location

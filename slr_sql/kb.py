@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
 from .answers import answer_bindings
+from .arguments import ListenerList, check_callable, check_time_option
 from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .engine import Engine
@@ -83,6 +84,24 @@ def _is_time_expression(t: Any) -> bool:
     return True
 
 
+def check_define(name: Any, arity: Any, fn: Any) -> None:
+    """The arguments of ``define``: a predicate's name (a str), its arity (a count) and
+    the Python function, else an :class:`SLRError` (the client of ``slr serve`` checks
+    them too before it refuses ``define``).
+
+    >>> check_define("double", 2, abs)
+    >>> check_define("double", "2", abs)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: define: arity must be a count (an integer >= 0), not '2'
+    """
+    if not isinstance(name, str):
+        raise SLRError(f"define: the predicate's name is a str (an atom), not {shown(name)}")
+    if type(arity) is not int or arity < 0:
+        raise SLRError(f"define: arity must be a count (an integer >= 0), not {shown(arity)}")
+    check_callable("define: fn", fn)
+
+
 def check_program_name(name: Any) -> str:
     """``name`` if it can name a program, else an :class:`SLRError` saying why. One of the
     checks of a method's arguments that a local knowledge base and ``slr_sql.connect``'s
@@ -138,15 +157,20 @@ class KnowledgeBase:
         # while they stay the same, no other connection changed what a refresh re-reads
         self._lookup_versions: tuple | None = None
         # extension points for the SQL compiler, buffers and synchronization
-        self.load_listeners: list[Callable[["KnowledgeBase"], None]] = []
+        # (each a ListenerList: what is no callable is refused as it is added, not when an
+        # add, a load or a refresh calls it and fails there)
+        self.load_listeners: list[Callable[["KnowledgeBase"], None]] = \
+            ListenerList("kb.load_listeners")
         # outside observers of stored events: the last stage of the event pipeline calls
         # them with each batch (the parts below are stages of the pipeline, not listeners)
-        self.add_listeners: list[Callable[[list], None]] = []
+        self.add_listeners: list[Callable[[list], None]] = ListenerList("kb.add_listeners")
         # called after the program was re-read from the file (another connection changed
         # it): like load_listeners, but nothing is written (the writer did that)
-        self.reload_listeners: list[Callable[["KnowledgeBase"], None]] = []
+        self.reload_listeners: list[Callable[["KnowledgeBase"], None]] = \
+            ListenerList("kb.reload_listeners")
         # called when another connection raised learned delays or completeness marks
-        self.progress_listeners: list[Callable[[], None]] = []
+        self.progress_listeners: list[Callable[[], None]] = \
+            ListenerList("kb.progress_listeners")
         # the program in force, built from the stored texts and kept current (slr_sql/loader.py)
         self.loader = ProgramLoader(self)
         self._refresh = self.loader.refresh
@@ -318,6 +342,7 @@ class KnowledgeBase:
         >>> kb.query("double(21, Y)")
         [{'Y': 42}]
         """
+        check_define(name, arity, fn)
         self.engine.python_preds[(name, arity)] = fn
         self.plans.clear()
 
@@ -675,7 +700,8 @@ class KnowledgeBase:
         >>> kb.mark_complete("p/1", 1); p.result(timeout=5)
         [{'L': [Atom('a')]}]
         """
-        check_query_options(at=at, timeout=timeout, robot=robot, args=args)
+        check_query_options(at=at, timeout=timeout, robot=robot, args=args,
+                            callback=callback)
         self._refresh()
         return self._sync.submit(goal, at=at, id=id, args=args, timeout=timeout,
                                  callback=callback, robot=robot)
@@ -1067,18 +1093,23 @@ def check_mark(event_type: Any, t: Any) -> None:
 
 
 def check_query_options(at: Any = None, timeout: Any = None, limit: Any = None,
-                        robot: Any = None, args: Any = None, max_steps: Any = None) -> None:
+                        robot: Any = None, args: Any = None, max_steps: Any = None, *,
+                        callback: Any = None) -> None:
     """The options of ``query``, ``solutions``, ``submit`` and ``ask``: ``at`` and
     ``timeout`` numbers of seconds (``timeout`` >= 0), ``limit`` and ``max_steps``
-    counts, ``robot`` a
-    robot's name, ``args`` a dict (None: not given), else an :class:`SLRError` (run by
-    the client of ``slr serve`` too, before sending).
+    counts, ``robot`` a robot's name, ``args`` a dict, ``callback`` a callable (None: not
+    given), else an :class:`SLRError` (run by the client of ``slr serve`` too, before
+    sending).
 
     >>> check_query_options(at=5, timeout=1.5, limit=3, args={"X": 1})
     >>> check_query_options(limit="x")
     Traceback (most recent call last):
     ...
     slr_sql.errors.SLRError: limit must be a count (an integer >= 0), not 'x'
+    >>> check_query_options(callback="print")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: callback must be callable (a function), not 'print'
     """
     if limit is not None and (type(limit) is not int or limit < 0):
         raise SLRError(f"limit must be a count (an integer >= 0), not {shown(limit)}")
@@ -1090,30 +1121,8 @@ def check_query_options(at: Any = None, timeout: Any = None, limit: Any = None,
         check_robot_name(robot)
     if args is not None and not isinstance(args, dict):
         raise SLRError(f"args must be a dict of variable name -> value, not {shown(args)}")
-
-
-def check_time_option(name: str, value: Any, minimum: float | None = None) -> None:
-    """``at=`` and ``timeout=`` are numbers of seconds (``None``: not given), else an
-    :class:`SLRError` (run by the client of ``slr serve`` too, before sending).
-
-    >>> check_time_option("timeout", 2.5, minimum=0.0)
-    >>> check_time_option("timeout", -1, minimum=0.0)
-    Traceback (most recent call last):
-    ...
-    slr_sql.errors.SLRError: timeout must be a number of seconds >= 0, not -1
-    """
-    if value is None:
-        return
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SLRError(f"{name} must be a number of seconds, not {shown(value)}")
-    try:
-        number = float(value)
-    except OverflowError:
-        raise SLRError(f"{name} is out of range (an integer of {value.bit_length()} bits)") \
-            from None
-    if math.isnan(number) or (minimum is not None and number < minimum):
-        raise SLRError(f"{name} must be a number of seconds"
-                       f"{'' if minimum is None else f' >= {minimum:g}'}, not {shown(value)}")
+    if callback is not None:
+        check_callable("callback", callback)
 
 
 class _LeftNoEvent(Exception):

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import inspect
+import math
 import threading
 import time
 import typing
@@ -425,7 +426,53 @@ SAME_WORDS = {
                                        "plot: TypeError: 'int' object is not iterable"),
     "unsubscribe of an id that is no text": (lambda kb: kb.unsubscribe(5), "SLRError",
                                              "no subscription with id 5"),
+    # each a raw TypeError on both sides (a str compared with or added to a number)
+    "result timeout that is text": (lambda kb: _on_waiting(kb, lambda p: p.result(timeout="x")),
+                                    "SLRError",
+                                    "result: timeout must be a number of seconds, not 'x'"),
+    "exception timeout that is text": (
+        lambda kb: _on_waiting(kb, lambda p: p.exception(timeout="x")), "SLRError",
+        "exception: timeout must be a number of seconds, not 'x'"),
+    "get timeout that is text": (lambda kb: _on_subscription(kb, lambda s: s.get(timeout="x")),
+                                 "SLRError", "get: timeout must be a number of seconds, not 'x'"),
+    # a local subscription's get(timeout=nan) waited for ever; remotely at once, "within nan s"
+    "get timeout NaN": (lambda kb: _on_subscription(kb, lambda s: s.get(timeout=math.nan)),
+                        "SLRError", "get: timeout must be a number of seconds >= 0, not nan"),
+    # an SLRTimeout "within -1 s" on both sides
+    "result with a negative timeout": (
+        lambda kb: _on_waiting(kb, lambda p: p.result(timeout=-1)), "SLRError",
+        "result: timeout must be a number of seconds >= 0, not -1"),
+    # each taken, then failing on a thread of its own where it was only logged
+    "submit with a callback that is no function": (
+        lambda kb: kb.submit("true", at=0, callback=5), "SLRError",
+        "callback must be callable (a function), not 5"),
+    "add_done_callback of no function": (
+        lambda kb: _on_waiting(kb, lambda p: p.add_done_callback("print")), "SLRError",
+        "add_done_callback: fn must be callable (a function), not 'print'"),
+    # remotely define was refused whatever its arguments, locally they were taken as given
+    "define of a function that is no function": (lambda kb: kb.define("p", 1, 5), "SLRError",
+                                                 "define: fn must be callable (a function), "
+                                                 "not 5"),
+    "define of an arity that is text": (lambda kb: kb.define("p", "1", abs), "SLRError",
+                                        "define: arity must be a count (an integer >= 0), "
+                                        "not '1'"),
 }
+
+
+def _on_waiting(kb, call):
+    """``call`` on a synchronized query that waits (no mark reaches its time), then
+    cancelled."""
+    pending = kb.submit("findall(W, w(W)^_, L)", at=1e12)
+    try:
+        return call(pending)
+    finally:
+        pending.cancel()
+
+
+def _on_subscription(kb, call):
+    """``call`` on a subscription to a type nobody adds, then closed."""
+    with kb.subscribe("nobody(X)^T") as sub:
+        return call(sub)
 
 
 # what a local knowledge base takes, taken remotely too (the server refused it)
@@ -449,3 +496,22 @@ def test_a_refused_argument_is_the_same_error_in_the_same_words_local_and_remote
     local, remote = (_error(call, kb) for kb in pair)
     assert local == remote
     assert local[0] == expected_class and expected_words in local[1], local
+
+
+def test_a_callback_that_is_no_function_is_refused_before_anything_waits(pair, caplog):
+    """kb.submit(goal, callback=5) was taken: the query was registered (remotely: submitted
+    to the server), and once it was answered the Future only logged "exception calling
+    callback" with a TypeError, on a thread of its own. It is refused at the call, on both,
+    and nothing waits."""
+    for kb in pair:
+        with pytest.raises(slr_sql.SLRError, match="callback must be callable"):
+            kb.submit("findall(W, w(W)^_, L)", at=1e12, id="never", callback=5)
+        assert [p.id for p in kb.pending()] == []
+        with pytest.raises(slr_sql.SLRError, match="subscribe: callback must be callable"):
+            kb.subscribe("p(X)^T", callback="print")
+        pending = kb.submit("true", at=0)
+        assert pending.result(timeout=10) == [{}]
+        with pytest.raises(slr_sql.SLRError, match="add_done_callback: fn must be callable"):
+            pending.add_done_callback(5)    # (done: a Future would call it now)
+    assert "exception calling callback" not in caplog.text
+

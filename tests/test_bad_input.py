@@ -329,3 +329,60 @@ def test_a_declared_arity_holds_after_reopen_and_in_another_connection(tmp_path)
             again.add("p(1)^1")
         again.add("p(1, 2)^1")
         assert again.query("p(X, Y)^T") == [{"X": 1, "Y": 2, "T": 1.0}]
+
+
+# ---------------------------------------------------------------- arguments refused at the call
+# (what only a local knowledge base has; tests/test_api_parity.py sweeps the methods both have)
+
+NOT_A_FUNCTION = [5, "print", None, [print]]
+
+
+@pytest.mark.parametrize("listeners", ["add_listeners", "load_listeners", "reload_listeners",
+                                       "progress_listeners"])
+@pytest.mark.parametrize("value", NOT_A_FUNCTION, ids=repr)
+def test_a_listener_that_is_no_function_is_refused_as_it_is_added(kb, listeners, value):
+    """kb.add_listeners took 5; the next add stored its events, then failed in its last
+    stage ("add: TypeError: 'int' object is not callable"), after the commit. Each way into
+    a listener list refuses it, and the knowledge base goes on as before."""
+    target = getattr(kb, listeners)
+    before = list(target)
+    for add in (target.append, lambda v: target.insert(0, v), lambda v: target.extend([v]),
+                lambda v: target.__iadd__([v]), lambda v: target.__setitem__(slice(0, 0), [v])):
+        with pytest.raises(SLRError, match=f"kb.{listeners}: a listener must be callable"):
+            add(value)
+    if target:
+        with pytest.raises(SLRError, match="must be callable"):
+            target[0] = value
+    assert list(target) == before
+    heard = []
+    kb.add_listeners.append(heard.append)
+    kb.load("p(X)^T :- q(X)^T.")
+    kb.add("q(1)^1")
+    assert len(heard) == 1 and kb.query("p(X)^T") == [{"X": 1, "T": 1.0}]
+
+
+def test_a_subscription_wait_refuses_a_timeout_that_is_no_seconds(kb):
+    """wait(timeout="x") was a TypeError (adding it to the monotonic clock)."""
+    with kb.subscribe("p(X)^T", callback=lambda answer: None) as sub:
+        for timeout, words in (("x", "not 'x'"), (float("nan"), ">= 0, not nan"),
+                               (-1, ">= 0, not -1")):
+            with pytest.raises(SLRError, match="wait: timeout must be a number of seconds"):
+                sub.wait(timeout=timeout)
+            with pytest.raises(SLRError, match=words):
+                sub.wait(timeout=timeout)
+        assert sub.wait(timeout=0) is False
+
+
+@pytest.mark.parametrize("forever", [None, float("inf"), 1e300])
+def test_a_wait_of_inf_or_beyond_a_thread_s_limit_waits_for_the_answer(kb, forever):
+    """result(timeout=inf) was an OverflowError ("timestamp out of range for platform
+    time_t"), as was any timeout beyond threading.TIMEOUT_MAX: they wait for ever, as None
+    does."""
+    import threading
+
+    pending = kb.submit("findall(X, p(X)^_, L)", at=5)
+    with kb.subscribe("p(X)^T", since=0) as sub:
+        threading.Timer(0.05, lambda: (kb.add("p(1)^1"), kb.mark_complete("p/1", 5))).start()
+        assert pending.result(timeout=forever) == [{"L": [1]}]
+        assert pending.exception(timeout=forever) is None
+        assert sub.get(timeout=forever) == {"X": 1, "T": 1.0}
