@@ -825,7 +825,9 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
           limit: int | None, as_json: bool, robot: str | None) -> None:
     """Ask GOAL and print one answer per line (`false.` when there is none)."""
     goal = strip_full_stop(goal)
-    at = _finite("--at", at)
+    # --at is the library's at= (and the shell's `at`): inf (every stored event) and -inf
+    # (none) are views, NaN is none
+    check_time_option("--at", at)
     timeout = _finite("--timeout", timeout, minimum=0.0)
     printer = AnswerPrinter(as_json)
     with _open(db, create=False) as kb:
@@ -1330,7 +1332,11 @@ class Shell:
         self.echo("added.")
 
     def _set_at(self, value: str) -> None:
-        at = None if value in ("none", "off") else float(value)
+        try:
+            at = None if value in ("none", "off") else float(value)
+        except ValueError:
+            raise slr_sql.SLRError(f"at takes a number of seconds (or none), not "
+                                   f"{printable_name(value)}") from None
         # refused here as every query would refuse it (nan), not echoed as a view and then
         # failing each goal; inf is a view queries take (every stored event)
         check_time_option("at", at)
