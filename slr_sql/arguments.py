@@ -1,8 +1,8 @@
 """Checks of the arguments that public methods of several layers share: numbers of seconds
 (``at=``, ``timeout=``), the timeout of a wait (``PendingQuery.result``,
-``Subscription.get``) and callables (``callback=``, listeners). Each raises an
+``Subscription.get``), callables (``callback=``, listeners) and flags. Each raises an
 :class:`~slr_sql.errors.SLRError` in words naming the argument; a local knowledge base, its
-parts (the synchronizer, the subscriptions) and the client of ``slr serve`` run
+parts (the synchronizer, the subscriptions, the clocks) and the client of ``slr serve`` run
 the same check, so the same bad value gets the same error wherever it is given.
 
 >>> check_time_option("at", 12.5)
@@ -22,15 +22,18 @@ from typing import Any, Iterable, TypeVar
 from .errors import SLRError
 from .printable import shown
 
-__all__ = ["check_time_option", "wait_seconds", "check_callable", "ListenerList"]
+__all__ = ["check_time_option", "wait_seconds", "check_callable", "check_flag",
+           "ListenerList"]
 
 T = TypeVar("T")
 
 
-def check_time_option(name: str, value: Any, minimum: float | None = None) -> None:
-    """``at=`` and ``timeout=`` are numbers of seconds (``None``: not given), else an
-    :class:`SLRError` (run by the client of ``slr serve`` too, before sending). Infinities
-    are numbers (SPEC: ``inf`` is +∞ where a number is expected); NaN is none.
+def check_time_option(name: str, value: Any, minimum: float | None = None, *,
+                      required: bool = False) -> None:
+    """``at=`` and ``timeout=`` are numbers of seconds (``None``: not given, unless
+    ``required``), else an :class:`SLRError` (run by the client of ``slr serve`` too, before
+    sending). Infinities are numbers (SPEC: ``inf`` is +∞ where a number is expected); NaN
+    is none.
 
     >>> check_time_option("timeout", 2.5, minimum=0.0)
     >>> check_time_option("timeout", -1, minimum=0.0)
@@ -38,7 +41,7 @@ def check_time_option(name: str, value: Any, minimum: float | None = None) -> No
     ...
     slr_sql.errors.SLRError: timeout must be a number of seconds >= 0, not -1
     """
-    if value is None:
+    if value is None and not required:
         return
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SLRError(f"{name} must be a number of seconds, not {shown(value)}")
@@ -82,6 +85,23 @@ def check_callable(name: str, value: Any) -> Any:
     """
     if not callable(value):
         raise SLRError(f"{name} must be callable (a function), not {shown(value)}")
+    return value
+
+
+def check_flag(name: str, value: Any) -> bool:
+    """A flag argument (``replace=``, ``atomic=``, ``wait=``, ``write=``): True or False,
+    else an :class:`SLRError` (a string such as ``"no"`` is true to Python, so taking its
+    truth would do the opposite of what was meant).
+
+    >>> check_flag("atomic", False)
+    False
+    >>> check_flag("atomic", "no")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: atomic must be True or False, not 'no'
+    """
+    if type(value) is not bool:
+        raise SLRError(f"{name} must be True or False, not {shown(value)}")
     return value
 
 

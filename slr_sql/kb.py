@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
 from .answers import answer_bindings
-from .arguments import ListenerList, check_callable, check_time_option
+from .arguments import ListenerList, check_callable, check_flag, check_time_option
 from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .engine import Engine
@@ -275,7 +275,7 @@ class KnowledgeBase:
         >>> kb.load("p(3).", name="main", replace=True); [a["X"] for a in kb.query("p(X)")]
         [3]
         """
-        name = check_load(text, filename, name)
+        name = check_load(text, filename, name, replace)
         clauses = parse_program(text, filename)   # syntax errors before taking the lock
         if not self.store.dialect.text_holds_nul:
             for what, value in (("program text", text), ("filename", filename),
@@ -421,6 +421,7 @@ class KnowledgeBase:
         >>> kb = open(clock=ManualClock(0)); kb.add_many(["p(1)^1", ("p", [2], 2.0, 2.0)])
         []
         """
+        check_flag("add_many: atomic", atomic)
         if type(events) is not list:
             try:
                 iterator = iter(events)
@@ -516,15 +517,20 @@ class KnowledgeBase:
         [{'X': 1, 'T': 1.0}]
         """
         if limit is not None or at is not None or timeout is not None or robot is not None \
-                or max_steps is not None or (args is not None and type(args) is not dict):
+                or max_steps is not None or (args is not None and type(args) is not dict) \
+                or wait is not False:
             # (the common query gives none of them: no call on its path)
             check_query_options(at=at, timeout=timeout, limit=limit, robot=robot, args=args,
-                                max_steps=max_steps)
+                                max_steps=max_steps, wait=wait)
         if wait:  # synchronized (SLRTimeout names the incomplete types)
             return self.submit(goal, at=at, args=args, timeout=timeout, robot=robot).result()
         if args and limit is None and robot is None:
             key = (goal, tuple(args))
-            plan = self._cached_plan(key)
+            try:
+                plan = self._cached_plan(key)
+            except TypeError:   # an unhashable goal (a list): no goal text, said as such
+                check_goal(goal)
+                raise
             if plan is not None and plan.bound_lookup is not None:
                 # the file is the truth: the lookup reads the stored versions with its rows;
                 # when they moved (or nothing matched), refresh as every call does, and keep
@@ -700,7 +706,7 @@ class KnowledgeBase:
         >>> kb.mark_complete("p/1", 1); p.result(timeout=5)
         [{'L': [Atom('a')]}]
         """
-        check_query_options(at=at, timeout=timeout, robot=robot, args=args,
+        check_query_options(at=at, timeout=timeout, robot=robot, args=args, id=id,
                             callback=callback)
         self._refresh()
         return self._sync.submit(goal, at=at, id=id, args=args, timeout=timeout,
@@ -845,7 +851,7 @@ class KnowledgeBase:
         """
         from .store import DatabaseError
 
-        check_sql(query, timeout)
+        check_sql(query, timeout, write)
         try:
             if not write:
                 return self.store.sql(query, params, False, timeout)
@@ -1006,9 +1012,9 @@ def unbindable_parameter(exc: BaseException) -> SLRError:
                     f"(parameters are None, int of 64 bits, float, str or bytes)")
 
 
-def check_sql(query: Any, timeout: Any) -> None:
-    """The statement and the ``timeout`` of ``sql``, else an :class:`SLRError` (run by the
-    client of ``slr serve`` too, before sending).
+def check_sql(query: Any, timeout: Any, write: Any = False) -> None:
+    """The statement, the ``timeout`` and the ``write`` flag of ``sql``, else an
+    :class:`SLRError` (run by the client of ``slr serve`` too, before sending).
 
     >>> check_sql("SELECT 1", 2.0)
     >>> check_sql("SELECT 1", "soon")
@@ -1019,12 +1025,13 @@ def check_sql(query: Any, timeout: Any) -> None:
     if not isinstance(query, str):
         raise SLRError(f"sql: the statement is text (a str), not a {type(query).__name__}")
     check_time_option("sql: timeout", timeout, minimum=0.0)
+    check_flag("sql: write", write)
 
 
-def check_load(text: Any, filename: Any, name: Any) -> str:
-    """The arguments of ``load``: program text, the file name its messages show and the
-    program's name (returned), else an :class:`SLRError` (run by the client of ``slr
-    serve`` too, before sending).
+def check_load(text: Any, filename: Any, name: Any, replace: Any = False) -> str:
+    """The arguments of ``load``: program text, the file name its messages show, the
+    program's name (returned) and ``replace`` (True or False), else an :class:`SLRError`
+    (run by the client of ``slr serve`` too, before sending).
 
     >>> check_load("p(1).", "<string>", "main")
     'main'
@@ -1040,6 +1047,7 @@ def check_load(text: Any, filename: Any, name: Any) -> str:
     if not isinstance(filename, str) or text_problem(filename):
         raise SLRError(f"load: filename is the text shown in messages (a str without lone "
                        f"surrogates), not {shown(filename)}")
+    check_flag("load: replace", replace)
     return name
 
 
@@ -1094,12 +1102,12 @@ def check_mark(event_type: Any, t: Any) -> None:
 
 def check_query_options(at: Any = None, timeout: Any = None, limit: Any = None,
                         robot: Any = None, args: Any = None, max_steps: Any = None, *,
-                        callback: Any = None) -> None:
+                        wait: Any = False, id: Any = None, callback: Any = None) -> None:
     """The options of ``query``, ``solutions``, ``submit`` and ``ask``: ``at`` and
     ``timeout`` numbers of seconds (``timeout`` >= 0), ``limit`` and ``max_steps``
-    counts, ``robot`` a robot's name, ``args`` a dict, ``callback`` a callable (None: not
-    given), else an :class:`SLRError` (run by the client of ``slr serve`` too, before
-    sending).
+    counts, ``robot`` a robot's name, ``args`` a dict, ``wait`` True or False, ``id`` a
+    non-empty string, ``callback`` a callable (None: not given), else an
+    :class:`SLRError` (run by the client of ``slr serve`` too, before sending).
 
     >>> check_query_options(at=5, timeout=1.5, limit=3, args={"X": 1})
     >>> check_query_options(limit="x")
@@ -1121,6 +1129,9 @@ def check_query_options(at: Any = None, timeout: Any = None, limit: Any = None,
         check_robot_name(robot)
     if args is not None and not isinstance(args, dict):
         raise SLRError(f"args must be a dict of variable name -> value, not {shown(args)}")
+    check_flag("wait", wait)
+    if id is not None and (not isinstance(id, str) or not id):
+        raise SLRError(f"id must be a non-empty string (or None: one is made), not {shown(id)}")
     if callback is not None:
         check_callable("callback", callback)
 

@@ -361,6 +361,29 @@ def test_a_listener_that_is_no_function_is_refused_as_it_is_added(kb, listeners,
     assert len(heard) == 1 and kb.query("p(X)^T") == [{"X": 1, "T": 1.0}]
 
 
+@pytest.mark.parametrize("call, words", [
+    (lambda: slr_sql.ManualClock("0"), "ManualClock: t must be a number of seconds, not '0'"),
+    (lambda: slr_sql.ManualClock(float("nan")), "ManualClock: t must be a number of seconds, "
+                                                "not nan"),
+    (lambda: slr_sql.ManualClock(0).set("5"), "ManualClock.set: t must be a number of "
+                                              "seconds, not '5'"),
+    (lambda: slr_sql.ManualClock(0).set(float("nan")), "not nan"),
+    (lambda: slr_sql.ManualClock(0).advance(None), "ManualClock.advance: dt must be a number "
+                                                   "of seconds, not None"),
+    (lambda: slr_sql.ManualClock(0).advance(-1), "dt must be a number of seconds >= 0, not -1"),
+    (lambda: slr_sql.ManualClock(0).subscribe(5), "Clock.subscribe: fn must be callable"),
+    (lambda: slr_sql.StreamClock().subscribe(None), "Clock.subscribe: fn must be callable"),
+], ids=["ManualClock text", "ManualClock nan", "set text", "set nan", "advance None",
+        "advance negative", "subscribe 5", "subscribe None"])
+def test_a_clock_refuses_what_is_no_time_or_no_function(call, words):
+    """ManualClock("0") was a ValueError and set("5") a TypeError; set(nan) made a clock that
+    every later set compared false with; a listener that is no function was taken and made
+    the next set fail (in every waiting query's release)."""
+    with pytest.raises(SLRError) as refused:
+        call()
+    assert words in str(refused.value)
+
+
 def test_a_subscription_wait_refuses_a_timeout_that_is_no_seconds(kb):
     """wait(timeout="x") was a TypeError (adding it to the monotonic clock)."""
     with kb.subscribe("p(X)^T", callback=lambda answer: None) as sub:

@@ -62,7 +62,7 @@ from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_ar
 from ..kb import (check_define, check_event_type, check_load, check_mark, check_program_name,
                   check_query_options, check_sql, not_event_text, read_program_file,
                   unbindable_parameter, unforeseen_failure)
-from ..arguments import check_callable, wait_seconds
+from ..arguments import check_callable, check_flag, wait_seconds
 from ..buffers import analyze, check_buffer_policy
 from ..terms import format_term
 from ..plans import argument_term, check_goal, not_a_variable
@@ -457,6 +457,7 @@ class RemoteKnowledgeBase:
         ([2], [{'X': 1, 'T': 1.0}, {'X': 2, 'T': 2.0}])
         >>> kb.close(); server.stop(); server.kb.close()
         """
+        check_flag("add_many: atomic", atomic)
         _iterable(events, "add_many")
         items: list = []
         given: list = []                # the caller's events (a rejection's .event)
@@ -527,7 +528,8 @@ class RemoteKnowledgeBase:
         [{'C': Atom('red')}]
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        body: dict[str, Any] = {"text": text, "name": check_load(text, filename, name)}
+        body: dict[str, Any] = {"text": text,
+                                "name": check_load(text, filename, name, replace)}
         if filename != "<string>":
             body["filename"] = filename
         if replace:
@@ -631,7 +633,7 @@ class RemoteKnowledgeBase:
         >>> kb.close(); server.stop(); server.kb.close()
         """
         check_query_options(at=at, timeout=timeout, limit=limit, robot=robot, args=args,
-                            max_steps=max_steps)
+                            max_steps=max_steps, wait=wait)
         if wait:  # synchronized: long-polls, however long the wait (as kb.query does it)
             return self.submit(goal, at=at, args=args, timeout=timeout, robot=robot).result()
         body = _goal_body(goal, at, args, timeout)
@@ -741,11 +743,11 @@ class RemoteKnowledgeBase:
         [{'L': [Atom('a')]}]
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        check_query_options(at=at, timeout=timeout, robot=robot, args=args,
+        check_query_options(at=at, timeout=timeout, robot=robot, args=args, id=id,
                             callback=callback)
         body = _goal_body(goal, at, args, timeout)
         if id is not None:
-            body["id"] = str(id)
+            body["id"] = id
         if robot is not None:
             body["robot"] = robot
         status, reply = self._request("POST", "/submit", body, ok=(200, 202))
@@ -963,7 +965,7 @@ class RemoteKnowledgeBase:
         slr_sql.service.errors.ServiceError: sql over the service is read-only: DELETE statements are not allowed (SELECT, WITH, VALUES, EXPLAIN)
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        check_sql(query, timeout)
+        check_sql(query, timeout, write)
         if write:
             raise ServiceError("sql(write=True) is not available over the network: the "
                                "service runs read-only SQL only (write with `slr sql DB "

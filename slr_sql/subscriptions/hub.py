@@ -33,7 +33,7 @@ from ..terms import format_atom
 from .matching import Matcher, time_arg
 from .queue import HISTORY_PHASE, LIVE_PHASE, Subscription, SubscriptionOverflow, \
     SubscriptionState, resolve_threadsafe
-from .registry import SubscriptionRegistry, journal_table
+from .registry import SubscriptionRegistry, journal_table, no_subscription
 
 __all__ = ["SubscriptionHub", "check_subscription", "DEFAULT_MAX_QUEUE", "DEFAULT_MAX_LAG", "POLL_INTERVAL"]
 
@@ -308,6 +308,8 @@ class SubscriptionHub:
         []
         >>> kb.close()
         """
+        if not isinstance(sub_id, str):   # (no id: a list, unhashable, is none either)
+            raise no_subscription(sub_id)
         with self.lock:
             sub = self._subs.get(sub_id)
         if sub is not None:
