@@ -102,6 +102,25 @@ def check_define(name: Any, arity: Any, fn: Any) -> None:
     check_callable("define: fn", fn)
 
 
+def check_open_options(path: Any, clock: Any, adopt: Any) -> None:
+    """The ``path``, ``clock`` and ``adopt`` of ``open``, else an :class:`SLRError` (the
+    store checks its own options: ``busy_timeout``, ``cache_mib``, ...).
+
+    >>> check_open_options("robot.db", None, False)
+    >>> check_open_options(5, None, False)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: open: path must be a file's path (a str or a pathlib.Path), a PostgreSQL URL or None, not 5
+    """
+    if path is not None and not isinstance(path, (str, os.PathLike)):
+        raise SLRError(f"open: path must be a file's path (a str or a pathlib.Path), a "
+                       f"PostgreSQL URL or None, not {shown(path)}")
+    if clock is not None and not callable(getattr(clock, "now", None)):
+        raise SLRError(f"open: clock must be a clock (slr_sql.WallClock, ManualClock or "
+                       f"StreamClock: an object with now()), not {shown(clock)}")
+    check_flag("open: adopt", adopt)
+
+
 def check_program_name(name: Any) -> str:
     """``name`` if it can name a program, else an :class:`SLRError` saying why. One of the
     checks of a method's arguments that a local knowledge base and ``slr_sql.connect``'s
@@ -135,6 +154,7 @@ class KnowledgeBase:
                  adopt: bool = False, checkpoint: str = "auto",
                  cache_mib: float = CACHE_SIZE_KIB / 1024, robot: str | None = None,
                  max_learned_delay: float | None = DEFAULT_MAX_LEARNED_DELAY):
+        check_open_options(path, clock, adopt)
         if max_learned_delay is not None:
             check_time_option("max_learned_delay", max_learned_delay, minimum=0.0)
             max_learned_delay = float(max_learned_delay)

@@ -409,3 +409,34 @@ def test_a_wait_of_inf_or_beyond_a_thread_s_limit_waits_for_the_answer(kb, forev
         assert pending.result(timeout=forever) == [{"L": [1]}]
         assert pending.exception(timeout=forever) is None
         assert sub.get(timeout=forever) == {"X": 1, "T": 1.0}
+
+
+@pytest.mark.parametrize("options, words", [
+    ({"path": 5}, "open: path must be a file's path (a str or a pathlib.Path), a PostgreSQL "
+                  "URL or None, not 5"),
+    ({"clock": 5}, "open: clock must be a clock"),
+    ({"adopt": "yes"}, "open: adopt must be True or False, not 'yes'"),
+    ({"synchronous": 5}, "synchronous must be OFF, NORMAL, FULL or EXTRA, not 5"),
+    ({"checkpoint": 5}, "checkpoint must be 'auto' or 'background', not 5"),
+    ({"cache_mib": "x"}, "cache_mib must be a number of MiB from 0.0625 to 1048576, not 'x'"),
+    ({"cache_mib": float("nan")}, "cache_mib must be a number of MiB"),
+], ids=["path 5", "clock 5", "adopt text", "synchronous 5", "checkpoint 5", "cache_mib text",
+        "cache_mib nan"])
+def test_open_refuses_options_of_the_wrong_kind_in_words_and_creates_nothing(tmp_path, options,
+                                                                             words):
+    """path=5 and synchronous=5 were "open: TypeError: ..." and "open: AttributeError: ...",
+    cache_mib and checkpoint "open: ValueError: ..." (the boundary's words for a Python
+    error); clock=5 and adopt="yes" were taken (clock=5 failed at the first call that asked
+    the time)."""
+    with pytest.raises(SLRError) as refused:
+        slr_sql.open(**({"path": tmp_path / "robot.db"} | options))
+    said = str(refused.value)
+    assert words in said and "Error:" not in said, said
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_connect_refuses_a_token_that_is_no_text_without_showing_it():
+    """connect(url, token=5) was a raw TypeError ('int' object is not iterable)."""
+    with pytest.raises(SLRError) as refused:
+        slr_sql.connect("http://127.0.0.1:9", token=12345)
+    assert str(refused.value) == "connect: token must be text (a str), not of type int"

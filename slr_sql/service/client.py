@@ -256,6 +256,9 @@ class RemoteKnowledgeBase:
         self.url = _service_url(url, httpx).rstrip("/")
         if token is None:
             token = os.environ.get("SLR_TOKEN") or None
+        if token is not None and not isinstance(token, str):   # (a secret: not shown)
+            raise SLRError(f"connect: token must be text (a str), not of type "
+                           f"{type(token).__name__}")
         if token:
             check_token_text(token)
         self._token = token
