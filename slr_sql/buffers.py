@@ -701,7 +701,11 @@ def prune_now(kb: Host) -> None:
 
 def _seconds(value: Any) -> float:
     if isinstance(value, str):
-        value = parse_duration(_parse_pattern(value))
+        try:
+            value = parse_duration(_parse_pattern(value))
+        except SLRError:   # (named: "a duration must be ..." does not say which argument)
+            raise SLRError(f"keep_seconds must be a non-negative number of seconds or a "
+                           f"duration such as \"500ms\", not {shown(value)}") from None
     return check_seconds(value)
 
 

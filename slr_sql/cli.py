@@ -26,7 +26,8 @@ import slr_sql
 from .api import KnowledgeBaseAPI
 from .answers import answer_text, rebuilt, value_text
 from .encoding import decode
-from .kb import KnowledgeBase, check_time_option
+from .arguments import check_time_option
+from .kb import KnowledgeBase
 from .parser import full_stop_end, parse_event_fast
 from .printable import printable_name, printable_syntax_error, printable_text
 from .store import refuse_no_store, shown_location
@@ -824,7 +825,9 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
           limit: int | None, as_json: bool, robot: str | None) -> None:
     """Ask GOAL and print one answer per line (`false.` when there is none)."""
     goal = strip_full_stop(goal)
-    at = _finite("--at", at)
+    # --at is the library's at= (and the shell's `at`): inf (every stored event) and -inf
+    # (none) are views, NaN is none
+    check_time_option("--at", at)
     timeout = _finite("--timeout", timeout, minimum=0.0)
     printer = AnswerPrinter(as_json)
     with _open(db, create=False) as kb:
@@ -1329,7 +1332,11 @@ class Shell:
         self.echo("added.")
 
     def _set_at(self, value: str) -> None:
-        at = None if value in ("none", "off") else float(value)
+        try:
+            at = None if value in ("none", "off") else float(value)
+        except ValueError:
+            raise slr_sql.SLRError(f"at takes a number of seconds (or none), not "
+                                   f"{printable_name(value)}") from None
         # refused here as every query would refuse it (nan), not echoed as a view and then
         # failing each goal; inf is a view queries take (every stored event)
         check_time_option("at", at)

@@ -13,6 +13,7 @@ import math
 import time
 from typing import Any, Callable
 
+from .arguments import check_callable, check_time_option
 from .errors import SLRError
 from .lockorder import ordered_lock
 from .terms import Atom, deref, format_term
@@ -53,6 +54,14 @@ class Clock:
         raise NotImplementedError
 
     def subscribe(self, fn: Callable[[float], None]) -> None:
+        """Call ``fn(t)`` each time the clock moves (to ``t``); ``fn`` must be callable.
+
+        >>> ManualClock(0).subscribe(5)
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: Clock.subscribe: fn must be callable (a function), not 5
+        """
+        check_callable("Clock.subscribe: fn", fn)
         with self._lock:
             self._listeners.append(fn)
 
@@ -91,20 +100,21 @@ class ManualClock(Clock):
 
     def __init__(self, t: float = 0.0) -> None:
         super().__init__()
+        check_time_option("ManualClock: t", t, required=True)
         self._t = float(t)
 
     def now(self) -> float:
         return self._t
 
     def set(self, t: float) -> None:
+        check_time_option("ManualClock.set: t", t, required=True)
         if t < self._t:
             raise SLRError(f"ManualClock cannot go back in time ({t} < {self._t})")
         self._t = float(t)
         self._moved(self._t)
 
     def advance(self, dt: float) -> None:
-        if dt < 0:
-            raise SLRError("ManualClock.advance needs dt >= 0")
+        check_time_option("ManualClock.advance: dt", dt, minimum=0.0, required=True)
         self.set(self._t + dt)
 
 

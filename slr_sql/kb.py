@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
 from .answers import answer_bindings
+from .arguments import ListenerList, check_callable, check_flag, check_time_option
 from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .engine import Engine
@@ -83,6 +84,43 @@ def _is_time_expression(t: Any) -> bool:
     return True
 
 
+def check_define(name: Any, arity: Any, fn: Any) -> None:
+    """The arguments of ``define``: a predicate's name (a str), its arity (a count) and
+    the Python function, else an :class:`SLRError` (the client of ``slr serve`` checks
+    them too before it refuses ``define``).
+
+    >>> check_define("double", 2, abs)
+    >>> check_define("double", "2", abs)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: define: arity must be a count (an integer >= 0), not '2'
+    """
+    if not isinstance(name, str):
+        raise SLRError(f"define: the predicate's name is a str (an atom), not {shown(name)}")
+    if type(arity) is not int or arity < 0:
+        raise SLRError(f"define: arity must be a count (an integer >= 0), not {shown(arity)}")
+    check_callable("define: fn", fn)
+
+
+def check_open_options(path: Any, clock: Any, adopt: Any) -> None:
+    """The ``path``, ``clock`` and ``adopt`` of ``open``, else an :class:`SLRError` (the
+    store checks its own options: ``busy_timeout``, ``cache_mib``, ...).
+
+    >>> check_open_options("robot.db", None, False)
+    >>> check_open_options(5, None, False)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: open: path must be a file's path (a str or a pathlib.Path), a PostgreSQL URL or None, not 5
+    """
+    if path is not None and not isinstance(path, (str, os.PathLike)):
+        raise SLRError(f"open: path must be a file's path (a str or a pathlib.Path), a "
+                       f"PostgreSQL URL or None, not {shown(path)}")
+    if clock is not None and not callable(getattr(clock, "now", None)):
+        raise SLRError(f"open: clock must be a clock (slr_sql.WallClock, ManualClock or "
+                       f"StreamClock: an object with now()), not {shown(clock)}")
+    check_flag("open: adopt", adopt)
+
+
 def check_program_name(name: Any) -> str:
     """``name`` if it can name a program, else an :class:`SLRError` saying why. One of the
     checks of a method's arguments that a local knowledge base and ``slr_sql.connect``'s
@@ -116,6 +154,7 @@ class KnowledgeBase:
                  adopt: bool = False, checkpoint: str = "auto",
                  cache_mib: float = CACHE_SIZE_KIB / 1024, robot: str | None = None,
                  max_learned_delay: float | None = DEFAULT_MAX_LEARNED_DELAY):
+        check_open_options(path, clock, adopt)
         if max_learned_delay is not None:
             check_time_option("max_learned_delay", max_learned_delay, minimum=0.0)
             max_learned_delay = float(max_learned_delay)
@@ -138,15 +177,20 @@ class KnowledgeBase:
         # while they stay the same, no other connection changed what a refresh re-reads
         self._lookup_versions: tuple | None = None
         # extension points for the SQL compiler, buffers and synchronization
-        self.load_listeners: list[Callable[["KnowledgeBase"], None]] = []
+        # (each a ListenerList: what is no callable is refused as it is added, not when an
+        # add, a load or a refresh calls it and fails there)
+        self.load_listeners: list[Callable[["KnowledgeBase"], None]] = \
+            ListenerList("kb.load_listeners")
         # outside observers of stored events: the last stage of the event pipeline calls
         # them with each batch (the parts below are stages of the pipeline, not listeners)
-        self.add_listeners: list[Callable[[list], None]] = []
+        self.add_listeners: list[Callable[[list], None]] = ListenerList("kb.add_listeners")
         # called after the program was re-read from the file (another connection changed
         # it): like load_listeners, but nothing is written (the writer did that)
-        self.reload_listeners: list[Callable[["KnowledgeBase"], None]] = []
+        self.reload_listeners: list[Callable[["KnowledgeBase"], None]] = \
+            ListenerList("kb.reload_listeners")
         # called when another connection raised learned delays or completeness marks
-        self.progress_listeners: list[Callable[[], None]] = []
+        self.progress_listeners: list[Callable[[], None]] = \
+            ListenerList("kb.progress_listeners")
         # the program in force, built from the stored texts and kept current (slr_sql/loader.py)
         self.loader = ProgramLoader(self)
         self._refresh = self.loader.refresh
@@ -251,7 +295,7 @@ class KnowledgeBase:
         >>> kb.load("p(3).", name="main", replace=True); [a["X"] for a in kb.query("p(X)")]
         [3]
         """
-        name = check_load(text, filename, name)
+        name = check_load(text, filename, name, replace)
         clauses = parse_program(text, filename)   # syntax errors before taking the lock
         if not self.store.dialect.text_holds_nul:
             for what, value in (("program text", text), ("filename", filename),
@@ -318,6 +362,7 @@ class KnowledgeBase:
         >>> kb.query("double(21, Y)")
         [{'Y': 42}]
         """
+        check_define(name, arity, fn)
         self.engine.python_preds[(name, arity)] = fn
         self.plans.clear()
 
@@ -396,6 +441,7 @@ class KnowledgeBase:
         >>> kb = open(clock=ManualClock(0)); kb.add_many(["p(1)^1", ("p", [2], 2.0, 2.0)])
         []
         """
+        check_flag("add_many: atomic", atomic)
         if type(events) is not list:
             try:
                 iterator = iter(events)
@@ -491,15 +537,20 @@ class KnowledgeBase:
         [{'X': 1, 'T': 1.0}]
         """
         if limit is not None or at is not None or timeout is not None or robot is not None \
-                or max_steps is not None or (args is not None and type(args) is not dict):
+                or max_steps is not None or (args is not None and type(args) is not dict) \
+                or wait is not False:
             # (the common query gives none of them: no call on its path)
             check_query_options(at=at, timeout=timeout, limit=limit, robot=robot, args=args,
-                                max_steps=max_steps)
+                                max_steps=max_steps, wait=wait)
         if wait:  # synchronized (SLRTimeout names the incomplete types)
             return self.submit(goal, at=at, args=args, timeout=timeout, robot=robot).result()
         if args and limit is None and robot is None:
             key = (goal, tuple(args))
-            plan = self._cached_plan(key)
+            try:
+                plan = self._cached_plan(key)
+            except TypeError:   # an unhashable goal (a list): no goal text, said as such
+                check_goal(goal)
+                raise
             if plan is not None and plan.bound_lookup is not None:
                 # the file is the truth: the lookup reads the stored versions with its rows;
                 # when they moved (or nothing matched), refresh as every call does, and keep
@@ -675,7 +726,8 @@ class KnowledgeBase:
         >>> kb.mark_complete("p/1", 1); p.result(timeout=5)
         [{'L': [Atom('a')]}]
         """
-        check_query_options(at=at, timeout=timeout, robot=robot, args=args)
+        check_query_options(at=at, timeout=timeout, robot=robot, args=args, id=id,
+                            callback=callback)
         self._refresh()
         return self._sync.submit(goal, at=at, id=id, args=args, timeout=timeout,
                                  callback=callback, robot=robot)
@@ -819,7 +871,7 @@ class KnowledgeBase:
         """
         from .store import DatabaseError
 
-        check_sql(query, timeout)
+        check_sql(query, timeout, write)
         try:
             if not write:
                 return self.store.sql(query, params, False, timeout)
@@ -980,9 +1032,9 @@ def unbindable_parameter(exc: BaseException) -> SLRError:
                     f"(parameters are None, int of 64 bits, float, str or bytes)")
 
 
-def check_sql(query: Any, timeout: Any) -> None:
-    """The statement and the ``timeout`` of ``sql``, else an :class:`SLRError` (run by the
-    client of ``slr serve`` too, before sending).
+def check_sql(query: Any, timeout: Any, write: Any = False) -> None:
+    """The statement, the ``timeout`` and the ``write`` flag of ``sql``, else an
+    :class:`SLRError` (run by the client of ``slr serve`` too, before sending).
 
     >>> check_sql("SELECT 1", 2.0)
     >>> check_sql("SELECT 1", "soon")
@@ -993,12 +1045,13 @@ def check_sql(query: Any, timeout: Any) -> None:
     if not isinstance(query, str):
         raise SLRError(f"sql: the statement is text (a str), not a {type(query).__name__}")
     check_time_option("sql: timeout", timeout, minimum=0.0)
+    check_flag("sql: write", write)
 
 
-def check_load(text: Any, filename: Any, name: Any) -> str:
-    """The arguments of ``load``: program text, the file name its messages show and the
-    program's name (returned), else an :class:`SLRError` (run by the client of ``slr
-    serve`` too, before sending).
+def check_load(text: Any, filename: Any, name: Any, replace: Any = False) -> str:
+    """The arguments of ``load``: program text, the file name its messages show, the
+    program's name (returned) and ``replace`` (True or False), else an :class:`SLRError`
+    (run by the client of ``slr serve`` too, before sending).
 
     >>> check_load("p(1).", "<string>", "main")
     'main'
@@ -1014,6 +1067,7 @@ def check_load(text: Any, filename: Any, name: Any) -> str:
     if not isinstance(filename, str) or text_problem(filename):
         raise SLRError(f"load: filename is the text shown in messages (a str without lone "
                        f"surrogates), not {shown(filename)}")
+    check_flag("load: replace", replace)
     return name
 
 
@@ -1067,18 +1121,23 @@ def check_mark(event_type: Any, t: Any) -> None:
 
 
 def check_query_options(at: Any = None, timeout: Any = None, limit: Any = None,
-                        robot: Any = None, args: Any = None, max_steps: Any = None) -> None:
+                        robot: Any = None, args: Any = None, max_steps: Any = None, *,
+                        wait: Any = False, id: Any = None, callback: Any = None) -> None:
     """The options of ``query``, ``solutions``, ``submit`` and ``ask``: ``at`` and
     ``timeout`` numbers of seconds (``timeout`` >= 0), ``limit`` and ``max_steps``
-    counts, ``robot`` a
-    robot's name, ``args`` a dict (None: not given), else an :class:`SLRError` (run by
-    the client of ``slr serve`` too, before sending).
+    counts, ``robot`` a robot's name, ``args`` a dict, ``wait`` True or False, ``id`` a
+    non-empty string, ``callback`` a callable (None: not given), else an
+    :class:`SLRError` (run by the client of ``slr serve`` too, before sending).
 
     >>> check_query_options(at=5, timeout=1.5, limit=3, args={"X": 1})
     >>> check_query_options(limit="x")
     Traceback (most recent call last):
     ...
     slr_sql.errors.SLRError: limit must be a count (an integer >= 0), not 'x'
+    >>> check_query_options(callback="print")
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: callback must be callable (a function), not 'print'
     """
     if limit is not None and (type(limit) is not int or limit < 0):
         raise SLRError(f"limit must be a count (an integer >= 0), not {shown(limit)}")
@@ -1090,30 +1149,11 @@ def check_query_options(at: Any = None, timeout: Any = None, limit: Any = None,
         check_robot_name(robot)
     if args is not None and not isinstance(args, dict):
         raise SLRError(f"args must be a dict of variable name -> value, not {shown(args)}")
-
-
-def check_time_option(name: str, value: Any, minimum: float | None = None) -> None:
-    """``at=`` and ``timeout=`` are numbers of seconds (``None``: not given), else an
-    :class:`SLRError` (run by the client of ``slr serve`` too, before sending).
-
-    >>> check_time_option("timeout", 2.5, minimum=0.0)
-    >>> check_time_option("timeout", -1, minimum=0.0)
-    Traceback (most recent call last):
-    ...
-    slr_sql.errors.SLRError: timeout must be a number of seconds >= 0, not -1
-    """
-    if value is None:
-        return
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SLRError(f"{name} must be a number of seconds, not {shown(value)}")
-    try:
-        number = float(value)
-    except OverflowError:
-        raise SLRError(f"{name} is out of range (an integer of {value.bit_length()} bits)") \
-            from None
-    if math.isnan(number) or (minimum is not None and number < minimum):
-        raise SLRError(f"{name} must be a number of seconds"
-                       f"{'' if minimum is None else f' >= {minimum:g}'}, not {shown(value)}")
+    check_flag("wait", wait)
+    if id is not None and (not isinstance(id, str) or not id):
+        raise SLRError(f"id must be a non-empty string (or None: one is made), not {shown(id)}")
+    if callback is not None:
+        check_callable("callback", callback)
 
 
 class _LeftNoEvent(Exception):

@@ -323,7 +323,11 @@ class PlanCache:
         [('A', 0), ('B', 1)]
         """
         key = (goal, arg_names)
-        plan = self.entries.get(key)
+        try:
+            plan = self.entries.get(key)
+        except TypeError:   # an unhashable goal (a list): no goal text, said as such
+            check_goal(goal)
+            raise
         if plan is not None:
             return plan
         check_goal(goal)

@@ -633,6 +633,26 @@ def _collect_query(source: Any, goal: str, every: float, lo: float, hi: float,
     return row
 
 
+def _texts(option: str, value: Any) -> list:
+    """An option of one text or a list of them as a list, else an :class:`SLRError` (a
+    number is no list of event types).
+
+    >>> _texts("types", "p/1"), _texts("types", ("p", "q/2"))
+    (['p/1'], ['p', 'q/2'])
+    >>> _texts("types", 5)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: plot: types must be a text or a list of texts, not 5
+    """
+    if isinstance(value, str):
+        return [value]
+    try:
+        return list(value)
+    except TypeError:
+        raise SLRError(f"plot: {option} must be a text or a list of texts, not "
+                       f"{shown(value)}") from None
+
+
 def collect_timeline(source: Any, types: Iterable[str] | str | None = None, *,
                      start: float | None = None, end: float | None = None,
                      values: Iterable[str] | str = (),
@@ -653,10 +673,8 @@ def collect_timeline(source: Any, types: Iterable[str] | str | None = None, *,
     ('move/1', 'exact', [(2.0, 8.0)])
     >>> kb.close()
     """
-    if isinstance(types, str):
-        types = [types]
-    if isinstance(values, str):
-        values = [values]
+    types = None if types is None else _texts("types", types)
+    values = _texts("values", values)
     width, height = size if size is not None else (DEFAULT_WIDTH, None)
     width = _check_pixels("width", width)
     if height is not None:
@@ -671,8 +689,7 @@ def collect_timeline(source: Any, types: Iterable[str] | str | None = None, *,
         raise SLRError(f"empty time window: from {lo:g} to {hi:g} (from must be before to)")
     specs = [parse_value_spec(text) for text in values]
 
-    if isinstance(by, str):
-        by = [by]
+    by = _texts("by", by)
     catalog = store_types(source)
     complex_names = _complex_names(source, complex_types)
     value_types = [_resolve_value(catalog, spec) for spec in specs]

@@ -40,6 +40,7 @@ from typing import Any, Callable, Iterable, NamedTuple
 
 from .analysis import GoalSet, goal_set
 from .answers import answer_bindings
+from .arguments import check_callable, wait_seconds
 from .clocks import (DEFAULT_MAX_LEARNED_DELAY, LearnedDelayNotWrittenWarning,
                      LearnedDelayWarning, ManualClock, StreamClock)
 from .errors import EventRejected, SLRError, SLRTimeout, SLRUnavailable, log_failure
@@ -277,16 +278,61 @@ class PendingQuery(Future):
         return "\n".join(lines)
 
     def result(self, timeout: float | None = None) -> list[dict[str, Any]]:
-        """The answer list, waiting up to ``timeout`` seconds (None: for ever). When the
-        wait runs out first: :class:`~slr_sql.SLRTimeout` saying what the query waits for
-        (it goes on waiting: call ``result`` again, or ``cancel()``)."""
+        """The answer list, waiting up to ``timeout`` seconds (None or ``inf``: for ever).
+        When the wait runs out first: :class:`~slr_sql.SLRTimeout` saying what the query
+        waits for (it goes on waiting: call ``result`` again, or ``cancel()``). A timeout
+        that is no number of seconds >= 0 is an :class:`SLRError`.
+
+        >>> import slr_sql
+        >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); p = kb.submit("p(X)^T", at=5)
+        >>> p.result(timeout="soon")
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: result: timeout must be a number of seconds, not 'soon'
+        >>> kb.close()
+        """
+        wait = wait_seconds("result: timeout", timeout)
         try:
-            return super().result(timeout)
+            return super().result(wait)
         except TimeoutError:
             if self.done():      # answered (or failed with its own SLRTimeout) meanwhile
                 return super().result(0)
             raise SLRTimeout(self.timeout_message(timeout) + "; it is still waiting "
                              "(call result() again, or cancel())") from None
+
+    def exception(self, timeout: float | None = None) -> BaseException | None:
+        """The query's error (None when it was answered), waiting up to ``timeout``
+        seconds as :meth:`result` does (its SLRTimeout included).
+
+        >>> import slr_sql
+        >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0))
+        >>> kb.submit("X is 1 / 0", at=0).exception(timeout=5)
+        SLREvaluationError('error(evaluation_error(zero_divisor),context((/)/2,_))')
+        >>> kb.close()
+        """
+        wait = wait_seconds("exception: timeout", timeout)
+        try:
+            return super().exception(wait)
+        except TimeoutError:
+            if self.done():
+                return super().exception(0)
+            raise SLRTimeout(self.timeout_message(timeout) + "; it is still waiting "
+                             "(call exception() again, or cancel())") from None
+
+    def add_done_callback(self, fn: Callable[[Any], Any]) -> None:
+        """Call ``fn(pending)`` once the query is answered, failed or cancelled (at once
+        if it is already); ``fn`` that is not callable is an :class:`SLRError` here, not
+        a logged TypeError later.
+
+        >>> import slr_sql
+        >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); p = kb.submit("p(X)^T", at=5)
+        >>> p.add_done_callback(5)
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: add_done_callback: fn must be callable (a function), not 5
+        >>> kb.close()
+        """
+        super().add_done_callback(check_callable("add_done_callback: fn", fn))
 
     def timeout_message(self, timeout: float | None) -> str:
         """The SLRTimeout text: which types were not complete, and their horizons."""

@@ -7,9 +7,12 @@ from __future__ import annotations
 
 import asyncio
 import inspect
+import math
+import re
 import threading
 import time
 import typing
+from pathlib import Path
 
 import pytest
 from service_helpers import ServiceProcess, same
@@ -421,11 +424,82 @@ SAME_WORDS = {
     "sql parameters that are no sequence": (lambda kb: kb.sql("SELECT ?", 5), "SLRError",
                                             "sql: a parameter cannot be bound: 'int' object is "
                                             "not iterable"),
+    # (was "plot: TypeError: 'int' object is not iterable")
     "plot of types that are no list": (lambda kb: kb.plot(5), "SLRError",
-                                       "plot: TypeError: 'int' object is not iterable"),
+                                       "plot: types must be a text or a list of texts, not 5"),
     "unsubscribe of an id that is no text": (lambda kb: kb.unsubscribe(5), "SLRError",
                                              "no subscription with id 5"),
+    # each a raw TypeError on both sides (a str compared with or added to a number)
+    "result timeout that is text": (lambda kb: _on_waiting(kb, lambda p: p.result(timeout="x")),
+                                    "SLRError",
+                                    "result: timeout must be a number of seconds, not 'x'"),
+    "exception timeout that is text": (
+        lambda kb: _on_waiting(kb, lambda p: p.exception(timeout="x")), "SLRError",
+        "exception: timeout must be a number of seconds, not 'x'"),
+    "get timeout that is text": (lambda kb: _on_subscription(kb, lambda s: s.get(timeout="x")),
+                                 "SLRError", "get: timeout must be a number of seconds, not 'x'"),
+    # a local subscription's get(timeout=nan) waited for ever; remotely at once, "within nan s"
+    "get timeout NaN": (lambda kb: _on_subscription(kb, lambda s: s.get(timeout=math.nan)),
+                        "SLRError", "get: timeout must be a number of seconds >= 0, not nan"),
+    # an SLRTimeout "within -1 s" on both sides
+    "result with a negative timeout": (
+        lambda kb: _on_waiting(kb, lambda p: p.result(timeout=-1)), "SLRError",
+        "result: timeout must be a number of seconds >= 0, not -1"),
+    # each taken, then failing on a thread of its own where it was only logged
+    "submit with a callback that is no function": (
+        lambda kb: kb.submit("true", at=0, callback=5), "SLRError",
+        "callback must be callable (a function), not 5"),
+    "add_done_callback of no function": (
+        lambda kb: _on_waiting(kb, lambda p: p.add_done_callback("print")), "SLRError",
+        "add_done_callback: fn must be callable (a function), not 'print'"),
+    # remotely define was refused whatever its arguments, locally they were taken as given
+    "define of a function that is no function": (lambda kb: kb.define("p", 1, 5), "SLRError",
+                                                 "define: fn must be callable (a function), "
+                                                 "not 5"),
+    "define of an arity that is text": (lambda kb: kb.define("p", "1", abs), "SLRError",
+                                        "define: arity must be a count (an integer >= 0), "
+                                        "not '1'"),
+    # flags were taken by their truth: "no" replaced, atomic="no" was atomic
+    "load with replace that is text": (lambda kb: kb.load("p(1).", replace="no"), "SLRError",
+                                       "load: replace must be True or False, not 'no'"),
+    "add_many with atomic that is text": (lambda kb: kb.add_many([], atomic="no"), "SLRError",
+                                          "add_many: atomic must be True or False, not 'no'"),
+    "query with wait that is text": (lambda kb: kb.query("true", wait="no"), "SLRError",
+                                     "wait must be True or False, not 'no'"),
+    "sql with write that is a number": (lambda kb: kb.sql("SELECT 1", write=1), "SLRError",
+                                        "sql: write must be True or False, not 1"),
+    # locally str(5) became the id; a list was "submit: TypeError: unhashable type: 'list'"
+    "submit with an id that is no text": (lambda kb: kb.submit("true", at=0, id=5), "SLRError",
+                                          "id must be a non-empty string (or None: one is "
+                                          "made), not 5"),
+    # locally "query: TypeError: unhashable type: 'list'"
+    "goal that is a list, with args": (lambda kb: kb.query(["p(X)"], args={"X": 1}),
+                                       "SLRError", "a goal is SLR text (a str), not list"),
+    "goal that is a list": (lambda kb: kb.query(["p(X)"]), "SLRError",
+                            "a goal is SLR text (a str), not list"),
+    "unsubscribe of an id that is a list": (lambda kb: kb.unsubscribe([1]), "SLRError",
+                                            "no subscription with id [1]"),
+    # "a duration must be a non-negative number of seconds, not x": which argument?
+    "keep_seconds that is no duration": (lambda kb: kb.add_buffer("p(_)", keep_seconds="x"),
+                                         "SLRError", "keep_seconds must be a non-negative "
+                                         "number of seconds or a duration"),
 }
+
+
+def _on_waiting(kb, call):
+    """``call`` on a synchronized query that waits (no mark reaches its time), then
+    cancelled."""
+    pending = kb.submit("findall(W, w(W)^_, L)", at=1e12)
+    try:
+        return call(pending)
+    finally:
+        pending.cancel()
+
+
+def _on_subscription(kb, call):
+    """``call`` on a subscription to a type nobody adds, then closed."""
+    with kb.subscribe("nobody(X)^T") as sub:
+        return call(sub)
 
 
 # what a local knowledge base takes, taken remotely too (the server refused it)
@@ -449,3 +523,220 @@ def test_a_refused_argument_is_the_same_error_in_the_same_words_local_and_remote
     local, remote = (_error(call, kb) for kb in pair)
     assert local == remote
     assert local[0] == expected_class and expected_words in local[1], local
+
+
+def test_a_callback_that_is_no_function_is_refused_before_anything_waits(pair, caplog):
+    """kb.submit(goal, callback=5) was taken: the query was registered (remotely: submitted
+    to the server), and once it was answered the Future only logged "exception calling
+    callback" with a TypeError, on a thread of its own. It is refused at the call, on both,
+    and nothing waits."""
+    for kb in pair:
+        with pytest.raises(slr_sql.SLRError, match="callback must be callable"):
+            kb.submit("findall(W, w(W)^_, L)", at=1e12, id="never", callback=5)
+        assert [p.id for p in kb.pending()] == []
+        with pytest.raises(slr_sql.SLRError, match="subscribe: callback must be callable"):
+            kb.subscribe("p(X)^T", callback="print")
+        pending = kb.submit("true", at=0)
+        assert pending.result(timeout=10) == [{}]
+        with pytest.raises(slr_sql.SLRError, match="add_done_callback: fn must be callable"):
+            pending.add_done_callback(5)    # (done: a Future would call it now)
+    assert "exception calling callback" not in caplog.text
+
+
+# -- every argument of every public method, given a value of the wrong kind -------------------
+#
+# Each (method, parameter) gets the wrong kinds of value its kind of parameter can meet: text
+# where a number is expected, NaN, a negative timeout, a bool where a count or a number is
+# expected, None where a value is required, a non-callable where a function is. Every one is
+# an SLRError (a subclass at most) naming what is wrong, of the same class locally and
+# through `slr serve`, and never the boundary's fallback words for a Python error
+# ("query: TypeError: ...").
+
+NAN, INF = math.nan, math.inf
+TIME = ["x", NAN, True, [1], b"1"]                  # at=, since=, t, start, end
+TIMEOUT = ["x", NAN, True, [1], -1, -INF]           # timeout= (seconds >= 0)
+COUNT = ["x", 1.5, True, -1, NAN, None]             # limit=, max_steps=, keep_last=
+TEXT = [5, None, True, [1], b"p"]                   # a goal, a program, a pattern, a name
+CALLABLE = [5, "print", True, [print]]              # callback=, fn
+FLAG = ["no", 1, None, 0.0]                         # replace=, atomic=, wait=, write=
+MAPPING = [[1], "X", 5, True]                       # args=
+ROBOT = [5, True, "", [1]]
+EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "tea.slr"
+
+
+def _listed(iterator):
+    return list(iterator)
+
+
+# "method.parameter": (the call given the bad value, its values, words the message holds)
+SWEEP = {
+    "load.text": (lambda kb, v: kb.load(v), TEXT, "program text"),
+    "load.filename": (lambda kb, v: kb.load("p(1).", v), [5, None, True, [1]], "filename"),
+    "load.name": (lambda kb, v: kb.load("p(1).", name=v), TEXT + [""], "program name"),
+    "load.replace": (lambda kb, v: kb.load("p(1).", name="swept", replace=v), FLAG,
+                     "replace"),
+    "load_file.path": (lambda kb, v: kb.load_file(v), [5, None, True, [1]], "path"),
+    "load_file.name": (lambda kb, v: kb.load_file(EXAMPLE, name=v), TEXT + [""],
+                       "program name"),
+    "load_file.replace": (lambda kb, v: kb.load_file(EXAMPLE, name="swept", replace=v), FLAG,
+                          "replace"),
+    "unload.name": (lambda kb, v: kb.unload(v), TEXT + [""], "program name"),
+    "define.name": (lambda kb, v: kb.define(v, 1, abs), [5, None, True, [1]], "name"),
+    "define.arity": (lambda kb, v: kb.define("p", v, abs), COUNT, "arity"),
+    "define.fn": (lambda kb, v: kb.define("p", 1, v), CALLABLE + [None], "fn"),
+    "add.text": (lambda kb, v: kb.add(v), TEXT, "add takes one event"),
+    "add_event.name": (lambda kb, v: kb.add_event(v, [1], 1.0), [5, None, True, [1]],
+                       "event name"),
+    "add_event.args": (lambda kb, v: kb.add_event("p", v, 1.0), [5, None, True, "ab"],
+                       "event arguments"),
+    "add_event.start": (lambda kb, v: kb.add_event("p", [1], v), TIME + [None], "event times"),
+    "add_event.end": (lambda kb, v: kb.add_event("p", [1], 1.0, v), TIME, "event times"),
+    "add_many.events": (lambda kb, v: kb.add_many(v), [5, None, True, NAN],
+                        "add_many takes an iterable"),
+    "add_many.atomic": (lambda kb, v: kb.add_many(["p(1)^1"], atomic=v), FLAG, "atomic"),
+    "query.goal": (lambda kb, v: kb.query(v), TEXT, "a goal is SLR text"),
+    "query.at": (lambda kb, v: kb.query("true", at=v), TIME, "at must be"),
+    "query.args": (lambda kb, v: kb.query("true", args=v), MAPPING, "args must be"),
+    "query.timeout": (lambda kb, v: kb.query("true", timeout=v), TIMEOUT, "timeout must be"),
+    "query.max_steps": (lambda kb, v: kb.query("true", max_steps=v), COUNT[:-1],
+                        "max_steps must be"),
+    "query.limit": (lambda kb, v: kb.query("true", limit=v), COUNT[:-1], "limit must be"),
+    "query.wait": (lambda kb, v: kb.query("true", wait=v), FLAG, "wait must be"),
+    "query.robot": (lambda kb, v: kb.query("true", robot=v), ROBOT, "robot"),
+    "solutions.goal": (lambda kb, v: _listed(kb.solutions(v)), TEXT, "a goal is SLR text"),
+    "solutions.at": (lambda kb, v: _listed(kb.solutions("true", at=v)), TIME, "at must be"),
+    "solutions.args": (lambda kb, v: _listed(kb.solutions("true", args=v)), MAPPING,
+                       "args must be"),
+    "solutions.timeout": (lambda kb, v: _listed(kb.solutions("true", timeout=v)), TIMEOUT,
+                          "timeout must be"),
+    "solutions.robot": (lambda kb, v: _listed(kb.solutions("true", robot=v)), ROBOT, "robot"),
+    "goal_warnings.goal": (lambda kb, v: kb.goal_warnings(v), TEXT, "a goal is SLR text"),
+    "explain.goal": (lambda kb, v: kb.explain(v), TEXT, "a goal is SLR text"),
+    "submit.goal": (lambda kb, v: kb.submit(v, at=0), TEXT, "a goal is SLR text"),
+    "submit.at": (lambda kb, v: kb.submit("true", at=v), TIME, "at must be"),
+    "submit.id": (lambda kb, v: kb.submit("true", at=0, id=v), [5, True, "", [1], NAN],
+                  "id must be"),
+    "submit.args": (lambda kb, v: kb.submit("true", at=0, args=v), MAPPING, "args must be"),
+    "submit.timeout": (lambda kb, v: kb.submit("true", at=0, timeout=v), TIMEOUT,
+                       "timeout must be"),
+    "submit.callback": (lambda kb, v: kb.submit("true", at=0, callback=v), CALLABLE,
+                        "callback must be callable"),
+    "submit.robot": (lambda kb, v: kb.submit("true", at=0, robot=v), ROBOT, "robot"),
+    "ask.goal": (lambda kb, v: asyncio.run(kb.ask(v, at=0)), TEXT, "a goal is SLR text"),
+    "ask.at": (lambda kb, v: asyncio.run(kb.ask("true", at=v)), TIME, "at must be"),
+    "ask.id": (lambda kb, v: asyncio.run(kb.ask("true", at=0, id=v)), [5, True, "", [1]],
+               "id must be"),
+    "ask.args": (lambda kb, v: asyncio.run(kb.ask("true", at=0, args=v)), MAPPING,
+                 "args must be"),
+    "ask.timeout": (lambda kb, v: asyncio.run(kb.ask("true", at=0, timeout=v)), TIMEOUT,
+                    "timeout must be"),
+    "ask.robot": (lambda kb, v: asyncio.run(kb.ask("true", at=0, robot=v)), ROBOT, "robot"),
+    "mark_complete.event_type": (lambda kb, v: kb.mark_complete(v, 1.0), TEXT + [""],
+                                 "event type"),
+    "mark_complete.t": (lambda kb, v: kb.mark_complete("swept/1", v), TIME + [None],
+                        "t must be"),
+    "complete_until.event_type": (lambda kb, v: kb.complete_until(v), TEXT + [""],
+                                  "event type"),
+    "add_buffer.pattern": (lambda kb, v: kb.add_buffer(v, keep_last=1), [5, None, True, [1]],
+                           "pattern"),
+    "add_buffer.keep_last": (lambda kb, v: kb.add_buffer("p(_)", keep_last=v), COUNT[:-1],
+                             "keep_last"),
+    "add_buffer.keep_seconds": (lambda kb, v: kb.add_buffer("p(_)", keep_seconds=v),
+                                ["x", NAN, -1, True, [1]], "keep_seconds"),
+    "add_buffer.keep_between": (lambda kb, v: kb.add_buffer("p(_)", keep_between=v),
+                                [5, "x", (NAN, 1), ("x", 1), (1,), (True, 2)],
+                                "keep_between"),
+    "remove_buffer.buffer_id": (lambda kb, v: kb.remove_buffer(v),
+                                ["x", 1.5, True, None, [1], NAN], "buffer id"),
+    "sql.query": (lambda kb, v: kb.sql(v), [5, None, True, [1]], "statement"),
+    "sql.params": (lambda kb, v: kb.sql("SELECT 1", v), [5, True, NAN], "parameter"),
+    "sql.write": (lambda kb, v: kb.sql("SELECT 1", write=v), FLAG, "write"),
+    "sql.timeout": (lambda kb, v: kb.sql("SELECT 1", timeout=v), TIMEOUT, "timeout must be"),
+    "plot.types": (lambda kb, v: kb.plot(v), [5, True, NAN], "types"),
+    "subscribe.pattern": (lambda kb, v: kb.subscribe(v), TEXT, "pattern"),
+    "subscribe.where": (lambda kb, v: kb.subscribe("p(X)^T", where=v), [5, True, [1]],
+                        "where"),
+    "subscribe.since": (lambda kb, v: kb.subscribe("p(X)^T", since=v), TIME + [None],
+                        "since"),
+    "subscribe.until": (lambda kb, v: kb.subscribe("p(X)^T", until=v), TIME, "until"),
+    "subscribe.id": (lambda kb, v: kb.subscribe("p(X)^T", id=v), [5, True, "", [1]], "id"),
+    "subscribe.callback": (lambda kb, v: kb.subscribe("p(X)^T", callback=v), CALLABLE,
+                           "callback must be callable"),
+    "subscribe.max_queue": (lambda kb, v: kb.subscribe("p(X)^T", max_queue=v),
+                            COUNT + [0], "max_queue"),
+    "subscribe.max_lag": (lambda kb, v: kb.subscribe("p(X)^T", max_lag=v), COUNT[:-1] + [0],
+                          "max_lag"),
+    "unsubscribe.id": (lambda kb, v: kb.unsubscribe(v), [5, None, True, [1]],
+                       "no subscription"),
+    # the PendingQuery of submit (a Future: exception() too) and the Subscription of subscribe
+    "PendingQuery.result.timeout": (
+        lambda kb, v: _on_waiting(kb, lambda p: p.result(timeout=v)), TIMEOUT,
+        "result: timeout must be"),
+    "PendingQuery.exception.timeout": (
+        lambda kb, v: _on_waiting(kb, lambda p: p.exception(timeout=v)), TIMEOUT,
+        "exception: timeout must be"),
+    "PendingQuery.add_done_callback.fn": (
+        lambda kb, v: _on_waiting(kb, lambda p: p.add_done_callback(v)), CALLABLE + [None],
+        "add_done_callback: fn must be callable"),
+    "Subscription.get.timeout": (
+        lambda kb, v: _on_subscription(kb, lambda s: s.get(timeout=v)), TIMEOUT,
+        "get: timeout must be"),
+}
+
+# parameters the sweep leaves out, and why
+NOT_SWEPT = {
+    "plot.options": "keyword options of the timeline, checked by plot (tests/test_plot.py)",
+    "__exit__.exc": "the context manager protocol: Python passes them",
+    "Subscription.__exit__.exc_type": "the context manager protocol: Python passes them",
+    "Subscription.__exit__.rest": "the context manager protocol: Python passes them",
+}
+
+
+def _parameters(proto: type, prefix: str) -> set[str]:
+    found = set()
+    for name in dir(proto):
+        fn = getattr(proto, name, None)
+        if not callable(fn) or (name.startswith("_") and name not in ("__enter__", "__exit__")):
+            continue
+        found |= {f"{prefix}{name}.{p}" for p in inspect.signature(fn).parameters if p != "self"}
+    return found
+
+
+def test_the_sweep_covers_every_parameter_of_every_public_method():
+    every = (_parameters(KnowledgeBaseAPI, "") | _parameters(PendingQueryAPI, "PendingQuery.")
+             | _parameters(SubscriptionAPI, "Subscription.")
+             | {"PendingQuery.exception.timeout"})   # (a Future's, not in the protocol)
+    assert every - set(SWEEP) - set(NOT_SWEPT) == set()
+    assert set(SWEEP) - every == set()
+
+
+# (a value's repr, short and the same in every run: an id of each case)
+def _value_id(value) -> str:
+    return {NAN: "nan", INF: "inf", -INF: "-inf"}.get(value, repr(value)) \
+        if isinstance(value, float) else repr(value)
+
+
+SWEPT = [pytest.param(key, value, id=f"{key}={_value_id(value)}")
+         for key, (_call, values, _words) in SWEEP.items() for value in values]
+
+
+@pytest.mark.parametrize("key, value", SWEPT)
+def test_a_wrong_kind_of_argument_is_an_slr_error_in_words_local_and_remote(pair, key, value):
+    call, _values, words = SWEEP[key]
+    local, remote = pair
+    outcomes = []
+    for kb in (local, remote):
+        try:
+            got = call(kb, value)
+        except slr_sql.SLRError as exc:
+            outcomes.append((type(exc).__name__, str(exc)))
+            continue
+        if hasattr(got, "close"):          # (a subscription made after all)
+            got.close()
+        outcomes.append(("value", repr(got)))
+    (local_class, local_words), (remote_class, remote_words) = outcomes
+    assert local_class != "value" and local_class == remote_class, outcomes
+    for said in (local_words, remote_words):
+        assert words in said, outcomes
+        assert not re.search(r"\b(Type|Value|Attribute|Key|Index|Overflow)Error\b", said), \
+            outcomes

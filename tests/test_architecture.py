@@ -24,7 +24,8 @@ LAYERS = {
     "api": 1,  # the KnowledgeBaseAPI protocol: typing only (errors for EventRejected)
     "unify": 1, "arith": 1, "encoding": 1, "program": 1, "parser": 1,
     "robotlib": 1, "clocks": 1, "answers": 1,
-    "printable": 1,  # text a stranger controls, made safe to print (terms' writeq escapes)
+    "printable": 0.5,  # text a stranger controls, made safe to print (terms' writeq escapes)
+    "arguments": 0.75,  # checks of public arguments shared by layers (seconds, callables)
     "log_throttle": 1.5,  # log lines a stranger can cause, bounded (printable, clocks)
     "library_terms": 1,  # generated: the library's clauses as Python (terms only)
     "store": 2, "frames": 2,

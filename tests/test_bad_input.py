@@ -329,3 +329,114 @@ def test_a_declared_arity_holds_after_reopen_and_in_another_connection(tmp_path)
             again.add("p(1)^1")
         again.add("p(1, 2)^1")
         assert again.query("p(X, Y)^T") == [{"X": 1, "Y": 2, "T": 1.0}]
+
+
+# ---------------------------------------------------------------- arguments refused at the call
+# (what only a local knowledge base has; tests/test_api_parity.py sweeps the methods both have)
+
+NOT_A_FUNCTION = [5, "print", None, [print]]
+
+
+@pytest.mark.parametrize("listeners", ["add_listeners", "load_listeners", "reload_listeners",
+                                       "progress_listeners"])
+@pytest.mark.parametrize("value", NOT_A_FUNCTION, ids=repr)
+def test_a_listener_that_is_no_function_is_refused_as_it_is_added(kb, listeners, value):
+    """kb.add_listeners took 5; the next add stored its events, then failed in its last
+    stage ("add: TypeError: 'int' object is not callable"), after the commit. Each way into
+    a listener list refuses it, and the knowledge base goes on as before."""
+    target = getattr(kb, listeners)
+    before = list(target)
+    for add in (target.append, lambda v: target.insert(0, v), lambda v: target.extend([v]),
+                lambda v: target.__iadd__([v]), lambda v: target.__setitem__(slice(0, 0), [v])):
+        with pytest.raises(SLRError, match=f"kb.{listeners}: a listener must be callable"):
+            add(value)
+    if target:
+        with pytest.raises(SLRError, match="must be callable"):
+            target[0] = value
+    assert list(target) == before
+    heard = []
+    kb.add_listeners.append(heard.append)
+    kb.load("p(X)^T :- q(X)^T.")
+    kb.add("q(1)^1")
+    assert len(heard) == 1 and kb.query("p(X)^T") == [{"X": 1, "T": 1.0}]
+
+
+@pytest.mark.parametrize("call, words", [
+    (lambda: slr_sql.ManualClock("0"), "ManualClock: t must be a number of seconds, not '0'"),
+    (lambda: slr_sql.ManualClock(float("nan")), "ManualClock: t must be a number of seconds, "
+                                                "not nan"),
+    (lambda: slr_sql.ManualClock(0).set("5"), "ManualClock.set: t must be a number of "
+                                              "seconds, not '5'"),
+    (lambda: slr_sql.ManualClock(0).set(float("nan")), "not nan"),
+    (lambda: slr_sql.ManualClock(0).advance(None), "ManualClock.advance: dt must be a number "
+                                                   "of seconds, not None"),
+    (lambda: slr_sql.ManualClock(0).advance(-1), "dt must be a number of seconds >= 0, not -1"),
+    (lambda: slr_sql.ManualClock(0).subscribe(5), "Clock.subscribe: fn must be callable"),
+    (lambda: slr_sql.StreamClock().subscribe(None), "Clock.subscribe: fn must be callable"),
+], ids=["ManualClock text", "ManualClock nan", "set text", "set nan", "advance None",
+        "advance negative", "subscribe 5", "subscribe None"])
+def test_a_clock_refuses_what_is_no_time_or_no_function(call, words):
+    """ManualClock("0") was a ValueError and set("5") a TypeError; set(nan) made a clock that
+    every later set compared false with; a listener that is no function was taken and made
+    the next set fail (in every waiting query's release)."""
+    with pytest.raises(SLRError) as refused:
+        call()
+    assert words in str(refused.value)
+
+
+def test_a_subscription_wait_refuses_a_timeout_that_is_no_seconds(kb):
+    """wait(timeout="x") was a TypeError (adding it to the monotonic clock)."""
+    with kb.subscribe("p(X)^T", callback=lambda answer: None) as sub:
+        for timeout, words in (("x", "not 'x'"), (float("nan"), ">= 0, not nan"),
+                               (-1, ">= 0, not -1")):
+            with pytest.raises(SLRError, match="wait: timeout must be a number of seconds"):
+                sub.wait(timeout=timeout)
+            with pytest.raises(SLRError, match=words):
+                sub.wait(timeout=timeout)
+        assert sub.wait(timeout=0) is False
+
+
+@pytest.mark.parametrize("forever", [None, float("inf"), 1e300])
+def test_a_wait_of_inf_or_beyond_a_thread_s_limit_waits_for_the_answer(kb, forever):
+    """result(timeout=inf) was an OverflowError ("timestamp out of range for platform
+    time_t"), as was any timeout beyond threading.TIMEOUT_MAX: they wait for ever, as None
+    does."""
+    import threading
+
+    pending = kb.submit("findall(X, p(X)^_, L)", at=5)
+    with kb.subscribe("p(X)^T", since=0) as sub:
+        threading.Timer(0.05, lambda: (kb.add("p(1)^1"), kb.mark_complete("p/1", 5))).start()
+        assert pending.result(timeout=forever) == [{"L": [1]}]
+        assert pending.exception(timeout=forever) is None
+        assert sub.get(timeout=forever) == {"X": 1, "T": 1.0}
+
+
+@pytest.mark.parametrize("options, words", [
+    ({"path": 5}, "open: path must be a file's path (a str or a pathlib.Path), a PostgreSQL "
+                  "URL or None, not 5"),
+    ({"clock": 5}, "open: clock must be a clock"),
+    ({"adopt": "yes"}, "open: adopt must be True or False, not 'yes'"),
+    ({"synchronous": 5}, "synchronous must be OFF, NORMAL, FULL or EXTRA, not 5"),
+    ({"checkpoint": 5}, "checkpoint must be 'auto' or 'background', not 5"),
+    ({"cache_mib": "x"}, "cache_mib must be a number of MiB from 0.0625 to 1048576, not 'x'"),
+    ({"cache_mib": float("nan")}, "cache_mib must be a number of MiB"),
+], ids=["path 5", "clock 5", "adopt text", "synchronous 5", "checkpoint 5", "cache_mib text",
+        "cache_mib nan"])
+def test_open_refuses_options_of_the_wrong_kind_in_words_and_creates_nothing(tmp_path, options,
+                                                                             words):
+    """path=5 and synchronous=5 were "open: TypeError: ..." and "open: AttributeError: ...",
+    cache_mib and checkpoint "open: ValueError: ..." (the boundary's words for a Python
+    error); clock=5 and adopt="yes" were taken (clock=5 failed at the first call that asked
+    the time)."""
+    with pytest.raises(SLRError) as refused:
+        slr_sql.open(**({"path": tmp_path / "robot.db"} | options))
+    said = str(refused.value)
+    assert words in said and "Error:" not in said, said
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_connect_refuses_a_token_that_is_no_text_without_showing_it():
+    """connect(url, token=5) was a raw TypeError ('int' object is not iterable)."""
+    with pytest.raises(SLRError) as refused:
+        slr_sql.connect("http://127.0.0.1:9", token=12345)
+    assert str(refused.value) == "connect: token must be text (a str), not of type int"

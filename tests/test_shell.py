@@ -647,3 +647,11 @@ def test_at_nan_is_refused_at_once_in_the_queries_words_and_the_view_stays(store
         "X = cup1, P = table, T = 1.0",
         "X = cup2, P = shelf, T = 2.0",
     ]
+
+
+def test_at_that_is_no_number_is_refused_in_words_and_the_view_stays(store):
+    """`at soon` said Python's "could not convert string to float: 'soon'"."""
+    r = run_piped(store, "at 1", "at soon", "seg(X, P)^T.")
+    assert r.returncode == 0, r.stderr
+    assert r.stderr == "error: at takes a number of seconds (or none), not soon\n"
+    assert r.stdout.splitlines() == ["stream view: at 1", "X = cup1, P = table, T = 1.0"]

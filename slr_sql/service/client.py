@@ -59,9 +59,10 @@ from slr_sql.api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 
 from .encoding import (TermError, decode_answers, decode_plain, dumps, encode_args,
                        encode_arguments, encode_term, loads)
-from ..kb import (check_event_type, check_load, check_mark, check_program_name,
+from ..kb import (check_define, check_event_type, check_load, check_mark, check_program_name,
                   check_query_options, check_sql, not_event_text, read_program_file,
                   unbindable_parameter, unforeseen_failure)
+from ..arguments import check_callable, check_flag, wait_seconds
 from ..buffers import analyze, check_buffer_policy
 from ..terms import format_term
 from ..plans import argument_term, check_goal, not_a_variable
@@ -255,6 +256,9 @@ class RemoteKnowledgeBase:
         self.url = _service_url(url, httpx).rstrip("/")
         if token is None:
             token = os.environ.get("SLR_TOKEN") or None
+        if token is not None and not isinstance(token, str):   # (a secret: not shown)
+            raise SLRError(f"connect: token must be text (a str), not of type "
+                           f"{type(token).__name__}")
         if token:
             check_token_text(token)
         self._token = token
@@ -456,6 +460,7 @@ class RemoteKnowledgeBase:
         ([2], [{'X': 1, 'T': 1.0}, {'X': 2, 'T': 2.0}])
         >>> kb.close(); server.stop(); server.kb.close()
         """
+        check_flag("add_many: atomic", atomic)
         _iterable(events, "add_many")
         items: list = []
         given: list = []                # the caller's events (a rejection's .event)
@@ -526,7 +531,8 @@ class RemoteKnowledgeBase:
         [{'C': Atom('red')}]
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        body: dict[str, Any] = {"text": text, "name": check_load(text, filename, name)}
+        body: dict[str, Any] = {"text": text,
+                                "name": check_load(text, filename, name, replace)}
         if filename != "<string>":
             body["filename"] = filename
         if replace:
@@ -608,6 +614,7 @@ class RemoteKnowledgeBase:
         slr_sql.service.errors.ServiceError: define() is not available over the network: register Python predicates in the process that runs the server
         >>> kb.close()
         """
+        check_define(name, arity, fn)   # (the arguments a local knowledge base refuses first)
         raise ServiceError("define() is not available over the network: register Python "
                            "predicates in the process that runs the server",
                            kind="NotImplemented")
@@ -629,7 +636,7 @@ class RemoteKnowledgeBase:
         >>> kb.close(); server.stop(); server.kb.close()
         """
         check_query_options(at=at, timeout=timeout, limit=limit, robot=robot, args=args,
-                            max_steps=max_steps)
+                            max_steps=max_steps, wait=wait)
         if wait:  # synchronized: long-polls, however long the wait (as kb.query does it)
             return self.submit(goal, at=at, args=args, timeout=timeout, robot=robot).result()
         body = _goal_body(goal, at, args, timeout)
@@ -739,10 +746,11 @@ class RemoteKnowledgeBase:
         [{'L': [Atom('a')]}]
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        check_query_options(at=at, timeout=timeout, robot=robot, args=args)
+        check_query_options(at=at, timeout=timeout, robot=robot, args=args, id=id,
+                            callback=callback)
         body = _goal_body(goal, at, args, timeout)
         if id is not None:
-            body["id"] = str(id)
+            body["id"] = id
         if robot is not None:
             body["robot"] = robot
         status, reply = self._request("POST", "/submit", body, ok=(200, 202))
@@ -960,7 +968,7 @@ class RemoteKnowledgeBase:
         slr_sql.service.errors.ServiceError: sql over the service is read-only: DELETE statements are not allowed (SELECT, WITH, VALUES, EXPLAIN)
         >>> kb.close(); server.stop(); server.kb.close()
         """
-        check_sql(query, timeout)
+        check_sql(query, timeout, write)
         if write:
             raise ServiceError("sql(write=True) is not available over the network: the "
                                "service runs read-only SQL only (write with `slr sql DB "
@@ -1156,11 +1164,41 @@ class RemotePendingQuery(Future):
         [{'X': 1, 'T': 12.0}]
         >>> kb.close(); server.stop(); server.kb.close()
         """
+        wait = wait_seconds("result: timeout", timeout)   # (as a local PendingQuery's)
         try:
-            return super().result(timeout)
+            return super().result(wait)
         except TimeoutError:
             if self.done():      # answered (or failed with its own SLRTimeout) meanwhile
                 return super().result(0)
+        error = self._waited_out(timeout, "result")
+        if error is None:
+            return super().result(0)
+        raise error
+
+    def exception(self, timeout: float | None = None) -> BaseException | None:
+        """The query's error (None when it was answered), waiting up to ``timeout`` seconds
+        as :meth:`result` does (its SLRTimeout included).
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); p = kb.submit("p(X)^T", at=20)
+        >>> kb.mark_complete("p/1", 20); p.exception(timeout=5) is None
+        True
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
+        wait = wait_seconds("exception: timeout", timeout)
+        try:
+            return super().exception(wait)
+        except TimeoutError:
+            if self.done():
+                return super().exception(0)
+        error = self._waited_out(timeout, "exception")
+        if error is None:
+            return super().exception(0)
+        raise error
+
+    def _waited_out(self, timeout: float | None, method: str) -> SLRTimeout | None:
+        """After a wait of ``method`` ran out: None if the server has the answer now, else
+        the SLRTimeout saying what the query waits for."""
         try:                     # what it waits for now, in the server's words
             status, reply = self.client._request("GET", f"/submit/{quote(self.handle)}",
                                                  params={"wait": 0}, ok=(200, 202))
@@ -1168,17 +1206,35 @@ class RemotePendingQuery(Future):
         except SLRError:
             pass
         if self.done():
-            return super().result(0)
-        still = "it is still waiting (call result() again, or cancel())"
+            return None
+        still = f"it is still waiting (call {method}() again, or cancel())"
         # the server's words are the local knowledge base's without the wait: "synchronized
         # query ID (GOAL at T) was not answerable: WHAT"; the wait goes where the local puts it
         head, answerable, what = self._waiting.partition(" was not answerable: ")
         if answerable:
-            raise SLRTimeout(f"{head} was not answerable within {timeout:g} s: {what}; {still}")
+            return SLRTimeout(f"{head} was not answerable within {timeout:g} s: {what}; {still}")
         what = ", ".join(map(str, self.waiting_for)) or "its answer"
         at = "now" if self.at is None else _time_text(float(self.at))
-        raise SLRTimeout(f"synchronized query {self.id!r} ({self.goal} at {at}) was not "
-                         f"answered within {timeout:g} s: {what}; {still}")
+        return SLRTimeout(f"synchronized query {self.id!r} ({self.goal} at {at}) was not "
+                          f"answered within {timeout:g} s: {what}; {still}")
+
+    def add_done_callback(self, fn: Callable[[Any], Any]) -> None:
+        """Call ``fn(pending)`` once the query is answered, failed or cancelled; ``fn``
+        that is not callable is an :class:`SLRError` here, as on a local PendingQuery.
+
+        >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
+        >>> kb = slr_sql.connect(server.url); p = kb.submit("p(X)^T", at=20)
+        >>> import threading; done = threading.Event()
+        >>> p.add_done_callback(lambda pending: done.set())
+        >>> p.add_done_callback("print")
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: add_done_callback: fn must be callable (a function), not 'print'
+        >>> kb.mark_complete("p/1", 20); done.wait(5)
+        True
+        >>> kb.close(); server.stop(); server.kb.close()
+        """
+        super().add_done_callback(check_callable("add_done_callback: fn", fn))
 
     def explain(self) -> str:
         """What the query waited for and what released it (the server's explanation).
@@ -1464,9 +1520,10 @@ class RemoteSubscription:
         ({'X': 1, 'T': 11.0}, None)
         >>> kb.close(); server.stop(); server.kb.close()
         """
+        wait = wait_seconds("get: timeout", timeout)   # (as a local subscription's)
         self._check_pull()
         try:
-            return self._next(timeout)
+            return self._next(wait)
         except StopIteration:
             return None
 

@@ -376,14 +376,16 @@ class Database:
                  checkpoint_interval: float = CHECKPOINT_INTERVAL,
                  cache_mib: float = CACHE_SIZE_KIB / 1024):
         busy_timeout = check_busy_timeout(busy_timeout)
+        # (SLRErrors: open's boundary words any other error as "open: ValueError: ...")
         if isinstance(cache_mib, bool) or not isinstance(cache_mib, (int, float)) \
                 or not 0.0625 <= cache_mib <= 1 << 20:
-            raise ValueError(f"cache_mib must be a number of MiB from 0.0625 to 1048576, "
-                             f"not {cache_mib!r}")
-        if synchronous.upper() not in ("OFF", "NORMAL", "FULL", "EXTRA"):
-            raise ValueError(f"synchronous must be OFF, NORMAL, FULL or EXTRA, not {synchronous!r}")
-        if checkpoint not in CHECKPOINT_MODES:
-            raise ValueError(f"checkpoint must be 'auto' or 'background', not {checkpoint!r}")
+            raise SLRError(f"cache_mib must be a number of MiB from 0.0625 to 1048576, "
+                           f"not {cache_mib!r}")
+        if not isinstance(synchronous, str) or \
+                synchronous.upper() not in ("OFF", "NORMAL", "FULL", "EXTRA"):
+            raise SLRError(f"synchronous must be OFF, NORMAL, FULL or EXTRA, not {synchronous!r}")
+        if not isinstance(checkpoint, str) or checkpoint not in CHECKPOINT_MODES:
+            raise SLRError(f"checkpoint must be 'auto' or 'background', not {checkpoint!r}")
         self.checkpointer: WalCheckpointer | None = None
         self.path = None if path in (None, ":memory:") else os.fspath(path)
         new = True if self.path is None else check_file(self.path, adopt)

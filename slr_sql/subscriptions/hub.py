@@ -21,6 +21,7 @@ import time
 import warnings
 from typing import Any, Callable
 
+from ..arguments import check_callable
 from ..clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning
 from ..encoding import NullArgument, decode
 from ..errors import NotAnEvent, SLRError, SLRSubscriptionInUse, log_failure
@@ -32,7 +33,7 @@ from ..terms import format_atom
 from .matching import Matcher, time_arg
 from .queue import HISTORY_PHASE, LIVE_PHASE, Subscription, SubscriptionOverflow, \
     SubscriptionState, resolve_threadsafe
-from .registry import SubscriptionRegistry, journal_table
+from .registry import SubscriptionRegistry, journal_table, no_subscription
 
 __all__ = ["SubscriptionHub", "check_subscription", "DEFAULT_MAX_QUEUE", "DEFAULT_MAX_LAG", "POLL_INTERVAL"]
 
@@ -105,8 +106,8 @@ def check_subscription(pattern: Any, where: Any, since: Any, until: Any, id: Any
                        f"({since_value:g})")
     if id is not None and (not isinstance(id, str) or not id):
         raise SLRError(f"subscribe: id must be a non-empty string, not {shown(id)}")
-    if callback is not None and not callable(callback):
-        raise SLRError("subscribe: callback must be callable")
+    if callback is not None:
+        check_callable("subscribe: callback", callback)
     if isinstance(max_queue, bool) or not isinstance(max_queue, int) or max_queue < 1:
         raise SLRError(f"subscribe: max_queue must be a positive integer, not {shown(max_queue)}")
     if max_lag is not None and (isinstance(max_lag, bool) or not isinstance(max_lag, int)
@@ -307,6 +308,8 @@ class SubscriptionHub:
         []
         >>> kb.close()
         """
+        if not isinstance(sub_id, str):   # (no id: a list, unhashable, is none either)
+            raise no_subscription(sub_id)
         with self.lock:
             sub = self._subs.get(sub_id)
         if sub is not None:

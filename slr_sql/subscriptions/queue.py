@@ -22,6 +22,7 @@ import threading
 import time
 from typing import Any, Callable, Protocol
 
+from ..arguments import wait_seconds
 from ..errors import SLRError, SLRTimeout
 from ..lockorder import ordered_lock
 from .matching import Matcher
@@ -342,9 +343,20 @@ class Subscription:
         """The next answer; None once the subscription has ended (``until`` reached or
         closed). Raises SLRTimeout when none came within ``timeout`` seconds, and the error
         that ended the subscription (e.g. :class:`SubscriptionOverflow`) after the answers
-        queued before it."""
+        queued before it. ``timeout``: seconds >= 0, None or ``inf`` for ever (anything
+        else is an SLRError).
+
+        >>> import slr_sql
+        >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); sub = kb.subscribe("p(X)^T")
+        >>> sub.get(timeout=float("nan"))
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: get: timeout must be a number of seconds >= 0, not nan
+        >>> sub.close(); kb.close()
+        """
+        wait = wait_seconds("get: timeout", timeout)
         self._check_pull()
-        item = self._take(timeout)
+        item = self._take(wait)
         if item is None:
             raise SLRTimeout(f"subscription {self.id!r}: no event within {timeout:g} s")
         if type(item) is _End:
@@ -620,7 +632,9 @@ class Subscription:
 
     def wait(self, timeout: float | None = None) -> bool:
         """Wait until a callback subscription has ended (``until`` reached, closed, or failed);
-        True if it has, False on timeout. Raises the error that ended it."""
+        True if it has, False on timeout (seconds >= 0, None or ``inf`` for ever). Raises
+        the error that ended it."""
+        timeout = wait_seconds("wait: timeout", timeout)
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout)
             if self._thread.is_alive():
