@@ -31,7 +31,8 @@ from ..program import flatten_conjunction
 from ..terms import Atom, Clause, String, Struct, Var, deref, format_term, is_ground, term_vars
 
 __all__ = ["POLICIES", "BINARY", "IGNORED_FACTS", "MAX_PATTERN_EVENTS", "MAX_ALTERNATIVES",
-           "MAX_PATTERN_DEPTH", "Leaf", "Alternative", "EventRule",
+           "MAX_PATTERN_DEPTH", "Leaf", "Alternative", "EventRule", "pattern_size",
+           "check_size",
            "compile_rule", "is_event_rule", "is_ignored_fact", "consumption_directive",
            "order_rules", "rule_error"]
 
@@ -664,10 +665,22 @@ def pattern_size(pattern: Any) -> tuple[int, int, int]:
     return sizes[id(deref(pattern))]
 
 
-def _check_size(clause: Clause, head: Any, pattern: Any) -> None:
-    """Refuse a pattern beyond :data:`MAX_PATTERN_EVENTS`, :data:`MAX_ALTERNATIVES` or
-    :data:`MAX_PATTERN_DEPTH`, before anything walks it."""
-    head = deref(head)
+def check_size(clause: Clause) -> None:
+    """Refuse the event rule ``clause`` if its pattern is beyond :data:`MAX_PATTERN_EVENTS`,
+    :data:`MAX_ALTERNATIVES` or :data:`MAX_PATTERN_DEPTH` (an SLRSyntaxError at the rule),
+    before anything walks it.
+
+    >>> from slr_sql.parser import parse_program
+    >>> check_size(parse_program("c(X) <- a(X) seq b(X).")[0])
+    >>> long = " seq ".join(f"a{i}(X)" for i in range(40))
+    >>> check_size(parse_program(f"c(X) <- {long}.")[0])
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRSyntaxError: <string>:1:1: event rule c/1: its pattern has 40 event atoms in one alternative; at most 32 are supported (split it into event rules over each other's complex events)
+    ...
+    """
+    rule = deref(clause.head)
+    head, pattern = deref(rule.args[0]), rule.args[1]
     name = (f" {head.name}/{len(head.args)}" if type(head) is Struct
             else f" {head}/0" if type(head) is Atom else "")
     atoms, alternatives, depth = pattern_size(pattern)
@@ -685,17 +698,20 @@ def _check_size(clause: Clause, head: Any, pattern: Any) -> None:
                                  f"{MAX_ALTERNATIVES} are supported")
 
 
-def compile_rule(clause: Clause) -> EventRule:
+def compile_rule(clause: Clause, sized: bool = True) -> EventRule:
     """Read the clause ``Head <- Pattern`` into an :class:`EventRule`; raises
-    :class:`SLRSyntaxError` (with line and column) for a rule that is not well formed.
+    :class:`SLRSyntaxError` (with line and column) for a rule that is not well formed, or
+    (with ``sized``) larger than :func:`check_size` admits -- not checked for a rule a
+    store holds already, which an earlier version loaded (docs/events.md, "Limits").
 
     >>> from slr_sql.parser import parse_program
     >>> r = compile_rule(parse_program("r(F) <- face(F, R1) seq face(F, R2) where R2 > R1.")[0])
     >>> r.name, r.arity, len(r.alternatives[0].leaves), r.alternatives[0].goals
     ('r', 1, 2, [Struct('>', (Var('R2'), Var('R1')))])
     """
+    if sized:
+        check_size(clause)
     rule = deref(clause.head)
-    _check_size(clause, rule.args[0], rule.args[1])
     head, pattern = deref(rule.args[0]), _lowercase_operators(rule.args[1])
     rule = Struct(rule.name, (rule.args[0], pattern))
     if type(head) is Struct and head.name == "^" and len(head.args) == 2:
