@@ -134,7 +134,10 @@ class ProgramLoader:
                 continue
             head = deref(clause.head)
             if _cep.is_event_rule(head):
-                decls.event_rules.append(_cep.compile_rule(clause))
+                # (the size of a new rule is checked by load: a rule the store holds
+                # already, loaded by an earlier version beyond today's maximum, still
+                # loads, so that its file opens and the program can be unloaded)
+                decls.event_rules.append(_cep.compile_rule(clause, sized=False))
                 continue
             if _cep.is_ignored_fact(head):
                 continue   # ETALIS-only facts such as print_trigger/1 (docs/events.md)
@@ -214,6 +217,10 @@ class ProgramLoader:
         """Add the parsed ``clauses`` of ``text`` to the program ``name`` (or, with
         ``replace``, make them the whole of it), in one transaction: stored, built, the event
         types declared and the load listeners run, or nothing changed."""
+        from . import cep as _cep
+        for clause in clauses:
+            if clause.head is not None and _cep.is_event_rule(clause.head):
+                _cep.check_size(clause)
         with self.load_lock, self.store.transaction():
             # the write lock is ours: the texts stored now are the latest
             stale = self.store.program_version() != self.version

@@ -29,11 +29,11 @@ from typing import Any
 
 from ..host import Host
 from ..terms import Struct
-from .rules import (IGNORED_FACTS, POLICIES, EventRule, compile_rule, consumption_directive,
-                    is_event_rule, is_ignored_fact, order_rules)
+from .rules import (IGNORED_FACTS, POLICIES, EventRule, check_size, compile_rule,
+                    consumption_directive, is_event_rule, is_ignored_fact, order_rules)
 from .runtime import EventRules
 
-__all__ = ["attach", "prepare", "compile_rule", "consumption_directive", "is_event_rule",
+__all__ = ["attach", "prepare", "check_size", "compile_rule", "consumption_directive", "is_event_rule",
            "is_ignored_fact", "EventRule", "EventRules", "POLICIES", "IGNORED_FACTS"]
 
 

@@ -30,7 +30,9 @@ from ..errors import SLRError, SLRSyntaxError
 from ..program import flatten_conjunction
 from ..terms import Atom, Clause, String, Struct, Var, deref, format_term, is_ground, term_vars
 
-__all__ = ["POLICIES", "BINARY", "IGNORED_FACTS", "Leaf", "Alternative", "EventRule",
+__all__ = ["POLICIES", "BINARY", "IGNORED_FACTS", "MAX_PATTERN_EVENTS", "MAX_ALTERNATIVES",
+           "MAX_PATTERN_DEPTH", "Leaf", "Alternative", "EventRule", "pattern_size",
+           "check_size",
            "compile_rule", "is_event_rule", "is_ignored_fact", "consumption_directive",
            "order_rules", "rule_error"]
 
@@ -43,6 +45,20 @@ _PATTERN_OPS = frozenset(BINARY + ("or", "cnot", "within", "where"))
 # the same operator (rules written either way are one rule)
 SYNONYMS = {variant: op for op in BINARY + ("or", "cnot", "where")
             for variant in (op.capitalize(), op.upper())}
+
+# The largest pattern a rule may have (docs/events.md, "Limits"), refused at load beyond.
+# Each alternative is decided by joins of the tables of its event atoms, one alias per
+# atom, where a decision also joins its pending row: SQLite joins at most 64 tables, and the
+# statements of recent and chronological rules grow with the square of the atoms (each
+# partner a sub-query over the partners after it). 32 atoms -- a 30-part sequence with
+# its negations -- keeps every statement well inside both engines' limits.
+MAX_PATTERN_EVENTS = 32
+# ``or`` multiplies: ``(a or b) seq (c or d) seq ..`` is one alternative per combination,
+# each with its own statements
+MAX_ALTERNATIVES = 64
+# operators nested in one pattern (``((a within 1) within 1) ..`` nests without atoms): the
+# readings of a pattern walk it recursively
+MAX_PATTERN_DEPTH = 128
 
 # ETALIS program facts that only steer ETALIS itself (what it prints, which events it takes
 # from outside): accepted so that ETALIS rule files load unchanged, and ignored.
@@ -601,15 +617,100 @@ def _canonical(term: Any) -> str:
     return format_term(walk(term))
 
 
-def compile_rule(clause: Clause) -> EventRule:
+def pattern_size(pattern: Any) -> tuple[int, int, int]:
+    """The size of a pattern, walked without recursion (a pattern of any depth can be
+    measured before it is refused): the most event atoms of one alternative (positive and
+    negated), the number of alternatives ``or`` makes, and how deep its operators nest.
+
+    >>> from slr_sql.parser import parse_term
+    >>> pattern_size(parse_term("(a or b) seq (c cnot d) seq e within 5")[0])
+    (4, 2, 4)
+    """
+    def operator(p: Any) -> str | None:
+        p = deref(p)
+        if type(p) is Struct and len(p.args) == 2:
+            name = SYNONYMS.get(str(p.name), str(p.name))
+            if name in _PATTERN_OPS:
+                return name
+        return None
+
+    sizes: dict[int, tuple[int, int, int]] = {}
+    stack: list[tuple[Any, bool]] = [(pattern, False)]
+    while stack:
+        node, visited = stack.pop()
+        node = deref(node)
+        op = operator(node)
+        if op is None:
+            sizes[id(node)] = (1, 1, 0)
+            continue
+        left, right = deref(node.args[0]), deref(node.args[1])
+        # (the negated side of cnot counts its atoms; where and within have no pattern there)
+        children = [left] if op in ("within", "where") else [left, right]
+        if not visited:
+            stack.append((node, True))
+            stack.extend((child, False) for child in children)
+            continue
+        l_atoms, l_alts, l_depth = sizes[id(left)]
+        if op in ("within", "where"):
+            sizes[id(node)] = (l_atoms, l_alts, l_depth + 1)
+            continue
+        r_atoms, r_alts, r_depth = sizes[id(right)]
+        depth = max(l_depth, r_depth) + 1
+        if op == "or":
+            sizes[id(node)] = (max(l_atoms, r_atoms), l_alts + r_alts, depth)
+        elif op == "cnot":   # its atoms joined by or are all negated in each alternative
+            sizes[id(node)] = (l_atoms + r_atoms * r_alts, l_alts, depth)
+        else:
+            sizes[id(node)] = (l_atoms + r_atoms, l_alts * r_alts, depth)
+    return sizes[id(deref(pattern))]
+
+
+def check_size(clause: Clause) -> None:
+    """Refuse the event rule ``clause`` if its pattern is beyond :data:`MAX_PATTERN_EVENTS`,
+    :data:`MAX_ALTERNATIVES` or :data:`MAX_PATTERN_DEPTH` (an SLRSyntaxError at the rule),
+    before anything walks it.
+
+    >>> from slr_sql.parser import parse_program
+    >>> check_size(parse_program("c(X) <- a(X) seq b(X).")[0])
+    >>> long = " seq ".join(f"a{i}(X)" for i in range(40))
+    >>> check_size(parse_program(f"c(X) <- {long}.")[0])
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRSyntaxError: <string>:1:1: event rule c/1: its pattern has 40 event atoms in one alternative; at most 32 are supported (split it into event rules over each other's complex events)
+    ...
+    """
+    rule = deref(clause.head)
+    head, pattern = deref(rule.args[0]), rule.args[1]
+    name = (f" {head.name}/{len(head.args)}" if type(head) is Struct
+            else f" {head}/0" if type(head) is Atom else "")
+    atoms, alternatives, depth = pattern_size(pattern)
+    if atoms > MAX_PATTERN_EVENTS:
+        raise rule_error(clause, f"event rule{name}: its pattern has {atoms} event atoms in "
+                                 f"one alternative; at most {MAX_PATTERN_EVENTS} are supported "
+                                 f"(split it into event rules over each other's complex "
+                                 f"events)")
+    if depth > MAX_PATTERN_DEPTH:
+        raise rule_error(clause, f"event rule{name}: its pattern nests operators "
+                                 f"{depth} deep; at most {MAX_PATTERN_DEPTH} are supported")
+    if alternatives > MAX_ALTERNATIVES:
+        raise rule_error(clause, f"event rule{name}: its pattern has {alternatives} "
+                                 f"alternatives (each or doubles the parts it joins); at most "
+                                 f"{MAX_ALTERNATIVES} are supported")
+
+
+def compile_rule(clause: Clause, sized: bool = True) -> EventRule:
     """Read the clause ``Head <- Pattern`` into an :class:`EventRule`; raises
-    :class:`SLRSyntaxError` (with line and column) for a rule that is not well formed.
+    :class:`SLRSyntaxError` (with line and column) for a rule that is not well formed, or
+    (with ``sized``) larger than :func:`check_size` admits -- not checked for a rule a
+    store holds already, which an earlier version loaded (docs/events.md, "Limits").
 
     >>> from slr_sql.parser import parse_program
     >>> r = compile_rule(parse_program("r(F) <- face(F, R1) seq face(F, R2) where R2 > R1.")[0])
     >>> r.name, r.arity, len(r.alternatives[0].leaves), r.alternatives[0].goals
     ('r', 1, 2, [Struct('>', (Var('R2'), Var('R1')))])
     """
+    if sized:
+        check_size(clause)
     rule = deref(clause.head)
     head, pattern = deref(rule.args[0]), _lowercase_operators(rule.args[1])
     rule = Struct(rule.name, (rule.args[0], pattern))

@@ -54,7 +54,7 @@ _rowids = orjson.loads
 _first, _second = itemgetter(0), itemgetter(1)
 _end_of = itemgetter(3)   # of a derived event (name, args, start, end)
 
-__all__ = ["EventRules", "RuleRuntime", "ready_prefix", "OTHERS_LOOK"]
+__all__ = ["EventRules", "RuleRuntime", "ready_prefix", "OTHERS_LOOK", "WRITTEN_ORDER_FROM"]
 
 _INF = math.inf
 
@@ -63,6 +63,11 @@ _INF = math.inf
 # what a clock move that decides nothing costs; a server's notifications, read from the
 # socket) before it looks again; an add always looks.
 OTHERS_LOOK = 0.1
+# A rule whose alternatives have more event atoms than this runs its statements in the join
+# order written on every engine (Dialect.written_join_order): PostgreSQL searches the order
+# of up to 8 tables itself, which for the small joins of most rules is as cheap as it is
+# good, and for a join of 30 tables took it half a second per statement.
+WRITTEN_ORDER_FROM = 8
 _FLOAT = frozenset((float,))
 
 
@@ -185,6 +190,11 @@ class RuleRuntime:
         self._before: int | None = None   # the provenance id a run's matches come after
         self._matched = False   # this run ran a statement that may add provenance rows
         self._queue: list = []  # statements whose result is not needed, not sent yet
+        # around the statements of a rule of many parts, on an engine that would search
+        # their join order (the order written is the plan: the new rows first)
+        written = eng.store.dialect.written_join_order()
+        self._join_order = written if written is not None \
+            and self.width > WRITTEN_ORDER_FROM else None
         self._done: list = []        # pending rows decided, not yet deleted
 
     # ----------------------------------------------------------------- building
@@ -598,6 +608,11 @@ class RuleRuntime:
         batch, self._queue = self._queue + statements, []
         if not batch:
             return []
+        if self._join_order is not None:
+            before, after = self._join_order
+            batch = [(before, {}, False)] + batch + [(after, {}, False)]
+            return self.eng.store.run_compiled_batch(batch)[
+                len(batch) - 1 - len(statements):-1]
         if len(batch) == 1 and not batch[0][2]:
             return [self.eng.store.run_compiled(batch[0][0], batch[0][1])]
         return self.eng.store.run_compiled_batch(batch)[len(batch) - len(statements):]

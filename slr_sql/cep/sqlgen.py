@@ -52,6 +52,8 @@ _NUMERIC = "IN ('integer', 'real')"
 _INT_BOUND = 2 ** 48
 _REAL_BOUND = 1e300
 _MAX_LEAVES = 16
+# conditions per parenthesized group of a long WHERE (AltSQL._where)
+_AND_GROUP = 64
 
 
 @dataclass(frozen=True)
@@ -117,6 +119,11 @@ def _expr(e: Expr, dialect: Any = SQLITE) -> str:
     return f"{dialect.scalar(e[0])}({', '.join(_expr(o, dialect) for o in operands)})"
 
 
+def _single(positions: frozenset) -> int | None:
+    """The position of a column of one position's row (None: of no position)."""
+    return next(iter(positions)) if len(positions) == 1 else None
+
+
 def _expr_positions(e: Expr) -> frozenset:
     if e[0] in ("s", "e"):
         return frozenset((e[1],))
@@ -127,6 +134,12 @@ def _expr_positions(e: Expr) -> frozenset:
 class _Cond:
     positions: frozenset
     sql: str
+    # an equality between two occurrences of a variable (group ("eq", id of the variable),
+    # ends: the (column, position) of each) or a window's bound of one row by another
+    # (group ("window", n), ends: ((None, bounding position), (None, bounded position))):
+    # a statement needs only some of each group (:meth:`AltSQL.cond_sql`)
+    group: tuple | None = None
+    ends: tuple = ()
 
 
 @dataclass
@@ -219,6 +232,7 @@ class AltSQL:
                 self.conds.append(sql)
         for n, (interval, leaf) in enumerate(alt.negations):
             self._negation(n, interval, leaf)
+        self._index_conditions()
         self.head_sql = self._head()
         if self.used_table is not None:   # chronological: the tables' names as parameters
             for p in range(self.k):
@@ -296,7 +310,11 @@ class AltSQL:
                 # positions sharing the variable are tied without the others (the recent
                 # policy's sub-queries pick positions one at a time)
                 for other in [first] + self._others.get(id(term), []):
-                    out.append(_Cond(other.positions | ref.positions, self._eq(other, ref)))
+                    out.append(_Cond(other.positions | ref.positions, self._eq(other, ref),
+                                     ("eq", id(term)), ((other.sql, _single(other.positions),
+                                                         other.kind),
+                                                        (ref.sql, _single(ref.positions),
+                                                         ref.kind))))
                 if ref.positions:
                     self._others.setdefault(id(term), []).append(ref)
             return
@@ -355,7 +373,9 @@ class AltSQL:
                 slack = f"abs({ei}) * 1e-12"
                 self.conds.append(_Cond(frozenset((i, j)),
                                         f"{ej} >= {ei} - {loose} - {slack} AND "
-                                        f"{sj} <= {si} + {loose} + {slack}"))
+                                        f"{sj} <= {si} + {loose} + {slack}",
+                                        ("window", d),
+                                        ((None, i, "time"), (None, j, "time"))))
 
     def _side(self, t: Any) -> tuple[str, str] | None:
         """An operand of a pushed comparison: (SQL, kind) with kind data/time/num."""
@@ -641,7 +661,23 @@ class AltSQL:
         return {f"e{p}": f"{prefix}e{p}" for p in range(self.k)}
 
     def _where(self, conds: list[str]) -> str:
-        return " AND ".join(c for c in conds if c) or self.dialect.true
+        """The conditions joined by AND; a long list in parenthesized groups of
+        :data:`_AND_GROUP`, since SQLite nests ``a AND b AND c ..`` one level per AND and
+        refuses an expression deeper than 1000 (two rows of one type in every pair of
+        positions of a long pattern: hundreds of ``e_i.seq <> e_j.seq``).
+
+        >>> from slr_sql.cep.rules import compile_rule
+        >>> from slr_sql.parser import parse_program
+        >>> alt = compile_rule(parse_program("c <- a.")[0]).alternatives[0]
+        >>> sql = AltSQL(alt, 0, ['"a"'], [], (), "unrestricted", lambda *a: "1")
+        >>> sql._where([f"x{i} = 1" for i in range(_AND_GROUP + 1)]).count("(")
+        2
+        """
+        conds = [c for c in conds if c]
+        if len(conds) > _AND_GROUP:
+            conds = ["(" + " AND ".join(conds[i:i + _AND_GROUP]) + ")"
+                     for i in range(0, len(conds), _AND_GROUP)]
+        return " AND ".join(conds) or self.dialect.true
 
     def _from(self, order: list[int], aliases: dict[str, str]) -> str:
         return " CROSS JOIN ".join(f"{self.tables[p]} AS {aliases[f'e{p}']}" for p in order)
@@ -691,17 +727,78 @@ class AltSQL:
                             for k, through in decision.items()) or self.dialect.true
 
     def cond_sql(self, aliases: dict[str, str], within: set | None = None,
-                 exclude: set | None = None) -> list[str]:
+                 exclude: set | None = None, order: list[int] | None = None) -> list[str]:
         """The conditions (rendered) whose positions all lie in ``within`` (all if None),
-        except those entirely inside ``exclude``."""
-        out = []
+        except those entirely inside ``exclude`` (rows the enclosing query has chosen, its
+        conditions between them checked there), the rows of the rest joined in ``order``
+        (default: by position).
+
+        Of a variable's equalities (one between every two of its occurrences) only as many
+        as tie its occurrences together are kept: each occurrence equal to the first one
+        joined (a chosen row first); the others follow, as equal values of equal SQL types
+        are an equivalence. Of a window's bounds (one per two rows), each row keeps the
+        bound by the first row joined before it (they only narrow index searches). With
+        all of them a pattern of n parts had n(n-1)/2 equalities per shared variable:
+        SQLite's planner took seconds per statement of 20-30 parts, and from ~60 parts
+        refused the statement (an expression deeper than 1000)."""
+        chosen = exclude or set()
+        placed = list(order if order is not None else range(self.k))
+        rank = {p: n for n, p in enumerate(placed)}
+        for p in chosen:
+            rank.setdefault(p, -1)
+        last = len(rank)
+
+        def inside(p: int | None) -> bool:
+            return within is None or p in within
+
+        kept = [n for n in self._plain_conds
+                if (within is None or self.conds[n].positions <= within)
+                and not (exclude is not None and self.conds[n].positions <= exclude)]
+        for group, nodes in self._occurrences.items():
+            nodes = [node for node in nodes if inside(node[1])]
+            if group[0] == "eq":
+                if len(nodes) < 2:
+                    continue
+                first = min(range(len(nodes)), key=lambda i: (rank.get(nodes[i][1], last), i))
+                for i, node in enumerate(nodes):
+                    if i != first and node[1] not in chosen:
+                        kept.append(self._pairs[(group, nodes[first][0], node[0])])
+                continue
+            for j in nodes:    # a window: ("", position) nodes
+                before = [i for i in nodes if rank.get(i[1], last) < rank.get(j[1], last)]
+                if before and j[1] not in chosen:
+                    i = min(before, key=lambda i: (rank.get(i[1], last), i[1]))
+                    kept.append(self._pairs[(group, i[0], j[0])])
+        return [render(self.conds[n].sql, aliases) for n in sorted(kept)]
+
+    def _index_conditions(self) -> None:
+        """The groups of conditions :meth:`cond_sql` thins out: each group's occurrences
+        (column or position, position) and the condition between two of them."""
+        kinds: dict = {}
         for c in self.conds:
-            if within is not None and not c.positions <= within:
+            if c.group is not None:
+                kinds.setdefault(c.group, set()).update(end[2] for end in c.ends)
+        # a variable that is a data argument somewhere and a time elsewhere: its equalities
+        # are no equivalence (a time 5.0 equals the data 5 and the data 5.0, which are two
+        # terms), so every one of them stays
+        mixed = {g for g, k in kinds.items() if len(k) > 1}
+        self._plain_conds: list[int] = []
+        self._occurrences: dict[tuple, list[tuple]] = {}
+        self._pairs: dict[tuple, int] = {}
+        for n, c in enumerate(self.conds):
+            if c.group is None or c.group in mixed:
+                self._plain_conds.append(n)
                 continue
-            if exclude is not None and c.positions <= exclude:
-                continue
-            out.append(render(c.sql, aliases))
-        return out
+            nodes = self._occurrences.setdefault(c.group, [])
+            ends = [(str(col) if col is not None else str(p), p) for col, p, _ in c.ends]
+            for node in ends:
+                if node not in nodes:
+                    nodes.append(node)
+            self._pairs[(c.group, ends[0][0], ends[1][0])] = n
+            if c.group[0] == "eq":
+                self._pairs[(c.group, ends[1][0], ends[0][0])] = n
+        for group, nodes in self._occurrences.items():
+            nodes.sort(key=lambda node: (node[1], node[0]) if group[0] == "window" else 0)
 
     def value_columns(self, aliases: dict[str, str]) -> list[str]:
         """seq of every position, start, end, then the values of ``value_vars``."""
@@ -757,7 +854,7 @@ class AltSQL:
         """unrestricted, pure: the new matches with position ``pos`` new, straight into the
         provenance table (only those whose negations can be decided now)."""
         a = self.aliases()
-        conds = self._delta_conds(pos, dirty, a) + self.cond_sql(a)
+        conds = self._delta_conds(pos, dirty, a) + self.cond_sql(a, order=self._order_from(pos))
         if self.negs:
             conds += [self.neg_complete(a), self.neg_ok(a)]
         return (self._prov_insert() + f"SELECT {', '.join(self._prov_values(a))} FROM "
@@ -774,7 +871,7 @@ class AltSQL:
     def _delta_pending(self, pos: int, dirty: set) -> str:
         """The new matches whose negated types are not complete yet: kept as pending."""
         a = self.aliases()
-        conds = self._delta_conds(pos, dirty, a) + self.cond_sql(a) \
+        conds = self._delta_conds(pos, dirty, a) + self.cond_sql(a, order=self._order_from(pos)) \
             + [f"NOT ({self.neg_complete(a)})"]
         seqs = ", ".join(f"e{p}.seq" for p in range(self.k))
         return ("INSERT INTO slr_cep_pending (rule, alt, kind, pos, rowids, t_start, t_end, "
@@ -798,7 +895,7 @@ class AltSQL:
         cols = self.value_columns(a)
         if self.negs:
             cols += [f"({self.neg_complete(a)})", f"({self.neg_ok(a)})"]
-        conds = self._delta_conds(pos, dirty, a) + self.cond_sql(a)
+        conds = self._delta_conds(pos, dirty, a) + self.cond_sql(a, order=self._order_from(pos))
         return (f"SELECT {', '.join(cols)} FROM {self._from(self._order_from(pos), a)} "
                 f"WHERE {self._where(conds)}" + self._match_order(a))
 
@@ -906,7 +1003,7 @@ class AltSQL:
         order = [pos] + self.partner_order(pos)
         first = (f"e{pos}.seq IN ({self.dialect.json_integers(':ts')})" if many
                  else f"e{pos}.seq = :t")
-        conds = [first] + self.cond_sql(a) + self._terminator_conds(pos, a)
+        conds = [first] + self.cond_sql(a, order=order) + self._terminator_conds(pos, a)
         if self.negs:
             conds.append(self.neg_ok(a))
         if self.policy == "chronological":
@@ -1115,16 +1212,20 @@ class AltSQL:
         for r in rest:
             aliases[f"e{r}"] = f"{q}e{r}"
         have = chosen | {p}
-        conds = self.cond_sql(aliases, within=have, exclude=chosen)
+        conds = self.cond_sql(aliases, within=have, exclude=chosen, order=[p])
         conds += self._terminator_one(pos, p, aliases)
         if rest:
             inner_have = have | set(rest)
-            inner = self.cond_sql(aliases, within=inner_have, exclude=have)
+            from_rest = not self.anchored(p, chosen) and all(self.anchored(r, chosen)
+                                                             for r in rest)
+            # (searched from the rest, p is joined after them)
+            inner = self.cond_sql(aliases, within=inner_have, exclude=have,
+                                  order=rest + [p] if from_rest else rest)
             for r in rest:
                 inner += self._terminator_one(pos, r, aliases)
             if self.negs:
                 inner.append(self.neg_ok(aliases))
-            if not self.anchored(p, chosen) and all(self.anchored(r, chosen) for r in rest):
+            if from_rest:
                 # p's history has no bound but the rest's has (seq with a where over the
                 # times): search from the few rows of the rest, the newest p among their
                 # partners (the same row as the EXISTS form, found from the other side)

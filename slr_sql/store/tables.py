@@ -42,7 +42,8 @@ from .connection import Database, DatabaseError
 from .dialect import SQLITE
 from .sqltext import RESERVED_PREFIXES, SAFE_IDENTIFIER, SQL_KEYWORDS, quote_identifier
 
-__all__ = ["EventType", "EventTables", "START_ORDER_RETRY", "START_ORDER_RETRY_LOOKUPS"]
+__all__ = ["EventType", "EventTables", "START_ORDER_RETRY", "START_ORDER_RETRY_LOOKUPS",
+           "START_ORDER_ONE_BY_ONE"]
 
 # Seconds of the store's clock after a start-order build met another session's lock before
 # a reader tries that table's build again (a try is a round trip and a failed savepoint;
@@ -153,6 +154,11 @@ _REFUSED_FOR_GOOD = (sqlite3.SQLITE_READONLY, sqlite3.SQLITE_PERM, sqlite3.SQLIT
 _SEARCH_BOUNDS = re.compile(r"^SEARCH .* \(([^()]*)\)$")
 _RANGE = re.compile(r"^(\w+)(<|>|<=|>=)\?$")
 _TIMES = frozenset({"t_start", "t_end"})
+
+
+# beyond this many types whose start order a plan uses, they are judged together
+# (EventTables.start_orders_wanted)
+START_ORDER_ONE_BY_ONE = 8
 
 
 def plan_cost(steps: list[str]) -> tuple[int, int, int]:
@@ -563,7 +569,9 @@ class EventTables:
         SQLite's planner is asked for the plan with every missing start-ordered index there
         (:meth:`Database.hypothetical_plan`); a type whose indexes that plan uses is asked
         about again without them: wanted only if the plan is then worse (:func:`plan_cost`:
-        a full scan or a sort more, or fewer columns bound by its searches). So ``t_start =
+        a full scan or a sort more, or fewer columns bound by its searches). Beyond
+        :data:`START_ORDER_ONE_BY_ONE` such types they are asked about together: all wanted
+        when the plan without any of them is worse, else none. So ``t_start =
         ? AND t_end = ?`` wants none (the end order binds both), ``arg1 = ? AND t_start > ?``
         does.
 
@@ -588,10 +596,19 @@ class EventTables:
         if steps is None:
             return None
         used = " ".join(steps)
+        using = {key: names for key, names in own.items()
+                 if any(f" {name} " in f"{used} " for name in names)}
+        if len(using) > START_ORDER_ONE_BY_ONE:
+            # (a statement over many types -- an event rule of many parts -- is asked once
+            # without all of them: a plan of a join of 30 tables took SQLite ~10 ms, and
+            # one per type was a second per statement, the most of a first add's time)
+            without = self.db.hypothetical_plan(
+                sql, extra, without=[name for names in using.values() for name in names])
+            if without is not None and plan_cost(without) <= plan_cost(steps):
+                return set()
+            return set(using)
         wanted = set()
-        for key, names in own.items():
-            if not any(f" {name} " in f"{used} " for name in names):
-                continue
+        for key, names in using.items():
             without = self.db.hypothetical_plan(sql, extra, without=names)
             if without is None or plan_cost(without) > plan_cost(steps):
                 wanted.add(key)

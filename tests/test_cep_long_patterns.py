@@ -1,0 +1,166 @@
+"""Event rules of many parts (docs/events.md, "Limits"): a pattern of the most event atoms
+a rule may have is decided on both backends as the naive reference of
+tests/test_cep_differential.py decides it, and a larger one is refused at load with the
+rule, its line and the maximum, the program in force left as it was.
+
+Before, a 30-part ``seq`` under ``recent`` loaded and then refused every add that decided
+it (SQLite's "Expression tree is too large": an equality of the shared variable between
+every two positions), a 30-part ``and`` spent seconds in SQLite's planner per position,
+beyond 64 parts SQLite refused the join, and from ~990 parts the load failed in the
+recursive walks of the rule's reader.
+"""
+from __future__ import annotations
+
+import random
+import subprocess
+import sys
+
+import pytest
+import test_cep_differential as cepdiff
+
+import slr_sql
+from slr_sql import ManualClock, SLRSyntaxError
+from slr_sql.cep.rules import MAX_ALTERNATIVES, MAX_PATTERN_DEPTH, MAX_PATTERN_EVENTS
+
+N = MAX_PATTERN_EVENTS
+
+
+@pytest.fixture
+def kb():
+    """A knowledge base in memory whose clock is the events' times."""
+    with slr_sql.open(None, clock=ManualClock(0)) as k:
+        yield k
+
+
+def _chain(op: str, leaves: list) -> tuple:
+    """The left-nested tree ``l0 op l1 op ..`` of the reference's rules."""
+    tree = leaves[0]
+    for leaf in leaves[1:]:
+        tree = (op, tree, leaf)
+    return tree
+
+
+def _stream(seed: int) -> list:
+    """One event of each type p0..p<N-1> with X = 0, in time order, and a few more: a
+    second p0 and a second last part (two initiators, two terminators), a p<N/2> out of
+    order (it fits an ``and``, not a ``seq``), a p3 of another X (no partner has it)."""
+    events = [(f"p{i}", (0,), float(i + 1), float(i + 1)) for i in range(N)]
+    events += [("p0", (0,), 0.5, 0.5), (f"p{N - 1}", (0,), N + 4.0, N + 5.0),
+               (f"p{N // 2}", (0,), 2.0, 2.0), ("p3", (1,), 3.5, 3.5)]
+    random.Random(seed).shuffle(events)   # (any arrival order: the same complex events)
+    return events
+
+
+@pytest.mark.parametrize("op, policy, within", [
+    ("and", "unrestricted", None),
+    ("seq", "recent", N + 1),
+    ("seq", "chronological", None),
+])
+def test_a_pattern_of_the_most_atoms_equals_the_reference(backend, op, policy, within):
+    rule = {"pattern": _chain(op, [("leaf", f"p{i}", ("X",)) for i in range(N)]),
+            "head": ["X"], "where": [], "cnot": None, "within": within, "policy": policy}
+    events = _stream(len(op) + len(policy))
+    expected = cepdiff.reference(rule, events)
+    assert expected, "the stream matches the pattern"
+    got = cepdiff.run(rule, events, list(range(len(events))), [len(events) // 2], False,
+                      False, where=backend)
+    assert cepdiff._typed(got) == cepdiff._typed([(tuple(h), s, e) for h, s, e in expected])
+
+
+def test_a_variable_of_every_part_is_tied_once_per_part_in_a_statement(kb):
+    # (each part equal to the first one joined: n - 1 equalities, not n(n-1)/2, which made
+    # SQLite's planner slow and its expressions too deep)
+    kb.load("c(X) <- " + " and ".join(f"a{i}(X)" for i in range(12)) + ".")
+    kb.add_many([f"a{i}(1)^{i}" for i in range(12)])
+    shown = kb.explain("c(X)")
+    statements = [line for line in shown.splitlines() if line.strip().startswith("WHERE")]
+    assert len(statements) == 12
+    assert all(line.count("typeof(") == 2 * 11 for line in statements), statements[0]
+    assert len(kb.query("c(X)^[S, E]")) == 1
+
+
+def test_a_variable_that_is_a_value_and_a_time_keeps_every_equality(backend):
+    # a time equals 5 and 5.0 alike, the values 5 and 5.0 are two terms: a(5) and c(5.0)
+    # do not match, whatever b's time says (b's time is the first X its statement joins)
+    with slr_sql.open(backend, clock=ManualClock(0)) as kb:
+        kb.load("r(X) <- a(X) and b(_)^X and c(X).")
+        kb.add_many(["a(5)^1", "c(5.0)^2", "c(5)^3"])
+        kb.add("b(x)^5")
+        assert kb.query("r(X)^[S, E]") == [{"X": 5, "S": 1.0, "E": 5.0}]
+
+
+def _refused(kb, text: str) -> SLRSyntaxError:
+    with pytest.raises(SLRSyntaxError) as e:
+        kb.load(text, "long.slr", name="rules", replace=True)
+    return e.value
+
+
+def test_a_pattern_beyond_the_most_atoms_is_refused_at_load_and_the_program_kept(backend):
+    with slr_sql.open(backend, clock=ManualClock(0)) as kb:
+        kb.load("c(X) <- a(X) seq b(X).", name="rules")
+        for op in ("and", "seq"):
+            text = ("ok(X) <- a(X) seq b(X).\n\nlong(X) <- "
+                    + f" {op} ".join(f"p{i}(X)" for i in range(N + 1)) + ".")
+            error = _refused(kb, text)
+            assert f"event rule long/1: its pattern has {N + 1} event atoms" in error.message
+            assert f"at most {N}" in error.message
+            assert (error.line, error.filename) == (3, "long.slr")
+        # negated atoms count too: each is a search of the statement
+        error = _refused(kb, "long <- (" + " seq ".join(f"p{i}" for i in range(N - 1))
+                         + ") cnot (x or y).")
+        assert f"has {N + 1} event atoms" in error.message
+        assert [r["head"] for r in kb.event_rules()] == ["c/1"]
+        kb.add_many(["a(1)^1", "b(1)^2"])
+        assert kb.query("c(X)^[S, E]") == [{"X": 1, "S": 1.0, "E": 2.0}]
+
+
+def test_a_store_holding_a_longer_rule_from_before_opens_and_can_unload_it(tmp_path):
+    # (a store an earlier version loaded such a rule into: written here as that version
+    # wrote the program's text, without the check of a load)
+    path = tmp_path / "robot.db"
+    with slr_sql.open(path, clock=ManualClock(0)) as kb:
+        kb.load("c(X) <- a(X) seq b(X).", name="small")
+        kb.store.append_program("long(X) <- " + " seq ".join(f"p{i}(X)" for i in range(N + 8))
+                                + ".", "long.slr", "long")
+    with slr_sql.open(path, clock=ManualClock(0)) as kb:
+        assert [r["head"] for r in kb.event_rules()] == ["c/1", "long/1"]
+        kb.unload("long")
+        assert [r["head"] for r in kb.event_rules()] == ["c/1"]
+        # a load of the same text is refused: new text meets the maximum
+        with pytest.raises(SLRSyntaxError, match=f"at most {N}"):
+            kb.load("long(X) <- " + " seq ".join(f"p{i}(X)" for i in range(N + 8)) + ".")
+
+
+@pytest.mark.parametrize("parts", [990, 5000])
+def test_a_pattern_of_thousands_of_parts_is_refused_not_a_recursion(kb, parts):
+    error = _refused(kb, "long(X) <- " + " seq ".join(f"p{i}(X)" for i in range(parts)) + ".")
+    assert f"its pattern has {parts} event atoms in one alternative; at most {N}" \
+        in error.message
+    assert kb.event_rules() == []
+
+
+def test_operators_nested_too_deep_or_too_many_alternatives_are_refused(kb):
+    deep = "a"
+    for _ in range(MAX_PATTERN_DEPTH + 1):
+        deep = f"({deep} within 1)"
+    error = _refused(kb, f"c <- {deep}.")
+    assert f"nests operators {MAX_PATTERN_DEPTH + 1} deep; at most {MAX_PATTERN_DEPTH}" \
+        in error.message
+    # each `or` part of a seq doubles the alternatives: 2^7 of them
+    error = _refused(kb, "c <- " + " seq ".join(f"(a{i} or b{i})" for i in range(7)) + ".")
+    assert "has 128 alternatives" in error.message
+    assert f"at most {MAX_ALTERNATIVES}" in error.message
+    kb.load("c <- " + " seq ".join(f"(a{i} or b{i})" for i in range(6)) + ".")
+    assert len(kb.event_rules()) == 1
+
+
+def test_the_command_line_words_a_pattern_of_a_thousand_parts(tmp_path):
+    rules = tmp_path / "long.slr"
+    rules.write_text("% a long sequence\nlong(X) <- "
+                     + " seq ".join(f"p{i}(X)" for i in range(1000)) + ".\n")
+    done = subprocess.run([sys.executable, "-m", "slr_sql", "load", str(tmp_path / "r.db"),
+                           str(rules)], capture_output=True, text=True, timeout=120)
+    assert done.returncode != 0
+    assert "Traceback" not in done.stderr
+    assert "long.slr:2:" in done.stderr
+    assert "event rule long/1: its pattern has 1000 event atoms" in done.stderr
