@@ -221,3 +221,21 @@ def test_marks_another_connection_wrote_are_heard_with_the_add(postgres_url):
         messages = _traced(kb, lambda: kb.add_many([("q", ("b",), 1.0, 1.0)]))
         assert waiting.result(timeout=10) == [{"X": "a", "T": 1.0}]
         assert messages.count(("B", "ReadyForQuery")) >= 1
+
+
+def test_an_add_with_a_rule_sees_a_rule_another_connection_loaded_after_its_last_call(
+        postgres_url):
+    """With an event rule the add opens a transaction (the rule's writer lock): the change
+    check goes ahead of its BEGIN, in the same round trip, and when it finds the program
+    changed the transaction is rolled back with what it ran and the add is made again on
+    the new program: both rules derive, every event is stored once."""
+    with _other(postgres_url) as kb, _other(postgres_url) as loader:
+        kb.load("xy(K) <- x(K) seq y(K).")
+        kb.add_many([("x", ("k",), 1.0, 1.0), ("z", ("k",), 0.0, 0.0)])
+        loader.load("yz(K) <- y(K) seq z(K).", name="other")
+        kb.add_many([("y", ("k",), 2.0, 2.0), ("z", ("k",), 3.0, 3.0)])
+        assert kb.query("xy(K)^[S, E]") == [{"K": "k", "S": 1.0, "E": 2.0}]
+        assert kb.query("yz(K)^[S, E]") == [{"K": "k", "S": 2.0, "E": 3.0}]
+        assert _column(postgres_url, "SELECT t_end FROM y ORDER BY seq") == [2.0]
+        assert _column(postgres_url, "SELECT t_end FROM z ORDER BY seq") == [0.0, 3.0]
+        assert _column(postgres_url, "SELECT count(*) FROM xy") == [1]

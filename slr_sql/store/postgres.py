@@ -410,18 +410,39 @@ class PgConnection:
                 self.checks[check.thread] = outer
 
     def _before_send(self) -> None:
-        """Before a statement: the change check this thread owes, if not sent yet, as a
-        statement of its own (outside a transaction whose BEGIN waits: a read); after a
-        check that said no, no statement of the add goes (the add is made again)."""
+        """Before a statement: the change check this thread owes, if not sent yet -- first
+        in the pipeline of a statement that sends the transaction's BEGIN (whose work is
+        rolled back if the check says no: :meth:`_pipelined_check`), else as a statement of
+        its own; after a check that said no, no statement of the add goes (the add is made
+        again)."""
         if not self.checks:
             return
         check = self.checks.get(threading.get_ident())
         if check is None:
             return
         if check.row is None:
+            if self.begin_pending:
+                return   # (the send that opens the transaction carries it)
             self._alive()
             raw = self.raw
             check.read(self._guard(lambda: raw.execute(check.sql, check.params).fetchone()))
+        if check.failed:
+            raise ChangedMeanwhile("the program changed meanwhile")
+
+    def _pipelined_check(self, begin: bool) -> WriteCheck | None:
+        """The change check this thread owes and has not sent, when the pipeline about to
+        go opens the transaction (``begin``): it goes first, ahead of the BEGIN, and
+        :meth:`_read_pipelined` reads its answer after the pipeline."""
+        if not begin or not self.checks:
+            return None
+        check = self.checks.get(threading.get_ident())
+        return check if check is not None and check.row is None else None
+
+    @staticmethod
+    def _read_pipelined(check: WriteCheck, cursor: Any) -> None:
+        """The answer of a check sent first in a pipeline; one that says no ends the add
+        (the transaction the pipeline opened is rolled back, with what it ran)."""
+        check.read(cursor.fetchone())
         if check.failed:
             raise ChangedMeanwhile("the program changed meanwhile")
 
@@ -513,14 +534,18 @@ class PgConnection:
             # savepoint) came after them, and goes after them
             begin, self.begin_pending = self.begin_pending, False
             prelude, self.prelude = self.prelude, []
+            check = self._pipelined_check(begin)
 
             def send() -> None:
                 with raw.pipeline():
+                    checked = raw.execute(check.sql, check.params) if check else None
                     if begin:
                         raw.execute("BEGIN")
                     cursor.execute(text, params)
                     for sql, args in prelude:
                         raw.execute(sql, args)
+                if check is not None:
+                    self._read_pipelined(check, checked)
             self._guard(send)
 
     def _take_deferred(self) -> tuple[str, list]:
@@ -552,14 +577,19 @@ class PgConnection:
         begin, self.begin_pending = self.begin_pending, False
         prelude, self.prelude = self.prelude, []
         raw = self.raw
+        check = self._pipelined_check(begin)
 
         def both() -> Any:
             with raw.pipeline():
+                checked = raw.execute(check.sql, check.params) if check else None
                 if begin:
                     raw.execute("BEGIN")
                 for text, params in prelude:
                     raw.execute(text, params)
-                return call()
+                result = call()
+            if check is not None:
+                self._read_pipelined(check, checked)
+            return result
         return both
 
     def _alive(self) -> None:
@@ -650,9 +680,11 @@ class PgConnection:
         cursors: list = []
         begin, self.begin_pending = self.begin_pending, False
         prelude, self.prelude = self.prelude, []
+        check = self._pipelined_check(begin)
 
         def run() -> None:
             with raw.pipeline():
+                checked = raw.execute(check.sql, check.params) if check else None
                 if begin:
                     raw.execute("BEGIN")
                 for text, params in prelude:
@@ -669,6 +701,8 @@ class PgConnection:
                     args = params if isinstance(params, dict) else (tuple(params) or None)
                     cursor.execute(text, args, prepare=None)
                     cursors.append(cursor)
+            if check is not None:
+                self._read_pipelined(check, checked)
         self._guard(run)
         return [self._guard(c.fetchall) if c is not None and c.description else []
                 for c in cursors]
