@@ -35,6 +35,7 @@ from .program import BufferDecl, Declarations, Program, split_event_atom, event_
 from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore, \
     store_error, check_robot_name, null_argument_text
 from .store.checks import event_arguments, shorten, shown, text_problem
+from .store.postgres import ChangedMeanwhile
 from .terms import Atom, String, Struct, Var, deref
 from .terms import format_atom, format_term
 
@@ -513,6 +514,20 @@ class KnowledgeBase:
         return prepared, positions
 
     def _add(self, events: list, atomic: bool) -> list[EventRejected]:
+        loader = self.loader
+        owed = loader.owe_check()
+        if owed is None:   # (checked now: SQLite, memory, a caller's transaction)
+            return self._pipeline.add(events, atomic)
+        # a server: the change check goes with the add's first statement; when it finds the
+        # program changed meanwhile, nothing was stored, and the add is made again on the
+        # program read now
+        try:
+            return self._pipeline.add(events, atomic, lambda: loader.settle_check(owed))
+        except ChangedMeanwhile:
+            loader.forget_check(owed)
+        except BaseException:
+            loader.forget_check(owed)   # (the next call checks again)
+            raise
         self._refresh()
         return self._pipeline.add(events, atomic)
 

@@ -81,6 +81,45 @@ class ProgramLoader:
                 listener()
         self.seen_data_version = data_version   # (not before: a failed re-read is retried)
 
+    def owe_check(self) -> Any:
+        """Before an add: on a server, the change check :meth:`refresh` makes, owed until
+        the add's first statement (which carries it: docs/postgres.md, "Concurrency");
+        returns what :meth:`settle_check` takes. Elsewhere (SQLite, memory, inside a
+        transaction), :meth:`refresh` now and None.
+
+        >>> import slr_sql
+        >>> slr_sql.open().loader.owe_check() is None   # (in memory: nobody else writes)
+        True
+        """
+        owed = None
+        if self.store.path is not None and not self.store.in_transaction_here:
+            owed = self.store.owe_change_check(self.version)
+        if owed is None:
+            self.refresh()
+        return owed
+
+    def settle_check(self, owed: Any) -> None:
+        """The add that owed the check stored its events (and committed): what the check
+        read is taken as :meth:`refresh` takes it (the progress listeners are told of
+        marks and delays another connection raised); a check the add never sent (it
+        stored nothing) is made now."""
+        read = self.store.settle_change_check(owed)
+        if read is None:
+            self.refresh()
+            return
+        counter, _, progress_version = read   # (the program: the add's own, or it failed)
+        if progress_version != self.progress_version:
+            self.progress_version = progress_version
+            for listener in self.host.progress_listeners:
+                listener()
+        self.seen_data_version = counter
+
+    def forget_check(self, owed: Any) -> None:
+        """The add that owed the check failed or is made again: nothing of what it read
+        is taken (the next call checks again)."""
+        self.store.settle_change_check(owed)
+        self.seen_data_version = None
+
     def reload(self) -> None:
         """Build the program from the texts stored now (the union of every named program,
         in load order) and tell the reload listeners. The version is read before the texts:

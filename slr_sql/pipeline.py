@@ -157,11 +157,14 @@ class EventPipeline:
         buffers.prune_hook = self.prune_after_decisions
 
     # -- entries ---------------------------------------------------------------------------
-    def add(self, events: Batch, atomic: bool) -> list[EventRejected]:
+    def add(self, events: Batch, atomic: bool,
+            on_stored: Callable[[], None] | None = None) -> list[EventRejected]:
         """Stages 1-6 for a batch of ``(name, args, start, end)`` events; returns the
         rejected ones (the marks' first), raises the first when ``atomic``. Inside a
         transaction this thread holds (``kb.store.transaction()``), stages 1 and 2 run in
-        it (a savepoint) and stages 3-6 once it committed (module docstring)."""
+        it (a savepoint) and stages 3-6 once it committed (module docstring). ``on_stored``
+        is called between stages 2 and 3 (outside a transaction: the knowledge base takes
+        what its change check read with the add's statement)."""
         inside = self.store.in_transaction_here
         run = self._enter()
         try:
@@ -184,6 +187,8 @@ class EventPipeline:
                 self.store.after_commit(lambda: self._committed(stored, written))
             else:
                 run.stored = True
+                if on_stored is not None:
+                    on_stored()
                 self._observe(run, stored, written)
         finally:
             self._leave(run)

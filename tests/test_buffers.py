@@ -290,6 +290,33 @@ def test_buffer_declared_before_its_type_exists_and_quoted_constants(open_kb):
         ("it's", 2.0), ("other", 3.0), ("other", 4.0)]
 
 
+def test_the_two_float_zeros_are_one_count_buffer_key_on_both_backends(open_kb):
+    # SQLite's triggers compare keys with SQL's `=`, which takes one zero for the other and
+    # shows no sign; PostgreSQL's compared the column texts ('0.0', '-0.0') and kept one
+    # event of each. Both backends keep one for both now (docs/buffers.md): as a whole
+    # argument, inside a compound or a list, a constant of the pattern, a repeated
+    # variable, and a buffer applied to the rows already stored.
+    kb = open_kb(0)
+    kb.load("cBuffer(p(K, _), 1). cBuffer(q(f(K), _), 1). cBuffer(s(0.0, _), 1). "
+            "cBuffer(t(X, X, _), 1). cBuffer(u([K], _), 1).")
+    kb.add_many(["p(0.0, a)^1", "p(-0.0, b)^2", "q(f(-0.0), a)^1", "q(f(0.0), b)^2",
+                 "s(-0.0, a)^1", "s(-0.0, b)^2", "t(0.0, -0.0, a)^1", "t(0.0, 0.0, b)^2",
+                 "u([0.0], a)^1", "u([-0.0], b)^2", "r(0.0, a)^1", "r(-0.0, b)^2",
+                 "w(f(0.0), a)^1", "w(f(-0.0), b)^2", "p(1.0, c)^3", "p(0, d)^4"])
+    kb.add_buffer("r(K, _)", keep_last=1)
+    kb.add_buffer("w(f(K), _)", keep_last=1)
+    kept = {name: [(format_term(from_python(a["K"])), str(a["V"])) for a in
+                   kb.query(f"{name}(K, V)^_" if name != "t" else "t(K, _, V)^_")]
+            for name in "pqstuwr"}
+    assert kept == {"p": [("-0.0", "b"), ("1.0", "c"), ("0", "d")], "q": [("f(0.0)", "b")],
+                    "s": [("-0.0", "b")], "t": [("0.0", "b")], "u": [("[-0.0]", "b")],
+                    "w": [("f(-0.0)", "b")], "r": [("-0.0", "b")]}
+    # the zeros' own values are kept: a zero's key finds the other, never a non-zero
+    kb.add_many(["p(0.0, e)^5", "p(1.0, f)^6"])
+    assert [(format_term(from_python(a["K"])), str(a["V"])) for a in kb.query("p(K, V)^_")] \
+        == [("0", "d"), ("0.0", "e"), ("1.0", "f")]
+
+
 @pytest.mark.parametrize("text", ["50%", "a?b", ":name", "$slr$", "x\\y", "é ✓", "1", "[x"])
 def test_constants_that_mean_something_to_sql_are_only_constants(open_kb, text):
     kb = open_kb(0)

@@ -191,17 +191,18 @@ def _pg_round_trips(kb, call) -> tuple[int, list[str]]:
 
 
 @pytest.mark.parametrize("policy, added, most", [
-    ("recent", "a", 4),          # ends no match: nothing read or copied for the rule
-    ("recent", "b", 5),          # a terminator to keep pending: no search, no copy
-    ("unrestricted", "b", 5),    # a match: found and copied with RETURNING, together
+    ("recent", "a", 3),          # ends no match: nothing read or copied for the rule
+    ("recent", "b", 4),          # a terminator to keep pending: no search, no copy
+    ("unrestricted", "b", 4),    # a match: found and copied with RETURNING, together
 ])
 def test_an_add_with_an_event_rule_takes_few_round_trips(postgres_url, policy, added, most):
     """One add of one event on a PostgreSQL store with ``a seq b``: the writer group's lock
     in the round trip of the watermarks, read in one statement, no catalog read for the
     complex type's triggers, no read-back of the copy, nothing for a rule the event cannot
     end, the rule's writes sent with its next read (the copy, the pending summary), the
-    insert's savepoint with the insert and its release with the rule's statements. (The
-    last session's code took 11, 14 and 12.)"""
+    insert's savepoint with the insert and its release with the rule's statements, and the
+    change check ahead of the BEGIN in its round trip. (One more while the change check
+    went alone; an earlier session's code took 11, 14 and 12.)"""
     clock = ManualClock(0.0)
     with slr_sql.open(postgres_url, clock=clock) as kb:
         kb.load(_program(policy))
@@ -267,10 +268,11 @@ def test_a_decision_round_is_four_round_trips(postgres_url):
 
 
 @pytest.mark.parametrize("policy", ["recent", "unrestricted"])
-def test_a_batch_with_an_event_rule_is_six_round_trips(postgres_url, policy):
-    """``add_many`` of ten events of both types: the change check, BEGIN with the check for
-    count buffers, the lock with the watermarks, the savepoint with the insert, the rule's
-    statements, COMMIT. (The last session's code took 16 and 15.)"""
+def test_a_batch_with_an_event_rule_is_five_round_trips(postgres_url, policy):
+    """``add_many`` of ten events of both types: the change check with BEGIN and the check
+    for count buffers, the lock with the watermarks, the savepoint with the insert, the
+    rule's statements, COMMIT. (Six while the change check went alone; an earlier session's
+    code took 16 and 15.)"""
     clock = ManualClock(0.0)
     with slr_sql.open(postgres_url, clock=clock) as kb:
         kb.load(_program(policy))
@@ -283,7 +285,7 @@ def test_a_batch_with_an_event_rule_is_six_round_trips(postgres_url, policy):
         # (the fewest of the last adds: the driver prepares a statement on its fifth run,
         # a round trip of its own, whenever a statement reaches it)
         waits, texts = min(fewest[4:], key=lambda found: found[0])
-        assert waits <= 6, texts
+        assert waits <= 5, texts
         assert len(kb.query("c(X)^[S, E]")) == (40 if policy == "recent" else 180)
 
 

@@ -637,6 +637,14 @@ class EventStore:
     def data_version(self) -> int:
         return self._catalog.data_version()
 
+    @_doc(Catalog.owe_change_check)
+    def owe_change_check(self, program_version: int) -> tuple[Any, Any] | None:
+        return self._catalog.owe_change_check(program_version)
+
+    @_doc(Catalog.settle_change_check)
+    def settle_change_check(self, owed: tuple[Any, Any]) -> tuple[int, int, int] | None:
+        return self._catalog.settle_change_check(owed)
+
     @_doc(Database.others_version)
     def others_version(self) -> int:
         return self._db.others_version()

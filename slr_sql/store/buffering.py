@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from collections.abc import Callable
 from typing import Any, Union
 
 from .dialect import POSTGRES
@@ -328,6 +329,10 @@ class SQLiteBufferPrinter:
 
 # ----------------------------------------------------------------------------- PostgreSQL
 
+# The column texts of the two float zeros (Python's repr, as written by the dialect)
+_PG_ZEROS = "('0.0', '-0.0')"
+
+
 def _pg_float(value: float) -> str:
     value = float(value)
     if value == math.inf:
@@ -370,6 +375,8 @@ class PostgresBufferPrinter:
 
     def test(self, t: Test, row: str) -> str:
         if isinstance(t, ArgEquals):
+            if type(t.value) is float and t.value == 0.0:   # either zero, as SQLite's `=`
+                return f"{row}arg{t.column} IN {_PG_ZEROS}"
             return f"{row}arg{t.column} = {sql_literal(POSTGRES.to_column(t.value))}"
         if isinstance(t, JsonEquals):
             x = self.at(row, t.column, t.path)
@@ -383,11 +390,26 @@ class PostgresBufferPrinter:
             x = self.at(row, t.column, t.path)
             return f"slr_json_length({x}) {'>=' if t.open else '='} {t.length}"
         if isinstance(t, SameTerm):
+            a, b = self.value(row, t.first), self.value(row, t.second)
             if t.first[1] is None:
-                return f"{row}arg{t.first[0]} = {row}arg{t.second[0]}"
-            return (f"{self.value(row, t.first)} = {self.value(row, t.second)} AND "
-                    f"{self.vtype(row, t.first)} = {self.vtype(row, t.second)}")
+                return f"({a} = {b} OR {a} IN {_PG_ZEROS} AND {b} IN {_PG_ZEROS})"
+            a_type, b_type = self.vtype(row, t.first), self.vtype(row, t.second)
+            return (f"({a} = {b} OR {a_type} = 'real' AND {a} IN {_PG_ZEROS} AND "
+                    f"{b} IN {_PG_ZEROS}) AND {a_type} = {b_type}")
         return f"slr_json_same({row}arg{t.column}, {self.at(row, t.inside, t.path)})"
+
+    def zero(self, row: str, place: Place) -> str:
+        """Whether the value at ``place`` is a float zero (either sign)."""
+        value, vtype = self.value(row, place), self.vtype(row, place)
+        is_zero = f"{value} IN {_PG_ZEROS}"
+        # (a whole column's text is a float's only when it reads as one: '0.0' is no atom's
+        # or string's spelling there; inside JSON a string's text may be '0.0')
+        return is_zero if vtype is None else f"({vtype} = 'real' AND {is_zero})"
+
+    def key_value(self, place: Place) -> str:
+        """The scanned row's value at key ``place`` with a float zero's sign dropped: one key
+        for both zeros (the partition of a newly installed count buffer)."""
+        return f"(CASE WHEN {self.zero('', place)} THEN '0.0' ELSE {self.value('', place)} END)"
 
     def condition(self, match: PatternMatch, row: str = "") -> str:
         """The match of one row (``""``: the scanned row, ``"NEW."``: the new one)."""
@@ -396,16 +418,33 @@ class PostgresBufferPrinter:
             return "TRUE"
         return conds[0] if len(conds) == 1 else "(" + " AND ".join(conds) + ")"
 
-    def key_equal(self, match: PatternMatch) -> str:
+    def key_equal(self, match: PatternMatch, zeros: bool = False) -> str:
+        """The scanned row has the new row's key. ``zeros``: a float zero of the new row's
+        key also finds the other zero (the condition of :meth:`new_zero`'s branch)."""
         # the keys' B-tree indexes (the event table's first argument, slr_bix_N) are
         # PostgreSQL's key indexes: a key of any length (dialect.key_indexes)
         parts = []
         for place in match.keys:
-            parts.append(POSTGRES.key_equal(self.value('', place), self.value('NEW.', place)))
+            value, new = self.value('', place), self.value('NEW.', place)
+            if zeros:
+                # either text; an array of both still reads the key index (a zero is short:
+                # slr_key of it is itself)
+                mate = (f"CASE WHEN {self.zero('NEW.', place)} THEN CASE {new} WHEN '0.0' "
+                        f"THEN '-0.0' ELSE '0.0' END END")
+                parts.append(f"slr_key({value}) = ANY (ARRAY[slr_key({new}), {mate}]) AND "
+                             f"{value} = ANY (ARRAY[{new}, {mate}])")
+            else:
+                parts.append(POSTGRES.key_equal(value, new))
             vtype = self.vtype("", place)
             if vtype is not None:
                 parts.append(f"{vtype} = {self.vtype('NEW.', place)}")
         return " AND ".join(parts) if parts else "TRUE"
+
+    def new_zero(self, match: PatternMatch) -> str | None:
+        """Whether the new row's key holds a float zero (None: the pattern has no key)."""
+        if not match.keys:
+            return None
+        return " OR ".join(self.zero("NEW.", place) for place in match.keys)
 
     def _trigger(self, name: str, table: str, timing: str, when: str | None, body: str,
                  declare: str = "") -> str:
@@ -470,22 +509,36 @@ class PostgresBufferPrinter:
                 "DECLARE cut float8; n bigint;\n")
         elif plan.kind == "cBuffer":
             n = int(plan.amount or 0)
-            same = f"{row_match} AND {self.key_equal(m)}"
-            newer = (f"SELECT 1 FROM {t} WHERE {same} AND t_end >= NEW.t_end "
-                     f"AND (t_end > NEW.t_end OR t_start > NEW.t_start) LIMIT {n}")
+            # the floats -0.0 and 0.0 are one key, as on SQLite, whose triggers compare
+            # keys with SQL's `=` (docs/buffers.md): a new row whose key holds a zero runs
+            # the statements that find both (the other rows keep their plans as before)
+            new_zero = self.new_zero(m)
+
+            def by_key(statement: Callable[[str], str]) -> str:
+                plain = statement(f"{row_match} AND {self.key_equal(m)}")
+                if new_zero is None:
+                    return plain
+                zeros = statement(f"{row_match} AND {self.key_equal(m, True)}")
+                return f"  IF {new_zero} THEN\n{zeros}\n  ELSE\n{plain}\n  END IF;"
+
+            def newer(same: str) -> str:
+                return (f"  IF (SELECT count(*) FROM (SELECT 1 FROM {t} WHERE {same} "
+                        f"AND t_end >= NEW.t_end AND (t_end > NEW.t_end OR t_start > "
+                        f"NEW.t_start) LIMIT {n}) AS newer) >= {n} THEN\n{drop}\n  END IF;")
+
+            def older(same: str) -> str:
+                return (f"  DELETE FROM {t} WHERE seq IN (SELECT seq FROM {t} WHERE {same} "
+                        f"ORDER BY {ORDER_NEWEST} OFFSET {n});")
             # concurrent writers take turns per count buffer until their commits: each
             # must see the rows the other stored, or both keep N of their own
             lock = (f"  PERFORM pg_advisory_xact_lock(hashtext(current_schema() || "
                     f"':buffers'), {bid % 2147483647});\n")
-            out[late] = self._trigger(
-                late, t, "BEFORE INSERT", when,
-                f"{lock}  IF (SELECT count(*) FROM ({newer}) AS newer) >= {n} THEN\n"
-                f"{drop}\n  END IF;\n  RETURN NEW;")
+            out[late] = self._trigger(late, t, "BEFORE INSERT", when,
+                                      f"{lock}{by_key(newer)}\n  RETURN NEW;")
             keep = f"slr_buf_{bid}_keep"
             out[keep] = self._trigger(
                 keep, t, "AFTER INSERT", when,
-                f"  DELETE FROM {t} WHERE seq IN (SELECT seq FROM {t} WHERE {same} "
-                f"ORDER BY {ORDER_NEWEST} OFFSET {n});\n"
+                f"{by_key(older)}\n"
                 f"{count_pruned}\n  RETURN NULL;",
                 "DECLARE n bigint;\n")
             if m.keys and m.keys[0] != (1, None):
@@ -521,7 +574,7 @@ class PostgresBufferPrinter:
             if plan.match.keys:
                 parts = []
                 for place in plan.match.keys:
-                    parts.append(self.value("", place))
+                    parts.append(self.key_value(place))
                     vtype = self.vtype("", place)
                     if vtype is not None:
                         parts.append(vtype)

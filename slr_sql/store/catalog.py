@@ -62,6 +62,16 @@ class ProgramText:
     loaded_at: float | None
 
 
+# One read of what another connection may have changed (a server): the change counter, the
+# program and progress versions, whether a tBuffer is active
+_CHANGE_CHECK = (
+    "SELECT pg_snapshot_xmax(pg_current_snapshot())::text::bigint AS slr_counter, "
+    "(SELECT value FROM slr_meta WHERE key = ?) AS slr_program, "
+    "(SELECT value FROM slr_meta WHERE key = ?) AS slr_progress, "
+    "EXISTS (SELECT 1 FROM slr_buffers WHERE kind = 'tBuffer' "
+    "AND removed_at IS NULL) AS slr_timed")
+
+
 def _number_text(value: float) -> str:
     """A float as JSON text that SQLite's ``CAST(... AS REAL)`` reads back exactly
     (``1e999`` for infinity, which both JSON and SQLite read as infinity)."""
@@ -121,14 +131,48 @@ class Catalog:
             return int(self.db.data_version())
         with self.db.lock:
             [(counter, program, progress, timed)] = self.db.execute(
-                "SELECT pg_snapshot_xmax(pg_current_snapshot())::text::bigint, "
-                "(SELECT value FROM slr_meta WHERE key = ?), "
-                "(SELECT value FROM slr_meta WHERE key = ?), "
-                "EXISTS (SELECT 1 FROM slr_buffers WHERE kind = 'tBuffer' "
-                "AND removed_at IS NULL)", (PROGRAM_VERSION, PROGRESS_VERSION))
+                _CHANGE_CHECK, (PROGRAM_VERSION, PROGRESS_VERSION))
             self._read_with_change = (int(program or 0), int(progress or 0))
             self.db.tbuffers_active = bool(timed)
             return int(counter)
+
+    def owe_change_check(self, program_version: int) -> tuple[Any, Any] | None:
+        """On a server, outside a transaction: the change check of an add that runs with
+        the program of version ``program_version`` (and, with ``db.tbuffers_active``, the
+        tBuffer flag last read), sent with the add's first statement instead of before
+        it -- inside that statement when the add is one statement of inserts alone (one
+        round trip: :class:`~slr_sql.store.postgres.WriteCheck`). A check that finds either
+        moved stores nothing of the add and raises ``ChangedMeanwhile``. Returns ``(check,
+        the check it stands in front of)`` for :meth:`settle_change_check`, or None (SQLite,
+        memory, inside a transaction: the caller checks as every call does).
+
+        >>> from slr_sql.store import EventStore
+        >>> EventStore(None).owe_change_check(0) is None   # (SQLite: PRAGMA data_version)
+        True
+        """
+        db = self.db
+        if db.dialect.name == "sqlite" or db.tx_depth:
+            return None
+        from .postgres import WriteCheck   # (a server's store: psycopg is there)
+        check = WriteCheck(
+            f"SELECT *, CAST(coalesce(slr_program, '0') AS bigint) = %s AND (%s OR NOT "
+            f"slr_timed) AS slr_fresh FROM ({db.dialect.statement(_CHANGE_CHECK)}) AS slr_read",
+            (int(program_version), db.tbuffers_active is not False,
+             PROGRAM_VERSION, PROGRESS_VERSION))
+        return check, db.conn.owe(check)
+
+    def settle_change_check(self, owed: tuple[Any, Any]) -> tuple[int, int, int] | None:
+        """The add that owed the check is done with it: ``(counter, program version,
+        progress version)`` as the check read them, or None when it was not sent or found
+        the program moved (a server's: see :meth:`owe_change_check`)."""
+        check, outer = owed
+        with self.db.lock:
+            self.db.conn.settle(check, outer)
+        if check.row is None or check.failed:
+            return None
+        counter, program, progress, timed, _ = check.row
+        self.db.tbuffers_active = bool(timed)
+        return int(counter), int(program or 0), int(progress or 0)
 
     # ------------------------------------------------------------------ program
 

@@ -27,6 +27,7 @@ import weakref
 import zlib
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager, suppress
+from itertools import chain
 from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
@@ -326,6 +327,45 @@ def _read_notifications(raw: Any) -> None:
             return
 
 
+class ChangedMeanwhile(SLRError):
+    """Another connection changed what an add's decisions rest on (the program, or a tBuffer
+    made active) since the add began, as its change check found: nothing of the add was
+    stored. The knowledge base reads the program again and adds once more; it never reaches
+    a caller of the API."""
+
+
+class WriteCheck:
+    """The change check an add owes before its first statement (:meth:`PgConnection.owe`):
+    ``sql`` (psycopg's placeholders, ``params``) reads one row of what another connection may
+    have changed, its last column ``slr_fresh`` whether the add's decisions still hold.
+    ``row`` is that row once read (None: not sent yet); ``failed``, that it said no.
+
+    >>> check = WriteCheck("SELECT ...", ()); check.row is None
+    True
+    >>> check.read((7, "3", "2", False, False)); check.failed
+    True
+    """
+
+    __slots__ = ("thread", "sql", "params", "row", "failed")
+
+    def __init__(self, sql: str, params: tuple) -> None:
+        self.thread = threading.get_ident()
+        self.sql = sql
+        self.params = params
+        self.row: tuple | None = None
+        self.failed = False
+
+    def read(self, row: tuple) -> None:
+        self.row = row
+        self.failed = not row[-1]
+
+
+# the values an add's rows may hold for its rows to go into the check's statement: a VALUES
+# list outside an INSERT types its columns by itself (text and float8 here), and the
+# INSERT then assigns them to the event table's text and double precision columns
+_CHECKED_VALUE_TYPES = {str, float}
+
+
 class PgConnection:
     """``execute``/``executemany`` with slr_sql's parameters, on one psycopg connection."""
 
@@ -350,6 +390,80 @@ class PgConnection:
         # opened and released (``(text, params)``, psycopg's style): they go in the round
         # trip of the transaction's next statement, ahead of it
         self.prelude: list[tuple[str, Any]] = []
+        # the change checks adds owe, by thread (WriteCheck): sent before the thread's next
+        # statement, or inside it when that statement is the deferred inserts alone
+        self.checks: dict[int, WriteCheck] = {}
+
+    def owe(self, check: WriteCheck) -> WriteCheck | None:
+        """Send ``check`` before (or with) this thread's next statement; returns the check
+        this thread owed before, for :meth:`settle`."""
+        outer = self.checks.get(check.thread)
+        self.checks[check.thread] = check
+        return outer
+
+    def settle(self, check: WriteCheck, outer: WriteCheck | None) -> None:
+        """The add that owed ``check`` is done with it (sent or not)."""
+        if self.checks.get(check.thread) is check:
+            if outer is None:
+                del self.checks[check.thread]
+            else:
+                self.checks[check.thread] = outer
+
+    def _before_send(self) -> None:
+        """Before a statement: the change check this thread owes, if not sent yet -- first
+        in the pipeline of a statement that sends the transaction's BEGIN (whose work is
+        rolled back if the check says no: :meth:`_pipelined_check`), else as a statement of
+        its own; after a check that said no, no statement of the add goes (the add is made
+        again)."""
+        if not self.checks:
+            return
+        check = self.checks.get(threading.get_ident())
+        if check is None:
+            return
+        if check.row is None:
+            if self.begin_pending:
+                return   # (the send that opens the transaction carries it)
+            self._alive()
+            raw = self.raw
+            check.read(self._guard(lambda: raw.execute(check.sql, check.params).fetchone()))
+        if check.failed:
+            raise ChangedMeanwhile("the program changed meanwhile")
+
+    def _pipelined_check(self, begin: bool) -> WriteCheck | None:
+        """The change check this thread owes and has not sent, when the pipeline about to
+        go opens the transaction (``begin``): it goes first, ahead of the BEGIN, and
+        :meth:`_read_pipelined` reads its answer after the pipeline."""
+        if not begin or not self.checks:
+            return None
+        check = self.checks.get(threading.get_ident())
+        return check if check is not None and check.row is None else None
+
+    @staticmethod
+    def _read_pipelined(check: WriteCheck, cursor: Any) -> None:
+        """The answer of a check sent first in a pipeline; one that says no ends the add
+        (the transaction the pipeline opened is rolled back, with what it ran)."""
+        check.read(cursor.fetchone())
+        if check.failed:
+            raise ChangedMeanwhile("the program changed meanwhile")
+
+    def _checked_inserts(self, check: WriteCheck, deferred: dict) -> tuple[str, list] | None:
+        """The deferred inserts as one statement that also makes ``check``: each table's
+        rows go in only when the check's ``slr_fresh`` holds (the same snapshot), and the
+        statement answers the check's row. None when a row holds a value of another type
+        (the check then goes as a statement of its own)."""
+        params = list(check.params)
+        parts = []
+        for i, ((table, columns), rows) in enumerate(deferred.items()):
+            if not set(map(type, chain.from_iterable(rows))) <= _CHECKED_VALUE_TYPES:
+                return None
+            row = "(" + ", ".join(["%s"] * len(rows[0])) + ")"
+            parts.append(f"slr_part{i} AS (INSERT INTO {table} ({columns}) SELECT * FROM "
+                         f"(VALUES {', '.join([row] * len(rows))}) AS slr_rows "
+                         f"WHERE (SELECT slr_fresh FROM slr_check))")
+            for values in rows:
+                params += values
+        return (f"WITH slr_check AS ({check.sql}), {', '.join(parts)} "
+                f"SELECT * FROM slr_check"), params
 
     def lock_later(self, key: int) -> None:
         """``pg_advisory_xact_lock(key)`` before the next statement, sent with it."""
@@ -402,12 +516,15 @@ class PgConnection:
         if self.deferred:
             self.flush()
         if self.begin_pending or self.prelude:
+            self._before_send()
             self._alive()
             self._guard(self._with_begin(lambda: None))
 
     def flush(self) -> None:
         """Send the deferred inserts (after the pending BEGIN, in the same round trip):
         before any other statement of their transaction, which may read their rows."""
+        if self.deferred:
+            self._before_send()
         text, params = self._take_deferred()
         if text:
             self._alive()
@@ -417,14 +534,18 @@ class PgConnection:
             # savepoint) came after them, and goes after them
             begin, self.begin_pending = self.begin_pending, False
             prelude, self.prelude = self.prelude, []
+            check = self._pipelined_check(begin)
 
             def send() -> None:
                 with raw.pipeline():
+                    checked = raw.execute(check.sql, check.params) if check else None
                     if begin:
                         raw.execute("BEGIN")
                     cursor.execute(text, params)
                     for sql, args in prelude:
                         raw.execute(sql, args)
+                if check is not None:
+                    self._read_pipelined(check, checked)
             self._guard(send)
 
     def _take_deferred(self) -> tuple[str, list]:
@@ -456,14 +577,19 @@ class PgConnection:
         begin, self.begin_pending = self.begin_pending, False
         prelude, self.prelude = self.prelude, []
         raw = self.raw
+        check = self._pipelined_check(begin)
 
         def both() -> Any:
             with raw.pipeline():
+                checked = raw.execute(check.sql, check.params) if check else None
                 if begin:
                     raw.execute("BEGIN")
                 for text, params in prelude:
                     raw.execute(text, params)
-                return call()
+                result = call()
+            if check is not None:
+                self._read_pipelined(check, checked)
+            return result
         return both
 
     def _alive(self) -> None:
@@ -510,14 +636,34 @@ class PgConnection:
         if self.begin_pending and sql in ("COMMIT", "ROLLBACK"):
             self.begin_pending = False   # no BEGIN was sent: nothing to end
             self.last_rowcount = 0
-            deferred, params = self._take_deferred()
+            check = self.checks.get(threading.get_ident()) if self.checks else None
+            checked = None
+            if check is not None and check.row is None and self.deferred and sql == "COMMIT":
+                # the change check the add owes goes in the same statement: one round trip
+                checked = self._checked_inserts(check, self.deferred)
+            if checked is not None:
+                self.deferred = {}
+                self.deferred_params = 0
+                deferred, params = checked
+            else:
+                if self.deferred and sql == "COMMIT":
+                    self._before_send()
+                deferred, params = self._take_deferred()
             if deferred and sql == "COMMIT":
                 # the transaction's only statement: it commits on its own (autocommit), as
                 # durably as a COMMIT, and an error in it stores none of its rows
                 self._guard(lambda: cursor.execute(deferred, params))
+                if checked is not None:
+                    check.read(self._guard(cursor.fetchone))   # type: ignore[union-attr]
+                    if check.failed:   # type: ignore[union-attr]
+                        # no row went in; the transaction, which sent nothing, ends as one
+                        # that did not begin
+                        self.begin_pending = True
+                        raise ChangedMeanwhile("the program changed meanwhile")
             return PgCursor(cursor, self)
         if self.deferred:
             self.flush()
+        self._before_send()
         self._guard(self._with_begin(lambda: cursor.execute(text, args, prepare=None)))
         self.last_rowcount = cursor.rowcount
         return PgCursor(cursor, self)
@@ -528,14 +674,17 @@ class PgConnection:
         are a list of rows)."""
         if self.deferred:
             self.flush()
+        self._before_send()
         self._alive()
         raw = self.raw
         cursors: list = []
         begin, self.begin_pending = self.begin_pending, False
         prelude, self.prelude = self.prelude, []
+        check = self._pipelined_check(begin)
 
         def run() -> None:
             with raw.pipeline():
+                checked = raw.execute(check.sql, check.params) if check else None
                 if begin:
                     raw.execute("BEGIN")
                 for text, params in prelude:
@@ -552,6 +701,8 @@ class PgConnection:
                     args = params if isinstance(params, dict) else (tuple(params) or None)
                     cursor.execute(text, args, prepare=None)
                     cursors.append(cursor)
+            if check is not None:
+                self._read_pipelined(check, checked)
         self._guard(run)
         return [self._guard(c.fetchall) if c is not None and c.description else []
                 for c in cursors]
@@ -568,6 +719,7 @@ class PgConnection:
             return self._insert_rows(plain.group(1), plain.group(2), rows)
         if self.deferred:
             self.flush()
+        self._before_send()
         self._alive()
         cursor = self.raw.cursor()
         if plain is not None and len(rows) > _COPY_FROM:
@@ -606,6 +758,7 @@ class PgConnection:
             return PgCursor(_NoRows, self)
         if self.deferred:
             self.flush()
+        self._before_send()
         self._alive()
         cursor = self.raw.cursor()
         step = max(1, _MAX_PARAMS // width)
@@ -626,6 +779,7 @@ class PgConnection:
         if rows > _COPY_FROM or self.begin_pending:
             yield
             return
+        self._before_send()
         self._alive()
         psycopg = _psycopg()
         try:
@@ -641,6 +795,7 @@ class PgConnection:
         """Run SQL text exactly as written (no parameters: DDL, trigger functions whose
         bodies hold ``%``, ``?`` or ``:`` of their own); several statements may be given."""
         self.send_begin()
+        self._before_send()
         self._alive()
         cursor = self.raw.cursor()
         self._guard(lambda: cursor.execute(sql, None, prepare=False))
