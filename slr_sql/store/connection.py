@@ -98,6 +98,10 @@ class WallClock:
 
 
 _SQLITE_MAGIC = b"SQLite format 3\x00"
+# The files SQLite keeps beside a database, named after it, and what each is: opening the
+# database takes a file of that name for its own and truncates, rewrites or deletes it
+_SIDE_FILES = (("-wal", "write-ahead log"), ("-shm", "shared-memory index"),
+               ("-journal", "rollback journal"))
 # Tables every store has (the first migration creates them).
 _STORE_TABLES = frozenset({"slr_meta", "slr_program", "slr_event_types"})
 
@@ -158,6 +162,7 @@ def check_file(path: str, adopt: bool = False) -> bool:
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise SLRError(f"{path}: no such directory: {folder}")
+    _refuse_side_files(path)
     try:
         info = os.stat(path)
     except FileNotFoundError:
@@ -200,6 +205,46 @@ def check_file(path: str, adopt: bool = False) -> bool:
         raise SLRError(f"{path}: cannot adopt {what}: it uses PRAGMA user_version "
                        f"({version}) for its own schema, as slr_sql does")
     return False
+
+
+def _is_sqlite_file(path: str) -> bool:
+    try:
+        with open(path, "rb") as handle:
+            return handle.read(len(_SQLITE_MAGIC)) == _SQLITE_MAGIC
+    except OSError:   # (no such file, or not readable: not one to be destroyed by a store)
+        return False
+
+
+def _refuse_side_files(path: str) -> None:
+    """Refuse a store at ``path`` that SQLite would destroy, or that would destroy one: a
+    path named as the ``-wal``, ``-shm`` or ``-journal`` of an SQLite database beside it
+    (opening that database truncates or deletes its side files: a store there was gone
+    after the next ``slr query`` of the database, a fleet store ``robot.db-wal`` as soon
+    as the push closed ``robot.db``); and a store whose side file is an SQLite database
+    (which opening the store would destroy). SQLite names the side files after the
+    database's real path, so a link's target is checked too.
+
+    >>> import tempfile, slr_sql; folder = tempfile.mkdtemp()
+    >>> slr_sql.open(os.path.join(folder, "robot.db")).close()
+    >>> check_file(os.path.join(folder, "robot.db-wal"))
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: ...robot.db-wal: the name of the write-ahead log of the SQLite database ...robot.db beside it ...
+    """
+    for spelled in dict.fromkeys((path, os.path.realpath(path))):
+        for suffix, what in _SIDE_FILES:
+            if spelled.endswith(suffix) and _is_sqlite_file(spelled[:-len(suffix)]):
+                raise SLRError(
+                    f"{path}: the name of the {what} of the SQLite database "
+                    f"{spelled[:-len(suffix)]} beside it (SQLite's own file, which opening "
+                    f"that database truncates or deletes): a store there would be lost; "
+                    f"give it another name")
+            side = spelled + suffix
+            if _is_sqlite_file(side):
+                raise SLRError(
+                    f"{path}: {side} beside it is an SQLite database (a store?), where "
+                    f"SQLite keeps the {what} of {path}: opening {path} would destroy "
+                    f"it; move that file to another name first")
 
 
 def _read_schema(path: str, header: bytes) -> tuple[list[tuple[str, str]], int]:
