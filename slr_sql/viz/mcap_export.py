@@ -301,6 +301,20 @@ def _check_overwrite(store: Any, path: str | Path) -> bool:
     if target.is_dir():
         raise ExportRefused(f"{path} is a directory: an export is an MCAP file; name a file "
                             f"in it, e.g. {target / 'export.mcap'}")
+    own = getattr(store, "path", None)
+    if own is not None and "://" not in str(own):
+        # by name too: a side file SQLite has not made yet is where it will write, and an
+        # export written there was deleted by the store's next open
+        real = os.path.realpath(target)
+        for suffix in ("", "-wal", "-shm", "-journal"):
+            if real == os.path.realpath(own) + suffix and suffix:
+                raise ExportRefused(f"{path} is the name of a file SQLite keeps beside the "
+                                    f"store being exported ({own}{suffix}): it would "
+                                    "destroy the export, or the export the store; name "
+                                    "another file")
+            if real == os.path.realpath(own):
+                raise ExportRefused(f"{path} is the store being exported ({own}) itself: "
+                                    "writing the export there would destroy the store")
     try:
         mode = os.stat(target).st_mode
     except OSError:
