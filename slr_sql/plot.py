@@ -1040,6 +1040,41 @@ def timeline(source: Any, types: Iterable[str] | str | None = None, *,
 IMAGE_FORMATS = {".png": "png", ".jpg": "jpg", ".jpeg": "jpg", ".svg": "svg", ".pdf": "pdf"}
 
 
+def check_image_target(path: str, store: str | None = None) -> None:
+    """Refuse (SLRError), before any work, to write an image over an SQLite database (the
+    store being drawn reached through a link, another store) or over ``store``'s own files
+    (it, its ``-wal``, ``-shm``, ``-journal``, whatever their spelling): matplotlib writes
+    through a link and truncates what is there, and ``slr plot robot.db -o view.png`` with
+    ``view.png`` a link to ``robot.db`` left an image where the store was.
+
+    >>> import os, tempfile, slr_sql
+    >>> folder = tempfile.mkdtemp(); db = os.path.join(folder, "robot.db")
+    >>> slr_sql.open(db).close(); os.symlink(db, os.path.join(folder, "view.png"))
+    >>> check_image_target(os.path.join(folder, "view.png"), db)
+    Traceback (most recent call last):
+        ...
+    slr_sql.errors.SLRError: cannot write .../view.png: it is the store being drawn (.../robot.db): writing the image there would destroy the store
+    """
+    import os
+
+    real = os.path.realpath(path)
+    if store is not None and "://" not in store:
+        for suffix in ("", "-wal", "-shm", "-journal"):
+            if real == os.path.realpath(store) + suffix:
+                what = "the store being drawn" if not suffix else \
+                    "the name of a file SQLite keeps beside the store being drawn"
+                raise SLRError(f"cannot write {path}: it is {what} ({store}{suffix}): "
+                               "writing the image there would destroy the store")
+    try:
+        with open(real, "rb") as existing:
+            head = existing.read(16)
+    except OSError:
+        return          # (no such file: made; another reason: writing it says why)
+    if head == b"SQLite format 3\x00":
+        raise SLRError(f"cannot write {path}: it is an SQLite database (a store?), not an "
+                       "image; remove the file first or choose another name")
+
+
 def save_timeline(figure: Any, path: str) -> None:
     """Write a timeline figure at its own size and dpi (``slr plot -o``) in the format its
     suffix names: .png, .jpg/.jpeg, .svg or .pdf; any other suffix is refused.
