@@ -469,9 +469,13 @@ class Database:
             [name for name in (self.path, self.path + "-wal", self.path + "-shm",
                                self.path + "-journal") if not os.path.lexists(name)]
         try:
-            self.conn = sqlite3.connect(self.path or ":memory:", check_same_thread=False,
-                                        isolation_level=None, timeout=busy_timeout,
-                                        cached_statements=512)
+            # (a URI of the path, as every other connection of the store opens it: SQLite,
+            # built to read URIs, took a plain 'file:other.db' for the file other.db, which
+            # check_file had not looked at and the store's readers did not open)
+            self.conn = sqlite3.connect(":memory:" if self.path is None else
+                                        _file_uri(self.path, "rwc"), uri=True,
+                                        check_same_thread=False, isolation_level=None,
+                                        timeout=busy_timeout, cached_statements=512)
         except sqlite3.Error as exc:
             raise SLRError(f"{self.path}: cannot open it ({exc})") from None
         conn = self.conn
