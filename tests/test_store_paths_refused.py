@@ -33,3 +33,17 @@ def test_a_reading_command_says_an_empty_file_is_no_store_in_the_same_words(tmp_
     assert done.stderr == (f"error: no such store: {db} is an empty file (only load, add, "
                            f"ingest, run, demo and serve create a store)\n")
     assert not out.exists() and db.stat().st_size == 0
+
+
+@pytest.mark.parametrize("command", [
+    ["export", "{url}", "{out}"], ["plot", "{url}", "-o", "{out}.png"],
+    ["fleet", "push", "{url}", "{out}.db"], ["foxglove", "{url}"]])
+def test_a_command_that_needs_the_store_itself_says_so_of_a_servers_url(tmp_path, command):
+    # (the URL of slr serve, which most commands take for DB: it was called no PostgreSQL URL)
+    url = "http://127.0.0.1:9"
+    out = tmp_path / "out"
+    done = slr(*[part.format(url=url, out=out) for part in command])
+    assert done.returncode == 1, (done.stdout, done.stderr)
+    assert done.stderr.startswith(f"error: {url}: the URL of a server (slr serve), not a "
+                                  f"store: this needs the store itself"), done.stderr
+    assert list(tmp_path.iterdir()) == []

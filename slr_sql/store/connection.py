@@ -348,6 +348,13 @@ def _refuse_url_shaped(path: str) -> None:
     is no store (a file path would make it a folder ``POSTGRESQL:``); said without its
     password."""
     if _URL_SHAPED.match(path) and not is_postgres_url(path):
+        if path[:8].lower().startswith(("http://", "https://")):
+            # (the URL of `slr serve`, which most commands take for DB: say who takes it)
+            raise SLRError(f"{shown_location(path)}: the URL of a server (slr serve), not a "
+                           f"store: this needs the store itself, its file or a PostgreSQL "
+                           f"URL (postgresql://...); a server's store is asked through "
+                           f"slr_sql.connect(URL) or the slr commands that take its URL "
+                           f"(query, add, sql, ...)")
         raise SLRError(f"{shown_location(path)}: not a store: a URL names a PostgreSQL store "
                        f"and begins postgresql:// or postgres:// (in lower case)")
 
