@@ -38,7 +38,7 @@ from typing import Any, Iterable
 from .errors import SLRError, SLRTimeout
 from .store.timeline import Statement, TimelineStatements, timeline_statements
 from .store import DatabaseError, quote_identifier
-from .printable import printable_text, shown
+from .printable import printable_name, printable_text, shown
 
 __all__ = [
     "timeline", "collect_timeline", "draw_timeline", "save_timeline", "parse_value_spec",
@@ -294,6 +294,16 @@ def _split_type(text: str) -> tuple[str, int | None]:
     return text.strip(), None
 
 
+def _known_types(catalog: list[EventTypeRef]) -> str:
+    r"""The store's event types for a message, each name as the terminal draws it (a name's
+    line break was a line of the message of its own).
+
+    >>> print(_known_types([EventTypeRef("seg", 2, "seg"), EventTypeRef("a\nb", 1, "t")]))
+    seg/2, 'a\nb'/1
+    """
+    return ", ".join(f"{printable_name(t.name)}/{t.arity}" for t in catalog) or "none"
+
+
 def _resolve_types(catalog: list[EventTypeRef], texts: Iterable[str]) -> list[EventTypeRef]:
     chosen: list[EventTypeRef] = []
     for text in texts:
@@ -302,8 +312,8 @@ def _resolve_types(catalog: list[EventTypeRef], texts: Iterable[str]) -> list[Ev
         name, arity = _split_type(text)
         found = [t for t in catalog if t.name == name and (arity is None or t.arity == arity)]
         if not found:
-            known = ", ".join(t.label for t in catalog) or "none"
-            raise SLRError(f"unknown event type: {text.strip()} (the store has: {known})")
+            raise SLRError(f"unknown event type: {printable_name(text.strip())} (the store "
+                           f"has: {_known_types(catalog)})")
         chosen.extend(t for t in found if t not in chosen)
     return chosen
 
@@ -433,9 +443,9 @@ def _resolve_value(catalog: list[EventTypeRef], spec: ValueSpec) -> EventTypeRef
     name, arity = _split_type(spec.type_text)
     found = [t for t in catalog if t.name == name and (arity is None or t.arity == arity)]
     if not found:
-        known = ", ".join(t.label for t in catalog) or "none"
-        raise SLRError(f"bad value {spec.text!r}: unknown event type {spec.type_text} "
-                       f"(the store has: {known})")
+        raise SLRError(f"bad value {spec.text!r}: unknown event type "
+                       f"{printable_name(spec.type_text)} (the store has: "
+                       f"{_known_types(catalog)})")
     fitting = [t for t in found if t.arity >= spec.argument]
     if not fitting:
         raise SLRError(f"bad value {spec.text!r}: {found[0].label} has {found[0].arity} "
