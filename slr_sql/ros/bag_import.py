@@ -324,7 +324,7 @@ def export_bag_id(summary: Any) -> str:
     >>> import pathlib, tempfile, slr_sql
     >>> from slr_sql.viz.mcap_export import export_mcap, export_summary
     >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); kb.add("seen(a)^1")
-    >>> path = pathlib.Path(tempfile.mkdtemp()) / "x.mcap"; _ = export_mcap(kb, path)
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "x.mcap"; _ = export_mcap(kb.store, path)
     >>> export_bag_id(export_summary(path)).startswith("export_")
     True
     """
