@@ -30,6 +30,7 @@ import random
 import re
 import sqlite3
 import stat
+import threading
 import time
 import weakref
 from contextlib import contextmanager
@@ -102,6 +103,58 @@ _SQLITE_MAGIC = b"SQLite format 3\x00"
 # database takes a file of that name for its own and truncates, rewrites or deletes it
 _SIDE_FILES = (("-wal", "write-ahead log"), ("-shm", "shared-memory index"),
                ("-journal", "rollback journal"))
+# The store files, by (device, inode), this process has open through SQLite connections
+# (Database, ReadConnection), with how many. POSIX drops every lock a process holds on a file
+# when the process closes any descriptor of that file, and SQLite cannot know of descriptors
+# it did not open: check_file reading the header of a store that another knowledge base of
+# this process had open dropped that connection's locks, so the next other process to close
+# the store took itself for its last user, checkpointed and deleted the -wal and -shm, and
+# the knowledge bases of this process (`slr serve --foxglove` after any `slr query` of the
+# file) refused every later write: their log had been deleted. A file held here is read only
+# through SQLite.
+_HELD: dict[tuple[int, int], int] = {}
+_HELD_LOCK = threading.Lock()   # (a leaf: held only around a stat, a count or a raw read)
+
+
+def _hold(path: str) -> tuple[int, int] | None:
+    """Count the file at ``path`` as open here through SQLite (call once connected, before
+    the connection's first statement takes a lock); its identity, to :func:`_release`."""
+    with _HELD_LOCK:
+        identity = _file_identity(path)
+        if identity is not None:
+            _HELD[identity] = _HELD.get(identity, 0) + 1
+        return identity
+
+
+def _release(identity: tuple[int, int] | None) -> None:
+    if identity is None:
+        return
+    with _HELD_LOCK:
+        left = _HELD.get(identity, 0) - 1
+        if left > 0:
+            _HELD[identity] = left
+        else:
+            _HELD.pop(identity, None)
+
+
+def _held_here(path: str) -> bool:
+    with _HELD_LOCK:
+        identity = _file_identity(path)
+        return identity is not None and identity in _HELD
+
+
+def _read_head(path: str, size: int) -> bytes | None:
+    """The first ``size`` bytes of the file ``path``; None, reading nothing, when this
+    process has the file open through SQLite (closing a descriptor of it would drop the
+    locks of those connections). OSError as open() raises it."""
+    with _HELD_LOCK:
+        identity = _file_identity(path)
+        if identity is not None and identity in _HELD:
+            return None
+        with open(path, "rb") as handle:
+            return handle.read(size)
+
+
 # Tables every store has (the first migration creates them).
 _STORE_TABLES = frozenset({"slr_meta", "slr_program", "slr_event_types"})
 
@@ -162,7 +215,8 @@ def check_file(path: str, adopt: bool = False) -> bool:
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise SLRError(f"{path}: no such directory: {folder}")
-    _refuse_side_files(path)
+    if not _held_here(path):  # (a store open here passed when it was opened)
+        _refuse_side_files(path)
     try:
         info = os.stat(path)
     except FileNotFoundError:
@@ -176,10 +230,12 @@ def check_file(path: str, adopt: bool = False) -> bool:
     if info.st_size == 0:
         return True
     try:
-        with open(path, "rb") as handle:
-            header = handle.read(100)
+        read = _read_head(path, 100)
     except OSError as exc:
         raise SLRError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    if read is None:   # a store this process has open: SQLite reads it (migrate checks it)
+        return False
+    header = read
     if not header.startswith(_SQLITE_MAGIC[:len(header)]) or len(header) < 16:
         raise SLRError(f"{path}: not an SQLite database (so not an slr_sql store)")
     if len(header) < 100:
@@ -209,10 +265,10 @@ def check_file(path: str, adopt: bool = False) -> bool:
 
 def _is_sqlite_file(path: str) -> bool:
     try:
-        with open(path, "rb") as handle:
-            return handle.read(len(_SQLITE_MAGIC)) == _SQLITE_MAGIC
+        head = _read_head(path, len(_SQLITE_MAGIC))
     except OSError:   # (no such file, or not readable: not one to be destroyed by a store)
         return False
+    return head is None or head == _SQLITE_MAGIC   # (None: SQLite has it open here)
 
 
 def _refuse_side_files(path: str) -> None:
@@ -485,6 +541,8 @@ class Database:
                                         timeout=busy_timeout, cached_statements=512)
         except sqlite3.Error as exc:
             raise SLRError(f"{self.path}: cannot open it ({exc})") from None
+        # (before the first statement takes a lock: see _HELD)
+        self._held = None if self.path is None else _hold(self.path)
         conn = self.conn
         try:
             self.guard = harden(conn)
@@ -516,6 +574,8 @@ class Database:
                 conn.execute("PRAGMA wal_autocheckpoint=0")
         except BaseException as exc:
             conn.close()
+            _release(self._held)
+            self._held = None
             for name in created:
                 try:
                     os.remove(name)
@@ -787,6 +847,8 @@ class Database:
                         pass  # best effort: the WAL is checkpointed on the next open anyway
             finally:
                 self.conn.close()
+                _release(self._held)
+                self._held = None
 
     def open_reader(self) -> "ReadConnection | None":
         """A :class:`ReadConnection` to this store's file (None in memory: no other
@@ -1697,6 +1759,7 @@ class ReadConnection:
                                         timeout=busy_timeout, cached_statements=64)
         except sqlite3.Error as exc:
             raise self._error(exc) from None
+        self._held = _hold(path)   # (before the first statement takes a lock: see _HELD)
         try:
             harden(self.conn)
             self.conn.execute("PRAGMA query_only=ON")
@@ -1704,11 +1767,16 @@ class ReadConnection:
             if functions is not None:
                 register_functions(self.conn, functions)
         except sqlite3.Error as exc:
-            self.conn.close()
+            self._close_connection()
             raise self._error(exc) from None
         if _file_identity(path) != self._identity:
-            self.conn.close()
+            self._close_connection()
             raise _store_gone(path, "the store file was deleted or replaced", "nothing was read")
+
+    def _close_connection(self) -> None:
+        self.conn.close()
+        _release(self._held)
+        self._held = None
 
     def _error(self, exc: sqlite3.Error) -> SLRError:
         now = _file_identity(self.path)
@@ -1732,7 +1800,7 @@ class ReadConnection:
         with self.lock:
             if not self.closed:
                 self.closed = True
-                self.conn.close()
+                self._close_connection()
 
 
 
