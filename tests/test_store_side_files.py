@@ -6,11 +6,16 @@ query robot.db``, and ``slr fleet push robot.db robot.db-wal`` reported its even
 to a fleet store that the push itself deleted."""
 from __future__ import annotations
 
+import os
+
 import pytest
 
 import slr_sql
 from slr_sql import ManualClock
 from test_cli import slr
+
+SIDE_WORDS = [("-wal", "write-ahead log"), ("-shm", "shared-memory index"),
+              ("-journal", "rollback journal")]
 
 
 def _store(path, robot=None, events=("seen(a)^1",)):
@@ -60,3 +65,20 @@ def test_a_fleet_push_to_the_robot_stores_wal_name_ships_nothing_and_says_why(tm
     assert "shipped" not in done.stdout
     assert "the name of the write-ahead log of the SQLite database" in done.stderr
     assert not (tmp_path / "r1.db-wal").exists()
+
+
+@pytest.mark.parametrize("suffix", ["-wal", "-shm", "-journal"])
+@pytest.mark.parametrize("kind", ["a named pipe", "a directory"])
+def test_a_side_file_that_is_no_file_is_said_and_never_waited_on(tmp_path, suffix, kind):
+    # a named pipe at robot.db-wal made the check for a database there wait for a writer
+    # for ever; a directory made SQLite say 'disk I/O error' or 'unable to open database'
+    db = _store(tmp_path / "robot.db")
+    side = tmp_path / f"robot.db{suffix}"
+    if kind == "a named pipe":
+        os.mkfifo(side)
+    else:
+        side.mkdir()
+    done = slr("query", str(db), "seen(X)^_", timeout=60)
+    assert done.returncode == 1, done.stdout
+    assert done.stderr == (f"error: {db}: {side} beside it is {kind}, where SQLite keeps the "
+                           f"{dict(SIDE_WORDS)[suffix]} of {db}: remove or rename it\n")

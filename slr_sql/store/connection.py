@@ -263,7 +263,22 @@ def check_file(path: str, adopt: bool = False) -> bool:
     return False
 
 
+def _file_kind(path: str) -> str | None:
+    """What is at ``path``: None for nothing (or a link to nothing), "file" for a regular
+    file, else its kind in words."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return None
+    if stat.S_ISREG(mode):
+        return "file"
+    return "a directory" if stat.S_ISDIR(mode) else "a named pipe" if stat.S_ISFIFO(mode) \
+        else "a socket" if stat.S_ISSOCK(mode) else "a device"
+
+
 def _is_sqlite_file(path: str) -> bool:
+    if _file_kind(path) != "file":   # (a named pipe's open would wait for a writer)
+        return False
     try:
         head = _read_head(path, len(_SQLITE_MAGIC))
     except OSError:   # (no such file, or not readable: not one to be destroyed by a store)
@@ -296,6 +311,10 @@ def _refuse_side_files(path: str) -> None:
                     f"that database truncates or deletes): a store there would be lost; "
                     f"give it another name")
             side = spelled + suffix
+            kind = _file_kind(side)
+            if kind not in (None, "file"):
+                raise SLRError(f"{path}: {side} beside it is {kind}, where SQLite keeps the "
+                               f"{what} of {path}: remove or rename it")
             if _is_sqlite_file(side):
                 raise SLRError(
                     f"{path}: {side} beside it is an SQLite database (a store?), where "
