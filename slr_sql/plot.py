@@ -1075,7 +1075,11 @@ def check_image_target(path: str, store: str | None = None) -> None:
                     "the name of a file SQLite keeps beside the store being drawn"
                 raise SLRError(f"cannot write {path}: it is {what} ({store}{suffix}): "
                                "writing the image there would destroy the store")
+    import stat
+
     try:
+        if not stat.S_ISREG(os.stat(real).st_mode):
+            return      # (a named pipe a viewer reads: its open would wait for a writer)
         with open(real, "rb") as existing:
             head = existing.read(16)
     except OSError:

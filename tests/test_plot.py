@@ -483,6 +483,18 @@ def test_cli_does_not_write_its_image_over_a_store(robot_db, tmp_path, how):
     assert _event_count(robot_db) == events > 0
 
 
+def test_cli_into_a_named_pipe_does_not_wait_to_read_it(robot_db, tmp_path):
+    # the check that -o is no SQLite database opened the pipe to read its first bytes,
+    # which waits for a writer: the command never ended
+    out = tmp_path / "view.png"
+    os.mkfifo(out)
+    done = subprocess.run([sys.executable, "-m", "slr_sql", "plot", str(robot_db), "-o",
+                           str(out)], capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "PYTHONPATH": str(REPO)}, cwd=REPO)
+    assert done.returncode == 1, done.stdout
+    assert done.stderr == f"error: cannot write {out}: File or stream is not seekable.\n"
+
+
 def test_cli_on_a_missing_store(tmp_path):
     missing = tmp_path / "nope.db"
     done = slr("plot", str(missing), "-o", str(tmp_path / "x.png"))
