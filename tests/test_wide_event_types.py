@@ -32,3 +32,17 @@ def test_a_type_of_1500_arguments_is_looked_up_buffered_and_exported(tmp_path):
     assert report.per_type == {("wide", ARITY): 2}
     with open(tmp_path / "wide.mcap", "rb") as stream:
         assert sum(1 for _ in make_reader(stream).iter_messages()) == 2
+
+
+def test_an_event_rule_over_a_type_of_1500_arguments_loads_and_detects():
+    # its load was refused: the rule's statements held a condition per argument
+    clock = ManualClock(0)
+    with slr_sql.open(clock=clock) as kb:
+        kb.load(f":- max_delay(wide/{ARITY}, 0).\nwide_alone(1) <- wide({ARGS}) cnot bump(1).",
+                name="rules")
+        for t in (1.0, 3.0):
+            clock.set(t)
+            kb.add_event("wide", list(range(ARITY)), start=t, end=t)
+        clock.set(10)
+        kb.add("bump(2)^10")
+        assert kb.query("wide_alone(X)^_") == [{"X": 1}, {"X": 1}]

@@ -37,6 +37,7 @@ from typing import Any, Callable
 from ..encoding import Unencodable, encode
 from ..store import quote_identifier
 from ..store.dialect import SQLITE, short_text
+from ..store.sqltext import joined_balanced
 from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
 from .rules import Alternative, Expr, Leaf
 
@@ -584,7 +585,7 @@ class AltSQL:
                     conds.append(self._eq(column, ref))
             else:
                 conds.append(self._const_cond(column, a) or self.dialect.false)
-        where = " AND ".join(conds) or self.dialect.true
+        where = joined_balanced(conds, "AND") or self.dialect.true
         return _Cond(positions, f"EXISTS (SELECT 1 FROM {table} AS {alias} WHERE {where})")
 
     def _negation(self, n: int, interval: tuple, leaf: Leaf) -> None:
@@ -603,7 +604,7 @@ class AltSQL:
         where = [f"{alias}.t_start > {s}", f"{alias}.t_end < {e}"] + [c.sql for c in conds]
         # the index on (t_end, t_start) bounds the scan to the interval
         sql = (f"NOT EXISTS (SELECT 1 FROM {table} AS {alias} WHERE "
-               f"{' AND '.join(where)})")
+               f"{joined_balanced(where, 'AND')})")
         self.negs.append(_Neg(leaf.key, positions, sql, e))
 
     def _head(self) -> list | None:
@@ -641,7 +642,7 @@ class AltSQL:
         return {f"e{p}": f"{prefix}e{p}" for p in range(self.k)}
 
     def _where(self, conds: list[str]) -> str:
-        return " AND ".join(c for c in conds if c) or self.dialect.true
+        return joined_balanced([c for c in conds if c], "AND") or self.dialect.true
 
     def _from(self, order: list[int], aliases: dict[str, str]) -> str:
         return " CROSS JOIN ".join(f"{self.tables[p]} AS {aliases[f'e{p}']}" for p in order)
@@ -680,7 +681,7 @@ class AltSQL:
 
     def neg_ok(self, aliases: dict[str, str]) -> str:
         parts = [render(n.sql, aliases) for n in self.negs if n.sql is not None]
-        return " AND ".join(parts) or self.dialect.true
+        return joined_balanced(parts, "AND") or self.dialect.true
 
     def inputs_complete(self, end: str) -> str:
         """Every type a terminator's decision reads complete up to ``end`` (its end): through
