@@ -291,8 +291,8 @@ def _refuse_side_files(path: str) -> None:
     path named as the ``-wal``, ``-shm`` or ``-journal`` of an SQLite database beside it
     (opening that database truncates or deletes its side files: a store there was gone
     after the next ``slr query`` of the database, a fleet store ``robot.db-wal`` as soon
-    as the push closed ``robot.db``); and a store whose side file is an SQLite database
-    (which opening the store would destroy). SQLite names the side files after the
+    as the push closed ``robot.db``); and a store whose -wal or -journal is an SQLite
+    database (which opening the store would destroy), or whose side file is no file. SQLite names the side files after the
     database's real path, so a link's target is checked too.
 
     >>> import tempfile, slr_sql; folder = tempfile.mkdtemp()
@@ -315,7 +315,9 @@ def _refuse_side_files(path: str) -> None:
             if kind not in (None, "file"):
                 raise SLRError(f"{path}: {side} beside it is {kind}, where SQLite keeps the "
                                f"{what} of {path}: remove or rename it")
-            if _is_sqlite_file(side):
+            # (never the -shm's bytes: SQLite locks that file, and a descriptor of ours
+            # closed would drop the locks of any connection of this process to the store)
+            if suffix != "-shm" and _is_sqlite_file(side):
                 raise SLRError(
                     f"{path}: {side} beside it is an SQLite database (a store?), where "
                     f"SQLite keeps the {what} of {path}: opening {path} would destroy "
