@@ -2068,7 +2068,8 @@ def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None
     if timeout is not None and query_goal is None:
         raise click.UsageError("--timeout goes with --query")
     timeout = _finite("--timeout", timeout, minimum=0.0)
-    _check_existing_store(db)
+    if not _is_url(db):   # (a server's store is drawn through its SQL, as kb.plot does)
+        _check_existing_store(db)
     dimensions = parse_size(size) if size is not None else None
     with _open(db, create=False) as kb:
         if query_goal is not None and every is None:
