@@ -250,3 +250,15 @@ def test_a_path_beginning_with_file_colon_is_that_file_not_a_uri_of_another(tmp_
     assert (tmp_path / "file:foreign.db").is_file()
     with slr_sql.open(str(tmp_path / "file:foreign.db"), clock=ManualClock(0)) as kb:
         assert kb.query("seen(X)^T") == [{"X": slr_sql.Atom("a"), "T": 1.0}]
+
+
+def test_a_path_beginning_with_two_slashes_is_opened_and_read(tmp_path):
+    # POSIX allows '//dir/robot.db' (abspath keeps it): its URI read '//dir' as a host, which
+    # SQLite refuses ('invalid uri authority'), so a store added to could not be read back
+    path = "/" + str(tmp_path / "robot.db")
+    assert path.startswith("//")
+    with slr_sql.open(path, clock=ManualClock(0)) as kb:
+        kb.add("seen(a)^1")
+    with slr_sql.open(path, clock=ManualClock(0)) as kb:
+        assert kb.sql("SELECT arg1 FROM seen")[1] == [("a",)]
+        assert kb.query("seen(X)^T") == [{"X": slr_sql.Atom("a"), "T": 1.0}]

@@ -127,10 +127,14 @@ def file_uri(path: str, mode: str = "ro") -> str:
     (``%``, ``?`` and ``#`` escaped).
 
     >>> file_uri("/data/50%/robot?#1.db", "rw")
-    'file:/data/50%25/robot%3f%231.db?mode=rw'
+    'file:///data/50%25/robot%3f%231.db?mode=rw'
+    >>> file_uri("//data/robot.db")
+    'file:////data/robot.db?mode=ro'
     """
     quoted = os.path.abspath(path).replace("%", "%25").replace("?", "%3f").replace("#", "%23")
-    return f"file:{quoted}?mode={mode}"
+    # (an empty authority, then the path: a path that begins with two slashes, which POSIX
+    # allows and abspath keeps, was read as 'file://AUTHORITY/...', refused by SQLite)
+    return f"file://{quoted}?mode={mode}"
 
 
 def file_identity(name: str) -> tuple[int, int] | None:
