@@ -257,7 +257,9 @@ class BufferSpec:
     @property
     def where(self) -> str:
         if self.source == "runtime":
-            return f"runtime buffer #{self.id} (kb.add_buffer)"
+            # (a buffer being added has no id yet: it was shown as #None)
+            return "a new runtime buffer (kb.add_buffer)" if self.id is None else \
+                f"runtime buffer #{self.id} (kb.add_buffer)"
         return self.origin
 
     def identity(self) -> tuple:
@@ -266,9 +268,16 @@ class BufferSpec:
 
 
 def _num(x: Any) -> str:
+    """A buffer's number as messages and ``slr stats`` show it: a whole float as an integer
+    while it is exact (below 2^53), else as Python writes it.
+
+    >>> _num(10.0), _num(0.5), _num(1e308), _num(math.inf), _num(None)
+    ('10', '0.5', '1e+308', 'inf', '_')
+    """
     if x is None:
         return "_"
-    if type(x) is float and x.is_integer() and math.isfinite(x):
+    # (1e308 written as an integer was 309 digits in a message)
+    if type(x) is float and x.is_integer() and abs(x) <= 2 ** 53:
         return str(int(x))
     if x == math.inf:
         return "inf"

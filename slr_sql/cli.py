@@ -2062,18 +2062,21 @@ def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None
     Intervals are bars, points ticks, --value arguments lines, arrival lags orange lines;
     histories too long for the picture are aggregated per pixel column.
     """
-    from .plot import IMAGE_FORMATS, collect_timeline, draw_timeline, parse_size
+    from .plot import (IMAGE_FORMATS, check_image_target, collect_timeline, draw_timeline,
+                       parse_size)
 
     suffix = os.path.splitext(output)[1].lower()
     if suffix not in IMAGE_FORMATS:   # before any work: nothing is written
         raise slr_sql.SLRError(f"cannot write {output}: the suffix {suffix or '(none)'} names "
                                f"no image format; use {', '.join(IMAGE_FORMATS)}")
+    check_image_target(output, db)
     if every is not None and query_goal is None:
         raise click.UsageError("--every goes with --query")
     if timeout is not None and query_goal is None:
         raise click.UsageError("--timeout goes with --query")
     timeout = _finite("--timeout", timeout, minimum=0.0)
-    _check_existing_store(db)
+    if not _is_url(db):   # (a server's store is drawn through its SQL, as kb.plot does)
+        _check_existing_store(db)
     dimensions = parse_size(size) if size is not None else None
     with _open(db, create=False) as kb:
         if query_goal is not None and every is None:

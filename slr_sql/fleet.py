@@ -702,7 +702,9 @@ def status(fleet: str, token: str | None = None, now: float | None = None) -> li
     stored from it), ``pending`` (events its store held unshipped at the last contact),
     ``lag_seconds`` (arrival of its latest event less arrival of the latest shipped, at the
     last contact; 0 when nothing was pending), ``last_contact`` (seconds since the epoch)
-    and ``since_contact`` (seconds), ``via`` None; and per robot whose rows another store
+    and ``since_contact`` (seconds), ``via`` None (``pending``, ``lag_seconds``,
+    ``last_contact`` None while its pusher never reported: killed in its first round); and
+    per robot whose rows another store
     relays there: ``shipped`` (its rows stored), ``via`` (the relaying store's robot),
     ``pending``, ``lag_seconds`` and ``last_contact`` None (its pusher reports to the
     relaying store); in name order.
@@ -722,12 +724,15 @@ def status(fleet: str, token: str | None = None, now: float | None = None) -> li
     out = []
     for r in rows:
         via = r.get("via")   # (a server of an older slr_sql does not say)
-        lag: float | None = None if via is not None else 0.0
-        if r["pending"] and r["head_arrival"] is not None:
+        # a robot whose pusher has not reported yet (killed in its first round, which
+        # reports with its last batch) has no known lag: not a lag of 0
+        unknown = via is not None or r["contact_at"] is None
+        lag: float | None = None if unknown else 0.0
+        if not unknown and r["pending"] and r["head_arrival"] is not None:
             lag = max(0.0, r["head_arrival"] - (r["last_arrival"] if r["last_arrival"]
                                                 is not None else r["head_arrival"]))
         out.append({"robot": r["robot"], "shipped": r["shipped"],
-                    "pending": None if via is not None else r["pending"],
+                    "pending": None if unknown else r["pending"],
                     "lag_seconds": lag, "last_contact": r["contact_at"],
                     "since_contact": None if r["contact_at"] is None
                     else max(0.0, now - r["contact_at"]), "via": via})
@@ -826,7 +831,9 @@ def click_group() -> Any:
             (printable_name(r["robot"]), str(r["shipped"]), "-", "-",
              f"relayed via {printable_name(r['via'])}")
             if r.get("via") is not None else
-            (printable_name(r["robot"]), str(r["shipped"]), str(r["pending"]), f"{r['lag_seconds']:.3f}",
+            (printable_name(r["robot"]), str(r["shipped"]),
+             "-" if r["pending"] is None else str(r["pending"]),
+             "-" if r["lag_seconds"] is None else f"{r['lag_seconds']:.3f}",
              "never" if r["last_contact"] is None else
              time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(r["last_contact"]))
              + f" UTC ({r['since_contact']:.0f} s ago)")

@@ -38,7 +38,7 @@ from typing import Any, Iterable
 from .errors import SLRError, SLRTimeout
 from .store.timeline import Statement, TimelineStatements, timeline_statements
 from .store import DatabaseError, quote_identifier
-from .printable import printable_text, shown
+from .printable import printable_name, printable_text, shown
 
 __all__ = [
     "timeline", "collect_timeline", "draw_timeline", "save_timeline", "parse_value_spec",
@@ -294,6 +294,16 @@ def _split_type(text: str) -> tuple[str, int | None]:
     return text.strip(), None
 
 
+def _known_types(catalog: list[EventTypeRef]) -> str:
+    r"""The store's event types for a message, each name as the terminal draws it (a name's
+    line break was a line of the message of its own).
+
+    >>> print(_known_types([EventTypeRef("seg", 2, "seg"), EventTypeRef("a\nb", 1, "t")]))
+    seg/2, 'a\nb'/1
+    """
+    return ", ".join(f"{printable_name(t.name)}/{t.arity}" for t in catalog) or "none"
+
+
 def _resolve_types(catalog: list[EventTypeRef], texts: Iterable[str]) -> list[EventTypeRef]:
     chosen: list[EventTypeRef] = []
     for text in texts:
@@ -302,8 +312,8 @@ def _resolve_types(catalog: list[EventTypeRef], texts: Iterable[str]) -> list[Ev
         name, arity = _split_type(text)
         found = [t for t in catalog if t.name == name and (arity is None or t.arity == arity)]
         if not found:
-            known = ", ".join(t.label for t in catalog) or "none"
-            raise SLRError(f"unknown event type: {text.strip()} (the store has: {known})")
+            raise SLRError(f"unknown event type: {printable_name(text.strip())} (the store "
+                           f"has: {_known_types(catalog)})")
         chosen.extend(t for t in found if t not in chosen)
     return chosen
 
@@ -433,9 +443,9 @@ def _resolve_value(catalog: list[EventTypeRef], spec: ValueSpec) -> EventTypeRef
     name, arity = _split_type(spec.type_text)
     found = [t for t in catalog if t.name == name and (arity is None or t.arity == arity)]
     if not found:
-        known = ", ".join(t.label for t in catalog) or "none"
-        raise SLRError(f"bad value {spec.text!r}: unknown event type {spec.type_text} "
-                       f"(the store has: {known})")
+        raise SLRError(f"bad value {spec.text!r}: unknown event type "
+                       f"{printable_name(spec.type_text)} (the store has: "
+                       f"{_known_types(catalog)})")
     fitting = [t for t in found if t.arity >= spec.argument]
     if not fitting:
         raise SLRError(f"bad value {spec.text!r}: {found[0].label} has {found[0].arity} "
@@ -1055,6 +1065,45 @@ def timeline(source: Any, types: Iterable[str] | str | None = None, *,
 
 
 IMAGE_FORMATS = {".png": "png", ".jpg": "jpg", ".jpeg": "jpg", ".svg": "svg", ".pdf": "pdf"}
+
+
+def check_image_target(path: str, store: str | None = None) -> None:
+    """Refuse (SLRError), before any work, to write an image over an SQLite database (the
+    store being drawn reached through a link, another store) or over ``store``'s own files
+    (it, its ``-wal``, ``-shm``, ``-journal``, whatever their spelling): matplotlib writes
+    through a link and truncates what is there, and ``slr plot robot.db -o view.png`` with
+    ``view.png`` a link to ``robot.db`` left an image where the store was.
+
+    >>> import os, tempfile, slr_sql
+    >>> folder = tempfile.mkdtemp(); db = os.path.join(folder, "robot.db")
+    >>> slr_sql.open(db).close(); os.symlink(db, os.path.join(folder, "view.png"))
+    >>> check_image_target(os.path.join(folder, "view.png"), db)
+    Traceback (most recent call last):
+        ...
+    slr_sql.errors.SLRError: cannot write .../view.png: it is the store being drawn (.../robot.db): writing the image there would destroy the store
+    """
+    import os
+
+    real = os.path.realpath(path)
+    if store is not None and "://" not in store:
+        for suffix in ("", "-wal", "-shm", "-journal"):
+            if real == os.path.realpath(store) + suffix:
+                what = "the store being drawn" if not suffix else \
+                    "the name of a file SQLite keeps beside the store being drawn"
+                raise SLRError(f"cannot write {path}: it is {what} ({store}{suffix}): "
+                               "writing the image there would destroy the store")
+    import stat
+
+    try:
+        if not stat.S_ISREG(os.stat(real).st_mode):
+            return      # (a named pipe a viewer reads: its open would wait for a writer)
+        with open(real, "rb") as existing:
+            head = existing.read(16)
+    except OSError:
+        return          # (no such file: made; another reason: writing it says why)
+    if head == b"SQLite format 3\x00":
+        raise SLRError(f"cannot write {path}: it is an SQLite database (a store?), not an "
+                       "image; remove the file first or choose another name")
 
 
 def save_timeline(figure: Any, path: str) -> None:

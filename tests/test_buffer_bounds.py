@@ -169,3 +169,17 @@ def test_post_buffers_refuses_out_of_range_bounds_with_400(tmp_path):
         assert HTTP.get(server.url + "/buffers", timeout=30).json()["buffers"] == []
         r = HTTP.post(server.url + "/add", json={"event": "p(b)^2"}, timeout=30)
         assert r.status_code == 200, r.text
+
+
+def test_a_conflict_with_a_wide_buffer_names_both_readably(kb):
+    # the widest duration was written as an integer of 309 digits, the buffer being added
+    # as 'runtime buffer #None'
+    kb.add_buffer("p(_)", keep_seconds=1e308)
+    with pytest.raises(SLRError) as refused:
+        kb.add_buffer("p(X)", keep_last=1)
+    assert str(refused.value).startswith(
+        "conflicting buffers: keep_seconds(p(_), 1e+308) at runtime buffer #1 (kb.add_buffer) "
+        "and keep_last(p(X), 1) at a new runtime buffer (kb.add_buffer) have unifiable patterns")
+    assert [str(b) for b in kb.buffers()] == [
+        "#1 tBuffer p(_): keep while end >= now - 1e+308s (runtime, kb.add_buffer; pruned 0, "
+        "dropped 0)"]

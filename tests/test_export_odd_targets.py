@@ -97,3 +97,17 @@ def test_a_socket_is_refused_before_anything_is_written(tmp_path):
     assert result.returncode == 1
     assert b"is not a file (a block device or a socket)" in result.stderr, result.stderr
     assert stat.S_ISSOCK(os.stat(path).st_mode)
+
+
+def test_an_export_named_as_a_side_file_of_the_store_is_refused_before_it_is_written(tmp_path):
+    # robot.db-journal does not exist while the store is in WAL mode: the export was written
+    # there and deleted by the store's next open, which took it for a journal
+    db = store(tmp_path)
+    target = tmp_path / "r.db-journal"
+    done = slr("export", str(db), str(target))
+    assert done.returncode == 1, done.stdout
+    assert done.stderr.decode() == (
+        f"error: {target} is the name of a file SQLite keeps beside the store being exported "
+        f"({db}-journal): it would destroy the export, or the export the store; name another "
+        f"file\n")
+    assert not target.exists()

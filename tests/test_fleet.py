@@ -1071,3 +1071,19 @@ def test_a_following_pusher_says_the_robot_store_waits_not_that_the_fleet_is_dow
     assert reports[0].outages == 0
     got = rows_of(fleet_db)
     assert sorted(k[3] for k in got) == ["a", "b"] and set(got.values()) == {1}
+
+
+def test_a_robot_whose_pusher_never_reported_has_no_lag_of_zero(tmp_path):
+    # a pusher killed in its first round stored batches but never reported (it reports with
+    # the round's last batch): status said 'lag events 0', as if nothing were left to ship
+    from slr_sql.shipping import receive
+
+    fleet_db = tmp_path / "fleet.db"
+    with slr_sql.open(fleet_db, clock=slr_sql.ManualClock(100)) as kb:
+        receive(kb, "r1", [("seen", 1, [(1, "pallet7", 10.0, 10.0, 3.0, "r1")])])
+    (row,) = fleet.status(str(fleet_db))
+    assert (row["shipped"], row["pending"], row["lag_seconds"], row["last_contact"]) == \
+        (1, None, None, None)
+    shown = subprocess.run([sys.executable, "-m", "slr_sql", "fleet", "status", str(fleet_db)],
+                           capture_output=True, text=True, env=slr_env(), timeout=60)
+    assert shown.stdout.splitlines()[1].split() == ["r1", "1", "-", "-", "never"], shown.stderr

@@ -232,3 +232,33 @@ def test_a_store_open_in_another_connection_opens_as_usual(tmp_path):
         first.add("p(1)^1")
         with slr_sql.open(path, clock=ManualClock(0.0)) as second:
             assert second.query("p(X)^_") == [{"X": 1}]
+
+
+def test_a_path_beginning_with_file_colon_is_that_file_not_a_uri_of_another(tmp_path,
+                                                                            monkeypatch):
+    # SQLite reads a name beginning with 'file:' as a URI: the store's connection opened
+    # foreign.db for 'file:foreign.db' and made it a store without adopt=True, which the
+    # checks (on the path as given) had not looked at, while its readers opened the path
+    foreign = tmp_path / "foreign.db"
+    with sqlite3.connect(foreign) as conn:
+        conn.execute("CREATE TABLE orders (id INTEGER)")
+    before = snapshot(foreign)
+    monkeypatch.chdir(tmp_path)
+    with slr_sql.open("file:foreign.db", clock=ManualClock(0)) as kb:
+        kb.add("seen(a)^1")
+    assert snapshot(foreign)[:2] == before[:2]   # (its bytes and time: untouched)
+    assert (tmp_path / "file:foreign.db").is_file()
+    with slr_sql.open(str(tmp_path / "file:foreign.db"), clock=ManualClock(0)) as kb:
+        assert kb.query("seen(X)^T") == [{"X": slr_sql.Atom("a"), "T": 1.0}]
+
+
+def test_a_path_beginning_with_two_slashes_is_opened_and_read(tmp_path):
+    # POSIX allows '//dir/robot.db' (abspath keeps it): its URI read '//dir' as a host, which
+    # SQLite refuses ('invalid uri authority'), so a store added to could not be read back
+    path = "/" + str(tmp_path / "robot.db")
+    assert path.startswith("//")
+    with slr_sql.open(path, clock=ManualClock(0)) as kb:
+        kb.add("seen(a)^1")
+    with slr_sql.open(path, clock=ManualClock(0)) as kb:
+        assert kb.sql("SELECT arg1 FROM seen")[1] == [("a",)]
+        assert kb.query("seen(X)^T") == [{"X": slr_sql.Atom("a"), "T": 1.0}]

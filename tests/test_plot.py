@@ -458,6 +458,43 @@ def test_cli_errors_are_words(robot_db, tmp_path, args, message):
     assert not out.exists()
 
 
+def _event_count(db) -> int:
+    with slr_sql.open(db, clock=slr_sql.ManualClock(0)) as kb:
+        return sum(len(kb.query(goal)) for goal in ("move(_)^_", "bump(_)^_", "speed(_)^_"))
+
+
+@pytest.mark.parametrize("how", ["symlink", "hard link", "another store"])
+def test_cli_does_not_write_its_image_over_a_store(robot_db, tmp_path, how):
+    # matplotlib writes through a link and truncates the file: an image took the store's place
+    out = tmp_path / "view.png"
+    if how == "symlink":
+        out.symlink_to(robot_db)
+    elif how == "hard link":
+        os.link(robot_db, out)
+    else:
+        with _open(out) as kb:
+            kb.add("other(r2)^1")
+    before, events = Path(os.path.realpath(out)).read_bytes(), _event_count(robot_db)
+    done = slr("plot", str(robot_db), "-o", str(out))
+    assert done.returncode == 1, done.stdout
+    assert done.stderr.startswith(f"error: cannot write {out}: it is "), done.stderr
+    assert "would destroy the store" in done.stderr or "an SQLite database" in done.stderr
+    assert Path(os.path.realpath(out)).read_bytes() == before
+    assert _event_count(robot_db) == events > 0
+
+
+def test_cli_into_a_named_pipe_does_not_wait_to_read_it(robot_db, tmp_path):
+    # the check that -o is no SQLite database opened the pipe to read its first bytes,
+    # which waits for a writer: the command never ended
+    out = tmp_path / "view.png"
+    os.mkfifo(out)
+    done = subprocess.run([sys.executable, "-m", "slr_sql", "plot", str(robot_db), "-o",
+                           str(out)], capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "PYTHONPATH": str(REPO)}, cwd=REPO)
+    assert done.returncode == 1, done.stdout
+    assert done.stderr == f"error: cannot write {out}: File or stream is not seekable.\n"
+
+
 def test_cli_on_a_missing_store(tmp_path):
     missing = tmp_path / "nope.db"
     done = slr("plot", str(missing), "-o", str(tmp_path / "x.png"))

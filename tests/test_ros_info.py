@@ -111,6 +111,24 @@ def test_info_of_an_slr_export(tmp_path):
     assert "without a MAP" in draft_map(info)
 
 
+def test_info_shows_the_id_the_import_of_an_export_records(tmp_path):
+    # docs/ros.md: the id `slr ros info` shows is the one slr_import records; for an
+    # export the two were computed apart, from other parts of the file, and differed
+    from slr_sql import ManualClock
+    from slr_sql.viz.mcap_export import export_mcap
+
+    with slr_sql.open(tmp_path / "r.db", clock=ManualClock(10.0)) as kb:
+        kb.add_many(["seen(a)^1", "seen(b)^2", "bump(r1)^3"])
+        kb.mark_complete("seen/1", 2)
+        export_mcap(kb.store, tmp_path / "out.mcap")
+    shown = bag_info(tmp_path / "out.mcap").bag_id
+    done = slr("ros", "import", str(tmp_path / "out.mcap"), "--db", str(tmp_path / "back.db"))
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.rstrip().endswith(f"[{shown}]"), (shown, done.stdout)
+    with slr_sql.open(tmp_path / "back.db", clock=ManualClock(10.0)) as kb:
+        assert {str(a["B"]) for a in kb.query("slr_import(B, _, _)^_")} == {shown}
+
+
 def test_info_of_an_slr_export_names_frames_as_tf_lookup_does(tmp_path):
     """An exported tf event's frames are terms: an atom is shown as it is, a string as
     "map" and a number as its text, so the frames tf_lookup keeps apart stay apart (a

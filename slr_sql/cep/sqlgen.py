@@ -37,6 +37,7 @@ from typing import Any, Callable
 from ..encoding import Unencodable, encode
 from ..store import quote_identifier
 from ..store.dialect import SQLITE, short_text
+from ..store.sqltext import joined_balanced
 from ..terms import Struct, Var, deref, format_term, is_ground, term_vars
 from .rules import Alternative, Expr, Leaf
 
@@ -52,8 +53,6 @@ _NUMERIC = "IN ('integer', 'real')"
 _INT_BOUND = 2 ** 48
 _REAL_BOUND = 1e300
 _MAX_LEAVES = 16
-# conditions per parenthesized group of a long WHERE (AltSQL._where)
-_AND_GROUP = 64
 
 
 @dataclass(frozen=True)
@@ -604,7 +603,7 @@ class AltSQL:
                     conds.append(self._eq(column, ref))
             else:
                 conds.append(self._const_cond(column, a) or self.dialect.false)
-        where = " AND ".join(conds) or self.dialect.true
+        where = joined_balanced(conds, "AND") or self.dialect.true
         return _Cond(positions, f"EXISTS (SELECT 1 FROM {table} AS {alias} WHERE {where})")
 
     def _negation(self, n: int, interval: tuple, leaf: Leaf) -> None:
@@ -623,7 +622,7 @@ class AltSQL:
         where = [f"{alias}.t_start > {s}", f"{alias}.t_end < {e}"] + [c.sql for c in conds]
         # the index on (t_end, t_start) bounds the scan to the interval
         sql = (f"NOT EXISTS (SELECT 1 FROM {table} AS {alias} WHERE "
-               f"{' AND '.join(where)})")
+               f"{joined_balanced(where, 'AND')})")
         self.negs.append(_Neg(leaf.key, positions, sql, e))
 
     def _head(self) -> list | None:
@@ -661,23 +660,18 @@ class AltSQL:
         return {f"e{p}": f"{prefix}e{p}" for p in range(self.k)}
 
     def _where(self, conds: list[str]) -> str:
-        """The conditions joined by AND; a long list in parenthesized groups of
-        :data:`_AND_GROUP`, since SQLite nests ``a AND b AND c ..`` one level per AND and
-        refuses an expression deeper than 1000 (two rows of one type in every pair of
-        positions of a long pattern: hundreds of ``e_i.seq <> e_j.seq``).
+        """The conditions joined by AND, a long list as a balanced tree of parenthesized
+        halves (:func:`joined_balanced`): SQLite refuses an expression deeper than 1000, and
+        a long pattern has hundreds (``e_i.seq <> e_j.seq`` for rows of one type).
 
         >>> from slr_sql.cep.rules import compile_rule
         >>> from slr_sql.parser import parse_program
         >>> alt = compile_rule(parse_program("c <- a.")[0]).alternatives[0]
         >>> sql = AltSQL(alt, 0, ['"a"'], [], (), "unrestricted", lambda *a: "1")
-        >>> sql._where([f"x{i} = 1" for i in range(_AND_GROUP + 1)]).count("(")
+        >>> sql._where([f"x{i} = 1" for i in range(65)]).count("(")
         2
         """
-        conds = [c for c in conds if c]
-        if len(conds) > _AND_GROUP:
-            conds = ["(" + " AND ".join(conds[i:i + _AND_GROUP]) + ")"
-                     for i in range(0, len(conds), _AND_GROUP)]
-        return " AND ".join(conds) or self.dialect.true
+        return joined_balanced([c for c in conds if c], "AND") or self.dialect.true
 
     def _from(self, order: list[int], aliases: dict[str, str]) -> str:
         return " CROSS JOIN ".join(f"{self.tables[p]} AS {aliases[f'e{p}']}" for p in order)
@@ -716,7 +710,7 @@ class AltSQL:
 
     def neg_ok(self, aliases: dict[str, str]) -> str:
         parts = [render(n.sql, aliases) for n in self.negs if n.sql is not None]
-        return " AND ".join(parts) or self.dialect.true
+        return joined_balanced(parts, "AND") or self.dialect.true
 
     def inputs_complete(self, end: str) -> str:
         """Every type a terminator's decision reads complete up to ``end`` (its end): through

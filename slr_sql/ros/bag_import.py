@@ -316,6 +316,24 @@ def _follow(clock: ManualClock | None, t: float) -> None:
         clock.set(t)
 
 
+def export_bag_id(summary: Any) -> str:
+    """The id an MCAP file of ``slr export`` is imported under (``slr_import`` records it,
+    ``slr ros info`` shows it), from its summary: each channel's topic, event type, arity
+    and message count.
+
+    >>> import pathlib, tempfile, slr_sql
+    >>> from slr_sql.viz.mcap_export import export_mcap, export_summary
+    >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); kb.add("seen(a)^1")
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "x.mcap"; _ = export_mcap(kb.store, path)
+    >>> export_bag_id(export_summary(path)).startswith("export_")
+    True
+    """
+    counts = summary.statistics.channel_message_counts if summary.statistics else {}
+    channels = sorted((c.topic, c.metadata.get("slr_event", ""), c.metadata.get("slr_arity", ""),
+                       counts.get(c.id, 0)) for c in summary.channels.values())
+    return "export_" + hashlib.sha256(json.dumps(channels).encode()).hexdigest()[:16]
+
+
 def _import_export(kb: KnowledgeBaseAPI, path: Path, progress: Callable[[int, int], None] | None,
                    batch_size: int, clock: ManualClock | None) -> ImportReport:
     """An MCAP file of ``slr export``: its events as they were stored (no mapping: its
@@ -331,8 +349,7 @@ def _import_export(kb: KnowledgeBaseAPI, path: Path, progress: Callable[[int, in
                        (summary.statistics.channel_message_counts.get(c.id, 0)
                         if summary.statistics else 0), types[c.id] is not None)
                       for c in summary.channels.values())
-    digest = hashlib.sha256(json.dumps([c[:4] for c in channels]).encode()).hexdigest()
-    report = ImportReport("export_" + digest[:16])
+    report = ImportReport(export_bag_id(summary))
     total = sum(c[3] for c in channels if c[4])
     for topic, event, arity, count, is_event in channels:
         if is_event:

@@ -14,7 +14,6 @@ slr_sql.ros.bag_import.BagError: cannot read /no/such.bag: no such file or direc
 """
 from __future__ import annotations
 
-import hashlib
 import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -22,7 +21,7 @@ from typing import Any
 
 from ..errors import SLRError
 from ..terms import Atom, format_term
-from .bag_import import bag_id, open_bag, read_messages
+from .bag_import import bag_id, export_bag_id, open_bag, read_messages
 from .mapping import TF_TOPICS, TF_TYPE, TIME_TYPES, normalize_topic, topic_event_name
 
 __all__ = ["TopicInfo", "FrameEdge", "BagInfo", "bag_info", "draft_map"]
@@ -102,7 +101,8 @@ def _export_info(path: Path) -> BagInfo:
     from slr_sql.viz.channels import event_from_message
     from slr_sql.viz.mcap_export import export_messages, export_summary
 
-    export_summary(path)   # (ExportCutShort when the file ends early)
+    # (ExportCutShort when the file ends early); the id the import records
+    exported_as = export_bag_id(export_summary(path))
     topics: dict[str, TopicInfo] = {}
     frames: dict[tuple, FrameEdge] = {}
     for schema, channel, message in export_messages(path):
@@ -131,11 +131,9 @@ def _export_info(path: Path) -> BagInfo:
             edge.count += 1
             edge.first = t if edge.first is None else min(edge.first, t)
             edge.last = t if edge.last is None else max(edge.last, t)
-    digest = hashlib.sha256(json.dumps(sorted((k, v.count) for k, v in topics.items()))
-                            .encode()).hexdigest()
     firsts = [t.first for t in topics.values() if t.first is not None]
     lasts = [t.last for t in topics.values() if t.last is not None]
-    return BagInfo(str(path), "export_" + digest[:16], sum(t.count for t in topics.values()),
+    return BagInfo(str(path), exported_as, sum(t.count for t in topics.values()),
                    min(firsts) if firsts else None, max(lasts) if lasts else None,
                    sorted(topics.values(), key=lambda i: i.topic),
                    sorted(frames.values(), key=lambda e: (e.topic, e.parent, e.child)),

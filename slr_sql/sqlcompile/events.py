@@ -16,6 +16,7 @@ import re
 
 from ..program import event_key, split_event_atom
 from ..store.dialect import short_text
+from ..store.sqltext import joined_balanced
 from ..terms import Atom, Struct, Var, deref, list_items, make_list
 from .model import NUMERIC, Col, Fallback, State
 
@@ -285,7 +286,7 @@ class EventGoals:
         qconds.append(f"{q}.t_end <= {hi}")
         if lo is not None:
             qconds.append(f"{q}.t_start >= {lo}")
-        sub = (f"(SELECT {q}.t_end FROM {table} AS {q} WHERE {' AND '.join(qconds)} "
+        sub = (f"(SELECT {q}.t_end FROM {table} AS {q} WHERE {joined_balanced(qconds, 'AND')} "
                f"ORDER BY {q}.t_end DESC LIMIT 1)")
         m = st.mark()
         by_robot = origin is not None and type(deref(origin)) is Var
@@ -330,7 +331,7 @@ class EventGoals:
         qconds.append(f"{q}.t_start >= {lo}")
         qconds.append(f"{q}.t_start <= {hi}")
         qconds.append(f"{q}.t_end <= {hi}")
-        sub = (f"(SELECT {q}.t_start FROM {table} AS {q} WHERE {' AND '.join(qconds)} "
+        sub = (f"(SELECT {q}.t_start FROM {table} AS {q} WHERE {joined_balanced(qconds, 'AND')} "
                f"ORDER BY {q}.t_start LIMIT 1)")
         self.start_ordered.add((name, n))
         m = st.mark()

@@ -10,6 +10,7 @@ import weakref
 from typing import Any
 
 from ..store.dialect import SQLITE
+from ..store.sqltext import joined_balanced
 from ..terms import Atom, CheckedBodies, Struct, Var, body_problem, deref, list_items
 
 
@@ -116,7 +117,7 @@ class Part:
         if self.froms:
             sql += " FROM " + self.from_sql()
         if self.conds:
-            sql += " WHERE " + " AND ".join(self.conds)
+            sql += " WHERE " + joined_balanced(self.conds, "AND")
         return sql
 
 

@@ -35,7 +35,7 @@ from collections.abc import Callable
 from typing import Any, Union
 
 from .dialect import POSTGRES
-from .sqltext import quote_identifier, sql_literal
+from .sqltext import joined_balanced, quote_identifier, sql_literal
 
 __all__ = ["ArgEquals", "JsonEquals", "JsonArray", "SameTerm", "MixedTerm", "PatternMatch",
            "BufferPlan", "BufferTables", "SQLiteBufferPrinter", "PostgresBufferPrinter",
@@ -224,20 +224,20 @@ class SQLiteBufferPrinter:
             groups.setdefault(_guarded(t), []).append(self.test(t, row))
         out = []
         for cols, conds in groups.items():
-            body = " AND ".join(conds)
+            body = joined_balanced(conds, "AND")
             if cols:
-                guards = " AND ".join(self.guard(f"{row}arg{i}") for i in cols)
+                guards = joined_balanced([self.guard(f"{row}arg{i}") for i in cols], "AND")
                 out.append(f"(CASE WHEN {guards} THEN ({body}) ELSE 0 END)")
             else:
                 out.append(body if len(conds) == 1 else f"({body})")
-        return " AND ".join(out) if out else "1"
+        return joined_balanced(out, "AND") if out else "1"
 
     def key_equal(self, match: PatternMatch) -> str:
         parts = []
         for place in match.keys:
             parts.append(f"{self.value('', place)} = {self.value('NEW.', place)}")
             parts.append(f"{self.vtype('', place)} = {self.vtype('NEW.', place)}")
-        return " AND ".join(parts) if parts else "1"
+        return joined_balanced(parts, "AND") if parts else "1"
 
     def objects(self, plan: BufferPlan, table: str) -> dict[str, str]:
         """The ``CREATE TRIGGER`` / ``CREATE INDEX`` statements of one buffer, by name."""
@@ -416,7 +416,7 @@ class PostgresBufferPrinter:
         conds = [self.test(t, row) for t in match.tests]
         if not conds:
             return "TRUE"
-        return conds[0] if len(conds) == 1 else "(" + " AND ".join(conds) + ")"
+        return conds[0] if len(conds) == 1 else "(" + joined_balanced(conds, "AND") + ")"
 
     def key_equal(self, match: PatternMatch, zeros: bool = False) -> str:
         """The scanned row has the new row's key. ``zeros``: a float zero of the new row's
@@ -438,7 +438,7 @@ class PostgresBufferPrinter:
             vtype = self.vtype("", place)
             if vtype is not None:
                 parts.append(f"{vtype} = {self.vtype('NEW.', place)}")
-        return " AND ".join(parts) if parts else "TRUE"
+        return joined_balanced(parts, "AND") if parts else "TRUE"
 
     def new_zero(self, match: PatternMatch) -> str | None:
         """Whether the new row's key holds a float zero (None: the pattern has no key)."""

@@ -30,6 +30,7 @@ import random
 import re
 import sqlite3
 import stat
+import threading
 import time
 import weakref
 from contextlib import contextmanager
@@ -98,6 +99,62 @@ class WallClock:
 
 
 _SQLITE_MAGIC = b"SQLite format 3\x00"
+# The files SQLite keeps beside a database, named after it, and what each is: opening the
+# database takes a file of that name for its own and truncates, rewrites or deletes it
+_SIDE_FILES = (("-wal", "write-ahead log"), ("-shm", "shared-memory index"),
+               ("-journal", "rollback journal"))
+# The store files, by (device, inode), this process has open through SQLite connections
+# (Database, ReadConnection), with how many. POSIX drops every lock a process holds on a file
+# when the process closes any descriptor of that file, and SQLite cannot know of descriptors
+# it did not open: check_file reading the header of a store that another knowledge base of
+# this process had open dropped that connection's locks, so the next other process to close
+# the store took itself for its last user, checkpointed and deleted the -wal and -shm, and
+# the knowledge bases of this process (`slr serve --foxglove` after any `slr query` of the
+# file) refused every later write: their log had been deleted. A file held here is read only
+# through SQLite.
+_HELD: dict[tuple[int, int], int] = {}
+_HELD_LOCK = threading.Lock()   # (a leaf: held only around a stat, a count or a raw read)
+
+
+def _hold(path: str) -> tuple[int, int] | None:
+    """Count the file at ``path`` as open here through SQLite (call once connected, before
+    the connection's first statement takes a lock); its identity, to :func:`_release`."""
+    with _HELD_LOCK:
+        identity = _file_identity(path)
+        if identity is not None:
+            _HELD[identity] = _HELD.get(identity, 0) + 1
+        return identity
+
+
+def _release(identity: tuple[int, int] | None) -> None:
+    if identity is None:
+        return
+    with _HELD_LOCK:
+        left = _HELD.get(identity, 0) - 1
+        if left > 0:
+            _HELD[identity] = left
+        else:
+            _HELD.pop(identity, None)
+
+
+def _held_here(path: str) -> bool:
+    with _HELD_LOCK:
+        identity = _file_identity(path)
+        return identity is not None and identity in _HELD
+
+
+def _read_head(path: str, size: int) -> bytes | None:
+    """The first ``size`` bytes of the file ``path``; None, reading nothing, when this
+    process has the file open through SQLite (closing a descriptor of it would drop the
+    locks of those connections). OSError as open() raises it."""
+    with _HELD_LOCK:
+        identity = _file_identity(path)
+        if identity is not None and identity in _HELD:
+            return None
+        with open(path, "rb") as handle:
+            return handle.read(size)
+
+
 # Tables every store has (the first migration creates them).
 _STORE_TABLES = frozenset({"slr_meta", "slr_program", "slr_event_types"})
 
@@ -158,6 +215,8 @@ def check_file(path: str, adopt: bool = False) -> bool:
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise SLRError(f"{path}: no such directory: {folder}")
+    if not _held_here(path):  # (a store open here passed when it was opened)
+        _refuse_side_files(path)
     try:
         info = os.stat(path)
     except FileNotFoundError:
@@ -171,10 +230,12 @@ def check_file(path: str, adopt: bool = False) -> bool:
     if info.st_size == 0:
         return True
     try:
-        with open(path, "rb") as handle:
-            header = handle.read(100)
+        read = _read_head(path, 100)
     except OSError as exc:
         raise SLRError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    if read is None:   # a store this process has open: SQLite reads it (migrate checks it)
+        return False
+    header = read
     if not header.startswith(_SQLITE_MAGIC[:len(header)]) or len(header) < 16:
         raise SLRError(f"{path}: not an SQLite database (so not an slr_sql store)")
     if len(header) < 100:
@@ -200,6 +261,67 @@ def check_file(path: str, adopt: bool = False) -> bool:
         raise SLRError(f"{path}: cannot adopt {what}: it uses PRAGMA user_version "
                        f"({version}) for its own schema, as slr_sql does")
     return False
+
+
+def _file_kind(path: str) -> str | None:
+    """What is at ``path``: None for nothing (or a link to nothing), "file" for a regular
+    file, else its kind in words."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return None
+    if stat.S_ISREG(mode):
+        return "file"
+    return "a directory" if stat.S_ISDIR(mode) else "a named pipe" if stat.S_ISFIFO(mode) \
+        else "a socket" if stat.S_ISSOCK(mode) else "a device"
+
+
+def _is_sqlite_file(path: str) -> bool:
+    if _file_kind(path) != "file":   # (a named pipe's open would wait for a writer)
+        return False
+    try:
+        head = _read_head(path, len(_SQLITE_MAGIC))
+    except OSError:   # (no such file, or not readable: not one to be destroyed by a store)
+        return False
+    return head is None or head == _SQLITE_MAGIC   # (None: SQLite has it open here)
+
+
+def _refuse_side_files(path: str) -> None:
+    """Refuse a store at ``path`` that SQLite would destroy, or that would destroy one: a
+    path named as the ``-wal``, ``-shm`` or ``-journal`` of an SQLite database beside it
+    (opening that database truncates or deletes its side files: a store there was gone
+    after the next ``slr query`` of the database, a fleet store ``robot.db-wal`` as soon
+    as the push closed ``robot.db``); and a store whose -wal or -journal is an SQLite
+    database (which opening the store would destroy), or whose side file is no file. SQLite names the side files after the
+    database's real path, so a link's target is checked too.
+
+    >>> import tempfile, slr_sql; folder = tempfile.mkdtemp()
+    >>> slr_sql.open(os.path.join(folder, "robot.db")).close()
+    >>> check_file(os.path.join(folder, "robot.db-wal"))
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: ...robot.db-wal: the name of the write-ahead log of the SQLite database ...robot.db beside it ...
+    """
+    for spelled in dict.fromkeys((path, os.path.realpath(path))):
+        for suffix, what in _SIDE_FILES:
+            if spelled.endswith(suffix) and _is_sqlite_file(spelled[:-len(suffix)]):
+                raise SLRError(
+                    f"{path}: the name of the {what} of the SQLite database "
+                    f"{spelled[:-len(suffix)]} beside it (SQLite's own file, which opening "
+                    f"that database truncates or deletes): a store there would be lost; "
+                    f"give it another name")
+            side = spelled + suffix
+            kind = _file_kind(side)
+            if kind not in (None, "file"):
+                raise SLRError(f"{path}: {side} beside it is {kind}, where SQLite keeps the "
+                               f"{what} of {path}: remove or rename it")
+            # (never the -shm's bytes: SQLite locks that file, and a descriptor of ours
+            # closed would drop the locks of any connection of this process to the store)
+            if suffix != "-shm" and _is_sqlite_file(side):
+                raise SLRError(
+                    f"{path}: {side} beside it is an SQLite database (a store?), where "
+                    f"SQLite keeps the {what} of {path}: opening {path} would destroy "
+                    f"it; move that file to another name first")
 
 
 def _read_schema(path: str, header: bytes) -> tuple[list[tuple[str, str]], int]:
@@ -303,6 +425,13 @@ def _refuse_url_shaped(path: str) -> None:
     is no store (a file path would make it a folder ``POSTGRESQL:``); said without its
     password."""
     if _URL_SHAPED.match(path) and not is_postgres_url(path):
+        if path[:8].lower().startswith(("http://", "https://")):
+            # (the URL of `slr serve`, which most commands take for DB: say who takes it)
+            raise SLRError(f"{shown_location(path)}: the URL of a server (slr serve), not a "
+                           f"store: this needs the store itself, its file or a PostgreSQL "
+                           f"URL (postgresql://...); a server's store is asked through "
+                           f"slr_sql.connect(URL) or the slr commands that take its URL "
+                           f"(query, add, sql, ...)")
         raise SLRError(f"{shown_location(path)}: not a store: a URL names a PostgreSQL store "
                        f"and begins postgresql:// or postgres:// (in lower case)")
 
@@ -426,11 +555,17 @@ class Database:
             [name for name in (self.path, self.path + "-wal", self.path + "-shm",
                                self.path + "-journal") if not os.path.lexists(name)]
         try:
-            self.conn = sqlite3.connect(self.path or ":memory:", check_same_thread=False,
-                                        isolation_level=None, timeout=busy_timeout,
-                                        cached_statements=512)
+            # (a URI of the path, as every other connection of the store opens it: SQLite,
+            # built to read URIs, took a plain 'file:other.db' for the file other.db, which
+            # check_file had not looked at and the store's readers did not open)
+            self.conn = sqlite3.connect(":memory:" if self.path is None else
+                                        _file_uri(self.path, "rwc"), uri=True,
+                                        check_same_thread=False, isolation_level=None,
+                                        timeout=busy_timeout, cached_statements=512)
         except sqlite3.Error as exc:
             raise SLRError(f"{self.path}: cannot open it ({exc})") from None
+        # (before the first statement takes a lock: see _HELD)
+        self._held = None if self.path is None else _hold(self.path)
         conn = self.conn
         try:
             self.guard = harden(conn)
@@ -462,6 +597,8 @@ class Database:
                 conn.execute("PRAGMA wal_autocheckpoint=0")
         except BaseException as exc:
             conn.close()
+            _release(self._held)
+            self._held = None
             for name in created:
                 try:
                     os.remove(name)
@@ -733,6 +870,8 @@ class Database:
                         pass  # best effort: the WAL is checkpointed on the next open anyway
             finally:
                 self.conn.close()
+                _release(self._held)
+                self._held = None
 
     def open_reader(self) -> "ReadConnection | None":
         """A :class:`ReadConnection` to this store's file (None in memory: no other
@@ -1643,6 +1782,7 @@ class ReadConnection:
                                         timeout=busy_timeout, cached_statements=64)
         except sqlite3.Error as exc:
             raise self._error(exc) from None
+        self._held = _hold(path)   # (before the first statement takes a lock: see _HELD)
         try:
             harden(self.conn)
             self.conn.execute("PRAGMA query_only=ON")
@@ -1650,11 +1790,16 @@ class ReadConnection:
             if functions is not None:
                 register_functions(self.conn, functions)
         except sqlite3.Error as exc:
-            self.conn.close()
+            self._close_connection()
             raise self._error(exc) from None
         if _file_identity(path) != self._identity:
-            self.conn.close()
+            self._close_connection()
             raise _store_gone(path, "the store file was deleted or replaced", "nothing was read")
+
+    def _close_connection(self) -> None:
+        self.conn.close()
+        _release(self._held)
+        self._held = None
 
     def _error(self, exc: sqlite3.Error) -> SLRError:
         now = _file_identity(self.path)
@@ -1678,7 +1823,7 @@ class ReadConnection:
         with self.lock:
             if not self.closed:
                 self.closed = True
-                self.conn.close()
+                self._close_connection()
 
 
 

@@ -21,6 +21,7 @@ from ..terms import Atom
 from .checks import BadEvent, shown, text_problem
 from .dialect import POSTGRES
 from .connection import Database
+from .sqltext import joined_balanced
 from .events import EventWriter
 from .tables import EventTables
 
@@ -489,7 +490,8 @@ class Fleet:
         args = [f"arg{i} = ? AND typeof(arg{i}) = typeof(?)" if typed else f"arg{i} = ?"
                 for i in range(1, arity + 1)]
         select = (f"SELECT 1 FROM {event_type.quoted} WHERE "
-                  + " AND ".join(args + ["t_start = ?", "t_end = ?", "robot = ?"]) + " LIMIT 1")
+                  + joined_balanced(args + ["t_start = ?", "t_end = ?", "robot = ?"], "AND")
+                  + " LIMIT 1")
         execute = self.db.execute
         return [bool(execute(select, [v for value in values[:arity]
                                       for v in ((value, value) if typed else (value,))]

@@ -21,7 +21,7 @@ from ..encoding import INT64_MAX, INT64_MIN, Unencodable, decode, encode
 from .catalog import PROGRAM_VERSION, PROGRESS_VERSION
 from .connection import Database
 from .dialect import short_text
-from .sqltext import quote_identifier
+from .sqltext import joined_balanced, quote_identifier
 from .tables import EventTables, EventType
 
 __all__ = ["Row", "RawPage", "EventReader", "null_argument_text"]
@@ -243,7 +243,7 @@ class EventReader:
             raise ValueError(kind)
         if resume:
             conditions.append(_RESUME[kind][0])
-        where = f" WHERE {' AND '.join(conditions)}" if conditions else ""
+        where = f" WHERE {joined_balanced(conditions, 'AND')}" if conditions else ""
         named = f" INDEXED BY {index}" if hint else ""
         sql = (f"SELECT {event_type.columns} FROM {event_type.quoted}{named}"
                f"{where} ORDER BY {order}")
@@ -544,8 +544,8 @@ class EventReader:
                     point: bool, far: bool) -> str:
         """The statement of :meth:`_latest_rows`, built now and cached (lock held)."""
         arity = event_type.arity
-        where = " AND ".join(self._equalities(positions, far)
-                             + (["t_start = t_end"] if point else []))
+        where = joined_balanced(self._equalities(positions, far)
+                                + (["t_start = t_end"] if point else []), "AND")
         where = (where + " AND ") if where else ""
         columns = ", ".join([f"arg{i + 1}" for i in range(arity)]
                             + ["t_start", "t_end", "seq"]
@@ -642,10 +642,10 @@ class EventReader:
             union = self.sql_cache.get(key)
             if union is None:
                 typeof = self.db.dialect.typeof
-                where = " AND ".join(
+                where = joined_balanced([
                     equal + ("" if kind is None else f" AND {typeof(f'arg{p + 1}')} = '{kind}'")
                     for equal, p, kind in zip(self._equalities(positions, far), positions,
-                                              kinds))
+                                              kinds)], "AND")
                 cols = event_type.columns
                 hints = self.db.dialect.index_hints
                 by_end = f" INDEXED BY {event_type.index_arg1_end}" if hints else ""
@@ -832,9 +832,9 @@ class EventReader:
             event_type = self.tables.lookup(name, arity)
             if event_type is None:
                 return RawPage([], False)
-            size = " + ".join(
+            size = joined_balanced(
                 [f"coalesce({self.db.dialect.byte_length(f'arg{i + 1}')}, 0)"
-                 for i in range(arity)]) or "0"
+                 for i in range(arity)], "+") or "0"
             # the sizes first (one more row than a page: whether any is left), then only the
             # rows that fit, so no statement ever hands over more than the bound of values
             sizes = self._raw_select(event_type, size, after_seq, end_from, end_to,

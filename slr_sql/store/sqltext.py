@@ -16,7 +16,7 @@ from typing import Any
 
 from ..errors import SLRBusy, SLRError, SLRStoreFull, naming_the_store
 
-__all__ = ["quote_identifier", "qualified_identifier", "sql_literal", "split_sql_script",
+__all__ = ["joined_balanced", "quote_identifier", "qualified_identifier", "sql_literal", "split_sql_script",
            "SAFE_IDENTIFIER", "RESERVED_PREFIXES", "SQL_KEYWORDS", "busy_error", "store_error", "disk_is_full",
            "file_uri", "file_identity"]
 
@@ -127,10 +127,14 @@ def file_uri(path: str, mode: str = "ro") -> str:
     (``%``, ``?`` and ``#`` escaped).
 
     >>> file_uri("/data/50%/robot?#1.db", "rw")
-    'file:/data/50%25/robot%3f%231.db?mode=rw'
+    'file:///data/50%25/robot%3f%231.db?mode=rw'
+    >>> file_uri("//data/robot.db")
+    'file:////data/robot.db?mode=ro'
     """
     quoted = os.path.abspath(path).replace("%", "%25").replace("?", "%3f").replace("#", "%23")
-    return f"file:{quoted}?mode={mode}"
+    # (an empty authority, then the path: a path that begins with two slashes, which POSIX
+    # allows and abspath keeps, was read as 'file://AUTHORITY/...', refused by SQLite)
+    return f"file://{quoted}?mode={mode}"
 
 
 def file_identity(name: str) -> tuple[int, int] | None:
@@ -144,6 +148,29 @@ def file_identity(name: str) -> tuple[int, int] | None:
     except OSError:
         return None
     return info.st_dev, info.st_ino
+
+
+# terms of one flat chain: the most that stay as written (a plan's or a lookup's usual text)
+FLAT_CHAIN = 64
+
+
+def joined_balanced(terms: list[str], op: str) -> str:
+    """``terms`` joined by ``op`` (``AND``, ``+``: associative), as written when they are at
+    most :data:`FLAT_CHAIN`, else as a balanced tree of parenthesized halves: SQLite refuses
+    an expression deeper than 1000 ('Expression tree is too large'), and a chain of one term
+    per argument of an event type of 1,000 arguments or more (a store holds up to ~1,990)
+    was that deep, so its events could be stored but not looked up, buffered or exported.
+
+    >>> joined_balanced(["a", "b", "c"], "AND")
+    'a AND b AND c'
+    >>> text = joined_balanced([f"x{i}" for i in range(200)], "+")
+    >>> text.startswith("((x0 + x1 + "), text.count("x")
+    (True, 200)
+    """
+    if len(terms) <= FLAT_CHAIN:
+        return f" {op} ".join(terms)
+    half = len(terms) // 2
+    return f"({joined_balanced(terms[:half], op)}) {op} ({joined_balanced(terms[half:], op)})"
 
 
 def quote_identifier(name: str) -> str:

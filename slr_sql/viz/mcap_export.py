@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
 from ..errors import SLRError
+from ..printable import printable_name
 from .channels import (JSON_SCHEMA_ENCODING, MARKS_SCHEMA, MARKS_TOPIC, METADATA_EVENT,
                        TF_TOPICS, TRANSFORMS_SCHEMA, TRANSFORMS_SCHEMA_NAME,
                        channel_type, event_channel, event_from_message, mark_message, time_ns,
@@ -98,8 +99,10 @@ def select_types(available: Iterable[tuple[str, int]], wanted: Iterable[str]) ->
         found = [k for k in available
                  if k[0] == spec or (arity.isdigit() and k[0] == name and str(k[1]) == arity)]
         if not found:
-            raise SLRError(f"no event type {spec} in the store (it has: "
-                           f"{', '.join(f'{n}/{a}' for n, a in available) or 'none'})")
+            # (names as the summary prints them: a name's line break was a line of the
+            # message of its own)
+            raise SLRError(f"no event type {printable_name(spec)} in the store (it has: "
+                           f"{', '.join(f'{printable_name(n)}/{a}' for n, a in available) or 'none'})")
         out += [k for k in found if k not in out]
     return out
 
@@ -301,6 +304,20 @@ def _check_overwrite(store: Any, path: str | Path) -> bool:
     if target.is_dir():
         raise ExportRefused(f"{path} is a directory: an export is an MCAP file; name a file "
                             f"in it, e.g. {target / 'export.mcap'}")
+    own = getattr(store, "path", None)
+    if own is not None and "://" not in str(own):
+        # by name too: a side file SQLite has not made yet is where it will write, and an
+        # export written there was deleted by the store's next open
+        real = os.path.realpath(target)
+        for suffix in ("", "-wal", "-shm", "-journal"):
+            if real == os.path.realpath(own) + suffix and suffix:
+                raise ExportRefused(f"{path} is the name of a file SQLite keeps beside the "
+                                    f"store being exported ({own}{suffix}): it would "
+                                    "destroy the export, or the export the store; name "
+                                    "another file")
+            if real == os.path.realpath(own):
+                raise ExportRefused(f"{path} is the store being exported ({own}) itself: "
+                                    "writing the export there would destroy the store")
     try:
         mode = os.stat(target).st_mode
     except OSError:
