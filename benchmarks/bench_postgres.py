@@ -106,11 +106,14 @@ def prev(admin: str, n: int, lookups: int) -> dict:
     url = database(admin, "bench_prev")
     # the statement kb.query runs for this goal (store/lookups.py, latest_rows): the rows
     # with the greatest end <= T of the object, and the two version counters it reads with
-    # them (a query sees another connection's program change in the same statement)
+    # them (a query sees another connection's program change in the same statement); a
+    # short text's equality names the partial index's predicate (dialect.key_equal), without
+    # which the server cannot use that index and scans the table
     sql = ("SELECT arg1, arg2, t_start, t_end, seq, (SELECT value FROM slr_meta WHERE key = "
            "%s), (SELECT value FROM slr_meta WHERE key = %s) FROM seg WHERE arg1 = %s AND "
-           "t_start = t_end AND t_end = (SELECT t_end FROM seg WHERE arg1 = %s AND t_start = "
-           "t_end AND t_end <= %s ORDER BY t_end DESC LIMIT 1) ORDER BY t_start, seq")
+           "char_length(arg1) < 64 AND t_start = t_end AND t_end = (SELECT t_end FROM seg "
+           "WHERE arg1 = %s AND char_length(arg1) < 64 AND t_start = t_end AND t_end <= %s "
+           "ORDER BY t_end DESC LIMIT 1) ORDER BY t_start, seq")
     goal = "prev(seg(O, L)^Z, T)"
     with slr_sql.open(url, clock=slr_sql.ManualClock(0.0)) as kb, \
             psycopg.connect(url, autocommit=True) as conn:
