@@ -16,6 +16,7 @@ slr_sql.errors.SLRError: submit: callback must be callable (a function), not 5
 from __future__ import annotations
 
 import math
+import numbers
 import threading
 from typing import Any, Iterable, TypeVar
 
@@ -32,8 +33,10 @@ def check_time_option(name: str, value: Any, minimum: float | None = None, *,
                       required: bool = False) -> None:
     """``at=`` and ``timeout=`` are numbers of seconds (``None``: not given, unless
     ``required``), else an :class:`SLRError` (run by the client of ``slr serve`` too, before
-    sending). Infinities are numbers (SPEC: ``inf`` is +∞ where a number is expected); NaN
-    is none.
+    sending, and by the command line's ``--at``). Any real number is taken
+    (``numbers.Real``: numpy's numbers, ``fractions.Fraction``), as ``mark_complete``'s time
+    is, but not a bool. Infinities are numbers (SPEC: ``inf`` is +∞ where a number is
+    expected); NaN is none.
 
     >>> check_time_option("timeout", 2.5, minimum=0.0)
     >>> check_time_option("timeout", -1, minimum=0.0)
@@ -43,13 +46,13 @@ def check_time_option(name: str, value: Any, minimum: float | None = None, *,
     """
     if value is None and not required:
         return
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise SLRError(f"{name} must be a number of seconds, not {shown(value)}")
     try:
         number = float(value)
     except OverflowError:
-        raise SLRError(f"{name} is out of range (an integer of {value.bit_length()} bits)") \
-            from None
+        raise SLRError(f"{name} is out of range (an integer of {int(value).bit_length()} "
+                       f"bits)") from None
     if math.isnan(number) or (minimum is not None and number < minimum):
         raise SLRError(f"{name} must be a number of seconds"
                        f"{'' if minimum is None else f' >= {minimum:g}'}, not {shown(value)}")

@@ -12,8 +12,10 @@ import re
 import threading
 import time
 import typing
+from fractions import Fraction
 from pathlib import Path
 
+import numpy as np
 import pytest
 from service_helpers import ServiceProcess, same
 
@@ -507,6 +509,16 @@ SAME_VALUE = {
     # (stamped now: the stores' clocks are wall clocks)
     "an event named ''": lambda kb: kb.add_event("", [1], time.time()),
     "a bool as an SQL parameter": lambda kb: kb.sql("SELECT ? + 1", [True]),
+    # any numbers.Real is a number of seconds, as mark_complete's time always was (numpy's
+    # numbers were refused by at=, timeout=, since=; remotely by mark_complete too)
+    "numpy numbers as at and timeout": lambda kb: kb.query("X = 1", at=np.int64(5),
+                                                           timeout=np.int64(10)),
+    "a Fraction as at and a numpy timeout for solutions": lambda kb: list(kb.solutions(
+        "X = 1", at=Fraction(1, 2), timeout=np.float32(10))),
+    "numpy numbers for submit and result": lambda kb: kb.submit(
+        "X = 1", at=np.float32(0), timeout=np.float32(10)).result(timeout=np.float32(10)),
+    "a numpy time for mark_complete": lambda kb: kb.mark_complete("numpy/1", np.int64(5)),
+    "a numpy timeout for sql": lambda kb: kb.sql("SELECT 1 AS one", timeout=np.int64(5)),
 }
 
 

@@ -4,7 +4,9 @@ argument and what is wrong with it, never the boundary's last resort "method: Va
 from __future__ import annotations
 
 import re
+from fractions import Fraction
 
+import numpy as np
 import pytest
 
 import slr_sql
@@ -32,6 +34,12 @@ CASES = [
     (lambda kb: kb.subscribe("p(X)^T", since=10 ** 400),
      "subscribe: since is out of range (an integer of 1329 bits; a time is a float)"),
     (lambda kb: kb.subscribe("p(X)^T", until=-10 ** 400), "subscribe: until is out of range"),
+    # any numbers.Real is a number of seconds (a Fraction beyond a float is out of range,
+    # not "an AttributeError"); numpy's bool is no number, as Python's is not
+    (lambda kb: kb.query("p(X)^T", at=Fraction(10 ** 400, 7)), "at is out of range (an "
+                                                               "integer of 1326 bits)"),
+    (lambda kb: kb.query("p(X)^T", timeout=np.True_), "timeout must be a number of seconds, "
+                                                      "not np.True_"),
     (lambda kb: kb.subscribe("p(X)^T", since={"a": HUGE}),
      "subscribe: since must be a number of seconds, not a dict holding an integer too long"),
     (lambda kb: kb.subscribe("p(X)^T", where=HUGE),

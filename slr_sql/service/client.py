@@ -44,6 +44,7 @@ import collections
 import functools
 import logging
 import math
+import numbers
 import os
 import ssl
 import threading
@@ -107,6 +108,7 @@ def connect(url: str, token: str | None = None, *, timeout: float = 60.0) -> "Re
     >>> kb.close(); server.stop(); local.close()
     """
     return RemoteKnowledgeBase(url, token=token, timeout=timeout)
+
 
 
 def _reads_answer(method: Callable) -> Callable:
@@ -360,7 +362,8 @@ class RemoteKnowledgeBase:
         return self._request("GET", path, params=params)[1]
 
     def _read_timeout(self, query_timeout: float | None) -> float:
-        return self.timeout + (query_timeout or 0.0)
+        # (float(): a numpy float32 timeout would keep its type, which a socket refuses)
+        return self.timeout + (0.0 if query_timeout is None else float(query_timeout))
 
     def limits(self) -> dict:
         """The server's limits (``GET /health``), fetched once.
@@ -989,8 +992,7 @@ class RemoteKnowledgeBase:
         body: dict[str, Any] = {"query": query, "params": sent}
         if timeout is not None:
             body["timeout"] = _number(timeout, "timeout")
-        reply = self._post("/sql", body, timeout=self._read_timeout(
-            timeout if isinstance(timeout, (int, float)) else None))
+        reply = self._post("/sql", body, timeout=self._read_timeout(timeout))
         return (list(_expect(reply, "columns", list)),
                 [tuple(row) for row in decode_plain(_expect(reply, "rows", list))])
 
@@ -1619,9 +1621,11 @@ def _iterable(value: Any, where: str) -> None:
 
 
 def _number(value: Any, what: str) -> Any:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SLRError(f"{what} must be a number, not {value!r}")
-    return encode_term(float(value) if isinstance(value, float) else int(value))
+    # any real number, as the checks before sending take it (numpy's, Fraction): an integer
+    # travels as one, any other as a float
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise SLRError(f"{what} must be a number, not {shown(value)}")
+    return encode_term(int(value) if isinstance(value, numbers.Integral) else float(value))
 
 
 def _goal_body(goal: str, at: Any, args: dict | None, timeout: Any) -> dict:
