@@ -386,6 +386,14 @@ SAME_WORDS = {
                                             "SLRError",
                                             "subscribe: since must be a number of seconds, "
                                             "not 'x'"),
+    # since and until had a check of their own, in other words ("must be a number, not NaN")
+    "subscribe since NaN": (lambda kb: kb.subscribe("p(X)^T", since=math.nan), "SLRError",
+                            "subscribe: since must be a number of seconds, not nan"),
+    "subscribe until NaN": (lambda kb: kb.subscribe("p(X)^T", until=math.nan), "SLRError",
+                            "subscribe: until must be a number of seconds, not nan"),
+    "subscribe until beyond a float": (lambda kb: kb.subscribe("p(X)^T", until=10 ** 400),
+                                       "SLRError", "subscribe: until is out of range (an "
+                                       "integer of 1329 bits)"),
     "subscribe where no goal": (lambda kb: kb.subscribe("p(X)^T", where=5), "SLRError",
                                 "subscribe: where must be a goal as text, not 5"),
     "subscribe to a pattern that is no text": (lambda kb: kb.subscribe(5), "SLRError",
@@ -519,6 +527,8 @@ SAME_VALUE = {
         "X = 1", at=np.float32(0), timeout=np.float32(10)).result(timeout=np.float32(10)),
     "a numpy time for mark_complete": lambda kb: kb.mark_complete("numpy/1", np.int64(5)),
     "a numpy timeout for sql": lambda kb: kb.sql("SELECT 1 AS one", timeout=np.int64(5)),
+    "numpy since and a Fraction until": lambda kb: kb.subscribe(
+        "nobody(X)^T", since=np.int64(0), until=Fraction(1, 2)).close(),
 }
 
 

@@ -32,7 +32,7 @@ CASES = [
     (lambda kb: kb.load("q(1).", filename="\udc80"), "load: filename is the text shown"),
     (lambda kb: kb.load(b"q(1)."), "load takes program text (a str), not a bytes"),
     (lambda kb: kb.subscribe("p(X)^T", since=10 ** 400),
-     "subscribe: since is out of range (an integer of 1329 bits; a time is a float)"),
+     "subscribe: since is out of range (an integer of 1329 bits)"),
     (lambda kb: kb.subscribe("p(X)^T", until=-10 ** 400), "subscribe: until is out of range"),
     # any numbers.Real is a number of seconds (a Fraction beyond a float is out of range,
     # not "an AttributeError"); numpy's bool is no number, as Python's is not
