@@ -394,6 +394,10 @@ SAME_WORDS = {
     "subscribe until beyond a float": (lambda kb: kb.subscribe("p(X)^T", until=10 ** 400),
                                        "SLRError", "subscribe: until is out of range (an "
                                        "integer of 1329 bits)"),
+    # the flag was taken by its truth: ack="no" acknowledged
+    "close with ack that is text": (
+        lambda kb: _on_subscription(kb, lambda s: s.close(ack="no")), "SLRError",
+        "close: ack must be True or False, not 'no'"),
     "subscribe where no goal": (lambda kb: kb.subscribe("p(X)^T", where=5), "SLRError",
                                 "subscribe: where must be a goal as text, not 5"),
     "subscribe to a pattern that is no text": (lambda kb: kb.subscribe(5), "SLRError",

@@ -44,6 +44,13 @@ CASES = [
      "subscribe: since must be a number of seconds, not a dict holding an integer too long"),
     (lambda kb: kb.subscribe("p(X)^T", where=HUGE),
      "subscribe: where must be a goal as text, not an integer of about 5001 digits"),
+    # (flags were taken by their truth: forget="no" forgot)
+    (lambda kb: kb.subscribe("p(X)^T", id="kept").close(forget="no"),
+     "close: forget must be True or False, not 'no'"),
+    (lambda kb: kb.subscribe("p(X)^T").close(join=1), "close: join must be True or False, "
+                                                      "not 1"),
+    (lambda kb: kb.subscribe("p(X)^T").close(ack=None), "close: ack must be True or False, "
+                                                        "not None"),
     (lambda kb: kb.mark_complete("p/1", "x"), "mark_complete: t must be a number of seconds, "
                                               "not 'x'"),
     (lambda kb: kb.mark_complete("p/1", 10 ** 400), "mark_complete: t is out of range"),
@@ -105,3 +112,12 @@ def test_an_add_many_rejection_is_still_an_event_rejected(kb):
     (error,) = kb.add_many([("p", [{"a": 1}], 3, 3), "p(c)^4"])
     assert isinstance(error, EventRejected) and error.index == 0
     assert "dict value {'a': 1} is not a term" in str(error)
+
+
+def test_a_refused_close_flag_closes_nothing(kb):
+    sub = kb.subscribe("p(X)^T", since=0, id="kept")
+    with pytest.raises(SLRError, match="close: forget must be True or False"):
+        sub.close(forget="yes")
+    assert not sub.closed and sub.get(timeout=5) == {"X": slr_sql.Atom("a"), "T": 1.0}
+    sub.close()
+    assert kb.subscribe("p(X)^T", id="kept").position() == sub.position()  # remembered

@@ -1576,10 +1576,15 @@ class RemoteSubscription:
 
         >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
         >>> kb = slr_sql.connect(server.url); sub = kb.subscribe("p(X)^T")
+        >>> sub.close(ack="no")       # (the flag checked as a local subscription checks it)
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: close: ack must be True or False, not 'no'
         >>> sub.close(); kb.add("p(1)^11"); sub.get(timeout=5) is None
         True
         >>> kb.close(); server.stop(); server.kb.close()
         """
+        check_flag("close: ack", ack)
         if not self._done:
             self._ack(self._returned if ack else self._handled)
         self._done = True
