@@ -24,7 +24,7 @@ from .errors import SLRError
 from .printable import shown
 
 __all__ = ["check_time_option", "wait_seconds", "check_callable", "check_flag",
-           "ListenerList"]
+           "check_option_names", "ListenerList"]
 
 T = TypeVar("T")
 
@@ -106,6 +106,24 @@ def check_flag(name: str, value: Any) -> bool:
     if type(value) is not bool:
         raise SLRError(f"{name} must be True or False, not {shown(value)}")
     return value
+
+
+def check_option_names(method: str, options: Iterable[str], known: Iterable[str]) -> None:
+    """The keyword options given to ``method`` (``open``, ``connect``) are among ``known``,
+    else an :class:`SLRError` naming the first unknown one and the known ones (not Python's
+    ``TypeError: ... got an unexpected keyword argument``).
+
+    >>> check_option_names("open", ["robot"], ["busy_timeout", "robot"])
+    >>> check_option_names("open", ["bogus"], ["busy_timeout", "robot"])
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: open has no option 'bogus' (its options: busy_timeout, robot)
+    """
+    known = list(known)
+    for name in options:
+        if name not in known:
+            raise SLRError(f"{method} has no option {shown(name)} "
+                           f"(its options: {', '.join(known)})")
 
 
 class ListenerList(list[T]):

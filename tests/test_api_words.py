@@ -121,3 +121,18 @@ def test_a_refused_close_flag_closes_nothing(kb):
     assert not sub.closed and sub.get(timeout=5) == {"X": slr_sql.Atom("a"), "T": 1.0}
     sub.close()
     assert kb.subscribe("p(X)^T", id="kept").position() == sub.position()  # remembered
+
+
+def test_an_unknown_option_of_open_or_connect_is_refused_in_words():
+    """open(bogus=1) was "open: TypeError: KnowledgeBase.__init__() got an unexpected
+    keyword argument 'bogus'" (the boundary's last resort), connect(url, bogus=1) a raw
+    TypeError."""
+    with pytest.raises(SLRError) as refused:
+        slr_sql.open(bogus=1)
+    assert str(refused.value) == (
+        "open has no option 'bogus' (its options: synchronous, busy_timeout, adopt, "
+        "checkpoint, cache_mib, robot, max_learned_delay)")
+    with pytest.raises(SLRError) as refused:
+        slr_sql.connect("http://127.0.0.1:9", bogus=1)   # (refused before connecting)
+    assert str(refused.value) == "connect has no option 'bogus' (its options: timeout)"
+    slr_sql.open(robot="r1", cache_mib=8).close()       # (the options it has are taken)

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import collections
 import functools
+import inspect
 import logging
 import math
 import numbers
@@ -109,6 +110,10 @@ def connect(url: str, token: str | None = None, *, timeout: float = 60.0) -> "Re
     """
     return RemoteKnowledgeBase(url, token=token, timeout=timeout)
 
+
+# the keyword options of connect() after its url and token (slr_sql.connect checks them)
+CONNECT_OPTIONS = tuple(name for name, parameter in inspect.signature(connect).parameters.items()
+                        if parameter.kind is inspect.Parameter.KEYWORD_ONLY)
 
 
 def _reads_answer(method: Callable) -> Callable:
