@@ -398,6 +398,10 @@ SAME_WORDS = {
     "close with ack that is text": (
         lambda kb: _on_subscription(kb, lambda s: s.close(ack="no")), "SLRError",
         "close: ack must be True or False, not 'no'"),
+    # (was "not 1.5NaN", SWI-Prolog's spelling, for a Python caller's nan)
+    "add_buffer of a pattern that is NaN": (lambda kb: kb.add_buffer(math.nan, keep_last=1),
+                                            "SLRError", "a buffer pattern must be an event "
+                                            "term, not nan"),
     "subscribe where no goal": (lambda kb: kb.subscribe("p(X)^T", where=5), "SLRError",
                                 "subscribe: where must be a goal as text, not 5"),
     "subscribe to a pattern that is no text": (lambda kb: kb.subscribe(5), "SLRError",
