@@ -33,7 +33,7 @@ def check_time_option(name: str, value: Any, minimum: float | None = None, *,
                       required: bool = False) -> None:
     """``at=`` and ``timeout=`` are numbers of seconds (``None``: not given, unless
     ``required``), else an :class:`SLRError` (run by the client of ``slr serve`` too, before
-    sending, and by the command line's ``--at``). Any real number is taken
+    sending, and by the command line's ``--at`` and ``--timeout``). Any real number is taken
     (``numbers.Real``: numpy's numbers, ``fractions.Fraction``), as ``mark_complete``'s time
     is, but not a bool. Infinities are numbers (SPEC: ``inf`` is +∞ where a number is
     expected); NaN is none.
