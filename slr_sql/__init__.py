@@ -7,6 +7,7 @@
 [{'O': Atom('cup1'), 'C': Atom('red'), 'T': 2.0}]
 """
 from .api import KnowledgeBaseAPI, PendingQueryAPI, ProgramInfo, SubscriptionAPI
+from .arguments import check_option_names
 from .clocks import Clock, ManualClock, StreamClock, WallClock
 from .errors import BufferNotFound, EventRejected, NotAnEvent, SLRBusy, SLRCancelled, SLRError, SLREvaluationError, \
     SLRStatementTimeout, SLRStoreFull, SLRServerUnreachable, SLRStoreGone, SLRSubscriptionInUse, \
@@ -24,9 +25,15 @@ def connect(url: str, token: str | None = None, **options):
     >>> kb = connect(server.url); kb.add("seen(cup1)^2"); kb.query("seen(X)^T")
     [{'X': Atom('cup1'), 'T': 2.0}]
     >>> kb.close(); server.stop(); server.kb.close()
+    >>> connect(server.url, bogus=1)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: connect has no option 'bogus' (its options: timeout)
     """
+    from .service.client import CONNECT_OPTIONS
     from .service.client import connect as _connect  # deferred: `import slr_sql` needs no httpx
 
+    check_option_names("connect", options, CONNECT_OPTIONS)
     return _connect(url, token=token, **options)
 
 

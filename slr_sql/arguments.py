@@ -16,6 +16,7 @@ slr_sql.errors.SLRError: submit: callback must be callable (a function), not 5
 from __future__ import annotations
 
 import math
+import numbers
 import threading
 from typing import Any, Iterable, TypeVar
 
@@ -23,7 +24,7 @@ from .errors import SLRError
 from .printable import shown
 
 __all__ = ["check_time_option", "wait_seconds", "check_callable", "check_flag",
-           "ListenerList"]
+           "check_option_names", "ListenerList"]
 
 T = TypeVar("T")
 
@@ -32,8 +33,10 @@ def check_time_option(name: str, value: Any, minimum: float | None = None, *,
                       required: bool = False) -> None:
     """``at=`` and ``timeout=`` are numbers of seconds (``None``: not given, unless
     ``required``), else an :class:`SLRError` (run by the client of ``slr serve`` too, before
-    sending). Infinities are numbers (SPEC: ``inf`` is +∞ where a number is expected); NaN
-    is none.
+    sending, and by the command line's ``--at`` and ``--timeout``). Any real number is taken
+    (``numbers.Real``: numpy's numbers, ``fractions.Fraction``), as ``mark_complete``'s time
+    is, but not a bool. Infinities are numbers (SPEC: ``inf`` is +∞ where a number is
+    expected); NaN is none.
 
     >>> check_time_option("timeout", 2.5, minimum=0.0)
     >>> check_time_option("timeout", -1, minimum=0.0)
@@ -43,13 +46,13 @@ def check_time_option(name: str, value: Any, minimum: float | None = None, *,
     """
     if value is None and not required:
         return
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise SLRError(f"{name} must be a number of seconds, not {shown(value)}")
     try:
         number = float(value)
     except OverflowError:
-        raise SLRError(f"{name} is out of range (an integer of {value.bit_length()} bits)") \
-            from None
+        raise SLRError(f"{name} is out of range (an integer of {int(value).bit_length()} "
+                       f"bits)") from None
     if math.isnan(number) or (minimum is not None and number < minimum):
         raise SLRError(f"{name} must be a number of seconds"
                        f"{'' if minimum is None else f' >= {minimum:g}'}, not {shown(value)}")
@@ -103,6 +106,24 @@ def check_flag(name: str, value: Any) -> bool:
     if type(value) is not bool:
         raise SLRError(f"{name} must be True or False, not {shown(value)}")
     return value
+
+
+def check_option_names(method: str, options: Iterable[str], known: Iterable[str]) -> None:
+    """The keyword options given to ``method`` (``open``, ``connect``) are among ``known``,
+    else an :class:`SLRError` naming the first unknown one and the known ones (not Python's
+    ``TypeError: ... got an unexpected keyword argument``).
+
+    >>> check_option_names("open", ["robot"], ["busy_timeout", "robot"])
+    >>> check_option_names("open", ["bogus"], ["busy_timeout", "robot"])
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: open has no option 'bogus' (its options: busy_timeout, robot)
+    """
+    known = list(known)
+    for name in options:
+        if name not in known:
+            raise SLRError(f"{method} has no option {shown(name)} "
+                           f"(its options: {', '.join(known)})")
 
 
 class ListenerList(list[T]):

@@ -77,8 +77,9 @@ def _strip_time(term: Any) -> Any:
     atom, start, end = ev
     for stamp in (start, end):
         if type(deref(stamp)) is not Var:
-            raise SLRError(f"buffer pattern {format_term(term)}: the time stamp must be a "
-                           "variable (buffers select events by their arguments)")
+            raise SLRError(f"buffer pattern {format_term(term, message=True)}: the time "
+                           "stamp must be a variable (buffers select events by their "
+                           "arguments)")
     return deref(atom)
 
 
@@ -204,7 +205,9 @@ def analyze(pattern: Any) -> Pattern:
     """
     atom = _strip_time(pattern)
     if type(atom) not in (Struct, Atom):
-        raise SLRError(f"a buffer pattern must be an event term, not {format_term(atom)}")
+        # (message=True: a Python nan or inf reads as Python writes it, not as SWI's 1.5NaN)
+        raise SLRError(f"a buffer pattern must be an event term, not "
+                       f"{format_term(atom, message=True)}")
     name, arity = event_key(atom)
     args = atom.args if type(atom) is Struct else ()
     an = _Analyzer()

@@ -258,17 +258,6 @@ def _existing_file(path: str) -> str:
     return path
 
 
-def _finite(option: str, value: float | None, minimum: float | None = None) -> float | None:
-    """A number option checked: finite (``--at 1e400`` is not a time), and >= ``minimum``."""
-    if value is None:
-        return None
-    if not math.isfinite(value):
-        raise slr_sql.SLRError(f"{option} must be a finite number, not {value}")
-    if minimum is not None and value < minimum:
-        raise slr_sql.SLRError(f"{option} must be at least {minimum:g}, not {value:g}")
-    return value
-
-
 @click.group(cls=SLRGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(version=slr_sql.__version__, prog_name="slr")
 @click.option("--token", envvar="SLR_TOKEN", default=None,
@@ -828,7 +817,8 @@ def query(db: str, goal: str, at: float | None, wait: bool, timeout: float | Non
     # --at is the library's at= (and the shell's `at`): inf (every stored event) and -inf
     # (none) are views, NaN is none
     check_time_option("--at", at)
-    timeout = _finite("--timeout", timeout, minimum=0.0)
+    # --timeout is the library's timeout= : inf (or 1e400) is no limit, NaN and < 0 are none
+    check_time_option("--timeout", timeout, minimum=0.0)
     printer = AnswerPrinter(as_json)
     with _open(db, create=False) as kb:
         _warn_about(kb, goal)
@@ -2074,7 +2064,7 @@ def plot(db: str, types: tuple[str, ...], start: float | None, end: float | None
         raise click.UsageError("--every goes with --query")
     if timeout is not None and query_goal is None:
         raise click.UsageError("--timeout goes with --query")
-    timeout = _finite("--timeout", timeout, minimum=0.0)
+    check_time_option("--timeout", timeout, minimum=0.0)   # (as slr query's: inf is no limit)
     if not _is_url(db):   # (a server's store is drawn through its SQL, as kb.plot does)
         _check_existing_store(db)
     dimensions = parse_size(size) if size is not None else None

@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import functools
+import inspect
 import math
 import numbers
 import os
@@ -20,7 +21,8 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
 from .answers import answer_bindings
-from .arguments import ListenerList, check_callable, check_flag, check_time_option
+from .arguments import (ListenerList, check_callable, check_flag, check_option_names,
+                        check_time_option)
 from .api import PendingQueryAPI, ProgramInfo, SubscriptionAPI
 from .clocks import DEFAULT_MAX_LEARNED_DELAY, Clock, WallClock, parse_duration
 from .engine import Engine
@@ -1254,6 +1256,11 @@ def unforeseen_failure(where: str, exc: BaseException) -> SLRError:
     return SLRError(f"{where}: {type(exc).__name__}: {exc}")
 
 
+# the keyword options of open(): those of KnowledgeBase after its path and clock
+OPEN_OPTIONS = tuple(name for name, parameter in
+                     inspect.signature(KnowledgeBase.__init__).parameters.items()
+                     if parameter.kind is inspect.Parameter.KEYWORD_ONLY)
+
 # Every public method of the facade goes through the boundary (one list, kept next to it).
 for _name in ("__init__", "close", "load", "unload", "programs", "load_file", "define", "add",
               "goal_warnings",
@@ -1286,6 +1293,13 @@ def open(path: str | Path | None = None, clock: Clock | None = None, **options: 
     for life): its events are stored with that name in their ``robot`` column, for
     ``origin/2`` and fleets (docs/fleet.md).
 
+    An option of another name is an :class:`SLRError` naming the options.
+
     >>> kb = open(); kb.close()
+    >>> open(bogus=1)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: open has no option 'bogus' (its options: synchronous, busy_timeout, adopt, checkpoint, cache_mib, robot, max_learned_delay)
     """
+    check_option_names("open", options, OPEN_OPTIONS)
     return KnowledgeBase(path, clock, **options)

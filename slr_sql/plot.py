@@ -35,6 +35,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Iterable
 
+from .arguments import check_time_option
 from .errors import SLRError, SLRTimeout
 from .store.timeline import Statement, TimelineStatements, timeline_statements
 from .store import DatabaseError, quote_identifier
@@ -606,11 +607,10 @@ def _collect_query(source: Any, goal: str, every: float, lo: float, hi: float,
         raise SLRError(f"--every {every:g} asks the goal {said} times between {lo:g} and "
                        f"{hi:g}; at most {MAX_SAMPLES}: a larger --every or a shorter window")
     n = int(samples)
-    if timeout is not None:
-        timeout = _check_time("timeout", timeout)
-        if timeout is None or timeout < 0:
-            raise SLRError(f"timeout must be a number of seconds >= 0, not {timeout!r}")
-    deadline = None if timeout is None else time.monotonic() + timeout
+    # the timeout= of kb.query, checked alike: inf (1e400) is no limit, NaN and < 0 are none
+    check_time_option("timeout", timeout, minimum=0.0)
+    seconds = None if timeout is None else float(timeout)
+    deadline = None if seconds is None or seconds == math.inf else time.monotonic() + seconds
     row = QueryRow(goal, every, n)
     for i in range(n):
         t = lo + i * every
@@ -621,9 +621,9 @@ def _collect_query(source: Any, goal: str, every: float, lo: float, hi: float,
             answers = source.query(goal, args={"T": t}, **({} if left is None
                                                            else {"timeout": left}))
         except SLRTimeout:
-            if timeout is None:
+            if deadline is None:
                 raise
-            raise SLRTimeout(f"--query {goal}: the timeout of {timeout:g} s ran out at T = "
+            raise SLRTimeout(f"--query {goal}: the timeout of {seconds:g} s ran out at T = "
                              f"{t:g}, its ask {i + 1} of {n}; a larger --every, a shorter "
                              f"window or a longer --timeout") from None
         text = None

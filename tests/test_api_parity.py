@@ -12,8 +12,10 @@ import re
 import threading
 import time
 import typing
+from fractions import Fraction
 from pathlib import Path
 
+import numpy as np
 import pytest
 from service_helpers import ServiceProcess, same
 
@@ -384,6 +386,22 @@ SAME_WORDS = {
                                             "SLRError",
                                             "subscribe: since must be a number of seconds, "
                                             "not 'x'"),
+    # since and until had a check of their own, in other words ("must be a number, not NaN")
+    "subscribe since NaN": (lambda kb: kb.subscribe("p(X)^T", since=math.nan), "SLRError",
+                            "subscribe: since must be a number of seconds, not nan"),
+    "subscribe until NaN": (lambda kb: kb.subscribe("p(X)^T", until=math.nan), "SLRError",
+                            "subscribe: until must be a number of seconds, not nan"),
+    "subscribe until beyond a float": (lambda kb: kb.subscribe("p(X)^T", until=10 ** 400),
+                                       "SLRError", "subscribe: until is out of range (an "
+                                       "integer of 1329 bits)"),
+    # the flag was taken by its truth: ack="no" acknowledged
+    "close with ack that is text": (
+        lambda kb: _on_subscription(kb, lambda s: s.close(ack="no")), "SLRError",
+        "close: ack must be True or False, not 'no'"),
+    # (was "not 1.5NaN", SWI-Prolog's spelling, for a Python caller's nan)
+    "add_buffer of a pattern that is NaN": (lambda kb: kb.add_buffer(math.nan, keep_last=1),
+                                            "SLRError", "a buffer pattern must be an event "
+                                            "term, not nan"),
     "subscribe where no goal": (lambda kb: kb.subscribe("p(X)^T", where=5), "SLRError",
                                 "subscribe: where must be a goal as text, not 5"),
     "subscribe to a pattern that is no text": (lambda kb: kb.subscribe(5), "SLRError",
@@ -507,6 +525,18 @@ SAME_VALUE = {
     # (stamped now: the stores' clocks are wall clocks)
     "an event named ''": lambda kb: kb.add_event("", [1], time.time()),
     "a bool as an SQL parameter": lambda kb: kb.sql("SELECT ? + 1", [True]),
+    # any numbers.Real is a number of seconds, as mark_complete's time always was (numpy's
+    # numbers were refused by at=, timeout=, since=; remotely by mark_complete too)
+    "numpy numbers as at and timeout": lambda kb: kb.query("X = 1", at=np.int64(5),
+                                                           timeout=np.int64(10)),
+    "a Fraction as at and a numpy timeout for solutions": lambda kb: list(kb.solutions(
+        "X = 1", at=Fraction(1, 2), timeout=np.float32(10))),
+    "numpy numbers for submit and result": lambda kb: kb.submit(
+        "X = 1", at=np.float32(0), timeout=np.float32(10)).result(timeout=np.float32(10)),
+    "a numpy time for mark_complete": lambda kb: kb.mark_complete("numpy/1", np.int64(5)),
+    "a numpy timeout for sql": lambda kb: kb.sql("SELECT 1 AS one", timeout=np.int64(5)),
+    "numpy since and a Fraction until": lambda kb: kb.subscribe(
+        "nobody(X)^T", since=np.int64(0), until=Fraction(1, 2)).close(),
 }
 
 

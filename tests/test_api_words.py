@@ -4,7 +4,9 @@ argument and what is wrong with it, never the boundary's last resort "method: Va
 from __future__ import annotations
 
 import re
+from fractions import Fraction
 
+import numpy as np
 import pytest
 
 import slr_sql
@@ -30,12 +32,25 @@ CASES = [
     (lambda kb: kb.load("q(1).", filename="\udc80"), "load: filename is the text shown"),
     (lambda kb: kb.load(b"q(1)."), "load takes program text (a str), not a bytes"),
     (lambda kb: kb.subscribe("p(X)^T", since=10 ** 400),
-     "subscribe: since is out of range (an integer of 1329 bits; a time is a float)"),
+     "subscribe: since is out of range (an integer of 1329 bits)"),
     (lambda kb: kb.subscribe("p(X)^T", until=-10 ** 400), "subscribe: until is out of range"),
+    # any numbers.Real is a number of seconds (a Fraction beyond a float is out of range,
+    # not "an AttributeError"); numpy's bool is no number, as Python's is not
+    (lambda kb: kb.query("p(X)^T", at=Fraction(10 ** 400, 7)), "at is out of range (an "
+                                                               "integer of 1326 bits)"),
+    (lambda kb: kb.query("p(X)^T", timeout=np.True_), "timeout must be a number of seconds, "
+                                                      "not np.True_"),
     (lambda kb: kb.subscribe("p(X)^T", since={"a": HUGE}),
      "subscribe: since must be a number of seconds, not a dict holding an integer too long"),
     (lambda kb: kb.subscribe("p(X)^T", where=HUGE),
      "subscribe: where must be a goal as text, not an integer of about 5001 digits"),
+    # (flags were taken by their truth: forget="no" forgot)
+    (lambda kb: kb.subscribe("p(X)^T", id="kept").close(forget="no"),
+     "close: forget must be True or False, not 'no'"),
+    (lambda kb: kb.subscribe("p(X)^T").close(join=1), "close: join must be True or False, "
+                                                      "not 1"),
+    (lambda kb: kb.subscribe("p(X)^T").close(ack=None), "close: ack must be True or False, "
+                                                        "not None"),
     (lambda kb: kb.mark_complete("p/1", "x"), "mark_complete: t must be a number of seconds, "
                                               "not 'x'"),
     (lambda kb: kb.mark_complete("p/1", 10 ** 400), "mark_complete: t is out of range"),
@@ -97,3 +112,27 @@ def test_an_add_many_rejection_is_still_an_event_rejected(kb):
     (error,) = kb.add_many([("p", [{"a": 1}], 3, 3), "p(c)^4"])
     assert isinstance(error, EventRejected) and error.index == 0
     assert "dict value {'a': 1} is not a term" in str(error)
+
+
+def test_a_refused_close_flag_closes_nothing(kb):
+    sub = kb.subscribe("p(X)^T", since=0, id="kept")
+    with pytest.raises(SLRError, match="close: forget must be True or False"):
+        sub.close(forget="yes")
+    assert not sub.closed and sub.get(timeout=5) == {"X": slr_sql.Atom("a"), "T": 1.0}
+    sub.close()
+    assert kb.subscribe("p(X)^T", id="kept").position() == sub.position()  # remembered
+
+
+def test_an_unknown_option_of_open_or_connect_is_refused_in_words():
+    """open(bogus=1) was "open: TypeError: KnowledgeBase.__init__() got an unexpected
+    keyword argument 'bogus'" (the boundary's last resort), connect(url, bogus=1) a raw
+    TypeError."""
+    with pytest.raises(SLRError) as refused:
+        slr_sql.open(bogus=1)
+    assert str(refused.value) == (
+        "open has no option 'bogus' (its options: synchronous, busy_timeout, adopt, "
+        "checkpoint, cache_mib, robot, max_learned_delay)")
+    with pytest.raises(SLRError) as refused:
+        slr_sql.connect("http://127.0.0.1:9", bogus=1)   # (refused before connecting)
+    assert str(refused.value) == "connect has no option 'bogus' (its options: timeout)"
+    slr_sql.open(robot="r1", cache_mib=8).close()       # (the options it has are taken)

@@ -172,11 +172,43 @@ def test_load_of_a_missing_program_file_is_an_error_in_words(db, tmp_path):
 
 @pytest.mark.parametrize("options", [
     pytest.param(["--at", "nan"], id="at nan"),
-    pytest.param(["--timeout", "1e400"], id="timeout 1e400"),
+    pytest.param(["--timeout", "nan"], id="timeout nan"),
     pytest.param(["--timeout", "-1"], id="timeout -1"),
+    pytest.param(["--timeout=-inf"], id="timeout -inf"),
 ])
 def test_query_options_out_of_range_are_errors_in_words(stored_db, options):
     fails_in_words(slr("query", stored_db, "p(X)^T", *options), "error: ")
+
+
+def test_timeout_inf_is_no_limit_as_in_the_library(stored_db, tmp_path):
+    """`slr query --timeout inf` was refused ("--timeout must be a finite number") while
+    `kb.query(timeout=inf)` takes it (SPEC: inf is +∞ where a number is expected): no limit,
+    spelled inf, 1e400 or an integer beyond a float, with and without --wait; `slr plot
+    --timeout` the same (and `kb.plot(timeout=inf)`, refused by the library too). NaN and
+    negative timeouts are refused in the library's words."""
+    plain = slr("query", stored_db, "p(X)^T")
+    assert plain.returncode == 0 and plain.stdout == "X = 4, T = 1.0\nX = 6, T = 2.0\n", \
+        plain.stderr
+    for spelled in ("inf", "1e400", "1" + "0" * 400):
+        r = slr("query", stored_db, "p(X)^T", "--timeout", spelled)
+        assert (r.returncode, r.stdout) == (0, plain.stdout), (spelled, r.stderr)
+    assert slr("add", stored_db, "fullyUpdated(p/1)^5").returncode == 0   # (complete up to 5)
+    r = slr("query", stored_db, "p(X)^T", "--at", "5", "--wait", "--timeout", "inf")
+    assert (r.returncode, r.stdout) == (0, plain.stdout), r.stderr
+    out = tmp_path / "plot.png"
+    r = slr("plot", stored_db, "p", "--query", "p(X)^T", "--every", "1", "--timeout", "inf",
+            "-o", str(out))
+    assert r.returncode == 0 and out.exists(), r.stderr
+    with slr_sql.open(stored_db) as kb:
+        assert kb.query("p(X)^T", timeout=math.inf) == kb.query("p(X)^T")
+        assert kb.plot(query="p(X)^T", every=1, timeout=math.inf) is not None
+        for bad in (math.nan, -1.0):
+            with pytest.raises(slr_sql.SLRError) as refused:
+                kb.query("p(X)^T", timeout=bad)
+            for command in (["query", stored_db, "p(X)^T"],
+                            ["plot", stored_db, "--query", "p(X)^T", "-o", str(out)]):
+                assert fails_in_words(slr(*command, "--timeout", str(bad))) == \
+                    f"error: --{refused.value}\n"
 
 
 def test_at_inf_is_the_view_of_every_stored_event_as_in_the_library_and_the_shell(stored_db):

@@ -42,8 +42,10 @@ from __future__ import annotations
 
 import collections
 import functools
+import inspect
 import logging
 import math
+import numbers
 import os
 import ssl
 import threading
@@ -107,6 +109,11 @@ def connect(url: str, token: str | None = None, *, timeout: float = 60.0) -> "Re
     >>> kb.close(); server.stop(); local.close()
     """
     return RemoteKnowledgeBase(url, token=token, timeout=timeout)
+
+
+# the keyword options of connect() after its url and token (slr_sql.connect checks them)
+CONNECT_OPTIONS = tuple(name for name, parameter in inspect.signature(connect).parameters.items()
+                        if parameter.kind is inspect.Parameter.KEYWORD_ONLY)
 
 
 def _reads_answer(method: Callable) -> Callable:
@@ -360,7 +367,8 @@ class RemoteKnowledgeBase:
         return self._request("GET", path, params=params)[1]
 
     def _read_timeout(self, query_timeout: float | None) -> float:
-        return self.timeout + (query_timeout or 0.0)
+        # (float(): a numpy float32 timeout would keep its type, which a socket refuses)
+        return self.timeout + (0.0 if query_timeout is None else float(query_timeout))
 
     def limits(self) -> dict:
         """The server's limits (``GET /health``), fetched once.
@@ -989,8 +997,7 @@ class RemoteKnowledgeBase:
         body: dict[str, Any] = {"query": query, "params": sent}
         if timeout is not None:
             body["timeout"] = _number(timeout, "timeout")
-        reply = self._post("/sql", body, timeout=self._read_timeout(
-            timeout if isinstance(timeout, (int, float)) else None))
+        reply = self._post("/sql", body, timeout=self._read_timeout(timeout))
         return (list(_expect(reply, "columns", list)),
                 [tuple(row) for row in decode_plain(_expect(reply, "rows", list))])
 
@@ -1574,10 +1581,15 @@ class RemoteSubscription:
 
         >>> server = BackgroundServer(slr_sql.open(clock=slr_sql.ManualClock(10))).start()
         >>> kb = slr_sql.connect(server.url); sub = kb.subscribe("p(X)^T")
+        >>> sub.close(ack="no")       # (the flag checked as a local subscription checks it)
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: close: ack must be True or False, not 'no'
         >>> sub.close(); kb.add("p(1)^11"); sub.get(timeout=5) is None
         True
         >>> kb.close(); server.stop(); server.kb.close()
         """
+        check_flag("close: ack", ack)
         if not self._done:
             self._ack(self._returned if ack else self._handled)
         self._done = True
@@ -1619,9 +1631,11 @@ def _iterable(value: Any, where: str) -> None:
 
 
 def _number(value: Any, what: str) -> Any:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SLRError(f"{what} must be a number, not {value!r}")
-    return encode_term(float(value) if isinstance(value, float) else int(value))
+    # any real number, as the checks before sending take it (numpy's, Fraction): an integer
+    # travels as one, any other as a float
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise SLRError(f"{what} must be a number, not {shown(value)}")
+    return encode_term(int(value) if isinstance(value, numbers.Integral) else float(value))
 
 
 def _goal_body(goal: str, at: Any, args: dict | None, timeout: Any) -> dict:

@@ -57,7 +57,7 @@ from .buffering import (ArgEquals, BufferPlan, BufferTables, JsonArray, JsonEqua
 from .catalog import Catalog, ProgramText
 from .checks import format_event
 from .connection import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, Database, DatabaseError, \
-    ReadConnection, is_postgres_url, refuse_no_store, run_sql_file, shown_location
+    ReadConnection, check_file_options, is_postgres_url, refuse_no_store, run_sql_file, shown_location
 from .events import Event, EventBatch, EventWriter
 from .fleet import ROBOT_NAME_MAX, Fleet, RouteConflict, ShipmentConflict, WriterInFlight, \
     check_robot_name
@@ -115,6 +115,9 @@ class EventStore:
             # imported here: ~2 ms of every process that opens a store, most of them SQLite's
             from .postgres import PgDatabase
 
+            # checked as on SQLite (the same value refused or taken on both engines), then
+            # unused: the server has its own durability, checkpoints and cache
+            check_file_options(synchronous, checkpoint, cache_mib)
             db = PgDatabase(str(path), clock, busy_timeout=busy_timeout, adopt=adopt)
         else:
             db = Database(path, clock, synchronous, busy_timeout, adopt, checkpoint,

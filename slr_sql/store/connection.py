@@ -93,6 +93,30 @@ def check_busy_timeout(value: Any) -> float:
     return float(value)
 
 
+def check_file_options(synchronous: Any, checkpoint: Any, cache_mib: Any) -> None:
+    """``synchronous``, ``checkpoint`` and ``cache_mib`` of ``open``, else an
+    :class:`SLRError` naming the option (open's boundary would word any other error as
+    ``open: ValueError: ...``). They tune an SQLite file; a PostgreSQL store checks them
+    the same way, then has no use for them (the server keeps its own durability,
+    checkpoints and cache), so a value is refused or taken alike on both engines.
+
+    >>> check_file_options("NORMAL", "background", 16)
+    >>> check_file_options("FAST", "auto", 64)
+    Traceback (most recent call last):
+    ...
+    slr_sql.errors.SLRError: synchronous must be OFF, NORMAL, FULL or EXTRA, not 'FAST'
+    """
+    if isinstance(cache_mib, bool) or not isinstance(cache_mib, (int, float)) \
+            or not 0.0625 <= cache_mib <= 1 << 20:
+        raise SLRError(f"cache_mib must be a number of MiB from 0.0625 to 1048576, "
+                       f"not {cache_mib!r}")
+    if not isinstance(synchronous, str) or \
+            synchronous.upper() not in ("OFF", "NORMAL", "FULL", "EXTRA"):
+        raise SLRError(f"synchronous must be OFF, NORMAL, FULL or EXTRA, not {synchronous!r}")
+    if not isinstance(checkpoint, str) or checkpoint not in CHECKPOINT_MODES:
+        raise SLRError(f"checkpoint must be 'auto' or 'background', not {checkpoint!r}")
+
+
 class WallClock:
     def now(self) -> float:
         return time.time()
@@ -505,16 +529,7 @@ class Database:
                  checkpoint_interval: float = CHECKPOINT_INTERVAL,
                  cache_mib: float = CACHE_SIZE_KIB / 1024):
         busy_timeout = check_busy_timeout(busy_timeout)
-        # (SLRErrors: open's boundary words any other error as "open: ValueError: ...")
-        if isinstance(cache_mib, bool) or not isinstance(cache_mib, (int, float)) \
-                or not 0.0625 <= cache_mib <= 1 << 20:
-            raise SLRError(f"cache_mib must be a number of MiB from 0.0625 to 1048576, "
-                           f"not {cache_mib!r}")
-        if not isinstance(synchronous, str) or \
-                synchronous.upper() not in ("OFF", "NORMAL", "FULL", "EXTRA"):
-            raise SLRError(f"synchronous must be OFF, NORMAL, FULL or EXTRA, not {synchronous!r}")
-        if not isinstance(checkpoint, str) or checkpoint not in CHECKPOINT_MODES:
-            raise SLRError(f"checkpoint must be 'auto' or 'background', not {checkpoint!r}")
+        check_file_options(synchronous, checkpoint, cache_mib)
         self.checkpointer: WalCheckpointer | None = None
         self.path = None if path in (None, ":memory:") else os.fspath(path)
         new = True if self.path is None else check_file(self.path, adopt)

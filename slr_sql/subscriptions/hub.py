@@ -21,7 +21,7 @@ import time
 import warnings
 from typing import Any, Callable
 
-from ..arguments import check_callable
+from ..arguments import check_callable, check_time_option
 from ..clocks import DEFAULT_MAX_LEARNED_DELAY, LearnedDelayWarning
 from ..encoding import NullArgument, decode
 from ..errors import NotAnEvent, SLRError, SLRSubscriptionInUse, log_failure
@@ -30,7 +30,7 @@ from ..host import Host
 from ..store import null_argument_text
 from ..store.checks import shown
 from ..terms import format_atom
-from .matching import Matcher, time_arg
+from .matching import Matcher
 from .queue import HISTORY_PHASE, LIVE_PHASE, Subscription, SubscriptionOverflow, \
     SubscriptionState, resolve_threadsafe
 from .registry import SubscriptionRegistry, journal_table, no_subscription
@@ -97,8 +97,10 @@ def check_subscription(pattern: Any, where: Any, since: Any, until: Any, id: Any
     if isinstance(since, str) and since.strip() == "now":
         since_value = None if now is None else float(now())
     else:
-        since_value = time_arg(since, "since")
-    until_value = None if until is None else time_arg(until, "until")
+        check_time_option("subscribe: since", since, required=True)
+        since_value = float(since)
+    check_time_option("subscribe: until", until)
+    until_value = None if until is None else float(until)
     if until_value == _INF:
         until_value = None
     if until_value is not None and since_value is not None and until_value < since_value:

@@ -1,20 +1,19 @@
-"""A subscription's pattern and condition, compiled (:class:`Matcher`), the arguments of
-``subscribe`` checked, and answers as JSON (:func:`answer_json`)."""
+"""A subscription's pattern and condition, compiled (:class:`Matcher`), and answers as JSON
+(:func:`answer_json`). (``subscribe``'s other arguments are checked by
+:func:`~slr_sql.subscriptions.hub.check_subscription`.)"""
 from __future__ import annotations
 
 import json
-import math
 from typing import Any
 
 from ..encoding import encode_json
 from ..errors import SLRError, SLRSyntaxError
 from ..parser import parse_term
 from ..program import split_event_atom
-from ..store.checks import shown
 from ..terms import Atom, String, Struct, Var, deref, make_list, to_python
 from ..unify import undo, unify
 
-__all__ = ["Matcher", "answer_json", "time_arg"]
+__all__ = ["Matcher", "answer_json"]
 
 
 def answer_json(answer: dict[str, Any]) -> str:
@@ -134,21 +133,3 @@ class Matcher:
             return self.match(args, start, end)
         except SLRError as exc:
             return exc
-
-
-def time_arg(value: Any, what: str) -> float:
-    """A ``since`` or ``until`` argument as a float, or a clear SLRError.
-
-    >>> time_arg(3, "since")
-    3.0
-    """
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SLRError(f"subscribe: {what} must be a number of seconds, not {shown(value)}")
-    try:
-        value = float(value)
-    except OverflowError:
-        raise SLRError(f"subscribe: {what} is out of range (an integer of "
-                       f"{value.bit_length()} bits; a time is a float)") from None
-    if math.isnan(value):
-        raise SLRError(f"subscribe: {what} must be a number, not NaN")
-    return value

@@ -22,7 +22,7 @@ import threading
 import time
 from typing import Any, Callable, Protocol
 
-from ..arguments import wait_seconds
+from ..arguments import check_flag, wait_seconds
 from ..errors import SLRError, SLRTimeout
 from ..lockorder import ordered_lock
 from .matching import Matcher
@@ -683,7 +683,21 @@ class Subscription:
     def close(self, forget: bool = False, ack: bool = True, join: bool = True) -> None:
         """Unregister. A durable subscription keeps its position (the last answer taken counts
         as handled unless ``ack=False``); ``forget=True`` removes its record too. Answers still
-        queued are dropped here and delivered again when a durable subscription resumes."""
+        queued are dropped here and delivered again when a durable subscription resumes.
+        Each flag is True or False, else an :class:`SLRError` (before anything is closed).
+
+        >>> import slr_sql; kb = slr_sql.open(clock=slr_sql.ManualClock(10))
+        >>> sub = kb.subscribe("p(X)^T"); sub.close(ack="no")
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: close: ack must be True or False, not 'no'
+        >>> sub.close(); sub.closed
+        True
+        >>> kb.close()
+        """
+        check_flag("close: forget", forget)
+        check_flag("close: ack", ack)
+        check_flag("close: join", join)
         with self._cond:
             if self._state is S.CLOSED and not forget:
                 return
