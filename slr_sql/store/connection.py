@@ -552,7 +552,7 @@ class Database:
         # catalog's indexes, the plans it gave: (statement, its extra indexes) -> steps):
         # hypothetical_plan asks its planner
         self._planning: tuple[int, sqlite3.Connection, dict[str, str], set[str],
-                              dict[tuple[str, frozenset[str]], list[str] | None]] | None = None
+                              dict[tuple, Any]] | None = None
         self.busy_timeout = busy_timeout
         self._absolute: str | None = None  # set once open (check_identity)
         self._identity: tuple = (None, None, None)
@@ -755,6 +755,27 @@ class Database:
             answers[key] = steps
         return None if steps is None else list(steps)
 
+    def plan_memo(self) -> dict[tuple, Any] | None:
+        """What :meth:`hypothetical_plan`'s answers are kept in, for what a caller derives
+        from them: emptied when the copy is made again (the schema changed, a rollback);
+        None if there is no copy to ask.
+
+        >>> db = Database(None); memo = db.plan_memo(); memo[("judged", "x")] = 1
+        >>> db.plan_memo() is memo, db.execute("CREATE TABLE t (x)") is not None
+        (True, True)
+        >>> ("judged", "x") in db.plan_memo()
+        False
+        """
+        with self.lock:
+            self.check_open()
+            try:
+                memo = self._planning_copy()[3]
+            except (sqlite3.Error, ValueError, TypeError):
+                return None
+            if len(memo) >= PLANS_REMEMBERED:
+                memo.clear()
+            return memo
+
     def _forget_planning_copy(self) -> None:
         """Before a rollback: the schema's version goes back with it, and the next changes
         may bring it to a number a copy made inside had, of another schema (lock held)."""
@@ -763,7 +784,7 @@ class Database:
             self._planning = None
 
     def _planning_copy(self) -> tuple[sqlite3.Connection, dict[str, str], set[str],
-                                      dict[tuple[str, frozenset[str]], list[str] | None]]:
+                                      dict[tuple, Any]]:
         """The in-memory copy of the schema :meth:`hypothetical_plan` asks, the extra
         indexes made in it since (name -> statement), the catalog's index names, and the
         plans it gave (lock held)."""
@@ -796,7 +817,7 @@ class Database:
                 if kind == "index":
                     catalog.add(name)
         made: dict[str, str] = {}
-        answers: dict[tuple[str, frozenset[str]], list[str] | None] = {}
+        answers: dict[tuple, Any] = {}
         self._planning = (version, copy, made, catalog, answers)
         return copy, made, catalog, answers
 
