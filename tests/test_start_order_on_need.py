@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+import sqlite3
 import subprocess
 import sys
 from pathlib import Path
@@ -472,3 +473,33 @@ def test_a_compiled_query_builds_the_start_order_it_searches_on_either_backend(
                 if table in searched else set()), table
         kb.sql_enabled = False
         assert kb.query(goal) == answers and answers
+
+
+def test_a_query_of_another_constant_does_not_ask_the_planner_again(tmp_path):
+    """Goals alike but for a constant compile plans of one statement text (the constant
+    is a parameter): whether it wants a start-ordered index is asked of the planning copy
+    once (the synchronizer compiles such a plan for each released query), and the answers
+    are each constant's."""
+    kb = slr_sql.open(str(tmp_path / "p.db"), clock=ManualClock(100.0))
+    kb.add_many([f"s({k})^{k}" for k in range(1, 20)])
+    db = kb.store._db
+    assert kb.query("prev(s(X)^T, 5), X > 0") == [{"X": 5, "T": 5.0}]
+    copy = db._planning[1]
+    asked: list[int] = []
+
+    def counting(action, *_):
+        # (the authorizer sees every statement prepared, an EXPLAIN too, which no trace
+        # callback reports: a SELECT's is one question to the planner)
+        if action == sqlite3.SQLITE_SELECT:
+            asked.append(action)
+        return sqlite3.SQLITE_OK
+
+    copy.set_authorizer(counting)
+    answers = [kb.query(f"prev(s(X)^T, {z}), X > 0") for z in (7, 9.5, 12)]
+    assert answers == [[{"X": 7, "T": 7.0}], [{"X": 9, "T": 9.0}], [{"X": 12, "T": 12.0}]]
+    assert db._planning[1] is copy and asked == []
+    # (a statement of another text is asked)
+    assert len(kb.query("s(X)^[S, E], S > 15")) == 4
+    assert db._planning[1] is copy and asked
+    assert _start_indexes(kb, "s") == set()
+    kb.close()

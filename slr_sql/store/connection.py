@@ -61,6 +61,11 @@ DatabaseError = sqlite3.Error
 
 CACHE_SIZE_KIB = 65536  # PRAGMA cache_size of the store's connection (64 MiB)
 
+# plans of the planning copy kept for statements asked again (Database.hypothetical_plan):
+# beyond this many they are forgotten together (statements whose text has its constants
+# in it are all new)
+PLANS_REMEMBERED = 1024
+
 # Seconds a write waits for another connection's write transaction before SLRBusy: long
 # enough for any ordinary transaction of another writer (milliseconds) and a checkpoint,
 # short enough that a process stuck holding the lock is reported rather than waited for.
@@ -559,8 +564,10 @@ class Database:
         # the Python functions statements may call (install_functions), on every connection
         self.functions: SqlFunctions | None = None
         # (schema version, in-memory copy of the schema, extra indexes made in it, the
-        # catalog's indexes): hypothetical_plan asks its planner
-        self._planning: tuple[int, sqlite3.Connection, dict[str, str], set[str]] | None = None
+        # catalog's indexes, the plans it gave: (statement, its extra indexes) -> steps):
+        # hypothetical_plan asks its planner
+        self._planning: tuple[int, sqlite3.Connection, dict[str, str], set[str],
+                              dict[tuple, Any]] | None = None
         self.busy_timeout = busy_timeout
         self._absolute: str | None = None  # set once open (check_identity)
         self._identity: tuple = (None, None, None)
@@ -718,7 +725,9 @@ class Database:
         are gathered (``ANALYZE`` is never run), so an index is judged without being built.
         The copy is made again when the schema changed, and after a rollback (which takes
         the schema's version back); the extra indexes stay in it until then, or until left
-        out.
+        out. Its answers are kept with it: a statement asked again with the same extra
+        indexes (a compiled query of another constant, whose text is the same) is answered
+        without the planner, as the copy's schema is all its plan depends on.
 
         >>> db = Database(None); _ = db.execute("CREATE TABLE t (x, y)")
         >>> sql, x = "SELECT * FROM t WHERE x = :v", {"t_x": "CREATE INDEX t_x ON t (x)"}
@@ -730,8 +739,18 @@ class Database:
         with self.lock:
             self.check_open()
             try:
-                copy, made, catalog = self._planning_copy()
-                left_out = set(without)
+                copy, made, catalog, answers = self._planning_copy()
+            except (sqlite3.Error, ValueError, TypeError):
+                return None
+            left_out = set(without)
+            asked = {name for name in extra if name not in catalog}
+            # (the indexes the copy has beyond the catalog's once this call's are made or
+            # dropped: with the statement, all its answer depends on)
+            key = (sql, frozenset((made.keys() - (asked & left_out)) | (asked - left_out)))
+            if key in answers:
+                known = answers[key]
+                return None if known is None else list(known)
+            try:
                 for name, statement in extra.items():
                     if name in catalog:
                         continue
@@ -743,8 +762,34 @@ class Database:
                         made[name] = statement
                 plan = copy.execute("EXPLAIN QUERY PLAN " + sql, _AnyParameters()).fetchall()
             except (sqlite3.Error, ValueError, TypeError):
+                steps = None
+            else:
+                steps = [str(row[-1]) for row in plan]
+            if len(answers) >= PLANS_REMEMBERED:
+                answers.clear()
+            answers[key] = steps
+        return None if steps is None else list(steps)
+
+    def plan_memo(self) -> dict[tuple, Any] | None:
+        """What :meth:`hypothetical_plan`'s answers are kept in, for what a caller derives
+        from them: emptied when the copy is made again (the schema changed, a rollback);
+        None if there is no copy to ask.
+
+        >>> db = Database(None); memo = db.plan_memo(); memo[("judged", "x")] = 1
+        >>> db.plan_memo() is memo, db.execute("CREATE TABLE t (x)") is not None
+        (True, True)
+        >>> ("judged", "x") in db.plan_memo()
+        False
+        """
+        with self.lock:
+            self.check_open()
+            try:
+                memo = self._planning_copy()[3]
+            except (sqlite3.Error, ValueError, TypeError):
                 return None
-        return [str(row[-1]) for row in plan]
+            if len(memo) >= PLANS_REMEMBERED:
+                memo.clear()
+            return memo
 
     def _forget_planning_copy(self) -> None:
         """Before a rollback: the schema's version goes back with it, and the next changes
@@ -753,13 +798,14 @@ class Database:
             self._planning[1].close()
             self._planning = None
 
-    def _planning_copy(self) -> tuple[sqlite3.Connection, dict[str, str], set[str]]:
+    def _planning_copy(self) -> tuple[sqlite3.Connection, dict[str, str], set[str],
+                                      dict[tuple, Any]]:
         """The in-memory copy of the schema :meth:`hypothetical_plan` asks, the extra
-        indexes made in it since (name -> statement), and the catalog's index names (lock
-        held)."""
+        indexes made in it since (name -> statement), the catalog's index names, and the
+        plans it gave (lock held)."""
         version = self.conn.execute("PRAGMA schema_version").fetchone()[0]
         if self._planning is not None and self._planning[0] == version:
-            return self._planning[1], self._planning[2], self._planning[3]
+            return self._planning[1], self._planning[2], self._planning[3], self._planning[4]
         self._forget_planning_copy()
         # (no statement cache: an EXPLAIN's rows are made when it is prepared, so a cached
         # one would answer for the indexes there were then)
@@ -786,8 +832,9 @@ class Database:
                 if kind == "index":
                     catalog.add(name)
         made: dict[str, str] = {}
-        self._planning = (version, copy, made, catalog)
-        return copy, made, catalog
+        answers: dict[tuple, Any] = {}
+        self._planning = (version, copy, made, catalog, answers)
+        return copy, made, catalog, answers
 
     def qualified(self, name: str) -> str:
         """The store's object ``name`` as its statements name it where it may be missing

@@ -1542,6 +1542,10 @@ class PgDatabase:
         build what a statement may use, conservatively)."""
         return None
 
+    def plan_memo(self) -> dict[tuple, Any] | None:
+        """None: there is no copy of the schema to ask (:meth:`hypothetical_plan`)."""
+        return None
+
     def index_names(self, table: str) -> set[str]:
         """Names of the indexes of ``table`` in the store's schema."""
         return {row[0] for row in self.execute(

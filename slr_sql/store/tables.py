@@ -573,7 +573,8 @@ class EventTables:
         :data:`START_ORDER_ONE_BY_ONE` such types they are asked about together: all wanted
         when the plan without any of them is worse, else none. So ``t_start =
         ? AND t_end = ?`` wants none (the end order binds both), ``arg1 = ? AND t_start > ?``
-        does.
+        does. The judgement is remembered with the copy's plans (:meth:`Database.plan_memo`)
+        for the statement's text and the types it found lacking.
 
         >>> from slr_sql.store import EventStore
         >>> s = EventStore(None); _ = s.declare_type("b", 1)
@@ -586,6 +587,19 @@ class EventTables:
         lacking = [t for t in self.types.values() if not t.start_order and t.quoted in sql]
         if not lacking:
             return set()
+        # (judged once per statement text and types lacking them while the schema stays:
+        # a query compiled again for another constant has the same text)
+        memo = self.db.plan_memo()
+        key = ("start orders wanted", sql, frozenset((t.name, t.arity) for t in lacking))
+        if memo is not None and key in memo:
+            return set(memo[key])
+        wanted = self._start_orders_wanted(sql, lacking)
+        if memo is not None and wanted is not None:
+            memo[key] = frozenset(wanted)
+        return wanted
+
+    def _start_orders_wanted(self, sql: str,
+                             lacking: list[EventType]) -> set[tuple[str, int]] | None:
         extra: dict[str, str] = {}
         own: dict[tuple[str, int], list[str]] = {}
         for event_type in lacking:
