@@ -171,8 +171,11 @@ def _pg_round_trips(kb, call) -> tuple[int, list[str]]:
     sent (prepared ones looked up by name once it returned)."""
     messages = traced_messages(kb, call)
     raw = kb.store._conn.raw
-    prepared = {f'"{name}"': text for name, text in
-                raw.execute("SELECT name, statement FROM pg_prepared_statements").fetchall()}
+    # (under the store's lock: the store's drain thread reads the same socket when the lock
+    # is free, and would take this statement's answer from under it now and again)
+    with kb.store._db.lock:
+        prepared = {f'"{name}"': text for name, text in raw.execute(
+            "SELECT name, statement FROM pg_prepared_statements").fetchall()}
     waits, texts, parsed = 0, [], ""
     for fields in messages:
         if len(fields) < 3:
