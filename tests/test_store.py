@@ -577,3 +577,32 @@ def test_a_lookup_read_across_a_rolled_back_add_loses_no_row(tmp_path):
         assert [args[0] for args, *_ in seen] == list(range(300))
         assert kb.query("findall(X, (p(X)^_, X >= 1000), L)") == [{"L": []}]
         assert kb.store.table_for("fresh", 1) is None
+
+
+def test_rows_into_a_large_table_go_in_one_statement_execution_per_row(file_store):
+    store = file_store
+    """Once a table holds more than ~65,536 rows an add binds the one-row INSERT per row
+    (cheaper per row there than multi-row VALUES), a small table still gets multi-row
+    INSERTs; the same rows stored, the same rejections, nothing stored by a refused atomic
+    add, on either path."""
+    store.add_events([("p", (i,), float(i), float(i)) for i in range(70_000)])
+    statements: list[str] = []
+    store._db.conn.set_trace_callback(statements.append)
+    try:
+        clean = store.add_events([("p", ("a",), 1e5, 1e5), ("p", ("b",), 1e5, 1e5)])
+        errors = store.add_events([("p", ("c",), 2e5, 2e5), ("p", (Var("X"),), 2e5, 2e5),
+                                   ("p", ("d",), 3e5, 3e5)])
+        with pytest.raises(EventRejected, match="after end time"):
+            store.add_events([("p", ("e",), 4e5, 4e5), ("p", ("f",), 5e5, 4e5)], atomic=True)
+        small = store.add_events([("q", (1,), 1.0, 1.0), ("q", (2,), 1.0, 1.0)])
+    finally:
+        store._db.conn.set_trace_callback(None)
+    assert clean == [] and [e.index for e in errors] == [1] and small == []
+    into_p = [s for s in statements if s.startswith('INSERT INTO "p"')]
+    assert len(into_p) == 4 and not any("),(" in s for s in into_p)
+    into_q = [s for s in statements if s.startswith('INSERT INTO "q"')]
+    assert len(into_q) == 1 and "),(" in into_q[0]
+    assert store.count("p", 1) == 70_004
+    assert [args for args, *_ in store.scan("p", 1, end_le=1e6)][-4:] == [
+        (Atom("a"),), (Atom("b"),), (Atom("c"),), (Atom("d"),)]
+    assert [(args, s) for args, s, *_ in store.scan("q", 1)] == [((1,), 1.0), ((2,), 1.0)]

@@ -50,6 +50,12 @@ _INSERT_CHUNK = 20_000  # events checked and inserted together: bounds memory on
 # executions of a one-row statement (binding and stepping a statement is per execution); the
 # sizes are powers of two so that a few statement texts, kept prepared, serve every batch
 _ROWS_PER_INSERT = 512
+# ... but only into a small table: as a table's indexes grow, each row of a multi-row INSERT
+# costs more than a row of an ``executemany`` of the one-row statement (measured on SQLite
+# 3.40 with the two end-ordered indexes: equal at ~100,000 rows stored, multi-row 1.4x at
+# 1,000,000, and 1.2-1.5x for 10,000 to 100,000 rows added to 900,000). Above this many rows
+# (the table's seq span once the rows are in) the rows go in by ``executemany``.
+_MULTI_ROW_TABLE_ROWS = 65_536
 _FOUR = {4}
 _FLOAT = frozenset({float})
 _SEQUENCES = frozenset({tuple, list})
@@ -319,19 +325,24 @@ class EventWriter:
 
     def _insert_rows(self, event_type: EventType, rows: Iterable[tuple], count: int,
                      with_robot: bool) -> None:
-        """Insert the ``count`` ``rows`` (SQLite), in their order, with multi-row INSERTs
-        of power-of-two sizes (an ``executemany`` of the one-row statement was ~5% faster
-        on a bulk ingest while a table had four indexes, ~2% slower with two)."""
+        """Insert the ``count`` ``rows`` (SQLite), in their order: with multi-row INSERTs
+        of power-of-two sizes into a small table, with an ``executemany`` of the one-row
+        statement once the table holds more than :data:`_MULTI_ROW_TABLE_ROWS` rows (there
+        it costs less per row). The same rows either way, in the add's transaction."""
         if not count:
             return
-        values = list(chain.from_iterable(rows))
-        width = len(values) // count
         execute = self.db.conn.execute
-        most = _ROWS_PER_INSERT
-        while most > 1 and most * width > self.db.max_parameters:
-            most //= 2
-        done = 0
         try:   # (every add: execute's mapping, in the add's transaction, which holds the lock)
+            if count > 1 and self._rows_after(event_type, count) > _MULTI_ROW_TABLE_ROWS:
+                self.db.conn.executemany(event_type.insert_sql if with_robot
+                                         else event_type.insert_unnamed_sql, rows)
+                return
+            values = list(chain.from_iterable(rows))
+            width = len(values) // count
+            most = _ROWS_PER_INSERT
+            while most > 1 and most * width > self.db.max_parameters:
+                most //= 2
+            done = 0
             while done < count:
                 size = min(most, 1 << ((count - done).bit_length() - 1))
                 execute(event_type.insert_rows_sql(size, with_robot),
@@ -339,6 +350,15 @@ class EventWriter:
                 done += size
         except sqlite3.Error as exc:
             raise self.db.failure(exc) from None
+
+    def _rows_after(self, event_type: EventType, count: int) -> int:
+        """About how many rows ``event_type``'s table holds once ``count`` more are in: its
+        seq span (two lookups at the ends of the rowid; rows pruned from the front of a
+        buffered table are not counted) plus ``count``."""
+        quoted = event_type.quoted
+        span = self.db.conn.execute(f"SELECT (SELECT max(seq) FROM {quoted}) - "
+                                    f"(SELECT min(seq) FROM {quoted})").fetchone()[0]
+        return (span or 0) + count
 
     def _insert_each(self, chunk: list, base: int, arrival: float, atomic: bool,
                      errors: list[EventRejected], ends: dict | None) -> None:
