@@ -16,6 +16,7 @@ slr_sql.errors.SLRError: submit: callback must be callable (a function), not 5
 from __future__ import annotations
 
 import math
+import numbers
 import threading
 from typing import Any, Iterable, TypeVar
 
@@ -29,7 +30,7 @@ T = TypeVar("T")
 
 
 def check_time_option(name: str, value: Any, minimum: float | None = None, *,
-                      required: bool = False) -> None:
+                      required: bool = False, real: bool = False) -> None:
     """``at=`` and ``timeout=`` are numbers of seconds (``None``: not given, unless
     ``required``), else an :class:`SLRError` (run by the client of ``slr serve`` too, before
     sending). Infinities are numbers (SPEC: ``inf`` is +∞ where a number is expected); NaN
@@ -40,16 +41,24 @@ def check_time_option(name: str, value: Any, minimum: float | None = None, *,
     Traceback (most recent call last):
     ...
     slr_sql.errors.SLRError: timeout must be a number of seconds >= 0, not -1
+
+    ``real``: any real number (:class:`numbers.Real`: a NumPy scalar, a Fraction) is one
+    too, for a caller that takes ``float(value)`` at once (a clock's time, a wait's
+    timeout: they always took them, a time read from an array included).
+
+    >>> from fractions import Fraction
+    >>> check_time_option("ManualClock.set: t", Fraction(1, 2), required=True, real=True)
     """
     if value is None and not required:
         return
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if isinstance(value, bool) or not isinstance(value, numbers.Real if real else (int, float)):
         raise SLRError(f"{name} must be a number of seconds, not {shown(value)}")
     try:
         number = float(value)
     except OverflowError:
-        raise SLRError(f"{name} is out of range (an integer of {value.bit_length()} bits)") \
-            from None
+        size = f"an integer of {value.bit_length()} bits" if isinstance(value, int) \
+            else shown(value)
+        raise SLRError(f"{name} is out of range ({size})") from None
     if math.isnan(number) or (minimum is not None and number < minimum):
         raise SLRError(f"{name} must be a number of seconds"
                        f"{'' if minimum is None else f' >= {minimum:g}'}, not {shown(value)}")
@@ -68,7 +77,7 @@ def wait_seconds(name: str, timeout: Any) -> float | None:
     ...
     slr_sql.errors.SLRError: get: timeout must be a number of seconds >= 0, not nan
     """
-    check_time_option(name, timeout, minimum=0.0)
+    check_time_option(name, timeout, minimum=0.0, real=True)
     if timeout is None:
         return None
     seconds = float(timeout)

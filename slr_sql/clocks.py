@@ -100,21 +100,21 @@ class ManualClock(Clock):
 
     def __init__(self, t: float = 0.0) -> None:
         super().__init__()
-        check_time_option("ManualClock: t", t, required=True)
+        check_time_option("ManualClock: t", t, required=True, real=True)
         self._t = float(t)
 
     def now(self) -> float:
         return self._t
 
     def set(self, t: float) -> None:
-        check_time_option("ManualClock.set: t", t, required=True)
+        check_time_option("ManualClock.set: t", t, required=True, real=True)
         if t < self._t:
             raise SLRError(f"ManualClock cannot go back in time ({t} < {self._t})")
         self._t = float(t)
         self._moved(self._t)
 
     def advance(self, dt: float) -> None:
-        check_time_option("ManualClock.advance: dt", dt, minimum=0.0, required=True)
+        check_time_option("ManualClock.advance: dt", dt, minimum=0.0, required=True, real=True)
         self.set(self._t + dt)
 
 
