@@ -43,6 +43,9 @@ def check_time_option(name: str, value: Any, minimum: float | None = None, *,
     Traceback (most recent call last):
     ...
     slr_sql.errors.SLRError: timeout must be a number of seconds >= 0, not -1
+
+    >>> from fractions import Fraction
+    >>> check_time_option("ManualClock.set: t", Fraction(1, 2), required=True)
     """
     if value is None and not required:
         return

@@ -100,7 +100,8 @@ def check_define(name: Any, arity: Any, fn: Any) -> None:
     """
     if not isinstance(name, str):
         raise SLRError(f"define: the predicate's name is a str (an atom), not {shown(name)}")
-    if type(arity) is not int or arity < 0:
+    # (any integer: a subclass of int, a NumPy integer -- define always took them)
+    if isinstance(arity, bool) or not isinstance(arity, numbers.Integral) or arity < 0:
         raise SLRError(f"define: arity must be a count (an integer >= 0), not {shown(arity)}")
     check_callable("define: fn", fn)
 
@@ -366,7 +367,7 @@ class KnowledgeBase:
         [{'Y': 42}]
         """
         check_define(name, arity, fn)
-        self.engine.python_preds[(name, arity)] = fn
+        self.engine.python_preds[(name, int(arity))] = fn
         self.plans.clear()
 
     # -- events -------------------------------------------------------------------------

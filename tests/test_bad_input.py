@@ -2,6 +2,9 @@
 reason (never a raw Python or sqlite3 exception), and nothing else in its batch is lost."""
 from __future__ import annotations
 
+from fractions import Fraction
+
+import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
@@ -382,6 +385,25 @@ def test_a_clock_refuses_what_is_no_time_or_no_function(call, words):
     with pytest.raises(SLRError) as refused:
         call()
     assert words in str(refused.value)
+
+
+def test_a_clock_and_a_wait_take_any_real_number_of_seconds(kb):
+    """A time read from a NumPy array (np.int64, np.float32) or a Fraction is a number of
+    seconds to a clock and to a wait's timeout, as it always was: the check of the times
+    took only int and float, and refused them."""
+    clock = slr_sql.ManualClock(np.int64(2))
+    clock.set(np.float32(3.5))
+    clock.advance(Fraction(1, 2))
+    clock.set(np.int64(5))
+    assert clock.now() == 5.0 and type(clock.now()) is float
+    assert slr_sql.ManualClock(Fraction(3, 4)).now() == 0.75
+    with kb.subscribe("p(X)^T") as sub:
+        kb.add("p(1)^1")
+        assert sub.get(timeout=np.int64(5))["X"] == 1
+        with pytest.raises(slr_sql.SLRTimeout):
+            sub.get(timeout=np.float32(0))
+    with pytest.raises(SLRError, match="ManualClock.set: t must be a number of seconds"):
+        slr_sql.ManualClock(0).set(np.bool_(True))
 
 
 def test_a_subscription_wait_refuses_a_timeout_that_is_no_seconds(kb):

@@ -678,6 +678,25 @@ def test_define_python_predicates(kb):
     check(kb, "quad(1, Z)", [{"Z": 4}])
 
 
+def test_define_takes_any_integer_arity(kb):
+    """An arity that is an int subclass (an IntEnum) or a NumPy integer is an arity, as
+    define always took it: the check of its arguments took only the exact int."""
+    import enum
+
+    import numpy as np
+
+    class Arity(enum.IntEnum):
+        TWO = 2
+
+    kb.define("double", Arity.TWO, lambda x, y: (x, 2 * x))
+    kb.define("triple", np.int64(2), lambda x, y: (x, 3 * x))
+    check(kb, "double(21, Y), triple(Y, Z)", [{"Y": 42, "Z": 126}])
+    with pytest.raises(SLRError, match="define: arity must be a count"):
+        kb.define("p", True, abs)
+    with pytest.raises(SLRError, match="define: arity must be a count"):
+        kb.define("p", np.int64(-1), abs)
+
+
 def test_args_binding_and_plan_reuse(kb):
     kb.load("edge(a, b). edge(b, c). edge(c, d). path(X, Y) :- edge(X, Y). "
             "path(X, Y) :- edge(X, Z), path(Z, Y).")
