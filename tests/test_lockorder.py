@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import re
 import threading
+from contextlib import nullcontext
 from pathlib import Path
 
 import pytest
@@ -177,6 +178,26 @@ def test_a_close_with_a_subscription_waiting_for_its_until_keeps_the_order(
                      **({"callback": lambda answer: None} if callback else {}))
     finally:
         kb.close()
+    assert violations() == []
+
+
+@pytest.mark.parametrize("ending", ["commit", "rollback"])
+def test_a_clock_moved_inside_a_transaction_fires_the_timers_once_it_ended(
+        debug_locks, tmp_path, ending):
+    # the synchronizer's clock listener takes its lock, which comes before the store's (a
+    # mark takes the two in that order): inside a transaction it waits for the end
+    clock = ManualClock(0.0)
+    with slr_sql.open(tmp_path / "kb.db", clock=clock) as kb:
+        kb.load(":- max_delay(p/1, 1).")
+        kb.add("p(1)^1")
+        waiting = kb.submit("findall(X, p(X)^_, L)", at=5)
+        with pytest.raises(KeyError) if ending == "rollback" else nullcontext():
+            with kb.store.transaction():
+                clock.set(10.0)               # p/1 complete up to 9: the query may run
+                assert not waiting.done()
+                if ending == "rollback":
+                    raise KeyError("undo")
+        assert waiting.result(timeout=30) == [{"L": [1]}]
     assert violations() == []
 
 
