@@ -201,6 +201,19 @@ def test_a_clock_moved_inside_a_transaction_fires_the_timers_once_it_ended(
     assert violations() == []
 
 
+def test_a_transform_looked_up_inside_a_transaction_keeps_the_order(debug_locks, tmp_path):
+    # the lookup takes the frame tree's lock, and another thread's lookup read the store
+    # while holding it: with the store's lock held here, the two waited for each other
+    with slr_sql.open(tmp_path / "kb.db", clock=ManualClock(0.0)) as kb:
+        kb.add("tf(map, odom, pose([1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]))^1")
+        assert kb.query("tf_lookup(map, odom, 1, pose(P, _))") == [{"P": [1.0, 0.0, 0.0]}]
+        with kb.store.transaction():
+            kb.add("tf(odom, base, pose([0.0, 2.0, 0.0], [0.0, 0.0, 0.0, 1.0]))^1")
+            assert kb.query("tf_lookup(map, base, 1, pose(P, _))") == \
+                [{"P": [1.0, 2.0, 0.0]}]
+    assert violations() == []
+
+
 def test_the_order_is_written_in_the_architecture_document():
     text = (Path(__file__).resolve().parent.parent / "docs" / "architecture.md").read_text()
     section = text[text.index("## Locks"):]
