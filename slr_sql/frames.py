@@ -107,27 +107,46 @@ class FrameTree:
         self.neighbours: dict[Any, list] = {}   # frame key -> [(frame key, parent, child)]
         self.paths: dict[tuple, list | None] = {}
         self.lock = ordered_lock("frames")   # the threads of one knowledge base share the tree
+        self._resets = 0   # how often the tree was read again from the start
 
     def chain(self, store: Any, target: Any, source: Any) -> list | None:
-        """:meth:`refresh`, then :meth:`path`, under the tree's lock."""
+        """:meth:`refresh`, then :meth:`path`."""
+        self.refresh(store)
         with self.lock:
-            self.refresh(store)
             return self.path(target, source)
 
     def refresh(self, store: Any) -> None:
-        """Read the (parent, child) pairs stored since the last refresh."""
-        for key in (TF, TF_STATIC):
-            pairs, top = store.distinct_pairs(key[0], key[1], self.seen[key])
-            if top < self.seen[key]:  # the newest events were deleted: read all again
-                self.seen = {TF: 0, TF_STATIC: 0}
-                self.kind.clear()
-                self.longest.clear()
-                self.neighbours.clear()
-                self.paths.clear()
-                return self.refresh(store)
-            self.seen[key] = top
-            for parent, child, longest in pairs:
-                self._add(parent, child, key, longest)
+        """Read the (parent, child) pairs stored since the last refresh.
+
+        The store is read without the tree's lock: a thread inside a transaction (holding
+        the store's lock) may look a transform up, so the tree's lock comes after the
+        store's and is never held while waiting for it. Two threads may read the same new
+        pairs; adding a pair again changes nothing."""
+        while True:
+            with self.lock:
+                seen, resets = dict(self.seen), self._resets
+            read = {key: store.distinct_pairs(key[0], key[1], seen[key])
+                    for key in (TF, TF_STATIC)}
+            with self.lock:
+                if self._resets != resets:    # another thread started again meanwhile
+                    continue
+                if any(top < seen[key] for key, (_pairs, top) in read.items()):
+                    # the newest events were deleted: read all again
+                    self.seen = {TF: 0, TF_STATIC: 0}
+                    self.kind.clear()
+                    self.longest.clear()
+                    self.neighbours.clear()
+                    self.paths.clear()
+                    self._resets += 1
+                    continue
+                for key, (pairs, top) in read.items():
+                    if top <= self.seen[key]:   # another thread added these already
+                        continue
+                    # (read from where the tree was or earlier: the pairs it has come first)
+                    self.seen[key] = top
+                    for parent, child, longest in pairs:
+                        self._add(parent, child, key, longest)
+                return
 
     def _add(self, parent: Any, child: Any, key: tuple, longest: float = 0.0) -> None:
         parent_key, child_key = frame_key(parent), frame_key(child)

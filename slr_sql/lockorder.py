@@ -20,7 +20,7 @@ debug mode it returns a plain ``threading.Lock`` / ``RLock``: no cost.
 >>> with store, sync: pass
 Traceback (most recent call last):
 ...
-slr_sql.lockorder.LockOrderViolation: took a sync lock while holding a store lock (the order is kb.load, sync, frames, store, buffers, subscriptions.hub, subscription, store.reader, clock.listeners, parser)
+slr_sql.lockorder.LockOrderViolation: took a sync lock while holding a store lock (the order is kb.load, sync, store, buffers, subscriptions.hub, subscription, store.reader, frames, clock.listeners, parser)
 >>> del os.environ["SLR_DEBUG_LOCKS"]; clear_violations()
 """
 from __future__ import annotations
@@ -37,12 +37,12 @@ __all__ = ["LOCK_ORDER", "LockOrderViolation", "OrderedLock", "ordered_lock", "d
 LOCK_ORDER = (
     "kb.load",             # KnowledgeBase: load / unload / re-reading the program
     "sync",                # Synchronizer: waiting queries, timers, completeness (its Condition)
-    "frames",              # FrameTree: the frame tree, refreshed from the store's transforms
     "store",               # Database / PgDatabase: the store's one connection, transactions
     "buffers",             # BufferManager: buffers installed and removed (in a transaction)
     "subscriptions.hub",   # SubscriptionHub: subscriptions by type, the delivery passes
     "subscription",        # Subscription: its queue and state (its Condition)
     "store.reader",        # ReadConnection / PgReadConnection: a reader's own connection
+    "frames",              # FrameTree: the frame tree (the store is read without it)
     "clock.listeners",     # Clock: its listener list (listeners are called without it)
     "parser",              # parser: building the full grammar's parser once
 )

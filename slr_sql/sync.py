@@ -1344,6 +1344,13 @@ class Synchronizer:
         """Clock listener (ManualClock / StreamClock): serve time-driven completeness."""
         if self._closed:
             return
+        if self.store.in_transaction_here:
+            # the clock moved inside a transaction this thread holds: the synchronizer's
+            # lock comes before the store's (a mark takes them in that order), so the
+            # timers fire once it ended -- also after a rollback, which does not take
+            # back the clock's move
+            self.store.after_commit(lambda: self._on_clock(t), always=True)
+            return
         with self.lock:
             released = self._fire_timers(float(t))
             self._fired = False

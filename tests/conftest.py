@@ -58,6 +58,29 @@ def pytest_configure(config):
     # before this file puts the checkout first on sys.path, and the tests would then run
     # against an installed copy.
     config.addinivalue_line("filterwarnings", "error::slr_sql.clocks.LearnedDelayWarning")
+    # run in debug mode (SLR_DEBUG_LOCKS=1: docs/architecture.md, "Locks"), a test fails when
+    # a lock was taken out of order on any thread, also one whose exception nobody saw
+    from slr_sql import lockorder
+    if lockorder.debug_locks():
+        config.pluginmanager.register(LockOrderKept(), "lock_order_kept")
+
+
+class LockOrderKept:
+    """Each test starts with no violation of the lock order recorded and fails (in its
+    teardown) when it left one (debug mode only)."""
+
+    @pytest.hookimpl(tryfirst=True)
+    def pytest_runtest_setup(self, item):
+        from slr_sql import lockorder
+        lockorder.clear_violations()
+
+    @pytest.hookimpl(trylast=True)   # after the test's fixtures were torn down
+    def pytest_runtest_teardown(self, item, nextitem):
+        from slr_sql import lockorder
+        seen = lockorder.violations()
+        if seen:
+            lockorder.clear_violations()
+            pytest.fail("locks taken out of order:\n" + "\n".join(seen), pytrace=False)
 
 
 

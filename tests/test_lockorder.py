@@ -3,8 +3,10 @@ knowledge base checks it; a representative workload keeps it, an acquisition out
 is caught before it can wait."""
 from __future__ import annotations
 
+import inspect
 import re
 import threading
+from contextlib import nullcontext
 from pathlib import Path
 
 import pytest
@@ -13,6 +15,10 @@ import slr_sql
 from slr_sql import ManualClock
 from slr_sql.lockorder import (LOCK_ORDER, LockOrderViolation, OrderedLock, clear_violations,
                                observed_nesting, ordered_lock, violations)
+
+import test_add_joins_the_round
+import test_after_commit_stages
+import test_close_during_add
 
 
 @pytest.fixture
@@ -177,6 +183,69 @@ def test_a_close_with_a_subscription_waiting_for_its_until_keeps_the_order(
                      **({"callback": lambda answer: None} if callback else {}))
     finally:
         kb.close()
+    assert violations() == []
+
+
+@pytest.mark.parametrize("ending", ["commit", "rollback"])
+def test_a_clock_moved_inside_a_transaction_fires_the_timers_once_it_ended(
+        debug_locks, tmp_path, ending):
+    # the synchronizer's clock listener takes its lock, which comes before the store's (a
+    # mark takes the two in that order): inside a transaction it waits for the end
+    clock = ManualClock(0.0)
+    with slr_sql.open(tmp_path / "kb.db", clock=clock) as kb:
+        kb.load(":- max_delay(p/1, 1).")
+        kb.add("p(1)^1")
+        waiting = kb.submit("findall(X, p(X)^_, L)", at=5)
+        with pytest.raises(KeyError) if ending == "rollback" else nullcontext():
+            with kb.store.transaction():
+                clock.set(10.0)               # p/1 complete up to 9: the query may run
+                assert not waiting.done()
+                if ending == "rollback":
+                    raise KeyError("undo")
+        assert waiting.result(timeout=30) == [{"L": [1]}]
+    assert violations() == []
+
+
+def test_a_transform_looked_up_inside_a_transaction_keeps_the_order(debug_locks, tmp_path):
+    # the lookup takes the frame tree's lock, and another thread's lookup read the store
+    # while holding it: with the store's lock held here, the two waited for each other
+    with slr_sql.open(tmp_path / "kb.db", clock=ManualClock(0.0)) as kb:
+        kb.add("tf(map, odom, pose([1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]))^1")
+        assert kb.query("tf_lookup(map, odom, 1, pose(P, _))") == [{"P": [1.0, 0.0, 0.0]}]
+        with kb.store.transaction():
+            kb.add("tf(odom, base, pose([0.0, 2.0, 0.0], [0.0, 0.0, 0.0, 1.0]))^1")
+            assert kb.query("tf_lookup(map, base, 1, pose(P, _))") == \
+                [{"P": [1.0, 2.0, 0.0]}]
+    assert violations() == []
+
+
+# Tests of the suite that make threads meet (transactions, clock moves and adds, a close
+# during adds, callbacks of the event pipeline), run again here in debug mode on SQLite
+# (the rest of the suite runs without it): a lock taken out of order on any of their
+# threads fails them. A few seconds; the whole suite can be run so with SLR_DEBUG_LOCKS=1.
+RUN_AGAIN_IN_DEBUG_MODE = [
+    (test_after_commit_stages.test_a_callback_that_raises_does_not_keep_the_later_ones_from_running,
+     {}),
+    (test_after_commit_stages.test_a_clock_move_inside_a_transaction_that_rolls_back_still_decides,
+     {}),
+    (test_after_commit_stages
+     .test_an_add_in_a_nested_part_is_heard_though_a_later_nested_part_rolled_back, {}),
+    (test_add_joins_the_round.test_a_failed_add_inside_a_callers_transaction_takes_back_only_itself,
+     {}),
+    (test_close_during_add.test_an_add_that_raised_stored_nothing_and_one_that_returned_stored_all,
+     {"trial": 3}),
+    (test_close_during_add.test_an_add_that_raised_stored_nothing_and_one_that_returned_stored_all,
+     {"trial": 17}),
+]
+
+
+@pytest.mark.parametrize("test, arguments", RUN_AGAIN_IN_DEBUG_MODE,
+                         ids=[f"{test.__module__}.{test.__name__}{arguments or ''}"
+                              for test, arguments in RUN_AGAIN_IN_DEBUG_MODE])
+def test_the_suites_concurrency_tests_keep_the_order(debug_locks, tmp_path, test, arguments):
+    parameters = inspect.signature(test).parameters
+    given = {"tmp_path": tmp_path, "backend": str(tmp_path / "robot.db"), **arguments}
+    test(**{name: given[name] for name in parameters})
     assert violations() == []
 
 
