@@ -37,7 +37,7 @@ from .program import BufferDecl, Declarations, Program, split_event_atom, event_
 from .store import CACHE_SIZE_KIB, DEFAULT_BUSY_TIMEOUT, DatabaseError, EventBatch, EventStore, \
     store_error, check_robot_name, null_argument_text
 from .store.checks import event_arguments, shorten, shown, text_problem
-from .store.postgres import ChangedMeanwhile
+from .store.connection import ChangedMeanwhile
 from .terms import Atom, String, Struct, Var, deref
 from .terms import format_atom, format_term
 

@@ -122,6 +122,14 @@ def check_file_options(synchronous: Any, checkpoint: Any, cache_mib: Any) -> Non
         raise SLRError(f"checkpoint must be 'auto' or 'background', not {checkpoint!r}")
 
 
+
+class ChangedMeanwhile(SLRError):
+    """Another connection changed what an add's decisions rest on (the program, or a tBuffer
+    made active) since the add began, as its change check found: nothing of the add was
+    stored. The knowledge base reads the program again and adds once more; it never reaches
+    a caller of the API. (Raised by the PostgreSQL backend; here, beside ``DatabaseError``,
+    so that the facade catches it without importing that backend.)"""
+
 class WallClock:
     def now(self) -> float:
         return time.time()

@@ -34,7 +34,7 @@ from urllib.parse import parse_qsl, urlencode, urlsplit
 from ..errors import CLOSED_WHILE_RUNNING, SLRBusy, SLRCancelled, SLRError, \
     SLRServerUnreachable, SLRStatementTimeout, SLRTimeout, SLRUnavailable, naming_the_store
 from ..lockorder import ordered_lock
-from .connection import Database, DatabaseError, drop_commit_callbacks, in_own_transaction, \
+from .connection import ChangedMeanwhile, Database, DatabaseError, drop_commit_callbacks, in_own_transaction, \
     is_postgres_url, merge_commit_callbacks, run_after_rollback, \
     password_token, run_commit_callbacks, shown_location
 from .authorizer import transaction_control_refusal
@@ -325,13 +325,6 @@ def _read_notifications(raw: Any) -> None:
             read += 1
         if not read:
             return
-
-
-class ChangedMeanwhile(SLRError):
-    """Another connection changed what an add's decisions rest on (the program, or a tBuffer
-    made active) since the add began, as its change check found: nothing of the add was
-    stored. The knowledge base reads the program again and adds once more; it never reaches
-    a caller of the API."""
 
 
 class WriteCheck:
