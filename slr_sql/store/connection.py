@@ -122,7 +122,6 @@ def check_file_options(synchronous: Any, checkpoint: Any, cache_mib: Any) -> Non
         raise SLRError(f"checkpoint must be 'auto' or 'background', not {checkpoint!r}")
 
 
-
 class ChangedMeanwhile(SLRError):
     """Another connection changed what an add's decisions rest on (the program, or a tBuffer
     made active) since the add began, as its change check found: nothing of the add was
