@@ -154,6 +154,12 @@ class EventWriter:
         # the robot the rows of an add are stored with: the store's name (None: unnamed),
         # or, while a fleet store receives a shipped batch, the shipping robot
         self.robot: str | None = None
+        # per table (its quoted name): at most how many rows it holds after this writer's
+        # last multi-row add (the rows it added counted, what others added or pruned not),
+        # and the tables found beyond _MULTI_ROW_TABLE_ROWS; the span is read only when the
+        # bound crosses that line, not at every add of the ingest path
+        self._rows_bound: dict[str, int] = {}
+        self._large_tables: set[str] = set()
 
     def add_events(self, events: Iterable[Event], atomic: bool = False, *,
                    join: bool = False) -> list[EventRejected]:
@@ -354,11 +360,22 @@ class EventWriter:
     def _rows_after(self, event_type: EventType, count: int) -> int:
         """About how many rows ``event_type``'s table holds once ``count`` more are in: its
         seq span (two lookups at the ends of the rowid; rows pruned from the front of a
-        buffered table are not counted) plus ``count``."""
+        buffered table are not counted) plus ``count``, read when this writer's bound
+        (:attr:`_rows_bound`) says the table may have grown past the line. Only the speed of
+        the insert rests on it: a table another connection filled meanwhile takes multi-row
+        INSERTs until this writer's own adds bring the bound to the line."""
         quoted = event_type.quoted
-        span = self.db.conn.execute(f"SELECT (SELECT max(seq) FROM {quoted}) - "
-                                    f"(SELECT min(seq) FROM {quoted})").fetchone()[0]
-        return (span or 0) + count
+        if quoted in self._large_tables:
+            return _MULTI_ROW_TABLE_ROWS + count
+        bound = self._rows_bound.get(quoted)
+        if bound is None or bound + count > _MULTI_ROW_TABLE_ROWS:
+            span = self.db.conn.execute(f"SELECT (SELECT max(seq) FROM {quoted}) - "
+                                        f"(SELECT min(seq) FROM {quoted})").fetchone()[0]
+            bound = span or 0
+            if bound > _MULTI_ROW_TABLE_ROWS:
+                self._large_tables.add(quoted)
+        self._rows_bound[quoted] = bound + count
+        return bound + count
 
     def _insert_each(self, chunk: list, base: int, arrival: float, atomic: bool,
                      errors: list[EventRejected], ends: dict | None) -> None:
