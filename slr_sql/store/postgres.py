@@ -925,6 +925,9 @@ STOP_GRACE = 0.5
 # again (doubling up to 2 s), and seconds one cancel request may take
 CANCEL_AGAIN = 0.1
 STOP_CANCEL_TIMEOUT = 5.0
+# Seconds a stopped read-only statement of kb.sql (on a connection of its own) is cancelled
+# again for, until its thread has ended
+CANCEL_AGAIN_FOR = 60.0
 
 
 # A transaction-control statement, by its first keywords (PostgreSQL's "Transaction
@@ -1083,11 +1086,12 @@ class _DetachedStatement:
     has one), the event its caller waits for, and what ended the wait early (the caller
     gave up at its timeout, or the store stopped its queries)."""
 
-    __slots__ = ("raw", "finished", "abandoned", "stopped")
+    __slots__ = ("raw", "finished", "ended", "abandoned", "stopped")
 
     def __init__(self) -> None:
         self.raw: Any = None
-        self.finished = threading.Event()
+        self.finished = threading.Event()   # its caller stops waiting
+        self.ended = threading.Event()      # its thread is done with the server
         self.abandoned = False
         self.stopped = False
 
@@ -1224,6 +1228,7 @@ class DetachedStatements:
                     with suppress(Exception):
                         raw.close()
                 self.slots.release()
+                one.ended.set()
                 one.finished.set()
 
         threading.Thread(target=work, name="slr-sql-statement", daemon=True).start()
@@ -1246,19 +1251,41 @@ class DetachedStatements:
 
     def stop(self) -> None:
         """End the statements running now, a close coming: each caller gets SLRError
-        "the knowledge base was closed while the query ran" at once, each statement is
-        cancelled on the server (``cancel_safe``; one the cancel misses runs on to its end
-        on its own connection, as one abandoned at its timeout), and none starts any more."""
+        "the knowledge base was closed while the query ran" at once, and each statement is
+        cancelled on the server (``cancel_safe``), again until its thread is done with it
+        -- a cancel that reaches the server before the statement runs is lost (the server
+        shows it active from its Parse message on) -- in a thread of its own, so the close
+        does not wait; none starts any more."""
         with self.lock:
             self.stopped = True
-            running = [(one, one.raw) for one in self.running]
-            for one, _ in running:
+            running = list(self.running)
+            for one in running:
                 one.stopped = True
-        for one, raw in running:
-            if raw is not None:
-                with suppress(Exception):   # (its thread may be closing it meanwhile)
-                    raw.cancel_safe(timeout=STOP_CANCEL_TIMEOUT)
+        for one in running:
             one.finished.set()
+        if running:
+            threading.Thread(target=self._cancel_until_ended, args=(running,),
+                             name="slr-sql-cancel", daemon=True).start()
+
+    def _cancel_until_ended(self, running: list[_DetachedStatement]) -> None:
+        """Cancel each of ``running``'s statements until its thread has ended (a pause of
+        :data:`CANCEL_AGAIN` doubling up to 2 s between rounds), for at most
+        :data:`CANCEL_AGAIN_FOR` seconds: past that the statement runs on to its end on its
+        own connection, as one abandoned at its timeout."""
+        pause = CANCEL_AGAIN
+        give_up = time.monotonic() + CANCEL_AGAIN_FOR
+        while True:
+            left = [one for one in running if not one.ended.is_set()]
+            if not left or time.monotonic() > give_up:
+                return
+            for one in left:
+                with self.lock:
+                    raw = one.raw
+                if raw is not None:
+                    with suppress(Exception):   # (its thread may be closing it meanwhile)
+                        raw.cancel_safe(timeout=STOP_CANCEL_TIMEOUT)
+            left[0].ended.wait(pause)
+            pause = min(pause * 2, 2.0)
 
     def close(self) -> None:
         """Close the idle connection; a running statement's thread closes its own."""
