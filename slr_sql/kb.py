@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import functools
 import inspect
-import math
 import numbers
 import os
 import time
@@ -1128,14 +1127,7 @@ def check_mark(event_type: Any, t: Any) -> None:
     slr_sql.errors.SLRError: mark_complete: t must be a number of seconds, not 'later'
     """
     check_event_type("mark_complete", event_type)
-    if isinstance(t, bool) or not isinstance(t, numbers.Real):  # (numpy numbers are Real)
-        raise SLRError(f"mark_complete: t must be a number of seconds, not {shown(t)}")
-    try:
-        if math.isnan(float(t)):
-            raise SLRError("mark_complete: t must be a number of seconds, not NaN")
-    except OverflowError:
-        raise SLRError(f"mark_complete: t is out of range (an integer of "
-                       f"{int(t).bit_length()} bits; a time is a float)") from None
+    check_time_option("mark_complete: t", t, required=True)
 
 
 def check_query_options(at: Any = None, timeout: Any = None, limit: Any = None,
