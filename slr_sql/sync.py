@@ -292,6 +292,7 @@ class PendingQuery(Future):
         >>> kb.close()
         """
         wait = wait_seconds("result: timeout", timeout)
+        self._refuse_wait_inside_transaction("result")
         try:
             return super().result(wait)
         except TimeoutError:
@@ -311,6 +312,7 @@ class PendingQuery(Future):
         >>> kb.close()
         """
         wait = wait_seconds("exception: timeout", timeout)
+        self._refuse_wait_inside_transaction("exception")
         try:
             return super().exception(wait)
         except TimeoutError:
@@ -318,6 +320,27 @@ class PendingQuery(Future):
                 return super().exception(0)
             raise SLRTimeout(self.timeout_message(timeout) + "; it is still waiting "
                              "(call exception() again, or cancel())") from None
+
+    def _refuse_wait_inside_transaction(self, method: str) -> None:
+        """Waiting for an answer inside a transaction of the store the calling thread holds
+        would wait for itself: the query is evaluated on another thread, with the store's
+        lock, and a query submitted or marked complete inside the transaction is registered
+        once it ended. Answered already, there is nothing to wait for.
+
+        >>> import slr_sql
+        >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); p = kb.submit("p(X)^T", at=5)
+        >>> with kb.store.transaction():
+        ...     p.result(timeout=5)
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: PendingQuery.result() inside a transaction of the store: ...
+        >>> kb.close()
+        """
+        if not self.done() and self._sync.store.in_transaction_here:
+            raise SLRError(f"PendingQuery.{method}() inside a transaction of the store: the "
+                           f"query is answered on another thread once the transaction ended "
+                           f"(it needs the store, and what the transaction adds and marks); "
+                           f"call {method}() after the transaction")
 
     def add_done_callback(self, fn: Callable[[Any], Any]) -> None:
         """Call ``fn(pending)`` once the query is answered, failed or cancelled (at once
@@ -683,6 +706,8 @@ class Synchronizer:
         self._timers: list = []      # [(clock deadline, seq, key)]
         self._timeouts: list = []    # [(monotonic deadline, seq, q)]
         self._queries: dict[str, PendingQuery] = {}
+        # the ids of queries submitted inside a transaction, registered once it ended
+        self._reserved_ids: set[str] = set()
         self._seq = itertools.count()
         self._ids = itertools.count(1)
         self._executor: ThreadPoolExecutor | None = None
@@ -718,6 +743,9 @@ class Synchronizer:
         if at is None:
             at = float(self.clock.now())
         at = float(at)
+        if self.store.in_transaction_here:
+            return self._submit_after_transaction(goal, at, id, args, timeout, callback,
+                                                  robot, plan)
         with self.lock:
             if id is None:
                 id = f"q{next(self._ids)}"
@@ -752,9 +780,66 @@ class Synchronizer:
             self._schedule(q)
         return q
 
+    def _submit_after_transaction(self, goal: str, at: float, id: str | None,
+                                  args: dict | None, timeout: float | None,
+                                  callback: Callable[[PendingQuery], Any] | None,
+                                  robot: str | None, plan: Any) -> PendingQuery:
+        """:meth:`submit` inside a transaction the calling thread holds: the synchronizer's
+        lock comes before the store's, so the query is made now and registered once the
+        transaction ended -- committed or rolled back (a query is no state of the store):
+        it is answered on what was committed. Its ``timeout`` counts from now."""
+        reserved = self._reserved_ids
+        if id is None:
+            id = f"q{next(self._ids)}"
+            while id in self._queries or id in reserved:
+                id = f"q{next(self._ids)}"
+        elif id in self._queries or id in reserved:
+            raise SLRError(f"a query with id {id!r} is already pending")
+        id = str(id)
+        reserved.add(id)   # (set.add and discard are atomic: no lock taken)
+        q = PendingQuery(self, id, goal, at, args)
+        q.robot = robot
+        q._plan = plan
+        if timeout is not None:
+            q._deadline = time.monotonic() + float(timeout)
+            q._timeout = float(timeout)
+        q.add_done_callback(self._forget)
+        if callback is not None:
+            q.add_done_callback(callback)
+
+        def register() -> None:
+            reserved.discard(id)
+            if q.done():         # cancelled meanwhile
+                return
+            try:
+                if self._closed:
+                    raise SLRError(f"the knowledge base was closed while query {id!r} was "
+                                   f"waiting")
+                with self.lock:
+                    if id in self._queries:
+                        raise SLRError(f"a query with id {id!r} is already pending")
+                    self._queries[id] = q
+                    if self.external_poll is not None:
+                        self.cond.notify_all()
+                    if q._deadline is not None:
+                        heapq.heappush(self._timeouts, (q._deadline, next(self._seq), q))
+                        self._ensure_thread()
+                        self.cond.notify_all()
+                term, _frame = instantiate(plan, args)
+                ready = self._static_ready(q, term, self.clock.now())
+            except BaseException as exc:   # the query's answer, not the transaction's error
+                self._set_exception(q, exc)
+                return
+            if ready:
+                self._schedule(q)
+
+        self.store.after_commit(register, always=True)
+        return q
+
     def pending(self) -> list[PendingQuery]:
-        with self.lock:
-            return [q for q in self._queries.values() if not q.done()]
+        # a copy of the table, not the synchronizer's lock: one C call, atomic under the
+        # GIL, and so callable inside a transaction of the store (whose lock comes after it)
+        return [q for q in self._queries.copy().values() if not q.done()]
 
     def mark_complete(self, spec: Any, t: float, source: str | None = None) -> None:
         """Apply a mark and tell the progress hook (decisions it makes possible are made)."""
@@ -798,7 +883,12 @@ class Synchronizer:
 
     def watch_external(self, interval: float = 0.05) -> None:
         """Also release queries on marks/events that *other processes* write to the file
-        (checked every ``interval`` s while queries are pending; see docs)."""
+        (checked every ``interval`` s while queries are pending; see docs). Inside a
+        transaction the calling thread holds, once it ended (the synchronizer's lock comes
+        before the store's)."""
+        if self.store.in_transaction_here:
+            self.store.after_commit(lambda: self.watch_external(interval), always=True)
+            return
         with self.cond:
             self.external_poll = float(interval)
             self._data_version = self._read_data_version()
@@ -1035,12 +1125,18 @@ class Synchronizer:
         return f"{_dur(self.clock.now() - w.since)} s"
 
     def _forget(self, q: PendingQuery) -> None:
+        if q.answered_at is None:
+            q.answered_at = self.clock.now()
+            q.answered_wall = time.monotonic()
+        if self.store.in_transaction_here:
+            # q.cancel() inside a transaction this thread holds: the synchronizer's lock
+            # comes before the store's, so q leaves the table once the transaction ended
+            # (done already, it is in no list of pending queries meanwhile)
+            self.store.after_commit(lambda: self._forget(q), always=True)
+            return
         with self.lock:
             if self._queries.get(q.id) is q:
                 del self._queries[q.id]
-            if q.answered_at is None:
-                q.answered_at = self.clock.now()
-                q.answered_wall = time.monotonic()
 
     def _ensure_executor(self) -> ThreadPoolExecutor:
         if self._executor is None:
