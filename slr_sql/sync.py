@@ -706,8 +706,9 @@ class Synchronizer:
         self._timers: list = []      # [(clock deadline, seq, key)]
         self._timeouts: list = []    # [(monotonic deadline, seq, q)]
         self._queries: dict[str, PendingQuery] = {}
-        # the ids of queries submitted inside a transaction, registered once it ended
-        self._reserved_ids: set[str] = set()
+        # the queries submitted inside a transaction, by id, until it ended and they are
+        # registered in _queries (changed by single dict operations: atomic, no lock taken)
+        self._deferred: dict[str, PendingQuery] = {}
         self._seq = itertools.count()
         self._ids = itertools.count(1)
         self._executor: ThreadPoolExecutor | None = None
@@ -749,9 +750,9 @@ class Synchronizer:
         with self.lock:
             if id is None:
                 id = f"q{next(self._ids)}"
-                while id in self._queries:
+                while id in self._queries or id in self._deferred:
                     id = f"q{next(self._ids)}"
-            elif id in self._queries:
+            elif id in self._queries or id in self._deferred:
                 raise SLRError(f"a query with id {id!r} is already pending")
             q = PendingQuery(self, str(id), goal, at, args)
             q.robot = robot
@@ -788,16 +789,16 @@ class Synchronizer:
         lock comes before the store's, so the query is made now and registered once the
         transaction ended -- committed or rolled back (a query is no state of the store):
         it is answered on what was committed. Its ``timeout`` counts from now."""
-        reserved = self._reserved_ids
+        deferred = self._deferred
         if id is None:
             id = f"q{next(self._ids)}"
-            while id in self._queries or id in reserved:
+            while id in self._queries or id in deferred:
                 id = f"q{next(self._ids)}"
-        elif id in self._queries or id in reserved:
+        elif id in self._queries or id in deferred:
             raise SLRError(f"a query with id {id!r} is already pending")
         id = str(id)
-        reserved.add(id)   # (set.add and discard are atomic: no lock taken)
         q = PendingQuery(self, id, goal, at, args)
+        deferred[id] = q
         q.robot = robot
         q._plan = plan
         if timeout is not None:
@@ -808,38 +809,50 @@ class Synchronizer:
             q.add_done_callback(callback)
 
         def register() -> None:
-            reserved.discard(id)
-            if q.done():         # cancelled meanwhile
-                return
             try:
-                if self._closed:
-                    raise SLRError(f"the knowledge base was closed while query {id!r} was "
-                                   f"waiting")
-                with self.lock:
-                    if id in self._queries:
-                        raise SLRError(f"a query with id {id!r} is already pending")
-                    self._queries[id] = q
-                    if self.external_poll is not None:
-                        self.cond.notify_all()
-                    if q._deadline is not None:
-                        heapq.heappush(self._timeouts, (q._deadline, next(self._seq), q))
-                        self._ensure_thread()
-                        self.cond.notify_all()
-                term, _frame = instantiate(plan, args)
-                ready = self._static_ready(q, term, self.clock.now())
-            except BaseException as exc:   # the query's answer, not the transaction's error
-                self._set_exception(q, exc)
-                return
-            if ready:
-                self._schedule(q)
+                if q.done():         # cancelled meanwhile
+                    return
+                self._register_deferred(q)
+            finally:
+                deferred.pop(id, None)   # (after: pending() lists it all along)
 
         self.store.after_commit(register, always=True)
         return q
 
+    def _register_deferred(self, q: PendingQuery) -> None:
+        """Register and start a query :meth:`submit` made inside a transaction, once that
+        ended; what fails is the query's answer, not an error of the transaction."""
+        id, plan, args = q.id, q._plan, q.args
+        try:
+            if self._closed:
+                raise SLRError(f"the knowledge base was closed while query {id!r} was "
+                               f"waiting")
+            with self.lock:
+                if id in self._queries:
+                    raise SLRError(f"a query with id {id!r} is already pending")
+                self._queries[id] = q
+                if self.external_poll is not None:
+                    self.cond.notify_all()
+                if q._deadline is not None:
+                    heapq.heappush(self._timeouts, (q._deadline, next(self._seq), q))
+                    self._ensure_thread()
+                    self.cond.notify_all()
+            term, _frame = instantiate(plan, args)
+            ready = self._static_ready(q, term, self.clock.now())
+        except BaseException as exc:   # the query's answer, not the transaction's error
+            self._set_exception(q, exc)
+            return
+        if ready:
+            self._schedule(q)
+
     def pending(self) -> list[PendingQuery]:
-        # a copy of the table, not the synchronizer's lock: one C call, atomic under the
-        # GIL, and so callable inside a transaction of the store (whose lock comes after it)
-        return [q for q in self._queries.copy().values() if not q.done()]
+        # copies of the tables, not the synchronizer's lock: one C call each, atomic under
+        # the GIL, and so callable inside a transaction of the store (whose lock comes after
+        # it); a query submitted inside one waits too, registered or not yet
+        queries = self._queries.copy()
+        for id, q in self._deferred.copy().items():   # (registered, it is in both a moment)
+            queries.setdefault(id, q)
+        return [q for q in queries.values() if not q.done()]
 
     def mark_complete(self, spec: Any, t: float, source: str | None = None) -> None:
         """Apply a mark and tell the progress hook (decisions it makes possible are made)."""
