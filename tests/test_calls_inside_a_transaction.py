@@ -121,10 +121,10 @@ def test_a_query_submitted_inside_a_rolled_back_transaction_is_still_registered(
 def test_an_id_pending_or_taken_inside_the_same_transaction_is_refused_up_front(kb):
     with kb.store.transaction():
         with pytest.raises(SLRError, match="'waiting' is already pending"):
-            kb.submit("p(X)^T", at=5, id="waiting")
-        kb.submit("p(X)^T", at=5, id="twice")
+            kb.submit("p(X)^T", at=100, id="waiting")
+        kb.submit("p(X)^T", at=100, id="twice")      # (waits: p/1 is complete up to 10)
         with pytest.raises(SLRError, match="'twice' is already pending"):
-            kb.submit("p(X)^T", at=5, id="twice")
+            kb.submit("p(X)^T", at=100, id="twice")
     assert {"waiting", "twice"} <= {p.id for p in kb.pending()}
 
 
