@@ -30,6 +30,7 @@ from .encoding import NullArgument, event_form_loop
 from .errors import BufferNotFound, EventRejected, NotAnEvent, SLRError, SLRUnavailable
 from .parser import parse_event_fast, parse_program, parse_term
 from .loader import ProgramLoader
+from .lockorder import held_here
 from .plans import PlanCache, argument_term, check_goal, instantiate
 from .plans import python_words as _python_words
 from .sql_functions import SQL_FUNCTIONS
@@ -297,10 +298,12 @@ class KnowledgeBase:
     def __exit__(self, *exc: Any) -> None:
         self.close()
 
-    def _refuse_inside_transaction(self, call: str, why: str) -> None:
+    def _refuse_inside_transaction(self, call: str, why: str, lock: Any = None) -> None:
         """Refuse ``call`` when the calling thread holds a transaction of the store: it
         would take a lock ordered before the store's (docs/architecture.md, "Locks") and
-        could wait for ever on a thread taking them in order. Nothing was done yet.
+        could wait for ever on a thread taking them in order. Nothing was done yet. A
+        thread that holds ``lock`` already (a load listener, inside a load, holds the
+        program's) takes it again, re-entrant, out of no order: not refused.
 
         >>> kb = open()
         >>> with kb.store.transaction():
@@ -310,7 +313,7 @@ class KnowledgeBase:
         slr_sql.errors.SLRError: kb.close() inside a transaction of the store: end the transaction first
         >>> kb.close()
         """
-        if self.store.in_transaction_here:
+        if self.store.in_transaction_here and not (lock is not None and held_here(lock)):
             raise SLRError(f"{call} inside a transaction of the store: {why}")
 
     # -- the file is the truth ----------------------------------------------------------
@@ -333,7 +336,8 @@ class KnowledgeBase:
         load takes the program's lock, which comes before the store's. Load before the
         transaction or after it.
         """
-        self._refuse_inside_transaction("kb.load()", _LOAD_LOCK_FIRST)
+        self._refuse_inside_transaction("kb.load()", _LOAD_LOCK_FIRST,
+                                       self.loader.load_lock)
         name = check_load(text, filename, name, replace)
         clauses = parse_program(text, filename)   # syntax errors before taking the lock
         if not self.store.dialect.text_holds_nul:
@@ -356,7 +360,8 @@ class KnowledgeBase:
 
         Refused inside a transaction of the store, as :meth:`load` is.
         """
-        self._refuse_inside_transaction("kb.unload()", _LOAD_LOCK_FIRST)
+        self._refuse_inside_transaction("kb.unload()", _LOAD_LOCK_FIRST,
+                                       self.loader.load_lock)
         name = check_program_name(name)
         self.loader.unload(name)
         self._pipeline.loaded()
@@ -392,7 +397,8 @@ class KnowledgeBase:
         [{'X': Atom('box')}]
         >>> kb.close()
         """
-        self._refuse_inside_transaction("kb.load_file()", _LOAD_LOCK_FIRST)
+        self._refuse_inside_transaction("kb.load_file()", _LOAD_LOCK_FIRST,
+                                       self.loader.load_lock)
         self.load(read_program_file(path), str(path), name=name, replace=replace)
 
     def define(self, name: str, arity: int, fn: Callable) -> None:
@@ -877,7 +883,8 @@ class KnowledgeBase:
         Refused inside a transaction of the store, as :meth:`load` is (the buffers change
         with the program, under its lock).
         """
-        self._refuse_inside_transaction("kb.add_buffer()", _LOAD_LOCK_FIRST)
+        self._refuse_inside_transaction("kb.add_buffer()", _LOAD_LOCK_FIRST,
+                                       self.loader.load_lock)
         self._refresh()
         return self._buffers.add_runtime(pattern, keep_last=keep_last,
                                          keep_seconds=keep_seconds, keep_between=keep_between)
@@ -896,7 +903,8 @@ class KnowledgeBase:
                            f"them), not {shown(buffer_id)}")
         if not -2 ** 63 <= buffer_id < 2 ** 63:
             raise BufferNotFound(f"no active buffer #{shown(buffer_id)}")
-        self._refuse_inside_transaction("kb.remove_buffer()", _LOAD_LOCK_FIRST)
+        self._refuse_inside_transaction("kb.remove_buffer()", _LOAD_LOCK_FIRST,
+                                       self.loader.load_lock)
         self._refresh()
         self._buffers.remove_runtime(buffer_id)
 

@@ -64,7 +64,7 @@ REFUSED = {
     "kb.load()": lambda kb, tmp_path: kb.load("r(1).", name="more"),
     "kb.load_file()": lambda kb, tmp_path: kb.load_file(_program_file(tmp_path), name="more"),
     "kb.unload()": lambda kb, tmp_path: kb.unload("main"),
-    "kb.add_buffer()": lambda kb, tmp_path: kb.add_buffer("p(_)", keep_seconds=5),
+    "kb.add_buffer()": lambda kb, tmp_path: kb.add_buffer("r(_)", keep_last=1),
     "kb.remove_buffer()": lambda kb, tmp_path: kb.remove_buffer(kb.buffers()[0].id),
     "kb.ask()": lambda kb, tmp_path: asyncio.run(kb.ask("p(X)^T", at=0)),
     "PendingQuery.result()": lambda kb, tmp_path: kb.waiting.result(timeout=2),
@@ -87,6 +87,20 @@ def test_a_call_taking_a_lock_before_the_stores_is_refused_and_changes_nothing(
     assert after[2] == [{"L": [0, 1, 2]}]          # its adds were committed
     assert after[:2] + after[3:] == before[:2] + before[3:]
     assert not kb.waiting.done()
+
+
+def test_a_load_listener_may_still_change_the_buffers_inside_the_load(kb):
+    """Inside a load the thread holds the program's lock already: taking it again is no
+    step out of order, so a load listener's add_buffer is not refused."""
+    made: list = []
+
+    def add_a_buffer_once(kb) -> None:
+        if not made:
+            made.append(kb.add_buffer("r(_)", keep_last=1))
+
+    kb.load_listeners.append(add_a_buffer_once)
+    kb.load("r(1).", name="more")
+    assert made and made[0] in [info.id for info in kb.buffers()]
 
 
 def test_a_rolled_back_transaction_after_a_refused_call_leaves_nothing(kb):
