@@ -29,6 +29,7 @@ from .encoding import NullArgument, event_form_loop
 from .errors import BufferNotFound, EventRejected, NotAnEvent, SLRError, SLRUnavailable
 from .parser import parse_event_fast, parse_program, parse_term
 from .loader import ProgramLoader
+from .lockorder import held_here
 from .plans import PlanCache, argument_term, check_goal, instantiate
 from .plans import python_words as _python_words
 from .sql_functions import SQL_FUNCTIONS
@@ -146,6 +147,11 @@ def check_program_name(name: Any) -> str:
 
 
 
+# why a call that changes the program (or its buffers) is refused inside a transaction
+_LOAD_LOCK_FIRST = ("it takes the program's lock, which comes before the store's; call it "
+                    "before the transaction or after it (nothing was changed)")
+
+
 class KnowledgeBase:
     """One SLR knowledge base: program + events + state in one SQLite file.
 
@@ -258,10 +264,19 @@ class KnowledgeBase:
         query ran". A transaction still running is waited for, what it evaluates included
         (an add, and the event rules' ``where`` goals deciding in it).
 
+        Refused inside a transaction of the store this thread holds (``with
+        kb.store.transaction():``): closing waits for the synchronizer and the
+        subscriptions, whose locks come before the store's, so it could wait for ever on a
+        thread that holds one of them and waits for the store. End the transaction first.
+
         >>> kb = open(); kb.close(); kb.query("true")
         Traceback (most recent call last):
         slr_sql.errors.SLRError: the event store is closed
         """
+        if getattr(self, "store", None) is not None:
+            self._refuse_inside_transaction(
+                "kb.close()", "closing takes the synchronizer's lock, which comes before the "
+                "store's; end the transaction first")
         if getattr(self, "engine", None) is not None:   # queries still running end
             self.engine.stopped = True
         if getattr(self, "store", None) is not None:
@@ -282,6 +297,24 @@ class KnowledgeBase:
     def __exit__(self, *exc: Any) -> None:
         self.close()
 
+    def _refuse_inside_transaction(self, call: str, why: str, lock: Any = None) -> None:
+        """Refuse ``call`` when the calling thread holds a transaction of the store: it
+        would take a lock ordered before the store's (docs/architecture.md, "Locks") and
+        could wait for ever on a thread taking them in order. Nothing was done yet. A
+        thread that holds ``lock`` already (a load listener, inside a load, holds the
+        program's) takes it again, re-entrant, out of no order: not refused.
+
+        >>> kb = open()
+        >>> with kb.store.transaction():
+        ...     kb._refuse_inside_transaction("kb.close()", "end the transaction first")
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: kb.close() inside a transaction of the store: end the transaction first
+        >>> kb.close()
+        """
+        if self.store.in_transaction_here and not (lock is not None and held_here(lock)):
+            raise SLRError(f"{call} inside a transaction of the store: {why}")
+
     # -- the file is the truth ----------------------------------------------------------
     # -- program ------------------------------------------------------------------------
     def load(self, text: str, filename: str = "<string>", *, name: str = "main",
@@ -297,7 +330,13 @@ class KnowledgeBase:
         [1, 2]
         >>> kb.load("p(3).", name="main", replace=True); [a["X"] for a in kb.query("p(X)")]
         [3]
+
+        Refused inside a transaction of the store (``with kb.store.transaction():``): a
+        load takes the program's lock, which comes before the store's. Load before the
+        transaction or after it.
         """
+        self._refuse_inside_transaction("kb.load()", _LOAD_LOCK_FIRST,
+                                       self.loader.load_lock)
         name = check_load(text, filename, name, replace)
         clauses = parse_program(text, filename)   # syntax errors before taking the lock
         if not self.store.dialect.text_holds_nul:
@@ -317,7 +356,11 @@ class KnowledgeBase:
 
         >>> kb = open(); kb.load("p(1).", name="tea"); kb.unload("tea"); kb.programs()
         {}
+
+        Refused inside a transaction of the store, as :meth:`load` is.
         """
+        self._refuse_inside_transaction("kb.unload()", _LOAD_LOCK_FIRST,
+                                       self.loader.load_lock)
         name = check_program_name(name)
         self.loader.unload(name)
         self._pipeline.loaded()
@@ -353,6 +396,8 @@ class KnowledgeBase:
         [{'X': Atom('box')}]
         >>> kb.close()
         """
+        self._refuse_inside_transaction("kb.load_file()", _LOAD_LOCK_FIRST,
+                                       self.loader.load_lock)
         self.load(read_program_file(path), str(path), name=name, replace=replace)
 
     def define(self, name: str, arity: int, fn: Callable) -> None:
@@ -742,6 +787,10 @@ class KnowledgeBase:
         False
         >>> kb.mark_complete("p/1", 1); p.result(timeout=5)
         [{'L': [Atom('a')]}]
+
+        Inside a transaction of the store (``with kb.store.transaction():``) the query is
+        registered once the transaction ended, committed or rolled back, and answered on
+        what was committed; its ``result()`` is waited for after the transaction.
         """
         check_query_options(at=at, timeout=timeout, robot=robot, args=args, id=id,
                             callback=callback)
@@ -760,8 +809,16 @@ class KnowledgeBase:
         >>> asyncio.run(kb.ask("p(X)^T", at=1))
         [{'X': 1, 'T': 1.0}]
         >>> kb.close()
+
+        Refused inside a transaction of the store: the answer would come only once the
+        transaction ended, which the awaiting coroutine holds open (:meth:`submit` there,
+        and await it after the transaction).
         """
         import asyncio
+
+        self._refuse_inside_transaction(
+            "kb.ask()", "the query is answered once the transaction ended, which waiting "
+            "for its answer inside it keeps open; submit() inside, and wait after it")
 
         from concurrent.futures import Future
 
@@ -821,13 +878,19 @@ class KnowledgeBase:
 
         >>> kb = open(); kb.add_buffer("face(P, _)", keep_last=1)
         1
+
+        Refused inside a transaction of the store, as :meth:`load` is (the buffers change
+        with the program, under its lock).
         """
+        self._refuse_inside_transaction("kb.add_buffer()", _LOAD_LOCK_FIRST,
+                                       self.loader.load_lock)
         self._refresh()
         return self._buffers.add_runtime(pattern, keep_last=keep_last,
                                          keep_seconds=keep_seconds, keep_between=keep_between)
 
     def remove_buffer(self, buffer_id: int) -> None:
-        """Remove a runtime buffer (the events it kept stay).
+        """Remove a runtime buffer (the events it kept stay). Refused inside a transaction
+        of the store, as :meth:`add_buffer` is.
 
         >>> kb = open(); buffer = kb.add_buffer("p(_)", keep_last=1); kb.remove_buffer(buffer)
         >>> kb.buffers()
@@ -839,6 +902,8 @@ class KnowledgeBase:
                            f"them), not {shown(buffer_id)}")
         if not -2 ** 63 <= buffer_id < 2 ** 63:
             raise BufferNotFound(f"no active buffer #{shown(buffer_id)}")
+        self._refuse_inside_transaction("kb.remove_buffer()", _LOAD_LOCK_FIRST,
+                                       self.loader.load_lock)
         self._refresh()
         self._buffers.remove_runtime(buffer_id)
 

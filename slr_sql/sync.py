@@ -292,6 +292,7 @@ class PendingQuery(Future):
         >>> kb.close()
         """
         wait = wait_seconds("result: timeout", timeout)
+        self._refuse_wait_inside_transaction("result")
         try:
             return super().result(wait)
         except TimeoutError:
@@ -311,6 +312,7 @@ class PendingQuery(Future):
         >>> kb.close()
         """
         wait = wait_seconds("exception: timeout", timeout)
+        self._refuse_wait_inside_transaction("exception")
         try:
             return super().exception(wait)
         except TimeoutError:
@@ -318,6 +320,27 @@ class PendingQuery(Future):
                 return super().exception(0)
             raise SLRTimeout(self.timeout_message(timeout) + "; it is still waiting "
                              "(call exception() again, or cancel())") from None
+
+    def _refuse_wait_inside_transaction(self, method: str) -> None:
+        """Waiting for an answer inside a transaction of the store the calling thread holds
+        would wait for itself: the query is evaluated on another thread, with the store's
+        lock, and a query submitted or marked complete inside the transaction is registered
+        once it ended. Answered already, there is nothing to wait for.
+
+        >>> import slr_sql
+        >>> kb = slr_sql.open(clock=slr_sql.ManualClock(0)); p = kb.submit("p(X)^T", at=5)
+        >>> with kb.store.transaction():
+        ...     p.result(timeout=5)
+        Traceback (most recent call last):
+        ...
+        slr_sql.errors.SLRError: PendingQuery.result() inside a transaction of the store: ...
+        >>> kb.close()
+        """
+        if not self.done() and self._sync.store.in_transaction_here:
+            raise SLRError(f"PendingQuery.{method}() inside a transaction of the store: the "
+                           f"query is answered on another thread once the transaction ended "
+                           f"(it needs the store, and what the transaction adds and marks); "
+                           f"call {method}() after the transaction")
 
     def add_done_callback(self, fn: Callable[[Any], Any]) -> None:
         """Call ``fn(pending)`` once the query is answered, failed or cancelled (at once
@@ -683,6 +706,9 @@ class Synchronizer:
         self._timers: list = []      # [(clock deadline, seq, key)]
         self._timeouts: list = []    # [(monotonic deadline, seq, q)]
         self._queries: dict[str, PendingQuery] = {}
+        # the queries submitted inside a transaction, by id, until it ended and they are
+        # registered in _queries (changed by single dict operations: atomic, no lock taken)
+        self._deferred: dict[str, PendingQuery] = {}
         self._seq = itertools.count()
         self._ids = itertools.count(1)
         self._executor: ThreadPoolExecutor | None = None
@@ -718,12 +744,15 @@ class Synchronizer:
         if at is None:
             at = float(self.clock.now())
         at = float(at)
+        if self.store.in_transaction_here:
+            return self._submit_after_transaction(goal, at, id, args, timeout, callback,
+                                                  robot, plan)
         with self.lock:
             if id is None:
                 id = f"q{next(self._ids)}"
-                while id in self._queries:
+                while id in self._queries or id in self._deferred:
                     id = f"q{next(self._ids)}"
-            elif id in self._queries:
+            elif id in self._queries or id in self._deferred:
                 raise SLRError(f"a query with id {id!r} is already pending")
             q = PendingQuery(self, str(id), goal, at, args)
             q.robot = robot
@@ -752,9 +781,78 @@ class Synchronizer:
             self._schedule(q)
         return q
 
+    def _submit_after_transaction(self, goal: str, at: float, id: str | None,
+                                  args: dict | None, timeout: float | None,
+                                  callback: Callable[[PendingQuery], Any] | None,
+                                  robot: str | None, plan: Any) -> PendingQuery:
+        """:meth:`submit` inside a transaction the calling thread holds: the synchronizer's
+        lock comes before the store's, so the query is made now and registered once the
+        transaction ended -- committed or rolled back (a query is no state of the store):
+        it is answered on what was committed. Its ``timeout`` counts from now."""
+        deferred = self._deferred
+        if id is None:
+            id = f"q{next(self._ids)}"
+            while id in self._queries or id in deferred:
+                id = f"q{next(self._ids)}"
+        elif id in self._queries or id in deferred:
+            raise SLRError(f"a query with id {id!r} is already pending")
+        id = str(id)
+        q = PendingQuery(self, id, goal, at, args)
+        deferred[id] = q
+        q.robot = robot
+        q._plan = plan
+        if timeout is not None:
+            q._deadline = time.monotonic() + float(timeout)
+            q._timeout = float(timeout)
+        q.add_done_callback(self._forget)
+        if callback is not None:
+            q.add_done_callback(callback)
+
+        def register() -> None:
+            try:
+                if q.done():         # cancelled meanwhile
+                    return
+                self._register_deferred(q)
+            finally:
+                deferred.pop(id, None)   # (after: pending() lists it all along)
+
+        self.store.after_commit(register, always=True)
+        return q
+
+    def _register_deferred(self, q: PendingQuery) -> None:
+        """Register and start a query :meth:`submit` made inside a transaction, once that
+        ended; what fails is the query's answer, not an error of the transaction."""
+        id, plan, args = q.id, q._plan, q.args
+        try:
+            if self._closed:
+                raise SLRError(f"the knowledge base was closed while query {id!r} was "
+                               f"waiting")
+            with self.lock:
+                if id in self._queries:
+                    raise SLRError(f"a query with id {id!r} is already pending")
+                self._queries[id] = q
+                if self.external_poll is not None:
+                    self.cond.notify_all()
+                if q._deadline is not None:
+                    heapq.heappush(self._timeouts, (q._deadline, next(self._seq), q))
+                    self._ensure_thread()
+                    self.cond.notify_all()
+            term, _frame = instantiate(plan, args)
+            ready = self._static_ready(q, term, self.clock.now())
+        except BaseException as exc:   # the query's answer, not the transaction's error
+            self._set_exception(q, exc)
+            return
+        if ready:
+            self._schedule(q)
+
     def pending(self) -> list[PendingQuery]:
-        with self.lock:
-            return [q for q in self._queries.values() if not q.done()]
+        # copies of the tables, not the synchronizer's lock: one C call each, atomic under
+        # the GIL, and so callable inside a transaction of the store (whose lock comes after
+        # it); a query submitted inside one waits too, registered or not yet
+        queries = self._queries.copy()
+        for id, q in self._deferred.copy().items():   # (registered, it is in both a moment)
+            queries.setdefault(id, q)
+        return [q for q in queries.values() if not q.done()]
 
     def mark_complete(self, spec: Any, t: float, source: str | None = None) -> None:
         """Apply a mark and tell the progress hook (decisions it makes possible are made)."""
@@ -798,7 +896,12 @@ class Synchronizer:
 
     def watch_external(self, interval: float = 0.05) -> None:
         """Also release queries on marks/events that *other processes* write to the file
-        (checked every ``interval`` s while queries are pending; see docs)."""
+        (checked every ``interval`` s while queries are pending; see docs). Inside a
+        transaction the calling thread holds, once it ended (the synchronizer's lock comes
+        before the store's)."""
+        if self.store.in_transaction_here:
+            self.store.after_commit(lambda: self.watch_external(interval), always=True)
+            return
         with self.cond:
             self.external_poll = float(interval)
             self._data_version = self._read_data_version()
@@ -1035,12 +1138,18 @@ class Synchronizer:
         return f"{_dur(self.clock.now() - w.since)} s"
 
     def _forget(self, q: PendingQuery) -> None:
+        if q.answered_at is None:
+            q.answered_at = self.clock.now()
+            q.answered_wall = time.monotonic()
+        if self.store.in_transaction_here:
+            # q.cancel() inside a transaction this thread holds: the synchronizer's lock
+            # comes before the store's, so q leaves the table once the transaction ended
+            # (done already, it is in no list of pending queries meanwhile)
+            self.store.after_commit(lambda: self._forget(q), always=True)
+            return
         with self.lock:
             if self._queries.get(q.id) is q:
                 del self._queries[q.id]
-            if q.answered_at is None:
-                q.answered_at = self.clock.now()
-                q.answered_wall = time.monotonic()
 
     def _ensure_executor(self) -> ThreadPoolExecutor:
         if self._executor is None:
