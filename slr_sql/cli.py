@@ -1111,9 +1111,15 @@ def write_rows(columns: list[str], rows: Iterable[tuple], fmt: str, out: Any = N
     JSON array of row objects (one row a line), ``nl`` one JSON object a line, ``csv`` and
     ``tsv`` with a header line, ``table`` a box table for reading.
 
+    JSON has no infinity nor NaN: ``json`` and ``nl`` write such a float as the service's
+    encoding does (``{"$float": "inf"}``, ``"-inf"``, ``"nan"``; what ``slr query --json`` and
+    ``POST /sql`` write), never the ``Infinity`` a JSON reader refuses.
+
     >>> write_rows(["n", "name"], [(1, "cup1"), (2, None)], "nl")
     {"n": 1, "name": "cup1"}
     {"n": 2, "name": null}
+    >>> write_rows(["x"], [(float("-inf"),)], "json")
+    [{"x": {"$float": "-inf"}}]
     """
     import csv
 
@@ -1121,6 +1127,8 @@ def write_rows(columns: list[str], rows: Iterable[tuple], fmt: str, out: Any = N
     if fmt in ("json", "nl"):
         from sqlite_utils.cli import output_rows  # sqlite-utils' own JSON writer
 
+        rows = (row if all(type(v) is not float or math.isfinite(v) for v in row)
+                else tuple(_json_float(v) for v in row) for row in rows)
         for line in output_rows(rows, columns, nl=fmt == "nl", arrays=False, json_cols=False):
             out.write(line + "\n")
     elif fmt in ("csv", "tsv"):
@@ -1140,6 +1148,13 @@ def write_rows(columns: list[str], rows: Iterable[tuple], fmt: str, out: Any = N
         # Into a pipe the table is not cut to the terminal's width.
         Console(file=out, highlight=False, markup=False,
                 width=None if out.isatty() else 500).print(table)
+
+
+def _json_float(value: Any) -> Any:
+    """``value``, a non-finite float as ``{"$float": "inf" | "-inf" | "nan"}``."""
+    if type(value) is float and not math.isfinite(value):
+        return {"$float": "nan" if value != value else ("inf" if value > 0 else "-inf")}
+    return value
 
 
 @main.command()
