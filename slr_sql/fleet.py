@@ -28,7 +28,8 @@ from typing import Any, Protocol, TypeVar
 
 from .errors import SLRError
 from .printable import printable_name, printable_text
-from .store import EventStore, WriterInFlight, check_robot_name, refuse_no_store, shown_location
+from .store import EventStore, WriterInFlight, check_robot_name, refuse_memory_store, refuse_no_store, \
+    shown_location
 
 __all__ = ["FleetRefused", "FleetTarget", "PushReport", "RobotStoreRestored", "open_target", "parse_type_spec",
            "push", "status"]
@@ -828,6 +829,7 @@ def click_group() -> Any:
     def name_command(db: str, robot: str) -> None:
         """Name the robot the store DB belongs to (kept in the store; once for life). Its
         events from now on carry the name; ``slr_sql.open(DB, robot=NAME)`` does the same."""
+        refuse_memory_store(db, "slr fleet name")
         with EventStore(db, robot=robot):
             pass
         click.echo(f"{printable_name(shown_location(db))} is the store of robot {printable_name(robot)}")
@@ -854,6 +856,7 @@ def click_group() -> Any:
         import signal
 
         refuse_no_store(db)
+        refuse_memory_store(fleet, "slr fleet push")
         stop = threading.Event()
         if follow:
             def on_signal(signum: int, frame: Any) -> None:
